@@ -1,0 +1,69 @@
+//! `augsim bench`: median static-solve times, split into assembly,
+//! factorisation and triangular solves.
+
+use anyhow::Result;
+use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
+use mesh::select::nodes_in_box;
+use mesh::Mesh;
+
+use crate::solve::ms;
+
+struct Case {
+    name: String,
+    problem: Problem,
+}
+
+fn beam(law: Law) -> Result<Case> {
+    let m = mesh::box_hex([0.0; 3], [4.0, 1.0, 1.0], [20, 5, 5])?;
+    let mut p = Problem::new(m, Material::new(law, 300.0, 0.4));
+    p.fix(&nodes_in_box(&p.mesh.nodes, [-1e-9; 3], [1.0 + 1e-9, 1.0 + 1e-9, 1e-9]));
+    let top_end = nodes_in_box(&p.mesh.nodes, [3.0 - 1e-9, -1e-9, 1.0 - 1e-9], [4.0 + 1e-9, 1.0 + 1e-9, 1.0 + 1e-9]);
+    p.add_traction(&top_end, [0.0, 0.0, -1.0]);
+    Ok(Case { name: format!("beam 20x5x5 H8, {law:?}"), problem: p })
+}
+
+fn block_t4(law: Law) -> Result<Case> {
+    // 14×8×7 cells × 6 = 4,704 tetrahedra over a 0.2 m organ-sized block.
+    let m: Mesh = mesh::box_tet([0.0; 3], [0.2, 0.12, 0.1], [14, 8, 7])?;
+    let mut p = Problem::new(m, Material::new(law, 5000.0, 0.48));
+    p.fix(&nodes_in_box(&p.mesh.nodes, [-1e-9; 3], [1e-9, 1.0, 1.0]));
+    let end = nodes_in_box(&p.mesh.nodes, [0.2 - 1e-9, -1.0, -1.0], [1.0, 1.0, 1.0]);
+    p.add_traction(&end, [0.0, 0.0, -100.0]);
+    Ok(Case { name: format!("block {} T4, {law:?}", p.mesh.cells.len()), problem: p })
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
+/// Runs every case `runs` times and prints medians.
+pub fn run(runs: usize) -> Result<()> {
+    let runs = runs.max(1);
+    println!(
+        "{:<34} {:>6} {:>5} {:>9} {:>9} {:>9} {:>9} {:>10}",
+        "case", "dofs", "iter", "total ms", "assem ms", "factor ms", "solve ms", "max|u| m"
+    );
+    for case in [beam(Law::Svk)?, beam(Law::Corotational)?, block_t4(Law::Svk)?, block_t4(Law::Corotational)?] {
+        let dofs = case.problem.num_dofs();
+        let mut solver = StaticSolver::new(case.problem)?;
+        let opts = SolverOptions::default();
+        let mut rows = Vec::new();
+        for _ in 0..runs {
+            rows.push(solver.solve(&opts)?);
+        }
+        let med = |f: &dyn Fn(&fem::Solution) -> f64| median(rows.iter().map(f).collect());
+        println!(
+            "{:<34} {:>6} {:>5} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>10.4}",
+            case.name,
+            dofs,
+            rows[0].iterations,
+            med(&|s| ms(s.timings.total)),
+            med(&|s| ms(s.timings.assembly)),
+            med(&|s| ms(s.timings.factorization)),
+            med(&|s| ms(s.timings.solve)),
+            fem::post::max_displacement(&rows[0].u)
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,198 @@
+//! Element geometry (shape-function gradients and quadrature weights in the
+//! reference configuration) and element kernels (internal force and tangent).
+
+use mesh::{Cells, Mesh};
+use nalgebra::Matrix3;
+
+use crate::material::Material;
+use crate::FemError;
+
+/// The nodes of H8's reference cube in VTK order.
+const HEX_REF: [[f64; 3]; 8] = [
+    [-1., -1., -1.],
+    [1., -1., -1.],
+    [1., 1., -1.],
+    [-1., 1., -1.],
+    [-1., -1., 1.],
+    [1., -1., 1.],
+    [1., 1., 1.],
+    [-1., 1., 1.],
+];
+
+/// Precomputed quadrature data of every element of a mesh.
+#[derive(Clone, Debug)]
+pub struct ElementGeometry {
+    /// Nodes per element (4 or 8).
+    pub nodes_per_element: usize,
+    /// Quadrature points per element (1 or 8).
+    pub points_per_element: usize,
+    /// Element connectivity, `nodes_per_element` entries per element.
+    pub connectivity: Vec<usize>,
+    /// ∂N_a/∂X at each quadrature point: index `(e * points + q) * nodes + a`.
+    pub grads: Vec<[f64; 3]>,
+    /// Shape function values at each quadrature point (same for all elements): `q * nodes + a`.
+    pub shape: Vec<f64>,
+    /// Quadrature weight × det J × cell fraction: index `e * points + q`.
+    pub weights: Vec<f64>,
+}
+
+impl ElementGeometry {
+    /// Computes gradients and weights; fails on a degenerate or inverted element.
+    pub fn new(mesh: &Mesh) -> Result<Self, FemError> {
+        let ne = mesh.cells.len();
+        let fraction = |e: usize| mesh.cell_fraction.as_ref().map_or(1.0, |f| f[e]);
+        let connectivity: Vec<usize> = (0..ne).flat_map(|e| mesh.cells.cell(e).to_vec()).collect();
+        let x = |k: usize| nalgebra::Vector3::from(mesh.nodes[k]);
+        match &mesh.cells {
+            Cells::Tet4(tets) => {
+                let mut grads = Vec::with_capacity(4 * ne);
+                let mut weights = Vec::with_capacity(ne);
+                for (e, t) in tets.iter().enumerate() {
+                    let dm = Matrix3::from_columns(&[x(t[1]) - x(t[0]), x(t[2]) - x(t[0]), x(t[3]) - x(t[0])]);
+                    let det = dm.determinant();
+                    let inv =
+                        dm.try_inverse().filter(|_| det > 0.0).ok_or(FemError::InvertedElement { element: e, det })?;
+                    let g: [[f64; 3]; 3] = std::array::from_fn(|a| [inv[(a, 0)], inv[(a, 1)], inv[(a, 2)]]);
+                    grads.push(std::array::from_fn(|d| -(g[0][d] + g[1][d] + g[2][d])));
+                    grads.extend_from_slice(&g);
+                    weights.push(det / 6.0 * fraction(e));
+                }
+                Ok(ElementGeometry {
+                    nodes_per_element: 4,
+                    points_per_element: 1,
+                    connectivity,
+                    grads,
+                    shape: vec![0.25; 4],
+                    weights,
+                })
+            }
+            Cells::Hex8(hexes) => {
+                let gp = 1.0 / 3f64.sqrt();
+                let points: Vec<[f64; 3]> = HEX_REF.iter().map(|r| r.map(|c| c * gp)).collect();
+                let mut shape = Vec::with_capacity(64);
+                let mut dref = Vec::with_capacity(64);
+                for p in &points {
+                    for r in &HEX_REF {
+                        let f = |d: usize| 1.0 + r[d] * p[d];
+                        shape.push(f(0) * f(1) * f(2) / 8.0);
+                        dref.push([r[0] * f(1) * f(2) / 8.0, f(0) * r[1] * f(2) / 8.0, f(0) * f(1) * r[2] / 8.0]);
+                    }
+                }
+                let mut grads = Vec::with_capacity(64 * ne);
+                let mut weights = Vec::with_capacity(8 * ne);
+                for (e, h) in hexes.iter().enumerate() {
+                    for q in 0..8 {
+                        let mut j = Matrix3::zeros();
+                        for a in 0..8 {
+                            let dn = nalgebra::RowVector3::from(dref[q * 8 + a]);
+                            j += x(h[a]) * dn;
+                        }
+                        let det = j.determinant();
+                        let jinv = j
+                            .try_inverse()
+                            .filter(|_| det > 0.0)
+                            .ok_or(FemError::InvertedElement { element: e, det })?;
+                        for a in 0..8 {
+                            let g = nalgebra::RowVector3::from(dref[q * 8 + a]) * jinv;
+                            grads.push([g[0], g[1], g[2]]);
+                        }
+                        weights.push(det * fraction(e));
+                    }
+                }
+                Ok(ElementGeometry { nodes_per_element: 8, points_per_element: 8, connectivity, grads, shape, weights })
+            }
+        }
+    }
+
+    /// Number of elements.
+    pub fn len(&self) -> usize {
+        self.weights.len() / self.points_per_element
+    }
+
+    /// True when there is no element.
+    pub fn is_empty(&self) -> bool {
+        self.weights.is_empty()
+    }
+
+    /// Node indices of element `e`.
+    pub fn element_nodes(&self, e: usize) -> &[usize] {
+        &self.connectivity[e * self.nodes_per_element..(e + 1) * self.nodes_per_element]
+    }
+
+    /// Deformation gradient F = I + Σ_a u_a ⊗ ∇N_a at quadrature point `q` of element `e`.
+    pub fn deformation_gradient(&self, e: usize, q: usize, u: &[f64]) -> Matrix3<f64> {
+        let npe = self.nodes_per_element;
+        let g = &self.grads[(e * self.points_per_element + q) * npe..][..npe];
+        let mut f = Matrix3::identity();
+        for (a, &n) in self.element_nodes(e).iter().enumerate() {
+            for i in 0..3 {
+                for j in 0..3 {
+                    f[(i, j)] += u[3 * n + i] * g[a][j];
+                }
+            }
+        }
+        f
+    }
+
+    /// Internal force `f` (3n entries) and, when `k` is given, tangent stiffness
+    /// (3n×3n, row-major, local dof `3a + i`) of element `e` at displacement `u`.
+    /// Fails when det F ≤ 0 at a quadrature point for a law that needs det F > 0,
+    /// or when the result is not finite.
+    pub fn force_tangent(
+        &self,
+        e: usize,
+        material: &Material,
+        u: &[f64],
+        f: &mut [f64],
+        mut k: Option<&mut [f64]>,
+    ) -> Result<(), FemError> {
+        let npe = self.nodes_per_element;
+        let ndof = 3 * npe;
+        f.fill(0.0);
+        if let Some(k) = k.as_deref_mut() {
+            k.fill(0.0);
+        }
+        for q in 0..self.points_per_element {
+            let w = self.weights[e * self.points_per_element + q];
+            let g = &self.grads[(e * self.points_per_element + q) * npe..][..npe];
+            let fg = self.deformation_gradient(e, q, u);
+            let det = fg.determinant();
+            if !det.is_finite() || (material.law.needs_positive_jacobian() && det <= 0.0) {
+                return Err(FemError::InvertedElement { element: e, det });
+            }
+            let (p, a_tan) = material.stress_tangent(&fg);
+            for a in 0..npe {
+                for i in 0..3 {
+                    f[3 * a + i] += w * (p[(i, 0)] * g[a][0] + p[(i, 1)] * g[a][1] + p[(i, 2)] * g[a][2]);
+                }
+            }
+            let Some(k) = k.as_deref_mut() else { continue };
+            // Q_a[i][k][L] = Σ_J g_aJ A_iJkL, then K_ab,ik = Σ_L Q_a[i][k][L] g_bL.
+            for a in 0..npe {
+                let mut qa = [[0.0; 9]; 3];
+                for i in 0..3 {
+                    for j in 0..3 {
+                        let gj = g[a][j] * w;
+                        let row = &a_tan[3 * i + j];
+                        for kl in 0..9 {
+                            qa[i][kl] += gj * row[kl];
+                        }
+                    }
+                }
+                for b in 0..npe {
+                    for i in 0..3 {
+                        let out = &mut k[(3 * a + i) * ndof + 3 * b..][..3];
+                        for kk in 0..3 {
+                            out[kk] +=
+                                qa[i][3 * kk] * g[b][0] + qa[i][3 * kk + 1] * g[b][1] + qa[i][3 * kk + 2] * g[b][2];
+                        }
+                    }
+                }
+            }
+        }
+        if f.iter().any(|v| !v.is_finite()) {
+            return Err(FemError::NonFinite(format!("internal force of element {e}")));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,55 @@
+//! Finite elements for soft-tissue mechanics: linear, co-rotational,
+//! Saint-Venant-Kirchhoff and Neo-Hookean materials on T4 and H8 meshes,
+//! Dirichlet conditions, springs, nodal forces, tractions and gravity, and a
+//! static Newton-Raphson solver on a sparse Cholesky factorisation.
+//!
+//! Units are SI: m, Pa, N, kg/m³. Displacement vectors hold 3 values per node
+//! (x, y, z of node 0, then node 1, ...).
+
+pub mod assembly;
+pub mod element;
+pub mod linsolve;
+pub mod material;
+pub mod post;
+pub mod problem;
+pub mod solver;
+
+pub use element::ElementGeometry;
+pub use material::{Law, Material};
+pub use problem::Problem;
+pub use solver::{Solution, SolverOptions, StaticSolver, Timings};
+
+/// Errors of a finite-element computation.
+#[derive(Debug, thiserror::Error)]
+pub enum FemError {
+    /// An element whose deformation gradient (or reference Jacobian) has det ≤ 0.
+    #[error("element {element} is inverted (det F = {det:.3e})")]
+    InvertedElement {
+        /// Element index.
+        element: usize,
+        /// The offending determinant.
+        det: f64,
+    },
+    /// Newton-Raphson did not reach the tolerance.
+    #[error("Newton-Raphson did not converge at load factor {load_factor:.4} after {iterations} iterations (relative residual {residual:.3e})")]
+    NotConverged {
+        /// The load factor being solved for.
+        load_factor: f64,
+        /// Iterations spent.
+        iterations: usize,
+        /// Last relative residual.
+        residual: f64,
+    },
+    /// A NaN or infinity appeared.
+    #[error("non-finite value in {0}")]
+    NonFinite(String),
+    /// The sparse factorisation failed.
+    #[error("factorisation failed: {0}")]
+    Factorization(String),
+    /// Inconsistent input.
+    #[error("invalid problem: {0}")]
+    Invalid(String),
+    /// A mesh error.
+    #[error(transparent)]
+    Mesh(#[from] mesh::MeshError),
+}

@@ -1,0 +1,265 @@
+//! Constitutive laws: first Piola-Kirchhoff stress P(F) and its consistent
+//! tangent A = ∂P/∂F for linear, co-rotational, Saint-Venant-Kirchhoff and
+//! compressible Neo-Hookean elasticity.
+//!
+//! The tangent is stored as a 9×9 array with index `3*i + J` for `P_iJ` and
+//! `3*k + L` for `F_kL` (row-major flattening of the 3×3 tensors).
+
+use nalgebra::Matrix3;
+use serde::{Deserialize, Serialize};
+
+/// ∂P/∂F as a 9×9 array (row-major flattening on both sides).
+pub type Tangent = [[f64; 9]; 9];
+
+/// The constitutive law.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Law {
+    /// Hooke's law on the small-strain tensor ε = sym(F) − I.
+    Linear,
+    /// Co-rotational linear elasticity: F = R·S (polar decomposition),
+    /// ε = S − I, P = R·(λ tr(ε) I + 2μ ε). Invariant to rigid rotations.
+    Corotational,
+    /// Saint-Venant-Kirchhoff: E = ½(FᵀF − I), S = λ tr(E) I + 2μE, P = F·S.
+    Svk,
+    /// Compressible Neo-Hookean: W = μ/2 (tr(FᵀF) − 3) − μ ln J + λ/2 (ln J)².
+    NeoHookean,
+}
+
+impl Law {
+    /// Whether the law is only defined for det F > 0 (all but linear).
+    pub fn needs_positive_jacobian(self) -> bool {
+        self != Law::Linear
+    }
+}
+
+/// An isotropic elastic material: law, Young's modulus (Pa), Poisson's ratio, density (kg/m³).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Material {
+    /// The constitutive law.
+    pub law: Law,
+    /// Young's modulus in Pa.
+    pub young: f64,
+    /// Poisson's ratio, in (−1, 0.5).
+    pub poisson: f64,
+    /// Mass density in kg/m³ (used by body forces).
+    #[serde(default = "default_density")]
+    pub density: f64,
+}
+
+fn default_density() -> f64 {
+    1000.0
+}
+
+impl Material {
+    /// A material with the default density of 1000 kg/m³.
+    pub fn new(law: Law, young: f64, poisson: f64) -> Self {
+        Material { law, young, poisson, density: default_density() }
+    }
+
+    /// Checks that the parameters are physical.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.young > 0.0 && self.young.is_finite()) {
+            return Err(format!("Young's modulus must be positive and finite, got {}", self.young));
+        }
+        if !(self.poisson > -1.0 && self.poisson < 0.5) {
+            return Err(format!("Poisson's ratio must lie in (-1, 0.5), got {}", self.poisson));
+        }
+        if !(self.density >= 0.0 && self.density.is_finite()) {
+            return Err(format!("density must be non-negative and finite, got {}", self.density));
+        }
+        Ok(())
+    }
+
+    /// Lamé constants (λ, μ) from Young's modulus and Poisson's ratio.
+    pub fn lame(&self) -> (f64, f64) {
+        let (e, nu) = (self.young, self.poisson);
+        (e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), e / (2.0 * (1.0 + nu)))
+    }
+
+    /// Strain energy density W(F) in J/m³.
+    pub fn energy(&self, f: &Matrix3<f64>) -> f64 {
+        let (lambda, mu) = self.lame();
+        let id = Matrix3::identity();
+        match self.law {
+            Law::Linear => {
+                let eps = (f + f.transpose()) * 0.5 - id;
+                0.5 * lambda * eps.trace().powi(2) + mu * eps.norm_squared()
+            }
+            Law::Corotational => {
+                let (_, s) = polar(f);
+                let eps = s - id;
+                0.5 * lambda * eps.trace().powi(2) + mu * eps.norm_squared()
+            }
+            Law::Svk => {
+                let e = (f.transpose() * f - id) * 0.5;
+                0.5 * lambda * e.trace().powi(2) + mu * e.norm_squared()
+            }
+            Law::NeoHookean => {
+                let lnj = f.determinant().ln();
+                0.5 * mu * (f.norm_squared() - 3.0) - mu * lnj + 0.5 * lambda * lnj * lnj
+            }
+        }
+    }
+
+    /// First Piola-Kirchhoff stress P(F) and its tangent ∂P/∂F.
+    /// The caller guarantees det F > 0 for laws that need it.
+    pub fn stress_tangent(&self, f: &Matrix3<f64>) -> (Matrix3<f64>, Tangent) {
+        let (lambda, mu) = self.lame();
+        let id = Matrix3::<f64>::identity();
+        let d = |a: usize, b: usize| if a == b { 1.0 } else { 0.0 };
+        let mut t = [[0.0; 9]; 9];
+        match self.law {
+            Law::Linear => {
+                let eps = (f + f.transpose()) * 0.5 - id;
+                let p = id * (lambda * eps.trace()) + eps * (2.0 * mu);
+                fill(&mut t, |i, j, k, l| lambda * d(i, j) * d(k, l) + mu * (d(i, k) * d(j, l) + d(i, l) * d(j, k)));
+                (p, t)
+            }
+            Law::Svk => {
+                let e = (f.transpose() * f - id) * 0.5;
+                let s = id * (lambda * e.trace()) + e * (2.0 * mu);
+                let f_ft = f * f.transpose();
+                // A_iJkL = δ_ik S_JL + λ F_iJ F_kL + μ (F Fᵀ)_ik δ_JL + μ F_iL F_kJ
+                fill(&mut t, |i, j, k, l| {
+                    d(i, k) * s[(j, l)]
+                        + lambda * f[(i, j)] * f[(k, l)]
+                        + mu * f_ft[(i, k)] * d(j, l)
+                        + mu * f[(i, l)] * f[(k, j)]
+                });
+                (f * s, t)
+            }
+            Law::NeoHookean => {
+                let jac = f.determinant();
+                let finv = f.try_inverse().unwrap_or_else(Matrix3::zeros);
+                let lnj = jac.ln();
+                let p = (f - finv.transpose()) * mu + finv.transpose() * (lambda * lnj);
+                // A_iJkL = μ δ_ik δ_JL + (μ − λ ln J) F⁻¹_Jk F⁻¹_Li + λ F⁻¹_Ji F⁻¹_Lk
+                fill(&mut t, |i, j, k, l| {
+                    mu * d(i, k) * d(j, l)
+                        + (mu - lambda * lnj) * finv[(j, k)] * finv[(l, i)]
+                        + lambda * finv[(j, i)] * finv[(l, k)]
+                });
+                (p, t)
+            }
+            Law::Corotational => corotational(f, lambda, mu),
+        }
+    }
+}
+
+fn fill(t: &mut Tangent, a: impl Fn(usize, usize, usize, usize) -> f64) {
+    for i in 0..3 {
+        for j in 0..3 {
+            for k in 0..3 {
+                for l in 0..3 {
+                    t[3 * i + j][3 * k + l] = a(i, j, k, l);
+                }
+            }
+        }
+    }
+}
+
+/// Polar decomposition F = R·S with R a proper rotation and S symmetric,
+/// for det F > 0 (through the SVD).
+pub fn polar(f: &Matrix3<f64>) -> (Matrix3<f64>, Matrix3<f64>) {
+    let svd = f.svd(true, true);
+    let (u, v_t) = (svd.u.expect("SVD with U"), svd.v_t.expect("SVD with Vᵀ"));
+    let mut sigma = svd.singular_values;
+    let mut u = u;
+    if (u * v_t).determinant() < 0.0 {
+        // Reflection: flip the smallest singular direction.
+        let k = sigma.imin();
+        sigma[k] = -sigma[k];
+        u.column_mut(k).neg_mut();
+    }
+    let r = u * v_t;
+    let s = v_t.transpose() * Matrix3::from_diagonal(&sigma) * v_t;
+    (r, (s + s.transpose()) * 0.5)
+}
+
+/// Co-rotational stress and its consistent tangent, including the variation
+/// of the rotation: with Ω = Rᵀ dR = [ω]×, ω = (tr(S) I − S)⁻¹ axial(Rᵀ dF − dFᵀ R).
+fn corotational(f: &Matrix3<f64>, lambda: f64, mu: f64) -> (Matrix3<f64>, Tangent) {
+    let id = Matrix3::<f64>::identity();
+    let (r, s) = polar(f);
+    let eps = s - id;
+    let sigma = id * (lambda * eps.trace()) + eps * (2.0 * mu);
+    let p = r * sigma;
+    let g_inv = (id * s.trace() - s).try_inverse().unwrap_or_else(Matrix3::zeros);
+    let mut t = [[0.0; 9]; 9];
+    for k in 0..3 {
+        for l in 0..3 {
+            let mut df = Matrix3::zeros();
+            df[(k, l)] = 1.0;
+            let m = r.transpose() * df - df.transpose() * r;
+            let omega = g_inv * nalgebra::Vector3::new(m[(2, 1)], m[(0, 2)], m[(1, 0)]);
+            let big_omega = omega.cross_matrix();
+            let ds = r.transpose() * df - big_omega * s;
+            let dsigma = id * (lambda * ds.trace()) + ds * (2.0 * mu);
+            let dp = r * big_omega * sigma + r * dsigma;
+            for i in 0..3 {
+                for j in 0..3 {
+                    t[3 * i + j][3 * k + l] = dp[(i, j)];
+                }
+            }
+        }
+    }
+    (p, t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample_f() -> Matrix3<f64> {
+        Matrix3::new(1.1, 0.05, -0.02, 0.03, 0.95, 0.04, -0.06, 0.02, 1.07)
+    }
+
+    #[test]
+    fn stress_is_energy_gradient_and_tangent_is_stress_gradient() {
+        let h = 1e-6;
+        for law in [Law::Linear, Law::Corotational, Law::Svk, Law::NeoHookean] {
+            let m = Material::new(law, 5000.0, 0.45);
+            let f = sample_f();
+            let (p, t) = m.stress_tangent(&f);
+            for k in 0..3 {
+                for l in 0..3 {
+                    let mut fp = f;
+                    fp[(k, l)] += h;
+                    let mut fm = f;
+                    fm[(k, l)] -= h;
+                    let dw = (m.energy(&fp) - m.energy(&fm)) / (2.0 * h);
+                    assert!((dw - p[(k, l)]).abs() < 1e-5 * m.young, "{law:?}: dW/dF {dw} vs P {}", p[(k, l)]);
+                    let (pp, _) = m.stress_tangent(&fp);
+                    let (pm, _) = m.stress_tangent(&fm);
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            let fd = (pp[(i, j)] - pm[(i, j)]) / (2.0 * h);
+                            let an = t[3 * i + j][3 * k + l];
+                            assert!((fd - an).abs() < 1e-5 * m.young, "{law:?} A[{i}{j}{k}{l}]: {an} vs fd {fd}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn lame_constants() {
+        let m = Material::new(Law::Svk, 300.0, 0.4);
+        let (l, mu) = m.lame();
+        assert!((mu - 300.0 / 2.8).abs() < 1e-12);
+        assert!((l - 300.0 * 0.4 / (1.4 * 0.2)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn polar_decomposition_is_exact() {
+        let f = sample_f();
+        let (r, s) = polar(&f);
+        assert!((r * s - f).norm() < 1e-12);
+        assert!((r.transpose() * r - Matrix3::identity()).norm() < 1e-12);
+        assert!((r.determinant() - 1.0).abs() < 1e-12);
+        assert!((s - s.transpose()).norm() < 1e-14);
+    }
+}

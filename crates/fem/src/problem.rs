@@ -1,0 +1,162 @@
+//! A static boundary-value problem: mesh, material, Dirichlet conditions,
+//! springs and external loads.
+
+use std::collections::BTreeMap;
+
+use mesh::{boundary_faces, Mesh, Point};
+
+use crate::element::ElementGeometry;
+use crate::material::Material;
+use crate::FemError;
+
+/// Everything a static solve needs. Loads are dead loads (fixed in the
+/// reference configuration) and are applied in full at load factor 1.
+#[derive(Clone, Debug)]
+pub struct Problem {
+    /// The mesh (metres).
+    pub mesh: Mesh,
+    /// The material of every element.
+    pub material: Material,
+    /// Prescribed displacement per constrained node (all three components);
+    /// a fixed node has the value `[0, 0, 0]`. The set of nodes is frozen when
+    /// a solver is built; the values may change between solves.
+    pub dirichlet: BTreeMap<usize, Point>,
+    /// Stiffness (N/m) of a zero-length spring tying each node to its rest position; 0 for none.
+    pub springs: Vec<f64>,
+    /// External nodal forces (N), 3 per node.
+    pub f_ext: Vec<f64>,
+}
+
+impl Problem {
+    /// A problem without constraints or loads.
+    pub fn new(mesh: Mesh, material: Material) -> Self {
+        let n = mesh.num_nodes();
+        Problem { mesh, material, dirichlet: BTreeMap::new(), springs: vec![0.0; n], f_ext: vec![0.0; 3 * n] }
+    }
+
+    /// Number of degrees of freedom (3 per node).
+    pub fn num_dofs(&self) -> usize {
+        3 * self.mesh.num_nodes()
+    }
+
+    /// Fixes the nodes (zero displacement).
+    pub fn fix(&mut self, nodes: &[usize]) {
+        self.prescribe(nodes, [0.0; 3]);
+    }
+
+    /// Prescribes the same displacement on every given node.
+    pub fn prescribe(&mut self, nodes: &[usize], displacement: Point) {
+        for &n in nodes {
+            self.dirichlet.insert(n, displacement);
+        }
+    }
+
+    /// Adds a spring of the given stiffness (N/m) to each node.
+    pub fn add_springs(&mut self, nodes: &[usize], stiffness: f64) {
+        for &n in nodes {
+            self.springs[n] += stiffness;
+        }
+    }
+
+    /// Adds the force `total` (N) shared equally by the nodes.
+    pub fn add_force(&mut self, nodes: &[usize], total: Point) {
+        let share = 1.0 / nodes.len().max(1) as f64;
+        for &n in nodes {
+            for d in 0..3 {
+                self.f_ext[3 * n + d] += total[d] * share;
+            }
+        }
+    }
+
+    /// Adds a surface traction (Pa, a force per reference area) on every boundary
+    /// face whose nodes all belong to `nodes`. Returns the loaded area (m²).
+    pub fn add_traction(&mut self, nodes: &[usize], traction: Point) -> f64 {
+        let mut member = vec![false; self.mesh.num_nodes()];
+        for &n in nodes {
+            member[n] = true;
+        }
+        let mut area = 0.0;
+        for face in boundary_faces(&self.mesh).into_iter().filter(|f| f.nodes.iter().all(|&n| member[n])) {
+            let x: Vec<Point> = face.nodes.iter().map(|&n| self.mesh.nodes[n]).collect();
+            for (k, w) in face_node_areas(&x).into_iter().enumerate() {
+                area += w;
+                for d in 0..3 {
+                    self.f_ext[3 * face.nodes[k] + d] += w * traction[d];
+                }
+            }
+        }
+        area
+    }
+
+    /// Adds the body force ρ·g of the material's density under acceleration `g` (m/s²).
+    pub fn add_gravity(&mut self, g: Point) -> Result<(), FemError> {
+        let geo = ElementGeometry::new(&self.mesh)?;
+        let (npe, nqp) = (geo.nodes_per_element, geo.points_per_element);
+        for e in 0..geo.len() {
+            for q in 0..nqp {
+                let w = geo.weights[e * nqp + q] * self.material.density;
+                for (a, &n) in geo.element_nodes(e).iter().enumerate() {
+                    for d in 0..3 {
+                        self.f_ext[3 * n + d] += w * geo.shape[q * npe + a] * g[d];
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks sizes, indices and finiteness of the data.
+    pub fn validate(&self) -> Result<(), FemError> {
+        let n = self.mesh.num_nodes();
+        self.material.validate().map_err(FemError::Invalid)?;
+        if self.springs.len() != n || self.f_ext.len() != 3 * n {
+            return Err(FemError::Invalid(format!(
+                "springs ({}) and f_ext ({}) must have {n} and {} entries",
+                self.springs.len(),
+                self.f_ext.len(),
+                3 * n
+            )));
+        }
+        if let Some((&k, _)) = self.dirichlet.iter().find(|(&k, _)| k >= n) {
+            return Err(FemError::Invalid(format!("constrained node {k} does not exist ({n} nodes)")));
+        }
+        if self.dirichlet.values().flatten().chain(&self.f_ext).any(|v| !v.is_finite()) {
+            return Err(FemError::NonFinite("prescribed displacement or external force".into()));
+        }
+        if self.springs.iter().any(|k| !(*k >= 0.0 && k.is_finite())) {
+            return Err(FemError::Invalid("spring stiffnesses must be non-negative and finite".into()));
+        }
+        Ok(())
+    }
+}
+
+/// Area associated with each node of a flat triangle (A/3 each) or a bilinear
+/// quadrilateral (∫ N_a dA by 2×2 Gauss quadrature).
+fn face_node_areas(x: &[Point]) -> Vec<f64> {
+    use mesh::{cross, dot, sub};
+    if x.len() == 3 {
+        let n = cross(sub(x[1], x[0]), sub(x[2], x[0]));
+        return vec![dot(n, n).sqrt() / 6.0; 3];
+    }
+    let gp = 1.0 / 3f64.sqrt();
+    let corners = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]];
+    let mut w = vec![0.0; 4];
+    for s in [-gp, gp] {
+        for t in [-gp, gp] {
+            let mut dxs = [0.0; 3];
+            let mut dxt = [0.0; 3];
+            for (a, c) in corners.iter().enumerate() {
+                for d in 0..3 {
+                    dxs[d] += x[a][d] * c[0] * (1.0 + c[1] * t) / 4.0;
+                    dxt[d] += x[a][d] * c[1] * (1.0 + c[0] * s) / 4.0;
+                }
+            }
+            let n = cross(dxs, dxt);
+            let da = dot(n, n).sqrt();
+            for (a, c) in corners.iter().enumerate() {
+                w[a] += da * (1.0 + c[0] * s) * (1.0 + c[1] * t) / 4.0;
+            }
+        }
+    }
+    w
+}

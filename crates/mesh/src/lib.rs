@@ -1,0 +1,270 @@
+//! Meshes and geometry for augsim.
+//!
+//! Volume meshes are made of linear tetrahedra (T4) or trilinear hexahedra (H8)
+//! and carry named node sets (regions). Coordinates are in metres.
+//! Node numbering of an H8 cell follows VTK/Gmsh: the bottom face 0-1-2-3
+//! counter-clockwise seen from above, then the top face 4-5-6-7.
+
+pub mod bvh;
+pub mod embedding;
+pub mod generate;
+pub mod immersed;
+pub mod io;
+pub mod phantom;
+pub mod sampling;
+pub mod select;
+pub mod surface;
+pub mod tetmesh;
+pub mod topology;
+
+use std::collections::BTreeMap;
+
+pub use generate::{box_hex, box_tet};
+pub use select::NodeSelection;
+pub use topology::{boundary_faces, boundary_nodes, boundary_surface, BoundaryFace};
+
+/// A point or vector in 3D, in metres.
+pub type Point = [f64; 3];
+
+/// A triangle surface (closed or not), counter-clockwise seen from outside.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TriSurface {
+    /// Vertex coordinates.
+    pub vertices: Vec<Point>,
+    /// Triangles as vertex indices.
+    pub triangles: Vec<[usize; 3]>,
+}
+
+/// Errors of mesh construction, reading and writing.
+#[derive(Debug, thiserror::Error)]
+pub enum MeshError {
+    /// An I/O failure on a named file.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// A file that could be opened but not understood.
+    #[error("{path}: {message}")]
+    Parse {
+        /// The file.
+        path: String,
+        /// What is wrong, with a line number where known.
+        message: String,
+    },
+    /// A mesh whose content is inconsistent (bad index, degenerate cell, ...).
+    #[error("invalid mesh: {0}")]
+    Invalid(String),
+}
+
+/// The cells of a volume mesh: all of one kind.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Cells {
+    /// Linear tetrahedra, positively oriented: (p1-p0)·((p2-p0)×(p3-p0)) > 0.
+    Tet4(Vec<[usize; 4]>),
+    /// Trilinear hexahedra in VTK order.
+    Hex8(Vec<[usize; 8]>),
+}
+
+impl Cells {
+    /// Number of cells.
+    pub fn len(&self) -> usize {
+        match self {
+            Cells::Tet4(c) => c.len(),
+            Cells::Hex8(c) => c.len(),
+        }
+    }
+
+    /// True when there are no cells.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Nodes per cell (4 or 8).
+    pub fn nodes_per_cell(&self) -> usize {
+        match self {
+            Cells::Tet4(_) => 4,
+            Cells::Hex8(_) => 8,
+        }
+    }
+
+    /// The node indices of cell `i`.
+    pub fn cell(&self, i: usize) -> &[usize] {
+        match self {
+            Cells::Tet4(c) => &c[i],
+            Cells::Hex8(c) => &c[i],
+        }
+    }
+
+    /// Short name of the cell kind ("T4" or "H8").
+    pub fn kind_name(&self) -> &'static str {
+        match self {
+            Cells::Tet4(_) => "T4",
+            Cells::Hex8(_) => "H8",
+        }
+    }
+}
+
+/// A volume mesh with named node sets.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Mesh {
+    /// Node coordinates.
+    pub nodes: Vec<Point>,
+    /// Cells.
+    pub cells: Cells,
+    /// Named node sets (e.g. "fixed", "visible", "markers").
+    pub regions: BTreeMap<String, Vec<usize>>,
+    /// Optional per-cell stiffness scale in [0, 1]: the volume fraction of an
+    /// immersed-boundary cell that lies inside the organ. `None` means 1 everywhere.
+    pub cell_fraction: Option<Vec<f64>>,
+}
+
+impl Mesh {
+    /// A mesh from nodes and cells, checked with [`Mesh::validate`].
+    pub fn new(nodes: Vec<Point>, cells: Cells) -> Result<Self, MeshError> {
+        let mesh = Mesh { nodes, cells, regions: BTreeMap::new(), cell_fraction: None };
+        mesh.validate()?;
+        Ok(mesh)
+    }
+
+    /// Number of nodes.
+    pub fn num_nodes(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// Checks indices, finiteness, cell orientation and region indices.
+    /// Tetrahedra must have positive volume; hexahedra a positive Jacobian at the
+    /// centre and corners.
+    pub fn validate(&self) -> Result<(), MeshError> {
+        let n = self.nodes.len();
+        if let Some(i) = self.nodes.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
+            return Err(MeshError::Invalid(format!("node {i} has a non-finite coordinate")));
+        }
+        for i in 0..self.cells.len() {
+            let cell = self.cells.cell(i);
+            if let Some(&bad) = cell.iter().find(|&&k| k >= n) {
+                return Err(MeshError::Invalid(format!("cell {i} refers to node {bad}, but there are {n} nodes")));
+            }
+            let vol = self.cell_volume(i);
+            if !(vol > 0.0) {
+                return Err(MeshError::Invalid(format!("cell {i} is inverted or degenerate (volume {vol:.3e})")));
+            }
+        }
+        if let Cells::Hex8(hexes) = &self.cells {
+            for (i, h) in hexes.iter().enumerate() {
+                if !hex_corner_jacobians_positive(&self.nodes, h) {
+                    return Err(MeshError::Invalid(format!("hexahedron {i} has a non-positive corner Jacobian")));
+                }
+            }
+        }
+        for (name, set) in &self.regions {
+            if let Some(&bad) = set.iter().find(|&&k| k >= n) {
+                return Err(MeshError::Invalid(format!(
+                    "region '{name}' refers to node {bad}, but there are {n} nodes"
+                )));
+            }
+        }
+        if let Some(f) = &self.cell_fraction {
+            if f.len() != self.cells.len() || f.iter().any(|x| !(0.0..=1.0).contains(x)) {
+                return Err(MeshError::Invalid("cell_fraction must hold one value in [0, 1] per cell".into()));
+            }
+        }
+        Ok(())
+    }
+
+    /// Signed volume of cell `i` (exact for tetrahedra; for hexahedra the sum of
+    /// a 6-tetrahedron split of the trilinear cell, exact for parallelepipeds).
+    pub fn cell_volume(&self, i: usize) -> f64 {
+        let p = |k: usize| self.nodes[self.cells.cell(i)[k]];
+        match &self.cells {
+            Cells::Tet4(_) => tet_volume(p(0), p(1), p(2), p(3)),
+            Cells::Hex8(_) => HEX_TO_TETS.iter().map(|t| tet_volume(p(t[0]), p(t[1]), p(t[2]), p(t[3]))).sum(),
+        }
+    }
+
+    /// Total volume of the mesh.
+    pub fn volume(&self) -> f64 {
+        (0..self.cells.len()).map(|i| self.cell_volume(i)).sum()
+    }
+
+    /// Axis-aligned bounding box (min, max) of the nodes.
+    pub fn bounds(&self) -> (Point, Point) {
+        bounds(&self.nodes)
+    }
+
+    /// The named region, or an error listing the regions that exist.
+    pub fn region(&self, name: &str) -> Result<&[usize], MeshError> {
+        self.regions.get(name).map(|v| v.as_slice()).ok_or_else(|| {
+            let names: Vec<&str> = self.regions.keys().map(|s| s.as_str()).collect();
+            MeshError::Invalid(format!("no region named '{name}' (regions: {})", names.join(", ")))
+        })
+    }
+
+    /// Translates and scales the nodes in place: x ← (x − centre) · scale.
+    pub fn transform(&mut self, centre: Point, scale: f64) {
+        for p in &mut self.nodes {
+            for d in 0..3 {
+                p[d] = (p[d] - centre[d]) * scale;
+            }
+        }
+    }
+}
+
+/// Axis-aligned bounding box (min, max) of a point set; infinities when empty.
+pub fn bounds(points: &[Point]) -> (Point, Point) {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in points {
+        for d in 0..3 {
+            lo[d] = lo[d].min(p[d]);
+            hi[d] = hi[d].max(p[d]);
+        }
+    }
+    (lo, hi)
+}
+
+/// Signed volume of the tetrahedron (a, b, c, d): positive when
+/// (b−a)·((c−a)×(d−a)) > 0.
+pub fn tet_volume(a: Point, b: Point, c: Point, d: Point) -> f64 {
+    let u = sub(b, a);
+    let v = sub(c, a);
+    let w = sub(d, a);
+    dot(u, cross(v, w)) / 6.0
+}
+
+/// A split of an H8 cell (VTK order) into 6 positively oriented tetrahedra
+/// around the diagonal 0–6. Conforming between neighbouring cells of a
+/// structured grid with the same split.
+pub const HEX_TO_TETS: [[usize; 4]; 6] =
+    [[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]];
+
+fn hex_corner_jacobians_positive(nodes: &[Point], h: &[usize; 8]) -> bool {
+    // Corner k of the reference cube and its three neighbours along +ξ, +η, +ζ
+    // (or −, with the sign accounted for so that the triple product is positive).
+    const NEIGH: [[usize; 3]; 8] =
+        [[1, 3, 4], [2, 0, 5], [3, 1, 6], [0, 2, 7], [7, 5, 0], [4, 6, 1], [5, 7, 2], [6, 4, 3]];
+    NEIGH.iter().enumerate().all(|(k, nb)| {
+        let o = nodes[h[k]];
+        let a = sub(nodes[h[nb[0]]], o);
+        let b = sub(nodes[h[nb[1]]], o);
+        let c = sub(nodes[h[nb[2]]], o);
+        dot(a, cross(b, c)) > 0.0
+    })
+}
+
+/// a − b.
+pub fn sub(a: Point, b: Point) -> Point {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+/// a · b.
+pub fn dot(a: Point, b: Point) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// a × b.
+pub fn cross(a: Point, b: Point) -> Point {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
