@@ -160,13 +160,21 @@ impl ElementGeometry {
             if !det.is_finite() || (material.law.needs_positive_jacobian() && det <= 0.0) {
                 return Err(FemError::InvertedElement { element: e, det });
             }
+            let Some(k) = k.as_deref_mut() else {
+                let p = material.stress(&fg);
+                for a in 0..npe {
+                    for i in 0..3 {
+                        f[3 * a + i] += w * (p[(i, 0)] * g[a][0] + p[(i, 1)] * g[a][1] + p[(i, 2)] * g[a][2]);
+                    }
+                }
+                continue;
+            };
             let (p, a_tan) = material.stress_tangent(&fg);
             for a in 0..npe {
                 for i in 0..3 {
                     f[3 * a + i] += w * (p[(i, 0)] * g[a][0] + p[(i, 1)] * g[a][1] + p[(i, 2)] * g[a][2]);
                 }
             }
-            let Some(k) = k.as_deref_mut() else { continue };
             // Q_a[i][k][L] = Σ_J g_aJ A_iJkL, then K_ab,ik = Σ_L Q_a[i][k][L] g_bL.
             for a in 0..npe {
                 let mut qa = [[0.0; 9]; 3];

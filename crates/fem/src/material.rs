@@ -103,6 +103,32 @@ impl Material {
         }
     }
 
+    /// First Piola-Kirchhoff stress P(F) alone (cheaper than [`Material::stress_tangent`]).
+    /// The caller guarantees det F > 0 for laws that need it.
+    pub fn stress(&self, f: &Matrix3<f64>) -> Matrix3<f64> {
+        let (lambda, mu) = self.lame();
+        let id = Matrix3::<f64>::identity();
+        match self.law {
+            Law::Linear => {
+                let eps = (f + f.transpose()) * 0.5 - id;
+                id * (lambda * eps.trace()) + eps * (2.0 * mu)
+            }
+            Law::Svk => {
+                let e = (f.transpose() * f - id) * 0.5;
+                f * (id * (lambda * e.trace()) + e * (2.0 * mu))
+            }
+            Law::NeoHookean => {
+                let finv_t = f.try_inverse().unwrap_or_else(Matrix3::zeros).transpose();
+                (f - finv_t) * mu + finv_t * (lambda * f.determinant().ln())
+            }
+            Law::Corotational => {
+                let (r, s) = polar(f);
+                let eps = s - id;
+                r * (id * (lambda * eps.trace()) + eps * (2.0 * mu))
+            }
+        }
+    }
+
     /// First Piola-Kirchhoff stress P(F) and its tangent ∂P/∂F.
     /// The caller guarantees det F > 0 for laws that need it.
     pub fn stress_tangent(&self, f: &Matrix3<f64>) -> (Matrix3<f64>, Tangent) {
@@ -160,22 +186,38 @@ fn fill(t: &mut Tangent, a: impl Fn(usize, usize, usize, usize) -> f64) {
     }
 }
 
-/// Polar decomposition F = R·S with R a proper rotation and S symmetric,
-/// for det F > 0 (through the SVD).
+/// Polar decomposition F = R·S with R a proper rotation and S symmetric
+/// positive definite, for det F > 0: Higham's scaled Newton iteration
+/// X ← ½(γX + X⁻ᵀ/γ), which converges quadratically in a handful of steps;
+/// falls back to the SVD if it does not.
 pub fn polar(f: &Matrix3<f64>) -> (Matrix3<f64>, Matrix3<f64>) {
+    let mut x = *f;
+    for _ in 0..30 {
+        let Some(inv) = x.try_inverse() else { break };
+        let gamma = (inv.norm() / x.norm()).sqrt();
+        let next = (x * gamma + inv.transpose() / gamma) * 0.5;
+        let change = (next - x).norm();
+        x = next;
+        if change <= 1e-14 * x.norm() {
+            let s = x.transpose() * f;
+            return (x, (s + s.transpose()) * 0.5);
+        }
+    }
+    polar_svd(f)
+}
+
+fn polar_svd(f: &Matrix3<f64>) -> (Matrix3<f64>, Matrix3<f64>) {
     let svd = f.svd(true, true);
-    let (u, v_t) = (svd.u.expect("SVD with U"), svd.v_t.expect("SVD with Vᵀ"));
+    let (mut u, v_t) = (svd.u.expect("SVD with U"), svd.v_t.expect("SVD with Vᵀ"));
     let mut sigma = svd.singular_values;
-    let mut u = u;
     if (u * v_t).determinant() < 0.0 {
         // Reflection: flip the smallest singular direction.
         let k = sigma.imin();
         sigma[k] = -sigma[k];
         u.column_mut(k).neg_mut();
     }
-    let r = u * v_t;
     let s = v_t.transpose() * Matrix3::from_diagonal(&sigma) * v_t;
-    (r, (s + s.transpose()) * 0.5)
+    (u * v_t, (s + s.transpose()) * 0.5)
 }
 
 /// Co-rotational stress and its consistent tangent, including the variation
@@ -223,6 +265,7 @@ mod tests {
             let m = Material::new(law, 5000.0, 0.45);
             let f = sample_f();
             let (p, t) = m.stress_tangent(&f);
+            assert!((m.stress(&f) - p).norm() < 1e-12 * m.young, "{law:?}: stress() and stress_tangent() differ");
             for k in 0..3 {
                 for l in 0..3 {
                     let mut fp = f;
@@ -256,7 +299,9 @@ mod tests {
     #[test]
     fn polar_decomposition_is_exact() {
         let f = sample_f();
+        let (r2, s2) = polar_svd(&f);
         let (r, s) = polar(&f);
+        assert!((r - r2).norm() < 1e-12 && (s - s2).norm() < 1e-12);
         assert!((r * s - f).norm() < 1e-12);
         assert!((r.transpose() * r - Matrix3::identity()).norm() < 1e-12);
         assert!((r.determinant() - 1.0).abs() < 1e-12);

@@ -30,7 +30,7 @@ pub fn von_mises(geometry: &ElementGeometry, material: &Material, u: &[f64]) -> 
             (0..n)
                 .map(|q| {
                     let f = geometry.deformation_gradient(e, q, u);
-                    let (p, _) = material.stress_tangent(&f);
+                    let p = material.stress(&f);
                     let s = p * f.transpose() / f.determinant();
                     let dev = s - Matrix3::identity() * (s.trace() / 3.0);
                     (1.5 * dev.norm_squared()).sqrt()

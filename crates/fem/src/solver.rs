@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::assembly::{assemble, Pattern, Workspace};
 use crate::element::ElementGeometry;
-use crate::linsolve::SparseCholesky;
+use crate::linsolve::{symmetric_matvec, SparseCholesky};
 use crate::problem::Problem;
 use crate::FemError;
 
@@ -28,11 +28,29 @@ pub struct SolverOptions {
     pub line_search: bool,
     /// How many times a failing load step may be halved before giving up.
     pub max_step_cuts: usize,
+    /// Newton systems: preconditioned conjugate gradients on the last
+    /// factorisation (kept across iterations and solves), refactorising only
+    /// when CG needs more than `cg_max_iterations`; `false` factorises every iteration.
+    pub reuse_factorization: bool,
+    /// CG iterations allowed before the tangent is refactorised.
+    pub cg_max_iterations: usize,
+    /// CG stops at ‖K du + r‖ ≤ cg_tolerance · ‖r‖ (inexact Newton forcing term).
+    pub cg_tolerance: f64,
 }
 
 impl Default for SolverOptions {
     fn default() -> Self {
-        SolverOptions { load_steps: 1, max_iterations: 20, rtol: 1e-8, utol: 1e-6, line_search: true, max_step_cuts: 8 }
+        SolverOptions {
+            load_steps: 1,
+            max_iterations: 20,
+            rtol: 1e-6,
+            utol: 1e-6,
+            line_search: true,
+            max_step_cuts: 8,
+            reuse_factorization: true,
+            cg_max_iterations: 20,
+            cg_tolerance: 1e-3,
+        }
     }
 }
 
@@ -43,7 +61,7 @@ pub struct Timings {
     pub assembly: Duration,
     /// Numeric factorisations.
     pub factorization: Duration,
-    /// Triangular solves.
+    /// Triangular solves and conjugate-gradient iterations.
     pub solve: Duration,
     /// Whole solve.
     pub total: Duration,
@@ -58,6 +76,10 @@ pub struct Solution {
     pub iterations: usize,
     /// Load steps taken (including halved ones that succeeded).
     pub load_steps: usize,
+    /// Numeric factorisations performed.
+    pub factorizations: usize,
+    /// Conjugate-gradient iterations performed.
+    pub cg_iterations: usize,
     /// Relative residual ‖r‖ / max(‖f_ext‖, ‖f_int‖) at each iterate, in order.
     pub residuals: Vec<f64>,
     /// Time split.
@@ -74,6 +96,7 @@ pub struct StaticSolver {
     constrained_nodes: Vec<usize>,
     work: Workspace,
     values: Vec<f64>,
+    factorized: bool,
 }
 
 impl std::fmt::Debug for StaticSolver {
@@ -103,7 +126,16 @@ impl StaticSolver {
         let cholesky = SparseCholesky::new(&pattern)?;
         let values = vec![0.0; pattern.nnz()];
         let constrained_nodes = problem.dirichlet.keys().copied().collect();
-        Ok(StaticSolver { problem, geometry, pattern, cholesky, constrained_nodes, work: Workspace::default(), values })
+        Ok(StaticSolver {
+            problem,
+            geometry,
+            pattern,
+            cholesky,
+            constrained_nodes,
+            work: Workspace::default(),
+            values,
+            factorized: false,
+        })
     }
 
     /// The problem being solved.
@@ -263,12 +295,20 @@ impl StaticSolver {
             self.evaluate(u, &mut f_int, true)?;
             stats.timings.assembly += t.elapsed();
             let t = Instant::now();
-            self.cholesky.factorize(&self.values)?;
-            stats.timings.factorization += t.elapsed();
-            let t = Instant::now();
-            du.iter_mut().zip(&r).for_each(|(d, r)| *d = -r);
-            self.cholesky.solve_in_place(&mut du)?;
+            let solved = opt.reuse_factorization && self.factorized && self.pcg(&r, &mut du, opt, stats);
             stats.timings.solve += t.elapsed();
+            if !solved {
+                let t = Instant::now();
+                self.factorized = false;
+                self.cholesky.factorize(&self.values)?;
+                self.factorized = true;
+                stats.factorizations += 1;
+                stats.timings.factorization += t.elapsed();
+                let t = Instant::now();
+                du.iter_mut().zip(&r).for_each(|(d, r)| *d = -r);
+                self.cholesky.solve_in_place(&mut du)?;
+                stats.timings.solve += t.elapsed();
+            }
             let alpha = self.line_search(u, &du, &mut trial, &mut f_int, &f_ext, &mut r, opt, stats)?;
             res = norm(&r);
             if alpha != 1.0 {
@@ -277,6 +317,45 @@ impl StaticSolver {
             u.copy_from_slice(&trial);
         }
         unreachable!("the loop returns at its last iteration")
+    }
+
+    /// Solves K du = −r by conjugate gradients preconditioned with the stored
+    /// factorisation. Returns false when it needs more than the allowed iterations.
+    fn pcg(&mut self, r: &[f64], du: &mut [f64], opt: &SolverOptions, stats: &mut Stats) -> bool {
+        let n = r.len();
+        let target = opt.cg_tolerance * norm(r);
+        du.fill(0.0);
+        let mut res: Vec<f64> = r.iter().map(|v| -v).collect();
+        let mut z = res.clone();
+        if self.cholesky.solve_in_place(&mut z).is_err() {
+            return false;
+        }
+        let mut p = z.clone();
+        let mut kp = vec![0.0; n];
+        let mut rz: f64 = res.iter().zip(&z).map(|(a, b)| a * b).sum();
+        for _ in 0..opt.cg_max_iterations {
+            stats.cg_iterations += 1;
+            symmetric_matvec(&self.pattern, &self.values, &p, &mut kp);
+            let pkp: f64 = p.iter().zip(&kp).map(|(a, b)| a * b).sum();
+            if !(pkp > 0.0) {
+                return false;
+            }
+            let a = rz / pkp;
+            du.iter_mut().zip(&p).for_each(|(x, p)| *x += a * p);
+            res.iter_mut().zip(&kp).for_each(|(r, kp)| *r -= a * kp);
+            if norm(&res) <= target {
+                return true;
+            }
+            z.copy_from_slice(&res);
+            if self.cholesky.solve_in_place(&mut z).is_err() {
+                return false;
+            }
+            let rz_new: f64 = res.iter().zip(&z).map(|(a, b)| a * b).sum();
+            let beta = rz_new / rz;
+            rz = rz_new;
+            p.iter_mut().zip(&z).for_each(|(p, z)| *p = z + beta * *p);
+        }
+        false
     }
 
     /// Line search along `du` on s(α) = du · r(u + α du), the directional
@@ -357,6 +436,8 @@ impl StaticSolver {
 #[derive(Default)]
 struct Stats {
     iterations: usize,
+    factorizations: usize,
+    cg_iterations: usize,
     residuals: Vec<f64>,
     timings: Timings,
 }
@@ -365,6 +446,14 @@ impl Stats {
     fn finish(self, u: Vec<f64>, load_steps: usize, start: Instant) -> Solution {
         let mut timings = self.timings;
         timings.total = start.elapsed();
-        Solution { u, iterations: self.iterations, load_steps, residuals: self.residuals, timings }
+        Solution {
+            u,
+            iterations: self.iterations,
+            load_steps,
+            factorizations: self.factorizations,
+            cg_iterations: self.cg_iterations,
+            residuals: self.residuals,
+            timings,
+        }
     }
 }

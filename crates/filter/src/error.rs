@@ -1,0 +1,79 @@
+//! Errors of the filter.
+
+use std::path::PathBuf;
+
+/// Boxed error of a model, as carried by [`FilterError::Model`].
+pub type BoxedModelError = Box<dyn std::error::Error + Send + Sync + 'static>;
+
+/// Everything that can go wrong while configuring or running the filter, or writing its traces.
+#[derive(Debug, thiserror::Error)]
+pub enum FilterError {
+    /// The configuration is unusable (empty parameter list, non-positive standard deviation, ...).
+    #[error("invalid filter configuration: {0}")]
+    InvalidConfig(String),
+    /// A vector or matrix has the wrong length.
+    #[error("dimension mismatch in {what}: expected {expected}, found {found}")]
+    DimensionMismatch {
+        /// Which quantity.
+        what: String,
+        /// Expected length.
+        expected: usize,
+        /// Actual length.
+        found: usize,
+    },
+    /// `Model::step` failed for one sigma point (e.g. Newton did not converge).
+    #[error("model step failed for sigma point {sigma_point} at iteration {iteration}: {source}")]
+    Model {
+        /// Index of the sigma point (0-based, `0..=p`).
+        sigma_point: usize,
+        /// Filter iteration (1-based) that was being computed.
+        iteration: usize,
+        /// The model's own error.
+        #[source]
+        source: BoxedModelError,
+    },
+    /// The observation or state vector of one sigma point contains NaN or infinity, or changed length.
+    #[error("sigma point {sigma_point} at iteration {iteration}: {what}")]
+    SigmaPoint {
+        /// Index of the sigma point (0-based).
+        sigma_point: usize,
+        /// Filter iteration (1-based).
+        iteration: usize,
+        /// What is wrong.
+        what: String,
+    },
+    /// A NaN or infinity appeared in a filter quantity (observation, innovation, gain, covariance, estimate).
+    #[error("non-finite {what} at iteration {iteration}")]
+    NonFinite {
+        /// Which quantity.
+        what: String,
+        /// Filter iteration (0 = initialisation).
+        iteration: usize,
+    },
+    /// A matrix that must be symmetric positive definite (the information matrix U) is not.
+    #[error("{what} is not positive definite at iteration {iteration}")]
+    NotPositiveDefinite {
+        /// Which matrix.
+        what: String,
+        /// Filter iteration (0 = initialisation).
+        iteration: usize,
+    },
+    /// Reading or writing a file failed.
+    #[error("I/O error on {path}: {source}")]
+    Io {
+        /// The file concerned.
+        path: PathBuf,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Serialising a trace to JSON failed.
+    #[error("JSON serialisation for {path}: {source}")]
+    Json {
+        /// The file concerned.
+        path: PathBuf,
+        /// The underlying error.
+        #[source]
+        source: serde_json::Error,
+    },
+}

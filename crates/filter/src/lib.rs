@@ -1,0 +1,23 @@
+//! Reduced-order unscented Kalman filter (ROUKF, Moireau & Chapelle 2011) for identifying the uncertain parameters
+//! of a large simulation (e.g. liver stiffness or boundary springs of a FEM model) from sparse observations.
+//!
+//! * [`Model`]: what the filter drives (one state per sigma point, `step` with physical parameters, `observe`);
+//!   [`VectorState`] adds vector access for joint state–parameter filtering.
+//! * [`Roukf`]: the filter ([`Roukf::new`] parameter-only, [`Roukf::new_joint`] joint), configured by
+//!   [`RoukfConfig`] with one [`ParameterSpec`] (prior, [`Transform`]) per parameter.
+//! * [`SimplexSigmaPoints`]: the p + 1 simplex sigma points.
+//! * [`Trace`]: per-iteration μ, σ (filter and physical space) and innovation norm, written as CSV or JSON.
+
+mod error;
+mod model;
+mod roukf;
+mod sigma;
+mod trace;
+mod transform;
+
+pub use error::{BoxedModelError, FilterError};
+pub use model::{Model, VectorState};
+pub use roukf::{Execution, ObservationNoise, ParameterSpec, Roukf, RoukfConfig};
+pub use sigma::SimplexSigmaPoints;
+pub use trace::{IterationTrace, Trace};
+pub use transform::Transform;

@@ -1,0 +1,477 @@
+//! The reduced-order unscented Kalman filter of Moireau & Chapelle (2011) with the reduced state restricted to the
+//! uncertain parameters θ (as in SOFA's Optimus plugin).
+//!
+//! # Algorithm (one iteration k, p parameters, m = p + 1 simplex sigma points I(i) with weights α_i = 1/m)
+//!
+//! The covariance is kept in factored form `P = L U^{-1} L^T`, `L = [L_x; L_θ]` (n × p over the full state,
+//! p × p over θ), `U` p × p. Initially `L_θ = I_p`, `L_x = 0`, `U = P_θ0^{-1}` (diagonal prior).
+//!
+//! 1. Sampling: `U = C C^T` (Cholesky); `θ(i) = θ̂ + L_θ C^{-T} I(i)` and, in joint mode, `x(i) = x̂ + L_x C^{-T} I(i)`.
+//! 2. Prediction: every sigma point advances its own copy of the model state with `g(θ(i))` (physical space);
+//!    `x(i)⁻`, `Z(i) = H(x(i)⁻)`; means `θ̂⁻ = Σ α_i θ(i)`, `x̂⁻ = Σ α_i x(i)⁻`, `Ẑ = Σ α_i Z(i)`.
+//! 3. Correction: `L_θ = Σ α_i (θ(i) - θ̂⁻) I(i)^T`, `L_x = Σ α_i (x(i)⁻ - x̂⁻) I(i)^T`,
+//!    `HL = Σ α_i (Z(i) - Ẑ) I(i)^T`, `U = P_α + HL^T W^{-1} HL` with `P_α = Σ α_i I(i) I(i)^T = I_p`,
+//!    `θ̂ = θ̂⁻ + L_θ U^{-1} HL^T W^{-1} (z - Ẑ)` and likewise `x̂ = x̂⁻ + L_x U^{-1} HL^T W^{-1} (z - Ẑ)`,
+//!    with `W = diag(σ_obs²)`. (The paper writes the mean state minus the measurement with the opposite sign.)
+//!
+//! Centred sums are used for `L` and `HL` (mathematically identical since `Σ α_i I(i) = 0`, more accurate).
+//! For a linear model with Gaussian noise this is exactly the Kalman filter of the augmented state.
+//!
+//! # Full state of the sigma points
+//!
+//! * [`Roukf::new`] (parameter-only): each sigma point keeps its own model state from its previous step (warm start)
+//!   and only θ is resampled; the model state is not corrected. This is exact when the state is a function of the
+//!   current parameters and loads (quasi-static FEM, where the state only serves as the Newton initial guess) and
+//!   needs nothing from the model beyond [`Model`]. No mean state is formed; run the model at
+//!   [`Roukf::mean_physical`] to display the estimated configuration.
+//! * [`Roukf::new_joint`] (paper's algorithm in full, for models with memory): the mean state `x̂` is the weighted
+//!   average of the sigma-point states corrected by `L_x`, and at every sampling each sigma point's state vector is
+//!   re-set to `x̂ + L_x C^{-T} I(i)` (other warm-start data in the state are kept).
+//!
+//! Each iteration works on clones of the sigma-point states and commits only when every step succeeded, so a
+//! failed iteration leaves the filter unchanged. Sigma points run in parallel with rayon or sequentially;
+//! all reductions are sequential in sigma-point order, so both modes give bit-identical numbers.
+
+use std::time::Instant;
+
+use nalgebra::{Cholesky, DMatrix, DVector};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::{FilterError, IterationTrace, Model, SimplexSigmaPoints, Trace, Transform, VectorState};
+
+/// One uncertain parameter: its name, transform and Gaussian prior **in filter space**
+/// (e.g. for [`Transform::Exp`], the mean and standard deviation of the logarithm).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParameterSpec {
+    /// Name used in traces.
+    pub name: String,
+    /// Map from filter space to physical space.
+    #[serde(default)]
+    pub transform: Transform,
+    /// Prior mean μ0 (filter space).
+    pub prior_mean: f64,
+    /// Prior standard deviation σ0 > 0 (filter space).
+    pub prior_std: f64,
+}
+
+impl ParameterSpec {
+    /// A parameter with the given name, transform and filter-space prior.
+    pub fn new(name: impl Into<String>, transform: Transform, prior_mean: f64, prior_std: f64) -> Self {
+        ParameterSpec { name: name.into(), transform, prior_mean, prior_std }
+    }
+}
+
+/// Standard deviation of the observation noise, `W = diag(σ_obs²)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum ObservationNoise {
+    /// The same σ_obs for every observed component.
+    Uniform(f64),
+    /// One σ_obs per observed component (length = observation length).
+    PerComponent(Vec<f64>),
+}
+
+/// How the sigma points are evaluated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Execution {
+    /// All sigma points at once on the rayon thread pool.
+    #[default]
+    Parallel,
+    /// One after the other on the calling thread (same numbers as `Parallel`).
+    Sequential,
+}
+
+/// Configuration of a [`Roukf`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RoukfConfig {
+    /// The reduced state, in order.
+    pub parameters: Vec<ParameterSpec>,
+    /// Observation noise.
+    pub observation_std: ObservationNoise,
+    /// Parallel or sequential sigma-point evaluation.
+    #[serde(default)]
+    pub execution: Execution,
+}
+
+/// Mean state and its factor for joint state–parameter filtering.
+struct Joint<M: Model> {
+    x: DVector<f64>,
+    l_x: DMatrix<f64>,
+    get: fn(&M, &M::State) -> DVector<f64>,
+    set: fn(&M, &mut M::State, &DVector<f64>),
+}
+
+/// What one sigma point returns from the prediction: observation and (joint mode) state vector.
+type SigmaOutput = (DVector<f64>, Option<DVector<f64>>);
+
+/// Reduced-order unscented Kalman filter over the parameters of a [`Model`] (see the module documentation).
+pub struct Roukf<M: Model> {
+    model: M,
+    config: RoukfConfig,
+    sigma: SimplexSigmaPoints,
+    theta: DVector<f64>,
+    l_theta: DMatrix<f64>,
+    u: DMatrix<f64>,
+    u_chol: DMatrix<f64>,
+    states: Vec<M::State>,
+    joint: Option<Joint<M>>,
+    iteration: usize,
+    predicted_observation: Option<DVector<f64>>,
+    trace: Trace,
+}
+
+impl<M: Model> Roukf<M> {
+    /// Parameter-only filter: every sigma point starts from a clone of `initial_state` and then keeps its own state.
+    pub fn new(model: M, initial_state: M::State, config: RoukfConfig) -> Result<Self, FilterError> {
+        Self::build(model, initial_state, config, None)
+    }
+
+    fn build(
+        model: M,
+        initial_state: M::State,
+        config: RoukfConfig,
+        joint: Option<Joint<M>>,
+    ) -> Result<Self, FilterError> {
+        let p = config.parameters.len();
+        let sigma = SimplexSigmaPoints::new(p)?;
+        for spec in &config.parameters {
+            if !(spec.prior_mean.is_finite() && spec.prior_std.is_finite() && spec.prior_std > 0.0) {
+                return Err(FilterError::InvalidConfig(format!(
+                    "parameter '{}': prior mean must be finite and prior std finite and > 0 (got {}, {})",
+                    spec.name, spec.prior_mean, spec.prior_std
+                )));
+            }
+        }
+        let stds: &[f64] = match &config.observation_std {
+            ObservationNoise::Uniform(s) => std::slice::from_ref(s),
+            ObservationNoise::PerComponent(v) => v,
+        };
+        if let Some((j, s)) = stds.iter().enumerate().find(|(_, s)| !(s.is_finite() && **s > 0.0)) {
+            return Err(FilterError::InvalidConfig(format!("observation std #{j} must be finite and > 0 (got {s})")));
+        }
+        let theta = DVector::from_iterator(p, config.parameters.iter().map(|s| s.prior_mean));
+        let u = DMatrix::from_diagonal(&DVector::from_iterator(
+            p,
+            config.parameters.iter().map(|s| 1.0 / (s.prior_std * s.prior_std)),
+        ));
+        let u_chol =
+            DMatrix::from_diagonal(&DVector::from_iterator(p, config.parameters.iter().map(|s| 1.0 / s.prior_std)));
+        let trace = Trace {
+            parameter_names: config.parameters.iter().map(|s| s.name.clone()).collect(),
+            transforms: config.parameters.iter().map(|s| s.transform).collect(),
+            records: Vec::new(),
+        };
+        let states = vec![initial_state; sigma.count()];
+        let mut filter = Roukf {
+            model,
+            config,
+            sigma,
+            theta,
+            l_theta: DMatrix::identity(p, p),
+            u,
+            u_chol,
+            states,
+            joint,
+            iteration: 0,
+            predicted_observation: None,
+            trace,
+        };
+        let record = filter.record(None, None);
+        filter.trace.records.push(record);
+        Ok(filter)
+    }
+
+    /// Runs one iteration with the measurement `z` at time step `iteration() + 1`: sampling, prediction of every
+    /// sigma point (model step + observation), correction. Returns the new trace record.
+    pub fn step(&mut self, z: &DVector<f64>) -> Result<&IterationTrace, FilterError> {
+        let start = Instant::now();
+        let k = self.iteration + 1;
+        let p = self.sigma.dim();
+        let m = self.sigma.count();
+        let q = z.len();
+        let inv_std = self.inverse_observation_std(q)?;
+        if z.iter().any(|v| !v.is_finite()) {
+            return Err(FilterError::NonFinite { what: "measurement z".into(), iteration: k });
+        }
+
+        // Sampling.
+        let offsets = self
+            .sigma
+            .offsets(&self.u_chol)
+            .ok_or_else(|| FilterError::NotPositiveDefinite { what: "U".into(), iteration: k })?;
+        let thetas: Vec<DVector<f64>> = (0..m).map(|i| &self.theta + &self.l_theta * offsets.column(i)).collect();
+        let mut physical: Vec<Vec<f64>> = Vec::with_capacity(m);
+        for (i, t) in thetas.iter().enumerate() {
+            let phys: Vec<f64> =
+                t.iter().zip(&self.config.parameters).map(|(v, s)| s.transform.to_physical(*v)).collect();
+            if phys.iter().any(|v| !v.is_finite()) {
+                return Err(FilterError::SigmaPoint {
+                    sigma_point: i,
+                    iteration: k,
+                    what: format!("non-finite physical parameters {phys:?}"),
+                });
+            }
+            physical.push(phys);
+        }
+        let mut states = self.states.clone();
+        if let Some(joint) = &self.joint {
+            for (i, state) in states.iter_mut().enumerate() {
+                let x = &joint.x + &joint.l_x * offsets.column(i);
+                (joint.set)(&self.model, state, &x);
+            }
+        }
+
+        // Prediction.
+        let model = &self.model;
+        let get = self.joint.as_ref().map(|j| j.get);
+        let run = |(i, state): (usize, &mut M::State)| -> Result<SigmaOutput, M::Error> {
+            model.step(state, &physical[i], k)?;
+            Ok((model.observe(state), get.map(|g| g(model, state))))
+        };
+        let results: Vec<Result<SigmaOutput, M::Error>> = match self.config.execution {
+            Execution::Parallel => states.par_iter_mut().enumerate().map(run).collect(),
+            Execution::Sequential => states.iter_mut().enumerate().map(run).collect(),
+        };
+        let mut observations = DMatrix::zeros(q, m);
+        let n = self.joint.as_ref().map_or(0, |j| j.x.len());
+        let mut state_vectors = DMatrix::zeros(n, m);
+        for (i, result) in results.into_iter().enumerate() {
+            let (zi, xi) =
+                result.map_err(|e| FilterError::Model { sigma_point: i, iteration: k, source: Box::new(e) })?;
+            let bad = |what: String| FilterError::SigmaPoint { sigma_point: i, iteration: k, what };
+            if zi.len() != q {
+                return Err(bad(format!("observation has length {}, the measurement has {q}", zi.len())));
+            }
+            if zi.iter().any(|v| !v.is_finite()) {
+                return Err(bad("observation contains NaN or infinity".into()));
+            }
+            observations.set_column(i, &zi);
+            if let Some(xi) = xi {
+                if xi.len() != n {
+                    return Err(bad(format!("state vector has length {}, expected {n}", xi.len())));
+                }
+                if xi.iter().any(|v| !v.is_finite()) {
+                    return Err(bad("state vector contains NaN or infinity".into()));
+                }
+                state_vectors.set_column(i, &xi);
+            }
+        }
+        let mut theta_matrix = DMatrix::zeros(p, m);
+        for (i, t) in thetas.iter().enumerate() {
+            theta_matrix.set_column(i, t);
+        }
+        let (theta_mean, l_theta) = self.mean_and_factor(&theta_matrix);
+        let (z_mean, hl) = self.mean_and_factor(&observations);
+
+        // Correction.
+        let mut g = hl;
+        for (mut row, w) in g.row_iter_mut().zip(inv_std.iter()) {
+            row *= *w;
+        }
+        let u = DMatrix::identity(p, p) + g.transpose() * &g;
+        let innovation = z - &z_mean;
+        let weighted = innovation.component_mul(&inv_std);
+        let nonfinite = |what: &str| FilterError::NonFinite { what: what.into(), iteration: k };
+        if u.iter().any(|v| !v.is_finite()) {
+            return Err(nonfinite("information matrix U"));
+        }
+        let chol = Cholesky::new(u.clone())
+            .ok_or_else(|| FilterError::NotPositiveDefinite { what: "U".into(), iteration: k })?;
+        let correction = chol.solve(&(g.transpose() * weighted));
+        let theta = &theta_mean + &l_theta * &correction;
+        if theta.iter().any(|v| !v.is_finite()) {
+            return Err(nonfinite("parameter estimate"));
+        }
+        let joint_update = match &self.joint {
+            Some(_) => {
+                let (x_mean, l_x) = self.mean_and_factor(&state_vectors);
+                let x = &x_mean + &l_x * &correction;
+                if x.iter().any(|v| !v.is_finite()) {
+                    return Err(nonfinite("state estimate"));
+                }
+                Some((x, l_x))
+            }
+            None => None,
+        };
+        let u_chol = chol.l();
+        let covariance = covariance_from(&l_theta, &u_chol).ok_or_else(|| nonfinite("parameter covariance"))?;
+        if covariance.iter().any(|v| !v.is_finite()) {
+            return Err(nonfinite("parameter covariance"));
+        }
+
+        // Commit.
+        self.theta = theta;
+        self.l_theta = l_theta;
+        self.u = u;
+        self.u_chol = u_chol;
+        self.states = states;
+        if let (Some(joint), Some((x, l_x))) = (&mut self.joint, joint_update) {
+            joint.x = x;
+            joint.l_x = l_x;
+        }
+        self.iteration = k;
+        self.predicted_observation = Some(z_mean);
+        let record = self.record(Some(innovation.norm()), Some(start.elapsed().as_secs_f64()));
+        self.trace.records.push(record);
+        Ok(self.trace.records.last().expect("a record was just pushed"))
+    }
+
+    /// `1/σ_obs` for an observation of length `q`.
+    fn inverse_observation_std(&self, q: usize) -> Result<DVector<f64>, FilterError> {
+        match &self.config.observation_std {
+            ObservationNoise::Uniform(s) => Ok(DVector::from_element(q, 1.0 / s)),
+            ObservationNoise::PerComponent(v) if v.len() == q => {
+                Ok(DVector::from_iterator(q, v.iter().map(|s| 1.0 / s)))
+            }
+            ObservationNoise::PerComponent(v) => Err(FilterError::DimensionMismatch {
+                what: "measurement vs. per-component observation std".into(),
+                expected: v.len(),
+                found: q,
+            }),
+        }
+    }
+
+    /// Weighted mean of the columns of `a` and the centred factor `Σ α_i (a_i - ā) I(i)^T`.
+    fn mean_and_factor(&self, a: &DMatrix<f64>) -> (DVector<f64>, DMatrix<f64>) {
+        let w = self.sigma.weights();
+        let mut mean = DVector::zeros(a.nrows());
+        for (col, wi) in a.column_iter().zip(w) {
+            mean.axpy(*wi, &col, 1.0);
+        }
+        let mut centred = a.clone();
+        for (i, mut col) in centred.column_iter_mut().enumerate() {
+            col -= &mean;
+            col *= w[i];
+        }
+        let factor = centred * self.sigma.points().transpose();
+        (mean, factor)
+    }
+
+    /// Trace record of the current estimate.
+    fn record(&self, innovation_norm: Option<f64>, wall_seconds: Option<f64>) -> IterationTrace {
+        IterationTrace {
+            iteration: self.iteration,
+            mean: self.theta.iter().copied().collect(),
+            std: self.std(),
+            mean_physical: self.mean_physical(),
+            std_physical: self.std_physical(),
+            innovation_norm,
+            wall_seconds,
+        }
+    }
+
+    /// Number of completed iterations (0 before the first [`Roukf::step`]).
+    pub fn iteration(&self) -> usize {
+        self.iteration
+    }
+
+    /// Current parameter mean θ̂ in filter space.
+    pub fn mean(&self) -> &DVector<f64> {
+        &self.theta
+    }
+
+    /// Current parameter estimate in physical space (transform applied to θ̂).
+    pub fn mean_physical(&self) -> Vec<f64> {
+        self.theta.iter().zip(&self.config.parameters).map(|(v, s)| s.transform.to_physical(*v)).collect()
+    }
+
+    /// Parameter covariance `L_θ U^{-1} L_θ^T` in filter space (p × p).
+    pub fn covariance(&self) -> DMatrix<f64> {
+        covariance_from(&self.l_theta, &self.u_chol)
+            .unwrap_or_else(|| DMatrix::from_element(self.sigma.dim(), self.sigma.dim(), f64::NAN))
+    }
+
+    /// Standard deviations in filter space.
+    pub fn std(&self) -> Vec<f64> {
+        self.covariance().diagonal().iter().map(|v| v.max(0.0).sqrt()).collect()
+    }
+
+    /// Standard deviations in physical space, first order: `|g'(θ̂)| σ`.
+    pub fn std_physical(&self) -> Vec<f64> {
+        self.std()
+            .iter()
+            .zip(self.theta.iter())
+            .zip(&self.config.parameters)
+            .map(|((s, v), spec)| spec.transform.derivative(*v).abs() * s)
+            .collect()
+    }
+
+    /// Factor `L_θ` (p × p) of the parameter covariance.
+    pub fn l_theta(&self) -> &DMatrix<f64> {
+        &self.l_theta
+    }
+
+    /// Information factor `U` (p × p).
+    pub fn u(&self) -> &DMatrix<f64> {
+        &self.u
+    }
+
+    /// The simplex sigma points in use.
+    pub fn sigma_points(&self) -> &SimplexSigmaPoints {
+        &self.sigma
+    }
+
+    /// Model states of the p + 1 sigma points after the last prediction (before any joint-mode re-sampling).
+    pub fn sigma_states(&self) -> &[M::State] {
+        &self.states
+    }
+
+    /// Joint mode: the corrected mean state vector x̂ (None in parameter-only mode).
+    pub fn mean_state(&self) -> Option<&DVector<f64>> {
+        self.joint.as_ref().map(|j| &j.x)
+    }
+
+    /// Joint mode: the state factor `L_x` (n × p) (None in parameter-only mode).
+    pub fn state_factor(&self) -> Option<&DMatrix<f64>> {
+        self.joint.as_ref().map(|j| &j.l_x)
+    }
+
+    /// Mean predicted observation `Σ α_i H(x_i)` of the last iteration (None before the first).
+    pub fn predicted_observation(&self) -> Option<&DVector<f64>> {
+        self.predicted_observation.as_ref()
+    }
+
+    /// History of the estimates, starting with the prior.
+    pub fn trace(&self) -> &Trace {
+        &self.trace
+    }
+
+    /// The model.
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &RoukfConfig {
+        &self.config
+    }
+}
+
+impl<M: VectorState> Roukf<M> {
+    /// Joint state–parameter filter (the paper's algorithm in full): the mean state starts at
+    /// `state_vector(initial_state)` with no uncertainty of its own (`L_x = 0`) and is corrected at every iteration.
+    pub fn new_joint(model: M, initial_state: M::State, config: RoukfConfig) -> Result<Self, FilterError> {
+        let x = model.state_vector(&initial_state);
+        if x.iter().any(|v| !v.is_finite()) {
+            return Err(FilterError::NonFinite { what: "initial state vector".into(), iteration: 0 });
+        }
+        let p = config.parameters.len();
+        let joint = Joint {
+            l_x: DMatrix::zeros(x.len(), p),
+            x,
+            get: <M as VectorState>::state_vector,
+            set: <M as VectorState>::set_state_vector,
+        };
+        Self::build(model, initial_state, config, Some(joint))
+    }
+}
+
+/// `L U^{-1} L^T` from the lower Cholesky factor C of U, as `Y^T Y` with `C Y = L^T`.
+fn covariance_from(l: &DMatrix<f64>, c_lower: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    let y = c_lower.solve_lower_triangular(&l.transpose())?;
+    Some(y.transpose() * y)
+}

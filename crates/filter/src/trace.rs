@@ -1,0 +1,115 @@
+//! Per-iteration traces of the filter and their CSV / JSON output (atomic writes).
+
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use serde::{Deserialize, Serialize};
+
+use crate::{FilterError, Transform};
+
+/// Estimate of the parameters after one filter iteration (iteration 0 is the prior).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IterationTrace {
+    /// Filter iteration (0 = prior, k = after the k-th observation).
+    pub iteration: usize,
+    /// Mean μ in filter space.
+    pub mean: Vec<f64>,
+    /// Standard deviation σ in filter space: square root of the diagonal of `L U^{-1} L^T`.
+    pub std: Vec<f64>,
+    /// Mean in physical space: transform applied to μ.
+    pub mean_physical: Vec<f64>,
+    /// Standard deviation in physical space, first order: `|g'(μ)| σ` for the transform g.
+    pub std_physical: Vec<f64>,
+    /// Euclidean norm of the innovation `z - Σ α_i H(x_i)` (None for the prior).
+    pub innovation_norm: Option<f64>,
+    /// Wall-clock time of the iteration, seconds (None for the prior).
+    pub wall_seconds: Option<f64>,
+}
+
+/// The whole history of a filter run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Trace {
+    /// Parameter names, in reduced-state order.
+    pub parameter_names: Vec<String>,
+    /// Transform of each parameter.
+    pub transforms: Vec<Transform>,
+    /// One record per iteration, starting with the prior.
+    pub records: Vec<IterationTrace>,
+}
+
+impl Trace {
+    /// CSV text: header `iteration,innovation_norm,wall_seconds` then `mu_<name>,sigma_<name>,mu_phys_<name>,
+    /// sigma_phys_<name>` per parameter; empty fields for the prior's innovation and time.
+    pub fn to_csv(&self) -> String {
+        let mut s = String::from("iteration,innovation_norm,wall_seconds");
+        for name in &self.parameter_names {
+            for prefix in ["mu_", "sigma_", "mu_phys_", "sigma_phys_"] {
+                s.push(',');
+                s.push_str(&csv_field(&format!("{prefix}{name}")));
+            }
+        }
+        s.push('\n');
+        let opt = |v: Option<f64>| v.map(|x| x.to_string()).unwrap_or_default();
+        for r in &self.records {
+            let _ = write!(s, "{},{},{}", r.iteration, opt(r.innovation_norm), opt(r.wall_seconds));
+            for j in 0..self.parameter_names.len() {
+                let _ = write!(s, ",{},{},{},{}", r.mean[j], r.std[j], r.mean_physical[j], r.std_physical[j]);
+            }
+            s.push('\n');
+        }
+        s
+    }
+
+    /// Writes [`Trace::to_csv`] to `path` atomically.
+    pub fn write_csv(&self, path: &Path) -> Result<(), FilterError> {
+        write_atomic(path, self.to_csv().as_bytes())
+    }
+
+    /// Writes the trace as pretty JSON to `path` atomically.
+    pub fn write_json(&self, path: &Path) -> Result<(), FilterError> {
+        let text =
+            serde_json::to_vec_pretty(self).map_err(|source| FilterError::Json { path: path.to_path_buf(), source })?;
+        write_atomic(path, &text)
+    }
+}
+
+/// Quotes a CSV field when it contains a comma, quote or line break.
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// Writes `bytes` to a temporary file in the directory of `path`, then renames it onto `path`.
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FilterError> {
+    static COUNTER: AtomicUsize = AtomicUsize::new(0);
+    let io_err = |p: &Path, source| FilterError::Io { path: p.to_path_buf(), source };
+    let file_name = path
+        .file_name()
+        .ok_or_else(|| io_err(path, std::io::Error::new(std::io::ErrorKind::InvalidInput, "path has no file name")))?;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let tmp = dir.join(format!(
+        ".{}.{}.{}.tmp",
+        file_name.to_string_lossy(),
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(source) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(io_err(path, source));
+    }
+    Ok(())
+}

@@ -1,0 +1,177 @@
+//! On linear-Gaussian models the ROUKF must coincide with the closed-form Kalman filter.
+
+mod common;
+
+use std::convert::Infallible;
+
+use augsim_filter::{Execution, Model, ObservationNoise, ParameterSpec, Roukf, RoukfConfig, Transform, VectorState};
+use common::Rng;
+use nalgebra::{DMatrix, DVector};
+
+fn rel_diff(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
+    (a - b).amax() / b.amax().max(1e-300)
+}
+
+/// Static parameters observed linearly: y_k = H_k θ + noise. The state holds the last H_k θ.
+struct StaticLinear {
+    h: Vec<DMatrix<f64>>,
+}
+
+impl Model for StaticLinear {
+    type State = DVector<f64>;
+    type Error = Infallible;
+    fn step(&self, state: &mut DVector<f64>, theta: &[f64], step: usize) -> Result<(), Infallible> {
+        *state = &self.h[step - 1] * DVector::from_column_slice(theta);
+        Ok(())
+    }
+    fn observe(&self, state: &DVector<f64>) -> DVector<f64> {
+        state.clone()
+    }
+}
+
+#[test]
+fn static_parameters_linear_observation_match_kalman_filter() {
+    let (p, q, steps) = (3, 2, 60);
+    let mut rng = Rng::new(11);
+    let h: Vec<DMatrix<f64>> = (0..steps).map(|_| DMatrix::from_fn(q, p, |_, _| rng.normal())).collect();
+    let truth = DVector::from_vec(vec![1.5, -0.7, 3.0]);
+    let obs_std = vec![0.1, 0.25];
+    let prior_mean = [0.0, 0.5, 1.0];
+    let prior_std = [2.0, 1.0, 0.5];
+    let config = RoukfConfig {
+        parameters: (0..p)
+            .map(|j| ParameterSpec::new(format!("t{j}"), Transform::Identity, prior_mean[j], prior_std[j]))
+            .collect(),
+        observation_std: ObservationNoise::PerComponent(obs_std.clone()),
+        execution: Execution::Parallel,
+    };
+    let mut roukf = Roukf::new(StaticLinear { h: h.clone() }, DVector::zeros(q), config).unwrap();
+
+    let mut mu = DVector::from_column_slice(&prior_mean);
+    let mut cov = DMatrix::from_diagonal(&DVector::from_iterator(p, prior_std.iter().map(|s| s * s)));
+    let r = DMatrix::from_diagonal(&DVector::from_iterator(q, obs_std.iter().map(|s| s * s)));
+    for (k, hk) in h.iter().enumerate() {
+        let noise = DVector::from_iterator(q, obs_std.iter().map(|s| s * rng.normal()));
+        let z = hk * &truth + noise;
+        // Closed-form Kalman filter (Joseph form).
+        let s = hk * &cov * hk.transpose() + &r;
+        let gain = &cov * hk.transpose() * s.try_inverse().unwrap();
+        mu = &mu + &gain * (&z - hk * &mu);
+        let ikh = DMatrix::identity(p, p) - &gain * hk;
+        cov = &ikh * &cov * ikh.transpose() + &gain * &r * gain.transpose();
+
+        let rec = roukf.step(&z).unwrap().clone();
+        assert_eq!(rec.iteration, k + 1);
+        let got_mu = DMatrix::from_column_slice(p, 1, &rec.mean);
+        let exp_mu = DMatrix::from_column_slice(p, 1, mu.as_slice());
+        assert!(rel_diff(&got_mu, &exp_mu) < 1e-10, "mean at {k}: {got_mu} vs {exp_mu}");
+        assert!(rel_diff(&roukf.covariance(), &cov) < 1e-10, "covariance at {k}");
+        for j in 0..p {
+            assert!((rec.std[j] - cov[(j, j)].sqrt()).abs() < 1e-10 * cov[(j, j)].sqrt());
+        }
+    }
+    // The data are informative: the estimate is close to the truth.
+    assert!((roukf.mean() - &truth).amax() < 0.1);
+}
+
+/// Linear state space with unknown static parameters: x_{k+1} = A x_k + B θ + u_k, y = C x.
+struct LinearStateSpace {
+    a: DMatrix<f64>,
+    b: DMatrix<f64>,
+    c: DMatrix<f64>,
+    inputs: Vec<DVector<f64>>,
+}
+
+impl Model for LinearStateSpace {
+    type State = DVector<f64>;
+    type Error = Infallible;
+    fn step(&self, x: &mut DVector<f64>, theta: &[f64], step: usize) -> Result<(), Infallible> {
+        *x = &self.a * &*x + &self.b * DVector::from_column_slice(theta) + &self.inputs[step - 1];
+        Ok(())
+    }
+    fn observe(&self, x: &DVector<f64>) -> DVector<f64> {
+        &self.c * x
+    }
+}
+
+impl VectorState for LinearStateSpace {
+    fn state_vector(&self, x: &DVector<f64>) -> DVector<f64> {
+        x.clone()
+    }
+    fn set_state_vector(&self, x: &mut DVector<f64>, v: &DVector<f64>) {
+        x.copy_from(v);
+    }
+}
+
+#[test]
+fn joint_linear_state_space_matches_augmented_kalman_filter() {
+    let (n, p, q, steps) = (3, 2, 2, 80);
+    let mut rng = Rng::new(23);
+    let (c, s) = (0.3f64.cos(), 0.3f64.sin());
+    let a = DMatrix::from_row_slice(n, n, &[0.95 * c, -0.95 * s, 0.0, 0.95 * s, 0.95 * c, 0.1, 0.0, 0.0, 0.9]);
+    let b = DMatrix::from_row_slice(n, p, &[0.2, 0.0, 0.0, 0.1, 0.3, -0.2]);
+    let cm = DMatrix::from_row_slice(q, n, &[1.0, 0.0, 0.5, 0.0, 1.0, -1.0]);
+    let inputs: Vec<DVector<f64>> = (0..steps).map(|_| DVector::from_fn(n, |_, _| 0.5 * rng.normal())).collect();
+    let truth = DVector::from_vec(vec![2.0, -1.0]);
+    let x0 = DVector::from_vec(vec![1.0, 0.0, -0.5]);
+    let obs_std = 0.05;
+    let prior_mean = [0.5, 0.0];
+    let prior_std = [1.0, 2.0];
+    let config = RoukfConfig {
+        parameters: (0..p)
+            .map(|j| ParameterSpec::new(format!("b{j}"), Transform::Identity, prior_mean[j], prior_std[j]))
+            .collect(),
+        observation_std: ObservationNoise::Uniform(obs_std),
+        execution: Execution::Sequential,
+    };
+    let model = LinearStateSpace { a: a.clone(), b: b.clone(), c: cm.clone(), inputs: inputs.clone() };
+    let mut roukf = Roukf::new_joint(model, x0.clone(), config).unwrap();
+
+    // Augmented Kalman filter on s = (x, θ), no process noise, x0 known.
+    let d = n + p;
+    let mut f = DMatrix::zeros(d, d);
+    f.view_mut((0, 0), (n, n)).copy_from(&a);
+    f.view_mut((0, n), (n, p)).copy_from(&b);
+    f.view_mut((n, n), (p, p)).fill_with_identity();
+    let mut hm = DMatrix::zeros(q, d);
+    hm.view_mut((0, 0), (q, n)).copy_from(&cm);
+    let r = DMatrix::identity(q, q) * (obs_std * obs_std);
+    let mut s_mean = DVector::zeros(d);
+    s_mean.rows_mut(0, n).copy_from(&x0);
+    s_mean.rows_mut(n, p).copy_from(&DVector::from_column_slice(&prior_mean));
+    let mut cov = DMatrix::zeros(d, d);
+    for j in 0..p {
+        cov[(n + j, n + j)] = prior_std[j] * prior_std[j];
+    }
+    let mut x_true = x0.clone();
+    for (k, input) in inputs.iter().enumerate() {
+        x_true = &a * &x_true + &b * &truth + input;
+        let z = &cm * &x_true + DVector::from_fn(q, |_, _| obs_std * rng.normal());
+
+        let mut u = DVector::zeros(d);
+        u.rows_mut(0, n).copy_from(input);
+        s_mean = &f * &s_mean + u;
+        cov = &f * &cov * f.transpose();
+        let sm = &hm * &cov * hm.transpose() + &r;
+        let gain = &cov * hm.transpose() * sm.try_inverse().unwrap();
+        s_mean = &s_mean + &gain * (&z - &hm * &s_mean);
+        let ikh = DMatrix::identity(d, d) - &gain * &hm;
+        cov = &ikh * &cov * ikh.transpose() + &gain * &r * gain.transpose();
+
+        roukf.step(&z).unwrap();
+        let theta = DMatrix::from_column_slice(p, 1, roukf.mean().as_slice());
+        let exp_theta = DMatrix::from_column_slice(p, 1, s_mean.rows(n, p).as_slice());
+        assert!(rel_diff(&theta, &exp_theta) < 1e-10, "θ at {k}: {theta} vs {exp_theta}");
+        let x = DMatrix::from_column_slice(n, 1, roukf.mean_state().unwrap().as_slice());
+        let exp_x = DMatrix::from_column_slice(n, 1, s_mean.rows(0, n).as_slice());
+        assert!(rel_diff(&x, &exp_x) < 1e-10, "x at {k}");
+        assert!(rel_diff(&roukf.covariance(), &cov.view((n, n), (p, p)).into_owned()) < 1e-10, "P_θθ at {k}");
+        let u_inv = roukf.u().clone().try_inverse().unwrap();
+        let lx = roukf.state_factor().unwrap();
+        let pxx = lx * &u_inv * lx.transpose();
+        assert!(rel_diff(&pxx, &cov.view((0, 0), (n, n)).into_owned()) < 1e-9, "P_xx at {k}");
+        let pxt = lx * &u_inv * roukf.l_theta().transpose();
+        assert!(rel_diff(&pxt, &cov.view((0, n), (n, p)).into_owned()) < 1e-9, "P_xθ at {k}");
+    }
+    assert!((roukf.mean() - &truth).amax() < 0.05, "estimate {} vs truth {truth}", roukf.mean());
+}
