@@ -187,13 +187,23 @@ impl ElementGeometry {
                         }
                     }
                 }
-                for b in 0..npe {
+                for b in a..npe {
                     for i in 0..3 {
                         let out = &mut k[(3 * a + i) * ndof + 3 * b..][..3];
                         for kk in 0..3 {
                             out[kk] +=
                                 qa[i][3 * kk] * g[b][0] + qa[i][3 * kk + 1] * g[b][1] + qa[i][3 * kk + 2] * g[b][2];
                         }
+                    }
+                }
+            }
+        }
+        // The tangent is symmetric: only blocks b ≥ a were accumulated; mirror them.
+        if let Some(k) = k {
+            for p in 0..ndof {
+                for q in (p / 3) * 3..ndof {
+                    if q / 3 > p / 3 {
+                        k[q * ndof + p] = k[p * ndof + q];
                     }
                 }
             }

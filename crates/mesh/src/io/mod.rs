@@ -1,0 +1,411 @@
+//! Mesh and surface file input and output.
+//!
+//! Volume meshes ([`Mesh`]) are read from Gmsh `.msh` (legacy `$NOD`/`$ELM`, 2.x ASCII and
+//! 4.1 ASCII), legacy VTK `.vtk` (ASCII or big-endian binary `UNSTRUCTURED_GRID`) and VTK XML
+//! `.vtu`. Only linear tetrahedra or trilinear hexahedra are kept (lower-dimensional cells are
+//! ignored); nodes not used by any kept cell are dropped and the rest renumbered in file order;
+//! every cell is turned positively oriented (mirrored cells are flipped), and a cell of zero
+//! volume is an error.
+//!
+//! Surfaces ([`TriSurface`]) are read from `.obj`, `.stl` (ASCII or binary, duplicate vertices
+//! merged exactly), legacy VTK `.vtk` (`POLYDATA` or `UNSTRUCTURED_GRID`) and `.vtu`; polygons are
+//! split into triangle fans and triangle strips into triangles. All vertices are kept.
+//!
+//! Writers ([`write_vtu`], [`write_vtk_legacy`], [`write_msh`], [`write_surface`]) write a
+//! temporary file in the target directory and rename it, so a reader never sees a partial file.
+//! Numbers are written in their shortest exact decimal form (ASCII) or as IEEE doubles (binary):
+//! reading back gives the same values. Named regions and `cell_fraction` are not written; pass
+//! them as [`Field`]s where needed.
+
+mod gmsh;
+mod legacy_vtk;
+mod surface_io;
+mod text;
+mod vtu;
+
+use std::fmt;
+use std::fs::{self, File, OpenOptions};
+use std::io::BufWriter;
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use crate::{Cells, Mesh, MeshError, Point, TriSurface, HEX_TO_TETS};
+
+pub use gmsh::{read_gmsh, write_msh};
+pub use legacy_vtk::{read_vtk, read_vtk_surface, read_vtk_with_fields, write_vtk_legacy, write_vtk_legacy_with};
+pub use surface_io::{read_obj, read_stl, write_obj, write_stl};
+pub use vtu::{read_vtu, read_vtu_surface, read_vtu_with_fields, write_vtu, write_vtu_with};
+
+/// Where the values of a [`Field`] live.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FieldLocation {
+    /// One tuple per node.
+    Point,
+    /// One tuple per cell.
+    Cell,
+}
+
+/// A named array of values attached to the nodes or the cells of a mesh, written as VTK point
+/// or cell data. Values are stored tuple after tuple: `values[i * components + c]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Field {
+    /// Array name: non-empty, without whitespace, quotes or `<>&`.
+    pub name: String,
+    /// Nodes or cells.
+    pub location: FieldLocation,
+    /// Components per tuple (1 for a scalar, 3 for a vector).
+    pub components: usize,
+    /// `components` values per node or cell.
+    pub values: Vec<f64>,
+}
+
+impl Field {
+    /// A point field with `components` values per node.
+    pub fn point(name: impl Into<String>, components: usize, values: Vec<f64>) -> Self {
+        Field { name: name.into(), location: FieldLocation::Point, components, values }
+    }
+
+    /// A cell field with `components` values per cell.
+    pub fn cell(name: impl Into<String>, components: usize, values: Vec<f64>) -> Self {
+        Field { name: name.into(), location: FieldLocation::Cell, components, values }
+    }
+
+    /// A 3-component point field from one vector per node (e.g. a displacement).
+    pub fn point_vectors(name: impl Into<String>, vectors: &[Point]) -> Self {
+        Field::point(name, 3, vectors.iter().flatten().copied().collect())
+    }
+
+    /// Number of tuples (`values.len() / components`).
+    pub fn num_tuples(&self) -> usize {
+        self.values.len().checked_div(self.components).unwrap_or(0)
+    }
+
+    /// The tuple at index `i` (panics when `i >= num_tuples()`).
+    pub fn tuple(&self, i: usize) -> &[f64] {
+        &self.values[i * self.components..(i + 1) * self.components]
+    }
+
+    /// Checks the name, the component count and the length against a mesh of `num_points` nodes
+    /// and `num_cells` cells.
+    pub fn check(&self, num_points: usize, num_cells: usize) -> Result<(), MeshError> {
+        let bad_char = |c: char| c.is_whitespace() || c.is_control() || "\"'<>&".contains(c);
+        if self.name.is_empty() || self.name.chars().any(bad_char) {
+            return Err(MeshError::Invalid(format!(
+                "field name {:?} is empty or holds whitespace, quotes or <>& (not allowed in VTK files)",
+                self.name
+            )));
+        }
+        if self.components == 0 {
+            return Err(MeshError::Invalid(format!("field '{}' has 0 components", self.name)));
+        }
+        let (count, what) = match self.location {
+            FieldLocation::Point => (num_points, "nodes"),
+            FieldLocation::Cell => (num_cells, "cells"),
+        };
+        if Some(self.values.len()) != count.checked_mul(self.components) {
+            return Err(MeshError::Invalid(format!(
+                "field '{}' has {} values, but {} {what} × {} components need {}",
+                self.name,
+                self.values.len(),
+                count,
+                self.components,
+                count.saturating_mul(self.components)
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// How array data is stored in a VTK file.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Encoding {
+    /// Human-readable decimal text (shortest exact form).
+    Ascii,
+    /// Binary doubles: base64 in `.vtu`, big-endian in legacy `.vtk`.
+    #[default]
+    Binary,
+}
+
+/// Reads a volume mesh, choosing the format by extension: `.msh` (Gmsh), `.vtk` (legacy VTK),
+/// `.vtu` (VTK XML).
+pub fn read_mesh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
+    let path = path.as_ref();
+    match extension(path).as_str() {
+        "msh" => read_gmsh(path),
+        "vtk" => read_vtk(path),
+        "vtu" => read_vtu(path),
+        _ => Err(parse_error(path, "unknown volume mesh extension (expected .msh, .vtk or .vtu)")),
+    }
+}
+
+/// Reads a volume mesh and its point and cell data (`.vtk`, `.vtu`; a `.msh` file gives no fields).
+pub fn read_mesh_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>), MeshError> {
+    let path = path.as_ref();
+    match extension(path).as_str() {
+        "msh" => Ok((read_gmsh(path)?, Vec::new())),
+        "vtk" => read_vtk_with_fields(path),
+        "vtu" => read_vtu_with_fields(path),
+        _ => Err(parse_error(path, "unknown volume mesh extension (expected .msh, .vtk or .vtu)")),
+    }
+}
+
+/// Writes a volume mesh, choosing the format by extension: `.vtu` and `.vtk` (binary, with the
+/// fields) or `.msh` (Gmsh 2.2 ASCII, which takes no fields).
+pub fn write_mesh(path: impl AsRef<Path>, mesh: &Mesh, fields: &[Field]) -> Result<(), MeshError> {
+    let path = path.as_ref();
+    match extension(path).as_str() {
+        "vtu" => write_vtu(path, mesh, fields),
+        "vtk" => write_vtk_legacy(path, mesh, fields),
+        "msh" if fields.is_empty() => write_msh(path, mesh),
+        "msh" => Err(MeshError::Invalid(format!(
+            "{}: Gmsh output carries no fields; write .vtu or .vtk to keep them",
+            path.display()
+        ))),
+        _ => Err(parse_error(path, "unknown volume mesh extension (expected .vtu, .vtk or .msh)")),
+    }
+}
+
+/// Reads a triangle surface, choosing the format by extension: `.obj`, `.stl`, `.vtk`, `.vtu`.
+pub fn read_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
+    let path = path.as_ref();
+    match extension(path).as_str() {
+        "obj" => read_obj(path),
+        "stl" => read_stl(path),
+        "vtk" => read_vtk_surface(path),
+        "vtu" => read_vtu_surface(path),
+        _ => Err(parse_error(path, "unknown surface extension (expected .obj, .stl, .vtk or .vtu)")),
+    }
+}
+
+/// Writes a triangle surface, choosing the format by extension: `.vtu` (binary), `.vtk` (binary
+/// `POLYDATA`), `.obj`, `.stl` (binary, single precision).
+pub fn write_surface(path: impl AsRef<Path>, surface: &TriSurface) -> Result<(), MeshError> {
+    let path = path.as_ref();
+    match extension(path).as_str() {
+        "vtu" => vtu::write_surface_vtu(path, surface),
+        "vtk" => legacy_vtk::write_surface_vtk(path, surface),
+        "obj" => write_obj(path, surface),
+        "stl" => write_stl(path, surface),
+        _ => Err(parse_error(path, "unknown surface extension (expected .vtu, .vtk, .obj or .stl)")),
+    }
+}
+
+/// Lower-case extension of a path ("" when none).
+fn extension(path: &Path) -> String {
+    path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase()
+}
+
+/// A parse error on `path`.
+fn parse_error(path: &Path, message: impl Into<String>) -> MeshError {
+    MeshError::Parse { path: path.display().to_string(), message: message.into() }
+}
+
+/// Reads a whole file, mapping failures to [`MeshError::Io`].
+fn read_bytes(path: &Path) -> Result<Vec<u8>, MeshError> {
+    fs::read(path).map_err(|source| MeshError::Io { path: path.display().to_string(), source })
+}
+
+/// Writes `path` atomically: `write` fills a temporary file in the same directory, which is then
+/// synced and renamed over `path`. On failure the temporary file is removed.
+fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<(), MeshError> {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let io_error = |source| MeshError::Io { path: path.display().to_string(), source };
+    let name = path
+        .file_name()
+        .ok_or_else(|| io_error(std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file name")))?;
+    let tmp = path.with_file_name(format!(
+        ".{}.{}.{}.tmp",
+        name.to_string_lossy(),
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let result = (|| {
+        let file = OpenOptions::new().write(true).create_new(true).open(&tmp)?;
+        let mut writer = BufWriter::new(file);
+        write(&mut writer)?;
+        let file = writer.into_inner().map_err(|e| e.into_error())?;
+        file.sync_all()?;
+        drop(file);
+        fs::rename(&tmp, path)
+    })();
+    result.map_err(|e| {
+        let _ = fs::remove_file(&tmp);
+        io_error(e)
+    })
+}
+
+/// Displays an `f64` in its shortest form that parses back to the same value (`nan`, `inf` and
+/// `-inf` for non-finite values).
+struct Num(f64);
+
+impl fmt::Display for Num {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let x = self.0;
+        if x.is_nan() {
+            f.write_str("nan")
+        } else if x.is_infinite() {
+            f.write_str(if x > 0.0 { "inf" } else { "-inf" })
+        } else {
+            write!(f, "{x:?}")
+        }
+    }
+}
+
+/// The cells of a mesh as VTK cell type, nodes per cell and flat connectivity.
+fn mesh_cells_flat(mesh: &Mesh) -> (u8, usize, Vec<usize>) {
+    match &mesh.cells {
+        Cells::Tet4(c) => (VTK_TETRA, 4, c.iter().flatten().copied().collect()),
+        Cells::Hex8(c) => (VTK_HEXAHEDRON, 8, c.iter().flatten().copied().collect()),
+    }
+}
+
+/// Checks what a writer needs so that it cannot fail half-way: cell indices in range and
+/// fields of the right length.
+fn check_for_writing(num_points: usize, num_cells: usize, conn: &[usize], fields: &[Field]) -> Result<(), MeshError> {
+    if let Some(&bad) = conn.iter().find(|&&k| k >= num_points) {
+        return Err(MeshError::Invalid(format!("a cell refers to node {bad}, but there are {num_points} nodes")));
+    }
+    for (i, f) in fields.iter().enumerate() {
+        f.check(num_points, num_cells)?;
+        if fields[..i].iter().any(|g| g.name == f.name && g.location == f.location) {
+            return Err(MeshError::Invalid(format!("two fields are named '{}'", f.name)));
+        }
+    }
+    Ok(())
+}
+
+/// Checks a surface before writing: triangle indices in range.
+fn check_surface(surface: &TriSurface) -> Result<Vec<usize>, MeshError> {
+    let conn: Vec<usize> = surface.triangles.iter().flatten().copied().collect();
+    check_for_writing(surface.vertices.len(), surface.triangles.len(), &conn, &[])?;
+    Ok(conn)
+}
+
+/// VTK cell type of a triangle.
+const VTK_TRIANGLE: u8 = 5;
+/// VTK cell type of a linear tetrahedron.
+const VTK_TETRA: u8 = 10;
+/// VTK cell type of an axis-aligned voxel (a hexahedron with another node order).
+const VTK_VOXEL: u8 = 11;
+/// VTK cell type of a trilinear hexahedron.
+const VTK_HEXAHEDRON: u8 = 12;
+
+/// The kind of volume cell read from a file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum VolumeKind {
+    Tet,
+    Hex,
+}
+
+impl VolumeKind {
+    fn nodes(self) -> usize {
+        match self {
+            VolumeKind::Tet => 4,
+            VolumeKind::Hex => 8,
+        }
+    }
+
+    fn plural(self) -> &'static str {
+        match self {
+            VolumeKind::Tet => "tetrahedra",
+            VolumeKind::Hex => "hexahedra",
+        }
+    }
+}
+
+/// A volume mesh as read from a file, made into a [`Mesh`]: keeps the nodes used by the cells
+/// (in file order), renumbers them, orients every cell positively and validates the result.
+/// `conn` holds `kind.nodes()` indices into `file_nodes` per cell; `describe(i)` names cell `i`
+/// for error messages. Returns the mesh and, for each mesh node, its index in `file_nodes`.
+fn finish_volume(
+    path: &Path,
+    file_nodes: &[Point],
+    kind: VolumeKind,
+    mut conn: Vec<usize>,
+    describe: &dyn Fn(usize) -> String,
+) -> Result<(Mesh, Vec<usize>), MeshError> {
+    let k = kind.nodes();
+    if conn.is_empty() {
+        return Err(parse_error(path, "no tetrahedra or hexahedra: not a volume mesh"));
+    }
+    let mut new_index = vec![usize::MAX; file_nodes.len()];
+    for &i in &conn {
+        new_index[i] = 0;
+    }
+    let mut kept = Vec::new();
+    for (i, slot) in new_index.iter_mut().enumerate() {
+        if *slot == 0 {
+            *slot = kept.len();
+            kept.push(i);
+        }
+    }
+    let nodes: Vec<Point> = kept.iter().map(|&i| file_nodes[i]).collect();
+    if let Some(i) = nodes.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
+        return Err(parse_error(path, format!("node {} has a non-finite coordinate {:?}", kept[i], nodes[i])));
+    }
+    for i in &mut conn {
+        *i = new_index[*i];
+    }
+    for (c, cell) in conn.chunks_exact_mut(k).enumerate() {
+        let p = |j: usize| nodes[cell[j]];
+        let volume = match kind {
+            VolumeKind::Tet => crate::tet_volume(p(0), p(1), p(2), p(3)),
+            VolumeKind::Hex => HEX_TO_TETS.iter().map(|t| crate::tet_volume(p(t[0]), p(t[1]), p(t[2]), p(t[3]))).sum(),
+        };
+        let (lo, hi) = crate::bounds(&cell.iter().map(|&i| nodes[i]).collect::<Vec<_>>());
+        let size = (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max);
+        let zero = volume.is_nan() || volume.abs() <= 1e-12 * size * size * size;
+        if zero {
+            return Err(parse_error(
+                path,
+                format!("{} has zero volume ({volume:.3e}): its nodes are repeated or coplanar", describe(c)),
+            ));
+        }
+        if volume < 0.0 {
+            match kind {
+                VolumeKind::Tet => cell.swap(2, 3),
+                VolumeKind::Hex => {
+                    let (bottom, top) = cell.split_at_mut(4);
+                    bottom.swap_with_slice(top);
+                }
+            }
+        }
+    }
+    let cells = match kind {
+        VolumeKind::Tet => Cells::Tet4(conn.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect()),
+        VolumeKind::Hex => Cells::Hex8(conn.chunks_exact(8).map(|c| std::array::from_fn(|j| c[j])).collect()),
+    };
+    let mesh = Mesh::new(nodes, cells).map_err(|e| parse_error(path, e.to_string()))?;
+    Ok((mesh, kept))
+}
+
+/// Restricts fields read from a file to the kept nodes and cells of a mesh.
+fn restrict_fields(fields: Vec<Field>, kept_nodes: &[usize], kept_cells: &[usize]) -> Vec<Field> {
+    fields
+        .into_iter()
+        .map(|f| {
+            let kept = match f.location {
+                FieldLocation::Point => kept_nodes,
+                FieldLocation::Cell => kept_cells,
+            };
+            let values = kept.iter().flat_map(|&i| f.tuple(i).to_vec()).collect();
+            Field { values, ..f }
+        })
+        .collect()
+}
+
+/// Triangles of a polygon (fan from its first vertex) appended to `out`.
+fn fan(polygon: &[usize], out: &mut Vec<[usize; 3]>) {
+    for j in 1..polygon.len().saturating_sub(1) {
+        out.push([polygon[0], polygon[j], polygon[j + 1]]);
+    }
+}
+
+/// Triangles of a triangle strip appended to `out`, every other one flipped so that all share
+/// the orientation of the first.
+fn strip(vertices: &[usize], out: &mut Vec<[usize; 3]>) {
+    for j in 0..vertices.len().saturating_sub(2) {
+        let (a, b, c) = (vertices[j], vertices[j + 1], vertices[j + 2]);
+        out.push(if j % 2 == 0 { [a, b, c] } else { [b, a, c] });
+    }
+}

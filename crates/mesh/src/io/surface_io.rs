@@ -1,0 +1,237 @@
+//! Wavefront OBJ and STL surfaces.
+
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::Path;
+
+use super::text::LineReader;
+use super::{check_surface, fan, parse_error, read_bytes, write_atomic, Num};
+use crate::{cross, sub, MeshError, Point, TriSurface};
+
+/// Reads a Wavefront OBJ surface: `v` vertices (all kept, in order) and `f` faces (1-based or
+/// negative relative indices, `v/vt/vn` forms accepted), polygons split into triangle fans.
+/// Normals, texture coordinates, groups and materials are ignored.
+pub fn read_obj(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
+    let path = path.as_ref();
+    let bytes = read_bytes(path)?;
+    let text = String::from_utf8_lossy(&bytes);
+    let mut lines = LineReader::new(path, &text);
+    let mut surface = TriSurface::default();
+    let mut polygon = Vec::new();
+    while let Some(mut line) = lines.next_line() {
+        match line.next_token() {
+            Some("v") => {
+                let p = line.point("vertex coordinate")?;
+                surface.vertices.push(p);
+            }
+            Some("f") => {
+                polygon.clear();
+                let n = surface.vertices.len() as i64;
+                while let Some(token) = line.next_token() {
+                    let index: i64 = token
+                        .split('/')
+                        .next()
+                        .and_then(|s| s.parse().ok())
+                        .ok_or_else(|| line.error(format!("face vertex '{token}' is not an index")))?;
+                    let i = if index < 0 { n + index } else { index - 1 };
+                    if index == 0 || i < 0 || i >= n {
+                        return Err(
+                            line.error(format!("face refers to vertex {index}, but {n} vertices are defined so far"))
+                        );
+                    }
+                    polygon.push(i as usize);
+                }
+                if polygon.len() < 3 {
+                    return Err(line.error(format!("a face needs at least 3 vertices, found {}", polygon.len())));
+                }
+                fan(&polygon, &mut surface.triangles);
+            }
+            _ => {}
+        }
+    }
+    if surface.triangles.is_empty() {
+        return Err(parse_error(path, "no faces ('f' lines)"));
+    }
+    Ok(surface)
+}
+
+/// Writes a surface as Wavefront OBJ (vertices written exactly, 1-based faces).
+pub fn write_obj(path: impl AsRef<Path>, surface: &TriSurface) -> Result<(), MeshError> {
+    check_surface(surface)?;
+    write_atomic(path.as_ref(), |w| {
+        writeln!(w, "# augsim: {} vertices, {} triangles", surface.vertices.len(), surface.triangles.len())?;
+        for p in &surface.vertices {
+            writeln!(w, "v {} {} {}", Num(p[0]), Num(p[1]), Num(p[2]))?;
+        }
+        for t in &surface.triangles {
+            writeln!(w, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1)?;
+        }
+        Ok(())
+    })
+}
+
+/// Merges vertices with exactly equal coordinates (0.0 and −0.0 are the same).
+#[derive(Default)]
+struct Merger {
+    index: HashMap<[u64; 3], usize>,
+    vertices: Vec<Point>,
+}
+
+impl Merger {
+    fn add(&mut self, p: Point) -> usize {
+        let p = p.map(|c| c + 0.0);
+        let next = self.vertices.len();
+        let i = *self.index.entry(p.map(f64::to_bits)).or_insert(next);
+        if i == next {
+            self.vertices.push(p);
+        }
+        i
+    }
+}
+
+/// Reads an STL surface, binary or ASCII. Vertices with exactly equal coordinates are merged so
+/// that the surface is indexed; facet normals are ignored (orientation is the vertex order).
+pub fn read_stl(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
+    let path = path.as_ref();
+    let bytes = read_bytes(path)?;
+    let declared = bytes.get(80..84).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
+    let binary_size = declared.map(|n| 84 + 50 * n as u128);
+    let size_matches = binary_size == Some(bytes.len() as u128);
+    let ascii_start = bytes.trim_ascii_start().get(..5).is_some_and(|s| s.eq_ignore_ascii_case(b"solid"));
+    if !size_matches && ascii_start && !bytes.contains(&0) {
+        return read_stl_ascii(path, &String::from_utf8_lossy(&bytes));
+    }
+    let (Some(n), Some(size)) = (declared, binary_size) else {
+        return Err(parse_error(
+            path,
+            format!(
+                "{} bytes: too short for a binary STL, and not an ASCII STL (which starts with 'solid')",
+                bytes.len()
+            ),
+        ));
+    };
+    if !size_matches {
+        return Err(parse_error(
+            path,
+            format!(
+                "binary STL header declares {n} triangles ({size} bytes), but the file has {} bytes \
+                 (truncated, or not an STL file)",
+                bytes.len()
+            ),
+        ));
+    }
+    let mut merger = Merger::default();
+    let mut triangles = Vec::with_capacity(n);
+    for (t, record) in bytes[84..].chunks_exact(50).enumerate() {
+        let f = |k: usize| {
+            let b = &record[12 + 4 * k..16 + 4 * k];
+            f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64
+        };
+        let corners: [Point; 3] = std::array::from_fn(|v| [f(3 * v), f(3 * v + 1), f(3 * v + 2)]);
+        if corners.iter().flatten().any(|c| !c.is_finite()) {
+            return Err(parse_error(path, format!("triangle {t} has a non-finite coordinate")));
+        }
+        triangles.push(corners.map(|p| merger.add(p)));
+    }
+    Ok(TriSurface { vertices: merger.vertices, triangles })
+}
+
+/// Where an ASCII STL parser is.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum State {
+    Outside,
+    Solid,
+    Facet,
+    Loop,
+    LoopDone,
+}
+
+impl State {
+    fn expected(self) -> &'static str {
+        match self {
+            State::Outside => "'solid'",
+            State::Solid => "'facet normal' or 'endsolid'",
+            State::Facet => "'outer loop'",
+            State::Loop => "'vertex' or 'endloop'",
+            State::LoopDone => "'endfacet'",
+        }
+    }
+}
+
+/// Parses an ASCII STL (several solids allowed; loops of more than 3 vertices become fans).
+fn read_stl_ascii(path: &Path, text: &str) -> Result<TriSurface, MeshError> {
+    let mut lines = LineReader::new(path, text);
+    let mut merger = Merger::default();
+    let mut triangles = Vec::new();
+    let mut polygon = Vec::new();
+    let mut state = State::Outside;
+    while let Some(mut line) = lines.next_line() {
+        let key = line.next_token().unwrap_or("").to_ascii_lowercase();
+        state = match (state, key.as_str()) {
+            (State::Outside, "solid") => State::Solid,
+            (State::Solid, "facet") => {
+                if !line.token("'normal'")?.eq_ignore_ascii_case("normal") {
+                    return Err(line.error("expected 'facet normal'"));
+                }
+                line.point("normal component")?;
+                State::Facet
+            }
+            (State::Facet, "outer") => {
+                if !line.token("'loop'")?.eq_ignore_ascii_case("loop") {
+                    return Err(line.error("expected 'outer loop'"));
+                }
+                polygon.clear();
+                State::Loop
+            }
+            (State::Loop, "vertex") => {
+                let p = line.point("vertex coordinate")?;
+                line.finish("the vertex coordinates")?;
+                polygon.push(merger.add(p));
+                State::Loop
+            }
+            (State::Loop, "endloop") => {
+                if polygon.len() < 3 {
+                    return Err(line.error(format!("a facet needs 3 vertices, found {}", polygon.len())));
+                }
+                fan(&polygon, &mut triangles);
+                State::LoopDone
+            }
+            (State::LoopDone, "endfacet") => State::Solid,
+            (State::Solid, "endsolid") => State::Outside,
+            (state, _) => {
+                return Err(line.error(format!("expected {}, found '{}'", state.expected(), line.text.trim())));
+            }
+        };
+    }
+    if state != State::Outside {
+        return Err(lines.end_of_file(&format!("{} (no closing 'endsolid')", state.expected())));
+    }
+    if triangles.is_empty() {
+        return Err(parse_error(path, "no facets"));
+    }
+    Ok(TriSurface { vertices: merger.vertices, triangles })
+}
+
+/// Writes a surface as binary STL (single precision, unit facet normals from the vertex order).
+pub fn write_stl(path: impl AsRef<Path>, surface: &TriSurface) -> Result<(), MeshError> {
+    check_surface(surface)?;
+    let count = u32::try_from(surface.triangles.len())
+        .map_err(|_| MeshError::Invalid("too many triangles for binary STL".into()))?;
+    write_atomic(path.as_ref(), |w| {
+        let mut header = [b' '; 80];
+        header[..17].copy_from_slice(b"augsim binary STL");
+        w.write_all(&header)?;
+        w.write_all(&count.to_le_bytes())?;
+        for t in &surface.triangles {
+            let [a, b, c] = t.map(|i| surface.vertices[i]);
+            let n = cross(sub(b, a), sub(c, a));
+            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            let n = if len > 0.0 { n.map(|x| x / len) } else { [0.0; 3] };
+            for x in n.iter().chain(a.iter()).chain(b.iter()).chain(c.iter()) {
+                w.write_all(&(*x as f32).to_le_bytes())?;
+            }
+            w.write_all(&[0, 0])?;
+        }
+        Ok(())
+    })
+}

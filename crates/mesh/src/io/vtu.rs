@@ -1,0 +1,657 @@
+//! VTK XML unstructured grids (`.vtu`).
+//!
+//! Written with Float64 values and Int64 connectivity, ASCII or base64 (UInt64 headers). Read:
+//! one `Piece`, arrays in `ascii`, `binary` (base64) or `appended` (raw or base64) form, UInt32
+//! or UInt64 headers, either byte order, uncompressed or zlib-compressed: what ParaView, VTK and
+//! meshio write. Every array is checked against its declared size.
+
+use std::io::Write;
+use std::path::Path;
+
+use std::io::Read;
+use std::ops::Range;
+
+use base64::engine::general_purpose::STANDARD as BASE64;
+use base64::Engine as _;
+
+use super::legacy_vtk::{surface_from_cells, volume_from_cells};
+use super::{
+    check_for_writing, check_surface, mesh_cells_flat, parse_error, write_atomic, Encoding, Field, FieldLocation, Num,
+    VTK_TRIANGLE,
+};
+use crate::{Mesh, MeshError, Point, TriSurface};
+
+/// A scalar type of a `.vtu` data array.
+trait VtuScalar: Copy {
+    /// The VTK XML type name.
+    const NAME: &'static str;
+    /// Appends the little-endian bytes.
+    fn le_bytes(self, out: &mut Vec<u8>);
+    /// Writes the value as text.
+    fn text(self, w: &mut dyn Write) -> std::io::Result<()>;
+}
+
+impl VtuScalar for f64 {
+    const NAME: &'static str = "Float64";
+    fn le_bytes(self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.to_le_bytes());
+    }
+    fn text(self, w: &mut dyn Write) -> std::io::Result<()> {
+        write!(w, "{}", Num(self))
+    }
+}
+
+impl VtuScalar for i64 {
+    const NAME: &'static str = "Int64";
+    fn le_bytes(self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.to_le_bytes());
+    }
+    fn text(self, w: &mut dyn Write) -> std::io::Result<()> {
+        write!(w, "{self}")
+    }
+}
+
+impl VtuScalar for u8 {
+    const NAME: &'static str = "UInt8";
+    fn le_bytes(self, out: &mut Vec<u8>) {
+        out.push(self);
+    }
+    fn text(self, w: &mut dyn Write) -> std::io::Result<()> {
+        write!(w, "{self}")
+    }
+}
+
+/// Writes one `<DataArray>` with extra attributes `attrs`: base64 of a UInt64 byte count
+/// followed by the data (binary), or text with `per_line` values per line (ASCII).
+fn write_array<T: VtuScalar>(
+    w: &mut dyn Write,
+    attrs: &str,
+    values: &[T],
+    encoding: Encoding,
+    per_line: usize,
+) -> std::io::Result<()> {
+    match encoding {
+        Encoding::Binary => {
+            let size = std::mem::size_of_val(values);
+            let mut bytes = Vec::with_capacity(8 + size);
+            bytes.extend_from_slice(&(size as u64).to_le_bytes());
+            for &v in values {
+                v.le_bytes(&mut bytes);
+            }
+            writeln!(w, "<DataArray type=\"{}\"{attrs} format=\"binary\">{}</DataArray>", T::NAME, BASE64.encode(bytes))
+        }
+        Encoding::Ascii => {
+            write!(w, "<DataArray type=\"{}\"{attrs} format=\"ascii\">", T::NAME)?;
+            for (i, &v) in values.iter().enumerate() {
+                w.write_all(if i % per_line == 0 { b"\n" } else { b" " })?;
+                v.text(w)?;
+            }
+            writeln!(w, "\n</DataArray>")
+        }
+    }
+}
+
+/// Writes a whole `.vtu` file of cells of one VTK type with `k` nodes each.
+fn write_grid(
+    path: &Path,
+    nodes: &[Point],
+    conn: &[usize],
+    k: usize,
+    cell_type: u8,
+    fields: &[Field],
+    encoding: Encoding,
+) -> Result<(), MeshError> {
+    let cells = conn.len() / k;
+    check_for_writing(nodes.len(), cells, conn, fields)?;
+    let points: Vec<f64> = nodes.iter().flatten().copied().collect();
+    let connectivity: Vec<i64> = conn.iter().map(|&i| i as i64).collect();
+    let offsets: Vec<i64> = (1..=cells).map(|c| (c * k) as i64).collect();
+    let types = vec![cell_type; cells];
+    write_atomic(path, |w| {
+        writeln!(
+            w,
+            "<?xml version=\"1.0\"?>\n\
+             <VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n\
+             <UnstructuredGrid>\n<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{cells}\">",
+            nodes.len()
+        )?;
+        for (location, tag) in [(FieldLocation::Point, "PointData"), (FieldLocation::Cell, "CellData")] {
+            let here: Vec<&Field> = fields.iter().filter(|f| f.location == location).collect();
+            if here.is_empty() {
+                continue;
+            }
+            writeln!(w, "<{tag}>")?;
+            for f in here {
+                let attrs = format!(" Name=\"{}\" NumberOfComponents=\"{}\"", f.name, f.components);
+                write_array(w, &attrs, &f.values, encoding, f.components.max(3))?;
+            }
+            writeln!(w, "</{tag}>")?;
+        }
+        writeln!(w, "<Points>")?;
+        write_array(w, " NumberOfComponents=\"3\"", &points, encoding, 3)?;
+        writeln!(w, "</Points>\n<Cells>")?;
+        write_array(w, " Name=\"connectivity\"", &connectivity, encoding, k)?;
+        write_array(w, " Name=\"offsets\"", &offsets, encoding, 16)?;
+        write_array(w, " Name=\"types\"", &types, encoding, 32)?;
+        writeln!(w, "</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>")
+    })
+}
+
+/// Writes a volume mesh with point and cell data as a VTK XML unstructured grid with base64
+/// binary arrays (Float64 values, Int64 connectivity), as read by ParaView and meshio.
+pub fn write_vtu(path: impl AsRef<Path>, mesh: &Mesh, fields: &[Field]) -> Result<(), MeshError> {
+    write_vtu_with(path, mesh, fields, Encoding::Binary)
+}
+
+/// Like [`write_vtu`], in the given encoding.
+pub fn write_vtu_with(
+    path: impl AsRef<Path>,
+    mesh: &Mesh,
+    fields: &[Field],
+    encoding: Encoding,
+) -> Result<(), MeshError> {
+    let (ty, k, conn) = mesh_cells_flat(mesh);
+    write_grid(path.as_ref(), &mesh.nodes, &conn, k, ty, fields, encoding)
+}
+
+/// Writes a surface as a `.vtu` of triangles.
+pub(super) fn write_surface_vtu(path: &Path, surface: &TriSurface) -> Result<(), MeshError> {
+    let conn = check_surface(surface)?;
+    write_grid(path, &surface.vertices, &conn, 3, VTK_TRIANGLE, &[], Encoding::Binary)
+}
+
+/// Message for a binary header that ends early.
+const CUT_HEADER: &str = "the binary header is cut short (truncated file?)";
+/// Message for binary data that ends before its header says.
+const CUT_DATA: &str = "the data is shorter than its header announces (truncated file?)";
+
+/// A `<DataArray>` of the file.
+struct ArrayDecl {
+    /// The enclosing element (`Points`, `Cells`, `PointData`, `CellData`, ...).
+    parent: String,
+    name: String,
+    ty: String,
+    components: usize,
+    format: String,
+    offset: Option<usize>,
+    /// Byte range of the element's text.
+    content: Range<usize>,
+    /// Byte offset of the tag, for line numbers.
+    at: usize,
+}
+
+/// The structure of a `.vtu` file: its settings, sizes, arrays and appended data.
+struct VtuFile<'a> {
+    path: &'a Path,
+    data: &'a [u8],
+    header64: bool,
+    big_endian: bool,
+    zlib: bool,
+    points: usize,
+    cells: usize,
+    arrays: Vec<ArrayDecl>,
+    /// Appended data: (raw, byte range after the `_` marker).
+    appended: Option<(bool, Range<usize>)>,
+}
+
+/// Line number (from 1) of byte offset `at`.
+fn line_at(data: &[u8], at: usize) -> usize {
+    data[..at.min(data.len())].iter().filter(|&&b| b == b'\n').count() + 1
+}
+
+/// Position of `needle` in `data` at or after `from`.
+fn find(data: &[u8], from: usize, needle: &[u8]) -> Option<usize> {
+    data.get(from..)?.windows(needle.len()).position(|w| w == needle).map(|p| p + from)
+}
+
+/// Replaces the five predefined XML entities.
+fn unescape(s: &str) -> String {
+    s.replace("&quot;", "\"").replace("&apos;", "'").replace("&lt;", "<").replace("&gt;", ">").replace("&amp;", "&")
+}
+
+/// Base64 characters needed for `n` bytes.
+fn b64_len(n: usize) -> usize {
+    n.div_ceil(3).saturating_mul(4)
+}
+
+/// An opening tag: name, attributes, whether it closes itself, and the offset after `>`.
+type Tag = (String, Vec<(String, String)>, bool, usize);
+
+/// Parses the opening tag that starts at `lt` (the `<`).
+fn parse_tag(data: &[u8], lt: usize) -> Result<Tag, String> {
+    let end = find(data, lt, b">").ok_or("a tag is not closed by '>' (truncated file?)")?;
+    let inner = String::from_utf8_lossy(&data[lt + 1..end]);
+    let (inner, self_closing) = match inner.strip_suffix('/') {
+        Some(s) => (s.to_string(), true),
+        None => (inner.to_string(), false),
+    };
+    let name_end = inner.find(|c: char| c.is_whitespace()).unwrap_or(inner.len());
+    let name = inner[..name_end].to_string();
+    let mut attrs = Vec::new();
+    let mut rest = inner[name_end..].trim_start();
+    while !rest.is_empty() {
+        let eq = rest.find('=').ok_or_else(|| format!("malformed attribute in <{name}>"))?;
+        let key = rest[..eq].trim().to_string();
+        let after = rest[eq + 1..].trim_start();
+        let quote = after.chars().next().filter(|c| *c == '"' || *c == '\'');
+        let quote = quote.ok_or_else(|| format!("attribute {key} of <{name}> is not quoted"))?;
+        let close = after[1..].find(quote).ok_or_else(|| format!("attribute {key} of <{name}> is not closed"))?;
+        attrs.push((key, unescape(&after[1..1 + close])));
+        rest = after[close + 2..].trim_start();
+    }
+    Ok((name, attrs, self_closing, end + 1))
+}
+
+/// Finds the elements of a `.vtu` file that matter.
+fn scan<'a>(path: &'a Path, data: &'a [u8]) -> Result<VtuFile<'a>, MeshError> {
+    let at_error = |at: usize, m: String| parse_error(path, format!("line {}: {m}", line_at(data, at)));
+    let mut file = VtuFile {
+        path,
+        data,
+        header64: false,
+        big_endian: false,
+        zlib: false,
+        points: 0,
+        cells: 0,
+        arrays: Vec::new(),
+        appended: None,
+    };
+    let mut stack: Vec<(String, usize)> = Vec::new();
+    let mut seen_file = false;
+    let mut pieces = 0;
+    let mut pos = 0;
+    while let Some(lt) = find(data, pos, b"<") {
+        let rest = &data[lt..];
+        let skip_to = |end: &[u8]| find(data, lt, end).map(|p| p + end.len());
+        if rest.starts_with(b"<?") || rest.starts_with(b"<!--") || rest.starts_with(b"<!") {
+            let end: &[u8] = if rest.starts_with(b"<?") {
+                b"?>"
+            } else if rest.starts_with(b"<!--") {
+                b"-->"
+            } else {
+                b">"
+            };
+            pos = skip_to(end).ok_or_else(|| at_error(lt, "unclosed declaration or comment".into()))?;
+            continue;
+        }
+        if rest.starts_with(b"</") {
+            let end = find(data, lt, b">").ok_or_else(|| at_error(lt, "unclosed end tag (truncated file?)".into()))?;
+            let name = String::from_utf8_lossy(&data[lt + 2..end]).trim().to_string();
+            match stack.pop() {
+                Some((open, _)) if open == name => {}
+                Some((open, at)) => {
+                    return Err(at_error(lt, format!("</{name}> closes <{open}> of line {}", line_at(data, at))))
+                }
+                None => return Err(at_error(lt, format!("</{name}> closes nothing"))),
+            }
+            pos = end + 1;
+            continue;
+        }
+        let (name, attrs, self_closing, end) = parse_tag(data, lt).map_err(|m| at_error(lt, m))?;
+        let attr = |key: &str| attrs.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str());
+        let count = |key: &str| -> Result<usize, MeshError> {
+            let v = attr(key).ok_or_else(|| at_error(lt, format!("<{name}> has no {key}")))?;
+            v.trim().parse().map_err(|_| at_error(lt, format!("{key}=\"{v}\" is not a count")))
+        };
+        match name.as_str() {
+            "VTKFile" => {
+                seen_file = true;
+                if attr("type") != Some("UnstructuredGrid") {
+                    return Err(at_error(lt, format!("type {:?} is not UnstructuredGrid", attr("type").unwrap_or(""))));
+                }
+                file.big_endian = attr("byte_order") == Some("BigEndian");
+                file.header64 = match attr("header_type") {
+                    None | Some("UInt32") => false,
+                    Some("UInt64") => true,
+                    Some(other) => return Err(at_error(lt, format!("unsupported header_type {other}"))),
+                };
+                file.zlib = match attr("compressor") {
+                    None | Some("") => false,
+                    Some("vtkZLibDataCompressor") => true,
+                    Some(other) => {
+                        return Err(at_error(lt, format!("compressor {other} is not supported (zlib or none are)")))
+                    }
+                };
+            }
+            "Piece" => {
+                pieces += 1;
+                if pieces > 1 {
+                    return Err(at_error(lt, "a second <Piece>: only single-piece files are supported".into()));
+                }
+                file.points = count("NumberOfPoints")?;
+                file.cells = count("NumberOfCells")?;
+            }
+            "DataArray" => {
+                let content = if self_closing {
+                    end..end
+                } else {
+                    let close = find(data, end, b"<")
+                        .ok_or_else(|| at_error(lt, "<DataArray> is not closed (truncated file?)".into()))?;
+                    end..close
+                };
+                file.arrays.push(ArrayDecl {
+                    parent: stack.last().map(|(n, _)| n.clone()).unwrap_or_default(),
+                    name: attr("Name").unwrap_or("").to_string(),
+                    ty: attr("type").unwrap_or("").to_string(),
+                    components: match attr("NumberOfComponents") {
+                        Some(_) => count("NumberOfComponents")?,
+                        None => 1,
+                    },
+                    format: attr("format").unwrap_or("ascii").to_string(),
+                    offset: match attr("offset") {
+                        Some(_) => Some(count("offset")?),
+                        None => None,
+                    },
+                    content,
+                    at: lt,
+                });
+            }
+            "AppendedData" => {
+                let raw = match attr("encoding") {
+                    Some("raw") => true,
+                    Some("base64") => false,
+                    other => return Err(at_error(lt, format!("AppendedData encoding {other:?} is not raw or base64"))),
+                };
+                let start = find(data, end, b"_")
+                    .ok_or_else(|| at_error(lt, "AppendedData has no '_' marker (truncated file?)".into()))?;
+                let stop = data
+                    .windows(b"</AppendedData>".len())
+                    .rposition(|w| w == b"</AppendedData>")
+                    .filter(|&p| p > start)
+                    .ok_or_else(|| at_error(lt, "AppendedData is not closed (truncated file?)".into()))?;
+                file.appended = Some((raw, start + 1..stop));
+                stack.clear();
+                break;
+            }
+            _ => {}
+        }
+        if !self_closing {
+            stack.push((name, lt));
+        }
+        pos = end;
+    }
+    if !seen_file {
+        return Err(parse_error(path, "not a VTK XML file (no <VTKFile> element)"));
+    }
+    if let Some((open, at)) = stack.last() {
+        return Err(parse_error(
+            path,
+            format!("file ends inside <{open}> of line {} (truncated file?)", line_at(data, *at)),
+        ));
+    }
+    if pieces == 0 {
+        return Err(parse_error(path, "no <Piece> element"));
+    }
+    Ok(file)
+}
+
+impl VtuFile<'_> {
+    /// An unsigned integer of the header type at the start of `b`.
+    fn header_uint(&self, b: &[u8]) -> Option<usize> {
+        let n = if self.header64 { 8 } else { 4 };
+        let b = b.get(..n)?;
+        let mut w = [0u8; 8];
+        if self.big_endian {
+            w[8 - n..].copy_from_slice(b);
+            Some(u64::from_be_bytes(w) as usize)
+        } else {
+            w[..n].copy_from_slice(b);
+            Some(u64::from_le_bytes(w) as usize)
+        }
+    }
+
+    /// Decompresses the zlib blocks described by `header` (a VTK compression header).
+    fn inflate(&self, header: &[u8], blocks: &[u8]) -> Result<Vec<u8>, String> {
+        let h: usize = if self.header64 { 8 } else { 4 };
+        let field = |k: usize| self.header_uint(header.get(k * h..).unwrap_or(&[])).ok_or(CUT_HEADER);
+        let (count, size, last) = (field(0)?, field(1)?, field(2)?);
+        let mut out = Vec::new();
+        let mut at = 0usize;
+        for b in 0..count {
+            let compressed = field(3 + b)?;
+            let end = at.checked_add(compressed).filter(|&e| e <= blocks.len()).ok_or(CUT_DATA)?;
+            let expected = if b + 1 == count && last != 0 { last } else { size };
+            let before = out.len();
+            flate2::read::ZlibDecoder::new(&blocks[at..end])
+                .take(expected as u64 + 1)
+                .read_to_end(&mut out)
+                .map_err(|e| format!("zlib block {b} cannot be inflated: {e}"))?;
+            if out.len() - before != expected {
+                return Err(format!("zlib block {b} inflates to {} bytes, not {expected}", out.len() - before));
+            }
+            at = end;
+        }
+        Ok(out)
+    }
+
+    /// Size in bytes of a zlib compression header of `count` blocks.
+    fn zlib_header_len(&self, count: usize) -> Result<usize, String> {
+        let h: usize = if self.header64 { 8 } else { 4 };
+        count.checked_add(3).and_then(|c| c.checked_mul(h)).ok_or_else(|| CUT_HEADER.to_string())
+    }
+
+    /// Total compressed size announced by a zlib compression header.
+    fn zlib_data_len(&self, header: &[u8]) -> Result<usize, String> {
+        let h: usize = if self.header64 { 8 } else { 4 };
+        let count = self.header_uint(header).ok_or(CUT_HEADER)?;
+        (0..count).try_fold(0usize, |total, b| {
+            let size = self.header_uint(header.get((3 + b) * h..).unwrap_or(&[])).ok_or(CUT_HEADER)?;
+            total.checked_add(size).ok_or_else(|| CUT_DATA.to_string())
+        })
+    }
+
+    /// The bytes of a binary block (header then data) stored raw.
+    fn raw_block(&self, bytes: &[u8]) -> Result<Vec<u8>, String> {
+        let h: usize = if self.header64 { 8 } else { 4 };
+        let first = self.header_uint(bytes).ok_or(CUT_HEADER)?;
+        if self.zlib {
+            let header = bytes.get(..self.zlib_header_len(first)?).ok_or(CUT_HEADER)?;
+            return self.inflate(header, &bytes[header.len()..]);
+        }
+        let data = h.checked_add(first).and_then(|end| bytes.get(h..end));
+        Ok(data.ok_or(format!("the header announces {first} bytes, more than the file holds (truncated?)"))?.to_vec())
+    }
+
+    /// The bytes of a binary block stored in base64: header and data encoded together or as
+    /// two streams (both are written by common tools). With `exact`, `text` must hold exactly
+    /// this block.
+    fn base64_block(&self, text: &[u8], exact: bool) -> Result<Vec<u8>, String> {
+        let h: usize = if self.header64 { 8 } else { 4 };
+        let decode = |t: &[u8]| BASE64.decode(t).map_err(|e| format!("invalid base64: {e}"));
+        let piece = |from: usize, to: usize| text.get(from..to).ok_or(CUT_DATA);
+        let hl = b64_len(h);
+        let first = self.header_uint(&decode(piece(0, hl)?)?).ok_or(CUT_HEADER)?;
+        let (bytes, needed) = if self.zlib {
+            let header_chars = b64_len(self.zlib_header_len(first)?);
+            let header = decode(piece(0, header_chars)?)?;
+            let needed = header_chars.saturating_add(b64_len(self.zlib_data_len(&header)?));
+            (self.inflate(&header, &decode(piece(header_chars, needed)?)?)?, needed)
+        } else if text[hl - 1] == b'=' {
+            let needed = hl.saturating_add(b64_len(first));
+            (decode(piece(hl, needed)?)?, needed)
+        } else {
+            let needed = b64_len(h.saturating_add(first));
+            (decode(piece(0, needed)?)?.get(h..).unwrap_or(&[]).to_vec(), needed)
+        };
+        if !self.zlib && bytes.len() != first {
+            return Err(format!("the header announces {first} bytes, but the data holds {}", bytes.len()));
+        }
+        if exact && text.len() != needed {
+            return Err(format!("{} base64 characters, but the header announces {needed}", text.len()));
+        }
+        Ok(bytes)
+    }
+
+    /// The values of an array as `f64`.
+    fn values(&self, a: &ArrayDecl) -> Result<Vec<f64>, MeshError> {
+        let fail = |m: String| self.array_error(a, m);
+        let size = match a.ty.as_str() {
+            "Int8" | "UInt8" => 1,
+            "Int16" | "UInt16" => 2,
+            "Int32" | "UInt32" | "Float32" => 4,
+            "Int64" | "UInt64" | "Float64" => 8,
+            other => return Err(fail(format!("unsupported type '{other}'"))),
+        };
+        if a.format == "ascii" {
+            let text = String::from_utf8_lossy(&self.data[a.content.clone()]);
+            return text
+                .split_whitespace()
+                .map(|t| t.parse::<f64>().map_err(|_| fail(format!("'{t}' is not a number"))))
+                .collect();
+        }
+        let bytes = match (a.format.as_str(), &self.appended, a.offset) {
+            ("binary", _, _) => {
+                let text: Vec<u8> =
+                    self.data[a.content.clone()].iter().copied().filter(|b| !b.is_ascii_whitespace()).collect();
+                self.base64_block(&text, true)
+            }
+            ("appended", Some((raw, range)), Some(offset)) => {
+                let region = &self.data[range.clone()];
+                let start = offset.min(region.len());
+                if *raw {
+                    self.raw_block(&region[start..])
+                } else {
+                    let text: Vec<u8> =
+                        region[start..].iter().copied().take_while(|b| !b.is_ascii_whitespace()).collect();
+                    self.base64_block(&text, false)
+                }
+            }
+            ("appended", None, _) => Err("format is appended, but the file has no <AppendedData>".into()),
+            ("appended", _, None) => Err("format is appended, but there is no offset".into()),
+            (other, _, _) => Err(format!("unknown format '{other}'")),
+        }
+        .map_err(fail)?;
+        if bytes.len() % size != 0 {
+            return Err(fail(format!("{} bytes is not a whole number of {} values", bytes.len(), a.ty)));
+        }
+        Ok(bytes
+            .chunks_exact(size)
+            .map(|c| {
+                let mut w = [0u8; 8];
+                if self.big_endian {
+                    w[..size].copy_from_slice(&c.iter().rev().copied().collect::<Vec<_>>());
+                } else {
+                    w[..size].copy_from_slice(c);
+                }
+                let (b2, b4) = ([w[0], w[1]], [w[0], w[1], w[2], w[3]]);
+                match a.ty.as_str() {
+                    "Int8" => w[0] as i8 as f64,
+                    "UInt8" => w[0] as f64,
+                    "Int16" => i16::from_le_bytes(b2) as f64,
+                    "UInt16" => u16::from_le_bytes(b2) as f64,
+                    "Int32" => i32::from_le_bytes(b4) as f64,
+                    "UInt32" => u32::from_le_bytes(b4) as f64,
+                    "Float32" => f32::from_le_bytes(b4) as f64,
+                    "Int64" => i64::from_le_bytes(w) as f64,
+                    "UInt64" => u64::from_le_bytes(w) as f64,
+                    _ => f64::from_le_bytes(w),
+                }
+            })
+            .collect())
+    }
+
+    /// An error about array `a`, with its line.
+    fn array_error(&self, a: &ArrayDecl, message: String) -> MeshError {
+        let line = line_at(self.data, a.at);
+        match a.name.as_str() {
+            "" => parse_error(self.path, format!("line {line}: <{}> DataArray: {message}", a.parent)),
+            name => parse_error(self.path, format!("line {line}: DataArray '{name}': {message}")),
+        }
+    }
+
+    /// The values of an array, checked to hold `count` tuples.
+    fn sized(&self, a: &ArrayDecl, count: usize) -> Result<Vec<f64>, MeshError> {
+        let values = self.values(a)?;
+        if Some(values.len()) != count.checked_mul(a.components) {
+            let m = format!("{} values, but {count} × {} components are declared", values.len(), a.components);
+            return Err(self.array_error(a, m));
+        }
+        Ok(values)
+    }
+
+    /// The array named `name` in `<Cells>`, as indices.
+    fn cell_array(&self, name: &str, count: Option<usize>) -> Result<Vec<usize>, MeshError> {
+        let a = self
+            .arrays
+            .iter()
+            .find(|a| a.parent == "Cells" && a.name == name)
+            .ok_or_else(|| parse_error(self.path, format!("<Cells> has no '{name}' array")))?;
+        let values = match count {
+            Some(n) => self.sized(a, n)?,
+            None => self.values(a)?,
+        };
+        values
+            .iter()
+            .map(|&x| {
+                (x >= 0.0 && x.fract() == 0.0)
+                    .then_some(x as usize)
+                    .ok_or_else(|| self.array_error(a, format!("{x} is not an index")))
+            })
+            .collect()
+    }
+}
+
+/// The unstructured grid of a `.vtu` file: points, cells, cell types and data arrays.
+type Grid = (Vec<Point>, Vec<Vec<usize>>, Vec<u32>, Vec<Field>);
+
+/// Reads a `.vtu` file into plain arrays.
+fn load(path: &Path) -> Result<Grid, MeshError> {
+    let data = super::read_bytes(path)?;
+    let file = scan(path, &data)?;
+    let points_array =
+        file.arrays.iter().find(|a| a.parent == "Points").ok_or_else(|| parse_error(path, "no <Points> DataArray"))?;
+    if points_array.components != 3 {
+        return Err(parse_error(path, "<Points> must have 3 components"));
+    }
+    let xyz = file.sized(points_array, file.points)?;
+    let points: Vec<Point> = xyz.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let connectivity = file.cell_array("connectivity", None)?;
+    let offsets = file.cell_array("offsets", Some(file.cells))?;
+    let types: Vec<u32> =
+        file.cell_array("types", Some(file.cells))?.iter().map(|&t| t.min(u32::MAX as usize) as u32).collect();
+    let mut cells = Vec::with_capacity(file.cells);
+    let mut start = 0;
+    for (c, &end) in offsets.iter().enumerate() {
+        if end < start || end > connectivity.len() {
+            return Err(parse_error(
+                path,
+                format!(
+                    "cell {c}: offset {end} is out of order or past the {} connectivity entries",
+                    connectivity.len()
+                ),
+            ));
+        }
+        cells.push(connectivity[start..end].to_vec());
+        start = end;
+    }
+    let mut fields = Vec::new();
+    for (parent, location, count) in
+        [("PointData", FieldLocation::Point, file.points), ("CellData", FieldLocation::Cell, file.cells)]
+    {
+        for a in file.arrays.iter().filter(|a| a.parent == parent) {
+            let values = file.sized(a, count)?;
+            fields.push(Field { name: a.name.clone(), location, components: a.components, values });
+        }
+    }
+    Ok((points, cells, types, fields))
+}
+
+/// Reads a `.vtu` unstructured grid as a volume mesh of tetrahedra or hexahedra.
+pub fn read_vtu(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
+    Ok(read_vtu_with_fields(path)?.0)
+}
+
+/// Like [`read_vtu`], also returning the point and cell data arrays restricted to the kept
+/// nodes and cells.
+pub fn read_vtu_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>), MeshError> {
+    let path = path.as_ref();
+    let (points, cells, types, fields) = load(path)?;
+    volume_from_cells(path, &points, &cells, &types, fields)
+}
+
+/// Reads the triangles, quads and polygons of a `.vtu` unstructured grid as a surface.
+pub fn read_vtu_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
+    let path = path.as_ref();
+    let (points, cells, types, _) = load(path)?;
+    surface_from_cells(path, points, types.iter().zip(&cells).map(|(&t, c)| (t, c.as_slice())))
+}
