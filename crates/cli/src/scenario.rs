@@ -61,6 +61,26 @@ pub enum MeshSource {
         /// "hex" (H8) or "tet" (6 T4 per cell).
         element: ElementKind,
     },
+    /// The built-in liver phantom meshed with about `tets` tetrahedra.
+    Phantom {
+        /// Target number of tetrahedra.
+        tets: usize,
+    },
+    /// The built-in liver phantom as an immersed-boundary H8 grid.
+    PhantomGrid {
+        /// Cell size (m).
+        spacing: f64,
+    },
+    /// A closed surface (.obj, .stl, .vtk) meshed with tetrahedra; the path is
+    /// relative to the scenario file.
+    Surface {
+        /// Path of the surface.
+        path: PathBuf,
+        /// Scale so that the largest extent is this length (m), centred at the origin.
+        length: f64,
+        /// Target number of tetrahedra.
+        tets: usize,
+    },
     /// A volume mesh file (.msh, .vtk, .vtu); the path is relative to the scenario file.
     File {
         /// Path of the file.
@@ -159,6 +179,13 @@ impl Scenario {
         Ok(match &self.mesh {
             MeshSource::Box { min, max, cells, element: ElementKind::Hex } => mesh::box_hex(*min, *max, *cells)?,
             MeshSource::Box { min, max, cells, element: ElementKind::Tet } => mesh::box_tet(*min, *max, *cells)?,
+            MeshSource::Phantom { tets } => mesh::phantom::liver_phantom(*tets)?,
+            MeshSource::PhantomGrid { spacing } => mesh::phantom::PhantomSpec::default().immersed(*spacing)?.mesh,
+            MeshSource::Surface { path, length, tets } => {
+                let mut surface = mesh::io::read_surface(dir.join(path))?;
+                surface.fit_to(*length)?;
+                mesh::tetmesh::mesh_surface_to_count(&surface, *tets, mesh::tetmesh::BoundaryFit::default())?.0
+            }
             MeshSource::File { path, scale, centre } => {
                 let mut m = mesh::io::read_mesh(dir.join(path))?;
                 let (lo, hi) = m.bounds();

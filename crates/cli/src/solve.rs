@@ -36,6 +36,9 @@ pub fn run(path: &Path, output: Option<&Path>) -> Result<()> {
         Field::cell("green_strain", 6, post::green_strain(geo, &sol.u)),
         Field::cell("von_mises", 1, post::von_mises(geo, &p.material, &sol.u)),
     ];
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     mesh::io::write_mesh(&out, &p.mesh, &fields).with_context(|| format!("writing {}", out.display()))?;
     let t = sol.timings;
     println!("material   {:?}, E = {} Pa, nu = {}", p.material.law, p.material.young, p.material.poisson);
