@@ -1,6 +1,8 @@
 //! `augsim`: data-driven simulation for augmented surgery.
 
+mod assimilate;
 mod bench;
+mod learn_cmd;
 mod mesh_cmd;
 mod scenario;
 mod solve;
@@ -45,6 +47,71 @@ enum Command {
         #[arg(short, long, default_value = "out/mesh.vtu")]
         output: PathBuf,
     },
+    /// ROUKF identification of Young's modulus and/or boundary springs from synthetic tracked surface points;
+    /// writes traces (CSV, JSON), assessment errors and PNG plots.
+    Assimilate {
+        /// Scenario TOML file (e.g. scenarios/roukf_young.toml).
+        scenario: PathBuf,
+        /// Number of filter iterations (default: the scenario's).
+        #[arg(long)]
+        iterations: Option<usize>,
+        /// Evaluate the sigma points one after the other instead of in parallel.
+        #[arg(long)]
+        sequential: bool,
+        /// Output directory; default out/<name>.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
+    /// Generate a FEM dataset (random loads → grid input/target pairs); resumable, splittable.
+    Generate {
+        /// Dataset scenario TOML (e.g. scenarios/liver_forces.toml).
+        scenario: PathBuf,
+        /// Output directory; default out/<name> (or out/<name>.part<i>of<n>).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Generate only part i of n (e.g. 0/8), for array jobs; join with `merge`.
+        #[arg(long)]
+        shard: Option<String>,
+        /// Override the number of samples.
+        #[arg(long)]
+        samples: Option<usize>,
+    },
+    /// Merge dataset parts written with `generate --shard i/n`.
+    Merge {
+        /// Output directory.
+        out: PathBuf,
+        /// Part directories.
+        #[arg(required = true)]
+        parts: Vec<PathBuf>,
+    },
+    /// Train a U-Net on a dataset (from scratch or fine-tuning a pre-trained model); resumable.
+    Train(learn_cmd::TrainArgs),
+    /// Evaluate a model on a dataset's test split: mean/std/max Euclidean error, worst sample as VTK.
+    Eval {
+        /// Model JSON (model.json).
+        model: PathBuf,
+        /// Dataset directory.
+        dataset: PathBuf,
+        /// Output directory (errors.csv, summary.json, worst.vtu).
+        #[arg(short, long, default_value = "out/eval")]
+        out: PathBuf,
+        /// Split and corruption.
+        #[command(flatten)]
+        split: learn_cmd::SplitArgs,
+    },
+    /// Predict the displacement for a constraint tensor (.npy [3, nx, ny, nz]) and time the network.
+    Predict {
+        /// Model JSON (model.json).
+        model: PathBuf,
+        /// Input tensor (.npy).
+        input: PathBuf,
+        /// Output tensor (.npy).
+        #[arg(short, long, default_value = "out/prediction.npy")]
+        output: PathBuf,
+        /// Timed runs after warm-up.
+        #[arg(long, default_value_t = 50)]
+        runs: usize,
+    },
     /// Benchmarks of the static solver (median times, split by phase).
     Bench {
         /// Repetitions per case.
@@ -60,6 +127,16 @@ fn main() {
         Command::Mesh { surface, length, tets, immersed, output } => {
             mesh_cmd::run(&mesh_cmd::MeshArgs { surface, length, tets, immersed, output })
         }
+        Command::Assimilate { scenario, iterations, sequential, output } => {
+            assimilate::run(&scenario, assimilate::Overrides { iterations, sequential, output })
+        }
+        Command::Generate { scenario, out, shard, samples } => {
+            learn_cmd::generate(&scenario, out.as_deref(), shard.as_deref(), samples)
+        }
+        Command::Merge { out, parts } => learn_cmd::merge(&out, &parts),
+        Command::Train(args) => learn_cmd::train(&args),
+        Command::Eval { model, dataset, out, split } => learn_cmd::eval(&model, &dataset, &split, &out),
+        Command::Predict { model, input, output, runs } => learn_cmd::predict(&model, &input, &output, runs),
         Command::Bench { runs } => bench::run(runs),
     };
     if let Err(e) = result {

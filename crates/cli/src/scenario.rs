@@ -176,24 +176,7 @@ impl Scenario {
 
     /// Builds the mesh (file paths relative to `dir`).
     pub fn build_mesh(&self, dir: &Path) -> Result<Mesh> {
-        Ok(match &self.mesh {
-            MeshSource::Box { min, max, cells, element: ElementKind::Hex } => mesh::box_hex(*min, *max, *cells)?,
-            MeshSource::Box { min, max, cells, element: ElementKind::Tet } => mesh::box_tet(*min, *max, *cells)?,
-            MeshSource::Phantom { tets } => mesh::phantom::liver_phantom(*tets)?,
-            MeshSource::PhantomGrid { spacing } => mesh::phantom::PhantomSpec::default().immersed(*spacing)?.mesh,
-            MeshSource::Surface { path, length, tets } => {
-                let mut surface = mesh::io::read_surface(dir.join(path))?;
-                surface.fit_to(*length)?;
-                mesh::tetmesh::mesh_surface_to_count(&surface, *tets, mesh::tetmesh::BoundaryFit::default())?.0
-            }
-            MeshSource::File { path, scale, centre } => {
-                let mut m = mesh::io::read_mesh(dir.join(path))?;
-                let (lo, hi) = m.bounds();
-                let c = if *centre { std::array::from_fn(|d| 0.5 * (lo[d] + hi[d])) } else { [0.0; 3] };
-                m.transform(c, *scale);
-                m
-            }
-        })
+        build_mesh(&self.mesh, dir)
     }
 
     /// Builds the boundary-value problem on `mesh`.
@@ -234,4 +217,26 @@ impl Scenario {
     pub fn output_path(&self) -> PathBuf {
         self.output.path.clone().unwrap_or_else(|| PathBuf::from(format!("out/{}.vtu", self.name)))
     }
+}
+
+/// Builds a mesh from its source (file paths relative to `dir`).
+pub fn build_mesh(source: &MeshSource, dir: &Path) -> Result<Mesh> {
+    Ok(match source {
+        MeshSource::Box { min, max, cells, element: ElementKind::Hex } => mesh::box_hex(*min, *max, *cells)?,
+        MeshSource::Box { min, max, cells, element: ElementKind::Tet } => mesh::box_tet(*min, *max, *cells)?,
+        MeshSource::Phantom { tets } => mesh::phantom::liver_phantom(*tets)?,
+        MeshSource::PhantomGrid { spacing } => mesh::phantom::PhantomSpec::default().immersed(*spacing)?.mesh,
+        MeshSource::Surface { path, length, tets } => {
+            let mut surface = mesh::io::read_surface(dir.join(path))?;
+            surface.fit_to(*length)?;
+            mesh::tetmesh::mesh_surface_to_count(&surface, *tets, mesh::tetmesh::BoundaryFit::default())?.0
+        }
+        MeshSource::File { path, scale, centre } => {
+            let mut m = mesh::io::read_mesh(dir.join(path))?;
+            let (lo, hi) = m.bounds();
+            let c = if *centre { std::array::from_fn(|d| 0.5 * (lo[d] + hi[d])) } else { [0.0; 3] };
+            m.transform(c, *scale);
+            m
+        }
+    })
 }

@@ -17,6 +17,8 @@ pub enum NodeSelection {
     List(Vec<usize>),
     /// A named region of the mesh.
     Region(String),
+    /// Every node picked by any of the selections.
+    Union(Vec<NodeSelection>),
 }
 
 impl NodeSelection {
@@ -35,6 +37,9 @@ impl NodeSelection {
                 list.clone()
             }
             NodeSelection::Region(name) => mesh.region(name)?.to_vec(),
+            NodeSelection::Union(parts) => {
+                parts.iter().map(|p| p.select(mesh)).collect::<Result<Vec<_>, _>>()?.into_iter().flatten().collect()
+            }
         };
         nodes.sort_unstable();
         nodes.dedup();

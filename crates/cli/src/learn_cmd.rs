@@ -1,0 +1,341 @@
+//! Learning commands: `generate`, `merge`, `train`, `eval`, `predict`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use fem::{Material, SolverOptions};
+use indicatif::{ProgressBar, ProgressStyle};
+use learn::generate::{DatasetConfig, Generator};
+use learn::{
+    Corruption, Dataset, DatasetPart, Initialization, Samples, Sparsity, TrainConfig, TrainOptions, TrainedModel,
+    UNetConfig,
+};
+use mesh::io::Field;
+use serde::Deserialize;
+
+use crate::scenario::MeshSource;
+
+/// A dataset scenario file: the FEM model and how samples are drawn.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetScenario {
+    /// Short name (the default output directory is `out/<name>`).
+    pub name: String,
+    /// Free text.
+    #[serde(default)]
+    pub description: String,
+    /// The organ or beam.
+    pub mesh: MeshSource,
+    /// The material.
+    pub material: Material,
+    /// Newton-Raphson settings.
+    #[serde(default)]
+    pub solver: SolverOptions,
+    /// Sampling of loads and encoding on the grid.
+    pub dataset: DatasetConfig,
+}
+
+/// `augsim generate`.
+pub fn generate(path: &Path, out: Option<&Path>, part: Option<&str>, samples: Option<usize>) -> Result<()> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read scenario {}", path.display()))?;
+    let mut scenario: DatasetScenario =
+        toml::from_str(&text).with_context(|| format!("invalid scenario {}", path.display()))?;
+    if let Some(n) = samples {
+        scenario.dataset.samples = n;
+    }
+    let part = part.map(parse_part).transpose()?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let mesh = crate::scenario::build_mesh(&scenario.mesh, &dir).context("building the mesh")?;
+    println!("scenario   {}: {}", scenario.name, scenario.description);
+    println!("mesh       {} nodes, {} {} cells", mesh.num_nodes(), mesh.cells.len(), mesh.cells.kind_name());
+    let generator = Generator::new(mesh, scenario.material, scenario.solver.clone(), scenario.dataset.clone())?;
+    let grid = generator.grid();
+    println!(
+        "grid       {} × {} × {} ({} nodes inside)",
+        grid.nx,
+        grid.ny,
+        grid.nz,
+        generator.mask().iter().filter(|&&m| m == 1).count()
+    );
+    let out = out.map(Path::to_path_buf).unwrap_or_else(|| match &part {
+        None => PathBuf::from(format!("out/{}", scenario.name)),
+        Some(p) => PathBuf::from(format!("out/{}.part{}of{}", scenario.name, p.index, p.count)),
+    });
+    let bar = ProgressBar::new(0).with_style(
+        ProgressStyle::with_template("{spinner} {bar:40} {pos}/{len} samples, {per_sec}, eta {eta}")
+            .expect("valid template"),
+    );
+    let start = std::time::Instant::now();
+    let manifest = generator.run(&out, &scenario.name, part, &|done, total| {
+        bar.set_length(total);
+        bar.set_position(done);
+    })?;
+    bar.finish_and_clear();
+    let secs = start.elapsed().as_secs_f64();
+    println!("samples    {} written, {} failed (reasons in the manifest)", manifest.num_samples, manifest.failed.len());
+    println!("time       {:.1} s ({:.1} ms per sample)", secs, 1e3 * secs / manifest.num_samples.max(1) as f64);
+    println!("wrote      {}", out.display());
+    Ok(())
+}
+
+fn parse_part(s: &str) -> Result<DatasetPart> {
+    let (i, n) = s.split_once('/').with_context(|| format!("--shard expects i/n, got '{s}'"))?;
+    let part = DatasetPart {
+        index: i.trim().parse().context("shard index")?,
+        count: n.trim().parse().context("shard count")?,
+    };
+    if part.count == 0 || part.index >= part.count {
+        bail!("--shard {s}: need 0 ≤ i < n");
+    }
+    Ok(part)
+}
+
+/// `augsim merge`.
+pub fn merge(out: &Path, parts: &[PathBuf]) -> Result<()> {
+    let manifest = learn::merge_datasets(parts, out, None)?;
+    println!(
+        "merged {} parts: {} samples, {} failed → {}",
+        parts.len(),
+        manifest.num_samples,
+        manifest.failed.len(),
+        out.display()
+    );
+    Ok(())
+}
+
+/// Train/test split and corruption options shared by `train` and `eval`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct SplitArgs {
+    /// Fraction of the dataset (its last samples) held out as the test set.
+    #[arg(long, default_value_t = 0.2)]
+    pub test_fraction: f64,
+    /// Keep a random visible patch of between MIN and MAX input nodes (e.g. 13,114).
+    #[arg(long, value_delimiter = ',', num_args = 2)]
+    pub sparse: Option<Vec<usize>>,
+    /// Additive Gaussian noise on the visible input nodes: standard deviation in the input unit.
+    #[arg(long, default_value_t = 0.0)]
+    pub noise: f64,
+}
+
+impl SplitArgs {
+    fn corruption(&self) -> Corruption {
+        Corruption {
+            sparsity: self.sparse.as_ref().map(|v| Sparsity::Patch { min_nodes: v[0], max_nodes: v[1] }),
+            noise_std: self.noise,
+        }
+    }
+
+    fn split(&self, dataset: &Dataset) -> Result<(Samples, Samples)> {
+        if !(0.0..1.0).contains(&self.test_fraction) {
+            bail!("--test-fraction must lie in [0, 1), got {}", self.test_fraction);
+        }
+        let all = dataset.load_all()?;
+        let n_train = all.len() - (all.len() as f64 * self.test_fraction).round() as usize;
+        Ok(all.split_at(n_train)?)
+    }
+}
+
+/// Options of `augsim train`.
+#[derive(Debug, clap::Args)]
+pub struct TrainArgs {
+    /// Dataset directory (from `augsim generate`).
+    pub dataset: PathBuf,
+    /// Output directory (model.json, model.safetensors, checkpoint.bin, curve.csv, curve.png).
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Optimiser steps.
+    #[arg(long, default_value_t = 2000)]
+    pub iterations: usize,
+    /// Samples per step.
+    #[arg(long, default_value_t = 4)]
+    pub batch: usize,
+    /// Adam learning rate.
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// Channels of the first U-Net level.
+    #[arg(long, default_value_t = 16)]
+    pub channels: usize,
+    /// Down-sampling steps of the U-Net.
+    #[arg(long, default_value_t = 3)]
+    pub depth: usize,
+    /// Use only the first N training samples (e.g. 100 for transfer learning).
+    #[arg(long)]
+    pub train_samples: Option<usize>,
+    /// Fine-tune this pre-trained model (model.json) instead of starting from scratch.
+    #[arg(long)]
+    pub init: Option<PathBuf>,
+    /// With --init: keep the encoder fixed.
+    #[arg(long)]
+    pub freeze_encoder: bool,
+    /// Validate (and keep the best model) every K steps.
+    #[arg(long, default_value_t = 100)]
+    pub validate_every: usize,
+    /// Seed of weights, batches and corruption.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Start afresh instead of resuming from out/checkpoint.bin.
+    #[arg(long)]
+    pub restart: bool,
+    /// Split and corruption.
+    #[command(flatten)]
+    pub split: SplitArgs,
+}
+
+/// `augsim train`.
+pub fn train(args: &TrainArgs) -> Result<()> {
+    let dataset = Dataset::open(&args.dataset)?;
+    let (mut train, test) = args.split.split(&dataset)?;
+    if let Some(n) = args.train_samples {
+        if n == 0 || n > train.len() {
+            bail!("--train-samples {n}: the training split has {} samples", train.len());
+        }
+        train = train.split_at(n)?.0;
+    }
+    let init = match &args.init {
+        Some(model) => Initialization::FineTune { model: model.clone(), freeze_encoder: args.freeze_encoder },
+        None => Initialization::Scratch {
+            unet: UNetConfig { base_channels: args.channels, depth: args.depth, ..UNetConfig::default() },
+            normalization: learn::Normalization::from_statistics(&dataset.manifest().statistics),
+            input_unit: dataset.manifest().units.input.clone(),
+        },
+    };
+    let config = TrainConfig {
+        iterations: args.iterations,
+        batch_size: args.batch,
+        learning_rate: args.lr,
+        seed: args.seed,
+        validate_every: args.validate_every,
+        checkpoint_every: args.validate_every,
+        eval_batch_size: args.batch,
+        train_corruption: args.split.corruption(),
+        val_corruption: args.split.corruption(),
+    };
+    let options = TrainOptions { out_dir: args.out.clone(), resume: !args.restart, progress: true, stop_after: None };
+    println!("train      {} samples, test {} samples, grid {}", train.len(), test.len(), dataset.manifest().grid);
+    let outcome = learn::train(&train, &test, &init, &config, &options)?;
+    let best =
+        outcome.curve.iter().filter_map(|r| r.val.map(|v| (r.iteration, v.mean))).min_by(|a, b| a.1.total_cmp(&b.1));
+    println!("steps      {} ({:.3} s per step)", outcome.iterations_done, outcome.mean_step_seconds);
+    if let Some((it, e)) = best {
+        println!("best       mean e = {:.4} mm at iteration {it}", e * 1e3);
+    }
+    println!("wrote      {}", outcome.model_path.display());
+    Ok(())
+}
+
+/// `augsim eval`: errors on the test split, per-sample CSV and the worst sample as VTK.
+pub fn eval(model_path: &Path, dataset_dir: &Path, split: &SplitArgs, out: &Path) -> Result<()> {
+    let model = TrainedModel::load(model_path, &learn::inference_device())?;
+    let dataset = Dataset::open(dataset_dir)?;
+    if dataset.manifest().grid != model.grid {
+        bail!("the model was trained on grid {} but the dataset is on grid {}", model.grid, dataset.manifest().grid);
+    }
+    let (_, test) = split.split(&dataset)?;
+    if test.is_empty() {
+        bail!("the test split is empty");
+    }
+    let report = learn::evaluate(&model, &test, &split.corruption(), 0, 4)?;
+    let s = &report.stats;
+    println!("samples    {}", test.len());
+    println!("mean e     {:.4e} m ({:.3} mm)", s.mean, s.mean * 1e3);
+    println!("std e      {:.4e} m ({:.3} mm)", s.std, s.std * 1e3);
+    println!("max e      {:.4e} m ({:.3} mm), sample index {}", s.max, s.max * 1e3, report.worst_index());
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut csv = String::from("index,error_m\n");
+    for (i, e) in report.indices.iter().zip(&report.errors) {
+        csv.push_str(&format!("{i},{e:e}\n"));
+    }
+    write_atomic(&out.join("errors.csv"), csv.as_bytes())?;
+    let summary = serde_json::json!({
+        "model": model_path, "dataset": dataset_dir, "samples": test.len(),
+        "mean_m": s.mean, "std_m": s.std, "max_m": s.max, "worst_index": report.worst_index(),
+        "corruption": split.corruption(),
+    });
+    write_atomic(&out.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    let worst = test.get(s.worst);
+    let prediction = model.predict(&worst.input)?;
+    let vtu = out.join("worst.vtu");
+    write_grid_sample(&vtu, dataset.manifest(), &worst.input, &worst.target, &prediction, &worst.mask)?;
+    println!(
+        "wrote      {}, {}, {}",
+        out.join("errors.csv").display(),
+        out.join("summary.json").display(),
+        vtu.display()
+    );
+    Ok(())
+}
+
+/// The grid as an H8 mesh with input, reference and predicted displacement and the mask.
+fn write_grid_sample(
+    path: &Path,
+    manifest: &learn::Manifest,
+    input: &[f32],
+    target: &[f32],
+    pred: &[f32],
+    mask: &[u8],
+) -> Result<()> {
+    let g = manifest.grid;
+    let get = |key: &str| -> Result<[f64; 3]> {
+        serde_json::from_value(manifest.metadata[key].clone()).with_context(|| format!("dataset manifest has no {key}"))
+    };
+    let (origin, spacing) = (get("grid_origin")?, get("grid_spacing")?);
+    let hi = std::array::from_fn(|d| origin[d] + spacing[d] * ([g.nx, g.ny, g.nz][d] - 1) as f64);
+    let grid_mesh = mesh::box_hex(origin, hi, [g.nx - 1, g.ny - 1, g.nz - 1])?;
+    // box_hex numbers nodes x fastest; the tensors are z fastest.
+    let n = g.nodes();
+    let to_points = |field: &[f32]| -> Vec<f64> {
+        let mut out = vec![0.0; 3 * n];
+        for k in 0..g.nz {
+            for j in 0..g.ny {
+                for i in 0..g.nx {
+                    let node = i + g.nx * (j + g.ny * k);
+                    for c in 0..3 {
+                        out[3 * node + c] = field[c * n + g.node_index(i, j, k)] as f64;
+                    }
+                }
+            }
+        }
+        out
+    };
+    let mask3: Vec<f32> = (0..3).flat_map(|_| mask.iter().map(|&m| m as f32)).collect();
+    let mask_points: Vec<f64> = to_points(&mask3).chunks(3).map(|c| c[0]).collect();
+    let fields = [
+        Field::point("input", 3, to_points(input)),
+        Field::point("reference", 3, to_points(target)),
+        Field::point("prediction", 3, to_points(pred)),
+        Field::point("mask", 1, mask_points),
+    ];
+    mesh::io::write_mesh(path, &grid_mesh, &fields).with_context(|| format!("writing {}", path.display()))
+}
+
+/// `augsim predict`: a constraint tensor (.npy, [3, nx, ny, nz]) to a displacement tensor, timed.
+pub fn predict(model_path: &Path, input: &Path, output: &Path, runs: usize) -> Result<()> {
+    let model = TrainedModel::load(model_path, &learn::inference_device())?;
+    let array = learn::npy::read_npy(input)?;
+    let g = model.grid;
+    if array.shape != [3, g.nx, g.ny, g.nz] {
+        bail!("{}: shape {:?}, but the model expects [3, {}, {}, {}]", input.display(), array.shape, g.nx, g.ny, g.nz);
+    }
+    let data = array.into_f32();
+    let prediction = model.predict(&data)?;
+    learn::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
+    let t = learn::time_prediction(&model, &data, 3, runs.max(1))?;
+    println!(
+        "prediction {} runs: median {:.2} ms, mean {:.2} ± {:.2} ms, min {:.2}, max {:.2}",
+        t.runs,
+        t.median * 1e3,
+        t.mean * 1e3,
+        t.std * 1e3,
+        t.min * 1e3,
+        t.max * 1e3
+    );
+    println!("wrote      {}", output.display());
+    Ok(())
+}
+
+/// Writes a file atomically (temporary file in the same directory, then rename).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = path.with_extension(format!("{}.tmp", path.extension().and_then(|e| e.to_str()).unwrap_or("")));
+    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
+}

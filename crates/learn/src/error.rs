@@ -1,0 +1,60 @@
+//! Error type of the learning crate.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in `augsim-learn`; each variant names the file involved, if any.
+#[derive(Debug, thiserror::Error)]
+pub enum LearnError {
+    /// An operating-system I/O error on a file.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// A malformed or truncated `.npy` file.
+    #[error("{path}: invalid .npy file: {message}")]
+    Npy {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A malformed manifest, or one that disagrees with the files on disk.
+    #[error("{path}: {message}")]
+    Manifest {
+        /// The manifest (or the shard file it disagrees with).
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A model bundle, checkpoint or weights file that cannot be used.
+    #[error("{path}: {message}")]
+    Model {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// An argument that does not fit (wrong length, empty set, bad configuration value).
+    #[error("invalid input: {0}")]
+    InvalidInput(String),
+}
+
+impl LearnError {
+    /// Wraps an I/O error with the path it concerns.
+    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        LearnError::Io { path: path.into(), source }
+    }
+
+    /// A manifest error for `path`.
+    pub(crate) fn manifest(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
+        LearnError::Manifest { path: path.into(), message: message.into() }
+    }
+
+    /// A model/checkpoint error for `path`.
+    pub(crate) fn model(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
+        LearnError::Model { path: path.into(), message: message.into() }
+    }
+}

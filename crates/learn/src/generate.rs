@@ -1,0 +1,505 @@
+//! Dataset generation: random loads solved by the FEM model, encoded on a
+//! regular grid as (input C, target U, mask) samples.
+//!
+//! Each sample `i` draws its loads from a generator seeded by the dataset seed
+//! and `i` alone, so a resumed, split (`part i/n`) or re-ordered generation
+//! produces the same samples. Samples are solved in parallel (rayon), each
+//! worker with its own solver whose factorisation is reused across samples.
+//! A sample whose solve fails is recorded in the manifest with its reason.
+
+use std::collections::HashMap;
+use std::ops::Range;
+use std::path::Path;
+
+use fem::{Material, Problem, SolverOptions, StaticSolver};
+use mesh::embedding::{Embedding, Grid};
+use mesh::{Mesh, NodeSelection};
+use rand::seq::index::sample as sample_indices;
+use rand::Rng;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::corrupt::item_rng;
+use crate::dataset::{DatasetPart, DatasetSpec, DatasetWriter, Manifest, Sample};
+use crate::grid::GridShape;
+use crate::{LearnError, Result};
+
+/// Stream number of the load generator in [`item_rng`].
+const LOAD_STREAM: u64 = 1;
+
+/// How a dataset is generated (the `[dataset]` table of a scenario file).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetConfig {
+    /// Number of samples (generation indices `0..samples`).
+    pub samples: usize,
+    /// Base random seed.
+    #[serde(default)]
+    pub seed: u64,
+    /// Samples per shard file.
+    #[serde(default = "default_shard_size")]
+    pub shard_size: usize,
+    /// Grid nodes along x, y, z for a tetrahedral organ (embedded grid over its
+    /// bounding box). Omitted for meshes whose nodes lie on a regular lattice
+    /// (a box of hexahedra, an immersed grid): the lattice is the grid.
+    pub grid: Option<[usize; 3]>,
+    /// Alternative fixed node sets: each sample fixes one, drawn uniformly
+    /// (one entry: always the same; e.g. the BC1/BC4/BC8 sets of DESIGN scenario 3).
+    pub fixed: Vec<NodeSelection>,
+    /// The random loads.
+    pub load: Load,
+    /// What the network sees.
+    pub input: Input,
+}
+
+fn default_shard_size() -> usize {
+    100
+}
+
+/// Random loads of one sample.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum Load {
+    /// One force along the inward surface normal, of random magnitude, shared by
+    /// the surface nodes within `radius` of a random centre node.
+    PatchForce {
+        /// Nodes the patch centre is drawn from (default: boundary nodes that are not fixed).
+        centres: Option<NodeSelection>,
+        /// Patch radius (m).
+        radius: f64,
+        /// Range of the total force magnitude (N).
+        magnitude: [f64; 2],
+    },
+    /// `count` simultaneous forces of random direction and magnitude on distinct random nodes.
+    PointForces {
+        /// Nodes the loaded nodes are drawn from.
+        nodes: NodeSelection,
+        /// Number of loaded nodes.
+        count: usize,
+        /// Range of each force's magnitude (N).
+        magnitude: [f64; 2],
+    },
+}
+
+/// The network input of a sample.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum Input {
+    /// The applied nodal forces (N), spread to the grid by the adjoint of
+    /// trilinear interpolation (total force preserved).
+    Force,
+    /// The displacement (m) of the observed nodes, optionally of a random
+    /// connected sub-domain of them only.
+    Displacement {
+        /// Observed nodes (e.g. the visible surface).
+        nodes: NodeSelection,
+        /// Keep only a random sub-domain of between `sparse[0]` and `sparse[1]`
+        /// observed nodes: those nearest to a random observed node.
+        sparse: Option<[usize; 2]>,
+    },
+}
+
+/// The FEM model and grid encoding shared by all samples.
+pub struct Generator {
+    mesh: Mesh,
+    material: Material,
+    solver_options: SolverOptions,
+    config: DatasetConfig,
+    fixed_sets: Vec<Vec<usize>>,
+    centres: Vec<usize>,
+    normals: Vec<[f64; 3]>,
+    load_nodes: Vec<usize>,
+    observed: Vec<usize>,
+    encoding: Encoding,
+    grid: GridShape,
+    origin: [f64; 3],
+    spacing: [f64; 3],
+}
+
+/// How nodal fields reach the grid.
+enum Encoding {
+    /// Mesh node n is grid node `node[n]` (flat index i*ny*nz + j*nz + k).
+    Lattice(Vec<usize>),
+    /// A tetrahedral mesh embedded in a grid.
+    Embedded {
+        embedding: Embedding,
+        /// For each mesh node, its grid cell corners and trilinear weights.
+        spread: Vec<[(usize, f64); 8]>,
+    },
+}
+
+fn invalid(msg: impl Into<String>) -> LearnError {
+    LearnError::InvalidInput(msg.into())
+}
+
+impl Generator {
+    /// Prepares the encoding and node sets; checks the configuration against the mesh.
+    pub fn new(mesh: Mesh, material: Material, solver_options: SolverOptions, config: DatasetConfig) -> Result<Self> {
+        if config.samples == 0 {
+            return Err(invalid("a dataset needs at least one sample"));
+        }
+        if config.fixed.is_empty() {
+            return Err(invalid("at least one fixed node set is needed (a free organ has rigid-body modes)"));
+        }
+        let select = |s: &NodeSelection| s.select(&mesh).map_err(|e| invalid(format!("selection {s:?}: {e}")));
+        let fixed_sets = config.fixed.iter().map(select).collect::<Result<Vec<_>>>()?;
+        let surface = mesh::boundary_surface(&mesh);
+        let normals = surface.vertex_normals();
+        let boundary = mesh::boundary_nodes(&mesh);
+        let (centres, load_nodes) = match &config.load {
+            Load::PatchForce { centres, radius, magnitude } => {
+                check_range(magnitude, "magnitude")?;
+                if !(*radius > 0.0) {
+                    return Err(invalid(format!("patch radius must be positive, got {radius}")));
+                }
+                let c = match centres {
+                    Some(s) => select(s)?,
+                    None => boundary.iter().copied().filter(|n| !fixed_sets.iter().any(|f| f.contains(n))).collect(),
+                };
+                (c, boundary.clone())
+            }
+            Load::PointForces { nodes, count, magnitude } => {
+                check_range(magnitude, "magnitude")?;
+                let n = select(nodes)?;
+                if *count == 0 || *count > n.len() {
+                    return Err(invalid(format!("cannot load {count} distinct nodes out of {}", n.len())));
+                }
+                (Vec::new(), n)
+            }
+        };
+        if matches!(config.load, Load::PatchForce { .. }) && centres.is_empty() {
+            return Err(invalid("no candidate node for the patch centre"));
+        }
+        let observed = match &config.input {
+            Input::Force => Vec::new(),
+            Input::Displacement { nodes, sparse } => {
+                let o = select(nodes)?;
+                if let Some([lo, hi]) = sparse {
+                    if lo > hi || *lo == 0 || *hi > o.len() {
+                        return Err(invalid(format!("sparse range [{lo}, {hi}] must lie in [1, {}]", o.len())));
+                    }
+                }
+                o
+            }
+        };
+        let (encoding, grid, origin, spacing) = match config.grid {
+            None => lattice_encoding(&mesh)?,
+            Some(dims) => embedded_encoding(&mesh, dims)?,
+        };
+        Ok(Generator {
+            mesh,
+            material,
+            solver_options,
+            config,
+            fixed_sets,
+            centres,
+            normals,
+            load_nodes,
+            observed,
+            encoding,
+            grid,
+            origin,
+            spacing,
+        })
+    }
+
+    /// The grid shape of the samples.
+    pub fn grid(&self) -> GridShape {
+        self.grid
+    }
+
+    /// Position of grid node (0, 0, 0) and the node spacing along each axis (m).
+    pub fn grid_geometry(&self) -> ([f64; 3], [f64; 3]) {
+        (self.origin, self.spacing)
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &DatasetConfig {
+        &self.config
+    }
+
+    /// The mask of grid nodes inside the organ.
+    pub fn mask(&self) -> Vec<u8> {
+        let mut m = vec![0u8; self.grid.nodes()];
+        match &self.encoding {
+            Encoding::Lattice(node) => node.iter().for_each(|&g| m[g] = 1),
+            Encoding::Embedded { embedding, .. } => {
+                embedding.mask().iter().enumerate().filter(|(_, &b)| b).for_each(|(g, _)| m[g] = 1)
+            }
+        }
+        m
+    }
+
+    /// Encodes a nodal vector field (3 per mesh node) on the grid.
+    /// Forces are spread (sum-preserving); displacements are interpolated.
+    pub fn encode(&self, field: &[f64], is_force: bool) -> Result<Vec<f32>> {
+        let n = self.grid.nodes();
+        let mut out = vec![0f32; 3 * n];
+        match &self.encoding {
+            Encoding::Lattice(node) => {
+                for (m, &g) in node.iter().enumerate() {
+                    for c in 0..3 {
+                        out[c * n + g] = field[3 * m + c] as f32;
+                    }
+                }
+            }
+            Encoding::Embedded { embedding, spread } => {
+                if is_force {
+                    let mut acc = vec![0f64; 3 * n];
+                    for (m, corners) in spread.iter().enumerate() {
+                        for &(g, w) in corners {
+                            for c in 0..3 {
+                                acc[c * n + g] += w * field[3 * m + c];
+                            }
+                        }
+                    }
+                    out.iter_mut().zip(&acc).for_each(|(o, a)| *o = *a as f32);
+                } else {
+                    let grid_field = embedding.map_nodal(field, 3).map_err(|e| invalid(e.to_string()))?;
+                    out.iter_mut().zip(&grid_field).for_each(|(o, v)| *o = *v as f32);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    fn problem(&self, fixed: usize) -> Problem {
+        let mut p = Problem::new(self.mesh.clone(), self.material);
+        p.fix(&self.fixed_sets[fixed]);
+        p
+    }
+
+    /// Generates sample `index`: draws loads, solves, encodes.
+    /// `solvers` caches one solver per fixed set for this worker.
+    fn sample(&self, index: u64, solvers: &mut HashMap<usize, StaticSolver>) -> std::result::Result<Sample, String> {
+        let mut rng = item_rng(self.config.seed, LOAD_STREAM, index);
+        let fixed = rng.random_range(0..self.fixed_sets.len());
+        let nn = self.mesh.num_nodes();
+        let mut f = vec![0.0; 3 * nn];
+        match &self.config.load {
+            Load::PatchForce { radius, magnitude, .. } => {
+                let centre = self.centres[rng.random_range(0..self.centres.len())];
+                let c = self.mesh.nodes[centre];
+                let patch: Vec<usize> = self
+                    .load_nodes
+                    .iter()
+                    .copied()
+                    .filter(|&n| {
+                        mesh::dot(mesh::sub(self.mesh.nodes[n], c), mesh::sub(self.mesh.nodes[n], c)) <= radius * radius
+                    })
+                    .filter(|n| !self.fixed_sets[fixed].contains(n))
+                    .collect();
+                let mag = rng.random_range(magnitude[0]..=magnitude[1]);
+                let normal = self.normals[centre];
+                for &n in &patch {
+                    for d in 0..3 {
+                        f[3 * n + d] -= mag * normal[d] / patch.len() as f64;
+                    }
+                }
+            }
+            Load::PointForces { count, magnitude, .. } => {
+                for k in sample_indices(&mut rng, self.load_nodes.len(), *count) {
+                    let n = self.load_nodes[k];
+                    let dir = random_unit(&mut rng);
+                    let mag = rng.random_range(magnitude[0]..=magnitude[1]);
+                    for d in 0..3 {
+                        f[3 * n + d] += mag * dir[d];
+                    }
+                }
+            }
+        }
+        let observed = match &self.config.input {
+            Input::Displacement { sparse: Some([lo, hi]), .. } => {
+                let count = rng.random_range(*lo..=*hi);
+                let seed = self.mesh.nodes[self.observed[rng.random_range(0..self.observed.len())]];
+                let mut by_distance: Vec<(f64, usize)> = self
+                    .observed
+                    .iter()
+                    .map(|&n| (mesh::dot(mesh::sub(self.mesh.nodes[n], seed), mesh::sub(self.mesh.nodes[n], seed)), n))
+                    .collect();
+                by_distance.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                by_distance.into_iter().take(count).map(|(_, n)| n).collect()
+            }
+            _ => self.observed.clone(),
+        };
+        let solver = match solvers.entry(fixed) {
+            std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::hash_map::Entry::Vacant(v) => {
+                v.insert(StaticSolver::new(self.problem(fixed)).map_err(|e| e.to_string())?)
+            }
+        };
+        solver.problem_mut().f_ext.copy_from_slice(&f);
+        let solution = solver.solve(&self.solver_options).map_err(|e| e.to_string())?;
+        let input = match &self.config.input {
+            Input::Force => self.encode(&f, true),
+            Input::Displacement { .. } => {
+                let mut partial = vec![0.0; 3 * nn];
+                for &n in &observed {
+                    partial[3 * n..3 * n + 3].copy_from_slice(&solution.u[3 * n..3 * n + 3]);
+                }
+                self.encode_observed(&partial, &observed)
+            }
+        }
+        .map_err(|e| e.to_string())?;
+        let target = self.encode(&solution.u, false).map_err(|e| e.to_string())?;
+        Ok(Sample { index, input, target, mask: self.mask() })
+    }
+
+    /// Displacements of observed nodes only, on the grid: exact on a lattice; for an
+    /// embedded mesh each observed node's value goes to its nearest grid node.
+    fn encode_observed(&self, partial: &[f64], observed: &[usize]) -> Result<Vec<f32>> {
+        match &self.encoding {
+            Encoding::Lattice(_) => self.encode(partial, false),
+            Encoding::Embedded { spread, .. } => {
+                let n = self.grid.nodes();
+                let mut out = vec![0f32; 3 * n];
+                for &m in observed {
+                    let (g, _) = spread[m].iter().copied().max_by(|a, b| a.1.total_cmp(&b.1)).expect("8 corners");
+                    for c in 0..3 {
+                        out[c * n + g] = partial[3 * m + c] as f32;
+                    }
+                }
+                Ok(out)
+            }
+        }
+    }
+
+    /// Generates indices `range` into `dir` (resuming an unfinished dataset
+    /// there), calling `progress(done, total)` after each batch.
+    pub fn run(
+        &self,
+        dir: &Path,
+        name: &str,
+        part: Option<DatasetPart>,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<Manifest> {
+        let range = part_range(self.config.samples, part.as_ref())?;
+        let spec = DatasetSpec {
+            scenario: name.to_string(),
+            seed: self.config.seed,
+            part: part.clone(),
+            grid: self.grid,
+            input_unit: match self.config.input {
+                Input::Force => "N".into(),
+                Input::Displacement { .. } => "m".into(),
+            },
+            target_unit: "m".into(),
+            shard_size: self.config.shard_size,
+            metadata: serde_json::json!({
+                "generator": "augsim",
+                "material": self.material,
+                "dataset": self.config,
+                "mesh_nodes": self.mesh.num_nodes(),
+                "mesh_cells": self.mesh.cells.len(),
+                "grid_origin": self.origin,
+                "grid_spacing": self.spacing,
+            }),
+        };
+        let mut writer = DatasetWriter::create_or_resume(dir, spec)?;
+        let start = writer.resume_from().max(range.start as u64);
+        let total = range.end as u64;
+        let batch = self.config.shard_size.max(rayon::current_num_threads()) as u64;
+        let mut next = start;
+        progress(next - range.start as u64, total - range.start as u64);
+        while next < total {
+            let end = (next + batch).min(total);
+            let results: Vec<(u64, std::result::Result<Sample, String>)> =
+                (next..end).into_par_iter().map_init(HashMap::new, |solvers, i| (i, self.sample(i, solvers))).collect();
+            for (i, r) in results {
+                match r {
+                    Ok(s) => writer.push(&s)?,
+                    Err(reason) => writer.push_failure(i, reason)?,
+                }
+            }
+            next = end;
+            progress(next - range.start as u64, total - range.start as u64);
+        }
+        writer.finish()
+    }
+}
+
+fn check_range(r: &[f64; 2], what: &str) -> Result<()> {
+    if !(r[0] >= 0.0 && r[1] >= r[0] && r[1].is_finite()) {
+        return Err(invalid(format!("{what} range {r:?} must satisfy 0 ≤ min ≤ max")));
+    }
+    Ok(())
+}
+
+fn random_unit(rng: &mut impl Rng) -> [f64; 3] {
+    loop {
+        let v: [f64; 3] = std::array::from_fn(|_| rng.random_range(-1.0..=1.0));
+        let l = mesh::dot(v, v).sqrt();
+        if l > 1e-3 && l <= 1.0 {
+            return v.map(|c| c / l);
+        }
+    }
+}
+
+/// Indices generated by worker `part` of `samples` in total: contiguous blocks.
+pub fn part_range(samples: usize, part: Option<&DatasetPart>) -> Result<Range<usize>> {
+    Ok(match part {
+        None => 0..samples,
+        Some(p) if p.count > 0 && p.index < p.count => {
+            (samples * p.index / p.count)..(samples * (p.index + 1) / p.count)
+        }
+        Some(p) => return Err(invalid(format!("invalid part {}/{}", p.index, p.count))),
+    })
+}
+
+/// The lattice of a mesh whose nodes lie on a regular grid (box of hexahedra,
+/// immersed grid): spacing from the smallest node separation per axis.
+fn lattice_encoding(mesh: &Mesh) -> Result<(Encoding, GridShape, [f64; 3], [f64; 3])> {
+    let (lo, hi) = mesh.bounds();
+    let mut spacing = [f64::INFINITY; 3];
+    for c in 0..mesh.cells.len() {
+        let cell = mesh.cells.cell(c);
+        for &a in cell {
+            for &b in cell {
+                for d in 0..3 {
+                    let s = (mesh.nodes[a][d] - mesh.nodes[b][d]).abs();
+                    if s > 1e-12 * (hi[d] - lo[d]) {
+                        spacing[d] = spacing[d].min(s);
+                    }
+                }
+            }
+        }
+    }
+    let dims: [usize; 3] = std::array::from_fn(|d| ((hi[d] - lo[d]) / spacing[d]).round() as usize + 1);
+    let shape = GridShape::new(dims[0], dims[1], dims[2]);
+    let mut node = Vec::with_capacity(mesh.num_nodes());
+    for (m, p) in mesh.nodes.iter().enumerate() {
+        let ijk: [f64; 3] = std::array::from_fn(|d| (p[d] - lo[d]) / spacing[d]);
+        if ijk.iter().any(|x| (x - x.round()).abs() > 1e-6) {
+            return Err(invalid(format!(
+                "mesh node {m} is not on a regular lattice: give `grid = [nx, ny, nz]` to embed the mesh instead"
+            )));
+        }
+        let [i, j, k] = ijk.map(|x| x.round() as usize);
+        node.push((i * shape.ny + j) * shape.nz + k);
+    }
+    Ok((Encoding::Lattice(node), shape, lo, spacing))
+}
+
+fn embedded_encoding(mesh: &Mesh, dims: [usize; 3]) -> Result<(Encoding, GridShape, [f64; 3], [f64; 3])> {
+    let (lo, hi) = mesh.bounds();
+    let grid = Grid::covering(lo, hi, dims).map_err(|e| invalid(e.to_string()))?;
+    let shape = GridShape::new(dims[0], dims[1], dims[2]);
+    let spread = mesh
+        .nodes
+        .iter()
+        .map(|p| {
+            let t: [f64; 3] =
+                std::array::from_fn(|d| ((p[d] - grid.origin[d]) / grid.spacing[d]).clamp(0.0, (dims[d] - 1) as f64));
+            let base: [usize; 3] = std::array::from_fn(|d| (t[d].floor() as usize).min(dims[d].saturating_sub(2)));
+            let fr: [f64; 3] = std::array::from_fn(|d| t[d] - base[d] as f64);
+            std::array::from_fn(|c| {
+                let o = [c & 1, (c >> 1) & 1, (c >> 2) & 1];
+                let w = (0..3).map(|d| if o[d] == 1 { fr[d] } else { 1.0 - fr[d] }).product::<f64>();
+                (((base[0] + o[0]) * shape.ny + base[1] + o[1]) * shape.nz + base[2] + o[2], w)
+            })
+        })
+        .collect();
+    let (origin, spacing) = (grid.origin, grid.spacing);
+    let embedding = Embedding::new(mesh, grid).map_err(|e| invalid(e.to_string()))?;
+    Ok((Encoding::Embedded { embedding, spread }, shape, origin, spacing))
+}

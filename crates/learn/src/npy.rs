@@ -1,0 +1,233 @@
+//! Minimal NumPy `.npy` reader and writer.
+//!
+//! Writes format version 1.0 with little-endian `<f4` (f32) or `|u1` (u8) data in C order,
+//! readable by `numpy.load`. Reads versions 1.0–3.0 with `<f4`, `<f8`, `|u1`/`<u1` or `|b1`
+//! data in C order; anything else, and any truncation, is a clear error naming the file.
+
+use std::io::Write;
+use std::path::Path;
+
+use crate::fsutil::{read, write_atomic_with};
+use crate::{LearnError, Result};
+
+const MAGIC: &[u8] = b"\x93NUMPY";
+
+/// The element data of an `.npy` array.
+#[derive(Clone, Debug, PartialEq)]
+pub enum NpyData {
+    /// `<f4` values.
+    F32(Vec<f32>),
+    /// `<f8` values.
+    F64(Vec<f64>),
+    /// `|u1` values (or `|b1`, stored as 0/1).
+    U8(Vec<u8>),
+}
+
+/// An array read from an `.npy` file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NpyArray {
+    /// The shape (C order).
+    pub shape: Vec<usize>,
+    /// The values.
+    pub data: NpyData,
+}
+
+impl NpyArray {
+    /// The values as f32 (f64 values are rounded, u8 values converted).
+    pub fn into_f32(self) -> Vec<f32> {
+        match self.data {
+            NpyData::F32(v) => v,
+            NpyData::F64(v) => v.into_iter().map(|x| x as f32).collect(),
+            NpyData::U8(v) => v.into_iter().map(f32::from).collect(),
+        }
+    }
+
+    /// The values as u8 (float values must be exactly 0 or 1, as for a mask).
+    pub fn into_mask(self, path: &Path) -> Result<Vec<u8>> {
+        let bad = |x: f64| LearnError::Npy {
+            path: path.to_path_buf(),
+            message: format!("mask values must be 0 or 1, found {x}"),
+        };
+        match self.data {
+            NpyData::U8(v) => match v.iter().find(|&&x| x > 1) {
+                Some(&x) => Err(bad(f64::from(x))),
+                None => Ok(v),
+            },
+            NpyData::F32(v) => v.into_iter().map(|x| to_mask(f64::from(x)).ok_or_else(|| bad(f64::from(x)))).collect(),
+            NpyData::F64(v) => v.into_iter().map(|x| to_mask(x).ok_or_else(|| bad(x))).collect(),
+        }
+    }
+}
+
+fn to_mask(x: f64) -> Option<u8> {
+    if x == 0.0 {
+        Some(0)
+    } else if x == 1.0 {
+        Some(1)
+    } else {
+        None
+    }
+}
+
+/// Builds a v1.0 header for `descr` and `shape`, padded so that the data starts on a 64-byte
+/// boundary.
+fn header(descr: &str, shape: &[usize]) -> Vec<u8> {
+    let shape_str = match shape.len() {
+        1 => format!("({},)", shape[0]),
+        _ => format!("({})", shape.iter().map(|d| d.to_string()).collect::<Vec<_>>().join(", ")),
+    };
+    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape_str}, }}");
+    let unpadded = MAGIC.len() + 2 + 2 + dict.len() + 1;
+    let pad = (64 - unpadded % 64) % 64;
+    dict.push_str(&" ".repeat(pad));
+    dict.push('\n');
+    let mut out = Vec::with_capacity(MAGIC.len() + 4 + dict.len());
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&[1, 0]);
+    out.extend_from_slice(&(dict.len() as u16).to_le_bytes());
+    out.extend_from_slice(dict.as_bytes());
+    out
+}
+
+fn check_len(shape: &[usize], len: usize) -> Result<()> {
+    let expected: usize = shape.iter().product();
+    if expected != len {
+        return Err(LearnError::InvalidInput(format!("npy write: shape {shape:?} needs {expected} values, got {len}")));
+    }
+    Ok(())
+}
+
+/// Writes f32 values of the given shape to `path` atomically (`<f4`, C order).
+pub fn write_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
+    check_len(shape, data.len())?;
+    let head = header("<f4", shape);
+    write_atomic_with(path, |w| {
+        w.write_all(&head)?;
+        for chunk in data.chunks(16384) {
+            let bytes: Vec<u8> = chunk.iter().flat_map(|x| x.to_le_bytes()).collect();
+            w.write_all(&bytes)?;
+        }
+        Ok(())
+    })
+}
+
+/// Writes u8 values of the given shape to `path` atomically (`|u1`, C order).
+pub fn write_u8(path: &Path, shape: &[usize], data: &[u8]) -> Result<()> {
+    check_len(shape, data.len())?;
+    let head = header("|u1", shape);
+    write_atomic_with(path, |w| {
+        w.write_all(&head)?;
+        w.write_all(data)
+    })
+}
+
+/// Reads an `.npy` file.
+pub fn read_npy(path: &Path) -> Result<NpyArray> {
+    let bytes = read(path)?;
+    parse(&bytes).map_err(|message| LearnError::Npy { path: path.to_path_buf(), message })
+}
+
+/// Reads only the shape of an `.npy` file from its header.
+pub fn read_shape(path: &Path) -> Result<Vec<usize>> {
+    use std::io::Read;
+    let err = |message: String| LearnError::Npy { path: path.to_path_buf(), message };
+    let mut file = std::fs::File::open(path).map_err(|e| LearnError::io(path, e))?;
+    let mut head = Vec::new();
+    Read::take(&mut file, 65536 + 12).read_to_end(&mut head).map_err(|e| LearnError::io(path, e))?;
+    let (header, _) = split_header(&head).map_err(err)?;
+    Ok(parse_header(header).map_err(err)?.2)
+}
+
+/// Splits the file into the header dictionary text and the data bytes.
+fn split_header(bytes: &[u8]) -> std::result::Result<(&str, &[u8]), String> {
+    if bytes.len() < 10 || &bytes[..6] != MAGIC {
+        return Err("missing the \\x93NUMPY magic string (not an .npy file, or empty)".into());
+    }
+    let (major, minor) = (bytes[6], bytes[7]);
+    let (header_len, start) = match major {
+        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
+        2 | 3 => {
+            if bytes.len() < 12 {
+                return Err("truncated header".into());
+            }
+            (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12)
+        }
+        _ => return Err(format!("unsupported format version {major}.{minor}")),
+    };
+    if bytes.len() < start + header_len {
+        return Err(format!("truncated header: needs {} bytes, the file has {}", start + header_len, bytes.len()));
+    }
+    let header =
+        std::str::from_utf8(&bytes[start..start + header_len]).map_err(|_| "header is not text".to_string())?;
+    Ok((header, &bytes[start + header_len..]))
+}
+
+/// Parses the header dictionary: (descr, fortran_order, shape).
+fn parse_header(header: &str) -> std::result::Result<(String, bool, Vec<usize>), String> {
+    let value_of = |key: &str| -> std::result::Result<&str, String> {
+        let pat = format!("'{key}':");
+        let at = header.find(&pat).ok_or_else(|| format!("header has no '{key}' entry: {header:?}"))?;
+        Ok(header[at + pat.len()..].trim_start())
+    };
+    let descr_rest = value_of("descr")?;
+    let descr = descr_rest
+        .strip_prefix('\'')
+        .and_then(|s| s.split('\'').next())
+        .ok_or_else(|| format!("cannot read 'descr' in header {header:?}"))?
+        .to_string();
+    let fortran_rest = value_of("fortran_order")?;
+    let fortran = if fortran_rest.starts_with("True") {
+        true
+    } else if fortran_rest.starts_with("False") {
+        false
+    } else {
+        return Err(format!("cannot read 'fortran_order' in header {header:?}"));
+    };
+    let shape_rest = value_of("shape")?;
+    let inner = shape_rest
+        .strip_prefix('(')
+        .and_then(|s| s.split(')').next())
+        .ok_or_else(|| format!("cannot read 'shape' in header {header:?}"))?;
+    let shape = inner
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| s.parse::<usize>().map_err(|_| format!("bad dimension {s:?} in shape of header {header:?}")))
+        .collect::<std::result::Result<Vec<_>, _>>()?;
+    Ok((descr, fortran, shape))
+}
+
+fn parse(bytes: &[u8]) -> std::result::Result<NpyArray, String> {
+    let (header, data) = split_header(bytes)?;
+    let (descr, fortran, shape) = parse_header(header)?;
+    if fortran {
+        return Err("Fortran-ordered arrays are not supported (save with C order)".into());
+    }
+    let count: usize = shape.iter().product();
+    let item = match descr.as_str() {
+        "<f4" => 4,
+        "<f8" => 8,
+        "|u1" | "<u1" | "|b1" => 1,
+        other => return Err(format!("unsupported dtype {other:?} (expected '<f4', '<f8', '|u1' or '|b1')")),
+    };
+    let needed = count * item;
+    if data.len() < needed {
+        return Err(format!(
+            "truncated: shape {shape:?} of {descr} needs {needed} data bytes, the file has {}",
+            data.len()
+        ));
+    }
+    if data.len() > needed {
+        return Err(format!("{} trailing bytes after the data of shape {shape:?} ({descr})", data.len() - needed));
+    }
+    let data = match item {
+        4 => NpyData::F32(data.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()),
+        8 => NpyData::F64(
+            data.chunks_exact(8)
+                .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
+                .collect(),
+        ),
+        _ => NpyData::U8(data.to_vec()),
+    };
+    Ok(NpyArray { shape, data })
+}

@@ -1,0 +1,619 @@
+//! Training: Adam on the masked MSE, seeded, with validation, best-weights selection,
+//! resumable checkpoints, learning curves and transfer learning.
+//!
+//! Reproducibility: weights are initialised from the seed; batch composition and training-time
+//! corruption come from counter-based generators (seed, iteration, batch slot), so the whole
+//! random state of a run is `(seed, iteration)`. A checkpoint stores the model, the Adam state,
+//! the best weights so far, the learning curve and that state, written atomically every
+//! `checkpoint_every` iterations; a run resumed from it produces the same result as an
+//! uninterrupted one. Resuming a finished run with more iterations extends it.
+//!
+//! Files written in `out_dir`: `model.json` + `model.safetensors` (best weights, on completion),
+//! `checkpoint.bin`, `curve.csv` (iteration, train loss, validation mean error) and `curve.png`.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::store::ModuleRecord;
+use burn::tensor::{Bytes, Device, Tensor, TensorData};
+use indicatif::{ProgressBar, ProgressStyle};
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::corrupt::{item_rng, splitmix64, Corruption};
+use crate::dataset::{Normalization, Samples};
+use crate::fsutil::{read, write_atomic};
+use crate::grid::CHANNELS;
+use crate::metrics::{masked_mse, ErrorStats};
+use crate::plot::plot_learning_curve;
+use crate::predict::evaluate_net;
+use crate::unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
+use crate::{inference_device, training_device, LearnError, Result};
+
+/// Random stream of the batch shuffling.
+const STREAM_SHUFFLE: u64 = 1;
+/// Random stream of the training-time corruption.
+const STREAM_TRAIN_CORRUPTION: u64 = 2;
+/// Random stream of the validation-time corruption.
+pub(crate) const STREAM_EVAL_CORRUPTION: u64 = 3;
+
+/// Training hyper-parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrainConfig {
+    /// Number of optimizer steps.
+    pub iterations: usize,
+    /// Samples per step.
+    pub batch_size: usize,
+    /// Adam learning rate.
+    pub learning_rate: f64,
+    /// Seed of weights, shuffling and corruption.
+    pub seed: u64,
+    /// Validate every this many iterations (and after the last one).
+    pub validate_every: usize,
+    /// Write a checkpoint every this many iterations (and after the last one).
+    pub checkpoint_every: usize,
+    /// Batch size of validation passes.
+    pub eval_batch_size: usize,
+    /// Corruption of training inputs.
+    pub train_corruption: Corruption,
+    /// Corruption of validation inputs (same draw at every validation).
+    pub val_corruption: Corruption,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        TrainConfig {
+            iterations: 1000,
+            batch_size: 4,
+            learning_rate: 1e-3,
+            seed: 0,
+            validate_every: 100,
+            checkpoint_every: 100,
+            eval_batch_size: 4,
+            train_corruption: Corruption::none(),
+            val_corruption: Corruption::none(),
+        }
+    }
+}
+
+impl TrainConfig {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: &str| Err(LearnError::InvalidInput(format!("training config: {m}")));
+        if self.iterations == 0 || self.batch_size == 0 || self.eval_batch_size == 0 {
+            return bad("iterations, batch_size and eval_batch_size must be at least 1");
+        }
+        if self.validate_every == 0 || self.checkpoint_every == 0 {
+            return bad("validate_every and checkpoint_every must be at least 1");
+        }
+        if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
+            return bad("learning_rate must be finite and > 0");
+        }
+        self.train_corruption.validate()?;
+        self.val_corruption.validate()
+    }
+}
+
+/// Where the network starts from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Initialization {
+    /// A new network with seeded random weights.
+    Scratch {
+        /// Network configuration.
+        unet: UNetConfig,
+        /// Input/target scales (e.g. [`Normalization::from_statistics`] of the manifest).
+        normalization: Normalization,
+        /// Unit of the inputs ("N" or "m").
+        input_unit: String,
+    },
+    /// Transfer learning from a saved model (its configuration, weights, normalisation and units).
+    FineTune {
+        /// The model JSON file.
+        model: PathBuf,
+        /// Keep the contracting path (encoder levels, down-sampling, bottleneck) fixed.
+        freeze_encoder: bool,
+    },
+}
+
+/// Run options that do not change the result.
+#[derive(Clone, Debug)]
+pub struct TrainOptions {
+    /// Output directory.
+    pub out_dir: PathBuf,
+    /// Continue from `out_dir/checkpoint.bin` if it exists (it must be from the same setup).
+    pub resume: bool,
+    /// Show a progress bar.
+    pub progress: bool,
+    /// Stop after this iteration as if interrupted (checkpoint written, no model file); a later
+    /// run with `resume` continues. For time-sliced training and tests.
+    pub stop_after: Option<usize>,
+}
+
+impl TrainOptions {
+    /// Options writing to `out_dir`, resuming if possible, without progress bar.
+    pub fn new(out_dir: impl Into<PathBuf>) -> Self {
+        TrainOptions { out_dir: out_dir.into(), resume: true, progress: false, stop_after: None }
+    }
+}
+
+/// One row of the learning curve.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CurveRow {
+    /// Iterations done.
+    pub iteration: usize,
+    /// Mean training loss (normalised units) over the iterations since the previous row.
+    pub train_loss: f64,
+    /// Validation errors (m): mean, std and max of the per-sample mean Euclidean error, if
+    /// there are validation samples.
+    pub val: Option<ErrorStats>,
+}
+
+/// What [`train`] returns.
+#[derive(Debug)]
+pub struct TrainOutcome {
+    /// The best model (on the inference device); saved as `model.json` when `completed`.
+    pub model: TrainedModel,
+    /// The learning curve.
+    pub curve: Vec<CurveRow>,
+    /// Iterations done (including those of a resumed checkpoint).
+    pub iterations_done: usize,
+    /// Whether all iterations ran (false after `stop_after`).
+    pub completed: bool,
+    /// Path of the model JSON (written only when `completed`).
+    pub model_path: PathBuf,
+    /// Mean wall time of one training step in this run (s).
+    pub mean_step_seconds: f64,
+}
+
+/// Names of the files in the output directory.
+pub const MODEL_FILE: &str = "model.json";
+/// Checkpoint file name.
+pub const CHECKPOINT_FILE: &str = "checkpoint.bin";
+/// Learning-curve CSV file name.
+pub const CURVE_CSV: &str = "curve.csv";
+/// Learning-curve plot file name.
+pub const CURVE_PNG: &str = "curve.png";
+
+/// The resolved starting point.
+struct Start {
+    net: UNet,
+    config: UNetConfig,
+    normalization: Normalization,
+    input_unit: String,
+    target_unit: String,
+    fine_tuned_from: Option<String>,
+    freeze: bool,
+}
+
+fn resolve_start(init: &Initialization, seed: u64, device: &Device) -> Result<Start> {
+    match init {
+        Initialization::Scratch { unet, normalization, input_unit } => {
+            normalization.validate()?;
+            Ok(Start {
+                net: UNet::new(unet, device, seed)?,
+                config: unet.clone(),
+                normalization: *normalization,
+                input_unit: input_unit.clone(),
+                target_unit: "m".into(),
+                fine_tuned_from: None,
+                freeze: false,
+            })
+        }
+        Initialization::FineTune { model, freeze_encoder } => {
+            let pre = TrainedModel::load(model, &inference_device())?;
+            let net = UNet::from_safetensors(&pre.config, pre.net.to_safetensors()?, device, model)?;
+            let net = if *freeze_encoder { net.freeze_encoder() } else { net };
+            Ok(Start {
+                net,
+                config: pre.config,
+                normalization: pre.normalization,
+                input_unit: pre.input_unit,
+                target_unit: pre.target_unit,
+                fine_tuned_from: Some(model.display().to_string()),
+                freeze: *freeze_encoder,
+            })
+        }
+    }
+}
+
+/// The batch positions of one iteration: an endless stream of per-epoch permutations.
+struct Shuffler {
+    seed: u64,
+    n: usize,
+    epoch: Option<u64>,
+    perm: Vec<usize>,
+}
+
+impl Shuffler {
+    fn position(&mut self, stream_pos: u64) -> usize {
+        let epoch = stream_pos / self.n as u64;
+        if self.epoch != Some(epoch) {
+            let mut rng = item_rng(self.seed, STREAM_SHUFFLE, epoch);
+            self.perm = (0..self.n).collect();
+            for i in (1..self.n).rev() {
+                let j = rng.random_range(0..=i);
+                self.perm.swap(i, j);
+            }
+            self.epoch = Some(epoch);
+        }
+        self.perm[(stream_pos % self.n as u64) as usize]
+    }
+}
+
+/// Builds normalised batch tensors `(x, y, mask)` from sample positions; `corrupt_stream`
+/// gives each slot its own generator.
+pub(crate) fn batch_tensors(
+    samples: &Samples,
+    positions: &[usize],
+    norm: &Normalization,
+    corruption: &Corruption,
+    rng_for: impl Fn(usize) -> rand::rngs::StdRng,
+    device: &Device,
+) -> Result<(Tensor<5>, Tensor<5>, Tensor<5>)> {
+    let grid = samples.grid;
+    let (f, n) = (grid.field_len(), grid.nodes());
+    let b = positions.len();
+    let mut x = Vec::with_capacity(b * f);
+    let mut y = Vec::with_capacity(b * f);
+    let mut m = Vec::with_capacity(b * n);
+    let (si, st) = ((1.0 / norm.input_scale) as f32, (1.0 / norm.target_scale) as f32);
+    for (slot, &p) in positions.iter().enumerate() {
+        let mut input = samples.input(p).to_vec();
+        if !corruption.is_identity() {
+            corruption.apply(&mut input, grid, &mut rng_for(slot))?;
+        }
+        x.extend(input.iter().map(|v| v * si));
+        y.extend(samples.target(p).iter().map(|v| v * st));
+        m.extend(samples.mask(p).iter().map(|&v| f32::from(v)));
+    }
+    let [nx, ny, nz] = grid.dims();
+    Ok((
+        Tensor::from_data(TensorData::new(x, [b, CHANNELS, nx, ny, nz]), device),
+        Tensor::from_data(TensorData::new(y, [b, CHANNELS, nx, ny, nz]), device),
+        Tensor::from_data(TensorData::new(m, [b, 1, nx, ny, nz]), device),
+    ))
+}
+
+/// Checkpoint metadata (the JSON section of `checkpoint.bin`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CheckpointState {
+    format: String,
+    version: u32,
+    /// Identifies the setup; a resume with a different one is refused.
+    fingerprint: serde_json::Value,
+    /// Iterations done.
+    iteration: usize,
+    /// The random state: generators are counter-based on (seed, iteration).
+    seed: u64,
+    /// Training loss accumulated since the last curve row.
+    loss_sum: f64,
+    loss_count: usize,
+    best_iteration: Option<usize>,
+    best_val: Option<f64>,
+    curve: Vec<CurveRow>,
+}
+
+const CHECKPOINT_MAGIC: &[u8; 8] = b"AUGSIMCK";
+const CHECKPOINT_FORMAT: &str = "augsim-checkpoint";
+
+fn record_error(path: &Path, what: &str, e: impl std::fmt::Display) -> LearnError {
+    LearnError::model(path, format!("{what}: {e}"))
+}
+
+fn write_checkpoint(
+    path: &Path,
+    state: &CheckpointState,
+    net: &UNet,
+    optim: &ModuleOptimizer,
+    best: Option<&UNet>,
+) -> Result<()> {
+    let json = serde_json::to_vec(state).map_err(|e| record_error(path, "cannot serialize checkpoint state", e))?;
+    let model = net.clone().into_record().into_bytes().map_err(|e| record_error(path, "cannot serialize model", e))?;
+    let opt = optim.into_bytes().map_err(|e| record_error(path, "cannot serialize optimizer state", e))?;
+    let best = match best {
+        Some(b) => b
+            .clone()
+            .into_record()
+            .into_bytes()
+            .map_err(|e| record_error(path, "cannot serialize best model", e))?
+            .to_vec(),
+        None => Vec::new(),
+    };
+    let mut out = Vec::with_capacity(8 + 32 + json.len() + model.len() + opt.len() + best.len());
+    out.extend_from_slice(CHECKPOINT_MAGIC);
+    for section in [&json[..], &model[..], &opt[..], &best[..]] {
+        out.extend_from_slice(&(section.len() as u64).to_le_bytes());
+        out.extend_from_slice(section);
+    }
+    write_atomic(path, &out)
+}
+
+/// The sections of a checkpoint file.
+struct Checkpoint {
+    state: CheckpointState,
+    model: Vec<u8>,
+    optimizer: Vec<u8>,
+    /// Empty when no best model was recorded yet.
+    best: Vec<u8>,
+}
+
+fn read_checkpoint(path: &Path) -> Result<Checkpoint> {
+    let bytes = read(path)?;
+    let bad = |m: &str| LearnError::model(path, format!("corrupt checkpoint: {m}"));
+    if bytes.len() < 8 || &bytes[..8] != CHECKPOINT_MAGIC {
+        return Err(bad("missing AUGSIMCK magic"));
+    }
+    let mut at = 8;
+    let mut sections = Vec::new();
+    for _ in 0..4 {
+        let len_bytes: [u8; 8] =
+            bytes.get(at..at + 8).and_then(|s| s.try_into().ok()).ok_or_else(|| bad("truncated"))?;
+        let len = u64::from_le_bytes(len_bytes) as usize;
+        at += 8;
+        let section = bytes.get(at..at.saturating_add(len)).ok_or_else(|| bad("truncated"))?;
+        sections.push(section.to_vec());
+        at += len;
+    }
+    if at != bytes.len() {
+        return Err(bad("trailing bytes"));
+    }
+    let best = sections.pop().unwrap_or_default();
+    let optimizer = sections.pop().unwrap_or_default();
+    let model = sections.pop().unwrap_or_default();
+    let json = sections.pop().unwrap_or_default();
+    let state: CheckpointState = serde_json::from_slice(&json).map_err(|e| bad(&format!("state JSON: {e}")))?;
+    if state.format != CHECKPOINT_FORMAT || state.version != 1 {
+        return Err(bad("unknown checkpoint format or version"));
+    }
+    Ok(Checkpoint { state, model, optimizer, best })
+}
+
+fn load_record_into(net: UNet, bytes: Vec<u8>, path: &Path) -> Result<UNet> {
+    let record =
+        ModuleRecord::from_bytes(Bytes::from_bytes_vec(bytes)).map_err(|e| record_error(path, "model record", e))?;
+    net.try_load_record(record).map_err(|e| record_error(path, "model record does not fit the network", e))
+}
+
+fn indices_hash(samples: &Samples) -> u64 {
+    samples.indices.iter().fold(splitmix64(samples.len() as u64), |h, &i| splitmix64(h ^ i))
+}
+
+/// Writes the learning curve as CSV:
+/// `iteration,train_loss,val_mean_error_m,val_std_error_m,val_max_error_m` (validation columns
+/// empty without validation samples).
+pub fn write_curve_csv(path: &Path, curve: &[CurveRow]) -> Result<()> {
+    let mut text = String::from("iteration,train_loss,val_mean_error_m,val_std_error_m,val_max_error_m\n");
+    for r in curve {
+        let val = r.val.map(|v| format!("{:e},{:e},{:e}", v.mean, v.std, v.max)).unwrap_or_else(|| ",,".into());
+        text.push_str(&format!("{},{:e},{val}\n", r.iteration, r.train_loss));
+    }
+    write_atomic(path, text.as_bytes())
+}
+
+/// Trains a U-Net on `train`, validating on `val` (may be empty: then the last weights are
+/// kept). See the module documentation for files, reproducibility and resume.
+pub fn train(
+    train: &Samples,
+    val: &Samples,
+    init: &Initialization,
+    config: &TrainConfig,
+    options: &TrainOptions,
+) -> Result<TrainOutcome> {
+    config.validate()?;
+    if train.is_empty() {
+        return Err(LearnError::InvalidInput("no training samples".into()));
+    }
+    if !val.is_empty() && val.grid != train.grid {
+        return Err(LearnError::InvalidInput(format!(
+            "validation grid {} differs from training grid {}",
+            val.grid, train.grid
+        )));
+    }
+    let out = &options.out_dir;
+    std::fs::create_dir_all(out).map_err(|e| LearnError::io(out, e))?;
+    let device = training_device();
+    let start = resolve_start(init, config.seed, &device)?;
+    // Everything that shapes the trajectory, so that a checkpoint is only resumed into the
+    // run it came from. The iteration count and checkpoint interval are left out: a finished
+    // run can be extended by resuming it with more iterations.
+    let mut trajectory = serde_json::to_value(config)
+        .map_err(|e| LearnError::InvalidInput(format!("cannot serialize the training config: {e}")))?;
+    if let Some(map) = trajectory.as_object_mut() {
+        map.remove("iterations");
+        map.remove("checkpoint_every");
+    }
+    let fingerprint = serde_json::json!({
+        "config": trajectory,
+        "init": init,
+        "grid": train.grid,
+        "train": [train.len(), indices_hash(train)],
+        "val": [val.len(), indices_hash(val)],
+    });
+    let mut net = start.net;
+    let mut optim = AdamConfig::new().init();
+    let mut state = CheckpointState {
+        format: CHECKPOINT_FORMAT.into(),
+        version: 1,
+        fingerprint,
+        iteration: 0,
+        seed: config.seed,
+        loss_sum: 0.0,
+        loss_count: 0,
+        best_iteration: None,
+        best_val: None,
+        curve: Vec::new(),
+    };
+    let mut best: Option<UNet> = None;
+    let checkpoint_path = out.join(CHECKPOINT_FILE);
+    if options.resume && checkpoint_path.exists() {
+        let saved = read_checkpoint(&checkpoint_path)?;
+        if saved.state.fingerprint != state.fingerprint {
+            return Err(LearnError::model(
+                &checkpoint_path,
+                "checkpoint is from a different setup (configuration, initialisation or data); \
+                 use another output directory or start without resume",
+            ));
+        }
+        net = load_record_into(net, saved.model, &checkpoint_path)?;
+        optim = optim
+            .from_bytes(Bytes::from_bytes_vec(saved.optimizer))
+            .map_err(|e| record_error(&checkpoint_path, "optimizer state", e))?;
+        if !saved.best.is_empty() {
+            let fresh = UNet::new(&start.config, &inference_device(), 0)?;
+            best = Some(load_record_into(fresh, saved.best, &checkpoint_path)?);
+        }
+        state = saved.state;
+        if state.iteration > config.iterations {
+            return Err(LearnError::model(
+                &checkpoint_path,
+                format!(
+                    "checkpoint is at iteration {}, beyond the {} iterations asked for",
+                    state.iteration, config.iterations
+                ),
+            ));
+        }
+    }
+
+    let progress = if options.progress {
+        let bar = ProgressBar::new(config.iterations as u64);
+        if let Ok(style) = ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise}<{eta_precise}] {msg}")
+        {
+            bar.set_style(style);
+        }
+        bar
+    } else {
+        ProgressBar::hidden()
+    };
+    progress.set_position(state.iteration as u64);
+
+    let mut shuffler = Shuffler { seed: config.seed, n: train.len(), epoch: None, perm: Vec::new() };
+    let eval_device = inference_device();
+    let mut step_time = 0.0;
+    let mut steps = 0usize;
+    let mut completed = true;
+    while state.iteration < config.iterations {
+        let it = state.iteration;
+        let t0 = Instant::now();
+        let first = (it * config.batch_size) as u64;
+        let positions: Vec<usize> = (0..config.batch_size as u64).map(|b| shuffler.position(first + b)).collect();
+        let (x, y, mask) = batch_tensors(
+            train,
+            &positions,
+            &start.normalization,
+            &config.train_corruption,
+            |slot| item_rng(config.seed, STREAM_TRAIN_CORRUPTION, first + slot as u64),
+            &device,
+        )?;
+        let loss = masked_mse(net.forward(x), y, mask);
+        let loss_value: f64 = loss.clone().into_scalar::<f32>().into();
+        if !loss_value.is_finite() {
+            return Err(LearnError::InvalidInput(format!(
+                "training diverged at iteration {} (loss {loss_value}); lower the learning rate",
+                it + 1
+            )));
+        }
+        let grads = GradientsParams::from_grads(loss.backward(), &net);
+        net = optim.step(config.learning_rate, net, grads);
+        step_time += t0.elapsed().as_secs_f64();
+        steps += 1;
+        state.iteration += 1;
+        state.loss_sum += loss_value;
+        state.loss_count += 1;
+        progress.set_position(state.iteration as u64);
+        progress.set_message(format!("loss {loss_value:.3e}"));
+
+        let done = state.iteration == config.iterations;
+        if state.iteration % config.validate_every == 0 || done {
+            let snapshot = net.valid();
+            let val_error = if val.is_empty() {
+                None
+            } else {
+                let report = evaluate_net(
+                    &snapshot,
+                    &start.normalization,
+                    val,
+                    &config.val_corruption,
+                    config.seed,
+                    config.eval_batch_size,
+                    &eval_device,
+                )?;
+                Some(report.stats)
+            };
+            state.curve.push(CurveRow {
+                iteration: state.iteration,
+                train_loss: state.loss_sum / state.loss_count.max(1) as f64,
+                val: val_error,
+            });
+            state.loss_sum = 0.0;
+            state.loss_count = 0;
+            let val_mean = val_error.map(|v| v.mean);
+            let improved = match (val_mean, state.best_val) {
+                (None, _) => true,
+                (Some(e), Some(b)) => e < b,
+                (Some(_), None) => true,
+            };
+            if improved {
+                state.best_val = val_mean;
+                state.best_iteration = Some(state.iteration);
+                best = Some(snapshot);
+            }
+            write_curve_csv(&out.join(CURVE_CSV), &state.curve)?;
+            if let Some(e) = val_mean {
+                progress.set_message(format!("loss {loss_value:.3e} val {:.4} mm", e * 1e3));
+            }
+        }
+        let stop = options.stop_after.is_some_and(|s| state.iteration >= s) && !done;
+        if state.iteration % config.checkpoint_every == 0 || done || stop {
+            write_checkpoint(&checkpoint_path, &state, &net, &optim, best.as_ref())?;
+        }
+        if stop {
+            completed = false;
+            break;
+        }
+    }
+    progress.finish_and_clear();
+
+    let best_net = match best {
+        Some(b) => b,
+        None => net.valid(),
+    };
+    let model = TrainedModel {
+        config: start.config,
+        normalization: start.normalization,
+        grid: train.grid,
+        input_unit: start.input_unit,
+        target_unit: start.target_unit,
+        training: Some(TrainingInfo {
+            iterations: state.iteration,
+            best_iteration: state.best_iteration.unwrap_or(state.iteration),
+            best_val_mean_error: state.best_val,
+            train_samples: train.len(),
+            val_samples: val.len(),
+            seed: config.seed,
+            fine_tuned_from: start.fine_tuned_from,
+            frozen_encoder: start.freeze,
+        }),
+        net: best_net,
+    };
+    let model_path = out.join(MODEL_FILE);
+    if completed {
+        model.save(&model_path)?;
+    }
+    if !state.curve.is_empty() {
+        write_curve_csv(&out.join(CURVE_CSV), &state.curve)?;
+        plot_learning_curve(&out.join(CURVE_PNG), &state.curve)?;
+    }
+    Ok(TrainOutcome {
+        model,
+        curve: state.curve,
+        iterations_done: state.iteration,
+        completed,
+        model_path,
+        mean_step_seconds: if steps > 0 { step_time / steps as f64 } else { 0.0 },
+    })
+}

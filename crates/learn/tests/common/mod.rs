@@ -1,0 +1,74 @@
+//! Synthetic samples for the tests: a force on a small patch of nodes, and a target that is a
+//! Gaussian blur of it (a linear, translation-invariant response a U-Net can learn), inside an
+//! ellipsoidal mask.
+
+#![allow(dead_code)]
+
+use augsim_learn::{GridShape, Sample, Samples};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+
+/// An ellipsoid filling most of the grid.
+pub fn ellipsoid_mask(grid: GridShape) -> Vec<u8> {
+    let [nx, ny, nz] = grid.dims();
+    let mut m = vec![0u8; grid.nodes()];
+    for i in 0..nx {
+        for j in 0..ny {
+            for k in 0..nz {
+                let r = |a: usize, n: usize| (a as f64 - (n as f64 - 1.0) / 2.0) / (n as f64 / 2.0);
+                if r(i, nx).powi(2) + r(j, ny).powi(2) + r(k, nz).powi(2) <= 1.0 {
+                    m[grid.node_index(i, j, k)] = 1;
+                }
+            }
+        }
+    }
+    m
+}
+
+/// Sample `index`: a force (N) on a 2x2x2 patch inside the mask; target (m) a blurred copy.
+pub fn synthetic_sample(grid: GridShape, index: u64) -> Sample {
+    let mut rng = StdRng::seed_from_u64(1000 + index);
+    let mask = ellipsoid_mask(grid);
+    let n = grid.nodes();
+    let [nx, ny, nz] = grid.dims();
+    let mut input = vec![0f32; grid.field_len()];
+    let center = loop {
+        let c = [rng.random_range(1..nx - 2), rng.random_range(1..ny - 2), rng.random_range(1..nz - 2)];
+        if mask[grid.node_index(c[0], c[1], c[2])] == 1 {
+            break c;
+        }
+    };
+    let force: [f32; 3] = [rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)];
+    for di in 0..2 {
+        for dj in 0..2 {
+            for dk in 0..2 {
+                for c in 0..3 {
+                    input[grid.field_index(c, center[0] + di, center[1] + dj, center[2] + dk)] = force[c];
+                }
+            }
+        }
+    }
+    let mut target = vec![0f32; grid.field_len()];
+    for i in 0..nx {
+        for j in 0..ny {
+            for k in 0..nz {
+                let d2 = [i, j, k].iter().zip(center).map(|(&a, b)| (a as f64 - b as f64 - 0.5).powi(2)).sum::<f64>();
+                let w = (-d2 / 4.0).exp() as f32;
+                for c in 0..3 {
+                    target[grid.field_index(c, i, j, k)] = 0.01 * w * force[c];
+                }
+            }
+        }
+    }
+    let _ = n;
+    Sample { index, input, target, mask }
+}
+
+/// `count` synthetic samples with indices `first..first+count`.
+pub fn synthetic_samples(grid: GridShape, first: u64, count: usize) -> Samples {
+    let mut s = Samples::new(grid);
+    for i in 0..count as u64 {
+        s.push(&synthetic_sample(grid, first + i)).unwrap();
+    }
+    s
+}

@@ -1,0 +1,334 @@
+//! .npy files and sharded datasets: round trips, resume, merge, statistics, corruption errors.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use augsim_learn::dataset::MANIFEST_FILE;
+use augsim_learn::npy::{self, NpyData};
+use augsim_learn::{merge_datasets, Dataset, DatasetPart, DatasetSpec, DatasetWriter, GridShape, LearnError, Samples};
+use common::synthetic_sample;
+
+fn grid() -> GridShape {
+    GridShape::new(6, 5, 4)
+}
+
+fn spec(shard_size: usize, part: Option<DatasetPart>) -> DatasetSpec {
+    DatasetSpec {
+        scenario: "test".into(),
+        seed: 7,
+        part,
+        grid: grid(),
+        input_unit: "N".into(),
+        target_unit: "m".into(),
+        shard_size,
+        metadata: serde_json::json!({"young_modulus": 5000.0}),
+    }
+}
+
+/// Writes samples `indices` (indices divisible by 7 fail) and finishes.
+fn write(dir: &Path, spec: DatasetSpec, indices: impl Iterator<Item = u64>) {
+    let mut w = DatasetWriter::create_or_resume(dir, spec).unwrap();
+    for i in indices {
+        push(&mut w, i);
+    }
+    w.finish().unwrap();
+}
+
+fn push(w: &mut DatasetWriter, i: u64) {
+    if i % 7 == 3 {
+        w.push_failure(i, format!("no convergence at {i}")).unwrap();
+    } else {
+        w.push(&synthetic_sample(grid(), i)).unwrap();
+    }
+}
+
+/// All files of a dataset directory with their bytes, sorted by relative path.
+fn tree(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push((p.strip_prefix(dir).unwrap().to_path_buf(), std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn npy_round_trip_and_header() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("a.npy");
+    let data: Vec<f32> = (0..60).map(|i| i as f32 * 0.37 - 3.0).collect();
+    npy::write_f32(&p, &[3, 4, 5], &data).unwrap();
+    let bytes = std::fs::read(&p).unwrap();
+    assert_eq!(&bytes[..8], b"\x93NUMPY\x01\x00");
+    let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    assert_eq!((10 + header_len) % 64, 0, "data must start on a 64-byte boundary");
+    assert_eq!(bytes.len(), 10 + header_len + 60 * 4);
+    let a = npy::read_npy(&p).unwrap();
+    assert_eq!(a.shape, vec![3, 4, 5]);
+    assert_eq!(a.data, NpyData::F32(data));
+
+    let q = dir.path().join("m.npy");
+    npy::write_u8(&q, &[7], &[0, 1, 1, 0, 1, 0, 0]).unwrap();
+    let m = npy::read_npy(&q).unwrap();
+    assert_eq!(m.shape, vec![7]);
+    assert_eq!(m.data, NpyData::U8(vec![0, 1, 1, 0, 1, 0, 0]));
+    assert_eq!(npy::read_shape(&q).unwrap(), vec![7]);
+}
+
+/// An .npy file as numpy writes it (v1.0 header padded to 64 bytes).
+fn numpy_file(descr: &str, fortran: &str, shape: &str, data: &[u8]) -> Vec<u8> {
+    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': {fortran}, 'shape': {shape}, }}");
+    while (10 + dict.len() + 1) % 64 != 0 {
+        dict.push(' ');
+    }
+    dict.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(dict.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(dict.as_bytes());
+    bytes.extend_from_slice(data);
+    bytes
+}
+
+#[test]
+fn npy_reads_numpy_f64_and_rejects_bad_files() {
+    let dir = tempfile::tempdir().unwrap();
+    // np.array([[1.5, -2.0]]) saved by numpy (float64).
+    let data: Vec<u8> = [1.5f64, -2.0].iter().flat_map(|x| x.to_le_bytes()).collect();
+    let bytes = numpy_file("<f8", "False", "(1, 2)", &data);
+    let p = dir.path().join("f8.npy");
+    std::fs::write(&p, &bytes).unwrap();
+    let a = npy::read_npy(&p).unwrap();
+    assert_eq!(a.shape, vec![1, 2]);
+    assert_eq!(a.into_f32(), vec![1.5, -2.0]);
+    // A bool mask (np.bool_) of shape (3,).
+    std::fs::write(&p, numpy_file("|b1", "False", "(3,)", &[1, 0, 1])).unwrap();
+    assert_eq!(npy::read_npy(&p).unwrap().into_mask(&p).unwrap(), vec![1, 0, 1]);
+
+    // Truncated data.
+    std::fs::write(&p, &bytes[..bytes.len() - 3]).unwrap();
+    let e = npy::read_npy(&p).unwrap_err().to_string();
+    assert!(e.contains("f8.npy") && e.contains("truncated"), "{e}");
+    // Trailing bytes.
+    let mut longer = bytes.clone();
+    longer.push(0);
+    std::fs::write(&p, &longer).unwrap();
+    assert!(npy::read_npy(&p).unwrap_err().to_string().contains("trailing"));
+    // Not an npy file.
+    std::fs::write(&p, b"hello world, this is text").unwrap();
+    let e = npy::read_npy(&p).unwrap_err().to_string();
+    assert!(e.contains("magic"), "{e}");
+    // Fortran order.
+    std::fs::write(&p, numpy_file("<f8", "True", "(1, 2)", &data)).unwrap();
+    assert!(npy::read_npy(&p).unwrap_err().to_string().contains("Fortran"));
+    // Unsupported dtype.
+    std::fs::write(&p, numpy_file("<i8", "False", "(1, 2)", &data)).unwrap();
+    assert!(npy::read_npy(&p).unwrap_err().to_string().contains("unsupported dtype"));
+}
+
+#[test]
+fn write_read_round_trip_is_exact() {
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), spec(4, None), 0..11);
+    let ds = Dataset::open(dir.path()).unwrap();
+    let m = ds.manifest();
+    assert!(m.complete);
+    assert_eq!(m.failed.iter().map(|f| f.index).collect::<Vec<_>>(), vec![3, 10]);
+    assert_eq!(m.num_samples, 9);
+    assert_eq!(m.shards.len(), 3);
+    assert_eq!(m.shards.iter().map(|s| s.num_samples).collect::<Vec<_>>(), vec![4, 4, 1]);
+    assert_eq!(m.next_index, 11);
+    assert_eq!(m.units.input, "N");
+    let all = ds.load_all().unwrap();
+    let expected: Vec<u64> = (0..11).filter(|i| i % 7 != 3).collect();
+    assert_eq!(all.indices, expected);
+    for (pos, &i) in expected.iter().enumerate() {
+        assert_eq!(all.get(pos), synthetic_sample(grid(), i), "sample {i}");
+    }
+    // Ranges crossing shard boundaries, and the train/test split.
+    let part = ds.load_range(3..6).unwrap();
+    assert_eq!(part.indices, expected[3..6].to_vec());
+    let (train, test) = all.clone().split_at(6).unwrap();
+    assert_eq!(train, ds.load_range(0..6).unwrap());
+    assert_eq!(test, ds.load_range(6..9).unwrap());
+    assert!(ds.load_range(5..10).is_err());
+}
+
+#[test]
+fn statistics_match_hand_computation() {
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), spec(2, None), 0..5);
+    let ds = Dataset::open(dir.path()).unwrap();
+    let all = ds.load_all().unwrap();
+    let n = grid().nodes();
+    let (mut cnt_in, mut sum_in, mut sq_in) = (0u64, [0f64; 3], 0f64);
+    let (mut cnt_t, mut sum_t, mut sq_t) = (0u64, [0f64; 3], [0f64; 3]);
+    for s in 0..all.len() {
+        let (inp, tgt, mask) = (all.input(s), all.target(s), all.mask(s));
+        for v in 0..n {
+            if (0..3).any(|c| inp[c * n + v] != 0.0) {
+                cnt_in += 1;
+                for c in 0..3 {
+                    sum_in[c] += inp[c * n + v] as f64;
+                    sq_in += (inp[c * n + v] as f64).powi(2);
+                }
+            }
+            if mask[v] == 1 {
+                cnt_t += 1;
+                for c in 0..3 {
+                    sum_t[c] += tgt[c * n + v] as f64;
+                    sq_t[c] += (tgt[c * n + v] as f64).powi(2);
+                }
+            }
+        }
+    }
+    let st = ds.manifest().statistics;
+    assert_eq!(st.inputs.nodes, cnt_in);
+    assert_eq!(st.targets.nodes, cnt_t);
+    assert!(cnt_in == 8 * 4, "each of the 4 samples loads a 2x2x2 patch");
+    for c in 0..3 {
+        assert!((st.inputs.mean[c] - sum_in[c] / cnt_in as f64).abs() < 1e-12);
+        let mean = sum_t[c] / cnt_t as f64;
+        let std = (sq_t[c] / cnt_t as f64 - mean * mean).sqrt();
+        assert!((st.targets.std[c] - std).abs() < 1e-12);
+    }
+    assert!((st.inputs.rms_norm - (sq_in / cnt_in as f64).sqrt()).abs() < 1e-12);
+    let norm = augsim_learn::Normalization::from_statistics(&st);
+    assert_eq!(norm.input_scale, st.inputs.rms_norm);
+}
+
+#[test]
+fn resumed_writing_equals_uninterrupted() {
+    let a = tempfile::tempdir().unwrap();
+    let b = tempfile::tempdir().unwrap();
+    write(a.path(), spec(3, None), 0..13);
+
+    // Interrupted: the writer is dropped (a crash) after 11 indices: 3 shards committed (9
+    // samples and the failure 3), the failure 10 pending and lost.
+    let mut w = DatasetWriter::create_or_resume(b.path(), spec(3, None)).unwrap();
+    for i in 0..11 {
+        push(&mut w, i);
+    }
+    drop(w);
+    let mut w = DatasetWriter::create_or_resume(b.path(), spec(3, None)).unwrap();
+    let from = w.resume_from();
+    assert_eq!(from, 10, "indices 0..10 hold 9 samples + the failure 3: three shards of 3");
+    for i in from..13 {
+        push(&mut w, i);
+    }
+    w.finish().unwrap();
+    assert_eq!(tree(a.path()), tree(b.path()));
+
+    // A complete dataset is not resumed, and a different spec is refused.
+    let e = DatasetWriter::create_or_resume(b.path(), spec(3, None)).err().unwrap().to_string();
+    assert!(e.contains("already complete"), "{e}");
+    let c = tempfile::tempdir().unwrap();
+    drop(DatasetWriter::create_or_resume(c.path(), spec(3, None)).unwrap());
+    let e = DatasetWriter::create_or_resume(c.path(), spec(4, None)).err().unwrap().to_string();
+    assert!(e.contains("cannot resume"), "{e}");
+}
+
+#[test]
+fn writer_rejects_bad_samples() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut w = DatasetWriter::create_or_resume(dir.path(), spec(3, None)).unwrap();
+    w.push(&synthetic_sample(grid(), 5)).unwrap();
+    assert!(w.push(&synthetic_sample(grid(), 5)).is_err(), "indices must increase");
+    assert!(w.push_failure(2, "late").is_err());
+    let mut s = synthetic_sample(grid(), 6);
+    s.target.pop();
+    let e = w.push(&s).unwrap_err().to_string();
+    assert!(e.contains("target has"), "{e}");
+    let mut s = synthetic_sample(grid(), 7);
+    s.input[0] = f32::NAN;
+    assert!(w.push(&s).is_err());
+}
+
+#[test]
+fn merge_of_worker_parts_equals_single_writer() {
+    let root = tempfile::tempdir().unwrap();
+    let single = root.path().join("single");
+    write(&single, spec(4, None), 0..15);
+    let parts: Vec<PathBuf> = (0..3).map(|w| root.path().join(format!("part{w}"))).collect();
+    for (w, dir) in parts.iter().enumerate() {
+        // Worker w of 3 takes the indices i with i % 3 == w, with its own shard size.
+        write(dir, spec(2, Some(DatasetPart { index: w, count: 3 })), (0..15).filter(|i| i % 3 == w as u64));
+    }
+    let merged = root.path().join("merged");
+    merge_datasets(&parts, &merged, Some(4)).unwrap();
+    assert_eq!(tree(&single), tree(&merged));
+
+    // Overlapping parts are refused.
+    let dup = root.path().join("dup");
+    let e = merge_datasets(&[parts[0].clone(), parts[0].clone()], &dup, None).unwrap_err().to_string();
+    assert!(e.contains("also appears"), "{e}");
+    // An unfinished part is refused.
+    let open = root.path().join("open");
+    drop(DatasetWriter::create_or_resume(&open, spec(2, Some(DatasetPart { index: 0, count: 3 }))).unwrap());
+    let e = merge_datasets(&[parts[1].clone(), open], &root.path().join("m2"), None).unwrap_err().to_string();
+    assert!(e.contains("not complete"), "{e}");
+}
+
+#[test]
+fn corrupt_shards_give_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), spec(4, None), 0..6);
+    let ds = Dataset::open(dir.path()).unwrap();
+    let inputs = dir.path().join("shard_00001/inputs.npy");
+
+    // Truncated inputs.
+    let bytes = std::fs::read(&inputs).unwrap();
+    std::fs::write(&inputs, &bytes[..bytes.len() - 10]).unwrap();
+    let e = ds.load_all().unwrap_err();
+    assert!(matches!(e, LearnError::Npy { .. }));
+    let e = e.to_string();
+    assert!(e.contains("shard_00001/inputs.npy") && e.contains("truncated"), "{e}");
+    std::fs::write(&inputs, &bytes).unwrap();
+    assert!(ds.load_all().is_ok());
+
+    // A masks file with the wrong shape (one sample fewer than the manifest says).
+    let masks = dir.path().join("shard_00000/masks.npy");
+    let saved = std::fs::read(&masks).unwrap();
+    let n = grid().nodes();
+    npy::write_u8(&masks, &[3, 6, 5, 4], &vec![1u8; 3 * n]).unwrap();
+    let e = ds.load_all().unwrap_err().to_string();
+    assert!(e.contains("shard_00000/masks.npy") && e.contains("does not match the manifest"), "{e}");
+    assert!(ds.check_files().is_err());
+    std::fs::write(&masks, &saved).unwrap();
+
+    // Mask values other than 0/1.
+    npy::write_u8(&masks, &[4, 6, 5, 4], &vec![2u8; 4 * n]).unwrap();
+    let e = ds.load_shard(0).unwrap_err().to_string();
+    assert!(e.contains("0 or 1"), "{e}");
+    std::fs::write(&masks, &saved).unwrap();
+
+    // A manifest whose counts disagree.
+    let mp = dir.path().join(MANIFEST_FILE);
+    let text = std::fs::read_to_string(&mp).unwrap();
+    std::fs::write(&mp, text.replacen("\"num_samples\": 5", "\"num_samples\": 6", 1)).unwrap();
+    let e = Dataset::open(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("manifest.json") && e.contains("num_samples"), "{e}");
+    std::fs::write(&mp, "{ not json").unwrap();
+    let e = Dataset::open(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("invalid manifest JSON"), "{e}");
+}
+
+#[test]
+fn samples_select_and_append() {
+    let s = common::synthetic_samples(grid(), 0, 4);
+    let sel = s.select(&[2, 0]).unwrap();
+    assert_eq!(sel.indices, vec![2, 0]);
+    assert_eq!(sel.get(0), s.get(2));
+    let mut t = Samples::new(grid());
+    t.append(sel).unwrap();
+    assert_eq!(t.len(), 2);
+    assert!(Samples::new(GridShape::new(2, 2, 2)).append(s).is_err());
+}

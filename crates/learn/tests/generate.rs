@@ -1,0 +1,190 @@
+//! FEM dataset generation: grid encoding, determinism, resume and split/merge.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::Path;
+
+use augsim_learn::generate::{DatasetConfig, Generator, Input, Load};
+use augsim_learn::{merge_datasets, Dataset, DatasetPart};
+use fem::{Law, Material, SolverOptions};
+use mesh::NodeSelection;
+
+fn bottom(x0: f64, x1: f64) -> NodeSelection {
+    NodeSelection::Box { min: [x0 - 1e-6, -1e-6, -1e-6], max: [x1 + 1e-6, 1.0 + 1e-6, 1e-6] }
+}
+
+fn top() -> NodeSelection {
+    NodeSelection::Box { min: [-1e-6, -1e-6, 1.0 - 1e-6], max: [4.0 + 1e-6, 1.0 + 1e-6, 1.0 + 1e-6] }
+}
+
+/// A small beam with a hidden fixed cuboid drawn from two alternatives.
+fn beam_generator(samples: usize) -> Generator {
+    let mesh = mesh::box_hex([0.0; 3], [4.0, 1.0, 1.0], [8, 2, 2]).unwrap();
+    let config = DatasetConfig {
+        samples,
+        seed: 7,
+        shard_size: 2,
+        grid: None,
+        fixed: vec![bottom(0.0, 1.0), bottom(2.0, 3.0)],
+        load: Load::PatchForce { centres: Some(top()), radius: 0.6, magnitude: [0.05, 0.2] },
+        input: Input::Displacement { nodes: top(), sparse: Some([3, 8]) },
+    };
+    Generator::new(mesh, Material::new(Law::Svk, 300.0, 0.4), SolverOptions::default(), config).unwrap()
+}
+
+fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    for entry in walk(dir) {
+        out.push((entry.strip_prefix(dir).unwrap().display().to_string(), std::fs::read(&entry).unwrap()));
+    }
+    out.sort();
+    out
+}
+
+fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut v = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            v.extend(walk(&p));
+        } else {
+            v.push(p);
+        }
+    }
+    v
+}
+
+#[test]
+fn lattice_encoding_is_exact_and_forces_are_conserved() {
+    let g = beam_generator(1);
+    let grid = g.grid();
+    assert_eq!([grid.nx, grid.ny, grid.nz], [9, 3, 3]);
+    let mesh = mesh::box_hex([0.0; 3], [4.0, 1.0, 1.0], [8, 2, 2]).unwrap();
+    let field: Vec<f64> = mesh.nodes.iter().flat_map(|p| [p[0] * 0.1, p[1] - p[2], 0.3 * p[2]]).collect();
+    let enc = g.encode(&field, false).unwrap();
+    let n = grid.nodes();
+    for p in &mesh.nodes {
+        let (i, j, k) = ((p[0] / 0.5).round() as usize, (p[1] / 0.5).round() as usize, (p[2] / 0.5).round() as usize);
+        let node = grid.node_index(i, j, k);
+        assert_eq!(enc[node], (p[0] * 0.1) as f32);
+        assert_eq!(enc[n + node], (p[1] - p[2]) as f32);
+        assert_eq!(enc[2 * n + node], (0.3 * p[2]) as f32);
+    }
+    assert!(g.mask().iter().all(|&m| m == 1));
+}
+
+#[test]
+fn embedded_encoding_reproduces_linear_fields_and_total_force() {
+    // A T4 box whose nodes coincide with the grid: linear fields are exact.
+    let mesh = mesh::box_tet([0.0; 3], [0.2, 0.1, 0.1], [4, 2, 2]).unwrap();
+    let all = NodeSelection::Box { min: [-1.0; 3], max: [1.0; 3] };
+    let config = DatasetConfig {
+        samples: 1,
+        seed: 0,
+        shard_size: 1,
+        grid: Some([9, 5, 5]),
+        fixed: vec![NodeSelection::Box { min: [-1e-6; 3], max: [1e-6, 1.0, 1.0] }],
+        load: Load::PointForces { nodes: all, count: 3, magnitude: [0.1, 0.2] },
+        input: Input::Force,
+    };
+    let g = Generator::new(mesh.clone(), Material::new(Law::Linear, 5000.0, 0.45), SolverOptions::default(), config).unwrap();
+    let lin = |p: &[f64; 3]| [0.01 + 0.2 * p[0] - 0.1 * p[1], 0.3 * p[2], -0.05 * p[0] + 0.4 * p[1]];
+    let field: Vec<f64> = mesh.nodes.iter().flat_map(lin).collect();
+    let enc = g.encode(&field, false).unwrap();
+    let grid = g.grid();
+    let n = grid.nodes();
+    let mut inside = 0;
+    for i in 0..9 {
+        for j in 0..5 {
+            for k in 0..5 {
+                let node = grid.node_index(i, j, k);
+                if g.mask()[node] == 0 {
+                    continue;
+                }
+                inside += 1;
+                let expect = lin(&[0.025 * i as f64, 0.025 * j as f64, 0.025 * k as f64]);
+                for c in 0..3 {
+                    assert!((enc[c * n + node] as f64 - expect[c]).abs() < 1e-6, "node ({i},{j},{k}) channel {c}");
+                }
+            }
+        }
+    }
+    assert_eq!(inside, 9 * 5 * 5, "every grid node lies in the box");
+    // Spreading nodal forces to the grid keeps the total force.
+    let forces: Vec<f64> = (0..3 * mesh.num_nodes()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+    let enc = g.encode(&forces, true).unwrap();
+    for c in 0..3 {
+        let total: f64 = forces.iter().skip(c).step_by(3).sum();
+        let grid_total: f64 = enc[c * n..(c + 1) * n].iter().map(|&v| v as f64).sum();
+        assert!((total - grid_total).abs() < 1e-4, "channel {c}: {total} vs {grid_total}");
+    }
+}
+
+#[test]
+fn generation_is_deterministic_and_resumes_after_a_kill() {
+    let g = beam_generator(6);
+    let tmp = tempfile::tempdir().unwrap();
+    let (full, resumed) = (tmp.path().join("full"), tmp.path().join("resumed"));
+    let manifest = g.run(&full, "beam", None, &|_, _| {}).unwrap();
+    assert_eq!(manifest.num_samples + manifest.failed.len(), 6);
+    assert!(manifest.num_samples >= 5, "failures: {:?}", manifest.failed);
+    // Kill after the first batch, then run again.
+    let killed = catch_unwind(AssertUnwindSafe(|| {
+        g.run(&resumed, "beam", None, &|done, _| {
+            if done >= 2 {
+                panic!("simulated kill");
+            }
+        })
+    }));
+    assert!(killed.is_err());
+    let partial = Dataset::open(&resumed).unwrap();
+    assert!(!partial.manifest().complete && partial.len() < 6);
+    g.run(&resumed, "beam", None, &|_, _| {}).unwrap();
+    assert_eq!(files(&full), files(&resumed), "a resumed generation must equal an uninterrupted one");
+    // The samples carry a visible sparse sub-domain of the top face and a full target.
+    let all = Dataset::open(&full).unwrap().load_all().unwrap();
+    let n = all.grid.nodes();
+    for i in 0..all.len() {
+        let visible = (0..n).filter(|&k| (0..3).any(|c| all.input(i)[c * n + k] != 0.0)).count();
+        assert!((3..=8).contains(&visible), "sample {i}: {visible} visible nodes");
+        assert!(all.target(i).iter().any(|&v| v.abs() > 1e-4));
+    }
+}
+
+#[test]
+fn split_generation_merges_into_the_full_dataset() {
+    let g = beam_generator(5);
+    let tmp = tempfile::tempdir().unwrap();
+    let full = tmp.path().join("full");
+    g.run(&full, "beam", None, &|_, _| {}).unwrap();
+    let parts: Vec<_> = (0..2)
+        .map(|i| {
+            let dir = tmp.path().join(format!("part{i}"));
+            g.run(&dir, "beam", Some(DatasetPart { index: i, count: 2 }), &|_, _| {}).unwrap();
+            dir
+        })
+        .collect();
+    let merged = tmp.path().join("merged");
+    merge_datasets(&parts, &merged, None).unwrap();
+    let a = Dataset::open(&full).unwrap().load_all().unwrap();
+    let b = Dataset::open(&merged).unwrap().load_all().unwrap();
+    assert_eq!(a, b);
+}
+
+#[test]
+fn bad_configurations_are_rejected_with_a_reason() {
+    let mesh = mesh::box_hex([0.0; 3], [4.0, 1.0, 1.0], [8, 2, 2]).unwrap();
+    let base = DatasetConfig {
+        samples: 2,
+        seed: 0,
+        shard_size: 1,
+        grid: None,
+        fixed: vec![bottom(0.0, 1.0)],
+        load: Load::PointForces { nodes: top(), count: 100, magnitude: [0.0, 1.0] },
+        input: Input::Force,
+    };
+    let m = Material::new(Law::Svk, 300.0, 0.4);
+    let err = Generator::new(mesh.clone(), m, SolverOptions::default(), base.clone()).err().unwrap().to_string();
+    assert!(err.contains("cannot load 100 distinct nodes"), "{err}");
+    let err = Generator::new(mesh, m, SolverOptions::default(), DatasetConfig { fixed: vec![], ..base }).err().unwrap().to_string();
+    assert!(err.contains("fixed"), "{err}");
+}

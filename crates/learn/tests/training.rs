@@ -1,0 +1,214 @@
+//! Training on tiny models: overfitting, bit-identical resume, transfer learning with a frozen
+//! encoder, evaluation and outputs.
+
+mod common;
+
+use augsim_learn::metrics::{masked_mse_values, mean_euclidean_error};
+use augsim_learn::train::{CHECKPOINT_FILE, CURVE_CSV, CURVE_PNG, MODEL_FILE};
+use augsim_learn::{
+    evaluate, inference_device, time_prediction, train, Corruption, GridShape, Initialization, Normalization, Samples,
+    Sparsity, TrainConfig, TrainOptions, TrainedModel, UNet, UNetConfig,
+};
+use common::synthetic_samples;
+
+fn grid() -> GridShape {
+    GridShape::new(8, 8, 8)
+}
+
+fn scratch(base: usize, depth: usize, data: &Samples) -> Initialization {
+    // Normalisation from the data, as the manifest statistics would give it.
+    let rms = |v: &[f32]| {
+        let s: f64 = v.iter().map(|x| f64::from(*x).powi(2)).sum();
+        (s / data.len() as f64 / data.grid.nodes() as f64).sqrt()
+    };
+    Initialization::Scratch {
+        unet: UNetConfig { base_channels: base, depth, ..UNetConfig::default() },
+        normalization: Normalization { input_scale: rms(&data.inputs) * 8.0, target_scale: rms(&data.targets) * 4.0 },
+        input_unit: "N".into(),
+    }
+}
+
+/// Masked MSE (physical units) of a model over a sample set.
+fn mse(model: &TrainedModel, s: &Samples) -> f64 {
+    let pred = model.predict_batch(&s.inputs).unwrap();
+    masked_mse_values(&pred, &s.targets, &s.masks, s.grid).unwrap()
+}
+
+#[test]
+fn tiny_unet_overfits_a_handful_of_samples() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = synthetic_samples(grid(), 0, 4);
+    let init = scratch(4, 2, &data);
+    let config = TrainConfig {
+        iterations: 600,
+        batch_size: 4,
+        learning_rate: 3e-3,
+        validate_every: 200,
+        checkpoint_every: 600,
+        ..TrainConfig::default()
+    };
+    let out = train(&data, &data, &init, &config, &TrainOptions::new(dir.path())).unwrap();
+    assert!(out.completed);
+    assert_eq!(out.iterations_done, 600);
+
+    // The same network before training (same seed, same normalisation).
+    let Initialization::Scratch { unet, normalization, .. } = &init else { unreachable!() };
+    let initial = TrainedModel {
+        config: unet.clone(),
+        normalization: *normalization,
+        grid: grid(),
+        input_unit: "N".into(),
+        target_unit: "m".into(),
+        training: None,
+        net: UNet::new(unet, &inference_device(), config.seed).unwrap(),
+    };
+    let (before, after) = (mse(&initial, &data), mse(&out.model, &data));
+    assert!(after * 100.0 <= before, "masked MSE only fell from {before:e} to {after:e}");
+
+    // The kept model is the best validated one, and the files are there.
+    let info = out.model.training.clone().unwrap();
+    let best = out.curve.iter().filter_map(|r| r.val.map(|v| v.mean)).fold(f64::INFINITY, f64::min);
+    assert_eq!(info.best_val_mean_error, Some(best));
+    let saved = TrainedModel::load(&dir.path().join(MODEL_FILE), &inference_device()).unwrap();
+    assert_eq!(saved.predict(data.input(0)).unwrap(), out.model.predict(data.input(0)).unwrap());
+    let csv = std::fs::read_to_string(dir.path().join(CURVE_CSV)).unwrap();
+    assert_eq!(csv.lines().count(), 4, "{csv}");
+    assert!(csv.starts_with("iteration,train_loss,val_mean_error_m,val_std_error_m,val_max_error_m\n200,"));
+    let png = std::fs::read(dir.path().join(CURVE_PNG)).unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+
+    // evaluate() agrees with per-sample predictions, and reports the worst sample.
+    let report = evaluate(&out.model, &data, &Corruption::none(), 0, 3).unwrap();
+    for p in 0..data.len() {
+        let pred = out.model.predict(data.input(p)).unwrap();
+        let e = mean_euclidean_error(&pred, data.target(p), data.mask(p), grid()).unwrap();
+        assert!((e - report.errors[p]).abs() <= 1e-6 * e.max(1e-9), "{e} vs {}", report.errors[p]);
+    }
+    let worst = report.errors.iter().cloned().fold(0.0, f64::max);
+    assert_eq!(report.stats.max, worst);
+    assert_eq!(report.errors[report.stats.worst], worst);
+    assert_eq!(report.worst_index(), data.indices[report.stats.worst]);
+    assert!(report.to_string().contains(&format!("sample index {}", report.worst_index())));
+
+    let timing = time_prediction(&out.model, data.input(0), 1, 3).unwrap();
+    assert!(timing.min <= timing.median && timing.median <= timing.max && timing.runs == 3);
+}
+
+#[test]
+fn resumed_training_equals_uninterrupted() {
+    let root = tempfile::tempdir().unwrap();
+    let train_set = synthetic_samples(grid(), 0, 6);
+    let val = synthetic_samples(grid(), 100, 2);
+    let init = scratch(2, 2, &train_set);
+    let config = TrainConfig {
+        iterations: 12,
+        batch_size: 4,
+        learning_rate: 1e-3,
+        seed: 42,
+        validate_every: 4,
+        checkpoint_every: 4,
+        eval_batch_size: 2,
+        train_corruption: Corruption {
+            sparsity: Some(Sparsity::Subset { min_fraction: 0.5, max_fraction: 1.0 }),
+            noise_std: 0.05,
+        },
+        val_corruption: Corruption { sparsity: None, noise_std: 0.02 },
+    };
+    let (a, b) = (root.path().join("a"), root.path().join("b"));
+    let full = train(&train_set, &val, &init, &config, &TrainOptions::new(&a)).unwrap();
+
+    // Interrupted after iteration 6 (checkpoint), then resumed.
+    let stopped =
+        train(&train_set, &val, &init, &config, &TrainOptions { stop_after: Some(6), ..TrainOptions::new(&b) })
+            .unwrap();
+    assert!(!stopped.completed);
+    assert_eq!(stopped.iterations_done, 6);
+    assert!(!b.join(MODEL_FILE).exists());
+    assert!(b.join(CHECKPOINT_FILE).exists());
+    let resumed = train(&train_set, &val, &init, &config, &TrainOptions::new(&b)).unwrap();
+    assert!(resumed.completed);
+    assert_eq!(resumed.curve, full.curve);
+    let (pa, pb) = (full.model.net.named_parameters(), resumed.model.net.named_parameters());
+    let max_diff = pa
+        .iter()
+        .zip(&pb)
+        .flat_map(|((_, x), (_, y))| x.iter().zip(y).map(|(u, v)| (u - v).abs()))
+        .fold(0f32, f32::max);
+    assert_eq!(max_diff, 0.0, "resumed weights differ from uninterrupted ones by up to {max_diff:e}");
+    assert!(
+        std::fs::read(a.join("model.safetensors")).unwrap() == std::fs::read(b.join("model.safetensors")).unwrap(),
+        "model files differ"
+    );
+    assert_eq!(std::fs::read(a.join(CURVE_CSV)).unwrap(), std::fs::read(b.join(CURVE_CSV)).unwrap());
+
+    // Extending the finished run to 16 iterations equals a run of 16 from the start.
+    let longer = TrainConfig { iterations: 16, ..config.clone() };
+    let extended = train(&train_set, &val, &init, &longer, &TrainOptions::new(&b)).unwrap();
+    let full16 = train(&train_set, &val, &init, &longer, &TrainOptions::new(root.path().join("c"))).unwrap();
+    assert_eq!(extended.curve, full16.curve);
+    assert_eq!(extended.model.net.named_parameters(), full16.model.net.named_parameters());
+    let shorter = TrainConfig { iterations: 8, ..config.clone() };
+    let e = train(&train_set, &val, &init, &shorter, &TrainOptions::new(&b)).unwrap_err().to_string();
+    assert!(e.contains("beyond"), "{e}");
+
+    // A checkpoint from another setup is refused.
+    let other = TrainConfig { learning_rate: 2e-3, ..config.clone() };
+    let e = train(&train_set, &val, &init, &other, &TrainOptions::new(&b)).unwrap_err().to_string();
+    assert!(e.contains("different setup"), "{e}");
+    // A corrupt checkpoint gives a clear error.
+    let ck = b.join(CHECKPOINT_FILE);
+    let bytes = std::fs::read(&ck).unwrap();
+    std::fs::write(&ck, &bytes[..bytes.len() / 2]).unwrap();
+    let e = train(&train_set, &val, &init, &config, &TrainOptions::new(&b)).unwrap_err().to_string();
+    assert!(e.contains("checkpoint.bin") && e.contains("truncated"), "{e}");
+}
+
+#[test]
+fn fine_tuning_with_a_frozen_encoder_leaves_it_unchanged() {
+    let root = tempfile::tempdir().unwrap();
+    let pre_data = synthetic_samples(grid(), 0, 4);
+    let new_data = synthetic_samples(grid(), 50, 4);
+    let config = TrainConfig {
+        iterations: 8,
+        validate_every: 4,
+        checkpoint_every: 8,
+        learning_rate: 3e-3,
+        ..TrainConfig::default()
+    };
+    let pre_dir = root.path().join("pre");
+    train(&pre_data, &pre_data, &scratch(2, 2, &pre_data), &config, &TrainOptions::new(&pre_dir)).unwrap();
+    let pre_path = pre_dir.join(MODEL_FILE);
+    let pre = TrainedModel::load(&pre_path, &inference_device()).unwrap();
+
+    let finetune = |freeze: bool, name: &str| {
+        let init = Initialization::FineTune { model: pre_path.clone(), freeze_encoder: freeze };
+        train(&new_data, &new_data, &init, &config, &TrainOptions::new(root.path().join(name))).unwrap()
+    };
+    let frozen = finetune(true, "frozen");
+    assert_eq!(frozen.model.normalization, pre.normalization);
+    assert!(frozen.model.training.as_ref().unwrap().frozen_encoder);
+    let before = pre.net.named_parameters();
+    let after = frozen.model.net.named_parameters();
+    let (mut encoder, mut decoder_changed) = (0, 0);
+    for ((name, a), (name2, b)) in before.iter().zip(&after) {
+        assert_eq!(name, name2);
+        if UNet::is_encoder_parameter(name) {
+            assert_eq!(a, b, "frozen parameter {name} changed");
+            encoder += 1;
+        } else if a != b {
+            decoder_changed += 1;
+        }
+    }
+    assert!(encoder > 0);
+    assert!(decoder_changed > 0, "fine-tuning changed nothing");
+
+    // Without freezing, the encoder moves too.
+    let free = finetune(false, "free");
+    let moved = pre
+        .net
+        .named_parameters()
+        .iter()
+        .zip(free.model.net.named_parameters())
+        .any(|((name, a), (_, b))| UNet::is_encoder_parameter(name) && *a != b);
+    assert!(moved);
+}

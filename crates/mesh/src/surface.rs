@@ -1,0 +1,304 @@
+//! Checks and measures of closed triangle surfaces.
+//!
+//! A surface that bounds a volume must be a closed 2-manifold: every edge is
+//! shared by exactly two triangles that traverse it in opposite directions,
+//! every vertex is surrounded by a single fan of triangles, and no triangle is
+//! degenerate. [`check_closed_manifold`] verifies this and says what is wrong
+//! and where. The enclosed volume follows from the divergence theorem; it is
+//! positive when the triangles are counter-clockwise seen from outside.
+
+use std::collections::HashMap;
+
+use crate::{bounds, cross, dot, sub, MeshError, Point, TriSurface};
+
+/// Summary of a surface that passed [`check_closed_manifold`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct SurfaceReport {
+    /// Number of vertices (including unused ones).
+    pub vertices: usize,
+    /// Number of vertices used by at least one triangle.
+    pub used_vertices: usize,
+    /// Number of triangles.
+    pub triangles: usize,
+    /// Number of distinct edges.
+    pub edges: usize,
+    /// Total area (m²).
+    pub area: f64,
+    /// Signed enclosed volume (m³): positive when the triangles face outward.
+    pub volume: f64,
+    /// Bounding box (min, max) of the used vertices.
+    pub bounds: (Point, Point),
+}
+
+/// Checks that `surface` is a closed, consistently oriented 2-manifold without
+/// degenerate triangles and returns its measures.
+///
+/// The error names the first problem found, e.g. "edge (12, 40) belongs to 3
+/// triangles", "surface is open: 17 boundary edges (first: edge (3, 9) of
+/// triangle 5)", "triangle 17 is flipped relative to its three neighbours".
+/// The orientation sign itself is not an error: a closed surface whose
+/// triangles all face inward has a negative `volume` (see
+/// [`TriSurface::orient_outward`]).
+pub fn check_closed_manifold(surface: &TriSurface) -> Result<SurfaceReport, MeshError> {
+    let nv = surface.vertices.len();
+    if surface.triangles.is_empty() {
+        return Err(MeshError::Invalid("surface has no triangles".into()));
+    }
+    for (t, tri) in surface.triangles.iter().enumerate() {
+        if let Some(&bad) = tri.iter().find(|&&k| k >= nv) {
+            return Err(MeshError::Invalid(format!(
+                "triangle {t} refers to vertex {bad}, but there are {nv} vertices"
+            )));
+        }
+    }
+    let mut used = vec![false; nv];
+    for tri in &surface.triangles {
+        for &k in tri {
+            used[k] = true;
+        }
+    }
+    let used_points: Vec<Point> = surface.vertices.iter().zip(&used).filter(|(_, &u)| u).map(|(p, _)| *p).collect();
+    if let Some(i) = surface.vertices.iter().zip(&used).position(|(p, &u)| u && p.iter().any(|c| !c.is_finite())) {
+        return Err(MeshError::Invalid(format!("vertex {i} has a non-finite coordinate")));
+    }
+    let (lo, hi) = bounds(&used_points);
+    let diag2 = dot(sub(hi, lo), sub(hi, lo));
+    for (t, tri) in surface.triangles.iter().enumerate() {
+        if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
+            return Err(MeshError::Invalid(format!("triangle {t} {tri:?} repeats a vertex")));
+        }
+        let a = triangle_area_vector(surface, t);
+        let area = dot(a, a).sqrt();
+        if !(area > 1e-14 * diag2) {
+            return Err(MeshError::Invalid(format!("triangle {t} {tri:?} is degenerate (area {area:.3e})")));
+        }
+    }
+
+    // Directed edge (a, b) -> triangles that traverse it in that direction.
+    let mut directed: HashMap<(usize, usize), Vec<usize>> = HashMap::with_capacity(3 * surface.triangles.len());
+    for (t, tri) in surface.triangles.iter().enumerate() {
+        for e in 0..3 {
+            directed.entry((tri[e], tri[(e + 1) % 3])).or_default().push(t);
+        }
+    }
+    // Undirected edges in a deterministic order.
+    let mut undirected: Vec<(usize, usize)> = directed.keys().map(|&(a, b)| (a.min(b), a.max(b))).collect();
+    undirected.sort_unstable();
+    undirected.dedup();
+
+    let mut boundary: Vec<(usize, usize, usize)> = Vec::new();
+    let mut inconsistent: Vec<(usize, usize, usize, usize)> = Vec::new();
+    for &(a, b) in &undirected {
+        let fwd = directed.get(&(a, b)).map_or(&[][..], |v| v.as_slice());
+        let bwd = directed.get(&(b, a)).map_or(&[][..], |v| v.as_slice());
+        let n = fwd.len() + bwd.len();
+        if n > 2 {
+            return Err(MeshError::Invalid(format!("edge ({a}, {b}) belongs to {n} triangles (non-manifold)")));
+        }
+        if n == 1 {
+            let t = fwd.first().or(bwd.first()).copied().unwrap_or(0);
+            boundary.push((a, b, t));
+        } else if fwd.len() == 2 || bwd.len() == 2 {
+            let pair = if fwd.len() == 2 { fwd } else { bwd };
+            inconsistent.push((a, b, pair[0], pair[1]));
+        }
+    }
+    if let Some(&(a, b, t)) = boundary.first() {
+        return Err(MeshError::Invalid(format!(
+            "surface is open: {} boundary edges (first: edge ({a}, {b}) of triangle {t})",
+            boundary.len()
+        )));
+    }
+    if let Some(&(a, b, t1, t2)) = inconsistent.first() {
+        // A triangle whose three edges all disagree with its neighbours is flipped.
+        let mut count: HashMap<usize, usize> = HashMap::new();
+        for &(_, _, t1, t2) in &inconsistent {
+            *count.entry(t1).or_default() += 1;
+            *count.entry(t2).or_default() += 1;
+        }
+        let mut flipped: Vec<usize> = count.iter().filter(|(_, &c)| c == 3).map(|(&t, _)| t).collect();
+        flipped.sort_unstable();
+        return Err(match flipped.first() {
+            Some(&t) => MeshError::Invalid(format!(
+                "triangle {t} {:?} is flipped relative to its three neighbours ({} inconsistently oriented edges)",
+                surface.triangles[t],
+                inconsistent.len()
+            )),
+            None => MeshError::Invalid(format!(
+                "triangles {t1} and {t2} are inconsistently oriented across edge ({a}, {b}) \
+                 ({} such edges)",
+                inconsistent.len()
+            )),
+        });
+    }
+
+    // Every vertex must be surrounded by a single fan: the triangles around it,
+    // linked through shared edges, form one cycle.
+    check_vertex_fans(surface, &used)?;
+
+    Ok(SurfaceReport {
+        vertices: nv,
+        used_vertices: used.iter().filter(|&&u| u).count(),
+        triangles: surface.triangles.len(),
+        edges: undirected.len(),
+        area: surface.area(),
+        volume: surface.enclosed_volume(),
+        bounds: (lo, hi),
+    })
+}
+
+/// Each vertex's incident triangles must form one cycle through shared edges
+/// (two cones touching at a vertex, for example, form two).
+fn check_vertex_fans(surface: &TriSurface, used: &[bool]) -> Result<(), MeshError> {
+    let nv = surface.vertices.len();
+    // For each vertex: the "next" map of its link: in triangle (v, a, b), a -> b.
+    let mut start = vec![0usize; nv + 1];
+    for tri in &surface.triangles {
+        for &k in tri {
+            start[k + 1] += 1;
+        }
+    }
+    for i in 0..nv {
+        start[i + 1] += start[i];
+    }
+    let mut fill = start.clone();
+    let mut link = vec![(0usize, 0usize); start[nv]];
+    for tri in &surface.triangles {
+        for e in 0..3 {
+            let v = tri[e];
+            link[fill[v]] = (tri[(e + 1) % 3], tri[(e + 2) % 3]);
+            fill[v] += 1;
+        }
+    }
+    for v in 0..nv {
+        if !used[v] {
+            continue;
+        }
+        let fan = &link[start[v]..start[v + 1]];
+        // Walk the cycle from the first link edge; the manifold edge check
+        // guarantees each link vertex has exactly one successor.
+        let mut steps = 1;
+        let first = fan[0].0;
+        let mut cur = fan[0].1;
+        while cur != first && steps <= fan.len() {
+            match fan.iter().find(|(a, _)| *a == cur) {
+                Some(&(_, b)) => cur = b,
+                None => break,
+            }
+            steps += 1;
+        }
+        if steps != fan.len() {
+            return Err(MeshError::Invalid(format!(
+                "vertex {v} is non-manifold: its {} triangles form more than one fan",
+                fan.len()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Area vector of triangle `t`: half the cross product, normal to the
+/// triangle, pointing outward for a counter-clockwise triangle.
+pub fn triangle_area_vector(surface: &TriSurface, t: usize) -> Point {
+    let [a, b, c] = surface.triangles[t].map(|k| surface.vertices[k]);
+    let n = cross(sub(b, a), sub(c, a));
+    [0.5 * n[0], 0.5 * n[1], 0.5 * n[2]]
+}
+
+impl TriSurface {
+    /// Total area of the triangles (m²).
+    pub fn area(&self) -> f64 {
+        (0..self.triangles.len())
+            .map(|t| {
+                let a = triangle_area_vector(self, t);
+                dot(a, a).sqrt()
+            })
+            .sum()
+    }
+
+    /// Signed enclosed volume by the divergence theorem (m³): positive when
+    /// the triangles are counter-clockwise seen from outside. Meaningful for
+    /// closed surfaces only.
+    pub fn enclosed_volume(&self) -> f64 {
+        // Sum of signed tetrahedra (centre, a, b, c); the centre keeps the
+        // terms small and the sum well conditioned.
+        let (lo, hi) = bounds(&self.vertices);
+        let o = if lo[0].is_finite() {
+            [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])]
+        } else {
+            [0.0; 3]
+        };
+        self.triangles
+            .iter()
+            .map(|tri| {
+                let [a, b, c] = tri.map(|k| sub(self.vertices[k], o));
+                dot(a, cross(b, c)) / 6.0
+            })
+            .sum()
+    }
+
+    /// Reverses every triangle (inside out).
+    pub fn flip(&mut self) {
+        for tri in &mut self.triangles {
+            tri.swap(1, 2);
+        }
+    }
+
+    /// Makes the triangles face outward: flips them all when the enclosed
+    /// volume is negative. Returns true when the surface was flipped.
+    pub fn orient_outward(&mut self) -> bool {
+        if self.enclosed_volume() < 0.0 {
+            self.flip();
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Translates and scales the vertices in place: x ← (x − centre) · scale.
+    pub fn transform(&mut self, centre: Point, scale: f64) {
+        for p in &mut self.vertices {
+            for d in 0..3 {
+                p[d] = (p[d] - centre[d]) * scale;
+            }
+        }
+    }
+
+    /// Centres the surface's bounding box at the origin and scales it so that
+    /// its largest extent equals `length` (m). Returns the (centre, scale)
+    /// that was applied, as in [`TriSurface::transform`].
+    pub fn fit_to(&mut self, length: f64) -> Result<(Point, f64), MeshError> {
+        if !(length > 0.0 && length.is_finite()) {
+            return Err(MeshError::Invalid(format!("fit_to: length must be positive and finite, got {length}")));
+        }
+        let (lo, hi) = bounds(&self.vertices);
+        let extent = (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max);
+        if !(extent > 0.0 && extent.is_finite()) {
+            return Err(MeshError::Invalid("fit_to: the surface has no finite extent".into()));
+        }
+        let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])];
+        let scale = length / extent;
+        self.transform(centre, scale);
+        Ok((centre, scale))
+    }
+
+    /// Area-weighted outward unit normal at each vertex (zero for unused vertices).
+    pub fn vertex_normals(&self) -> Vec<Point> {
+        let mut n = vec![[0.0; 3]; self.vertices.len()];
+        for (t, tri) in self.triangles.iter().enumerate() {
+            let a = triangle_area_vector(self, t);
+            for &k in tri {
+                for d in 0..3 {
+                    n[k][d] += a[d];
+                }
+            }
+        }
+        for v in &mut n {
+            let len = dot(*v, *v).sqrt();
+            if len > 0.0 {
+                *v = v.map(|c| c / len);
+            }
+        }
+        n
+    }
+}
