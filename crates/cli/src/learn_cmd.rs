@@ -109,6 +109,9 @@ pub struct SplitArgs {
     /// Fraction of the dataset (its last samples) held out as the test set.
     #[arg(long, default_value_t = 0.2)]
     pub test_fraction: f64,
+    /// Number of test samples (the last ones); overrides --test-fraction.
+    #[arg(long)]
+    pub test_samples: Option<usize>,
     /// Keep a random visible patch of between MIN and MAX input nodes (e.g. 13,114).
     #[arg(long, value_delimiter = ',', num_args = 2)]
     pub sparse: Option<Vec<usize>>,
@@ -130,7 +133,11 @@ impl SplitArgs {
             bail!("--test-fraction must lie in [0, 1), got {}", self.test_fraction);
         }
         let all = dataset.load_all()?;
-        let n_train = all.len() - (all.len() as f64 * self.test_fraction).round() as usize;
+        let n_test = self.test_samples.unwrap_or((all.len() as f64 * self.test_fraction).round() as usize);
+        if n_test > all.len() {
+            bail!("{n_test} test samples asked, the dataset has {}", all.len());
+        }
+        let n_train = all.len() - n_test;
         Ok(all.split_at(n_train)?)
     }
 }
