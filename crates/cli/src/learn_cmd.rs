@@ -342,7 +342,6 @@ pub fn predict(model_path: &Path, input: &Path, output: &Path, runs: usize) -> R
 
 /// Writes a file atomically (temporary file in the same directory, then rename).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = path.with_extension(format!("{}.tmp", path.extension().and_then(|e| e.to_str()).unwrap_or("")));
-    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
+    use std::io::Write;
+    mesh::io::write_file_atomic(path, |f| f.write_all(bytes)).with_context(|| format!("writing {}", path.display()))
 }

@@ -7,16 +7,23 @@
 //!   [`RoukfConfig`] with one [`ParameterSpec`] (prior, [`Transform`]) per parameter.
 //! * [`SimplexSigmaPoints`]: the p + 1 simplex sigma points.
 //! * [`Trace`]: per-iteration μ, σ (filter and physical space) and innovation norm, written as CSV or JSON.
+//! * [`fem_model::FemModel`]: a static finite-element problem as a [`Model`] (Young's modulus and boundary springs
+//!   as parameters, time-profiled loads, one solver per sigma point); [`observation`]: points tracked through
+//!   barycentric weights and synthetic noisy measurements.
 
 mod error;
+pub mod fem_model;
 mod model;
+pub mod observation;
 mod roukf;
 mod sigma;
 mod trace;
 mod transform;
 
 pub use error::{BoxedModelError, FilterError};
+pub use fem_model::{FemModel, FemModelError, FemParameter, FemState, LoadPattern, Profile};
 pub use model::{Model, VectorState};
+pub use observation::TrackedPoint;
 pub use roukf::{Execution, ObservationNoise, ParameterSpec, Roukf, RoukfConfig};
 pub use sigma::SimplexSigmaPoints;
 pub use trace::{IterationTrace, Trace};

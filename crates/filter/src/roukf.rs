@@ -125,7 +125,8 @@ pub struct Roukf<M: Model> {
 }
 
 impl<M: Model> Roukf<M> {
-    /// Parameter-only filter: every sigma point starts from a clone of `initial_state` and then keeps its own state.
+    /// Parameter-only filter: every sigma point starts from a clone of `initial_state` (passed through
+    /// [`Model::assign_sigma_point`]) and then keeps its own state.
     pub fn new(model: M, initial_state: M::State, config: RoukfConfig) -> Result<Self, FilterError> {
         Self::build(model, initial_state, config, None)
     }
@@ -165,7 +166,10 @@ impl<M: Model> Roukf<M> {
             transforms: config.parameters.iter().map(|s| s.transform).collect(),
             records: Vec::new(),
         };
-        let states = vec![initial_state; sigma.count()];
+        let mut states = vec![initial_state; sigma.count()];
+        for (i, state) in states.iter_mut().enumerate() {
+            model.assign_sigma_point(state, i);
+        }
         let mut filter = Roukf {
             model,
             config,

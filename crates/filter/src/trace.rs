@@ -3,7 +3,6 @@
 use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use serde::{Deserialize, Serialize};
 
@@ -84,32 +83,8 @@ fn csv_field(s: &str) -> String {
     }
 }
 
-/// Writes `bytes` to a temporary file in the directory of `path`, then renames it onto `path`.
+/// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename).
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FilterError> {
-    static COUNTER: AtomicUsize = AtomicUsize::new(0);
-    let io_err = |p: &Path, source| FilterError::Io { path: p.to_path_buf(), source };
-    let file_name = path
-        .file_name()
-        .ok_or_else(|| io_err(path, std::io::Error::new(std::io::ErrorKind::InvalidInput, "path has no file name")))?;
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let tmp = dir.join(format!(
-        ".{}.{}.{}.tmp",
-        file_name.to_string_lossy(),
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(source) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(io_err(path, source));
-    }
-    Ok(())
+    mesh::io::write_file_atomic(path, |f| f.write_all(bytes))
+        .map_err(|source| FilterError::Io { path: path.to_path_buf(), source })
 }

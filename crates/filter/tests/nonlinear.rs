@@ -258,7 +258,8 @@ fn traces_are_written_as_csv_and_json() {
     names.sort();
     assert_eq!(names, ["trace.csv", "trace.json"]);
 
-    let missing = dir.path().join("no_such_dir").join("t.csv");
-    let err = trace.write_csv(&missing).unwrap_err();
-    assert!(err.to_string().contains("no_such_dir"), "{err}");
+    // A parent that is a regular file cannot hold the output: a clear error naming the path.
+    let blocked = dir.path().join("trace.csv").join("t.csv");
+    let err = trace.write_csv(&blocked).unwrap_err();
+    assert!(err.to_string().contains("trace.csv/t.csv"), "{err}");
 }

@@ -27,9 +27,9 @@
 
 pub mod corrupt;
 pub mod dataset;
-pub mod generate;
 mod error;
 mod fsutil;
+pub mod generate;
 mod grid;
 pub mod metrics;
 pub mod npy;

@@ -9,7 +9,8 @@
 //! uninterrupted one. Resuming a finished run with more iterations extends it.
 //!
 //! Files written in `out_dir`: `model.json` + `model.safetensors` (best weights, on completion),
-//! `checkpoint.bin`, `curve.csv` (iteration, train loss, validation mean error) and `curve.png`.
+//! `checkpoint.bin`, `curve.csv` (iteration, train loss, validation mean error), `curve.png` (loss) and
+//! `curve_error.png` (validation error).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -86,7 +86,8 @@ fn embedded_encoding_reproduces_linear_fields_and_total_force() {
         load: Load::PointForces { nodes: all, count: 3, magnitude: [0.1, 0.2] },
         input: Input::Force,
     };
-    let g = Generator::new(mesh.clone(), Material::new(Law::Linear, 5000.0, 0.45), SolverOptions::default(), config).unwrap();
+    let g = Generator::new(mesh.clone(), Material::new(Law::Linear, 5000.0, 0.45), SolverOptions::default(), config)
+        .unwrap();
     let lin = |p: &[f64; 3]| [0.01 + 0.2 * p[0] - 0.1 * p[1], 0.3 * p[2], -0.05 * p[0] + 0.4 * p[1]];
     let field: Vec<f64> = mesh.nodes.iter().flat_map(lin).collect();
     let enc = g.encode(&field, false).unwrap();
@@ -185,6 +186,9 @@ fn bad_configurations_are_rejected_with_a_reason() {
     let m = Material::new(Law::Svk, 300.0, 0.4);
     let err = Generator::new(mesh.clone(), m, SolverOptions::default(), base.clone()).err().unwrap().to_string();
     assert!(err.contains("cannot load 100 distinct nodes"), "{err}");
-    let err = Generator::new(mesh, m, SolverOptions::default(), DatasetConfig { fixed: vec![], ..base }).err().unwrap().to_string();
+    let err = Generator::new(mesh, m, SolverOptions::default(), DatasetConfig { fixed: vec![], ..base })
+        .err()
+        .unwrap()
+        .to_string();
     assert!(err.contains("fixed"), "{err}");
 }

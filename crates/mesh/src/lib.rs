@@ -19,13 +19,13 @@ pub mod topology;
 
 use std::collections::BTreeMap;
 
-pub use generate::{box_hex, box_tet};
-pub use select::NodeSelection;
 pub use bvh::SurfaceBvh;
 pub use embedding::{Embedding, Grid, Location, MeshLocator};
+pub use generate::{box_hex, box_tet};
 pub use immersed::{immersed_grid, immersed_surface, ImmersedGrid, ImmersedOptions};
 pub use phantom::{liver_phantom, PhantomSpec};
 pub use sampling::{sample_visible, sample_visible_boundary, SurfaceSample};
+pub use select::NodeSelection;
 pub use surface::{check_closed_manifold, SurfaceReport};
 pub use tetmesh::{
     mesh_surface, stuff, tet_quality, BoundaryFit, ImplicitDomain, SdfDomain, TetMeshOptions, TetQuality,

@@ -420,7 +420,9 @@ fn field_and_write_errors() {
     let twice = [Field::cell("a", 1, vec![0.0; mesh.cells.len()]), Field::cell("a", 1, vec![1.0; mesh.cells.len()])];
     assert!(message(write_vtu(dir.path().join("x.vtu"), &mesh, &twice)).contains("two fields"));
     assert!(fs::read_dir(dir.path()).unwrap().next().is_none(), "nothing written on error");
-    match write_vtu(dir.path().join("no/such/dir/x.vtu"), &mesh, &[]) {
+    // Missing directories are created; a parent that is a regular file is an I/O error naming the target.
+    fs::write(dir.path().join("plain"), b"").unwrap();
+    match write_vtu(dir.path().join("plain/x.vtu"), &mesh, &[]) {
         Err(MeshError::Io { path, .. }) => assert!(path.ends_with("x.vtu")),
         other => panic!("{other:?}"),
     }

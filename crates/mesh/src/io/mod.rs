@@ -206,13 +206,18 @@ fn read_bytes(path: &Path) -> Result<Vec<u8>, MeshError> {
 }
 
 /// Writes `path` atomically: `write` fills a temporary file in the same directory, which is then
-/// synced and renamed over `path`. On failure the temporary file is removed.
-fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<(), MeshError> {
+/// synced and renamed over `path`, so a reader sees the old file or the new one, never a part.
+/// Missing parent directories are created. On failure the temporary file is removed.
+pub fn write_file_atomic(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+) -> std::io::Result<()> {
     static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let io_error = |source| MeshError::Io { path: path.display().to_string(), source };
-    let name = path
-        .file_name()
-        .ok_or_else(|| io_error(std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file name")))?;
+    let name =
+        path.file_name().ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file name"))?;
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        fs::create_dir_all(dir)?;
+    }
     let tmp = path.with_file_name(format!(
         ".{}.{}.{}.tmp",
         name.to_string_lossy(),
@@ -228,10 +233,15 @@ fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> std::io
         drop(file);
         fs::rename(&tmp, path)
     })();
-    result.map_err(|e| {
+    if result.is_err() {
         let _ = fs::remove_file(&tmp);
-        io_error(e)
-    })
+    }
+    result
+}
+
+/// [`write_file_atomic`] with the error mapped to [`MeshError::Io`].
+fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<(), MeshError> {
+    write_file_atomic(path, write).map_err(|source| MeshError::Io { path: path.display().to_string(), source })
 }
 
 /// Displays an `f64` in its shortest form that parses back to the same value (`nan`, `inf` and

@@ -1,0 +1,294 @@
+//! A static finite-element problem as a filter [`Model`]: the uncertain parameters (Young's modulus, boundary
+//! spring stiffnesses) are set on the problem, time-dependent loads are applied for step k, and the static
+//! equilibrium is solved by Newton-Raphson warm-started from the sigma point's own previous displacement.
+//! The observation is the current position of tracked points (barycentric in the mesh).
+//!
+//! Every sigma point owns a [`StaticSolver`] (its slot, set by [`Model::assign_sigma_point`]), created on first
+//! use, so that its symbolic analysis and last numeric factorisation (the preconditioner of the next Newton
+//! systems) are reused from step to step, and so that the results do not depend on the order in which the sigma
+//! points run: parallel and sequential filters give the same numbers.
+
+use std::sync::{Mutex, PoisonError};
+
+use fem::{FemError, Problem, SolverOptions, StaticSolver};
+use mesh::Point;
+use nalgebra::DVector;
+use serde::{Deserialize, Serialize};
+
+use crate::observation::{tracked_positions, TrackedPoint};
+use crate::Model;
+
+/// Errors of the finite-element model adapter.
+#[derive(Debug, thiserror::Error)]
+pub enum FemModelError {
+    /// The solve failed (no convergence, inverted element, invalid parameter value, ...).
+    #[error(transparent)]
+    Fem(#[from] FemError),
+    /// Inconsistent model definition or use.
+    #[error("invalid FEM model: {0}")]
+    Invalid(String),
+}
+
+/// How the physical value θ_j of one filter parameter enters the problem.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FemParameter {
+    /// Young's modulus of the material (Pa) = θ_j.
+    Young,
+    /// Zero-length springs on `nodes`, each of stiffness `scale · θ_j` (N/m), added to the problem's own springs.
+    Springs {
+        /// The nodes tied to their rest position by this parameter.
+        nodes: Vec<usize>,
+        /// Stiffness (N/m) per unit of θ_j (> 0).
+        scale: f64,
+    },
+}
+
+/// Time profile of a [`LoadPattern`]: its amplitude at time step k, with τ = k / period.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum Profile {
+    /// a = ½(1 − cos 2πτ): from 0 up to 1 at half a period and back, repeated every `period` steps.
+    RaisedCosine {
+        /// Steps per cycle (> 0).
+        period: usize,
+    },
+    /// a = sin(2πτ + phase).
+    Sine {
+        /// Steps per cycle (> 0).
+        period: usize,
+        /// Phase (rad).
+        #[serde(default)]
+        phase: f64,
+    },
+}
+
+impl Profile {
+    /// Amplitude at time step `step`.
+    pub fn amplitude(&self, step: usize) -> f64 {
+        let two_pi = 2.0 * std::f64::consts::PI;
+        match *self {
+            Profile::RaisedCosine { period } => 0.5 * (1.0 - (two_pi * (step % period) as f64 / period as f64).cos()),
+            Profile::Sine { period, phase } => (two_pi * (step % period) as f64 / period as f64 + phase).sin(),
+        }
+    }
+
+    fn period(&self) -> usize {
+        match *self {
+            Profile::RaisedCosine { period } | Profile::Sine { period, .. } => period,
+        }
+    }
+}
+
+/// Loads scaled by a time profile: at step k, nodal forces `a(k) · f` are added to the problem's forces and
+/// displacements `a(k) · d` to the prescribed values of constrained nodes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadPattern {
+    /// The time profile a(k).
+    pub profile: Profile,
+    /// Nodal forces at amplitude 1 (N).
+    pub forces: Vec<(usize, Point)>,
+    /// Prescribed displacements at amplitude 1 (m); the nodes must be constrained in the problem.
+    pub displacements: Vec<(usize, Point)>,
+}
+
+/// State of one sigma point (or of a plain simulation): the last equilibrium.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FemState {
+    /// Displacement, 3 per node (m): the last solution and the warm start of the next solve.
+    pub u: Vec<f64>,
+    /// Newton iterations of the last solve.
+    pub newton_iterations: usize,
+    /// Index of the solver this state is solved with.
+    slot: usize,
+}
+
+/// A static FEM problem driven by the filter (see the module documentation).
+pub struct FemModel {
+    problem: Problem,
+    parameters: Vec<FemParameter>,
+    loads: Vec<LoadPattern>,
+    observed: Vec<TrackedPoint>,
+    options: SolverOptions,
+    solvers: Vec<Mutex<Option<StaticSolver>>>,
+}
+
+impl std::fmt::Debug for FemModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FemModel")
+            .field("nodes", &self.problem.mesh.num_nodes())
+            .field("parameters", &self.parameters)
+            .field("observed_points", &self.observed.len())
+            .finish()
+    }
+}
+
+impl FemModel {
+    /// A model over `problem` (its material, springs, forces and prescribed values are the base that the
+    /// parameters and loads modify at every step). One solver slot per sigma point: `parameters.len() + 1`.
+    pub fn new(
+        problem: Problem,
+        parameters: Vec<FemParameter>,
+        loads: Vec<LoadPattern>,
+        observed: Vec<TrackedPoint>,
+        options: SolverOptions,
+    ) -> Result<Self, FemModelError> {
+        problem.validate()?;
+        let n = problem.mesh.num_nodes();
+        let invalid = |m: String| Err(FemModelError::Invalid(m));
+        for (j, p) in parameters.iter().enumerate() {
+            if let FemParameter::Springs { nodes, scale } = p {
+                if nodes.is_empty() {
+                    return invalid(format!("spring parameter #{j} has no node"));
+                }
+                if let Some(&k) = nodes.iter().find(|&&k| k >= n) {
+                    return invalid(format!("spring parameter #{j} refers to node {k}, but the mesh has {n} nodes"));
+                }
+                if !(scale.is_finite() && *scale > 0.0) {
+                    return invalid(format!("spring parameter #{j}: scale must be finite and > 0, got {scale}"));
+                }
+            }
+        }
+        for (j, load) in loads.iter().enumerate() {
+            if load.profile.period() == 0 {
+                return invalid(format!("load #{j}: the period of its profile must be at least one step"));
+            }
+            for (k, v) in load.forces.iter().chain(&load.displacements) {
+                if *k >= n || v.iter().any(|c| !c.is_finite()) {
+                    return invalid(format!("load #{j}: node {k} (of {n}) with value {v:?} is not usable"));
+                }
+            }
+            if let Some((k, _)) = load.displacements.iter().find(|(k, _)| !problem.dirichlet.contains_key(k)) {
+                return invalid(format!("load #{j} prescribes a displacement on node {k}, which is not constrained"));
+            }
+        }
+        if observed.is_empty() {
+            return invalid("no observed point".into());
+        }
+        for t in &observed {
+            t.validate(n)?;
+        }
+        let solvers = (0..=parameters.len()).map(|_| Mutex::new(None)).collect();
+        Ok(FemModel { problem, parameters, loads, observed, options, solvers })
+    }
+
+    /// The rest state (zero displacement), solved with the first solver slot.
+    pub fn initial_state(&self) -> FemState {
+        FemState { u: vec![0.0; self.problem.num_dofs()], newton_iterations: 0, slot: 0 }
+    }
+
+    /// The base problem.
+    pub fn problem(&self) -> &Problem {
+        &self.problem
+    }
+
+    /// The uncertain parameters, in filter order.
+    pub fn parameters(&self) -> &[FemParameter] {
+        &self.parameters
+    }
+
+    /// The observed points.
+    pub fn observed_points(&self) -> &[TrackedPoint] {
+        &self.observed
+    }
+
+    /// The base problem with the physical parameter values `theta` and the loads of time step `step` applied.
+    pub fn configure(&self, problem: &mut Problem, theta: &[f64], step: usize) -> Result<(), FemModelError> {
+        if theta.len() != self.parameters.len() {
+            return Err(FemModelError::Invalid(format!(
+                "{} parameter values given, the model has {}",
+                theta.len(),
+                self.parameters.len()
+            )));
+        }
+        problem.material = self.problem.material;
+        problem.springs.clone_from(&self.problem.springs);
+        problem.f_ext.clone_from(&self.problem.f_ext);
+        problem.dirichlet.clone_from(&self.problem.dirichlet);
+        for (p, &value) in self.parameters.iter().zip(theta) {
+            match p {
+                FemParameter::Young => problem.material.young = value,
+                FemParameter::Springs { nodes, scale } => {
+                    for &k in nodes {
+                        problem.springs[k] += scale * value;
+                    }
+                }
+            }
+        }
+        for load in &self.loads {
+            let a = load.profile.amplitude(step);
+            for (k, f) in &load.forces {
+                for (target, f) in problem.f_ext[3 * k..3 * k + 3].iter_mut().zip(f) {
+                    *target += a * f;
+                }
+            }
+            for (k, v) in &load.displacements {
+                if let Some(x) = problem.dirichlet.get_mut(k) {
+                    for (x, v) in x.iter_mut().zip(v) {
+                        *x += a * v;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Runs the model alone with fixed parameters `theta` over time steps `1..=steps` (a new solver, each step
+    /// warm-started from the previous one) and hands every state to `visit` with its step.
+    pub fn simulate(
+        &self,
+        theta: &[f64],
+        steps: usize,
+        mut visit: impl FnMut(usize, &FemState),
+    ) -> Result<(), FemModelError> {
+        let mut solver = StaticSolver::new(self.problem.clone())?;
+        let mut state = self.initial_state();
+        for k in 1..=steps {
+            self.solve_step(&mut solver, &mut state, theta, k)?;
+            visit(k, &state);
+        }
+        Ok(())
+    }
+
+    fn solve_step(
+        &self,
+        solver: &mut StaticSolver,
+        state: &mut FemState,
+        theta: &[f64],
+        step: usize,
+    ) -> Result<(), FemModelError> {
+        self.configure(solver.problem_mut(), theta, step)?;
+        let solution = solver.solve_from(Some(&state.u), &self.options)?;
+        state.u = solution.u;
+        state.newton_iterations = solution.iterations;
+        Ok(())
+    }
+}
+
+impl Model for FemModel {
+    type State = FemState;
+    type Error = FemModelError;
+
+    fn step(&self, state: &mut FemState, theta: &[f64], step: usize) -> Result<(), FemModelError> {
+        let slot = self.solvers.get(state.slot).ok_or_else(|| {
+            FemModelError::Invalid(format!(
+                "state of solver slot {} (the model has {})",
+                state.slot,
+                self.solvers.len()
+            ))
+        })?;
+        let mut guard = slot.lock().unwrap_or_else(PoisonError::into_inner);
+        let solver = match &mut *guard {
+            Some(solver) => solver,
+            empty => empty.insert(StaticSolver::new(self.problem.clone())?),
+        };
+        self.solve_step(solver, state, theta, step)
+    }
+
+    fn observe(&self, state: &FemState) -> DVector<f64> {
+        tracked_positions(&self.problem.mesh.nodes, &self.observed, &state.u)
+    }
+
+    fn assign_sigma_point(&self, state: &mut FemState, sigma_point: usize) {
+        state.slot = sigma_point;
+    }
+}

@@ -1,0 +1,259 @@
+//! PNG line plots for augsim reports: one chart with several named series, optional shaded bands (e.g. μ ± σ),
+//! linear or logarithmic y axis. Text uses the embedded DejaVu Sans font (no system font lookup), and files are
+//! written atomically (temporary sibling, then rename).
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Once;
+
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::register_font;
+
+/// Width and height of the PNG, pixels.
+const SIZE: (u32, u32) = (1000, 600);
+
+/// Colours of successive series (repeated beyond ten).
+const PALETTE: [RGBColor; 10] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(23, 190, 207),
+];
+
+/// Errors of plotting.
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    /// Nothing drawable: no series, or no finite (positive, on a log axis) value.
+    #[error("cannot plot {path}: {message}")]
+    NoData {
+        /// The file that was to be written.
+        path: PathBuf,
+        /// What is missing.
+        message: String,
+    },
+    /// The drawing backend failed.
+    #[error("cannot draw {path}: {message}")]
+    Draw {
+        /// The file being written.
+        path: PathBuf,
+        /// The backend's message.
+        message: String,
+    },
+    /// Renaming the finished temporary file onto the target failed.
+    #[error("cannot write {path}: {source}")]
+    Io {
+        /// The target file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+}
+
+/// Titles and axes of a chart.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PlotSpec {
+    /// Caption above the chart.
+    pub title: String,
+    /// Label of the x axis.
+    pub x_label: String,
+    /// Label of the y axis.
+    pub y_label: String,
+    /// Logarithmic y axis (non-positive values are left out); drawn linear when the values span less than a
+    /// decade, where a log axis would carry no tick label.
+    pub log_y: bool,
+}
+
+/// One line of a chart.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Series {
+    /// Legend entry; an empty name leaves the series out of the legend.
+    pub name: String,
+    /// (x, y) points in order; non-finite points are skipped.
+    pub points: Vec<(f64, f64)>,
+    /// Optional shaded band (x, low, high) drawn under the line in a light shade of its colour.
+    pub band: Option<Vec<(f64, f64, f64)>>,
+}
+
+static FONT: Once = Once::new();
+
+/// Registers DejaVu Sans (embedded) as plotters' "sans-serif" font.
+fn register_fonts() {
+    FONT.call_once(|| {
+        // The embedded font is a valid TrueType file; registration cannot fail on it.
+        let _ = register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
+    });
+}
+
+/// Draws `series` on one chart into the PNG file `path` (1000 × 600 pixels), written atomically.
+pub fn line_plot(path: &Path, spec: &PlotSpec, series: &[Series]) -> Result<(), PlotError> {
+    let no_data = |message: &str| PlotError::NoData { path: path.to_path_buf(), message: message.into() };
+    let usable = |y: f64| y.is_finite() && (!spec.log_y || y > 0.0);
+    let mut xs = Vec::new();
+    let mut ys = Vec::new();
+    for s in series {
+        for &(x, y) in s.points.iter().filter(|(x, y)| x.is_finite() && usable(*y)) {
+            xs.push(x);
+            ys.push(y);
+        }
+        for &(x, lo, hi) in s.band.iter().flatten().filter(|(x, _, _)| x.is_finite()) {
+            xs.push(x);
+            ys.extend([lo, hi].into_iter().filter(|v| usable(*v)));
+        }
+    }
+    let y_range = padded_range(&ys, spec.log_y).ok_or_else(|| {
+        no_data(if spec.log_y { "no positive finite value for the log axis" } else { "no finite value" })
+    })?;
+    let x_range = padded_range(&xs, false).ok_or_else(|| no_data("no finite point"))?;
+
+    register_fonts();
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    static COUNTER: AtomicUsize = AtomicUsize::new(0);
+    // The temporary name keeps the .png extension: the encoder picks the format from it.
+    let tmp = path.with_file_name(format!(
+        ".{name}.tmp-{}-{}.png",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let drawn = {
+        let root = BitMapBackend::new(&tmp, SIZE).into_drawing_area();
+        if spec.log_y && y_range.end >= 10.0 * y_range.start {
+            draw(&root, spec, series, x_range, y_range.clone().log_scale(), y_range)
+        } else {
+            draw(&root, spec, series, x_range, y_range.clone(), y_range)
+        }
+        .and_then(|()| root.present().map_err(|e| e.to_string()))
+    };
+    if let Err(message) = drawn {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(PlotError::Draw { path: path.to_path_buf(), message });
+    }
+    std::fs::rename(&tmp, path).map_err(|source| {
+        let _ = std::fs::remove_file(&tmp);
+        PlotError::Io { path: path.to_path_buf(), source }
+    })
+}
+
+/// Range of the values with a 5 % margin (multiplicative on a log axis); a single value gets a unit-size range.
+fn padded_range(values: &[f64], log: bool) -> Option<Range<f64>> {
+    let (lo, hi) = values
+        .iter()
+        .filter(|v| v.is_finite() && (!log || **v > 0.0))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    if lo > hi {
+        return None;
+    }
+    Some(if log {
+        let pad = if hi > lo { (hi / lo).powf(0.05) } else { 2.0 };
+        lo / pad..hi * pad
+    } else {
+        let pad = if hi > lo { 0.05 * (hi - lo) } else { 0.5 * lo.abs().max(1e-12) };
+        lo - pad..hi + pad
+    })
+}
+
+fn draw<Y>(
+    root: &DrawingArea<BitMapBackend, Shift>,
+    spec: &PlotSpec,
+    series: &[Series],
+    x_range: Range<f64>,
+    y_coord: Y,
+    y_range: Range<f64>,
+) -> Result<(), String>
+where
+    Y: AsRangedCoord<Value = f64>,
+    Y::CoordDescType: ValueFormatter<f64>,
+{
+    let err = |e: &dyn std::fmt::Display| e.to_string();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let mut chart = ChartBuilder::on(root)
+        .caption(&spec.title, ("sans-serif", 24))
+        .margin(20)
+        .x_label_area_size(50)
+        .y_label_area_size(90)
+        .build_cartesian_2d(x_range, y_coord)
+        .map_err(|e| err(&e))?;
+    let y_span = (y_range.end - y_range.start).abs().max(y_range.end.abs());
+    chart
+        .configure_mesh()
+        .x_desc(&spec.x_label)
+        .y_desc(&spec.y_label)
+        .light_line_style(RGBColor(242, 242, 242))
+        .bold_line_style(RGBColor(205, 205, 205))
+        .label_style(("sans-serif", 15))
+        .axis_desc_style(("sans-serif", 17))
+        .x_label_formatter(&|v| tick_label(*v, 0.0))
+        .y_label_formatter(&|v| tick_label(*v, y_span))
+        .draw()
+        .map_err(|e| err(&e))?;
+    let clamp = |y: f64| y.clamp(y_range.start, y_range.end);
+    for (i, s) in series.iter().enumerate() {
+        let color = PALETTE[i % PALETTE.len()];
+        if let Some(band) = &s.band {
+            let ok: Vec<&(f64, f64, f64)> =
+                band.iter().filter(|b| b.0.is_finite() && b.1.is_finite() && b.2.is_finite()).collect();
+            if ok.len() >= 2 {
+                let outline: Vec<(f64, f64)> =
+                    ok.iter().map(|b| (b.0, clamp(b.2))).chain(ok.iter().rev().map(|b| (b.0, clamp(b.1)))).collect();
+                chart
+                    .draw_series(std::iter::once(Polygon::new(outline, color.mix(0.2).filled())))
+                    .map_err(|e| err(&e))?;
+            }
+        }
+        let points: Vec<(f64, f64)> = s
+            .points
+            .iter()
+            .copied()
+            .filter(|(x, y)| x.is_finite() && y.is_finite() && (!spec.log_y || *y > 0.0))
+            .collect();
+        let line = chart.draw_series(LineSeries::new(points, color.stroke_width(2))).map_err(|e| err(&e))?;
+        if !s.name.is_empty() {
+            line.label(&s.name)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3)));
+        }
+    }
+    if series.iter().any(|s| !s.name.is_empty()) {
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 15))
+            .draw()
+            .map_err(|e| err(&e))?;
+    }
+    Ok(())
+}
+
+/// Tick text: plain decimals for moderate magnitudes, scientific notation with a trimmed mantissa otherwise
+/// (`span` is the axis extent, so that 0 on an axis of tiny values reads "0").
+fn tick_label(v: f64, span: f64) -> String {
+    let a = v.abs();
+    if a == 0.0 || a < 1e-9 * span {
+        "0".into()
+    } else if (0.1..1e5).contains(&a) {
+        let s = format!("{v:.3}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        let s = format!("{v:.2e}");
+        match s.split_once('e') {
+            Some((mantissa, exponent)) => {
+                let mantissa = if mantissa.contains('.') {
+                    mantissa.trim_end_matches('0').trim_end_matches('.')
+                } else {
+                    mantissa
+                };
+                format!("{mantissa}e{exponent}")
+            }
+            None => s,
+        }
+    }
+}

@@ -1,0 +1,72 @@
+//! Line plots: PNG files are written (valid signature and size), atomically, and bad input is refused.
+
+use augsim_plot::{line_plot, PlotError, PlotSpec, Series};
+
+const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
+
+fn png_size(bytes: &[u8]) -> (u32, u32) {
+    assert_eq!(&bytes[..8], &PNG_SIGNATURE);
+    assert_eq!(&bytes[12..16], b"IHDR");
+    let be = |i: usize| u32::from_be_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+    (be(16), be(20))
+}
+
+fn estimate_series() -> Vec<Series> {
+    let mu: Vec<(f64, f64)> = (0..200).map(|k| (k as f64, 5000.0 - 4000.0 * (-(k as f64) / 30.0).exp())).collect();
+    let band = mu.iter().map(|&(x, y)| (x, y - 200.0 / (1.0 + x), y + 200.0 / (1.0 + x))).collect();
+    vec![
+        Series { name: "μ ± σ".into(), points: mu, band: Some(band) },
+        Series { name: "truth".into(), points: vec![(0.0, 5000.0), (199.0, 5000.0)], band: None },
+        Series { name: String::new(), points: vec![(0.0, 1000.0), (f64::NAN, 2.0), (199.0, 1000.0)], band: None },
+    ]
+}
+
+#[test]
+fn linear_and_log_plots_are_written_as_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = PlotSpec {
+        title: "Young's modulus".into(),
+        x_label: "iteration".into(),
+        y_label: "E (Pa)".into(),
+        log_y: false,
+    };
+    let path = dir.path().join("young.png");
+    line_plot(&path, &spec, &estimate_series()).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    assert_eq!(png_size(&bytes), (1000, 600));
+    // Overwriting an existing plot works and leaves no temporary file behind. A log axis over four decades,
+    // with a zero left out; a narrow positive range on a log axis is drawn too.
+    let log = PlotSpec { log_y: true, ..spec };
+    let decay: Vec<(f64, f64)> = (0..100).map(|k| (k as f64, 10f64.powf(-(k as f64) / 25.0))).collect();
+    let series = [
+        Series { name: "innovation".into(), points: decay, band: None },
+        Series { name: "with a zero".into(), points: vec![(0.0, 0.0), (10.0, 0.3)], band: None },
+    ];
+    line_plot(&path, &log, &series).unwrap();
+    line_plot(&dir.path().join("narrow.png"), &log, &estimate_series()).unwrap();
+    std::fs::remove_file(dir.path().join("narrow.png")).unwrap();
+    assert_eq!(png_size(&std::fs::read(&path).unwrap()), (1000, 600));
+    let names: Vec<String> =
+        std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert_eq!(names, ["young.png"]);
+    // The two charts differ (the axis really changed).
+    assert_ne!(bytes, std::fs::read(&path).unwrap());
+}
+
+#[test]
+fn unusable_input_is_refused_with_the_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("empty.png");
+    let spec = PlotSpec::default();
+    let err = line_plot(&path, &spec, &[]).unwrap_err();
+    assert!(matches!(err, PlotError::NoData { .. }) && err.to_string().contains("empty.png"), "{err}");
+    let only_negative = [Series { name: "e".into(), points: vec![(0.0, -1.0), (1.0, 0.0)], band: None }];
+    let log = PlotSpec { log_y: true, ..PlotSpec::default() };
+    assert!(line_plot(&path, &log, &only_negative).unwrap_err().to_string().contains("log axis"));
+    assert!(!path.exists());
+    // A missing directory is reported, and nothing is left behind.
+    let missing = dir.path().join("no_such_dir").join("p.png");
+    let err = line_plot(&missing, &spec, &estimate_series()).unwrap_err();
+    assert!(err.to_string().contains("no_such_dir"), "{err}");
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
