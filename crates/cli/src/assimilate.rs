@@ -26,6 +26,8 @@ use nalgebra::DVector;
 use plot::{line_plot, PlotSpec, Series};
 use serde::Deserialize;
 
+use crate::scenario::{Fixed, MeshSource};
+
 /// An assimilation scenario file.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -38,12 +40,12 @@ pub struct AssimilationScenario {
     /// Filter iterations = time steps (one observation each).
     pub iterations: usize,
     /// The organ mesh.
-    pub mesh: MeshSpec,
+    pub mesh: MeshSource,
     /// Material; `young` is the true value of the reference run (and the model's value when not estimated).
     pub material: Material,
     /// Nodes with zero displacement.
     #[serde(default)]
-    pub fixed: Vec<FixedSpec>,
+    pub fixed: Vec<Fixed>,
     /// Known forces with a time profile.
     #[serde(default)]
     pub force: Vec<ForceSpec>,
@@ -67,40 +69,6 @@ pub struct AssimilationScenario {
     /// Outputs.
     #[serde(default)]
     pub output: OutputSpec,
-}
-
-/// Where the mesh comes from.
-#[derive(Debug, Deserialize)]
-#[serde(rename_all = "snake_case", deny_unknown_fields)]
-pub enum MeshSpec {
-    /// The procedural liver phantom with about `tets` tetrahedra and its named regions.
-    Phantom {
-        /// Target number of tetrahedra.
-        tets: usize,
-    },
-    /// A tetrahedral mesh file (path relative to the scenario file).
-    File {
-        /// Path of the file.
-        path: PathBuf,
-        /// Multiply coordinates by this factor.
-        #[serde(default = "one")]
-        scale: f64,
-        /// Move the bounding-box centre to the origin before scaling.
-        #[serde(default)]
-        centre: bool,
-    },
-}
-
-fn one() -> f64 {
-    1.0
-}
-
-/// Fixed nodes.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct FixedSpec {
-    /// Which nodes.
-    pub select: NodeSelection,
 }
 
 /// A total force shared equally by the selected nodes, times a profile.
@@ -282,7 +250,7 @@ pub fn run(path: &Path, overrides: Overrides) -> Result<()> {
     let out_dir = overrides.output.or(sc.output.dir.clone()).unwrap_or_else(|| PathBuf::from("out").join(&sc.name));
     std::fs::create_dir_all(&out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
 
-    let mesh = build_mesh(&sc.mesh, &dir).context("building the mesh")?;
+    let mesh = crate::scenario::build_mesh(&sc.mesh, &dir).context("building the mesh")?;
     println!(
         "scenario     {}{}",
         sc.name,
@@ -620,19 +588,6 @@ fn build_problem(sc: &AssimilationScenario, mesh: Mesh) -> Result<(Problem, Vec<
     tool_nodes.sort_unstable();
     tool_nodes.dedup();
     Ok((problem, loads, tool_nodes))
-}
-
-fn build_mesh(spec: &MeshSpec, dir: &Path) -> Result<Mesh> {
-    Ok(match spec {
-        MeshSpec::Phantom { tets } => mesh::phantom::liver_phantom(*tets)?,
-        MeshSpec::File { path, scale, centre } => {
-            let mut m = mesh::io::read_mesh(dir.join(path))?;
-            let (lo, hi) = m.bounds();
-            let c = if *centre { std::array::from_fn(|d| 0.5 * (lo[d] + hi[d])) } else { [0.0; 3] };
-            m.transform(c, *scale);
-            m
-        }
-    })
 }
 
 /// The filter's parameters, in order: Young's modulus (if estimated), then one spring per node of Σ.
