@@ -34,6 +34,25 @@ fn liver_t4(law: Law) -> Result<Case> {
     Ok(Case { name: format!("liver {} T4, {law:?}", p.mesh.cells.len()), problem: p })
 }
 
+/// Median time (ms) and mean Newton iterations of `runs` frames whose load
+/// factor moves by 2 % per frame between 0.9 and 1.1, each warm-started from the last.
+fn frames(solver: &mut StaticSolver, opts: &SolverOptions, u_full: &[f64], runs: usize) -> Result<(f64, f64)> {
+    let base = solver.problem().f_ext.clone();
+    let mut u = u_full.to_vec();
+    let (mut times, mut iterations) = (Vec::new(), 0);
+    for k in 0..runs {
+        let phase = (k % 20) as f64;
+        let factor = 1.0 + 0.02 * if phase < 10.0 { phase - 5.0 } else { 15.0 - phase };
+        solver.problem_mut().f_ext.iter_mut().zip(&base).for_each(|(f, b)| *f = factor * b);
+        let s = solver.solve_from(Some(&u), opts)?;
+        times.push(ms(s.timings.total));
+        iterations += s.iterations;
+        u = s.u;
+    }
+    solver.problem_mut().f_ext = base;
+    Ok((median(times), iterations as f64 / runs as f64))
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
     v[v.len() / 2]
@@ -45,8 +64,23 @@ pub fn run(runs: usize) -> Result<()> {
     println!("Static solves from rest. 'first': a new solver's first solve (symbolic analysis excluded);");
     println!("'median': repeated solves reusing the last factorisation as a CG preconditioner.");
     println!(
-        "{:<30} {:>5} {:>5} {:>4} {:>4} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}",
-        "case", "dofs", "iter", "fact", "cg", "first ms", "median ms", "assem ms", "factor ms", "solve ms", "max|u| m"
+        "'frame': a frame of a sequence whose load varies by 2 % per frame, warm-started from the previous frame."
+    );
+    println!(
+        "{:<30} {:>5} {:>5} {:>4} {:>4} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7}",
+        "case",
+        "dofs",
+        "iter",
+        "fact",
+        "cg",
+        "first ms",
+        "median ms",
+        "assem ms",
+        "factor ms",
+        "solve ms",
+        "max|u| m",
+        "frame ms",
+        "fr.iter"
     );
     for case in [beam(Law::Svk)?, beam(Law::Corotational)?, liver_t4(Law::Svk)?, liver_t4(Law::Corotational)?] {
         let dofs = case.problem.num_dofs();
@@ -58,9 +92,10 @@ pub fn run(runs: usize) -> Result<()> {
             rows.push(solver.solve(&opts)?);
         }
         let med = |f: &dyn Fn(&fem::Solution) -> f64| median(rows.iter().map(f).collect());
-        let last = rows.last().expect("at least one run");
+        let last = rows.last().expect("at least one run").clone();
+        let (frame_ms, frame_iterations) = frames(&mut solver, &opts, &last.u, runs)?;
         println!(
-            "{:<30} {:>5} {:>5} {:>4} {:>4} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.4}",
+            "{:<30} {:>5} {:>5} {:>4} {:>4} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.4} {:>9.2} {:>7.1}",
             case.name,
             dofs,
             last.iterations,
@@ -71,7 +106,9 @@ pub fn run(runs: usize) -> Result<()> {
             med(&|s| ms(s.timings.assembly)),
             med(&|s| ms(s.timings.factorization)),
             med(&|s| ms(s.timings.solve)),
-            fem::post::max_displacement(&last.u)
+            fem::post::max_displacement(&last.u),
+            frame_ms,
+            frame_iterations
         );
     }
     Ok(())
