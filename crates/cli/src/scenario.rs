@@ -240,3 +240,40 @@ pub fn build_mesh(source: &MeshSource, dir: &Path) -> Result<Mesh> {
         }
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::assimilate::AssimilationScenario;
+    use crate::learn_cmd::DatasetScenario;
+
+    /// Every shipped scenario parses as exactly one kind of scenario, and its mesh source is valid.
+    #[test]
+    fn shipped_scenarios_parse() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios");
+        let mut count = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            let text = std::fs::read_to_string(&path).unwrap();
+            let kinds = [
+                toml::from_str::<Scenario>(&text).is_ok(),
+                toml::from_str::<DatasetScenario>(&text).is_ok(),
+                toml::from_str::<AssimilationScenario>(&text).is_ok(),
+            ];
+            assert_eq!(kinds.iter().filter(|&&k| k).count(), 1, "{}: parses as {kinds:?}", path.display());
+            count += 1;
+        }
+        assert_eq!(count, 11, "scenario files");
+        let (beam, dir) = Scenario::load(&dir.join("beam.toml")).unwrap();
+        let problem = beam.build_problem(beam.build_mesh(&dir).unwrap()).unwrap();
+        assert_eq!(problem.mesh.cells.len(), 500);
+        assert!(!problem.dirichlet.is_empty() && problem.f_ext.iter().any(|&f| f != 0.0));
+    }
+
+    #[test]
+    fn unknown_keys_are_named() {
+        let text = "name = \"x\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\ncells = [1, 1, 1]\nelement = \"hex\"\n[material]\nlaw = \"svk\"\nyoung = 1.0\npoisson = 0.3\nstiffnes = 3\n";
+        let err = toml::from_str::<Scenario>(text).unwrap_err().to_string();
+        assert!(err.contains("stiffnes"), "{err}");
+    }
+}
