@@ -121,6 +121,13 @@ enum Command {
 }
 
 fn main() {
+    // Output piped into a program that stops reading (e.g. `| head`) ends the process quietly, as
+    // for other command-line tools, instead of a panic on the failed write.
+    #[cfg(unix)]
+    // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     let result: Result<()> = match cli.command {
         Command::Solve { scenario, output } => solve::run(&scenario, output.as_deref()),
