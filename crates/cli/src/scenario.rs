@@ -174,11 +174,6 @@ impl Scenario {
         Ok((scenario, dir))
     }
 
-    /// Builds the mesh (file paths relative to `dir`).
-    pub fn build_mesh(&self, dir: &Path) -> Result<Mesh> {
-        build_mesh(&self.mesh, dir)
-    }
-
     /// Builds the boundary-value problem on `mesh`.
     pub fn build_problem(&self, mesh: Mesh) -> Result<Problem> {
         self.material.validate().map_err(anyhow::Error::msg).context("material")?;
@@ -265,7 +260,7 @@ mod tests {
         }
         assert_eq!(count, 11, "scenario files");
         let (beam, dir) = Scenario::load(&dir.join("beam.toml")).unwrap();
-        let problem = beam.build_problem(beam.build_mesh(&dir).unwrap()).unwrap();
+        let problem = beam.build_problem(build_mesh(&beam.mesh, &dir).unwrap()).unwrap();
         assert_eq!(problem.mesh.cells.len(), 500);
         assert!(!problem.dirichlet.is_empty() && problem.f_ext.iter().any(|&f| f != 0.0));
     }

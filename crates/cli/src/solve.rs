@@ -11,7 +11,7 @@ use crate::scenario::Scenario;
 /// Runs the scenario and writes the result; prints a summary.
 pub fn run(path: &Path, output: Option<&Path>) -> Result<()> {
     let (scenario, dir) = Scenario::load(path)?;
-    let mesh = scenario.build_mesh(&dir).context("building the mesh")?;
+    let mesh = crate::scenario::build_mesh(&scenario.mesh, &dir).context("building the mesh")?;
     let problem = scenario.build_problem(mesh)?;
     println!(
         "scenario   {}{}",

@@ -114,6 +114,7 @@ pub struct Generator {
     grid: GridShape,
     origin: [f64; 3],
     spacing: [f64; 3],
+    mask: Vec<u8>,
 }
 
 /// How nodal fields reach the grid.
@@ -142,6 +143,7 @@ impl Generator {
             return Err(invalid("at least one fixed node set is needed (a free organ has rigid-body modes)"));
         }
         let select = |s: &NodeSelection| s.select(&mesh).map_err(|e| invalid(format!("selection {s:?}: {e}")));
+        // Selections are sorted and free of repeats: membership tests below use binary search.
         let fixed_sets = config.fixed.iter().map(select).collect::<Result<Vec<_>>>()?;
         let surface = mesh::boundary_surface(&mesh);
         let normals = surface.vertex_normals();
@@ -154,7 +156,11 @@ impl Generator {
                 }
                 let c = match centres {
                     Some(s) => select(s)?,
-                    None => boundary.iter().copied().filter(|n| !fixed_sets.iter().any(|f| f.contains(n))).collect(),
+                    None => boundary
+                        .iter()
+                        .copied()
+                        .filter(|n| fixed_sets.iter().all(|f| f.binary_search(n).is_err()))
+                        .collect(),
                 };
                 (c, boundary.clone())
             }
@@ -186,6 +192,13 @@ impl Generator {
             None => lattice_encoding(&mesh)?,
             Some(dims) => embedded_encoding(&mesh, dims)?,
         };
+        let mut mask = vec![0u8; grid.nodes()];
+        match &encoding {
+            Encoding::Lattice(node) => node.iter().for_each(|&g| mask[g] = 1),
+            Encoding::Embedded { embedding, .. } => {
+                embedding.mask().iter().enumerate().filter(|(_, &b)| b).for_each(|(g, _)| mask[g] = 1)
+            }
+        }
         Ok(Generator {
             mesh,
             material,
@@ -200,6 +213,7 @@ impl Generator {
             grid,
             origin,
             spacing,
+            mask,
         })
     }
 
@@ -218,16 +232,9 @@ impl Generator {
         &self.config
     }
 
-    /// The mask of grid nodes inside the organ.
-    pub fn mask(&self) -> Vec<u8> {
-        let mut m = vec![0u8; self.grid.nodes()];
-        match &self.encoding {
-            Encoding::Lattice(node) => node.iter().for_each(|&g| m[g] = 1),
-            Encoding::Embedded { embedding, .. } => {
-                embedding.mask().iter().enumerate().filter(|(_, &b)| b).for_each(|(g, _)| m[g] = 1)
-            }
-        }
-        m
+    /// The mask of grid nodes inside the organ (1 inside, 0 outside).
+    pub fn mask(&self) -> &[u8] {
+        &self.mask
     }
 
     /// Encodes a nodal vector field (3 per mesh node) on the grid.
@@ -287,7 +294,7 @@ impl Generator {
                     .filter(|&n| {
                         mesh::dot(mesh::sub(self.mesh.nodes[n], c), mesh::sub(self.mesh.nodes[n], c)) <= radius * radius
                     })
-                    .filter(|n| !self.fixed_sets[fixed].contains(n))
+                    .filter(|n| self.fixed_sets[fixed].binary_search(n).is_err())
                     .collect();
                 let mag = rng.random_range(magnitude[0]..=magnitude[1]);
                 let normal = self.normals[centre];
@@ -342,7 +349,7 @@ impl Generator {
         }
         .map_err(|e| e.to_string())?;
         let target = self.encode(&solution.u, false).map_err(|e| e.to_string())?;
-        Ok(Sample { index, input, target, mask: self.mask() })
+        Ok(Sample { index, input, target, mask: self.mask.clone() })
     }
 
     /// Displacements of observed nodes only, on the grid: exact on a lattice; for an
