@@ -159,6 +159,9 @@ pub struct TrainArgs {
     /// Adam learning rate.
     #[arg(long, default_value_t = 1e-3)]
     pub lr: f64,
+    /// Let the learning rate fall to this value along a half cosine over the iterations.
+    #[arg(long)]
+    pub final_lr: Option<f64>,
     /// Channels of the first U-Net level.
     #[arg(long, default_value_t = 16)]
     pub channels: usize,
@@ -210,10 +213,10 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         iterations: args.iterations,
         batch_size: args.batch,
         learning_rate: args.lr,
+        final_learning_rate: args.final_lr,
         seed: args.seed,
         validate_every: args.validate_every,
         checkpoint_every: args.validate_every,
-        eval_batch_size: args.batch,
         train_corruption: args.split.corruption(),
         val_corruption: args.split.corruption(),
     };
@@ -241,7 +244,7 @@ pub fn eval(model_path: &Path, dataset_dir: &Path, split: &SplitArgs, out: &Path
     if test.is_empty() {
         bail!("the test split is empty");
     }
-    let report = learn::evaluate(&model, &test, &split.corruption(), 0, 4)?;
+    let report = learn::evaluate(&model, &test, &split.corruption(), 0)?;
     let s = &report.stats;
     println!("samples    {}", test.len());
     println!("mean e     {:.4e} m ({:.3} mm)", s.mean, s.mean * 1e3);
@@ -324,9 +327,10 @@ pub fn predict(model_path: &Path, input: &Path, output: &Path, runs: usize) -> R
         bail!("{}: shape {:?}, but the model expects [3, {}, {}, {}]", input.display(), array.shape, g.nx, g.ny, g.nz);
     }
     let data = array.into_f32();
-    let prediction = model.predict(&data)?;
+    let predictor = learn::Predictor::new(&model)?;
+    let prediction = predictor.predict(&data)?;
     learn::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
-    let t = learn::time_prediction(&model, &data, 3, runs.max(1))?;
+    let t = learn::time_prediction(&predictor, &data, 3, runs.max(1))?;
     println!(
         "prediction {} runs: median {:.2} ms, mean {:.2} ± {:.2} ms, min {:.2}, max {:.2}",
         t.runs,

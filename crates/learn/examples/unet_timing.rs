@@ -1,13 +1,14 @@
-//! Times the default U-Net (16 first-layer channels, depth 3) on the liver grid 21x23x21
-//! (padded to 24^3): inference forward pass and full training step (forward, backward, Adam)
-//! for a batch, and a single-sample prediction.
+//! Times a U-Net on the liver grid 21x23x21 (padded to a multiple of 2^depth): inference forward
+//! pass and full training step (forward, backward, Adam) for a batch, and a single-sample
+//! prediction with burn and with the repacked [`InferenceNet`](augsim_learn::InferenceNet).
 //!
-//! `cargo run --release -p augsim-learn --example unet_timing -- [batch] [runs]`
+//! `cargo run --release -p augsim-learn --example unet_timing -- [batch] [runs] [base_channels] [depth]`
+//! (defaults: 4, 5 and the default configuration, 16 channels, depth 3).
 
 use std::time::Instant;
 
 use augsim_learn::metrics::masked_mse;
-use augsim_learn::{inference_device, training_device, Timing, UNet, UNetConfig};
+use augsim_learn::{inference_device, training_device, GridShape, Timing, UNet, UNetConfig};
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Distribution, Tensor};
@@ -40,9 +41,14 @@ fn main() {
     let args: Vec<usize> = std::env::args().skip(1).filter_map(|a| a.parse().ok()).collect();
     let batch = args.first().copied().unwrap_or(4);
     let runs = args.get(1).copied().unwrap_or(5);
-    let config = UNetConfig::default();
+    let default = UNetConfig::default();
+    let config = UNetConfig {
+        base_channels: args.get(2).copied().unwrap_or(default.base_channels),
+        depth: args.get(3).copied().unwrap_or(default.depth),
+        ..default
+    };
     let shape = [batch, 3, 21, 23, 21];
-    println!("U-Net {config:?}, batch {batch}, grid 21x23x21 (padded to 24^3)");
+    println!("U-Net {config:?}, batch {batch}, grid 21x23x21");
 
     let device = inference_device();
     let net = UNet::new(&config, &device, 0).expect("valid config");
@@ -58,6 +64,15 @@ fn main() {
         "forward, batch 1",
         &time(runs, || {
             let _ = net.forward(x1.clone()).into_data();
+        }),
+    );
+    let fast = net.to_inference().expect("repacked network");
+    let input = x1.into_data().try_to_vec::<f32>().expect("f32 input");
+    let grid = GridShape::new(21, 23, 21);
+    report(
+        "InferenceNet, batch 1",
+        &time(runs, || {
+            std::hint::black_box(fast.forward(&input, grid).expect("forward"));
         }),
     );
 

@@ -21,6 +21,7 @@
 //! - [`corrupt`]: sparse visible inputs and Gaussian noise.
 //! - [`metrics`]: masked MSE loss and mean Euclidean errors.
 //! - [`train`](mod@train): the training loop (Adam, checkpoints, resume, fine-tuning, learning curves).
+//! - [`inference`]: the trained network repacked for fast CPU inference.
 //! - [`predict`]: evaluation over a sample set and timed prediction.
 
 #![warn(missing_docs)]
@@ -31,6 +32,7 @@ mod error;
 mod fsutil;
 pub mod generate;
 mod grid;
+pub mod inference;
 pub mod metrics;
 pub mod npy;
 pub mod plot;
@@ -45,8 +47,9 @@ pub use dataset::{
 };
 pub use error::LearnError;
 pub use grid::{GridShape, CHANNELS, LAYOUT};
+pub use inference::InferenceNet;
 pub use metrics::{ErrorStats, EvalReport};
-pub use predict::{evaluate, time_prediction, Timing};
+pub use predict::{evaluate, time_prediction, Predictor, Timing};
 pub use train::{train, CurveRow, Initialization, TrainConfig, TrainOptions, TrainOutcome};
 pub use unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
 

@@ -2,115 +2,107 @@
 
 use std::time::Instant;
 
-use burn::module::Module;
-use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
 use crate::corrupt::{item_rng, Corruption};
 use crate::dataset::{Normalization, Samples};
-use crate::grid::CHANNELS;
+use crate::grid::GridShape;
+use crate::inference::InferenceNet;
 use crate::metrics::{mean_euclidean_error, EvalReport};
-use crate::train::{batch_tensors, STREAM_EVAL_CORRUPTION};
-use crate::unet::{TrainedModel, UNet};
+use crate::train::STREAM_EVAL_CORRUPTION;
+use crate::unet::TrainedModel;
 use crate::{LearnError, Result};
 
-/// Runs `net` on normalised batches of `samples` (corrupted with generator per sample position
-/// derived from `seed`) and returns the per-sample errors (m).
+/// Runs `net` on the normalised inputs of `samples` (each corrupted with its own generator,
+/// derived from `seed` and the sample position) and returns the per-sample errors (m).
 pub(crate) fn evaluate_net(
-    net: &UNet,
+    net: &InferenceNet,
     norm: &Normalization,
     samples: &Samples,
     corruption: &Corruption,
     seed: u64,
-    batch_size: usize,
-    device: &Device,
 ) -> Result<EvalReport> {
     if samples.is_empty() {
         return Err(LearnError::InvalidInput("no samples to evaluate".into()));
     }
-    if batch_size == 0 {
-        return Err(LearnError::InvalidInput("evaluation batch size must be at least 1".into()));
-    }
     let grid = samples.grid;
-    let f = grid.field_len();
+    let (si, st) = (1.0 / norm.input_scale, norm.target_scale);
     let mut errors = Vec::with_capacity(samples.len());
-    let positions: Vec<usize> = (0..samples.len()).collect();
-    for chunk in positions.chunks(batch_size) {
-        let (x, _, _) = batch_tensors(
-            samples,
-            chunk,
-            norm,
-            corruption,
-            |slot| item_rng(seed, STREAM_EVAL_CORRUPTION, chunk[slot] as u64),
-            device,
-        )?;
-        let pred = to_vec(net.forward(x))?;
-        for (slot, &p) in chunk.iter().enumerate() {
-            let pred: Vec<f32> =
-                pred[slot * f..(slot + 1) * f].iter().map(|v| (f64::from(*v) * norm.target_scale) as f32).collect();
-            errors.push(
-                mean_euclidean_error(&pred, samples.target(p), samples.mask(p), grid).map_err(|e| {
-                    LearnError::InvalidInput(format!("sample {} (index {}): {e}", p, samples.indices[p]))
-                })?,
-            );
+    for p in 0..samples.len() {
+        let mut input = samples.input(p).to_vec();
+        if !corruption.is_identity() {
+            corruption.apply(&mut input, grid, &mut item_rng(seed, STREAM_EVAL_CORRUPTION, p as u64))?;
         }
+        let x: Vec<f32> = input.iter().map(|v| (f64::from(*v) * si) as f32).collect();
+        let pred: Vec<f32> = net.forward(&x, grid)?.iter().map(|v| (f64::from(*v) * st) as f32).collect();
+        errors.push(
+            mean_euclidean_error(&pred, samples.target(p), samples.mask(p), grid)
+                .map_err(|e| LearnError::InvalidInput(format!("sample {} (index {}): {e}", p, samples.indices[p])))?,
+        );
     }
     EvalReport::new(errors, samples.indices.clone())
-}
-
-fn to_vec(t: Tensor<5>) -> Result<Vec<f32>> {
-    t.into_data()
-        .try_into_vec_as::<f32>()
-        .map_err(|e| LearnError::InvalidInput(format!("cannot read the network output: {e:?}")))
 }
 
 /// Evaluates `model` on `samples`: per-sample mean Euclidean errors (m), mean, std, max and the
 /// worst sample. Inputs are corrupted with `corruption`, one reproducible draw per sample from
 /// `seed`.
-pub fn evaluate(
-    model: &TrainedModel,
-    samples: &Samples,
-    corruption: &Corruption,
-    seed: u64,
-    batch_size: usize,
-) -> Result<EvalReport> {
+pub fn evaluate(model: &TrainedModel, samples: &Samples, corruption: &Corruption, seed: u64) -> Result<EvalReport> {
     corruption.validate()?;
-    let device = model_device(model);
-    evaluate_net(&model.net, &model.normalization, samples, corruption, seed, batch_size, &device)
+    if samples.grid != model.grid {
+        return Err(LearnError::InvalidInput(format!(
+            "samples are on grid {}, the model on grid {}",
+            samples.grid, model.grid
+        )));
+    }
+    evaluate_net(&model.net.to_inference()?, &model.normalization, samples, corruption, seed)
 }
 
-fn model_device(model: &TrainedModel) -> Device {
-    model.net.devices().into_iter().next().unwrap_or_else(crate::inference_device)
+/// A trained model ready for repeated predictions: its network repacked once for fast CPU
+/// inference ([`InferenceNet`]), with its normalisation and grid.
+pub struct Predictor {
+    net: InferenceNet,
+    normalization: Normalization,
+    grid: GridShape,
 }
 
-impl TrainedModel {
+impl Predictor {
+    /// Repacks `model` for prediction.
+    pub fn new(model: &TrainedModel) -> Result<Predictor> {
+        Ok(Predictor { net: model.net.to_inference()?, normalization: model.normalization, grid: model.grid })
+    }
+
+    /// The grid inputs must be on.
+    pub fn grid(&self) -> GridShape {
+        self.grid
+    }
+
     /// Predicts the displacement field (m, `[3, nx, ny, nz]`) for one input field (`[3, nx, ny,
     /// nz]` on the model's grid, in the model's input unit). Values outside the organ are
     /// meaningless; apply the mask.
     pub fn predict(&self, input: &[f32]) -> Result<Vec<f32>> {
-        self.predict_batch(input)
-    }
-
-    /// Predicts for several inputs concatenated (`[N, 3, nx, ny, nz]`), in one batch.
-    pub fn predict_batch(&self, inputs: &[f32]) -> Result<Vec<f32>> {
         let f = self.grid.field_len();
-        if inputs.is_empty() || inputs.len() % f != 0 {
+        if input.len() != f {
             return Err(LearnError::InvalidInput(format!(
-                "prediction input has {} values, not a multiple of {f} (3 channels on grid {})",
-                inputs.len(),
+                "prediction input has {} values, expected {f} (3 channels on grid {})",
+                input.len(),
                 self.grid
             )));
         }
-        if inputs.iter().any(|v| !v.is_finite()) {
+        if input.iter().any(|v| !v.is_finite()) {
             return Err(LearnError::InvalidInput("prediction input has a non-finite value".into()));
         }
-        let n = inputs.len() / f;
         let si = 1.0 / self.normalization.input_scale;
-        let x: Vec<f32> = inputs.iter().map(|v| (f64::from(*v) * si) as f32).collect();
-        let [nx, ny, nz] = self.grid.dims();
-        let x = Tensor::<5>::from_data(TensorData::new(x, [n, CHANNELS, nx, ny, nz]), &model_device(self));
-        let out = to_vec(self.net.forward(x))?;
+        let x: Vec<f32> = input.iter().map(|v| (f64::from(*v) * si) as f32).collect();
+        let out = self.net.forward(&x, self.grid)?;
         Ok(out.into_iter().map(|v| (f64::from(v) * self.normalization.target_scale) as f32).collect())
+    }
+}
+
+impl TrainedModel {
+    /// Predicts one displacement field (see [`Predictor::predict`]); for repeated predictions
+    /// build a [`Predictor`] once.
+    pub fn predict(&self, input: &[f32]) -> Result<Vec<f32>> {
+        Predictor::new(self)?.predict(input)
     }
 }
 
@@ -146,19 +138,19 @@ impl Timing {
     }
 }
 
-/// Times [`TrainedModel::predict`] on `input` (including normalisation and the copy back):
+/// Times [`Predictor::predict`] on `input` (including normalisation and the copy back):
 /// `warmup` untimed runs, then `runs` timed ones.
-pub fn time_prediction(model: &TrainedModel, input: &[f32], warmup: usize, runs: usize) -> Result<Timing> {
+pub fn time_prediction(predictor: &Predictor, input: &[f32], warmup: usize, runs: usize) -> Result<Timing> {
     if runs == 0 {
         return Err(LearnError::InvalidInput("time_prediction needs at least one run".into()));
     }
     for _ in 0..warmup {
-        model.predict(input)?;
+        predictor.predict(input)?;
     }
     let mut d = Vec::with_capacity(runs);
     for _ in 0..runs {
         let t0 = Instant::now();
-        std::hint::black_box(model.predict(input)?);
+        std::hint::black_box(predictor.predict(input)?);
         d.push(t0.elapsed().as_secs_f64());
     }
     Timing::from_durations(d)

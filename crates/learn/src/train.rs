@@ -48,16 +48,18 @@ pub struct TrainConfig {
     pub iterations: usize,
     /// Samples per step.
     pub batch_size: usize,
-    /// Adam learning rate.
+    /// Adam learning rate (at the first iteration).
     pub learning_rate: f64,
+    /// When set, the rate falls from `learning_rate` to this value along a half cosine over
+    /// the `iterations` (the schedule then depends on `iterations`, so such a run cannot be
+    /// extended by resuming it with more).
+    pub final_learning_rate: Option<f64>,
     /// Seed of weights, shuffling and corruption.
     pub seed: u64,
     /// Validate every this many iterations (and after the last one).
     pub validate_every: usize,
     /// Write a checkpoint every this many iterations (and after the last one).
     pub checkpoint_every: usize,
-    /// Batch size of validation passes.
-    pub eval_batch_size: usize,
     /// Corruption of training inputs.
     pub train_corruption: Corruption,
     /// Corruption of validation inputs (same draw at every validation).
@@ -70,10 +72,10 @@ impl Default for TrainConfig {
             iterations: 1000,
             batch_size: 4,
             learning_rate: 1e-3,
+            final_learning_rate: None,
             seed: 0,
             validate_every: 100,
             checkpoint_every: 100,
-            eval_batch_size: 4,
             train_corruption: Corruption::none(),
             val_corruption: Corruption::none(),
         }
@@ -84,8 +86,8 @@ impl TrainConfig {
     /// Checks the values.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: &str| Err(LearnError::InvalidInput(format!("training config: {m}")));
-        if self.iterations == 0 || self.batch_size == 0 || self.eval_batch_size == 0 {
-            return bad("iterations, batch_size and eval_batch_size must be at least 1");
+        if self.iterations == 0 || self.batch_size == 0 {
+            return bad("iterations and batch_size must be at least 1");
         }
         if self.validate_every == 0 || self.checkpoint_every == 0 {
             return bad("validate_every and checkpoint_every must be at least 1");
@@ -93,8 +95,22 @@ impl TrainConfig {
         if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
             return bad("learning_rate must be finite and > 0");
         }
+        if self.final_learning_rate.is_some_and(|r| !(r > 0.0 && r <= self.learning_rate)) {
+            return bad("final_learning_rate must be > 0 and at most learning_rate");
+        }
         self.train_corruption.validate()?;
         self.val_corruption.validate()
+    }
+
+    /// The learning rate of (0-based) iteration `it`.
+    pub fn learning_rate_at(&self, it: usize) -> f64 {
+        match self.final_learning_rate {
+            None => self.learning_rate,
+            Some(last) => {
+                let t = it as f64 / (self.iterations.max(2) - 1) as f64;
+                last + 0.5 * (self.learning_rate - last) * (1.0 + (std::f64::consts::PI * t.min(1.0)).cos())
+            }
+        }
     }
 }
 
@@ -420,12 +436,14 @@ pub fn train(
     let device = training_device();
     let start = resolve_start(init, config.seed, &device)?;
     // Everything that shapes the trajectory, so that a checkpoint is only resumed into the
-    // run it came from. The iteration count and checkpoint interval are left out: a finished
-    // run can be extended by resuming it with more iterations.
+    // run it came from. The checkpoint interval is left out, and so is the iteration count
+    // under a constant rate: such a finished run can be extended by resuming it with more.
     let mut trajectory = serde_json::to_value(config)
         .map_err(|e| LearnError::InvalidInput(format!("cannot serialize the training config: {e}")))?;
     if let Some(map) = trajectory.as_object_mut() {
-        map.remove("iterations");
+        if config.final_learning_rate.is_none() {
+            map.remove("iterations");
+        }
         map.remove("checkpoint_every");
     }
     let fingerprint = serde_json::json!({
@@ -493,7 +511,6 @@ pub fn train(
     progress.set_position(state.iteration as u64);
 
     let mut shuffler = Shuffler { seed: config.seed, n: train.len(), epoch: None, perm: Vec::new() };
-    let eval_device = inference_device();
     let mut step_time = 0.0;
     let mut steps = 0usize;
     let mut completed = true;
@@ -519,7 +536,7 @@ pub fn train(
             )));
         }
         let grads = GradientsParams::from_grads(loss.backward(), &net);
-        net = optim.step(config.learning_rate, net, grads);
+        net = optim.step(config.learning_rate_at(it), net, grads);
         step_time += t0.elapsed().as_secs_f64();
         steps += 1;
         state.iteration += 1;
@@ -534,15 +551,8 @@ pub fn train(
             let val_error = if val.is_empty() {
                 None
             } else {
-                let report = evaluate_net(
-                    &snapshot,
-                    &start.normalization,
-                    val,
-                    &config.val_corruption,
-                    config.seed,
-                    config.eval_batch_size,
-                    &eval_device,
-                )?;
+                let fast = snapshot.to_inference()?;
+                let report = evaluate_net(&fast, &start.normalization, val, &config.val_corruption, config.seed)?;
                 Some(report.stats)
             };
             state.curve.push(CurveRow {

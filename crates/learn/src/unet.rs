@@ -31,6 +31,7 @@ use serde::{Deserialize, Serialize};
 use crate::dataset::Normalization;
 use crate::fsutil::{read, write_atomic};
 use crate::grid::{GridShape, CHANNELS, LAYOUT};
+use crate::inference::{Block, InferenceNet, Packed};
 use crate::{LearnError, Result};
 
 /// U-Net hyper-parameters.
@@ -187,6 +188,45 @@ impl UNet {
         } else {
             out
         }
+    }
+
+    /// The network repacked for fast CPU inference (same results up to rounding).
+    pub fn to_inference(&self) -> Result<InferenceNet> {
+        let values = |t: Tensor<5>| -> Result<Vec<f32>> {
+            t.into_data()
+                .try_into_vec_as::<f32>()
+                .map_err(|e| LearnError::InvalidInput(format!("cannot read weights: {e:?}")))
+        };
+        let bias = |b: &Option<Param<Tensor<1>>>, n: usize| -> Result<Vec<f32>> {
+            match b {
+                Some(b) => b
+                    .val()
+                    .into_data()
+                    .try_into_vec_as::<f32>()
+                    .map_err(|e| LearnError::InvalidInput(format!("cannot read biases: {e:?}"))),
+                None => Ok(vec![0.0; n]),
+            }
+        };
+        // `parts`: the input is the concatenation of that many equal channel groups.
+        let conv = |c: &Conv3d, parts: usize| -> Result<Packed> {
+            let [c_out, c_in, kx, ky, kz] = c.weight.dims();
+            let splits = vec![c_in / parts; parts];
+            Packed::conv(&values(c.weight.val())?, &bias(&c.bias, c_out)?, c_out, &splits, kx * ky * kz)
+        };
+        let block = |b: &ConvBlock, parts: usize| -> Result<Block> { Ok([conv(&b.conv1, parts)?, conv(&b.conv2, 1)?]) };
+        let up = |u: &ConvTranspose3d| -> Result<Packed> {
+            let [c_in, c_out, ..] = u.weight.dims();
+            Packed::transposed(&values(u.weight.val())?, &bias(&u.bias, c_out)?, c_in, c_out)
+        };
+        InferenceNet::new(
+            self.bottleneck.conv1.weight.dims()[2],
+            self.encoder.iter().map(|b| block(b, 1)).collect::<Result<_>>()?,
+            self.down.iter().map(|d| conv(d, 1)).collect::<Result<_>>()?,
+            block(&self.bottleneck, 1)?,
+            self.up.iter().map(up).collect::<Result<_>>()?,
+            self.decoder.iter().map(|b| block(b, 2)).collect::<Result<_>>()?,
+            conv(&self.head, 1)?,
+        )
     }
 
     /// Stops gradient updates of the contracting path (encoder levels, down-sampling, bottleneck).

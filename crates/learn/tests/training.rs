@@ -6,7 +6,7 @@ mod common;
 use augsim_learn::metrics::{masked_mse_values, mean_euclidean_error};
 use augsim_learn::train::{CHECKPOINT_FILE, CURVE_CSV, CURVE_PNG, MODEL_FILE};
 use augsim_learn::{
-    evaluate, inference_device, time_prediction, train, Corruption, GridShape, Initialization, Normalization, Samples,
+    evaluate, inference_device, time_prediction, train, Predictor, Corruption, GridShape, Initialization, Normalization, Samples,
     Sparsity, TrainConfig, TrainOptions, TrainedModel, UNet, UNetConfig,
 };
 use common::synthetic_samples;
@@ -30,7 +30,8 @@ fn scratch(base: usize, depth: usize, data: &Samples) -> Initialization {
 
 /// Masked MSE (physical units) of a model over a sample set.
 fn mse(model: &TrainedModel, s: &Samples) -> f64 {
-    let pred = model.predict_batch(&s.inputs).unwrap();
+    let predictor = Predictor::new(model).unwrap();
+    let pred: Vec<f32> = (0..s.len()).flat_map(|p| predictor.predict(s.input(p)).unwrap()).collect();
     masked_mse_values(&pred, &s.targets, &s.masks, s.grid).unwrap()
 }
 
@@ -78,7 +79,7 @@ fn tiny_unet_overfits_a_handful_of_samples() {
     assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
 
     // evaluate() agrees with per-sample predictions, and reports the worst sample.
-    let report = evaluate(&out.model, &data, &Corruption::none(), 0, 3).unwrap();
+    let report = evaluate(&out.model, &data, &Corruption::none(), 0).unwrap();
     for p in 0..data.len() {
         let pred = out.model.predict(data.input(p)).unwrap();
         let e = mean_euclidean_error(&pred, data.target(p), data.mask(p), grid()).unwrap();
@@ -90,8 +91,23 @@ fn tiny_unet_overfits_a_handful_of_samples() {
     assert_eq!(report.worst_index(), data.indices[report.stats.worst]);
     assert!(report.to_string().contains(&format!("sample index {}", report.worst_index())));
 
-    let timing = time_prediction(&out.model, data.input(0), 1, 3).unwrap();
+    let timing = time_prediction(&Predictor::new(&out.model).unwrap(), data.input(0), 1, 3).unwrap();
     assert!(timing.min <= timing.median && timing.median <= timing.max && timing.runs == 3);
+}
+
+#[test]
+fn cosine_learning_rate_falls_from_first_to_final() {
+    let config =
+        TrainConfig { iterations: 101, learning_rate: 1e-3, final_learning_rate: Some(1e-5), ..Default::default() };
+    config.validate().unwrap();
+    assert!((config.learning_rate_at(0) - 1e-3).abs() < 1e-15);
+    assert!((config.learning_rate_at(100) - 1e-5).abs() < 1e-15);
+    assert!((config.learning_rate_at(50) - 0.5 * (1e-3 + 1e-5)).abs() < 1e-12, "half-way is the mean");
+    assert!((0..100).all(|i| config.learning_rate_at(i + 1) < config.learning_rate_at(i)));
+    let constant = TrainConfig { final_learning_rate: None, ..config.clone() };
+    assert!((0..101).all(|i| constant.learning_rate_at(i) == 1e-3));
+    let bad = TrainConfig { final_learning_rate: Some(2e-3), ..config };
+    assert!(bad.validate().unwrap_err().to_string().contains("final_learning_rate"));
 }
 
 #[test]
@@ -104,10 +120,10 @@ fn resumed_training_equals_uninterrupted() {
         iterations: 12,
         batch_size: 4,
         learning_rate: 1e-3,
+        final_learning_rate: None,
         seed: 42,
         validate_every: 4,
         checkpoint_every: 4,
-        eval_batch_size: 2,
         train_corruption: Corruption {
             sparsity: Some(Sparsity::Subset { min_fraction: 0.5, max_fraction: 1.0 }),
             noise_std: 0.05,
@@ -150,6 +166,15 @@ fn resumed_training_equals_uninterrupted() {
     let shorter = TrainConfig { iterations: 8, ..config.clone() };
     let e = train(&train_set, &val, &init, &shorter, &TrainOptions::new(&b)).unwrap_err().to_string();
     assert!(e.contains("beyond"), "{e}");
+
+    // With a cosine schedule the rate depends on the iteration count: extending is refused.
+    let cosine = TrainConfig { final_learning_rate: Some(1e-4), ..config.clone() };
+    let cosine_dir = root.path().join("d");
+    train(&train_set, &val, &init, &cosine, &TrainOptions::new(&cosine_dir)).unwrap();
+    let e = train(&train_set, &val, &init, &TrainConfig { iterations: 16, ..cosine }, &TrainOptions::new(&cosine_dir))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("different setup"), "{e}");
 
     // A checkpoint from another setup is refused.
     let other = TrainConfig { learning_rate: 2e-3, ..config.clone() };
