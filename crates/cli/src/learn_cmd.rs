@@ -220,7 +220,13 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         train_corruption: args.split.corruption(),
         val_corruption: args.split.corruption(),
     };
-    let options = TrainOptions { out_dir: args.out.clone(), resume: !args.restart, progress: true, stop_after: None };
+    let options = TrainOptions {
+        out_dir: args.out.clone(),
+        resume: !args.restart,
+        progress: true,
+        stop_after: None,
+        placement: dataset.manifest().placement(),
+    };
     println!("train      {} samples, test {} samples, grid {}", train.len(), test.len(), dataset.manifest().grid);
     let outcome = learn::train(&train, &test, &init, &config, &options)?;
     let best =
@@ -285,10 +291,8 @@ fn write_grid_sample(
     mask: &[u8],
 ) -> Result<()> {
     let g = manifest.grid;
-    let get = |key: &str| -> Result<[f64; 3]> {
-        serde_json::from_value(manifest.metadata[key].clone()).with_context(|| format!("dataset manifest has no {key}"))
-    };
-    let (origin, spacing) = (get("grid_origin")?, get("grid_spacing")?);
+    let placement = manifest.placement().context("the dataset manifest has no grid_origin/grid_spacing")?;
+    let (origin, spacing) = (placement.origin, placement.spacing);
     let hi = std::array::from_fn(|d| origin[d] + spacing[d] * ([g.nx, g.ny, g.nz][d] - 1) as f64);
     let grid_mesh = mesh::box_hex(origin, hi, [g.nx - 1, g.ny - 1, g.nz - 1])?;
     // box_hex numbers nodes x fastest; the tensors are z fastest.
@@ -318,15 +322,49 @@ fn write_grid_sample(
     mesh::io::write_mesh(path, &grid_mesh, &fields).with_context(|| format!("writing {}", path.display()))
 }
 
-/// `augsim predict`: a constraint tensor (.npy, [3, nx, ny, nz]) to a displacement tensor, timed.
-pub fn predict(model_path: &Path, input: &Path, output: &Path, runs: usize) -> Result<()> {
+/// `augsim predict`: a grid tensor (.npy `[3, nx, ny, nz]`) or a point cloud (.csv or .npy
+/// `[N, 6]`: x, y, z and the vector in the model's input unit) to a displacement tensor, timed;
+/// with `mesh`, the displacement interpolated to that mesh's nodes is written beside the tensor.
+pub fn predict(model_path: &Path, input: &Path, output: &Path, mesh_path: Option<&Path>, runs: usize) -> Result<()> {
     let model = TrainedModel::load(model_path, &learn::inference_device())?;
-    let array = learn::npy::read_npy(input)?;
     let g = model.grid;
-    if array.shape != [3, g.nx, g.ny, g.nz] {
-        bail!("{}: shape {:?}, but the model expects [3, {}, {}, {}]", input.display(), array.shape, g.nx, g.ny, g.nz);
-    }
-    let data = array.into_f32();
+    let placed = || -> Result<mesh::embedding::Grid> {
+        let placement = model.placement.with_context(|| {
+            format!(
+                "{} does not record where its grid lies (trained before grid placement was stored)",
+                model_path.display()
+            )
+        })?;
+        Ok(placement.grid(g)?)
+    };
+    let data = match read_predict_input(input)? {
+        PredictInput::Grid(array) => {
+            if array.shape != [3, g.nx, g.ny, g.nz] {
+                bail!(
+                    "{}: shape {:?}, but the model expects [3, {}, {}, {}] (or a point cloud [N, 6])",
+                    input.display(),
+                    array.shape,
+                    g.nx,
+                    g.ny,
+                    g.nz
+                );
+            }
+            array.into_f32()
+        }
+        PredictInput::Points(points, vectors) => {
+            let force = match model.input_unit.as_str() {
+                "N" => true,
+                "m" => false,
+                other => bail!("model input unit {other:?} is neither N (forces) nor m (displacements)"),
+            };
+            let t0 = std::time::Instant::now();
+            let data = learn::encode_points(&placed()?, &points, &vectors, force)
+                .with_context(|| format!("mapping {} onto the model grid", input.display()))?;
+            let what = if force { "forces spread to the grid" } else { "displacements on their nearest grid nodes" };
+            println!("points     {} ({what}, {:.2} ms)", points.len(), t0.elapsed().as_secs_f64() * 1e3);
+            data
+        }
+    };
     let predictor = learn::Predictor::new(&model)?;
     let prediction = predictor.predict(&data)?;
     learn::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
@@ -341,7 +379,90 @@ pub fn predict(model_path: &Path, input: &Path, output: &Path, runs: usize) -> R
         t.max * 1e3
     );
     println!("wrote      {}", output.display());
+    if let Some(mesh_path) = mesh_path {
+        let organ = mesh::io::read_mesh(mesh_path).with_context(|| format!("reading {}", mesh_path.display()))?;
+        let u = displacement_on_mesh(&organ, &placed()?, &prediction)?;
+        let max = u.chunks(3).map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()).fold(0.0, f64::max);
+        let vtu = output.with_extension("vtu");
+        mesh::io::write_mesh(&vtu, &organ, &[Field::point("displacement", 3, u)])
+            .with_context(|| format!("writing {}", vtu.display()))?;
+        println!("mesh       {} nodes, max |u| {:.3} mm", organ.num_nodes(), max * 1e3);
+        println!("wrote      {}", vtu.display());
+    }
     Ok(())
+}
+
+/// What `augsim predict` reads.
+enum PredictInput {
+    /// A grid tensor.
+    Grid(learn::npy::NpyArray),
+    /// Points and their vectors.
+    Points(Vec<mesh::Point>, Vec<[f64; 3]>),
+}
+
+/// Reads a grid tensor or a point cloud (`.npy` `[N, 6]`, or `.csv` with six numbers per line
+/// and an optional header line).
+fn read_predict_input(path: &Path) -> Result<PredictInput> {
+    let rows: Vec<[f64; 6]> = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")) {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let mut rows = Vec::new();
+        for (l, line) in text.lines().enumerate() {
+            let fields: Vec<&str> = line.split([',', ';']).map(str::trim).filter(|f| !f.is_empty()).collect();
+            if fields.is_empty() {
+                continue;
+            }
+            let numbers: Result<Vec<f64>, _> = fields.iter().map(|f| f.parse::<f64>()).collect();
+            match numbers {
+                Ok(v) if v.len() == 6 => rows.push([v[0], v[1], v[2], v[3], v[4], v[5]]),
+                Ok(v) => bail!("{}:{}: {} numbers, expected 6 (x, y, z, vx, vy, vz)", path.display(), l + 1, v.len()),
+                Err(_) if l == 0 => {} // header
+                Err(e) => bail!("{}:{}: {e}", path.display(), l + 1),
+            }
+        }
+        rows
+    } else {
+        let array = learn::npy::read_npy(path)?;
+        match array.shape.as_slice() {
+            [_, 6] => array.into_f64().chunks_exact(6).map(|r| std::array::from_fn(|i| r[i])).collect(),
+            _ => return Ok(PredictInput::Grid(array)),
+        }
+    };
+    if rows.is_empty() {
+        bail!("{}: no points", path.display());
+    }
+    Ok(PredictInput::Points(
+        rows.iter().map(|r| [r[0], r[1], r[2]]).collect(),
+        rows.iter().map(|r| [r[3], r[4], r[5]]).collect(),
+    ))
+}
+
+/// Interpolates a predicted grid displacement (`[3, nx, ny, nz]`) to the nodes of `organ`
+/// (node-major). Grid nodes outside the organ carry no trained value, so each node uses only
+/// the corners of its grid cell that lie inside the organ (weights renormalised), or all eight
+/// when none does.
+fn displacement_on_mesh(organ: &mesh::Mesh, grid: &mesh::embedding::Grid, field: &[f32]) -> Result<Vec<f64>> {
+    let inside = mesh::embedding::Embedding::new(organ, grid.clone())?.mask();
+    let n = grid.num_nodes();
+    let mut u = vec![0.0; 3 * organ.num_nodes()];
+    for (m, p) in organ.nodes.iter().enumerate() {
+        let corners = grid.corners(*p).with_context(|| format!("mesh node {m} {p:?} is outside the model grid"))?;
+        let kept: f64 = corners.iter().filter(|(g, _)| inside[*g]).map(|(_, w)| w).sum();
+        for (g, w) in corners {
+            let w = if kept > 1e-12 {
+                if inside[g] {
+                    w / kept
+                } else {
+                    0.0
+                }
+            } else {
+                w
+            };
+            for c in 0..3 {
+                u[3 * m + c] += w * f64::from(field[c * n + g]);
+            }
+        }
+    }
+    Ok(u)
 }
 
 /// Writes a file atomically (temporary file in the same directory, then rename).

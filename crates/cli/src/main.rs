@@ -99,15 +99,20 @@ enum Command {
         #[command(flatten)]
         split: learn_cmd::SplitArgs,
     },
-    /// Predict the displacement for a constraint tensor (.npy [3, nx, ny, nz]) and time the network.
+    /// Predict the displacement for a constraint tensor or a point cloud and time the network.
     Predict {
         /// Model JSON (model.json).
         model: PathBuf,
-        /// Input tensor (.npy).
+        /// Input: a grid tensor (.npy [3, nx, ny, nz]) or a point cloud (.csv or .npy [N, 6]: x, y, z
+        /// and the force (N) or displacement (m) at each point, as the model was trained).
         input: PathBuf,
-        /// Output tensor (.npy).
+        /// Output tensor (.npy [3, nx, ny, nz], m).
         #[arg(short, long, default_value = "out/prediction.npy")]
         output: PathBuf,
+        /// Also interpolate the displacement to this volume mesh's nodes (same frame as the
+        /// training mesh) and write it beside the output as .vtu.
+        #[arg(long)]
+        mesh: Option<PathBuf>,
         /// Timed runs after warm-up.
         #[arg(long, default_value_t = 50)]
         runs: usize,
@@ -143,7 +148,9 @@ fn main() {
         Command::Merge { out, parts } => learn_cmd::merge(&out, &parts),
         Command::Train(args) => learn_cmd::train(&args),
         Command::Eval { model, dataset, out, split } => learn_cmd::eval(&model, &dataset, &split, &out),
-        Command::Predict { model, input, output, runs } => learn_cmd::predict(&model, &input, &output, runs),
+        Command::Predict { model, input, output, mesh, runs } => {
+            learn_cmd::predict(&model, &input, &output, mesh.as_deref(), runs)
+        }
         Command::Bench { runs } => bench::run(runs),
     };
     if let Err(e) = result {

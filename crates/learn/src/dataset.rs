@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::fsutil::write_atomic;
-use crate::grid::{GridShape, CHANNELS, LAYOUT};
+use crate::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::npy;
 use crate::{LearnError, Result};
 
@@ -284,6 +284,13 @@ pub struct Manifest {
 }
 
 impl Manifest {
+    /// Where the grid lies in space, from the generator's metadata (`grid_origin`,
+    /// `grid_spacing`); `None` for datasets without them.
+    pub fn placement(&self) -> Option<GridPlacement> {
+        let get = |key: &str| serde_json::from_value::<[f64; 3]>(self.metadata.get(key)?.clone()).ok();
+        Some(GridPlacement { origin: get("grid_origin")?, spacing: get("grid_spacing")? })
+    }
+
     fn new(spec: &DatasetSpec) -> Self {
         Manifest {
             format: FORMAT.into(),

@@ -13,7 +13,7 @@ use std::path::Path;
 
 use fem::{Material, Problem, SolverOptions, StaticSolver};
 use mesh::embedding::{Embedding, Grid};
-use mesh::{Mesh, NodeSelection};
+use mesh::{Mesh, NodeSelection, Point};
 use rand::seq::index::sample as sample_indices;
 use rand::Rng;
 use rayon::prelude::*;
@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::corrupt::item_rng;
 use crate::dataset::{DatasetPart, DatasetSpec, DatasetWriter, Manifest, Sample};
-use crate::grid::GridShape;
+use crate::grid::{encode_points, GridPlacement, GridShape};
 use crate::{LearnError, Result};
 
 /// Stream number of the load generator in [`item_rng`].
@@ -112,8 +112,7 @@ pub struct Generator {
     observed: Vec<usize>,
     encoding: Encoding,
     grid: GridShape,
-    origin: [f64; 3],
-    spacing: [f64; 3],
+    placement: GridPlacement,
     mask: Vec<u8>,
 }
 
@@ -122,11 +121,7 @@ enum Encoding {
     /// Mesh node n is grid node `node[n]` (flat index i*ny*nz + j*nz + k).
     Lattice(Vec<usize>),
     /// A tetrahedral mesh embedded in a grid.
-    Embedded {
-        embedding: Embedding,
-        /// For each mesh node, its grid cell corners and trilinear weights.
-        spread: Vec<[(usize, f64); 8]>,
-    },
+    Embedded { embedding: Embedding, grid: Grid },
 }
 
 fn invalid(msg: impl Into<String>) -> LearnError {
@@ -188,7 +183,7 @@ impl Generator {
                 o
             }
         };
-        let (encoding, grid, origin, spacing) = match config.grid {
+        let (encoding, grid, placement) = match config.grid {
             None => lattice_encoding(&mesh)?,
             Some(dims) => embedded_encoding(&mesh, dims)?,
         };
@@ -211,8 +206,7 @@ impl Generator {
             observed,
             encoding,
             grid,
-            origin,
-            spacing,
+            placement,
             mask,
         })
     }
@@ -222,9 +216,9 @@ impl Generator {
         self.grid
     }
 
-    /// Position of grid node (0, 0, 0) and the node spacing along each axis (m).
-    pub fn grid_geometry(&self) -> ([f64; 3], [f64; 3]) {
-        (self.origin, self.spacing)
+    /// Where the grid lies in space.
+    pub fn placement(&self) -> GridPlacement {
+        self.placement
     }
 
     /// The configuration.
@@ -250,17 +244,10 @@ impl Generator {
                     }
                 }
             }
-            Encoding::Embedded { embedding, spread } => {
+            Encoding::Embedded { embedding, grid } => {
                 if is_force {
-                    let mut acc = vec![0f64; 3 * n];
-                    for (m, corners) in spread.iter().enumerate() {
-                        for &(g, w) in corners {
-                            for c in 0..3 {
-                                acc[c * n + g] += w * field[3 * m + c];
-                            }
-                        }
-                    }
-                    out.iter_mut().zip(&acc).for_each(|(o, a)| *o = *a as f32);
+                    let forces: Vec<[f64; 3]> = field.chunks_exact(3).map(|f| [f[0], f[1], f[2]]).collect();
+                    out = encode_points(grid, &self.mesh.nodes, &forces, true)?;
                 } else {
                     let grid_field = embedding.map_nodal(field, 3).map_err(|e| invalid(e.to_string()))?;
                     out.iter_mut().zip(&grid_field).for_each(|(o, v)| *o = *v as f32);
@@ -353,20 +340,15 @@ impl Generator {
     }
 
     /// Displacements of observed nodes only, on the grid: exact on a lattice; for an
-    /// embedded mesh each observed node's value goes to its nearest grid node.
+    /// embedded mesh see [`encode_points`] (nearest grid node, averaged).
     fn encode_observed(&self, partial: &[f64], observed: &[usize]) -> Result<Vec<f32>> {
         match &self.encoding {
             Encoding::Lattice(_) => self.encode(partial, false),
-            Encoding::Embedded { spread, .. } => {
-                let n = self.grid.nodes();
-                let mut out = vec![0f32; 3 * n];
-                for &m in observed {
-                    let (g, _) = spread[m].iter().copied().max_by(|a, b| a.1.total_cmp(&b.1)).expect("8 corners");
-                    for c in 0..3 {
-                        out[c * n + g] = partial[3 * m + c] as f32;
-                    }
-                }
-                Ok(out)
+            Encoding::Embedded { grid, .. } => {
+                let points: Vec<Point> = observed.iter().map(|&m| self.mesh.nodes[m]).collect();
+                let values: Vec<[f64; 3]> =
+                    observed.iter().map(|&m| [partial[3 * m], partial[3 * m + 1], partial[3 * m + 2]]).collect();
+                encode_points(grid, &points, &values, false)
             }
         }
     }
@@ -398,8 +380,8 @@ impl Generator {
                 "dataset": self.config,
                 "mesh_nodes": self.mesh.num_nodes(),
                 "mesh_cells": self.mesh.cells.len(),
-                "grid_origin": self.origin,
-                "grid_spacing": self.spacing,
+                "grid_origin": self.placement.origin,
+                "grid_spacing": self.placement.spacing,
             }),
         };
         let mut writer = DatasetWriter::create_or_resume(dir, spec)?;
@@ -455,7 +437,7 @@ pub fn part_range(samples: usize, part: Option<&DatasetPart>) -> Result<Range<us
 
 /// The lattice of a mesh whose nodes lie on a regular grid (box of hexahedra,
 /// immersed grid): spacing from the smallest node separation per axis.
-fn lattice_encoding(mesh: &Mesh) -> Result<(Encoding, GridShape, [f64; 3], [f64; 3])> {
+fn lattice_encoding(mesh: &Mesh) -> Result<(Encoding, GridShape, GridPlacement)> {
     let (lo, hi) = mesh.bounds();
     let mut spacing = [f64::INFINITY; 3];
     for c in 0..mesh.cells.len() {
@@ -484,29 +466,13 @@ fn lattice_encoding(mesh: &Mesh) -> Result<(Encoding, GridShape, [f64; 3], [f64;
         let [i, j, k] = ijk.map(|x| x.round() as usize);
         node.push((i * shape.ny + j) * shape.nz + k);
     }
-    Ok((Encoding::Lattice(node), shape, lo, spacing))
+    Ok((Encoding::Lattice(node), shape, GridPlacement { origin: lo, spacing }))
 }
 
-fn embedded_encoding(mesh: &Mesh, dims: [usize; 3]) -> Result<(Encoding, GridShape, [f64; 3], [f64; 3])> {
+fn embedded_encoding(mesh: &Mesh, dims: [usize; 3]) -> Result<(Encoding, GridShape, GridPlacement)> {
     let (lo, hi) = mesh.bounds();
     let grid = Grid::covering(lo, hi, dims).map_err(|e| invalid(e.to_string()))?;
-    let shape = GridShape::new(dims[0], dims[1], dims[2]);
-    let spread = mesh
-        .nodes
-        .iter()
-        .map(|p| {
-            let t: [f64; 3] =
-                std::array::from_fn(|d| ((p[d] - grid.origin[d]) / grid.spacing[d]).clamp(0.0, (dims[d] - 1) as f64));
-            let base: [usize; 3] = std::array::from_fn(|d| (t[d].floor() as usize).min(dims[d].saturating_sub(2)));
-            let fr: [f64; 3] = std::array::from_fn(|d| t[d] - base[d] as f64);
-            std::array::from_fn(|c| {
-                let o = [c & 1, (c >> 1) & 1, (c >> 2) & 1];
-                let w = (0..3).map(|d| if o[d] == 1 { fr[d] } else { 1.0 - fr[d] }).product::<f64>();
-                (((base[0] + o[0]) * shape.ny + base[1] + o[1]) * shape.nz + base[2] + o[2], w)
-            })
-        })
-        .collect();
-    let (origin, spacing) = (grid.origin, grid.spacing);
-    let embedding = Embedding::new(mesh, grid).map_err(|e| invalid(e.to_string()))?;
-    Ok((Encoding::Embedded { embedding, spread }, shape, origin, spacing))
+    let placement = GridPlacement { origin: grid.origin, spacing: grid.spacing };
+    let embedding = Embedding::new(mesh, grid.clone()).map_err(|e| invalid(e.to_string()))?;
+    Ok((Encoding::Embedded { embedding, grid }, GridShape::new(dims[0], dims[1], dims[2]), placement))
 }

@@ -1,6 +1,10 @@
 //! The regular grid and the one tensor layout used everywhere.
 
+use mesh::embedding::Grid;
+use mesh::Point;
 use serde::{Deserialize, Serialize};
+
+use crate::{LearnError, Result};
 
 /// Number of channels of input and target fields (x, y, z components).
 pub const CHANNELS: usize = 3;
@@ -76,5 +80,127 @@ impl GridShape {
         let j = (node / self.nz) % self.ny;
         let i = node / (self.nz * self.ny);
         [i, j, k]
+    }
+}
+
+/// Where a grid lies in space: the position of node (0, 0, 0) and the node spacing along x, y
+/// and z (m). Stored in models so that point clouds can be mapped onto their grid.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridPlacement {
+    /// Position of node (0, 0, 0) (m).
+    pub origin: [f64; 3],
+    /// Node spacing (m).
+    pub spacing: [f64; 3],
+}
+
+impl GridPlacement {
+    /// The placed grid of `shape` nodes (checked: finite origin, positive spacing, ≥ 2 nodes
+    /// per axis).
+    pub fn grid(&self, shape: GridShape) -> Result<Grid> {
+        Grid::new(self.origin, self.spacing, shape.dims()).map_err(|e| LearnError::InvalidInput(e.to_string()))
+    }
+}
+
+/// Encodes vectors given at points (e.g. a tracked point cloud, or mesh nodes) as a network
+/// input on `grid` (`[3, nx, ny, nz]`). Forces are spread to the 8 corners of each point's grid
+/// cell by the adjoint of trilinear interpolation, so the total force is preserved.
+/// Displacements go to the nearest grid node (the largest trilinear weight); points sharing a
+/// node are averaged. A point outside the grid box or a non-finite value is an error.
+pub fn encode_points(grid: &Grid, points: &[Point], values: &[[f64; 3]], force: bool) -> Result<Vec<f32>> {
+    if points.len() != values.len() {
+        return Err(LearnError::InvalidInput(format!("{} points but {} vectors", points.len(), values.len())));
+    }
+    let n = grid.num_nodes();
+    let mut sum = vec![0.0f64; CHANNELS * n];
+    let mut count = vec![0u32; n];
+    for (p, (pt, v)) in points.iter().zip(values).enumerate() {
+        if pt.iter().chain(v).any(|x| !x.is_finite()) {
+            return Err(LearnError::InvalidInput(format!("point {p}: non-finite position or value")));
+        }
+        let corners = grid.corners(*pt).ok_or_else(|| {
+            LearnError::InvalidInput(format!(
+                "point {p} {pt:?} is outside the grid box {:?}..{:?}",
+                grid.origin,
+                grid.upper()
+            ))
+        })?;
+        if force {
+            for (g, w) in corners {
+                for c in 0..CHANNELS {
+                    sum[c * n + g] += w * v[c];
+                }
+            }
+        } else {
+            let (g, _) = corners.into_iter().fold((0, f64::NEG_INFINITY), |a, b| if b.1 > a.1 { b } else { a });
+            count[g] += 1;
+            for c in 0..CHANNELS {
+                sum[c * n + g] += v[c];
+            }
+        }
+    }
+    if !force {
+        for (g, &k) in count.iter().enumerate().filter(|(_, &k)| k > 1) {
+            for c in 0..CHANNELS {
+                sum[c * n + g] /= f64::from(k);
+            }
+        }
+    }
+    Ok(sum.into_iter().map(|x| x as f32).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid() -> Grid {
+        Grid::new([0.0, -1.0, 2.0], [0.5, 0.25, 1.0], [4, 5, 3]).unwrap()
+    }
+
+    #[test]
+    fn point_forces_keep_their_sum_and_their_moment() {
+        let g = grid();
+        let points = [[0.3, -0.6, 2.2], [1.49, 0.0, 3.9], [0.0, -1.0, 2.0]];
+        let forces = [[1.0, -2.0, 0.5], [0.25, 0.0, -3.0], [2.0, 1.0, 1.0]];
+        let field = encode_points(&g, &points, &forces, true).unwrap();
+        let n = g.num_nodes();
+        let nodes = g.nodes();
+        for c in 0..3 {
+            let total: f64 = (0..n).map(|i| f64::from(field[c * n + i])).sum();
+            let want: f64 = forces.iter().map(|f| f[c]).sum();
+            assert!((total - want).abs() < 1e-5, "channel {c}: {total} vs {want}");
+            // First moment Σ x_d f_c: trilinear spreading is exact for linear functions.
+            for d in 0..3 {
+                let m: f64 = (0..n).map(|i| nodes[i][d] * f64::from(field[c * n + i])).sum();
+                let want: f64 = points.iter().zip(&forces).map(|(p, f)| p[d] * f[c]).sum();
+                assert!((m - want).abs() < 1e-5, "moment x{d} f{c}: {m} vs {want}");
+            }
+        }
+    }
+
+    #[test]
+    fn displacements_go_to_the_nearest_node_and_are_averaged() {
+        let g = grid();
+        let near = g.node(1, 2, 1);
+        let points = [[near[0] + 0.1, near[1], near[2]], [near[0], near[1] - 0.05, near[2] + 0.2], g.node(3, 4, 2)];
+        let values = [[1.0, 2.0, 3.0], [3.0, 0.0, -1.0], [0.5, 0.5, 0.5]];
+        let field = encode_points(&g, &points, &values, false).unwrap();
+        let n = g.num_nodes();
+        let (a, b) = (g.node_index(1, 2, 1), g.node_index(3, 4, 2));
+        for c in 0..3 {
+            assert_eq!(field[c * n + a], ((values[0][c] + values[1][c]) / 2.0) as f32);
+            assert_eq!(field[c * n + b], values[2][c] as f32);
+        }
+        assert_eq!(field.iter().filter(|v| **v != 0.0).count(), 6, "only the two nodes are written");
+    }
+
+    #[test]
+    fn points_outside_the_grid_and_bad_values_are_errors() {
+        let g = grid();
+        let e = encode_points(&g, &[[0.0, 0.0, 5.0]], &[[1.0, 0.0, 0.0]], true).unwrap_err().to_string();
+        assert!(e.contains("point 0") && e.contains("outside"), "{e}");
+        let e = encode_points(&g, &[[0.1, 0.0, 2.5]], &[[f64::NAN, 0.0, 0.0]], false).unwrap_err().to_string();
+        assert!(e.contains("non-finite"), "{e}");
+        assert!(encode_points(&g, &[[0.1, 0.0, 2.5]], &[], false).is_err());
     }
 }

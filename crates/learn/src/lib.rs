@@ -46,7 +46,7 @@ pub use dataset::{
     Samples, ShardInfo, Statistics,
 };
 pub use error::LearnError;
-pub use grid::{GridShape, CHANNELS, LAYOUT};
+pub use grid::{encode_points, GridPlacement, GridShape, CHANNELS, LAYOUT};
 pub use inference::InferenceNet;
 pub use metrics::{ErrorStats, EvalReport};
 pub use predict::{evaluate, time_prediction, Predictor, Timing};

@@ -42,6 +42,15 @@ impl NpyArray {
         }
     }
 
+    /// The values as f64 (f32 and u8 values converted exactly).
+    pub fn into_f64(self) -> Vec<f64> {
+        match self.data {
+            NpyData::F32(v) => v.into_iter().map(f64::from).collect(),
+            NpyData::F64(v) => v,
+            NpyData::U8(v) => v.into_iter().map(f64::from).collect(),
+        }
+    }
+
     /// The values as u8 (float values must be exactly 0 or 1, as for a mask).
     pub fn into_mask(self, path: &Path) -> Result<Vec<u8>> {
         let bad = |x: f64| LearnError::Npy {

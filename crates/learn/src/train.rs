@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use crate::corrupt::{item_rng, splitmix64, Corruption};
 use crate::dataset::{Normalization, Samples};
 use crate::fsutil::{read, write_atomic};
-use crate::grid::CHANNELS;
+use crate::grid::{GridPlacement, CHANNELS};
 use crate::metrics::{masked_mse, ErrorStats};
 use crate::plot::plot_learning_curve;
 use crate::predict::evaluate_net;
@@ -148,12 +148,15 @@ pub struct TrainOptions {
     /// Stop after this iteration as if interrupted (checkpoint written, no model file); a later
     /// run with `resume` continues. For time-sliced training and tests.
     pub stop_after: Option<usize>,
+    /// Where the training grid lies in space (e.g. [`Manifest::placement`](crate::Manifest::placement)), recorded in the
+    /// model for point-cloud prediction.
+    pub placement: Option<GridPlacement>,
 }
 
 impl TrainOptions {
-    /// Options writing to `out_dir`, resuming if possible, without progress bar.
+    /// Options writing to `out_dir`, resuming if possible, without progress bar or placement.
     pub fn new(out_dir: impl Into<PathBuf>) -> Self {
-        TrainOptions { out_dir: out_dir.into(), resume: true, progress: false, stop_after: None }
+        TrainOptions { out_dir: out_dir.into(), resume: true, progress: false, stop_after: None, placement: None }
     }
 }
 
@@ -597,6 +600,7 @@ pub fn train(
         config: start.config,
         normalization: start.normalization,
         grid: train.grid,
+        placement: options.placement,
         input_unit: start.input_unit,
         target_unit: start.target_unit,
         training: Some(TrainingInfo {

@@ -30,7 +30,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::dataset::Normalization;
 use crate::fsutil::{read, write_atomic};
-use crate::grid::{GridShape, CHANNELS, LAYOUT};
+use crate::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::inference::{Block, InferenceNet, Packed};
 use crate::{LearnError, Result};
 
@@ -362,6 +362,8 @@ struct ModelFile {
     unet: UNetConfig,
     normalization: Normalization,
     grid: GridShape,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    placement: Option<GridPlacement>,
     input_unit: String,
     target_unit: String,
     weights: String,
@@ -381,6 +383,8 @@ pub struct TrainedModel {
     pub normalization: Normalization,
     /// Grid of the training data (prediction inputs must be on it).
     pub grid: GridShape,
+    /// Where that grid lies in space, when known (needed to map point clouds onto it).
+    pub placement: Option<GridPlacement>,
     /// Input unit ("N" or "m").
     pub input_unit: String,
     /// Target unit ("m").
@@ -408,6 +412,7 @@ impl TrainedModel {
             unet: self.config.clone(),
             normalization: self.normalization,
             grid: self.grid,
+            placement: self.placement,
             input_unit: self.input_unit.clone(),
             target_unit: self.target_unit.clone(),
             weights: weights_name,
@@ -438,6 +443,7 @@ impl TrainedModel {
             config: file.unet,
             normalization: file.normalization,
             grid: file.grid,
+            placement: file.placement,
             input_unit: file.input_unit,
             target_unit: file.target_unit,
             training: file.training,

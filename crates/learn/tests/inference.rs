@@ -25,9 +25,13 @@ fn trained_a_little(config: &UNetConfig, grid: [usize; 3]) -> UNet {
 
 #[test]
 fn inference_network_matches_the_burn_forward_pass() {
-    for (base_channels, depth, kernel_size, grid) in
-        [(4, 3, 3, [21, 23, 21]), (3, 2, 3, [5, 6, 7]), (2, 1, 5, [7, 4, 6]), (3, 0, 3, [4, 5, 3]), (2, 2, 1, [8, 8, 8])]
-    {
+    for (base_channels, depth, kernel_size, grid) in [
+        (4, 3, 3, [21, 23, 21]),
+        (3, 2, 3, [5, 6, 7]),
+        (2, 1, 5, [7, 4, 6]),
+        (3, 0, 3, [4, 5, 3]),
+        (2, 2, 1, [8, 8, 8]),
+    ] {
         let config = UNetConfig { base_channels, depth, kernel_size, ..UNetConfig::default() };
         let net = trained_a_little(&config, grid);
         let biases: f32 = net

@@ -6,8 +6,8 @@ mod common;
 use augsim_learn::metrics::{masked_mse_values, mean_euclidean_error};
 use augsim_learn::train::{CHECKPOINT_FILE, CURVE_CSV, CURVE_PNG, MODEL_FILE};
 use augsim_learn::{
-    evaluate, inference_device, time_prediction, train, Predictor, Corruption, GridShape, Initialization, Normalization, Samples,
-    Sparsity, TrainConfig, TrainOptions, TrainedModel, UNet, UNetConfig,
+    evaluate, inference_device, time_prediction, train, Corruption, GridShape, Initialization, Normalization,
+    Predictor, Samples, Sparsity, TrainConfig, TrainOptions, TrainedModel, UNet, UNetConfig,
 };
 use common::synthetic_samples;
 
@@ -58,6 +58,7 @@ fn tiny_unet_overfits_a_handful_of_samples() {
         config: unet.clone(),
         normalization: *normalization,
         grid: grid(),
+        placement: None,
         input_unit: "N".into(),
         target_unit: "m".into(),
         training: None,

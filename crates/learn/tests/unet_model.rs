@@ -2,7 +2,7 @@
 
 mod common;
 
-use augsim_learn::{inference_device, GridShape, Normalization, TrainedModel, UNet, UNetConfig};
+use augsim_learn::{inference_device, GridPlacement, GridShape, Normalization, TrainedModel, UNet, UNetConfig};
 use burn::tensor::{Distribution, Tensor};
 
 fn tiny(depth: usize) -> UNetConfig {
@@ -68,6 +68,7 @@ fn save_then_load_gives_identical_predictions() {
         config: config.clone(),
         normalization: Normalization { input_scale: 2.5, target_scale: 0.01 },
         grid,
+        placement: Some(GridPlacement { origin: [-0.1, 0.0, 0.25], spacing: [0.01, 0.02, 0.015] }),
         input_unit: "N".into(),
         target_unit: "m".into(),
         training: None,
@@ -80,6 +81,7 @@ fn save_then_load_gives_identical_predictions() {
     assert_eq!(loaded.config, config);
     assert_eq!(loaded.normalization, model.normalization);
     assert_eq!(loaded.grid, grid);
+    assert_eq!(loaded.placement, model.placement);
     let input = common::synthetic_sample(grid, 0).input;
     let a = model.predict(&input).unwrap();
     let b = loaded.predict(&input).unwrap();

@@ -106,6 +106,29 @@ impl Grid {
         self.node(self.dims[0] - 1, self.dims[1] - 1, self.dims[2] - 1)
     }
 
+    /// The 8 corner nodes (grid node indices) of the grid cell holding `p` and their trilinear
+    /// weights (summing to 1), or `None` when `p` is outside the grid box.
+    pub fn corners(&self, p: Point) -> Option<[(usize, f64); 8]> {
+        let mut base = [0usize; 3];
+        let mut t = [0.0f64; 3];
+        for d in 0..3 {
+            let f = (p[d] - self.origin[d]) / self.spacing[d];
+            let last = (self.dims[d] - 1) as f64;
+            let tol = 1e-9 * last.max(1.0);
+            if !(f >= -tol && f <= last + tol) {
+                return None;
+            }
+            let f = f.clamp(0.0, last);
+            base[d] = (f.floor() as usize).min(self.dims[d] - 2);
+            t[d] = f - base[d] as f64;
+        }
+        Some(std::array::from_fn(|corner| {
+            let o = [corner & 1, corner >> 1 & 1, corner >> 2 & 1];
+            let w: f64 = (0..3).map(|d| if o[d] == 1 { t[d] } else { 1.0 - t[d] }).product();
+            (self.node_index(base[0] + o[0], base[1] + o[1], base[2] + o[2]), w)
+        }))
+    }
+
     /// Trilinear interpolation of a [channel, x, y, z] field with `channels`
     /// channels at `points`; the result is point-major (`out[p·C + c]`). A
     /// point outside the grid box is an error naming it.
@@ -118,36 +141,18 @@ impl Grid {
                 self.num_nodes()
             )));
         }
+        let n = self.num_nodes();
         let mut out = vec![0.0; points.len() * channels];
         for (p, pt) in points.iter().enumerate() {
-            let mut base = [0usize; 3];
-            let mut t = [0.0f64; 3];
-            for d in 0..3 {
-                let f = (pt[d] - self.origin[d]) / self.spacing[d];
-                let last = (self.dims[d] - 1) as f64;
-                let tol = 1e-9 * last.max(1.0);
-                if !(f >= -tol && f <= last + tol) {
-                    return Err(MeshError::Invalid(format!(
-                        "point {p} {pt:?} is outside the grid box {:?}..{:?}",
-                        self.origin,
-                        self.upper()
-                    )));
-                }
-                let f = f.clamp(0.0, last);
-                let b = (f.floor() as usize).min(self.dims[d] - 2);
-                base[d] = b;
-                t[d] = f - b as f64;
-            }
+            let corners = self.corners(*pt).ok_or_else(|| {
+                MeshError::Invalid(format!(
+                    "point {p} {pt:?} is outside the grid box {:?}..{:?}",
+                    self.origin,
+                    self.upper()
+                ))
+            })?;
             for c in 0..channels {
-                let mut v = 0.0;
-                for corner in 0..8usize {
-                    let o = [corner & 1, corner >> 1 & 1, corner >> 2 & 1];
-                    let w: f64 = (0..3).map(|d| if o[d] == 1 { t[d] } else { 1.0 - t[d] }).product();
-                    if w != 0.0 {
-                        v += w * field[self.tensor_index(c, base[0] + o[0], base[1] + o[1], base[2] + o[2])];
-                    }
-                }
-                out[p * channels + c] = v;
+                out[p * channels + c] = corners.iter().map(|&(g, w)| w * field[c * n + g]).sum();
             }
         }
         Ok(out)

@@ -1,0 +1,98 @@
+//! End to end through the command line: generate a tiny liver dataset, train a tiny network,
+//! then predict from a point cloud of forces and interpolate the result to the organ mesh.
+
+use std::path::Path;
+use std::process::Command;
+
+fn augsim(args: &[&str], dir: &Path) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_augsim")).args(args).current_dir(dir).output().unwrap();
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "augsim {args:?} failed:\n{text}");
+    text
+}
+
+fn augsim_err(args: &[&str], dir: &Path) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_augsim")).args(args).current_dir(dir).output().unwrap();
+    assert!(!out.status.success(), "augsim {args:?} should fail");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn point_cloud_prediction_through_the_cli() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("tiny.toml"),
+        r#"
+name = "tiny"
+[mesh.phantom]
+tets = 800
+[material]
+law = "svk"
+young = 5000.0
+poisson = 0.45
+[dataset]
+samples = 6
+seed = 3
+shard_size = 3
+grid = [9, 10, 9]
+fixed = [{ region = "fixed" }]
+input = "force"
+[dataset.load.patch_force]
+radius = 0.03
+magnitude = [0.05, 0.2]
+"#,
+    )
+    .unwrap();
+    augsim(&["generate", "tiny.toml", "--out", "data"], d);
+    augsim(&["mesh", "--tets", "800", "-o", "organ.vtu"], d);
+    let text = augsim(
+        &[
+            "train",
+            "data",
+            "--out",
+            "net",
+            "--iterations",
+            "6",
+            "--channels",
+            "2",
+            "--depth",
+            "1",
+            "--test-samples",
+            "2",
+        ],
+        d,
+    );
+    assert!(text.contains("best"), "{text}");
+
+    // Two point forces inside the organ's bounding box, one on a grid-cell corner.
+    let model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("net/model.json")).unwrap()).unwrap();
+    let origin: Vec<f64> = serde_json::from_value(model["placement"]["origin"].clone()).unwrap();
+    let spacing: Vec<f64> = serde_json::from_value(model["placement"]["spacing"].clone()).unwrap();
+    let p =
+        |i: f64, j: f64, k: f64| [origin[0] + i * spacing[0], origin[1] + j * spacing[1], origin[2] + k * spacing[2]];
+    let (a, b) = (p(4.0, 5.0, 4.0), p(3.5, 2.25, 6.0));
+    std::fs::write(
+        d.join("cloud.csv"),
+        format!("x,y,z,fx,fy,fz\n{},{},{},0,0,-0.1\n{},{},{},0.05,0,0\n", a[0], a[1], a[2], b[0], b[1], b[2]),
+    )
+    .unwrap();
+    let text =
+        augsim(&["predict", "net/model.json", "cloud.csv", "-o", "pred.npy", "--mesh", "organ.vtu", "--runs", "2"], d);
+    assert!(text.contains("points     2"), "{text}");
+    assert!(text.contains("prediction 2 runs"), "{text}");
+    assert!(d.join("pred.npy").exists() && d.join("pred.vtu").exists());
+    let (organ, fields) = mesh::io::read_mesh_with_fields(d.join("pred.vtu")).unwrap();
+    let u = fields.iter().find(|f| f.name == "displacement").expect("displacement field");
+    assert_eq!(u.values.len(), 3 * organ.num_nodes());
+    assert!(u.values.iter().all(|v| v.is_finite()) && u.values.iter().any(|v| *v != 0.0));
+
+    // A point outside the grid, a malformed line and a grid tensor of the wrong shape.
+    std::fs::write(d.join("far.csv"), "5,5,5,0,0,1\n").unwrap();
+    let e = augsim_err(&["predict", "net/model.json", "far.csv"], d);
+    assert!(e.contains("outside the grid box"), "{e}");
+    std::fs::write(d.join("bad.csv"), "x,y,z,fx,fy,fz\n0,0,0,1,2\n").unwrap();
+    let e = augsim_err(&["predict", "net/model.json", "bad.csv"], d);
+    assert!(e.contains("bad.csv:2") && e.contains("expected 6"), "{e}");
+}
