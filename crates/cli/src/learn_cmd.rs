@@ -250,12 +250,32 @@ pub fn eval(model_path: &Path, dataset_dir: &Path, split: &SplitArgs, out: &Path
     if test.is_empty() {
         bail!("the test split is empty");
     }
-    let report = learn::evaluate(&model, &test, &split.corruption(), 0)?;
+    let markers = dataset.manifest().markers();
+    let placement = dataset.manifest().placement();
+    let (report, tre) = match placement {
+        Some(placement) if !markers.is_empty() => {
+            let grid = placement.grid(model.grid)?;
+            let (report, tre) = learn::evaluate_at_points(&model, &test, &split.corruption(), 0, &grid, &markers)?;
+            (report, Some(tre))
+        }
+        _ => (learn::evaluate(&model, &test, &split.corruption(), 0)?, None),
+    };
     let s = &report.stats;
     println!("samples    {}", test.len());
     println!("mean e     {:.4e} m ({:.3} mm)", s.mean, s.mean * 1e3);
     println!("std e      {:.4e} m ({:.3} mm)", s.std, s.std * 1e3);
     println!("max e      {:.4e} m ({:.3} mm), sample index {}", s.max, s.max * 1e3, report.worst_index());
+    if let Some(t) = &tre {
+        println!(
+            "TRE        {} markers: mean {:.3} mm, std {:.3} mm, max {:.3} mm (no-motion baseline: mean {:.3} mm, max {:.3} mm)",
+            markers.len(),
+            t.errors.mean * 1e3,
+            t.errors.std * 1e3,
+            t.errors.max * 1e3,
+            t.no_motion.mean * 1e3,
+            t.no_motion.max * 1e3
+        );
+    }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut csv = String::from("index,error_m\n");
     for (i, e) in report.indices.iter().zip(&report.errors) {
@@ -265,7 +285,7 @@ pub fn eval(model_path: &Path, dataset_dir: &Path, split: &SplitArgs, out: &Path
     let summary = serde_json::json!({
         "model": model_path, "dataset": dataset_dir, "samples": test.len(),
         "mean_m": s.mean, "std_m": s.std, "max_m": s.max, "worst_index": report.worst_index(),
-        "corruption": split.corruption(),
+        "corruption": split.corruption(), "marker_errors": tre,
     });
     write_atomic(&out.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
     let worst = test.get(s.worst);

@@ -23,6 +23,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::fsutil::write_atomic;
+use mesh::Point;
+
 use crate::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::npy;
 use crate::{LearnError, Result};
@@ -289,6 +291,12 @@ impl Manifest {
     pub fn placement(&self) -> Option<GridPlacement> {
         let get = |key: &str| serde_json::from_value::<[f64; 3]>(self.metadata.get(key)?.clone()).ok();
         Some(GridPlacement { origin: get("grid_origin")?, spacing: get("grid_spacing")? })
+    }
+
+    /// Internal marker positions recorded by the generator (`markers` in the metadata: the
+    /// mesh's "markers" region); empty when there are none.
+    pub fn markers(&self) -> Vec<Point> {
+        self.metadata.get("markers").and_then(|m| serde_json::from_value(m.clone()).ok()).unwrap_or_default()
     }
 
     fn new(spec: &DatasetSpec) -> Self {

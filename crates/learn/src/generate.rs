@@ -382,6 +382,7 @@ impl Generator {
                 "mesh_cells": self.mesh.cells.len(),
                 "grid_origin": self.placement.origin,
                 "grid_spacing": self.placement.spacing,
+                "markers": self.mesh.regions.get("markers").map(|m| m.iter().map(|&n| self.mesh.nodes[n]).collect::<Vec<_>>()),
             }),
         };
         let mut writer = DatasetWriter::create_or_resume(dir, spec)?;

@@ -555,7 +555,8 @@ pub fn train(
                 None
             } else {
                 let fast = snapshot.to_inference()?;
-                let report = evaluate_net(&fast, &start.normalization, val, &config.val_corruption, config.seed)?;
+                let report =
+                    evaluate_net(&fast, &start.normalization, val, &config.val_corruption, config.seed, |_, _| Ok(()))?;
                 Some(report.stats)
             };
             state.curve.push(CurveRow {

@@ -6,10 +6,11 @@ mod common;
 use augsim_learn::metrics::{masked_mse_values, mean_euclidean_error};
 use augsim_learn::train::{CHECKPOINT_FILE, CURVE_CSV, CURVE_PNG, MODEL_FILE};
 use augsim_learn::{
-    evaluate, inference_device, time_prediction, train, Corruption, GridShape, Initialization, Normalization,
-    Predictor, Samples, Sparsity, TrainConfig, TrainOptions, TrainedModel, UNet, UNetConfig,
+    evaluate, evaluate_at_points, inference_device, time_prediction, train, Corruption, GridShape, Initialization,
+    Normalization, Predictor, Samples, Sparsity, TrainConfig, TrainOptions, TrainedModel, UNet, UNetConfig,
 };
 use common::synthetic_samples;
+use mesh::embedding::Grid;
 
 fn grid() -> GridShape {
     GridShape::new(8, 8, 8)
@@ -91,6 +92,32 @@ fn tiny_unet_overfits_a_handful_of_samples() {
     assert_eq!(report.errors[report.stats.worst], worst);
     assert_eq!(report.worst_index(), data.indices[report.stats.worst]);
     assert!(report.to_string().contains(&format!("sample index {}", report.worst_index())));
+
+    // Errors at points: at a grid node they are the nodal errors; half-way between two nodes
+    // the fields are averaged.
+    let g = grid();
+    let placed = Grid::new([0.1, -0.2, 0.3], [0.5, 0.25, 0.75], g.dims()).unwrap();
+    let (a, b) = (placed.node(1, 2, 1), placed.node(2, 2, 1));
+    let mid = [0.5 * (a[0] + b[0]), a[1], a[2]];
+    let (same, at) = evaluate_at_points(&out.model, &data, &Corruption::none(), 0, &placed, &[a, mid]).unwrap();
+    assert_eq!(same.errors, report.errors);
+    let n = g.nodes();
+    let value = |field: &[f32], node: usize| -> [f64; 3] { std::array::from_fn(|c| f64::from(field[c * n + node])) };
+    let dist =
+        |u: [f64; 3], v: [f64; 3]| ((u[0] - v[0]).powi(2) + (u[1] - v[1]).powi(2) + (u[2] - v[2]).powi(2)).sqrt();
+    let (na, nb) = (g.node_index(1, 2, 1), g.node_index(2, 2, 1));
+    let (mut at_a, mut at_mid, mut still) = (0.0, 0.0, 0.0f64);
+    for p in 0..data.len() {
+        let (pred, target) = (out.model.predict(data.input(p)).unwrap(), data.target(p));
+        at_a += dist(value(&pred, na), value(target, na)) / data.len() as f64;
+        let avg = |f: &[f32]| -> [f64; 3] { std::array::from_fn(|c| 0.5 * (value(f, na)[c] + value(f, nb)[c])) };
+        at_mid += dist(avg(&pred), avg(target)) / data.len() as f64;
+        still = still.max(dist(value(target, na), [0.0; 3])).max(dist(avg(target), [0.0; 3]));
+    }
+    assert!((at.per_point_mean[0] - at_a).abs() < 1e-6 * at_a.max(1e-12), "{:?} vs {at_a}", at.per_point_mean);
+    assert!((at.per_point_mean[1] - at_mid).abs() < 1e-6 * at_mid.max(1e-12), "{:?} vs {at_mid}", at.per_point_mean);
+    assert!((at.no_motion.max - still).abs() < 1e-6 * still);
+    assert!(evaluate_at_points(&out.model, &data, &Corruption::none(), 0, &placed, &[[9.0, 9.0, 9.0]]).is_err());
 
     let timing = time_prediction(&Predictor::new(&out.model).unwrap(), data.input(0), 1, 3).unwrap();
     assert!(timing.min <= timing.median && timing.median <= timing.max && timing.runs == 3);
