@@ -1,5 +1,5 @@
 //! `augsim bench`: median static-solve times, split into assembly,
-//! factorisation and triangular solves.
+//! factorisation and triangular solves; single-sample U-Net prediction times.
 
 use anyhow::Result;
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
@@ -58,7 +58,7 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// Runs every case `runs` times and prints medians.
+/// Runs every case `runs` times and prints medians: static solves, then U-Net prediction.
 pub fn run(runs: usize) -> Result<()> {
     let runs = runs.max(1);
     println!("Static solves from rest. 'first': a new solver's first solve (symbolic analysis excluded);");
@@ -109,6 +109,42 @@ pub fn run(runs: usize) -> Result<()> {
             fem::post::max_displacement(&last.u),
             frame_ms,
             frame_iterations
+        );
+    }
+    unet_prediction(runs)
+}
+
+/// Single-sample U-Net prediction on the scenario-1 liver grid (the path of `augsim predict`:
+/// normalisation, repacked CPU network, copy back), for two network sizes. The weights are
+/// random: the time does not depend on their values.
+fn unet_prediction(runs: usize) -> Result<()> {
+    println!();
+    println!("U-Net prediction, one sample on the liver grid 21x23x21, depth 3, after 3 warm-up runs:");
+    println!("{:<30} {:>10} {:>10} {:>10} {:>10}", "first-layer channels", "params", "median ms", "min ms", "max ms");
+    let grid = learn::GridShape::new(21, 23, 21);
+    let input: Vec<f32> = (0..grid.field_len()).map(|i| ((i * 7919) % 2001) as f32 * 1e-3 - 1.0).collect();
+    for base_channels in [8, 16] {
+        let config = learn::UNetConfig { base_channels, ..learn::UNetConfig::default() };
+        let net = learn::UNet::new(&config, &learn::inference_device(), 0)?;
+        let params: usize = net.named_parameters().iter().map(|(_, v)| v.len()).sum();
+        let model = learn::TrainedModel {
+            config,
+            normalization: learn::Normalization { input_scale: 1.0, target_scale: 1.0 },
+            grid,
+            placement: None,
+            input_unit: "N".into(),
+            target_unit: "m".into(),
+            training: None,
+            net,
+        };
+        let t = learn::time_prediction(&learn::Predictor::new(&model)?, &input, 3, runs)?;
+        println!(
+            "{:<30} {:>10} {:>10.2} {:>10.2} {:>10.2}",
+            base_channels,
+            params,
+            t.median * 1e3,
+            t.min * 1e3,
+            t.max * 1e3
         );
     }
     Ok(())
