@@ -289,9 +289,10 @@ pub fn eval(model_path: &Path, dataset_dir: &Path, split: &SplitArgs, out: &Path
     });
     write_atomic(&out.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
     let worst = test.get(s.worst);
-    let prediction = model.predict(&worst.input)?;
+    let input = learn::evaluation_input(&test, s.worst, &split.corruption(), 0)?;
+    let prediction = model.predict(&input)?;
     let vtu = out.join("worst.vtu");
-    write_grid_sample(&vtu, dataset.manifest(), &worst.input, &worst.target, &prediction, &worst.mask)?;
+    write_grid_sample(&vtu, dataset.manifest(), &input, &worst.target, &prediction, &worst.mask)?;
     println!(
         "wrote      {}, {}, {}",
         out.join("errors.csv").display(),

@@ -49,7 +49,7 @@ pub use error::LearnError;
 pub use grid::{encode_points, GridPlacement, GridShape, CHANNELS, LAYOUT};
 pub use inference::InferenceNet;
 pub use metrics::{ErrorStats, EvalReport};
-pub use predict::{evaluate, evaluate_at_points, time_prediction, PointErrors, Predictor, Timing};
+pub use predict::{evaluate, evaluate_at_points, evaluation_input, time_prediction, PointErrors, Predictor, Timing};
 pub use train::{train, CurveRow, Initialization, TrainConfig, TrainOptions, TrainOutcome};
 pub use unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
 

@@ -34,10 +34,7 @@ pub(crate) fn evaluate_net(
     let (si, st) = (1.0 / norm.input_scale, norm.target_scale);
     let mut errors = Vec::with_capacity(samples.len());
     for p in 0..samples.len() {
-        let mut input = samples.input(p).to_vec();
-        if !corruption.is_identity() {
-            corruption.apply(&mut input, grid, &mut item_rng(seed, STREAM_EVAL_CORRUPTION, p as u64))?;
-        }
+        let input = evaluation_input(samples, p, corruption, seed)?;
         let x: Vec<f32> = input.iter().map(|v| (f64::from(*v) * si) as f32).collect();
         let pred: Vec<f32> = net.forward(&x, grid)?.iter().map(|v| (f64::from(*v) * st) as f32).collect();
         visit(p, &pred)?;
@@ -47,6 +44,16 @@ pub(crate) fn evaluate_net(
         );
     }
     EvalReport::new(errors, samples.indices.clone())
+}
+
+/// The input evaluation gives the sample at `position`: corrupted with `corruption`, with that
+/// sample's own reproducible draw from `seed`.
+pub fn evaluation_input(samples: &Samples, position: usize, corruption: &Corruption, seed: u64) -> Result<Vec<f32>> {
+    let mut input = samples.input(position).to_vec();
+    if !corruption.is_identity() {
+        corruption.apply(&mut input, samples.grid, &mut item_rng(seed, STREAM_EVAL_CORRUPTION, position as u64))?;
+    }
+    Ok(input)
 }
 
 /// Evaluates `model` on `samples`: per-sample mean Euclidean errors (m), mean, std, max and the

@@ -6,8 +6,9 @@ mod common;
 use augsim_learn::metrics::{masked_mse_values, mean_euclidean_error};
 use augsim_learn::train::{CHECKPOINT_FILE, CURVE_CSV, CURVE_PNG, MODEL_FILE};
 use augsim_learn::{
-    evaluate, evaluate_at_points, inference_device, time_prediction, train, Corruption, GridShape, Initialization,
-    Normalization, Predictor, Samples, Sparsity, TrainConfig, TrainOptions, TrainedModel, UNet, UNetConfig,
+    evaluate, evaluate_at_points, evaluation_input, inference_device, time_prediction, train, Corruption, GridShape,
+    Initialization, Normalization, Predictor, Samples, Sparsity, TrainConfig, TrainOptions, TrainedModel, UNet,
+    UNetConfig,
 };
 use common::synthetic_samples;
 use mesh::embedding::Grid;
@@ -86,6 +87,16 @@ fn tiny_unet_overfits_a_handful_of_samples() {
         let pred = out.model.predict(data.input(p)).unwrap();
         let e = mean_euclidean_error(&pred, data.target(p), data.mask(p), grid()).unwrap();
         assert!((e - report.errors[p]).abs() <= 1e-6 * e.max(1e-9), "{e} vs {}", report.errors[p]);
+    }
+    // With corrupted inputs, the errors are those of the inputs `evaluation_input` gives.
+    let noisy = Corruption { sparsity: None, noise_std: 0.3 };
+    let noisy_report = evaluate(&out.model, &data, &noisy, 5).unwrap();
+    for p in 0..data.len() {
+        let input = evaluation_input(&data, p, &noisy, 5).unwrap();
+        assert_ne!(input, data.input(p));
+        let e =
+            mean_euclidean_error(&out.model.predict(&input).unwrap(), data.target(p), data.mask(p), grid()).unwrap();
+        assert!((e - noisy_report.errors[p]).abs() <= 1e-6 * e.max(1e-9), "{e} vs {}", noisy_report.errors[p]);
     }
     let worst = report.errors.iter().cloned().fold(0.0, f64::max);
     assert_eq!(report.stats.max, worst);
