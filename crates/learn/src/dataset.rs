@@ -20,11 +20,10 @@
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+use mesh::Point;
 use serde::{Deserialize, Serialize};
 
 use crate::fsutil::write_atomic;
-use mesh::Point;
-
 use crate::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::npy;
 use crate::{LearnError, Result};

@@ -148,8 +148,9 @@ pub struct TrainOptions {
     /// Stop after this iteration as if interrupted (checkpoint written, no model file); a later
     /// run with `resume` continues. For time-sliced training and tests.
     pub stop_after: Option<usize>,
-    /// Where the training grid lies in space (e.g. [`Manifest::placement`](crate::Manifest::placement)), recorded in the
-    /// model for point-cloud prediction.
+    /// Where the training grid lies in space (e.g. from
+    /// [`Manifest::placement`](crate::Manifest::placement)), recorded in the model for
+    /// point-cloud prediction.
     pub placement: Option<GridPlacement>,
 }
 
