@@ -313,9 +313,8 @@ fn write_grid_sample(
 ) -> Result<()> {
     let g = manifest.grid;
     let placement = manifest.placement().context("the dataset manifest has no grid_origin/grid_spacing")?;
-    let (origin, spacing) = (placement.origin, placement.spacing);
-    let hi = std::array::from_fn(|d| origin[d] + spacing[d] * ([g.nx, g.ny, g.nz][d] - 1) as f64);
-    let grid_mesh = mesh::box_hex(origin, hi, [g.nx - 1, g.ny - 1, g.nz - 1])?;
+    let grid = placement.grid(g)?;
+    let grid_mesh = mesh::box_hex(grid.origin, grid.upper(), [g.nx - 1, g.ny - 1, g.nz - 1])?;
     // box_hex numbers nodes x fastest; the tensors are z fastest.
     let n = g.nodes();
     let to_points = |field: &[f32]| -> Vec<f64> {
@@ -466,7 +465,7 @@ fn displacement_on_mesh(organ: &mesh::Mesh, grid: &mesh::embedding::Grid, field:
     let n = grid.num_nodes();
     let mut u = vec![0.0; 3 * organ.num_nodes()];
     for (m, p) in organ.nodes.iter().enumerate() {
-        let corners = grid.corners(*p).with_context(|| format!("mesh node {m} {p:?} is outside the model grid"))?;
+        let corners = grid.corners(m, *p).context("a mesh node is outside the model grid")?;
         let kept: f64 = corners.iter().filter(|(g, _)| inside[*g]).map(|(_, w)| w).sum();
         for (g, w) in corners {
             let w = if kept > 1e-12 {

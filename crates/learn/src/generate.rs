@@ -120,8 +120,8 @@ pub struct Generator {
 enum Encoding {
     /// Mesh node n is grid node `node[n]` (flat index i*ny*nz + j*nz + k).
     Lattice(Vec<usize>),
-    /// A tetrahedral mesh embedded in a grid.
-    Embedded { embedding: Embedding, grid: Grid },
+    /// A tetrahedral mesh embedded in a grid (`embedding.grid`).
+    Embedded(Embedding),
 }
 
 fn invalid(msg: impl Into<String>) -> LearnError {
@@ -190,7 +190,7 @@ impl Generator {
         let mut mask = vec![0u8; grid.nodes()];
         match &encoding {
             Encoding::Lattice(node) => node.iter().for_each(|&g| mask[g] = 1),
-            Encoding::Embedded { embedding, .. } => {
+            Encoding::Embedded(embedding) => {
                 embedding.mask().iter().enumerate().filter(|(_, &b)| b).for_each(|(g, _)| mask[g] = 1)
             }
         }
@@ -216,11 +216,6 @@ impl Generator {
         self.grid
     }
 
-    /// Where the grid lies in space.
-    pub fn placement(&self) -> GridPlacement {
-        self.placement
-    }
-
     /// The configuration.
     pub fn config(&self) -> &DatasetConfig {
         &self.config
@@ -244,10 +239,10 @@ impl Generator {
                     }
                 }
             }
-            Encoding::Embedded { embedding, grid } => {
+            Encoding::Embedded(embedding) => {
                 if is_force {
                     let forces: Vec<[f64; 3]> = field.chunks_exact(3).map(|f| [f[0], f[1], f[2]]).collect();
-                    out = encode_points(grid, &self.mesh.nodes, &forces, true)?;
+                    out = encode_points(&embedding.grid, &self.mesh.nodes, &forces, true)?;
                 } else {
                     let grid_field = embedding.map_nodal(field, 3).map_err(|e| invalid(e.to_string()))?;
                     out.iter_mut().zip(&grid_field).for_each(|(o, v)| *o = *v as f32);
@@ -344,11 +339,11 @@ impl Generator {
     fn encode_observed(&self, partial: &[f64], observed: &[usize]) -> Result<Vec<f32>> {
         match &self.encoding {
             Encoding::Lattice(_) => self.encode(partial, false),
-            Encoding::Embedded { grid, .. } => {
+            Encoding::Embedded(embedding) => {
                 let points: Vec<Point> = observed.iter().map(|&m| self.mesh.nodes[m]).collect();
                 let values: Vec<[f64; 3]> =
                     observed.iter().map(|&m| [partial[3 * m], partial[3 * m + 1], partial[3 * m + 2]]).collect();
-                encode_points(grid, &points, &values, false)
+                encode_points(&embedding.grid, &points, &values, false)
             }
         }
     }
@@ -474,6 +469,6 @@ fn embedded_encoding(mesh: &Mesh, dims: [usize; 3]) -> Result<(Encoding, GridSha
     let (lo, hi) = mesh.bounds();
     let grid = Grid::covering(lo, hi, dims).map_err(|e| invalid(e.to_string()))?;
     let placement = GridPlacement { origin: grid.origin, spacing: grid.spacing };
-    let embedding = Embedding::new(mesh, grid.clone()).map_err(|e| invalid(e.to_string()))?;
-    Ok((Encoding::Embedded { embedding, grid }, GridShape::new(dims[0], dims[1], dims[2]), placement))
+    let embedding = Embedding::new(mesh, grid).map_err(|e| invalid(e.to_string()))?;
+    Ok((Encoding::Embedded(embedding), GridShape::new(dims[0], dims[1], dims[2]), placement))
 }

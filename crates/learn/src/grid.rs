@@ -118,13 +118,7 @@ pub fn encode_points(grid: &Grid, points: &[Point], values: &[[f64; 3]], force: 
         if pt.iter().chain(v).any(|x| !x.is_finite()) {
             return Err(LearnError::InvalidInput(format!("point {p}: non-finite position or value")));
         }
-        let corners = grid.corners(*pt).ok_or_else(|| {
-            LearnError::InvalidInput(format!(
-                "point {p} {pt:?} is outside the grid box {:?}..{:?}",
-                grid.origin,
-                grid.upper()
-            ))
-        })?;
+        let corners = grid.corners(p, *pt).map_err(|e| LearnError::InvalidInput(e.to_string()))?;
         if force {
             for (g, w) in corners {
                 for c in 0..CHANNELS {

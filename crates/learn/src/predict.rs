@@ -150,11 +150,6 @@ impl Predictor {
         Ok(Predictor { net: model.net.to_inference()?, normalization: model.normalization, grid: model.grid })
     }
 
-    /// The grid inputs must be on.
-    pub fn grid(&self) -> GridShape {
-        self.grid
-    }
-
     /// Predicts the displacement field (m, `[3, nx, ny, nz]`) for one input field (`[3, nx, ny,
     /// nz]` on the model's grid, in the model's input unit). Values outside the organ are
     /// meaningless; apply the mask.

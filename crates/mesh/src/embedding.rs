@@ -106,9 +106,10 @@ impl Grid {
         self.node(self.dims[0] - 1, self.dims[1] - 1, self.dims[2] - 1)
     }
 
-    /// The 8 corner nodes (grid node indices) of the grid cell holding `p` and their trilinear
-    /// weights (summing to 1), or `None` when `p` is outside the grid box.
-    pub fn corners(&self, p: Point) -> Option<[(usize, f64); 8]> {
+    /// The 8 corner nodes (grid node indices) of the grid cell holding point `p` and their
+    /// trilinear weights (summing to 1); outside the grid box, an error naming point number
+    /// `index` (the caller's numbering).
+    pub fn corners(&self, index: usize, p: Point) -> Result<[(usize, f64); 8], MeshError> {
         let mut base = [0usize; 3];
         let mut t = [0.0f64; 3];
         for d in 0..3 {
@@ -116,13 +117,17 @@ impl Grid {
             let last = (self.dims[d] - 1) as f64;
             let tol = 1e-9 * last.max(1.0);
             if !(f >= -tol && f <= last + tol) {
-                return None;
+                return Err(MeshError::Invalid(format!(
+                    "point {index} {p:?} is outside the grid box {:?}..{:?}",
+                    self.origin,
+                    self.upper()
+                )));
             }
             let f = f.clamp(0.0, last);
             base[d] = (f.floor() as usize).min(self.dims[d] - 2);
             t[d] = f - base[d] as f64;
         }
-        Some(std::array::from_fn(|corner| {
+        Ok(std::array::from_fn(|corner| {
             let o = [corner & 1, corner >> 1 & 1, corner >> 2 & 1];
             let w: f64 = (0..3).map(|d| if o[d] == 1 { t[d] } else { 1.0 - t[d] }).product();
             (self.node_index(base[0] + o[0], base[1] + o[1], base[2] + o[2]), w)
@@ -144,13 +149,7 @@ impl Grid {
         let n = self.num_nodes();
         let mut out = vec![0.0; points.len() * channels];
         for (p, pt) in points.iter().enumerate() {
-            let corners = self.corners(*pt).ok_or_else(|| {
-                MeshError::Invalid(format!(
-                    "point {p} {pt:?} is outside the grid box {:?}..{:?}",
-                    self.origin,
-                    self.upper()
-                ))
-            })?;
+            let corners = self.corners(p, *pt)?;
             for c in 0..channels {
                 out[p * channels + c] = corners.iter().map(|&(g, w)| w * field[c * n + g]).sum();
             }
