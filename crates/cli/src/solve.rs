@@ -33,15 +33,21 @@ pub fn run(path: &Path, output: Option<&Path>) -> Result<()> {
     let p = solver.problem();
     let fields = [
         Field::point("displacement", 3, sol.u.clone()),
-        Field::cell("green_strain", 6, post::green_strain(geo, &sol.u)),
-        Field::cell("von_mises", 1, post::von_mises(geo, &p.material, &sol.u)),
+        Field::cell("green_strain", 6, post::green_strain(geo, &p.material, &sol.u)?),
+        Field::cell("von_mises", 1, post::von_mises(geo, &p.material, &sol.u)?),
     ];
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     mesh::io::write_mesh(&out, &p.mesh, &fields).with_context(|| format!("writing {}", out.display()))?;
     let t = sol.timings;
-    println!("material   {:?}, E = {} Pa, nu = {}", p.material.law, p.material.young, p.material.poisson);
+    println!(
+        "material   {:?} ({:?} elements), E = {} Pa, nu = {}",
+        p.material.law,
+        geo.formulation,
+        p.material.young,
+        p.material.poisson
+    );
     println!("system     {} dofs, {} free, {} stored non-zeros", p.num_dofs(), free, nnz);
     println!(
         "newton     {} iterations in {} load step(s), final relative residual {:.2e}",

@@ -14,7 +14,7 @@ use crate::FemError;
 /// Marks a dof that is constrained, or a matrix entry that is not stored.
 const NONE: u32 = u32::MAX;
 
-/// Sparse pattern of the free-dof tangent and the element → value scatter map.
+/// Sparse pattern of the free-dof tangent and the patch → value scatter map.
 #[derive(Clone, Debug)]
 pub struct Pattern {
     /// For each global dof, its free index or `u32::MAX` when constrained.
@@ -27,15 +27,15 @@ pub struct Pattern {
     pub row_idx: Vec<u32>,
     /// Position of each free dof's diagonal entry in the value array.
     pub diag: Vec<u32>,
-    /// For element e and local pair (p, q), the value position, or `u32::MAX`:
-    /// index `e * ndof² + p * ndof + q`.
+    /// For patch p and local pair (r, c), the value position, or `u32::MAX`:
+    /// index `matrix_ptr[p] + r * ndof_p + c`.
     scatter: Vec<u32>,
-    /// Local dofs per element.
-    ndof: usize,
+    /// Start of each patch's dense tangent in the concatenation of all of them.
+    matrix_ptr: Vec<usize>,
 }
 
 impl Pattern {
-    /// Builds the pattern for the given elements and constrained global dofs.
+    /// Builds the pattern for the geometry's patches and constrained global dofs.
     pub fn new(geometry: &ElementGeometry, num_dofs: usize, constrained: &[bool]) -> Result<Self, FemError> {
         let mut free_index = vec![NONE; num_dofs];
         let mut num_free = 0usize;
@@ -48,23 +48,17 @@ impl Pattern {
         if num_free == 0 {
             return Err(FemError::Invalid("every degree of freedom is constrained: nothing to solve".into()));
         }
-        let npe = geometry.nodes_per_element;
-        let ndof = 3 * npe;
-        let local_free = |e: usize| -> Vec<u32> {
-            geometry
-                .element_nodes(e)
-                .iter()
-                .flat_map(|&n| (0..3).map(move |i| 3 * n + i))
-                .map(|d| free_index[d])
-                .collect()
+        let patches = &geometry.patches;
+        let local_free = |p: usize| -> Vec<u32> {
+            patches.nodes(p).iter().flat_map(|&n| (0..3).map(move |i| 3 * n + i)).map(|d| free_index[d]).collect()
         };
         // Column lists of the lower triangle.
         let mut cols: Vec<Vec<u32>> = vec![Vec::new(); num_free];
         for (c, col) in cols.iter_mut().enumerate() {
             col.push(c as u32);
         }
-        for e in 0..geometry.len() {
-            let dofs = local_free(e);
+        for p in 0..patches.len() {
+            let dofs = local_free(p);
             for &r in &dofs {
                 for &c in &dofs {
                     if r != NONE && c != NONE && r > c {
@@ -87,19 +81,25 @@ impl Pattern {
             lo as u32 + row_idx[lo..hi].binary_search(&r).expect("entry in pattern") as u32
         };
         let diag = (0..num_free as u32).map(|c| position(c, c)).collect();
-        let mut scatter = vec![NONE; geometry.len() * ndof * ndof];
-        for e in 0..geometry.len() {
-            let dofs = local_free(e);
-            for p in 0..ndof {
-                for q in 0..ndof {
-                    let (r, c) = (dofs[p], dofs[q]);
-                    if r != NONE && c != NONE && r >= c {
-                        scatter[(e * ndof + p) * ndof + q] = position(r, c);
+        let mut matrix_ptr = vec![0usize];
+        for p in 0..patches.len() {
+            let nd = 3 * patches.nodes(p).len();
+            matrix_ptr.push(matrix_ptr[p] + nd * nd);
+        }
+        let mut scatter = vec![NONE; matrix_ptr[patches.len()]];
+        for p in 0..patches.len() {
+            let dofs = local_free(p);
+            let nd = dofs.len();
+            for r in 0..nd {
+                for c in 0..nd {
+                    let (gr, gc) = (dofs[r], dofs[c]);
+                    if gr != NONE && gc != NONE && gr >= gc {
+                        scatter[matrix_ptr[p] + r * nd + c] = position(gr, gc);
                     }
                 }
             }
         }
-        Ok(Pattern { free_index, num_free, col_ptr, row_idx, diag, scatter, ndof })
+        Ok(Pattern { free_index, num_free, col_ptr, row_idx, diag, scatter, matrix_ptr })
     }
 
     /// Number of stored (lower-triangle) entries.
@@ -108,16 +108,19 @@ impl Pattern {
     }
 }
 
-/// Reusable buffers for element results.
+/// Reusable buffers for patch results.
 #[derive(Debug, Default)]
 pub struct Workspace {
     forces: Vec<f64>,
     stiffness: Vec<f64>,
 }
 
+/// Patches evaluated per parallel task.
+const CHUNK: usize = 64;
+
 /// Internal force over all dofs (`f_int`, length 3n) and, when `values` is
-/// given, the free-dof tangent values in the pattern's order. Elements are
-/// evaluated in parallel; their contributions are summed in element order,
+/// given, the free-dof tangent values in the pattern's order. Patches are
+/// evaluated in parallel; their contributions are summed in patch order,
 /// so the result does not depend on the number of threads.
 pub fn assemble(
     geometry: &ElementGeometry,
@@ -128,33 +131,46 @@ pub fn assemble(
     values: Option<&mut [f64]>,
     work: &mut Workspace,
 ) -> Result<(), FemError> {
-    let ne = geometry.len();
-    let ndof = pattern.ndof;
+    let patches = &geometry.patches;
+    let np = patches.len();
     let want_k = values.is_some();
-    work.forces.resize(ne * ndof, 0.0);
-    work.stiffness.resize(if want_k { ne * ndof * ndof } else { 0 }, 0.0);
-    let chunk = 64;
-    let run = |c: usize, fc: &mut [f64], mut kc: Option<&mut [f64]>| {
-        for (i, fe) in fc.chunks_mut(ndof).enumerate() {
-            let ke = kc.as_deref_mut().map(|k| &mut k[i * ndof * ndof..(i + 1) * ndof * ndof]);
-            geometry.force_tangent(c * chunk + i, material, u, fe, ke)?;
+    work.forces.resize(3 * patches.node_offset(np), 0.0);
+    work.stiffness.resize(if want_k { pattern.matrix_ptr[np] } else { 0 }, 0.0);
+    // Split the buffers into one (forces, stiffness) pair of slices per chunk of patches.
+    let mut tasks = Vec::with_capacity(np.div_ceil(CHUNK));
+    let (mut forces, mut stiffness) = (work.forces.as_mut_slice(), work.stiffness.as_mut_slice());
+    for first in (0..np).step_by(CHUNK) {
+        let last = (first + CHUNK).min(np);
+        let (fc, rest) = forces.split_at_mut(3 * (patches.node_offset(last) - patches.node_offset(first)));
+        forces = rest;
+        let kc = if want_k {
+            let (kc, rest) = stiffness.split_at_mut(pattern.matrix_ptr[last] - pattern.matrix_ptr[first]);
+            stiffness = rest;
+            Some(kc)
+        } else {
+            None
+        };
+        tasks.push((first, last, fc, kc));
+    }
+    tasks.into_par_iter().try_for_each(|(first, last, fc, mut kc)| {
+        let mut scratch = Vec::new();
+        let (mut fo, mut ko) = (0, 0);
+        for p in first..last {
+            let nd = 3 * patches.nodes(p).len();
+            let fe = &mut fc[fo..fo + nd];
+            let ke = kc.as_deref_mut().map(|k| &mut k[ko..ko + nd * nd]);
+            geometry.patch_force_tangent(p, material, u, fe, ke, &mut scratch)?;
+            fo += nd;
+            ko += nd * nd;
         }
         Ok::<(), FemError>(())
-    };
-    if want_k {
-        work.forces
-            .par_chunks_mut(chunk * ndof)
-            .zip(work.stiffness.par_chunks_mut(chunk * ndof * ndof))
-            .enumerate()
-            .try_for_each(|(c, (fc, kc))| run(c, fc, Some(kc)))?;
-    } else {
-        work.forces.par_chunks_mut(chunk * ndof).enumerate().try_for_each(|(c, fc)| run(c, fc, None))?;
-    }
+    })?;
     f_int.fill(0.0);
-    for e in 0..ne {
-        for (a, &n) in geometry.element_nodes(e).iter().enumerate() {
+    for p in 0..np {
+        let offset = 3 * patches.node_offset(p);
+        for (a, &n) in patches.nodes(p).iter().enumerate() {
             for i in 0..3 {
-                f_int[3 * n + i] += work.forces[e * ndof + 3 * a + i];
+                f_int[3 * n + i] += work.forces[offset + 3 * a + i];
             }
         }
     }

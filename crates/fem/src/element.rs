@@ -4,7 +4,9 @@
 use mesh::{Cells, Mesh};
 use nalgebra::Matrix3;
 
-use crate::material::Material;
+use crate::fbar::{self, PatchPoint};
+use crate::material::{Formulation, Material};
+use crate::patch::{Patches, TET_PATCH_SIZE};
 use crate::FemError;
 
 /// The nodes of H8's reference cube in VTK order.
@@ -34,11 +36,30 @@ pub struct ElementGeometry {
     pub shape: Vec<f64>,
     /// Quadrature weight × det J × cell fraction: index `e * points + q`.
     pub weights: Vec<f64>,
+    /// The formulation: [`Formulation::Standard`] or [`Formulation::Fbar`].
+    pub formulation: Formulation,
+    /// The assembly units: one element each (standard, H8 F-bar) or groups of
+    /// about [`TET_PATCH_SIZE`] tetrahedra sharing their volume ratio (T4 F-bar).
+    pub patches: Patches,
 }
 
 impl ElementGeometry {
-    /// Computes gradients and weights; fails on a degenerate or inverted element.
-    pub fn new(mesh: &Mesh) -> Result<Self, FemError> {
+    /// Computes gradients, weights and patches for the formulation
+    /// ([`Formulation::Auto`] is taken as standard: resolve it with
+    /// [`Material::resolved_formulation`] first); fails on a degenerate or
+    /// inverted element.
+    pub fn new(mesh: &Mesh, formulation: Formulation) -> Result<Self, FemError> {
+        let mut geometry = Self::standard(mesh)?;
+        if formulation == Formulation::Fbar {
+            geometry.formulation = Formulation::Fbar;
+            if geometry.nodes_per_element == 4 {
+                geometry.patches = Patches::tetrahedra(&geometry.connectivity, TET_PATCH_SIZE);
+            }
+        }
+        Ok(geometry)
+    }
+
+    fn standard(mesh: &Mesh) -> Result<Self, FemError> {
         let ne = mesh.cells.len();
         let fraction = |e: usize| mesh.cell_fraction.as_ref().map_or(1.0, |f| f[e]);
         let connectivity: Vec<usize> = (0..ne).flat_map(|e| mesh.cells.cell(e).to_vec()).collect();
@@ -60,10 +81,12 @@ impl ElementGeometry {
                 Ok(ElementGeometry {
                     nodes_per_element: 4,
                     points_per_element: 1,
+                    patches: Patches::singletons(&connectivity, 4),
                     connectivity,
                     grads,
                     shape: vec![0.25; 4],
                     weights,
+                    formulation: Formulation::Standard,
                 })
             }
             Cells::Hex8(hexes) => {
@@ -99,7 +122,16 @@ impl ElementGeometry {
                         weights.push(det * fraction(e));
                     }
                 }
-                Ok(ElementGeometry { nodes_per_element: 8, points_per_element: 8, connectivity, grads, shape, weights })
+                Ok(ElementGeometry {
+                    nodes_per_element: 8,
+                    points_per_element: 8,
+                    patches: Patches::singletons(&connectivity, 8),
+                    connectivity,
+                    grads,
+                    shape,
+                    weights,
+                    formulation: Formulation::Standard,
+                })
             }
         }
     }
@@ -132,6 +164,41 @@ impl ElementGeometry {
             }
         }
         f
+    }
+
+    /// The deformation gradient each quadrature point is evaluated at (F, or F̄
+    /// under F-bar), index `e * points + q`.
+    pub fn effective_gradients(&self, law: crate::Law, u: &[f64]) -> Result<Vec<Matrix3<f64>>, FemError> {
+        let nq = self.points_per_element;
+        let mut out = vec![Matrix3::identity(); self.len() * nq];
+        for p in 0..self.patches.len() {
+            let elements = self.patches.elements(p);
+            let gradients = match self.formulation {
+                Formulation::Fbar => fbar::patch_gradients(self, p, law, u)?,
+                _ => elements.iter().flat_map(|&e| (0..nq).map(move |q| self.deformation_gradient(e, q, u))).collect(),
+            };
+            for (slot, &e) in elements.iter().enumerate() {
+                out[e * nq..(e + 1) * nq].copy_from_slice(&gradients[slot * nq..(slot + 1) * nq]);
+            }
+        }
+        Ok(out)
+    }
+
+    /// Internal force and, when `k` is given, tangent of patch `p` over its
+    /// nodes (see [`Patches::nodes`]); `scratch` is reused between calls.
+    pub fn patch_force_tangent(
+        &self,
+        p: usize,
+        material: &Material,
+        u: &[f64],
+        f: &mut [f64],
+        k: Option<&mut [f64]>,
+        scratch: &mut Vec<PatchPoint>,
+    ) -> Result<(), FemError> {
+        match self.formulation {
+            Formulation::Fbar => fbar::patch_force_tangent(self, p, material, u, f, k, scratch),
+            _ => self.force_tangent(self.patches.elements(p)[0], material, u, f, k),
+        }
     }
 
     /// Internal force `f` (3n entries) and, when `k` is given, tangent stiffness

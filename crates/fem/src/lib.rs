@@ -1,5 +1,6 @@
 //! Finite elements for soft-tissue mechanics: linear, co-rotational,
 //! Saint-Venant-Kirchhoff and Neo-Hookean materials on T4 and H8 meshes,
+//! standard or locking-free (F-bar) for nearly incompressible tissue,
 //! Dirichlet conditions, springs, nodal forces, tractions and gravity, and a
 //! static Newton-Raphson solver on a sparse Cholesky factorisation.
 //!
@@ -8,14 +9,16 @@
 
 pub mod assembly;
 pub mod element;
+pub mod fbar;
 pub mod linsolve;
 pub mod material;
+pub mod patch;
 pub mod post;
 pub mod problem;
 pub mod solver;
 
 pub use element::ElementGeometry;
-pub use material::{Law, Material};
+pub use material::{Formulation, Law, Material};
 pub use problem::Problem;
 pub use solver::{Solution, SolverOptions, StaticSolver, Timings};
 

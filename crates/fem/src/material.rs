@@ -33,12 +33,36 @@ impl Law {
     }
 }
 
+/// How the elements treat the volume change, the part of the deformation that
+/// locks displacement elements when the material is nearly incompressible.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Formulation {
+    /// `fbar` when Poisson's ratio is at least [`FBAR_POISSON`], `standard` otherwise.
+    #[default]
+    Auto,
+    /// Displacement elements: each quadrature point deforms by its own F.
+    Standard,
+    /// F-bar (de Souza Neto et al. 1996, 2005): each quadrature point uses
+    /// F̄ = (J̄/J)^⅓ F, whose volume ratio J̄ is the volume average of J over a
+    /// patch: the element itself for H8 (the Q1-P0 / mean-dilatation hexahedron)
+    /// and a group of about six face-adjacent tetrahedra for T4 (the F-bar-patch
+    /// tetrahedron). The linear law uses its small-strain form, B-bar.
+    Fbar,
+}
+
+/// Poisson's ratio from which [`Formulation::Auto`] selects F-bar.
+pub const FBAR_POISSON: f64 = 0.45;
+
 /// An isotropic elastic material: law, Young's modulus (Pa), Poisson's ratio, density (kg/m³).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Material {
     /// The constitutive law.
     pub law: Law,
+    /// Element formulation (default: automatic from Poisson's ratio).
+    #[serde(default)]
+    pub formulation: Formulation,
     /// Young's modulus in Pa.
     pub young: f64,
     /// Poisson's ratio, in (−1, 0.5).
@@ -55,7 +79,21 @@ fn default_density() -> f64 {
 impl Material {
     /// A material with the default density of 1000 kg/m³.
     pub fn new(law: Law, young: f64, poisson: f64) -> Self {
-        Material { law, young, poisson, density: default_density() }
+        Material { law, young, poisson, formulation: Formulation::Auto, density: default_density() }
+    }
+
+    /// The same material with the given element formulation.
+    pub fn with_formulation(self, formulation: Formulation) -> Self {
+        Material { formulation, ..self }
+    }
+
+    /// The formulation in use: [`Formulation::Auto`] resolved from Poisson's ratio.
+    pub fn resolved_formulation(&self) -> Formulation {
+        match self.formulation {
+            Formulation::Auto if self.poisson >= FBAR_POISSON => Formulation::Fbar,
+            Formulation::Auto => Formulation::Standard,
+            f => f,
+        }
     }
 
     /// Checks that the parameters are physical.

@@ -90,7 +90,7 @@ impl Problem {
 
     /// Adds the body force ρ·g of the material's density under acceleration `g` (m/s²).
     pub fn add_gravity(&mut self, g: Point) -> Result<(), FemError> {
-        let geo = ElementGeometry::new(&self.mesh)?;
+        let geo = ElementGeometry::new(&self.mesh, crate::Formulation::Standard)?;
         let (npe, nqp) = (geo.nodes_per_element, geo.points_per_element);
         for e in 0..geo.len() {
             for q in 0..nqp {

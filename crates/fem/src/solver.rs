@@ -117,7 +117,7 @@ impl StaticSolver {
     /// Prepares geometry, pattern and symbolic factorisation for the problem.
     pub fn new(problem: Problem) -> Result<Self, FemError> {
         problem.validate()?;
-        let geometry = ElementGeometry::new(&problem.mesh)?;
+        let geometry = ElementGeometry::new(&problem.mesh, problem.material.resolved_formulation())?;
         let mut constrained = vec![false; problem.num_dofs()];
         for &n in problem.dirichlet.keys() {
             constrained[3 * n..3 * n + 3].fill(true);
@@ -215,6 +215,9 @@ impl StaticSolver {
         self.problem.validate()?;
         if !self.problem.dirichlet.keys().copied().eq(self.constrained_nodes.iter().copied()) {
             return Err(FemError::Invalid("the set of constrained nodes changed after the solver was built".into()));
+        }
+        if self.problem.material.resolved_formulation() != self.geometry.formulation {
+            return Err(FemError::Invalid("the element formulation changed after the solver was built".into()));
         }
         let ndof = self.problem.num_dofs();
         let mut stats = Stats::default();

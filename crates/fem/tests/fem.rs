@@ -2,11 +2,12 @@
 //! finite differences and invariances.
 
 use augsim_fem as fem;
-use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
+use fem::{Formulation, Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::{boundary_nodes, box_hex, box_tet, Mesh};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 const LAWS: [Law; 4] = [Law::Linear, Law::Corotational, Law::Svk, Law::NeoHookean];
+const FORMULATIONS: [Formulation; 2] = [Formulation::Standard, Formulation::Fbar];
 
 /// Deterministic pseudo-random numbers in [-1, 1].
 fn noise(seed: usize) -> f64 {
@@ -32,15 +33,20 @@ fn distorted(hex: bool, n: usize) -> Mesh {
     m
 }
 
+/// Every element kind × law × formulation.
+fn cases() -> impl Iterator<Item = (bool, Law, Formulation)> {
+    [false, true].into_iter().flat_map(|hex| LAWS.into_iter().flat_map(move |l| FORMULATIONS.map(|f| (hex, l, f))))
+}
+
 #[test]
 fn patch_test_reproduces_homogeneous_deformation() {
     let a = Matrix3::new(0.02, 0.01, -0.015, 0.005, -0.01, 0.02, 0.01, 0.0, 0.03);
     let b = Vector3::new(0.001, -0.002, 0.003);
-    for hex in [false, true] {
-        for law in LAWS {
+    for (hex, law, form) in cases() {
+        {
             let m = distorted(hex, 3);
             let exact = |p: &[f64; 3]| a * Vector3::from(*p) + b;
-            let mut problem = Problem::new(m.clone(), Material::new(law, 5000.0, 0.3));
+            let mut problem = Problem::new(m.clone(), Material::new(law, 5000.0, 0.3).with_formulation(form));
             for n in boundary_nodes(&m) {
                 let u = exact(&m.nodes[n]);
                 problem.prescribe(&[n], [u.x, u.y, u.z]);
@@ -53,18 +59,18 @@ fn patch_test_reproduces_homogeneous_deformation() {
                 .enumerate()
                 .map(|(i, p)| (Vector3::from_column_slice(&sol.u[3 * i..3 * i + 3]) - exact(p)).norm())
                 .fold(0.0, f64::max);
-            assert!(err < 1e-10, "hex={hex} {law:?}: patch test error {err:e}");
+            assert!(err < 1e-10, "hex={hex} {law:?} {form:?}: patch test error {err:e}");
         }
     }
 }
 
 #[test]
 fn tangent_matches_finite_difference_of_internal_force() {
-    for hex in [false, true] {
-        for law in LAWS {
+    for (hex, law, form) in cases() {
+        {
             let m = distorted(hex, 2);
             let n = m.num_nodes();
-            let mut problem = Problem::new(m, Material::new(law, 3000.0, 0.42));
+            let mut problem = Problem::new(m, Material::new(law, 3000.0, 0.42).with_formulation(form));
             problem.fix(&[0]);
             problem.add_springs(&[1, 2], 50.0);
             let mut solver = StaticSolver::new(problem).unwrap();
@@ -86,7 +92,7 @@ fn tangent_matches_finite_difference_of_internal_force() {
                     worst = worst.max(((fp[row] - fm[row]) / (2.0 * h) - k[i][j]).abs());
                 }
             }
-            assert!(worst < 1e-6 * scale, "hex={hex} {law:?}: tangent error {worst:e} (scale {scale:e})");
+            assert!(worst < 1e-6 * scale, "hex={hex} {law:?} {form:?}: tangent error {worst:e} (scale {scale:e})");
         }
     }
 }
@@ -95,7 +101,9 @@ fn tangent_matches_finite_difference_of_internal_force() {
 fn rigid_rotation_produces_no_internal_force() {
     let rot = Rotation3::from_euler_angles(0.7, -0.4, 1.1);
     for hex in [false, true] {
-        for law in [Law::Corotational, Law::Svk, Law::NeoHookean] {
+        for (law, form) in
+            [Law::Corotational, Law::Svk, Law::NeoHookean].into_iter().flat_map(|l| FORMULATIONS.map(|f| (l, f)))
+        {
             let m = distorted(hex, 2);
             let u: Vec<f64> = m
                 .nodes
@@ -105,10 +113,11 @@ fn rigid_rotation_produces_no_internal_force() {
                     (rot * x - x).data.0[0]
                 })
                 .collect();
-            let mut solver = StaticSolver::new(Problem::new(m, Material::new(law, 5000.0, 0.45))).unwrap();
+            let material = Material::new(law, 5000.0, 0.45).with_formulation(form);
+            let mut solver = StaticSolver::new(Problem::new(m, material)).unwrap();
             let f = solver.internal_force(&u).unwrap();
             let fmax = f.iter().fold(0.0f64, |a, b| a.max(b.abs()));
-            assert!(fmax < 1e-9, "hex={hex} {law:?}: |f| = {fmax:e} under a rigid rotation");
+            assert!(fmax < 1e-9, "hex={hex} {law:?} {form:?}: |f| = {fmax:e} under a rigid rotation");
         }
         // The linear law is not rotation invariant: the same test must see forces.
         let m = distorted(hex, 2);

@@ -1,0 +1,99 @@
+//! Volumetric locking: bending of a slender cantilever against Timoshenko beam
+//! theory as Poisson's ratio approaches ½, and volume conservation of a nearly
+//! incompressible block under large compression.
+
+use augsim_fem as fem;
+use fem::{Formulation, Law, Material, Problem, SolverOptions, StaticSolver};
+use mesh::{box_hex, box_tet, Cells, Mesh};
+use nalgebra::Matrix3;
+
+const LENGTH: f64 = 10.0;
+const YOUNG: f64 = 1000.0;
+const LOAD: f64 = 1e-4;
+
+/// Tip deflection of a 10 × 1 × 1 cantilever clamped at x = 0 under a small
+/// downward end traction, divided by Timoshenko's (Cowper's shear coefficient).
+fn deflection_ratio(hex: bool, cells: [usize; 3], law: Law, form: Formulation, nu: f64) -> f64 {
+    let m =
+        if hex { box_hex([0.0; 3], [LENGTH, 1.0, 1.0], cells) } else { box_tet([0.0; 3], [LENGTH, 1.0, 1.0], cells) }
+            .unwrap();
+    let clamp = mesh::select::nodes_in_box(&m.nodes, [-1e-9; 3], [1e-9, 1.0 + 1e-9, 1.0 + 1e-9]);
+    let tip = mesh::select::nodes_in_box(&m.nodes, [LENGTH - 1e-9, -1e-9, -1e-9], [LENGTH + 1e-9, 1.1, 1.1]);
+    let mut problem = Problem::new(m, Material::new(law, YOUNG, nu).with_formulation(form));
+    problem.fix(&clamp);
+    problem.add_traction(&tip, [0.0, 0.0, -LOAD]);
+    let mut solver = StaticSolver::new(problem).unwrap();
+    let u = solver.solve(&SolverOptions { rtol: 1e-10, ..Default::default() }).unwrap().u;
+    let w = -tip.iter().map(|&n| u[3 * n + 2]).sum::<f64>() / tip.len() as f64;
+    let (p, inertia, area) = (LOAD, 1.0 / 12.0, 1.0);
+    let shear_coefficient = 10.0 * (1.0 + nu) / (12.0 + 11.0 * nu);
+    let g = YOUNG / (2.0 * (1.0 + nu));
+    let theory = p * LENGTH.powi(3) / (3.0 * YOUNG * inertia) + p * LENGTH / (shear_coefficient * g * area);
+    w / theory
+}
+
+#[test]
+fn fbar_does_not_lock_in_bending() {
+    let mut table = String::from("element law formulation  nu=0.3  nu=0.49  nu=0.499\n");
+    for (hex, cells) in [(false, [20, 2, 2]), (true, [20, 2, 2])] {
+        for law in [Law::Linear, Law::NeoHookean] {
+            for form in [Formulation::Standard, Formulation::Fbar] {
+                let r: Vec<f64> =
+                    [0.3, 0.49, 0.499].iter().map(|&nu| deflection_ratio(hex, cells, law, form, nu)).collect();
+                let kind = if hex { "H8" } else { "T4" };
+                table += &format!("{kind} {law:?} {form:?}  {:.3}  {:.3}  {:.3}\n", r[0], r[1], r[2]);
+                if form == Formulation::Fbar {
+                    for (nu, ri) in [(0.49, r[1]), (0.499, r[2])] {
+                        assert!(
+                            (ri / r[0] - 1.0).abs() < 0.10,
+                            "{kind} {law:?} F-bar locks: ratio {ri:.3} at nu = {nu} vs {:.3} at 0.3",
+                            r[0]
+                        );
+                    }
+                } else if !hex {
+                    // The standard tetrahedron locks: this is what the test guards against.
+                    assert!(r[2] < 0.5 * r[0], "standard T4 no longer locks? {r:?}");
+                }
+            }
+        }
+    }
+    eprintln!("{table}");
+}
+
+/// Deformed volume: Σ over quadrature points of w det F (exact for T4; for H8 up to
+/// the 2×2×2 rule, which integrates det F of a trilinear map exactly).
+fn deformed_volume(m: &Mesh, u: &[f64]) -> f64 {
+    let geo = fem::ElementGeometry::new(m, Formulation::Standard).unwrap();
+    let nq = geo.points_per_element;
+    (0..geo.len())
+        .flat_map(|e| (0..nq).map(move |q| (e, q)))
+        .map(|(e, q)| {
+            let f: Matrix3<f64> = geo.deformation_gradient(e, q, u);
+            geo.weights[e * nq + q] * f.determinant()
+        })
+        .sum()
+}
+
+#[test]
+fn nearly_incompressible_block_keeps_its_volume_under_compression() {
+    for hex in [false, true] {
+        let m =
+            if hex { box_hex([0.0; 3], [1.0; 3], [4, 4, 4]) } else { box_tet([0.0; 3], [1.0; 3], [4, 4, 4]) }.unwrap();
+        assert!(matches!(m.cells, Cells::Hex8(_)) == hex);
+        let bottom = mesh::select::nodes_in_box(&m.nodes, [-1.0, -1.0, -1e-9], [2.0, 2.0, 1e-9]);
+        let top = mesh::select::nodes_in_box(&m.nodes, [-1.0, -1.0, 1.0 - 1e-9], [2.0, 2.0, 1.0 + 1e-9]);
+        let v0 = m.volume();
+        for law in [Law::NeoHookean] {
+            let mut problem =
+                Problem::new(m.clone(), Material::new(law, YOUNG, 0.499).with_formulation(Formulation::Fbar));
+            problem.fix(&bottom);
+            problem.prescribe(&top, [0.0, 0.0, -0.25]);
+            let mut solver = StaticSolver::new(problem).unwrap();
+            let sol = solver.solve(&SolverOptions { load_steps: 4, ..Default::default() }).unwrap();
+            let v = deformed_volume(&m, &sol.u);
+            let bulge = sol.u.chunks(3).map(|d| d[0].abs().max(d[1].abs())).fold(0.0, f64::max);
+            assert!((v / v0 - 1.0).abs() < 0.01, "hex={hex} {law:?}: volume {v:.4} vs {v0:.4}");
+            assert!(bulge > 0.05, "hex={hex} {law:?}: the block must bulge sideways ({bulge:.3})");
+        }
+    }
+}
