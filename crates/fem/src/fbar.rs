@@ -48,6 +48,8 @@ pub struct PatchPoint {
     grads: usize,
     w: f64,
     f: Matrix3<f64>,
+    /// F⁻ᵀ (finite strain only).
+    finv_t: V9,
     /// Volume measure m(F): J or tr F − 3.
     m: f64,
     alpha: f64,
@@ -84,6 +86,12 @@ fn gather(
                 return Err(FemError::InvertedElement { element: e, det: m });
             }
             let w = geo.weights[e * nq + q];
+            let finv_t = if linear {
+                [0.0; 9]
+            } else {
+                let c = f.try_inverse().ok_or(FemError::InvertedElement { element: e, det: m })?;
+                flat(&c.transpose())
+            };
             volume += w;
             sum += w * m;
             points.push(PatchPoint {
@@ -91,6 +99,7 @@ fn gather(
                 grads: (e * nq + q) * geo.nodes_per_element,
                 w,
                 f,
+                finv_t,
                 m,
                 alpha: 1.0,
                 stress: [0.0; 9],
@@ -121,8 +130,7 @@ impl Kinematics {
             let id = flat(&Matrix3::identity());
             (id, id, id)
         } else {
-            let finv_t = flat(&p.f.try_inverse().unwrap_or_else(Matrix3::zeros).transpose());
-            (flat(&p.f), finv_t, finv_t.map(|v| v * p.m))
+            (flat(&p.f), p.finv_t, p.finv_t.map(|v| v * p.m))
         }
     }
 
@@ -178,8 +186,8 @@ pub fn patch_force_tangent(
             material.stress(&fbar)
         };
         p.stress = flat(&stress);
-        let (x, _, _) = kin.directions(p);
         let phi = kin.phi(alpha);
+        let x = if kin.linear { flat(&Matrix3::identity()) } else { flat(&p.f) };
         sigma_bar += p.w * phi * dot(&p.stress, &x);
         if want_k {
             gamma += p.w * phi * phi * dot(&x, &mat_vec(&p.tangent, &x));
@@ -225,7 +233,7 @@ pub fn patch_force_tangent(
         // a = w (Mᵀ A φ + P̄ : ∂²Φ/∂F∂m̄).
         let mut av: V9 = std::array::from_fn(|r| p.w * phi * alpha * (ax[r] - xax * y[r] / 3.0));
         if !kin.linear {
-            let finv = p.f.try_inverse().unwrap_or_else(Matrix3::zeros);
+            let finv = Matrix3::from_fn(|r, c| p.finv_t[3 * c + r]);
             let tau = xp; // P̄ : F
             let jac = p.m;
             for r in 0..9 {

@@ -43,6 +43,17 @@ pub enum FemError {
         /// Last relative residual.
         residual: f64,
     },
+    /// Saint-Venant-Kirchhoff passed its compressive limit point: no static
+    /// equilibrium exists beyond it under this load.
+    #[error("Saint-Venant-Kirchhoff passed its compressive limit point at load factor {load_factor:.3}: element {element} is compressed to a principal stretch of {stretch:.3} (SVK's stress peaks at 1/sqrt(3) = 0.577 and falls beyond, so no equilibrium exists under the full load); use law = \"neo_hookean\" for large compression")]
+    LimitPoint {
+        /// The most compressed element.
+        element: usize,
+        /// Its smallest principal stretch.
+        stretch: f64,
+        /// The last load factor reached.
+        load_factor: f64,
+    },
     /// A NaN or infinity appeared.
     #[error("non-finite value in {0}")]
     NonFinite(String),

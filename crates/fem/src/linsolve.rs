@@ -66,6 +66,36 @@ impl SparseCholesky {
         })
     }
 
+    /// Whether the last factorisation was LLᵀ (the matrix was positive definite);
+    /// false after the LDLᵀ fallback or before any factorisation.
+    pub fn is_positive_definite(&self) -> bool {
+        self.factor == Factor::Llt
+    }
+
+    /// Multiply-adds of one numeric factorisation, Σ_j c_j² over the column
+    /// counts c_j of the factor (from the symbolic structure).
+    pub fn factorization_work(&self) -> f64 {
+        use faer::sparse::linalg::cholesky::SymbolicCholeskyRaw;
+        match self.symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(sn) => {
+                let (begin, end, rows) = (sn.supernode_begin(), sn.supernode_end(), sn.col_ptr_for_row_idx());
+                (0..sn.n_supernodes())
+                    .map(|s| {
+                        let width = end[s] as usize - begin[s] as usize;
+                        let below = (rows[s + 1] - rows[s]) as usize;
+                        (0..width).map(|j| ((width - j + below) as f64).powi(2)).sum::<f64>()
+                    })
+                    .sum()
+            }
+            // Simplicial factors are used for tiny systems: nnz(L) × mean column count.
+            SymbolicCholeskyRaw::Simplicial(_) => {
+                let n = self.symbolic.nrows().max(1) as f64;
+                let nnz = self.l_values.len() as f64;
+                nnz * nnz / n
+            }
+        }
+    }
+
     /// Number of non-zeros in the factor.
     pub fn factor_nnz(&self) -> usize {
         self.l_values.len()
@@ -127,20 +157,5 @@ impl SparseCholesky {
             return Err(FemError::NonFinite("solution of the linear system".into()));
         }
         Ok(())
-    }
-}
-
-/// y = A x for a symmetric matrix stored as its lower triangle in CSC.
-pub fn symmetric_matvec(pattern: &Pattern, values: &[f64], x: &[f64], y: &mut [f64]) {
-    y.fill(0.0);
-    for c in 0..pattern.num_free {
-        let (lo, hi) = (pattern.col_ptr[c] as usize, pattern.col_ptr[c + 1] as usize);
-        for p in lo..hi {
-            let r = pattern.row_idx[p] as usize;
-            y[r] += values[p] * x[c];
-            if r != c {
-                y[c] += values[p] * x[r];
-            }
-        }
     }
 }

@@ -1,6 +1,14 @@
-//! Static equilibrium by Newton-Raphson: find u with f_int(u) + K_s u = λ f_ext
-//! on the free dofs, for load factors λ stepping to 1 (adaptive: a step that
-//! fails is halved), with a backtracking line search on the residual norm.
+//! Static equilibrium: find u with f_int(u) + K_s u = λ f_ext on the free dofs,
+//! for load factors λ stepping to 1 (a step that fails is halved, and the step
+//! grows back after successes), with a line search on the energy.
+//!
+//! Each iteration solves with a kept factorisation of the tangent, corrected by
+//! limited-memory BFGS updates (the factor is the initial inverse Hessian of the
+//! two-loop recursion): an iteration costs one internal-force evaluation and one
+//! pair of triangular solves. The tangent is reassembled and refactorised only
+//! when that pays: when the iterations still needed at the observed rate of
+//! convergence would take longer than a factorisation (timed) and a few
+//! iterations with the new factor.
 
 use std::time::{Duration, Instant};
 
@@ -8,7 +16,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::assembly::{assemble, Pattern, Workspace};
 use crate::element::ElementGeometry;
-use crate::linsolve::{symmetric_matvec, SparseCholesky};
+use crate::linsolve::SparseCholesky;
+use crate::material::{Law, Material};
 use crate::problem::Problem;
 use crate::FemError;
 
@@ -28,28 +37,24 @@ pub struct SolverOptions {
     pub line_search: bool,
     /// How many times a failing load step may be halved before giving up.
     pub max_step_cuts: usize,
-    /// Newton systems: preconditioned conjugate gradients on the last
-    /// factorisation (kept across iterations and solves), refactorising only
-    /// when CG needs more than `cg_max_iterations`; `false` factorises every iteration.
+    /// Keep the last factorisation across iterations and solves, with BFGS
+    /// updates; `false`: full Newton-Raphson, a new factorisation every iteration.
     pub reuse_factorization: bool,
-    /// CG iterations allowed before the tangent is refactorised.
-    pub cg_max_iterations: usize,
-    /// CG stops at ‖K du + r‖ ≤ cg_tolerance · ‖r‖ (inexact Newton forcing term).
-    pub cg_tolerance: f64,
+    /// BFGS correction pairs kept (0: plain modified Newton on the kept factor).
+    pub bfgs_memory: usize,
 }
 
 impl Default for SolverOptions {
     fn default() -> Self {
         SolverOptions {
             load_steps: 1,
-            max_iterations: 20,
+            max_iterations: 40,
             rtol: 1e-6,
             utol: 1e-6,
             line_search: true,
             max_step_cuts: 8,
             reuse_factorization: true,
-            cg_max_iterations: 20,
-            cg_tolerance: 1e-3,
+            bfgs_memory: 12,
         }
     }
 }
@@ -61,7 +66,7 @@ pub struct Timings {
     pub assembly: Duration,
     /// Numeric factorisations.
     pub factorization: Duration,
-    /// Triangular solves and conjugate-gradient iterations.
+    /// Triangular solves and BFGS updates.
     pub solve: Duration,
     /// Whole solve.
     pub total: Duration,
@@ -72,14 +77,14 @@ pub struct Timings {
 pub struct Solution {
     /// Displacement, 3 per node (m).
     pub u: Vec<f64>,
-    /// Newton iterations over all load steps.
+    /// Iterations (each one force evaluation and one solve) over all load steps.
     pub iterations: usize,
     /// Load steps taken (including halved ones that succeeded).
     pub load_steps: usize,
     /// Numeric factorisations performed.
     pub factorizations: usize,
-    /// Conjugate-gradient iterations performed.
-    pub cg_iterations: usize,
+    /// Tangent assemblies performed.
+    pub tangent_assemblies: usize,
     /// Relative residual ‖r‖ / max(‖f_ext‖, ‖f_int‖) at each iterate, in order.
     pub residuals: Vec<f64>,
     /// Time split.
@@ -93,10 +98,13 @@ pub struct StaticSolver {
     geometry: ElementGeometry,
     pattern: Pattern,
     cholesky: SparseCholesky,
+    rest: Option<RestFactor>,
     constrained_nodes: Vec<usize>,
     work: Workspace,
     values: Vec<f64>,
     factorized: bool,
+    /// A tangent assembly and factorisation, in iterations (see [`refactorization_cost`]).
+    refactorization_cost: f64,
 }
 
 impl std::fmt::Debug for StaticSolver {
@@ -107,6 +115,24 @@ impl std::fmt::Debug for StaticSolver {
             .finish()
     }
 }
+
+/// The cost of assembling and factorising the tangent, in iterations (one
+/// force evaluation with its line search, two triangular solves), estimated
+/// from operation counts: an element kernel with its tangent ≈ 3 force
+/// evaluations, and dense supernodal factorisation runs about 2× more
+/// operations per second than the memory-bound solves and element loops.
+fn refactorization_cost(geometry: &ElementGeometry, pattern: &Pattern, cholesky: &SparseCholesky) -> f64 {
+    let points = (geometry.len() * geometry.points_per_element) as f64;
+    let force = 300.0 * points + pattern.nnz() as f64;
+    let iteration = 1.5 * force + 4.0 * cholesky.factor_nnz() as f64;
+    (3.0 * force + cholesky.factorization_work() / 2.0) / iteration
+}
+
+/// Iterations expected after a refactorisation, in the cost comparison that decides it.
+const REFRESH_ITERATIONS: f64 = 4.0;
+
+/// Principal stretch at which Saint-Venant-Kirchhoff's uniaxial compressive stress peaks.
+const SVK_LIMIT_STRETCH: f64 = 0.577_350_269_189_625_8;
 
 /// Euclidean norm.
 pub fn norm(v: &[f64]) -> f64 {
@@ -124,6 +150,7 @@ impl StaticSolver {
         }
         let pattern = Pattern::new(&geometry, problem.num_dofs(), &constrained)?;
         let cholesky = SparseCholesky::new(&pattern)?;
+        let refactorization_cost = refactorization_cost(&geometry, &pattern, &cholesky);
         let values = vec![0.0; pattern.nnz()];
         let constrained_nodes = problem.dirichlet.keys().copied().collect();
         Ok(StaticSolver {
@@ -131,10 +158,12 @@ impl StaticSolver {
             geometry,
             pattern,
             cholesky,
+            rest: None,
             constrained_nodes,
             work: Workspace::default(),
             values,
             factorized: false,
+            refactorization_cost,
         })
     }
 
@@ -226,14 +255,15 @@ impl StaticSolver {
                 return Err(FemError::Invalid(format!("warm start must hold {ndof} finite values")));
             }
             let mut u = u0.to_vec();
-            if self.newton(&mut u, 1.0, options, &mut stats).is_ok() {
+            if self.newton(&mut u, 1.0, Start::Kept, options, &mut stats).is_ok() {
                 return Ok(stats.finish(u, 1, start));
             }
         }
         let mut u = vec![0.0; ndof];
         let mut previous: Option<(f64, Vec<f64>)> = None;
         let mut lambda = 0.0;
-        let mut step = 1.0 / options.load_steps.max(1) as f64;
+        let full_step = 1.0 / options.load_steps.max(1) as f64;
+        let mut step = full_step;
         let mut cuts = 0;
         let mut steps = 0;
         while lambda < 1.0 {
@@ -244,11 +274,16 @@ impl StaticSolver {
                 let ratio = (target - lambda) / (lambda - l0);
                 trial.iter_mut().zip(u0).for_each(|(t, p)| *t += ratio * (*t - p));
             }
-            match self.newton(&mut trial, target, options, &mut stats) {
+            // Start from the rest tangent unless this solve already refactorised.
+            let from = if stats.refactorized { Start::Kept } else { Start::Rest };
+            match self.newton(&mut trial, target, from, options, &mut stats) {
                 Ok(()) => {
                     previous = Some((lambda, std::mem::replace(&mut u, trial)));
                     lambda = target;
                     steps += 1;
+                    // Grow back towards the requested step after a cut.
+                    cuts = 0;
+                    step = (2.0 * step).min(full_step);
                 }
                 Err(FemError::NotConverged { .. } | FemError::InvertedElement { .. } | FemError::Factorization(_))
                     if cuts < options.max_step_cuts =>
@@ -256,14 +291,52 @@ impl StaticSolver {
                     cuts += 1;
                     step *= 0.5;
                 }
-                Err(e) => return Err(e),
+                Err(e) => return Err(self.diagnose(e, lambda, &trial, &u, &stats)),
             }
         }
         Ok(stats.finish(u, steps, start))
     }
 
-    /// Newton iterations at load factor `lambda`, updating `u` in place.
-    fn newton(&mut self, u: &mut [f64], lambda: f64, opt: &SolverOptions, stats: &mut Stats) -> Result<(), FemError> {
+    /// Turns the failure of a Saint-Venant-Kirchhoff solve past its compressive
+    /// limit point into [`FemError::LimitPoint`]: the tangent was found indefinite,
+    /// or a quadrature point is compressed beyond the stretch 1/√3 where SVK's
+    /// stress peaks. `lambda` is the last converged load factor, `trial` the
+    /// failing iterate and `u` the last converged state.
+    fn diagnose(&self, error: FemError, lambda: f64, trial: &[f64], u: &[f64], stats: &Stats) -> FemError {
+        if self.problem.material.law != Law::Svk {
+            return error;
+        }
+        let law = self.problem.material.law;
+        let gradients = match self.geometry.effective_gradients(law, trial) {
+            Ok(g) => g,
+            Err(_) => match self.geometry.effective_gradients(law, u) {
+                Ok(g) => g,
+                Err(_) => return error,
+            },
+        };
+        let nq = self.geometry.points_per_element;
+        let (point, stretch) = gradients
+            .iter()
+            .map(|f| (f.transpose() * f).symmetric_eigenvalues().min().max(0.0).sqrt())
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .unwrap_or((0, 1.0));
+        if stats.indefinite || stretch < SVK_LIMIT_STRETCH * 1.05 {
+            FemError::LimitPoint { element: point / nq, stretch, load_factor: lambda }
+        } else {
+            error
+        }
+    }
+
+    /// Iterations at load factor `lambda`, updating `u` in place.
+    fn newton(
+        &mut self,
+        u: &mut [f64],
+        lambda: f64,
+        from: Start,
+        opt: &SolverOptions,
+        stats: &mut Stats,
+    ) -> Result<(), FemError> {
         let ndof = u.len();
         for (&n, v) in &self.problem.dirichlet {
             for d in 0..3 {
@@ -272,13 +345,23 @@ impl StaticSolver {
         }
         let f_ext: Vec<f64> = self.problem.f_ext.iter().map(|f| lambda * f).collect();
         let mut f_int = vec![0.0; ndof];
-        let mut r = vec![0.0; self.pattern.num_free];
+        let nf = self.pattern.num_free;
+        let mut r = vec![0.0; nf];
         let t = Instant::now();
         self.evaluate(u, &mut f_int, false)?;
         stats.timings.assembly += t.elapsed();
         let mut res = self.residual(&f_int, &f_ext, &mut r);
-        let mut du = vec![0.0; self.pattern.num_free];
+        let mut du = vec![0.0; nf];
+        let mut r_old = vec![0.0; nf];
         let mut trial = u.to_vec();
+        let mut bfgs = Bfgs::new(if opt.reuse_factorization { opt.bfgs_memory } else { 0 });
+        // The first factor: the rest tangent's (kept while the material and
+        // springs are unchanged, it serves every solve from rest), or the last
+        // factor computed.
+        let want_rest = from == Start::Rest || !self.factorized;
+        let mut use_rest = want_rest && opt.reuse_factorization && self.prepare_rest_factor(stats)?;
+        let mut refresh = !(use_rest || (opt.reuse_factorization && self.factorized));
+        let (mut last_ratio, mut since_refresh) = (1.0f64, 0usize);
         for it in 0..=opt.max_iterations {
             let scale = norm(&f_ext).max(norm(&f_int));
             let rel = if scale > 0.0 { res / scale } else { 0.0 };
@@ -294,71 +377,91 @@ impl StaticSolver {
                 return Err(FemError::NotConverged { load_factor: lambda, iterations: it, residual: rel });
             }
             stats.iterations += 1;
-            let t = Instant::now();
-            self.evaluate(u, &mut f_int, true)?;
-            stats.timings.assembly += t.elapsed();
-            let t = Instant::now();
-            let solved = opt.reuse_factorization && self.factorized && self.pcg(&r, &mut du, opt, stats);
-            stats.timings.solve += t.elapsed();
-            if !solved {
+            if refresh {
+                let t = Instant::now();
+                self.evaluate(u, &mut f_int, true)?;
+                stats.tangent_assemblies += 1;
+                stats.timings.assembly += t.elapsed();
                 let t = Instant::now();
                 self.factorized = false;
                 self.cholesky.factorize(&self.values)?;
                 self.factorized = true;
+                stats.indefinite |= !self.cholesky.is_positive_definite();
+                stats.refactorized = true;
                 stats.factorizations += 1;
                 stats.timings.factorization += t.elapsed();
-                let t = Instant::now();
-                du.iter_mut().zip(&r).for_each(|(d, r)| *d = -r);
-                self.cholesky.solve_in_place(&mut du)?;
-                stats.timings.solve += t.elapsed();
+                bfgs.clear();
+                refresh = !opt.reuse_factorization;
+                use_rest = false;
             }
+            let t = Instant::now();
+            du.iter_mut().zip(&r).for_each(|(d, r)| *d = -r);
+            let cholesky = match (&mut self.rest, use_rest) {
+                (Some(rest), true) => &mut rest.factor,
+                _ => &mut self.cholesky,
+            };
+            bfgs.apply(&mut du, |v| cholesky.solve_in_place(v))?;
+            stats.timings.solve += t.elapsed();
+            r_old.copy_from_slice(&r);
             let alpha = self.line_search(u, &du, &mut trial, &mut f_int, &f_ext, &mut r, opt, stats)?;
-            res = norm(&r);
+            let res_new = norm(&r);
             if alpha != 1.0 {
                 du.iter_mut().for_each(|d| *d *= alpha);
             }
+            // Refactorise when the iterations left at the rate of the last two
+            // would cost more than a refactorisation plus a few iterations. The
+            // costs are estimated from operation counts, not timed, so that the
+            // path of a solve (and its last bits) never depends on the machine's load.
+            let ratio = res_new / res;
+            since_refresh += 1;
+            if opt.reuse_factorization && since_refresh >= 2 {
+                let rate = (ratio * last_ratio).sqrt();
+                let target = opt.rtol * norm(&f_ext).max(norm(&f_int));
+                let left = if rate < 1.0 { ((target / res_new).ln() / rate.ln()).max(0.0) } else { f64::INFINITY };
+                if left > self.refactorization_cost + REFRESH_ITERATIONS {
+                    refresh = true;
+                    since_refresh = 0;
+                }
+            }
+            last_ratio = ratio;
+            let t = Instant::now();
+            bfgs.push(&du, &r, &r_old);
+            stats.timings.solve += t.elapsed();
+            res = res_new;
             u.copy_from_slice(&trial);
         }
         unreachable!("the loop returns at its last iteration")
     }
 
-    /// Solves K du = −r by conjugate gradients preconditioned with the stored
-    /// factorisation. Returns false when it needs more than the allowed iterations.
-    fn pcg(&mut self, r: &[f64], du: &mut [f64], opt: &SolverOptions, stats: &mut Stats) -> bool {
-        let n = r.len();
-        let target = opt.cg_tolerance * norm(r);
-        du.fill(0.0);
-        let mut res: Vec<f64> = r.iter().map(|v| -v).collect();
-        let mut z = res.clone();
-        if self.cholesky.solve_in_place(&mut z).is_err() {
-            return false;
+    /// Makes sure the rest-state factor matches the current material and springs,
+    /// factorising the tangent at u = 0 if not. Returns false when the rest
+    /// tangent is not positive definite (then it is no use as a preconditioner).
+    fn prepare_rest_factor(&mut self, stats: &mut Stats) -> Result<bool, FemError> {
+        let (material, springs) = (self.problem.material, &self.problem.springs);
+        if let Some(rest) = &self.rest {
+            if rest.material == material && &rest.springs == springs {
+                return Ok(rest.factor.is_positive_definite());
+            }
         }
-        let mut p = z.clone();
-        let mut kp = vec![0.0; n];
-        let mut rz: f64 = res.iter().zip(&z).map(|(a, b)| a * b).sum();
-        for _ in 0..opt.cg_max_iterations {
-            stats.cg_iterations += 1;
-            symmetric_matvec(&self.pattern, &self.values, &p, &mut kp);
-            let pkp: f64 = p.iter().zip(&kp).map(|(a, b)| a * b).sum();
-            if !(pkp > 0.0) {
-                return false;
-            }
-            let a = rz / pkp;
-            du.iter_mut().zip(&p).for_each(|(x, p)| *x += a * p);
-            res.iter_mut().zip(&kp).for_each(|(r, kp)| *r -= a * kp);
-            if norm(&res) <= target {
-                return true;
-            }
-            z.copy_from_slice(&res);
-            if self.cholesky.solve_in_place(&mut z).is_err() {
-                return false;
-            }
-            let rz_new: f64 = res.iter().zip(&z).map(|(a, b)| a * b).sum();
-            let beta = rz_new / rz;
-            rz = rz_new;
-            p.iter_mut().zip(&z).for_each(|(p, z)| *p = z + beta * *p);
-        }
-        false
+        let mut rest = match self.rest.take() {
+            Some(rest) => rest,
+            None => RestFactor { factor: SparseCholesky::new(&self.pattern)?, material, springs: Vec::new() },
+        };
+        let zero = vec![0.0; self.problem.num_dofs()];
+        let mut f = vec![0.0; zero.len()];
+        let t = Instant::now();
+        self.evaluate(&zero, &mut f, true)?;
+        stats.tangent_assemblies += 1;
+        stats.timings.assembly += t.elapsed();
+        let t = Instant::now();
+        rest.factor.factorize(&self.values)?;
+        stats.factorizations += 1;
+        stats.timings.factorization += t.elapsed();
+        rest.material = material;
+        rest.springs = self.problem.springs.clone();
+        let definite = rest.factor.is_positive_definite();
+        self.rest = Some(rest);
+        Ok(definite)
     }
 
     /// Line search along `du` on s(α) = du · r(u + α du), the directional
@@ -436,11 +539,83 @@ impl StaticSolver {
     }
 }
 
+/// Where an iteration sequence takes its first factor from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Start {
+    /// The factor of the tangent at rest.
+    Rest,
+    /// The last factor computed (the rest tangent's if there is none).
+    Kept,
+}
+
+/// The factorised tangent at u = 0, with the data it depends on.
+struct RestFactor {
+    factor: SparseCholesky,
+    material: Material,
+    springs: Vec<f64>,
+}
+
+/// Limited-memory BFGS on top of a kept factorisation: the inverse Hessian
+/// approximation starts from the factor's inverse and takes the curvature
+/// pairs (s, y) = (step, change of the residual) of the last iterations.
+struct Bfgs {
+    memory: usize,
+    pairs: std::collections::VecDeque<(Vec<f64>, Vec<f64>, f64)>,
+}
+
+impl Bfgs {
+    fn new(memory: usize) -> Self {
+        Bfgs { memory, pairs: std::collections::VecDeque::with_capacity(memory) }
+    }
+
+    fn clear(&mut self) {
+        self.pairs.clear();
+    }
+
+    /// Records the step `s` that moved the residual from `r_old` to `r`; pairs
+    /// without positive curvature are skipped (they would break positivity).
+    fn push(&mut self, s: &[f64], r: &[f64], r_old: &[f64]) {
+        if self.memory == 0 {
+            return;
+        }
+        let y: Vec<f64> = r.iter().zip(r_old).map(|(a, b)| a - b).collect();
+        let sy: f64 = s.iter().zip(&y).map(|(a, b)| a * b).sum();
+        if !(sy > 1e-12 * norm(s) * norm(&y)) {
+            return;
+        }
+        if self.pairs.len() == self.memory {
+            self.pairs.pop_front();
+        }
+        self.pairs.push_back((s.to_vec(), y, 1.0 / sy));
+    }
+
+    /// v ← H v by the two-loop recursion, H₀ applied by `solve`.
+    fn apply(&self, v: &mut [f64], mut solve: impl FnMut(&mut [f64]) -> Result<(), FemError>) -> Result<(), FemError> {
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let mut alphas = Vec::with_capacity(self.pairs.len());
+        for (s, y, rho) in self.pairs.iter().rev() {
+            let a = rho * dot(s, v);
+            v.iter_mut().zip(y).for_each(|(x, y)| *x -= a * y);
+            alphas.push(a);
+        }
+        solve(v)?;
+        for ((s, y, rho), a) in self.pairs.iter().zip(alphas.iter().rev()) {
+            let b = rho * dot(y, v);
+            v.iter_mut().zip(s).for_each(|(x, s)| *x += (a - b) * s);
+        }
+        Ok(())
+    }
+}
+
 #[derive(Default)]
 struct Stats {
     iterations: usize,
     factorizations: usize,
-    cg_iterations: usize,
+    tangent_assemblies: usize,
+    /// A factorisation found the tangent indefinite (past a limit or bifurcation point).
+    indefinite: bool,
+    /// The kept factor was recomputed during this solve.
+    refactorized: bool,
     residuals: Vec<f64>,
     timings: Timings,
 }
@@ -454,7 +629,7 @@ impl Stats {
             iterations: self.iterations,
             load_steps,
             factorizations: self.factorizations,
-            cg_iterations: self.cg_iterations,
+            tangent_assemblies: self.tangent_assemblies,
             residuals: self.residuals,
             timings,
         }
