@@ -1,0 +1,65 @@
+//! `augsim solve` on the shipped large-deformation scenarios, and the diagnosis
+//! of Saint-Venant-Kirchhoff's compressive limit point.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn repository() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// Runs `augsim solve`, returns (success, stdout + stderr).
+fn solve(scenario: &Path, out: &Path) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_augsim"))
+        .args(["solve", scenario.to_str().unwrap(), "-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    (out.status.success(), format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr)))
+}
+
+fn max_displacement(text: &str) -> f64 {
+    let line = text.lines().find(|l| l.starts_with("max |u|")).unwrap_or_else(|| panic!("no max |u| in:\n{text}"));
+    line.split_whitespace().nth(2).unwrap().parse().unwrap()
+}
+
+#[test]
+fn neo_hookean_phantom_reaches_paper_scale_deformation() {
+    let dir = tempfile::tempdir().unwrap();
+    for (scenario, at_least) in [("liver_large.toml", 0.08), ("liver_tool.toml", 0.04)] {
+        let out = dir.path().join("out.vtu");
+        let (ok, text) = solve(&repository().join("scenarios").join(scenario), &out);
+        assert!(ok, "{scenario} failed:\n{text}");
+        assert!(text.contains("Fbar elements"), "{scenario} must use F-bar at nu >= 0.45:\n{text}");
+        let u = max_displacement(&text);
+        assert!(u >= at_least, "{scenario}: max |u| = {u} m < {at_least} m");
+        assert!(out.exists());
+    }
+}
+
+#[test]
+fn svk_past_its_limit_point_is_diagnosed() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = dir.path().join("svk.toml");
+    std::fs::write(
+        &scenario,
+        r#"name = "svk_push"
+[mesh.phantom]
+tets = 2000
+[material]
+law = "svk"
+young = 5000.0
+poisson = 0.48
+formulation = "standard"
+[[fixed]]
+select = { region = "fixed" }
+[[force]]
+select = { region = "push" }
+total = [0.0, 0.0, -1.0]
+"#,
+    )
+    .unwrap();
+    let (ok, text) = solve(&scenario, &dir.path().join("out.vtu"));
+    assert!(!ok, "SVK must not converge under this load:\n{text}");
+    assert!(text.contains("passed its compressive limit point at load factor 0."), "{text}");
+    assert!(text.contains("element ") && text.contains("neo_hookean"), "{text}");
+}
