@@ -43,10 +43,7 @@ pub fn run(path: &Path, output: Option<&Path>) -> Result<()> {
     let t = sol.timings;
     println!(
         "material   {:?} ({:?} elements), E = {} Pa, nu = {}",
-        p.material.law,
-        geo.formulation,
-        p.material.young,
-        p.material.poisson
+        p.material.law, geo.formulation, p.material.young, p.material.poisson
     );
     println!("system     {} dofs, {} free, {} stored non-zeros", p.num_dofs(), free, nnz);
     println!(
