@@ -16,6 +16,7 @@ pub mod patch;
 pub mod post;
 pub mod problem;
 pub mod solver;
+pub mod verification;
 
 pub use element::ElementGeometry;
 pub use material::{Formulation, Law, Material};

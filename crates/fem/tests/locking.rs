@@ -7,29 +7,10 @@ use fem::{Formulation, Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::{box_hex, box_tet, Cells, Mesh};
 use nalgebra::Matrix3;
 
-const LENGTH: f64 = 10.0;
 const YOUNG: f64 = 1000.0;
-const LOAD: f64 = 1e-4;
 
-/// Tip deflection of a 10 × 1 × 1 cantilever clamped at x = 0 under a small
-/// downward end traction, divided by Timoshenko's (Cowper's shear coefficient).
 fn deflection_ratio(hex: bool, cells: [usize; 3], law: Law, form: Formulation, nu: f64) -> f64 {
-    let m =
-        if hex { box_hex([0.0; 3], [LENGTH, 1.0, 1.0], cells) } else { box_tet([0.0; 3], [LENGTH, 1.0, 1.0], cells) }
-            .unwrap();
-    let clamp = mesh::select::nodes_in_box(&m.nodes, [-1e-9; 3], [1e-9, 1.0 + 1e-9, 1.0 + 1e-9]);
-    let tip = mesh::select::nodes_in_box(&m.nodes, [LENGTH - 1e-9, -1e-9, -1e-9], [LENGTH + 1e-9, 1.1, 1.1]);
-    let mut problem = Problem::new(m, Material::new(law, YOUNG, nu).with_formulation(form));
-    problem.fix(&clamp);
-    problem.add_traction(&tip, [0.0, 0.0, -LOAD]);
-    let mut solver = StaticSolver::new(problem).unwrap();
-    let u = solver.solve(&SolverOptions { rtol: 1e-10, ..Default::default() }).unwrap().u;
-    let w = -tip.iter().map(|&n| u[3 * n + 2]).sum::<f64>() / tip.len() as f64;
-    let (p, inertia, area) = (LOAD, 1.0 / 12.0, 1.0);
-    let shear_coefficient = 10.0 * (1.0 + nu) / (12.0 + 11.0 * nu);
-    let g = YOUNG / (2.0 * (1.0 + nu));
-    let theory = p * LENGTH.powi(3) / (3.0 * YOUNG * inertia) + p * LENGTH / (shear_coefficient * g * area);
-    w / theory
+    fem::verification::cantilever_deflection_ratio(hex, cells, law, form, nu).unwrap()
 }
 
 #[test]
