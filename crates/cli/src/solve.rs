@@ -47,8 +47,9 @@ pub fn run(path: &Path, output: Option<&Path>) -> Result<()> {
     );
     println!("system     {} dofs, {} free, {} stored non-zeros", p.num_dofs(), free, nnz);
     println!(
-        "newton     {} iterations in {} load step(s), final relative residual {:.2e}",
+        "solver     {} iterations, {} factorisation(s), {} load step(s), final relative residual {:.2e}",
         sol.iterations,
+        sol.factorizations,
         sol.load_steps,
         sol.residuals.last().copied().unwrap_or(0.0)
     );
