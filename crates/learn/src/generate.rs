@@ -3,9 +3,14 @@
 //!
 //! Each sample `i` draws its loads from a generator seeded by the dataset seed
 //! and `i` alone, so a resumed, split (`part i/n`) or re-ordered generation
-//! produces the same samples. Samples are solved in parallel (rayon), each
-//! worker with its own solver whose factorisation is reused across samples.
-//! A sample whose solve fails is recorded in the manifest with its reason.
+//! produces the same samples. Samples are solved in parallel (rayon) by blocks
+//! of [`BLOCK`] consecutive indices: a block's samples are solved in index order
+//! by solvers created for that block (one per fixed set), which keep their
+//! symbolic analysis and factorisations from one solve to the next. A sample's
+//! solution thus depends on its index alone, bit for bit, whatever the number
+//! of threads and wherever a resumed or split generation starts (it solves the
+//! block's earlier samples again first). A sample whose solve fails is recorded
+//! in the manifest with its reason.
 
 use std::collections::HashMap;
 use std::ops::Range;
@@ -26,6 +31,10 @@ use crate::{LearnError, Result};
 
 /// Stream number of the load generator in [`item_rng`].
 const LOAD_STREAM: u64 = 1;
+
+/// Samples per block: indices `b * BLOCK..(b + 1) * BLOCK` are solved in order by
+/// the solvers of block `b` (independent of the thread count).
+const BLOCK: u64 = 32;
 
 /// How a dataset is generated (the `[dataset]` table of a scenario file).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -259,7 +268,7 @@ impl Generator {
     }
 
     /// Generates sample `index`: draws loads, solves, encodes.
-    /// `solvers` caches one solver per fixed set for this worker.
+    /// `solvers` caches one solver per fixed set for the block of `index`.
     fn sample(&self, index: u64, solvers: &mut HashMap<usize, StaticSolver>) -> std::result::Result<Sample, String> {
         let mut rng = item_rng(self.config.seed, LOAD_STREAM, index);
         let fixed = rng.random_range(0..self.fixed_sets.len());
@@ -334,6 +343,21 @@ impl Generator {
         Ok(Sample { index, input, target, mask: self.mask.clone() })
     }
 
+    /// Generates the indices of block `block` that lie in `keep`, in order. All the
+    /// block's samples before `keep.end` are solved, in order and by solvers created
+    /// here, so that each solution depends on its index alone.
+    fn block(&self, block: u64, keep: &Range<u64>) -> Vec<(u64, std::result::Result<Sample, String>)> {
+        let mut solvers = HashMap::new();
+        let mut out = Vec::new();
+        for i in block * BLOCK..((block + 1) * BLOCK).min(keep.end) {
+            let sample = self.sample(i, &mut solvers);
+            if i >= keep.start {
+                out.push((i, sample));
+            }
+        }
+        out
+    }
+
     /// Displacements of observed nodes only, on the grid: exact on a lattice; for an
     /// embedded mesh see [`encode_points`] (nearest grid node, averaged).
     fn encode_observed(&self, partial: &[f64], observed: &[usize]) -> Result<Vec<f32>> {
@@ -383,14 +407,17 @@ impl Generator {
         let mut writer = DatasetWriter::create_or_resume(dir, spec)?;
         let start = writer.resume_from().max(range.start as u64);
         let total = range.end as u64;
-        let batch = self.config.shard_size.max(rayon::current_num_threads()) as u64;
+        // Blocks per batch: at least a shard, and as many for every thread.
+        let threads = rayon::current_num_threads() as u64;
+        let batch = (self.config.shard_size as u64).div_ceil(BLOCK).div_ceil(threads) * threads;
         let mut next = start;
         progress(next - range.start as u64, total - range.start as u64);
         while next < total {
-            let end = (next + batch).min(total);
-            let results: Vec<(u64, std::result::Result<Sample, String>)> =
-                (next..end).into_par_iter().map_init(HashMap::new, |solvers, i| (i, self.sample(i, solvers))).collect();
-            for (i, r) in results {
+            let end = ((next / BLOCK + batch) * BLOCK).min(total);
+            let keep = next..end;
+            let results: Vec<_> =
+                (next / BLOCK..end.div_ceil(BLOCK)).into_par_iter().map(|b| self.block(b, &keep)).collect();
+            for (i, r) in results.into_iter().flatten() {
                 match r {
                     Ok(s) => writer.push(&s)?,
                     Err(reason) => writer.push_failure(i, reason)?,
