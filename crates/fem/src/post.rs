@@ -7,39 +7,41 @@ use crate::element::ElementGeometry;
 use crate::material::Material;
 use crate::FemError;
 
+/// `each` applied to every cell's effective deformation gradients.
+fn per_cell<T>(
+    geometry: &ElementGeometry,
+    material: &Material,
+    u: &[f64],
+    each: impl Fn(&[Matrix3<f64>]) -> T,
+) -> Result<Vec<T>, FemError> {
+    let gradients = geometry.effective_gradients(material.law, u)?;
+    Ok(gradients.chunks(geometry.points_per_element).map(each).collect())
+}
+
 /// Mean over each cell's quadrature points of the Green-Lagrange strain
 /// E = ½(FᵀF − I), as 6 components per cell (xx, yy, zz, xy, yz, xz).
 pub fn green_strain(geometry: &ElementGeometry, material: &Material, u: &[f64]) -> Result<Vec<f64>, FemError> {
-    let gradients = geometry.effective_gradients(material.law, u)?;
-    let n = geometry.points_per_element;
-    Ok(gradients
-        .chunks(n)
-        .flat_map(|fs| {
-            let mean =
-                fs.iter().map(|f| (f.transpose() * f - Matrix3::identity()) * 0.5).sum::<Matrix3<f64>>() / n as f64;
-            [mean[(0, 0)], mean[(1, 1)], mean[(2, 2)], mean[(0, 1)], mean[(1, 2)], mean[(0, 2)]]
-        })
-        .collect())
+    let cells = per_cell(geometry, material, u, |fs| {
+        let mean =
+            fs.iter().map(|f| (f.transpose() * f - Matrix3::identity()) * 0.5).sum::<Matrix3<f64>>() / fs.len() as f64;
+        [mean[(0, 0)], mean[(1, 1)], mean[(2, 2)], mean[(0, 1)], mean[(1, 2)], mean[(0, 2)]]
+    })?;
+    Ok(cells.into_iter().flatten().collect())
 }
 
 /// Mean over each cell's quadrature points of the von Mises equivalent of the
 /// Cauchy stress σ = J⁻¹ P Fᵀ (Pa).
 pub fn von_mises(geometry: &ElementGeometry, material: &Material, u: &[f64]) -> Result<Vec<f64>, FemError> {
-    let gradients = geometry.effective_gradients(material.law, u)?;
-    let n = geometry.points_per_element;
-    Ok(gradients
-        .chunks(n)
-        .map(|fs| {
-            fs.iter()
-                .map(|f| {
-                    let s = material.stress(f) * f.transpose() / f.determinant();
-                    let dev = s - Matrix3::identity() * (s.trace() / 3.0);
-                    (1.5 * dev.norm_squared()).sqrt()
-                })
-                .sum::<f64>()
-                / n as f64
-        })
-        .collect())
+    per_cell(geometry, material, u, |fs| {
+        fs.iter()
+            .map(|f| {
+                let s = material.stress(f) * f.transpose() / f.determinant();
+                let dev = s - Matrix3::identity() * (s.trace() / 3.0);
+                (1.5 * dev.norm_squared()).sqrt()
+            })
+            .sum::<f64>()
+            / fs.len() as f64
+    })
 }
 
 /// Largest nodal displacement magnitude (m).
