@@ -2,7 +2,7 @@
 //! Saint-Venant-Kirchhoff and Neo-Hookean materials on T4 and H8 meshes,
 //! standard or locking-free (F-bar) for nearly incompressible tissue,
 //! Dirichlet conditions, springs, nodal forces, tractions and gravity, and a
-//! static Newton-Raphson solver on a sparse Cholesky factorisation.
+//! static quasi-Newton solver (L-BFGS on a kept sparse Cholesky factorisation).
 //!
 //! Units are SI: m, Pa, N, kg/m³. Displacement vectors hold 3 values per node
 //! (x, y, z of node 0, then node 1, ...).
