@@ -8,7 +8,8 @@
 use rayon::prelude::*;
 
 use crate::element::ElementGeometry;
-use crate::material::Material;
+use crate::fbar;
+use crate::material::{Formulation, Material};
 use crate::FemError;
 
 /// Marks a dof that is constrained, or a matrix entry that is not stored.
@@ -159,7 +160,10 @@ pub fn assemble(
             let nd = 3 * patches.nodes(p).len();
             let fe = &mut fc[fo..fo + nd];
             let ke = kc.as_deref_mut().map(|k| &mut k[ko..ko + nd * nd]);
-            geometry.patch_force_tangent(p, material, u, fe, ke, &mut scratch)?;
+            match geometry.formulation {
+                Formulation::Fbar => fbar::patch_force_tangent(geometry, p, material, u, fe, ke, &mut scratch)?,
+                _ => geometry.force_tangent(patches.elements(p)[0], material, u, fe, ke)?,
+            }
             fo += nd;
             ko += nd * nd;
         }

@@ -4,7 +4,6 @@
 use mesh::{Cells, Mesh};
 use nalgebra::Matrix3;
 
-use crate::fbar::{self, PatchPoint};
 use crate::material::{Formulation, Material};
 use crate::patch::{Patches, TET_PATCH_SIZE};
 use crate::FemError;
@@ -164,41 +163,6 @@ impl ElementGeometry {
             }
         }
         f
-    }
-
-    /// The deformation gradient each quadrature point is evaluated at (F, or F̄
-    /// under F-bar), index `e * points + q`.
-    pub fn effective_gradients(&self, law: crate::Law, u: &[f64]) -> Result<Vec<Matrix3<f64>>, FemError> {
-        let nq = self.points_per_element;
-        let mut out = vec![Matrix3::identity(); self.len() * nq];
-        for p in 0..self.patches.len() {
-            let elements = self.patches.elements(p);
-            let gradients = match self.formulation {
-                Formulation::Fbar => fbar::patch_gradients(self, p, law, u)?,
-                _ => elements.iter().flat_map(|&e| (0..nq).map(move |q| self.deformation_gradient(e, q, u))).collect(),
-            };
-            for (slot, &e) in elements.iter().enumerate() {
-                out[e * nq..(e + 1) * nq].copy_from_slice(&gradients[slot * nq..(slot + 1) * nq]);
-            }
-        }
-        Ok(out)
-    }
-
-    /// Internal force and, when `k` is given, tangent of patch `p` over its
-    /// nodes (see [`Patches::nodes`]); `scratch` is reused between calls.
-    pub fn patch_force_tangent(
-        &self,
-        p: usize,
-        material: &Material,
-        u: &[f64],
-        f: &mut [f64],
-        k: Option<&mut [f64]>,
-        scratch: &mut Vec<PatchPoint>,
-    ) -> Result<(), FemError> {
-        match self.formulation {
-            Formulation::Fbar => fbar::patch_force_tangent(self, p, material, u, f, k, scratch),
-            _ => self.force_tangent(self.patches.elements(p)[0], material, u, f, k),
-        }
     }
 
     /// Internal force `f` (3n entries) and, when `k` is given, tangent stiffness

@@ -4,8 +4,27 @@
 use nalgebra::Matrix3;
 
 use crate::element::ElementGeometry;
-use crate::material::Material;
+use crate::fbar;
+use crate::material::{Formulation, Law, Material};
 use crate::FemError;
+
+/// The deformation gradient each quadrature point is evaluated at (F, or F̄
+/// under F-bar), index `e * points + q`.
+pub fn effective_gradients(geometry: &ElementGeometry, law: Law, u: &[f64]) -> Result<Vec<Matrix3<f64>>, FemError> {
+    let nq = geometry.points_per_element;
+    let mut out = vec![Matrix3::identity(); geometry.len() * nq];
+    for p in 0..geometry.patches.len() {
+        let elements = geometry.patches.elements(p);
+        let gradients = match geometry.formulation {
+            Formulation::Fbar => fbar::patch_gradients(geometry, p, law, u)?,
+            _ => elements.iter().flat_map(|&e| (0..nq).map(move |q| geometry.deformation_gradient(e, q, u))).collect(),
+        };
+        for (slot, &e) in elements.iter().enumerate() {
+            out[e * nq..(e + 1) * nq].copy_from_slice(&gradients[slot * nq..(slot + 1) * nq]);
+        }
+    }
+    Ok(out)
+}
 
 /// `each` applied to every cell's effective deformation gradients.
 fn per_cell<T>(
@@ -14,7 +33,7 @@ fn per_cell<T>(
     u: &[f64],
     each: impl Fn(&[Matrix3<f64>]) -> T,
 ) -> Result<Vec<T>, FemError> {
-    let gradients = geometry.effective_gradients(material.law, u)?;
+    let gradients = effective_gradients(geometry, material.law, u)?;
     Ok(gradients.chunks(geometry.points_per_element).map(each).collect())
 }
 

@@ -18,6 +18,7 @@ use crate::assembly::{assemble, Pattern, Workspace};
 use crate::element::ElementGeometry;
 use crate::linsolve::SparseCholesky;
 use crate::material::{Law, Material};
+use crate::post::effective_gradients;
 use crate::problem::Problem;
 use crate::FemError;
 
@@ -307,9 +308,9 @@ impl StaticSolver {
             return error;
         }
         let law = self.problem.material.law;
-        let gradients = match self.geometry.effective_gradients(law, trial) {
+        let gradients = match effective_gradients(&self.geometry, law, trial) {
             Ok(g) => g,
-            Err(_) => match self.geometry.effective_gradients(law, u) {
+            Err(_) => match effective_gradients(&self.geometry, law, u) {
                 Ok(g) => g,
                 Err(_) => return error,
             },

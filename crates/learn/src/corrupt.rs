@@ -149,6 +149,13 @@ impl Corruption {
     }
 }
 
+/// Random stream of the batch shuffling.
+pub(crate) const STREAM_SHUFFLE: u64 = 1;
+/// Random stream of the training-time corruption.
+pub(crate) const STREAM_TRAIN_CORRUPTION: u64 = 2;
+/// Random stream of the evaluation-time (validation and test) corruption.
+pub(crate) const STREAM_EVAL_CORRUPTION: u64 = 3;
+
 /// A random generator for one corrupted item, derived from a seed, a stream (training,
 /// evaluation, ...) and the item number, independent of the order in which items are processed.
 pub fn item_rng(seed: u64, stream: u64, item: u64) -> StdRng {

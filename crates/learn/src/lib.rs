@@ -27,6 +27,7 @@
 #![warn(missing_docs)]
 
 pub mod corrupt;
+pub mod curve;
 pub mod dataset;
 mod error;
 mod fsutil;
@@ -35,12 +36,12 @@ mod grid;
 pub mod inference;
 pub mod metrics;
 pub mod npy;
-pub mod plot;
 pub mod predict;
 pub mod train;
 pub mod unet;
 
 pub use corrupt::{Corruption, Sparsity};
+pub use curve::CurveRow;
 pub use dataset::{
     merge_datasets, Dataset, DatasetPart, DatasetSpec, DatasetWriter, FailedSample, Manifest, Normalization, Sample,
     Samples, ShardInfo, Statistics,
@@ -50,7 +51,7 @@ pub use grid::{encode_points, GridPlacement, GridShape, CHANNELS, LAYOUT};
 pub use inference::InferenceNet;
 pub use metrics::{ErrorStats, EvalReport};
 pub use predict::{evaluate, evaluate_at_points, evaluation_input, time_prediction, PointErrors, Predictor, Timing};
-pub use train::{train, CurveRow, Initialization, TrainConfig, TrainOptions, TrainOutcome};
+pub use train::{train, Initialization, TrainConfig, TrainOptions, TrainOutcome};
 pub use unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
 
 /// Result type of this crate.

@@ -4,13 +4,12 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::corrupt::{item_rng, Corruption};
+use crate::corrupt::{item_rng, Corruption, STREAM_EVAL_CORRUPTION};
 use crate::dataset::{Normalization, Samples};
 use crate::grid::GridShape;
 use crate::grid::CHANNELS;
 use crate::inference::InferenceNet;
 use crate::metrics::{mean_euclidean_error, ErrorStats, EvalReport};
-use crate::train::STREAM_EVAL_CORRUPTION;
 use crate::unet::TrainedModel;
 use crate::{LearnError, Result};
 use mesh::embedding::Grid;

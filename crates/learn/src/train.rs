@@ -23,22 +23,15 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::corrupt::{item_rng, splitmix64, Corruption};
+use crate::corrupt::{item_rng, splitmix64, Corruption, STREAM_SHUFFLE, STREAM_TRAIN_CORRUPTION};
+use crate::curve::{plot_learning_curve, write_curve_csv, CurveRow};
 use crate::dataset::{Normalization, Samples};
 use crate::fsutil::{read, write_atomic};
 use crate::grid::{GridPlacement, CHANNELS};
-use crate::metrics::{masked_mse, ErrorStats};
-use crate::plot::plot_learning_curve;
+use crate::metrics::masked_mse;
 use crate::predict::evaluate_net;
 use crate::unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
 use crate::{inference_device, training_device, LearnError, Result};
-
-/// Random stream of the batch shuffling.
-const STREAM_SHUFFLE: u64 = 1;
-/// Random stream of the training-time corruption.
-const STREAM_TRAIN_CORRUPTION: u64 = 2;
-/// Random stream of the validation-time corruption.
-pub(crate) const STREAM_EVAL_CORRUPTION: u64 = 3;
 
 /// Training hyper-parameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -159,18 +152,6 @@ impl TrainOptions {
     pub fn new(out_dir: impl Into<PathBuf>) -> Self {
         TrainOptions { out_dir: out_dir.into(), resume: true, progress: false, stop_after: None, placement: None }
     }
-}
-
-/// One row of the learning curve.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct CurveRow {
-    /// Iterations done.
-    pub iteration: usize,
-    /// Mean training loss (normalised units) over the iterations since the previous row.
-    pub train_loss: f64,
-    /// Validation errors (m): mean, std and max of the per-sample mean Euclidean error, if
-    /// there are validation samples.
-    pub val: Option<ErrorStats>,
 }
 
 /// What [`train`] returns.
@@ -402,18 +383,6 @@ fn load_record_into(net: UNet, bytes: Vec<u8>, path: &Path) -> Result<UNet> {
 
 fn indices_hash(samples: &Samples) -> u64 {
     samples.indices.iter().fold(splitmix64(samples.len() as u64), |h, &i| splitmix64(h ^ i))
-}
-
-/// Writes the learning curve as CSV:
-/// `iteration,train_loss,val_mean_error_m,val_std_error_m,val_max_error_m` (validation columns
-/// empty without validation samples).
-pub fn write_curve_csv(path: &Path, curve: &[CurveRow]) -> Result<()> {
-    let mut text = String::from("iteration,train_loss,val_mean_error_m,val_std_error_m,val_max_error_m\n");
-    for r in curve {
-        let val = r.val.map(|v| format!("{:e},{:e},{:e}", v.mean, v.std, v.max)).unwrap_or_else(|| ",,".into());
-        text.push_str(&format!("{},{:e},{val}\n", r.iteration, r.train_loss));
-    }
-    write_atomic(path, text.as_bytes())
 }
 
 /// Trains a U-Net on `train`, validating on `val` (may be empty: then the last weights are

@@ -1,11 +1,39 @@
-//! Learning-curve plots (PNG): the training loss and the validation error.
+//! The learning curve: its rows, written as CSV and drawn as PNG (training loss,
+//! validation error).
 
 use std::path::Path;
 
 use plot::{line_plot, PlotSpec, Series};
 
-use crate::train::CurveRow;
+use serde::{Deserialize, Serialize};
+
+use crate::fsutil::write_atomic;
+use crate::metrics::ErrorStats;
 use crate::{LearnError, Result};
+
+/// One row of the learning curve.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CurveRow {
+    /// Iterations done.
+    pub iteration: usize,
+    /// Mean training loss (normalised units) over the iterations since the previous row.
+    pub train_loss: f64,
+    /// Validation errors (m): mean, std and max of the per-sample mean Euclidean error, if
+    /// there are validation samples.
+    pub val: Option<ErrorStats>,
+}
+
+/// Writes the learning curve as CSV:
+/// `iteration,train_loss,val_mean_error_m,val_std_error_m,val_max_error_m` (validation columns
+/// empty without validation samples).
+pub fn write_curve_csv(path: &Path, curve: &[CurveRow]) -> Result<()> {
+    let mut text = String::from("iteration,train_loss,val_mean_error_m,val_std_error_m,val_max_error_m\n");
+    for r in curve {
+        let val = r.val.map(|v| format!("{:e},{:e},{:e}", v.mean, v.std, v.max)).unwrap_or_else(|| ",,".into());
+        text.push_str(&format!("{},{:e},{val}\n", r.iteration, r.train_loss));
+    }
+    write_atomic(path, text.as_bytes())
+}
 
 /// Draws the training loss against the iteration into `path` and, when the curve has
 /// validation rows, the validation mean error ē ± σ (mm) into `<stem>_error.png` beside it,
