@@ -11,7 +11,7 @@ use augsim_mesh::sampling::sample_visible_boundary;
 use augsim_mesh::tetmesh::{mesh_surface_to_count, stuff, surface_domain, tet_quality, BoundaryFit, TetMeshOptions};
 use augsim_mesh::{liver_phantom, Mesh, MeshError};
 
-const LIVER_OBJ: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/meshes/liver-smooth.obj");
+const LIVER_OBJ: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/liver-smooth.obj");
 
 /// Runs `f` `runs` times; returns the median time in milliseconds and the last result.
 fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {

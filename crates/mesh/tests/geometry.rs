@@ -18,7 +18,7 @@ use augsim_mesh::{boundary_nodes, box_hex, Cells, Mesh, Point, TriSurface};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-const LIVER_OBJ: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/meshes/liver-smooth.obj");
+const LIVER_OBJ: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/liver-smooth.obj");
 
 fn norm(p: Point) -> f64 {
     (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()
