@@ -65,8 +65,8 @@ struct Kinematics {
     volume: f64,
 }
 
-/// Fills `points` with the patch's quadrature points and returns m̄; fails on
-/// an inverted element for the finite-strain laws.
+/// Fills `points` with the patch's quadrature points and returns the patch's
+/// kinematics (m̄, volume); fails on an inverted element for the finite-strain laws.
 fn gather(
     geo: &ElementGeometry,
     patch: usize,
@@ -187,7 +187,7 @@ pub fn patch_force_tangent(
         };
         p.stress = flat(&stress);
         let phi = kin.phi(alpha);
-        let x = if kin.linear { flat(&Matrix3::identity()) } else { flat(&p.f) };
+        let (x, _, _) = kin.directions(p);
         sigma_bar += p.w * phi * dot(&p.stress, &x);
         if want_k {
             gamma += p.w * phi * phi * dot(&x, &mat_vec(&p.tangent, &x));

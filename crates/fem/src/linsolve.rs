@@ -1,6 +1,7 @@
 //! Sparse symmetric positive-definite solves with faer: the symbolic
 //! factorisation (AMD ordering, supernodal) is computed once per pattern and
-//! reused by every numeric factorisation.
+//! reused by every numeric factorisation. Two numeric factors can be held at
+//! once ([`Slot`]), sharing the symbolic analysis and the workspace.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
@@ -21,14 +22,30 @@ enum Factor {
     Ldlt,
 }
 
-/// A sparse Cholesky factorisation bound to one pattern.
+/// Which of the two numeric factors a call addresses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Slot {
+    /// The latest tangent's.
+    Latest,
+    /// The tangent at rest.
+    Rest,
+}
+
+impl Slot {
+    fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// Sparse Cholesky factorisations bound to one pattern.
 pub struct SparseCholesky {
     symbolic: SymbolicCholesky<u32>,
     col_ptr: Vec<u32>,
     row_idx: Vec<u32>,
-    l_values: Vec<f64>,
+    /// Factor values per slot (allocated at the slot's first factorisation).
+    l_values: [Vec<f64>; 2],
     mem: MemBuffer,
-    factor: Factor,
+    factor: [Factor; 2],
 }
 
 impl std::fmt::Debug for SparseCholesky {
@@ -55,21 +72,25 @@ impl SparseCholesky {
             .or(symbolic.solve_in_place_scratch::<f64>(1, par()));
         let mem = MemBuffer::try_new(req)
             .map_err(|_| FemError::Factorization("out of memory for the factorisation workspace".into()))?;
-        let l_values = vec![0.0; symbolic.len_val()];
         Ok(SparseCholesky {
             symbolic,
             col_ptr: pattern.col_ptr.clone(),
             row_idx: pattern.row_idx.clone(),
-            l_values,
+            l_values: [Vec::new(), Vec::new()],
             mem,
-            factor: Factor::None,
+            factor: [Factor::None; 2],
         })
     }
 
-    /// Whether the last factorisation was LLᵀ (the matrix was positive definite);
+    /// Whether the slot's factorisation is LLᵀ (the matrix was positive definite);
     /// false after the LDLᵀ fallback or before any factorisation.
-    pub fn is_positive_definite(&self) -> bool {
-        self.factor == Factor::Llt
+    pub fn is_positive_definite(&self, slot: Slot) -> bool {
+        self.factor[slot.index()] == Factor::Llt
+    }
+
+    /// Whether the slot holds a factorisation.
+    pub fn is_factorized(&self, slot: Slot) -> bool {
+        self.factor[slot.index()] != Factor::None
     }
 
     /// Multiply-adds of one numeric factorisation, Σ_j c_j² over the column
@@ -90,7 +111,7 @@ impl SparseCholesky {
             // Simplicial factors are used for tiny systems: nnz(L) × mean column count.
             SymbolicCholeskyRaw::Simplicial(_) => {
                 let n = self.symbolic.nrows().max(1) as f64;
-                let nnz = self.l_values.len() as f64;
+                let nnz = self.factor_nnz() as f64;
                 nnz * nnz / n
             }
         }
@@ -98,20 +119,22 @@ impl SparseCholesky {
 
     /// Number of non-zeros in the factor.
     pub fn factor_nnz(&self) -> usize {
-        self.l_values.len()
+        self.symbolic.len_val()
     }
 
     /// Numeric factorisation of the matrix with the given values (pattern order).
     /// Tries LLᵀ; if the matrix is not positive definite (e.g. a buckling
     /// tangent) falls back to LDLᵀ with the same symbolic structure.
-    pub fn factorize(&mut self, values: &[f64]) -> Result<(), FemError> {
+    pub fn factorize(&mut self, slot: Slot, values: &[f64]) -> Result<(), FemError> {
         let n = self.symbolic.nrows();
         let sym = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
         let a = SparseColMatRef::new(sym, values);
         let stack = MemStack::new(&mut self.mem);
-        self.factor = Factor::None;
+        let (l_values, factor) = (&mut self.l_values[slot.index()], &mut self.factor[slot.index()]);
+        l_values.resize(self.symbolic.len_val(), 0.0);
+        *factor = Factor::None;
         let llt = self.symbolic.factorize_numeric_llt(
-            &mut self.l_values,
+            l_values,
             a,
             Side::Lower,
             LltRegularization::default(),
@@ -120,13 +143,13 @@ impl SparseCholesky {
             Default::default(),
         );
         if llt.is_ok() {
-            self.factor = Factor::Llt;
+            *factor = Factor::Llt;
             return Ok(());
         }
         let stack = MemStack::new(&mut self.mem);
         self.symbolic
             .factorize_numeric_ldlt(
-                &mut self.l_values,
+                l_values,
                 a,
                 Side::Lower,
                 LdltRegularization::default(),
@@ -135,21 +158,20 @@ impl SparseCholesky {
                 Default::default(),
             )
             .map_err(|e| FemError::Factorization(format!("tangent stiffness is singular: {e:?}")))?;
-        self.factor = Factor::Ldlt;
+        *factor = Factor::Ldlt;
         Ok(())
     }
 
-    /// Solves A x = b in place with the last factorisation.
-    pub fn solve_in_place(&mut self, rhs: &mut [f64]) -> Result<(), FemError> {
+    /// Solves A x = b in place with the slot's factorisation.
+    pub fn solve_in_place(&mut self, slot: Slot, rhs: &mut [f64]) -> Result<(), FemError> {
         let n = rhs.len();
         let stack = MemStack::new(&mut self.mem);
         let mat = MatMut::from_column_major_slice_mut(rhs, n, 1);
-        match self.factor {
-            Factor::Llt => {
-                LltRef::new(&self.symbolic, &self.l_values).solve_in_place_with_conj(Conj::No, mat, par(), stack)
-            }
+        let l_values = &self.l_values[slot.index()];
+        match self.factor[slot.index()] {
+            Factor::Llt => LltRef::new(&self.symbolic, l_values).solve_in_place_with_conj(Conj::No, mat, par(), stack),
             Factor::Ldlt => {
-                LdltRef::new(&self.symbolic, &self.l_values).solve_in_place_with_conj(Conj::No, mat, par(), stack)
+                LdltRef::new(&self.symbolic, l_values).solve_in_place_with_conj(Conj::No, mat, par(), stack)
             }
             Factor::None => return Err(FemError::Factorization("solve before a successful factorisation".into())),
         }

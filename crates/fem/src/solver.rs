@@ -7,8 +7,8 @@
 //! two-loop recursion): an iteration costs one internal-force evaluation and one
 //! pair of triangular solves. The tangent is reassembled and refactorised only
 //! when that pays: when the iterations still needed at the observed rate of
-//! convergence would take longer than a factorisation (timed) and a few
-//! iterations with the new factor.
+//! convergence would cost more than a refactorisation and a few iterations
+//! with the new factor (costs estimated from operation counts).
 
 use std::time::{Duration, Instant};
 
@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::assembly::{assemble, Pattern, Workspace};
 use crate::element::ElementGeometry;
-use crate::linsolve::SparseCholesky;
+use crate::linsolve::{Slot, SparseCholesky};
 use crate::material::{Law, Material};
 use crate::post::effective_gradients;
 use crate::problem::Problem;
@@ -99,11 +99,11 @@ pub struct StaticSolver {
     geometry: ElementGeometry,
     pattern: Pattern,
     cholesky: SparseCholesky,
-    rest: Option<RestFactor>,
+    /// What the rest slot's factor was computed with (material, springs).
+    rest_key: Option<(Material, Vec<f64>)>,
     constrained_nodes: Vec<usize>,
     work: Workspace,
     values: Vec<f64>,
-    factorized: bool,
     /// A tangent assembly and factorisation, in iterations (see [`refactorization_cost`]).
     refactorization_cost: f64,
 }
@@ -137,7 +137,12 @@ const SVK_LIMIT_STRETCH: f64 = 0.577_350_269_189_625_8;
 
 /// Euclidean norm.
 pub fn norm(v: &[f64]) -> f64 {
-    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+    dot(v, v).sqrt()
+}
+
+/// Dot product.
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 impl StaticSolver {
@@ -159,11 +164,10 @@ impl StaticSolver {
             geometry,
             pattern,
             cholesky,
-            rest: None,
+            rest_key: None,
             constrained_nodes,
             work: Workspace::default(),
             values,
-            factorized: false,
             refactorization_cost,
         })
     }
@@ -308,12 +312,10 @@ impl StaticSolver {
             return error;
         }
         let law = self.problem.material.law;
-        let gradients = match effective_gradients(&self.geometry, law, trial) {
-            Ok(g) => g,
-            Err(_) => match effective_gradients(&self.geometry, law, u) {
-                Ok(g) => g,
-                Err(_) => return error,
-            },
+        let Ok(gradients) =
+            effective_gradients(&self.geometry, law, trial).or_else(|_| effective_gradients(&self.geometry, law, u))
+        else {
+            return error;
         };
         let nq = self.geometry.points_per_element;
         let (point, stretch) = gradients
@@ -345,6 +347,7 @@ impl StaticSolver {
             }
         }
         let f_ext: Vec<f64> = self.problem.f_ext.iter().map(|f| lambda * f).collect();
+        let ext_norm = norm(&f_ext);
         let mut f_int = vec![0.0; ndof];
         let nf = self.pattern.num_free;
         let mut r = vec![0.0; nf];
@@ -359,12 +362,16 @@ impl StaticSolver {
         // The first factor: the rest tangent's (kept while the material and
         // springs are unchanged, it serves every solve from rest), or the last
         // factor computed.
-        let want_rest = from == Start::Rest || !self.factorized;
-        let mut use_rest = want_rest && opt.reuse_factorization && self.prepare_rest_factor(stats)?;
-        let mut refresh = !(use_rest || (opt.reuse_factorization && self.factorized));
+        let latest = self.cholesky.is_factorized(Slot::Latest);
+        let want_rest = from == Start::Rest || !latest;
+        let mut slot = Slot::Latest;
+        if want_rest && opt.reuse_factorization && self.prepare_rest_factor(stats)? {
+            slot = Slot::Rest;
+        }
+        let mut refresh = !(slot == Slot::Rest || (opt.reuse_factorization && latest));
         let (mut last_ratio, mut since_refresh) = (1.0f64, 0usize);
         for it in 0..=opt.max_iterations {
-            let scale = norm(&f_ext).max(norm(&f_int));
+            let scale = ext_norm.max(norm(&f_int));
             let rel = if scale > 0.0 { res / scale } else { 0.0 };
             stats.residuals.push(rel);
             if !rel.is_finite() {
@@ -384,24 +391,19 @@ impl StaticSolver {
                 stats.tangent_assemblies += 1;
                 stats.timings.assembly += t.elapsed();
                 let t = Instant::now();
-                self.factorized = false;
-                self.cholesky.factorize(&self.values)?;
-                self.factorized = true;
-                stats.indefinite |= !self.cholesky.is_positive_definite();
+                self.cholesky.factorize(Slot::Latest, &self.values)?;
+                stats.indefinite |= !self.cholesky.is_positive_definite(Slot::Latest);
                 stats.refactorized = true;
                 stats.factorizations += 1;
                 stats.timings.factorization += t.elapsed();
                 bfgs.clear();
                 refresh = !opt.reuse_factorization;
-                use_rest = false;
+                slot = Slot::Latest;
             }
             let t = Instant::now();
             du.iter_mut().zip(&r).for_each(|(d, r)| *d = -r);
-            let cholesky = match (&mut self.rest, use_rest) {
-                (Some(rest), true) => &mut rest.factor,
-                _ => &mut self.cholesky,
-            };
-            bfgs.apply(&mut du, |v| cholesky.solve_in_place(v))?;
+            let cholesky = &mut self.cholesky;
+            bfgs.apply(&mut du, |v| cholesky.solve_in_place(slot, v))?;
             stats.timings.solve += t.elapsed();
             r_old.copy_from_slice(&r);
             let alpha = self.line_search(u, &du, &mut trial, &mut f_int, &f_ext, &mut r, opt, stats)?;
@@ -417,7 +419,7 @@ impl StaticSolver {
             since_refresh += 1;
             if opt.reuse_factorization && since_refresh >= 2 {
                 let rate = (ratio * last_ratio).sqrt();
-                let target = opt.rtol * norm(&f_ext).max(norm(&f_int));
+                let target = opt.rtol * ext_norm.max(norm(&f_int));
                 let left = if rate < 1.0 { ((target / res_new).ln() / rate.ln()).max(0.0) } else { f64::INFINITY };
                 if left > self.refactorization_cost + REFRESH_ITERATIONS {
                     refresh = true;
@@ -438,16 +440,12 @@ impl StaticSolver {
     /// factorising the tangent at u = 0 if not. Returns false when the rest
     /// tangent is not positive definite (then it is no use as a preconditioner).
     fn prepare_rest_factor(&mut self, stats: &mut Stats) -> Result<bool, FemError> {
-        let (material, springs) = (self.problem.material, &self.problem.springs);
-        if let Some(rest) = &self.rest {
-            if rest.material == material && &rest.springs == springs {
-                return Ok(rest.factor.is_positive_definite());
+        if let Some((material, springs)) = &self.rest_key {
+            if *material == self.problem.material && *springs == self.problem.springs {
+                return Ok(self.cholesky.is_positive_definite(Slot::Rest));
             }
         }
-        let mut rest = match self.rest.take() {
-            Some(rest) => rest,
-            None => RestFactor { factor: SparseCholesky::new(&self.pattern)?, material, springs: Vec::new() },
-        };
+        self.rest_key = None;
         let zero = vec![0.0; self.problem.num_dofs()];
         let mut f = vec![0.0; zero.len()];
         let t = Instant::now();
@@ -455,14 +453,11 @@ impl StaticSolver {
         stats.tangent_assemblies += 1;
         stats.timings.assembly += t.elapsed();
         let t = Instant::now();
-        rest.factor.factorize(&self.values)?;
+        self.cholesky.factorize(Slot::Rest, &self.values)?;
         stats.factorizations += 1;
         stats.timings.factorization += t.elapsed();
-        rest.material = material;
-        rest.springs = self.problem.springs.clone();
-        let definite = rest.factor.is_positive_definite();
-        self.rest = Some(rest);
-        Ok(definite)
+        self.rest_key = Some((self.problem.material, self.problem.springs.clone()));
+        Ok(self.cholesky.is_positive_definite(Slot::Rest))
     }
 
     /// Line search along `du` on s(α) = du · r(u + α du), the directional
@@ -482,7 +477,7 @@ impl StaticSolver {
         opt: &SolverOptions,
         stats: &mut Stats,
     ) -> Result<f64, FemError> {
-        let s0: f64 = du.iter().zip(r.iter()).map(|(d, r)| d * r).sum();
+        let s0 = dot(du, r);
         let (mut a_lo, mut s_lo) = (0.0, s0);
         let mut alpha: f64 = 1.0;
         for attempt in 0..8 {
@@ -505,7 +500,7 @@ impl StaticSolver {
                 Ok(()) => {}
             }
             self.residual(f_int, f_ext, r);
-            let s: f64 = du.iter().zip(r.iter()).map(|(d, r)| d * r).sum();
+            let s = dot(du, r);
             // Not a descent direction (indefinite tangent) or close enough to the root: accept.
             if last || s0 >= 0.0 || s.abs() <= 0.5 * s0.abs() {
                 return Ok(alpha);
@@ -549,13 +544,6 @@ enum Start {
     Kept,
 }
 
-/// The factorised tangent at u = 0, with the data it depends on.
-struct RestFactor {
-    factor: SparseCholesky,
-    material: Material,
-    springs: Vec<f64>,
-}
-
 /// Limited-memory BFGS on top of a kept factorisation: the inverse Hessian
 /// approximation starts from the factor's inverse and takes the curvature
 /// pairs (s, y) = (step, change of the residual) of the last iterations.
@@ -580,7 +568,7 @@ impl Bfgs {
             return;
         }
         let y: Vec<f64> = r.iter().zip(r_old).map(|(a, b)| a - b).collect();
-        let sy: f64 = s.iter().zip(&y).map(|(a, b)| a * b).sum();
+        let sy = dot(s, &y);
         if !(sy > 1e-12 * norm(s) * norm(&y)) {
             return;
         }
@@ -592,7 +580,6 @@ impl Bfgs {
 
     /// v ← H v by the two-loop recursion, H₀ applied by `solve`.
     fn apply(&self, v: &mut [f64], mut solve: impl FnMut(&mut [f64]) -> Result<(), FemError>) -> Result<(), FemError> {
-        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
         let mut alphas = Vec::with_capacity(self.pairs.len());
         for (s, y, rho) in self.pairs.iter().rev() {
             let a = rho * dot(s, v);
