@@ -154,7 +154,7 @@ pub fn assemble(
         tasks.push((first, last, fc, kc));
     }
     tasks.into_par_iter().try_for_each(|(first, last, fc, mut kc)| {
-        let mut scratch = Vec::new();
+        let mut scratch = fbar::PatchScratch::default();
         let (mut fo, mut ko) = (0, 0);
         for p in first..last {
             let nd = 3 * patches.nodes(p).len();

@@ -24,7 +24,7 @@
 use nalgebra::Matrix3;
 
 use crate::element::ElementGeometry;
-use crate::material::{Law, Material, Tangent};
+use crate::material::{cofactor, Law, Material, Tangent};
 use crate::FemError;
 
 type V9 = [f64; 9];
@@ -41,9 +41,17 @@ fn mat_vec(a: &Tangent, x: &V9) -> V9 {
     std::array::from_fn(|r| dot(&a[r], x))
 }
 
+/// Scratch space of a patch evaluation, reused across patches.
+#[derive(Clone, Debug, Default)]
+pub struct PatchScratch {
+    points: Vec<PatchPoint>,
+    /// A = ∂P/∂F at F̄ per point (tangent evaluations only).
+    tangents: Vec<Tangent>,
+}
+
 /// Per-quadrature-point state of a patch evaluation.
 #[derive(Clone, Debug)]
-pub struct PatchPoint {
+struct PatchPoint {
     slot: usize,
     grads: usize,
     w: f64,
@@ -54,7 +62,6 @@ pub struct PatchPoint {
     m: f64,
     alpha: f64,
     stress: V9,
-    tangent: Tangent,
 }
 
 /// Kinematics shared by force, tangent and post-processing.
@@ -81,17 +88,18 @@ fn gather(
     for (slot, &e) in geo.patches.elements(patch).iter().enumerate() {
         for q in 0..nq {
             let f = geo.deformation_gradient(e, q, u);
-            let m = if linear { f.trace() - 3.0 } else { f.determinant() };
+            // F⁻ᵀ = cof(F) / J.
+            let (m, finv_t) = if linear {
+                (f.trace() - 3.0, [0.0; 9])
+            } else {
+                let cof = cofactor(&f);
+                let jac = f.row(0).dot(&cof.row(0));
+                (jac, flat(&(cof / jac)))
+            };
             if !m.is_finite() || (!linear && m <= 0.0) {
                 return Err(FemError::InvertedElement { element: e, det: m });
             }
             let w = geo.weights[e * nq + q];
-            let finv_t = if linear {
-                [0.0; 9]
-            } else {
-                let c = f.try_inverse().ok_or(FemError::InvertedElement { element: e, det: m })?;
-                flat(&c.transpose())
-            };
             volume += w;
             sum += w * m;
             points.push(PatchPoint {
@@ -103,7 +111,6 @@ fn gather(
                 m,
                 alpha: 1.0,
                 stress: [0.0; 9],
-                tangent: [[0.0; 9]; 9],
             });
         }
     }
@@ -159,7 +166,7 @@ pub fn patch_gradients(
 
 /// Internal force (`f`, 3 per patch node) and, when `k` is given, the
 /// consistent tangent (row-major, local dof `3a + i` over the patch's nodes)
-/// of patch `patch`. `points` is scratch space.
+/// of patch `patch`.
 pub fn patch_force_tangent(
     geo: &ElementGeometry,
     patch: usize,
@@ -167,20 +174,22 @@ pub fn patch_force_tangent(
     u: &[f64],
     f: &mut [f64],
     mut k: Option<&mut [f64]>,
-    points: &mut Vec<PatchPoint>,
+    scratch: &mut PatchScratch,
 ) -> Result<(), FemError> {
+    let PatchScratch { points, tangents } = scratch;
     let kin = gather(geo, patch, material.law, u, points)?;
     let want_k = k.is_some();
     let npe = geo.nodes_per_element;
     let ndof = f.len();
     // Stresses (and tangents) at F̄; σ̄ and γ.
     let (mut sigma_bar, mut gamma) = (0.0, 0.0);
+    tangents.clear();
     for p in points.iter_mut() {
         let (fbar, alpha) = kin.modified(p);
         p.alpha = alpha;
         let stress = if want_k {
             let (s, t) = material.stress_tangent(&fbar);
-            p.tangent = t;
+            tangents.push(t);
             s
         } else {
             material.stress(&fbar)
@@ -190,7 +199,8 @@ pub fn patch_force_tangent(
         let (x, _, _) = kin.directions(p);
         sigma_bar += p.w * phi * dot(&p.stress, &x);
         if want_k {
-            gamma += p.w * phi * phi * dot(&x, &mat_vec(&p.tangent, &x));
+            let t = &tangents[tangents.len() - 1];
+            gamma += p.w * phi * phi * dot(&x, &mat_vec(t, &x));
             if !kin.linear {
                 // P̄ : ∂²Φ/∂m̄² with ∂²Φ/∂m̄² = −2α / (9 m̄²) F.
                 gamma -= p.w * 2.0 * alpha / (9.0 * kin.mean * kin.mean) * dot(&p.stress, &x);
@@ -203,7 +213,7 @@ pub fn patch_force_tangent(
     if let Some(k) = k.as_deref_mut() {
         k.fill(0.0);
     }
-    for p in points.iter() {
+    for (q, p) in points.iter().enumerate() {
         let (x, y, dm) = kin.directions(p);
         let c = p.w / kin.volume;
         let alpha = p.alpha;
@@ -221,12 +231,13 @@ pub fn patch_force_tangent(
         }
         let Some(k) = k.as_deref_mut() else { continue };
         // D = w (Mᵀ A M + P̄ : ∂²Φ/∂F²) + σ̄ c ∂²m.
-        let ax = mat_vec(&p.tangent, &x);
+        let tangent = &tangents[q];
+        let ax = mat_vec(tangent, &x);
         let xax = dot(&x, &ax);
         let a2 = alpha * alpha;
         let mut d: Tangent = std::array::from_fn(|r| {
             std::array::from_fn(|s| {
-                p.w * a2 * (p.tangent[r][s] - (ax[r] * y[s] + y[r] * ax[s]) / 3.0 + xax * y[r] * y[s] / 9.0)
+                p.w * a2 * (tangent[r][s] - (ax[r] * y[s] + y[r] * ax[s]) / 3.0 + xax * y[r] * y[s] / 9.0)
             })
         });
         let phi = kin.phi(alpha);
@@ -313,7 +324,7 @@ mod tests {
         let u: Vec<f64> = (0..3 * m.num_nodes()).map(|i| 0.04 * ((i * 37 % 11) as f64 / 11.0 - 0.5)).collect();
         for law in [Law::Linear, Law::Corotational, Law::Svk, Law::NeoHookean] {
             let material = Material::new(law, 3000.0, 0.49);
-            let mut scratch = Vec::new();
+            let mut scratch = PatchScratch::default();
             for e in 0..geo.len() {
                 let (mut f1, mut k1, mut f2, mut k2) = (vec![0.0; 12], vec![0.0; 144], vec![0.0; 12], vec![0.0; 144]);
                 patch_force_tangent(&geo, e, &material, &u, &mut f1, Some(&mut k1), &mut scratch).unwrap();

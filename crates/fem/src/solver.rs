@@ -273,6 +273,9 @@ impl StaticSolver {
                 return Ok(stats.finish(u, 1, start));
             }
         }
+        // The latest factor is that of a converged state (or none): a failed
+        // attempt leaves one of a state that is no use as a preconditioner.
+        let mut latest_converged = u0.is_none();
         let mut u = vec![0.0; ndof];
         let mut previous: Option<(f64, Vec<f64>)> = None;
         let mut lambda = 0.0;
@@ -288,10 +291,17 @@ impl StaticSolver {
                 let ratio = (target - lambda) / (lambda - l0);
                 trial.iter_mut().zip(u0).for_each(|(t, p)| *t += ratio * (*t - p));
             }
-            // Start from the rest tangent unless this solve already refactorised.
-            let from = if stats.refactorized { Start::Kept } else { Start::Rest };
+            // Start from the rest tangent unless this solve already refactorised
+            // at a converged state; after a failure, from a new tangent at the last
+            // converged state.
+            let from = match (stats.refactorized && latest_converged, lambda > 0.0) {
+                (true, _) => Start::Kept,
+                (false, true) => Start::Fresh,
+                (false, false) => Start::Rest,
+            };
             match self.newton(&mut trial, target, from, options, &mut stats) {
                 Ok(()) => {
+                    latest_converged = true;
                     previous = Some((lambda, std::mem::replace(&mut u, trial)));
                     lambda = target;
                     steps += 1;
@@ -302,6 +312,7 @@ impl StaticSolver {
                 Err(FemError::NotConverged { .. } | FemError::InvertedElement { .. } | FemError::Factorization(_))
                     if cuts < options.max_step_cuts =>
                 {
+                    latest_converged = false;
                     cuts += 1;
                     step *= 0.5;
                 }
@@ -377,7 +388,7 @@ impl StaticSolver {
         if want_rest && opt.reuse_factorization && self.prepare_rest_factor(stats)? {
             slot = Slot::Rest;
         }
-        let mut refresh = !(slot == Slot::Rest || (opt.reuse_factorization && latest));
+        let mut refresh = from == Start::Fresh || !(slot == Slot::Rest || (opt.reuse_factorization && latest));
         let (mut last_ratio, mut since_refresh) = (1.0f64, 0usize);
         for it in 0..=opt.max_iterations {
             let scale = ext_norm.max(norm(&f_int));
@@ -551,6 +562,8 @@ enum Start {
     Rest,
     /// The last factor computed (the rest tangent's if there is none).
     Kept,
+    /// A new factor of the tangent at the starting iterate.
+    Fresh,
 }
 
 /// Limited-memory BFGS on top of a kept factorisation: the inverse Hessian
