@@ -401,7 +401,7 @@ pub fn predict(model_path: &Path, input: &Path, output: &Path, mesh_path: Option
     println!("wrote      {}", output.display());
     if let Some(mesh_path) = mesh_path {
         let organ = mesh::io::read_mesh(mesh_path).with_context(|| format!("reading {}", mesh_path.display()))?;
-        let u = displacement_on_mesh(&organ, &placed()?, &prediction)?;
+        let u = learn::GridToMesh::new(&organ, &placed()?)?.apply(&prediction)?;
         let max = u.chunks(3).map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()).fold(0.0, f64::max);
         let vtu = output.with_extension("vtu");
         mesh::io::write_mesh(&vtu, &organ, &[Field::point("displacement", 3, u)])
@@ -454,35 +454,6 @@ fn read_predict_input(path: &Path) -> Result<PredictInput> {
         rows.iter().map(|r| [r[0], r[1], r[2]]).collect(),
         rows.iter().map(|r| [r[3], r[4], r[5]]).collect(),
     ))
-}
-
-/// Interpolates a predicted grid displacement (`[3, nx, ny, nz]`) to the nodes of `organ`
-/// (node-major). Grid nodes outside the organ carry no trained value, so each node uses only
-/// the corners of its grid cell that lie inside the organ (weights renormalised), or all eight
-/// when none does.
-fn displacement_on_mesh(organ: &mesh::Mesh, grid: &mesh::embedding::Grid, field: &[f32]) -> Result<Vec<f64>> {
-    let inside = mesh::embedding::Embedding::new(organ, grid.clone())?.mask();
-    let n = grid.num_nodes();
-    let mut u = vec![0.0; 3 * organ.num_nodes()];
-    for (m, p) in organ.nodes.iter().enumerate() {
-        let corners = grid.corners(m, *p).context("a mesh node is outside the model grid")?;
-        let kept: f64 = corners.iter().filter(|(g, _)| inside[*g]).map(|(_, w)| w).sum();
-        for (g, w) in corners {
-            let w = if kept > 1e-12 {
-                if inside[g] {
-                    w / kept
-                } else {
-                    0.0
-                }
-            } else {
-                w
-            };
-            for c in 0..3 {
-                u[3 * m + c] += w * f64::from(field[c * n + g]);
-            }
-        }
-    }
-    Ok(u)
 }
 
 /// Writes a file atomically (temporary file in the same directory, then rename).

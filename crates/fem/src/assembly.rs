@@ -103,6 +103,13 @@ impl Pattern {
         Ok(Pattern { free_index, num_free, col_ptr, row_idx, diag, scatter, matrix_ptr })
     }
 
+    /// The value position of free-dof entry (row, col), row ≥ col; panics when it is not
+    /// stored (the 3×3 block of a node always is).
+    pub fn position(&self, row: usize, col: usize) -> usize {
+        let (lo, hi) = (self.col_ptr[col] as usize, self.col_ptr[col + 1] as usize);
+        lo + self.row_idx[lo..hi].binary_search(&(row as u32)).expect("entry in pattern")
+    }
+
     /// Number of stored (lower-triangle) entries.
     pub fn nnz(&self) -> usize {
         self.row_idx.len()

@@ -25,13 +25,34 @@ pub struct Problem {
     pub springs: Vec<f64>,
     /// External nodal forces (N), 3 per node.
     pub f_ext: Vec<f64>,
+    /// Springs that resist a node's displacement along one direction only.
+    pub normal_springs: Vec<NormalSpring>,
+}
+
+/// A zero-length spring acting along a unit direction n only: energy ½ k (n·u)²,
+/// e.g. a point-to-plane data term that lets the surface slide along itself.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NormalSpring {
+    /// The node.
+    pub node: usize,
+    /// Unit direction.
+    pub normal: Point,
+    /// Stiffness (N/m).
+    pub stiffness: f64,
 }
 
 impl Problem {
     /// A problem without constraints or loads.
     pub fn new(mesh: Mesh, material: Material) -> Self {
         let n = mesh.num_nodes();
-        Problem { mesh, material, dirichlet: BTreeMap::new(), springs: vec![0.0; n], f_ext: vec![0.0; 3 * n] }
+        Problem {
+            mesh,
+            material,
+            dirichlet: BTreeMap::new(),
+            springs: vec![0.0; n],
+            f_ext: vec![0.0; 3 * n],
+            normal_springs: Vec::new(),
+        }
     }
 
     /// Number of degrees of freedom (3 per node).
@@ -125,6 +146,15 @@ impl Problem {
         }
         if self.springs.iter().any(|k| !(*k >= 0.0 && k.is_finite())) {
             return Err(FemError::Invalid("spring stiffnesses must be non-negative and finite".into()));
+        }
+        for (i, s) in self.normal_springs.iter().enumerate() {
+            let length = s.normal.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if s.node >= n || !(s.stiffness >= 0.0 && s.stiffness.is_finite()) || !((length - 1.0).abs() < 1e-6) {
+                return Err(FemError::Invalid(format!(
+                    "normal spring {i}: node {} of {n}, stiffness {}, |normal| {length} (must be 1)",
+                    s.node, s.stiffness
+                )));
+            }
         }
         Ok(())
     }

@@ -19,7 +19,7 @@ use crate::element::ElementGeometry;
 use crate::linsolve::{Slot, SparseCholesky};
 use crate::material::{Law, Material};
 use crate::post::effective_gradients;
-use crate::problem::Problem;
+use crate::problem::{NormalSpring, Problem};
 use crate::FemError;
 
 /// Settings of the Newton-Raphson solver.
@@ -100,7 +100,7 @@ pub struct StaticSolver {
     pattern: Pattern,
     cholesky: SparseCholesky,
     /// What the rest slot's factor was computed with (material, springs).
-    rest_key: Option<(Material, Vec<f64>)>,
+    rest_key: Option<(Material, Vec<f64>, Vec<NormalSpring>)>,
     constrained_nodes: Vec<usize>,
     work: Workspace,
     values: Vec<f64>,
@@ -239,6 +239,23 @@ impl StaticSolver {
                 f[3 * n + d] += k * u[3 * n + d];
                 if let (true, Some(i)) = (tangent, self.free_index(3 * n + d)) {
                     self.values[self.pattern.diag[i] as usize] += k;
+                }
+            }
+        }
+        for s in &self.problem.normal_springs {
+            let (n, k, dir) = (s.node, s.stiffness, s.normal);
+            let stretch = k * (0..3).map(|d| dir[d] * u[3 * n + d]).sum::<f64>();
+            for d in 0..3 {
+                f[3 * n + d] += stretch * dir[d];
+            }
+            if !tangent {
+                continue;
+            }
+            for a in 0..3 {
+                for b in 0..=a {
+                    let (Some(r), Some(c)) = (self.free_index(3 * n + a), self.free_index(3 * n + b)) else { continue };
+                    let position = self.pattern.position(r.max(c), r.min(c));
+                    self.values[position] += k * dir[a] * dir[b];
                 }
             }
         }
@@ -460,8 +477,9 @@ impl StaticSolver {
     /// factorising the tangent at u = 0 if not. Returns false when the rest
     /// tangent is not positive definite (then it is no use as a preconditioner).
     fn prepare_rest_factor(&mut self, stats: &mut Stats) -> Result<bool, FemError> {
-        if let Some((material, springs)) = &self.rest_key {
-            if *material == self.problem.material && *springs == self.problem.springs {
+        if let Some((material, springs, normal_springs)) = &self.rest_key {
+            let p = &self.problem;
+            if *material == p.material && *springs == p.springs && *normal_springs == p.normal_springs {
                 return Ok(self.cholesky.is_positive_definite(Slot::Rest));
             }
         }
@@ -476,7 +494,8 @@ impl StaticSolver {
         self.cholesky.factorize(Slot::Rest, &self.values)?;
         stats.factorizations += 1;
         stats.timings.factorization += t.elapsed();
-        self.rest_key = Some((self.problem.material, self.problem.springs.clone()));
+        let p = &self.problem;
+        self.rest_key = Some((p.material, p.springs.clone(), p.normal_springs.clone()));
         Ok(self.cholesky.is_positive_definite(Slot::Rest))
     }
 

@@ -2,7 +2,7 @@
 //! finite differences and invariances.
 
 use augsim_fem as fem;
-use fem::{Formulation, Law, Material, Problem, SolverOptions, StaticSolver};
+use fem::{Formulation, Law, Material, NormalSpring, Problem, SolverOptions, StaticSolver};
 use mesh::{boundary_nodes, box_hex, box_tet, Mesh};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
@@ -73,6 +73,11 @@ fn tangent_matches_finite_difference_of_internal_force() {
             let mut problem = Problem::new(m, Material::new(law, 3000.0, 0.42).with_formulation(form));
             problem.fix(&[0]);
             problem.add_springs(&[1, 2], 50.0);
+            let s = 1.0 / 3f64.sqrt();
+            problem.normal_springs = vec![
+                NormalSpring { node: 2, normal: [s, -s, s], stiffness: 80.0 },
+                NormalSpring { node: 3, normal: [0.0, 0.6, 0.8], stiffness: 30.0 },
+            ];
             let mut solver = StaticSolver::new(problem).unwrap();
             let u: Vec<f64> = (0..3 * n).map(|i| if i < 3 { 0.0 } else { 0.05 * noise(7 * i + 1) }).collect();
             let k = solver.tangent_dense(&u).unwrap();

@@ -143,6 +143,62 @@ pub fn encode_points(grid: &Grid, points: &[Point], values: &[[f64; 3]], force: 
     Ok(sum.into_iter().map(|x| x as f32).collect())
 }
 
+/// Interpolation of grid fields (`[3, nx, ny, nz]`) to the nodes of a mesh embedded in the
+/// grid, weights computed once. Grid nodes outside the organ carry no trained value, so each
+/// mesh node uses only the corners of its grid cell that lie inside the organ (weights
+/// renormalised), or all eight when none does.
+#[derive(Clone, Debug)]
+pub struct GridToMesh {
+    grid_nodes: usize,
+    /// Per mesh node, its (grid node, weight) terms.
+    terms: Vec<Vec<(usize, f64)>>,
+}
+
+impl GridToMesh {
+    /// The weights for the nodes of `organ` in `grid`; every node must lie in the grid's box.
+    pub fn new(organ: &mesh::Mesh, grid: &Grid) -> Result<Self> {
+        let invalid = |e: mesh::MeshError| LearnError::InvalidInput(e.to_string());
+        let inside = mesh::embedding::Embedding::new(organ, grid.clone()).map_err(invalid)?.mask();
+        let terms = organ
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(m, p)| {
+                let corners = grid.corners(m, *p).map_err(|e| {
+                    LearnError::InvalidInput(format!("mesh node {m} is outside the model grid: {e}"))
+                })?;
+                let kept: f64 = corners.iter().filter(|(g, _)| inside[*g]).map(|(_, w)| w).sum();
+                Ok(corners
+                    .into_iter()
+                    .filter(|&(g, w)| w != 0.0 && (kept <= 1e-12 || inside[g]))
+                    .map(|(g, w)| (g, if kept > 1e-12 { w / kept } else { w }))
+                    .collect())
+            })
+            .collect::<Result<_>>()?;
+        Ok(GridToMesh { grid_nodes: grid.num_nodes(), terms })
+    }
+
+    /// The field at the mesh nodes, node-major (`3 × nodes`).
+    pub fn apply(&self, field: &[f32]) -> Result<Vec<f64>> {
+        let n = self.grid_nodes;
+        if field.len() != CHANNELS * n {
+            return Err(LearnError::InvalidInput(format!(
+                "grid field has {} values, expected {CHANNELS} × {n}",
+                field.len()
+            )));
+        }
+        let mut u = vec![0.0; CHANNELS * self.terms.len()];
+        for (m, terms) in self.terms.iter().enumerate() {
+            for &(g, w) in terms {
+                for c in 0..CHANNELS {
+                    u[CHANNELS * m + c] += w * f64::from(field[c * n + g]);
+                }
+            }
+        }
+        Ok(u)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -47,7 +47,7 @@ pub use dataset::{
     Samples, ShardInfo, Statistics,
 };
 pub use error::LearnError;
-pub use grid::{encode_points, GridPlacement, GridShape, CHANNELS, LAYOUT};
+pub use grid::{encode_points, GridPlacement, GridShape, GridToMesh, CHANNELS, LAYOUT};
 pub use inference::InferenceNet;
 pub use metrics::{ErrorStats, EvalReport};
 pub use predict::{evaluate, evaluate_at_points, evaluation_input, time_prediction, PointErrors, Predictor, Timing};

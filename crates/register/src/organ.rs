@@ -1,0 +1,142 @@
+//! The preoperative organ: a volumetric mesh and its surface embedded in it.
+
+use mesh::embedding::MeshLocator;
+use mesh::{Mesh, Point, TriSurface};
+
+use crate::{RegisterError, Result};
+
+/// Interpolation weights of a point in the mesh: (node, weight) pairs summing to 1.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Stencil(pub Vec<(usize, f64)>);
+
+impl Stencil {
+    /// The interpolated vector of a node-major field with 3 components per node.
+    pub fn vector(&self, u: &[f64]) -> Point {
+        let mut v = [0.0; 3];
+        for &(n, w) in &self.0 {
+            for (d, x) in v.iter_mut().enumerate() {
+                *x += w * u[3 * n + d];
+            }
+        }
+        v
+    }
+}
+
+/// A volumetric mesh (T4 or H8) with the surface the camera sees, each surface
+/// vertex located in the mesh so that any nodal displacement moves the surface.
+#[derive(Clone, Debug)]
+pub struct Organ {
+    mesh: Mesh,
+    surface: TriSurface,
+    stencils: Vec<Stencil>,
+    locator: MeshLocator,
+}
+
+impl Organ {
+    /// The organ of `mesh` with the given surface (e.g. the smooth surface of an
+    /// organ meshed by an immersed grid), or the mesh's own boundary when `None`.
+    /// A surface vertex outside every element (an immersed grid may leave a sliver
+    /// of the surface uncovered) takes the nearest mesh node.
+    pub fn new(mesh: Mesh, surface: Option<TriSurface>) -> Result<Organ> {
+        let locator = MeshLocator::new(&mesh)?;
+        let surface = match surface {
+            Some(s) => s,
+            None => compact(mesh::boundary_surface(&mesh)),
+        };
+        if surface.triangles.is_empty() {
+            return Err(RegisterError::Invalid("the organ surface has no triangles".into()));
+        }
+        let nv = surface.vertices.len();
+        if let Some(t) = surface.triangles.iter().position(|t| t.iter().any(|&k| k >= nv)) {
+            return Err(RegisterError::Invalid(format!("surface triangle {t} refers to a missing vertex")));
+        }
+        let stencils = surface
+            .vertices
+            .iter()
+            .map(|&p| match locator.locate(p) {
+                Some(loc) => Stencil(loc.terms().collect()),
+                None => Stencil(vec![(nearest_node(&mesh.nodes, p), 1.0)]),
+            })
+            .collect();
+        Ok(Organ { mesh, surface, stencils, locator })
+    }
+
+    /// The volumetric mesh.
+    pub fn mesh(&self) -> &Mesh {
+        &self.mesh
+    }
+
+    /// The surface at rest.
+    pub fn surface(&self) -> &TriSurface {
+        &self.surface
+    }
+
+    /// Where each surface vertex takes its displacement from.
+    pub fn surface_stencils(&self) -> &[Stencil] {
+        &self.stencils
+    }
+
+    /// The surface moved by the nodal displacement `u` (3 per mesh node).
+    pub fn deformed_surface(&self, u: &[f64]) -> TriSurface {
+        let vertices = self
+            .surface
+            .vertices
+            .iter()
+            .zip(&self.stencils)
+            .map(|(p, s)| {
+                let d = s.vector(u);
+                [p[0] + d[0], p[1] + d[1], p[2] + d[2]]
+            })
+            .collect();
+        TriSurface { vertices, triangles: self.surface.triangles.clone() }
+    }
+
+    /// Stencils of points inside the organ (e.g. targets); a point outside is an error naming it.
+    pub fn locate(&self, points: &[Point], what: &str) -> Result<Vec<Stencil>> {
+        points
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| {
+                self.locator.locate(p).map(|l| Stencil(l.terms().collect())).ok_or_else(|| {
+                    RegisterError::Invalid(format!("{what} {i} at {p:?} is outside the organ mesh"))
+                })
+            })
+            .collect()
+    }
+}
+
+/// Positions of located points after the displacement `u`.
+pub fn displaced(rest: &[Point], stencils: &[Stencil], u: &[f64]) -> Vec<Point> {
+    rest.iter()
+        .zip(stencils)
+        .map(|(p, s)| {
+            let d = s.vector(u);
+            [p[0] + d[0], p[1] + d[1], p[2] + d[2]]
+        })
+        .collect()
+}
+
+fn nearest_node(nodes: &[Point], p: Point) -> usize {
+    let d2 = |q: &Point| (0..3).map(|d| (q[d] - p[d]).powi(2)).sum::<f64>();
+    (0..nodes.len()).min_by(|&a, &b| d2(&nodes[a]).total_cmp(&d2(&nodes[b]))).unwrap_or(0)
+}
+
+/// The surface restricted to the vertices its triangles use.
+fn compact(surface: TriSurface) -> TriSurface {
+    let mut index = vec![usize::MAX; surface.vertices.len()];
+    let mut vertices = Vec::new();
+    let triangles = surface
+        .triangles
+        .iter()
+        .map(|t| {
+            t.map(|k| {
+                if index[k] == usize::MAX {
+                    index[k] = vertices.len();
+                    vertices.push(surface.vertices[k]);
+                }
+                index[k]
+            })
+        })
+        .collect();
+    TriSurface { vertices, triangles }
+}

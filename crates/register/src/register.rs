@@ -1,0 +1,249 @@
+//! The registration loop: closest-point matches on the deformed surface,
+//! turned into nodal displacement observations, explained by a [`Deformer`].
+
+use std::time::{Duration, Instant};
+
+use mesh::bvh::SurfaceBvh;
+use mesh::{Point, TriSurface};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::organ::Organ;
+use crate::{RegisterError, Result};
+
+/// Displacement observations of mesh nodes: for each node, the displacement
+/// the matched cloud points ask of it and their total weight (0: unobserved).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Observations {
+    /// Observed displacement per node (m); zero where the weight is zero.
+    pub target: Vec<Point>,
+    /// Sum of the interpolation weights of the matches that reach each node.
+    pub weight: Vec<f64>,
+    /// Unit normal of the deformed surface where the node's matches lie (zero if unobserved).
+    pub normal: Vec<Point>,
+}
+
+/// A model that gives the organ's nodal displacement (3 per node) explaining observations.
+pub trait Deformer {
+    /// The nodal displacement explaining `observations` at iteration `iteration`
+    /// (from 0) of a frame; `previous` is the last estimate (a warm start).
+    fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>>;
+}
+
+/// Settings of the registration loop.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RegistrationOptions {
+    /// Most match-and-deform iterations per frame.
+    pub iterations: usize,
+    /// Stop once no surface vertex moved by more than this between iterations (m).
+    pub tolerance: f64,
+    /// Matches farther than this multiple of the median match distance are outliers...
+    pub outlier_factor: f64,
+    /// ... but a match within this distance (m) is never one.
+    pub min_outlier_distance: f64,
+    /// ... nor, at the first iteration, one within this distance (m), halved at
+    /// each iteration: the most deformed parts are far from the model at first.
+    pub capture_distance: f64,
+}
+
+impl Default for RegistrationOptions {
+    fn default() -> Self {
+        RegistrationOptions {
+            iterations: 30,
+            tolerance: 1e-4,
+            outlier_factor: 3.0,
+            min_outlier_distance: 5e-3,
+            capture_distance: 0.05,
+        }
+    }
+}
+
+impl RegistrationOptions {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<()> {
+        let ok = self.iterations > 0
+            && self.tolerance >= 0.0
+            && self.outlier_factor > 0.0
+            && self.min_outlier_distance >= 0.0
+            && self.capture_distance >= 0.0
+            && [self.tolerance, self.outlier_factor, self.min_outlier_distance, self.capture_distance]
+                .iter()
+                .all(|v| v.is_finite());
+        if ok {
+            Ok(())
+        } else {
+            Err(RegisterError::Invalid(format!("invalid registration options {self:?}")))
+        }
+    }
+}
+
+/// The registration of one frame.
+#[derive(Clone, Debug)]
+pub struct FrameResult {
+    /// Nodal displacement of the organ mesh (m, 3 per node).
+    pub u: Vec<f64>,
+    /// Match-and-deform iterations run.
+    pub iterations: usize,
+    /// Mean distance from the cloud points to the registered surface (m), all points.
+    pub surface_residual: f64,
+    /// Cloud points kept as matches in the last iteration.
+    pub inliers: usize,
+    /// Wall time of the frame, matching included.
+    pub time: Duration,
+}
+
+/// Registers `organ` to `cloud` (positions only, rigidly aligned), starting
+/// from `start` (a previous frame's displacement) or from rest.
+pub fn register_frame(
+    organ: &Organ,
+    deformer: &mut dyn Deformer,
+    cloud: &[Point],
+    start: Option<&[f64]>,
+    options: &RegistrationOptions,
+) -> Result<FrameResult> {
+    let t0 = Instant::now();
+    options.validate()?;
+    check_cloud(cloud)?;
+    let ndof = 3 * organ.mesh().num_nodes();
+    let mut u = match start {
+        Some(s) if s.len() == ndof => s.to_vec(),
+        Some(s) => {
+            return Err(RegisterError::Invalid(format!("start displacement has {} values, expected {ndof}", s.len())))
+        }
+        None => vec![0.0; ndof],
+    };
+    let mut surface = organ.deformed_surface(&u);
+    let mut iterations = 0;
+    let mut inliers = 0;
+    while iterations < options.iterations {
+        iterations += 1;
+        let capture = options.capture_distance * 0.5f64.powi(iterations as i32 - 1);
+        let (observations, kept) = observe(organ, &surface, cloud, options, capture)?;
+        inliers = kept;
+        u = deformer.deform(&observations, &u, iterations - 1)?;
+        if u.len() != ndof || u.iter().any(|v| !v.is_finite()) {
+            return Err(RegisterError::Invalid("the deformer returned a displacement that is not finite".into()));
+        }
+        let next = organ.deformed_surface(&u);
+        let moved = next.vertices.iter().zip(&surface.vertices).map(|(a, b)| distance(*a, *b)).fold(0.0, f64::max);
+        surface = next;
+        if moved <= options.tolerance {
+            break;
+        }
+    }
+    let bvh = SurfaceBvh::new(&surface)?;
+    let surface_residual = cloud.par_iter().map(|&c| bvh.distance(c)).sum::<f64>() / cloud.len() as f64;
+    Ok(FrameResult { u, iterations, surface_residual, inliers, time: t0.elapsed() })
+}
+
+/// Matches each cloud point to the closest point of the deformed `surface`,
+/// drops outliers (farther than the larger of `capture` and the options' limits), and spreads each match's displacement (cloud point − rest
+/// position of the matched surface point) to the mesh nodes that move it.
+/// Returns the observations and the number of matches kept.
+pub fn observe(
+    organ: &Organ,
+    surface: &TriSurface,
+    cloud: &[Point],
+    options: &RegistrationOptions,
+    capture: f64,
+) -> Result<(Observations, usize)> {
+    let bvh = SurfaceBvh::new(surface)?;
+    let matches: Vec<_> = cloud.par_iter().map(|&c| bvh.closest_point(c)).collect();
+    let mut distances: Vec<f64> = matches.iter().map(|m| m.distance).collect();
+    let median = median(&mut distances);
+    let limit = (options.outlier_factor * median).max(options.min_outlier_distance).max(capture);
+    let n = organ.mesh().num_nodes();
+    let mut obs = Observations { target: vec![[0.0; 3]; n], weight: vec![0.0; n], normal: vec![[0.0; 3]; n] };
+    let rest = &organ.surface().vertices;
+    let stencils = organ.surface_stencils();
+    let mut kept = 0;
+    for (c, m) in cloud.iter().zip(&matches) {
+        if m.distance > limit {
+            continue;
+        }
+        kept += 1;
+        let tri = surface.triangles[m.triangle];
+        let corners = tri.map(|k| surface.vertices[k]);
+        let bary = barycentric(corners, m.point);
+        let normal = unit(mesh::cross(sub(corners[1], corners[0]), sub(corners[2], corners[0])));
+        let mut p0 = [0.0; 3];
+        for (b, &k) in bary.iter().zip(&tri) {
+            for d in 0..3 {
+                p0[d] += b * rest[k][d];
+            }
+        }
+        let shift = [c[0] - p0[0], c[1] - p0[1], c[2] - p0[2]];
+        for (b, &k) in bary.iter().zip(&tri) {
+            for &(node, w) in &stencils[k].0 {
+                let w = b * w;
+                obs.weight[node] += w;
+                for d in 0..3 {
+                    obs.target[node][d] += w * shift[d];
+                    obs.normal[node][d] += w * normal[d];
+                }
+            }
+        }
+    }
+    for ((t, n), &w) in obs.target.iter_mut().zip(&mut obs.normal).zip(&obs.weight) {
+        if w > 0.0 {
+            t.iter_mut().for_each(|x| *x /= w);
+            *n = unit(*n);
+        }
+    }
+    Ok((obs, kept))
+}
+
+/// Rejects an empty cloud or one with a non-finite coordinate.
+pub fn check_cloud(cloud: &[Point]) -> Result<()> {
+    if cloud.is_empty() {
+        return Err(RegisterError::Invalid("the point cloud is empty".into()));
+    }
+    if let Some(i) = cloud.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
+        return Err(RegisterError::Invalid(format!("cloud point {i} is not finite")));
+    }
+    Ok(())
+}
+
+/// Barycentric coordinates of `p` (a point of the triangle's plane) in triangle `t`,
+/// clamped to the triangle.
+fn barycentric(t: [Point; 3], p: Point) -> [f64; 3] {
+    let e0 = sub(t[1], t[0]);
+    let e1 = sub(t[2], t[0]);
+    let e2 = sub(p, t[0]);
+    let (d00, d01, d11) = (mesh::dot(e0, e0), mesh::dot(e0, e1), mesh::dot(e1, e1));
+    let (d20, d21) = (mesh::dot(e2, e0), mesh::dot(e2, e1));
+    let den = d00 * d11 - d01 * d01;
+    if !(den.abs() > 0.0) {
+        return [1.0, 0.0, 0.0];
+    }
+    let v = ((d11 * d20 - d01 * d21) / den).clamp(0.0, 1.0);
+    let w = ((d00 * d21 - d01 * d20) / den).clamp(0.0, 1.0 - v);
+    [1.0 - v - w, v, w]
+}
+
+/// `v` scaled to unit length (zero stays zero).
+fn unit(v: Point) -> Point {
+    let l = mesh::dot(v, v).sqrt();
+    if l > 0.0 {
+        v.map(|x| x / l)
+    } else {
+        v
+    }
+}
+
+fn sub(a: Point, b: Point) -> Point {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+/// Euclidean distance.
+pub fn distance(a: Point, b: Point) -> f64 {
+    let d = sub(a, b);
+    mesh::dot(d, d).sqrt()
+}
+
+/// Median of a non-empty list (reorders it).
+fn median(v: &mut [f64]) -> f64 {
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+}
