@@ -4,6 +4,7 @@ mod assimilate;
 mod bench;
 mod learn_cmd;
 mod mesh_cmd;
+mod register_cmd;
 mod scenario;
 mod solve;
 
@@ -117,6 +118,9 @@ enum Command {
         #[arg(long, default_value_t = 50)]
         runs: usize,
     },
+    /// Register the organ to an intraoperative point cloud (no correspondences): deformed organ,
+    /// registered targets and, given the truth, the target registration error.
+    Register(register_cmd::RegisterArgs),
     /// Benchmarks of the static solver (median times, split by phase).
     Bench {
         /// Repetitions per case.
@@ -136,6 +140,7 @@ fn main() {
     let cli = Cli::parse();
     let result: Result<()> = match cli.command {
         Command::Solve { scenario, output } => solve::run(&scenario, output.as_deref()),
+        Command::Register(args) => register_cmd::run(&args),
         Command::Mesh { surface, length, tets, immersed, output } => {
             mesh_cmd::run(&mesh_cmd::MeshArgs { surface, length, tets, immersed, output })
         }

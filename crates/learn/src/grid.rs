@@ -164,9 +164,9 @@ impl GridToMesh {
             .iter()
             .enumerate()
             .map(|(m, p)| {
-                let corners = grid.corners(m, *p).map_err(|e| {
-                    LearnError::InvalidInput(format!("mesh node {m} is outside the model grid: {e}"))
-                })?;
+                let corners = grid
+                    .corners(m, *p)
+                    .map_err(|e| LearnError::InvalidInput(format!("mesh node {m} is outside the model grid: {e}")))?;
                 let kept: f64 = corners.iter().filter(|(g, _)| inside[*g]).map(|(_, w)| w).sum();
                 Ok(corners
                     .into_iter()

@@ -12,6 +12,7 @@ pub mod cloud;
 mod error;
 
 pub use error::{RegisterError, Result};
+pub mod case;
 mod deformers;
 pub mod organ;
 pub mod register;

@@ -10,6 +10,14 @@ use crate::{RegisterError, Result};
 pub struct Stencil(pub Vec<(usize, f64)>);
 
 impl Stencil {
+    /// The stencil of a location, its weights clipped to [0, 1] and renormalised
+    /// (a point on an element's face may get a weight of −1e−15).
+    fn of(location: &mesh::embedding::Location) -> Stencil {
+        let terms: Vec<(usize, f64)> = location.terms().map(|(n, w)| (n, w.clamp(0.0, 1.0))).collect();
+        let sum: f64 = terms.iter().map(|t| t.1).sum();
+        Stencil(terms.into_iter().filter(|t| t.1 > 0.0).map(|(n, w)| (n, w / sum)).collect())
+    }
+
     /// The interpolated vector of a node-major field with 3 components per node.
     pub fn vector(&self, u: &[f64]) -> Point {
         let mut v = [0.0; 3];
@@ -54,7 +62,7 @@ impl Organ {
             .vertices
             .iter()
             .map(|&p| match locator.locate(p) {
-                Some(loc) => Stencil(loc.terms().collect()),
+                Some(loc) => Stencil::of(&loc),
                 None => Stencil(vec![(nearest_node(&mesh.nodes, p), 1.0)]),
             })
             .collect();
@@ -97,9 +105,10 @@ impl Organ {
             .iter()
             .enumerate()
             .map(|(i, &p)| {
-                self.locator.locate(p).map(|l| Stencil(l.terms().collect())).ok_or_else(|| {
-                    RegisterError::Invalid(format!("{what} {i} at {p:?} is outside the organ mesh"))
-                })
+                self.locator
+                    .locate(p)
+                    .map(|l| Stencil::of(&l))
+                    .ok_or_else(|| RegisterError::Invalid(format!("{what} {i} at {p:?} is outside the organ mesh")))
             })
             .collect()
     }

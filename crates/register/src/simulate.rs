@@ -31,8 +31,7 @@ pub fn simulate_cloud(surface: &TriSurface, camera: &CameraModel, seed: u64) -> 
     let samples = sample_visible(surface, camera.view, camera.points, seed)?;
     let mut rng = StdRng::seed_from_u64(seed ^ 0x9e37_79b9_7f4a_7c15);
     let noise = Normal::new(0.0, camera.noise).map_err(|e| RegisterError::Invalid(e.to_string()))?;
-    let mut cloud: Vec<Point> =
-        samples.iter().map(|s| s.point.map(|x| x + noise.sample(&mut rng))).collect();
+    let mut cloud: Vec<Point> = samples.iter().map(|s| s.point.map(|x| x + noise.sample(&mut rng))).collect();
     let (lo, hi) = mesh::bounds(&surface.vertices);
     let extra = (camera.outliers * camera.points as f64).round() as usize;
     for _ in 0..extra {

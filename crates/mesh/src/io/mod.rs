@@ -419,3 +419,22 @@ fn strip(vertices: &[usize], out: &mut Vec<[usize; 3]>) {
         out.push(if j % 2 == 0 { [a, b, c] } else { [b, a, c] });
     }
 }
+
+/// Writes a ParaView collection (`.pvd`) of time steps: (time, file path relative to the
+/// collection's directory) pairs, atomically.
+pub fn write_pvd(path: impl AsRef<Path>, steps: &[(f64, String)]) -> Result<(), MeshError> {
+    let path = path.as_ref();
+    write_file_atomic(path, |w| {
+        use std::io::Write;
+        writeln!(w, "<?xml version=\"1.0\"?>")?;
+        writeln!(w, "<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">")?;
+        writeln!(w, "  <Collection>")?;
+        for (t, file) in steps {
+            let file = file.replace('&', "&amp;").replace('"', "&quot;").replace('<', "&lt;");
+            writeln!(w, "    <DataSet timestep=\"{t}\" group=\"\" part=\"0\" file=\"{file}\"/>")?;
+        }
+        writeln!(w, "  </Collection>")?;
+        writeln!(w, "</VTKFile>")
+    })
+    .map_err(|source| MeshError::Io { path: path.display().to_string(), source })
+}

@@ -1,0 +1,80 @@
+//! `augsim register`: the built-in demo end to end, then the same cloud as a
+//! two-frame sequence, and clear errors for bad input.
+
+use std::path::Path;
+use std::process::Command;
+
+fn augsim(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_augsim")).args(args).output().expect("augsim runs");
+    (out.status.success(), format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr)))
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn demo_registers_the_phantom_and_reports_the_tre() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    let (ok, text) = augsim(&["register", "--demo", "--out", out.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    let s = json(&out.join("summary.json"));
+    let (tre, rigid) = (s["tre_mean_mm"].as_f64().unwrap(), s["no_deformation_tre_mean_mm"].as_f64().unwrap());
+    assert!(rigid > 10.0 && tre < 0.25 * rigid, "TRE {tre} mm against {rigid} mm without deformation\n{text}");
+    assert!(s["surface_residual_mm"].as_f64().unwrap() < 3.0, "{s}");
+    assert!(out.join("organ.vtu").exists() && out.join("targets.csv").exists());
+    let rows = std::fs::read_to_string(out.join("targets.csv")).unwrap();
+    assert_eq!(rows.lines().count(), 11, "header and 10 markers:\n{rows}");
+
+    // The case's cloud twice as a sequence, on the liver scenario's model; truth per frame.
+    let (seq, truth) = (dir.path().join("seq"), dir.path().join("truth"));
+    for d in [&seq, &truth] {
+        std::fs::create_dir_all(d).unwrap();
+    }
+    for f in ["a.csv", "b.csv"] {
+        std::fs::copy(out.join("case/cloud.csv"), seq.join(f)).unwrap();
+        std::fs::copy(out.join("case/truth.csv"), truth.join(f)).unwrap();
+    }
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/liver.toml");
+    let targets = out.join("case/targets_rest.csv");
+    let seq_out = dir.path().join("seq_out");
+    let common = ["--fem", scenario.to_str().unwrap(), "--targets", targets.to_str().unwrap()];
+    let (ok, text) = augsim(
+        &[
+            &["register", seq.to_str().unwrap()],
+            &common[..],
+            &["--truth", truth.to_str().unwrap(), "--out", seq_out.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(ok, "{text}");
+    assert!(seq_out.join("organ.pvd").exists() && seq_out.join("organ_0001.vtu").exists());
+    assert_eq!(json(&seq_out.join("summary.json"))["frames"].as_array().unwrap().len(), 2);
+
+    // Errors: a truth file for a two-frame sequence, an empty cloud, a target outside the organ.
+    let (ok, text) = augsim(
+        &[
+            &["register", seq.to_str().unwrap()],
+            &common[..],
+            &["--truth", out.join("case/truth.csv").to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(!ok && text.contains("1 truth file(s) for 2 cloud frame(s)"), "{text}");
+    let empty = dir.path().join("empty.csv");
+    std::fs::write(&empty, "x,y,z\n").unwrap();
+    let (ok, text) = augsim(&[&["register", empty.to_str().unwrap()], &common[..]].concat());
+    assert!(!ok && text.contains("no points"), "{text}");
+    let far = dir.path().join("far.csv");
+    std::fs::write(&far, "x,y,z\n1,1,1\n").unwrap();
+    let (ok, text) = augsim(&[
+        "register",
+        empty.to_str().unwrap(),
+        "--fem",
+        scenario.to_str().unwrap(),
+        "--targets",
+        far.to_str().unwrap(),
+    ]);
+    assert!(!ok && text.contains("target 0") && text.contains("outside"), "{text}");
+}
