@@ -4,7 +4,6 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use fem::{Law, Material, Problem, SolverOptions};
 use mesh::io::Field;
 use mesh::Point;
 use register::case::{phantom_push, target_errors};
@@ -47,11 +46,14 @@ pub struct RegisterArgs {
     /// Output directory: organ.vtu (organ.pvd for a sequence), targets.csv, summary.json.
     #[arg(short, long, default_value = "out/register")]
     out: PathBuf,
-    /// Built-in demo: a Neo-Hookean phantom of 9,000 tetrahedra pushed down by 1.5 N, seen from
+    /// Built-in demo: a Neo-Hookean phantom of 9,000 tetrahedra pushed down (--force), seen from
     /// above (1,500 points, 1 mm noise, 5 % outliers), registered with a co-rotational FEM on
     /// another mesh of 3,000; the case's files are written to --out first.
     #[arg(long)]
     demo: bool,
+    /// The force (N) pushing the demo's truth down.
+    #[arg(long, default_value_t = 1.5, requires = "demo")]
+    force: f64,
 }
 
 /// One frame's line of summary.json.
@@ -95,7 +97,7 @@ struct Setup {
 /// Runs the registration and writes the outputs.
 pub fn run(args: &RegisterArgs) -> Result<()> {
     let (cloud_path, targets_path, truth_path) = if args.demo {
-        write_demo_case(&args.out)?
+        write_demo_case(&args.out, args.force)?
     } else {
         let cloud = args.cloud.clone().context("a cloud is required")?;
         (cloud, args.targets.clone(), args.truth.clone())
@@ -277,29 +279,28 @@ fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<Setup> {
     Ok(Setup { organ, deformer, method: format!("U-Net {}", model_path.display()), default_targets })
 }
 
-/// The demo's registration model: a co-rotational phantom of 3,000 tetrahedra, fixed between
-/// the lobes (another mesh and another law than the truth's).
+/// The demo's registration model ([`register::case::corotational_model`]).
 fn demo_setup() -> Result<Setup> {
-    let m = mesh::phantom::liver_phantom(3000)?;
-    let mut problem = Problem::new(m.clone(), Material::new(Law::Corotational, 5000.0, 0.48));
-    problem.fix(m.region("fixed")?);
-    let stiffness = FemDeformer::default_stiffness(&problem);
-    let deformer = Box::new(FemDeformer::new(problem, stiffness, SolverOptions::default())?);
-    let organ = Organ::new(m, None)?;
-    Ok(Setup {
-        organ,
-        deformer,
-        method: "FEM, Corotational, phantom of 3,000 T4 (demo)".into(),
-        default_targets: vec![],
-    })
+    let (organ, deformer) = register::case::corotational_model()?;
+    let method = format!("FEM, Corotational, phantom of {} T4 (demo)", organ.mesh().cells.len());
+    Ok(Setup { organ, deformer: Box::new(deformer), method, default_targets: vec![] })
 }
 
-/// Simulates the demo case and writes cloud.csv, targets.csv (rest) and truth.csv into `out`.
-fn write_demo_case(out: &Path) -> Result<(PathBuf, Option<PathBuf>, Option<PathBuf>)> {
+/// Simulates the demo case and writes cloud.csv, targets.csv (rest) and truth.csv into `out/case`.
+fn write_demo_case(out: &Path, force: f64) -> Result<(PathBuf, Option<PathBuf>, Option<PathBuf>)> {
     let camera = CameraModel { view: [0.0, 0.0, -1.0], points: 1500, noise: 1e-3, outliers: 0.05 };
-    println!("demo       truth: Neo-Hookean phantom of 9,000 T4 pushed down by 1.5 N; camera along -z,");
-    println!("           1,500 points on the visible surface, 1 mm noise, 5 % outliers");
-    let case = phantom_push(1.5, &camera, 1)?;
+    println!(
+        "demo       truth: Neo-Hookean phantom of about {} T4 pushed down by {force} N; camera along {:?},",
+        register::case::TRUTH_TETS,
+        camera.view
+    );
+    println!(
+        "           {} points on the visible surface, {} mm noise, {} % outliers",
+        camera.points,
+        camera.noise * 1e3,
+        camera.outliers * 1e2
+    );
+    let case = phantom_push(force, &camera, 1)?;
     let dir = out.join("case");
     let (cloud, targets, truth) = (dir.join("cloud.csv"), dir.join("targets_rest.csv"), dir.join("truth.csv"));
     write_csv(&cloud, &case.cloud)?;

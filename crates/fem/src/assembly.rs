@@ -77,10 +77,7 @@ impl Pattern {
             row_idx.extend_from_slice(col);
             col_ptr.push(row_idx.len() as u32);
         }
-        let position = |r: u32, c: u32| -> u32 {
-            let (lo, hi) = (col_ptr[c as usize] as usize, col_ptr[c as usize + 1] as usize);
-            lo as u32 + row_idx[lo..hi].binary_search(&r).expect("entry in pattern") as u32
-        };
+        let position = |r: u32, c: u32| entry_position(&col_ptr, &row_idx, r as usize, c as usize) as u32;
         let diag = (0..num_free as u32).map(|c| position(c, c)).collect();
         let mut matrix_ptr = vec![0usize];
         for p in 0..patches.len() {
@@ -106,14 +103,19 @@ impl Pattern {
     /// The value position of free-dof entry (row, col), row ≥ col; panics when it is not
     /// stored (the 3×3 block of a node always is).
     pub fn position(&self, row: usize, col: usize) -> usize {
-        let (lo, hi) = (self.col_ptr[col] as usize, self.col_ptr[col + 1] as usize);
-        lo + self.row_idx[lo..hi].binary_search(&(row as u32)).expect("entry in pattern")
+        entry_position(&self.col_ptr, &self.row_idx, row, col)
     }
 
     /// Number of stored (lower-triangle) entries.
     pub fn nnz(&self) -> usize {
         self.row_idx.len()
     }
+}
+
+/// The value position of entry (row, col) in a CSC pattern; panics when it is not stored.
+fn entry_position(col_ptr: &[u32], row_idx: &[u32], row: usize, col: usize) -> usize {
+    let (lo, hi) = (col_ptr[col] as usize, col_ptr[col + 1] as usize);
+    lo + row_idx[lo..hi].binary_search(&(row as u32)).expect("entry in pattern")
 }
 
 /// Reusable buffers for patch results.

@@ -187,24 +187,21 @@ pub fn patch_force_tangent(
     for p in points.iter_mut() {
         let (fbar, alpha) = kin.modified(p);
         p.alpha = alpha;
+        let phi = kin.phi(alpha);
+        let (x, _, _) = kin.directions(p);
         let stress = if want_k {
             let (s, t) = material.stress_tangent(&fbar);
+            gamma += p.w * phi * phi * dot(&x, &mat_vec(&t, &x));
             tangents.push(t);
             s
         } else {
             material.stress(&fbar)
         };
         p.stress = flat(&stress);
-        let phi = kin.phi(alpha);
-        let (x, _, _) = kin.directions(p);
         sigma_bar += p.w * phi * dot(&p.stress, &x);
-        if want_k {
-            let t = &tangents[tangents.len() - 1];
-            gamma += p.w * phi * phi * dot(&x, &mat_vec(t, &x));
-            if !kin.linear {
-                // P̄ : ∂²Φ/∂m̄² with ∂²Φ/∂m̄² = −2α / (9 m̄²) F.
-                gamma -= p.w * 2.0 * alpha / (9.0 * kin.mean * kin.mean) * dot(&p.stress, &x);
-            }
+        if want_k && !kin.linear {
+            // P̄ : ∂²Φ/∂m̄² with ∂²Φ/∂m̄² = −2α / (9 m̄²) F.
+            gamma -= p.w * 2.0 * alpha / (9.0 * kin.mean * kin.mean) * dot(&p.stress, &x);
         }
     }
     f.fill(0.0);

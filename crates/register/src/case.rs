@@ -5,6 +5,7 @@
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::Point;
 
+use crate::deformers::FemDeformer;
 use crate::organ::Organ;
 use crate::simulate::{simulate_cloud, CameraModel};
 use crate::Result;
@@ -40,6 +41,20 @@ pub fn phantom_push(force: f64, camera: &CameraModel, seed: u64) -> Result<Synth
     let organ = Organ::new(p.mesh, None)?;
     let cloud = simulate_cloud(&organ.deformed_surface(&u), camera, seed)?;
     Ok(SyntheticCase { cloud, targets, truth })
+}
+
+/// Tetrahedra of the registration model of [`corotational_model`].
+pub const MODEL_TETS: usize = 3000;
+
+/// The registration model for [`phantom_push`]: a co-rotational phantom of about
+/// [`MODEL_TETS`] tetrahedra (another mesh and another law than the truth's), fixed between
+/// the lobes, with the default data stiffness.
+pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
+    let m = mesh::phantom::liver_phantom(MODEL_TETS)?;
+    let mut problem = Problem::new(m.clone(), Material::new(Law::Corotational, 5000.0, 0.48));
+    problem.fix(m.region("fixed")?);
+    let stiffness = FemDeformer::default_stiffness(&problem);
+    Ok((Organ::new(m, None)?, FemDeformer::new(problem, stiffness, SolverOptions::default())?))
 }
 
 /// Per-target distances (m) between two lists of positions of the same length.

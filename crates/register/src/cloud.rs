@@ -113,14 +113,9 @@ impl std::fmt::Display for Num {
     }
 }
 
-/// Rejects an empty cloud and non-finite coordinates.
+/// Rejects an empty cloud and non-finite coordinates ([`crate::check_cloud`]), naming the file.
 fn check_points(path: &Path, points: Vec<Point>) -> Result<Vec<Point>> {
-    if points.is_empty() {
-        return Err(RegisterError::format(path, "no points"));
-    }
-    if let Some(i) = points.iter().position(|p| p.iter().any(|v| !v.is_finite())) {
-        return Err(RegisterError::format(path, format!("point {i} has a non-finite coordinate {:?}", points[i])));
-    }
+    crate::check_cloud(&points).map_err(|e| RegisterError::format(path, e.to_string()))?;
     Ok(points)
 }
 

@@ -59,18 +59,18 @@ impl Deformer for FemDeformer {
         }
         let ramp = 0.25f64.powi(STIFFNESS_RAMP.saturating_sub(iteration) as i32);
         let k = ramp * self.stiffness / total;
-        let iso = ISOTROPIC_FRACTION;
         let problem = self.solver.problem_mut();
         problem.normal_springs.clear();
         for (n, (&w, t)) in observations.weight.iter().zip(&observations.target).enumerate() {
+            let (k_all, k_normal) = (ISOTROPIC_FRACTION * k * w, (1.0 - ISOTROPIC_FRACTION) * k * w);
             let normal = observations.normal[n];
             let along = mesh::dot(normal, *t);
-            problem.springs[n] = self.base_springs[n] + iso * k * w;
+            problem.springs[n] = self.base_springs[n] + k_all;
             for d in 0..3 {
-                problem.f_ext[3 * n + d] = k * w * (iso * t[d] + (1.0 - iso) * along * normal[d]);
+                problem.f_ext[3 * n + d] = k_all * t[d] + k_normal * along * normal[d];
             }
-            if w > 0.0 && iso < 1.0 {
-                problem.normal_springs.push(NormalSpring { node: n, normal, stiffness: (1.0 - iso) * k * w });
+            if k_normal > 0.0 {
+                problem.normal_springs.push(NormalSpring { node: n, normal, stiffness: k_normal });
             }
         }
         Ok(self.solver.solve_from(Some(previous), &self.options)?.u)

@@ -86,17 +86,10 @@ impl Organ {
 
     /// The surface moved by the nodal displacement `u` (3 per mesh node).
     pub fn deformed_surface(&self, u: &[f64]) -> TriSurface {
-        let vertices = self
-            .surface
-            .vertices
-            .iter()
-            .zip(&self.stencils)
-            .map(|(p, s)| {
-                let d = s.vector(u);
-                [p[0] + d[0], p[1] + d[1], p[2] + d[2]]
-            })
-            .collect();
-        TriSurface { vertices, triangles: self.surface.triangles.clone() }
+        TriSurface {
+            vertices: displaced(&self.surface.vertices, &self.stencils, u),
+            triangles: self.surface.triangles.clone(),
+        }
     }
 
     /// Stencils of points inside the organ (e.g. targets); a point outside is an error naming it.

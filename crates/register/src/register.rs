@@ -4,7 +4,7 @@
 use std::time::{Duration, Instant};
 
 use mesh::bvh::SurfaceBvh;
-use mesh::{Point, TriSurface};
+use mesh::{sub, Point, TriSurface};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -197,10 +197,10 @@ pub fn observe(
 /// Rejects an empty cloud or one with a non-finite coordinate.
 pub fn check_cloud(cloud: &[Point]) -> Result<()> {
     if cloud.is_empty() {
-        return Err(RegisterError::Invalid("the point cloud is empty".into()));
+        return Err(RegisterError::Invalid("no points (the point cloud is empty)".into()));
     }
     if let Some(i) = cloud.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
-        return Err(RegisterError::Invalid(format!("cloud point {i} is not finite")));
+        return Err(RegisterError::Invalid(format!("point {i} has a non-finite coordinate {:?}", cloud[i])));
     }
     Ok(())
 }
@@ -230,10 +230,6 @@ fn unit(v: Point) -> Point {
     } else {
         v
     }
-}
-
-fn sub(a: Point, b: Point) -> Point {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 /// Euclidean distance.

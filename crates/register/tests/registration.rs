@@ -3,7 +3,7 @@
 
 use augsim_register as register;
 use fem::{Law, Material, Problem, SolverOptions};
-use register::case::{phantom_push, target_errors};
+use register::case::{corotational_model, phantom_push, target_errors};
 use register::organ::displaced;
 use register::{register_frame, CameraModel, FemDeformer, Organ, RegistrationOptions};
 
@@ -16,12 +16,7 @@ fn mean(v: &[f64]) -> f64 {
 /// markers move by 14 mm on average).
 fn fem_tre(camera: &CameraModel) -> (f64, f64, f64) {
     let case = phantom_push(1.5, camera, 7).unwrap();
-    let m = mesh::phantom::liver_phantom(3000).unwrap();
-    let mut problem = Problem::new(m.clone(), Material::new(Law::Corotational, 5000.0, 0.48));
-    problem.fix(m.region("fixed").unwrap());
-    let stiffness = FemDeformer::default_stiffness(&problem);
-    let mut deformer = FemDeformer::new(problem, stiffness, SolverOptions::default()).unwrap();
-    let organ = Organ::new(m, None).unwrap();
+    let (organ, mut deformer) = corotational_model().unwrap();
     let stencils = organ.locate(&case.targets, "target").unwrap();
     let frame = register_frame(&organ, &mut deformer, &case.cloud, None, &RegistrationOptions::default()).unwrap();
     let registered = displaced(&case.targets, &stencils, &frame.u);
