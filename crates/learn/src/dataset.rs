@@ -213,6 +213,12 @@ impl Normalization {
         Normalization { input_scale: positive(stats.inputs.rms_norm), target_scale: positive(stats.targets.rms_norm) }
     }
 
+    /// Scales from the statistics of `samples` alone (the training samples: nothing of the
+    /// validation or test samples may shape the model).
+    pub fn from_samples(samples: &Samples) -> Self {
+        Normalization::from_statistics(&samples.statistics())
+    }
+
     /// Checks that both scales are finite and positive.
     pub fn validate(&self) -> Result<()> {
         for (name, x) in [("input_scale", self.input_scale), ("target_scale", self.target_scale)] {
@@ -318,6 +324,21 @@ impl Manifest {
             shards: Vec::new(),
             metadata: spec.metadata.clone(),
         }
+    }
+
+    /// Identifies where the samples come from: the scenario, seed, grid, units and generator
+    /// settings, but not the sample count, shard size or worker part. Two datasets with the same
+    /// source hold the same sample under the same generation index (a smaller dataset generated
+    /// with the same seed shares its first samples with a larger one).
+    pub fn source_id(&self) -> String {
+        let mut metadata = self.metadata.clone();
+        if let Some(config) = metadata.get_mut("dataset").and_then(|d| d.as_object_mut()) {
+            config.remove("samples");
+            config.remove("shard_size");
+        }
+        let key = serde_json::json!([self.grid, self.units, metadata]).to_string();
+        let hash = key.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3));
+        format!("{}/seed {}/{hash:016x}", self.scenario, self.seed)
     }
 
     /// The specification this dataset was created with.
@@ -457,12 +478,25 @@ pub struct Samples {
     pub targets: Vec<f32>,
     /// Masks, `[N, nx, ny, nz]`.
     pub masks: Vec<u8>,
+    /// The data source of the samples ([`Manifest::source_id`]) when they come from a dataset:
+    /// with the generation indices, it tells which samples a model has already seen.
+    pub source: Option<String>,
 }
 
 impl Samples {
-    /// An empty set on `grid`.
+    /// An empty set on `grid`, of no known source.
     pub fn new(grid: GridShape) -> Self {
-        Samples { grid, indices: Vec::new(), inputs: Vec::new(), targets: Vec::new(), masks: Vec::new() }
+        Samples { grid, indices: Vec::new(), inputs: Vec::new(), targets: Vec::new(), masks: Vec::new(), source: None }
+    }
+
+    /// Statistics of the samples (inputs over nodes with a nonzero input, targets over masked
+    /// nodes), as a manifest records them for a whole dataset.
+    pub fn statistics(&self) -> Statistics {
+        let mut sums = StatSums::default();
+        for i in 0..self.len() {
+            sums.add_sample(self.grid, self.input(i), self.target(i), self.mask(i));
+        }
+        Statistics::from_sums(&sums)
     }
 
     /// Number of samples.
@@ -515,7 +549,7 @@ impl Samples {
 
     /// The samples at the given positions, in that order.
     pub fn select(&self, positions: &[usize]) -> Result<Samples> {
-        let mut out = Samples::new(self.grid);
+        let mut out = Samples { source: self.source.clone(), ..Samples::new(self.grid) };
         for &p in positions {
             if p >= self.len() {
                 return Err(LearnError::InvalidInput(format!("sample position {p} out of range (len {})", self.len())));
@@ -540,16 +574,25 @@ impl Samples {
             inputs: self.inputs.split_off(n * f),
             targets: self.targets.split_off(n * f),
             masks: self.masks.split_off(n * m),
+            source: self.source.clone(),
         };
         Ok((self, rest))
     }
 
-    /// Appends all samples of `other` (same grid).
+    /// Appends all samples of `other` (same grid; same source, unless `self` is empty).
     pub fn append(&mut self, mut other: Samples) -> Result<()> {
         if other.grid != self.grid {
             return Err(LearnError::InvalidInput(format!(
                 "cannot append samples on grid {} to grid {}",
                 other.grid, self.grid
+            )));
+        }
+        if self.is_empty() {
+            self.source = other.source.take();
+        } else if other.source != self.source {
+            return Err(LearnError::InvalidInput(format!(
+                "cannot append samples of source {:?} to samples of source {:?}",
+                other.source, self.source
             )));
         }
         self.indices.append(&mut other.indices);
@@ -791,6 +834,7 @@ impl Dataset {
             inputs: inputs.into_f32(),
             targets: targets.into_f32(),
             masks: masks.into_mask(&mask_path)?,
+            source: Some(self.manifest.source_id()),
         };
         Ok(samples)
     }
@@ -810,7 +854,7 @@ impl Dataset {
                 self.dir.display()
             )));
         }
-        let mut out = Samples::new(self.manifest.grid);
+        let mut out = Samples { source: Some(self.manifest.source_id()), ..Samples::new(self.manifest.grid) };
         let mut start = 0;
         for (s, shard) in self.manifest.shards.iter().enumerate() {
             let end = start + shard.num_samples;

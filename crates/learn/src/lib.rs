@@ -22,7 +22,9 @@
 //! - [`metrics`]: masked MSE loss and mean Euclidean errors.
 //! - [`train`](mod@train): the training loop (Adam, checkpoints, resume, fine-tuning, learning curves).
 //! - [`inference`]: the trained network repacked for fast CPU inference.
-//! - [`predict`]: evaluation over a sample set and timed prediction.
+//! - [`evaluation`]: errors of a model over a sample set and at points.
+//! - [`predict`]: single predictions and their timing.
+//! - [`split`]: train / validation / test splits and the held-out guard.
 
 #![warn(missing_docs)]
 
@@ -30,6 +32,7 @@ pub mod corrupt;
 pub mod curve;
 pub mod dataset;
 mod error;
+pub mod evaluation;
 mod fsutil;
 pub mod generate;
 mod grid;
@@ -37,6 +40,7 @@ pub mod inference;
 pub mod metrics;
 pub mod npy;
 pub mod predict;
+pub mod split;
 pub mod train;
 pub mod unet;
 
@@ -50,7 +54,9 @@ pub use error::LearnError;
 pub use grid::{encode_points, GridPlacement, GridShape, GridToMesh, CHANNELS, LAYOUT};
 pub use inference::InferenceNet;
 pub use metrics::{ErrorStats, EvalReport};
-pub use predict::{evaluate, evaluate_at_points, evaluation_input, time_prediction, PointErrors, Predictor, Timing};
+pub use split::{IndexSet, Split};
+pub use evaluation::{evaluate, evaluate_at_points, evaluation_input, PointErrors};
+pub use predict::{time_prediction, Predictor, Timing};
 pub use train::{train, Initialization, TrainConfig, TrainOptions, TrainOutcome};
 pub use unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
 

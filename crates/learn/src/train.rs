@@ -26,10 +26,11 @@ use serde::{Deserialize, Serialize};
 use crate::corrupt::{item_rng, splitmix64, Corruption, STREAM_SHUFFLE, STREAM_TRAIN_CORRUPTION};
 use crate::curve::{plot_learning_curve, write_curve_csv, CurveRow};
 use crate::dataset::{Normalization, Samples};
+use crate::split::{IndexSet, Split};
 use crate::fsutil::{read, write_atomic};
 use crate::grid::{GridPlacement, CHANNELS};
 use crate::metrics::masked_mse;
-use crate::predict::evaluate_net;
+use crate::evaluation::evaluate_net;
 use crate::unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
 use crate::{inference_device, training_device, LearnError, Result};
 
@@ -145,12 +146,23 @@ pub struct TrainOptions {
     /// [`Manifest::placement`](crate::Manifest::placement)), recorded in the model for
     /// point-cloud prediction.
     pub placement: Option<GridPlacement>,
+    /// The samples of the training data's source held out for testing, recorded in the model
+    /// beside the training and validation samples (e.g. [`Split::test`]).
+    pub test: IndexSet,
 }
 
 impl TrainOptions {
-    /// Options writing to `out_dir`, resuming if possible, without progress bar or placement.
+    /// Options writing to `out_dir`, resuming if possible, without progress bar, placement or
+    /// recorded test samples.
     pub fn new(out_dir: impl Into<PathBuf>) -> Self {
-        TrainOptions { out_dir: out_dir.into(), resume: true, progress: false, stop_after: None, placement: None }
+        TrainOptions {
+            out_dir: out_dir.into(),
+            resume: true,
+            progress: false,
+            stop_after: None,
+            placement: None,
+            test: IndexSet::default(),
+        }
     }
 }
 
@@ -189,6 +201,8 @@ struct Start {
     target_unit: String,
     fine_tuned_from: Option<String>,
     freeze: bool,
+    /// The splits of the model fine-tuned from.
+    pretraining: Vec<Split>,
 }
 
 fn resolve_start(init: &Initialization, seed: u64, device: &Device) -> Result<Start> {
@@ -203,6 +217,7 @@ fn resolve_start(init: &Initialization, seed: u64, device: &Device) -> Result<St
                 target_unit: "m".into(),
                 fine_tuned_from: None,
                 freeze: false,
+                pretraining: Vec::new(),
             })
         }
         Initialization::FineTune { model, freeze_encoder } => {
@@ -217,6 +232,7 @@ fn resolve_start(init: &Initialization, seed: u64, device: &Device) -> Result<St
                 target_unit: pre.target_unit,
                 fine_tuned_from: Some(model.display().to_string()),
                 freeze: *freeze_encoder,
+                pretraining: pre.training.map(|t| t.splits().cloned().collect()).unwrap_or_default(),
             })
         }
     }
@@ -385,6 +401,33 @@ fn indices_hash(samples: &Samples) -> u64 {
     samples.indices.iter().fold(splitmix64(samples.len() as u64), |h, &i| splitmix64(h ^ i))
 }
 
+/// The split of a run: `train`, `val` and `test` must be disjoint, and `val` from the source of
+/// `train`.
+fn held_out_split(train: &Samples, val: &Samples, test: &IndexSet) -> Result<Split> {
+    if !val.is_empty() && val.source != train.source {
+        return Err(LearnError::InvalidInput(format!(
+            "validation samples (source {:?}) and training samples (source {:?}) come from different data",
+            val.source, train.source
+        )));
+    }
+    let split = Split {
+        source: train.source.clone(),
+        train: IndexSet::from_indices(&train.indices),
+        validation: IndexSet::from_indices(&val.indices),
+        test: test.clone(),
+    };
+    let overlap = |a: &IndexSet, b: &[u64], what: &str| match a.first_common(b) {
+        Some(i) => Err(LearnError::InvalidInput(format!("sample {i} is both a training and a {what} sample"))),
+        None => Ok(()),
+    };
+    overlap(&split.train, &val.indices, "validation")?;
+    overlap(test, &train.indices, "test")?;
+    if let Some(i) = test.first_common(&val.indices) {
+        return Err(LearnError::InvalidInput(format!("sample {i} is both a validation and a test sample")));
+    }
+    Ok(split)
+}
+
 /// Trains a U-Net on `train`, validating on `val` (may be empty: then the last weights are
 /// kept). See the module documentation for files, reproducibility and resume.
 pub fn train(
@@ -404,6 +447,7 @@ pub fn train(
             val.grid, train.grid
         )));
     }
+    let split = held_out_split(train, val, &options.test)?;
     let out = &options.out_dir;
     std::fs::create_dir_all(out).map_err(|e| LearnError::io(out, e))?;
     let device = training_device();
@@ -583,6 +627,8 @@ pub fn train(
             seed: config.seed,
             fine_tuned_from: start.fine_tuned_from,
             frozen_encoder: start.freeze,
+            split,
+            pretraining: start.pretraining,
         }),
         net: best_net,
     };

@@ -28,10 +28,11 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use crate::dataset::Normalization;
+use crate::dataset::{Normalization, Samples};
 use crate::fsutil::{read, write_atomic};
 use crate::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::inference::{Block, InferenceNet, Packed};
+use crate::split::Split;
 use crate::{LearnError, Result};
 
 /// U-Net hyper-parameters.
@@ -350,6 +351,20 @@ pub struct TrainingInfo {
     pub fine_tuned_from: Option<String>,
     /// Whether the encoder was frozen.
     pub frozen_encoder: bool,
+    /// The samples of this run: training, validation (checkpoint selection) and test.
+    #[serde(default)]
+    pub split: Split,
+    /// The splits of the runs this one was fine-tuned from, most recent first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pretraining: Vec<Split>,
+}
+
+impl TrainingInfo {
+    /// Every split that shaped the model: this run's and those of the runs it was fine-tuned
+    /// from.
+    pub fn splits(&self) -> impl Iterator<Item = &Split> {
+        std::iter::once(&self.split).chain(&self.pretraining)
+    }
 }
 
 /// The JSON part of a saved model.
@@ -421,6 +436,30 @@ impl TrainedModel {
         let text = serde_json::to_string_pretty(&file)
             .map_err(|e| LearnError::model(json_path, format!("cannot serialize model file: {e}")))?;
         write_atomic(json_path, text.as_bytes())
+    }
+
+    /// Fails when `samples` include samples this model (or a model it was fine-tuned from) was
+    /// trained or validated on; models without a recorded split pass.
+    pub fn check_unseen(&self, samples: &Samples) -> Result<()> {
+        self.training.iter().flat_map(TrainingInfo::splits).try_for_each(|split| split.check_unseen(samples))
+    }
+
+    /// The samples of `samples` held out from this model: from the data it was trained on, its
+    /// recorded test samples; from other data, every sample that no run behind the model
+    /// trained or validated on (all of them, for a dataset it never saw).
+    pub fn held_out(&self, samples: &Samples) -> Result<Samples> {
+        let Some(info) = &self.training else { return Ok(samples.clone()) };
+        if samples.source.is_some() && info.split.source == samples.source {
+            let [_, _, test] = info.split.apply(samples)?;
+            return Ok(test);
+        }
+        let seen = |i: u64| {
+            info.splits().any(|s| {
+                samples.source.is_some() && s.source == samples.source && (s.train.contains(i) || s.validation.contains(i))
+            })
+        };
+        let positions: Vec<usize> = (0..samples.len()).filter(|&p| !seen(samples.indices[p])).collect();
+        samples.select(&positions)
     }
 
     /// Loads a model saved by [`save`](Self::save) onto `device`.

@@ -203,6 +203,31 @@ fn statistics_match_hand_computation() {
     assert!((st.inputs.rms_norm - (sq_in / cnt_in as f64).sqrt()).abs() < 1e-12);
     let norm = augsim_learn::Normalization::from_statistics(&st);
     assert_eq!(norm.input_scale, st.inputs.rms_norm);
+
+    // The statistics of loaded samples are the manifest's (which sums shard by shard), and
+    // those of a subset (a training split) its own.
+    let loaded = all.statistics();
+    assert_eq!((loaded.inputs.nodes, loaded.targets.nodes), (st.inputs.nodes, st.targets.nodes));
+    assert!((loaded.targets.rms_norm - st.targets.rms_norm).abs() < 1e-12 * st.targets.rms_norm);
+    let first = all.select(&[0]).unwrap().statistics();
+    assert_eq!(first.inputs.nodes, 8);
+    assert_ne!(first.targets.rms_norm, st.targets.rms_norm);
+}
+
+#[test]
+fn the_source_names_the_samples_not_the_dataset_size() {
+    let (a, b, c) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    write(a.path(), spec(4, None), 0..11);
+    write(b.path(), spec(2, None), 0..5);
+    write(c.path(), DatasetSpec { seed: 8, ..spec(4, None) }, 0..11);
+    let source = |d: &Path| Dataset::open(d).unwrap().manifest().source_id();
+    assert_eq!(source(a.path()), source(b.path()), "fewer samples and other shards: the same samples");
+    assert_ne!(source(a.path()), source(c.path()), "another seed: other samples");
+    let loaded = Dataset::open(a.path()).unwrap().load_range(2..5).unwrap();
+    assert_eq!(loaded.source, Some(source(a.path())));
+    // Samples of different sources do not mix.
+    let mut mixed = loaded.clone();
+    assert!(mixed.append(Dataset::open(c.path()).unwrap().load_range(0..1).unwrap()).is_err());
 }
 
 #[test]

@@ -50,7 +50,8 @@ fn tiny_unet_overfits_a_handful_of_samples() {
         checkpoint_every: 600,
         ..TrainConfig::default()
     };
-    let out = train(&data, &data, &init, &config, &TrainOptions::new(dir.path())).unwrap();
+    let val = synthetic_samples(grid(), 10, 2);
+    let out = train(&data, &val, &init, &config, &TrainOptions::new(dir.path())).unwrap();
     assert!(out.completed);
     assert_eq!(out.iterations_done, 600);
 
@@ -240,13 +241,14 @@ fn fine_tuning_with_a_frozen_encoder_leaves_it_unchanged() {
         ..TrainConfig::default()
     };
     let pre_dir = root.path().join("pre");
-    train(&pre_data, &pre_data, &scratch(2, 2, &pre_data), &config, &TrainOptions::new(&pre_dir)).unwrap();
+    let (pre_val, new_val) = (synthetic_samples(grid(), 20, 2), synthetic_samples(grid(), 60, 2));
+    train(&pre_data, &pre_val, &scratch(2, 2, &pre_data), &config, &TrainOptions::new(&pre_dir)).unwrap();
     let pre_path = pre_dir.join(MODEL_FILE);
     let pre = TrainedModel::load(&pre_path, &inference_device()).unwrap();
 
     let finetune = |freeze: bool, name: &str| {
         let init = Initialization::FineTune { model: pre_path.clone(), freeze_encoder: freeze };
-        train(&new_data, &new_data, &init, &config, &TrainOptions::new(root.path().join(name))).unwrap()
+        train(&new_data, &new_val, &init, &config, &TrainOptions::new(root.path().join(name))).unwrap()
     };
     let frozen = finetune(true, "frozen");
     assert_eq!(frozen.model.normalization, pre.normalization);

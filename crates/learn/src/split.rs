@@ -1,0 +1,128 @@
+//! Train / validation / test splits of a dataset's samples, recorded in the model, and the
+//! guard that keeps evaluation off the samples a model was trained or selected on.
+//!
+//! A split is fixed by generation indices, not by positions, so it survives re-sharding and
+//! merging; together with the dataset's [source](crate::Manifest::source_id) it names exactly
+//! the samples that shaped a model (its training samples set the weights and the
+//! normalisation, its validation samples chose the checkpoint).
+
+use serde::{Deserialize, Serialize};
+
+use crate::dataset::Samples;
+use crate::{LearnError, Result};
+
+/// A set of generation indices, stored as sorted, disjoint, non-adjacent half-open ranges
+/// `[start, end)` (a JSON list of pairs).
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct IndexSet(Vec<[u64; 2]>);
+
+impl IndexSet {
+    /// The set of `indices` (any order, repeats allowed).
+    pub fn from_indices(indices: &[u64]) -> Self {
+        let mut sorted = indices.to_vec();
+        sorted.sort_unstable();
+        let mut ranges: Vec<[u64; 2]> = Vec::new();
+        for i in sorted {
+            match ranges.last_mut() {
+                Some(last) if i <= last[1] => last[1] = last[1].max(i + 1),
+                _ => ranges.push([i, i + 1]),
+            }
+        }
+        IndexSet(ranges)
+    }
+
+    /// Whether `index` is in the set.
+    pub fn contains(&self, index: u64) -> bool {
+        let at = self.0.partition_point(|r| r[1] <= index);
+        self.0.get(at).is_some_and(|r| r[0] <= index)
+    }
+
+    /// Number of indices.
+    pub fn len(&self) -> u64 {
+        self.0.iter().map(|r| r[1] - r[0]).sum()
+    }
+
+    /// Whether the set is empty.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    /// The first index of `indices` that is in the set.
+    pub fn first_common(&self, indices: &[u64]) -> Option<u64> {
+        indices.iter().copied().find(|&i| self.contains(i))
+    }
+}
+
+/// Which samples of one data source trained, selected and test a model.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Split {
+    /// The data source ([`Manifest::source_id`](crate::Manifest::source_id)); `None` for
+    /// samples of no known dataset.
+    pub source: Option<String>,
+    /// Samples the weights and the normalisation were fitted on.
+    pub train: IndexSet,
+    /// Samples the best checkpoint (and any hyper-parameter) was chosen on.
+    pub validation: IndexSet,
+    /// Samples held out for the reported figures.
+    pub test: IndexSet,
+}
+
+impl Split {
+    /// Splits `samples` in index order: the last `test` samples for testing, the `validation`
+    /// samples before them for validation, the rest for training (samples are drawn
+    /// independently, so their order carries no information).
+    pub fn last(samples: &Samples, validation: usize, test: usize) -> Result<Split> {
+        let n = samples.len();
+        if validation + test >= n {
+            return Err(LearnError::InvalidInput(format!(
+                "{validation} validation and {test} test samples leave no training sample out of {n}"
+            )));
+        }
+        let mut indices = samples.indices.clone();
+        indices.sort_unstable();
+        let (train, rest) = indices.split_at(n - validation - test);
+        let (val, test) = rest.split_at(validation);
+        Ok(Split {
+            source: samples.source.clone(),
+            train: IndexSet::from_indices(train),
+            validation: IndexSet::from_indices(val),
+            test: IndexSet::from_indices(test),
+        })
+    }
+
+    /// The training, validation and test samples of `samples` (which must come from the
+    /// split's source), each in the order of `samples`.
+    pub fn apply(&self, samples: &Samples) -> Result<[Samples; 3]> {
+        if samples.source != self.source {
+            return Err(LearnError::InvalidInput(format!(
+                "the split is of source {:?}, the samples of {:?}",
+                self.source, samples.source
+            )));
+        }
+        let part = |set: &IndexSet| {
+            let positions: Vec<usize> = (0..samples.len()).filter(|&p| set.contains(samples.indices[p])).collect();
+            samples.select(&positions)
+        };
+        Ok([part(&self.train)?, part(&self.validation)?, part(&self.test)?])
+    }
+
+    /// Fails when `samples` share an index with the training or validation samples of this
+    /// split's source: figures on them would not be held out.
+    pub fn check_unseen(&self, samples: &Samples) -> Result<()> {
+        if samples.source.is_none() || samples.source != self.source {
+            return Ok(());
+        }
+        for (set, role) in [(&self.train, "train"), (&self.validation, "select (validate)")] {
+            if let Some(i) = set.first_common(&samples.indices) {
+                return Err(LearnError::InvalidInput(format!(
+                    "sample {i} of {} was used to {role} this model; evaluate it on its test samples \
+                     or on another dataset",
+                    samples.source.as_deref().unwrap_or_default()
+                )));
+            }
+        }
+        Ok(())
+    }
+}
