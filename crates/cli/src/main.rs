@@ -48,21 +48,10 @@ enum Command {
         #[arg(short, long, default_value = "out/mesh.vtu")]
         output: PathBuf,
     },
-    /// ROUKF identification of Young's modulus and/or boundary springs from synthetic tracked surface points;
-    /// writes traces (CSV, JSON), assessment errors and PNG plots.
-    Assimilate {
-        /// Scenario TOML file (e.g. scenarios/roukf_young.toml).
-        scenario: PathBuf,
-        /// Number of filter iterations (default: the scenario's).
-        #[arg(long)]
-        iterations: Option<usize>,
-        /// Evaluate the sigma points one after the other instead of in parallel.
-        #[arg(long)]
-        sequential: bool,
-        /// Output directory; default out/<name>.
-        #[arg(short, long)]
-        output: Option<PathBuf>,
-    },
+    /// ROUKF identification of Young's modulus and/or boundary springs from tracked surface points (synthetic,
+    /// or CSV track files); writes traces (CSV, JSON), the estimated deformation (.pvd), assessment errors and
+    /// PNG plots.
+    Assimilate(assimilate::AssimilateArgs),
     /// Generate a FEM dataset (random loads → grid input/target pairs); resumable, splittable.
     Generate {
         /// Dataset scenario TOML (e.g. scenarios/liver_forces.toml).
@@ -144,9 +133,7 @@ fn main() {
         Command::Mesh { surface, length, tets, immersed, output } => {
             mesh_cmd::run(&mesh_cmd::MeshArgs { surface, length, tets, immersed, output })
         }
-        Command::Assimilate { scenario, iterations, sequential, output } => {
-            assimilate::run(&scenario, assimilate::Overrides { iterations, sequential, output })
-        }
+        Command::Assimilate(args) => assimilate::run(&args),
         Command::Generate { scenario, out, shard, samples } => {
             learn_cmd::generate(&scenario, out.as_deref(), shard.as_deref(), samples)
         }
@@ -168,9 +155,9 @@ fn main() {
 mod tests {
     use std::path::Path;
 
-    use crate::assimilate::AssimilationScenario;
     use crate::learn_cmd::DatasetScenario;
     use crate::scenario::{build_mesh, Scenario};
+    use filter::assimilation::AssimilationScenario;
 
     /// Every shipped scenario parses as exactly one kind of scenario, and its mesh source is valid.
     #[test]

@@ -4,6 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+use fem::scenario::fixed_problem;
+pub use fem::scenario::{build_mesh, Fixed, MeshSource};
 use fem::{Material, Problem, SolverOptions};
 use mesh::{Mesh, NodeSelection, Point};
 use serde::Deserialize;
@@ -44,76 +46,6 @@ pub struct Scenario {
     /// Outputs.
     #[serde(default)]
     pub output: Output,
-}
-
-/// The mesh of a scenario.
-#[derive(Debug, Deserialize)]
-#[serde(rename_all = "snake_case", deny_unknown_fields)]
-pub enum MeshSource {
-    /// A structured box.
-    Box {
-        /// Lower corner (m).
-        min: Point,
-        /// Upper corner (m).
-        max: Point,
-        /// Cells along x, y, z.
-        cells: [usize; 3],
-        /// "hex" (H8) or "tet" (6 T4 per cell).
-        element: ElementKind,
-    },
-    /// The built-in liver phantom meshed with about `tets` tetrahedra.
-    Phantom {
-        /// Target number of tetrahedra.
-        tets: usize,
-    },
-    /// The built-in liver phantom as an immersed-boundary H8 grid.
-    PhantomGrid {
-        /// Cell size (m).
-        spacing: f64,
-    },
-    /// A closed surface (.obj, .stl, .vtk) meshed with tetrahedra; the path is
-    /// relative to the scenario file.
-    Surface {
-        /// Path of the surface.
-        path: PathBuf,
-        /// Scale so that the largest extent is this length (m), centred at the origin.
-        length: f64,
-        /// Target number of tetrahedra.
-        tets: usize,
-    },
-    /// A volume mesh file (.msh, .vtk, .vtu); the path is relative to the scenario file.
-    File {
-        /// Path of the file.
-        path: PathBuf,
-        /// Multiply coordinates by this factor (e.g. 0.001 for mm).
-        #[serde(default = "one")]
-        scale: f64,
-        /// Move the bounding-box centre to the origin before scaling.
-        #[serde(default)]
-        centre: bool,
-    },
-}
-
-fn one() -> f64 {
-    1.0
-}
-
-/// Element kind of a generated box.
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum ElementKind {
-    /// Trilinear hexahedra.
-    Hex,
-    /// Linear tetrahedra.
-    Tet,
-}
-
-/// Fixed nodes.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Fixed {
-    /// Which nodes.
-    pub select: NodeSelection,
 }
 
 /// Prescribed displacement.
@@ -176,14 +108,9 @@ impl Scenario {
 
     /// Builds the boundary-value problem on `mesh`.
     pub fn build_problem(&self, mesh: Mesh) -> Result<Problem> {
-        self.material.validate().map_err(anyhow::Error::msg).context("material")?;
-        let mut p = Problem::new(mesh, self.material);
+        let mut p = fixed_problem(mesh, self.material, &self.fixed)?;
         let pick =
             |s: &NodeSelection, what: &str, p: &Problem| s.select(&p.mesh).with_context(|| format!("{what} selection"));
-        for f in &self.fixed {
-            let nodes = pick(&f.select, "fixed", &p)?;
-            p.fix(&nodes);
-        }
         for f in &self.prescribed {
             let nodes = pick(&f.select, "prescribed", &p)?;
             p.prescribe(&nodes, f.displacement);
@@ -212,28 +139,6 @@ impl Scenario {
     pub fn output_path(&self) -> PathBuf {
         self.output.path.clone().unwrap_or_else(|| PathBuf::from(format!("out/{}.vtu", self.name)))
     }
-}
-
-/// Builds a mesh from its source (file paths relative to `dir`).
-pub fn build_mesh(source: &MeshSource, dir: &Path) -> Result<Mesh> {
-    Ok(match source {
-        MeshSource::Box { min, max, cells, element: ElementKind::Hex } => mesh::box_hex(*min, *max, *cells)?,
-        MeshSource::Box { min, max, cells, element: ElementKind::Tet } => mesh::box_tet(*min, *max, *cells)?,
-        MeshSource::Phantom { tets } => mesh::phantom::liver_phantom(*tets)?,
-        MeshSource::PhantomGrid { spacing } => mesh::phantom::PhantomSpec::default().immersed(*spacing)?.mesh,
-        MeshSource::Surface { path, length, tets } => {
-            let mut surface = mesh::io::read_surface(dir.join(path))?;
-            surface.fit_to(*length)?;
-            mesh::tetmesh::mesh_surface_to_count(&surface, *tets, mesh::tetmesh::BoundaryFit::default())?.0
-        }
-        MeshSource::File { path, scale, centre } => {
-            let mut m = mesh::io::read_mesh(dir.join(path))?;
-            let (lo, hi) = m.bounds();
-            let c = if *centre { std::array::from_fn(|d| 0.5 * (lo[d] + hi[d])) } else { [0.0; 3] };
-            m.transform(c, *scale);
-            m
-        }
-    })
 }
 
 #[cfg(test)]

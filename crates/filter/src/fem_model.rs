@@ -91,6 +91,16 @@ pub struct LoadPattern {
     pub displacements: Vec<(usize, Point)>,
 }
 
+/// A prescribed displacement that follows measured data step by step (e.g. a tracked tool): at time step k the
+/// constrained `node` moves by `displacements[k - 1]` on top of its base value and any load pattern.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlPath {
+    /// The node; it must be constrained in the problem.
+    pub node: usize,
+    /// Displacement (m) at steps 1, 2, ….
+    pub displacements: Vec<Point>,
+}
+
 /// State of one sigma point (or of a plain simulation): the last equilibrium.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FemState {
@@ -107,6 +117,7 @@ pub struct FemModel {
     problem: Problem,
     parameters: Vec<FemParameter>,
     loads: Vec<LoadPattern>,
+    controls: Vec<ControlPath>,
     observed: Vec<TrackedPoint>,
     options: SolverOptions,
     solvers: Vec<Mutex<Option<StaticSolver>>>,
@@ -168,7 +179,25 @@ impl FemModel {
             t.validate(n)?;
         }
         let solvers = (0..=parameters.len()).map(|_| Mutex::new(None)).collect();
-        Ok(FemModel { problem, parameters, loads, observed, options, solvers })
+        Ok(FemModel { problem, parameters, loads, controls: Vec::new(), observed, options, solvers })
+    }
+
+    /// The model with displacements prescribed step by step on constrained nodes (see [`ControlPath`]).
+    pub fn with_controls(mut self, controls: Vec<ControlPath>) -> Result<Self, FemModelError> {
+        let n = self.problem.mesh.num_nodes();
+        for c in &controls {
+            if !self.problem.dirichlet.contains_key(&c.node) {
+                return Err(FemModelError::Invalid(format!(
+                    "control path on node {} (of {n}), which is not constrained",
+                    c.node
+                )));
+            }
+            if c.displacements.iter().flatten().any(|v| !v.is_finite()) {
+                return Err(FemModelError::Invalid(format!("control path on node {} is not finite", c.node)));
+            }
+        }
+        self.controls = controls;
+        Ok(self)
     }
 
     /// The rest state (zero displacement), solved with the first solver slot.
@@ -226,6 +255,20 @@ impl FemModel {
                     for (x, v) in x.iter_mut().zip(v) {
                         *x += a * v;
                     }
+                }
+            }
+        }
+        for c in &self.controls {
+            let v = step.checked_sub(1).and_then(|i| c.displacements.get(i)).ok_or_else(|| {
+                FemModelError::Invalid(format!(
+                    "the control path on node {} has {} steps, step {step} asked",
+                    c.node,
+                    c.displacements.len()
+                ))
+            })?;
+            if let Some(x) = problem.dirichlet.get_mut(&c.node) {
+                for (x, v) in x.iter_mut().zip(v) {
+                    *x += v;
                 }
             }
         }

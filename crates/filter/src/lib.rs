@@ -11,6 +11,7 @@
 //!   as parameters, time-profiled loads, one solver per sigma point); [`observation`]: points tracked through
 //!   barycentric weights and synthetic noisy measurements.
 
+pub mod assimilation;
 mod error;
 pub mod fem_model;
 mod model;
@@ -21,7 +22,7 @@ mod trace;
 mod transform;
 
 pub use error::{BoxedModelError, FilterError};
-pub use fem_model::{FemModel, FemModelError, FemParameter, FemState, LoadPattern, Profile};
+pub use fem_model::{ControlPath, FemModel, FemModelError, FemParameter, FemState, LoadPattern, Profile};
 pub use model::{Model, VectorState};
 pub use observation::TrackedPoint;
 pub use roukf::{Execution, ObservationNoise, ParameterSpec, Roukf, RoukfConfig};

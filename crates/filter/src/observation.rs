@@ -1,18 +1,14 @@
 //! Observation operators for finite-element models: points tracked through barycentric weights in a tetrahedral
 //! mesh, and synthetic measurements (a reference run plus Gaussian noise).
 
-use mesh::{tet_volume, Cells, Mesh, Point};
+use mesh::{MeshLocator, Point};
 use nalgebra::DVector;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::FemModelError;
-
-/// Smallest barycentric weight accepted for a point inside a tetrahedron (points on faces, up to rounding).
-const INSIDE_TOLERANCE: f64 = -1e-9;
 
 /// A material point of the mesh: a fixed combination of the displacements of (up to) four nodes, e.g. a surface
 /// feature point inside the tetrahedron that contains it, or a node itself.
@@ -30,44 +26,24 @@ impl TrackedPoint {
         TrackedPoint { nodes: [node; 4], weights: [1.0, 0.0, 0.0, 0.0] }
     }
 
-    /// Locates `p` in a tetrahedral mesh: the tetrahedron whose smallest barycentric weight at `p` is largest.
-    /// Errors when the mesh is not tetrahedral or `p` lies outside every tetrahedron (beyond rounding).
-    pub fn locate(mesh: &Mesh, p: Point) -> Result<Self, FemModelError> {
-        let Cells::Tet4(tets) = &mesh.cells else {
-            return Err(FemModelError::Invalid(format!(
-                "tracked points need a tetrahedral mesh, this one has {} cells",
-                mesh.cells.kind_name()
-            )));
-        };
+    /// Locates `p` with a locator built on a tetrahedral mesh ([`MeshLocator::new`]); weights on faces, up to
+    /// rounding, are clamped to zero and renormalised. Errors when the mesh is not tetrahedral or `p` lies outside.
+    pub fn locate(locator: &MeshLocator, p: Point) -> Result<Self, FemModelError> {
         if p.iter().any(|c| !c.is_finite()) {
             return Err(FemModelError::Invalid(format!("tracked point {p:?} is not finite")));
         }
-        let best = tets
-            .par_iter()
-            .enumerate()
-            .filter_map(|(e, t)| {
-                let x = t.map(|k| mesh.nodes[k]);
-                let inside_box = (0..3).all(|d| {
-                    let lo = x.iter().map(|q| q[d]).fold(f64::INFINITY, f64::min);
-                    let hi = x.iter().map(|q| q[d]).fold(f64::NEG_INFINITY, f64::max);
-                    let pad = 1e-9 * (hi - lo);
-                    p[d] >= lo - pad && p[d] <= hi + pad
-                });
-                inside_box.then(|| {
-                    let w = barycentric(x, p);
-                    (e, w, w.iter().copied().fold(f64::INFINITY, f64::min))
-                })
-            })
-            .max_by(|a, b| a.2.total_cmp(&b.2).then(b.0.cmp(&a.0)));
-        match best {
-            Some((e, w, min)) if min >= INSIDE_TOLERANCE => {
-                // Clamp rounding noise on faces and renormalise so that the weights stay a partition of unity.
-                let w = w.map(|v| v.max(0.0));
-                let sum: f64 = w.iter().sum();
-                Ok(TrackedPoint { nodes: tets[e], weights: w.map(|v| v / sum) })
-            }
-            _ => Err(FemModelError::Invalid(format!("tracked point {p:?} lies outside the mesh"))),
+        let location = locator
+            .locate(p)
+            .ok_or_else(|| FemModelError::Invalid(format!("tracked point {p:?} lies outside the mesh")))?;
+        if location.count != 4 {
+            return Err(FemModelError::Invalid(format!(
+                "tracked points need a tetrahedral mesh, this one has {}-node cells",
+                location.count
+            )));
         }
+        let w: [f64; 4] = std::array::from_fn(|i| location.weights[i].max(0.0));
+        let sum: f64 = w.iter().sum();
+        Ok(TrackedPoint { nodes: std::array::from_fn(|i| location.nodes[i]), weights: w.map(|v| v / sum) })
     }
 
     /// Current position of the point: reference position plus interpolated displacement `u` (3 per node).
@@ -97,17 +73,6 @@ impl TrackedPoint {
         }
         Ok(())
     }
-}
-
-/// Barycentric coordinates of `p` in the tetrahedron `x` (sum 1; all ≥ 0 inside).
-fn barycentric(x: [Point; 4], p: Point) -> [f64; 4] {
-    let v = tet_volume(x[0], x[1], x[2], x[3]);
-    [
-        tet_volume(p, x[1], x[2], x[3]) / v,
-        tet_volume(x[0], p, x[2], x[3]) / v,
-        tet_volume(x[0], x[1], p, x[3]) / v,
-        tet_volume(x[0], x[1], x[2], p) / v,
-    ]
 }
 
 /// Current positions of `points` for the displacement `u`, stacked as (x, y, z) per point.

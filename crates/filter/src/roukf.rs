@@ -192,14 +192,34 @@ impl<M: Model> Roukf<M> {
     /// Runs one iteration with the measurement `z` at time step `iteration() + 1`: sampling, prediction of every
     /// sigma point (model step + observation), correction. Returns the new trace record.
     pub fn step(&mut self, z: &DVector<f64>) -> Result<&IterationTrace, FilterError> {
+        self.step_partial(z, &vec![true; z.len()])
+    }
+
+    /// Like [`Roukf::step`] with only the components of `z` marked in `available` measured (e.g. tracked features
+    /// occluded in this frame): the others get zero weight in the correction and their values in `z` are ignored
+    /// (they may be NaN). With no component available the iteration only predicts. The innovation norm of the
+    /// record is over the available components.
+    pub fn step_partial(&mut self, z: &DVector<f64>, available: &[bool]) -> Result<&IterationTrace, FilterError> {
         let start = Instant::now();
         let k = self.iteration + 1;
         let p = self.sigma.dim();
         let m = self.sigma.count();
         let q = z.len();
-        let inv_std = self.inverse_observation_std(q)?;
-        if z.iter().any(|v| !v.is_finite()) {
+        if available.len() != q {
+            return Err(FilterError::DimensionMismatch {
+                what: "availability mask vs. measurement".into(),
+                expected: q,
+                found: available.len(),
+            });
+        }
+        let mut inv_std = self.inverse_observation_std(q)?;
+        if z.iter().zip(available).any(|(v, &a)| a && !v.is_finite()) {
             return Err(FilterError::NonFinite { what: "measurement z".into(), iteration: k });
+        }
+        for (w, &a) in inv_std.iter_mut().zip(available) {
+            if !a {
+                *w = 0.0;
+            }
         }
 
         // Sampling.
@@ -277,7 +297,10 @@ impl<M: Model> Roukf<M> {
             row *= *w;
         }
         let u = DMatrix::identity(p, p) + g.transpose() * &g;
-        let innovation = z - &z_mean;
+        let innovation = DVector::from_iterator(
+            q,
+            z.iter().zip(&z_mean).zip(available).map(|((v, mean), &a)| if a { v - mean } else { 0.0 }),
+        );
         let weighted = innovation.component_mul(&inv_std);
         let nonfinite = |what: &str| FilterError::NonFinite { what: what.into(), iteration: k };
         if u.iter().any(|v| !v.is_finite()) {

@@ -8,7 +8,7 @@ use augsim_filter::{
 };
 use fem::{Law, Material, Problem, SolverOptions};
 use mesh::select::nodes_in_box;
-use mesh::{Mesh, Point};
+use mesh::{Mesh, MeshLocator, Point};
 use nalgebra::DVector;
 
 const LENGTH: f64 = 0.1;
@@ -42,7 +42,7 @@ fn young_model() -> FemModel {
         displacements: vec![],
     };
     let mut observed: Vec<TrackedPoint> = top(&problem.mesh).into_iter().map(TrackedPoint::at_node).collect();
-    observed.push(TrackedPoint::locate(&problem.mesh, [0.071, 0.013, 0.004]).unwrap());
+    observed.push(TrackedPoint::locate(&MeshLocator::new(&problem.mesh).unwrap(), [0.071, 0.013, 0.004]).unwrap());
     FemModel::new(problem, vec![FemParameter::Young], vec![load], observed, SolverOptions::default()).unwrap()
 }
 
@@ -212,8 +212,9 @@ fn parallel_and_sequential_fem_filters_are_bit_identical() {
 #[test]
 fn tracked_points_interpolate_linear_fields_exactly() {
     let mesh = beam();
+    let locator = MeshLocator::new(&mesh).unwrap();
     let p: Point = [0.0437, 0.0071, 0.0155];
-    let t = TrackedPoint::locate(&mesh, p).unwrap();
+    let t = TrackedPoint::locate(&locator, p).unwrap();
     assert!(t.weights.iter().all(|w| *w >= 0.0));
     assert!((t.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
     // A linear displacement field u(x) = A x + b is reproduced exactly at the point.
@@ -227,12 +228,12 @@ fn tracked_points_interpolate_linear_fields_exactly() {
         assert!((got[d] - (p[d] + want[d])).abs() < 1e-14, "{got:?} vs {want:?}");
     }
     // Points on the boundary are found; points outside and hexahedral meshes are rejected with a message.
-    let corner = TrackedPoint::locate(&mesh, [LENGTH, SIDE, SIDE]).unwrap();
+    let corner = TrackedPoint::locate(&locator, [LENGTH, SIDE, SIDE]).unwrap();
     assert!((tracked_positions(&mesh.nodes, &[corner], &vec![0.0; u.len()])[0] - LENGTH).abs() < 1e-15);
-    let outside = TrackedPoint::locate(&mesh, [0.05, 0.01, 0.03]).unwrap_err();
+    let outside = TrackedPoint::locate(&locator, [0.05, 0.01, 0.03]).unwrap_err();
     assert!(outside.to_string().contains("outside"), "{outside}");
     let hex = mesh::box_hex([0.0; 3], [1.0; 3], [1, 1, 1]).unwrap();
-    let err = TrackedPoint::locate(&hex, [0.5; 3]).unwrap_err();
+    let err = TrackedPoint::locate(&MeshLocator::new(&hex).unwrap(), [0.5; 3]).unwrap_err();
     assert!(err.to_string().contains("tetrahedral"), "{err}");
     assert!(TrackedPoint::at_node(54).validate(54).is_err());
 }

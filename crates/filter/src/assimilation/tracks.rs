@@ -1,0 +1,231 @@
+//! Tracked features in CSV files (metres, one header line, comma-separated, blank lines ignored):
+//!
+//! * tracks (observations, controls, assessment points): header `frame,id,x,y,z`, one row per feature and frame.
+//!   Frame 0 is the rest configuration; frames 1, 2, … are the filter's time steps. A feature without a row in a
+//!   frame is occluded there.
+//! * rest positions (features): header `id,x,y,z`, one row per feature; when given, they replace the frame-0 rows.
+//!
+//! Every error names the file and, where there is one, the line.
+
+use std::collections::{BTreeMap, HashMap};
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use mesh::Point;
+use nalgebra::DVector;
+
+use super::AssimilationError;
+
+/// Header of a track file.
+pub const TRACK_HEADER: &str = "frame,id,x,y,z";
+/// Header of a rest-position file.
+pub const REST_HEADER: &str = "id,x,y,z";
+
+/// The rows of a track file, grouped by feature.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tracks {
+    /// The file read.
+    pub path: PathBuf,
+    /// Feature ids in order of first appearance.
+    pub ids: Vec<String>,
+    /// Line of each feature's first row.
+    lines: Vec<usize>,
+    /// Position of each feature per frame.
+    positions: Vec<BTreeMap<usize, Point>>,
+}
+
+impl Tracks {
+    /// Reads a track file (header `frame,id,x,y,z`).
+    pub fn read(path: &Path) -> Result<Self, AssimilationError> {
+        let mut tracks = Tracks { path: path.to_path_buf(), ids: Vec::new(), lines: Vec::new(), positions: Vec::new() };
+        let mut index: HashMap<String, usize> = HashMap::new();
+        let mut first_line: HashMap<(usize, usize), usize> = HashMap::new();
+        for (line, fields) in rows(path, TRACK_HEADER)? {
+            let bad = |message: String| AssimilationError::file(path, Some(line), message);
+            let frame: usize =
+                fields[0].parse().map_err(|_| bad(format!("frame `{}` is not a whole number ≥ 0", fields[0])))?;
+            let id = fields[1].as_str();
+            let point = coordinates(&fields[2..], path, line)?;
+            let j = *index.entry(id.to_string()).or_insert_with(|| {
+                tracks.ids.push(id.to_string());
+                tracks.lines.push(line);
+                tracks.positions.push(BTreeMap::new());
+                tracks.ids.len() - 1
+            });
+            if let Some(earlier) = first_line.insert((j, frame), line) {
+                return Err(bad(format!("feature `{id}` at frame {frame} is already given on line {earlier}")));
+            }
+            tracks.positions[j].insert(frame, point);
+        }
+        Ok(tracks)
+    }
+
+    /// The largest frame number in the file.
+    pub fn last_frame(&self) -> usize {
+        self.positions.iter().filter_map(|p| p.keys().next_back()).copied().max().unwrap_or(0)
+    }
+
+    /// Line of feature `j`'s first row.
+    pub fn line(&self, j: usize) -> usize {
+        self.lines[j]
+    }
+
+    /// Position of feature `j` in `frame`, or `None` when it is occluded there.
+    pub fn position(&self, j: usize, frame: usize) -> Option<Point> {
+        self.positions.get(j)?.get(&frame).copied()
+    }
+
+    /// Rest position of every feature: from `rest` when given (every id must be there), else its frame-0 row.
+    pub fn rest_positions(&self, rest: Option<&RestPositions>) -> Result<Vec<Point>, AssimilationError> {
+        self.ids
+            .iter()
+            .enumerate()
+            .map(|(j, id)| {
+                let line = Some(self.lines[j]);
+                match rest {
+                    Some(r) => r.get(id).ok_or_else(|| {
+                        AssimilationError::file(
+                            &self.path,
+                            line,
+                            format!("unknown id `{id}`: {} gives no rest position for it", r.path.display()),
+                        )
+                    }),
+                    None => self.position(j, 0).ok_or_else(|| {
+                        AssimilationError::file(
+                            &self.path,
+                            line,
+                            format!(
+                                "feature `{id}` has no frame-0 row (its rest position) and no features file gives it"
+                            ),
+                        )
+                    }),
+                }
+            })
+            .collect()
+    }
+
+    /// The stacked positions (x, y, z per feature) in `frame` and, per component, whether it was measured;
+    /// occluded components hold NaN.
+    pub fn frame(&self, frame: usize) -> (DVector<f64>, Vec<bool>) {
+        let mut z = DVector::from_element(3 * self.ids.len(), f64::NAN);
+        let mut available = vec![false; z.len()];
+        for j in 0..self.ids.len() {
+            if let Some(p) = self.position(j, frame) {
+                for d in 0..3 {
+                    z[3 * j + d] = p[d];
+                    available[3 * j + d] = true;
+                }
+            }
+        }
+        (z, available)
+    }
+}
+
+/// Rest positions of features, read from a file with header `id,x,y,z`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RestPositions {
+    /// The file read.
+    pub path: PathBuf,
+    positions: HashMap<String, Point>,
+}
+
+impl RestPositions {
+    /// Reads a rest-position file (header `id,x,y,z`); an id given twice is an error.
+    pub fn read(path: &Path) -> Result<Self, AssimilationError> {
+        let mut positions = HashMap::new();
+        let mut lines: HashMap<String, usize> = HashMap::new();
+        for (line, fields) in rows(path, REST_HEADER)? {
+            let point = coordinates(&fields[1..], path, line)?;
+            if let Some(earlier) = lines.insert(fields[0].clone(), line) {
+                return Err(AssimilationError::file(
+                    path,
+                    Some(line),
+                    format!("feature `{}` is already given on line {earlier}", fields[0]),
+                ));
+            }
+            positions.insert(fields[0].clone(), point);
+        }
+        Ok(RestPositions { path: path.to_path_buf(), positions })
+    }
+
+    /// The rest position of feature `id`.
+    pub fn get(&self, id: &str) -> Option<Point> {
+        self.positions.get(id).copied()
+    }
+}
+
+/// Writes a track file atomically: `frames[f]` holds the stacked positions of the features `ids` at frame f
+/// (frame 0 = rest); non-finite components mark an occluded feature, whose row is left out. Numbers are written
+/// in the shortest form that reads back to the same value.
+pub fn write_tracks(path: &Path, ids: &[String], frames: &[DVector<f64>]) -> Result<(), AssimilationError> {
+    if let Some((f, z)) = frames.iter().enumerate().find(|(_, z)| z.len() != 3 * ids.len()) {
+        return Err(AssimilationError::Setup(format!("frame {f} holds {} values for {} features", z.len(), ids.len())));
+    }
+    if let Some(id) = ids.iter().find(|id| id.is_empty() || id.contains([',', '\n', '\r']) || id.trim() != *id) {
+        return Err(AssimilationError::Setup(format!("feature id `{id}` cannot be written to a CSV field")));
+    }
+    mesh::io::write_file_atomic(path, |w| {
+        writeln!(w, "{TRACK_HEADER}")?;
+        for (f, z) in frames.iter().enumerate() {
+            for (j, id) in ids.iter().enumerate() {
+                let p = [z[3 * j], z[3 * j + 1], z[3 * j + 2]];
+                if p.iter().all(|v| v.is_finite()) {
+                    writeln!(w, "{f},{id},{},{},{}", p[0], p[1], p[2])?;
+                }
+            }
+        }
+        Ok(())
+    })
+    .map_err(|e| AssimilationError::file(path, None, format!("cannot write: {e}")))
+}
+
+/// The data rows of a CSV file whose first non-blank line is `header` (compared without case and spaces): the
+/// 1-based line number and the trimmed fields (as many as the header has, the id field non-empty).
+fn rows(path: &Path, header: &str) -> Result<Vec<(usize, Vec<String>)>, AssimilationError> {
+    let text =
+        std::fs::read_to_string(path).map_err(|e| AssimilationError::file(path, None, format!("cannot read: {e}")))?;
+    let mut out = Vec::new();
+    let expected: Vec<&str> = header.split(',').collect();
+    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim_start_matches('\u{feff}').trim()));
+    let (first, found) = lines.by_ref().find(|(_, l)| !l.is_empty()).ok_or_else(|| {
+        AssimilationError::file(path, None, format!("the file is empty: expected the header `{header}`"))
+    })?;
+    let names: Vec<String> = found.split(',').map(|f| f.trim().to_ascii_lowercase()).collect();
+    if names != expected {
+        return Err(AssimilationError::file(
+            path,
+            Some(first),
+            format!("the header must be `{header}`, found `{found}`"),
+        ));
+    }
+    for (line, l) in lines.filter(|(_, l)| !l.is_empty()) {
+        let fields: Vec<&str> = l.split(',').map(str::trim).collect();
+        if fields.len() != expected.len() {
+            return Err(AssimilationError::file(
+                path,
+                Some(line),
+                format!("{} fields, expected {} ({header})", fields.len(), expected.len()),
+            ));
+        }
+        let id = expected.iter().position(|&n| n == "id").map_or("", |i| fields[i]);
+        if id.is_empty() {
+            return Err(AssimilationError::file(path, Some(line), "empty id".into()));
+        }
+        out.push((line, fields.into_iter().map(str::to_string).collect()));
+    }
+    if out.is_empty() {
+        return Err(AssimilationError::file(path, None, format!("no data rows after the header `{header}`")));
+    }
+    Ok(out)
+}
+
+/// The three coordinates `x, y, z` of a row (finite numbers).
+fn coordinates(fields: &[String], path: &Path, line: usize) -> Result<Point, AssimilationError> {
+    let mut p = [0.0; 3];
+    for (d, (v, name)) in fields.iter().zip(["x", "y", "z"]).enumerate() {
+        p[d] = v.parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| {
+            AssimilationError::file(path, Some(line), format!("{name} = `{v}` is not a finite number"))
+        })?;
+    }
+    Ok(p)
+}
