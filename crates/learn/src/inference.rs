@@ -20,38 +20,65 @@ use crate::{LearnError, Result};
 
 /// A volume of `channels` values per node, channels-last (`[x, y, z, channel]`, channel
 /// fastest), with a zero halo of `halo` nodes on every side of the `dims` interior nodes.
-struct Volume {
-    dims: [usize; 3],
-    halo: usize,
-    channels: usize,
-    data: Vec<f32>,
+pub(crate) struct Volume {
+    pub(crate) dims: [usize; 3],
+    pub(crate) halo: usize,
+    pub(crate) channels: usize,
+    pub(crate) data: Vec<f32>,
 }
 
 impl Volume {
-    fn zeros(dims: [usize; 3], halo: usize, channels: usize) -> Volume {
+    pub(crate) fn zeros(dims: [usize; 3], halo: usize, channels: usize) -> Volume {
         let len = dims.iter().map(|d| d + 2 * halo).product::<usize>() * channels;
         Volume { dims, halo, channels, data: vec![0.0; len] }
     }
 
+    /// The volume of interior `padded` (at least `grid`) holding a channel-major field
+    /// (`[channels, nx, ny, nz]`, `channels · grid.nodes()` values) at its low corner, zero elsewhere.
+    pub(crate) fn from_field(
+        field: &[f32],
+        channels: usize,
+        grid: GridShape,
+        padded: [usize; 3],
+        halo: usize,
+    ) -> Volume {
+        let nodes = grid.nodes();
+        let mut v = Volume::zeros(padded, halo, channels);
+        for c in 0..channels {
+            for node in 0..nodes {
+                let [i, j, k] = grid.node_coords(node);
+                let at = v.node(i, j, k) * channels + c;
+                v.data[at] = field[c * nodes + node];
+            }
+        }
+        v
+    }
+
     /// Stored nodes along y and z (interior plus halo).
-    fn stored_yz(&self) -> (usize, usize) {
+    pub(crate) fn stored_yz(&self) -> (usize, usize) {
         (self.dims[1] + 2 * self.halo, self.dims[2] + 2 * self.halo)
     }
 
     /// Stored nodes in one x-plane.
-    fn plane_nodes(&self) -> usize {
+    pub(crate) fn plane_nodes(&self) -> usize {
         let (sy, sz) = self.stored_yz();
         sy * sz
     }
 
     /// Storage position (node number) of interior node `(i, j, k)`.
-    fn node(&self, i: usize, j: usize, k: usize) -> usize {
+    pub(crate) fn node(&self, i: usize, j: usize, k: usize) -> usize {
         let (sy, sz) = self.stored_yz();
         ((i + self.halo) * sy + j + self.halo) * sz + k + self.halo
     }
 
+    /// Stored nodes from interior node `(i, 0, 0)` to `(i, ny - 1, nz - 1)` of a plane (the rows
+    /// of the tap views of [`same_conv`], halo nodes between the y-lines included).
+    pub(crate) fn plane_rows(&self) -> usize {
+        (self.dims[1] - 1) * self.stored_yz().1 + self.dims[2]
+    }
+
     /// Channel vector of the node at storage position `node`.
-    fn at(&self, node: usize) -> &[f32] {
+    pub(crate) fn at(&self, node: usize) -> &[f32] {
         &self.data[node * self.channels..(node + 1) * self.channels]
     }
 }
@@ -60,11 +87,11 @@ impl Volume {
 /// decoder's concatenation of up-sampled and skip features): each such part has its own
 /// `(taps · channels) × c_out` row-major matrix, rows tap-major (taps in x, y, z order, z fastest).
 pub(crate) struct Packed {
-    parts: Vec<(usize, Vec<f32>)>,
-    bias: Vec<f32>,
-    c_in: usize,
-    c_out: usize,
-    taps: usize,
+    pub(crate) parts: Vec<(usize, Vec<f32>)>,
+    pub(crate) bias: Vec<f32>,
+    pub(crate) c_in: usize,
+    pub(crate) c_out: usize,
+    pub(crate) taps: usize,
 }
 
 impl Packed {
@@ -73,19 +100,12 @@ impl Packed {
     pub(crate) fn conv(weight: &[f32], bias: &[f32], c_out: usize, splits: &[usize], taps: usize) -> Result<Packed> {
         let c_in: usize = splits.iter().sum();
         check_len("convolution", weight.len(), bias.len(), c_out * c_in * taps, c_out)?;
+        let mut rest = permuted(weight, &conv_order(c_out, splits, taps));
         let mut parts = Vec::with_capacity(splits.len());
-        let mut first = 0;
         for &c in splits {
-            let mut matrix = vec![0.0; taps * c * c_out];
-            for co in 0..c_out {
-                for ci in 0..c {
-                    for t in 0..taps {
-                        matrix[(t * c + ci) * c_out + co] = weight[(co * c_in + first + ci) * taps + t];
-                    }
-                }
-            }
-            parts.push((c, matrix));
-            first += c;
+            let tail = rest.split_off(taps * c * c_out);
+            parts.push((c, rest));
+            rest = tail;
         }
         Ok(Packed { parts, bias: bias.to_vec(), c_in, c_out, taps })
     }
@@ -95,22 +115,57 @@ impl Packed {
     /// blocks, one per x-offset, columns tap-major.
     pub(crate) fn transposed(weight: &[f32], bias: &[f32], c_in: usize, c_out: usize) -> Result<Packed> {
         check_len("transposed convolution", weight.len(), bias.len(), c_in * c_out * 8, c_out)?;
-        let mut matrix = vec![0.0; weight.len()];
-        for ci in 0..c_in {
-            for co in 0..c_out {
-                for t in 0..8 {
-                    matrix[((t / 4) * c_in + ci) * 4 * c_out + (t % 4) * c_out + co] =
-                        weight[(ci * c_out + co) * 8 + t];
-                }
-            }
-        }
+        let matrix = permuted(weight, &transposed_order(c_in, c_out));
         Ok(Packed { parts: vec![(c_in, matrix)], bias: bias.to_vec(), c_in, c_out, taps: 8 })
     }
 
     /// The weight matrix of a single-part layer.
-    fn matrix(&self) -> &[f32] {
+    pub(crate) fn matrix(&self) -> &[f32] {
         &self.parts[0].1
     }
+}
+
+/// Where each weight of a convolution (burn's `[c_out, c_in, taps]` order) goes in the
+/// concatenation of the part matrices of [`Packed::conv`].
+pub(crate) fn conv_order(c_out: usize, splits: &[usize], taps: usize) -> Vec<usize> {
+    let c_in: usize = splits.iter().sum();
+    let mut order = vec![0; c_out * c_in * taps];
+    let (mut offset, mut first) = (0, 0);
+    for &c in splits {
+        for co in 0..c_out {
+            for ci in 0..c {
+                for t in 0..taps {
+                    order[(co * c_in + first + ci) * taps + t] = offset + (t * c + ci) * c_out + co;
+                }
+            }
+        }
+        offset += taps * c * c_out;
+        first += c;
+    }
+    order
+}
+
+/// Where each weight of a 2×2×2 transposed convolution (burn's `[c_in, c_out, 8]` order) goes
+/// in the matrix of [`Packed::transposed`].
+pub(crate) fn transposed_order(c_in: usize, c_out: usize) -> Vec<usize> {
+    let mut order = vec![0; c_in * c_out * 8];
+    for ci in 0..c_in {
+        for co in 0..c_out {
+            for t in 0..8 {
+                order[(ci * c_out + co) * 8 + t] = ((t / 4) * c_in + ci) * 4 * c_out + (t % 4) * c_out + co;
+            }
+        }
+    }
+    order
+}
+
+/// `out[order[n]] = values[n]`.
+fn permuted(values: &[f32], order: &[usize]) -> Vec<f32> {
+    let mut out = vec![0.0; values.len()];
+    for (v, &at) in values.iter().zip(order) {
+        out[at] = *v;
+    }
+    out
 }
 
 fn check_len(what: &str, weights: usize, bias: usize, want_w: usize, want_b: usize) -> Result<()> {
@@ -178,15 +233,7 @@ impl InferenceNet {
         }
         let m = 1usize << self.encoder.len();
         let padded = dims.map(|n| n.div_ceil(m) * m);
-        let halo = self.kernel / 2;
-        let mut h = Volume::zeros(padded, halo, self.in_channels);
-        for c in 0..self.in_channels {
-            for node in 0..nodes {
-                let [i, j, k] = grid.node_coords(node);
-                let at = h.node(i, j, k) * self.in_channels + c;
-                h.data[at] = input[c * nodes + node];
-            }
-        }
+        let mut h = Volume::from_field(input, self.in_channels, grid, padded, self.kernel / 2);
         let mut skips = Vec::with_capacity(self.encoder.len());
         for (block, down) in self.encoder.iter().zip(&self.down) {
             h = self.block(&[&h], block);
@@ -225,7 +272,7 @@ impl InferenceNet {
 /// along z are neighbours in it; so each (x, y) tap offset is one matrix product on a strided
 /// view of the stored data (row `n` = the channel vectors of nodes `n .. n + kernel` of the run),
 /// accumulated. Halo rows inside the run are computed and dropped.
-fn same_conv(inputs: &[&Volume], layer: &Packed, kernel: usize, relu: bool) -> Volume {
+pub(crate) fn same_conv(inputs: &[&Volume], layer: &Packed, kernel: usize, relu: bool) -> Volume {
     let first = inputs[0];
     let (dims, halo) = (first.dims, first.halo);
     debug_assert!(kernel / 2 <= halo && inputs.iter().all(|v| v.dims == dims && v.halo == halo));
@@ -233,12 +280,9 @@ fn same_conv(inputs: &[&Volume], layer: &Packed, kernel: usize, relu: bool) -> V
     let mut out = Volume::zeros(dims, halo, layer.c_out);
     let (sy, sz) = out.stored_yz();
     let c_out = layer.c_out;
-    let (r, k) = ((kernel / 2) as isize, kernel);
-    // Storage offset of tap (a, b, 0) from the output node.
-    let offsets: Vec<isize> = (0..k * k)
-        .map(|ab| (((ab / k) as isize - r) * sy as isize + (ab % k) as isize - r) * sz as isize - r)
-        .collect();
-    let rows = (dims[1] - 1) * sz + dims[2];
+    let k = kernel;
+    let offsets = tap_offsets(&out, kernel);
+    let rows = out.plane_rows();
     let corner = out.node(0, 0, 0);
     out.data.par_chunks_mut(sy * sz * c_out).skip(halo).take(dims[0]).enumerate().for_each_init(
         || vec![0.0f32; rows * c_out],
@@ -248,10 +292,7 @@ fn same_conv(inputs: &[&Volume], layer: &Packed, kernel: usize, relu: bool) -> V
             for (ab, off) in offsets.iter().enumerate() {
                 let start = (base + off) as usize;
                 for (v, (c, matrix)) in inputs.iter().zip(&layer.parts) {
-                    // Row n: the k channel vectors along z from node start + n, contiguous in
-                    // channels-last storage (rows overlap).
-                    let data = &v.data[start * c..(start + rows - 1) * c + k * c];
-                    let lhs = MatRef::from_row_major_slice_with_stride(data, rows, k * c, *c);
+                    let lhs = tap_view(v, start, rows, k);
                     gemm(product, lhs, &matrix[ab * k * c * c_out..][..k * c * c_out], c_out, accumulate);
                     accumulate = true;
                 }
@@ -267,25 +308,34 @@ fn same_conv(inputs: &[&Volume], layer: &Packed, kernel: usize, relu: bool) -> V
     out
 }
 
+/// Storage offsets (in nodes) from an output node of `v` to the first input node of each
+/// (x, y) tap offset `(a, b, 0)` of a `kernel`-sized stride-1 convolution, `a`-major.
+pub(crate) fn tap_offsets(v: &Volume, kernel: usize) -> Vec<isize> {
+    let (sy, sz) = v.stored_yz();
+    let (r, k) = ((kernel / 2) as isize, kernel);
+    (0..k * k).map(|ab| (((ab / k) as isize - r) * sy as isize + (ab % k) as isize - r) * sz as isize - r).collect()
+}
+
+/// The strided view of `v` (`rows × (kernel · channels)`) whose row `n` is the `kernel` channel
+/// vectors along z from node `start + n`, contiguous in channels-last storage (rows overlap).
+pub(crate) fn tap_view(v: &Volume, start: usize, rows: usize, kernel: usize) -> MatRef<'_, f32> {
+    let c = v.channels;
+    let data = &v.data[start * c..(start + rows - 1) * c + kernel * c];
+    MatRef::from_row_major_slice_with_stride(data, rows, kernel * c, c)
+}
+
 /// The 2×2×2 stride-2 convolution (no padding): for each output x-plane, the 8 input channel
 /// vectors under every output node are gathered into a patch matrix, then one matrix product.
-fn downsample(fine: &Volume, layer: &Packed) -> Volume {
+pub(crate) fn downsample(fine: &Volume, layer: &Packed) -> Volume {
     let dims = fine.dims.map(|n| n / 2);
     let mut out = Volume::zeros(dims, fine.halo, layer.c_out);
     let (halo, (sy, sz)) = (out.halo, out.stored_yz());
-    let (c_in, c_out, k_len) = (layer.c_in, layer.c_out, layer.taps * layer.c_in);
+    let (c_out, k_len) = (layer.c_out, layer.taps * layer.c_in);
     let rows = dims[1] * dims[2];
     out.data.par_chunks_mut(sy * sz * c_out).skip(halo).take(dims[0]).enumerate().for_each_init(
         || (vec![0.0f32; rows * k_len], vec![0.0f32; rows * c_out]),
         |(patches, product), (i, plane)| {
-            for j in 0..dims[1] {
-                for k in 0..dims[2] {
-                    let row = &mut patches[(j * dims[2] + k) * k_len..][..k_len];
-                    for (t, tap) in row.chunks_exact_mut(c_in).enumerate() {
-                        tap.copy_from_slice(fine.at(fine.node(2 * i + t / 4, 2 * j + (t / 2) % 2, 2 * k + t % 2)));
-                    }
-                }
-            }
+            gather_patches(fine, i, patches);
             gemm(product, MatRef::from_row_major_slice(&patches[..], rows, k_len), layer.matrix(), c_out, false);
             for j in 0..dims[1] {
                 let at = ((j + halo) * sz + halo) * c_out;
@@ -296,9 +346,35 @@ fn downsample(fine: &Volume, layer: &Packed) -> Volume {
     out
 }
 
+/// Gathers the 2×2×2 patches of `fine` under the nodes of coarse x-plane `i` into `patches`
+/// (row `j · (ny / 2) + k`: the 8 channel vectors, taps in x, y, z order, z fastest).
+pub(crate) fn gather_patches(fine: &Volume, i: usize, patches: &mut [f32]) {
+    let [_, ny, nz] = fine.dims.map(|n| n / 2);
+    let c = fine.channels;
+    for j in 0..ny {
+        for k in 0..nz {
+            let row = &mut patches[(j * nz + k) * 8 * c..][..8 * c];
+            for (t, tap) in row.chunks_exact_mut(c).enumerate() {
+                tap.copy_from_slice(fine.at(fine.node(2 * i + t / 4, 2 * j + (t / 2) % 2, 2 * k + t % 2)));
+            }
+        }
+    }
+}
+
+/// Gathers the interior nodes of x-plane `i` of `v` into `rows` (row `j · nz + k`).
+pub(crate) fn gather_plane(v: &Volume, i: usize, rows: &mut [f32]) {
+    let [_, ny, nz] = v.dims;
+    let c = v.channels;
+    for j in 0..ny {
+        for k in 0..nz {
+            rows[(j * nz + k) * c..][..c].copy_from_slice(v.at(v.node(i, j, k)));
+        }
+    }
+}
+
 /// The 2×2×2 stride-2 transposed convolution: output plane `i` takes coarse plane `i / 2` and
 /// the weight block of x-offset `i % 2`.
-fn upsample(coarse: &Volume, layer: &Packed) -> Volume {
+pub(crate) fn upsample(coarse: &Volume, layer: &Packed) -> Volume {
     let dims = coarse.dims.map(|n| 2 * n);
     let mut out = Volume::zeros(dims, coarse.halo, layer.c_out);
     let (halo, (_, sz)) = (out.halo, out.stored_yz());
@@ -310,11 +386,7 @@ fn upsample(coarse: &Volume, layer: &Packed) -> Volume {
     out.data.par_chunks_mut(plane_len).skip(halo).take(dims[0]).enumerate().for_each_init(
         || (vec![0.0f32; rows * c_in], vec![0.0f32; rows * n]),
         |(patches, product), (i, plane)| {
-            for j in 0..ny {
-                for k in 0..nz {
-                    patches[(j * nz + k) * c_in..][..c_in].copy_from_slice(coarse.at(coarse.node(i / 2, j, k)));
-                }
-            }
+            gather_plane(coarse, i / 2, patches);
             let lhs = MatRef::from_row_major_slice(&patches[..], rows, c_in);
             gemm(product, lhs, &layer.matrix()[(i % 2) * c_in * n..][..c_in * n], n, false);
             for j in 0..ny {
@@ -334,7 +406,7 @@ fn upsample(coarse: &Volume, layer: &Packed) -> Volume {
 /// `product (rows × n) (+)= lhs (rows × k) · matrix (k × n)`: `matrix` row-major, `product`
 /// column-major (the long dimension contiguous suits the GEMM kernels); added to the product
 /// when `accumulate`, replacing it otherwise.
-fn gemm(product: &mut [f32], lhs: MatRef<'_, f32>, matrix: &[f32], n: usize, accumulate: bool) {
+pub(crate) fn gemm(product: &mut [f32], lhs: MatRef<'_, f32>, matrix: &[f32], n: usize, accumulate: bool) {
     let (rows, k) = (lhs.nrows(), lhs.ncols());
     let dst = MatMut::from_column_major_slice_mut(&mut product[..rows * n], rows, n);
     let rhs = MatRef::from_row_major_slice(matrix, k, n);

@@ -28,6 +28,7 @@
 
 #![warn(missing_docs)]
 
+pub mod backprop;
 pub mod corrupt;
 pub mod curve;
 pub mod dataset;

@@ -28,6 +28,7 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
+use crate::backprop::Layers;
 use crate::dataset::{Normalization, Samples};
 use crate::fsutil::{read, write_atomic};
 use crate::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
@@ -228,6 +229,21 @@ impl UNet {
             self.decoder.iter().map(|b| block(b, 2)).collect::<Result<_>>()?,
             conv(&self.head, 1)?,
         )
+    }
+
+    /// The layers, for the hand-written backward pass of [`crate::backprop`].
+    pub(crate) fn layers(&self) -> Layers<'_> {
+        fn block(b: &ConvBlock) -> [&Conv3d; 2] {
+            [&b.conv1, &b.conv2]
+        }
+        Layers {
+            encoder: self.encoder.iter().map(block).collect(),
+            down: self.down.iter().collect(),
+            bottleneck: block(&self.bottleneck),
+            up: self.up.iter().collect(),
+            decoder: self.decoder.iter().map(block).collect(),
+            head: &self.head,
+        }
     }
 
     /// Stops gradient updates of the contracting path (encoder levels, down-sampling, bottleneck).
