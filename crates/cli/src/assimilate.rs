@@ -35,6 +35,10 @@ pub struct AssimilateArgs {
     /// Tracked assessment points (CSV `frame,id,x,y,z`): the estimated deformation's error is reported there.
     #[arg(long, requires = "observations")]
     pub assessment: Option<PathBuf>,
+    /// Forgetting factor in (0, 1]: the parameter covariance is divided by it before every step (default: the
+    /// scenario's filter.forgetting, else 1 = none).
+    #[arg(long)]
+    pub forgetting: Option<f64>,
     /// Write the estimated deformation every N steps (default: the scenario's output.every, else 1).
     #[arg(long)]
     pub every: Option<usize>,
@@ -48,6 +52,9 @@ pub fn run(args: &AssimilateArgs) -> Result<()> {
     }
     if args.sequential {
         sc.filter.execution = Execution::Sequential;
+    }
+    if let Some(rho) = args.forgetting {
+        sc.filter.forgetting = rho;
     }
     if args.every.is_some() {
         sc.output.every = args.every;

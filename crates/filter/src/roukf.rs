@@ -6,7 +6,8 @@
 //! The covariance is kept in factored form `P = L U^{-1} L^T`, `L = [L_x; L_θ]` (n × p over the full state,
 //! p × p over θ), `U` p × p. Initially `L_θ = I_p`, `L_x = 0`, `U = P_θ0^{-1}` (diagonal prior).
 //!
-//! 1. Sampling: `U = C C^T` (Cholesky); `θ(i) = θ̂ + L_θ C^{-T} I(i)` and, in joint mode, `x(i) = x̂ + L_x C^{-T} I(i)`.
+//! 1. Sampling: `U = C C^T` (Cholesky); `θ(i) = θ̂ + L_θ C^{-T} I(i)` and, in joint mode, `x(i) = x̂ + L_x C^{-T} I(i)`,
+//!    with `C^{-T}` divided by √ρ for a forgetting factor ρ < 1 (the covariance inflated to `P / ρ`).
 //! 2. Prediction: every sigma point advances its own copy of the model state with `g(θ(i))` (physical space);
 //!    `x(i)⁻`, `Z(i) = H(x(i)⁻)`; means `θ̂⁻ = Σ α_i θ(i)`, `x̂⁻ = Σ α_i x(i)⁻`, `Ẑ = Σ α_i Z(i)`.
 //! 3. Correction: `L_θ = Σ α_i (θ(i) - θ̂⁻) I(i)^T`, `L_x = Σ α_i (x(i)⁻ - x̂⁻) I(i)^T`,
@@ -95,6 +96,15 @@ pub struct RoukfConfig {
     /// Parallel or sequential sigma-point evaluation.
     #[serde(default)]
     pub execution: Execution,
+    /// Forgetting factor ρ in (0, 1]: the covariance is divided by ρ before every prediction (process noise
+    /// `(1/ρ − 1) P`, old measurements weigh ρ per step less), so that σ does not shrink below what the model error
+    /// allows; 1 (the default) is the plain filter.
+    #[serde(default = "no_forgetting")]
+    pub forgetting: f64,
+}
+
+fn no_forgetting() -> f64 {
+    1.0
 }
 
 /// Mean state and its factor for joint state–parameter filtering.
@@ -146,6 +156,12 @@ impl<M: Model> Roukf<M> {
                     spec.name, spec.prior_mean, spec.prior_std
                 )));
             }
+        }
+        if !(config.forgetting > 0.0 && config.forgetting <= 1.0) {
+            return Err(FilterError::InvalidConfig(format!(
+                "the forgetting factor must lie in (0, 1], got {}",
+                config.forgetting
+            )));
         }
         let stds: &[f64] = match &config.observation_std {
             ObservationNoise::Uniform(s) => std::slice::from_ref(s),
@@ -226,7 +242,8 @@ impl<M: Model> Roukf<M> {
         let offsets = self
             .sigma
             .offsets(&self.u_chol)
-            .ok_or_else(|| FilterError::NotPositiveDefinite { what: "U".into(), iteration: k })?;
+            .ok_or_else(|| FilterError::NotPositiveDefinite { what: "U".into(), iteration: k })?
+            / self.config.forgetting.sqrt();
         let thetas: Vec<DVector<f64>> = (0..m).map(|i| &self.theta + &self.l_theta * offsets.column(i)).collect();
         let mut physical: Vec<Vec<f64>> = Vec::with_capacity(m);
         for (i, t) in thetas.iter().enumerate() {

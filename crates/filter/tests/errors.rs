@@ -52,6 +52,7 @@ fn config(execution: Execution) -> RoukfConfig {
         parameters: vec![ParameterSpec::new("k", Transform::Identity, 1.0, 0.5)],
         observation_std: ObservationNoise::Uniform(0.1),
         execution,
+        forgetting: 1.0,
     }
 }
 

@@ -67,6 +67,7 @@ fn young_modulus_is_identified_within_one_percent_from_noiseless_data() {
         parameters: vec![ParameterSpec::new("young", transform, mean, std)],
         observation_std: ObservationNoise::Uniform(1e-5),
         execution: Execution::Parallel,
+        forgetting: 1.0,
     };
     let initial = model.initial_state();
     let mut roukf = Roukf::new(model, initial, config(Transform::Exp, 3000f64.ln(), 0.5)).unwrap();
@@ -134,6 +135,7 @@ fn spring_config(execution: Execution) -> RoukfConfig {
         ],
         observation_std: ObservationNoise::Uniform(2e-5),
         execution,
+        forgetting: 1.0,
     }
 }
 

@@ -29,8 +29,9 @@ impl Model for StaticLinear {
     }
 }
 
-#[test]
-fn static_parameters_linear_observation_match_kalman_filter() {
+/// Runs the ROUKF on `StaticLinear` against the closed-form Kalman filter whose covariance is divided by
+/// `forgetting` before every update and which uses only the components that `available(k)` marks at step k.
+fn static_parameters_against_kalman(forgetting: f64, available: impl Fn(usize) -> Vec<bool>) -> Roukf<StaticLinear> {
     let (p, q, steps) = (3, 2, 60);
     let mut rng = Rng::new(11);
     let h: Vec<DMatrix<f64>> = (0..steps).map(|_| DMatrix::from_fn(q, p, |_, _| rng.normal())).collect();
@@ -44,23 +45,35 @@ fn static_parameters_linear_observation_match_kalman_filter() {
             .collect(),
         observation_std: ObservationNoise::PerComponent(obs_std.clone()),
         execution: Execution::Parallel,
+        forgetting,
     };
     let mut roukf = Roukf::new(StaticLinear { h: h.clone() }, DVector::zeros(q), config).unwrap();
 
     let mut mu = DVector::from_column_slice(&prior_mean);
     let mut cov = DMatrix::from_diagonal(&DVector::from_iterator(p, prior_std.iter().map(|s| s * s)));
-    let r = DMatrix::from_diagonal(&DVector::from_iterator(q, obs_std.iter().map(|s| s * s)));
     for (k, hk) in h.iter().enumerate() {
         let noise = DVector::from_iterator(q, obs_std.iter().map(|s| s * rng.normal()));
-        let z = hk * &truth + noise;
-        // Closed-form Kalman filter (Joseph form).
-        let s = hk * &cov * hk.transpose() + &r;
-        let gain = &cov * hk.transpose() * s.try_inverse().unwrap();
-        mu = &mu + &gain * (&z - hk * &mu);
-        let ikh = DMatrix::identity(p, p) - &gain * hk;
-        cov = &ikh * &cov * ikh.transpose() + &gain * &r * gain.transpose();
+        let mut z = hk * &truth + noise;
+        let mask = available(k);
+        let rows: Vec<usize> = (0..q).filter(|&i| mask[i]).collect();
+        cov /= forgetting;
+        if !rows.is_empty() {
+            // Closed-form Kalman filter (Joseph form) on the measured components.
+            let hk = hk.select_rows(&rows);
+            let r =
+                DMatrix::from_diagonal(&DVector::from_iterator(rows.len(), rows.iter().map(|&i| obs_std[i].powi(2))));
+            let s = &hk * &cov * hk.transpose() + &r;
+            let gain = &cov * hk.transpose() * s.try_inverse().unwrap();
+            mu = &mu + &gain * (z.select_rows(&rows) - &hk * &mu);
+            let ikh = DMatrix::identity(p, p) - &gain * &hk;
+            cov = &ikh * &cov * ikh.transpose() + &gain * &r * gain.transpose();
+        }
+        // What the filter must ignore: a NaN where nothing was measured.
+        for i in (0..q).filter(|&i| !mask[i]) {
+            z[i] = f64::NAN;
+        }
 
-        let rec = roukf.step(&z).unwrap().clone();
+        let rec = roukf.step_partial(&z, &mask).unwrap().clone();
         assert_eq!(rec.iteration, k + 1);
         let got_mu = DMatrix::from_column_slice(p, 1, &rec.mean);
         let exp_mu = DMatrix::from_column_slice(p, 1, mu.as_slice());
@@ -72,6 +85,34 @@ fn static_parameters_linear_observation_match_kalman_filter() {
     }
     // The data are informative: the estimate is close to the truth.
     assert!((roukf.mean() - &truth).amax() < 0.1);
+    roukf
+}
+
+#[test]
+fn static_parameters_linear_observation_match_kalman_filter() {
+    static_parameters_against_kalman(1.0, |_| vec![true; 2]);
+}
+
+#[test]
+fn forgetting_and_missing_components_match_kalman_filter() {
+    // Component 1 missing every third step, both missing every seventh.
+    let mask = |k: usize| vec![k % 7 != 6, k % 3 != 0 && k % 7 != 6];
+    let plain = static_parameters_against_kalman(1.0, mask);
+    let forgetting = static_parameters_against_kalman(0.9, mask);
+    // Forgetting keeps σ from collapsing as 1/√k: after 60 steps it is over twice the plain filter's.
+    let (s1, s09) = (plain.std(), forgetting.std());
+    assert!(s1.iter().zip(&s09).all(|(a, b)| *b > 2.0 * a), "{s1:?} vs {s09:?}");
+    // Invalid factors are configuration errors.
+    for rho in [0.0, -0.5, 1.5, f64::NAN] {
+        let config = RoukfConfig {
+            parameters: vec![ParameterSpec::new("t", Transform::Identity, 0.0, 1.0)],
+            observation_std: ObservationNoise::Uniform(1.0),
+            execution: Execution::Sequential,
+            forgetting: rho,
+        };
+        let err = Roukf::new(StaticLinear { h: vec![] }, DVector::zeros(1), config).err().unwrap().to_string();
+        assert!(err.contains("forgetting factor"), "{err}");
+    }
 }
 
 /// Linear state space with unknown static parameters: x_{k+1} = A x_k + B θ + u_k, y = C x.
@@ -123,6 +164,7 @@ fn joint_linear_state_space_matches_augmented_kalman_filter() {
             .collect(),
         observation_std: ObservationNoise::Uniform(obs_std),
         execution: Execution::Sequential,
+        forgetting: 1.0,
     };
     let model = LinearStateSpace { a: a.clone(), b: b.clone(), c: cm.clone(), inputs: inputs.clone() };
     let mut roukf = Roukf::new_joint(model, x0.clone(), config).unwrap();

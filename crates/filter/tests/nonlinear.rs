@@ -57,6 +57,7 @@ fn rate_config(execution: Execution) -> RoukfConfig {
         parameters: vec![ParameterSpec::new("rate", Transform::Exp, 0.5f64.ln(), 1.0)],
         observation_std: ObservationNoise::Uniform(0.01),
         execution,
+        forgetting: 1.0,
     }
 }
 
@@ -182,6 +183,7 @@ fn cascade_run(execution: Execution, joint: bool) -> (Trace, Vec<[f64; 2]>) {
         ],
         observation_std: ObservationNoise::PerComponent(vec![0.01, 0.02]),
         execution,
+        forgetting: 1.0,
     };
     let mut roukf = if joint {
         Roukf::new_joint(Cascade, [0.0, 0.0], config).unwrap()

@@ -349,6 +349,7 @@ impl Experiment {
             parameters: self.unknowns.specs.clone(),
             observation_std: ObservationNoise::Uniform(self.filter_std),
             execution: self.scenario.filter.execution,
+            forgetting: self.scenario.filter.forgetting,
         };
         let model = self.model(self.base.clone(), self.unknowns.parameters.clone())?;
         let initial = model.initial_state();

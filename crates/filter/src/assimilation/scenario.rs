@@ -168,12 +168,25 @@ pub struct AssessmentSpec {
 }
 
 /// Filter settings.
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FilterSpec {
     /// Parallel or sequential sigma points.
     #[serde(default)]
     pub execution: Execution,
+    /// Forgetting factor ρ in (0, 1] (see [`crate::RoukfConfig::forgetting`]); 1: none.
+    #[serde(default = "one")]
+    pub forgetting: f64,
+}
+
+impl Default for FilterSpec {
+    fn default() -> Self {
+        FilterSpec { execution: Execution::default(), forgetting: 1.0 }
+    }
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 /// Output settings.
