@@ -177,14 +177,28 @@ impl Experiment {
         }
 
         let mesh = build_mesh(&sc.mesh, dir).context(|| "building the mesh".into())?;
-        let (mut problem, loads, tool_nodes) = build_problem(sc, mesh)?;
+        let (problem, loads, tool_nodes) = build_problem(sc, mesh)?;
         let locator = MeshLocator::new(&problem.mesh).context(|| "indexing the mesh for point location".into())?;
         let unknowns = unknowns(sc, &problem.mesh)?;
 
+        let setup = Setup {
+            nodes: problem.mesh.num_nodes(),
+            cells: problem.mesh.cells.len(),
+            cell_kind: problem.mesh.cells.kind_name(),
+            constrained_nodes: 0,
+            tool_nodes: tool_nodes.len(),
+            control_nodes: 0,
+            features: 0,
+            assessment_points: 0,
+            parameters: 0,
+            iterations: 0,
+            occluded: 0,
+            reference: None,
+        };
         let mut experiment = Experiment {
-            scenario: scenario.clone(),
+            scenario,
             start,
-            base: problem.clone(),
+            base: problem,
             loads,
             controls: Vec::new(),
             unknowns,
@@ -194,27 +208,11 @@ impl Experiment {
             every,
             assessment: None,
             synthetic_tracks: Vec::new(),
-            setup: Setup {
-                nodes: problem.mesh.num_nodes(),
-                cells: problem.mesh.cells.len(),
-                cell_kind: problem.mesh.cells.kind_name(),
-                constrained_nodes: 0,
-                tool_nodes: tool_nodes.len(),
-                control_nodes: 0,
-                features: 0,
-                assessment_points: 0,
-                parameters: 0,
-                iterations: 0,
-                occluded: 0,
-                reference: None,
-            },
+            setup,
         };
         match files {
             None => experiment.synthesise(&locator, &tool_nodes)?,
-            Some(f) => {
-                experiment.read_files(&mut problem, &locator, f)?;
-                experiment.base = problem;
-            }
+            Some(f) => experiment.read_files(&locator, f)?,
         }
         let s = &mut experiment.setup;
         s.constrained_nodes = experiment.base.dirichlet.len();
@@ -296,13 +294,9 @@ impl Experiment {
         Ok(())
     }
 
-    /// Measurements, controls and assessment points from track files; control nodes are constrained in `problem`.
-    fn read_files(
-        &mut self,
-        problem: &mut Problem,
-        locator: &MeshLocator,
-        files: &ObservationFiles,
-    ) -> Result<(), AssimilationError> {
+    /// Measurements, controls and assessment points from track files; control nodes are constrained in the base
+    /// problem.
+    fn read_files(&mut self, locator: &MeshLocator, files: &ObservationFiles) -> Result<(), AssimilationError> {
         let rest = files.features.as_deref().map(RestPositions::read).transpose()?;
         let tracks = Tracks::read(&files.observations)?;
         let last = tracks.last_frame();
@@ -315,7 +309,7 @@ impl Experiment {
             (1..=iterations).map(|k| tracks.frame(k)).map(|(z, available)| Frame { z, available }).collect();
         if let Some(path) = &files.controls {
             let controls = Tracks::read(path)?;
-            self.controls = control_paths(problem, &controls, rest.as_ref(), iterations)?;
+            self.controls = control_paths(&mut self.base, &controls, rest.as_ref(), iterations)?;
         }
         if let Some(path) = &files.assessment {
             let tracks = Tracks::read(path)?;

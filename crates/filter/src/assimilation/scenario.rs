@@ -42,7 +42,8 @@ pub struct AssimilationScenario {
     pub springs: Option<SpringsSpec>,
     /// The tracked feature points and their noise.
     pub observations: ObservationSpec,
-    /// Points where the estimated deformation is compared with the reference run.
+    /// Points where the estimated deformation is compared with the reference run (synthetic observations only;
+    /// with track files, assessment points come from their own track file).
     pub assessment: Option<AssessmentSpec>,
     /// Filter settings.
     #[serde(default)]

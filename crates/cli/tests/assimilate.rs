@@ -1,0 +1,74 @@
+//! `augsim assimilate` on a small beam: a synthetic run writes its tracks, the tracks fed back with
+//! `--observations` give the same estimate, and a bad track file stops the run with its file and line.
+
+use std::path::Path;
+use std::process::Command;
+
+const BEAM: &str = r#"
+name = "beam"
+iterations = 6
+[mesh.box]
+min = [0.0, 0.0, 0.0]
+max = [0.1, 0.02, 0.02]
+cells = [5, 2, 2]
+element = "tet"
+[material]
+law = "svk"
+young = 5000.0
+poisson = 0.3
+[[fixed]]
+select = { box = { min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] } }
+[[force]]
+select = { box = { min = [0.0999, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }
+total = [0.0, 0.0, -2e-3]
+profile = { raised_cosine = { period = 6 } }
+[young]
+transform = "exp"
+prior_mean = 8.0
+prior_std = 0.5
+[observations]
+points = 8
+seed = 1
+noise_std = 1e-5
+"#;
+
+/// Runs `augsim assimilate` with `args`; returns (success, stdout + stderr).
+fn assimilate(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_augsim")).arg("assimilate").args(args).output().unwrap();
+    (out.status.success(), format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr)))
+}
+
+fn young(summary: &Path) -> f64 {
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(summary).unwrap()).unwrap();
+    json["young"]["mean"].as_f64().unwrap()
+}
+
+#[test]
+fn synthetic_tracks_fed_back_and_bad_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scenario = d.join("beam.toml");
+    std::fs::write(&scenario, BEAM).unwrap();
+    let s = scenario.to_str().unwrap();
+    let synthetic = d.join("synthetic");
+    let (ok, text) = assimilate(&[s, "-o", synthetic.to_str().unwrap(), "--every", "3"]);
+    assert!(ok, "{text}");
+    assert!(text.contains("reference    6 steps") && text.contains("young        μ ="), "{text}");
+    assert!(synthetic.join("deformation.pvd").exists() && synthetic.join("deformation/step_00006.vtu").exists());
+
+    let tracks = synthetic.join("tracks/observations.csv");
+    let read = d.join("read");
+    let (ok, text) = assimilate(&[s, "--observations", tracks.to_str().unwrap(), "-o", read.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    assert!(text.contains("tracks       6 frames") && text.contains("0 occluded"), "{text}");
+    assert_eq!(young(&synthetic.join("summary.json")).to_bits(), young(&read.join("summary.json")).to_bits());
+
+    let bad = d.join("bad.csv");
+    std::fs::write(&bad, "frame,id,x,y,z\n0,f0,0.05,0.01,0.02\n1,f0,0.05,oops,0.02\n").unwrap();
+    let (ok, text) = assimilate(&[s, "--observations", bad.to_str().unwrap(), "-o", d.join("bad").to_str().unwrap()]);
+    assert!(!ok);
+    assert!(text.contains(&format!("error: {}:3: y = `oops` is not a finite number", bad.display())), "{text}");
+    // Track options need --observations.
+    let (ok, text) = assimilate(&[s, "--controls", bad.to_str().unwrap()]);
+    assert!(!ok && text.contains("--observations"), "{text}");
+}
