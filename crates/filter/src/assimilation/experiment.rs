@@ -225,11 +225,6 @@ impl Experiment {
         Ok(experiment)
     }
 
-    /// The scenario.
-    pub fn scenario(&self) -> &AssimilationScenario {
-        &self.scenario
-    }
-
     /// Summary of the prepared experiment.
     pub fn setup(&self) -> &Setup {
         &self.setup
