@@ -4,34 +4,6 @@
 use std::path::Path;
 use std::process::Command;
 
-const BEAM: &str = r#"
-name = "beam"
-iterations = 6
-[mesh.box]
-min = [0.0, 0.0, 0.0]
-max = [0.1, 0.02, 0.02]
-cells = [5, 2, 2]
-element = "tet"
-[material]
-law = "svk"
-young = 5000.0
-poisson = 0.3
-[[fixed]]
-select = { box = { min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] } }
-[[force]]
-select = { box = { min = [0.0999, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }
-total = [0.0, 0.0, -2e-3]
-profile = { raised_cosine = { period = 6 } }
-[young]
-transform = "exp"
-prior_mean = 8.0
-prior_std = 0.5
-[observations]
-points = 8
-seed = 1
-noise_std = 1e-5
-"#;
-
 /// Runs `augsim assimilate` with `args`; returns (success, stdout + stderr).
 fn assimilate(args: &[&str]) -> (bool, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_augsim")).arg("assimilate").args(args).output().unwrap();
@@ -47,20 +19,20 @@ fn young(summary: &Path) -> f64 {
 fn synthetic_tracks_fed_back_and_bad_files() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let scenario = d.join("beam.toml");
-    std::fs::write(&scenario, BEAM).unwrap();
+    // The filter crate's test beam: 8 steps, Young's modulus from 10 tracked points, deformation every 4 steps.
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../filter/tests/data/beam_assimilation.toml");
     let s = scenario.to_str().unwrap();
     let synthetic = d.join("synthetic");
-    let (ok, text) = assimilate(&[s, "-o", synthetic.to_str().unwrap(), "--every", "3"]);
+    let (ok, text) = assimilate(&[s, "-o", synthetic.to_str().unwrap()]);
     assert!(ok, "{text}");
-    assert!(text.contains("reference    6 steps") && text.contains("young        μ ="), "{text}");
-    assert!(synthetic.join("deformation.pvd").exists() && synthetic.join("deformation/step_00006.vtu").exists());
+    assert!(text.contains("reference    8 steps") && text.contains("young        μ ="), "{text}");
+    assert!(synthetic.join("deformation.pvd").exists() && synthetic.join("deformation/step_00008.vtu").exists());
 
     let tracks = synthetic.join("tracks/observations.csv");
     let read = d.join("read");
     let (ok, text) = assimilate(&[s, "--observations", tracks.to_str().unwrap(), "-o", read.to_str().unwrap()]);
     assert!(ok, "{text}");
-    assert!(text.contains("tracks       6 frames") && text.contains("0 occluded"), "{text}");
+    assert!(text.contains("tracks       8 frames") && text.contains("0 occluded"), "{text}");
     assert_eq!(young(&synthetic.join("summary.json")).to_bits(), young(&read.join("summary.json")).to_bits());
 
     let bad = d.join("bad.csv");

@@ -6,40 +6,10 @@ use std::path::{Path, PathBuf};
 use augsim_filter::assimilation::tracks::{RestPositions, Tracks};
 use augsim_filter::assimilation::{AssimilationScenario, Experiment, ObservationFiles, Report};
 
-/// A cantilever beam (5×2×2 cells, T4) fixed at x = 0, pushed down at its free end; Young's modulus estimated from
-/// 10 points on its top face, 2 assessment nodes.
-const BEAM: &str = r#"
-name = "beam"
-iterations = 8
-[mesh.box]
-min = [0.0, 0.0, 0.0]
-max = [0.1, 0.02, 0.02]
-cells = [5, 2, 2]
-element = "tet"
-[material]
-law = "svk"
-young = 5000.0
-poisson = 0.3
-[[fixed]]
-select = { box = { min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] } }
-[[force]]
-select = { box = { min = [0.0999, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }
-total = [0.0, 0.0, -2e-3]
-profile = { raised_cosine = { period = 8 } }
-[young]
-transform = "exp"
-prior_mean = 8.0
-prior_std = 0.5
-[observations]
-points = 10
-seed = 3
-noise_std = 1e-5
-[assessment]
-select = { box = { min = [0.05, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }
-count = 2
-[output]
-every = 4
-"#;
+/// The test scenario (see its header).
+fn beam() -> String {
+    std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/beam_assimilation.toml")).unwrap()
+}
 
 /// A tool pressing the middle of the top face, with its own profile.
 const TOOL: &str = r#"
@@ -84,7 +54,8 @@ fn files(tracks: &Path, controls: bool) -> ObservationFiles {
 #[test]
 fn tracks_written_by_a_synthetic_run_give_the_same_estimate() {
     let dir = tempfile::tempdir().unwrap();
-    let (synthetic, expected) = run(dir.path(), BEAM, None, "synthetic");
+    let beam = beam();
+    let (synthetic, expected) = run(dir.path(), &beam, None, "synthetic");
     assert!(synthetic.synthetic);
     let young = synthetic.young.as_ref().unwrap();
     assert!((young.mean - 5000.0).abs() < 0.01 * 5000.0, "{young:?}");
@@ -101,7 +72,7 @@ fn tracks_written_by_a_synthetic_run_give_the_same_estimate() {
     assert!(max_u("step_00004.vtu") > 1e-3 && max_u("step_00008.vtu") < 1e-9);
 
     let tracks = dir.path().join("synthetic/tracks");
-    let (read, got) = run(dir.path(), BEAM, Some(&files(&tracks, false)), "read");
+    let (read, got) = run(dir.path(), &beam, Some(&files(&tracks, false)), "read");
     assert!(!read.synthetic);
     assert_eq!(got, expected, "the filter means of every iteration, bit for bit");
     assert_eq!(read.young.as_ref().unwrap().std.to_bits(), young.std.to_bits());
@@ -127,12 +98,12 @@ fn tracks_written_by_a_synthetic_run_give_the_same_estimate() {
         controls: None,
         assessment: None,
     };
-    assert_eq!(run(dir.path(), BEAM, Some(&split), "split").1, expected);
+    assert_eq!(run(dir.path(), &beam, Some(&split), "split").1, expected);
 
     // An occluded feature (f1 at frame 3) is skipped for that frame: the run goes on and lands nearby.
     let occluded: String = moving.lines().filter(|l| !l.starts_with("3,f1,")).map(|l| format!("{l}\n")).collect();
     std::fs::write(dir.path().join("moving.csv"), occluded).unwrap();
-    let (sc, base) = scenario(dir.path(), "occluded.toml", BEAM);
+    let (sc, base) = scenario(dir.path(), "occluded.toml", &beam);
     let experiment = Experiment::prepare(sc, &base, Some(&split)).unwrap();
     assert_eq!(experiment.setup().occluded, 1);
     let report = experiment.run(&dir.path().join("occluded"), |_| ()).unwrap();
@@ -143,20 +114,21 @@ fn tracks_written_by_a_synthetic_run_give_the_same_estimate() {
 #[test]
 fn tool_tracks_as_controls_reproduce_the_tool() {
     let dir = tempfile::tempdir().unwrap();
-    let with_tool = format!("{BEAM}{TOOL}");
+    let beam = beam();
+    let with_tool = format!("{beam}{TOOL}");
     let (synthetic, _) = run(dir.path(), &with_tool, None, "synthetic");
     let tracks = dir.path().join("synthetic/tracks");
     let controls = Tracks::read(&tracks.join("controls.csv")).unwrap();
     assert_eq!(controls.ids.len(), 6, "the tool's nodes");
     // The same beam without the scenario's tool, driven by the tracked tool instead.
-    let (sc, base) = scenario(dir.path(), "controlled.toml", BEAM);
+    let (sc, base) = scenario(dir.path(), "controlled.toml", &beam);
     let experiment = Experiment::prepare(sc, &base, Some(&files(&tracks, true))).unwrap();
     assert_eq!(experiment.setup().control_nodes, 6);
     let read = experiment.run(&dir.path().join("controlled"), |_| ()).unwrap();
     let (a, b) = (synthetic.young.unwrap(), read.young.unwrap());
     assert!((a.mean - b.mean).abs() < 1e-9 * a.mean && (a.std - b.std).abs() < 1e-9 * a.std, "{a:?} vs {b:?}");
     // Without the controls the beam moves differently and the estimate is off.
-    let (sc, base) = scenario(dir.path(), "uncontrolled.toml", BEAM);
+    let (sc, base) = scenario(dir.path(), "uncontrolled.toml", &beam);
     let report = Experiment::prepare(sc, &base, Some(&files(&tracks, false)))
         .unwrap()
         .run(&dir.path().join("uncontrolled"), |_| ())
@@ -221,7 +193,7 @@ fn bad_track_files_are_named_with_their_line() {
         "frame,id,x,y,z\n0,in,0.05,0.01,0.02\n0,out,0.05,0.01,0.03\n1,in,0.05,0.01,0.02\n",
     )
     .unwrap();
-    let (sc, base) = scenario(d, "beam.toml", BEAM);
+    let (sc, base) = scenario(d, "beam.toml", &beam());
     let files = ObservationFiles { observations: d.join("outside.csv"), ..Default::default() };
     let err = Experiment::prepare(sc, &base, Some(&files)).err().unwrap().to_string();
     assert!(err.contains("outside.csv:3: feature `out`") && err.contains("outside the mesh"), "{err}");
