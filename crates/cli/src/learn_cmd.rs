@@ -7,8 +7,8 @@ use fem::{Material, SolverOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 use learn::generate::{DatasetConfig, Generator};
 use learn::{
-    Corruption, Dataset, DatasetPart, Initialization, Samples, Sparsity, TrainConfig, TrainOptions, TrainedModel,
-    UNetConfig,
+    Corruption, Dataset, DatasetPart, Initialization, Samples, Sparsity, Split, TrainConfig, TrainOptions,
+    TrainedModel, UNetConfig,
 };
 use mesh::io::Field;
 use serde::Deserialize;
@@ -103,15 +103,9 @@ pub fn merge(out: &Path, parts: &[PathBuf]) -> Result<()> {
     Ok(())
 }
 
-/// Train/test split and corruption options shared by `train` and `eval`.
+/// Input corruption, shared by `train` (training and validation inputs) and `eval`.
 #[derive(Debug, Clone, clap::Args)]
-pub struct SplitArgs {
-    /// Fraction of the dataset (its last samples) held out as the test set.
-    #[arg(long, default_value_t = 0.2)]
-    pub test_fraction: f64,
-    /// Number of test samples (the last ones); overrides --test-fraction.
-    #[arg(long)]
-    pub test_samples: Option<usize>,
+pub struct CorruptionArgs {
     /// Keep a random visible patch of between MIN and MAX input nodes (e.g. 13,114).
     #[arg(long, value_delimiter = ',', num_args = 2)]
     pub sparse: Option<Vec<usize>>,
@@ -120,25 +114,45 @@ pub struct SplitArgs {
     pub noise: f64,
 }
 
-impl SplitArgs {
+impl CorruptionArgs {
     fn corruption(&self) -> Corruption {
         Corruption {
             sparsity: self.sparse.as_ref().map(|v| Sparsity::Patch { min_nodes: v[0], max_nodes: v[1] }),
             noise_std: self.noise,
         }
     }
+}
 
-    fn split(&self, dataset: &Dataset) -> Result<(Samples, Samples)> {
-        if !(0.0..1.0).contains(&self.test_fraction) {
-            bail!("--test-fraction must lie in [0, 1), got {}", self.test_fraction);
-        }
-        let all = dataset.load_all()?;
-        let n_test = self.test_samples.unwrap_or((all.len() as f64 * self.test_fraction).round() as usize);
-        if n_test > all.len() {
-            bail!("{n_test} test samples asked, the dataset has {}", all.len());
-        }
-        let n_train = all.len() - n_test;
-        Ok(all.split_at(n_train)?)
+/// How `train` splits the dataset (by generation index: the last samples are the test set, the
+/// ones before them the validation set, the rest the training set).
+#[derive(Debug, Clone, clap::Args)]
+pub struct SplitArgs {
+    /// Fraction of the dataset held out as the test set (its last samples).
+    #[arg(long, default_value_t = 0.2)]
+    pub test_fraction: f64,
+    /// Number of test samples; overrides --test-fraction.
+    #[arg(long)]
+    pub test_samples: Option<usize>,
+    /// Fraction of the dataset used for validation (checkpoint selection): the samples before the
+    /// test set.
+    #[arg(long, default_value_t = 0.1)]
+    pub validation_fraction: f64,
+    /// Number of validation samples; overrides --validation-fraction.
+    #[arg(long)]
+    pub validation_samples: Option<usize>,
+}
+
+impl SplitArgs {
+    fn split(&self, all: &Samples) -> Result<Split> {
+        let count = |fraction: f64, given: Option<usize>, flag: &str| -> Result<usize> {
+            if !(0.0..1.0).contains(&fraction) {
+                bail!("--{flag}-fraction must lie in [0, 1), got {fraction}");
+            }
+            Ok(given.unwrap_or((all.len() as f64 * fraction).round() as usize))
+        };
+        let test = count(self.test_fraction, self.test_samples, "test")?;
+        let validation = count(self.validation_fraction, self.validation_samples, "validation")?;
+        Ok(Split::last(all, validation, test)?)
     }
 }
 
@@ -186,15 +200,20 @@ pub struct TrainArgs {
     /// Start afresh instead of resuming from out/checkpoint.bin.
     #[arg(long)]
     pub restart: bool,
-    /// Split and corruption.
+    /// Train / validation / test split.
     #[command(flatten)]
     pub split: SplitArgs,
+    /// Input corruption.
+    #[command(flatten)]
+    pub corruption: CorruptionArgs,
 }
 
 /// `augsim train`.
 pub fn train(args: &TrainArgs) -> Result<()> {
     let dataset = Dataset::open(&args.dataset)?;
-    let (mut train, test) = args.split.split(&dataset)?;
+    let all = dataset.load_all()?;
+    let split = args.split.split(&all)?;
+    let [mut train, validation, test] = split.apply(&all)?;
     if let Some(n) = args.train_samples {
         if n == 0 || n > train.len() {
             bail!("--train-samples {n}: the training split has {} samples", train.len());
@@ -205,7 +224,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         Some(model) => Initialization::FineTune { model: model.clone(), freeze_encoder: args.freeze_encoder },
         None => Initialization::Scratch {
             unet: UNetConfig { base_channels: args.channels, depth: args.depth, ..UNetConfig::default() },
-            normalization: learn::Normalization::from_statistics(&dataset.manifest().statistics),
+            normalization: learn::Normalization::from_samples(&train),
             input_unit: dataset.manifest().units.input.clone(),
         },
     };
@@ -217,8 +236,8 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         seed: args.seed,
         validate_every: args.validate_every,
         checkpoint_every: args.validate_every,
-        train_corruption: args.split.corruption(),
-        val_corruption: args.split.corruption(),
+        train_corruption: args.corruption.corruption(),
+        val_corruption: args.corruption.corruption(),
     };
     let options = TrainOptions {
         out_dir: args.out.clone(),
@@ -226,39 +245,56 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         progress: true,
         stop_after: None,
         placement: dataset.manifest().placement(),
+        test: split.test,
     };
-    println!("train      {} samples, test {} samples, grid {}", train.len(), test.len(), dataset.manifest().grid);
-    let outcome = learn::train(&train, &test, &init, &config, &options)?;
+    println!(
+        "split      {} training, {} validation, {} test samples (held out, recorded in the model); grid {}",
+        train.len(),
+        validation.len(),
+        test.len(),
+        dataset.manifest().grid
+    );
+    let outcome = learn::train(&train, &validation, &init, &config, &options)?;
     let best =
         outcome.curve.iter().filter_map(|r| r.val.map(|v| (r.iteration, v.mean))).min_by(|a, b| a.1.total_cmp(&b.1));
     println!("steps      {} ({:.3} s per step)", outcome.iterations_done, outcome.mean_step_seconds);
     if let Some((it, e)) = best {
-        println!("best       mean e = {:.4} mm at iteration {it}", e * 1e3);
+        println!("best       validation mean e = {:.4} mm at iteration {it}", e * 1e3);
     }
     println!("wrote      {}", outcome.model_path.display());
     Ok(())
 }
 
-/// `augsim eval`: errors on the test split, per-sample CSV and the worst sample as VTK.
-pub fn eval(model_path: &Path, dataset_dir: &Path, split: &SplitArgs, out: &Path) -> Result<()> {
+/// `augsim eval`: errors on the samples held out from the model (its recorded test split of
+/// the dataset it was trained on, or every unseen sample of another dataset), per-sample CSV and
+/// the worst sample as VTK.
+pub fn eval(model_path: &Path, dataset_dir: &Path, corruption: &CorruptionArgs, out: &Path) -> Result<()> {
     let model = TrainedModel::load(model_path, &learn::inference_device())?;
     let dataset = Dataset::open(dataset_dir)?;
     if dataset.manifest().grid != model.grid {
         bail!("the model was trained on grid {} but the dataset is on grid {}", model.grid, dataset.manifest().grid);
     }
-    let (_, test) = split.split(&dataset)?;
+    let all = dataset.load_all()?;
+    let test = model.held_out(&all)?;
     if test.is_empty() {
-        bail!("the test split is empty");
+        bail!("{} holds no sample held out from this model (no test split recorded for it)", dataset_dir.display());
     }
+    let trained_here = model.training.as_ref().is_some_and(|t| t.split.source.is_some() && t.split.source == all.source);
+    println!(
+        "held out   {} of {} samples ({})",
+        test.len(),
+        all.len(),
+        if trained_here { "the test split recorded in the model" } else { "those no run behind the model trained or validated on" }
+    );
     let markers = dataset.manifest().markers();
     let placement = dataset.manifest().placement();
     let (report, tre) = match placement {
         Some(placement) if !markers.is_empty() => {
             let grid = placement.grid(model.grid)?;
-            let (report, tre) = learn::evaluate_at_points(&model, &test, &split.corruption(), 0, &grid, &markers)?;
+            let (report, tre) = learn::evaluate_at_points(&model, &test, &corruption.corruption(), 0, &grid, &markers)?;
             (report, Some(tre))
         }
-        _ => (learn::evaluate(&model, &test, &split.corruption(), 0)?, None),
+        _ => (learn::evaluate(&model, &test, &corruption.corruption(), 0)?, None),
     };
     let s = &report.stats;
     println!("samples    {}", test.len());
@@ -285,11 +321,11 @@ pub fn eval(model_path: &Path, dataset_dir: &Path, split: &SplitArgs, out: &Path
     let summary = serde_json::json!({
         "model": model_path, "dataset": dataset_dir, "samples": test.len(),
         "mean_m": s.mean, "std_m": s.std, "max_m": s.max, "worst_index": report.worst_index(),
-        "corruption": split.corruption(), "marker_errors": tre,
+        "corruption": corruption.corruption(), "marker_errors": tre,
     });
     write_atomic(&out.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
     let worst = test.get(s.worst);
-    let input = learn::evaluation_input(&test, s.worst, &split.corruption(), 0)?;
+    let input = learn::evaluation_input(&test, s.worst, &corruption.corruption(), 0)?;
     let prediction = model.predict(&input)?;
     let vtu = out.join("worst.vtu");
     write_grid_sample(&vtu, dataset.manifest(), &input, &worst.target, &prediction, &worst.mask)?;

@@ -76,7 +76,8 @@ enum Command {
     },
     /// Train a U-Net on a dataset (from scratch or fine-tuning a pre-trained model); resumable.
     Train(learn_cmd::TrainArgs),
-    /// Evaluate a model on a dataset's test split: mean/std/max Euclidean error, worst sample as VTK.
+    /// Evaluate a model on the samples held out from it (the test split recorded in the model, or a
+    /// dataset it never saw): mean/std/max Euclidean error, worst sample as VTK.
     Eval {
         /// Model JSON (model.json).
         model: PathBuf,
@@ -85,9 +86,9 @@ enum Command {
         /// Output directory (errors.csv, summary.json, worst.vtu).
         #[arg(short, long, default_value = "out/eval")]
         out: PathBuf,
-        /// Split and corruption.
+        /// Input corruption.
         #[command(flatten)]
-        split: learn_cmd::SplitArgs,
+        corruption: learn_cmd::CorruptionArgs,
     },
     /// Predict the displacement for a constraint tensor or a point cloud and time the network.
     Predict {
@@ -139,7 +140,7 @@ fn main() {
         }
         Command::Merge { out, parts } => learn_cmd::merge(&out, &parts),
         Command::Train(args) => learn_cmd::train(&args),
-        Command::Eval { model, dataset, out, split } => learn_cmd::eval(&model, &dataset, &split, &out),
+        Command::Eval { model, dataset, out, corruption } => learn_cmd::eval(&model, &dataset, &corruption, &out),
         Command::Predict { model, input, output, mesh, runs } => {
             learn_cmd::predict(&model, &input, &output, mesh.as_deref(), runs)
         }

@@ -4,12 +4,15 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+use fem::{Law, Material};
 use mesh::io::Field;
 use mesh::Point;
-use register::case::{phantom_push, target_errors};
+use register::case::{compare, fem_model, network_model, phantom_push, Method};
 use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
-use register::organ::displaced;
-use register::{register_frame, CameraModel, Deformer, FemDeformer, NetworkDeformer, Organ, RegistrationOptions};
+use register::picture::side_view;
+use register::{
+    register_sequence, CameraModel, Deformer, FemDeformer, NetworkDeformer, Organ, RegistrationOptions, Summary,
+};
 use serde::Serialize;
 
 use crate::learn_cmd::write_atomic;
@@ -27,8 +30,9 @@ pub struct RegisterArgs {
     /// FEM registration on this scenario's mesh, material (law, formulation) and fixed nodes.
     #[arg(long, conflicts_with = "model")]
     fem: Option<PathBuf>,
-    /// U-Net registration with this model (model.json); the organ comes from --scenario.
-    #[arg(long, requires = "scenario")]
+    /// U-Net registration with this model (model.json); the organ comes from --scenario. With
+    /// --demo: the network of the comparison (default: models/liver_ar/model.json).
+    #[arg(long)]
     model: Option<PathBuf>,
     /// The dataset scenario the model was trained on, for --model (its mesh is the organ, its
     /// observed nodes the network's input).
@@ -47,8 +51,8 @@ pub struct RegisterArgs {
     #[arg(short, long, default_value = "out/register")]
     out: PathBuf,
     /// Built-in demo: a Neo-Hookean phantom of 9,000 tetrahedra pushed down (--force), seen from
-    /// above (1,500 points, 1 mm noise, 5 % outliers), registered with a co-rotational FEM on
-    /// another mesh of 3,000; the case's files are written to --out first.
+    /// above (1,500 points, 1 mm noise, 5 % outliers), registered with a co-rotational FEM, an
+    /// SVK FEM (both on another mesh of 3,000) and the shipped U-Net; prints the comparison.
     #[arg(long)]
     demo: bool,
     /// The force (N) pushing the demo's truth down.
@@ -71,19 +75,12 @@ struct FrameSummary {
     tre_max_mm: Option<f64>,
 }
 
+/// summary.json: the run's figures and each frame's.
 #[derive(Serialize)]
-struct Summary {
-    method: String,
-    targets: usize,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    tre_mean_mm: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    tre_max_mm: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    no_deformation_tre_mean_mm: Option<f64>,
-    surface_residual_mm: f64,
-    time_ms: f64,
-    frames: Vec<FrameSummary>,
+struct RunSummary {
+    #[serde(flatten)]
+    summary: Summary,
+    per_frame: Vec<FrameSummary>,
 }
 
 /// The organ, its deformer and default targets.
@@ -96,123 +93,108 @@ struct Setup {
 
 /// Runs the registration and writes the outputs.
 pub fn run(args: &RegisterArgs) -> Result<()> {
-    let (cloud_path, targets_path, truth_path) = if args.demo {
-        write_demo_case(&args.out, args.force)?
-    } else {
-        let cloud = args.cloud.clone().context("a cloud is required")?;
-        (cloud, args.targets.clone(), args.truth.clone())
-    };
-    let setup = if args.demo {
-        demo_setup()?
-    } else if let Some(model) = &args.model {
-        network_setup(model, args.scenario.as_deref().context("--model needs --scenario")?)?
+    if args.demo {
+        return demo(args);
+    }
+    let cloud_path = args.cloud.clone().context("a cloud is required")?;
+    let setup = if let Some(model) = &args.model {
+        network_setup(model, args.scenario.as_deref().context("--model needs --scenario (or --demo)")?)?
     } else if let Some(fem) = &args.fem {
         fem_setup(fem)?
     } else {
         bail!("give --fem SCENARIO or --model MODEL --scenario SCENARIO (or --demo)");
     };
     let Setup { organ, mut deformer, method, default_targets } = setup;
-    let targets = match &targets_path {
+    let targets = match &args.targets {
         Some(p) => read_targets(p)?,
         None => default_targets,
     };
     if targets.is_empty() {
         bail!("no targets: give --targets, or a mesh with `markers` or `tumour` regions");
     }
-    let stencils = organ.locate(&targets, "target")?;
     let frames = read_frames(&cloud_path)?;
-    let truths: Option<Vec<Vec<Point>>> = match &truth_path {
+    let truths: Option<Vec<Vec<Point>>> = match &args.truth {
         None => None,
         Some(p) => {
             let files = if p.is_dir() { read_frames(p)? } else { vec![p.clone()] };
             if files.len() != frames.len() {
                 bail!("{} truth file(s) for {} cloud frame(s)", files.len(), frames.len());
             }
-            let t = files.iter().map(|f| read_targets(f)).collect::<Result<Vec<_>, _>>()?;
-            if let Some((i, bad)) = t.iter().enumerate().find(|(_, t)| t.len() != targets.len()) {
-                bail!("truth of frame {i} has {} points for {} targets", bad.len(), targets.len());
-            }
-            Some(t)
+            Some(files.iter().map(|f| read_targets(f)).collect::<Result<Vec<_>, _>>()?)
         }
     };
     let options = RegistrationOptions { iterations: args.iterations, ..Default::default() };
     println!("method     {method}");
-    println!(
-        "organ      {} nodes, {} {} cells; surface of {} triangles; {} targets",
-        organ.mesh().num_nodes(),
-        organ.mesh().cells.len(),
-        organ.mesh().cells.kind_name(),
-        organ.surface().triangles.len(),
-        targets.len()
-    );
+    print_organ(&organ, targets.len());
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let sequence = frames.len() > 1;
-    let mut u: Option<Vec<f64>> = None;
-    let (mut rows, mut steps, mut all_errors, mut rigid_errors) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut registered = Vec::new();
-    for (i, file) in frames.iter().enumerate() {
-        let cloud = read_point_cloud(file)?;
-        let frame = register_frame(&organ, deformer.as_mut(), &cloud, u.as_deref(), &options)
-            .with_context(|| format!("registering {}", file.display()))?;
-        registered = displaced(&targets, &stencils, &frame.u);
-        let errors = truths.as_ref().map(|t| target_errors(&registered, &t[i]));
-        if let Some(t) = &truths {
-            rigid_errors.extend(target_errors(&targets, &t[i]));
-        }
-        let name = if sequence { format!("organ_{i:04}.vtu") } else { "organ.vtu".into() };
-        let fields = [Field::point("displacement", 3, frame.u.clone())];
-        mesh::io::write_mesh(args.out.join(&name), organ.mesh(), &fields)?;
-        steps.push((i as f64, name));
-        let row = FrameSummary {
-            cloud: file.display().to_string(),
-            points: cloud.len(),
-            inliers: frame.inliers,
-            iterations: frame.iterations,
-            surface_residual_mm: frame.surface_residual * 1e3,
-            time_ms: ms(frame.time),
-            tre_mean_mm: errors.as_ref().map(|e| mean(e) * 1e3),
-            tre_max_mm: errors.as_ref().map(|e| max(e) * 1e3),
-        };
-        println!(
-            "frame {i:<4} {} points ({} matched), {} iterations, surface residual {:.2} mm, {:.1} ms{}",
-            row.points,
-            row.inliers,
-            row.iterations,
-            row.surface_residual_mm,
-            row.time_ms,
-            row.tre_mean_mm.map_or(String::new(), |t| format!(
-                ", TRE mean {t:.2} mm, max {:.2} mm",
-                row.tre_max_mm.unwrap_or(0.0)
-            ))
-        );
-        all_errors.extend(errors.unwrap_or_default());
-        rows.push(row);
-        u = Some(frame.u);
-    }
+    let (mut steps, mut rows) = (Vec::new(), Vec::new());
+    let clouds = frames.iter().map(|f| read_point_cloud(f));
+    let outcomes =
+        register_sequence(&organ, deformer.as_mut(), clouds, &targets, truths.as_deref(), &options, |i, o| {
+            let r = &o.registration;
+            let row = FrameSummary {
+                cloud: frames[i].display().to_string(),
+                points: r.points,
+                inliers: r.inliers,
+                iterations: r.iterations,
+                surface_residual_mm: r.surface_residual * 1e3,
+                time_ms: ms(r.time),
+                tre_mean_mm: o.errors.as_ref().map(|e| mean(e) * 1e3),
+                tre_max_mm: o.errors.as_ref().map(|e| max(e) * 1e3),
+            };
+            println!(
+                "frame {i:<4} {} points ({} matched), {} iterations, surface residual {:.2} mm, {:.1} ms{}",
+                row.points,
+                row.inliers,
+                row.iterations,
+                row.surface_residual_mm,
+                row.time_ms,
+                row.tre_mean_mm.map_or(String::new(), |t| format!(
+                    ", TRE mean {t:.2} mm, max {:.2} mm",
+                    row.tre_max_mm.unwrap_or(0.0)
+                ))
+            );
+            let name = if sequence { format!("organ_{i:04}.vtu") } else { "organ.vtu".into() };
+            mesh::io::write_mesh(args.out.join(&name), organ.mesh(), &[Field::point("displacement", 3, r.u.clone())])?;
+            steps.push((i as f64, name));
+            rows.push(row);
+            Ok(())
+        })?;
     if sequence {
         mesh::io::write_pvd(args.out.join("organ.pvd"), &steps)?;
     }
-    write_targets(&args.out.join("targets.csv"), &targets, &registered)?;
-    let summary = Summary {
-        method,
-        targets: targets.len(),
-        tre_mean_mm: (!all_errors.is_empty()).then(|| mean(&all_errors) * 1e3),
-        tre_max_mm: (!all_errors.is_empty()).then(|| max(&all_errors) * 1e3),
-        no_deformation_tre_mean_mm: (!rigid_errors.is_empty()).then(|| mean(&rigid_errors) * 1e3),
-        surface_residual_mm: rows.iter().map(|r| r.surface_residual_mm).sum::<f64>() / rows.len() as f64,
-        time_ms: rows.iter().map(|r| r.time_ms).sum::<f64>() / rows.len() as f64,
-        frames: rows,
-    };
+    let last = outcomes.last().context("no frame")?;
+    write_targets(&args.out.join("targets.csv"), &targets, &last.targets)?;
+    let summary = Summary::new(method, &outcomes)?;
     if let (Some(t), Some(m), Some(r)) = (summary.tre_mean_mm, summary.tre_max_mm, summary.no_deformation_tre_mean_mm) {
         println!("TRE        mean {t:.2} mm, max {m:.2} mm (without deformation: mean {r:.2} mm)");
     }
-    write_atomic(&args.out.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    let run = RunSummary { summary, per_frame: rows };
+    write_atomic(&args.out.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
     println!(
         "wrote      {} ({}, targets.csv, summary.json)",
         args.out.display(),
         if sequence { "organ.pvd" } else { "organ.vtu" }
     );
     Ok(())
+}
+
+/// A file name for a method: its lowercase letters and digits, other runs as one `_`.
+fn slug(name: &str) -> String {
+    let lower = name.to_ascii_lowercase();
+    let words: Vec<&str> = lower.split(|c: char| !c.is_ascii_alphanumeric()).filter(|w| !w.is_empty()).collect();
+    words.join("_")
+}
+
+fn print_organ(organ: &Organ, targets: usize) {
+    println!(
+        "organ      {} nodes, {} {} cells; surface of {} triangles; {targets} targets",
+        organ.mesh().num_nodes(),
+        organ.mesh().cells.len(),
+        organ.mesh().cells.kind_name(),
+        organ.surface().triangles.len(),
+    );
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -279,33 +261,120 @@ fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<Setup> {
     Ok(Setup { organ, deformer, method: format!("U-Net {}", model_path.display()), default_targets })
 }
 
-/// The demo's registration model ([`register::case::corotational_model`]).
-fn demo_setup() -> Result<Setup> {
-    let (organ, deformer) = register::case::corotational_model()?;
-    let method = format!("FEM, Corotational, phantom of {} T4 (demo)", organ.mesh().cells.len());
-    Ok(Setup { organ, deformer: Box::new(deformer), method, default_targets: vec![] })
-}
+/// The shipped network for the built-in phantom (trained by `scenarios/liver_ar.toml`).
+const DEMO_MODEL: &str = "models/liver_ar/model.json";
 
-/// Simulates the demo case and writes cloud.csv, targets.csv (rest) and truth.csv into `out/case`.
-fn write_demo_case(out: &Path, force: f64) -> Result<(PathBuf, Option<PathBuf>, Option<PathBuf>)> {
+/// `--demo`: simulates the case, registers it with each method and prints the comparison.
+fn demo(args: &RegisterArgs) -> Result<()> {
     let camera = CameraModel { view: [0.0, 0.0, -1.0], points: 1500, noise: 1e-3, outliers: 0.05 };
     println!(
-        "demo       truth: Neo-Hookean phantom of about {} T4 pushed down by {force} N; camera along {:?},",
+        "demo       truth: Neo-Hookean phantom (nu = 0.48) of about {} T4, its push patch pressed down by {} N;",
         register::case::TRUTH_TETS,
-        camera.view
+        args.force
     );
     println!(
-        "           {} points on the visible surface, {} mm noise, {} % outliers",
+        "           camera along {:?}: {} points on the visible surface, {} mm noise, {} % outliers",
+        camera.view,
         camera.points,
         camera.noise * 1e3,
         camera.outliers * 1e2
     );
-    let case = phantom_push(force, &camera, 1)?;
-    let dir = out.join("case");
-    let (cloud, targets, truth) = (dir.join("cloud.csv"), dir.join("targets_rest.csv"), dir.join("truth.csv"));
-    write_csv(&cloud, &case.cloud)?;
-    write_csv(&targets, &case.targets)?;
-    write_csv(&truth, &case.truth)?;
-    println!("case       {}", dir.display());
-    Ok((cloud, Some(targets), Some(truth)))
+    let case = phantom_push(args.force, &camera, 1)?;
+    let dir = args.out.join("case");
+    write_csv(&dir.join("cloud.csv"), &case.cloud)?;
+    write_csv(&dir.join("targets_rest.csv"), &case.targets)?;
+    write_csv(&dir.join("truth.csv"), &case.truth)?;
+    println!("case       {} (cloud.csv, targets_rest.csv, truth.csv)", dir.display());
+
+    let mut methods = Vec::new();
+    let (organ, deformer) = register::case::corotational_model()?;
+    methods.push(Method { name: "FEM co-rotational, 3k T4".into(), organ, deformer: Box::new(deformer) });
+    let (organ, deformer) = fem_model(Material::new(Law::Svk, 5000.0, 0.49))?;
+    methods.push(Method { name: "FEM SVK, 3k T4".into(), organ, deformer: Box::new(deformer) });
+    let model_path = args.model.clone().unwrap_or_else(|| PathBuf::from(DEMO_MODEL));
+    if model_path.exists() {
+        let model = learn::TrainedModel::load(&model_path, &learn::inference_device())?;
+        let (organ, deformer) = network_model(&model)?;
+        methods.push(Method { name: "U-Net".into(), organ, deformer: Box::new(deformer) });
+    } else {
+        println!(
+            "U-Net      skipped: {} not found (run from the repository root, or give --model)",
+            model_path.display()
+        );
+    }
+    let options = RegistrationOptions { iterations: args.iterations, ..Default::default() };
+    let rows = compare(&case, methods, &options)?;
+    let rest = &rows.first().context("no method to compare")?.summary;
+    println!();
+    println!(
+        "{:<28} {:>14} {:>13} {:>17} {:>10} {:>10}",
+        "method", "TRE mean (mm)", "TRE max (mm)", "residual (mm)", "ms/frame", "iterations"
+    );
+    let line = |name: &str, t: Option<f64>, m: Option<f64>, res: String, time: String, it: String| {
+        println!(
+            "{name:<28} {:>14.2} {:>13.2} {res:>17} {time:>10} {it:>10}",
+            t.unwrap_or(f64::NAN),
+            m.unwrap_or(f64::NAN)
+        );
+    };
+    line(
+        "no deformation",
+        rest.no_deformation_tre_mean_mm,
+        rest.no_deformation_tre_max_mm,
+        "-".into(),
+        "-".into(),
+        "-".into(),
+    );
+    let mut csv = String::from("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_ms,iterations\n");
+    csv.push_str(&format!(
+        "no deformation,{},{},,,\n",
+        rest.no_deformation_tre_mean_mm.unwrap_or(f64::NAN),
+        rest.no_deformation_tre_max_mm.unwrap_or(f64::NAN)
+    ));
+    for row in &rows {
+        let (s, outcome) = (&row.summary, &row.outcome);
+        line(
+            &s.method,
+            s.tre_mean_mm,
+            s.tre_max_mm,
+            format!("{:.2}", s.surface_residual_mm),
+            format!("{:.1}", s.time_ms),
+            format!("{}", s.iterations),
+        );
+        csv.push_str(&format!(
+            "{},{},{},{},{},{}\n",
+            s.method,
+            s.tre_mean_mm.unwrap_or(f64::NAN),
+            s.tre_max_mm.unwrap_or(f64::NAN),
+            s.surface_residual_mm,
+            s.time_ms,
+            s.iterations
+        ));
+        let slug = slug(&s.method);
+        let method_dir = args.out.join(slug);
+        std::fs::create_dir_all(&method_dir).with_context(|| format!("creating {}", method_dir.display()))?;
+        let fields = [Field::point("displacement", 3, outcome.registration.u.clone())];
+        mesh::io::write_mesh(method_dir.join("organ.vtu"), row.organ.mesh(), &fields)?;
+        write_targets(&method_dir.join("targets.csv"), &case.targets, &outcome.targets)?;
+        let title = format!("{}: TRE mean {:.2} mm (side view)", s.method, s.tre_mean_mm.unwrap_or(f64::NAN));
+        let u = &outcome.registration.u;
+        side_view(
+            &method_dir.join("registration.png"),
+            &title,
+            &row.organ,
+            u,
+            &case.cloud,
+            &outcome.targets,
+            Some(&case.truth),
+        )?;
+    }
+    write_atomic(&args.out.join("comparison.csv"), csv.as_bytes())?;
+    let summaries: Vec<&Summary> = rows.iter().map(|r| &r.summary).collect();
+    write_atomic(&args.out.join("summary.json"), serde_json::to_string_pretty(&summaries)?.as_bytes())?;
+    println!();
+    println!(
+        "wrote      {} (comparison.csv, summary.json; per method: organ.vtu, targets.csv, registration.png)",
+        args.out.display()
+    );
+    Ok(())
 }

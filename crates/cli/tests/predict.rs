@@ -63,7 +63,14 @@ magnitude = [0.05, 0.2]
         ],
         d,
     );
-    assert!(text.contains("best"), "{text}");
+    assert!(text.contains("split      3 training, 1 validation, 2 test samples"), "{text}");
+    assert!(text.contains("best       validation"), "{text}");
+
+    // The model records its split; eval reports on its test samples only.
+    let text = augsim(&["eval", "net/model.json", "data", "--out", "eval"], d);
+    assert!(text.contains("held out   2 of 6 samples (the test split recorded in the model)"), "{text}");
+    let errors = std::fs::read_to_string(d.join("eval/errors.csv")).unwrap();
+    assert_eq!(errors.lines().count(), 3, "{errors}");
 
     // Two point forces inside the organ's bounding box, one on a grid-cell corner.
     let model: serde_json::Value =

@@ -9,6 +9,9 @@ fn augsim(args: &[&str]) -> (bool, String) {
     (out.status.success(), format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr)))
 }
 
+/// The shipped network for the built-in phantom.
+const MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
+
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -17,15 +20,31 @@ fn json(path: &Path) -> serde_json::Value {
 fn demo_registers_the_phantom_and_reports_the_tre() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");
-    let (ok, text) = augsim(&["register", "--demo", "--out", out.to_str().unwrap()]);
+    let (ok, text) = augsim(&["register", "--demo", "--out", out.to_str().unwrap(), "--model", MODEL]);
     assert!(ok, "{text}");
-    let s = json(&out.join("summary.json"));
-    let (tre, rigid) = (s["tre_mean_mm"].as_f64().unwrap(), s["no_deformation_tre_mean_mm"].as_f64().unwrap());
-    assert!(rigid > 10.0 && tre < 0.25 * rigid, "TRE {tre} mm against {rigid} mm without deformation\n{text}");
-    assert!(s["surface_residual_mm"].as_f64().unwrap() < 3.0, "{s}");
-    assert!(out.join("organ.vtu").exists() && out.join("targets.csv").exists());
-    let rows = std::fs::read_to_string(out.join("targets.csv")).unwrap();
-    assert_eq!(rows.lines().count(), 11, "header and 10 markers:\n{rows}");
+    let rows = json(&out.join("summary.json"));
+    let rows = rows.as_array().unwrap();
+    let methods: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
+    assert_eq!(methods, ["FEM co-rotational, 3k T4", "FEM SVK, 3k T4", "U-Net"], "{text}");
+    // The FEM rows recover most of the motion. The U-Net row is only required to run: with
+    // closest-point observations its TRE is not yet better than no deformation (issue 11).
+    for (s, worst) in rows.iter().zip([0.25, 0.35]) {
+        let (tre, rigid) = (s["tre_mean_mm"].as_f64().unwrap(), s["no_deformation_tre_mean_mm"].as_f64().unwrap());
+        assert!(rigid > 10.0 && tre < worst * rigid, "TRE {tre} mm against {rigid} mm without deformation\n{text}");
+        assert!(s["surface_residual_mm"].as_f64().unwrap() < 3.0, "{s}");
+    }
+    assert!(rows[2]["tre_mean_mm"].as_f64().unwrap().is_finite(), "{text}");
+    let table = std::fs::read_to_string(out.join("comparison.csv")).unwrap();
+    assert!(table.starts_with("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_ms,iterations\nno deformation,"));
+    assert_eq!(table.lines().count(), 5, "{table}");
+    let dir_of = |m: &str| out.join(m);
+    for m in ["fem_co_rotational_3k_t4", "fem_svk_3k_t4", "u_net"] {
+        for f in ["organ.vtu", "targets.csv", "registration.png"] {
+            assert!(dir_of(m).join(f).exists(), "{m}/{f}");
+        }
+    }
+    let targets = std::fs::read_to_string(dir_of("u_net").join("targets.csv")).unwrap();
+    assert_eq!(targets.lines().count(), 11, "header and 10 markers:\n{targets}");
 
     // The case's cloud twice as a sequence, on the liver scenario's model; truth per frame.
     let (seq, truth) = (dir.path().join("seq"), dir.path().join("truth"));
@@ -50,7 +69,8 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
     );
     assert!(ok, "{text}");
     assert!(seq_out.join("organ.pvd").exists() && seq_out.join("organ_0001.vtu").exists());
-    assert_eq!(json(&seq_out.join("summary.json"))["frames"].as_array().unwrap().len(), 2);
+    let summary = json(&seq_out.join("summary.json"));
+    assert_eq!((summary["frames"].as_u64(), summary["per_frame"].as_array().unwrap().len()), (Some(2), 2));
 
     // Errors: a truth file for a two-frame sequence, an empty cloud, a target outside the organ.
     let (ok, text) = augsim(

@@ -1,6 +1,7 @@
-//! PNG line plots for augsim reports: one chart with several named series, optional shaded bands (e.g. μ ± σ),
-//! linear or logarithmic y axis. Text uses the embedded DejaVu Sans font (no system font lookup), and files are
-//! written atomically (temporary sibling, then rename).
+//! PNG plots for augsim reports: line charts with several named series, optional shaded bands (e.g. μ ± σ),
+//! linear or logarithmic y axis; scatter plots of projected 3D points with equal axis scales. Text uses the
+//! embedded DejaVu Sans font (no system font lookup), and files are written atomically (temporary sibling, then
+//! rename).
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -114,6 +115,103 @@ pub fn line_plot(path: &Path, spec: &PlotSpec, series: &[Series]) -> Result<(), 
     })?;
     let x_range = padded_range(&xs, false).ok_or_else(|| no_data("no finite point"))?;
 
+    write_png(path, SIZE, |root| {
+        if spec.log_y && y_range.end >= 10.0 * y_range.start {
+            draw(root, spec, series, x_range, y_range.clone().log_scale(), y_range)
+        } else {
+            draw(root, spec, series, x_range, y_range.clone(), y_range)
+        }
+    })
+}
+
+/// A set of points drawn as dots of one colour (the `index`-th palette colour).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PointSet {
+    /// Legend entry; an empty name leaves the set out of the legend.
+    pub name: String,
+    /// (x, y) positions; non-finite ones are skipped.
+    pub points: Vec<(f64, f64)>,
+    /// Dot radius, pixels.
+    pub radius: u32,
+    /// Palette colour index.
+    pub color: usize,
+}
+
+/// Draws point sets (later ones on top) into the PNG file `path` with equal scales on both axes
+/// (a projection of a 3D scene keeps its shape), written atomically; `links` are grey segments
+/// (e.g. from an estimate to the truth).
+pub fn scatter_plot(
+    path: &Path,
+    spec: &PlotSpec,
+    sets: &[PointSet],
+    links: &[((f64, f64), (f64, f64))],
+) -> Result<(), PlotError> {
+    let finite = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite();
+    let all: Vec<(f64, f64)> = sets.iter().flat_map(|s| s.points.iter().filter(finite).copied()).collect();
+    let (Some(x), Some(y)) = (
+        padded_range(&all.iter().map(|p| p.0).collect::<Vec<_>>(), false),
+        padded_range(&all.iter().map(|p| p.1).collect::<Vec<_>>(), false),
+    ) else {
+        return Err(PlotError::NoData { path: path.to_path_buf(), message: "no finite point".into() });
+    };
+    // Equal scales: the plot area's aspect follows the data's (width fixed).
+    let width = SIZE.0;
+    let aspect = (y.end - y.start) / (x.end - x.start);
+    let height = ((f64::from(width - 150) * aspect) as u32 + 130).clamp(300, 1400);
+    write_png(path, (width, height), |root| {
+        let err = |e: &dyn std::fmt::Display| e.to_string();
+        root.fill(&WHITE).map_err(|e| err(&e))?;
+        let mut chart = ChartBuilder::on(root)
+            .caption(&spec.title, ("sans-serif", 22))
+            .margin(20)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d(x.clone(), y.clone())
+            .map_err(|e| err(&e))?;
+        chart
+            .configure_mesh()
+            .x_desc(&spec.x_label)
+            .y_desc(&spec.y_label)
+            .light_line_style(RGBColor(245, 245, 245))
+            .label_style(("sans-serif", 14))
+            .axis_desc_style(("sans-serif", 16))
+            .draw()
+            .map_err(|e| err(&e))?;
+        let grey = RGBColor(90, 90, 90);
+        chart
+            .draw_series(links.iter().map(|&(a, b)| PathElement::new(vec![a, b], grey.stroke_width(1))))
+            .map_err(|e| err(&e))?;
+        for s in sets {
+            let color = PALETTE[s.color % PALETTE.len()];
+            let r = s.radius;
+            let drawn = chart
+                .draw_series(s.points.iter().filter(finite).map(|&p| Circle::new(p, r, color.filled())))
+                .map_err(|e| err(&e))?;
+            if !s.name.is_empty() {
+                drawn.label(&s.name).legend(move |(x, y)| Circle::new((x + 10, y), r.max(4), color.filled()));
+            }
+        }
+        if sets.iter().any(|s| !s.name.is_empty()) {
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::LowerRight)
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .label_font(("sans-serif", 15))
+                .draw()
+                .map_err(|e| err(&e))?;
+        }
+        Ok(())
+    })
+}
+
+/// Renders `draw` on a `size` bitmap into a temporary sibling of `path`, then renames it onto
+/// `path` (nothing is left behind on failure).
+fn write_png(
+    path: &Path,
+    size: (u32, u32),
+    draw: impl FnOnce(&DrawingArea<BitMapBackend, Shift>) -> Result<(), String>,
+) -> Result<(), PlotError> {
     register_fonts();
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     static COUNTER: AtomicUsize = AtomicUsize::new(0);
@@ -124,13 +222,8 @@ pub fn line_plot(path: &Path, spec: &PlotSpec, series: &[Series]) -> Result<(), 
         COUNTER.fetch_add(1, Ordering::Relaxed)
     ));
     let drawn = {
-        let root = BitMapBackend::new(&tmp, SIZE).into_drawing_area();
-        if spec.log_y && y_range.end >= 10.0 * y_range.start {
-            draw(&root, spec, series, x_range, y_range.clone().log_scale(), y_range)
-        } else {
-            draw(&root, spec, series, x_range, y_range.clone(), y_range)
-        }
-        .and_then(|()| root.present().map_err(|e| e.to_string()))
+        let root = BitMapBackend::new(&tmp, size).into_drawing_area();
+        draw(&root).and_then(|()| root.present().map_err(|e| e.to_string()))
     };
     if let Err(message) = drawn {
         let _ = std::fs::remove_file(&tmp);

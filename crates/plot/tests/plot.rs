@@ -70,3 +70,30 @@ fn unusable_input_is_refused_with_the_path() {
     assert!(err.to_string().contains("no_such_dir"), "{err}");
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }
+
+#[test]
+fn scatter_plots_keep_the_aspect_of_the_data() {
+    use augsim_plot::{scatter_plot, PointSet};
+    let dir = tempfile::tempdir().unwrap();
+    let spec = PlotSpec { title: "side view".into(), x_label: "x (m)".into(), y_label: "z (m)".into(), log_y: false };
+    let ring: Vec<(f64, f64)> =
+        (0..60).map(|k| (k as f64 * 0.1).sin_cos()).map(|(s, c)| (0.2 * c, 0.05 * s)).collect();
+    let sets = [
+        PointSet { name: "surface".into(), points: ring.clone(), radius: 2, color: 7 },
+        PointSet { name: "targets".into(), points: vec![(0.0, 0.0), (f64::NAN, 1.0)], radius: 5, color: 1 },
+    ];
+    let path = dir.path().join("scatter.png");
+    scatter_plot(&path, &spec, &sets, &[((0.0, 0.0), (0.01, 0.01))]).unwrap();
+    let (w, h) = png_size(&std::fs::read(&path).unwrap());
+    // A 4:1 wide scene gives a wide picture (at the minimum height here).
+    assert_eq!(w, 1000);
+    assert!(h < w / 2, "{w} x {h}");
+    let tall: Vec<(f64, f64)> = ring.iter().map(|&(x, y)| (y, x)).collect();
+    let tall_sets = [PointSet { points: tall, ..sets[0].clone() }];
+    scatter_plot(&path, &spec, &tall_sets, &[]).unwrap();
+    let (_, h2) = png_size(&std::fs::read(&path).unwrap());
+    assert!(h2 > w, "a tall scene gives a tall picture: {h2}");
+    let e = scatter_plot(&dir.path().join("none.png"), &spec, &[], &[]).unwrap_err();
+    assert!(matches!(e, PlotError::NoData { .. }), "{e}");
+    assert!(!dir.path().join("none.png").exists());
+}

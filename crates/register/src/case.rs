@@ -5,8 +5,12 @@
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::Point;
 
-use crate::deformers::FemDeformer;
+use learn::TrainedModel;
+
+use crate::deformers::{FemDeformer, NetworkDeformer};
 use crate::organ::Organ;
+use crate::register::{Deformer, RegistrationOptions};
+use crate::sequence::{register_sequence, FrameOutcome, Summary};
 use crate::simulate::{simulate_cloud, CameraModel};
 use crate::Result;
 
@@ -43,21 +47,67 @@ pub fn phantom_push(force: f64, camera: &CameraModel, seed: u64) -> Result<Synth
     Ok(SyntheticCase { cloud, targets, truth })
 }
 
-/// Tetrahedra of the registration model of [`corotational_model`].
+/// Tetrahedra of the registration models (the FEM models and the network's training mesh).
 pub const MODEL_TETS: usize = 3000;
 
-/// The registration model for [`phantom_push`]: a co-rotational phantom of about
-/// [`MODEL_TETS`] tetrahedra (another mesh and another law than the truth's), fixed between
-/// the lobes, with the default data stiffness.
-pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
+/// A FEM registration model for [`phantom_push`]: the phantom of about [`MODEL_TETS`]
+/// tetrahedra (another mesh than the truth's) with `material`, fixed between the lobes, with
+/// the default data stiffness.
+pub fn fem_model(material: Material) -> Result<(Organ, FemDeformer)> {
     let m = mesh::phantom::liver_phantom(MODEL_TETS)?;
-    let mut problem = Problem::new(m.clone(), Material::new(Law::Corotational, 5000.0, 0.48));
+    let mut problem = Problem::new(m.clone(), material);
     problem.fix(m.region("fixed")?);
     let stiffness = FemDeformer::default_stiffness(&problem);
     Ok((Organ::new(m, None)?, FemDeformer::new(problem, stiffness, SolverOptions::default())?))
 }
 
-/// Per-target distances (m) between two lists of positions of the same length.
-pub fn target_errors(registered: &[Point], truth: &[Point]) -> Vec<f64> {
-    registered.iter().zip(truth).map(|(a, b)| crate::register::distance(*a, *b)).collect()
+/// The co-rotational registration model (E = 5 kPa, ν = 0.48): another law than the truth's.
+pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
+    fem_model(Material::new(Law::Corotational, 5000.0, 0.48))
+}
+
+/// The U-Net registration model: `model`, trained on the phantom of [`MODEL_TETS`]
+/// tetrahedra with the displacement of its `visible` region as input (`scenarios/liver_ar.toml`).
+pub fn network_model(model: &TrainedModel) -> Result<(Organ, NetworkDeformer)> {
+    let m = mesh::phantom::liver_phantom(MODEL_TETS)?;
+    let visible = m.region("visible")?.to_vec();
+    let organ = Organ::new(m, None)?;
+    let deformer = NetworkDeformer::new(model, &organ, &visible)?;
+    Ok((organ, deformer))
+}
+
+/// A registration method of a comparison.
+pub struct Method {
+    /// Name in the table.
+    pub name: String,
+    /// The organ it deforms.
+    pub organ: Organ,
+    /// How it deforms.
+    pub deformer: Box<dyn Deformer>,
+}
+
+/// One method's result in a comparison.
+pub struct Compared {
+    /// Its figures.
+    pub summary: Summary,
+    /// Its registration of the case.
+    pub outcome: FrameOutcome,
+    /// The organ it deformed.
+    pub organ: Organ,
+}
+
+/// Registers the case's cloud with each method (one frame, from rest), in order.
+pub fn compare(case: &SyntheticCase, methods: Vec<Method>, options: &RegistrationOptions) -> Result<Vec<Compared>> {
+    let mut rows = Vec::new();
+    for mut m in methods {
+        let truth = [case.truth.clone()];
+        let frames = [Ok(case.cloud.clone())];
+        let mut outcomes =
+            register_sequence(&m.organ, m.deformer.as_mut(), frames, &case.targets, Some(&truth), options, |_, _| {
+                Ok(())
+            })?;
+        let summary = Summary::new(m.name, &outcomes)?;
+        rows.push(Compared { summary, outcome: outcomes.remove(0), organ: m.organ });
+    }
+    Ok(rows)
 }

@@ -118,16 +118,29 @@ impl NetworkDeformer {
 }
 
 impl Deformer for NetworkDeformer {
-    fn deform(&mut self, observations: &Observations, _previous: &[f64], _iteration: usize) -> Result<Vec<f64>> {
+    fn deform(&mut self, observations: &Observations, previous: &[f64], _iteration: usize) -> Result<Vec<f64>> {
+        if !observations.weight.iter().zip(&self.input).any(|(&w, &input)| w > 0.0 && input) {
+            return Err(RegisterError::Invalid("no cloud point matches the network's input surface".into()));
+        }
+        // The network was trained on the full displacement of every input node, but a closest-point
+        // match measures only the offset along the surface normal: each observed input node takes
+        // the current estimate moved along its normal by the observed offset (point to plane); an
+        // input node that no cloud point reaches keeps its current estimate (zero would read as
+        // "did not move").
         let (mut points, mut values) = (Vec::new(), Vec::new());
         for (n, (&w, t)) in observations.weight.iter().zip(&observations.target).enumerate() {
-            if w > 0.0 && self.input[n] {
+            if self.input[n] {
+                let current = [previous[3 * n], previous[3 * n + 1], previous[3 * n + 2]];
+                let value = if w > 0.0 {
+                    let normal = observations.normal[n];
+                    let along: f64 = (0..3).map(|d| (t[d] - current[d]) * normal[d]).sum();
+                    std::array::from_fn(|d| current[d] + along * normal[d])
+                } else {
+                    current
+                };
                 points.push(self.nodes[n]);
-                values.push(*t);
+                values.push(value);
             }
-        }
-        if points.is_empty() {
-            return Err(RegisterError::Invalid("no cloud point matches the network's input surface".into()));
         }
         let input = encode_points(&self.grid, &points, &values, false)?;
         Ok(self.to_mesh.apply(&self.predictor.predict(&input)?)?)

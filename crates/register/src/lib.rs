@@ -15,10 +15,13 @@ pub use error::{RegisterError, Result};
 pub mod case;
 mod deformers;
 pub mod organ;
+pub mod picture;
 pub mod register;
+pub mod sequence;
 pub mod simulate;
 
 pub use deformers::{FemDeformer, NetworkDeformer};
 pub use organ::{Organ, Stencil};
 pub use register::{check_cloud, observe, register_frame, Deformer, FrameResult, Observations, RegistrationOptions};
+pub use sequence::{register_sequence, target_errors, FrameOutcome, Summary};
 pub use simulate::{simulate_cloud, CameraModel};

@@ -87,6 +87,8 @@ pub struct FrameResult {
     pub iterations: usize,
     /// Mean distance from the cloud points to the registered surface (m), all points.
     pub surface_residual: f64,
+    /// Cloud points.
+    pub points: usize,
     /// Cloud points kept as matches in the last iteration.
     pub inliers: usize,
     /// Wall time of the frame, matching included.
@@ -134,7 +136,7 @@ pub fn register_frame(
     }
     let bvh = SurfaceBvh::new(&surface)?;
     let surface_residual = cloud.par_iter().map(|&c| bvh.distance(c)).sum::<f64>() / cloud.len() as f64;
-    Ok(FrameResult { u, iterations, surface_residual, inliers, time: t0.elapsed() })
+    Ok(FrameResult { u, iterations, surface_residual, points: cloud.len(), inliers, time: t0.elapsed() })
 }
 
 /// Matches each cloud point to the closest point of the deformed `surface`,

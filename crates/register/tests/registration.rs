@@ -3,7 +3,8 @@
 
 use augsim_register as register;
 use fem::{Law, Material, Problem, SolverOptions};
-use register::case::{corotational_model, phantom_push, target_errors};
+use register::case::{corotational_model, phantom_push};
+use register::target_errors;
 use register::organ::displaced;
 use register::{register_frame, CameraModel, FemDeformer, Organ, RegistrationOptions};
 
