@@ -21,6 +21,8 @@
 //! Parameters that do not require gradients (a frozen encoder) get none, and when no parameter
 //! of the contracting path requires one, its backward pass is skipped.
 
+use std::cell::RefCell;
+
 use burn::module::{Param, ParamId};
 use burn::nn::conv::{Conv3d, ConvTranspose3d};
 use burn::optim::GradientsParams;
@@ -31,7 +33,7 @@ use rayon::prelude::*;
 
 use crate::grid::GridShape;
 use crate::inference::{
-    conv_order, downsample, gather_patches, gather_plane, same_conv, tap_offsets, tap_view, upsample, Packed, Volume,
+    conv_layout, downsample, gather_patches, gather_plane, same_conv, tap_offsets, tap_view, upsample, Packed, Volume,
 };
 use crate::unet::UNet;
 use crate::{LearnError, Result};
@@ -92,18 +94,24 @@ pub fn loss_and_gradients(
     let m = 1usize << prepared.encoder.len();
     let padded = grid.dims().map(|n| n.div_ceil(m) * m);
     let halo = prepared.kernel / 2;
+    // One gradient accumulator per thread.
+    let per_thread = batch.div_ceil(rayon::current_num_threads());
     let (loss, grads) = (0..batch)
         .into_par_iter()
-        .map(|s| {
-            let input = Volume::from_field(&inputs[s * c_in * nodes..][..c_in * nodes], c_in, grid, padded, halo);
-            let activations = prepared.forward(input);
-            let target = &targets[s * c_out * nodes..][..c_out * nodes];
-            let (loss, d_output) =
-                output_gradient(&activations.output, target, &masks[s * nodes..][..nodes], grid, scale);
-            let mut grads = prepared.zero_grads();
-            prepared.backward(&activations, d_output, &mut grads);
-            (loss, grads)
-        })
+        .with_min_len(per_thread)
+        .fold(
+            || (0.0, prepared.zero_grads()),
+            |(loss, mut grads), s| {
+                let input = Volume::from_field(&inputs[s * c_in * nodes..][..c_in * nodes], c_in, grid, padded, halo);
+                let activations = prepared.forward(input);
+                let target = &targets[s * c_out * nodes..][..c_out * nodes];
+                let (sample_loss, d_output) =
+                    output_gradient(&activations.output, target, &masks[s * nodes..][..nodes], grid, scale);
+                let spent = prepared.backward(&activations, d_output, &mut grads);
+                recycle(spent.into_iter().chain(activations.into_volumes()));
+                (loss + sample_loss, grads)
+            },
+        )
         .reduce_with(|(loss_a, mut a), (loss_b, b)| {
             for (ga, gb) in a.iter_mut().zip(&b) {
                 ga.add(gb);
@@ -124,12 +132,13 @@ struct Slot {
     bias: Option<ParamId>,
     /// Number of biases (output channels).
     biases: usize,
-    /// Position of each weight (burn's order) in the accumulated gradient.
-    order: Vec<usize>,
+    /// The layout of the accumulated weight gradient: that of [`conv_layout`] with these
+    /// output channels, input channel parts and taps.
+    layout: (usize, Vec<usize>, usize),
 }
 
 /// One layer's gradient accumulators: the weights in the packed layout of the layer (see
-/// [`Slot::order`]) and the biases.
+/// [`Slot::layout`]) and the biases.
 struct Grad {
     weight: Vec<f32>,
     bias: Vec<f32>,
@@ -169,6 +178,44 @@ struct Activations {
     output: Volume,
 }
 
+impl Activations {
+    /// All the volumes.
+    fn into_volumes(self) -> impl Iterator<Item = Volume> {
+        let levels = self.encoder.into_iter().chain([self.bottleneck]).chain(self.decoder).flatten();
+        levels.chain(self.down).chain(self.up).chain([self.input, self.output])
+    }
+}
+
+thread_local! {
+    /// Storage of volumes this thread used before, for reuse: fresh allocations of this size
+    /// cost page faults.
+    static POOL: RefCell<Vec<Vec<f32>>> = const { RefCell::new(Vec::new()) };
+}
+
+/// The most buffers a thread's pool keeps.
+const POOL_SIZE: usize = 96;
+
+/// A zero volume stored in the smallest large enough buffer of this thread's pool, if any.
+fn pooled(dims: [usize; 3], halo: usize, channels: usize) -> Volume {
+    let len = dims.iter().map(|d| d + 2 * halo).product::<usize>() * channels;
+    let data = POOL.with_borrow_mut(|pool| {
+        let best = pool.iter().enumerate().filter(|(_, b)| b.capacity() >= len).min_by_key(|(_, b)| b.capacity());
+        best.map(|(i, _)| i).map(|i| pool.swap_remove(i))
+    });
+    Volume::zeros_in(data.unwrap_or_default(), dims, halo, channels)
+}
+
+/// Gives the storage of `volumes` to this thread's pool.
+fn recycle(volumes: impl IntoIterator<Item = Volume>) {
+    POOL.with_borrow_mut(|pool| {
+        for v in volumes {
+            if pool.len() < POOL_SIZE {
+                pool.push(v.data);
+            }
+        }
+    });
+}
+
 /// The network repacked for one step.
 struct Prepared {
     kernel: usize,
@@ -185,9 +232,16 @@ struct Prepared {
     device: Device,
 }
 
-/// Collects the slots while the layers are packed.
-struct Packer {
-    slots: Vec<Slot>,
+/// A layer to prepare.
+#[derive(Clone, Copy)]
+enum Spec<'a> {
+    /// A stride-1 convolution (kernel `k³`) whose input is the concatenation of that many
+    /// equal channel groups.
+    Same(&'a Conv3d, usize),
+    /// A 2×2×2 stride-2 convolution `[c_out, c_in, 2, 2, 2]`.
+    Down(&'a Conv3d),
+    /// A 2×2×2 stride-2 transposed convolution `[c_in, c_out, 2, 2, 2]`.
+    Up(&'a ConvTranspose3d),
 }
 
 fn values<const D: usize>(p: &Param<Tensor<D>>) -> Result<Vec<f32>> {
@@ -197,93 +251,105 @@ fn values<const D: usize>(p: &Param<Tensor<D>>) -> Result<Vec<f32>> {
         .map_err(|e| LearnError::InvalidInput(format!("cannot read parameters: {e:?}")))
 }
 
-impl Packer {
-    /// Biases (zeros without) and the slot of a layer.
-    fn slot(
-        &mut self,
-        weight: &Param<Tensor<5>>,
-        bias: &Option<Param<Tensor<1>>>,
-        n: usize,
-        order: Vec<usize>,
-    ) -> Result<(Vec<f32>, usize, bool)> {
-        let values = match bias {
-            Some(b) => values(b)?,
-            None => vec![0.0; n],
-        };
-        let slot = Slot {
-            weight: weight.is_require_grad().then_some(weight.id),
-            dims: weight.dims(),
-            bias: bias.as_ref().filter(|b| b.is_require_grad()).map(|b| b.id),
-            biases: n,
-            order,
-        };
-        let trainable = slot.weight.is_some() || slot.bias.is_some();
-        self.slots.push(slot);
-        Ok((values, self.slots.len() - 1, trainable))
-    }
-
-    /// A stride-1 convolution (kernel `k³`) whose input is the concatenation of `parts` equal
-    /// channel groups.
-    fn same(&mut self, c: &Conv3d, parts: usize) -> Result<Layer> {
-        let [c_out, c_in, kx, ky, kz] = c.weight.dims();
-        if kx != ky || ky != kz || parts == 0 || c_in % parts != 0 {
-            return Err(LearnError::InvalidInput(format!(
-                "convolution {c_out}x{c_in}x{kx}x{ky}x{kz} of {parts} parts"
-            )));
-        }
-        let taps = kx * ky * kz;
-        let splits = vec![c_in / parts; parts];
-        let weight = values(&c.weight)?;
-        let (bias, slot, trainable) = self.slot(&c.weight, &c.bias, c_out, conv_order(c_out, &splits, taps))?;
-        let forward = Packed::conv(&weight, &bias, c_out, &splits, taps)?;
-        // `[c_in, c_out, taps]` with the taps reversed: the convolution from output to input.
-        let mut flipped = vec![0.0; weight.len()];
-        for co in 0..c_out {
-            for ci in 0..c_in {
-                for t in 0..taps {
-                    flipped[(ci * c_out + co) * taps + t] = weight[(co * c_in + ci) * taps + taps - 1 - t];
+/// Packs the layer of `spec` and describes its gradients (slot number `slot`).
+fn prepare(spec: Spec, slot: usize) -> Result<(Layer, Slot)> {
+    let (weight, bias) = match spec {
+        Spec::Same(c, _) | Spec::Down(c) => (&c.weight, &c.bias),
+        Spec::Up(u) => (&u.weight, &u.bias),
+    };
+    let dims = weight.dims();
+    let values_w = values(weight)?;
+    let biases = if matches!(spec, Spec::Up(_)) { dims[1] } else { dims[0] };
+    let values_b = match bias {
+        Some(b) => values(b)?,
+        None => vec![0.0; biases],
+    };
+    let (forward, backward, layout) = match spec {
+        Spec::Same(_, parts) => {
+            let [c_out, c_in, kx, ky, kz] = dims;
+            if kx != ky || ky != kz || parts == 0 || c_in % parts != 0 {
+                return Err(LearnError::InvalidInput(format!(
+                    "convolution {c_out}x{c_in}x{kx}x{ky}x{kz} of {parts} parts"
+                )));
+            }
+            let taps = kx * ky * kz;
+            let splits = vec![c_in / parts; parts];
+            // `[c_in, c_out, taps]` with the taps reversed: the convolution from output to input.
+            let mut flipped = vec![0.0; values_w.len()];
+            for (ci, flipped) in flipped.chunks_exact_mut(c_out * taps).enumerate() {
+                for (co, flipped) in flipped.chunks_exact_mut(taps).enumerate() {
+                    let w = &values_w[(co * c_in + ci) * taps..][..taps];
+                    for (f, w) in flipped.iter_mut().zip(w.iter().rev()) {
+                        *f = *w;
+                    }
                 }
             }
+            (
+                Packed::conv(&values_w, &values_b, c_out, &splits, taps)?,
+                Packed::conv(&flipped, &vec![0.0; c_in], c_in, &[c_out], taps)?,
+                (c_out, splits, taps),
+            )
         }
-        let backward = Packed::conv(&flipped, &vec![0.0; c_in], c_in, &[c_out], taps)?;
-        Ok(Layer { forward, backward, slot, trainable })
-    }
+        Spec::Down(_) => {
+            let [c_out, c_in, ..] = dims;
+            (
+                Packed::conv(&values_w, &values_b, c_out, &[c_in], 8)?,
+                Packed::transposed(&values_w, &vec![0.0; c_in], c_out, c_in)?,
+                (c_out, vec![c_in], 8),
+            )
+        }
+        Spec::Up(_) => {
+            let [c_in, c_out, ..] = dims;
+            (
+                Packed::transposed(&values_w, &values_b, c_in, c_out)?,
+                Packed::conv(&values_w, &vec![0.0; c_in], c_in, &[c_out], 8)?,
+                (c_in, vec![c_out], 8),
+            )
+        }
+    };
+    let slot_info = Slot {
+        weight: weight.is_require_grad().then_some(weight.id),
+        dims,
+        bias: bias.as_ref().filter(|b| b.is_require_grad()).map(|b| b.id),
+        biases,
+        layout,
+    };
+    let trainable = slot_info.weight.is_some() || slot_info.bias.is_some();
+    Ok((Layer { forward, backward, slot, trainable }, slot_info))
+}
 
-    /// A 2×2×2 stride-2 convolution `[c_out, c_in, 2, 2, 2]`.
-    fn down(&mut self, c: &Conv3d) -> Result<Layer> {
-        let [c_out, c_in, ..] = c.weight.dims();
-        let weight = values(&c.weight)?;
-        let (bias, slot, trainable) = self.slot(&c.weight, &c.bias, c_out, conv_order(c_out, &[c_in], 8))?;
-        let forward = Packed::conv(&weight, &bias, c_out, &[c_in], 8)?;
-        let backward = Packed::transposed(&weight, &vec![0.0; c_in], c_out, c_in)?;
-        Ok(Layer { forward, backward, slot, trainable })
-    }
-
-    /// A 2×2×2 stride-2 transposed convolution `[c_in, c_out, 2, 2, 2]`.
-    fn up(&mut self, u: &ConvTranspose3d) -> Result<Layer> {
-        let [c_in, c_out, ..] = u.weight.dims();
-        let weight = values(&u.weight)?;
-        let (bias, slot, trainable) = self.slot(&u.weight, &u.bias, c_out, conv_order(c_in, &[c_out], 8))?;
-        let forward = Packed::transposed(&weight, &bias, c_in, c_out)?;
-        let backward = Packed::conv(&weight, &vec![0.0; c_in], c_in, &[c_out], 8)?;
-        Ok(Layer { forward, backward, slot, trainable })
-    }
-
-    fn block(&mut self, b: [&Conv3d; 2], parts: usize) -> Result<[Layer; 2]> {
-        Ok([self.same(b[0], parts)?, self.same(b[1], 1)?])
-    }
+/// The next `N` prepared layers.
+fn take<const N: usize>(layers: &mut impl Iterator<Item = Layer>) -> Result<[Layer; N]> {
+    let taken: Vec<Layer> = layers.take(N).collect();
+    taken.try_into().map_err(|_| LearnError::InvalidInput("U-Net layers missing".into()))
 }
 
 impl Prepared {
+    /// Packs every layer (in parallel).
     fn new(net: &UNet) -> Result<Prepared> {
         let layers = net.layers();
-        let mut p = Packer { slots: Vec::new() };
-        let encoder = layers.encoder.iter().map(|b| p.block(*b, 1)).collect::<Result<Vec<_>>>()?;
-        let down = layers.down.iter().map(|d| p.down(d)).collect::<Result<Vec<_>>>()?;
-        let bottleneck = p.block(layers.bottleneck, 1)?;
-        let up = layers.up.iter().map(|u| p.up(u)).collect::<Result<Vec<_>>>()?;
-        let decoder = layers.decoder.iter().map(|b| p.block(*b, 2)).collect::<Result<Vec<_>>>()?;
-        let head = p.same(layers.head, 1)?;
+        let depth = layers.encoder.len();
+        let mut specs = Vec::new();
+        for b in &layers.encoder {
+            specs.extend([Spec::Same(b[0], 1), Spec::Same(b[1], 1)]);
+        }
+        specs.extend(layers.down.iter().map(|d| Spec::Down(d)));
+        specs.extend([Spec::Same(layers.bottleneck[0], 1), Spec::Same(layers.bottleneck[1], 1)]);
+        specs.extend(layers.up.iter().map(|u| Spec::Up(u)));
+        for b in &layers.decoder {
+            specs.extend([Spec::Same(b[0], 2), Spec::Same(b[1], 1)]);
+        }
+        specs.push(Spec::Same(layers.head, 1));
+        let prepared =
+            specs.into_par_iter().enumerate().map(|(i, spec)| prepare(spec, i)).collect::<Result<Vec<_>>>()?;
+        let (built, slots): (Vec<Layer>, Vec<Slot>) = prepared.into_iter().unzip();
+        let mut built = built.into_iter();
+        let encoder = (0..depth).map(|_| take::<2>(&mut built)).collect::<Result<Vec<_>>>()?;
+        let down = (0..depth).map(|_| take::<1>(&mut built).map(|[l]| l)).collect::<Result<Vec<_>>>()?;
+        let bottleneck = take::<2>(&mut built)?;
+        let up = (0..depth).map(|_| take::<1>(&mut built).map(|[l]| l)).collect::<Result<Vec<_>>>()?;
+        let decoder = (0..depth).map(|_| take::<2>(&mut built)).collect::<Result<Vec<_>>>()?;
+        let [head] = take::<1>(&mut built)?;
         let train_encoder = encoder.iter().flatten().chain(&down).chain(&bottleneck).any(|l| l.trainable);
         if !train_encoder && up.iter().chain(decoder.iter().flatten()).chain([&head]).all(|l| !l.trainable) {
             return Err(LearnError::InvalidInput(
@@ -299,20 +365,23 @@ impl Prepared {
             up,
             decoder,
             head,
-            slots: p.slots,
+            slots,
             train_encoder,
             device: layers.head.weight.val().device(),
         })
     }
 
     fn zero_grads(&self) -> Vec<Grad> {
-        self.slots.iter().map(|s| Grad { weight: vec![0.0; s.order.len()], bias: vec![0.0; s.biases] }).collect()
+        self.slots
+            .iter()
+            .map(|s| Grad { weight: vec![0.0; s.dims.iter().product()], bias: vec![0.0; s.biases] })
+            .collect()
     }
 
     /// Two convolutions with ReLU on the channel concatenation of `inputs`.
     fn block(&self, inputs: &[&Volume], block: &[Layer; 2]) -> [Volume; 2] {
-        let mid = same_conv(inputs, &block[0].forward, self.kernel, true);
-        let out = same_conv(&[&mid], &block[1].forward, self.kernel, true);
+        let mid = conv(inputs, &block[0].forward, self.kernel, true, None);
+        let out = conv(&[&mid], &block[1].forward, self.kernel, true, None);
         [mid, out]
     }
 
@@ -346,7 +415,7 @@ impl Prepared {
         if layer.trainable {
             let g = &mut grads[layer.slot];
             add_bias_grad(dz, &mut g.bias);
-            conv_weight_grad(inputs, dz, kernel, &mut g.weight);
+            weight_grad(inputs, dz, kernel, &mut g.weight);
         }
     }
 
@@ -360,70 +429,97 @@ impl Prepared {
         }
     }
 
-    /// The backward pass of one sample from the gradient of its (padded) output.
-    fn backward(&self, a: &Activations, d_output: Volume, grads: &mut [Grad]) {
+    /// The backward pass of one sample from the gradient of its (padded) output; returns the
+    /// volumes it used (for [`recycle`]).
+    fn backward(&self, a: &Activations, d_output: Volume, grads: &mut [Grad]) -> Vec<Volume> {
         let (depth, k) = (self.encoder.len(), self.kernel);
         let features = a.decoder.first().map_or(&a.bottleneck[1], |b| &b[1]);
         self.same_grads(&self.head, &[features], &d_output, 1, grads);
-        let mut d = same_conv(&[&d_output], &self.head.backward, 1, false);
+        // `d`: the gradient of the last convolution's pre-activation.
+        let mut d = conv(&[&d_output], &self.head.backward, 1, false, Some(features));
+        let mut spent = vec![d_output];
         // Gradients of the decoders' concatenated inputs: their skip parts join the encoder's.
         let mut d_concat = Vec::with_capacity(depth);
         for l in 0..depth {
-            let ([mid, out], layers) = (&a.decoder[l], &self.decoder[l]);
-            relu_mask(&mut d, out);
+            let ([mid, _], layers) = (&a.decoder[l], &self.decoder[l]);
             self.same_grads(&layers[1], &[mid], &d, k, grads);
-            d = same_conv(&[&d], &layers[1].backward, k, false);
-            relu_mask(&mut d, mid);
+            let next = conv(&[&d], &layers[1].backward, k, false, Some(mid));
+            spent.push(std::mem::replace(&mut d, next));
             self.same_grads(&layers[0], &[&a.up[l], &a.encoder[l][1]], &d, k, grads);
-            let concat = same_conv(&[&d], &layers[0].backward, k, false);
-            let mut d_up = Volume::zeros(concat.dims, concat.halo, a.up[l].channels);
+            let concat = conv(&[&d], &layers[0].backward, k, false, None);
+            let mut d_up = pooled(concat.dims, concat.halo, a.up[l].channels);
             add_channels(&mut d_up, &concat, 0);
             let coarse = a.decoder.get(l + 1).map_or(&a.bottleneck[1], |b| &b[1]);
             self.stride2_grads(&self.up[l], &d_up, coarse, &d_up, grads);
             d_concat.push(concat);
             if !self.train_encoder && l + 1 == depth {
-                return;
+                spent.extend([d, d_up]);
+                spent.extend(d_concat);
+                return spent;
             }
-            d = downsample(&d_up, &self.up[l].backward);
+            spent.push(std::mem::replace(&mut d, downsample(&d_up, &self.up[l].backward)));
+            spent.push(d_up);
+            relu_mask(&mut d, coarse);
         }
         if !self.train_encoder {
-            return;
+            spent.push(d);
+            spent.extend(d_concat);
+            return spent;
         }
-        let [mid, out] = &a.bottleneck;
-        relu_mask(&mut d, out);
+        let mid = &a.bottleneck[0];
         self.same_grads(&self.bottleneck[1], &[mid], &d, k, grads);
-        d = same_conv(&[&d], &self.bottleneck[1].backward, k, false);
-        relu_mask(&mut d, mid);
+        let next = conv(&[&d], &self.bottleneck[1].backward, k, false, Some(mid));
+        spent.push(std::mem::replace(&mut d, next));
         self.same_grads(&self.bottleneck[0], &[a.down.last().unwrap_or(&a.input)], &d, k, grads);
         // `d` is the output gradient of `first`, whose input gradient is still to be taken.
         let mut first = &self.bottleneck[0];
         for l in (0..depth).rev() {
-            let d_down = same_conv(&[&d], &first.backward, k, false);
+            let d_down = conv(&[&d], &first.backward, k, false, None);
             let [mid, out] = &a.encoder[l];
             self.stride2_grads(&self.down[l], out, &d_down, &d_down, grads);
             let mut d_skip = upsample(&d_down, &self.down[l].backward);
             add_channels(&mut d_skip, &d_concat[l], a.up[l].channels);
             relu_mask(&mut d_skip, out);
             self.same_grads(&self.encoder[l][1], &[mid], &d_skip, k, grads);
-            d = same_conv(&[&d_skip], &self.encoder[l][1].backward, k, false);
-            relu_mask(&mut d, mid);
+            spent.push(std::mem::replace(&mut d, conv(&[&d_skip], &self.encoder[l][1].backward, k, false, Some(mid))));
+            spent.extend([d_down, d_skip]);
             let input = if l == 0 { &a.input } else { &a.down[l - 1] };
             self.same_grads(&self.encoder[l][0], &[input], &d, k, grads);
             first = &self.encoder[l][0];
         }
+        spent.push(d);
+        spent.extend(d_concat);
+        spent
     }
 
     /// The summed gradients as burn tensors under the parameter ids.
     fn register(&self, grads: Vec<Grad>) -> GradientsParams {
-        let mut out = GradientsParams::new();
-        for (slot, g) in self.slots.iter().zip(grads) {
-            if let Some(id) = slot.weight {
-                let values: Vec<f32> = slot.order.iter().map(|&at| g.weight[at]).collect();
-                out.register(id, Tensor::<5>::from_data(TensorData::new(values, slot.dims), &self.device).inner());
-            }
-            if let Some(id) = slot.bias {
+        type Entry<const D: usize> = Option<(ParamId, Tensor<D>)>;
+        let tensors: Vec<(Entry<5>, Entry<1>)> = self
+            .slots
+            .par_iter()
+            .zip(grads)
+            .map(|(slot, g)| {
+                let weight = slot.weight.map(|id| {
+                    let mut values = vec![0.0; g.weight.len()];
+                    let (c_out, splits, taps) = &slot.layout;
+                    conv_layout(*c_out, splits, *taps, |w, p| values[w] = g.weight[p]);
+                    (id, Tensor::<5>::from_data(TensorData::new(values, slot.dims), &self.device).inner())
+                });
                 let n = g.bias.len();
-                out.register(id, Tensor::<1>::from_data(TensorData::new(g.bias, [n]), &self.device).inner());
+                let bias = slot
+                    .bias
+                    .map(|id| (id, Tensor::<1>::from_data(TensorData::new(g.bias, [n]), &self.device).inner()));
+                (weight, bias)
+            })
+            .collect();
+        let mut out = GradientsParams::new();
+        for (weight, bias) in tensors {
+            if let Some((id, t)) = weight {
+                out.register(id, t);
+            }
+            if let Some((id, t)) = bias {
+                out.register(id, t);
             }
         }
         out
@@ -434,7 +530,7 @@ impl Prepared {
 /// output: `scale · mask · (pred − target)` on the grid, zero on the padding.
 fn output_gradient(output: &Volume, target: &[f32], mask: &[f32], grid: GridShape, scale: f32) -> (f64, Volume) {
     let (nodes, c) = (grid.nodes(), output.channels);
-    let mut d = Volume::zeros(output.dims, output.halo, c);
+    let mut d = pooled(output.dims, output.halo, c);
     let mut loss = 0.0f64;
     for (node, &m) in mask.iter().enumerate() {
         let [i, j, k] = grid.node_coords(node);
@@ -474,6 +570,358 @@ fn add_channels(dst: &mut Volume, src: &Volume, from: usize) {
             *a += b;
         }
     }
+}
+
+/// A stride-1 convolution as [`same_conv`], its output zeroed where `mask` (same shape) is not
+/// positive (the ReLU of the layer below, in the backward pass); by the register-blocked SIMD
+/// loops of [`simd::conv_plane`] when they apply (see [`lanes`]).
+fn conv(inputs: &[&Volume], layer: &Packed, kernel: usize, relu: bool, mask: Option<&Volume>) -> Volume {
+    let lanes = lanes(layer.c_out);
+    if lanes == 0 {
+        let mut out = same_conv(inputs, layer, kernel, relu);
+        if let Some(mask) = mask {
+            relu_mask(&mut out, mask);
+        }
+        return out;
+    }
+    let first = inputs[0];
+    let mut out = pooled(first.dims, first.halo, layer.c_out);
+    let job = ConvJob { inputs, layer, kernel, relu, mask, offsets: tap_offsets(first, kernel) };
+    let plane_len = out.plane_nodes() * layer.c_out;
+    out.data
+        .par_chunks_mut(plane_len)
+        .skip(first.halo)
+        .take(first.dims[0])
+        .enumerate()
+        .for_each(|(i, plane)| simd::conv_plane(lanes, &job, i, plane));
+    out
+}
+
+/// Adds the weight gradient of a stride-1 convolution (see [`conv_weight_grad`]); by the
+/// register-blocked SIMD loops of [`simd::weight_grad_part`] when they apply (see [`lanes`]).
+fn weight_grad(inputs: &[&Volume], dz: &Volume, kernel: usize, grad: &mut [f32]) {
+    let lanes = lanes(dz.channels);
+    if lanes == 0 {
+        return conv_weight_grad(inputs, dz, kernel, grad);
+    }
+    let offsets = tap_offsets(dz, kernel);
+    let mut part = 0;
+    for v in inputs {
+        let len = kernel.pow(3) * v.channels * dz.channels;
+        simd::weight_grad_part(lanes, v, dz, kernel, &offsets, &mut grad[part..part + len]);
+        part += len;
+    }
+}
+
+/// The SIMD width (16 or 8 lanes) of the register-blocked loops for `channels` output
+/// channels: they need AVX-512 and a multiple of 8 channels; 0 when they do not apply (the faer
+/// GEMM path is taken instead).
+fn lanes(channels: usize) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        return if channels % 16 == 0 {
+            16
+        } else if channels % 8 == 0 {
+            8
+        } else {
+            0
+        };
+    }
+    let _ = channels;
+    0
+}
+
+/// A stride-1 convolution: inputs (channel parts), weights, ReLU, output mask (see [`conv`]),
+/// and the storage offsets of the (x, y) tap offsets ([`tap_offsets`]).
+struct ConvJob<'a> {
+    inputs: &'a [&'a Volume],
+    layer: &'a Packed,
+    kernel: usize,
+    relu: bool,
+    mask: Option<&'a Volume>,
+    offsets: Vec<isize>,
+}
+
+/// Register-blocked convolution loops on AVX-512 (16 lanes, `__m512`) or its 256-bit half
+/// (8 lanes, `__m256`): each accumulator holds `L` output channels of one node (convolution) or
+/// of one weight-matrix row (weight gradient), and every input value is broadcast into a fused
+/// multiply-add with a vector of weights or gradients.
+#[cfg(target_arch = "x86_64")]
+mod simd {
+    use std::arch::x86_64::*;
+
+    use super::{ConvJob, Volume};
+
+    /// Operations on a vector of `LANES` f32.
+    trait Lanes: Copy {
+        const LANES: usize;
+        /// Zeros.
+        fn zero() -> Self;
+        /// Loads `LANES` values from `from[0..LANES]`.
+        fn load(from: &[f32]) -> Self;
+        /// `self + x · w`.
+        fn fmadd(self, x: f32, w: Self) -> Self;
+        /// The lanes.
+        fn to_array(self, to: &mut [f32]);
+    }
+
+    impl Lanes for __m512 {
+        const LANES: usize = 16;
+        #[inline(always)]
+        fn zero() -> Self {
+            // SAFETY: only reached from `avx512` functions (AVX-512F checked by `lanes`).
+            unsafe { _mm512_setzero_ps() }
+        }
+        #[inline(always)]
+        fn load(from: &[f32]) -> Self {
+            let from = &from[..16];
+            // SAFETY: 16 values in bounds; AVX-512F as above.
+            unsafe { _mm512_loadu_ps(from.as_ptr()) }
+        }
+        #[inline(always)]
+        fn fmadd(self, x: f32, w: Self) -> Self {
+            // SAFETY: AVX-512F as above.
+            unsafe { _mm512_fmadd_ps(_mm512_set1_ps(x), w, self) }
+        }
+        #[inline(always)]
+        fn to_array(self, to: &mut [f32]) {
+            let to = &mut to[..16];
+            // SAFETY: 16 values in bounds; AVX-512F as above.
+            unsafe { _mm512_storeu_ps(to.as_mut_ptr(), self) }
+        }
+    }
+
+    impl Lanes for __m256 {
+        const LANES: usize = 8;
+        #[inline(always)]
+        fn zero() -> Self {
+            // SAFETY: only reached from `avx512` functions (AVX-512F, hence AVX and FMA).
+            unsafe { _mm256_setzero_ps() }
+        }
+        #[inline(always)]
+        fn load(from: &[f32]) -> Self {
+            let from = &from[..8];
+            // SAFETY: 8 values in bounds; AVX as above.
+            unsafe { _mm256_loadu_ps(from.as_ptr()) }
+        }
+        #[inline(always)]
+        fn fmadd(self, x: f32, w: Self) -> Self {
+            // SAFETY: FMA as above.
+            unsafe { _mm256_fmadd_ps(_mm256_set1_ps(x), w, self) }
+        }
+        #[inline(always)]
+        fn to_array(self, to: &mut [f32]) {
+            let to = &mut to[..8];
+            // SAFETY: 8 values in bounds; AVX as above.
+            unsafe { _mm256_storeu_ps(to.as_mut_ptr(), self) }
+        }
+    }
+
+    /// Calls `$body` for `$first` over `0..$n` in blocks of `$r` nodes or rows, the largest of
+    /// the listed constants (the last one 1) that fits in what is left.
+    macro_rules! blocked {
+        ($n:expr, [$($size:literal),+], |$first:ident, $r:ident| $body:expr) => {{
+            let n = $n;
+            let mut $first = 0;
+            while $first < n {
+                $(
+                    if n - $first >= $size {
+                        const $r: usize = $size;
+                        $body;
+                        $first += $r;
+                        continue;
+                    }
+                )+
+            }
+        }};
+    }
+
+    /// Output x-plane `i` (`plane`: its stored nodes) of a stride-1 convolution with `lanes`
+    /// (16 or 8) SIMD lanes.
+    pub(super) fn conv_plane(lanes: usize, job: &ConvJob, i: usize, plane: &mut [f32]) {
+        #[target_feature(enable = "avx512f,avx2,fma")]
+        fn avx512<V: Lanes>(job: &ConvJob, i: usize, plane: &mut [f32]) {
+            // Channel blocks per accumulator row: more when the lines are short.
+            let blocks = job.layer.c_out / V::LANES;
+            if blocks % 4 == 0 {
+                plane_loops::<4, V>(job, i, plane)
+            } else if blocks % 2 == 0 {
+                plane_loops::<2, V>(job, i, plane)
+            } else {
+                plane_loops::<1, V>(job, i, plane)
+            }
+        }
+        // SAFETY: `lanes` is non-zero only where the CPU has AVX-512F (checked by `lanes`).
+        unsafe {
+            if lanes == 16 {
+                avx512::<__m512>(job, i, plane)
+            } else {
+                avx512::<__m256>(job, i, plane)
+            }
+        }
+    }
+
+    /// For each y-line of plane `i`, blocks of `R` consecutive output nodes × `B · V::LANES`
+    /// output channels are accumulated over the inputs' taps and channels (the input channel
+    /// vectors of a node's `kernel` z-taps are contiguous, and those of consecutive nodes
+    /// overlap), then biased, rectified if asked and stored; halo nodes stay zero.
+    #[inline(always)]
+    fn plane_loops<const B: usize, V: Lanes>(job: &ConvJob, i: usize, plane: &mut [f32]) {
+        let first = job.inputs[0];
+        let [_, ny, nz] = first.dims;
+        let plane_start = (i + first.halo) * first.plane_nodes();
+        let c_out = job.layer.c_out;
+        for j in 0..ny {
+            let node = first.node(i, j, 0);
+            for cb in (0..c_out).step_by(B * V::LANES) {
+                let out = |n: usize| (node + n - plane_start) * c_out;
+                if B == 1 {
+                    blocked!(nz, [12, 8, 4, 2, 1], |n, R| conv_block::<R, B, V>(
+                        job,
+                        node + n,
+                        cb,
+                        &mut plane[out(n)..]
+                    ));
+                } else {
+                    blocked!(nz, [6, 4, 2, 1], |n, R| conv_block::<R, B, V>(job, node + n, cb, &mut plane[out(n)..]));
+                }
+            }
+        }
+    }
+
+    /// `R` output nodes from storage node `node`, channels `cb .. cb + B · V::LANES`, stored
+    /// into `out` (from the first node's channel vector).
+    #[inline(always)]
+    fn conv_block<const R: usize, const B: usize, V: Lanes>(job: &ConvJob, node: usize, cb: usize, out: &mut [f32]) {
+        let mut acc = [[V::zero(); B]; R];
+        let c_out = job.layer.c_out;
+        for (v, (c, matrix)) in job.inputs.iter().zip(&job.layer.parts) {
+            let (c, kc) = (*c, job.kernel * *c);
+            for (ab, off) in job.offsets.iter().enumerate() {
+                let start = (node as isize + off) as usize * c;
+                let xs = &v.data[start..start + (R - 1) * c + kc];
+                let w = &matrix[ab * kc * c_out..][..kc * c_out];
+                for t in 0..kc {
+                    let wr = &w[t * c_out + cb..][..B * V::LANES];
+                    let wv: [V; B] = std::array::from_fn(|b| V::load(&wr[b * V::LANES..]));
+                    for (r, acc) in acc.iter_mut().enumerate() {
+                        // SAFETY: r · c + t < (R - 1) · c + kc = xs.len().
+                        let x = unsafe { *xs.get_unchecked(r * c + t) };
+                        for (a, w) in acc.iter_mut().zip(&wv) {
+                            *a = a.fmadd(x, *w);
+                        }
+                    }
+                }
+            }
+        }
+        let bias = &job.layer.bias[cb..cb + B * V::LANES];
+        let mut lanes = [0.0f32; 16];
+        let all = [1.0f32; 64];
+        for (r, acc) in acc.iter().enumerate() {
+            let out = &mut out[r * c_out + cb..][..B * V::LANES];
+            let mask = job.mask.map_or(&all[..B * V::LANES], |m| &m.data[(node + r) * c_out + cb..][..B * V::LANES]);
+            let groups =
+                out.chunks_exact_mut(V::LANES).zip(bias.chunks_exact(V::LANES)).zip(mask.chunks_exact(V::LANES));
+            for (a, ((out, bias), mask)) in acc.iter().zip(groups) {
+                a.to_array(&mut lanes);
+                for (((o, a), b), m) in out.iter_mut().zip(lanes).zip(bias).zip(mask) {
+                    let y = a + b;
+                    *o = if *m <= 0.0 {
+                        0.0
+                    } else if job.relu {
+                        y.max(0.0)
+                    } else {
+                        y
+                    };
+                }
+            }
+        }
+    }
+
+    /// Adds the weight gradient of one input part `v` to `grad` (its matrix in the layout of
+    /// [`Packed::conv`](crate::inference::Packed::conv)) given the output gradient `dz`, with
+    /// `lanes` (16 or 8) SIMD lanes.
+    pub(super) fn weight_grad_part(
+        lanes: usize,
+        v: &Volume,
+        dz: &Volume,
+        kernel: usize,
+        offsets: &[isize],
+        grad: &mut [f32],
+    ) {
+        #[target_feature(enable = "avx512f,avx2,fma")]
+        fn avx512<V: Lanes>(v: &Volume, dz: &Volume, kernel: usize, offsets: &[isize], grad: &mut [f32]) {
+            weight_grad_loops::<V>(v, dz, kernel, offsets, grad)
+        }
+        // SAFETY: `lanes` is non-zero only where the CPU has AVX-512F (checked by `lanes`).
+        unsafe {
+            if lanes == 16 {
+                avx512::<__m512>(v, dz, kernel, offsets, grad)
+            } else {
+                avx512::<__m256>(v, dz, kernel, offsets, grad)
+            }
+        }
+    }
+
+    /// For each (x, y) tap offset, blocks of `R` matrix rows (z tap, input channel) ×
+    /// `V::LANES` output channels are accumulated over all interior output nodes, line by line.
+    #[inline(always)]
+    fn weight_grad_loops<V: Lanes>(v: &Volume, dz: &Volume, kernel: usize, offsets: &[isize], grad: &mut [f32]) {
+        let (kc, c_out) = (kernel * v.channels, dz.channels);
+        for (ab, &off) in offsets.iter().enumerate() {
+            let block = &mut grad[ab * kc * c_out..][..kc * c_out];
+            for cb in (0..c_out).step_by(V::LANES) {
+                blocked!(kc, [16, 8, 4, 2, 1], |row, R| weight_grad_block::<R, V>(v, dz, off, row, cb, block));
+            }
+        }
+    }
+
+    /// Rows `row .. row + R`, channels `cb ..` of the weight gradient of tap offset `off`.
+    #[inline(always)]
+    fn weight_grad_block<const R: usize, V: Lanes>(
+        v: &Volume,
+        dz: &Volume,
+        off: isize,
+        row: usize,
+        cb: usize,
+        block: &mut [f32],
+    ) {
+        let mut acc = [V::zero(); R];
+        let [nx, ny, nz] = dz.dims;
+        let (c, c_out) = (v.channels, dz.channels);
+        for i in 0..nx {
+            for j in 0..ny {
+                let node = dz.node(i, j, 0);
+                let ds = &dz.data[node * c_out..(node + nz) * c_out];
+                let start = (node as isize + off) as usize * c + row;
+                let xs = &v.data[start..start + (nz - 1) * c + R];
+                for n in 0..nz {
+                    let d = V::load(&ds[n * c_out + cb..]);
+                    for (r, a) in acc.iter_mut().enumerate() {
+                        // SAFETY: n · c + r < (nz - 1) · c + R = xs.len().
+                        *a = a.fmadd(unsafe { *xs.get_unchecked(n * c + r) }, d);
+                    }
+                }
+            }
+        }
+        let mut lanes = [0.0f32; 16];
+        for (r, a) in acc.iter().enumerate() {
+            a.to_array(&mut lanes);
+            for (g, a) in block[(row + r) * c_out + cb..][..V::LANES].iter_mut().zip(lanes) {
+                *g += a;
+            }
+        }
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+mod simd {
+    //! No SIMD loops off x86-64: [`super::lanes`] is 0 and the faer path is taken.
+    use super::{ConvJob, Volume};
+
+    pub(super) fn conv_plane(_: usize, _: &ConvJob, _: usize, _: &mut [f32]) {}
+
+    pub(super) fn weight_grad_part(_: usize, _: &Volume, _: &Volume, _: usize, _: &[isize], _: &mut [f32]) {}
 }
 
 /// Adds the weight gradient of a stride-1 convolution (`kernel³`, zero padding) of the channel

@@ -29,8 +29,14 @@ pub(crate) struct Volume {
 
 impl Volume {
     pub(crate) fn zeros(dims: [usize; 3], halo: usize, channels: usize) -> Volume {
-        let len = dims.iter().map(|d| d + 2 * halo).product::<usize>() * channels;
-        Volume { dims, halo, channels, data: vec![0.0; len] }
+        Volume::zeros_in(Vec::new(), dims, halo, channels)
+    }
+
+    /// A zero volume stored in `data` (cleared and resized; reusing its allocation).
+    pub(crate) fn zeros_in(mut data: Vec<f32>, dims: [usize; 3], halo: usize, channels: usize) -> Volume {
+        data.clear();
+        data.resize(dims.iter().map(|d| d + 2 * halo).product::<usize>() * channels, 0.0);
+        Volume { dims, halo, channels, data }
     }
 
     /// The volume of interior `padded` (at least `grid`) holding a channel-major field
@@ -100,7 +106,8 @@ impl Packed {
     pub(crate) fn conv(weight: &[f32], bias: &[f32], c_out: usize, splits: &[usize], taps: usize) -> Result<Packed> {
         let c_in: usize = splits.iter().sum();
         check_len("convolution", weight.len(), bias.len(), c_out * c_in * taps, c_out)?;
-        let mut rest = permuted(weight, &conv_order(c_out, splits, taps));
+        let mut rest = vec![0.0; weight.len()];
+        conv_layout(c_out, splits, taps, |w, p| rest[p] = weight[w]);
         let mut parts = Vec::with_capacity(splits.len());
         for &c in splits {
             let tail = rest.split_off(taps * c * c_out);
@@ -115,7 +122,8 @@ impl Packed {
     /// blocks, one per x-offset, columns tap-major.
     pub(crate) fn transposed(weight: &[f32], bias: &[f32], c_in: usize, c_out: usize) -> Result<Packed> {
         check_len("transposed convolution", weight.len(), bias.len(), c_in * c_out * 8, c_out)?;
-        let matrix = permuted(weight, &transposed_order(c_in, c_out));
+        let mut matrix = vec![0.0; weight.len()];
+        transposed_layout(c_in, c_out, |w, p| matrix[p] = weight[w]);
         Ok(Packed { parts: vec![(c_in, matrix)], bias: bias.to_vec(), c_in, c_out, taps: 8 })
     }
 
@@ -125,47 +133,39 @@ impl Packed {
     }
 }
 
-/// Where each weight of a convolution (burn's `[c_out, c_in, taps]` order) goes in the
-/// concatenation of the part matrices of [`Packed::conv`].
-pub(crate) fn conv_order(c_out: usize, splits: &[usize], taps: usize) -> Vec<usize> {
+/// Calls `f(w, p)` for each weight of a convolution: `w` its index in burn's `[c_out, c_in,
+/// taps]` order, `p` its position in the concatenation of the part matrices of
+/// [`Packed::conv`]. The order of the calls fills those matrices 16 output channels (a cache
+/// line) at a time, reading 16 weight rows: their rows are `c_out` apart, often a multiple of
+/// 4 KiB, and a plain scatter thrashes the cache.
+pub(crate) fn conv_layout(c_out: usize, splits: &[usize], taps: usize, mut f: impl FnMut(usize, usize)) {
     let c_in: usize = splits.iter().sum();
-    let mut order = vec![0; c_out * c_in * taps];
-    let (mut offset, mut first) = (0, 0);
-    for &c in splits {
-        for co in 0..c_out {
+    for block in (0..c_out).step_by(16) {
+        let (mut offset, mut first) = (0, 0);
+        for &c in splits {
             for ci in 0..c {
                 for t in 0..taps {
-                    order[(co * c_in + first + ci) * taps + t] = offset + (t * c + ci) * c_out + co;
+                    for co in block..c_out.min(block + 16) {
+                        f((co * c_in + first + ci) * taps + t, offset + (t * c + ci) * c_out + co);
+                    }
                 }
             }
+            offset += taps * c * c_out;
+            first += c;
         }
-        offset += taps * c * c_out;
-        first += c;
     }
-    order
 }
 
-/// Where each weight of a 2×2×2 transposed convolution (burn's `[c_in, c_out, 8]` order) goes
-/// in the matrix of [`Packed::transposed`].
-pub(crate) fn transposed_order(c_in: usize, c_out: usize) -> Vec<usize> {
-    let mut order = vec![0; c_in * c_out * 8];
+/// Calls `f(w, p)` for each weight of a 2×2×2 transposed convolution: `w` its index in burn's
+/// `[c_in, c_out, 8]` order (increasing), `p` its position in the matrix of [`Packed::transposed`].
+pub(crate) fn transposed_layout(c_in: usize, c_out: usize, mut f: impl FnMut(usize, usize)) {
     for ci in 0..c_in {
         for co in 0..c_out {
             for t in 0..8 {
-                order[(ci * c_out + co) * 8 + t] = ((t / 4) * c_in + ci) * 4 * c_out + (t % 4) * c_out + co;
+                f((ci * c_out + co) * 8 + t, ((t / 4) * c_in + ci) * 4 * c_out + (t % 4) * c_out + co);
             }
         }
     }
-    order
-}
-
-/// `out[order[n]] = values[n]`.
-fn permuted(values: &[f32], order: &[usize]) -> Vec<f32> {
-    let mut out = vec![0.0; values.len()];
-    for (v, &at) in values.iter().zip(order) {
-        out[at] = *v;
-    }
-    out
 }
 
 fn check_len(what: &str, weights: usize, bias: usize, want_w: usize, want_b: usize) -> Result<()> {

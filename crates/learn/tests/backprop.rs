@@ -94,9 +94,14 @@ fn check_against_burn(net: &UNet, batch: usize, grid: GridShape) -> usize {
 
 #[test]
 fn gradients_match_burn_autodiff() {
-    for (base_channels, depth, kernel_size, grid, batch) in
-        [(3, 2, 3, [7, 6, 5], 2), (2, 1, 5, [5, 4, 6], 3), (2, 0, 3, [3, 4, 2], 1), (4, 3, 3, [9, 8, 8], 2)]
-    {
+    for (base_channels, depth, kernel_size, grid, batch) in [
+        (3, 2, 3, [7, 6, 5], 2),
+        (2, 1, 5, [5, 4, 6], 3),
+        (2, 0, 3, [3, 4, 2], 1),
+        (4, 3, 3, [9, 8, 8], 2),
+        (8, 2, 3, [7, 6, 5], 2),
+        (16, 1, 3, [5, 6, 4], 2),
+    ] {
         let config = UNetConfig { base_channels, depth, kernel_size, ..UNetConfig::default() };
         let net = trained_a_little(&config, grid);
         let biases: f32 = net
