@@ -248,8 +248,8 @@ fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<Setup> {
         toml::from_str(&text).with_context(|| format!("invalid dataset scenario {}", scenario_path.display()))?;
     let dir = scenario_path.parent().map(Path::to_path_buf).unwrap_or_default();
     let mesh = build_mesh(&scenario.mesh, &dir).context("building the mesh")?;
-    let inputs = match &scenario.dataset.input {
-        learn::generate::Input::Displacement { nodes, .. } => nodes.select(&mesh)?,
+    let (inputs, normal) = match &scenario.dataset.input {
+        learn::generate::Input::Displacement { nodes, normal, .. } => (nodes.select(&mesh)?, *normal),
         learn::generate::Input::Force => {
             bail!("{}: the model must take displacements as input, not forces", scenario_path.display())
         }
@@ -257,7 +257,7 @@ fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<Setup> {
     let default_targets = region_targets(&mesh);
     let organ = organ_of(&scenario.mesh, mesh)?;
     let model = learn::TrainedModel::load(model_path, &learn::inference_device())?;
-    let deformer = Box::new(NetworkDeformer::new(&model, &organ, &inputs)?);
+    let deformer = Box::new(NetworkDeformer::new(&model, &organ, &inputs, normal)?);
     Ok(Setup { organ, deformer, method: format!("U-Net {}", model_path.display()), default_targets })
 }
 

@@ -26,14 +26,11 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
     let rows = rows.as_array().unwrap();
     let methods: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
     assert_eq!(methods, ["FEM co-rotational, 3k T4", "FEM SVK, 3k T4", "U-Net"], "{text}");
-    // The FEM rows recover most of the motion. The U-Net row is only required to run: with
-    // closest-point observations its TRE is not yet better than no deformation (issue 11).
-    for (s, worst) in rows.iter().zip([0.25, 0.35]) {
+    for (s, worst) in rows.iter().zip([0.25, 0.35, 0.25]) {
         let (tre, rigid) = (s["tre_mean_mm"].as_f64().unwrap(), s["no_deformation_tre_mean_mm"].as_f64().unwrap());
         assert!(rigid > 10.0 && tre < worst * rigid, "TRE {tre} mm against {rigid} mm without deformation\n{text}");
         assert!(s["surface_residual_mm"].as_f64().unwrap() < 3.0, "{s}");
     }
-    assert!(rows[2]["tre_mean_mm"].as_f64().unwrap().is_finite(), "{text}");
     let table = std::fs::read_to_string(out.join("comparison.csv")).unwrap();
     assert!(table.starts_with("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_ms,iterations\nno deformation,"));
     assert_eq!(table.lines().count(), 5, "{table}");

@@ -105,6 +105,12 @@ pub enum Input {
         /// Keep only a random sub-domain of between `sparse[0]` and `sparse[1]`
         /// observed nodes: those nearest to a random observed node.
         sparse: Option<[usize; 2]>,
+        /// Keep only each observed node's displacement along the outward normal of the rest
+        /// surface there, `(u·n) n`: what matching the organ's surface to a camera's point
+        /// cloud measures (closest points give no tangential motion). The network then learns
+        /// the tangential surface motion and the volume from the normal motion alone.
+        #[serde(default)]
+        normal: bool,
     },
 }
 
@@ -131,6 +137,12 @@ enum Encoding {
     Lattice(Vec<usize>),
     /// A tetrahedral mesh embedded in a grid (`embedding.grid`).
     Embedded(Embedding),
+}
+
+/// The part of `u` along the unit vector `n`: `(u·n) n`.
+pub fn normal_part(u: &[f64], n: [f64; 3]) -> [f64; 3] {
+    let along = u[0] * n[0] + u[1] * n[1] + u[2] * n[2];
+    n.map(|c| along * c)
 }
 
 fn invalid(msg: impl Into<String>) -> LearnError {
@@ -182,7 +194,7 @@ impl Generator {
         }
         let observed = match &config.input {
             Input::Force => Vec::new(),
-            Input::Displacement { nodes, sparse } => {
+            Input::Displacement { nodes, sparse, .. } => {
                 let o = select(nodes)?;
                 if let Some([lo, hi]) = sparse {
                     if lo > hi || *lo == 0 || *hi > o.len() {
@@ -330,10 +342,12 @@ impl Generator {
         let solution = solver.solve(&self.solver_options).map_err(|e| e.to_string())?;
         let input = match &self.config.input {
             Input::Force => self.encode(&f, true),
-            Input::Displacement { .. } => {
+            Input::Displacement { normal, .. } => {
                 let mut partial = vec![0.0; 3 * nn];
                 for &n in &observed {
-                    partial[3 * n..3 * n + 3].copy_from_slice(&solution.u[3 * n..3 * n + 3]);
+                    let u = &solution.u[3 * n..3 * n + 3];
+                    let kept = if *normal { normal_part(u, self.normals[n]) } else { [u[0], u[1], u[2]] };
+                    partial[3 * n..3 * n + 3].copy_from_slice(&kept);
                 }
                 self.encode_observed(&partial, &observed)
             }

@@ -30,7 +30,7 @@ fn beam_generator_with_shards(samples: usize, shard_size: usize) -> Generator {
         grid: None,
         fixed: vec![bottom(0.0, 1.0), bottom(2.0, 3.0)],
         load: Load::PatchForce { centres: Some(top()), radius: 0.6, magnitude: [0.05, 0.2] },
-        input: Input::Displacement { nodes: top(), sparse: Some([3, 8]) },
+        input: Input::Displacement { nodes: top(), sparse: Some([3, 8]), normal: false },
     };
     Generator::new(mesh, Material::new(Law::Svk, 300.0, 0.4), SolverOptions::default(), config).unwrap()
 }

@@ -67,12 +67,13 @@ pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
 }
 
 /// The U-Net registration model: `model`, trained on the phantom of [`MODEL_TETS`]
-/// tetrahedra with the displacement of its `visible` region as input (`scenarios/liver_ar.toml`).
+/// tetrahedra with the normal displacement of its `visible` region as input
+/// (`scenarios/liver_ar.toml`).
 pub fn network_model(model: &TrainedModel) -> Result<(Organ, NetworkDeformer)> {
     let m = mesh::phantom::liver_phantom(MODEL_TETS)?;
     let visible = m.region("visible")?.to_vec();
     let organ = Organ::new(m, None)?;
-    let deformer = NetworkDeformer::new(model, &organ, &visible)?;
+    let deformer = NetworkDeformer::new(model, &organ, &visible, true)?;
     Ok((organ, deformer))
 }
 

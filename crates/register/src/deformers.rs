@@ -2,6 +2,7 @@
 //! finite-element model pulled by data springs, and a trained U-Net.
 
 use fem::{NormalSpring, Problem, SolverOptions, StaticSolver};
+use learn::generate::normal_part;
 use learn::{encode_points, GridToMesh, Predictor, TrainedModel};
 use mesh::embedding::Grid;
 
@@ -77,20 +78,40 @@ impl Deformer for FemDeformer {
     }
 }
 
-/// U-Net registration: the observed displacements of the network's input nodes
-/// go to the grid as in training; the predicted field is read back at the mesh nodes.
+/// U-Net registration. The observed displacements of the network's input nodes (the visible
+/// surface) are first fitted by a smooth field: each node's match offsets with a membrane
+/// penalty on neighbouring nodes' differences, unseen nodes interpolated. A network trained on
+/// the normal motion of its input nodes (`normal = true` in the dataset's input, as
+/// `scenarios/liver_ar.toml`) gets the normal part of that fit, which is what closest-point
+/// matching measures, and infers the tangential motion and the volume. A network trained on the
+/// full displacement gets the fit itself, and its input nodes keep the fit (fed back, its own
+/// predictions at its inputs would drift along the surface, where no match corrects them).
 pub struct NetworkDeformer {
     predictor: Predictor,
     grid: Grid,
     to_mesh: GridToMesh,
-    nodes: Vec<mesh::Point>,
-    input: Vec<bool>,
+    /// The input nodes (mesh numbering) and their positions.
+    inputs: Vec<usize>,
+    points: Vec<mesh::Point>,
+    /// Mesh edges between input nodes, as positions in `inputs`.
+    edges: Vec<(usize, usize)>,
+    /// For a network of normal motion: the outward unit normal of the rest surface at each
+    /// input node.
+    normals: Option<Vec<mesh::Point>>,
 }
+
+/// Weight of the membrane penalty, relative to one matched cloud point's weight.
+pub const MEMBRANE_WEIGHT: f64 = 1.0;
+
+/// Weight pulling an input node towards its current estimate (keeps nodes without data or
+/// neighbours determined).
+const ANCHOR_WEIGHT: f64 = 1e-3;
 
 impl NetworkDeformer {
     /// The deformer of `model` for `organ` (meshed on the model's grid, or embedded in it);
-    /// `input_nodes`: the mesh nodes whose displacement the network was trained to take.
-    pub fn new(model: &TrainedModel, organ: &Organ, input_nodes: &[usize]) -> Result<NetworkDeformer> {
+    /// `input_nodes`: the mesh nodes whose displacement the network was trained to take, along
+    /// the rest surface's normal only when `normal` (boundary nodes then).
+    pub fn new(model: &TrainedModel, organ: &Organ, input_nodes: &[usize], normal: bool) -> Result<NetworkDeformer> {
         let placement = model.placement.ok_or_else(|| {
             RegisterError::Invalid("the model does not record where its grid lies: retrain it".into())
         })?;
@@ -102,47 +123,130 @@ impl NetworkDeformer {
         }
         let grid = placement.grid(model.grid)?;
         let mesh = organ.mesh();
-        let mut input = vec![false; mesh.num_nodes()];
-        for &n in input_nodes {
-            *input.get_mut(n).ok_or_else(|| RegisterError::Invalid(format!("input node {n} is not a mesh node")))? =
-                true;
+        let mut local = vec![usize::MAX; mesh.num_nodes()];
+        for (i, &n) in input_nodes.iter().enumerate() {
+            *local.get_mut(n).ok_or_else(|| RegisterError::Invalid(format!("input node {n} is not a mesh node")))? = i;
         }
+        let mut edges = Vec::new();
+        for c in 0..mesh.cells.len() {
+            let cell = mesh.cells.cell(c);
+            for (a, &p) in cell.iter().enumerate() {
+                for &q in &cell[a + 1..] {
+                    let (i, j) = (local[p], local[q]);
+                    if i != usize::MAX && j != usize::MAX {
+                        edges.push((i.min(j), i.max(j)));
+                    }
+                }
+            }
+        }
+        edges.sort_unstable();
+        edges.dedup();
+        let normals = if normal {
+            let all = mesh::boundary_surface(mesh).vertex_normals();
+            let picked: Vec<mesh::Point> = input_nodes.iter().map(|&n| all[n]).collect();
+            if let Some(i) = picked.iter().position(|n| *n == [0.0; 3]) {
+                return Err(RegisterError::Invalid(format!(
+                    "input node {} is not on the surface: it has no normal",
+                    input_nodes[i]
+                )));
+            }
+            Some(picked)
+        } else {
+            None
+        };
         Ok(NetworkDeformer {
             predictor: Predictor::new(model)?,
             to_mesh: GridToMesh::new(mesh, &grid)?,
             grid,
-            nodes: mesh.nodes.clone(),
-            input,
+            inputs: input_nodes.to_vec(),
+            points: input_nodes.iter().map(|&n| mesh.nodes[n]).collect(),
+            edges,
+            normals,
         })
     }
+
+    /// The surface estimate: per coordinate, `(W + ε I + λ L) s = W d + ε s₀` (W: match weights,
+    /// d: observed displacements, L: the graph Laplacian of the input nodes, s₀: the current
+    /// estimate), solved by conjugate gradients from s₀.
+    fn surface_estimate(&self, observations: &Observations, previous: &[f64]) -> Vec<[f64; 3]> {
+        let m = self.inputs.len();
+        let w: Vec<f64> = self.inputs.iter().map(|&n| observations.weight[n]).collect();
+        let diagonal: Vec<f64> = w.iter().map(|w| w + ANCHOR_WEIGHT).collect();
+        let apply = |x: &[f64], out: &mut [f64]| {
+            for i in 0..m {
+                out[i] = diagonal[i] * x[i];
+            }
+            for &(i, j) in &self.edges {
+                let f = MEMBRANE_WEIGHT * (x[i] - x[j]);
+                out[i] += f;
+                out[j] -= f;
+            }
+        };
+        let mut estimate = vec![[0.0; 3]; m];
+        for d in 0..3 {
+            let start: Vec<f64> = self.inputs.iter().map(|&n| previous[3 * n + d]).collect();
+            let rhs: Vec<f64> =
+                (0..m).map(|i| w[i] * observations.target[self.inputs[i]][d] + ANCHOR_WEIGHT * start[i]).collect();
+            let x = conjugate_gradients(apply, &rhs, start, 1e-10);
+            for i in 0..m {
+                estimate[i][d] = x[i];
+            }
+        }
+        estimate
+    }
+}
+
+/// Solves `A x = b` for a symmetric positive definite `A` given by its product, from `x`, to a
+/// relative residual of `tolerance` (at most `b.len()` iterations).
+fn conjugate_gradients(apply: impl Fn(&[f64], &mut [f64]), b: &[f64], mut x: Vec<f64>, tolerance: f64) -> Vec<f64> {
+    let n = b.len();
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let mut ax = vec![0.0; n];
+    apply(&x, &mut ax);
+    let mut r: Vec<f64> = b.iter().zip(&ax).map(|(b, a)| b - a).collect();
+    let mut p = r.clone();
+    let mut rr = dot(&r, &r);
+    let stop = tolerance * tolerance * dot(b, b).max(f64::MIN_POSITIVE);
+    let mut ap = vec![0.0; n];
+    for _ in 0..n {
+        if rr <= stop {
+            break;
+        }
+        apply(&p, &mut ap);
+        let alpha = rr / dot(&p, &ap);
+        for i in 0..n {
+            x[i] += alpha * p[i];
+            r[i] -= alpha * ap[i];
+        }
+        let next = dot(&r, &r);
+        for i in 0..n {
+            p[i] = r[i] + next / rr * p[i];
+        }
+        rr = next;
+    }
+    x
 }
 
 impl Deformer for NetworkDeformer {
     fn deform(&mut self, observations: &Observations, previous: &[f64], _iteration: usize) -> Result<Vec<f64>> {
-        if !observations.weight.iter().zip(&self.input).any(|(&w, &input)| w > 0.0 && input) {
+        if !self.inputs.iter().any(|&n| observations.weight[n] > 0.0) {
             return Err(RegisterError::Invalid("no cloud point matches the network's input surface".into()));
         }
-        // The network was trained on the full displacement of every input node, but a closest-point
-        // match measures only the offset along the surface normal: each observed input node takes
-        // the current estimate moved along its normal by the observed offset (point to plane); an
-        // input node that no cloud point reaches keeps its current estimate (zero would read as
-        // "did not move").
-        let (mut points, mut values) = (Vec::new(), Vec::new());
-        for (n, (&w, t)) in observations.weight.iter().zip(&observations.target).enumerate() {
-            if self.input[n] {
-                let current = [previous[3 * n], previous[3 * n + 1], previous[3 * n + 2]];
-                let value = if w > 0.0 {
-                    let normal = observations.normal[n];
-                    let along: f64 = (0..3).map(|d| (t[d] - current[d]) * normal[d]).sum();
-                    std::array::from_fn(|d| current[d] + along * normal[d])
-                } else {
-                    current
-                };
-                points.push(self.nodes[n]);
-                values.push(value);
+        let surface = self.surface_estimate(observations, previous);
+        match &self.normals {
+            Some(normals) => {
+                let along: Vec<mesh::Point> = surface.iter().zip(normals).map(|(s, &n)| normal_part(s, n)).collect();
+                let input = encode_points(&self.grid, &self.points, &along, false)?;
+                Ok(self.to_mesh.apply(&self.predictor.predict(&input)?)?)
+            }
+            None => {
+                let input = encode_points(&self.grid, &self.points, &surface, false)?;
+                let mut u = self.to_mesh.apply(&self.predictor.predict(&input)?)?;
+                for (&n, s) in self.inputs.iter().zip(&surface) {
+                    u[3 * n..3 * n + 3].copy_from_slice(s);
+                }
+                Ok(u)
             }
         }
-        let input = encode_points(&self.grid, &points, &values, false)?;
-        Ok(self.to_mesh.apply(&self.predictor.predict(&input)?)?)
     }
 }
