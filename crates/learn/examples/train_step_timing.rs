@@ -17,31 +17,22 @@ use burn::tensor::{Distribution, Tensor, TensorData};
 
 const WARM_UP: usize = 3;
 
-/// Median and spread of `runs` calls of `step` after the warm-up calls.
+/// Statistics of `runs` timed calls of `step` after `WARM_UP` untimed ones.
 fn time(runs: usize, mut step: impl FnMut()) -> Timing {
-    for _ in 0..WARM_UP {
-        step();
-    }
-    let d = (0..runs)
+    let durations = (0..WARM_UP + runs)
         .map(|_| {
             let t0 = Instant::now();
             step();
             t0.elapsed().as_secs_f64()
         })
+        .skip(WARM_UP)
         .collect();
-    Timing::from_durations(d).expect("runs > 0")
+    Timing::from_durations(durations).expect("runs > 0")
 }
 
 fn report(name: &str, t: &Timing) {
-    println!(
-        "  {name}: median {:.1} ms (mean {:.1} ± {:.1}, min {:.1}, max {:.1}, {} runs)",
-        t.median * 1e3,
-        t.mean * 1e3,
-        t.std * 1e3,
-        t.min * 1e3,
-        t.max * 1e3,
-        t.runs
-    );
+    let [median, min, max] = [t.median, t.min, t.max].map(|s| s * 1e3);
+    println!("  {name}: median {median:.1} ms (min {min:.1}, max {max:.1}, {} runs)", t.runs);
 }
 
 fn main() {

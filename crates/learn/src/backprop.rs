@@ -17,9 +17,18 @@
 //!   convolution with the same weight array ([`downsample`]); both weight gradients are sums of
 //!   gathered 2×2×2 patches (transposed) times coarse planes.
 //!
-//! Samples run in parallel (rayon), each with its own gradient accumulators, summed at the end.
-//! Parameters that do not require gradients (a frozen encoder) get none, and when no parameter
-//! of the contracting path requires one, its backward pass is skipped.
+//! Where the CPU has AVX-512 and a layer's output channels are a multiple of 8, the stride-1
+//! convolutions (forward and input gradient) and their weight gradients run as register-blocked
+//! SIMD loops instead of faer GEMMs: channels-last rows of the convolution views are broadcast
+//! into fused multiply-adds with vectors of 8 or 16 output channels (see `simd`); the ReLU mask
+//! of the layer below is applied as the input gradient is stored. (The AVX-512 intrinsics are
+//! stable since Rust 1.89.)
+//!
+//! Samples run in parallel (rayon), with one gradient accumulator per thread, summed at the end;
+//! volumes are recycled through a small per-thread pool of buffers, since fresh allocations of
+//! their size cost page faults at every step. Parameters that do not require gradients (a frozen
+//! encoder) get none, and when no parameter of the contracting path requires one, its backward
+//! pass is skipped.
 
 use std::cell::RefCell;
 
@@ -574,65 +583,50 @@ fn add_channels(dst: &mut Volume, src: &Volume, from: usize) {
 
 /// A stride-1 convolution as [`same_conv`], its output zeroed where `mask` (same shape) is not
 /// positive (the ReLU of the layer below, in the backward pass); by the register-blocked SIMD
-/// loops of [`simd::conv_plane`] when they apply (see [`lanes`]).
+/// loops of [`simd::conv_plane`] where they apply (see [`simd::lanes`]).
 fn conv(inputs: &[&Volume], layer: &Packed, kernel: usize, relu: bool, mask: Option<&Volume>) -> Volume {
-    let lanes = lanes(layer.c_out);
-    if lanes == 0 {
-        let mut out = same_conv(inputs, layer, kernel, relu);
-        if let Some(mask) = mask {
-            relu_mask(&mut out, mask);
-        }
+    #[cfg(target_arch = "x86_64")]
+    if let Some(lanes) = simd::lanes(layer.c_out) {
+        let first = inputs[0];
+        let mut out = pooled(first.dims, first.halo, layer.c_out);
+        let job = ConvJob { inputs, layer, kernel, relu, mask, offsets: tap_offsets(first, kernel) };
+        let plane_len = out.plane_nodes() * layer.c_out;
+        out.data
+            .par_chunks_mut(plane_len)
+            .skip(first.halo)
+            .take(first.dims[0])
+            .enumerate()
+            .for_each(|(i, plane)| simd::conv_plane(lanes, &job, i, plane));
         return out;
     }
-    let first = inputs[0];
-    let mut out = pooled(first.dims, first.halo, layer.c_out);
-    let job = ConvJob { inputs, layer, kernel, relu, mask, offsets: tap_offsets(first, kernel) };
-    let plane_len = out.plane_nodes() * layer.c_out;
-    out.data
-        .par_chunks_mut(plane_len)
-        .skip(first.halo)
-        .take(first.dims[0])
-        .enumerate()
-        .for_each(|(i, plane)| simd::conv_plane(lanes, &job, i, plane));
+    let mut out = same_conv(inputs, layer, kernel, relu);
+    if let Some(mask) = mask {
+        relu_mask(&mut out, mask);
+    }
     out
 }
 
 /// Adds the weight gradient of a stride-1 convolution (see [`conv_weight_grad`]); by the
-/// register-blocked SIMD loops of [`simd::weight_grad_part`] when they apply (see [`lanes`]).
+/// register-blocked SIMD loops of [`simd::weight_grad_part`] where they apply (see
+/// [`simd::lanes`]).
 fn weight_grad(inputs: &[&Volume], dz: &Volume, kernel: usize, grad: &mut [f32]) {
-    let lanes = lanes(dz.channels);
-    if lanes == 0 {
-        return conv_weight_grad(inputs, dz, kernel, grad);
-    }
-    let offsets = tap_offsets(dz, kernel);
-    let mut part = 0;
-    for v in inputs {
-        let len = kernel.pow(3) * v.channels * dz.channels;
-        simd::weight_grad_part(lanes, v, dz, kernel, &offsets, &mut grad[part..part + len]);
-        part += len;
-    }
-}
-
-/// The SIMD width (16 or 8 lanes) of the register-blocked loops for `channels` output
-/// channels: they need AVX-512 and a multiple of 8 channels; 0 when they do not apply (the faer
-/// GEMM path is taken instead).
-fn lanes(channels: usize) -> usize {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx512f") {
-        return if channels % 16 == 0 {
-            16
-        } else if channels % 8 == 0 {
-            8
-        } else {
-            0
-        };
+    if let Some(lanes) = simd::lanes(dz.channels) {
+        let offsets = tap_offsets(dz, kernel);
+        let mut part = 0;
+        for v in inputs {
+            let len = kernel.pow(3) * v.channels * dz.channels;
+            simd::weight_grad_part(lanes, v, dz, kernel, &offsets, &mut grad[part..part + len]);
+            part += len;
+        }
+        return;
     }
-    let _ = channels;
-    0
+    conv_weight_grad(inputs, dz, kernel, grad)
 }
 
 /// A stride-1 convolution: inputs (channel parts), weights, ReLU, output mask (see [`conv`]),
 /// and the storage offsets of the (x, y) tap offsets ([`tap_offsets`]).
+#[cfg(target_arch = "x86_64")]
 struct ConvJob<'a> {
     inputs: &'a [&'a Volume],
     layer: &'a Packed,
@@ -652,6 +646,21 @@ mod simd {
 
     use super::{ConvJob, Volume};
 
+    /// The SIMD width (16 or 8 lanes) of the loops for `channels` output channels: they need
+    /// AVX-512 and a multiple of 8 channels; `None` where they do not apply (the faer GEMM path
+    /// is taken instead).
+    pub(super) fn lanes(channels: usize) -> Option<usize> {
+        if !is_x86_feature_detected!("avx512f") {
+            None
+        } else if channels % 16 == 0 {
+            Some(16)
+        } else if channels % 8 == 0 {
+            Some(8)
+        } else {
+            None
+        }
+    }
+
     /// Operations on a vector of `LANES` f32.
     trait Lanes: Copy {
         const LANES: usize;
@@ -663,58 +672,99 @@ mod simd {
         fn fmadd(self, x: f32, w: Self) -> Self;
         /// The lanes.
         fn to_array(self, to: &mut [f32]);
+        /// `self + bias`, rectified if `relu`, zeroed where `mask` is `<= 0`.
+        fn finish(self, bias: Self, relu: bool, mask: Option<Self>) -> Self;
     }
 
-    impl Lanes for __m512 {
-        const LANES: usize = 16;
-        #[inline(always)]
-        fn zero() -> Self {
-            // SAFETY: only reached from `avx512` functions (AVX-512F checked by `lanes`).
-            unsafe { _mm512_setzero_ps() }
-        }
-        #[inline(always)]
-        fn load(from: &[f32]) -> Self {
-            let from = &from[..16];
-            // SAFETY: 16 values in bounds; AVX-512F as above.
-            unsafe { _mm512_loadu_ps(from.as_ptr()) }
-        }
-        #[inline(always)]
-        fn fmadd(self, x: f32, w: Self) -> Self {
-            // SAFETY: AVX-512F as above.
-            unsafe { _mm512_fmadd_ps(_mm512_set1_ps(x), w, self) }
-        }
-        #[inline(always)]
-        fn to_array(self, to: &mut [f32]) {
-            let to = &mut to[..16];
-            // SAFETY: 16 values in bounds; AVX-512F as above.
-            unsafe { _mm512_storeu_ps(to.as_mut_ptr(), self) }
-        }
+    /// Implements [`Lanes`] for a vector type from its intrinsics (`$keep`: `keep_512` or
+    /// `keep_256`).
+    macro_rules! lanes {
+        ($v:ty, $n:literal, $setzero:ident, $set1:ident, $loadu:ident, $storeu:ident, $fmadd:ident, $add:ident,
+         $max:ident, $keep:ident) => {
+            impl Lanes for $v {
+                const LANES: usize = $n;
+                #[inline(always)]
+                fn zero() -> Self {
+                    // SAFETY: only reached from `avx512` functions (AVX-512F checked by `lanes`;
+                    // it implies AVX and FMA).
+                    unsafe { $setzero() }
+                }
+                #[inline(always)]
+                fn load(from: &[f32]) -> Self {
+                    let from = &from[..$n];
+                    // SAFETY: `$n` values in bounds; CPU features as above.
+                    unsafe { $loadu(from.as_ptr()) }
+                }
+                #[inline(always)]
+                fn fmadd(self, x: f32, w: Self) -> Self {
+                    // SAFETY: CPU features as above.
+                    unsafe { $fmadd($set1(x), w, self) }
+                }
+                #[inline(always)]
+                fn to_array(self, to: &mut [f32]) {
+                    let to = &mut to[..$n];
+                    // SAFETY: `$n` values in bounds; CPU features as above.
+                    unsafe { $storeu(to.as_mut_ptr(), self) }
+                }
+                #[inline(always)]
+                fn finish(self, bias: Self, relu: bool, mask: Option<Self>) -> Self {
+                    // SAFETY: CPU features as above.
+                    unsafe {
+                        let y = $add(self, bias);
+                        let y = if relu { $max(y, $setzero()) } else { y };
+                        match mask {
+                            Some(m) => $keep(y, m),
+                            None => y,
+                        }
+                    }
+                }
+            }
+        };
     }
 
-    impl Lanes for __m256 {
-        const LANES: usize = 8;
-        #[inline(always)]
-        fn zero() -> Self {
-            // SAFETY: only reached from `avx512` functions (AVX-512F, hence AVX and FMA).
-            unsafe { _mm256_setzero_ps() }
-        }
-        #[inline(always)]
-        fn load(from: &[f32]) -> Self {
-            let from = &from[..8];
-            // SAFETY: 8 values in bounds; AVX as above.
-            unsafe { _mm256_loadu_ps(from.as_ptr()) }
-        }
-        #[inline(always)]
-        fn fmadd(self, x: f32, w: Self) -> Self {
-            // SAFETY: FMA as above.
-            unsafe { _mm256_fmadd_ps(_mm256_set1_ps(x), w, self) }
-        }
-        #[inline(always)]
-        fn to_array(self, to: &mut [f32]) {
-            let to = &mut to[..8];
-            // SAFETY: 8 values in bounds; AVX as above.
-            unsafe { _mm256_storeu_ps(to.as_mut_ptr(), self) }
-        }
+    lanes!(
+        __m512,
+        16,
+        _mm512_setzero_ps,
+        _mm512_set1_ps,
+        _mm512_loadu_ps,
+        _mm512_storeu_ps,
+        _mm512_fmadd_ps,
+        _mm512_add_ps,
+        _mm512_max_ps,
+        keep_512
+    );
+    lanes!(
+        __m256,
+        8,
+        _mm256_setzero_ps,
+        _mm256_set1_ps,
+        _mm256_loadu_ps,
+        _mm256_storeu_ps,
+        _mm256_fmadd_ps,
+        _mm256_add_ps,
+        _mm256_max_ps,
+        keep_256
+    );
+
+    /// The lanes of `y` where `m` is not `<= 0` (as [`relu_mask`](super::relu_mask)), zeros
+    /// elsewhere.
+    ///
+    /// # Safety
+    /// Needs AVX-512F.
+    #[inline(always)]
+    unsafe fn keep_512(y: __m512, m: __m512) -> __m512 {
+        _mm512_maskz_mov_ps(_mm512_cmpnle_ps_mask(m, _mm512_setzero_ps()), y)
+    }
+
+    /// The lanes of `y` where `m` is not `<= 0` (as [`relu_mask`](super::relu_mask)), zeros
+    /// elsewhere.
+    ///
+    /// # Safety
+    /// Needs AVX.
+    #[inline(always)]
+    unsafe fn keep_256(y: __m256, m: __m256) -> __m256 {
+        _mm256_and_ps(y, _mm256_cmp_ps::<_CMP_NLE_UQ>(m, _mm256_setzero_ps()))
     }
 
     /// Calls `$body` for `$first` over `0..$n` in blocks of `$r` nodes or rows, the largest of
@@ -744,14 +794,14 @@ mod simd {
             // Channel blocks per accumulator row: more when the lines are short.
             let blocks = job.layer.c_out / V::LANES;
             if blocks % 4 == 0 {
-                plane_loops::<4, V>(job, i, plane)
+                with_channels::<4, V>(job, i, plane)
             } else if blocks % 2 == 0 {
-                plane_loops::<2, V>(job, i, plane)
+                with_channels::<2, V>(job, i, plane)
             } else {
-                plane_loops::<1, V>(job, i, plane)
+                with_channels::<1, V>(job, i, plane)
             }
         }
-        // SAFETY: `lanes` is non-zero only where the CPU has AVX-512F (checked by `lanes`).
+        // SAFETY: `lanes` is only given where the CPU has AVX-512F (checked by `lanes`).
         unsafe {
             if lanes == 16 {
                 avx512::<__m512>(job, i, plane)
@@ -761,12 +811,27 @@ mod simd {
         }
     }
 
+    /// [`plane_loops`] with the inputs' channel count `C` a constant when it is a common one
+    /// (all parts alike), 0 (read at run time) otherwise.
+    #[inline(always)]
+    fn with_channels<const B: usize, V: Lanes>(job: &ConvJob, i: usize, plane: &mut [f32]) {
+        let c = job.layer.parts[0].0;
+        match c {
+            _ if job.layer.parts.iter().any(|p| p.0 != c) => plane_loops::<B, 0, V>(job, i, plane),
+            8 => plane_loops::<B, 8, V>(job, i, plane),
+            16 => plane_loops::<B, 16, V>(job, i, plane),
+            32 => plane_loops::<B, 32, V>(job, i, plane),
+            64 => plane_loops::<B, 64, V>(job, i, plane),
+            _ => plane_loops::<B, 0, V>(job, i, plane),
+        }
+    }
+
     /// For each y-line of plane `i`, blocks of `R` consecutive output nodes × `B · V::LANES`
     /// output channels are accumulated over the inputs' taps and channels (the input channel
     /// vectors of a node's `kernel` z-taps are contiguous, and those of consecutive nodes
     /// overlap), then biased, rectified if asked and stored; halo nodes stay zero.
     #[inline(always)]
-    fn plane_loops<const B: usize, V: Lanes>(job: &ConvJob, i: usize, plane: &mut [f32]) {
+    fn plane_loops<const B: usize, const C: usize, V: Lanes>(job: &ConvJob, i: usize, plane: &mut [f32]) {
         let first = job.inputs[0];
         let [_, ny, nz] = first.dims;
         let plane_start = (i + first.halo) * first.plane_nodes();
@@ -776,14 +841,19 @@ mod simd {
             for cb in (0..c_out).step_by(B * V::LANES) {
                 let out = |n: usize| (node + n - plane_start) * c_out;
                 if B == 1 {
-                    blocked!(nz, [12, 8, 4, 2, 1], |n, R| conv_block::<R, B, V>(
+                    blocked!(nz, [12, 8, 4, 2, 1], |n, R| conv_block::<R, B, C, V>(
                         job,
                         node + n,
                         cb,
                         &mut plane[out(n)..]
                     ));
                 } else {
-                    blocked!(nz, [6, 4, 2, 1], |n, R| conv_block::<R, B, V>(job, node + n, cb, &mut plane[out(n)..]));
+                    blocked!(nz, [6, 4, 2, 1], |n, R| conv_block::<R, B, C, V>(
+                        job,
+                        node + n,
+                        cb,
+                        &mut plane[out(n)..]
+                    ));
                 }
             }
         }
@@ -792,18 +862,28 @@ mod simd {
     /// `R` output nodes from storage node `node`, channels `cb .. cb + B · V::LANES`, stored
     /// into `out` (from the first node's channel vector).
     #[inline(always)]
-    fn conv_block<const R: usize, const B: usize, V: Lanes>(job: &ConvJob, node: usize, cb: usize, out: &mut [f32]) {
+    fn conv_block<const R: usize, const B: usize, const C: usize, V: Lanes>(
+        job: &ConvJob,
+        node: usize,
+        cb: usize,
+        out: &mut [f32],
+    ) {
         let mut acc = [[V::zero(); B]; R];
         let c_out = job.layer.c_out;
         for (v, (c, matrix)) in job.inputs.iter().zip(&job.layer.parts) {
-            let (c, kc) = (*c, job.kernel * *c);
+            // A constant channel count turns the node strides into address displacements.
+            let c = if C == 0 { *c } else { C };
+            let kc = job.kernel * c;
             for (ab, off) in job.offsets.iter().enumerate() {
                 let start = (node as isize + off) as usize * c;
                 let xs = &v.data[start..start + (R - 1) * c + kc];
                 let w = &matrix[ab * kc * c_out..][..kc * c_out];
                 for t in 0..kc {
                     let wr = &w[t * c_out + cb..][..B * V::LANES];
-                    let wv: [V; B] = std::array::from_fn(|b| V::load(&wr[b * V::LANES..]));
+                    let mut wv = [V::zero(); B];
+                    for (b, w) in wv.iter_mut().enumerate() {
+                        *w = V::load(&wr[b * V::LANES..]);
+                    }
                     for (r, acc) in acc.iter_mut().enumerate() {
                         // SAFETY: r · c + t < (R - 1) · c + kc = xs.len().
                         let x = unsafe { *xs.get_unchecked(r * c + t) };
@@ -814,26 +894,16 @@ mod simd {
                 }
             }
         }
-        let bias = &job.layer.bias[cb..cb + B * V::LANES];
-        let mut lanes = [0.0f32; 16];
-        let all = [1.0f32; 64];
+        let mut bias = [V::zero(); B];
+        for (b, v) in bias.iter_mut().enumerate() {
+            *v = V::load(&job.layer.bias[cb + b * V::LANES..]);
+        }
         for (r, acc) in acc.iter().enumerate() {
-            let out = &mut out[r * c_out + cb..][..B * V::LANES];
-            let mask = job.mask.map_or(&all[..B * V::LANES], |m| &m.data[(node + r) * c_out + cb..][..B * V::LANES]);
-            let groups =
-                out.chunks_exact_mut(V::LANES).zip(bias.chunks_exact(V::LANES)).zip(mask.chunks_exact(V::LANES));
-            for (a, ((out, bias), mask)) in acc.iter().zip(groups) {
-                a.to_array(&mut lanes);
-                for (((o, a), b), m) in out.iter_mut().zip(lanes).zip(bias).zip(mask) {
-                    let y = a + b;
-                    *o = if *m <= 0.0 {
-                        0.0
-                    } else if job.relu {
-                        y.max(0.0)
-                    } else {
-                        y
-                    };
-                }
+            let at = r * c_out + cb;
+            for (b, (a, bias)) in acc.iter().zip(bias).enumerate() {
+                let at = at + b * V::LANES;
+                let mask = job.mask.map(|m| V::load(&m.data[node * c_out + at..]));
+                a.finish(bias, job.relu, mask).to_array(&mut out[at..]);
             }
         }
     }
@@ -853,7 +923,7 @@ mod simd {
         fn avx512<V: Lanes>(v: &Volume, dz: &Volume, kernel: usize, offsets: &[isize], grad: &mut [f32]) {
             weight_grad_loops::<V>(v, dz, kernel, offsets, grad)
         }
-        // SAFETY: `lanes` is non-zero only where the CPU has AVX-512F (checked by `lanes`).
+        // SAFETY: `lanes` is only given where the CPU has AVX-512F (checked by `lanes`).
         unsafe {
             if lanes == 16 {
                 avx512::<__m512>(v, dz, kernel, offsets, grad)
@@ -868,60 +938,52 @@ mod simd {
     #[inline(always)]
     fn weight_grad_loops<V: Lanes>(v: &Volume, dz: &Volume, kernel: usize, offsets: &[isize], grad: &mut [f32]) {
         let (kc, c_out) = (kernel * v.channels, dz.channels);
-        for (ab, &off) in offsets.iter().enumerate() {
-            let block = &mut grad[ab * kc * c_out..][..kc * c_out];
-            for cb in (0..c_out).step_by(V::LANES) {
-                blocked!(kc, [16, 8, 4, 2, 1], |row, R| weight_grad_block::<R, V>(v, dz, off, row, cb, block));
+        // Plane by plane, so that the planes read stay in cache across the passes.
+        for i in 0..dz.dims[0] {
+            for (ab, &off) in offsets.iter().enumerate() {
+                let block = &mut grad[ab * kc * c_out..][..kc * c_out];
+                for cb in (0..c_out).step_by(V::LANES) {
+                    blocked!(kc, [16, 8, 4, 2, 1], |row, R| weight_grad_block::<R, V>(v, dz, i, off, row, cb, block));
+                }
             }
         }
     }
 
-    /// Rows `row .. row + R`, channels `cb ..` of the weight gradient of tap offset `off`.
+    /// Adds the output nodes of plane `i` to rows `row .. row + R`, channels `cb ..` of the
+    /// weight gradient of tap offset `off`.
     #[inline(always)]
     fn weight_grad_block<const R: usize, V: Lanes>(
         v: &Volume,
         dz: &Volume,
+        i: usize,
         off: isize,
         row: usize,
         cb: usize,
         block: &mut [f32],
     ) {
         let mut acc = [V::zero(); R];
-        let [nx, ny, nz] = dz.dims;
+        for (r, a) in acc.iter_mut().enumerate() {
+            *a = V::load(&block[(row + r) * dz.channels + cb..]);
+        }
+        let [_, ny, nz] = dz.dims;
         let (c, c_out) = (v.channels, dz.channels);
-        for i in 0..nx {
-            for j in 0..ny {
-                let node = dz.node(i, j, 0);
-                let ds = &dz.data[node * c_out..(node + nz) * c_out];
-                let start = (node as isize + off) as usize * c + row;
-                let xs = &v.data[start..start + (nz - 1) * c + R];
-                for n in 0..nz {
-                    let d = V::load(&ds[n * c_out + cb..]);
-                    for (r, a) in acc.iter_mut().enumerate() {
-                        // SAFETY: n · c + r < (nz - 1) · c + R = xs.len().
-                        *a = a.fmadd(unsafe { *xs.get_unchecked(n * c + r) }, d);
-                    }
+        for j in 0..ny {
+            let node = dz.node(i, j, 0);
+            let ds = &dz.data[node * c_out..(node + nz) * c_out];
+            let start = (node as isize + off) as usize * c + row;
+            let xs = &v.data[start..start + (nz - 1) * c + R];
+            for n in 0..nz {
+                let d = V::load(&ds[n * c_out + cb..]);
+                for (r, a) in acc.iter_mut().enumerate() {
+                    // SAFETY: n · c + r < (nz - 1) · c + R = xs.len().
+                    *a = a.fmadd(unsafe { *xs.get_unchecked(n * c + r) }, d);
                 }
             }
         }
-        let mut lanes = [0.0f32; 16];
         for (r, a) in acc.iter().enumerate() {
-            a.to_array(&mut lanes);
-            for (g, a) in block[(row + r) * c_out + cb..][..V::LANES].iter_mut().zip(lanes) {
-                *g += a;
-            }
+            a.to_array(&mut block[(row + r) * c_out + cb..]);
         }
     }
-}
-
-#[cfg(not(target_arch = "x86_64"))]
-mod simd {
-    //! No SIMD loops off x86-64: [`super::lanes`] is 0 and the faer path is taken.
-    use super::{ConvJob, Volume};
-
-    pub(super) fn conv_plane(_: usize, _: &ConvJob, _: usize, _: &mut [f32]) {}
-
-    pub(super) fn weight_grad_part(_: usize, _: &Volume, _: &Volume, _: usize, _: &[isize], _: &mut [f32]) {}
 }
 
 /// Adds the weight gradient of a stride-1 convolution (`kernel³`, zero padding) of the channel
