@@ -668,6 +668,11 @@ mod simd {
         fn zero() -> Self;
         /// Loads `LANES` values from `from[0..LANES]`.
         fn load(from: &[f32]) -> Self;
+        /// Loads `LANES` values from `from`.
+        ///
+        /// # Safety
+        /// `from` points to `LANES` readable values.
+        unsafe fn load_ptr(from: *const f32) -> Self;
         /// `self + x · w`.
         fn fmadd(self, x: f32, w: Self) -> Self;
         /// The lanes.
@@ -692,8 +697,13 @@ mod simd {
                 #[inline(always)]
                 fn load(from: &[f32]) -> Self {
                     let from = &from[..$n];
-                    // SAFETY: `$n` values in bounds; CPU features as above.
-                    unsafe { $loadu(from.as_ptr()) }
+                    // SAFETY: `$n` values in bounds.
+                    unsafe { Self::load_ptr(from.as_ptr()) }
+                }
+                #[inline(always)]
+                unsafe fn load_ptr(from: *const f32) -> Self {
+                    // SAFETY: `$n` readable values (the caller's promise); CPU features as above.
+                    unsafe { $loadu(from) }
                 }
                 #[inline(always)]
                 fn fmadd(self, x: f32, w: Self) -> Self {
@@ -870,6 +880,7 @@ mod simd {
     ) {
         let mut acc = [[V::zero(); B]; R];
         let c_out = job.layer.c_out;
+        assert!(cb + B * V::LANES <= c_out, "channel block beyond the output channels");
         for (v, (c, matrix)) in job.inputs.iter().zip(&job.layer.parts) {
             // A constant channel count turns the node strides into address displacements.
             let c = if C == 0 { *c } else { C };
@@ -877,12 +888,13 @@ mod simd {
             for (ab, off) in job.offsets.iter().enumerate() {
                 let start = (node as isize + off) as usize * c;
                 let xs = &v.data[start..start + (R - 1) * c + kc];
-                let w = &matrix[ab * kc * c_out..][..kc * c_out];
+                let w = matrix[ab * kc * c_out..][..kc * c_out].as_ptr();
                 for t in 0..kc {
-                    let wr = &w[t * c_out + cb..][..B * V::LANES];
                     let mut wv = [V::zero(); B];
-                    for (b, w) in wv.iter_mut().enumerate() {
-                        *w = V::load(&wr[b * V::LANES..]);
+                    for (b, wv) in wv.iter_mut().enumerate() {
+                        // SAFETY: t · c_out + cb + (b + 1) · LANES ≤ kc · c_out, the length of
+                        // the slice behind `w` (cb + B · LANES ≤ c_out, asserted above).
+                        *wv = unsafe { V::load_ptr(w.add(t * c_out + cb + b * V::LANES)) };
                     }
                     for (r, acc) in acc.iter_mut().enumerate() {
                         // SAFETY: r · c + t < (R - 1) · c + kc = xs.len().
@@ -967,13 +979,17 @@ mod simd {
         }
         let [_, ny, nz] = dz.dims;
         let (c, c_out) = (v.channels, dz.channels);
+        assert!(cb + V::LANES <= c_out, "channel block beyond the output channels");
         for j in 0..ny {
             let node = dz.node(i, j, 0);
             let ds = &dz.data[node * c_out..(node + nz) * c_out];
             let start = (node as isize + off) as usize * c + row;
             let xs = &v.data[start..start + (nz - 1) * c + R];
+            let ds = ds.as_ptr();
             for n in 0..nz {
-                let d = V::load(&ds[n * c_out + cb..]);
+                // SAFETY: n · c_out + cb + LANES ≤ nz · c_out, the length of the slice behind
+                // `ds` (cb + LANES ≤ c_out, asserted above).
+                let d = unsafe { V::load_ptr(ds.add(n * c_out + cb)) };
                 for (r, a) in acc.iter_mut().enumerate() {
                     // SAFETY: n · c + r < (nz - 1) · c + R = xs.len().
                     *a = a.fmadd(unsafe { *xs.get_unchecked(n * c + r) }, d);
