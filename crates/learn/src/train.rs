@@ -1,5 +1,7 @@
 //! Training: Adam on the masked MSE, seeded, with validation, best-weights selection,
-//! resumable checkpoints, learning curves and transfer learning.
+//! resumable checkpoints, learning curves and transfer learning. Gradients come from the
+//! hand-written backward pass of [`backprop`](crate::backprop), which equals burn's autodiff up
+//! to summation order; burn keeps the model, the optimiser and their records.
 //!
 //! Reproducibility: weights are initialised from the seed; batch composition and training-time
 //! corruption come from counter-based generators (seed, iteration, batch slot), so the whole
@@ -16,9 +18,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use burn::module::Module;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::optim::{AdamConfig, ModuleOptimizer};
 use burn::store::ModuleRecord;
-use burn::tensor::{Bytes, Device, Tensor, TensorData};
+use burn::tensor::{Bytes, Device};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -28,8 +30,8 @@ use crate::curve::{plot_learning_curve, write_curve_csv, CurveRow};
 use crate::dataset::{Normalization, Samples};
 use crate::split::{IndexSet, Split};
 use crate::fsutil::{read, write_atomic};
-use crate::grid::{GridPlacement, CHANNELS};
-use crate::metrics::masked_mse;
+use crate::grid::GridPlacement;
+use crate::backprop::loss_and_gradients;
 use crate::evaluation::evaluate_net;
 use crate::unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
 use crate::{inference_device, training_device, LearnError, Result};
@@ -262,38 +264,42 @@ impl Shuffler {
     }
 }
 
-/// Builds normalised batch tensors `(x, y, mask)` from sample positions; `corrupt_stream`
-/// gives each slot its own generator.
-pub(crate) fn batch_tensors(
+/// A normalised batch in the grid layout: inputs and targets `[batch, 3, nx, ny, nz]`, masks
+/// `[batch, 1, nx, ny, nz]` as weights.
+struct Batch {
+    inputs: Vec<f32>,
+    targets: Vec<f32>,
+    masks: Vec<f32>,
+}
+
+/// Builds the normalised batch of the samples at `positions`; `rng_for` gives each slot its
+/// own corruption generator.
+fn batch(
     samples: &Samples,
     positions: &[usize],
     norm: &Normalization,
     corruption: &Corruption,
     rng_for: impl Fn(usize) -> rand::rngs::StdRng,
-    device: &Device,
-) -> Result<(Tensor<5>, Tensor<5>, Tensor<5>)> {
+) -> Result<Batch> {
     let grid = samples.grid;
     let (f, n) = (grid.field_len(), grid.nodes());
     let b = positions.len();
-    let mut x = Vec::with_capacity(b * f);
-    let mut y = Vec::with_capacity(b * f);
-    let mut m = Vec::with_capacity(b * n);
+    let mut out = Batch {
+        inputs: Vec::with_capacity(b * f),
+        targets: Vec::with_capacity(b * f),
+        masks: Vec::with_capacity(b * n),
+    };
     let (si, st) = ((1.0 / norm.input_scale) as f32, (1.0 / norm.target_scale) as f32);
     for (slot, &p) in positions.iter().enumerate() {
         let mut input = samples.input(p).to_vec();
         if !corruption.is_identity() {
             corruption.apply(&mut input, grid, &mut rng_for(slot))?;
         }
-        x.extend(input.iter().map(|v| v * si));
-        y.extend(samples.target(p).iter().map(|v| v * st));
-        m.extend(samples.mask(p).iter().map(|&v| f32::from(v)));
+        out.inputs.extend(input.iter().map(|v| v * si));
+        out.targets.extend(samples.target(p).iter().map(|v| v * st));
+        out.masks.extend(samples.mask(p).iter().map(|&v| f32::from(v)));
     }
-    let [nx, ny, nz] = grid.dims();
-    Ok((
-        Tensor::from_data(TensorData::new(x, [b, CHANNELS, nx, ny, nz]), device),
-        Tensor::from_data(TensorData::new(y, [b, CHANNELS, nx, ny, nz]), device),
-        Tensor::from_data(TensorData::new(m, [b, 1, nx, ny, nz]), device),
-    ))
+    Ok(out)
 }
 
 /// Checkpoint metadata (the JSON section of `checkpoint.bin`).
@@ -536,23 +542,17 @@ pub fn train(
         let t0 = Instant::now();
         let first = (it * config.batch_size) as u64;
         let positions: Vec<usize> = (0..config.batch_size as u64).map(|b| shuffler.position(first + b)).collect();
-        let (x, y, mask) = batch_tensors(
-            train,
-            &positions,
-            &start.normalization,
-            &config.train_corruption,
-            |slot| item_rng(config.seed, STREAM_TRAIN_CORRUPTION, first + slot as u64),
-            &device,
-        )?;
-        let loss = masked_mse(net.forward(x), y, mask);
-        let loss_value: f64 = loss.clone().into_scalar::<f32>().into();
+        let b = batch(train, &positions, &start.normalization, &config.train_corruption, |slot| {
+            item_rng(config.seed, STREAM_TRAIN_CORRUPTION, first + slot as u64)
+        })?;
+        let (loss_value, grads) =
+            loss_and_gradients(&net, &b.inputs, &b.targets, &b.masks, positions.len(), train.grid)?;
         if !loss_value.is_finite() {
             return Err(LearnError::InvalidInput(format!(
                 "training diverged at iteration {} (loss {loss_value}); lower the learning rate",
                 it + 1
             )));
         }
-        let grads = GradientsParams::from_grads(loss.backward(), &net);
         net = optim.step(config.learning_rate_at(it), net, grads);
         step_time += t0.elapsed().as_secs_f64();
         steps += 1;
