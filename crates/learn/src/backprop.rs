@@ -857,13 +857,15 @@ mod simd {
                         cb,
                         &mut plane[out(n)..]
                     ));
-                } else {
-                    blocked!(nz, [6, 4, 2, 1], |n, R| conv_block::<R, B, C, V>(
+                } else if B == 2 {
+                    blocked!(nz, [6, 4, 3, 2, 1], |n, R| conv_block::<R, B, C, V>(
                         job,
                         node + n,
                         cb,
                         &mut plane[out(n)..]
                     ));
+                } else {
+                    blocked!(nz, [3, 2, 1], |n, R| conv_block::<R, B, C, V>(job, node + n, cb, &mut plane[out(n)..]));
                 }
             }
         }
@@ -955,7 +957,9 @@ mod simd {
             for (ab, &off) in offsets.iter().enumerate() {
                 let block = &mut grad[ab * kc * c_out..][..kc * c_out];
                 for cb in (0..c_out).step_by(V::LANES) {
-                    blocked!(kc, [16, 8, 4, 2, 1], |row, R| weight_grad_block::<R, V>(v, dz, i, off, row, cb, block));
+                    blocked!(kc, [16, 9, 8, 4, 2, 1], |row, R| weight_grad_block::<R, V>(
+                        v, dz, i, off, row, cb, block
+                    ));
                 }
             }
         }
