@@ -122,9 +122,11 @@ pub fn loss_and_gradients(
             },
         )
         .reduce_with(|(loss_a, mut a), (loss_b, b)| {
-            for (ga, gb) in a.iter_mut().zip(&b) {
-                ga.add(gb);
-            }
+            vectorised(|| {
+                for (ga, gb) in a.iter_mut().zip(&b) {
+                    ga.add(gb);
+                }
+            });
             (loss_a + loss_b, a)
         })
         .ok_or_else(|| LearnError::InvalidInput("gradients of an empty batch".into()))?;
@@ -154,6 +156,7 @@ struct Grad {
 }
 
 impl Grad {
+    #[inline(always)]
     fn add(&mut self, other: &Grad) {
         for (a, b) in self.weight.iter_mut().chain(&mut self.bias).zip(other.weight.iter().chain(&other.bias)) {
             *a += b;
@@ -423,7 +426,7 @@ impl Prepared {
     fn same_grads(&self, layer: &Layer, inputs: &[&Volume], dz: &Volume, kernel: usize, grads: &mut [Grad]) {
         if layer.trainable {
             let g = &mut grads[layer.slot];
-            add_bias_grad(dz, &mut g.bias);
+            vectorised(|| add_bias_grad(dz, &mut g.bias));
             weight_grad(inputs, dz, kernel, &mut g.weight);
         }
     }
@@ -433,7 +436,7 @@ impl Prepared {
     fn stride2_grads(&self, layer: &Layer, fine: &Volume, coarse: &Volume, d_out: &Volume, grads: &mut [Grad]) {
         if layer.trainable {
             let g = &mut grads[layer.slot];
-            add_bias_grad(d_out, &mut g.bias);
+            vectorised(|| add_bias_grad(d_out, &mut g.bias));
             stride2_weight_grad(fine, coarse, &mut g.weight);
         }
     }
@@ -457,7 +460,7 @@ impl Prepared {
             self.same_grads(&layers[0], &[&a.up[l], &a.encoder[l][1]], &d, k, grads);
             let concat = conv(&[&d], &layers[0].backward, k, false, None);
             let mut d_up = pooled(concat.dims, concat.halo, a.up[l].channels);
-            add_channels(&mut d_up, &concat, 0);
+            vectorised(|| add_channels(&mut d_up, &concat, 0));
             let coarse = a.decoder.get(l + 1).map_or(&a.bottleneck[1], |b| &b[1]);
             self.stride2_grads(&self.up[l], &d_up, coarse, &d_up, grads);
             d_concat.push(concat);
@@ -468,7 +471,7 @@ impl Prepared {
             }
             spent.push(std::mem::replace(&mut d, downsample(&d_up, &self.up[l].backward)));
             spent.push(d_up);
-            relu_mask(&mut d, coarse);
+            vectorised(|| relu_mask(&mut d, coarse));
         }
         if !self.train_encoder {
             spent.push(d);
@@ -487,8 +490,10 @@ impl Prepared {
             let [mid, out] = &a.encoder[l];
             self.stride2_grads(&self.down[l], out, &d_down, &d_down, grads);
             let mut d_skip = upsample(&d_down, &self.down[l].backward);
-            add_channels(&mut d_skip, &d_concat[l], a.up[l].channels);
-            relu_mask(&mut d_skip, out);
+            vectorised(|| {
+                add_channels(&mut d_skip, &d_concat[l], a.up[l].channels);
+                relu_mask(&mut d_skip, out);
+            });
             self.same_grads(&self.encoder[l][1], &[mid], &d_skip, k, grads);
             spent.push(std::mem::replace(&mut d, conv(&[&d_skip], &self.encoder[l][1].backward, k, false, Some(mid))));
             spent.extend([d_down, d_skip]);
@@ -553,7 +558,24 @@ fn output_gradient(output: &Volume, target: &[f32], mask: &[f32], grid: GridShap
     (loss, d)
 }
 
+/// Runs `f` compiled for AVX-512 where the CPU has it, so that the element-wise loops it
+/// inlines use 16 lanes.
+#[inline(always)]
+fn vectorised<T>(f: impl FnOnce() -> T) -> T {
+    #[cfg(target_arch = "x86_64")]
+    if is_x86_feature_detected!("avx512f") {
+        #[target_feature(enable = "avx512f,avx2,fma")]
+        fn avx512<T>(f: impl FnOnce() -> T) -> T {
+            f()
+        }
+        // SAFETY: the CPU has AVX-512F (checked above).
+        return unsafe { avx512(f) };
+    }
+    f()
+}
+
 /// Zeroes the gradient where the post-ReLU output `y` is not positive.
+#[inline(always)]
 fn relu_mask(d: &mut Volume, y: &Volume) {
     for (g, v) in d.data.iter_mut().zip(&y.data) {
         if *v <= 0.0 {
@@ -563,6 +585,7 @@ fn relu_mask(d: &mut Volume, y: &Volume) {
 }
 
 /// Adds the gradient summed over nodes (halo nodes hold zeros).
+#[inline(always)]
 fn add_bias_grad(d: &Volume, bias: &mut [f32]) {
     for node in d.data.chunks_exact(d.channels) {
         for (b, v) in bias.iter_mut().zip(node) {
@@ -572,6 +595,7 @@ fn add_bias_grad(d: &Volume, bias: &mut [f32]) {
 }
 
 /// Adds channels `from .. from + dst.channels` of `src` to `dst` (same grid and halo).
+#[inline(always)]
 fn add_channels(dst: &mut Volume, src: &Volume, from: usize) {
     let c = dst.channels;
     for (d, s) in dst.data.chunks_exact_mut(c).zip(src.data.chunks_exact(src.channels)) {
