@@ -124,6 +124,9 @@ pub fn line_plot(path: &Path, spec: &PlotSpec, series: &[Series]) -> Result<(), 
     })
 }
 
+/// A straight segment between two points of a chart.
+pub type Segment = ((f64, f64), (f64, f64));
+
 /// A set of points drawn as dots of one colour (the `index`-th palette colour).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct PointSet {
@@ -144,7 +147,7 @@ pub fn scatter_plot(
     path: &Path,
     spec: &PlotSpec,
     sets: &[PointSet],
-    links: &[((f64, f64), (f64, f64))],
+    links: &[Segment],
 ) -> Result<(), PlotError> {
     let finite = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite();
     let all: Vec<(f64, f64)> = sets.iter().flat_map(|s| s.points.iter().filter(finite).copied()).collect();
