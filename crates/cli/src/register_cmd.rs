@@ -140,8 +140,8 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
                 iterations: r.iterations,
                 surface_residual_mm: r.surface_residual * 1e3,
                 time_ms: ms(r.time),
-                tre_mean_mm: o.errors.as_ref().map(|e| mean(e) * 1e3),
-                tre_max_mm: o.errors.as_ref().map(|e| max(e) * 1e3),
+                tre_mean_mm: o.tre_mm().map(|t| t.0),
+                tre_max_mm: o.tre_mm().map(|t| t.1),
             };
             println!(
                 "frame {i:<4} {} points ({} matched), {} iterations, surface residual {:.2} mm, {:.1} ms{}",
@@ -195,14 +195,6 @@ fn print_organ(organ: &Organ, targets: usize) {
         organ.mesh().cells.kind_name(),
         organ.surface().triangles.len(),
     );
-}
-
-fn mean(v: &[f64]) -> f64 {
-    v.iter().sum::<f64>() / v.len() as f64
-}
-
-fn max(v: &[f64]) -> f64 {
-    v.iter().copied().fold(0.0, f64::max)
 }
 
 /// targets.csv: rest and registered position of each target.
@@ -288,9 +280,9 @@ fn demo(args: &RegisterArgs) -> Result<()> {
 
     let mut methods = Vec::new();
     let (organ, deformer) = register::case::corotational_model()?;
-    methods.push(Method { name: "FEM co-rotational, 3k T4".into(), organ, deformer: Box::new(deformer) });
+    methods.push(Method { name: "FEM co-rotational (3k T4)".into(), organ, deformer: Box::new(deformer) });
     let (organ, deformer) = fem_model(Material::new(Law::Svk, 5000.0, 0.49))?;
-    methods.push(Method { name: "FEM SVK, 3k T4".into(), organ, deformer: Box::new(deformer) });
+    methods.push(Method { name: "FEM SVK (3k T4)".into(), organ, deformer: Box::new(deformer) });
     let model_path = args.model.clone().unwrap_or_else(|| PathBuf::from(DEMO_MODEL));
     if model_path.exists() {
         let model = learn::TrainedModel::load(&model_path, &learn::inference_device())?;
@@ -307,49 +299,24 @@ fn demo(args: &RegisterArgs) -> Result<()> {
     let rest = &rows.first().context("no method to compare")?.summary;
     println!();
     println!(
-        "{:<28} {:>14} {:>13} {:>17} {:>10} {:>10}",
+        "{:<28} {:>14} {:>13} {:>14} {:>10} {:>10}",
         "method", "TRE mean (mm)", "TRE max (mm)", "residual (mm)", "ms/frame", "iterations"
     );
-    let line = |name: &str, t: Option<f64>, m: Option<f64>, res: String, time: String, it: String| {
-        println!(
-            "{name:<28} {:>14.2} {:>13.2} {res:>17} {time:>10} {it:>10}",
-            t.unwrap_or(f64::NAN),
-            m.unwrap_or(f64::NAN)
-        );
-    };
-    line(
-        "no deformation",
-        rest.no_deformation_tre_mean_mm,
-        rest.no_deformation_tre_max_mm,
-        "-".into(),
-        "-".into(),
-        "-".into(),
-    );
     let mut csv = String::from("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_ms,iterations\n");
-    csv.push_str(&format!(
-        "no deformation,{},{},,,\n",
-        rest.no_deformation_tre_mean_mm.unwrap_or(f64::NAN),
-        rest.no_deformation_tre_max_mm.unwrap_or(f64::NAN)
-    ));
+    let mut row = |name: &str, values: [Option<f64>; 5]| {
+        let [t, m, res, time, it] = values.map(|v| v.map_or("-".to_string(), |v| format!("{v:.2}")));
+        println!("{name:<28} {t:>14} {m:>13} {res:>14} {time:>10} {it:>10}");
+        let fields = values.map(|v| v.map_or(String::new(), |v| v.to_string()));
+        csv.push_str(&format!("{name},{}\n", fields.join(",")));
+    };
+    row("no deformation", [rest.no_deformation_tre_mean_mm, rest.no_deformation_tre_max_mm, None, None, None]);
+    for r in &rows {
+        let s = &r.summary;
+        let values = [s.tre_mean_mm, s.tre_max_mm, Some(s.surface_residual_mm), Some(s.time_ms), Some(s.iterations)];
+        row(&s.method, values);
+    }
     for row in &rows {
         let (s, outcome) = (&row.summary, &row.outcome);
-        line(
-            &s.method,
-            s.tre_mean_mm,
-            s.tre_max_mm,
-            format!("{:.2}", s.surface_residual_mm),
-            format!("{:.1}", s.time_ms),
-            format!("{}", s.iterations),
-        );
-        csv.push_str(&format!(
-            "{},{},{},{},{},{}\n",
-            s.method,
-            s.tre_mean_mm.unwrap_or(f64::NAN),
-            s.tre_max_mm.unwrap_or(f64::NAN),
-            s.surface_residual_mm,
-            s.time_ms,
-            s.iterations
-        ));
         let slug = slug(&s.method);
         let method_dir = args.out.join(slug);
         std::fs::create_dir_all(&method_dir).with_context(|| format!("creating {}", method_dir.display()))?;

@@ -25,7 +25,7 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
     let rows = json(&out.join("summary.json"));
     let rows = rows.as_array().unwrap();
     let methods: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
-    assert_eq!(methods, ["FEM co-rotational, 3k T4", "FEM SVK, 3k T4", "U-Net"], "{text}");
+    assert_eq!(methods, ["FEM co-rotational (3k T4)", "FEM SVK (3k T4)", "U-Net"], "{text}");
     for (s, worst) in rows.iter().zip([0.25, 0.35, 0.25]) {
         let (tre, rigid) = (s["tre_mean_mm"].as_f64().unwrap(), s["no_deformation_tre_mean_mm"].as_f64().unwrap());
         assert!(rigid > 10.0 && tre < worst * rigid, "TRE {tre} mm against {rigid} mm without deformation\n{text}");
@@ -34,6 +34,7 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
     let table = std::fs::read_to_string(out.join("comparison.csv")).unwrap();
     assert!(table.starts_with("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_ms,iterations\nno deformation,"));
     assert_eq!(table.lines().count(), 5, "{table}");
+    assert!(table.lines().all(|l| l.split(',').count() == 6), "{table}");
     let dir_of = |m: &str| out.join(m);
     for m in ["fem_co_rotational_3k_t4", "fem_svk_3k_t4", "u_net"] {
         for f in ["organ.vtu", "targets.csv", "registration.png"] {

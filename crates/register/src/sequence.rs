@@ -22,6 +22,13 @@ pub struct FrameOutcome {
     pub rest_errors: Option<Vec<f64>>,
 }
 
+impl FrameOutcome {
+    /// Mean and largest TRE of the frame (mm), when the truth is known.
+    pub fn tre_mm(&self) -> Option<(f64, f64)> {
+        self.errors.as_ref().filter(|e| !e.is_empty()).map(|e| (mean(e) * 1e3, max(e) * 1e3))
+    }
+}
+
 /// Registers `organ` to each cloud of `frames` in turn, each frame starting from the previous
 /// one's displacement; `targets` are rest positions inside the organ, `truths` (one list per
 /// frame, in the order of `targets`) their true deformed positions. `on_frame` sees each
