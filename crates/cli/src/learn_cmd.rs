@@ -279,12 +279,17 @@ pub fn eval(model_path: &Path, dataset_dir: &Path, corruption: &CorruptionArgs, 
     if test.is_empty() {
         bail!("{} holds no sample held out from this model (no test split recorded for it)", dataset_dir.display());
     }
-    let trained_here = model.training.as_ref().is_some_and(|t| t.split.source.is_some() && t.split.source == all.source);
+    let trained_here =
+        model.training.as_ref().is_some_and(|t| t.split.source.is_some() && t.split.source == all.source);
     println!(
         "held out   {} of {} samples ({})",
         test.len(),
         all.len(),
-        if trained_here { "the test split recorded in the model" } else { "those no run behind the model trained or validated on" }
+        if trained_here {
+            "the test split recorded in the model"
+        } else {
+            "those no run behind the model trained or validated on"
+        }
     );
     let markers = dataset.manifest().markers();
     let placement = dataset.manifest().placement();

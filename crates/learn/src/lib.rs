@@ -52,12 +52,12 @@ pub use dataset::{
     Samples, ShardInfo, Statistics,
 };
 pub use error::LearnError;
+pub use evaluation::{evaluate, evaluate_at_points, evaluation_input, PointErrors};
 pub use grid::{encode_points, GridPlacement, GridShape, GridToMesh, CHANNELS, LAYOUT};
 pub use inference::InferenceNet;
 pub use metrics::{ErrorStats, EvalReport};
-pub use split::{IndexSet, Split};
-pub use evaluation::{evaluate, evaluate_at_points, evaluation_input, PointErrors};
 pub use predict::{time_prediction, Predictor, Timing};
+pub use split::{IndexSet, Split};
 pub use train::{train, Initialization, TrainConfig, TrainOptions, TrainOutcome};
 pub use unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
 

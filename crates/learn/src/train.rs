@@ -25,14 +25,14 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::backprop::loss_and_gradients;
 use crate::corrupt::{item_rng, splitmix64, Corruption, STREAM_SHUFFLE, STREAM_TRAIN_CORRUPTION};
 use crate::curve::{plot_learning_curve, write_curve_csv, CurveRow};
 use crate::dataset::{Normalization, Samples};
-use crate::split::{IndexSet, Split};
+use crate::evaluation::evaluate_net;
 use crate::fsutil::{read, write_atomic};
 use crate::grid::GridPlacement;
-use crate::backprop::loss_and_gradients;
-use crate::evaluation::evaluate_net;
+use crate::split::{IndexSet, Split};
 use crate::unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
 use crate::{inference_device, training_device, LearnError, Result};
 

@@ -471,7 +471,9 @@ impl TrainedModel {
         }
         let seen = |i: u64| {
             info.splits().any(|s| {
-                samples.source.is_some() && s.source == samples.source && (s.train.contains(i) || s.validation.contains(i))
+                samples.source.is_some()
+                    && s.source == samples.source
+                    && (s.train.contains(i) || s.validation.contains(i))
             })
         };
         let positions: Vec<usize> = (0..samples.len()).filter(|&p| !seen(samples.indices[p])).collect();

@@ -143,12 +143,7 @@ pub struct PointSet {
 /// Draws point sets (later ones on top) into the PNG file `path` with equal scales on both axes
 /// (a projection of a 3D scene keeps its shape), written atomically; `links` are grey segments
 /// (e.g. from an estimate to the truth).
-pub fn scatter_plot(
-    path: &Path,
-    spec: &PlotSpec,
-    sets: &[PointSet],
-    links: &[Segment],
-) -> Result<(), PlotError> {
+pub fn scatter_plot(path: &Path, spec: &PlotSpec, sets: &[PointSet], links: &[Segment]) -> Result<(), PlotError> {
     let finite = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite();
     let all: Vec<(f64, f64)> = sets.iter().flat_map(|s| s.points.iter().filter(finite).copied()).collect();
     let (Some(x), Some(y)) = (

@@ -76,8 +76,7 @@ fn scatter_plots_keep_the_aspect_of_the_data() {
     use augsim_plot::{scatter_plot, PointSet};
     let dir = tempfile::tempdir().unwrap();
     let spec = PlotSpec { title: "side view".into(), x_label: "x (m)".into(), y_label: "z (m)".into(), log_y: false };
-    let ring: Vec<(f64, f64)> =
-        (0..60).map(|k| (k as f64 * 0.1).sin_cos()).map(|(s, c)| (0.2 * c, 0.05 * s)).collect();
+    let ring: Vec<(f64, f64)> = (0..60).map(|k| (k as f64 * 0.1).sin_cos()).map(|(s, c)| (0.2 * c, 0.05 * s)).collect();
     let sets = [
         PointSet { name: "surface".into(), points: ring.clone(), radius: 2, color: 7 },
         PointSet { name: "targets".into(), points: vec![(0.0, 0.0), (f64::NAN, 1.0)], radius: 5, color: 1 },
