@@ -8,6 +8,7 @@ use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use mesh::io::Scalar;
 use mesh::Point;
 
 use crate::{RegisterError, Result};
@@ -187,45 +188,19 @@ enum PlyFormat {
     BinaryBigEndian,
 }
 
-#[derive(Clone, Copy, Debug)]
-enum Scalar {
-    I8,
-    U8,
-    I16,
-    U16,
-    I32,
-    U32,
-    F32,
-    F64,
-}
-
-impl Scalar {
-    fn parse(name: &str) -> Option<Scalar> {
-        Some(match name {
-            "char" | "int8" => Scalar::I8,
-            "uchar" | "uint8" => Scalar::U8,
-            "short" | "int16" => Scalar::I16,
-            "ushort" | "uint16" => Scalar::U16,
-            "int" | "int32" => Scalar::I32,
-            "uint" | "uint32" => Scalar::U32,
-            "float" | "float32" => Scalar::F32,
-            "double" | "float64" => Scalar::F64,
-            _ => return None,
-        })
-    }
-
-    fn size(self) -> usize {
-        match self {
-            Scalar::I8 | Scalar::U8 => 1,
-            Scalar::I16 | Scalar::U16 => 2,
-            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
-            Scalar::F64 => 8,
-        }
-    }
-
-    fn is_integer(self) -> bool {
-        !matches!(self, Scalar::F32 | Scalar::F64)
-    }
+/// The scalar type of a PLY type name.
+fn ply_scalar(name: &str) -> Option<Scalar> {
+    Some(match name {
+        "char" | "int8" => Scalar::I8,
+        "uchar" | "uint8" => Scalar::U8,
+        "short" | "int16" => Scalar::I16,
+        "ushort" | "uint16" => Scalar::U16,
+        "int" | "int32" => Scalar::I32,
+        "uint" | "uint32" => Scalar::U32,
+        "float" | "float32" => Scalar::F32,
+        "double" | "float64" => Scalar::F64,
+        _ => return None,
+    })
 }
 
 #[derive(Debug)]
@@ -299,15 +274,15 @@ fn parse_ply_header(bytes: &[u8]) -> std::result::Result<PlyHeader, String> {
                 elements.push(Element { name: name.to_string(), count, properties: Vec::new() });
             }
             ["property", "list", count, item, name] => {
-                let count = Scalar::parse(count)
+                let count = ply_scalar(count)
                     .filter(|t| t.is_integer())
                     .ok_or_else(|| bad("list count type must be an integer type"))?;
-                let item = Scalar::parse(item).ok_or_else(|| bad("unknown property type"))?;
+                let item = ply_scalar(item).ok_or_else(|| bad("unknown property type"))?;
                 let element = elements.last_mut().ok_or_else(|| bad("property before any element"))?;
                 element.properties.push(Property::List { name: name.to_string(), count, item });
             }
             ["property", ty, name] => {
-                let ty = Scalar::parse(ty).ok_or_else(|| bad("unknown property type"))?;
+                let ty = ply_scalar(ty).ok_or_else(|| bad("unknown property type"))?;
                 let element = elements.last_mut().ok_or_else(|| bad("property before any element"))?;
                 element.properties.push(Property::Scalar { name: name.to_string(), ty });
             }
@@ -344,21 +319,7 @@ impl PlyData<'_> {
                 let size = ty.size();
                 let raw = bytes.get(*pos..*pos + size).ok_or("unexpected end of file")?;
                 *pos += size;
-                let mut buf = [0u8; 8];
-                buf[..size].copy_from_slice(raw);
-                if *big_endian {
-                    buf[..size].reverse();
-                }
-                Ok(match ty {
-                    Scalar::I8 => f64::from(buf[0] as i8),
-                    Scalar::U8 => f64::from(buf[0]),
-                    Scalar::I16 => f64::from(i16::from_le_bytes([buf[0], buf[1]])),
-                    Scalar::U16 => f64::from(u16::from_le_bytes([buf[0], buf[1]])),
-                    Scalar::I32 => f64::from(i32::from_le_bytes([buf[0], buf[1], buf[2], buf[3]])),
-                    Scalar::U32 => f64::from(u32::from_le_bytes([buf[0], buf[1], buf[2], buf[3]])),
-                    Scalar::F32 => f64::from(f32::from_le_bytes([buf[0], buf[1], buf[2], buf[3]])),
-                    Scalar::F64 => f64::from_le_bytes(buf),
-                })
+                Ok(ty.decode(raw, *big_endian))
             }
         }
     }

@@ -3,6 +3,7 @@
 use std::io::Write;
 use std::path::Path;
 
+use super::scalar::Scalar;
 use super::{
     check_for_writing, check_surface, fan, finish_volume, mesh_cells_flat, parse_error, read_bytes, restrict_fields,
     strip, write_atomic, Encoding, Field, FieldLocation, Num, VolumeKind, VTK_HEXAHEDRON, VTK_TETRA, VTK_VOXEL,
@@ -34,65 +35,21 @@ const KEYWORDS: [&str; 21] = [
     "OFFSETS",
 ];
 
-/// A scalar type of the legacy format.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Scalar {
-    U8,
-    I8,
-    U16,
-    I16,
-    U32,
-    I32,
-    U64,
-    I64,
-    F32,
-    F64,
-}
-
-impl Scalar {
-    fn from_name(name: &str) -> Option<Scalar> {
-        Some(match name.to_ascii_lowercase().as_str() {
-            "unsigned_char" | "vtktypeuint8" => Scalar::U8,
-            "char" | "vtktypeint8" => Scalar::I8,
-            "unsigned_short" | "vtktypeuint16" => Scalar::U16,
-            "short" | "vtktypeint16" => Scalar::I16,
-            "unsigned_int" | "vtktypeuint32" => Scalar::U32,
-            "int" | "vtktypeint32" => Scalar::I32,
-            "unsigned_long" | "vtktypeuint64" => Scalar::U64,
-            "long" | "vtktypeint64" => Scalar::I64,
-            "float" | "vtktypefloat32" => Scalar::F32,
-            "double" | "vtktypefloat64" => Scalar::F64,
-            _ => return None,
-        })
-    }
-
-    fn size(self) -> usize {
-        match self {
-            Scalar::U8 | Scalar::I8 => 1,
-            Scalar::U16 | Scalar::I16 => 2,
-            Scalar::U32 | Scalar::I32 | Scalar::F32 => 4,
-            Scalar::U64 | Scalar::I64 | Scalar::F64 => 8,
-        }
-    }
-
-    /// Decodes one big-endian value from exactly `self.size()` bytes.
-    fn decode(self, b: &[u8]) -> f64 {
-        let mut w = [0u8; 8];
-        w[..b.len()].copy_from_slice(b);
-        let (b2, b4) = ([w[0], w[1]], [w[0], w[1], w[2], w[3]]);
-        match self {
-            Scalar::U8 => w[0] as f64,
-            Scalar::I8 => w[0] as i8 as f64,
-            Scalar::U16 => u16::from_be_bytes(b2) as f64,
-            Scalar::I16 => i16::from_be_bytes(b2) as f64,
-            Scalar::U32 => u32::from_be_bytes(b4) as f64,
-            Scalar::I32 => i32::from_be_bytes(b4) as f64,
-            Scalar::U64 => u64::from_be_bytes(w) as f64,
-            Scalar::I64 => i64::from_be_bytes(w) as f64,
-            Scalar::F32 => f32::from_be_bytes(b4) as f64,
-            Scalar::F64 => f64::from_be_bytes(w),
-        }
-    }
+/// The scalar type of a legacy-format type name.
+fn vtk_scalar(name: &str) -> Option<Scalar> {
+    Some(match name.to_ascii_lowercase().as_str() {
+        "unsigned_char" | "vtktypeuint8" => Scalar::U8,
+        "char" | "vtktypeint8" => Scalar::I8,
+        "unsigned_short" | "vtktypeuint16" => Scalar::U16,
+        "short" | "vtktypeint16" => Scalar::I16,
+        "unsigned_int" | "vtktypeuint32" => Scalar::U32,
+        "int" | "vtktypeint32" => Scalar::I32,
+        "unsigned_long" | "vtktypeuint64" => Scalar::U64,
+        "long" | "vtktypeint64" => Scalar::I64,
+        "float" | "vtktypefloat32" => Scalar::F32,
+        "double" | "vtktypefloat64" => Scalar::F64,
+        _ => return None,
+    })
 }
 
 /// The last data block read, to explain a corrupt file.
@@ -234,7 +191,7 @@ impl<'a> Reader<'a> {
             let block = &self.data[self.pos..self.pos + bytes];
             self.line += block.iter().filter(|&&b| b == b'\n').count();
             self.pos += bytes;
-            block.chunks_exact(scalar.size()).map(|b| scalar.decode(b)).collect()
+            block.chunks_exact(scalar.size()).map(|b| scalar.decode(b, true)).collect()
         } else {
             let mut values = Vec::with_capacity(n.min(self.data.len()));
             for k in 0..n {
@@ -393,7 +350,7 @@ impl<'a> Reader<'a> {
     /// A scalar type name from a header's arguments.
     fn scalar(&self, name: Option<&String>, keyword: &str, header: usize) -> Result<Scalar, MeshError> {
         let name = name.map(String::as_str).unwrap_or("");
-        Scalar::from_name(name).ok_or_else(|| {
+        vtk_scalar(name).ok_or_else(|| {
             parse_error(self.path, format!("line {header}: {keyword} has unsupported data type '{name}'"))
         })
     }

@@ -19,6 +19,7 @@
 
 mod gmsh;
 mod legacy_vtk;
+mod scalar;
 mod surface_io;
 mod text;
 mod vtu;
@@ -33,6 +34,7 @@ use crate::{Cells, Mesh, MeshError, Point, TriSurface, HEX_TO_TETS};
 
 pub use gmsh::{read_gmsh, write_msh};
 pub use legacy_vtk::{read_vtk, read_vtk_surface, read_vtk_with_fields, write_vtk_legacy, write_vtk_legacy_with};
+pub use scalar::Scalar;
 pub use surface_io::{read_obj, read_stl, write_obj, write_stl};
 pub use vtu::{read_vtu, read_vtu_surface, read_vtu_with_fields, write_vtu, write_vtu_with};
 
