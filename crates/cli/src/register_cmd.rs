@@ -4,10 +4,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use fem::{Law, Material};
 use mesh::io::Field;
 use mesh::Point;
-use register::case::{compare, fem_model, network_model, phantom_push, Method};
+use register::case::{compare, phantom_push};
 use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
 use register::picture::side_view;
 use register::{
@@ -132,7 +131,7 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
     let clouds = frames.iter().map(|f| read_point_cloud(f));
     let outcomes =
         register_sequence(&organ, deformer.as_mut(), clouds, &targets, truths.as_deref(), &options, |i, o| {
-            let r = &o.registration;
+            let (r, tre) = (&o.registration, o.tre_mm());
             let row = FrameSummary {
                 cloud: frames[i].display().to_string(),
                 points: r.points,
@@ -140,8 +139,8 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
                 iterations: r.iterations,
                 surface_residual_mm: r.surface_residual * 1e3,
                 time_ms: ms(r.time),
-                tre_mean_mm: o.tre_mm().map(|t| t.0),
-                tre_max_mm: o.tre_mm().map(|t| t.1),
+                tre_mean_mm: tre.map(|t| t.0),
+                tre_max_mm: tre.map(|t| t.1),
             };
             println!(
                 "frame {i:<4} {} points ({} matched), {} iterations, surface residual {:.2} mm, {:.1} ms{}",
@@ -278,22 +277,17 @@ fn demo(args: &RegisterArgs) -> Result<()> {
     write_csv(&dir.join("truth.csv"), &case.truth)?;
     println!("case       {} (cloud.csv, targets_rest.csv, truth.csv)", dir.display());
 
-    let mut methods = Vec::new();
-    let (organ, deformer) = register::case::corotational_model()?;
-    methods.push(Method { name: "FEM co-rotational (3k T4)".into(), organ, deformer: Box::new(deformer) });
-    let (organ, deformer) = fem_model(Material::new(Law::Svk, 5000.0, 0.49))?;
-    methods.push(Method { name: "FEM SVK (3k T4)".into(), organ, deformer: Box::new(deformer) });
     let model_path = args.model.clone().unwrap_or_else(|| PathBuf::from(DEMO_MODEL));
-    if model_path.exists() {
-        let model = learn::TrainedModel::load(&model_path, &learn::inference_device())?;
-        let (organ, deformer) = network_model(&model)?;
-        methods.push(Method { name: "U-Net".into(), organ, deformer: Box::new(deformer) });
+    let network = if model_path.exists() {
+        Some(learn::TrainedModel::load(&model_path, &learn::inference_device())?)
     } else {
         println!(
             "U-Net      skipped: {} not found (run from the repository root, or give --model)",
             model_path.display()
         );
-    }
+        None
+    };
+    let methods = register::case::methods(network.as_ref())?;
     let options = RegistrationOptions { iterations: args.iterations, ..Default::default() };
     let rows = compare(&case, methods, &options)?;
     let rest = &rows.first().context("no method to compare")?.summary;

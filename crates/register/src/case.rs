@@ -3,7 +3,7 @@
 //! inverse crime), the cloud from a camera looking at its deformed surface.
 
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
-use mesh::Point;
+use mesh::{Mesh, Point};
 
 use learn::TrainedModel;
 
@@ -50,31 +50,59 @@ pub fn phantom_push(force: f64, camera: &CameraModel, seed: u64) -> Result<Synth
 /// Tetrahedra of the registration models (the FEM models and the network's training mesh).
 pub const MODEL_TETS: usize = 3000;
 
-/// A FEM registration model for [`phantom_push`]: the phantom of about [`MODEL_TETS`]
-/// tetrahedra (another mesh than the truth's) with `material`, fixed between the lobes, with
-/// the default data stiffness.
-pub fn fem_model(material: Material) -> Result<(Organ, FemDeformer)> {
-    let m = mesh::phantom::liver_phantom(MODEL_TETS)?;
-    let mut problem = Problem::new(m.clone(), material);
-    problem.fix(m.region("fixed")?);
+/// The phantom of about [`MODEL_TETS`] tetrahedra that the registration models deform
+/// (another mesh than the truth's).
+pub fn model_mesh() -> Result<Mesh> {
+    Ok(mesh::phantom::liver_phantom(MODEL_TETS)?)
+}
+
+/// A FEM registration model for [`phantom_push`] on `mesh` (a phantom, e.g. [`model_mesh`])
+/// with `material`, fixed between the lobes, with the default data stiffness.
+pub fn fem_model(mesh: Mesh, material: Material) -> Result<(Organ, FemDeformer)> {
+    let mut problem = Problem::new(mesh.clone(), material);
+    problem.fix(mesh.region("fixed")?);
     let stiffness = FemDeformer::default_stiffness(&problem);
-    Ok((Organ::new(m, None)?, FemDeformer::new(problem, stiffness, SolverOptions::default())?))
+    Ok((Organ::new(mesh, None)?, FemDeformer::new(problem, stiffness, SolverOptions::default())?))
 }
 
-/// The co-rotational registration model (E = 5 kPa, ν = 0.48): another law than the truth's.
+/// The co-rotational registration law (E = 5 kPa, ν = 0.48): another law than the truth's.
+fn corotational_material() -> Material {
+    Material::new(Law::Corotational, 5000.0, 0.48)
+}
+
+/// The co-rotational registration model on [`model_mesh`].
 pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
-    fem_model(Material::new(Law::Corotational, 5000.0, 0.48))
+    fem_model(model_mesh()?, corotational_material())
 }
 
-/// The U-Net registration model: `model`, trained on the phantom of [`MODEL_TETS`]
-/// tetrahedra with the normal displacement of its `visible` region as input
-/// (`scenarios/liver_ar.toml`).
-pub fn network_model(model: &TrainedModel) -> Result<(Organ, NetworkDeformer)> {
-    let m = mesh::phantom::liver_phantom(MODEL_TETS)?;
-    let visible = m.region("visible")?.to_vec();
-    let organ = Organ::new(m, None)?;
+/// The U-Net registration model on `mesh` (the phantom the network was trained on, e.g.
+/// [`model_mesh`]): `model`, trained with the normal displacement of the `visible` region as
+/// input (`scenarios/liver_ar.toml`).
+pub fn network_model(mesh: Mesh, model: &TrainedModel) -> Result<(Organ, NetworkDeformer)> {
+    let visible = mesh.region("visible")?.to_vec();
+    let organ = Organ::new(mesh, None)?;
     let deformer = NetworkDeformer::new(model, &organ, &visible, true)?;
     Ok((organ, deformer))
+}
+
+/// The methods compared on [`phantom_push`], all on [`model_mesh`]: the co-rotational FEM, the
+/// SVK FEM (E = 5 kPa, ν = 0.49, the law of the network's training data) and, when given, the
+/// U-Net `network`.
+pub fn methods(network: Option<&TrainedModel>) -> Result<Vec<Method>> {
+    let mesh = model_mesh()?;
+    let fem = |name: &str, material: Material| -> Result<Method> {
+        let (organ, deformer) = fem_model(mesh.clone(), material)?;
+        Ok(Method { name: name.into(), organ, deformer: Box::new(deformer) })
+    };
+    let mut out = vec![
+        fem("FEM co-rotational (3k T4)", corotational_material())?,
+        fem("FEM SVK (3k T4)", Material::new(Law::Svk, 5000.0, 0.49))?,
+    ];
+    if let Some(model) = network {
+        let (organ, deformer) = network_model(mesh, model)?;
+        out.push(Method { name: "U-Net".into(), organ, deformer: Box::new(deformer) });
+    }
+    Ok(out)
 }
 
 /// A registration method of a comparison.
