@@ -279,13 +279,11 @@ pub fn eval(model_path: &Path, dataset_dir: &Path, corruption: &CorruptionArgs, 
     if test.is_empty() {
         bail!("{} holds no sample held out from this model (no test split recorded for it)", dataset_dir.display());
     }
-    let trained_here =
-        model.training.as_ref().is_some_and(|t| t.split.source.is_some() && t.split.source == all.source);
     println!(
         "held out   {} of {} samples ({})",
         test.len(),
         all.len(),
-        if trained_here {
+        if model.trained_on(&all) {
             "the test split recorded in the model"
         } else {
             "those no run behind the model trained or validated on"

@@ -460,12 +460,18 @@ impl TrainedModel {
         self.training.iter().flat_map(TrainingInfo::splits).try_for_each(|split| split.check_unseen(samples))
     }
 
+    /// Whether `samples` come from the data this model's own run was trained on (then its
+    /// recorded test split is what [`held_out`](Self::held_out) gives).
+    pub fn trained_on(&self, samples: &Samples) -> bool {
+        self.training.as_ref().is_some_and(|t| samples.source.is_some() && t.split.source == samples.source)
+    }
+
     /// The samples of `samples` held out from this model: from the data it was trained on, its
     /// recorded test samples; from other data, every sample that no run behind the model
     /// trained or validated on (all of them, for a dataset it never saw).
     pub fn held_out(&self, samples: &Samples) -> Result<Samples> {
         let Some(info) = &self.training else { return Ok(samples.clone()) };
-        if samples.source.is_some() && info.split.source == samples.source {
+        if self.trained_on(samples) {
             let [_, _, test] = info.split.apply(samples)?;
             return Ok(test);
         }
