@@ -422,15 +422,13 @@ fn held_out_split(train: &Samples, val: &Samples, test: &IndexSet) -> Result<Spl
         validation: IndexSet::from_indices(&val.indices),
         test: test.clone(),
     };
-    let overlap = |a: &IndexSet, b: &[u64], what: &str| match a.first_common(b) {
-        Some(i) => Err(LearnError::InvalidInput(format!("sample {i} is both a training and a {what} sample"))),
+    let overlap = |set: &IndexSet, indices: &[u64], roles: &str| match set.first_common(indices) {
+        Some(i) => Err(LearnError::InvalidInput(format!("sample {i} is both a {roles} sample"))),
         None => Ok(()),
     };
-    overlap(&split.train, &val.indices, "validation")?;
-    overlap(test, &train.indices, "test")?;
-    if let Some(i) = test.first_common(&val.indices) {
-        return Err(LearnError::InvalidInput(format!("sample {i} is both a validation and a test sample")));
-    }
+    overlap(&split.train, &val.indices, "training and a validation")?;
+    overlap(test, &train.indices, "training and a test")?;
+    overlap(test, &val.indices, "validation and a test")?;
     Ok(split)
 }
 
