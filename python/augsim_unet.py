@@ -1,0 +1,228 @@
+#!/usr/bin/env python3
+"""augsim's U-Net in PyTorch, rebuilt from a trained model directory.
+
+Depends on torch and numpy only (the safetensors file is parsed here). It reproduces
+``augsim predict`` on a grid tensor:
+
+    import numpy as np, augsim_unet
+    model = augsim_unet.load("models/liver_ar")          # torch.nn.Module, eval mode, float32
+    u = augsim_unet.predict(model, np.load("input.npy"))  # [3, nx, ny, nz] displacement (m)
+
+A model directory holds ``model.json`` (format "augsim-unet" v1: U-Net configuration,
+normalisation, grid, units) and the weights file it names (``model.safetensors``), as written by
+``augsim train``.
+
+Conventions (crates/learn/src/unet.rs, inference.rs, predict.rs, grid.rs):
+
+- Grid tensors are ``[channel, x, y, z]``, C order (z fastest), float32; the channels are the x, y,
+  z components. Prediction input: the model's ``input_unit`` (N for forces, m for imposed
+  displacements), shape ``[in_channels, nx, ny, nz]`` on the model's grid ``model.grid``;
+  output: displacement in m, ``[out_channels, nx, ny, nz]``. Values outside the organ are
+  meaningless (apply the dataset mask).
+- Normalisation: one scale per field, no offset. The network sees
+  ``float32(float64(x) * (1 / input_scale))`` and its output ``y`` becomes
+  ``float32(float64(y) * target_scale)``; an input array of another dtype is first cast to
+  float32, as augsim does with a float64 ``.npy``.
+- Architecture (``depth`` down steps, ``c_l = base_channels * 2**l``, ``k = kernel_size``):
+  encoder level l: two k^3 convolutions (zero padding k//2) + ReLU to c_l, kept as skip, then a
+  2^3 stride-2 convolution; bottleneck: two convolutions + ReLU to c_depth; decoder level
+  l = depth-1..0: 2^3 stride-2 transposed convolution to c_l, concatenation [upsampled, skip]
+  along channels, two convolutions + ReLU to c_l; head: 1^3 convolution to out_channels.
+  The input is zero-padded at the high end of x, y and z to a multiple of 2**depth and the
+  output cropped back to the input grid, so there is no interpolation anywhere.
+- Weights: burn's names and layouts, the same as PyTorch's (``encoder.0.conv1.weight``
+  ``[c_out, c_in, k, k, k]``, ``up.0.weight`` ``[c_in, c_out, 2, 2, 2]``, every layer has a bias).
+
+Point-cloud inputs (``augsim predict`` on .csv or ``[N, 6]`` .npy) are not handled here: encode
+them on the grid with augsim first.
+
+Command line: ``python augsim_unet.py MODEL_DIR INPUT.npy OUTPUT.npy``.
+"""
+
+import json
+import os
+import struct
+import sys
+
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+MODEL_FORMAT = "augsim-unet"
+MODEL_VERSION = 1
+
+_DTYPES = {"F32": "<f4", "F64": "<f8", "F16": "<f2", "BF16": "<u2"}
+
+
+def read_safetensors(path):
+    """Reads a safetensors file into a dict name -> float32 numpy array.
+
+    Format: an 8-byte little-endian header length, a JSON header (name -> dtype, shape,
+    data_offsets relative to the end of the header; optional ``__metadata__``), raw
+    little-endian data.
+    """
+    with open(path, "rb") as f:
+        data = f.read()
+    if len(data) < 8:
+        raise ValueError(f"{path}: too short for a safetensors file")
+    (n,) = struct.unpack("<Q", data[:8])
+    if 8 + n > len(data):
+        raise ValueError(f"{path}: header length {n} runs past the end of the file")
+    header = json.loads(data[8:8 + n].decode("utf-8"))
+    body = memoryview(data)[8 + n:]
+    tensors = {}
+    for name, info in header.items():
+        if name == "__metadata__":
+            continue
+        dtype, shape, (start, end) = info["dtype"], info["shape"], info["data_offsets"]
+        if dtype not in _DTYPES:
+            raise ValueError(f"{path}: tensor {name}: unsupported dtype {dtype}")
+        if not 0 <= start <= end <= len(body):
+            raise ValueError(f"{path}: tensor {name}: data offsets {start}..{end} outside the data")
+        a = np.frombuffer(body[start:end], dtype=_DTYPES[dtype])
+        if a.size != int(np.prod(shape, dtype=np.int64)):
+            raise ValueError(f"{path}: tensor {name}: {a.size} values for shape {shape}")
+        if dtype == "BF16":
+            a = (a.astype(np.uint32) << 16).view(np.float32)
+        tensors[name] = a.astype(np.float32).reshape(shape)
+    return tensors
+
+
+class ConvBlock(nn.Module):
+    """Two same-size convolutions, each followed by ReLU."""
+
+    def __init__(self, c_in, c_out, k):
+        super().__init__()
+        self.conv1 = nn.Conv3d(c_in, c_out, k, padding=k // 2)
+        self.conv2 = nn.Conv3d(c_out, c_out, k, padding=k // 2)
+
+    def forward(self, x):
+        return F.relu(self.conv2(F.relu(self.conv1(x))))
+
+
+class UNet(nn.Module):
+    """augsim's 3D U-Net; parameter names match augsim's safetensors files.
+
+    ``forward`` takes a normalised batch ``[batch, in_channels, nx, ny, nz]`` of any grid size
+    (zero-padded internally to a multiple of ``2**depth``, cropped back) and returns
+    ``[batch, out_channels, nx, ny, nz]`` in normalised units.
+    """
+
+    def __init__(self, in_channels=3, out_channels=3, base_channels=16, depth=3, kernel_size=3):
+        super().__init__()
+        if kernel_size % 2 == 0:
+            raise ValueError(f"kernel_size {kernel_size} must be odd")
+        ch = lambda l: base_channels << l
+        k = kernel_size
+        self.depth = depth
+        self.encoder = nn.ModuleList(
+            [ConvBlock(in_channels if l == 0 else ch(l - 1), ch(l), k) for l in range(depth)])
+        self.down = nn.ModuleList([nn.Conv3d(ch(l), ch(l), 2, stride=2) for l in range(depth)])
+        self.bottleneck = ConvBlock(in_channels if depth == 0 else ch(depth - 1), ch(depth), k)
+        self.up = nn.ModuleList([nn.ConvTranspose3d(ch(l + 1), ch(l), 2, stride=2) for l in range(depth)])
+        self.decoder = nn.ModuleList([ConvBlock(2 * ch(l), ch(l), k) for l in range(depth)])
+        self.head = nn.Conv3d(ch(0), out_channels, 1)
+
+    def forward(self, x):
+        nx, ny, nz = x.shape[2:]
+        m = 1 << self.depth
+        px, py, pz = (-nx) % m, (-ny) % m, (-nz) % m
+        h = F.pad(x, (0, pz, 0, py, 0, px)) if px or py or pz else x
+        skips = []
+        for block, down in zip(self.encoder, self.down):
+            h = block(h)
+            skips.append(h)
+            h = down(h)
+        h = self.bottleneck(h)
+        for l in reversed(range(self.depth)):
+            h = self.decoder[l](torch.cat([self.up[l](h), skips[l]], 1))
+        return self.head(h)[:, :, :nx, :ny, :nz]
+
+
+def _model_json(model_dir):
+    return model_dir if os.path.isfile(model_dir) else os.path.join(model_dir, "model.json")
+
+
+def load(model_dir, device="cpu"):
+    """Loads a trained augsim model: a directory holding model.json, or the model.json path.
+
+    Returns a :class:`UNet` in eval mode (float32, on ``device``) with the model file's
+    metadata as attributes: ``config`` (the "unet" dict), ``input_scale``, ``target_scale``,
+    ``grid`` ((nx, ny, nz)), ``input_unit``, ``target_unit``, ``placement`` (dict or None) and
+    ``info`` (the whole model.json). The weights must fit the configuration exactly.
+    """
+    json_path = _model_json(model_dir)
+    with open(json_path, encoding="utf-8") as f:
+        info = json.load(f)
+    if info.get("format") != MODEL_FORMAT or info.get("version") != MODEL_VERSION:
+        raise ValueError(f"{json_path}: format {info.get('format')!r} v{info.get('version')} "
+                         f"is not {MODEL_FORMAT!r} v{MODEL_VERSION}")
+    weights = info["weights"]
+    if os.path.basename(weights) != weights or os.path.isabs(weights):
+        raise ValueError(f"{json_path}: weights {weights!r} must be a file name beside the model file")
+    config = {"in_channels": 3, "out_channels": 3, "base_channels": 16, "depth": 3, "kernel_size": 3}
+    config.update(info["unet"])
+    net = UNet(**config)
+    tensors = read_safetensors(os.path.join(os.path.dirname(os.path.abspath(json_path)), weights))
+    state = {name: torch.from_numpy(a.copy()) for name, a in tensors.items()}
+    try:
+        net.load_state_dict(state, strict=True)
+    except RuntimeError as e:
+        raise ValueError(f"{json_path}: weights do not fit the configuration {config}: {e}") from e
+    norm = info["normalization"]
+    net.config = config
+    net.input_scale = float(norm["input_scale"])
+    net.target_scale = float(norm["target_scale"])
+    net.grid = tuple(int(n) for n in info["grid"])
+    net.input_unit = info.get("input_unit")
+    net.target_unit = info.get("target_unit")
+    net.placement = info.get("placement")
+    net.info = info
+    return net.to(device).eval()
+
+
+def predict(model, grid_input):
+    """Predicts the displacement (m) for a grid input, as ``augsim predict`` does.
+
+    ``grid_input``: array ``[in_channels, nx, ny, nz]`` (``[channel, x, y, z]``, C order) on the
+    model's grid, in the model's input unit; a batch ``[N, in_channels, nx, ny, nz]`` (a dataset
+    shard's inputs) also works. Returns float32 ``[out_channels, nx, ny, nz]`` (or
+    ``[N, out_channels, nx, ny, nz]``). Non-finite values and other grids are errors.
+    """
+    x = np.asarray(grid_input).astype(np.float32)
+    single = x.ndim == 4
+    if single:
+        x = x[None]
+    want = (model.config["in_channels"],) + tuple(model.grid)
+    if x.ndim != 5 or x.shape[1:] != want:
+        raise ValueError(f"input shape {np.shape(grid_input)}, but the model expects {list(want)} "
+                         f"(or a batch [N, {', '.join(map(str, want))}])")
+    if not np.all(np.isfinite(x)):
+        raise ValueError("prediction input has a non-finite value")
+    xn = (x.astype(np.float64) * (1.0 / model.input_scale)).astype(np.float32)
+    device = next(model.parameters()).device
+    with torch.inference_mode():
+        y = model(torch.from_numpy(xn).to(device)).cpu().numpy()
+    out = (y.astype(np.float64) * model.target_scale).astype(np.float32)
+    return out[0] if single else out
+
+
+def main(argv=None):
+    """``python augsim_unet.py MODEL_DIR INPUT.npy OUTPUT.npy``: writes the prediction as .npy."""
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) != 3 or argv[0] in ("-h", "--help"):
+        print("usage: python augsim_unet.py MODEL_DIR INPUT.npy OUTPUT.npy\n"
+              "  INPUT: grid tensor [3, nx, ny, nz] on the model grid (model input unit);\n"
+              "  OUTPUT: float32 displacement [3, nx, ny, nz] (m), as `augsim predict` writes",
+              file=sys.stderr)
+        return 2
+    model = load(argv[0])
+    out = predict(model, np.load(argv[1]))
+    np.save(argv[2], out)
+    print(f"wrote {argv[2]}: shape {list(out.shape)}, max |u| component {np.abs(out).max():.4e} m")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
