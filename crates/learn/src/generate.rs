@@ -70,7 +70,9 @@ fn default_shard_size() -> usize {
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum Load {
     /// One force along the inward surface normal, of random magnitude, shared by
-    /// the surface nodes within `radius` of a random centre node.
+    /// the surface nodes within `radius` of a random centre node in proportion to
+    /// their material share ([`mesh::Mesh::node_material_share`]: equal shares on a
+    /// body-fitted mesh; little for immersed-grid nodes outside the organ).
     PatchForce {
         /// Nodes the patch centre is drawn from (default: boundary nodes that are not fixed).
         centres: Option<NodeSelection>,
@@ -123,6 +125,8 @@ pub struct Generator {
     fixed_sets: Vec<Vec<usize>>,
     centres: Vec<usize>,
     normals: Vec<[f64; 3]>,
+    /// Each node's share of material, weighting the patch force.
+    material_share: Vec<f64>,
     load_nodes: Vec<usize>,
     observed: Vec<usize>,
     encoding: Encoding,
@@ -215,6 +219,7 @@ impl Generator {
                 embedding.mask().iter().enumerate().filter(|(_, &b)| b).for_each(|(g, _)| mask[g] = 1)
             }
         }
+        let material_share = mesh.node_material_share();
         Ok(Generator {
             mesh,
             material,
@@ -223,6 +228,7 @@ impl Generator {
             fixed_sets,
             centres,
             normals,
+            material_share,
             load_nodes,
             observed,
             encoding,
@@ -301,9 +307,13 @@ impl Generator {
                     .collect();
                 let mag = rng.random_range(magnitude[0]..=magnitude[1]);
                 let normal = self.normals[centre];
+                let total: f64 = patch.iter().map(|&n| self.material_share[n]).sum();
+                if !(total > 0.0) {
+                    return Err(format!("the patch around node {centre} has no free surface node"));
+                }
                 for &n in &patch {
                     for d in 0..3 {
-                        f[3 * n + d] -= mag * normal[d] / patch.len() as f64;
+                        f[3 * n + d] -= mag * normal[d] * self.material_share[n] / total;
                     }
                 }
             }

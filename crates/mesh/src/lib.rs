@@ -193,6 +193,22 @@ impl Mesh {
         }
     }
 
+    /// Each node's share of material: the mean volume fraction of the cells
+    /// around it (1 for every node of a body-fitted mesh; small for a node of an
+    /// immersed grid whose cells barely reach into the organ).
+    pub fn node_material_share(&self) -> Vec<f64> {
+        let Some(fraction) = &self.cell_fraction else { return vec![1.0; self.nodes.len()] };
+        let mut sum = vec![0.0; self.nodes.len()];
+        let mut count = vec![0usize; self.nodes.len()];
+        for (c, f) in fraction.iter().enumerate() {
+            for &k in self.cells.cell(c) {
+                sum[k] += f;
+                count[k] += 1;
+            }
+        }
+        sum.iter().zip(&count).map(|(s, &n)| if n > 0 { s / n as f64 } else { 0.0 }).collect()
+    }
+
     /// Total volume of the mesh.
     pub fn volume(&self) -> f64 {
         (0..self.cells.len()).map(|i| self.cell_volume(i)).sum()

@@ -531,6 +531,17 @@ fn immersed_grid_fractions_and_volume() {
     let err = grid.organ_volume() / volume - 1.0;
     println!("immersed phantom: {} cells, {} nodes, volume error {:+.3}%", f.len(), grid.mesh.num_nodes(), 100.0 * err);
     assert!(err.abs() < 0.03);
+    // Material shares: 1 at nodes whose cells are all full, the mean of the cell fractions elsewhere.
+    let share = grid.mesh.node_material_share();
+    let mut around = vec![Vec::new(); grid.mesh.num_nodes()];
+    for (c, &x) in f.iter().enumerate() {
+        grid.mesh.cells.cell(c).iter().for_each(|&k| around[k].push(x));
+    }
+    for (k, xs) in around.iter().enumerate() {
+        let mean = xs.iter().sum::<f64>() / xs.len() as f64;
+        assert!((share[k] - mean).abs() < 1e-12 && share[k] > 0.0 && share[k] <= 1.0);
+    }
+    assert!(share.contains(&1.0) && share.iter().any(|&s| s < 0.1));
     for (c, &x) in f.iter().enumerate() {
         let ijk = grid.cell_index[c];
         let centre: Point = std::array::from_fn(|d| grid.origin[d] + (ijk[d] as f64 + 0.5) * grid.spacing);
@@ -546,6 +557,7 @@ fn immersed_grid_fractions_and_volume() {
     assert_eq!(grid.mesh.region("markers").unwrap().len(), 10);
     // Regions copied from the T4 phantom lie near their source nodes.
     let t4 = liver_phantom(3000).unwrap();
+    assert!(t4.node_material_share().iter().all(|&s| s == 1.0), "a body-fitted mesh has full shares");
     let mut copy = grid.clone();
     copy.mesh.regions.clear();
     assert!(copy.transfer_regions(&t4).is_empty());
