@@ -7,6 +7,7 @@ mod mesh_cmd;
 mod register_cmd;
 mod scenario;
 mod solve;
+mod view_cmd;
 
 use std::path::PathBuf;
 
@@ -111,6 +112,9 @@ enum Command {
     /// Register the organ to an intraoperative point cloud (no correspondences): deformed organ,
     /// registered targets and, given the truth, the target registration error.
     Register(register_cmd::RegisterArgs),
+    /// A self-contained HTML 3D viewer (opens in a browser, no network): a dataset sample on the organ (rest,
+    /// FEM reference, the model's prediction, coloured by its error, markers) or a mesh file's displacements.
+    View(view_cmd::ViewArgs),
     /// Benchmarks of the static solver (median times, split by phase).
     Bench {
         /// Repetitions per case.
@@ -131,6 +135,7 @@ fn main() {
     let result: Result<()> = match cli.command {
         Command::Solve { scenario, output } => solve::run(&scenario, output.as_deref()),
         Command::Register(args) => register_cmd::run(&args),
+        Command::View(args) => view_cmd::run(&args),
         Command::Mesh { surface, length, tets, immersed, output } => {
             mesh_cmd::run(&mesh_cmd::MeshArgs { surface, length, tets, immersed, output })
         }

@@ -41,6 +41,7 @@ pub mod inference;
 pub mod metrics;
 pub mod npy;
 pub mod predict;
+pub mod sample_view;
 pub mod split;
 pub mod train;
 pub mod unet;

@@ -3,6 +3,8 @@
 //! embedded DejaVu Sans font (no system font lookup), and files are written atomically (temporary sibling, then
 //! rename).
 
+pub mod viewer;
+
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};

@@ -1,0 +1,170 @@
+//! `augsim view`: a self-contained HTML 3D viewer (one file, opens in a browser without network) of a dataset
+//! sample on the organ — rest shape, FEM reference, a model's prediction, coloured by the prediction error, with
+//! the internal markers — or of the displacement fields of a mesh file.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use learn::sample_view::{first_held_out, sample_on_mesh};
+use learn::{Dataset, TrainedModel};
+use mesh::io::{Field, FieldLocation};
+use mesh::Mesh;
+use plot::viewer::{Layer, Scalar, Scene};
+
+use crate::learn_cmd::DatasetScenario;
+
+/// Options of `augsim view`.
+#[derive(Debug, clap::Args)]
+pub struct ViewArgs {
+    /// Trained model: its directory or its model.json.
+    #[arg(long, requires = "dataset")]
+    pub model: Option<PathBuf>,
+    /// Dataset directory the sample is taken from.
+    #[arg(long, requires = "model")]
+    pub dataset: Option<PathBuf>,
+    /// Generation index of the sample (as `eval` reports them); default: the first sample held out from the
+    /// model.
+    #[arg(long, requires = "model")]
+    pub sample: Option<u64>,
+    /// Dataset scenario the dataset was generated from, to rebuild the organ's mesh; default
+    /// scenarios/<dataset name>.toml.
+    #[arg(long, requires = "model", conflicts_with = "mesh")]
+    pub scenario: Option<PathBuf>,
+    /// The organ's volume mesh (.vtu, .vtk, .msh) instead of rebuilding it from the scenario.
+    #[arg(long, requires = "model")]
+    pub mesh: Option<PathBuf>,
+    /// Show a mesh file (.vtu, .vtk) instead: its 3-component point fields as displacements (m), coloured by the
+    /// error when it has `reference` and `prediction` fields (as `eval` writes), else by the first one's
+    /// magnitude.
+    #[arg(long, conflicts_with_all = ["model", "dataset"])]
+    pub vtu: Option<PathBuf>,
+    /// Output HTML file.
+    #[arg(short, long, default_value = "out/view.html")]
+    pub out: PathBuf,
+}
+
+/// Runs `augsim view`.
+pub fn run(args: &ViewArgs) -> Result<()> {
+    let scene = match (&args.vtu, &args.model, &args.dataset) {
+        (Some(file), _, _) => file_scene(file)?,
+        (None, Some(model), Some(dataset)) => sample_scene(args, model, dataset)?,
+        _ => bail!("give --model and --dataset (a dataset sample), or --vtu FILE (a mesh file with displacements)"),
+    };
+    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    plot::viewer::write_html(&args.out, &scene)?;
+    println!("wrote      {} (open it in a browser)", args.out.display());
+    Ok(())
+}
+
+/// The scene of a dataset sample with the model's prediction.
+fn sample_scene(args: &ViewArgs, model_path: &Path, dataset_dir: &Path) -> Result<Scene> {
+    let model_json = if model_path.is_dir() { model_path.join("model.json") } else { model_path.to_path_buf() };
+    let model = TrainedModel::load(&model_json, &learn::inference_device())?;
+    let dataset = Dataset::open(dataset_dir)?;
+    let manifest = dataset.manifest();
+    let (organ, from) = match (&args.mesh, &args.scenario) {
+        (Some(path), _) => {
+            (mesh::io::read_mesh(path).with_context(|| format!("reading {}", path.display()))?, path.clone())
+        }
+        (None, given) => {
+            let path = given.clone().unwrap_or_else(|| PathBuf::from(format!("scenarios/{}.toml", manifest.scenario)));
+            if given.is_none() && !path.is_file() {
+                bail!(
+                    "the organ's mesh: no {} here; give the dataset's scenario (--scenario) or its mesh (--mesh)",
+                    path.display()
+                );
+            }
+            (scenario_mesh(&path)?, path)
+        }
+    };
+    let index = match args.sample {
+        Some(i) => i,
+        None => first_held_out(&model, manifest)
+            .with_context(|| format!("{} holds no sample held out from the model", dataset_dir.display()))?,
+    };
+    let sample = sample_on_mesh(&model, &dataset, index, &organ)?;
+    let scene =
+        sample.scene(&organ, &format!("{}, sample {index}: U-Net prediction vs FEM reference", manifest.scenario));
+    println!("sample     {index} of {} ({} sample of this model)", dataset_dir.display(), sample.role);
+    println!(
+        "mesh       {} nodes, {} surface triangles ({})",
+        organ.num_nodes(),
+        scene.triangles.len(),
+        from.display()
+    );
+    for note in scene.notes.iter().skip(1) {
+        println!("           {note}");
+    }
+    Ok(scene)
+}
+
+/// The organ's mesh as a dataset scenario builds it.
+fn scenario_mesh(path: &Path) -> Result<Mesh> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read scenario {}", path.display()))?;
+    let scenario: DatasetScenario =
+        toml::from_str(&text).with_context(|| format!("invalid scenario {}", path.display()))?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    crate::scenario::build_mesh(&scenario.mesh, &dir)
+        .with_context(|| format!("building the mesh of {}", path.display()))
+}
+
+/// The scene of a mesh file: its boundary at rest and moved by each 3-component point field.
+fn file_scene(path: &Path) -> Result<Scene> {
+    let (organ, fields) =
+        mesh::io::read_mesh_with_fields(path).with_context(|| format!("reading {}", path.display()))?;
+    let vectors: Vec<&Field> = fields
+        .iter()
+        .filter(|f| f.location == FieldLocation::Point && f.components == 3 && f.num_tuples() == organ.num_nodes())
+        .collect();
+    let field = |name: &str| vectors.iter().find(|f| f.name == name);
+    let magnitude = |v: &[f64]| -> Vec<f64> {
+        v.chunks_exact(3).map(|c| 1e3 * (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()).collect()
+    };
+    let colour = match (field("reference"), field("prediction"), vectors.first()) {
+        (Some(r), Some(p), _) => Some(Scalar {
+            name: "prediction error".into(),
+            unit: "mm".into(),
+            values: magnitude(&p.values.iter().zip(&r.values).map(|(a, b)| a - b).collect::<Vec<_>>()),
+        }),
+        (_, _, Some(f)) => {
+            Some(Scalar { name: format!("|{}|", f.name), unit: "mm".into(), values: magnitude(&f.values) })
+        }
+        _ => None,
+    };
+    let surface = mesh::boundary_surface(&organ);
+    println!(
+        "mesh       {} nodes, {} surface triangles; displacement fields: {}",
+        organ.num_nodes(),
+        surface.triangles.len(),
+        if vectors.is_empty() {
+            "none".into()
+        } else {
+            vectors.iter().map(|f| f.name.as_str()).collect::<Vec<_>>().join(", ")
+        }
+    );
+    Ok(Scene {
+        title: path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+        notes: vec![format!("{} nodes, {} {} cells", organ.num_nodes(), organ.cells.len(), organ.cells.kind_name())],
+        triangles: surface.triangles.iter().map(|t| t.map(|i| i as u32)).collect(),
+        layers: vectors
+            .iter()
+            .map(|f| Layer {
+                name: f.name.clone(),
+                positions: organ
+                    .nodes
+                    .iter()
+                    .enumerate()
+                    .map(|(n, p)| {
+                        let u = f.tuple(n);
+                        [p[0] + u[0], p[1] + u[1], p[2] + u[2]]
+                    })
+                    .collect(),
+            })
+            .collect(),
+        rest: organ.nodes,
+        colour,
+        points: Vec::new(),
+    })
+}
