@@ -7,10 +7,10 @@ use fem::{Material, SolverOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 use learn::generate::{DatasetConfig, Generator};
 use learn::{
-    Corruption, Dataset, DatasetPart, Initialization, Samples, Sparsity, Split, TrainConfig, TrainOptions,
+    Corruption, Dataset, DatasetPart, Initialization, PredictInput, Sparsity, SplitPolicy, TrainConfig, TrainOptions,
     TrainedModel, UNetConfig,
 };
-use mesh::io::Field;
+use mesh::io::{write_atomic_bytes, Field};
 use serde::Deserialize;
 
 use crate::scenario::MeshSource;
@@ -124,7 +124,7 @@ impl CorruptionArgs {
 }
 
 /// How `train` splits the dataset (by generation index: the last samples are the test set, the
-/// ones before them the validation set, the rest the training set).
+/// ones before them the validation set, the rest the training set); see [`SplitPolicy`].
 #[derive(Debug, Clone, clap::Args)]
 pub struct SplitArgs {
     /// Fraction of the dataset held out as the test set (its last samples).
@@ -140,19 +140,20 @@ pub struct SplitArgs {
     /// Number of validation samples; overrides --validation-fraction.
     #[arg(long)]
     pub validation_samples: Option<usize>,
+    /// Use only the first N training samples (e.g. 100 for transfer learning).
+    #[arg(long)]
+    pub train_samples: Option<usize>,
 }
 
 impl SplitArgs {
-    fn split(&self, all: &Samples) -> Result<Split> {
-        let count = |fraction: f64, given: Option<usize>, flag: &str| -> Result<usize> {
-            if !(0.0..1.0).contains(&fraction) {
-                bail!("--{flag}-fraction must lie in [0, 1), got {fraction}");
-            }
-            Ok(given.unwrap_or((all.len() as f64 * fraction).round() as usize))
-        };
-        let test = count(self.test_fraction, self.test_samples, "test")?;
-        let validation = count(self.validation_fraction, self.validation_samples, "validation")?;
-        Ok(Split::last(all, validation, test)?)
+    fn policy(&self) -> SplitPolicy {
+        SplitPolicy {
+            test_fraction: self.test_fraction,
+            test_samples: self.test_samples,
+            validation_fraction: self.validation_fraction,
+            validation_samples: self.validation_samples,
+            train_samples: self.train_samples,
+        }
     }
 }
 
@@ -182,9 +183,6 @@ pub struct TrainArgs {
     /// Down-sampling steps of the U-Net.
     #[arg(long, default_value_t = 3)]
     pub depth: usize,
-    /// Use only the first N training samples (e.g. 100 for transfer learning).
-    #[arg(long)]
-    pub train_samples: Option<usize>,
     /// Fine-tune this pre-trained model (model.json) instead of starting from scratch.
     #[arg(long)]
     pub init: Option<PathBuf>,
@@ -212,14 +210,7 @@ pub struct TrainArgs {
 pub fn train(args: &TrainArgs) -> Result<()> {
     let dataset = Dataset::open(&args.dataset)?;
     let all = dataset.load_all()?;
-    let split = args.split.split(&all)?;
-    let [mut train, validation, test] = split.apply(&all)?;
-    if let Some(n) = args.train_samples {
-        if n == 0 || n > train.len() {
-            bail!("--train-samples {n}: the training split has {} samples", train.len());
-        }
-        train = train.split_at(n)?.0;
-    }
+    let (split, [train, validation, test]) = args.split.policy().apply(&all)?;
     let init = match &args.init {
         Some(model) => Initialization::FineTune { model: model.clone(), freeze_encoder: args.freeze_encoder },
         None => Initialization::Scratch {
@@ -320,18 +311,23 @@ pub fn eval(model_path: &Path, dataset_dir: &Path, corruption: &CorruptionArgs, 
     for (i, e) in report.indices.iter().zip(&report.errors) {
         csv.push_str(&format!("{i},{e:e}\n"));
     }
-    write_atomic(&out.join("errors.csv"), csv.as_bytes())?;
+    write_atomic_bytes(&out.join("errors.csv"), csv.as_bytes())?;
     let summary = serde_json::json!({
         "model": model_path, "dataset": dataset_dir, "samples": test.len(),
         "mean_m": s.mean, "std_m": s.std, "max_m": s.max, "worst_index": report.worst_index(),
         "corruption": corruption.corruption(), "marker_errors": tre,
     });
-    write_atomic(&out.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    write_atomic_bytes(&out.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
     let worst = test.get(s.worst);
     let input = learn::evaluation_input(&test, s.worst, &corruption.corruption(), 0)?;
     let prediction = model.predict(&input)?;
     let vtu = out.join("worst.vtu");
-    write_grid_sample(&vtu, dataset.manifest(), &input, &worst.target, &prediction, &worst.mask)?;
+    let grid = dataset
+        .manifest()
+        .placement()
+        .context("the dataset manifest has no grid_origin/grid_spacing")?
+        .grid(dataset.manifest().grid)?;
+    learn::write_grid_sample(&vtu, &grid, &input, &worst.target, &prediction, &worst.mask)?;
     println!(
         "wrote      {}, {}, {}",
         out.join("errors.csv").display(),
@@ -341,89 +337,29 @@ pub fn eval(model_path: &Path, dataset_dir: &Path, corruption: &CorruptionArgs, 
     Ok(())
 }
 
-/// The grid as an H8 mesh with input, reference and predicted displacement and the mask.
-fn write_grid_sample(
-    path: &Path,
-    manifest: &learn::Manifest,
-    input: &[f32],
-    target: &[f32],
-    pred: &[f32],
-    mask: &[u8],
-) -> Result<()> {
-    let g = manifest.grid;
-    let placement = manifest.placement().context("the dataset manifest has no grid_origin/grid_spacing")?;
-    let grid = placement.grid(g)?;
-    let grid_mesh = mesh::box_hex(grid.origin, grid.upper(), [g.nx - 1, g.ny - 1, g.nz - 1])?;
-    // box_hex numbers nodes x fastest; the tensors are z fastest.
-    let n = g.nodes();
-    let to_points = |field: &[f32]| -> Vec<f64> {
-        let mut out = vec![0.0; 3 * n];
-        for k in 0..g.nz {
-            for j in 0..g.ny {
-                for i in 0..g.nx {
-                    let node = i + g.nx * (j + g.ny * k);
-                    for c in 0..3 {
-                        out[3 * node + c] = field[c * n + g.node_index(i, j, k)] as f64;
-                    }
-                }
-            }
-        }
-        out
-    };
-    let mask3: Vec<f32> = (0..3).flat_map(|_| mask.iter().map(|&m| m as f32)).collect();
-    let mask_points: Vec<f64> = to_points(&mask3).chunks(3).map(|c| c[0]).collect();
-    let fields = [
-        Field::point("input", 3, to_points(input)),
-        Field::point("reference", 3, to_points(target)),
-        Field::point("prediction", 3, to_points(pred)),
-        Field::point("mask", 1, mask_points),
-    ];
-    mesh::io::write_mesh(path, &grid_mesh, &fields).with_context(|| format!("writing {}", path.display()))
-}
-
 /// `augsim predict`: a grid tensor (.npy `[3, nx, ny, nz]`) or a point cloud (.csv or .npy
 /// `[N, 6]`: x, y, z and the vector in the model's input unit) to a displacement tensor, timed;
 /// with `mesh`, the displacement interpolated to that mesh's nodes is written beside the tensor.
 pub fn predict(model_path: &Path, input: &Path, output: &Path, mesh_path: Option<&Path>, runs: usize) -> Result<()> {
     let model = TrainedModel::load(model_path, &learn::inference_device())?;
     let g = model.grid;
-    let placed = || -> Result<mesh::embedding::Grid> {
-        let placement = model.placement.with_context(|| {
-            format!(
-                "{} does not record where its grid lies (trained before grid placement was stored)",
-                model_path.display()
-            )
-        })?;
-        Ok(placement.grid(g)?)
+    let read = PredictInput::read(input)?;
+    let points = match &read {
+        PredictInput::Points(cloud) => Some(cloud.len()),
+        PredictInput::Grid(_) => None,
     };
-    let data = match read_predict_input(input)? {
-        PredictInput::Grid(array) => {
-            if array.shape != [3, g.nx, g.ny, g.nz] {
-                bail!(
-                    "{}: shape {:?}, but the model expects [3, {}, {}, {}] (or a point cloud [N, 6])",
-                    input.display(),
-                    array.shape,
-                    g.nx,
-                    g.ny,
-                    g.nz
-                );
-            }
-            array.into_f32()
-        }
-        PredictInput::Points(points, vectors) => {
-            let force = match model.input_unit.as_str() {
-                "N" => true,
-                "m" => false,
-                other => bail!("model input unit {other:?} is neither N (forces) nor m (displacements)"),
-            };
-            let t0 = std::time::Instant::now();
-            let data = learn::encode_points(&placed()?, &points, &vectors, force)
-                .with_context(|| format!("mapping {} onto the model grid", input.display()))?;
-            let what = if force { "forces spread to the grid" } else { "displacements on their nearest grid nodes" };
-            println!("points     {} ({what}, {:.2} ms)", points.len(), t0.elapsed().as_secs_f64() * 1e3);
-            data
-        }
-    };
+    let t0 = std::time::Instant::now();
+    let data = read
+        .into_network_input(&model)
+        .with_context(|| format!("{} as the input of {}", input.display(), model_path.display()))?;
+    if let Some(n) = points {
+        let what = if model.takes_forces()? {
+            "forces spread to the grid"
+        } else {
+            "displacements on their nearest grid nodes"
+        };
+        println!("points     {n} ({what}, {:.2} ms)", t0.elapsed().as_secs_f64() * 1e3);
+    }
     let predictor = learn::Predictor::new(&model)?;
     let prediction = predictor.predict(&data)?;
     learn::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
@@ -440,7 +376,9 @@ pub fn predict(model_path: &Path, input: &Path, output: &Path, mesh_path: Option
     println!("wrote      {}", output.display());
     if let Some(mesh_path) = mesh_path {
         let organ = mesh::io::read_mesh(mesh_path).with_context(|| format!("reading {}", mesh_path.display()))?;
-        let u = learn::GridToMesh::new(&organ, &placed()?)?.apply(&prediction)?;
+        let u = model
+            .field_on_mesh(&prediction, &organ)
+            .with_context(|| format!("{} on {}", model_path.display(), mesh_path.display()))?;
         let max = u.chunks(3).map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()).fold(0.0, f64::max);
         let vtu = output.with_extension("vtu");
         mesh::io::write_mesh(&vtu, &organ, &[Field::point("displacement", 3, u)])
@@ -449,54 +387,4 @@ pub fn predict(model_path: &Path, input: &Path, output: &Path, mesh_path: Option
         println!("wrote      {}", vtu.display());
     }
     Ok(())
-}
-
-/// What `augsim predict` reads.
-enum PredictInput {
-    /// A grid tensor.
-    Grid(learn::npy::NpyArray),
-    /// Points and their vectors.
-    Points(Vec<mesh::Point>, Vec<[f64; 3]>),
-}
-
-/// Reads a grid tensor or a point cloud (`.npy` `[N, 6]`, or `.csv` with six numbers per line
-/// and an optional header line).
-fn read_predict_input(path: &Path) -> Result<PredictInput> {
-    let rows: Vec<[f64; 6]> = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")) {
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let mut rows = Vec::new();
-        for (l, line) in text.lines().enumerate() {
-            let fields: Vec<&str> = line.split([',', ';']).map(str::trim).filter(|f| !f.is_empty()).collect();
-            if fields.is_empty() {
-                continue;
-            }
-            let numbers: Result<Vec<f64>, _> = fields.iter().map(|f| f.parse::<f64>()).collect();
-            match numbers {
-                Ok(v) if v.len() == 6 => rows.push([v[0], v[1], v[2], v[3], v[4], v[5]]),
-                Ok(v) => bail!("{}:{}: {} numbers, expected 6 (x, y, z, vx, vy, vz)", path.display(), l + 1, v.len()),
-                Err(_) if l == 0 => {} // header
-                Err(e) => bail!("{}:{}: {e}", path.display(), l + 1),
-            }
-        }
-        rows
-    } else {
-        let array = learn::npy::read_npy(path)?;
-        match array.shape.as_slice() {
-            [_, 6] => array.into_f64().chunks_exact(6).map(|r| std::array::from_fn(|i| r[i])).collect(),
-            _ => return Ok(PredictInput::Grid(array)),
-        }
-    };
-    if rows.is_empty() {
-        bail!("{}: no points", path.display());
-    }
-    Ok(PredictInput::Points(
-        rows.iter().map(|r| [r[0], r[1], r[2]]).collect(),
-        rows.iter().map(|r| [r[3], r[4], r[5]]).collect(),
-    ))
-}
-
-/// Writes a file atomically (temporary file in the same directory, then rename).
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    use std::io::Write;
-    mesh::io::write_file_atomic(path, |f| f.write_all(bytes)).with_context(|| format!("writing {}", path.display()))
 }

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use mesh::io::Field;
+use mesh::io::{write_atomic_bytes, Field};
 use mesh::Point;
 use register::case::{compare, phantom_push};
 use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
@@ -14,7 +14,6 @@ use register::{
 };
 use serde::Serialize;
 
-use crate::learn_cmd::write_atomic;
 use crate::learn_cmd::DatasetScenario;
 use crate::scenario::{build_mesh, MeshSource, Scenario};
 use crate::solve::ms;
@@ -170,7 +169,7 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
         println!("TRE        mean {t:.2} mm, max {m:.2} mm (without deformation: mean {r:.2} mm)");
     }
     let run = RunSummary { summary, per_frame: rows };
-    write_atomic(&args.out.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
+    write_atomic_bytes(&args.out.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
     println!(
         "wrote      {} ({}, targets.csv, summary.json)",
         args.out.display(),
@@ -202,7 +201,7 @@ fn write_targets(path: &Path, rest: &[Point], registered: &[Point]) -> Result<()
     for (a, b) in rest.iter().zip(registered) {
         text.push_str(&format!("{},{},{},{},{},{}\n", a[0], a[1], a[2], b[0], b[1], b[2]));
     }
-    write_atomic(path, text.as_bytes())
+    Ok(write_atomic_bytes(path, text.as_bytes())?)
 }
 
 /// Rest positions of the nodes of the `markers` and `tumour` regions, when the mesh has them.
@@ -329,9 +328,9 @@ fn demo(args: &RegisterArgs) -> Result<()> {
             Some(&case.truth),
         )?;
     }
-    write_atomic(&args.out.join("comparison.csv"), csv.as_bytes())?;
+    write_atomic_bytes(&args.out.join("comparison.csv"), csv.as_bytes())?;
     let summaries: Vec<&Summary> = rows.iter().map(|r| &r.summary).collect();
-    write_atomic(&args.out.join("summary.json"), serde_json::to_string_pretty(&summaries)?.as_bytes())?;
+    write_atomic_bytes(&args.out.join("summary.json"), serde_json::to_string_pretty(&summaries)?.as_bytes())?;
     println!();
     println!(
         "wrote      {} (comparison.csv, summary.json; per method: organ.vtu, targets.csv, registration.png)",

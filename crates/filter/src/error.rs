@@ -77,3 +77,9 @@ pub enum FilterError {
         source: serde_json::Error,
     },
 }
+
+impl From<mesh::io::WriteError> for FilterError {
+    fn from(e: mesh::io::WriteError) -> Self {
+        FilterError::Io { path: e.path, source: e.source }
+    }
+}

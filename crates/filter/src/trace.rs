@@ -1,9 +1,9 @@
 //! Per-iteration traces of the filter and their CSV / JSON output (atomic writes).
 
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::Path;
 
+use mesh::io::write_atomic_bytes;
 use serde::{Deserialize, Serialize};
 
 use crate::{FilterError, Transform};
@@ -63,14 +63,14 @@ impl Trace {
 
     /// Writes [`Trace::to_csv`] to `path` atomically.
     pub fn write_csv(&self, path: &Path) -> Result<(), FilterError> {
-        write_atomic(path, self.to_csv().as_bytes())
+        Ok(write_atomic_bytes(path, self.to_csv().as_bytes())?)
     }
 
     /// Writes the trace as pretty JSON to `path` atomically.
     pub fn write_json(&self, path: &Path) -> Result<(), FilterError> {
         let text =
             serde_json::to_vec_pretty(self).map_err(|source| FilterError::Json { path: path.to_path_buf(), source })?;
-        write_atomic(path, &text)
+        Ok(write_atomic_bytes(path, &text)?)
     }
 }
 
@@ -81,10 +81,4 @@ fn csv_field(s: &str) -> String {
     } else {
         s.to_string()
     }
-}
-
-/// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename).
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FilterError> {
-    mesh::io::write_file_atomic(path, |f| f.write_all(bytes))
-        .map_err(|source| FilterError::Io { path: path.to_path_buf(), source })
 }

@@ -3,11 +3,11 @@
 
 use std::path::Path;
 
+use mesh::io::write_atomic_bytes;
 use plot::{line_plot, PlotSpec, Series};
 
 use serde::{Deserialize, Serialize};
 
-use crate::fsutil::write_atomic;
 use crate::metrics::ErrorStats;
 use crate::{LearnError, Result};
 
@@ -32,7 +32,7 @@ pub fn write_curve_csv(path: &Path, curve: &[CurveRow]) -> Result<()> {
         let val = r.val.map(|v| format!("{:e},{:e},{:e}", v.mean, v.std, v.max)).unwrap_or_else(|| ",,".into());
         text.push_str(&format!("{},{:e},{val}\n", r.iteration, r.train_loss));
     }
-    write_atomic(path, text.as_bytes())
+    Ok(write_atomic_bytes(path, text.as_bytes())?)
 }
 
 /// Draws the training loss against the iteration into `path` and, when the curve has

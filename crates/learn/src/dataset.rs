@@ -20,10 +20,10 @@
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+use mesh::io::write_atomic_bytes;
 use mesh::Point;
 use serde::{Deserialize, Serialize};
 
-use crate::fsutil::write_atomic;
 use crate::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::npy;
 use crate::{LearnError, Result};
@@ -367,7 +367,7 @@ impl Manifest {
     fn write(&self, path: &Path) -> Result<()> {
         let text = serde_json::to_string_pretty(self)
             .map_err(|e| LearnError::manifest(path, format!("cannot serialize manifest: {e}")))?;
-        write_atomic(path, text.as_bytes())
+        Ok(write_atomic_bytes(path, text.as_bytes())?)
     }
 
     /// Checks internal consistency (not the shard files).

@@ -29,6 +29,16 @@ pub enum LearnError {
         /// What is wrong.
         message: String,
     },
+    /// An input file (a point cloud) that cannot be used.
+    #[error("{}{}: {message}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
+    Input {
+        /// The file.
+        path: PathBuf,
+        /// The line (1-based), where known.
+        line: Option<usize>,
+        /// What is wrong.
+        message: String,
+    },
     /// A model bundle, checkpoint or weights file that cannot be used.
     #[error("{path}: {message}")]
     Model {
@@ -40,6 +50,12 @@ pub enum LearnError {
     /// An argument that does not fit (wrong length, empty set, bad configuration value).
     #[error("invalid input: {0}")]
     InvalidInput(String),
+}
+
+impl From<mesh::io::WriteError> for LearnError {
+    fn from(e: mesh::io::WriteError) -> Self {
+        LearnError::Io { path: e.path, source: e.source }
+    }
 }
 
 impl LearnError {

@@ -2,17 +2,45 @@
 //! points (target registration errors), with reproducible input corruption. Training uses it
 //! for validation, `eval` for the test figures.
 
+use std::path::Path;
+
+use mesh::io::Field;
 use serde::{Deserialize, Serialize};
 
 use crate::corrupt::{item_rng, Corruption, STREAM_EVAL_CORRUPTION};
 use crate::dataset::{Normalization, Samples};
-use crate::grid::CHANNELS;
+use crate::grid::{GridMesh, CHANNELS};
 use crate::inference::InferenceNet;
 use crate::metrics::{mean_euclidean_error, ErrorStats, EvalReport};
 use crate::unet::TrainedModel;
 use crate::{LearnError, Result};
 use mesh::embedding::Grid;
 use mesh::Point;
+
+/// Writes one sample on the placed `grid` as a hexahedral mesh ([`GridMesh`]; `.vtu`, `.vtk` or `.msh` by the
+/// extension, see [`mesh::io::write_mesh`]) with the point fields `input`, `reference` (the target),
+/// `prediction` (3 components each, tensor layout) and `mask`, as `augsim eval` writes its worst sample.
+pub fn write_grid_sample(
+    path: &Path,
+    grid: &Grid,
+    input: &[f32],
+    target: &[f32],
+    prediction: &[f32],
+    mask: &[u8],
+) -> Result<()> {
+    let grid_mesh = GridMesh::new(grid)?;
+    let mask: Vec<f32> = mask.iter().map(|&m| f32::from(m)).collect();
+    let fields = [
+        Field::point("input", CHANNELS, grid_mesh.field(input, CHANNELS)?),
+        Field::point("reference", CHANNELS, grid_mesh.field(target, CHANNELS)?),
+        Field::point("prediction", CHANNELS, grid_mesh.field(prediction, CHANNELS)?),
+        Field::point("mask", 1, grid_mesh.field(&mask, 1)?),
+    ];
+    mesh::io::write_mesh(path, &grid_mesh.mesh, &fields).map_err(|e| match e {
+        mesh::MeshError::Io { source, .. } => LearnError::io(path, source),
+        e => LearnError::InvalidInput(e.to_string()),
+    })
+}
 
 /// Runs `net` on the normalised inputs of `samples` (each corrupted with its own generator,
 /// derived from `seed` and the sample position) and returns the per-sample errors (m);

@@ -332,13 +332,7 @@ impl Generator {
             Input::Displacement { sparse: Some([lo, hi]), .. } => {
                 let count = rng.random_range(*lo..=*hi);
                 let seed = self.mesh.nodes[self.observed[rng.random_range(0..self.observed.len())]];
-                let mut by_distance: Vec<(f64, usize)> = self
-                    .observed
-                    .iter()
-                    .map(|&n| (mesh::dot(mesh::sub(self.mesh.nodes[n], seed), mesh::sub(self.mesh.nodes[n], seed)), n))
-                    .collect();
-                by_distance.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-                by_distance.into_iter().take(count).map(|(_, n)| n).collect()
+                mesh::select::k_nearest(&self.mesh.nodes, self.observed.iter().copied(), seed, count)
             }
             _ => self.observed.clone(),
         };

@@ -199,6 +199,50 @@ impl GridToMesh {
     }
 }
 
+/// A placed grid seen as a hexahedral mesh, to write grid fields as VTK: one H8 cell per grid cell, nodes numbered
+/// x fastest as [`mesh::box_hex`] numbers them (the tensors are z fastest, see [`LAYOUT`]).
+#[derive(Clone, Debug)]
+pub struct GridMesh {
+    /// The mesh of the grid's cells.
+    pub mesh: mesh::Mesh,
+    shape: GridShape,
+}
+
+impl GridMesh {
+    /// The mesh of `grid`.
+    pub fn new(grid: &Grid) -> Result<Self> {
+        let [nx, ny, nz] = grid.dims;
+        let mesh = mesh::box_hex(grid.origin, grid.upper(), [nx - 1, ny - 1, nz - 1])
+            .map_err(|e| LearnError::InvalidInput(e.to_string()))?;
+        Ok(GridMesh { mesh, shape: GridShape::from(grid.dims) })
+    }
+
+    /// A field of `channels` channels in the tensor layout (`[c, x, y, z]`, e.g. 3 for a displacement, 1 for a
+    /// mask) as node-major values at the mesh nodes (`channels × nodes`).
+    pub fn field(&self, field: &[f32], channels: usize) -> Result<Vec<f64>> {
+        let g = self.shape;
+        let n = g.nodes();
+        if field.len() != channels * n {
+            return Err(LearnError::InvalidInput(format!(
+                "grid field has {} values, expected {channels} × {n}",
+                field.len()
+            )));
+        }
+        let mut out = vec![0.0; channels * n];
+        for k in 0..g.nz {
+            for j in 0..g.ny {
+                for i in 0..g.nx {
+                    let node = i + g.nx * (j + g.ny * k);
+                    for c in 0..channels {
+                        out[channels * node + c] = f64::from(field[c * n + g.node_index(i, j, k)]);
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -242,6 +286,26 @@ mod tests {
             assert_eq!(field[c * n + b], values[2][c] as f32);
         }
         assert_eq!(field.iter().filter(|v| **v != 0.0).count(), 6, "only the two nodes are written");
+    }
+
+    #[test]
+    fn grid_fields_land_on_the_grid_mesh_nodes_at_the_same_place() {
+        let g = grid();
+        let grid_mesh = GridMesh::new(&g).unwrap();
+        assert_eq!(grid_mesh.mesh.num_nodes(), g.num_nodes());
+        // A field holding each grid node's own coordinates reads back as the mesh nodes' positions.
+        let n = g.num_nodes();
+        let nodes = g.nodes();
+        let field: Vec<f32> = (0..3).flat_map(|c| nodes.iter().map(move |p| p[c] as f32)).collect();
+        let on_mesh = grid_mesh.field(&field, 3).unwrap();
+        for (m, p) in grid_mesh.mesh.nodes.iter().enumerate() {
+            for c in 0..3 {
+                assert!((on_mesh[3 * m + c] - p[c]).abs() < 1e-6, "node {m} channel {c}");
+            }
+        }
+        let mask: Vec<f32> = (0..n).map(|i| i as f32).collect();
+        assert_eq!(grid_mesh.field(&mask, 1).unwrap().len(), n);
+        assert!(grid_mesh.field(&mask, 3).is_err());
     }
 
     #[test]

@@ -24,7 +24,8 @@
 //! - [`inference`]: the trained network repacked for fast CPU inference.
 //! - [`evaluation`]: errors of a model over a sample set and at points.
 //! - [`predict`]: single predictions and their timing.
-//! - [`split`]: train / validation / test splits and the held-out guard.
+//! - [`points`]: point clouds (`.csv`, `.npy`) and grid tensors as prediction input.
+//! - [`split`]: train / validation / test splits, the policy that sizes them, and the held-out guard.
 
 #![warn(missing_docs)]
 
@@ -40,6 +41,7 @@ mod grid;
 pub mod inference;
 pub mod metrics;
 pub mod npy;
+pub mod points;
 pub mod predict;
 pub mod sample_view;
 pub mod split;
@@ -53,12 +55,13 @@ pub use dataset::{
     Samples, ShardInfo, Statistics,
 };
 pub use error::LearnError;
-pub use evaluation::{evaluate, evaluate_at_points, evaluation_input, PointErrors};
-pub use grid::{encode_points, GridPlacement, GridShape, GridToMesh, CHANNELS, LAYOUT};
+pub use evaluation::{evaluate, evaluate_at_points, evaluation_input, write_grid_sample, PointErrors};
+pub use grid::{encode_points, GridMesh, GridPlacement, GridShape, GridToMesh, CHANNELS, LAYOUT};
 pub use inference::InferenceNet;
 pub use metrics::{ErrorStats, EvalReport};
+pub use points::{PointCloud, PredictInput};
 pub use predict::{time_prediction, Predictor, Timing};
-pub use split::{IndexSet, Split};
+pub use split::{IndexSet, Split, SplitPolicy};
 pub use train::{train, Initialization, TrainConfig, TrainOptions, TrainOutcome};
 pub use unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
 

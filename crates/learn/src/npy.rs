@@ -7,7 +7,9 @@
 use std::io::Write;
 use std::path::Path;
 
-use crate::fsutil::{read, write_atomic_with};
+use mesh::io::write_atomic;
+
+use crate::fsutil::read;
 use crate::{LearnError, Result};
 
 const MAGIC: &[u8] = b"\x93NUMPY";
@@ -110,24 +112,26 @@ fn check_len(shape: &[usize], len: usize) -> Result<()> {
 pub fn write_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
     check_len(shape, data.len())?;
     let head = header("<f4", shape);
-    write_atomic_with(path, |w| {
+    write_atomic(path, |w| {
         w.write_all(&head)?;
         for chunk in data.chunks(16384) {
             let bytes: Vec<u8> = chunk.iter().flat_map(|x| x.to_le_bytes()).collect();
             w.write_all(&bytes)?;
         }
         Ok(())
-    })
+    })?;
+    Ok(())
 }
 
 /// Writes u8 values of the given shape to `path` atomically (`|u1`, C order).
 pub fn write_u8(path: &Path, shape: &[usize], data: &[u8]) -> Result<()> {
     check_len(shape, data.len())?;
     let head = header("|u1", shape);
-    write_atomic_with(path, |w| {
+    write_atomic(path, |w| {
         w.write_all(&head)?;
         w.write_all(data)
-    })
+    })?;
+    Ok(())
 }
 
 /// Reads an `.npy` file.

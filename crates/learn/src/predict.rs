@@ -2,10 +2,12 @@
 
 use std::time::Instant;
 
+use mesh::embedding::Grid;
+use mesh::Mesh;
 use serde::{Deserialize, Serialize};
 
 use crate::dataset::Normalization;
-use crate::grid::GridShape;
+use crate::grid::{GridShape, GridToMesh};
 use crate::inference::InferenceNet;
 use crate::unet::TrainedModel;
 use crate::{LearnError, Result};
@@ -52,6 +54,36 @@ impl TrainedModel {
     pub fn predict(&self, input: &[f32]) -> Result<Vec<f32>> {
         Predictor::new(self)?.predict(input)
     }
+
+    /// The model's grid where it lies in space (needed to put points on it or to interpolate to a mesh); an
+    /// error for a model trained before grid placement was recorded.
+    pub fn placed_grid(&self) -> Result<Grid> {
+        let placement = self.placement.ok_or_else(|| {
+            LearnError::InvalidInput(
+                "the model does not record where its grid lies (trained before grid placement was stored): retrain it"
+                    .into(),
+            )
+        })?;
+        placement.grid(self.grid)
+    }
+
+    /// Whether the network takes nodal forces (input unit N) rather than displacements (m); any other unit is an
+    /// error.
+    pub fn takes_forces(&self) -> Result<bool> {
+        match self.input_unit.as_str() {
+            "N" => Ok(true),
+            "m" => Ok(false),
+            other => Err(LearnError::InvalidInput(format!(
+                "model input unit {other:?} is neither N (forces) nor m (displacements)"
+            ))),
+        }
+    }
+
+    /// A field on the model's grid (`[3, nx, ny, nz]`, e.g. a prediction) interpolated to the nodes of `organ`
+    /// ([`GridToMesh`]), node-major (`3 × nodes`). Every node must lie in the placed grid.
+    pub fn field_on_mesh(&self, field: &[f32], organ: &Mesh) -> Result<Vec<f64>> {
+        GridToMesh::new(organ, &self.placed_grid()?)?.apply(field)
+    }
 }
 
 /// Wall-clock statistics of repeated predictions (s).
@@ -59,7 +91,7 @@ impl TrainedModel {
 pub struct Timing {
     /// Timed runs.
     pub runs: usize,
-    /// Median.
+    /// Median ([`mesh::stats::median`]: the upper of the two middle runs for an even count).
     pub median: f64,
     /// Mean.
     pub mean: f64,
@@ -77,9 +109,9 @@ impl Timing {
         if d.is_empty() {
             return Err(LearnError::InvalidInput("no timed runs".into()));
         }
+        let median = mesh::stats::median(&mut d);
         d.sort_by(f64::total_cmp);
         let n = d.len();
-        let median = if n % 2 == 1 { d[n / 2] } else { 0.5 * (d[n / 2 - 1] + d[n / 2]) };
         let mean = d.iter().sum::<f64>() / n as f64;
         let std = (d.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n as f64).sqrt();
         Ok(Timing { runs: n, median, mean, std, min: d[0], max: d[n - 1] })

@@ -54,6 +54,73 @@ impl IndexSet {
     }
 }
 
+/// How many samples [`Split::last`] holds out, as `augsim train` takes them: each held-out set is a fraction of
+/// all the samples (rounded to the nearest count) unless a count is given; the last samples are the test set, the
+/// ones before them the validation set, the rest the training set, of which only the first `train_samples` may be
+/// used (e.g. 100 for transfer learning).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SplitPolicy {
+    /// Fraction of the samples held out as the test set, in [0, 1).
+    pub test_fraction: f64,
+    /// Number of test samples; overrides `test_fraction`.
+    pub test_samples: Option<usize>,
+    /// Fraction of the samples used for validation (checkpoint selection), in [0, 1).
+    pub validation_fraction: f64,
+    /// Number of validation samples; overrides `validation_fraction`.
+    pub validation_samples: Option<usize>,
+    /// Train on the first this many training samples only (at least 1, at most the training set).
+    pub train_samples: Option<usize>,
+}
+
+impl Default for SplitPolicy {
+    /// 20 % test, 10 % validation, every training sample used.
+    fn default() -> Self {
+        SplitPolicy {
+            test_fraction: 0.2,
+            test_samples: None,
+            validation_fraction: 0.1,
+            validation_samples: None,
+            train_samples: None,
+        }
+    }
+}
+
+impl SplitPolicy {
+    /// The split of `samples` ([`Split::last`] with this policy's validation and test counts).
+    pub fn split(&self, samples: &Samples) -> Result<Split> {
+        let count = |fraction: f64, given: Option<usize>, what: &str| -> Result<usize> {
+            if !(0.0..1.0).contains(&fraction) {
+                return Err(LearnError::InvalidInput(format!(
+                    "the {what} fraction must lie in [0, 1), got {fraction}"
+                )));
+            }
+            Ok(given.unwrap_or((samples.len() as f64 * fraction).round() as usize))
+        };
+        let test = count(self.test_fraction, self.test_samples, "test")?;
+        let validation = count(self.validation_fraction, self.validation_samples, "validation")?;
+        Split::last(samples, validation, test)
+    }
+
+    /// The split of `samples` and its training (the first `train_samples` when set), validation and test
+    /// samples. The split records the whole training set even when only part of it is used, so that evaluation
+    /// stays off all of it.
+    pub fn apply(&self, samples: &Samples) -> Result<(Split, [Samples; 3])> {
+        let split = self.split(samples)?;
+        let [mut train, validation, test] = split.apply(samples)?;
+        if let Some(n) = self.train_samples {
+            if n == 0 || n > train.len() {
+                return Err(LearnError::InvalidInput(format!(
+                    "{n} training samples asked, the training split has {}",
+                    train.len()
+                )));
+            }
+            train = train.split_at(n)?.0;
+        }
+        Ok((split, [train, validation, test]))
+    }
+}
+
 /// Which samples of one data source trained, selected and test a model.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -22,6 +22,7 @@ use burn::optim::{AdamConfig, ModuleOptimizer};
 use burn::store::ModuleRecord;
 use burn::tensor::{Bytes, Device};
 use indicatif::{ProgressBar, ProgressStyle};
+use mesh::io::write_atomic_bytes;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
@@ -30,7 +31,7 @@ use crate::corrupt::{item_rng, splitmix64, Corruption, STREAM_SHUFFLE, STREAM_TR
 use crate::curve::{plot_learning_curve, write_curve_csv, CurveRow};
 use crate::dataset::{Normalization, Samples};
 use crate::evaluation::evaluate_net;
-use crate::fsutil::{read, write_atomic};
+use crate::fsutil::read;
 use crate::grid::GridPlacement;
 use crate::split::{IndexSet, Split};
 use crate::unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
@@ -354,7 +355,7 @@ fn write_checkpoint(
         out.extend_from_slice(&(section.len() as u64).to_le_bytes());
         out.extend_from_slice(section);
     }
-    write_atomic(path, &out)
+    Ok(write_atomic_bytes(path, &out)?)
 }
 
 /// The sections of a checkpoint file.

@@ -24,13 +24,14 @@ use burn::store::{ModuleSnapshot, SafetensorsStore};
 use burn::tensor::activation::relu;
 use burn::tensor::ops::PadMode;
 use burn::tensor::{Device, Tensor, TensorData};
+use mesh::io::write_atomic_bytes;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use crate::backprop::Layers;
 use crate::dataset::{Normalization, Samples};
-use crate::fsutil::{read, write_atomic};
+use crate::fsutil::read;
 use crate::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::inference::{Block, InferenceNet, Packed};
 use crate::split::Split;
@@ -435,7 +436,7 @@ impl TrainedModel {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .ok_or_else(|| LearnError::InvalidInput(format!("model path {} has no file name", json_path.display())))?;
-        write_atomic(&weights_path, &self.net.to_safetensors()?)?;
+        write_atomic_bytes(&weights_path, &self.net.to_safetensors()?)?;
         let file = ModelFile {
             format: MODEL_FORMAT.into(),
             version: MODEL_VERSION,
@@ -451,7 +452,7 @@ impl TrainedModel {
         };
         let text = serde_json::to_string_pretty(&file)
             .map_err(|e| LearnError::model(json_path, format!("cannot serialize model file: {e}")))?;
-        write_atomic(json_path, text.as_bytes())
+        Ok(write_atomic_bytes(json_path, text.as_bytes())?)
     }
 
     /// Fails when `samples` include samples this model (or a model it was fine-tuned from) was

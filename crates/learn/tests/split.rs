@@ -6,7 +6,7 @@ mod common;
 use augsim_learn::train::MODEL_FILE;
 use augsim_learn::{
     evaluate, inference_device, train, Corruption, GridShape, IndexSet, Initialization, Normalization, Samples, Split,
-    TrainConfig, TrainOptions, TrainedModel, UNetConfig,
+    SplitPolicy, TrainConfig, TrainOptions, TrainedModel, UNetConfig,
 };
 use common::synthetic_sample;
 
@@ -47,6 +47,35 @@ fn splits_are_disjoint_cover_the_samples_and_store_compactly() {
     // Nothing left for training, or samples of another source, are errors.
     assert!(Split::last(&all, 4, 6).is_err());
     assert!(split.apply(&samples(&[0, 1], "beam")).is_err());
+}
+
+#[test]
+fn the_split_policy_rounds_fractions_lets_counts_override_them_and_limits_training() {
+    let all = samples(&(0..10).collect::<Vec<_>>(), "liver");
+    // Defaults: 20 % test, 10 % validation.
+    let (split, [train, val, test]) = SplitPolicy::default().apply(&all).unwrap();
+    assert_eq!((train.indices.len(), val.indices, test.indices), (7, vec![7], vec![8, 9]));
+    assert_eq!(split, Split::last(&all, 1, 2).unwrap());
+    // Fractions round to the nearest count (0.25 × 10 = 2.5 → 3); counts override fractions.
+    let policy = SplitPolicy { test_fraction: 0.25, validation_samples: Some(3), ..SplitPolicy::default() };
+    assert_eq!(policy.split(&all).unwrap(), Split::last(&all, 3, 3).unwrap());
+    let policy = SplitPolicy { test_samples: Some(0), validation_fraction: 0.0, ..SplitPolicy::default() };
+    assert_eq!(policy.split(&all).unwrap().train.len(), 10);
+    // Only the first training samples are used, but the split records all of them.
+    let (split, [train, ..]) = SplitPolicy { train_samples: Some(2), ..SplitPolicy::default() }.apply(&all).unwrap();
+    assert_eq!(train.indices, [0, 1]);
+    assert_eq!(split.train.len(), 7);
+    for bad in [
+        SplitPolicy { train_samples: Some(0), ..SplitPolicy::default() },
+        SplitPolicy { train_samples: Some(8), ..SplitPolicy::default() },
+        SplitPolicy { test_fraction: 1.0, ..SplitPolicy::default() },
+        SplitPolicy { validation_fraction: -0.1, ..SplitPolicy::default() },
+        SplitPolicy { test_samples: Some(5), validation_samples: Some(5), ..SplitPolicy::default() },
+    ] {
+        assert!(bad.apply(&all).is_err(), "{bad:?}");
+    }
+    let e = SplitPolicy { test_fraction: 1.5, ..SplitPolicy::default() }.split(&all).unwrap_err().to_string();
+    assert!(e.contains("test fraction") && e.contains("1.5"), "{e}");
 }
 
 #[test]

@@ -8,6 +8,7 @@ use std::time::Instant;
 use augsim_mesh::embedding::{Embedding, Grid};
 use augsim_mesh::phantom::PhantomSpec;
 use augsim_mesh::sampling::sample_visible_boundary;
+use augsim_mesh::stats::median;
 use augsim_mesh::tetmesh::{mesh_surface_to_count, stuff, surface_domain, tet_quality, BoundaryFit, TetMeshOptions};
 use augsim_mesh::{liver_phantom, Mesh, MeshError};
 
@@ -23,8 +24,7 @@ fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
         times.push(t.elapsed().as_secs_f64() * 1e3);
         last = Some(out);
     }
-    times.sort_by(f64::total_cmp);
-    (times[runs / 2], last.expect("at least one run"))
+    (median(&mut times), last.expect("at least one run"))
 }
 
 fn main() -> Result<(), MeshError> {

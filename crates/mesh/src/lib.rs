@@ -13,6 +13,7 @@ pub mod io;
 pub mod phantom;
 pub mod sampling;
 pub mod select;
+pub mod stats;
 pub mod surface;
 pub mod tetmesh;
 pub mod topology;

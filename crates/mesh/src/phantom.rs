@@ -33,6 +33,7 @@ use std::collections::BTreeMap;
 use rayon::prelude::*;
 
 use crate::immersed::{immersed_grid, ImmersedGrid, ImmersedOptions};
+use crate::select::{k_nearest, nearest};
 use crate::tetmesh::{segment_root, stuff, stuff_to_count, BoundaryFit, ImplicitDomain, TetMeshOptions};
 use crate::{dot, sub, Mesh, MeshError, Point};
 
@@ -331,12 +332,8 @@ impl PhantomSpec {
         let mut tumour: Vec<usize> =
             interior.iter().copied().filter(|&k| within(self.tumour_centre, self.tumour_radius, nodes[k])).collect();
         if tumour.len() < 4 {
-            let mut by_dist = interior.clone();
-            let d2 = |k: usize| dot(sub(nodes[k], self.tumour_centre), sub(nodes[k], self.tumour_centre));
-            by_dist.sort_by(|&a, &b| d2(a).total_cmp(&d2(b)).then(a.cmp(&b)));
-            by_dist.truncate(4);
-            by_dist.sort_unstable();
-            tumour = by_dist;
+            tumour = k_nearest(nodes, interior.iter().copied(), self.tumour_centre, 4);
+            tumour.sort_unstable();
         }
         let mut regions = BTreeMap::new();
         for (name, set) in [
@@ -368,11 +365,7 @@ fn farthest_points(nodes: &[Point], candidates: &[usize], count: usize) -> Vec<u
     let n = candidates.len() as f64;
     let centroid: Point = std::array::from_fn(|d| candidates.iter().map(|&k| nodes[k][d]).sum::<f64>() / n);
     let d2 = |a: Point, b: Point| dot(sub(a, b), sub(a, b));
-    let first = candidates
-        .iter()
-        .copied()
-        .min_by(|&a, &b| d2(nodes[a], centroid).total_cmp(&d2(nodes[b], centroid)).then(a.cmp(&b)))
-        .unwrap_or(candidates[0]);
+    let first = nearest(nodes, candidates.iter().copied(), centroid).unwrap_or(candidates[0]);
     let mut chosen = vec![first];
     let mut dist: Vec<f64> = candidates.iter().map(|&k| d2(nodes[k], nodes[first])).collect();
     while chosen.len() < count.min(candidates.len()) {

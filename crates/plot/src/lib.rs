@@ -7,7 +7,6 @@ pub mod viewer;
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Once;
 
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
@@ -198,34 +197,33 @@ pub fn scatter_plot(path: &Path, spec: &PlotSpec, sets: &[PointSet], links: &[Se
     })
 }
 
-/// Renders `draw` on a `size` bitmap into a temporary sibling of `path`, then renames it onto
-/// `path` (nothing is left behind on failure).
+/// Renders `draw` on a `size` bitmap into a temporary sibling of `path`, then persists (renames) it onto `path`
+/// (nothing is left behind on failure). This crate does not depend on `mesh`, whose `mesh::io::write_atomic` the
+/// other crates use, so it calls `tempfile`'s persist itself: the same temporary sibling and rename, with a `.png`
+/// suffix because the encoder picks the format from the name.
 fn write_png(
     path: &Path,
     size: (u32, u32),
     draw: impl FnOnce(&DrawingArea<BitMapBackend, Shift>) -> Result<(), String>,
 ) -> Result<(), PlotError> {
     register_fonts();
+    let io = |source: std::io::Error| PlotError::Io { path: path.to_path_buf(), source };
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    static COUNTER: AtomicUsize = AtomicUsize::new(0);
-    // The temporary name keeps the .png extension: the encoder picks the format from it.
-    let tmp = path.with_file_name(format!(
-        ".{name}.tmp-{}-{}.png",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
+    let prefix = format!(".{name}.");
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(".tmp.png");
+    // An ordinary file (0o666 less the umask), not a temporary file's owner-only one.
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    let tmp = builder.tempfile_in(dir).map_err(io)?;
     let drawn = {
-        let root = BitMapBackend::new(&tmp, size).into_drawing_area();
+        let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
         draw(&root).and_then(|()| root.present().map_err(|e| e.to_string()))
     };
-    if let Err(message) = drawn {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(PlotError::Draw { path: path.to_path_buf(), message });
-    }
-    std::fs::rename(&tmp, path).map_err(|source| {
-        let _ = std::fs::remove_file(&tmp);
-        PlotError::Io { path: path.to_path_buf(), source }
-    })
+    drawn.map_err(|message| PlotError::Draw { path: path.to_path_buf(), message })?;
+    tmp.persist(path).map_err(|e| io(e.error))?;
+    Ok(())
 }
 
 /// Range of the values with a 5 % margin (multiplicative on a log axis); a single value gets a unit-size range.

@@ -70,7 +70,7 @@ pub fn read_frames(path: &Path) -> Result<Vec<PathBuf>> {
 
 /// Writes `points` as a binary little-endian PLY with float64 `x`, `y`, `z`, atomically.
 pub fn write_ply_binary(path: &Path, points: &[Point]) -> Result<()> {
-    mesh::io::write_file_atomic(path, |w| {
+    mesh::io::write_atomic(path, |w| {
         write!(
             w,
             "ply\nformat binary_little_endian 1.0\nelement vertex {}\n\
@@ -83,20 +83,20 @@ pub fn write_ply_binary(path: &Path, points: &[Point]) -> Result<()> {
             }
         }
         Ok(())
-    })
-    .map_err(|e| RegisterError::io(path, e))
+    })?;
+    Ok(())
 }
 
 /// Writes `points` as CSV with the header `x,y,z`, atomically; the values read back exactly.
 pub fn write_csv(path: &Path, points: &[Point]) -> Result<()> {
-    mesh::io::write_file_atomic(path, |w| {
+    mesh::io::write_atomic(path, |w| {
         writeln!(w, "x,y,z")?;
         for p in points {
             writeln!(w, "{},{},{}", Num(p[0]), Num(p[1]), Num(p[2]))?;
         }
         Ok(())
-    })
-    .map_err(|e| RegisterError::io(path, e))
+    })?;
+    Ok(())
 }
 
 /// Shortest round-tripping text of a value: plain notation for ordinary magnitudes, scientific

@@ -112,16 +112,13 @@ impl NetworkDeformer {
     /// `input_nodes`: the mesh nodes whose displacement the network was trained to take, along
     /// the rest surface's normal only when `normal` (boundary nodes then).
     pub fn new(model: &TrainedModel, organ: &Organ, input_nodes: &[usize], normal: bool) -> Result<NetworkDeformer> {
-        let placement = model.placement.ok_or_else(|| {
-            RegisterError::Invalid("the model does not record where its grid lies: retrain it".into())
-        })?;
         if model.input_unit != "m" {
             return Err(RegisterError::Invalid(format!(
                 "the model takes {} on its input, registration needs a displacement model (m)",
                 model.input_unit
             )));
         }
-        let grid = placement.grid(model.grid)?;
+        let grid = model.placed_grid()?;
         let mesh = organ.mesh();
         let mut local = vec![usize::MAX; mesh.num_nodes()];
         for (i, &n) in input_nodes.iter().enumerate() {

@@ -35,6 +35,12 @@ pub enum RegisterError {
     Learn(#[from] learn::LearnError),
 }
 
+impl From<mesh::io::WriteError> for RegisterError {
+    fn from(e: mesh::io::WriteError) -> Self {
+        RegisterError::Io { path: e.path, source: e.source }
+    }
+}
+
 impl RegisterError {
     /// An I/O error on `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {

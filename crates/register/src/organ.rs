@@ -63,7 +63,7 @@ impl Organ {
             .iter()
             .map(|&p| match locator.locate(p) {
                 Some(loc) => Stencil::of(&loc),
-                None => Stencil(vec![(nearest_node(&mesh.nodes, p), 1.0)]),
+                None => Stencil(vec![(mesh::select::nearest(&mesh.nodes, 0..mesh.num_nodes(), p).unwrap_or(0), 1.0)]),
             })
             .collect();
         Ok(Organ { mesh, surface, stencils, locator })
@@ -116,11 +116,6 @@ pub fn displaced(rest: &[Point], stencils: &[Stencil], u: &[f64]) -> Vec<Point> 
             [p[0] + d[0], p[1] + d[1], p[2] + d[2]]
         })
         .collect()
-}
-
-fn nearest_node(nodes: &[Point], p: Point) -> usize {
-    let d2 = |q: &Point| (0..3).map(|d| (q[d] - p[d]).powi(2)).sum::<f64>();
-    (0..nodes.len()).min_by(|&a, &b| d2(&nodes[a]).total_cmp(&d2(&nodes[b]))).unwrap_or(0)
 }
 
 /// The surface restricted to the vertices its triangles use.

@@ -153,7 +153,7 @@ pub fn observe(
     let bvh = SurfaceBvh::new(surface)?;
     let matches: Vec<_> = cloud.par_iter().map(|&c| bvh.closest_point(c)).collect();
     let mut distances: Vec<f64> = matches.iter().map(|m| m.distance).collect();
-    let median = median(&mut distances);
+    let median = mesh::stats::median(&mut distances);
     let limit = (options.outlier_factor * median).max(options.min_outlier_distance).max(capture);
     let n = organ.mesh().num_nodes();
     let mut obs = Observations { target: vec![[0.0; 3]; n], weight: vec![0.0; n], normal: vec![[0.0; 3]; n] };
@@ -238,10 +238,4 @@ fn unit(v: Point) -> Point {
 pub fn distance(a: Point, b: Point) -> f64 {
     let d = sub(a, b);
     mesh::dot(d, d).sqrt()
-}
-
-/// Median of a non-empty list (reorders it).
-fn median(v: &mut [f64]) -> f64 {
-    let mid = v.len() / 2;
-    *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }

@@ -6,6 +6,7 @@ use std::time::Instant;
 use fem::scenario::{build_mesh, fixed_problem};
 use fem::Problem;
 use mesh::io::Field;
+use mesh::select::{k_nearest, nearest};
 use mesh::{Mesh, MeshLocator, Point};
 use nalgebra::DVector;
 use serde::Serialize;
@@ -403,7 +404,7 @@ impl Experiment {
             cases.extend(comparisons);
             assessment = report::assessment(&cases, a.points.len(), out_dir)?;
         }
-        let times: Vec<f64> = trace.records.iter().filter_map(|r| r.wall_seconds).collect();
+        let mut times: Vec<f64> = trace.records.iter().filter_map(|r| r.wall_seconds).collect();
         let report = Report {
             scenario: self.scenario.name.clone(),
             synthetic,
@@ -413,7 +414,7 @@ impl Experiment {
             execution: self.scenario.filter.execution,
             filter_seconds,
             seconds_per_iteration_mean: times.iter().sum::<f64>() / times.len().max(1) as f64,
-            seconds_per_iteration_median: median(&times),
+            seconds_per_iteration_median: mesh::stats::median(&mut times),
             newton_iterations_per_solve: newton as f64 / (iterations * (self.unknowns.specs.len() + 1)).max(1) as f64,
             total_seconds: self.start.elapsed().as_secs_f64(),
             max_displacement: self.setup.reference.map(|r| r.max_displacement),
@@ -489,9 +490,7 @@ fn build_problem(
                 if count == 0 {
                     return Err(AssimilationError::Setup("tool: count must be at least 1".into()));
                 }
-                let d2 = |k: usize| dist2(problem.mesh.nodes[k], p);
-                nodes.sort_by(|&a, &b| d2(a).total_cmp(&d2(b)).then(a.cmp(&b)));
-                nodes.truncate(count);
+                nodes = k_nearest(&problem.mesh.nodes, nodes, p, count);
             }
             (None, Some(_)) => {
                 return Err(AssimilationError::Setup(
@@ -618,8 +617,7 @@ fn assessment_points(
     }
     let n = candidates.len() as f64;
     let centroid: Point = std::array::from_fn(|d| candidates.iter().map(|&k| nodes[k][d]).sum::<f64>() / n);
-    let nearest = |a: &&usize, b: &&usize| dist2(nodes[**a], centroid).total_cmp(&dist2(nodes[**b], centroid));
-    let mut chosen = vec![*candidates.iter().min_by(nearest).expect("at least one candidate")];
+    let mut chosen = vec![nearest(nodes, candidates.iter().copied(), centroid).expect("at least one candidate")];
     while chosen.len() < spec.count {
         let gap = |k: usize| chosen.iter().map(|&c| dist2(nodes[k], nodes[c])).fold(f64::INFINITY, f64::min);
         let next = candidates
@@ -667,11 +665,8 @@ fn control_paths(
     for (j, p) in positions.iter().enumerate() {
         let bad = |m: String| AssimilationError::file(&tracks.path, Some(tracks.line(j)), m);
         let id = &tracks.ids[j];
-        let node = surface
-            .iter()
-            .copied()
-            .filter(|k| !problem.dirichlet.contains_key(k))
-            .min_by(|&a, &b| dist2(problem.mesh.nodes[a], *p).total_cmp(&dist2(problem.mesh.nodes[b], *p)))
+        let free = surface.iter().copied().filter(|k| !problem.dirichlet.contains_key(k));
+        let node = nearest(&problem.mesh.nodes, free, *p)
             .ok_or_else(|| bad(format!("tool feature `{id}`: every surface node is constrained already")))?;
         if let Some(other) = paths.iter().position(|c| c.node == node) {
             return Err(bad(format!(
@@ -705,10 +700,4 @@ fn mean_error(a: &DVector<f64>, truth: &Frame) -> f64 {
         .map(|i| (0..3).map(|d| (a[3 * i + d] - truth.z[3 * i + d]).powi(2)).sum::<f64>().sqrt())
         .fold((0.0, 0usize), |(s, n), e| (s + e, n + 1));
     sum / n as f64
-}
-
-fn median(v: &[f64]) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(|a, b| a.total_cmp(b));
-    s.get(s.len() / 2).copied().unwrap_or(f64::NAN)
 }

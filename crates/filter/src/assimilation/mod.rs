@@ -33,7 +33,7 @@ pub use scenario::{
 /// Errors of an assimilation experiment.
 #[derive(Debug, thiserror::Error)]
 pub enum AssimilationError {
-    /// An input file that cannot be read or understood.
+    /// A file that cannot be read, understood or written.
     #[error("{location}: {message}")]
     File {
         /// The file, with `:line` where known.
@@ -53,6 +53,12 @@ pub enum AssimilationError {
         #[source]
         source: crate::BoxedModelError,
     },
+}
+
+impl From<mesh::io::WriteError> for AssimilationError {
+    fn from(e: mesh::io::WriteError) -> Self {
+        AssimilationError::file(&e.path, None, format!("cannot write: {}", e.source))
+    }
 }
 
 impl AssimilationError {

@@ -1,9 +1,9 @@
 //! The outputs of an assimilation run: the summary ([`Report`], `summary.json`), PNG plots of the estimates and
 //! the innovation, and the assessment errors (`assessment.csv`, `assessment.png`).
 
-use std::io::Write as _;
 use std::path::Path;
 
+use mesh::io::write_atomic_bytes;
 use plot::{line_plot, PlotSpec, Series};
 use serde::Serialize;
 
@@ -90,7 +90,7 @@ impl Report {
     /// Writes the report as pretty JSON, atomically.
     pub fn write_json(&self, path: &Path) -> Result<(), AssimilationError> {
         let text = serde_json::to_vec_pretty(self).context(|| "serialising the summary".into())?;
-        write_atomic(path, &text)
+        Ok(write_atomic_bytes(path, &text)?)
     }
 }
 
@@ -217,7 +217,7 @@ pub(super) fn assessment(
         }
         csv.push('\n');
     }
-    write_atomic(&out_dir.join("assessment.csv"), csv.as_bytes())?;
+    write_atomic_bytes(&out_dir.join("assessment.csv"), csv.as_bytes())?;
     let mut summary = Vec::new();
     let mut series = Vec::new();
     for (label, errors) in cases {
@@ -261,9 +261,4 @@ fn converged_at(means: impl Iterator<Item = f64>, truth: f64, tol: f64) -> Optio
         }
     }
     since
-}
-
-/// Writes `bytes` to `path` atomically.
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), AssimilationError> {
-    mesh::io::write_file_atomic(path, |f| f.write_all(bytes)).context(|| format!("cannot write {}", path.display()))
 }

@@ -164,7 +164,7 @@ pub fn write_tracks(path: &Path, ids: &[String], frames: &[DVector<f64>]) -> Res
     if let Some(id) = ids.iter().find(|id| id.is_empty() || id.contains([',', '\n', '\r']) || id.trim() != *id) {
         return Err(AssimilationError::Setup(format!("feature id `{id}` cannot be written to a CSV field")));
     }
-    mesh::io::write_file_atomic(path, |w| {
+    mesh::io::write_atomic(path, |w| {
         writeln!(w, "{TRACK_HEADER}")?;
         for (f, z) in frames.iter().enumerate() {
             for (j, id) in ids.iter().enumerate() {
@@ -175,8 +175,8 @@ pub fn write_tracks(path: &Path, ids: &[String], frames: &[DVector<f64>]) -> Res
             }
         }
         Ok(())
-    })
-    .map_err(|e| AssimilationError::file(path, None, format!("cannot write: {e}")))
+    })?;
+    Ok(())
 }
 
 /// The data rows of a CSV file whose first non-blank line is `header` (compared without case and spaces): the

@@ -404,4 +404,5 @@ pub fn write_msh(path: impl AsRef<Path>, mesh: &Mesh) -> Result<(), MeshError> {
         }
         writeln!(w, "$EndElements")
     })
+    .map_err(MeshError::from)
 }

@@ -821,6 +821,7 @@ fn write_legacy(
         }
         Ok(())
     })
+    .map_err(MeshError::from)
 }
 
 /// Writes a volume mesh with point and cell data as a binary legacy VTK `UNSTRUCTURED_GRID`.

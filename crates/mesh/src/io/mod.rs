@@ -11,8 +11,9 @@
 //! merged exactly), legacy VTK `.vtk` (`POLYDATA` or `UNSTRUCTURED_GRID`) and `.vtu`; polygons are
 //! split into triangle fans and triangle strips into triangles. All vertices are kept.
 //!
-//! Writers ([`write_vtu`], [`write_vtk_legacy`], [`write_msh`], [`write_surface`]) write a
-//! temporary file in the target directory and rename it, so a reader never sees a partial file.
+//! Writers ([`write_vtu`], [`write_vtk_legacy`], [`write_msh`], [`write_surface`]) go through
+//! [`write_atomic`] (a temporary file in the target directory, renamed onto the target), so a
+//! reader never sees a partial file; the other crates write their files with it too.
 //! Numbers are written in their shortest exact decimal form (ASCII) or as IEEE doubles (binary):
 //! reading back gives the same values. Named regions and `cell_fraction` are not written; pass
 //! them as [`Field`]s where needed.
@@ -25,10 +26,9 @@ mod text;
 mod vtu;
 
 use std::fmt;
-use std::fs::{self, File, OpenOptions};
-use std::io::BufWriter;
-use std::path::Path;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::fs::{self, File};
+use std::io::{BufWriter, Write as _};
+use std::path::{Path, PathBuf};
 
 use crate::{Cells, Mesh, MeshError, Point, TriSurface, HEX_TO_TETS};
 
@@ -207,43 +207,65 @@ fn read_bytes(path: &Path) -> Result<Vec<u8>, MeshError> {
     fs::read(path).map_err(|source| MeshError::Io { path: path.display().to_string(), source })
 }
 
-/// Writes `path` atomically: `write` fills a temporary file in the same directory, which is then
-/// synced and renamed over `path`, so a reader sees the old file or the new one, never a part.
-/// Missing parent directories are created. On failure the temporary file is removed.
-pub fn write_file_atomic(
-    path: &Path,
-    write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
-) -> std::io::Result<()> {
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let name =
-        path.file_name().ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file name"))?;
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        fs::create_dir_all(dir)?;
-    }
-    let tmp = path.with_file_name(format!(
-        ".{}.{}.{}.tmp",
-        name.to_string_lossy(),
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let result = (|| {
-        let file = OpenOptions::new().write(true).create_new(true).open(&tmp)?;
-        let mut writer = BufWriter::new(file);
-        write(&mut writer)?;
-        let file = writer.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        drop(file);
-        fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&tmp);
-    }
-    result
+/// An atomic write that failed: the file it was to write and why (see [`write_atomic`]).
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {source}", path.display())]
+pub struct WriteError {
+    /// The file that was to be written.
+    pub path: PathBuf,
+    /// The underlying error.
+    pub source: std::io::Error,
 }
 
-/// [`write_file_atomic`] with the error mapped to [`MeshError::Io`].
-fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<(), MeshError> {
-    write_file_atomic(path, write).map_err(|source| MeshError::Io { path: path.display().to_string(), source })
+impl From<WriteError> for MeshError {
+    fn from(e: WriteError) -> Self {
+        MeshError::Io { path: e.path.display().to_string(), source: e.source }
+    }
+}
+
+/// Writes `path` atomically, the one helper for every file augsim writes: `write` fills a temporary sibling
+/// (`tempfile`'s named temporary file in the same directory, so the rename cannot cross file systems), which is
+/// synced and persisted (renamed) over `path`, so a reader sees the old file or the new one, never a part.
+/// Missing parent directories are created; the file gets ordinary permissions (`0o666` less the umask on Unix),
+/// not the owner-only ones of a temporary file. On failure the temporary file is removed and `path` is left as it
+/// was; the error names `path`.
+pub fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+) -> Result<(), WriteError> {
+    persist_atomic(path, write).map_err(|source| WriteError { path: path.to_path_buf(), source })
+}
+
+/// [`write_atomic`] of a whole buffer.
+pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
+    write_atomic(path, |w| w.write_all(bytes))
+}
+
+/// The body of [`write_atomic`], with the bare I/O error.
+fn persist_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> std::io::Result<()> {
+    let name =
+        path.file_name().ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file name"))?;
+    let dir = match path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        Some(dir) => {
+            fs::create_dir_all(dir)?;
+            dir
+        }
+        None => Path::new("."),
+    };
+    let prefix = format!(".{}.", name.to_string_lossy());
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(".tmp");
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    // Dropped on an early return, the temporary file removes itself.
+    let tmp = builder.tempfile_in(dir)?;
+    let (file, tmp_path) = tmp.into_parts();
+    let mut writer = BufWriter::new(file);
+    write(&mut writer)?;
+    let file = writer.into_inner().map_err(|e| e.into_error())?;
+    file.sync_all()?;
+    tempfile::NamedTempFile::from_parts(file, tmp_path).persist(path).map_err(|e| e.error)?;
+    Ok(())
 }
 
 /// Displays an `f64` in its shortest form that parses back to the same value (`nan`, `inf` and
@@ -426,8 +448,7 @@ fn strip(vertices: &[usize], out: &mut Vec<[usize; 3]>) {
 /// collection's directory) pairs, atomically.
 pub fn write_pvd(path: impl AsRef<Path>, steps: &[(f64, String)]) -> Result<(), MeshError> {
     let path = path.as_ref();
-    write_file_atomic(path, |w| {
-        use std::io::Write;
+    write_atomic(path, |w| {
         writeln!(w, "<?xml version=\"1.0\"?>")?;
         writeln!(w, "<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">")?;
         writeln!(w, "  <Collection>")?;
@@ -437,6 +458,41 @@ pub fn write_pvd(path: impl AsRef<Path>, steps: &[(f64, String)]) -> Result<(), 
         }
         writeln!(w, "  </Collection>")?;
         writeln!(w, "</VTKFile>")
-    })
-    .map_err(|source| MeshError::Io { path: path.display().to_string(), source })
+    })?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn atomic_writes_replace_whole_files_and_leave_nothing_behind_on_failure() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("sub/out.txt");
+        write_atomic_bytes(&path, b"first").unwrap();
+        write_atomic(&path, |w| w.write_all(b"second")).unwrap();
+        assert_eq!(fs::read(&path).unwrap(), b"second");
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            // The mode of an ordinary new file (0o666 less the umask), not a temporary file's owner-only 0o600.
+            let plain = dir.path().join("plain");
+            File::create(&plain).unwrap();
+            let mode = |p: &Path| fs::metadata(p).unwrap().permissions().mode() & 0o777;
+            assert_eq!(mode(&path), mode(&plain));
+            fs::remove_file(&plain).unwrap();
+        }
+        let e = write_atomic(&path, |w| {
+            w.write_all(b"partial")?;
+            Err(std::io::Error::other("disk full"))
+        })
+        .unwrap_err();
+        assert_eq!(e.to_string(), format!("{}: disk full", path.display()));
+        assert_eq!(fs::read(&path).unwrap(), b"second", "the old file stays");
+        let names: Vec<_> = fs::read_dir(path.parent().unwrap()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names, ["out.txt"], "no temporary file is left");
+        let e = MeshError::from(write_atomic_bytes(dir.path(), b"x").unwrap_err());
+        assert!(e.to_string().contains(&dir.path().display().to_string()), "{e}");
+    }
 }

@@ -68,6 +68,7 @@ pub fn write_obj(path: impl AsRef<Path>, surface: &TriSurface) -> Result<(), Mes
         }
         Ok(())
     })
+    .map_err(MeshError::from)
 }
 
 /// Merges vertices with exactly equal coordinates (0.0 and −0.0 are the same).
@@ -234,4 +235,5 @@ pub fn write_stl(path: impl AsRef<Path>, surface: &TriSurface) -> Result<(), Mes
         }
         Ok(())
     })
+    .map_err(MeshError::from)
 }

@@ -135,6 +135,7 @@ fn write_grid(
         write_array(w, " Name=\"types\"", &types, encoding, 32)?;
         writeln!(w, "</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>")
     })
+    .map_err(MeshError::from)
 }
 
 /// Writes a volume mesh with point and cell data as a VTK XML unstructured grid with base64

@@ -1,0 +1,29 @@
+//! Small statistics shared by the crates (the one median).
+
+/// The median of `values`, reordering them: the element of rank `n / 2` (0-based) in `f64::total_cmp` order,
+/// i.e. the middle value for an odd count and the upper of the two middle values for an even count (no
+/// averaging: the median is always one of the values). NaNs count as the largest values (a negative NaN as the
+/// smallest), as `total_cmp` orders them; an empty list gives NaN. Linear time (`select_nth_unstable_by`).
+pub fn median(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    let mid = values.len() / 2;
+    *values.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::median;
+
+    #[test]
+    fn the_median_is_the_middle_or_upper_middle_value() {
+        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 3.0, "even count: the upper middle value");
+        assert_eq!(median(&mut [5.0]), 5.0);
+        assert!(median(&mut []).is_nan());
+        // NaN counts as the largest value.
+        assert_eq!(median(&mut [f64::NAN, 1.0, 2.0]), 2.0);
+        assert!(median(&mut [f64::NAN, f64::NAN, 1.0]).is_nan());
+    }
+}
