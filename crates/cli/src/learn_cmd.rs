@@ -3,49 +3,25 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use fem::{Material, SolverOptions};
+
 use indicatif::{ProgressBar, ProgressStyle};
-use learn::generate::{DatasetConfig, Generator};
+use learn::generate::Generator;
 use learn::{
     Corruption, Dataset, DatasetPart, Initialization, PredictInput, Sparsity, SplitPolicy, TrainConfig, TrainOptions,
     TrainedModel, UNetConfig,
 };
 use mesh::io::{write_atomic_bytes, Field};
-use serde::Deserialize;
 
-use crate::scenario::MeshSource;
-
-/// A dataset scenario file: the FEM model and how samples are drawn.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DatasetScenario {
-    /// Short name (the default output directory is `out/<name>`).
-    pub name: String,
-    /// Free text.
-    #[serde(default)]
-    pub description: String,
-    /// The organ or beam.
-    pub mesh: MeshSource,
-    /// The material.
-    pub material: Material,
-    /// Newton-Raphson settings.
-    #[serde(default)]
-    pub solver: SolverOptions,
-    /// Sampling of loads and encoding on the grid.
-    pub dataset: DatasetConfig,
-}
+use learn::scenario::DatasetScenario;
 
 /// `augsim generate`.
 pub fn generate(path: &Path, out: Option<&Path>, part: Option<&str>, samples: Option<usize>) -> Result<()> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read scenario {}", path.display()))?;
-    let mut scenario: DatasetScenario =
-        toml::from_str(&text).with_context(|| format!("invalid scenario {}", path.display()))?;
+    let (mut scenario, dir) = DatasetScenario::load(path)?;
     if let Some(n) = samples {
         scenario.dataset.samples = n;
     }
     let part = part.map(parse_part).transpose()?;
-    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let mesh = crate::scenario::build_mesh(&scenario.mesh, &dir).context("building the mesh")?;
+    let mesh = scenario.mesh(&dir)?;
     println!("scenario   {}: {}", scenario.name, scenario.description);
     println!("mesh       {} nodes, {} {} cells", mesh.num_nodes(), mesh.cells.len(), mesh.cells.kind_name());
     let generator = Generator::new(mesh, scenario.material, scenario.solver.clone(), scenario.dataset.clone())?;

@@ -2,6 +2,7 @@
 
 mod assimilate;
 mod bench;
+mod experiment;
 mod learn_cmd;
 mod mesh_cmd;
 mod register_cmd;
@@ -115,6 +116,9 @@ enum Command {
     /// A self-contained HTML 3D viewer (opens in a browser, no network): a dataset sample on the organ (rest,
     /// FEM reference, the model's prediction, coloured by its error, markers) or a mesh file's displacements.
     View(view_cmd::ViewArgs),
+    /// Run a published experiment end to end (generate, train, identify, register, evaluate) and write
+    /// result.json, PNG figures and the report (report.md, report.html) beside the published figures.
+    Experiment(experiment::ExperimentArgs),
     /// Benchmarks of the static solver (median times, split by phase).
     Bench {
         /// Repetitions per case.
@@ -149,6 +153,7 @@ fn main() {
         Command::Predict { model, input, output, mesh, runs } => {
             learn_cmd::predict(&model, &input, &output, mesh.as_deref(), runs)
         }
+        Command::Experiment(args) => experiment::run(&args),
         Command::Bench { runs } => bench::run(runs),
     };
     if let Err(e) = result {
@@ -161,9 +166,9 @@ fn main() {
 mod tests {
     use std::path::Path;
 
-    use crate::learn_cmd::DatasetScenario;
     use crate::scenario::{build_mesh, Scenario};
     use filter::assimilation::AssimilationScenario;
+    use learn::scenario::DatasetScenario;
 
     /// Every shipped scenario parses as exactly one kind of scenario, and its mesh source is valid.
     #[test]

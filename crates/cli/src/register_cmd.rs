@@ -14,9 +14,9 @@ use register::{
 };
 use serde::Serialize;
 
-use crate::learn_cmd::DatasetScenario;
 use crate::scenario::{build_mesh, MeshSource, Scenario};
 use crate::solve::ms;
+use learn::scenario::DatasetScenario;
 
 /// Arguments of `augsim register`.
 #[derive(clap::Args)]

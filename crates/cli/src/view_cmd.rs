@@ -11,7 +11,7 @@ use mesh::io::{Field, FieldLocation};
 use mesh::Mesh;
 use plot::viewer::{Layer, Scalar, Scene};
 
-use crate::learn_cmd::DatasetScenario;
+use learn::scenario::DatasetScenario;
 
 /// Options of `augsim view`.
 #[derive(Debug, clap::Args)]

@@ -44,6 +44,7 @@ pub mod npy;
 pub mod points;
 pub mod predict;
 pub mod sample_view;
+pub mod scenario;
 pub mod split;
 pub mod train;
 pub mod unet;

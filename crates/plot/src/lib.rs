@@ -1,5 +1,5 @@
 //! PNG plots for augsim reports: line charts with several named series, optional shaded bands (e.g. μ ± σ),
-//! linear or logarithmic y axis; scatter plots of projected 3D points with equal axis scales. Text uses the
+//! linear or logarithmic y axis; scatter plots of projected 3D points with equal axis scales; grouped bar charts. Text uses the
 //! embedded DejaVu Sans font (no system font lookup), and files are written atomically (temporary sibling, then
 //! rename).
 
@@ -192,6 +192,91 @@ pub fn scatter_plot(path: &Path, spec: &PlotSpec, sets: &[PointSet], links: &[Se
         }
         if sets.iter().any(|s| !s.name.is_empty()) {
             draw_legend(&mut chart, SeriesLabelPosition::LowerRight)?;
+        }
+        Ok(())
+    })
+}
+
+/// One series of a grouped bar chart: a value (or none) per category, in the `index`-th palette colour.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct BarSeries {
+    /// Legend entry.
+    pub name: String,
+    /// One value per category; `None` or a non-finite value leaves a gap.
+    pub values: Vec<Option<f64>>,
+}
+
+/// Draws a grouped bar chart (one group per category, one bar per series, from 0) into the PNG
+/// file `path`, written atomically. Every series needs one value per category.
+pub fn bar_chart(path: &Path, spec: &PlotSpec, categories: &[String], series: &[BarSeries]) -> Result<(), PlotError> {
+    let no_data = |message: String| PlotError::NoData { path: path.to_path_buf(), message };
+    if let Some(s) = series.iter().find(|s| s.values.len() != categories.len()) {
+        return Err(no_data(format!(
+            "series '{}' has {} values for {} categories",
+            s.name,
+            s.values.len(),
+            categories.len()
+        )));
+    }
+    let values: Vec<f64> =
+        series.iter().flat_map(|s| s.values.iter().flatten().copied()).filter(|v| v.is_finite()).collect();
+    let top = values.iter().fold(0.0f64, |m, &v| m.max(v));
+    let bottom = values.iter().fold(0.0f64, |m, &v| m.min(v));
+    if values.is_empty() || top == bottom {
+        return Err(no_data("no finite non-zero value".into()));
+    }
+    let pad = 0.08 * (top - bottom);
+    let y = (bottom - if bottom < 0.0 { pad } else { 0.0 })..(top + pad);
+    let n = categories.len() as f64;
+    write_png(path, SIZE, |root| {
+        let err = |e: &dyn std::fmt::Display| e.to_string();
+        root.fill(&WHITE).map_err(|e| err(&e))?;
+        let mut chart = ChartBuilder::on(root)
+            .caption(&spec.title, ("sans-serif", 24))
+            .margin(20)
+            .x_label_area_size(50)
+            .y_label_area_size(90)
+            .build_cartesian_2d(0.0..n, y.clone())
+            .map_err(|e| err(&e))?;
+        let y_span = (y.end - y.start).abs();
+        let label = |v: &f64| {
+            let k = v.floor();
+            if (v - k - 0.5).abs() < 1e-6 && k >= 0.0 && (k as usize) < categories.len() {
+                categories[k as usize].clone()
+            } else {
+                String::new()
+            }
+        };
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(2 * categories.len() + 1)
+            .x_desc(&spec.x_label)
+            .y_desc(&spec.y_label)
+            .light_line_style(RGBColor(242, 242, 242))
+            .label_style(("sans-serif", 15))
+            .axis_desc_style(("sans-serif", 17))
+            .x_label_formatter(&label)
+            .y_label_formatter(&|v| tick_label(*v, y_span))
+            .draw()
+            .map_err(|e| err(&e))?;
+        let width = 0.8 / series.len().max(1) as f64;
+        for (i, s) in series.iter().enumerate() {
+            let color = PALETTE[i % PALETTE.len()];
+            let bars = s.values.iter().enumerate().filter_map(|(c, v)| {
+                let v = v.filter(|v| v.is_finite())?;
+                let x0 = c as f64 + 0.1 + i as f64 * width;
+                Some(Rectangle::new([(x0, 0.0), (x0 + 0.92 * width, v)], color.filled()))
+            });
+            let drawn = chart.draw_series(bars).map_err(|e| err(&e))?;
+            if !s.name.is_empty() {
+                drawn
+                    .label(&s.name)
+                    .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 16, y + 6)], color.filled()));
+            }
+        }
+        if series.iter().any(|s| !s.name.is_empty()) {
+            draw_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         }
         Ok(())
     })

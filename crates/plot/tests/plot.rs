@@ -96,3 +96,24 @@ fn scatter_plots_keep_the_aspect_of_the_data() {
     assert!(matches!(e, PlotError::NoData { .. }), "{e}");
     assert!(!dir.path().join("none.png").exists());
 }
+
+#[test]
+fn bar_charts_are_written_and_mismatched_series_refused() {
+    use augsim_plot::{bar_chart, BarSeries};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bars.png");
+    let spec = PlotSpec { title: "TRE".into(), x_label: "method".into(), y_label: "mm".into(), log_y: false };
+    let categories = vec!["FEM".to_string(), "U-Net".to_string()];
+    let series = [
+        BarSeries { name: "ours".into(), values: vec![Some(2.2), Some(2.1)] },
+        BarSeries { name: "published".into(), values: vec![Some(3.79), None] },
+    ];
+    bar_chart(&path, &spec, &categories, &series).unwrap();
+    assert_eq!(png_size(&std::fs::read(&path).unwrap()), (1000, 600));
+    let short = [BarSeries { name: "ours".into(), values: vec![Some(1.0)] }];
+    let e = bar_chart(&dir.path().join("bad.png"), &spec, &categories, &short).unwrap_err();
+    assert!(e.to_string().contains("bad.png") && e.to_string().contains("1 values for 2 categories"), "{e}");
+    let empty = [BarSeries { name: "ours".into(), values: vec![None, Some(f64::NAN)] }];
+    assert!(bar_chart(&dir.path().join("empty.png"), &spec, &categories, &empty).is_err());
+    assert!(!dir.path().join("bad.png").exists() && !dir.path().join("empty.png").exists());
+}

@@ -1,0 +1,52 @@
+//! `augsim experiment`: runs the published experiments and writes their report.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+use clap::Args;
+use experiment::{Name, Size};
+
+/// Arguments of `augsim experiment`.
+#[derive(Debug, Args)]
+pub struct ExperimentArgs {
+    /// fem-speed, young, springs, liver-forces, liver-ar, beam-sparse, or all.
+    pub name: String,
+    /// quick (minutes on 2 cores) or paper (the published data sizes).
+    #[arg(long, default_value = "quick")]
+    pub size: String,
+    /// Output directory: one sub-directory per experiment, report.md and report.html.
+    #[arg(long, default_value = "out/experiments")]
+    pub out: PathBuf,
+    /// Also rewrite the generated section of this Markdown file (e.g. README.md) from every result under --out.
+    #[arg(long)]
+    pub readme: Option<PathBuf>,
+}
+
+/// Runs `augsim experiment`.
+pub fn run(args: &ExperimentArgs) -> Result<()> {
+    let size = match args.size.as_str() {
+        "quick" => Size::Quick,
+        "paper" => Size::Paper,
+        other => bail!("--size must be quick or paper, got '{other}'"),
+    };
+    let names = if args.name == "all" { Name::ALL.to_vec() } else { vec![Name::parse(&args.name)?] };
+    for name in names {
+        println!("== {} ({})", name.as_str(), args.size);
+        let result = experiment::run(name, size, &args.out, &|message| println!("   {message}"))?;
+        println!("   {}: {:.0} s", result.title, result.seconds);
+        let width = result.rows.iter().map(|r| r.quantity.chars().count()).max().unwrap_or(0);
+        for row in &result.rows {
+            let published =
+                if row.published.is_empty() { String::new() } else { format!("   (published: {})", row.published) };
+            println!("   {:<width$}  {}{published}", row.quantity, row.ours);
+        }
+    }
+    let results = experiment::load_all(&args.out)?;
+    let [md, html] = experiment::report::write(&args.out, &results)?;
+    println!("wrote      {} and {} ({} experiments)", md.display(), html.display(), results.len());
+    if let Some(readme) = &args.readme {
+        experiment::report::update_markdown(readme, &results)?;
+        println!("updated    {}", readme.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,240 @@
+//! Static FEM solve times (the cases of `augsim bench`): a new solver's first solve, repeated
+//! solves from rest, and warm-started frames of a slowly varying load.
+
+use std::path::Path;
+
+use anyhow::Result;
+use fem::{Formulation, Law, Material, Problem, SolverOptions, StaticSolver};
+use mesh::select::nodes_in_box;
+use serde::{Deserialize, Serialize};
+
+use mesh::stats::median;
+
+use crate::{fmt, ExperimentResult, Name, Progress, Row, Size};
+
+/// The timings of one case (ms, medians over the runs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CaseTiming {
+    /// The case.
+    pub name: String,
+    /// Degrees of freedom.
+    pub dofs: usize,
+    /// Newton iterations, factorisations and tangent assemblies of the last solve from rest.
+    pub iterations: usize,
+    /// Factorisations of the last solve from rest.
+    pub factorizations: usize,
+    /// Tangent assemblies of the last solve from rest.
+    pub assemblies: usize,
+    /// A new solver's first solve (symbolic analysis excluded).
+    pub first_ms: f64,
+    /// Repeated solves from rest (the rest tangent's factorisation kept).
+    pub median_ms: f64,
+    /// Its assembly part.
+    pub assembly_ms: f64,
+    /// Its factorisation part.
+    pub factorization_ms: f64,
+    /// Its triangular-solve part.
+    pub solve_ms: f64,
+    /// Maximum displacement (m).
+    pub max_displacement: f64,
+    /// A frame of a sequence whose load varies by 2 % per frame, warm-started.
+    pub frame_ms: f64,
+    /// Mean Newton iterations per frame.
+    pub frame_iterations: f64,
+}
+
+fn beam(law: Law) -> Result<(String, Problem)> {
+    let m = mesh::box_hex([0.0; 3], [4.0, 1.0, 1.0], [20, 5, 5])?;
+    let mut p = Problem::new(m, Material::new(law, 300.0, 0.4));
+    p.fix(&nodes_in_box(&p.mesh.nodes, [-1e-9; 3], [1.0 + 1e-9, 1.0 + 1e-9, 1e-9]));
+    let top_end = nodes_in_box(&p.mesh.nodes, [3.0 - 1e-9, -1e-9, 1.0 - 1e-9], [4.0 + 1e-9, 1.0 + 1e-9, 1.0 + 1e-9]);
+    p.add_traction(&top_end, [0.0, 0.0, -1.0]);
+    Ok((format!("beam 20x5x5 H8, {law:?}, {:?}", p.material.resolved_formulation()), p))
+}
+
+/// The built-in phantom (DESIGN scenario 1), fixed between the lobes, pressed down on one
+/// lobe by an 800 Pa traction.
+fn liver(tets: usize, law: Law, formulation: Formulation) -> Result<(String, Problem)> {
+    let m = mesh::phantom::liver_phantom(tets)?;
+    let material = Material::new(law, 5000.0, 0.48).with_formulation(formulation);
+    let mut p = Problem::new(m, material);
+    let fixed = p.mesh.region("fixed")?.to_vec();
+    let push = p.mesh.region("push")?.to_vec();
+    p.fix(&fixed);
+    p.add_traction(&push, [0.0, 0.0, -800.0]);
+    let form = material.resolved_formulation();
+    Ok((format!("liver {} T4, {law:?}, {form:?}", p.mesh.cells.len()), p))
+}
+
+/// Median time (ms) and mean Newton iterations of `runs` frames whose load factor moves by
+/// 2 % per frame between 0.9 and 1.1, each warm-started from the last.
+fn frames(solver: &mut StaticSolver, opts: &SolverOptions, u_full: &[f64], runs: usize) -> Result<(f64, f64)> {
+    let base = solver.problem().f_ext.clone();
+    let mut u = u_full.to_vec();
+    let (mut times, mut iterations) = (Vec::new(), 0);
+    for k in 0..runs {
+        let phase = (k % 20) as f64;
+        let factor = 1.0 + 0.02 * if phase < 10.0 { phase - 5.0 } else { 15.0 - phase };
+        solver.problem_mut().f_ext.iter_mut().zip(&base).for_each(|(f, b)| *f = factor * b);
+        let s = solver.solve_from(Some(&u), opts)?;
+        times.push(s.timings.total.as_secs_f64() * 1e3);
+        iterations += s.iterations;
+        u = s.u;
+    }
+    solver.problem_mut().f_ext = base;
+    Ok((median(&mut times), iterations as f64 / runs as f64))
+}
+
+/// Times every case `runs` times (the 50k-tet phantom, when `large`, at most 3 times),
+/// calling `each` with each case's timing as it is done.
+pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> Result<Vec<CaseTiming>> {
+    let runs = runs.max(1);
+    let mut cases = vec![
+        beam(Law::Svk)?,
+        beam(Law::Corotational)?,
+        liver(5000, Law::Svk, Formulation::Standard)?,
+        liver(5000, Law::Svk, Formulation::Fbar)?,
+        liver(5000, Law::Corotational, Formulation::Standard)?,
+        liver(5000, Law::Corotational, Formulation::Fbar)?,
+    ];
+    if large {
+        cases.push(liver(50000, Law::Svk, Formulation::Fbar)?);
+    }
+    let mut out = Vec::new();
+    for (name, problem) in cases {
+        let dofs = problem.num_dofs();
+        let runs = if dofs > 20_000 { runs.min(3) } else { runs };
+        let mut solver = StaticSolver::new(problem)?;
+        let opts = SolverOptions::default();
+        let first = solver.solve(&opts)?;
+        let mut rows = Vec::new();
+        for _ in 0..runs {
+            rows.push(solver.solve(&opts)?);
+        }
+        let med = |f: &dyn Fn(&fem::Solution) -> std::time::Duration| {
+            median(&mut rows.iter().map(|s| f(s).as_secs_f64() * 1e3).collect::<Vec<_>>())
+        };
+        let last = rows.last().expect("at least one run");
+        let (frame_ms, frame_iterations) = frames(&mut solver, &opts, &last.u.clone(), runs)?;
+        let timing = CaseTiming {
+            name,
+            dofs,
+            iterations: last.iterations,
+            factorizations: last.factorizations,
+            assemblies: last.tangent_assemblies,
+            first_ms: first.timings.total.as_secs_f64() * 1e3,
+            median_ms: med(&|s| s.timings.total),
+            assembly_ms: med(&|s| s.timings.assembly),
+            factorization_ms: med(&|s| s.timings.factorization),
+            solve_ms: med(&|s| s.timings.solve),
+            max_displacement: fem::post::max_displacement(&last.u),
+            frame_ms,
+            frame_iterations,
+        };
+        each(&timing);
+        out.push(timing);
+    }
+    Ok(out)
+}
+
+/// The experiment: quick = 5 runs of the 5k-tet cases; paper = 20 runs plus the 50k-tet phantom.
+pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
+    let (runs, large) = match size {
+        Size::Quick => (5, false),
+        Size::Paper => (20, true),
+    };
+    let cases = measure(runs, large, &mut |c| {
+        progress(&format!(
+            "{}: first {:.1} ms, median {:.1} ms, frame {:.1} ms",
+            c.name, c.first_ms, c.median_ms, c.frame_ms
+        ))
+    })?;
+    let published = |c: &CaseTiming| {
+        if !c.name.starts_with("liver 5012") {
+            ""
+        } else if c.name.contains("Svk") {
+            "1,550 ms (SVK, ~5k T4)"
+        } else {
+            "25 ms (co-rotational, ~5k T4)"
+        }
+    };
+    let rows = cases
+        .iter()
+        .map(|c| {
+            let ours = format!(
+                "first {} / from rest {} / frame {}",
+                fmt(c.first_ms, 1, "ms"),
+                fmt(c.median_ms, 1, "ms"),
+                fmt(c.frame_ms, 1, "ms")
+            );
+            Row::new(&c.name, ours, published(c))
+        })
+        .collect();
+    let csv = std::iter::once(
+        "case,dofs,iterations,factorizations,first_ms,median_ms,assembly_ms,factorization_ms,solve_ms,max_u_m,frame_ms,frame_iterations\n"
+            .to_string(),
+    )
+    .chain(cases.iter().map(|c| {
+        format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            c.name,
+            c.dofs,
+            c.iterations,
+            c.factorizations,
+            c.first_ms,
+            c.median_ms,
+            c.assembly_ms,
+            c.factorization_ms,
+            c.solve_ms,
+            c.max_displacement,
+            c.frame_ms,
+            c.frame_iterations
+        )
+    }))
+    .collect::<String>();
+    mesh::io::write_atomic_bytes(&dir.join("timings.csv"), csv.as_bytes())?;
+    let short = |name: &str| {
+        [
+            ("beam 20x5x5 H8", "beam"),
+            ("liver 5012 T4", "5k"),
+            ("liver 49701 T4", "50k"),
+            (",", ""),
+            ("Corotational", "co-rot"),
+            ("Standard", "std"),
+            ("Fbar", "F-bar"),
+        ]
+        .iter()
+        .fold(name.to_string(), |s, (from, to)| s.replace(from, to))
+    };
+    let categories: Vec<String> = cases.iter().map(|c| short(&c.name)).collect();
+    let series = |name: &str, f: fn(&CaseTiming) -> f64| plot::BarSeries {
+        name: name.into(),
+        values: cases.iter().map(|c| Some(f(c))).collect(),
+    };
+    plot::bar_chart(
+        &dir.join("timings.png"),
+        &plot::PlotSpec {
+            title: format!("Static solves ({runs} runs, medians)"),
+            x_label: String::new(),
+            y_label: "ms".into(),
+            log_y: false,
+        },
+        &categories,
+        &[series("first solve", |c| c.first_ms), series("from rest", |c| c.median_ms), series("frame", |c| c.frame_ms)],
+    )?;
+    let mut values = serde_json::Map::new();
+    values.insert("cases".into(), serde_json::to_value(&cases)?);
+    Ok(ExperimentResult {
+        name: Name::FemSpeed,
+        title: "Static FEM on the liver: solve times".into(),
+        size,
+        seconds: 0.0,
+        rows,
+        figures: vec!["timings.png".into()],
+        notes: vec![
+            format!("{runs} runs per case on this machine, medians; 'first': a new solver's first solve from rest; 'from rest': repeated solves with the rest tangent's factor kept; 'frame': one frame of a load varying by 2 % per frame, warm-started."),
+            "Liver: the built-in phantom, E = 5 kPa, ν = 0.48, 800 Pa on one lobe. The published times are for a ~5k-tet liver on the authors' machine.".into(),
+        ],
+        values,
+    })
+}

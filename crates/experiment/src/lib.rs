@@ -1,0 +1,183 @@
+//! The published experiments, each run end to end by one call: it generates its data,
+//! trains, identifies or registers, evaluates on data that played no part in producing the
+//! model, and writes `DIR/<name>/result.json` with its figures beside the published ones,
+//! plus PNG figures. [`report::write`] gathers the results into `DIR/report.md` and
+//! `DIR/report.html`.
+//!
+//! Every step resumes after a kill: datasets and training resume from what is on disk, and
+//! an experiment whose `result.json` was written at the requested size is not run again.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+
+mod fem_speed;
+mod identification;
+mod learning;
+mod registration;
+pub mod report;
+
+pub use fem_speed::{measure as measure_fem_speed, CaseTiming};
+
+/// How large an experiment is run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Size {
+    /// Minutes on 2 cores: fewer samples, steps and filter iterations.
+    Quick,
+    /// The published data sizes (training budgets stay within a CPU's reach: see each result's notes).
+    Paper,
+}
+
+/// One experiment per published result.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Name {
+    /// Static FEM solve times on the liver (published: SVK 1,550 ms, co-rotational 25 ms).
+    FemSpeed,
+    /// Scenario 5: Young's modulus by ROUKF.
+    Young,
+    /// Scenario 6: boundary springs by ROUKF.
+    Springs,
+    /// Scenario 1: U-Net from nodal forces to the liver's displacement.
+    LiverForces,
+    /// Scenario 2: registration to a partial point cloud, TRE at internal markers.
+    LiverAr,
+    /// Scenario 4: beam with sparse, noisy imposed displacements.
+    BeamSparse,
+}
+
+impl Name {
+    /// Every experiment, in the order `all` runs them.
+    pub const ALL: [Name; 6] =
+        [Name::FemSpeed, Name::Young, Name::Springs, Name::LiverForces, Name::LiverAr, Name::BeamSparse];
+
+    /// The command-line and directory name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Name::FemSpeed => "fem-speed",
+            Name::Young => "young",
+            Name::Springs => "springs",
+            Name::LiverForces => "liver-forces",
+            Name::LiverAr => "liver-ar",
+            Name::BeamSparse => "beam-sparse",
+        }
+    }
+
+    /// Parses a command-line name.
+    pub fn parse(s: &str) -> Result<Name> {
+        Name::ALL.into_iter().find(|n| n.as_str() == s).with_context(|| {
+            let names: Vec<&str> = Name::ALL.iter().map(|n| n.as_str()).collect();
+            format!("unknown experiment '{s}' (one of: {}, all)", names.join(", "))
+        })
+    }
+}
+
+/// One line of a result table: our figure beside the published one.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Row {
+    /// What is measured.
+    pub quantity: String,
+    /// Our value, formatted with its unit.
+    pub ours: String,
+    /// The published value, formatted, or empty where none was published.
+    pub published: String,
+}
+
+impl Row {
+    /// A row; `published` may be empty.
+    pub fn new(quantity: impl Into<String>, ours: impl Into<String>, published: impl Into<String>) -> Row {
+        Row { quantity: quantity.into(), ours: ours.into(), published: published.into() }
+    }
+}
+
+/// What an experiment produced.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ExperimentResult {
+    /// The experiment.
+    pub name: Name,
+    /// Heading of its report section.
+    pub title: String,
+    /// The size it ran at.
+    pub size: Size,
+    /// Wall time of the run that finished it (s; steps resumed from disk are not counted).
+    pub seconds: f64,
+    /// The table.
+    pub rows: Vec<Row>,
+    /// Figures (PNG) and 3D viewers (HTML), relative to the experiment's directory.
+    pub figures: Vec<String>,
+    /// What the figures are conditional on (splits, load ranges, failed samples, budgets).
+    pub notes: Vec<String>,
+    /// The raw numbers behind the table, by name (SI units unless the name says otherwise).
+    pub values: serde_json::Map<String, serde_json::Value>,
+}
+
+/// The result file of an experiment.
+pub const RESULT_FILE: &str = "result.json";
+
+/// Progress messages of a long run (the CLI prints them).
+pub type Progress<'a> = &'a (dyn Fn(&str) + Sync);
+
+/// Runs experiment `name` at `size` under `root/<name>/` (resuming what is there) and writes
+/// its `result.json`. A result already written at the same size is returned as it is.
+pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<ExperimentResult> {
+    let dir = root.join(name.as_str());
+    if let Some(done) = load(&dir)? {
+        if done.size == size {
+            progress(&format!("{}: already done at this size ({})", name.as_str(), dir.join(RESULT_FILE).display()));
+            return Ok(done);
+        }
+    }
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let start = Instant::now();
+    let mut result = match name {
+        Name::FemSpeed => fem_speed::run(size, &dir, progress)?,
+        Name::Young => identification::young(size, &dir, progress)?,
+        Name::Springs => identification::springs(size, &dir, progress)?,
+        Name::LiverForces => learning::liver_forces(size, &dir, progress)?,
+        Name::LiverAr => registration::liver_ar(size, &dir, progress)?,
+        Name::BeamSparse => learning::beam_sparse(size, &dir, progress)?,
+    };
+    result.seconds = start.elapsed().as_secs_f64();
+    let json = serde_json::to_string_pretty(&result)?;
+    mesh::io::write_atomic_bytes(&dir.join(RESULT_FILE), json.as_bytes())?;
+    Ok(result)
+}
+
+/// The result in `dir`, if one was written.
+pub fn load(dir: &Path) -> Result<Option<ExperimentResult>> {
+    let path = dir.join(RESULT_FILE);
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).map(Some).with_context(|| format!("{}: not an experiment result", path.display()))
+}
+
+/// Every result under `root`, in [`Name::ALL`] order.
+pub fn load_all(root: &Path) -> Result<Vec<ExperimentResult>> {
+    let mut out = Vec::new();
+    for name in Name::ALL {
+        if let Some(r) = load(&root.join(name.as_str()))? {
+            out.push(r);
+        }
+    }
+    if out.is_empty() {
+        bail!("no experiment result under {}", root.display());
+    }
+    Ok(out)
+}
+
+/// A scenario shipped with augsim, written into `dir` (so that the run records what it used).
+fn write_scenario(dir: &Path, file: &str, text: &str) -> Result<PathBuf> {
+    let path = dir.join(file);
+    mesh::io::write_atomic_bytes(&path, text.as_bytes())?;
+    Ok(path)
+}
+
+/// `v` formatted with `digits` decimals and `unit`.
+fn fmt(v: f64, digits: usize, unit: &str) -> String {
+    format!("{v:.digits$} {unit}").trim_end().to_string()
+}

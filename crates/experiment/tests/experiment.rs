@@ -1,0 +1,70 @@
+//! The smallest experiment end to end (what `augsim experiment springs --size quick` runs),
+//! its resumption and its report.
+
+use augsim_experiment::{self as experiment, Name, Size};
+
+#[test]
+fn springs_experiment_writes_a_result_resumes_and_reports() {
+    let root = tempfile::tempdir().unwrap();
+    let result = experiment::run(Name::Springs, Size::Quick, root.path(), &|_| {}).unwrap();
+    let value = |row: usize| -> f64 { result.rows[row].ours.trim_end_matches(" mm").parse().unwrap() };
+    let (estimated, fixed, free) = (value(0), value(1), value(2));
+    println!("assessment errors: estimated {estimated} mm, fixed {fixed} mm, free {free} mm");
+    // The published claim: estimated springs beat both fully fixed and free attachments.
+    assert!(estimated < fixed && estimated < free, "{:?}", result.rows);
+    for figure in &result.figures {
+        assert!(root.path().join("springs").join(figure).exists(), "{figure} missing");
+    }
+    // A second run finds the result and does not run again.
+    let again = experiment::run(Name::Springs, Size::Quick, root.path(), &|_| {}).unwrap();
+    assert_eq!(again, result);
+    let all = experiment::load_all(root.path()).unwrap();
+    assert_eq!(all, vec![result.clone()]);
+    let [md, html] = experiment::report::write(root.path(), &all).unwrap();
+    let md = std::fs::read_to_string(md).unwrap();
+    let html = std::fs::read_to_string(html).unwrap();
+    assert!(md.contains(&result.title) && md.contains("| quantity | augsim | published |"));
+    assert!(md.contains("![run/springs.png](springs/run/springs.png)"));
+    assert!(html.contains("<img src=\"springs/run/springs.png\"") && !html.contains("http"));
+}
+
+#[test]
+fn names_parse_and_unknown_ones_are_refused() {
+    for name in Name::ALL {
+        assert_eq!(Name::parse(name.as_str()).unwrap(), name);
+    }
+    let e = Name::parse("liver").unwrap_err().to_string();
+    assert!(e.contains("unknown experiment 'liver'") && e.contains("beam-sparse"), "{e}");
+    let empty = tempfile::tempdir().unwrap();
+    assert!(experiment::load_all(empty.path()).unwrap_err().to_string().contains("no experiment result"));
+}
+
+#[test]
+fn the_generated_readme_section_is_replaced_between_its_markers() {
+    use experiment::{report, ExperimentResult, Row};
+    let dir = tempfile::tempdir().unwrap();
+    let readme = dir.path().join("README.md");
+    let [begin, end] = report::MARKERS;
+    std::fs::write(&readme, format!("# title\n\nbefore\n{begin}\nold text\n{end}\nafter\n")).unwrap();
+    let result = ExperimentResult {
+        name: Name::Young,
+        title: "Scenario 5".into(),
+        size: Size::Quick,
+        seconds: 12.0,
+        rows: vec![Row::new("E", "4,990 ± 20 Pa", "4,992 ± 15 Pa")],
+        figures: vec!["run/young.png".into()],
+        notes: vec!["synthetic".into()],
+        values: Default::default(),
+    };
+    report::update_markdown(&readme, &[result]).unwrap();
+    let text = std::fs::read_to_string(&readme).unwrap();
+    assert!(text.starts_with("# title\n\nbefore\n") && text.ends_with(&format!("{end}\nafter\n")));
+    assert!(
+        !text.contains("old text")
+            && text.contains("### Scenario 5")
+            && text.contains("| E | 4,990 ± 20 Pa | 4,992 ± 15 Pa |")
+    );
+    assert!(!text.contains("young.png"), "no figure links in the README section");
+    std::fs::write(&readme, "no markers").unwrap();
+    assert!(report::update_markdown(&readme, &[]).unwrap_err().to_string().contains("markers"));
+}
