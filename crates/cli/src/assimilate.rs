@@ -35,6 +35,10 @@ pub struct AssimilateArgs {
     /// Tracked assessment points (CSV `frame,id,x,y,z`): the estimated deformation's error is reported there.
     #[arg(long, requires = "observations")]
     pub assessment: Option<PathBuf>,
+    /// The scenario's parameter values are the truth behind the tracks (e.g. tracks of a synthetic run on a finer
+    /// mesh): report the estimate's error against them.
+    #[arg(long, requires = "observations")]
+    pub known_truth: bool,
     /// Forgetting factor in (0, 1]: the parameter covariance is divided by it before every step (default: the
     /// scenario's filter.forgetting, else 1 = none).
     #[arg(long)]
@@ -65,6 +69,7 @@ pub fn run(args: &AssimilateArgs) -> Result<()> {
         features: args.features.clone(),
         controls: args.controls.clone(),
         assessment: args.assessment.clone(),
+        known_truth: args.known_truth,
     });
     println!(
         "scenario     {}{}",
@@ -93,10 +98,13 @@ pub fn run(args: &AssimilateArgs) -> Result<()> {
             1e3 * r.max_displacement
         ),
         (None, Some(f)) => println!(
-            "tracks       {} frames from {}, {} occluded feature observations",
+            "tracks       {} frames from {}, {} occluded feature observations, {} points outside the mesh moved \
+             onto its surface (at most {:.2} mm)",
             s.iterations,
             f.observations.display(),
-            s.occluded
+            s.occluded,
+            s.projected,
+            1e3 * s.max_projection
         ),
         (None, None) => {}
     }

@@ -48,6 +48,7 @@ fn files(tracks: &Path, controls: bool) -> ObservationFiles {
         features: None,
         controls: controls.then(|| tracks.join("controls.csv")),
         assessment: Some(tracks.join("assessment.csv")),
+        known_truth: false,
     }
 }
 
@@ -97,6 +98,7 @@ fn tracks_written_by_a_synthetic_run_give_the_same_estimate() {
         features: Some(dir.path().join("features.csv")),
         controls: None,
         assessment: None,
+        known_truth: false,
     };
     assert_eq!(run(dir.path(), &beam, Some(&split), "split").1, expected);
 
@@ -197,4 +199,16 @@ fn bad_track_files_are_named_with_their_line() {
     let files = ObservationFiles { observations: d.join("outside.csv"), ..Default::default() };
     let err = Experiment::prepare(sc, &base, Some(&files)).err().unwrap().to_string();
     assert!(err.contains("outside.csv:3: feature `out`") && err.contains("outside the mesh"), "{err}");
+
+    // A feature just outside (0.5 mm above the top face, as from a finer surface) is moved onto the surface.
+    std::fs::write(
+        d.join("near.csv"),
+        "frame,id,x,y,z\n0,in,0.05,0.01,0.02\n0,near,0.05,0.01,0.0205\n1,in,0.05,0.01,0.02\n1,near,0.05,0.01,0.0205\n",
+    )
+    .unwrap();
+    let (sc, base) = scenario(d, "beam.toml", &beam());
+    let files = ObservationFiles { observations: d.join("near.csv"), ..Default::default() };
+    let setup = Experiment::prepare(sc, &base, Some(&files)).unwrap().setup().clone();
+    assert_eq!((setup.features, setup.projected), (2, 1));
+    assert!((setup.max_projection - 5e-4).abs() < 1e-12, "{}", setup.max_projection);
 }

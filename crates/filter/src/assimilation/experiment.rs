@@ -7,7 +7,7 @@ use fem::scenario::{build_mesh, fixed_problem};
 use fem::Problem;
 use mesh::io::Field;
 use mesh::select::{k_nearest, nearest};
-use mesh::{Mesh, MeshLocator, Point};
+use mesh::{Mesh, MeshLocator, Point, SurfaceBvh};
 use nalgebra::DVector;
 use serde::Serialize;
 
@@ -15,10 +15,11 @@ use super::report::{self, Report};
 use super::scenario::{AssessmentSpec, AssimilationScenario, ObservationSpec};
 use super::tracks::{write_tracks, RestPositions, Tracks};
 use super::{AssimilationError, Context};
+
 use crate::observation::{add_noise, tracked_positions};
 use crate::{
-    ControlPath, FemModel, FemParameter, LoadPattern, Model, ObservationNoise, ParameterSpec, Roukf, RoukfConfig,
-    TrackedPoint,
+    ControlPath, FemModel, FemModelError, FemParameter, LoadPattern, Model, ObservationNoise, ParameterSpec, Roukf,
+    RoukfConfig, TrackedPoint,
 };
 
 /// Track files that replace the synthetic observations (formats in [`super::tracks`]).
@@ -33,6 +34,9 @@ pub struct ObservationFiles {
     pub controls: Option<PathBuf>,
     /// Assessment points (`frame,id,x,y,z`): where the estimated deformation is compared with the tracks.
     pub assessment: Option<PathBuf>,
+    /// The scenario's parameter values are the truth behind the tracks (e.g. tracks written by a synthetic run on
+    /// another mesh): the report gives the errors against them.
+    pub known_truth: bool,
 }
 
 /// Summary of a prepared experiment.
@@ -60,6 +64,10 @@ pub struct Setup {
     pub iterations: usize,
     /// Feature observations missing (occluded) in the filtered frames.
     pub occluded: usize,
+    /// Tracked points (features, assessment) outside the mesh moved onto its surface.
+    pub projected: usize,
+    /// The largest such move (m).
+    pub max_projection: f64,
     /// The reference run (synthetic observations only).
     pub reference: Option<Reference>,
 }
@@ -133,6 +141,8 @@ pub struct Experiment {
     every: usize,
     assessment: Option<Assessment>,
     synthetic_tracks: Vec<TrackOutput>,
+    /// The scenario's values are the truth (synthetic observations, or [`ObservationFiles::known_truth`]).
+    known_truth: bool,
     setup: Setup,
 }
 
@@ -194,6 +204,8 @@ impl Experiment {
             parameters: 0,
             iterations: 0,
             occluded: 0,
+            projected: 0,
+            max_projection: 0.0,
             reference: None,
         };
         let mut experiment = Experiment {
@@ -209,6 +221,7 @@ impl Experiment {
             every,
             assessment: None,
             synthetic_tracks: Vec::new(),
+            known_truth: files.is_some_and(|f| f.known_truth),
             setup,
         };
         match files {
@@ -300,7 +313,8 @@ impl Experiment {
         if iterations == 0 {
             return Err(AssimilationError::file(&files.observations, None, "no frame after frame 0 (the rest)".into()));
         }
-        self.observed = locate_tracks(&tracks, rest.as_ref(), locator)?;
+        let mut finder = PointFinder::new(&self.base.mesh, locator)?;
+        self.observed = locate_tracks(&tracks, rest.as_ref(), &mut finder)?;
         self.measurements =
             (1..=iterations).map(|k| tracks.frame(k)).map(|(z, available)| Frame { z, available }).collect();
         if let Some(path) = &files.controls {
@@ -309,11 +323,13 @@ impl Experiment {
         }
         if let Some(path) = &files.assessment {
             let tracks = Tracks::read(path)?;
-            let points = locate_tracks(&tracks, rest.as_ref(), locator)?;
+            let points = locate_tracks(&tracks, rest.as_ref(), &mut finder)?;
             let truth =
                 (1..=iterations).map(|k| tracks.frame(k)).map(|(z, available)| Frame { z, available }).collect();
             self.assessment = Some(Assessment { points, truth });
         }
+        self.setup.projected = finder.moved.len();
+        self.setup.max_projection = finder.moved.iter().copied().fold(0.0, f64::max);
         Ok(())
     }
 
@@ -324,13 +340,21 @@ impl Experiment {
             .context(|| "building the FEM model".into())
     }
 
+    /// Writes the synthetic observations into `dir` (`observations.csv`, and `assessment.csv` and `controls.csv`
+    /// when there are such points): track files another experiment can read, e.g. on another mesh. Nothing is
+    /// written for observations read from files.
+    pub fn write_tracks(&self, dir: &Path) -> Result<(), AssimilationError> {
+        for (file, ids, frames) in &self.synthetic_tracks {
+            write_tracks(&dir.join(file), ids, frames)?;
+        }
+        Ok(())
+    }
+
     /// Runs the filter and writes the outputs into `out_dir` (see the module documentation); `progress` is called
     /// after every iteration.
     pub fn run(&self, out_dir: &Path, mut progress: impl FnMut(&Progress)) -> Result<Report, AssimilationError> {
         std::fs::create_dir_all(out_dir).context(|| format!("cannot create {}", out_dir.display()))?;
-        for (file, ids, frames) in &self.synthetic_tracks {
-            write_tracks(&out_dir.join("tracks").join(file), ids, frames)?;
-        }
+        self.write_tracks(&out_dir.join("tracks"))?;
         let iterations = self.measurements.len();
         let nodes = &self.base.mesh.nodes;
         let comparisons = self.comparisons()?;
@@ -384,7 +408,7 @@ impl Experiment {
         let trace = roukf.trace();
         trace.write_csv(&out_dir.join("trace.csv")).context(|| "writing the trace".into())?;
         trace.write_json(&out_dir.join("trace.json")).context(|| "writing the trace".into())?;
-        let synthetic = self.setup.reference.is_some();
+        let synthetic = self.setup.reference.is_some() || self.known_truth;
         let offset = usize::from(self.scenario.young.is_some());
         let young = match self.scenario.young {
             Some(_) => Some(report::young(trace, synthetic.then_some(self.unknowns.truth[0]), out_dir)?),
@@ -631,11 +655,52 @@ fn assessment_points(
     Ok(chosen.into_iter().map(TrackedPoint::at_node).collect())
 }
 
+/// Locates tracked points in a tetrahedral mesh. A point outside the mesh by at most half the mean element size
+/// (a feature of a finer or smoother surface than the mesh's facets) is moved to the closest point of the mesh's
+/// surface first; the moves are kept.
+struct PointFinder<'a> {
+    locator: &'a MeshLocator,
+    surface: SurfaceBvh,
+    reach: f64,
+    moved: Vec<f64>,
+}
+
+impl<'a> PointFinder<'a> {
+    fn new(mesh: &Mesh, locator: &'a MeshLocator) -> Result<Self, AssimilationError> {
+        let surface = SurfaceBvh::new(&mesh::boundary_surface(mesh)).context(|| "indexing the mesh surface".into())?;
+        let reach = 0.5 * (mesh.volume() / mesh.cells.len().max(1) as f64).cbrt();
+        Ok(PointFinder { locator, surface, reach, moved: Vec::new() })
+    }
+
+    fn locate(&mut self, p: Point) -> Result<TrackedPoint, FemModelError> {
+        let outside = match TrackedPoint::locate(self.locator, p) {
+            Ok(t) => return Ok(t),
+            Err(e) => e,
+        };
+        let c = self.surface.closest_point(p);
+        if !(c.distance <= self.reach) {
+            if !c.distance.is_finite() || self.locator.locate(p).is_some() {
+                return Err(outside);
+            }
+            return Err(FemModelError::Invalid(format!(
+                "tracked point {p:?} lies outside the mesh, {:.3e} m from its surface (points within {:.3e} m, \
+                 half an element, are moved onto it)",
+                c.distance, self.reach
+            )));
+        }
+        // A hair inside, so that rounding cannot leave the point on the outer side of the facet.
+        let inside: Point = std::array::from_fn(|d| c.point[d] + 1e-3 * (c.point[d] - p[d]));
+        let t = TrackedPoint::locate(self.locator, inside)?;
+        self.moved.push(c.distance);
+        Ok(t)
+    }
+}
+
 /// The features of a track file located in the mesh at their rest positions; an error names the feature's line.
 fn locate_tracks(
     tracks: &Tracks,
     rest: Option<&RestPositions>,
-    locator: &MeshLocator,
+    finder: &mut PointFinder,
 ) -> Result<Vec<TrackedPoint>, AssimilationError> {
     let positions = tracks.rest_positions(rest)?;
     tracks
@@ -644,7 +709,7 @@ fn locate_tracks(
         .zip(positions)
         .enumerate()
         .map(|(j, (id, p))| {
-            TrackedPoint::locate(locator, p).map_err(|e| {
+            finder.locate(p).map_err(|e| {
                 AssimilationError::file(&tracks.path, Some(tracks.line(j)), format!("feature `{id}`: {e}"))
             })
         })
