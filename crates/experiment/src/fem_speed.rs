@@ -115,7 +115,7 @@ pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> R
             median(&mut rows.iter().map(|s| f(s).as_secs_f64() * 1e3).collect::<Vec<_>>())
         };
         let last = rows.last().expect("at least one run");
-        let (frame_ms, frame_iterations) = frames(&mut solver, &opts, &last.u.clone(), runs)?;
+        let (frame_ms, frame_iterations) = frames(&mut solver, &opts, &last.u, runs)?;
         let timing = CaseTiming {
             name,
             dofs,

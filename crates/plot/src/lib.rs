@@ -159,14 +159,8 @@ pub fn scatter_plot(path: &Path, spec: &PlotSpec, sets: &[PointSet], links: &[Se
     let height = ((f64::from(width - 150) * aspect) as u32 + 130).clamp(300, 1400);
     write_png(path, (width, height), |root| {
         let err = |e: &dyn std::fmt::Display| e.to_string();
-        root.fill(&WHITE).map_err(|e| err(&e))?;
-        let mut chart = ChartBuilder::on(root)
-            .caption(&spec.title, ("sans-serif", 22))
-            .margin(20)
-            .x_label_area_size(45)
-            .y_label_area_size(70)
-            .build_cartesian_2d(x.clone(), y.clone())
-            .map_err(|e| err(&e))?;
+        let mut chart =
+            new_chart(root, &spec.title, Frame { title: 22, x_labels: 45, y_labels: 70 }, x.clone(), y.clone())?;
         chart
             .configure_mesh()
             .x_desc(&spec.x_label)
@@ -230,14 +224,7 @@ pub fn bar_chart(path: &Path, spec: &PlotSpec, categories: &[String], series: &[
     let n = categories.len() as f64;
     write_png(path, SIZE, |root| {
         let err = |e: &dyn std::fmt::Display| e.to_string();
-        root.fill(&WHITE).map_err(|e| err(&e))?;
-        let mut chart = ChartBuilder::on(root)
-            .caption(&spec.title, ("sans-serif", 24))
-            .margin(20)
-            .x_label_area_size(50)
-            .y_label_area_size(90)
-            .build_cartesian_2d(0.0..n, y.clone())
-            .map_err(|e| err(&e))?;
+        let mut chart = new_chart(root, &spec.title, Frame::LARGE, 0.0..n, y.clone())?;
         let y_span = (y.end - y.start).abs();
         let label = |v: &f64| {
             let k = v.floor();
@@ -282,6 +269,40 @@ pub fn bar_chart(path: &Path, spec: &PlotSpec, categories: &[String], series: &[
     })
 }
 
+/// Title size and label-area sizes (pixels) of a chart.
+#[derive(Clone, Copy)]
+struct Frame {
+    title: u32,
+    x_labels: u32,
+    y_labels: u32,
+}
+
+impl Frame {
+    /// Line and bar charts.
+    const LARGE: Frame = Frame { title: 24, x_labels: 50, y_labels: 90 };
+}
+
+/// A chart on a PNG bitmap with x and y coordinates of types `X`, `Y`.
+type Chart<'b, X, Y> = ChartContext<'b, BitMapBackend<'b>, Cartesian2d<X, Y>>;
+
+/// Fills `root` white and sets up a chart titled `title` over the coordinates `x`, `y`.
+fn new_chart<'b, X: AsRangedCoord, Y: AsRangedCoord>(
+    root: &DrawingArea<BitMapBackend<'b>, Shift>,
+    title: &str,
+    frame: Frame,
+    x: X,
+    y: Y,
+) -> Result<Chart<'b, X::CoordDescType, Y::CoordDescType>, String> {
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    ChartBuilder::on(root)
+        .caption(title, ("sans-serif", frame.title))
+        .margin(20)
+        .x_label_area_size(frame.x_labels)
+        .y_label_area_size(frame.y_labels)
+        .build_cartesian_2d(x, y)
+        .map_err(|e| e.to_string())
+}
+
 /// Renders `draw` on a `size` bitmap into a temporary sibling of `path`, then persists (renames) it onto `path`
 /// (nothing is left behind on failure). This crate does not depend on `mesh`, whose `mesh::io::write_atomic` the
 /// other crates use, so it calls `tempfile`'s persist itself: the same temporary sibling and rename, with a `.png`
@@ -293,15 +314,7 @@ fn write_png(
 ) -> Result<(), PlotError> {
     register_fonts();
     let io = |source: std::io::Error| PlotError::Io { path: path.to_path_buf(), source };
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let prefix = format!(".{name}.");
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(&prefix).suffix(".tmp.png");
-    // An ordinary file (0o666 less the umask), not a temporary file's owner-only one.
-    #[cfg(unix)]
-    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
-    let tmp = builder.tempfile_in(dir).map_err(io)?;
+    let tmp = sibling_tempfile(path, ".tmp.png").map_err(io)?;
     let drawn = {
         let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
         draw(&root).and_then(|()| root.present().map_err(|e| e.to_string()))
@@ -309,6 +322,20 @@ fn write_png(
     drawn.map_err(|message| PlotError::Draw { path: path.to_path_buf(), message })?;
     tmp.persist(path).map_err(|e| io(e.error))?;
     Ok(())
+}
+
+/// A temporary file beside `path` (same directory, so that persisting it over `path` is a rename), named
+/// `.<name>.XXXXXX<suffix>`, with ordinary permissions (0o666 less the umask) rather than a temporary file's
+/// owner-only ones. The plot crate's writers fill it and persist it: a reader sees the old file or the new one.
+pub(crate) fn sibling_tempfile(path: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let prefix = format!(".{name}.");
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(suffix);
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    builder.tempfile_in(dir)
 }
 
 /// Range of the values with a 5 % margin (multiplicative on a log axis); a single value gets a unit-size range.
@@ -342,14 +369,7 @@ where
     Y::CoordDescType: ValueFormatter<f64>,
 {
     let err = |e: &dyn std::fmt::Display| e.to_string();
-    root.fill(&WHITE).map_err(|e| err(&e))?;
-    let mut chart = ChartBuilder::on(root)
-        .caption(&spec.title, ("sans-serif", 24))
-        .margin(20)
-        .x_label_area_size(50)
-        .y_label_area_size(90)
-        .build_cartesian_2d(x_range, y_coord)
-        .map_err(|e| err(&e))?;
+    let mut chart = new_chart(root, &spec.title, Frame::LARGE, x_range, y_coord)?;
     let y_span = (y_range.end - y_range.start).abs().max(y_range.end.abs());
     chart
         .configure_mesh()

@@ -208,16 +208,7 @@ impl Scene {
 pub fn write_html(path: &Path, scene: &Scene) -> Result<(), ViewerError> {
     let page = scene.to_html()?;
     let io = |source: std::io::Error| ViewerError::Io { path: path.to_path_buf(), source };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".viewer-").suffix(".html.tmp");
-    // An ordinary file (mode 666 less the umask), not the temporary file's owner-only default.
-    #[cfg(unix)]
-    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
-    let mut file = builder.tempfile_in(dir).map_err(io)?;
+    let mut file = crate::sibling_tempfile(path, ".tmp").map_err(io)?;
     file.write_all(page.as_bytes()).map_err(io)?;
     file.as_file().sync_all().map_err(io)?;
     file.persist(path).map_err(|e| io(e.error))?;
