@@ -32,7 +32,7 @@ pub struct Scenario {
     /// Zero-length springs to the rest position.
     #[serde(default)]
     pub springs: Vec<Springs>,
-    /// Total forces shared equally by selected nodes.
+    /// Total forces spread over selected nodes as a uniform traction ([`fem::force_shares`]).
     #[serde(default)]
     pub force: Vec<Force>,
     /// Surface tractions on boundary faces whose nodes are all selected.

@@ -79,10 +79,10 @@ impl Problem {
         }
     }
 
-    /// Adds the force `total` (N) shared equally by the nodes.
+    /// Adds the force `total` (N) spread over the nodes by [`force_shares`]: the uniform
+    /// traction of that resultant on the boundary faces they span.
     pub fn add_force(&mut self, nodes: &[usize], total: Point) {
-        let share = 1.0 / nodes.len().max(1) as f64;
-        for &n in nodes {
+        for (n, share) in force_shares(&self.mesh, nodes) {
             for d in 0..3 {
                 self.f_ext[3 * n + d] += total[d] * share;
             }
@@ -92,21 +92,13 @@ impl Problem {
     /// Adds a surface traction (Pa, a force per reference area) on every boundary
     /// face whose nodes all belong to `nodes`. Returns the loaded area (m²).
     pub fn add_traction(&mut self, nodes: &[usize], traction: Point) -> f64 {
-        let mut member = vec![false; self.mesh.num_nodes()];
-        for &n in nodes {
-            member[n] = true;
-        }
-        let mut area = 0.0;
-        for face in boundary_faces(&self.mesh).into_iter().filter(|f| f.nodes.iter().all(|&n| member[n])) {
-            let x: Vec<Point> = face.nodes.iter().map(|&n| self.mesh.nodes[n]).collect();
-            for (k, w) in face_node_areas(&x).into_iter().enumerate() {
-                area += w;
-                for d in 0..3 {
-                    self.f_ext[3 * face.nodes[k] + d] += w * traction[d];
-                }
+        let areas = node_areas(&self.mesh, nodes);
+        for &(n, w) in &areas {
+            for d in 0..3 {
+                self.f_ext[3 * n + d] += w * traction[d];
             }
         }
-        area
+        areas.iter().map(|(_, w)| w).sum()
     }
 
     /// Adds the body force ρ·g of the material's density under acceleration `g` (m/s²).
@@ -158,6 +150,43 @@ impl Problem {
         }
         Ok(())
     }
+}
+
+/// Each node's share (summing to 1) of a total force applied as the uniform traction of
+/// that resultant on the boundary faces wholly made of the nodes: its lumped area on them
+/// over their area, so that the load does not depend on how many nodes sample the patch.
+/// Nodes on no such face get no share; when the nodes span no boundary face (a single
+/// node, interior nodes), the shares are equal.
+pub fn force_shares(mesh: &Mesh, nodes: &[usize]) -> Vec<(usize, f64)> {
+    let areas = node_areas(mesh, nodes);
+    let total: f64 = areas.iter().map(|(_, w)| w).sum();
+    if total > 0.0 {
+        return areas.into_iter().map(|(n, w)| (n, w / total)).collect();
+    }
+    let share = 1.0 / nodes.len().max(1) as f64;
+    nodes.iter().map(|&n| (n, share)).collect()
+}
+
+/// Lumped area (m²) of each node on the boundary faces wholly made of `nodes`, in order of
+/// first appearance; nodes on no such face are left out.
+fn node_areas(mesh: &Mesh, nodes: &[usize]) -> Vec<(usize, f64)> {
+    let mut member = vec![false; mesh.num_nodes()];
+    for &n in nodes {
+        member[n] = true;
+    }
+    let mut slot = vec![usize::MAX; mesh.num_nodes()];
+    let mut areas: Vec<(usize, f64)> = Vec::new();
+    for face in boundary_faces(mesh).into_iter().filter(|f| f.nodes.iter().all(|&n| member[n])) {
+        let x: Vec<Point> = face.nodes.iter().map(|&n| mesh.nodes[n]).collect();
+        for (&n, w) in face.nodes.iter().zip(face_node_areas(&x)) {
+            if slot[n] == usize::MAX {
+                slot[n] = areas.len();
+                areas.push((n, 0.0));
+            }
+            areas[slot[n]].1 += w;
+        }
+    }
+    areas
 }
 
 /// Area associated with each node of a flat triangle (A/3 each) or a bilinear

@@ -260,3 +260,36 @@ fn failures_are_reported_not_looped() {
     let err = StaticSolver::new(problem).unwrap_err();
     assert!(matches!(err, fem::FemError::NonFinite(_)), "{err}");
 }
+
+/// A total force is spread over a node set by tributary surface area, not in equal shares:
+/// on the top face of a 1 × 1 box with 4 × 2 cells, a corner node carries 1/32 of it, an
+/// node on an edge 1/16, an inner node 1/8; an interior node set falls back to equal shares.
+#[test]
+fn total_force_is_shared_by_tributary_area() {
+    let m = box_hex([0.0; 3], [1.0, 1.0, 0.5], [4, 2, 1]).unwrap();
+    let top = mesh::select::nodes_in_box(&m.nodes, [-1e-9, -1e-9, 0.5 - 1e-9], [1.0 + 1e-9, 1.0 + 1e-9, 0.5 + 1e-9]);
+    assert_eq!(top.len(), 15);
+    let shares = fem::force_shares(&m, &top);
+    assert!((shares.iter().map(|(_, s)| s).sum::<f64>() - 1.0).abs() < 1e-12);
+    for &(n, s) in &shares {
+        let [x, y, _] = m.nodes[n];
+        let on_edge = |c: f64| c.abs() < 1e-9 || (c - 1.0).abs() < 1e-9;
+        let expected = match (on_edge(x), on_edge(y)) {
+            (true, true) => 1.0 / 32.0,
+            (true, false) | (false, true) => 1.0 / 16.0,
+            (false, false) => 1.0 / 8.0,
+        };
+        assert!((s - expected).abs() < 1e-12, "node at ({x}, {y}): share {s}, expected {expected}");
+    }
+    // The same as the traction of that resultant on the face.
+    let mut by_force = Problem::new(m.clone(), Material::new(Law::Linear, 1.0, 0.3));
+    by_force.add_force(&top, [0.0, 0.0, -2.0]);
+    let mut by_traction = by_force.clone();
+    by_traction.f_ext.fill(0.0);
+    assert!((by_traction.add_traction(&top, [0.0, 0.0, -2.0]) - 1.0).abs() < 1e-12);
+    assert!(by_force.f_ext.iter().zip(&by_traction.f_ext).all(|(a, b)| (a - b).abs() < 1e-12));
+    // Interior nodes only (a hexahedral box of 2 × 2 × 2 cells has one): equal shares.
+    let cube = box_hex([0.0; 3], [1.0; 3], [2, 2, 2]).unwrap();
+    let centre = mesh::select::nodes_in_box(&cube.nodes, [0.49; 3], [0.51; 3]);
+    assert_eq!(fem::force_shares(&cube, &centre), vec![(centre[0], 1.0)]);
+}

@@ -501,8 +501,8 @@ fn build_problem(
     let mut loads = Vec::new();
     for f in &sc.force {
         let nodes = select(&f.select, "force", &problem)?;
-        let share = 1.0 / nodes.len() as f64;
-        let forces = nodes.iter().map(|&k| (k, f.total.map(|c| c * share))).collect();
+        let shares = fem::force_shares(&problem.mesh, &nodes);
+        let forces = shares.into_iter().map(|(k, s)| (k, f.total.map(|c| c * s))).collect();
         loads.push(LoadPattern { profile: f.profile, forces, displacements: vec![] });
     }
     let mut tool_nodes = Vec::new();

@@ -56,7 +56,7 @@ pub struct AssimilationScenario {
     pub output: OutputSpec,
 }
 
-/// A total force shared equally by the selected nodes, times a profile.
+/// A total force spread over the selected nodes as a uniform traction ([`fem::force_shares`]), times a profile.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ForceSpec {
