@@ -6,11 +6,13 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use mesh::io::{write_atomic_bytes, Field};
 use mesh::Point;
-use register::case::{compare, phantom_push};
+use register::case::{case_methods, compare, synthetic_case};
 use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
 use register::picture::side_view;
+use register::scenario::{slug, MethodKind};
 use register::{
-    register_sequence, CameraModel, Deformer, FemDeformer, NetworkDeformer, Organ, RegistrationOptions, Summary,
+    register_sequence, CaseScenario, Deformer, FemDeformer, NetworkDeformer, Organ, RegistrationOptions, RigidOptions,
+    RigidResult, RigidTransform, Summary,
 };
 use serde::Serialize;
 
@@ -23,13 +25,13 @@ use learn::scenario::DatasetScenario;
 pub struct RegisterArgs {
     /// Intraoperative cloud, positions only (m): .csv with a header naming x, y, z; .npy [N, 3];
     /// .ply (ASCII or binary). A directory is a sequence of frames, in file-name order.
-    #[arg(required_unless_present = "demo")]
+    #[arg(required_unless_present = "comparison")]
     cloud: Option<PathBuf>,
     /// FEM registration on this scenario's mesh, material (law, formulation) and fixed nodes.
     #[arg(long, conflicts_with = "model")]
     fem: Option<PathBuf>,
     /// U-Net registration with this model (model.json); the organ comes from --scenario. With
-    /// --demo: the network of the comparison (default: models/liver_ar/model.json).
+    /// --demo or --case: the network of the comparison (default: models/liver_ar/model.json).
     #[arg(long)]
     model: Option<PathBuf>,
     /// The dataset scenario the model was trained on, for --model (its mesh is the organ, its
@@ -39,23 +41,39 @@ pub struct RegisterArgs {
     /// Targets at rest (CSV x,y,z, m); default: the mesh's `markers` and `tumour` regions.
     #[arg(long)]
     targets: Option<PathBuf>,
-    /// True deformed positions of the targets (CSV x,y,z, same order): the TRE is reported.
+    /// True deformed positions of the targets (CSV x,y,z, same order, in the cloud's frame): the
+    /// TRE is reported.
     #[arg(long)]
     truth: Option<PathBuf>,
-    /// Most match-and-deform iterations per frame.
-    #[arg(long, default_value_t = RegistrationOptions::default().iterations)]
-    iterations: usize,
+    /// Most match-and-deform iterations per frame (default 30, or the case's).
+    #[arg(long)]
+    iterations: Option<usize>,
+    /// Rigid pre-alignment: trimmed point-to-plane ICP of the cloud to the organ's rest surface
+    /// before the deformable iterations (on the first frame of a sequence); targets, organ.vtu and
+    /// the TRE are then in the cloud's frame, and summary.json gives the organ → cloud transform.
+    #[arg(long)]
+    rigid: bool,
     /// Output directory: organ.vtu (organ.pvd for a sequence), targets.csv, summary.json.
     #[arg(short, long, default_value = "out/register")]
     out: PathBuf,
-    /// Built-in demo: a Neo-Hookean phantom of 9,000 tetrahedra pushed down (--force), seen from
-    /// above (1,500 points, 1 mm noise, 5 % outliers), registered with a co-rotational FEM, an
-    /// SVK FEM (both on another mesh of 3,000) and the shipped U-Net; prints the comparison.
-    #[arg(long)]
+    /// Built-in comparison case (scenarios/register_case.toml): a Neo-Hookean phantom of 9,000
+    /// tetrahedra pushed down (--force), seen from above (1,500 points, 1 mm noise, 5 %
+    /// outliers), registered with a co-rotational FEM, an SVK FEM (both on another mesh of 3,000)
+    /// and the shipped U-Net; prints the comparison.
+    #[arg(long, group = "comparison")]
     demo: bool,
-    /// The force (N) pushing the demo's truth down.
-    #[arg(long, default_value_t = 1.5, requires = "demo")]
-    force: f64,
+    /// The comparison of --demo on this case scenario (TOML, as scenarios/register_case.toml).
+    #[arg(long, group = "comparison", value_name = "CASE.toml")]
+    case: Option<PathBuf>,
+    /// The force (N) pushing the case's truth (default: the case's, 1.5 N for --demo).
+    #[arg(long, requires = "comparison")]
+    force: Option<f64>,
+    /// Misaligns the case's camera frame: rotation (degrees) about the case's axis...
+    #[arg(long, requires = "comparison", allow_negative_numbers = true)]
+    misalign_deg: Option<f64>,
+    /// ... and translation (mm) along its direction (try with and without --rigid).
+    #[arg(long, requires = "comparison", allow_negative_numbers = true)]
+    misalign_mm: Option<f64>,
 }
 
 /// One frame's line of summary.json.
@@ -91,7 +109,7 @@ struct Setup {
 
 /// Runs the registration and writes the outputs.
 pub fn run(args: &RegisterArgs) -> Result<()> {
-    if args.demo {
+    if args.demo || args.case.is_some() {
         return demo(args);
     }
     let cloud_path = args.cloud.clone().context("a cloud is required")?;
@@ -121,15 +139,25 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
             Some(files.iter().map(|f| read_targets(f)).collect::<Result<Vec<_>, _>>()?)
         }
     };
-    let options = RegistrationOptions { iterations: args.iterations, ..Default::default() };
+    let defaults = RegistrationOptions::default();
+    let options = RegistrationOptions {
+        iterations: args.iterations.unwrap_or(defaults.iterations),
+        rigid: args.rigid.then(RigidOptions::default),
+        ..defaults
+    };
     println!("method     {method}");
     print_organ(&organ, targets.len());
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let sequence = frames.len() > 1;
     let (mut steps, mut rows) = (Vec::new(), Vec::new());
     let clouds = frames.iter().map(|f| read_point_cloud(f));
+    let mut moved_mesh: Option<mesh::Mesh> = None;
     let outcomes =
         register_sequence(&organ, deformer.as_mut(), clouds, &targets, truths.as_deref(), &options, |i, o| {
+            if let (Some(rigid), None) = (&o.rigid, &moved_mesh) {
+                print_rigid(rigid, None);
+                moved_mesh = Some(rigid.organ_to_cloud().move_mesh(organ.mesh()));
+            }
             let (r, tre) = (&o.registration, o.tre_mm());
             let row = FrameSummary {
                 cloud: frames[i].display().to_string(),
@@ -154,7 +182,8 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
                 ))
             );
             let name = if sequence { format!("organ_{i:04}.vtu") } else { "organ.vtu".into() };
-            mesh::io::write_mesh(args.out.join(&name), organ.mesh(), &[Field::point("displacement", 3, r.u.clone())])?;
+            let (m, u) = in_cloud_frame(organ.mesh(), moved_mesh.as_ref(), o.rigid.as_ref(), &r.u);
+            mesh::io::write_mesh(args.out.join(&name), &m, &[Field::point("displacement", 3, u)])?;
             steps.push((i as f64, name));
             rows.push(row);
             Ok(())
@@ -163,7 +192,7 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
         mesh::io::write_pvd(args.out.join("organ.pvd"), &steps)?;
     }
     let last = outcomes.last().context("no frame")?;
-    write_targets(&args.out.join("targets.csv"), &targets, &last.targets)?;
+    write_targets(&args.out.join("targets.csv"), &rest_in_cloud_frame(&targets, last.rigid.as_ref()), &last.targets)?;
     let summary = Summary::new(method, &outcomes)?;
     if let (Some(t), Some(m), Some(r)) = (summary.tre_mean_mm, summary.tre_max_mm, summary.no_deformation_tre_mean_mm) {
         println!("TRE        mean {t:.2} mm, max {m:.2} mm (without deformation: mean {r:.2} mm)");
@@ -178,11 +207,65 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
     Ok(())
 }
 
-/// A file name for a method: its lowercase letters and digits, other runs as one `_`.
-fn slug(name: &str) -> String {
-    let lower = name.to_ascii_lowercase();
-    let words: Vec<&str> = lower.split(|c: char| !c.is_ascii_alphanumeric()).filter(|w| !w.is_empty()).collect();
-    words.join("_")
+/// The organ mesh and a displacement in the cloud's frame: as given without a rigid alignment;
+/// with one, the mesh moved by it (`moved`, when already computed) and the displacement rotated.
+fn in_cloud_frame<'a>(
+    organ: &'a mesh::Mesh,
+    moved: Option<&'a mesh::Mesh>,
+    rigid: Option<&RigidResult>,
+    u: &[f64],
+) -> (std::borrow::Cow<'a, mesh::Mesh>, Vec<f64>) {
+    match rigid {
+        None => (std::borrow::Cow::Borrowed(organ), u.to_vec()),
+        Some(r) => {
+            let t = r.organ_to_cloud();
+            let m = match moved {
+                Some(m) => std::borrow::Cow::Borrowed(m),
+                None => std::borrow::Cow::Owned(t.move_mesh(organ)),
+            };
+            (m, t.rotate_field(u))
+        }
+    }
+}
+
+/// Rest targets in the cloud's frame (moved by the rigid alignment, if any).
+fn rest_in_cloud_frame(targets: &[Point], rigid: Option<&RigidResult>) -> Vec<Point> {
+    match rigid {
+        None => targets.to_vec(),
+        Some(r) => {
+            let t = r.organ_to_cloud();
+            targets.iter().map(|&p| t.apply(p)).collect()
+        }
+    }
+}
+
+/// The rigid alignment's line, with its error against `truth` (the true organ → cloud
+/// transform) when known.
+fn print_rigid(r: &RigidResult, truth: Option<&RigidTransform>) {
+    let t = r.organ_to_cloud();
+    println!(
+        "rigid      ICP: organ -> cloud rotation {:.2} deg, translation {:.2} mm; {} iterations{}, {} of {} points \
+         kept, rms {:.2} mm, {:.1} ms",
+        t.angle().to_degrees(),
+        t.translation_norm() * 1e3,
+        r.iterations,
+        if r.converged { "" } else { " (not converged)" },
+        r.kept,
+        r.points,
+        r.rms * 1e3,
+        ms(r.time)
+    );
+    if let Some(truth) = truth {
+        let (angle, shift) = t.error_to(truth);
+        println!(
+            "           against the case's true misalignment ({:.2} deg, {:.2} mm): {:.2} deg, {:.2} mm off \
+             (the rigid fit takes up part of the deformation)",
+            truth.angle().to_degrees(),
+            truth.translation_norm() * 1e3,
+            angle.to_degrees(),
+            shift * 1e3
+        );
+    }
 }
 
 fn print_organ(organ: &Organ, targets: usize) {
@@ -254,30 +337,77 @@ fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<Setup> {
 /// The shipped network for the built-in phantom (trained by `scenarios/liver_ar.toml`).
 const DEMO_MODEL: &str = "models/liver_ar/model.json";
 
-/// `--demo`: simulates the case, registers it with each method and prints the comparison.
+/// The comparison case of `--demo` (the built-in scenario) or `--case FILE`, with the command
+/// line's overrides.
+fn comparison_case(args: &RegisterArgs) -> Result<CaseScenario> {
+    let mut scenario = match &args.case {
+        Some(path) => CaseScenario::load(path)?,
+        None => CaseScenario::builtin(),
+    };
+    if let Some(force) = args.force {
+        scenario.truth.force = force;
+    }
+    if let Some(deg) = args.misalign_deg {
+        scenario.misalignment.rotation_deg = deg;
+    }
+    if let Some(mm) = args.misalign_mm {
+        scenario.misalignment.translation_mm = mm;
+    }
+    if let Some(iterations) = args.iterations {
+        scenario.registration.iterations = iterations;
+    }
+    if args.rigid && scenario.registration.rigid.is_none() {
+        scenario.registration.rigid = Some(RigidOptions::default());
+    }
+    let origin =
+        args.case.as_ref().map_or_else(|| register::scenario::BUILTIN_NAME.into(), |p| p.display().to_string());
+    scenario.validate().with_context(|| format!("{origin} with the command line's settings"))?;
+    Ok(scenario)
+}
+
+/// `--demo` and `--case`: simulates the case, registers it with each method and prints the
+/// comparison.
 fn demo(args: &RegisterArgs) -> Result<()> {
-    let camera = CameraModel { view: [0.0, 0.0, -1.0], points: 1500, noise: 1e-3, outliers: 0.05 };
+    let scenario = comparison_case(args)?;
+    let (t, c, m) = (&scenario.truth, &scenario.camera, &scenario.misalignment);
+    println!("case       {}: {}", scenario.name, scenario.description);
     println!(
-        "demo       truth: Neo-Hookean phantom (nu = 0.48) of about {} T4, its push patch pressed down by {} N;",
-        register::case::TRUTH_TETS,
-        args.force
+        "truth      {:?} phantom (E = {} kPa, nu = {}) of about {} T4, fixed on `{}`, {} N along {:?} on `{}`",
+        t.material.law,
+        t.material.young * 1e-3,
+        t.material.poisson,
+        t.tets,
+        t.fixed,
+        t.force,
+        t.direction,
+        t.load
     );
     println!(
-        "           camera along {:?}: {} points on the visible surface, {} mm noise, {} % outliers",
-        camera.view,
-        camera.points,
-        camera.noise * 1e3,
-        camera.outliers * 1e2
+        "camera     along {:?}: {} points on the visible surface, {} mm noise, {} % outliers (seed {})",
+        c.view,
+        c.points,
+        c.noise * 1e3,
+        c.outliers * 1e2,
+        c.seed
     );
-    let case = phantom_push(args.force, &camera, 1)?;
+    if m.rotation_deg != 0.0 || m.translation_mm != 0.0 {
+        println!(
+            "misaligned camera frame: {} deg about {:?}, then {} mm along {:?}",
+            m.rotation_deg, m.axis, m.translation_mm, m.direction
+        );
+    }
+    let case = synthetic_case(&scenario)?;
     let dir = args.out.join("case");
     write_csv(&dir.join("cloud.csv"), &case.cloud)?;
     write_csv(&dir.join("targets_rest.csv"), &case.targets)?;
     write_csv(&dir.join("truth.csv"), &case.truth)?;
     println!("case       {} (cloud.csv, targets_rest.csv, truth.csv)", dir.display());
 
+    let wants_network = scenario.models.method.iter().any(|m| m.kind == MethodKind::Network);
     let model_path = args.model.clone().unwrap_or_else(|| PathBuf::from(DEMO_MODEL));
-    let network = if model_path.exists() {
+    let network = if !wants_network {
+        None
+    } else if model_path.exists() {
         Some(learn::TrainedModel::load(&model_path, &learn::inference_device())?)
     } else {
         println!(
@@ -286,10 +416,14 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         );
         None
     };
-    let methods = register::case::methods(network.as_ref())?;
-    let options = RegistrationOptions { iterations: args.iterations, ..Default::default() };
-    let rows = compare(&case, methods, &options)?;
-    let rest = &rows.first().context("no method to compare")?.summary;
+    let methods = case_methods(&scenario, network.as_ref())?;
+    let rows = compare(&case, methods, &scenario.registration)?;
+    let first = rows.first().context("no method to compare")?;
+    let rest = &first.summary;
+    let rigid = first.outcome.rigid.as_ref();
+    if let Some(r) = rigid {
+        print_rigid(r, Some(&case.pose));
+    }
     println!();
     println!(
         "{:<28} {:>14} {:>13} {:>14} {:>10} {:>10}",
@@ -302,7 +436,8 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         let fields = values.map(|v| v.map_or(String::new(), |v| v.to_string()));
         csv.push_str(&format!("{name},{}\n", fields.join(",")));
     };
-    row("no deformation", [rest.no_deformation_tre_mean_mm, rest.no_deformation_tre_max_mm, None, None, None]);
+    let baseline = if rigid.is_some() { "rigid only (ICP)" } else { "no deformation" };
+    row(baseline, [rest.no_deformation_tre_mean_mm, rest.no_deformation_tre_max_mm, None, None, None]);
     for r in &rows {
         let s = &r.summary;
         let values = [s.tre_mean_mm, s.tre_max_mm, Some(s.surface_residual_mm), Some(s.time_ms), Some(s.iterations)];
@@ -310,22 +445,25 @@ fn demo(args: &RegisterArgs) -> Result<()> {
     }
     for row in &rows {
         let (s, outcome) = (&row.summary, &row.outcome);
-        let slug = slug(&s.method);
-        let method_dir = args.out.join(slug);
+        let method_dir = args.out.join(slug(&s.method));
         std::fs::create_dir_all(&method_dir).with_context(|| format!("creating {}", method_dir.display()))?;
-        let fields = [Field::point("displacement", 3, outcome.registration.u.clone())];
-        mesh::io::write_mesh(method_dir.join("organ.vtu"), row.organ.mesh(), &fields)?;
-        write_targets(&method_dir.join("targets.csv"), &case.targets, &outcome.targets)?;
-        let title = format!("{}: TRE mean {:.2} mm (side view)", s.method, s.tre_mean_mm.unwrap_or(f64::NAN));
         let u = &outcome.registration.u;
+        let (m, u_cloud) = in_cloud_frame(row.organ.mesh(), None, outcome.rigid.as_ref(), u);
+        mesh::io::write_mesh(method_dir.join("organ.vtu"), &m, &[Field::point("displacement", 3, u_cloud)])?;
+        let rest_targets = rest_in_cloud_frame(&case.targets, outcome.rigid.as_ref());
+        write_targets(&method_dir.join("targets.csv"), &rest_targets, &outcome.targets)?;
+        // The picture is drawn in the organ's frame: cloud, targets and truth moved back.
+        let back = outcome.rigid.as_ref().map_or_else(RigidTransform::identity, |r| r.cloud_to_organ);
+        let to_organ = |points: &[Point]| -> Vec<Point> { points.iter().map(|&p| back.apply(p)).collect() };
+        let title = format!("{}: TRE mean {:.2} mm (side view)", s.method, s.tre_mean_mm.unwrap_or(f64::NAN));
         side_view(
             &method_dir.join("registration.png"),
             &title,
             &row.organ,
             u,
-            &case.cloud,
-            &outcome.targets,
-            Some(&case.truth),
+            &to_organ(&case.cloud),
+            &to_organ(&outcome.targets),
+            Some(&to_organ(&case.truth)),
         )?;
     }
     write_atomic_bytes(&args.out.join("comparison.csv"), csv.as_bytes())?;

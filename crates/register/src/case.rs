@@ -1,8 +1,11 @@
 //! A synthetic intraoperative case on the built-in phantom: the ground truth
 //! comes from a finer mesh and another law than the registration model (no
 //! inverse crime), the cloud from a camera looking at its deformed surface.
+//! The case and its methods are described by a [`CaseScenario`]
+//! (`scenarios/register_case.toml` is the built-in one).
 
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
+use mesh::phantom::{PhantomSpec, SurfacePatch};
 use mesh::{Mesh, Point};
 
 use learn::TrainedModel;
@@ -10,41 +13,73 @@ use learn::TrainedModel;
 use crate::deformers::{FemDeformer, NetworkDeformer};
 use crate::organ::Organ;
 use crate::register::{Deformer, RegistrationOptions};
+use crate::rigid::RigidTransform;
+use crate::scenario::{CameraSpec, CaseScenario, MethodKind, Misalignment};
 use crate::sequence::{register_sequence, FrameOutcome, Summary};
 use crate::simulate::{simulate_cloud, CameraModel};
-use crate::Result;
+use crate::{RegisterError, Result};
 
-/// Tetrahedra of the ground-truth phantom.
+/// Tetrahedra of the ground-truth phantom of the built-in case.
 pub const TRUTH_TETS: usize = 9000;
 
 /// What the operating room gives (the cloud) and what it hides (the truth).
 #[derive(Clone, Debug)]
 pub struct SyntheticCase {
-    /// The intraoperative cloud.
+    /// The intraoperative cloud, in the camera's frame.
     pub cloud: Vec<Point>,
-    /// Internal targets at rest (the phantom's `markers`).
+    /// Internal targets at rest (the phantom's `markers`), in the model's frame.
     pub targets: Vec<Point>,
-    /// Their true deformed positions.
+    /// Their true deformed positions, in the camera's frame.
     pub truth: Vec<Point>,
+    /// Model frame → camera frame: the scenario's misalignment (the identity when none).
+    pub pose: RigidTransform,
 }
 
-/// The Neo-Hookean phantom (E = 5 kPa, ν = 0.48, F-bar) of about [`TRUTH_TETS`] tetrahedra,
-/// fixed between the lobes, its `push` patch pressed down by `force` N; the camera model's
-/// view of the deformed surface, reproducible from `seed`.
-pub fn phantom_push(force: f64, camera: &CameraModel, seed: u64) -> Result<SyntheticCase> {
-    let m = mesh::phantom::liver_phantom(TRUTH_TETS)?;
-    let mut p = Problem::new(m, Material::new(Law::NeoHookean, 5000.0, 0.48));
-    let fixed = p.mesh.region("fixed")?.to_vec();
-    let push = p.mesh.region("push")?.to_vec();
+/// The case of `scenario`: the phantom of `truth.tets` tetrahedra and `truth.material`, fixed on
+/// `truth.fixed`, `truth.force` N along `truth.direction` spread over `truth.load`; the camera's
+/// view of the deformed surface, reproducible from its seed; cloud and truth moved by the
+/// misalignment.
+pub fn synthetic_case(scenario: &CaseScenario) -> Result<SyntheticCase> {
+    scenario.validate()?;
+    let t = &scenario.truth;
+    let mut spec = PhantomSpec::default();
+    if let Some(patch) = t.patch {
+        spec.push = SurfacePatch { from: patch.from, direction: patch.direction, radius: patch.radius };
+    }
+    let m = spec.mesh(t.tets)?;
+    let mut p = Problem::new(m, t.material);
+    let fixed = p.mesh.region(&t.fixed)?.to_vec();
+    let load = p.mesh.region(&t.load)?.to_vec();
     p.fix(&fixed);
-    p.add_force(&push, [0.0, 0.0, -force]);
+    let len = mesh::dot(t.direction, t.direction).sqrt();
+    p.add_force(&load, t.direction.map(|d| d / len * t.force));
     let u = StaticSolver::new(p.clone())?.solve(&SolverOptions::default())?.u;
-    let markers = p.mesh.region("markers")?.to_vec();
+    let markers = p.mesh.region(&t.targets)?.to_vec();
     let targets: Vec<Point> = markers.iter().map(|&n| p.mesh.nodes[n]).collect();
-    let truth = markers.iter().map(|&n| std::array::from_fn(|d| p.mesh.nodes[n][d] + u[3 * n + d])).collect();
+    let mut truth: Vec<Point> =
+        markers.iter().map(|&n| std::array::from_fn(|d| p.mesh.nodes[n][d] + u[3 * n + d])).collect();
     let organ = Organ::new(p.mesh, None)?;
-    let cloud = simulate_cloud(&organ.deformed_surface(&u), camera, seed)?;
-    Ok(SyntheticCase { cloud, targets, truth })
+    let camera = &scenario.camera;
+    let mut cloud = simulate_cloud(&organ.deformed_surface(&u), &camera.model(), camera.seed)?;
+    let pose = scenario.misalignment.transform()?;
+    if pose != RigidTransform::identity() {
+        for x in cloud.iter_mut().chain(truth.iter_mut()) {
+            *x = pose.apply(*x);
+        }
+    }
+    Ok(SyntheticCase { cloud, targets, truth, pose })
+}
+
+/// The built-in case ([`CaseScenario::builtin`]: the Neo-Hookean phantom, E = 5 kPa, ν = 0.48,
+/// F-bar, of about [`TRUTH_TETS`] tetrahedra, fixed between the lobes) with its `push` patch
+/// pressed down by `force` N, seen by `camera` from `seed`, without misalignment.
+pub fn phantom_push(force: f64, camera: &CameraModel, seed: u64) -> Result<SyntheticCase> {
+    let mut scenario = CaseScenario::builtin();
+    scenario.truth.force = force;
+    scenario.camera =
+        CameraSpec { view: camera.view, points: camera.points, noise: camera.noise, outliers: camera.outliers, seed };
+    scenario.misalignment = Misalignment::default();
+    synthetic_case(&scenario)
 }
 
 /// Tetrahedra of the registration models (the FEM models and the network's training mesh).
@@ -59,20 +94,21 @@ pub fn model_mesh() -> Result<Mesh> {
 /// A FEM registration model for [`phantom_push`] on `mesh` (a phantom, e.g. [`model_mesh`])
 /// with `material`, fixed between the lobes, with the default data stiffness.
 pub fn fem_model(mesh: Mesh, material: Material) -> Result<(Organ, FemDeformer)> {
+    fem_model_fixed_on(mesh, material, "fixed")
+}
+
+/// [`fem_model`] fixed on the region `fixed`.
+fn fem_model_fixed_on(mesh: Mesh, material: Material, fixed: &str) -> Result<(Organ, FemDeformer)> {
     let mut problem = Problem::new(mesh.clone(), material);
-    problem.fix(mesh.region("fixed")?);
+    problem.fix(mesh.region(fixed)?);
     let stiffness = FemDeformer::default_stiffness(&problem);
     Ok((Organ::new(mesh, None)?, FemDeformer::new(problem, stiffness, SolverOptions::default())?))
 }
 
-/// The co-rotational registration law (E = 5 kPa, ν = 0.48): another law than the truth's.
-fn corotational_material() -> Material {
-    Material::new(Law::Corotational, 5000.0, 0.48)
-}
-
-/// The co-rotational registration model on [`model_mesh`].
+/// The co-rotational registration model (E = 5 kPa, ν = 0.48: another law than the truth's) on
+/// [`model_mesh`].
 pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
-    fem_model(model_mesh()?, corotational_material())
+    fem_model(model_mesh()?, Material::new(Law::Corotational, 5000.0, 0.48))
 }
 
 /// The U-Net registration model on `mesh` (the phantom the network was trained on, e.g.
@@ -85,22 +121,34 @@ pub fn network_model(mesh: Mesh, model: &TrainedModel) -> Result<(Organ, Network
     Ok((organ, deformer))
 }
 
-/// The methods compared on [`phantom_push`], all on [`model_mesh`]: the co-rotational FEM, the
-/// SVK FEM (E = 5 kPa, ν = 0.49, the law of the network's training data) and, when given, the
-/// U-Net `network`.
+/// The methods of the built-in case, all on [`model_mesh`]: the co-rotational FEM, the SVK FEM
+/// (E = 5 kPa, ν = 0.49, the law of the network's training data) and, when given, the U-Net
+/// `network`.
 pub fn methods(network: Option<&TrainedModel>) -> Result<Vec<Method>> {
-    let mesh = model_mesh()?;
-    let fem = |name: &str, material: Material| -> Result<Method> {
-        let (organ, deformer) = fem_model(mesh.clone(), material)?;
-        Ok(Method { name: name.into(), organ, deformer: Box::new(deformer) })
-    };
-    let mut out = vec![
-        fem("FEM co-rotational (3k T4)", corotational_material())?,
-        fem("FEM SVK (3k T4)", Material::new(Law::Svk, 5000.0, 0.49))?,
-    ];
-    if let Some(model) = network {
-        let (organ, deformer) = network_model(mesh, model)?;
-        out.push(Method { name: "U-Net".into(), organ, deformer: Box::new(deformer) });
+    case_methods(&CaseScenario::builtin(), network)
+}
+
+/// The methods of `scenario`, in its order, on the phantom of `models.tets` tetrahedra; its
+/// network methods get `network`, and are left out when it is `None`.
+pub fn case_methods(scenario: &CaseScenario, network: Option<&TrainedModel>) -> Result<Vec<Method>> {
+    let mesh = mesh::phantom::liver_phantom(scenario.models.tets)?;
+    let mut out = Vec::new();
+    for spec in &scenario.models.method {
+        let name = spec.name.clone();
+        match (spec.kind, spec.material, network) {
+            (MethodKind::Fem, Some(material), _) => {
+                let (organ, deformer) = fem_model_fixed_on(mesh.clone(), material, &scenario.truth.fixed)?;
+                out.push(Method { name, organ, deformer: Box::new(deformer) });
+            }
+            (MethodKind::Fem, None, _) => {
+                return Err(RegisterError::Invalid(format!("method {name:?}: a FEM method needs a material")))
+            }
+            (MethodKind::Network, _, Some(model)) => {
+                let (organ, deformer) = network_model(mesh.clone(), model)?;
+                out.push(Method { name, organ, deformer: Box::new(deformer) });
+            }
+            (MethodKind::Network, _, None) => {}
+        }
     }
     Ok(out)
 }

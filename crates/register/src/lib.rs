@@ -1,6 +1,7 @@
 //! Registration for augmented reality: an intraoperative point cloud (positions
 //! only, no correspondences, partial and noisy, rigidly aligned with the
-//! preoperative model) in; the deformed organ and its hidden targets out.
+//! preoperative model, or roughly so with the rigid ICP pre-alignment of
+//! [`rigid`]) in; the deformed organ and its hidden targets out.
 //!
 //! The organ is a volumetric mesh with its smooth surface embedded in it. Each
 //! iteration matches every cloud point to the closest point of the current
@@ -17,11 +18,15 @@ mod deformers;
 pub mod organ;
 pub mod picture;
 pub mod register;
+pub mod rigid;
+pub mod scenario;
 pub mod sequence;
 pub mod simulate;
 
 pub use deformers::{FemDeformer, NetworkDeformer};
 pub use organ::{Organ, Stencil};
 pub use register::{check_cloud, observe, register_frame, Deformer, FrameResult, Observations, RegistrationOptions};
+pub use rigid::{rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
+pub use scenario::CaseScenario;
 pub use sequence::{register_sequence, target_errors, FrameOutcome, Summary};
 pub use simulate::{simulate_cloud, CameraModel};

@@ -9,6 +9,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::organ::Organ;
+use crate::rigid::RigidOptions;
 use crate::{RegisterError, Result};
 
 /// Displacement observations of mesh nodes: for each node, the displacement
@@ -45,6 +46,11 @@ pub struct RegistrationOptions {
     /// ... nor, at the first iteration, one within this distance (m), halved at
     /// each iteration: the most deformed parts are far from the model at first.
     pub capture_distance: f64,
+    /// Rigid pre-alignment of the cloud to the rest surface (ICP, [`crate::rigid`]) before the
+    /// deformable iterations; `None`: the cloud is taken as rigidly aligned. In a sequence it is
+    /// estimated on the first frame and kept for the others.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rigid: Option<RigidOptions>,
 }
 
 impl Default for RegistrationOptions {
@@ -55,6 +61,7 @@ impl Default for RegistrationOptions {
             outlier_factor: 3.0,
             min_outlier_distance: 5e-3,
             capture_distance: 0.05,
+            rigid: None,
         }
     }
 }
@@ -71,7 +78,7 @@ impl RegistrationOptions {
                 .iter()
                 .all(|v| v.is_finite());
         if ok {
-            Ok(())
+            self.rigid.as_ref().map_or(Ok(()), RigidOptions::validate)
         } else {
             Err(RegisterError::Invalid(format!("invalid registration options {self:?}")))
         }
@@ -95,8 +102,9 @@ pub struct FrameResult {
     pub time: Duration,
 }
 
-/// Registers `organ` to `cloud` (positions only, rigidly aligned), starting
-/// from `start` (a previous frame's displacement) or from rest.
+/// Registers `organ` to `cloud` (positions only, rigidly aligned: `options.rigid` is not used
+/// here, see [`crate::register_sequence`]), starting from `start` (a previous frame's
+/// displacement) or from rest.
 pub fn register_frame(
     organ: &Organ,
     deformer: &mut dyn Deformer,
@@ -209,7 +217,7 @@ pub fn check_cloud(cloud: &[Point]) -> Result<()> {
 
 /// Barycentric coordinates of `p` (a point of the triangle's plane) in triangle `t`,
 /// clamped to the triangle.
-fn barycentric(t: [Point; 3], p: Point) -> [f64; 3] {
+pub(crate) fn barycentric(t: [Point; 3], p: Point) -> [f64; 3] {
     let e0 = sub(t[1], t[0]);
     let e1 = sub(t[2], t[0]);
     let e2 = sub(p, t[0]);

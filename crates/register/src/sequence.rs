@@ -1,25 +1,34 @@
 //! Registration of a sequence of frames: each frame warm-started from the previous one, the
 //! targets carried along, their registration errors (TRE) where the truth is known, and the
 //! summary of the run.
+//!
+//! With a rigid pre-alignment ([`RegistrationOptions::rigid`]) the cloud is moved onto the organ
+//! (the transform estimated on the first frame, kept for the sequence), registered there, and
+//! the registered targets are moved back: targets and errors are in the cloud's frame.
 
 use mesh::Point;
 use serde::Serialize;
 
 use crate::organ::{displaced, Organ};
 use crate::register::{distance, register_frame, Deformer, FrameResult, RegistrationOptions};
+use crate::rigid::{rigid_align, RigidResult, RigidSummary};
 use crate::{RegisterError, Result};
 
 /// One registered frame.
 #[derive(Clone, Debug)]
 pub struct FrameOutcome {
-    /// The registration (displacement, iterations, residual, time).
+    /// The registration (displacement in the organ's frame, iterations, residual, time: the
+    /// rigid alignment's included on the frame that estimated it).
     pub registration: FrameResult,
-    /// Registered target positions.
+    /// Registered target positions, in the cloud's frame.
     pub targets: Vec<Point>,
     /// Distance of each registered target from its true position (m), when the truth is known.
     pub errors: Option<Vec<f64>>,
-    /// Distance of each rest target from its true position (m): the error of not deforming.
+    /// Distance of each rest target (moved by the rigid alignment, if any) from its true position
+    /// (m): the error of not deforming.
     pub rest_errors: Option<Vec<f64>>,
+    /// The rigid pre-alignment, when the options ask for one.
+    pub rigid: Option<RigidResult>,
 }
 
 impl FrameOutcome {
@@ -31,8 +40,8 @@ impl FrameOutcome {
 
 /// Registers `organ` to each cloud of `frames` in turn, each frame starting from the previous
 /// one's displacement; `targets` are rest positions inside the organ, `truths` (one list per
-/// frame, in the order of `targets`) their true deformed positions. `on_frame` sees each
-/// frame as soon as it is registered (to print or write it).
+/// frame, in the order of `targets`, in the cloud's frame) their true deformed positions.
+/// `on_frame` sees each frame as soon as it is registered (to print or write it).
 pub fn register_sequence(
     organ: &Organ,
     deformer: &mut dyn Deformer,
@@ -51,7 +60,9 @@ pub fn register_sequence(
         )));
     }
     let mut outcomes: Vec<FrameOutcome> = Vec::new();
+    let mut rigid: Option<RigidResult> = None;
     for (i, cloud) in frames.into_iter().enumerate() {
+        let mut cloud = cloud?;
         let truth = match truths {
             Some(t) => Some(
                 t.get(i)
@@ -59,14 +70,32 @@ pub fn register_sequence(
             ),
             None => None,
         };
+        let mut rigid_time = std::time::Duration::ZERO;
+        if let (Some(rigid_options), None) = (&options.rigid, &rigid) {
+            let r = rigid_align(organ.surface(), &cloud, rigid_options)?;
+            rigid_time = r.time;
+            rigid = Some(r);
+        }
+        let to_cloud = rigid.as_ref().map(RigidResult::organ_to_cloud);
+        if let Some(r) = &rigid {
+            cloud.iter_mut().for_each(|p| *p = r.cloud_to_organ.apply(*p));
+        }
         let start = outcomes.last().map(|o| o.registration.u.as_slice());
-        let registration = register_frame(organ, deformer, &cloud?, start, options)?;
-        let registered = displaced(targets, &stencils, &registration.u);
+        let mut registration = register_frame(organ, deformer, &cloud, start, options)?;
+        registration.time += rigid_time;
+        let mut registered = displaced(targets, &stencils, &registration.u);
+        let mut rest = targets.to_vec();
+        if let Some(t) = &to_cloud {
+            for p in registered.iter_mut().chain(rest.iter_mut()) {
+                *p = t.apply(*p);
+            }
+        }
         let outcome = FrameOutcome {
             errors: truth.map(|t| target_errors(&registered, t)),
-            rest_errors: truth.map(|t| target_errors(targets, t)),
+            rest_errors: truth.map(|t| target_errors(&rest, t)),
             targets: registered,
             registration,
+            rigid: rigid.clone(),
         };
         on_frame(i, &outcome)?;
         outcomes.push(outcome);
@@ -95,7 +124,8 @@ pub struct Summary {
     pub tre_mean_mm: Option<f64>,
     /// Largest TRE (mm), when the truth is known.
     pub tre_max_mm: Option<f64>,
-    /// Mean distance of the rest targets from the truth (mm): the TRE without deformation.
+    /// Mean distance of the rest targets (rigidly aligned, if asked) from the truth (mm): the TRE
+    /// without deformation.
     pub no_deformation_tre_mean_mm: Option<f64>,
     /// Largest distance of a rest target from the truth (mm).
     pub no_deformation_tre_max_mm: Option<f64>,
@@ -105,6 +135,9 @@ pub struct Summary {
     pub time_ms: f64,
     /// Match-and-deform iterations per frame, mean over frames.
     pub iterations: f64,
+    /// The rigid pre-alignment (organ → cloud transform, ICP figures), when there was one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rigid: Option<RigidSummary>,
 }
 
 impl Summary {
@@ -132,6 +165,7 @@ impl Summary {
             surface_residual_mm: per_frame(|o| o.registration.surface_residual) * 1e3,
             time_ms: per_frame(|o| o.registration.time.as_secs_f64()) * 1e3,
             iterations: per_frame(|o| o.registration.iterations as f64),
+            rigid: outcomes[0].rigid.as_ref().map(RigidSummary::from),
         })
     }
 }
