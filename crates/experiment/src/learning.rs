@@ -8,8 +8,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use anyhow::Result;
 use learn::scenario::DatasetScenario;
 use learn::{
-    Corruption, Dataset, EvalReport, Initialization, Samples, Split, TrainConfig, TrainOptions, TrainedModel,
-    UNetConfig,
+    Corruption, CurveRow, Dataset, EvalReport, Initialization, Samples, SplitPolicy, TrainConfig, TrainOptions,
+    TrainedModel, UNetConfig,
 };
 
 use crate::{fmt, write_scenario, ExperimentResult, Name, Progress, Row, Size};
@@ -51,6 +51,7 @@ pub(crate) fn dataset(dir: &Path, file: &str, text: &str, samples: usize, progre
 }
 
 /// How a network is trained.
+#[derive(Clone)]
 pub(crate) struct Recipe {
     pub iterations: usize,
     pub channels: usize,
@@ -62,11 +63,16 @@ pub(crate) struct Recipe {
     pub test: usize,
     /// Corruption of training and validation inputs.
     pub corruption: Corruption,
+    /// Train on the first this many training samples only (the split stays that of the whole set).
+    pub train_samples: Option<usize>,
+    /// Fine-tune this pre-trained model (its `model.json`) instead of starting from scratch.
+    pub fine_tune: Option<PathBuf>,
 }
 
 impl Recipe {
     /// 8 channels, Adam at 1e-3 falling to 1e-5 along a half cosine, validated 20 times per run (at least
-    /// every 50 steps), clean inputs; `validation` and `test` samples held out.
+    /// every 50 steps), clean inputs, from scratch on every training sample; `validation` and `test` samples
+    /// held out.
     pub fn new(iterations: usize, validation: usize, test: usize) -> Recipe {
         Recipe {
             iterations,
@@ -77,35 +83,57 @@ impl Recipe {
             validation,
             test,
             corruption: Corruption::default(),
+            train_samples: None,
+            fine_tune: None,
         }
     }
 }
 
-/// The model directory of a recipe (relative to the experiment's directory).
+/// The model directory of a recipe (relative to the experiment's directory): `model-<steps>-steps`, then
+/// `-<n>-samples` when it trains on part of the training split and `-fine-tuned` when it starts from a
+/// pre-trained model.
 pub(crate) fn model_dir(recipe: &Recipe) -> String {
-    format!("model-{}-steps", recipe.iterations)
+    let mut name = format!("model-{}-steps", recipe.iterations);
+    if let Some(n) = recipe.train_samples {
+        name += &format!("-{n}-samples");
+    }
+    if recipe.fine_tune.is_some() {
+        name += "-fine-tuned";
+    }
+    name
 }
 
-/// A trained network and its held-out test samples.
+/// A trained network, its validation and held-out test samples and its learning curve.
 pub(crate) struct Trained {
     pub model: TrainedModel,
+    pub validation: Samples,
     pub test: Samples,
     pub split: [usize; 3],
     pub best_validation: Option<(usize, f64)>,
+    pub curve: Vec<CurveRow>,
     pub step_seconds: f64,
 }
 
-/// Trains (or resumes training) a U-Net on `dataset` into `dir/model-<steps>-steps`.
+/// Trains (or resumes training) a U-Net on `dataset` into `dir/`[`model_dir`].
 pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Progress) -> Result<Trained> {
-    progress(&format!("training {} steps", recipe.iterations));
     let all = dataset.load_all()?;
-    let split = Split::last(&all, recipe.validation, recipe.test)?;
-    let [train, validation, test] = split.apply(&all)?;
-    let init = Initialization::Scratch {
-        unet: UNetConfig { base_channels: recipe.channels, ..UNetConfig::default() },
-        normalization: learn::Normalization::from_samples(&train),
-        input_unit: dataset.manifest().units.input.clone(),
+    let policy = SplitPolicy {
+        validation_samples: Some(recipe.validation),
+        test_samples: Some(recipe.test),
+        train_samples: recipe.train_samples,
+        ..SplitPolicy::default()
     };
+    let (split, [train, validation, test]) = policy.apply(&all)?;
+    let init = match &recipe.fine_tune {
+        Some(model) => Initialization::FineTune { model: model.clone(), freeze_encoder: false },
+        None => Initialization::Scratch {
+            unet: UNetConfig { base_channels: recipe.channels, ..UNetConfig::default() },
+            normalization: learn::Normalization::from_samples(&train),
+            input_unit: dataset.manifest().units.input.clone(),
+        },
+    };
+    let start = if recipe.fine_tune.is_some() { "fine-tuning" } else { "from scratch" };
+    progress(&format!("training {} steps {start} on {} samples", recipe.iterations, train.len()));
     let config = TrainConfig {
         iterations: recipe.iterations,
         batch_size: 4,
@@ -132,8 +160,10 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
     Ok(Trained {
         split: [train.len(), validation.len(), test.len()],
         model: outcome.model,
+        validation,
         test,
         best_validation,
+        curve: outcome.curve,
         step_seconds: outcome.mean_step_seconds,
     })
 }
@@ -173,7 +203,7 @@ pub(crate) fn error_histogram(path: &Path, title: &str, reports: &[(&str, &EvalR
 }
 
 /// Largest reference displacement over `samples` (m).
-fn max_displacement(samples: &Samples) -> f64 {
+pub(crate) fn max_displacement(samples: &Samples) -> f64 {
     samples.targets.chunks_exact(3).map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt() as f64).fold(0.0, f64::max)
 }
 

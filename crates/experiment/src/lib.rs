@@ -18,6 +18,7 @@ mod identification;
 mod learning;
 mod registration;
 pub mod report;
+mod transfer;
 
 pub use fem_speed::{measure as measure_fem_speed, CaseTiming};
 
@@ -45,14 +46,23 @@ pub enum Name {
     LiverForces,
     /// Scenario 2: registration to a partial point cloud, TRE at internal markers.
     LiverAr,
+    /// Scenario 3: beam, pre-trained on other boundary conditions and fine-tuned on 100 samples.
+    BeamTransfer,
     /// Scenario 4: beam with sparse, noisy imposed displacements.
     BeamSparse,
 }
 
 impl Name {
     /// Every experiment, in the order `all` runs them.
-    pub const ALL: [Name; 6] =
-        [Name::FemSpeed, Name::Young, Name::Springs, Name::LiverForces, Name::LiverAr, Name::BeamSparse];
+    pub const ALL: [Name; 7] = [
+        Name::FemSpeed,
+        Name::Young,
+        Name::Springs,
+        Name::LiverForces,
+        Name::LiverAr,
+        Name::BeamTransfer,
+        Name::BeamSparse,
+    ];
 
     /// The command-line and directory name.
     pub fn as_str(self) -> &'static str {
@@ -62,6 +72,7 @@ impl Name {
             Name::Springs => "springs",
             Name::LiverForces => "liver-forces",
             Name::LiverAr => "liver-ar",
+            Name::BeamTransfer => "beam-transfer",
             Name::BeamSparse => "beam-sparse",
         }
     }
@@ -138,6 +149,7 @@ pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<Ex
         Name::Springs => identification::springs(size, &dir, progress)?,
         Name::LiverForces => learning::liver_forces(size, &dir, progress)?,
         Name::LiverAr => registration::liver_ar(size, &dir, progress)?,
+        Name::BeamTransfer => transfer::beam_transfer(size, &dir, progress)?,
         Name::BeamSparse => learning::beam_sparse(size, &dir, progress)?,
     };
     result.seconds = start.elapsed().as_secs_f64();
