@@ -282,6 +282,26 @@ impl TriSurface {
         Ok((centre, scale))
     }
 
+    /// The surface restricted to the vertices its triangles use (in order of first use).
+    pub fn compacted(&self) -> TriSurface {
+        let mut index = vec![usize::MAX; self.vertices.len()];
+        let mut vertices = Vec::new();
+        let triangles = self
+            .triangles
+            .iter()
+            .map(|t| {
+                t.map(|k| {
+                    if index[k] == usize::MAX {
+                        index[k] = vertices.len();
+                        vertices.push(self.vertices[k]);
+                    }
+                    index[k]
+                })
+            })
+            .collect();
+        TriSurface { vertices, triangles }
+    }
+
     /// Area-weighted outward unit normal at each vertex (zero for unused vertices).
     pub fn vertex_normals(&self) -> Vec<Point> {
         let mut n = vec![[0.0; 3]; self.vertices.len()];

@@ -49,7 +49,7 @@ impl Organ {
         let locator = MeshLocator::new(&mesh)?;
         let surface = match surface {
             Some(s) => s,
-            None => compact(mesh::boundary_surface(&mesh)),
+            None => mesh::boundary_surface(&mesh).compacted(),
         };
         if surface.triangles.is_empty() {
             return Err(RegisterError::Invalid("the organ surface has no triangles".into()));
@@ -116,24 +116,4 @@ pub fn displaced(rest: &[Point], stencils: &[Stencil], u: &[f64]) -> Vec<Point> 
             [p[0] + d[0], p[1] + d[1], p[2] + d[2]]
         })
         .collect()
-}
-
-/// The surface restricted to the vertices its triangles use.
-fn compact(surface: TriSurface) -> TriSurface {
-    let mut index = vec![usize::MAX; surface.vertices.len()];
-    let mut vertices = Vec::new();
-    let triangles = surface
-        .triangles
-        .iter()
-        .map(|t| {
-            t.map(|k| {
-                if index[k] == usize::MAX {
-                    index[k] = vertices.len();
-                    vertices.push(surface.vertices[k]);
-                }
-                index[k]
-            })
-        })
-        .collect();
-    TriSurface { vertices, triangles }
 }
