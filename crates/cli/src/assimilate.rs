@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 use filter::assimilation::{AssimilationScenario, Experiment, ObservationFiles, Report};
-use filter::Execution;
+use filter::{Execution, SigmaPointSet};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `augsim assimilate`.
@@ -43,6 +43,10 @@ pub struct AssimilateArgs {
     /// scenario's filter.forgetting, else 1 = none).
     #[arg(long)]
     pub forgetting: Option<f64>,
+    /// Sigma points: `simplex` (p + 1) or `star` (2p + 1) (default: the scenario's filter.sigma_points, else
+    /// simplex).
+    #[arg(long, value_name = "SET")]
+    pub sigma_points: Option<SigmaPointSet>,
     /// Write the estimated deformation every N steps (default: the scenario's output.every, else 1).
     #[arg(long)]
     pub every: Option<usize>,
@@ -60,6 +64,9 @@ pub fn run(args: &AssimilateArgs) -> Result<()> {
     if let Some(rho) = args.forgetting {
         sc.filter.forgetting = rho;
     }
+    if let Some(set) = args.sigma_points {
+        sc.filter.sigma_points = set;
+    }
     if args.every.is_some() {
         sc.output.every = args.every;
     }
@@ -76,19 +83,21 @@ pub fn run(args: &AssimilateArgs) -> Result<()> {
         sc.name,
         if sc.description.is_empty() { String::new() } else { format!(": {}", sc.description) }
     );
+    let sigma_set = sc.filter.sigma_points;
     let experiment = Experiment::prepare(sc, &dir, files.as_ref())?;
     let s = experiment.setup();
     println!("mesh         {} nodes, {} {} cells", s.nodes, s.cells, s.cell_kind);
     println!(
         "setup        {} constrained nodes ({} tool, {} tracked tool), {} feature points, {} assessment points, \
-         {} parameter(s), {} sigma points",
+         {} parameter(s), {} {} sigma points",
         s.constrained_nodes,
         s.tool_nodes,
         s.control_nodes,
         s.features,
         s.assessment_points,
         s.parameters,
-        s.parameters + 1
+        s.sigma_points,
+        sigma_set
     );
     match (&s.reference, &files) {
         (Some(r), _) => println!(
@@ -136,13 +145,22 @@ fn print_report(r: &Report) {
         r.newton_iterations_per_solve,
         r.execution
     );
+    let t = &r.filter_times;
+    println!(
+        "time         FEM solves {:.2} s summed over the sigma points (assembly {:.2} s, {:.2} factorisations per \
+         solve {:.2} s, triangular solves {:.2} s), writing the deformation {:.2} s",
+        t.solves, t.assembly, t.factorizations_per_solve, t.factorization, t.triangular_solves, t.writing
+    );
     if let Some(y) = &r.young {
         let truth = match y.truth {
             Some(t) => format!(
                 " (truth {t:.0} Pa, error {:+.2} %), within 1 % {}",
                 100.0 * (y.mean - t) / t,
-                y.within_1_percent_from_iteration
-                    .map_or("never (so far)".to_string(), |k| format!("from iteration {k} on"))
+                match (y.within_1_percent_from_iteration, y.within_1_percent_after_seconds) {
+                    (Some(k), Some(t)) => format!("from iteration {k} on ({t:.2} s of filter time)"),
+                    (Some(k), None) => format!("from iteration {k} on"),
+                    _ => "never (so far)".to_string(),
+                }
             ),
             None => String::new(),
         };

@@ -44,3 +44,22 @@ fn synthetic_tracks_fed_back_and_bad_files() {
     let (ok, text) = assimilate(&[s, "--controls", bad.to_str().unwrap()]);
     assert!(!ok && text.contains("--observations"), "{text}");
 }
+
+#[test]
+fn star_sigma_points_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../filter/tests/data/beam_assimilation.toml");
+    let s = scenario.to_str().unwrap();
+    let star = d.join("star");
+    let (ok, text) = assimilate(&[s, "--sigma-points", "star", "-o", star.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    assert!(text.contains("1 parameter(s), 3 star sigma points"), "{text}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(star.join("summary.json")).unwrap()).unwrap();
+    assert_eq!((json["sigma_points"].as_u64(), json["sigma_point_set"].as_str()), (Some(3), Some("star")));
+    assert!((young(&star.join("summary.json")) - 5000.0).abs() < 50.0);
+    // An unknown set is refused with the choices.
+    let (ok, text) = assimilate(&[s, "--sigma-points", "cross", "-o", d.join("cross").to_str().unwrap()]);
+    assert!(!ok && text.contains("cross") && text.contains("`simplex` or `star`"), "{text}");
+}

@@ -10,13 +10,13 @@
 
 use std::sync::{Mutex, PoisonError};
 
-use fem::{FemError, Problem, SolverOptions, StaticSolver};
+use fem::{FemError, Problem, SolverOptions, StaticSolver, Timings};
 use mesh::Point;
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
 use crate::observation::{tracked_positions, TrackedPoint};
-use crate::Model;
+use crate::{Model, SigmaPointSet};
 
 /// Errors of the finite-element model adapter.
 #[derive(Debug, thiserror::Error)]
@@ -108,6 +108,10 @@ pub struct FemState {
     pub u: Vec<f64>,
     /// Newton iterations of the last solve.
     pub newton_iterations: usize,
+    /// Numeric factorisations of the last solve.
+    pub factorizations: usize,
+    /// Time split of the last solve (assembly, factorisation, triangular solves; total).
+    pub timings: Timings,
     /// Index of the solver this state is solved with.
     slot: usize,
 }
@@ -135,7 +139,8 @@ impl std::fmt::Debug for FemModel {
 
 impl FemModel {
     /// A model over `problem` (its material, springs, forces and prescribed values are the base that the
-    /// parameters and loads modify at every step). One solver slot per sigma point: `parameters.len() + 1`.
+    /// parameters and loads modify at every step). One solver slot per sigma point, `2 parameters.len() + 1`
+    /// slots: enough for either sigma-point set (a slot's solver is only created when its sigma point first runs).
     pub fn new(
         problem: Problem,
         parameters: Vec<FemParameter>,
@@ -178,7 +183,7 @@ impl FemModel {
         for t in &observed {
             t.validate(n)?;
         }
-        let solvers = (0..=parameters.len()).map(|_| Mutex::new(None)).collect();
+        let solvers = (0..SigmaPointSet::Star.count(parameters.len())).map(|_| Mutex::new(None)).collect();
         Ok(FemModel { problem, parameters, loads, controls: Vec::new(), observed, options, solvers })
     }
 
@@ -202,7 +207,13 @@ impl FemModel {
 
     /// The rest state (zero displacement), solved with the first solver slot.
     pub fn initial_state(&self) -> FemState {
-        FemState { u: vec![0.0; self.problem.num_dofs()], newton_iterations: 0, slot: 0 }
+        FemState {
+            u: vec![0.0; self.problem.num_dofs()],
+            newton_iterations: 0,
+            factorizations: 0,
+            timings: Timings::default(),
+            slot: 0,
+        }
     }
 
     /// The base problem.
@@ -303,6 +314,8 @@ impl FemModel {
         let solution = solver.solve_from(Some(&state.u), &self.options)?;
         state.u = solution.u;
         state.newton_iterations = solution.iterations;
+        state.factorizations = solution.factorizations;
+        state.timings = solution.timings;
         Ok(())
     }
 }

@@ -5,7 +5,7 @@
 //!   [`VectorState`] adds vector access for joint state–parameter filtering.
 //! * [`Roukf`]: the filter ([`Roukf::new`] parameter-only, [`Roukf::new_joint`] joint), configured by
 //!   [`RoukfConfig`] with one [`ParameterSpec`] (prior, [`Transform`]) per parameter.
-//! * [`SimplexSigmaPoints`]: the p + 1 simplex sigma points.
+//! * [`SigmaPoints`]: the p + 1 simplex or 2p + 1 star sigma points ([`SigmaPointSet`]).
 //! * [`Trace`]: per-iteration μ, σ (filter and physical space) and innovation norm, written as CSV or JSON.
 //! * [`fem_model::FemModel`]: a static finite-element problem as a [`Model`] (Young's modulus and boundary springs
 //!   as parameters, time-profiled loads, one solver per sigma point); [`observation`]: points tracked through
@@ -28,6 +28,6 @@ pub use fem_model::{ControlPath, FemModel, FemModelError, FemParameter, FemState
 pub use model::{Model, VectorState};
 pub use observation::TrackedPoint;
 pub use roukf::{Execution, ObservationNoise, ParameterSpec, Roukf, RoukfConfig};
-pub use sigma::SimplexSigmaPoints;
+pub use sigma::{SigmaPointSet, SigmaPoints};
 pub use trace::{IterationTrace, Trace};
 pub use transform::Transform;

@@ -21,8 +21,9 @@ pub trait Model: Sync {
     fn observe(&self, state: &Self::State) -> DVector<f64>;
 
     /// Called once per sigma point when the filter is built, on that sigma point's own copy of the initial state
-    /// (`sigma_point` in `0..=p`), so that a model can tie per-sigma-point resources to it (e.g. the index of a
-    /// solver that keeps its factorisation between the steps of that sigma point). Does nothing by default.
+    /// (`sigma_point` in `0..m`: m = p + 1 simplex or 2p + 1 star sigma points), so that a model can tie
+    /// per-sigma-point resources to it (e.g. the index of a solver that keeps its factorisation between the steps of
+    /// that sigma point). Does nothing by default.
     fn assign_sigma_point(&self, _state: &mut Self::State, _sigma_point: usize) {}
 }
 

@@ -1,7 +1,11 @@
 //! The reduced-order unscented Kalman filter of Moireau & Chapelle (2011) with the reduced state restricted to the
 //! uncertain parameters θ (as in SOFA's Optimus plugin).
 //!
-//! # Algorithm (one iteration k, p parameters, m = p + 1 simplex sigma points I(i) with weights α_i = 1/m)
+//! # Algorithm (one iteration k, p parameters, m unit sigma points I(i) with weights α_i)
+//!
+//! The sigma points are the p + 1 simplex points (default, α_i = 1/(p+1)) or the 2p + 1 star points (centre and
+//! ±√(p+½) along every axis, α_i = 1/(2p+1)), chosen by [`RoukfConfig::sigma_points`] (see [`crate::SigmaPoints`]).
+//! Both have `Σ α_i I(i) = 0` and `P_α = Σ α_i I(i) I(i)^T = I_p`, which is all the algorithm below relies on.
 //!
 //! The covariance is kept in factored form `P = L U^{-1} L^T`, `L = [L_x; L_θ]` (n × p over the full state,
 //! p × p over θ), `U` p × p. Initially `L_θ = I_p`, `L_x = 0`, `U = P_θ0^{-1}` (diagonal prior).
@@ -39,7 +43,7 @@ use nalgebra::{Cholesky, DMatrix, DVector};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::{FilterError, IterationTrace, Model, SimplexSigmaPoints, Trace, Transform, VectorState};
+use crate::{FilterError, IterationTrace, Model, SigmaPointSet, SigmaPoints, Trace, Transform, VectorState};
 
 /// One uncertain parameter: its name, transform and Gaussian prior **in filter space**
 /// (e.g. for [`Transform::Exp`], the mean and standard deviation of the logarithm).
@@ -101,6 +105,9 @@ pub struct RoukfConfig {
     /// allows; 1 (the default) is the plain filter.
     #[serde(default = "no_forgetting")]
     pub forgetting: f64,
+    /// Simplex (p + 1, the default) or star (2p + 1) sigma points.
+    #[serde(default)]
+    pub sigma_points: SigmaPointSet,
 }
 
 fn no_forgetting() -> f64 {
@@ -122,7 +129,7 @@ type SigmaOutput = (DVector<f64>, Option<DVector<f64>>);
 pub struct Roukf<M: Model> {
     model: M,
     config: RoukfConfig,
-    sigma: SimplexSigmaPoints,
+    sigma: SigmaPoints,
     theta: DVector<f64>,
     l_theta: DMatrix<f64>,
     u: DMatrix<f64>,
@@ -148,7 +155,7 @@ impl<M: Model> Roukf<M> {
         joint: Option<Joint<M>>,
     ) -> Result<Self, FilterError> {
         let p = config.parameters.len();
-        let sigma = SimplexSigmaPoints::new(p)?;
+        let sigma = config.sigma_points.build(p)?;
         for spec in &config.parameters {
             if !(spec.prior_mean.is_finite() && spec.prior_std.is_finite() && spec.prior_std > 0.0) {
                 return Err(FilterError::InvalidConfig(format!(
@@ -313,6 +320,7 @@ impl<M: Model> Roukf<M> {
         for (mut row, w) in g.row_iter_mut().zip(inv_std.iter()) {
             row *= *w;
         }
+        // U = P_α + HL^T W^{-1} HL with P_α = I_p for both sigma-point sets.
         let u = DMatrix::identity(p, p) + g.transpose() * &g;
         let innovation = DVector::from_iterator(
             q,
@@ -454,12 +462,12 @@ impl<M: Model> Roukf<M> {
         &self.u
     }
 
-    /// The simplex sigma points in use.
-    pub fn sigma_points(&self) -> &SimplexSigmaPoints {
+    /// The sigma points in use.
+    pub fn sigma_points(&self) -> &SigmaPoints {
         &self.sigma
     }
 
-    /// Model states of the p + 1 sigma points after the last prediction (before any joint-mode re-sampling).
+    /// Model states of the sigma points (in the order of [`Roukf::sigma_points`]) after the last prediction (before any joint-mode re-sampling).
     pub fn sigma_states(&self) -> &[M::State] {
         &self.states
     }

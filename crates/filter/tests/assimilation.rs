@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use augsim_filter::assimilation::tracks::{RestPositions, Tracks};
 use augsim_filter::assimilation::{AssimilationScenario, Experiment, ObservationFiles, Report};
+use augsim_filter::SigmaPointSet;
 
 /// The test scenario (see its header).
 fn beam() -> String {
@@ -211,4 +212,38 @@ fn bad_track_files_are_named_with_their_line() {
     let setup = Experiment::prepare(sc, &base, Some(&files)).unwrap().setup().clone();
     assert_eq!((setup.features, setup.projected), (2, 1));
     assert!((setup.max_projection - 5e-4).abs() < 1e-12, "{}", setup.max_projection);
+}
+
+#[test]
+fn star_sigma_points_from_the_scenario() {
+    let dir = tempfile::tempdir().unwrap();
+    let beam = beam();
+    let (simplex, _) = run(dir.path(), &beam, None, "simplex");
+    assert_eq!((simplex.sigma_points, simplex.sigma_point_set), (2, SigmaPointSet::Simplex));
+    let star_text = format!("{beam}[filter]\nsigma_points = \"star\"\n");
+    let (sc, base) = scenario(dir.path(), "star.toml", &star_text);
+    let experiment = Experiment::prepare(sc, &base, None).unwrap();
+    assert_eq!((experiment.setup().parameters, experiment.setup().sigma_points), (1, 3));
+    let star = experiment.run(&dir.path().join("star"), |_| ()).unwrap();
+    assert_eq!((star.sigma_points, star.sigma_point_set), (3, SigmaPointSet::Star));
+    let summary = std::fs::read_to_string(dir.path().join("star/summary.json")).unwrap();
+    assert!(summary.contains("\"sigma_point_set\": \"star\""), "{summary}");
+    // Same observations, both within 1 % of the truth and of each other.
+    let (a, b) = (simplex.young.unwrap(), star.young.unwrap());
+    for y in [&a, &b] {
+        assert!((y.mean - 5000.0).abs() < 0.01 * 5000.0, "{y:?}");
+        let k = y.within_1_percent_from_iteration.unwrap();
+        assert!(k >= 1 && y.within_1_percent_after_seconds.unwrap() > 0.0, "{y:?}");
+    }
+    assert!((a.mean - b.mean).abs() < 0.002 * a.mean, "{a:?} vs {b:?}");
+
+    // An unknown set is an error that names the value and the choices.
+    let err = AssimilationScenario::load(&{
+        let path = dir.path().join("cross.toml");
+        std::fs::write(&path, format!("{beam}[filter]\nsigma_points = \"cross\"\n")).unwrap();
+        path
+    })
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("cross") && err.contains("simplex") && err.contains("star"), "{err}");
 }

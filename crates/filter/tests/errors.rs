@@ -2,7 +2,9 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use augsim_filter::{Execution, FilterError, Model, ObservationNoise, ParameterSpec, Roukf, RoukfConfig, Transform};
+use augsim_filter::{
+    Execution, FilterError, Model, ObservationNoise, ParameterSpec, Roukf, RoukfConfig, SigmaPointSet, Transform,
+};
 use nalgebra::DVector;
 
 #[derive(Debug)]
@@ -53,6 +55,7 @@ fn config(execution: Execution) -> RoukfConfig {
         observation_std: ObservationNoise::Uniform(0.1),
         execution,
         forgetting: 1.0,
+        sigma_points: SigmaPointSet::Simplex,
     }
 }
 

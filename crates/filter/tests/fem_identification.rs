@@ -4,7 +4,7 @@
 use augsim_filter::observation::{add_noise, tracked_positions};
 use augsim_filter::{
     Execution, FemModel, FemModelError, FemParameter, LoadPattern, Model, ObservationNoise, ParameterSpec, Profile,
-    Roukf, RoukfConfig, TrackedPoint, Transform,
+    Roukf, RoukfConfig, SigmaPointSet, TrackedPoint, Transform,
 };
 use fem::{Law, Material, Problem, SolverOptions};
 use mesh::select::nodes_in_box;
@@ -68,6 +68,7 @@ fn young_modulus_is_identified_within_one_percent_from_noiseless_data() {
         observation_std: ObservationNoise::Uniform(1e-5),
         execution: Execution::Parallel,
         forgetting: 1.0,
+        sigma_points: SigmaPointSet::Simplex,
     };
     let initial = model.initial_state();
     let mut roukf = Roukf::new(model, initial, config(Transform::Exp, 3000f64.ln(), 0.5)).unwrap();
@@ -136,6 +137,7 @@ fn spring_config(execution: Execution) -> RoukfConfig {
         observation_std: ObservationNoise::Uniform(2e-5),
         execution,
         forgetting: 1.0,
+        sigma_points: SigmaPointSet::Simplex,
     }
 }
 
@@ -288,9 +290,52 @@ fn inconsistent_models_are_rejected() {
     let mut state = model.initial_state();
     let err = model.step(&mut state, &[-5.0], 1).unwrap_err();
     assert!(err.to_string().contains("Young"), "{err}");
-    // One solver per sigma point (p + 1 = 2 here): a state tied to a slot beyond them is refused.
-    model.assign_sigma_point(&mut state, 1);
-    model.step(&mut state, &[TRUE_YOUNG], 1).unwrap();
+    // One solver per sigma point of either set (2p + 1 = 3 star points here): a state tied to a slot beyond them is
+    // refused.
     model.assign_sigma_point(&mut state, 2);
-    assert!(model.step(&mut state, &[TRUE_YOUNG], 2).unwrap_err().to_string().contains("slot 2"));
+    model.step(&mut state, &[TRUE_YOUNG], 1).unwrap();
+    model.assign_sigma_point(&mut state, 3);
+    assert!(model.step(&mut state, &[TRUE_YOUNG], 2).unwrap_err().to_string().contains("slot 3"));
+}
+
+/// Identifies E on the beam from noisy data with the given sigma-point set; returns the filter.
+fn young_filter(set: SigmaPointSet, data: &[DVector<f64>]) -> Roukf<FemModel> {
+    let model = young_model();
+    let initial = model.initial_state();
+    let config = RoukfConfig {
+        parameters: vec![ParameterSpec::new("young", Transform::Exp, 3000f64.ln(), 0.5)],
+        observation_std: ObservationNoise::Uniform(2e-5),
+        execution: Execution::Parallel,
+        forgetting: 1.0,
+        sigma_points: set,
+    };
+    let mut roukf = Roukf::new(model, initial, config).unwrap();
+    for z in data {
+        roukf.step(z).unwrap();
+    }
+    roukf
+}
+
+#[test]
+fn star_and_simplex_sigma_points_converge_to_the_same_young_modulus() {
+    let model = young_model();
+    // Two and a half load cycles: the last step is at the peak of the load.
+    let data = add_noise(&clean_observations(&model, &[TRUE_YOUNG], 2 * PERIOD + PERIOD / 2), 2e-5, 11).unwrap();
+    let simplex = young_filter(SigmaPointSet::Simplex, &data);
+    let star = young_filter(SigmaPointSet::Star, &data);
+    assert_eq!(simplex.sigma_states().len(), 2);
+    assert_eq!(star.sigma_states().len(), 3);
+    // The star set's centre point solves with the mean modulus, the other two on either side of it.
+    let star_states = star.sigma_states();
+    assert!(star_states[1].u != star_states[0].u && star_states[2].u != star_states[0].u);
+    let (a, b) = (simplex.mean_physical()[0], star.mean_physical()[0]);
+    let (sa, sb) = (simplex.std_physical()[0], star.std_physical()[0]);
+    for (e, s) in [(a, sa), (b, sb)] {
+        assert!((e - TRUE_YOUNG).abs() < 0.01 * TRUE_YOUNG, "estimate {e} ± {s}");
+        assert!((e - TRUE_YOUNG).abs() < 4.0 * s, "estimate {e} ± {s}");
+    }
+    // Same data: the two estimates agree well inside their σ (they differ by what the sigma points' spreads, ±1 and
+    // ±√1.5 standard deviations, sample of the nonlinearity on the way from the prior).
+    assert!((a - b).abs() < 0.25 * sa.min(sb), "simplex {a} ± {sa}, star {b} ± {sb}");
+    assert!((sa / sb - 1.0).abs() < 0.05, "σ simplex {sa}, star {sb}");
 }

@@ -4,7 +4,9 @@ mod common;
 
 use std::convert::Infallible;
 
-use augsim_filter::{Execution, Model, ObservationNoise, ParameterSpec, Roukf, RoukfConfig, Transform, VectorState};
+use augsim_filter::{
+    Execution, Model, ObservationNoise, ParameterSpec, Roukf, RoukfConfig, SigmaPointSet, Transform, VectorState,
+};
 use common::Rng;
 use nalgebra::{DMatrix, DVector};
 
@@ -29,9 +31,14 @@ impl Model for StaticLinear {
     }
 }
 
-/// Runs the ROUKF on `StaticLinear` against the closed-form Kalman filter whose covariance is divided by
-/// `forgetting` before every update and which uses only the components that `available(k)` marks at step k.
-fn static_parameters_against_kalman(forgetting: f64, available: impl Fn(usize) -> Vec<bool>) -> Roukf<StaticLinear> {
+/// Runs the ROUKF with the sigma points `set` on `StaticLinear` against the closed-form Kalman filter whose
+/// covariance is divided by `forgetting` before every update and which uses only the components that `available(k)`
+/// marks at step k.
+fn static_parameters_against_kalman(
+    set: SigmaPointSet,
+    forgetting: f64,
+    available: impl Fn(usize) -> Vec<bool>,
+) -> Roukf<StaticLinear> {
     let (p, q, steps) = (3, 2, 60);
     let mut rng = Rng::new(11);
     let h: Vec<DMatrix<f64>> = (0..steps).map(|_| DMatrix::from_fn(q, p, |_, _| rng.normal())).collect();
@@ -46,8 +53,10 @@ fn static_parameters_against_kalman(forgetting: f64, available: impl Fn(usize) -
         observation_std: ObservationNoise::PerComponent(obs_std.clone()),
         execution: Execution::Parallel,
         forgetting,
+        sigma_points: set,
     };
     let mut roukf = Roukf::new(StaticLinear { h: h.clone() }, DVector::zeros(q), config).unwrap();
+    assert_eq!(roukf.sigma_points().count(), set.count(p));
 
     let mut mu = DVector::from_column_slice(&prior_mean);
     let mut cov = DMatrix::from_diagonal(&DVector::from_iterator(p, prior_std.iter().map(|s| s * s)));
@@ -90,15 +99,30 @@ fn static_parameters_against_kalman(forgetting: f64, available: impl Fn(usize) -
 
 #[test]
 fn static_parameters_linear_observation_match_kalman_filter() {
-    static_parameters_against_kalman(1.0, |_| vec![true; 2]);
+    static_parameters_against_kalman(SigmaPointSet::Simplex, 1.0, |_| vec![true; 2]);
+}
+
+#[test]
+fn star_sigma_points_match_kalman_filter() {
+    // 2p + 1 = 7 points instead of 4, same closed-form mean and covariance at every step, with and without
+    // forgetting and missing components.
+    let all = |_: usize| vec![true; 2];
+    let mask = |k: usize| vec![k % 5 != 4, k % 2 == 0];
+    let star = static_parameters_against_kalman(SigmaPointSet::Star, 1.0, all);
+    assert_eq!(star.sigma_states().len(), 7);
+    static_parameters_against_kalman(SigmaPointSet::Star, 0.95, mask);
+    // Both sets give the same filter up to rounding.
+    let simplex = static_parameters_against_kalman(SigmaPointSet::Simplex, 1.0, all);
+    assert!((star.mean() - simplex.mean()).amax() < 1e-12 * simplex.mean().amax());
+    assert!(rel_diff(&star.covariance(), &simplex.covariance()) < 1e-10);
 }
 
 #[test]
 fn forgetting_and_missing_components_match_kalman_filter() {
     // Component 1 missing every third step, both missing every seventh.
     let mask = |k: usize| vec![k % 7 != 6, k % 3 != 0 && k % 7 != 6];
-    let plain = static_parameters_against_kalman(1.0, mask);
-    let forgetting = static_parameters_against_kalman(0.9, mask);
+    let plain = static_parameters_against_kalman(SigmaPointSet::Simplex, 1.0, mask);
+    let forgetting = static_parameters_against_kalman(SigmaPointSet::Simplex, 0.9, mask);
     // Forgetting keeps σ from collapsing as 1/√k: after 60 steps it is over twice the plain filter's.
     let (s1, s09) = (plain.std(), forgetting.std());
     assert!(s1.iter().zip(&s09).all(|(a, b)| *b > 2.0 * a), "{s1:?} vs {s09:?}");
@@ -109,6 +133,7 @@ fn forgetting_and_missing_components_match_kalman_filter() {
             observation_std: ObservationNoise::Uniform(1.0),
             execution: Execution::Sequential,
             forgetting: rho,
+            sigma_points: SigmaPointSet::Simplex,
         };
         let err = Roukf::new(StaticLinear { h: vec![] }, DVector::zeros(1), config).err().unwrap().to_string();
         assert!(err.contains("forgetting factor"), "{err}");
@@ -146,6 +171,11 @@ impl VectorState for LinearStateSpace {
 
 #[test]
 fn joint_linear_state_space_matches_augmented_kalman_filter() {
+    joint_against_augmented_kalman(SigmaPointSet::Simplex);
+    joint_against_augmented_kalman(SigmaPointSet::Star);
+}
+
+fn joint_against_augmented_kalman(set: SigmaPointSet) {
     let (n, p, q, steps) = (3, 2, 2, 80);
     let mut rng = Rng::new(23);
     let (c, s) = (0.3f64.cos(), 0.3f64.sin());
@@ -165,6 +195,7 @@ fn joint_linear_state_space_matches_augmented_kalman_filter() {
         observation_std: ObservationNoise::Uniform(obs_std),
         execution: Execution::Sequential,
         forgetting: 1.0,
+        sigma_points: set,
     };
     let model = LinearStateSpace { a: a.clone(), b: b.clone(), c: cm.clone(), inputs: inputs.clone() };
     let mut roukf = Roukf::new_joint(model, x0.clone(), config).unwrap();
@@ -203,17 +234,17 @@ fn joint_linear_state_space_matches_augmented_kalman_filter() {
         roukf.step(&z).unwrap();
         let theta = DMatrix::from_column_slice(p, 1, roukf.mean().as_slice());
         let exp_theta = DMatrix::from_column_slice(p, 1, s_mean.rows(n, p).as_slice());
-        assert!(rel_diff(&theta, &exp_theta) < 1e-10, "θ at {k}: {theta} vs {exp_theta}");
+        assert!(rel_diff(&theta, &exp_theta) < 1e-10, "θ at {k} ({set}): {theta} vs {exp_theta}");
         let x = DMatrix::from_column_slice(n, 1, roukf.mean_state().unwrap().as_slice());
         let exp_x = DMatrix::from_column_slice(n, 1, s_mean.rows(0, n).as_slice());
-        assert!(rel_diff(&x, &exp_x) < 1e-10, "x at {k}");
-        assert!(rel_diff(&roukf.covariance(), &cov.view((n, n), (p, p)).into_owned()) < 1e-10, "P_θθ at {k}");
+        assert!(rel_diff(&x, &exp_x) < 1e-10, "x at {k} ({set})");
+        assert!(rel_diff(&roukf.covariance(), &cov.view((n, n), (p, p)).into_owned()) < 1e-10, "P_θθ at {k} ({set})");
         let u_inv = roukf.u().clone().try_inverse().unwrap();
         let lx = roukf.state_factor().unwrap();
         let pxx = lx * &u_inv * lx.transpose();
-        assert!(rel_diff(&pxx, &cov.view((0, 0), (n, n)).into_owned()) < 1e-9, "P_xx at {k}");
+        assert!(rel_diff(&pxx, &cov.view((0, 0), (n, n)).into_owned()) < 1e-9, "P_xx at {k} ({set})");
         let pxt = lx * &u_inv * roukf.l_theta().transpose();
-        assert!(rel_diff(&pxt, &cov.view((0, n), (n, p)).into_owned()) < 1e-9, "P_xθ at {k}");
+        assert!(rel_diff(&pxt, &cov.view((0, n), (n, p)).into_owned()) < 1e-9, "P_xθ at {k} ({set})");
     }
     assert!((roukf.mean() - &truth).amax() < 0.05, "estimate {} vs truth {truth}", roukf.mean());
 }

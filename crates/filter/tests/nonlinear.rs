@@ -5,7 +5,7 @@ mod common;
 use std::convert::Infallible;
 
 use augsim_filter::{
-    Execution, Model, ObservationNoise, ParameterSpec, Roukf, RoukfConfig, Trace, Transform, VectorState,
+    Execution, Model, ObservationNoise, ParameterSpec, Roukf, RoukfConfig, SigmaPointSet, Trace, Transform, VectorState,
 };
 use common::Rng;
 use nalgebra::DVector;
@@ -58,6 +58,7 @@ fn rate_config(execution: Execution) -> RoukfConfig {
         observation_std: ObservationNoise::Uniform(0.01),
         execution,
         forgetting: 1.0,
+        sigma_points: SigmaPointSet::Simplex,
     }
 }
 
@@ -184,6 +185,7 @@ fn cascade_run(execution: Execution, joint: bool) -> (Trace, Vec<[f64; 2]>) {
         observation_std: ObservationNoise::PerComponent(vec![0.01, 0.02]),
         execution,
         forgetting: 1.0,
+        sigma_points: SigmaPointSet::Simplex,
     };
     let mut roukf = if joint {
         Roukf::new_joint(Cascade, [0.0, 0.0], config).unwrap()

@@ -11,7 +11,7 @@ use mesh::{Mesh, MeshLocator, Point, SurfaceBvh};
 use nalgebra::DVector;
 use serde::Serialize;
 
-use super::report::{self, Report};
+use super::report::{self, FilterTimes, Report};
 use super::scenario::{AssessmentSpec, AssimilationScenario, ObservationSpec};
 use super::tracks::{write_tracks, RestPositions, Tracks};
 use super::{AssimilationError, Context};
@@ -60,6 +60,8 @@ pub struct Setup {
     pub assessment_points: usize,
     /// Estimated parameters.
     pub parameters: usize,
+    /// Sigma points of the filter (p + 1 simplex or 2p + 1 star).
+    pub sigma_points: usize,
     /// Filter iterations (time steps).
     pub iterations: usize,
     /// Feature observations missing (occluded) in the filtered frames.
@@ -202,6 +204,7 @@ impl Experiment {
             features: 0,
             assessment_points: 0,
             parameters: 0,
+            sigma_points: 0,
             iterations: 0,
             occluded: 0,
             projected: 0,
@@ -234,6 +237,7 @@ impl Experiment {
         s.features = experiment.observed.len();
         s.assessment_points = experiment.assessment.as_ref().map_or(0, |a| a.points.len());
         s.parameters = experiment.unknowns.specs.len();
+        s.sigma_points = experiment.scenario.filter.sigma_points.count(s.parameters);
         s.iterations = experiment.measurements.len();
         s.occluded = experiment.measurements.iter().map(|f| f.available.iter().filter(|a| !**a).count() / 3).sum();
         Ok(experiment)
@@ -364,12 +368,15 @@ impl Experiment {
             observation_std: ObservationNoise::Uniform(self.filter_std),
             execution: self.scenario.filter.execution,
             forgetting: self.scenario.filter.forgetting,
+            sigma_points: self.scenario.filter.sigma_points,
         };
         let model = self.model(self.base.clone(), self.unknowns.parameters.clone())?;
         let initial = model.initial_state();
         let mut roukf = Roukf::new(model, initial, config).context(|| "configuring the filter".into())?;
         let mut estimated_errors = Vec::with_capacity(iterations);
         let mut newton = 0usize;
+        let mut spent = FilterTimes::default();
+        let mut factorizations = 0usize;
         let mut frames = Vec::new();
         let t_filter = Instant::now();
         for (k, frame) in (1..).zip(&self.measurements) {
@@ -377,21 +384,29 @@ impl Experiment {
             let innovation = rec.innovation_norm.unwrap_or(0.0);
             let states = roukf.sigma_states();
             newton += states.iter().map(|s| s.newton_iterations).sum::<usize>();
-            let mut mean = vec![0.0; self.base.num_dofs()];
             for s in states {
+                factorizations += s.factorizations;
+                spent.solves += s.timings.total.as_secs_f64();
+                spent.assembly += s.timings.assembly.as_secs_f64();
+                spent.factorization += s.timings.factorization.as_secs_f64();
+                spent.triangular_solves += s.timings.solve.as_secs_f64();
+            }
+            let mut mean = vec![0.0; self.base.num_dofs()];
+            for (s, w) in states.iter().zip(roukf.sigma_points().weights()) {
                 for (m, u) in mean.iter_mut().zip(&s.u) {
-                    *m += u;
+                    *m += w * u;
                 }
             }
-            mean.iter_mut().for_each(|m| *m /= states.len() as f64);
             if let Some(a) = &self.assessment {
                 estimated_errors.push(mean_error(&tracked_positions(nodes, &a.points, &mean), &a.truth[k - 1]));
             }
             if k % self.every == 0 {
+                let t_write = Instant::now();
                 let file = format!("deformation/step_{k:05}.vtu");
                 mesh::io::write_vtu(out_dir.join(&file), &self.base.mesh, &[Field::point("displacement", 3, mean)])
                     .context(|| format!("writing the estimated deformation of step {k}"))?;
                 frames.push((k as f64, file));
+                spent.writing += t_write.elapsed().as_secs_f64();
             }
             progress(&Progress {
                 iteration: k,
@@ -400,6 +415,8 @@ impl Experiment {
             });
         }
         let filter_seconds = t_filter.elapsed().as_secs_f64();
+        let sigma_count = roukf.sigma_points().count();
+        spent.factorizations_per_solve = factorizations as f64 / (iterations * sigma_count).max(1) as f64;
         if !frames.is_empty() {
             mesh::io::write_pvd(out_dir.join("deformation.pvd"), &frames)
                 .context(|| "writing deformation.pvd".into())?;
@@ -434,12 +451,14 @@ impl Experiment {
             synthetic,
             nodes: nodes.len(),
             iterations,
-            sigma_points: self.unknowns.specs.len() + 1,
+            sigma_points: sigma_count,
+            sigma_point_set: self.scenario.filter.sigma_points,
             execution: self.scenario.filter.execution,
             filter_seconds,
             seconds_per_iteration_mean: times.iter().sum::<f64>() / times.len().max(1) as f64,
             seconds_per_iteration_median: mesh::stats::median(&mut times),
-            newton_iterations_per_solve: newton as f64 / (iterations * (self.unknowns.specs.len() + 1)).max(1) as f64,
+            newton_iterations_per_solve: newton as f64 / (iterations * sigma_count).max(1) as f64,
+            filter_times: spent,
             total_seconds: self.start.elapsed().as_secs_f64(),
             max_displacement: self.setup.reference.map(|r| r.max_displacement),
             young,

@@ -12,9 +12,11 @@
 //!   `deformation.pvd` + `deformation/step_*.vtu`, `assessment.csv` with assessment points, and for synthetic
 //!   data the observed tracks in `tracks/` (readable back with [`ObservationFiles`]).
 //!
-//! The estimated deformation at time step k is the mean of the sigma points' states predicted for step k (before
-//! the correction with the measurement of step k); its error at the assessment points is compared, on request,
-//! with runs where the spring region is fully fixed and fully free.
+//! The estimated deformation at time step k is the weighted mean of the sigma points' states predicted for step k
+//! (before the correction with the measurement of step k); its error at the assessment points is compared, on
+//! request, with runs where the spring region is fully fixed and fully free. `summary.json` also says where the
+//! filter's time went ([`FilterTimes`]: the FEM solves' assembly, factorisations and triangular solves, and the
+//! writing of the deformation).
 
 mod experiment;
 mod report;
@@ -24,7 +26,7 @@ pub mod tracks;
 use std::path::Path;
 
 pub use experiment::{Experiment, ObservationFiles, Progress, Reference, Setup};
-pub use report::{AssessmentCase, Report, SpringsReport, YoungReport};
+pub use report::{AssessmentCase, FilterTimes, Report, SpringsReport, YoungReport};
 pub use scenario::{
     AssessmentSpec, AssimilationScenario, FilterSpec, ForceSpec, ObservationSpec, OutputSpec, SpringTruth, SpringsSpec,
     ToolSpec, YoungSpec,

@@ -9,7 +9,7 @@ use mesh::{NodeSelection, Point};
 use serde::Deserialize;
 
 use super::AssimilationError;
-use crate::{Execution, Profile, Transform};
+use crate::{Execution, Profile, SigmaPointSet, Transform};
 
 /// An assimilation scenario file.
 #[derive(Debug, Clone, Deserialize)]
@@ -178,11 +178,14 @@ pub struct FilterSpec {
     /// Forgetting factor ρ in (0, 1] (see [`crate::RoukfConfig::forgetting`]); 1: none.
     #[serde(default = "one")]
     pub forgetting: f64,
+    /// `"simplex"` (p + 1 points, the default) or `"star"` (2p + 1 points) (see [`crate::SigmaPointSet`]).
+    #[serde(default)]
+    pub sigma_points: SigmaPointSet,
 }
 
 impl Default for FilterSpec {
     fn default() -> Self {
-        FilterSpec { execution: Execution::default(), forgetting: 1.0 }
+        FilterSpec { execution: Execution::default(), forgetting: 1.0, sigma_points: SigmaPointSet::default() }
     }
 }
 
