@@ -169,6 +169,7 @@ mod tests {
     use crate::scenario::{build_mesh, Scenario};
     use filter::assimilation::AssimilationScenario;
     use learn::scenario::DatasetScenario;
+    use register::scenario::CaseScenario;
 
     /// Every shipped scenario parses as exactly one kind of scenario, and its mesh source is valid.
     #[test]
@@ -182,11 +183,12 @@ mod tests {
                 toml::from_str::<Scenario>(&text).is_ok(),
                 toml::from_str::<DatasetScenario>(&text).is_ok(),
                 toml::from_str::<AssimilationScenario>(&text).is_ok(),
+                toml::from_str::<CaseScenario>(&text).is_ok(),
             ];
             assert_eq!(kinds.iter().filter(|&&k| k).count(), 1, "{}: parses as {kinds:?}", path.display());
             count += 1;
         }
-        assert_eq!(count, 14, "scenario files");
+        assert_eq!(count, 16, "scenario files");
         let (beam, dir) = Scenario::load(&dir.join("beam.toml")).unwrap();
         let problem = beam.build_problem(build_mesh(&beam.mesh, &dir).unwrap()).unwrap();
         assert_eq!(problem.mesh.cells.len(), 500);
