@@ -41,7 +41,7 @@ fn assimilate(
         scenario.iterations = iterations.or(scenario.iterations);
         if let Some(n) = phantom_tets {
             let MeshSource::Phantom { tets } = &mut scenario.mesh else {
-                bail!("{file}: the reference run needs the built-in phantom");
+                bail!("{file}: another phantom size needs the built-in phantom mesh");
             };
             *tets = n;
         }
