@@ -228,11 +228,16 @@ fn mean_displacement(samples: &Samples) -> f64 {
 
 fn split_note(t: &Trained, samples: usize) -> String {
     let [train, validation, test] = t.split;
+    // A model trained by an earlier run of the experiment is read back, not timed.
+    let timing = if t.step_seconds > 0.0 {
+        format!("{:.3} s per training step", t.step_seconds)
+    } else {
+        "trained by an earlier run, so not timed here".into()
+    };
     format!(
         "{samples} samples generated: {train} training, {validation} validation (checkpoint selection{}), \
-         {test} test (every figure above); {:.3} s per training step.",
+         {test} test (every figure above); {timing}.",
         t.best_validation.map_or(String::new(), |(it, _)| format!(", best at step {it}")),
-        t.step_seconds
     )
 }
 
