@@ -4,7 +4,8 @@
 //!
 //! `cargo run --release -p augsim-learn --example train_step_timing -- [runs] [batch] [channels...]`
 //! (defaults: 20 runs, batch 4, channels 8 and 16). Compare with
-//! `bench/torch_unet_twin.py --base C --grid 21 23 21 --threads 2` (in the repository root).
+//! `bench/torch_unet_twin.py --base C --grid 24 24 24 --threads 2` in the repository root (the twin takes the
+//! padded grid).
 
 use std::time::Instant;
 
