@@ -45,7 +45,7 @@ pub struct RegisterArgs {
     /// TRE is reported.
     #[arg(long)]
     truth: Option<PathBuf>,
-    /// Most match-and-deform iterations per frame (default 30, or the case's).
+    /// Most match-and-deform iterations per frame (default: the library's, or the case's).
     #[arg(long)]
     iterations: Option<usize>,
     /// Rigid pre-alignment: trimmed point-to-plane ICP of the cloud to the organ's rest surface
@@ -56,16 +56,15 @@ pub struct RegisterArgs {
     /// Output directory: organ.vtu (organ.pvd for a sequence), targets.csv, summary.json.
     #[arg(short, long, default_value = "out/register")]
     out: PathBuf,
-    /// Built-in comparison case (scenarios/register_case.toml): a Neo-Hookean phantom of 9,000
-    /// tetrahedra pushed down (--force), seen from above (1,500 points, 1 mm noise, 5 %
-    /// outliers), registered with a co-rotational FEM, an SVK FEM (both on another mesh of 3,000)
-    /// and the shipped U-Net; prints the comparison.
+    /// Built-in comparison case (scenarios/register_case.toml, which describes it): a phantom
+    /// truth pushed down (--force) and seen from above, registered by each of the case's methods
+    /// (FEM models on another mesh, the shipped U-Net); prints the comparison.
     #[arg(long, group = "comparison")]
     demo: bool,
     /// The comparison of --demo on this case scenario (TOML, as scenarios/register_case.toml).
     #[arg(long, group = "comparison", value_name = "CASE.toml")]
     case: Option<PathBuf>,
-    /// The force (N) pushing the case's truth (default: the case's, 1.5 N for --demo).
+    /// The force (N) pushing the case's truth (default: the case's).
     #[arg(long, requires = "comparison")]
     force: Option<f64>,
     /// Misaligns the case's camera frame: rotation (degrees) about the case's axis...
@@ -258,8 +257,7 @@ fn print_rigid(r: &RigidResult, truth: Option<&RigidTransform>) {
     if let Some(truth) = truth {
         let (angle, shift) = t.error_to(truth);
         println!(
-            "           against the case's true misalignment ({:.2} deg, {:.2} mm): {:.2} deg, {:.2} mm off \
-             (the rigid fit takes up part of the deformation)",
+            "           against the case's true misalignment ({:.2} deg, {:.2} mm): {:.2} deg, {:.2} mm off",
             truth.angle().to_degrees(),
             truth.translation_norm() * 1e3,
             angle.to_degrees(),
@@ -315,12 +313,8 @@ fn fem_setup(path: &Path) -> Result<Setup> {
 }
 
 fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<Setup> {
-    let text = std::fs::read_to_string(scenario_path)
-        .with_context(|| format!("cannot read scenario {}", scenario_path.display()))?;
-    let scenario: DatasetScenario =
-        toml::from_str(&text).with_context(|| format!("invalid dataset scenario {}", scenario_path.display()))?;
-    let dir = scenario_path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let mesh = build_mesh(&scenario.mesh, &dir).context("building the mesh")?;
+    let (scenario, dir) = DatasetScenario::load(scenario_path)?;
+    let mesh = scenario.mesh(&dir)?;
     let (inputs, normal) = match &scenario.dataset.input {
         learn::generate::Input::Displacement { nodes, normal, .. } => (nodes.select(&mesh)?, *normal),
         learn::generate::Input::Force => {

@@ -8,7 +8,6 @@ use anyhow::{bail, Context, Result};
 use learn::sample_view::{first_held_out, sample_on_mesh};
 use learn::{Dataset, TrainedModel};
 use mesh::io::{Field, FieldLocation};
-use mesh::Mesh;
 use plot::viewer::{Layer, Scalar, Scene};
 
 use learn::scenario::DatasetScenario;
@@ -76,7 +75,13 @@ fn sample_scene(args: &ViewArgs, model_path: &Path, dataset_dir: &Path) -> Resul
                     path.display()
                 );
             }
-            (scenario_mesh(&path)?, path)
+            (
+                {
+                    let (scenario, dir) = DatasetScenario::load(&path)?;
+                    scenario.mesh(&dir)?
+                },
+                path,
+            )
         }
     };
     let index = match args.sample {
@@ -98,16 +103,6 @@ fn sample_scene(args: &ViewArgs, model_path: &Path, dataset_dir: &Path) -> Resul
         println!("           {note}");
     }
     Ok(scene)
-}
-
-/// The organ's mesh as a dataset scenario builds it.
-fn scenario_mesh(path: &Path) -> Result<Mesh> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read scenario {}", path.display()))?;
-    let scenario: DatasetScenario =
-        toml::from_str(&text).with_context(|| format!("invalid scenario {}", path.display()))?;
-    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    crate::scenario::build_mesh(&scenario.mesh, &dir)
-        .with_context(|| format!("building the mesh of {}", path.display()))
 }
 
 /// The scene of a mesh file: its boundary at rest and moved by each 3-component point field.
