@@ -1,4 +1,4 @@
-//! Small statistics shared by the crates (the one median).
+//! Small statistics shared by the crates (the one median, mean and maximum).
 
 /// The median of `values`, reordering them: the element of rank `n / 2` (0-based) in `f64::total_cmp` order,
 /// i.e. the middle value for an odd count and the upper of the two middle values for an even count (no
@@ -12,9 +12,26 @@ pub fn median(values: &mut [f64]) -> f64 {
     *values.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
+/// The arithmetic mean of `values`; NaN when there are none.
+pub fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len() as f64
+}
+
+/// The largest of `values`, NaNs left out (`f64::max`); NaN when there are none.
+pub fn max(values: &[f64]) -> f64 {
+    values.iter().copied().fold(f64::NAN, f64::max)
+}
+
 #[cfg(test)]
 mod tests {
-    use super::median;
+    use super::{max, mean, median};
+
+    #[test]
+    fn mean_and_max_of_a_list_and_of_none() {
+        assert_eq!(mean(&[1.0, 2.0, 6.0]), 3.0);
+        assert_eq!(max(&[1.0, f64::NAN, 6.0, 2.0]), 6.0);
+        assert!(mean(&[]).is_nan() && max(&[]).is_nan());
+    }
 
     #[test]
     fn the_median_is_the_middle_or_upper_middle_value() {

@@ -6,6 +6,7 @@
 //! (the transform estimated on the first frame, kept for the sequence), registered there, and
 //! the registered targets are moved back: targets and errors are in the cloud's frame.
 
+use mesh::stats::{max, mean};
 use mesh::Point;
 use serde::Serialize;
 
@@ -168,12 +169,4 @@ impl Summary {
             rigid: outcomes[0].rigid.as_ref().map(RigidSummary::from),
         })
     }
-}
-
-fn mean(v: &[f64]) -> f64 {
-    v.iter().sum::<f64>() / v.len() as f64
-}
-
-fn max(v: &[f64]) -> f64 {
-    v.iter().copied().fold(0.0, f64::max)
 }
