@@ -222,10 +222,8 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         dataset.manifest().grid
     );
     let outcome = learn::train(&train, &validation, &init, &config, &options)?;
-    let best =
-        outcome.curve.iter().filter_map(|r| r.val.map(|v| (r.iteration, v.mean))).min_by(|a, b| a.1.total_cmp(&b.1));
     println!("steps      {} ({:.3} s per step)", outcome.iterations_done, outcome.mean_step_seconds);
-    if let Some((it, e)) = best {
+    if let Some((it, Some(e))) = outcome.model.training.as_ref().map(|t| (t.best_iteration, t.best_val_mean_error)) {
         println!("best       validation mean e = {:.4} mm at iteration {it}", e * 1e3);
     }
     println!("wrote      {}", outcome.model_path.display());

@@ -25,6 +25,29 @@ pub(crate) struct Generated {
     pub dataset: Dataset,
 }
 
+impl Generated {
+    /// What the data are, from the scenario itself: its description, material and, for a
+    /// displacement input on a sparse sub-domain, the range of observed nodes.
+    pub fn note(&self) -> String {
+        let (s, m) = (&self.scenario, &self.scenario.material);
+        let sparse = match &s.dataset.input {
+            learn::generate::Input::Displacement { sparse: Some([lo, hi]), .. } => {
+                format!("; {lo}–{hi} observed nodes per sample")
+            }
+            _ => String::new(),
+        };
+        format!(
+            "Data: {}.toml, {} ({:?}, E = {} Pa, ν = {}, {:?} elements){sparse}.",
+            s.name,
+            s.description,
+            m.law,
+            m.young,
+            m.poisson,
+            m.resolved_formulation()
+        )
+    }
+}
+
 /// Generates (or resumes) `samples` samples of a shipped scenario into `dir/data-<samples>`.
 pub(crate) fn dataset(dir: &Path, file: &str, text: &str, samples: usize, progress: Progress) -> Result<Generated> {
     let path = write_scenario(dir, file, text)?;
@@ -109,9 +132,15 @@ pub(crate) struct Trained {
     pub validation: Samples,
     pub test: Samples,
     pub split: [usize; 3],
-    pub best_validation: Option<(usize, f64)>,
     pub curve: Vec<CurveRow>,
     pub step_seconds: f64,
+}
+
+impl Trained {
+    /// The step whose weights were kept for their validation error (`None` without validation).
+    pub fn best_validation_step(&self) -> Option<usize> {
+        self.model.training.as_ref().filter(|t| t.best_val_mean_error.is_some()).map(|t| t.best_iteration)
+    }
 }
 
 /// Trains (or resumes training) a U-Net on `dataset` into `dir/`[`model_dir`].
@@ -155,14 +184,11 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
         test: split.test.clone(),
     };
     let outcome = learn::train(&train, &validation, &init, &config, &options)?;
-    let best_validation =
-        outcome.curve.iter().filter_map(|r| r.val.map(|v| (r.iteration, v.mean))).min_by(|a, b| a.1.total_cmp(&b.1));
     Ok(Trained {
         split: [train.len(), validation.len(), test.len()],
         model: outcome.model,
         validation,
         test,
-        best_validation,
         curve: outcome.curve,
         step_seconds: outcome.mean_step_seconds,
     })
@@ -237,7 +263,7 @@ fn split_note(t: &Trained, samples: usize) -> String {
     format!(
         "{samples} samples generated: {train} training, {validation} validation (checkpoint selection{}), \
          {test} test (every figure above); {timing}.",
-        t.best_validation.map_or(String::new(), |(it, _)| format!(", best at step {it}")),
+        t.best_validation_step().map_or(String::new(), |it| format!(", best at step {it}")),
     )
 }
 
@@ -290,10 +316,11 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
         figures: vec![format!("{}/curve.png", model_dir(&recipe)), "errors.png".into()],
         notes: vec![
             split_note(&t, samples),
-            "Phantom of 5,012 T4, Neo-Hookean (SVK passes its compressive limit point under these loads), E = 5 kPa, \
-             ν = 0.48 (F-bar), one normal force of 0–2 N on a 2 cm surface patch (liver_forces_large.toml): the \
-             published data reach 8 cm of displacement, ours about 11 cm at most."
-                .into(),
+            format!(
+                "{} Neo-Hookean because SVK passes its compressive limit point under these loads; the largest \
+                 displacement of our test set is in the table.",
+                data.note()
+            ),
         ],
         values,
     })
@@ -337,9 +364,7 @@ pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<
         figures: vec![format!("{}/curve.png", model_dir(&recipe)), "errors.png".into()],
         notes: vec![
             split_note(&t, samples),
-            "Beam 4 × 1 × 1 m (20×5×5 H8), SVK, both ends fixed; input: displacement of 13–114 upper-face nodes of a random \
-             patch; noise is added to the visible inputs at evaluation only."
-                .into(),
+            format!("{} Noise is added to the visible inputs at evaluation only.", data.note()),
         ],
         values,
     })

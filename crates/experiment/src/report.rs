@@ -6,6 +6,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
+use plot::viewer::escape_html;
+
 use crate::{ExperimentResult, Size};
 
 fn size_name(size: Size) -> &'static str {
@@ -75,10 +77,6 @@ pub fn update_markdown(path: &Path, results: &[ExperimentResult]) -> Result<()> 
     Ok(())
 }
 
-fn escape(text: &str) -> String {
-    text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
-}
-
 /// The HTML report (no script, no external resource); figure paths are relative to `root`.
 pub fn html(results: &[ExperimentResult]) -> String {
     let mut s = String::from(
@@ -94,7 +92,7 @@ pub fn html(results: &[ExperimentResult]) -> String {
             s,
             "<h2>{}</h2>\n<p><code>augsim experiment {} --size {}</code> ({:.0} s)</p>\n<table><tr><th>quantity</th>\
              <th>augsim</th><th>published</th></tr>\n",
-            escape(&r.title),
+            escape_html(&r.title),
             r.name.as_str(),
             size_name(r.size),
             r.seconds
@@ -104,14 +102,14 @@ pub fn html(results: &[ExperimentResult]) -> String {
             let _ = writeln!(
                 s,
                 "<tr><td>{}</td><td>{}</td><td>{}</td></tr>",
-                escape(&row.quantity),
-                escape(&row.ours),
-                escape(published)
+                escape_html(&row.quantity),
+                escape_html(&row.ours),
+                escape_html(published)
             );
         }
         s.push_str("</table>\n<ul>\n");
         for note in &r.notes {
-            let _ = writeln!(s, "<li>{}</li>", escape(note));
+            let _ = writeln!(s, "<li>{}</li>", escape_html(note));
         }
         s.push_str("</ul>\n<div>\n");
         for f in &r.figures {
@@ -120,10 +118,10 @@ pub fn html(results: &[ExperimentResult]) -> String {
                 let _ = writeln!(
                     s,
                     "<p><a href=\"{0}\">3D viewer ({0})</a>: rotate the organ, errors as colour</p>",
-                    escape(&src)
+                    escape_html(&src)
                 );
             } else {
-                let _ = writeln!(s, "<a href=\"{0}\"><img src=\"{0}\" alt=\"{0}\"></a>", escape(&src));
+                let _ = writeln!(s, "<a href=\"{0}\"><img src=\"{0}\" alt=\"{0}\"></a>", escape_html(&src));
             }
         }
         s.push_str("</div>\n");

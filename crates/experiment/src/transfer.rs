@@ -166,7 +166,7 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
     }
     rows.push(Row::new("largest displacement in the target test set", fmt(max_displacement(test) * 1e3, 1, "mm"), ""));
 
-    let best = |t: &Trained| t.best_validation.map_or("—".to_string(), |(step, _)| step.to_string());
+    let best = |t: &Trained| t.best_validation_step().map_or("—".to_string(), |step| step.to_string());
     let timed: Vec<f64> = [&pre, &full, &scratch, &tuned].iter().map(|t| t.step_seconds).filter(|&s| s > 0.0).collect();
     let step_time = if timed.is_empty() {
         String::new()

@@ -253,7 +253,7 @@ fn push_string(s: &mut String, text: &str) {
 }
 
 /// Text escaped for HTML content.
-fn escape_html(text: &str) -> String {
+pub fn escape_html(text: &str) -> String {
     text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
 
