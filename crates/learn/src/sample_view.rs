@@ -14,29 +14,7 @@ use crate::grid::{GridToMesh, CHANNELS};
 use crate::unet::TrainedModel;
 use crate::{LearnError, Result};
 
-/// What a sample was to a model.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum SampleRole {
-    /// Trained on (by this model or one it was fine-tuned from).
-    Training,
-    /// Used to choose the checkpoint.
-    Validation,
-    /// In the test split recorded in the model.
-    Test,
-    /// In no split of the model: data it never saw.
-    Unseen,
-}
-
-impl std::fmt::Display for SampleRole {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            SampleRole::Training => "training",
-            SampleRole::Validation => "validation",
-            SampleRole::Test => "test",
-            SampleRole::Unseen => "unseen",
-        })
-    }
-}
+pub use crate::split::SampleRole;
 
 /// A sample's reference and predicted displacement (m) at the nodes of the organ's mesh and at the markers.
 #[derive(Clone, Debug, PartialEq)]
@@ -117,7 +95,7 @@ pub fn sample_on_mesh(model: &TrainedModel, dataset: &Dataset, index: u64, organ
     };
     Ok(SampleOnMesh {
         index,
-        role: role(model, samples.source.as_deref(), index),
+        role: model.role(samples.source.as_deref(), index),
         reference: triples(to_mesh.apply(target)?),
         prediction: triples(to_mesh.apply(&prediction)?),
         marker_reference: at_markers(target)?,
@@ -134,28 +112,11 @@ pub fn first_held_out(model: &TrainedModel, manifest: &Manifest) -> Option<u64> 
         .shards
         .iter()
         .flat_map(|s| s.indices.iter().copied())
-        .find(|&i| matches!(role(model, Some(&source), i), SampleRole::Test | SampleRole::Unseen))
+        .find(|&i| matches!(model.role(Some(&source), i), SampleRole::Test | SampleRole::Unseen))
 }
 
 fn interpolate(grid: &Grid, field: &[f64], points: &[Point]) -> Result<Vec<f64>> {
     grid.interpolate(field, CHANNELS, points).map_err(|e| LearnError::InvalidInput(format!("markers: {e}")))
-}
-
-/// The role of sample `index` of the data source `source` for `model`.
-fn role(model: &TrainedModel, source: Option<&str>, index: u64) -> SampleRole {
-    let Some(info) = &model.training else { return SampleRole::Unseen };
-    for split in info.splits().filter(|s| source.is_some() && s.source.as_deref() == source) {
-        if split.train.contains(index) {
-            return SampleRole::Training;
-        }
-        if split.validation.contains(index) {
-            return SampleRole::Validation;
-        }
-    }
-    if source.is_some() && info.split.source.as_deref() == source && info.split.test.contains(index) {
-        return SampleRole::Test;
-    }
-    SampleRole::Unseen
 }
 
 fn norm(v: [f64; 3]) -> f64 {

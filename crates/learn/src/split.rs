@@ -193,3 +193,27 @@ impl Split {
         Ok(())
     }
 }
+
+/// What a sample was to a model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SampleRole {
+    /// Trained on (by this model or one it was fine-tuned from).
+    Training,
+    /// Used to choose the checkpoint.
+    Validation,
+    /// In the test split recorded in the model.
+    Test,
+    /// In no split of the model: data it never saw.
+    Unseen,
+}
+
+impl std::fmt::Display for SampleRole {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SampleRole::Training => "training",
+            SampleRole::Validation => "validation",
+            SampleRole::Test => "test",
+            SampleRole::Unseen => "unseen",
+        })
+    }
+}

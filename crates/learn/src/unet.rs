@@ -34,7 +34,7 @@ use crate::dataset::{Normalization, Samples};
 use crate::fsutil::read;
 use crate::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::inference::{Block, InferenceNet, Packed};
-use crate::split::Split;
+use crate::split::{SampleRole, Split};
 use crate::{LearnError, Result};
 
 /// U-Net hyper-parameters.
@@ -467,6 +467,25 @@ impl TrainedModel {
         self.training.as_ref().is_some_and(|t| samples.source.is_some() && t.split.source == samples.source)
     }
 
+    /// What sample `index` of the data source `source` was to this model: trained or validated on
+    /// by any run behind it, in its own run's test split, or never seen.
+    pub fn role(&self, source: Option<&str>, index: u64) -> SampleRole {
+        let Some(info) = &self.training else { return SampleRole::Unseen };
+        let ours = |s: &Split| source.is_some() && s.source.as_deref() == source;
+        for split in info.splits().filter(|s| ours(s)) {
+            if split.train.contains(index) {
+                return SampleRole::Training;
+            }
+            if split.validation.contains(index) {
+                return SampleRole::Validation;
+            }
+        }
+        if ours(&info.split) && info.split.test.contains(index) {
+            return SampleRole::Test;
+        }
+        SampleRole::Unseen
+    }
+
     /// The samples of `samples` held out from this model: from the data it was trained on, its
     /// recorded test samples; from other data, every sample that no run behind the model
     /// trained or validated on (all of them, for a dataset it never saw).
@@ -476,13 +495,8 @@ impl TrainedModel {
             let [_, _, test] = info.split.apply(samples)?;
             return Ok(test);
         }
-        let seen = |i: u64| {
-            info.splits().any(|s| {
-                samples.source.is_some()
-                    && s.source == samples.source
-                    && (s.train.contains(i) || s.validation.contains(i))
-            })
-        };
+        let seen =
+            |i: u64| matches!(self.role(samples.source.as_deref(), i), SampleRole::Training | SampleRole::Validation);
         let positions: Vec<usize> = (0..samples.len()).filter(|&p| !seen(samples.indices[p])).collect();
         samples.select(&positions)
     }
