@@ -63,7 +63,8 @@ impl Ellipsoid {
 
 /// A patch of the surface: the boundary point met going from `from` (an
 /// interior point) along `direction`, and a radius around it.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct SurfacePatch {
     /// An interior starting point (m).
     pub from: Point,

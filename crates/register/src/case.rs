@@ -5,7 +5,7 @@
 //! (`scenarios/register_case.toml` is the built-in one).
 
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
-use mesh::phantom::{PhantomSpec, SurfacePatch};
+use mesh::phantom::PhantomSpec;
 use mesh::{Mesh, Point};
 
 use learn::TrainedModel;
@@ -44,7 +44,7 @@ pub fn synthetic_case(scenario: &CaseScenario) -> Result<SyntheticCase> {
     let t = &scenario.truth;
     let mut spec = PhantomSpec::default();
     if let Some(patch) = t.patch {
-        spec.push = SurfacePatch { from: patch.from, direction: patch.direction, radius: patch.radius };
+        spec.push = patch;
     }
     let m = spec.mesh(t.tets)?;
     let mut p = Problem::new(m, t.material);

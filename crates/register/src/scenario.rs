@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use fem::Material;
+use mesh::phantom::SurfacePatch;
 use mesh::Point;
 use serde::{Deserialize, Serialize};
 
@@ -68,7 +69,7 @@ pub struct TruthSpec {
     /// Moves the phantom's `push` region: a patch of the surface around the boundary point met
     /// from `from` along `direction`. Default: the phantom's own.
     #[serde(default)]
-    pub patch: Option<PatchSpec>,
+    pub patch: Option<SurfacePatch>,
     /// The phantom region whose nodes are the targets (their rest positions).
     #[serde(default = "default_targets")]
     pub targets: String,
@@ -88,18 +89,6 @@ fn default_targets() -> String {
 
 fn default_direction() -> Point {
     [0.0, 0.0, -1.0]
-}
-
-/// A patch of the phantom's surface ([`mesh::phantom::SurfacePatch`]).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct PatchSpec {
-    /// An interior starting point (m).
-    pub from: Point,
-    /// Direction of the search for the surface.
-    pub direction: Point,
-    /// Radius around the boundary point (m).
-    pub radius: f64,
 }
 
 /// The simulated camera ([`CameraModel`]) and its random seed.
