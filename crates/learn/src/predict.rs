@@ -109,12 +109,11 @@ impl Timing {
         if d.is_empty() {
             return Err(LearnError::InvalidInput("no timed runs".into()));
         }
-        let median = mesh::stats::median(&mut d);
-        d.sort_by(f64::total_cmp);
         let n = d.len();
-        let mean = d.iter().sum::<f64>() / n as f64;
+        let (mean, max) = (mesh::stats::mean(&d), mesh::stats::max(&d));
+        let min = d.iter().copied().fold(f64::INFINITY, f64::min);
         let std = (d.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n as f64).sqrt();
-        Ok(Timing { runs: n, median, mean, std, min: d[0], max: d[n - 1] })
+        Ok(Timing { runs: n, median: mesh::stats::median(&mut d), mean, std, min, max })
     }
 }
 
