@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use mesh::io::{write_atomic_bytes, Field};
 use mesh::Point;
-use register::case::{case_methods, compare, synthetic_case};
+use register::case::{case_methods, compare, synthetic_case, Registered};
 use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
 use register::picture::side_view;
 use register::scenario::{slug, MethodKind};
@@ -411,10 +411,12 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         None
     };
     let methods = case_methods(&scenario, network.as_ref())?;
-    let rows = compare(&case, methods, &scenario.registration)?;
-    let first = rows.first().context("no method to compare")?;
-    let rest = &first.summary;
-    let rigid = first.outcome.rigid.as_ref();
+    let rows = compare(&case, methods, &scenario.registration);
+    if rows.is_empty() {
+        bail!("no method to compare");
+    }
+    let registered: Vec<&Registered> = rows.iter().filter_map(|r| r.result.as_ref().ok()).collect();
+    let rigid = registered.first().and_then(|r| r.outcome.rigid.as_ref());
     if let Some(r) = rigid {
         print_rigid(r, Some(&case.pose));
     }
@@ -423,26 +425,38 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         "{:<28} {:>14} {:>13} {:>14} {:>10} {:>10}",
         "method", "TRE mean (mm)", "TRE max (mm)", "residual (mm)", "ms/frame", "iterations"
     );
-    let mut csv = String::from("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_ms,iterations\n");
-    let mut row = |name: &str, values: [Option<f64>; 5]| {
+    let mut csv = String::from("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_ms,iterations,error\n");
+    let mut row = |name: &str, values: [Option<f64>; 5], error: &str| {
         let [t, m, res, time, it] = values.map(|v| v.map_or("-".to_string(), |v| format!("{v:.2}")));
-        println!("{name:<28} {t:>14} {m:>13} {res:>14} {time:>10} {it:>10}");
+        if error.is_empty() {
+            println!("{name:<28} {t:>14} {m:>13} {res:>14} {time:>10} {it:>10}");
+        } else {
+            println!("{name:<28} failed: {error}");
+        }
         let fields = values.map(|v| v.map_or(String::new(), |v| v.to_string()));
-        csv.push_str(&format!("{name},{}\n", fields.join(",")));
+        csv.push_str(&format!("{name},{},\"{}\"\n", fields.join(","), error.replace('"', "\"\"")));
     };
-    let baseline = if rigid.is_some() { "rigid only (ICP)" } else { "no deformation" };
-    row(baseline, [rest.no_deformation_tre_mean_mm, rest.no_deformation_tre_max_mm, None, None, None]);
-    for r in &rows {
-        let s = &r.summary;
-        let values = [s.tre_mean_mm, s.tre_max_mm, Some(s.surface_residual_mm), Some(s.time_ms), Some(s.iterations)];
-        row(&s.method, values);
+    if let Some(first) = registered.first() {
+        let (rest, baseline) = (&first.summary, if rigid.is_some() { "rigid only (ICP)" } else { "no deformation" });
+        row(baseline, [rest.no_deformation_tre_mean_mm, rest.no_deformation_tre_max_mm, None, None, None], "");
     }
-    for row in &rows {
-        let (s, outcome) = (&row.summary, &row.outcome);
+    for r in &rows {
+        match &r.result {
+            Ok(reg) => {
+                let s = &reg.summary;
+                let values =
+                    [s.tre_mean_mm, s.tre_max_mm, Some(s.surface_residual_mm), Some(s.time_ms), Some(s.iterations)];
+                row(&r.method, values, "");
+            }
+            Err(e) => row(&r.method, [None; 5], &e.to_string()),
+        }
+    }
+    for reg in &registered {
+        let (s, outcome) = (&reg.summary, &reg.outcome);
         let method_dir = args.out.join(slug(&s.method));
         std::fs::create_dir_all(&method_dir).with_context(|| format!("creating {}", method_dir.display()))?;
         let u = &outcome.registration.u;
-        let (m, u_cloud) = in_cloud_frame(row.organ.mesh(), None, outcome.rigid.as_ref(), u);
+        let (m, u_cloud) = in_cloud_frame(reg.organ.mesh(), None, outcome.rigid.as_ref(), u);
         mesh::io::write_mesh(method_dir.join("organ.vtu"), &m, &[Field::point("displacement", 3, u_cloud)])?;
         let rest_targets = rest_in_cloud_frame(&case.targets, outcome.rigid.as_ref());
         write_targets(&method_dir.join("targets.csv"), &rest_targets, &outcome.targets)?;
@@ -453,7 +467,7 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         side_view(
             &method_dir.join("registration.png"),
             &title,
-            &row.organ,
+            &reg.organ,
             u,
             &to_organ(&case.cloud),
             &to_organ(&outcome.targets),
@@ -461,7 +475,13 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         )?;
     }
     write_atomic_bytes(&args.out.join("comparison.csv"), csv.as_bytes())?;
-    let summaries: Vec<&Summary> = rows.iter().map(|r| &r.summary).collect();
+    let summaries: Vec<serde_json::Value> = rows
+        .iter()
+        .map(|r| match &r.result {
+            Ok(reg) => serde_json::to_value(&reg.summary),
+            Err(e) => Ok(serde_json::json!({ "method": r.method, "error": e.to_string() })),
+        })
+        .collect::<Result<_, _>>()?;
     write_atomic_bytes(&args.out.join("summary.json"), serde_json::to_string_pretty(&summaries)?.as_bytes())?;
     println!();
     println!(

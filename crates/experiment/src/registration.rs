@@ -32,6 +32,8 @@ struct MethodTre {
     times: Vec<f64>,
     /// TRE mean and max (mm) on the design case.
     design: (f64, f64),
+    /// Held-out cases on which the method failed (not in the figures above), with the error.
+    failures: Vec<String>,
 }
 
 /// The published figure of a method (text, and its mean TRE in mm where one was published).
@@ -84,13 +86,23 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         let case = synthetic_case(&scenario)?;
         marker_count = case.targets.len();
         // Fresh methods per case: each registers from rest, with no state from the last case.
-        let rows = compare(&case, methods(Some(&t.model))?, &options)?;
+        let rows = compare(&case, methods(Some(&t.model))?, &options);
         if per_method.is_empty() {
-            per_method =
-                rows.iter().map(|r| MethodTre { method: r.summary.method.clone(), ..MethodTre::default() }).collect();
+            per_method = rows.iter().map(|r| MethodTre { method: r.method.clone(), ..MethodTre::default() }).collect();
         }
         for (entry, r) in per_method.iter_mut().zip(&rows) {
-            let s = &r.summary;
+            let s = match &r.result {
+                Ok(registered) => &registered.summary,
+                Err(e) if design => {
+                    entry.design = (f64::NAN, f64::NAN);
+                    progress(&format!("{} failed on the design case: {e}", r.method));
+                    continue;
+                }
+                Err(e) => {
+                    entry.failures.push(format!("{force} N: {e}"));
+                    continue;
+                }
+            };
             let (tre_mean, tre_max) = (s.tre_mean_mm.unwrap_or(f64::NAN), s.tre_max_mm.unwrap_or(f64::NAN));
             if design {
                 entry.design = (tre_mean, tre_max);
@@ -101,7 +113,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
             }
         }
         if !design {
-            let first = rows.first().context("no method compared")?;
+            let first = rows.iter().find_map(|r| r.result.as_ref().ok()).context("every method failed")?;
             no_motion.push(first.summary.no_deformation_tre_mean_mm.unwrap_or(f64::NAN));
         }
     }
@@ -122,10 +134,14 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         rows.push(Row::new(
             format!("registration, {}: TRE mean (max), time per frame", m.method),
             format!(
-                "{} ({}), {}",
+                "{} ({}), {}{}",
                 fmt(mean(&m.means), 2, "mm"),
                 fmt(max(&m.maxima), 1, "mm"),
-                fmt(mean(&m.times), 0, "ms")
+                fmt(mean(&m.times), 0, "ms"),
+                match m.failures.len() {
+                    0 => String::new(),
+                    n => format!("; failed on {n} of {} cases", held_out.len()),
+                }
             ),
             published(&m.method).0,
         ));
@@ -174,6 +190,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
                 "design_force_n": DESIGN_FORCE,
                 "design_tre_mean_mm": m.design.0,
                 "design_tre_max_mm": m.design.1,
+                "failures": m.failures,
             }),
         );
     }

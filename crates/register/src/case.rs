@@ -163,8 +163,8 @@ pub struct Method {
     pub deformer: Box<dyn Deformer>,
 }
 
-/// One method's result in a comparison.
-pub struct Compared {
+/// One method's registration of a comparison case.
+pub struct Registered {
     /// Its figures.
     pub summary: Summary,
     /// Its registration of the case.
@@ -173,18 +173,36 @@ pub struct Compared {
     pub organ: Organ,
 }
 
+/// One method's result in a comparison: its registration, or why it failed (e.g. an SVK
+/// model pulled past its compressive limit point), which does not stop the other methods.
+pub struct Compared {
+    /// The method's name.
+    pub method: String,
+    /// Its registration, or its error.
+    pub result: Result<Registered>,
+}
+
 /// Registers the case's cloud with each method (one frame, from rest), in order.
-pub fn compare(case: &SyntheticCase, methods: Vec<Method>, options: &RegistrationOptions) -> Result<Vec<Compared>> {
-    let mut rows = Vec::new();
-    for mut m in methods {
-        let truth = [case.truth.clone()];
-        let frames = [Ok(case.cloud.clone())];
-        let mut outcomes =
-            register_sequence(&m.organ, m.deformer.as_mut(), frames, &case.targets, Some(&truth), options, |_, _| {
-                Ok(())
-            })?;
-        let summary = Summary::new(m.name, &outcomes)?;
-        rows.push(Compared { summary, outcome: outcomes.remove(0), organ: m.organ });
-    }
-    Ok(rows)
+pub fn compare(case: &SyntheticCase, methods: Vec<Method>, options: &RegistrationOptions) -> Vec<Compared> {
+    methods
+        .into_iter()
+        .map(|mut m| {
+            let truth = [case.truth.clone()];
+            let frames = [Ok(case.cloud.clone())];
+            let result = register_sequence(
+                &m.organ,
+                m.deformer.as_mut(),
+                frames,
+                &case.targets,
+                Some(&truth),
+                options,
+                |_, _| Ok(()),
+            )
+            .and_then(|mut outcomes| {
+                let summary = Summary::new(m.name.clone(), &outcomes)?;
+                Ok(Registered { summary, outcome: outcomes.remove(0), organ: m.organ })
+            });
+            Compared { method: m.name, result }
+        })
+        .collect()
 }

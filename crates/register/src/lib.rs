@@ -16,6 +16,7 @@ pub use error::{RegisterError, Result};
 pub mod case;
 mod deformers;
 pub mod organ;
+pub mod outliers;
 pub mod picture;
 pub mod register;
 pub mod rigid;

@@ -39,18 +39,29 @@ pub struct RegistrationOptions {
     pub iterations: usize,
     /// Stop once no surface vertex moved by more than this between iterations (m).
     pub tolerance: f64,
+    /// Cloud points whose mean distance to their 8 nearest neighbours exceeds this multiple
+    /// of the cloud's median are isolated (flying pixels) and never matched ([`crate::outliers`]).
+    pub isolation_factor: f64,
     /// Matches farther than this multiple of the median match distance are outliers...
     pub outlier_factor: f64,
     /// ... but a match within this distance (m) is never one.
     pub min_outlier_distance: f64,
-    /// ... nor, at the first iteration, one within this distance (m), halved at
-    /// each iteration: the most deformed parts are far from the model at first.
+    /// ... nor, at the first iteration, one within this distance (m), which shrinks by
+    /// `capture_decay` at each iteration: the most deformed parts are far from the model at
+    /// first, and a deep push needs several iterations to be reached.
     pub capture_distance: f64,
+    /// Factor (0–1] applied to the capture distance at each iteration.
+    pub capture_decay: f64,
     /// Rigid pre-alignment of the cloud to the rest surface (ICP, [`crate::rigid`]) before the
     /// deformable iterations; `None`: the cloud is taken as rigidly aligned. In a sequence it is
     /// estimated on the first frame and kept for the others.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rigid: Option<RigidOptions>,
+    /// The direction the camera looks along, in the organ's frame: cloud points are matched
+    /// only to the surface that faces it (a point on a thin lobe pushed down must not match
+    /// the lobe's underside). `None`: estimated from the cloud at the first iteration.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub view: Option<Point>,
 }
 
 impl Default for RegistrationOptions {
@@ -58,10 +69,13 @@ impl Default for RegistrationOptions {
         RegistrationOptions {
             iterations: 30,
             tolerance: 1e-4,
+            isolation_factor: 3.0,
             outlier_factor: 3.0,
             min_outlier_distance: 5e-3,
             capture_distance: 0.05,
+            capture_decay: 0.93,
             rigid: None,
+            view: None,
         }
     }
 }
@@ -71,13 +85,23 @@ impl RegistrationOptions {
     pub fn validate(&self) -> Result<()> {
         let ok = self.iterations > 0
             && self.tolerance >= 0.0
+            && self.isolation_factor > 0.0
             && self.outlier_factor > 0.0
             && self.min_outlier_distance >= 0.0
             && self.capture_distance >= 0.0
-            && [self.tolerance, self.outlier_factor, self.min_outlier_distance, self.capture_distance]
-                .iter()
-                .all(|v| v.is_finite());
-        if ok {
+            && self.capture_decay > 0.0
+            && self.capture_decay <= 1.0
+            && [
+                self.tolerance,
+                self.isolation_factor,
+                self.outlier_factor,
+                self.min_outlier_distance,
+                self.capture_distance,
+            ]
+            .iter()
+            .all(|v| v.is_finite());
+        let view_ok = self.view.is_none_or(|v| v.iter().all(|x| x.is_finite()) && mesh::dot(v, v) > 0.0);
+        if ok && view_ok {
             self.rigid.as_ref().map_or(Ok(()), RigidOptions::validate)
         } else {
             Err(RegisterError::Invalid(format!("invalid registration options {self:?}")))
@@ -126,11 +150,19 @@ pub fn register_frame(
     let mut surface = organ.deformed_surface(&u);
     let mut iterations = 0;
     let mut inliers = 0;
+    let mut view = options.view.map(unit);
+    // The points that may be matched: all but the isolated ones.
+    let isolated = crate::outliers::isolated_points(cloud, options.isolation_factor);
+    let kept: Vec<Point> = cloud.iter().zip(&isolated).filter(|(_, &i)| !i).map(|(p, _)| *p).collect();
+    let candidates = if kept.is_empty() { cloud } else { &kept };
     while iterations < options.iterations {
         iterations += 1;
-        let capture = options.capture_distance * 0.5f64.powi(iterations as i32 - 1);
-        let (observations, kept) = observe(organ, &surface, cloud, options, capture)?;
-        inliers = kept;
+        let capture = options.capture_distance * options.capture_decay.powi(iterations as i32 - 1);
+        if view.is_none() && iterations == 1 {
+            view = estimate_view(&surface, candidates, options, capture)?;
+        }
+        let (observations, matched) = observe(organ, &surface, candidates, options, capture, view)?;
+        inliers = matched;
         u = deformer.deform(&observations, &u, iterations - 1)?;
         if u.len() != ndof || u.iter().any(|v| !v.is_finite()) {
             return Err(RegisterError::Invalid("the deformer returned a displacement that is not finite".into()));
@@ -157,12 +189,10 @@ pub fn observe(
     cloud: &[Point],
     options: &RegistrationOptions,
     capture: f64,
+    view: Option<Point>,
 ) -> Result<(Observations, usize)> {
-    let bvh = SurfaceBvh::new(surface)?;
-    let matches: Vec<_> = cloud.par_iter().map(|&c| bvh.closest_point(c)).collect();
-    let mut distances: Vec<f64> = matches.iter().map(|m| m.distance).collect();
-    let median = mesh::stats::median(&mut distances);
-    let limit = (options.outlier_factor * median).max(options.min_outlier_distance).max(capture);
+    let (facing, original) = facing_part(surface, view);
+    let (matches, limit) = closest_matches(&facing, cloud, options, capture)?;
     let n = organ.mesh().num_nodes();
     let mut obs = Observations { target: vec![[0.0; 3]; n], weight: vec![0.0; n], normal: vec![[0.0; 3]; n] };
     let rest = &organ.surface().vertices;
@@ -173,7 +203,7 @@ pub fn observe(
             continue;
         }
         kept += 1;
-        let tri = surface.triangles[m.triangle];
+        let tri = surface.triangles[original[m.triangle]];
         let corners = tri.map(|k| surface.vertices[k]);
         let bary = barycentric(corners, m.point);
         let normal = unit(mesh::cross(sub(corners[1], corners[0]), sub(corners[2], corners[0])));
@@ -202,6 +232,58 @@ pub fn observe(
         }
     }
     Ok((obs, kept))
+}
+
+/// The closest point of `surface` to each cloud point, and the distance beyond which a
+/// match is an outlier: the larger of `capture` and the options' limits.
+fn closest_matches(
+    surface: &TriSurface,
+    cloud: &[Point],
+    options: &RegistrationOptions,
+    capture: f64,
+) -> Result<(Vec<mesh::bvh::ClosestPoint>, f64)> {
+    let bvh = SurfaceBvh::new(surface)?;
+    let matches: Vec<_> = cloud.par_iter().map(|&c| bvh.closest_point(c)).collect();
+    let mut distances: Vec<f64> = matches.iter().map(|m| m.distance).collect();
+    let median = mesh::stats::median(&mut distances);
+    Ok((matches, (options.outlier_factor * median).max(options.min_outlier_distance).max(capture)))
+}
+
+/// The triangles of `surface` that face a camera looking along `view` (all of them
+/// when there is no view), as a surface of their own, with each one's index in `surface`.
+fn facing_part(surface: &TriSurface, view: Option<Point>) -> (TriSurface, Vec<usize>) {
+    let original: Vec<usize> = match view {
+        Some(v) => (0..surface.triangles.len())
+            .filter(|&t| mesh::dot(mesh::surface::triangle_area_vector(surface, t), v) < 0.0)
+            .collect(),
+        None => (0..surface.triangles.len()).collect(),
+    };
+    let triangles = original.iter().map(|&t| surface.triangles[t]).collect();
+    (TriSurface { vertices: surface.vertices.clone(), triangles }, original)
+}
+
+/// Smallest length of the mean unit normal of the matched triangles for the cloud to count
+/// as seen from one side (a cloud all around the organ has none).
+const ONE_SIDED: f64 = 0.2;
+
+/// The direction a camera looks along, estimated from the cloud: the opposite of the mean
+/// outward normal of the surface triangles its inlier points match; `None` when the
+/// matched normals have no clear mean (a cloud all around the organ).
+fn estimate_view(
+    surface: &TriSurface,
+    cloud: &[Point],
+    options: &RegistrationOptions,
+    capture: f64,
+) -> Result<Option<Point>> {
+    let (matches, limit) = closest_matches(surface, cloud, options, capture)?;
+    let (mut sum, mut count) = ([0.0; 3], 0usize);
+    for m in matches.iter().filter(|m| m.distance <= limit) {
+        let n = unit(mesh::surface::triangle_area_vector(surface, m.triangle));
+        (0..3).for_each(|d| sum[d] -= n[d]);
+        count += 1;
+    }
+    let length = mesh::dot(sum, sum).sqrt();
+    Ok((count > 0 && length >= ONE_SIDED * count as f64).then(|| sum.map(|x| x / length)))
 }
 
 /// Rejects an empty cloud or one with a non-finite coordinate.
@@ -246,4 +328,36 @@ fn unit(v: Point) -> Point {
 pub fn distance(a: Point, b: Point) -> f64 {
     let d = sub(a, b);
     mesh::dot(d, d).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mesh::sampling::sample_visible;
+
+    fn phantom_surface() -> TriSurface {
+        mesh::boundary_surface(&mesh::phantom::liver_phantom(1500).unwrap()).compacted()
+    }
+
+    /// A cloud seen from above gives a view close to straight down; a cloud all around the
+    /// organ gives none (every triangle may then be matched).
+    #[test]
+    fn the_view_is_estimated_from_a_one_sided_cloud_only() {
+        let surface = phantom_surface();
+        let options = RegistrationOptions::default();
+        let top: Vec<Point> =
+            sample_visible(&surface, [0.0, 0.0, -1.0], 800, 3).unwrap().into_iter().map(|s| s.point).collect();
+        let view = estimate_view(&surface, &top, &options, 0.05).unwrap().expect("a view");
+        assert!(view[2] < -0.95, "{view:?}");
+        let all: Vec<Point> = surface.vertices.clone();
+        assert_eq!(estimate_view(&surface, &all, &options, 0.05).unwrap(), None);
+        // Matching is then restricted to the triangles facing the camera.
+        let (facing, original) = facing_part(&surface, Some(view));
+        assert!(facing.triangles.len() < surface.triangles.len() * 3 / 4);
+        for (t, &o) in original.iter().enumerate() {
+            assert_eq!(facing.triangles[t], surface.triangles[o]);
+            assert!(mesh::dot(mesh::surface::triangle_area_vector(&surface, o), view) < 0.0);
+        }
+        assert_eq!(facing_part(&surface, None).0.triangles.len(), surface.triangles.len());
+    }
 }

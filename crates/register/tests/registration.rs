@@ -54,9 +54,8 @@ fn network_tre(camera: &CameraModel) -> (f64, f64) {
         &case,
         vec![Method { name: "U-Net".into(), organ, deformer: Box::new(deformer) }],
         &RegistrationOptions::default(),
-    )
-    .unwrap();
-    let errors = rows[0].outcome.errors.clone().unwrap();
+    );
+    let errors = rows[0].result.as_ref().unwrap().outcome.errors.clone().unwrap();
     (mean(&errors), mean(&target_errors(&case.targets, &case.truth)))
 }
 
@@ -96,4 +95,30 @@ fn bad_clouds_and_targets_are_clear_errors() {
     assert!(e.contains("target 1") && e.contains("outside"), "{e}");
     let e = register_frame(&organ, &mut deformer, &[[0.0; 3]], Some(&[0.0; 5]), &opts).unwrap_err().to_string();
     assert!(e.contains("start displacement"), "{e}");
+}
+
+/// A deformer that always fails, as an SVK model pulled past its limit point would.
+struct Failing;
+
+impl register::Deformer for Failing {
+    fn deform(&mut self, _: &register::Observations, _: &[f64], _: usize) -> register::Result<Vec<f64>> {
+        Err(register::RegisterError::Invalid("this model always fails".into()))
+    }
+}
+
+#[test]
+fn a_failing_method_is_reported_and_the_others_still_register() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/register_case_test.toml");
+    let scenario = register::CaseScenario::load(&path).unwrap();
+    let case = register::case::synthetic_case(&scenario).unwrap();
+    let mut methods = register::case::case_methods(&scenario, None).unwrap();
+    methods.truncate(1);
+    let organ = methods[0].organ.clone();
+    methods.insert(0, Method { name: "failing".into(), organ, deformer: Box::new(Failing) });
+    let rows = compare(&case, methods, &scenario.registration);
+    assert_eq!(rows.len(), 2);
+    let e = rows[0].result.as_ref().err().expect("the failing method fails").to_string();
+    assert!(rows[0].method == "failing" && e.contains("always fails"), "{e}");
+    let s = &rows[1].result.as_ref().expect("the FEM method registers").summary;
+    assert!(s.tre_mean_mm.unwrap() < s.no_deformation_tre_mean_mm.unwrap());
 }

@@ -113,9 +113,10 @@ fn pipeline(scenario: &CaseScenario) -> (f64, f64, Option<(f64, f64)>) {
     let case = synthetic_case(scenario).unwrap();
     let mut methods = case_methods(scenario, None).unwrap();
     methods.truncate(1);
-    let rows = compare(&case, methods, &scenario.registration).unwrap();
-    let s = &rows[0].summary;
-    let rigid = rows[0].outcome.rigid.as_ref().map(|r| {
+    let rows = compare(&case, methods, &scenario.registration);
+    let registered = rows[0].result.as_ref().unwrap();
+    let s = &registered.summary;
+    let rigid = registered.outcome.rigid.as_ref().map(|r| {
         let (a, t) = r.organ_to_cloud().error_to(&case.pose);
         (a.to_degrees(), t * 1e3)
     });

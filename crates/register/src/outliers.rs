@@ -1,0 +1,178 @@
+//! Isolated points of a cloud (a depth camera's flying pixels, specular spots, instruments
+//! seen edge-on): a statistical outlier filter on the distances to the nearest neighbours,
+//! the test of PCL's `StatisticalOutlierRemoval`, made scale-free by the median.
+
+use std::collections::HashMap;
+
+use mesh::Point;
+use rayon::prelude::*;
+
+/// Neighbours whose mean distance measures how isolated a point is.
+pub const NEIGHBOURS: usize = 8;
+
+/// Marks the points whose mean distance to their [`NEIGHBOURS`] nearest neighbours exceeds
+/// `factor` times the median of that distance over the cloud: on a surface sampled every few
+/// millimetres, a point floating in the volume is several times farther from its neighbours
+/// than any surface sample. Returns `true` for an outlier; a cloud of at most [`NEIGHBOURS`]
+/// points has none.
+pub fn isolated_points(cloud: &[Point], factor: f64) -> Vec<bool> {
+    if cloud.len() <= NEIGHBOURS {
+        return vec![false; cloud.len()];
+    }
+    let grid = PointGrid::new(cloud);
+    let spread: Vec<f64> = cloud.par_iter().map(|&p| grid.mean_neighbour_distance(cloud, p)).collect();
+    let mut sorted = spread.clone();
+    let median = mesh::stats::median(&mut sorted);
+    spread.iter().map(|&d| d > factor * median).collect()
+}
+
+/// Most cells along one axis of a [`PointGrid`].
+const MAX_CELLS: i64 = 1024;
+
+/// Points hashed into cubic cells over the cloud's bulk (the box of its 1st to 99th
+/// percentiles, widened by a tenth); a point beyond that box goes to the nearest cell.
+struct PointGrid {
+    origin: Point,
+    cell: f64,
+    dims: [i64; 3],
+    cells: HashMap<[i64; 3], Vec<usize>>,
+}
+
+impl PointGrid {
+    /// Cells sized so that a cloud filling the box would put a few points in each.
+    fn new(cloud: &[Point]) -> Self {
+        let (mut origin, mut extent) = ([0.0; 3], [0.0; 3]);
+        for d in 0..3 {
+            let mut x: Vec<f64> = cloud.iter().map(|p| p[d]).collect();
+            x.sort_by(f64::total_cmp);
+            let (lo, hi) = (x[x.len() / 100], x[x.len() - 1 - x.len() / 100]);
+            let margin = 0.1 * (hi - lo);
+            origin[d] = lo - margin;
+            extent[d] = (hi - lo + 2.0 * margin).max(1e-9);
+        }
+        // A few points per cell whether the cloud fills a volume, a surface or a line: the
+        // largest of the spacings it would have spread over its 3, 2 or 1 largest extents.
+        let mut sorted = extent;
+        sorted.sort_by(|a, b| b.total_cmp(a));
+        let n = cloud.len() as f64;
+        let cell =
+            (1..=3).map(|d| (4.0 * sorted[..d].iter().product::<f64>() / n).powf(1.0 / d as f64)).fold(1e-9, f64::max);
+        let dims = extent.map(|e| ((e / cell).ceil() as i64).clamp(1, MAX_CELLS));
+        let mut grid = PointGrid { origin, cell, dims, cells: HashMap::new() };
+        for (i, &p) in cloud.iter().enumerate() {
+            grid.cells.entry(grid.key(p)).or_default().push(i);
+        }
+        grid
+    }
+
+    fn key(&self, p: Point) -> [i64; 3] {
+        std::array::from_fn(|d| (((p[d] - self.origin[d]) / self.cell).floor() as i64).clamp(0, self.dims[d] - 1))
+    }
+
+    /// Mean distance from `p` (a point of `cloud`) to its [`NEIGHBOURS`] nearest other points:
+    /// cells are visited in growing cubic shells until the shell's inner distance exceeds the
+    /// farthest of the best found.
+    fn mean_neighbour_distance(&self, cloud: &[Point], p: Point) -> f64 {
+        let centre = self.key(p);
+        // Squared distances of the nearest found so far, sorted, the point itself included.
+        let mut best: Vec<f64> = Vec::with_capacity(NEIGHBOURS + 2);
+        let mut ring = 0i64;
+        loop {
+            for dx in -ring..=ring {
+                for dy in -ring..=ring {
+                    for dz in -ring..=ring {
+                        if dx.abs().max(dy.abs()).max(dz.abs()) != ring {
+                            continue;
+                        }
+                        let Some(points) = self.cells.get(&[centre[0] + dx, centre[1] + dy, centre[2] + dz]) else {
+                            continue;
+                        };
+                        for &j in points {
+                            let q = cloud[j];
+                            let d2 = (0..3).map(|d| (q[d] - p[d]).powi(2)).sum::<f64>();
+                            if best.len() <= NEIGHBOURS || d2 < best[NEIGHBOURS] {
+                                let at = best.partition_point(|&b| b < d2);
+                                best.insert(at, d2);
+                                best.truncate(NEIGHBOURS + 1);
+                            }
+                        }
+                    }
+                }
+            }
+            // Every point not yet visited is at least `ring * cell` away (farther still if
+            // it lies beyond the grid); past the largest dimension, every cell was visited.
+            let reach = ring as f64 * self.cell;
+            let all = ring >= self.dims.into_iter().max().unwrap_or(1);
+            if all || (best.len() > NEIGHBOURS && best[NEIGHBOURS] <= reach * reach) {
+                break;
+            }
+            ring += 1;
+        }
+        // The point itself is the first entry, at distance 0.
+        best[1..].iter().map(|d| d.sqrt()).sum::<f64>() / NEIGHBOURS as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sampled plane keeps all its points; the points floating well above it (a tenth of
+    /// the cloud) are found.
+    #[test]
+    fn floating_points_over_a_sampled_plane_are_isolated() {
+        let mut cloud = Vec::new();
+        for i in 0..40 {
+            for j in 0..40 {
+                let jitter = ((i * 7 + j * 13) % 10) as f64 * 1e-4;
+                cloud.push([i as f64 * 4e-3 + jitter, j as f64 * 4e-3, jitter]);
+            }
+        }
+        let surface = cloud.len();
+        for k in 0..160 {
+            let s = k as f64;
+            cloud.push([(s * 0.618).fract() * 0.16, (s * 0.414).fract() * 0.16, 0.01 + (s * 0.732).fract() * 0.05]);
+        }
+        let flags = isolated_points(&cloud, 3.0);
+        assert_eq!(flags[..surface].iter().filter(|&&f| f).count(), 0, "a surface point was flagged");
+        // Every point more than 2 cm (five sample spacings) off the plane; nearer ones may
+        // pass for samples (they are then ordinary far matches).
+        let far: Vec<bool> = (surface..cloud.len()).filter(|&i| cloud[i][2] > 0.02).map(|i| flags[i]).collect();
+        assert!(
+            far.len() > 90 && far.iter().all(|&f| f),
+            "{} of {} far points flagged",
+            far.iter().filter(|&&f| f).count(),
+            far.len()
+        );
+    }
+
+    /// The grid search returns the exact mean distance to the nearest neighbours.
+    #[test]
+    fn neighbour_distances_match_brute_force() {
+        let cloud: Vec<Point> = (0..300)
+            .map(|k| {
+                let s = k as f64;
+                [(s * 0.618).fract(), (s * 0.414).fract() * 0.3, (s * 0.732).fract() * 0.05]
+            })
+            .collect();
+        let grid = PointGrid::new(&cloud);
+        for &p in cloud.iter().step_by(17) {
+            let mut d: Vec<f64> =
+                cloud.iter().map(|q| (0..3).map(|i| (q[i] - p[i]).powi(2)).sum::<f64>().sqrt()).collect();
+            d.sort_by(f64::total_cmp);
+            let brute = d[1..=NEIGHBOURS].iter().sum::<f64>() / NEIGHBOURS as f64;
+            assert!((grid.mean_neighbour_distance(&cloud, p) - brute).abs() < 1e-12);
+        }
+    }
+
+    /// A tiny cloud has no outliers; a point a kilometre away is one (and costs no more
+    /// than any other).
+    #[test]
+    fn tiny_clouds_and_far_points() {
+        assert_eq!(isolated_points(&[[0.0; 3], [1.0, 0.0, 0.0]], 3.0), vec![false, false]);
+        let mut cloud: Vec<Point> = (0..400).map(|k| [(k % 20) as f64 * 1e-3, (k / 20) as f64 * 1e-3, 0.0]).collect();
+        cloud.push([1000.0, 0.0, 0.0]);
+        let flags = isolated_points(&cloud, 3.0);
+        assert!(flags[400] && !flags[..400].iter().any(|&f| f));
+    }
+}
