@@ -7,6 +7,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use learn::sample_view::sample_on_mesh;
 use learn::Corruption;
+use mesh::phantom::SurfacePatch;
 use mesh::stats::{max, mean};
 use register::case::{compare, methods, synthetic_case, TRUTH_TETS};
 use register::CaseScenario;
@@ -16,11 +17,46 @@ use crate::{fmt, ExperimentResult, Name, Progress, Row, Size};
 
 const LIVER_AR: &str = include_str!("../../../scenarios/liver_ar.toml");
 
-/// Tool forces (N) of the registration cases, camera seeds 1, 2, 3 in this order. The 1.5 N case is
-/// the one the registration settings were chosen on: it is reported apart, and the figures beside
-/// the published ones are over the others.
-const FORCES: [f64; 3] = [1.0, 1.5, 2.0];
-const DESIGN_FORCE: f64 = 1.5;
+/// A registration case: the shipped case's truth with another load.
+struct Variant {
+    /// Short description for the table.
+    label: &'static str,
+    /// Tool force (N) and its direction.
+    force: f64,
+    direction: [f64; 3],
+    /// Where the tool pushes (`None`: the shipped case's patch on the left lobe).
+    patch: Option<SurfacePatch>,
+    /// The camera's seed.
+    seed: u64,
+}
+
+/// The case the registration settings were chosen on (with the same patch at 1, 2 and 2.5 N):
+/// reported apart.
+const DESIGN: Variant = Variant { label: "1.5 N down, left lobe", force: 1.5, direction: DOWN, patch: None, seed: 1 };
+
+const DOWN: [f64; 3] = [0.0, 0.0, -1.0];
+
+/// Held-out cases, fixed before any was registered: an oblique push, another spot of the left
+/// lobe, the right lobe, and a harder push of the design spot. The figures beside the published
+/// ones are over these only.
+const HELD_OUT: [Variant; 4] = [
+    Variant { label: "1.75 N oblique, left lobe", force: 1.75, direction: [0.4, 0.0, -1.0], patch: None, seed: 11 },
+    Variant {
+        label: "2.5 N down, right lobe",
+        force: 2.5,
+        direction: DOWN,
+        patch: Some(SurfacePatch { from: [0.06, 0.02, 0.0], direction: [0.0, 0.0, 1.0], radius: 0.02 }),
+        seed: 12,
+    },
+    Variant {
+        label: "1.5 N down, left lobe front",
+        force: 1.5,
+        direction: DOWN,
+        patch: Some(SurfacePatch { from: [-0.04, -0.025, 0.0], direction: [0.0, 0.0, 1.0], radius: 0.02 }),
+        seed: 13,
+    },
+    Variant { label: "3 N down, left lobe", force: 3.0, direction: DOWN, patch: None, seed: 14 },
+];
 
 /// One registration method's figures over the cases.
 #[derive(Default)]
@@ -71,18 +107,19 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     let title = format!("liver_ar, test sample {index}: U-Net prediction vs FEM reference");
     plot::viewer::write_html(&dir.join("viewer.html"), &sample.scene(&organ, &title))?;
 
-    // The shipped comparison case (its camera, truth and registration settings) at each force.
+    // The shipped comparison case (its camera, truth and registration settings) under each load.
     let builtin = CaseScenario::builtin();
     let options = builtin.registration.clone();
-    let held_out: Vec<f64> = FORCES.into_iter().filter(|&f| f != DESIGN_FORCE).collect();
     let mut per_method: Vec<MethodTre> = Vec::new();
-    let (mut no_motion, mut marker_count) = (Vec::new(), 0);
-    for (k, force) in FORCES.into_iter().enumerate() {
-        let design = force == DESIGN_FORCE;
-        progress(&format!("registering the {force} N case"));
+    let (mut no_motion, mut marker_count, mut case_rows) = (Vec::new(), 0, Vec::new());
+    for (k, variant) in std::iter::once(&DESIGN).chain(&HELD_OUT).enumerate() {
+        let design = k == 0;
+        progress(&format!("registering the case {}", variant.label));
         let mut scenario = builtin.clone();
-        scenario.truth.force = force;
-        scenario.camera.seed = 1 + k as u64;
+        scenario.truth.force = variant.force;
+        scenario.truth.direction = variant.direction;
+        scenario.truth.patch = variant.patch.or(scenario.truth.patch);
+        scenario.camera.seed = variant.seed;
         let case = synthetic_case(&scenario)?;
         marker_count = case.targets.len();
         // Fresh methods per case: each registers from rest, with no state from the last case.
@@ -90,20 +127,23 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         if per_method.is_empty() {
             per_method = rows.iter().map(|r| MethodTre { method: r.method.clone(), ..MethodTre::default() }).collect();
         }
+        let motion = mean(&register::target_errors(&case.targets, &case.truth)) * 1e3;
+        let mut cells = Vec::new();
         for (entry, r) in per_method.iter_mut().zip(&rows) {
             let s = match &r.result {
                 Ok(registered) => &registered.summary,
-                Err(e) if design => {
-                    entry.design = (f64::NAN, f64::NAN);
-                    progress(&format!("{} failed on the design case: {e}", r.method));
-                    continue;
-                }
                 Err(e) => {
-                    entry.failures.push(format!("{force} N: {e}"));
+                    cells.push(format!("{}: failed", r.method));
+                    if design {
+                        entry.design = (f64::NAN, f64::NAN);
+                    } else {
+                        entry.failures.push(format!("{}: {e}", variant.label));
+                    }
                     continue;
                 }
             };
             let (tre_mean, tre_max) = (s.tre_mean_mm.unwrap_or(f64::NAN), s.tre_max_mm.unwrap_or(f64::NAN));
+            cells.push(format!("{} {} / {}", r.method, fmt(tre_mean, 2, "mm"), fmt(tre_max, 1, "mm")));
             if design {
                 entry.design = (tre_mean, tre_max);
             } else {
@@ -113,9 +153,14 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
             }
         }
         if !design {
-            let first = rows.iter().find_map(|r| r.result.as_ref().ok()).context("every method failed")?;
-            no_motion.push(first.summary.no_deformation_tre_mean_mm.unwrap_or(f64::NAN));
+            no_motion.push(motion);
         }
+        let kind = if design { "design case" } else { "held-out case" };
+        case_rows.push(Row::new(
+            format!("{kind} {} (markers move {} on average): TRE mean / max", variant.label, fmt(motion, 1, "mm")),
+            cells.join("; "),
+            "",
+        ));
     }
     let mut rows = vec![
         Row::new(
@@ -140,19 +185,13 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
                 fmt(mean(&m.times), 0, "ms"),
                 match m.failures.len() {
                     0 => String::new(),
-                    n => format!("; failed on {n} of {} cases", held_out.len()),
+                    n => format!("; failed on {n} of {} cases", HELD_OUT.len()),
                 }
             ),
             published(&m.method).0,
         ));
     }
-    for m in &per_method {
-        rows.push(Row::new(
-            format!("design case ({DESIGN_FORCE} N), {}: TRE mean (max)", m.method),
-            format!("{} ({})", fmt(m.design.0, 2, "mm"), fmt(m.design.1, 1, "mm")),
-            "",
-        ));
-    }
+    rows.extend(case_rows);
     let categories: Vec<String> = per_method.iter().map(|m| m.method.clone()).collect();
     let bars = |name: &str, f: &dyn Fn(&MethodTre) -> Option<f64>| plot::BarSeries {
         name: name.into(),
@@ -163,7 +202,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         &plot::PlotSpec {
             title: format!(
                 "TRE at {marker_count} markers over the {} held-out cases: mean, and the largest",
-                held_out.len()
+                HELD_OUT.len()
             ),
             x_label: String::new(),
             y_label: "mm".into(),
@@ -183,11 +222,11 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         values.insert(
             m.method.clone(),
             serde_json::json!({
-                "held_out_forces_n": held_out,
+                "held_out_cases": HELD_OUT.iter().map(|v| v.label).collect::<Vec<_>>(),
                 "tre_mean_mm": m.means,
                 "tre_max_mm": m.maxima,
                 "time_ms": m.times,
-                "design_force_n": DESIGN_FORCE,
+                "design_case": DESIGN.label,
                 "design_tre_mean_mm": m.design.0,
                 "design_tre_max_mm": m.design.1,
                 "failures": m.failures,
@@ -216,15 +255,17 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
             ),
             format!(
                 "Registration cases: scenarios/register_case.toml's truth ({:?} phantom of about {TRUTH_TETS} T4, \
-                 another mesh and law than the models) pushed by {held_out:?} N; its camera along {:?} sees \
+                 another mesh and law than the models) under the loads listed; its camera along {:?} sees \
                  {} points with {} noise and {:.0} % outliers. The registration figures beside the published ones \
-                 are over these held-out cases only; the {DESIGN_FORCE} N case, on which the method was designed, \
-                 is reported apart. Published: ex vivo human liver.",
+                 are over the {} held-out cases only (a failed method is counted apart); the design case, with \
+                 the same spot pushed by 1, 2 and 2.5 N, is where the registration settings were chosen. \
+                 Published: ex vivo human liver.",
                 builtin.truth.material.law,
                 builtin.camera.view,
                 builtin.camera.points,
                 fmt(builtin.camera.noise * 1e3, 1, "mm"),
-                100.0 * builtin.camera.outliers
+                100.0 * builtin.camera.outliers,
+                HELD_OUT.len()
             ),
         ],
         values,

@@ -116,15 +116,18 @@ fn bad_case_scenarios_are_clear_errors() {
     assert!(e.contains("FEM SVK") && e.contains("Poisson"), "{e}");
     let e = parse(&edit("iterations = 30", "iterations = 0"));
     assert!(e.contains("registration"), "{e}");
-    let e = parse(&edit("capture_distance = 0.05", "capture_distance = 0.05\n\n[registration.rigid]\nkeep = 1.5"));
+    let e = parse(&edit("capture_decay = 0.93", "capture_decay = 0.93\n\n[registration.rigid]\nkeep = 1.5"));
     assert!(e.contains("keep"), "{e}");
+    let e = parse(&edit("capture_decay = 0.93", "capture_decay = 1.5"));
+    assert!(e.contains("registration"), "{e}");
+    let e = parse(&edit("capture_decay = 0.93", "capture_decay = 0.93\nview = [0.0, 0.0, 0.0]"));
+    assert!(e.contains("registration"), "{e}");
     let e = parse(&edit("tets = 3000", "tets = 10"));
     assert!(e.contains("at least 100"), "{e}");
     let e = CaseScenario::load(Path::new("no/such/case.toml")).unwrap_err().to_string();
     assert!(e.contains("no/such/case.toml"), "{e}");
     // A rigid table with defaults, and a moved push patch, are accepted.
-    let ok =
-        edit("capture_distance = 0.05", "capture_distance = 0.05\n\n[registration.rigid]\nmetric = \"point_to_point\"");
+    let ok = edit("capture_decay = 0.93", "capture_decay = 0.93\n\n[registration.rigid]\nmetric = \"point_to_point\"");
     let s = CaseScenario::parse(&ok, origin).unwrap();
     assert_eq!(s.registration.rigid.unwrap().metric, register::IcpMetric::PointToPoint);
     let ok = edit(
