@@ -434,7 +434,8 @@ fn demo(args: &RegisterArgs) -> Result<()> {
             println!("{name:<28} failed: {error}");
         }
         let fields = values.map(|v| v.map_or(String::new(), |v| v.to_string()));
-        csv.push_str(&format!("{name},{},\"{}\"\n", fields.join(","), error.replace('"', "\"\"")));
+        let error = if error.is_empty() { String::new() } else { format!("\"{}\"", error.replace('"', "\"\"")) };
+        csv.push_str(&format!("{name},{},{error}\n", fields.join(",")));
     };
     if let Some(first) = registered.first() {
         let (rest, baseline) = (&first.summary, if rigid.is_some() { "rigid only (ICP)" } else { "no deformation" });
