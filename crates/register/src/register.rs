@@ -179,9 +179,10 @@ pub fn register_frame(
     Ok(FrameResult { u, iterations, surface_residual, points: cloud.len(), inliers, time: t0.elapsed() })
 }
 
-/// Matches each cloud point to the closest point of the deformed `surface`,
-/// drops outliers (farther than the larger of `capture` and the options' limits), and spreads each match's displacement (cloud point − rest
-/// position of the matched surface point) to the mesh nodes that move it.
+/// Matches each cloud point to the closest point of the deformed `surface` (of its triangles
+/// facing a camera looking along `view`, when given), drops outliers (farther than the larger
+/// of `capture` and the options' limits), and spreads each match's displacement (cloud point −
+/// rest position of the matched surface point) to the mesh nodes that move it.
 /// Returns the observations and the number of matches kept.
 pub fn observe(
     organ: &Organ,
