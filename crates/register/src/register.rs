@@ -316,7 +316,7 @@ pub(crate) fn barycentric(t: [Point; 3], p: Point) -> [f64; 3] {
 }
 
 /// `v` scaled to unit length (zero stays zero).
-fn unit(v: Point) -> Point {
+pub(crate) fn unit(v: Point) -> Point {
     let l = mesh::dot(v, v).sqrt();
     if l > 0.0 {
         v.map(|x| x / l)

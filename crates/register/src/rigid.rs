@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 
 use mesh::bvh::SurfaceBvh;
 use mesh::{cross, dot, sub, Mesh, Point, TriSurface};
+use nalgebra::{Matrix6, Vector6};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -136,7 +137,7 @@ impl RigidTransform {
 /// The rotation matrix of the rotation vector `w` (axis × angle), by Rodrigues' formula.
 fn rotation_matrix(w: Point) -> [[f64; 3]; 3] {
     let angle = dot(w, w).sqrt();
-    let mut r = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let mut r = RigidTransform::identity().rotation;
     if angle == 0.0 {
         return r;
     }
@@ -258,13 +259,7 @@ pub fn rigid_align(surface: &TriSurface, cloud: &[Point], options: &RigidOptions
     let smooth_normal = |triangle: usize, p: Point| {
         let tri = surface.triangles[triangle];
         let b = crate::register::barycentric(tri.map(|k| surface.vertices[k]), p);
-        let n: Point = std::array::from_fn(|d| (0..3).map(|c| b[c] * vertex_normals[tri[c]][d]).sum());
-        let l = dot(n, n).sqrt();
-        if l > 0.0 {
-            n.map(|x| x / l)
-        } else {
-            n
-        }
+        crate::register::unit(std::array::from_fn(|d| (0..3).map(|c| b[c] * vertex_normals[tri[c]][d]).sum()))
     };
     let mut transform = RigidTransform::identity();
     let mut iterations = 0;
@@ -353,38 +348,18 @@ pub fn rigid_align(surface: &TriSurface, cloud: &[Point], options: &RigidOptions
 
 /// Solves the symmetric positive definite 6 × 6 system `h x = b` by Cholesky; `None` when `h` is
 /// singular (a pivot below 1e-10 of the largest diagonal entry).
-fn solve_spd(mut h: [[f64; 6]; 6], b: [f64; 6]) -> Option<[f64; 6]> {
-    let scale = (0..6).map(|i| h[i][i]).fold(0.0, f64::max);
+fn solve_spd(h: [[f64; 6]; 6], b: [f64; 6]) -> Option<[f64; 6]> {
+    let h = Matrix6::from_fn(|i, j| h[i][j]);
+    let scale = h.diagonal().max();
     if !(scale > 0.0 && scale.is_finite()) {
         return None;
     }
-    for j in 0..6 {
-        let mut d = h[j][j];
-        for k in 0..j {
-            d -= h[j][k] * h[j][k];
-        }
-        if !(d > 1e-10 * scale) {
-            return None;
-        }
-        let d = d.sqrt();
-        h[j][j] = d;
-        for i in j + 1..6 {
-            let mut s = h[i][j];
-            for k in 0..j {
-                s -= h[i][k] * h[j][k];
-            }
-            h[i][j] = s / d;
-        }
+    let cholesky = h.cholesky()?;
+    // The pivots are the squares of the factor's diagonal.
+    if cholesky.l().diagonal().iter().any(|d| !(d * d > 1e-10 * scale)) {
+        return None;
     }
-    let mut y = [0.0; 6];
-    for i in 0..6 {
-        y[i] = (b[i] - (0..i).map(|k| h[i][k] * y[k]).sum::<f64>()) / h[i][i];
-    }
-    let mut x = [0.0; 6];
-    for i in (0..6).rev() {
-        x[i] = (y[i] - (i + 1..6).map(|k| h[k][i] * x[k]).sum::<f64>()) / h[i][i];
-    }
-    Some(x)
+    Some(cholesky.solve(&Vector6::from(b)).into())
 }
 
 /// The rigid alignment in summary.json: the organ → cloud transform and the ICP's figures.
