@@ -6,7 +6,7 @@
 //! markers), so their difference is the network's error alone, not that of the grid encoding.
 
 use mesh::embedding::Grid;
-use mesh::{Mesh, Point};
+use mesh::{stats, Mesh, Point};
 use plot::viewer::{Layer, PointLayer, Scalar, Scene};
 
 use crate::dataset::{Dataset, Manifest};
@@ -119,31 +119,19 @@ fn interpolate(grid: &Grid, field: &[f64], points: &[Point]) -> Result<Vec<f64>>
     grid.interpolate(field, CHANNELS, points).map_err(|e| LearnError::InvalidInput(format!("markers: {e}")))
 }
 
-fn norm(v: [f64; 3]) -> f64 {
-    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
-}
-
-fn difference(a: &[[f64; 3]], b: &[[f64; 3]]) -> Vec<f64> {
-    a.iter().zip(b).map(|(p, q)| norm([p[0] - q[0], p[1] - q[1], p[2] - q[2]])).collect()
-}
-
 fn moved(rest: &[Point], u: &[[f64; 3]]) -> Vec<[f64; 3]> {
     rest.iter().zip(u).map(|(p, u)| [p[0] + u[0], p[1] + u[1], p[2] + u[2]]).collect()
-}
-
-fn mean_max(v: &[f64]) -> (f64, f64) {
-    (v.iter().sum::<f64>() / v.len().max(1) as f64, v.iter().copied().fold(0.0, f64::max))
 }
 
 impl SampleOnMesh {
     /// Prediction error `|u_pred − u_ref|` at each mesh node (m).
     pub fn errors(&self) -> Vec<f64> {
-        difference(&self.prediction, &self.reference)
+        mesh::distances(&self.prediction, &self.reference)
     }
 
     /// Prediction error at each marker (m): the target registration error.
     pub fn marker_errors(&self) -> Vec<f64> {
-        difference(&self.marker_prediction, &self.marker_reference)
+        mesh::distances(&self.marker_prediction, &self.marker_reference)
     }
 
     /// The viewer scene: the boundary surface of `organ` at rest, moved by the reference and by the prediction,
@@ -152,8 +140,8 @@ impl SampleOnMesh {
     pub fn scene(&self, organ: &Mesh, title: &str) -> Scene {
         let surface = mesh::boundary_surface(organ);
         let errors = self.errors();
-        let (mean, max) = mean_max(&errors);
-        let largest = self.reference.iter().copied().map(norm).fold(0.0, f64::max);
+        let (mean, max) = (stats::mean(&errors), stats::max(&errors));
+        let largest = self.reference.iter().copied().map(mesh::norm).fold(0.0, f64::max);
         let mut notes = vec![
             format!("sample {} ({} sample of this model)", self.index, self.role),
             format!("error at the {} nodes: mean {:.2} mm, max {:.2} mm", errors.len(), 1e3 * mean, 1e3 * max),
@@ -161,7 +149,8 @@ impl SampleOnMesh {
         ];
         let mut points = Vec::new();
         if !self.markers.is_empty() {
-            let (m, x) = mean_max(&self.marker_errors());
+            let marker_errors = self.marker_errors();
+            let (m, x) = (stats::mean(&marker_errors), stats::max(&marker_errors));
             notes.push(format!("{} markers: error mean {:.2} mm, max {:.2} mm", self.markers.len(), 1e3 * m, 1e3 * x));
             points = vec![
                 PointLayer { name: "markers at rest".into(), positions: self.markers.clone(), colour: [170, 170, 170] },

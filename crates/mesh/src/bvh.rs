@@ -19,7 +19,7 @@
 
 use rayon::prelude::*;
 
-use crate::{cross, dot, sub, MeshError, Point, TriSurface};
+use crate::{cross, dot, norm, sub, MeshError, Point, TriSurface};
 
 /// Triangles per leaf.
 const LEAF_SIZE: usize = 4;
@@ -424,10 +424,6 @@ fn empty_node() -> Node {
         moment: [[0.0; 3]; 3],
         area: 0.0,
     }
-}
-
-fn norm(a: Point) -> f64 {
-    dot(a, a).sqrt()
 }
 
 fn centroid(p: [Point; 3]) -> Point {

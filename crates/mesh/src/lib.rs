@@ -290,6 +290,21 @@ pub fn dot(a: Point, b: Point) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// |a|.
+pub fn norm(a: Point) -> f64 {
+    dot(a, a).sqrt()
+}
+
+/// |a − b|.
+pub fn distance(a: Point, b: Point) -> f64 {
+    norm(sub(a, b))
+}
+
+/// |aᵢ − bᵢ| for each pair of two lists of points (as long as the shorter).
+pub fn distances(a: &[Point], b: &[Point]) -> Vec<f64> {
+    a.iter().zip(b).map(|(p, q)| distance(*p, *q)).collect()
+}
+
 /// a × b.
 pub fn cross(a: Point, b: Point) -> Point {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]

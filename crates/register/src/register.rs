@@ -168,7 +168,8 @@ pub fn register_frame(
             return Err(RegisterError::Invalid("the deformer returned a displacement that is not finite".into()));
         }
         let next = organ.deformed_surface(&u);
-        let moved = next.vertices.iter().zip(&surface.vertices).map(|(a, b)| distance(*a, *b)).fold(0.0, f64::max);
+        let moved =
+            next.vertices.iter().zip(&surface.vertices).map(|(a, b)| mesh::distance(*a, *b)).fold(0.0, f64::max);
         surface = next;
         if moved <= options.tolerance {
             break;
@@ -317,18 +318,12 @@ pub(crate) fn barycentric(t: [Point; 3], p: Point) -> [f64; 3] {
 
 /// `v` scaled to unit length (zero stays zero).
 pub(crate) fn unit(v: Point) -> Point {
-    let l = mesh::dot(v, v).sqrt();
+    let l = mesh::norm(v);
     if l > 0.0 {
         v.map(|x| x / l)
     } else {
         v
     }
-}
-
-/// Euclidean distance.
-pub fn distance(a: Point, b: Point) -> f64 {
-    let d = sub(a, b);
-    mesh::dot(d, d).sqrt()
 }
 
 #[cfg(test)]

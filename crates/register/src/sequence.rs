@@ -11,7 +11,7 @@ use mesh::Point;
 use serde::Serialize;
 
 use crate::organ::{displaced, Organ};
-use crate::register::{distance, register_frame, Deformer, FrameResult, RegistrationOptions};
+use crate::register::{register_frame, Deformer, FrameResult, RegistrationOptions};
 use crate::rigid::{rigid_align, RigidResult, RigidSummary};
 use crate::{RegisterError, Result};
 
@@ -109,7 +109,7 @@ pub fn register_sequence(
 
 /// Per-target distances (m) between two lists of positions of the same length.
 pub fn target_errors(registered: &[Point], truth: &[Point]) -> Vec<f64> {
-    registered.iter().zip(truth).map(|(a, b)| distance(*a, *b)).collect()
+    mesh::distances(registered, truth)
 }
 
 /// The figures of a registration run, over all its frames.
