@@ -141,6 +141,16 @@ impl Trained {
     pub fn best_validation_step(&self) -> Option<usize> {
         self.model.training.as_ref().filter(|t| t.best_val_mean_error.is_some()).map(|t| t.best_iteration)
     }
+
+    /// Seconds per training step, or that the model was trained by an earlier run of the
+    /// experiment (read back, not timed: the experiment's time then leaves training out).
+    pub fn timing(&self) -> String {
+        if self.step_seconds > 0.0 {
+            format!("{:.3} s per training step", self.step_seconds)
+        } else {
+            "trained by an earlier run, so not timed here".into()
+        }
+    }
 }
 
 /// Trains (or resumes training) a U-Net on `dataset` into `dir/`[`model_dir`].
@@ -254,12 +264,7 @@ fn mean_displacement(samples: &Samples) -> f64 {
 
 fn split_note(t: &Trained, samples: usize) -> String {
     let [train, validation, test] = t.split;
-    // A model trained by an earlier run of the experiment is read back, not timed.
-    let timing = if t.step_seconds > 0.0 {
-        format!("{:.3} s per training step", t.step_seconds)
-    } else {
-        "trained by an earlier run, so not timed here".into()
-    };
+    let timing = t.timing();
     format!(
         "{samples} samples generated: {train} training, {validation} validation (checkpoint selection{}), \
          {test} test (every figure above); {timing}.",

@@ -249,9 +249,10 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         notes: vec![
             format!(
                 "Network: {samples} samples of liver_ar.toml ({train_n} training, {validation_n} validation, {test_n} test), \
-                 {iterations} steps, {} channels, {} mm training noise.",
+                 {iterations} steps, {} channels, {} mm training noise; {}.",
                 recipe.channels,
-                1e3 * recipe.corruption.noise_std
+                1e3 * recipe.corruption.noise_std,
+                t.timing()
             ),
             format!(
                 "Registration cases: scenarios/register_case.toml's truth ({:?} phantom of about {TRUTH_TETS} T4, \
