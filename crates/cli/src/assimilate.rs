@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 use filter::assimilation::{AssimilationScenario, Experiment, ObservationFiles, Report};
-use filter::{Execution, SigmaPointSet};
+use filter::{Discrepancy, Execution, SigmaPointSet};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `augsim assimilate`.
@@ -47,6 +47,14 @@ pub struct AssimilateArgs {
     /// simplex).
     #[arg(long, value_name = "SET")]
     pub sigma_points: Option<SigmaPointSet>,
+    /// Allowance for model error in the reported σ: `none`, `independent` (the misfit beyond the observation noise
+    /// as extra white noise) or `systematic` (a model error that may lie along the parameters' sensitivity)
+    /// (default: the scenario's filter.discrepancy, else none).
+    #[arg(long, value_name = "KIND")]
+    pub discrepancy: Option<Discrepancy>,
+    /// Degrees of freedom d ≥ 1 of a systematic discrepancy (default: the scenario's filter.discrepancy_dof, else 1).
+    #[arg(long, value_name = "D")]
+    pub discrepancy_dof: Option<f64>,
     /// Write the estimated deformation every N steps (default: the scenario's output.every, else 1).
     #[arg(long)]
     pub every: Option<usize>,
@@ -66,6 +74,12 @@ pub fn run(args: &AssimilateArgs) -> Result<()> {
     }
     if let Some(set) = args.sigma_points {
         sc.filter.sigma_points = set;
+    }
+    if let Some(kind) = args.discrepancy {
+        sc.filter.discrepancy = kind;
+    }
+    if let Some(d) = args.discrepancy_dof {
+        sc.filter.discrepancy_dof = d;
     }
     if args.every.is_some() {
         sc.output.every = args.every;
@@ -165,6 +179,14 @@ fn print_report(r: &Report) {
             None => String::new(),
         };
         println!("young        μ = {:.1} ± {:.1} Pa{truth}", y.mean, y.std);
+        if let (Some(noise), Some(misfit)) = (y.noise_std, y.misfit) {
+            println!(
+                "discrepancy  σ = {:.1} Pa from the observation noise alone; misfit χ²/ν = {misfit:.3} (effective \
+                 observation noise {:.2} × nominal)",
+                noise,
+                misfit.sqrt()
+            );
+        }
     }
     if let Some(s) = &r.springs {
         let n = s.stiffness.len() as f64;

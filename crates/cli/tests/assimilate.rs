@@ -63,3 +63,31 @@ fn star_sigma_points_from_the_command_line() {
     let (ok, text) = assimilate(&[s, "--sigma-points", "cross", "-o", d.join("cross").to_str().unwrap()]);
     assert!(!ok && text.contains("cross") && text.contains("`simplex` or `star`"), "{text}");
 }
+
+#[test]
+fn discrepancy_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../filter/tests/data/beam_assimilation.toml");
+    let s = scenario.to_str().unwrap();
+    let (plain, honest) = (d.join("plain"), d.join("honest"));
+    let (ok, text) = assimilate(&[s, "-o", plain.to_str().unwrap()]);
+    assert!(ok && !text.contains("discrepancy"), "{text}");
+    let (ok, text) =
+        assimilate(&[s, "--discrepancy", "systematic", "--discrepancy-dof", "2", "-o", honest.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    assert!(text.contains("discrepancy  σ = ") && text.contains("misfit χ²/ν = "), "{text}");
+    assert_eq!(young(&plain.join("summary.json")).to_bits(), young(&honest.join("summary.json")).to_bits());
+    let (ok, text) = assimilate(&[s, "--discrepancy", "bias", "-o", d.join("bias").to_str().unwrap()]);
+    assert!(!ok && text.contains("`none`, `independent` or `systematic`"), "{text}");
+    let (ok, text) = assimilate(&[
+        s,
+        "--discrepancy",
+        "systematic",
+        "--discrepancy-dof",
+        "0",
+        "-o",
+        d.join("dof").to_str().unwrap(),
+    ]);
+    assert!(!ok && text.contains("degrees of freedom"), "{text}");
+}

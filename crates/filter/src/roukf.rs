@@ -33,10 +33,54 @@
 //!   average of the sigma-point states corrected by `L_x`, and at every sampling each sigma point's state vector is
 //!   re-set to `x̂ + L_x C^{-T} I(i)` (other warm-start data in the state are kept).
 //!
+//! # Model discrepancy (optional, [`Roukf::with_discrepancy`])
+//!
+//! The covariance above accounts for the observation noise only: with `q` components per frame and K frames it
+//! shrinks like `1/(K q)`. When the model cannot reproduce the data (a coarser mesh than the one that made the
+//! observations, a wrong constitutive law), the estimate is biased by the part of the model error that a change of
+//! θ can imitate, and that bias does not shrink. It cannot be seen in the residuals either: the filter moves θ until
+//! the part of the model error along the sensitivity `J = ∂H/∂θ` is explained, and what is left in the residuals is
+//! only the model error orthogonal to J. [`Discrepancy`] adds to the reported covariance an allowance for that
+//! bias, sized by what the residuals do show, under a stated assumption about how much of it can lie along J:
+//!
+//! * After each correction, the whitened post-correction residual `r̃_k = W^{-1/2}(z_k - Ẑ - HL c)` of frame k
+//!   (`c` the correction in sigma-point coordinates, only the available components) is recorded with its
+//!   Fisher information `F_k = J̃_k^T J̃_k` and score `J̃_k^T r̃_k`, `J̃_k = W^{-1/2} HL L_θ^{-1}` (the sensitivity in
+//!   filter space, through the centred factor `L_θ`), and the estimate `θ_k`. From sums of these, the misfit of all
+//!   frames *at the current estimate* θ̂, `χ²(θ̂) = Σ_k |r̃_k - J̃_k (θ̂ - θ_k)|²`, is known to first order without
+//!   storing any frame, so the early frames, observed while θ̂ was still far off, do not count as model error.
+//! * With the nominal `W` right and the model right, `χ² ~ χ²(ν)`, `ν = Σ_k q_k - p`. The excess
+//!   `e = max(0, χ² - ν - 2√(2ν))` (beyond two standard deviations of a χ²(ν), so that an exact model adds
+//!   nothing in about 98 % of runs) is the misfit energy the noise model cannot explain.
+//! * The parameter error that a discrepancy of energy `e` can cause depends on how many independent directions
+//!   (over all frames) it is spread over, `d` ("degrees of freedom" of the discrepancy): if `d` directions share
+//!   it equally and J̃ is one of them, the bias has covariance `(e/d) S^{-1}`, `S = P_0^{-1} + Σ_k F_k` (the
+//!   information of the data and the prior). The reported covariance is `P + (e/d) S^{-1}`:
+//!   - [`Discrepancy::Independent`], `d = ν`: the misfit is extra white observation noise, independent across
+//!     components and frames. This is innovation-based adaptive estimation of the observation variance (Mehra 1972;
+//!     the effective σ_obs is `σ_obs √(χ²/ν)`, never below the nominal one) and scales the covariance by the
+//!     reduced χ² (the "Birge ratio" of least-squares fitting); it does not cover a bias.
+//!   - [`Discrepancy::Systematic`] `{ dof: d }` (default `d = 1`): the misfit is a model error correlated across
+//!     the features of a frame and across frames, of at most `d` independent directions, so that all of it may
+//!     lie along J. The covariance then does not shrink with the number of observations (`e` and `S` both grow
+//!     like K); this is the effective-number-of-observations correction for fully correlated errors, in the
+//!     spirit of a Kennedy–O'Hagan model discrepancy or of a Schmidt "consider" covariance for a bias. With an
+//!     exact model, `e = 0` and nothing is added. `d = 1` is the worst case and can be very wide with many
+//!     parameters: every direction of θ that the data barely determine (small `S`) may take the whole misfit.
+//! * With a forgetting factor ρ < 1 every sum is discounted by ρ per frame (ρ² for the variance `2ν` of χ²), so
+//!   that misfit and information are measured over the same bounded memory as the filter's covariance.
+//!
+//! The allowance changes only the reported covariance ([`Roukf::covariance`], [`Roukf::std`], the trace's σ): the
+//! estimate, the sigma points and the gain are those of the plain filter, so the option cannot degrade the estimate,
+//! and without it the filter is unchanged bit for bit. [`Roukf::misfit`] gives `χ²/ν` and
+//! [`Roukf::filter_covariance`] the noise-only covariance; the trace records both.
+//!
 //! Each iteration works on clones of the sigma-point states and commits only when every step succeeded, so a
 //! failed iteration leaves the filter unchanged. Sigma points run in parallel with rayon or sequentially;
 //! all reductions are sequential in sigma-point order, so both modes give bit-identical numbers.
 
+use std::fmt;
+use std::str::FromStr;
 use std::time::Instant;
 
 use nalgebra::{Cholesky, DMatrix, DVector};
@@ -114,6 +158,141 @@ fn no_forgetting() -> f64 {
     1.0
 }
 
+/// Allowance for model error in the reported covariance (see the module documentation, "Model discrepancy").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Discrepancy {
+    /// None: the covariance reflects the observation noise only (the plain filter).
+    #[default]
+    None,
+    /// The misfit beyond the nominal noise is extra white observation noise (`d = ν`): adaptive observation
+    /// variance, the covariance scaled by the reduced χ².
+    Independent,
+    /// The misfit is a model error correlated over components and frames, with `d` independent directions over the
+    /// whole run (`d = 1`: all of it may lie along the parameters' sensitivity).
+    Systematic,
+}
+
+impl Discrepancy {
+    /// The name used in scenario files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Discrepancy::None => "none",
+            Discrepancy::Independent => "independent",
+            Discrepancy::Systematic => "systematic",
+        }
+    }
+}
+
+impl fmt::Display for Discrepancy {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Discrepancy {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "none" => Ok(Discrepancy::None),
+            "independent" => Ok(Discrepancy::Independent),
+            "systematic" => Ok(Discrepancy::Systematic),
+            other => Err(format!("unknown discrepancy `{other}`: expected `none`, `independent` or `systematic`")),
+        }
+    }
+}
+
+/// Running sums over the frames (each discounted by the forgetting factor ρ per frame) from which the misfit
+/// `χ²(θ)` of all frames at any θ and the information `S` follow (see the module documentation).
+#[derive(Clone)]
+struct Misfit {
+    kind: Discrepancy,
+    /// Degrees of freedom d of a systematic discrepancy.
+    dof: f64,
+    /// Prior information `P_0^{-1}` (filter space).
+    prior_information: DMatrix<f64>,
+    /// `Σ |r̃_k|²`.
+    residual: f64,
+    /// `Σ J̃_k^T r̃_k`.
+    score: DVector<f64>,
+    /// `Σ θ_k · J̃_k^T r̃_k`.
+    theta_score: f64,
+    /// `Σ F_k`.
+    information: DMatrix<f64>,
+    /// `Σ F_k θ_k`.
+    information_theta: DVector<f64>,
+    /// `Σ θ_k^T F_k θ_k`.
+    theta_information_theta: f64,
+    /// `Σ q_k` (discounted by ρ) and `Σ q_k` discounted by ρ² (the variance of χ² over 2).
+    components: f64,
+    components_squared_discount: f64,
+}
+
+impl Misfit {
+    fn new(kind: Discrepancy, dof: f64, prior_information: DMatrix<f64>) -> Self {
+        let p = prior_information.nrows();
+        Misfit {
+            kind,
+            dof,
+            prior_information,
+            residual: 0.0,
+            score: DVector::zeros(p),
+            theta_score: 0.0,
+            information: DMatrix::zeros(p, p),
+            information_theta: DVector::zeros(p),
+            theta_information_theta: 0.0,
+            components: 0.0,
+            components_squared_discount: 0.0,
+        }
+    }
+
+    /// Adds one frame: whitened residual `r`, whitened sensitivity `j` (q × p, filter space), estimate `theta`
+    /// after the frame, `q` available components; the earlier sums discounted by `rho`.
+    fn add(&mut self, rho: f64, r: &DVector<f64>, j: &DMatrix<f64>, theta: &DVector<f64>, q: usize) {
+        let f = j.transpose() * j;
+        let g = j.transpose() * r;
+        let f_theta = &f * theta;
+        self.residual = rho * self.residual + r.norm_squared();
+        self.score = &self.score * rho + &g;
+        self.theta_score = rho * self.theta_score + theta.dot(&g);
+        self.information = &self.information * rho + &f;
+        self.information_theta = &self.information_theta * rho + &f_theta;
+        self.theta_information_theta = rho * self.theta_information_theta + theta.dot(&f_theta);
+        self.components = rho * self.components + q as f64;
+        self.components_squared_discount = rho * rho * self.components_squared_discount + q as f64;
+    }
+
+    /// `χ²(θ) = Σ_k |r̃_k - J̃_k (θ - θ_k)|²` (first order), never negative.
+    fn chi_squared(&self, theta: &DVector<f64>) -> f64 {
+        let value = self.residual - 2.0 * (theta.dot(&self.score) - self.theta_score)
+            + theta.dot(&(&self.information * theta))
+            - 2.0 * theta.dot(&self.information_theta)
+            + self.theta_information_theta;
+        value.max(0.0)
+    }
+
+    /// Degrees of freedom ν of χ² (at least 1).
+    fn nu(&self) -> f64 {
+        (self.components - self.prior_information.nrows() as f64).max(1.0)
+    }
+
+    /// `(χ²/ν, allowance)`: the reduced χ² at `theta` and the covariance `(e/d) S^{-1}` added to the filter's.
+    fn allowance(&self, theta: &DVector<f64>) -> (f64, Option<DMatrix<f64>>) {
+        let chi2 = self.chi_squared(theta);
+        let nu = self.nu();
+        let excess = (chi2 - nu - 2.0 * (2.0 * self.components_squared_discount).sqrt()).max(0.0);
+        let d = match self.kind {
+            Discrepancy::None => return (chi2 / nu, None),
+            Discrepancy::Independent => nu,
+            Discrepancy::Systematic => self.dof,
+        };
+        let s = &self.prior_information + &self.information;
+        let inverse = Cholesky::new(s).map(|c| c.inverse());
+        (chi2 / nu, inverse.map(|inv| inv * (excess / d)))
+    }
+}
+
 /// Mean state and its factor for joint state–parameter filtering.
 struct Joint<M: Model> {
     x: DVector<f64>,
@@ -138,6 +317,7 @@ pub struct Roukf<M: Model> {
     joint: Option<Joint<M>>,
     iteration: usize,
     predicted_observation: Option<DVector<f64>>,
+    misfit: Option<Misfit>,
     trace: Trace,
 }
 
@@ -146,6 +326,29 @@ impl<M: Model> Roukf<M> {
     /// [`Model::assign_sigma_point`]) and then keeps its own state.
     pub fn new(model: M, initial_state: M::State, config: RoukfConfig) -> Result<Self, FilterError> {
         Self::build(model, initial_state, config, None)
+    }
+
+    /// Adds an allowance for model error to the reported covariance from now on (see the module documentation,
+    /// "Model discrepancy"); `dof` is the number d ≥ 1 of independent directions of a
+    /// [`Discrepancy::Systematic`] one (ignored otherwise). [`Discrepancy::None`] keeps the plain filter. Call it
+    /// before the first [`Roukf::step`]: the frames before are not counted.
+    pub fn with_discrepancy(mut self, kind: Discrepancy, dof: f64) -> Result<Self, FilterError> {
+        if kind == Discrepancy::Systematic && !(dof.is_finite() && dof >= 1.0) {
+            return Err(FilterError::InvalidConfig(format!(
+                "the discrepancy's degrees of freedom must be finite and ≥ 1, got {dof}"
+            )));
+        }
+        self.misfit = match kind {
+            Discrepancy::None => None,
+            _ => {
+                let prior = DMatrix::from_diagonal(&DVector::from_iterator(
+                    self.sigma.dim(),
+                    self.config.parameters.iter().map(|s| 1.0 / (s.prior_std * s.prior_std)),
+                ));
+                Some(Misfit::new(kind, dof, prior))
+            }
+        };
+        Ok(self)
     }
 
     fn build(
@@ -205,6 +408,7 @@ impl<M: Model> Roukf<M> {
             joint,
             iteration: 0,
             predicted_observation: None,
+            misfit: None,
             trace,
         };
         let record = filter.record(None, None);
@@ -333,7 +537,7 @@ impl<M: Model> Roukf<M> {
         }
         let chol = Cholesky::new(u.clone())
             .ok_or_else(|| FilterError::NotPositiveDefinite { what: "U".into(), iteration: k })?;
-        let correction = chol.solve(&(g.transpose() * weighted));
+        let correction = chol.solve(&(g.transpose() * &weighted));
         let theta = &theta_mean + &l_theta * &correction;
         if theta.iter().any(|v| !v.is_finite()) {
             return Err(nonfinite("parameter estimate"));
@@ -355,6 +559,18 @@ impl<M: Model> Roukf<M> {
             return Err(nonfinite("parameter covariance"));
         }
 
+        // The frame's misfit statistics: whitened post-correction residual and sensitivity J̃ = G L_θ^{-1} (a singular
+        // L_θ, which the sampling never produces, would leave the frame out).
+        let misfit = self.misfit.as_ref().map(|m| {
+            let mut m = m.clone();
+            if let Some(jt) = l_theta.transpose().lu().solve(&g.transpose()) {
+                let residual = &weighted - &g * &correction;
+                let count = available.iter().filter(|&&a| a).count();
+                m.add(self.config.forgetting, &residual, &jt.transpose(), &theta, count);
+            }
+            m
+        });
+
         // Commit.
         self.theta = theta;
         self.l_theta = l_theta;
@@ -367,6 +583,7 @@ impl<M: Model> Roukf<M> {
         }
         self.iteration = k;
         self.predicted_observation = Some(z_mean);
+        self.misfit = misfit;
         let record = self.record(Some(innovation.norm()), Some(start.elapsed().as_secs_f64()));
         self.trace.records.push(record);
         Ok(self.trace.records.last().expect("a record was just pushed"))
@@ -413,6 +630,8 @@ impl<M: Model> Roukf<M> {
             std_physical: self.std_physical(),
             innovation_norm,
             wall_seconds,
+            noise_std_physical: self.misfit.as_ref().map(|_| self.physical(&self.filter_covariance())),
+            misfit: self.misfit(),
         }
     }
 
@@ -431,24 +650,47 @@ impl<M: Model> Roukf<M> {
         self.theta.iter().zip(&self.config.parameters).map(|(v, s)| s.transform.to_physical(*v)).collect()
     }
 
-    /// Parameter covariance `L_θ U^{-1} L_θ^T` in filter space (p × p).
+    /// Reported parameter covariance in filter space (p × p): the filter's [`Roukf::filter_covariance`], plus the
+    /// allowance for model error when [`Roukf::with_discrepancy`] asked for one.
     pub fn covariance(&self) -> DMatrix<f64> {
+        let p = self.filter_covariance();
+        match self.misfit.as_ref().and_then(|m| m.allowance(&self.theta).1) {
+            Some(allowance) => p + allowance,
+            None => p,
+        }
+    }
+
+    /// The filter's own parameter covariance `L_θ U^{-1} L_θ^T` in filter space (p × p): the observation noise only.
+    pub fn filter_covariance(&self) -> DMatrix<f64> {
         covariance_from(&self.l_theta, &self.u_chol)
             .unwrap_or_else(|| DMatrix::from_element(self.sigma.dim(), self.sigma.dim(), f64::NAN))
     }
 
-    /// Standard deviations in filter space.
+    /// With a discrepancy allowance ([`Roukf::with_discrepancy`]) and at least one frame: the reduced misfit
+    /// `χ²(θ̂)/ν` of all frames at the current estimate (about 1 when the model and the nominal noise are right; its
+    /// square root times σ_obs is the effective observation noise).
+    pub fn misfit(&self) -> Option<f64> {
+        self.misfit.as_ref().filter(|m| m.components > 0.0).map(|m| m.allowance(&self.theta).0)
+    }
+
+    /// Standard deviations in filter space (of [`Roukf::covariance`]).
     pub fn std(&self) -> Vec<f64> {
         self.covariance().diagonal().iter().map(|v| v.max(0.0).sqrt()).collect()
     }
 
     /// Standard deviations in physical space, first order: `|g'(θ̂)| σ`.
     pub fn std_physical(&self) -> Vec<f64> {
-        self.std()
+        self.physical(&self.covariance())
+    }
+
+    /// First-order physical standard deviations `|g'(θ̂)| √P_jj` of a filter-space covariance.
+    fn physical(&self, covariance: &DMatrix<f64>) -> Vec<f64> {
+        covariance
+            .diagonal()
             .iter()
             .zip(self.theta.iter())
             .zip(&self.config.parameters)
-            .map(|((s, v), spec)| spec.transform.derivative(*v).abs() * s)
+            .map(|((c, v), spec)| spec.transform.derivative(*v).abs() * c.max(0.0).sqrt())
             .collect()
     }
 

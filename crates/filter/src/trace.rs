@@ -25,6 +25,14 @@ pub struct IterationTrace {
     pub innovation_norm: Option<f64>,
     /// Wall-clock time of the iteration, seconds (None for the prior).
     pub wall_seconds: Option<f64>,
+    /// With a model-discrepancy allowance ([`crate::Discrepancy`]): the physical σ of the observation noise alone
+    /// (the filter's own covariance), while `std` and `std_physical` include the allowance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_std_physical: Option<Vec<f64>>,
+    /// With a model-discrepancy allowance, after the first frame: the reduced misfit χ²/ν of all frames at this
+    /// estimate (about 1 when the model and the nominal observation noise are right).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub misfit: Option<f64>,
 }
 
 /// The whole history of a filter run.
@@ -40,21 +48,36 @@ pub struct Trace {
 
 impl Trace {
     /// CSV text: header `iteration,innovation_norm,wall_seconds` then `mu_<name>,sigma_<name>,mu_phys_<name>,
-    /// sigma_phys_<name>` per parameter; empty fields for the prior's innovation and time.
+    /// sigma_phys_<name>` per parameter; empty fields for the prior's innovation and time. With a model-discrepancy
+    /// allowance, also `misfit` and a `noise_sigma_phys_<name>` per parameter (see [`IterationTrace`]).
     pub fn to_csv(&self) -> String {
+        let discrepancy = self.records.iter().any(|r| r.noise_std_physical.is_some());
         let mut s = String::from("iteration,innovation_norm,wall_seconds");
+        if discrepancy {
+            s.push_str(",misfit");
+        }
         for name in &self.parameter_names {
             for prefix in ["mu_", "sigma_", "mu_phys_", "sigma_phys_"] {
                 s.push(',');
                 s.push_str(&csv_field(&format!("{prefix}{name}")));
+            }
+            if discrepancy {
+                s.push(',');
+                s.push_str(&csv_field(&format!("noise_sigma_phys_{name}")));
             }
         }
         s.push('\n');
         let opt = |v: Option<f64>| v.map(|x| x.to_string()).unwrap_or_default();
         for r in &self.records {
             let _ = write!(s, "{},{},{}", r.iteration, opt(r.innovation_norm), opt(r.wall_seconds));
+            if discrepancy {
+                let _ = write!(s, ",{}", opt(r.misfit));
+            }
             for j in 0..self.parameter_names.len() {
                 let _ = write!(s, ",{},{},{},{}", r.mean[j], r.std[j], r.mean_physical[j], r.std_physical[j]);
+                if discrepancy {
+                    let _ = write!(s, ",{}", opt(r.noise_std_physical.as_ref().map(|v| v[j])));
+                }
             }
             s.push('\n');
         }

@@ -372,7 +372,10 @@ impl Experiment {
         };
         let model = self.model(self.base.clone(), self.unknowns.parameters.clone())?;
         let initial = model.initial_state();
-        let mut roukf = Roukf::new(model, initial, config).context(|| "configuring the filter".into())?;
+        let filter = &self.scenario.filter;
+        let mut roukf = Roukf::new(model, initial, config)
+            .and_then(|f| f.with_discrepancy(filter.discrepancy, filter.discrepancy_dof))
+            .context(|| "configuring the filter".into())?;
         let mut estimated_errors = Vec::with_capacity(iterations);
         let mut newton = 0usize;
         let mut spent = FilterTimes::default();

@@ -82,6 +82,14 @@ pub struct YoungReport {
     pub within_1_percent_from_iteration: Option<usize>,
     /// Filter wall-clock time (s, the iterations' own times summed) until that iteration.
     pub within_1_percent_after_seconds: Option<f64>,
+    /// With a model-discrepancy allowance (`[filter] discrepancy`): the final σ of the observation noise alone
+    /// (Pa), while `std` includes the allowance.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub noise_std: Option<f64>,
+    /// With a model-discrepancy allowance: the final reduced misfit χ²/ν of all frames (1 when the model and the
+    /// nominal noise are right).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub misfit: Option<f64>,
 }
 
 /// The spring estimates, in N/m.
@@ -156,6 +164,8 @@ pub(super) fn young(trace: &Trace, truth: Option<f64>, out_dir: &Path) -> Result
         truth,
         within_1_percent_from_iteration: within,
         within_1_percent_after_seconds: seconds,
+        noise_std: last.noise_std_physical.as_ref().map(|s| s[0]),
+        misfit: last.misfit,
     })
 }
 

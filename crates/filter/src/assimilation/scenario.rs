@@ -9,7 +9,7 @@ use mesh::{NodeSelection, Point};
 use serde::Deserialize;
 
 use super::AssimilationError;
-use crate::{Execution, Profile, SigmaPointSet, Transform};
+use crate::{Discrepancy, Execution, Profile, SigmaPointSet, Transform};
 
 /// An assimilation scenario file.
 #[derive(Debug, Clone, Deserialize)]
@@ -181,11 +181,25 @@ pub struct FilterSpec {
     /// `"simplex"` (p + 1 points, the default) or `"star"` (2p + 1 points) (see [`crate::SigmaPointSet`]).
     #[serde(default)]
     pub sigma_points: SigmaPointSet,
+    /// Allowance for model error in the reported σ: `"none"` (the default), `"independent"` (the misfit as extra
+    /// white noise) or `"systematic"` (a model error that may lie along the parameters' sensitivity) (see
+    /// [`crate::Discrepancy`] and [`crate::Roukf::with_discrepancy`]).
+    #[serde(default)]
+    pub discrepancy: Discrepancy,
+    /// Degrees of freedom d ≥ 1 of a systematic discrepancy (default 1).
+    #[serde(default = "one")]
+    pub discrepancy_dof: f64,
 }
 
 impl Default for FilterSpec {
     fn default() -> Self {
-        FilterSpec { execution: Execution::default(), forgetting: 1.0, sigma_points: SigmaPointSet::default() }
+        FilterSpec {
+            execution: Execution::default(),
+            forgetting: 1.0,
+            sigma_points: SigmaPointSet::default(),
+            discrepancy: Discrepancy::None,
+            discrepancy_dof: 1.0,
+        }
     }
 }
 
