@@ -7,8 +7,8 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use learn::generate::Generator;
 use learn::{
-    Corruption, Dataset, DatasetPart, Initialization, PredictInput, Sparsity, SplitPolicy, TrainConfig, TrainOptions,
-    TrainedModel, UNetConfig,
+    Compute, Corruption, Dataset, DatasetPart, Initialization, PredictInput, Sparsity, SplitPolicy, TrainConfig,
+    TrainOptions, TrainedModel, UNetConfig,
 };
 use mesh::io::{write_atomic_bytes, Field};
 
@@ -180,10 +180,32 @@ pub struct TrainArgs {
     /// Input corruption.
     #[command(flatten)]
     pub corruption: CorruptionArgs,
+    /// Where the network trains.
+    #[command(flatten)]
+    pub device: DeviceArgs,
+}
+
+/// `--device`: where the network runs.
+#[derive(Debug, Clone, Copy, clap::Args)]
+pub struct DeviceArgs {
+    /// `cpu` (the repacked CPU engines, fastest on a CPU), `gpu` (burn on a GPU through wgpu: Vulkan,
+    /// Metal or DX12; needs a build with `--features gpu`) or `cpu-burn` (burn's own kernels on the CPU: the GPU's code
+    /// path, slower).
+    #[arg(long = "device", default_value = "cpu")]
+    pub compute: Compute,
+}
+
+impl DeviceArgs {
+    /// Checks the device and prints which it is.
+    fn announce(self) -> Result<Compute> {
+        println!("device     {}", self.compute.describe()?);
+        Ok(self.compute)
+    }
 }
 
 /// `augsim train`.
 pub fn train(args: &TrainArgs) -> Result<()> {
+    let compute = args.device.announce()?;
     let dataset = Dataset::open(&args.dataset)?;
     let all = dataset.load_all()?;
     let (split, [train, validation, test]) = args.split.policy().apply(&all)?;
@@ -213,6 +235,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         stop_after: None,
         placement: dataset.manifest().placement(),
         test: split.test,
+        compute,
     };
     println!(
         "split      {} training, {} validation, {} test samples (held out, recorded in the model); grid {}",
@@ -233,7 +256,14 @@ pub fn train(args: &TrainArgs) -> Result<()> {
 /// `augsim eval`: errors on the samples held out from the model (its recorded test split of
 /// the dataset it was trained on, or every unseen sample of another dataset), per-sample CSV and
 /// the worst sample as VTK.
-pub fn eval(model_path: &Path, dataset_dir: &Path, corruption: &CorruptionArgs, out: &Path) -> Result<()> {
+pub fn eval(
+    model_path: &Path,
+    dataset_dir: &Path,
+    corruption: &CorruptionArgs,
+    device: DeviceArgs,
+    out: &Path,
+) -> Result<()> {
+    let compute = device.announce()?;
     let model = TrainedModel::load(model_path, &learn::inference_device())?;
     let dataset = Dataset::open(dataset_dir)?;
     if dataset.manifest().grid != model.grid {
@@ -259,10 +289,11 @@ pub fn eval(model_path: &Path, dataset_dir: &Path, corruption: &CorruptionArgs, 
     let (report, tre) = match placement {
         Some(placement) if !markers.is_empty() => {
             let grid = placement.grid(model.grid)?;
-            let (report, tre) = learn::evaluate_at_points(&model, &test, &corruption.corruption(), 0, &grid, &markers)?;
+            let (report, tre) =
+                learn::evaluate_at_points(&model, &test, &corruption.corruption(), 0, &grid, &markers, compute)?;
             (report, Some(tre))
         }
-        _ => (learn::evaluate(&model, &test, &corruption.corruption(), 0)?, None),
+        _ => (learn::evaluate(&model, &test, &corruption.corruption(), 0, compute)?, None),
     };
     let s = &report.stats;
     println!("samples    {}", test.len());
@@ -294,7 +325,7 @@ pub fn eval(model_path: &Path, dataset_dir: &Path, corruption: &CorruptionArgs, 
     write_atomic_bytes(&out.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
     let worst = test.get(s.worst);
     let input = learn::evaluation_input(&test, s.worst, &corruption.corruption(), 0)?;
-    let prediction = model.predict(&input)?;
+    let prediction = learn::Predictor::new(&model, compute)?.predict(&input)?;
     let vtu = out.join("worst.vtu");
     let grid = dataset
         .manifest()
@@ -314,7 +345,15 @@ pub fn eval(model_path: &Path, dataset_dir: &Path, corruption: &CorruptionArgs, 
 /// `augsim predict`: a grid tensor (.npy `[3, nx, ny, nz]`) or a point cloud (.csv or .npy
 /// `[N, 6]`: x, y, z and the vector in the model's input unit) to a displacement tensor, timed;
 /// with `mesh`, the displacement interpolated to that mesh's nodes is written beside the tensor.
-pub fn predict(model_path: &Path, input: &Path, output: &Path, mesh_path: Option<&Path>, runs: usize) -> Result<()> {
+pub fn predict(
+    model_path: &Path,
+    input: &Path,
+    output: &Path,
+    mesh_path: Option<&Path>,
+    runs: usize,
+    device: DeviceArgs,
+) -> Result<()> {
+    let compute = device.announce()?;
     let model = TrainedModel::load(model_path, &learn::inference_device())?;
     let g = model.grid;
     let read = PredictInput::read(input)?;
@@ -334,7 +373,7 @@ pub fn predict(model_path: &Path, input: &Path, output: &Path, mesh_path: Option
         };
         println!("points     {n} ({what}, {:.2} ms)", t0.elapsed().as_secs_f64() * 1e3);
     }
-    let predictor = learn::Predictor::new(&model)?;
+    let predictor = learn::Predictor::new(&model, compute)?;
     let prediction = predictor.predict(&data)?;
     learn::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
     let t = learn::time_prediction(&predictor, &data, 3, runs.max(1))?;

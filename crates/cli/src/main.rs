@@ -91,6 +91,9 @@ enum Command {
         /// Input corruption.
         #[command(flatten)]
         corruption: learn_cmd::CorruptionArgs,
+        /// Where the network runs.
+        #[command(flatten)]
+        device: learn_cmd::DeviceArgs,
     },
     /// Predict the displacement for a constraint tensor or a point cloud and time the network.
     Predict {
@@ -109,6 +112,9 @@ enum Command {
         /// Timed runs after warm-up.
         #[arg(long, default_value_t = 50)]
         runs: usize,
+        /// Where the network runs.
+        #[command(flatten)]
+        device: learn_cmd::DeviceArgs,
     },
     /// Register the organ to an intraoperative point cloud (no correspondences): deformed organ,
     /// registered targets and, given the truth, the target registration error.
@@ -149,9 +155,11 @@ fn main() {
         }
         Command::Merge { out, parts } => learn_cmd::merge(&out, &parts),
         Command::Train(args) => learn_cmd::train(&args),
-        Command::Eval { model, dataset, out, corruption } => learn_cmd::eval(&model, &dataset, &corruption, &out),
-        Command::Predict { model, input, output, mesh, runs } => {
-            learn_cmd::predict(&model, &input, &output, mesh.as_deref(), runs)
+        Command::Eval { model, dataset, out, corruption, device } => {
+            learn_cmd::eval(&model, &dataset, &corruption, device, &out)
+        }
+        Command::Predict { model, input, output, mesh, runs, device } => {
+            learn_cmd::predict(&model, &input, &output, mesh.as_deref(), runs, device)
         }
         Command::Experiment(args) => experiment::run(&args),
         Command::Bench { runs } => bench::run(runs),

@@ -95,6 +95,24 @@ magnitude = [0.05, 0.2]
     assert_eq!(u.values.len(), 3 * organ.num_nodes());
     assert!(u.values.iter().all(|v| v.is_finite()) && u.values.iter().any(|v| *v != 0.0));
 
+    // burn's own kernels (the GPU's code path) predict the same tensor; the GPU needs its feature.
+    let text = augsim(
+        &["predict", "net/model.json", "cloud.csv", "-o", "pred_burn.npy", "--runs", "1", "--device", "cpu-burn"],
+        d,
+    );
+    assert!(text.contains("device     cpu (burn flex)"), "{text}");
+    let read = |name: &str| learn::npy::read_npy(&d.join(name)).unwrap().into_f32();
+    let (repacked, burn) = (read("pred.npy"), read("pred_burn.npy"));
+    let scale = repacked.iter().fold(0f32, |m, v| m.max(v.abs()));
+    let diff = repacked.iter().zip(&burn).fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+    assert!(scale > 0.0 && diff <= 1e-5 * scale, "cpu-burn differs by {diff:e} (scale {scale:e})");
+    if cfg!(not(feature = "gpu")) {
+        let e = augsim_err(&["predict", "net/model.json", "cloud.csv", "--device", "gpu"], d);
+        assert!(e.contains("built without GPU support") && e.contains("--features gpu"), "{e}");
+    }
+    let e = augsim_err(&["eval", "net/model.json", "data", "--device", "tpu"], d);
+    assert!(e.contains("expected `cpu`, `gpu` or `cpu-burn`"), "{e}");
+
     // A point outside the grid, a malformed line and a grid tensor of the wrong shape.
     std::fs::write(d.join("far.csv"), "5,5,5,0,0,1\n").unwrap();
     let e = augsim_err(&["predict", "net/model.json", "far.csv"], d);

@@ -8,8 +8,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use anyhow::Result;
 use learn::scenario::DatasetScenario;
 use learn::{
-    Corruption, CurveRow, Dataset, EvalReport, Initialization, Samples, SplitPolicy, TrainConfig, TrainOptions,
-    TrainedModel, UNetConfig,
+    Compute, Corruption, CurveRow, Dataset, EvalReport, Initialization, Samples, SplitPolicy, TrainConfig,
+    TrainOptions, TrainedModel, UNetConfig,
 };
 
 use crate::{fmt, write_scenario, ExperimentResult, Name, Progress, Row, Size};
@@ -186,12 +186,10 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
     };
     let out = dir.join(model_dir(recipe));
     let options = TrainOptions {
-        out_dir: out,
-        resume: true,
         progress: true,
-        stop_after: None,
         placement: dataset.manifest().placement(),
         test: split.test.clone(),
+        ..TrainOptions::new(out)
     };
     let outcome = learn::train(&train, &validation, &init, &config, &options)?;
     Ok(Trained {
@@ -281,8 +279,8 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
     let data = dataset(dir, "liver_forces_large.toml", LIVER_FORCES, samples, progress)?;
     let recipe = Recipe::new(iterations, samples / 10, samples / 5);
     let t = train(&data.dataset, dir, &recipe, progress)?;
-    let report = learn::evaluate(&t.model, &t.test, &Corruption::default(), 0)?;
-    let predictor = learn::Predictor::new(&t.model)?;
+    let report = learn::evaluate(&t.model, &t.test, &Corruption::default(), 0, Compute::Cpu)?;
+    let predictor = learn::Predictor::new(&t.model, Compute::Cpu)?;
     let input = t.test.get(0).input;
     let timing = learn::time_prediction(&predictor, &input, 3, 20)?;
     error_histogram(&dir.join("errors.png"), "Scenario 1: test-sample errors", &[("U-Net", &report)])?;
@@ -341,9 +339,9 @@ pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<
     let recipe = Recipe::new(iterations, samples / 25, samples / 5);
     let t = train(&data.dataset, dir, &recipe, progress)?;
     let noise = |std: f64| Corruption { noise_std: std, ..Corruption::default() };
-    let clean = learn::evaluate(&t.model, &t.test, &noise(0.0), 0)?;
-    let mm = learn::evaluate(&t.model, &t.test, &noise(1e-3), 0)?;
-    let cm = learn::evaluate(&t.model, &t.test, &noise(1e-2), 0)?;
+    let clean = learn::evaluate(&t.model, &t.test, &noise(0.0), 0, Compute::Cpu)?;
+    let mm = learn::evaluate(&t.model, &t.test, &noise(1e-3), 0, Compute::Cpu)?;
+    let cm = learn::evaluate(&t.model, &t.test, &noise(1e-2), 0, Compute::Cpu)?;
     error_histogram(
         &dir.join("errors.png"),
         "Scenario 4: test-sample errors by input noise",

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use learn::sample_view::sample_on_mesh;
-use learn::Corruption;
+use learn::{Compute, Corruption};
 use mesh::phantom::SurfacePatch;
 use mesh::stats::{max, mean};
 use register::case::{compare, methods, synthetic_case, TRUTH_TETS};
@@ -98,7 +98,8 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     let markers = manifest.markers();
     let placement = manifest.placement().context("the liver_ar dataset records its grid placement")?;
     let grid = placement.grid(t.model.grid)?;
-    let (report, tre) = learn::evaluate_at_points(&t.model, &t.test, &Corruption::default(), 0, &grid, &markers)?;
+    let (report, tre) =
+        learn::evaluate_at_points(&t.model, &t.test, &Corruption::default(), 0, &grid, &markers, Compute::Cpu)?;
     error_histogram(&dir.join("errors.png"), "Scenario 2: test-sample errors", &[("U-Net", &report)])?;
     // The first test sample in the 3D viewer.
     let organ = data.scenario.mesh(&data.scenario_dir)?;

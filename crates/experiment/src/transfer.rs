@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use learn::{Corruption, CurveRow, EvalReport};
+use learn::{Compute, Corruption, CurveRow, EvalReport};
 use serde::Serialize;
 
 use crate::learning::{dataset, error_histogram, max_displacement, model_dir, train, Recipe, Trained};
@@ -99,13 +99,13 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
     // The target runs share their validation and test samples (the 100-sample runs use part of the training split).
     let clean = Corruption::default();
     let test = &full.test;
-    let bc4_test = learn::evaluate(&pre.model, &pre.test, &clean, 0)?;
-    let full_test = learn::evaluate(&full.model, test, &clean, 0)?;
-    let scratch_test = learn::evaluate(&scratch.model, test, &clean, 0)?;
-    let tuned_test = learn::evaluate(&tuned.model, test, &clean, 0)?;
-    let pre_test = learn::evaluate(&pre.model, test, &clean, 0)?;
+    let bc4_test = learn::evaluate(&pre.model, &pre.test, &clean, 0, Compute::Cpu)?;
+    let full_test = learn::evaluate(&full.model, test, &clean, 0, Compute::Cpu)?;
+    let scratch_test = learn::evaluate(&scratch.model, test, &clean, 0, Compute::Cpu)?;
+    let tuned_test = learn::evaluate(&tuned.model, test, &clean, 0, Compute::Cpu)?;
+    let pre_test = learn::evaluate(&pre.model, test, &clean, 0, Compute::Cpu)?;
     // Step 0 of fine-tuning: the pre-trained network on the target's validation samples.
-    let pre_validation = learn::evaluate(&pre.model, &full.validation, &clean, 0)?.stats.mean;
+    let pre_validation = learn::evaluate(&pre.model, &full.validation, &clean, 0, Compute::Cpu)?.stats.mean;
 
     let tuned_curve: Vec<(usize, f64)> =
         std::iter::once((0, pre_validation)).chain(validation_curve(&tuned.curve)).collect();

@@ -44,7 +44,7 @@ use crate::grid::GridShape;
 use crate::inference::{
     conv_layout, downsample, gather_patches, gather_plane, same_conv, tap_offsets, tap_view, upsample, Packed, Volume,
 };
-use crate::unet::UNet;
+use crate::unet::{tensor_values, UNet};
 use crate::{LearnError, Result};
 
 /// The layers of a [`UNet`] (from `UNet::layers`), in the order of its fields.
@@ -257,10 +257,7 @@ enum Spec<'a> {
 }
 
 fn values<const D: usize>(p: &Param<Tensor<D>>) -> Result<Vec<f32>> {
-    p.val()
-        .into_data()
-        .try_into_vec_as::<f32>()
-        .map_err(|e| LearnError::InvalidInput(format!("cannot read parameters: {e:?}")))
+    tensor_values(p.val())
 }
 
 /// Packs the layer of `spec` and describes its gradients (slot number `slot`).

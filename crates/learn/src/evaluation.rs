@@ -8,12 +8,12 @@ use mesh::io::Field;
 use serde::{Deserialize, Serialize};
 
 use crate::corrupt::{item_rng, Corruption, STREAM_EVAL_CORRUPTION};
-use crate::dataset::{Normalization, Samples};
+use crate::dataset::Samples;
 use crate::grid::{GridMesh, CHANNELS};
-use crate::inference::InferenceNet;
 use crate::metrics::{mean_euclidean_error, ErrorStats, EvalReport};
+use crate::predict::Predictor;
 use crate::unet::TrainedModel;
-use crate::{LearnError, Result};
+use crate::{Compute, LearnError, Result};
 use mesh::embedding::Grid;
 use mesh::Point;
 
@@ -42,12 +42,11 @@ pub fn write_grid_sample(
     })
 }
 
-/// Runs `net` on the normalised inputs of `samples` (each corrupted with its own generator,
-/// derived from `seed` and the sample position) and returns the per-sample errors (m);
+/// Runs `predictor` on the inputs of `samples` (each corrupted with its own generator, derived
+/// from `seed` and the sample position) and returns the per-sample errors (m);
 /// `visit(position, prediction)` sees each prediction (m).
 pub(crate) fn evaluate_net(
-    net: &InferenceNet,
-    norm: &Normalization,
+    predictor: &Predictor,
     samples: &Samples,
     corruption: &Corruption,
     seed: u64,
@@ -57,12 +56,9 @@ pub(crate) fn evaluate_net(
         return Err(LearnError::InvalidInput("no samples to evaluate".into()));
     }
     let grid = samples.grid;
-    let (si, st) = (1.0 / norm.input_scale, norm.target_scale);
     let mut errors = Vec::with_capacity(samples.len());
     for p in 0..samples.len() {
-        let input = evaluation_input(samples, p, corruption, seed)?;
-        let x: Vec<f32> = input.iter().map(|v| (f64::from(*v) * si) as f32).collect();
-        let pred: Vec<f32> = net.forward(&x, grid)?.iter().map(|v| (f64::from(*v) * st) as f32).collect();
+        let pred = predictor.predict(&evaluation_input(samples, p, corruption, seed)?)?;
         visit(p, &pred)?;
         errors.push(
             mean_euclidean_error(&pred, samples.target(p), samples.mask(p), grid)
@@ -82,13 +78,19 @@ pub fn evaluation_input(samples: &Samples, position: usize, corruption: &Corrupt
     Ok(input)
 }
 
-/// Evaluates `model` on `samples`: per-sample mean Euclidean errors (m), mean, std, max and the
-/// worst sample. Inputs are corrupted with `corruption`, one reproducible draw per sample from
-/// `seed`.
-pub fn evaluate(model: &TrainedModel, samples: &Samples, corruption: &Corruption, seed: u64) -> Result<EvalReport> {
+/// Evaluates `model` on `samples`, run on `compute`: per-sample mean Euclidean errors (m), mean,
+/// std, max and the worst sample. Inputs are corrupted with `corruption`, one reproducible draw
+/// per sample from `seed`.
+pub fn evaluate(
+    model: &TrainedModel,
+    samples: &Samples,
+    corruption: &Corruption,
+    seed: u64,
+    compute: Compute,
+) -> Result<EvalReport> {
     corruption.validate()?;
     check_samples(model, samples)?;
-    evaluate_net(&model.net.to_inference()?, &model.normalization, samples, corruption, seed, |_, _| Ok(()))
+    evaluate_net(&Predictor::new(model, compute)?, samples, corruption, seed, |_, _| Ok(()))
 }
 
 /// The samples must lie on the model's grid and be held out from its training and selection.
@@ -124,6 +126,7 @@ pub fn evaluate_at_points(
     seed: u64,
     grid: &Grid,
     points: &[Point],
+    compute: Compute,
 ) -> Result<(EvalReport, PointErrors)> {
     corruption.validate()?;
     check_samples(model, samples)?;
@@ -141,15 +144,14 @@ pub fn evaluate_at_points(
     };
     let norm3 = |v: &[f64]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     let (mut errors, mut no_motion) = (Vec::new(), Vec::new());
-    let report =
-        evaluate_net(&model.net.to_inference()?, &model.normalization, samples, corruption, seed, |p, pred| {
-            let (pred, reference) = (at(pred)?, at(samples.target(p))?);
-            for (a, b) in pred.chunks_exact(3).zip(reference.chunks_exact(3)) {
-                errors.push(norm3(&[a[0] - b[0], a[1] - b[1], a[2] - b[2]]));
-                no_motion.push(norm3(b));
-            }
-            Ok(())
-        })?;
+    let report = evaluate_net(&Predictor::new(model, compute)?, samples, corruption, seed, |p, pred| {
+        let (pred, reference) = (at(pred)?, at(samples.target(p))?);
+        for (a, b) in pred.chunks_exact(3).zip(reference.chunks_exact(3)) {
+            errors.push(norm3(&[a[0] - b[0], a[1] - b[1], a[2] - b[2]]));
+            no_motion.push(norm3(b));
+        }
+        Ok(())
+    })?;
     let per_point_mean = (0..points.len())
         .map(|k| errors.iter().skip(k).step_by(points.len()).sum::<f64>() / samples.len() as f64)
         .collect();

@@ -24,12 +24,14 @@
 //! - [`inference`]: the trained network repacked for fast CPU inference.
 //! - [`evaluation`]: errors of a model over a sample set and at points.
 //! - [`predict`]: single predictions and their timing.
+//! - [`compute`]: where the network runs (CPU engines, or a GPU through burn with the `gpu` feature).
 //! - [`points`]: point clouds (`.csv`, `.npy`) and grid tensors as prediction input.
 //! - [`split`]: train / validation / test splits, the policy that sizes them, and the held-out guard.
 
 #![warn(missing_docs)]
 
 pub mod backprop;
+pub mod compute;
 pub mod corrupt;
 pub mod curve;
 pub mod dataset;
@@ -49,6 +51,7 @@ pub mod split;
 pub mod train;
 pub mod unet;
 
+pub use compute::Compute;
 pub use corrupt::{Corruption, Sparsity};
 pub use curve::CurveRow;
 pub use dataset::{

@@ -1,6 +1,10 @@
 //! Single predictions and prediction timing.
 
+use std::path::Path;
 use std::time::Instant;
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor, TensorData};
 
 use mesh::embedding::Grid;
 use mesh::Mesh;
@@ -9,21 +13,57 @@ use serde::{Deserialize, Serialize};
 use crate::dataset::Normalization;
 use crate::grid::{GridShape, GridToMesh};
 use crate::inference::InferenceNet;
-use crate::unet::TrainedModel;
+use crate::unet::{tensor_values, TrainedModel, UNet};
+use crate::Compute;
 use crate::{LearnError, Result};
 
-/// A trained model ready for repeated predictions: its network repacked once for fast CPU
-/// inference ([`InferenceNet`]), with its normalisation and grid.
+/// A trained model ready for repeated predictions, with its normalisation and grid: on the CPU
+/// its network repacked once for fast inference ([`InferenceNet`]), otherwise burn's network on
+/// the chosen device ([`Compute`]).
 pub struct Predictor {
-    net: InferenceNet,
+    engine: Engine,
     normalization: Normalization,
     grid: GridShape,
 }
 
+/// What runs the network.
+enum Engine {
+    /// The repacked CPU engine.
+    Repacked(InferenceNet),
+    /// burn's network on `device` (a GPU, or burn's CPU backend).
+    Burn { net: UNet, device: Device },
+}
+
 impl Predictor {
-    /// Repacks `model` for prediction.
-    pub fn new(model: &TrainedModel) -> Result<Predictor> {
-        Ok(Predictor { net: model.net.to_inference()?, normalization: model.normalization, grid: model.grid })
+    /// Prepares `model` for prediction on `compute`: repacks it for the CPU engine, or copies
+    /// its weights to burn's device (an error when that device is not available).
+    pub fn new(model: &TrainedModel, compute: Compute) -> Result<Predictor> {
+        let net = if compute.uses_burn() {
+            let weights = model.net.to_safetensors()?;
+            UNet::from_safetensors(&model.config, weights, &compute.device()?, Path::new("(model in memory)"))?
+        } else {
+            model.net.clone()
+        };
+        Predictor::from_net(&net, compute, model.normalization, model.grid)
+    }
+
+    /// A predictor of `net` (for burn's engines already on `compute`'s device, as training
+    /// keeps it).
+    pub(crate) fn from_net(
+        net: &UNet,
+        compute: Compute,
+        normalization: Normalization,
+        grid: GridShape,
+    ) -> Result<Predictor> {
+        let engine = if compute.uses_burn() {
+            let device = net.devices().into_iter().next().ok_or_else(|| {
+                LearnError::InvalidInput("the network has no parameters, so no device to run on".into())
+            })?;
+            Engine::Burn { net: net.clone(), device }
+        } else {
+            Engine::Repacked(net.to_inference()?)
+        };
+        Ok(Predictor { engine, normalization, grid })
     }
 
     /// Predicts the displacement field (m, `[3, nx, ny, nz]`) for one input field (`[3, nx, ny,
@@ -43,8 +83,21 @@ impl Predictor {
         }
         let si = 1.0 / self.normalization.input_scale;
         let x: Vec<f32> = input.iter().map(|v| (f64::from(*v) * si) as f32).collect();
-        let out = self.net.forward(&x, self.grid)?;
+        let out = self.forward_normalized(x)?;
         Ok(out.into_iter().map(|v| (f64::from(v) * self.normalization.target_scale) as f32).collect())
+    }
+
+    /// The network's output for a normalised input (`[3, nx, ny, nz]`), normalised.
+    pub(crate) fn forward_normalized(&self, x: Vec<f32>) -> Result<Vec<f32>> {
+        match &self.engine {
+            Engine::Repacked(net) => net.forward(&x, self.grid),
+            Engine::Burn { net, device } => {
+                let [nx, ny, nz] = self.grid.dims();
+                let c = x.len() / self.grid.nodes();
+                let input = Tensor::<5>::from_data(TensorData::new(x, [1, c, nx, ny, nz]), device);
+                tensor_values(net.forward(input))
+            }
+        }
     }
 }
 
@@ -52,7 +105,7 @@ impl TrainedModel {
     /// Predicts one displacement field (see [`Predictor::predict`]); for repeated predictions
     /// build a [`Predictor`] once.
     pub fn predict(&self, input: &[f32]) -> Result<Vec<f32>> {
-        Predictor::new(self)?.predict(input)
+        Predictor::new(self, Compute::Cpu)?.predict(input)
     }
 
     /// The model's grid where it lies in space (needed to put points on it or to interpolate to a mesh); an

@@ -1,7 +1,9 @@
 //! Training: Adam on the masked MSE, seeded, with validation, best-weights selection,
-//! resumable checkpoints, learning curves and transfer learning. Gradients come from the
-//! hand-written backward pass of [`backprop`](crate::backprop), which equals burn's autodiff up
-//! to summation order; burn keeps the model, the optimiser and their records.
+//! resumable checkpoints, learning curves and transfer learning. On the CPU ([`Compute::Cpu`])
+//! gradients come from the hand-written backward pass of [`backprop`](crate::backprop), which
+//! equals burn's autodiff up to summation order; on a GPU (or [`Compute::CpuBurn`]) from burn's
+//! autodiff itself. burn keeps the model, the optimiser and their records either way, so a
+//! checkpoint written on one device resumes on the other.
 //!
 //! Reproducibility: weights are initialised from the seed; batch composition and training-time
 //! corruption come from counter-based generators (seed, iteration, batch slot), so the whole
@@ -18,9 +20,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use burn::module::Module;
-use burn::optim::{AdamConfig, ModuleOptimizer};
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::store::ModuleRecord;
-use burn::tensor::{Bytes, Device};
+use burn::tensor::{Bytes, Device, Tensor, TensorData};
 use indicatif::{ProgressBar, ProgressStyle};
 use mesh::io::write_atomic_bytes;
 use rand::Rng;
@@ -32,10 +34,12 @@ use crate::curve::{plot_learning_curve, write_curve_csv, CurveRow};
 use crate::dataset::{Normalization, Samples};
 use crate::evaluation::evaluate_net;
 use crate::fsutil::read;
-use crate::grid::GridPlacement;
+use crate::grid::{GridPlacement, GridShape};
+use crate::metrics::masked_mse;
+use crate::predict::Predictor;
 use crate::split::{IndexSet, Split};
-use crate::unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
-use crate::{inference_device, training_device, LearnError, Result};
+use crate::unet::{tensor_values, TrainedModel, TrainingInfo, UNet, UNetConfig};
+use crate::{inference_device, Compute, LearnError, Result};
 
 /// Training hyper-parameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -152,11 +156,13 @@ pub struct TrainOptions {
     /// The samples of the training data's source held out for testing, recorded in the model
     /// beside the training and validation samples (e.g. [`Split::test`]).
     pub test: IndexSet,
+    /// Where the network is trained and validated (the same result up to rounding).
+    pub compute: Compute,
 }
 
 impl TrainOptions {
     /// Options writing to `out_dir`, resuming if possible, without progress bar, placement or
-    /// recorded test samples.
+    /// recorded test samples, on the CPU.
     pub fn new(out_dir: impl Into<PathBuf>) -> Self {
         TrainOptions {
             out_dir: out_dir.into(),
@@ -165,6 +171,7 @@ impl TrainOptions {
             stop_after: None,
             placement: None,
             test: IndexSet::default(),
+            compute: Compute::Cpu,
         }
     }
 }
@@ -301,6 +308,26 @@ fn batch(
         out.masks.extend(samples.mask(p).iter().map(|&v| f32::from(v)));
     }
     Ok(out)
+}
+
+/// The masked MSE loss of `net` on a batch and its gradients by burn's autodiff, on `device` (an
+/// autodiff device, where `net` lives): what a GPU runs. Equal to
+/// [`loss_and_gradients`](crate::backprop::loss_and_gradients) up to summation order.
+fn autodiff_loss_and_gradients(
+    net: &UNet,
+    b: &Batch,
+    batch: usize,
+    grid: GridShape,
+    device: &Device,
+) -> Result<(f64, GradientsParams)> {
+    let [nx, ny, nz] = grid.dims();
+    let tensor = |values: &[f32]| {
+        let channels = values.len() / (batch * grid.nodes());
+        Tensor::<5>::from_data(TensorData::new(values.to_vec(), [batch, channels, nx, ny, nz]), device)
+    };
+    let loss = masked_mse(net.forward(tensor(&b.inputs)), tensor(&b.targets), tensor(&b.masks));
+    let value = tensor_values(loss.clone())?.first().copied().unwrap_or(f32::NAN);
+    Ok((f64::from(value), GradientsParams::from_grads(loss.backward(), net)))
 }
 
 /// Checkpoint metadata (the JSON section of `checkpoint.bin`).
@@ -455,7 +482,7 @@ pub fn train(
     let split = held_out_split(train, val, &options.test)?;
     let out = &options.out_dir;
     std::fs::create_dir_all(out).map_err(|e| LearnError::io(out, e))?;
-    let device = training_device();
+    let device = options.compute.training_device()?;
     let start = resolve_start(init, config.seed, &device)?;
     // Everything that shapes the trajectory, so that a checkpoint is only resumed into the
     // run it came from. The checkpoint interval is left out, and so is the iteration count
@@ -544,8 +571,11 @@ pub fn train(
         let b = batch(train, &positions, &start.normalization, &config.train_corruption, |slot| {
             item_rng(config.seed, STREAM_TRAIN_CORRUPTION, first + slot as u64)
         })?;
-        let (loss_value, grads) =
-            loss_and_gradients(&net, &b.inputs, &b.targets, &b.masks, positions.len(), train.grid)?;
+        let (loss_value, grads) = if options.compute.uses_burn() {
+            autodiff_loss_and_gradients(&net, &b, positions.len(), train.grid, &device)?
+        } else {
+            loss_and_gradients(&net, &b.inputs, &b.targets, &b.masks, positions.len(), train.grid)?
+        };
         if !loss_value.is_finite() {
             return Err(LearnError::InvalidInput(format!(
                 "training diverged at iteration {} (loss {loss_value}); lower the learning rate",
@@ -567,9 +597,8 @@ pub fn train(
             let val_error = if val.is_empty() {
                 None
             } else {
-                let fast = snapshot.to_inference()?;
-                let report =
-                    evaluate_net(&fast, &start.normalization, val, &config.val_corruption, config.seed, |_, _| Ok(()))?;
+                let predictor = Predictor::from_net(&snapshot, options.compute, start.normalization, val.grid)?;
+                let report = evaluate_net(&predictor, val, &config.val_corruption, config.seed, |_, _| Ok(()))?;
                 Some(report.stats)
             };
             state.curve.push(CurveRow {
@@ -606,10 +635,15 @@ pub fn train(
     }
     progress.finish_and_clear();
 
-    let best_net = match best {
+    let mut best_net = match best {
         Some(b) => b,
         None => net.valid(),
     };
+    if options.compute == Compute::Gpu {
+        // The model is returned on the inference device, whatever trained it.
+        let weights = best_net.to_safetensors()?;
+        best_net = UNet::from_safetensors(&start.config, weights, &inference_device(), &out.join(MODEL_FILE))?;
+    }
     let model = TrainedModel {
         config: start.config,
         normalization: start.normalization,

@@ -123,6 +123,11 @@ pub struct UNet {
 /// Parameter-path prefixes of the contracting path (frozen by [`UNet::freeze_encoder`]).
 const ENCODER_PREFIXES: [&str; 3] = ["encoder.", "down.", "bottleneck."];
 
+/// The values of a float tensor, read back from its device.
+pub(crate) fn tensor_values<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>> {
+    t.into_data().try_into_vec_as::<f32>().map_err(|e| LearnError::InvalidInput(format!("cannot read a tensor: {e:?}")))
+}
+
 impl UNet {
     /// A new network on `device`, with weights drawn from a generator seeded by `seed`
     /// (He-uniform weights, zero biases), independent of the backend's global random state.
@@ -195,18 +200,10 @@ impl UNet {
 
     /// The network repacked for fast CPU inference (same results up to rounding).
     pub fn to_inference(&self) -> Result<InferenceNet> {
-        let values = |t: Tensor<5>| -> Result<Vec<f32>> {
-            t.into_data()
-                .try_into_vec_as::<f32>()
-                .map_err(|e| LearnError::InvalidInput(format!("cannot read weights: {e:?}")))
-        };
+        let values = tensor_values::<5>;
         let bias = |b: &Option<Param<Tensor<1>>>, n: usize| -> Result<Vec<f32>> {
             match b {
-                Some(b) => b
-                    .val()
-                    .into_data()
-                    .try_into_vec_as::<f32>()
-                    .map_err(|e| LearnError::InvalidInput(format!("cannot read biases: {e:?}"))),
+                Some(b) => tensor_values(b.val()),
                 None => Ok(vec![0.0; n]),
             }
         };

@@ -5,8 +5,8 @@ mod common;
 
 use augsim_learn::train::MODEL_FILE;
 use augsim_learn::{
-    evaluate, inference_device, train, Corruption, GridShape, IndexSet, Initialization, Normalization, Samples, Split,
-    SplitPolicy, TrainConfig, TrainOptions, TrainedModel, UNetConfig,
+    evaluate, inference_device, train, Compute, Corruption, GridShape, IndexSet, Initialization, Normalization,
+    Samples, Split, SplitPolicy, TrainConfig, TrainOptions, TrainedModel, UNetConfig,
 };
 use common::synthetic_sample;
 
@@ -122,14 +122,14 @@ fn models_record_their_split_and_evaluation_refuses_seen_samples() {
     assert_eq!(model.held_out(&all).unwrap(), test);
 
     let none = Corruption::none();
-    assert!(evaluate(&model, &test, &none, 0).is_ok());
-    let e = evaluate(&model, &train_set, &none, 0).unwrap_err().to_string();
+    assert!(evaluate(&model, &test, &none, 0, Compute::Cpu).is_ok());
+    let e = evaluate(&model, &train_set, &none, 0, Compute::Cpu).unwrap_err().to_string();
     assert!(e.contains("sample 0 of liver was used to train this model"), "{e}");
-    let e = evaluate(&model, &val, &none, 0).unwrap_err().to_string();
+    let e = evaluate(&model, &val, &none, 0, Compute::Cpu).unwrap_err().to_string();
     assert!(e.contains("sample 5 of liver was used to select"), "{e}");
     // The same indices of another dataset are unseen.
     let other = samples(&(0..10).collect::<Vec<_>>(), "beam");
-    assert!(evaluate(&model, &other, &none, 0).is_ok());
+    assert!(evaluate(&model, &other, &none, 0, Compute::Cpu).is_ok());
     assert_eq!(model.held_out(&other).unwrap(), other);
 
     // Overlapping roles are refused before training.
@@ -153,5 +153,5 @@ fn models_record_their_split_and_evaluation_refuses_seen_samples() {
     assert_eq!((&info.split, &info.pretraining[..]), (&beam, &[split.clone()][..]));
     assert_eq!(tuned.held_out(&other).unwrap(), beam_test);
     assert_eq!(tuned.held_out(&all).unwrap(), test, "the pre-training's unseen samples");
-    assert!(evaluate(&tuned, &train_set, &none, 0).is_err());
+    assert!(evaluate(&tuned, &train_set, &none, 0, Compute::Cpu).is_err());
 }

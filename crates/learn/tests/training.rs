@@ -6,9 +6,9 @@ mod common;
 use augsim_learn::metrics::{masked_mse_values, mean_euclidean_error};
 use augsim_learn::train::{CHECKPOINT_FILE, CURVE_CSV, CURVE_PNG, MODEL_FILE};
 use augsim_learn::{
-    evaluate, evaluate_at_points, evaluation_input, inference_device, time_prediction, train, Corruption, GridShape,
-    Initialization, Normalization, Predictor, Samples, Sparsity, TrainConfig, TrainOptions, TrainedModel, UNet,
-    UNetConfig,
+    evaluate, evaluate_at_points, evaluation_input, inference_device, time_prediction, train, Compute, Corruption,
+    GridShape, Initialization, Normalization, Predictor, Samples, Sparsity, TrainConfig, TrainOptions, TrainedModel,
+    UNet, UNetConfig,
 };
 use common::synthetic_samples;
 use mesh::embedding::Grid;
@@ -32,7 +32,7 @@ fn scratch(base: usize, depth: usize, data: &Samples) -> Initialization {
 
 /// Masked MSE (physical units) of a model over a sample set.
 fn mse(model: &TrainedModel, s: &Samples) -> f64 {
-    let predictor = Predictor::new(model).unwrap();
+    let predictor = Predictor::new(model, Compute::Cpu).unwrap();
     let pred: Vec<f32> = (0..s.len()).flat_map(|p| predictor.predict(s.input(p)).unwrap()).collect();
     masked_mse_values(&pred, &s.targets, &s.masks, s.grid).unwrap()
 }
@@ -83,7 +83,7 @@ fn tiny_unet_overfits_a_handful_of_samples() {
     assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
 
     // evaluate() agrees with per-sample predictions, and reports the worst sample.
-    let report = evaluate(&out.model, &data, &Corruption::none(), 0).unwrap();
+    let report = evaluate(&out.model, &data, &Corruption::none(), 0, Compute::Cpu).unwrap();
     for p in 0..data.len() {
         let pred = out.model.predict(data.input(p)).unwrap();
         let e = mean_euclidean_error(&pred, data.target(p), data.mask(p), grid()).unwrap();
@@ -91,7 +91,7 @@ fn tiny_unet_overfits_a_handful_of_samples() {
     }
     // With corrupted inputs, the errors are those of the inputs `evaluation_input` gives.
     let noisy = Corruption { sparsity: None, noise_std: 0.3 };
-    let noisy_report = evaluate(&out.model, &data, &noisy, 5).unwrap();
+    let noisy_report = evaluate(&out.model, &data, &noisy, 5, Compute::Cpu).unwrap();
     for p in 0..data.len() {
         let input = evaluation_input(&data, p, &noisy, 5).unwrap();
         assert_ne!(input, data.input(p));
@@ -111,7 +111,8 @@ fn tiny_unet_overfits_a_handful_of_samples() {
     let placed = Grid::new([0.1, -0.2, 0.3], [0.5, 0.25, 0.75], g.dims()).unwrap();
     let (a, b) = (placed.node(1, 2, 1), placed.node(2, 2, 1));
     let mid = [0.5 * (a[0] + b[0]), a[1], a[2]];
-    let (same, at) = evaluate_at_points(&out.model, &data, &Corruption::none(), 0, &placed, &[a, mid]).unwrap();
+    let (same, at) =
+        evaluate_at_points(&out.model, &data, &Corruption::none(), 0, &placed, &[a, mid], Compute::Cpu).unwrap();
     assert_eq!(same.errors, report.errors);
     let n = g.nodes();
     let value = |field: &[f32], node: usize| -> [f64; 3] { std::array::from_fn(|c| f64::from(field[c * n + node])) };
@@ -129,9 +130,10 @@ fn tiny_unet_overfits_a_handful_of_samples() {
     assert!((at.per_point_mean[0] - at_a).abs() < 1e-6 * at_a.max(1e-12), "{:?} vs {at_a}", at.per_point_mean);
     assert!((at.per_point_mean[1] - at_mid).abs() < 1e-6 * at_mid.max(1e-12), "{:?} vs {at_mid}", at.per_point_mean);
     assert!((at.no_motion.max - still).abs() < 1e-6 * still);
-    assert!(evaluate_at_points(&out.model, &data, &Corruption::none(), 0, &placed, &[[9.0, 9.0, 9.0]]).is_err());
+    assert!(evaluate_at_points(&out.model, &data, &Corruption::none(), 0, &placed, &[[9.0, 9.0, 9.0]], Compute::Cpu)
+        .is_err());
 
-    let timing = time_prediction(&Predictor::new(&out.model).unwrap(), data.input(0), 1, 3).unwrap();
+    let timing = time_prediction(&Predictor::new(&out.model, Compute::Cpu).unwrap(), data.input(0), 1, 3).unwrap();
     assert!(timing.min <= timing.median && timing.median <= timing.max && timing.runs == 3);
 }
 
@@ -277,4 +279,87 @@ fn fine_tuning_with_a_frozen_encoder_leaves_it_unchanged() {
         .zip(free.model.net.named_parameters())
         .any(|((name, a), (_, b))| UNet::is_encoder_parameter(name) && *a != b);
     assert!(moved);
+}
+
+/// burn's own kernels and autodiff ([`Compute::CpuBurn`]: the code path a GPU runs) train and
+/// predict as the repacked CPU engines do, up to rounding; a checkpoint written on one resumes on
+/// the other.
+#[test]
+fn burn_path_trains_and_predicts_as_the_cpu_engines_do() {
+    let root = tempfile::tempdir().unwrap();
+    let data = synthetic_samples(grid(), 0, 4);
+    let val = synthetic_samples(grid(), 10, 2);
+    let init = scratch(3, 2, &data);
+    let config = TrainConfig {
+        iterations: 8,
+        batch_size: 2,
+        learning_rate: 3e-3,
+        validate_every: 4,
+        checkpoint_every: 4,
+        ..TrainConfig::default()
+    };
+    let on = |compute: Compute, name: &str| TrainOptions { compute, ..TrainOptions::new(root.path().join(name)) };
+    let cpu = train(&data, &val, &init, &config, &on(Compute::Cpu, "cpu")).unwrap();
+    let burn = train(&data, &val, &init, &config, &on(Compute::CpuBurn, "burn")).unwrap();
+    assert_eq!(cpu.curve.len(), burn.curve.len());
+    for (a, b) in cpu.curve.iter().zip(&burn.curve) {
+        let rel = (a.train_loss - b.train_loss).abs() / a.train_loss;
+        assert!(
+            rel < 1e-4,
+            "iteration {}: train loss {} (cpu) against {} (burn)",
+            a.iteration,
+            a.train_loss,
+            b.train_loss
+        );
+        let (va, vb) = (a.val.unwrap().mean, b.val.unwrap().mean);
+        assert!((va - vb).abs() <= 1e-4 * va, "iteration {}: validation {va} against {vb}", a.iteration);
+    }
+    let largest =
+        cpu.model.net.named_parameters().iter().flat_map(|(_, v)| v.clone()).fold(0f32, |m, v| m.max(v.abs()));
+    let differ = cpu
+        .model
+        .net
+        .named_parameters()
+        .iter()
+        .zip(&burn.model.net.named_parameters())
+        .flat_map(|((_, x), (_, y))| x.iter().zip(y).map(|(u, v)| (u - v).abs()).collect::<Vec<_>>())
+        .fold(0f32, f32::max);
+    assert!(differ <= 1e-3 * largest, "weights differ by {differ:e} (largest weight {largest:e})");
+
+    // One model, predicted by both engines.
+    let repacked = Predictor::new(&cpu.model, Compute::Cpu).unwrap().predict(data.input(1)).unwrap();
+    let by_burn = Predictor::new(&cpu.model, Compute::CpuBurn).unwrap().predict(data.input(1)).unwrap();
+    let scale = repacked.iter().fold(0f32, |m, v| m.max(v.abs()));
+    let diff = repacked.iter().zip(&by_burn).fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+    assert!(scale > 0.0 && diff <= 1e-5 * scale, "predictions differ by {diff:e} (scale {scale:e})");
+    let report = evaluate(&cpu.model, &val, &Corruption::none(), 0, Compute::Cpu).unwrap();
+    let report_burn = evaluate(&cpu.model, &val, &Corruption::none(), 0, Compute::CpuBurn).unwrap();
+    assert!((report.stats.mean - report_burn.stats.mean).abs() <= 1e-5 * report.stats.mean);
+
+    // Stopped on burn's path, resumed on the CPU engines: the same run up to rounding.
+    let mixed = root.path().join("mixed");
+    let stopped = TrainOptions { stop_after: Some(4), ..on(Compute::CpuBurn, "mixed") };
+    assert!(!train(&data, &val, &init, &config, &stopped).unwrap().completed);
+    let resumed = train(&data, &val, &init, &config, &TrainOptions::new(&mixed)).unwrap();
+    assert!(resumed.completed);
+    let last = |o: &augsim_learn::TrainOutcome| o.curve.last().unwrap().val.unwrap().mean;
+    assert!((last(&resumed) - last(&cpu)).abs() <= 1e-4 * last(&cpu));
+}
+
+/// Asking for the GPU in a build without the `gpu` feature is a clear error.
+#[cfg(not(feature = "gpu"))]
+#[test]
+fn gpu_without_the_feature_is_a_clear_error() {
+    let e = Compute::Gpu.device().unwrap_err().to_string();
+    assert!(e.contains("--features gpu"), "{e}");
+    let root = tempfile::tempdir().unwrap();
+    let data = synthetic_samples(grid(), 0, 2);
+    let options = TrainOptions { compute: Compute::Gpu, ..TrainOptions::new(root.path()) };
+    let e = train(&data, &Samples::new(grid()), &scratch(2, 1, &data), &TrainConfig::default(), &options)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("without GPU support"), "{e}");
+    assert_eq!("cpu-burn".parse::<Compute>().unwrap(), Compute::CpuBurn);
+    let e = "tpu".parse::<Compute>().unwrap_err().to_string();
+    assert!(e.contains("`cpu`, `gpu` or `cpu-burn`"), "{e}");
 }

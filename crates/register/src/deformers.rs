@@ -152,7 +152,7 @@ impl NetworkDeformer {
             None
         };
         Ok(NetworkDeformer {
-            predictor: Predictor::new(model)?,
+            predictor: Predictor::new(model, learn::Compute::Cpu)?,
             to_mesh: GridToMesh::new(mesh, &grid)?,
             grid,
             inputs: input_nodes.to_vec(),
