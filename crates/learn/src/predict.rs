@@ -5,7 +5,6 @@ use std::time::Instant;
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
-
 use mesh::embedding::Grid;
 use mesh::Mesh;
 use serde::{Deserialize, Serialize};
@@ -88,7 +87,7 @@ impl Predictor {
     }
 
     /// The network's output for a normalised input (`[3, nx, ny, nz]`), normalised.
-    pub(crate) fn forward_normalized(&self, x: Vec<f32>) -> Result<Vec<f32>> {
+    fn forward_normalized(&self, x: Vec<f32>) -> Result<Vec<f32>> {
         match &self.engine {
             Engine::Repacked(net) => net.forward(&x, self.grid),
             Engine::Burn { net, device } => {
