@@ -207,9 +207,8 @@ impl FromStr for Discrepancy {
 /// `χ²(θ)` of all frames at any θ and the information `S` follow (see the module documentation).
 #[derive(Clone)]
 struct Misfit {
-    kind: Discrepancy,
-    /// Degrees of freedom d of a systematic discrepancy.
-    dof: f64,
+    /// Degrees of freedom d of a systematic discrepancy; `None` for an independent one (d = ν).
+    systematic_dof: Option<f64>,
     /// Prior information `P_0^{-1}` (filter space).
     prior_information: DMatrix<f64>,
     /// `Σ |r̃_k|²`.
@@ -230,11 +229,10 @@ struct Misfit {
 }
 
 impl Misfit {
-    fn new(kind: Discrepancy, dof: f64, prior_information: DMatrix<f64>) -> Self {
+    fn new(systematic_dof: Option<f64>, prior_information: DMatrix<f64>) -> Self {
         let p = prior_information.nrows();
         Misfit {
-            kind,
-            dof,
+            systematic_dof,
             prior_information,
             residual: 0.0,
             score: DVector::zeros(p),
@@ -277,19 +275,18 @@ impl Misfit {
         (self.components - self.prior_information.nrows() as f64).max(1.0)
     }
 
-    /// `(χ²/ν, allowance)`: the reduced χ² at `theta` and the covariance `(e/d) S^{-1}` added to the filter's.
-    fn allowance(&self, theta: &DVector<f64>) -> (f64, Option<DMatrix<f64>>) {
-        let chi2 = self.chi_squared(theta);
+    /// The reduced χ² at `theta`, `χ²(θ)/ν`.
+    fn reduced_chi_squared(&self, theta: &DVector<f64>) -> f64 {
+        self.chi_squared(theta) / self.nu()
+    }
+
+    /// The covariance `(e/d) S^{-1}` added to the filter's at `theta` (`None` when S is singular).
+    fn allowance(&self, theta: &DVector<f64>) -> Option<DMatrix<f64>> {
         let nu = self.nu();
-        let excess = (chi2 - nu - 2.0 * (2.0 * self.components_squared_discount).sqrt()).max(0.0);
-        let d = match self.kind {
-            Discrepancy::None => return (chi2 / nu, None),
-            Discrepancy::Independent => nu,
-            Discrepancy::Systematic => self.dof,
-        };
+        let excess = (self.chi_squared(theta) - nu - 2.0 * (2.0 * self.components_squared_discount).sqrt()).max(0.0);
+        let d = self.systematic_dof.unwrap_or(nu);
         let s = &self.prior_information + &self.information;
-        let inverse = Cholesky::new(s).map(|c| c.inverse());
-        (chi2 / nu, inverse.map(|inv| inv * (excess / d)))
+        Cholesky::new(s).map(|c| c.inverse() * (excess / d))
     }
 }
 
@@ -338,15 +335,16 @@ impl<M: Model> Roukf<M> {
                 "the discrepancy's degrees of freedom must be finite and ≥ 1, got {dof}"
             )));
         }
+        let prior = || {
+            DMatrix::from_diagonal(&DVector::from_iterator(
+                self.sigma.dim(),
+                self.config.parameters.iter().map(|s| 1.0 / (s.prior_std * s.prior_std)),
+            ))
+        };
         self.misfit = match kind {
             Discrepancy::None => None,
-            _ => {
-                let prior = DMatrix::from_diagonal(&DVector::from_iterator(
-                    self.sigma.dim(),
-                    self.config.parameters.iter().map(|s| 1.0 / (s.prior_std * s.prior_std)),
-                ));
-                Some(Misfit::new(kind, dof, prior))
-            }
+            Discrepancy::Independent => Some(Misfit::new(None, prior())),
+            Discrepancy::Systematic => Some(Misfit::new(Some(dof), prior())),
         };
         Ok(self)
     }
@@ -654,7 +652,7 @@ impl<M: Model> Roukf<M> {
     /// allowance for model error when [`Roukf::with_discrepancy`] asked for one.
     pub fn covariance(&self) -> DMatrix<f64> {
         let p = self.filter_covariance();
-        match self.misfit.as_ref().and_then(|m| m.allowance(&self.theta).1) {
+        match self.misfit.as_ref().and_then(|m| m.allowance(&self.theta)) {
             Some(allowance) => p + allowance,
             None => p,
         }
@@ -670,7 +668,7 @@ impl<M: Model> Roukf<M> {
     /// `χ²(θ̂)/ν` of all frames at the current estimate (about 1 when the model and the nominal noise are right; its
     /// square root times σ_obs is the effective observation noise).
     pub fn misfit(&self) -> Option<f64> {
-        self.misfit.as_ref().filter(|m| m.components > 0.0).map(|m| m.allowance(&self.theta).0)
+        self.misfit.as_ref().filter(|m| m.components > 0.0).map(|m| m.reduced_chi_squared(&self.theta))
     }
 
     /// Standard deviations in filter space (of [`Roukf::covariance`]).

@@ -92,7 +92,9 @@ impl FromStr for Compute {
 #[cfg(feature = "gpu")]
 fn gpu_device() -> Result<Device> {
     use burn::tensor::{DeviceKind, DeviceType};
-    if Device::enumerate(DeviceType::Wgpu).into_iter().next().is_none() {
+    // Enumerating opens every adapter: once per process.
+    static FOUND: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    if !*FOUND.get_or_init(|| Device::enumerate(DeviceType::Wgpu).into_iter().next().is_some()) {
         return Err(LearnError::InvalidInput(
             "no GPU adapter found by wgpu: install the GPU's Vulkan driver (e.g. the NVIDIA driver's \
              Vulkan ICD, or Mesa's) or use --device cpu"

@@ -37,12 +37,10 @@ impl Predictor {
     /// Prepares `model` for prediction on `compute`: repacks it for the CPU engine, or copies
     /// its weights to burn's device (an error when that device is not available).
     pub fn new(model: &TrainedModel, compute: Compute) -> Result<Predictor> {
-        let net = if compute.uses_burn() {
-            let weights = model.net.to_safetensors()?;
-            UNet::from_safetensors(&model.config, weights, &compute.device()?, Path::new("(model in memory)"))?
-        } else {
-            model.net.clone()
-        };
+        if !compute.uses_burn() {
+            return Predictor::from_net(&model.net, compute, model.normalization, model.grid);
+        }
+        let net = model.net.copied_to(&model.config, &compute.device()?, Path::new("(model in memory)"))?;
         Predictor::from_net(&net, compute, model.normalization, model.grid)
     }
 

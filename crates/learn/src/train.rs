@@ -232,7 +232,7 @@ fn resolve_start(init: &Initialization, seed: u64, device: &Device) -> Result<St
         }
         Initialization::FineTune { model, freeze_encoder } => {
             let pre = TrainedModel::load(model, &inference_device())?;
-            let net = UNet::from_safetensors(&pre.config, pre.net.to_safetensors()?, device, model)?;
+            let net = pre.net.copied_to(&pre.config, device, model)?;
             let net = if *freeze_encoder { net.freeze_encoder() } else { net };
             Ok(Start {
                 net,
@@ -641,8 +641,7 @@ pub fn train(
     };
     if options.compute == Compute::Gpu {
         // The model is returned on the inference device, whatever trained it.
-        let weights = best_net.to_safetensors()?;
-        best_net = UNet::from_safetensors(&start.config, weights, &inference_device(), &out.join(MODEL_FILE))?;
+        best_net = best_net.copied_to(&start.config, &inference_device(), &out.join(MODEL_FILE))?;
     }
     let model = TrainedModel {
         config: start.config,

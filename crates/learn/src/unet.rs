@@ -289,6 +289,12 @@ impl UNet {
         }
         Ok(net)
     }
+
+    /// A copy of this network (of `config`) on `device`, e.g. from the CPU to a GPU or back; `source` only names
+    /// where the weights came from in errors.
+    pub fn copied_to(&self, config: &UNetConfig, device: &Device, source: &Path) -> Result<UNet> {
+        UNet::from_safetensors(config, self.to_safetensors()?, device, source)
+    }
 }
 
 /// Draws He-uniform weights and zero biases from a seeded generator.
