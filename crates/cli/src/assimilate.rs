@@ -115,10 +115,22 @@ pub fn run(args: &AssimilateArgs) -> Result<()> {
     );
     match (&s.reference, &files) {
         (Some(r), _) => println!(
-            "reference    {} steps in {:.2} s, max |u| = {:.2} mm",
+            "reference    {} steps in {:.2} s, max |u| = {:.2} mm, on {}",
             s.iterations,
             r.seconds,
-            1e3 * r.max_displacement
+            1e3 * r.max_displacement,
+            if r.model {
+                "the filter's own model (an inverse crime: add a [reference] section with another mesh)".to_string()
+            } else {
+                format!(
+                    "another mesh, {} nodes and {} cells ({} tracked points moved onto the model's surface, at most \
+                     {:.2} mm)",
+                    r.nodes,
+                    r.cells,
+                    s.projected,
+                    1e3 * s.max_projection
+                )
+            }
         ),
         (None, Some(f)) => println!(
             "tracks       {} frames from {}, {} occluded feature observations, {} points outside the mesh moved \

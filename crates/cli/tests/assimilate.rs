@@ -26,6 +26,7 @@ fn synthetic_tracks_fed_back_and_bad_files() {
     let (ok, text) = assimilate(&[s, "-o", synthetic.to_str().unwrap()]);
     assert!(ok, "{text}");
     assert!(text.contains("reference    8 steps") && text.contains("young        μ ="), "{text}");
+    assert!(text.contains("on the filter's own model (an inverse crime"), "{text}");
     assert!(synthetic.join("deformation.pvd").exists() && synthetic.join("deformation/step_00008.vtu").exists());
 
     let tracks = synthetic.join("tracks/observations.csv");

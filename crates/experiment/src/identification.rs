@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use fem::scenario::MeshSource;
-use filter::assimilation::{AssimilationScenario, Experiment, ObservationFiles, Report, Setup};
+use filter::assimilation::{AssimilationScenario, Experiment, ObservationFiles, ReferenceSpec, Report, Setup};
 use filter::Discrepancy;
 
 use crate::{fmt, write_scenario, ExperimentResult, Name, Progress, Row, Size};
@@ -41,18 +41,21 @@ fn assimilate(
     progress: Progress,
 ) -> Result<(Vec<Report>, Setup)> {
     let path = write_scenario(dir, file, text)?;
-    let load = |phantom_tets: Option<usize>| -> Result<(AssimilationScenario, PathBuf)> {
+    let load = || -> Result<(AssimilationScenario, PathBuf)> {
         let (mut scenario, scenario_dir) = AssimilationScenario::load(&path)?;
         scenario.iterations = iterations.or(scenario.iterations);
-        if let Some(n) = phantom_tets {
+        if let Some(n) = model_tets {
             let MeshSource::Phantom { tets } = &mut scenario.mesh else {
                 bail!("{file}: another phantom size needs the built-in phantom mesh");
             };
             *tets = n;
         }
+        let law = scenario.reference.as_ref().and_then(|r| r.law);
+        scenario.reference = Some(ReferenceSpec { mesh: MeshSource::Phantom { tets: reference_tets }, law });
         Ok((scenario, scenario_dir))
     };
-    let (reference, scenario_dir) = load(Some(reference_tets))?;
+    let (scenario, scenario_dir) = load()?;
+    let reference = scenario.reference_scenario().context("the reference section was just set")?;
     let tracks = dir.join("reference-tracks");
     let stamp = tracks.join("complete.txt");
     let key = format!(
@@ -76,12 +79,12 @@ fn assimilate(
         Experiment::prepare(reference, &scenario_dir, None)?.write_tracks(&tracks)?;
         mesh::io::write_atomic_bytes(&stamp, key.as_bytes())?;
     }
-    let existing = |name: &str| Some(tracks.join(name)).filter(|p| p.exists());
     let files = ObservationFiles {
         observations: tracks.join("observations.csv"),
         features: None,
-        controls: existing("controls.csv"),
-        assessment: existing("assessment.csv"),
+        // The scenario's own [[tool]] moves the model, as it moved the reference: no tool tracks as controls.
+        controls: None,
+        assessment: Some(tracks.join("assessment.csv")).filter(|p| p.exists()),
         known_truth: true,
     };
     let mut reports = Vec::new();
@@ -92,10 +95,8 @@ fn assimilate(
         &[("run", Discrepancy::None)]
     };
     for &(run, kind) in variants {
-        let (mut scenario, _) = load(model_tets)?;
-        if kind != Discrepancy::None {
-            scenario.filter.discrepancy = kind;
-        }
+        let (mut scenario, _) = load()?;
+        scenario.filter.discrepancy = kind;
         let experiment = Experiment::prepare(scenario, &scenario_dir, Some(&files))?;
         let total = experiment.setup().iterations;
         let mut last = 0;
@@ -269,9 +270,10 @@ pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<Expe
         figures: vec!["run/springs.png".into(), "run/springs_final.png".into(), "run/assessment.png".into()],
         notes: vec![format!(
             "{} springs on the hidden surface of a {}-node phantom, a tool prescribing displacement on a small \
-             visible area. No inverse crime: observations, tool tracks and assessment points come from a reference \
-             run on a {SPRINGS_REFERENCE_TETS}-tet phantom ({} points moved onto the model's surface, at most \
-             {:.2} mm); assessment errors are means over the run at {} internal markers.",
+             visible area (on each mesh its own nodes nearest the tool). No inverse crime: observations and \
+             assessment points come from a reference run on a {SPRINGS_REFERENCE_TETS}-tet phantom ({} points moved \
+             onto the model's surface, at most {:.2} mm); assessment errors are means over the run at {} internal \
+             markers.",
             s.stiffness.len(),
             report.nodes,
             setup.projected,

@@ -247,3 +247,35 @@ fn star_sigma_points_from_the_scenario() {
     .to_string();
     assert!(err.contains("cross") && err.contains("simplex") && err.contains("star"), "{err}");
 }
+
+#[test]
+fn a_reference_section_observes_another_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    let beam = beam();
+    let (plain, plain_means) = run(dir.path(), &beam, None, "plain");
+    let own = plain.reference.unwrap();
+    assert!(own.model && own.nodes == plain.nodes, "{own:?}");
+
+    // The model's own mesh as the reference: the tracks go through location on the model, the same bits.
+    let same_mesh = "[reference.mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.1, 0.02, 0.02]\ncells = [5, 2, 2]\n\
+                     element = \"tet\"\n";
+    let (same, same_means) = run(dir.path(), &format!("{beam}{same_mesh}"), None, "same");
+    assert_eq!(same_means, plain_means, "the filter means of every iteration, bit for bit");
+    assert!(same.synthetic && !same.reference.unwrap().model);
+
+    // A finer reference under Neo-Hookean: another discretisation and law, so another estimate,
+    // reported against the scenario's truth; the tracks written are the reference's.
+    let finer = "[reference]\nlaw = \"neo_hookean\"\n[reference.mesh.box]\nmin = [0.0, 0.0, 0.0]\n\
+                 max = [0.1, 0.02, 0.02]\ncells = [10, 4, 4]\nelement = \"tet\"\n";
+    let (other, other_means) = run(dir.path(), &format!("{beam}{finer}"), None, "finer");
+    let reference = other.reference.unwrap();
+    assert!(!reference.model && reference.nodes == 11 * 5 * 5 && reference.cells == 960, "{reference:?}");
+    assert_eq!(other.nodes, plain.nodes, "the filter keeps the scenario's mesh");
+    let (y, y0) = (other.young.unwrap(), plain.young.unwrap());
+    assert_eq!(y.truth, Some(5000.0));
+    // The finer beam, less stiff, bends more under the same force than the coarse one:
+    // the model must be softer to follow it.
+    assert!(other_means != plain_means && y.mean < 0.9 * y0.mean, "{} vs {}", y.mean, y0.mean);
+    let tracks = std::fs::read_to_string(dir.path().join("finer/tracks/observations.csv")).unwrap();
+    assert_eq!(tracks.lines().count(), 1 + 10 * 9, "10 features over frames 0..=8");
+}

@@ -77,6 +77,12 @@ pub struct Setup {
 /// The reference run that synthesises the observations.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Reference {
+    /// It ran on the filter's own model (mesh and law): an inverse crime. `false` with a `[reference]` section.
+    pub model: bool,
+    /// Nodes of its mesh.
+    pub nodes: usize,
+    /// Cells of its mesh.
+    pub cells: usize,
     /// Wall-clock time (s).
     pub seconds: f64,
     /// Largest nodal displacement over all steps (m).
@@ -128,6 +134,15 @@ struct Assessment {
 
 /// A track file to write: name, feature ids, frames from 0.
 type TrackOutput = (&'static str, Vec<String>, Vec<DVector<f64>>);
+
+/// The tracks an experiment reads: observed features, their rest positions (default: frame 0), tool features and
+/// assessment points.
+struct TrackSet {
+    observations: Tracks,
+    rest: Option<RestPositions>,
+    controls: Option<Tracks>,
+    assessment: Option<Tracks>,
+}
 
 /// A prepared assimilation experiment (see the module documentation).
 pub struct Experiment {
@@ -227,9 +242,10 @@ impl Experiment {
             known_truth: files.is_some_and(|f| f.known_truth),
             setup,
         };
-        match files {
-            None => experiment.synthesise(&locator, &tool_nodes)?,
-            Some(f) => experiment.read_files(&locator, f)?,
+        match (files, experiment.scenario.reference_scenario()) {
+            (Some(f), _) => experiment.read_files(&locator, f)?,
+            (None, Some(reference)) => experiment.observe_reference(&locator, reference, dir)?,
+            (None, None) => experiment.synthesise(&locator, &tool_nodes)?,
         }
         let s = &mut experiment.setup;
         s.constrained_nodes = experiment.base.dirichlet.len();
@@ -285,7 +301,13 @@ impl Experiment {
                 max_displacement = max_displacement.max(fem::post::max_displacement(&s.u));
             })
             .context(|| "reference simulation with the true parameters".into())?;
-        self.setup.reference = Some(Reference { seconds: t0.elapsed().as_secs_f64(), max_displacement });
+        self.setup.reference = Some(Reference {
+            model: true,
+            nodes: nodes.len(),
+            cells: self.base.mesh.cells.len(),
+            seconds: t0.elapsed().as_secs_f64(),
+            max_displacement,
+        });
         let obs = &sc.observations;
         let measurements = add_noise(&clean, obs.noise_std, obs.seed).context(|| "observation noise".into())?;
 
@@ -310,26 +332,75 @@ impl Experiment {
     /// Measurements, controls and assessment points from track files; control nodes are constrained in the base
     /// problem.
     fn read_files(&mut self, locator: &MeshLocator, files: &ObservationFiles) -> Result<(), AssimilationError> {
-        let rest = files.features.as_deref().map(RestPositions::read).transpose()?;
-        let tracks = Tracks::read(&files.observations)?;
-        let last = tracks.last_frame();
+        let read = |path: &Option<PathBuf>| path.as_deref().map(Tracks::read).transpose();
+        let tracks = TrackSet {
+            rest: files.features.as_deref().map(RestPositions::read).transpose()?,
+            observations: Tracks::read(&files.observations)?,
+            controls: read(&files.controls)?,
+            assessment: read(&files.assessment)?,
+        };
+        self.use_tracks(locator, &tracks)
+    }
+
+    /// Synthetic observations of a reference run on another mesh (and law), `scenario`: its tracks are located on
+    /// this model's mesh like track files (its tool acts on this model through the scenario's own `[[tool]]`, so
+    /// its tool tracks are not used as controls) and kept for writing; its parameters are the truth.
+    fn observe_reference(
+        &mut self,
+        locator: &MeshLocator,
+        scenario: AssimilationScenario,
+        dir: &Path,
+    ) -> Result<(), AssimilationError> {
+        let reference = Experiment::prepare(scenario, dir, None)?;
+        let label = |file: &str| PathBuf::from(format!("the reference run's {file}"));
+        let track = |file: &str| {
+            reference
+                .synthetic_tracks
+                .iter()
+                .find(|t| t.0 == file)
+                .map(|(_, ids, frames)| Tracks::from_frames(label(file), ids, frames))
+        };
+        let tracks = TrackSet {
+            rest: None,
+            observations: track("observations.csv").expect("a synthetic run tracks its features"),
+            controls: None,
+            assessment: track("assessment.csv"),
+        };
+        self.use_tracks(locator, &tracks)?;
+        self.known_truth = true;
+        let r = &reference.setup;
+        self.setup.reference = Some(Reference {
+            model: false,
+            nodes: r.nodes,
+            cells: r.cells,
+            ..r.reference.expect("a synthetic run records its reference run")
+        });
+        self.synthetic_tracks = reference.synthetic_tracks;
+        Ok(())
+    }
+
+    /// Measurements, controls and assessment points from tracks; control nodes are constrained in the base problem.
+    fn use_tracks(&mut self, locator: &MeshLocator, tracks: &TrackSet) -> Result<(), AssimilationError> {
+        let rest = tracks.rest.as_ref();
+        let last = tracks.observations.last_frame();
         let iterations = self.scenario.iterations.map_or(last, |n| n.min(last));
         if iterations == 0 {
-            return Err(AssimilationError::file(&files.observations, None, "no frame after frame 0 (the rest)".into()));
+            let path = &tracks.observations.path;
+            return Err(AssimilationError::file(path, None, "no frame after frame 0 (the rest)".into()));
         }
         let mut finder = PointFinder::new(&self.base.mesh, locator)?;
-        self.observed = locate_tracks(&tracks, rest.as_ref(), &mut finder)?;
-        self.measurements =
-            (1..=iterations).map(|k| tracks.frame(k)).map(|(z, available)| Frame { z, available }).collect();
-        if let Some(path) = &files.controls {
-            let controls = Tracks::read(path)?;
-            self.controls = control_paths(&mut self.base, &controls, rest.as_ref(), iterations)?;
+        self.observed = locate_tracks(&tracks.observations, rest, &mut finder)?;
+        self.measurements = (1..=iterations)
+            .map(|k| tracks.observations.frame(k))
+            .map(|(z, available)| Frame { z, available })
+            .collect();
+        if let Some(controls) = &tracks.controls {
+            self.controls = control_paths(&mut self.base, controls, rest, iterations)?;
         }
-        if let Some(path) = &files.assessment {
-            let tracks = Tracks::read(path)?;
-            let points = locate_tracks(&tracks, rest.as_ref(), &mut finder)?;
+        if let Some(assessment) = &tracks.assessment {
+            let points = locate_tracks(assessment, rest, &mut finder)?;
             let truth =
-                (1..=iterations).map(|k| tracks.frame(k)).map(|(z, available)| Frame { z, available }).collect();
+                (1..=iterations).map(|k| assessment.frame(k)).map(|(z, available)| Frame { z, available }).collect();
             self.assessment = Some(Assessment { points, truth });
         }
         self.setup.projected = finder.moved.len();
@@ -463,7 +534,7 @@ impl Experiment {
             newton_iterations_per_solve: newton as f64 / (iterations * sigma_count).max(1) as f64,
             filter_times: spent,
             total_seconds: self.start.elapsed().as_secs_f64(),
-            max_displacement: self.setup.reference.map(|r| r.max_displacement),
+            reference: self.setup.reference,
             young,
             springs,
             assessment,

@@ -4,7 +4,8 @@
 //! * [`AssimilationScenario`]: the TOML schema (mesh, material, fixed nodes, time-profiled forces and tool,
 //!   unknowns with their priors, observations, assessment points, filter and output settings).
 //! * [`Experiment::prepare`]: builds the model and the measurements, either synthetic (a reference run with the
-//!   true parameters, observed at feature points drawn on the visible surface, plus Gaussian noise) or read from
+//!   true parameters, on the scenario's `[reference]` mesh and law where it has one and else on the filter's own
+//!   model, observed at feature points drawn on the visible surface, plus Gaussian noise) or read from
 //!   track files ([`ObservationFiles`], formats in [`tracks`]): observed features, tool features whose
 //!   displacement is prescribed on the nearest free surface node, and assessment points.
 //! * [`Experiment::run`]: the filter (one FEM solve per sigma point and step, in parallel), then the outputs in a
@@ -28,8 +29,8 @@ use std::path::Path;
 pub use experiment::{Experiment, ObservationFiles, Progress, Reference, Setup};
 pub use report::{AssessmentCase, FilterTimes, Report, SpringsReport, YoungReport};
 pub use scenario::{
-    AssessmentSpec, AssimilationScenario, FilterSpec, ForceSpec, ObservationSpec, OutputSpec, SpringTruth, SpringsSpec,
-    ToolSpec, YoungSpec,
+    AssessmentSpec, AssimilationScenario, FilterSpec, ForceSpec, ObservationSpec, OutputSpec, ReferenceSpec,
+    SpringTruth, SpringsSpec, ToolSpec, YoungSpec,
 };
 
 /// Errors of an assimilation experiment.

@@ -7,7 +7,7 @@ use mesh::io::write_atomic_bytes;
 use plot::{line_plot, PlotSpec, Series};
 use serde::Serialize;
 
-use super::{AssimilationError, Context};
+use super::{AssimilationError, Context, Reference};
 use crate::{Execution, SigmaPointSet, Trace};
 
 /// The results of a run (also written as `summary.json`).
@@ -39,8 +39,9 @@ pub struct Report {
     pub filter_times: FilterTimes,
     /// Wall-clock time since the experiment was prepared (s).
     pub total_seconds: f64,
-    /// Largest displacement of the reference run (m; synthetic only).
-    pub max_displacement: Option<f64>,
+    /// The reference run behind synthetic observations: its mesh, whether it was the filter's own model, its
+    /// time and largest displacement.
+    pub reference: Option<Reference>,
     /// Young's modulus, when estimated.
     pub young: Option<YoungReport>,
     /// Boundary springs, when estimated.

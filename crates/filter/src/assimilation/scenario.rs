@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use fem::scenario::{Fixed, MeshSource};
-use fem::{Material, SolverOptions};
+use fem::{Law, Material, SolverOptions};
 use mesh::{NodeSelection, Point};
 use serde::Deserialize;
 
@@ -45,6 +45,10 @@ pub struct AssimilationScenario {
     /// Points where the estimated deformation is compared with the reference run (synthetic observations only;
     /// with track files, assessment points come from their own track file).
     pub assessment: Option<AssessmentSpec>,
+    /// Where synthetic observations come from when not from the filter's own model: a reference run on another
+    /// mesh (and optionally another law), so that the filter never observes its own discretisation (no inverse
+    /// crime). Without it the reference run uses the model itself. Ignored when the observations come from files.
+    pub reference: Option<ReferenceSpec>,
     /// Filter settings.
     #[serde(default)]
     pub filter: FilterSpec,
@@ -132,6 +136,17 @@ pub struct SpringTruth {
     pub select: NodeSelection,
     /// Value in transformed units (stiffness / scale).
     pub value: f64,
+}
+
+/// The reference run's own model: the scenario's loads, tool, true parameters, observations and assessment applied
+/// to another mesh (and law).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReferenceSpec {
+    /// The reference mesh (e.g. a finer phantom); its selections (`fixed`, forces, tool, Σ) are made on it.
+    pub mesh: MeshSource,
+    /// The reference law (default: the scenario's).
+    pub law: Option<Law>,
 }
 
 /// Tracked feature points on the visible surface.
@@ -225,6 +240,17 @@ impl AssimilationScenario {
         let scenario = toml::from_str(&text)
             .map_err(|e| AssimilationError::Setup(format!("invalid scenario {}: {e}", path.display())))?;
         Ok((scenario, path.parent().map(Path::to_path_buf).unwrap_or_default()))
+    }
+
+    /// The scenario of the reference run behind its synthetic observations when it has a `[reference]` section:
+    /// the same scenario on the reference mesh and law, without the section.
+    pub fn reference_scenario(&self) -> Option<AssimilationScenario> {
+        let reference = self.reference.as_ref()?;
+        let mut scenario = self.clone();
+        scenario.mesh = reference.mesh.clone();
+        scenario.material.law = reference.law.unwrap_or(self.material.law);
+        scenario.reference = None;
+        Some(scenario)
     }
 
     /// The output directory: `output.dir`, else `out/<name>`.

@@ -60,6 +60,19 @@ impl Tracks {
         Ok(tracks)
     }
 
+    /// Tracks of every feature in frames 0, 1, … (`frames[f]` stacks x, y, z per feature), as [`write_tracks`]
+    /// would write them to `path`: messages name that file and the lines the rows would have there.
+    pub fn from_frames(path: PathBuf, ids: &[String], frames: &[DVector<f64>]) -> Self {
+        let n = ids.len();
+        let positions = (0..n)
+            .map(|j| {
+                let at = |z: &DVector<f64>| [z[3 * j], z[3 * j + 1], z[3 * j + 2]];
+                frames.iter().map(at).enumerate().filter(|(_, p)| p.iter().all(|v| v.is_finite())).collect()
+            })
+            .collect();
+        Tracks { path, ids: ids.to_vec(), lines: (0..n).map(|j| 2 + j).collect(), positions }
+    }
+
     /// The largest frame number in the file.
     pub fn last_frame(&self) -> usize {
         self.positions.iter().filter_map(|p| p.keys().next_back()).copied().max().unwrap_or(0)
