@@ -15,7 +15,7 @@ use crate::FemError;
 /// Marks a dof that is constrained, or a matrix entry that is not stored.
 const NONE: u32 = u32::MAX;
 
-/// Sparse pattern of the free-dof tangent and the patch → value scatter map.
+/// Sparse pattern of the free-dof tangent and the map from the patches' dense tangents to its values.
 #[derive(Clone, Debug)]
 pub struct Pattern {
     /// For each global dof, its free index or `u32::MAX` when constrained.
@@ -28,11 +28,13 @@ pub struct Pattern {
     pub row_idx: Vec<u32>,
     /// Position of each free dof's diagonal entry in the value array.
     pub diag: Vec<u32>,
-    /// For patch p and local pair (r, c), the value position, or `u32::MAX`:
-    /// index `matrix_ptr[p] + r * ndof_p + c`.
-    scatter: Vec<u32>,
     /// Start of each patch's dense tangent in the concatenation of all of them.
     matrix_ptr: Vec<usize>,
+    /// The entries of the patches' dense tangents (index `matrix_ptr[p] + r * ndof_p + c` for
+    /// patch p and local pair (r, c)) summed into value position v:
+    /// `gather[gather_ptr[v]..gather_ptr[v + 1]]`, in patch order.
+    gather_ptr: Vec<u32>,
+    gather: Vec<u32>,
 }
 
 impl Pattern {
@@ -84,7 +86,12 @@ impl Pattern {
             let nd = 3 * patches.nodes(p).len();
             matrix_ptr.push(matrix_ptr[p] + nd * nd);
         }
-        let mut scatter = vec![NONE; matrix_ptr[patches.len()]];
+        let entries = matrix_ptr[patches.len()];
+        if entries > NONE as usize {
+            return Err(FemError::Invalid(format!("the element tangents hold {entries} entries, more than 2³² − 1")));
+        }
+        // For each patch entry, the value position or NONE (upper triangle, constrained dofs).
+        let mut scatter = vec![NONE; entries];
         for p in 0..patches.len() {
             let dofs = local_free(p);
             let nd = dofs.len();
@@ -97,7 +104,20 @@ impl Pattern {
                 }
             }
         }
-        Ok(Pattern { free_index, num_free, col_ptr, row_idx, diag, scatter, matrix_ptr })
+        let mut gather_ptr = vec![0u32; row_idx.len() + 1];
+        for &v in scatter.iter().filter(|&&v| v != NONE) {
+            gather_ptr[v as usize + 1] += 1;
+        }
+        for v in 0..row_idx.len() {
+            gather_ptr[v + 1] += gather_ptr[v];
+        }
+        let mut fill = gather_ptr.clone();
+        let mut gather = vec![0u32; gather_ptr[row_idx.len()] as usize];
+        for (entry, &v) in scatter.iter().enumerate().filter(|(_, &v)| v != NONE) {
+            gather[fill[v as usize] as usize] = entry as u32;
+            fill[v as usize] += 1;
+        }
+        Ok(Pattern { free_index, num_free, col_ptr, row_idx, diag, matrix_ptr, gather_ptr, gather })
     }
 
     /// The value position of free-dof entry (row, col), row ≥ col; panics when it is not
@@ -127,6 +147,9 @@ pub struct Workspace {
 
 /// Patches evaluated per parallel task.
 const CHUNK: usize = 64;
+
+/// Tangent values summed per parallel task.
+const VALUE_CHUNK: usize = 4096;
 
 /// Internal force over all dofs (`f_int`, length 3n) and, when `values` is
 /// given, the free-dof tangent values in the pattern's order. Patches are
@@ -188,12 +211,15 @@ pub fn assemble(
         }
     }
     if let Some(values) = values {
-        values.fill(0.0);
-        for (s, k) in pattern.scatter.iter().zip(&work.stiffness) {
-            if *s != NONE {
-                values[*s as usize] += k;
+        // Each value sums its entries in patch order, whatever the number of threads.
+        let stiffness = &work.stiffness;
+        values.par_chunks_mut(VALUE_CHUNK).enumerate().for_each(|(chunk, out)| {
+            for (i, v) in out.iter_mut().enumerate() {
+                let at = chunk * VALUE_CHUNK + i;
+                let range = pattern.gather_ptr[at] as usize..pattern.gather_ptr[at + 1] as usize;
+                *v = pattern.gather[range].iter().fold(0.0, |sum, &e| sum + stiffness[e as usize]);
             }
-        }
+        });
     }
     Ok(())
 }
