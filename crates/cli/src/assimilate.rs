@@ -123,10 +123,11 @@ pub fn run(args: &AssimilateArgs) -> Result<()> {
                 "the filter's own model (an inverse crime: add a [reference] section with another mesh)".to_string()
             } else {
                 format!(
-                    "another mesh, {} nodes and {} cells ({} tracked points moved onto the model's surface, at most \
-                     {:.2} mm)",
+                    "a reference of its own: {} nodes, {} cells, {:?} ({} tracked points moved onto the model's \
+                     surface, at most {:.2} mm)",
                     r.nodes,
                     r.cells,
+                    r.law,
                     s.projected,
                     1e3 * s.max_projection
                 )

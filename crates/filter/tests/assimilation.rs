@@ -270,6 +270,7 @@ fn a_reference_section_observes_another_mesh() {
     let (other, other_means) = run(dir.path(), &format!("{beam}{finer}"), None, "finer");
     let reference = other.reference.unwrap();
     assert!(!reference.model && reference.nodes == 11 * 5 * 5 && reference.cells == 960, "{reference:?}");
+    assert_eq!(reference.law, fem::Law::NeoHookean);
     assert_eq!(other.nodes, plain.nodes, "the filter keeps the scenario's mesh");
     let (y, y0) = (other.young.unwrap(), plain.young.unwrap());
     assert_eq!(y.truth, Some(5000.0));

@@ -83,6 +83,8 @@ pub struct Reference {
     pub nodes: usize,
     /// Cells of its mesh.
     pub cells: usize,
+    /// Its constitutive law.
+    pub law: fem::Law,
     /// Wall-clock time (s).
     pub seconds: f64,
     /// Largest nodal displacement over all steps (m).
@@ -305,6 +307,7 @@ impl Experiment {
             model: true,
             nodes: nodes.len(),
             cells: self.base.mesh.cells.len(),
+            law: self.base.material.law,
             seconds: t0.elapsed().as_secs_f64(),
             max_displacement,
         });
@@ -368,13 +371,8 @@ impl Experiment {
         };
         self.use_tracks(locator, &tracks)?;
         self.known_truth = true;
-        let r = &reference.setup;
-        self.setup.reference = Some(Reference {
-            model: false,
-            nodes: r.nodes,
-            cells: r.cells,
-            ..r.reference.expect("a synthetic run records its reference run")
-        });
+        let run = reference.setup.reference.expect("a synthetic run records its reference run");
+        self.setup.reference = Some(Reference { model: false, ..run });
         self.synthetic_tracks = reference.synthetic_tracks;
         Ok(())
     }
