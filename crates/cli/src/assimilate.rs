@@ -119,7 +119,7 @@ pub fn run(args: &AssimilateArgs) -> Result<()> {
             s.iterations,
             r.seconds,
             1e3 * r.max_displacement,
-            if r.model {
+            if r.inverse_crime {
                 "the filter's own model (an inverse crime: add a [reference] section with another mesh)".to_string()
             } else {
                 format!(

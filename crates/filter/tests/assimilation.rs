@@ -254,14 +254,14 @@ fn a_reference_section_observes_another_mesh() {
     let beam = beam();
     let (plain, plain_means) = run(dir.path(), &beam, None, "plain");
     let own = plain.reference.unwrap();
-    assert!(own.model && own.nodes == plain.nodes, "{own:?}");
+    assert!(own.inverse_crime && own.nodes == plain.nodes, "{own:?}");
 
     // The model's own mesh as the reference: the tracks go through location on the model, the same bits.
     let same_mesh = "[reference.mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.1, 0.02, 0.02]\ncells = [5, 2, 2]\n\
                      element = \"tet\"\n";
     let (same, same_means) = run(dir.path(), &format!("{beam}{same_mesh}"), None, "same");
     assert_eq!(same_means, plain_means, "the filter means of every iteration, bit for bit");
-    assert!(same.synthetic && !same.reference.unwrap().model);
+    assert!(same.synthetic && !same.reference.unwrap().inverse_crime);
 
     // A finer reference under Neo-Hookean: another discretisation and law, so another estimate,
     // reported against the scenario's truth; the tracks written are the reference's.
@@ -269,7 +269,7 @@ fn a_reference_section_observes_another_mesh() {
                  max = [0.1, 0.02, 0.02]\ncells = [10, 4, 4]\nelement = \"tet\"\n";
     let (other, other_means) = run(dir.path(), &format!("{beam}{finer}"), None, "finer");
     let reference = other.reference.unwrap();
-    assert!(!reference.model && reference.nodes == 11 * 5 * 5 && reference.cells == 960, "{reference:?}");
+    assert!(!reference.inverse_crime && reference.nodes == 11 * 5 * 5 && reference.cells == 960, "{reference:?}");
     assert_eq!(reference.law, fem::Law::NeoHookean);
     assert_eq!(other.nodes, plain.nodes, "the filter keeps the scenario's mesh");
     let (y, y0) = (other.young.unwrap(), plain.young.unwrap());

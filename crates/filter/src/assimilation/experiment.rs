@@ -77,8 +77,8 @@ pub struct Setup {
 /// The reference run that synthesises the observations.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Reference {
-    /// It ran on the filter's own model (mesh and law): an inverse crime. `false` with a `[reference]` section.
-    pub model: bool,
+    /// It ran on the filter's own model (mesh and law). `false` with a `[reference]` section.
+    pub inverse_crime: bool,
     /// Nodes of its mesh.
     pub nodes: usize,
     /// Cells of its mesh.
@@ -304,7 +304,7 @@ impl Experiment {
             })
             .context(|| "reference simulation with the true parameters".into())?;
         self.setup.reference = Some(Reference {
-            model: true,
+            inverse_crime: true,
             nodes: nodes.len(),
             cells: self.base.mesh.cells.len(),
             law: self.base.material.law,
@@ -372,7 +372,7 @@ impl Experiment {
         self.use_tracks(locator, &tracks)?;
         self.known_truth = true;
         let run = reference.setup.reference.expect("a synthetic run records its reference run");
-        self.setup.reference = Some(Reference { model: false, ..run });
+        self.setup.reference = Some(Reference { inverse_crime: false, ..run });
         self.synthetic_tracks = reference.synthetic_tracks;
         Ok(())
     }
