@@ -75,13 +75,8 @@ fn sample_scene(args: &ViewArgs, model_path: &Path, dataset_dir: &Path) -> Resul
                     path.display()
                 );
             }
-            (
-                {
-                    let (scenario, dir) = DatasetScenario::load(&path)?;
-                    scenario.mesh(&dir)?
-                },
-                path,
-            )
+            let (scenario, dir) = DatasetScenario::load(&path)?;
+            (scenario.mesh(&dir)?, path)
         }
     };
     let index = match args.sample {

@@ -284,7 +284,7 @@ fn estimate_view(
         (0..3).for_each(|d| sum[d] -= n[d]);
         count += 1;
     }
-    let length = mesh::dot(sum, sum).sqrt();
+    let length = mesh::norm(sum);
     Ok((count > 0 && length >= ONE_SIDED * count as f64).then(|| sum.map(|x| x / length)))
 }
 
