@@ -26,7 +26,9 @@ pub mod simulate;
 
 pub use deformers::{FemDeformer, NetworkDeformer};
 pub use organ::{Organ, Stencil};
-pub use register::{check_cloud, observe, register_frame, Deformer, FrameResult, Observations, RegistrationOptions};
+pub use register::{
+    check_cloud, observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions,
+};
 pub use rigid::{rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
 pub use scenario::CaseScenario;
 pub use sequence::{register_sequence, target_errors, FrameOutcome, Summary};

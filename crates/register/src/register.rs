@@ -8,7 +8,7 @@ use mesh::{sub, Point, TriSurface};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::organ::Organ;
+use crate::organ::{Organ, Stencil};
 use crate::rigid::RigidOptions;
 use crate::{RegisterError, Result};
 
@@ -22,6 +22,17 @@ pub struct Observations {
     pub weight: Vec<f64>,
     /// Unit normal of the deformed surface where the node's matches lie (zero if unobserved).
     pub normal: Vec<Point>,
+    /// The kept matches themselves, for a deformer that fits the surface to each point.
+    pub matches: Vec<PointMatch>,
+}
+
+/// A kept match: a cloud point and the surface point it matched.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointMatch {
+    /// The mesh nodes that move the matched surface point, with their weights (summing to 1).
+    pub stencil: Stencil,
+    /// Cloud point − rest position of the matched surface point (m).
+    pub shift: Point,
 }
 
 /// A model that gives the organ's nodal displacement (3 per node) explaining observations.
@@ -196,7 +207,12 @@ pub fn observe(
     let (facing, original) = facing_part(surface, view);
     let (matches, limit) = closest_matches(&facing, cloud, options, capture)?;
     let n = organ.mesh().num_nodes();
-    let mut obs = Observations { target: vec![[0.0; 3]; n], weight: vec![0.0; n], normal: vec![[0.0; 3]; n] };
+    let mut obs = Observations {
+        target: vec![[0.0; 3]; n],
+        weight: vec![0.0; n],
+        normal: vec![[0.0; 3]; n],
+        matches: Vec::with_capacity(cloud.len()),
+    };
     let rest = &organ.surface().vertices;
     let stencils = organ.surface_stencils();
     let mut kept = 0;
@@ -216,6 +232,7 @@ pub fn observe(
             }
         }
         let shift = [c[0] - p0[0], c[1] - p0[1], c[2] - p0[2]];
+        let mut stencil = Vec::with_capacity(3);
         for (b, &k) in bary.iter().zip(&tri) {
             for &(node, w) in &stencils[k].0 {
                 let w = b * w;
@@ -224,8 +241,10 @@ pub fn observe(
                     obs.target[node][d] += w * shift[d];
                     obs.normal[node][d] += w * normal[d];
                 }
+                stencil.push((node, w));
             }
         }
+        obs.matches.push(PointMatch { stencil: Stencil(stencil), shift });
     }
     for ((t, n), &w) in obs.target.iter_mut().zip(&mut obs.normal).zip(&obs.weight) {
         if w > 0.0 {
