@@ -210,20 +210,26 @@ impl NetworkDeformer {
             .map(|&(i, j)| (unknown[i], unknown[j]))
             .filter(|&(i, j)| i != usize::MAX && j != usize::MAX)
             .collect();
-        let apply = |x: &[f64], out: &mut [f64]| {
-            for i in 0..n {
-                out[i] = ANCHOR_WEIGHT * x[i];
+        // A x for the three coordinates at once (the matrix is the same for each).
+        let apply = |x: &[[f64; 3]], out: &mut [[f64; 3]]| {
+            for (o, x) in out.iter_mut().zip(x) {
+                *o = x.map(|v| ANCHOR_WEIGHT * v);
             }
             for (a, _) in &rows {
-                let ax: f64 = a.iter().map(|&(i, w)| w * x[i]).sum();
+                let mut ax = [0.0; 3];
                 for &(i, w) in a {
-                    out[i] += w * ax;
+                    (0..3).for_each(|d| ax[d] += w * x[i][d]);
+                }
+                for &(i, w) in a {
+                    (0..3).for_each(|d| out[i][d] += w * ax[d]);
                 }
             }
             for &(i, j) in &edges {
-                let f = MEMBRANE_WEIGHT * (x[i] - x[j]);
-                out[i] += f;
-                out[j] -= f;
+                for d in 0..3 {
+                    let f = MEMBRANE_WEIGHT * (x[i][d] - x[j][d]);
+                    out[i][d] += f;
+                    out[j][d] -= f;
+                }
             }
         };
         let mut diagonal = vec![ANCHOR_WEIGHT; n];
@@ -234,56 +240,65 @@ impl NetworkDeformer {
             diagonal[i] += MEMBRANE_WEIGHT;
             diagonal[j] += MEMBRANE_WEIGHT;
         }
-        let per_coordinate: Vec<Vec<f64>> = (0..3)
-            .map(|d| {
-                let start: Vec<f64> = nodes.iter().map(|&k| previous[3 * k + d]).collect();
-                let mut rhs: Vec<f64> = start.iter().map(|s| ANCHOR_WEIGHT * s).collect();
-                for (a, shift) in &rows {
-                    for &(i, w) in a {
-                        rhs[i] += w * shift[d];
-                    }
-                }
-                conjugate_gradients(&apply, &diagonal, &rhs, start, 1e-10)
-            })
-            .collect();
-        (0..self.inputs.len()).map(|i| std::array::from_fn(|d| per_coordinate[d][i])).collect()
+        let start: Vec<[f64; 3]> = nodes.iter().map(|&k| std::array::from_fn(|d| previous[3 * k + d])).collect();
+        let mut rhs: Vec<[f64; 3]> = start.iter().map(|s| s.map(|v| ANCHOR_WEIGHT * v)).collect();
+        for (a, shift) in &rows {
+            for &(i, w) in a {
+                (0..3).for_each(|d| rhs[i][d] += w * shift[d]);
+            }
+        }
+        let mut x = conjugate_gradients(apply, &diagonal, &rhs, start, 1e-10);
+        x.truncate(self.inputs.len());
+        x
     }
 }
 
-/// Solves `A x = b` for a symmetric positive definite `A` given by its product, from `x`, to a
-/// relative residual of `tolerance` (at most `b.len()` iterations), preconditioned by the
-/// inverse of `A`'s `diagonal`.
+/// Solves `A X = B` for a symmetric positive definite `A` given by its product and three
+/// right-hand sides (the columns of `B`, each its own conjugate-gradient sequence sharing the
+/// products), from `X`, to a relative residual of `tolerance` per column (at most `b.len()`
+/// iterations), preconditioned by the inverse of `A`'s `diagonal`.
 fn conjugate_gradients(
-    apply: &impl Fn(&[f64], &mut [f64]),
+    apply: impl Fn(&[[f64; 3]], &mut [[f64; 3]]),
     diagonal: &[f64],
-    b: &[f64],
-    mut x: Vec<f64>,
+    b: &[[f64; 3]],
+    mut x: Vec<[f64; 3]>,
     tolerance: f64,
-) -> Vec<f64> {
+) -> Vec<[f64; 3]> {
     let n = b.len();
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let mut ax = vec![0.0; n];
+    let dot = |a: &[[f64; 3]], b: &[[f64; 3]]| {
+        a.iter().zip(b).fold([0.0; 3], |s, (a, b)| std::array::from_fn(|d| s[d] + a[d] * b[d]))
+    };
+    let mut ax = vec![[0.0; 3]; n];
     apply(&x, &mut ax);
-    let mut r: Vec<f64> = b.iter().zip(&ax).map(|(b, a)| b - a).collect();
-    let mut z: Vec<f64> = r.iter().zip(diagonal).map(|(r, d)| r / d).collect();
+    let mut r: Vec<[f64; 3]> = b.iter().zip(&ax).map(|(b, a)| std::array::from_fn(|d| b[d] - a[d])).collect();
+    let mut z: Vec<[f64; 3]> = r.iter().zip(diagonal).map(|(r, d)| r.map(|v| v / d)).collect();
     let mut p = z.clone();
     let mut rz = dot(&r, &z);
-    let stop = tolerance * tolerance * dot(b, b).max(f64::MIN_POSITIVE);
-    let mut ap = vec![0.0; n];
+    let stop = dot(b, b).map(|bb| tolerance * tolerance * bb.max(f64::MIN_POSITIVE));
+    let mut ap = vec![[0.0; 3]; n];
     for _ in 0..n {
-        if dot(&r, &r) <= stop {
+        let rr = dot(&r, &r);
+        // A converged column stops moving (its step is zero).
+        let active: [bool; 3] = std::array::from_fn(|d| rr[d] > stop[d]);
+        if !active.contains(&true) {
             break;
         }
         apply(&p, &mut ap);
-        let alpha = rz / dot(&p, &ap);
+        let pap = dot(&p, &ap);
+        let alpha: [f64; 3] = std::array::from_fn(|d| if active[d] { rz[d] / pap[d] } else { 0.0 });
         for i in 0..n {
-            x[i] += alpha * p[i];
-            r[i] -= alpha * ap[i];
-            z[i] = r[i] / diagonal[i];
+            for d in 0..3 {
+                x[i][d] += alpha[d] * p[i][d];
+                r[i][d] -= alpha[d] * ap[i][d];
+                z[i][d] = r[i][d] / diagonal[i];
+            }
         }
         let next = dot(&r, &z);
+        let beta: [f64; 3] = std::array::from_fn(|d| if active[d] { next[d] / rz[d] } else { 0.0 });
         for i in 0..n {
-            p[i] = z[i] + next / rz * p[i];
+            for d in 0..3 {
+                p[i][d] = if active[d] { z[i][d] + beta[d] * p[i][d] } else { 0.0 };
+            }
         }
         rz = next;
     }

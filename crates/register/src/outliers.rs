@@ -2,8 +2,6 @@
 //! seen edge-on): a statistical outlier filter on the distances to the nearest neighbours,
 //! the test of PCL's `StatisticalOutlierRemoval`, made scale-free by the median.
 
-use std::collections::HashMap;
-
 use mesh::Point;
 use rayon::prelude::*;
 
@@ -29,13 +27,15 @@ pub fn isolated_points(cloud: &[Point], factor: f64) -> Vec<bool> {
 /// Most cells along one axis of a [`PointGrid`].
 const MAX_CELLS: i64 = 1024;
 
-/// Points hashed into cubic cells over the cloud's bulk (the box of its 1st to 99th
+/// Points sorted into cubic cells over the cloud's bulk (the box of its 1st to 99th
 /// percentiles, widened by a tenth); a point beyond that box goes to the nearest cell.
 struct PointGrid {
     origin: Point,
     cell: f64,
     dims: [i64; 3],
-    cells: HashMap<[i64; 3], Vec<usize>>,
+    /// The points of cell c are `order[starts[c]..starts[c + 1]]` (cells numbered x-major).
+    starts: Vec<u32>,
+    order: Vec<u32>,
 }
 
 impl PointGrid {
@@ -58,11 +58,26 @@ impl PointGrid {
         let cell =
             (1..=3).map(|d| (4.0 * sorted[..d].iter().product::<f64>() / n).powf(1.0 / d as f64)).fold(1e-9, f64::max);
         let dims = extent.map(|e| ((e / cell).ceil() as i64).clamp(1, MAX_CELLS));
-        let mut grid = PointGrid { origin, cell, dims, cells: HashMap::new() };
-        for (i, &p) in cloud.iter().enumerate() {
-            grid.cells.entry(grid.key(p)).or_default().push(i);
+        // At most about a cell per point: the cell is at least the volume's spacing.
+        let count = dims.iter().product::<i64>() as usize;
+        let mut grid = PointGrid { origin, cell, dims, starts: vec![0; count + 1], order: vec![0; cloud.len()] };
+        let keys: Vec<usize> = cloud.iter().map(|&p| grid.index(grid.key(p))).collect();
+        for &k in &keys {
+            grid.starts[k + 1] += 1;
+        }
+        for c in 0..count {
+            grid.starts[c + 1] += grid.starts[c];
+        }
+        let mut next = grid.starts.clone();
+        for (i, &k) in keys.iter().enumerate() {
+            grid.order[next[k] as usize] = i as u32;
+            next[k] += 1;
         }
         grid
+    }
+
+    fn index(&self, key: [i64; 3]) -> usize {
+        ((key[0] * self.dims[1] + key[1]) * self.dims[2] + key[2]) as usize
     }
 
     fn key(&self, p: Point) -> [i64; 3] {
@@ -84,11 +99,13 @@ impl PointGrid {
                         if dx.abs().max(dy.abs()).max(dz.abs()) != ring {
                             continue;
                         }
-                        let Some(points) = self.cells.get(&[centre[0] + dx, centre[1] + dy, centre[2] + dz]) else {
+                        let key = [centre[0] + dx, centre[1] + dy, centre[2] + dz];
+                        if (0..3).any(|d| key[d] < 0 || key[d] >= self.dims[d]) {
                             continue;
-                        };
-                        for &j in points {
-                            let q = cloud[j];
+                        }
+                        let c = self.index(key);
+                        for &j in &self.order[self.starts[c] as usize..self.starts[c + 1] as usize] {
+                            let q = cloud[j as usize];
                             let d2 = (0..3).map(|d| (q[d] - p[d]).powi(2)).sum::<f64>();
                             if best.len() <= NEIGHBOURS || d2 < best[NEIGHBOURS] {
                                 let at = best.partition_point(|&b| b < d2);
