@@ -58,7 +58,9 @@ impl PointGrid {
         let cell =
             (1..=3).map(|d| (4.0 * sorted[..d].iter().product::<f64>() / n).powf(1.0 / d as f64)).fold(1e-9, f64::max);
         let dims = extent.map(|e| ((e / cell).ceil() as i64).clamp(1, MAX_CELLS));
-        // At most about a cell per point: the cell is at least the volume's spacing.
+        // At most about two cells per point: the cell is at least the spacing of the points
+        // spread over the box's volume, its two largest extents and its largest, so each term
+        // of Π (e/cell + 1) is at most n/4.
         let count = dims.iter().product::<i64>() as usize;
         let mut grid = PointGrid { origin, cell, dims, starts: vec![0; count + 1], order: vec![0; cloud.len()] };
         let keys: Vec<usize> = cloud.iter().map(|&p| grid.index(grid.key(p))).collect();
