@@ -33,6 +33,10 @@ pub struct SyntheticCase {
     pub truth: Vec<Point>,
     /// Model frame → camera frame: the scenario's misalignment (the identity when none).
     pub pose: RigidTransform,
+    /// The truth's organ (its finer mesh) and nodal displacement, in the model's frame.
+    pub truth_organ: Organ,
+    /// Its displacement (m, 3 per node).
+    pub truth_u: Vec<f64>,
 }
 
 /// The case of `scenario`: the phantom of `truth.tets` tetrahedra and `truth.material`, fixed on
@@ -67,7 +71,7 @@ pub fn synthetic_case(scenario: &CaseScenario) -> Result<SyntheticCase> {
             *x = pose.apply(*x);
         }
     }
-    Ok(SyntheticCase { cloud, targets, truth, pose })
+    Ok(SyntheticCase { cloud, targets, truth, pose, truth_organ: organ, truth_u: u })
 }
 
 /// The built-in case ([`CaseScenario::builtin`]: the Neo-Hookean phantom, E = 5 kPa, ν = 0.48,

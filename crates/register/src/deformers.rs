@@ -185,12 +185,12 @@ impl NetworkDeformer {
     /// and s₀ the current estimate; by Jacobi-preconditioned conjugate gradients from s₀. Returns
     /// the input nodes' part. Fitting the matches themselves, not each node's mean match offset,
     /// keeps the depth of a push: a mean over the triangles around a node flattens a dent.
-    fn surface_estimate(&self, observations: &Observations, previous: &[f64]) -> Vec<[f64; 3]> {
+    pub fn surface_estimate(&self, observations: &Observations, previous: &[f64]) -> Vec<[f64; 3]> {
         // The unknowns: the inputs, then the other fit nodes that a match moves.
         let mut unknown = vec![usize::MAX; self.fit_nodes.len()];
         let mut nodes: Vec<usize> = self.inputs.clone();
         unknown[..nodes.len()].iter_mut().enumerate().for_each(|(i, u)| *u = i);
-        let mut rows: Vec<(Vec<(usize, f64)>, [f64; 3])> = Vec::with_capacity(observations.matches.len());
+        let mut rows: Vec<FitRow> = Vec::with_capacity(observations.matches.len());
         for matched in &observations.matches {
             let mut weights = Vec::with_capacity(matched.stencil.0.len());
             for &(node, w) in &matched.stencil.0 {
@@ -252,6 +252,9 @@ impl NetworkDeformer {
         x
     }
 }
+
+/// A match in the surface fit: its interpolation weights on the unknowns and its shift.
+type FitRow = (Vec<(usize, f64)>, [f64; 3]);
 
 /// Solves `A X = B` for a symmetric positive definite `A` given by its product and three
 /// right-hand sides (the columns of `B`, each its own conjugate-gradient sequence sharing the
