@@ -66,6 +66,20 @@ pub struct SurfaceBvh {
     triangles: Vec<[usize; 3]>,
     order: Vec<u32>,
     nodes: Vec<Node>,
+    /// The nodes' boxes alone, and the triangles' corners in `order`: what a closest-point
+    /// search reads, packed (a node with its winding-number moments is 200 bytes).
+    boxes: Vec<NodeBox>,
+    corners: Vec<[Point; 3]>,
+}
+
+/// A node's bounding box and where its triangles or children are (as in [`Node`]).
+#[derive(Clone, Copy, Debug)]
+struct NodeBox {
+    lo: Point,
+    hi: Point,
+    centre: Point,
+    first: u32,
+    count: u32,
 }
 
 impl SurfaceBvh {
@@ -95,10 +109,18 @@ impl SurfaceBvh {
             triangles: surface.triangles.clone(),
             order: (0..surface.triangles.len() as u32).collect(),
             nodes: Vec::with_capacity(2 * surface.triangles.len() / LEAF_SIZE + 2),
+            boxes: Vec::new(),
+            corners: Vec::new(),
         };
         let centroids: Vec<Point> = bvh.triangles.iter().map(|t| centroid(t.map(|k| bvh.vertices[k]))).collect();
         bvh.nodes.push(empty_node());
         bvh.build(0, 0, bvh.triangles.len(), &centroids);
+        bvh.boxes = bvh
+            .nodes
+            .iter()
+            .map(|n| NodeBox { lo: n.lo, hi: n.hi, centre: n.centre, first: n.first, count: n.count })
+            .collect();
+        bvh.corners = bvh.order.iter().map(|&t| bvh.tri(t as usize)).collect();
         Ok(bvh)
     }
 
@@ -282,15 +304,16 @@ impl SurfaceBvh {
         let mut best = ClosestPoint { point: q, triangle: 0, distance: f64::INFINITY };
         let mut best2 = f64::INFINITY;
         let mut stack: Vec<(u32, f64)> = Vec::with_capacity(64);
-        stack.push((0, box_dist2(&self.nodes[0], q)));
+        stack.push((0, box_dist2(&self.boxes[0], q)));
         while let Some((i, bd2)) = stack.pop() {
             if bd2 >= best2 {
                 continue;
             }
-            let nd = &self.nodes[i as usize];
+            let nd = &self.boxes[i as usize];
             if nd.count > 0 {
-                for &t in &self.order[nd.first as usize..(nd.first + nd.count) as usize] {
-                    let c = closest_on_triangle(self.tri(t as usize), q);
+                let range = nd.first as usize..(nd.first + nd.count) as usize;
+                for (&t, &corners) in self.order[range.clone()].iter().zip(&self.corners[range]) {
+                    let c = closest_on_triangle(corners, q);
                     let e = sub(c, q);
                     let d2 = dot(e, e);
                     if d2 < best2 {
@@ -300,7 +323,7 @@ impl SurfaceBvh {
                 }
             } else {
                 let (a, b) = (nd.first, nd.first + 1);
-                let (na, nb) = (&self.nodes[a as usize], &self.nodes[b as usize]);
+                let (na, nb) = (&self.boxes[a as usize], &self.boxes[b as usize]);
                 let (da, db) = (box_dist2(na, q), box_dist2(nb, q));
                 // Visit the nearer child first (pushed last); a point inside
                 // both boxes goes first to the child whose centre is nearer.
@@ -447,7 +470,7 @@ pub fn solid_angle(p: [Point; 3], q: Point) -> f64 {
     2.0 * num.atan2(den)
 }
 
-fn box_dist2(nd: &Node, q: Point) -> f64 {
+fn box_dist2(nd: &NodeBox, q: Point) -> f64 {
     (0..3)
         .map(|d| {
             let e = (nd.lo[d] - q[d]).max(q[d] - nd.hi[d]).max(0.0);

@@ -110,6 +110,9 @@ pub struct NetworkDeformer {
 /// the lowest TRE; below it the fit follows the noise and the loop no longer settles at 2.5 N.
 pub const MEMBRANE_WEIGHT: f64 = 0.03;
 
+/// Relative residual at which the surface fit stops (its error is then well below a micrometre).
+const FIT_TOLERANCE: f64 = 1e-6;
+
 /// Weight pulling an input node towards its current estimate (keeps nodes without data or
 /// neighbours determined).
 const ANCHOR_WEIGHT: f64 = 1e-3;
@@ -247,7 +250,7 @@ impl NetworkDeformer {
                 (0..3).for_each(|d| rhs[i][d] += w * shift[d]);
             }
         }
-        let mut x = conjugate_gradients(apply, &diagonal, &rhs, start, 1e-10);
+        let mut x = conjugate_gradients(apply, &diagonal, &rhs, start, FIT_TOLERANCE);
         x.truncate(self.inputs.len());
         x
     }
