@@ -126,6 +126,12 @@ impl Pattern {
         entry_position(&self.col_ptr, &self.row_idx, row, col)
     }
 
+    /// The value position of entry (row, col) with row ≥ col, if it is stored.
+    pub fn find(&self, row: usize, col: usize) -> Option<usize> {
+        let (lo, hi) = (self.col_ptr[col] as usize, self.col_ptr[col + 1] as usize);
+        self.row_idx[lo..hi].binary_search(&(row as u32)).ok().map(|i| lo + i)
+    }
+
     /// Number of stored (lower-triangle) entries.
     pub fn nnz(&self) -> usize {
         self.row_idx.len()

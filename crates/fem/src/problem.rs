@@ -26,19 +26,29 @@ pub struct Problem {
     /// External nodal forces (N), 3 per node.
     pub f_ext: Vec<f64>,
     /// Springs that resist a node's displacement along one direction only.
-    pub normal_springs: Vec<NormalSpring>,
+    pub point_springs: Vec<PointSpring>,
 }
 
-/// A zero-length spring acting along a unit direction n only: energy ½ k (n·u)²,
-/// e.g. a point-to-plane data term that lets the surface slide along itself.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NormalSpring {
-    /// The node.
-    pub node: usize,
-    /// Unit direction.
-    pub normal: Point,
-    /// Stiffness (N/m).
+/// A zero-length spring on a point that moves with one or several nodes (its displacement
+/// x = Σ w_j u_j, e.g. a point of a surface triangle): energy ½ (x − t)ᵀ (k I + k_n n nᵀ) (x − t),
+/// with `stiffness` k in every direction and `normal_stiffness` k_n more along the unit `normal`
+/// (point to plane when k = 0, letting the surface slide along itself). A data term that ties a
+/// matched surface point to where a cloud point puts it. The pull K t is a load: load stepping
+/// scales it with the forces. Couplings between nodes that share no
+/// element are left out of the tangent: the forces are exact and the solver's quasi-Newton
+/// updates absorb the difference.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointSpring {
+    /// The nodes and their interpolation weights.
+    pub nodes: Vec<(usize, f64)>,
+    /// The point's target displacement t (m).
+    pub target: Point,
+    /// Stiffness in every direction (N/m).
     pub stiffness: f64,
+    /// Unit direction of the extra stiffness.
+    pub normal: Point,
+    /// Extra stiffness along `normal` (N/m).
+    pub normal_stiffness: f64,
 }
 
 impl Problem {
@@ -51,7 +61,7 @@ impl Problem {
             dirichlet: BTreeMap::new(),
             springs: vec![0.0; n],
             f_ext: vec![0.0; 3 * n],
-            normal_springs: Vec::new(),
+            point_springs: Vec::new(),
         }
     }
 
@@ -139,12 +149,21 @@ impl Problem {
         if self.springs.iter().any(|k| !(*k >= 0.0 && k.is_finite())) {
             return Err(FemError::Invalid("spring stiffnesses must be non-negative and finite".into()));
         }
-        for (i, s) in self.normal_springs.iter().enumerate() {
+        let stiffness_ok = |k: f64| k >= 0.0 && k.is_finite();
+        for (i, s) in self.point_springs.iter().enumerate() {
             let length = s.normal.iter().map(|x| x * x).sum::<f64>().sqrt();
-            if s.node >= n || !(s.stiffness >= 0.0 && s.stiffness.is_finite()) || !((length - 1.0).abs() < 1e-6) {
+            let nodes_ok = !s.nodes.is_empty() && s.nodes.iter().all(|&(k, w)| k < n && w.is_finite());
+            let normal_ok = s.normal_stiffness == 0.0 || (length - 1.0).abs() < 1e-6;
+            if !(nodes_ok
+                && normal_ok
+                && stiffness_ok(s.stiffness)
+                && stiffness_ok(s.normal_stiffness)
+                && s.target.iter().all(|x| x.is_finite()))
+            {
                 return Err(FemError::Invalid(format!(
-                    "normal spring {i}: node {} of {n}, stiffness {}, |normal| {length} (must be 1)",
-                    s.node, s.stiffness
+                    "point spring {i}: nodes {:?} of {n}, target {:?}, stiffness {} and {} along a normal of length {length} \
+                     (nodes must exist, stiffnesses be non-negative, the normal of length 1)",
+                    s.nodes, s.target, s.stiffness, s.normal_stiffness
                 )));
             }
         }

@@ -19,7 +19,7 @@ use crate::element::ElementGeometry;
 use crate::linsolve::{Slot, SparseCholesky};
 use crate::material::{Law, Material};
 use crate::post::effective_gradients;
-use crate::problem::{NormalSpring, Problem};
+use crate::problem::{PointSpring, Problem};
 use crate::FemError;
 
 /// Settings of the Newton-Raphson solver.
@@ -100,7 +100,7 @@ pub struct StaticSolver {
     pattern: Pattern,
     cholesky: SparseCholesky,
     /// What the rest slot's factor was computed with (material, springs).
-    rest_key: Option<(Material, Vec<f64>, Vec<NormalSpring>)>,
+    rest_key: Option<(Material, Vec<f64>, Vec<PointSpring>)>,
     constrained_nodes: Vec<usize>,
     work: Workspace,
     values: Vec<f64>,
@@ -202,7 +202,8 @@ impl StaticSolver {
         (self.pattern.num_free, self.pattern.nnz())
     }
 
-    /// Internal force f_int(u) + K_s u over all dofs (springs included).
+    /// Internal force f_int(u) + K_s u over all dofs (springs included; a point spring's pull
+    /// towards its target counts as an external load).
     pub fn internal_force(&mut self, u: &[f64]) -> Result<Vec<f64>, FemError> {
         let mut f = vec![0.0; u.len()];
         self.evaluate(u, &mut f, false)?;
@@ -242,24 +243,56 @@ impl StaticSolver {
                 }
             }
         }
-        for s in &self.problem.normal_springs {
-            let (n, k, dir) = (s.node, s.stiffness, s.normal);
-            let stretch = k * (0..3).map(|d| dir[d] * u[3 * n + d]).sum::<f64>();
-            for d in 0..3 {
-                f[3 * n + d] += stretch * dir[d];
+        for s in &self.problem.point_springs {
+            // K x, K = k I + k_n n nᵀ (the target's pull K t is an external load: see `loads`).
+            let mut r = [0.0; 3];
+            for &(n, w) in &s.nodes {
+                (0..3).for_each(|d| r[d] += w * u[3 * n + d]);
+            }
+            let along = s.normal_stiffness * (0..3).map(|d| s.normal[d] * r[d]).sum::<f64>();
+            let kr: [f64; 3] = std::array::from_fn(|d| s.stiffness * r[d] + along * s.normal[d]);
+            for &(n, w) in &s.nodes {
+                (0..3).for_each(|d| f[3 * n + d] += w * kr[d]);
             }
             if !tangent {
                 continue;
             }
-            for a in 0..3 {
-                for b in 0..=a {
-                    let (Some(r), Some(c)) = (self.free_index(3 * n + a), self.free_index(3 * n + b)) else { continue };
-                    let position = self.pattern.position(r.max(c), r.min(c));
-                    self.values[position] += k * dir[a] * dir[b];
+            for &(a, wa) in &s.nodes {
+                for &(b, wb) in &s.nodes {
+                    for p in 0..3 {
+                        for q in 0..3 {
+                            let (Some(row), Some(col)) = (self.free_index(3 * a + p), self.free_index(3 * b + q))
+                            else {
+                                continue;
+                            };
+                            // Each stored (lower) entry once: from the ordered pair with row ≥ col.
+                            if row < col {
+                                continue;
+                            }
+                            let k = f64::from(p == q) * s.stiffness + s.normal_stiffness * s.normal[p] * s.normal[q];
+                            if let Some(position) = self.pattern.find(row, col) {
+                                self.values[position] += wa * wb * k;
+                            }
+                        }
+                    }
                 }
             }
         }
         Ok(())
+    }
+
+    /// The external load at load factor 1: the nodal forces and the point springs' pull towards
+    /// their targets (Σ w_j K t on each node j), so that load stepping scales both.
+    fn loads(&self) -> Vec<f64> {
+        let mut f = self.problem.f_ext.clone();
+        for s in &self.problem.point_springs {
+            let along = s.normal_stiffness * (0..3).map(|d| s.normal[d] * s.target[d]).sum::<f64>();
+            let kt: [f64; 3] = std::array::from_fn(|d| s.stiffness * s.target[d] + along * s.normal[d]);
+            for &(n, w) in &s.nodes {
+                (0..3).for_each(|d| f[3 * n + d] += w * kt[d]);
+            }
+        }
+        f
     }
 
     /// Solves from the rest configuration.
@@ -383,7 +416,7 @@ impl StaticSolver {
                 u[3 * n + d] = lambda * v[d];
             }
         }
-        let f_ext: Vec<f64> = self.problem.f_ext.iter().map(|f| lambda * f).collect();
+        let f_ext: Vec<f64> = self.loads().iter().map(|f| lambda * f).collect();
         let ext_norm = norm(&f_ext);
         let mut f_int = vec![0.0; ndof];
         let nf = self.pattern.num_free;
@@ -477,9 +510,9 @@ impl StaticSolver {
     /// factorising the tangent at u = 0 if not. Returns false when the rest
     /// tangent is not positive definite (then it is no use as a preconditioner).
     fn prepare_rest_factor(&mut self, stats: &mut Stats) -> Result<bool, FemError> {
-        if let Some((material, springs, normal_springs)) = &self.rest_key {
+        if let Some((material, springs, point_springs)) = &self.rest_key {
             let p = &self.problem;
-            if *material == p.material && *springs == p.springs && *normal_springs == p.normal_springs {
+            if *material == p.material && *springs == p.springs && *point_springs == p.point_springs {
                 return Ok(self.cholesky.is_positive_definite(Slot::Rest));
             }
         }
@@ -495,7 +528,7 @@ impl StaticSolver {
         stats.factorizations += 1;
         stats.timings.factorization += t.elapsed();
         let p = &self.problem;
-        self.rest_key = Some((p.material, p.springs.clone(), p.normal_springs.clone()));
+        self.rest_key = Some((p.material, p.springs.clone(), p.point_springs.clone()));
         Ok(self.cholesky.is_positive_definite(Slot::Rest))
     }
 

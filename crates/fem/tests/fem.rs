@@ -2,7 +2,7 @@
 //! finite differences and invariances.
 
 use augsim_fem as fem;
-use fem::{Formulation, Law, Material, NormalSpring, Problem, SolverOptions, StaticSolver};
+use fem::{Formulation, Law, Material, PointSpring, Problem, SolverOptions, StaticSolver};
 use mesh::{boundary_nodes, box_hex, box_tet, Mesh};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
@@ -74,9 +74,23 @@ fn tangent_matches_finite_difference_of_internal_force() {
             problem.fix(&[0]);
             problem.add_springs(&[1, 2], 50.0);
             let s = 1.0 / 3f64.sqrt();
-            problem.normal_springs = vec![
-                NormalSpring { node: 2, normal: [s, -s, s], stiffness: 80.0 },
-                NormalSpring { node: 3, normal: [0.0, 0.6, 0.8], stiffness: 30.0 },
+            // A point-to-plane spring on one node, and a spring on a point of the first cell.
+            let cell = problem.mesh.cells.cell(0).to_vec();
+            problem.point_springs = vec![
+                PointSpring {
+                    nodes: vec![(2, 1.0)],
+                    target: [0.01, 0.0, -0.02],
+                    stiffness: 0.0,
+                    normal: [s, -s, s],
+                    normal_stiffness: 80.0,
+                },
+                PointSpring {
+                    nodes: vec![(cell[1], 0.2), (cell[2], 0.5), (cell[3], 0.3)],
+                    target: [0.02, -0.01, 0.03],
+                    stiffness: 10.0,
+                    normal: [0.0, 0.6, 0.8],
+                    normal_stiffness: 30.0,
+                },
             ];
             let mut solver = StaticSolver::new(problem).unwrap();
             let u: Vec<f64> = (0..3 * n).map(|i| if i < 3 { 0.0 } else { 0.05 * noise(7 * i + 1) }).collect();
@@ -217,6 +231,46 @@ fn gravity_and_springs_balance_exactly() {
     let sol = solver.solve(&SolverOptions::default()).unwrap();
     let spring_force: f64 = sol.u.chunks(3).map(|u| 10.0 * u[2]).sum();
     assert!((spring_force + weight).abs() < 1e-6 * weight, "springs carry {spring_force}, weight {weight}");
+}
+
+#[test]
+fn point_springs_balance_gravity_and_pull_their_point() {
+    // The block hanging on springs at points of its cells (each point between two nodes that
+    // share no element too: that coupling is left out of the tangent) carries its weight.
+    let m = box_tet([0.0; 3], [0.1, 0.1, 0.1], [3, 3, 3]).unwrap();
+    let n = m.num_nodes();
+    let mut problem = Problem::new(m, Material::new(Law::Svk, 5000.0, 0.45));
+    problem.add_gravity([0.0, 0.0, -9.81]).unwrap();
+    let spring = |nodes: Vec<(usize, f64)>, target: [f64; 3]| PointSpring {
+        nodes,
+        target,
+        stiffness: 10.0,
+        normal: [0.0, 0.0, 1.0],
+        normal_stiffness: 20.0,
+    };
+    problem.point_springs = (0..n).map(|k| spring(vec![(k, 0.75), ((k * 7 + 3) % n, 0.25)], [0.0; 3])).collect();
+    let weight = 1000.0 * 0.001 * 9.81;
+    let mut solver = StaticSolver::new(problem.clone()).unwrap();
+    let sol = solver.solve(&SolverOptions::default()).unwrap();
+    let carried: f64 = problem
+        .point_springs
+        .iter()
+        .map(|s| 30.0 * s.nodes.iter().map(|&(k, w)| w * sol.u[3 * k + 2]).sum::<f64>())
+        .sum();
+    assert!((carried + weight).abs() < 1e-6 * weight, "point springs carry {carried}, weight {weight}");
+    // A stiff spring on a point of a cell takes the point to its target.
+    let cell = problem.mesh.cells.cell(0).to_vec();
+    let point = vec![(cell[0], 0.1), (cell[1], 0.2), (cell[2], 0.3), (cell[3], 0.4)];
+    let target = [0.004, -0.002, 0.003];
+    problem.f_ext.iter_mut().for_each(|f| *f = 0.0);
+    problem.point_springs = vec![PointSpring { stiffness: 1e6, ..spring(point.clone(), target) }];
+    let top: Vec<usize> = (0..n).filter(|&k| problem.mesh.nodes[k][2] > 0.0999).collect();
+    problem.fix(&top);
+    let sol = StaticSolver::new(problem).unwrap().solve(&SolverOptions::default()).unwrap();
+    for (d, t) in target.iter().enumerate() {
+        let x: f64 = point.iter().map(|&(k, w)| w * sol.u[3 * k + d]).sum();
+        assert!((x - t).abs() < 1e-3 * t.abs(), "component {d}: {x} against {t}");
+    }
 }
 
 #[test]

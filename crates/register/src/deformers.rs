@@ -1,7 +1,7 @@
 //! The two ways of turning observations into a volumetric displacement: the
 //! finite-element model pulled by data springs, and a trained U-Net.
 
-use fem::{NormalSpring, Problem, SolverOptions, StaticSolver};
+use fem::{PointSpring, Problem, SolverOptions, StaticSolver};
 use learn::generate::normal_part;
 use learn::{encode_points, GridToMesh, Predictor, TrainedModel};
 use mesh::embedding::Grid;
@@ -10,23 +10,21 @@ use crate::organ::Organ;
 use crate::register::{Deformer, Observations};
 use crate::{RegisterError, Result};
 
-/// Finite-element registration: every observed node is tied by a zero-length
-/// spring to its observed position; the organ's own boundary conditions
-/// (fixed nodes, its springs) hold the rest. The scenario's loads are dropped:
-/// the intraoperative loads are unknown, the data stand in for them. The springs
-/// stiffen over the first iterations of a frame ([`STIFFNESS_RAMP`]): the first
-/// matches of a large deformation are poor, and stiff springs pulling towards them
-/// would crush elements.
+/// Finite-element registration: every matched surface point is tied by a zero-length spring
+/// to its cloud point (a [`PointSpring`] on the nodes that move it, mostly point to plane);
+/// the organ's own boundary conditions (fixed nodes, its springs) hold the rest. The scenario's
+/// loads are dropped: the intraoperative loads are unknown, the data stand in for them. The
+/// springs stiffen over the first iterations of a frame ([`STIFFNESS_RAMP`]): the first matches
+/// of a large deformation are poor, and stiff springs pulling towards them would crush elements.
 pub struct FemDeformer {
     solver: StaticSolver,
-    base_springs: Vec<f64>,
     stiffness: f64,
     options: SolverOptions,
 }
 
-/// Share of the data stiffness that ties a node to its observed position in
-/// every direction; the rest acts along the surface normal only (point to
-/// plane), so that the surface can slide along itself.
+/// Share of the data stiffness that ties a point to its cloud point in every direction; the
+/// rest acts along the surface normal only (point to plane), so that the surface can slide
+/// along itself.
 pub const ISOTROPIC_FRACTION: f64 = 0.05;
 
 /// Iterations over which the data springs reach their stiffness, ×4 per iteration.
@@ -40,40 +38,36 @@ impl FemDeformer {
             return Err(RegisterError::Invalid(format!("data stiffness {stiffness} N/m must be positive")));
         }
         problem.f_ext.iter_mut().for_each(|f| *f = 0.0);
-        let base_springs = problem.springs.clone();
-        Ok(FemDeformer { solver: StaticSolver::new(problem)?, base_springs, stiffness, options })
+        Ok(FemDeformer { solver: StaticSolver::new(problem)?, stiffness, options })
     }
 
-    /// A data stiffness a hundred times the organ's own scale E·L (L: the cube root of its
-    /// volume): the surface follows the data within a millimetre where a small patch of it
-    /// moves by centimetres; the model fills in the rest.
+    /// A data stiffness fifty times the organ's own scale E·L (L: the cube root of its volume):
+    /// the surface follows the data within a millimetre where a small patch of it moves by
+    /// centimetres; the model fills in the rest. Chosen on the design pushes of `augsim register
+    /// --demo` (1 to 2.5 N) among 100, 50 and 25 E·L.
     pub fn default_stiffness(problem: &Problem) -> f64 {
-        100.0 * problem.material.young * problem.mesh.volume().abs().cbrt()
+        50.0 * problem.material.young * problem.mesh.volume().abs().cbrt()
     }
 }
 
 impl Deformer for FemDeformer {
     fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>> {
-        let total: f64 = observations.weight.iter().sum();
-        if !(total > 0.0) {
+        if observations.matches.is_empty() {
             return Err(RegisterError::Invalid("no cloud point matches the organ surface".into()));
         }
         let ramp = 0.25f64.powi(STIFFNESS_RAMP.saturating_sub(iteration) as i32);
-        let k = ramp * self.stiffness / total;
-        let problem = self.solver.problem_mut();
-        problem.normal_springs.clear();
-        for (n, (&w, t)) in observations.weight.iter().zip(&observations.target).enumerate() {
-            let (k_all, k_normal) = (ISOTROPIC_FRACTION * k * w, (1.0 - ISOTROPIC_FRACTION) * k * w);
-            let normal = observations.normal[n];
-            let along = mesh::dot(normal, *t);
-            problem.springs[n] = self.base_springs[n] + k_all;
-            for d in 0..3 {
-                problem.f_ext[3 * n + d] = k_all * t[d] + k_normal * along * normal[d];
-            }
-            if k_normal > 0.0 {
-                problem.normal_springs.push(NormalSpring { node: n, normal, stiffness: k_normal });
-            }
-        }
+        let k = ramp * self.stiffness / observations.matches.len() as f64;
+        self.solver.problem_mut().point_springs = observations
+            .matches
+            .iter()
+            .map(|m| PointSpring {
+                nodes: m.stencil.0.clone(),
+                target: m.shift,
+                stiffness: ISOTROPIC_FRACTION * k,
+                normal: m.normal,
+                normal_stiffness: (1.0 - ISOTROPIC_FRACTION) * k,
+            })
+            .collect();
         Ok(self.solver.solve_from(Some(previous), &self.options)?.u)
     }
 }
@@ -369,7 +363,14 @@ mod tests {
             .min_by(|&a, &b| u[3 * deformer.inputs[a] + 2].total_cmp(&u[3 * deformer.inputs[b] + 2]))
             .unwrap();
         let node = deformer.inputs[deepest];
-        let (truth, fitted, mean) = (u[3 * node + 2], fit[deepest][2], observations.target[node][2]);
+        // Each node's mean match offset: the matches' shifts weighted by the node's share in them.
+        let mean = observations
+            .matches
+            .iter()
+            .flat_map(|m| m.stencil.0.iter().filter(|&&(k, _)| k == node).map(move |&(_, w)| w * m.shift[2]))
+            .sum::<f64>()
+            / observations.weight[node];
+        let (truth, fitted) = (u[3 * node + 2], fit[deepest][2]);
         eprintln!(
             "deepest visible node: {:.2} mm, fit {:.2} mm, mean offset {:.2} mm",
             truth * 1e3,

@@ -12,18 +12,14 @@ use crate::organ::{Organ, Stencil};
 use crate::rigid::RigidOptions;
 use crate::{RegisterError, Result};
 
-/// Displacement observations of mesh nodes: for each node, the displacement
-/// the matched cloud points ask of it and their total weight (0: unobserved).
+/// What the cloud says of the organ's displacement: each kept match asks the surface point it
+/// matched to move onto its cloud point.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Observations {
-    /// Observed displacement per node (m); zero where the weight is zero.
-    pub target: Vec<Point>,
-    /// Sum of the interpolation weights of the matches that reach each node.
-    pub weight: Vec<f64>,
-    /// Unit normal of the deformed surface where the node's matches lie (zero if unobserved).
-    pub normal: Vec<Point>,
-    /// The kept matches themselves, for a deformer that fits the surface to each point.
+    /// The kept matches.
     pub matches: Vec<PointMatch>,
+    /// Per mesh node, the sum of its interpolation weights over the matches (0: unobserved).
+    pub weight: Vec<f64>,
 }
 
 /// A kept match: a cloud point and the surface point it matched.
@@ -33,6 +29,8 @@ pub struct PointMatch {
     pub stencil: Stencil,
     /// Cloud point − rest position of the matched surface point (m).
     pub shift: Point,
+    /// Unit normal of the matched triangle, deformed.
+    pub normal: Point,
 }
 
 /// A model that gives the organ's nodal displacement (3 per node) explaining observations.
@@ -193,8 +191,8 @@ pub fn register_frame(
 
 /// Matches each cloud point to the closest point of the deformed `surface` (of its triangles
 /// facing a camera looking along `view`, when given), drops outliers (farther than the larger
-/// of `capture` and the options' limits), and spreads each match's displacement (cloud point −
-/// rest position of the matched surface point) to the mesh nodes that move it.
+/// of `capture` and the options' limits), and keeps each match's displacement (cloud point −
+/// rest position of the matched surface point) with the mesh nodes that move it.
 /// Returns the observations and the number of matches kept.
 pub fn observe(
     organ: &Organ,
@@ -207,12 +205,7 @@ pub fn observe(
     let (facing, original) = facing_part(surface, view);
     let (matches, limit) = closest_matches(&facing, cloud, options, capture)?;
     let n = organ.mesh().num_nodes();
-    let mut obs = Observations {
-        target: vec![[0.0; 3]; n],
-        weight: vec![0.0; n],
-        normal: vec![[0.0; 3]; n],
-        matches: Vec::with_capacity(cloud.len()),
-    };
+    let mut obs = Observations { matches: Vec::with_capacity(cloud.len()), weight: vec![0.0; n] };
     let rest = &organ.surface().vertices;
     let stencils = organ.surface_stencils();
     let mut kept = 0;
@@ -237,20 +230,10 @@ pub fn observe(
             for &(node, w) in &stencils[k].0 {
                 let w = b * w;
                 obs.weight[node] += w;
-                for d in 0..3 {
-                    obs.target[node][d] += w * shift[d];
-                    obs.normal[node][d] += w * normal[d];
-                }
                 stencil.push((node, w));
             }
         }
-        obs.matches.push(PointMatch { stencil: Stencil(stencil), shift });
-    }
-    for ((t, n), &w) in obs.target.iter_mut().zip(&mut obs.normal).zip(&obs.weight) {
-        if w > 0.0 {
-            t.iter_mut().for_each(|x| *x /= w);
-            *n = unit(*n);
-        }
+        obs.matches.push(PointMatch { stencil: Stencil(stencil), shift, normal });
     }
     Ok((obs, kept))
 }
