@@ -128,8 +128,7 @@ impl Pattern {
 
     /// The value position of entry (row, col) with row ≥ col, if it is stored.
     pub fn find(&self, row: usize, col: usize) -> Option<usize> {
-        let (lo, hi) = (self.col_ptr[col] as usize, self.col_ptr[col + 1] as usize);
-        self.row_idx[lo..hi].binary_search(&(row as u32)).ok().map(|i| lo + i)
+        find_entry(&self.col_ptr, &self.row_idx, row, col)
     }
 
     /// Number of stored (lower-triangle) entries.
@@ -140,8 +139,13 @@ impl Pattern {
 
 /// The value position of entry (row, col) in a CSC pattern; panics when it is not stored.
 fn entry_position(col_ptr: &[u32], row_idx: &[u32], row: usize, col: usize) -> usize {
+    find_entry(col_ptr, row_idx, row, col).expect("entry in pattern")
+}
+
+/// The value position of entry (row, col) in a CSC pattern, if it is stored.
+fn find_entry(col_ptr: &[u32], row_idx: &[u32], row: usize, col: usize) -> Option<usize> {
     let (lo, hi) = (col_ptr[col] as usize, col_ptr[col + 1] as usize);
-    lo + row_idx[lo..hi].binary_search(&(row as u32)).expect("entry in pattern")
+    row_idx[lo..hi].binary_search(&(row as u32)).ok().map(|i| lo + i)
 }
 
 /// Reusable buffers for patch results.

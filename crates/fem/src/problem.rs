@@ -161,8 +161,8 @@ impl Problem {
                 && s.target.iter().all(|x| x.is_finite()))
             {
                 return Err(FemError::Invalid(format!(
-                    "point spring {i}: nodes {:?} of {n}, target {:?}, stiffness {} and {} along a normal of length {length} \
-                     (nodes must exist, stiffnesses be non-negative, the normal of length 1)",
+                    "point spring {i}: nodes {:?} of {n}, target {:?}, stiffness {} and {} along a normal of \
+                     length {length} (nodes must exist, stiffnesses be non-negative, the normal of length 1)",
                     s.nodes, s.target, s.stiffness, s.normal_stiffness
                 )));
             }
