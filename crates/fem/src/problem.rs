@@ -51,6 +51,14 @@ pub struct PointSpring {
     pub normal_stiffness: f64,
 }
 
+impl PointSpring {
+    /// K v, with K = k I + k_n n nᵀ the spring's stiffness.
+    pub fn stiffness_times(&self, v: Point) -> Point {
+        let along = self.normal_stiffness * (0..3).map(|d| self.normal[d] * v[d]).sum::<f64>();
+        std::array::from_fn(|d| self.stiffness * v[d] + along * self.normal[d])
+    }
+}
+
 impl Problem {
     /// A problem without constraints or loads.
     pub fn new(mesh: Mesh, material: Material) -> Self {

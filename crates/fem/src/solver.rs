@@ -249,8 +249,7 @@ impl StaticSolver {
             for &(n, w) in &s.nodes {
                 (0..3).for_each(|d| r[d] += w * u[3 * n + d]);
             }
-            let along = s.normal_stiffness * (0..3).map(|d| s.normal[d] * r[d]).sum::<f64>();
-            let kr: [f64; 3] = std::array::from_fn(|d| s.stiffness * r[d] + along * s.normal[d]);
+            let kr = s.stiffness_times(r);
             for &(n, w) in &s.nodes {
                 (0..3).for_each(|d| f[3 * n + d] += w * kr[d]);
             }
@@ -286,8 +285,7 @@ impl StaticSolver {
     fn loads(&self) -> Vec<f64> {
         let mut f = self.problem.f_ext.clone();
         for s in &self.problem.point_springs {
-            let along = s.normal_stiffness * (0..3).map(|d| s.normal[d] * s.target[d]).sum::<f64>();
-            let kt: [f64; 3] = std::array::from_fn(|d| s.stiffness * s.target[d] + along * s.normal[d]);
+            let kt = s.stiffness_times(s.target);
             for &(n, w) in &s.nodes {
                 (0..3).for_each(|d| f[3 * n + d] += w * kt[d]);
             }

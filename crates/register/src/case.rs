@@ -33,7 +33,7 @@ pub struct SyntheticCase {
     pub truth: Vec<Point>,
     /// Model frame → camera frame: the scenario's misalignment (the identity when none).
     pub pose: RigidTransform,
-    /// The truth's organ (its finer mesh) and nodal displacement, in the model's frame.
+    /// The truth's organ (its finer mesh), in the model's frame.
     pub truth_organ: Organ,
     /// Its displacement (m, 3 per node).
     pub truth_u: Vec<f64>,

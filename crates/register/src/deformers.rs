@@ -75,24 +75,24 @@ impl Deformer for FemDeformer {
 /// U-Net registration. The displacement of the network's input nodes (the visible surface) is
 /// first fitted to the matches: the surface it interpolates passes near each matched cloud
 /// point (least squares), with a membrane penalty on neighbouring nodes' differences, unseen
-/// nodes interpolated. A network trained on
-/// the normal motion of its input nodes (`normal = true` in the dataset's input, as
-/// `scenarios/liver_ar.toml`) gets the normal part of that fit, which is what closest-point
-/// matching measures, and infers the tangential motion and the volume. A network trained on the
-/// full displacement gets the fit itself, and its input nodes keep the fit (fed back, its own
-/// predictions at its inputs would drift along the surface, where no match corrects them).
+/// nodes interpolated. A network trained on the normal motion of its input nodes (`normal =
+/// true` in the dataset's input, as `scenarios/liver_ar.toml`) gets the normal part of that fit,
+/// which is what closest-point matching measures, and infers the tangential motion and the
+/// volume. A network trained on the full displacement gets the fit itself, and its input nodes
+/// keep the fit (fed back, its own predictions at its inputs would drift along the surface,
+/// where no match corrects them).
 pub struct NetworkDeformer {
     predictor: Predictor,
     grid: Grid,
     to_mesh: GridToMesh,
     /// The input nodes (mesh numbering) and their positions.
     inputs: Vec<usize>,
-    /// The nodes the surface fit moves: the inputs, then the other nodes of the surface.
-    fit_nodes: Vec<usize>,
-    /// Each mesh node's position in `fit_nodes` (`usize::MAX`: none).
-    local: Vec<usize>,
-    /// Mesh edges between fit nodes, as positions in `fit_nodes`.
     points: Vec<mesh::Point>,
+    /// The nodes the surface fit may move: the inputs, then the other nodes of the surface.
+    /// Each mesh node's index among them (`usize::MAX`: none), and how many there are.
+    local: Vec<usize>,
+    fit_count: usize,
+    /// Mesh edges between those nodes, as their indices.
     edges: Vec<(usize, usize)>,
     /// For a network of normal motion: the outward unit normal of the rest surface at each
     /// input node.
@@ -129,11 +129,11 @@ impl NetworkDeformer {
         for (i, &n) in input_nodes.iter().enumerate() {
             *local.get_mut(n).ok_or_else(|| RegisterError::Invalid(format!("input node {n} is not a mesh node")))? = i;
         }
-        let mut fit_nodes = input_nodes.to_vec();
+        let mut fit_count = input_nodes.len();
         for &(n, _) in organ.surface_stencils().iter().flat_map(|s| &s.0) {
             if local[n] == usize::MAX {
-                local[n] = fit_nodes.len();
-                fit_nodes.push(n);
+                local[n] = fit_count;
+                fit_count += 1;
             }
         }
         let mut edges = Vec::new();
@@ -168,8 +168,8 @@ impl NetworkDeformer {
             to_mesh: GridToMesh::new(mesh, &grid)?,
             grid,
             inputs: input_nodes.to_vec(),
-            fit_nodes,
             local,
+            fit_count,
             points: input_nodes.iter().map(|&n| mesh.nodes[n]).collect(),
             edges,
             normals,
@@ -184,7 +184,7 @@ impl NetworkDeformer {
     /// keeps the depth of a push: a mean over the triangles around a node flattens a dent.
     pub fn surface_estimate(&self, observations: &Observations, previous: &[f64]) -> Vec<[f64; 3]> {
         // The unknowns: the inputs, then the other fit nodes that a match moves.
-        let mut unknown = vec![usize::MAX; self.fit_nodes.len()];
+        let mut unknown = vec![usize::MAX; self.fit_count];
         let mut nodes: Vec<usize> = self.inputs.clone();
         unknown[..nodes.len()].iter_mut().enumerate().for_each(|(i, u)| *u = i);
         let mut rows: Vec<FitRow> = Vec::with_capacity(observations.matches.len());
