@@ -165,8 +165,7 @@ impl Generator {
         let select = |s: &NodeSelection| s.select(&mesh).map_err(|e| invalid(format!("selection {s:?}: {e}")));
         // Selections are sorted and free of repeats: membership tests below use binary search.
         let fixed_sets = config.fixed.iter().map(select).collect::<Result<Vec<_>>>()?;
-        let surface = mesh::boundary_surface(&mesh);
-        let normals = surface.vertex_normals();
+        let normals = mesh.surface_normals();
         let boundary = mesh::boundary_nodes(&mesh);
         let (centres, load_nodes) = match &config.load {
             Load::PatchForce { centres, radius, magnitude } => {

@@ -129,14 +129,28 @@ pub struct Mesh {
     /// Optional per-cell stiffness scale in [0, 1]: the volume fraction of an
     /// immersed-boundary cell that lies inside the organ. `None` means 1 everywhere.
     pub cell_fraction: Option<Vec<f64>>,
+    /// Optional outward unit normal of the organ's surface at each node, where the mesh knows it
+    /// better than its boundary faces do: on an immersed grid the surface cuts through cells, and
+    /// its nodes are mostly inside the grid. `None`: see [`Mesh::surface_normals`].
+    pub node_normals: Option<Vec<Point>>,
 }
 
 impl Mesh {
     /// A mesh from nodes and cells, checked with [`Mesh::validate`].
     pub fn new(nodes: Vec<Point>, cells: Cells) -> Result<Self, MeshError> {
-        let mesh = Mesh { nodes, cells, regions: BTreeMap::new(), cell_fraction: None };
+        let mesh = Mesh { nodes, cells, regions: BTreeMap::new(), cell_fraction: None, node_normals: None };
         mesh.validate()?;
         Ok(mesh)
+    }
+
+    /// The outward unit normal of the organ's surface at each node: [`Mesh::node_normals`] when
+    /// the mesh has them, otherwise the area-weighted normals of its boundary faces (zero for a
+    /// node on none).
+    pub fn surface_normals(&self) -> Vec<Point> {
+        match &self.node_normals {
+            Some(normals) => normals.clone(),
+            None => topology::boundary_surface(self).vertex_normals(),
+        }
     }
 
     /// Number of nodes.

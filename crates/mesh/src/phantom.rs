@@ -294,8 +294,8 @@ impl PhantomSpec {
             }
         }
         let normals: Vec<Point> = mesh.nodes.par_iter().map(|&p| self.normal(p)).collect();
-        let regions = self.regions(&mesh.nodes, &on_surface, &normals)?;
-        grid.mesh.regions = regions;
+        grid.mesh.regions = self.regions(&mesh.nodes, &on_surface, &normals)?;
+        grid.mesh.node_normals = Some(normals);
         Ok(grid)
     }
 

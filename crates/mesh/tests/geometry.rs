@@ -520,6 +520,26 @@ fn phantom_regions_and_volume() {
     assert!((250..=350).contains(&coarse.num_nodes()) && (25..=45).contains(&hidden));
 }
 
+/// On the immersed grid the surface cuts through cells: most visible nodes lie inside the grid,
+/// where its boundary faces give no normal. The grid carries the phantom's own normal at every
+/// node, facing the camera on the visible region (a tool push along it loads the organ, and the
+/// normal motion there is an input).
+#[test]
+fn immersed_grid_nodes_have_the_phantoms_normals() {
+    let spec = PhantomSpec::default();
+    let grid = spec.immersed(0.01).unwrap();
+    let normals = grid.mesh.surface_normals();
+    let faces = augsim_mesh::boundary_surface(&grid.mesh).vertex_normals();
+    let visible = grid.mesh.region("visible").unwrap();
+    let without_face_normal = visible.iter().filter(|&&k| faces[k] == [0.0; 3]).count();
+    println!("{} visible nodes, {without_face_normal} on no boundary face", visible.len());
+    assert!(without_face_normal > visible.len() / 4, "{without_face_normal} of {}", visible.len());
+    for &k in visible {
+        assert!((norm(normals[k]) - 1.0).abs() < 1e-9, "node {k}: {:?}", normals[k]);
+        assert!(augsim_mesh::dot(normals[k], spec.view_direction) < 0.0, "node {k} faces away");
+    }
+}
+
 #[test]
 fn immersed_grid_fractions_and_volume() {
     let spec = PhantomSpec::default();

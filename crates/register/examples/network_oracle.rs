@@ -61,7 +61,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     // The network given the true normal motion of its input nodes.
     let visible = mesh.region("visible")?.to_vec();
-    let normals = mesh::boundary_surface(&mesh).vertex_normals();
+    let normals = mesh.surface_normals();
     let points: Vec<Point> = visible.iter().map(|&n| mesh.nodes[n]).collect();
     let along: Vec<Point> = visible.iter().map(|&n| normal_part(&truth_u[3 * n..3 * n + 3], normals[n])).collect();
     let grid = model.placed_grid()?;

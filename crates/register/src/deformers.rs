@@ -151,7 +151,7 @@ impl NetworkDeformer {
         edges.sort_unstable();
         edges.dedup();
         let normals = if normal {
-            let all = mesh::boundary_surface(mesh).vertex_normals();
+            let all = mesh.surface_normals();
             let picked: Vec<mesh::Point> = input_nodes.iter().map(|&n| all[n]).collect();
             if let Some(i) = picked.iter().position(|n| *n == [0.0; 3]) {
                 return Err(RegisterError::Invalid(format!(
