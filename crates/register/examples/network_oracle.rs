@@ -11,7 +11,7 @@
 use std::path::Path;
 
 use augsim_register::case::{model_mesh, network_model, synthetic_case};
-use augsim_register::{observe, register_frame, target_errors, CaseScenario, Organ};
+use augsim_register::{observe, register_frame, target_errors, CaseScenario, Organ, RigidTransform};
 use learn::generate::normal_part;
 use learn::{encode_points, GridToMesh, Predictor, TrainedModel};
 use mesh::Point;
@@ -28,6 +28,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         scenario.truth.force = force.parse()?;
     }
     let case = synthetic_case(&scenario)?;
+    if case.pose != RigidTransform::identity() {
+        return Err("the oracle compares with the truth in the model's frame: remove the case's misalignment".into());
+    }
     let model = TrainedModel::load(Path::new(MODEL), &learn::inference_device())?;
     let mesh = model_mesh()?;
     let organ = Organ::new(mesh.clone(), None)?;
