@@ -70,11 +70,11 @@ fn default_shard_size() -> usize {
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum Load {
     /// One force along the inward surface normal, of random magnitude, shared by
-    /// the surface nodes within `radius` of a random centre node in proportion to
-    /// their material share ([`mesh::Mesh::node_material_share`]: equal shares on a
-    /// body-fitted mesh; little for immersed-grid nodes outside the organ).
+    /// the surface nodes ([`mesh::Mesh::surface_nodes`]) within `radius` of a random centre
+    /// node in proportion to their material share ([`mesh::Mesh::node_material_share`]:
+    /// equal shares on a body-fitted mesh; little for immersed-grid nodes outside the organ).
     PatchForce {
-        /// Nodes the patch centre is drawn from (default: boundary nodes that are not fixed).
+        /// Nodes the patch centre is drawn from (default: surface nodes that are not fixed).
         centres: Option<NodeSelection>,
         /// Patch radius (m).
         radius: f64,
@@ -166,7 +166,8 @@ impl Generator {
         // Selections are sorted and free of repeats: membership tests below use binary search.
         let fixed_sets = config.fixed.iter().map(select).collect::<Result<Vec<_>>>()?;
         let normals = mesh.surface_normals();
-        let boundary = mesh::boundary_nodes(&mesh);
+        // Where a tool can push: the organ's surface (on an immersed grid, its cut cells' nodes).
+        let surface = mesh.surface_nodes();
         let (centres, load_nodes) = match &config.load {
             Load::PatchForce { centres, radius, magnitude } => {
                 check_range(magnitude, "magnitude")?;
@@ -175,13 +176,13 @@ impl Generator {
                 }
                 let c = match centres {
                     Some(s) => select(s)?,
-                    None => boundary
+                    None => surface
                         .iter()
                         .copied()
                         .filter(|n| fixed_sets.iter().all(|f| f.binary_search(n).is_err()))
                         .collect(),
                 };
-                (c, boundary.clone())
+                (c, surface.clone())
             }
             Load::PointForces { nodes, count, magnitude } => {
                 check_range(magnitude, "magnitude")?;

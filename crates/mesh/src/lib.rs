@@ -153,6 +153,22 @@ impl Mesh {
         }
     }
 
+    /// The nodes on the organ's surface, sorted: on an immersed grid (with cell fractions) the
+    /// nodes of its cut cells, where the surface passes (most of them inside the grid); otherwise
+    /// the nodes of its boundary faces.
+    pub fn surface_nodes(&self) -> Vec<usize> {
+        let Some(fraction) = &self.cell_fraction else { return topology::boundary_nodes(self) };
+        let mut nodes: Vec<usize> = fraction
+            .iter()
+            .enumerate()
+            .filter(|(_, &f)| f < 1.0)
+            .flat_map(|(c, _)| self.cells.cell(c).to_vec())
+            .collect();
+        nodes.sort_unstable();
+        nodes.dedup();
+        nodes
+    }
+
     /// Number of nodes.
     pub fn num_nodes(&self) -> usize {
         self.nodes.len()

@@ -284,15 +284,8 @@ impl PhantomSpec {
     pub fn immersed(&self, spacing: f64) -> Result<ImmersedGrid, MeshError> {
         let mut grid = immersed_grid(self, &ImmersedOptions::with_spacing(spacing))?;
         let mesh = &grid.mesh;
-        let fraction = mesh.cell_fraction.as_deref().unwrap_or(&[]);
         let mut on_surface = vec![false; mesh.num_nodes()];
-        for (c, &f) in fraction.iter().enumerate() {
-            if f < 1.0 {
-                for &k in mesh.cells.cell(c) {
-                    on_surface[k] = true;
-                }
-            }
-        }
+        mesh.surface_nodes().into_iter().for_each(|k| on_surface[k] = true);
         let normals: Vec<Point> = mesh.nodes.par_iter().map(|&p| self.normal(p)).collect();
         grid.mesh.regions = self.regions(&mesh.nodes, &on_surface, &normals)?;
         grid.mesh.node_normals = Some(normals);

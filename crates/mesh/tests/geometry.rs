@@ -520,14 +520,20 @@ fn phantom_regions_and_volume() {
     assert!((250..=350).contains(&coarse.num_nodes()) && (25..=45).contains(&hidden));
 }
 
-/// On the immersed grid the surface cuts through cells: most visible nodes lie inside the grid,
-/// where its boundary faces give no normal. The grid carries the phantom's own normal at every
-/// node, facing the camera on the visible region (a tool push along it loads the organ, and the
-/// normal motion there is an input).
+/// On the immersed grid the surface cuts through cells: its surface nodes are its cut cells'
+/// nodes, and most visible nodes lie inside the grid, where its boundary faces give no normal.
+/// The grid carries the phantom's own normal at every node, facing the camera on the visible
+/// region (a tool push along it loads the organ, and the normal motion there is an input).
 #[test]
 fn immersed_grid_nodes_have_the_phantoms_normals() {
     let spec = PhantomSpec::default();
     let grid = spec.immersed(0.01).unwrap();
+    let surface = grid.mesh.surface_nodes();
+    let outer = augsim_mesh::boundary_nodes(&grid.mesh);
+    assert!(surface.windows(2).all(|w| w[0] < w[1]));
+    assert!(grid.mesh.region("visible").unwrap().iter().all(|k| surface.binary_search(k).is_ok()));
+    let inside = surface.iter().filter(|k| outer.binary_search(k).is_err()).count();
+    assert!(inside > surface.len() / 4, "{inside} of {} surface nodes inside the grid", surface.len());
     let normals = grid.mesh.surface_normals();
     let faces = augsim_mesh::boundary_surface(&grid.mesh).vertex_normals();
     let visible = grid.mesh.region("visible").unwrap();
