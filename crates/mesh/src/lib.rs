@@ -129,9 +129,10 @@ pub struct Mesh {
     /// Optional per-cell stiffness scale in [0, 1]: the volume fraction of an
     /// immersed-boundary cell that lies inside the organ. `None` means 1 everywhere.
     pub cell_fraction: Option<Vec<f64>>,
-    /// Optional outward unit normal of the organ's surface at each node, where the mesh knows it
-    /// better than its boundary faces do: on an immersed grid the surface cuts through cells, and
-    /// its nodes are mostly inside the grid. `None`: see [`Mesh::surface_normals`].
+    /// Optional outward unit normal of the organ's surface at each node (zero where it has none),
+    /// where the mesh knows it better than its boundary faces do: on an immersed grid the surface
+    /// cuts through cells, and its nodes are mostly inside the grid. `None`: see
+    /// [`Mesh::surface_normals`].
     pub node_normals: Option<Vec<Point>>,
 }
 
@@ -209,6 +210,12 @@ impl Mesh {
         if let Some(f) = &self.cell_fraction {
             if f.len() != self.cells.len() || f.iter().any(|x| !(0.0..=1.0).contains(x)) {
                 return Err(MeshError::Invalid("cell_fraction must hold one value in [0, 1] per cell".into()));
+            }
+        }
+        if let Some(normals) = &self.node_normals {
+            let unit_or_none = |v: &Point| *v == [0.0; 3] || (norm(*v) - 1.0).abs() < 1e-6;
+            if normals.len() != n || !normals.iter().all(unit_or_none) {
+                return Err(MeshError::Invalid("node_normals must hold one unit (or zero) vector per node".into()));
             }
         }
         Ok(())

@@ -528,6 +528,10 @@ fn phantom_regions_and_volume() {
 fn immersed_grid_nodes_have_the_phantoms_normals() {
     let spec = PhantomSpec::default();
     let grid = spec.immersed(0.01).unwrap();
+    grid.mesh.validate().unwrap();
+    let mut wrong = grid.mesh.clone();
+    wrong.node_normals.as_mut().unwrap().pop();
+    assert!(wrong.validate().unwrap_err().to_string().contains("node_normals"));
     let surface = grid.mesh.surface_nodes();
     let outer = augsim_mesh::boundary_nodes(&grid.mesh);
     assert!(surface.windows(2).all(|w| w[0] < w[1]));
