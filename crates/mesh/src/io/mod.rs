@@ -15,8 +15,8 @@
 //! [`write_atomic`] (a temporary file in the target directory, renamed onto the target), so a
 //! reader never sees a partial file; the other crates write their files with it too.
 //! Numbers are written in their shortest exact decimal form (ASCII) or as IEEE doubles (binary):
-//! reading back gives the same values. Named regions, `cell_fraction` and `node_normals` are not written; pass
-//! them as [`Field`]s where needed.
+//! reading back gives the same values. Named regions, `cell_fraction` and `node_normals` are not
+//! written; pass them as [`Field`]s where needed.
 
 mod gmsh;
 mod legacy_vtk;
