@@ -49,6 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     };
     let truth_u: Vec<f64> = mesh.nodes.iter().flat_map(|&x| truth_at(x)).collect();
+    let node_truth = |n: usize| -> Point { std::array::from_fn(|d| truth_u[3 * n + d]) };
     let stencils = organ.locate(&case.targets, "target")?;
     let tre = |u: &[f64]| {
         let registered = augsim_register::organ::displaced(&case.targets, &stencils, u);
@@ -77,12 +78,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (_, deformer) = network_model(mesh.clone(), &model)?;
     let options = &scenario.registration;
     let view = options.view.or(Some(scenario.camera.view));
-    let (observations, _) = observe(&organ, &organ.deformed_surface(&truth_u), &case.cloud, options, 0.0, view)?;
+    let observations = observe(&organ, &organ.deformed_surface(&truth_u), &case.cloud, options, 0.0, view)?;
     let fit = deformer.surface_estimate(&observations, &truth_u);
     let misfit: Vec<f64> = visible
         .iter()
         .zip(&fit)
-        .map(|(&n, f)| (mesh::dot(*f, normals[n]) - mesh::dot(truth_at(mesh.nodes[n]), normals[n])).abs())
+        .map(|(&n, f)| (mesh::dot(*f, normals[n]) - mesh::dot(node_truth(n), normals[n])).abs())
         .collect();
     println!(
         "fit on the true surface                normal motion off by {:.2} mm on average, {:.2} mm at most",

@@ -355,7 +355,7 @@ mod tests {
         let view = [0.0, 0.0, -1.0];
         let cloud: Vec<mesh::Point> =
             mesh::sampling::sample_visible(&deformed, view, 3000, 5).unwrap().into_iter().map(|s| s.point).collect();
-        let (observations, _) =
+        let observations =
             observe(&organ, &deformed, &cloud, &RegistrationOptions::default(), 0.05, Some(view)).unwrap();
         let fit = deformer.surface_estimate(&observations, &vec![0.0; u.len()]);
         let deepest = (0..deformer.inputs.len())

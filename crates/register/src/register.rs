@@ -170,8 +170,8 @@ pub fn register_frame(
         if view.is_none() && iterations == 1 {
             view = estimate_view(&surface, candidates, options, capture)?;
         }
-        let (observations, matched) = observe(organ, &surface, candidates, options, capture, view)?;
-        inliers = matched;
+        let observations = observe(organ, &surface, candidates, options, capture, view)?;
+        inliers = observations.matches.len();
         u = deformer.deform(&observations, &u, iterations - 1)?;
         if u.len() != ndof || u.iter().any(|v| !v.is_finite()) {
             return Err(RegisterError::Invalid("the deformer returned a displacement that is not finite".into()));
@@ -193,7 +193,6 @@ pub fn register_frame(
 /// facing a camera looking along `view`, when given), drops outliers (farther than the larger
 /// of `capture` and the options' limits), and keeps each match's displacement (cloud point −
 /// rest position of the matched surface point) with the mesh nodes that move it.
-/// Returns the observations and the number of matches kept.
 pub fn observe(
     organ: &Organ,
     surface: &TriSurface,
@@ -201,19 +200,17 @@ pub fn observe(
     options: &RegistrationOptions,
     capture: f64,
     view: Option<Point>,
-) -> Result<(Observations, usize)> {
+) -> Result<Observations> {
     let (facing, original) = facing_part(surface, view);
     let (matches, limit) = closest_matches(&facing, cloud, options, capture)?;
     let n = organ.mesh().num_nodes();
     let mut obs = Observations { matches: Vec::with_capacity(cloud.len()), weight: vec![0.0; n] };
     let rest = &organ.surface().vertices;
     let stencils = organ.surface_stencils();
-    let mut kept = 0;
     for (c, m) in cloud.iter().zip(&matches) {
         if m.distance > limit {
             continue;
         }
-        kept += 1;
         let tri = surface.triangles[original[m.triangle]];
         let corners = tri.map(|k| surface.vertices[k]);
         let bary = barycentric(corners, m.point);
@@ -235,7 +232,7 @@ pub fn observe(
         }
         obs.matches.push(PointMatch { stencil: Stencil(stencil), shift, normal });
     }
-    Ok((obs, kept))
+    Ok(obs)
 }
 
 /// The closest point of `surface` to each cloud point, and the distance beyond which a
