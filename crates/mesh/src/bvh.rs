@@ -27,8 +27,10 @@ const LEAF_SIZE: usize = 4;
 const BETA: f64 = 2.0;
 const FOUR_PI: f64 = 4.0 * std::f64::consts::PI;
 
-#[derive(Clone, Debug)]
-struct Node {
+/// A node's bounding box and where its triangles or children are: all a closest-point search
+/// reads, packed apart from the winding-number moments ([`Node`]).
+#[derive(Clone, Copy, Debug)]
+struct NodeBox {
     lo: Point,
     hi: Point,
     /// First triangle (in `order`) when a leaf, else index of the first child
@@ -36,6 +38,11 @@ struct Node {
     first: u32,
     /// Number of triangles in a leaf; 0 for an inner node.
     count: u32,
+}
+
+/// A node's moments for the fast winding number (same index as its [`NodeBox`]).
+#[derive(Clone, Debug)]
+struct Node {
     /// Area-weighted centroid of the triangles.
     centre: Point,
     /// Radius of a ball about `centre` containing the triangles.
@@ -65,21 +72,10 @@ pub struct SurfaceBvh {
     vertices: Vec<Point>,
     triangles: Vec<[usize; 3]>,
     order: Vec<u32>,
-    nodes: Vec<Node>,
-    /// The nodes' boxes alone, and the triangles' corners in `order`: what a closest-point
-    /// search reads, packed (a node with its winding-number moments is 200 bytes).
     boxes: Vec<NodeBox>,
+    nodes: Vec<Node>,
+    /// The triangles' corners in `order`, for the closest-point search.
     corners: Vec<[Point; 3]>,
-}
-
-/// A node's bounding box and where its triangles or children are (as in [`Node`]).
-#[derive(Clone, Copy, Debug)]
-struct NodeBox {
-    lo: Point,
-    hi: Point,
-    centre: Point,
-    first: u32,
-    count: u32,
 }
 
 impl SurfaceBvh {
@@ -108,18 +104,13 @@ impl SurfaceBvh {
             vertices: surface.vertices.clone(),
             triangles: surface.triangles.clone(),
             order: (0..surface.triangles.len() as u32).collect(),
+            boxes: Vec::with_capacity(2 * surface.triangles.len() / LEAF_SIZE + 2),
             nodes: Vec::with_capacity(2 * surface.triangles.len() / LEAF_SIZE + 2),
-            boxes: Vec::new(),
             corners: Vec::new(),
         };
         let centroids: Vec<Point> = bvh.triangles.iter().map(|t| centroid(t.map(|k| bvh.vertices[k]))).collect();
-        bvh.nodes.push(empty_node());
+        bvh.push_node();
         bvh.build(0, 0, bvh.triangles.len(), &centroids);
-        bvh.boxes = bvh
-            .nodes
-            .iter()
-            .map(|n| NodeBox { lo: n.lo, hi: n.hi, centre: n.centre, first: n.first, count: n.count })
-            .collect();
         bvh.corners = bvh.order.iter().map(|&t| bvh.tri(t as usize)).collect();
         Ok(bvh)
     }
@@ -131,7 +122,7 @@ impl SurfaceBvh {
 
     /// Bounding box (min, max) of the surface.
     pub fn bounds(&self) -> (Point, Point) {
-        (self.nodes[0].lo, self.nodes[0].hi)
+        (self.boxes[0].lo, self.boxes[0].hi)
     }
 
     fn tri(&self, t: usize) -> [Point; 3] {
@@ -156,11 +147,8 @@ impl SurfaceBvh {
                 chi[d] = chi[d].max(c[d]);
             }
         }
-        self.nodes[node].lo = lo;
-        self.nodes[node].hi = hi;
         if end - start <= LEAF_SIZE {
-            self.nodes[node].first = start as u32;
-            self.nodes[node].count = (end - start) as u32;
+            self.boxes[node] = NodeBox { lo, hi, first: start as u32, count: (end - start) as u32 };
             self.leaf_moments(node);
             return;
         }
@@ -169,18 +157,23 @@ impl SurfaceBvh {
         self.order[start..end].select_nth_unstable_by(mid - start, |&a, &b| {
             centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis])
         });
-        let left = self.nodes.len();
-        self.nodes.push(empty_node());
-        self.nodes.push(empty_node());
-        self.nodes[node].first = left as u32;
-        self.nodes[node].count = 0;
+        let left = self.boxes.len();
+        self.push_node();
+        self.push_node();
+        self.boxes[node] = NodeBox { lo, hi, first: left as u32, count: 0 };
         self.build(left, start, mid, centroids);
         self.build(left + 1, mid, end, centroids);
         self.inner_moments(node, left);
     }
 
+    /// Appends a node to be filled by [`build`](Self::build).
+    fn push_node(&mut self) {
+        self.boxes.push(NodeBox { lo: [0.0; 3], hi: [0.0; 3], first: 0, count: 0 });
+        self.nodes.push(Node { centre: [0.0; 3], radius: 0.0, dipole: [0.0; 3], moment: [[0.0; 3]; 3], area: 0.0 });
+    }
+
     fn leaf_moments(&mut self, node: usize) {
-        let (first, count) = (self.nodes[node].first as usize, self.nodes[node].count as usize);
+        let (first, count) = (self.boxes[node].first as usize, self.boxes[node].count as usize);
         let mut area_sum = 0.0;
         let mut centre = [0.0; 3];
         let mut dipole = [0.0; 3];
@@ -198,7 +191,7 @@ impl SurfaceBvh {
         if area_sum > 0.0 {
             centre = centre.map(|c| c / area_sum);
         } else {
-            let (lo, hi) = (self.nodes[node].lo, self.nodes[node].hi);
+            let (lo, hi) = (self.boxes[node].lo, self.boxes[node].hi);
             centre = std::array::from_fn(|d| 0.5 * (lo[d] + hi[d]));
         }
         let mut moment = [[0.0; 3]; 3];
@@ -260,7 +253,7 @@ impl SurfaceBvh {
         let mut stack: Vec<u32> = Vec::with_capacity(64);
         stack.push(0);
         while let Some(i) = stack.pop() {
-            let nd = &self.nodes[i as usize];
+            let (nd, b) = (&self.nodes[i as usize], &self.boxes[i as usize]);
             let r = sub(nd.centre, q);
             let d2 = dot(r, r);
             if d2 > (BETA * nd.radius) * (BETA * nd.radius) {
@@ -276,13 +269,13 @@ impl SurfaceBvh {
                     }
                 }
                 w += (dot(nd.dipole, r) * inv3 + trace * inv3 - 3.0 * rmr * inv3 / d2) / FOUR_PI;
-            } else if nd.count > 0 {
-                for &t in &self.order[nd.first as usize..(nd.first + nd.count) as usize] {
+            } else if b.count > 0 {
+                for &t in &self.order[b.first as usize..(b.first + b.count) as usize] {
                     w += solid_angle(self.tri(t as usize), q) / FOUR_PI;
                 }
             } else {
-                stack.push(nd.first);
-                stack.push(nd.first + 1);
+                stack.push(b.first);
+                stack.push(b.first + 1);
             }
         }
         w
@@ -328,7 +321,7 @@ impl SurfaceBvh {
                 // Visit the nearer child first (pushed last); a point inside
                 // both boxes goes first to the child whose centre is nearer.
                 let a_first = if da == db {
-                    let (ca, cb) = (sub(na.centre, q), sub(nb.centre, q));
+                    let (ca, cb) = (sub(self.nodes[a as usize].centre, q), sub(self.nodes[b as usize].centre, q));
                     dot(ca, ca) < dot(cb, cb)
                 } else {
                     da < db
@@ -370,7 +363,7 @@ impl SurfaceBvh {
         let mut hits = Vec::new();
         let mut stack: Vec<u32> = vec![0];
         while let Some(i) = stack.pop() {
-            let nd = &self.nodes[i as usize];
+            let nd = &self.boxes[i as usize];
             if !segment_hits_box(nd, a, inv) {
                 continue;
             }
@@ -435,20 +428,6 @@ impl SurfaceBvh {
     }
 }
 
-fn empty_node() -> Node {
-    Node {
-        lo: [0.0; 3],
-        hi: [0.0; 3],
-        first: 0,
-        count: 0,
-        centre: [0.0; 3],
-        radius: 0.0,
-        dipole: [0.0; 3],
-        moment: [[0.0; 3]; 3],
-        area: 0.0,
-    }
-}
-
 fn centroid(p: [Point; 3]) -> Point {
     std::array::from_fn(|d| (p[0][d] + p[1][d] + p[2][d]) / 3.0)
 }
@@ -479,7 +458,7 @@ fn box_dist2(nd: &NodeBox, q: Point) -> f64 {
         .sum()
 }
 
-fn segment_hits_box(nd: &Node, a: Point, inv: Point) -> bool {
+fn segment_hits_box(nd: &NodeBox, a: Point, inv: Point) -> bool {
     let (mut t0, mut t1) = (0.0f64, 1.0f64);
     for d in 0..3 {
         let (mut ta, mut tb) = ((nd.lo[d] - a[d]) * inv[d], (nd.hi[d] - a[d]) * inv[d]);
