@@ -64,13 +64,23 @@ impl Tracks {
     /// would write them to `path`: messages name that file and the lines the rows would have there.
     pub fn from_frames(path: PathBuf, ids: &[String], frames: &[DVector<f64>]) -> Self {
         let n = ids.len();
-        let positions = (0..n)
-            .map(|j| {
-                let at = |z: &DVector<f64>| [z[3 * j], z[3 * j + 1], z[3 * j + 2]];
-                frames.iter().map(at).enumerate().filter(|(_, p)| p.iter().all(|v| v.is_finite())).collect()
-            })
-            .collect();
-        Tracks { path, ids: ids.to_vec(), lines: (0..n).map(|j| 2 + j).collect(), positions }
+        let mut positions = vec![BTreeMap::new(); n];
+        // The rows in the order [`write_tracks`] writes them (after the header line), occluded points left out.
+        let mut lines = vec![0; n];
+        let mut line = 1;
+        for (f, z) in frames.iter().enumerate() {
+            for (j, track) in positions.iter_mut().enumerate() {
+                let p = [z[3 * j], z[3 * j + 1], z[3 * j + 2]];
+                if p.iter().all(|v| v.is_finite()) {
+                    line += 1;
+                    if track.is_empty() {
+                        lines[j] = line;
+                    }
+                    track.insert(f, p);
+                }
+            }
+        }
+        Tracks { path, ids: ids.to_vec(), lines, positions }
     }
 
     /// The largest frame number in the file.
@@ -241,4 +251,35 @@ fn coordinates(fields: &[String], path: &Path, line: usize) -> Result<Point, Ass
         })?;
     }
     Ok(p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Tracks made from frames in memory are those read back from the file the frames are written to,
+    /// line numbers included, with a point occluded (not finite) in the first frame.
+    #[test]
+    fn tracks_from_frames_are_those_of_their_file() {
+        let ids = vec!["a".to_string(), "b".to_string()];
+        let frames = vec![
+            DVector::from_vec(vec![f64::NAN, 0.0, 0.0, 1.0, 2.0, 3.0]),
+            DVector::from_vec(vec![0.1, 0.2, 0.3, 1.1, 2.1, 3.1]),
+            DVector::from_vec(vec![0.4, 0.5, 0.6, f64::NAN, 2.2, 3.2]),
+        ];
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("tracks.csv");
+        write_tracks(&path, &ids, &frames).unwrap();
+        let read = Tracks::read(&path).unwrap();
+        let made = Tracks::from_frames(path, &ids, &frames);
+        // Ids come in order of first appearance in the file: `b` (frame 0) before `a` (frame 1).
+        assert_eq!(read.ids, ["b", "a"]);
+        for (j, id) in made.ids.iter().enumerate() {
+            let k = read.ids.iter().position(|r| r == id).unwrap();
+            assert_eq!(made.line(j), read.line(k), "{id}");
+            for f in 0..frames.len() {
+                assert_eq!(made.position(j, f), read.position(k, f), "{id} frame {f}");
+            }
+        }
+    }
 }
