@@ -166,11 +166,11 @@ impl Generator {
         // Selections are sorted and free of repeats: membership tests below use binary search.
         let fixed_sets = config.fixed.iter().map(select).collect::<Result<Vec<_>>>()?;
         let normals = mesh.surface_normals();
-        // Where a tool can push: the organ's surface (on an immersed grid, its cut cells' nodes).
-        let surface = mesh.surface_nodes();
         let (centres, load_nodes) = match &config.load {
             Load::PatchForce { centres, radius, magnitude } => {
                 check_range(magnitude, "magnitude")?;
+                // Where a tool can push: the organ's surface (on an immersed grid, its cut cells' nodes).
+                let surface = mesh.surface_nodes();
                 if !(*radius > 0.0) {
                     return Err(invalid(format!("patch radius must be positive, got {radius}")));
                 }
@@ -182,7 +182,7 @@ impl Generator {
                         .filter(|n| fixed_sets.iter().all(|f| f.binary_search(n).is_err()))
                         .collect(),
                 };
-                (c, surface.clone())
+                (c, surface)
             }
             Load::PointForces { nodes, count, magnitude } => {
                 check_range(magnitude, "magnitude")?;
