@@ -120,12 +120,6 @@ impl Pattern {
         Ok(Pattern { free_index, num_free, col_ptr, row_idx, diag, matrix_ptr, gather_ptr, gather })
     }
 
-    /// The value position of free-dof entry (row, col), row ≥ col; panics when it is not
-    /// stored (the 3×3 block of a node always is).
-    pub fn position(&self, row: usize, col: usize) -> usize {
-        entry_position(&self.col_ptr, &self.row_idx, row, col)
-    }
-
     /// The value position of entry (row, col) with row ≥ col, if it is stored.
     pub fn find(&self, row: usize, col: usize) -> Option<usize> {
         find_entry(&self.col_ptr, &self.row_idx, row, col)
