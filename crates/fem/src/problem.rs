@@ -25,7 +25,7 @@ pub struct Problem {
     pub springs: Vec<f64>,
     /// External nodal forces (N), 3 per node.
     pub f_ext: Vec<f64>,
-    /// Springs that resist a node's displacement along one direction only.
+    /// Zero-length springs on points that move with several nodes (e.g. data terms on surface points).
     pub point_springs: Vec<PointSpring>,
 }
 
@@ -34,9 +34,8 @@ pub struct Problem {
 /// with `stiffness` k in every direction and `normal_stiffness` k_n more along the unit `normal`
 /// (point to plane when k = 0, letting the surface slide along itself). A data term that ties a
 /// matched surface point to where a cloud point puts it. The pull K t is a load: load stepping
-/// scales it with the forces. Couplings between nodes that share no
-/// element are left out of the tangent: the forces are exact and the solver's quasi-Newton
-/// updates absorb the difference.
+/// scales it with the forces. Couplings between nodes that share no element are left out of the
+/// tangent: the forces are exact and the solver's quasi-Newton updates absorb the difference.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PointSpring {
     /// The nodes and their interpolation weights.
@@ -154,10 +153,10 @@ impl Problem {
         if self.dirichlet.values().flatten().chain(&self.f_ext).any(|v| !v.is_finite()) {
             return Err(FemError::NonFinite("prescribed displacement or external force".into()));
         }
-        if self.springs.iter().any(|k| !(*k >= 0.0 && k.is_finite())) {
+        let stiffness_ok = |k: f64| k >= 0.0 && k.is_finite();
+        if !self.springs.iter().all(|&k| stiffness_ok(k)) {
             return Err(FemError::Invalid("spring stiffnesses must be non-negative and finite".into()));
         }
-        let stiffness_ok = |k: f64| k >= 0.0 && k.is_finite();
         for (i, s) in self.point_springs.iter().enumerate() {
             let length = s.normal.iter().map(|x| x * x).sum::<f64>().sqrt();
             let nodes_ok = !s.nodes.is_empty() && s.nodes.iter().all(|&(k, w)| k < n && w.is_finite());
