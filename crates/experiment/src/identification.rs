@@ -3,8 +3,6 @@
 
 use std::path::Path;
 
-use std::path::PathBuf;
-
 use anyhow::{bail, Context, Result};
 use fem::scenario::MeshSource;
 use filter::assimilation::{AssimilationScenario, Experiment, ObservationFiles, ReferenceSpec, Report, Setup};
@@ -41,20 +39,16 @@ fn assimilate(
     progress: Progress,
 ) -> Result<(Vec<Report>, Setup)> {
     let path = write_scenario(dir, file, text)?;
-    let load = || -> Result<(AssimilationScenario, PathBuf)> {
-        let (mut scenario, scenario_dir) = AssimilationScenario::load(&path)?;
-        scenario.iterations = iterations.or(scenario.iterations);
-        if let Some(n) = model_tets {
-            let MeshSource::Phantom { tets } = &mut scenario.mesh else {
-                bail!("{file}: another phantom size needs the built-in phantom mesh");
-            };
-            *tets = n;
-        }
-        let law = scenario.reference.as_ref().and_then(|r| r.law);
-        scenario.reference = Some(ReferenceSpec { mesh: MeshSource::Phantom { tets: reference_tets }, law });
-        Ok((scenario, scenario_dir))
-    };
-    let (scenario, scenario_dir) = load()?;
+    let (mut scenario, scenario_dir) = AssimilationScenario::load(&path)?;
+    scenario.iterations = iterations.or(scenario.iterations);
+    if let Some(n) = model_tets {
+        let MeshSource::Phantom { tets } = &mut scenario.mesh else {
+            bail!("{file}: another phantom size needs the built-in phantom mesh");
+        };
+        *tets = n;
+    }
+    let law = scenario.reference.as_ref().and_then(|r| r.law);
+    scenario.reference = Some(ReferenceSpec { mesh: MeshSource::Phantom { tets: reference_tets }, law });
     let reference = scenario.reference_scenario().context("the reference section was just set")?;
     let tracks = dir.join("reference-tracks");
     let stamp = tracks.join("complete.txt");
@@ -95,7 +89,7 @@ fn assimilate(
         &[("run", Discrepancy::None)]
     };
     for &(run, kind) in variants {
-        let (mut scenario, _) = load()?;
+        let mut scenario = scenario.clone();
         scenario.filter.discrepancy = kind;
         let experiment = Experiment::prepare(scenario, &scenario_dir, Some(&files))?;
         let total = experiment.setup().iterations;
