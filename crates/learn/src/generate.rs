@@ -57,6 +57,11 @@ pub struct DatasetConfig {
     pub fixed: Vec<NodeSelection>,
     /// The random loads.
     pub load: Load,
+    /// Adds a body force ρ·a to every sample, `a` of uniformly random direction and of
+    /// magnitude drawn in this range (m/s²): gravity's pull on an organ whose supports and
+    /// orientation changed since the preoperative scan (e.g. `[0.0, 9.81]`).
+    #[serde(default)]
+    pub gravity: Option<[f64; 2]>,
     /// What the network sees.
     pub input: Input,
 }
@@ -81,6 +86,20 @@ pub enum Load {
         /// Range of the total force magnitude (N).
         magnitude: [f64; 2],
     },
+    /// A surgical tool pressing the surface: the surface nodes within `radius` of a random
+    /// centre node are moved by a random depth along the inward normal at the centre
+    /// (prescribed displacements, the tool's face sticking to the tissue).
+    Tool {
+        /// Nodes the tool's centre is drawn from (default: surface nodes that are not fixed).
+        centres: Option<NodeSelection>,
+        /// Radius of the tool's face (m).
+        radius: f64,
+        /// Range of the indentation depth (m).
+        depth: [f64; 2],
+    },
+    /// One of these loads (none of them `any`), drawn uniformly for each sample: e.g. tool
+    /// presses and force pushes, so that a network meets both kinds of dent.
+    Any(Vec<Load>),
     /// `count` simultaneous forces of random direction and magnitude on distinct random nodes.
     PointForces {
         /// Nodes the loaded nodes are drawn from.
@@ -123,16 +142,70 @@ pub struct Generator {
     solver_options: SolverOptions,
     config: DatasetConfig,
     fixed_sets: Vec<Vec<usize>>,
-    centres: Vec<usize>,
+    /// The loads a sample draws from (one, or the alternatives of [`Load::Any`]).
+    loads: Vec<LoadNodes>,
     normals: Vec<[f64; 3]>,
     /// Each node's share of material, weighting the patch force.
     material_share: Vec<f64>,
-    load_nodes: Vec<usize>,
+    /// The range of the body acceleration and the body forces of unit accelerations along x, y, z.
+    gravity: Option<([f64; 2], Vec<Vec<f64>>)>,
     observed: Vec<usize>,
     encoding: Encoding,
     grid: GridShape,
     placement: GridPlacement,
     mask: Vec<u8>,
+}
+
+/// A load and the nodes it draws from.
+struct LoadNodes {
+    load: Load,
+    /// Nodes a patch centre is drawn from (patch loads only).
+    centres: Vec<usize>,
+    /// Nodes a load may act on.
+    nodes: Vec<usize>,
+}
+
+impl LoadNodes {
+    /// Checks `load` against the mesh and selects its nodes (`select` resolves a selection).
+    fn new(
+        load: &Load,
+        mesh: &Mesh,
+        fixed_sets: &[Vec<usize>],
+        select: &dyn Fn(&NodeSelection) -> Result<Vec<usize>>,
+    ) -> Result<LoadNodes> {
+        let (centres, nodes) = match load {
+            Load::PatchForce { centres, radius, magnitude: range } | Load::Tool { centres, radius, depth: range } => {
+                check_range(range, if matches!(load, Load::Tool { .. }) { "depth" } else { "magnitude" })?;
+                if !(*radius > 0.0) {
+                    return Err(invalid(format!("patch radius must be positive, got {radius}")));
+                }
+                // Where a tool can push: the organ's surface (on an immersed grid, its cut cells' nodes).
+                let surface = mesh.surface_nodes();
+                let c: Vec<usize> = match centres {
+                    Some(s) => select(s)?,
+                    None => surface
+                        .iter()
+                        .copied()
+                        .filter(|n| fixed_sets.iter().all(|f| f.binary_search(n).is_err()))
+                        .collect(),
+                };
+                if c.is_empty() {
+                    return Err(invalid("no candidate node for the patch centre"));
+                }
+                (c, surface)
+            }
+            Load::PointForces { nodes, count, magnitude } => {
+                check_range(magnitude, "magnitude")?;
+                let n = select(nodes)?;
+                if *count == 0 || *count > n.len() {
+                    return Err(invalid(format!("cannot load {count} distinct nodes out of {}", n.len())));
+                }
+                (Vec::new(), n)
+            }
+            Load::Any(_) => return Err(invalid("`any` lists single loads, not other `any`")),
+        };
+        Ok(LoadNodes { load: load.clone(), centres, nodes })
+    }
 }
 
 /// How nodal fields reach the grid.
@@ -166,36 +239,11 @@ impl Generator {
         // Selections are sorted and free of repeats: membership tests below use binary search.
         let fixed_sets = config.fixed.iter().map(select).collect::<Result<Vec<_>>>()?;
         let normals = mesh.surface_normals();
-        let (centres, load_nodes) = match &config.load {
-            Load::PatchForce { centres, radius, magnitude } => {
-                check_range(magnitude, "magnitude")?;
-                // Where a tool can push: the organ's surface (on an immersed grid, its cut cells' nodes).
-                let surface = mesh.surface_nodes();
-                if !(*radius > 0.0) {
-                    return Err(invalid(format!("patch radius must be positive, got {radius}")));
-                }
-                let c = match centres {
-                    Some(s) => select(s)?,
-                    None => surface
-                        .iter()
-                        .copied()
-                        .filter(|n| fixed_sets.iter().all(|f| f.binary_search(n).is_err()))
-                        .collect(),
-                };
-                (c, surface)
-            }
-            Load::PointForces { nodes, count, magnitude } => {
-                check_range(magnitude, "magnitude")?;
-                let n = select(nodes)?;
-                if *count == 0 || *count > n.len() {
-                    return Err(invalid(format!("cannot load {count} distinct nodes out of {}", n.len())));
-                }
-                (Vec::new(), n)
-            }
-        };
-        if matches!(config.load, Load::PatchForce { .. }) && centres.is_empty() {
-            return Err(invalid("no candidate node for the patch centre"));
-        }
+        let loads = match &config.load {
+            Load::Any(list) if list.is_empty() => return Err(invalid("`any` needs at least one load")),
+            Load::Any(list) => list.iter().map(|l| LoadNodes::new(l, &mesh, &fixed_sets, &select)).collect(),
+            one => LoadNodes::new(one, &mesh, &fixed_sets, &select).map(|l| vec![l]),
+        }?;
         let observed = match &config.input {
             Input::Force => Vec::new(),
             Input::Displacement { nodes, sparse, .. } => {
@@ -220,16 +268,31 @@ impl Generator {
             }
         }
         let material_share = mesh.node_material_share();
+        // The body force of a unit acceleration along x, y and z.
+        let gravity = match config.gravity {
+            Some(range) => {
+                check_range(&range, "gravity")?;
+                let mut basis = Vec::with_capacity(3);
+                for d in 0..3 {
+                    let mut unit = Problem::new(mesh.clone(), material);
+                    unit.add_gravity(std::array::from_fn(|k| if k == d { 1.0 } else { 0.0 }))
+                        .map_err(|e| invalid(e.to_string()))?;
+                    basis.push(unit.f_ext);
+                }
+                Some((range, basis))
+            }
+            None => None,
+        };
         Ok(Generator {
             mesh,
             material,
             solver_options,
             config,
             fixed_sets,
-            centres,
+            loads,
             normals,
             material_share,
-            load_nodes,
+            gravity,
             observed,
             encoding,
             grid,
@@ -292,24 +355,18 @@ impl Generator {
         let fixed = rng.random_range(0..self.fixed_sets.len());
         let nn = self.mesh.num_nodes();
         let mut f = vec![0.0; 3 * nn];
-        match &self.config.load {
+        // Nodes moved by a tool, and by how much.
+        let mut tool = None;
+        // A draw among alternatives only: a single load's samples stay those of before `any`.
+        let loads = &self.loads[if self.loads.len() > 1 { rng.random_range(0..self.loads.len()) } else { 0 }];
+        match &loads.load {
             Load::PatchForce { radius, magnitude, .. } => {
-                let centre = self.centres[rng.random_range(0..self.centres.len())];
-                let c = self.mesh.nodes[centre];
-                let patch: Vec<usize> = self
-                    .load_nodes
-                    .iter()
-                    .copied()
-                    .filter(|&n| {
-                        mesh::dot(mesh::sub(self.mesh.nodes[n], c), mesh::sub(self.mesh.nodes[n], c)) <= radius * radius
-                    })
-                    .filter(|n| self.fixed_sets[fixed].binary_search(n).is_err())
-                    .collect();
+                let (centre, patch) = self.patch(loads, &mut rng, *radius, fixed)?;
                 let mag = rng.random_range(magnitude[0]..=magnitude[1]);
                 let normal = self.normals[centre];
                 let total: f64 = patch.iter().map(|&n| self.material_share[n]).sum();
                 if !(total > 0.0) {
-                    return Err(format!("the patch around node {centre} has no free surface node"));
+                    return Err(format!("the patch around node {centre} has no material"));
                 }
                 for &n in &patch {
                     for d in 0..3 {
@@ -317,15 +374,28 @@ impl Generator {
                     }
                 }
             }
+            Load::Tool { radius, depth, .. } => {
+                let (centre, patch) = self.patch(loads, &mut rng, *radius, fixed)?;
+                let depth = rng.random_range(depth[0]..=depth[1]);
+                tool = Some((patch, self.normals[centre].map(|c| -depth * c)));
+            }
             Load::PointForces { count, magnitude, .. } => {
-                for k in sample_indices(&mut rng, self.load_nodes.len(), *count) {
-                    let n = self.load_nodes[k];
+                for k in sample_indices(&mut rng, loads.nodes.len(), *count) {
+                    let n = loads.nodes[k];
                     let dir = random_unit(&mut rng);
                     let mag = rng.random_range(magnitude[0]..=magnitude[1]);
                     for d in 0..3 {
                         f[3 * n + d] += mag * dir[d];
                     }
                 }
+            }
+            Load::Any(_) => unreachable!("alternatives are resolved in Generator::new"),
+        }
+        if let Some((range, basis)) = &self.gravity {
+            let direction = random_unit(&mut rng);
+            let a = rng.random_range(range[0]..=range[1]);
+            for (d, unit) in basis.iter().enumerate() {
+                f.iter_mut().zip(unit).for_each(|(f, u)| *f += a * direction[d] * u);
             }
         }
         let observed = match &self.config.input {
@@ -336,14 +406,27 @@ impl Generator {
             }
             _ => self.observed.clone(),
         };
-        let solver = match solvers.entry(fixed) {
-            std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
-            std::collections::hash_map::Entry::Vacant(v) => {
-                v.insert(StaticSolver::new(self.problem(fixed)).map_err(|e| e.to_string())?)
+        let solution = match tool {
+            // The tool's nodes change from one sample to the next, and with them the system's
+            // pattern: a solver of its own.
+            Some((nodes, displacement)) => {
+                let mut problem = self.problem(fixed);
+                problem.prescribe(&nodes, displacement);
+                problem.f_ext.copy_from_slice(&f);
+                StaticSolver::new(problem).and_then(|mut s| s.solve(&self.solver_options))
             }
-        };
-        solver.problem_mut().f_ext.copy_from_slice(&f);
-        let solution = solver.solve(&self.solver_options).map_err(|e| e.to_string())?;
+            None => {
+                let solver = match solvers.entry(fixed) {
+                    std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+                    std::collections::hash_map::Entry::Vacant(v) => {
+                        v.insert(StaticSolver::new(self.problem(fixed)).map_err(|e| e.to_string())?)
+                    }
+                };
+                solver.problem_mut().f_ext.copy_from_slice(&f);
+                solver.solve(&self.solver_options)
+            }
+        }
+        .map_err(|e| e.to_string())?;
         let input = match &self.config.input {
             Input::Force => self.encode(&f, true),
             Input::Displacement { normal, .. } => {
@@ -359,6 +442,31 @@ impl Generator {
         .map_err(|e| e.to_string())?;
         let target = self.encode(&solution.u, false).map_err(|e| e.to_string())?;
         Ok(Sample { index, input, target, mask: self.mask.clone() })
+    }
+
+    /// Draws a patch of `load`: a random centre and its free nodes within `radius` of it.
+    fn patch(
+        &self,
+        load: &LoadNodes,
+        rng: &mut impl Rng,
+        radius: f64,
+        fixed: usize,
+    ) -> std::result::Result<(usize, Vec<usize>), String> {
+        let centre = load.centres[rng.random_range(0..load.centres.len())];
+        let c = self.mesh.nodes[centre];
+        let patch: Vec<usize> = load
+            .nodes
+            .iter()
+            .copied()
+            .filter(|&n| {
+                mesh::dot(mesh::sub(self.mesh.nodes[n], c), mesh::sub(self.mesh.nodes[n], c)) <= radius * radius
+            })
+            .filter(|n| self.fixed_sets[fixed].binary_search(n).is_err())
+            .collect();
+        if patch.is_empty() {
+            return Err(format!("the patch around node {centre} has no free surface node"));
+        }
+        Ok((centre, patch))
     }
 
     /// Generates the indices of block `block` that lie in `keep`, in order. All the

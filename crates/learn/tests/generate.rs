@@ -30,6 +30,7 @@ fn beam_generator_with_shards(samples: usize, shard_size: usize) -> Generator {
         grid: None,
         fixed: vec![bottom(0.0, 1.0), bottom(2.0, 3.0)],
         load: Load::PatchForce { centres: Some(top()), radius: 0.6, magnitude: [0.05, 0.2] },
+        gravity: None,
         input: Input::Displacement { nodes: top(), sparse: Some([3, 8]), normal: false },
     };
     Generator::new(mesh, Material::new(Law::Svk, 300.0, 0.4), SolverOptions::default(), config).unwrap()
@@ -88,6 +89,7 @@ fn embedded_encoding_reproduces_linear_fields_and_total_force() {
         grid: Some([9, 5, 5]),
         fixed: vec![NodeSelection::Box { min: [-1e-6; 3], max: [1e-6, 1.0, 1.0] }],
         load: Load::PointForces { nodes: all, count: 3, magnitude: [0.1, 0.2] },
+        gravity: None,
         input: Input::Force,
     };
     let g = Generator::new(mesh.clone(), Material::new(Law::Linear, 5000.0, 0.45), SolverOptions::default(), config)
@@ -210,14 +212,139 @@ fn bad_configurations_are_rejected_with_a_reason() {
         grid: None,
         fixed: vec![bottom(0.0, 1.0)],
         load: Load::PointForces { nodes: top(), count: 100, magnitude: [0.0, 1.0] },
+        gravity: None,
         input: Input::Force,
     };
     let m = Material::new(Law::Svk, 300.0, 0.4);
     let err = Generator::new(mesh.clone(), m, SolverOptions::default(), base.clone()).err().unwrap().to_string();
     assert!(err.contains("cannot load 100 distinct nodes"), "{err}");
-    let err = Generator::new(mesh, m, SolverOptions::default(), DatasetConfig { fixed: vec![], ..base })
+    let err =
+        Generator::new(mesh.clone(), m, SolverOptions::default(), DatasetConfig { fixed: vec![], ..base.clone() })
+            .err()
+            .unwrap()
+            .to_string();
+    assert!(err.contains("fixed"), "{err}");
+    let tool = Load::Tool { centres: Some(top()), radius: 0.6, depth: [0.2, 0.1] };
+    let err = Generator::new(mesh.clone(), m, SolverOptions::default(), DatasetConfig { load: tool, ..base.clone() })
         .err()
         .unwrap()
         .to_string();
-    assert!(err.contains("fixed"), "{err}");
+    assert!(err.contains("depth range"), "{err}");
+    let err = Generator::new(
+        mesh,
+        m,
+        SolverOptions::default(),
+        DatasetConfig {
+            gravity: Some([-1.0, 9.81]),
+            load: Load::PointForces { nodes: top(), count: 1, magnitude: [0.0, 1.0] },
+            ..base
+        },
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(err.contains("gravity range"), "{err}");
+}
+
+/// The generated samples of a beam fixed at one end, loaded by `load` and `gravity`, with the
+/// full displacement of its top face as input.
+fn beam_samples(law: Law, load: Load, gravity: Option<[f64; 2]>, samples: usize) -> augsim_learn::Samples {
+    let mesh = mesh::box_hex([0.0; 3], [4.0, 1.0, 1.0], [8, 2, 2]).unwrap();
+    let config = DatasetConfig {
+        samples,
+        seed: 3,
+        shard_size: samples,
+        grid: None,
+        fixed: vec![bottom(0.0, 1.0)],
+        load,
+        gravity,
+        input: Input::Displacement { nodes: top(), sparse: None, normal: false },
+    };
+    let mut material = Material::new(law, 300.0, 0.3);
+    material.density = 10.0;
+    let g = Generator::new(mesh, material, SolverOptions::default(), config).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let manifest = g.run(tmp.path(), "beam", None, &|_, _| {}).unwrap();
+    assert!(manifest.failed.is_empty(), "{:?}", manifest.failed);
+    Dataset::open(tmp.path()).unwrap().load_all().unwrap()
+}
+
+#[test]
+fn a_tool_moves_the_nodes_under_it_by_its_depth() {
+    let tool = Load::Tool { centres: Some(top()), radius: 0.6, depth: [0.05, 0.1] };
+    let data = beam_samples(Law::NeoHookean, tool, None, 4);
+    let n = data.grid.nodes();
+    let mut depths = Vec::new();
+    for i in 0..data.len() {
+        let u = data.target(i);
+        let on_top: Vec<usize> = (0..n).filter(|&k| (0..3).any(|c| data.input(i)[c * n + k] != 0.0)).collect();
+        let moved = |k: usize| [u[k], u[n + k], u[2 * n + k]];
+        let tool = tool_nodes(&data, i);
+        assert!(!tool.is_empty(), "sample {i}: no node under the tool");
+        let d = moved(tool[0]);
+        assert!(tool.iter().all(|&k| moved(k) == d), "sample {i}: one displacement for the whole tool");
+        let depth = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() as f64;
+        assert!((0.05 - 1e-6..=0.1 + 1e-6).contains(&depth), "sample {i}: depth {depth}");
+        assert!(d[2] < 0.0, "sample {i}: the tool presses into the beam: {d:?}");
+        // The rest of the beam follows.
+        assert!(on_top.iter().any(|&k| !tool.contains(&k) && u[2 * n + k] < -0.01), "sample {i}");
+        depths.push(depth);
+    }
+    assert!(depths.iter().any(|&d| d != depths[0]), "random depths: {depths:?}");
+}
+
+/// Sample `i`'s tool nodes: the nodes of the top face that share one displacement.
+fn tool_nodes(data: &augsim_learn::Samples, i: usize) -> Vec<usize> {
+    let n = data.grid.nodes();
+    let u = data.target(i);
+    let on_top: Vec<usize> = (0..n).filter(|&k| (0..3).any(|c| data.input(i)[c * n + k] != 0.0)).collect();
+    let moved = |k: usize| [u[k], u[n + k], u[2 * n + k]];
+    on_top.iter().copied().filter(|&k| on_top.iter().filter(|&&j| moved(j) == moved(k)).count() >= 2).collect()
+}
+
+#[test]
+fn each_sample_draws_one_of_the_alternative_loads() {
+    let tool = Load::Tool { centres: Some(top()), radius: 0.6, depth: [0.05, 0.1] };
+    let push = Load::PatchForce { centres: Some(top()), radius: 0.6, magnitude: [0.05, 0.2] };
+    let data = beam_samples(Law::NeoHookean, Load::Any(vec![tool, push]), None, 12);
+    let pressed = (0..data.len()).filter(|&i| !tool_nodes(&data, i).is_empty()).count();
+    assert!(pressed > 0 && pressed < data.len(), "{pressed} of {} samples pressed by the tool", data.len());
+    let nested = Load::Any(vec![Load::Any(vec![])]);
+    let mesh = mesh::box_hex([0.0; 3], [4.0, 1.0, 1.0], [8, 2, 2]).unwrap();
+    let config = DatasetConfig {
+        samples: 1,
+        seed: 0,
+        shard_size: 1,
+        grid: None,
+        fixed: vec![bottom(0.0, 1.0)],
+        load: nested,
+        gravity: None,
+        input: Input::Force,
+    };
+    let err = Generator::new(mesh, Material::new(Law::Svk, 300.0, 0.4), SolverOptions::default(), config)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("not other `any`"), "{err}");
+}
+
+#[test]
+fn gravity_adds_a_body_force_of_the_drawn_acceleration() {
+    // No other load; a linear law, so that the displacement is proportional to the acceleration
+    // drawn (the same direction for the same seed and index).
+    let none = || Load::PointForces { nodes: top(), count: 1, magnitude: [0.0, 0.0] };
+    let one = beam_samples(Law::Linear, none(), Some([1.0, 1.0]), 3);
+    let two = beam_samples(Law::Linear, none(), Some([2.0, 2.0]), 3);
+    let directions: Vec<Vec<f32>> = (0..3)
+        .map(|i| {
+            let u = one.target(i);
+            let scale = u.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
+            assert!(scale > 1e-4, "sample {i}: gravity must move the beam");
+            for (a, b) in u.iter().zip(two.target(i)) {
+                assert!((2.0 * a - b).abs() <= 1e-5 * scale, "sample {i}: {b} against twice {a}");
+            }
+            u.iter().map(|v| v / scale).collect()
+        })
+        .collect();
+    assert!(directions[0] != directions[1] && directions[1] != directions[2], "random directions");
 }
