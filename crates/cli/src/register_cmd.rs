@@ -6,17 +6,17 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use mesh::io::{write_atomic_bytes, Field};
 use mesh::Point;
-use register::case::{case_methods, compare, synthetic_case, Registered};
+use register::case::{case_methods, compare, network_model, organ_of, synthetic_case, Registered};
 use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
 use register::picture::side_view;
 use register::scenario::{slug, MethodKind};
 use register::{
-    register_sequence, CaseScenario, Deformer, FemDeformer, NetworkDeformer, Organ, RegistrationOptions, RigidOptions,
-    RigidResult, RigidTransform, Summary,
+    register_sequence, CaseScenario, Deformer, FemDeformer, Organ, RegistrationOptions, RigidOptions, RigidResult,
+    RigidTransform, Summary,
 };
 use serde::Serialize;
 
-use crate::scenario::{build_mesh, MeshSource, Scenario};
+use crate::scenario::{build_mesh, Scenario};
 use crate::solve::ms;
 use learn::scenario::DatasetScenario;
 
@@ -290,16 +290,6 @@ fn region_targets(m: &mesh::Mesh) -> Vec<Point> {
     ["markers", "tumour"].iter().filter_map(|r| m.region(r).ok()).flatten().map(|&n| m.nodes[n]).collect()
 }
 
-/// The organ of a mesh source: its mesh, with the phantom's smooth surface when the mesh is the
-/// phantom's immersed grid (the camera sees the organ, not the grid's staircase).
-fn organ_of(source: &MeshSource, mesh: mesh::Mesh) -> Result<Organ> {
-    let surface = match source {
-        MeshSource::PhantomGrid { .. } => Some(mesh::boundary_surface(&mesh::phantom::liver_phantom(5000)?)),
-        _ => None,
-    };
-    Ok(Organ::new(mesh, surface)?)
-}
-
 fn fem_setup(path: &Path) -> Result<Setup> {
     let (scenario, dir) = Scenario::load(path)?;
     let mesh = build_mesh(&scenario.mesh, &dir).context("building the mesh")?;
@@ -314,18 +304,15 @@ fn fem_setup(path: &Path) -> Result<Setup> {
 
 fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<Setup> {
     let (scenario, dir) = DatasetScenario::load(scenario_path)?;
-    let mesh = scenario.mesh(&dir)?;
-    let (inputs, normal) = match &scenario.dataset.input {
-        learn::generate::Input::Displacement { nodes, normal, .. } => (nodes.select(&mesh)?, *normal),
-        learn::generate::Input::Force => {
-            bail!("{}: the model must take displacements as input, not forces", scenario_path.display())
-        }
-    };
-    let default_targets = region_targets(&mesh);
-    let organ = organ_of(&scenario.mesh, mesh)?;
     let model = learn::TrainedModel::load(model_path, &learn::inference_device())?;
-    let deformer = Box::new(NetworkDeformer::new(&model, &organ, &inputs, normal)?);
-    Ok(Setup { organ, deformer, method: format!("U-Net {}", model_path.display()), default_targets })
+    let (organ, deformer) = network_model(&scenario, &dir, &model)?;
+    let default_targets = region_targets(organ.mesh());
+    Ok(Setup {
+        organ,
+        deformer: Box::new(deformer),
+        method: format!("U-Net {}", model_path.display()),
+        default_targets,
+    })
 }
 
 /// The shipped network for the built-in phantom (trained by `scenarios/liver_ar.toml`).

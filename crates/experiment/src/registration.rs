@@ -15,7 +15,7 @@ use register::CaseScenario;
 use crate::learning::{dataset, error_histogram, model_dir, train, Recipe};
 use crate::{fmt, ExperimentResult, Name, Progress, Row, Size};
 
-const LIVER_AR: &str = include_str!("../../../scenarios/liver_ar.toml");
+use register::case::AR_SCENARIO as LIVER_AR;
 
 /// A registration case: the shipped case's truth with another load.
 struct Variant {

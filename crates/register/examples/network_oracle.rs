@@ -10,8 +10,8 @@
 
 use std::path::Path;
 
-use augsim_register::case::{model_mesh, network_model, synthetic_case};
-use augsim_register::{observe, register_frame, target_errors, CaseScenario, Organ, RigidTransform};
+use augsim_register::case::{ar_scenario, network_model, synthetic_case};
+use augsim_register::{observe, register_frame, target_errors, CaseScenario, RigidTransform};
 use learn::generate::normal_part;
 use learn::{encode_points, GridToMesh, Predictor, TrainedModel};
 use mesh::Point;
@@ -32,8 +32,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Err("the oracle compares with the truth in the model's frame: remove the case's misalignment".into());
     }
     let model = TrainedModel::load(Path::new(MODEL), &learn::inference_device())?;
-    let mesh = model_mesh()?;
-    let organ = Organ::new(mesh.clone(), None)?;
+    let (organ, deformer) = network_model(&ar_scenario(), Path::new(""), &model)?;
+    let mesh = organ.mesh().clone();
     // The truth at each node of the network's mesh: interpolated in the finer mesh, or its nearest
     // node's for a node just outside it (the two meshes' surfaces differ by their facets).
     let truth_at = |x: Point| -> Point {
@@ -75,7 +75,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("network, true normal motion in         TRE {mean:.2} / {max:.2} mm");
 
     // The loop's fit on the true deformed surface, against the true normal motion.
-    let (_, deformer) = network_model(mesh.clone(), &model)?;
     let options = &scenario.registration;
     let view = options.view.or(Some(scenario.camera.view));
     let observations = observe(&organ, &organ.deformed_surface(&truth_u), &case.cloud, options, 0.0, view)?;
@@ -91,7 +90,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         1e3 * mesh::stats::max(&misfit)
     );
 
-    let (_, mut deformer) = network_model(mesh, &model)?;
+    let mut deformer = deformer;
     let frame = register_frame(&organ, &mut deformer, &case.cloud, None, options)?;
     let (mean, max) = tre(&frame.u);
     println!("registration loop                      TRE {mean:.2} / {max:.2} mm in {} iterations", frame.iterations);

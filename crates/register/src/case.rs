@@ -4,10 +4,15 @@
 //! The case and its methods are described by a [`CaseScenario`]
 //! (`scenarios/register_case.toml` is the built-in one).
 
+use std::path::Path;
+
+use fem::scenario::MeshSource;
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::phantom::PhantomSpec;
 use mesh::{Mesh, Point};
 
+use learn::generate::Input;
+use learn::scenario::DatasetScenario;
 use learn::TrainedModel;
 
 use crate::deformers::{FemDeformer, NetworkDeformer};
@@ -115,13 +120,40 @@ pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
     fem_model(model_mesh()?, Material::new(Law::Corotational, 5000.0, 0.48))
 }
 
-/// The U-Net registration model on `mesh` (the phantom the network was trained on, e.g.
-/// [`model_mesh`]): `model`, trained with the normal displacement of the `visible` region as
-/// input (`scenarios/liver_ar.toml`).
-pub fn network_model(mesh: Mesh, model: &TrainedModel) -> Result<(Organ, NetworkDeformer)> {
-    let visible = mesh.region("visible")?.to_vec();
-    let organ = Organ::new(mesh, None)?;
-    let deformer = NetworkDeformer::new(model, &organ, &visible, true)?;
+/// The dataset scenario of the shipped AR network (`scenarios/liver_ar.toml`).
+pub const AR_SCENARIO: &str = include_str!("../../../scenarios/liver_ar.toml");
+
+/// [`AR_SCENARIO`], parsed.
+pub fn ar_scenario() -> DatasetScenario {
+    DatasetScenario::parse(AR_SCENARIO, Path::new("scenarios/liver_ar.toml")).expect("the shipped AR scenario is valid")
+}
+
+/// The organ of a mesh built from `source`: the mesh, with the phantom's smooth surface when
+/// it is the phantom's immersed grid (the camera sees the organ, not the grid's staircase).
+pub fn organ_of(source: &MeshSource, mesh: Mesh) -> Result<Organ> {
+    let surface = match source {
+        MeshSource::PhantomGrid { .. } => Some(mesh::boundary_surface(&mesh::phantom::liver_phantom(5000)?)),
+        _ => None,
+    };
+    Organ::new(mesh, surface)
+}
+
+/// The U-Net registration model of `model`, trained on the dataset of `scenario` (e.g.
+/// [`ar_scenario`]; mesh paths relative to `dir`): the scenario's organ, the network fed with
+/// the displacement of the scenario's input nodes.
+pub fn network_model(scenario: &DatasetScenario, dir: &Path, model: &TrainedModel) -> Result<(Organ, NetworkDeformer)> {
+    let mesh = scenario.mesh(dir)?;
+    let (inputs, normal) = match &scenario.dataset.input {
+        Input::Displacement { nodes, normal, .. } => (nodes.select(&mesh)?, *normal),
+        Input::Force => {
+            return Err(RegisterError::Invalid(format!(
+                "scenario {}: registration needs a network of displacements, not of forces",
+                scenario.name
+            )))
+        }
+    };
+    let organ = organ_of(&scenario.mesh, mesh)?;
+    let deformer = NetworkDeformer::new(model, &organ, &inputs, normal)?;
     Ok((organ, deformer))
 }
 
@@ -132,8 +164,9 @@ pub fn methods(network: Option<&TrainedModel>) -> Result<Vec<Method>> {
     case_methods(&CaseScenario::builtin(), network)
 }
 
-/// The methods of `scenario`, in its order, on the phantom of `models.tets` tetrahedra; its
-/// network methods get `network`, and are left out when it is `None`.
+/// The methods of `scenario`, in its order: its FEM methods on the phantom of `models.tets`
+/// tetrahedra, its network methods with `network` (trained by [`ar_scenario`], on its organ),
+/// left out when it is `None`.
 pub fn case_methods(scenario: &CaseScenario, network: Option<&TrainedModel>) -> Result<Vec<Method>> {
     let mesh = mesh::phantom::liver_phantom(scenario.models.tets)?;
     let mut out = Vec::new();
@@ -148,7 +181,7 @@ pub fn case_methods(scenario: &CaseScenario, network: Option<&TrainedModel>) -> 
                 return Err(RegisterError::Invalid(format!("method {name:?}: a FEM method needs a material")))
             }
             (MethodKind::Network, _, Some(model)) => {
-                let (organ, deformer) = network_model(mesh.clone(), model)?;
+                let (organ, deformer) = network_model(&ar_scenario(), Path::new(""), model)?;
                 out.push(Method { name, organ, deformer: Box::new(deformer) });
             }
             (MethodKind::Network, _, None) => {}
