@@ -230,6 +230,9 @@ fn bad_configurations_are_rejected_with_a_reason() {
         .unwrap()
         .to_string();
     assert!(err.contains("depth range"), "{err}");
+    let nested = DatasetConfig { load: Load::Any(vec![Load::Any(vec![])]), ..base.clone() };
+    let err = Generator::new(mesh.clone(), m, SolverOptions::default(), nested).err().unwrap().to_string();
+    assert!(err.contains("not other `any`"), "{err}");
     let err = Generator::new(
         mesh,
         m,
@@ -309,23 +312,6 @@ fn each_sample_draws_one_of_the_alternative_loads() {
     let data = beam_samples(Law::NeoHookean, Load::Any(vec![tool, push]), None, 12);
     let pressed = (0..data.len()).filter(|&i| !tool_nodes(&data, i).is_empty()).count();
     assert!(pressed > 0 && pressed < data.len(), "{pressed} of {} samples pressed by the tool", data.len());
-    let nested = Load::Any(vec![Load::Any(vec![])]);
-    let mesh = mesh::box_hex([0.0; 3], [4.0, 1.0, 1.0], [8, 2, 2]).unwrap();
-    let config = DatasetConfig {
-        samples: 1,
-        seed: 0,
-        shard_size: 1,
-        grid: None,
-        fixed: vec![bottom(0.0, 1.0)],
-        load: nested,
-        gravity: None,
-        input: Input::Force,
-    };
-    let err = Generator::new(mesh, Material::new(Law::Svk, 300.0, 0.4), SolverOptions::default(), config)
-        .err()
-        .unwrap()
-        .to_string();
-    assert!(err.contains("not other `any`"), "{err}");
 }
 
 #[test]
