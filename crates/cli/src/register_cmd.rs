@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use mesh::io::{write_atomic_bytes, Field};
 use mesh::Point;
-use register::case::{case_methods, compare, network_model, organ_of, synthetic_case, Registered};
+use register::case::{
+    ar_scenario, case_methods, compare, network_model, organ_of, synthetic_case, Network, Registered,
+};
 use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
 use register::picture::side_view;
 use register::scenario::{slug, MethodKind};
@@ -35,7 +37,8 @@ pub struct RegisterArgs {
     #[arg(long)]
     model: Option<PathBuf>,
     /// The dataset scenario the model was trained on, for --model (its mesh is the organ, its
-    /// observed nodes the network's input).
+    /// observed nodes the network's input); with --demo or --case, default: the shipped
+    /// scenarios/liver_ar.toml.
     #[arg(long)]
     scenario: Option<PathBuf>,
     /// Targets at rest (CSV x,y,z, m); default: the mesh's `markers` and `tumour` regions.
@@ -305,7 +308,7 @@ fn fem_setup(path: &Path) -> Result<Setup> {
 fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<Setup> {
     let (scenario, dir) = DatasetScenario::load(scenario_path)?;
     let model = learn::TrainedModel::load(model_path, &learn::inference_device())?;
-    let (organ, deformer) = network_model(&scenario, &dir, &model)?;
+    let (organ, deformer) = network_model(&Network { model: &model, scenario: &scenario, dir: &dir })?;
     let default_targets = region_targets(organ.mesh());
     Ok(Setup {
         organ,
@@ -386,7 +389,7 @@ fn demo(args: &RegisterArgs) -> Result<()> {
 
     let wants_network = scenario.models.method.iter().any(|m| m.kind == MethodKind::Network);
     let model_path = args.model.clone().unwrap_or_else(|| PathBuf::from(DEMO_MODEL));
-    let network = if !wants_network {
+    let model = if !wants_network {
         None
     } else if model_path.exists() {
         Some(learn::TrainedModel::load(&model_path, &learn::inference_device())?)
@@ -397,6 +400,11 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         );
         None
     };
+    let (network_scenario, network_dir) = match &args.scenario {
+        Some(path) => DatasetScenario::load(path)?,
+        None => (ar_scenario(), PathBuf::new()),
+    };
+    let network = model.as_ref().map(|model| Network { model, scenario: &network_scenario, dir: &network_dir });
     let methods = case_methods(&scenario, network.as_ref())?;
     let rows = compare(&case, methods, &scenario.registration);
     if rows.is_empty() {

@@ -9,7 +9,7 @@ use learn::sample_view::sample_on_mesh;
 use learn::{Compute, Corruption};
 use mesh::phantom::SurfacePatch;
 use mesh::stats::{max, mean};
-use register::case::{compare, methods, synthetic_case, TRUTH_TETS};
+use register::case::{compare, methods, synthetic_case, Network, TRUTH_TETS};
 use register::CaseScenario;
 
 use crate::learning::{dataset, error_histogram, model_dir, train, Recipe};
@@ -124,7 +124,8 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         let case = synthetic_case(&scenario)?;
         marker_count = case.targets.len();
         // Fresh methods per case: each registers from rest, with no state from the last case.
-        let rows = compare(&case, methods(Some(&t.model))?, &options);
+        let network = Network { model: &t.model, scenario: &data.scenario, dir: &data.scenario_dir };
+        let rows = compare(&case, methods(Some(&network))?, &options);
         if per_method.is_empty() {
             per_method = rows.iter().map(|r| MethodTre { method: r.method.clone(), ..MethodTre::default() }).collect();
         }

@@ -138,11 +138,28 @@ pub fn organ_of(source: &MeshSource, mesh: Mesh) -> Result<Organ> {
     Organ::new(mesh, surface)
 }
 
-/// The U-Net registration model of `model`, trained on the dataset of `scenario` (e.g.
-/// [`ar_scenario`]; mesh paths relative to `dir`): the scenario's organ, the network fed with
-/// the displacement of the scenario's input nodes.
-pub fn network_model(scenario: &DatasetScenario, dir: &Path, model: &TrainedModel) -> Result<(Organ, NetworkDeformer)> {
-    let mesh = scenario.mesh(dir)?;
+/// A trained network and the dataset scenario it was trained on.
+pub struct Network<'a> {
+    /// The network.
+    pub model: &'a TrainedModel,
+    /// Its dataset scenario: the organ's mesh and the network's input nodes.
+    pub scenario: &'a DatasetScenario,
+    /// The scenario's directory (mesh paths are relative to it).
+    pub dir: &'a Path,
+}
+
+impl<'a> Network<'a> {
+    /// `model`, trained on [`ar_scenario`] (e.g. the shipped `models/liver_ar`).
+    pub fn shipped_scenario(model: &'a TrainedModel, scenario: &'a DatasetScenario) -> Network<'a> {
+        Network { model, scenario, dir: Path::new("") }
+    }
+}
+
+/// The U-Net registration model of a network: its scenario's organ, the network fed with the
+/// displacement of the scenario's input nodes.
+pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
+    let (scenario, model) = (network.scenario, network.model);
+    let mesh = scenario.mesh(network.dir)?;
     let (inputs, normal) = match &scenario.dataset.input {
         Input::Displacement { nodes, normal, .. } => (nodes.select(&mesh)?, *normal),
         Input::Force => {
@@ -157,17 +174,17 @@ pub fn network_model(scenario: &DatasetScenario, dir: &Path, model: &TrainedMode
     Ok((organ, deformer))
 }
 
-/// The methods of the built-in case, all on [`model_mesh`]: the co-rotational FEM, the SVK FEM
-/// (E = 5 kPa, ν = 0.49, the law of the network's training data) and, when given, the U-Net
+/// The methods of the built-in case: the co-rotational FEM and the SVK FEM (E = 5 kPa, ν = 0.49,
+/// the law of the network's training data) on [`model_mesh`], and, when given, the U-Net
 /// `network`.
-pub fn methods(network: Option<&TrainedModel>) -> Result<Vec<Method>> {
+pub fn methods(network: Option<&Network>) -> Result<Vec<Method>> {
     case_methods(&CaseScenario::builtin(), network)
 }
 
 /// The methods of `scenario`, in its order: its FEM methods on the phantom of `models.tets`
-/// tetrahedra, its network methods with `network` (trained by [`ar_scenario`], on its organ),
-/// left out when it is `None`.
-pub fn case_methods(scenario: &CaseScenario, network: Option<&TrainedModel>) -> Result<Vec<Method>> {
+/// tetrahedra, its network methods with `network` (on its scenario's organ), left out when it
+/// is `None`.
+pub fn case_methods(scenario: &CaseScenario, network: Option<&Network>) -> Result<Vec<Method>> {
     let mesh = mesh::phantom::liver_phantom(scenario.models.tets)?;
     let mut out = Vec::new();
     for spec in &scenario.models.method {
@@ -180,8 +197,8 @@ pub fn case_methods(scenario: &CaseScenario, network: Option<&TrainedModel>) -> 
             (MethodKind::Fem, None, _) => {
                 return Err(RegisterError::Invalid(format!("method {name:?}: a FEM method needs a material")))
             }
-            (MethodKind::Network, _, Some(model)) => {
-                let (organ, deformer) = network_model(&ar_scenario(), Path::new(""), model)?;
+            (MethodKind::Network, _, Some(network)) => {
+                let (organ, deformer) = network_model(network)?;
                 out.push(Method { name, organ, deformer: Box::new(deformer) });
             }
             (MethodKind::Network, _, None) => {}
