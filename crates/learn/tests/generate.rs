@@ -4,6 +4,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
 
 use augsim_learn::generate::{DatasetConfig, Generator, Input, Load};
+use augsim_learn::scenario::DatasetScenario;
 use augsim_learn::{merge_datasets, Dataset, DatasetPart};
 use fem::{Law, Material, SolverOptions};
 use mesh::NodeSelection;
@@ -333,4 +334,40 @@ fn gravity_adds_a_body_force_of_the_drawn_acceleration() {
         })
         .collect();
     assert!(directions[0] != directions[1] && directions[1] != directions[2], "random directions");
+}
+
+/// The shipped scenarios (`scenarios/`).
+fn shipped(name: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios").join(name)
+}
+
+#[test]
+fn every_shipped_dataset_scenario_parses() {
+    let mut parsed = 0;
+    for entry in std::fs::read_dir(shipped("")).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        if path.extension().is_some_and(|e| e == "toml") && text.contains("\n[dataset]") {
+            DatasetScenario::load(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            parsed += 1;
+        }
+    }
+    assert!(parsed >= 8, "{parsed} dataset scenarios");
+}
+
+#[test]
+fn the_grid_ar_scenario_presses_the_immersed_phantom_by_centimetres() {
+    let (mut scenario, dir) = DatasetScenario::load(&shipped("liver_ar_grid.toml")).unwrap();
+    scenario.dataset.samples = 2;
+    let g = scenario.generator(&dir).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let manifest = g.run(tmp.path(), "liver_ar_grid", None, &|_, _| {}).unwrap();
+    assert!(manifest.failed.is_empty(), "{:?}", manifest.failed);
+    let data = Dataset::open(tmp.path()).unwrap().load_all().unwrap();
+    let n = data.grid.nodes();
+    for i in 0..data.len() {
+        let u = data.target(i);
+        let largest = (0..n).map(|k| (0..3).map(|c| u[c * n + k].powi(2)).sum::<f32>().sqrt()).fold(0.0, f32::max);
+        assert!((0.01..0.1).contains(&largest), "sample {i}: largest displacement {largest} m");
+    }
 }
