@@ -196,7 +196,7 @@ mod tests {
             assert_eq!(kinds.iter().filter(|&&k| k).count(), 1, "{}: parses as {kinds:?}", path.display());
             count += 1;
         }
-        assert_eq!(count, 17, "scenario files");
+        assert_eq!(count, 18, "scenario files");
         let (beam, dir) = Scenario::load(&dir.join("beam.toml")).unwrap();
         let problem = beam.build_problem(build_mesh(&beam.mesh, &dir).unwrap()).unwrap();
         assert_eq!(problem.mesh.cells.len(), 500);
