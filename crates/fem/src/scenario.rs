@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use mesh::immersed::ImmersedOptions;
 use mesh::{Mesh, MeshError, NodeSelection, Point};
 use serde::Deserialize;
 
@@ -32,6 +33,10 @@ pub enum MeshSource {
     PhantomGrid {
         /// Cell size (m).
         spacing: f64,
+        /// Cells with at most this volume fraction are left out (default 0: every cell with
+        /// material); nearly empty cut cells are the first to be crushed under large loads.
+        #[serde(default)]
+        min_fraction: f64,
     },
     /// A closed surface (.obj, .stl, .vtk) meshed with tetrahedra; the path is
     /// relative to the scenario file.
@@ -84,7 +89,10 @@ pub fn build_mesh(source: &MeshSource, dir: &Path) -> Result<Mesh, MeshError> {
         MeshSource::Box { min, max, cells, element: ElementKind::Hex } => mesh::box_hex(*min, *max, *cells)?,
         MeshSource::Box { min, max, cells, element: ElementKind::Tet } => mesh::box_tet(*min, *max, *cells)?,
         MeshSource::Phantom { tets } => mesh::phantom::liver_phantom(*tets)?,
-        MeshSource::PhantomGrid { spacing } => mesh::phantom::PhantomSpec::default().immersed(*spacing)?.mesh,
+        MeshSource::PhantomGrid { spacing, min_fraction } => {
+            let options = ImmersedOptions { min_fraction: *min_fraction, ..ImmersedOptions::with_spacing(*spacing) };
+            mesh::phantom::PhantomSpec::default().immersed_with(&options)?.mesh
+        }
         MeshSource::Surface { path, length, tets } => {
             let mut surface = mesh::io::read_surface(dir.join(path))?;
             surface.fit_to(*length)?;

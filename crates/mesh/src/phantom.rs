@@ -282,7 +282,12 @@ impl PhantomSpec {
     /// the surface nodes are the nodes of cells partly inside the organ
     /// (0 < fraction < 1) and their normals the phantom's normal at the node.
     pub fn immersed(&self, spacing: f64) -> Result<ImmersedGrid, MeshError> {
-        let mut grid = immersed_grid(self, &ImmersedOptions::with_spacing(spacing))?;
+        self.immersed_with(&ImmersedOptions::with_spacing(spacing))
+    }
+
+    /// [`PhantomSpec::immersed`] with any grid options (e.g. a minimum cell fraction).
+    pub fn immersed_with(&self, options: &ImmersedOptions) -> Result<ImmersedGrid, MeshError> {
+        let mut grid = immersed_grid(self, options)?;
         let mesh = &grid.mesh;
         let mut on_surface = vec![false; mesh.num_nodes()];
         mesh.surface_nodes().into_iter().for_each(|k| on_surface[k] = true);

@@ -561,6 +561,18 @@ fn immersed_grid_fractions_and_volume() {
     let err = grid.organ_volume() / volume - 1.0;
     println!("immersed phantom: {} cells, {} nodes, volume error {:+.3}%", f.len(), grid.mesh.num_nodes(), 100.0 * err);
     assert!(err.abs() < 0.03);
+    // Without the nearly empty cells: fewer cells, each above the threshold, the regions kept,
+    // at most a tenth of a cell's volume lost per cell left out.
+    let options = ImmersedOptions { min_fraction: 0.1, ..ImmersedOptions::with_spacing(0.01) };
+    let trimmed = spec.immersed_with(&options).unwrap();
+    let kept = trimmed.mesh.cell_fraction.as_ref().unwrap();
+    let dropped = f.len() - kept.len();
+    assert!(dropped > 0 && kept.iter().all(|&x| x > 0.1), "{dropped} cells left out");
+    let lost = grid.organ_volume() - trimmed.organ_volume();
+    assert!(lost > 0.0 && lost <= 0.1 * dropped as f64 * 1e-6 + 1e-12, "{lost} m³ lost with {dropped} cells");
+    for name in ["fixed", "visible", "push", "markers"] {
+        assert!(!trimmed.mesh.region(name).unwrap().is_empty(), "{name}");
+    }
     // Material shares: 1 at nodes whose cells are all full, the mean of the cell fractions elsewhere.
     let share = grid.mesh.node_material_share();
     let mut around = vec![Vec::new(); grid.mesh.num_nodes()];
