@@ -147,8 +147,8 @@ pub struct Generator {
     normals: Vec<[f64; 3]>,
     /// Each node's share of material, weighting the patch force.
     material_share: Vec<f64>,
-    /// The range of the body acceleration and the body forces of unit accelerations along x, y, z.
-    gravity: Option<([f64; 2], Vec<Vec<f64>>)>,
+    /// The range of the body acceleration and each node's mass (kg).
+    gravity: Option<([f64; 2], Vec<f64>)>,
     observed: Vec<usize>,
     encoding: Encoding,
     grid: GridShape,
@@ -268,18 +268,13 @@ impl Generator {
             }
         }
         let material_share = mesh.node_material_share();
-        // The body force of a unit acceleration along x, y and z.
+        // Each node's mass: the x component of the body force of a unit acceleration.
         let gravity = match config.gravity {
             Some(range) => {
                 check_range(&range, "gravity")?;
-                let mut basis = Vec::with_capacity(3);
-                for d in 0..3 {
-                    let mut unit = Problem::new(mesh.clone(), material);
-                    unit.add_gravity(std::array::from_fn(|k| if k == d { 1.0 } else { 0.0 }))
-                        .map_err(|e| invalid(e.to_string()))?;
-                    basis.push(unit.f_ext);
-                }
-                Some((range, basis))
+                let mut unit = Problem::new(mesh.clone(), material);
+                unit.add_gravity([1.0; 3]).map_err(|e| invalid(e.to_string()))?;
+                Some((range, unit.f_ext.iter().step_by(3).copied().collect()))
             }
             None => None,
         };
@@ -391,11 +386,11 @@ impl Generator {
             }
             Load::Any(_) => unreachable!("alternatives are resolved in Generator::new"),
         }
-        if let Some((range, basis)) = &self.gravity {
+        if let Some((range, masses)) = &self.gravity {
             let direction = random_unit(&mut rng);
             let a = rng.random_range(range[0]..=range[1]);
-            for (d, unit) in basis.iter().enumerate() {
-                f.iter_mut().zip(unit).for_each(|(f, u)| *f += a * direction[d] * u);
+            for (f, m) in f.chunks_exact_mut(3).zip(masses) {
+                (0..3).for_each(|d| f[d] += a * direction[d] * m);
             }
         }
         let observed = match &self.config.input {
@@ -459,7 +454,8 @@ impl Generator {
             .iter()
             .copied()
             .filter(|&n| {
-                mesh::dot(mesh::sub(self.mesh.nodes[n], c), mesh::sub(self.mesh.nodes[n], c)) <= radius * radius
+                let d = mesh::sub(self.mesh.nodes[n], c);
+                mesh::dot(d, d) <= radius * radius
             })
             .filter(|n| self.fixed_sets[fixed].binary_search(n).is_err())
             .collect();
