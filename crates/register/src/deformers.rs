@@ -307,7 +307,8 @@ fn conjugate_gradients(
 
 impl Deformer for NetworkDeformer {
     fn deform(&mut self, observations: &Observations, previous: &[f64], _iteration: usize) -> Result<Vec<f64>> {
-        if !self.inputs.iter().any(|&n| observations.weight[n] > 0.0) {
+        let observes_an_input = |&(n, w): &(usize, f64)| w > 0.0 && self.local[n] < self.inputs.len();
+        if !observations.matches.iter().flat_map(|m| &m.stencil.0).any(observes_an_input) {
             return Err(RegisterError::Invalid("no cloud point matches the network's input surface".into()));
         }
         let surface = self.surface_estimate(observations, previous);
@@ -361,8 +362,12 @@ mod tests {
         let observations =
             observe(&organ, &deformed, &cloud, &RegistrationOptions::default(), 0.05, Some(view)).unwrap();
         let fit = deformer.surface_estimate(&observations, &vec![0.0; u.len()]);
+        // A node's total interpolation weight over the matches (0: unobserved).
+        let weight = |node: usize| -> f64 {
+            observations.matches.iter().flat_map(|m| &m.stencil.0).filter(|&&(k, _)| k == node).map(|&(_, w)| w).sum()
+        };
         let deepest = (0..deformer.inputs.len())
-            .filter(|&i| observations.weight[deformer.inputs[i]] > 0.0)
+            .filter(|&i| weight(deformer.inputs[i]) > 0.0)
             .min_by(|&a, &b| u[3 * deformer.inputs[a] + 2].total_cmp(&u[3 * deformer.inputs[b] + 2]))
             .unwrap();
         let node = deformer.inputs[deepest];
@@ -372,7 +377,7 @@ mod tests {
             .iter()
             .flat_map(|m| m.stencil.0.iter().filter(|&&(k, _)| k == node).map(move |&(_, w)| w * m.shift[2]))
             .sum::<f64>()
-            / observations.weight[node];
+            / weight(node);
         let (truth, fitted) = (u[3 * node + 2], fit[deepest][2]);
         eprintln!(
             "deepest visible node: {:.2} mm, fit {:.2} mm, mean offset {:.2} mm",

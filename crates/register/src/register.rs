@@ -18,8 +18,6 @@ use crate::{RegisterError, Result};
 pub struct Observations {
     /// The kept matches.
     pub matches: Vec<PointMatch>,
-    /// Per mesh node, the sum of its interpolation weights over the matches (0: unobserved).
-    pub weight: Vec<f64>,
 }
 
 /// A kept match: a cloud point and the surface point it matched.
@@ -203,8 +201,7 @@ pub fn observe(
 ) -> Result<Observations> {
     let (facing, original) = facing_part(surface, view);
     let (matches, limit) = closest_matches(&facing, cloud, options, capture)?;
-    let n = organ.mesh().num_nodes();
-    let mut obs = Observations { matches: Vec::with_capacity(cloud.len()), weight: vec![0.0; n] };
+    let mut obs = Observations { matches: Vec::with_capacity(cloud.len()) };
     let rest = &organ.surface().vertices;
     let stencils = organ.surface_stencils();
     for (c, m) in cloud.iter().zip(&matches) {
@@ -224,11 +221,7 @@ pub fn observe(
         let shift = [c[0] - p0[0], c[1] - p0[1], c[2] - p0[2]];
         let mut stencil = Vec::with_capacity(3);
         for (b, &k) in bary.iter().zip(&tri) {
-            for &(node, w) in &stencils[k].0 {
-                let w = b * w;
-                obs.weight[node] += w;
-                stencil.push((node, w));
-            }
+            stencil.extend(stencils[k].0.iter().map(|&(node, w)| (node, b * w)));
         }
         obs.matches.push(PointMatch { stencil: Stencil(stencil), shift, normal });
     }
