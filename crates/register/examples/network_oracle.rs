@@ -10,7 +10,7 @@
 
 use std::path::Path;
 
-use augsim_register::case::{ar_scenario, network_model, synthetic_case, Network};
+use augsim_register::case::{ar_network_model, synthetic_case};
 use augsim_register::{observe, register_frame, target_errors, CaseScenario, RigidTransform};
 use learn::generate::normal_part;
 use learn::{encode_points, GridToMesh, Predictor, TrainedModel};
@@ -32,7 +32,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Err("the oracle compares with the truth in the model's frame: remove the case's misalignment".into());
     }
     let model = TrainedModel::load(Path::new(MODEL), &learn::inference_device())?;
-    let (organ, deformer) = network_model(&Network::shipped_scenario(&model, &ar_scenario()))?;
+    let (organ, deformer) = ar_network_model(&model)?;
     let mesh = organ.mesh().clone();
     // The truth at each node of the network's mesh: interpolated in the finer mesh, or its nearest
     // node's for a node just outside it (the two meshes' surfaces differ by their facets).

@@ -148,13 +148,6 @@ pub struct Network<'a> {
     pub dir: &'a Path,
 }
 
-impl<'a> Network<'a> {
-    /// `model`, trained on [`ar_scenario`] (e.g. the shipped `models/liver_ar`).
-    pub fn shipped_scenario(model: &'a TrainedModel, scenario: &'a DatasetScenario) -> Network<'a> {
-        Network { model, scenario, dir: Path::new("") }
-    }
-}
-
 /// The U-Net registration model of a network: its scenario's organ, the network fed with the
 /// displacement of the scenario's input nodes.
 pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
@@ -172,6 +165,11 @@ pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
     let organ = organ_of(&scenario.mesh, mesh)?;
     let deformer = NetworkDeformer::new(model, &organ, &inputs, normal)?;
     Ok((organ, deformer))
+}
+
+/// [`network_model`] of `model` trained on [`ar_scenario`] (e.g. the shipped `models/liver_ar`).
+pub fn ar_network_model(model: &TrainedModel) -> Result<(Organ, NetworkDeformer)> {
+    network_model(&Network { model, scenario: &ar_scenario(), dir: Path::new("") })
 }
 
 /// The methods of the built-in case: the co-rotational FEM and the SVK FEM (E = 5 kPa, ν = 0.49,

@@ -343,10 +343,7 @@ mod tests {
     fn the_surface_fit_keeps_the_depth_of_a_dent() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
         let model = TrainedModel::load(std::path::Path::new(path), &learn::inference_device()).unwrap();
-        let (organ, deformer) = {
-            let scenario = crate::case::ar_scenario();
-            crate::case::network_model(&crate::case::Network::shipped_scenario(&model, &scenario)).unwrap()
-        };
+        let (organ, deformer) = crate::case::ar_network_model(&model).unwrap();
         let mesh = organ.mesh();
         let top = mesh.nodes.iter().map(|p| p[2]).fold(f64::MIN, f64::max);
         let centre = [-0.06, 0.005];

@@ -3,7 +3,7 @@
 
 use augsim_register as register;
 use fem::{Law, Material, Problem, SolverOptions};
-use register::case::{ar_scenario, compare, corotational_model, network_model, phantom_push, Method, Network};
+use register::case::{ar_network_model, compare, corotational_model, phantom_push, Method};
 use register::organ::displaced;
 use register::target_errors;
 use register::{register_frame, CameraModel, FemDeformer, Organ, RegistrationOptions};
@@ -49,7 +49,7 @@ const MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/
 fn network_tre(camera: &CameraModel) -> (f64, f64) {
     let case = phantom_push(1.5, camera, 7).unwrap();
     let model = learn::TrainedModel::load(std::path::Path::new(MODEL), &learn::inference_device()).unwrap();
-    let (organ, deformer) = network_model(&Network::shipped_scenario(&model, &ar_scenario())).unwrap();
+    let (organ, deformer) = ar_network_model(&model).unwrap();
     let rows = compare(
         &case,
         vec![Method { name: "U-Net".into(), organ, deformer: Box::new(deformer) }],
