@@ -60,7 +60,9 @@ pub struct DatasetConfig {
     /// Adds a body force ρ·a to every sample, `a` of uniformly random direction and of
     /// magnitude drawn in this range (m/s²): gravity's pull on an organ whose supports and
     /// orientation changed since the preoperative scan (e.g. `[0.0, 9.81]`).
-    #[serde(default)]
+    /// Left out of the manifest when absent, so that a dataset without gravity keeps the source
+    /// identity ([`crate::Manifest::source_id`]) it had before the option existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gravity: Option<[f64; 2]>,
     /// What the network sees.
     pub input: Input,

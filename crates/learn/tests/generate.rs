@@ -357,3 +357,17 @@ fn the_grid_ar_scenario_presses_the_immersed_phantom_by_centimetres() {
         assert!((0.01..0.1).contains(&largest), "sample {i}: largest displacement {largest} m");
     }
 }
+
+/// A dataset regenerated from `scenarios/liver_ar.toml` has the source identity recorded in the
+/// shipped network's split, so that `eval` finds its test samples and refuses its training ones
+/// (options added to the generator since must not change the manifest of a scenario without them).
+#[test]
+fn a_regenerated_liver_ar_dataset_is_the_shipped_networks_own() {
+    let (mut scenario, dir) = DatasetScenario::load(&shipped("liver_ar.toml")).unwrap();
+    scenario.dataset.samples = 1;
+    let tmp = tempfile::tempdir().unwrap();
+    scenario.generator(&dir).unwrap().run(tmp.path(), &scenario.name, None, &|_, _| {}).unwrap();
+    let model = std::fs::read_to_string(shipped("../models/liver_ar/model.json")).unwrap();
+    let model: serde_json::Value = serde_json::from_str(&model).unwrap();
+    assert_eq!(Dataset::open(tmp.path()).unwrap().manifest().source_id(), model["training"]["split"]["source"]);
+}
