@@ -163,7 +163,7 @@ impl Mesh {
             .iter()
             .enumerate()
             .filter(|(_, &f)| f < 1.0)
-            .flat_map(|(c, _)| self.cells.cell(c).to_vec())
+            .flat_map(|(c, _)| self.cells.cell(c).iter().copied())
             .collect();
         nodes.sort_unstable();
         nodes.dedup();
