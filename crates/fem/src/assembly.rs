@@ -7,7 +7,7 @@
 
 use rayon::prelude::*;
 
-use crate::element::ElementGeometry;
+use crate::element::{ElementGeometry, ForceScratch};
 use crate::fbar;
 use crate::material::{Formulation, Material};
 use crate::FemError;
@@ -190,15 +190,20 @@ pub fn assemble(
         tasks.push((first, last, fc, kc));
     }
     tasks.into_par_iter().try_for_each(|(first, last, fc, mut kc)| {
+        // A standard element is the patch of the same index.
+        if geometry.formulation != Formulation::Fbar && kc.is_none() {
+            return geometry.forces(first..last, material, u, fc, &mut ForceScratch::default());
+        }
         let mut scratch = fbar::PatchScratch::default();
         let (mut fo, mut ko) = (0, 0);
         for p in first..last {
             let nd = 3 * patches.nodes(p).len();
             let fe = &mut fc[fo..fo + nd];
             let ke = kc.as_deref_mut().map(|k| &mut k[ko..ko + nd * nd]);
-            match geometry.formulation {
-                Formulation::Fbar => fbar::patch_force_tangent(geometry, p, material, u, fe, ke, &mut scratch)?,
-                _ => geometry.force_tangent(patches.elements(p)[0], material, u, fe, ke)?,
+            match (geometry.formulation, ke) {
+                (Formulation::Fbar, ke) => fbar::patch_force_tangent(geometry, p, material, u, fe, ke, &mut scratch)?,
+                (_, Some(ke)) => geometry.force_tangent(patches.elements(p)[0], material, u, fe, ke)?,
+                (_, None) => unreachable!("standard forces alone are evaluated above"),
             }
             fo += nd;
             ko += nd * nd;

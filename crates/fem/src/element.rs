@@ -1,6 +1,8 @@
 //! Element geometry (shape-function gradients and quadrature weights in the
 //! reference configuration) and element kernels (internal force and tangent).
 
+use std::ops::Range;
+
 use mesh::{Cells, Mesh};
 use nalgebra::Matrix3;
 
@@ -165,47 +167,73 @@ impl ElementGeometry {
         f
     }
 
-    /// Internal force `f` (3n entries) and, when `k` is given, tangent stiffness
-    /// (3n×3n, row-major, local dof `3a + i`) of element `e` at displacement `u`.
-    /// Fails when det F ≤ 0 at a quadrature point for a law that needs det F > 0,
-    /// or when the result is not finite.
+    /// Internal forces of the elements `elements`, one after the other in `f` (3 per element
+    /// node): the deformation gradients of all their quadrature points first, then every
+    /// stress at once ([`Material::stresses`], which vectorises the co-rotational law).
+    /// Fails when det F ≤ 0 at a quadrature point for a law that needs det F > 0, or when
+    /// a force is not finite.
+    pub fn forces(
+        &self,
+        elements: Range<usize>,
+        material: &Material,
+        u: &[f64],
+        f: &mut [f64],
+        scratch: &mut ForceScratch,
+    ) -> Result<(), FemError> {
+        let (npe, nq) = (self.nodes_per_element, self.points_per_element);
+        let ForceScratch { gradients, stresses } = scratch;
+        gradients.clear();
+        for e in elements.clone() {
+            for q in 0..nq {
+                gradients.push(self.checked_gradient(e, q, material, u)?);
+            }
+        }
+        stresses.resize(gradients.len(), Matrix3::zeros());
+        material.stresses(gradients, stresses);
+        f.fill(0.0);
+        for (i, e) in elements.enumerate() {
+            let fe = &mut f[3 * npe * i..3 * npe * (i + 1)];
+            for q in 0..nq {
+                let at = e * nq + q;
+                add_point_force(fe, self.weights[at], &stresses[i * nq + q], &self.grads[at * npe..][..npe]);
+            }
+            if fe.iter().any(|v| !v.is_finite()) {
+                return Err(FemError::NonFinite(format!("internal force of element {e}")));
+            }
+        }
+        Ok(())
+    }
+
+    /// The deformation gradient at point `q` of element `e`, checked against inversion.
+    fn checked_gradient(&self, e: usize, q: usize, material: &Material, u: &[f64]) -> Result<Matrix3<f64>, FemError> {
+        let fg = self.deformation_gradient(e, q, u);
+        let det = fg.determinant();
+        if !det.is_finite() || (material.law.needs_positive_jacobian() && det <= 0.0) {
+            return Err(FemError::InvertedElement { element: e, det });
+        }
+        Ok(fg)
+    }
+
+    /// Internal force `f` (3n entries) and tangent stiffness `k` (3n×3n, row-major, local dof
+    /// `3a + i`) of element `e` at displacement `u`. Fails as [`ElementGeometry::forces`] does.
     pub fn force_tangent(
         &self,
         e: usize,
         material: &Material,
         u: &[f64],
         f: &mut [f64],
-        mut k: Option<&mut [f64]>,
+        k: &mut [f64],
     ) -> Result<(), FemError> {
         let npe = self.nodes_per_element;
         let ndof = 3 * npe;
         f.fill(0.0);
-        if let Some(k) = k.as_deref_mut() {
-            k.fill(0.0);
-        }
+        k.fill(0.0);
         for q in 0..self.points_per_element {
             let w = self.weights[e * self.points_per_element + q];
             let g = &self.grads[(e * self.points_per_element + q) * npe..][..npe];
-            let fg = self.deformation_gradient(e, q, u);
-            let det = fg.determinant();
-            if !det.is_finite() || (material.law.needs_positive_jacobian() && det <= 0.0) {
-                return Err(FemError::InvertedElement { element: e, det });
-            }
-            let Some(k) = k.as_deref_mut() else {
-                let p = material.stress(&fg);
-                for a in 0..npe {
-                    for i in 0..3 {
-                        f[3 * a + i] += w * (p[(i, 0)] * g[a][0] + p[(i, 1)] * g[a][1] + p[(i, 2)] * g[a][2]);
-                    }
-                }
-                continue;
-            };
+            let fg = self.checked_gradient(e, q, material, u)?;
             let (p, a_tan) = material.stress_tangent(&fg);
-            for a in 0..npe {
-                for i in 0..3 {
-                    f[3 * a + i] += w * (p[(i, 0)] * g[a][0] + p[(i, 1)] * g[a][1] + p[(i, 2)] * g[a][2]);
-                }
-            }
+            add_point_force(f, w, &p, g);
             // Q_a[i][k][L] = Σ_J g_aJ A_iJkL, then K_ab,ik = Σ_L Q_a[i][k][L] g_bL.
             for a in 0..npe {
                 let mut qa = [[0.0; 9]; 3];
@@ -230,12 +258,10 @@ impl ElementGeometry {
             }
         }
         // The tangent is symmetric: only blocks b ≥ a were accumulated; mirror them.
-        if let Some(k) = k {
-            for p in 0..ndof {
-                for q in (p / 3) * 3..ndof {
-                    if q / 3 > p / 3 {
-                        k[q * ndof + p] = k[p * ndof + q];
-                    }
+        for p in 0..ndof {
+            for q in (p / 3) * 3..ndof {
+                if q / 3 > p / 3 {
+                    k[q * ndof + p] = k[p * ndof + q];
                 }
             }
         }
@@ -243,5 +269,21 @@ impl ElementGeometry {
             return Err(FemError::NonFinite(format!("internal force of element {e}")));
         }
         Ok(())
+    }
+}
+
+/// Scratch space of [`ElementGeometry::forces`], reused across calls.
+#[derive(Clone, Debug, Default)]
+pub struct ForceScratch {
+    gradients: Vec<Matrix3<f64>>,
+    stresses: Vec<Matrix3<f64>>,
+}
+
+/// Adds a quadrature point's force, w · P ∇N_a per node a, to an element's force `f`.
+fn add_point_force(f: &mut [f64], w: f64, p: &Matrix3<f64>, g: &[[f64; 3]]) {
+    for (a, ga) in g.iter().enumerate() {
+        for i in 0..3 {
+            f[3 * a + i] += w * (p[(i, 0)] * ga[0] + p[(i, 1)] * ga[1] + p[(i, 2)] * ga[2]);
+        }
     }
 }

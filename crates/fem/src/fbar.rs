@@ -41,12 +41,30 @@ fn mat_vec(a: &Tangent, x: &V9) -> V9 {
     std::array::from_fn(|r| dot(&a[r], x))
 }
 
+/// x^⅓ for x > 0 to within one unit in the last place, twice as fast as `f64::cbrt` (which
+/// rounds correctly): an estimate from the exponent bits (within 6 %), two Halley steps
+/// (cubic convergence) and one Newton step.
+fn cube_root(x: f64) -> f64 {
+    if !(x.is_normal() && x > 0.0) {
+        return x.cbrt();
+    }
+    let mut y = f64::from_bits(x.to_bits() / 3 + (0x2a9f_7893_u64 << 32));
+    for _ in 0..2 {
+        let y3 = y * y * y;
+        y *= (y3 + 2.0 * x) / (2.0 * y3 + x);
+    }
+    y - (y * y * y - x) / (3.0 * y * y)
+}
+
 /// Scratch space of a patch evaluation, reused across patches.
 #[derive(Clone, Debug, Default)]
 pub struct PatchScratch {
     points: Vec<PatchPoint>,
     /// A = ∂P/∂F at F̄ per point (tangent evaluations only).
     tangents: Vec<Tangent>,
+    /// F̄ and P̄ per point (force evaluations only).
+    gradients: Vec<Matrix3<f64>>,
+    stresses: Vec<Matrix3<f64>>,
 }
 
 /// Per-quadrature-point state of a patch evaluation.
@@ -56,8 +74,8 @@ struct PatchPoint {
     grads: usize,
     w: f64,
     f: Matrix3<f64>,
-    /// F⁻ᵀ (finite strain only).
-    finv_t: V9,
+    /// ∂m/∂F: cof F = J F⁻ᵀ for finite strain, I for the linear law.
+    dm: V9,
     /// Volume measure m(F): J or tr F − 3.
     m: f64,
     alpha: f64,
@@ -89,12 +107,11 @@ fn gather(
         for q in 0..nq {
             let f = geo.deformation_gradient(e, q, u);
             // F⁻ᵀ = cof(F) / J.
-            let (m, finv_t) = if linear {
-                (f.trace() - 3.0, [0.0; 9])
+            let (m, dm) = if linear {
+                (f.trace() - 3.0, flat(&Matrix3::identity()))
             } else {
                 let cof = cofactor(&f);
-                let jac = f.row(0).dot(&cof.row(0));
-                (jac, flat(&(cof / jac)))
+                (f.row(0).dot(&cof.row(0)), flat(&cof))
             };
             if !m.is_finite() || (!linear && m <= 0.0) {
                 return Err(FemError::InvertedElement { element: e, det: m });
@@ -107,7 +124,7 @@ fn gather(
                 grads: (e * nq + q) * geo.nodes_per_element,
                 w,
                 f,
-                finv_t,
+                dm,
                 m,
                 alpha: 1.0,
                 stress: [0.0; 9],
@@ -126,18 +143,26 @@ impl Kinematics {
         if self.linear {
             (p.f + Matrix3::identity() * ((self.mean - p.m) / 3.0), 1.0)
         } else {
-            let alpha = (self.mean / p.m).cbrt();
+            let alpha = cube_root(self.mean / p.m);
             (p.f * alpha, alpha)
         }
     }
 
-    /// (x, y) of M = α (I − ⅓ x yᵀ), and ∂m/∂F.
-    fn directions(&self, p: &PatchPoint) -> (V9, V9, V9) {
+    /// x of M = α (I − ⅓ x yᵀ): F, or I for the linear law.
+    fn x(&self, p: &PatchPoint) -> V9 {
         if self.linear {
-            let id = flat(&Matrix3::identity());
-            (id, id, id)
+            p.dm
         } else {
-            (flat(&p.f), p.finv_t, p.finv_t.map(|v| v * p.m))
+            flat(&p.f)
+        }
+    }
+
+    /// The factor s in y = ∂m/∂F / s: J, or 1 for the linear law.
+    fn y_scale(&self, p: &PatchPoint) -> f64 {
+        if self.linear {
+            1.0
+        } else {
+            p.m
         }
     }
 
@@ -176,7 +201,7 @@ pub fn patch_force_tangent(
     mut k: Option<&mut [f64]>,
     scratch: &mut PatchScratch,
 ) -> Result<(), FemError> {
-    let PatchScratch { points, tangents } = scratch;
+    let PatchScratch { points, tangents, gradients, stresses } = scratch;
     let kin = gather(geo, patch, material.law, u, points)?;
     let want_k = k.is_some();
     let npe = geo.nodes_per_element;
@@ -184,20 +209,32 @@ pub fn patch_force_tangent(
     // Stresses (and tangents) at F̄; σ̄ and γ.
     let (mut sigma_bar, mut gamma) = (0.0, 0.0);
     tangents.clear();
-    for p in points.iter_mut() {
-        let (fbar, alpha) = kin.modified(p);
-        p.alpha = alpha;
-        let phi = kin.phi(alpha);
-        let (x, _, _) = kin.directions(p);
+    if !want_k {
+        // Forces alone: every point's stress at once (vectorised for the co-rotational law).
+        gradients.clear();
+        for p in points.iter_mut() {
+            let (fbar, alpha) = kin.modified(p);
+            p.alpha = alpha;
+            gradients.push(fbar);
+        }
+        stresses.resize(gradients.len(), Matrix3::zeros());
+        material.stresses(gradients, stresses);
+    }
+    for (q, p) in points.iter_mut().enumerate() {
+        let x = kin.x(p);
         let stress = if want_k {
+            let (fbar, alpha) = kin.modified(p);
+            p.alpha = alpha;
             let (s, t) = material.stress_tangent(&fbar);
+            let phi = kin.phi(alpha);
             gamma += p.w * phi * phi * dot(&x, &mat_vec(&t, &x));
             tangents.push(t);
             s
         } else {
-            material.stress(&fbar)
+            stresses[q]
         };
         p.stress = flat(&stress);
+        let (alpha, phi) = (p.alpha, kin.phi(p.alpha));
         sigma_bar += p.w * phi * dot(&p.stress, &x);
         if want_k && !kin.linear {
             // P̄ : ∂²Φ/∂m̄² with ∂²Φ/∂m̄² = −2α / (9 m̄²) F.
@@ -211,13 +248,13 @@ pub fn patch_force_tangent(
         k.fill(0.0);
     }
     for (q, p) in points.iter().enumerate() {
-        let (x, y, dm) = kin.directions(p);
+        let (x, dm) = (kin.x(p), &p.dm);
         let c = p.w / kin.volume;
         let alpha = p.alpha;
-        // Mᵀ P̄ = α (P̄ − ⅓ (x·P̄) y).
+        // g = w Mᵀ P̄ + σ̄ c ∂m with Mᵀ P̄ = α (P̄ − ⅓ (x·P̄) y) and y = ∂m / s.
         let xp = dot(&x, &p.stress);
-        let mt_p: V9 = std::array::from_fn(|r| alpha * (p.stress[r] - xp * y[r] / 3.0));
-        let g: V9 = std::array::from_fn(|r| p.w * mt_p[r] + sigma_bar * c * dm[r]);
+        let (wa, dm_factor) = (p.w * alpha, sigma_bar * c - p.w * alpha * xp / (3.0 * kin.y_scale(p)));
+        let g: V9 = std::array::from_fn(|r| wa * p.stress[r] + dm_factor * dm[r]);
         let grads = &geo.grads[p.grads..p.grads + npe];
         let local = geo.patches.local_nodes(patch, p.slot);
         for (a, &la) in local.iter().enumerate() {
@@ -227,6 +264,8 @@ pub fn patch_force_tangent(
             }
         }
         let Some(k) = k.as_deref_mut() else { continue };
+        let y = dm.map(|v| v / kin.y_scale(p));
+        let mt_p: V9 = std::array::from_fn(|r| alpha * (p.stress[r] - xp * y[r] / 3.0));
         // D = w (Mᵀ A M + P̄ : ∂²Φ/∂F²) + σ̄ c ∂²m.
         let tangent = &tangents[q];
         let ax = mat_vec(tangent, &x);
@@ -241,7 +280,7 @@ pub fn patch_force_tangent(
         // a = w (Mᵀ A φ + P̄ : ∂²Φ/∂F∂m̄).
         let mut av: V9 = std::array::from_fn(|r| p.w * phi * alpha * (ax[r] - xax * y[r] / 3.0));
         if !kin.linear {
-            let finv = Matrix3::from_fn(|r, c| p.finv_t[3 * c + r]);
+            let finv = Matrix3::from_fn(|r, c| y[3 * c + r]);
             let tau = xp; // P̄ : F
             let jac = p.m;
             for r in 0..9 {
@@ -311,6 +350,19 @@ mod tests {
     use crate::material::Formulation;
     use crate::patch::Patches;
 
+    #[test]
+    fn cube_root_is_within_one_ulp() {
+        for i in 0..100_000 {
+            let x = 10f64.powf(-6.0 + 12.0 * i as f64 / 100_000.0);
+            let (fast, exact) = (cube_root(x), x.cbrt());
+            assert!(fast.to_bits().abs_diff(exact.to_bits()) <= 1, "{x}: {fast} against {exact}");
+        }
+        assert_eq!(cube_root(1.0), 1.0);
+        assert_eq!(cube_root(8.0), 2.0);
+        assert_eq!(cube_root(0.0), 0.0);
+        assert!(cube_root(f64::INFINITY).is_infinite());
+    }
+
     /// On one-tetrahedron patches J̄ = J, so F-bar (and B-bar) must reproduce the
     /// standard element's force and tangent: two independent code paths.
     #[test]
@@ -325,7 +377,7 @@ mod tests {
             for e in 0..geo.len() {
                 let (mut f1, mut k1, mut f2, mut k2) = (vec![0.0; 12], vec![0.0; 144], vec![0.0; 12], vec![0.0; 144]);
                 patch_force_tangent(&geo, e, &material, &u, &mut f1, Some(&mut k1), &mut scratch).unwrap();
-                geo.force_tangent(e, &material, &u, &mut f2, Some(&mut k2)).unwrap();
+                geo.force_tangent(e, &material, &u, &mut f2, &mut k2).unwrap();
                 let scale = k2.iter().fold(0.0f64, |a, b| a.max(b.abs()));
                 let df = f1.iter().zip(&f2).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
                 let dk = k1.iter().zip(&k2).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));

@@ -10,6 +10,7 @@
 pub mod assembly;
 pub mod element;
 pub mod fbar;
+mod lanes;
 pub mod linsolve;
 pub mod material;
 pub mod patch;

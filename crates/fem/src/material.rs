@@ -8,6 +8,8 @@
 use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
+use crate::lanes::{Lanes, Mask};
+
 /// ∂P/∂F as a 9×9 array (row-major flattening on both sides).
 pub type Tangent = [[f64; 9]; 9];
 
@@ -159,12 +161,20 @@ impl Material {
                 let finv_t = f.try_inverse().unwrap_or_else(Matrix3::zeros).transpose();
                 (f - finv_t) * mu + finv_t * (lambda * f.determinant().ln())
             }
-            Law::Corotational => {
-                let (r, s) = polar(f);
-                let eps = s - id;
-                r * (id * (lambda * eps.trace()) + eps * (2.0 * mu))
-            }
+            Law::Corotational => corotational_stress(&rotation(f), f, lambda, mu),
         }
+    }
+
+    /// First Piola-Kirchhoff stresses at many points, `out[i]` = [`Material::stress`]`(fs[i])`
+    /// bit for bit; the co-rotational law's rotations are computed several at a time
+    /// ([`rotations_each`]). The caller guarantees det F > 0 for laws that need it.
+    pub fn stresses(&self, fs: &[Matrix3<f64>], out: &mut [Matrix3<f64>]) {
+        if self.law != Law::Corotational {
+            out.iter_mut().zip(fs).for_each(|(p, f)| *p = self.stress(f));
+            return;
+        }
+        let (lambda, mu) = self.lame();
+        rotations_each(fs, |i, r| out[i] = corotational_stress(&r, &fs[i], lambda, mu));
     }
 
     /// First Piola-Kirchhoff stress P(F) and its tangent ∂P/∂F.
@@ -230,32 +240,95 @@ fn fill(t: &mut Tangent, a: impl Fn(usize, usize, usize, usize) -> f64) {
 /// quadratically, so once a step changes X by less than 10⁻⁸ (relative) the
 /// new iterate is exact to rounding. Falls back to the SVD if it does not converge.
 pub fn polar(f: &Matrix3<f64>) -> (Matrix3<f64>, Matrix3<f64>) {
-    let mut x = *f;
-    let mut scaled = true;
-    for _ in 0..30 {
-        let cof = cofactor(&x);
-        let det = x[(0, 0)] * cof[(0, 0)] + x[(0, 1)] * cof[(0, 1)] + x[(0, 2)] * cof[(0, 2)];
-        if det == 0.0 || !det.is_finite() {
-            break;
-        }
-        let inv_t = cof / det;
-        let norm2 = x.norm_squared();
-        let next = if scaled {
-            let gamma = (inv_t.norm_squared() / norm2).sqrt().sqrt();
-            (x * gamma + inv_t / gamma) * 0.5
-        } else {
-            (x + inv_t) * 0.5
-        };
-        let change2 = (next - x).norm_squared();
-        x = next;
-        // Near convergence the scaling only slows the quadratic rate (Higham).
-        scaled = change2 > 1e-4 * norm2;
-        if change2 <= 1e-16 * norm2 {
-            let s = x.transpose() * f;
-            return (x, (s + s.transpose()) * 0.5);
+    let r = rotation(f);
+    let s = r.transpose() * f;
+    (r, (s + s.transpose()) * 0.5)
+}
+
+/// The rotation R of the polar decomposition F = R·S ([`polar`]).
+pub fn rotation(f: &Matrix3<f64>) -> Matrix3<f64> {
+    let (x, converged) = newton_polar(std::array::from_fn(|k| Lanes([f[(k / 3, k % 3)]])));
+    if !converged.0[0] {
+        return polar_svd(f).0;
+    }
+    Matrix3::from_fn(|i, j| x[3 * i + j].0[0])
+}
+
+/// Calls `each(i, R)` with the rotation of every `fs[i]` ([`rotation`], bit for bit), four at a
+/// time with vector instructions.
+pub fn rotations_each(fs: &[Matrix3<f64>], mut each: impl FnMut(usize, Matrix3<f64>)) {
+    for (c, chunk) in fs.chunks(4).enumerate() {
+        // Padding lanes hold the identity, which converges at once.
+        let x: [Lanes<4>; 9] = std::array::from_fn(|k| {
+            Lanes(std::array::from_fn(|l| chunk.get(l).map_or(f64::from(k % 4 == 0), |f| f[(k / 3, k % 3)])))
+        });
+        let (x, converged) = newton_polar_x4(x);
+        for (l, f) in chunk.iter().enumerate() {
+            let r = if converged.0[l] { Matrix3::from_fn(|i, j| x[3 * i + j].0[l]) } else { polar_svd(f).0 };
+            each(4 * c + l, r);
         }
     }
-    polar_svd(f)
+}
+
+/// [`newton_polar`] on four lanes, compiled for AVX where the processor has it.
+fn newton_polar_x4(x: [Lanes<4>; 9]) -> ([Lanes<4>; 9], Mask<4>) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        #[target_feature(enable = "avx")]
+        fn avx(x: [Lanes<4>; 9]) -> ([Lanes<4>; 9], Mask<4>) {
+            newton_polar(x)
+        }
+        // SAFETY: the processor has AVX (checked above).
+        return unsafe { avx(x) };
+    }
+    newton_polar(x)
+}
+
+/// Higham's scaled Newton iteration on `N` matrices at once, one per lane of `x`
+/// (entries `x[3r + c]`). A lane stops changing once it has converged, so its result does
+/// not depend on the others. Returns the iterates and the lanes that converged (det X = 0
+/// or a non-finite value stops a lane unconverged).
+#[inline(always)]
+fn newton_polar<const N: usize>(mut x: [Lanes<N>; 9]) -> ([Lanes<N>; 9], Mask<N>) {
+    // Rows (columns) of the 2×2 minor of each cofactor entry.
+    const PAIR: [(usize, usize); 3] = [(1, 2), (2, 0), (0, 1)];
+    let splat = Lanes::<N>::splat;
+    let (mut active, mut converged, mut scaled) = (Mask([true; N]), Mask([false; N]), Mask([true; N]));
+    for _ in 0..30 {
+        if !active.any() {
+            break;
+        }
+        let mut cof = [splat(0.0); 9];
+        for (k, c) in cof.iter_mut().enumerate() {
+            let ((r0, r1), (c0, c1)) = (PAIR[k / 3], PAIR[k % 3]);
+            *c = x[3 * r0 + c0] * x[3 * r1 + c1] - x[3 * r0 + c1] * x[3 * r1 + c0];
+        }
+        let det = x[0] * cof[0] + x[1] * cof[1] + x[2] * cof[2];
+        let (mut norm2, mut cof_norm2) = (splat(0.0), splat(0.0));
+        for k in 0..9 {
+            norm2 = norm2 + x[k] * x[k];
+            cof_norm2 = cof_norm2 + cof[k] * cof[k];
+        }
+        // X⁻ᵀ = cof(X) / det X, so X ← a X + b cof(X) with a = γ/2, b = 1/(2γ det X) and
+        // γ = (‖X⁻¹‖ / ‖X‖)^½. Near convergence the scaling only slows the quadratic rate
+        // (Higham): γ = 1.
+        let gamma = scaled.select((cof_norm2 / (det * det * norm2)).sqrt().sqrt(), splat(1.0));
+        let (a, b) = (splat(0.5) * gamma, splat(0.5) / (gamma * det));
+        let (mut change2, mut next) = (splat(0.0), [splat(0.0); 9]);
+        for k in 0..9 {
+            next[k] = a * x[k] + b * cof[k];
+            let d = next[k] - x[k];
+            change2 = change2 + d * d;
+        }
+        let take = active.and(det.finite_nonzero());
+        active = take.and(change2.gt(splat(1e-16) * norm2));
+        converged = converged.or(take.and_not(active));
+        scaled = change2.gt(splat(1e-4) * norm2);
+        for (x, next) in x.iter_mut().zip(next) {
+            *x = take.select(next, *x);
+        }
+    }
+    (x, converged)
 }
 
 /// The cofactor matrix, cof(X) = det(X) X⁻ᵀ.
@@ -288,6 +361,12 @@ fn polar_svd(f: &Matrix3<f64>) -> (Matrix3<f64>, Matrix3<f64>) {
     (u * v_t, (s + s.transpose()) * 0.5)
 }
 
+/// Co-rotational stress P = R·(λ tr(ε) I + 2μ ε), ε = S − I, from the rotation R of the polar
+/// decomposition F = R·S: since R·S = F and tr S = R : F, P = (λ (R : F − 3) − 2μ) R + 2μ F.
+fn corotational_stress(r: &Matrix3<f64>, f: &Matrix3<f64>, lambda: f64, mu: f64) -> Matrix3<f64> {
+    r * (lambda * (r.dot(f) - 3.0) - 2.0 * mu) + f * (2.0 * mu)
+}
+
 /// Co-rotational stress and its consistent tangent, including the variation
 /// of the rotation: with Ω = Rᵀ dR = [ω]×, ω = (tr(S) I − S)⁻¹ axial(Rᵀ dF − dFᵀ R).
 fn corotational(f: &Matrix3<f64>, lambda: f64, mu: f64) -> (Matrix3<f64>, Tangent) {
@@ -295,7 +374,7 @@ fn corotational(f: &Matrix3<f64>, lambda: f64, mu: f64) -> (Matrix3<f64>, Tangen
     let (r, s) = polar(f);
     let eps = s - id;
     let sigma = id * (lambda * eps.trace()) + eps * (2.0 * mu);
-    let p = r * sigma;
+    let p = corotational_stress(&r, f, lambda, mu);
     let g_inv = (id * s.trace() - s).try_inverse().unwrap_or_else(Matrix3::zeros);
     let mut t = [[0.0; 9]; 9];
     for k in 0..3 {
@@ -379,5 +458,47 @@ mod tests {
             assert!((s - s.transpose()).norm() < 1e-14 * s.norm());
         }
         assert!((rotation * stretch - polar(&(rotation * stretch)).0 * stretch).norm() < 1e-12);
+    }
+
+    /// The four-lane rotations equal the one-lane ones bit for bit, whatever the other
+    /// lanes hold: mild and strong deformations, a rotation, a singular matrix (the SVD
+    /// fallback) and a count that leaves a partial last chunk.
+    #[test]
+    fn vectorised_polar_and_stresses_equal_the_scalar_ones() {
+        let turn = nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::x_axis(), 1.1).into_inner();
+        let mut fs: Vec<Matrix3<f64>> = (0..9)
+            .map(|i| {
+                let t = i as f64;
+                Matrix3::new(
+                    1.0 + 0.3 * t.sin(),
+                    0.2 * t,
+                    -0.1,
+                    0.05 * t,
+                    0.9,
+                    0.3 * t.cos(),
+                    0.1,
+                    -0.2,
+                    1.2 - 0.05 * t,
+                )
+            })
+            .collect();
+        fs.insert(3, turn);
+        fs.insert(5, Matrix3::zeros());
+        fs.push(turn * sample_f());
+        let mut seen = vec![false; fs.len()];
+        rotations_each(&fs, |i, r| {
+            assert_eq!(r, rotation(&fs[i]), "matrix {i}");
+            seen[i] = true;
+        });
+        assert!(seen.iter().all(|&s| s));
+        let deformations: Vec<Matrix3<f64>> = fs.iter().filter(|f| f.determinant() > 0.0).copied().collect();
+        for law in [Law::Linear, Law::Corotational, Law::Svk, Law::NeoHookean] {
+            let m = Material::new(law, 5000.0, 0.45);
+            let mut out = vec![Matrix3::zeros(); deformations.len()];
+            m.stresses(&deformations, &mut out);
+            for (f, p) in deformations.iter().zip(&out) {
+                assert_eq!(*p, m.stress(f), "{law:?}");
+            }
+        }
     }
 }
