@@ -190,7 +190,8 @@ pub fn assemble(
         tasks.push((first, last, fc, kc));
     }
     tasks.into_par_iter().try_for_each(|(first, last, fc, mut kc)| {
-        // A standard element is the patch of the same index.
+        // Standard elements' forces alone: all of the chunk's stresses at once (a standard
+        // element is the patch of the same index).
         if geometry.formulation != Formulation::Fbar && kc.is_none() {
             return geometry.forces(first..last, material, u, fc, &mut ForceScratch::default());
         }
@@ -200,10 +201,9 @@ pub fn assemble(
             let nd = 3 * patches.nodes(p).len();
             let fe = &mut fc[fo..fo + nd];
             let ke = kc.as_deref_mut().map(|k| &mut k[ko..ko + nd * nd]);
-            match (geometry.formulation, ke) {
-                (Formulation::Fbar, ke) => fbar::patch_force_tangent(geometry, p, material, u, fe, ke, &mut scratch)?,
-                (_, Some(ke)) => geometry.force_tangent(patches.elements(p)[0], material, u, fe, ke)?,
-                (_, None) => unreachable!("standard forces alone are evaluated above"),
+            match geometry.formulation {
+                Formulation::Fbar => fbar::patch_force_tangent(geometry, p, material, u, fe, ke, &mut scratch)?,
+                _ => geometry.force_tangent(patches.elements(p)[0], material, u, fe, ke)?,
             }
             fo += nd;
             ko += nd * nd;

@@ -214,16 +214,20 @@ impl ElementGeometry {
         Ok(fg)
     }
 
-    /// Internal force `f` (3n entries) and tangent stiffness `k` (3n×3n, row-major, local dof
-    /// `3a + i`) of element `e` at displacement `u`. Fails as [`ElementGeometry::forces`] does.
+    /// Internal force `f` (3n entries) and, when `k` is given, tangent stiffness (3n×3n,
+    /// row-major, local dof `3a + i`) of element `e` at displacement `u`. Fails as
+    /// [`ElementGeometry::forces`] does.
     pub fn force_tangent(
         &self,
         e: usize,
         material: &Material,
         u: &[f64],
         f: &mut [f64],
-        k: &mut [f64],
+        k: Option<&mut [f64]>,
     ) -> Result<(), FemError> {
+        let Some(k) = k else {
+            return self.forces(e..e + 1, material, u, f, &mut ForceScratch::default());
+        };
         let npe = self.nodes_per_element;
         let ndof = 3 * npe;
         f.fill(0.0);

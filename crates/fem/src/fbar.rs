@@ -106,7 +106,7 @@ fn gather(
     for (slot, &e) in geo.patches.elements(patch).iter().enumerate() {
         for q in 0..nq {
             let f = geo.deformation_gradient(e, q, u);
-            // F⁻ᵀ = cof(F) / J.
+            // ∂J/∂F = cof F; ∂(tr F − 3)/∂F = I.
             let (m, dm) = if linear {
                 (f.trace() - 3.0, flat(&Matrix3::identity()))
             } else {
@@ -377,7 +377,7 @@ mod tests {
             for e in 0..geo.len() {
                 let (mut f1, mut k1, mut f2, mut k2) = (vec![0.0; 12], vec![0.0; 144], vec![0.0; 12], vec![0.0; 144]);
                 patch_force_tangent(&geo, e, &material, &u, &mut f1, Some(&mut k1), &mut scratch).unwrap();
-                geo.force_tangent(e, &material, &u, &mut f2, &mut k2).unwrap();
+                geo.force_tangent(e, &material, &u, &mut f2, Some(&mut k2)).unwrap();
                 let scale = k2.iter().fold(0.0f64, |a, b| a.max(b.abs()));
                 let df = f1.iter().zip(&f2).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
                 let dk = k1.iter().zip(&k2).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
