@@ -22,7 +22,7 @@ pub mod verification;
 
 pub use element::ElementGeometry;
 pub use material::{Formulation, Law, Material};
-pub use problem::{force_shares, PointSpring, Problem};
+pub use problem::{force_shares, nodal_masses, PointSpring, Problem};
 pub use solver::{Solution, SolverOptions, StaticSolver, Timings};
 
 /// Errors of a finite-element computation.

@@ -120,17 +120,9 @@ impl Problem {
 
     /// Adds the body force ρ·g of the material's density under acceleration `g` (m/s²).
     pub fn add_gravity(&mut self, g: Point) -> Result<(), FemError> {
-        let geo = ElementGeometry::new(&self.mesh, crate::Formulation::Standard)?;
-        let (npe, nqp) = (geo.nodes_per_element, geo.points_per_element);
-        for e in 0..geo.len() {
-            for q in 0..nqp {
-                let w = geo.weights[e * nqp + q] * self.material.density;
-                for (a, &n) in geo.element_nodes(e).iter().enumerate() {
-                    for d in 0..3 {
-                        self.f_ext[3 * n + d] += w * geo.shape[q * npe + a] * g[d];
-                    }
-                }
-            }
+        let masses = nodal_masses(&self.mesh, self.material.density)?;
+        for (f, m) in self.f_ext.chunks_exact_mut(3).zip(masses) {
+            (0..3).for_each(|d| f[d] += m * g[d]);
         }
         Ok(())
     }
@@ -244,4 +236,22 @@ fn face_node_areas(x: &[Point]) -> Vec<f64> {
         }
     }
     w
+}
+
+/// Each node's lumped mass (kg): ρ ∫ N_a over the elements around node a (the row sums of the
+/// consistent mass matrix), with the elements' quadrature weights (scaled by each cell's volume
+/// fraction on an immersed grid).
+pub fn nodal_masses(mesh: &Mesh, density: f64) -> Result<Vec<f64>, FemError> {
+    let geo = ElementGeometry::new(mesh, crate::Formulation::Standard)?;
+    let (npe, nqp) = (geo.nodes_per_element, geo.points_per_element);
+    let mut masses = vec![0.0; mesh.num_nodes()];
+    for e in 0..geo.len() {
+        for q in 0..nqp {
+            let w = geo.weights[e * nqp + q] * density;
+            for (a, &n) in geo.element_nodes(e).iter().enumerate() {
+                masses[n] += w * geo.shape[q * npe + a];
+            }
+        }
+    }
+    Ok(masses)
 }

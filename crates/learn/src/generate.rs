@@ -270,13 +270,10 @@ impl Generator {
             }
         }
         let material_share = mesh.node_material_share();
-        // Each node's mass: the x component of the body force of a unit acceleration.
         let gravity = match config.gravity {
             Some(range) => {
                 check_range(&range, "gravity")?;
-                let mut unit = Problem::new(mesh.clone(), material);
-                unit.add_gravity([1.0; 3]).map_err(|e| invalid(e.to_string()))?;
-                Some((range, unit.f_ext.iter().step_by(3).copied().collect()))
+                Some((range, fem::nodal_masses(&mesh, material.density).map_err(|e| invalid(e.to_string()))?))
             }
             None => None,
         };
