@@ -183,6 +183,7 @@ impl ElementGeometry {
         let (npe, nq) = (self.nodes_per_element, self.points_per_element);
         let ForceScratch { gradients, stresses } = scratch;
         gradients.clear();
+        gradients.reserve(elements.len() * nq);
         for e in elements.clone() {
             for q in 0..nq {
                 gradients.push(self.checked_gradient(e, q, material, u)?);

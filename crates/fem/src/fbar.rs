@@ -29,6 +29,9 @@ use crate::FemError;
 
 type V9 = [f64; 9];
 
+/// The identity, flattened.
+const IDENTITY: V9 = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+
 fn flat(m: &Matrix3<f64>) -> V9 {
     std::array::from_fn(|r| m[(r / 3, r % 3)])
 }
@@ -108,7 +111,7 @@ fn gather(
             let f = geo.deformation_gradient(e, q, u);
             // ∂J/∂F = cof F; ∂(tr F − 3)/∂F = I.
             let (m, dm) = if linear {
-                (f.trace() - 3.0, flat(&Matrix3::identity()))
+                (f.trace() - 3.0, IDENTITY)
             } else {
                 let cof = cofactor(&f);
                 (f.row(0).dot(&cof.row(0)), flat(&cof))
@@ -151,7 +154,7 @@ impl Kinematics {
     /// x of M = α (I − ⅓ x yᵀ): F, or I for the linear law.
     fn x(&self, p: &PatchPoint) -> V9 {
         if self.linear {
-            p.dm
+            IDENTITY
         } else {
             flat(&p.f)
         }

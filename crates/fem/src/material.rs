@@ -491,14 +491,14 @@ mod tests {
             seen[i] = true;
         });
         assert!(seen.iter().all(|&s| s));
+        // The other laws' `stresses` is `stress` point by point: only the co-rotational one has a
+        // path of its own to check.
         let deformations: Vec<Matrix3<f64>> = fs.iter().filter(|f| f.determinant() > 0.0).copied().collect();
-        for law in [Law::Linear, Law::Corotational, Law::Svk, Law::NeoHookean] {
-            let m = Material::new(law, 5000.0, 0.45);
-            let mut out = vec![Matrix3::zeros(); deformations.len()];
-            m.stresses(&deformations, &mut out);
-            for (f, p) in deformations.iter().zip(&out) {
-                assert_eq!(*p, m.stress(f), "{law:?}");
-            }
+        let m = Material::new(Law::Corotational, 5000.0, 0.45);
+        let mut out = vec![Matrix3::zeros(); deformations.len()];
+        m.stresses(&deformations, &mut out);
+        for (f, p) in deformations.iter().zip(&out) {
+            assert_eq!(*p, m.stress(f));
         }
     }
 }
