@@ -48,7 +48,8 @@ pub struct RegisterArgs {
     /// TRE is reported.
     #[arg(long)]
     truth: Option<PathBuf>,
-    /// Most match-and-deform iterations per frame (default: the library's, or the case's).
+    /// Most match-and-deform iterations per frame (default: the library's, or the case's and its
+    /// methods'; given, it holds for every method of a case).
     #[arg(long)]
     iterations: Option<usize>,
     /// Rigid pre-alignment: trimmed point-to-plane ICP of the cloud to the organ's rest surface
@@ -338,7 +339,9 @@ fn comparison_case(args: &RegisterArgs) -> Result<CaseScenario> {
         scenario.misalignment.translation_mm = mm;
     }
     if let Some(iterations) = args.iterations {
+        // Given on the command line, it holds for every method.
         scenario.registration.iterations = iterations;
+        scenario.models.method.iter_mut().for_each(|m| m.iterations = None);
     }
     if args.rigid && scenario.registration.rigid.is_none() {
         scenario.registration.rigid = Some(RigidOptions::default());

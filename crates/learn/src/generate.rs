@@ -76,10 +76,11 @@ fn default_shard_size() -> usize {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum Load {
-    /// One force along the inward surface normal, of random magnitude, shared by
-    /// the surface nodes ([`mesh::Mesh::surface_nodes`]) within `radius` of a random centre
-    /// node in proportion to their material share ([`mesh::Mesh::node_material_share`]:
-    /// equal shares on a body-fitted mesh; little for immersed-grid nodes outside the organ).
+    /// One force along the inward surface normal at a random centre node (or within a cone
+    /// around it), of random magnitude, shared by the surface nodes
+    /// ([`mesh::Mesh::surface_nodes`]) within `radius` of the centre in proportion to their
+    /// material share ([`mesh::Mesh::node_material_share`]: equal shares on a body-fitted
+    /// mesh; little for immersed-grid nodes outside the organ).
     PatchForce {
         /// Nodes the patch centre is drawn from (default: surface nodes that are not fixed).
         centres: Option<NodeSelection>,
@@ -87,6 +88,12 @@ pub enum Load {
         radius: f64,
         /// Range of the total force magnitude (N).
         magnitude: [f64; 2],
+        /// Half-angle (degrees, 0–180) of the cone around the inward normal the force's
+        /// direction is drawn from, uniformly over its solid angle: oblique pushes, and pulls
+        /// beyond 90°. Absent: along the inward normal (no draw, so that datasets without it
+        /// keep their samples).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        cone: Option<f64>,
     },
     /// A surgical tool pressing the surface: the surface nodes within `radius` of a random
     /// centre node are moved by a random depth along the inward normal at the centre
@@ -176,8 +183,14 @@ impl LoadNodes {
         select: &dyn Fn(&NodeSelection) -> Result<Vec<usize>>,
     ) -> Result<LoadNodes> {
         let (centres, nodes) = match load {
-            Load::PatchForce { centres, radius, magnitude: range } | Load::Tool { centres, radius, depth: range } => {
+            Load::PatchForce { centres, radius, magnitude: range, .. }
+            | Load::Tool { centres, radius, depth: range } => {
                 check_range(range, if matches!(load, Load::Tool { .. }) { "depth" } else { "magnitude" })?;
+                if let Load::PatchForce { cone: Some(cone), .. } = load {
+                    if !(0.0..=180.0).contains(cone) {
+                        return Err(invalid(format!("cone half-angle must lie in 0–180 degrees, got {cone}")));
+                    }
+                }
                 if !(*radius > 0.0) {
                     return Err(invalid(format!("patch radius must be positive, got {radius}")));
                 }
@@ -354,10 +367,14 @@ impl Generator {
         // A draw among alternatives only: a single load's samples stay those of before `any`.
         let loads = &self.loads[if self.loads.len() > 1 { rng.random_range(0..self.loads.len()) } else { 0 }];
         match &loads.load {
-            Load::PatchForce { radius, magnitude, .. } => {
+            Load::PatchForce { radius, magnitude, cone, .. } => {
                 let (centre, patch) = self.patch(loads, &mut rng, *radius, fixed)?;
                 let mag = rng.random_range(magnitude[0]..=magnitude[1]);
-                let normal = self.normals[centre];
+                // The force pushes along −normal.
+                let normal = match cone {
+                    Some(cone) => direction_in_cone(&mut rng, self.normals[centre], cone.to_radians()),
+                    None => self.normals[centre],
+                };
                 let total: f64 = patch.iter().map(|&n| self.material_share[n]).sum();
                 if !(total > 0.0) {
                     return Err(format!("the patch around node {centre} has no material"));
@@ -556,6 +573,22 @@ fn check_range(r: &[f64; 2], what: &str) -> Result<()> {
         return Err(invalid(format!("{what} range {r:?} must satisfy 0 ≤ min ≤ max")));
     }
     Ok(())
+}
+
+/// A unit vector drawn uniformly over the spherical cap of half-angle `half_angle` (radians)
+/// around the unit vector `axis`.
+fn direction_in_cone(rng: &mut impl Rng, axis: [f64; 3], half_angle: f64) -> [f64; 3] {
+    let cos = rng.random_range(half_angle.cos()..=1.0);
+    let azimuth = rng.random_range(0.0..std::f64::consts::TAU);
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    // An orthonormal pair across the axis, from the coordinate axis least aligned with it.
+    let least = (0..3).min_by(|&a, &b| axis[a].abs().total_cmp(&axis[b].abs())).unwrap_or(0);
+    let mut e = [0.0; 3];
+    e[least] = 1.0;
+    let u = mesh::cross(axis, e);
+    let u = u.map(|c| c / mesh::norm(u));
+    let v = mesh::cross(axis, u);
+    std::array::from_fn(|d| cos * axis[d] + sin * (azimuth.cos() * u[d] + azimuth.sin() * v[d]))
 }
 
 fn random_unit(rng: &mut impl Rng) -> [f64; 3] {

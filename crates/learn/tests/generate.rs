@@ -30,7 +30,7 @@ fn beam_generator_with_shards(samples: usize, shard_size: usize) -> Generator {
         shard_size,
         grid: None,
         fixed: vec![bottom(0.0, 1.0), bottom(2.0, 3.0)],
-        load: Load::PatchForce { centres: Some(top()), radius: 0.6, magnitude: [0.05, 0.2] },
+        load: Load::PatchForce { centres: Some(top()), radius: 0.6, magnitude: [0.05, 0.2], cone: None },
         gravity: None,
         input: Input::Displacement { nodes: top(), sparse: Some([3, 8]), normal: false },
     };
@@ -231,6 +231,12 @@ fn bad_configurations_are_rejected_with_a_reason() {
         .unwrap()
         .to_string();
     assert!(err.contains("depth range"), "{err}");
+    let cone = Load::PatchForce { centres: Some(top()), radius: 0.6, magnitude: [0.1, 0.2], cone: Some(200.0) };
+    let err = Generator::new(mesh.clone(), m, SolverOptions::default(), DatasetConfig { load: cone, ..base.clone() })
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("cone half-angle"), "{err}");
     let nested = DatasetConfig { load: Load::Any(vec![Load::Any(vec![])]), ..base.clone() };
     let err = Generator::new(mesh.clone(), m, SolverOptions::default(), nested).err().unwrap().to_string();
     assert!(err.contains("not other `any`"), "{err}");
@@ -309,10 +315,51 @@ fn tool_nodes(data: &augsim_learn::Samples, i: usize) -> Vec<usize> {
 #[test]
 fn each_sample_draws_one_of_the_alternative_loads() {
     let tool = Load::Tool { centres: Some(top()), radius: 0.6, depth: [0.05, 0.1] };
-    let push = Load::PatchForce { centres: Some(top()), radius: 0.6, magnitude: [0.05, 0.2] };
+    let push = Load::PatchForce { centres: Some(top()), radius: 0.6, magnitude: [0.05, 0.2], cone: None };
     let data = beam_samples(Law::NeoHookean, Load::Any(vec![tool, push]), None, 12);
     let pressed = (0..data.len()).filter(|&i| !tool_nodes(&data, i).is_empty()).count();
     assert!(pressed > 0 && pressed < data.len(), "{pressed} of {} samples pressed by the tool", data.len());
+}
+
+/// The total force of each sample of a beam pushed on its top face within a cone of
+/// `half_angle` degrees around the inward normal, read back from the force input. The patch
+/// centres are top nodes off the face's edges, where the normal is +z.
+fn patch_force_totals(half_angle: f64, samples: usize) -> Vec<[f64; 3]> {
+    let mesh = mesh::box_hex([0.0; 3], [4.0, 1.0, 1.0], [8, 2, 2]).unwrap();
+    let inside = NodeSelection::Box { min: [0.4, 0.4, 1.0 - 1e-6], max: [3.6, 0.6, 1.0 + 1e-6] };
+    let config = DatasetConfig {
+        samples,
+        seed: 5,
+        shard_size: samples,
+        grid: None,
+        fixed: vec![bottom(0.0, 1.0)],
+        load: Load::PatchForce { centres: Some(inside), radius: 0.6, magnitude: [0.05, 0.2], cone: Some(half_angle) },
+        gravity: None,
+        input: Input::Force,
+    };
+    let g = Generator::new(mesh, Material::new(Law::Linear, 300.0, 0.3), SolverOptions::default(), config).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    g.run(tmp.path(), "beam", None, &|_, _| {}).unwrap();
+    let data = Dataset::open(tmp.path()).unwrap().load_all().unwrap();
+    let n = data.grid.nodes();
+    (0..data.len())
+        .map(|i| std::array::from_fn(|c| data.input(i)[c * n..(c + 1) * n].iter().map(|&f| f64::from(f)).sum()))
+        .collect()
+}
+
+#[test]
+fn a_patch_force_cone_tilts_the_push_within_its_half_angle() {
+    let angle = |f: &[f64; 3]| {
+        let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+        assert!((0.05 - 1e-6..=0.2 + 1e-6).contains(&norm), "magnitude {norm}");
+        (-f[2] / norm).clamp(-1.0, 1.0).acos().to_degrees()
+    };
+    let tilted: Vec<f64> = patch_force_totals(40.0, 12).iter().map(angle).collect();
+    assert!(tilted.iter().all(|&a| a <= 40.0 + 1e-3), "{tilted:?}");
+    assert!(tilted.iter().any(|&a| a > 15.0), "tilted pushes: {tilted:?}");
+    // Beyond 90°, pulls: a force with an outward component.
+    let any: Vec<f64> = patch_force_totals(180.0, 12).iter().map(angle).collect();
+    assert!(any.iter().any(|&a| a > 90.0) && any.iter().any(|&a| a < 90.0), "{any:?}");
 }
 
 #[test]

@@ -186,18 +186,18 @@ pub fn case_methods(scenario: &CaseScenario, network: Option<&Network>) -> Resul
     let mesh = mesh::phantom::liver_phantom(scenario.models.tets)?;
     let mut out = Vec::new();
     for spec in &scenario.models.method {
-        let name = spec.name.clone();
+        let (name, iterations) = (spec.name.clone(), spec.iterations);
         match (spec.kind, spec.material, network) {
             (MethodKind::Fem, Some(material), _) => {
                 let (organ, deformer) = fem_model_fixed_on(mesh.clone(), material, &scenario.truth.fixed)?;
-                out.push(Method { name, organ, deformer: Box::new(deformer) });
+                out.push(Method { name, organ, deformer: Box::new(deformer), iterations });
             }
             (MethodKind::Fem, None, _) => {
                 return Err(RegisterError::Invalid(format!("method {name:?}: a FEM method needs a material")))
             }
             (MethodKind::Network, _, Some(network)) => {
                 let (organ, deformer) = network_model(network)?;
-                out.push(Method { name, organ, deformer: Box::new(deformer) });
+                out.push(Method { name, organ, deformer: Box::new(deformer), iterations });
             }
             (MethodKind::Network, _, None) => {}
         }
@@ -213,6 +213,8 @@ pub struct Method {
     pub organ: Organ,
     /// How it deforms.
     pub deformer: Box<dyn Deformer>,
+    /// Most match-and-deform iterations, in place of the comparison's (`None`: the comparison's).
+    pub iterations: Option<usize>,
 }
 
 /// One method's registration of a comparison case.
@@ -239,6 +241,8 @@ pub fn compare(case: &SyntheticCase, methods: Vec<Method>, options: &Registratio
     methods
         .into_iter()
         .map(|mut m| {
+            let options =
+                RegistrationOptions { iterations: m.iterations.unwrap_or(options.iterations), ..options.clone() };
             let truth = [case.truth.clone()];
             let frames = [Ok(case.cloud.clone())];
             let result = register_sequence(
@@ -247,7 +251,7 @@ pub fn compare(case: &SyntheticCase, methods: Vec<Method>, options: &Registratio
                 frames,
                 &case.targets,
                 Some(&truth),
-                options,
+                &options,
                 |_, _| Ok(()),
             )
             .and_then(|mut outcomes| {

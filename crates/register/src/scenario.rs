@@ -177,6 +177,10 @@ pub struct MethodSpec {
     /// The finite-element model's material (`kind = "fem"` only).
     #[serde(default)]
     pub material: Option<Material>,
+    /// Most match-and-deform iterations for this method, in place of `[registration]
+    /// iterations`: e.g. the U-Net's real-time budget.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub iterations: Option<usize>,
 }
 
 /// The kinds of registration method.
@@ -263,6 +267,9 @@ impl CaseScenario {
                     return bad(format!("method {name:?}: kind = \"network\" takes no `material`"))
                 }
                 (MethodKind::Network, None) => {}
+            }
+            if method.iterations == Some(0) {
+                return bad(format!("method {name:?}: iterations must be at least 1"));
             }
             let slug = slug(name);
             if slug.is_empty() {

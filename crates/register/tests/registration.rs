@@ -52,7 +52,7 @@ fn network_tre(camera: &CameraModel) -> (f64, f64) {
     let (organ, deformer) = ar_network_model(&model).unwrap();
     let rows = compare(
         &case,
-        vec![Method { name: "U-Net".into(), organ, deformer: Box::new(deformer) }],
+        vec![Method { name: "U-Net".into(), organ, deformer: Box::new(deformer), iterations: None }],
         &RegistrationOptions::default(),
     );
     let errors = rows[0].result.as_ref().unwrap().outcome.errors.clone().unwrap();
@@ -114,7 +114,7 @@ fn a_failing_method_is_reported_and_the_others_still_register() {
     let mut methods = register::case::case_methods(&scenario, None).unwrap();
     methods.truncate(1);
     let organ = methods[0].organ.clone();
-    methods.insert(0, Method { name: "failing".into(), organ, deformer: Box::new(Failing) });
+    methods.insert(0, Method { name: "failing".into(), organ, deformer: Box::new(Failing), iterations: None });
     let rows = compare(&case, methods, &scenario.registration);
     assert_eq!(rows.len(), 2);
     let e = rows[0].result.as_ref().err().expect("the failing method fails").to_string();
