@@ -259,6 +259,17 @@ fn bad_configurations_are_rejected_with_a_reason() {
 /// The generated samples of a beam fixed at one end, loaded by `load` and `gravity`, with the
 /// full displacement of its top face as input.
 fn beam_samples(law: Law, load: Load, gravity: Option<[f64; 2]>, samples: usize) -> augsim_learn::Samples {
+    beam_dataset(law, load, gravity, Input::Displacement { nodes: top(), sparse: None, normal: false }, samples)
+}
+
+/// The generated samples of a beam fixed at one end, loaded by `load` and `gravity`, with `input`.
+fn beam_dataset(
+    law: Law,
+    load: Load,
+    gravity: Option<[f64; 2]>,
+    input: Input,
+    samples: usize,
+) -> augsim_learn::Samples {
     let mesh = mesh::box_hex([0.0; 3], [4.0, 1.0, 1.0], [8, 2, 2]).unwrap();
     let config = DatasetConfig {
         samples,
@@ -268,7 +279,7 @@ fn beam_samples(law: Law, load: Load, gravity: Option<[f64; 2]>, samples: usize)
         fixed: vec![bottom(0.0, 1.0)],
         load,
         gravity,
-        input: Input::Displacement { nodes: top(), sparse: None, normal: false },
+        input,
     };
     let mut material = Material::new(law, 300.0, 0.3);
     material.density = 10.0;
@@ -325,22 +336,9 @@ fn each_sample_draws_one_of_the_alternative_loads() {
 /// `half_angle` degrees around the inward normal, read back from the force input. The patch
 /// centres are top nodes off the face's edges, where the normal is +z.
 fn patch_force_totals(half_angle: f64, samples: usize) -> Vec<[f64; 3]> {
-    let mesh = mesh::box_hex([0.0; 3], [4.0, 1.0, 1.0], [8, 2, 2]).unwrap();
     let inside = NodeSelection::Box { min: [0.4, 0.4, 1.0 - 1e-6], max: [3.6, 0.6, 1.0 + 1e-6] };
-    let config = DatasetConfig {
-        samples,
-        seed: 5,
-        shard_size: samples,
-        grid: None,
-        fixed: vec![bottom(0.0, 1.0)],
-        load: Load::PatchForce { centres: Some(inside), radius: 0.6, magnitude: [0.05, 0.2], cone: Some(half_angle) },
-        gravity: None,
-        input: Input::Force,
-    };
-    let g = Generator::new(mesh, Material::new(Law::Linear, 300.0, 0.3), SolverOptions::default(), config).unwrap();
-    let tmp = tempfile::tempdir().unwrap();
-    g.run(tmp.path(), "beam", None, &|_, _| {}).unwrap();
-    let data = Dataset::open(tmp.path()).unwrap().load_all().unwrap();
+    let load = Load::PatchForce { centres: Some(inside), radius: 0.6, magnitude: [0.05, 0.2], cone: Some(half_angle) };
+    let data = beam_dataset(Law::Linear, load, None, Input::Force, samples);
     let n = data.grid.nodes();
     (0..data.len())
         .map(|i| std::array::from_fn(|c| data.input(i)[c * n..(c + 1) * n].iter().map(|&f| f64::from(f)).sum()))
