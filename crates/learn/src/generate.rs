@@ -370,8 +370,8 @@ impl Generator {
             Load::PatchForce { radius, magnitude, cone, .. } => {
                 let (centre, patch) = self.patch(loads, &mut rng, *radius, fixed)?;
                 let mag = rng.random_range(magnitude[0]..=magnitude[1]);
-                // The force pushes along −normal.
-                let normal = match cone {
+                // The force pushes along −outward: the outward normal, or a direction within the cone around it.
+                let outward = match cone {
                     Some(cone) => direction_in_cone(&mut rng, self.normals[centre], cone.to_radians()),
                     None => self.normals[centre],
                 };
@@ -381,7 +381,7 @@ impl Generator {
                 }
                 for &n in &patch {
                     for d in 0..3 {
-                        f[3 * n + d] -= mag * normal[d] * self.material_share[n] / total;
+                        f[3 * n + d] -= mag * outward[d] * self.material_share[n] / total;
                     }
                 }
             }
