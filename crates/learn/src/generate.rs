@@ -182,15 +182,15 @@ impl LoadNodes {
         fixed_sets: &[Vec<usize>],
         select: &dyn Fn(&NodeSelection) -> Result<Vec<usize>>,
     ) -> Result<LoadNodes> {
+        if let Load::PatchForce { cone: Some(cone), .. } = load {
+            if !(0.0..=180.0).contains(cone) {
+                return Err(invalid(format!("cone half-angle must lie in 0–180 degrees, got {cone}")));
+            }
+        }
         let (centres, nodes) = match load {
             Load::PatchForce { centres, radius, magnitude: range, .. }
             | Load::Tool { centres, radius, depth: range } => {
                 check_range(range, if matches!(load, Load::Tool { .. }) { "depth" } else { "magnitude" })?;
-                if let Load::PatchForce { cone: Some(cone), .. } = load {
-                    if !(0.0..=180.0).contains(cone) {
-                        return Err(invalid(format!("cone half-angle must lie in 0–180 degrees, got {cone}")));
-                    }
-                }
                 if !(*radius > 0.0) {
                     return Err(invalid(format!("patch radius must be positive, got {radius}")));
                 }
@@ -585,8 +585,7 @@ fn direction_in_cone(rng: &mut impl Rng, axis: [f64; 3], half_angle: f64) -> [f6
     let least = (0..3).min_by(|&a, &b| axis[a].abs().total_cmp(&axis[b].abs())).unwrap_or(0);
     let mut e = [0.0; 3];
     e[least] = 1.0;
-    let u = mesh::cross(axis, e);
-    let u = u.map(|c| c / mesh::norm(u));
+    let u = mesh::unit(mesh::cross(axis, e));
     let v = mesh::cross(axis, u);
     std::array::from_fn(|d| cos * axis[d] + sin * (azimuth.cos() * u[d] + azimuth.sin() * v[d]))
 }

@@ -332,6 +332,16 @@ pub fn norm(a: Point) -> f64 {
     dot(a, a).sqrt()
 }
 
+/// `v` scaled to unit length (zero stays zero).
+pub fn unit(v: Point) -> Point {
+    let l = norm(v);
+    if l > 0.0 {
+        v.map(|x| x / l)
+    } else {
+        v
+    }
+}
+
 /// |a − b|.
 pub fn distance(a: Point, b: Point) -> f64 {
     norm(sub(a, b))

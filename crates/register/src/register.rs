@@ -4,7 +4,7 @@
 use std::time::{Duration, Instant};
 
 use mesh::bvh::SurfaceBvh;
-use mesh::{sub, Point, TriSurface};
+use mesh::{sub, unit, Point, TriSurface};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -306,16 +306,6 @@ pub(crate) fn barycentric(t: [Point; 3], p: Point) -> [f64; 3] {
     let v = ((d11 * d20 - d01 * d21) / den).clamp(0.0, 1.0);
     let w = ((d00 * d21 - d01 * d20) / den).clamp(0.0, 1.0 - v);
     [1.0 - v - w, v, w]
-}
-
-/// `v` scaled to unit length (zero stays zero).
-pub(crate) fn unit(v: Point) -> Point {
-    let l = mesh::norm(v);
-    if l > 0.0 {
-        v.map(|x| x / l)
-    } else {
-        v
-    }
 }
 
 #[cfg(test)]

@@ -259,7 +259,7 @@ pub fn rigid_align(surface: &TriSurface, cloud: &[Point], options: &RigidOptions
     let smooth_normal = |triangle: usize, p: Point| {
         let tri = surface.triangles[triangle];
         let b = crate::register::barycentric(tri.map(|k| surface.vertices[k]), p);
-        crate::register::unit(std::array::from_fn(|d| (0..3).map(|c| b[c] * vertex_normals[tri[c]][d]).sum()))
+        mesh::unit(std::array::from_fn(|d| (0..3).map(|c| b[c] * vertex_normals[tri[c]][d]).sum()))
     };
     let mut transform = RigidTransform::identity();
     let mut iterations = 0;
