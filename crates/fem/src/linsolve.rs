@@ -1,7 +1,11 @@
 //! Sparse symmetric positive-definite solves with faer: the symbolic
-//! factorisation (AMD ordering, supernodal) is computed once per pattern and
-//! reused by every numeric factorisation. Two numeric factors can be held at
-//! once ([`Slot`]), sharing the symbolic analysis and the workspace.
+//! factorisation (supernodal) is computed once per pattern and reused by every
+//! numeric factorisation. Two numeric factors can be held at once ([`Slot`]),
+//! sharing the symbolic analysis and the workspace.
+//!
+//! The fill-reducing ordering is faer's approximate minimum degree (AMD) or, for
+//! large systems, METIS's nested dissection of the node graph when that needs
+//! less factorisation work ([`Ordering`]).
 //!
 //! The factors are computed and applied in single precision: the Newton solver
 //! uses them only as the initial inverse Hessian of its quasi-Newton iterations
@@ -12,6 +16,7 @@
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::perm::PermRef;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, LdltRef, LltRef, SymbolicCholesky, SymmetricOrdering,
 };
@@ -37,6 +42,18 @@ pub enum Slot {
     Rest,
 }
 
+/// The fill-reducing ordering of a [`SparseCholesky`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ordering {
+    /// Approximate minimum degree (faer).
+    Amd,
+    /// Nested dissection of the node graph (METIS), 3 dofs per node.
+    NestedDissection,
+    /// AMD, or nested dissection where AMD's factorisation would cost more than
+    /// [`ND_WORK`] multiply-adds and nested dissection costs less.
+    Auto,
+}
+
 impl Slot {
     fn index(self) -> usize {
         self as usize
@@ -58,6 +75,8 @@ pub struct SparseCholesky {
     work: f64,
     /// Sequential or parallel, from `work`.
     par: Par,
+    /// The ordering used.
+    ordering: Ordering,
 }
 
 impl std::fmt::Debug for SparseCholesky {
@@ -72,14 +91,50 @@ impl std::fmt::Debug for SparseCholesky {
 /// faster sequential on 2 cores; 29k dofs faster in parallel).
 const PARALLEL_WORK: f64 = 2e9;
 
+/// Above this many multiply-adds of an AMD factorisation, [`Ordering::Auto`] tries nested
+/// dissection. On the 50k-tet liver phantom (29k dofs, F-bar) it cuts the work by 38 % and the
+/// factor by 23 %; on the 5k-tet one (3.4k dofs) it saves 4–17 % of the work but its factor
+/// was no faster, so small systems keep AMD.
+pub const ND_WORK: f64 = PARALLEL_WORK;
+
 impl SparseCholesky {
-    /// Symbolic analysis of the pattern (lower triangle, CSC).
+    /// Symbolic analysis of the pattern (lower triangle, CSC) with [`Ordering::Auto`].
     pub fn new(pattern: &Pattern) -> Result<Self, FemError> {
-        let n = pattern.num_free;
-        let sym = SymbolicSparseColMatRef::new_checked(n, n, &pattern.col_ptr, None, &pattern.row_idx);
-        let symbolic =
-            factorize_symbolic_cholesky(sym, Side::Lower, SymmetricOrdering::Amd, CholeskySymbolicParams::default())
-                .map_err(|e| FemError::Factorization(format!("symbolic analysis failed: {e:?}")))?;
+        SparseCholesky::with_ordering(pattern, Ordering::Auto)
+    }
+
+    /// Symbolic analysis of the pattern with the given ordering. Nested dissection needs the free
+    /// dofs in node triples (as [`Pattern`] numbers them); where it cannot be computed, AMD is used.
+    pub fn with_ordering(pattern: &Pattern, ordering: Ordering) -> Result<Self, FemError> {
+        let analyse = |ordering: SymmetricOrdering<'_, u32>| {
+            let n = pattern.num_free;
+            let sym = SymbolicSparseColMatRef::new_checked(n, n, &pattern.col_ptr, None, &pattern.row_idx);
+            factorize_symbolic_cholesky(sym, Side::Lower, ordering, CholeskySymbolicParams::default())
+                .map_err(|e| FemError::Factorization(format!("symbolic analysis failed: {e:?}")))
+        };
+        let amd = || analyse(SymmetricOrdering::Amd).map(|s| (s, Ordering::Amd));
+        let nested = || -> Result<Option<(SymbolicCholesky<u32>, Ordering)>, FemError> {
+            let Some((forward, inverse)) = nested_dissection(pattern) else {
+                return Ok(None);
+            };
+            let perm = PermRef::new_checked(&forward, &inverse, pattern.num_free);
+            Ok(Some((analyse(SymmetricOrdering::Custom(perm))?, Ordering::NestedDissection)))
+        };
+        let (symbolic, ordering) = match ordering {
+            Ordering::Amd => amd()?,
+            Ordering::NestedDissection => nested()?.map_or_else(amd, Ok)?,
+            Ordering::Auto => {
+                let first = amd()?;
+                if factorization_work(&first.0) <= ND_WORK {
+                    first
+                } else {
+                    match nested()? {
+                        Some(nd) if factorization_work(&nd.0) < factorization_work(&first.0) => nd,
+                        _ => first,
+                    }
+                }
+            }
+        };
         let work = factorization_work(&symbolic);
         let par = if work < PARALLEL_WORK { Par::Seq } else { Par::rayon(0) };
         let req = symbolic
@@ -98,7 +153,13 @@ impl SparseCholesky {
             factor: [Factor::None; 2],
             work,
             par,
+            ordering,
         })
+    }
+
+    /// The fill-reducing ordering in use ([`Ordering::Amd`] or [`Ordering::NestedDissection`]).
+    pub fn ordering(&self) -> Ordering {
+        self.ordering
     }
 
     /// Whether the slot's factorisation is LLᵀ (the matrix was positive definite);
@@ -211,4 +272,62 @@ fn factorization_work(symbolic: &SymbolicCholesky<u32>) -> f64 {
             nnz * nnz / n
         }
     }
+}
+
+/// METIS's nested-dissection ordering of the free nodes (the free dofs taken three by three),
+/// expanded to their dofs: `(forward, inverse)` with `forward[new] = old`. `None` when the free
+/// dofs do not come in node triples or METIS fails.
+fn nested_dissection(pattern: &Pattern) -> Option<(Vec<u32>, Vec<u32>)> {
+    let n = pattern.num_free;
+    if n == 0 || n % 3 != 0 || i32::try_from(n).is_err() {
+        return None;
+    }
+    let nodes = n / 3;
+    let mut neighbours: Vec<Vec<i32>> = vec![Vec::new(); nodes];
+    for c in 0..n {
+        for &r in &pattern.row_idx[pattern.col_ptr[c] as usize..pattern.col_ptr[c + 1] as usize] {
+            let (a, b) = (r as usize / 3, c / 3);
+            if a != b {
+                neighbours[a].push(b as i32);
+                neighbours[b].push(a as i32);
+            }
+        }
+    }
+    let mut xadj = Vec::with_capacity(nodes + 1);
+    let mut adjncy = Vec::new();
+    xadj.push(0);
+    for list in &mut neighbours {
+        list.sort_unstable();
+        list.dedup();
+        adjncy.extend_from_slice(list);
+        xadj.push(i32::try_from(adjncy.len()).ok()?);
+    }
+    let mut count = nodes as i32;
+    let (mut perm, mut iperm) = (vec![0i32; nodes], vec![0i32; nodes]);
+    let mut options = [0; metis_sys::METIS_NOPTIONS as usize];
+    // SAFETY: the arrays have the lengths METIS_NodeND reads and writes (xadj: nodes + 1,
+    // adjncy: xadj[nodes], perm and iperm: nodes, options: METIS_NOPTIONS); METIS keeps no
+    // pointer after returning.
+    let status = unsafe {
+        metis_sys::METIS_SetDefaultOptions(options.as_mut_ptr());
+        options[metis_sys::moptions_et_METIS_OPTION_NUMBERING as usize] = 0;
+        metis_sys::METIS_NodeND(
+            &mut count,
+            xadj.as_mut_ptr(),
+            adjncy.as_mut_ptr(),
+            std::ptr::null_mut(),
+            options.as_mut_ptr(),
+            perm.as_mut_ptr(),
+            iperm.as_mut_ptr(),
+        )
+    };
+    if status != metis_sys::rstatus_et_METIS_OK {
+        return None;
+    }
+    let forward: Vec<u32> = perm.iter().flat_map(|&p| (0..3).map(move |d| 3 * p as u32 + d)).collect();
+    let mut inverse = vec![0u32; n];
+    for (new, &old) in forward.iter().enumerate() {
+        inverse[old as usize] = new as u32;
+    }
+    Some((forward, inverse))
 }
