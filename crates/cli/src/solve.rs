@@ -45,7 +45,13 @@ pub fn run(path: &Path, output: Option<&Path>) -> Result<()> {
         "material   {:?} ({:?} elements), E = {} Pa, nu = {}",
         p.material.law, geo.formulation, p.material.young, p.material.poisson
     );
-    println!("system     {} dofs, {} free, {} stored non-zeros", p.num_dofs(), free, nnz);
+    println!(
+        "system     {} dofs, {} free, {} stored non-zeros, {} ordering",
+        p.num_dofs(),
+        free,
+        nnz,
+        solver.ordering().name()
+    );
     println!(
         "solver     {} iterations, {} factorisation(s), {} load step(s), final relative residual {:.2e}",
         sol.iterations,

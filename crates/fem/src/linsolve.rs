@@ -54,6 +54,17 @@ pub enum Ordering {
     Auto,
 }
 
+impl Ordering {
+    /// The ordering's name, as printed.
+    pub fn name(self) -> &'static str {
+        match self {
+            Ordering::Amd => "AMD",
+            Ordering::NestedDissection => "nested-dissection",
+            Ordering::Auto => "automatic",
+        }
+    }
+}
+
 impl Slot {
     fn index(self) -> usize {
         self as usize

@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::assembly::{assemble, Pattern, Workspace};
 use crate::element::ElementGeometry;
-use crate::linsolve::{Slot, SparseCholesky};
+use crate::linsolve::{Ordering, Slot, SparseCholesky};
 use crate::material::{Law, Material};
 use crate::post::effective_gradients;
 use crate::problem::{PointSpring, Problem};
@@ -195,6 +195,11 @@ impl StaticSolver {
     /// The element geometry.
     pub fn geometry(&self) -> &ElementGeometry {
         &self.geometry
+    }
+
+    /// The fill-reducing ordering of the tangent's factorisations.
+    pub fn ordering(&self) -> Ordering {
+        self.cholesky.ordering()
     }
 
     /// Number of free dofs and stored non-zeros of the tangent.
