@@ -290,7 +290,7 @@ fn factorization_work(symbolic: &SymbolicCholesky<u32>) -> f64 {
 /// dofs do not come in node triples or METIS fails.
 fn nested_dissection(pattern: &Pattern) -> Option<(Vec<u32>, Vec<u32>)> {
     let n = pattern.num_free;
-    if n == 0 || n % 3 != 0 || i32::try_from(n).is_err() {
+    if n == 0 || !n.is_multiple_of(3) || i32::try_from(n).is_err() {
         return None;
     }
     let nodes = n / 3;
