@@ -336,9 +336,10 @@ fn nested_dissection(pattern: &Pattern) -> Option<(Vec<u32>, Vec<u32>)> {
         return None;
     }
     let forward: Vec<u32> = perm.iter().flat_map(|&p| (0..3).map(move |d| 3 * p as u32 + d)).collect();
-    let mut inverse = vec![0u32; n];
+    let mut inverse = vec![u32::MAX; n];
     for (new, &old) in forward.iter().enumerate() {
-        inverse[old as usize] = new as u32;
+        *inverse.get_mut(old as usize)? = new as u32;
     }
-    Some((forward, inverse))
+    // A permutation sets every entry.
+    inverse.iter().all(|&i| i != u32::MAX).then_some((forward, inverse))
 }
