@@ -22,7 +22,10 @@
 //! SIMD loops instead of faer GEMMs: channels-last rows of the convolution views are broadcast
 //! into fused multiply-adds with vectors of 8 or 16 output channels (see `simd`); the ReLU mask
 //! of the layer below is applied as the input gradient is stored. (The AVX-512 intrinsics are
-//! stable since Rust 1.89.)
+//! stable since Rust 1.89.) Where all channel counts are multiples of 16 and the volume has at
+//! least 16 tiles of 2×2×2 nodes per x-plane pair, the 3×3×3 convolutions and weight gradients
+//! take the Winograd F(2³, 3³) loops of [`crate::winograd`] instead: 64 products per tile and
+//! channel pair instead of 216.
 //!
 //! Samples run in parallel (rayon), with one gradient accumulator per thread, summed at the end;
 //! volumes are recycled through a small per-thread pool of buffers, since fresh allocations of
@@ -44,7 +47,9 @@ use crate::grid::GridShape;
 use crate::inference::{
     conv_layout, downsample, gather_patches, gather_plane, same_conv, tap_offsets, tap_view, upsample, Packed, Volume,
 };
+use crate::lanes::{has_avx512, vectorised};
 use crate::unet::{tensor_values, UNet};
+use crate::winograd::{self, Winograd};
 use crate::{LearnError, Result};
 
 /// The layers of a [`UNet`] (from `UNet::layers`), in the order of its fields.
@@ -171,10 +176,26 @@ struct Layer {
     /// Weights of the input gradient: the flipped, channel-transposed convolution (stride 1),
     /// the transposed convolution (down-sampling) or the stride-2 convolution (up-sampling).
     backward: Packed,
+    /// The Winograd transforms of `forward` and `backward`, where those loops take them (see
+    /// [`crate::winograd`]).
+    winograd: [Option<Winograd>; 2],
     /// Index of its [`Slot`] and [`Grad`].
     slot: usize,
     /// Whether any of its parameters requires a gradient.
     trainable: bool,
+}
+
+impl Layer {
+    /// The stride-1 convolution with ReLU of the channel concatenation of `inputs`.
+    fn forward_conv(&self, inputs: &[&Volume], kernel: usize) -> Volume {
+        conv(inputs, &self.forward, self.winograd[0].as_ref(), kernel, true, None)
+    }
+
+    /// The input gradient of a stride-1 convolution from its output gradient `d`, zeroed where
+    /// `mask` (the ReLU output of the layer below) is not positive.
+    fn input_gradient(&self, d: &Volume, kernel: usize, mask: Option<&Volume>) -> Volume {
+        conv(&[d], &self.backward, self.winograd[1].as_ref(), kernel, false, mask)
+    }
 }
 
 /// The activations of one sample: the post-ReLU outputs double as ReLU masks.
@@ -324,7 +345,9 @@ fn prepare(spec: Spec, slot: usize) -> Result<(Layer, Slot)> {
         layout,
     };
     let trainable = slot_info.weight.is_some() || slot_info.bias.is_some();
-    Ok((Layer { forward, backward, slot, trainable }, slot_info))
+    let transform = |p: &Packed| (p.taps == 27 && has_avx512()).then(|| Winograd::new(&p.parts, p.c_out)).flatten();
+    let winograd = [transform(&forward), transform(&backward)];
+    Ok((Layer { forward, backward, winograd, slot, trainable }, slot_info))
 }
 
 /// The next `N` prepared layers.
@@ -389,8 +412,8 @@ impl Prepared {
 
     /// Two convolutions with ReLU on the channel concatenation of `inputs`.
     fn block(&self, inputs: &[&Volume], block: &[Layer; 2]) -> [Volume; 2] {
-        let mid = conv(inputs, &block[0].forward, self.kernel, true, None);
-        let out = conv(&[&mid], &block[1].forward, self.kernel, true, None);
+        let mid = block[0].forward_conv(inputs, self.kernel);
+        let out = block[1].forward_conv(&[&mid], self.kernel);
         [mid, out]
     }
 
@@ -445,17 +468,17 @@ impl Prepared {
         let features = a.decoder.first().map_or(&a.bottleneck[1], |b| &b[1]);
         self.same_grads(&self.head, &[features], &d_output, 1, grads);
         // `d`: the gradient of the last convolution's pre-activation.
-        let mut d = conv(&[&d_output], &self.head.backward, 1, false, Some(features));
+        let mut d = self.head.input_gradient(&d_output, 1, Some(features));
         let mut spent = vec![d_output];
         // Gradients of the decoders' concatenated inputs: their skip parts join the encoder's.
         let mut d_concat = Vec::with_capacity(depth);
         for l in 0..depth {
             let ([mid, _], layers) = (&a.decoder[l], &self.decoder[l]);
             self.same_grads(&layers[1], &[mid], &d, k, grads);
-            let next = conv(&[&d], &layers[1].backward, k, false, Some(mid));
+            let next = layers[1].input_gradient(&d, k, Some(mid));
             spent.push(std::mem::replace(&mut d, next));
             self.same_grads(&layers[0], &[&a.up[l], &a.encoder[l][1]], &d, k, grads);
-            let concat = conv(&[&d], &layers[0].backward, k, false, None);
+            let concat = layers[0].input_gradient(&d, k, None);
             let mut d_up = pooled(concat.dims, concat.halo, a.up[l].channels);
             vectorised(|| add_channels(&mut d_up, &concat, 0));
             let coarse = a.decoder.get(l + 1).map_or(&a.bottleneck[1], |b| &b[1]);
@@ -477,13 +500,13 @@ impl Prepared {
         }
         let mid = &a.bottleneck[0];
         self.same_grads(&self.bottleneck[1], &[mid], &d, k, grads);
-        let next = conv(&[&d], &self.bottleneck[1].backward, k, false, Some(mid));
+        let next = self.bottleneck[1].input_gradient(&d, k, Some(mid));
         spent.push(std::mem::replace(&mut d, next));
         self.same_grads(&self.bottleneck[0], &[a.down.last().unwrap_or(&a.input)], &d, k, grads);
         // `d` is the output gradient of `first`, whose input gradient is still to be taken.
         let mut first = &self.bottleneck[0];
         for l in (0..depth).rev() {
-            let d_down = conv(&[&d], &first.backward, k, false, None);
+            let d_down = first.input_gradient(&d, k, None);
             let [mid, out] = &a.encoder[l];
             self.stride2_grads(&self.down[l], out, &d_down, &d_down, grads);
             let mut d_skip = upsample(&d_down, &self.down[l].backward);
@@ -492,7 +515,7 @@ impl Prepared {
                 relu_mask(&mut d_skip, out);
             });
             self.same_grads(&self.encoder[l][1], &[mid], &d_skip, k, grads);
-            spent.push(std::mem::replace(&mut d, conv(&[&d_skip], &self.encoder[l][1].backward, k, false, Some(mid))));
+            spent.push(std::mem::replace(&mut d, self.encoder[l][1].input_gradient(&d_skip, k, Some(mid))));
             spent.extend([d_down, d_skip]);
             let input = if l == 0 { &a.input } else { &a.down[l - 1] };
             self.same_grads(&self.encoder[l][0], &[input], &d, k, grads);
@@ -555,22 +578,6 @@ fn output_gradient(output: &Volume, target: &[f32], mask: &[f32], grid: GridShap
     (loss, d)
 }
 
-/// Runs `f` compiled for AVX-512 where the CPU has it, so that the element-wise loops it
-/// inlines use 16 lanes.
-#[inline(always)]
-fn vectorised<T>(f: impl FnOnce() -> T) -> T {
-    #[cfg(target_arch = "x86_64")]
-    if is_x86_feature_detected!("avx512f") {
-        #[target_feature(enable = "avx512f,avx2,fma")]
-        fn avx512<T>(f: impl FnOnce() -> T) -> T {
-            f()
-        }
-        // SAFETY: the CPU has AVX-512F (checked above).
-        return unsafe { avx512(f) };
-    }
-    f()
-}
-
 /// Zeroes the gradient where the post-ReLU output `y` is not positive.
 #[inline(always)]
 fn relu_mask(d: &mut Volume, y: &Volume) {
@@ -603,12 +610,26 @@ fn add_channels(dst: &mut Volume, src: &Volume, from: usize) {
 }
 
 /// A stride-1 convolution as [`same_conv`], its output zeroed where `mask` (same shape) is not
-/// positive (the ReLU of the layer below, in the backward pass); by the register-blocked SIMD
-/// loops of [`simd::conv_plane`] where they apply (see [`simd::lanes`]).
-fn conv(inputs: &[&Volume], layer: &Packed, kernel: usize, relu: bool, mask: Option<&Volume>) -> Volume {
+/// positive (the ReLU of the layer below, in the backward pass): by the Winograd loops where the
+/// layer has their transform `winograd` and they pay on the volumes (see [`winograd::pays`]),
+/// else by the register-blocked SIMD loops of [`simd::conv_plane`] where they apply (see
+/// [`simd::lanes`]).
+fn conv(
+    inputs: &[&Volume],
+    layer: &Packed,
+    winograd: Option<&Winograd>,
+    kernel: usize,
+    relu: bool,
+    mask: Option<&Volume>,
+) -> Volume {
+    let first = inputs[0];
+    if let Some(w) = winograd.filter(|_| winograd::pays(inputs, first)) {
+        let mut out = pooled(first.dims, first.halo, layer.c_out);
+        winograd::conv(inputs, layer, w, relu, mask, &mut out);
+        return out;
+    }
     #[cfg(target_arch = "x86_64")]
     if let Some(lanes) = simd::lanes(layer.c_out) {
-        let first = inputs[0];
         let mut out = pooled(first.dims, first.halo, layer.c_out);
         let job = ConvJob { inputs, layer, kernel, relu, mask, offsets: tap_offsets(first, kernel) };
         let plane_len = out.plane_nodes() * layer.c_out;
@@ -627,10 +648,14 @@ fn conv(inputs: &[&Volume], layer: &Packed, kernel: usize, relu: bool, mask: Opt
     out
 }
 
-/// Adds the weight gradient of a stride-1 convolution (see [`conv_weight_grad`]); by the
-/// register-blocked SIMD loops of [`simd::weight_grad_part`] where they apply (see
-/// [`simd::lanes`]).
+/// Adds the weight gradient of a stride-1 convolution (see [`conv_weight_grad`]): by the
+/// Winograd loops for 3×3×3 kernels on AVX-512 where they pay on the volumes (see
+/// [`winograd::pays`]), else by the register-blocked SIMD loops of [`simd::weight_grad_part`]
+/// where they apply (see [`simd::lanes`]).
 fn weight_grad(inputs: &[&Volume], dz: &Volume, kernel: usize, grad: &mut [f32]) {
+    if kernel == 3 && has_avx512() && winograd::pays(inputs, dz) {
+        return winograd::weight_grad(inputs, dz, grad);
+    }
     #[cfg(target_arch = "x86_64")]
     if let Some(lanes) = simd::lanes(dz.channels) {
         let offsets = tap_offsets(dz, kernel);

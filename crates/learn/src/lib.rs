@@ -41,6 +41,7 @@ mod fsutil;
 pub mod generate;
 mod grid;
 pub mod inference;
+mod lanes;
 pub mod metrics;
 pub mod npy;
 pub mod points;
@@ -50,6 +51,7 @@ pub mod scenario;
 pub mod split;
 pub mod train;
 pub mod unet;
+mod winograd;
 
 pub use compute::Compute;
 pub use corrupt::{Corruption, Sparsity};
