@@ -86,7 +86,7 @@ pub fn loss_and_gradients(
     batch: usize,
     grid: GridShape,
 ) -> Result<(f64, GradientsParams)> {
-    let prepared = Prepared::new(net)?;
+    let prepared = Prepared::new(net, grid)?;
     let nodes = grid.nodes();
     let (c_in, c_out) = (prepared.in_channels, prepared.head.forward.c_out);
     if batch == 0 || nodes == 0 {
@@ -105,8 +105,7 @@ pub fn loss_and_gradients(
     }
     let weight = masks.iter().map(|&m| f64::from(m)).sum::<f64>().max(1.0);
     let scale = (2.0 / weight) as f32;
-    let m = 1usize << prepared.encoder.len();
-    let padded = grid.dims().map(|n| n.div_ceil(m) * m);
+    let padded = prepared.padded;
     let halo = prepared.kernel / 2;
     // One gradient accumulator per thread.
     let per_thread = batch.div_ceil(rayon::current_num_threads());
@@ -253,6 +252,8 @@ fn recycle(volumes: impl IntoIterator<Item = Volume>) {
 struct Prepared {
     kernel: usize,
     in_channels: usize,
+    /// The grid padded to a multiple of `2^depth` nodes along each axis.
+    padded: [usize; 3],
     encoder: Vec<[Layer; 2]>,
     down: Vec<Layer>,
     bottleneck: [Layer; 2],
@@ -269,8 +270,8 @@ struct Prepared {
 #[derive(Clone, Copy)]
 enum Spec<'a> {
     /// A stride-1 convolution (kernel `k³`) whose input is the concatenation of that many
-    /// equal channel groups.
-    Same(&'a Conv3d, usize),
+    /// equal channel groups, on volumes of these sizes.
+    Same(&'a Conv3d, usize, [usize; 3]),
     /// A 2×2×2 stride-2 convolution `[c_out, c_in, 2, 2, 2]`.
     Down(&'a Conv3d),
     /// A 2×2×2 stride-2 transposed convolution `[c_in, c_out, 2, 2, 2]`.
@@ -284,7 +285,7 @@ fn values<const D: usize>(p: &Param<Tensor<D>>) -> Result<Vec<f32>> {
 /// Packs the layer of `spec` and describes its gradients (slot number `slot`).
 fn prepare(spec: Spec, slot: usize) -> Result<(Layer, Slot)> {
     let (weight, bias) = match spec {
-        Spec::Same(c, _) | Spec::Down(c) => (&c.weight, &c.bias),
+        Spec::Same(c, ..) | Spec::Down(c) => (&c.weight, &c.bias),
         Spec::Up(u) => (&u.weight, &u.bias),
     };
     let dims = weight.dims();
@@ -295,7 +296,7 @@ fn prepare(spec: Spec, slot: usize) -> Result<(Layer, Slot)> {
         None => vec![0.0; biases],
     };
     let (forward, backward, layout) = match spec {
-        Spec::Same(_, parts) => {
+        Spec::Same(_, parts, _) => {
             let [c_out, c_in, kx, ky, kz] = dims;
             if kx != ky || ky != kz || parts == 0 || c_in % parts != 0 {
                 return Err(LearnError::InvalidInput(format!(
@@ -345,7 +346,12 @@ fn prepare(spec: Spec, slot: usize) -> Result<(Layer, Slot)> {
         layout,
     };
     let trainable = slot_info.weight.is_some() || slot_info.bias.is_some();
-    let transform = |p: &Packed| (p.taps == 27 && has_avx512()).then(|| Winograd::new(&p.parts, p.c_out)).flatten();
+    // The Winograd transforms where the loops pay on the layer's volumes (see `conv`).
+    let fast = match spec {
+        Spec::Same(_, _, dims) => has_avx512() && winograd::tiles_pay(dims),
+        _ => false,
+    };
+    let transform = |p: &Packed| (fast && p.taps == 27).then(|| Winograd::new(&p.parts, p.c_out)).flatten();
     let winograd = [transform(&forward), transform(&backward)];
     Ok((Layer { forward, backward, winograd, slot, trainable }, slot_info))
 }
@@ -357,21 +363,25 @@ fn take<const N: usize>(layers: &mut impl Iterator<Item = Layer>) -> Result<[Lay
 }
 
 impl Prepared {
-    /// Packs every layer (in parallel).
-    fn new(net: &UNet) -> Result<Prepared> {
+    /// Packs every layer (in parallel) for inputs on `grid`.
+    fn new(net: &UNet, grid: GridShape) -> Result<Prepared> {
         let layers = net.layers();
         let depth = layers.encoder.len();
+        let m = 1usize << depth;
+        let padded = grid.dims().map(|n| n.div_ceil(m) * m);
+        let level = |l: usize| padded.map(|n| n >> l);
         let mut specs = Vec::new();
-        for b in &layers.encoder {
-            specs.extend([Spec::Same(b[0], 1), Spec::Same(b[1], 1)]);
+        for (l, b) in layers.encoder.iter().enumerate() {
+            specs.extend([Spec::Same(b[0], 1, level(l)), Spec::Same(b[1], 1, level(l))]);
         }
         specs.extend(layers.down.iter().map(|d| Spec::Down(d)));
-        specs.extend([Spec::Same(layers.bottleneck[0], 1), Spec::Same(layers.bottleneck[1], 1)]);
+        let bottom = level(depth);
+        specs.extend([Spec::Same(layers.bottleneck[0], 1, bottom), Spec::Same(layers.bottleneck[1], 1, bottom)]);
         specs.extend(layers.up.iter().map(|u| Spec::Up(u)));
-        for b in &layers.decoder {
-            specs.extend([Spec::Same(b[0], 2), Spec::Same(b[1], 1)]);
+        for (l, b) in layers.decoder.iter().enumerate() {
+            specs.extend([Spec::Same(b[0], 2, level(l)), Spec::Same(b[1], 1, level(l))]);
         }
-        specs.push(Spec::Same(layers.head, 1));
+        specs.push(Spec::Same(layers.head, 1, padded));
         let prepared =
             specs.into_par_iter().enumerate().map(|(i, spec)| prepare(spec, i)).collect::<Result<Vec<_>>>()?;
         let (built, slots): (Vec<Layer>, Vec<Slot>) = prepared.into_iter().unzip();
@@ -390,6 +400,7 @@ impl Prepared {
         }
         Ok(Prepared {
             kernel: layers.bottleneck[0].weight.dims()[2],
+            padded,
             in_channels: encoder.first().unwrap_or(&bottleneck)[0].forward.c_in,
             encoder,
             down,

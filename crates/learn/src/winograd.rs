@@ -190,10 +190,16 @@ pub(crate) fn takes(inputs: &[&Volume], dz: &Volume) -> bool {
 }
 
 /// Whether the loops take a convolution of `inputs` with output (gradient) `dz` ([`takes`]) and
-/// beat the direct loops of [`crate::backprop`] on it: with at least 16 tiles per x-slab (at 6³
-/// nodes, chunks of 9 tiles padded to 16 rows waste the gain; see the README's measurements).
+/// beat the direct loops of [`crate::backprop`] on it ([`tiles_pay`]).
 pub(crate) fn pays(inputs: &[&Volume], dz: &Volume) -> bool {
-    takes(inputs, dz) && (dz.dims[1] / 2) * (dz.dims[2] / 2) >= 2 * ROWS
+    takes(inputs, dz) && tiles_pay(dz.dims)
+}
+
+/// Whether volumes of `dims` nodes have enough tiles for the loops to beat the direct ones: at
+/// least 16 per x-slab (at 6³ nodes, chunks of 9 tiles padded to 16 rows waste the gain; see the
+/// README's measurements).
+pub(crate) fn tiles_pay(dims: [usize; 3]) -> bool {
+    (dims[1] / 2) * (dims[2] / 2) >= 2 * ROWS
 }
 
 /// The tiles of a volume, in chunks: within each x-slab (tiles of one x index), runs of tiles in
