@@ -689,48 +689,44 @@ mod tests {
     fn convolution_equals_the_direct_sum() {
         // One chunk of 3 tiles per slab (padded rows), and two chunks of 28 per slab.
         for dims in [[4, 6, 2], [2, 16, 14]] {
-            convolution_case(dims);
-        }
-    }
-
-    fn convolution_case(dims: [usize; 3]) {
-        let (a, b) = (random_volume(dims, 16, 1), random_volume(dims, 32, 2));
-        let c_out = 32;
-        let weight = seeded(c_out * 48 * 27, 3);
-        let bias: Vec<f32> = (0..c_out).map(|c| c as f32 * 0.01 - 0.1).collect();
-        let layer = Packed::conv(&weight, &bias, c_out, &[16, 32], 27).unwrap();
-        let inputs = [&a, &b];
-        assert!(takes(&inputs, &a));
-        let want = direct(&inputs, &weight, &bias, c_out);
-        let mask = random_volume(dims, c_out, 4);
-        for portable in BUILDS {
-            let w = Winograd::with(&layer.parts, c_out, portable).expect("16-multiples take the Winograd loops");
-            for (relu, mask) in [(false, None), (true, None), (false, Some(&mask))] {
-                let mut out = Volume::zeros(dims, 1, c_out);
-                conv_with(&inputs, &layer, &w, relu, mask, &mut out, portable);
-                let mut checked = 0;
-                for i in 0..dims[0] {
-                    for j in 0..dims[1] {
-                        for k in 0..dims[2] {
-                            for co in 0..c_out {
-                                let node = out.node(i, j, k);
-                                let mut y = want[((i * dims[1] + j) * dims[2] + k) * c_out + co];
-                                if relu {
-                                    y = y.max(0.0);
+            let (a, b) = (random_volume(dims, 16, 1), random_volume(dims, 32, 2));
+            let c_out = 32;
+            let weight = seeded(c_out * 48 * 27, 3);
+            let bias: Vec<f32> = (0..c_out).map(|c| c as f32 * 0.01 - 0.1).collect();
+            let layer = Packed::conv(&weight, &bias, c_out, &[16, 32], 27).unwrap();
+            let inputs = [&a, &b];
+            assert!(takes(&inputs, &a));
+            let want = direct(&inputs, &weight, &bias, c_out);
+            let mask = random_volume(dims, c_out, 4);
+            for portable in BUILDS {
+                let w = Winograd::with(&layer.parts, c_out, portable).expect("16-multiples take the Winograd loops");
+                for (relu, mask) in [(false, None), (true, None), (false, Some(&mask))] {
+                    let mut out = Volume::zeros(dims, 1, c_out);
+                    conv_with(&inputs, &layer, &w, relu, mask, &mut out, portable);
+                    let mut checked = 0;
+                    for i in 0..dims[0] {
+                        for j in 0..dims[1] {
+                            for k in 0..dims[2] {
+                                for co in 0..c_out {
+                                    let node = out.node(i, j, k);
+                                    let mut y = want[((i * dims[1] + j) * dims[2] + k) * c_out + co];
+                                    if relu {
+                                        y = y.max(0.0);
+                                    }
+                                    if mask.is_some_and(|m| m.data[node * c_out + co] <= 0.0) {
+                                        y = 0.0;
+                                    }
+                                    let got = out.data[node * c_out + co];
+                                    let at = format!("({i},{j},{k}) ch {co}, portable {portable}");
+                                    assert!((got - y).abs() <= 1e-4 * (1.0 + y.abs()), "{at}: {got} vs {y}");
+                                    checked += 1;
                                 }
-                                if mask.is_some_and(|m| m.data[node * c_out + co] <= 0.0) {
-                                    y = 0.0;
-                                }
-                                let got = out.data[node * c_out + co];
-                                let at = format!("({i},{j},{k}) ch {co}, portable {portable}");
-                                assert!((got - y).abs() <= 1e-4 * (1.0 + y.abs()), "{at}: {got} vs {y}");
-                                checked += 1;
                             }
                         }
                     }
+                    assert_eq!(checked, dims.iter().product::<usize>() * c_out);
+                    assert!(halo_is_zero(&out), "the halo stays zero");
                 }
-                assert_eq!(checked, dims.iter().product::<usize>() * c_out);
-                assert!(halo_is_zero(&out), "the halo stays zero");
             }
         }
     }
@@ -738,44 +734,40 @@ mod tests {
     #[test]
     fn weight_gradient_equals_the_direct_sum() {
         for dims in [[2, 4, 6], [2, 16, 14]] {
-            weight_gradient_case(dims);
-        }
-    }
-
-    fn weight_gradient_case(dims: [usize; 3]) {
-        let (a, b) = (random_volume(dims, 32, 5), random_volume(dims, 16, 6));
-        let dz = random_volume(dims, 16, 7);
-        let inputs = [&a, &b];
-        assert!(takes(&inputs, &dz));
-        for portable in BUILDS {
-            let mut grad = vec![1.0; 27 * 48 * 16];
-            weight_grad_with(&inputs, &dz, &mut grad, portable);
-            // Direct: d w[tap][ci][co] = Σ_nodes x[node + tap - 1][ci] · dz[node][co], in the part layout.
-            let mut part = 0;
-            for v in inputs {
-                let c = v.channels;
-                for tap in 0..27 {
-                    let (ta, tb, tc) = (tap / 9, tap / 3 % 3, tap % 3);
-                    for ci in 0..c {
-                        for co in 0..16 {
-                            let mut s = 0.0f64;
-                            for i in 0..dims[0] {
-                                for j in 0..dims[1] {
-                                    for k in 0..dims[2] {
-                                        let node =
-                                            v.node(i + ta, j + tb, k + tc) - v.plane_nodes() - v.stored_yz().1 - 1;
-                                        let d = dz.data[dz.node(i, j, k) * 16 + co];
-                                        s += f64::from(v.data[node * c + ci]) * f64::from(d);
+            let (a, b) = (random_volume(dims, 32, 5), random_volume(dims, 16, 6));
+            let dz = random_volume(dims, 16, 7);
+            let inputs = [&a, &b];
+            assert!(takes(&inputs, &dz));
+            for portable in BUILDS {
+                let mut grad = vec![1.0; 27 * 48 * 16];
+                weight_grad_with(&inputs, &dz, &mut grad, portable);
+                // Direct: d w[tap][ci][co] = Σ_nodes x[node + tap - 1][ci] · dz[node][co], in the part layout.
+                let mut part = 0;
+                for v in inputs {
+                    let c = v.channels;
+                    for tap in 0..27 {
+                        let (ta, tb, tc) = (tap / 9, tap / 3 % 3, tap % 3);
+                        for ci in 0..c {
+                            for co in 0..16 {
+                                let mut s = 0.0f64;
+                                for i in 0..dims[0] {
+                                    for j in 0..dims[1] {
+                                        for k in 0..dims[2] {
+                                            let node =
+                                                v.node(i + ta, j + tb, k + tc) - v.plane_nodes() - v.stored_yz().1 - 1;
+                                            let d = dz.data[dz.node(i, j, k) * 16 + co];
+                                            s += f64::from(v.data[node * c + ci]) * f64::from(d);
+                                        }
                                     }
                                 }
+                                let got = f64::from(grad[part + row(tap, c, ci) * 16 + co] - 1.0);
+                                let at = format!("tap {tap} ch {ci}->{co}, portable {portable}");
+                                assert!((got - s).abs() <= 1e-4 * (1.0 + s.abs()), "{at}: {got} vs {s}");
                             }
-                            let got = f64::from(grad[part + row(tap, c, ci) * 16 + co] - 1.0);
-                            let at = format!("tap {tap} ch {ci}->{co}, portable {portable}");
-                            assert!((got - s).abs() <= 1e-4 * (1.0 + s.abs()), "{at}: {got} vs {s}");
                         }
                     }
+                    part += 27 * c * 16;
                 }
-                part += 27 * c * 16;
             }
         }
     }
