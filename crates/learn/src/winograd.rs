@@ -10,9 +10,10 @@
 //! made of additions and halvings. The weight gradient is the transposed computation:
 //! `Gᵀ [Σ_tiles (Bᵀ d B) ⊗ (A dy Aᵀ)] G`, 64 products of `c_in × tiles` by `tiles × c_out`.
 //!
-//! Channels go 16 at a time in [`Vector`]s (`__m512` on AVX-512, see [`run`]): the loops take layers whose input parts and
-//! outputs all have a multiple of 16 channels, on volumes of even sizes with a halo
-//! ([`takes`]). Tiles are transformed in chunks of at most [`CHUNK`], so that a chunk's
+//! Channels go 16 at a time in [`Vector`]s (`__m512` on AVX-512, see [`run`]): the loops take
+//! layers whose input parts and outputs all have a multiple of 16 channels, on volumes of even
+//! sizes with a halo ([`takes`]), and the training engine uses them where they beat its direct
+//! loops ([`pays`]). Tiles are transformed in chunks of at most [`CHUNK`], so that a chunk's
 //! transformed inputs and products stay in the core's cache.
 
 use std::cell::RefCell;
