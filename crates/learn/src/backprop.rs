@@ -709,9 +709,9 @@ mod simd {
     pub(super) fn lanes(channels: usize) -> Option<usize> {
         if !is_x86_feature_detected!("avx512f") {
             None
-        } else if channels % 16 == 0 {
+        } else if channels.is_multiple_of(16) {
             Some(16)
-        } else if channels % 8 == 0 {
+        } else if channels.is_multiple_of(8) {
             Some(8)
         } else {
             None
@@ -860,9 +860,9 @@ mod simd {
         fn avx512<V: Lanes>(job: &ConvJob, i: usize, plane: &mut [f32]) {
             // Channel blocks per accumulator row: more when the lines are short.
             let blocks = job.layer.c_out / V::LANES;
-            if blocks % 4 == 0 {
+            if blocks.is_multiple_of(4) {
                 with_channels::<4, V>(job, i, plane)
-            } else if blocks % 2 == 0 {
+            } else if blocks.is_multiple_of(2) {
                 with_channels::<2, V>(job, i, plane)
             } else {
                 with_channels::<1, V>(job, i, plane)
