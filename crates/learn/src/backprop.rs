@@ -702,12 +702,13 @@ mod simd {
     use std::arch::x86_64::*;
 
     use super::{ConvJob, Volume};
+    use crate::lanes::{has_avx512, Vector};
 
     /// The SIMD width (16 or 8 lanes) of the loops for `channels` output channels: they need
     /// AVX-512 and a multiple of 8 channels; `None` where they do not apply (the faer GEMM path
     /// is taken instead).
     pub(super) fn lanes(channels: usize) -> Option<usize> {
-        if !is_x86_feature_detected!("avx512f") {
+        if !has_avx512() {
             None
         } else if channels.is_multiple_of(16) {
             Some(16)
@@ -716,122 +717,6 @@ mod simd {
         } else {
             None
         }
-    }
-
-    /// Operations on a vector of `LANES` f32.
-    trait Lanes: Copy {
-        const LANES: usize;
-        /// Zeros.
-        fn zero() -> Self;
-        /// Loads `LANES` values from `from[0..LANES]`.
-        fn load(from: &[f32]) -> Self;
-        /// Loads `LANES` values from `from`.
-        ///
-        /// # Safety
-        /// `from` points to `LANES` readable values.
-        unsafe fn load_ptr(from: *const f32) -> Self;
-        /// `self + x · w`.
-        fn fmadd(self, x: f32, w: Self) -> Self;
-        /// The lanes.
-        fn to_array(self, to: &mut [f32]);
-        /// `self + bias`, rectified if `relu`, zeroed where `mask` is `<= 0`.
-        fn finish(self, bias: Self, relu: bool, mask: Option<Self>) -> Self;
-    }
-
-    /// Implements [`Lanes`] for a vector type from its intrinsics (`$keep`: `keep_512` or
-    /// `keep_256`).
-    macro_rules! lanes {
-        ($v:ty, $n:literal, $setzero:ident, $set1:ident, $loadu:ident, $storeu:ident, $fmadd:ident, $add:ident,
-         $max:ident, $keep:ident) => {
-            impl Lanes for $v {
-                const LANES: usize = $n;
-                #[inline(always)]
-                fn zero() -> Self {
-                    // SAFETY: only reached from `avx512` functions (AVX-512F checked by `lanes`;
-                    // it implies AVX and FMA).
-                    unsafe { $setzero() }
-                }
-                #[inline(always)]
-                fn load(from: &[f32]) -> Self {
-                    let from = &from[..$n];
-                    // SAFETY: `$n` values in bounds.
-                    unsafe { Self::load_ptr(from.as_ptr()) }
-                }
-                #[inline(always)]
-                unsafe fn load_ptr(from: *const f32) -> Self {
-                    // SAFETY: `$n` readable values (the caller's promise); CPU features as above.
-                    unsafe { $loadu(from) }
-                }
-                #[inline(always)]
-                fn fmadd(self, x: f32, w: Self) -> Self {
-                    // SAFETY: CPU features as above.
-                    unsafe { $fmadd($set1(x), w, self) }
-                }
-                #[inline(always)]
-                fn to_array(self, to: &mut [f32]) {
-                    let to = &mut to[..$n];
-                    // SAFETY: `$n` values in bounds; CPU features as above.
-                    unsafe { $storeu(to.as_mut_ptr(), self) }
-                }
-                #[inline(always)]
-                fn finish(self, bias: Self, relu: bool, mask: Option<Self>) -> Self {
-                    // SAFETY: CPU features as above.
-                    unsafe {
-                        let y = $add(self, bias);
-                        let y = if relu { $max(y, $setzero()) } else { y };
-                        match mask {
-                            Some(m) => $keep(y, m),
-                            None => y,
-                        }
-                    }
-                }
-            }
-        };
-    }
-
-    lanes!(
-        __m512,
-        16,
-        _mm512_setzero_ps,
-        _mm512_set1_ps,
-        _mm512_loadu_ps,
-        _mm512_storeu_ps,
-        _mm512_fmadd_ps,
-        _mm512_add_ps,
-        _mm512_max_ps,
-        keep_512
-    );
-    lanes!(
-        __m256,
-        8,
-        _mm256_setzero_ps,
-        _mm256_set1_ps,
-        _mm256_loadu_ps,
-        _mm256_storeu_ps,
-        _mm256_fmadd_ps,
-        _mm256_add_ps,
-        _mm256_max_ps,
-        keep_256
-    );
-
-    /// The lanes of `y` where `m` is not `<= 0` (as [`relu_mask`](super::relu_mask)), zeros
-    /// elsewhere.
-    ///
-    /// # Safety
-    /// Needs AVX-512F.
-    #[inline(always)]
-    unsafe fn keep_512(y: __m512, m: __m512) -> __m512 {
-        _mm512_maskz_mov_ps(_mm512_cmpnle_ps_mask(m, _mm512_setzero_ps()), y)
-    }
-
-    /// The lanes of `y` where `m` is not `<= 0` (as [`relu_mask`](super::relu_mask)), zeros
-    /// elsewhere.
-    ///
-    /// # Safety
-    /// Needs AVX.
-    #[inline(always)]
-    unsafe fn keep_256(y: __m256, m: __m256) -> __m256 {
-        _mm256_and_ps(y, _mm256_cmp_ps::<_CMP_NLE_UQ>(m, _mm256_setzero_ps()))
     }
 
     /// Calls `$body` for `$first` over `0..$n` in blocks of `$r` nodes or rows, the largest of
@@ -857,7 +742,7 @@ mod simd {
     /// (16 or 8) SIMD lanes.
     pub(super) fn conv_plane(lanes: usize, job: &ConvJob, i: usize, plane: &mut [f32]) {
         #[target_feature(enable = "avx512f,avx2,fma")]
-        fn avx512<V: Lanes>(job: &ConvJob, i: usize, plane: &mut [f32]) {
+        fn avx512<V: Vector>(job: &ConvJob, i: usize, plane: &mut [f32]) {
             // Channel blocks per accumulator row: more when the lines are short.
             let blocks = job.layer.c_out / V::LANES;
             if blocks.is_multiple_of(4) {
@@ -881,7 +766,7 @@ mod simd {
     /// [`plane_loops`] with the inputs' channel count `C` a constant when it is a common one
     /// (all parts alike), 0 (read at run time) otherwise.
     #[inline(always)]
-    fn with_channels<const B: usize, V: Lanes>(job: &ConvJob, i: usize, plane: &mut [f32]) {
+    fn with_channels<const B: usize, V: Vector>(job: &ConvJob, i: usize, plane: &mut [f32]) {
         let c = job.layer.parts[0].0;
         match c {
             _ if job.layer.parts.iter().any(|p| p.0 != c) => plane_loops::<B, 0, V>(job, i, plane),
@@ -898,7 +783,7 @@ mod simd {
     /// vectors of a node's `kernel` z-taps are contiguous, and those of consecutive nodes
     /// overlap), then biased, rectified if asked and stored; halo nodes stay zero.
     #[inline(always)]
-    fn plane_loops<const B: usize, const C: usize, V: Lanes>(job: &ConvJob, i: usize, plane: &mut [f32]) {
+    fn plane_loops<const B: usize, const C: usize, V: Vector>(job: &ConvJob, i: usize, plane: &mut [f32]) {
         let first = job.inputs[0];
         let [_, ny, nz] = first.dims;
         let plane_start = (i + first.halo) * first.plane_nodes();
@@ -931,7 +816,7 @@ mod simd {
     /// `R` output nodes from storage node `node`, channels `cb .. cb + B · V::LANES`, stored
     /// into `out` (from the first node's channel vector).
     #[inline(always)]
-    fn conv_block<const R: usize, const B: usize, const C: usize, V: Lanes>(
+    fn conv_block<const R: usize, const B: usize, const C: usize, V: Vector>(
         job: &ConvJob,
         node: usize,
         cb: usize,
@@ -959,7 +844,7 @@ mod simd {
                         // SAFETY: r · c + t < (R - 1) · c + kc = xs.len().
                         let x = unsafe { *xs.get_unchecked(r * c + t) };
                         for (a, w) in acc.iter_mut().zip(&wv) {
-                            *a = a.fmadd(x, *w);
+                            *a = a.fma(x, *w);
                         }
                     }
                 }
@@ -974,7 +859,7 @@ mod simd {
             for (b, (a, bias)) in acc.iter().zip(bias).enumerate() {
                 let at = at + b * V::LANES;
                 let mask = job.mask.map(|m| V::load(&m.data[node * c_out + at..]));
-                a.finish(bias, job.relu, mask).to_array(&mut out[at..]);
+                a.finish(bias, job.relu, mask).store(&mut out[at..]);
             }
         }
     }
@@ -991,7 +876,7 @@ mod simd {
         grad: &mut [f32],
     ) {
         #[target_feature(enable = "avx512f,avx2,fma")]
-        fn avx512<V: Lanes>(v: &Volume, dz: &Volume, kernel: usize, offsets: &[isize], grad: &mut [f32]) {
+        fn avx512<V: Vector>(v: &Volume, dz: &Volume, kernel: usize, offsets: &[isize], grad: &mut [f32]) {
             weight_grad_loops::<V>(v, dz, kernel, offsets, grad)
         }
         // SAFETY: `lanes` is only given where the CPU has AVX-512F (checked by `lanes`).
@@ -1007,7 +892,7 @@ mod simd {
     /// For each (x, y) tap offset, blocks of `R` matrix rows (z tap, input channel) ×
     /// `V::LANES` output channels are accumulated over all interior output nodes, line by line.
     #[inline(always)]
-    fn weight_grad_loops<V: Lanes>(v: &Volume, dz: &Volume, kernel: usize, offsets: &[isize], grad: &mut [f32]) {
+    fn weight_grad_loops<V: Vector>(v: &Volume, dz: &Volume, kernel: usize, offsets: &[isize], grad: &mut [f32]) {
         let (kc, c_out) = (kernel * v.channels, dz.channels);
         // Plane by plane, so that the planes read stay in cache across the passes.
         for i in 0..dz.dims[0] {
@@ -1025,7 +910,7 @@ mod simd {
     /// Adds the output nodes of plane `i` to rows `row .. row + R`, channels `cb ..` of the
     /// weight gradient of tap offset `off`.
     #[inline(always)]
-    fn weight_grad_block<const R: usize, V: Lanes>(
+    fn weight_grad_block<const R: usize, V: Vector>(
         v: &Volume,
         dz: &Volume,
         i: usize,
@@ -1053,12 +938,12 @@ mod simd {
                 let d = unsafe { V::load_ptr(ds.add(n * c_out + cb)) };
                 for (r, a) in acc.iter_mut().enumerate() {
                     // SAFETY: n · c + r < (nz - 1) · c + R = xs.len().
-                    *a = a.fmadd(unsafe { *xs.get_unchecked(n * c + r) }, d);
+                    *a = a.fma(unsafe { *xs.get_unchecked(n * c + r) }, d);
                 }
             }
         }
         for (r, a) in acc.iter().enumerate() {
-            a.to_array(&mut block[(row + r) * c_out + cb..]);
+            a.store(&mut block[(row + r) * c_out + cb..]);
         }
     }
 }

@@ -22,7 +22,7 @@ use std::ops::Range;
 use rayon::prelude::*;
 
 use crate::inference::{Packed, Volume};
-use crate::lanes::{gather, run, Kernel, Vector, LANES};
+use crate::lanes::{run, Kernel, Vector, LANES};
 
 /// Points of a transformed tile (4 × 4 × 4).
 const POINTS: usize = 64;
@@ -229,6 +229,12 @@ impl Tiling {
         (0..slab).step_by(self.chunk).map(move |s| s..(s + self.chunk).min(slab))
     }
 
+    /// Stored nodes in one x-plane.
+    #[inline(always)]
+    fn plane(&self) -> usize {
+        self.stored.0 * self.stored.1
+    }
+
     /// The storage node, within its x-plane, of the low corner of output tile `t` of a slab
     /// (its 2×2×2 output nodes are `+ j · sz + k` in planes `2 tx + i`).
     #[inline(always)]
@@ -240,8 +246,7 @@ impl Tiling {
     /// The storage node of the low corner of the 4×4×4 input nodes of tile `t` of slab `tx`.
     #[inline(always)]
     fn input_corner(&self, tx: usize, t: usize) -> usize {
-        let (sy, sz) = self.stored;
-        (2 * tx + self.halo - 1) * sy * sz + self.in_plane(t) - sz - 1
+        (2 * tx + self.halo - 1) * self.plane() + self.in_plane(t) - self.stored.1 - 1
     }
 }
 
@@ -380,13 +385,12 @@ fn conv_with(
     portable: bool,
 ) {
     let tiling = Tiling::new(inputs[0]);
-    let plane = out.plane_nodes();
     let finish = Finish { bias: &layer.bias, relu, mask };
     let mut planes: Vec<&mut [f32]> =
-        out.data.chunks_mut(plane * layer.c_out).skip(out.halo).take(out.dims[0]).collect();
+        out.data.chunks_mut(tiling.plane() * layer.c_out).skip(out.halo).take(out.dims[0]).collect();
     planes.par_chunks_mut(2).enumerate().for_each(|(tx, pair)| {
         BUFFERS.with_borrow_mut(|[v, m, _]| {
-            let slab = ConvSlab { inputs, layer, w, finish: &finish, tiling: &tiling, plane, tx, pair, v, m };
+            let slab = ConvSlab { inputs, layer, w, finish: &finish, tiling: &tiling, tx, pair, v, m };
             run(slab, portable)
         })
     });
@@ -400,7 +404,6 @@ struct ConvSlab<'a, 'b> {
     w: &'a Winograd,
     finish: &'a Finish<'a>,
     tiling: &'a Tiling,
-    plane: usize,
     tx: usize,
     pair: &'a mut [&'b mut [f32]],
     v: &'a mut Vec<f32>,
@@ -422,7 +425,7 @@ impl Kernel for ConvSlab<'_, '_> {
                 n if n % 2 == 0 => multiply::<V, 4, 2>(v, &self.w.u, rows, c_in, c_out, m),
                 _ => multiply::<V, 8, 1>(v, &self.w.u, rows, c_in, c_out, m),
             }
-            write_outputs::<V>(m, c_out, self.tiling, self.tx, tiles, self.finish, self.plane, self.pair);
+            write_outputs::<V>(m, c_out, self.tiling, self.tx, tiles, self.finish, self.pair);
         }
     }
 }
@@ -438,7 +441,6 @@ fn write_outputs<V: Vector>(
     tx: usize,
     tiles: Range<usize>,
     finish: &Finish,
-    plane: usize,
     pair: &mut [&mut [f32]],
 ) {
     let sz = tiling.stored.1;
@@ -454,15 +456,11 @@ fn write_outputs<V: Vector>(
             for n in 0..8 {
                 let (i, j, k) = (n / 4, n / 2 % 2, n % 2);
                 let node = q + j * sz + k;
-                let mut y = x[at(i, j, k)].add(bias);
-                if finish.relu {
-                    y = y.relu();
-                }
-                if let Some(mask) = finish.mask {
-                    let global = (2 * tx + i + tiling.halo) * plane + node;
-                    y = y.keep_where(V::load(&mask.data[global * c_out + cb..]));
-                }
-                y.store(&mut pair[i][node * c_out + cb..]);
+                let mask = finish.mask.map(|mask| {
+                    let global = (2 * tx + i + tiling.halo) * tiling.plane() + node;
+                    V::load(&mask.data[global * c_out + cb..])
+                });
+                x[at(i, j, k)].finish(bias, finish.relu, mask).store(&mut pair[i][node * c_out + cb..]);
             }
         }
     }
@@ -547,7 +545,7 @@ fn transform_output_gradients<V: Vector>(
     y: &mut [f32],
 ) {
     let (c, sz) = (dz.channels, tiling.stored.1);
-    let plane = dz.plane_nodes();
+    let plane = tiling.plane();
     let len = tiles.len();
     let mut x = [V::zero(); POINTS];
     for (r, t) in tiles.enumerate() {
@@ -586,7 +584,9 @@ fn accumulate<V: Vector, const R: usize, const B: usize>(
             for ci in (0..c_in).step_by(R) {
                 let mut acc = [[V::zero(); B]; R];
                 for (r, acc) in acc.iter_mut().enumerate() {
-                    *acc = gather(|b| V::load(&sp[(ci + r) * c_out + cb + b * LANES..]));
+                    for (b, a) in acc.iter_mut().enumerate() {
+                        *a = V::load(&sp[(ci + r) * c_out + cb + b * LANES..]);
+                    }
                 }
                 for t in 0..rows {
                     let at_y = t * pitch(c_out) + p * c_out + cb;
