@@ -197,8 +197,8 @@ pub(crate) fn pays(inputs: &[&Volume], dz: &Volume) -> bool {
 }
 
 /// Whether volumes of `dims` nodes have enough tiles for the loops to beat the direct ones: at
-/// least 16 per x-slab (at 6³ nodes, chunks of 9 tiles padded to 16 rows waste the gain; see the
-/// README's measurements).
+/// least 16 per x-slab (at 6³ nodes, chunks of 9 tiles padded to 16 rows gained nothing overall;
+/// see the README's measurements).
 pub(crate) fn tiles_pay(dims: [usize; 3]) -> bool {
     (dims[1] / 2) * (dims[2] / 2) >= 2 * ROWS
 }
