@@ -149,6 +149,18 @@ pub struct Workspace {
     stiffness: Vec<f64>,
 }
 
+impl Workspace {
+    /// Buffers sized for the geometry's patches and written once, so that the first assembly
+    /// does not pay for the operating system's first touch of their pages.
+    pub fn for_pattern(geometry: &ElementGeometry, pattern: &Pattern) -> Self {
+        let np = geometry.patches.len();
+        let mut work = Workspace::default();
+        work.forces.resize(3 * geometry.patches.node_offset(np), 0.0);
+        work.stiffness.resize(pattern.matrix_ptr[np], 0.0);
+        work
+    }
+}
+
 /// Patches evaluated per parallel task.
 const CHUNK: usize = 64;
 

@@ -76,7 +76,7 @@ pub struct SparseCholesky {
     symbolic: SymbolicCholesky<u32>,
     col_ptr: Vec<u32>,
     row_idx: Vec<u32>,
-    /// Factor values per slot (allocated at the slot's first factorisation).
+    /// Factor values per slot.
     l_values: [Vec<f32>; 2],
     /// Matrix values or right-hand side in single precision.
     scratch: Vec<f32>,
@@ -152,14 +152,25 @@ impl SparseCholesky {
             .factorize_numeric_llt_scratch::<f32>(par, Default::default())
             .or(symbolic.factorize_numeric_ldlt_scratch::<f32>(par, Default::default()))
             .or(symbolic.solve_in_place_scratch::<f32>(1, par));
-        let mem = MemBuffer::try_new(req)
+        let mut mem = MemBuffer::try_new(req)
             .map_err(|_| FemError::Factorization("out of memory for the factorisation workspace".into()))?;
+        // Every buffer is written once here, so that the first factorisations do not pay for the
+        // operating system's first touch of their pages.
+        mem.fill(std::mem::MaybeUninit::new(0));
+        let factor = || {
+            let mut values = Vec::new();
+            values.resize(symbolic.len_val(), 0.0f32);
+            values
+        };
+        let l_values = [factor(), factor()];
+        let mut scratch = Vec::new();
+        scratch.resize(pattern.nnz().max(pattern.num_free), 0.0);
         Ok(SparseCholesky {
-            symbolic,
             col_ptr: pattern.col_ptr.clone(),
             row_idx: pattern.row_idx.clone(),
-            l_values: [Vec::new(), Vec::new()],
-            scratch: Vec::new(),
+            symbolic,
+            l_values,
+            scratch,
             mem,
             factor: [Factor::None; 2],
             work,
@@ -206,7 +217,6 @@ impl SparseCholesky {
         let a = SparseColMatRef::new(sym, self.scratch.as_slice());
         let stack = MemStack::new(&mut self.mem);
         let (l_values, factor) = (&mut self.l_values[slot.index()], &mut self.factor[slot.index()]);
-        l_values.resize(self.symbolic.len_val(), 0.0);
         *factor = Factor::None;
         let llt = self.symbolic.factorize_numeric_llt(
             l_values,

@@ -183,6 +183,7 @@ impl StaticSolver {
         let cholesky = SparseCholesky::new(&pattern)?;
         let refactorization_cost = refactorization_cost(&geometry, &pattern, &cholesky);
         let values = vec![0.0; pattern.nnz()];
+        let work = Workspace::for_pattern(&geometry, &pattern);
         let constrained_nodes = problem.dirichlet.keys().copied().collect();
         Ok(StaticSolver {
             problem,
@@ -191,7 +192,7 @@ impl StaticSolver {
             cholesky,
             rest_key: None,
             constrained_nodes,
-            work: Workspace::default(),
+            work,
             values,
             refactorization_cost,
             latest_residual: 0.0,
