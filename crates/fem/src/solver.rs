@@ -154,7 +154,7 @@ const JUDGE_ANY: usize = 4;
 /// A factor whose tangent was assembled at a state with a relative residual above this (far
 /// from equilibrium: an early iterate of a cold solve) is not kept for the next warm-started
 /// solve, which refactorises at its start instead. Measured on the bench's frame sequences:
-/// 4.2–5.3 iterations per frame instead of 4.3–6.9, for one refactorisation at the first frame.
+/// 4.2–5.3 iterations per frame instead of 4.2–7.0, for one refactorisation at the first frame.
 const STALE_RESIDUAL: f64 = 0.1;
 
 /// Principal stretch at which Saint-Venant-Kirchhoff's uniaxial compressive stress peaks.
