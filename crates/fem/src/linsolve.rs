@@ -157,12 +157,12 @@ impl SparseCholesky {
         // Every buffer is written once here, so that the first factorisations do not pay for the
         // operating system's first touch of their pages.
         mem.fill(std::mem::MaybeUninit::new(0));
-        let factor = || {
+        let zeroed = || {
             let mut values = Vec::new();
             values.resize(symbolic.len_val(), 0.0f32);
             values
         };
-        let l_values = [factor(), factor()];
+        let l_values = [zeroed(), zeroed()];
         let mut scratch = Vec::new();
         scratch.resize(pattern.nnz().max(pattern.num_free), 0.0);
         Ok(SparseCholesky {

@@ -533,7 +533,6 @@ impl StaticSolver {
                 if left > self.refactorization_cost + REFRESH_ITERATIONS {
                     refresh = true;
                     since_refresh = 0;
-                    undamped = 0;
                 }
             }
             last_ratio = ratio;

@@ -251,18 +251,21 @@ pub(crate) fn run<K: Kernel>(kernel: K, portable: bool) -> K::Output {
     kernel.run::<Portable>()
 }
 
-/// Runs `f` compiled for AVX-512 where the CPU has it, so that the element-wise loops it
-/// inlines use 16 lanes (functions it calls must be `#[inline(always)]` to be compiled so).
+/// Runs `f` compiled for AVX-512 where the CPU has it (through [`run`]), so that the
+/// element-wise loops it inlines use 16 lanes (functions it calls must be `#[inline(always)]` to
+/// be compiled so).
 #[inline(always)]
 pub(crate) fn vectorised<T>(f: impl FnOnce() -> T) -> T {
-    #[cfg(target_arch = "x86_64")]
-    if has_avx512() {
-        #[target_feature(enable = "avx512f,avx2,fma")]
-        fn avx512<T>(f: impl FnOnce() -> T) -> T {
-            f()
-        }
-        // SAFETY: the CPU has AVX-512F (checked above).
-        return unsafe { avx512(f) };
+    run(Closure(f), false)
+}
+
+/// A closure as a [`Kernel`] that does not use the vectors (see [`vectorised`]).
+struct Closure<F>(F);
+
+impl<T, F: FnOnce() -> T> Kernel for Closure<F> {
+    type Output = T;
+    #[inline(always)]
+    fn run<V: Vector>(self) -> T {
+        (self.0)()
     }
-    f()
 }

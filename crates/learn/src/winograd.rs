@@ -653,6 +653,12 @@ mod tests {
         })
     }
 
+    /// The storage node of interior node `(i, j, k)` moved by tap `(a, b, c)` of a 3×3×3 kernel
+    /// (offsets −1, 0, 1 along each axis).
+    fn tap_node(v: &Volume, [i, j, k]: [usize; 3], [a, b, c]: [usize; 3]) -> usize {
+        v.node(i + a, j + b, k + c) - v.plane_nodes() - v.stored_yz().1 - 1
+    }
+
     /// The direct convolution, node by node: `Σ w[co][ci][a][b][c] · x[i + a - 1][j + b - 1][k + c - 1][ci]`.
     fn direct(inputs: &[&Volume], weight: &[f32], bias: &[f32], c_out: usize) -> Vec<f32> {
         let [nx, ny, nz] = inputs[0].dims;
@@ -668,7 +674,7 @@ mod tests {
                             for ci in 0..v.channels {
                                 for tap in 0..27 {
                                     let (a, b, c) = (tap / 9, tap / 3 % 3, tap % 3);
-                                    let node = v.node(i + a, j + b, k + c) - v.plane_nodes() - v.stored_yz().1 - 1;
+                                    let node = tap_node(v, [i, j, k], [a, b, c]);
                                     let x = v.data[node * v.channels + ci];
                                     s += f64::from(weight[(co * c_in + c0 + ci) * 27 + tap]) * f64::from(x);
                                 }
@@ -754,8 +760,7 @@ mod tests {
                                 for i in 0..dims[0] {
                                     for j in 0..dims[1] {
                                         for k in 0..dims[2] {
-                                            let node =
-                                                v.node(i + ta, j + tb, k + tc) - v.plane_nodes() - v.stored_yz().1 - 1;
+                                            let node = tap_node(v, [i, j, k], [ta, tb, tc]);
                                             let d = dz.data[dz.node(i, j, k) * 16 + co];
                                             s += f64::from(v.data[node * c + ci]) * f64::from(d);
                                         }
