@@ -202,20 +202,25 @@ pub fn assemble(
         tasks.push((first, last, fc, kc));
     }
     tasks.into_par_iter().try_for_each(|(first, last, fc, mut kc)| {
-        // Standard elements' forces alone: all of the chunk's stresses at once (a standard
-        // element is the patch of the same index).
-        if geometry.formulation != Formulation::Fbar && kc.is_none() {
-            return geometry.forces(first..last, material, u, fc, &mut ForceScratch::default());
-        }
+        // Forces alone: all of the chunk's stresses at once (a standard element is the patch of
+        // the same index).
+        let Some(kc) = kc.as_deref_mut() else {
+            return match geometry.formulation {
+                Formulation::Fbar => {
+                    fbar::patch_forces(geometry, first..last, material, u, fc, &mut Default::default())
+                }
+                _ => geometry.forces(first..last, material, u, fc, &mut ForceScratch::default()),
+            };
+        };
         let mut scratch = fbar::PatchScratch::default();
         let (mut fo, mut ko) = (0, 0);
         for p in first..last {
             let nd = 3 * patches.nodes(p).len();
             let fe = &mut fc[fo..fo + nd];
-            let ke = kc.as_deref_mut().map(|k| &mut k[ko..ko + nd * nd]);
+            let ke = &mut kc[ko..ko + nd * nd];
             match geometry.formulation {
                 Formulation::Fbar => fbar::patch_force_tangent(geometry, p, material, u, fe, ke, &mut scratch)?,
-                _ => geometry.force_tangent(patches.elements(p)[0], material, u, fe, ke)?,
+                _ => geometry.force_tangent(patches.elements(p)[0], material, u, fe, Some(ke))?,
             }
             fo += nd;
             ko += nd * nd;

@@ -21,6 +21,8 @@
 //! For both measures M = α (I − ⅓ x yᵀ) with (α, x, y) = ((m̄/J)^⅓, F, F⁻ᵀ) for
 //! F-bar and (1, I, I) for B-bar, and φ = ϕ x with ϕ = α / (3 m̄) and ⅓.
 
+use std::ops::Range;
+
 use nalgebra::Matrix3;
 
 use crate::element::ElementGeometry;
@@ -68,6 +70,8 @@ pub struct PatchScratch {
     /// F̄ and P̄ per point (force evaluations only).
     gradients: Vec<Matrix3<f64>>,
     stresses: Vec<Matrix3<f64>>,
+    /// Each patch's first point and kinematics (force evaluations only).
+    kinematics: Vec<(usize, Kinematics)>,
 }
 
 /// Per-quadrature-point state of a patch evaluation.
@@ -86,6 +90,7 @@ struct PatchPoint {
 }
 
 /// Kinematics shared by force, tangent and post-processing.
+#[derive(Clone, Debug)]
 struct Kinematics {
     linear: bool,
     /// Patch volume average of m.
@@ -93,7 +98,7 @@ struct Kinematics {
     volume: f64,
 }
 
-/// Fills `points` with the patch's quadrature points and returns the patch's
+/// Appends the patch's quadrature points to `points` and returns the patch's
 /// kinematics (m̄, volume); fails on an inverted element for the finite-strain laws.
 fn gather(
     geo: &ElementGeometry,
@@ -103,7 +108,6 @@ fn gather(
     points: &mut Vec<PatchPoint>,
 ) -> Result<Kinematics, FemError> {
     let linear = law == Law::Linear;
-    points.clear();
     let (mut volume, mut sum) = (0.0, 0.0);
     let nq = geo.points_per_element;
     for (slot, &e) in geo.patches.elements(patch).iter().enumerate() {
@@ -192,81 +196,133 @@ pub fn patch_gradients(
     Ok(points.iter().map(|p| kin.modified(p).0).collect())
 }
 
-/// Internal force (`f`, 3 per patch node) and, when `k` is given, the
-/// consistent tangent (row-major, local dof `3a + i` over the patch's nodes)
-/// of patch `patch`.
+/// Internal forces of the patches `patches`, one after the other in `f` (3 per patch node):
+/// the modified gradients of all their quadrature points first, then every stress at once
+/// ([`Material::stresses`], which vectorises the co-rotational law). The same values, bit
+/// for bit, as [`patch_force_tangent`] without a tangent, patch by patch.
+pub fn patch_forces(
+    geo: &ElementGeometry,
+    patches: Range<usize>,
+    material: &Material,
+    u: &[f64],
+    f: &mut [f64],
+    scratch: &mut PatchScratch,
+) -> Result<(), FemError> {
+    let PatchScratch { points, gradients, stresses, kinematics, .. } = scratch;
+    points.clear();
+    gradients.clear();
+    kinematics.clear();
+    for patch in patches.clone() {
+        let start = points.len();
+        let kin = gather(geo, patch, material.law, u, points)?;
+        for p in &mut points[start..] {
+            let (fbar, alpha) = kin.modified(p);
+            p.alpha = alpha;
+            gradients.push(fbar);
+        }
+        kinematics.push((start, kin));
+    }
+    stresses.resize(gradients.len(), Matrix3::zeros());
+    material.stresses(gradients, stresses);
+    let mut offset = 0;
+    for (i, patch) in patches.enumerate() {
+        let (start, kin) = &kinematics[i];
+        let end = kinematics.get(i + 1).map_or(points.len(), |k| k.0);
+        let fp = &mut f[offset..offset + 3 * geo.patches.nodes(patch).len()];
+        offset += fp.len();
+        let mut sigma_bar = 0.0;
+        for (p, stress) in points[*start..end].iter_mut().zip(&stresses[*start..end]) {
+            p.stress = flat(stress);
+            sigma_bar += p.w * kin.phi(p.alpha) * dot(&p.stress, &kin.x(p));
+        }
+        fp.fill(0.0);
+        for p in &points[*start..end] {
+            add_point_force(geo, patch, kin, p, sigma_bar, fp);
+        }
+        check_finite(geo, patch, fp)?;
+    }
+    Ok(())
+}
+
+/// Adds a point's force g · ∇N_a to the patch's nodal forces `f`, with
+/// g = w Mᵀ P̄ + σ̄ c ∂m = w α (P̄ − ⅓ (x·P̄) y) + σ̄ c ∂m and y = ∂m / s.
+fn add_point_force(
+    geo: &ElementGeometry,
+    patch: usize,
+    kin: &Kinematics,
+    p: &PatchPoint,
+    sigma_bar: f64,
+    f: &mut [f64],
+) {
+    let c = p.w / kin.volume;
+    let xp = dot(&kin.x(p), &p.stress);
+    let (wa, dm_factor) = (p.w * p.alpha, sigma_bar * c - p.w * p.alpha * xp / (3.0 * kin.y_scale(p)));
+    let g: V9 = std::array::from_fn(|r| wa * p.stress[r] + dm_factor * p.dm[r]);
+    let npe = geo.nodes_per_element;
+    let grads = &geo.grads[p.grads..p.grads + npe];
+    for (&la, ga) in geo.patches.local_nodes(patch, p.slot).iter().zip(grads) {
+        for i in 0..3 {
+            f[3 * la as usize + i] += g[3 * i] * ga[0] + g[3 * i + 1] * ga[1] + g[3 * i + 2] * ga[2];
+        }
+    }
+}
+
+/// Fails when a force of the patch is not finite.
+fn check_finite(geo: &ElementGeometry, patch: usize, f: &[f64]) -> Result<(), FemError> {
+    if f.iter().any(|v| !v.is_finite()) {
+        return Err(FemError::NonFinite(format!(
+            "internal force of the patch of element {}",
+            geo.patches.elements(patch)[0]
+        )));
+    }
+    Ok(())
+}
+
+/// Internal force (`f`, 3 per patch node) and consistent tangent `k` (row-major, local dof
+/// `3a + i` over the patch's nodes) of patch `patch`.
 pub fn patch_force_tangent(
     geo: &ElementGeometry,
     patch: usize,
     material: &Material,
     u: &[f64],
     f: &mut [f64],
-    mut k: Option<&mut [f64]>,
+    k: &mut [f64],
     scratch: &mut PatchScratch,
 ) -> Result<(), FemError> {
-    let PatchScratch { points, tangents, gradients, stresses } = scratch;
+    let PatchScratch { points, tangents, .. } = scratch;
+    points.clear();
     let kin = gather(geo, patch, material.law, u, points)?;
-    let want_k = k.is_some();
-    let npe = geo.nodes_per_element;
     let ndof = f.len();
-    // Stresses (and tangents) at F̄; σ̄ and γ.
+    // Stresses and tangents at F̄; σ̄ and γ.
     let (mut sigma_bar, mut gamma) = (0.0, 0.0);
     tangents.clear();
-    if !want_k {
-        // Forces alone: every point's stress at once (vectorised for the co-rotational law).
-        gradients.clear();
-        for p in points.iter_mut() {
-            let (fbar, alpha) = kin.modified(p);
-            p.alpha = alpha;
-            gradients.push(fbar);
-        }
-        stresses.resize(gradients.len(), Matrix3::zeros());
-        material.stresses(gradients, stresses);
-    }
-    for (q, p) in points.iter_mut().enumerate() {
+    for p in points.iter_mut() {
         let x = kin.x(p);
-        let stress = if want_k {
-            let (fbar, alpha) = kin.modified(p);
-            p.alpha = alpha;
-            let (s, t) = material.stress_tangent(&fbar);
-            let phi = kin.phi(alpha);
-            gamma += p.w * phi * phi * dot(&x, &mat_vec(&t, &x));
-            tangents.push(t);
-            s
-        } else {
-            stresses[q]
-        };
+        let (fbar, alpha) = kin.modified(p);
+        p.alpha = alpha;
+        let (stress, t) = material.stress_tangent(&fbar);
+        let phi = kin.phi(alpha);
+        gamma += p.w * phi * phi * dot(&x, &mat_vec(&t, &x));
+        tangents.push(t);
         p.stress = flat(&stress);
-        let (alpha, phi) = (p.alpha, kin.phi(p.alpha));
         sigma_bar += p.w * phi * dot(&p.stress, &x);
-        if want_k && !kin.linear {
+        if !kin.linear {
             // P̄ : ∂²Φ/∂m̄² with ∂²Φ/∂m̄² = −2α / (9 m̄²) F.
             gamma -= p.w * 2.0 * alpha / (9.0 * kin.mean * kin.mean) * dot(&p.stress, &x);
         }
     }
     f.fill(0.0);
-    let mut a_bar = vec![0.0; if want_k { ndof } else { 0 }];
-    let mut b_bar = vec![0.0; if want_k { ndof } else { 0 }];
-    if let Some(k) = k.as_deref_mut() {
-        k.fill(0.0);
-    }
+    k.fill(0.0);
+    let (mut a_bar, mut b_bar) = (vec![0.0; ndof], vec![0.0; ndof]);
+    let npe = geo.nodes_per_element;
     for (q, p) in points.iter().enumerate() {
+        add_point_force(geo, patch, &kin, p, sigma_bar, f);
         let (x, dm) = (kin.x(p), &p.dm);
         let c = p.w / kin.volume;
         let alpha = p.alpha;
-        // g = w Mᵀ P̄ + σ̄ c ∂m with Mᵀ P̄ = α (P̄ − ⅓ (x·P̄) y) and y = ∂m / s.
         let xp = dot(&x, &p.stress);
-        let (wa, dm_factor) = (p.w * alpha, sigma_bar * c - p.w * alpha * xp / (3.0 * kin.y_scale(p)));
-        let g: V9 = std::array::from_fn(|r| wa * p.stress[r] + dm_factor * dm[r]);
         let grads = &geo.grads[p.grads..p.grads + npe];
         let local = geo.patches.local_nodes(patch, p.slot);
-        for (a, &la) in local.iter().enumerate() {
-            let ga = grads[a];
-            for i in 0..3 {
-                f[3 * la as usize + i] += g[3 * i] * ga[0] + g[3 * i + 1] * ga[1] + g[3 * i + 2] * ga[2];
-            }
-        }
-        let Some(k) = k.as_deref_mut() else { continue };
         let y = dm.map(|v| v / kin.y_scale(p));
         let mt_p: V9 = std::array::from_fn(|r| alpha * (p.stress[r] - xp * y[r] / 3.0));
         // D = w (Mᵀ A M + P̄ : ∂²Φ/∂F²) + σ̄ c ∂²m.
@@ -330,21 +386,13 @@ pub fn patch_force_tangent(
             }
         }
     }
-    if let Some(k) = k {
-        for r in 0..ndof {
-            let row = &mut k[r * ndof..(r + 1) * ndof];
-            for (s, v) in row.iter_mut().enumerate() {
-                *v += a_bar[r] * b_bar[s] + b_bar[r] * a_bar[s] + gamma * b_bar[r] * b_bar[s];
-            }
+    for r in 0..ndof {
+        let row = &mut k[r * ndof..(r + 1) * ndof];
+        for (s, v) in row.iter_mut().enumerate() {
+            *v += a_bar[r] * b_bar[s] + b_bar[r] * a_bar[s] + gamma * b_bar[r] * b_bar[s];
         }
     }
-    if f.iter().any(|v| !v.is_finite()) {
-        return Err(FemError::NonFinite(format!(
-            "internal force of the patch of element {}",
-            geo.patches.elements(patch)[0]
-        )));
-    }
-    Ok(())
+    check_finite(geo, patch, f)
 }
 
 #[cfg(test)]
@@ -379,12 +427,36 @@ mod tests {
             let mut scratch = PatchScratch::default();
             for e in 0..geo.len() {
                 let (mut f1, mut k1, mut f2, mut k2) = (vec![0.0; 12], vec![0.0; 144], vec![0.0; 12], vec![0.0; 144]);
-                patch_force_tangent(&geo, e, &material, &u, &mut f1, Some(&mut k1), &mut scratch).unwrap();
+                patch_force_tangent(&geo, e, &material, &u, &mut f1, &mut k1, &mut scratch).unwrap();
                 geo.force_tangent(e, &material, &u, &mut f2, Some(&mut k2)).unwrap();
                 let scale = k2.iter().fold(0.0f64, |a, b| a.max(b.abs()));
                 let df = f1.iter().zip(&f2).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
                 let dk = k1.iter().zip(&k2).fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
                 assert!(df < 1e-10 * scale && dk < 1e-10 * scale, "{law:?} element {e}: |df| {df:e}, |dk| {dk:e}");
+            }
+        }
+    }
+
+    /// The chunked force path (all stresses of many patches at once) and the tangent path
+    /// must give the same forces bit for bit: the solver mixes them.
+    #[test]
+    fn chunked_forces_equal_the_tangent_path() {
+        let m = mesh::box_tet([0.0; 3], [1.0, 0.7, 0.5], [4, 3, 3]).unwrap();
+        let geo = ElementGeometry::new(&m, Formulation::Fbar).unwrap();
+        let np = geo.patches.len();
+        let u: Vec<f64> = (0..3 * m.num_nodes()).map(|i| 0.04 * ((i * 37 % 11) as f64 / 11.0 - 0.5)).collect();
+        for law in [Law::Linear, Law::Corotational, Law::Svk, Law::NeoHookean] {
+            let material = Material::new(law, 3000.0, 0.49);
+            let mut scratch = PatchScratch::default();
+            let mut chunked = vec![0.0; 3 * geo.patches.node_offset(np)];
+            patch_forces(&geo, 0..np, &material, &u, &mut chunked, &mut scratch).unwrap();
+            let mut offset = 0;
+            for p in 0..np {
+                let nd = 3 * geo.patches.nodes(p).len();
+                let (mut f, mut k) = (vec![0.0; nd], vec![0.0; nd * nd]);
+                patch_force_tangent(&geo, p, &material, &u, &mut f, &mut k, &mut scratch).unwrap();
+                assert_eq!(f, chunked[offset..offset + nd], "{law:?}, patch {p}");
+                offset += nd;
             }
         }
     }
