@@ -14,7 +14,7 @@ pub fn run(runs: usize) -> Result<()> {
         "'frame': a frame of a sequence whose load varies by 2 % per frame, warm-started from the previous frame."
     );
     println!(
-        "{:<40} {:>6} {:>5} {:>4} {:>4} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7}",
+        "{:<42} {:>6} {:>5} {:>4} {:>4} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7}",
         "case",
         "dofs",
         "iter",
@@ -32,7 +32,7 @@ pub fn run(runs: usize) -> Result<()> {
     );
     experiment::measure_fem_speed(runs, true, &mut |c| {
         println!(
-            "{:<40} {:>6} {:>5} {:>4} {:>4} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.4} {:>9.2} {:>7.1}",
+            "{:<42} {:>6} {:>5} {:>4} {:>4} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.4} {:>9.2} {:>7.1}",
             c.name,
             c.dofs,
             c.iterations,
