@@ -52,22 +52,6 @@ use crate::unet::{tensor_values, UNet};
 use crate::winograd::{self, Winograd};
 use crate::{LearnError, Result};
 
-/// The layers of a [`UNet`] (from `UNet::layers`), in the order of its fields.
-pub(crate) struct Layers<'a> {
-    /// The two convolutions of each encoder level.
-    pub(crate) encoder: Vec<[&'a Conv3d; 2]>,
-    /// The stride-2 down-sampling convolutions.
-    pub(crate) down: Vec<&'a Conv3d>,
-    /// The bottleneck's two convolutions.
-    pub(crate) bottleneck: [&'a Conv3d; 2],
-    /// The stride-2 transposed (up-sampling) convolutions.
-    pub(crate) up: Vec<&'a ConvTranspose3d>,
-    /// The two convolutions of each decoder level.
-    pub(crate) decoder: Vec<[&'a Conv3d; 2]>,
-    /// The 1×1×1 output convolution.
-    pub(crate) head: &'a Conv3d,
-}
-
 /// The masked MSE loss of `net` on a batch and the gradients of its trainable parameters.
 ///
 /// `inputs` is `[batch, in_channels, nx, ny, nz]`, `targets` `[batch, out_channels, nx, ny, nz]`

@@ -29,7 +29,6 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use crate::backprop::Layers;
 use crate::dataset::{Normalization, Samples};
 use crate::fsutil::read;
 use crate::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
@@ -543,4 +542,21 @@ fn weights_path(json_path: &Path, name: &str) -> Result<PathBuf> {
         ));
     }
     Ok(json_path.with_file_name(name))
+}
+
+/// The layers of a [`UNet`] (from `UNet::layers`), in the order of its fields, for the
+/// hand-written backward pass of [`crate::backprop`].
+pub(crate) struct Layers<'a> {
+    /// The two convolutions of each encoder level.
+    pub(crate) encoder: Vec<[&'a Conv3d; 2]>,
+    /// The stride-2 down-sampling convolutions.
+    pub(crate) down: Vec<&'a Conv3d>,
+    /// The bottleneck's two convolutions.
+    pub(crate) bottleneck: [&'a Conv3d; 2],
+    /// The stride-2 transposed (up-sampling) convolutions.
+    pub(crate) up: Vec<&'a ConvTranspose3d>,
+    /// The two convolutions of each decoder level.
+    pub(crate) decoder: Vec<[&'a Conv3d; 2]>,
+    /// The 1×1×1 output convolution.
+    pub(crate) head: &'a Conv3d,
 }
