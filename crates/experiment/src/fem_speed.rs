@@ -291,7 +291,7 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
         rows,
         figures: vec!["timings.png".into()],
         notes: vec![
-            format!("{runs} runs per case on this machine, medians; 'setup': building a solver (sparse pattern, ordering, symbolic analysis, buffers); 'first': its first solve from rest; 'from rest': repeated solves with the rest tangent's factor kept; 'frame': one frame of a load varying by 2 % per frame, warm-started."),
+            format!("{runs} runs per case on this machine, medians; 'setup': building a solver (sparse pattern, ordering, symbolic analysis, buffers); 'first': its first solve from rest; 'from rest': repeated solves with the rest tangent's factor kept, the cases taking turns; 'frame': one frame of a load varying by 2 % per frame, warm-started."),
             format!(
                 "Liver: the built-in phantom, E = {} Pa, ν = {}, {} Pa on one lobe. The published times are for a \
                  ~5k-tet liver on the authors' machine.",
