@@ -64,19 +64,17 @@ fn nearly_incompressible_block_keeps_its_volume_under_compression() {
         let bottom = mesh::select::nodes_in_box(&m.nodes, [-1.0, -1.0, -1e-9], [2.0, 2.0, 1e-9]);
         let top = mesh::select::nodes_in_box(&m.nodes, [-1.0, -1.0, 1.0 - 1e-9], [2.0, 2.0, 1.0 + 1e-9]);
         let v0 = m.volume();
-        for law in [Law::NeoHookean] {
-            let mut problem =
-                Problem::new(m.clone(), Material::new(law, YOUNG, 0.499).with_formulation(Formulation::Fbar));
-            problem.fix(&bottom);
-            problem.prescribe(&top, [0.0, 0.0, -0.25]);
-            let mut solver = StaticSolver::new(problem).unwrap();
-            // Asked in one load step, the 25 % compression needs step cuts: their
-            // retries must not start from the factor of the state that failed.
-            let sol = solver.solve(&SolverOptions { load_steps: 1, ..Default::default() }).unwrap();
-            let v = deformed_volume(&m, &sol.u);
-            let bulge = sol.u.chunks(3).map(|d| d[0].abs().max(d[1].abs())).fold(0.0, f64::max);
-            assert!((v / v0 - 1.0).abs() < 0.01, "hex={hex} {law:?}: volume {v:.4} vs {v0:.4}");
-            assert!(bulge > 0.05, "hex={hex} {law:?}: the block must bulge sideways ({bulge:.3})");
-        }
+        let law = Law::NeoHookean;
+        let mut problem = Problem::new(m.clone(), Material::new(law, YOUNG, 0.499).with_formulation(Formulation::Fbar));
+        problem.fix(&bottom);
+        problem.prescribe(&top, [0.0, 0.0, -0.25]);
+        let mut solver = StaticSolver::new(problem).unwrap();
+        // Asked in one load step, the 25 % compression needs step cuts: their
+        // retries must not start from the factor of the state that failed.
+        let sol = solver.solve(&SolverOptions { load_steps: 1, ..Default::default() }).unwrap();
+        let v = deformed_volume(&m, &sol.u);
+        let bulge = sol.u.chunks(3).map(|d| d[0].abs().max(d[1].abs())).fold(0.0, f64::max);
+        assert!((v / v0 - 1.0).abs() < 0.01, "hex={hex} {law:?}: volume {v:.4} vs {v0:.4}");
+        assert!(bulge > 0.05, "hex={hex} {law:?}: the block must bulge sideways ({bulge:.3})");
     }
 }

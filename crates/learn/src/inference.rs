@@ -206,7 +206,7 @@ impl InferenceNet {
     ) -> Result<InferenceNet> {
         let depth = encoder.len();
         let bad = |m: String| Err(LearnError::InvalidInput(format!("inference network: {m}")));
-        if kernel % 2 == 0 || down.len() != depth || up.len() != depth || decoder.len() != depth {
+        if kernel.is_multiple_of(2) || down.len() != depth || up.len() != depth || decoder.len() != depth {
             return bad(format!("kernel {kernel} or level counts do not fit depth {depth}"));
         }
         let in_channels = encoder.first().unwrap_or(&bottleneck)[0].c_in;

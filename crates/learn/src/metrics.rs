@@ -43,7 +43,7 @@ pub fn masked_mse_values(pred: &[f32], target: &[f32], masks: &[u8], grid: GridS
 
 fn check_lengths(pred: &[f32], target: &[f32], masks: &[u8], grid: GridShape) -> Result<usize> {
     let n = grid.nodes();
-    if n == 0 || masks.len() % n != 0 {
+    if n == 0 || !masks.len().is_multiple_of(n) {
         return Err(LearnError::InvalidInput(format!("mask length {} is not a multiple of grid {grid}", masks.len())));
     }
     let samples = masks.len() / n;

@@ -592,7 +592,7 @@ pub fn train(
         progress.set_message(format!("loss {loss_value:.3e}"));
 
         let done = state.iteration == config.iterations;
-        if state.iteration % config.validate_every == 0 || done {
+        if state.iteration.is_multiple_of(config.validate_every) || done {
             let snapshot = net.valid();
             let val_error = if val.is_empty() {
                 None
@@ -625,7 +625,7 @@ pub fn train(
             }
         }
         let stop = options.stop_after.is_some_and(|s| state.iteration >= s) && !done;
-        if state.iteration % config.checkpoint_every == 0 || done || stop {
+        if state.iteration.is_multiple_of(config.checkpoint_every) || done || stop {
             write_checkpoint(&checkpoint_path, &state, &net, &optim, best.as_ref())?;
         }
         if stop {

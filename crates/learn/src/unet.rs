@@ -68,7 +68,7 @@ impl UNetConfig {
         if self.depth > 6 {
             return bad(format!("depth {} is more than 6", self.depth));
         }
-        if self.kernel_size % 2 == 0 {
+        if self.kernel_size.is_multiple_of(2) {
             return bad(format!("kernel_size {} must be odd", self.kernel_size));
         }
         Ok(())

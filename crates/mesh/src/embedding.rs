@@ -405,7 +405,7 @@ pub fn interpolate_at(locations: &[Location], field: &[f64], channels: usize) ->
     let max_node = locations.iter().flat_map(|l| l.nodes[..l.count].iter()).copied().max().unwrap_or(0);
     if channels == 0
         || (!locations.is_empty() && field.len() < (max_node + 1) * channels)
-        || field.len() % channels != 0
+        || !field.len().is_multiple_of(channels)
     {
         return Err(MeshError::Invalid(format!(
             "mesh field of {} values does not hold {channels} channels for node {max_node}",

@@ -8,7 +8,7 @@ fn lattice_index(n: [usize; 3], i: usize, j: usize, k: usize) -> usize {
 }
 
 fn lattice(lo: Point, hi: Point, n: [usize; 3]) -> Result<Vec<Point>, MeshError> {
-    if n.iter().any(|&c| c == 0) || (0..3).any(|d| !(hi[d] > lo[d])) {
+    if n.contains(&0) || (0..3).any(|d| !(hi[d] > lo[d])) {
         return Err(MeshError::Invalid(format!("box {lo:?}..{hi:?} with {n:?} cells is empty")));
     }
     let mut nodes = Vec::with_capacity((n[0] + 1) * (n[1] + 1) * (n[2] + 1));

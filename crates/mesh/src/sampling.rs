@@ -105,7 +105,7 @@ pub fn sample_visible_boundary(
 /// A node-major field (`channels` per node) interpolated at the samples;
 /// point-major result (`out[s·C + c]`).
 pub fn interpolate_samples(samples: &[SurfaceSample], field: &[f64], channels: usize) -> Result<Vec<f64>, MeshError> {
-    if channels == 0 || field.len() % channels != 0 {
+    if channels == 0 || !field.len().is_multiple_of(channels) {
         return Err(MeshError::Invalid(format!("field of {} values is not {channels} channels per node", field.len())));
     }
     let n = field.len() / channels;
