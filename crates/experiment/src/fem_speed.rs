@@ -29,10 +29,11 @@ pub struct CaseTiming {
     pub factorizations: usize,
     /// Tangent assemblies of the last solve from rest.
     pub assemblies: usize,
-    /// Building the solver: sparse pattern, ordering, symbolic analysis, buffers.
+    /// Building a solver: sparse pattern, ordering, symbolic analysis, buffers (median over
+    /// the new solvers built).
     #[serde(default)]
     pub setup_ms: f64,
-    /// A new solver's first solve (setup excluded).
+    /// A new solver's first solve, setup excluded (median over the new solvers built).
     pub first_ms: f64,
     /// Repeated solves from rest (the rest tangent's factorisation kept).
     pub median_ms: f64,
@@ -117,15 +118,13 @@ fn liver(tets: usize, law: Law, formulation: Formulation, load: f64) -> Result<C
     })
 }
 
-/// A case being timed: its solver, setup and first-solve times and repeated solves from rest.
+/// A case being timed: the setup and first-solve times of its new solvers, the last solver
+/// built and its repeated solves from rest.
 struct Timed {
-    name: String,
-    label: String,
-    published: &'static str,
-    dofs: usize,
-    solver: StaticSolver,
-    setup_ms: f64,
-    first_ms: f64,
+    case: Case,
+    solver: Option<StaticSolver>,
+    setups: Vec<f64>,
+    firsts: Vec<f64>,
     rows: Vec<fem::Solution>,
 }
 
@@ -148,10 +147,11 @@ fn frames(solver: &mut StaticSolver, opts: &SolverOptions, u_full: &[f64], runs:
     Ok((median(&mut times), iterations as f64 / runs as f64))
 }
 
-/// Times every case `runs` times (the 50k-tet phantom, when `large`, at most 3 times),
-/// calling `each` with each case's timing once all are done. The repeated solves take
-/// turns between the cases, so that a burst of load from elsewhere on the machine falls on
-/// all cases alike and their ratios stay meaningful.
+/// Times every case `runs` times (the 50k-tet phantom, when `large`, at most 3 times): as
+/// many new solvers (setup and first solve), then as many repeated solves from rest and
+/// frames; calls `each` with each case's timing once all are done. The cases take turns,
+/// so that a burst of load from elsewhere on the machine falls on all of them alike and
+/// their ratios stay meaningful.
 pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> Result<Vec<CaseTiming>> {
     let runs = runs.max(1);
     let mut cases = vec![
@@ -167,24 +167,33 @@ pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> R
         cases.push(liver(50000, Law::Svk, Formulation::Fbar, 1.0)?);
     }
     let opts = SolverOptions::default();
-    let mut timed = Vec::new();
-    for Case { name, label, published, problem } in cases {
-        let dofs = problem.num_dofs();
-        let setup = std::time::Instant::now();
-        let solver = StaticSolver::new(problem)?;
-        let setup_ms = setup.elapsed().as_secs_f64() * 1e3;
-        let mut t = Timed { name, label, published, dofs, solver, setup_ms, first_ms: 0.0, rows: Vec::new() };
-        t.first_ms = t.solver.solve(&opts)?.timings.total.as_secs_f64() * 1e3;
-        timed.push(t);
-    }
     let runs_of = |dofs: usize| if dofs > 20_000 { runs.min(3) } else { runs };
+    let mut timed: Vec<Timed> = cases
+        .into_iter()
+        .map(|c| Timed { case: c, solver: None, setups: Vec::new(), firsts: Vec::new(), rows: Vec::new() })
+        .collect();
+    // New solvers (setup and first solve), then repeated solves from rest on the last one; the
+    // cases take turns in both.
     for k in 0..runs {
-        for t in timed.iter_mut().filter(|t| k < runs_of(t.dofs)) {
-            t.rows.push(t.solver.solve(&opts)?);
+        for t in timed.iter_mut().filter(|t| k < runs_of(t.case.problem.num_dofs())) {
+            let problem = t.case.problem.clone();
+            let clock = std::time::Instant::now();
+            let mut solver = StaticSolver::new(problem)?;
+            t.setups.push(clock.elapsed().as_secs_f64() * 1e3);
+            t.firsts.push(solver.solve(&opts)?.timings.total.as_secs_f64() * 1e3);
+            t.solver = Some(solver);
+        }
+    }
+    for k in 0..runs {
+        for t in timed.iter_mut().filter(|t| k < runs_of(t.case.problem.num_dofs())) {
+            let solver = t.solver.as_mut().expect("built above");
+            t.rows.push(solver.solve(&opts)?);
         }
     }
     let mut out = Vec::new();
-    for Timed { name, label, published, dofs, mut solver, setup_ms, first_ms, rows } in timed {
+    for Timed { case: Case { name, label, published, problem }, solver, mut setups, mut firsts, rows } in timed {
+        let mut solver = solver.expect("built above");
+        let dofs = problem.num_dofs();
         let med = |f: &dyn Fn(&fem::Solution) -> std::time::Duration| {
             median(&mut rows.iter().map(|s| f(s).as_secs_f64() * 1e3).collect::<Vec<_>>())
         };
@@ -198,8 +207,8 @@ pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> R
             iterations: last.iterations,
             factorizations: last.factorizations,
             assemblies: last.tangent_assemblies,
-            setup_ms,
-            first_ms,
+            setup_ms: median(&mut setups),
+            first_ms: median(&mut firsts),
             median_ms: med(&|s| s.timings.total),
             assembly_ms: med(&|s| s.timings.assembly),
             factorization_ms: med(&|s| s.timings.factorization),
@@ -291,7 +300,7 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
         rows,
         figures: vec!["timings.png".into()],
         notes: vec![
-            format!("{runs} runs per case on this machine, medians; 'setup': building a solver (sparse pattern, ordering, symbolic analysis, buffers); 'first': its first solve from rest; 'from rest': repeated solves with the rest tangent's factor kept, the cases taking turns; 'frame': one frame of a load varying by 2 % per frame, warm-started."),
+            format!("{runs} runs per case on this machine, medians; 'setup': building a solver (sparse pattern, ordering, symbolic analysis, buffers) and 'first': its first solve from rest, medians over as many new solvers; 'from rest': repeated solves with the rest tangent's factor kept, the cases taking turns; 'frame': one frame of a load varying by 2 % per frame, warm-started."),
             format!(
                 "Liver: the built-in phantom, E = {} Pa, ν = {}, {} Pa on one lobe. The published times are for a \
                  ~5k-tet liver on the authors' machine.",
