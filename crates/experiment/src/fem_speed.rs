@@ -89,7 +89,7 @@ const LIVER_TRACTION: f64 = 800.0;
 /// The load factor under which the standard element deforms the 5k-tet phantom as far as
 /// F-bar does under the nominal load (SVK: max |u| 15.9 against 15.8 mm), so that the two
 /// formulations are also compared on equally nonlinear solves.
-pub const EQUAL_DEFORMATION_LOAD: f64 = 1.2;
+const EQUAL_DEFORMATION_LOAD: f64 = 1.2;
 
 /// The built-in phantom (DESIGN scenario 1), fixed between the lobes, pressed down on one
 /// lobe by `load` × [`LIVER_TRACTION`]. Only the ~5k-tet phantom has published times (the
