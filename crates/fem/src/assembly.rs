@@ -153,11 +153,19 @@ impl Workspace {
     /// Buffers sized for the geometry's patches and written once, so that the first assembly
     /// does not pay for the operating system's first touch of their pages.
     pub fn for_pattern(geometry: &ElementGeometry, pattern: &Pattern) -> Self {
-        let np = geometry.patches.len();
         let mut work = Workspace::default();
-        work.forces.resize(3 * geometry.patches.node_offset(np), 0.0);
-        work.stiffness.resize(pattern.matrix_ptr[np], 0.0);
+        work.fit(geometry, pattern, true);
         work
+    }
+
+    /// Sizes the patch forces and, with `tangent`, the patch stiffnesses for the geometry (a
+    /// force evaluation leaves the stiffness buffer as it is).
+    fn fit(&mut self, geometry: &ElementGeometry, pattern: &Pattern, tangent: bool) {
+        let np = geometry.patches.len();
+        self.forces.resize(3 * geometry.patches.node_offset(np), 0.0);
+        if tangent {
+            self.stiffness.resize(pattern.matrix_ptr[np], 0.0);
+        }
     }
 }
 
@@ -183,8 +191,7 @@ pub fn assemble(
     let patches = &geometry.patches;
     let np = patches.len();
     let want_k = values.is_some();
-    work.forces.resize(3 * patches.node_offset(np), 0.0);
-    work.stiffness.resize(if want_k { pattern.matrix_ptr[np] } else { 0 }, 0.0);
+    work.fit(geometry, pattern, want_k);
     // Split the buffers into one (forces, stiffness) pair of slices per chunk of patches.
     let mut tasks = Vec::with_capacity(np.div_ceil(CHUNK));
     let (mut forces, mut stiffness) = (work.forces.as_mut_slice(), work.stiffness.as_mut_slice());
@@ -201,25 +208,24 @@ pub fn assemble(
         };
         tasks.push((first, last, fc, kc));
     }
-    tasks.into_par_iter().try_for_each(|(first, last, fc, mut kc)| {
+    // Scratch space per rayon job (reused by the chunks a job takes), not per chunk.
+    let scratch = || (ForceScratch::default(), fbar::PatchScratch::default());
+    tasks.into_par_iter().try_for_each_init(scratch, |(element_scratch, patch_scratch), (first, last, fc, kc)| {
         // Forces alone: all of the chunk's stresses at once (a standard element is the patch of
         // the same index).
-        let Some(kc) = kc.as_deref_mut() else {
+        let Some(kc) = kc else {
             return match geometry.formulation {
-                Formulation::Fbar => {
-                    fbar::patch_forces(geometry, first..last, material, u, fc, &mut Default::default())
-                }
-                _ => geometry.forces(first..last, material, u, fc, &mut ForceScratch::default()),
+                Formulation::Fbar => fbar::patch_forces(geometry, first..last, material, u, fc, patch_scratch),
+                _ => geometry.forces(first..last, material, u, fc, element_scratch),
             };
         };
-        let mut scratch = fbar::PatchScratch::default();
         let (mut fo, mut ko) = (0, 0);
         for p in first..last {
             let nd = 3 * patches.nodes(p).len();
             let fe = &mut fc[fo..fo + nd];
             let ke = &mut kc[ko..ko + nd * nd];
             match geometry.formulation {
-                Formulation::Fbar => fbar::patch_force_tangent(geometry, p, material, u, fe, ke, &mut scratch)?,
+                Formulation::Fbar => fbar::patch_force_tangent(geometry, p, material, u, fe, ke, patch_scratch)?,
                 _ => geometry.force_tangent(patches.elements(p)[0], material, u, fe, Some(ke))?,
             }
             fo += nd;

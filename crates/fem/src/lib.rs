@@ -25,6 +25,14 @@ pub use material::{Formulation, Law, Material};
 pub use problem::{force_shares, nodal_masses, PointSpring, Problem};
 pub use solver::{Solution, SolverOptions, StaticSolver, Timings};
 
+/// `n` zeros, written now: a buffer made so has its pages touched when it is built rather than
+/// at its first use (`vec![0.0; n]` may take untouched zero pages from the operating system).
+pub(crate) fn written_zeros<T: Copy + Default>(n: usize) -> Vec<T> {
+    let mut v = Vec::with_capacity(n);
+    v.resize(n, T::default());
+    v
+}
+
 /// Errors of a finite-element computation.
 #[derive(Debug, thiserror::Error)]
 pub enum FemError {

@@ -24,7 +24,7 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
 
 use crate::assembly::Pattern;
-use crate::FemError;
+use crate::{written_zeros, FemError};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Factor {
@@ -157,14 +157,8 @@ impl SparseCholesky {
         // Every buffer is written once here, so that the first factorisations do not pay for the
         // operating system's first touch of their pages.
         mem.fill(std::mem::MaybeUninit::new(0));
-        let zeroed = || {
-            let mut values = Vec::new();
-            values.resize(symbolic.len_val(), 0.0f32);
-            values
-        };
-        let l_values = [zeroed(), zeroed()];
-        let mut scratch = Vec::new();
-        scratch.resize(pattern.nnz().max(pattern.num_free), 0.0);
+        let l_values = [written_zeros(symbolic.len_val()), written_zeros(symbolic.len_val())];
+        let scratch = written_zeros(pattern.nnz().max(pattern.num_free));
         Ok(SparseCholesky {
             col_ptr: pattern.col_ptr.clone(),
             row_idx: pattern.row_idx.clone(),

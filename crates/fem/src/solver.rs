@@ -20,7 +20,7 @@ use crate::linsolve::{Ordering, Slot, SparseCholesky};
 use crate::material::{Law, Material};
 use crate::post::effective_gradients;
 use crate::problem::{PointSpring, Problem};
-use crate::FemError;
+use crate::{written_zeros, FemError};
 
 /// Settings of the Newton-Raphson solver.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -191,7 +191,7 @@ impl StaticSolver {
         let pattern = Pattern::new(&geometry, problem.num_dofs(), &constrained)?;
         let cholesky = SparseCholesky::new(&pattern)?;
         let refactorization_cost = refactorization_cost(&geometry, &pattern, &cholesky);
-        let values = vec![0.0; pattern.nnz()];
+        let values = written_zeros(pattern.nnz());
         let work = Workspace::for_pattern(&geometry, &pattern);
         let constrained_nodes = problem.dirichlet.keys().copied().collect();
         Ok(StaticSolver {
