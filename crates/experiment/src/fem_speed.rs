@@ -118,14 +118,25 @@ fn liver(tets: usize, law: Law, formulation: Formulation, load: f64) -> Result<C
     })
 }
 
-/// A case being timed: the setup and first-solve times of its new solvers, the last solver
-/// built and its repeated solves from rest.
+/// A case being timed: its runs, the setup and first-solve times of its new solvers, the
+/// last solver built and its repeated solves from rest.
 struct Timed {
     case: Case,
-    solver: Option<StaticSolver>,
+    runs: usize,
+    solver: StaticSolver,
     setups: Vec<f64>,
     firsts: Vec<f64>,
     rows: Vec<fem::Solution>,
+}
+
+/// A new solver for `problem`, its setup time and the time of its first solve (ms).
+fn new_solver(problem: &Problem, opts: &SolverOptions) -> Result<(StaticSolver, f64, f64)> {
+    let problem = problem.clone();
+    let clock = std::time::Instant::now();
+    let mut solver = StaticSolver::new(problem)?;
+    let setup = clock.elapsed().as_secs_f64() * 1e3;
+    let first = solver.solve(opts)?.timings.total.as_secs_f64() * 1e3;
+    Ok((solver, setup, first))
 }
 
 /// Median time (ms) and mean Newton iterations of `runs` frames whose load factor moves by
@@ -167,38 +178,38 @@ pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> R
         cases.push(liver(50000, Law::Svk, Formulation::Fbar, 1.0)?);
     }
     let opts = SolverOptions::default();
-    let runs_of = |dofs: usize| if dofs > 20_000 { runs.min(3) } else { runs };
-    let mut timed: Vec<Timed> = cases
-        .into_iter()
-        .map(|c| Timed { case: c, solver: None, setups: Vec::new(), firsts: Vec::new(), rows: Vec::new() })
-        .collect();
+    let runs_of = |case: &Case| if case.problem.num_dofs() > 20_000 { runs.min(3) } else { runs };
     // New solvers (setup and first solve), then repeated solves from rest on the last one; the
     // cases take turns in both.
-    for k in 0..runs {
-        for t in timed.iter_mut().filter(|t| k < runs_of(t.case.problem.num_dofs())) {
-            let problem = t.case.problem.clone();
-            let clock = std::time::Instant::now();
-            let mut solver = StaticSolver::new(problem)?;
-            t.setups.push(clock.elapsed().as_secs_f64() * 1e3);
-            t.firsts.push(solver.solve(&opts)?.timings.total.as_secs_f64() * 1e3);
-            t.solver = Some(solver);
+    let mut timed = Vec::new();
+    for case in cases {
+        let (solver, setup, first) = new_solver(&case.problem, &opts)?;
+        let runs = runs_of(&case);
+        timed.push(Timed { case, runs, solver, setups: vec![setup], firsts: vec![first], rows: Vec::new() });
+    }
+    for k in 1..runs {
+        for t in timed.iter_mut().filter(|t| k < t.runs) {
+            let (solver, setup, first) = new_solver(&t.case.problem, &opts)?;
+            t.solver = solver;
+            t.setups.push(setup);
+            t.firsts.push(first);
         }
     }
     for k in 0..runs {
-        for t in timed.iter_mut().filter(|t| k < runs_of(t.case.problem.num_dofs())) {
-            let solver = t.solver.as_mut().expect("built above");
-            t.rows.push(solver.solve(&opts)?);
+        for t in timed.iter_mut().filter(|t| k < t.runs) {
+            t.rows.push(t.solver.solve(&opts)?);
         }
     }
     let mut out = Vec::new();
-    for Timed { case: Case { name, label, published, problem }, solver, mut setups, mut firsts, rows } in timed {
-        let mut solver = solver.expect("built above");
+    for Timed { case: Case { name, label, published, problem }, runs, mut solver, mut setups, mut firsts, rows } in
+        timed
+    {
         let dofs = problem.num_dofs();
         let med = |f: &dyn Fn(&fem::Solution) -> std::time::Duration| {
             median(&mut rows.iter().map(|s| f(s).as_secs_f64() * 1e3).collect::<Vec<_>>())
         };
         let last = rows.last().expect("at least one run");
-        let (frame_ms, frame_iterations) = frames(&mut solver, &opts, &last.u, runs_of(dofs))?;
+        let (frame_ms, frame_iterations) = frames(&mut solver, &opts, &last.u, runs)?;
         let timing = CaseTiming {
             name,
             label,
