@@ -100,8 +100,8 @@ impl Problem {
     /// traction of that resultant on the boundary faces they span.
     pub fn add_force(&mut self, nodes: &[usize], total: Point) {
         for (n, share) in force_shares(&self.mesh, nodes) {
-            for d in 0..3 {
-                self.f_ext[3 * n + d] += total[d] * share;
+            for (f, t) in self.f_ext[3 * n..3 * n + 3].iter_mut().zip(total) {
+                *f += t * share;
             }
         }
     }
@@ -111,8 +111,8 @@ impl Problem {
     pub fn add_traction(&mut self, nodes: &[usize], traction: Point) -> f64 {
         let areas = node_areas(&self.mesh, nodes);
         for &(n, w) in &areas {
-            for d in 0..3 {
-                self.f_ext[3 * n + d] += w * traction[d];
+            for (f, t) in self.f_ext[3 * n..3 * n + 3].iter_mut().zip(traction) {
+                *f += w * t;
             }
         }
         areas.iter().map(|(_, w)| w).sum()

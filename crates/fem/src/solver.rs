@@ -248,8 +248,8 @@ impl StaticSolver {
         self.evaluate(u, &mut f, true)?;
         let n = self.pattern.num_free;
         let mut k = vec![vec![0.0; n]; n];
-        for c in 0..n {
-            for p in self.pattern.col_ptr[c] as usize..self.pattern.col_ptr[c + 1] as usize {
+        for (c, column) in self.pattern.col_ptr.windows(2).enumerate() {
+            for p in column[0] as usize..column[1] as usize {
                 let r = self.pattern.row_idx[p] as usize;
                 k[r][c] = self.values[p];
                 k[c][r] = self.values[p];

@@ -24,8 +24,8 @@ fn distorted(hex: bool, n: usize) -> Mesh {
     let h = 0.6 / n as f64;
     for (i, p) in m.nodes.iter_mut().enumerate() {
         if boundary.binary_search(&i).is_err() {
-            for d in 0..3 {
-                p[d] += 0.2 * h * noise(3 * i + d);
+            for (d, pd) in p.iter_mut().enumerate() {
+                *pd += 0.2 * h * noise(3 * i + d);
             }
         }
     }

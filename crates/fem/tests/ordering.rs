@@ -43,11 +43,12 @@ fn dominant_values(p: &Pattern) -> Vec<f64> {
 fn multiply(p: &Pattern, values: &[f64], x: &[f64]) -> Vec<f64> {
     let mut y = vec![0.0; x.len()];
     for c in 0..p.num_free {
-        for k in p.col_ptr[c] as usize..p.col_ptr[c + 1] as usize {
-            let r = p.row_idx[k] as usize;
-            y[r] += values[k] * x[c];
+        let range = p.col_ptr[c] as usize..p.col_ptr[c + 1] as usize;
+        for (&r, &v) in p.row_idx[range.clone()].iter().zip(&values[range]) {
+            let r = r as usize;
+            y[r] += v * x[c];
             if r != c {
-                y[c] += values[k] * x[r];
+                y[c] += v * x[r];
             }
         }
     }

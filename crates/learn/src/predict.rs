@@ -26,6 +26,8 @@ pub struct Predictor {
 }
 
 /// What runs the network.
+// One per predictor, held for its lifetime: the variants' sizes do not matter.
+#[allow(clippy::large_enum_variant)]
 enum Engine {
     /// The repacked CPU engine.
     Repacked(InferenceNet),

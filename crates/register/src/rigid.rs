@@ -438,8 +438,8 @@ mod tests {
             }
         }
         let x = solve_spd(h, [1.0; 6]).unwrap();
-        for i in 0..6 {
-            let r: f64 = (0..6).map(|j| h[i][j] * x[j]).sum();
+        for row in &h {
+            let r: f64 = row.iter().zip(&x).map(|(a, b)| a * b).sum();
             assert!((r - 1.0).abs() < 1e-12);
         }
         h[5] = [0.0; 6];
