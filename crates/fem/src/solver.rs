@@ -335,6 +335,22 @@ impl StaticSolver {
     /// solve restarts from rest with load stepping.
     pub fn solve_from(&mut self, u0: Option<&[f64]>, options: &SolverOptions) -> Result<Solution, FemError> {
         let start = Instant::now();
+        // The whole solve runs on a rayon worker (in place when called from one), so that each
+        // parallel assembly starts at once on the solving thread, the other workers joining as
+        // they wake. Called from outside the pool, every assembly would instead wait for a
+        // sleeping worker to wake: on the 2-core bench host, one assembly in three then ran on
+        // a single thread, and solves from rest of the 5k-tet liver took 15 % longer (F-bar
+        // 25.4 against 21.8 ms, standard 15.2 against 13.1 ms, medians of 60).
+        rayon::scope(|_| self.solve_on_worker(u0, options, start))
+    }
+
+    /// [`StaticSolver::solve_from`] on the current thread; its time counts from `start`.
+    fn solve_on_worker(
+        &mut self,
+        u0: Option<&[f64]>,
+        options: &SolverOptions,
+        start: Instant,
+    ) -> Result<Solution, FemError> {
         self.problem.validate()?;
         if !self.problem.dirichlet.keys().copied().eq(self.constrained_nodes.iter().copied()) {
             return Err(FemError::Invalid("the set of constrained nodes changed after the solver was built".into()));
