@@ -120,6 +120,46 @@ impl Pattern {
         Ok(Pattern { free_index, num_free, col_ptr, row_idx, diag, matrix_ptr, gather_ptr, gather })
     }
 
+    /// Renumbers the free dofs: free dof `forward[new]` becomes `new` (`inverse` is the inverse
+    /// permutation). Numbered in a factorisation's fill-reducing order, the values are
+    /// assembled in the order the factorisation reads them, so that it need not permute them.
+    pub fn renumber(&mut self, forward: &[u32], inverse: &[u32]) -> Result<(), FemError> {
+        let n = self.num_free;
+        let is_inverse = |(new, &old): (usize, &u32)| inverse.get(old as usize) == Some(&(new as u32));
+        if forward.len() != n || inverse.len() != n || !forward.iter().enumerate().all(is_inverse) {
+            return Err(FemError::Invalid(format!("a renumbering of the {n} free dofs must be a permutation")));
+        }
+        for i in self.free_index.iter_mut().filter(|i| **i != NONE) {
+            *i = inverse[*i as usize];
+        }
+        // Each stored entry (r, c) moves to (inverse[r], inverse[c]), taken into the lower
+        // triangle; it keeps the patch entries that sum into it.
+        let mut cols: Vec<Vec<(u32, u32)>> = vec![Vec::new(); n];
+        for c in 0..n {
+            for v in self.col_ptr[c]..self.col_ptr[c + 1] {
+                let (r, c) = (inverse[self.row_idx[v as usize] as usize], inverse[c]);
+                cols[r.min(c) as usize].push((r.max(c), v));
+            }
+        }
+        let (mut col_ptr, mut row_idx) = (Vec::with_capacity(n + 1), Vec::with_capacity(self.nnz()));
+        let (mut gather_ptr, mut gather) = (Vec::with_capacity(self.nnz() + 1), Vec::with_capacity(self.gather.len()));
+        col_ptr.push(0u32);
+        gather_ptr.push(0u32);
+        for col in &mut cols {
+            col.sort_unstable();
+            for &(r, v) in col.iter() {
+                row_idx.push(r);
+                let v = v as usize;
+                gather.extend_from_slice(&self.gather[self.gather_ptr[v] as usize..self.gather_ptr[v + 1] as usize]);
+                gather_ptr.push(gather.len() as u32);
+            }
+            col_ptr.push(row_idx.len() as u32);
+        }
+        self.diag = (0..n).map(|c| entry_position(&col_ptr, &row_idx, c, c) as u32).collect();
+        (self.col_ptr, self.row_idx, self.gather_ptr, self.gather) = (col_ptr, row_idx, gather_ptr, gather);
+        Ok(())
+    }
+
     /// The value position of entry (row, col) with row ≥ col, if it is stored.
     pub fn find(&self, row: usize, col: usize) -> Option<usize> {
         find_entry(&self.col_ptr, &self.row_idx, row, col)

@@ -5,7 +5,8 @@
 //!
 //! The fill-reducing ordering is faer's approximate minimum degree (AMD) or, for
 //! large systems, METIS's nested dissection of the node graph when that needs
-//! less factorisation work ([`Ordering`]).
+//! less factorisation work ([`Ordering`]). The pattern's free dofs are renumbered in
+//! that order, so that the factorisation reads the values as they are assembled.
 //!
 //! The factors are computed and applied in single precision: the Newton solver
 //! uses them only as the initial inverse Hessian of its quasi-Newton iterations
@@ -17,6 +18,7 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::perm::PermRef;
+use faer::sparse::linalg::amd;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, LdltRef, LltRef, SymbolicCholesky, SymmetricOrdering,
 };
@@ -109,43 +111,37 @@ const PARALLEL_WORK: f64 = 2e9;
 pub const ND_WORK: f64 = PARALLEL_WORK;
 
 impl SparseCholesky {
-    /// Symbolic analysis of the pattern (lower triangle, CSC) with [`Ordering::Auto`].
-    pub fn new(pattern: &Pattern) -> Result<Self, FemError> {
+    /// [`SparseCholesky::with_ordering`] with [`Ordering::Auto`].
+    pub fn new(pattern: &mut Pattern) -> Result<Self, FemError> {
         SparseCholesky::with_ordering(pattern, Ordering::Auto)
     }
 
-    /// Symbolic analysis of the pattern with the given ordering. Nested dissection needs the free
-    /// dofs in node triples (as [`Pattern`] numbers them); where it cannot be computed, AMD is used.
-    pub fn with_ordering(pattern: &Pattern, ordering: Ordering) -> Result<Self, FemError> {
-        let analyse = |ordering: SymmetricOrdering<'_, u32>| {
-            let n = pattern.num_free;
-            let sym = SymbolicSparseColMatRef::new_checked(n, n, &pattern.col_ptr, None, &pattern.row_idx);
-            factorize_symbolic_cholesky(sym, Side::Lower, ordering, CholeskySymbolicParams::default())
-                .map_err(|e| FemError::Factorization(format!("symbolic analysis failed: {e:?}")))
+    /// Computes the fill-reducing ordering of the pattern (lower triangle, CSC), renumbers the
+    /// pattern's free dofs in that order ([`Pattern::renumber`]) and analyses it. Every
+    /// factorisation then reads the values as assembled, where faer would otherwise permute
+    /// them each time (measured on the 5k-tet liver, F-bar: 0.5–0.7 ms of a 6.8 ms factorisation).
+    /// Where nested dissection cannot be computed, AMD is used.
+    pub fn with_ordering(pattern: &mut Pattern, ordering: Ordering) -> Result<Self, FemError> {
+        let amd = |pattern: &Pattern| amd_permutation(pattern).map(|perm| (perm, Ordering::Amd));
+        let ((forward, inverse), mut chosen) = match ordering {
+            Ordering::NestedDissection => match nested_dissection(pattern) {
+                Some(perm) => (perm, Ordering::NestedDissection),
+                None => amd(pattern)?,
+            },
+            Ordering::Amd | Ordering::Auto => amd(pattern)?,
         };
-        let amd = || analyse(SymmetricOrdering::Amd).map(|s| (s, Ordering::Amd));
-        let nested = || -> Result<Option<(SymbolicCholesky<u32>, Ordering)>, FemError> {
-            let Some((forward, inverse)) = nested_dissection(pattern) else {
-                return Ok(None);
-            };
-            let perm = PermRef::new_checked(&forward, &inverse, pattern.num_free);
-            Ok(Some((analyse(SymmetricOrdering::Custom(perm))?, Ordering::NestedDissection)))
-        };
-        let (symbolic, ordering) = match ordering {
-            Ordering::Amd => amd()?,
-            Ordering::NestedDissection => nested()?.map_or_else(amd, Ok)?,
-            Ordering::Auto => {
-                let first = amd()?;
-                if factorization_work(&first.0) <= ND_WORK {
-                    first
-                } else {
-                    match nested()? {
-                        Some(nd) if factorization_work(&nd.0) < factorization_work(&first.0) => nd,
-                        _ => first,
-                    }
+        pattern.renumber(&forward, &inverse)?;
+        let mut symbolic = analyse(pattern, None)?;
+        if ordering == Ordering::Auto && factorization_work(&symbolic) > ND_WORK {
+            if let Some((forward, inverse)) = nested_dissection(pattern) {
+                let perm = PermRef::new_checked(&forward, &inverse, pattern.num_free);
+                if factorization_work(&analyse(pattern, Some(perm))?) < factorization_work(&symbolic) {
+                    pattern.renumber(&forward, &inverse)?;
+                    symbolic = analyse(pattern, None)?;
+                    chosen = Ordering::NestedDissection;
                 }
             }
-        };
+        }
         let work = factorization_work(&symbolic);
         let par = if work < PARALLEL_WORK { Par::Seq } else { Par::rayon(0) };
         let req = symbolic
@@ -169,7 +165,7 @@ impl SparseCholesky {
             factor: [Factor::None; 2],
             work,
             par,
-            ordering,
+            ordering: chosen,
         })
     }
 
@@ -289,19 +285,85 @@ fn factorization_work(symbolic: &SymbolicCholesky<u32>) -> f64 {
     }
 }
 
-/// METIS's nested-dissection ordering of the free nodes (the free dofs taken three by three),
-/// expanded to their dofs: `(forward, inverse)` with `forward[new] = old`. `None` when the free
-/// dofs do not come in node triples or METIS fails.
+/// Symbolic analysis of the pattern in the permutation `perm`, or in its own order when `None`
+/// (then faer reads the upper triangle: the pattern's lower one, transposed).
+fn analyse(pattern: &Pattern, perm: Option<PermRef<'_, u32>>) -> Result<SymbolicCholesky<u32>, FemError> {
+    let n = pattern.num_free;
+    let params = CholeskySymbolicParams::default();
+    let symbolic = match perm {
+        Some(perm) => {
+            let sym = SymbolicSparseColMatRef::new_checked(n, n, &pattern.col_ptr, None, &pattern.row_idx);
+            factorize_symbolic_cholesky(sym, Side::Lower, SymmetricOrdering::Custom(perm), params)
+        }
+        None => {
+            let (col_ptr, row_idx) = transpose(pattern);
+            let sym = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
+            factorize_symbolic_cholesky(sym, Side::Upper, SymmetricOrdering::Identity, params)
+        }
+    };
+    symbolic.map_err(|e| FemError::Factorization(format!("symbolic analysis failed: {e:?}")))
+}
+
+/// faer's approximate minimum degree ordering of the pattern: `(forward, inverse)`.
+fn amd_permutation(pattern: &Pattern) -> Result<(Vec<u32>, Vec<u32>), FemError> {
+    let n = pattern.num_free;
+    let sym = SymbolicSparseColMatRef::new_checked(n, n, &pattern.col_ptr, None, &pattern.row_idx);
+    let (mut forward, mut inverse) = (vec![0u32; n], vec![0u32; n]);
+    let mut mem = MemBuffer::try_new(amd::order_scratch::<u32>(n, pattern.nnz()))
+        .map_err(|_| FemError::Factorization("out of memory for the ordering".into()))?;
+    amd::order(&mut forward, &mut inverse, sym, amd::Control::default(), MemStack::new(&mut mem))
+        .map_err(|e| FemError::Factorization(format!("minimum degree ordering failed: {e:?}")))?;
+    Ok((forward, inverse))
+}
+
+/// The pattern's lower triangle transposed (the upper triangle), as CSC `(col_ptr, row_idx)`.
+fn transpose(pattern: &Pattern) -> (Vec<u32>, Vec<u32>) {
+    let n = pattern.num_free;
+    let mut col_ptr = vec![0u32; n + 1];
+    for &r in &pattern.row_idx {
+        col_ptr[r as usize + 1] += 1;
+    }
+    for c in 0..n {
+        col_ptr[c + 1] += col_ptr[c];
+    }
+    let mut fill = col_ptr.clone();
+    let mut row_idx = vec![0u32; pattern.row_idx.len()];
+    // Columns in increasing order: each transposed column's rows come out sorted.
+    for c in 0..n {
+        for &r in &pattern.row_idx[pattern.col_ptr[c] as usize..pattern.col_ptr[c + 1] as usize] {
+            row_idx[fill[r as usize] as usize] = c as u32;
+            fill[r as usize] += 1;
+        }
+    }
+    (col_ptr, row_idx)
+}
+
+/// METIS's nested-dissection ordering of the nodes with free dofs, each node's free dofs taken
+/// together: `(forward, inverse)` with `forward[new] = old` over the free dofs. `None` when
+/// METIS fails.
 fn nested_dissection(pattern: &Pattern) -> Option<(Vec<u32>, Vec<u32>)> {
     let n = pattern.num_free;
-    if n == 0 || !n.is_multiple_of(3) || i32::try_from(n).is_err() {
+    if n == 0 || i32::try_from(n).is_err() {
         return None;
     }
-    let nodes = n / 3;
+    // The free dofs of each node (global dof / 3), in the order of the global dofs.
+    let mut node_of = vec![0usize; n];
+    let mut dofs_of: Vec<Vec<u32>> = Vec::new();
+    let mut last = usize::MAX;
+    for (dof, &free) in pattern.free_index.iter().enumerate().filter(|(_, &f)| f != u32::MAX) {
+        if dof / 3 != last {
+            last = dof / 3;
+            dofs_of.push(Vec::new());
+        }
+        let node = dofs_of.len() - 1;
+        dofs_of[node].push(free);
+        node_of[free as usize] = node;
+    }
+    let nodes = dofs_of.len();
     let mut neighbours: Vec<Vec<i32>> = vec![Vec::new(); nodes];
     for c in 0..n {
         for &r in &pattern.row_idx[pattern.col_ptr[c] as usize..pattern.col_ptr[c + 1] as usize] {
-            let (a, b) = (r as usize / 3, c / 3);
+            let (a, b) = (node_of[r as usize], node_of[c]);
             if a != b {
                 neighbours[a].push(b as i32);
                 neighbours[b].push(a as i32);
@@ -339,7 +401,7 @@ fn nested_dissection(pattern: &Pattern) -> Option<(Vec<u32>, Vec<u32>)> {
     if status != metis_sys::rstatus_et_METIS_OK {
         return None;
     }
-    let forward: Vec<u32> = perm.iter().flat_map(|&p| (0..3).map(move |d| 3 * p as u32 + d)).collect();
+    let forward: Vec<u32> = perm.iter().flat_map(|&p| dofs_of[p as usize].iter().copied()).collect();
     let mut inverse = vec![u32::MAX; n];
     for (new, &old) in forward.iter().enumerate() {
         *inverse.get_mut(old as usize)? = new as u32;

@@ -188,8 +188,8 @@ impl StaticSolver {
         for &n in problem.dirichlet.keys() {
             constrained[3 * n..3 * n + 3].fill(true);
         }
-        let pattern = Pattern::new(&geometry, problem.num_dofs(), &constrained)?;
-        let cholesky = SparseCholesky::new(&pattern)?;
+        let mut pattern = Pattern::new(&geometry, problem.num_dofs(), &constrained)?;
+        let cholesky = SparseCholesky::new(&mut pattern)?;
         let refactorization_cost = refactorization_cost(&geometry, &pattern, &cholesky);
         let values = written_zeros(pattern.nnz());
         let work = Workspace::for_pattern(&geometry, &pattern);

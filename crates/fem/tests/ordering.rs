@@ -55,42 +55,109 @@ fn multiply(p: &Pattern, values: &[f64], x: &[f64]) -> Vec<f64> {
     y
 }
 
-fn solve(p: &Pattern, ordering: Ordering, values: &[f64], rhs: &[f64]) -> (SparseCholesky, Vec<f64>) {
-    let mut cholesky = SparseCholesky::with_ordering(p, ordering).unwrap();
-    cholesky.factorize(Slot::Latest, values).unwrap();
-    let mut x = rhs.to_vec();
+/// Renumbers the cube's pattern in `ordering` and solves the dominant system on it with the
+/// right-hand side `rhs(i)` at free dof i: the pattern, the factorisation and the solution.
+fn solve(n: usize, ordering: Ordering, rhs: impl Fn(usize) -> f64) -> (Pattern, SparseCholesky, Vec<f64>) {
+    let mut p = cube_pattern(n);
+    let mut cholesky = SparseCholesky::with_ordering(&mut p, ordering).unwrap();
+    cholesky.factorize(Slot::Latest, &dominant_values(&p)).unwrap();
+    let mut x: Vec<f64> = (0..p.num_free).map(rhs).collect();
     cholesky.solve_in_place(Slot::Latest, &mut x).unwrap();
-    (cholesky, x)
+    (p, cholesky, x)
+}
+
+/// A right-hand side by global dof, so that solutions in different numberings compare.
+fn global_rhs(p: &Pattern) -> Vec<f64> {
+    let mut rhs = vec![0.0; p.num_free];
+    for (dof, &i) in p.free_index.iter().enumerate().filter(|(_, &i)| i != u32::MAX) {
+        rhs[i as usize] = ((dof * 7919) % 101) as f64 / 50.0 - 1.0;
+    }
+    rhs
 }
 
 #[test]
 fn nested_dissection_solves_as_amd_does_with_less_work_on_a_cube() {
-    let p = cube_pattern(14);
-    let values = dominant_values(&p);
-    let rhs: Vec<f64> = (0..p.num_free).map(|i| ((i * 7919) % 101) as f64 / 50.0 - 1.0).collect();
-    let (amd, x_amd) = solve(&p, Ordering::Amd, &values, &rhs);
-    let (nd, x_nd) = solve(&p, Ordering::NestedDissection, &values, &rhs);
-    assert_eq!(amd.ordering(), Ordering::Amd);
-    assert_eq!(nd.ordering(), Ordering::NestedDissection);
+    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let mut solutions = Vec::new();
+    for ordering in [Ordering::Amd, Ordering::NestedDissection] {
+        // The right-hand side in the pattern's own numbering, known once it is renumbered.
+        let mut p = cube_pattern(14);
+        SparseCholesky::with_ordering(&mut p, ordering).unwrap();
+        let rhs = global_rhs(&p);
+        let (p, cholesky, x) = solve(14, ordering, |i| rhs[i]);
+        assert_eq!(cholesky.ordering(), ordering);
+        let r: Vec<f64> = multiply(&p, &dominant_values(&p), &x).iter().zip(&rhs).map(|(a, b)| a - b).collect();
+        assert!(norm(&r) < 1e-5 * norm(&rhs), "{ordering:?}: relative residual {:.2e}", norm(&r) / norm(&rhs));
+        // The solution by global dof.
+        let by_dof: Vec<f64> = p.free_index.iter().filter(|&&i| i != u32::MAX).map(|&i| x[i as usize]).collect();
+        solutions.push((cholesky, by_dof));
+    }
+    let ((amd, x_amd), (nd, x_nd)) = (&solutions[0], &solutions[1]);
     let (w_amd, w_nd) = (amd.factorization_work(), nd.factorization_work());
     println!("AMD: work {w_amd:.3e}, factor {}; ND: work {w_nd:.3e}, factor {}", amd.factor_nnz(), nd.factor_nnz());
     assert!(w_nd < 0.9 * w_amd, "nested dissection work {w_nd:.3e} against AMD's {w_amd:.3e}");
+    // The two orderings solve the same system (to single precision).
+    let gap = x_amd.iter().zip(x_nd).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    assert!(gap < 1e-4 * norm(x_amd) / (x_amd.len() as f64).sqrt(), "AMD and ND solutions differ by {gap:.2e}");
     // Above the threshold, the automatic choice takes the ordering with less work.
     assert!(w_amd > ND_WORK);
-    assert_eq!(SparseCholesky::new(&p).unwrap().ordering(), Ordering::NestedDissection);
+    assert_eq!(SparseCholesky::new(&mut cube_pattern(14)).unwrap().ordering(), Ordering::NestedDissection);
     // METIS runs with a fixed seed: the same ordering, hence the same bits, every time.
-    assert_eq!(solve(&p, Ordering::NestedDissection, &values, &rhs).1, x_nd);
-    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
-    for x in [&x_amd, &x_nd] {
-        let r: Vec<f64> = multiply(&p, &values, x).iter().zip(&rhs).map(|(a, b)| a - b).collect();
-        assert!(norm(&r) < 1e-5 * norm(&rhs), "relative residual {:.2e}", norm(&r) / norm(&rhs));
+    let mut p = cube_pattern(14);
+    SparseCholesky::with_ordering(&mut p, Ordering::NestedDissection).unwrap();
+    let rhs = global_rhs(&p);
+    assert_eq!(
+        solve(14, Ordering::NestedDissection, |i| rhs[i]).2,
+        solve(14, Ordering::NestedDissection, |i| rhs[i]).2
+    );
+}
+
+/// Renumbering keeps the matrix: the values assembled through a renumbered pattern are those
+/// of the original one, bit for bit, each at its renumbered place; a non-permutation is refused.
+#[test]
+fn renumbering_moves_every_entry_with_its_dofs() {
+    use fem::assembly::{assemble, Workspace};
+    use fem::{Law, Material};
+    let m = box_tet([0.0; 3], [1.0, 0.6, 0.4], [4, 3, 2]).unwrap();
+    let material = Material::new(Law::NeoHookean, 1000.0, 0.45);
+    let geometry = ElementGeometry::new(&m, Formulation::Fbar).unwrap();
+    let constrained: Vec<bool> = (0..3 * m.nodes.len()).map(|d| m.nodes[d / 3][0] == 0.0).collect();
+    let original = Pattern::new(&geometry, constrained.len(), &constrained).unwrap();
+    let n = original.num_free;
+    // A scrambling permutation: forward[new] = old.
+    let forward: Vec<u32> = (0..n as u32).map(|i| (i * 7 + 3) % n as u32).collect();
+    let mut inverse = vec![0u32; n];
+    forward.iter().enumerate().for_each(|(new, &old)| inverse[old as usize] = new as u32);
+    let mut renumbered = original.clone();
+    assert!(renumbered.renumber(&forward[1..], &inverse).is_err());
+    assert!(renumbered.renumber(&vec![0; n], &inverse).is_err());
+    renumbered.renumber(&forward, &inverse).unwrap();
+    let u: Vec<f64> = (0..constrained.len()).map(|i| 0.01 * ((i * 13 % 7) as f64 - 3.0)).collect();
+    let values = |p: &Pattern| {
+        let (mut f, mut k) = (vec![0.0; u.len()], vec![0.0; p.nnz()]);
+        assemble(&geometry, p, &material, &u, &mut f, Some(&mut k), &mut Workspace::for_pattern(&geometry, p)).unwrap();
+        k
+    };
+    let (before, after) = (values(&original), values(&renumbered));
+    assert_eq!(renumbered.nnz(), original.nnz());
+    for (dof, &i) in original.free_index.iter().enumerate() {
+        let expected = if i == u32::MAX { u32::MAX } else { inverse[i as usize] };
+        assert_eq!(renumbered.free_index[dof], expected);
     }
+    for c in 0..n {
+        for v in original.col_ptr[c] as usize..original.col_ptr[c + 1] as usize {
+            let (r, c) = (inverse[original.row_idx[v] as usize] as usize, inverse[c] as usize);
+            let w = renumbered.find(r.max(c), r.min(c)).expect("entry renumbered");
+            assert_eq!(after[w].to_bits(), before[v].to_bits());
+        }
+    }
+    assert!((0..n).all(|i| renumbered.row_idx[renumbered.diag[i] as usize] == i as u32));
 }
 
 #[test]
 fn auto_keeps_amd_below_the_work_threshold() {
-    let p = cube_pattern(6);
-    let auto = SparseCholesky::new(&p).unwrap();
+    let mut p = cube_pattern(6);
+    let auto = SparseCholesky::new(&mut p).unwrap();
     assert!(auto.factorization_work() < ND_WORK);
     assert_eq!(auto.ordering(), Ordering::Amd);
 }
