@@ -375,7 +375,8 @@ pub fn patch_force_tangent(
                     }
                 }
             }
-            for (b, &lb) in local.iter().enumerate() {
+            // Blocks on and above the diagonal only (patch node la ≤ lb); mirrored below.
+            for (b, &lb) in local.iter().enumerate().filter(|(_, &lb)| lb >= la as u16) {
                 let gb = grads[b];
                 for i in 0..3 {
                     let out = &mut k[(3 * la + i) * ndof + 3 * lb as usize..][..3];
@@ -386,10 +387,17 @@ pub fn patch_force_tangent(
             }
         }
     }
+    // The patch coupling on the blocks on and above the diagonal, then the tangent's symmetry.
     for r in 0..ndof {
-        let row = &mut k[r * ndof..(r + 1) * ndof];
-        for (s, v) in row.iter_mut().enumerate() {
+        let first = 3 * (r / 3);
+        let row = &mut k[r * ndof + first..(r + 1) * ndof];
+        for (s, v) in (first..ndof).zip(row) {
             *v += a_bar[r] * b_bar[s] + b_bar[r] * a_bar[s] + gamma * b_bar[r] * b_bar[s];
+        }
+    }
+    for r in 0..ndof {
+        for s in 3 * (r / 3 + 1)..ndof {
+            k[s * ndof + r] = k[r * ndof + s];
         }
     }
     check_finite(geo, patch, f)
