@@ -30,7 +30,7 @@ pub fn run(runs: usize) -> Result<()> {
         "frame ms",
         "fr.iter"
     );
-    experiment::measure_fem_speed(runs, true, &mut |c| {
+    let cases = experiment::measure_fem_speed(runs, true, &mut |c| {
         println!(
             "{:<42} {:>6} {:>5} {:>4} {:>4} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.4} {:>9.2} {:>7.1}",
             c.name,
@@ -49,6 +49,12 @@ pub fn run(runs: usize) -> Result<()> {
             c.frame_iterations
         )
     })?;
+    println!();
+    println!("F-bar over the standard element, by the medians above:");
+    println!("{:<62} {:>7} {:>9} {:>7}", "pair", "first", "from rest", "frame");
+    for r in experiment::fbar_ratios(&cases) {
+        println!("{:<62} {:>6.2}× {:>8.2}× {:>6.2}×", r.pair, r.first, r.from_rest, r.frame);
+    }
     unet_prediction(runs)
 }
 

@@ -21,6 +21,16 @@ pub struct CaseTiming {
     pub label: String,
     /// The published time of the same kind of solve, where there is one.
     pub published: String,
+    /// The mesh and law (e.g. "5k liver, Svk"): F-bar is compared with the standard element
+    /// within a group.
+    #[serde(default)]
+    pub group: String,
+    /// Whether the case uses the F-bar formulation.
+    #[serde(default)]
+    pub fbar: bool,
+    /// The factor on the group's nominal load.
+    #[serde(default = "one")]
+    pub load: f64,
     /// Degrees of freedom.
     pub dofs: usize,
     /// Newton iterations of the last solve from rest.
@@ -51,11 +61,55 @@ pub struct CaseTiming {
     pub frame_iterations: f64,
 }
 
-/// A case to time: its name, its label for plots, the published time it compares with, the problem.
+fn one() -> f64 {
+    1.0
+}
+
+/// F-bar's time over the standard element's on one pair of cases of a group.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Ratio {
+    /// The group and how the pair is matched: equal load, or equal deformation (the standard
+    /// element under a larger load).
+    pub pair: String,
+    /// First solves.
+    pub first: f64,
+    /// Solves from rest.
+    pub from_rest: f64,
+    /// Frames.
+    pub frame: f64,
+}
+
+/// F-bar over the standard element, per group: the F-bar case under the nominal load against
+/// each standard case of its group.
+pub fn fbar_ratios(cases: &[CaseTiming]) -> Vec<Ratio> {
+    let mut out = Vec::new();
+    for f in cases.iter().filter(|c| c.fbar && c.load == 1.0) {
+        for s in cases.iter().filter(|c| !c.fbar && c.group == f.group) {
+            let matched = if s.load == 1.0 {
+                "equal load".to_string()
+            } else {
+                format!("equal deformation (standard under ×{})", s.load)
+            };
+            out.push(Ratio {
+                pair: format!("{}, {matched}", f.group),
+                first: f.first_ms / s.first_ms,
+                from_rest: f.median_ms / s.median_ms,
+                frame: f.frame_ms / s.frame_ms,
+            });
+        }
+    }
+    out
+}
+
+/// A case to time: its name, its label for plots, the published time it compares with, its
+/// group (mesh and law), formulation and load factor, the problem.
 struct Case {
     name: String,
     label: String,
     published: &'static str,
+    group: String,
+    fbar: bool,
+    load: f64,
     problem: Problem,
 }
 
@@ -77,6 +131,9 @@ fn beam(law: Law, formulation: Formulation) -> Result<Case> {
         name: format!("beam 20x5x5 H8, {law:?}, {form:?}"),
         label: format!("beam {}", short(law, form)),
         published: "",
+        group: format!("beam H8, {law:?}"),
+        fbar: form == Formulation::Fbar,
+        load: 1.0,
         problem: p,
     })
 }
@@ -110,10 +167,14 @@ fn liver(tets: usize, law: Law, formulation: Formulation, load: f64) -> Result<C
         _ => "",
     };
     let scaled = if load == 1.0 { String::new() } else { format!(", load ×{load}") };
+    let thousands = (cells as f64 / 1000.0).round();
     Ok(Case {
         name: format!("liver {cells} T4, {law:?}, {form:?}{scaled}"),
-        label: format!("{}k {}{}", (cells as f64 / 1000.0).round(), short(law, form), scaled.replace(", load ", " ")),
+        label: format!("{thousands}k {}{}", short(law, form), scaled.replace(", load ", " ")),
         published,
+        group: format!("{thousands}k liver, {law:?}"),
+        fbar: form == Formulation::Fbar,
+        load,
         problem: p,
     })
 }
@@ -202,8 +263,14 @@ pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> R
         }
     }
     let mut out = Vec::new();
-    for Timed { case: Case { name, label, published, problem }, runs, mut solver, mut setups, mut firsts, rows } in
-        timed
+    for Timed {
+        case: Case { name, label, published, group, fbar, load, problem },
+        runs,
+        mut solver,
+        mut setups,
+        mut firsts,
+        rows,
+    } in timed
     {
         let dofs = problem.num_dofs();
         let med = |f: &dyn Fn(&fem::Solution) -> std::time::Duration| {
@@ -215,6 +282,9 @@ pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> R
             name,
             label,
             published: published.into(),
+            group,
+            fbar,
+            load,
             dofs,
             iterations: last.iterations,
             factorizations: last.factorizations,
@@ -259,6 +329,13 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
             );
             Row::new(&c.name, ours, &c.published)
         })
+        .chain(fbar_ratios(&cases).iter().map(|r| {
+            Row::new(
+                format!("F-bar / standard, {}: first / from rest / frame", r.pair),
+                format!("{:.2}× / {:.2}× / {:.2}×", r.first, r.from_rest, r.frame),
+                "",
+            )
+        }))
         .collect();
     let csv = std::iter::once(
         "case,dofs,iterations,factorizations,assemblies,setup_ms,first_ms,median_ms,assembly_ms,factorization_ms,solve_ms,max_u_m,frame_ms,frame_iterations\n"
@@ -335,6 +412,48 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// F-bar is compared within its group only, at equal load and against each scaled
+    /// standard case; F-bar cases under other loads are not compared.
+    #[test]
+    fn fbar_ratios_pair_cases_within_a_group() {
+        let case = |group: &str, fbar: bool, load: f64, ms: f64| CaseTiming {
+            name: format!("{group} {fbar} {load}"),
+            label: String::new(),
+            published: String::new(),
+            group: group.into(),
+            fbar,
+            load,
+            dofs: 1,
+            iterations: 1,
+            factorizations: 1,
+            assemblies: 1,
+            setup_ms: 1.0,
+            first_ms: 2.0 * ms,
+            median_ms: ms,
+            assembly_ms: 0.0,
+            factorization_ms: 0.0,
+            solve_ms: 0.0,
+            max_displacement: 0.0,
+            frame_ms: ms / 4.0,
+            frame_iterations: 1.0,
+        };
+        let cases = [
+            case("liver", false, 1.0, 10.0),
+            case("liver", true, 1.0, 15.0),
+            case("liver", false, 1.2, 12.0),
+            case("liver", true, 1.2, 99.0),
+            case("beam", false, 1.0, 8.0),
+            case("beam", true, 1.0, 10.0),
+        ];
+        let ratios = fbar_ratios(&cases);
+        let pairs: Vec<&str> = ratios.iter().map(|r| r.pair.as_str()).collect();
+        assert_eq!(pairs, ["liver, equal load", "liver, equal deformation (standard under ×1.2)", "beam, equal load"]);
+        let expected = [1.5, 1.25, 1.25];
+        for (r, e) in ratios.iter().zip(expected) {
+            assert!((r.from_rest - e).abs() < 1e-12 && (r.first - e).abs() < 1e-12 && (r.frame - e).abs() < 1e-12);
+        }
+    }
 
     /// The equal-deformation case must deform the standard element as far as F-bar (within
     /// 2 %), or its comparison means nothing.

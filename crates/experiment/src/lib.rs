@@ -20,7 +20,7 @@ mod registration;
 pub mod report;
 mod transfer;
 
-pub use fem_speed::{measure as measure_fem_speed, CaseTiming};
+pub use fem_speed::{fbar_ratios, measure as measure_fem_speed, CaseTiming, Ratio};
 
 /// How large an experiment is run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
