@@ -133,28 +133,41 @@ impl Pattern {
             *i = inverse[*i as usize];
         }
         // Each stored entry (r, c) moves to (inverse[r], inverse[c]), taken into the lower
-        // triangle; it keeps the patch entries that sum into it.
-        let mut cols: Vec<Vec<(u32, u32)>> = vec![Vec::new(); n];
+        // triangle; it keeps the patch entries that sum into it. Entries (new row, old position)
+        // are bucketed by new column, then sorted within each column.
+        let moved = |v: usize, c: usize| {
+            let (r, c) = (inverse[self.row_idx[v] as usize], inverse[c]);
+            (r.max(c), r.min(c))
+        };
+        let mut col_ptr = vec![0u32; n + 1];
         for c in 0..n {
-            for v in self.col_ptr[c]..self.col_ptr[c + 1] {
-                let (r, c) = (inverse[self.row_idx[v as usize] as usize], inverse[c]);
-                cols[r.min(c) as usize].push((r.max(c), v));
+            for v in self.col_ptr[c] as usize..self.col_ptr[c + 1] as usize {
+                col_ptr[moved(v, c).1 as usize + 1] += 1;
             }
         }
-        let (mut col_ptr, mut row_idx) = (Vec::with_capacity(n + 1), Vec::with_capacity(self.nnz()));
+        for c in 0..n {
+            col_ptr[c + 1] += col_ptr[c];
+        }
+        let mut fill = col_ptr.clone();
+        let mut entries = vec![(0u32, 0u32); self.nnz()];
+        for c in 0..n {
+            for v in self.col_ptr[c] as usize..self.col_ptr[c + 1] as usize {
+                let (r, new_c) = moved(v, c);
+                entries[fill[new_c as usize] as usize] = (r, v as u32);
+                fill[new_c as usize] += 1;
+            }
+        }
         let (mut gather_ptr, mut gather) = (Vec::with_capacity(self.nnz() + 1), Vec::with_capacity(self.gather.len()));
-        col_ptr.push(0u32);
         gather_ptr.push(0u32);
-        for col in &mut cols {
-            col.sort_unstable();
-            for &(r, v) in col.iter() {
-                row_idx.push(r);
-                let v = v as usize;
-                gather.extend_from_slice(&self.gather[self.gather_ptr[v] as usize..self.gather_ptr[v + 1] as usize]);
-                gather_ptr.push(gather.len() as u32);
-            }
-            col_ptr.push(row_idx.len() as u32);
+        for c in 0..n {
+            entries[col_ptr[c] as usize..col_ptr[c + 1] as usize].sort_unstable();
         }
+        for &(_, v) in &entries {
+            let v = v as usize;
+            gather.extend_from_slice(&self.gather[self.gather_ptr[v] as usize..self.gather_ptr[v + 1] as usize]);
+            gather_ptr.push(gather.len() as u32);
+        }
+        let row_idx: Vec<u32> = entries.iter().map(|&(r, _)| r).collect();
         self.diag = (0..n).map(|c| entry_position(&col_ptr, &row_idx, c, c) as u32).collect();
         (self.col_ptr, self.row_idx, self.gather_ptr, self.gather) = (col_ptr, row_idx, gather_ptr, gather);
         Ok(())
