@@ -785,7 +785,7 @@ mod tests {
         let decreasing: Vec<f64> = (0..30).map(|i| 0.8f64.powi(i)).collect();
         assert!(!stalled(&decreasing));
         // Too short to judge: at least one residual before the window.
-        assert!(!stalled(&vec![1.0; STALL_ITERATIONS]));
+        assert!(!stalled(&[1.0; STALL_ITERATIONS]));
         let mut flat = vec![1.0; STALL_ITERATIONS + 1];
         assert!(stalled(&flat));
         // One residual in the window below 0.9 × the best before it is progress.
