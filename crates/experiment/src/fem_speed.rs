@@ -61,6 +61,7 @@ pub struct CaseTiming {
     pub frame_iterations: f64,
 }
 
+/// The load factor of a case in a result written before cases recorded it: the nominal load.
 fn one() -> f64 {
     1.0
 }
