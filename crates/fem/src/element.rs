@@ -262,18 +262,22 @@ impl ElementGeometry {
                 }
             }
         }
-        // The tangent is symmetric: only blocks b ≥ a were accumulated; mirror them.
-        for p in 0..ndof {
-            for q in (p / 3) * 3..ndof {
-                if q / 3 > p / 3 {
-                    k[q * ndof + p] = k[p * ndof + q];
-                }
-            }
-        }
+        // The tangent is symmetric: only blocks b ≥ a were accumulated.
+        mirror_upper_blocks(k, ndof);
         if f.iter().any(|v| !v.is_finite()) {
             return Err(FemError::NonFinite(format!("internal force of element {e}")));
         }
         Ok(())
+    }
+}
+
+/// Copies the node blocks above the diagonal of a symmetric row-major `ndof × ndof` tangent
+/// (3 × 3 blocks, local dof `3a + i`) onto those below it.
+pub(crate) fn mirror_upper_blocks(k: &mut [f64], ndof: usize) {
+    for r in 0..ndof {
+        for s in 3 * (r / 3 + 1)..ndof {
+            k[s * ndof + r] = k[r * ndof + s];
+        }
     }
 }
 

@@ -25,7 +25,7 @@ use std::ops::Range;
 
 use nalgebra::Matrix3;
 
-use crate::element::ElementGeometry;
+use crate::element::{mirror_upper_blocks, ElementGeometry};
 use crate::material::{cofactor, Law, Material, Tangent};
 use crate::FemError;
 
@@ -395,11 +395,7 @@ pub fn patch_force_tangent(
             *v += a_bar[r] * b_bar[s] + b_bar[r] * a_bar[s] + gamma * b_bar[r] * b_bar[s];
         }
     }
-    for r in 0..ndof {
-        for s in 3 * (r / 3 + 1)..ndof {
-            k[s * ndof + r] = k[r * ndof + s];
-        }
-    }
+    mirror_upper_blocks(k, ndof);
     check_finite(geo, patch, f)
 }
 
