@@ -121,15 +121,22 @@ fn short(law: Law, formulation: Formulation) -> String {
     format!("{law} {formulation}")
 }
 
+/// The beam's cells (4 × 1 × 1 m, H8).
+const BEAM_CELLS: [usize; 3] = [20, 5, 5];
+/// The beam's material: Young's modulus (Pa) and Poisson's ratio.
+const BEAM_MATERIAL: (f64, f64) = (300.0, 0.4);
+
+/// The beam, fixed at the bottom of its first metre, its last metre's top pulled down by 1 Pa.
 fn beam(law: Law, formulation: Formulation) -> Result<Case> {
-    let m = mesh::box_hex([0.0; 3], [4.0, 1.0, 1.0], [20, 5, 5])?;
-    let mut p = Problem::new(m, Material::new(law, 300.0, 0.4).with_formulation(formulation));
+    let m = mesh::box_hex([0.0; 3], [4.0, 1.0, 1.0], BEAM_CELLS)?;
+    let material = Material::new(law, BEAM_MATERIAL.0, BEAM_MATERIAL.1).with_formulation(formulation);
+    let mut p = Problem::new(m, material);
     p.fix(&nodes_in_box(&p.mesh.nodes, [-1e-9; 3], [1.0 + 1e-9, 1.0 + 1e-9, 1e-9]));
     let top_end = nodes_in_box(&p.mesh.nodes, [3.0 - 1e-9, -1e-9, 1.0 - 1e-9], [4.0 + 1e-9, 1.0 + 1e-9, 1.0 + 1e-9]);
     p.add_traction(&top_end, [0.0, 0.0, -1.0]);
     let form = p.material.resolved_formulation();
     Ok(Case {
-        name: format!("beam 20x5x5 H8, {law:?}, {form:?}"),
+        name: format!("beam {}x{}x{} H8, {law:?}, {form:?}", BEAM_CELLS[0], BEAM_CELLS[1], BEAM_CELLS[2]),
         label: format!("beam {}", short(law, form)),
         published: "",
         group: format!("beam H8, {law:?}"),
@@ -396,10 +403,12 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
                  ~5k-tet liver on the authors' machine.",
                 LIVER_MATERIAL.0, LIVER_MATERIAL.1, LIVER_TRACTION
             ),
-            "Beam: 20 × 5 × 5 H8, E = 300 Pa, ν = 0.4, pulled down at its free end. H8 F-bar averages J over \
-             each element (one element per patch), so its tangent has the standard element's pattern; T4 F-bar \
-             averages over patches of about six tetrahedra, which couples their nodes and fills the factor more."
-                .to_string(),
+            format!(
+                "Beam: {} × {} × {} H8, E = {} Pa, ν = {}, pulled down at its free end. H8 F-bar averages J over \
+                 each element (one element per patch), so its tangent has the standard element's pattern; T4 F-bar \
+                 averages over patches of about six tetrahedra, which couples their nodes and fills the factor more.",
+                BEAM_CELLS[0], BEAM_CELLS[1], BEAM_CELLS[2], BEAM_MATERIAL.0, BEAM_MATERIAL.1
+            ),
             format!(
                 "'load ×{EQUAL_DEFORMATION_LOAD}': the standard element under {EQUAL_DEFORMATION_LOAD} times the load, \
                  which deforms it as far as F-bar under the nominal load (max |u| in timings.csv): the two \
