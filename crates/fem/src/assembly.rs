@@ -38,7 +38,9 @@ pub struct Pattern {
 }
 
 impl Pattern {
-    /// Builds the pattern for the geometry's patches and constrained global dofs.
+    /// Builds the pattern for the geometry's patches and constrained global dofs, column by
+    /// column: each free dof's column gathers the rows of the patches around its node, and the
+    /// patch entries summing into each value are listed in patch order.
     pub fn new(geometry: &ElementGeometry, num_dofs: usize, constrained: &[bool]) -> Result<Self, FemError> {
         let mut free_index = vec![NONE; num_dofs];
         let mut num_free = 0usize;
@@ -52,71 +54,85 @@ impl Pattern {
             return Err(FemError::Invalid("every degree of freedom is constrained: nothing to solve".into()));
         }
         let patches = &geometry.patches;
-        let local_free = |p: usize| -> Vec<u32> {
-            patches.nodes(p).iter().flat_map(|&n| (0..3).map(move |i| 3 * n + i)).map(|d| free_index[d]).collect()
-        };
-        // Column lists of the lower triangle.
-        let mut cols: Vec<Vec<u32>> = vec![Vec::new(); num_free];
-        for (c, col) in cols.iter_mut().enumerate() {
-            col.push(c as u32);
-        }
-        for p in 0..patches.len() {
-            let dofs = local_free(p);
-            for &r in &dofs {
-                for &c in &dofs {
-                    if r != NONE && c != NONE && r > c {
-                        cols[c as usize].push(r);
-                    }
-                }
-            }
-        }
-        let mut col_ptr = Vec::with_capacity(num_free + 1);
-        let mut row_idx = Vec::new();
-        col_ptr.push(0u32);
-        for col in &mut cols {
-            col.sort_unstable();
-            col.dedup();
-            row_idx.extend_from_slice(col);
-            col_ptr.push(row_idx.len() as u32);
-        }
-        let position = |r: u32, c: u32| entry_position(&col_ptr, &row_idx, r as usize, c as usize) as u32;
-        let diag = (0..num_free as u32).map(|c| position(c, c)).collect();
-        let mut matrix_ptr = vec![0usize];
-        for p in 0..patches.len() {
+        let np = patches.len();
+        let mut matrix_ptr = Vec::with_capacity(np + 1);
+        matrix_ptr.push(0usize);
+        for p in 0..np {
             let nd = 3 * patches.nodes(p).len();
             matrix_ptr.push(matrix_ptr[p] + nd * nd);
         }
-        let entries = matrix_ptr[patches.len()];
+        let entries = matrix_ptr[np];
         if entries > NONE as usize {
             return Err(FemError::Invalid(format!("the element tangents hold {entries} entries, more than 2³² − 1")));
         }
-        // For each patch entry, the value position or NONE (upper triangle, constrained dofs).
-        let mut scatter = vec![NONE; entries];
-        for p in 0..patches.len() {
-            let dofs = local_free(p);
-            let nd = dofs.len();
-            for r in 0..nd {
-                for c in 0..nd {
-                    let (gr, gc) = (dofs[r], dofs[c]);
-                    if gr != NONE && gc != NONE && gr >= gc {
-                        scatter[matrix_ptr[p] + r * nd + c] = position(gr, gc);
+        // The patches around each node, in patch order, with the node's place in each.
+        let num_nodes = num_dofs / 3;
+        let mut around_ptr = vec![0usize; num_nodes + 1];
+        for p in 0..np {
+            for &n in patches.nodes(p) {
+                around_ptr[n + 1] += 1;
+            }
+        }
+        for n in 0..num_nodes {
+            around_ptr[n + 1] += around_ptr[n];
+        }
+        let mut fill = around_ptr.clone();
+        let mut around = vec![(0u32, 0u16); around_ptr[num_nodes]];
+        for p in 0..np {
+            for (a, &n) in patches.nodes(p).iter().enumerate() {
+                around[fill[n]] = (p as u32, a as u16);
+                fill[n] += 1;
+            }
+        }
+        let (mut col_ptr, mut row_idx) = (Vec::with_capacity(num_free + 1), Vec::new());
+        let (mut gather_ptr, mut gather) = (vec![0u32], Vec::new());
+        col_ptr.push(0u32);
+        // Per column: the value position of each row (valid where `stamp` is the column).
+        let (mut stamp, mut position) = (vec![NONE; num_free], vec![0u32; num_free]);
+        let mut entries_of_column = Vec::new();
+        for (dof, &c) in free_index.iter().enumerate().filter(|(_, &c)| c != NONE) {
+            let (node, i) = (dof / 3, dof % 3);
+            let first = row_idx.len();
+            // Rows r ≥ c of the patches around the node (the diagonal even without a patch).
+            row_idx.push(c);
+            stamp[c as usize] = c;
+            for &(p, _) in &around[around_ptr[node]..around_ptr[node + 1]] {
+                for &m in patches.nodes(p as usize) {
+                    for r in free_index[3 * m..3 * m + 3].iter().copied().filter(|&r| r != NONE && r > c) {
+                        if stamp[r as usize] != c {
+                            stamp[r as usize] = c;
+                            row_idx.push(r);
+                        }
                     }
                 }
             }
+            row_idx[first..].sort_unstable();
+            for (k, &r) in row_idx[first..].iter().enumerate() {
+                position[r as usize] = k as u32;
+            }
+            col_ptr.push(row_idx.len() as u32);
+            // Each value's patch entries in patch order: (value, entry) pairs sorted stably by value.
+            entries_of_column.clear();
+            for &(p, a) in &around[around_ptr[node]..around_ptr[node + 1]] {
+                let (nodes, start) = (patches.nodes(p as usize), matrix_ptr[p as usize]);
+                let (nd, cl) = (3 * nodes.len(), 3 * a as usize + i);
+                for (rl, row_dof) in nodes.iter().flat_map(|&m| 3 * m..3 * m + 3).enumerate() {
+                    let r = free_index[row_dof];
+                    if r != NONE && r >= c {
+                        entries_of_column.push((position[r as usize], (start + rl * nd + cl) as u32));
+                    }
+                }
+            }
+            entries_of_column.sort_by_key(|&(value, _)| value);
+            let mut sorted = entries_of_column.iter().peekable();
+            for value in 0..(row_idx.len() - first) as u32 {
+                while let Some(&(_, entry)) = sorted.next_if(|(v, _)| *v == value) {
+                    gather.push(entry);
+                }
+                gather_ptr.push(gather.len() as u32);
+            }
         }
-        let mut gather_ptr = vec![0u32; row_idx.len() + 1];
-        for &v in scatter.iter().filter(|&&v| v != NONE) {
-            gather_ptr[v as usize + 1] += 1;
-        }
-        for v in 0..row_idx.len() {
-            gather_ptr[v + 1] += gather_ptr[v];
-        }
-        let mut fill = gather_ptr.clone();
-        let mut gather = vec![0u32; gather_ptr[row_idx.len()] as usize];
-        for (entry, &v) in scatter.iter().enumerate().filter(|(_, &v)| v != NONE) {
-            gather[fill[v as usize] as usize] = entry as u32;
-            fill[v as usize] += 1;
-        }
+        let diag = col_ptr[..num_free].to_vec();
         Ok(Pattern { free_index, num_free, col_ptr, row_idx, diag, matrix_ptr, gather_ptr, gather })
     }
 
