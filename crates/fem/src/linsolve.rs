@@ -110,6 +110,18 @@ const PARALLEL_WORK: f64 = 2e9;
 /// was no faster, so small systems keep AMD.
 pub const ND_WORK: f64 = PARALLEL_WORK;
 
+/// From this many free dofs, [`Ordering::Auto`] computes AMD and nested dissection at once, on two
+/// threads, instead of nested dissection only once AMD's analysis has found more than
+/// [`ND_WORK`] multiply-adds (the 5k-tet liver has 3.4k free dofs and 1–2·10⁸, the 50k-tet one
+/// 28k and 2.6–3.3·10¹⁰). The choice is the same either way.
+pub const BOTH_ORDERINGS_DOFS: usize = 10_000;
+
+/// Whether nested dissection replaces AMD: AMD's factorisation costs more than [`ND_WORK`]
+/// multiply-adds and nested dissection's less.
+fn prefer_nested(amd_work: f64, nd_work: f64) -> bool {
+    amd_work > ND_WORK && nd_work < amd_work
+}
+
 impl SparseCholesky {
     /// [`SparseCholesky::with_ordering`] with [`Ordering::Auto`].
     pub fn new(pattern: &mut Pattern) -> Result<Self, FemError> {
@@ -122,26 +134,37 @@ impl SparseCholesky {
     /// them each time (measured on the 5k-tet liver, F-bar: 0.5–0.7 ms of a 6.8 ms factorisation).
     /// Where nested dissection cannot be computed, AMD is used.
     pub fn with_ordering(pattern: &mut Pattern, ordering: Ordering) -> Result<Self, FemError> {
-        let amd = |pattern: &Pattern| amd_permutation(pattern).map(|perm| (perm, Ordering::Amd));
-        let ((forward, inverse), mut chosen) = match ordering {
+        let (symbolic, chosen) = match ordering {
+            Ordering::Amd => (renumbered(pattern, amd_permutation(pattern)?)?, Ordering::Amd),
             Ordering::NestedDissection => match nested_dissection(pattern) {
-                Some(perm) => (perm, Ordering::NestedDissection),
-                None => amd(pattern)?,
+                Some(perm) => (renumbered(pattern, perm)?, Ordering::NestedDissection),
+                None => (renumbered(pattern, amd_permutation(pattern)?)?, Ordering::Amd),
             },
-            Ordering::Amd | Ordering::Auto => amd(pattern)?,
-        };
-        pattern.renumber(&forward, &inverse)?;
-        let mut symbolic = analyse(pattern, None)?;
-        if ordering == Ordering::Auto && factorization_work(&symbolic) > ND_WORK {
-            if let Some((forward, inverse)) = nested_dissection(pattern) {
-                let perm = PermRef::new_checked(&forward, &inverse, pattern.num_free);
-                if factorization_work(&analyse(pattern, Some(perm))?) < factorization_work(&symbolic) {
-                    pattern.renumber(&forward, &inverse)?;
-                    symbolic = analyse(pattern, None)?;
-                    chosen = Ordering::NestedDissection;
+            Ordering::Auto if pattern.num_free < BOTH_ORDERINGS_DOFS => {
+                let symbolic = renumbered(pattern, amd_permutation(pattern)?)?;
+                let amd_work = factorization_work(&symbolic);
+                match (amd_work > ND_WORK).then(|| nested_dissection(pattern)).flatten() {
+                    Some(perm) if prefer_nested(amd_work, work_in_order(pattern, &perm)?) => {
+                        (renumbered(pattern, perm)?, Ordering::NestedDissection)
+                    }
+                    _ => (symbolic, Ordering::Amd),
                 }
             }
-        }
+            Ordering::Auto => {
+                // Both orderings at once, each analysed in the pattern's present numbering.
+                let (amd, nested) = rayon::join(
+                    || amd_permutation(pattern).and_then(|perm| Ok((work_in_order(pattern, &perm)?, perm))),
+                    || nested_dissection(pattern).map(|perm| Ok::<_, FemError>((work_in_order(pattern, &perm)?, perm))),
+                );
+                let (amd_work, amd) = amd?;
+                match nested.transpose()? {
+                    Some((nd_work, perm)) if prefer_nested(amd_work, nd_work) => {
+                        (renumbered(pattern, perm)?, Ordering::NestedDissection)
+                    }
+                    _ => (renumbered(pattern, amd)?, Ordering::Amd),
+                }
+            }
+        };
         let work = factorization_work(&symbolic);
         let par = if work < PARALLEL_WORK { Par::Seq } else { Par::rayon(0) };
         let req = symbolic
@@ -304,6 +327,21 @@ fn analyse(pattern: &Pattern, perm: Option<PermRef<'_, u32>>) -> Result<Symbolic
     symbolic.map_err(|e| FemError::Factorization(format!("symbolic analysis failed: {e:?}")))
 }
 
+/// Renumbers the pattern in the order `(forward, inverse)` and analyses it.
+fn renumbered(
+    pattern: &mut Pattern,
+    (forward, inverse): (Vec<u32>, Vec<u32>),
+) -> Result<SymbolicCholesky<u32>, FemError> {
+    pattern.renumber(&forward, &inverse)?;
+    analyse(pattern, None)
+}
+
+/// Multiply-adds of a factorisation of the pattern in the order `(forward, inverse)`.
+fn work_in_order(pattern: &Pattern, (forward, inverse): &(Vec<u32>, Vec<u32>)) -> Result<f64, FemError> {
+    let perm = PermRef::new_checked(forward, inverse, pattern.num_free);
+    Ok(factorization_work(&analyse(pattern, Some(perm))?))
+}
+
 /// faer's approximate minimum degree ordering of the pattern: `(forward, inverse)`.
 fn amd_permutation(pattern: &Pattern) -> Result<(Vec<u32>, Vec<u32>), FemError> {
     let n = pattern.num_free;
@@ -360,10 +398,13 @@ fn nested_dissection(pattern: &Pattern) -> Option<(Vec<u32>, Vec<u32>)> {
         node_of[free as usize] = node;
     }
     let nodes = dofs_of.len();
+    // The free dofs of two nodes that share a patch all couple, so the column of each node's
+    // first free dof (in the present numbering) holds every later neighbour.
     let mut neighbours: Vec<Vec<i32>> = vec![Vec::new(); nodes];
-    for c in 0..n {
+    for (b, dofs) in dofs_of.iter().enumerate() {
+        let c = *dofs.iter().min().expect("a node has a free dof") as usize;
         for &r in &pattern.row_idx[pattern.col_ptr[c] as usize..pattern.col_ptr[c + 1] as usize] {
-            let (a, b) = (node_of[r as usize], node_of[c]);
+            let a = node_of[r as usize];
             if a != b {
                 neighbours[a].push(b as i32);
                 neighbours[b].push(a as i32);

@@ -3,7 +3,7 @@
 
 use augsim_fem as fem;
 use fem::assembly::Pattern;
-use fem::linsolve::{Ordering, Slot, SparseCholesky, ND_WORK};
+use fem::linsolve::{Ordering, Slot, SparseCholesky, BOTH_ORDERINGS_DOFS, ND_WORK};
 use fem::{ElementGeometry, Formulation};
 use mesh::box_tet;
 
@@ -102,6 +102,24 @@ fn nested_dissection_solves_as_amd_does_with_less_work_on_a_cube() {
     assert_eq!(SparseCholesky::new(&mut cube_pattern(14)).unwrap().ordering(), Ordering::NestedDissection);
     // METIS runs with a fixed seed: the same ordering, hence the same bits, every time.
     assert_eq!(&solve(14, Ordering::NestedDissection).3, x_nd_own);
+}
+
+/// A system large enough for the automatic choice to compute both orderings at once makes the
+/// choice the sequential path makes, and numbers the pattern as nested dissection alone does.
+#[test]
+fn auto_on_a_large_system_computes_both_orderings_and_takes_nested_dissection() {
+    let (mut auto, mut nested) = (cube_pattern(15), cube_pattern(15));
+    assert!(auto.num_free >= BOTH_ORDERINGS_DOFS);
+    let chosen = SparseCholesky::new(&mut auto).unwrap();
+    let reference = SparseCholesky::with_ordering(&mut nested, Ordering::NestedDissection).unwrap();
+    assert_eq!(chosen.ordering(), Ordering::NestedDissection);
+    assert_eq!(chosen.factorization_work(), reference.factorization_work());
+    assert_eq!(
+        (&auto.free_index, &auto.col_ptr, &auto.row_idx),
+        (&nested.free_index, &nested.col_ptr, &nested.row_idx)
+    );
+    let amd = SparseCholesky::with_ordering(&mut cube_pattern(15), Ordering::Amd).unwrap();
+    assert!(amd.factorization_work() > ND_WORK && chosen.factorization_work() < amd.factorization_work());
 }
 
 /// Renumbering keeps the matrix: the values assembled through a renumbered pattern are those
