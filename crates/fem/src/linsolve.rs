@@ -134,34 +134,34 @@ impl SparseCholesky {
     /// them each time (measured on the 5k-tet liver, F-bar: 0.5–0.7 ms of a 6.8 ms factorisation).
     /// Where nested dissection cannot be computed, AMD is used.
     pub fn with_ordering(pattern: &mut Pattern, ordering: Ordering) -> Result<Self, FemError> {
+        let amd =
+            |pattern: &mut Pattern| Ok::<_, FemError>((renumbered(pattern, amd_permutation(pattern)?)?, Ordering::Amd));
+        let nested =
+            |pattern: &mut Pattern, perm| Ok::<_, FemError>((renumbered(pattern, perm)?, Ordering::NestedDissection));
         let (symbolic, chosen) = match ordering {
-            Ordering::Amd => (renumbered(pattern, amd_permutation(pattern)?)?, Ordering::Amd),
+            Ordering::Amd => amd(pattern)?,
             Ordering::NestedDissection => match nested_dissection(pattern) {
-                Some(perm) => (renumbered(pattern, perm)?, Ordering::NestedDissection),
-                None => (renumbered(pattern, amd_permutation(pattern)?)?, Ordering::Amd),
+                Some(perm) => nested(pattern, perm)?,
+                None => amd(pattern)?,
             },
             Ordering::Auto if pattern.num_free < BOTH_ORDERINGS_DOFS => {
-                let symbolic = renumbered(pattern, amd_permutation(pattern)?)?;
+                let (symbolic, chosen) = amd(pattern)?;
                 let amd_work = factorization_work(&symbolic);
                 match (amd_work > ND_WORK).then(|| nested_dissection(pattern)).flatten() {
-                    Some(perm) if prefer_nested(amd_work, work_in_order(pattern, &perm)?) => {
-                        (renumbered(pattern, perm)?, Ordering::NestedDissection)
-                    }
-                    _ => (symbolic, Ordering::Amd),
+                    Some(perm) if prefer_nested(amd_work, work_in_order(pattern, &perm)?) => nested(pattern, perm)?,
+                    _ => (symbolic, chosen),
                 }
             }
             Ordering::Auto => {
                 // Both orderings at once, each analysed in the pattern's present numbering.
-                let (amd, nested) = rayon::join(
+                let (by_amd, by_nested) = rayon::join(
                     || amd_permutation(pattern).and_then(|perm| Ok((work_in_order(pattern, &perm)?, perm))),
                     || nested_dissection(pattern).map(|perm| Ok::<_, FemError>((work_in_order(pattern, &perm)?, perm))),
                 );
-                let (amd_work, amd) = amd?;
-                match nested.transpose()? {
-                    Some((nd_work, perm)) if prefer_nested(amd_work, nd_work) => {
-                        (renumbered(pattern, perm)?, Ordering::NestedDissection)
-                    }
-                    _ => (renumbered(pattern, amd)?, Ordering::Amd),
+                let (amd_work, amd_perm) = by_amd?;
+                match by_nested.transpose()? {
+                    Some((nd_work, perm)) if prefer_nested(amd_work, nd_work) => nested(pattern, perm)?,
+                    _ => (renumbered(pattern, amd_perm)?, Ordering::Amd),
                 }
             }
         };
