@@ -26,8 +26,6 @@ pub struct Pattern {
     pub col_ptr: Vec<u32>,
     /// CSC row indices, sorted within each column.
     pub row_idx: Vec<u32>,
-    /// Position of each free dof's diagonal entry in the value array.
-    pub diag: Vec<u32>,
     /// Start of each patch's dense tangent in the concatenation of all of them.
     matrix_ptr: Vec<usize>,
     /// The entries of the patches' dense tangents (index `matrix_ptr[p] + r * ndof_p + c` for
@@ -87,31 +85,11 @@ impl Pattern {
         let (mut col_ptr, mut row_idx) = (Vec::with_capacity(num_free + 1), Vec::new());
         let (mut gather_ptr, mut gather) = (vec![0u32], Vec::new());
         col_ptr.push(0u32);
-        // Per column: the value position of each row (valid where `stamp` is the column).
-        let (mut stamp, mut position) = (vec![NONE; num_free], vec![0u32; num_free]);
         let mut entries_of_column = Vec::new();
         for (dof, &c) in free_index.iter().enumerate().filter(|(_, &c)| c != NONE) {
             let (node, i) = (dof / 3, dof % 3);
-            let first = row_idx.len();
-            // Rows r ≥ c of the patches around the node (the diagonal even without a patch).
-            row_idx.push(c);
-            stamp[c as usize] = c;
-            for &(p, _) in &around[around_ptr[node]..around_ptr[node + 1]] {
-                for &m in patches.nodes(p as usize) {
-                    for r in free_index[3 * m..3 * m + 3].iter().copied().filter(|&r| r != NONE && r > c) {
-                        if stamp[r as usize] != c {
-                            stamp[r as usize] = c;
-                            row_idx.push(r);
-                        }
-                    }
-                }
-            }
-            row_idx[first..].sort_unstable();
-            for (k, &r) in row_idx[first..].iter().enumerate() {
-                position[r as usize] = k as u32;
-            }
-            col_ptr.push(row_idx.len() as u32);
-            // Each value's patch entries in patch order: (value, entry) pairs sorted stably by value.
+            // The (row, patch entry) pairs of rows r ≥ c in the patches around the node, sorted
+            // stably by row: each value's patch entries in patch order.
             entries_of_column.clear();
             for &(p, a) in &around[around_ptr[node]..around_ptr[node + 1]] {
                 let (nodes, start) = (patches.nodes(p as usize), matrix_ptr[p as usize]);
@@ -119,21 +97,24 @@ impl Pattern {
                 for (rl, row_dof) in nodes.iter().flat_map(|&m| 3 * m..3 * m + 3).enumerate() {
                     let r = free_index[row_dof];
                     if r != NONE && r >= c {
-                        entries_of_column.push((position[r as usize], (start + rl * nd + cl) as u32));
+                        entries_of_column.push((r, (start + rl * nd + cl) as u32));
                     }
                 }
             }
-            entries_of_column.sort_by_key(|&(value, _)| value);
-            let mut sorted = entries_of_column.iter().peekable();
-            for value in 0..(row_idx.len() - first) as u32 {
-                while let Some(&(_, entry)) = sorted.next_if(|(v, _)| *v == value) {
-                    gather.push(entry);
-                }
+            entries_of_column.sort_by_key(|&(r, _)| r);
+            // A node in no patch still has its (empty) diagonal.
+            if entries_of_column.is_empty() {
+                row_idx.push(c);
                 gather_ptr.push(gather.len() as u32);
             }
+            for run in entries_of_column.chunk_by(|x, y| x.0 == y.0) {
+                row_idx.push(run[0].0);
+                gather.extend(run.iter().map(|&(_, entry)| entry));
+                gather_ptr.push(gather.len() as u32);
+            }
+            col_ptr.push(row_idx.len() as u32);
         }
-        let diag = col_ptr[..num_free].to_vec();
-        Ok(Pattern { free_index, num_free, col_ptr, row_idx, diag, matrix_ptr, gather_ptr, gather })
+        Ok(Pattern { free_index, num_free, col_ptr, row_idx, matrix_ptr, gather_ptr, gather })
     }
 
     /// Renumbers the free dofs: free dof `forward[new]` becomes `new` (`inverse` is the inverse
@@ -184,31 +165,26 @@ impl Pattern {
             gather_ptr.push(gather.len() as u32);
         }
         let row_idx: Vec<u32> = entries.iter().map(|&(r, _)| r).collect();
-        self.diag = (0..n).map(|c| entry_position(&col_ptr, &row_idx, c, c) as u32).collect();
         (self.col_ptr, self.row_idx, self.gather_ptr, self.gather) = (col_ptr, row_idx, gather_ptr, gather);
         Ok(())
     }
 
     /// The value position of entry (row, col) with row ≥ col, if it is stored.
     pub fn find(&self, row: usize, col: usize) -> Option<usize> {
-        find_entry(&self.col_ptr, &self.row_idx, row, col)
+        let (lo, hi) = (self.col_ptr[col] as usize, self.col_ptr[col + 1] as usize);
+        self.row_idx[lo..hi].binary_search(&(row as u32)).ok().map(|i| lo + i)
+    }
+
+    /// The value position of free dof `i`'s diagonal entry: the first of its column, whose rows
+    /// are sorted and start at the diagonal.
+    pub fn diag(&self, i: usize) -> usize {
+        self.col_ptr[i] as usize
     }
 
     /// Number of stored (lower-triangle) entries.
     pub fn nnz(&self) -> usize {
         self.row_idx.len()
     }
-}
-
-/// The value position of entry (row, col) in a CSC pattern; panics when it is not stored.
-fn entry_position(col_ptr: &[u32], row_idx: &[u32], row: usize, col: usize) -> usize {
-    find_entry(col_ptr, row_idx, row, col).expect("entry in pattern")
-}
-
-/// The value position of entry (row, col) in a CSC pattern, if it is stored.
-fn find_entry(col_ptr: &[u32], row_idx: &[u32], row: usize, col: usize) -> Option<usize> {
-    let (lo, hi) = (col_ptr[col] as usize, col_ptr[col + 1] as usize);
-    row_idx[lo..hi].binary_search(&(row as u32)).ok().map(|i| lo + i)
 }
 
 /// Reusable buffers for patch results.

@@ -293,7 +293,7 @@ impl StaticSolver {
             for d in 0..3 {
                 f[3 * n + d] += k * u[3 * n + d];
                 if let (true, Some(i)) = (tangent, self.free_index(3 * n + d)) {
-                    self.values[self.pattern.diag[i] as usize] += k;
+                    self.values[self.pattern.diag(i)] += k;
                 }
             }
         }

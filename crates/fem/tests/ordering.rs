@@ -34,7 +34,7 @@ fn dominant_values(p: &Pattern) -> Vec<f64> {
         }
     }
     for (i, d) in degree.iter().enumerate() {
-        values[p.diag[i] as usize] = d + 1.0;
+        values[p.diag(i)] = d + 1.0;
     }
     values
 }
@@ -161,7 +161,7 @@ fn renumbering_moves_every_entry_with_its_dofs() {
             assert_eq!(after[w].to_bits(), before[v].to_bits());
         }
     }
-    assert!((0..n).all(|i| renumbered.row_idx[renumbered.diag[i] as usize] == i as u32));
+    assert!((0..n).all(|i| renumbered.row_idx[renumbered.diag(i)] == i as u32));
 }
 
 #[test]
