@@ -406,8 +406,13 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
             format!(
                 "Beam: {} × {} × {} H8, E = {} Pa, ν = {}, pulled down at its free end. H8 F-bar averages J over \
                  each element (one element per patch), so its tangent has the standard element's pattern; T4 F-bar \
-                 averages over patches of about six tetrahedra, which couples their nodes and fills the factor more.",
-                BEAM_CELLS[0], BEAM_CELLS[1], BEAM_CELLS[2], BEAM_MATERIAL.0, BEAM_MATERIAL.1
+                 averages over patches of about {} tetrahedra, which couples their nodes and fills the factor more.",
+                BEAM_CELLS[0],
+                BEAM_CELLS[1],
+                BEAM_CELLS[2],
+                BEAM_MATERIAL.0,
+                BEAM_MATERIAL.1,
+                fem::patch::TET_PATCH_SIZE
             ),
             format!(
                 "'load ×{EQUAL_DEFORMATION_LOAD}': the standard element under {EQUAL_DEFORMATION_LOAD} times the load, \
