@@ -1,13 +1,14 @@
-//! `augsim assimilate`: parses the command line, runs a [`filter::assimilation::Experiment`] and prints its
+//! `augsim assimilate`: parses the command line, runs a [`experiment::assimilation::Experiment`] and prints its
 //! setup, progress and results.
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use filter::assimilation::{AssimilationScenario, Experiment, ObservationFiles, Report};
+use experiment::assimilation::{Experiment, ObservationFiles, Report};
 use filter::{Discrepancy, Execution, SigmaPointSet};
 use indicatif::{ProgressBar, ProgressStyle};
+use scenario::AssimilationScenario;
 
 /// Arguments of `augsim assimilate`.
 #[derive(Debug, Args)]

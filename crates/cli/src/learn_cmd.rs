@@ -5,14 +5,14 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 
 use indicatif::{ProgressBar, ProgressStyle};
-use learn::generate::Generator;
+use learn::data::generate::Generator;
 use learn::{
     Compute, Corruption, Dataset, DatasetPart, Initialization, PredictInput, Sparsity, SplitPolicy, TrainConfig,
     TrainOptions, TrainedModel, UNetConfig,
 };
 use mesh::io::{write_atomic_bytes, Field};
 
-use learn::scenario::DatasetScenario;
+use scenario::DatasetScenario;
 
 /// `augsim generate`.
 pub fn generate(path: &Path, out: Option<&Path>, part: Option<&str>, samples: Option<usize>) -> Result<()> {
@@ -245,6 +245,8 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         dataset.manifest().grid
     );
     let outcome = learn::train(&train, &validation, &init, &config, &options)?;
+    let curve = args.out.join(experiment::curve::CURVE_PNG);
+    experiment::curve::plot_learning_curve(&curve, &outcome.curve)?;
     println!("steps      {} ({:.3} s per step)", outcome.iterations_done, outcome.mean_step_seconds);
     if let Some((it, Some(e))) = outcome.model.training.as_ref().map(|t| (t.best_iteration, t.best_val_mean_error)) {
         println!("best       validation mean e = {:.4} mm at iteration {it}", e * 1e3);
@@ -375,7 +377,7 @@ pub fn predict(
     }
     let predictor = learn::Predictor::new(&model, compute)?;
     let prediction = predictor.predict(&data)?;
-    learn::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
+    learn::data::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
     let t = learn::time_prediction(&predictor, &data, 3, runs.max(1))?;
     println!(
         "prediction {} runs: median {:.2} ms, mean {:.2} ± {:.2} ms, min {:.2}, max {:.2}",

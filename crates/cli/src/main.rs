@@ -6,7 +6,6 @@ mod experiment;
 mod learn_cmd;
 mod mesh_cmd;
 mod register_cmd;
-mod scenario;
 mod solve;
 mod view_cmd;
 
@@ -167,39 +166,5 @@ fn main() {
     if let Err(e) = result {
         eprintln!("error: {e:#}");
         std::process::exit(1);
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use std::path::Path;
-
-    use crate::scenario::{build_mesh, Scenario};
-    use filter::assimilation::AssimilationScenario;
-    use learn::scenario::DatasetScenario;
-    use register::scenario::CaseScenario;
-
-    /// Every shipped scenario parses as exactly one kind of scenario, and its mesh source is valid.
-    #[test]
-    fn shipped_scenarios_parse() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios");
-        let mut count = 0;
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            let text = std::fs::read_to_string(&path).unwrap();
-            let kinds = [
-                toml::from_str::<Scenario>(&text).is_ok(),
-                toml::from_str::<DatasetScenario>(&text).is_ok(),
-                toml::from_str::<AssimilationScenario>(&text).is_ok(),
-                toml::from_str::<CaseScenario>(&text).is_ok(),
-            ];
-            assert_eq!(kinds.iter().filter(|&&k| k).count(), 1, "{}: parses as {kinds:?}", path.display());
-            count += 1;
-        }
-        assert_eq!(count, 18, "scenario files");
-        let (beam, dir) = Scenario::load(&dir.join("beam.toml")).unwrap();
-        let problem = beam.build_problem(build_mesh(&beam.mesh, &dir).unwrap()).unwrap();
-        assert_eq!(problem.mesh.cells.len(), 500);
-        assert!(!problem.dirichlet.is_empty() && problem.f_ext.iter().any(|&f| f != 0.0));
     }
 }

@@ -4,23 +4,22 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use mesh::io::{write_atomic_bytes, Field};
-use mesh::Point;
-use register::case::{
+use experiment::case::{
     ar_scenario, case_methods, compare, network_model, organ_of, synthetic_case, Network, Registered,
 };
+use experiment::picture::side_view;
+use mesh::io::{write_atomic_bytes, Field};
+use mesh::Point;
 use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
-use register::picture::side_view;
-use register::scenario::{slug, MethodKind};
 use register::{
-    register_sequence, CaseScenario, Deformer, FemDeformer, Organ, RegistrationOptions, RigidOptions, RigidResult,
-    RigidTransform, Summary,
+    register_sequence, Deformer, FemDeformer, Organ, RegistrationOptions, RigidOptions, RigidResult, RigidTransform,
+    Summary,
 };
+use scenario::registration::{slug, MethodKind, BUILTIN_CASE};
 use serde::Serialize;
 
-use crate::scenario::{build_mesh, Scenario};
 use crate::solve::ms;
-use learn::scenario::DatasetScenario;
+use scenario::{CaseScenario, DatasetScenario, StaticScenario};
 
 /// Arguments of `augsim register`.
 #[derive(clap::Args)]
@@ -295,10 +294,9 @@ fn region_targets(m: &mesh::Mesh) -> Vec<Point> {
 }
 
 fn fem_setup(path: &Path) -> Result<Setup> {
-    let (scenario, dir) = Scenario::load(path)?;
-    let mesh = build_mesh(&scenario.mesh, &dir).context("building the mesh")?;
-    let problem = scenario.build_problem(mesh.clone())?;
-    let organ = organ_of(&scenario.mesh, mesh)?;
+    let (scenario, dir) = StaticScenario::load(path)?;
+    let problem = scenario.build_problem(&dir)?;
+    let organ = organ_of(&scenario.mesh, problem.mesh.clone())?;
     let default_targets = region_targets(&problem.mesh);
     let method = format!("FEM, {:?} ({:?} elements)", problem.material.law, problem.material.resolved_formulation());
     let stiffness = FemDeformer::default_stiffness(&problem);
@@ -347,8 +345,8 @@ fn comparison_case(args: &RegisterArgs) -> Result<CaseScenario> {
         scenario.registration.rigid = Some(RigidOptions::default());
     }
     let origin =
-        args.case.as_ref().map_or_else(|| register::scenario::BUILTIN_NAME.into(), |p| p.display().to_string());
-    scenario.validate().with_context(|| format!("{origin} with the command line's settings"))?;
+        args.case.as_ref().map_or_else(|| format!("{BUILTIN_CASE} (built-in scenario)"), |p| p.display().to_string());
+    scenario.validate().map_err(|m| anyhow::anyhow!("{origin} with the command line's settings: {m}"))?;
     Ok(scenario)
 }
 

@@ -6,13 +6,12 @@ use anyhow::{Context, Result};
 use fem::{post, StaticSolver};
 use mesh::io::Field;
 
-use crate::scenario::Scenario;
+use scenario::StaticScenario;
 
 /// Runs the scenario and writes the result; prints a summary.
 pub fn run(path: &Path, output: Option<&Path>) -> Result<()> {
-    let (scenario, dir) = Scenario::load(path)?;
-    let mesh = crate::scenario::build_mesh(&scenario.mesh, &dir).context("building the mesh")?;
-    let problem = scenario.build_problem(mesh)?;
+    let (scenario, dir) = StaticScenario::load(path)?;
+    let problem = scenario.build_problem(&dir)?;
     println!(
         "scenario   {}{}",
         scenario.name,

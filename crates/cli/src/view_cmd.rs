@@ -5,12 +5,12 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use learn::sample_view::{first_held_out, sample_on_mesh};
+use experiment::sample_view::{first_held_out, sample_on_mesh};
 use learn::{Dataset, TrainedModel};
 use mesh::io::{Field, FieldLocation};
 use plot::viewer::{Layer, Scalar, Scene};
 
-use learn::scenario::DatasetScenario;
+use scenario::DatasetScenario;
 
 /// Options of `augsim view`.
 #[derive(Debug, clap::Args)]

@@ -24,6 +24,7 @@ fn point_cloud_prediction_through_the_cli() {
     std::fs::write(
         d.join("tiny.toml"),
         r#"
+kind = "dataset"
 name = "tiny"
 [mesh.phantom]
 tets = 800
@@ -101,7 +102,7 @@ magnitude = [0.05, 0.2]
         d,
     );
     assert!(text.contains("device     cpu (burn flex)"), "{text}");
-    let read = |name: &str| learn::npy::read_npy(&d.join(name)).unwrap().into_f32();
+    let read = |name: &str| learn::data::npy::read_npy(&d.join(name)).unwrap().into_f32();
     let (repacked, burn) = (read("pred.npy"), read("pred_burn.npy"));
     let scale = repacked.iter().fold(0f32, |m, v| m.max(v.abs()));
     let diff = repacked.iter().zip(&burn).fold(0f32, |m, (a, b)| m.max((a - b).abs()));

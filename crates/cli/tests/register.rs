@@ -55,7 +55,7 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
         std::fs::copy(out.join("case/cloud.csv"), seq.join(f)).unwrap();
         std::fs::copy(out.join("case/truth.csv"), truth.join(f)).unwrap();
     }
-    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/liver.toml");
+    let scenario = Path::new("liver"); // the built-in scenario, by name
     let targets = out.join("case/targets_rest.csv");
     let seq_out = dir.path().join("seq_out");
     let common = ["--fem", scenario.to_str().unwrap(), "--targets", targets.to_str().unwrap()];

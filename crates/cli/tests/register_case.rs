@@ -13,8 +13,9 @@ fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// A built-in scenario's file.
 fn scenario(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenario/scenarios").join(name)
 }
 
 /// Rows of a CSV file of numbers after its header.
@@ -113,7 +114,7 @@ fn register_case_runs_the_test_sized_comparison_and_rigid_recovers_a_misalignmen
     let fem = dir.path().join("small.toml");
     std::fs::write(
         &fem,
-        "name = \"small\"\n[mesh.phantom]\ntets = 800\n[material]\nlaw = \"corotational\"\nyoung = 5000.0\n\
+        "kind = \"static\"\nname = \"small\"\n[mesh.phantom]\ntets = 800\n[material]\nlaw = \"corotational\"\nyoung = 5000.0\n\
          poisson = 0.48\n[[fixed]]\nselect = { region = \"fixed\" }\n",
     )
     .unwrap();

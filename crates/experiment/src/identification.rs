@@ -3,15 +3,13 @@
 
 use std::path::Path;
 
+use crate::assimilation::{Experiment, ObservationFiles, Report, Setup};
 use anyhow::{bail, Context, Result};
-use fem::scenario::MeshSource;
-use filter::assimilation::{AssimilationScenario, Experiment, ObservationFiles, ReferenceSpec, Report, Setup};
 use filter::Discrepancy;
+use scenario::assimilation::ReferenceSpec;
+use scenario::{AssimilationScenario, MeshSource};
 
 use crate::{fmt, write_scenario, ExperimentResult, Name, Progress, Row, Size};
-
-const YOUNG: &str = include_str!("../../../scenarios/roukf_young.toml");
-const SPRINGS: &str = include_str!("../../../scenarios/roukf_springs.toml");
 
 /// Tetrahedra of the reference phantoms that make the observations (the published liver size for scenario 5;
 /// about 2.6 times the model's for scenario 6).
@@ -30,20 +28,19 @@ const YOUNG_PUBLISHED_REFERENCE_TETS: usize = 20_000;
 #[allow(clippy::too_many_arguments)]
 fn assimilate(
     dir: &Path,
-    file: &str,
-    text: &str,
+    name: &str,
     reference_tets: usize,
     model_tets: Option<usize>,
     iterations: Option<usize>,
     discrepancy: bool,
     progress: Progress,
 ) -> Result<(Vec<Report>, Setup)> {
-    let path = write_scenario(dir, file, text)?;
+    let (path, text) = write_scenario(dir, name)?;
     let (mut scenario, scenario_dir) = AssimilationScenario::load(&path)?;
     scenario.iterations = iterations.or(scenario.iterations);
     if let Some(n) = model_tets {
         let MeshSource::Phantom { tets } = &mut scenario.mesh else {
-            bail!("{file}: another phantom size needs the built-in phantom mesh");
+            bail!("{name}: another phantom size needs the built-in phantom mesh");
         };
         *tets = n;
     }
@@ -59,11 +56,11 @@ fn assimilate(
     );
     if std::fs::read_to_string(&stamp).is_ok_and(|k| k == key) {
         progress(&format!(
-            "{file}: reference tracks of a {reference_tets}-tet phantom reused from {}",
+            "{name}: reference tracks of a {reference_tets}-tet phantom reused from {}",
             tracks.display()
         ));
     } else {
-        progress(&format!("{file}: reference run on a {reference_tets}-tet phantom"));
+        progress(&format!("{name}: reference run on a {reference_tets}-tet phantom"));
         match std::fs::remove_file(&stamp) {
             Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
                 return Err(e).with_context(|| format!("cannot remove {}", stamp.display()));
@@ -97,7 +94,7 @@ fn assimilate(
         reports.push(experiment.run(&dir.join(run), |p| {
             if p.iteration >= last + total.div_ceil(10) || p.iteration == total {
                 last = p.iteration;
-                progress(&format!("{file} ({run}): iteration {}/{total} {}", p.iteration, p.message));
+                progress(&format!("{name} ({run}): iteration {}/{total} {}", p.iteration, p.message));
             }
         })?);
         setup.get_or_insert_with(|| experiment.setup().clone());
@@ -126,12 +123,11 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
         Size::Quick => Some(200),
         Size::Paper => None,
     };
-    let young = "roukf_young.toml";
-    let (reports, setup) = assimilate(dir, young, YOUNG, YOUNG_REFERENCE_TETS, None, iterations, true, progress)?;
+    let young = "roukf_young";
+    let (reports, setup) = assimilate(dir, young, YOUNG_REFERENCE_TETS, None, iterations, true, progress)?;
     let (fines, _) = assimilate(
         &dir.join(format!("model-{YOUNG_PUBLISHED_MODEL_TETS}")),
         young,
-        YOUNG,
         YOUNG_PUBLISHED_REFERENCE_TETS,
         Some(YOUNG_PUBLISHED_MODEL_TETS),
         iterations,
@@ -231,8 +227,7 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
 
 /// Scenario 6 (the scenario's 300 iterations at both sizes: it takes seconds).
 pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
-    let (reports, setup) =
-        assimilate(dir, "roukf_springs.toml", SPRINGS, SPRINGS_REFERENCE_TETS, None, None, false, progress)?;
+    let (reports, setup) = assimilate(dir, "roukf_springs", SPRINGS_REFERENCE_TETS, None, None, false, progress)?;
     let report = &reports[0];
     let error = |label: &str| {
         report

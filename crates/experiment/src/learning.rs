@@ -6,16 +6,13 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use anyhow::Result;
-use learn::scenario::DatasetScenario;
 use learn::{
     Compute, Corruption, CurveRow, Dataset, EvalReport, Initialization, Samples, SplitPolicy, TrainConfig,
     TrainOptions, TrainedModel, UNetConfig,
 };
+use scenario::DatasetScenario;
 
 use crate::{fmt, write_scenario, ExperimentResult, Name, Progress, Row, Size};
-
-const LIVER_FORCES: &str = include_str!("../../../scenarios/liver_forces_large.toml");
-const BEAM_SPARSE: &str = include_str!("../../../scenarios/beam_sparse.toml");
 
 /// A generated dataset and the scenario it came from.
 pub(crate) struct Generated {
@@ -31,7 +28,7 @@ impl Generated {
     pub fn note(&self) -> String {
         let (s, m) = (&self.scenario, &self.scenario.material);
         let sparse = match &s.dataset.input {
-            learn::generate::Input::Displacement { sparse: Some([lo, hi]), .. } => {
+            learn::data::generate::Input::Displacement { sparse: Some([lo, hi]), .. } => {
                 format!("; {lo}–{hi} observed nodes per sample")
             }
             _ => String::new(),
@@ -49,8 +46,8 @@ impl Generated {
 }
 
 /// Generates (or resumes) `samples` samples of a shipped scenario into `dir/data-<samples>`.
-pub(crate) fn dataset(dir: &Path, file: &str, text: &str, samples: usize, progress: Progress) -> Result<Generated> {
-    let path = write_scenario(dir, file, text)?;
+pub(crate) fn dataset(dir: &Path, name: &str, samples: usize, progress: Progress) -> Result<Generated> {
+    let (path, _) = write_scenario(dir, name)?;
     let (mut scenario, scenario_dir) = DatasetScenario::load(&path)?;
     scenario.dataset.samples = samples;
     // One dataset per size: a quick run and a paper run keep their own samples.
@@ -189,9 +186,10 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
         progress: true,
         placement: dataset.manifest().placement(),
         test: split.test.clone(),
-        ..TrainOptions::new(out)
+        ..TrainOptions::new(out.clone())
     };
     let outcome = learn::train(&train, &validation, &init, &config, &options)?;
+    crate::curve::plot_learning_curve(&out.join(crate::curve::CURVE_PNG), &outcome.curve)?;
     Ok(Trained {
         split: [train.len(), validation.len(), test.len()],
         model: outcome.model,
@@ -276,7 +274,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
         Size::Quick => (300, 600),
         Size::Paper => (2000, 9000),
     };
-    let data = dataset(dir, "liver_forces_large.toml", LIVER_FORCES, samples, progress)?;
+    let data = dataset(dir, "liver_forces_large", samples, progress)?;
     let recipe = Recipe::new(iterations, samples / 10, samples / 5);
     let t = train(&data.dataset, dir, &recipe, progress)?;
     let report = learn::evaluate(&t.model, &t.test, &Corruption::default(), 0, Compute::Cpu)?;
@@ -316,7 +314,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
         size,
         seconds: 0.0,
         rows,
-        figures: vec![format!("{}/curve.png", model_dir(&recipe)), "errors.png".into()],
+        figures: vec![format!("{}/{}", model_dir(&recipe), crate::curve::CURVE_PNG), "errors.png".into()],
         notes: vec![
             split_note(&t, samples),
             format!(
@@ -335,7 +333,7 @@ pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<
         Size::Quick => (1200, 800),
         Size::Paper => (12600, 6000),
     };
-    let data = dataset(dir, "beam_sparse.toml", BEAM_SPARSE, samples, progress)?;
+    let data = dataset(dir, "beam_sparse", samples, progress)?;
     let recipe = Recipe::new(iterations, samples / 25, samples / 5);
     let t = train(&data.dataset, dir, &recipe, progress)?;
     let noise = |std: f64| Corruption { noise_std: std, ..Corruption::default() };
@@ -364,7 +362,7 @@ pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<
         size,
         seconds: 0.0,
         rows,
-        figures: vec![format!("{}/curve.png", model_dir(&recipe)), "errors.png".into()],
+        figures: vec![format!("{}/{}", model_dir(&recipe), crate::curve::CURVE_PNG), "errors.png".into()],
         notes: vec![
             split_note(&t, samples),
             format!("{} Noise is added to the visible inputs at evaluation only.", data.note()),

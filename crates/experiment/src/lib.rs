@@ -1,11 +1,23 @@
-//! The published experiments, each run end to end by one call: it generates its data,
-//! trains, identifies or registers, evaluates on data that played no part in producing the
-//! model, and writes `DIR/<name>/result.json` with its figures beside the published ones,
-//! plus PNG figures. [`report::write`] gathers the results into `DIR/report.md` and
-//! `DIR/report.html`.
+//! The application layer of augsim: runs driven by scenario files, synthetic cases, pictures,
+//! and the published experiments with their reports. The algorithm crates (mesh, fem, filter,
+//! learn, register) know nothing of these.
 //!
-//! Every step resumes after a kill: datasets and training resume from what is on disk, and
-//! an experiment whose `result.json` was written at the requested size is not run again.
+//! - [`assimilation`]: ROUKF identification experiments from an assimilation scenario
+//!   (synthetic observations or track files, traces, plots, the estimated deformation).
+//! - [`case`], [`simulate`], [`picture`]: synthetic registration cases on the phantom (truth
+//!   from a finer mesh and another law, a simulated camera cloud), the comparison of methods,
+//!   side-view pictures.
+//! - [`curve`], [`sample_view`]: the learning curve as PNG; a dataset sample and a model's
+//!   prediction in the 3D viewer.
+//! - The published experiments ([`run`], [`Name`]): each generates its data, trains,
+//!   identifies or registers, evaluates on data that played no part in producing the model,
+//!   and writes `DIR/<name>/result.json` with its figures beside the published ones, plus PNG
+//!   figures. [`report`] gathers the results into `DIR/report.md`, `DIR/report.html`,
+//!   `docs/results.md` and the README's headline table.
+//!
+//! Every step of an experiment resumes after a kill: datasets and training resume from what is
+//! on disk, and an experiment whose `result.json` was written at the requested size is not run
+//! again.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -13,11 +25,17 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+pub mod assimilation;
+pub mod case;
+pub mod curve;
 mod fem_speed;
 mod identification;
 mod learning;
+pub mod picture;
 mod registration;
 pub mod report;
+pub mod sample_view;
+pub mod simulate;
 mod transfer;
 
 pub use fem_speed::{fbar_ratios, measure as measure_fem_speed, CaseTiming, Ratio};
@@ -182,11 +200,13 @@ pub fn load_all(root: &Path) -> Result<Vec<ExperimentResult>> {
     Ok(out)
 }
 
-/// A scenario shipped with augsim, written into `dir` (so that the run records what it used).
-fn write_scenario(dir: &Path, file: &str, text: &str) -> Result<PathBuf> {
-    let path = dir.join(file);
+/// The built-in scenario `name` written into `dir` as `<name>.toml` (so that the run records
+/// what it used): its path and text.
+fn write_scenario(dir: &Path, name: &str) -> Result<(PathBuf, &'static str)> {
+    let text = scenario::builtin(name).with_context(|| format!("no built-in scenario {name}"))?;
+    let path = dir.join(format!("{name}.toml"));
     mesh::io::write_atomic_bytes(&path, text.as_bytes())?;
-    Ok(path)
+    Ok((path, text))
 }
 
 /// `v` formatted with `digits` decimals and `unit`.

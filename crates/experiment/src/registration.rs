@@ -4,18 +4,18 @@
 
 use std::path::Path;
 
+use crate::case::{compare, methods, synthetic_case, Network, TRUTH_TETS};
+use crate::sample_view::sample_on_mesh;
 use anyhow::{Context, Result};
-use learn::sample_view::sample_on_mesh;
 use learn::{Compute, Corruption};
 use mesh::phantom::SurfacePatch;
 use mesh::stats::{max, mean};
-use register::case::{compare, methods, synthetic_case, Network, TRUTH_TETS};
-use register::CaseScenario;
+use scenario::CaseScenario;
 
 use crate::learning::{dataset, error_histogram, model_dir, train, Recipe};
 use crate::{fmt, ExperimentResult, Name, Progress, Row, Size};
 
-use register::case::AR_SCENARIO as LIVER_AR;
+use crate::case::AR_SCENARIO as LIVER_AR;
 
 /// A registration case: the shipped case's truth with another load.
 struct Variant {
@@ -88,7 +88,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         Size::Quick => (400, 1500),
         Size::Paper => (2000, 4000),
     };
-    let data = dataset(dir, "liver_ar.toml", LIVER_AR, samples, progress)?;
+    let data = dataset(dir, LIVER_AR, samples, progress)?;
     let recipe = Recipe {
         corruption: Corruption { noise_std: 5e-4, ..Corruption::default() },
         ..Recipe::new(iterations, samples / 10, samples / 5)
@@ -244,7 +244,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         rows,
         figures: vec![
             "tre.png".into(),
-            format!("{}/curve.png", model_dir(&recipe)),
+            format!("{}/{}", model_dir(&recipe), crate::curve::CURVE_PNG),
             "errors.png".into(),
             "viewer.html".into(),
         ],

@@ -13,9 +13,6 @@ use serde::Serialize;
 use crate::learning::{dataset, error_histogram, max_displacement, model_dir, train, Recipe, Trained};
 use crate::{fmt, ExperimentResult, Name, Progress, Row, Size};
 
-const BEAM_BC4: &str = include_str!("../../../scenarios/beam_bc4.toml");
-const BEAM_TARGET: &str = include_str!("../../../scenarios/beam_target.toml");
-
 /// Training samples of each dataset, as published (the test set is what remains after validation).
 const TRAIN: usize = 1209;
 /// Validation samples of each dataset, as published.
@@ -81,12 +78,12 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
         ..Recipe::new(iterations, VALIDATION, samples - TRAIN - VALIDATION)
     };
     let (bc4_dir, target_dir) = (dir.join("bc4"), dir.join("target"));
-    let bc4 = dataset(&bc4_dir, "beam_bc4.toml", BEAM_BC4, samples, progress)?;
-    let target = dataset(&target_dir, "beam_target.toml", BEAM_TARGET, samples, progress)?;
+    let bc4 = dataset(&bc4_dir, "beam_bc4", samples, progress)?;
+    let target = dataset(&target_dir, "beam_target", samples, progress)?;
 
     progress("BC4: pre-training");
     let pre = train(&bc4.dataset, &bc4_dir, &recipe, progress)?;
-    let pre_path = bc4_dir.join(model_dir(&recipe)).join(learn::train::MODEL_FILE);
+    let pre_path = bc4_dir.join(model_dir(&recipe)).join(learn::training::train::MODEL_FILE);
     // The path is part of the fine-tuning run's identity: the same however `dir` was spelled.
     let pre_path =
         std::fs::canonicalize(&pre_path).with_context(|| format!("finding the pre-trained {}", pre_path.display()))?;

@@ -16,7 +16,6 @@ pub mod material;
 pub mod patch;
 pub mod post;
 pub mod problem;
-pub mod scenario;
 pub mod solver;
 pub mod verification;
 

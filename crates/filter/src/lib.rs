@@ -11,10 +11,7 @@
 //! * [`fem_model::FemModel`]: a static finite-element problem as a [`Model`] (Young's modulus and boundary springs
 //!   as parameters, time-profiled loads, one solver per sigma point); [`observation`]: points tracked through
 //!   barycentric weights and synthetic noisy measurements.
-//! * [`assimilation`]: whole experiments from a scenario file (synthetic observations or CSV track files, the run,
-//!   traces, plots, the estimated deformation as a ParaView series), as `augsim assimilate` runs them.
 
-pub mod assimilation;
 mod error;
 pub mod fem_model;
 mod model;

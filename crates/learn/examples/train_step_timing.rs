@@ -9,8 +9,8 @@
 
 use std::time::Instant;
 
-use augsim_learn::backprop::loss_and_gradients;
-use augsim_learn::metrics::masked_mse;
+use augsim_learn::net::backprop::loss_and_gradients;
+use augsim_learn::training::metrics::masked_mse;
 use augsim_learn::{training_device, GridShape, Timing, UNet, UNetConfig};
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};

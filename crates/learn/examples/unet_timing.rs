@@ -7,7 +7,7 @@
 
 use std::time::Instant;
 
-use augsim_learn::metrics::masked_mse;
+use augsim_learn::training::metrics::masked_mse;
 use augsim_learn::{inference_device, training_device, GridShape, Timing, UNet, UNetConfig};
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};

@@ -14,62 +14,38 @@
 //! m) and a mask. Units are SI throughout.
 //!
 //! # Modules
-//! - [`npy`]: minimal NumPy `.npy` reader/writer (v1.0 header, `<f4`, `<f8`, `|u1`, `|b1`).
-//! - [`dataset`]: sharded datasets with a JSON manifest, resumable writer, reader, merge.
-//! - [`generate`]: FEM-generated samples (random loads → grid input and target), parallel, resumable.
-//! - [`unet`]: the 3D U-Net, its configuration and the saved-model bundle (JSON + safetensors).
-//! - [`corrupt`]: sparse visible inputs and Gaussian noise.
-//! - [`metrics`]: masked MSE loss and mean Euclidean errors.
-//! - [`train`](mod@train): the training loop (Adam, checkpoints, resume, fine-tuning, learning curves).
-//! - [`inference`]: the trained network repacked for fast CPU inference.
-//! - [`evaluation`]: errors of a model over a sample set and at points.
-//! - [`predict`]: single predictions and their timing.
-//! - [`compute`]: where the network runs (CPU engines, or a GPU through burn with the `gpu` feature).
-//! - [`points`]: point clouds (`.csv`, `.npy`) and grid tensors as prediction input.
-//! - [`split`]: train / validation / test splits, the policy that sizes them, and the held-out guard.
+//! - [`data`]: datasets — the `.npy` format, sharded datasets, FEM generation, the grid and its
+//!   placement, splits, input corruption, point clouds as input.
+//! - [`net`]: the network — the 3D U-Net, its saved-model bundle, and the engines that run it
+//!   (burn on the CPU or a GPU, the repacked CPU inference engine, the hand-written backward pass).
+//! - [`training`]: training (Adam, checkpoints, resume, fine-tuning), metrics, evaluation and the
+//!   learning curve.
 
 #![warn(missing_docs)]
 
-pub mod backprop;
-pub mod compute;
-pub mod corrupt;
-pub mod curve;
-pub mod dataset;
+pub mod data;
 mod error;
-pub mod evaluation;
 mod fsutil;
-pub mod generate;
-mod grid;
-pub mod inference;
-mod lanes;
-pub mod metrics;
-pub mod npy;
-pub mod points;
-pub mod predict;
-pub mod sample_view;
-pub mod scenario;
-pub mod split;
-pub mod train;
-pub mod unet;
-mod winograd;
+pub mod net;
+pub mod training;
 
-pub use compute::Compute;
-pub use corrupt::{Corruption, Sparsity};
-pub use curve::CurveRow;
-pub use dataset::{
+pub use data::corrupt::{Corruption, Sparsity};
+pub use data::dataset::{
     merge_datasets, Dataset, DatasetPart, DatasetSpec, DatasetWriter, FailedSample, Manifest, Normalization, Sample,
     Samples, ShardInfo, Statistics,
 };
+pub use data::grid::{encode_points, GridMesh, GridPlacement, GridShape, GridToMesh, CHANNELS, LAYOUT};
+pub use data::points::{PointCloud, PredictInput};
+pub use data::split::{IndexSet, Split, SplitPolicy};
 pub use error::LearnError;
-pub use evaluation::{evaluate, evaluate_at_points, evaluation_input, write_grid_sample, PointErrors};
-pub use grid::{encode_points, GridMesh, GridPlacement, GridShape, GridToMesh, CHANNELS, LAYOUT};
-pub use inference::InferenceNet;
-pub use metrics::{ErrorStats, EvalReport};
-pub use points::{PointCloud, PredictInput};
-pub use predict::{time_prediction, Predictor, Timing};
-pub use split::{IndexSet, Split, SplitPolicy};
-pub use train::{train, Initialization, TrainConfig, TrainOptions, TrainOutcome};
-pub use unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
+pub use net::compute::Compute;
+pub use net::inference::InferenceNet;
+pub use net::predict::{time_prediction, Predictor, Timing};
+pub use net::unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
+pub use training::curve::CurveRow;
+pub use training::evaluation::{evaluate, evaluate_at_points, evaluation_input, write_grid_sample, PointErrors};
+pub use training::metrics::{ErrorStats, EvalReport};
+pub use training::train::{train, Initialization, TrainConfig, TrainOptions, TrainOutcome};
 
 /// Result type of this crate.
 pub type Result<T> = std::result::Result<T, LearnError>;

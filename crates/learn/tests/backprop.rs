@@ -1,7 +1,7 @@
 //! The hand-written backward pass gives burn autodiff's loss and gradients.
 
-use augsim_learn::backprop::loss_and_gradients;
-use augsim_learn::metrics::masked_mse;
+use augsim_learn::net::backprop::loss_and_gradients;
+use augsim_learn::training::metrics::masked_mse;
 use augsim_learn::{inference_device, training_device, GridShape, UNet, UNetConfig};
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
 use burn::optim::{AdamConfig, GradientsParams};

@@ -2,8 +2,8 @@
 
 mod common;
 
-use augsim_learn::corrupt::item_rng;
-use augsim_learn::metrics::{masked_mse, masked_mse_values, mean_euclidean_error};
+use augsim_learn::data::corrupt::item_rng;
+use augsim_learn::training::metrics::{masked_mse, masked_mse_values, mean_euclidean_error};
 use augsim_learn::{inference_device, Corruption, ErrorStats, GridShape, Sparsity};
 use burn::tensor::{Tensor, TensorData};
 

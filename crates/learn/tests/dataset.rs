@@ -4,8 +4,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use augsim_learn::dataset::MANIFEST_FILE;
-use augsim_learn::npy::{self, NpyData};
+use augsim_learn::data::dataset::MANIFEST_FILE;
+use augsim_learn::data::npy::{self, NpyData};
 use augsim_learn::{merge_datasets, Dataset, DatasetPart, DatasetSpec, DatasetWriter, GridShape, LearnError, Samples};
 use common::synthetic_sample;
 

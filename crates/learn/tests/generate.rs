@@ -3,8 +3,7 @@
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
 
-use augsim_learn::generate::{DatasetConfig, Generator, Input, Load};
-use augsim_learn::scenario::DatasetScenario;
+use augsim_learn::data::generate::{DatasetConfig, Generator, Input, Load};
 use augsim_learn::{merge_datasets, Dataset, DatasetPart};
 use fem::{Law, Material, SolverOptions};
 use mesh::NodeSelection;
@@ -379,40 +378,4 @@ fn gravity_adds_a_body_force_of_the_drawn_acceleration() {
         })
         .collect();
     assert!(directions[0] != directions[1] && directions[1] != directions[2], "random directions");
-}
-
-/// The shipped scenarios (`scenarios/`).
-fn shipped(name: &str) -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios").join(name)
-}
-
-#[test]
-fn the_grid_ar_scenario_presses_the_immersed_phantom_by_centimetres() {
-    let (mut scenario, dir) = DatasetScenario::load(&shipped("liver_ar_grid.toml")).unwrap();
-    scenario.dataset.samples = 2;
-    let g = scenario.generator(&dir).unwrap();
-    let tmp = tempfile::tempdir().unwrap();
-    let manifest = g.run(tmp.path(), "liver_ar_grid", None, &|_, _| {}).unwrap();
-    assert!(manifest.failed.is_empty(), "{:?}", manifest.failed);
-    let data = Dataset::open(tmp.path()).unwrap().load_all().unwrap();
-    let n = data.grid.nodes();
-    for i in 0..data.len() {
-        let u = data.target(i);
-        let largest = (0..n).map(|k| (0..3).map(|c| u[c * n + k].powi(2)).sum::<f32>().sqrt()).fold(0.0, f32::max);
-        assert!((0.01..0.1).contains(&largest), "sample {i}: largest displacement {largest} m");
-    }
-}
-
-/// A dataset regenerated from `scenarios/liver_ar.toml` has the source identity recorded in the
-/// shipped network's split, so that `eval` finds its test samples and refuses its training ones
-/// (options added to the generator since must not change the manifest of a scenario without them).
-#[test]
-fn a_regenerated_liver_ar_dataset_is_the_shipped_networks_own() {
-    let (mut scenario, dir) = DatasetScenario::load(&shipped("liver_ar.toml")).unwrap();
-    scenario.dataset.samples = 1;
-    let tmp = tempfile::tempdir().unwrap();
-    scenario.generator(&dir).unwrap().run(tmp.path(), &scenario.name, None, &|_, _| {}).unwrap();
-    let model = std::fs::read_to_string(shipped("../models/liver_ar/model.json")).unwrap();
-    let model: serde_json::Value = serde_json::from_str(&model).unwrap();
-    assert_eq!(Dataset::open(tmp.path()).unwrap().manifest().source_id(), model["training"]["split"]["source"]);
 }

@@ -1,6 +1,6 @@
 //! The repacked CPU inference network computes what the burn network computes.
 
-use augsim_learn::metrics::masked_mse;
+use augsim_learn::training::metrics::masked_mse;
 use augsim_learn::{inference_device, training_device, GridShape, UNet, UNetConfig};
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};

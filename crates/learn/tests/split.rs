@@ -3,7 +3,7 @@
 
 mod common;
 
-use augsim_learn::train::MODEL_FILE;
+use augsim_learn::training::train::MODEL_FILE;
 use augsim_learn::{
     evaluate, inference_device, train, Compute, Corruption, GridShape, IndexSet, Initialization, Normalization,
     Samples, Split, SplitPolicy, TrainConfig, TrainOptions, TrainedModel, UNetConfig,

@@ -168,11 +168,11 @@ fn read_csv(path: &Path) -> Result<Vec<Point>> {
 // NPY
 
 fn read_npy_cloud(path: &Path) -> Result<Vec<Point>> {
-    let array = learn::npy::read_npy(path)?;
+    let array = learn::data::npy::read_npy(path)?;
     if array.shape.len() != 2 || array.shape[1] != 3 {
         return Err(RegisterError::format(path, format!("expected an array of shape [N, 3], found {:?}", array.shape)));
     }
-    if matches!(array.data, learn::npy::NpyData::U8(_)) {
+    if matches!(array.data, learn::data::npy::NpyData::U8(_)) {
         return Err(RegisterError::format(path, "expected float32 or float64 values, found uint8"));
     }
     Ok(array.into_f64().chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())

@@ -2,7 +2,7 @@
 //! finite-element model pulled by data springs, and a trained U-Net.
 
 use fem::{PointSpring, Problem, SolverOptions, StaticSolver};
-use learn::generate::normal_part;
+use learn::data::generate::normal_part;
 use learn::{encode_points, GridToMesh, Predictor, TrainedModel};
 use mesh::embedding::Grid;
 
@@ -343,7 +343,12 @@ mod tests {
     fn the_surface_fit_keeps_the_depth_of_a_dent() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
         let model = TrainedModel::load(std::path::Path::new(path), &learn::inference_device()).unwrap();
-        let (organ, deformer) = crate::case::ar_network_model(&model).unwrap();
+        // The network's training organ (the `liver_ar` dataset scenario): the 3k-T4 phantom, the
+        // normal displacement of its visible nodes as input.
+        let phantom = mesh::phantom::liver_phantom(3000).unwrap();
+        let visible = phantom.region("visible").unwrap().to_vec();
+        let organ = Organ::new(phantom, None).unwrap();
+        let deformer = NetworkDeformer::new(&model, &organ, &visible, true).unwrap();
         let mesh = organ.mesh();
         let top = mesh.nodes.iter().map(|p| p[2]).fold(f64::MIN, f64::max);
         let centre = [-0.06, 0.005];

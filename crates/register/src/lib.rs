@@ -13,16 +13,12 @@ pub mod cloud;
 mod error;
 
 pub use error::{RegisterError, Result};
-pub mod case;
 mod deformers;
 pub mod organ;
 pub mod outliers;
-pub mod picture;
 pub mod register;
 pub mod rigid;
-pub mod scenario;
 pub mod sequence;
-pub mod simulate;
 
 pub use deformers::{FemDeformer, NetworkDeformer};
 pub use organ::{Organ, Stencil};
@@ -30,6 +26,4 @@ pub use register::{
     check_cloud, observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions,
 };
 pub use rigid::{rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
-pub use scenario::CaseScenario;
 pub use sequence::{register_sequence, target_errors, FrameOutcome, Summary};
-pub use simulate::{simulate_cloud, CameraModel};

@@ -1,0 +1,99 @@
+//! How far the U-Net registration of a case is from what its network can do. Three figures:
+//! - the shipped network given the *true* normal motion of its input nodes (the truth's
+//!   displacement at the network mesh's nodes): the best any matching loop could give it;
+//! - the loop's surface fit computed on the *true* deformed surface: whether the truth is a
+//!   fixed point of matching and fitting;
+//! - the registration loop itself.
+//!
+//! `cargo run --release -p augsim-register --example network_oracle -- [CASE.toml] [FORCE]`
+//! (default: the built-in `register_case` scenario; FORCE in N replaces its force).
+
+use std::path::Path;
+
+use augsim_experiment::case::{ar_network_model, synthetic_case};
+use learn::data::generate::normal_part;
+use learn::{encode_points, GridToMesh, Predictor, TrainedModel};
+use mesh::Point;
+use register::{observe, register_frame, target_errors, RigidTransform};
+use scenario::CaseScenario;
+
+const MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut scenario = match args.first() {
+        Some(path) => CaseScenario::load(Path::new(path))?,
+        None => CaseScenario::builtin(),
+    };
+    if let Some(force) = args.get(1) {
+        scenario.truth.force = force.parse()?;
+    }
+    let case = synthetic_case(&scenario)?;
+    if case.pose != RigidTransform::identity() {
+        return Err("the oracle compares with the truth in the model's frame: remove the case's misalignment".into());
+    }
+    let model = TrainedModel::load(Path::new(MODEL), &learn::inference_device())?;
+    let (organ, deformer) = ar_network_model(&model)?;
+    let mesh = organ.mesh().clone();
+    // The truth at each node of the network's mesh: interpolated in the finer mesh, or its nearest
+    // node's for a node just outside it (the two meshes' surfaces differ by their facets).
+    let truth_at = |x: Point| -> Point {
+        match case.truth_organ.locate(&[x], "node") {
+            Ok(stencil) => stencil[0].vector(&case.truth_u),
+            Err(_) => {
+                let nodes = &case.truth_organ.mesh().nodes;
+                let k = (0..nodes.len())
+                    .min_by(|&a, &b| mesh::distance(nodes[a], x).total_cmp(&mesh::distance(nodes[b], x)));
+                let k = k.unwrap_or(0);
+                std::array::from_fn(|d| case.truth_u[3 * k + d])
+            }
+        }
+    };
+    let truth_u: Vec<f64> = mesh.nodes.iter().flat_map(|&x| truth_at(x)).collect();
+    let node_truth = |n: usize| -> Point { std::array::from_fn(|d| truth_u[3 * n + d]) };
+    let stencils = organ.locate(&case.targets, "target")?;
+    let tre = |u: &[f64]| {
+        let registered = register::organ::displaced(&case.targets, &stencils, u);
+        let e = target_errors(&registered, &case.truth);
+        (1e3 * mesh::stats::mean(&e), 1e3 * mesh::stats::max(&e))
+    };
+    println!("case       {} at {} N; markers move {:.1} mm on average", scenario.name, scenario.truth.force, {
+        let rest = target_errors(&case.targets, &case.truth);
+        1e3 * mesh::stats::mean(&rest)
+    });
+    let (mean, max) = tre(&truth_u);
+    println!("truth on the network's mesh            TRE {mean:.2} / {max:.2} mm (interpolation alone)");
+
+    // The network given the true normal motion of its input nodes.
+    let visible = mesh.region("visible")?.to_vec();
+    let normals = mesh.surface_normals();
+    let points: Vec<Point> = visible.iter().map(|&n| mesh.nodes[n]).collect();
+    let along: Vec<Point> = visible.iter().map(|&n| normal_part(&truth_u[3 * n..3 * n + 3], normals[n])).collect();
+    let grid = model.placed_grid()?;
+    let prediction =
+        Predictor::new(&model, learn::Compute::Cpu)?.predict(&encode_points(&grid, &points, &along, false)?)?;
+    let (mean, max) = tre(&GridToMesh::new(&mesh, &grid)?.apply(&prediction)?);
+    println!("network, true normal motion in         TRE {mean:.2} / {max:.2} mm");
+
+    // The loop's fit on the true deformed surface, against the true normal motion.
+    let options = &scenario.registration;
+    let view = options.view.or(Some(scenario.camera.view));
+    let observations = observe(&organ, &organ.deformed_surface(&truth_u), &case.cloud, options, 0.0, view)?;
+    let fit = deformer.surface_estimate(&observations, &truth_u);
+    let misfit: Vec<f64> = visible
+        .iter()
+        .zip(&fit)
+        .map(|(&n, f)| (mesh::dot(*f, normals[n]) - mesh::dot(node_truth(n), normals[n])).abs())
+        .collect();
+    println!(
+        "fit on the true surface                normal motion off by {:.2} mm on average, {:.2} mm at most",
+        1e3 * mesh::stats::mean(&misfit),
+        1e3 * mesh::stats::max(&misfit)
+    );
+
+    let mut deformer = deformer;
+    let frame = register_frame(&organ, &mut deformer, &case.cloud, None, options)?;
+    let (mean, max) = tre(&frame.u);
+    println!("registration loop                      TRE {mean:.2} / {max:.2} mm in {} iterations", frame.iterations);
+    Ok(())
+}

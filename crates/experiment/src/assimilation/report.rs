@@ -1,0 +1,302 @@
+//! The outputs of an assimilation run: the summary ([`Report`], `summary.json`), PNG plots of the estimates and
+//! the innovation, and the assessment errors (`assessment.csv`, `assessment.png`).
+
+use std::path::Path;
+
+use mesh::io::write_atomic_bytes;
+use plot::{line_plot, PlotSpec, Series};
+use serde::Serialize;
+
+use super::{AssimilationError, Context, Reference};
+use filter::{Execution, SigmaPointSet, Trace};
+
+/// The results of a run (also written as `summary.json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Report {
+    /// Scenario name.
+    pub scenario: String,
+    /// Synthetic observations (a reference run with the scenario's true parameters) rather than track files.
+    pub synthetic: bool,
+    /// Mesh nodes.
+    pub nodes: usize,
+    /// Filter iterations.
+    pub iterations: usize,
+    /// Sigma points (parameters + 1 simplex, 2 parameters + 1 star).
+    pub sigma_points: usize,
+    /// Simplex or star sigma points.
+    pub sigma_point_set: SigmaPointSet,
+    /// Parallel or sequential sigma points.
+    pub execution: Execution,
+    /// Wall-clock time of the filter (s).
+    pub filter_seconds: f64,
+    /// Mean time per iteration (s).
+    pub seconds_per_iteration_mean: f64,
+    /// Median time per iteration (s).
+    pub seconds_per_iteration_median: f64,
+    /// Newton iterations per FEM solve.
+    pub newton_iterations_per_solve: f64,
+    /// Where the filter's time went.
+    pub filter_times: FilterTimes,
+    /// Wall-clock time since the experiment was prepared (s).
+    pub total_seconds: f64,
+    /// The reference run behind synthetic observations: its mesh, whether it was the filter's own model, its
+    /// time and largest displacement.
+    pub reference: Option<Reference>,
+    /// Young's modulus, when estimated.
+    pub young: Option<YoungReport>,
+    /// Boundary springs, when estimated.
+    pub springs: Option<SpringsReport>,
+    /// Assessment errors of the estimate (and of the comparison runs).
+    pub assessment: Vec<AssessmentCase>,
+    /// Steps of the estimated deformation written to `deformation.pvd`.
+    pub deformation_frames: usize,
+}
+
+/// Where the filter's time went. The FEM solves' times are each solve's own wall-clock time summed over all
+/// sigma points and iterations: with parallel sigma points they add up to more than the filter's wall time.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct FilterTimes {
+    /// FEM solves in all (s).
+    pub solves: f64,
+    /// Of which element evaluation and assembly: internal forces and tangents (s).
+    pub assembly: f64,
+    /// Of which numeric factorisations (s).
+    pub factorization: f64,
+    /// Of which triangular solves and BFGS updates (s).
+    pub triangular_solves: f64,
+    /// Numeric factorisations per FEM solve.
+    pub factorizations_per_solve: f64,
+    /// Writing the estimated deformation (`deformation/step_*.vtu`) (s).
+    pub writing: f64,
+}
+
+/// The Young's modulus estimate.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct YoungReport {
+    /// Final mean (Pa).
+    pub mean: f64,
+    /// Final standard deviation (Pa).
+    pub std: f64,
+    /// The true value (synthetic only).
+    pub truth: Option<f64>,
+    /// First iteration from which every estimate stays within 1 % of the truth.
+    pub within_1_percent_from_iteration: Option<usize>,
+    /// Filter wall-clock time (s, the iterations' own times summed) until that iteration.
+    pub within_1_percent_after_seconds: Option<f64>,
+    /// With a model-discrepancy allowance (`[filter] discrepancy`): the final σ of the observation noise alone
+    /// (Pa), while `std` includes the allowance.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub noise_std: Option<f64>,
+    /// With a model-discrepancy allowance: the final reduced misfit χ²/ν of all frames (1 when the model and the
+    /// nominal noise are right).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub misfit: Option<f64>,
+}
+
+/// The spring estimates, in N/m.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SpringsReport {
+    /// The node of each spring.
+    pub nodes: Vec<usize>,
+    /// Final stiffness per node.
+    pub stiffness: Vec<f64>,
+    /// Final standard deviation per node.
+    pub std: Vec<f64>,
+    /// True stiffness per node (synthetic only).
+    pub truth: Option<Vec<f64>>,
+    /// RMS error against the truth.
+    pub rms_error: Option<f64>,
+}
+
+/// Assessment errors of one case over the run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AssessmentCase {
+    /// `estimated`, `fixed` or `free`.
+    pub label: String,
+    /// Mean over the steps of the mean distance at the assessment points (m).
+    pub mean_error: f64,
+    /// Largest per-step mean distance (m).
+    pub max_error: f64,
+}
+
+impl Report {
+    /// Writes the report as pretty JSON, atomically.
+    pub fn write_json(&self, path: &Path) -> Result<(), AssimilationError> {
+        let text = serde_json::to_vec_pretty(self).context(|| "serialising the summary".into())?;
+        Ok(write_atomic_bytes(path, &text)?)
+    }
+}
+
+/// Plots the Young's modulus estimate (`young.png`, and `young_zoom.png` without the first tenth of the
+/// iterations) and summarises it.
+pub(super) fn young(trace: &Trace, truth: Option<f64>, out_dir: &Path) -> Result<YoungReport, AssimilationError> {
+    let last = last(trace)?;
+    let within = truth.and_then(|t| converged_at(trace.records.iter().map(|r| r.mean_physical[0]), t, 0.01));
+    let n = last.iteration;
+    for (file, from) in [("young.png", 0), ("young_zoom.png", n / 10)] {
+        let records = || trace.records.iter().filter(|r| r.iteration >= from);
+        let mu = records().map(|r| (r.iteration as f64, r.mean_physical[0])).collect();
+        let band = records()
+            .map(|r| {
+                (r.iteration as f64, r.mean_physical[0] - r.std_physical[0], r.mean_physical[0] + r.std_physical[0])
+            })
+            .collect();
+        let mut series = vec![Series { name: "estimate μ ± σ".into(), points: mu, band: Some(band) }];
+        if let Some(t) = truth {
+            series.push(Series {
+                name: format!("truth {t:.0} Pa"),
+                points: vec![(from as f64, t), (n as f64, t)],
+                band: None,
+            });
+        }
+        plot(
+            &out_dir.join(file),
+            format!("Young's modulus: ROUKF estimate μ ± σ (iterations {from}–{n})"),
+            "iteration",
+            "Young's modulus (Pa)",
+            &series,
+        )?;
+    }
+    let seconds =
+        within.map(|k| trace.records.iter().filter(|r| r.iteration <= k).filter_map(|r| r.wall_seconds).sum::<f64>());
+    Ok(YoungReport {
+        mean: last.mean_physical[0],
+        std: last.std_physical[0],
+        truth,
+        within_1_percent_from_iteration: within,
+        within_1_percent_after_seconds: seconds,
+        noise_std: last.noise_std_physical.as_ref().map(|s| s[0]),
+        misfit: last.misfit,
+    })
+}
+
+/// Plots the spring estimates (`springs.png` over the iterations, `springs_final.png` per node, with the truth when
+/// known), in N/m; `truth` in transformed units, parameters from index `offset` on.
+pub(super) fn springs(
+    trace: &Trace,
+    nodes: &[usize],
+    scale: f64,
+    truth: Option<&[f64]>,
+    offset: usize,
+    out_dir: &Path,
+) -> Result<SpringsReport, AssimilationError> {
+    let last = last(trace)?;
+    let est: Vec<f64> = (0..nodes.len()).map(|j| scale * last.mean_physical[offset + j]).collect();
+    let sd: Vec<f64> = (0..nodes.len()).map(|j| scale * last.std_physical[offset + j]).collect();
+    let truth: Option<Vec<f64>> = truth.map(|t| t.iter().map(|t| scale * t).collect());
+    let rms = truth
+        .as_ref()
+        .map(|truth| (est.iter().zip(truth).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / est.len() as f64).sqrt());
+    let series: Vec<Series> = (0..nodes.len())
+        .map(|j| Series {
+            name: String::new(),
+            points: trace.records.iter().map(|r| (r.iteration as f64, scale * r.mean_physical[offset + j])).collect(),
+            band: None,
+        })
+        .collect();
+    plot(
+        &out_dir.join("springs.png"),
+        format!("{} boundary springs: ROUKF estimates μ", nodes.len()),
+        "iteration",
+        "stiffness (N/m)",
+        &series,
+    )?;
+    let at = |v: &[f64]| -> Vec<(f64, f64)> { v.iter().enumerate().map(|(j, v)| (j as f64, *v)).collect() };
+    let mut series = vec![Series {
+        name: "estimate μ ± σ".into(),
+        points: at(&est),
+        band: Some(est.iter().zip(&sd).enumerate().map(|(j, (v, s))| (j as f64, v - s, v + s)).collect()),
+    }];
+    if let Some(t) = &truth {
+        series.push(Series { name: "truth".into(), points: at(t), band: None });
+    }
+    plot(
+        &out_dir.join("springs_final.png"),
+        format!("Spring stiffness per node of Σ after {} iterations", last.iteration),
+        "spring (node of Σ, by index)",
+        "stiffness (N/m)",
+        &series,
+    )?;
+    Ok(SpringsReport { nodes: nodes.to_vec(), stiffness: est, std: sd, truth, rms_error: rms })
+}
+
+/// Plots the innovation norm (`innovation.png`).
+pub(super) fn innovation(trace: &Trace, out_dir: &Path) -> Result<(), AssimilationError> {
+    let points: Vec<(f64, f64)> =
+        trace.records.iter().filter_map(|r| r.innovation_norm.map(|v| (r.iteration as f64, v))).collect();
+    let path = out_dir.join("innovation.png");
+    let spec = PlotSpec {
+        title: "Innovation norm ‖z − Σ α_i H(x_i)‖".into(),
+        x_label: "iteration".into(),
+        y_label: "innovation norm (m)".into(),
+        log_y: true,
+    };
+    line_plot(&path, &spec, &[Series { name: String::new(), points, band: None }])
+        .context(|| format!("plotting {}", path.display()))
+}
+
+/// Writes (`assessment.csv`) and plots (`assessment.png`) the assessment errors over time of each case, and
+/// summarises them (steps without a measured assessment point are left out).
+pub(super) fn assessment(
+    cases: &[(&str, Vec<f64>)],
+    points: usize,
+    out_dir: &Path,
+) -> Result<Vec<AssessmentCase>, AssimilationError> {
+    let mut csv = String::from("step");
+    for (label, _) in cases {
+        csv.push_str(&format!(",{label}_mean_error_m"));
+    }
+    csv.push('\n');
+    let steps = cases.iter().map(|c| c.1.len()).min().unwrap_or(0);
+    for k in 0..steps {
+        csv.push_str(&(k + 1).to_string());
+        for (_, e) in cases {
+            csv.push_str(&format!(",{}", e[k]));
+        }
+        csv.push('\n');
+    }
+    write_atomic_bytes(&out_dir.join("assessment.csv"), csv.as_bytes())?;
+    let mut summary = Vec::new();
+    let mut series = Vec::new();
+    for (label, errors) in cases {
+        let finite: Vec<f64> = errors.iter().copied().filter(|e| e.is_finite()).collect();
+        let mean = finite.iter().sum::<f64>() / finite.len() as f64;
+        let max = finite.iter().copied().fold(f64::NAN, f64::max);
+        summary.push(AssessmentCase { label: label.to_string(), mean_error: mean, max_error: max });
+        series.push(Series {
+            name: format!("{label} ({:.2} mm mean)", 1e3 * mean),
+            points: errors.iter().enumerate().map(|(k, e)| ((k + 1) as f64, 1e3 * e)).collect(),
+            band: None,
+        });
+    }
+    plot(
+        &out_dir.join("assessment.png"),
+        format!("Mean error at {points} assessment points"),
+        "time step",
+        "error (mm)",
+        &series,
+    )?;
+    Ok(summary)
+}
+
+fn plot(path: &Path, title: String, x: &str, y: &str, series: &[Series]) -> Result<(), AssimilationError> {
+    let spec = PlotSpec { title, x_label: x.into(), y_label: y.into(), log_y: false };
+    line_plot(path, &spec, series).context(|| format!("plotting {}", path.display()))
+}
+
+fn last(trace: &Trace) -> Result<&filter::IterationTrace, AssimilationError> {
+    trace.records.last().ok_or_else(|| AssimilationError::Setup("the trace is empty".into()))
+}
+
+/// First iteration from which every estimate stays within `tol` (relative) of `truth`.
+fn converged_at(means: impl Iterator<Item = f64>, truth: f64, tol: f64) -> Option<usize> {
+    let mut since = None;
+    for (k, m) in means.enumerate() {
+        if ((m - truth) / truth).abs() < tol {
+            since.get_or_insert(k);
+        } else {
+            since = None;
+        }
+    }
+    since
+}

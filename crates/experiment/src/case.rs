@@ -1,0 +1,265 @@
+//! A synthetic intraoperative case on the built-in phantom: the ground truth
+//! comes from a finer mesh and another law than the registration model (no
+//! inverse crime), the cloud from a camera looking at its deformed surface.
+//! The case and its methods are described by a [`CaseScenario`]
+//! (`scenarios/register_case.toml` is the built-in one).
+
+use std::path::Path;
+
+use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
+use mesh::phantom::PhantomSpec;
+use mesh::{Mesh, Point};
+
+use learn::data::generate::Input;
+use learn::TrainedModel;
+
+use anyhow::{anyhow, bail, Result};
+use register::{
+    register_sequence, Deformer, FemDeformer, FrameOutcome, NetworkDeformer, Organ, RegistrationOptions,
+    RigidTransform, Summary,
+};
+use scenario::registration::{CameraSpec, MethodKind, Misalignment};
+use scenario::{CaseScenario, DatasetScenario, MeshSource};
+
+use crate::simulate::{simulate_cloud, CameraModel};
+
+/// Tetrahedra of the ground-truth phantom of the built-in case.
+pub const TRUTH_TETS: usize = 9000;
+
+/// What the operating room gives (the cloud) and what it hides (the truth).
+#[derive(Clone, Debug)]
+pub struct SyntheticCase {
+    /// The intraoperative cloud, in the camera's frame.
+    pub cloud: Vec<Point>,
+    /// Internal targets at rest (the phantom's `markers`), in the model's frame.
+    pub targets: Vec<Point>,
+    /// Their true deformed positions, in the camera's frame.
+    pub truth: Vec<Point>,
+    /// Model frame → camera frame: the scenario's misalignment (the identity when none).
+    pub pose: RigidTransform,
+    /// The truth's organ (its finer mesh), in the model's frame.
+    pub truth_organ: Organ,
+    /// Its displacement (m, 3 per node).
+    pub truth_u: Vec<f64>,
+}
+
+/// The case of `scenario`: the phantom of `truth.tets` tetrahedra and `truth.material`, fixed on
+/// `truth.fixed`, `truth.force` N along `truth.direction` spread over `truth.load`; the camera's
+/// view of the deformed surface, reproducible from its seed; cloud and truth moved by the
+/// misalignment.
+pub fn synthetic_case(scenario: &CaseScenario) -> Result<SyntheticCase> {
+    scenario.validate().map_err(|m| anyhow!("case {}: {m}", scenario.name))?;
+    let t = &scenario.truth;
+    let mut spec = PhantomSpec::default();
+    if let Some(patch) = t.patch {
+        spec.push = patch;
+    }
+    let m = spec.mesh(t.tets)?;
+    let mut p = Problem::new(m, t.material);
+    let fixed = p.mesh.region(&t.fixed)?.to_vec();
+    let load = p.mesh.region(&t.load)?.to_vec();
+    p.fix(&fixed);
+    let len = mesh::dot(t.direction, t.direction).sqrt();
+    p.add_force(&load, t.direction.map(|d| d / len * t.force));
+    let u = StaticSolver::new(p.clone())?.solve(&SolverOptions::default())?.u;
+    let markers = p.mesh.region(&t.targets)?.to_vec();
+    let targets: Vec<Point> = markers.iter().map(|&n| p.mesh.nodes[n]).collect();
+    let mut truth: Vec<Point> =
+        markers.iter().map(|&n| std::array::from_fn(|d| p.mesh.nodes[n][d] + u[3 * n + d])).collect();
+    let organ = Organ::new(p.mesh, None)?;
+    let camera = &scenario.camera;
+    let mut cloud = simulate_cloud(&organ.deformed_surface(&u), &camera_model(camera), camera.seed)?;
+    let pose = scenario.misalignment.transform().map_err(|m| anyhow!(m))?;
+    if pose != RigidTransform::identity() {
+        for x in cloud.iter_mut().chain(truth.iter_mut()) {
+            *x = pose.apply(*x);
+        }
+    }
+    Ok(SyntheticCase { cloud, targets, truth, pose, truth_organ: organ, truth_u: u })
+}
+
+/// The built-in case ([`CaseScenario::builtin`]: the Neo-Hookean phantom, E = 5 kPa, ν = 0.48,
+/// F-bar, of about [`TRUTH_TETS`] tetrahedra, fixed between the lobes) with its `push` patch
+/// pressed down by `force` N, seen by `camera` from `seed`, without misalignment.
+pub fn phantom_push(force: f64, camera: &CameraModel, seed: u64) -> Result<SyntheticCase> {
+    let mut scenario = CaseScenario::builtin();
+    scenario.truth.force = force;
+    scenario.camera =
+        CameraSpec { view: camera.view, points: camera.points, noise: camera.noise, outliers: camera.outliers, seed };
+    scenario.misalignment = Misalignment::default();
+    synthetic_case(&scenario)
+}
+
+/// Tetrahedra of the registration models (the FEM models and the network's training mesh).
+pub const MODEL_TETS: usize = 3000;
+
+/// The phantom of about [`MODEL_TETS`] tetrahedra that the registration models deform
+/// (another mesh than the truth's).
+pub fn model_mesh() -> Result<Mesh> {
+    Ok(mesh::phantom::liver_phantom(MODEL_TETS)?)
+}
+
+/// A FEM registration model for [`phantom_push`] on `mesh` (a phantom, e.g. [`model_mesh`])
+/// with `material`, fixed between the lobes, with the default data stiffness.
+pub fn fem_model(mesh: Mesh, material: Material) -> Result<(Organ, FemDeformer)> {
+    fem_model_fixed_on(mesh, material, "fixed")
+}
+
+/// [`fem_model`] fixed on the region `fixed`.
+fn fem_model_fixed_on(mesh: Mesh, material: Material, fixed: &str) -> Result<(Organ, FemDeformer)> {
+    let mut problem = Problem::new(mesh.clone(), material);
+    problem.fix(mesh.region(fixed)?);
+    let stiffness = FemDeformer::default_stiffness(&problem);
+    Ok((Organ::new(mesh, None)?, FemDeformer::new(problem, stiffness, SolverOptions::default())?))
+}
+
+/// The co-rotational registration model (E = 5 kPa, ν = 0.48: another law than the truth's) on
+/// [`model_mesh`].
+pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
+    fem_model(model_mesh()?, Material::new(Law::Corotational, 5000.0, 0.48))
+}
+
+/// The name of the built-in dataset scenario of the shipped AR network.
+pub const AR_SCENARIO: &str = "liver_ar";
+
+/// The built-in scenario [`AR_SCENARIO`], parsed.
+pub fn ar_scenario() -> DatasetScenario {
+    DatasetScenario::builtin(AR_SCENARIO)
+}
+
+/// The camera model of a case's camera.
+pub fn camera_model(camera: &CameraSpec) -> CameraModel {
+    CameraModel { view: camera.view, points: camera.points, noise: camera.noise, outliers: camera.outliers }
+}
+
+/// The organ of a mesh built from `source`: the mesh, with the phantom's smooth surface when
+/// it is the phantom's immersed grid (the camera sees the organ, not the grid's staircase).
+pub fn organ_of(source: &MeshSource, mesh: Mesh) -> Result<Organ> {
+    let surface = match source {
+        MeshSource::PhantomGrid { .. } => Some(mesh::boundary_surface(&mesh::phantom::liver_phantom(5000)?)),
+        _ => None,
+    };
+    Ok(Organ::new(mesh, surface)?)
+}
+
+/// A trained network and the dataset scenario it was trained on.
+pub struct Network<'a> {
+    /// The network.
+    pub model: &'a TrainedModel,
+    /// Its dataset scenario: the organ's mesh and the network's input nodes.
+    pub scenario: &'a DatasetScenario,
+    /// The scenario's directory (mesh paths are relative to it).
+    pub dir: &'a Path,
+}
+
+/// The U-Net registration model of a network: its scenario's organ, the network fed with the
+/// displacement of the scenario's input nodes.
+pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
+    let (scenario, model) = (network.scenario, network.model);
+    let mesh = scenario.mesh(network.dir)?;
+    let (inputs, normal) = match &scenario.dataset.input {
+        Input::Displacement { nodes, normal, .. } => (nodes.select(&mesh)?, *normal),
+        Input::Force => {
+            bail!("scenario {}: registration needs a network of displacements, not of forces", scenario.name)
+        }
+    };
+    let organ = organ_of(&scenario.mesh, mesh)?;
+    let deformer = NetworkDeformer::new(model, &organ, &inputs, normal)?;
+    Ok((organ, deformer))
+}
+
+/// [`network_model`] of `model` trained on [`ar_scenario`] (e.g. the shipped `models/liver_ar`).
+pub fn ar_network_model(model: &TrainedModel) -> Result<(Organ, NetworkDeformer)> {
+    network_model(&Network { model, scenario: &ar_scenario(), dir: Path::new("") })
+}
+
+/// The methods of the built-in case: the co-rotational FEM and the SVK FEM (E = 5 kPa, ν = 0.49,
+/// the law of the network's training data) on [`model_mesh`], and, when given, the U-Net
+/// `network`.
+pub fn methods(network: Option<&Network>) -> Result<Vec<Method>> {
+    case_methods(&CaseScenario::builtin(), network)
+}
+
+/// The methods of `scenario`, in its order: its FEM methods on the phantom of `models.tets`
+/// tetrahedra, its network methods with `network` (on its scenario's organ), left out when it
+/// is `None`.
+pub fn case_methods(scenario: &CaseScenario, network: Option<&Network>) -> Result<Vec<Method>> {
+    let mesh = mesh::phantom::liver_phantom(scenario.models.tets)?;
+    let mut out = Vec::new();
+    for spec in &scenario.models.method {
+        let (name, iterations) = (spec.name.clone(), spec.iterations);
+        match (spec.kind, spec.material, network) {
+            (MethodKind::Fem, Some(material), _) => {
+                let (organ, deformer) = fem_model_fixed_on(mesh.clone(), material, &scenario.truth.fixed)?;
+                out.push(Method { name, organ, deformer: Box::new(deformer), iterations });
+            }
+            (MethodKind::Fem, None, _) => {
+                bail!("method {name:?}: a FEM method needs a material")
+            }
+            (MethodKind::Network, _, Some(network)) => {
+                let (organ, deformer) = network_model(network)?;
+                out.push(Method { name, organ, deformer: Box::new(deformer), iterations });
+            }
+            (MethodKind::Network, _, None) => {}
+        }
+    }
+    Ok(out)
+}
+
+/// A registration method of a comparison.
+pub struct Method {
+    /// Name in the table.
+    pub name: String,
+    /// The organ it deforms.
+    pub organ: Organ,
+    /// How it deforms.
+    pub deformer: Box<dyn Deformer>,
+    /// Most match-and-deform iterations, in place of the comparison's (`None`: the comparison's).
+    pub iterations: Option<usize>,
+}
+
+/// One method's registration of a comparison case.
+pub struct Registered {
+    /// Its figures.
+    pub summary: Summary,
+    /// Its registration of the case.
+    pub outcome: FrameOutcome,
+    /// The organ it deformed.
+    pub organ: Organ,
+}
+
+/// One method's result in a comparison: its registration, or why it failed (e.g. an SVK
+/// model pulled past its compressive limit point), which does not stop the other methods.
+pub struct Compared {
+    /// The method's name.
+    pub method: String,
+    /// Its registration, or its error.
+    pub result: register::Result<Registered>,
+}
+
+/// Registers the case's cloud with each method (one frame, from rest), in order.
+pub fn compare(case: &SyntheticCase, methods: Vec<Method>, options: &RegistrationOptions) -> Vec<Compared> {
+    methods
+        .into_iter()
+        .map(|mut m| {
+            let options =
+                RegistrationOptions { iterations: m.iterations.unwrap_or(options.iterations), ..options.clone() };
+            let truth = [case.truth.clone()];
+            let frames = [Ok(case.cloud.clone())];
+            let result = register_sequence(
+                &m.organ,
+                m.deformer.as_mut(),
+                frames,
+                &case.targets,
+                Some(&truth),
+                &options,
+                |_, _| Ok(()),
+            )
+            .and_then(|mut outcomes| {
+                let summary = Summary::new(m.name.clone(), &outcomes)?;
+                Ok(Registered { summary, outcome: outcomes.remove(0), organ: m.organ })
+            });
+            Compared { method: m.name, result }
+        })
+        .collect()
+}

@@ -1,0 +1,44 @@
+//! Simulated intraoperative clouds: what a camera looking along a direction
+//! sees of a deformed surface, with noise and outliers.
+
+use mesh::sampling::sample_visible;
+use mesh::{Point, TriSurface};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+
+use anyhow::{anyhow, bail, Result};
+
+/// How the camera sees the organ.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CameraModel {
+    /// Viewing direction (the camera looks along it).
+    pub view: Point,
+    /// Points sampled uniformly by area on the visible triangles.
+    pub points: usize,
+    /// Standard deviation of the isotropic Gaussian noise added to each point (m).
+    pub noise: f64,
+    /// Fraction of extra points drawn uniformly in the surface's bounding box, grown by 10 %.
+    pub outliers: f64,
+}
+
+/// A cloud of `camera.points` points on the visible part of `surface` (outward oriented)
+/// plus outliers, reproducible from `seed`.
+pub fn simulate_cloud(surface: &TriSurface, camera: &CameraModel, seed: u64) -> Result<Vec<Point>> {
+    if !(camera.noise >= 0.0 && camera.noise.is_finite() && camera.outliers >= 0.0 && camera.outliers.is_finite()) {
+        bail!("invalid camera model {camera:?}");
+    }
+    let samples = sample_visible(surface, camera.view, camera.points, seed)?;
+    let mut rng = StdRng::seed_from_u64(seed ^ 0x9e37_79b9_7f4a_7c15);
+    let noise = Normal::new(0.0, camera.noise).map_err(|e| anyhow!("camera noise: {e}"))?;
+    let mut cloud: Vec<Point> = samples.iter().map(|s| s.point.map(|x| x + noise.sample(&mut rng))).collect();
+    let (lo, hi) = mesh::bounds(&surface.vertices);
+    let extra = (camera.outliers * camera.points as f64).round() as usize;
+    for _ in 0..extra {
+        cloud.push(std::array::from_fn(|d| {
+            let pad = 0.05 * (hi[d] - lo[d]);
+            rng.random_range(lo[d] - pad..=hi[d] + pad)
+        }));
+    }
+    Ok(cloud)
+}

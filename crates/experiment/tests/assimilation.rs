@@ -1,0 +1,329 @@
+//! Assimilation experiments on a small beam: synthetic tracks written by a run and read back give the same
+//! estimate, tool tracks as controls, occluded features, and the errors of bad track files.
+
+use std::path::{Path, PathBuf};
+
+use augsim_experiment::assimilation::tracks::{RestPositions, Tracks};
+use augsim_experiment::assimilation::{Experiment, ObservationFiles, Report};
+use filter::SigmaPointSet;
+use scenario::AssimilationScenario;
+
+/// The test scenario (see its header).
+fn beam() -> String {
+    std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/beam_assimilation.toml")).unwrap()
+}
+
+/// A tool pressing the middle of the top face, with its own profile.
+const TOOL: &str = r#"
+[[tool]]
+select = { box = { min = [0.039, -1.0, 0.0199], max = [0.061, 1.0, 1.0] } }
+displacement = [0.0, 0.0, -5e-4]
+profile = { sine = { period = 8 } }
+"#;
+
+fn scenario(dir: &Path, name: &str, text: &str) -> (AssimilationScenario, PathBuf) {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    AssimilationScenario::load(&path).unwrap()
+}
+
+fn run(dir: &Path, text: &str, files: Option<&ObservationFiles>, out: &str) -> (Report, Vec<Vec<u64>>) {
+    let (sc, base) = scenario(dir, &format!("{out}.toml"), text);
+    let experiment = Experiment::prepare(sc, &base, files).unwrap();
+    let mut calls = 0;
+    let report = experiment.run(&dir.join(out), |_| calls += 1).unwrap();
+    assert_eq!(calls, report.iterations);
+    let trace: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join(out).join("trace.json")).unwrap()).unwrap();
+    let means = trace["records"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["mean"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap().to_bits()).collect())
+        .collect();
+    (report, means)
+}
+
+fn files(tracks: &Path, controls: bool) -> ObservationFiles {
+    ObservationFiles {
+        observations: tracks.join("observations.csv"),
+        features: None,
+        controls: controls.then(|| tracks.join("controls.csv")),
+        assessment: Some(tracks.join("assessment.csv")),
+        known_truth: false,
+    }
+}
+
+#[test]
+fn tracks_written_by_a_synthetic_run_give_the_same_estimate() {
+    let dir = tempfile::tempdir().unwrap();
+    let beam = beam();
+    let (synthetic, expected) = run(dir.path(), &beam, None, "synthetic");
+    assert!(synthetic.synthetic);
+    let young = synthetic.young.as_ref().unwrap();
+    assert!((young.mean - 5000.0).abs() < 0.01 * 5000.0, "{young:?}");
+    // The estimated deformation of steps 4 and 8 as a ParaView series.
+    assert_eq!(synthetic.deformation_frames, 2);
+    let pvd = std::fs::read_to_string(dir.path().join("synthetic/deformation.pvd")).unwrap();
+    assert!(pvd.contains("deformation/step_00008.vtu"), "{pvd}");
+    // At step 4 the load peaks (the end moves by millimetres); at step 8 it is back to zero.
+    let max_u = |step: &str| {
+        let (_, fields) = mesh::io::read_vtu_with_fields(dir.path().join("synthetic/deformation").join(step)).unwrap();
+        let u = fields.iter().find(|f| f.name == "displacement").unwrap();
+        u.values.iter().fold(0.0f64, |m, v| m.max(v.abs()))
+    };
+    assert!(max_u("step_00004.vtu") > 1e-3 && max_u("step_00008.vtu") < 1e-9);
+
+    let tracks = dir.path().join("synthetic/tracks");
+    let (read, got) = run(dir.path(), &beam, Some(&files(&tracks, false)), "read");
+    assert!(!read.synthetic);
+    assert_eq!(got, expected, "the filter means of every iteration, bit for bit");
+    assert_eq!(read.young.as_ref().unwrap().std.to_bits(), young.std.to_bits());
+    // The assessment tracks give the same errors (up to the rounding of nodes located as points).
+    let (a, b) = (&synthetic.assessment[0], &read.assessment[0]);
+    assert!((a.mean_error - b.mean_error).abs() < 1e-12 && a.mean_error > 0.0, "{a:?} vs {b:?}");
+
+    // Rest positions from a features file instead of frame 0, with the frame-0 rows gone: the same again.
+    let text = std::fs::read_to_string(tracks.join("observations.csv")).unwrap();
+    let mut features = String::from("id,x,y,z\n");
+    let mut moving = String::from("frame,id,x,y,z\n");
+    for line in text.lines().skip(1) {
+        match line.strip_prefix("0,") {
+            Some(rest) => features.push_str(&format!("{rest}\n")),
+            None => moving.push_str(&format!("{line}\n")),
+        }
+    }
+    std::fs::write(dir.path().join("features.csv"), features).unwrap();
+    std::fs::write(dir.path().join("moving.csv"), &moving).unwrap();
+    let split = ObservationFiles {
+        observations: dir.path().join("moving.csv"),
+        features: Some(dir.path().join("features.csv")),
+        controls: None,
+        assessment: None,
+        known_truth: false,
+    };
+    assert_eq!(run(dir.path(), &beam, Some(&split), "split").1, expected);
+
+    // An occluded feature (f1 at frame 3) is skipped for that frame: the run goes on and lands nearby.
+    let occluded: String = moving.lines().filter(|l| !l.starts_with("3,f1,")).map(|l| format!("{l}\n")).collect();
+    std::fs::write(dir.path().join("moving.csv"), occluded).unwrap();
+    let (sc, base) = scenario(dir.path(), "occluded.toml", &beam);
+    let experiment = Experiment::prepare(sc, &base, Some(&split)).unwrap();
+    assert_eq!(experiment.setup().occluded, 1);
+    let report = experiment.run(&dir.path().join("occluded"), |_| ()).unwrap();
+    let (e, e0) = (report.young.unwrap().mean, young.mean);
+    assert!(e != e0 && (e - e0).abs() < 1e-3 * e0, "{e} vs {e0}");
+}
+
+#[test]
+fn tool_tracks_as_controls_reproduce_the_tool() {
+    let dir = tempfile::tempdir().unwrap();
+    let beam = beam();
+    let with_tool = format!("{beam}{TOOL}");
+    let (synthetic, _) = run(dir.path(), &with_tool, None, "synthetic");
+    let tracks = dir.path().join("synthetic/tracks");
+    let controls = Tracks::read(&tracks.join("controls.csv")).unwrap();
+    assert_eq!(controls.ids.len(), 6, "the tool's nodes");
+    // The same beam without the scenario's tool, driven by the tracked tool instead.
+    let (sc, base) = scenario(dir.path(), "controlled.toml", &beam);
+    let experiment = Experiment::prepare(sc, &base, Some(&files(&tracks, true))).unwrap();
+    assert_eq!(experiment.setup().control_nodes, 6);
+    let read = experiment.run(&dir.path().join("controlled"), |_| ()).unwrap();
+    let (a, b) = (synthetic.young.unwrap(), read.young.unwrap());
+    assert!((a.mean - b.mean).abs() < 1e-9 * a.mean && (a.std - b.std).abs() < 1e-9 * a.std, "{a:?} vs {b:?}");
+    // Without the controls the beam moves differently and the estimate is off.
+    let (sc, base) = scenario(dir.path(), "uncontrolled.toml", &beam);
+    let report = Experiment::prepare(sc, &base, Some(&files(&tracks, false)))
+        .unwrap()
+        .run(&dir.path().join("uncontrolled"), |_| ())
+        .unwrap();
+    assert!((report.young.unwrap().mean - a.mean).abs() > 1e-3 * a.mean);
+}
+
+/// Writes `text` to a file in `dir` and reads it as tracks; returns the error message.
+fn track_error(dir: &Path, text: &str) -> String {
+    let path = dir.join("bad.csv");
+    std::fs::write(&path, text).unwrap();
+    Tracks::read(&path).unwrap_err().to_string()
+}
+
+#[test]
+fn bad_track_files_are_named_with_their_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let bad = d.join("bad.csv").display().to_string();
+    let cases = [
+        ("", format!("{bad}: the file is empty")),
+        ("\n  \n", format!("{bad}: the file is empty")),
+        ("frame,id,x,y,z\n", format!("{bad}: no data rows")),
+        ("frame,name,x,y,z\n0,a,0,0,0\n", format!("{bad}:1: the header must be `frame,id,x,y,z`")),
+        ("frame,id,x,y,z\n0,a,0,0,0\n1,a,0,abc,0\n", format!("{bad}:3: y = `abc` is not a finite number")),
+        ("frame,id,x,y,z\n0,a,0,0,NaN\n", format!("{bad}:2: z = `NaN` is not a finite number")),
+        ("frame,id,x,y,z\n\n-1,a,0,0,0\n", format!("{bad}:3: frame `-1` is not a whole number")),
+        ("frame,id,x,y,z\n0,a,0,0\n", format!("{bad}:2: 4 fields, expected 5")),
+        ("frame,id,x,y,z\n0, ,0,0,0\n", format!("{bad}:2: empty id")),
+        (
+            "frame,id,x,y,z\n0,a,0,0,0\n0,a,1,0,0\n",
+            format!("{bad}:3: feature `a` at frame 0 is already given on line 2"),
+        ),
+    ];
+    for (text, want) in cases {
+        let got = track_error(d, text);
+        assert!(got.starts_with(&want), "{text:?}: got `{got}`, want `{want}…`");
+    }
+    // Header case and spaces, a byte-order mark, CRLF line ends and blank lines are accepted.
+    std::fs::write(d.join("ok.csv"), "\u{feff}Frame, ID, x, y, z\r\n0,a,0,0,0\r\n\r\n2,a,0.001,0,0\r\n").unwrap();
+    let ok = Tracks::read(&d.join("ok.csv")).unwrap();
+    assert_eq!((ok.last_frame(), ok.position(0, 1), ok.position(0, 2)), (2, None, Some([0.001, 0.0, 0.0])));
+
+    // Rest positions: unknown ids, repeated ids, a missing frame 0.
+    std::fs::write(d.join("features.csv"), "id,x,y,z\na,0.01,0.01,0.01\n").unwrap();
+    let features = RestPositions::read(&d.join("features.csv")).unwrap();
+    std::fs::write(d.join("tracks.csv"), "frame,id,x,y,z\n1,a,0,0,0\n1,b,0,0,0\n").unwrap();
+    let tracks = Tracks::read(&d.join("tracks.csv")).unwrap();
+    let err = tracks.rest_positions(Some(&features)).unwrap_err().to_string();
+    assert!(err.contains("tracks.csv:3: unknown id `b`") && err.contains("features.csv"), "{err}");
+    let err = tracks.rest_positions(None).unwrap_err().to_string();
+    assert!(err.contains("tracks.csv:2: feature `a` has no frame-0 row"), "{err}");
+    std::fs::write(d.join("features.csv"), "id,x,y,z\na,0,0,0\na,1,1,1\n").unwrap();
+    let err = RestPositions::read(&d.join("features.csv")).unwrap_err().to_string();
+    assert!(err.contains("features.csv:3: feature `a` is already given on line 2"), "{err}");
+    let err = RestPositions::read(&d.join("missing.csv")).unwrap_err().to_string();
+    assert!(err.contains("missing.csv: cannot read"), "{err}");
+
+    // Through an experiment: a feature outside the organ, named with its line.
+    std::fs::write(
+        d.join("outside.csv"),
+        "frame,id,x,y,z\n0,in,0.05,0.01,0.02\n0,out,0.05,0.01,0.03\n1,in,0.05,0.01,0.02\n",
+    )
+    .unwrap();
+    let (sc, base) = scenario(d, "beam.toml", &beam());
+    let files = ObservationFiles { observations: d.join("outside.csv"), ..Default::default() };
+    let err = Experiment::prepare(sc, &base, Some(&files)).err().unwrap().to_string();
+    assert!(err.contains("outside.csv:3: feature `out`") && err.contains("outside the mesh"), "{err}");
+
+    // A feature just outside (0.5 mm above the top face, as from a finer surface) is moved onto the surface.
+    std::fs::write(
+        d.join("near.csv"),
+        "frame,id,x,y,z\n0,in,0.05,0.01,0.02\n0,near,0.05,0.01,0.0205\n1,in,0.05,0.01,0.02\n1,near,0.05,0.01,0.0205\n",
+    )
+    .unwrap();
+    let (sc, base) = scenario(d, "beam.toml", &beam());
+    let files = ObservationFiles { observations: d.join("near.csv"), ..Default::default() };
+    let setup = Experiment::prepare(sc, &base, Some(&files)).unwrap().setup().clone();
+    assert_eq!((setup.features, setup.projected), (2, 1));
+    assert!((setup.max_projection - 5e-4).abs() < 1e-12, "{}", setup.max_projection);
+}
+
+#[test]
+fn star_sigma_points_from_the_scenario() {
+    let dir = tempfile::tempdir().unwrap();
+    let beam = beam();
+    let (simplex, _) = run(dir.path(), &beam, None, "simplex");
+    assert_eq!((simplex.sigma_points, simplex.sigma_point_set), (2, SigmaPointSet::Simplex));
+    let star_text = format!("{beam}[filter]\nsigma_points = \"star\"\n");
+    let (sc, base) = scenario(dir.path(), "star.toml", &star_text);
+    let experiment = Experiment::prepare(sc, &base, None).unwrap();
+    assert_eq!((experiment.setup().parameters, experiment.setup().sigma_points), (1, 3));
+    let star = experiment.run(&dir.path().join("star"), |_| ()).unwrap();
+    assert_eq!((star.sigma_points, star.sigma_point_set), (3, SigmaPointSet::Star));
+    let summary = std::fs::read_to_string(dir.path().join("star/summary.json")).unwrap();
+    assert!(summary.contains("\"sigma_point_set\": \"star\""), "{summary}");
+    // Same observations, both within 1 % of the truth and of each other.
+    let (a, b) = (simplex.young.unwrap(), star.young.unwrap());
+    for y in [&a, &b] {
+        assert!((y.mean - 5000.0).abs() < 0.01 * 5000.0, "{y:?}");
+        let k = y.within_1_percent_from_iteration.unwrap();
+        assert!(k >= 1 && y.within_1_percent_after_seconds.unwrap() > 0.0, "{y:?}");
+    }
+    assert!((a.mean - b.mean).abs() < 0.002 * a.mean, "{a:?} vs {b:?}");
+
+    // An unknown set is an error that names the value and the choices.
+    let err = AssimilationScenario::load(&{
+        let path = dir.path().join("cross.toml");
+        std::fs::write(&path, format!("{beam}[filter]\nsigma_points = \"cross\"\n")).unwrap();
+        path
+    })
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("cross") && err.contains("simplex") && err.contains("star"), "{err}");
+}
+
+#[test]
+fn a_reference_section_observes_another_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    let beam = beam();
+    let (plain, plain_means) = run(dir.path(), &beam, None, "plain");
+    let own = plain.reference.unwrap();
+    assert!(own.inverse_crime && own.nodes == plain.nodes, "{own:?}");
+
+    // The model's own mesh as the reference: the tracks go through location on the model, the same bits.
+    let same_mesh = "[reference.mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.1, 0.02, 0.02]\ncells = [5, 2, 2]\n\
+                     element = \"tet\"\n";
+    let (same, same_means) = run(dir.path(), &format!("{beam}{same_mesh}"), None, "same");
+    assert_eq!(same_means, plain_means, "the filter means of every iteration, bit for bit");
+    assert!(same.synthetic && !same.reference.unwrap().inverse_crime);
+
+    // A finer reference under Neo-Hookean: another discretisation and law, so another estimate,
+    // reported against the scenario's truth; the tracks written are the reference's.
+    let finer = "[reference]\nlaw = \"neo_hookean\"\n[reference.mesh.box]\nmin = [0.0, 0.0, 0.0]\n\
+                 max = [0.1, 0.02, 0.02]\ncells = [10, 4, 4]\nelement = \"tet\"\n";
+    let (other, other_means) = run(dir.path(), &format!("{beam}{finer}"), None, "finer");
+    let reference = other.reference.unwrap();
+    assert!(!reference.inverse_crime && reference.nodes == 11 * 5 * 5 && reference.cells == 960, "{reference:?}");
+    assert_eq!(reference.law, fem::Law::NeoHookean);
+    assert_eq!(other.nodes, plain.nodes, "the filter keeps the scenario's mesh");
+    let (y, y0) = (other.young.unwrap(), plain.young.unwrap());
+    assert_eq!(y.truth, Some(5000.0));
+    // The finer beam, less stiff, bends more under the same force than the coarse one:
+    // the model must be softer to follow it.
+    assert!(other_means != plain_means && y.mean < 0.9 * y0.mean, "{} vs {}", y.mean, y0.mean);
+    let tracks = std::fs::read_to_string(dir.path().join("finer/tracks/observations.csv")).unwrap();
+    assert_eq!(tracks.lines().count(), 1 + 10 * 9, "10 features over frames 0..=8");
+}
+
+#[test]
+fn discrepancy_from_the_scenario_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let beam = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/beam_assimilation.toml"),
+    )
+    .unwrap();
+    let run = |name: &str, text: &str| {
+        let path = dir.path().join(format!("{name}.toml"));
+        std::fs::write(&path, text).unwrap();
+        let (sc, base) = AssimilationScenario::load(&path).unwrap();
+        Experiment::prepare(sc, &base, None).unwrap().run(&dir.path().join(name), |_| ())
+    };
+    let plain = run("plain", &beam).unwrap().young.unwrap();
+    let honest = run("honest", &format!("{beam}[filter]\ndiscrepancy = \"systematic\"\n")).unwrap().young.unwrap();
+    assert_eq!(honest.mean, plain.mean, "the allowance does not change the estimate");
+    assert_eq!(honest.noise_std, Some(plain.std));
+    assert!(honest.std >= plain.std && honest.misfit.is_some_and(|m| m > 0.5 && m < 2.0), "{honest:?}");
+    assert!(plain.noise_std.is_none() && plain.misfit.is_none());
+    let summary = std::fs::read_to_string(dir.path().join("honest/summary.json")).unwrap();
+    assert!(summary.contains("\"misfit\"") && summary.contains("\"noise_std\""), "{summary}");
+    let plain_summary = std::fs::read_to_string(dir.path().join("plain/summary.json")).unwrap();
+    assert!(!plain_summary.contains("misfit"), "{plain_summary}");
+    let csv = std::fs::read_to_string(dir.path().join("honest/trace.csv")).unwrap();
+    assert!(csv.lines().next().unwrap().contains(",misfit,"), "{csv}");
+
+    let bad = run("bad", &format!("{beam}[filter]\ndiscrepancy = \"systematic\"\ndiscrepancy_dof = 0.5\n"));
+    let message = anyhow_like(bad.unwrap_err());
+    assert!(message.contains("degrees of freedom") && message.contains("0.5"), "{message}");
+    let path = dir.path().join("unknown.toml");
+    std::fs::write(&path, format!("{beam}[filter]\ndiscrepancy = \"bias\"\n")).unwrap();
+    let err = AssimilationScenario::load(&path).unwrap_err().to_string();
+    assert!(err.contains("bias") && err.contains("systematic"), "{err}");
+}
+
+/// The error with its chain of sources, one per line.
+fn anyhow_like(e: impl std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        text.push_str(&format!("\n{s}"));
+        source = s.source();
+    }
+    text
+}

@@ -1,0 +1,1021 @@
+//! Sharded datasets of (input, target, mask) samples on a regular grid.
+//!
+//! On disk a dataset is a directory:
+//!
+//! ```text
+//! manifest.json              JSON manifest (see [`Manifest`])
+//! shard_00000/inputs.npy     [N, 3, nx, ny, nz] float32  (forces in N or displacements in m)
+//! shard_00000/targets.npy    [N, 3, nx, ny, nz] float32  (displacements in m)
+//! shard_00000/masks.npy      [N, nx, ny, nz]    uint8    (1 inside the organ)
+//! shard_00001/...
+//! ```
+//!
+//! Python reads it with numpy alone (`json.load` + `numpy.load`). Every file is written
+//! atomically; a shard is committed by rewriting the manifest after its three files are in
+//! place, so a killed writer leaves a consistent dataset that [`DatasetWriter::create_or_resume`]
+//! continues. Samples carry their generation index (the random seed of a sample is derived from
+//! the dataset seed and this index by the generator), and a generation that failed is recorded
+//! with its reason instead of a sample.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use mesh::io::write_atomic_bytes;
+use mesh::Point;
+use serde::{Deserialize, Serialize};
+
+use crate::data::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
+use crate::data::npy;
+use crate::{LearnError, Result};
+
+/// Value of the manifest's `format` field.
+pub const FORMAT: &str = "augsim-dataset";
+/// Version of the manifest layout written by this crate.
+pub const VERSION: u32 = 1;
+/// File name of the manifest inside a dataset directory.
+pub const MANIFEST_FILE: &str = "manifest.json";
+
+/// Which part of a dataset a worker writes when generation is split over `count` workers.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetPart {
+    /// This worker's number, `0..count`.
+    pub index: usize,
+    /// Number of workers.
+    pub count: usize,
+}
+
+/// What a dataset is: everything fixed when it is created.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetSpec {
+    /// Scenario name.
+    pub scenario: String,
+    /// Base random seed of the generation (per-sample seeds derive from it and the index).
+    pub seed: u64,
+    /// The part written by this worker, if generation is split.
+    pub part: Option<DatasetPart>,
+    /// The grid.
+    pub grid: GridShape,
+    /// Unit of the input field: "N" (forces) or "m" (imposed displacements).
+    pub input_unit: String,
+    /// Unit of the target field ("m").
+    pub target_unit: String,
+    /// Samples per shard.
+    pub shard_size: usize,
+    /// Free-form scenario parameters recorded by the generator.
+    pub metadata: serde_json::Value,
+}
+
+/// Units of the stored fields.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Units {
+    /// Unit of the inputs.
+    pub input: String,
+    /// Unit of the targets.
+    pub target: String,
+}
+
+/// A generation index that produced no sample, and why.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FailedSample {
+    /// The generation index.
+    pub index: u64,
+    /// Why it failed.
+    pub reason: String,
+}
+
+/// Per-shard sums from which the statistics are derived (kept so that merges and resumed
+/// writes reproduce the statistics of an uninterrupted write exactly).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StatSums {
+    /// Nodes with a nonzero input vector.
+    pub input_nodes: u64,
+    /// Per-channel sum of the inputs over those nodes.
+    pub input_sum: [f64; 3],
+    /// Per-channel sum of squared inputs over those nodes.
+    pub input_sum_sq: [f64; 3],
+    /// Nodes inside the mask.
+    pub target_nodes: u64,
+    /// Per-channel sum of the targets over masked nodes.
+    pub target_sum: [f64; 3],
+    /// Per-channel sum of squared targets over masked nodes.
+    pub target_sum_sq: [f64; 3],
+}
+
+impl StatSums {
+    fn add_sample(&mut self, grid: GridShape, input: &[f32], target: &[f32], mask: &[u8]) {
+        let n = grid.nodes();
+        for node in 0..n {
+            let v = [input[node], input[n + node], input[2 * n + node]];
+            if v.iter().any(|&x| x != 0.0) {
+                self.input_nodes += 1;
+                for (c, &x) in v.iter().enumerate() {
+                    self.input_sum[c] += f64::from(x);
+                    self.input_sum_sq[c] += f64::from(x) * f64::from(x);
+                }
+            }
+            if mask[node] != 0 {
+                self.target_nodes += 1;
+                for c in 0..CHANNELS {
+                    let u = f64::from(target[c * n + node]);
+                    self.target_sum[c] += u;
+                    self.target_sum_sq[c] += u * u;
+                }
+            }
+        }
+    }
+
+    fn add(&mut self, other: &StatSums) {
+        self.input_nodes += other.input_nodes;
+        self.target_nodes += other.target_nodes;
+        for c in 0..CHANNELS {
+            self.input_sum[c] += other.input_sum[c];
+            self.input_sum_sq[c] += other.input_sum_sq[c];
+            self.target_sum[c] += other.target_sum[c];
+            self.target_sum_sq[c] += other.target_sum_sq[c];
+        }
+    }
+}
+
+/// Statistics of one field: per-channel mean and standard deviation, and the RMS of the vector
+/// norm, over the counted nodes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChannelStats {
+    /// Number of counted nodes (inputs: nodes with a nonzero input; targets: masked nodes).
+    pub nodes: u64,
+    /// Per-channel mean.
+    pub mean: [f64; 3],
+    /// Per-channel standard deviation (population).
+    pub std: [f64; 3],
+    /// Root mean square of the vector norm, `sqrt(Σ_c Σ v_c² / nodes)`.
+    pub rms_norm: f64,
+}
+
+impl ChannelStats {
+    fn from_sums(nodes: u64, sum: &[f64; 3], sum_sq: &[f64; 3]) -> Self {
+        if nodes == 0 {
+            return ChannelStats::default();
+        }
+        let n = nodes as f64;
+        let mean = [sum[0] / n, sum[1] / n, sum[2] / n];
+        let std = [0, 1, 2].map(|c| (sum_sq[c] / n - mean[c] * mean[c]).max(0.0).sqrt());
+        let rms_norm = ((sum_sq[0] + sum_sq[1] + sum_sq[2]) / n).sqrt();
+        ChannelStats { nodes, mean, std, rms_norm }
+    }
+}
+
+/// Dataset statistics: inputs over nodes with a nonzero input vector, targets over masked nodes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Statistics {
+    /// Input statistics.
+    pub inputs: ChannelStats,
+    /// Target statistics.
+    pub targets: ChannelStats,
+}
+
+impl Statistics {
+    fn from_sums(s: &StatSums) -> Self {
+        Statistics {
+            inputs: ChannelStats::from_sums(s.input_nodes, &s.input_sum, &s.input_sum_sq),
+            targets: ChannelStats::from_sums(s.target_nodes, &s.target_sum, &s.target_sum_sq),
+        }
+    }
+}
+
+/// Global scales applied to inputs and targets before they reach the network: the network sees
+/// `input / input_scale` and predicts `target / target_scale`. One scale per field (not per
+/// channel) keeps vector directions; no offset keeps "no load" and "outside the organ" at zero.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Normalization {
+    /// Scale of the inputs (input unit).
+    pub input_scale: f64,
+    /// Scale of the targets (m).
+    pub target_scale: f64,
+}
+
+impl Normalization {
+    /// No scaling.
+    pub fn identity() -> Self {
+        Normalization { input_scale: 1.0, target_scale: 1.0 }
+    }
+
+    /// Scales from dataset statistics: the RMS norms of inputs and targets (1 where a field is
+    /// all zero).
+    pub fn from_statistics(stats: &Statistics) -> Self {
+        let positive = |x: f64| if x > 0.0 && x.is_finite() { x } else { 1.0 };
+        Normalization { input_scale: positive(stats.inputs.rms_norm), target_scale: positive(stats.targets.rms_norm) }
+    }
+
+    /// Scales from the statistics of `samples` alone (the training samples: nothing of the
+    /// validation or test samples may shape the model).
+    pub fn from_samples(samples: &Samples) -> Self {
+        Normalization::from_statistics(&samples.statistics())
+    }
+
+    /// Checks that both scales are finite and positive.
+    pub fn validate(&self) -> Result<()> {
+        for (name, x) in [("input_scale", self.input_scale), ("target_scale", self.target_scale)] {
+            if !(x > 0.0 && x.is_finite()) {
+                return Err(LearnError::InvalidInput(format!("normalization {name} must be finite and > 0, got {x}")));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One committed shard.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShardInfo {
+    /// Shard directory name (`shard_00000`).
+    pub name: String,
+    /// Number of samples.
+    pub num_samples: usize,
+    /// Generation index of each sample, increasing.
+    pub indices: Vec<u64>,
+    /// Inputs file, relative to the dataset directory.
+    pub inputs: String,
+    /// Targets file, relative to the dataset directory.
+    pub targets: String,
+    /// Masks file, relative to the dataset directory.
+    pub masks: String,
+    /// Sums for the statistics.
+    pub sums: StatSums,
+}
+
+/// The dataset manifest (`manifest.json`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Manifest layout version ([`VERSION`]).
+    pub version: u32,
+    /// Scenario name.
+    pub scenario: String,
+    /// Base random seed.
+    pub seed: u64,
+    /// Part written by this worker, if any.
+    pub part: Option<DatasetPart>,
+    /// The grid.
+    pub grid: GridShape,
+    /// Channels of inputs and targets (3).
+    pub channels: usize,
+    /// The tensor layout ([`LAYOUT`]).
+    pub layout: String,
+    /// Units of inputs and targets.
+    pub units: Units,
+    /// Samples per shard.
+    pub shard_size: usize,
+    /// Number of committed samples.
+    pub num_samples: usize,
+    /// First generation index not yet committed (samples and failures).
+    pub next_index: u64,
+    /// Whether the writer finished.
+    pub complete: bool,
+    /// Statistics over all committed samples.
+    pub statistics: Statistics,
+    /// Generation indices that failed.
+    pub failed: Vec<FailedSample>,
+    /// The shards, in index order.
+    pub shards: Vec<ShardInfo>,
+    /// Free-form scenario parameters.
+    pub metadata: serde_json::Value,
+}
+
+impl Manifest {
+    /// Where the grid lies in space, from the generator's metadata (`grid_origin`,
+    /// `grid_spacing`); `None` for datasets without them.
+    pub fn placement(&self) -> Option<GridPlacement> {
+        let get = |key: &str| serde_json::from_value::<[f64; 3]>(self.metadata.get(key)?.clone()).ok();
+        Some(GridPlacement { origin: get("grid_origin")?, spacing: get("grid_spacing")? })
+    }
+
+    /// Internal marker positions recorded by the generator (`markers` in the metadata: the
+    /// mesh's "markers" region); empty when there are none.
+    pub fn markers(&self) -> Vec<Point> {
+        self.metadata.get("markers").and_then(|m| serde_json::from_value(m.clone()).ok()).unwrap_or_default()
+    }
+
+    fn new(spec: &DatasetSpec) -> Self {
+        Manifest {
+            format: FORMAT.into(),
+            version: VERSION,
+            scenario: spec.scenario.clone(),
+            seed: spec.seed,
+            part: spec.part.clone(),
+            grid: spec.grid,
+            channels: CHANNELS,
+            layout: LAYOUT.into(),
+            units: Units { input: spec.input_unit.clone(), target: spec.target_unit.clone() },
+            shard_size: spec.shard_size,
+            num_samples: 0,
+            next_index: 0,
+            complete: false,
+            statistics: Statistics::default(),
+            failed: Vec::new(),
+            shards: Vec::new(),
+            metadata: spec.metadata.clone(),
+        }
+    }
+
+    /// Identifies where the samples come from: the scenario, seed, grid, units and generator
+    /// settings, but not the sample count, shard size or worker part. Two datasets with the same
+    /// source hold the same sample under the same generation index (a smaller dataset generated
+    /// with the same seed shares its first samples with a larger one).
+    pub fn source_id(&self) -> String {
+        let mut metadata = self.metadata.clone();
+        if let Some(config) = metadata.get_mut("dataset").and_then(|d| d.as_object_mut()) {
+            config.remove("samples");
+            config.remove("shard_size");
+        }
+        let key = serde_json::json!([self.grid, self.units, metadata]).to_string();
+        let hash = key.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3));
+        format!("{}/seed {}/{hash:016x}", self.scenario, self.seed)
+    }
+
+    /// The specification this dataset was created with.
+    pub fn spec(&self) -> DatasetSpec {
+        DatasetSpec {
+            scenario: self.scenario.clone(),
+            seed: self.seed,
+            part: self.part.clone(),
+            grid: self.grid,
+            input_unit: self.units.input.clone(),
+            target_unit: self.units.target.clone(),
+            shard_size: self.shard_size,
+            metadata: self.metadata.clone(),
+        }
+    }
+
+    /// Reads and validates a manifest file.
+    pub fn read(path: &Path) -> Result<Manifest> {
+        let text = std::fs::read_to_string(path).map_err(|e| LearnError::io(path, e))?;
+        let manifest: Manifest = serde_json::from_str(&text)
+            .map_err(|e| LearnError::manifest(path, format!("invalid manifest JSON: {e}")))?;
+        manifest.validate(path)?;
+        Ok(manifest)
+    }
+
+    fn write(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string_pretty(self)
+            .map_err(|e| LearnError::manifest(path, format!("cannot serialize manifest: {e}")))?;
+        Ok(write_atomic_bytes(path, text.as_bytes())?)
+    }
+
+    /// Checks internal consistency (not the shard files).
+    fn validate(&self, path: &Path) -> Result<()> {
+        let err = |m: String| Err(LearnError::manifest(path, m));
+        if self.format != FORMAT {
+            return err(format!("format is {:?}, expected {FORMAT:?}", self.format));
+        }
+        if self.version != VERSION {
+            return err(format!("manifest version {} is not supported (expected {VERSION})", self.version));
+        }
+        if self.channels != CHANNELS {
+            return err(format!("channels is {}, expected {CHANNELS}", self.channels));
+        }
+        if self.grid.nodes() == 0 {
+            return err(format!("grid {} has no nodes", self.grid));
+        }
+        if self.shard_size == 0 {
+            return err("shard_size is 0".into());
+        }
+        let mut total = 0;
+        let mut last: Option<u64> = None;
+        for shard in &self.shards {
+            if shard.indices.len() != shard.num_samples {
+                return err(format!(
+                    "shard {} lists {} indices for {} samples",
+                    shard.name,
+                    shard.indices.len(),
+                    shard.num_samples
+                ));
+            }
+            for file in [&shard.inputs, &shard.targets, &shard.masks] {
+                let p = Path::new(file);
+                if p.is_absolute() || p.components().any(|c| matches!(c, std::path::Component::ParentDir)) {
+                    return err(format!(
+                        "shard {} file {file:?} must be a relative path inside the dataset",
+                        shard.name
+                    ));
+                }
+            }
+            for &i in &shard.indices {
+                if last.is_some_and(|l| i <= l) {
+                    return err(format!("sample indices are not increasing at index {i} in shard {}", shard.name));
+                }
+                last = Some(i);
+            }
+            total += shard.num_samples;
+        }
+        if total != self.num_samples {
+            return err(format!("num_samples is {} but the shards hold {total}", self.num_samples));
+        }
+        let max_failed = self.failed.iter().map(|f| f.index).max();
+        if let Some(m) = last.into_iter().chain(max_failed).max() {
+            if m >= self.next_index {
+                return err(format!("next_index {} is not past the last recorded index {m}", self.next_index));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One sample: input field, target field (both `[3, nx, ny, nz]`) and mask (`[nx, ny, nz]`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sample {
+    /// Generation index.
+    pub index: u64,
+    /// Input field `C` (N or m).
+    pub input: Vec<f32>,
+    /// Target displacement `U` (m).
+    pub target: Vec<f32>,
+    /// Mask, 1 inside the organ.
+    pub mask: Vec<u8>,
+}
+
+impl Sample {
+    /// Checks lengths, finiteness and mask values against the grid.
+    pub fn validate(&self, grid: GridShape) -> Result<()> {
+        let bad = |m: String| Err(LearnError::InvalidInput(format!("sample {}: {m}", self.index)));
+        if self.input.len() != grid.field_len() {
+            return bad(format!("input has {} values, grid {grid} needs {}", self.input.len(), grid.field_len()));
+        }
+        if self.target.len() != grid.field_len() {
+            return bad(format!("target has {} values, grid {grid} needs {}", self.target.len(), grid.field_len()));
+        }
+        if self.mask.len() != grid.nodes() {
+            return bad(format!("mask has {} values, grid {grid} needs {}", self.mask.len(), grid.nodes()));
+        }
+        if let Some(x) = self.mask.iter().find(|&&m| m > 1) {
+            return bad(format!("mask value {x} is not 0 or 1"));
+        }
+        if self.input.iter().chain(&self.target).any(|x| !x.is_finite()) {
+            return bad("input or target has a non-finite value".into());
+        }
+        Ok(())
+    }
+}
+
+/// A set of samples in memory, stored contiguously in the shard layout.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Samples {
+    /// The grid.
+    pub grid: GridShape,
+    /// Generation index of each sample.
+    pub indices: Vec<u64>,
+    /// Inputs, `[N, 3, nx, ny, nz]`.
+    pub inputs: Vec<f32>,
+    /// Targets, `[N, 3, nx, ny, nz]`.
+    pub targets: Vec<f32>,
+    /// Masks, `[N, nx, ny, nz]`.
+    pub masks: Vec<u8>,
+    /// The data source of the samples ([`Manifest::source_id`]) when they come from a dataset:
+    /// with the generation indices, it tells which samples a model has already seen.
+    pub source: Option<String>,
+}
+
+impl Samples {
+    /// An empty set on `grid`, of no known source.
+    pub fn new(grid: GridShape) -> Self {
+        Samples { grid, indices: Vec::new(), inputs: Vec::new(), targets: Vec::new(), masks: Vec::new(), source: None }
+    }
+
+    /// Statistics of the samples (inputs over nodes with a nonzero input, targets over masked
+    /// nodes), as a manifest records them for a whole dataset.
+    pub fn statistics(&self) -> Statistics {
+        let mut sums = StatSums::default();
+        for i in 0..self.len() {
+            sums.add_sample(self.grid, self.input(i), self.target(i), self.mask(i));
+        }
+        Statistics::from_sums(&sums)
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.indices.len()
+    }
+
+    /// Whether there is no sample.
+    pub fn is_empty(&self) -> bool {
+        self.indices.is_empty()
+    }
+
+    /// Appends a sample after validating it.
+    pub fn push(&mut self, sample: &Sample) -> Result<()> {
+        sample.validate(self.grid)?;
+        self.indices.push(sample.index);
+        self.inputs.extend_from_slice(&sample.input);
+        self.targets.extend_from_slice(&sample.target);
+        self.masks.extend_from_slice(&sample.mask);
+        Ok(())
+    }
+
+    /// Input field of sample `i`.
+    pub fn input(&self, i: usize) -> &[f32] {
+        let n = self.grid.field_len();
+        &self.inputs[i * n..(i + 1) * n]
+    }
+
+    /// Target field of sample `i`.
+    pub fn target(&self, i: usize) -> &[f32] {
+        let n = self.grid.field_len();
+        &self.targets[i * n..(i + 1) * n]
+    }
+
+    /// Mask of sample `i`.
+    pub fn mask(&self, i: usize) -> &[u8] {
+        let n = self.grid.nodes();
+        &self.masks[i * n..(i + 1) * n]
+    }
+
+    /// Sample `i`, copied.
+    pub fn get(&self, i: usize) -> Sample {
+        Sample {
+            index: self.indices[i],
+            input: self.input(i).to_vec(),
+            target: self.target(i).to_vec(),
+            mask: self.mask(i).to_vec(),
+        }
+    }
+
+    /// The samples at the given positions, in that order.
+    pub fn select(&self, positions: &[usize]) -> Result<Samples> {
+        let mut out = Samples { source: self.source.clone(), ..Samples::new(self.grid) };
+        for &p in positions {
+            if p >= self.len() {
+                return Err(LearnError::InvalidInput(format!("sample position {p} out of range (len {})", self.len())));
+            }
+            out.indices.push(self.indices[p]);
+            out.inputs.extend_from_slice(self.input(p));
+            out.targets.extend_from_slice(self.target(p));
+            out.masks.extend_from_slice(self.mask(p));
+        }
+        Ok(out)
+    }
+
+    /// Splits into the first `n` samples and the rest (e.g. train / test).
+    pub fn split_at(mut self, n: usize) -> Result<(Samples, Samples)> {
+        if n > self.len() {
+            return Err(LearnError::InvalidInput(format!("cannot split {} samples at {n}", self.len())));
+        }
+        let (f, m) = (self.grid.field_len(), self.grid.nodes());
+        let rest = Samples {
+            grid: self.grid,
+            indices: self.indices.split_off(n),
+            inputs: self.inputs.split_off(n * f),
+            targets: self.targets.split_off(n * f),
+            masks: self.masks.split_off(n * m),
+            source: self.source.clone(),
+        };
+        Ok((self, rest))
+    }
+
+    /// Appends all samples of `other` (same grid; same source, unless `self` is empty).
+    pub fn append(&mut self, mut other: Samples) -> Result<()> {
+        if other.grid != self.grid {
+            return Err(LearnError::InvalidInput(format!(
+                "cannot append samples on grid {} to grid {}",
+                other.grid, self.grid
+            )));
+        }
+        if self.is_empty() {
+            self.source = other.source.take();
+        } else if other.source != self.source {
+            return Err(LearnError::InvalidInput(format!(
+                "cannot append samples of source {:?} to samples of source {:?}",
+                other.source, self.source
+            )));
+        }
+        self.indices.append(&mut other.indices);
+        self.inputs.append(&mut other.inputs);
+        self.targets.append(&mut other.targets);
+        self.masks.append(&mut other.masks);
+        Ok(())
+    }
+}
+
+/// Appends samples to shards of a dataset directory; resumable.
+///
+/// Samples (and failures) must come in increasing generation index. Every `shard_size` samples
+/// a shard is written and committed to the manifest; [`finish`](Self::finish) commits the last,
+/// partial shard and marks the dataset complete. After a crash, `create_or_resume` on the same
+/// directory with the same spec continues after the last committed index
+/// ([`resume_from`](Self::resume_from)); samples of the uncommitted shard are generated again.
+pub struct DatasetWriter {
+    dir: PathBuf,
+    manifest: Manifest,
+    pending: Samples,
+    pending_failures: Vec<FailedSample>,
+    last_index: Option<u64>,
+}
+
+impl DatasetWriter {
+    /// Creates a new dataset in `dir`, or resumes the unfinished one there (whose spec must equal
+    /// `spec`). A complete dataset in `dir` is an error.
+    pub fn create_or_resume(dir: &Path, spec: DatasetSpec) -> Result<DatasetWriter> {
+        if spec.shard_size == 0 {
+            return Err(LearnError::InvalidInput("shard_size must be at least 1".into()));
+        }
+        if spec.grid.nodes() == 0 {
+            return Err(LearnError::InvalidInput(format!("grid {} has no nodes", spec.grid)));
+        }
+        if let Some(part) = &spec.part {
+            if part.count == 0 || part.index >= part.count {
+                return Err(LearnError::InvalidInput(format!("invalid part {}/{}", part.index, part.count)));
+            }
+        }
+        let manifest_path = dir.join(MANIFEST_FILE);
+        let manifest = if manifest_path.exists() {
+            let dataset = Dataset::open(dir)?;
+            let existing = dataset.manifest.spec();
+            if existing != spec {
+                return Err(LearnError::manifest(
+                    &manifest_path,
+                    format!("cannot resume: the existing dataset was created with {existing:?}, not {spec:?}"),
+                ));
+            }
+            if dataset.manifest.complete {
+                return Err(LearnError::manifest(&manifest_path, "the dataset is already complete"));
+            }
+            dataset.check_files()?;
+            dataset.manifest
+        } else {
+            std::fs::create_dir_all(dir).map_err(|e| LearnError::io(dir, e))?;
+            let manifest = Manifest::new(&spec);
+            manifest.write(&manifest_path)?;
+            manifest
+        };
+        let last_index = manifest.next_index.checked_sub(1);
+        Ok(DatasetWriter {
+            dir: dir.to_path_buf(),
+            pending: Samples::new(manifest.grid),
+            manifest,
+            pending_failures: Vec::new(),
+            last_index,
+        })
+    }
+
+    /// First generation index not yet committed: where a resumed generation starts.
+    pub fn resume_from(&self) -> u64 {
+        self.manifest.next_index
+    }
+
+    /// The manifest as committed so far.
+    pub fn manifest(&self) -> &Manifest {
+        &self.manifest
+    }
+
+    fn check_order(&self, index: u64) -> Result<()> {
+        if self.last_index.is_some_and(|l| index <= l) {
+            return Err(LearnError::InvalidInput(format!(
+                "generation index {index} is not after the previous one ({})",
+                self.last_index.unwrap_or_default()
+            )));
+        }
+        Ok(())
+    }
+
+    /// Appends a sample; writes a shard when `shard_size` samples are pending.
+    pub fn push(&mut self, sample: &Sample) -> Result<()> {
+        self.check_order(sample.index)?;
+        self.pending.push(sample)?;
+        self.last_index = Some(sample.index);
+        if self.pending.len() == self.manifest.shard_size {
+            self.commit()?;
+        }
+        Ok(())
+    }
+
+    /// Records that generation index `index` failed (committed with the next shard).
+    pub fn push_failure(&mut self, index: u64, reason: impl Into<String>) -> Result<()> {
+        self.check_order(index)?;
+        self.pending_failures.push(FailedSample { index, reason: reason.into() });
+        self.last_index = Some(index);
+        Ok(())
+    }
+
+    /// Writes the pending samples as a new shard (if any) and commits the manifest.
+    fn commit(&mut self) -> Result<()> {
+        if !self.pending.is_empty() {
+            let name = format!("shard_{:05}", self.manifest.shards.len());
+            let grid = self.manifest.grid;
+            let n = self.pending.len();
+            let [nx, ny, nz] = grid.dims();
+            let info = ShardInfo {
+                inputs: format!("{name}/inputs.npy"),
+                targets: format!("{name}/targets.npy"),
+                masks: format!("{name}/masks.npy"),
+                num_samples: n,
+                indices: self.pending.indices.clone(),
+                sums: {
+                    let mut s = StatSums::default();
+                    for i in 0..n {
+                        s.add_sample(grid, self.pending.input(i), self.pending.target(i), self.pending.mask(i));
+                    }
+                    s
+                },
+                name,
+            };
+            npy::write_f32(&self.dir.join(&info.inputs), &[n, CHANNELS, nx, ny, nz], &self.pending.inputs)?;
+            npy::write_f32(&self.dir.join(&info.targets), &[n, CHANNELS, nx, ny, nz], &self.pending.targets)?;
+            npy::write_u8(&self.dir.join(&info.masks), &[n, nx, ny, nz], &self.pending.masks)?;
+            self.manifest.num_samples += n;
+            self.manifest.shards.push(info);
+            self.pending = Samples::new(grid);
+        }
+        self.manifest.failed.append(&mut self.pending_failures);
+        if let Some(last) = self.last_index {
+            self.manifest.next_index = last + 1;
+        }
+        let mut sums = StatSums::default();
+        for shard in &self.manifest.shards {
+            sums.add(&shard.sums);
+        }
+        self.manifest.statistics = Statistics::from_sums(&sums);
+        self.manifest.write(&self.dir.join(MANIFEST_FILE))
+    }
+
+    /// Commits what is pending and marks the dataset complete.
+    pub fn finish(mut self) -> Result<Manifest> {
+        self.manifest.complete = true;
+        self.commit()?;
+        Ok(self.manifest)
+    }
+}
+
+/// A dataset directory opened for reading.
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    dir: PathBuf,
+    manifest: Manifest,
+}
+
+impl Dataset {
+    /// Opens the dataset in `dir` (reads and validates the manifest).
+    pub fn open(dir: &Path) -> Result<Dataset> {
+        let manifest = Manifest::read(&dir.join(MANIFEST_FILE))?;
+        Ok(Dataset { dir: dir.to_path_buf(), manifest })
+    }
+
+    /// The manifest.
+    pub fn manifest(&self) -> &Manifest {
+        &self.manifest
+    }
+
+    /// The dataset directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.manifest.num_samples
+    }
+
+    /// Whether the dataset holds no sample.
+    pub fn is_empty(&self) -> bool {
+        self.manifest.num_samples == 0
+    }
+
+    /// Checks that every shard file exists with the shape the manifest gives (headers only).
+    pub fn check_files(&self) -> Result<()> {
+        for shard in &self.manifest.shards {
+            for (file, shape) in self.expected_shapes(shard) {
+                let path = self.dir.join(file);
+                let found = npy::read_shape(&path)?;
+                if found != shape {
+                    return Err(shape_error(&path, &shape, &found));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn expected_shapes<'a>(&self, shard: &'a ShardInfo) -> [(&'a str, Vec<usize>); 3] {
+        let [nx, ny, nz] = self.manifest.grid.dims();
+        let n = shard.num_samples;
+        [
+            (shard.inputs.as_str(), vec![n, CHANNELS, nx, ny, nz]),
+            (shard.targets.as_str(), vec![n, CHANNELS, nx, ny, nz]),
+            (shard.masks.as_str(), vec![n, nx, ny, nz]),
+        ]
+    }
+
+    /// Loads shard `shard` (its position in the manifest).
+    pub fn load_shard(&self, shard: usize) -> Result<Samples> {
+        let info = self.manifest.shards.get(shard).ok_or_else(|| {
+            LearnError::InvalidInput(format!("shard {shard} out of range ({} shards)", self.manifest.shards.len()))
+        })?;
+        let [inputs, targets, masks] = self.expected_shapes(info).map(|(file, shape)| {
+            let path = self.dir.join(file);
+            npy::read_npy(&path).and_then(|a| {
+                if a.shape != shape {
+                    Err(shape_error(&path, &shape, &a.shape))
+                } else {
+                    Ok((path, a))
+                }
+            })
+        });
+        let (_, inputs) = inputs?;
+        let (_, targets) = targets?;
+        let (mask_path, masks) = masks?;
+        let samples = Samples {
+            grid: self.manifest.grid,
+            indices: info.indices.clone(),
+            inputs: inputs.into_f32(),
+            targets: targets.into_f32(),
+            masks: masks.into_mask(&mask_path)?,
+            source: Some(self.manifest.source_id()),
+        };
+        Ok(samples)
+    }
+
+    /// Loads every sample, in index order.
+    pub fn load_all(&self) -> Result<Samples> {
+        self.load_range(0..self.len())
+    }
+
+    /// Loads the samples at positions `range` (0-based over the whole dataset, in index order),
+    /// reading only the shards that overlap it.
+    pub fn load_range(&self, range: Range<usize>) -> Result<Samples> {
+        if range.start > range.end || range.end > self.len() {
+            return Err(LearnError::InvalidInput(format!(
+                "sample range {range:?} is out of the dataset's {} samples ({})",
+                self.len(),
+                self.dir.display()
+            )));
+        }
+        let mut out = Samples { source: Some(self.manifest.source_id()), ..Samples::new(self.manifest.grid) };
+        let mut start = 0;
+        for (s, shard) in self.manifest.shards.iter().enumerate() {
+            let end = start + shard.num_samples;
+            let lo = range.start.max(start);
+            let hi = range.end.min(end);
+            if lo < hi {
+                let loaded = self.load_shard(s)?;
+                let part = if lo == start && hi == end {
+                    loaded
+                } else {
+                    loaded.select(&((lo - start)..(hi - start)).collect::<Vec<_>>())?
+                };
+                out.append(part)?;
+            }
+            start = end;
+        }
+        Ok(out)
+    }
+}
+
+fn shape_error(path: &Path, expected: &[usize], found: &[usize]) -> LearnError {
+    LearnError::manifest(path, format!("array shape {found:?} does not match the manifest, which gives {expected:?}"))
+}
+
+/// Streams the samples and failures of one complete dataset in index order.
+struct MergeCursor {
+    dataset: Dataset,
+    next_shard: usize,
+    loaded: Option<Samples>,
+    position: usize,
+    failures: std::vec::IntoIter<FailedSample>,
+    next_failure: Option<FailedSample>,
+}
+
+enum MergeItem {
+    Sample(Sample),
+    Failure(FailedSample),
+}
+
+impl MergeCursor {
+    fn new(dataset: Dataset) -> Self {
+        let mut failures = dataset.manifest.failed.clone();
+        failures.sort_by_key(|f| f.index);
+        let mut failures = failures.into_iter();
+        let next_failure = failures.next();
+        MergeCursor { dataset, next_shard: 0, loaded: None, position: 0, failures, next_failure }
+    }
+
+    /// Index of the next pending sample, loading shards as needed.
+    fn peek_sample(&mut self) -> Result<Option<u64>> {
+        loop {
+            if let Some(s) = &self.loaded {
+                if self.position < s.len() {
+                    return Ok(Some(s.indices[self.position]));
+                }
+            }
+            if self.next_shard >= self.dataset.manifest.shards.len() {
+                return Ok(None);
+            }
+            self.loaded = Some(self.dataset.load_shard(self.next_shard)?);
+            self.next_shard += 1;
+            self.position = 0;
+        }
+    }
+
+    fn peek(&mut self) -> Result<Option<u64>> {
+        let sample = self.peek_sample()?;
+        let failure = self.next_failure.as_ref().map(|f| f.index);
+        Ok(match (sample, failure) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        })
+    }
+
+    fn pop(&mut self) -> Result<Option<MergeItem>> {
+        let sample = self.peek_sample()?;
+        let failure = self.next_failure.as_ref().map(|f| f.index);
+        match (sample, failure) {
+            (Some(s), f) if f.is_none_or(|f| s < f) => {
+                let loaded = self.loaded.as_ref().expect("peek_sample loaded a shard");
+                let item = loaded.get(self.position);
+                self.position += 1;
+                Ok(Some(MergeItem::Sample(item)))
+            }
+            (_, Some(_)) => {
+                let f = self.next_failure.take().expect("failure present");
+                self.next_failure = self.failures.next();
+                Ok(Some(MergeItem::Failure(f)))
+            }
+            _ => Ok(None),
+        }
+    }
+}
+
+/// Merges complete datasets written by parallel workers (`--shard i/n`) into a new dataset
+/// `out`, in generation-index order, re-sharded with `shard_size` (default: the first part's).
+/// The parts must agree on scenario, seed, grid, units and metadata, and no generation index
+/// may appear twice. The result equals what a single worker would have written.
+pub fn merge_datasets(parts: &[PathBuf], out: &Path, shard_size: Option<usize>) -> Result<Manifest> {
+    if parts.is_empty() {
+        return Err(LearnError::InvalidInput("merge needs at least one dataset".into()));
+    }
+    if out.join(MANIFEST_FILE).exists() {
+        return Err(LearnError::manifest(out.join(MANIFEST_FILE), "merge output already holds a dataset"));
+    }
+    let datasets = parts.iter().map(|p| Dataset::open(p)).collect::<Result<Vec<_>>>()?;
+    let first = datasets[0].manifest.spec();
+    for (path, d) in parts.iter().zip(&datasets) {
+        let m = &d.manifest;
+        let manifest_path = path.join(MANIFEST_FILE);
+        if !m.complete {
+            return Err(LearnError::manifest(
+                &manifest_path,
+                "dataset is not complete; finish or resume its generation first",
+            ));
+        }
+        let spec = m.spec();
+        let same = spec.scenario == first.scenario
+            && spec.seed == first.seed
+            && spec.grid == first.grid
+            && spec.input_unit == first.input_unit
+            && spec.target_unit == first.target_unit
+            && spec.metadata == first.metadata;
+        if !same {
+            return Err(LearnError::manifest(
+                &manifest_path,
+                format!(
+                    "dataset does not match the first one ({}): scenario, seed, grid, units and metadata must agree",
+                    parts[0].display()
+                ),
+            ));
+        }
+    }
+    let spec = DatasetSpec { part: None, shard_size: shard_size.unwrap_or(first.shard_size), ..first };
+    let mut writer = DatasetWriter::create_or_resume(out, spec)?;
+    let mut cursors: Vec<MergeCursor> = datasets.into_iter().map(MergeCursor::new).collect();
+    let mut last: Option<(u64, usize)> = None;
+    loop {
+        let mut best: Option<(u64, usize)> = None;
+        for (c, cursor) in cursors.iter_mut().enumerate() {
+            if let Some(i) = cursor.peek()? {
+                if best.is_none_or(|(b, _)| i < b) {
+                    best = Some((i, c));
+                }
+            }
+        }
+        let Some((index, c)) = best else { break };
+        if let Some((prev, pc)) = last {
+            if prev == index {
+                return Err(LearnError::manifest(
+                    parts[c].join(MANIFEST_FILE),
+                    format!("generation index {index} also appears in {}", parts[pc].display()),
+                ));
+            }
+        }
+        last = Some((index, c));
+        match cursors[c].pop()? {
+            Some(MergeItem::Sample(s)) => writer.push(&s)?,
+            Some(MergeItem::Failure(f)) => writer.push_failure(f.index, f.reason)?,
+            None => break,
+        }
+    }
+    writer.finish()
+}

@@ -1,0 +1,654 @@
+//! Dataset generation: random loads solved by the FEM model, encoded on a
+//! regular grid as (input C, target U, mask) samples.
+//!
+//! Each sample `i` draws its loads from a generator seeded by the dataset seed
+//! and `i` alone, so a resumed, split (`part i/n`) or re-ordered generation
+//! produces the same samples. Samples are solved in parallel (rayon) by blocks
+//! of [`BLOCK`] consecutive indices: a block's samples are solved in index order
+//! by solvers created for that block (one per fixed set), which keep their
+//! symbolic analysis and factorisations from one solve to the next. A sample's
+//! solution thus depends on its index alone, bit for bit, whatever the number
+//! of threads and wherever a resumed or split generation starts (it solves the
+//! block's earlier samples again first). A sample whose solve fails is recorded
+//! in the manifest with its reason.
+
+use std::collections::HashMap;
+use std::ops::Range;
+use std::path::Path;
+
+use fem::{Material, Problem, SolverOptions, StaticSolver};
+use mesh::embedding::{Embedding, Grid};
+use mesh::{Mesh, NodeSelection, Point};
+use rand::seq::index::sample as sample_indices;
+use rand::Rng;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::data::corrupt::item_rng;
+use crate::data::dataset::{DatasetPart, DatasetSpec, DatasetWriter, Manifest, Sample};
+use crate::data::grid::{encode_points, GridPlacement, GridShape};
+use crate::{LearnError, Result};
+
+/// Stream number of the load generator in [`item_rng`].
+const LOAD_STREAM: u64 = 1;
+
+/// Samples per block: indices `b * BLOCK..(b + 1) * BLOCK` are solved in order by
+/// the solvers of block `b` (independent of the thread count).
+const BLOCK: u64 = 32;
+
+/// How a dataset is generated (the `[dataset]` table of a scenario file).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetConfig {
+    /// Number of samples (generation indices `0..samples`).
+    pub samples: usize,
+    /// Base random seed.
+    #[serde(default)]
+    pub seed: u64,
+    /// Samples per shard file.
+    #[serde(default = "default_shard_size")]
+    pub shard_size: usize,
+    /// Grid nodes along x, y, z for a tetrahedral organ (embedded grid over its
+    /// bounding box). Omitted for meshes whose nodes lie on a regular lattice
+    /// (a box of hexahedra, an immersed grid): the lattice is the grid.
+    pub grid: Option<[usize; 3]>,
+    /// Alternative fixed node sets: each sample fixes one, drawn uniformly
+    /// (one entry: always the same; e.g. the BC1/BC4/BC8 sets of DESIGN scenario 3).
+    pub fixed: Vec<NodeSelection>,
+    /// The random loads.
+    pub load: Load,
+    /// Adds a body force ρ·a to every sample, `a` of uniformly random direction and of
+    /// magnitude drawn in this range (m/s²): gravity's pull on an organ whose supports and
+    /// orientation changed since the preoperative scan (e.g. `[0.0, 9.81]`).
+    /// Left out of the manifest when absent, so that a dataset without gravity keeps the source
+    /// identity ([`crate::Manifest::source_id`]) it had before the option existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gravity: Option<[f64; 2]>,
+    /// What the network sees.
+    pub input: Input,
+}
+
+fn default_shard_size() -> usize {
+    100
+}
+
+/// Random loads of one sample.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum Load {
+    /// One force along the inward surface normal at a random centre node (or within a cone
+    /// around it), of random magnitude, shared by the surface nodes
+    /// ([`mesh::Mesh::surface_nodes`]) within `radius` of the centre in proportion to their
+    /// material share ([`mesh::Mesh::node_material_share`]: equal shares on a body-fitted
+    /// mesh; little for immersed-grid nodes outside the organ).
+    PatchForce {
+        /// Nodes the patch centre is drawn from (default: surface nodes that are not fixed).
+        centres: Option<NodeSelection>,
+        /// Patch radius (m).
+        radius: f64,
+        /// Range of the total force magnitude (N).
+        magnitude: [f64; 2],
+        /// Half-angle (degrees, 0–180) of the cone around the inward normal the force's
+        /// direction is drawn from, uniformly over its solid angle: oblique pushes, and pulls
+        /// beyond 90°. Absent: along the inward normal (no draw, so that datasets without it
+        /// keep their samples).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        cone: Option<f64>,
+    },
+    /// A surgical tool pressing the surface: the surface nodes within `radius` of a random
+    /// centre node are moved by a random depth along the inward normal at the centre
+    /// (prescribed displacements, the tool's face sticking to the tissue).
+    Tool {
+        /// Nodes the tool's centre is drawn from (default: surface nodes that are not fixed).
+        centres: Option<NodeSelection>,
+        /// Radius of the tool's face (m).
+        radius: f64,
+        /// Range of the indentation depth (m).
+        depth: [f64; 2],
+    },
+    /// One of these loads (none of them `any`), drawn uniformly for each sample: e.g. tool
+    /// presses and force pushes, so that a network meets both kinds of dent.
+    Any(Vec<Load>),
+    /// `count` simultaneous forces of random direction and magnitude on distinct random nodes.
+    PointForces {
+        /// Nodes the loaded nodes are drawn from.
+        nodes: NodeSelection,
+        /// Number of loaded nodes.
+        count: usize,
+        /// Range of each force's magnitude (N).
+        magnitude: [f64; 2],
+    },
+}
+
+/// The network input of a sample.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum Input {
+    /// The applied nodal forces (N), spread to the grid by the adjoint of
+    /// trilinear interpolation (total force preserved).
+    Force,
+    /// The displacement (m) of the observed nodes, optionally of a random
+    /// connected sub-domain of them only.
+    Displacement {
+        /// Observed nodes (e.g. the visible surface).
+        nodes: NodeSelection,
+        /// Keep only a random sub-domain of between `sparse[0]` and `sparse[1]`
+        /// observed nodes: those nearest to a random observed node.
+        sparse: Option<[usize; 2]>,
+        /// Keep only each observed node's displacement along the outward normal of the rest
+        /// surface there, `(u·n) n`: what matching the organ's surface to a camera's point
+        /// cloud measures (closest points give no tangential motion). The network then learns
+        /// the tangential surface motion and the volume from the normal motion alone.
+        #[serde(default)]
+        normal: bool,
+    },
+}
+
+/// The FEM model and grid encoding shared by all samples.
+pub struct Generator {
+    mesh: Mesh,
+    material: Material,
+    solver_options: SolverOptions,
+    config: DatasetConfig,
+    fixed_sets: Vec<Vec<usize>>,
+    /// The loads a sample draws from (one, or the alternatives of [`Load::Any`]).
+    loads: Vec<LoadNodes>,
+    normals: Vec<[f64; 3]>,
+    /// Each node's share of material, weighting the patch force.
+    material_share: Vec<f64>,
+    /// The range of the body acceleration and each node's mass (kg).
+    gravity: Option<([f64; 2], Vec<f64>)>,
+    observed: Vec<usize>,
+    encoding: Encoding,
+    grid: GridShape,
+    placement: GridPlacement,
+    mask: Vec<u8>,
+}
+
+/// A load and the nodes it draws from.
+struct LoadNodes {
+    load: Load,
+    /// Nodes a patch centre is drawn from (patch loads only).
+    centres: Vec<usize>,
+    /// Nodes a load may act on.
+    nodes: Vec<usize>,
+}
+
+impl LoadNodes {
+    /// Checks `load` against the mesh and selects its nodes (`select` resolves a selection).
+    fn new(
+        load: &Load,
+        mesh: &Mesh,
+        fixed_sets: &[Vec<usize>],
+        select: &dyn Fn(&NodeSelection) -> Result<Vec<usize>>,
+    ) -> Result<LoadNodes> {
+        if let Load::PatchForce { cone: Some(cone), .. } = load {
+            if !(0.0..=180.0).contains(cone) {
+                return Err(invalid(format!("cone half-angle must lie in 0–180 degrees, got {cone}")));
+            }
+        }
+        let (centres, nodes) = match load {
+            Load::PatchForce { centres, radius, magnitude: range, .. }
+            | Load::Tool { centres, radius, depth: range } => {
+                check_range(range, if matches!(load, Load::Tool { .. }) { "depth" } else { "magnitude" })?;
+                if !(*radius > 0.0) {
+                    return Err(invalid(format!("patch radius must be positive, got {radius}")));
+                }
+                // Where a tool can push: the organ's surface (on an immersed grid, its cut cells' nodes).
+                let surface = mesh.surface_nodes();
+                let c: Vec<usize> = match centres {
+                    Some(s) => select(s)?,
+                    None => surface
+                        .iter()
+                        .copied()
+                        .filter(|n| fixed_sets.iter().all(|f| f.binary_search(n).is_err()))
+                        .collect(),
+                };
+                if c.is_empty() {
+                    return Err(invalid("no candidate node for the patch centre"));
+                }
+                (c, surface)
+            }
+            Load::PointForces { nodes, count, magnitude } => {
+                check_range(magnitude, "magnitude")?;
+                let n = select(nodes)?;
+                if *count == 0 || *count > n.len() {
+                    return Err(invalid(format!("cannot load {count} distinct nodes out of {}", n.len())));
+                }
+                (Vec::new(), n)
+            }
+            Load::Any(_) => return Err(invalid("`any` lists single loads, not other `any`")),
+        };
+        Ok(LoadNodes { load: load.clone(), centres, nodes })
+    }
+}
+
+/// How nodal fields reach the grid.
+enum Encoding {
+    /// Mesh node n is grid node `node[n]` (flat index i*ny*nz + j*nz + k).
+    Lattice(Vec<usize>),
+    /// A tetrahedral mesh embedded in a grid (`embedding.grid`).
+    Embedded(Embedding),
+}
+
+/// The part of `u` along the unit vector `n`: `(u·n) n`.
+pub fn normal_part(u: &[f64], n: [f64; 3]) -> [f64; 3] {
+    let along = u[0] * n[0] + u[1] * n[1] + u[2] * n[2];
+    n.map(|c| along * c)
+}
+
+fn invalid(msg: impl Into<String>) -> LearnError {
+    LearnError::InvalidInput(msg.into())
+}
+
+impl Generator {
+    /// Prepares the encoding and node sets; checks the configuration against the mesh.
+    pub fn new(mesh: Mesh, material: Material, solver_options: SolverOptions, config: DatasetConfig) -> Result<Self> {
+        if config.samples == 0 {
+            return Err(invalid("a dataset needs at least one sample"));
+        }
+        if config.fixed.is_empty() {
+            return Err(invalid("at least one fixed node set is needed (a free organ has rigid-body modes)"));
+        }
+        let select = |s: &NodeSelection| s.select(&mesh).map_err(|e| invalid(format!("selection {s:?}: {e}")));
+        // Selections are sorted and free of repeats: membership tests below use binary search.
+        let fixed_sets = config.fixed.iter().map(select).collect::<Result<Vec<_>>>()?;
+        let normals = mesh.surface_normals();
+        let loads = match &config.load {
+            Load::Any(list) if list.is_empty() => return Err(invalid("`any` needs at least one load")),
+            Load::Any(list) => list.iter().map(|l| LoadNodes::new(l, &mesh, &fixed_sets, &select)).collect(),
+            one => LoadNodes::new(one, &mesh, &fixed_sets, &select).map(|l| vec![l]),
+        }?;
+        let observed = match &config.input {
+            Input::Force => Vec::new(),
+            Input::Displacement { nodes, sparse, .. } => {
+                let o = select(nodes)?;
+                if let Some([lo, hi]) = sparse {
+                    if lo > hi || *lo == 0 || *hi > o.len() {
+                        return Err(invalid(format!("sparse range [{lo}, {hi}] must lie in [1, {}]", o.len())));
+                    }
+                }
+                o
+            }
+        };
+        let (encoding, grid, placement) = match config.grid {
+            None => lattice_encoding(&mesh)?,
+            Some(dims) => embedded_encoding(&mesh, dims)?,
+        };
+        let mut mask = vec![0u8; grid.nodes()];
+        match &encoding {
+            Encoding::Lattice(node) => node.iter().for_each(|&g| mask[g] = 1),
+            Encoding::Embedded(embedding) => {
+                embedding.mask().iter().enumerate().filter(|(_, &b)| b).for_each(|(g, _)| mask[g] = 1)
+            }
+        }
+        let material_share = mesh.node_material_share();
+        let gravity = match config.gravity {
+            Some(range) => {
+                check_range(&range, "gravity")?;
+                Some((range, fem::nodal_masses(&mesh, material.density).map_err(|e| invalid(e.to_string()))?))
+            }
+            None => None,
+        };
+        Ok(Generator {
+            mesh,
+            material,
+            solver_options,
+            config,
+            fixed_sets,
+            loads,
+            normals,
+            material_share,
+            gravity,
+            observed,
+            encoding,
+            grid,
+            placement,
+            mask,
+        })
+    }
+
+    /// The grid shape of the samples.
+    pub fn grid(&self) -> GridShape {
+        self.grid
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &DatasetConfig {
+        &self.config
+    }
+
+    /// The mask of grid nodes inside the organ (1 inside, 0 outside).
+    pub fn mask(&self) -> &[u8] {
+        &self.mask
+    }
+
+    /// Encodes a nodal vector field (3 per mesh node) on the grid.
+    /// Forces are spread (sum-preserving); displacements are interpolated.
+    pub fn encode(&self, field: &[f64], is_force: bool) -> Result<Vec<f32>> {
+        let n = self.grid.nodes();
+        let mut out = vec![0f32; 3 * n];
+        match &self.encoding {
+            Encoding::Lattice(node) => {
+                for (m, &g) in node.iter().enumerate() {
+                    for c in 0..3 {
+                        out[c * n + g] = field[3 * m + c] as f32;
+                    }
+                }
+            }
+            Encoding::Embedded(embedding) => {
+                if is_force {
+                    let forces: Vec<[f64; 3]> = field.chunks_exact(3).map(|f| [f[0], f[1], f[2]]).collect();
+                    out = encode_points(&embedding.grid, &self.mesh.nodes, &forces, true)?;
+                } else {
+                    let grid_field = embedding.map_nodal(field, 3).map_err(|e| invalid(e.to_string()))?;
+                    out.iter_mut().zip(&grid_field).for_each(|(o, v)| *o = *v as f32);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    fn problem(&self, fixed: usize) -> Problem {
+        let mut p = Problem::new(self.mesh.clone(), self.material);
+        p.fix(&self.fixed_sets[fixed]);
+        p
+    }
+
+    /// Generates sample `index`: draws loads, solves, encodes.
+    /// `solvers` caches one solver per fixed set for the block of `index`.
+    fn sample(&self, index: u64, solvers: &mut HashMap<usize, StaticSolver>) -> std::result::Result<Sample, String> {
+        let mut rng = item_rng(self.config.seed, LOAD_STREAM, index);
+        let fixed = rng.random_range(0..self.fixed_sets.len());
+        let nn = self.mesh.num_nodes();
+        let mut f = vec![0.0; 3 * nn];
+        // Nodes moved by a tool, and by how much.
+        let mut tool = None;
+        // A draw among alternatives only: a single load's samples stay those of before `any`.
+        let loads = &self.loads[if self.loads.len() > 1 { rng.random_range(0..self.loads.len()) } else { 0 }];
+        match &loads.load {
+            Load::PatchForce { radius, magnitude, cone, .. } => {
+                let (centre, patch) = self.patch(loads, &mut rng, *radius, fixed)?;
+                let mag = rng.random_range(magnitude[0]..=magnitude[1]);
+                // The force pushes along −outward: the outward normal, or a direction within the cone around it.
+                let outward = match cone {
+                    Some(cone) => direction_in_cone(&mut rng, self.normals[centre], cone.to_radians()),
+                    None => self.normals[centre],
+                };
+                let total: f64 = patch.iter().map(|&n| self.material_share[n]).sum();
+                if !(total > 0.0) {
+                    return Err(format!("the patch around node {centre} has no material"));
+                }
+                for &n in &patch {
+                    for d in 0..3 {
+                        f[3 * n + d] -= mag * outward[d] * self.material_share[n] / total;
+                    }
+                }
+            }
+            Load::Tool { radius, depth, .. } => {
+                let (centre, patch) = self.patch(loads, &mut rng, *radius, fixed)?;
+                let depth = rng.random_range(depth[0]..=depth[1]);
+                tool = Some((patch, self.normals[centre].map(|c| -depth * c)));
+            }
+            Load::PointForces { count, magnitude, .. } => {
+                for k in sample_indices(&mut rng, loads.nodes.len(), *count) {
+                    let n = loads.nodes[k];
+                    let dir = random_unit(&mut rng);
+                    let mag = rng.random_range(magnitude[0]..=magnitude[1]);
+                    for d in 0..3 {
+                        f[3 * n + d] += mag * dir[d];
+                    }
+                }
+            }
+            Load::Any(_) => unreachable!("alternatives are resolved in Generator::new"),
+        }
+        if let Some((range, masses)) = &self.gravity {
+            let direction = random_unit(&mut rng);
+            let a = rng.random_range(range[0]..=range[1]);
+            for (f, m) in f.chunks_exact_mut(3).zip(masses) {
+                (0..3).for_each(|d| f[d] += a * direction[d] * m);
+            }
+        }
+        let observed = match &self.config.input {
+            Input::Displacement { sparse: Some([lo, hi]), .. } => {
+                let count = rng.random_range(*lo..=*hi);
+                let seed = self.mesh.nodes[self.observed[rng.random_range(0..self.observed.len())]];
+                mesh::select::k_nearest(&self.mesh.nodes, self.observed.iter().copied(), seed, count)
+            }
+            _ => self.observed.clone(),
+        };
+        let solution = match tool {
+            // The tool's nodes change from one sample to the next, and with them the system's
+            // pattern: a solver of its own.
+            Some((nodes, displacement)) => {
+                let mut problem = self.problem(fixed);
+                problem.prescribe(&nodes, displacement);
+                problem.f_ext.copy_from_slice(&f);
+                StaticSolver::new(problem).and_then(|mut s| s.solve(&self.solver_options))
+            }
+            None => {
+                let solver = match solvers.entry(fixed) {
+                    std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+                    std::collections::hash_map::Entry::Vacant(v) => {
+                        v.insert(StaticSolver::new(self.problem(fixed)).map_err(|e| e.to_string())?)
+                    }
+                };
+                solver.problem_mut().f_ext.copy_from_slice(&f);
+                solver.solve(&self.solver_options)
+            }
+        }
+        .map_err(|e| e.to_string())?;
+        let input = match &self.config.input {
+            Input::Force => self.encode(&f, true),
+            Input::Displacement { normal, .. } => {
+                let mut partial = vec![0.0; 3 * nn];
+                for &n in &observed {
+                    let u = &solution.u[3 * n..3 * n + 3];
+                    let kept = if *normal { normal_part(u, self.normals[n]) } else { [u[0], u[1], u[2]] };
+                    partial[3 * n..3 * n + 3].copy_from_slice(&kept);
+                }
+                self.encode_observed(&partial, &observed)
+            }
+        }
+        .map_err(|e| e.to_string())?;
+        let target = self.encode(&solution.u, false).map_err(|e| e.to_string())?;
+        Ok(Sample { index, input, target, mask: self.mask.clone() })
+    }
+
+    /// Draws a patch of `load`: a random centre and its free nodes within `radius` of it.
+    fn patch(
+        &self,
+        load: &LoadNodes,
+        rng: &mut impl Rng,
+        radius: f64,
+        fixed: usize,
+    ) -> std::result::Result<(usize, Vec<usize>), String> {
+        let centre = load.centres[rng.random_range(0..load.centres.len())];
+        let c = self.mesh.nodes[centre];
+        let patch: Vec<usize> = load
+            .nodes
+            .iter()
+            .copied()
+            .filter(|&n| {
+                let d = mesh::sub(self.mesh.nodes[n], c);
+                mesh::dot(d, d) <= radius * radius
+            })
+            .filter(|n| self.fixed_sets[fixed].binary_search(n).is_err())
+            .collect();
+        if patch.is_empty() {
+            return Err(format!("the patch around node {centre} has no free surface node"));
+        }
+        Ok((centre, patch))
+    }
+
+    /// Generates the indices of block `block` that lie in `keep`, in order. All the
+    /// block's samples before `keep.end` are solved, in order and by solvers created
+    /// here, so that each solution depends on its index alone.
+    fn block(&self, block: u64, keep: &Range<u64>) -> Vec<(u64, std::result::Result<Sample, String>)> {
+        let mut solvers = HashMap::new();
+        let mut out = Vec::new();
+        for i in block * BLOCK..((block + 1) * BLOCK).min(keep.end) {
+            let sample = self.sample(i, &mut solvers);
+            if i >= keep.start {
+                out.push((i, sample));
+            }
+        }
+        out
+    }
+
+    /// Displacements of observed nodes only, on the grid: exact on a lattice; for an
+    /// embedded mesh see [`encode_points`] (nearest grid node, averaged).
+    fn encode_observed(&self, partial: &[f64], observed: &[usize]) -> Result<Vec<f32>> {
+        match &self.encoding {
+            Encoding::Lattice(_) => self.encode(partial, false),
+            Encoding::Embedded(embedding) => {
+                let points: Vec<Point> = observed.iter().map(|&m| self.mesh.nodes[m]).collect();
+                let values: Vec<[f64; 3]> =
+                    observed.iter().map(|&m| [partial[3 * m], partial[3 * m + 1], partial[3 * m + 2]]).collect();
+                encode_points(&embedding.grid, &points, &values, false)
+            }
+        }
+    }
+
+    /// Generates indices `range` into `dir` (resuming an unfinished dataset
+    /// there), calling `progress(done, total)` after each batch.
+    pub fn run(
+        &self,
+        dir: &Path,
+        name: &str,
+        part: Option<DatasetPart>,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<Manifest> {
+        let range = part_range(self.config.samples, part.as_ref())?;
+        let spec = DatasetSpec {
+            scenario: name.to_string(),
+            seed: self.config.seed,
+            part: part.clone(),
+            grid: self.grid,
+            input_unit: match self.config.input {
+                Input::Force => "N".into(),
+                Input::Displacement { .. } => "m".into(),
+            },
+            target_unit: "m".into(),
+            shard_size: self.config.shard_size,
+            metadata: serde_json::json!({
+                "generator": "augsim",
+                "material": self.material,
+                "dataset": self.config,
+                "mesh_nodes": self.mesh.num_nodes(),
+                "mesh_cells": self.mesh.cells.len(),
+                "grid_origin": self.placement.origin,
+                "grid_spacing": self.placement.spacing,
+                "markers": self.mesh.regions.get("markers").map(|m| m.iter().map(|&n| self.mesh.nodes[n]).collect::<Vec<_>>()),
+            }),
+        };
+        let mut writer = DatasetWriter::create_or_resume(dir, spec)?;
+        let start = writer.resume_from().max(range.start as u64);
+        let total = range.end as u64;
+        // Blocks per batch: at least a shard, and as many for every thread.
+        let threads = rayon::current_num_threads() as u64;
+        let batch = (self.config.shard_size as u64).div_ceil(BLOCK).div_ceil(threads) * threads;
+        let mut next = start;
+        progress(next - range.start as u64, total - range.start as u64);
+        while next < total {
+            let end = ((next / BLOCK + batch) * BLOCK).min(total);
+            let keep = next..end;
+            let results: Vec<_> =
+                (next / BLOCK..end.div_ceil(BLOCK)).into_par_iter().map(|b| self.block(b, &keep)).collect();
+            for (i, r) in results.into_iter().flatten() {
+                match r {
+                    Ok(s) => writer.push(&s)?,
+                    Err(reason) => writer.push_failure(i, reason)?,
+                }
+            }
+            next = end;
+            progress(next - range.start as u64, total - range.start as u64);
+        }
+        writer.finish()
+    }
+}
+
+fn check_range(r: &[f64; 2], what: &str) -> Result<()> {
+    if !(r[0] >= 0.0 && r[1] >= r[0] && r[1].is_finite()) {
+        return Err(invalid(format!("{what} range {r:?} must satisfy 0 ≤ min ≤ max")));
+    }
+    Ok(())
+}
+
+/// A unit vector drawn uniformly over the spherical cap of half-angle `half_angle` (radians)
+/// around the unit vector `axis`.
+fn direction_in_cone(rng: &mut impl Rng, axis: [f64; 3], half_angle: f64) -> [f64; 3] {
+    let cos = rng.random_range(half_angle.cos()..=1.0);
+    let azimuth = rng.random_range(0.0..std::f64::consts::TAU);
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    // An orthonormal pair across the axis, from the coordinate axis least aligned with it.
+    let least = (0..3).min_by(|&a, &b| axis[a].abs().total_cmp(&axis[b].abs())).unwrap_or(0);
+    let mut e = [0.0; 3];
+    e[least] = 1.0;
+    let u = mesh::unit(mesh::cross(axis, e));
+    let v = mesh::cross(axis, u);
+    std::array::from_fn(|d| cos * axis[d] + sin * (azimuth.cos() * u[d] + azimuth.sin() * v[d]))
+}
+
+fn random_unit(rng: &mut impl Rng) -> [f64; 3] {
+    loop {
+        let v: [f64; 3] = std::array::from_fn(|_| rng.random_range(-1.0..=1.0));
+        let l = mesh::dot(v, v).sqrt();
+        if l > 1e-3 && l <= 1.0 {
+            return v.map(|c| c / l);
+        }
+    }
+}
+
+/// Indices generated by worker `part` of `samples` in total: contiguous blocks.
+pub fn part_range(samples: usize, part: Option<&DatasetPart>) -> Result<Range<usize>> {
+    Ok(match part {
+        None => 0..samples,
+        Some(p) if p.count > 0 && p.index < p.count => {
+            (samples * p.index / p.count)..(samples * (p.index + 1) / p.count)
+        }
+        Some(p) => return Err(invalid(format!("invalid part {}/{}", p.index, p.count))),
+    })
+}
+
+/// The lattice of a mesh whose nodes lie on a regular grid (box of hexahedra,
+/// immersed grid): spacing from the smallest node separation per axis.
+fn lattice_encoding(mesh: &Mesh) -> Result<(Encoding, GridShape, GridPlacement)> {
+    let (lo, hi) = mesh.bounds();
+    let mut spacing = [f64::INFINITY; 3];
+    for c in 0..mesh.cells.len() {
+        let cell = mesh.cells.cell(c);
+        for &a in cell {
+            for &b in cell {
+                for d in 0..3 {
+                    let s = (mesh.nodes[a][d] - mesh.nodes[b][d]).abs();
+                    if s > 1e-12 * (hi[d] - lo[d]) {
+                        spacing[d] = spacing[d].min(s);
+                    }
+                }
+            }
+        }
+    }
+    let dims: [usize; 3] = std::array::from_fn(|d| ((hi[d] - lo[d]) / spacing[d]).round() as usize + 1);
+    let shape = GridShape::new(dims[0], dims[1], dims[2]);
+    let mut node = Vec::with_capacity(mesh.num_nodes());
+    for (m, p) in mesh.nodes.iter().enumerate() {
+        let ijk: [f64; 3] = std::array::from_fn(|d| (p[d] - lo[d]) / spacing[d]);
+        if ijk.iter().any(|x| (x - x.round()).abs() > 1e-6) {
+            return Err(invalid(format!(
+                "mesh node {m} is not on a regular lattice: give `grid = [nx, ny, nz]` to embed the mesh instead"
+            )));
+        }
+        let [i, j, k] = ijk.map(|x| x.round() as usize);
+        node.push((i * shape.ny + j) * shape.nz + k);
+    }
+    Ok((Encoding::Lattice(node), shape, GridPlacement { origin: lo, spacing }))
+}
+
+fn embedded_encoding(mesh: &Mesh, dims: [usize; 3]) -> Result<(Encoding, GridShape, GridPlacement)> {
+    let (lo, hi) = mesh.bounds();
+    let grid = Grid::covering(lo, hi, dims).map_err(|e| invalid(e.to_string()))?;
+    let placement = GridPlacement { origin: grid.origin, spacing: grid.spacing };
+    let embedding = Embedding::new(mesh, grid).map_err(|e| invalid(e.to_string()))?;
+    Ok((Encoding::Embedded(embedding), GridShape::new(dims[0], dims[1], dims[2]), placement))
+}

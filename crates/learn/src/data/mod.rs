@@ -1,0 +1,17 @@
+//! Datasets: what a network learns from, and how inputs reach its grid.
+//!
+//! - [`npy`]: minimal NumPy `.npy` reader/writer (v1.0 header, `<f4`, `<f8`, `|u1`, `|b1`).
+//! - [`dataset`]: sharded datasets with a JSON manifest, resumable writer, reader, merge.
+//! - [`generate`]: FEM-generated samples (random loads → grid input and target), parallel, resumable.
+//! - [`grid`]: the regular grid, its placement in space, and the mapping between mesh nodes and grid nodes.
+//! - [`split`]: train / validation / test splits, the policy that sizes them, and the held-out guard.
+//! - [`corrupt`]: sparse visible inputs and Gaussian noise.
+//! - [`points`]: point clouds (`.csv`, `.npy`) and grid tensors as prediction input.
+
+pub mod corrupt;
+pub mod dataset;
+pub mod generate;
+pub mod grid;
+pub mod npy;
+pub mod points;
+pub mod split;

@@ -1,0 +1,154 @@
+//! Point clouds as network input: vectors given at points (`[N, 6]`: x, y, z and the vector in the model's input
+//! unit), read from `.csv` or `.npy`, and what a prediction reads ([`PredictInput`]: such a cloud, or a tensor
+//! already on the model's grid) turned into the network's input.
+
+use std::path::Path;
+
+use mesh::Point;
+
+use crate::data::grid::encode_points;
+use crate::data::npy::{read_npy, NpyArray};
+use crate::net::unet::TrainedModel;
+use crate::{LearnError, Result};
+
+/// Vectors at points (m; the vectors in the model's input unit: forces in N or displacements in m).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PointCloud {
+    /// Positions.
+    pub points: Vec<Point>,
+    /// One vector per point.
+    pub vectors: Vec<[f64; 3]>,
+}
+
+impl PointCloud {
+    /// Parses CSV text with six numbers per line (x, y, z, vx, vy, vz), separated by commas or semicolons; blank
+    /// lines are skipped and a first line that is not numbers is a header. `path` names the text in errors, with
+    /// the line number.
+    pub fn parse_csv(text: &str, path: &Path) -> Result<PointCloud> {
+        let bad =
+            |line: usize, message: String| LearnError::Input { path: path.to_path_buf(), line: Some(line), message };
+        let mut rows = Vec::new();
+        for (l, line) in text.lines().enumerate() {
+            let fields: Vec<&str> = line.split([',', ';']).map(str::trim).filter(|f| !f.is_empty()).collect();
+            if fields.is_empty() {
+                continue;
+            }
+            match fields.iter().map(|f| f.parse::<f64>()).collect::<std::result::Result<Vec<f64>, _>>() {
+                Ok(v) if v.len() == 6 => rows.push([v[0], v[1], v[2], v[3], v[4], v[5]]),
+                Ok(v) => return Err(bad(l + 1, format!("{} numbers, expected 6 (x, y, z, vx, vy, vz)", v.len()))),
+                Err(_) if l == 0 => {} // header
+                Err(e) => return Err(bad(l + 1, e.to_string())),
+            }
+        }
+        Ok(PointCloud::from_rows(&rows))
+    }
+
+    /// The cloud of `[x, y, z, vx, vy, vz]` rows.
+    pub fn from_rows(rows: &[[f64; 6]]) -> PointCloud {
+        PointCloud {
+            points: rows.iter().map(|r| [r[0], r[1], r[2]]).collect(),
+            vectors: rows.iter().map(|r| [r[3], r[4], r[5]]).collect(),
+        }
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// Whether there is no point.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+}
+
+/// What a prediction reads.
+#[derive(Clone, Debug)]
+pub enum PredictInput {
+    /// A tensor on the model's grid (`[3, nx, ny, nz]`).
+    Grid(NpyArray),
+    /// Vectors at points, to be put on the model's grid.
+    Points(PointCloud),
+}
+
+impl PredictInput {
+    /// Reads a point cloud (`.csv`, see [`PointCloud::parse_csv`], or `.npy` of shape `[N, 6]`) or a grid tensor
+    /// (any other `.npy`). A cloud without points is an error.
+    pub fn read(path: &Path) -> Result<PredictInput> {
+        let cloud = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")) {
+            let text = std::fs::read_to_string(path).map_err(|e| LearnError::io(path, e))?;
+            PointCloud::parse_csv(&text, path)?
+        } else {
+            let array = read_npy(path)?;
+            match array.shape.as_slice() {
+                [_, 6] => PointCloud::from_rows(
+                    &array.into_f64().chunks_exact(6).map(|r| std::array::from_fn(|i| r[i])).collect::<Vec<_>>(),
+                ),
+                _ => return Ok(PredictInput::Grid(array)),
+            }
+        };
+        if cloud.is_empty() {
+            return Err(LearnError::Input { path: path.to_path_buf(), line: None, message: "no points".into() });
+        }
+        Ok(PredictInput::Points(cloud))
+    }
+
+    /// The network input of `model` (`[3, nx, ny, nz]` in its input unit): a grid tensor as it is, once its shape
+    /// is checked; a point cloud put on the model's grid where it lies ([`encode_points`]: forces spread to the
+    /// corners of their cell, displacements on their nearest grid node, by the model's input unit).
+    pub fn into_network_input(self, model: &TrainedModel) -> Result<Vec<f32>> {
+        let g = model.grid;
+        match self {
+            PredictInput::Grid(array) if array.shape == [3, g.nx, g.ny, g.nz] => Ok(array.into_f32()),
+            PredictInput::Grid(array) => Err(LearnError::InvalidInput(format!(
+                "a tensor of shape {:?}, but the model expects [3, {}, {}, {}] (or a point cloud [N, 6])",
+                array.shape, g.nx, g.ny, g.nz
+            ))),
+            PredictInput::Points(cloud) => {
+                encode_points(&model.placed_grid()?, &cloud.points, &cloud.vectors, model.takes_forces()?)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_point_clouds_take_a_header_blank_lines_and_both_separators() {
+        let path = Path::new("cloud.csv");
+        let text = "x,y,z,fx,fy,fz\n0.1, 0.2, 0.3, 1, 2, 3\n\n-1e-3;0;5;0.5;-0.5;0\n";
+        let cloud = PointCloud::parse_csv(text, path).unwrap();
+        assert_eq!(cloud.points, [[0.1, 0.2, 0.3], [-1e-3, 0.0, 5.0]]);
+        assert_eq!(cloud.vectors, [[1.0, 2.0, 3.0], [0.5, -0.5, 0.0]]);
+        let e = PointCloud::parse_csv("1,2,3,4,5,6\n1,2,3,4,5\n", path).unwrap_err().to_string();
+        assert!(e.starts_with("cloud.csv:2: 5 numbers"), "{e}");
+        // Only the first line may be a header.
+        let e = PointCloud::parse_csv("1,2,3,4,5,6\nx,y,z,a,b,c\n", path).unwrap_err().to_string();
+        assert!(e.starts_with("cloud.csv:2: "), "{e}");
+        assert!(PointCloud::parse_csv("x,y,z,a,b,c\n", path).unwrap().is_empty());
+    }
+
+    #[test]
+    fn clouds_and_grid_tensors_are_told_apart_by_shape_and_extension() {
+        let dir = tempfile::tempdir().unwrap();
+        let npy = dir.path().join("cloud.npy");
+        crate::data::npy::write_f32(&npy, &[2, 6], &[0.0, 0.1, 0.2, 1.0, 0.0, 0.0, 0.5, 0.5, 0.5, 0.0, 0.0, 2.0])
+            .unwrap();
+        match PredictInput::read(&npy).unwrap() {
+            PredictInput::Points(c) => {
+                assert_eq!(c.len(), 2);
+                assert_eq!(c.vectors[1], [0.0, 0.0, 2.0]);
+            }
+            PredictInput::Grid(_) => panic!("a [2, 6] array is a point cloud"),
+        }
+        let grid = dir.path().join("grid.npy");
+        crate::data::npy::write_f32(&grid, &[3, 2, 2, 2], &[0.0; 24]).unwrap();
+        assert!(matches!(PredictInput::read(&grid).unwrap(), PredictInput::Grid(a) if a.shape == [3, 2, 2, 2]));
+        let empty = dir.path().join("empty.CSV");
+        std::fs::write(&empty, "x,y,z,u,v,w\n").unwrap();
+        let e = PredictInput::read(&empty).unwrap_err().to_string();
+        assert!(e.ends_with("empty.CSV: no points"), "{e}");
+    }
+}

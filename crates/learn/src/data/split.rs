@@ -1,0 +1,219 @@
+//! Train / validation / test splits of a dataset's samples, recorded in the model, and the
+//! guard that keeps evaluation off the samples a model was trained or selected on.
+//!
+//! A split is fixed by generation indices, not by positions, so it survives re-sharding and
+//! merging; together with the dataset's [source](crate::Manifest::source_id) it names exactly
+//! the samples that shaped a model (its training samples set the weights and the
+//! normalisation, its validation samples chose the checkpoint).
+
+use serde::{Deserialize, Serialize};
+
+use crate::data::dataset::Samples;
+use crate::{LearnError, Result};
+
+/// A set of generation indices, stored as sorted, disjoint, non-adjacent half-open ranges
+/// `[start, end)` (a JSON list of pairs).
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct IndexSet(Vec<[u64; 2]>);
+
+impl IndexSet {
+    /// The set of `indices` (any order, repeats allowed).
+    pub fn from_indices(indices: &[u64]) -> Self {
+        let mut sorted = indices.to_vec();
+        sorted.sort_unstable();
+        let mut ranges: Vec<[u64; 2]> = Vec::new();
+        for i in sorted {
+            match ranges.last_mut() {
+                Some(last) if i <= last[1] => last[1] = last[1].max(i + 1),
+                _ => ranges.push([i, i + 1]),
+            }
+        }
+        IndexSet(ranges)
+    }
+
+    /// Whether `index` is in the set.
+    pub fn contains(&self, index: u64) -> bool {
+        let at = self.0.partition_point(|r| r[1] <= index);
+        self.0.get(at).is_some_and(|r| r[0] <= index)
+    }
+
+    /// Number of indices.
+    pub fn len(&self) -> u64 {
+        self.0.iter().map(|r| r[1] - r[0]).sum()
+    }
+
+    /// Whether the set is empty.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    /// The first index of `indices` that is in the set.
+    pub fn first_common(&self, indices: &[u64]) -> Option<u64> {
+        indices.iter().copied().find(|&i| self.contains(i))
+    }
+}
+
+/// How many samples [`Split::last`] holds out, as `augsim train` takes them: each held-out set is a fraction of
+/// all the samples (rounded to the nearest count) unless a count is given; the last samples are the test set, the
+/// ones before them the validation set, the rest the training set, of which only the first `train_samples` may be
+/// used (e.g. 100 for transfer learning).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SplitPolicy {
+    /// Fraction of the samples held out as the test set, in [0, 1).
+    pub test_fraction: f64,
+    /// Number of test samples; overrides `test_fraction`.
+    pub test_samples: Option<usize>,
+    /// Fraction of the samples used for validation (checkpoint selection), in [0, 1).
+    pub validation_fraction: f64,
+    /// Number of validation samples; overrides `validation_fraction`.
+    pub validation_samples: Option<usize>,
+    /// Train on the first this many training samples only (at least 1, at most the training set).
+    pub train_samples: Option<usize>,
+}
+
+impl Default for SplitPolicy {
+    /// 20 % test, 10 % validation, every training sample used.
+    fn default() -> Self {
+        SplitPolicy {
+            test_fraction: 0.2,
+            test_samples: None,
+            validation_fraction: 0.1,
+            validation_samples: None,
+            train_samples: None,
+        }
+    }
+}
+
+impl SplitPolicy {
+    /// The split of `samples` ([`Split::last`] with this policy's validation and test counts).
+    pub fn split(&self, samples: &Samples) -> Result<Split> {
+        let count = |fraction: f64, given: Option<usize>, what: &str| -> Result<usize> {
+            if !(0.0..1.0).contains(&fraction) {
+                return Err(LearnError::InvalidInput(format!(
+                    "the {what} fraction must lie in [0, 1), got {fraction}"
+                )));
+            }
+            Ok(given.unwrap_or((samples.len() as f64 * fraction).round() as usize))
+        };
+        let test = count(self.test_fraction, self.test_samples, "test")?;
+        let validation = count(self.validation_fraction, self.validation_samples, "validation")?;
+        Split::last(samples, validation, test)
+    }
+
+    /// The split of `samples` and its training (the first `train_samples` when set), validation and test
+    /// samples. The split records the whole training set even when only part of it is used, so that evaluation
+    /// stays off all of it.
+    pub fn apply(&self, samples: &Samples) -> Result<(Split, [Samples; 3])> {
+        let split = self.split(samples)?;
+        let [mut train, validation, test] = split.apply(samples)?;
+        if let Some(n) = self.train_samples {
+            if n == 0 || n > train.len() {
+                return Err(LearnError::InvalidInput(format!(
+                    "{n} training samples asked, the training split has {}",
+                    train.len()
+                )));
+            }
+            train = train.split_at(n)?.0;
+        }
+        Ok((split, [train, validation, test]))
+    }
+}
+
+/// Which samples of one data source trained, selected and test a model.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Split {
+    /// The data source ([`Manifest::source_id`](crate::Manifest::source_id)); `None` for
+    /// samples of no known dataset.
+    pub source: Option<String>,
+    /// Samples the weights and the normalisation were fitted on.
+    pub train: IndexSet,
+    /// Samples the best checkpoint (and any hyper-parameter) was chosen on.
+    pub validation: IndexSet,
+    /// Samples held out for the reported figures.
+    pub test: IndexSet,
+}
+
+impl Split {
+    /// Splits `samples` in index order: the last `test` samples for testing, the `validation`
+    /// samples before them for validation, the rest for training (samples are drawn
+    /// independently, so their order carries no information).
+    pub fn last(samples: &Samples, validation: usize, test: usize) -> Result<Split> {
+        let n = samples.len();
+        if validation + test >= n {
+            return Err(LearnError::InvalidInput(format!(
+                "{validation} validation and {test} test samples leave no training sample out of {n}"
+            )));
+        }
+        let mut indices = samples.indices.clone();
+        indices.sort_unstable();
+        let (train, rest) = indices.split_at(n - validation - test);
+        let (val, test) = rest.split_at(validation);
+        Ok(Split {
+            source: samples.source.clone(),
+            train: IndexSet::from_indices(train),
+            validation: IndexSet::from_indices(val),
+            test: IndexSet::from_indices(test),
+        })
+    }
+
+    /// The training, validation and test samples of `samples` (which must come from the
+    /// split's source), each in the order of `samples`.
+    pub fn apply(&self, samples: &Samples) -> Result<[Samples; 3]> {
+        if samples.source != self.source {
+            return Err(LearnError::InvalidInput(format!(
+                "the split is of source {:?}, the samples of {:?}",
+                self.source, samples.source
+            )));
+        }
+        let part = |set: &IndexSet| {
+            let positions: Vec<usize> = (0..samples.len()).filter(|&p| set.contains(samples.indices[p])).collect();
+            samples.select(&positions)
+        };
+        Ok([part(&self.train)?, part(&self.validation)?, part(&self.test)?])
+    }
+
+    /// Fails when `samples` share an index with the training or validation samples of this
+    /// split's source: figures on them would not be held out.
+    pub fn check_unseen(&self, samples: &Samples) -> Result<()> {
+        if samples.source.is_none() || samples.source != self.source {
+            return Ok(());
+        }
+        for (set, role) in [(&self.train, "train"), (&self.validation, "select (validate)")] {
+            if let Some(i) = set.first_common(&samples.indices) {
+                return Err(LearnError::InvalidInput(format!(
+                    "sample {i} of {} was used to {role} this model; evaluate it on its test samples \
+                     or on another dataset",
+                    samples.source.as_deref().unwrap_or_default()
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What a sample was to a model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SampleRole {
+    /// Trained on (by this model or one it was fine-tuned from).
+    Training,
+    /// Used to choose the checkpoint.
+    Validation,
+    /// In the test split recorded in the model.
+    Test,
+    /// In no split of the model: data it never saw.
+    Unseen,
+}
+
+impl std::fmt::Display for SampleRole {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SampleRole::Training => "training",
+            SampleRole::Validation => "validation",
+            SampleRole::Test => "test",
+            SampleRole::Unseen => "unseen",
+        })
+    }
+}

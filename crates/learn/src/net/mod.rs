@@ -1,0 +1,18 @@
+//! The network: the 3D U-Net ([`unet`], its architecture documented there and in
+//! `docs/method.md`) and the engines that run it.
+//!
+//! Four engines compute the same network from the same weights:
+//! - burn's own kernels and autodiff on the CPU (`flex`) — [`unet`];
+//! - burn on a GPU through wgpu (the `gpu` feature) — [`unet`], selected by [`compute`];
+//! - the repacked CPU inference engine (channels-last GEMMs, Winograd) — [`inference`];
+//! - the hand-written CPU backward pass used for training — [`backprop`].
+//!
+//! [`compute`] chooses among them; [`predict`] times single predictions.
+
+pub mod backprop;
+pub mod compute;
+pub mod inference;
+pub(crate) mod lanes;
+pub mod predict;
+pub mod unet;
+pub(crate) mod winograd;

@@ -1,0 +1,188 @@
+//! Single predictions and prediction timing.
+
+use std::path::Path;
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor, TensorData};
+use mesh::embedding::Grid;
+use mesh::Mesh;
+use serde::{Deserialize, Serialize};
+
+use crate::data::dataset::Normalization;
+use crate::data::grid::{GridShape, GridToMesh};
+use crate::net::inference::InferenceNet;
+use crate::net::unet::{tensor_values, TrainedModel, UNet};
+use crate::Compute;
+use crate::{LearnError, Result};
+
+/// A trained model ready for repeated predictions, with its normalisation and grid: on the CPU
+/// its network repacked once for fast inference ([`InferenceNet`]), otherwise burn's network on
+/// the chosen device ([`Compute`]).
+pub struct Predictor {
+    engine: Engine,
+    normalization: Normalization,
+    grid: GridShape,
+}
+
+/// What runs the network.
+// One per predictor, held for its lifetime: the variants' sizes do not matter.
+#[allow(clippy::large_enum_variant)]
+enum Engine {
+    /// The repacked CPU engine.
+    Repacked(InferenceNet),
+    /// burn's network on `device` (a GPU, or burn's CPU backend).
+    Burn { net: UNet, device: Device },
+}
+
+impl Predictor {
+    /// Prepares `model` for prediction on `compute`: repacks it for the CPU engine, or copies
+    /// its weights to burn's device (an error when that device is not available).
+    pub fn new(model: &TrainedModel, compute: Compute) -> Result<Predictor> {
+        if !compute.uses_burn() {
+            return Predictor::from_net(&model.net, compute, model.normalization, model.grid);
+        }
+        let net = model.net.copied_to(&model.config, &compute.device()?, Path::new("(model in memory)"))?;
+        Predictor::from_net(&net, compute, model.normalization, model.grid)
+    }
+
+    /// A predictor of `net` (for burn's engines already on `compute`'s device, as training
+    /// keeps it).
+    pub(crate) fn from_net(
+        net: &UNet,
+        compute: Compute,
+        normalization: Normalization,
+        grid: GridShape,
+    ) -> Result<Predictor> {
+        let engine = if compute.uses_burn() {
+            let device = net.devices().into_iter().next().ok_or_else(|| {
+                LearnError::InvalidInput("the network has no parameters, so no device to run on".into())
+            })?;
+            Engine::Burn { net: net.clone(), device }
+        } else {
+            Engine::Repacked(net.to_inference()?)
+        };
+        Ok(Predictor { engine, normalization, grid })
+    }
+
+    /// Predicts the displacement field (m, `[3, nx, ny, nz]`) for one input field (`[3, nx, ny,
+    /// nz]` on the model's grid, in the model's input unit). Values outside the organ are
+    /// meaningless; apply the mask.
+    pub fn predict(&self, input: &[f32]) -> Result<Vec<f32>> {
+        let f = self.grid.field_len();
+        if input.len() != f {
+            return Err(LearnError::InvalidInput(format!(
+                "prediction input has {} values, expected {f} (3 channels on grid {})",
+                input.len(),
+                self.grid
+            )));
+        }
+        if input.iter().any(|v| !v.is_finite()) {
+            return Err(LearnError::InvalidInput("prediction input has a non-finite value".into()));
+        }
+        let si = 1.0 / self.normalization.input_scale;
+        let x: Vec<f32> = input.iter().map(|v| (f64::from(*v) * si) as f32).collect();
+        let out = self.forward_normalized(x)?;
+        Ok(out.into_iter().map(|v| (f64::from(v) * self.normalization.target_scale) as f32).collect())
+    }
+
+    /// The network's output for a normalised input (`[3, nx, ny, nz]`), normalised.
+    fn forward_normalized(&self, x: Vec<f32>) -> Result<Vec<f32>> {
+        match &self.engine {
+            Engine::Repacked(net) => net.forward(&x, self.grid),
+            Engine::Burn { net, device } => {
+                let [nx, ny, nz] = self.grid.dims();
+                let c = x.len() / self.grid.nodes();
+                let input = Tensor::<5>::from_data(TensorData::new(x, [1, c, nx, ny, nz]), device);
+                tensor_values(net.forward(input))
+            }
+        }
+    }
+}
+
+impl TrainedModel {
+    /// Predicts one displacement field (see [`Predictor::predict`]); for repeated predictions
+    /// build a [`Predictor`] once.
+    pub fn predict(&self, input: &[f32]) -> Result<Vec<f32>> {
+        Predictor::new(self, Compute::Cpu)?.predict(input)
+    }
+
+    /// The model's grid where it lies in space (needed to put points on it or to interpolate to a mesh); an
+    /// error for a model trained before grid placement was recorded.
+    pub fn placed_grid(&self) -> Result<Grid> {
+        let placement = self.placement.ok_or_else(|| {
+            LearnError::InvalidInput(
+                "the model does not record where its grid lies (trained before grid placement was stored): retrain it"
+                    .into(),
+            )
+        })?;
+        placement.grid(self.grid)
+    }
+
+    /// Whether the network takes nodal forces (input unit N) rather than displacements (m); any other unit is an
+    /// error.
+    pub fn takes_forces(&self) -> Result<bool> {
+        match self.input_unit.as_str() {
+            "N" => Ok(true),
+            "m" => Ok(false),
+            other => Err(LearnError::InvalidInput(format!(
+                "model input unit {other:?} is neither N (forces) nor m (displacements)"
+            ))),
+        }
+    }
+
+    /// A field on the model's grid (`[3, nx, ny, nz]`, e.g. a prediction) interpolated to the nodes of `organ`
+    /// ([`GridToMesh`]), node-major (`3 × nodes`). Every node must lie in the placed grid.
+    pub fn field_on_mesh(&self, field: &[f32], organ: &Mesh) -> Result<Vec<f64>> {
+        GridToMesh::new(organ, &self.placed_grid()?)?.apply(field)
+    }
+}
+
+/// Wall-clock statistics of repeated predictions (s).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Timing {
+    /// Timed runs.
+    pub runs: usize,
+    /// Median ([`mesh::stats::median`]: the upper of the two middle runs for an even count).
+    pub median: f64,
+    /// Mean.
+    pub mean: f64,
+    /// Standard deviation.
+    pub std: f64,
+    /// Fastest run.
+    pub min: f64,
+    /// Slowest run.
+    pub max: f64,
+}
+
+impl Timing {
+    /// Statistics of a non-empty list of durations (s).
+    pub fn from_durations(mut d: Vec<f64>) -> Result<Timing> {
+        if d.is_empty() {
+            return Err(LearnError::InvalidInput("no timed runs".into()));
+        }
+        let n = d.len();
+        let (mean, max) = (mesh::stats::mean(&d), mesh::stats::max(&d));
+        let min = d.iter().copied().fold(f64::INFINITY, f64::min);
+        let std = (d.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n as f64).sqrt();
+        Ok(Timing { runs: n, median: mesh::stats::median(&mut d), mean, std, min, max })
+    }
+}
+
+/// Times [`Predictor::predict`] on `input` (including normalisation and the copy back):
+/// `warmup` untimed runs, then `runs` timed ones.
+pub fn time_prediction(predictor: &Predictor, input: &[f32], warmup: usize, runs: usize) -> Result<Timing> {
+    if runs == 0 {
+        return Err(LearnError::InvalidInput("time_prediction needs at least one run".into()));
+    }
+    for _ in 0..warmup {
+        predictor.predict(input)?;
+    }
+    let mut d = Vec::with_capacity(runs);
+    for _ in 0..runs {
+        let t0 = Instant::now();
+        std::hint::black_box(predictor.predict(input)?);
+        d.push(t0.elapsed().as_secs_f64());
+    }
+    Timing::from_durations(d)
+}

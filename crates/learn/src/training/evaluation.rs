@@ -1,0 +1,166 @@
+//! Evaluation of a model over a sample set: per-sample errors on the grid and errors at given
+//! points (target registration errors), with reproducible input corruption. Training uses it
+//! for validation, `eval` for the test figures.
+
+use std::path::Path;
+
+use mesh::io::Field;
+use serde::{Deserialize, Serialize};
+
+use crate::data::corrupt::{item_rng, Corruption, STREAM_EVAL_CORRUPTION};
+use crate::data::dataset::Samples;
+use crate::data::grid::{GridMesh, CHANNELS};
+use crate::net::predict::Predictor;
+use crate::net::unet::TrainedModel;
+use crate::training::metrics::{mean_euclidean_error, ErrorStats, EvalReport};
+use crate::{Compute, LearnError, Result};
+use mesh::embedding::Grid;
+use mesh::Point;
+
+/// Writes one sample on the placed `grid` as a hexahedral mesh ([`GridMesh`]; `.vtu`, `.vtk` or `.msh` by the
+/// extension, see [`mesh::io::write_mesh`]) with the point fields `input`, `reference` (the target),
+/// `prediction` (3 components each, tensor layout) and `mask`, as `augsim eval` writes its worst sample.
+pub fn write_grid_sample(
+    path: &Path,
+    grid: &Grid,
+    input: &[f32],
+    target: &[f32],
+    prediction: &[f32],
+    mask: &[u8],
+) -> Result<()> {
+    let grid_mesh = GridMesh::new(grid)?;
+    let mask: Vec<f32> = mask.iter().map(|&m| f32::from(m)).collect();
+    let fields = [
+        Field::point("input", CHANNELS, grid_mesh.field(input, CHANNELS)?),
+        Field::point("reference", CHANNELS, grid_mesh.field(target, CHANNELS)?),
+        Field::point("prediction", CHANNELS, grid_mesh.field(prediction, CHANNELS)?),
+        Field::point("mask", 1, grid_mesh.field(&mask, 1)?),
+    ];
+    mesh::io::write_mesh(path, &grid_mesh.mesh, &fields).map_err(|e| match e {
+        mesh::MeshError::Io { source, .. } => LearnError::io(path, source),
+        e => LearnError::InvalidInput(e.to_string()),
+    })
+}
+
+/// Runs `predictor` on the inputs of `samples` (each corrupted with its own generator, derived
+/// from `seed` and the sample position) and returns the per-sample errors (m);
+/// `visit(position, prediction)` sees each prediction (m).
+pub(crate) fn evaluate_net(
+    predictor: &Predictor,
+    samples: &Samples,
+    corruption: &Corruption,
+    seed: u64,
+    mut visit: impl FnMut(usize, &[f32]) -> Result<()>,
+) -> Result<EvalReport> {
+    if samples.is_empty() {
+        return Err(LearnError::InvalidInput("no samples to evaluate".into()));
+    }
+    let grid = samples.grid;
+    let mut errors = Vec::with_capacity(samples.len());
+    for p in 0..samples.len() {
+        let pred = predictor.predict(&evaluation_input(samples, p, corruption, seed)?)?;
+        visit(p, &pred)?;
+        errors.push(
+            mean_euclidean_error(&pred, samples.target(p), samples.mask(p), grid)
+                .map_err(|e| LearnError::InvalidInput(format!("sample {} (index {}): {e}", p, samples.indices[p])))?,
+        );
+    }
+    EvalReport::new(errors, samples.indices.clone())
+}
+
+/// The input evaluation gives the sample at `position`: corrupted with `corruption`, with that
+/// sample's own reproducible draw from `seed`.
+pub fn evaluation_input(samples: &Samples, position: usize, corruption: &Corruption, seed: u64) -> Result<Vec<f32>> {
+    let mut input = samples.input(position).to_vec();
+    if !corruption.is_identity() {
+        corruption.apply(&mut input, samples.grid, &mut item_rng(seed, STREAM_EVAL_CORRUPTION, position as u64))?;
+    }
+    Ok(input)
+}
+
+/// Evaluates `model` on `samples`, run on `compute`: per-sample mean Euclidean errors (m), mean,
+/// std, max and the worst sample. Inputs are corrupted with `corruption`, one reproducible draw
+/// per sample from `seed`.
+pub fn evaluate(
+    model: &TrainedModel,
+    samples: &Samples,
+    corruption: &Corruption,
+    seed: u64,
+    compute: Compute,
+) -> Result<EvalReport> {
+    corruption.validate()?;
+    check_samples(model, samples)?;
+    evaluate_net(&Predictor::new(model, compute)?, samples, corruption, seed, |_, _| Ok(()))
+}
+
+/// The samples must lie on the model's grid and be held out from its training and selection.
+fn check_samples(model: &TrainedModel, samples: &Samples) -> Result<()> {
+    if samples.grid != model.grid {
+        return Err(LearnError::InvalidInput(format!(
+            "samples are on grid {}, the model on grid {}",
+            samples.grid, model.grid
+        )));
+    }
+    model.check_unseen(samples)
+}
+
+/// Errors at given points (e.g. internal markers: target registration errors), over all
+/// samples and points (m).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PointErrors {
+    /// `|u_pred(x) − u_ref(x)|` over all (sample, point) pairs, both fields interpolated
+    /// trilinearly on the grid.
+    pub errors: ErrorStats,
+    /// `|u_ref(x)|`: the error of assuming the organ did not move, for comparison.
+    pub no_motion: ErrorStats,
+    /// Mean error of each point over the samples.
+    pub per_point_mean: Vec<f64>,
+}
+
+/// [`evaluate`], plus the errors at `points` (positions on `grid`, the model grid placed in
+/// space).
+pub fn evaluate_at_points(
+    model: &TrainedModel,
+    samples: &Samples,
+    corruption: &Corruption,
+    seed: u64,
+    grid: &Grid,
+    points: &[Point],
+    compute: Compute,
+) -> Result<(EvalReport, PointErrors)> {
+    corruption.validate()?;
+    check_samples(model, samples)?;
+    if points.is_empty() || grid.dims != samples.grid.dims() {
+        return Err(LearnError::InvalidInput(format!(
+            "{} evaluation points on a {:?} grid (samples on {})",
+            points.len(),
+            grid.dims,
+            samples.grid
+        )));
+    }
+    let at = |field: &[f32]| -> Result<Vec<f64>> {
+        let f: Vec<f64> = field.iter().map(|v| f64::from(*v)).collect();
+        grid.interpolate(&f, CHANNELS, points).map_err(|e| LearnError::InvalidInput(e.to_string()))
+    };
+    let norm3 = |v: &[f64]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let (mut errors, mut no_motion) = (Vec::new(), Vec::new());
+    let report = evaluate_net(&Predictor::new(model, compute)?, samples, corruption, seed, |p, pred| {
+        let (pred, reference) = (at(pred)?, at(samples.target(p))?);
+        for (a, b) in pred.chunks_exact(3).zip(reference.chunks_exact(3)) {
+            errors.push(norm3(&[a[0] - b[0], a[1] - b[1], a[2] - b[2]]));
+            no_motion.push(norm3(b));
+        }
+        Ok(())
+    })?;
+    let per_point_mean = (0..points.len())
+        .map(|k| errors.iter().skip(k).step_by(points.len()).sum::<f64>() / samples.len() as f64)
+        .collect();
+    Ok((
+        report,
+        PointErrors {
+            errors: ErrorStats::from_errors(&errors)?,
+            no_motion: ErrorStats::from_errors(&no_motion)?,
+            per_point_mean,
+        },
+    ))
+}

@@ -1,0 +1,680 @@
+//! Training: Adam on the masked MSE, seeded, with validation, best-weights selection,
+//! resumable checkpoints, learning curves and transfer learning. On the CPU ([`Compute::Cpu`])
+//! gradients come from the hand-written backward pass of [`backprop`](crate::net::backprop), which
+//! equals burn's autodiff up to summation order; on a GPU (or [`Compute::CpuBurn`]) from burn's
+//! autodiff itself. burn keeps the model, the optimiser and their records either way, so a
+//! checkpoint written on one device resumes on the other.
+//!
+//! Reproducibility: weights are initialised from the seed; batch composition and training-time
+//! corruption come from counter-based generators (seed, iteration, batch slot), so the whole
+//! random state of a run is `(seed, iteration)`. A checkpoint stores the model, the Adam state,
+//! the best weights so far, the learning curve and that state, written atomically every
+//! `checkpoint_every` iterations; a run resumed from it produces the same result as an
+//! uninterrupted one. Resuming a finished run with more iterations extends it.
+//!
+//! Files written in `out_dir`: `model.json` + `model.safetensors` (best weights, on completion),
+//! `checkpoint.bin` and `curve.csv` (iteration, train loss, validation mean error); the application
+//! draws the curve from [`TrainOutcome::curve`].
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::store::ModuleRecord;
+use burn::tensor::{Bytes, Device, Tensor, TensorData};
+use indicatif::{ProgressBar, ProgressStyle};
+use mesh::io::write_atomic_bytes;
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::data::corrupt::{item_rng, splitmix64, Corruption, STREAM_SHUFFLE, STREAM_TRAIN_CORRUPTION};
+use crate::data::dataset::{Normalization, Samples};
+use crate::data::grid::{GridPlacement, GridShape};
+use crate::data::split::{IndexSet, Split};
+use crate::fsutil::read;
+use crate::net::backprop::loss_and_gradients;
+use crate::net::predict::Predictor;
+use crate::net::unet::{tensor_values, TrainedModel, TrainingInfo, UNet, UNetConfig};
+use crate::training::curve::{write_curve_csv, CurveRow};
+use crate::training::evaluation::evaluate_net;
+use crate::training::metrics::masked_mse;
+use crate::{inference_device, Compute, LearnError, Result};
+
+/// Training hyper-parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrainConfig {
+    /// Number of optimizer steps.
+    pub iterations: usize,
+    /// Samples per step.
+    pub batch_size: usize,
+    /// Adam learning rate (at the first iteration).
+    pub learning_rate: f64,
+    /// When set, the rate falls from `learning_rate` to this value along a half cosine over
+    /// the `iterations` (the schedule then depends on `iterations`, so such a run cannot be
+    /// extended by resuming it with more).
+    pub final_learning_rate: Option<f64>,
+    /// Seed of weights, shuffling and corruption.
+    pub seed: u64,
+    /// Validate every this many iterations (and after the last one).
+    pub validate_every: usize,
+    /// Write a checkpoint every this many iterations (and after the last one).
+    pub checkpoint_every: usize,
+    /// Corruption of training inputs.
+    pub train_corruption: Corruption,
+    /// Corruption of validation inputs (same draw at every validation).
+    pub val_corruption: Corruption,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        TrainConfig {
+            iterations: 1000,
+            batch_size: 4,
+            learning_rate: 1e-3,
+            final_learning_rate: None,
+            seed: 0,
+            validate_every: 100,
+            checkpoint_every: 100,
+            train_corruption: Corruption::none(),
+            val_corruption: Corruption::none(),
+        }
+    }
+}
+
+impl TrainConfig {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: &str| Err(LearnError::InvalidInput(format!("training config: {m}")));
+        if self.iterations == 0 || self.batch_size == 0 {
+            return bad("iterations and batch_size must be at least 1");
+        }
+        if self.validate_every == 0 || self.checkpoint_every == 0 {
+            return bad("validate_every and checkpoint_every must be at least 1");
+        }
+        if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
+            return bad("learning_rate must be finite and > 0");
+        }
+        if self.final_learning_rate.is_some_and(|r| !(r > 0.0 && r <= self.learning_rate)) {
+            return bad("final_learning_rate must be > 0 and at most learning_rate");
+        }
+        self.train_corruption.validate()?;
+        self.val_corruption.validate()
+    }
+
+    /// The learning rate of (0-based) iteration `it`.
+    pub fn learning_rate_at(&self, it: usize) -> f64 {
+        match self.final_learning_rate {
+            None => self.learning_rate,
+            Some(last) => {
+                let t = it as f64 / (self.iterations.max(2) - 1) as f64;
+                last + 0.5 * (self.learning_rate - last) * (1.0 + (std::f64::consts::PI * t.min(1.0)).cos())
+            }
+        }
+    }
+}
+
+/// Where the network starts from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Initialization {
+    /// A new network with seeded random weights.
+    Scratch {
+        /// Network configuration.
+        unet: UNetConfig,
+        /// Input/target scales (e.g. [`Normalization::from_statistics`] of the manifest).
+        normalization: Normalization,
+        /// Unit of the inputs ("N" or "m").
+        input_unit: String,
+    },
+    /// Transfer learning from a saved model (its configuration, weights, normalisation and units).
+    FineTune {
+        /// The model JSON file.
+        model: PathBuf,
+        /// Keep the contracting path (encoder levels, down-sampling, bottleneck) fixed.
+        freeze_encoder: bool,
+    },
+}
+
+/// Run options that do not change the result.
+#[derive(Clone, Debug)]
+pub struct TrainOptions {
+    /// Output directory.
+    pub out_dir: PathBuf,
+    /// Continue from `out_dir/checkpoint.bin` if it exists (it must be from the same setup).
+    pub resume: bool,
+    /// Show a progress bar.
+    pub progress: bool,
+    /// Stop after this iteration as if interrupted (checkpoint written, no model file); a later
+    /// run with `resume` continues. For time-sliced training and tests.
+    pub stop_after: Option<usize>,
+    /// Where the training grid lies in space (e.g. from
+    /// [`Manifest::placement`](crate::Manifest::placement)), recorded in the model for
+    /// point-cloud prediction.
+    pub placement: Option<GridPlacement>,
+    /// The samples of the training data's source held out for testing, recorded in the model
+    /// beside the training and validation samples (e.g. [`Split::test`]).
+    pub test: IndexSet,
+    /// Where the network is trained and validated (the same result up to rounding).
+    pub compute: Compute,
+}
+
+impl TrainOptions {
+    /// Options writing to `out_dir`, resuming if possible, without progress bar, placement or
+    /// recorded test samples, on the CPU.
+    pub fn new(out_dir: impl Into<PathBuf>) -> Self {
+        TrainOptions {
+            out_dir: out_dir.into(),
+            resume: true,
+            progress: false,
+            stop_after: None,
+            placement: None,
+            test: IndexSet::default(),
+            compute: Compute::Cpu,
+        }
+    }
+}
+
+/// What [`train`] returns.
+#[derive(Debug)]
+pub struct TrainOutcome {
+    /// The best model (on the inference device); saved as `model.json` when `completed`.
+    pub model: TrainedModel,
+    /// The learning curve.
+    pub curve: Vec<CurveRow>,
+    /// Iterations done (including those of a resumed checkpoint).
+    pub iterations_done: usize,
+    /// Whether all iterations ran (false after `stop_after`).
+    pub completed: bool,
+    /// Path of the model JSON (written only when `completed`).
+    pub model_path: PathBuf,
+    /// Mean wall time of one training step in this run (s).
+    pub mean_step_seconds: f64,
+}
+
+/// Names of the files in the output directory.
+pub const MODEL_FILE: &str = "model.json";
+/// Checkpoint file name.
+pub const CHECKPOINT_FILE: &str = "checkpoint.bin";
+/// Learning-curve CSV file name.
+pub const CURVE_CSV: &str = "curve.csv";
+
+/// The resolved starting point.
+struct Start {
+    net: UNet,
+    config: UNetConfig,
+    normalization: Normalization,
+    input_unit: String,
+    target_unit: String,
+    fine_tuned_from: Option<String>,
+    freeze: bool,
+    /// The splits of the model fine-tuned from.
+    pretraining: Vec<Split>,
+}
+
+fn resolve_start(init: &Initialization, seed: u64, device: &Device) -> Result<Start> {
+    match init {
+        Initialization::Scratch { unet, normalization, input_unit } => {
+            normalization.validate()?;
+            Ok(Start {
+                net: UNet::new(unet, device, seed)?,
+                config: unet.clone(),
+                normalization: *normalization,
+                input_unit: input_unit.clone(),
+                target_unit: "m".into(),
+                fine_tuned_from: None,
+                freeze: false,
+                pretraining: Vec::new(),
+            })
+        }
+        Initialization::FineTune { model, freeze_encoder } => {
+            let pre = TrainedModel::load(model, &inference_device())?;
+            let net = pre.net.copied_to(&pre.config, device, model)?;
+            let net = if *freeze_encoder { net.freeze_encoder() } else { net };
+            Ok(Start {
+                net,
+                config: pre.config,
+                normalization: pre.normalization,
+                input_unit: pre.input_unit,
+                target_unit: pre.target_unit,
+                fine_tuned_from: Some(model.display().to_string()),
+                freeze: *freeze_encoder,
+                pretraining: pre.training.map(|t| t.splits().cloned().collect()).unwrap_or_default(),
+            })
+        }
+    }
+}
+
+/// The batch positions of one iteration: an endless stream of per-epoch permutations.
+struct Shuffler {
+    seed: u64,
+    n: usize,
+    epoch: Option<u64>,
+    perm: Vec<usize>,
+}
+
+impl Shuffler {
+    fn position(&mut self, stream_pos: u64) -> usize {
+        let epoch = stream_pos / self.n as u64;
+        if self.epoch != Some(epoch) {
+            let mut rng = item_rng(self.seed, STREAM_SHUFFLE, epoch);
+            self.perm = (0..self.n).collect();
+            for i in (1..self.n).rev() {
+                let j = rng.random_range(0..=i);
+                self.perm.swap(i, j);
+            }
+            self.epoch = Some(epoch);
+        }
+        self.perm[(stream_pos % self.n as u64) as usize]
+    }
+}
+
+/// A normalised batch in the grid layout: inputs and targets `[batch, 3, nx, ny, nz]`, masks
+/// `[batch, 1, nx, ny, nz]` as weights.
+struct Batch {
+    inputs: Vec<f32>,
+    targets: Vec<f32>,
+    masks: Vec<f32>,
+}
+
+/// Builds the normalised batch of the samples at `positions`; `rng_for` gives each slot its
+/// own corruption generator.
+fn batch(
+    samples: &Samples,
+    positions: &[usize],
+    norm: &Normalization,
+    corruption: &Corruption,
+    rng_for: impl Fn(usize) -> rand::rngs::StdRng,
+) -> Result<Batch> {
+    let grid = samples.grid;
+    let (f, n) = (grid.field_len(), grid.nodes());
+    let b = positions.len();
+    let mut out = Batch {
+        inputs: Vec::with_capacity(b * f),
+        targets: Vec::with_capacity(b * f),
+        masks: Vec::with_capacity(b * n),
+    };
+    let (si, st) = ((1.0 / norm.input_scale) as f32, (1.0 / norm.target_scale) as f32);
+    for (slot, &p) in positions.iter().enumerate() {
+        let mut input = samples.input(p).to_vec();
+        if !corruption.is_identity() {
+            corruption.apply(&mut input, grid, &mut rng_for(slot))?;
+        }
+        out.inputs.extend(input.iter().map(|v| v * si));
+        out.targets.extend(samples.target(p).iter().map(|v| v * st));
+        out.masks.extend(samples.mask(p).iter().map(|&v| f32::from(v)));
+    }
+    Ok(out)
+}
+
+/// The masked MSE loss of `net` on a batch and its gradients by burn's autodiff, on `device` (an
+/// autodiff device, where `net` lives): what a GPU runs. Equal to
+/// [`loss_and_gradients`](crate::net::backprop::loss_and_gradients) up to summation order.
+fn autodiff_loss_and_gradients(
+    net: &UNet,
+    b: &Batch,
+    batch: usize,
+    grid: GridShape,
+    device: &Device,
+) -> Result<(f64, GradientsParams)> {
+    let [nx, ny, nz] = grid.dims();
+    let tensor = |values: &[f32]| {
+        let channels = values.len() / (batch * grid.nodes());
+        Tensor::<5>::from_data(TensorData::new(values.to_vec(), [batch, channels, nx, ny, nz]), device)
+    };
+    let loss = masked_mse(net.forward(tensor(&b.inputs)), tensor(&b.targets), tensor(&b.masks));
+    let value = tensor_values(loss.clone())?.first().copied().unwrap_or(f32::NAN);
+    Ok((f64::from(value), GradientsParams::from_grads(loss.backward(), net)))
+}
+
+/// Checkpoint metadata (the JSON section of `checkpoint.bin`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CheckpointState {
+    format: String,
+    version: u32,
+    /// Identifies the setup; a resume with a different one is refused.
+    fingerprint: serde_json::Value,
+    /// Iterations done.
+    iteration: usize,
+    /// The random state: generators are counter-based on (seed, iteration).
+    seed: u64,
+    /// Training loss accumulated since the last curve row.
+    loss_sum: f64,
+    loss_count: usize,
+    best_iteration: Option<usize>,
+    best_val: Option<f64>,
+    curve: Vec<CurveRow>,
+}
+
+const CHECKPOINT_MAGIC: &[u8; 8] = b"AUGSIMCK";
+const CHECKPOINT_FORMAT: &str = "augsim-checkpoint";
+
+fn record_error(path: &Path, what: &str, e: impl std::fmt::Display) -> LearnError {
+    LearnError::model(path, format!("{what}: {e}"))
+}
+
+fn write_checkpoint(
+    path: &Path,
+    state: &CheckpointState,
+    net: &UNet,
+    optim: &ModuleOptimizer,
+    best: Option<&UNet>,
+) -> Result<()> {
+    let json = serde_json::to_vec(state).map_err(|e| record_error(path, "cannot serialize checkpoint state", e))?;
+    let model = net.clone().into_record().into_bytes().map_err(|e| record_error(path, "cannot serialize model", e))?;
+    let opt = optim.into_bytes().map_err(|e| record_error(path, "cannot serialize optimizer state", e))?;
+    let best = match best {
+        Some(b) => b
+            .clone()
+            .into_record()
+            .into_bytes()
+            .map_err(|e| record_error(path, "cannot serialize best model", e))?
+            .to_vec(),
+        None => Vec::new(),
+    };
+    let mut out = Vec::with_capacity(8 + 32 + json.len() + model.len() + opt.len() + best.len());
+    out.extend_from_slice(CHECKPOINT_MAGIC);
+    for section in [&json[..], &model[..], &opt[..], &best[..]] {
+        out.extend_from_slice(&(section.len() as u64).to_le_bytes());
+        out.extend_from_slice(section);
+    }
+    Ok(write_atomic_bytes(path, &out)?)
+}
+
+/// The sections of a checkpoint file.
+struct Checkpoint {
+    state: CheckpointState,
+    model: Vec<u8>,
+    optimizer: Vec<u8>,
+    /// Empty when no best model was recorded yet.
+    best: Vec<u8>,
+}
+
+fn read_checkpoint(path: &Path) -> Result<Checkpoint> {
+    let bytes = read(path)?;
+    let bad = |m: &str| LearnError::model(path, format!("corrupt checkpoint: {m}"));
+    if bytes.len() < 8 || &bytes[..8] != CHECKPOINT_MAGIC {
+        return Err(bad("missing AUGSIMCK magic"));
+    }
+    let mut at = 8;
+    let mut sections = Vec::new();
+    for _ in 0..4 {
+        let len_bytes: [u8; 8] =
+            bytes.get(at..at + 8).and_then(|s| s.try_into().ok()).ok_or_else(|| bad("truncated"))?;
+        let len = u64::from_le_bytes(len_bytes) as usize;
+        at += 8;
+        let section = bytes.get(at..at.saturating_add(len)).ok_or_else(|| bad("truncated"))?;
+        sections.push(section.to_vec());
+        at += len;
+    }
+    if at != bytes.len() {
+        return Err(bad("trailing bytes"));
+    }
+    let best = sections.pop().unwrap_or_default();
+    let optimizer = sections.pop().unwrap_or_default();
+    let model = sections.pop().unwrap_or_default();
+    let json = sections.pop().unwrap_or_default();
+    let state: CheckpointState = serde_json::from_slice(&json).map_err(|e| bad(&format!("state JSON: {e}")))?;
+    if state.format != CHECKPOINT_FORMAT || state.version != 1 {
+        return Err(bad("unknown checkpoint format or version"));
+    }
+    Ok(Checkpoint { state, model, optimizer, best })
+}
+
+fn load_record_into(net: UNet, bytes: Vec<u8>, path: &Path) -> Result<UNet> {
+    let record =
+        ModuleRecord::from_bytes(Bytes::from_bytes_vec(bytes)).map_err(|e| record_error(path, "model record", e))?;
+    net.try_load_record(record).map_err(|e| record_error(path, "model record does not fit the network", e))
+}
+
+fn indices_hash(samples: &Samples) -> u64 {
+    samples.indices.iter().fold(splitmix64(samples.len() as u64), |h, &i| splitmix64(h ^ i))
+}
+
+/// The split of a run: `train`, `val` and `test` must be disjoint, and `val` from the source of
+/// `train`.
+fn held_out_split(train: &Samples, val: &Samples, test: &IndexSet) -> Result<Split> {
+    if !val.is_empty() && val.source != train.source {
+        return Err(LearnError::InvalidInput(format!(
+            "validation samples (source {:?}) and training samples (source {:?}) come from different data",
+            val.source, train.source
+        )));
+    }
+    let split = Split {
+        source: train.source.clone(),
+        train: IndexSet::from_indices(&train.indices),
+        validation: IndexSet::from_indices(&val.indices),
+        test: test.clone(),
+    };
+    let overlap = |set: &IndexSet, indices: &[u64], roles: &str| match set.first_common(indices) {
+        Some(i) => Err(LearnError::InvalidInput(format!("sample {i} is both a {roles} sample"))),
+        None => Ok(()),
+    };
+    overlap(&split.train, &val.indices, "training and a validation")?;
+    overlap(test, &train.indices, "training and a test")?;
+    overlap(test, &val.indices, "validation and a test")?;
+    Ok(split)
+}
+
+/// Trains a U-Net on `train`, validating on `val` (may be empty: then the last weights are
+/// kept). See the module documentation for files, reproducibility and resume.
+pub fn train(
+    train: &Samples,
+    val: &Samples,
+    init: &Initialization,
+    config: &TrainConfig,
+    options: &TrainOptions,
+) -> Result<TrainOutcome> {
+    config.validate()?;
+    if train.is_empty() {
+        return Err(LearnError::InvalidInput("no training samples".into()));
+    }
+    if !val.is_empty() && val.grid != train.grid {
+        return Err(LearnError::InvalidInput(format!(
+            "validation grid {} differs from training grid {}",
+            val.grid, train.grid
+        )));
+    }
+    let split = held_out_split(train, val, &options.test)?;
+    let out = &options.out_dir;
+    std::fs::create_dir_all(out).map_err(|e| LearnError::io(out, e))?;
+    let device = options.compute.training_device()?;
+    let start = resolve_start(init, config.seed, &device)?;
+    // Everything that shapes the trajectory, so that a checkpoint is only resumed into the
+    // run it came from. The checkpoint interval is left out, and so is the iteration count
+    // under a constant rate: such a finished run can be extended by resuming it with more.
+    let mut trajectory = serde_json::to_value(config)
+        .map_err(|e| LearnError::InvalidInput(format!("cannot serialize the training config: {e}")))?;
+    if let Some(map) = trajectory.as_object_mut() {
+        if config.final_learning_rate.is_none() {
+            map.remove("iterations");
+        }
+        map.remove("checkpoint_every");
+    }
+    let fingerprint = serde_json::json!({
+        "config": trajectory,
+        "init": init,
+        "grid": train.grid,
+        "train": [train.len(), indices_hash(train)],
+        "val": [val.len(), indices_hash(val)],
+    });
+    let mut net = start.net;
+    let mut optim = AdamConfig::new().init();
+    let mut state = CheckpointState {
+        format: CHECKPOINT_FORMAT.into(),
+        version: 1,
+        fingerprint,
+        iteration: 0,
+        seed: config.seed,
+        loss_sum: 0.0,
+        loss_count: 0,
+        best_iteration: None,
+        best_val: None,
+        curve: Vec::new(),
+    };
+    let mut best: Option<UNet> = None;
+    let checkpoint_path = out.join(CHECKPOINT_FILE);
+    if options.resume && checkpoint_path.exists() {
+        let saved = read_checkpoint(&checkpoint_path)?;
+        if saved.state.fingerprint != state.fingerprint {
+            return Err(LearnError::model(
+                &checkpoint_path,
+                "checkpoint is from a different setup (configuration, initialisation or data); \
+                 use another output directory or start without resume",
+            ));
+        }
+        net = load_record_into(net, saved.model, &checkpoint_path)?;
+        optim = optim
+            .from_bytes(Bytes::from_bytes_vec(saved.optimizer))
+            .map_err(|e| record_error(&checkpoint_path, "optimizer state", e))?;
+        if !saved.best.is_empty() {
+            let fresh = UNet::new(&start.config, &inference_device(), 0)?;
+            best = Some(load_record_into(fresh, saved.best, &checkpoint_path)?);
+        }
+        state = saved.state;
+        if state.iteration > config.iterations {
+            return Err(LearnError::model(
+                &checkpoint_path,
+                format!(
+                    "checkpoint is at iteration {}, beyond the {} iterations asked for",
+                    state.iteration, config.iterations
+                ),
+            ));
+        }
+    }
+
+    let progress = if options.progress {
+        let bar = ProgressBar::new(config.iterations as u64);
+        if let Ok(style) = ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise}<{eta_precise}] {msg}")
+        {
+            bar.set_style(style);
+        }
+        bar
+    } else {
+        ProgressBar::hidden()
+    };
+    progress.set_position(state.iteration as u64);
+
+    let mut shuffler = Shuffler { seed: config.seed, n: train.len(), epoch: None, perm: Vec::new() };
+    let mut step_time = 0.0;
+    let mut steps = 0usize;
+    let mut completed = true;
+    while state.iteration < config.iterations {
+        let it = state.iteration;
+        let t0 = Instant::now();
+        let first = (it * config.batch_size) as u64;
+        let positions: Vec<usize> = (0..config.batch_size as u64).map(|b| shuffler.position(first + b)).collect();
+        let b = batch(train, &positions, &start.normalization, &config.train_corruption, |slot| {
+            item_rng(config.seed, STREAM_TRAIN_CORRUPTION, first + slot as u64)
+        })?;
+        let (loss_value, grads) = if options.compute.uses_burn() {
+            autodiff_loss_and_gradients(&net, &b, positions.len(), train.grid, &device)?
+        } else {
+            loss_and_gradients(&net, &b.inputs, &b.targets, &b.masks, positions.len(), train.grid)?
+        };
+        if !loss_value.is_finite() {
+            return Err(LearnError::InvalidInput(format!(
+                "training diverged at iteration {} (loss {loss_value}); lower the learning rate",
+                it + 1
+            )));
+        }
+        net = optim.step(config.learning_rate_at(it), net, grads);
+        step_time += t0.elapsed().as_secs_f64();
+        steps += 1;
+        state.iteration += 1;
+        state.loss_sum += loss_value;
+        state.loss_count += 1;
+        progress.set_position(state.iteration as u64);
+        progress.set_message(format!("loss {loss_value:.3e}"));
+
+        let done = state.iteration == config.iterations;
+        if state.iteration.is_multiple_of(config.validate_every) || done {
+            let snapshot = net.valid();
+            let val_error = if val.is_empty() {
+                None
+            } else {
+                let predictor = Predictor::from_net(&snapshot, options.compute, start.normalization, val.grid)?;
+                let report = evaluate_net(&predictor, val, &config.val_corruption, config.seed, |_, _| Ok(()))?;
+                Some(report.stats)
+            };
+            state.curve.push(CurveRow {
+                iteration: state.iteration,
+                train_loss: state.loss_sum / state.loss_count.max(1) as f64,
+                val: val_error,
+            });
+            state.loss_sum = 0.0;
+            state.loss_count = 0;
+            let val_mean = val_error.map(|v| v.mean);
+            let improved = match (val_mean, state.best_val) {
+                (None, _) => true,
+                (Some(e), Some(b)) => e < b,
+                (Some(_), None) => true,
+            };
+            if improved {
+                state.best_val = val_mean;
+                state.best_iteration = Some(state.iteration);
+                best = Some(snapshot);
+            }
+            write_curve_csv(&out.join(CURVE_CSV), &state.curve)?;
+            if let Some(e) = val_mean {
+                progress.set_message(format!("loss {loss_value:.3e} val {:.4} mm", e * 1e3));
+            }
+        }
+        let stop = options.stop_after.is_some_and(|s| state.iteration >= s) && !done;
+        if state.iteration.is_multiple_of(config.checkpoint_every) || done || stop {
+            write_checkpoint(&checkpoint_path, &state, &net, &optim, best.as_ref())?;
+        }
+        if stop {
+            completed = false;
+            break;
+        }
+    }
+    progress.finish_and_clear();
+
+    let mut best_net = match best {
+        Some(b) => b,
+        None => net.valid(),
+    };
+    if options.compute == Compute::Gpu {
+        // The model is returned on the inference device, whatever trained it.
+        best_net = best_net.copied_to(&start.config, &inference_device(), &out.join(MODEL_FILE))?;
+    }
+    let model = TrainedModel {
+        config: start.config,
+        normalization: start.normalization,
+        grid: train.grid,
+        placement: options.placement,
+        input_unit: start.input_unit,
+        target_unit: start.target_unit,
+        training: Some(TrainingInfo {
+            iterations: state.iteration,
+            best_iteration: state.best_iteration.unwrap_or(state.iteration),
+            best_val_mean_error: state.best_val,
+            train_samples: train.len(),
+            val_samples: val.len(),
+            seed: config.seed,
+            fine_tuned_from: start.fine_tuned_from,
+            frozen_encoder: start.freeze,
+            split,
+            pretraining: start.pretraining,
+        }),
+        net: best_net,
+    };
+    let model_path = out.join(MODEL_FILE);
+    if completed {
+        model.save(&model_path)?;
+    }
+    if !state.curve.is_empty() {
+        write_curve_csv(&out.join(CURVE_CSV), &state.curve)?;
+    }
+    Ok(TrainOutcome {
+        model,
+        curve: state.curve,
+        iterations_done: state.iteration,
+        completed,
+        model_path,
+        mean_step_seconds: if steps > 0 { step_time / steps as f64 } else { 0.0 },
+    })
+}

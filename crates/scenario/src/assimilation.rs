@@ -1,0 +1,262 @@
+//! Assimilation scenarios (`kind = "assimilation"`, `augsim assimilate`): model, loads, unknowns, observations, assessment, filter and outputs.
+//! Unknown keys are errors that name the key.
+
+use std::path::{Path, PathBuf};
+
+use fem::{Law, Material, SolverOptions};
+use filter::{Discrepancy, Execution, Profile, SigmaPointSet, Transform};
+use mesh::{NodeSelection, Point};
+use serde::Deserialize;
+
+use crate::{Fixed, Kind, MeshSource, Result, ScenarioText};
+
+/// An assimilation scenario file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AssimilationScenario {
+    /// Short name, used for the default output directory.
+    pub name: String,
+    /// Free text.
+    #[serde(default)]
+    pub description: String,
+    /// Filter iterations = time steps (one observation each); needed for synthetic observations; with observation
+    /// files, at most this many frames are used (default: all).
+    pub iterations: Option<usize>,
+    /// The organ mesh.
+    pub mesh: MeshSource,
+    /// Material; `young` is the true value of the reference run (and the model's value when not estimated).
+    pub material: Material,
+    /// Nodes with zero displacement.
+    #[serde(default)]
+    pub fixed: Vec<Fixed>,
+    /// Known forces with a time profile.
+    #[serde(default)]
+    pub force: Vec<ForceSpec>,
+    /// Prescribed displacements (the tool) with a time profile.
+    #[serde(default)]
+    pub tool: Vec<ToolSpec>,
+    /// Estimate Young's modulus.
+    pub young: Option<YoungSpec>,
+    /// Estimate one spring stiffness per node of a region.
+    pub springs: Option<SpringsSpec>,
+    /// The tracked feature points and their noise.
+    pub observations: ObservationSpec,
+    /// Points where the estimated deformation is compared with the reference run (synthetic observations only;
+    /// with track files, assessment points come from their own track file).
+    pub assessment: Option<AssessmentSpec>,
+    /// Where synthetic observations come from when not from the filter's own model: a reference run on another
+    /// mesh (and optionally another law), so that the filter never observes its own discretisation (no inverse
+    /// crime). Without it the reference run uses the model itself. Ignored when the observations come from files.
+    pub reference: Option<ReferenceSpec>,
+    /// Filter settings.
+    #[serde(default)]
+    pub filter: FilterSpec,
+    /// Newton-Raphson settings of every solve.
+    #[serde(default)]
+    pub solver: SolverOptions,
+    /// Outputs.
+    #[serde(default)]
+    pub output: OutputSpec,
+}
+
+/// A total force spread over the selected nodes as a uniform traction ([`fem::force_shares`]), times a profile.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ForceSpec {
+    /// Which nodes.
+    pub select: NodeSelection,
+    /// Total force at amplitude 1 (N).
+    pub total: Point,
+    /// Amplitude over time.
+    pub profile: Profile,
+}
+
+/// A prescribed displacement of the selected nodes (optionally only the `count` nearest to `near`), times a profile.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ToolSpec {
+    /// Candidate nodes.
+    pub select: NodeSelection,
+    /// Keep the candidates nearest to this point (m).
+    pub near: Option<Point>,
+    /// How many to keep with `near` (default 1).
+    pub count: Option<usize>,
+    /// Displacement at amplitude 1 (m).
+    pub displacement: Point,
+    /// Amplitude over time.
+    pub profile: Profile,
+}
+
+/// Prior of Young's modulus (filter space).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct YoungSpec {
+    /// Filter-space transform.
+    #[serde(default)]
+    pub transform: Transform,
+    /// Prior mean (filter space; Pa for the identity).
+    pub prior_mean: f64,
+    /// Prior standard deviation (filter space).
+    pub prior_std: f64,
+}
+
+/// One unknown spring per selected node: stiffness = `scale` · transform(filter value).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpringsSpec {
+    /// The attached nodes (the hidden region Σ).
+    pub select: NodeSelection,
+    /// Stiffness (N/m) per unit of the transformed value.
+    pub scale: f64,
+    /// Filter-space transform (default `abs`: non-negative stiffness).
+    #[serde(default = "abs")]
+    pub transform: Transform,
+    /// Prior mean (filter space).
+    pub prior_mean: f64,
+    /// Prior standard deviation (filter space).
+    pub prior_std: f64,
+    /// True values (transformed units) of the reference run on parts of Σ; 0 elsewhere.
+    #[serde(default)]
+    pub truth: Vec<SpringTruth>,
+    /// Also run the model with Σ all fixed and all free, and compare the assessment errors.
+    #[serde(default)]
+    pub compare: bool,
+}
+
+fn abs() -> Transform {
+    Transform::Abs
+}
+
+/// True spring value on the nodes of Σ that a selection picks.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpringTruth {
+    /// Which nodes of Σ.
+    pub select: NodeSelection,
+    /// Value in transformed units (stiffness / scale).
+    pub value: f64,
+}
+
+/// The reference run's own model: the scenario's loads, tool, true parameters, observations and assessment applied
+/// to another mesh (and law).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReferenceSpec {
+    /// The reference mesh (e.g. a finer phantom); its selections (`fixed`, forces, tool, Σ) are made on it.
+    pub mesh: MeshSource,
+    /// The reference law (default: the scenario's).
+    pub law: Option<Law>,
+}
+
+/// Tracked feature points on the visible surface.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObservationSpec {
+    /// Number of synthetic feature points (drawn uniformly by area on the surface facing the camera, away from
+    /// constrained nodes); needed unless the observations come from a file.
+    pub points: Option<usize>,
+    /// Viewing direction of the camera.
+    #[serde(default = "view")]
+    pub view_direction: Point,
+    /// Seed of the point sampling and of the noise.
+    #[serde(default)]
+    pub seed: u64,
+    /// Standard deviation of the measurement noise (m): added to the synthetic observations, and the tracker's
+    /// accuracy for observations from a file.
+    pub noise_std: f64,
+    /// Observation standard deviation assumed by the filter (m); default `noise_std`.
+    pub filter_std: Option<f64>,
+}
+
+fn view() -> Point {
+    [0.0, 0.0, -1.0]
+}
+
+/// Assessment points: `count` nodes of a selection, spread out, that are neither constrained nor observed.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AssessmentSpec {
+    /// Candidate nodes.
+    pub select: NodeSelection,
+    /// How many.
+    pub count: usize,
+}
+
+/// Filter settings.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FilterSpec {
+    /// Parallel or sequential sigma points.
+    #[serde(default)]
+    pub execution: Execution,
+    /// Forgetting factor ρ in (0, 1] (see [`filter::RoukfConfig::forgetting`]); 1: none.
+    #[serde(default = "one")]
+    pub forgetting: f64,
+    /// `"simplex"` (p + 1 points, the default) or `"star"` (2p + 1 points) (see [`filter::SigmaPointSet`]).
+    #[serde(default)]
+    pub sigma_points: SigmaPointSet,
+    /// Allowance for model error in the reported σ: `"none"` (the default), `"independent"` (the misfit as extra
+    /// white noise) or `"systematic"` (a model error that may lie along the parameters' sensitivity) (see
+    /// [`filter::Discrepancy`] and [`filter::Roukf::with_discrepancy`]).
+    #[serde(default)]
+    pub discrepancy: Discrepancy,
+    /// Degrees of freedom d ≥ 1 of a systematic discrepancy (default 1).
+    #[serde(default = "one")]
+    pub discrepancy_dof: f64,
+}
+
+impl Default for FilterSpec {
+    fn default() -> Self {
+        FilterSpec {
+            execution: Execution::default(),
+            forgetting: 1.0,
+            sigma_points: SigmaPointSet::default(),
+            discrepancy: Discrepancy::None,
+            discrepancy_dof: 1.0,
+        }
+    }
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// Output settings.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputSpec {
+    /// Directory of the results; default `out/<name>`.
+    pub dir: Option<PathBuf>,
+    /// Write the estimated deformation of every `every`-th time step (default 1: every step).
+    pub every: Option<usize>,
+}
+
+impl AssimilationScenario {
+    /// Reads and parses a scenario file (or a built-in scenario); returns it with the directory that its relative
+    /// paths start from.
+    pub fn load(path: &Path) -> Result<(Self, PathBuf)> {
+        let source = ScenarioText::read(path)?;
+        Ok((Self::from_text(&source)?, source.dir))
+    }
+
+    /// Parses scenario text.
+    pub fn from_text(source: &ScenarioText) -> Result<Self> {
+        source.parse_as(Kind::Assimilation)
+    }
+
+    /// The scenario of the reference run behind its synthetic observations when it has a `[reference]` section:
+    /// the same scenario on the reference mesh and law, without the section.
+    pub fn reference_scenario(&self) -> Option<AssimilationScenario> {
+        let reference = self.reference.as_ref()?;
+        let mut scenario = self.clone();
+        scenario.mesh = reference.mesh.clone();
+        scenario.material.law = reference.law.unwrap_or(self.material.law);
+        scenario.reference = None;
+        Some(scenario)
+    }
+
+    /// The output directory: `output.dir`, else `out/<name>`.
+    pub fn output_dir(&self) -> PathBuf {
+        self.output.dir.clone().unwrap_or_else(|| PathBuf::from("out").join(&self.name))
+    }
+}

@@ -1,0 +1,155 @@
+//! Static scenarios (`kind = "static"`, `augsim solve`): mesh source, material, boundary
+//! conditions, loads, solver settings and outputs.
+
+use std::path::{Path, PathBuf};
+
+use fem::{Material, Problem, SolverOptions};
+use mesh::{NodeSelection, Point};
+use serde::Deserialize;
+
+use crate::{build_mesh, fixed_problem, Fixed, Kind, MeshSource, Result, ScenarioError, ScenarioText};
+
+/// A static boundary-value problem.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StaticScenario {
+    /// Short name, used for output file names.
+    pub name: String,
+    /// Free text shown by `solve`.
+    #[serde(default)]
+    pub description: String,
+    /// Where the mesh comes from.
+    pub mesh: MeshSource,
+    /// The material.
+    pub material: Material,
+    /// Nodes with zero displacement.
+    #[serde(default)]
+    pub fixed: Vec<Fixed>,
+    /// Nodes with a prescribed displacement.
+    #[serde(default)]
+    pub prescribed: Vec<Prescribed>,
+    /// Zero-length springs to the rest position.
+    #[serde(default)]
+    pub springs: Vec<Springs>,
+    /// Total forces spread over selected nodes as a uniform traction ([`fem::force_shares`]).
+    #[serde(default)]
+    pub force: Vec<Force>,
+    /// Surface tractions on boundary faces whose nodes are all selected.
+    #[serde(default)]
+    pub traction: Vec<Traction>,
+    /// Gravity acceleration (m/s²).
+    pub gravity: Option<Point>,
+    /// Newton-Raphson settings.
+    #[serde(default)]
+    pub solver: SolverOptions,
+    /// Outputs.
+    #[serde(default)]
+    pub output: Output,
+}
+
+/// Prescribed displacement.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Prescribed {
+    /// Which nodes.
+    pub select: NodeSelection,
+    /// Displacement (m).
+    pub displacement: Point,
+}
+
+/// Springs.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Springs {
+    /// Which nodes.
+    pub select: NodeSelection,
+    /// Stiffness per node (N/m).
+    pub stiffness: f64,
+}
+
+/// A total force.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Force {
+    /// Which nodes share it.
+    pub select: NodeSelection,
+    /// Total force (N).
+    pub total: Point,
+}
+
+/// A traction.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Traction {
+    /// Nodes of the loaded faces.
+    pub select: NodeSelection,
+    /// Force per reference area (Pa).
+    pub traction: Point,
+}
+
+/// Output settings.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Output {
+    /// Result file (.vtu or .vtk); default `out/<name>.vtu`.
+    pub path: Option<PathBuf>,
+}
+
+impl StaticScenario {
+    /// Reads and parses a scenario file (or a built-in scenario); returns it with the directory
+    /// that its relative paths start from.
+    pub fn load(path: &Path) -> Result<(Self, PathBuf)> {
+        let source = ScenarioText::read(path)?;
+        Ok((Self::from_text(&source)?, source.dir))
+    }
+
+    /// Parses scenario text.
+    pub fn from_text(source: &ScenarioText) -> Result<Self> {
+        source.parse_as(Kind::Static)
+    }
+
+    /// Parses the text of a scenario; `origin` names it in errors and relative paths start
+    /// from its directory.
+    pub fn parse(text: &str, origin: &Path) -> Result<Self> {
+        let dir = origin.parent().map(Path::to_path_buf).unwrap_or_default();
+        Self::from_text(&ScenarioText { text: text.to_string(), origin: origin.to_path_buf(), dir })
+    }
+
+    /// The boundary-value problem: the mesh built from its source (file paths relative to
+    /// `dir`), the material, constraints and loads.
+    pub fn build_problem(&self, dir: &Path) -> Result<Problem> {
+        let fail = |m: String| ScenarioError::build(&self.name, m);
+        let mesh = build_mesh(&self.mesh, dir).map_err(|e| fail(format!("building the mesh: {e}")))?;
+        let mut p = fixed_problem(mesh, self.material, &self.fixed).map_err(|e| fail(e.to_string()))?;
+        let pick = |s: &NodeSelection, what: &str, p: &Problem| {
+            s.select(&p.mesh).map_err(|e| fail(format!("{what} selection: {e}")))
+        };
+        for f in &self.prescribed {
+            let nodes = pick(&f.select, "prescribed", &p)?;
+            p.prescribe(&nodes, f.displacement);
+        }
+        for s in &self.springs {
+            let nodes = pick(&s.select, "springs", &p)?;
+            p.add_springs(&nodes, s.stiffness);
+        }
+        for f in &self.force {
+            let nodes = pick(&f.select, "force", &p)?;
+            p.add_force(&nodes, f.total);
+        }
+        for t in &self.traction {
+            let nodes = pick(&t.select, "traction", &p)?;
+            if p.add_traction(&nodes, t.traction) == 0.0 {
+                return Err(fail(format!("traction selection {:?} covers no boundary face", t.select)));
+            }
+        }
+        if let Some(g) = self.gravity {
+            p.add_gravity(g).map_err(|e| fail(format!("gravity: {e}")))?;
+        }
+        Ok(p)
+    }
+
+    /// The output path: `output.path`, else `out/<name>.vtu`.
+    pub fn output_path(&self) -> PathBuf {
+        self.output.path.clone().unwrap_or_else(|| PathBuf::from(format!("out/{}.vtu", self.name)))
+    }
+}

@@ -1,0 +1,282 @@
+//! Registration cases (`kind = "registration_case"`, `augsim register --demo | --case`): the truth
+//! (phantom size, law, fixed and loaded regions, force), the camera (view, points, noise,
+//! outliers, seed), an optional rigid misalignment of the camera's frame, the registration
+//! models (phantom size, methods) and the registration settings.
+
+use std::path::Path;
+
+use fem::Material;
+use mesh::phantom::SurfacePatch;
+use mesh::Point;
+use register::{RegistrationOptions, RigidTransform};
+use serde::{Deserialize, Serialize};
+
+use crate::{Kind, Result, ScenarioError, ScenarioText};
+
+/// The name of the built-in case of `augsim register --demo`.
+pub const BUILTIN_CASE: &str = "register_case";
+
+/// A registration comparison case.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CaseScenario {
+    /// Short name.
+    pub name: String,
+    /// One line of description.
+    #[serde(default)]
+    pub description: String,
+    /// The deformation to recover.
+    pub truth: TruthSpec,
+    /// What the camera sees of it.
+    pub camera: CameraSpec,
+    /// Where the camera's frame lies against the preoperative model's (none by default).
+    #[serde(default)]
+    pub misalignment: Misalignment,
+    /// The registration models.
+    pub models: ModelsSpec,
+    /// The registration loop (`[registration]`, and `[registration.rigid]` for a rigid
+    /// pre-alignment); defaults as [`RegistrationOptions::default`].
+    #[serde(default)]
+    pub registration: RegistrationOptions,
+}
+
+/// The ground truth: the built-in liver phantom, meshed finer than the models, fixed on one
+/// region and pushed on another.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TruthSpec {
+    /// The phantom meshed with about this many tetrahedra.
+    pub tets: usize,
+    /// Its material (law, Young's modulus, Poisson's ratio; formulation automatic by default).
+    pub material: Material,
+    /// The phantom region held fixed.
+    #[serde(default = "default_fixed")]
+    pub fixed: String,
+    /// The phantom region the force is spread over.
+    #[serde(default = "default_load")]
+    pub load: String,
+    /// Total force (N)...
+    pub force: f64,
+    /// ... along this direction (normalised).
+    #[serde(default = "default_direction")]
+    pub direction: Point,
+    /// Moves the phantom's `push` region: a patch of the surface around the boundary point met
+    /// from `from` along `direction`. Default: the phantom's own.
+    #[serde(default)]
+    pub patch: Option<SurfacePatch>,
+    /// The phantom region whose nodes are the targets (their rest positions).
+    #[serde(default = "default_targets")]
+    pub targets: String,
+}
+
+fn default_fixed() -> String {
+    "fixed".into()
+}
+
+fn default_load() -> String {
+    "push".into()
+}
+
+fn default_targets() -> String {
+    "markers".into()
+}
+
+fn default_direction() -> Point {
+    [0.0, 0.0, -1.0]
+}
+
+/// The simulated camera and its random seed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSpec {
+    /// Viewing direction (the camera looks along it).
+    pub view: Point,
+    /// Points sampled uniformly by area on the visible triangles.
+    pub points: usize,
+    /// Standard deviation of the Gaussian noise on each point (m).
+    pub noise: f64,
+    /// Extra points uniform in the bounding box grown by 10 %, as a fraction of `points`.
+    pub outliers: f64,
+    /// Seed of the sampling and noise.
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+/// A rigid misalignment of the camera's frame: cloud and truth are moved by
+/// `x ↦ R x + t`, R the rotation by `rotation_deg` about `axis` (through the origin of the
+/// model's frame, inside the phantom), t of length `translation_mm` along `direction`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Misalignment {
+    /// Rotation angle (degrees).
+    pub rotation_deg: f64,
+    /// Rotation axis.
+    pub axis: Point,
+    /// Translation length (mm).
+    pub translation_mm: f64,
+    /// Translation direction.
+    pub direction: Point,
+}
+
+impl Default for Misalignment {
+    fn default() -> Self {
+        Misalignment { rotation_deg: 0.0, axis: [1.0, 1.0, 1.0], translation_mm: 0.0, direction: [-1.0, 1.0, 0.0] }
+    }
+}
+
+impl Misalignment {
+    /// The model → camera transform.
+    pub fn transform(&self) -> std::result::Result<RigidTransform, String> {
+        let len = mesh::dot(self.direction, self.direction).sqrt();
+        if self.translation_mm != 0.0 && !(len > 0.0 && len.is_finite()) {
+            return Err(format!("misalignment direction {:?} must be non-zero and finite", self.direction));
+        }
+        let shift = if self.translation_mm == 0.0 { 0.0 } else { self.translation_mm * 1e-3 / len };
+        RigidTransform::from_axis_angle(self.axis, self.rotation_deg.to_radians(), self.direction.map(|x| x * shift))
+            .map_err(|e| e.to_string())
+    }
+}
+
+/// The registration models: every method deforms the phantom meshed with `tets` tetrahedra.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelsSpec {
+    /// The phantom meshed with about this many tetrahedra.
+    pub tets: usize,
+    /// The methods compared, in order (`[[models.method]]`).
+    pub method: Vec<MethodSpec>,
+}
+
+/// A registration method of the comparison.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MethodSpec {
+    /// Name in the table (its output directory is made of its letters and digits).
+    pub name: String,
+    /// What deforms the organ.
+    pub kind: MethodKind,
+    /// The finite-element model's material (`kind = "fem"` only).
+    #[serde(default)]
+    pub material: Option<Material>,
+    /// Most match-and-deform iterations for this method, in place of `[registration]
+    /// iterations`: e.g. the U-Net's real-time budget.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub iterations: Option<usize>,
+}
+
+/// The kinds of registration method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MethodKind {
+    /// The finite-element model of the method's `material`, fixed on the truth's fixed region,
+    /// pulled by data springs of the default stiffness ([`register::FemDeformer::default_stiffness`]).
+    Fem,
+    /// The U-Net given to the comparison (`augsim register --model`), trained on this phantom
+    /// with the normal displacement of its `visible` region as input; left out when none is given.
+    Network,
+}
+
+impl CaseScenario {
+    /// Parses and checks scenario text.
+    pub fn from_text(source: &ScenarioText) -> Result<CaseScenario> {
+        let scenario: CaseScenario = source.parse_as(Kind::RegistrationCase)?;
+        scenario.validate().map_err(|m| ScenarioError::invalid(&source.origin, m))?;
+        Ok(scenario)
+    }
+
+    /// Parses and checks the text of a scenario; `origin` names it in errors.
+    pub fn parse(text: &str, origin: &Path) -> Result<CaseScenario> {
+        let dir = origin.parent().map(Path::to_path_buf).unwrap_or_default();
+        Self::from_text(&ScenarioText { text: text.to_string(), origin: origin.to_path_buf(), dir })
+    }
+
+    /// Reads a scenario file (or a built-in scenario).
+    pub fn load(path: &Path) -> Result<CaseScenario> {
+        Self::from_text(&ScenarioText::read(path)?)
+    }
+
+    /// The built-in case of `augsim register --demo` ([`BUILTIN_CASE`]).
+    pub fn builtin() -> CaseScenario {
+        crate::builtin_as(BUILTIN_CASE, Kind::RegistrationCase)
+    }
+
+    /// Checks the values (what parsing cannot).
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        let bad = |m: String| Err(m);
+        let finite = |p: Point| p.iter().all(|x| x.is_finite());
+        let nonzero = |p: Point| finite(p) && p.iter().any(|&x| x != 0.0);
+        let t = &self.truth;
+        if t.tets < 100 || self.models.tets < 100 {
+            return bad(format!("truth.tets = {} and models.tets = {} must be at least 100", t.tets, self.models.tets));
+        }
+        t.material.validate().map_err(|e| format!("truth.material: {e}"))?;
+        if !t.force.is_finite() {
+            return bad(format!("truth.force = {} must be finite", t.force));
+        }
+        if !nonzero(t.direction) {
+            return bad(format!("truth.direction = {:?} must be non-zero and finite", t.direction));
+        }
+        if let Some(p) = &t.patch {
+            if !(finite(p.from) && nonzero(p.direction) && p.radius > 0.0 && p.radius.is_finite()) {
+                return bad(format!("truth.patch = {p:?}: finite `from`, non-zero `direction`, positive `radius`"));
+            }
+        }
+        let c = &self.camera;
+        if !nonzero(c.view) {
+            return bad(format!("camera.view = {:?} must be non-zero and finite", c.view));
+        }
+        if c.points == 0 {
+            return bad("camera.points must be at least 1".into());
+        }
+        if !(c.noise >= 0.0 && c.noise.is_finite() && c.outliers >= 0.0 && c.outliers.is_finite()) {
+            return bad(format!("camera.noise = {} and camera.outliers = {} must be >= 0", c.noise, c.outliers));
+        }
+        let m = &self.misalignment;
+        if !(m.rotation_deg.is_finite() && m.translation_mm.is_finite() && finite(m.axis) && finite(m.direction)) {
+            return bad(format!("misalignment {m:?} must be finite"));
+        }
+        m.transform().map_err(|e| format!("misalignment: {e}"))?;
+        if self.models.method.is_empty() {
+            return bad("models.method: no method to compare (add [[models.method]] tables)".into());
+        }
+        let mut slugs = Vec::new();
+        for method in &self.models.method {
+            let name = &method.name;
+            match (method.kind, &method.material) {
+                (MethodKind::Fem, Some(material)) => {
+                    material.validate().map_err(|e| format!("method {name:?}: material: {e}"))?
+                }
+                (MethodKind::Fem, None) => {
+                    return bad(format!("method {name:?}: kind = \"fem\" needs a `material` (law, young, poisson)"))
+                }
+                (MethodKind::Network, Some(_)) => {
+                    return bad(format!("method {name:?}: kind = \"network\" takes no `material`"))
+                }
+                (MethodKind::Network, None) => {}
+            }
+            if method.iterations == Some(0) {
+                return bad(format!("method {name:?}: iterations must be at least 1"));
+            }
+            let slug = slug(name);
+            if slug.is_empty() {
+                return bad(format!("method name {name:?} has no letter or digit"));
+            }
+            if slugs.contains(&slug) {
+                return bad(format!("method name {name:?} is not distinct from another's ({slug})"));
+            }
+            slugs.push(slug);
+        }
+        self.registration.validate().map_err(|e| format!("registration: {e}"))
+    }
+}
+
+/// A file name for a method: its lowercase letters and digits, other runs as one `_`.
+pub fn slug(name: &str) -> String {
+    let lower = name.to_ascii_lowercase();
+    let words: Vec<&str> = lower.split(|c: char| !c.is_ascii_alphanumeric()).filter(|w| !w.is_empty()).collect();
+    words.join("_")
+}

@@ -1,0 +1,120 @@
+//! What every scenario kind shares: where the mesh comes from, fixed nodes, and the constrained base problem.
+
+use std::path::{Path, PathBuf};
+
+use mesh::immersed::ImmersedOptions;
+use mesh::{Mesh, MeshError, NodeSelection, Point};
+use serde::Deserialize;
+
+use fem::{FemError, Material, Problem};
+
+/// The mesh of a scenario.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum MeshSource {
+    /// A structured box.
+    Box {
+        /// Lower corner (m).
+        min: Point,
+        /// Upper corner (m).
+        max: Point,
+        /// Cells along x, y, z.
+        cells: [usize; 3],
+        /// "hex" (H8) or "tet" (6 T4 per cell).
+        element: ElementKind,
+    },
+    /// The built-in liver phantom meshed with about `tets` tetrahedra.
+    Phantom {
+        /// Target number of tetrahedra.
+        tets: usize,
+    },
+    /// The built-in liver phantom as an immersed-boundary H8 grid.
+    PhantomGrid {
+        /// Cell size (m).
+        spacing: f64,
+        /// Cells with at most this volume fraction are left out (default 0: every cell with
+        /// material); nearly empty cut cells are the first to be crushed under large loads.
+        #[serde(default)]
+        min_fraction: f64,
+    },
+    /// A closed surface (.obj, .stl, .vtk) meshed with tetrahedra; the path is
+    /// relative to the scenario file.
+    Surface {
+        /// Path of the surface.
+        path: PathBuf,
+        /// Scale so that the largest extent is this length (m), centred at the origin.
+        length: f64,
+        /// Target number of tetrahedra.
+        tets: usize,
+    },
+    /// A volume mesh file (.msh, .vtk, .vtu); the path is relative to the scenario file.
+    File {
+        /// Path of the file.
+        path: PathBuf,
+        /// Multiply coordinates by this factor (e.g. 0.001 for mm).
+        #[serde(default = "one")]
+        scale: f64,
+        /// Move the bounding-box centre to the origin before scaling.
+        #[serde(default)]
+        centre: bool,
+    },
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// Element kind of a generated box.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ElementKind {
+    /// Trilinear hexahedra.
+    Hex,
+    /// Linear tetrahedra.
+    Tet,
+}
+
+/// Fixed nodes.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Fixed {
+    /// Which nodes.
+    pub select: NodeSelection,
+}
+
+/// Builds a mesh from its source (file paths relative to `dir`).
+pub fn build_mesh(source: &MeshSource, dir: &Path) -> Result<Mesh, MeshError> {
+    Ok(match source {
+        MeshSource::Box { min, max, cells, element: ElementKind::Hex } => mesh::box_hex(*min, *max, *cells)?,
+        MeshSource::Box { min, max, cells, element: ElementKind::Tet } => mesh::box_tet(*min, *max, *cells)?,
+        MeshSource::Phantom { tets } => mesh::phantom::liver_phantom(*tets)?,
+        MeshSource::PhantomGrid { spacing, min_fraction } => {
+            let options = ImmersedOptions { min_fraction: *min_fraction, ..ImmersedOptions::with_spacing(*spacing) };
+            mesh::phantom::PhantomSpec::default().immersed_with(&options)?.mesh
+        }
+        MeshSource::Surface { path, length, tets } => {
+            let mut surface = mesh::io::read_surface(dir.join(path))?;
+            surface.fit_to(*length)?;
+            mesh::tetmesh::mesh_surface_to_count(&surface, *tets, mesh::tetmesh::BoundaryFit::default())?.0
+        }
+        MeshSource::File { path, scale, centre } => {
+            let mut m = mesh::io::read_mesh(dir.join(path))?;
+            let (lo, hi) = m.bounds();
+            let c = if *centre { std::array::from_fn(|d| 0.5 * (lo[d] + hi[d])) } else { [0.0; 3] };
+            m.transform(c, *scale);
+            m
+        }
+    })
+}
+
+/// The problem on `mesh` with `material` (validated) and the `fixed` nodes held at zero displacement; errors name
+/// the material or the selection at fault.
+pub fn fixed_problem(mesh: Mesh, material: Material, fixed: &[Fixed]) -> Result<Problem, FemError> {
+    material.validate().map_err(|m| FemError::Invalid(format!("material: {m}")))?;
+    let mut problem = Problem::new(mesh, material);
+    for f in fixed {
+        let nodes = f.select.select(&problem.mesh).map_err(|e| FemError::Invalid(format!("fixed selection: {e}")))?;
+        problem.fix(&nodes);
+    }
+    Ok(problem)
+}
