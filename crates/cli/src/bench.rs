@@ -11,7 +11,8 @@ pub fn run(runs: usize) -> Result<()> {
     println!("ordering, symbolic analysis, buffers) and 'first': its first solve, over as many new solvers as runs;");
     println!("'median': repeated solves from rest on the last (the rest tangent's factorisation is kept).");
     println!(
-        "'frame': a frame of a sequence whose load varies by 2 % per frame, warm-started from the previous frame."
+        "'frame': a frame of a sequence whose load varies by {:.0} % per frame, warm-started from the previous frame.",
+        100.0 * experiment::FRAME_LOAD_STEP
     );
     println!(
         "{:<42} {:>6} {:>5} {:>4} {:>4} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7}",
@@ -63,9 +64,9 @@ pub fn run(runs: usize) -> Result<()> {
 /// random: the time does not depend on their values.
 fn unet_prediction(runs: usize) -> Result<()> {
     println!();
-    println!("U-Net prediction, one sample on the liver grid 21x23x21, depth 3, after 3 warm-up runs:");
-    println!("{:<30} {:>10} {:>10} {:>10} {:>10}", "first-layer channels", "params", "median ms", "min ms", "max ms");
     let grid = learn::GridShape::new(21, 23, 21);
+    println!("U-Net prediction, one sample on the liver grid {grid}, depth 3, after 3 warm-up runs:");
+    println!("{:<30} {:>10} {:>10} {:>10} {:>10}", "first-layer channels", "params", "median ms", "min ms", "max ms");
     let input: Vec<f32> = (0..grid.field_len()).map(|i| ((i * 7919) % 2001) as f32 * 1e-3 - 1.0).collect();
     for base_channels in [8, 16] {
         let config = learn::UNetConfig { base_channels, ..learn::UNetConfig::default() };

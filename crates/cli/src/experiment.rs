@@ -17,9 +17,14 @@ pub struct ExperimentArgs {
     /// Output directory: one sub-directory per experiment, report.md and report.html.
     #[arg(long, default_value = "out/experiments")]
     pub out: PathBuf,
-    /// Also rewrite the generated section of this Markdown file (e.g. README.md) from every result under --out.
+    /// Also rewrite the headline summary of this Markdown file (e.g. README.md, between its markers) from every
+    /// result under --out.
     #[arg(long)]
     pub readme: Option<PathBuf>,
+    /// Also write the full results page (e.g. docs/results.md: the summary, then every table) from every result
+    /// under --out.
+    #[arg(long)]
+    pub results: Option<PathBuf>,
 }
 
 /// Runs `augsim experiment`.
@@ -47,6 +52,10 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
     if let Some(readme) = &args.readme {
         experiment::report::update_markdown(readme, &results)?;
         println!("updated    {}", readme.display());
+    }
+    if let Some(page) = &args.results {
+        experiment::report::write_results_page(page, &results)?;
+        println!("wrote      {}", page.display());
     }
     Ok(())
 }

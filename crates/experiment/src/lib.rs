@@ -38,7 +38,7 @@ pub mod sample_view;
 pub mod simulate;
 mod transfer;
 
-pub use fem_speed::{fbar_ratios, measure as measure_fem_speed, CaseTiming, Ratio};
+pub use fem_speed::{fbar_ratios, measure as measure_fem_speed, CaseTiming, Ratio, FRAME_LOAD_STEP};
 
 /// How large an experiment is run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -122,6 +122,78 @@ impl Row {
     }
 }
 
+/// Whether our figure is better than the published one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// Better by more than [`ON_PAR`].
+    Better,
+    /// Within [`ON_PAR`] of it (or, for a qualitative finding, the same finding).
+    OnPar,
+    /// Worse by more than [`ON_PAR`] (or, for a qualitative finding, not found).
+    Worse,
+}
+
+impl Verdict {
+    /// The word shown in the summaries.
+    pub fn word(self) -> &'static str {
+        match self {
+            Verdict::Better => "better",
+            Verdict::OnPar => "on par",
+            Verdict::Worse => "worse",
+        }
+    }
+}
+
+/// Relative difference within which two figures are on par.
+pub const ON_PAR: f64 = 0.05;
+
+/// A headline figure of an experiment: ours beside the published one, with the verdict.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Headline {
+    /// What is compared (one line).
+    pub figure: String,
+    /// Our value, formatted.
+    pub ours: String,
+    /// The published value, formatted.
+    pub published: String,
+    /// Ours against the published one.
+    pub verdict: Verdict,
+}
+
+impl Headline {
+    /// A figure where lower is better (an error, a time): ours and the published one in `unit`,
+    /// shown with `digits` decimals.
+    pub fn lower_is_better(figure: impl Into<String>, ours: f64, published: f64, digits: usize, unit: &str) -> Self {
+        let verdict = if !(ours.is_finite()) {
+            Verdict::Worse
+        } else if ours < published * (1.0 - ON_PAR) {
+            Verdict::Better
+        } else if ours > published * (1.0 + ON_PAR) {
+            Verdict::Worse
+        } else {
+            Verdict::OnPar
+        };
+        Headline {
+            figure: figure.into(),
+            ours: fmt(ours, digits, unit),
+            published: fmt(published, digits, unit),
+            verdict,
+        }
+    }
+
+    /// A qualitative finding of the publication (`published`) that our run reproduces or not.
+    pub fn finding(
+        figure: impl Into<String>,
+        ours: impl Into<String>,
+        published: impl Into<String>,
+        holds: bool,
+    ) -> Self {
+        let verdict = if holds { Verdict::OnPar } else { Verdict::Worse };
+        Headline { figure: figure.into(), ours: ours.into(), published: published.into(), verdict }
+    }
+}
+
 /// What an experiment produced.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ExperimentResult {
@@ -133,6 +205,9 @@ pub struct ExperimentResult {
     pub size: Size,
     /// Wall time of the run that finished it (s; steps resumed from disk are not counted).
     pub seconds: f64,
+    /// The headline figures, for the summaries (README, `docs/results.md`).
+    #[serde(default)]
+    pub headlines: Vec<Headline>,
     /// The table.
     pub rows: Vec<Row>,
     /// Figures (PNG) and 3D viewers (HTML), relative to the experiment's directory.

@@ -13,7 +13,7 @@ use mesh::stats::{max, mean};
 use scenario::CaseScenario;
 
 use crate::learning::{dataset, error_histogram, model_dir, train, Recipe};
-use crate::{fmt, ExperimentResult, Name, Progress, Row, Size};
+use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 
 use crate::case::AR_SCENARIO as LIVER_AR;
 
@@ -193,6 +193,14 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
             published(&m.method).0,
         ));
     }
+    let headlines = per_method
+        .iter()
+        .filter_map(|m| {
+            let value = published(&m.method).1?;
+            let figure = format!("registration TRE, {} ({} held-out cases)", m.method, HELD_OUT.len());
+            Some(Headline::lower_is_better(figure, mean(&m.means), value, 2, "mm"))
+        })
+        .collect();
     rows.extend(case_rows);
     let categories: Vec<String> = per_method.iter().map(|m| m.method.clone()).collect();
     let bars = |name: &str, f: &dyn Fn(&MethodTre) -> Option<f64>| plot::BarSeries {
@@ -237,6 +245,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     }
     let [train_n, validation_n, test_n] = t.split;
     Ok(ExperimentResult {
+        headlines,
         name: Name::LiverAr,
         title: "Scenario 2: augmented-reality registration (TRE)".into(),
         size,

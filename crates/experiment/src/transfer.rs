@@ -11,7 +11,7 @@ use learn::{Compute, Corruption, CurveRow, EvalReport};
 use serde::Serialize;
 
 use crate::learning::{dataset, error_histogram, max_displacement, model_dir, train, Recipe, Trained};
-use crate::{fmt, ExperimentResult, Name, Progress, Row, Size};
+use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 
 /// Training samples of each dataset, as published (the test set is what remains after validation).
 const TRAIN: usize = 1209;
@@ -204,6 +204,22 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
             .into(),
     ];
 
+    let headlines = vec![
+        Headline::lower_is_better(
+            format!("beam transfer: test ē, pre-trained on BC4 and fine-tuned on {few_n} samples"),
+            tuned_test.stats.mean * 1e3,
+            0.80,
+            2,
+            "mm",
+        ),
+        Headline::lower_is_better(
+            format!("beam transfer: test ē, from scratch on {few_n} samples"),
+            scratch_test.stats.mean * 1e3,
+            3.49,
+            2,
+            "mm",
+        ),
+    ];
     let mut values = serde_json::Map::new();
     for (key, r) in [
         ("scratch_full", &full_test),
@@ -217,6 +233,7 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
     values.insert("pre_trained_validation_m".into(), pre_validation.into());
     values.insert("crossings".into(), serde_json::to_value(&crossings)?);
     Ok(ExperimentResult {
+        headlines,
         name: Name::BeamTransfer,
         title: "Scenario 3: beam, transfer learning to a hidden boundary condition".into(),
         size,

@@ -43,31 +43,44 @@ fn names_parse_and_unknown_ones_are_refused() {
 }
 
 #[test]
-fn the_generated_readme_section_is_replaced_between_its_markers() {
-    use experiment::{report, ExperimentResult, Row};
+fn the_readme_summary_and_the_results_page_come_from_the_same_results() {
+    use experiment::{report, ExperimentResult, Headline, Row, Verdict};
     let dir = tempfile::tempdir().unwrap();
     let readme = dir.path().join("README.md");
     let [begin, end] = report::MARKERS;
     std::fs::write(&readme, format!("# title\n\nbefore\n{begin}\nold text\n{end}\nafter\n")).unwrap();
     let result = ExperimentResult {
         name: Name::Young,
-        title: "Scenario 5".into(),
+        title: "ROUKF Young's modulus".into(),
         size: Size::Quick,
         seconds: 12.0,
+        headlines: vec![
+            Headline::lower_is_better("E error", 0.10, 0.16, 2, "%"),
+            Headline::lower_is_better("filter time", 510.0, 500.0, 0, "s"),
+            Headline::lower_is_better("TRE", 4.0, 3.0, 1, "mm"),
+            Headline::finding("springs", "0.4 mm (fixed 0.9 mm)", "lower than fixed", true),
+        ],
         rows: vec![Row::new("E", "4,990 ± 20 Pa", "4,992 ± 15 Pa")],
         figures: vec!["run/young.png".into()],
         notes: vec!["synthetic".into()],
         values: Default::default(),
     };
-    report::update_markdown(&readme, &[result]).unwrap();
+    let verdicts: Vec<Verdict> = result.headlines.iter().map(|h| h.verdict).collect();
+    assert_eq!(verdicts, [Verdict::Better, Verdict::OnPar, Verdict::Worse, Verdict::OnPar]);
+    assert_eq!(Headline::lower_is_better("x", f64::NAN, 1.0, 1, "mm").verdict, Verdict::Worse);
+    report::update_markdown(&readme, std::slice::from_ref(&result)).unwrap();
     let text = std::fs::read_to_string(&readme).unwrap();
     assert!(text.starts_with("# title\n\nbefore\n") && text.ends_with(&format!("{end}\nafter\n")));
-    assert!(
-        !text.contains("old text")
-            && text.contains("### Scenario 5")
-            && text.contains("| E | 4,990 ± 20 Pa | 4,992 ± 15 Pa |")
-    );
-    assert!(!text.contains("young.png"), "no figure links in the README section");
+    assert!(!text.contains("old text") && text.contains("| E error | 0.10 % | 0.16 % | better |"), "{text}");
+    assert!(!text.contains("4,990 ± 20 Pa"), "the README has the summary only");
+    let page = dir.path().join("docs/results.md");
+    report::write_results_page(&page, std::slice::from_ref(&result)).unwrap();
+    let page = std::fs::read_to_string(&page).unwrap();
+    let summary = report::summary(std::slice::from_ref(&result));
+    assert!(text.contains(summary.trim()) && page.contains(&summary), "one summary in both");
+    let (at_summary, at_details) = (page.find("## Summary").unwrap(), page.find("### ROUKF Young's modulus").unwrap());
+    assert!(at_summary < at_details && page.contains("| E | 4,990 ± 20 Pa | 4,992 ± 15 Pa |"), "{page}");
+    assert!(!page.contains("young.png"), "no figure links outside the run's directory");
     std::fs::write(&readme, "no markers").unwrap();
     assert!(report::update_markdown(&readme, &[]).unwrap_err().to_string().contains("markers"));
 }

@@ -6,6 +6,27 @@
 //!
 //! Units are SI: m, Pa, N, kg/m³. Displacement vectors hold 3 values per node
 //! (x, y, z of node 0, then node 1, ...).
+//!
+//! A bar in uniaxial tension, solved and checked against its exact solution:
+//!
+//! ```
+//! use augsim_fem::{Law, Material, Problem, SolverOptions, StaticSolver};
+//! use mesh::select::nodes_in_box;
+//!
+//! // 2 × 1 × 1 m, 4 × 2 × 2 hexahedra, E = 1 kPa, ν = 0: fixed at x = 0, pulled by 10 Pa at x = 2.
+//! let mesh = mesh::box_hex([0.0; 3], [2.0, 1.0, 1.0], [4, 2, 2])?;
+//! let mut problem = Problem::new(mesh, Material::new(Law::Linear, 1000.0, 0.0));
+//! let fixed = nodes_in_box(&problem.mesh.nodes, [-0.1; 3], [0.1, 1.1, 1.1]);
+//! let end = nodes_in_box(&problem.mesh.nodes, [1.9, -0.1, -0.1], [2.1, 1.1, 1.1]);
+//! problem.fix(&fixed);
+//! problem.add_traction(&end, [10.0, 0.0, 0.0]);
+//! let solution = StaticSolver::new(problem)?.solve(&SolverOptions::default())?;
+//! // u_x = σ L / E = 0.02 m at the loaded end, exactly (the field is linear).
+//! for &n in &end {
+//!     assert!((solution.u[3 * n] - 0.02).abs() < 1e-8, "{}", solution.u[3 * n]);
+//! }
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 pub mod assembly;
 pub mod element;

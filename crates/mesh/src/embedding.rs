@@ -475,10 +475,4 @@ impl Embedding {
         }
         Ok(out)
     }
-
-    /// [`Embedding::map_nodal`] for a vector field given per node (3 channels).
-    pub fn map_vectors(&self, field: &[Point]) -> Result<Vec<f64>, MeshError> {
-        let flat: Vec<f64> = field.iter().flat_map(|v| v.iter().copied()).collect();
-        self.map_nodal(&flat, 3)
-    }
 }

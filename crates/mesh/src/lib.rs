@@ -92,14 +92,6 @@ impl Cells {
         self.len() == 0
     }
 
-    /// Nodes per cell (4 or 8).
-    pub fn nodes_per_cell(&self) -> usize {
-        match self {
-            Cells::Tet4(_) => 4,
-            Cells::Hex8(_) => 8,
-        }
-    }
-
     /// The node indices of cell `i`.
     pub fn cell(&self, i: usize) -> &[usize] {
         match self {

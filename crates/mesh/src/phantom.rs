@@ -34,7 +34,7 @@ use rayon::prelude::*;
 
 use crate::immersed::{immersed_grid, ImmersedGrid, ImmersedOptions};
 use crate::select::{k_nearest, nearest};
-use crate::tetmesh::{segment_root, stuff, stuff_to_count, BoundaryFit, ImplicitDomain, TetMeshOptions};
+use crate::tetmesh::{segment_root, stuff_to_count, BoundaryFit, ImplicitDomain};
 use crate::{dot, sub, Mesh, MeshError, Point};
 
 /// An axis-aligned ellipsoid.
@@ -249,13 +249,6 @@ impl PhantomSpec {
             return Err(MeshError::Invalid(format!("the phantom needs at least 100 tetrahedra, asked {target_tets}")));
         }
         let mut mesh = stuff_to_count(self, target_tets, None, self.fit)?;
-        self.attach_t4_regions(&mut mesh)?;
-        Ok(mesh)
-    }
-
-    /// The phantom meshed with lattice spacing `size` (m), with the named regions.
-    pub fn mesh_with_size(&self, size: f64) -> Result<Mesh, MeshError> {
-        let mut mesh = stuff(self, &TetMeshOptions::with_size(size).with_fit(self.fit))?;
         self.attach_t4_regions(&mut mesh)?;
         Ok(mesh)
     }

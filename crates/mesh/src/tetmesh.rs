@@ -160,19 +160,12 @@ pub struct SdfDomain<F> {
     f: F,
     lo: Point,
     hi: Point,
-    lipschitz: Option<f64>,
 }
 
 impl<F: Fn(Point) -> f64 + Sync> SdfDomain<F> {
     /// The domain {p : f(p) < 0} inside the box [lo, hi].
     pub fn new(f: F, lo: Point, hi: Point) -> Self {
-        SdfDomain { f, lo, hi, lipschitz: None }
-    }
-
-    /// Declares a bound on the slope of f (1 for an exact signed distance),
-    /// see [`ImplicitDomain::lipschitz`].
-    pub fn with_lipschitz(self, l: f64) -> Self {
-        SdfDomain { lipschitz: Some(l), ..self }
+        SdfDomain { f, lo, hi }
     }
 }
 
@@ -182,9 +175,6 @@ impl<F: Fn(Point) -> f64 + Sync> ImplicitDomain for SdfDomain<F> {
     }
     fn bounds(&self) -> (Point, Point) {
         (self.lo, self.hi)
-    }
-    fn lipschitz(&self) -> Option<f64> {
-        self.lipschitz
     }
 }
 

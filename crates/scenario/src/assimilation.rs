@@ -3,12 +3,13 @@
 
 use std::path::{Path, PathBuf};
 
-use fem::{Law, Material, SolverOptions};
-use filter::{Discrepancy, Execution, Profile, SigmaPointSet, Transform};
-use mesh::{NodeSelection, Point};
+use fem::{Law, Material, Problem, SolverOptions};
+use filter::{Discrepancy, Execution, LoadPattern, Profile, SigmaPointSet, Transform};
+use mesh::select::k_nearest;
+use mesh::{Mesh, NodeSelection, Point};
 use serde::Deserialize;
 
-use crate::{Fixed, Kind, MeshSource, Result, ScenarioText};
+use crate::{fixed_problem, Fixed, Kind, MeshSource, Result, ScenarioError, ScenarioText};
 
 /// An assimilation scenario file.
 #[derive(Debug, Clone, Deserialize)]
@@ -253,6 +254,47 @@ impl AssimilationScenario {
         scenario.material.law = reference.law.unwrap_or(self.material.law);
         scenario.reference = None;
         Some(scenario)
+    }
+
+    /// The base problem on `mesh` (material, fixed and tool nodes constrained at rest), the
+    /// time-profiled loads (forces and tool displacements), and the tool nodes.
+    pub fn build_problem(&self, mesh: Mesh) -> Result<(Problem, Vec<LoadPattern>, Vec<usize>)> {
+        let fail = |m: String| ScenarioError::build(&self.name, m);
+        let mut problem = fixed_problem(mesh, self.material, &self.fixed).map_err(|e| fail(e.to_string()))?;
+        let select = |s: &NodeSelection, what: &str, p: &Problem| {
+            s.select(&p.mesh).map_err(|e| fail(format!("{what} selection: {e}")))
+        };
+        let mut loads = Vec::new();
+        for f in &self.force {
+            let nodes = select(&f.select, "force", &problem)?;
+            let shares = fem::force_shares(&problem.mesh, &nodes);
+            let forces = shares.into_iter().map(|(k, s)| (k, f.total.map(|c| c * s))).collect();
+            loads.push(LoadPattern { profile: f.profile, forces, displacements: vec![] });
+        }
+        let mut tool_nodes = Vec::new();
+        for t in &self.tool {
+            let mut nodes = select(&t.select, "tool", &problem)?;
+            match (t.near, t.count) {
+                (Some(_), Some(0)) => return Err(fail("tool: count must be at least 1".into())),
+                (Some(p), count) => nodes = k_nearest(&problem.mesh.nodes, nodes, p, count.unwrap_or(1)),
+                (None, Some(_)) => {
+                    return Err(fail("tool: `count` needs `near`, the point the nodes are nearest to".into()))
+                }
+                (None, None) => {}
+            }
+            for &k in &nodes {
+                problem.dirichlet.entry(k).or_insert([0.0; 3]);
+            }
+            loads.push(LoadPattern {
+                profile: t.profile,
+                forces: vec![],
+                displacements: nodes.iter().map(|&k| (k, t.displacement)).collect(),
+            });
+            tool_nodes.extend(nodes);
+        }
+        tool_nodes.sort_unstable();
+        tool_nodes.dedup();
+        Ok((problem, loads, tool_nodes))
     }
 
     /// The output directory: `output.dir`, else `out/<name>`.

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use fem::Problem;
 use mesh::io::Field;
-use mesh::select::{k_nearest, nearest};
+use mesh::select::nearest;
 use mesh::{Mesh, MeshLocator, Point, SurfaceBvh};
 use nalgebra::DVector;
 use serde::Serialize;
@@ -20,7 +20,7 @@ use filter::{
     RoukfConfig, TrackedPoint,
 };
 use scenario::assimilation::{AssessmentSpec, ObservationSpec};
-use scenario::{build_mesh, fixed_problem, AssimilationScenario};
+use scenario::{build_mesh, AssimilationScenario};
 
 /// Track files that replace the synthetic observations (formats in [`super::tracks`]).
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -207,7 +207,8 @@ impl Experiment {
         }
 
         let mesh = build_mesh(&sc.mesh, dir).context(|| "building the mesh".into())?;
-        let (problem, loads, tool_nodes) = build_problem(sc, mesh)?;
+        let (problem, loads, tool_nodes) =
+            sc.build_problem(mesh).map_err(|e| AssimilationError::Setup(e.to_string()))?;
         let locator = MeshLocator::new(&problem.mesh).context(|| "indexing the mesh for point location".into())?;
         let unknowns = unknowns(sc, &problem.mesh)?;
 
@@ -578,55 +579,6 @@ impl Experiment {
             _ => format!("|innovation| = {innovation:.2e} m"),
         }
     }
-}
-
-/// The base problem (material, fixed and tool nodes constrained at rest), the time-profiled loads, and the tool
-/// nodes.
-fn build_problem(
-    sc: &AssimilationScenario,
-    mesh: Mesh,
-) -> Result<(Problem, Vec<LoadPattern>, Vec<usize>), AssimilationError> {
-    let mut problem = fixed_problem(mesh, sc.material, &sc.fixed).context(|| "setting up the problem".into())?;
-    let select =
-        |s: &mesh::NodeSelection, what: &str, p: &Problem| s.select(&p.mesh).context(|| format!("{what} selection"));
-    let mut loads = Vec::new();
-    for f in &sc.force {
-        let nodes = select(&f.select, "force", &problem)?;
-        let shares = fem::force_shares(&problem.mesh, &nodes);
-        let forces = shares.into_iter().map(|(k, s)| (k, f.total.map(|c| c * s))).collect();
-        loads.push(LoadPattern { profile: f.profile, forces, displacements: vec![] });
-    }
-    let mut tool_nodes = Vec::new();
-    for t in &sc.tool {
-        let mut nodes = select(&t.select, "tool", &problem)?;
-        match (t.near, t.count) {
-            (Some(p), count) => {
-                let count = count.unwrap_or(1);
-                if count == 0 {
-                    return Err(AssimilationError::Setup("tool: count must be at least 1".into()));
-                }
-                nodes = k_nearest(&problem.mesh.nodes, nodes, p, count);
-            }
-            (None, Some(_)) => {
-                return Err(AssimilationError::Setup(
-                    "tool: `count` needs `near`, the point the nodes are nearest to".into(),
-                ))
-            }
-            (None, None) => {}
-        }
-        for &k in &nodes {
-            problem.dirichlet.entry(k).or_insert([0.0; 3]);
-        }
-        loads.push(LoadPattern {
-            profile: t.profile,
-            forces: vec![],
-            displacements: nodes.iter().map(|&k| (k, t.displacement)).collect(),
-        });
-        tool_nodes.extend(nodes);
-    }
-    tool_nodes.sort_unstable();
-    tool_nodes.dedup();
-    Ok((problem, loads, tool_nodes))
 }
 
 /// The filter's parameters, in order: Young's modulus (if estimated), then one spring per node of Σ.
