@@ -38,7 +38,7 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
     for name in names {
         println!("== {} ({})", name.as_str(), args.size);
         let result = experiment::run(name, size, &args.out, &|message| println!("   {message}"))?;
-        println!("   {}: {:.0} s", result.title, result.seconds);
+        println!("   {}: {:.0} s", result.name.title(), result.seconds);
         let width = result.rows.iter().map(|r| r.quantity.chars().count()).max().unwrap_or(0);
         for row in &result.rows {
             let published =

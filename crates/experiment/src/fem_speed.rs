@@ -161,7 +161,7 @@ const LIVER_TRACTION: f64 = 800.0;
 /// formulations are also compared on equally nonlinear solves.
 const EQUAL_DEFORMATION_LOAD: f64 = 1.2;
 
-/// The built-in phantom (DESIGN scenario 1), fixed between the lobes, pressed down on one
+/// The built-in phantom (the liver-forces experiment's organ), fixed between the lobes, pressed down on one
 /// lobe by `load` × [`LIVER_TRACTION`]. Only the ~5k-tet phantom has published times (the
 /// published liver's size).
 fn liver(tets: usize, law: Law, formulation: Formulation, load: f64) -> Result<Case> {
@@ -412,7 +412,6 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
     Ok(ExperimentResult {
         headlines,
         name: Name::FemSpeed,
-        title: "Static FEM on the liver: solve times".into(),
         size,
         seconds: 0.0,
         rows,

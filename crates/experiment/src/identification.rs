@@ -11,11 +11,11 @@ use scenario::{AssimilationScenario, MeshSource};
 
 use crate::{fmt, write_scenario, ExperimentResult, Headline, Name, Progress, Row, Size};
 
-/// Tetrahedra of the reference phantoms that make the observations (the published liver size for scenario 5;
-/// about 2.6 times the model's for scenario 6).
+/// Tetrahedra of the reference phantoms that make the observations (the published liver size for the Young's-modulus experiment;
+/// about 2.6 times the model's for the springs experiment).
 const YOUNG_REFERENCE_TETS: usize = 11_000;
 const SPRINGS_REFERENCE_TETS: usize = 3_000;
-/// Scenario 5 again with the filter's model at the published liver size, observed on a finer phantom.
+/// The ROUKF Young's modulus experiment again with the filter's model at the published liver size, observed on a finer phantom.
 const YOUNG_PUBLISHED_MODEL_TETS: usize = 11_000;
 const YOUNG_PUBLISHED_REFERENCE_TETS: usize = 20_000;
 
@@ -126,7 +126,7 @@ fn values(report: &Report) -> Result<serde_json::Map<String, serde_json::Value>>
     Ok(values)
 }
 
-/// Scenario 5 (quick: 200 filter iterations; paper: the scenario's 600).
+/// The ROUKF Young's modulus experiment (quick: 200 filter iterations; paper: the scenario's 600).
 pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let iterations = match size {
         Size::Quick => Some(200),
@@ -214,7 +214,6 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
     Ok(ExperimentResult {
         headlines,
         name: Name::Young,
-        title: "Scenario 5: Young's modulus by ROUKF".into(),
         size,
         seconds: 0.0,
         rows,
@@ -257,7 +256,7 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
     })
 }
 
-/// Scenario 6 (the scenario's 300 iterations at both sizes: it takes seconds).
+/// The ROUKF boundary springs experiment (the scenario's 300 iterations at both sizes: it takes seconds).
 pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let (reports, setup, reference_cells) =
         assimilate(dir, "roukf_springs", SPRINGS_REFERENCE_TETS, None, None, false, progress)?;
@@ -297,7 +296,6 @@ pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<Expe
     Ok(ExperimentResult {
         headlines,
         name: Name::Springs,
-        title: "Scenario 6: boundary springs by ROUKF".into(),
         size,
         seconds: 0.0,
         rows,

@@ -268,7 +268,7 @@ fn split_note(t: &Trained, samples: usize) -> String {
     )
 }
 
-/// Scenario 1 (quick: 300 samples, 600 steps; paper: the published 2,000 samples, 9,000 steps).
+/// The liver forces experiment (quick: 300 samples, 600 steps; paper: the published 2,000 samples, 9,000 steps).
 pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let (samples, iterations) = match size {
         Size::Quick => (300, 600),
@@ -281,7 +281,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
     let predictor = learn::Predictor::new(&t.model, Compute::Cpu)?;
     let input = t.test.get(0).input;
     let timing = learn::time_prediction(&predictor, &input, 3, 20)?;
-    error_histogram(&dir.join("errors.png"), "Scenario 1: test-sample errors", &[("U-Net", &report)])?;
+    error_histogram(&dir.join("errors.png"), "Liver forces: test-sample errors", &[("U-Net", &report)])?;
     let s = &report.stats;
     let mean = mean_displacement(&t.test);
     let rows = vec![
@@ -321,7 +321,6 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
     Ok(ExperimentResult {
         headlines,
         name: Name::LiverForces,
-        title: "Scenario 1: liver, nodal forces → displacement (U-Net)".into(),
         size,
         seconds: 0.0,
         rows,
@@ -338,7 +337,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
     })
 }
 
-/// Scenario 4 (quick: 1,200 samples, 800 steps; paper: the published 12,600 = 10,080 + 2,520, 6,000 steps).
+/// The beam sparse input experiment (quick: 1,200 samples, 800 steps; paper: the published 12,600 = 10,080 + 2,520, 6,000 steps).
 pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let (samples, iterations) = match size {
         Size::Quick => (1200, 800),
@@ -353,7 +352,7 @@ pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<
     let cm = learn::evaluate(&t.model, &t.test, &noise(1e-2), 0, Compute::Cpu)?;
     error_histogram(
         &dir.join("errors.png"),
-        "Scenario 4: test-sample errors by input noise",
+        "Beam sparse input: test-sample errors by input noise",
         &[("no noise", &clean), ("σ = 1 mm", &mm), ("σ = 1 cm", &cm)],
     )?;
     let pair =
@@ -377,7 +376,6 @@ pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<
     Ok(ExperimentResult {
         headlines,
         name: Name::BeamSparse,
-        title: "Scenario 4: beam, sparse visible displacement".into(),
         size,
         seconds: 0.0,
         rows,

@@ -56,17 +56,17 @@ pub enum Size {
 pub enum Name {
     /// Static FEM solve times on the liver (published: SVK 1,550 ms, co-rotational 25 ms).
     FemSpeed,
-    /// Scenario 5: Young's modulus by ROUKF.
+    /// Young's modulus of the liver identified by the ROUKF from tracked surface points.
     Young,
-    /// Scenario 6: boundary springs by ROUKF.
+    /// Hidden boundary springs identified by the ROUKF.
     Springs,
-    /// Scenario 1: U-Net from nodal forces to the liver's displacement.
+    /// U-Net from nodal forces to the liver's displacement.
     LiverForces,
-    /// Scenario 2: registration to a partial point cloud, TRE at internal markers.
+    /// Registration to a partial point cloud, TRE at internal markers.
     LiverAr,
-    /// Scenario 3: beam, pre-trained on other boundary conditions and fine-tuned on 100 samples.
+    /// Beam: pre-trained on other boundary conditions and fine-tuned on 100 samples.
     BeamTransfer,
-    /// Scenario 4: beam with sparse, noisy imposed displacements.
+    /// Beam with sparse, noisy imposed displacements.
     BeamSparse,
 }
 
@@ -92,6 +92,19 @@ impl Name {
             Name::LiverAr => "liver-ar",
             Name::BeamTransfer => "beam-transfer",
             Name::BeamSparse => "beam-sparse",
+        }
+    }
+
+    /// The heading of its report section.
+    pub fn title(self) -> &'static str {
+        match self {
+            Name::FemSpeed => "Static FEM on the liver: solve times",
+            Name::Young => "ROUKF: Young's modulus",
+            Name::Springs => "ROUKF: hidden boundary springs",
+            Name::LiverForces => "U-Net: liver, nodal forces → displacement",
+            Name::LiverAr => "Registration for augmented reality (TRE)",
+            Name::BeamTransfer => "U-Net: beam, transfer learning to a hidden boundary condition",
+            Name::BeamSparse => "U-Net: beam, sparse visible displacement",
         }
     }
 
@@ -199,8 +212,6 @@ impl Headline {
 pub struct ExperimentResult {
     /// The experiment.
     pub name: Name,
-    /// Heading of its report section.
-    pub title: String,
     /// The size it ran at.
     pub size: Size,
     /// Wall time of the run that finished it (s; steps resumed from disk are not counted).

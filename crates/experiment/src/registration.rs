@@ -1,4 +1,4 @@
-//! Scenario 2: the augmented-reality network trained from the shipped scenario, then
+//! The augmented-reality registration experiment: the augmented-reality network trained from the shipped scenario, then
 //! registration of synthetic intraoperative clouds with it and with two FEM models; the TRE
 //! at the phantom's internal markers.
 
@@ -100,7 +100,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     let grid = placement.grid(t.model.grid)?;
     let (report, tre) =
         learn::evaluate_at_points(&t.model, &t.test, &Corruption::default(), 0, &grid, &markers, Compute::Cpu)?;
-    error_histogram(&dir.join("errors.png"), "Scenario 2: test-sample errors", &[("U-Net", &report)])?;
+    error_histogram(&dir.join("errors.png"), "Augmented-reality registration: test-sample errors", &[("U-Net", &report)])?;
     // The first test sample in the 3D viewer.
     let organ = data.scenario.mesh(&data.scenario_dir)?;
     let index = t.test.indices.first().copied().context("no test sample")?;
@@ -247,7 +247,6 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     Ok(ExperimentResult {
         headlines,
         name: Name::LiverAr,
-        title: "Scenario 2: augmented-reality registration (TRE)".into(),
         size,
         seconds: 0.0,
         rows,

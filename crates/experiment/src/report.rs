@@ -82,7 +82,7 @@ pub fn results_page(results: &[ExperimentResult]) -> String {
 fn sections(results: &[ExperimentResult], heading: &str, figures: bool) -> String {
     let mut s = String::new();
     for r in results {
-        let _ = write!(s, "\n{heading} {}\n\n", r.title);
+        let _ = write!(s, "\n{heading} {}\n\n", r.name.title());
         let _ =
             writeln!(s, "`augsim experiment {} --size {}` ({:.0} s)\n", r.name.as_str(), size_name(r.size), r.seconds);
         s.push_str("| quantity | augsim | published |\n| --- | --- | --- |\n");
@@ -155,7 +155,7 @@ pub fn html(results: &[ExperimentResult]) -> String {
             s,
             "<h2>{}</h2>\n<p><code>augsim experiment {} --size {}</code> ({:.0} s)</p>\n<table><tr><th>quantity</th>\
              <th>augsim</th><th>published</th></tr>\n",
-            escape_html(&r.title),
+            escape_html(r.name.title()),
             r.name.as_str(),
             size_name(r.size),
             r.seconds

@@ -1,4 +1,4 @@
-//! Scenario 3: transfer learning on the beam. A U-Net pre-trained on the BC4 boundary conditions
+//! The beam transfer experiment: transfer learning on the beam. A U-Net pre-trained on the BC4 boundary conditions
 //! is fine-tuned on 100 samples of the target boundary condition, beside networks trained from
 //! scratch on the target's whole training split and on the same 100 samples. Every checkpoint is
 //! chosen on the target's validation samples and every figure is measured on its test samples; the
@@ -65,7 +65,7 @@ fn stats_cell(r: &EvalReport) -> String {
     format!("ē {} (σ {:.3}, max {:.2})", fmt(s.mean * 1e3, 3, "mm"), s.std * 1e3, s.max * 1e3)
 }
 
-/// Scenario 3 (quick: 2,009 samples per dataset, 8 channels; paper: the published 5,241, 16 channels; 1,500
+/// The beam transfer experiment (quick: 2,009 samples per dataset, 8 channels; paper: the published 5,241, 16 channels; 1,500
 /// steps per run at both sizes, 1,209 training and 200 validation samples per dataset).
 pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let (samples, channels, iterations) = match size {
@@ -130,7 +130,7 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
     ]
     .map(|(name, points)| plot::Series { name, points, band: None });
     let spec = plot::PlotSpec {
-        title: "Scenario 3: validation error on the target against training step".into(),
+        title: "Beam transfer: validation error on the target against training step".into(),
         x_label: "training step (0: the pre-trained network before fine-tuning)".into(),
         y_label: format!("validation ē over {validation_n} samples (mm)"),
         log_y: false,
@@ -138,7 +138,7 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
     plot::line_plot(&dir.join("curves.png"), &spec, &series)?;
     error_histogram(
         &dir.join("errors.png"),
-        "Scenario 3: target test-sample errors by strategy",
+        "Beam transfer: target test-sample errors by strategy",
         &[
             (full_label.as_str(), &full_test),
             (scratch_label.as_str(), &scratch_test),
@@ -235,7 +235,6 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
     Ok(ExperimentResult {
         headlines,
         name: Name::BeamTransfer,
-        title: "Scenario 3: beam, transfer learning to a hidden boundary condition".into(),
         size,
         seconds: 0.0,
         rows,

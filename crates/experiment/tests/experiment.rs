@@ -23,7 +23,7 @@ fn springs_experiment_writes_a_result_resumes_and_reports() {
     let [md, html] = experiment::report::write(root.path(), &all).unwrap();
     let md = std::fs::read_to_string(md).unwrap();
     let html = std::fs::read_to_string(html).unwrap();
-    assert!(md.contains(&result.title) && md.contains("| quantity | augsim | published |"));
+    assert!(md.contains(result.name.title()) && md.contains("| quantity | augsim | published |"));
     assert!(md.contains("![run/springs.png](springs/run/springs.png)"));
     assert!(html.contains("<img src=\"springs/run/springs.png\"") && !html.contains("http"));
 }
@@ -51,7 +51,6 @@ fn the_readme_summary_and_the_results_page_come_from_the_same_results() {
     std::fs::write(&readme, format!("# title\n\nbefore\n{begin}\nold text\n{end}\nafter\n")).unwrap();
     let result = ExperimentResult {
         name: Name::Young,
-        title: "ROUKF Young's modulus".into(),
         size: Size::Quick,
         seconds: 12.0,
         headlines: vec![
@@ -78,7 +77,7 @@ fn the_readme_summary_and_the_results_page_come_from_the_same_results() {
     let page = std::fs::read_to_string(&page).unwrap();
     let summary = report::summary(std::slice::from_ref(&result));
     assert!(text.contains(summary.trim()) && page.contains(&summary), "one summary in both");
-    let (at_summary, at_details) = (page.find("## Summary").unwrap(), page.find("### ROUKF Young's modulus").unwrap());
+    let (at_summary, at_details) = (page.find("## Summary").unwrap(), page.find("### ROUKF: Young's modulus").unwrap());
     assert!(at_summary < at_details && page.contains("| E | 4,990 ± 20 Pa | 4,992 ± 15 Pa |"), "{page}");
     assert!(!page.contains("young.png"), "no figure links outside the run's directory");
     std::fs::write(&readme, "no markers").unwrap();

@@ -21,9 +21,10 @@
 //! problem.fix(&fixed);
 //! problem.add_traction(&end, [10.0, 0.0, 0.0]);
 //! let solution = StaticSolver::new(problem)?.solve(&SolverOptions::default())?;
-//! // u_x = σ L / E = 0.02 m at the loaded end, exactly (the field is linear).
+//! // u_x = σ L / E = 0.02 m at the loaded end: the field is linear, so the elements hold it
+//! // exactly, to the solver's tolerance.
 //! for &n in &end {
-//!     assert!((solution.u[3 * n] - 0.02).abs() < 1e-8, "{}", solution.u[3 * n]);
+//!     assert!((solution.u[3 * n] - 0.02).abs() < 1e-5 * 0.02, "{}", solution.u[3 * n]);
 //! }
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```

@@ -17,7 +17,7 @@ const TRUTH: f64 = 5.0;
 const NOMINAL_STD: f64 = 0.01;
 const FRAMES: usize = 200;
 
-/// `h_k(θ) = s_k θ φ` with a raised-cosine load `s_k` of period 100 frames (as scenario 5's force).
+/// `h_k(θ) = s_k θ φ` with a raised-cosine load `s_k` of period 100 frames (as the ROUKF Young's-modulus scenario's force).
 struct Cyclic {
     pattern: DVector<f64>,
 }

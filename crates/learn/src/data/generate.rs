@@ -53,7 +53,7 @@ pub struct DatasetConfig {
     /// (a box of hexahedra, an immersed grid): the lattice is the grid.
     pub grid: Option<[usize; 3]>,
     /// Alternative fixed node sets: each sample fixes one, drawn uniformly
-    /// (one entry: always the same; e.g. the BC1/BC4/BC8 sets of DESIGN scenario 3).
+    /// (one entry: always the same; e.g. the BC1/BC4/BC8 sets of the beam transfer-learning scenarios).
     pub fixed: Vec<NodeSelection>,
     /// The random loads.
     pub load: Load,
