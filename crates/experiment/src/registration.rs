@@ -100,7 +100,11 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     let grid = placement.grid(t.model.grid)?;
     let (report, tre) =
         learn::evaluate_at_points(&t.model, &t.test, &Corruption::default(), 0, &grid, &markers, Compute::Cpu)?;
-    error_histogram(&dir.join("errors.png"), "Augmented-reality registration: test-sample errors", &[("U-Net", &report)])?;
+    error_histogram(
+        &dir.join("errors.png"),
+        "Augmented-reality registration: test-sample errors",
+        &[("U-Net", &report)],
+    )?;
     // The first test sample in the 3D viewer.
     let organ = data.scenario.mesh(&data.scenario_dir)?;
     let index = t.test.indices.first().copied().context("no test sample")?;
