@@ -12,7 +12,7 @@ A model directory holds ``model.json`` (format "augsim-unet" v1: U-Net configura
 normalisation, grid, units) and the weights file it names (``model.safetensors``), as written by
 ``augsim train``.
 
-Conventions (crates/learn/src/unet.rs, inference.rs, predict.rs, grid.rs):
+Conventions (crates/learn/src/net/unet.rs, net/inference.rs, net/predict.rs, data/grid.rs):
 
 - Grid tensors are ``[channel, x, y, z]``, C order (z fastest), float32; the channels are the x, y,
   z components. Prediction input: the model's ``input_unit`` (N for forces, m for imposed
@@ -23,13 +23,8 @@ Conventions (crates/learn/src/unet.rs, inference.rs, predict.rs, grid.rs):
   ``float32(float64(x) * (1 / input_scale))`` and its output ``y`` becomes
   ``float32(float64(y) * target_scale)``; an input array of another dtype is first cast to
   float32, as augsim does with a float64 ``.npy``.
-- Architecture (``depth`` down steps, ``c_l = base_channels * 2**l``, ``k = kernel_size``):
-  encoder level l: two k^3 convolutions (zero padding k//2) + ReLU to c_l, kept as skip, then a
-  2^3 stride-2 convolution; bottleneck: two convolutions + ReLU to c_depth; decoder level
-  l = depth-1..0: 2^3 stride-2 transposed convolution to c_l, concatenation [upsampled, skip]
-  along channels, two convolutions + ReLU to c_l; head: 1^3 convolution to out_channels.
-  The input is zero-padded at the high end of x, y and z to a multiple of 2**depth and the
-  output cropped back to the input grid, so there is no interpolation anywhere.
+- Architecture: the one description in ``docs/method.md`` (section 5.2), which every augsim engine
+  follows.
 - Weights: burn's names and layouts, the same as PyTorch's (``encoder.0.conv1.weight``
   ``[c_out, c_in, k, k, k]``, ``up.0.weight`` ``[c_in, c_out, 2, 2, 2]``, every layer has a bias).
 

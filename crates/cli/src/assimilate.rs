@@ -13,7 +13,7 @@ use scenario::AssimilationScenario;
 /// Arguments of `augsim assimilate`.
 #[derive(Debug, Args)]
 pub struct AssimilateArgs {
-    /// Scenario TOML file (e.g. scenarios/roukf_young.toml).
+    /// Assimilation scenario: a TOML file, or the name of a built-in one (e.g. roukf_young).
     pub scenario: PathBuf,
     /// Number of filter iterations (default: the scenario's; with --observations, all frames).
     #[arg(long)]

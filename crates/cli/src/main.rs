@@ -26,7 +26,7 @@ struct Cli {
 enum Command {
     /// Static solve of a scenario file; writes displacement, strain and stress as VTK.
     Solve {
-        /// Scenario TOML file (e.g. scenarios/beam.toml).
+        /// Static scenario: a TOML file, or the name of a built-in one (e.g. beam).
         scenario: PathBuf,
         /// Output file (.vtu or .vtk); default out/<name>.vtu.
         #[arg(short, long)]
@@ -55,7 +55,7 @@ enum Command {
     Assimilate(assimilate::AssimilateArgs),
     /// Generate a FEM dataset (random loads → grid input/target pairs); resumable, splittable.
     Generate {
-        /// Dataset scenario TOML (e.g. scenarios/liver_forces.toml).
+        /// Dataset scenario: a TOML file, or the name of a built-in one (e.g. liver_forces).
         scenario: PathBuf,
         /// Output directory; default out/<name> (or out/<name>.part<i>of<n>).
         #[arg(short, long)]

@@ -37,7 +37,7 @@ pub struct RegisterArgs {
     model: Option<PathBuf>,
     /// The dataset scenario the model was trained on, for --model (its mesh is the organ, its
     /// observed nodes the network's input); with --demo or --case, default: the shipped
-    /// scenarios/liver_ar.toml.
+    /// liver_ar.
     #[arg(long)]
     scenario: Option<PathBuf>,
     /// Targets at rest (CSV x,y,z, m); default: the mesh's `markers` and `tumour` regions.
@@ -59,12 +59,12 @@ pub struct RegisterArgs {
     /// Output directory: organ.vtu (organ.pvd for a sequence), targets.csv, summary.json.
     #[arg(short, long, default_value = "out/register")]
     out: PathBuf,
-    /// Built-in comparison case (scenarios/register_case.toml, which describes it): a phantom
+    /// Built-in comparison case (register_case, which describes it): a phantom
     /// truth pushed down (--force) and seen from above, registered by each of the case's methods
     /// (FEM models on another mesh, the shipped U-Net); prints the comparison.
     #[arg(long, group = "comparison")]
     demo: bool,
-    /// The comparison of --demo on this case scenario (TOML, as scenarios/register_case.toml).
+    /// The comparison of --demo on this case scenario (TOML, as register_case).
     #[arg(long, group = "comparison", value_name = "CASE.toml")]
     case: Option<PathBuf>,
     /// The force (N) pushing the case's truth (default: the case's).
@@ -317,7 +317,7 @@ fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<Setup> {
     })
 }
 
-/// The shipped network for the built-in phantom (trained by `scenarios/liver_ar.toml`).
+/// The shipped network for the built-in phantom (trained by the built-in `liver_ar` scenario).
 const DEMO_MODEL: &str = "models/liver_ar/model.json";
 
 /// The comparison case of `--demo` (the built-in scenario) or `--case FILE`, with the command

@@ -25,8 +25,8 @@ pub struct ViewArgs {
     /// model.
     #[arg(long, requires = "model")]
     pub sample: Option<u64>,
-    /// Dataset scenario the dataset was generated from, to rebuild the organ's mesh; default
-    /// scenarios/<dataset name>.toml.
+    /// Dataset scenario the dataset was generated from, to rebuild the organ's mesh; default: the
+    /// built-in scenario of the dataset's name.
     #[arg(long, requires = "model", conflicts_with = "mesh")]
     pub scenario: Option<PathBuf>,
     /// The organ's volume mesh (.vtu, .vtk, .msh) instead of rebuilding it from the scenario.
@@ -68,14 +68,9 @@ fn sample_scene(args: &ViewArgs, model_path: &Path, dataset_dir: &Path) -> Resul
             (mesh::io::read_mesh(path).with_context(|| format!("reading {}", path.display()))?, path.clone())
         }
         (None, given) => {
-            let path = given.clone().unwrap_or_else(|| PathBuf::from(format!("scenarios/{}.toml", manifest.scenario)));
-            if given.is_none() && !path.is_file() {
-                bail!(
-                    "the organ's mesh: no {} here; give the dataset's scenario (--scenario) or its mesh (--mesh)",
-                    path.display()
-                );
-            }
-            let (scenario, dir) = DatasetScenario::load(&path)?;
+            let path = given.clone().unwrap_or_else(|| PathBuf::from(&manifest.scenario));
+            let (scenario, dir) = DatasetScenario::load(&path)
+                .context("the organ's mesh: give the dataset's scenario (--scenario) or its mesh (--mesh)")?;
             (scenario.mesh(&dir)?, path)
         }
     };

@@ -2,7 +2,7 @@
 //! comes from a finer mesh and another law than the registration model (no
 //! inverse crime), the cloud from a camera looking at its deformed surface.
 //! The case and its methods are described by a [`CaseScenario`]
-//! (`scenarios/register_case.toml` is the built-in one).
+//! (the built-in `register_case` scenario is the built-in one).
 
 use std::path::Path;
 

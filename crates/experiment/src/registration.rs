@@ -269,7 +269,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
                 t.timing()
             ),
             format!(
-                "Registration cases: scenarios/register_case.toml's truth ({:?} phantom of about {TRUTH_TETS} T4, \
+                "Registration cases: register_case's truth ({:?} phantom of about {TRUTH_TETS} T4, \
                  another mesh and law than the models) under the loads listed; its camera along {:?} sees \
                  {} points with {} noise and {:.0} % outliers. The registration figures beside the published ones \
                  are over the {} held-out cases only (a failed method is counted apart); the design case, with \

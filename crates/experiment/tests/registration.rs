@@ -43,7 +43,7 @@ fn fem_registration_recovers_hidden_markers_from_a_partial_cloud() {
     assert!(tre_noisy < tre + 1e-3, "1 mm noise and 10 % outliers: TRE {tre_noisy} against {tre}");
 }
 
-/// The network shipped for the phantom (`scenarios/liver_ar.toml`).
+/// The network shipped for the phantom (the built-in `liver_ar` scenario).
 const MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
 
 /// (TRE, no-deformation TRE) in m of the shipped U-Net's registration of the 1.5 N case.

@@ -76,7 +76,7 @@ impl Deformer for FemDeformer {
 /// first fitted to the matches: the surface it interpolates passes near each matched cloud
 /// point (least squares), with a membrane penalty on neighbouring nodes' differences, unseen
 /// nodes interpolated. A network trained on the normal motion of its input nodes (`normal =
-/// true` in the dataset's input, as `scenarios/liver_ar.toml`) gets the normal part of that fit,
+/// true` in the dataset's input, as the built-in `liver_ar` scenario) gets the normal part of that fit,
 /// which is what closest-point matching measures, and infers the tangential motion and the
 /// volume. A network trained on the full displacement gets the fit itself, and its input nodes
 /// keep the fit (fed back, its own predictions at its inputs would drift along the surface,

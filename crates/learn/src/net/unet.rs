@@ -1,16 +1,8 @@
 //! The 3D U-Net and the saved-model bundle.
 //!
-//! Architecture (`depth` = number of down steps, `c_l = base_channels · 2^l`):
-//! - encoder level `l = 0..depth`: two 3×3×3 convolutions + ReLU (`→ c_l`), kept as skip, then a
-//!   2×2×2 stride-2 convolution halving the grid (burn 0.22 has no 3D max-pooling);
-//! - bottleneck: two convolutions + ReLU to `c_depth`;
-//! - decoder level `l = depth-1..0`: 2×2×2 stride-2 transposed convolution to `c_l`, concatenation
-//!   with the skip, two convolutions + ReLU to `c_l`;
-//! - head: 1×1×1 convolution to the output channels.
-//!
-//! Inputs are zero-padded (at the high end of each axis) to a multiple of `2^depth` and the
-//! output is cropped back, so any grid works. The "encoder" for transfer learning is the
-//! contracting path: encoder levels, down-sampling convolutions and the bottleneck.
+//! The architecture is described once, in `docs/method.md` (section 5.2); every engine ([`UNet`]
+//! here, [`crate::InferenceNet`], the backward pass of [`crate::net::backprop`]) and
+//! `python/augsim_unet.py` follow it.
 //!
 //! A saved model is a JSON file (configuration, normalisation, grid, units, training summary)
 //! and a safetensors file of the weights beside it.
