@@ -119,7 +119,7 @@ class AugsimUNetTest(unittest.TestCase):
 
     def test_liver_ar(self):
         data = os.path.join(self.tmp, "liver_ar_data")
-        run_augsim("generate", os.path.join(ROOT, "scenarios", "liver_ar.toml"), "--out", data, "--samples", "2")
+        run_augsim("generate", "liver_ar", "--out", data, "--samples", "2")
         samples = shard_inputs(data)
         model = augsim_unet.load(LIVER_AR)
         self.assertEqual(model.grid, (24, 24, 16))
@@ -133,7 +133,7 @@ class AugsimUNetTest(unittest.TestCase):
 
     def test_tiny_models(self):
         data = os.path.join(self.tmp, "beam_data")
-        run_augsim("generate", os.path.join(ROOT, "scenarios", "beam_target.toml"), "--out", data, "--samples", "8")
+        run_augsim("generate", "beam_target", "--out", data, "--samples", "8")
         samples = shard_inputs(data)
         for channels, depth in TINY:
             with self.subTest(channels=channels, depth=depth):

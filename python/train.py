@@ -1,0 +1,386 @@
+#!/usr/bin/env python3
+"""Trains augsim's U-Net with PyTorch (on GPUs when there are some) and writes a model directory
+that ``augsim eval``, ``augsim predict`` and ``augsim register`` load unchanged.
+
+    python python/train.py DATASET --out DIR [--iterations N] [--channels C] [--depth D]
+                           [--batch B] [--lr LR] [--final-lr LR] [--validate-every K]
+                           [--validation-samples N | --validation-fraction F]
+                           [--test-samples N | --test-fraction F] [--train-samples N]
+                           [--seed S] [--device cuda|cpu]
+    torchrun --nproc_per_node=4 python/train.py ...        # data-parallel on 4 GPUs (DDP)
+
+It follows ``augsim train``: the same architecture (``docs/method.md``, section 5.2; the module of
+``augsim_unet.py``), the same split rule (by generation index: the last samples test, those before
+them validate, the rest train; recorded in model.json with the dataset's identity, so that
+``augsim eval`` evaluates on the test samples only), the same normalisation (one scale per field:
+the RMS vector norm of the training inputs over their non-zero nodes and of the training targets
+over the organ), the same loss (masked MSE in normalised units), Adam (β = 0.9, 0.999, ε = 1e-5)
+with an optional half-cosine decay of the rate, and the checkpoint chosen on the validation mean
+Euclidean error. Batches are drawn by PyTorch's generator, so the run is reproducible from the seed
+but its batches differ from ``augsim train``'s. ``DIR/checkpoint.pt`` is written at every
+validation; rerunning the same command resumes from it.
+
+Needs torch and numpy (see python/README.md).
+"""
+
+import argparse
+import json
+import math
+import os
+import struct
+import sys
+import time
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import augsim_unet  # noqa: E402
+
+LAYOUT = ("[channel, x, y, z], C order, z fastest: index = ((c*nx + i)*ny + j)*nz + k; shards prepend the "
+          "sample axis; masks are [x, y, z]")
+
+
+# ---------------------------------------------------------------- the dataset, as augsim reads it
+
+
+def read_dataset(path):
+    """The manifest and every sample of an augsim dataset directory, in generation-index order:
+    (manifest, indices [N] int64, inputs [N, 3, nx, ny, nz] f32, targets (same), masks [N, nx, ny, nz] u8)."""
+    with open(os.path.join(path, "manifest.json"), encoding="utf-8") as f:
+        manifest = json.load(f)
+    if manifest.get("format") != "augsim-dataset":
+        raise ValueError(f"{path}: not an augsim dataset (format {manifest.get('format')!r})")
+    if not manifest.get("complete", False):
+        raise ValueError(f"{path}: the dataset is incomplete; finish it with `augsim generate` first")
+    parts = [[], [], [], []]
+    for shard in manifest["shards"]:
+        arrays = [np.load(os.path.join(path, shard[key])) for key in ("inputs", "targets", "masks")]
+        n = shard["num_samples"]
+        if any(a.shape[0] != n for a in arrays) or len(shard["indices"]) != n:
+            raise ValueError(f"{path}: shard {shard['name']} does not hold {n} samples")
+        parts[0].append(np.asarray(shard["indices"], dtype=np.int64))
+        for part, a in zip(parts[1:], arrays):
+            part.append(a)
+    indices, inputs, targets, masks = (np.concatenate(p) for p in parts)
+    order = np.argsort(indices, kind="stable")
+    return manifest, indices[order], inputs[order].astype(np.float32), targets[order].astype(np.float32), \
+        masks[order].astype(np.uint8)
+
+
+def _json_float(x):
+    """A float as serde_json writes it (Ryu's shortest representation and notation)."""
+    if x == 0.0:
+        return "-0.0" if math.copysign(1.0, x) < 0 else "0.0"
+    if not math.isfinite(x):
+        return "null"
+    sign = "-" if x < 0 else ""
+    mantissa, _, exponent = repr(abs(x)).partition("e")
+    whole, _, fraction = mantissa.partition(".")
+    digits = (whole + fraction).lstrip("0")
+    k = int(exponent or 0) - len(fraction)
+    stripped = digits.rstrip("0")
+    k += len(digits) - len(stripped)
+    digits, length = stripped, len(stripped)
+    kk = length + k
+    if 0 <= k and kk <= 16:
+        text = digits + "0" * k + ".0"
+    elif 0 < kk <= 16:
+        text = digits[:kk] + "." + digits[kk:]
+    elif -5 < kk <= 0:
+        text = "0." + "0" * (-kk) + digits
+    elif length == 1:
+        text = f"{digits}e{kk - 1}"
+    else:
+        text = f"{digits[0]}.{digits[1:]}e{kk - 1}"
+    return sign + text
+
+
+def _json_compact(value):
+    """Compact JSON with sorted keys, as serde_json writes a ``Value``."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if value is None:
+        return "null"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return _json_float(value)
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, list):
+        return "[" + ",".join(_json_compact(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ",".join(f"{json.dumps(k, ensure_ascii=False)}:{_json_compact(v)}"
+                              for k, v in sorted(value.items())) + "}"
+    raise TypeError(f"cannot encode {type(value).__name__}")
+
+
+def source_id(manifest):
+    """The dataset's identity, as augsim computes it (``Manifest::source_id``): the scenario, the
+    seed and a hash of everything that decides the samples except their count."""
+    metadata = json.loads(json.dumps(manifest.get("metadata")))
+    config = metadata.get("dataset") if isinstance(metadata, dict) else None
+    if isinstance(config, dict):
+        config.pop("samples", None)
+        config.pop("shard_size", None)
+    key = _json_compact([manifest["grid"], manifest["units"], metadata]).encode("utf-8")
+    h = 0xCBF29CE484222325
+    for b in key:
+        h = ((h ^ b) * 0x100000001B3) & 0xFFFFFFFFFFFFFFFF
+    return f"{manifest['scenario']}/seed {manifest['seed']}/{h:016x}"
+
+
+def index_ranges(indices):
+    """Sorted indices as half-open ranges [[start, end], ...] (augsim's ``IndexSet``)."""
+    ranges = []
+    for i in sorted(int(i) for i in indices):
+        if ranges and i <= ranges[-1][1]:
+            ranges[-1][1] = max(ranges[-1][1], i + 1)
+        else:
+            ranges.append([i, i + 1])
+    return ranges
+
+
+def split_positions(n, validation, test):
+    """Positions (in index order) of the training, validation and test samples: the last `test`,
+    the `validation` before them, the rest."""
+    if validation + test >= n:
+        raise ValueError(f"{validation} validation and {test} test samples leave no training sample out of {n}")
+    cut = n - validation - test
+    return np.arange(cut), np.arange(cut, cut + validation), np.arange(cut + validation, n)
+
+
+def normalization(inputs, targets, masks):
+    """(input_scale, target_scale): RMS vector norms of the inputs over their non-zero nodes and of
+    the targets over the organ's nodes (1 where there is nothing to measure)."""
+    def rms(fields, nodes):
+        squared = (fields.astype(np.float64) ** 2).sum(axis=1)
+        count = int(nodes.sum())
+        value = math.sqrt(squared[nodes].sum() / count) if count else 0.0
+        return value if value > 0 and math.isfinite(value) else 1.0
+    return rms(inputs, np.any(inputs != 0, axis=1)), rms(targets, masks != 0)
+
+
+# ---------------------------------------------------------------- training
+
+
+def he_uniform_(net, generator):
+    """augsim's initialisation: He-uniform weights (bound sqrt(6 / fan-in), fan-in = the weight's
+    second dimension times the kernel volume), zero biases."""
+    with torch.no_grad():
+        for name, p in net.named_parameters():
+            if name.endswith("bias"):
+                p.zero_()
+            else:
+                fan_in = p.shape[1] * int(np.prod(p.shape[2:]))
+                bound = math.sqrt(6.0 / fan_in)
+                p.copy_((torch.rand(p.shape, generator=generator) * 2 - 1) * bound)
+
+
+def masked_mse(pred, target, mask):
+    """Mean over the organ's nodes of the squared error vector norm (normalised units)."""
+    return ((pred - target) ** 2).sum(1).mul(mask).sum() / mask.sum().clamp_min(1.0)
+
+
+def mean_euclidean_errors(net, inputs, targets, masks, scales, device, batch):
+    """Per-sample mean Euclidean error (m) over the organ's nodes."""
+    errors = []
+    net.eval()
+    with torch.inference_mode():
+        for s in range(0, len(inputs), batch):
+            x = torch.from_numpy(inputs[s:s + batch] * np.float32(1.0 / scales[0])).to(device)
+            y = net(x).double().cpu().numpy() * scales[1]
+            d = np.sqrt(((y - targets[s:s + batch].astype(np.float64)) ** 2).sum(axis=1))
+            m = masks[s:s + batch] != 0
+            errors.extend((d * m).sum(axis=(1, 2, 3)) / np.maximum(m.sum(axis=(1, 2, 3)), 1))
+    net.train()
+    return np.asarray(errors)
+
+
+def learning_rate(args, it):
+    """The rate of (0-based) step `it`: constant, or a half cosine from --lr to --final-lr."""
+    if args.final_lr is None:
+        return args.lr
+    t = min(it / (max(args.iterations, 2) - 1), 1.0)
+    return args.final_lr + 0.5 * (args.lr - args.final_lr) * (1.0 + math.cos(math.pi * t))
+
+
+def write_safetensors(path, tensors):
+    """Writes name -> float32 array as safetensors, atomically."""
+    header, offset, blobs = {}, 0, []
+    for name in sorted(tensors):
+        data = np.ascontiguousarray(tensors[name], dtype="<f4").tobytes()
+        header[name] = {"dtype": "F32", "shape": list(tensors[name].shape), "data_offsets": [offset, offset + len(data)]}
+        offset += len(data)
+        blobs.append(data)
+    text = json.dumps(header, separators=(",", ":")).encode("utf-8")
+    text += b" " * (-len(text) % 8)
+    write_atomic(path, struct.pack("<Q", len(text)) + text + b"".join(blobs))
+
+
+def write_atomic(path, data):
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def model_json(args, manifest, config, scales, best, split):
+    metadata = manifest.get("metadata") or {}
+    placement = None
+    if "grid_origin" in metadata and "grid_spacing" in metadata:
+        placement = {"origin": metadata["grid_origin"], "spacing": metadata["grid_spacing"]}
+    return {
+        "format": augsim_unet.MODEL_FORMAT,
+        "version": augsim_unet.MODEL_VERSION,
+        "layout": LAYOUT,
+        "unet": config,
+        "normalization": {"input_scale": scales[0], "target_scale": scales[1]},
+        "grid": manifest["grid"],
+        "placement": placement,
+        "input_unit": manifest["units"]["input"],
+        "target_unit": manifest["units"]["target"],
+        "weights": "model.safetensors",
+        "training": {
+            "iterations": args.iterations,
+            "best_iteration": best["iteration"],
+            "best_val_mean_error": best["error"],
+            "train_samples": split["train_samples"],
+            "val_samples": split["val_samples"],
+            "seed": args.seed,
+            "fine_tuned_from": None,
+            "frozen_encoder": False,
+            "split": split["record"],
+        },
+    }
+
+
+def parse_args(argv):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("dataset", help="augsim dataset directory (from `augsim generate`)")
+    p.add_argument("--out", required=True, help="model directory to write (model.json, model.safetensors)")
+    p.add_argument("--iterations", type=int, default=2000, help="optimiser steps (default 2000)")
+    p.add_argument("--batch", type=int, default=4, help="samples per step, over all GPUs (default 4)")
+    p.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
+    p.add_argument("--final-lr", type=float, default=None, help="decay the rate to this along a half cosine")
+    p.add_argument("--channels", type=int, default=16, help="channels of the first level (default 16)")
+    p.add_argument("--depth", type=int, default=3, help="down-sampling steps (default 3)")
+    p.add_argument("--validate-every", type=int, default=100, help="validate and checkpoint every K steps")
+    p.add_argument("--test-fraction", type=float, default=0.2)
+    p.add_argument("--test-samples", type=int, default=None)
+    p.add_argument("--validation-fraction", type=float, default=0.1)
+    p.add_argument("--validation-samples", type=int, default=None)
+    p.add_argument("--train-samples", type=int, default=None, help="train on the first N training samples only")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default=None, help="cuda or cpu (default: cuda when available)")
+    args = p.parse_args(argv)
+    for name in ("iterations", "batch", "channels", "validate_every"):
+        if getattr(args, name) < 1:
+            p.error(f"--{name.replace('_', '-')} must be at least 1")
+    if not (args.lr > 0 and (args.final_lr is None or 0 < args.final_lr <= args.lr)):
+        p.error("--lr must be > 0 and --final-lr in (0, lr]")
+    for name in ("test_fraction", "validation_fraction"):
+        if not 0 <= getattr(args, name) < 1:
+            p.error(f"--{name.replace('_', '-')} must lie in [0, 1)")
+    return args
+
+
+def main(argv=None):
+    args = parse_args(sys.argv[1:] if argv is None else argv)
+    distributed = int(os.environ.get("WORLD_SIZE", "1")) > 1
+    rank, world = 0, 1
+    if distributed:
+        torch.distributed.init_process_group("nccl" if torch.cuda.is_available() else "gloo")
+        rank, world = torch.distributed.get_rank(), torch.distributed.get_world_size()
+    device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    if device.type == "cuda":
+        device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
+        torch.cuda.set_device(device)
+    say = print if rank == 0 else (lambda *a, **k: None)
+
+    manifest, indices, inputs, targets, masks = read_dataset(args.dataset)
+    n = len(indices)
+    count = lambda fraction, given: given if given is not None else int(round(n * fraction))  # noqa: E731
+    train, val, test = split_positions(n, count(args.validation_fraction, args.validation_samples),
+                                       count(args.test_fraction, args.test_samples))
+    record = {"source": source_id(manifest), "train": index_ranges(indices[train]),
+              "validation": index_ranges(indices[val]), "test": index_ranges(indices[test])}
+    if args.train_samples is not None:
+        if not 0 < args.train_samples <= len(train):
+            raise SystemExit(f"{args.train_samples} training samples asked, the training split has {len(train)}")
+        train = train[:args.train_samples]
+    scales = normalization(inputs[train], targets[train], masks[train])
+    say(f"split      {len(train)} training, {len(val)} validation, {len(test)} test samples; grid "
+        f"{'x'.join(map(str, manifest['grid']))}; {world} process(es) on {device}")
+
+    config = {"in_channels": 3, "out_channels": 3, "base_channels": args.channels, "depth": args.depth,
+              "kernel_size": 3}
+    torch.manual_seed(args.seed)
+    net = augsim_unet.UNet(**config)
+    he_uniform_(net, torch.Generator().manual_seed(args.seed))
+    net.to(device)
+    model = torch.nn.parallel.DistributedDataParallel(net, device_ids=[device] if device.type == "cuda" else None) \
+        if distributed else net
+    optimiser = torch.optim.Adam(net.parameters(), lr=args.lr, betas=(0.9, 0.999), eps=1e-5)
+    os.makedirs(args.out, exist_ok=True)
+    checkpoint_path = os.path.join(args.out, "checkpoint.pt")
+    start, best = 0, {"iteration": 0, "error": None, "state": None}
+    if os.path.exists(checkpoint_path):
+        state = torch.load(checkpoint_path, map_location=device, weights_only=False)
+        if state["config"] != config or state["split"] != record:
+            raise SystemExit(f"{checkpoint_path} is of another configuration or split; remove it to start afresh")
+        net.load_state_dict(state["net"])
+        optimiser.load_state_dict(state["optimiser"])
+        start, best = state["iteration"], state["best"]
+        say(f"resumed    from step {start}")
+
+    x_train = torch.from_numpy(inputs[train] * np.float32(1.0 / scales[0]))
+    y_train = torch.from_numpy(targets[train] * np.float32(1.0 / scales[1]))
+    m_train = torch.from_numpy(masks[train].astype(np.float32))
+    per_rank = max(args.batch // world, 1)
+    began = time.time()
+    for it in range(start, args.iterations):
+        generator = torch.Generator().manual_seed(args.seed * 1_000_003 + it)
+        batch = torch.randint(len(train), (per_rank * world,), generator=generator)[rank * per_rank:(rank + 1) * per_rank]
+        for group in optimiser.param_groups:
+            group["lr"] = learning_rate(args, it)
+        x, y, m = (t[batch].to(device, non_blocking=True) for t in (x_train, y_train, m_train))
+        loss = masked_mse(model(x), y, m)
+        optimiser.zero_grad(set_to_none=True)
+        loss.backward()
+        optimiser.step()
+        done = it + 1
+        if done % args.validate_every == 0 or done == args.iterations:
+            if rank == 0:
+                errors = mean_euclidean_errors(net, inputs[val], targets[val], masks[val], scales, device, 8) \
+                    if len(val) else np.zeros(0)
+                error = float(errors.mean()) if len(errors) else None
+                if best["error"] is None or (error is not None and error < best["error"]) or not len(errors):
+                    best = {"iteration": done, "error": error,
+                            "state": {k: v.detach().cpu().clone() for k, v in net.state_dict().items()}}
+                rate = (done - start) / max(time.time() - began, 1e-9)
+                shown = "—" if error is None else f"{error * 1e3:.4f} mm"
+                say(f"step {done:>7}  loss {loss.item():.4e}  validation ē {shown}  ({rate:.1f} steps/s)")
+                torch.save({"config": config, "split": record, "iteration": done, "best": best,
+                            "net": net.state_dict(), "optimiser": optimiser.state_dict()}, checkpoint_path + ".tmp")
+                os.replace(checkpoint_path + ".tmp", checkpoint_path)
+    if rank == 0:
+        weights = {k: v.numpy() for k, v in (best["state"] or net.state_dict()).items()}
+        write_safetensors(os.path.join(args.out, "model.safetensors"), weights)
+        split = {"train_samples": len(train), "val_samples": len(val), "record": record}
+        text = json.dumps(model_json(args, manifest, config, scales, best, split), indent=2)
+        write_atomic(os.path.join(args.out, "model.json"), text.encode("utf-8"))
+        shown = "—" if best["error"] is None else f"{best['error'] * 1e3:.4f} mm"
+        say(f"best       validation ē {shown} at step {best['iteration']}")
+        say(f"wrote      {os.path.join(args.out, 'model.json')}")
+    if distributed:
+        torch.distributed.destroy_process_group()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
