@@ -388,7 +388,8 @@ fn demo(args: &RegisterArgs) -> Result<()> {
     write_csv(&dir.join("truth.csv"), &case.truth)?;
     println!("case       {} (cloud.csv, targets_rest.csv, truth.csv)", dir.display());
 
-    let wants_network = scenario.models.method.iter().any(|m| m.kind == MethodKind::Network);
+    let wants_network =
+        scenario.models.method.iter().any(|m| matches!(m.kind, MethodKind::Network | MethodKind::Hybrid));
     let model_path = args.model.clone().unwrap_or_else(|| PathBuf::from(DEMO_MODEL));
     let model = if !wants_network {
         None

@@ -15,8 +15,8 @@ use learn::TrainedModel;
 
 use anyhow::{anyhow, bail, Result};
 use register::{
-    register_sequence, Deformer, FemDeformer, FrameOutcome, NetworkDeformer, Organ, RegistrationOptions,
-    RigidTransform, Summary,
+    register_sequence, Deformer, FemDeformer, FrameOutcome, HybridDeformer, NetworkDeformer, Organ,
+    RegistrationOptions, RigidTransform, Summary,
 };
 use scenario::registration::{CameraSpec, MethodKind, Misalignment};
 use scenario::{CaseScenario, DatasetScenario, MeshSource};
@@ -200,7 +200,21 @@ pub fn case_methods(scenario: &CaseScenario, network: Option<&Network>) -> Resul
                 let (organ, deformer) = network_model(network)?;
                 out.push(Method { name, organ, deformer: Box::new(deformer), iterations });
             }
-            (MethodKind::Network, _, None) => {}
+            (MethodKind::Hybrid, Some(material), Some(network)) => {
+                let (organ, deformer) = network_model(network)?;
+                let (fem_organ, fem) = fem_model_fixed_on(mesh.clone(), material, &scenario.truth.fixed)?;
+                if fem_organ.mesh().nodes != organ.mesh().nodes {
+                    bail!(
+                        "method {name:?}: the network's organ is not the FEM model's mesh ({} T4)",
+                        scenario.models.tets
+                    );
+                }
+                let network_iterations = spec.network_iterations.unwrap_or(1);
+                let deformer = HybridDeformer::new(deformer, fem, network_iterations)?;
+                out.push(Method { name, organ, deformer: Box::new(deformer), iterations });
+            }
+            (MethodKind::Hybrid, None, _) => bail!("method {name:?}: a hybrid method needs a material"),
+            (MethodKind::Network | MethodKind::Hybrid, _, None) => {}
         }
     }
     Ok(out)

@@ -139,3 +139,41 @@ fn a_failing_method_is_reported_and_the_others_still_register() {
     let s = &rows[1].result.as_ref().expect("the FEM method registers").summary;
     assert!(s.tre_mean_mm.unwrap() < s.no_deformation_tre_mean_mm.unwrap());
 }
+
+/// A hybrid method is the network for its first iterations (with as many network iterations as
+/// iterations in all, the network's very registration), then the FEM from the network's estimate.
+#[test]
+fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
+    use scenario::registration::{MethodKind, MethodSpec};
+    let model = learn::TrainedModel::load(std::path::Path::new(MODEL), &learn::inference_device()).unwrap();
+    let network_scenario = experiment::case::ar_scenario();
+    let network =
+        experiment::case::Network { model: &model, scenario: &network_scenario, dir: std::path::Path::new("") };
+    let mut scenario = scenario::CaseScenario::builtin();
+    let material = Some(Material::new(Law::Corotational, 5000.0, 0.48));
+    let hybrid = |network_iterations: usize, iterations: usize| MethodSpec {
+        name: format!("hybrid {network_iterations}/{iterations}"),
+        kind: MethodKind::Hybrid,
+        material,
+        iterations: Some(iterations),
+        network_iterations: Some(network_iterations),
+    };
+    scenario.models.method.retain(|m| m.kind == MethodKind::Network);
+    scenario.models.method.extend([hybrid(6, 6), hybrid(4, 6)]);
+    scenario.validate().unwrap();
+    let case = experiment::case::synthetic_case(&scenario).unwrap();
+    let methods = experiment::case::case_methods(&scenario, Some(&network)).unwrap();
+    let rows = compare(&case, methods, &scenario.registration);
+    let u = |k: usize| rows[k].result.as_ref().unwrap().outcome.registration.u.clone();
+    assert_eq!(u(0), u(1), "all network iterations: the network's registration");
+    assert_ne!(u(1), u(2), "the FEM takes over after 4");
+    let s = &rows[2].result.as_ref().unwrap().summary;
+    assert!(s.tre_mean_mm.unwrap() < 0.2 * s.no_deformation_tre_mean_mm.unwrap(), "{s:?}");
+    // Hybrid scenarios are checked: network iterations are needed, and only hybrids take them.
+    let mut bad = scenario.clone();
+    bad.models.method[1].network_iterations = None;
+    assert!(bad.validate().unwrap_err().contains("network_iterations"));
+    let mut bad = scenario;
+    bad.models.method[0].network_iterations = Some(2);
+    assert!(bad.validate().unwrap_err().contains("only kind = \"hybrid\""));
+}

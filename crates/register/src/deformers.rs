@@ -1,5 +1,6 @@
-//! The two ways of turning observations into a volumetric displacement: the
-//! finite-element model pulled by data springs, and a trained U-Net.
+//! The ways of turning observations into a volumetric displacement: the finite-element model
+//! pulled by data springs, a trained U-Net, and the two in turn (the network's estimate, then a
+//! few finite-element iterations from it).
 
 use fem::{PointSpring, Problem, SolverOptions, StaticSolver};
 use learn::data::generate::normal_part;
@@ -69,6 +70,37 @@ impl Deformer for FemDeformer {
             })
             .collect();
         Ok(self.solver.solve_from(Some(previous), &self.options)?.u)
+    }
+}
+
+/// The U-Net for the first iterations of a frame, then the finite-element model from its
+/// estimate: the network brings the surface near the cloud in a few milliseconds, so that the
+/// matches the finite-element model is pulled by are already good and its springs can take their
+/// full stiffness at once.
+pub struct HybridDeformer {
+    network: NetworkDeformer,
+    fem: FemDeformer,
+    network_iterations: usize,
+}
+
+impl HybridDeformer {
+    /// `network` for the first `network_iterations` iterations of a frame (at least 1), `fem`
+    /// (on the same organ) after them.
+    pub fn new(network: NetworkDeformer, fem: FemDeformer, network_iterations: usize) -> Result<HybridDeformer> {
+        if network_iterations == 0 {
+            return Err(RegisterError::Invalid("a hybrid registration needs at least one network iteration".into()));
+        }
+        Ok(HybridDeformer { network, fem, network_iterations })
+    }
+}
+
+impl Deformer for HybridDeformer {
+    fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>> {
+        match iteration.checked_sub(self.network_iterations) {
+            None => self.network.deform(observations, previous, iteration),
+            // Past the ramp: the network's estimate is a good start, the springs are stiff at once.
+            Some(k) => self.fem.deform(observations, previous, STIFFNESS_RAMP + k),
+        }
     }
 }
 

@@ -53,7 +53,7 @@ pub mod register;
 pub mod rigid;
 pub mod sequence;
 
-pub use deformers::{FemDeformer, NetworkDeformer};
+pub use deformers::{FemDeformer, HybridDeformer, NetworkDeformer};
 pub use organ::{Organ, Stencil};
 pub use register::{
     check_cloud, observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions,

@@ -166,6 +166,9 @@ pub struct MethodSpec {
     /// iterations`: e.g. the U-Net's real-time budget.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub iterations: Option<usize>,
+    /// The network's iterations before the finite-element ones (`kind = "hybrid"` only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub network_iterations: Option<usize>,
 }
 
 /// The kinds of registration method.
@@ -178,6 +181,9 @@ pub enum MethodKind {
     /// The U-Net given to the comparison (`augsim register --model`), trained on this phantom
     /// with the normal displacement of its `visible` region as input; left out when none is given.
     Network,
+    /// The U-Net for `network_iterations`, then the finite-element model of `material` from its
+    /// estimate; left out when no network is given.
+    Hybrid,
 }
 
 impl CaseScenario {
@@ -247,16 +253,27 @@ impl CaseScenario {
         for method in &self.models.method {
             let name = &method.name;
             match (method.kind, &method.material) {
-                (MethodKind::Fem, Some(material)) => {
+                (MethodKind::Fem | MethodKind::Hybrid, Some(material)) => {
                     material.validate().map_err(|e| format!("method {name:?}: material: {e}"))?
                 }
-                (MethodKind::Fem, None) => {
-                    return bad(format!("method {name:?}: kind = \"fem\" needs a `material` (law, young, poisson)"))
+                (MethodKind::Fem | MethodKind::Hybrid, None) => {
+                    return bad(format!(
+                        "method {name:?}: kind = \"fem\" or \"hybrid\" needs a `material` (law, young, poisson)"
+                    ))
                 }
                 (MethodKind::Network, Some(_)) => {
                     return bad(format!("method {name:?}: kind = \"network\" takes no `material`"))
                 }
                 (MethodKind::Network, None) => {}
+            }
+            match (method.kind, method.network_iterations) {
+                (MethodKind::Hybrid, None | Some(0)) => {
+                    return bad(format!("method {name:?}: kind = \"hybrid\" needs `network_iterations` of at least 1"))
+                }
+                (MethodKind::Fem | MethodKind::Network, Some(_)) => {
+                    return bad(format!("method {name:?}: only kind = \"hybrid\" takes `network_iterations`"))
+                }
+                _ => {}
             }
             if method.iterations == Some(0) {
                 return bad(format!("method {name:?}: iterations must be at least 1"));
