@@ -141,7 +141,7 @@ fn refactorization_cost(geometry: &ElementGeometry, pattern: &Pattern, cholesky:
 /// refactorisation's cost before one is made: a new factor does not remove the
 /// nonlinearity, so the iterations after it are not free either. Tuned on the
 /// bench cases among 4, 8, 12, 20, 40 and no margin: 40 gave the shortest cold
-/// solves on the 5k and 50k liver and the beam, within 10 % of the best each).
+/// solves on the 5k and 50k liver and the beam, within 10 % of the best each.
 const REFRESH_ITERATIONS: f64 = 40.0;
 
 /// A factor is judged on the rate of convergence of this many iterations. The rest tangent's
