@@ -376,6 +376,9 @@ fn transpose(pattern: &Pattern) -> (Vec<u32>, Vec<u32>) {
     (col_ptr, row_idx)
 }
 
+/// Serialises the calls into METIS, whose random generator is one per process.
+static METIS: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// METIS's nested-dissection ordering of the nodes with free dofs, each node's free dofs taken
 /// together: `(forward, inverse)` with `forward[new] = old` over the free dofs. `None` when
 /// METIS fails.
@@ -423,6 +426,10 @@ fn nested_dissection(pattern: &Pattern) -> Option<(Vec<u32>, Vec<u32>)> {
     let mut count = nodes as i32;
     let (mut perm, mut iperm) = (vec![0i32; nodes], vec![0i32; nodes]);
     let mut options = [0; metis_sys::METIS_NOPTIONS as usize];
+    // METIS draws from one random generator per process (GKlib's), reseeded by each call: calls
+    // at once on several threads would interleave their draws and their orderings would depend
+    // on timing. One at a time, each ordering depends on its graph alone.
+    let _one_at_a_time = METIS.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     // SAFETY: the arrays have the lengths METIS_NodeND reads and writes (xadj: nodes + 1,
     // adjncy: xadj[nodes], perm and iperm: nodes, options: METIS_NOPTIONS); METIS keeps no
     // pointer after returning.

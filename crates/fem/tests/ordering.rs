@@ -171,3 +171,28 @@ fn auto_keeps_amd_below_the_work_threshold() {
     assert!(auto.factorization_work() < ND_WORK);
     assert_eq!(auto.ordering(), Ordering::Amd);
 }
+
+/// Nested dissection computed on several threads at once gives every thread the ordering it
+/// gives alone (METIS's random generator is shared by the process: its calls must not overlap).
+#[test]
+fn nested_dissection_on_several_threads_at_once_is_the_sequential_one() {
+    let numbering = |p: &Pattern| (p.free_index.clone(), p.col_ptr.clone(), p.row_idx.clone());
+    let mut alone = cube_pattern(10);
+    SparseCholesky::with_ordering(&mut alone, Ordering::NestedDissection).unwrap();
+    let want = numbering(&alone);
+    for _ in 0..4 {
+        let got: Vec<_> = std::thread::scope(|s| {
+            let threads: Vec<_> = (0..4)
+                .map(|_| {
+                    s.spawn(|| {
+                        let mut p = cube_pattern(10);
+                        SparseCholesky::with_ordering(&mut p, Ordering::NestedDissection).unwrap();
+                        numbering(&p)
+                    })
+                })
+                .collect();
+            threads.into_iter().map(|t| t.join().unwrap()).collect()
+        });
+        assert!(got.iter().all(|g| *g == want), "an ordering computed beside others differs from the lone one");
+    }
+}
