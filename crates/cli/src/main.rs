@@ -6,6 +6,7 @@ mod experiment;
 mod learn_cmd;
 mod mesh_cmd;
 mod register_cmd;
+mod serve_cmd;
 mod solve;
 mod view_cmd;
 
@@ -118,6 +119,9 @@ enum Command {
     /// Register the organ to an intraoperative point cloud (no correspondences): deformed organ,
     /// registered targets and, given the truth, the target registration error.
     Register(register_cmd::RegisterArgs),
+    /// Registration on a stream for navigation systems: an OpenIGTLink server that registers each
+    /// point cloud it receives and answers with the registered targets, organ and status.
+    Serve(serve_cmd::ServeArgs),
     /// A self-contained HTML 3D viewer (opens in a browser, no network): a dataset sample on the organ (rest,
     /// FEM reference, the model's prediction, coloured by its error, markers) or a mesh file's displacements.
     View(view_cmd::ViewArgs),
@@ -144,6 +148,7 @@ fn main() {
     let result: Result<()> = match cli.command {
         Command::Solve { scenario, output } => solve::run(&scenario, output.as_deref()),
         Command::Register(args) => register_cmd::run(&args),
+        Command::Serve(args) => serve_cmd::run(&args),
         Command::View(args) => view_cmd::run(&args),
         Command::Mesh { surface, length, tets, immersed, output } => {
             mesh_cmd::run(&mesh_cmd::MeshArgs { surface, length, tets, immersed, output })

@@ -102,11 +102,11 @@ struct RunSummary {
 }
 
 /// The organ, its deformer and default targets.
-struct Setup {
-    organ: Organ,
-    deformer: Box<dyn Deformer>,
-    method: String,
-    default_targets: Vec<Point>,
+pub(crate) struct Setup {
+    pub organ: Organ,
+    pub deformer: Box<dyn Deformer + Send>,
+    pub method: String,
+    pub default_targets: Vec<Point>,
 }
 
 /// Runs the registration and writes the outputs.
@@ -293,7 +293,7 @@ fn region_targets(m: &mesh::Mesh) -> Vec<Point> {
     ["markers", "tumour"].iter().filter_map(|r| m.region(r).ok()).flatten().map(|&n| m.nodes[n]).collect()
 }
 
-fn fem_setup(path: &Path) -> Result<Setup> {
+pub(crate) fn fem_setup(path: &Path) -> Result<Setup> {
     let (scenario, dir) = StaticScenario::load(path)?;
     let problem = scenario.build_problem(&dir)?;
     let organ = organ_of(&scenario.mesh, problem.mesh.clone())?;
@@ -304,7 +304,7 @@ fn fem_setup(path: &Path) -> Result<Setup> {
     Ok(Setup { organ, deformer, method, default_targets })
 }
 
-fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<Setup> {
+pub(crate) fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<Setup> {
     let (scenario, dir) = DatasetScenario::load(scenario_path)?;
     let model = learn::TrainedModel::load(model_path, &learn::inference_device())?;
     let (organ, deformer) = network_model(&Network { model: &model, scenario: &scenario, dir: &dir })?;

@@ -1,0 +1,113 @@
+//! `augsim serve`: registration on a stream, over OpenIGTLink (see the `augsim-live` crate).
+
+use std::net::TcpListener;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use anyhow::{bail, Context, Result};
+use live::{Outputs, ServeOptions, Session};
+use register::RegistrationOptions;
+
+use crate::register_cmd::{fem_setup, network_setup, Setup};
+
+/// Options of `augsim serve`.
+#[derive(Debug, clap::Args)]
+pub struct ServeArgs {
+    /// FEM registration on this static scenario (a file or a built-in name).
+    #[arg(long, conflicts_with = "model", required_unless_present = "model")]
+    fem: Option<PathBuf>,
+    /// U-Net registration with this model (model.json); the organ comes from --scenario.
+    #[arg(long, requires = "scenario")]
+    model: Option<PathBuf>,
+    /// The dataset scenario the model was trained on (a file or a built-in name, e.g. liver_ar).
+    #[arg(long)]
+    scenario: Option<PathBuf>,
+    /// Targets at rest (CSV x,y,z, in --units); default: the mesh's `markers` and `tumour` regions.
+    #[arg(long)]
+    targets: Option<PathBuf>,
+    /// TCP port (OpenIGTLink's is 18944).
+    #[arg(long, default_value_t = 18944)]
+    port: u16,
+    /// Address to listen on (0.0.0.0: every interface).
+    #[arg(long, default_value = "127.0.0.1")]
+    host: String,
+    /// Unit of every coordinate exchanged: clouds, targets, organ (mm, as 3D Slicer uses, or m).
+    #[arg(long, default_value = "mm")]
+    units: String,
+    /// The answers to each cloud, comma-separated: targets (POINT), organ (POLYDATA), status (STRING).
+    #[arg(long, default_value = "targets,organ,status")]
+    outputs: String,
+    /// Most match-and-deform iterations per frame (default: the library's).
+    #[arg(long)]
+    iterations: Option<usize>,
+}
+
+/// The registration of `(fem scenario, model, dataset scenario)`: the FEM's or the network's.
+fn setup(method: &(Option<PathBuf>, Option<PathBuf>, Option<PathBuf>)) -> Result<Setup> {
+    match method {
+        (Some(fem), _, _) => fem_setup(fem),
+        (None, Some(model), Some(scenario)) => network_setup(model, scenario),
+        _ => bail!("give --fem SCENARIO, or --model MODEL with --scenario SCENARIO"),
+    }
+}
+
+/// Set by SIGINT / SIGTERM: the server stops.
+static STOP: AtomicBool = AtomicBool::new(false);
+
+#[cfg(unix)]
+extern "C" fn request_stop(_: libc::c_int) {
+    STOP.store(true, Ordering::SeqCst);
+}
+
+/// Runs `augsim serve` until SIGINT or SIGTERM.
+pub fn run(args: &ServeArgs) -> Result<()> {
+    let unit = match args.units.as_str() {
+        "mm" => 1e-3,
+        "m" => 1.0,
+        other => bail!("--units must be mm or m, got '{other}'"),
+    };
+    let outputs = Outputs::parse(&args.outputs).map_err(anyhow::Error::msg).context("--outputs")?;
+    let method = (args.fem.clone(), args.model.clone(), args.scenario.clone());
+    // Built once here so that a bad model or scenario stops the command before it listens.
+    let first = setup(&method)?;
+    let targets = match &args.targets {
+        Some(path) => register::cloud::read_targets(path)?.into_iter().map(|p| p.map(|x| x * unit)).collect(),
+        None => first.default_targets.clone(),
+    };
+    if targets.is_empty() {
+        bail!("no targets: give --targets, or a mesh with `markers` or `tumour` regions");
+    }
+    let mut options = RegistrationOptions::default();
+    if let Some(n) = args.iterations {
+        options.iterations = n;
+    }
+    options.validate()?;
+    println!("method     {}", first.method);
+    println!("organ      {} nodes, {} targets", first.organ.mesh().num_nodes(), targets.len());
+    let first = std::sync::Mutex::new(Some(first));
+    let factory = move || -> std::result::Result<Session, String> {
+        // The first client takes the setup built above; the others build their own.
+        let setup = match first.lock().map_err(|e| e.to_string())?.take() {
+            Some(s) => s,
+            None => setup(&method).map_err(|e| format!("{e:#}"))?,
+        };
+        Ok(Session { organ: setup.organ, deformer: setup.deformer, targets: targets.clone(), options: options.clone() })
+    };
+    let address = format!("{}:{}", args.host, args.port);
+    let listener = TcpListener::bind(&address).with_context(|| format!("listening on {address}"))?;
+    #[cfg(unix)]
+    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+    unsafe {
+        libc::signal(libc::SIGINT, request_stop as *const () as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, request_stop as *const () as libc::sighandler_t);
+    }
+    println!(
+        "listening  {address} (OpenIGTLink; clouds as POLYDATA or POINT named `cloud`, in {}); Ctrl-C stops",
+        args.units
+    );
+    let serve_options = ServeOptions { unit, outputs, ..ServeOptions::default() };
+    live::serve(listener, Arc::new(factory), serve_options, &STOP)?;
+    println!("stopped");
+    Ok(())
+}

@@ -1,0 +1,397 @@
+//! Registration on a stream, for navigation systems (3D Slicer with SlicerIGT, PLUS, an AR
+//! headset application): an OpenIGTLink server that registers every point cloud it receives and
+//! answers with the registered targets, the deformed organ surface and a status line.
+//!
+//! Protocol (OpenIGTLink version 1–3, the `openigtlink-rust` crate's messages):
+//! - in: a point cloud as POLYDATA (its points; vertices optional) or POINT, device name `cloud`;
+//! - out, per cloud, in this order and as chosen by [`Outputs`]: POINT `targets` (the
+//!   registered targets, in the order given to the server), POLYDATA `organ` (the registered
+//!   surface with its triangles), STRING `status` (one line of JSON: `frame`, `ms`,
+//!   `surface_residual`, `inliers`, `points`, `iterations`, in the stream's unit; or `frame`
+//!   and `error`).
+//!
+//! Each client has its own registration, warm-started from its previous frame. A client's clouds
+//! are registered one at a time; a cloud that arrives while one is being registered replaces any
+//! cloud still waiting (the newest wins: the backlog never grows). A malformed, truncated or
+//! oversized message closes that client's connection (after a STRING `status` error where the
+//! connection still allows it); a cloud with no point, too many points or a non-finite
+//! coordinate gets an error status and the stream goes on. Other clients are never affected.
+
+use std::io::{Read, Write};
+use std::net::{Shutdown, TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
+
+use mesh::Point;
+use openigtlink_rust::protocol::header::Header;
+use openigtlink_rust::protocol::types::{PointElement, PointMessage, PolyDataMessage, StringMessage};
+use openigtlink_rust::protocol::{calculate_crc, IgtlMessage, Message};
+use register::organ::displaced;
+use register::{register_frame, Deformer, Organ, RegistrationOptions, Stencil};
+
+/// Errors of the server.
+#[derive(Debug, thiserror::Error)]
+pub enum LiveError {
+    /// A socket could not be set up.
+    #[error("{what}: {source}")]
+    Io {
+        /// What was being done.
+        what: String,
+        /// Why it failed.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The registration of a new client could not be built.
+    #[error("setting up a registration: {0}")]
+    Setup(String),
+}
+
+/// Result type of this crate.
+pub type Result<T> = std::result::Result<T, LiveError>;
+
+/// The answers sent for each cloud.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Outputs {
+    /// POINT `targets`.
+    pub targets: bool,
+    /// POLYDATA `organ`.
+    pub organ: bool,
+    /// STRING `status`.
+    pub status: bool,
+}
+
+impl Outputs {
+    /// Every output.
+    pub const ALL: Outputs = Outputs { targets: true, organ: true, status: true };
+
+    /// Parses a comma-separated list of `targets`, `organ`, `status` (e.g. `targets,status`).
+    pub fn parse(list: &str) -> std::result::Result<Outputs, String> {
+        let mut out = Outputs { targets: false, organ: false, status: false };
+        for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            match name {
+                "targets" => out.targets = true,
+                "organ" => out.organ = true,
+                "status" => out.status = true,
+                other => return Err(format!("unknown output '{other}' (targets, organ, status)")),
+            }
+        }
+        if out == (Outputs { targets: false, organ: false, status: false }) {
+            return Err("no output chosen (targets, organ, status)".into());
+        }
+        Ok(out)
+    }
+}
+
+/// Settings of the server.
+#[derive(Clone, Debug)]
+pub struct ServeOptions {
+    /// Metres per unit of the coordinates on the wire (0.001: millimetres, as 3D Slicer uses).
+    pub unit: f64,
+    /// The answers sent for each cloud.
+    pub outputs: Outputs,
+    /// Largest message body accepted (bytes); a larger one closes the connection.
+    pub max_message_bytes: u64,
+    /// Largest cloud registered (points); a larger one gets an error status.
+    pub max_points: usize,
+}
+
+impl Default for ServeOptions {
+    fn default() -> Self {
+        ServeOptions { unit: 1e-3, outputs: Outputs::ALL, max_message_bytes: 64 << 20, max_points: 200_000 }
+    }
+}
+
+/// One client's registration: the organ, what deforms it, the targets and the loop's settings.
+pub struct Session {
+    /// The organ (its mesh and surface, in m).
+    pub organ: Organ,
+    /// What deforms it.
+    pub deformer: Box<dyn Deformer + Send>,
+    /// The targets' rest positions (m).
+    pub targets: Vec<Point>,
+    /// The registration loop.
+    pub options: RegistrationOptions,
+}
+
+/// Builds a new client's [`Session`].
+pub type SessionFactory = dyn Fn() -> std::result::Result<Session, String> + Send + Sync;
+
+/// How long the accept loop sleeps between checks of the stop flag.
+const POLL: Duration = Duration::from_millis(20);
+
+/// Serves clients on `listener` until `stop` is set, then closes every connection and returns.
+pub fn serve(
+    listener: TcpListener,
+    factory: Arc<SessionFactory>,
+    options: ServeOptions,
+    stop: &AtomicBool,
+) -> Result<()> {
+    let io = |what: &str| {
+        let what = what.to_string();
+        move |source| LiveError::Io { what, source }
+    };
+    listener.set_nonblocking(true).map_err(io("listening"))?;
+    let mut clients: Vec<Client> = Vec::new();
+    while !stop.load(Ordering::SeqCst) {
+        match listener.accept() {
+            Ok((stream, _)) => match Client::start(stream, factory.clone(), options.clone()) {
+                Ok(client) => clients.push(client),
+                Err(e) => eprintln!("augsim serve: a client could not be set up: {e}"),
+            },
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(POLL),
+            Err(e) => return Err(io("accepting a client")(e)),
+        }
+        clients.retain(|c| !c.finished());
+    }
+    for client in clients {
+        client.stop();
+    }
+    Ok(())
+}
+
+/// A connected client: its reader and registration threads.
+struct Client {
+    shared: Arc<Shared>,
+    threads: Vec<std::thread::JoinHandle<()>>,
+}
+
+/// What a client's two threads share.
+struct Shared {
+    /// The newest cloud waiting to be registered, with its frame number.
+    waiting: Mutex<Option<(u64, Vec<Point>)>>,
+    arrived: Condvar,
+    /// Set when the connection ends (either side, or the server stops).
+    closed: AtomicBool,
+    /// The socket, for writing (answers from the registration thread, errors from the reader).
+    writer: Mutex<TcpStream>,
+    options: ServeOptions,
+}
+
+impl Shared {
+    fn close(&self) {
+        self.closed.store(true, Ordering::SeqCst);
+        if let Ok(w) = self.writer.lock() {
+            let _ = w.shutdown(Shutdown::Both);
+        }
+        self.arrived.notify_all();
+    }
+
+    fn send<T: Message>(&self, content: T, device: &str) -> std::result::Result<(), String> {
+        let bytes = encode_message(content, device)?;
+        let mut w = self.writer.lock().map_err(|_| "writer poisoned".to_string())?;
+        w.write_all(&bytes).map_err(|e| e.to_string())
+    }
+
+    fn send_status(&self, status: &serde_json::Value) {
+        if self.options.outputs.status && self.send(StringMessage::utf8(status.to_string()), "status").is_err() {
+            self.close();
+        }
+    }
+}
+
+impl Client {
+    fn start(stream: TcpStream, factory: Arc<SessionFactory>, options: ServeOptions) -> std::io::Result<Client> {
+        stream.set_nonblocking(false)?;
+        stream.set_nodelay(true)?;
+        let reader = stream.try_clone()?;
+        let shared = Arc::new(Shared {
+            waiting: Mutex::new(None),
+            arrived: Condvar::new(),
+            closed: AtomicBool::new(false),
+            writer: Mutex::new(stream),
+            options,
+        });
+        let (s1, s2) = (shared.clone(), shared.clone());
+        let threads = vec![
+            std::thread::spawn(move || read_clouds(reader, &s1)),
+            std::thread::spawn(move || register_clouds(&s2, &*factory)),
+        ];
+        Ok(Client { shared, threads })
+    }
+
+    fn finished(&self) -> bool {
+        self.threads.iter().all(|t| t.is_finished())
+    }
+
+    fn stop(self) {
+        self.shared.close();
+        for t in self.threads {
+            let _ = t.join();
+        }
+    }
+}
+
+/// Reads messages until the connection ends; keeps the newest cloud for the registration thread.
+fn read_clouds(mut stream: TcpStream, shared: &Shared) {
+    let mut frame = 0u64;
+    while !shared.closed.load(Ordering::SeqCst) {
+        let points = match read_message(&mut stream, shared.options.max_message_bytes) {
+            Ok(Some(Some(points))) => points,
+            Ok(Some(None)) => continue,
+            Ok(None) => break, // the client closed the connection
+            Err(e) => {
+                shared.send_status(&serde_json::json!({ "error": e }));
+                break;
+            }
+        };
+        frame += 1;
+        let cloud = points.into_iter().map(|p| p.map(|x| f64::from(x) * shared.options.unit)).collect();
+        *shared.waiting.lock().unwrap_or_else(|e| e.into_inner()) = Some((frame, cloud));
+        shared.arrived.notify_one();
+    }
+    shared.close();
+}
+
+/// One message from the stream: the points of a `cloud` POLYDATA or POINT message (wire units),
+/// or `Some(None)` for any other message; `None` when the peer closed the connection between
+/// messages; an error for a malformed, truncated or oversized message.
+fn read_message(stream: &mut TcpStream, max_body: u64) -> std::result::Result<Option<Option<Vec<[f32; 3]>>>, String> {
+    let mut header = [0u8; Header::SIZE];
+    match stream.read(&mut header[..1]) {
+        Ok(0) => return Ok(None),
+        Ok(_) => {}
+        Err(e) => return Err(format!("reading a message: {e}")),
+    }
+    stream.read_exact(&mut header[1..]).map_err(|e| format!("truncated message header: {e}"))?;
+    let parsed = Header::decode(&header).map_err(|e| format!("malformed message header: {e}"))?;
+    if parsed.body_size > max_body {
+        return Err(format!("message body of {} bytes exceeds the limit of {max_body}", parsed.body_size));
+    }
+    let mut data = header.to_vec();
+    data.resize(Header::SIZE + parsed.body_size as usize, 0);
+    stream.read_exact(&mut data[Header::SIZE..]).map_err(|e| format!("truncated message body: {e}"))?;
+    let kind = parsed.type_name.as_str().map_err(|e| format!("malformed message type: {e}"))?;
+    if parsed.device_name.as_str().ok() != Some("cloud") || !matches!(kind, "POLYDATA" | "POINT") {
+        return Ok(Some(None)); // not a cloud: other messages are ignored
+    }
+    let body = &data[Header::SIZE..];
+    let points = match kind {
+        "POLYDATA" => decode_body::<PolyDataMessage>(&parsed, body)?.points,
+        _ => decode_body::<PointMessage>(&parsed, body)?.points.iter().map(|p| p.position).collect(),
+    };
+    Ok(Some(Some(points)))
+}
+
+/// A message as bytes on the wire, with header version 1 (no extended header): what every
+/// OpenIGTLink client reads (3D Slicer, PLUS, pyigtl).
+pub fn encode_message<T: Message>(content: T, device: &str) -> std::result::Result<Vec<u8>, String> {
+    let mut bytes = IgtlMessage::new(content, device).and_then(|m| m.encode()).map_err(|e| e.to_string())?;
+    // The header's version field; the CRC covers the body only, which has no extended header.
+    bytes[..2].copy_from_slice(&1u16.to_be_bytes());
+    Ok(bytes)
+}
+
+/// The content of a message of type `T` from its header and body: the CRC checked, the
+/// content taken from between the extended header and the metadata for header version 2 (the
+/// whole body for version 1), then decoded. Errors say what is wrong; a malformed body never
+/// panics.
+pub fn decode_body<T: Message>(header: &Header, body: &[u8]) -> std::result::Result<T, String> {
+    let kind = T::message_type();
+    if calculate_crc(body) != header.crc {
+        return Err(format!("{kind} message: CRC mismatch"));
+    }
+    let content = if header.version < 2 {
+        body
+    } else {
+        let field =
+            |at: usize, n: usize| body.get(at..at + n).map(|b| b.iter().fold(0usize, |v, &x| v << 8 | x as usize));
+        let bad = || format!("{kind} message: malformed extended header");
+        let (ext, meta_header, meta) =
+            (field(0, 2).ok_or_else(bad)?, field(2, 2).ok_or_else(bad)?, field(4, 4).ok_or_else(bad)?);
+        let end = body.len().checked_sub(meta_header).and_then(|e| e.checked_sub(meta)).ok_or_else(bad)?;
+        if ext < 12 || ext > end {
+            return Err(bad());
+        }
+        &body[ext..end]
+    };
+    // A malformed body must end a connection, not the server: the decoder is guarded.
+    match std::panic::catch_unwind(|| T::decode_content(content)) {
+        Ok(Ok(message)) => Ok(message),
+        Ok(Err(e)) => Err(format!("malformed {kind} message: {e}")),
+        Err(_) => Err(format!("malformed {kind} message")),
+    }
+}
+
+/// Registers the newest cloud, frame after frame, until the connection ends.
+fn register_clouds(shared: &Shared, factory: &SessionFactory) {
+    let mut session = match factory() {
+        Ok(s) => s,
+        Err(e) => {
+            shared.send_status(&serde_json::json!({ "error": format!("setting up the registration: {e}") }));
+            shared.close();
+            return;
+        }
+    };
+    let stencils = match session.organ.locate(&session.targets, "target") {
+        Ok(s) => s,
+        Err(e) => {
+            shared.send_status(&serde_json::json!({ "error": e.to_string() }));
+            shared.close();
+            return;
+        }
+    };
+    let mut warm: Option<Vec<f64>> = None;
+    loop {
+        let (frame, cloud) = {
+            let mut waiting = shared.waiting.lock().unwrap_or_else(|e| e.into_inner());
+            loop {
+                if shared.closed.load(Ordering::SeqCst) {
+                    return;
+                }
+                if let Some(next) = waiting.take() {
+                    break next;
+                }
+                waiting = shared.arrived.wait(waiting).unwrap_or_else(|e| e.into_inner());
+            }
+        };
+        if let Err(e) = answer(shared, &mut session, &stencils, &mut warm, frame, &cloud) {
+            shared.send_status(&serde_json::json!({ "frame": frame, "error": e }));
+        }
+    }
+}
+
+/// Registers one cloud and sends the chosen answers.
+fn answer(
+    shared: &Shared,
+    session: &mut Session,
+    stencils: &[Stencil],
+    warm: &mut Option<Vec<f64>>,
+    frame: u64,
+    cloud: &[Point],
+) -> std::result::Result<(), String> {
+    let options = &shared.options;
+    if cloud.len() > options.max_points {
+        return Err(format!("cloud of {} points exceeds the limit of {}", cloud.len(), options.max_points));
+    }
+    let start = Instant::now();
+    let result = register_frame(&session.organ, session.deformer.as_mut(), cloud, warm.as_deref(), &session.options)
+        .map_err(|e| e.to_string())?;
+    let unit = options.unit;
+    let to_wire = |p: &Point| p.map(|x| (x / unit) as f32);
+    if options.outputs.targets {
+        let registered = displaced(&session.targets, stencils, &result.u);
+        let points = registered
+            .iter()
+            .enumerate()
+            .map(|(k, p)| PointElement::new(format!("target {}", k + 1), "targets", to_wire(p)))
+            .collect();
+        shared.send(PointMessage::new(points), "targets")?;
+    }
+    if options.outputs.organ {
+        let surface = session.organ.deformed_surface(&result.u);
+        let polygons = surface.triangles.iter().flat_map(|t| [3, t[0] as u32, t[1] as u32, t[2] as u32]).collect();
+        let organ = PolyDataMessage::new(surface.vertices.iter().map(to_wire).collect()).with_polygons(polygons);
+        shared.send(organ, "organ")?;
+    }
+    shared.send_status(&serde_json::json!({
+        "frame": frame,
+        "ms": start.elapsed().as_secs_f64() * 1e3,
+        "surface_residual": result.surface_residual / unit,
+        "inliers": result.inliers,
+        "points": result.points,
+        "iterations": result.iterations,
+    }));
+    *warm = Some(result.u);
+    Ok(())
+}

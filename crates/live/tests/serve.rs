@@ -1,0 +1,191 @@
+//! The OpenIGTLink server end to end, with clients speaking the protocol over TCP: a cloud in
+//! millimetres registered into targets, organ and status; a bad cloud answered with an error; a
+//! malformed or oversized message closing that client alone; a clean stop.
+
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use augsim_live::{decode_body, encode_message, serve, Outputs, ServeOptions, Session};
+use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
+use mesh::select::nodes_in_box;
+use mesh::Point;
+use openigtlink_rust::protocol::calculate_crc;
+use openigtlink_rust::protocol::header::Header;
+use openigtlink_rust::protocol::types::{PointMessage, PolyDataMessage, StringMessage};
+use register::{FemDeformer, Organ, RegistrationOptions};
+
+const SIDE: f64 = 0.05;
+
+/// A soft cube fixed at its base (the organ) and the target at its centre.
+fn cube() -> (Problem, Point) {
+    let mesh = mesh::box_tet([0.0; 3], [SIDE; 3], [4, 4, 4]).unwrap();
+    let mut problem = Problem::new(mesh, Material::new(Law::Corotational, 5000.0, 0.45));
+    let base = nodes_in_box(&problem.mesh.nodes, [-1.0, -1.0, -1e-6], [1.0, 1.0, 1e-6]);
+    problem.fix(&base);
+    (problem, [SIDE / 2.0; 3])
+}
+
+/// The cube's top face pressed down: the cloud a camera above sees (mm) and the centre's true
+/// position (mm).
+fn pressed_cloud(pressure: f64) -> (Vec<[f32; 3]>, Point) {
+    let (mut problem, centre) = cube();
+    let top = nodes_in_box(&problem.mesh.nodes, [-1.0, -1.0, SIDE - 1e-6], [1.0; 3]);
+    problem.add_traction(&top, [0.0, 0.0, -pressure]);
+    let u = StaticSolver::new(problem.clone()).unwrap().solve(&SolverOptions::default()).unwrap().u;
+    let organ = Organ::new(problem.mesh.clone(), None).unwrap();
+    let rest = organ.surface().vertices.clone();
+    let deformed = organ.deformed_surface(&u).vertices;
+    let cloud =
+        deformed.iter().zip(&rest).filter(|(_, r)| r[2] > SIDE - 1e-6).map(|(p, _)| p.map(|x| (x * 1e3) as f32));
+    let k = problem.mesh.nodes.iter().position(|p| (0..3).all(|d| (p[d] - centre[d]).abs() < 1e-9)).unwrap();
+    (cloud.collect(), std::array::from_fn(|d| (centre[d] + u[3 * k + d]) * 1e3))
+}
+
+fn session() -> Result<Session, String> {
+    let (problem, centre) = cube();
+    let organ = Organ::new(problem.mesh.clone(), None).map_err(|e| e.to_string())?;
+    let stiffness = FemDeformer::default_stiffness(&problem);
+    let deformer = FemDeformer::new(problem, stiffness, SolverOptions::default()).map_err(|e| e.to_string())?;
+    let options = RegistrationOptions { view: Some([0.0, 0.0, -1.0]), ..RegistrationOptions::default() };
+    Ok(Session { organ, deformer: Box::new(deformer), targets: vec![centre], options })
+}
+
+fn send_cloud(stream: &mut TcpStream, points: Vec<[f32; 3]>) {
+    let bytes = encode_message(PolyDataMessage::new(points), "cloud").unwrap();
+    stream.write_all(&bytes).unwrap();
+}
+
+/// A message from the server.
+#[derive(Debug)]
+enum Answer {
+    Targets(PointMessage),
+    Organ(PolyDataMessage),
+    Status(serde_json::Value),
+}
+
+/// The next message from the server, `None` at the end of the stream.
+fn receive(stream: &mut TcpStream) -> Option<Answer> {
+    let mut header = [0u8; Header::SIZE];
+    stream.read_exact(&mut header).ok()?;
+    let parsed = Header::decode(&header).unwrap();
+    let mut body = vec![0; parsed.body_size as usize];
+    stream.read_exact(&mut body).unwrap();
+    Some(match parsed.type_name.as_str().unwrap() {
+        "POINT" => Answer::Targets(decode_body(&parsed, &body).unwrap()),
+        "POLYDATA" => Answer::Organ(decode_body(&parsed, &body).unwrap()),
+        "STRING" => {
+            let text: StringMessage = decode_body(&parsed, &body).unwrap();
+            Answer::Status(serde_json::from_str(text.as_str()).unwrap())
+        }
+        other => panic!("unexpected {other} message"),
+    })
+}
+
+fn status(message: Option<Answer>) -> serde_json::Value {
+    match message {
+        Some(Answer::Status(s)) => s,
+        other => panic!("expected the status STRING, got {other:?}"),
+    }
+}
+
+fn connect(port: u16) -> TcpStream {
+    let stream = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    stream.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    stream
+}
+
+#[test]
+fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let stop = Arc::new(AtomicBool::new(false));
+    let server = {
+        let stop = stop.clone();
+        std::thread::spawn(move || serve(listener, Arc::new(session), ServeOptions::default(), &stop))
+    };
+
+    // A cloud in millimetres: the registered target is the pressed centre.
+    let (cloud, truth) = pressed_cloud(300.0);
+    let motion = (truth[2] - SIDE * 1e3 / 2.0).abs();
+    let mut client = connect(port);
+    send_cloud(&mut client, cloud.clone());
+    let target = match receive(&mut client) {
+        Some(Answer::Targets(m)) => {
+            assert_eq!(m.points.len(), 1);
+            m.points[0].position.map(f64::from)
+        }
+        other => panic!("expected the targets POINT, got {other:?}"),
+    };
+    let error = (0..3).map(|d| (target[d] - truth[d]).powi(2)).sum::<f64>().sqrt();
+    assert!(motion > 0.5 && error < 0.25 * motion, "target off by {error:.3} mm, the centre moved {motion:.3} mm");
+    match receive(&mut client) {
+        Some(Answer::Organ(m)) => {
+            assert_eq!(m.points.len(), 98, "the cube's surface nodes");
+            assert_eq!(m.polygons.len(), 4 * 192, "3 and the indices of each of 192 triangles");
+            assert!(m.points.iter().all(|p| p.iter().all(|x| (-1.0..=51.0).contains(x))), "in mm");
+        }
+        other => panic!("expected the organ POLYDATA, got {other:?}"),
+    }
+    let s = status(receive(&mut client));
+    assert_eq!(s["frame"], 1);
+    assert!(s["ms"].as_f64().unwrap() > 0.0 && s["surface_residual"].as_f64().unwrap() < 0.5, "{s}");
+
+    // A cloud with a NaN: an error status for that frame, the stream goes on.
+    let mut bad = cloud.clone();
+    bad[3][1] = f32::NAN;
+    send_cloud(&mut client, bad);
+    let s = status(receive(&mut client));
+    assert!(s["frame"] == 2 && s["error"].as_str().unwrap().contains("finite"), "{s}");
+    send_cloud(&mut client, Vec::new());
+    let s = status(receive(&mut client));
+    assert!(s["frame"] == 3 && s["error"].is_string(), "{s}");
+
+    // Another client sends an oversized message, a third garbage: each is closed alone.
+    let mut huge = encode_message(PolyDataMessage::new(cloud.clone()), "cloud").unwrap();
+    huge[42..50].copy_from_slice(&u64::MAX.to_be_bytes());
+    let mut other = connect(port);
+    other.write_all(&huge[..Header::SIZE]).unwrap();
+    let s = status(receive(&mut other));
+    assert!(s["error"].as_str().unwrap().contains("exceeds"), "{s}");
+    assert!(receive(&mut other).is_none(), "the connection is closed");
+    // A POLYDATA that claims 1,000 points and holds 2, with a correct CRC; then a corrupted one.
+    let mut lying = encode_message(PolyDataMessage::new(vec![[0.0; 3]; 2]), "cloud").unwrap();
+    lying[Header::SIZE..Header::SIZE + 4].copy_from_slice(&1000u32.to_be_bytes());
+    let crc = calculate_crc(&lying[Header::SIZE..]);
+    lying[50..58].copy_from_slice(&crc.to_be_bytes());
+    let mut garbage = connect(port);
+    garbage.write_all(&lying).unwrap();
+    let s = status(receive(&mut garbage));
+    assert!(s["error"].as_str().unwrap().contains("malformed POLYDATA"), "{s}");
+    assert!(receive(&mut garbage).is_none(), "the connection is closed");
+    let mut corrupted = huge.clone();
+    let body_size = (corrupted.len() - Header::SIZE) as u64;
+    corrupted[42..50].copy_from_slice(&body_size.to_be_bytes());
+    corrupted[Header::SIZE + 10] ^= 0x55;
+    let mut garbage = connect(port);
+    garbage.write_all(&corrupted).unwrap();
+    let s = status(receive(&mut garbage));
+    assert!(s["error"].as_str().unwrap().contains("CRC"), "{s}");
+
+    // The first client is still served, warm-started; only the status is asked of a new server
+    // setting, so here the three answers again.
+    send_cloud(&mut client, cloud);
+    assert!(matches!(receive(&mut client), Some(Answer::Targets(_))));
+    assert!(matches!(receive(&mut client), Some(Answer::Organ(_))));
+    assert_eq!(status(receive(&mut client))["frame"], 4);
+
+    stop.store(true, Ordering::SeqCst);
+    server.join().unwrap().unwrap();
+    assert!(receive(&mut client).is_none(), "the server closed the connection when it stopped");
+}
+
+#[test]
+fn outputs_parse_and_refuse_unknown_names() {
+    assert_eq!(Outputs::parse("targets,status").unwrap(), Outputs { targets: true, organ: false, status: true });
+    assert_eq!(Outputs::parse("targets, organ, status").unwrap(), Outputs::ALL);
+    assert!(Outputs::parse("targets,mesh").unwrap_err().contains("mesh"));
+    assert!(Outputs::parse("").is_err());
+}
