@@ -42,9 +42,6 @@ pub enum LiveError {
         #[source]
         source: std::io::Error,
     },
-    /// The registration of a new client could not be built.
-    #[error("setting up a registration: {0}")]
-    Setup(String),
 }
 
 /// Result type of this crate.
