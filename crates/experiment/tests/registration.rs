@@ -177,3 +177,32 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     bad.models.method[0].network_iterations = Some(2);
     assert!(bad.validate().unwrap_err().contains("only kind = \"hybrid\""));
 }
+
+/// A frame from rest starts at iteration 0; a warm-started frame at [`register::WARM_START_ITERATION`]
+/// (past the FEM springs' stiffness ramp and the widest capture distances).
+#[test]
+fn a_warm_started_frame_starts_past_the_ramp() {
+    struct Recording(Vec<usize>);
+    impl register::Deformer for Recording {
+        fn deform(
+            &mut self,
+            _: &register::Observations,
+            previous: &[f64],
+            iteration: usize,
+        ) -> register::Result<Vec<f64>> {
+            self.0.push(iteration);
+            Ok(previous.iter().map(|u| u + 1e-3).collect()) // moves, so the loop goes on
+        }
+    }
+    let (organ, _) = corotational_model().unwrap();
+    let camera = CameraModel { view: [0.0, 0.0, -1.0], points: 300, noise: 0.0, outliers: 0.0 };
+    let cloud = experiment::simulate::simulate_cloud(organ.surface(), &camera, 3).unwrap();
+    let options = RegistrationOptions { iterations: 2, tolerance: 0.0, ..RegistrationOptions::default() };
+    let mut cold = Recording(Vec::new());
+    register_frame(&organ, &mut cold, &cloud, None, &options).unwrap();
+    let start = vec![0.0; 3 * organ.mesh().num_nodes()];
+    let mut warm = Recording(Vec::new());
+    register_frame(&organ, &mut warm, &cloud, Some(&start), &options).unwrap();
+    let w = register::WARM_START_ITERATION;
+    assert_eq!((cold.0, warm.0), (vec![0, 1], vec![w, w + 1]));
+}

@@ -57,6 +57,7 @@ pub use deformers::{FemDeformer, HybridDeformer, NetworkDeformer};
 pub use organ::{Organ, Stencil};
 pub use register::{
     check_cloud, observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions,
+    WARM_START_ITERATION,
 };
 pub use rigid::{rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
 pub use sequence::{register_sequence, target_errors, FrameOutcome, Summary};

@@ -33,10 +33,16 @@ pub struct PointMatch {
 
 /// A model that gives the organ's nodal displacement (3 per node) explaining observations.
 pub trait Deformer {
-    /// The nodal displacement explaining `observations` at iteration `iteration`
-    /// (from 0) of a frame; `previous` is the last estimate (a warm start).
+    /// The nodal displacement explaining `observations` at iteration `iteration` of a frame
+    /// (from 0 for a frame registered from rest, from [`WARM_START_ITERATION`] for one
+    /// warm-started from a previous frame); `previous` is the last estimate (a warm start).
     fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>>;
 }
+
+/// The first iteration of a frame warm-started from a previous frame's estimate: its matches are
+/// already good from the start, so the loop starts where a frame from rest would have settled
+/// (past the finite-element springs' stiffness ramp and the first, widest capture distances).
+pub const WARM_START_ITERATION: usize = 3;
 
 /// Settings of the registration loop.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -162,15 +168,17 @@ pub fn register_frame(
     let isolated = crate::outliers::isolated_points(cloud, options.isolation_factor);
     let kept: Vec<Point> = cloud.iter().zip(&isolated).filter(|(_, &i)| !i).map(|(p, _)| *p).collect();
     let candidates = if kept.is_empty() { cloud } else { &kept };
+    let first = if start.is_some() { WARM_START_ITERATION } else { 0 };
     while iterations < options.iterations {
         iterations += 1;
-        let capture = options.capture_distance * options.capture_decay.powi(iterations as i32 - 1);
+        let iteration = first + iterations - 1;
+        let capture = options.capture_distance * options.capture_decay.powi(iteration as i32);
         if view.is_none() && iterations == 1 {
             view = estimate_view(&surface, candidates, options, capture)?;
         }
         let observations = observe(organ, &surface, candidates, options, capture, view)?;
         inliers = observations.matches.len();
-        u = deformer.deform(&observations, &u, iterations - 1)?;
+        u = deformer.deform(&observations, &u, iteration)?;
         if u.len() != ndof || u.iter().any(|v| !v.is_finite()) {
             return Err(RegisterError::Invalid("the deformer returned a displacement that is not finite".into()));
         }
