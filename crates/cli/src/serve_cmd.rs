@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
-use live::{Outputs, ServeOptions, Session};
+use live::{ClientRegistration, Outputs, ServeOptions};
 use register::RegistrationOptions;
 
 use crate::register_cmd::{fem_setup, network_setup, Setup};
@@ -86,13 +86,18 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     println!("method     {}", first.method);
     println!("organ      {} nodes, {} targets", first.organ.mesh().num_nodes(), targets.len());
     let first = std::sync::Mutex::new(Some(first));
-    let factory = move || -> std::result::Result<Session, String> {
+    let factory = move || -> std::result::Result<ClientRegistration, String> {
         // The first client takes the setup built above; the others build their own.
         let setup = match first.lock().map_err(|e| e.to_string())?.take() {
             Some(s) => s,
             None => setup(&method).map_err(|e| format!("{e:#}"))?,
         };
-        Ok(Session { organ: setup.organ, deformer: setup.deformer, targets: targets.clone(), options: options.clone() })
+        Ok(ClientRegistration {
+            organ: setup.organ,
+            deformer: setup.deformer,
+            targets: targets.clone(),
+            options: options.clone(),
+        })
     };
     let address = format!("{}:{}", args.host, args.port);
     let listener = TcpListener::bind(&address).with_context(|| format!("listening on {address}"))?;

@@ -100,7 +100,7 @@ impl Default for ServeOptions {
 }
 
 /// One client's registration: the organ, what deforms it, the targets and the loop's settings.
-pub struct Session {
+pub struct ClientRegistration {
     /// The organ (its mesh and surface, in m).
     pub organ: Organ,
     /// What deforms it.
@@ -111,8 +111,8 @@ pub struct Session {
     pub options: RegistrationOptions,
 }
 
-/// Builds a new client's [`Session`].
-pub type SessionFactory = dyn Fn() -> std::result::Result<Session, String> + Send + Sync;
+/// Builds a new client's [`ClientRegistration`].
+pub type RegistrationFactory = dyn Fn() -> std::result::Result<ClientRegistration, String> + Send + Sync;
 
 /// How long the accept loop sleeps between checks of the stop flag.
 const POLL: Duration = Duration::from_millis(20);
@@ -120,7 +120,7 @@ const POLL: Duration = Duration::from_millis(20);
 /// Serves clients on `listener` until `stop` is set, then closes every connection and returns.
 pub fn serve(
     listener: TcpListener,
-    factory: Arc<SessionFactory>,
+    factory: Arc<RegistrationFactory>,
     options: ServeOptions,
     stop: &AtomicBool,
 ) -> Result<()> {
@@ -188,7 +188,7 @@ impl Shared {
 }
 
 impl Client {
-    fn start(stream: TcpStream, factory: Arc<SessionFactory>, options: ServeOptions) -> std::io::Result<Client> {
+    fn start(stream: TcpStream, factory: Arc<RegistrationFactory>, options: ServeOptions) -> std::io::Result<Client> {
         stream.set_nonblocking(false)?;
         stream.set_nodelay(true)?;
         let reader = stream.try_clone()?;
@@ -311,8 +311,8 @@ pub fn decode_body<T: Message>(header: &Header, body: &[u8]) -> std::result::Res
 }
 
 /// Registers the newest cloud, frame after frame, until the connection ends.
-fn register_clouds(shared: &Shared, factory: &SessionFactory) {
-    let mut session = match factory() {
+fn register_clouds(shared: &Shared, factory: &RegistrationFactory) {
+    let mut registration = match factory() {
         Ok(s) => s,
         Err(e) => {
             shared.send_status(&serde_json::json!({ "error": format!("setting up the registration: {e}") }));
@@ -320,7 +320,7 @@ fn register_clouds(shared: &Shared, factory: &SessionFactory) {
             return;
         }
     };
-    let stencils = match session.organ.locate(&session.targets, "target") {
+    let stencils = match registration.organ.locate(&registration.targets, "target") {
         Ok(s) => s,
         Err(e) => {
             shared.send_status(&serde_json::json!({ "error": e.to_string() }));
@@ -342,7 +342,7 @@ fn register_clouds(shared: &Shared, factory: &SessionFactory) {
                 waiting = shared.arrived.wait(waiting).unwrap_or_else(|e| e.into_inner());
             }
         };
-        if let Err(e) = answer(shared, &mut session, &stencils, &mut warm, frame, &cloud) {
+        if let Err(e) = answer(shared, &mut registration, &stencils, &mut warm, frame, &cloud) {
             shared.send_status(&serde_json::json!({ "frame": frame, "error": e }));
         }
     }
@@ -351,7 +351,7 @@ fn register_clouds(shared: &Shared, factory: &SessionFactory) {
 /// Registers one cloud and sends the chosen answers.
 fn answer(
     shared: &Shared,
-    session: &mut Session,
+    registration: &mut ClientRegistration,
     stencils: &[Stencil],
     warm: &mut Option<Vec<f64>>,
     frame: u64,
@@ -362,12 +362,18 @@ fn answer(
         return Err(format!("cloud of {} points exceeds the limit of {}", cloud.len(), options.max_points));
     }
     let start = Instant::now();
-    let result = register_frame(&session.organ, session.deformer.as_mut(), cloud, warm.as_deref(), &session.options)
-        .map_err(|e| e.to_string())?;
+    let result = register_frame(
+        &registration.organ,
+        registration.deformer.as_mut(),
+        cloud,
+        warm.as_deref(),
+        &registration.options,
+    )
+    .map_err(|e| e.to_string())?;
     let unit = options.unit;
     let to_wire = |p: &Point| p.map(|x| (x / unit) as f32);
     if options.outputs.targets {
-        let registered = displaced(&session.targets, stencils, &result.u);
+        let registered = displaced(&registration.targets, stencils, &result.u);
         let points = registered
             .iter()
             .enumerate()
@@ -376,7 +382,7 @@ fn answer(
         shared.send(PointMessage::new(points), "targets")?;
     }
     if options.outputs.organ {
-        let surface = session.organ.deformed_surface(&result.u);
+        let surface = registration.organ.deformed_surface(&result.u);
         let polygons = surface.triangles.iter().flat_map(|t| [3, t[0] as u32, t[1] as u32, t[2] as u32]).collect();
         let organ = PolyDataMessage::new(surface.vertices.iter().map(to_wire).collect()).with_polygons(polygons);
         shared.send(organ, "organ")?;

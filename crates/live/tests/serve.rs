@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use augsim_live::{decode_body, encode_message, serve, Outputs, ServeOptions, Session};
+use augsim_live::{decode_body, encode_message, serve, ClientRegistration, Outputs, ServeOptions};
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::select::nodes_in_box;
 use mesh::Point;
@@ -44,13 +44,13 @@ fn pressed_cloud(pressure: f64) -> (Vec<[f32; 3]>, Point) {
     (cloud.collect(), std::array::from_fn(|d| (centre[d] + u[3 * k + d]) * 1e3))
 }
 
-fn session() -> Result<Session, String> {
+fn cube_registration() -> Result<ClientRegistration, String> {
     let (problem, centre) = cube();
     let organ = Organ::new(problem.mesh.clone(), None).map_err(|e| e.to_string())?;
     let stiffness = FemDeformer::default_stiffness(&problem);
     let deformer = FemDeformer::new(problem, stiffness, SolverOptions::default()).map_err(|e| e.to_string())?;
     let options = RegistrationOptions { view: Some([0.0, 0.0, -1.0]), ..RegistrationOptions::default() };
-    Ok(Session { organ, deformer: Box::new(deformer), targets: vec![centre], options })
+    Ok(ClientRegistration { organ, deformer: Box::new(deformer), targets: vec![centre], options })
 }
 
 fn send_cloud(stream: &mut TcpStream, points: Vec<[f32; 3]>) {
@@ -104,7 +104,7 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
     let stop = Arc::new(AtomicBool::new(false));
     let server = {
         let stop = stop.clone();
-        std::thread::spawn(move || serve(listener, Arc::new(session), ServeOptions::default(), &stop))
+        std::thread::spawn(move || serve(listener, Arc::new(cube_registration), ServeOptions::default(), &stop))
     };
 
     // A cloud in millimetres: the registered target is the pressed centre.
