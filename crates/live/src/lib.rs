@@ -73,7 +73,7 @@ impl Outputs {
                 other => return Err(format!("unknown output '{other}' (targets, organ, status)")),
             }
         }
-        if out == (Outputs { targets: false, organ: false, status: false }) {
+        if !(out.targets || out.organ || out.status) {
             return Err("no output chosen (targets, organ, status)".into());
         }
         Ok(out)
@@ -224,9 +224,9 @@ fn read_clouds(mut stream: TcpStream, shared: &Shared) {
     let mut frame = 0u64;
     while !shared.closed.load(Ordering::SeqCst) {
         let points = match read_message(&mut stream, shared.options.max_message_bytes) {
-            Ok(Some(Some(points))) => points,
-            Ok(Some(None)) => continue,
-            Ok(None) => break, // the client closed the connection
+            Ok(Incoming::Cloud(points)) => points,
+            Ok(Incoming::Other) => continue,
+            Ok(Incoming::Closed) => break,
             Err(e) => {
                 shared.send_status(&serde_json::json!({ "error": e }));
                 break;
@@ -240,13 +240,21 @@ fn read_clouds(mut stream: TcpStream, shared: &Shared) {
     shared.close();
 }
 
-/// One message from the stream: the points of a `cloud` POLYDATA or POINT message (wire units),
-/// or `Some(None)` for any other message; `None` when the peer closed the connection between
-/// messages; an error for a malformed, truncated or oversized message.
-fn read_message(stream: &mut TcpStream, max_body: u64) -> std::result::Result<Option<Option<Vec<[f32; 3]>>>, String> {
+/// What the next message of a stream is.
+enum Incoming {
+    /// The points of a `cloud` POLYDATA or POINT message (wire units).
+    Cloud(Vec<[f32; 3]>),
+    /// Any other message (ignored).
+    Other,
+    /// The peer closed the connection between messages.
+    Closed,
+}
+
+/// The next message from the stream; an error for a malformed, truncated or oversized one.
+fn read_message(stream: &mut TcpStream, max_body: u64) -> std::result::Result<Incoming, String> {
     let mut header = [0u8; Header::SIZE];
     match stream.read(&mut header[..1]) {
-        Ok(0) => return Ok(None),
+        Ok(0) => return Ok(Incoming::Closed),
         Ok(_) => {}
         Err(e) => return Err(format!("reading a message: {e}")),
     }
@@ -260,14 +268,14 @@ fn read_message(stream: &mut TcpStream, max_body: u64) -> std::result::Result<Op
     stream.read_exact(&mut data[Header::SIZE..]).map_err(|e| format!("truncated message body: {e}"))?;
     let kind = parsed.type_name.as_str().map_err(|e| format!("malformed message type: {e}"))?;
     if parsed.device_name.as_str().ok() != Some("cloud") || !matches!(kind, "POLYDATA" | "POINT") {
-        return Ok(Some(None)); // not a cloud: other messages are ignored
+        return Ok(Incoming::Other);
     }
     let body = &data[Header::SIZE..];
     let points = match kind {
         "POLYDATA" => decode_body::<PolyDataMessage>(&parsed, body)?.points,
         _ => decode_body::<PointMessage>(&parsed, body)?.points.iter().map(|p| p.position).collect(),
     };
-    Ok(Some(Some(points)))
+    Ok(Incoming::Cloud(points))
 }
 
 /// A message as bytes on the wire, with header version 1 (no extended header): what every

@@ -236,8 +236,7 @@ impl AssimilationScenario {
     /// Reads and parses a scenario file (or a built-in scenario); returns it with the directory that its relative
     /// paths start from.
     pub fn load(path: &Path) -> Result<(Self, PathBuf)> {
-        let source = ScenarioText::read(path)?;
-        Ok((Self::from_text(&source)?, source.dir))
+        crate::load_with(path, Self::from_text)
     }
 
     /// Parses scenario text.

@@ -39,13 +39,12 @@ impl DatasetScenario {
     /// Reads a scenario file (or a built-in scenario); returns it with its directory (mesh paths
     /// are relative to it).
     pub fn load(path: &Path) -> Result<(Self, PathBuf)> {
-        let source = ScenarioText::read(path)?;
-        Ok((Self::from_text(&source)?, source.dir))
+        crate::load_with(path, Self::from_text)
     }
 
     /// The built-in dataset scenario `name` (e.g. `liver_ar`); panics when there is none.
     pub fn builtin(name: &str) -> DatasetScenario {
-        crate::builtin_as(name, Kind::Dataset)
+        crate::builtin_with(name, Self::from_text)
     }
 
     /// Builds the mesh (paths relative to `dir`).

@@ -104,11 +104,7 @@ impl ScenarioText {
     /// `beam.toml`), the built-in scenario of that name.
     pub fn read(path: &Path) -> Result<ScenarioText> {
         match std::fs::read_to_string(path) {
-            Ok(text) => Ok(ScenarioText {
-                text,
-                origin: path.to_path_buf(),
-                dir: path.parent().map(Path::to_path_buf).unwrap_or_default(),
-            }),
+            Ok(text) => Ok(ScenarioText::new(&text, path)),
             Err(source) => {
                 let bare = path.parent().is_none_or(|p| p.as_os_str().is_empty());
                 let name = path.to_str().map(|s| s.trim_end_matches(".toml")).unwrap_or_default();
@@ -118,6 +114,12 @@ impl ScenarioText {
                 }
             }
         }
+    }
+
+    /// Text named `origin` (a path: relative paths in it start from its directory).
+    pub fn new(text: &str, origin: &Path) -> ScenarioText {
+        let dir = origin.parent().map(Path::to_path_buf).unwrap_or_default();
+        ScenarioText { text: text.to_string(), origin: origin.to_path_buf(), dir }
     }
 
     /// A built-in scenario's text.
@@ -201,11 +203,18 @@ pub fn builtin(name: &str) -> Option<&'static str> {
     BUILTIN.iter().find(|(n, _)| *n == name).map(|(_, text)| *text)
 }
 
-/// The built-in scenario `name`, parsed as `T` of kind `kind`; panics when it is not one (a
-/// defect of this crate, tested).
-fn builtin_as<T: serde::de::DeserializeOwned>(name: &str, kind: Kind) -> T {
+/// The built-in scenario `name` parsed with `from_text`; panics when there is none or it does
+/// not parse (a defect of this crate, tested).
+fn builtin_with<T>(name: &str, from_text: impl Fn(&ScenarioText) -> Result<T>) -> T {
     let text = builtin(name).unwrap_or_else(|| panic!("no built-in scenario {name}"));
-    ScenarioText::builtin(name, text).parse_as(kind).unwrap_or_else(|e| panic!("built-in scenario {name}: {e}"))
+    from_text(&ScenarioText::builtin(name, text)).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Reads `path` (or the built-in scenario of that name) and parses it with `from_text`; returns
+/// it with the directory its relative paths start from.
+fn load_with<T>(path: &Path, from_text: impl Fn(&ScenarioText) -> Result<T>) -> Result<(T, PathBuf)> {
+    let source = ScenarioText::read(path)?;
+    Ok((from_text(&source)?, source.dir))
 }
 
 /// Splits off the top-level `kind` key: the kind and the text without it (its line left blank,

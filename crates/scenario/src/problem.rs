@@ -99,8 +99,7 @@ impl StaticScenario {
     /// Reads and parses a scenario file (or a built-in scenario); returns it with the directory
     /// that its relative paths start from.
     pub fn load(path: &Path) -> Result<(Self, PathBuf)> {
-        let source = ScenarioText::read(path)?;
-        Ok((Self::from_text(&source)?, source.dir))
+        crate::load_with(path, Self::from_text)
     }
 
     /// Parses scenario text.
@@ -111,8 +110,7 @@ impl StaticScenario {
     /// Parses the text of a scenario; `origin` names it in errors and relative paths start
     /// from its directory.
     pub fn parse(text: &str, origin: &Path) -> Result<Self> {
-        let dir = origin.parent().map(Path::to_path_buf).unwrap_or_default();
-        Self::from_text(&ScenarioText { text: text.to_string(), origin: origin.to_path_buf(), dir })
+        Self::from_text(&ScenarioText::new(text, origin))
     }
 
     /// The boundary-value problem: the mesh built from its source (file paths relative to

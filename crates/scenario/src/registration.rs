@@ -196,8 +196,7 @@ impl CaseScenario {
 
     /// Parses and checks the text of a scenario; `origin` names it in errors.
     pub fn parse(text: &str, origin: &Path) -> Result<CaseScenario> {
-        let dir = origin.parent().map(Path::to_path_buf).unwrap_or_default();
-        Self::from_text(&ScenarioText { text: text.to_string(), origin: origin.to_path_buf(), dir })
+        Self::from_text(&ScenarioText::new(text, origin))
     }
 
     /// Reads a scenario file (or a built-in scenario).
@@ -207,7 +206,7 @@ impl CaseScenario {
 
     /// The built-in case of `augsim register --demo` ([`BUILTIN_CASE`]).
     pub fn builtin() -> CaseScenario {
-        crate::builtin_as(BUILTIN_CASE, Kind::RegistrationCase)
+        crate::builtin_with(BUILTIN_CASE, Self::from_text)
     }
 
     /// Checks the values (what parsing cannot).
