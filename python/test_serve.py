@@ -26,7 +26,8 @@ import unittest
 import numpy as np
 import pyigtl
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from test_augsim_unet import augsim_bin  # noqa: E402  (needs no torch)
 FRAMES = 12
 MODEL = """kind = "static"
 name = "phantom_800"
@@ -39,13 +40,6 @@ poisson = 0.48
 [[fixed]]
 select = { region = "fixed" }
 """
-
-
-def augsim_bin():
-    path = os.environ.get("AUGSIM_BIN", os.path.join(ROOT, "target", "release", "augsim"))
-    if not (os.path.isfile(path) and os.access(path, os.X_OK)):
-        raise AssertionError(f"augsim binary not found at {path}: build it with `cargo build --release -p augsim`")
-    return path
 
 
 def free_port():
