@@ -75,6 +75,7 @@ fn report(mesh: &Mesh, reference: Option<f64>) -> Result<()> {
             println!("dihedral   min {:.1}°, max {:.1}°", q.min_dihedral_deg, q.max_dihedral_deg);
             print_volume(q.volume, q.reference_volume);
         }
+        mesh::Cells::Tet10(_) => print_volume(mesh.volume(), reference),
         mesh::Cells::Hex8(_) => {
             let fraction = mesh.cell_fraction.as_deref().unwrap_or(&[]);
             let organ: f64 =

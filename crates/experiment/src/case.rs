@@ -105,12 +105,14 @@ pub fn fem_model(mesh: Mesh, material: Material) -> Result<(Organ, FemDeformer)>
     fem_model_fixed_on(mesh, material, "fixed")
 }
 
-/// [`fem_model`] fixed on the region `fixed`.
+/// [`fem_model`] fixed on the region `fixed`; the organ is the problem's mesh (quadratic when the
+/// material asks for it).
 fn fem_model_fixed_on(mesh: Mesh, material: Material, fixed: &str) -> Result<(Organ, FemDeformer)> {
-    let mut problem = Problem::new(mesh.clone(), material);
-    problem.fix(mesh.region(fixed)?);
+    let mut problem = Problem::new(mesh, material);
+    let fixed = problem.mesh.region(fixed)?.to_vec();
+    problem.fix(&fixed);
     let stiffness = FemDeformer::default_stiffness(&problem);
-    Ok((Organ::new(mesh, None)?, FemDeformer::new(problem, stiffness, SolverOptions::default())?))
+    Ok((Organ::new(problem.mesh.clone(), None)?, FemDeformer::new(problem, stiffness, SolverOptions::default())?))
 }
 
 /// The co-rotational registration model (E = 5 kPa, ν = 0.48: another law than the truth's) on

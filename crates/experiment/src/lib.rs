@@ -28,6 +28,7 @@ use serde::{Deserialize, Serialize};
 pub mod assimilation;
 pub mod case;
 pub mod curve;
+mod fem_convergence;
 mod fem_speed;
 mod identification;
 mod learning;
@@ -56,6 +57,8 @@ pub enum Size {
 pub enum Name {
     /// Static FEM solve times on the liver (published: SVK 1,550 ms, co-rotational 25 ms).
     FemSpeed,
+    /// Convergence of the elements under mesh refinement (error versus dofs and time).
+    FemConvergence,
     /// Young's modulus of the liver identified by the ROUKF from tracked surface points.
     Young,
     /// Hidden boundary springs identified by the ROUKF.
@@ -72,8 +75,9 @@ pub enum Name {
 
 impl Name {
     /// Every experiment, in the order `all` runs them.
-    pub const ALL: [Name; 7] = [
+    pub const ALL: [Name; 8] = [
         Name::FemSpeed,
+        Name::FemConvergence,
         Name::Young,
         Name::Springs,
         Name::LiverForces,
@@ -86,6 +90,7 @@ impl Name {
     pub fn as_str(self) -> &'static str {
         match self {
             Name::FemSpeed => "fem-speed",
+            Name::FemConvergence => "fem-convergence",
             Name::Young => "young",
             Name::Springs => "springs",
             Name::LiverForces => "liver-forces",
@@ -99,6 +104,7 @@ impl Name {
     pub fn title(self) -> &'static str {
         match self {
             Name::FemSpeed => "Static FEM on the liver: solve times",
+            Name::FemConvergence => "FEM convergence under mesh refinement",
             Name::Young => "ROUKF: Young's modulus",
             Name::Springs => "ROUKF: hidden boundary springs",
             Name::LiverForces => "U-Net: liver, nodal forces → displacement",
@@ -249,6 +255,7 @@ pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<Ex
     let start = Instant::now();
     let mut result = match name {
         Name::FemSpeed => fem_speed::run(size, &dir, progress)?,
+        Name::FemConvergence => fem_convergence::run(size, &dir, progress)?,
         Name::Young => identification::young(size, &dir, progress)?,
         Name::Springs => identification::springs(size, &dir, progress)?,
         Name::LiverForces => learning::liver_forces(size, &dir, progress)?,

@@ -32,7 +32,19 @@ fn springs_experiment_writes_a_result_resumes_and_reports() {
 fn names_parse_and_unknown_ones_are_refused() {
     // The order `all` runs them in and the report follows.
     let names = Name::ALL.map(Name::as_str);
-    assert_eq!(names, ["fem-speed", "young", "springs", "liver-forces", "liver-ar", "beam-transfer", "beam-sparse"]);
+    assert_eq!(
+        names,
+        [
+            "fem-speed",
+            "fem-convergence",
+            "young",
+            "springs",
+            "liver-forces",
+            "liver-ar",
+            "beam-transfer",
+            "beam-sparse"
+        ]
+    );
     for name in Name::ALL {
         assert_eq!(Name::parse(name.as_str()).unwrap(), name);
     }

@@ -5,6 +5,7 @@
 
 use augsim_fem::verification::cantilever_deflection_ratio;
 use augsim_fem::{Formulation, Law};
+use mesh::CellKind;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<usize> = std::env::args().skip(1).map(|a| a.parse()).collect::<Result<_, _>>()?;
@@ -17,13 +18,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!();
     println!("| element | formulation | {} |", poisson.map(|nu| format!("ν = {nu}")).join(" | "));
     println!("| --- | --- |{}", " --- |".repeat(poisson.len()));
-    for (hex, name) in [(false, "T4"), (true, "H8")] {
+    for kind in [CellKind::Tet4, CellKind::Tet10, CellKind::Hex8] {
         for (form, label) in [(Formulation::Standard, "standard"), (Formulation::Fbar, "F-bar")] {
             let ratios: Vec<String> = poisson
                 .iter()
-                .map(|&nu| cantilever_deflection_ratio(hex, cells, Law::Linear, form, nu).map(|r| format!("{r:.3}")))
+                .map(|&nu| cantilever_deflection_ratio(kind, cells, Law::Linear, form, nu).map(|r| format!("{r:.3}")))
                 .collect::<Result<_, _>>()?;
-            println!("| {name} | {label} | {} |", ratios.join(" | "));
+            println!("| {} | {label} | {} |", kind.name(), ratios.join(" | "));
         }
     }
     Ok(())

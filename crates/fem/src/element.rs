@@ -25,9 +25,9 @@ const HEX_REF: [[f64; 3]; 8] = [
 /// Precomputed quadrature data of every element of a mesh.
 #[derive(Clone, Debug)]
 pub struct ElementGeometry {
-    /// Nodes per element (4 or 8).
+    /// Nodes per element (4, 8 or 10).
     pub nodes_per_element: usize,
-    /// Quadrature points per element (1 or 8).
+    /// Quadrature points per element (1 for T4, 8 for H8, 4 for T10).
     pub points_per_element: usize,
     /// Element connectivity, `nodes_per_element` entries per element.
     pub connectivity: Vec<usize>,
@@ -39,7 +39,7 @@ pub struct ElementGeometry {
     pub weights: Vec<f64>,
     /// The formulation: [`Formulation::Standard`] or [`Formulation::Fbar`].
     pub formulation: Formulation,
-    /// The assembly units: one element each (standard, H8 F-bar) or groups of
+    /// The assembly units: one element each (standard, H8 and T10 F-bar) or groups of
     /// about [`TET_PATCH_SIZE`] tetrahedra sharing their volume ratio (T4 F-bar).
     pub patches: Patches,
 }
@@ -61,12 +61,12 @@ impl ElementGeometry {
     }
 
     fn standard(mesh: &Mesh) -> Result<Self, FemError> {
-        let ne = mesh.cells.len();
-        let fraction = |e: usize| mesh.cell_fraction.as_ref().map_or(1.0, |f| f[e]);
-        let connectivity: Vec<usize> = (0..ne).flat_map(|e| mesh.cells.cell(e).to_vec()).collect();
-        let x = |k: usize| nalgebra::Vector3::from(mesh.nodes[k]);
         match &mesh.cells {
             Cells::Tet4(tets) => {
+                let ne = tets.len();
+                let fraction = |e: usize| mesh.cell_fraction.as_ref().map_or(1.0, |f| f[e]);
+                let connectivity: Vec<usize> = tets.iter().flatten().copied().collect();
+                let x = |k: usize| nalgebra::Vector3::from(mesh.nodes[k]);
                 let mut grads = Vec::with_capacity(4 * ne);
                 let mut weights = Vec::with_capacity(ne);
                 for (e, t) in tets.iter().enumerate() {
@@ -102,37 +102,20 @@ impl ElementGeometry {
                         dref.push([r[0] * f(1) * f(2) / 8.0, f(0) * r[1] * f(2) / 8.0, f(0) * f(1) * r[2] / 8.0]);
                     }
                 }
-                let mut grads = Vec::with_capacity(64 * ne);
-                let mut weights = Vec::with_capacity(8 * ne);
-                for (e, h) in hexes.iter().enumerate() {
-                    for q in 0..8 {
-                        let mut j = Matrix3::zeros();
-                        for a in 0..8 {
-                            let dn = nalgebra::RowVector3::from(dref[q * 8 + a]);
-                            j += x(h[a]) * dn;
-                        }
-                        let det = j.determinant();
-                        let jinv = j
-                            .try_inverse()
-                            .filter(|_| det > 0.0)
-                            .ok_or(FemError::InvertedElement { element: e, det })?;
-                        for a in 0..8 {
-                            let g = nalgebra::RowVector3::from(dref[q * 8 + a]) * jinv;
-                            grads.push([g[0], g[1], g[2]]);
-                        }
-                        weights.push(det * fraction(e));
-                    }
+                isoparametric(mesh, hexes, shape, &dref, &[1.0; 8])
+            }
+            Cells::Tet10(tets) => {
+                // The 4-point Gauss rule (degree 2: the linear-elastic tangent exactly) at barycentric
+                // coordinates (a, b, b, b) and permutations; reference coordinates ξ = (λ1, λ2, λ3).
+                let (a, b) = (0.585_410_196_624_968_5, 0.138_196_601_125_010_5);
+                let mut shape = Vec::with_capacity(40);
+                let mut dref = Vec::with_capacity(40);
+                for q in 0..4 {
+                    let l: [f64; 4] = std::array::from_fn(|k| if k == q { a } else { b });
+                    shape.extend(mesh::tet10_shape(l));
+                    dref.extend(mesh::tet10_shape_derivatives(l).map(|d| [d[1] - d[0], d[2] - d[0], d[3] - d[0]]));
                 }
-                Ok(ElementGeometry {
-                    nodes_per_element: 8,
-                    points_per_element: 8,
-                    patches: Patches::singletons(&connectivity, 8),
-                    connectivity,
-                    grads,
-                    shape,
-                    weights,
-                    formulation: Formulation::Standard,
-                })
+                isoparametric(mesh, tets, shape, &dref, &[1.0 / 24.0; 4])
             }
         }
     }
@@ -269,6 +252,48 @@ impl ElementGeometry {
         }
         Ok(())
     }
+}
+
+/// The geometry of isoparametric elements with `N` nodes: `shape` and `dref` hold N_a and
+/// ∂N_a/∂ξ at each reference quadrature point (`q * N + a`), whose reference weights are
+/// `ref_weights`. Fails on a point where the map from the reference element is not positive.
+fn isoparametric<const N: usize>(
+    mesh: &Mesh,
+    cells: &[[usize; N]],
+    shape: Vec<f64>,
+    dref: &[[f64; 3]],
+    ref_weights: &[f64],
+) -> Result<ElementGeometry, FemError> {
+    let nq = ref_weights.len();
+    let fraction = |e: usize| mesh.cell_fraction.as_ref().map_or(1.0, |f| f[e]);
+    let mut grads = Vec::with_capacity(N * nq * cells.len());
+    let mut weights = Vec::with_capacity(nq * cells.len());
+    for (e, cell) in cells.iter().enumerate() {
+        for (q, w) in ref_weights.iter().enumerate() {
+            let mut j = Matrix3::zeros();
+            for (a, &n) in cell.iter().enumerate() {
+                j += nalgebra::Vector3::from(mesh.nodes[n]) * nalgebra::RowVector3::from(dref[q * N + a]);
+            }
+            let det = j.determinant();
+            let jinv = j.try_inverse().filter(|_| det > 0.0).ok_or(FemError::InvertedElement { element: e, det })?;
+            for a in 0..N {
+                let g = nalgebra::RowVector3::from(dref[q * N + a]) * jinv;
+                grads.push([g[0], g[1], g[2]]);
+            }
+            weights.push(w * det * fraction(e));
+        }
+    }
+    let connectivity: Vec<usize> = cells.iter().flatten().copied().collect();
+    Ok(ElementGeometry {
+        nodes_per_element: N,
+        points_per_element: nq,
+        patches: Patches::singletons(&connectivity, N),
+        connectivity,
+        grads,
+        shape,
+        weights,
+        formulation: Formulation::Standard,
+    })
 }
 
 /// Copies the node blocks above the diagonal of a symmetric row-major `ndof × ndof` tangent

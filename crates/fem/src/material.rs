@@ -65,6 +65,11 @@ pub struct Material {
     /// Element formulation (default: automatic from Poisson's ratio).
     #[serde(default)]
     pub formulation: Formulation,
+    /// Polynomial order of the elements: 1 (the mesh's own cells, default) or 2, quadratic
+    /// tetrahedra (T10) made from a T4 mesh by [`Problem::new`](crate::Problem::new). A mesh
+    /// read with quadratic cells is solved with them whatever the order.
+    #[serde(default = "linear_order")]
+    pub order: u8,
     /// Young's modulus in Pa.
     pub young: f64,
     /// Poisson's ratio, in (−1, 0.5).
@@ -78,10 +83,19 @@ fn default_density() -> f64 {
     1000.0
 }
 
+fn linear_order() -> u8 {
+    1
+}
+
 impl Material {
     /// A material with the default density of 1000 kg/m³.
     pub fn new(law: Law, young: f64, poisson: f64) -> Self {
-        Material { law, young, poisson, formulation: Formulation::Auto, density: default_density() }
+        Material { law, young, poisson, formulation: Formulation::Auto, order: 1, density: default_density() }
+    }
+
+    /// The same material on elements of the given polynomial order (1 or 2).
+    pub fn with_order(self, order: u8) -> Self {
+        Material { order, ..self }
     }
 
     /// The same material with the given element formulation.
@@ -108,6 +122,12 @@ impl Material {
         }
         if !(self.density >= 0.0 && self.density.is_finite()) {
             return Err(format!("density must be non-negative and finite, got {}", self.density));
+        }
+        if !(1..=2).contains(&self.order) {
+            return Err(format!(
+                "order must be 1 (the mesh's own elements) or 2 (quadratic tetrahedra), got {}",
+                self.order
+            ));
         }
         Ok(())
     }

@@ -3,7 +3,7 @@
 
 use std::collections::BTreeMap;
 
-use mesh::{boundary_faces, Mesh, Point};
+use mesh::{boundary_faces, Cells, Mesh, Point};
 
 use crate::element::ElementGeometry;
 use crate::material::Material;
@@ -59,8 +59,15 @@ impl PointSpring {
 }
 
 impl Problem {
-    /// A problem without constraints or loads.
+    /// A problem without constraints or loads. When the material asks for quadratic elements
+    /// (`order = 2`), a T4 mesh becomes a T10 mesh ([`Mesh::quadratic`]): its own nodes keep
+    /// their indices, the mid-edge nodes follow and join the regions between two of their
+    /// nodes; [`Problem::validate`] fails for order 2 on other cells.
     pub fn new(mesh: Mesh, material: Material) -> Self {
+        let mesh = match &mesh.cells {
+            Cells::Tet4(_) if material.order == 2 => mesh.quadratic().unwrap_or(mesh),
+            _ => mesh,
+        };
         let n = mesh.num_nodes();
         Problem {
             mesh,
@@ -131,6 +138,12 @@ impl Problem {
     pub fn validate(&self) -> Result<(), FemError> {
         let n = self.mesh.num_nodes();
         self.material.validate().map_err(FemError::Invalid)?;
+        if self.material.order == 2 && !matches!(self.mesh.cells, Cells::Tet10(_)) {
+            return Err(FemError::Invalid(format!(
+                "order = 2 makes quadratic tetrahedra from a T4 mesh; this mesh has {} cells",
+                self.mesh.cells.kind_name()
+            )));
+        }
         if self.springs.len() != n || self.f_ext.len() != 3 * n {
             return Err(FemError::Invalid(format!(
                 "springs ({}) and f_ext ({}) must have {n} and {} entries",
@@ -207,13 +220,17 @@ fn node_areas(mesh: &Mesh, nodes: &[usize]) -> Vec<(usize, f64)> {
     areas
 }
 
-/// Area associated with each node of a flat triangle (A/3 each) or a bilinear
-/// quadrilateral (∫ N_a dA by 2×2 Gauss quadrature).
+/// ∫ N_a dA of each node of a boundary face: a flat triangle (A/3 each), a quadratic triangle
+/// (3-point rule, exact on flat faces: 0 at the corners, A/3 at the mid-edge nodes) or a
+/// bilinear quadrilateral (2×2 Gauss rule).
 fn face_node_areas(x: &[Point]) -> Vec<f64> {
     use mesh::{cross, dot, sub};
     if x.len() == 3 {
         let n = cross(sub(x[1], x[0]), sub(x[2], x[0]));
         return vec![dot(n, n).sqrt() / 6.0; 3];
+    }
+    if x.len() == 6 {
+        return quadratic_triangle_node_areas(x);
     }
     let gp = 1.0 / 3f64.sqrt();
     let corners = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]];
@@ -233,6 +250,45 @@ fn face_node_areas(x: &[Point]) -> Vec<f64> {
             for (a, c) in corners.iter().enumerate() {
                 w[a] += da * (1.0 + c[0] * s) * (1.0 + c[1] * t) / 4.0;
             }
+        }
+    }
+    w
+}
+
+/// [`face_node_areas`] of a quadratic triangle: corners, then the mid-edge nodes of 0-1, 1-2, 2-0.
+fn quadratic_triangle_node_areas(x: &[Point]) -> Vec<f64> {
+    use mesh::{cross, dot};
+    // Shape functions of barycentric l and their derivatives along ξ = l1 and η = l2.
+    let shape = |l: [f64; 3]| -> [f64; 6] {
+        [
+            l[0] * (2.0 * l[0] - 1.0),
+            l[1] * (2.0 * l[1] - 1.0),
+            l[2] * (2.0 * l[2] - 1.0),
+            4.0 * l[0] * l[1],
+            4.0 * l[1] * l[2],
+            4.0 * l[2] * l[0],
+        ]
+    };
+    let dshape = |l: [f64; 3]| -> [[f64; 2]; 6] {
+        let d0 = 4.0 * l[0] - 1.0;
+        [
+            [-d0, -d0],
+            [4.0 * l[1] - 1.0, 0.0],
+            [0.0, 4.0 * l[2] - 1.0],
+            [4.0 * (l[0] - l[1]), -4.0 * l[1]],
+            [4.0 * l[2], 4.0 * l[1]],
+            [-4.0 * l[2], 4.0 * (l[0] - l[2])],
+        ]
+    };
+    let mut w = vec![0.0; 6];
+    for q in 0..3 {
+        let l: [f64; 3] = std::array::from_fn(|k| if k == q { 2.0 / 3.0 } else { 1.0 / 6.0 });
+        let (n, dn) = (shape(l), dshape(l));
+        let tangent = |t: usize| -> Point { std::array::from_fn(|d| (0..6).map(|a| x[a][d] * dn[a][t]).sum()) };
+        let normal = cross(tangent(0), tangent(1));
+        let da = dot(normal, normal).sqrt() / 6.0;
+        for a in 0..6 {
+            w[a] += da * n[a];
         }
     }
     w

@@ -1,7 +1,7 @@
 //! Reference problems with known answers, shared by the tests and the
 //! examples that print the README's verification tables.
 
-use mesh::{box_hex, box_tet};
+use mesh::CellKind;
 
 use crate::material::{Formulation, Law, Material};
 use crate::problem::Problem;
@@ -11,9 +11,9 @@ use crate::FemError;
 /// Tip deflection of a 10 × 1 × 1 cantilever (Young's modulus 1,000 Pa) clamped
 /// at x = 0 under a small downward end traction, divided by Timoshenko beam
 /// theory's PL³/(3EI) + PL/(κGA) with Cowper's κ = 10(1 + ν)/(12 + 11ν).
-/// `cells` divides the beam into H8 (`hex`) or 6 T4 per cell.
+/// `cells` divides the beam into cells of `kind` ([`mesh::box_mesh`]: H8, or 6 T4 or T10 per cell).
 pub fn cantilever_deflection_ratio(
-    hex: bool,
+    kind: CellKind,
     cells: [usize; 3],
     law: Law,
     formulation: Formulation,
@@ -21,7 +21,7 @@ pub fn cantilever_deflection_ratio(
 ) -> Result<f64, FemError> {
     let (length, young, load) = (10.0, 1000.0, 1e-4);
     let hi = [length, 1.0, 1.0];
-    let m = if hex { box_hex([0.0; 3], hi, cells)? } else { box_tet([0.0; 3], hi, cells)? };
+    let m = mesh::box_mesh(kind, [0.0; 3], hi, cells)?;
     let clamp = mesh::select::nodes_in_box(&m.nodes, [-1e-9; 3], [1e-9, 1.0 + 1e-9, 1.0 + 1e-9]);
     let tip = mesh::select::nodes_in_box(&m.nodes, [length - 1e-9, -1e-9, -1e-9], [length + 1e-9, 1.1, 1.1]);
     let mut problem = Problem::new(m, Material::new(law, young, poisson).with_formulation(formulation));

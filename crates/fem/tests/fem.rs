@@ -3,7 +3,7 @@
 
 use augsim_fem as fem;
 use fem::{Formulation, Law, Material, PointSpring, Problem, SolverOptions, StaticSolver};
-use mesh::{boundary_nodes, box_hex, box_tet, Mesh};
+use mesh::{boundary_nodes, box_hex, box_tet, CellKind, Mesh};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 const LAWS: [Law; 4] = [Law::Linear, Law::Corotational, Law::Svk, Law::NeoHookean];
@@ -15,36 +15,45 @@ fn noise(seed: usize) -> f64 {
     2.0 * (x - x.floor()) - 1.0
 }
 
-/// A unit-ish box with its interior nodes moved randomly (a distorted mesh).
-fn distorted(hex: bool, n: usize) -> Mesh {
-    let mut m =
-        if hex { box_hex([0.0; 3], [1.0, 0.8, 0.6], [n; 3]) } else { box_tet([0.0; 3], [1.0, 0.8, 0.6], [n; 3]) }
-            .unwrap();
-    let boundary = boundary_nodes(&m);
-    let h = 0.6 / n as f64;
+const KINDS: [CellKind; 3] = [CellKind::Tet4, CellKind::Hex8, CellKind::Tet10];
+
+/// Moves the interior nodes of `m` randomly, by up to `amplitude`.
+fn perturb_interior(m: &mut Mesh, amplitude: f64) {
+    let boundary = boundary_nodes(m);
     for (i, p) in m.nodes.iter_mut().enumerate() {
         if boundary.binary_search(&i).is_err() {
             for (d, pd) in p.iter_mut().enumerate() {
-                *pd += 0.2 * h * noise(3 * i + d);
+                *pd += amplitude * noise(3 * i + d);
             }
         }
+    }
+}
+
+/// A unit-ish box with its interior nodes moved randomly (a distorted mesh); for T10, the
+/// distorted T4 mesh with mid-edge nodes (straight edges).
+fn distorted(kind: CellKind, n: usize) -> Mesh {
+    let linear = if kind == CellKind::Hex8 { CellKind::Hex8 } else { CellKind::Tet4 };
+    let mut m = mesh::box_mesh(linear, [0.0; 3], [1.0, 0.8, 0.6], [n; 3]).unwrap();
+    perturb_interior(&mut m, 0.2 * 0.6 / n as f64);
+    if kind == CellKind::Tet10 {
+        m = m.quadratic().unwrap();
     }
     m.validate().unwrap();
     m
 }
 
 /// Every element kind × law × formulation.
-fn cases() -> impl Iterator<Item = (bool, Law, Formulation)> {
-    [false, true].into_iter().flat_map(|hex| LAWS.into_iter().flat_map(move |l| FORMULATIONS.map(|f| (hex, l, f))))
+fn cases() -> impl Iterator<Item = (CellKind, Law, Formulation)> {
+    KINDS.into_iter().flat_map(|kind| LAWS.into_iter().flat_map(move |l| FORMULATIONS.map(|f| (kind, l, f))))
 }
 
 #[test]
 fn patch_test_reproduces_homogeneous_deformation() {
     let a = Matrix3::new(0.02, 0.01, -0.015, 0.005, -0.01, 0.02, 0.01, 0.0, 0.03);
     let b = Vector3::new(0.001, -0.002, 0.003);
-    for (hex, law, form) in cases() {
+    for (kind, law, form) in cases() {
         {
-            let m = distorted(hex, 3);
+            let m = distorted(kind, 3);
             let exact = |p: &[f64; 3]| a * Vector3::from(*p) + b;
             let mut problem = Problem::new(m.clone(), Material::new(law, 5000.0, 0.3).with_formulation(form));
             for n in boundary_nodes(&m) {
@@ -59,16 +68,16 @@ fn patch_test_reproduces_homogeneous_deformation() {
                 .enumerate()
                 .map(|(i, p)| (Vector3::from_column_slice(&sol.u[3 * i..3 * i + 3]) - exact(p)).norm())
                 .fold(0.0, f64::max);
-            assert!(err < 1e-10, "hex={hex} {law:?} {form:?}: patch test error {err:e}");
+            assert!(err < 1e-10, "{kind:?} {law:?} {form:?}: patch test error {err:e}");
         }
     }
 }
 
 #[test]
 fn tangent_matches_finite_difference_of_internal_force() {
-    for (hex, law, form) in cases() {
+    for (kind, law, form) in cases() {
         {
-            let m = distorted(hex, 2);
+            let m = distorted(kind, 2);
             let n = m.num_nodes();
             let mut problem = Problem::new(m, Material::new(law, 3000.0, 0.42).with_formulation(form));
             problem.fix(&[0]);
@@ -111,7 +120,7 @@ fn tangent_matches_finite_difference_of_internal_force() {
                     worst = worst.max(((fp[row] - fm[row]) / (2.0 * h) - k[i][j]).abs());
                 }
             }
-            assert!(worst < 1e-6 * scale, "hex={hex} {law:?} {form:?}: tangent error {worst:e} (scale {scale:e})");
+            assert!(worst < 1e-6 * scale, "{kind:?} {law:?} {form:?}: tangent error {worst:e} (scale {scale:e})");
         }
     }
 }
@@ -119,11 +128,11 @@ fn tangent_matches_finite_difference_of_internal_force() {
 #[test]
 fn rigid_rotation_produces_no_internal_force() {
     let rot = Rotation3::from_euler_angles(0.7, -0.4, 1.1);
-    for hex in [false, true] {
+    for kind in KINDS {
         for (law, form) in
             [Law::Corotational, Law::Svk, Law::NeoHookean].into_iter().flat_map(|l| FORMULATIONS.map(|f| (l, f)))
         {
-            let m = distorted(hex, 2);
+            let m = distorted(kind, 2);
             let u: Vec<f64> = m
                 .nodes
                 .iter()
@@ -136,10 +145,10 @@ fn rigid_rotation_produces_no_internal_force() {
             let mut solver = StaticSolver::new(Problem::new(m, material)).unwrap();
             let f = solver.internal_force(&u).unwrap();
             let fmax = f.iter().fold(0.0f64, |a, b| a.max(b.abs()));
-            assert!(fmax < 1e-9, "hex={hex} {law:?} {form:?}: |f| = {fmax:e} under a rigid rotation");
+            assert!(fmax < 1e-9, "{kind:?} {law:?} {form:?}: |f| = {fmax:e} under a rigid rotation");
         }
         // The linear law is not rotation invariant: the same test must see forces.
-        let m = distorted(hex, 2);
+        let m = distorted(kind, 2);
         let u: Vec<f64> = m
             .nodes
             .iter()
@@ -155,9 +164,9 @@ fn rigid_rotation_produces_no_internal_force() {
 }
 
 /// Cantilever along x, clamped at x = 0, with a downward traction on the free end.
-fn cantilever(hex: bool, n: [usize; 3], law: Law, load: f64) -> (Vec<f64>, Mesh) {
+fn cantilever(kind: CellKind, n: [usize; 3], law: Law, load: f64) -> (Vec<f64>, Mesh) {
     let (l, h) = (4.0, 1.0);
-    let m = if hex { box_hex([0.0; 3], [l, h, h], n) } else { box_tet([0.0; 3], [l, h, h], n) }.unwrap();
+    let m = mesh::box_mesh(kind, [0.0; 3], [l, h, h], n).unwrap();
     let clamp = mesh::select::nodes_in_box(&m.nodes, [-1e-9; 3], [1e-9, h + 1e-9, h + 1e-9]);
     let tip = mesh::select::nodes_in_box(&m.nodes, [l - 1e-9, -1e-9, -1e-9], [l + 1e-9, h + 1e-9, h + 1e-9]);
     let mut problem = Problem::new(m.clone(), Material::new(law, 300.0, 0.0));
@@ -185,7 +194,7 @@ fn h8_cantilever_converges_to_euler_bernoulli() {
     let errors: Vec<f64> = [[4, 1, 1], [8, 2, 2], [16, 4, 4], [32, 8, 8]]
         .iter()
         .map(|&n| {
-            let (u, m) = cantilever(true, n, Law::Linear, q);
+            let (u, m) = cantilever(CellKind::Hex8, n, Law::Linear, q);
             (tip_deflection(&u, &m) - exact).abs() / exact
         })
         .collect();
@@ -197,20 +206,91 @@ fn h8_cantilever_converges_to_euler_bernoulli() {
     assert!(errors[0] > 2.0 * errors[3], "refinement must matter: {errors:?}");
 }
 
+/// A quadratic displacement field with the constant body force that balances it is an exact
+/// solution of linear elasticity: T10 (straight edges) must reproduce it at every node to the
+/// solver's tolerance, T4 cannot.
+#[test]
+fn t10_reproduces_a_quadratic_field_that_t4_cannot() {
+    let mut t4 = box_tet([0.0; 3], [1.0, 0.8, 0.6], [3; 3]).unwrap();
+    perturb_interior(&mut t4, 0.04);
+    // u_i = c/2 xᵀ H_i x + c g_i·x: Hessians H_i and a gradient at the origin.
+    let hessians = [
+        Matrix3::new(1.0, 0.3, -0.2, 0.3, -0.5, 0.4, -0.2, 0.4, 0.8),
+        Matrix3::new(-0.6, 0.1, 0.5, 0.1, 0.9, -0.3, 0.5, -0.3, 0.2),
+        Matrix3::new(0.4, -0.7, 0.1, -0.7, 0.3, 0.6, 0.1, 0.6, -0.9),
+    ];
+    let c = 0.01;
+    let exact = |p: &[f64; 3]| -> Vector3<f64> {
+        let x = Vector3::from(*p);
+        Vector3::from_fn(|i, _| c * (0.5 * x.dot(&(hessians[i] * x)) + 0.1 * (i as f64 + 1.0) * x[(i + 1) % 3]))
+    };
+    let material = Material::new(Law::Linear, 5000.0, 0.3);
+    let (lambda, mu) = material.lame();
+    // b = −((λ + μ) ∇(div u) + μ Δu), with ∂_j div u = c Σ_i H_i[i][j] and Δu_i = c tr H_i.
+    let body = Vector3::from_fn(|j, _| {
+        let grad_div: f64 = (0..3).map(|i| hessians[i][(i, j)]).sum();
+        -c * ((lambda + mu) * grad_div + mu * hessians[j].trace())
+    });
+    let error = |m: &Mesh| {
+        let mut problem = Problem::new(m.clone(), material);
+        for n in boundary_nodes(m) {
+            let u = exact(&m.nodes[n]);
+            problem.prescribe(&[n], [u.x, u.y, u.z]);
+        }
+        let g = body / material.density;
+        problem.add_gravity([g.x, g.y, g.z]).unwrap();
+        let sol = StaticSolver::new(problem)
+            .unwrap()
+            .solve(&SolverOptions { rtol: 1e-13, utol: 1e-13, ..Default::default() })
+            .unwrap();
+        m.nodes
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (Vector3::from_column_slice(&sol.u[3 * i..3 * i + 3]) - exact(p)).norm())
+            .fold(0.0, f64::max)
+    };
+    let scale = t4.nodes.iter().map(|p| exact(p).norm()).fold(0.0, f64::max);
+    let (e4, e10) = (error(&t4), error(&t4.quadratic().unwrap()));
+    assert!(e10 < 1e-9 * scale, "T10 error {e10:e} (field up to {scale:e})");
+    assert!(e4 > 1e-4 * scale, "T4 reproduces a quadratic field? error {e4:e} (field up to {scale:e})");
+}
+
+/// A quadratic face carries a uniform traction on its mid-edge nodes only (∫ N dA = 0 at the
+/// corners of a flat quadratic triangle): the loaded area and the resultant stay exact.
+#[test]
+fn quadratic_faces_carry_the_traction_resultant() {
+    let m = mesh::box_mesh(CellKind::Tet10, [0.0; 3], [1.0, 1.0, 0.5], [4, 2, 1]).unwrap();
+    let top = mesh::select::nodes_in_box(&m.nodes, [-1e-9, -1e-9, 0.5 - 1e-9], [1.0 + 1e-9, 1.0 + 1e-9, 0.5 + 1e-9]);
+    let mut problem = Problem::new(m, Material::new(Law::Linear, 1.0, 0.3));
+    assert!((problem.add_traction(&top, [0.0, 0.0, -2.0]) - 1.0).abs() < 1e-12);
+    let fz: f64 = problem.f_ext.chunks(3).map(|f| f[2]).sum();
+    assert!((fz + 2.0).abs() < 1e-12, "resultant {fz}");
+    let corners = 15; // the 5 × 3 vertices of the top face
+    let loaded = top.iter().filter(|&&n| problem.f_ext[3 * n + 2].abs() > 1e-12).count();
+    assert_eq!(loaded, top.len() - corners, "only mid-edge nodes are loaded");
+    assert!(top.iter().all(|&n| problem.f_ext[3 * n + 2] <= 1e-12));
+    // Gravity: the consistent loads sum to the weight (corner shares are negative on T10).
+    let mut heavy = problem.clone();
+    heavy.f_ext.fill(0.0);
+    heavy.add_gravity([0.0, 0.0, -10.0]).unwrap();
+    let weight: f64 = heavy.f_ext.chunks(3).map(|f| f[2]).sum();
+    assert!((weight + 1000.0 * 0.5 * 10.0).abs() < 1e-9, "weight {weight}");
+}
+
 #[test]
 fn nonlinear_laws_agree_with_linear_for_small_loads() {
-    for hex in [false, true] {
+    for kind in KINDS {
         let n = [8, 2, 2];
-        let (ul, m) = cantilever(hex, n, Law::Linear, 1e-4);
+        let (ul, m) = cantilever(kind, n, Law::Linear, 1e-4);
         let dl = tip_deflection(&ul, &m);
         for law in [Law::Corotational, Law::Svk, Law::NeoHookean] {
-            let (u, m) = cantilever(hex, n, law, 1e-4);
+            let (u, m) = cantilever(kind, n, law, 1e-4);
             let d = tip_deflection(&u, &m);
-            assert!((d - dl).abs() < 2e-3 * dl, "hex={hex} {law:?}: {d} vs linear {dl}");
+            assert!((d - dl).abs() < 2e-3 * dl, "{kind:?} {law:?}: {d} vs linear {dl}");
         }
         // At a large load the models must differ (geometric nonlinearity).
-        let (ul, m) = cantilever(hex, n, Law::Linear, 2.0);
-        let (us, _) = cantilever(hex, n, Law::Svk, 2.0);
+        let (ul, m) = cantilever(kind, n, Law::Linear, 2.0);
+        let (us, _) = cantilever(kind, n, Law::Svk, 2.0);
         let (dl, ds) = (tip_deflection(&ul, &m), tip_deflection(&us, &m));
         assert!((dl - ds).abs() > 0.05 * dl, "large load: svk {ds} vs linear {dl}");
     }
@@ -275,7 +355,7 @@ fn point_springs_balance_gravity_and_pull_their_point() {
 
 #[test]
 fn warm_start_from_solution_needs_no_iteration() {
-    let (u, m) = cantilever(true, [8, 2, 2], Law::Svk, 0.05);
+    let (u, m) = cantilever(CellKind::Hex8, [8, 2, 2], Law::Svk, 0.05);
     let clamp = mesh::select::nodes_in_box(&m.nodes, [-1e-9; 3], [1e-9, 1.1, 1.1]);
     let tip = mesh::select::nodes_in_box(&m.nodes, [3.999, -1.0, -1.0], [4.001, 2.0, 2.0]);
     let mut problem = Problem::new(m, Material::new(Law::Svk, 300.0, 0.0));

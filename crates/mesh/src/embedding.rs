@@ -158,6 +158,9 @@ impl Grid {
     }
 }
 
+/// The most nodes a cell has (T10).
+pub const MAX_CELL_NODES: usize = 10;
+
 /// Where a point lies in a mesh: its element and the interpolation weights
 /// of the element's nodes.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -165,14 +168,23 @@ pub struct Location {
     /// The containing element.
     pub cell: usize,
     /// Its nodes (the first `count`).
-    pub nodes: [usize; 8],
-    /// The nodes' weights (barycentric for T4, trilinear for H8; sum 1).
-    pub weights: [f64; 8],
-    /// Nodes per element: 4 or 8.
+    pub nodes: [usize; MAX_CELL_NODES],
+    /// The nodes' weights (barycentric for T4, trilinear for H8, quadratic for T10; sum 1).
+    pub weights: [f64; MAX_CELL_NODES],
+    /// Nodes per element: 4, 8 or 10.
     pub count: usize,
 }
 
 impl Location {
+    /// Cell `cell`'s `nodes` with their `weights` (as many).
+    fn new(cell: usize, nodes: &[usize], weights: &[f64]) -> Self {
+        let mut location =
+            Location { cell, nodes: [0; MAX_CELL_NODES], weights: [0.0; MAX_CELL_NODES], count: nodes.len() };
+        location.nodes[..nodes.len()].copy_from_slice(nodes);
+        location.weights[..weights.len()].copy_from_slice(weights);
+        location
+    }
+
     /// (node, weight) pairs.
     pub fn terms(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
         self.nodes[..self.count].iter().copied().zip(self.weights[..self.count].iter().copied())
@@ -304,12 +316,13 @@ impl MeshLocator {
             Cells::Tet4(t) => {
                 let t = t[c];
                 let lambda = barycentric(t.map(|k| self.nodes[k]), p)?;
-                let margin = lambda.iter().cloned().fold(f64::INFINITY, f64::min);
-                let mut nodes = [0usize; 8];
-                let mut weights = [0.0; 8];
-                nodes[..4].copy_from_slice(&t);
-                weights[..4].copy_from_slice(&lambda);
-                Some((margin, Location { cell: c, nodes, weights, count: 4 }))
+                Some((margin(&lambda), Location::new(c, &t, &lambda)))
+            }
+            // Located in the tetrahedron of its corners: exact for straight edges.
+            Cells::Tet10(t) => {
+                let t = t[c];
+                let lambda = barycentric(std::array::from_fn(|k| self.nodes[t[k]]), p)?;
+                Some((margin(&lambda), Location::new(c, &t, &crate::tet10_shape(lambda))))
             }
             Cells::Hex8(h) => {
                 let h = h[c];
@@ -321,10 +334,15 @@ impl MeshLocator {
                 }
                 let xi = hex_reference(&x, p)?;
                 let margin = 1.0 - xi.iter().map(|v| v.abs()).fold(0.0, f64::max);
-                Some((margin, Location { cell: c, nodes: h, weights: hex_shape(xi), count: 8 }))
+                Some((margin, Location::new(c, &h, &hex_shape(xi))))
             }
         }
     }
+}
+
+/// How far inside a tetrahedron barycentric coordinates are: the smallest.
+fn margin(lambda: &[f64; 4]) -> f64 {
+    lambda.iter().cloned().fold(f64::INFINITY, f64::min)
 }
 
 /// Barycentric coordinates of p in tetrahedron t (None if degenerate).

@@ -1,6 +1,6 @@
 //! Structured box meshes.
 
-use crate::{Cells, Mesh, MeshError, Point, HEX_TO_TETS};
+use crate::{CellKind, Cells, Mesh, MeshError, Point, HEX_TO_TETS};
 
 /// Node index of grid point (i, j, k) in an (nx+1)×(ny+1)×(nz+1) lattice, x fastest.
 fn lattice_index(n: [usize; 3], i: usize, j: usize, k: usize) -> usize {
@@ -55,4 +55,14 @@ pub fn box_hex(lo: Point, hi: Point, n: [usize; 3]) -> Result<Mesh, MeshError> {
 pub fn box_tet(lo: Point, hi: Point, n: [usize; 3]) -> Result<Mesh, MeshError> {
     let tets = hex_cells(n).iter().flat_map(|h| HEX_TO_TETS.map(|t| t.map(|k| h[k]))).collect();
     Mesh::new(lattice(lo, hi, n)?, Cells::Tet4(tets))
+}
+
+/// A box [lo, hi] with n[0]×n[1]×n[2] cells of the given kind: hexahedra ([`box_hex`]), or
+/// hexahedra split into 6 tetrahedra ([`box_tet`]), linear or quadratic ([`Mesh::quadratic`]).
+pub fn box_mesh(kind: CellKind, lo: Point, hi: Point, n: [usize; 3]) -> Result<Mesh, MeshError> {
+    match kind {
+        CellKind::Hex8 => box_hex(lo, hi, n),
+        CellKind::Tet4 => box_tet(lo, hi, n),
+        CellKind::Tet10 => box_tet(lo, hi, n)?.quadratic(),
+    }
 }

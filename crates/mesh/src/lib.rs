@@ -1,9 +1,10 @@
 //! Meshes and geometry for augsim.
 //!
-//! Volume meshes are made of linear tetrahedra (T4) or trilinear hexahedra (H8)
-//! and carry named node sets (regions). Coordinates are in metres.
+//! Volume meshes are made of linear tetrahedra (T4), quadratic tetrahedra (T10) or trilinear
+//! hexahedra (H8) and carry named node sets (regions). Coordinates are in metres.
 //! Node numbering of an H8 cell follows VTK/Gmsh: the bottom face 0-1-2-3
-//! counter-clockwise seen from above, then the top face 4-5-6-7.
+//! counter-clockwise seen from above, then the top face 4-5-6-7; a T10 cell follows VTK:
+//! its four corners, then the mid-edge nodes of edges 0-1, 1-2, 0-2, 0-3, 1-3, 2-3.
 
 pub mod bvh;
 pub mod embedding;
@@ -11,6 +12,7 @@ pub mod generate;
 pub mod immersed;
 pub mod io;
 pub mod phantom;
+pub mod quadratic;
 pub mod sampling;
 pub mod select;
 pub mod stats;
@@ -21,10 +23,11 @@ pub mod topology;
 use std::collections::BTreeMap;
 
 pub use bvh::SurfaceBvh;
-pub use embedding::{Embedding, Grid, Location, MeshLocator};
-pub use generate::{box_hex, box_tet};
+pub use embedding::{Embedding, Grid, Location, MeshLocator, MAX_CELL_NODES};
+pub use generate::{box_hex, box_mesh, box_tet};
 pub use immersed::{immersed_grid, immersed_surface, ImmersedGrid, ImmersedOptions};
 pub use phantom::{liver_phantom, PhantomSpec};
+pub use quadratic::{tet10_shape, tet10_shape_derivatives, TET10_EDGES};
 pub use sampling::{sample_visible, sample_visible_boundary, SurfaceSample};
 pub use select::NodeSelection;
 pub use surface::{check_closed_manifold, SurfaceReport};
@@ -76,6 +79,31 @@ pub enum Cells {
     Tet4(Vec<[usize; 4]>),
     /// Trilinear hexahedra in VTK order.
     Hex8(Vec<[usize; 8]>),
+    /// Quadratic tetrahedra in VTK order: the corners of a positively oriented T4, then the
+    /// mid-edge nodes of [`TET10_EDGES`].
+    Tet10(Vec<[usize; 10]>),
+}
+
+/// The kind of a mesh's cells.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum CellKind {
+    /// Linear tetrahedra.
+    Tet4,
+    /// Trilinear hexahedra.
+    Hex8,
+    /// Quadratic tetrahedra.
+    Tet10,
+}
+
+impl CellKind {
+    /// Short name ("T4", "H8" or "T10").
+    pub fn name(self) -> &'static str {
+        match self {
+            CellKind::Tet4 => "T4",
+            CellKind::Hex8 => "H8",
+            CellKind::Tet10 => "T10",
+        }
+    }
 }
 
 impl Cells {
@@ -84,6 +112,7 @@ impl Cells {
         match self {
             Cells::Tet4(c) => c.len(),
             Cells::Hex8(c) => c.len(),
+            Cells::Tet10(c) => c.len(),
         }
     }
 
@@ -97,15 +126,22 @@ impl Cells {
         match self {
             Cells::Tet4(c) => &c[i],
             Cells::Hex8(c) => &c[i],
+            Cells::Tet10(c) => &c[i],
         }
     }
 
-    /// Short name of the cell kind ("T4" or "H8").
-    pub fn kind_name(&self) -> &'static str {
+    /// The kind of the cells.
+    pub fn kind(&self) -> CellKind {
         match self {
-            Cells::Tet4(_) => "T4",
-            Cells::Hex8(_) => "H8",
+            Cells::Tet4(_) => CellKind::Tet4,
+            Cells::Hex8(_) => CellKind::Hex8,
+            Cells::Tet10(_) => CellKind::Tet10,
         }
+    }
+
+    /// Short name of the cell kind ("T4", "H8" or "T10").
+    pub fn kind_name(&self) -> &'static str {
+        self.kind().name()
     }
 }
 
@@ -213,12 +249,13 @@ impl Mesh {
         Ok(())
     }
 
-    /// Signed volume of cell `i` (exact for tetrahedra; for hexahedra the sum of
-    /// a 6-tetrahedron split of the trilinear cell, exact for parallelepipeds).
+    /// Signed volume of cell `i` (exact for tetrahedra, of a T10 that of its corners: exact for
+    /// straight edges; for hexahedra the sum of a 6-tetrahedron split of the trilinear cell,
+    /// exact for parallelepipeds).
     pub fn cell_volume(&self, i: usize) -> f64 {
         let p = |k: usize| self.nodes[self.cells.cell(i)[k]];
         match &self.cells {
-            Cells::Tet4(_) => tet_volume(p(0), p(1), p(2), p(3)),
+            Cells::Tet4(_) | Cells::Tet10(_) => tet_volume(p(0), p(1), p(2), p(3)),
             Cells::Hex8(_) => HEX_TO_TETS.iter().map(|t| tet_volume(p(t[0]), p(t[1]), p(t[2]), p(t[3]))).sum(),
         }
     }

@@ -97,7 +97,7 @@ pub fn sample_visible_boundary(
         crate::Cells::Tet4(tets) => {
             TriSurface { vertices: mesh.nodes.clone(), triangles: crate::tetmesh::boundary_triangles(tets) }
         }
-        crate::Cells::Hex8(_) => crate::boundary_surface(mesh),
+        crate::Cells::Hex8(_) | crate::Cells::Tet10(_) => crate::boundary_surface(mesh),
     };
     sample_visible(&surface, view_direction, count, seed)
 }

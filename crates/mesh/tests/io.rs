@@ -232,7 +232,7 @@ fn corrupted_gmsh_files_give_located_errors() {
     assert!(m.contains("line 188") && m.contains("unknown element type 99"), "{m}");
 
     let m = message(read_mesh(put(d, "tet10.msh", with_line(&liver, 188, "2 11 1 1 10 1 2 3 4 5 6 7 8 9 10"))));
-    assert!(m.contains("10-node tetrahedron") && m.contains("line 188"), "{m}");
+    assert!(m.contains("mixes tetrahedra") && m.contains("quadratic tetrahedra") && m.contains("line 188"), "{m}");
 
     let m = message(read_mesh(put(d, "mixed.msh", with_line(&liver, 190, "4 5 1 1 8 1 2 3 4 5 6 7 8"))));
     assert!(m.contains("mixes tetrahedra") && m.contains("line 190"), "{m}");
@@ -351,7 +351,7 @@ fn handwritten_vtk_variants() {
 #[test]
 fn volume_round_trips_are_exact() {
     let dir = tempfile::tempdir().unwrap();
-    for mesh in [tet_box(), hex_box()] {
+    for mesh in [tet_box(), hex_box(), tet_box().quadratic().unwrap()] {
         let fields = fields_for(&mesh);
         for (name, enc) in [("b.vtu", Encoding::Binary), ("a.vtu", Encoding::Ascii)] {
             let path = dir.path().join(name);
@@ -503,7 +503,9 @@ fn meshio_round_trips() {
         std::process::Command::new("python3").args(["-c", "import meshio"]).output().is_ok_and(|o| o.status.success());
     assert!(has_meshio, "this test was asked for but python3 cannot import meshio: pip install meshio");
     let dir = tempfile::tempdir().unwrap();
-    for (mesh, cell_name) in [(tet_box(), "tetra"), (hex_box(), "hexahedron")] {
+    for (mesh, cell_name) in
+        [(tet_box(), "tetra"), (hex_box(), "hexahedron"), (tet_box().quadratic().unwrap(), "tetra10")]
+    {
         let fields = fields_for(&mesh);
         for (name, enc) in [("m.vtu", Encoding::Binary), ("a.vtu", Encoding::Ascii), ("m.vtk", Encoding::Binary)] {
             let path = dir.path().join(name);
@@ -647,6 +649,7 @@ fn vtu_in_layout(mesh: &Mesh, fields: &[Field], layout: Layout) -> Vec<u8> {
     let (ty, k) = match &mesh.cells {
         Cells::Tet4(_) => (10u8, 4),
         Cells::Hex8(_) => (12u8, 8),
+        Cells::Tet10(_) => (24u8, 10),
     };
     let conn: Vec<usize> = (0..mesh.cells.len()).flat_map(|i| mesh.cells.cell(i).to_vec()).collect();
     let offsets: Vec<usize> = (1..=mesh.cells.len()).map(|c| c * k).collect();

@@ -242,8 +242,11 @@ fn invalid(msg: impl Into<String>) -> LearnError {
 }
 
 impl Generator {
-    /// Prepares the encoding and node sets; checks the configuration against the mesh.
+    /// Prepares the encoding and node sets; checks the configuration against the mesh. With
+    /// quadratic elements (`material.order = 2`) the samples are solved, loaded and observed on
+    /// the T10 mesh ([`Mesh::quadratic`]: the mesh's nodes, then its mid-edge nodes).
     pub fn new(mesh: Mesh, material: Material, solver_options: SolverOptions, config: DatasetConfig) -> Result<Self> {
+        let mesh = if material.order == 2 { mesh.quadratic().map_err(|e| invalid(e.to_string()))? } else { mesh };
         if config.samples == 0 {
             return Err(invalid("a dataset needs at least one sample"));
         }

@@ -88,8 +88,8 @@ struct Volume {
 }
 
 impl Volume {
-    /// Reads the node tags left on `line` for element `tag` of type `ty`; keeps linear
-    /// tetrahedra and hexahedra, ignores lower-dimensional elements.
+    /// Reads the node tags left on `line` for element `tag` of type `ty`; keeps linear and
+    /// quadratic tetrahedra and hexahedra, ignores lower-dimensional elements.
     fn add(&mut self, line: &mut Line, tag: u64, ty: u32, nodes: &Nodes) -> Result<(), MeshError> {
         let (dim, n, name) =
             element_type(ty).ok_or_else(|| line.error(format!("element {tag} has unknown element type {ty}")))?;
@@ -103,10 +103,11 @@ impl Volume {
         let kind = match ty {
             4 => VolumeKind::Tet,
             5 => VolumeKind::Hex,
+            11 => VolumeKind::Tet10,
             _ => {
                 return Err(line.error(format!(
-                    "element {tag} is a {name} (type {ty}): only 4-node tetrahedra (type 4) and \
-                     8-node hexahedra (type 5) are supported"
+                    "element {tag} is a {name} (type {ty}): only 4-node tetrahedra (type 4), \
+                     10-node tetrahedra (type 11) and 8-node hexahedra (type 5) are supported"
                 )))
             }
         };
@@ -121,12 +122,17 @@ impl Volume {
             }
             Some(_) => {}
         }
+        let start = self.conn.len();
         for _ in 0..n {
             let t: u64 = line.parse("node tag")?;
             let &i = nodes.index.get(&t).ok_or_else(|| {
                 line.error(format!("element {tag} refers to node {t}, which is not in the node section"))
             })?;
             self.conn.push(i);
+        }
+        if kind == VolumeKind::Tet10 {
+            // Gmsh numbers the mid-edge nodes of 3-2 and 3-1 the other way round from VTK.
+            self.conn.swap(start + 8, start + 9);
         }
         self.tags.push(tag);
         self.lines.push(line.no);
@@ -383,11 +389,15 @@ fn read_elements_v4(lines: &mut LineReader, header: &Line, nodes: &Nodes) -> Res
 /// elementary tag 1). Coordinates are written exactly.
 pub fn write_msh(path: impl AsRef<Path>, mesh: &Mesh) -> Result<(), MeshError> {
     let path = path.as_ref();
-    let (_, k, conn) = mesh_cells_flat(mesh);
+    let (_, k, mut conn) = mesh_cells_flat(mesh);
     check_for_writing(mesh.num_nodes(), mesh.cells.len(), &conn, &[])?;
     let ty = match mesh.cells {
         Cells::Tet4(_) => 4,
         Cells::Hex8(_) => 5,
+        Cells::Tet10(_) => {
+            conn.chunks_exact_mut(10).for_each(|c| c.swap(8, 9));
+            11
+        }
     };
     write_atomic(path, |w| {
         writeln!(w, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n{}", mesh.num_nodes())?;

@@ -6,7 +6,8 @@ use std::path::Path;
 use super::scalar::Scalar;
 use super::{
     check_for_writing, check_surface, fan, finish_volume, mesh_cells_flat, parse_error, read_bytes, restrict_fields,
-    strip, write_atomic, Encoding, Field, FieldLocation, Num, VolumeKind, VTK_HEXAHEDRON, VTK_TETRA, VTK_VOXEL,
+    strip, write_atomic, Encoding, Field, FieldLocation, Num, VolumeKind, VTK_HEXAHEDRON, VTK_QUADRATIC_TETRA,
+    VTK_TETRA, VTK_VOXEL,
 };
 use crate::{Mesh, MeshError, Point, TriSurface};
 
@@ -553,11 +554,12 @@ pub(super) fn volume_from_cells(
             VTK_TETRA => (VolumeKind::Tet, &[0, 1, 2, 3]),
             VTK_HEXAHEDRON => (VolumeKind::Hex, &[0, 1, 2, 3, 4, 5, 6, 7]),
             VTK_VOXEL => (VolumeKind::Hex, &[0, 1, 3, 2, 4, 5, 7, 6]),
+            VTK_QUADRATIC_TETRA => (VolumeKind::Tet10, &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9]),
             _ => {
                 return Err(parse_error(
                     path,
                     format!(
-                    "cell {c} is a {name} (VTK type {ty}): only tetrahedra (10) and hexahedra (11, 12) are supported"
+                    "cell {c} is a {name} (VTK type {ty}): only tetrahedra (10, 24) and hexahedra (11, 12) are supported"
                 ),
                 ))
             }

@@ -290,6 +290,7 @@ fn mesh_cells_flat(mesh: &Mesh) -> (u8, usize, Vec<usize>) {
     match &mesh.cells {
         Cells::Tet4(c) => (VTK_TETRA, 4, c.iter().flatten().copied().collect()),
         Cells::Hex8(c) => (VTK_HEXAHEDRON, 8, c.iter().flatten().copied().collect()),
+        Cells::Tet10(c) => (VTK_QUADRATIC_TETRA, 10, c.iter().flatten().copied().collect()),
     }
 }
 
@@ -323,12 +324,16 @@ const VTK_TETRA: u8 = 10;
 const VTK_VOXEL: u8 = 11;
 /// VTK cell type of a trilinear hexahedron.
 const VTK_HEXAHEDRON: u8 = 12;
+/// VTK cell type of a quadratic tetrahedron (corners, then mid-edge nodes of 0-1, 1-2, 0-2,
+/// 0-3, 1-3, 2-3).
+const VTK_QUADRATIC_TETRA: u8 = 24;
 
 /// The kind of volume cell read from a file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum VolumeKind {
     Tet,
     Hex,
+    Tet10,
 }
 
 impl VolumeKind {
@@ -336,6 +341,7 @@ impl VolumeKind {
         match self {
             VolumeKind::Tet => 4,
             VolumeKind::Hex => 8,
+            VolumeKind::Tet10 => 10,
         }
     }
 
@@ -343,6 +349,7 @@ impl VolumeKind {
         match self {
             VolumeKind::Tet => "tetrahedra",
             VolumeKind::Hex => "hexahedra",
+            VolumeKind::Tet10 => "quadratic tetrahedra",
         }
     }
 }
@@ -383,7 +390,7 @@ fn finish_volume(
     for (c, cell) in conn.chunks_exact_mut(k).enumerate() {
         let p = |j: usize| nodes[cell[j]];
         let volume = match kind {
-            VolumeKind::Tet => crate::tet_volume(p(0), p(1), p(2), p(3)),
+            VolumeKind::Tet | VolumeKind::Tet10 => crate::tet_volume(p(0), p(1), p(2), p(3)),
             VolumeKind::Hex => HEX_TO_TETS.iter().map(|t| crate::tet_volume(p(t[0]), p(t[1]), p(t[2]), p(t[3]))).sum(),
         };
         let (lo, hi) = crate::bounds(&cell.iter().map(|&i| nodes[i]).collect::<Vec<_>>());
@@ -398,6 +405,8 @@ fn finish_volume(
         if volume < 0.0 {
             match kind {
                 VolumeKind::Tet => cell.swap(2, 3),
+                // Corners 2 and 3 swap, and with them the mid-edge nodes of 1-2 and 1-3, 0-2 and 0-3.
+                VolumeKind::Tet10 => [(2, 3), (5, 8), (6, 7)].into_iter().for_each(|(a, b)| cell.swap(a, b)),
                 VolumeKind::Hex => {
                     let (bottom, top) = cell.split_at_mut(4);
                     bottom.swap_with_slice(top);
@@ -408,6 +417,7 @@ fn finish_volume(
     let cells = match kind {
         VolumeKind::Tet => Cells::Tet4(conn.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect()),
         VolumeKind::Hex => Cells::Hex8(conn.chunks_exact(8).map(|c| std::array::from_fn(|j| c[j])).collect()),
+        VolumeKind::Tet10 => Cells::Tet10(conn.chunks_exact(10).map(|c| std::array::from_fn(|j| c[j])).collect()),
     };
     let mesh = Mesh::new(nodes, cells).map_err(|e| parse_error(path, e.to_string()))?;
     Ok((mesh, kept))

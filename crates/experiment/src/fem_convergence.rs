@@ -1,0 +1,363 @@
+//! Convergence of the finite elements under mesh refinement: the error against a reference
+//! versus degrees of freedom and versus solve time, for the linear tetrahedron (standard and
+//! F-bar), the quadratic tetrahedron (standard and F-bar on the element's volume) and the F-bar
+//! hexahedron, on a cantilever (ν = 0.3, 0.49, 0.499) and on the liver phantom.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use fem::{Formulation, Law, Material, Problem, SolverOptions, StaticSolver};
+use mesh::{CellKind, Mesh, MeshLocator, PhantomSpec, Point};
+use serde::{Deserialize, Serialize};
+
+use crate::{ExperimentResult, Name, Progress, Row, Size};
+
+/// An element: its cells and formulation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Element {
+    kind: CellKind,
+    formulation: Formulation,
+}
+
+impl Element {
+    fn label(self) -> String {
+        let form = if self.formulation == Formulation::Fbar { " F-bar" } else { "" };
+        format!("{}{form}", self.kind.name())
+    }
+}
+
+/// The elements compared.
+const ELEMENTS: [Element; 5] = [
+    Element { kind: CellKind::Tet4, formulation: Formulation::Standard },
+    Element { kind: CellKind::Tet4, formulation: Formulation::Fbar },
+    Element { kind: CellKind::Tet10, formulation: Formulation::Standard },
+    Element { kind: CellKind::Tet10, formulation: Formulation::Fbar },
+    Element { kind: CellKind::Hex8, formulation: Formulation::Fbar },
+];
+
+/// One solve of a convergence study.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ConvergencePoint {
+    /// The problem (e.g. "cantilever, ν = 0.49").
+    pub problem: String,
+    /// The element (e.g. "T10 F-bar").
+    pub element: String,
+    /// The mesh (cells or target tetrahedra).
+    pub mesh: String,
+    /// Degrees of freedom (3 per node).
+    pub dofs: usize,
+    /// A new solver's setup and first solve (ms).
+    pub ms: f64,
+    /// The measured quantity (m): the tip deflection, or the RMS displacement at the probes.
+    pub value: f64,
+    /// Relative error against the problem's reference.
+    pub error: f64,
+}
+
+/// A problem's reference value and how it was obtained.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Reference {
+    /// The problem.
+    pub problem: String,
+    /// The reference quantity (m).
+    pub value: f64,
+    /// How it was obtained.
+    pub source: String,
+}
+
+/// The cheapest element (least time) within a tolerance on a problem.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Cheapest {
+    /// The problem.
+    pub problem: String,
+    /// The relative tolerance.
+    pub tolerance: f64,
+    /// The element and mesh, or `None` when no solve reached it.
+    pub choice: Option<ConvergencePoint>,
+}
+
+/// The cantilever's length, Young's modulus and end traction (a small load: linear response).
+const BEAM: (f64, f64, f64) = (10.0, 1000.0, 1e-4);
+
+/// Solves `problem` with a new solver, timing setup and solve.
+fn timed_solve(problem: Problem) -> Result<(Vec<f64>, f64)> {
+    let start = Instant::now();
+    let options = SolverOptions { rtol: 1e-10, ..Default::default() };
+    let u = StaticSolver::new(problem)?.solve(&options)?.u;
+    Ok((u, start.elapsed().as_secs_f64() * 1e3))
+}
+
+/// The cantilever of `cells` (H8, or 6 T4 / T10 per cell), clamped at x = 0 with a downward end
+/// traction: the mean tip deflection (m), dofs and ms.
+fn cantilever(element: Element, cells: [usize; 3], poisson: f64) -> Result<(f64, usize, f64)> {
+    let (length, young, load) = BEAM;
+    let m = mesh::box_mesh(element.kind, [0.0; 3], [length, 1.0, 1.0], cells)?;
+    let clamp = mesh::select::nodes_in_box(&m.nodes, [-1e-9; 3], [1e-9, 1.0 + 1e-9, 1.0 + 1e-9]);
+    let tip = mesh::select::nodes_in_box(&m.nodes, [length - 1e-9, -1e-9, -1e-9], [length + 1e-9, 1.1, 1.1]);
+    let material = Material::new(Law::Linear, young, poisson).with_formulation(element.formulation);
+    let dofs = 3 * m.num_nodes();
+    let mut problem = Problem::new(m, material);
+    problem.fix(&clamp);
+    problem.add_traction(&tip, [0.0, 0.0, -load]);
+    let (u, ms) = timed_solve(problem)?;
+    Ok((-tip.iter().map(|&n| u[3 * n + 2]).sum::<f64>() / tip.len() as f64, dofs, ms))
+}
+
+/// Timoshenko beam theory's tip deflection of the cantilever (Cowper's shear coefficient).
+fn timoshenko(poisson: f64) -> f64 {
+    let (length, young, load) = BEAM;
+    let kappa = 10.0 * (1.0 + poisson) / (12.0 + 11.0 * poisson);
+    let shear = young / (2.0 * (1.0 + poisson));
+    load * length.powi(3) / (3.0 * young / 12.0) + load * length / (kappa * shear)
+}
+
+/// Richardson extrapolation of three values on meshes refined by `ratio` each time, with the
+/// order estimated from them (clamped to 1–4); the finest value when they do not converge
+/// monotonically. Returns the value and how it was obtained.
+fn richardson(values: [f64; 3], ratio: f64) -> (f64, String) {
+    let (d1, d2) = (values[1] - values[0], values[2] - values[1]);
+    if d1 * d2 <= 0.0 || d2.abs() >= d1.abs() {
+        return (values[2], "finest quadratic mesh (not monotone: no extrapolation)".into());
+    }
+    let order = ((d1 / d2).ln() / ratio.ln()).clamp(1.0, 4.0);
+    (values[2] + d2 / (ratio.powf(order) - 1.0), format!("Richardson extrapolation of T10, order {order:.2}"))
+}
+
+/// The phantom's probes: points of a regular grid at least 5 mm inside the organ and inside
+/// every mesh of `meshes`.
+fn probes(spec: &PhantomSpec, meshes: &[Mesh]) -> Result<Vec<Point>> {
+    let locators = meshes.iter().map(MeshLocator::new).collect::<Result<Vec<_>, _>>()?;
+    let (lo, hi) = meshes[0].bounds();
+    let n = 12;
+    let mut out = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            for k in 0..n {
+                let t = [i, j, k].map(|c| (c as f64 + 0.5) / n as f64);
+                let p: Point = std::array::from_fn(|d| lo[d] + t[d] * (hi[d] - lo[d]));
+                if spec.signed_distance(p) < -0.005 && locators.iter().all(|l| l.locate(p).is_some()) {
+                    out.push(p);
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The phantom (SVK, E = 5 kPa, ν = 0.48) fixed on `fixed`, 0.3 N down spread over `push`: the
+/// displacement at `probes` (m, 3 each), dofs and ms.
+fn phantom(element: Element, m: Mesh, probes: &[Point]) -> Result<(Vec<Point>, usize, f64)> {
+    let material = Material::new(Law::Svk, 5000.0, 0.48)
+        .with_formulation(element.formulation)
+        .with_order(if element.kind == CellKind::Tet10 { 2 } else { 1 });
+    let mut problem = Problem::new(m, material);
+    let (fixed, push) = (problem.mesh.region("fixed")?.to_vec(), problem.mesh.region("push")?.to_vec());
+    problem.fix(&fixed);
+    problem.add_force(&push, [0.0, 0.0, -0.3]);
+    let dofs = problem.num_dofs();
+    let mesh = problem.mesh.clone();
+    let (u, ms) = timed_solve(problem)?;
+    let locator = MeshLocator::new(&mesh)?;
+    let at = probes
+        .iter()
+        .map(|&p| {
+            let loc = locator.locate(p).with_context(|| format!("probe {p:?} outside the phantom"))?;
+            Ok(std::array::from_fn(|d| loc.terms().map(|(n, w)| w * u[3 * n + d]).sum()))
+        })
+        .collect::<Result<Vec<Point>>>()?;
+    Ok((at, dofs, ms))
+}
+
+fn rms(v: &[Point]) -> f64 {
+    (v.iter().map(|p| mesh::dot(*p, *p)).sum::<f64>() / v.len().max(1) as f64).sqrt()
+}
+
+/// Runs the study (see the module documentation) and writes its plots into `dir`.
+pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
+    let levels: &[usize] = match size {
+        Size::Quick => &[1, 2, 3],
+        Size::Paper => &[1, 2, 3, 4],
+    };
+    let sizes: &[usize] = match size {
+        Size::Quick => &[3000, 5000, 11000],
+        Size::Paper => &[3000, 5000, 11000, 20000],
+    };
+    let mut points = Vec::new();
+    let mut references = Vec::new();
+    for poisson in [0.3, 0.49, 0.499] {
+        let problem = format!("cantilever, ν = {poisson}");
+        let mut solved = Vec::new();
+        for element in ELEMENTS {
+            for &k in levels {
+                let cells = [10 * k, k, k];
+                progress(&format!("fem-convergence: {problem}, {} on {}x{}x{}", element.label(), cells[0], k, k));
+                let (value, dofs, ms) = cantilever(element, cells, poisson)?;
+                solved.push((element, format!("{}x{}x{}", cells[0], k, k), value, dofs, ms));
+            }
+        }
+        let t10: Vec<f64> = solved.iter().filter(|s| s.0 == ELEMENTS[2]).map(|s| s.2).collect();
+        let n = t10.len();
+        let ratio = levels[n - 1] as f64 / levels[n - 2] as f64;
+        let (value, source) = richardson([t10[n - 3], t10[n - 2], t10[n - 1]], ratio);
+        let source = format!(
+            "{source}; Timoshenko beam theory {:.4e} m ({:+.2} %)",
+            timoshenko(poisson),
+            100.0 * (timoshenko(poisson) / value - 1.0)
+        );
+        references.push(Reference { problem: problem.clone(), value, source });
+        points.extend(solved.into_iter().map(|(e, mesh, v, dofs, ms)| ConvergencePoint {
+            problem: problem.clone(),
+            element: e.label(),
+            mesh,
+            dofs,
+            ms,
+            value: v,
+            error: (v / value - 1.0).abs(),
+        }));
+    }
+    // The phantom: the probes lie inside every mesh; the reference is the finest T10 F-bar mesh.
+    let meshes = sizes.iter().map(|&t| mesh::liver_phantom(t)).collect::<Result<Vec<_>, _>>()?;
+    let probe_points = probes(&PhantomSpec::default(), &meshes)?;
+    let problem = "liver phantom, SVK, ν = 0.48".to_string();
+    let mut solved = Vec::new();
+    for element in ELEMENTS.into_iter().filter(|e| e.kind != CellKind::Hex8) {
+        for (&tets, m) in sizes.iter().zip(&meshes) {
+            progress(&format!("fem-convergence: phantom, {} on {tets} tetrahedra", element.label()));
+            let (at, dofs, ms) = phantom(element, m.clone(), &probe_points)?;
+            solved.push((element, tets, at, dofs, ms));
+        }
+    }
+    let reference = solved
+        .iter()
+        .filter(|s| s.0 == ELEMENTS[3])
+        .last()
+        .map(|s| s.2.clone())
+        .context("no T10 F-bar solve of the phantom")?;
+    let scale = rms(&reference);
+    references.push(Reference {
+        problem: problem.clone(),
+        value: scale,
+        source: format!(
+            "T10 F-bar on the finest phantom ({} tetrahedra); RMS displacement at {} probes 5 mm or more inside",
+            sizes.last().unwrap_or(&0),
+            probe_points.len()
+        ),
+    });
+    for (e, tets, at, dofs, ms) in solved {
+        let diff: Vec<Point> = at.iter().zip(&reference).map(|(a, r)| mesh::sub(*a, *r)).collect();
+        points.push(ConvergencePoint {
+            problem: problem.clone(),
+            element: e.label(),
+            mesh: format!("{tets} tets"),
+            dofs,
+            ms,
+            value: rms(&at),
+            error: rms(&diff) / scale,
+        });
+    }
+    let problems: Vec<String> = references.iter().map(|r| r.problem.clone()).collect();
+    let mut cheapest = Vec::new();
+    for p in &problems {
+        for tolerance in [0.01, 0.05] {
+            let choice = points
+                .iter()
+                .filter(|c| &c.problem == p && c.error <= tolerance)
+                // The reference's own solve is not a candidate on the phantom.
+                .filter(|c| c.error > 0.0)
+                .min_by(|a, b| a.ms.total_cmp(&b.ms))
+                .cloned();
+            cheapest.push(Cheapest { problem: p.clone(), tolerance, choice });
+        }
+    }
+    let mut figures = Vec::new();
+    for (file, p) in [("cantilever_049.png", &problems[1]), ("phantom.png", &problems[3])] {
+        for (suffix, x_label, x) in [
+            (
+                "",
+                "degrees of freedom (log10)",
+                (|c: &ConvergencePoint| (c.dofs as f64).log10()) as fn(&ConvergencePoint) -> f64,
+            ),
+            ("_time", "setup and solve time, ms (log10)", |c: &ConvergencePoint| c.ms.log10()),
+        ] {
+            let name = file.replace(".png", &format!("{suffix}.png"));
+            plot_errors(&dir.join(&name), p, x_label, x, &points)?;
+            figures.push(name);
+        }
+    }
+    let mut rows = Vec::new();
+    for c in &cheapest {
+        let ours = match &c.choice {
+            Some(p) => {
+                format!("{} ({}, {} dofs, {:.0} ms, error {:.2} %)", p.element, p.mesh, p.dofs, p.ms, 100.0 * p.error)
+            }
+            None => "none of the meshes".into(),
+        };
+        rows.push(Row::new(format!("cheapest within {:.0} %: {}", 100.0 * c.tolerance, c.problem), ours, ""));
+    }
+    for p in &points {
+        rows.push(Row::new(
+            format!("{}: {} on {}", p.problem, p.element, p.mesh),
+            format!("error {:.2} % ({} dofs, {:.0} ms)", 100.0 * p.error, p.dofs, p.ms),
+            "",
+        ));
+    }
+    let notes = vec![
+        "Cantilever 10 × 1 × 1 m, E = 1 kPa, linear law (B-bar for F-bar), clamped at x = 0, a small downward end \
+         traction; quantity: mean tip deflection; meshes of 10k × k × k cells (H8, or 6 T4 / T10 per cell)."
+            .to_string(),
+        "Phantom: SVK, E = 5 kPa, ν = 0.48, fixed on `fixed`, 0.3 N downward spread over `push` by tributary area; \
+         quantity: the displacement at the probes (relative RMS error against the reference); the phantom's meshes \
+         are not nested and its regions are node selections, so part of the error between sizes is the problem \
+         changing with the mesh."
+            .to_string(),
+        "Times: a new solver's setup and first solve (ms), on this machine, one run each.".to_string(),
+    ];
+    let mut values = serde_json::Map::new();
+    values.insert("points".into(), serde_json::to_value(&points)?);
+    values.insert("references".into(), serde_json::to_value(&references)?);
+    values.insert("cheapest".into(), serde_json::to_value(&cheapest)?);
+    Ok(ExperimentResult {
+        name: Name::FemConvergence,
+        size,
+        seconds: 0.0,
+        headlines: Vec::new(),
+        rows,
+        figures,
+        notes: notes
+            .into_iter()
+            .chain(references.iter().map(|r| format!("Reference, {}: {:.5e} m, {}", r.problem, r.value, r.source)))
+            .collect(),
+        values,
+    })
+}
+
+/// The relative error (%) of every element on `problem` against `x` of each solve, one line per element.
+fn plot_errors(
+    path: &Path,
+    problem: &str,
+    x_label: &str,
+    x: fn(&ConvergencePoint) -> f64,
+    points: &[ConvergencePoint],
+) -> Result<()> {
+    let series: Vec<plot::Series> = ELEMENTS
+        .iter()
+        .map(|e| e.label())
+        .filter_map(|label| {
+            let pts: Vec<(f64, f64)> = points
+                .iter()
+                .filter(|c| c.problem == problem && c.element == label && c.error > 0.0)
+                .map(|c| (x(c), 100.0 * c.error))
+                .collect();
+            (!pts.is_empty()).then(|| plot::Series { name: label, points: pts, band: None })
+        })
+        .collect();
+    let spec = plot::PlotSpec {
+        title: format!("Convergence: {problem}"),
+        x_label: x_label.into(),
+        y_label: "relative error (%)".into(),
+        log_y: true,
+    };
+    plot::line_plot(path, &spec, &series)?;
+    Ok(())
+}
