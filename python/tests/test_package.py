@@ -138,6 +138,17 @@ def test_predict_matches_the_command_line(tmp_path):
     run("predict", os.path.join(LIVER_AR, "model.json"), str(tmp_path / "in.npy"), "-o", str(tmp_path / "out.npy"),
         "--runs", "1")
     np.testing.assert_allclose(u, np.load(tmp_path / "out.npy"), rtol=0, atol=1e-7)
+    # A cloud [N, 6]: displacements (m) at points of the organ, put on the grid as the CLI does.
+    organ = augsim.Registration(model=LIVER_AR, scenario="liver_ar").points
+    cloud = np.hstack([organ[::50], np.full((len(organ[::50]), 3), 2e-3)])
+    np.save(tmp_path / "cloud.npy", cloud)
+    run("predict", os.path.join(LIVER_AR, "model.json"), str(tmp_path / "cloud.npy"), "-o",
+        str(tmp_path / "cloud_out.npy"), "--runs", "1")
+    u = augsim.predict(os.path.join(LIVER_AR, "model.json"), cloud)
+    assert np.abs(u).max() > 1e-4
+    np.testing.assert_allclose(u, np.load(tmp_path / "cloud_out.npy"), rtol=0, atol=1e-7)
+    with pytest.raises(ValueError, match="without points"):
+        augsim.predict(LIVER_AR, np.zeros((0, 6)))
     with pytest.raises(augsim.AugsimError, match=r"\[3, 24, 24, 16\]"):
         augsim.predict(LIVER_AR, grid[:, :10])
     with pytest.raises(augsim.AugsimError, match="model.json"):
