@@ -4,22 +4,18 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use experiment::case::{
-    ar_scenario, case_methods, compare, network_model, organ_of, synthetic_case, Network, Registered,
-};
+use experiment::case::{ar_scenario, case_methods, compare, synthetic_case, Network, Registered};
 use experiment::picture::side_view;
+use experiment::setup::{fem_setup, network_setup, RegistrationSetup};
 use mesh::io::{write_atomic_bytes, Field};
 use mesh::Point;
 use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
-use register::{
-    register_sequence, Deformer, FemDeformer, Organ, RegistrationOptions, RigidOptions, RigidResult, RigidTransform,
-    Summary,
-};
+use register::{register_sequence, Organ, RegistrationOptions, RigidOptions, RigidResult, RigidTransform, Summary};
 use scenario::registration::{slug, MethodKind, BUILTIN_CASE};
 use serde::Serialize;
 
 use crate::solve::ms;
-use scenario::{CaseScenario, DatasetScenario, StaticScenario};
+use scenario::{CaseScenario, DatasetScenario};
 
 /// Arguments of `augsim register`.
 #[derive(clap::Args)]
@@ -101,14 +97,6 @@ struct RunSummary {
     per_frame: Vec<FrameSummary>,
 }
 
-/// The organ, its deformer and default targets.
-pub(crate) struct Setup {
-    pub organ: Organ,
-    pub deformer: Box<dyn Deformer + Send>,
-    pub method: String,
-    pub default_targets: Vec<Point>,
-}
-
 /// Runs the registration and writes the outputs.
 pub fn run(args: &RegisterArgs) -> Result<()> {
     if args.demo || args.case.is_some() {
@@ -122,7 +110,7 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
     } else {
         bail!("give --fem SCENARIO or --model MODEL --scenario SCENARIO (or --demo)");
     };
-    let Setup { organ, mut deformer, method, default_targets } = setup;
+    let RegistrationSetup { organ, mut deformer, method, default_targets } = setup;
     let targets = match &args.targets {
         Some(p) => read_targets(p)?,
         None => default_targets,
@@ -286,35 +274,6 @@ fn write_targets(path: &Path, rest: &[Point], registered: &[Point]) -> Result<()
         text.push_str(&format!("{},{},{},{},{},{}\n", a[0], a[1], a[2], b[0], b[1], b[2]));
     }
     Ok(write_atomic_bytes(path, text.as_bytes())?)
-}
-
-/// Rest positions of the nodes of the `markers` and `tumour` regions, when the mesh has them.
-fn region_targets(m: &mesh::Mesh) -> Vec<Point> {
-    ["markers", "tumour"].iter().filter_map(|r| m.region(r).ok()).flatten().map(|&n| m.nodes[n]).collect()
-}
-
-pub(crate) fn fem_setup(path: &Path) -> Result<Setup> {
-    let (scenario, dir) = StaticScenario::load(path)?;
-    let problem = scenario.build_problem(&dir)?;
-    let organ = organ_of(&scenario.mesh, problem.mesh.clone())?;
-    let default_targets = region_targets(&problem.mesh);
-    let method = format!("FEM, {:?} ({:?} elements)", problem.material.law, problem.material.resolved_formulation());
-    let stiffness = FemDeformer::default_stiffness(&problem);
-    let deformer = Box::new(FemDeformer::new(problem, stiffness, scenario.solver.clone())?);
-    Ok(Setup { organ, deformer, method, default_targets })
-}
-
-pub(crate) fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<Setup> {
-    let (scenario, dir) = DatasetScenario::load(scenario_path)?;
-    let model = learn::TrainedModel::load(model_path, &learn::inference_device())?;
-    let (organ, deformer) = network_model(&Network { model: &model, scenario: &scenario, dir: &dir })?;
-    let default_targets = region_targets(organ.mesh());
-    Ok(Setup {
-        organ,
-        deformer: Box::new(deformer),
-        method: format!("U-Net {}", model_path.display()),
-        default_targets,
-    })
 }
 
 /// The shipped network for the built-in phantom (trained by the built-in `liver_ar` scenario).

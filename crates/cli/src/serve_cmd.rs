@@ -9,7 +9,7 @@ use anyhow::{bail, Context, Result};
 use live::{ClientRegistration, Outputs, ServeOptions};
 use register::RegistrationOptions;
 
-use crate::register_cmd::{fem_setup, network_setup, Setup};
+use experiment::setup::{fem_setup, network_setup, RegistrationSetup};
 
 /// Options of `augsim serve`.
 #[derive(Debug, clap::Args)]
@@ -44,7 +44,7 @@ pub struct ServeArgs {
 }
 
 /// The registration of `(fem scenario, model, dataset scenario)`: the FEM's or the network's.
-fn setup(method: &(Option<PathBuf>, Option<PathBuf>, Option<PathBuf>)) -> Result<Setup> {
+fn setup(method: &(Option<PathBuf>, Option<PathBuf>, Option<PathBuf>)) -> Result<RegistrationSetup> {
     match method {
         (Some(fem), _, _) => fem_setup(fem),
         (None, Some(model), Some(scenario)) => network_setup(model, scenario),
@@ -62,11 +62,7 @@ extern "C" fn request_stop(_: libc::c_int) {
 
 /// Runs `augsim serve` until SIGINT or SIGTERM.
 pub fn run(args: &ServeArgs) -> Result<()> {
-    let unit = match args.units.as_str() {
-        "mm" => 1e-3,
-        "m" => 1.0,
-        other => bail!("--units must be mm or m, got '{other}'"),
-    };
+    let unit = live::metres_per_unit(&args.units).map_err(anyhow::Error::msg).context("--units")?;
     let outputs = Outputs::parse(&args.outputs).map_err(anyhow::Error::msg).context("--outputs")?;
     let method = (args.fem.clone(), args.model.clone(), args.scenario.clone());
     // Built once here so that a bad model or scenario stops the command before it listens.

@@ -59,7 +59,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
 
 /// The scene of a dataset sample with the model's prediction.
 fn sample_scene(args: &ViewArgs, model_path: &Path, dataset_dir: &Path) -> Result<Scene> {
-    let model_json = if model_path.is_dir() { model_path.join("model.json") } else { model_path.to_path_buf() };
+    let model_json = TrainedModel::json_path(model_path);
     let model = TrainedModel::load(&model_json, &learn::inference_device())?;
     let dataset = Dataset::open(dataset_dir)?;
     let manifest = dataset.manifest();

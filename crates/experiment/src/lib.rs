@@ -7,6 +7,7 @@
 //! - [`case`], [`simulate`], [`picture`]: synthetic registration cases on the phantom (truth
 //!   from a finer mesh and another law, a simulated camera cloud), the comparison of methods,
 //!   side-view pictures.
+//! - [`setup`]: a registration method (FEM or U-Net) from its scenario and model files.
 //! - [`curve`], [`sample_view`]: the learning curve as PNG; a dataset sample and a model's
 //!   prediction in the 3D viewer.
 //! - The published experiments ([`run`], [`Name`]): each generates its data, trains,
@@ -36,6 +37,7 @@ pub mod picture;
 mod registration;
 pub mod report;
 pub mod sample_view;
+pub mod setup;
 pub mod simulate;
 mod transfer;
 

@@ -28,7 +28,7 @@ use openigtlink_rust::protocol::header::Header;
 use openigtlink_rust::protocol::types::{PointElement, PointMessage, PolyDataMessage, StringMessage};
 use openigtlink_rust::protocol::{calculate_crc, IgtlMessage, Message};
 use register::organ::displaced;
-use register::{register_frame, Deformer, Organ, RegistrationOptions, Stencil};
+use register::{register_frame, Deformer, FrameResult, Organ, RegistrationOptions, Stencil};
 
 /// Errors of the server.
 #[derive(Debug, thiserror::Error)]
@@ -113,6 +113,59 @@ pub struct ClientRegistration {
 
 /// Builds a new client's [`ClientRegistration`].
 pub type RegistrationFactory = dyn Fn() -> std::result::Result<ClientRegistration, String> + Send + Sync;
+
+/// Metres per unit of a unit's name: `mm` (as 3D Slicer uses) or `m`.
+pub fn metres_per_unit(units: &str) -> std::result::Result<f64, String> {
+    match units {
+        "mm" => Ok(1e-3),
+        "m" => Ok(1.0),
+        other => Err(format!("must be mm or m, got '{other}'")),
+    }
+}
+
+/// A [`ClientRegistration`] under way: its targets located in the organ, each frame
+/// warm-started from the previous one (what the server does for each client).
+pub struct WarmRegistration {
+    registration: ClientRegistration,
+    stencils: Vec<Stencil>,
+    warm: Option<Vec<f64>>,
+}
+
+/// One registered frame.
+pub struct RegisteredFrame {
+    /// The registration (displacement of the organ's nodes, iterations, residual, time; in m).
+    pub result: FrameResult,
+    /// The registered targets, in the order given (m).
+    pub targets: Vec<Point>,
+}
+
+impl WarmRegistration {
+    /// Locates the targets of `registration` in its organ (an error for a target outside it).
+    pub fn new(registration: ClientRegistration) -> register::Result<WarmRegistration> {
+        let stencils = registration.organ.locate(&registration.targets, "target")?;
+        Ok(WarmRegistration { registration, stencils, warm: None })
+    }
+
+    /// Registers `cloud` (m), starting from the previous frame's displacement, which it then
+    /// replaces; a failed frame leaves the warm start as it was.
+    pub fn register(&mut self, cloud: &[Point]) -> register::Result<RegisteredFrame> {
+        let r = &mut self.registration;
+        let result = register_frame(&r.organ, r.deformer.as_mut(), cloud, self.warm.as_deref(), &r.options)?;
+        let targets = displaced(&r.targets, &self.stencils, &result.u);
+        self.warm = Some(result.u.clone());
+        Ok(RegisteredFrame { result, targets })
+    }
+
+    /// Forgets the previous frame: the next one starts from the rest shape.
+    pub fn reset(&mut self) {
+        self.warm = None;
+    }
+
+    /// The registration's organ, targets and settings.
+    pub fn registration(&self) -> &ClientRegistration {
+        &self.registration
+    }
+}
 
 /// How long the accept loop sleeps between checks of the stop flag.
 const POLL: Duration = Duration::from_millis(20);
@@ -320,7 +373,7 @@ pub fn decode_body<T: Message>(header: &Header, body: &[u8]) -> std::result::Res
 
 /// Registers the newest cloud, frame after frame, until the connection ends.
 fn register_clouds(shared: &Shared, factory: &RegistrationFactory) {
-    let mut registration = match factory() {
+    let registration = match factory() {
         Ok(s) => s,
         Err(e) => {
             shared.send_status(&serde_json::json!({ "error": format!("setting up the registration: {e}") }));
@@ -328,15 +381,14 @@ fn register_clouds(shared: &Shared, factory: &RegistrationFactory) {
             return;
         }
     };
-    let stencils = match registration.organ.locate(&registration.targets, "target") {
-        Ok(s) => s,
+    let mut registration = match WarmRegistration::new(registration) {
+        Ok(r) => r,
         Err(e) => {
             shared.send_status(&serde_json::json!({ "error": e.to_string() }));
             shared.close();
             return;
         }
     };
-    let mut warm: Option<Vec<f64>> = None;
     loop {
         let (frame, cloud) = {
             let mut waiting = shared.waiting.lock().unwrap_or_else(|e| e.into_inner());
@@ -350,7 +402,7 @@ fn register_clouds(shared: &Shared, factory: &RegistrationFactory) {
                 waiting = shared.arrived.wait(waiting).unwrap_or_else(|e| e.into_inner());
             }
         };
-        if let Err(e) = answer(shared, &mut registration, &stencils, &mut warm, frame, &cloud) {
+        if let Err(e) = answer(shared, &mut registration, frame, &cloud) {
             shared.send_status(&serde_json::json!({ "frame": frame, "error": e }));
         }
     }
@@ -359,9 +411,7 @@ fn register_clouds(shared: &Shared, factory: &RegistrationFactory) {
 /// Registers one cloud and sends the chosen answers.
 fn answer(
     shared: &Shared,
-    registration: &mut ClientRegistration,
-    stencils: &[Stencil],
-    warm: &mut Option<Vec<f64>>,
+    registration: &mut WarmRegistration,
     frame: u64,
     cloud: &[Point],
 ) -> std::result::Result<(), String> {
@@ -370,19 +420,11 @@ fn answer(
         return Err(format!("cloud of {} points exceeds the limit of {}", cloud.len(), options.max_points));
     }
     let start = Instant::now();
-    let result = register_frame(
-        &registration.organ,
-        registration.deformer.as_mut(),
-        cloud,
-        warm.as_deref(),
-        &registration.options,
-    )
-    .map_err(|e| e.to_string())?;
+    let RegisteredFrame { result, targets } = registration.register(cloud).map_err(|e| e.to_string())?;
     let unit = options.unit;
     let to_wire = |p: &Point| p.map(|x| (x / unit) as f32);
     if options.outputs.targets {
-        let registered = displaced(&registration.targets, stencils, &result.u);
-        let points = registered
+        let points = targets
             .iter()
             .enumerate()
             .map(|(k, p)| PointElement::new(format!("target {}", k + 1), "targets", to_wire(p)))
@@ -390,7 +432,7 @@ fn answer(
         shared.send(PointMessage::new(points), "targets")?;
     }
     if options.outputs.organ {
-        let surface = registration.organ.deformed_surface(&result.u);
+        let surface = registration.registration().organ.deformed_surface(&result.u);
         let polygons = surface.triangles.iter().flat_map(|t| [3, t[0] as u32, t[1] as u32, t[2] as u32]).collect();
         let organ = PolyDataMessage::new(surface.vertices.iter().map(to_wire).collect()).with_polygons(polygons);
         shared.send(organ, "organ")?;
@@ -403,6 +445,5 @@ fn answer(
         "points": result.points,
         "iterations": result.iterations,
     }));
-    *warm = Some(result.u);
     Ok(())
 }

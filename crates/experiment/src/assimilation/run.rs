@@ -414,6 +414,42 @@ impl Experiment {
             .context(|| "building the FEM model".into())
     }
 
+    /// The filter at its prior, over the FEM model, configured as the scenario says: step it with
+    /// the measurements of [`observations`](Self::observations) (or others of the same points).
+    pub fn filter(&self) -> Result<Roukf<FemModel>, AssimilationError> {
+        let config = RoukfConfig {
+            parameters: self.unknowns.specs.clone(),
+            observation_std: ObservationNoise::Uniform(self.filter_std),
+            execution: self.scenario.filter.execution,
+            forgetting: self.scenario.filter.forgetting,
+            sigma_points: self.scenario.filter.sigma_points,
+        };
+        let model = self.model(self.base.clone(), self.unknowns.parameters.clone())?;
+        let initial = model.initial_state();
+        let filter = &self.scenario.filter;
+        Roukf::new(model, initial, config)
+            .and_then(|f| f.with_discrepancy(filter.discrepancy, filter.discrepancy_dof))
+            .context(|| "configuring the filter".into())
+    }
+
+    /// The measurements of steps 1, 2, …: the observed points' positions stacked (x, y, z per
+    /// point, m), and which components were measured.
+    pub fn observations(&self) -> impl Iterator<Item = (&DVector<f64>, &[bool])> {
+        self.measurements.iter().map(|f| (&f.z, f.available.as_slice()))
+    }
+
+    /// Rest positions of the observed points, in the order of the measurements.
+    pub fn observed_points(&self) -> Vec<Point> {
+        let rest = vec![0.0; self.base.num_dofs()];
+        self.observed.iter().map(|t| t.position(&self.base.mesh.nodes, &rest)).collect()
+    }
+
+    /// The scenario's values of the estimated parameters, in filter order (the truth of
+    /// synthetic observations).
+    pub fn scenario_values(&self) -> &[f64] {
+        &self.unknowns.truth
+    }
+
     /// Writes the synthetic observations into `dir` (`observations.csv`, and `assessment.csv` and `controls.csv`
     /// when there are such points): track files another experiment can read, e.g. on another mesh. Nothing is
     /// written for observations read from files.
@@ -433,19 +469,7 @@ impl Experiment {
         let nodes = &self.base.mesh.nodes;
         let comparisons = self.comparisons()?;
 
-        let config = RoukfConfig {
-            parameters: self.unknowns.specs.clone(),
-            observation_std: ObservationNoise::Uniform(self.filter_std),
-            execution: self.scenario.filter.execution,
-            forgetting: self.scenario.filter.forgetting,
-            sigma_points: self.scenario.filter.sigma_points,
-        };
-        let model = self.model(self.base.clone(), self.unknowns.parameters.clone())?;
-        let initial = model.initial_state();
-        let filter = &self.scenario.filter;
-        let mut roukf = Roukf::new(model, initial, config)
-            .and_then(|f| f.with_discrepancy(filter.discrepancy, filter.discrepancy_dof))
-            .context(|| "configuring the filter".into())?;
+        let mut roukf = self.filter()?;
         let mut estimated_errors = Vec::with_capacity(iterations);
         let mut newton = 0usize;
         let mut spent = FilterTimes::default();

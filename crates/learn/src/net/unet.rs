@@ -495,6 +495,15 @@ impl TrainedModel {
         samples.select(&positions)
     }
 
+    /// The model JSON of `path`: `path/model.json` for a model directory, else `path` itself.
+    pub fn json_path(path: &Path) -> PathBuf {
+        if path.is_dir() {
+            path.join("model.json")
+        } else {
+            path.to_path_buf()
+        }
+    }
+
     /// Loads a model saved by [`save`](Self::save) onto `device`.
     pub fn load(json_path: &Path, device: &Device) -> Result<TrainedModel> {
         let text = std::fs::read_to_string(json_path).map_err(|e| LearnError::io(json_path, e))?;

@@ -1,0 +1,442 @@
+//! `augsim._augsim`, the native module of augsim's Python package (`python/`, built by maturin):
+//! static solves, registration of point clouds with a warm start between frames, U-Net
+//! predictions and the ROUKF one step at a time. Every call reuses what the command line does
+//! (scenario loaders, `experiment::setup`, `live::WarmRegistration`, `experiment::assimilation`);
+//! long computations run without the GIL, and augsim's errors, panics included, arrive in Python
+//! as `augsim.AugsimError` with augsim's message.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::PathBuf;
+use std::sync::{Mutex, MutexGuard};
+
+use experiment::assimilation::Experiment;
+use experiment::setup::{fem_setup, network_setup};
+use fem::{post, StaticSolver};
+use filter::{FemModel, Roukf};
+use learn::data::npy::{NpyArray, NpyData};
+use learn::{PointCloud, PredictInput, TrainedModel};
+use live::{ClientRegistration, RegisteredFrame, WarmRegistration};
+use mesh::Point;
+use nalgebra::DVector;
+use numpy::ndarray::{Array2, Array3, ArrayD, IxDyn};
+use numpy::{AllowTypeChange, IntoPyArray, PyArray2, PyArray3, PyArrayDyn, PyArrayLikeDyn};
+use pyo3::create_exception;
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use register::RegistrationOptions;
+use scenario::{AssimilationScenario, StaticScenario};
+
+create_exception!(
+    _augsim,
+    AugsimError,
+    PyRuntimeError,
+    "An error reported by augsim: a file that cannot be read, an invalid scenario, cloud or \
+     model, a solve that failed. Its message is augsim's."
+);
+
+/// Runs `f` without the GIL; its error, or a panic, becomes an [`AugsimError`].
+fn compute<T: Send>(py: Python<'_>, f: impl FnOnce() -> anyhow::Result<T> + Send) -> PyResult<T> {
+    match py.detach(|| catch_unwind(AssertUnwindSafe(f))) {
+        Ok(Ok(value)) => Ok(value),
+        Ok(Err(e)) => Err(AugsimError::new_err(format!("{e:#}"))),
+        Err(panic) => {
+            let message = panic
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| panic.downcast_ref::<&str>().copied())
+                .unwrap_or("no message");
+            Err(AugsimError::new_err(format!("internal error (a bug in augsim): {message}")))
+        }
+    }
+}
+
+/// The state behind `lock`; an error when an earlier call panicked while holding it.
+fn locked<T>(lock: &Mutex<T>) -> anyhow::Result<MutexGuard<'_, T>> {
+    lock.lock().map_err(|_| anyhow::anyhow!("an earlier call failed inside augsim: build a new object"))
+}
+
+/// The values of an array-like (converted to float64) with its shape.
+fn array(value: &Bound<'_, PyAny>, what: &str) -> PyResult<(Vec<usize>, Vec<f64>)> {
+    let a: PyArrayLikeDyn<'_, f64, AllowTypeChange> =
+        value.extract().map_err(|e| PyValueError::new_err(format!("{what} must be an array of numbers: {e}")))?;
+    let values = a.as_array();
+    Ok((values.shape().to_vec(), values.iter().copied().collect()))
+}
+
+/// Points from an array of shape `[N, 3]`, each coordinate multiplied by `scale`.
+fn points(value: &Bound<'_, PyAny>, what: &str, scale: f64) -> PyResult<Vec<Point>> {
+    let (shape, values) = array(value, what)?;
+    if shape.len() != 2 || shape[1] != 3 {
+        return Err(PyValueError::new_err(format!("{what} must have shape [N, 3], got {shape:?}")));
+    }
+    Ok(values.chunks_exact(3).map(|p| [p[0] * scale, p[1] * scale, p[2] * scale]).collect())
+}
+
+/// An `[N, 3]` array of nodal vectors (3 values per node), each divided by `unit`.
+fn nodal<'py>(py: Python<'py>, values: &[f64], unit: f64) -> Bound<'py, PyArray2<f64>> {
+    let scaled = values.iter().map(|v| v / unit).collect();
+    Array2::from_shape_vec((values.len() / 3, 3), scaled).expect("3 values per node").into_pyarray(py)
+}
+
+/// An `[N, 3]` array of points, each coordinate divided by `unit`.
+fn point_array<'py>(py: Python<'py>, points: &[Point], unit: f64) -> Bound<'py, PyArray2<f64>> {
+    nodal(py, points.as_flattened(), unit)
+}
+
+/// The result of a static solve (m).
+#[pyclass(frozen, module = "augsim")]
+struct Solution {
+    /// Rest positions of the mesh's nodes, float64 [n, 3] (m).
+    #[pyo3(get)]
+    points: Py<PyArray2<f64>>,
+    /// Displacement of each node, float64 [n, 3] (m).
+    #[pyo3(get)]
+    displacement: Py<PyArray2<f64>>,
+    /// Solver iterations over all load steps.
+    #[pyo3(get)]
+    iterations: usize,
+    /// Load steps taken.
+    #[pyo3(get)]
+    load_steps: usize,
+    /// Numeric factorisations of the tangent stiffness.
+    #[pyo3(get)]
+    factorizations: usize,
+    /// Final relative residual |r| / max(|f_ext|, |f_int|).
+    #[pyo3(get)]
+    residual: f64,
+    /// Largest nodal displacement (m).
+    #[pyo3(get)]
+    max_displacement: f64,
+    /// Wall time of the solve (ms).
+    #[pyo3(get)]
+    ms: f64,
+}
+
+/// Solves a static scenario as `augsim solve` does.
+///
+/// `scenario`: a scenario file (TOML, `kind = "static"`) or the name of a built-in one (`beam`,
+/// `liver`, ...). Returns a `Solution` (`points`, `displacement`, `iterations`, ...). Raises
+/// `AugsimError` when the scenario cannot be read or the solve fails to converge.
+#[pyfunction]
+fn solve(py: Python<'_>, scenario: PathBuf) -> PyResult<Solution> {
+    let (nodes, sol) = compute(py, || {
+        let (scenario, dir) = StaticScenario::load(&scenario)?;
+        let problem = scenario.build_problem(&dir)?;
+        let nodes = problem.mesh.nodes.clone();
+        Ok((nodes, StaticSolver::new(problem)?.solve(&scenario.solver)?))
+    })?;
+    Ok(Solution {
+        points: point_array(py, &nodes, 1.0).unbind(),
+        displacement: nodal(py, &sol.u, 1.0).unbind(),
+        iterations: sol.iterations,
+        load_steps: sol.load_steps,
+        factorizations: sol.factorizations,
+        residual: sol.residuals.last().copied().unwrap_or(0.0),
+        max_displacement: post::max_displacement(&sol.u),
+        ms: sol.timings.total.as_secs_f64() * 1e3,
+    })
+}
+
+/// A registered cloud, in the registration's units.
+#[pyclass(frozen, module = "augsim")]
+struct Registered {
+    /// The registered targets, float64 [k, 3], in the order given.
+    #[pyo3(get)]
+    targets: Py<PyArray2<f64>>,
+    /// Displacement of the organ's nodes, float64 [n, 3] (rest positions: `Registration.points`).
+    #[pyo3(get)]
+    displacement: Py<PyArray2<f64>>,
+    /// Mean distance from the cloud's matched points to the registered surface.
+    #[pyo3(get)]
+    surface_residual: f64,
+    /// Cloud points matched (outliers rejected) in the last iteration.
+    #[pyo3(get)]
+    inliers: usize,
+    /// Points in the cloud.
+    #[pyo3(get)]
+    points: usize,
+    /// Match-and-deform iterations.
+    #[pyo3(get)]
+    iterations: usize,
+    /// Wall time of the registration (ms).
+    #[pyo3(get)]
+    ms: f64,
+}
+
+/// Registration of intraoperative point clouds, as `augsim serve` does for each client: each
+/// cloud is warm-started from the previous one's registration.
+///
+/// Either `fem`: a static scenario (file or built-in name, e.g. `liver`) whose FEM deforms the
+/// organ; or `model` (a model directory or its model.json) with `scenario`, the dataset scenario
+/// it was trained on (e.g. `liver_ar`). `targets`: rest positions, a CSV file (x, y, z) or an
+/// array [k, 3], in `units`; default: the mesh's `markers` and `tumour` nodes. `units`: "m" or
+/// "mm", of the targets, every cloud and every result. `iterations`: most match-and-deform
+/// iterations per cloud (default: the library's).
+#[pyclass(module = "augsim")]
+struct Registration {
+    state: Mutex<WarmRegistration>,
+    unit: f64,
+    /// The method in words (e.g. "FEM, Corotational (Standard elements)").
+    #[pyo3(get)]
+    method: String,
+    /// The units of clouds, targets and results ("m" or "mm").
+    #[pyo3(get)]
+    units: String,
+}
+
+#[pymethods]
+impl Registration {
+    #[new]
+    #[pyo3(signature = (*, fem=None, model=None, scenario=None, targets=None, units="m", iterations=None))]
+    fn new(
+        py: Python<'_>,
+        fem: Option<PathBuf>,
+        model: Option<PathBuf>,
+        scenario: Option<PathBuf>,
+        targets: Option<&Bound<'_, PyAny>>,
+        units: &str,
+        iterations: Option<usize>,
+    ) -> PyResult<Self> {
+        let unit = live::metres_per_unit(units).map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
+        let given: Option<Result<PathBuf, Vec<Point>>> = match targets {
+            None => None,
+            Some(t) => Some(match t.extract::<PathBuf>() {
+                Ok(path) => Ok(path),
+                Err(_) => Err(points(t, "targets", unit)?),
+            }),
+        };
+        let method = match (fem, model, scenario) {
+            (Some(fem), None, None) => Ok(fem),
+            (None, Some(model), Some(scenario)) => Err((model, scenario)),
+            _ => return Err(PyValueError::new_err("give fem=SCENARIO, or model=MODEL with scenario=SCENARIO")),
+        };
+        let mut options = RegistrationOptions::default();
+        if let Some(n) = iterations {
+            options.iterations = n;
+        }
+        let (state, method) = compute(py, move || {
+            options.validate()?;
+            let setup = match method {
+                Ok(fem) => fem_setup(&fem)?,
+                Err((model, scenario)) => network_setup(&TrainedModel::json_path(&model), &scenario)?,
+            };
+            let targets = match given {
+                None => setup.default_targets,
+                Some(Ok(path)) => {
+                    register::cloud::read_targets(&path)?.into_iter().map(|p| p.map(|x| x * unit)).collect()
+                }
+                Some(Err(points)) => points,
+            };
+            if targets.is_empty() {
+                anyhow::bail!("no targets: give targets, or a mesh with `markers` or `tumour` regions");
+            }
+            let registration = ClientRegistration { organ: setup.organ, deformer: setup.deformer, targets, options };
+            Ok((WarmRegistration::new(registration)?, setup.method))
+        })?;
+        Ok(Registration { state: Mutex::new(state), unit, method, units: units.to_string() })
+    }
+
+    /// Registers a cloud of positions, float [N, 3] in `units` (no correspondences needed),
+    /// starting from the previous cloud's registration. Returns a `Registered` (`targets`,
+    /// `displacement`, `surface_residual`, `inliers`, `iterations`, `ms`). Raises ValueError for
+    /// an array of another shape, AugsimError for a cloud augsim rejects (no point, a NaN) or a
+    /// failed registration (the warm start is then kept).
+    fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>) -> PyResult<Registered> {
+        let cloud = points(cloud, "cloud", self.unit)?;
+        let RegisteredFrame { result, targets } = compute(py, || Ok(locked(&self.state)?.register(&cloud)?))?;
+        Ok(Registered {
+            targets: point_array(py, &targets, self.unit).unbind(),
+            displacement: nodal(py, &result.u, self.unit).unbind(),
+            surface_residual: result.surface_residual / self.unit,
+            inliers: result.inliers,
+            points: result.points,
+            iterations: result.iterations,
+            ms: result.time.as_secs_f64() * 1e3,
+        })
+    }
+
+    /// Forgets the previous cloud: the next one is registered from the organ at rest (a FEM
+    /// keeps its solver's factorisation, which changes the result slightly: 0.06 mm on the tests' case).
+    fn reset(&self, py: Python<'_>) -> PyResult<()> {
+        compute(py, || {
+            locked(&self.state)?.reset();
+            Ok(())
+        })
+    }
+
+    /// Rest positions of the organ's nodes, float64 [n, 3], in `units`.
+    #[getter]
+    fn points<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let nodes = compute(py, || Ok(locked(&self.state)?.registration().organ.mesh().nodes.clone()))?;
+        Ok(point_array(py, &nodes, self.unit))
+    }
+
+    /// Rest positions of the targets, float64 [k, 3], in `units`.
+    #[getter]
+    fn targets<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let targets = compute(py, || Ok(locked(&self.state)?.registration().targets.clone()))?;
+        Ok(point_array(py, &targets, self.unit))
+    }
+}
+
+/// Predicts with a trained U-Net, as `augsim predict` does.
+///
+/// `model`: a model directory or its model.json. `input`: a grid tensor [3, nx, ny, nz] on the
+/// model's grid, in the model's input unit; or a point cloud [N, 6] (x, y, z in m and the vector
+/// in the model's input unit) that is put on the grid. Returns the displacement, float32
+/// [3, nx, ny, nz] (m), meaningful inside the organ. Raises ValueError for an empty cloud,
+/// AugsimError for an unreadable model or an input that does not fit it.
+#[pyfunction]
+fn predict<'py>(py: Python<'py>, model: PathBuf, input: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let (shape, values) = array(input, "input")?;
+    let input = match shape.as_slice() {
+        [0, 6] => return Err(PyValueError::new_err("input: a point cloud without points")),
+        [_, 6] => PredictInput::Points(PointCloud::from_rows(
+            &values.chunks_exact(6).map(|r| std::array::from_fn(|i| r[i])).collect::<Vec<_>>(),
+        )),
+        _ => PredictInput::Grid(NpyArray {
+            shape: shape.clone(),
+            data: NpyData::F32(values.iter().map(|&v| v as f32).collect()),
+        }),
+    };
+    let (grid, prediction) = compute(py, || {
+        let path = TrainedModel::json_path(&model);
+        let model = TrainedModel::load(&path, &learn::inference_device())?;
+        let data = input.into_network_input(&model)?;
+        Ok((model.grid, model.predict(&data)?))
+    })?;
+    let array = ArrayD::from_shape_vec(IxDyn(&[3, grid.nx, grid.ny, grid.nz]), prediction)
+        .map_err(|e| AugsimError::new_err(format!("prediction of an unexpected size: {e}")))?;
+    Ok(array.into_pyarray(py))
+}
+
+/// The filter's estimate after a step.
+#[pyclass(frozen, module = "augsim")]
+struct Estimate {
+    /// Filter iterations done.
+    #[pyo3(get)]
+    iteration: usize,
+    /// The parameters' estimate (physical units; `Assimilation.names` says which).
+    #[pyo3(get)]
+    mean: Vec<f64>,
+    /// Their standard deviations.
+    #[pyo3(get)]
+    std: Vec<f64>,
+    /// Norm of the innovation of the step (m), over the measured components.
+    #[pyo3(get)]
+    innovation: f64,
+}
+
+/// The ROUKF of an assimilation scenario, one step at a time.
+///
+/// `scenario`: an assimilation scenario file or built-in name (`roukf_young`, `roukf_springs`).
+/// Building it runs the scenario's reference simulation, whose synthetic measurements are
+/// `observations`; `iterations` overrides the scenario's number of steps. Each `step` takes the
+/// measured positions of the observed points at the next time step of the scenario's loading.
+#[pyclass(module = "augsim")]
+struct Assimilation {
+    experiment: Experiment,
+    filter: Mutex<Roukf<FemModel>>,
+    /// The estimated parameters' names, in order (`young`, `k_<node>` for a spring).
+    #[pyo3(get)]
+    names: Vec<String>,
+}
+
+#[pymethods]
+impl Assimilation {
+    #[new]
+    #[pyo3(signature = (scenario, *, iterations=None))]
+    fn new(py: Python<'_>, scenario: PathBuf, iterations: Option<usize>) -> PyResult<Self> {
+        let (experiment, filter) = compute(py, || {
+            let (mut sc, dir) = AssimilationScenario::load(&scenario)?;
+            if iterations.is_some() {
+                sc.iterations = iterations;
+            }
+            let experiment = Experiment::prepare(sc, &dir, None)?;
+            let filter = experiment.filter()?;
+            Ok((experiment, filter))
+        })?;
+        let names = filter.config().parameters.iter().map(|p| p.name.clone()).collect();
+        Ok(Assimilation { experiment, filter: Mutex::new(filter), names })
+    }
+
+    /// One filter step with the measured positions of the observed points, float [p, 3] (m,
+    /// in the order of `observed_points`; NaN for a point not seen). Returns the `Estimate`
+    /// after it. Raises ValueError for another shape, AugsimError when the step fails.
+    fn step(&self, py: Python<'_>, observation: &Bound<'_, PyAny>) -> PyResult<Estimate> {
+        let (shape, z) = array(observation, "observation")?;
+        let p = self.experiment.setup().features;
+        if shape != [p, 3] {
+            return Err(PyValueError::new_err(format!("observation must have shape [{p}, 3], got {shape:?}")));
+        }
+        compute(py, || {
+            let available: Vec<bool> = z.iter().map(|v| !v.is_nan()).collect();
+            let mut filter = locked(&self.filter)?;
+            let record = filter.step_partial(&DVector::from_vec(z), &available)?;
+            let innovation = record.innovation_norm.unwrap_or(0.0);
+            Ok(Estimate {
+                iteration: filter.iteration(),
+                mean: filter.mean_physical(),
+                std: filter.std_physical(),
+                innovation,
+            })
+        })
+    }
+
+    /// The current estimate of the parameters (physical units), in the order of `names`.
+    #[getter]
+    fn mean(&self, py: Python<'_>) -> PyResult<Vec<f64>> {
+        compute(py, || Ok(locked(&self.filter)?.mean_physical()))
+    }
+
+    /// The current standard deviations of the parameters.
+    #[getter]
+    fn std(&self, py: Python<'_>) -> PyResult<Vec<f64>> {
+        compute(py, || Ok(locked(&self.filter)?.std_physical()))
+    }
+
+    /// Filter steps done.
+    #[getter]
+    fn iteration(&self, py: Python<'_>) -> PyResult<usize> {
+        compute(py, || Ok(locked(&self.filter)?.iteration()))
+    }
+
+    /// The scenario's values of the parameters, in the order of `names`: the truth behind
+    /// `observations`.
+    #[getter]
+    fn scenario_values(&self) -> Vec<f64> {
+        self.experiment.scenario_values().to_vec()
+    }
+
+    /// Rest positions of the observed points, float64 [p, 3] (m).
+    #[getter]
+    fn observed_points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        point_array(py, &self.experiment.observed_points(), 1.0)
+    }
+
+    /// The scenario's synthetic measurements, float64 [steps, p, 3] (m; NaN where not seen).
+    #[getter]
+    fn observations<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {
+        let frames: Vec<(&DVector<f64>, &[bool])> = self.experiment.observations().collect();
+        let values: Vec<f64> = frames
+            .iter()
+            .flat_map(|(z, available)| z.iter().zip(available.iter()).map(|(&v, &a)| if a { v } else { f64::NAN }))
+            .collect();
+        let p = self.experiment.setup().features;
+        Array3::from_shape_vec((frames.len(), p, 3), values).expect("3 values per observed point").into_pyarray(py)
+    }
+}
+
+/// augsim's native module: see the `augsim` package.
+#[pymodule]
+fn _augsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("AugsimError", m.py().get_type::<AugsimError>())?;
+    m.add_function(wrap_pyfunction!(solve, m)?)?;
+    m.add_function(wrap_pyfunction!(predict, m)?)?;
+    m.add_class::<Solution>()?;
+    m.add_class::<Registration>()?;
+    m.add_class::<Registered>()?;
+    m.add_class::<Assimilation>()?;
+    m.add_class::<Estimate>()?;
+    Ok(())
+}

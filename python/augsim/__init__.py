@@ -1,0 +1,30 @@
+"""augsim from Python: static FEM solves, registration of intraoperative point clouds (FEM or
+U-Net, warm-started between clouds), U-Net predictions and the ROUKF one step at a time.
+
+The computations are augsim's own (the same code as the ``augsim`` command line); arrays are
+NumPy float64 unless said otherwise, lengths in metres unless a ``units`` argument says "mm".
+augsim's errors are raised as :class:`AugsimError` with augsim's message; arrays of the wrong
+shape raise :class:`ValueError`. The API is described in ``python/README.md``.
+"""
+
+from ._augsim import (
+    Assimilation,
+    AugsimError,
+    Estimate,
+    Registered,
+    Registration,
+    Solution,
+    predict,
+    solve,
+)
+
+__all__ = [
+    "Assimilation",
+    "AugsimError",
+    "Estimate",
+    "Registered",
+    "Registration",
+    "Solution",
+    "predict",
+    "solve",
+]

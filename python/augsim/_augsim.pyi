@@ -1,0 +1,68 @@
+"""Type stubs of augsim's native module (documentation: the docstrings and python/README.md)."""
+
+import os
+from typing import Optional, Union
+
+import numpy as np
+import numpy.typing as npt
+
+_Path = Union[str, os.PathLike]
+
+class AugsimError(RuntimeError): ...
+
+class Solution:
+    points: npt.NDArray[np.float64]
+    displacement: npt.NDArray[np.float64]
+    iterations: int
+    load_steps: int
+    factorizations: int
+    residual: float
+    max_displacement: float
+    ms: float
+
+def solve(scenario: _Path) -> Solution: ...
+def predict(model: _Path, input: npt.ArrayLike) -> npt.NDArray[np.float32]: ...
+
+class Registered:
+    targets: npt.NDArray[np.float64]
+    displacement: npt.NDArray[np.float64]
+    surface_residual: float
+    inliers: int
+    points: int
+    iterations: int
+    ms: float
+
+class Registration:
+    method: str
+    units: str
+    points: npt.NDArray[np.float64]
+    targets: npt.NDArray[np.float64]
+    def __init__(
+        self,
+        *,
+        fem: Optional[_Path] = None,
+        model: Optional[_Path] = None,
+        scenario: Optional[_Path] = None,
+        targets: Union[_Path, npt.ArrayLike, None] = None,
+        units: str = "m",
+        iterations: Optional[int] = None,
+    ) -> None: ...
+    def register(self, cloud: npt.ArrayLike) -> Registered: ...
+    def reset(self) -> None: ...
+
+class Estimate:
+    iteration: int
+    mean: list[float]
+    std: list[float]
+    innovation: float
+
+class Assimilation:
+    names: list[str]
+    mean: list[float]
+    std: list[float]
+    iteration: int
+    scenario_values: list[float]
+    observed_points: npt.NDArray[np.float64]
+    observations: npt.NDArray[np.float64]
+    def __init__(self, scenario: _Path, *, iterations: Optional[int] = None) -> None: ...
+    def step(self, observation: npt.ArrayLike) -> Estimate: ...

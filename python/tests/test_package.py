@@ -1,0 +1,176 @@
+"""Tests of the `augsim` Python package (pip install ./python): each call against the command
+line's result or a known figure, the warm start between clouds, and the errors.
+
+Run: pytest -s python/tests (the augsim binary: $AUGSIM_BIN, default target/release/augsim;
+`.ci/run` runs them).
+"""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import augsim
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+sys.path.insert(0, os.path.dirname(HERE))
+from test_augsim_unet import augsim_bin  # noqa: E402  (needs no torch)
+from test_serve import MODEL, read_csv  # noqa: E402  (the server test's FEM model and CSV reader)
+
+LIVER_AR = os.path.join(ROOT, "models", "liver_ar")
+BEAM_ASSIMILATION = os.path.join(ROOT, "crates", "experiment", "tests", "data", "beam_assimilation.toml")
+
+
+def run(*args):
+    r = subprocess.run([augsim_bin(), *args], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+    return r.stdout
+
+
+def test_solve_beam_matches_the_command_line(tmp_path):
+    s = augsim.solve("beam")
+    assert s.points.shape == s.displacement.shape == (6 * 6 * 21, 3)
+    assert s.points.dtype == s.displacement.dtype == np.float64
+    out = run("solve", "beam", "-o", str(tmp_path / "beam.vtu"))
+    line = next(l for l in out.splitlines() if l.startswith("max |u|"))
+    cli_max = float(line.split()[2])
+    norms = np.linalg.norm(s.displacement, axis=1)
+    assert norms.max() == pytest.approx(cli_max, rel=1e-4)
+    assert s.max_displacement == pytest.approx(norms.max())
+    assert f"solver     {s.iterations} iterations" in out
+    # Fixed on its bottom face up to x = 1 m, pulled down at x = 4 m: the tip sinks.
+    fixed = (s.points[:, 0] <= 1.0) & (s.points[:, 2] < 0.01)
+    assert fixed.sum() == 6 * 6 and np.abs(s.displacement[fixed]).max() == 0.0
+    tip = s.points[:, 0] > 4.0 - 1e-9
+    assert (s.displacement[tip, 2] < -0.45).all()
+    assert 0 < s.residual < 1e-6 and s.load_steps >= 1
+
+
+@pytest.fixture(scope="module")
+def case(tmp_path_factory):
+    """The server test's case: register_case_test made by `augsim register --case`, in mm."""
+    d = tmp_path_factory.mktemp("case")
+    run("register", "--case", "register_case_test", "--out", str(d))
+    cloud = read_csv(d / "case" / "cloud.csv") * 1e3
+    truth = read_csv(d / "case" / "truth.csv") * 1e3
+    rest = read_csv(d / "case" / "targets_rest.csv") * 1e3
+    targets = d / "targets_mm.csv"
+    np.savetxt(targets, rest, delimiter=",", header="x,y,z", comments="")
+    scenario = d / "model.toml"
+    scenario.write_text(MODEL)
+    return dict(cloud=cloud, truth=truth, rest=rest, targets=targets, scenario=scenario)
+
+
+def test_registration_reduces_the_tre_with_a_warm_start(case):
+    reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm")
+    assert reg.units == "mm" and reg.method.startswith("FEM, Corotational")
+    np.testing.assert_allclose(reg.targets, case["rest"], atol=1e-9)
+    unregistered = np.linalg.norm(case["rest"] - case["truth"], axis=1).mean()
+    rng = np.random.default_rng(1)
+    frames = [reg.register(case["cloud"] + rng.normal(0.0, 0.5, case["cloud"].shape)) for _ in range(4)]
+    tres = [np.linalg.norm(f.targets - case["truth"], axis=1).mean() for f in frames]
+    print(f"\nTRE per frame {', '.join(f'{t:.2f}' for t in tres)} mm (unregistered {unregistered:.2f} mm); "
+          f"iterations {[f.iterations for f in frames]}, {[round(f.ms, 1) for f in frames]} ms", file=sys.stderr)
+    assert max(tres) < 0.3 * unregistered
+    first = frames[0]
+    assert first.targets.shape == case["rest"].shape
+    assert first.displacement.shape == reg.points.shape
+    assert first.points == len(case["cloud"]) and 0 < first.inliers <= first.points
+    assert 0 < first.surface_residual < 2.0  # mm
+    # The warm start: after those frames the noiseless cloud registers otherwise (measured: 0.85 mm
+    # apart) than from rest, as a new Registration does; after reset() it registers from rest
+    # again (measured: 0.06 mm apart, the FEM solver keeping its factorisation).
+    warm = reg.register(case["cloud"])
+    reg.reset()
+    again = reg.register(case["cloud"])
+    fresh = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm").register(case["cloud"])
+    warm_gap, reset_gap = (np.abs(r.targets - fresh.targets).max() for r in (warm, again))
+    print(f"warm vs fresh {warm_gap:.3f} mm, reset vs fresh {reset_gap:.3f} mm", file=sys.stderr)
+    assert warm_gap > 0.3 and reset_gap < 0.25 * warm_gap
+
+
+def test_registration_with_default_targets_in_metres(case):
+    reg = augsim.Registration(fem=case["scenario"], targets=case["rest"] * 1e-3)
+    r = reg.register(case["cloud"] * 1e-3)
+    assert np.linalg.norm(r.targets * 1e3 - case["truth"], axis=1).mean() < 0.3 * np.linalg.norm(
+        case["rest"] - case["truth"], axis=1).mean()
+
+
+def test_registration_with_the_unet(case):
+    reg = augsim.Registration(model=LIVER_AR, scenario="liver_ar", targets=case["rest"], units="mm")
+    assert reg.method.startswith("U-Net")
+    r = reg.register(case["cloud"])
+    unregistered = np.linalg.norm(case["rest"] - case["truth"], axis=1).mean()
+    assert np.linalg.norm(r.targets - case["truth"], axis=1).mean() < 0.5 * unregistered
+
+
+def test_registration_errors(case, tmp_path):
+    reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm")
+    bad = case["cloud"].copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(augsim.AugsimError, match="finite"):
+        reg.register(bad)
+    with pytest.raises(ValueError, match=r"shape \[N, 3\]"):
+        reg.register(case["cloud"][:, :2])
+    with pytest.raises(augsim.AugsimError):
+        reg.register(np.zeros((0, 3)))
+    # The registration goes on after an error.
+    assert reg.register(case["cloud"]).iterations > 0
+    missing = str(tmp_path / "missing.toml")
+    with pytest.raises(augsim.AugsimError, match="missing.toml"):
+        augsim.Registration(fem=missing)
+    with pytest.raises(ValueError, match="units"):
+        augsim.Registration(fem=case["scenario"], units="cm")
+    with pytest.raises(ValueError, match="fem=SCENARIO"):
+        augsim.Registration(model=LIVER_AR)
+    with pytest.raises(augsim.AugsimError, match="target"):
+        augsim.Registration(fem=case["scenario"], targets=[[10.0, 10.0, 10.0]])  # 10 m: outside the organ
+
+
+def test_predict_matches_the_command_line(tmp_path):
+    grid = np.random.default_rng(2).normal(0.0, 1e-3, (3, 24, 24, 16)).astype(np.float32)
+    u = augsim.predict(LIVER_AR, grid)
+    assert u.shape == grid.shape and u.dtype == np.float32
+    np.save(tmp_path / "in.npy", grid)
+    run("predict", os.path.join(LIVER_AR, "model.json"), str(tmp_path / "in.npy"), "-o", str(tmp_path / "out.npy"),
+        "--runs", "1")
+    np.testing.assert_allclose(u, np.load(tmp_path / "out.npy"), rtol=0, atol=1e-7)
+    # A cloud [N, 6]: displacements (m) at points of the organ, put on the grid as the CLI does.
+    organ = augsim.Registration(model=LIVER_AR, scenario="liver_ar").points
+    cloud = np.hstack([organ[::50], np.full((len(organ[::50]), 3), 2e-3)])
+    np.save(tmp_path / "cloud.npy", cloud)
+    run("predict", os.path.join(LIVER_AR, "model.json"), str(tmp_path / "cloud.npy"), "-o",
+        str(tmp_path / "cloud_out.npy"), "--runs", "1")
+    u = augsim.predict(os.path.join(LIVER_AR, "model.json"), cloud)
+    assert np.abs(u).max() > 1e-4
+    np.testing.assert_allclose(u, np.load(tmp_path / "cloud_out.npy"), rtol=0, atol=1e-7)
+    with pytest.raises(ValueError, match="without points"):
+        augsim.predict(LIVER_AR, np.zeros((0, 6)))
+    with pytest.raises(augsim.AugsimError, match=r"\[3, 24, 24, 16\]"):
+        augsim.predict(LIVER_AR, grid[:, :10])
+    with pytest.raises(augsim.AugsimError, match="model.json"):
+        augsim.predict(tmp_path, grid)
+
+
+def test_roukf_converges_to_the_young_modulus():
+    a = augsim.Assimilation(BEAM_ASSIMILATION)
+    assert a.names == ["young"] and a.scenario_values == [5000.0]
+    observations = a.observations
+    assert observations.shape == (8, 10, 3) and a.observed_points.shape == (10, 3)
+    prior = a.mean[0]
+    errors = []
+    for k, z in enumerate(observations, 1):
+        e = a.step(z)
+        assert e.iteration == k == a.iteration and len(e.mean) == len(e.std) == 1
+        errors.append(abs(e.mean[0] - 5000.0))
+    print(f"\nROUKF: E from {prior:.0f} Pa to {a.mean[0]:.1f} ± {a.std[0]:.1f} Pa (truth 5000 Pa)", file=sys.stderr)
+    assert abs(prior - 5000.0) > 1000.0
+    assert errors[-1] < 50.0 and errors[-1] < errors[0]
+    assert a.std[0] < 0.1 * 5000.0
+    with pytest.raises(ValueError, match=r"shape \[10, 3\]"):
+        a.step(observations[0][:5])
+    with pytest.raises(augsim.AugsimError, match="missing"):
+        augsim.Assimilation(os.path.join(ROOT, "missing.toml"))
