@@ -23,8 +23,9 @@ pub fn generate(path: &Path, out: Option<&Path>, part: Option<&str>, samples: Op
     let part = part.map(parse_part).transpose()?;
     let mesh = scenario.mesh(&dir)?;
     println!("scenario   {}: {}", scenario.name, scenario.description);
-    println!("mesh       {} nodes, {} {} cells", mesh.num_nodes(), mesh.cells.len(), mesh.cells.kind_name());
     let generator = Generator::new(mesh, scenario.material, scenario.solver.clone(), scenario.dataset.clone())?;
+    let mesh = generator.mesh();
+    println!("mesh       {} nodes, {} {} cells", mesh.num_nodes(), mesh.cells.len(), mesh.cells.kind_name());
     let grid = generator.grid();
     println!(
         "grid       {} × {} × {} ({} nodes inside)",

@@ -68,7 +68,8 @@ pub struct Material {
     /// Polynomial order of the elements: 1 (the mesh's own cells, default) or 2, quadratic
     /// tetrahedra (T10) made from a T4 mesh by [`Problem::new`](crate::Problem::new). A mesh
     /// read with quadratic cells is solved with them whatever the order.
-    #[serde(default = "linear_order")]
+    /// Not written when 1, so that what linear elements wrote before it existed stays the same.
+    #[serde(default = "linear_order", skip_serializing_if = "is_linear_order")]
     pub order: u8,
     /// Young's modulus in Pa.
     pub young: f64,
@@ -85,6 +86,10 @@ fn default_density() -> f64 {
 
 fn linear_order() -> u8 {
     1
+}
+
+fn is_linear_order(order: &u8) -> bool {
+    *order == 1
 }
 
 impl Material {

@@ -311,6 +311,11 @@ impl Generator {
         })
     }
 
+    /// The mesh the samples are solved on (quadratic with `order = 2`).
+    pub fn mesh(&self) -> &Mesh {
+        &self.mesh
+    }
+
     /// The grid shape of the samples.
     pub fn grid(&self) -> GridShape {
         self.grid
