@@ -230,8 +230,8 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     }
     let reference = solved
         .iter()
-        .filter(|s| s.0 == ELEMENTS[3])
-        .last()
+        .rev()
+        .find(|s| s.0 == ELEMENTS[3])
         .map(|s| s.2.clone())
         .context("no T10 F-bar solve of the phantom")?;
     let scale = rms(&reference);
@@ -349,7 +349,7 @@ fn plot_errors(
                 .filter(|c| c.problem == problem && c.element == label && c.error > 0.0)
                 .map(|c| (x(c), 100.0 * c.error))
                 .collect();
-            (!pts.is_empty()).then(|| plot::Series { name: label, points: pts, band: None })
+            (!pts.is_empty()).then_some(plot::Series { name: label, points: pts, band: None })
         })
         .collect();
     let spec = plot::PlotSpec {
