@@ -44,8 +44,8 @@ fn assimilate(
         };
         *tets = n;
     }
-    let law = scenario.reference.as_ref().and_then(|r| r.law);
-    scenario.reference = Some(ReferenceSpec { mesh: MeshSource::Phantom { tets: reference_tets }, law });
+    let (law, order) = scenario.reference.as_ref().map_or((None, None), |r| (r.law, r.order));
+    scenario.reference = Some(ReferenceSpec { mesh: MeshSource::Phantom { tets: reference_tets }, law, order });
     let reference = scenario.reference_scenario().context("the reference section was just set")?;
     let tracks = dir.join("reference-tracks");
     let stamp = tracks.join("complete.txt");

@@ -147,6 +147,8 @@ pub struct ReferenceSpec {
     pub mesh: MeshSource,
     /// The reference law (default: the scenario's).
     pub law: Option<Law>,
+    /// The reference elements' order, 1 or 2 (quadratic tetrahedra; default: the scenario's).
+    pub order: Option<u8>,
 }
 
 /// Tracked feature points on the visible surface.
@@ -251,6 +253,7 @@ impl AssimilationScenario {
         let mut scenario = self.clone();
         scenario.mesh = reference.mesh.clone();
         scenario.material.law = reference.law.unwrap_or(self.material.law);
+        scenario.material.order = reference.order.unwrap_or(self.material.order);
         scenario.reference = None;
         Some(scenario)
     }
@@ -299,5 +302,35 @@ impl AssimilationScenario {
     /// The output directory: `output.dir`, else `out/<name>`.
     pub fn output_dir(&self) -> PathBuf {
         self.output.dir.clone().unwrap_or_else(|| PathBuf::from("out").join(&self.name))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The reference run takes its own mesh, law and element order, and keeps the rest.
+    #[test]
+    fn the_reference_scenario_takes_its_mesh_law_and_order() {
+        let text = crate::builtin("roukf_young").expect("built in").replace(
+            "[reference.mesh.phantom]",
+            "[reference]\nlaw = \"neo_hookean\"\norder = 2\n\n[reference.mesh.phantom]",
+        );
+        let parse = |t: &str| AssimilationScenario::from_text(&ScenarioText::new(t, Path::new("young.toml")));
+        let scenario = parse(&text).unwrap();
+        let reference = scenario.reference_scenario().unwrap();
+        assert!(matches!(reference.mesh, MeshSource::Phantom { tets: 11000 }));
+        assert_eq!((reference.material.law, reference.material.order), (Law::NeoHookean, 2));
+        assert_eq!((scenario.material.law, scenario.material.order), (Law::Svk, 1));
+        assert_eq!(reference.material.young, scenario.material.young);
+        assert!(reference.reference.is_none());
+        let bad = text.replace("order = 2", "order = 3");
+        let built = parse(&bad).and_then(|s| {
+            s.reference_scenario()
+                .unwrap()
+                .build_problem(mesh::box_tet([0.0; 3], [1.0; 3], [1, 1, 1]).unwrap())
+                .map(|_| ())
+        });
+        assert!(built.is_err_and(|e| e.to_string().contains("order must be 1")), "order 3 accepted");
     }
 }
