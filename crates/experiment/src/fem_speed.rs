@@ -162,11 +162,12 @@ const LIVER_TRACTION: f64 = 800.0;
 const EQUAL_DEFORMATION_LOAD: f64 = 1.2;
 
 /// The built-in phantom (the liver-forces experiment's organ), fixed between the lobes, pressed down on one
-/// lobe by `load` × [`LIVER_TRACTION`]. Only the ~5k-tet phantom has published times (the
-/// published liver's size).
-fn liver(tets: usize, law: Law, formulation: Formulation, load: f64) -> Result<Case> {
+/// lobe by `load` × [`LIVER_TRACTION`], on elements of `order` 1 (T4) or 2 (T10). Only the ~5k-tet T4
+/// phantom has published times (the published liver's size).
+fn liver(tets: usize, order: u8, law: Law, formulation: Formulation, load: f64) -> Result<Case> {
     let m = mesh::phantom::liver_phantom(tets)?;
-    let material = Material::new(law, LIVER_MATERIAL.0, LIVER_MATERIAL.1).with_formulation(formulation);
+    let material =
+        Material::new(law, LIVER_MATERIAL.0, LIVER_MATERIAL.1).with_formulation(formulation).with_order(order);
     let mut p = Problem::new(m, material);
     let fixed = p.mesh.region("fixed")?.to_vec();
     let push = p.mesh.region("push")?.to_vec();
@@ -174,19 +175,20 @@ fn liver(tets: usize, law: Law, formulation: Formulation, load: f64) -> Result<C
     p.add_traction(&push, [0.0, 0.0, -LIVER_TRACTION * load]);
     let form = material.resolved_formulation();
     let cells = p.mesh.cells.len();
-    let (published, published_ms) = match (tets, law, load == 1.0) {
-        (5000, Law::Svk, true) => ("1,550 ms (SVK, ~5k T4)", Some(1550.0)),
-        (5000, Law::Corotational, true) => ("25 ms (co-rotational, ~5k T4)", Some(25.0)),
+    let (published, published_ms) = match (tets, order, law, load == 1.0) {
+        (5000, 1, Law::Svk, true) => ("1,550 ms (SVK, ~5k T4)", Some(1550.0)),
+        (5000, 1, Law::Corotational, true) => ("25 ms (co-rotational, ~5k T4)", Some(25.0)),
         _ => ("", None),
     };
     let scaled = if load == 1.0 { String::new() } else { format!(", load ×{load}") };
     let thousands = (cells as f64 / 1000.0).round();
+    let (kind, quadratic) = (p.mesh.cells.kind_name(), if order == 2 { " T10" } else { "" });
     Ok(Case {
-        name: format!("liver {cells} T4, {law:?}, {form:?}{scaled}"),
-        label: format!("{thousands}k {}{}", short(law, form), scaled.replace(", load ", " ")),
+        name: format!("liver {cells} {kind}, {law:?}, {form:?}{scaled}"),
+        label: format!("{thousands}k{quadratic} {}{}", short(law, form), scaled.replace(", load ", " ")),
         published,
         published_ms,
-        group: format!("{thousands}k liver, {law:?}"),
+        group: format!("{thousands}k liver{quadratic}, {law:?}"),
         fbar: form == Formulation::Fbar,
         load,
         problem: p,
@@ -248,14 +250,16 @@ pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> R
         beam(Law::Svk, Formulation::Standard)?,
         beam(Law::Svk, Formulation::Fbar)?,
         beam(Law::Corotational, Formulation::Standard)?,
-        liver(5000, Law::Svk, Formulation::Standard, 1.0)?,
-        liver(5000, Law::Svk, Formulation::Fbar, 1.0)?,
-        liver(5000, Law::Svk, Formulation::Standard, EQUAL_DEFORMATION_LOAD)?,
-        liver(5000, Law::Corotational, Formulation::Standard, 1.0)?,
-        liver(5000, Law::Corotational, Formulation::Fbar, 1.0)?,
+        liver(5000, 1, Law::Svk, Formulation::Standard, 1.0)?,
+        liver(5000, 1, Law::Svk, Formulation::Fbar, 1.0)?,
+        liver(5000, 1, Law::Svk, Formulation::Standard, EQUAL_DEFORMATION_LOAD)?,
+        liver(5000, 1, Law::Corotational, Formulation::Standard, 1.0)?,
+        liver(5000, 1, Law::Corotational, Formulation::Fbar, 1.0)?,
+        liver(5000, 2, Law::Svk, Formulation::Standard, 1.0)?,
+        liver(5000, 2, Law::Corotational, Formulation::Standard, 1.0)?,
     ];
     if large {
-        cases.push(liver(50000, Law::Svk, Formulation::Fbar, 1.0)?);
+        cases.push(liver(50000, 1, Law::Svk, Formulation::Fbar, 1.0)?);
     }
     let opts = SolverOptions::default();
     let runs_of = |case: &Case| if case.problem.num_dofs() > 20_000 { runs.min(3) } else { runs };
@@ -496,7 +500,7 @@ mod tests {
     #[test]
     fn the_scaled_standard_case_deforms_as_far_as_fbar() {
         let max_u = |formulation, load| {
-            let Case { problem, .. } = liver(5000, Law::Svk, formulation, load).unwrap();
+            let Case { problem, .. } = liver(5000, 1, Law::Svk, formulation, load).unwrap();
             let u = StaticSolver::new(problem).unwrap().solve(&SolverOptions::default()).unwrap().u;
             fem::post::max_displacement(&u)
         };

@@ -379,3 +379,40 @@ fn gravity_adds_a_body_force_of_the_drawn_acceleration() {
         .collect();
     assert!(directions[0] != directions[1] && directions[1] != directions[2], "random directions");
 }
+
+/// With `order = 2` the samples are solved on quadratic tetrahedra: the generator's mesh is the T10 mesh of
+/// the given T4 mesh, its embedding reproduces quadratic fields at the grid nodes, and patch forces (spread
+/// as the traction of their resultant) are carried without a failed sample.
+#[test]
+fn quadratic_tetrahedra_are_solved_encoded_and_loaded_as_such() {
+    let t4 = mesh::box_tet([0.0; 3], [0.2, 0.1, 0.1], [4, 2, 2]).unwrap();
+    let top = NodeSelection::Box { min: [-1.0, -1.0, 0.1 - 1e-6], max: [1.0, 1.0, 1.0] };
+    let config = DatasetConfig {
+        samples: 2,
+        seed: 3,
+        shard_size: 2,
+        grid: Some([9, 5, 5]),
+        fixed: vec![NodeSelection::Box { min: [-1e-6; 3], max: [1e-6, 1.0, 1.0] }],
+        load: Load::PatchForce { centres: Some(top.clone()), radius: 0.05, magnitude: [0.05, 0.1], cone: None },
+        gravity: None,
+        input: Input::Displacement { nodes: top, sparse: None, normal: false },
+    };
+    let material = Material::new(Law::NeoHookean, 5000.0, 0.45).with_order(2);
+    let g = Generator::new(t4.clone(), material, SolverOptions::default(), config).unwrap();
+    let t10 = t4.quadratic().unwrap();
+    assert_eq!(g.mesh(), &t10);
+    let quad = |p: &[f64; 3]| [p[0] * p[1] - 2.0 * p[2] * p[2], 0.5 * p[0] * p[0] + p[1], p[1] * p[2]];
+    let field: Vec<f64> = t10.nodes.iter().flat_map(quad).collect();
+    let enc = g.encode(&field, false).unwrap();
+    let (grid, n) = (g.grid(), g.grid().nodes());
+    for (i, j, k) in [(1, 1, 1), (4, 2, 3), (7, 4, 2), (8, 0, 4)] {
+        let node = grid.node_index(i, j, k);
+        let expect = quad(&[0.025 * i as f64, 0.025 * j as f64, 0.025 * k as f64]);
+        for c in 0..3 {
+            assert!((enc[c * n + node] as f64 - expect[c]).abs() < 1e-7, "node ({i},{j},{k}) channel {c}");
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = g.run(dir.path(), "t10", None, &|_, _| {}).unwrap();
+    assert_eq!((manifest.num_samples, manifest.failed.len()), (2, 0), "{:?}", manifest.failed);
+}

@@ -278,7 +278,7 @@ impl Experiment {
             }
         };
         let (observed, rest) = feature_points(&self.base, locator, &sc.observations)?;
-        let observed_nodes: Vec<usize> = observed.iter().flat_map(|t| t.nodes).collect();
+        let observed_nodes: Vec<usize> = observed.iter().flat_map(|t| t.terms().map(|(n, _)| n)).collect();
         let assessment = match &sc.assessment {
             Some(a) => assessment_points(&self.base, a, &observed_nodes)?,
             None => Vec::new(),

@@ -80,7 +80,10 @@ pub enum Load {
     /// around it), of random magnitude, shared by the surface nodes
     /// ([`mesh::Mesh::surface_nodes`]) within `radius` of the centre in proportion to their
     /// material share ([`mesh::Mesh::node_material_share`]: equal shares on a body-fitted
-    /// mesh; little for immersed-grid nodes outside the organ).
+    /// mesh; little for immersed-grid nodes outside the organ). On quadratic tetrahedra the
+    /// force is the uniform traction of that resultant on the patch ([`fem::force_shares`]):
+    /// equal shares would load the corner nodes, which a uniform traction on a quadratic face
+    /// leaves unloaded, and crush the elements around them.
     PatchForce {
         /// Nodes the patch centre is drawn from (default: surface nodes that are not fixed).
         centres: Option<NodeSelection>,
@@ -383,13 +386,18 @@ impl Generator {
                     Some(cone) => direction_in_cone(&mut rng, self.normals[centre], cone.to_radians()),
                     None => self.normals[centre],
                 };
-                let total: f64 = patch.iter().map(|&n| self.material_share[n]).sum();
-                if !(total > 0.0) {
-                    return Err(format!("the patch around node {centre} has no material"));
-                }
-                for &n in &patch {
+                let shares: Vec<(usize, f64)> = if matches!(self.mesh.cells, mesh::Cells::Tet10(_)) {
+                    fem::force_shares(&self.mesh, &patch)
+                } else {
+                    let total: f64 = patch.iter().map(|&n| self.material_share[n]).sum();
+                    if !(total > 0.0) {
+                        return Err(format!("the patch around node {centre} has no material"));
+                    }
+                    patch.iter().map(|&n| (n, self.material_share[n] / total)).collect()
+                };
+                for (n, share) in shares {
                     for d in 0..3 {
-                        f[3 * n + d] -= mag * outward[d] * self.material_share[n] / total;
+                        f[3 * n + d] -= mag * outward[d] * share;
                     }
                 }
             }
