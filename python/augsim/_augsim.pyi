@@ -30,6 +30,7 @@ class Registered:
     inliers: int
     points: int
     iterations: int
+    warnings: list[str]
     ms: float
 
 class Registration:

@@ -83,6 +83,7 @@ struct FrameSummary {
     iterations: usize,
     surface_residual_mm: f64,
     time_ms: f64,
+    warnings: Vec<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     tre_mean_mm: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -156,6 +157,7 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
                 iterations: r.iterations,
                 surface_residual_mm: r.surface_residual * 1e3,
                 time_ms: ms(r.time),
+                warnings: r.warnings.clone(),
                 tre_mean_mm: tre.map(|t| t.0),
                 tre_max_mm: tre.map(|t| t.1),
             };
@@ -171,6 +173,9 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
                     row.tre_max_mm.unwrap_or(0.0)
                 ))
             );
+            for w in &row.warnings {
+                eprintln!("warning    frame {i}: {w}");
+            }
             let name = if sequence { format!("organ_{i:04}.vtu") } else { "organ.vtu".into() };
             let (m, u) = in_cloud_frame(organ.mesh(), moved_mesh.as_ref(), o.rigid.as_ref(), &r.u);
             mesh::io::write_mesh(args.out.join(&name), &m, &[Field::point("displacement", 3, u)])?;

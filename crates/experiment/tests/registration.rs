@@ -206,3 +206,38 @@ fn a_warm_started_frame_starts_past_the_ramp() {
     let w = register::WARM_START_ITERATION;
     assert_eq!((cold.0, warm.0), (vec![0, 1], vec![w, w + 1]));
 }
+
+/// A cloud in millimetres and a cloud of random points are refused with what they probably are; a
+/// cloud shifted by 5 cm registers but is flagged (suggesting a rigid pre-alignment); the aligned
+/// cloud is not flagged.
+#[test]
+fn clouds_that_cannot_be_the_organ_are_refused_or_flagged() {
+    let camera = CameraModel { view: [0.0, 0.0, -1.0], points: 1500, noise: 1e-3, outliers: 0.05 };
+    let case = phantom_push(1.5, &camera, 7).unwrap();
+    let (organ, mut deformer) = corotational_model().unwrap();
+    let opts = RegistrationOptions::default();
+    let mut register = |cloud: &[[f64; 3]]| register_frame(&organ, &mut deformer, cloud, None, &opts);
+    let millimetres: Vec<[f64; 3]> = case.cloud.iter().map(|p| p.map(|c| 1e3 * c)).collect();
+    let e = register(&millimetres).unwrap_err().to_string();
+    assert!(e.contains("millimetres"), "{e}");
+    let mut state = 12345u64;
+    let mut uniform = || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64 * 100.0 - 50.0
+    };
+    let random: Vec<[f64; 3]> = (0..2000).map(|_| [uniform(), uniform(), uniform()]).collect();
+    let e = register(&random).unwrap_err().to_string();
+    assert!(e.contains("cannot be a view of the organ"), "{e}");
+    let good = register(&case.cloud).unwrap();
+    assert!(good.warnings.is_empty(), "{:?} ({} unfitted)", good.warnings, good.far_share);
+    let shifted: Vec<[f64; 3]> = case.cloud.iter().map(|p| [p[0] - 0.035, p[1] + 0.035, p[2]]).collect();
+    let moved = register(&shifted).unwrap();
+    assert!(
+        moved.warnings.iter().any(|w| w.contains("--rigid")),
+        "{:?}: {} unfitted, aligned {}",
+        moved.warnings,
+        moved.far_share,
+        good.far_share
+    );
+    eprintln!("unfitted points: aligned {:.3}, shifted 5 cm {:.3}", good.far_share, moved.far_share);
+}

@@ -7,8 +7,8 @@
 //! - out, per cloud, in this order and as chosen by [`Outputs`]: POINT `targets` (the
 //!   registered targets, in the order given to the server), POLYDATA `organ` (the registered
 //!   surface with its triangles), STRING `status` (one line of JSON: `frame`, `ms`,
-//!   `surface_residual`, `inliers`, `points`, `iterations`, in the stream's unit; or `frame`
-//!   and `error`).
+//!   `surface_residual`, `plausible` and `warnings` (see `register::plausibility`), `inliers`,
+//!   `points`, `iterations`, in the stream's unit; or `frame` and `error`).
 //!
 //! Each client has its own registration, warm-started from its previous frame. A client's clouds
 //! are registered one at a time; a cloud that arrives while one is being registered replaces any
@@ -441,6 +441,8 @@ fn answer(
         "frame": frame,
         "ms": start.elapsed().as_secs_f64() * 1e3,
         "surface_residual": result.surface_residual / unit,
+        "plausible": result.warnings.is_empty(),
+        "warnings": result.warnings,
         "inliers": result.inliers,
         "points": result.points,
         "iterations": result.iterations,

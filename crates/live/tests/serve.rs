@@ -132,6 +132,7 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
     let s = status(receive(&mut client));
     assert_eq!(s["frame"], 1);
     assert!(s["ms"].as_f64().unwrap() > 0.0 && s["surface_residual"].as_f64().unwrap() < 0.5, "{s}");
+    assert!(s["plausible"] == true && s["warnings"].as_array().unwrap().is_empty(), "{s}");
 
     // A cloud with a NaN: an error status for that frame, the stream goes on.
     let mut bad = cloud.clone();
@@ -142,6 +143,13 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
     send_cloud(&mut client, Vec::new());
     let s = status(receive(&mut client));
     assert!(s["frame"] == 3 && s["error"].is_string(), "{s}");
+    // The same cloud in metres to a server in millimetres, then in micrometres: refused, saying why.
+    send_cloud(&mut client, cloud.iter().map(|p| p.map(|x| x * 1e-3)).collect());
+    let s = status(receive(&mut client));
+    assert!(s["frame"] == 4 && s["error"].as_str().unwrap().contains("too small"), "{s}");
+    send_cloud(&mut client, cloud.iter().map(|p| p.map(|x| x * 1e3)).collect());
+    let s = status(receive(&mut client));
+    assert!(s["frame"] == 5 && s["error"].as_str().unwrap().contains("millimetres?"), "{s}");
 
     // Another client sends an oversized message, a third garbage: each is closed alone.
     let mut huge = encode_message(PolyDataMessage::new(cloud.clone()), "cloud").unwrap();
@@ -175,7 +183,7 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
     send_cloud(&mut client, cloud);
     assert!(matches!(receive(&mut client), Some(Answer::Targets(_))));
     assert!(matches!(receive(&mut client), Some(Answer::Organ(_))));
-    assert_eq!(status(receive(&mut client))["frame"], 4);
+    assert_eq!(status(receive(&mut client))["frame"], 6);
 
     stop.store(true, Ordering::SeqCst);
     server.join().unwrap().unwrap();

@@ -158,6 +158,10 @@ struct Registered {
     /// Match-and-deform iterations.
     #[pyo3(get)]
     iterations: usize,
+    /// Why the result may not be believed (the registered surface far from the cloud, an
+    /// implausible motion); empty when plausible.
+    #[pyo3(get)]
+    warnings: Vec<String>,
     /// Wall time of the registration (ms).
     #[pyo3(get)]
     ms: f64,
@@ -238,7 +242,7 @@ impl Registration {
 
     /// Registers a cloud of positions, float [N, 3] in `units` (no correspondences needed),
     /// starting from the previous cloud's registration. Returns a `Registered` (`targets`,
-    /// `displacement`, `surface_residual`, `inliers`, `iterations`, `ms`). Raises ValueError for
+    /// `displacement`, `surface_residual`, `inliers`, `iterations`, `warnings`, `ms`). Raises ValueError for
     /// an array of another shape, AugsimError for a cloud augsim rejects (no point, a NaN) or a
     /// failed registration (the warm start is then kept).
     fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>) -> PyResult<Registered> {
@@ -251,6 +255,7 @@ impl Registration {
             inliers: result.inliers,
             points: result.points,
             iterations: result.iterations,
+            warnings: result.warnings.clone(),
             ms: result.time.as_secs_f64() * 1e3,
         })
     }

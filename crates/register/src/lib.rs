@@ -49,6 +49,7 @@ pub use error::{RegisterError, Result};
 mod deformers;
 pub mod organ;
 pub mod outliers;
+pub mod plausibility;
 pub mod register;
 pub mod rigid;
 pub mod sequence;

@@ -131,6 +131,11 @@ pub struct FrameResult {
     pub iterations: usize,
     /// Mean distance from the cloud points to the registered surface (m), all points.
     pub surface_residual: f64,
+    /// The share of the cloud's points left farther than [`crate::plausibility::FAR_DISTANCE`] from the
+    /// registered surface.
+    pub far_share: f64,
+    /// Why the result may not be believed ([`crate::plausibility::warnings`]); empty when plausible.
+    pub warnings: Vec<String>,
     /// Cloud points.
     pub points: usize,
     /// Cloud points kept as matches in the last iteration.
@@ -160,6 +165,7 @@ pub fn register_frame(
         }
         None => vec![0.0; ndof],
     };
+    crate::plausibility::check_extent(organ, cloud)?;
     let mut surface = organ.deformed_surface(&u);
     let mut iterations = 0;
     let mut inliers = 0;
@@ -190,9 +196,20 @@ pub fn register_frame(
             break;
         }
     }
-    let bvh = SurfaceBvh::new(&surface)?;
-    let surface_residual = cloud.par_iter().map(|&c| bvh.distance(c)).sum::<f64>() / cloud.len() as f64;
-    Ok(FrameResult { u, iterations, surface_residual, points: cloud.len(), inliers, time: t0.elapsed() })
+    let distances = crate::plausibility::residuals(organ, &u, cloud)?;
+    let surface_residual = distances.iter().sum::<f64>() / cloud.len() as f64;
+    let far_share = crate::plausibility::far_share(&distances);
+    let warnings = crate::plausibility::warnings(organ, &u, far_share);
+    Ok(FrameResult {
+        u,
+        iterations,
+        surface_residual,
+        far_share,
+        warnings,
+        points: cloud.len(),
+        inliers,
+        time: t0.elapsed(),
+    })
 }
 
 /// Matches each cloud point to the closest point of the deformed `surface` (of its triangles

@@ -139,6 +139,11 @@ pub struct Summary {
     /// The rigid pre-alignment (organ → cloud transform, ICP figures), when there was one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rigid: Option<RigidSummary>,
+    /// Whether every frame's result is plausible ([`crate::plausibility`]).
+    pub plausible: bool,
+    /// The frames' warnings, each once, in order of first appearance (prefixed by the frame when
+    /// there are several).
+    pub warnings: Vec<String>,
 }
 
 impl Summary {
@@ -167,6 +172,19 @@ impl Summary {
             time_ms: per_frame(|o| o.registration.time.as_secs_f64()) * 1e3,
             iterations: per_frame(|o| o.registration.iterations as f64),
             rigid: outcomes[0].rigid.as_ref().map(RigidSummary::from),
+            plausible: outcomes.iter().all(|o| o.registration.warnings.is_empty()),
+            warnings: {
+                let mut seen = Vec::new();
+                for (k, o) in outcomes.iter().enumerate() {
+                    for w in &o.registration.warnings {
+                        let w = if n > 1 { format!("frame {k}: {w}") } else { w.clone() };
+                        if !seen.contains(&w) {
+                            seen.push(w);
+                        }
+                    }
+                }
+                seen
+            },
         })
     }
 }

@@ -1,0 +1,117 @@
+//! Whether a cloud can be the organ at all, and whether a registration's result is believable:
+//! a cloud that spans many times the organ (millimetres given for metres, random points) or a
+//! tiny fraction of it (metres given for millimetres) is refused; a result whose registered surface stays far from the cloud or
+//! whose organ moves by more than half its size is flagged, with what to try.
+
+use mesh::{Point, SurfaceBvh};
+use rayon::prelude::*;
+
+use crate::{Organ, RegisterError, Result};
+
+/// A cloud may span at most this many times the organ's extent (a partial view spans less).
+pub const MAX_EXTENT_RATIO: f64 = 5.0;
+/// ... and at least this fraction of it (a camera's view of a few centimetres of the organ).
+pub const MIN_EXTENT_RATIO: f64 = 0.01;
+/// A cloud taken for millimetres lies, divided by 1000, within this fraction of the organ's size
+/// of its rest surface (median distance).
+pub const MILLIMETRE_FIT: f64 = 0.03;
+/// A cloud point farther than this (m) from the registered surface is not fitted: several times a
+/// depth camera's noise.
+pub const FAR_DISTANCE: f64 = 0.005;
+/// A result leaving more than this share of the cloud's points unfitted is flagged (a camera's
+/// outliers are a few per cent).
+pub const SUSPECT_FAR_SHARE: f64 = 0.2;
+/// An organ moved by more than this fraction of its extent is flagged.
+pub const SUSPECT_MOTION: f64 = 0.5;
+
+/// The extent of a point set: the diagonal of its box between the 2nd and 98th percentiles on
+/// each axis (a few stray points do not count).
+fn robust_extent(points: &[Point]) -> f64 {
+    let mut sum = 0.0;
+    for d in 0..3 {
+        let mut c: Vec<f64> = points.iter().map(|p| p[d]).collect();
+        c.sort_unstable_by(f64::total_cmp);
+        let at = |q: f64| c[((c.len() - 1) as f64 * q).round() as usize];
+        sum += (at(0.98) - at(0.02)).powi(2);
+    }
+    sum.sqrt()
+}
+
+/// The organ's extent: the diagonal of its rest bounding box (m).
+pub fn organ_extent(organ: &Organ) -> f64 {
+    let (lo, hi) = organ.mesh().bounds();
+    mesh::distance(lo, hi)
+}
+
+/// Refuses a (non-empty, finite) cloud whose extent cannot be a view of the organ, saying what it
+/// probably is.
+pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<()> {
+    let (size, extent) = (organ_extent(organ), robust_extent(cloud));
+    let ratio = extent / size;
+    if ratio > MAX_EXTENT_RATIO {
+        let hint = if looks_like_millimetres(organ, cloud)? {
+            " Is it in millimetres? Divided by 1000 it lies on the organ's surface: registration works in the \
+             organ's unit, metres (a server or the Python package takes --units mm / units=\"mm\")."
+        } else {
+            " It cannot be a view of the organ: wrong units, or not the organ's points."
+        };
+        return Err(RegisterError::Invalid(format!(
+            "the cloud spans {extent:.4} m, {ratio:.0} times the organ's {size:.4} m.{hint}"
+        )));
+    }
+    if ratio < MIN_EXTENT_RATIO {
+        return Err(RegisterError::Invalid(format!(
+            "the cloud spans {extent:.3e} m, {ratio:.1e} of the organ's {size:.4} m: too small to be a view of it \
+             (metres given where millimetres are expected? a server in millimetres takes --units m)"
+        )));
+    }
+    Ok(())
+}
+
+/// Whether the cloud divided by 1000 is a view of the organ at rest: its extent within the
+/// organ's, its median distance to the rest surface within [`MILLIMETRE_FIT`] of the organ's size.
+fn looks_like_millimetres(organ: &Organ, cloud: &[Point]) -> Result<bool> {
+    let metres: Vec<Point> = cloud.iter().map(|p| p.map(|c| 1e-3 * c)).collect();
+    let size = organ_extent(organ);
+    if robust_extent(&metres) > MAX_EXTENT_RATIO * size {
+        return Ok(false);
+    }
+    let bvh = SurfaceBvh::new(organ.surface())?;
+    let mut distances: Vec<f64> = metres.par_iter().map(|&c| bvh.distance(c)).collect();
+    Ok(mesh::stats::median(&mut distances) < MILLIMETRE_FIT * size)
+}
+
+/// The distances from each cloud point to the registered surface (m).
+pub(crate) fn residuals(organ: &Organ, u: &[f64], cloud: &[Point]) -> Result<Vec<f64>> {
+    let bvh = SurfaceBvh::new(&organ.deformed_surface(u))?;
+    Ok(cloud.par_iter().map(|&c| bvh.distance(c)).collect())
+}
+
+/// The share of `distances` (cloud point to registered surface, m) beyond [`FAR_DISTANCE`].
+pub fn far_share(distances: &[f64]) -> f64 {
+    distances.iter().filter(|&&d| d > FAR_DISTANCE).count() as f64 / distances.len().max(1) as f64
+}
+
+/// What a registered frame says about itself: the warnings (empty when the result is plausible)
+/// given the share of its cloud left unfitted ([`far_share`]) and its displacement `u`.
+pub fn warnings(organ: &Organ, u: &[f64], far_share: f64) -> Vec<String> {
+    let size = organ_extent(organ);
+    let motion = u.chunks_exact(3).map(|d| mesh::norm([d[0], d[1], d[2]])).fold(0.0, f64::max);
+    let mut out = Vec::new();
+    if far_share > SUSPECT_FAR_SHARE {
+        out.push(format!(
+            "{:.0} % of the cloud stays more than {:.0} mm from the registered surface: the cloud does not fit the \
+             organ. If its frame is not the organ's, pre-align it (--rigid)",
+            100.0 * far_share,
+            FAR_DISTANCE * 1e3
+        ));
+    }
+    if motion > SUSPECT_MOTION * size {
+        out.push(format!(
+            "the organ moves by up to {:.0} mm, over half its size ({:.0} mm): not a plausible deformation",
+            motion * 1e3,
+            size * 1e3
+        ));
+    }
+    out
+}
