@@ -54,7 +54,7 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
         println!("updated    {}", readme.display());
     }
     if let Some(page) = &args.results {
-        experiment::report::write_results_page(page, &results)?;
+        experiment::report::write_results_page(page, &results, &args.out)?;
         println!("wrote      {}", page.display());
     }
     Ok(())

@@ -324,6 +324,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         headlines: Vec::new(),
         rows,
         figures,
+        page_figures: vec!["cantilever_049.png".into(), "phantom.png".into()],
         notes: notes
             .into_iter()
             .chain(references.iter().map(|r| format!("Reference, {}: {:.5e} m, {}", r.problem, r.value, r.source)))

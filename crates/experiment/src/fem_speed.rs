@@ -420,6 +420,7 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
         seconds: 0.0,
         rows,
         figures: vec!["timings.png".into()],
+        page_figures: Vec::new(),
         notes: vec![
             format!("{runs} runs per case on this machine, medians; 'setup': building a solver (sparse pattern, ordering, symbolic analysis, buffers) and 'first': its first solve from rest, medians over as many new solvers; 'from rest': repeated solves with the rest tangent's factor kept, the cases taking turns; 'frame': one frame of a load varying by {:.0} % per frame, warm-started.", 100.0 * FRAME_LOAD_STEP),
             format!(

@@ -218,6 +218,7 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
         seconds: 0.0,
         rows,
         figures: vec!["run/young.png".into(), "run/young_zoom.png".into(), "run/innovation.png".into()],
+        page_figures: Vec::new(),
         notes: vec![
             format!(
                 "No inverse crime: the observations ({} noisy surface features) come from a reference run \
@@ -300,6 +301,7 @@ pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<Expe
         seconds: 0.0,
         rows,
         figures: vec!["run/springs.png".into(), "run/springs_final.png".into(), "run/assessment.png".into()],
+        page_figures: Vec::new(),
         notes: vec![format!(
             "{} springs on the hidden surface of a {}-node phantom, a tool prescribing displacement on a small \
              visible area (on each mesh its own nodes nearest the tool). No inverse crime: observations and \

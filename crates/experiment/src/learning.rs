@@ -325,6 +325,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
         seconds: 0.0,
         rows,
         figures: vec![format!("{}/{}", model_dir(&recipe), crate::curve::CURVE_PNG), "errors.png".into()],
+        page_figures: Vec::new(),
         notes: vec![
             split_note(&t, samples),
             format!(
@@ -380,6 +381,7 @@ pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<
         seconds: 0.0,
         rows,
         figures: vec![format!("{}/{}", model_dir(&recipe), crate::curve::CURVE_PNG), "errors.png".into()],
+        page_figures: Vec::new(),
         notes: vec![
             split_note(&t, samples),
             format!("{} Noise is added to the visible inputs at evaluation only.", data.note()),

@@ -231,6 +231,9 @@ pub struct ExperimentResult {
     pub rows: Vec<Row>,
     /// Figures (PNG) and 3D viewers (HTML), relative to the experiment's directory.
     pub figures: Vec<String>,
+    /// Those of the figures also shown on the results page (`docs/results.md`), copied beside it.
+    #[serde(default)]
+    pub page_figures: Vec<String>,
     /// What the figures are conditional on (splits, load ranges, failed samples, budgets).
     pub notes: Vec<String>,
     /// The raw numbers behind the table, by name (SI units unless the name says otherwise).

@@ -278,6 +278,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
             "errors.png".into(),
             "viewer.html".into(),
         ],
+        page_figures: Vec::new(),
         notes: vec![
             format!(
                 "Network: {samples} samples of the liver_ar scenario ({train_n} training, {validation_n} validation, {test_n} test), \

@@ -95,6 +95,12 @@ fn sections(results: &[ExperimentResult], heading: &str, figures: bool) -> Strin
         for note in &r.notes {
             let _ = writeln!(s, "- {note}");
         }
+        if !figures && !r.page_figures.is_empty() {
+            s.push('\n');
+            for f in &r.page_figures {
+                let _ = writeln!(s, "![{f}]({})", page_figure(r, f));
+            }
+        }
         if figures && !r.figures.is_empty() {
             s.push('\n');
             for f in &r.figures {
@@ -193,13 +199,26 @@ pub fn html(results: &[ExperimentResult]) -> String {
     s
 }
 
-/// Writes the results page [`results_page`] to `path`, atomically.
-pub fn write_results_page(path: &Path, results: &[ExperimentResult]) -> Result<()> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+/// Writes the results page [`results_page`] to `path`, atomically, with copies of the results'
+/// page figures (from `root/<experiment>/`) beside it.
+pub fn write_results_page(path: &Path, results: &[ExperimentResult], root: &Path) -> Result<()> {
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for r in results {
+        for f in &r.page_figures {
+            let (from, to) = (root.join(r.name.as_str()).join(f), dir.join(page_figure(r, f)));
+            let bytes = std::fs::read(&from).with_context(|| format!("reading {}", from.display()))?;
+            mesh::io::write_atomic_bytes(&to, &bytes)?;
+        }
     }
     mesh::io::write_atomic_bytes(path, results_page(results).as_bytes())?;
     Ok(())
+}
+
+/// The results page's copy of figure `f` of result `r`: `<experiment>-<file name>`.
+fn page_figure(r: &ExperimentResult, f: &str) -> String {
+    let file = Path::new(f).file_name().map_or(f.into(), |n| n.to_string_lossy().into_owned());
+    format!("{}-{file}", r.name.as_str())
 }
 
 /// Writes `root/report.md` and `root/report.html`; returns their paths.

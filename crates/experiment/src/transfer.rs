@@ -239,6 +239,7 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
         seconds: 0.0,
         rows,
         figures: vec!["curves.png".into(), "errors.png".into()],
+        page_figures: Vec::new(),
         notes,
         values,
     })

@@ -73,6 +73,7 @@ fn the_readme_summary_and_the_results_page_come_from_the_same_results() {
         ],
         rows: vec![Row::new("E", "4,990 ± 20 Pa", "4,992 ± 15 Pa")],
         figures: vec!["run/young.png".into()],
+        page_figures: Vec::new(),
         notes: vec!["synthetic".into()],
         values: Default::default(),
     };
@@ -85,13 +86,22 @@ fn the_readme_summary_and_the_results_page_come_from_the_same_results() {
     assert!(!text.contains("old text") && text.contains("| E error | 0.10 % | 0.16 % | better |"), "{text}");
     assert!(!text.contains("4,990 ± 20 Pa"), "the README has the summary only");
     let page = dir.path().join("docs/results.md");
-    report::write_results_page(&page, std::slice::from_ref(&result)).unwrap();
+    report::write_results_page(&page, std::slice::from_ref(&result), dir.path()).unwrap();
     let page = std::fs::read_to_string(&page).unwrap();
     let summary = report::summary(std::slice::from_ref(&result));
     assert!(text.contains(summary.trim()) && page.contains(&summary), "one summary in both");
     let (at_summary, at_details) = (page.find("## Summary").unwrap(), page.find("### ROUKF: Young's modulus").unwrap());
     assert!(at_summary < at_details && page.contains("| E | 4,990 ± 20 Pa | 4,992 ± 15 Pa |"), "{page}");
     assert!(!page.contains("young.png"), "no figure links outside the run's directory");
+    // A page figure is copied beside the page and shown there.
+    let figure = dir.path().join("young/run/young.png");
+    std::fs::create_dir_all(figure.parent().unwrap()).unwrap();
+    std::fs::write(&figure, b"png").unwrap();
+    let shown = ExperimentResult { page_figures: vec!["run/young.png".into()], ..result.clone() };
+    let page = dir.path().join("docs/results.md");
+    report::write_results_page(&page, std::slice::from_ref(&shown), dir.path()).unwrap();
+    assert!(std::fs::read_to_string(&page).unwrap().contains("](young-young.png)"));
+    assert_eq!(std::fs::read(dir.path().join("docs/young-young.png")).unwrap(), b"png");
     std::fs::write(&readme, "no markers").unwrap();
     assert!(report::update_markdown(&readme, &[]).unwrap_err().to_string().contains("markers"));
 }
