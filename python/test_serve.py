@@ -8,7 +8,9 @@ phantom; pyigtl sends the case's cloud in millimetres as POINT messages, each fr
 0.5 mm noise, and reads the registered targets (POINT) and the status (STRING JSON). It checks
 every frame is answered in order with a target registration error well below the unregistered
 one, that a cloud with a NaN gets an error status while the stream goes on, and prints the
-latency (send to status, median and p95), the sustained frame rate and the TRE per frame.
+latency (send to status, median and p95), the sustained frame rate and the TRE per frame. With
+`--rigid`, the same cloud moved by a few centimetres comes back as a TRANSFORM `rigid` and targets
+in the cloud's frame.
 
 Run: python3 -m venv .venv && .venv/bin/pip install pyigtl numpy && .venv/bin/python python/test_serve.py
 The augsim binary: $AUGSIM_BIN, default target/release/augsim. `.ci/run` runs it.
@@ -52,38 +54,77 @@ def read_csv(path):
     return np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)[:, :3]
 
 
+def connected(test, port):
+    """A pyigtl client connected to the server on `port`."""
+    client = pyigtl.OpenIGTLinkClient(host="127.0.0.1", port=port)
+    deadline = time.time() + 30
+    while not client.is_connected() and time.time() < deadline:
+        time.sleep(0.05)
+    test.assertTrue(client.is_connected(), "pyigtl could not connect")
+    return client
+
+
 class ServeTest(unittest.TestCase):
+    def serve(self, tmp, options, exchange):
+        """Makes the case in `tmp`, starts `augsim serve` on it with `options` and runs
+        `exchange(port, cloud, truth, rest)` (mm), then stops the server with SIGINT."""
+        r = subprocess.run([augsim_bin(), "register", "--case", "register_case_test", "--out", tmp],
+                           capture_output=True, text=True)
+        self.assertEqual(r.returncode, 0, r.stdout + r.stderr)
+        cloud = read_csv(os.path.join(tmp, "case", "cloud.csv")) * 1e3  # m -> mm
+        truth = read_csv(os.path.join(tmp, "case", "truth.csv")) * 1e3
+        rest = read_csv(os.path.join(tmp, "case", "targets_rest.csv")) * 1e3
+        targets = os.path.join(tmp, "targets_mm.csv")
+        np.savetxt(targets, rest, delimiter=",", header="x,y,z", comments="")
+        scenario = os.path.join(tmp, "model.toml")
+        with open(scenario, "w", encoding="utf-8") as f:
+            f.write(MODEL)
+        port = free_port()
+        server = subprocess.Popen([augsim_bin(), "serve", "--fem", scenario, "--targets", targets, "--port",
+                                   str(port)] + options, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        try:
+            exchange(port, cloud, truth, rest)
+        finally:
+            server.send_signal(2)  # SIGINT: a clean stop
+            out, _ = server.communicate(timeout=30)
+        self.assertEqual(server.returncode, 0, out)
+        self.assertIn("stopped", out)
+
     def test_a_stream_from_pyigtl(self):
         with tempfile.TemporaryDirectory(prefix="augsim_serve_test_") as tmp:
-            r = subprocess.run([augsim_bin(), "register", "--case", "register_case_test", "--out", tmp],
-                               capture_output=True, text=True)
-            self.assertEqual(r.returncode, 0, r.stdout + r.stderr)
-            cloud = read_csv(os.path.join(tmp, "case", "cloud.csv")) * 1e3  # m -> mm
-            truth = read_csv(os.path.join(tmp, "case", "truth.csv")) * 1e3
-            rest = read_csv(os.path.join(tmp, "case", "targets_rest.csv")) * 1e3
-            targets = os.path.join(tmp, "targets_mm.csv")
-            np.savetxt(targets, rest, delimiter=",", header="x,y,z", comments="")
-            scenario = os.path.join(tmp, "model.toml")
-            with open(scenario, "w", encoding="utf-8") as f:
-                f.write(MODEL)
-            port = free_port()
-            server = subprocess.Popen([augsim_bin(), "serve", "--fem", scenario, "--targets", targets, "--port",
-                                       str(port), "--outputs", "targets,status"],
-                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-            try:
-                self.stream(port, cloud, truth, rest)
-            finally:
-                server.send_signal(2)  # SIGINT: a clean stop
-                out, _ = server.communicate(timeout=30)
-            self.assertEqual(server.returncode, 0, out)
-            self.assertIn("stopped", out)
+            self.serve(tmp, ["--outputs", "targets,status"], self.stream)
+
+    def test_a_rigid_pre_alignment_answers_a_transform(self):
+        with tempfile.TemporaryDirectory(prefix="augsim_serve_test_") as tmp:
+            self.serve(tmp, ["--rigid", "--outputs", "targets,transform,status"], self.shifted)
+
+    def shifted(self, port, cloud, truth, rest):
+        """The cloud moved by a few centimetres: the TRANSFORM `rigid` holds the move (up to what of
+        the push the rigid fit of a deformed, partial surface takes: within 1 cm), and the targets
+        come back in the cloud's frame."""
+        client = connected(self, port)
+        shift = np.array([20.0, -15.0, 10.0])
+        try:
+            client.send_message(pyigtl.PointMessage(positions=(cloud + shift).astype(np.float32),
+                                                    device_name="cloud"), wait=True)
+            targets = client.wait_for_message("targets", timeout=60)
+            transform = client.wait_for_message("rigid", timeout=60)
+            status = json.loads(client.wait_for_message("status", timeout=60).string)
+        finally:
+            client.stop()
+        self.assertIsNotNone(targets)
+        self.assertIsNotNone(transform)
+        matrix = np.asarray(transform.matrix)
+        moved = np.linalg.norm(matrix[:3, 3] - shift)
+        tre = np.linalg.norm(np.asarray(targets.positions) - (truth + shift), axis=1).mean()
+        unregistered = np.linalg.norm(rest - (truth + shift), axis=1).mean()
+        print(f"\nrigid: translation {np.round(matrix[:3, 3], 2)} mm for a move of {shift} mm; TRE {tre:.2f} mm "
+              f"(unregistered {unregistered:.2f} mm); {status['ms']:.0f} ms", file=sys.stderr)
+        self.assertLess(moved, 10.0)
+        self.assertLess(tre, 0.3 * unregistered)
 
     def stream(self, port, cloud, truth, rest):
-        client = pyigtl.OpenIGTLinkClient(host="127.0.0.1", port=port)
-        deadline = time.time() + 30
-        while not client.is_connected() and time.time() < deadline:
-            time.sleep(0.05)
-        self.assertTrue(client.is_connected(), "pyigtl could not connect")
+        client = connected(self, port)
         rng = np.random.default_rng(1)
         unregistered = np.linalg.norm(rest - truth, axis=1).mean()
         latencies, tres, server_ms = [], [], []

@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 use live::{ClientRegistration, Outputs, ServeOptions};
+use register::rigid::RigidOptions;
 use register::RegistrationOptions;
 
 use experiment::setup::{fem_setup, network_setup, RegistrationSetup};
@@ -35,12 +36,18 @@ pub struct ServeArgs {
     /// Unit of every coordinate exchanged: clouds, targets, organ (mm, as 3D Slicer uses, or m).
     #[arg(long, default_value = "mm")]
     units: String,
-    /// The answers to each cloud, comma-separated: targets (POINT), organ (POLYDATA), status (STRING).
-    #[arg(long, default_value = "targets,organ,status")]
+    /// The answers to each cloud, comma-separated: targets (POINT), organ (POLYDATA), transform
+    /// (TRANSFORM `rigid`, with --rigid), status (STRING).
+    #[arg(long, default_value = "targets,organ,transform,status")]
     outputs: String,
     /// Most match-and-deform iterations per frame (default: the library's).
     #[arg(long)]
     iterations: Option<usize>,
+    /// Rigid pre-alignment: each client's first cloud is aligned to the organ's rest surface
+    /// (trimmed point-to-plane ICP), the pose kept for its next clouds; targets and organ are sent
+    /// in the cloud's frame, with the organ-to-cloud TRANSFORM `rigid`.
+    #[arg(long)]
+    rigid: bool,
 }
 
 /// The registration of `(fem scenario, model, dataset scenario)`: the FEM's or the network's.
@@ -74,7 +81,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     if targets.is_empty() {
         bail!("no targets: give --targets, or a mesh with `markers` or `tumour` regions");
     }
-    let mut options = RegistrationOptions::default();
+    let mut options = RegistrationOptions { rigid: args.rigid.then(RigidOptions::default), ..Default::default() };
     if let Some(n) = args.iterations {
         options.iterations = n;
     }

@@ -6,7 +6,10 @@
 //! - in: a point cloud as POLYDATA (its points; vertices optional) or POINT, device name `cloud`;
 //! - out, per cloud, in this order and as chosen by [`Outputs`]: POINT `targets` (the
 //!   registered targets, in the order given to the server), POLYDATA `organ` (the registered
-//!   surface with its triangles), STRING `status` (one line of JSON: `frame`, `ms`,
+//!   surface with its triangles), TRANSFORM `rigid` (the organ-to-cloud transform, when the
+//!   registration options ask for a rigid pre-alignment: estimated on a client's first cloud,
+//!   kept after it; targets and organ are then in the cloud's frame), STRING `status` (one line
+//!   of JSON: `frame`, `ms`,
 //!   `surface_residual`, `plausible` and `warnings` (see `register::plausibility`), `inliers`,
 //!   `points`, `iterations`, in the stream's unit; or `frame` and `error`).
 //!
@@ -25,9 +28,10 @@ use std::time::{Duration, Instant};
 
 use mesh::Point;
 use openigtlink_rust::protocol::header::Header;
-use openigtlink_rust::protocol::types::{PointElement, PointMessage, PolyDataMessage, StringMessage};
+use openigtlink_rust::protocol::types::{PointElement, PointMessage, PolyDataMessage, StringMessage, TransformMessage};
 use openigtlink_rust::protocol::{calculate_crc, IgtlMessage, Message};
 use register::organ::displaced;
+use register::rigid::{rigid_align, RigidTransform};
 use register::{register_frame, Deformer, FrameResult, Organ, RegistrationOptions, Stencil};
 
 /// Errors of the server.
@@ -54,27 +58,31 @@ pub struct Outputs {
     pub targets: bool,
     /// POLYDATA `organ`.
     pub organ: bool,
+    /// TRANSFORM `rigid`: the organ-to-cloud transform, when a rigid pre-alignment is on.
+    pub transform: bool,
     /// STRING `status`.
     pub status: bool,
 }
 
 impl Outputs {
     /// Every output.
-    pub const ALL: Outputs = Outputs { targets: true, organ: true, status: true };
+    pub const ALL: Outputs = Outputs { targets: true, organ: true, transform: true, status: true };
 
-    /// Parses a comma-separated list of `targets`, `organ`, `status` (e.g. `targets,status`).
+    /// Parses a comma-separated list of `targets`, `organ`, `transform`, `status` (e.g.
+    /// `targets,status`).
     pub fn parse(list: &str) -> std::result::Result<Outputs, String> {
-        let mut out = Outputs { targets: false, organ: false, status: false };
+        let mut out = Outputs { targets: false, organ: false, transform: false, status: false };
         for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
             match name {
                 "targets" => out.targets = true,
                 "organ" => out.organ = true,
+                "transform" => out.transform = true,
                 "status" => out.status = true,
-                other => return Err(format!("unknown output '{other}' (targets, organ, status)")),
+                other => return Err(format!("unknown output '{other}' (targets, organ, transform, status)")),
             }
         }
-        if !(out.targets || out.organ || out.status) {
-            return Err("no output chosen (targets, organ, status)".into());
+        if !(out.targets || out.organ || out.transform || out.status) {
+            return Err("no output chosen (targets, organ, transform, status)".into());
         }
         Ok(out)
     }
@@ -129,36 +137,73 @@ pub struct WarmRegistration {
     registration: ClientRegistration,
     stencils: Vec<Stencil>,
     warm: Option<Vec<f64>>,
+    /// The cloud-to-organ transform of the rigid pre-alignment, estimated on the first frame.
+    rigid: Option<RigidTransform>,
 }
 
 /// One registered frame.
 pub struct RegisteredFrame {
-    /// The registration (displacement of the organ's nodes, iterations, residual, time; in m).
+    /// The registration (displacement of the organ's nodes, iterations, residual, time; in m, in
+    /// the organ's frame).
     pub result: FrameResult,
-    /// The registered targets, in the order given (m).
+    /// The registered targets, in the order given (m), in the cloud's frame.
     pub targets: Vec<Point>,
+    /// The organ-to-cloud transform of the rigid pre-alignment, when the options ask for one.
+    pub rigid: Option<RigidTransform>,
+}
+
+impl RegisteredFrame {
+    /// The registered organ surface (m), in the cloud's frame.
+    pub fn organ_surface(&self, organ: &Organ) -> mesh::TriSurface {
+        let mut surface = organ.deformed_surface(&self.result.u);
+        if let Some(t) = &self.rigid {
+            surface.vertices.iter_mut().for_each(|p| *p = t.apply(*p));
+        }
+        surface
+    }
 }
 
 impl WarmRegistration {
     /// Locates the targets of `registration` in its organ (an error for a target outside it).
     pub fn new(registration: ClientRegistration) -> register::Result<WarmRegistration> {
         let stencils = registration.organ.locate(&registration.targets, "target")?;
-        Ok(WarmRegistration { registration, stencils, warm: None })
+        Ok(WarmRegistration { registration, stencils, warm: None, rigid: None })
     }
 
     /// Registers `cloud` (m), starting from the previous frame's displacement, which it then
-    /// replaces; a failed frame leaves the warm start as it was.
+    /// replaces; a failed frame leaves the warm start as it was. With a rigid pre-alignment in
+    /// the options, the first frame estimates the cloud's pose (trimmed ICP to the organ's rest
+    /// surface), which the following frames keep.
     pub fn register(&mut self, cloud: &[Point]) -> register::Result<RegisteredFrame> {
         let r = &mut self.registration;
-        let result = register_frame(&r.organ, r.deformer.as_mut(), cloud, self.warm.as_deref(), &r.options)?;
-        let targets = displaced(&r.targets, &self.stencils, &result.u);
+        register::check_cloud(cloud)?;
+        let rigid = match (&r.options.rigid, self.rigid) {
+            (Some(options), None) => Some(rigid_align(r.organ.surface(), cloud, options)?.cloud_to_organ),
+            (_, known) => known,
+        };
+        let moved: Vec<Point>;
+        let in_organ = match &rigid {
+            Some(t) => {
+                moved = cloud.iter().map(|&p| t.apply(p)).collect();
+                &moved
+            }
+            None => cloud,
+        };
+        let result = register_frame(&r.organ, r.deformer.as_mut(), in_organ, self.warm.as_deref(), &r.options)?;
+        let to_cloud = rigid.as_ref().map(RigidTransform::inverse);
+        let mut targets = displaced(&r.targets, &self.stencils, &result.u);
+        if let Some(t) = &to_cloud {
+            targets.iter_mut().for_each(|p| *p = t.apply(*p));
+        }
         self.warm = Some(result.u.clone());
-        Ok(RegisteredFrame { result, targets })
+        self.rigid = rigid;
+        Ok(RegisteredFrame { result, targets, rigid: to_cloud })
     }
 
-    /// Forgets the previous frame: the next one starts from the rest shape.
+    /// Forgets the previous frame (and the rigid pose): the next one starts from the rest shape.
     pub fn reset(&mut self) {
         self.warm = None;
+        self.rigid = None;
     }
 
     /// The registration's organ, targets and settings.
@@ -420,7 +465,8 @@ fn answer(
         return Err(format!("cloud of {} points exceeds the limit of {}", cloud.len(), options.max_points));
     }
     let start = Instant::now();
-    let RegisteredFrame { result, targets } = registration.register(cloud).map_err(|e| e.to_string())?;
+    let frame_result = registration.register(cloud).map_err(|e| e.to_string())?;
+    let RegisteredFrame { result, targets, rigid } = &frame_result;
     let unit = options.unit;
     let to_wire = |p: &Point| p.map(|x| (x / unit) as f32);
     if options.outputs.targets {
@@ -432,10 +478,18 @@ fn answer(
         shared.send(PointMessage::new(points), "targets")?;
     }
     if options.outputs.organ {
-        let surface = registration.registration().organ.deformed_surface(&result.u);
+        let surface = frame_result.organ_surface(&registration.registration().organ);
         let polygons = surface.triangles.iter().flat_map(|t| [3, t[0] as u32, t[1] as u32, t[2] as u32]).collect();
         let organ = PolyDataMessage::new(surface.vertices.iter().map(to_wire).collect()).with_polygons(polygons);
         shared.send(organ, "organ")?;
+    }
+    if let (true, Some(t)) = (options.outputs.transform, rigid) {
+        let row = |i: usize| {
+            let r = t.rotation[i];
+            [r[0] as f32, r[1] as f32, r[2] as f32, (t.translation[i] / unit) as f32]
+        };
+        let matrix = [row(0), row(1), row(2), [0.0, 0.0, 0.0, 1.0]];
+        shared.send(TransformMessage { matrix }, "rigid")?;
     }
     shared.send_status(&serde_json::json!({
         "frame": frame,

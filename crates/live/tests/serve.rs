@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use augsim_live::{decode_body, encode_message, serve, ClientRegistration, Outputs, ServeOptions};
+use augsim_live::{decode_body, encode_message, serve, ClientRegistration, Outputs, ServeOptions, WarmRegistration};
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::select::nodes_in_box;
 use mesh::Point;
@@ -192,8 +192,47 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
 
 #[test]
 fn outputs_parse_and_refuse_unknown_names() {
-    assert_eq!(Outputs::parse("targets,status").unwrap(), Outputs { targets: true, organ: false, status: true });
-    assert_eq!(Outputs::parse("targets, organ, status").unwrap(), Outputs::ALL);
+    assert_eq!(
+        Outputs::parse("targets,status").unwrap(),
+        Outputs { targets: true, organ: false, transform: false, status: true }
+    );
+    assert_eq!(Outputs::parse("targets, organ, transform, status").unwrap(), Outputs::ALL);
     assert!(Outputs::parse("targets,mesh").unwrap_err().contains("mesh"));
     assert!(Outputs::parse("").is_err());
+}
+
+/// With a rigid pre-alignment, a cloud of the cube's sides and top moved by a few millimetres is
+/// aligned on the first frame: the target comes back in the cloud's frame, the organ-to-cloud
+/// transform is the move (to the ICP's accuracy on the cube's 98 surface nodes), and the next
+/// frame keeps the pose.
+#[test]
+fn a_rigid_pre_alignment_answers_in_the_clouds_frame() {
+    let mut registration = cube_registration().unwrap();
+    registration.options.rigid = Some(register::RigidOptions::default());
+    let shift = [0.004, -0.003, 0.002];
+    let cloud: Vec<Point> = registration
+        .organ
+        .surface()
+        .vertices
+        .iter()
+        .filter(|p| p[2] > 1e-6)
+        .map(|p| std::array::from_fn(|d| p[d] + shift[d]))
+        .collect();
+    let centre = registration.targets[0];
+    let mut warm = WarmRegistration::new(registration).unwrap();
+    let mut poses = Vec::new();
+    for frame in 0..2 {
+        let answer = warm.register(&cloud).unwrap();
+        let t = answer.rigid.expect("a rigid transform");
+        let moved = (0..3).map(|d| (t.translation[d] - shift[d]).abs()).fold(0.0, f64::max);
+        assert!(moved < 1.5e-3, "frame {frame}: translation {:?} for a move of {shift:?}", t.translation);
+        let target = answer.targets[0];
+        let off = (0..3).map(|d| (target[d] - centre[d] - shift[d]).abs()).fold(0.0, f64::max);
+        assert!(off < 1.5e-3, "frame {frame}: target {target:?}, expected the centre moved by {shift:?}");
+        assert!(off < 0.5 * mesh::norm(shift), "the target must follow the cloud");
+        poses.push(t);
+    }
+    assert_eq!(poses[0], poses[1], "the pose of the first frame is kept");
+    warm.reset();
+    assert!(warm.register(&cloud).unwrap().rigid.is_some(), "a reset estimates the pose again");
 }

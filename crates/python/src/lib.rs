@@ -247,7 +247,7 @@ impl Registration {
     /// failed registration (the warm start is then kept).
     fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>) -> PyResult<Registered> {
         let cloud = points(cloud, "cloud", self.unit)?;
-        let RegisteredFrame { result, targets } = compute(py, || Ok(locked(&self.state)?.register(&cloud)?))?;
+        let RegisteredFrame { result, targets, .. } = compute(py, || Ok(locked(&self.state)?.register(&cloud)?))?;
         Ok(Registered {
             targets: point_array(py, &targets, self.unit).unbind(),
             displacement: nodal(py, &result.u, self.unit).unbind(),
