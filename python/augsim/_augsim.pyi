@@ -31,6 +31,7 @@ class Registered:
     points: int
     iterations: int
     warnings: list[str]
+    rigid: Optional[npt.NDArray[np.float64]]
     ms: float
 
 class Registration:
@@ -47,6 +48,7 @@ class Registration:
         targets: Union[_Path, npt.ArrayLike, None] = None,
         units: str = "m",
         iterations: Optional[int] = None,
+        rigid: bool = False,
     ) -> None: ...
     def register(self, cloud: npt.ArrayLike) -> Registered: ...
     def reset(self) -> None: ...

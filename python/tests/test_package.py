@@ -107,6 +107,17 @@ def test_registration_with_the_unet(case):
     assert np.linalg.norm(r.targets - case["truth"], axis=1).mean() < 0.5 * unregistered
 
 
+def test_a_rigid_pre_alignment_answers_in_the_clouds_frame(case):
+    shift = np.array([20.0, -15.0, 10.0])
+    reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm", rigid=True)
+    r = reg.register(case["cloud"] + shift)
+    assert r.rigid.shape == (4, 4) and np.allclose(r.rigid[3], [0.0, 0.0, 0.0, 1.0])
+    # The rigid fit of a deformed partial surface takes part of the push: within 1 cm of the move.
+    assert np.linalg.norm(r.rigid[:3, 3] - shift) < 10.0
+    unregistered = np.linalg.norm(case["rest"] - (case["truth"] + shift), axis=1).mean()
+    assert np.linalg.norm(r.targets - (case["truth"] + shift), axis=1).mean() < 0.3 * unregistered
+
+
 def test_registration_errors(case, tmp_path):
     reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm")
     bad = case["cloud"].copy()
@@ -117,8 +128,14 @@ def test_registration_errors(case, tmp_path):
         reg.register(case["cloud"][:, :2])
     with pytest.raises(augsim.AugsimError):
         reg.register(np.zeros((0, 3)))
+    # A cloud in metres where millimetres are expected, or in micrometres: refused, saying why.
+    with pytest.raises(augsim.AugsimError, match="too small"):
+        reg.register(case["cloud"] * 1e-3)
+    with pytest.raises(augsim.AugsimError, match="millimetres"):
+        reg.register(case["cloud"] * 1e3)
     # The registration goes on after an error.
-    assert reg.register(case["cloud"]).iterations > 0
+    good = reg.register(case["cloud"])
+    assert good.iterations > 0 and good.warnings == [] and good.rigid is None
     missing = str(tmp_path / "missing.toml")
     with pytest.raises(augsim.AugsimError, match="missing.toml"):
         augsim.Registration(fem=missing)

@@ -162,6 +162,10 @@ struct Registered {
     /// implausible motion); empty when plausible.
     #[pyo3(get)]
     warnings: Vec<String>,
+    /// With `rigid=True`: the organ-to-cloud transform, float64 [4, 4] (translation in `units`);
+    /// otherwise None.
+    #[pyo3(get)]
+    rigid: Option<Py<PyArray2<f64>>>,
     /// Wall time of the registration (ms).
     #[pyo3(get)]
     ms: f64,
@@ -175,7 +179,8 @@ struct Registered {
 /// it was trained on (e.g. `liver_ar`). `targets`: rest positions, a CSV file (x, y, z) or an
 /// array [k, 3], in `units`; default: the mesh's `markers` and `tumour` nodes. `units`: "m" or
 /// "mm", of the targets, every cloud and every result. `iterations`: most match-and-deform
-/// iterations per cloud (default: the library's).
+/// iterations per cloud (default: the library's). `rigid`: align the first cloud rigidly to the
+/// organ (trimmed ICP) and keep that pose; results are then in the cloud's frame.
 #[pyclass(module = "augsim")]
 struct Registration {
     state: Mutex<WarmRegistration>,
@@ -191,7 +196,7 @@ struct Registration {
 #[pymethods]
 impl Registration {
     #[new]
-    #[pyo3(signature = (*, fem=None, model=None, scenario=None, targets=None, units="m", iterations=None))]
+    #[pyo3(signature = (*, fem=None, model=None, scenario=None, targets=None, units="m", iterations=None, rigid=false))]
     fn new(
         py: Python<'_>,
         fem: Option<PathBuf>,
@@ -200,6 +205,7 @@ impl Registration {
         targets: Option<&Bound<'_, PyAny>>,
         units: &str,
         iterations: Option<usize>,
+        rigid: bool,
     ) -> PyResult<Self> {
         let unit = live::metres_per_unit(units).map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
         let given: Option<Result<PathBuf, Vec<Point>>> = match targets {
@@ -214,7 +220,8 @@ impl Registration {
             (None, Some(model), Some(scenario)) => Err((model, scenario)),
             _ => return Err(PyValueError::new_err("give fem=SCENARIO, or model=MODEL with scenario=SCENARIO")),
         };
-        let mut options = RegistrationOptions::default();
+        let mut options =
+            RegistrationOptions { rigid: rigid.then(register::RigidOptions::default), ..Default::default() };
         if let Some(n) = iterations {
             options.iterations = n;
         }
@@ -247,7 +254,17 @@ impl Registration {
     /// failed registration (the warm start is then kept).
     fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>) -> PyResult<Registered> {
         let cloud = points(cloud, "cloud", self.unit)?;
-        let RegisteredFrame { result, targets, .. } = compute(py, || Ok(locked(&self.state)?.register(&cloud)?))?;
+        let RegisteredFrame { result, targets, rigid } = compute(py, || Ok(locked(&self.state)?.register(&cloud)?))?;
+        let rigid = rigid.map(|t| {
+            let mut m = Array2::<f64>::eye(4);
+            for i in 0..3 {
+                for j in 0..3 {
+                    m[(i, j)] = t.rotation[i][j];
+                }
+                m[(i, 3)] = t.translation[i] / self.unit;
+            }
+            m.into_pyarray(py).unbind()
+        });
         Ok(Registered {
             targets: point_array(py, &targets, self.unit).unbind(),
             displacement: nodal(py, &result.u, self.unit).unbind(),
@@ -256,6 +273,7 @@ impl Registration {
             points: result.points,
             iterations: result.iterations,
             warnings: result.warnings.clone(),
+            rigid,
             ms: result.time.as_secs_f64() * 1e3,
         })
     }
