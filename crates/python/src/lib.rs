@@ -197,6 +197,7 @@ struct Registration {
 impl Registration {
     #[new]
     #[pyo3(signature = (*, fem=None, model=None, scenario=None, targets=None, units="m", iterations=None, rigid=false))]
+    #[allow(clippy::too_many_arguments)] // one per Python keyword argument
     fn new(
         py: Python<'_>,
         fem: Option<PathBuf>,
