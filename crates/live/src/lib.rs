@@ -30,9 +30,8 @@ use mesh::Point;
 use openigtlink_rust::protocol::header::Header;
 use openigtlink_rust::protocol::types::{PointElement, PointMessage, PolyDataMessage, StringMessage, TransformMessage};
 use openigtlink_rust::protocol::{calculate_crc, IgtlMessage, Message};
-use register::organ::displaced;
-use register::rigid::{rigid_align, RigidTransform};
-use register::{register_frame, Deformer, FrameResult, Organ, RegistrationOptions, Stencil};
+use register::rigid::RigidTransform;
+use register::{Deformer, FrameResult, Organ, RegistrationOptions, Tracker};
 
 /// Errors of the server.
 #[derive(Debug, thiserror::Error)]
@@ -132,13 +131,11 @@ pub fn metres_per_unit(units: &str) -> std::result::Result<f64, String> {
 }
 
 /// A [`ClientRegistration`] under way: its targets located in the organ, each frame
-/// warm-started from the previous one (what the server does for each client).
+/// warm-started from the previous one, the rigid pose kept ([`register::Tracker`]: what the
+/// server does for each client).
 pub struct WarmRegistration {
     registration: ClientRegistration,
-    stencils: Vec<Stencil>,
-    warm: Option<Vec<f64>>,
-    /// The cloud-to-organ transform of the rigid pre-alignment, estimated on the first frame.
-    rigid: Option<RigidTransform>,
+    tracker: Tracker,
 }
 
 /// One registered frame.
@@ -166,44 +163,22 @@ impl RegisteredFrame {
 impl WarmRegistration {
     /// Locates the targets of `registration` in its organ (an error for a target outside it).
     pub fn new(registration: ClientRegistration) -> register::Result<WarmRegistration> {
-        let stencils = registration.organ.locate(&registration.targets, "target")?;
-        Ok(WarmRegistration { registration, stencils, warm: None, rigid: None })
+        let tracker = Tracker::new(&registration.organ, &registration.targets)?;
+        Ok(WarmRegistration { registration, tracker })
     }
 
-    /// Registers `cloud` (m), starting from the previous frame's displacement, which it then
-    /// replaces; a failed frame leaves the warm start as it was. With a rigid pre-alignment in
-    /// the options, the first frame estimates the cloud's pose (trimmed ICP to the organ's rest
-    /// surface), which the following frames keep.
+    /// Registers `cloud` (m) as [`Tracker::register`] does: from the previous frame, with the
+    /// pose of the first when the options ask for a rigid pre-alignment.
     pub fn register(&mut self, cloud: &[Point]) -> register::Result<RegisteredFrame> {
         let r = &mut self.registration;
-        register::check_cloud(cloud)?;
-        let rigid = match (&r.options.rigid, self.rigid) {
-            (Some(options), None) => Some(rigid_align(r.organ.surface(), cloud, options)?.cloud_to_organ),
-            (_, known) => known,
-        };
-        let moved: Vec<Point>;
-        let in_organ = match &rigid {
-            Some(t) => {
-                moved = cloud.iter().map(|&p| t.apply(p)).collect();
-                &moved
-            }
-            None => cloud,
-        };
-        let result = register_frame(&r.organ, r.deformer.as_mut(), in_organ, self.warm.as_deref(), &r.options)?;
-        let to_cloud = rigid.as_ref().map(RigidTransform::inverse);
-        let mut targets = displaced(&r.targets, &self.stencils, &result.u);
-        if let Some(t) = &to_cloud {
-            targets.iter_mut().for_each(|p| *p = t.apply(*p));
-        }
-        self.warm = Some(result.u.clone());
-        self.rigid = rigid;
-        Ok(RegisteredFrame { result, targets, rigid: to_cloud })
+        let tracked = self.tracker.register(&r.organ, r.deformer.as_mut(), cloud, &r.options)?;
+        let rigid = tracked.rigid.as_ref().map(|t| t.organ_to_cloud());
+        Ok(RegisteredFrame { result: tracked.registration, targets: tracked.targets, rigid })
     }
 
     /// Forgets the previous frame (and the rigid pose): the next one starts from the rest shape.
     pub fn reset(&mut self) {
-        self.warm = None;
-        self.rigid = None;
+        self.tracker.reset();
     }
 
     /// The registration's organ, targets and settings.
@@ -484,11 +459,7 @@ fn answer(
         shared.send(organ, "organ")?;
     }
     if let (true, Some(t)) = (options.outputs.transform, rigid) {
-        let row = |i: usize| {
-            let r = t.rotation[i];
-            [r[0] as f32, r[1] as f32, r[2] as f32, (t.translation[i] / unit) as f32]
-        };
-        let matrix = [row(0), row(1), row(2), [0.0, 0.0, 0.0, 1.0]];
+        let matrix = t.homogeneous(unit).map(|row| row.map(|x| x as f32));
         shared.send(TransformMessage { matrix }, "rigid")?;
     }
     shared.send_status(&serde_json::json!({

@@ -257,14 +257,8 @@ impl Registration {
         let cloud = points(cloud, "cloud", self.unit)?;
         let RegisteredFrame { result, targets, rigid } = compute(py, || Ok(locked(&self.state)?.register(&cloud)?))?;
         let rigid = rigid.map(|t| {
-            let mut m = Array2::<f64>::eye(4);
-            for i in 0..3 {
-                for j in 0..3 {
-                    m[(i, j)] = t.rotation[i][j];
-                }
-                m[(i, 3)] = t.translation[i] / self.unit;
-            }
-            m.into_pyarray(py).unbind()
+            let rows = t.homogeneous(self.unit);
+            Array2::from_shape_fn((4, 4), |(i, j)| rows[i][j]).into_pyarray(py).unbind()
         });
         Ok(Registered {
             targets: point_array(py, &targets, self.unit).unbind(),

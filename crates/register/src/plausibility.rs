@@ -81,12 +81,6 @@ fn looks_like_millimetres(organ: &Organ, cloud: &[Point]) -> Result<bool> {
     Ok(mesh::stats::median(&mut distances) < MILLIMETRE_FIT * size)
 }
 
-/// The distances from each cloud point to the registered surface (m).
-pub(crate) fn residuals(organ: &Organ, u: &[f64], cloud: &[Point]) -> Result<Vec<f64>> {
-    let bvh = SurfaceBvh::new(&organ.deformed_surface(u))?;
-    Ok(cloud.par_iter().map(|&c| bvh.distance(c)).collect())
-}
-
 /// The share of `distances` (cloud point to registered surface, m) beyond [`FAR_DISTANCE`].
 pub fn far_share(distances: &[f64]) -> f64 {
     distances.iter().filter(|&&d| d > FAR_DISTANCE).count() as f64 / distances.len().max(1) as f64

@@ -196,7 +196,8 @@ pub fn register_frame(
             break;
         }
     }
-    let distances = crate::plausibility::residuals(organ, &u, cloud)?;
+    let bvh = SurfaceBvh::new(&surface)?;
+    let distances: Vec<f64> = cloud.par_iter().map(|&c| bvh.distance(c)).collect();
     let surface_residual = distances.iter().sum::<f64>() / cloud.len() as f64;
     let far_share = crate::plausibility::far_share(&distances);
     let warnings = crate::plausibility::warnings(organ, &u, far_share);

@@ -68,6 +68,15 @@ impl RigidTransform {
         [r[0] + self.translation[0], r[1] + self.translation[1], r[2] + self.translation[2]]
     }
 
+    /// The 4 × 4 homogeneous matrix, rows, its translation expressed in units of `unit` m.
+    pub fn homogeneous(&self, unit: f64) -> [[f64; 4]; 4] {
+        let row = |i: usize| {
+            let r = self.rotation[i];
+            [r[0], r[1], r[2], self.translation[i] / unit]
+        };
+        [row(0), row(1), row(2), [0.0, 0.0, 0.0, 1.0]]
+    }
+
     /// The rotated vector `v` (no translation: for displacements and normals).
     pub fn rotate(&self, v: Point) -> Point {
         std::array::from_fn(|i| dot(self.rotation[i], v))

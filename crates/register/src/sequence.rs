@@ -10,7 +10,7 @@ use mesh::stats::{max, mean};
 use mesh::Point;
 use serde::Serialize;
 
-use crate::organ::{displaced, Organ};
+use crate::organ::{displaced, Organ, Stencil};
 use crate::register::{register_frame, Deformer, FrameResult, RegistrationOptions};
 use crate::rigid::{rigid_align, RigidResult, RigidSummary};
 use crate::{RegisterError, Result};
@@ -39,6 +39,79 @@ impl FrameOutcome {
     }
 }
 
+/// Clouds registered one after the other: each warm-started from the previous one's
+/// displacement; with a rigid pre-alignment in the options, the cloud's pose estimated on the
+/// first cloud (trimmed ICP to the organ's rest surface) and kept; the targets carried along in the
+/// cloud's frame. What [`register_sequence`] and a streaming server do per client.
+pub struct Tracker {
+    stencils: Vec<Stencil>,
+    targets: Vec<Point>,
+    warm: Option<Vec<f64>>,
+    rigid: Option<RigidResult>,
+}
+
+/// One cloud registered by a [`Tracker`].
+#[derive(Clone, Debug)]
+pub struct Tracked {
+    /// The registration (displacement in the organ's frame, iterations, residual, time: the
+    /// rigid alignment's included on the cloud that estimated it).
+    pub registration: FrameResult,
+    /// The registered targets, in the cloud's frame.
+    pub targets: Vec<Point>,
+    /// The rigid pre-alignment, when the options ask for one.
+    pub rigid: Option<RigidResult>,
+}
+
+impl Tracker {
+    /// Locates `targets` (rest positions) in `organ`; an error names a target outside it.
+    pub fn new(organ: &Organ, targets: &[Point]) -> Result<Tracker> {
+        Ok(Tracker { stencils: organ.locate(targets, "target")?, targets: targets.to_vec(), warm: None, rigid: None })
+    }
+
+    /// Registers `cloud` (in its own frame), starting from the previous cloud's displacement,
+    /// which it then replaces; a failed cloud leaves the warm start and the pose as they were.
+    pub fn register(
+        &mut self,
+        organ: &Organ,
+        deformer: &mut dyn Deformer,
+        cloud: &[Point],
+        options: &RegistrationOptions,
+    ) -> Result<Tracked> {
+        let (rigid, rigid_time) = match (&options.rigid, &self.rigid) {
+            (Some(rigid_options), None) => {
+                let r = rigid_align(organ.surface(), cloud, rigid_options)?;
+                let time = r.time;
+                (Some(r), time)
+            }
+            (_, known) => (known.clone(), std::time::Duration::ZERO),
+        };
+        let moved: Vec<Point>;
+        let in_organ = match &rigid {
+            Some(r) => {
+                moved = cloud.iter().map(|&p| r.cloud_to_organ.apply(p)).collect();
+                &moved
+            }
+            None => cloud,
+        };
+        let mut registration = register_frame(organ, deformer, in_organ, self.warm.as_deref(), options)?;
+        registration.time += rigid_time;
+        let mut targets = displaced(&self.targets, &self.stencils, &registration.u);
+        if let Some(r) = &rigid {
+            let to_cloud = r.organ_to_cloud();
+            targets.iter_mut().for_each(|p| *p = to_cloud.apply(*p));
+        }
+        self.warm = Some(registration.u.clone());
+        self.rigid = rigid.clone();
+        Ok(Tracked { registration, targets, rigid })
+    }
+
+    /// Forgets the previous cloud and the pose: the next cloud starts from rest.
+    pub fn reset(&mut self) {
+        self.warm = None;
+        self.rigid = None;
+    }
+}
+
 /// Registers `organ` to each cloud of `frames` in turn, each frame starting from the previous
 /// one's displacement; `targets` are rest positions inside the organ, `truths` (one list per
 /// frame, in the order of `targets`, in the cloud's frame) their true deformed positions.
@@ -52,7 +125,6 @@ pub fn register_sequence(
     options: &RegistrationOptions,
     mut on_frame: impl FnMut(usize, &FrameOutcome) -> Result<()>,
 ) -> Result<Vec<FrameOutcome>> {
-    let stencils = organ.locate(targets, "target")?;
     if let Some((i, t)) = truths.into_iter().flatten().enumerate().find(|(_, t)| t.len() != targets.len()) {
         return Err(RegisterError::Invalid(format!(
             "the truth of frame {i} has {} points for {} targets",
@@ -61,9 +133,9 @@ pub fn register_sequence(
         )));
     }
     let mut outcomes: Vec<FrameOutcome> = Vec::new();
-    let mut rigid: Option<RigidResult> = None;
+    let mut tracker = Tracker::new(organ, targets)?;
     for (i, cloud) in frames.into_iter().enumerate() {
-        let mut cloud = cloud?;
+        let cloud = cloud?;
         let truth = match truths {
             Some(t) => Some(
                 t.get(i)
@@ -71,32 +143,19 @@ pub fn register_sequence(
             ),
             None => None,
         };
-        let mut rigid_time = std::time::Duration::ZERO;
-        if let (Some(rigid_options), None) = (&options.rigid, &rigid) {
-            let r = rigid_align(organ.surface(), &cloud, rigid_options)?;
-            rigid_time = r.time;
-            rigid = Some(r);
-        }
-        let to_cloud = rigid.as_ref().map(RigidResult::organ_to_cloud);
-        if let Some(r) = &rigid {
-            cloud.iter_mut().for_each(|p| *p = r.cloud_to_organ.apply(*p));
-        }
-        let start = outcomes.last().map(|o| o.registration.u.as_slice());
-        let mut registration = register_frame(organ, deformer, &cloud, start, options)?;
-        registration.time += rigid_time;
-        let mut registered = displaced(targets, &stencils, &registration.u);
+        let Tracked { registration, targets: registered, rigid } =
+            tracker.register(organ, deformer, &cloud, options)?;
         let mut rest = targets.to_vec();
-        if let Some(t) = &to_cloud {
-            for p in registered.iter_mut().chain(rest.iter_mut()) {
-                *p = t.apply(*p);
-            }
+        if let Some(r) = &rigid {
+            let to_cloud = r.organ_to_cloud();
+            rest.iter_mut().for_each(|p| *p = to_cloud.apply(*p));
         }
         let outcome = FrameOutcome {
             errors: truth.map(|t| target_errors(&registered, t)),
             rest_errors: truth.map(|t| target_errors(&rest, t)),
             targets: registered,
             registration,
-            rigid: rigid.clone(),
+            rigid,
         };
         on_frame(i, &outcome)?;
         outcomes.push(outcome);
