@@ -384,7 +384,7 @@ fn gravity_adds_a_body_force_of_the_drawn_acceleration() {
 /// the given T4 mesh, its embedding reproduces quadratic fields at the grid nodes, and patch forces (spread
 /// as the traction of their resultant) are carried without a failed sample.
 #[test]
-fn quadratic_tetrahedra_are_solved_encoded_and_loaded_as_such() {
+fn quadratic_tetrahedra_are_solved_and_encoded_as_such() {
     let t4 = mesh::box_tet([0.0; 3], [0.2, 0.1, 0.1], [4, 2, 2]).unwrap();
     let top = NodeSelection::Box { min: [-1.0, -1.0, 0.1 - 1e-6], max: [1.0, 1.0, 1.0] };
     let config = DatasetConfig {
