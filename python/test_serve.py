@@ -54,6 +54,24 @@ def read_csv(path):
     return np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)[:, :3]
 
 
+def make_case(tmp):
+    """The `register_case_test` case made in `tmp` by `augsim register --case`, in mm: its cloud,
+    the targets' truth and rest positions, the rest positions as a CSV file and the FEM model's
+    scenario file."""
+    r = subprocess.run([augsim_bin(), "register", "--case", "register_case_test", "--out", str(tmp)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+    case = {name: read_csv(os.path.join(tmp, "case", f"{name}.csv")) * 1e3  # m -> mm
+            for name in ("cloud", "truth")}
+    case["rest"] = read_csv(os.path.join(tmp, "case", "targets_rest.csv")) * 1e3
+    case["targets"] = os.path.join(tmp, "targets_mm.csv")
+    np.savetxt(case["targets"], case["rest"], delimiter=",", header="x,y,z", comments="")
+    case["scenario"] = os.path.join(tmp, "model.toml")
+    with open(case["scenario"], "w", encoding="utf-8") as f:
+        f.write(MODEL)
+    return case
+
+
 def connected(test, port):
     """A pyigtl client connected to the server on `port`."""
     client = pyigtl.OpenIGTLinkClient(host="127.0.0.1", port=port)
@@ -68,17 +86,8 @@ class ServeTest(unittest.TestCase):
     def serve(self, tmp, options, exchange):
         """Makes the case in `tmp`, starts `augsim serve` on it with `options` and runs
         `exchange(port, cloud, truth, rest)` (mm), then stops the server with SIGINT."""
-        r = subprocess.run([augsim_bin(), "register", "--case", "register_case_test", "--out", tmp],
-                           capture_output=True, text=True)
-        self.assertEqual(r.returncode, 0, r.stdout + r.stderr)
-        cloud = read_csv(os.path.join(tmp, "case", "cloud.csv")) * 1e3  # m -> mm
-        truth = read_csv(os.path.join(tmp, "case", "truth.csv")) * 1e3
-        rest = read_csv(os.path.join(tmp, "case", "targets_rest.csv")) * 1e3
-        targets = os.path.join(tmp, "targets_mm.csv")
-        np.savetxt(targets, rest, delimiter=",", header="x,y,z", comments="")
-        scenario = os.path.join(tmp, "model.toml")
-        with open(scenario, "w", encoding="utf-8") as f:
-            f.write(MODEL)
+        case = make_case(tmp)
+        cloud, truth, rest, targets, scenario = (case[k] for k in ("cloud", "truth", "rest", "targets", "scenario"))
         port = free_port()
         server = subprocess.Popen([augsim_bin(), "serve", "--fem", scenario, "--targets", targets, "--port",
                                    str(port)] + options, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

@@ -18,7 +18,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, os.path.dirname(HERE))
 from test_augsim_unet import augsim_bin  # noqa: E402  (needs no torch)
-from test_serve import MODEL, read_csv  # noqa: E402  (the server test's FEM model and CSV reader)
+from test_serve import make_case  # noqa: E402  (the server test's case and FEM model)
 
 LIVER_AR = os.path.join(ROOT, "models", "liver_ar")
 BEAM_ASSIMILATION = os.path.join(ROOT, "crates", "experiment", "tests", "data", "beam_assimilation.toml")
@@ -52,16 +52,7 @@ def test_solve_beam_matches_the_command_line(tmp_path):
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
     """The server test's case: register_case_test made by `augsim register --case`, in mm."""
-    d = tmp_path_factory.mktemp("case")
-    run("register", "--case", "register_case_test", "--out", str(d))
-    cloud = read_csv(d / "case" / "cloud.csv") * 1e3
-    truth = read_csv(d / "case" / "truth.csv") * 1e3
-    rest = read_csv(d / "case" / "targets_rest.csv") * 1e3
-    targets = d / "targets_mm.csv"
-    np.savetxt(targets, rest, delimiter=",", header="x,y,z", comments="")
-    scenario = d / "model.toml"
-    scenario.write_text(MODEL)
-    return dict(cloud=cloud, truth=truth, rest=rest, targets=targets, scenario=scenario)
+    return make_case(tmp_path_factory.mktemp("case"))
 
 
 def test_registration_reduces_the_tre_with_a_warm_start(case):
