@@ -347,10 +347,28 @@ fn demo(args: &RegisterArgs) -> Result<()> {
     }
     let case = synthetic_case(&scenario)?;
     let dir = args.out.join("case");
-    write_csv(&dir.join("cloud.csv"), &case.cloud)?;
+    let peak = case.peak();
+    write_csv(&dir.join("cloud.csv"), &peak.cloud)?;
     write_csv(&dir.join("targets_rest.csv"), &case.targets)?;
-    write_csv(&dir.join("truth.csv"), &case.truth)?;
-    println!("case       {} (cloud.csv, targets_rest.csv, truth.csv)", dir.display());
+    write_csv(&dir.join("truth.csv"), &peak.truth)?;
+    if case.frames.len() > 1 {
+        for (k, frame) in case.frames.iter().enumerate() {
+            write_csv(&dir.join("clouds").join(format!("cloud_{k:04}.csv")), &frame.cloud)?;
+            write_csv(&dir.join("truths").join(format!("truth_{k:04}.csv")), &frame.truth)?;
+        }
+        let forces: Vec<String> = case.frames.iter().map(|f| format!("{:.2}", f.force)).collect();
+        println!(
+            "frames     {}: forces {} N, each frame warm-started from the previous one",
+            forces.len(),
+            forces.join(" ")
+        );
+        println!(
+            "case       {} (cloud.csv, truth.csv: the peak frame; clouds/, truths/: every frame; targets_rest.csv)",
+            dir.display()
+        );
+    } else {
+        println!("case       {} (cloud.csv, targets_rest.csv, truth.csv)", dir.display());
+    }
 
     let wants_network =
         scenario.models.method.iter().any(|m| matches!(m.kind, MethodKind::Network | MethodKind::Hybrid));
@@ -377,20 +395,21 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         bail!("no method to compare");
     }
     let registered: Vec<&Registered> = rows.iter().filter_map(|r| r.result.as_ref().ok()).collect();
-    let rigid = registered.first().and_then(|r| r.outcome.rigid.as_ref());
+    let rigid = registered.first().and_then(|r| r.outcomes[0].rigid.as_ref());
     if let Some(r) = rigid {
         print_rigid(r, Some(&case.pose));
     }
     println!();
     println!(
-        "{:<28} {:>14} {:>13} {:>14} {:>10} {:>10}",
-        "method", "TRE mean (mm)", "TRE max (mm)", "residual (mm)", "ms/frame", "iterations"
+        "{:<28} {:>14} {:>13} {:>14} {:>10} {:>10} {:>10}",
+        "method", "TRE mean (mm)", "TRE max (mm)", "residual (mm)", "ms/frame", "p95 (ms)", "iterations"
     );
-    let mut csv = String::from("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_ms,iterations,error\n");
-    let mut row = |name: &str, values: [Option<f64>; 5], error: &str| {
-        let [t, m, res, time, it] = values.map(|v| v.map_or("-".to_string(), |v| format!("{v:.2}")));
+    let mut csv =
+        String::from("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_median_ms,time_p95_ms,iterations,error\n");
+    let mut row = |name: &str, values: [Option<f64>; 6], error: &str| {
+        let [t, m, res, time, p95, it] = values.map(|v| v.map_or("-".to_string(), |v| format!("{v:.2}")));
         if error.is_empty() {
-            println!("{name:<28} {t:>14} {m:>13} {res:>14} {time:>10} {it:>10}");
+            println!("{name:<28} {t:>14} {m:>13} {res:>14} {time:>10} {p95:>10} {it:>10}");
         } else {
             println!("{name:<28} failed: {error}");
         }
@@ -400,21 +419,27 @@ fn demo(args: &RegisterArgs) -> Result<()> {
     };
     if let Some(first) = registered.first() {
         let (rest, baseline) = (&first.summary, if rigid.is_some() { "rigid only (ICP)" } else { "no deformation" });
-        row(baseline, [rest.no_deformation_tre_mean_mm, rest.no_deformation_tre_max_mm, None, None, None], "");
+        row(baseline, [rest.no_deformation_tre_mean_mm, rest.no_deformation_tre_max_mm, None, None, None, None], "");
     }
     for r in &rows {
         match &r.result {
             Ok(reg) => {
                 let s = &reg.summary;
-                let values =
-                    [s.tre_mean_mm, s.tre_max_mm, Some(s.surface_residual_mm), Some(s.time_ms), Some(s.iterations)];
+                let values = [
+                    s.tre_mean_mm,
+                    s.tre_max_mm,
+                    Some(s.surface_residual_mm),
+                    Some(s.time_median_ms),
+                    Some(s.time_p95_ms),
+                    Some(s.iterations),
+                ];
                 row(&r.method, values, "");
             }
-            Err(e) => row(&r.method, [None; 5], &e.to_string()),
+            Err(e) => row(&r.method, [None; 6], &e.to_string()),
         }
     }
     for reg in &registered {
-        let (s, outcome) = (&reg.summary, &reg.outcome);
+        let (s, outcome) = (&reg.summary, reg.peak(&case));
         let method_dir = args.out.join(slug(&s.method));
         std::fs::create_dir_all(&method_dir).with_context(|| format!("creating {}", method_dir.display()))?;
         let u = &outcome.registration.u;
@@ -431,9 +456,9 @@ fn demo(args: &RegisterArgs) -> Result<()> {
             &title,
             &reg.organ,
             u,
-            &to_organ(&case.cloud),
+            &to_organ(&peak.cloud),
             &to_organ(&outcome.targets),
-            Some(&to_organ(&case.truth)),
+            Some(&to_organ(&peak.truth)),
         )?;
     }
     write_atomic_bytes(&args.out.join("comparison.csv"), csv.as_bytes())?;

@@ -36,10 +36,10 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
     }
     let table = std::fs::read_to_string(out.join("comparison.csv")).unwrap();
     assert!(table
-        .starts_with("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_ms,iterations,error\nno deformation,"));
+        .starts_with("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_median_ms,time_p95_ms,iterations,error\nno deformation,"));
     assert_eq!(table.lines().count(), 5, "{table}");
     // Every method registered: the error column is empty on every line.
-    assert!(table.lines().skip(1).all(|l| l.split(',').count() == 7 && l.ends_with(',')), "{table}");
+    assert!(table.lines().skip(1).all(|l| l.split(',').count() == 8 && l.ends_with(',')), "{table}");
     let dir_of = |m: &str| out.join(m);
     for m in ["fem_co_rotational_3k_t4", "fem_svk_3k_t4", "u_net"] {
         for f in ["organ.vtu", "targets.csv", "registration.png"] {

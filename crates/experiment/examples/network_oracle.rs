@@ -39,13 +39,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // node's for a node just outside it (the two meshes' surfaces differ by their facets).
     let truth_at = |x: Point| -> Point {
         match case.truth_organ.locate(&[x], "node") {
-            Ok(stencil) => stencil[0].vector(&case.truth_u),
+            Ok(stencil) => stencil[0].vector(&case.peak().truth_u),
             Err(_) => {
                 let nodes = &case.truth_organ.mesh().nodes;
                 let k = (0..nodes.len())
                     .min_by(|&a, &b| mesh::distance(nodes[a], x).total_cmp(&mesh::distance(nodes[b], x)));
                 let k = k.unwrap_or(0);
-                std::array::from_fn(|d| case.truth_u[3 * k + d])
+                std::array::from_fn(|d| case.peak().truth_u[3 * k + d])
             }
         }
     };
@@ -54,11 +54,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let stencils = organ.locate(&case.targets, "target")?;
     let tre = |u: &[f64]| {
         let registered = register::organ::displaced(&case.targets, &stencils, u);
-        let e = target_errors(&registered, &case.truth);
+        let e = target_errors(&registered, &case.peak().truth);
         (1e3 * mesh::stats::mean(&e), 1e3 * mesh::stats::max(&e))
     };
     println!("case       {} at {} N; markers move {:.1} mm on average", scenario.name, scenario.truth.force, {
-        let rest = target_errors(&case.targets, &case.truth);
+        let rest = target_errors(&case.targets, &case.peak().truth);
         1e3 * mesh::stats::mean(&rest)
     });
     let (mean, max) = tre(&truth_u);
@@ -78,7 +78,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // The loop's fit on the true deformed surface, against the true normal motion.
     let options = &scenario.registration;
     let view = options.view.or(Some(scenario.camera.view));
-    let observations = observe(&organ, &organ.deformed_surface(&truth_u), &case.cloud, options, 0.0, view)?;
+    let observations = observe(&organ, &organ.deformed_surface(&truth_u), &case.peak().cloud, options, 0.0, view)?;
     let fit = deformer.surface_estimate(&observations, &truth_u);
     let misfit: Vec<f64> = visible
         .iter()
@@ -92,7 +92,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
 
     let mut deformer = deformer;
-    let frame = register_frame(&organ, &mut deformer, &case.cloud, None, options)?;
+    let frame = register_frame(&organ, &mut deformer, &case.peak().cloud, None, options)?;
     let (mean, max) = tre(&frame.u);
     println!("registration loop                      TRE {mean:.2} / {max:.2} mm in {} iterations", frame.iterations);
     Ok(())

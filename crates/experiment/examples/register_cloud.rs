@@ -16,15 +16,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // What the operating room gives (a cloud of positions) and what it hides (the markers' truth).
     let scenario = CaseScenario::load(Path::new("register_case_test"))?;
     let case = synthetic_case(&scenario)?;
-    println!("cloud      {} points, {} hidden markers", case.cloud.len(), case.targets.len());
+    println!("cloud      {} points, {} hidden markers", case.peak().cloud.len(), case.targets.len());
 
     // The preoperative model: the organ (its mesh and surface) and what deforms it.
     let (organ, mut deformer) = corotational_model()?;
     let stencils = organ.locate(&case.targets, "target")?;
-    let tre = |u: &[f64]| 1e3 * mesh::stats::mean(&target_errors(&displaced(&case.targets, &stencils, u), &case.truth));
+    let tre = |u: &[f64]| {
+        1e3 * mesh::stats::mean(&target_errors(&displaced(&case.targets, &stencils, u), &case.peak().truth))
+    };
     println!("before     mean TRE {:.2} mm (no deformation)", tre(&vec![0.0; 3 * organ.mesh().num_nodes()]));
 
-    let frame = register_frame(&organ, &mut deformer, &case.cloud, None, &RegistrationOptions::default())?;
+    let frame = register_frame(&organ, &mut deformer, &case.peak().cloud, None, &RegistrationOptions::default())?;
     println!(
         "after      mean TRE {:.2} mm; surface residual {:.2} mm, {} of {} points kept, {} iterations, {:.0} ms",
         tre(&frame.u),

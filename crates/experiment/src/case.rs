@@ -26,27 +26,64 @@ use crate::simulate::{simulate_cloud, CameraModel};
 /// Tetrahedra of the ground-truth phantom of the built-in case.
 pub const TRUTH_TETS: usize = 9000;
 
-/// What the operating room gives (the cloud) and what it hides (the truth).
+/// What the operating room gives (the clouds) and what it hides (the truth).
 #[derive(Clone, Debug)]
 pub struct SyntheticCase {
-    /// The intraoperative cloud, in the camera's frame.
-    pub cloud: Vec<Point>,
+    /// The frames, in order: one, or a press and release ([`scenario::registration::TruthSpec::frames`]).
+    pub frames: Vec<CaseFrame>,
     /// Internal targets at rest (the phantom's `markers`), in the model's frame.
     pub targets: Vec<Point>,
-    /// Their true deformed positions, in the camera's frame.
-    pub truth: Vec<Point>,
     /// Model frame → camera frame: the scenario's misalignment (the identity when none).
     pub pose: RigidTransform,
     /// The truth's organ (its finer mesh), in the model's frame.
     pub truth_organ: Organ,
-    /// Its displacement (m, 3 per node).
+}
+
+/// One frame of a [`SyntheticCase`].
+#[derive(Clone, Debug)]
+pub struct CaseFrame {
+    /// The force pushing the truth (N).
+    pub force: f64,
+    /// The intraoperative cloud, in the camera's frame.
+    pub cloud: Vec<Point>,
+    /// The targets' true deformed positions, in the camera's frame.
+    pub truth: Vec<Point>,
+    /// The truth's displacement (m, 3 per node of [`SyntheticCase::truth_organ`]).
     pub truth_u: Vec<f64>,
 }
 
+impl SyntheticCase {
+    /// The index of the frame of the largest force (the first of them).
+    pub fn peak_index(&self) -> usize {
+        let mut best = 0;
+        for (k, f) in self.frames.iter().enumerate() {
+            if f.force.abs() > self.frames[best].force.abs() {
+                best = k;
+            }
+        }
+        best
+    }
+
+    /// The frame of the largest force: the case of a single frame.
+    pub fn peak(&self) -> &CaseFrame {
+        &self.frames[self.peak_index()]
+    }
+
+    /// The clouds of the frames, in order.
+    pub fn clouds(&self) -> Vec<Vec<Point>> {
+        self.frames.iter().map(|f| f.cloud.clone()).collect()
+    }
+
+    /// The targets' truth of the frames, in order.
+    pub fn truths(&self) -> Vec<Vec<Point>> {
+        self.frames.iter().map(|f| f.truth.clone()).collect()
+    }
+}
+
 /// The case of `scenario`: the phantom of `truth.tets` tetrahedra and `truth.material`, fixed on
-/// `truth.fixed`, `truth.force` N along `truth.direction` spread over `truth.load`; the camera's
-/// view of the deformed surface, reproducible from its seed; cloud and truth moved by the
-/// misalignment.
+/// `truth.fixed`, pushed along `truth.direction` by each frame's force spread over `truth.load`
+/// (each frame's solve starts from the previous one); the camera's view of each deformed
+/// surface, reproducible from its seed; clouds and truths moved by the misalignment.
 pub fn synthetic_case(scenario: &CaseScenario) -> Result<SyntheticCase> {
     scenario.validate().map_err(|m| anyhow!("case {}: {m}", scenario.name))?;
     let t = &scenario.truth;
@@ -60,22 +97,32 @@ pub fn synthetic_case(scenario: &CaseScenario) -> Result<SyntheticCase> {
     let load = p.mesh.region(&t.load)?.to_vec();
     p.fix(&fixed);
     let len = mesh::dot(t.direction, t.direction).sqrt();
-    p.add_force(&load, t.direction.map(|d| d / len * t.force));
-    let u = StaticSolver::new(p.clone())?.solve(&SolverOptions::default())?.u;
     let markers = p.mesh.region(&t.targets)?.to_vec();
     let targets: Vec<Point> = markers.iter().map(|&n| p.mesh.nodes[n]).collect();
-    let mut truth: Vec<Point> =
-        markers.iter().map(|&n| std::array::from_fn(|d| p.mesh.nodes[n][d] + u[3 * n + d])).collect();
-    let organ = Organ::new(p.mesh, None)?;
-    let camera = &scenario.camera;
-    let mut cloud = simulate_cloud(&organ.deformed_surface(&u), &camera_model(camera), camera.seed)?;
+    let organ = Organ::new(p.mesh.clone(), None)?;
     let pose = scenario.misalignment.transform().map_err(|m| anyhow!(m))?;
-    if pose != RigidTransform::identity() {
-        for x in cloud.iter_mut().chain(truth.iter_mut()) {
-            *x = pose.apply(*x);
+    let camera = &scenario.camera;
+    let mut solver = StaticSolver::new(p)?;
+    let mut frames: Vec<CaseFrame> = Vec::with_capacity(t.frames);
+    for (k, force) in t.frame_forces().into_iter().enumerate() {
+        let problem = solver.problem_mut();
+        problem.f_ext.iter_mut().for_each(|f| *f = 0.0);
+        problem.add_force(&load, t.direction.map(|d| d / len * force));
+        let start = frames.last().map(|f| f.truth_u.as_slice());
+        let u = solver.solve_from(start, &SolverOptions::default())?.u;
+        let nodes = &solver.problem().mesh.nodes;
+        let mut truth: Vec<Point> =
+            markers.iter().map(|&n| std::array::from_fn(|d| nodes[n][d] + u[3 * n + d])).collect();
+        let seed = camera.seed + k as u64;
+        let mut cloud = simulate_cloud(&organ.deformed_surface(&u), &camera_model(camera), seed)?;
+        if pose != RigidTransform::identity() {
+            for x in cloud.iter_mut().chain(truth.iter_mut()) {
+                *x = pose.apply(*x);
+            }
         }
+        frames.push(CaseFrame { force, cloud, truth, truth_u: u });
     }
-    Ok(SyntheticCase { cloud, targets, truth, pose, truth_organ: organ, truth_u: u })
+    Ok(SyntheticCase { frames, targets, pose, truth_organ: organ })
 }
 
 /// The built-in case ([`CaseScenario::builtin`]: the Neo-Hookean phantom, E = 5 kPa, ν = 0.48,
@@ -238,10 +285,17 @@ pub struct Method {
 pub struct Registered {
     /// Its figures.
     pub summary: Summary,
-    /// Its registration of the case.
-    pub outcome: FrameOutcome,
+    /// Its registration of each frame of the case, in order.
+    pub outcomes: Vec<FrameOutcome>,
     /// The organ it deformed.
     pub organ: Organ,
+}
+
+impl Registered {
+    /// Its registration of the case's [`SyntheticCase::peak`] frame.
+    pub fn peak(&self, case: &SyntheticCase) -> &FrameOutcome {
+        &self.outcomes[case.peak_index()]
+    }
 }
 
 /// One method's result in a comparison: its registration, or why it failed (e.g. an SVK
@@ -253,27 +307,28 @@ pub struct Compared {
     pub result: register::Result<Registered>,
 }
 
-/// Registers the case's cloud with each method (one frame, from rest), in order.
+/// Registers the case's clouds with each method (the first frame from rest, each next one
+/// warm-started from the previous one), in order.
 pub fn compare(case: &SyntheticCase, methods: Vec<Method>, options: &RegistrationOptions) -> Vec<Compared> {
+    let truths = case.truths();
     methods
         .into_iter()
         .map(|mut m| {
             let options =
                 RegistrationOptions { iterations: m.iterations.unwrap_or(options.iterations), ..options.clone() };
-            let truth = [case.truth.clone()];
-            let frames = [Ok(case.cloud.clone())];
+            let frames = case.frames.iter().map(|f| Ok(f.cloud.clone()));
             let result = register_sequence(
                 &m.organ,
                 m.deformer.as_mut(),
                 frames,
                 &case.targets,
-                Some(&truth),
+                Some(&truths),
                 &options,
                 |_, _| Ok(()),
             )
-            .and_then(|mut outcomes| {
+            .and_then(|outcomes| {
                 let summary = Summary::new(m.name.clone(), &outcomes)?;
-                Ok(Registered { summary, outcome: outcomes.remove(0), organ: m.organ })
+                Ok(Registered { summary, outcomes, organ: m.organ })
             });
             Compared { method: m.name, result }
         })

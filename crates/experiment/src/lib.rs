@@ -39,6 +39,7 @@ pub mod report;
 pub mod sample_view;
 pub mod setup;
 pub mod simulate;
+pub mod stream;
 mod transfer;
 
 pub use fem_speed::{fbar_ratios, measure as measure_fem_speed, CaseTiming, Ratio, FRAME_LOAD_STEP};
@@ -73,11 +74,13 @@ pub enum Name {
     BeamTransfer,
     /// Beam with sparse, noisy imposed displacements.
     BeamSparse,
+    /// Registration on a stream over OpenIGTLink: latency, frame rate and TRE per frame.
+    Stream,
 }
 
 impl Name {
     /// Every experiment, in the order `all` runs them.
-    pub const ALL: [Name; 8] = [
+    pub const ALL: [Name; 9] = [
         Name::FemSpeed,
         Name::FemConvergence,
         Name::Young,
@@ -86,6 +89,7 @@ impl Name {
         Name::LiverAr,
         Name::BeamTransfer,
         Name::BeamSparse,
+        Name::Stream,
     ];
 
     /// The command-line and directory name.
@@ -99,6 +103,7 @@ impl Name {
             Name::LiverAr => "liver-ar",
             Name::BeamTransfer => "beam-transfer",
             Name::BeamSparse => "beam-sparse",
+            Name::Stream => "stream",
         }
     }
 
@@ -113,6 +118,7 @@ impl Name {
             Name::LiverAr => "Registration for augmented reality (TRE)",
             Name::BeamTransfer => "U-Net: beam, transfer learning to a hidden boundary condition",
             Name::BeamSparse => "U-Net: beam, sparse visible displacement",
+            Name::Stream => "Live registration over OpenIGTLink (press and release)",
         }
     }
 
@@ -267,6 +273,7 @@ pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<Ex
         Name::LiverAr => registration::liver_ar(size, &dir, progress)?,
         Name::BeamTransfer => transfer::beam_transfer(size, &dir, progress)?,
         Name::BeamSparse => learning::beam_sparse(size, &dir, progress)?,
+        Name::Stream => stream::run(size, &dir, progress)?,
     };
     result.seconds = start.elapsed().as_secs_f64();
     let json = serde_json::to_string_pretty(&result)?;

@@ -151,7 +151,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         if per_method.is_empty() {
             per_method = rows.iter().map(|r| MethodTre { method: r.method.clone(), ..MethodTre::default() }).collect();
         }
-        let motion = mean(&register::target_errors(&case.targets, &case.truth)) * 1e3;
+        let motion = mean(&register::target_errors(&case.targets, &case.peak().truth)) * 1e3;
         let mut cells = Vec::new();
         for (entry, r) in per_method.iter_mut().zip(&rows) {
             let s = match &r.result {

@@ -70,7 +70,9 @@ fn a_scenario_builds_the_case_exactly_as_its_definition_says() {
     let s = CaseScenario::load(Path::new("register_case_test")).unwrap();
     let case = synthetic_case(&s).unwrap();
     let (cloud, targets, truth) = hard_coded(s.truth.tets, s.truth.force, &camera_model(&s.camera), s.camera.seed);
-    assert_eq!((case.cloud, case.targets, case.truth), (cloud, targets, truth), "bit for bit");
+    assert_eq!(case.frames.len(), 1);
+    let frame = case.frames[0].clone();
+    assert_eq!((frame.cloud, case.targets, frame.truth), (cloud, targets, truth), "bit for bit");
     assert_eq!(case.pose, RigidTransform::identity());
     // A misalignment moves cloud and truth, not the rest targets.
     let mut moved = s.clone();
@@ -79,13 +81,43 @@ fn a_scenario_builds_the_case_exactly_as_its_definition_says() {
     let off = synthetic_case(&moved).unwrap();
     let plain = synthetic_case(&s).unwrap();
     assert_eq!(off.targets, plain.targets);
-    assert!((off.pose.angle().to_degrees() - 5.0).abs() < 1e-9 && (off.pose.translation_norm() - 0.01).abs() < 1e-12);
+    let pose = off.pose;
+    assert!((pose.angle().to_degrees() - 5.0).abs() < 1e-9 && (pose.translation_norm() - 0.01).abs() < 1e-12);
+    let (off, plain) = (off.peak(), plain.peak());
     for (a, b) in off.truth.iter().zip(&plain.truth).chain(off.cloud.iter().zip(&plain.cloud)) {
-        let p = off.pose.apply(*b);
+        let p = pose.apply(*b);
         assert!((0..3).all(|d| (a[d] - p[d]).abs() < 1e-15), "{a:?} {p:?}");
     }
     let methods = case_methods(&s, None).unwrap();
     assert_eq!(methods.iter().map(|m| m.name.as_str()).collect::<Vec<_>>(), ["FEM co-rotational", "FEM SVK"]);
+}
+
+#[test]
+fn a_press_and_release_rises_to_the_force_and_falls_back_each_frame_seen_anew() {
+    let mut s = CaseScenario::load(Path::new("register_case_test")).unwrap();
+    s.truth.frames = 5;
+    let case = synthetic_case(&s).unwrap();
+    let forces: Vec<f64> = case.frames.iter().map(|f| f.force).collect();
+    let f = s.truth.force;
+    let expected = [0.5 * f, 0.75f64.sqrt() * f, f, 0.75f64.sqrt() * f, 0.5 * f];
+    assert!(forces.iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-12), "{forces:?}");
+    assert_eq!(case.peak_index(), 2);
+    // The peak frame, warm-started from the frames before it, is the single frame at the force
+    // solved from rest (to the solver's tolerance), seen with the seed of its place.
+    let (_, _, truth) = hard_coded(s.truth.tets, f, &camera_model(&s.camera), s.camera.seed);
+    let motion = mesh::stats::mean(&register::target_errors(&case.targets, &truth));
+    let off = mesh::stats::max(&register::target_errors(&case.peak().truth, &truth));
+    assert!(off < 1e-4 * motion, "{off} m off the single frame for a motion of {motion} m");
+    // Symmetric loads give the same truth on the way down, and every frame has its own cloud.
+    let back = mesh::stats::max(&register::target_errors(&case.frames[1].truth, &case.frames[3].truth));
+    assert!(back < 1e-4 * motion, "{back}");
+    assert_ne!(case.frames[1].cloud, case.frames[3].cloud);
+    let mut single = s.clone();
+    single.truth.frames = 1;
+    single.camera.seed += 2;
+    let alone = synthetic_case(&single).unwrap().frames[0].cloud.clone();
+    let apart = mesh::stats::max(&register::target_errors(&case.peak().cloud, &alone));
+    assert!(case.peak().cloud.len() == alone.len() && apart < 1e-4 * motion, "{apart}");
 }
 
 #[test]

@@ -42,7 +42,8 @@ fn names_parse_and_unknown_ones_are_refused() {
             "liver-forces",
             "liver-ar",
             "beam-transfer",
-            "beam-sparse"
+            "beam-sparse",
+            "stream"
         ]
     );
     for name in Name::ALL {

@@ -20,11 +20,12 @@ fn fem_tre(camera: &CameraModel) -> (f64, f64, f64) {
     let case = phantom_push(1.5, camera, 7).unwrap();
     let (organ, mut deformer) = corotational_model().unwrap();
     let stencils = organ.locate(&case.targets, "target").unwrap();
-    let frame = register_frame(&organ, &mut deformer, &case.cloud, None, &RegistrationOptions::default()).unwrap();
+    let frame =
+        register_frame(&organ, &mut deformer, &case.peak().cloud, None, &RegistrationOptions::default()).unwrap();
     let registered = displaced(&case.targets, &stencils, &frame.u);
     (
-        mean(&target_errors(&registered, &case.truth)),
-        mean(&target_errors(&case.targets, &case.truth)),
+        mean(&target_errors(&registered, &case.peak().truth)),
+        mean(&target_errors(&case.targets, &case.peak().truth)),
         frame.surface_residual,
     )
 }
@@ -56,8 +57,8 @@ fn network_tre(camera: &CameraModel) -> (f64, f64) {
         vec![Method { name: "U-Net".into(), organ, deformer: Box::new(deformer), iterations: None }],
         &RegistrationOptions::default(),
     );
-    let errors = rows[0].result.as_ref().unwrap().outcome.errors.clone().unwrap();
-    (mean(&errors), mean(&target_errors(&case.targets, &case.truth)))
+    let errors = rows[0].result.as_ref().unwrap().outcomes[0].errors.clone().unwrap();
+    (mean(&errors), mean(&target_errors(&case.targets, &case.peak().truth)))
 }
 
 #[test]
@@ -164,7 +165,7 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     let case = experiment::case::synthetic_case(&scenario).unwrap();
     let methods = experiment::case::case_methods(&scenario, Some(&network)).unwrap();
     let rows = compare(&case, methods, &scenario.registration);
-    let u = |k: usize| rows[k].result.as_ref().unwrap().outcome.registration.u.clone();
+    let u = |k: usize| rows[k].result.as_ref().unwrap().outcomes[0].registration.u.clone();
     assert_eq!(u(0), u(1), "all network iterations: the network's registration");
     assert_ne!(u(1), u(2), "the FEM takes over after 4");
     let s = &rows[2].result.as_ref().unwrap().summary;
@@ -217,7 +218,7 @@ fn clouds_that_cannot_be_the_organ_are_refused_or_flagged() {
     let (organ, mut deformer) = corotational_model().unwrap();
     let opts = RegistrationOptions::default();
     let mut register = |cloud: &[[f64; 3]]| register_frame(&organ, &mut deformer, cloud, None, &opts);
-    let millimetres: Vec<[f64; 3]> = case.cloud.iter().map(|p| p.map(|c| 1e3 * c)).collect();
+    let millimetres: Vec<[f64; 3]> = case.peak().cloud.iter().map(|p| p.map(|c| 1e3 * c)).collect();
     let e = register(&millimetres).unwrap_err().to_string();
     assert!(e.contains("millimetres"), "{e}");
     let mut state = 12345u64;
@@ -228,9 +229,9 @@ fn clouds_that_cannot_be_the_organ_are_refused_or_flagged() {
     let random: Vec<[f64; 3]> = (0..2000).map(|_| [uniform(), uniform(), uniform()]).collect();
     let e = register(&random).unwrap_err().to_string();
     assert!(e.contains("cannot be a view of the organ"), "{e}");
-    let good = register(&case.cloud).unwrap();
+    let good = register(&case.peak().cloud).unwrap();
     assert!(good.warnings.is_empty(), "{:?} ({} unfitted)", good.warnings, good.far_share);
-    let shifted: Vec<[f64; 3]> = case.cloud.iter().map(|p| [p[0] - 0.035, p[1] + 0.035, p[2]]).collect();
+    let shifted: Vec<[f64; 3]> = case.peak().cloud.iter().map(|p| [p[0] - 0.035, p[1] + 0.035, p[2]]).collect();
     let moved = register(&shifted).unwrap();
     assert!(
         moved.warnings.iter().any(|w| w.contains("--rigid")),

@@ -115,7 +115,7 @@ fn pipeline(scenario: &CaseScenario) -> (f64, f64, Option<(f64, f64)>) {
     let rows = compare(&case, methods, &scenario.registration);
     let registered = rows[0].result.as_ref().unwrap();
     let s = &registered.summary;
-    let rigid = registered.outcome.rigid.as_ref().map(|r| {
+    let rigid = registered.outcomes[0].rigid.as_ref().map(|r| {
         let (a, t) = r.organ_to_cloud().error_to(&case.pose);
         (a.to_degrees(), t * 1e3)
     });

@@ -501,9 +501,13 @@ impl StaticSolver {
         let mut bfgs = Bfgs::new(if opt.reuse_factorization { opt.bfgs_memory } else { 0 });
         // The first factor: the rest tangent's (kept while the material and
         // springs are unchanged, it serves every solve from rest), or the last
-        // factor computed.
+        // factor computed. A warm start without a last factor takes the rest
+        // factor only while it is current: one to be made anew is made at the
+        // warm start instead, where it is a better preconditioner, and kept (the
+        // springs of a registration change at every solve: a rest factor made
+        // for each would never serve twice).
         let latest = self.cholesky.is_factorized(Slot::Latest);
-        let want_rest = from == Start::Rest || !latest;
+        let want_rest = from == Start::Rest || (!latest && self.rest_factor_current());
         let mut slot = Slot::Latest;
         if want_rest && opt.reuse_factorization && self.prepare_rest_factor(stats)? {
             slot = Slot::Rest;
@@ -584,15 +588,20 @@ impl StaticSolver {
         unreachable!("the loop returns at its last iteration")
     }
 
+    /// Whether the rest-state factor was made with the current material and springs.
+    fn rest_factor_current(&self) -> bool {
+        let p = &self.problem;
+        self.rest_key.as_ref().is_some_and(|(material, springs, point_springs)| {
+            *material == p.material && *springs == p.springs && *point_springs == p.point_springs
+        })
+    }
+
     /// Makes sure the rest-state factor matches the current material and springs,
     /// factorising the tangent at u = 0 if not. Returns false when the rest
     /// tangent is not positive definite (then it is no use as a preconditioner).
     fn prepare_rest_factor(&mut self, stats: &mut Stats) -> Result<bool, FemError> {
-        if let Some((material, springs, point_springs)) = &self.rest_key {
-            let p = &self.problem;
-            if *material == p.material && *springs == p.springs && *point_springs == p.point_springs {
-                return Ok(self.cholesky.is_positive_definite(Slot::Rest));
-            }
+        if self.rest_factor_current() {
+            return Ok(self.cholesky.is_positive_definite(Slot::Rest));
         }
         self.rest_key = None;
         let zero = vec![0.0; self.problem.num_dofs()];

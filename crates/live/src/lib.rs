@@ -20,6 +20,8 @@
 //! connection still allows it); a cloud with no point, too many points or a non-finite
 //! coordinate gets an error status and the stream goes on. Other clients are never affected.
 
+pub mod client;
+
 use std::io::{Read, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, Ordering};

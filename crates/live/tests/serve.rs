@@ -2,19 +2,19 @@
 //! millimetres registered into targets, organ and status; a bad cloud answered with an error; a
 //! malformed or oversized message closing that client alone; a clean stop.
 
-use std::io::{Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpListener;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use augsim_live::{decode_body, encode_message, serve, ClientRegistration, Outputs, ServeOptions, WarmRegistration};
+use augsim_live::client::{Answer, Client};
+use augsim_live::{encode_message, serve, ClientRegistration, Outputs, ServeOptions, WarmRegistration};
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::select::nodes_in_box;
 use mesh::Point;
 use openigtlink_rust::protocol::calculate_crc;
 use openigtlink_rust::protocol::header::Header;
-use openigtlink_rust::protocol::types::{PointMessage, PolyDataMessage, StringMessage};
+use openigtlink_rust::protocol::types::PolyDataMessage;
 use register::{FemDeformer, Organ, RegistrationOptions};
 
 const SIDE: f64 = 0.05;
@@ -53,37 +53,6 @@ fn cube_registration() -> Result<ClientRegistration, String> {
     Ok(ClientRegistration { organ, deformer: Box::new(deformer), targets: vec![centre], options })
 }
 
-fn send_cloud(stream: &mut TcpStream, points: Vec<[f32; 3]>) {
-    let bytes = encode_message(PolyDataMessage::new(points), "cloud").unwrap();
-    stream.write_all(&bytes).unwrap();
-}
-
-/// A message from the server.
-#[derive(Debug)]
-enum Answer {
-    Targets(PointMessage),
-    Organ(PolyDataMessage),
-    Status(serde_json::Value),
-}
-
-/// The next message from the server, `None` at the end of the stream.
-fn receive(stream: &mut TcpStream) -> Option<Answer> {
-    let mut header = [0u8; Header::SIZE];
-    stream.read_exact(&mut header).ok()?;
-    let parsed = Header::decode(&header).unwrap();
-    let mut body = vec![0; parsed.body_size as usize];
-    stream.read_exact(&mut body).unwrap();
-    Some(match parsed.type_name.as_str().unwrap() {
-        "POINT" => Answer::Targets(decode_body(&parsed, &body).unwrap()),
-        "POLYDATA" => Answer::Organ(decode_body(&parsed, &body).unwrap()),
-        "STRING" => {
-            let text: StringMessage = decode_body(&parsed, &body).unwrap();
-            Answer::Status(serde_json::from_str(text.as_str()).unwrap())
-        }
-        other => panic!("unexpected {other} message"),
-    })
-}
-
 fn status(message: Option<Answer>) -> serde_json::Value {
     match message {
         Some(Answer::Status(s)) => s,
@@ -91,10 +60,8 @@ fn status(message: Option<Answer>) -> serde_json::Value {
     }
 }
 
-fn connect(port: u16) -> TcpStream {
-    let stream = TcpStream::connect(("127.0.0.1", port)).unwrap();
-    stream.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
-    stream
+fn connect(port: u16) -> Client {
+    Client::connect(("127.0.0.1", port), Duration::from_secs(60)).unwrap()
 }
 
 #[test]
@@ -111,17 +78,17 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
     let (cloud, truth) = pressed_cloud(300.0);
     let motion = (truth[2] - SIDE * 1e3 / 2.0).abs();
     let mut client = connect(port);
-    send_cloud(&mut client, cloud.clone());
-    let target = match receive(&mut client) {
+    client.send_cloud(cloud.clone()).unwrap();
+    let target = match client.receive().unwrap() {
         Some(Answer::Targets(m)) => {
-            assert_eq!(m.points.len(), 1);
-            m.points[0].position.map(f64::from)
+            assert_eq!(m.len(), 1);
+            m[0].map(f64::from)
         }
         other => panic!("expected the targets POINT, got {other:?}"),
     };
     let error = (0..3).map(|d| (target[d] - truth[d]).powi(2)).sum::<f64>().sqrt();
     assert!(motion > 0.5 && error < 0.25 * motion, "target off by {error:.3} mm, the centre moved {motion:.3} mm");
-    match receive(&mut client) {
+    match client.receive().unwrap() {
         Some(Answer::Organ(m)) => {
             assert_eq!(m.points.len(), 98, "the cube's surface nodes");
             assert_eq!(m.polygons.len(), 4 * 192, "3 and the indices of each of 192 triangles");
@@ -129,7 +96,7 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
         }
         other => panic!("expected the organ POLYDATA, got {other:?}"),
     }
-    let s = status(receive(&mut client));
+    let s = status(client.receive().unwrap());
     assert_eq!(s["frame"], 1);
     assert!(s["ms"].as_f64().unwrap() > 0.0 && s["surface_residual"].as_f64().unwrap() < 0.5, "{s}");
     assert!(s["plausible"] == true && s["warnings"].as_array().unwrap().is_empty(), "{s}");
@@ -137,57 +104,57 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
     // A cloud with a NaN: an error status for that frame, the stream goes on.
     let mut bad = cloud.clone();
     bad[3][1] = f32::NAN;
-    send_cloud(&mut client, bad);
-    let s = status(receive(&mut client));
+    client.send_cloud(bad).unwrap();
+    let s = status(client.receive().unwrap());
     assert!(s["frame"] == 2 && s["error"].as_str().unwrap().contains("finite"), "{s}");
-    send_cloud(&mut client, Vec::new());
-    let s = status(receive(&mut client));
+    client.send_cloud(Vec::new()).unwrap();
+    let s = status(client.receive().unwrap());
     assert!(s["frame"] == 3 && s["error"].is_string(), "{s}");
     // The same cloud in metres to a server in millimetres, then in micrometres: refused, saying why.
-    send_cloud(&mut client, cloud.iter().map(|p| p.map(|x| x * 1e-3)).collect());
-    let s = status(receive(&mut client));
+    client.send_cloud(cloud.iter().map(|p| p.map(|x| x * 1e-3)).collect()).unwrap();
+    let s = status(client.receive().unwrap());
     assert!(s["frame"] == 4 && s["error"].as_str().unwrap().contains("too small"), "{s}");
-    send_cloud(&mut client, cloud.iter().map(|p| p.map(|x| x * 1e3)).collect());
-    let s = status(receive(&mut client));
+    client.send_cloud(cloud.iter().map(|p| p.map(|x| x * 1e3)).collect()).unwrap();
+    let s = status(client.receive().unwrap());
     assert!(s["frame"] == 5 && s["error"].as_str().unwrap().contains("millimetres?"), "{s}");
 
     // Another client sends an oversized message, a third garbage: each is closed alone.
     let mut huge = encode_message(PolyDataMessage::new(cloud.clone()), "cloud").unwrap();
     huge[42..50].copy_from_slice(&u64::MAX.to_be_bytes());
     let mut other = connect(port);
-    other.write_all(&huge[..Header::SIZE]).unwrap();
-    let s = status(receive(&mut other));
+    other.send_bytes(&huge[..Header::SIZE]).unwrap();
+    let s = status(other.receive().unwrap());
     assert!(s["error"].as_str().unwrap().contains("exceeds"), "{s}");
-    assert!(receive(&mut other).is_none(), "the connection is closed");
+    assert!(other.receive().unwrap().is_none(), "the connection is closed");
     // A POLYDATA that claims 1,000 points and holds 2, with a correct CRC; then a corrupted one.
     let mut lying = encode_message(PolyDataMessage::new(vec![[0.0; 3]; 2]), "cloud").unwrap();
     lying[Header::SIZE..Header::SIZE + 4].copy_from_slice(&1000u32.to_be_bytes());
     let crc = calculate_crc(&lying[Header::SIZE..]);
     lying[50..58].copy_from_slice(&crc.to_be_bytes());
     let mut garbage = connect(port);
-    garbage.write_all(&lying).unwrap();
-    let s = status(receive(&mut garbage));
+    garbage.send_bytes(&lying).unwrap();
+    let s = status(garbage.receive().unwrap());
     assert!(s["error"].as_str().unwrap().contains("malformed POLYDATA"), "{s}");
-    assert!(receive(&mut garbage).is_none(), "the connection is closed");
+    assert!(garbage.receive().unwrap().is_none(), "the connection is closed");
     let mut corrupted = huge.clone();
     let body_size = (corrupted.len() - Header::SIZE) as u64;
     corrupted[42..50].copy_from_slice(&body_size.to_be_bytes());
     corrupted[Header::SIZE + 10] ^= 0x55;
     let mut garbage = connect(port);
-    garbage.write_all(&corrupted).unwrap();
-    let s = status(receive(&mut garbage));
+    garbage.send_bytes(&corrupted).unwrap();
+    let s = status(garbage.receive().unwrap());
     assert!(s["error"].as_str().unwrap().contains("CRC"), "{s}");
 
     // The first client is still served, warm-started; only the status is asked of a new server
     // setting, so here the three answers again.
-    send_cloud(&mut client, cloud);
-    assert!(matches!(receive(&mut client), Some(Answer::Targets(_))));
-    assert!(matches!(receive(&mut client), Some(Answer::Organ(_))));
-    assert_eq!(status(receive(&mut client))["frame"], 6);
+    client.send_cloud(cloud).unwrap();
+    assert!(matches!(client.receive().unwrap(), Some(Answer::Targets(_))));
+    assert!(matches!(client.receive().unwrap(), Some(Answer::Organ(_))));
+    assert_eq!(status(client.receive().unwrap())["frame"], 6);
 
     stop.store(true, Ordering::SeqCst);
     server.join().unwrap().unwrap();
-    assert!(receive(&mut client).is_none(), "the server closed the connection when it stopped");
+    assert!(client.receive().unwrap().is_none(), "the server closed the connection when it stopped");
 }
 
 #[test]

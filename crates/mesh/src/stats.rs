@@ -12,6 +12,19 @@ pub fn median(values: &mut [f64]) -> f64 {
     *values.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
+/// The `q`-th percentile (0–100] of `values` by nearest rank: the smallest value with at least
+/// q % of the values at or below it (the median's rank rule aside, the upper one: `q = 50` of
+/// four values is the second). NaN when there are none.
+pub fn percentile(values: &[f64], q: f64) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let n = sorted.len();
+    sorted[((q / 100.0 * n as f64).ceil() as usize).clamp(1, n) - 1]
+}
+
 /// The arithmetic mean of `values`; NaN when there are none.
 pub fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len() as f64
@@ -24,7 +37,17 @@ pub fn max(values: &[f64]) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use super::{max, mean, median};
+    use super::{max, mean, median, percentile};
+
+    #[test]
+    fn percentiles_by_nearest_rank() {
+        let v: Vec<f64> = (1..=20).rev().map(f64::from).collect();
+        assert_eq!(percentile(&v, 95.0), 19.0);
+        assert_eq!(percentile(&v, 100.0), 20.0);
+        assert_eq!(percentile(&v, 50.0), 10.0);
+        assert_eq!(percentile(&[7.0], 95.0), 7.0);
+        assert!(percentile(&[], 95.0).is_nan());
+    }
 
     #[test]
     fn mean_and_max_of_a_list_and_of_none() {

@@ -50,6 +50,12 @@ pub const WARM_START_ITERATION: usize = 3;
 pub struct RegistrationOptions {
     /// Most match-and-deform iterations per frame.
     pub iterations: usize,
+    /// Most iterations of a frame warm-started from the previous one (a stream), when fewer than
+    /// `iterations`: the clouds of a stream move little from frame to frame, and the next frame
+    /// goes on from where this one stopped. Rarely does a frame meet `tolerance` anyway: on the
+    /// press-and-release stream of the registration case, with noise drawn anew at each frame,
+    /// most frames ran to 30 iterations for a TRE of 1.16 mm; 4 gave 1.23 mm at 0.2× the time.
+    pub warm_iterations: usize,
     /// Stop once no surface vertex moved by more than this between iterations (m).
     pub tolerance: f64,
     /// Cloud points whose mean distance to their 8 nearest neighbours exceeds this multiple
@@ -81,6 +87,7 @@ impl Default for RegistrationOptions {
     fn default() -> Self {
         RegistrationOptions {
             iterations: 30,
+            warm_iterations: 4,
             tolerance: 1e-4,
             isolation_factor: 3.0,
             outlier_factor: 3.0,
@@ -97,6 +104,7 @@ impl RegistrationOptions {
     /// Checks the values.
     pub fn validate(&self) -> Result<()> {
         let ok = self.iterations > 0
+            && self.warm_iterations > 0
             && self.tolerance >= 0.0
             && self.isolation_factor > 0.0
             && self.outlier_factor > 0.0
@@ -174,8 +182,11 @@ pub fn register_frame(
     let isolated = crate::outliers::isolated_points(cloud, options.isolation_factor);
     let kept: Vec<Point> = cloud.iter().zip(&isolated).filter(|(_, &i)| !i).map(|(p, _)| *p).collect();
     let candidates = if kept.is_empty() { cloud } else { &kept };
-    let first = if start.is_some() { WARM_START_ITERATION } else { 0 };
-    while iterations < options.iterations {
+    let (first, most) = match start {
+        Some(_) => (WARM_START_ITERATION, options.iterations.min(options.warm_iterations)),
+        None => (0, options.iterations),
+    };
+    while iterations < most {
         iterations += 1;
         let iteration = first + iterations - 1;
         let capture = options.capture_distance * options.capture_decay.powi(iteration as i32);

@@ -193,6 +193,10 @@ pub struct Summary {
     pub surface_residual_mm: f64,
     /// Wall time per frame (ms), matching included, mean over frames.
     pub time_ms: f64,
+    /// Median wall time per frame (ms).
+    pub time_median_ms: f64,
+    /// 95th percentile of the wall time per frame (ms, [`mesh::stats::percentile`]).
+    pub time_p95_ms: f64,
     /// Match-and-deform iterations per frame, mean over frames.
     pub iterations: f64,
     /// The rigid pre-alignment (organ → cloud transform, ICP figures), when there was one.
@@ -219,6 +223,7 @@ impl Summary {
             |v: &Option<Vec<f64>>, stat: fn(&[f64]) -> f64| v.as_ref().filter(|v| !v.is_empty()).map(|v| stat(v) * 1e3);
         let (errors, rest) = (all(|o| &o.errors), all(|o| &o.rest_errors));
         let per_frame = |f: fn(&FrameOutcome) -> f64| outcomes.iter().map(f).sum::<f64>() / n as f64;
+        let mut times: Vec<f64> = outcomes.iter().map(|o| o.registration.time.as_secs_f64() * 1e3).collect();
         Ok(Summary {
             method: method.into(),
             frames: n,
@@ -229,6 +234,8 @@ impl Summary {
             no_deformation_tre_max_mm: mm(&rest, max),
             surface_residual_mm: per_frame(|o| o.registration.surface_residual) * 1e3,
             time_ms: per_frame(|o| o.registration.time.as_secs_f64()) * 1e3,
+            time_p95_ms: mesh::stats::percentile(&times, 95.0),
+            time_median_ms: mesh::stats::median(&mut times),
             iterations: per_frame(|o| o.registration.iterations as f64),
             rigid: outcomes[0].rigid.as_ref().map(RigidSummary::from),
             plausible: outcomes.iter().all(|o| o.registration.warnings.is_empty()),

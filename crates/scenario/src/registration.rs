@@ -67,6 +67,33 @@ pub struct TruthSpec {
     /// The phantom region whose nodes are the targets (their rest positions).
     #[serde(default = "default_targets")]
     pub targets: String,
+    /// Frames of a press and release: frame k of n (k = 1…n) is pushed by
+    /// force · sin(π k / (n + 1)), rising to `force` mid-way (odd n) and falling back, each seen
+    /// by the camera with the seed `camera.seed + k − 1`. 1 (the default): one frame at `force`.
+    #[serde(default = "default_frames", skip_serializing_if = "is_one")]
+    pub frames: usize,
+}
+
+/// The most frames a case may have.
+pub const MAX_FRAMES: usize = 1000;
+
+fn default_frames() -> usize {
+    1
+}
+
+fn is_one(n: &usize) -> bool {
+    *n == 1
+}
+
+impl TruthSpec {
+    /// The force of each frame (N), in order ([`TruthSpec::frames`]).
+    pub fn frame_forces(&self) -> Vec<f64> {
+        let n = self.frames;
+        if n == 1 {
+            return vec![self.force];
+        }
+        (1..=n).map(|k| self.force * (std::f64::consts::PI * k as f64 / (n + 1) as f64).sin()).collect()
+    }
 }
 
 fn default_fixed() -> String {
@@ -221,6 +248,9 @@ impl CaseScenario {
         t.material.validate().map_err(|e| format!("truth.material: {e}"))?;
         if !t.force.is_finite() {
             return bad(format!("truth.force = {} must be finite", t.force));
+        }
+        if !(1..=MAX_FRAMES).contains(&t.frames) {
+            return bad(format!("truth.frames = {} must be between 1 and {MAX_FRAMES}", t.frames));
         }
         if !nonzero(t.direction) {
             return bad(format!("truth.direction = {:?} must be non-zero and finite", t.direction));

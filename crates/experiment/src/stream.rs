@@ -1,0 +1,244 @@
+//! Live registration over OpenIGTLink: the registration case's press and release (the truth on
+//! a finer mesh and with another law than the models) streamed frame after frame to the server
+//! of `augsim serve`, run in this process and reached over TCP by an OpenIGTLink client, in
+//! millimetres as 3D Slicer sends them. Each cloud is sent once the previous one is answered
+//! (the rate the server sustains); latency from sending to the status, the server's own time,
+//! frames per second and the TRE of every frame.
+
+use std::net::TcpListener;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, Context, Result};
+use live::client::Client;
+use live::{ClientRegistration, Outputs, ServeOptions};
+use mesh::stats::{max, mean, median, percentile};
+use register::{Deformer, Organ, RegistrationOptions};
+use scenario::CaseScenario;
+use serde::Serialize;
+
+use crate::case::{ar_network_model, corotational_model, synthetic_case, SyntheticCase};
+use crate::{ExperimentResult, Name, Progress, Row, Size};
+
+/// Frames of the press and release.
+const FRAMES: usize = 40;
+
+/// Points of each cloud (before the camera's outliers).
+const POINTS: usize = 3000;
+
+/// The shipped network, relative to the directory the experiment runs from (the repository's).
+const SHIPPED_MODEL: &str = "models/liver_ar/model.json";
+
+/// Most iterations of the network's frames (its real-time budget, as in the registration case).
+const NETWORK_ITERATIONS: usize = 6;
+
+/// One method's stream.
+#[derive(Clone, Debug, Serialize)]
+pub struct Stream {
+    /// The method.
+    pub method: String,
+    /// Send-to-status latency of each frame (ms).
+    pub latency_ms: Vec<f64>,
+    /// The server's time of each frame (ms: registration and encoding).
+    pub server_ms: Vec<f64>,
+    /// Match-and-deform iterations of each frame.
+    pub iterations: Vec<usize>,
+    /// Mean TRE of each frame (mm).
+    pub tre_mm: Vec<f64>,
+    /// Largest TRE of each frame (mm).
+    pub tre_max_mm: Vec<f64>,
+    /// Frames answered per second over the stream.
+    pub frames_per_second: f64,
+}
+
+/// The press and release of the built-in registration case, in [`FRAMES`] frames of [`POINTS`]
+/// points.
+pub fn press_and_release() -> CaseScenario {
+    let mut scenario = CaseScenario::builtin();
+    scenario.truth.frames = FRAMES;
+    scenario.camera.points = POINTS;
+    scenario
+}
+
+/// Streams `case` to a server of `make` (a new registration per client) and measures it.
+pub fn stream_case<D: Deformer + Send + 'static>(
+    method: &str,
+    case: &SyntheticCase,
+    options: &RegistrationOptions,
+    make: impl Fn() -> Result<(Organ, D)> + Send + Sync + 'static,
+) -> Result<Stream> {
+    let listener = TcpListener::bind("127.0.0.1:0").context("listening on a local port")?;
+    let port = listener.local_addr()?.port();
+    let (targets, options) = (case.targets.clone(), options.clone());
+    let factory = move || -> std::result::Result<ClientRegistration, String> {
+        let (organ, deformer) = make().map_err(|e| format!("{e:#}"))?;
+        Ok(ClientRegistration {
+            organ,
+            deformer: Box::new(deformer),
+            targets: targets.clone(),
+            options: options.clone(),
+        })
+    };
+    let serve_options = ServeOptions {
+        unit: 1e-3,
+        outputs: Outputs { targets: true, organ: false, transform: false, status: true },
+        ..ServeOptions::default()
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let server = {
+        let stop = stop.clone();
+        std::thread::spawn(move || live::serve(listener, Arc::new(factory), serve_options, &stop))
+    };
+    let measured = measure(method, case, port);
+    stop.store(true, Ordering::SeqCst);
+    let served = server.join().map_err(|_| anyhow!("the server panicked"))?;
+    served?;
+    measured
+}
+
+/// The client's side of [`stream_case`].
+fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
+    let mut client = Client::connect(("127.0.0.1", port), Duration::from_secs(120)).map_err(|e| anyhow!(e))?;
+    let mut s = Stream {
+        method: method.into(),
+        latency_ms: Vec::new(),
+        server_ms: Vec::new(),
+        iterations: Vec::new(),
+        tre_mm: Vec::new(),
+        tre_max_mm: Vec::new(),
+        frames_per_second: 0.0,
+    };
+    let began = Instant::now();
+    for (k, frame) in case.frames.iter().enumerate() {
+        let cloud: Vec<[f32; 3]> = frame.cloud.iter().map(|p| p.map(|x| (x * 1e3) as f32)).collect();
+        let sent = Instant::now();
+        client.send_cloud(cloud).map_err(|e| anyhow!(e))?;
+        let live::client::Frame { targets, status } = client.until_status().map_err(|e| anyhow!(e))?;
+        s.latency_ms.push(sent.elapsed().as_secs_f64() * 1e3);
+        if let Some(e) = status.get("error") {
+            return Err(anyhow!("{method}, frame {k}: the server answered {e}"));
+        }
+        let targets = targets.ok_or_else(|| anyhow!("{method}, frame {k}: no targets"))?;
+        let errors: Vec<f64> = targets
+            .iter()
+            .zip(&frame.truth)
+            .map(|(p, t)| (0..3).map(|d| (f64::from(p[d]) - t[d] * 1e3).powi(2)).sum::<f64>().sqrt())
+            .collect();
+        s.tre_mm.push(mean(&errors));
+        s.tre_max_mm.push(max(&errors));
+        s.server_ms.push(status["ms"].as_f64().unwrap_or(f64::NAN));
+        s.iterations.push(status["iterations"].as_u64().unwrap_or(0) as usize);
+    }
+    s.frames_per_second = case.frames.len() as f64 / began.elapsed().as_secs_f64();
+    Ok(s)
+}
+
+/// Runs the experiment: the co-rotational FEM (3k T4) and the shipped network, when found.
+pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
+    let scenario = press_and_release();
+    progress(&format!("simulating the press and release ({FRAMES} frames, truth of about {} T4)", scenario.truth.tets));
+    let case = synthetic_case(&scenario)?;
+    let options = scenario.registration.clone();
+    let mut streams = Vec::new();
+    progress("streaming to the co-rotational FEM");
+    streams.push(stream_case("FEM co-rotational (3k T4), warm-started", &case, &options, corotational_model)?);
+    let model_path = Path::new(SHIPPED_MODEL);
+    let network_found = model_path.exists();
+    if network_found {
+        progress("streaming to the shipped network");
+        let model = Arc::new(learn::TrainedModel::load(model_path, &learn::inference_device())?);
+        let network_options = RegistrationOptions { iterations: NETWORK_ITERATIONS, ..options.clone() };
+        let make = move || ar_network_model(&model);
+        streams.push(stream_case("U-Net (models/liver_ar)", &case, &network_options, make)?);
+    }
+    let rest: Vec<f64> =
+        case.frames.iter().map(|f| mean(&register::target_errors(&case.targets, &f.truth)) * 1e3).collect();
+    let mut rows = vec![Row::new(
+        "no deformation: TRE mean over frames (largest frame mean)",
+        format!("{:.2} mm ({:.2} mm)", mean(&rest), max(&rest)),
+        "",
+    )];
+    for s in &streams {
+        let mut latency = s.latency_ms.clone();
+        let mut server = s.server_ms.clone();
+        rows.push(Row::new(
+            format!("{}: latency median / p95", s.method),
+            format!("{:.1} / {:.1} ms", median(&mut latency), percentile(&s.latency_ms, 95.0)),
+            "",
+        ));
+        rows.push(Row::new(
+            format!("{}: server time median / p95; first frame", s.method),
+            format!("{:.1} / {:.1} ms; {:.1} ms", median(&mut server), percentile(&s.server_ms, 95.0), s.server_ms[0]),
+            "",
+        ));
+        rows.push(Row::new(
+            format!("{}: sustained rate", s.method),
+            format!("{:.1} frames/s", s.frames_per_second),
+            "",
+        ));
+        rows.push(Row::new(
+            format!("{}: TRE mean over frames (largest frame mean; largest)", s.method),
+            format!("{:.2} mm ({:.2} mm; {:.2} mm)", mean(&s.tre_mm), max(&s.tre_mm), max(&s.tre_max_mm)),
+            "",
+        ));
+    }
+    if !network_found {
+        rows.push(Row::new("U-Net", format!("skipped: {SHIPPED_MODEL} not found (run from the repository)"), ""));
+    }
+    let figure = "stream.png";
+    plot_stream(&dir.join(figure), &rest, &streams)?;
+    let notes = vec![
+        format!(
+            "Case: the built-in registration case (truth: Neo-Hookean phantom, E = 5 kPa, ν = 0.48, about {} T4) \
+             pressed by a force rising to {} N and falling back over {FRAMES} frames (sine), each frame seen anew by \
+             the camera ({POINTS} points, 1 mm noise, 5 % outliers); the models are another mesh (3k T4) and law.",
+            scenario.truth.tets, scenario.truth.force
+        ),
+        format!(
+            "Server in this process, client over TCP on this machine (OpenIGTLink POLYDATA in mm; answers: POINT \
+             targets and STRING status). Each cloud is sent when the previous one is answered. A frame warm-started \
+             from the previous one runs at most {} iterations (the first frame from rest up to {}; the network {}).",
+            options.warm_iterations, options.iterations, NETWORK_ITERATIONS
+        ),
+        "Timings: one run on this machine; the figures are only as quiet as the machine was.".to_string(),
+    ];
+    let mut values = serde_json::Map::new();
+    values.insert("streams".into(), serde_json::to_value(&streams)?);
+    values.insert("no_deformation_tre_mm".into(), serde_json::to_value(&rest)?);
+    Ok(ExperimentResult {
+        name: Name::Stream,
+        size,
+        seconds: 0.0,
+        headlines: Vec::new(),
+        rows,
+        figures: vec![figure.into()],
+        page_figures: vec![figure.into()],
+        notes,
+        values,
+    })
+}
+
+/// TRE and latency of each frame.
+fn plot_stream(path: &Path, rest: &[f64], streams: &[Stream]) -> Result<()> {
+    let frames = |v: &[f64]| -> Vec<(f64, f64)> { v.iter().enumerate().map(|(k, &y)| (k as f64 + 1.0, y)).collect() };
+    let mut series = vec![plot::Series { name: "no deformation: TRE (mm)".into(), points: frames(rest), band: None }];
+    for s in streams {
+        series.push(plot::Series { name: format!("{}: TRE (mm)", s.method), points: frames(&s.tre_mm), band: None });
+        let latency: Vec<f64> = s.latency_ms.iter().map(|ms| ms / 10.0).collect();
+        series.push(plot::Series {
+            name: format!("{}: latency (10 ms)", s.method),
+            points: frames(&latency),
+            band: None,
+        });
+    }
+    let spec = plot::PlotSpec {
+        title: "Press and release streamed over OpenIGTLink".into(),
+        x_label: "frame".into(),
+        y_label: "TRE (mm); latency (units of 10 ms)".into(),
+        log_y: false,
+    };
+    plot::line_plot(path, &spec, &series)?;
+    Ok(())
+}

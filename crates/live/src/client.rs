@@ -1,0 +1,95 @@
+//! An OpenIGTLink client of the server, for tests, benchmarks and Rust programs: it sends clouds
+//! and reads the server's answers ([`Answer`]).
+
+use std::io::{Read, Write};
+use std::net::{TcpStream, ToSocketAddrs};
+use std::time::Duration;
+
+use openigtlink_rust::protocol::header::Header;
+use openigtlink_rust::protocol::types::{PointMessage, PolyDataMessage, StringMessage, TransformMessage};
+
+use crate::{decode_body, encode_message};
+
+/// A message from the server.
+#[derive(Debug)]
+pub enum Answer {
+    /// POINT `targets`: the registered targets, in the stream's unit.
+    Targets(Vec<[f32; 3]>),
+    /// POLYDATA `organ`: the registered organ surface.
+    Organ(PolyDataMessage),
+    /// TRANSFORM `rigid`: the organ-to-cloud transform, row-major 4 × 4.
+    Rigid([[f32; 4]; 4]),
+    /// STRING `status`: one line of JSON.
+    Status(serde_json::Value),
+}
+
+/// The answers to one cloud that [`Client::until_status`] keeps.
+#[derive(Debug)]
+pub struct Frame {
+    /// The registered targets, when the server sends them.
+    pub targets: Option<Vec<[f32; 3]>>,
+    /// The status line.
+    pub status: serde_json::Value,
+}
+
+/// A connection to `augsim serve`.
+pub struct Client {
+    stream: TcpStream,
+}
+
+impl Client {
+    /// Connects to the server at `address`; reads wait at most `timeout` for an answer.
+    pub fn connect(address: impl ToSocketAddrs, timeout: Duration) -> std::result::Result<Client, String> {
+        let stream = TcpStream::connect(address).map_err(|e| format!("connecting to the server: {e}"))?;
+        stream.set_read_timeout(Some(timeout)).map_err(|e| e.to_string())?;
+        stream.set_nodelay(true).map_err(|e| e.to_string())?;
+        Ok(Client { stream })
+    }
+
+    /// Sends a cloud (in the server's unit) as a POLYDATA message of device `cloud`.
+    pub fn send_cloud(&mut self, points: Vec<[f32; 3]>) -> std::result::Result<(), String> {
+        self.send_bytes(&encode_message(PolyDataMessage::new(points), "cloud")?)
+    }
+
+    /// Sends raw bytes (e.g. a malformed message).
+    pub fn send_bytes(&mut self, bytes: &[u8]) -> std::result::Result<(), String> {
+        self.stream.write_all(bytes).map_err(|e| format!("sending: {e}"))
+    }
+
+    /// The next message from the server; `None` when the connection is closed.
+    pub fn receive(&mut self) -> std::result::Result<Option<Answer>, String> {
+        let mut header = [0u8; Header::SIZE];
+        if self.stream.read_exact(&mut header).is_err() {
+            return Ok(None);
+        }
+        let parsed = Header::decode(&header).map_err(|e| format!("malformed header: {e}"))?;
+        let mut body = vec![0; parsed.body_size as usize];
+        self.stream.read_exact(&mut body).map_err(|e| format!("truncated answer: {e}"))?;
+        let kind = parsed.type_name.as_str().map_err(|e| e.to_string())?;
+        Ok(Some(match kind {
+            "POINT" => Answer::Targets(
+                decode_body::<PointMessage>(&parsed, &body)?.points.iter().map(|p| p.position).collect(),
+            ),
+            "POLYDATA" => Answer::Organ(decode_body(&parsed, &body)?),
+            "TRANSFORM" => Answer::Rigid(decode_body::<TransformMessage>(&parsed, &body)?.matrix),
+            "STRING" => {
+                let text: StringMessage = decode_body(&parsed, &body)?;
+                Answer::Status(serde_json::from_str(text.as_str()).map_err(|e| format!("status is not JSON: {e}"))?)
+            }
+            other => return Err(format!("unexpected {other} message")),
+        }))
+    }
+
+    /// Reads answers up to and including the next status.
+    pub fn until_status(&mut self) -> std::result::Result<Frame, String> {
+        let mut targets = None;
+        loop {
+            match self.receive()? {
+                Some(Answer::Status(status)) => return Ok(Frame { targets, status }),
+                Some(Answer::Targets(t)) => targets = Some(t),
+                Some(_) => {}
+                None => return Err("the server closed the connection".into()),
+            }
+        }
+    }
+}
