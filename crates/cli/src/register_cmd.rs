@@ -66,6 +66,10 @@ pub struct RegisterArgs {
     /// The force (N) pushing the case's truth (default: the case's).
     #[arg(long, requires = "comparison")]
     force: Option<f64>,
+    /// The case as a press and release of this many frames (the force rising to the case's and
+    /// falling back), registered as a stream: each frame warm-started from the previous one.
+    #[arg(long, requires = "comparison")]
+    frames: Option<usize>,
     /// Misaligns the case's camera frame: rotation (degrees) about the case's axis...
     #[arg(long, requires = "comparison", allow_negative_numbers = true)]
     misalign_deg: Option<f64>,
@@ -293,6 +297,9 @@ fn comparison_case(args: &RegisterArgs) -> Result<CaseScenario> {
     };
     if let Some(force) = args.force {
         scenario.truth.force = force;
+    }
+    if let Some(frames) = args.frames {
+        scenario.truth.frames = frames;
     }
     if let Some(deg) = args.misalign_deg {
         scenario.misalignment.rotation_deg = deg;

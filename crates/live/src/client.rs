@@ -6,8 +6,9 @@ use std::net::{TcpStream, ToSocketAddrs};
 use std::time::Duration;
 
 use openigtlink_rust::protocol::header::Header;
-use openigtlink_rust::protocol::types::{PointMessage, PolyDataMessage, StringMessage, TransformMessage};
+use openigtlink_rust::protocol::types::{PointMessage, StringMessage, TransformMessage};
 
+use crate::polydata::PolyData;
 use crate::{decode_body, encode_message};
 
 /// A message from the server.
@@ -16,7 +17,7 @@ pub enum Answer {
     /// POINT `targets`: the registered targets, in the stream's unit.
     Targets(Vec<[f32; 3]>),
     /// POLYDATA `organ`: the registered organ surface.
-    Organ(PolyDataMessage),
+    Organ(PolyData),
     /// TRANSFORM `rigid`: the organ-to-cloud transform, row-major 4 × 4.
     Rigid([[f32; 4]; 4]),
     /// STRING `status`: one line of JSON.
@@ -48,7 +49,7 @@ impl Client {
 
     /// Sends a cloud (in the server's unit) as a POLYDATA message of device `cloud`.
     pub fn send_cloud(&mut self, points: Vec<[f32; 3]>) -> std::result::Result<(), String> {
-        self.send_bytes(&encode_message(PolyDataMessage::new(points), "cloud")?)
+        self.send_bytes(&encode_message(PolyData { points, triangles: Vec::new() }, "cloud")?)
     }
 
     /// Sends raw bytes (e.g. a malformed message).

@@ -21,6 +21,7 @@
 //! coordinate gets an error status and the stream goes on. Other clients are never affected.
 
 pub mod client;
+pub mod polydata;
 
 use std::io::{Read, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
@@ -30,7 +31,8 @@ use std::time::{Duration, Instant};
 
 use mesh::Point;
 use openigtlink_rust::protocol::header::Header;
-use openigtlink_rust::protocol::types::{PointElement, PointMessage, PolyDataMessage, StringMessage, TransformMessage};
+use openigtlink_rust::protocol::types::{PointElement, PointMessage, StringMessage, TransformMessage};
+use polydata::PolyData;
 use openigtlink_rust::protocol::{calculate_crc, IgtlMessage, Message};
 use register::rigid::RigidTransform;
 use register::{Deformer, FrameResult, Organ, RegistrationOptions, Tracker};
@@ -347,7 +349,7 @@ fn read_message(stream: &mut TcpStream, max_body: u64) -> std::result::Result<In
     }
     let body = &data[Header::SIZE..];
     let points = match kind {
-        "POLYDATA" => decode_body::<PolyDataMessage>(&parsed, body)?.points,
+        "POLYDATA" => decode_body::<PolyData>(&parsed, body)?.points,
         _ => decode_body::<PointMessage>(&parsed, body)?.points.iter().map(|p| p.position).collect(),
     };
     Ok(Incoming::Cloud(points))
@@ -456,8 +458,8 @@ fn answer(
     }
     if options.outputs.organ {
         let surface = frame_result.organ_surface(&registration.registration().organ);
-        let polygons = surface.triangles.iter().flat_map(|t| [3, t[0] as u32, t[1] as u32, t[2] as u32]).collect();
-        let organ = PolyDataMessage::new(surface.vertices.iter().map(to_wire).collect()).with_polygons(polygons);
+        let triangles = surface.triangles.iter().map(|t| t.map(|i| i as u32)).collect();
+        let organ = PolyData { points: surface.vertices.iter().map(to_wire).collect(), triangles };
         shared.send(organ, "organ")?;
     }
     if let (true, Some(t)) = (options.outputs.transform, rigid) {
