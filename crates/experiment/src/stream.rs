@@ -199,7 +199,8 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         format!(
             "Server in this process, client over TCP on this machine (OpenIGTLink POLYDATA in mm; answers: POINT \
              targets and STRING status). Each cloud is sent when the previous one is answered. A frame warm-started \
-             from the previous one runs at most {} iterations (the first frame from rest up to {}; the network {}).",
+             from the previous one runs at most {} iterations (the first frame, from rest, up to {} for the FEM and {} \
+             for the network).",
             options.warm_iterations, options.iterations, NETWORK_ITERATIONS
         ),
         "Timings: one run on this machine; the figures are only as quiet as the machine was.".to_string(),
