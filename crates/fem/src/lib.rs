@@ -32,6 +32,7 @@
 pub mod assembly;
 pub mod element;
 pub mod fbar;
+pub mod geometric;
 mod lanes;
 pub mod linsolve;
 pub mod material;

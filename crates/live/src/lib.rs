@@ -32,8 +32,8 @@ use std::time::{Duration, Instant};
 use mesh::Point;
 use openigtlink_rust::protocol::header::Header;
 use openigtlink_rust::protocol::types::{PointElement, PointMessage, StringMessage, TransformMessage};
-use polydata::PolyData;
 use openigtlink_rust::protocol::{calculate_crc, IgtlMessage, Message};
+use polydata::PolyData;
 use register::rigid::RigidTransform;
 use register::{Deformer, FrameResult, Organ, RegistrationOptions, Tracker};
 

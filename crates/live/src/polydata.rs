@@ -66,8 +66,8 @@ impl Message for PolyData {
             .map(|c| std::array::from_fn(|d| f32::from_be_bytes([c[4 * d], c[4 * d + 1], c[4 * d + 2], c[4 * d + 3]])))
             .collect();
         let polygons_at = (points_end + counts[2] + counts[4]) as usize;
-        let triangles = read_triangles(&data[polygons_at..polygons_at + counts[6] as usize], counts[5], counts[0])
-            .map_err(bad)?;
+        let triangles =
+            read_triangles(&data[polygons_at..polygons_at + counts[6] as usize], counts[5], counts[0]).map_err(bad)?;
         Ok(PolyData { points, triangles })
     }
 }
@@ -91,7 +91,7 @@ fn read_triangles(list: &[u8], n: u64, points: u64) -> Result<Vec<[u32; 3]>, Str
         at += 1 + size;
         cells += 1;
     }
-    if cells != n || list.len() % 4 != 0 {
+    if cells != n || !list.len().is_multiple_of(4) {
         return Err(format!("{cells} polygons in a list announced to hold {n}"));
     }
     Ok(triangles)

@@ -290,6 +290,24 @@ impl PhantomSpec {
         Ok(grid)
     }
 
+    /// The ball of space behind a named region, for attachments and loads that stay the same
+    /// on every mesh ([`crate::Ball`]): `fixed` (the attachment), `hidden` (Σ) and `push` (the
+    /// tool's patch; with `hidden` and `push` only the boundary facing away from, or towards,
+    /// the camera belongs to the region: see [`PhantomSpec::view_direction`]).
+    pub fn region_ball(&self, name: &str) -> Result<crate::Ball, MeshError> {
+        let patch = match name {
+            "fixed" => &self.fixed,
+            "hidden" => &self.hidden,
+            "push" => &self.push,
+            other => {
+                return Err(MeshError::Invalid(format!(
+                    "the phantom has no ball behind region '{other}' (fixed, hidden, push)"
+                )))
+            }
+        };
+        Ok(crate::Ball { centre: self.patch_centre(patch)?, radius: patch.radius })
+    }
+
     /// The named regions for nodes `nodes`, given which nodes are on the
     /// surface and their outward normals (see the module documentation).
     pub fn regions(

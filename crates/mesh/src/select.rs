@@ -115,3 +115,20 @@ mod tests {
         assert_eq!(nearest(&with_nan, 0..2, p), Some(1));
     }
 }
+
+/// A ball of space: a region that stays the same whatever the mesh.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ball {
+    /// Centre (m).
+    pub centre: Point,
+    /// Radius (m).
+    pub radius: f64,
+}
+
+impl Ball {
+    /// Whether `x` lies inside (strictly).
+    pub fn contains(&self, x: Point) -> bool {
+        crate::distance(x, self.centre) < self.radius
+    }
+}

@@ -13,7 +13,7 @@ use crate::{RegisterError, Result};
 
 /// Finite-element registration: every matched surface point is tied by a zero-length spring
 /// to its cloud point (a [`PointSpring`] on the nodes that move it, mostly point to plane);
-/// the organ's own boundary conditions (fixed nodes, its springs) hold the rest. The scenario's
+/// the organ's own boundary conditions (fixed nodes, its springs and point springs) hold the rest. The scenario's
 /// loads are dropped: the intraoperative loads are unknown, the data stand in for them. The
 /// springs stiffen over the first iterations of a frame ([`STIFFNESS_RAMP`]): the first matches
 /// of a large deformation are poor, and stiff springs pulling towards them would crush elements.
@@ -21,6 +21,9 @@ pub struct FemDeformer {
     solver: StaticSolver,
     stiffness: f64,
     options: SolverOptions,
+    /// The problem's own point springs (e.g. an elastic foundation) come first; the data
+    /// springs follow them.
+    own_springs: usize,
 }
 
 /// Share of the data stiffness that ties a point to its cloud point in every direction; the
@@ -47,7 +50,8 @@ impl FemDeformer {
             return Err(RegisterError::Invalid(format!("data stiffness {stiffness} N/m must be positive")));
         }
         problem.f_ext.iter_mut().for_each(|f| *f = 0.0);
-        Ok(FemDeformer { solver: StaticSolver::new(problem)?, stiffness, options })
+        let own_springs = problem.point_springs.len();
+        Ok(FemDeformer { solver: StaticSolver::new(problem)?, stiffness, options, own_springs })
     }
 
     /// A data stiffness fifty times the organ's own scale E·L (L: the cube root of its volume):
@@ -66,17 +70,15 @@ impl Deformer for FemDeformer {
         }
         let ramp = 0.25f64.powi(STIFFNESS_RAMP.saturating_sub(iteration) as i32);
         let k = ramp * self.stiffness / observations.matches.len() as f64;
-        self.solver.problem_mut().point_springs = observations
-            .matches
-            .iter()
-            .map(|m| PointSpring {
-                nodes: m.stencil.0.clone(),
-                target: m.shift,
-                stiffness: ISOTROPIC_FRACTION * k,
-                normal: m.normal,
-                normal_stiffness: (1.0 - ISOTROPIC_FRACTION) * k,
-            })
-            .collect();
+        let springs = &mut self.solver.problem_mut().point_springs;
+        springs.truncate(self.own_springs);
+        springs.extend(observations.matches.iter().map(|m| PointSpring {
+            nodes: m.stencil.0.clone(),
+            target: m.shift,
+            stiffness: ISOTROPIC_FRACTION * k,
+            normal: m.normal,
+            normal_stiffness: (1.0 - ISOTROPIC_FRACTION) * k,
+        }));
         Ok(self.solver.solve_from(Some(previous), &self.options)?.u)
     }
 }
@@ -373,7 +375,40 @@ impl Deformer for NetworkDeformer {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::register::{observe, RegistrationOptions};
+    use crate::register::{observe, register_frame, RegistrationOptions};
+
+    /// A block held only by an elastic foundation over its bottom centimetre, its top pressed
+    /// down 5 mm: the
+    /// registration keeps the foundation beside its data springs, so the base stays where it
+    /// is while the top follows the cloud, frame after frame.
+    #[test]
+    fn the_problems_own_point_springs_stay_beside_the_data_springs() {
+        let mesh = mesh::box_tet([0.0; 3], [0.04, 0.04, 0.04], [4, 4, 4]).unwrap();
+        let mut problem = Problem::new(mesh, fem::Material::new(fem::Law::Corotational, 5000.0, 0.45));
+        let base = mesh::Ball { centre: [0.02, 0.02, -0.5], radius: 0.51 };
+        problem.add_foundation(&base, 1e10).unwrap();
+        let own = problem.point_springs.len();
+        let organ = Organ::new(problem.mesh.clone(), None).unwrap();
+        let stiffness = FemDeformer::default_stiffness(&problem);
+        let mut deformer = FemDeformer::new(problem, stiffness, SolverOptions::default()).unwrap();
+        let press = |p: &mesh::Point| [p[0], p[1], p[2] - 0.005 * p[2] / 0.04];
+        let cloud: Vec<mesh::Point> =
+            organ.surface().vertices.iter().filter(|p| p[2] > 0.04 - 1e-9).map(press).collect();
+        let options = RegistrationOptions { view: Some([0.0, 0.0, -1.0]), ..RegistrationOptions::default() };
+        let mut start: Option<Vec<f64>> = None;
+        for frame in 0..2 {
+            let r = register_frame(&organ, &mut deformer, &cloud, start.as_deref(), &options).unwrap();
+            let springs = &deformer.solver.problem().point_springs;
+            assert_eq!(springs.len(), own + r.inliers, "frame {frame}: the foundation, then one spring per match");
+            let node_z = |at: f64| -> f64 {
+                let n = organ.mesh().nodes.iter().position(|p| (p[2] - at).abs() < 1e-9 && p[0] == 0.02).unwrap();
+                r.u[3 * n + 2]
+            };
+            assert!(node_z(0.0).abs() < 2e-4, "frame {frame}: the base moved by {} m", node_z(0.0));
+            assert!((node_z(0.04) + 0.005).abs() < 1e-3, "frame {frame}: the top moved by {} m", node_z(0.04));
+            start = Some(r.u);
+        }
+    }
 
     /// A smooth dent (2 cm deep at the deepest visible node) pressed into the top of the left
     /// lobe, seen by a camera from above without noise: fitted to the matches themselves, the

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use fem::{Material, Problem, SolverOptions};
-use mesh::{NodeSelection, Point};
+use mesh::{Ball, NodeSelection, Point};
 use serde::Deserialize;
 
 use crate::{build_mesh, fixed_problem, Fixed, Kind, MeshSource, Result, ScenarioError, ScenarioText};
@@ -37,6 +37,12 @@ pub struct StaticScenario {
     /// Surface tractions on boundary faces whose nodes are all selected.
     #[serde(default)]
     pub traction: Vec<Traction>,
+    /// Elastic foundations over the part of the organ inside a ball.
+    #[serde(default)]
+    pub attachment: Vec<Attachment>,
+    /// Total forces spread as a uniform traction over the boundary inside a ball.
+    #[serde(default)]
+    pub patch_force: Vec<PatchForce>,
     /// Gravity acceleration (m/s²).
     pub gravity: Option<Point>,
     /// Newton-Raphson settings.
@@ -85,6 +91,58 @@ pub struct Traction {
     pub select: NodeSelection,
     /// Force per reference area (Pa).
     pub traction: Point,
+}
+
+/// A ball of space: given, or the phantom's ball behind one of its regions.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpaceBall {
+    /// The ball: `{ centre = [x, y, z], radius = r }` (m)...
+    #[serde(default)]
+    pub ball: Option<Ball>,
+    /// ... or the built-in phantom's ball behind `fixed`, `hidden` or `push`
+    /// ([`mesh::PhantomSpec::region_ball`]).
+    #[serde(default)]
+    pub phantom: Option<String>,
+}
+
+impl SpaceBall {
+    fn resolve(&self) -> std::result::Result<Ball, String> {
+        match (&self.ball, &self.phantom) {
+            (Some(b), None) => Ok(*b),
+            (None, Some(name)) => mesh::PhantomSpec::default().region_ball(name).map_err(|e| e.to_string()),
+            _ => Err("give either `ball = { centre, radius }` or `phantom = \"fixed\" | \"hidden\" | \"push\"`".into()),
+        }
+    }
+}
+
+/// An elastic foundation: the organ inside a ball tied to its rest position with a stiffness
+/// per volume ([`Problem::add_foundation`]); unlike fixed nodes, the same on every mesh.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Attachment {
+    /// Where.
+    #[serde(flatten)]
+    pub region: SpaceBall,
+    /// Stiffness per volume of tissue (N/m per m³).
+    pub stiffness: f64,
+}
+
+/// A total force spread as a uniform traction over the boundary inside a ball
+/// ([`Problem::add_patch_force`]); the same on every mesh.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PatchForce {
+    /// Where.
+    #[serde(flatten)]
+    pub region: SpaceBall,
+    /// Only the faces whose outward normal points against this direction (those a camera looking
+    /// along it sees); default: all, or for the phantom's `push` its visible side and for
+    /// `hidden` the side away from the camera.
+    #[serde(default)]
+    pub facing: Option<Point>,
+    /// Total force (N).
+    pub total: Point,
 }
 
 /// Output settings.
@@ -139,6 +197,20 @@ impl StaticScenario {
             if p.add_traction(&nodes, t.traction) == 0.0 {
                 return Err(fail(format!("traction selection {:?} covers no boundary face", t.select)));
             }
+        }
+        for (k, a) in self.attachment.iter().enumerate() {
+            let ball = a.region.resolve().map_err(|e| fail(format!("attachment {}: {e}", k + 1)))?;
+            p.add_foundation(&ball, a.stiffness).map_err(|e| fail(format!("attachment {}: {e}", k + 1)))?;
+        }
+        for (k, f) in self.patch_force.iter().enumerate() {
+            let ball = f.region.resolve().map_err(|e| fail(format!("patch force {}: {e}", k + 1)))?;
+            let view = mesh::PhantomSpec::default().view_direction;
+            let facing = f.facing.or(match f.region.phantom.as_deref() {
+                Some("push") => Some(view),
+                Some("hidden") => Some(view.map(|v| -v)),
+                _ => None,
+            });
+            p.add_patch_force(&ball, facing, f.total).map_err(|e| fail(format!("patch force {}: {e}", k + 1)))?;
         }
         if let Some(g) = self.gravity {
             p.add_gravity(g).map_err(|e| fail(format!("gravity: {e}")))?;
