@@ -48,6 +48,11 @@ pub struct ServeArgs {
     /// in the cloud's frame, with the organ-to-cloud TRANSFORM `rigid`.
     #[arg(long)]
     rigid: bool,
+    /// Identification on the stream: the ROUKF of this assimilation scenario (its model, unknowns
+    /// and observed points) steps with each POINT `features` message (the observed points'
+    /// positions, in the stream's unit, in the scenario's order) and answers a STRING `estimate`.
+    #[arg(long, value_name = "SCENARIO")]
+    assimilate: Option<PathBuf>,
 }
 
 /// The registration of `(fem scenario, model, dataset scenario)`: the FEM's or the network's.
@@ -60,6 +65,23 @@ fn setup(method: &(Option<PathBuf>, Option<PathBuf>, Option<PathBuf>)) -> Result
 }
 
 /// Set by SIGINT / SIGTERM: the server stops.
+/// The ROUKF of an assimilation scenario for each client (its experiment, with the reference run
+/// of synthetic observations, prepared once here).
+fn identification(path: &std::path::Path, unit: f64) -> Result<Arc<live::IdentificationFactory>> {
+    let (scenario, dir) = scenario::AssimilationScenario::load(path)?;
+    let experiment = Arc::new(experiment::assimilation::Experiment::prepare(scenario, &dir, None)?);
+    let filter = experiment::assimilation::OnlineFilter::new(&experiment)?;
+    println!(
+        "identify   {} ({}) from {} features per step (POINT `features`, in the stream's unit of {unit} m)",
+        path.display(),
+        filter.names().join(", "),
+        filter.features()
+    );
+    Ok(Arc::new(move || -> std::result::Result<Box<dyn live::Identification>, String> {
+        Ok(Box::new(experiment::assimilation::OnlineFilter::new(&experiment).map_err(|e| e.to_string())?))
+    }))
+}
+
 static STOP: AtomicBool = AtomicBool::new(false);
 
 #[cfg(unix)]
@@ -102,8 +124,13 @@ pub fn run(args: &ServeArgs) -> Result<()> {
             options: options.clone(),
         })
     };
+    let identification = match &args.assimilate {
+        Some(path) => Some(identification(path, unit)?),
+        None => None,
+    };
     let address = format!("{}:{}", args.host, args.port);
     let listener = TcpListener::bind(&address).with_context(|| format!("listening on {address}"))?;
+    let address = listener.local_addr().map_or(address, |a| a.to_string());
     #[cfg(unix)]
     // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
     unsafe {
@@ -114,7 +141,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         "listening  {address} (OpenIGTLink; clouds as POLYDATA or POINT named `cloud`, in {}); Ctrl-C stops",
         args.units
     );
-    let serve_options = ServeOptions { unit, outputs, ..ServeOptions::default() };
+    let serve_options = ServeOptions { unit, outputs, identification, ..ServeOptions::default() };
     live::serve(listener, Arc::new(factory), serve_options, &STOP)?;
     println!("stopped");
     Ok(())

@@ -6,7 +6,7 @@ use std::net::{TcpStream, ToSocketAddrs};
 use std::time::Duration;
 
 use openigtlink_rust::protocol::header::Header;
-use openigtlink_rust::protocol::types::{PointMessage, StringMessage, TransformMessage};
+use openigtlink_rust::protocol::types::{PointElement, PointMessage, StringMessage, TransformMessage};
 
 use crate::polydata::PolyData;
 use crate::{decode_body, encode_message};
@@ -22,6 +22,8 @@ pub enum Answer {
     Rigid([[f32; 4]; 4]),
     /// STRING `status`: one line of JSON.
     Status(serde_json::Value),
+    /// STRING `estimate`: an identification step's estimate, one line of JSON.
+    Estimate(serde_json::Value),
 }
 
 /// The answers to one cloud that [`Client::until_status`] keeps.
@@ -52,6 +54,14 @@ impl Client {
         self.send_bytes(&encode_message(PolyData { points, triangles: Vec::new() }, "cloud")?)
     }
 
+    /// Sends points (in the server's unit) as a POINT message of device `device` (e.g. the
+    /// observed features of an identification step, device `features`).
+    pub fn send_points(&mut self, device: &str, points: &[[f32; 3]]) -> std::result::Result<(), String> {
+        let elements =
+            points.iter().enumerate().map(|(k, &p)| PointElement::new(format!("{device} {}", k + 1), device, p));
+        self.send_bytes(&encode_message(PointMessage::new(elements.collect()), device)?)
+    }
+
     /// Sends raw bytes (e.g. a malformed message).
     pub fn send_bytes(&mut self, bytes: &[u8]) -> std::result::Result<(), String> {
         self.stream.write_all(bytes).map_err(|e| format!("sending: {e}"))
@@ -75,7 +85,11 @@ impl Client {
             "TRANSFORM" => Answer::Rigid(decode_body::<TransformMessage>(&parsed, &body)?.matrix),
             "STRING" => {
                 let text: StringMessage = decode_body(&parsed, &body)?;
-                Answer::Status(serde_json::from_str(text.as_str()).map_err(|e| format!("status is not JSON: {e}"))?)
+                let json = serde_json::from_str(text.as_str()).map_err(|e| format!("a STRING is not JSON: {e}"))?;
+                match parsed.device_name.as_str() {
+                    Ok("estimate") => Answer::Estimate(json),
+                    _ => Answer::Status(json),
+                }
             }
             other => return Err(format!("unexpected {other} message")),
         }))

@@ -19,6 +19,14 @@
 //! oversized message closes that client's connection (after a STRING `status` error where the
 //! connection still allows it); a cloud with no point, too many points or a non-finite
 //! coordinate gets an error status and the stream goes on. Other clients are never affected.
+//!
+//! Identification on the stream, when the server has one ([`ServeOptions::identification`], e.g.
+//! the ROUKF of an assimilation scenario): POINT (or POLYDATA) `features`, the observed
+//! features' positions in the scenario's order (NaN for one not seen), make one filter step each,
+//! in order, answered by a STRING `estimate` (one line of JSON: `step`, `ms` and the
+//! identification's fields, or `step` and `error`). A client's filter is built at its first
+//! `features`; steps waiting beyond [`MAX_PENDING_STEPS`] are refused, so that the backlog stays
+//! bounded.
 
 pub mod client;
 pub mod polydata;
@@ -91,8 +99,24 @@ impl Outputs {
     }
 }
 
+/// Identification on the stream: a filter that takes one set of observed feature positions per
+/// step (e.g. the ROUKF of an assimilation scenario).
+pub trait Identification: Send {
+    /// Features per step.
+    fn features(&self) -> usize;
+    /// One step with the features' positions (m; NaN for a feature not seen); the estimate
+    /// after it, as JSON fields.
+    fn step(&mut self, positions: &[Point]) -> std::result::Result<serde_json::Map<String, serde_json::Value>, String>;
+}
+
+/// Builds a new client's [`Identification`].
+pub type IdentificationFactory = dyn Fn() -> std::result::Result<Box<dyn Identification>, String> + Send + Sync;
+
+/// Most `features` messages waiting for their step; more are refused with an error estimate.
+pub const MAX_PENDING_STEPS: usize = 16;
+
 /// Settings of the server.
-#[derive(Clone, Debug)]
+#[derive(Clone)]
 pub struct ServeOptions {
     /// Metres per unit of the coordinates on the wire (0.001: millimetres, as 3D Slicer uses).
     pub unit: f64,
@@ -102,11 +126,20 @@ pub struct ServeOptions {
     pub max_message_bytes: u64,
     /// Largest cloud registered (points); a larger one gets an error status.
     pub max_points: usize,
+    /// Identification on the stream (`features` in, `estimate` out); `None`: `features` are
+    /// answered with an error.
+    pub identification: Option<Arc<IdentificationFactory>>,
 }
 
 impl Default for ServeOptions {
     fn default() -> Self {
-        ServeOptions { unit: 1e-3, outputs: Outputs::ALL, max_message_bytes: 64 << 20, max_points: 200_000 }
+        ServeOptions {
+            unit: 1e-3,
+            outputs: Outputs::ALL,
+            max_message_bytes: 64 << 20,
+            max_points: 200_000,
+            identification: None,
+        }
     }
 }
 
@@ -230,10 +263,18 @@ struct Client {
     threads: Vec<std::thread::JoinHandle<()>>,
 }
 
+/// The newest cloud, with its frame number, and the features of the steps to come, in order,
+/// with their step numbers.
+#[derive(Default)]
+struct Mailbox {
+    cloud: Option<(u64, Vec<Point>)>,
+    features: std::collections::VecDeque<(u64, Vec<Point>)>,
+}
+
 /// What a client's two threads share.
 struct Shared {
-    /// The newest cloud waiting to be registered, with its frame number.
-    waiting: Mutex<Option<(u64, Vec<Point>)>>,
+    /// What waits for the registration thread.
+    waiting: Mutex<Mailbox>,
     arrived: Condvar,
     /// Set when the connection ends (either side, or the server stops).
     closed: AtomicBool,
@@ -257,6 +298,12 @@ impl Shared {
         w.write_all(&bytes).map_err(|e| e.to_string())
     }
 
+    fn send_estimate(&self, estimate: &serde_json::Value) {
+        if self.send(StringMessage::utf8(estimate.to_string()), "estimate").is_err() {
+            self.close();
+        }
+    }
+
     fn send_status(&self, status: &serde_json::Value) {
         if self.options.outputs.status && self.send(StringMessage::utf8(status.to_string()), "status").is_err() {
             self.close();
@@ -270,7 +317,7 @@ impl Client {
         stream.set_nodelay(true)?;
         let reader = stream.try_clone()?;
         let shared = Arc::new(Shared {
-            waiting: Mutex::new(None),
+            waiting: Mutex::new(Mailbox::default()),
             arrived: Condvar::new(),
             closed: AtomicBool::new(false),
             writer: Mutex::new(stream),
@@ -278,7 +325,7 @@ impl Client {
         });
         let (s1, s2) = (shared.clone(), shared.clone());
         let threads = vec![
-            std::thread::spawn(move || read_clouds(reader, &s1)),
+            std::thread::spawn(move || read_messages(reader, &s1)),
             std::thread::spawn(move || register_clouds(&s2, &*factory)),
         ];
         Ok(Client { shared, threads })
@@ -296,23 +343,41 @@ impl Client {
     }
 }
 
-/// Reads messages until the connection ends; keeps the newest cloud for the registration thread.
-fn read_clouds(mut stream: TcpStream, shared: &Shared) {
-    let mut frame = 0u64;
+/// Reads messages until the connection ends; keeps the newest cloud, and the features of the
+/// steps to come, for the registration thread.
+fn read_messages(mut stream: TcpStream, shared: &Shared) {
+    let (mut frame, mut step) = (0u64, 0u64);
+    let to_metres = |points: Vec<[f32; 3]>| -> Vec<Point> {
+        points.into_iter().map(|p| p.map(|x| f64::from(x) * shared.options.unit)).collect()
+    };
     while !shared.closed.load(Ordering::SeqCst) {
-        let points = match read_message(&mut stream, shared.options.max_message_bytes) {
-            Ok(Incoming::Cloud(points)) => points,
-            Ok(Incoming::Other) => continue,
+        match read_message(&mut stream, shared.options.max_message_bytes) {
+            Ok(Incoming::Cloud(points)) => {
+                frame += 1;
+                let cloud = to_metres(points);
+                shared.waiting.lock().unwrap_or_else(|e| e.into_inner()).cloud = Some((frame, cloud));
+                shared.arrived.notify_one();
+            }
+            Ok(Incoming::Features(points)) => {
+                step += 1;
+                let mut waiting = shared.waiting.lock().unwrap_or_else(|e| e.into_inner());
+                if waiting.features.len() >= MAX_PENDING_STEPS {
+                    drop(waiting);
+                    let error = format!("{MAX_PENDING_STEPS} steps are already waiting: step refused");
+                    shared.send_estimate(&serde_json::json!({ "step": step, "error": error }));
+                    continue;
+                }
+                waiting.features.push_back((step, to_metres(points)));
+                drop(waiting);
+                shared.arrived.notify_one();
+            }
+            Ok(Incoming::Other) => {}
             Ok(Incoming::Closed) => break,
             Err(e) => {
                 shared.send_status(&serde_json::json!({ "error": e }));
                 break;
             }
-        };
-        frame += 1;
-        let cloud = points.into_iter().map(|p| p.map(|x| f64::from(x) * shared.options.unit)).collect();
-        *shared.waiting.lock().unwrap_or_else(|e| e.into_inner()) = Some((frame, cloud));
-        shared.arrived.notify_one();
+        }
     }
     shared.close();
 }
@@ -321,6 +386,8 @@ fn read_clouds(mut stream: TcpStream, shared: &Shared) {
 enum Incoming {
     /// The points of a `cloud` POLYDATA or POINT message (wire units).
     Cloud(Vec<[f32; 3]>),
+    /// The points of a `features` POLYDATA or POINT message (wire units).
+    Features(Vec<[f32; 3]>),
     /// Any other message (ignored).
     Other,
     /// The peer closed the connection between messages.
@@ -344,7 +411,8 @@ fn read_message(stream: &mut TcpStream, max_body: u64) -> std::result::Result<In
     data.resize(Header::SIZE + parsed.body_size as usize, 0);
     stream.read_exact(&mut data[Header::SIZE..]).map_err(|e| format!("truncated message body: {e}"))?;
     let kind = parsed.type_name.as_str().map_err(|e| format!("malformed message type: {e}"))?;
-    if parsed.device_name.as_str().ok() != Some("cloud") || !matches!(kind, "POLYDATA" | "POINT") {
+    let device = parsed.device_name.as_str().ok();
+    if !matches!(device, Some("cloud" | "features")) || !matches!(kind, "POLYDATA" | "POINT") {
         return Ok(Incoming::Other);
     }
     let body = &data[Header::SIZE..];
@@ -352,7 +420,7 @@ fn read_message(stream: &mut TcpStream, max_body: u64) -> std::result::Result<In
         "POLYDATA" => decode_body::<PolyData>(&parsed, body)?.points,
         _ => decode_body::<PointMessage>(&parsed, body)?.points.iter().map(|p| p.position).collect(),
     };
-    Ok(Incoming::Cloud(points))
+    Ok(if device == Some("cloud") { Incoming::Cloud(points) } else { Incoming::Features(points) })
 }
 
 /// A message as bytes on the wire, with header version 1 (no extended header): what every
@@ -413,23 +481,73 @@ fn register_clouds(shared: &Shared, factory: &RegistrationFactory) {
             return;
         }
     };
+    let mut identification: Option<Box<dyn Identification>> = None;
     loop {
-        let (frame, cloud) = {
+        let work = {
             let mut waiting = shared.waiting.lock().unwrap_or_else(|e| e.into_inner());
             loop {
                 if shared.closed.load(Ordering::SeqCst) {
                     return;
                 }
-                if let Some(next) = waiting.take() {
-                    break next;
+                // Steps first, in order: they are few and each counts; then the newest cloud.
+                if let Some((step, features)) = waiting.features.pop_front() {
+                    break Work::Step(step, features);
+                }
+                if let Some((frame, cloud)) = waiting.cloud.take() {
+                    break Work::Cloud(frame, cloud);
                 }
                 waiting = shared.arrived.wait(waiting).unwrap_or_else(|e| e.into_inner());
             }
         };
-        if let Err(e) = answer(shared, &mut registration, frame, &cloud) {
-            shared.send_status(&serde_json::json!({ "frame": frame, "error": e }));
+        match work {
+            Work::Cloud(frame, cloud) => {
+                if let Err(e) = answer(shared, &mut registration, frame, &cloud) {
+                    shared.send_status(&serde_json::json!({ "frame": frame, "error": e }));
+                }
+            }
+            Work::Step(step, features) => {
+                let start = Instant::now();
+                let estimate = identify(&shared.options, &mut identification, &features).map(|mut fields| {
+                    fields.insert("ms".into(), (start.elapsed().as_secs_f64() * 1e3).into());
+                    fields
+                });
+                let mut answer = match estimate {
+                    Ok(fields) => fields,
+                    Err(e) => serde_json::Map::from_iter([("error".to_string(), e.into())]),
+                };
+                answer.insert("step".into(), step.into());
+                shared.send_estimate(&serde_json::Value::Object(answer));
+            }
         }
     }
+}
+
+/// What the registration thread does next.
+enum Work {
+    /// Register a cloud (frame number, points in m).
+    Cloud(u64, Vec<Point>),
+    /// Make an identification step (step number, features in m).
+    Step(u64, Vec<Point>),
+}
+
+/// One identification step with `features`, building the client's filter at its first step.
+fn identify(
+    options: &ServeOptions,
+    identification: &mut Option<Box<dyn Identification>>,
+    features: &[Point],
+) -> std::result::Result<serde_json::Map<String, serde_json::Value>, String> {
+    if identification.is_none() {
+        let factory = options.identification.as_ref().ok_or("this server has no identification (features)")?;
+        *identification = Some(factory().map_err(|e| format!("setting up the identification: {e}"))?);
+    }
+    let filter = identification.as_mut().ok_or("no identification")?;
+    if features.len() != filter.features() {
+        return Err(format!("{} features sent, the identification observes {}", features.len(), filter.features()));
+    }
+    if features.iter().flatten().any(|x| x.is_infinite()) {
+        return Err("a feature has an infinite coordinate (NaN marks one not seen)".into());
+    }
+    filter.step(features)
 }
 
 /// Registers one cloud and sends the chosen answers.

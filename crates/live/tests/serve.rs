@@ -203,3 +203,76 @@ fn a_rigid_pre_alignment_answers_in_the_clouds_frame() {
     warm.reset();
     assert!(warm.register(&cloud).unwrap().rigid.is_some(), "a reset estimates the pose again");
 }
+
+/// An identification that takes 20 ms a step and reports the mean height of its features.
+struct SlowMean;
+
+impl augsim_live::Identification for SlowMean {
+    fn features(&self) -> usize {
+        2
+    }
+
+    fn step(&mut self, positions: &[Point]) -> Result<serde_json::Map<String, serde_json::Value>, String> {
+        std::thread::sleep(Duration::from_millis(20));
+        let z = positions.iter().map(|p| p[2]).sum::<f64>() / 2.0;
+        Ok(serde_json::Map::from_iter([("z".to_string(), z.into())]))
+    }
+}
+
+/// `features` make identification steps in order, each answered by an `estimate`; a burst
+/// larger than the server keeps waiting gets errors for the steps beyond it, never a backlog;
+/// a server without identification says so.
+#[test]
+fn features_step_the_identification_in_order_with_a_bounded_backlog() {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let stop = Arc::new(AtomicBool::new(false));
+    let factory: Arc<augsim_live::IdentificationFactory> = Arc::new(|| Ok(Box::new(SlowMean)));
+    let options = ServeOptions { identification: Some(factory), ..ServeOptions::default() };
+    let server = {
+        let stop = stop.clone();
+        std::thread::spawn(move || serve(listener, Arc::new(cube_registration), options, &stop))
+    };
+    let mut client = connect(port);
+    let burst = 3 * augsim_live::MAX_PENDING_STEPS;
+    for k in 0..burst {
+        client.send_points("features", &[[0.0, 0.0, k as f32], [0.0, 0.0, k as f32 + 2.0]]).unwrap();
+    }
+    let mut answered = vec![None; burst];
+    for _ in 0..burst {
+        match client.receive().unwrap() {
+            Some(Answer::Estimate(e)) => {
+                let step = e["step"].as_u64().unwrap() as usize;
+                assert!(answered[step - 1].is_none(), "step {step} answered twice");
+                answered[step - 1] = Some(e);
+            }
+            other => panic!("expected an estimate, got {other:?}"),
+        }
+    }
+    let refused = answered.iter().flatten().filter(|e| e["error"].is_string()).count();
+    assert!(refused > 0 && refused <= burst - augsim_live::MAX_PENDING_STEPS, "{refused} of {burst} refused");
+    // The first step was made at once: 1 mm, in metres.
+    assert!((answered[0].as_ref().unwrap()["z"].as_f64().unwrap() - 1e-3).abs() < 1e-12);
+    // Clouds are still registered.
+    let (cloud, _) = pressed_cloud(300.0);
+    client.send_cloud(cloud).unwrap();
+    assert_eq!(client.until_status().unwrap().status["frame"], 1);
+    // A server without identification answers features with an error.
+    stop.store(true, Ordering::SeqCst);
+    server.join().unwrap().unwrap();
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let stop = Arc::new(AtomicBool::new(false));
+    let server = {
+        let stop = stop.clone();
+        std::thread::spawn(move || serve(listener, Arc::new(cube_registration), ServeOptions::default(), &stop))
+    };
+    let mut client = connect(port);
+    client.send_points("features", &[[0.0; 3]; 2]).unwrap();
+    match client.receive().unwrap() {
+        Some(Answer::Estimate(e)) => assert!(e["error"].as_str().unwrap().contains("no identification"), "{e}"),
+        other => panic!("expected an estimate, got {other:?}"),
+    }
+    stop.store(true, Ordering::SeqCst);
+    server.join().unwrap().unwrap();
+}

@@ -9,10 +9,9 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 
-use experiment::assimilation::Experiment;
+use experiment::assimilation::{Experiment, OnlineFilter};
 use experiment::setup::{fem_setup, network_setup};
 use fem::{post, StaticSolver};
-use filter::{FemModel, Roukf};
 use learn::data::npy::{NpyArray, NpyData};
 use learn::{PointCloud, PredictInput, TrainedModel};
 use live::{ClientRegistration, RegisteredFrame, WarmRegistration};
@@ -354,7 +353,7 @@ struct Estimate {
 #[pyclass(module = "augsim")]
 struct Assimilation {
     experiment: Experiment,
-    filter: Mutex<Roukf<FemModel>>,
+    filter: Mutex<OnlineFilter>,
     /// The estimated parameters' names, in order (`young`, `k_<node>` for a spring).
     #[pyo3(get)]
     names: Vec<String>,
@@ -371,10 +370,10 @@ impl Assimilation {
                 sc.iterations = iterations;
             }
             let experiment = Experiment::prepare(sc, &dir, None)?;
-            let filter = experiment.filter()?;
+            let filter = OnlineFilter::new(&experiment)?;
             Ok((experiment, filter))
         })?;
-        let names = filter.config().parameters.iter().map(|p| p.name.clone()).collect();
+        let names = filter.names().to_vec();
         Ok(Assimilation { experiment, filter: Mutex::new(filter), names })
     }
 
@@ -388,29 +387,21 @@ impl Assimilation {
             return Err(PyValueError::new_err(format!("observation must have shape [{p}, 3], got {shape:?}")));
         }
         compute(py, || {
-            let available: Vec<bool> = z.iter().map(|v| !v.is_nan()).collect();
-            let mut filter = locked(&self.filter)?;
-            let record = filter.step_partial(&DVector::from_vec(z), &available)?;
-            let innovation = record.innovation_norm.unwrap_or(0.0);
-            Ok(Estimate {
-                iteration: filter.iteration(),
-                mean: filter.mean_physical(),
-                std: filter.std_physical(),
-                innovation,
-            })
+            let e = locked(&self.filter)?.step(z)?;
+            Ok(Estimate { iteration: e.iteration, mean: e.mean, std: e.std, innovation: e.innovation })
         })
     }
 
     /// The current estimate of the parameters (physical units), in the order of `names`.
     #[getter]
     fn mean(&self, py: Python<'_>) -> PyResult<Vec<f64>> {
-        compute(py, || Ok(locked(&self.filter)?.mean_physical()))
+        compute(py, || Ok(locked(&self.filter)?.mean()))
     }
 
     /// The current standard deviations of the parameters.
     #[getter]
     fn std(&self, py: Python<'_>) -> PyResult<Vec<f64>> {
-        compute(py, || Ok(locked(&self.filter)?.std_physical()))
+        compute(py, || Ok(locked(&self.filter)?.std()))
     }
 
     /// Filter steps done.

@@ -19,12 +19,14 @@
 //! filter's time went ([`FilterTimes`]: the FEM solves' assembly, factorisations and triangular solves, and the
 //! writing of the deformation).
 
+mod online;
 mod report;
 mod run;
 pub mod tracks;
 
 use std::path::Path;
 
+pub use online::{Estimate, OnlineFilter};
 pub use report::{AssessmentCase, FilterTimes, Report, SpringsReport, YoungReport};
 pub use run::{Experiment, ObservationFiles, Progress, Reference, Setup};
 

@@ -1,0 +1,95 @@
+//! The ROUKF of an assimilation experiment stepped with measurements as they arrive: from Python
+//! one step at a time, or on an OpenIGTLink stream ([`live::Identification`]).
+
+use filter::{FemModel, Roukf};
+use mesh::Point;
+use nalgebra::DVector;
+
+use super::{AssimilationError, Context, Experiment};
+
+/// The filter at its prior, waiting for measurements.
+pub struct OnlineFilter {
+    filter: Roukf<FemModel>,
+    names: Vec<String>,
+    features: usize,
+}
+
+/// The filter's estimate after a step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Estimate {
+    /// Filter steps done.
+    pub iteration: usize,
+    /// The parameters' estimate (physical units), in the order of [`OnlineFilter::names`].
+    pub mean: Vec<f64>,
+    /// Their standard deviations.
+    pub std: Vec<f64>,
+    /// Norm of the step's innovation over the measured components (m).
+    pub innovation: f64,
+}
+
+impl OnlineFilter {
+    /// The filter of `experiment` ([`Experiment::filter`]).
+    pub fn new(experiment: &Experiment) -> Result<OnlineFilter, AssimilationError> {
+        let filter = experiment.filter()?;
+        let names = filter.config().parameters.iter().map(|p| p.name.clone()).collect();
+        Ok(OnlineFilter { filter, names, features: experiment.setup().features })
+    }
+
+    /// The estimated parameters' names, in order (`young`, `k_<node>` for a spring).
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// Observed points per step.
+    pub fn features(&self) -> usize {
+        self.features
+    }
+
+    /// One step with the observed points' positions stacked (x, y, z per point, m; NaN for a
+    /// component not measured).
+    pub fn step(&mut self, z: Vec<f64>) -> Result<Estimate, AssimilationError> {
+        if z.len() != 3 * self.features {
+            return Err(AssimilationError::Setup(format!(
+                "{} values measured for {} observed points",
+                z.len(),
+                self.features
+            )));
+        }
+        let available: Vec<bool> = z.iter().map(|v| !v.is_nan()).collect();
+        let record = self.filter.step_partial(&DVector::from_vec(z), &available).context(|| "a filter step".into())?;
+        let innovation = record.innovation_norm.unwrap_or(0.0);
+        Ok(Estimate { iteration: self.iteration(), mean: self.mean(), std: self.std(), innovation })
+    }
+
+    /// Filter steps done.
+    pub fn iteration(&self) -> usize {
+        self.filter.iteration()
+    }
+
+    /// The parameters' estimate (physical units).
+    pub fn mean(&self) -> Vec<f64> {
+        self.filter.mean_physical()
+    }
+
+    /// Their standard deviations.
+    pub fn std(&self) -> Vec<f64> {
+        self.filter.std_physical()
+    }
+}
+
+impl live::Identification for OnlineFilter {
+    fn features(&self) -> usize {
+        self.features
+    }
+
+    fn step(&mut self, positions: &[Point]) -> Result<serde_json::Map<String, serde_json::Value>, String> {
+        let e = OnlineFilter::step(self, positions.iter().flatten().copied().collect()).map_err(|e| e.to_string())?;
+        let mut fields = serde_json::Map::new();
+        fields.insert("iteration".into(), e.iteration.into());
+        fields.insert("names".into(), self.names.clone().into());
+        fields.insert("mean".into(), e.mean.into());
+        fields.insert("std".into(), e.std.into());
+        fields.insert("innovation".into(), e.innovation.into());
+        Ok(fields)
+    }
+}
