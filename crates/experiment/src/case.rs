@@ -69,11 +69,6 @@ impl SyntheticCase {
         &self.frames[self.peak_index()]
     }
 
-    /// The clouds of the frames, in order.
-    pub fn clouds(&self) -> Vec<Vec<Point>> {
-        self.frames.iter().map(|f| f.cloud.clone()).collect()
-    }
-
     /// The targets' truth of the frames, in order.
     pub fn truths(&self) -> Vec<Vec<Point>> {
         self.frames.iter().map(|f| f.truth.clone()).collect()

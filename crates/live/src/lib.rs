@@ -298,15 +298,20 @@ impl Shared {
         w.write_all(&bytes).map_err(|e| e.to_string())
     }
 
-    fn send_estimate(&self, estimate: &serde_json::Value) {
-        if self.send(StringMessage::utf8(estimate.to_string()), "estimate").is_err() {
+    /// Sends one line of JSON as a STRING of `device`; a failed send ends the connection.
+    fn send_json(&self, device: &str, json: &serde_json::Value) {
+        if self.send(StringMessage::utf8(json.to_string()), device).is_err() {
             self.close();
         }
     }
 
+    fn send_estimate(&self, estimate: &serde_json::Value) {
+        self.send_json("estimate", estimate);
+    }
+
     fn send_status(&self, status: &serde_json::Value) {
-        if self.options.outputs.status && self.send(StringMessage::utf8(status.to_string()), "status").is_err() {
-            self.close();
+        if self.options.outputs.status {
+            self.send_json("status", status);
         }
     }
 }
@@ -326,7 +331,7 @@ impl Client {
         let (s1, s2) = (shared.clone(), shared.clone());
         let threads = vec![
             std::thread::spawn(move || read_messages(reader, &s1)),
-            std::thread::spawn(move || register_clouds(&s2, &*factory)),
+            std::thread::spawn(move || serve_client(&s2, &*factory)),
         ];
         Ok(Client { shared, threads })
     }
@@ -463,8 +468,9 @@ pub fn decode_body<T: Message>(header: &Header, body: &[u8]) -> std::result::Res
     }
 }
 
-/// Registers the newest cloud, frame after frame, until the connection ends.
-fn register_clouds(shared: &Shared, factory: &RegistrationFactory) {
+/// Registers the newest cloud, frame after frame, and makes the identification steps, until the
+/// connection ends.
+fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
     let registration = match factory() {
         Ok(s) => s,
         Err(e) => {

@@ -13,8 +13,9 @@ use crate::{RegisterError, Result};
 
 /// Finite-element registration: every matched surface point is tied by a zero-length spring
 /// to its cloud point (a [`PointSpring`] on the nodes that move it, mostly point to plane);
-/// the organ's own boundary conditions (fixed nodes, its springs and point springs) hold the rest. The scenario's
-/// loads are dropped: the intraoperative loads are unknown, the data stand in for them. The
+/// the organ's own boundary conditions (fixed nodes, its springs and point springs) hold the
+/// rest. The scenario's loads are dropped: the intraoperative loads are unknown, the data stand
+/// in for them. The
 /// springs stiffen over the first iterations of a frame ([`STIFFNESS_RAMP`]): the first matches
 /// of a large deformation are poor, and stiff springs pulling towards them would crush elements.
 pub struct FemDeformer {
