@@ -15,9 +15,9 @@ use crate::{RegisterError, Result};
 /// to its cloud point (a [`PointSpring`] on the nodes that move it, mostly point to plane);
 /// the organ's own boundary conditions (fixed nodes, its springs and point springs) hold the
 /// rest. The scenario's loads are dropped: the intraoperative loads are unknown, the data stand
-/// in for them. The
-/// springs stiffen over the first iterations of a frame ([`STIFFNESS_RAMP`]): the first matches
-/// of a large deformation are poor, and stiff springs pulling towards them would crush elements.
+/// in for them. The springs stiffen over the first iterations of a frame ([`STIFFNESS_RAMP`]): the
+/// first matches of a large deformation are poor, and stiff springs pulling towards them would
+/// crush elements.
 pub struct FemDeformer {
     solver: StaticSolver,
     stiffness: f64,
