@@ -118,7 +118,8 @@ pub fn line_plot(path: &Path, spec: &PlotSpec, series: &[Series]) -> Result<(), 
 
     write_png(path, SIZE, |root| {
         if spec.log_y && y_range.end >= 10.0 * y_range.start {
-            draw(root, spec, series, x_range, y_range.clone().log_scale(), y_range)
+            let keys = log_ticks(&y_range);
+            draw(root, spec, series, x_range, y_range.clone().log_scale().with_key_points(keys), y_range)
         } else {
             draw(root, spec, series, x_range, y_range.clone(), y_range)
         }
@@ -432,6 +433,21 @@ fn draw_legend<'a, CT: CoordTranslate>(
 
 /// Tick text: plain decimals for moderate magnitudes, scientific notation with a trimmed mantissa otherwise
 /// (`span` is the axis extent, so that 0 on an axis of tiny values reads "0").
+/// The 1-2-5 values of each decade inside `range` (positive): labelled ticks on a log axis
+/// (plotters' own labels only the decade of the upper bound when the range spans a few decades).
+fn log_ticks(range: &Range<f64>) -> Vec<f64> {
+    let first = range.start.log10().floor() as i32;
+    let last = range.end.log10().ceil() as i32;
+    let all: Vec<f64> =
+        (first..=last).flat_map(|e| [1.0, 2.0, 5.0].map(|m| m * 10f64.powi(e))).filter(|v| range.contains(v)).collect();
+    // Several decades: the decades only, so that labels do not crowd.
+    if last - first > 4 {
+        all.into_iter().filter(|v| (v.log10() - v.log10().round()).abs() < 1e-9).collect()
+    } else {
+        all
+    }
+}
+
 fn tick_label(v: f64, span: f64) -> String {
     let a = v.abs();
     if a == 0.0 || a < 1e-9 * span {
@@ -452,5 +468,18 @@ fn tick_label(v: f64, span: f64) -> String {
             }
             None => s,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::log_ticks;
+
+    #[test]
+    fn a_log_axis_is_labelled_at_1_2_5_in_each_decade_or_at_decades_over_many() {
+        assert_eq!(log_ticks(&(1.3..45.0)), [2.0, 5.0, 10.0, 20.0]);
+        let wide = log_ticks(&(2e-4..3e3));
+        assert_eq!(wide.len(), 7, "{wide:?}");
+        assert!(wide.iter().zip([1e-3, 1e-2, 0.1, 1.0, 10.0, 100.0, 1000.0]).all(|(a, b)| (a / b - 1.0).abs() < 1e-12));
     }
 }
