@@ -200,7 +200,9 @@ pub struct Network<'a> {
 /// displacement of the scenario's input nodes.
 pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
     let (scenario, model) = (network.scenario, network.model);
-    let mesh = scenario.mesh(network.dir)?;
+    // The mesh its samples were solved and encoded on: quadratic when the scenario's material
+    // asks for T10 (the mid-edge nodes are network inputs too).
+    let mesh = scenario.generator(network.dir)?.mesh().clone();
     let (inputs, normal) = match &scenario.dataset.input {
         Input::Displacement { nodes, normal, .. } => (nodes.select(&mesh)?, *normal),
         Input::Force => {
