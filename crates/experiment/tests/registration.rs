@@ -242,3 +242,23 @@ fn clouds_that_cannot_be_the_organ_are_refused_or_flagged() {
     );
     eprintln!("unfitted points: aligned {:.3}, shifted 5 cm {:.3}", good.far_share, moved.far_share);
 }
+
+/// A network of a T10 dataset scenario deforms the quadratic mesh its samples were solved on:
+/// the mid-edge nodes of the visible region are inputs too.
+#[test]
+fn the_network_of_a_t10_scenario_deforms_the_quadratic_mesh() {
+    let model = learn::TrainedModel::load(std::path::Path::new(MODEL), &learn::inference_device()).unwrap();
+    let mut scenario = experiment::case::ar_scenario();
+    let network = |scenario: &scenario::DatasetScenario| {
+        let n = experiment::case::Network { model: &model, scenario, dir: std::path::Path::new("") };
+        experiment::case::network_model(&n).unwrap().0
+    };
+    let linear = network(&scenario);
+    scenario.material = scenario.material.with_order(2);
+    let quadratic = network(&scenario);
+    assert_eq!(linear.mesh().cells.kind_name(), "T4");
+    assert_eq!(quadratic.mesh().cells.kind_name(), "T10");
+    let expected = linear.mesh().quadratic().unwrap();
+    assert_eq!(quadratic.mesh().nodes, expected.nodes);
+    assert!(quadratic.mesh().region("visible").unwrap().len() > 2 * linear.mesh().region("visible").unwrap().len());
+}
