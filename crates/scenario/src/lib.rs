@@ -177,7 +177,7 @@ impl Scenario {
 }
 
 /// The built-in scenarios: `(name, text)`, the files of this crate's `scenarios/` directory.
-pub const BUILTIN: [(&str, &str); 18] = [
+pub const BUILTIN: [(&str, &str); 19] = [
     ("beam", include_str!("../scenarios/beam.toml")),
     ("beam_bc1", include_str!("../scenarios/beam_bc1.toml")),
     ("beam_bc4", include_str!("../scenarios/beam_bc4.toml")),
@@ -188,6 +188,7 @@ pub const BUILTIN: [(&str, &str); 18] = [
     ("liver", include_str!("../scenarios/liver.toml")),
     ("liver_ar", include_str!("../scenarios/liver_ar.toml")),
     ("liver_ar_grid", include_str!("../scenarios/liver_ar_grid.toml")),
+    ("liver_ar_t10", include_str!("../scenarios/liver_ar_t10.toml")),
     ("liver_forces", include_str!("../scenarios/liver_forces.toml")),
     ("liver_forces_large", include_str!("../scenarios/liver_forces_large.toml")),
     ("liver_large", include_str!("../scenarios/liver_large.toml")),
