@@ -188,6 +188,18 @@ fn stalled(residuals: &[f64]) -> bool {
     least(&residuals[split..]) > STALL_PROGRESS * least(&residuals[..split])
 }
 
+/// The predictor of a load step from `lambda` to `target`: the load path extrapolated linearly
+/// from the last two converged states (`previous` at its load factor, `u` at `lambda`); `u`
+/// itself when there is no earlier state at a smaller load factor.
+fn predict(u: &[f64], previous: Option<&(f64, Vec<f64>)>, lambda: f64, target: f64) -> Vec<f64> {
+    let mut trial = u.to_vec();
+    if let Some((l0, u0)) = previous.filter(|(l0, _)| *l0 < lambda) {
+        let ratio = (target - lambda) / (lambda - l0);
+        trial.iter_mut().zip(u0).for_each(|(t, p)| *t += ratio * (*t - p));
+    }
+    trial
+}
+
 /// Principal stretch at which Saint-Venant-Kirchhoff's uniaxial compressive stress peaks.
 const SVK_LIMIT_STRETCH: f64 = 0.577_350_269_189_625_8;
 
@@ -405,12 +417,13 @@ impl StaticSolver {
         let mut steps = 0;
         while lambda < 1.0 {
             let target = (lambda + step).min(1.0);
-            // Predictor: extrapolate the load path linearly from the last two states.
-            let mut trial = u.clone();
-            if let Some((l0, u0)) = &previous {
-                let ratio = (target - lambda) / (lambda - l0);
-                trial.iter_mut().zip(u0).for_each(|(t, p)| *t += ratio * (*t - p));
+            if target <= lambda {
+                // The step fell below the load factor's resolution: it would never advance.
+                let residual = stats.residuals.last().copied().unwrap_or(f64::NAN);
+                let e = FemError::NotConverged { load_factor: lambda, iterations: stats.iterations, residual };
+                return Err(self.diagnose(e, lambda, &u, &u, &stats));
             }
+            let mut trial = predict(&u, previous.as_ref(), lambda, target);
             // Start from the rest tangent unless this solve already refactorised
             // at a converged state; after a failure, from a new tangent at the last
             // converged state.
@@ -788,6 +801,17 @@ impl Stats {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_predictor_extrapolates_a_straight_path_and_never_divides_by_a_zero_step() {
+        let path = |l: f64| vec![2.0 * l, -l];
+        let ahead = predict(&path(0.5), Some(&(0.25, path(0.25))), 0.5, 0.75);
+        assert!(ahead.iter().zip(path(0.75)).all(|(a, b)| (a - b).abs() < 1e-15), "{ahead:?}");
+        // Two states at the same load factor (a step below its resolution): no extrapolation.
+        let same = predict(&path(0.5), Some(&(0.5, path(0.25))), 0.5, 0.5);
+        assert_eq!(same, path(0.5));
+        assert_eq!(predict(&path(0.5), None, 0.5, 0.75), path(0.5));
+    }
 
     #[test]
     fn a_sequence_stalls_when_its_last_residuals_stay_near_the_best_before_them() {
