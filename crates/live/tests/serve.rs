@@ -60,19 +60,38 @@ fn status(message: Option<Answer>) -> serde_json::Value {
     }
 }
 
+/// A server of the cube's registration on a free local port, run on a thread.
+struct Server {
+    port: u16,
+    stop: Arc<AtomicBool>,
+    thread: std::thread::JoinHandle<augsim_live::Result<()>>,
+}
+
+impl Server {
+    fn start(options: ServeOptions) -> Server {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        let thread = std::thread::spawn(move || serve(listener, Arc::new(cube_registration), options, &flag));
+        Server { port, stop, thread }
+    }
+
+    /// Stops the server and waits for it.
+    fn stop(self) {
+        self.stop.store(true, Ordering::SeqCst);
+        self.thread.join().unwrap().unwrap();
+    }
+}
+
 fn connect(port: u16) -> Client {
     Client::connect(("127.0.0.1", port), Duration::from_secs(60)).unwrap()
 }
 
 #[test]
 fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
-    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-    let port = listener.local_addr().unwrap().port();
-    let stop = Arc::new(AtomicBool::new(false));
-    let server = {
-        let stop = stop.clone();
-        std::thread::spawn(move || serve(listener, Arc::new(cube_registration), ServeOptions::default(), &stop))
-    };
+    let server = Server::start(ServeOptions::default());
+    let port = server.port;
 
     // A cloud in millimetres: the registered target is the pressed centre.
     let (cloud, truth) = pressed_cloud(300.0);
@@ -152,8 +171,7 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
     assert!(matches!(client.receive().unwrap(), Some(Answer::Organ(_))));
     assert_eq!(status(client.receive().unwrap())["frame"], 6);
 
-    stop.store(true, Ordering::SeqCst);
-    server.join().unwrap().unwrap();
+    server.stop();
     assert!(client.receive().unwrap().is_none(), "the server closed the connection when it stopped");
 }
 
@@ -224,16 +242,9 @@ impl augsim_live::Identification for SlowMean {
 /// a server without identification says so.
 #[test]
 fn features_step_the_identification_in_order_with_a_bounded_backlog() {
-    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-    let port = listener.local_addr().unwrap().port();
-    let stop = Arc::new(AtomicBool::new(false));
     let factory: Arc<augsim_live::IdentificationFactory> = Arc::new(|| Ok(Box::new(SlowMean)));
-    let options = ServeOptions { identification: Some(factory), ..ServeOptions::default() };
-    let server = {
-        let stop = stop.clone();
-        std::thread::spawn(move || serve(listener, Arc::new(cube_registration), options, &stop))
-    };
-    let mut client = connect(port);
+    let server = Server::start(ServeOptions { identification: Some(factory), ..ServeOptions::default() });
+    let mut client = connect(server.port);
     let burst = 3 * augsim_live::MAX_PENDING_STEPS;
     for k in 0..burst {
         client.send_points("features", &[[0.0, 0.0, k as f32], [0.0, 0.0, k as f32 + 2.0]]).unwrap();
@@ -258,21 +269,13 @@ fn features_step_the_identification_in_order_with_a_bounded_backlog() {
     client.send_cloud(cloud).unwrap();
     assert_eq!(client.until_status().unwrap().status["frame"], 1);
     // A server without identification answers features with an error.
-    stop.store(true, Ordering::SeqCst);
-    server.join().unwrap().unwrap();
-    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-    let port = listener.local_addr().unwrap().port();
-    let stop = Arc::new(AtomicBool::new(false));
-    let server = {
-        let stop = stop.clone();
-        std::thread::spawn(move || serve(listener, Arc::new(cube_registration), ServeOptions::default(), &stop))
-    };
-    let mut client = connect(port);
+    server.stop();
+    let server = Server::start(ServeOptions::default());
+    let mut client = connect(server.port);
     client.send_points("features", &[[0.0; 3]; 2]).unwrap();
     match client.receive().unwrap() {
         Some(Answer::Estimate(e)) => assert!(e["error"].as_str().unwrap().contains("no identification"), "{e}"),
         other => panic!("expected an estimate, got {other:?}"),
     }
-    stop.store(true, Ordering::SeqCst);
-    server.join().unwrap().unwrap();
+    server.stop();
 }
