@@ -77,8 +77,14 @@ fn identification(path: &std::path::Path, unit: f64) -> Result<Arc<live::Identif
         filter.names().join(", "),
         filter.features()
     );
+    // The first client takes the filter built here; the others build their own.
+    let first = std::sync::Mutex::new(Some(filter));
     Ok(Arc::new(move || -> std::result::Result<Box<dyn live::Identification>, String> {
-        Ok(Box::new(experiment::assimilation::OnlineFilter::new(&experiment).map_err(|e| e.to_string())?))
+        let filter = match first.lock().map_err(|e| e.to_string())?.take() {
+            Some(f) => f,
+            None => experiment::assimilation::OnlineFilter::new(&experiment).map_err(|e| e.to_string())?,
+        };
+        Ok(Box::new(filter))
     }))
 }
 
