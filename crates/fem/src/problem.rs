@@ -84,6 +84,11 @@ impl Problem {
         3 * self.mesh.num_nodes()
     }
 
+    /// The total stiffness of the point springs (N/m: each spring's isotropic and normal parts).
+    pub fn point_spring_stiffness(&self) -> f64 {
+        self.point_springs.iter().map(|s| s.stiffness + s.normal_stiffness).sum()
+    }
+
     /// Fixes the nodes (zero displacement).
     pub fn fix(&mut self, nodes: &[usize]) {
         self.prescribe(nodes, [0.0; 3]);

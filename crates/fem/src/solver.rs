@@ -109,6 +109,12 @@ pub struct StaticSolver {
     /// The latest factor's tangent was assembled at an iterate far from equilibrium (see
     /// [`STALE_RESIDUAL`]).
     latest_stale: bool,
+    /// The last warm-started solve on the latest factor took more iterations than a
+    /// refactorisation costs (see [`StaticSolver::solve_from`]).
+    latest_slow: bool,
+    /// The total stiffness of the point springs the latest factor was made with (see
+    /// [`SPRING_SCALE_CHANGE`]).
+    latest_spring_stiffness: f64,
 }
 
 impl std::fmt::Debug for StaticSolver {
@@ -165,6 +171,24 @@ const JUDGE_ANY: usize = 4;
 /// Measured on the bench's frame sequences: 4.2–5.3 iterations per frame instead of 4.2–7.0,
 /// for one refactorisation at the first frame.
 const STALE_RESIDUAL: f64 = 0.1;
+
+/// A kept factor made with point springs whose total stiffness differs from the current one by
+/// more than this ratio is replaced at a warm start (the point springs themselves may change at
+/// every solve, as a registration's data springs do; their scale is what makes the factor a good
+/// or a poor preconditioner). A registration stiffens its data springs ×4 per iteration over the
+/// first iterations of a frame: on the held-out press-and-release stream each solve then took 13
+/// iterations on the factor made at the softest springs, and frames 1–3 took 46–69 ms instead of
+/// about 25.
+const SPRING_SCALE_CHANGE: f64 = 2.0;
+
+/// About the iterations of a warm-started solve on a factor made at its start (2–3 on the
+/// press-and-release stream). A warm-started solve that took more than this plus a
+/// refactorisation's cost on a kept factor would have been cheaper on a new one; the next warm
+/// start makes one. On the held-out stream (39 warm frames of 4 solves), counting a factorisation
+/// as the 4.9 iterations it costs there: 874 iterations without this rule; 608 iterations and 5
+/// factorisations with it (632 in all); 494 and 29 with a margin of 0 (636); 750 and 2 with a
+/// margin of 5 (760).
+const FRESH_FACTOR_ITERATIONS: f64 = 2.0;
 
 /// An iteration sequence has stalled when its last [`STALL_ITERATIONS`] residuals all stay above
 /// [`STALL_PROGRESS`] times the smallest one before them: the load step is then cut at once
@@ -239,6 +263,8 @@ impl StaticSolver {
             values,
             refactorization_cost,
             latest_stale: false,
+            latest_slow: false,
+            latest_spring_stiffness: 0.0,
         })
     }
 
@@ -366,7 +392,11 @@ impl StaticSolver {
 
     /// Solves from a warm start `u0` (e.g. the previous frame's solution) when
     /// given: the full load is applied at once from `u0`; if that fails, the
-    /// solve restarts from rest with load stepping.
+    /// solve restarts from rest with load stepping. A warm start keeps the
+    /// latest factor unless it was made far from equilibrium, with point
+    /// springs of another scale, or the last warm start on it took more
+    /// iterations than a refactorisation costs (over a stream of solves a
+    /// factor made at another state costs more and more iterations).
     pub fn solve_from(&mut self, u0: Option<&[f64]>, options: &SolverOptions) -> Result<Solution, FemError> {
         let start = Instant::now();
         // The whole solve runs on a rayon worker (in place when called from one), so that each
@@ -399,9 +429,16 @@ impl StaticSolver {
                 return Err(FemError::Invalid(format!("warm start must hold {ndof} finite values")));
             }
             let mut u = u0.to_vec();
-            // A kept factor assembled far from equilibrium is replaced by one at the warm start.
-            let from = if self.latest_stale { Start::Fresh } else { Start::Kept };
+            // A kept factor assembled far from equilibrium, or with point springs of another
+            // scale, is replaced by one at the warm start.
+            let from = if self.latest_stale || self.latest_slow || self.spring_scale_changed() {
+                Start::Fresh
+            } else {
+                Start::Kept
+            };
             if self.newton(&mut u, 1.0, from, options, &mut stats).is_ok() {
+                self.latest_slow = !stats.refactorized
+                    && stats.iterations as f64 > self.refactorization_cost + FRESH_FACTOR_ITERATIONS;
                 return Ok(stats.finish(u, 1, start));
             }
         }
@@ -550,6 +587,8 @@ impl StaticSolver {
                 stats.timings.assembly += t.elapsed();
                 let t = Instant::now();
                 self.latest_stale = it > 0 && rel > STALE_RESIDUAL;
+                self.latest_spring_stiffness = self.problem.point_spring_stiffness();
+                self.latest_slow = false;
                 self.cholesky.factorize(Slot::Latest, &self.values)?;
                 stats.indefinite |= !self.cholesky.is_positive_definite(Slot::Latest);
                 stats.refactorized = true;
@@ -599,6 +638,13 @@ impl StaticSolver {
             u.copy_from_slice(&trial);
         }
         unreachable!("the loop returns at its last iteration")
+    }
+
+    /// Whether the point springs' total stiffness left the range of [`SPRING_SCALE_CHANGE`]
+    /// around the one the latest factor was made with.
+    fn spring_scale_changed(&self) -> bool {
+        let (now, then) = (self.problem.point_spring_stiffness(), self.latest_spring_stiffness);
+        now > SPRING_SCALE_CHANGE * then || then > SPRING_SCALE_CHANGE * now
     }
 
     /// Whether the rest-state factor was made with the current material and springs.
