@@ -5,17 +5,23 @@ use mesh::{Mesh, Point, TriSurface};
 
 use crate::{RegisterError, Result};
 
+/// Interpolation weights below this are rounding errors (see [`Stencil`]'s constructor).
+const NEGLIGIBLE_WEIGHT: f64 = 1e-12;
+
 /// Interpolation weights of a point in the mesh: (node, weight) pairs summing to 1.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Stencil(pub Vec<(usize, f64)>);
 
 impl Stencil {
-    /// The stencil of a location, its weights clipped to [0, 1] and renormalised
-    /// (a point on an element's face may get a weight of −1e−15).
+    /// The stencil of a location, its weights clipped to [0, 1], those below [`NEGLIGIBLE_WEIGHT`]
+    /// dropped, and renormalised: a point on an element's face may get weights of ±1e−15 from
+    /// the nodes off the face (on a T10 face, from the mid-edge nodes off it: kept, they had
+    /// doubled the nodes a surface match moves).
     fn of(location: &mesh::embedding::Location) -> Stencil {
-        let terms: Vec<(usize, f64)> = location.terms().map(|(n, w)| (n, w.clamp(0.0, 1.0))).collect();
+        let terms: Vec<(usize, f64)> =
+            location.terms().map(|(n, w)| (n, w.clamp(0.0, 1.0))).filter(|t| t.1 > NEGLIGIBLE_WEIGHT).collect();
         let sum: f64 = terms.iter().map(|t| t.1).sum();
-        Stencil(terms.into_iter().filter(|t| t.1 > 0.0).map(|(n, w)| (n, w / sum)).collect())
+        Stencil(terms.into_iter().map(|(n, w)| (n, w / sum)).collect())
     }
 
     /// The interpolated vector of a node-major field with 3 components per node.
