@@ -91,7 +91,7 @@ def test_registration_with_default_targets_in_metres(case):
 
 
 def test_registration_with_the_unet(case):
-    reg = augsim.Registration(model=LIVER_AR, scenario="liver_ar", targets=case["rest"], units="mm")
+    reg = augsim.Registration(model=LIVER_AR, scenario="liver_ar_t10", targets=case["rest"], units="mm")
     assert reg.method.startswith("U-Net")
     r = reg.register(case["cloud"])
     unregistered = np.linalg.norm(case["rest"] - case["truth"], axis=1).mean()
@@ -147,7 +147,7 @@ def test_predict_matches_the_command_line(tmp_path):
         "--runs", "1")
     np.testing.assert_allclose(u, np.load(tmp_path / "out.npy"), rtol=0, atol=1e-7)
     # A cloud [N, 6]: displacements (m) at points of the organ, put on the grid as the CLI does.
-    organ = augsim.Registration(model=LIVER_AR, scenario="liver_ar").points
+    organ = augsim.Registration(model=LIVER_AR, scenario="liver_ar_t10").points
     cloud = np.hstack([organ[::50], np.full((len(organ[::50]), 3), 2e-3)])
     np.save(tmp_path / "cloud.npy", cloud)
     run("predict", os.path.join(LIVER_AR, "model.json"), str(tmp_path / "cloud.npy"), "-o",

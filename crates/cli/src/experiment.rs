@@ -9,8 +9,8 @@ use experiment::{Name, Size};
 /// Arguments of `augsim experiment`.
 #[derive(Debug, Args)]
 pub struct ExperimentArgs {
-    /// fem-speed, fem-convergence, young, springs, liver-forces, liver-ar, beam-transfer, beam-sparse, stream, or
-    /// all.
+    /// fem-speed, fem-convergence, young, springs, liver-forces, liver-ar, beam-transfer, beam-sparse, stream,
+    /// held-out, or all.
     pub name: String,
     /// quick (minutes on 2 cores) or paper (the published data sizes).
     #[arg(long, default_value = "quick")]

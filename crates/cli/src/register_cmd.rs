@@ -33,7 +33,7 @@ pub struct RegisterArgs {
     model: Option<PathBuf>,
     /// The dataset scenario the model was trained on, for --model (its mesh is the organ, its
     /// observed nodes the network's input); with --demo or --case, default: the shipped
-    /// liver_ar.
+    /// liver_ar_t10.
     #[arg(long)]
     scenario: Option<PathBuf>,
     /// Targets at rest (CSV x,y,z, m); default: the mesh's `markers` and `tumour` regions.
@@ -285,7 +285,7 @@ fn write_targets(path: &Path, rest: &[Point], registered: &[Point]) -> Result<()
     Ok(write_atomic_bytes(path, text.as_bytes())?)
 }
 
-/// The shipped network for the built-in phantom (trained by the built-in `liver_ar` scenario).
+/// The shipped network for the built-in phantom (trained by the built-in `liver_ar_t10` scenario).
 const DEMO_MODEL: &str = "models/liver_ar/model.json";
 
 /// The comparison case of `--demo` (the built-in scenario) or `--case FILE`, with the command

@@ -21,7 +21,7 @@ pub struct ServeArgs {
     /// U-Net registration with this model (model.json); the organ comes from --scenario.
     #[arg(long, requires = "scenario")]
     model: Option<PathBuf>,
-    /// The dataset scenario the model was trained on (a file or a built-in name, e.g. liver_ar).
+    /// The dataset scenario the model was trained on (a file or a built-in name, e.g. liver_ar_t10).
     #[arg(long)]
     scenario: Option<PathBuf>,
     /// Targets at rest (CSV x,y,z, in --units); default: the mesh's `markers` and `tumour` regions.

@@ -163,8 +163,12 @@ pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
     fem_model(model_mesh()?, Material::new(Law::Corotational, 5000.0, 0.48))
 }
 
+/// The shipped augmented-reality network, relative to the directory an experiment runs from (the
+/// repository's).
+pub const SHIPPED_MODEL: &str = "models/liver_ar/model.json";
+
 /// The name of the built-in dataset scenario of the shipped AR network.
-pub const AR_SCENARIO: &str = "liver_ar";
+pub const AR_SCENARIO: &str = "liver_ar_t10";
 
 /// The built-in scenario [`AR_SCENARIO`], parsed.
 pub fn ar_scenario() -> DatasetScenario {
@@ -233,31 +237,34 @@ pub fn case_methods(scenario: &CaseScenario, network: Option<&Network>) -> Resul
     let mesh = mesh::phantom::liver_phantom(scenario.models.tets)?;
     let mut out = Vec::new();
     for spec in &scenario.models.method {
-        let (name, iterations) = (spec.name.clone(), spec.iterations);
+        let (name, iterations, warm_iterations) = (spec.name.clone(), spec.iterations, spec.warm_iterations);
         match (spec.kind, spec.material, network) {
             (MethodKind::Fem, Some(material), _) => {
                 let (organ, deformer) = fem_model_fixed_on(mesh.clone(), material, &scenario.truth.fixed)?;
-                out.push(Method { name, organ, deformer: Box::new(deformer), iterations });
+                out.push(Method { name, organ, deformer: Box::new(deformer), iterations, warm_iterations });
             }
             (MethodKind::Fem, None, _) => {
                 bail!("method {name:?}: a FEM method needs a material")
             }
             (MethodKind::Network, _, Some(network)) => {
                 let (organ, deformer) = network_model(network)?;
-                out.push(Method { name, organ, deformer: Box::new(deformer), iterations });
+                out.push(Method { name, organ, deformer: Box::new(deformer), iterations, warm_iterations });
             }
             (MethodKind::Hybrid, Some(material), Some(network)) => {
                 let (organ, deformer) = network_model(network)?;
                 let (fem_organ, fem) = fem_model_fixed_on(mesh.clone(), material, &scenario.truth.fixed)?;
                 if fem_organ.mesh().nodes != organ.mesh().nodes {
                     bail!(
-                        "method {name:?}: the network's organ is not the FEM model's mesh ({} T4)",
-                        scenario.models.tets
+                        "method {name:?}: the network's organ ({} nodes) is not the FEM model's mesh (the phantom of \
+                         {} T4, {} nodes): a hybrid needs a network trained on the model's own mesh",
+                        organ.mesh().num_nodes(),
+                        scenario.models.tets,
+                        fem_organ.mesh().num_nodes()
                     );
                 }
                 let network_iterations = spec.network_iterations.unwrap_or(1);
                 let deformer = HybridDeformer::new(deformer, fem, network_iterations)?;
-                out.push(Method { name, organ, deformer: Box::new(deformer), iterations });
+                out.push(Method { name, organ, deformer: Box::new(deformer), iterations, warm_iterations });
             }
             (MethodKind::Hybrid, None, _) => bail!("method {name:?}: a hybrid method needs a material"),
             (MethodKind::Network | MethodKind::Hybrid, _, None) => {}
@@ -276,6 +283,8 @@ pub struct Method {
     pub deformer: Box<dyn Deformer>,
     /// Most match-and-deform iterations, in place of the comparison's (`None`: the comparison's).
     pub iterations: Option<usize>,
+    /// Most iterations of a warm-started frame, in place of the comparison's (`None`: the comparison's).
+    pub warm_iterations: Option<usize>,
 }
 
 /// One method's registration of a comparison case.
@@ -311,8 +320,11 @@ pub fn compare(case: &SyntheticCase, methods: Vec<Method>, options: &Registratio
     methods
         .into_iter()
         .map(|mut m| {
-            let options =
-                RegistrationOptions { iterations: m.iterations.unwrap_or(options.iterations), ..options.clone() };
+            let options = RegistrationOptions {
+                iterations: m.iterations.unwrap_or(options.iterations),
+                warm_iterations: m.warm_iterations.unwrap_or(options.warm_iterations),
+                ..options.clone()
+            };
             let frames = case.frames.iter().map(|f| Ok(f.cloud.clone()));
             let result = register_sequence(
                 &m.organ,

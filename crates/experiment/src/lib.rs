@@ -31,6 +31,7 @@ pub mod case;
 pub mod curve;
 mod fem_convergence;
 mod fem_speed;
+mod held_out;
 mod identification;
 mod learning;
 pub mod picture;
@@ -76,11 +77,13 @@ pub enum Name {
     BeamSparse,
     /// Registration on a stream over OpenIGTLink: latency, frame rate and TRE per frame.
     Stream,
+    /// Registration on held-out cases: network, hybrid and FEM, TRE and time per frame.
+    HeldOut,
 }
 
 impl Name {
     /// Every experiment, in the order `all` runs them.
-    pub const ALL: [Name; 9] = [
+    pub const ALL: [Name; 10] = [
         Name::FemSpeed,
         Name::FemConvergence,
         Name::Young,
@@ -90,6 +93,7 @@ impl Name {
         Name::BeamTransfer,
         Name::BeamSparse,
         Name::Stream,
+        Name::HeldOut,
     ];
 
     /// The command-line and directory name.
@@ -104,6 +108,7 @@ impl Name {
             Name::BeamTransfer => "beam-transfer",
             Name::BeamSparse => "beam-sparse",
             Name::Stream => "stream",
+            Name::HeldOut => "held-out",
         }
     }
 
@@ -119,6 +124,7 @@ impl Name {
             Name::BeamTransfer => "U-Net: beam, transfer learning to a hidden boundary condition",
             Name::BeamSparse => "U-Net: beam, sparse visible displacement",
             Name::Stream => "Live registration over OpenIGTLink (press and release)",
+            Name::HeldOut => "Registration on held-out cases",
         }
     }
 
@@ -274,6 +280,7 @@ pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<Ex
         Name::BeamTransfer => transfer::beam_transfer(size, &dir, progress)?,
         Name::BeamSparse => learning::beam_sparse(size, &dir, progress)?,
         Name::Stream => stream::run(size, &dir, progress)?,
+        Name::HeldOut => held_out::run(size, &dir, progress)?,
     };
     result.seconds = start.elapsed().as_secs_f64();
     let json = serde_json::to_string_pretty(&result)?;

@@ -10,17 +10,12 @@ use anyhow::{Context, Result};
 use learn::{Compute, Corruption};
 use mesh::phantom::SurfacePatch;
 use mesh::stats::{max, mean};
-use scenario::registration::{MethodKind, MethodSpec};
 use scenario::CaseScenario;
 
 use crate::learning::{dataset, error_histogram, model_dir, train, Recipe};
 use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 
 use crate::case::AR_SCENARIO as LIVER_AR;
-
-/// Iterations of the hybrid method's network, then of its FEM (see [`liver_ar`]).
-const HYBRID_NETWORK_ITERATIONS: usize = 4;
-const HYBRID_FEM_ITERATIONS: usize = 2;
 
 /// A registration case: the shipped case's truth with another load.
 struct Variant {
@@ -80,8 +75,6 @@ struct MethodTre {
 /// The published figure of a method (text, and its mean TRE in mm where one was published).
 fn published(method: &str) -> (&'static str, Option<f64>) {
     match method {
-        // The hybrid (network, then FEM): no published counterpart.
-        m if m.contains('+') => ("", None),
         m if m.starts_with("U-Net") => ("2.92 mm (max 5.3 mm), a few ms", Some(2.92)),
         m if m.contains("co-rotational") => ("3.79 mm, ~25 ms", Some(3.79)),
         m if m.contains("SVK") => ("≈ the U-Net's, 1,550 ms", None),
@@ -89,11 +82,11 @@ fn published(method: &str) -> (&'static str, Option<f64>) {
     }
 }
 
-/// Quick: 400 samples, 1,500 steps; paper: the shipped network's recipe (2,000 samples, 4,000 steps).
+/// Quick: 400 samples, 1,500 steps; paper: the shipped network's recipe (2,000 samples, 48,000 steps).
 pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let (samples, iterations) = match size {
         Size::Quick => (400, 1500),
-        Size::Paper => (2000, 4000),
+        Size::Paper => (2000, 48000),
     };
     let data = dataset(dir, LIVER_AR, samples, progress)?;
     let recipe = Recipe {
@@ -113,25 +106,15 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         &[("U-Net", &report)],
     )?;
     // The first test sample in the 3D viewer.
-    let organ = data.scenario.mesh(&data.scenario_dir)?;
+    // The mesh its samples were solved on (quadratic for a T10 scenario).
+    let organ = data.scenario.generator(&data.scenario_dir)?.mesh().clone();
     let index = t.test.indices.first().copied().context("no test sample")?;
     let sample = sample_on_mesh(&t.model, &data.dataset, index, &organ)?;
     let title = format!("liver_ar, test sample {index}: U-Net prediction vs FEM reference");
     plot::viewer::write_html(&dir.join("viewer.html"), &sample.scene(&organ, &title))?;
 
-    // The shipped comparison case (its camera, truth and registration settings) under each load.
-    // The shipped case's methods, and the network followed by the co-rotational FEM from its
-    // estimate, configured on the design case only (of 2+2, 3+2, 4+2 and 3+3 iterations,
-    // 4+2 registered it best).
-    let mut builtin = CaseScenario::builtin();
-    let corotational = builtin.models.method.iter().find(|m| m.kind == MethodKind::Fem).map(|m| m.material);
-    builtin.models.method.push(MethodSpec {
-        name: format!("U-Net {HYBRID_NETWORK_ITERATIONS} + FEM co-rotational {HYBRID_FEM_ITERATIONS}"),
-        kind: MethodKind::Hybrid,
-        material: corotational.context("the shipped case has no FEM method")?,
-        iterations: Some(HYBRID_NETWORK_ITERATIONS + HYBRID_FEM_ITERATIONS),
-        network_iterations: Some(HYBRID_NETWORK_ITERATIONS),
-    });
+    // The shipped comparison case (its camera, truth, registration settings and methods) under each load.
+    let builtin = CaseScenario::builtin();
     let options = builtin.registration.clone();
     let mut per_method: Vec<MethodTre> = Vec::new();
     let (mut no_motion, mut marker_count, mut case_rows) = (Vec::new(), 0, Vec::new());
@@ -281,7 +264,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         page_figures: Vec::new(),
         notes: vec![
             format!(
-                "Network: {samples} samples of the liver_ar scenario ({train_n} training, {validation_n} validation, {test_n} test), \
+                "Network: {samples} samples of the {LIVER_AR} scenario ({train_n} training, {validation_n} validation, {test_n} test), \
                  {iterations} steps, {} channels, {} mm training noise; {}.",
                 recipe.channels,
                 1e3 * recipe.corruption.noise_std,
@@ -300,12 +283,6 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
                 fmt(builtin.camera.noise * 1e3, 1, "mm"),
                 100.0 * builtin.camera.outliers,
                 HELD_OUT.len()
-            ),
-            format!(
-                "'U-Net {HYBRID_NETWORK_ITERATIONS} + FEM co-rotational {HYBRID_FEM_ITERATIONS}': the network's \
-                 estimate after {HYBRID_NETWORK_ITERATIONS} iterations, then {HYBRID_FEM_ITERATIONS} iterations of the \
-                 co-rotational FEM from it with its data springs at full stiffness; the split was chosen on the design \
-                 case only."
             ),
         ],
         values,

@@ -17,10 +17,11 @@ use live::{ClientRegistration, Outputs, ServeOptions};
 use mesh::phantom::SurfacePatch;
 use mesh::stats::{max, mean, median, percentile};
 use register::{Deformer, Organ, RegistrationOptions};
+use scenario::registration::MethodKind;
 use scenario::CaseScenario;
 use serde::Serialize;
 
-use crate::case::{ar_network_model, corotational_model, synthetic_case, SyntheticCase};
+use crate::case::{ar_network_model, corotational_model, synthetic_case, SyntheticCase, SHIPPED_MODEL};
 use crate::{ExperimentResult, Name, Progress, Row, Size};
 
 /// Frames of the press and release.
@@ -28,12 +29,6 @@ const FRAMES: usize = 40;
 
 /// Points of each cloud (before the camera's outliers).
 const POINTS: usize = 3000;
-
-/// The shipped network, relative to the directory the experiment runs from (the repository's).
-const SHIPPED_MODEL: &str = "models/liver_ar/model.json";
-
-/// Most iterations of the network's frames (its real-time budget, as in the registration case).
-const NETWORK_ITERATIONS: usize = 6;
 
 /// One method's stream.
 #[derive(Clone, Debug, Serialize)]
@@ -154,7 +149,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     if network_found {
         progress("streaming to the shipped network");
         let model = Arc::new(learn::TrainedModel::load(model_path, &learn::inference_device())?);
-        let network_options = RegistrationOptions { iterations: NETWORK_ITERATIONS, ..options.clone() };
+        let network_options = network_options(&scenario)?;
         let make = move || ar_network_model(&model);
         streams.push(stream_case("U-Net (models/liver_ar)", &case, &network_options, make)?);
     }
@@ -206,9 +201,12 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         format!(
             "Server in this process, client over TCP on this machine (OpenIGTLink POLYDATA in mm; answers: POINT \
              targets and STRING status). Each cloud is sent when the previous one is answered. A frame warm-started \
-             from the previous one runs at most {} iterations (the first frame, from rest, up to {} for the FEM and {} \
-             for the network).",
-            options.warm_iterations, options.iterations, NETWORK_ITERATIONS
+             from the previous one runs at most {} iterations for the FEM and {} for the network (the first frame, \
+             from rest, up to {} and {}: the registration case's budgets).",
+            options.warm_iterations,
+            network_options(&scenario)?.warm_iterations,
+            options.iterations,
+            network_options(&scenario)?.iterations,
         ),
         "Timings: one run on this machine; the figures are only as quiet as the machine was.".to_string(),
     ];
@@ -225,6 +223,22 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         page_figures: vec![figure.into()],
         notes,
         values,
+    })
+}
+
+/// The registration settings of `scenario`'s network method (its iteration budgets).
+fn network_options(scenario: &CaseScenario) -> Result<RegistrationOptions> {
+    let spec = scenario
+        .models
+        .method
+        .iter()
+        .find(|m| m.kind == MethodKind::Network)
+        .context("the registration case has no network method")?;
+    let options = &scenario.registration;
+    Ok(RegistrationOptions {
+        iterations: spec.iterations.unwrap_or(options.iterations),
+        warm_iterations: spec.warm_iterations.unwrap_or(options.warm_iterations),
+        ..options.clone()
     })
 }
 

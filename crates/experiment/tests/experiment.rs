@@ -43,7 +43,8 @@ fn names_parse_and_unknown_ones_are_refused() {
             "liver-ar",
             "beam-transfer",
             "beam-sparse",
-            "stream"
+            "stream",
+            "held-out"
         ]
     );
     for name in Name::ALL {

@@ -54,7 +54,13 @@ fn network_tre(camera: &CameraModel) -> (f64, f64) {
     let (organ, deformer) = ar_network_model(&model).unwrap();
     let rows = compare(
         &case,
-        vec![Method { name: "U-Net".into(), organ, deformer: Box::new(deformer), iterations: None }],
+        vec![Method {
+            name: "U-Net".into(),
+            organ,
+            deformer: Box::new(deformer),
+            iterations: None,
+            warm_iterations: None,
+        }],
         &RegistrationOptions::default(),
     );
     let errors = rows[0].result.as_ref().unwrap().outcomes[0].errors.clone().unwrap();
@@ -132,7 +138,10 @@ fn a_failing_method_is_reported_and_the_others_still_register() {
     let mut methods = experiment::case::case_methods(&scenario, None).unwrap();
     methods.truncate(1);
     let organ = methods[0].organ.clone();
-    methods.insert(0, Method { name: "failing".into(), organ, deformer: Box::new(Failing), iterations: None });
+    methods.insert(
+        0,
+        Method { name: "failing".into(), organ, deformer: Box::new(Failing), iterations: None, warm_iterations: None },
+    );
     let rows = compare(&case, methods, &scenario.registration);
     assert_eq!(rows.len(), 2);
     let e = rows[0].result.as_ref().err().expect("the failing method fails").to_string();
@@ -147,7 +156,9 @@ fn a_failing_method_is_reported_and_the_others_still_register() {
 fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     use scenario::registration::{MethodKind, MethodSpec};
     let model = learn::TrainedModel::load(std::path::Path::new(MODEL), &learn::inference_device()).unwrap();
-    let network_scenario = experiment::case::ar_scenario();
+    // A hybrid needs the network on the FEM model's mesh: the 3k-T4 phantom of `liver_ar` (the
+    // shipped network's grid covers it too).
+    let network_scenario = scenario::DatasetScenario::builtin("liver_ar");
     let network =
         experiment::case::Network { model: &model, scenario: &network_scenario, dir: std::path::Path::new("") };
     let mut scenario = scenario::CaseScenario::builtin();
@@ -157,6 +168,7 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
         kind: MethodKind::Hybrid,
         material,
         iterations: Some(iterations),
+        warm_iterations: None,
         network_iterations: Some(network_iterations),
     };
     scenario.models.method.retain(|m| m.kind == MethodKind::Network);
@@ -168,8 +180,11 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     let u = |k: usize| rows[k].result.as_ref().unwrap().outcomes[0].registration.u.clone();
     assert_eq!(u(0), u(1), "all network iterations: the network's registration");
     assert_ne!(u(1), u(2), "the FEM takes over after 4");
+    // The network sees the T4 phantom's visible nodes only (it was trained on the quadratic
+    // mesh's, mid-edge nodes included): the FEM after it does better than it alone.
+    let tre = |k: usize| rows[k].result.as_ref().unwrap().summary.tre_mean_mm.unwrap();
     let s = &rows[2].result.as_ref().unwrap().summary;
-    assert!(s.tre_mean_mm.unwrap() < 0.2 * s.no_deformation_tre_mean_mm.unwrap(), "{s:?}");
+    assert!(tre(2) < 0.7 * s.no_deformation_tre_mean_mm.unwrap() && tre(2) < tre(1), "{s:?}, network {}", tre(1));
     // Hybrid scenarios are checked: network iterations are needed, and only hybrids take them.
     let mut bad = scenario.clone();
     bad.models.method[1].network_iterations = None;
@@ -248,7 +263,7 @@ fn clouds_that_cannot_be_the_organ_are_refused_or_flagged() {
 #[test]
 fn the_network_of_a_t10_scenario_deforms_the_quadratic_mesh() {
     let model = learn::TrainedModel::load(std::path::Path::new(MODEL), &learn::inference_device()).unwrap();
-    let mut scenario = experiment::case::ar_scenario();
+    let mut scenario = scenario::DatasetScenario::builtin("liver_ar");
     let network = |scenario: &scenario::DatasetScenario| {
         let n = experiment::case::Network { model: &model, scenario, dir: std::path::Path::new("") };
         experiment::case::network_model(&n).unwrap().0

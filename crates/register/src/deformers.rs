@@ -419,8 +419,8 @@ mod tests {
     fn the_surface_fit_keeps_the_depth_of_a_dent() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
         let model = TrainedModel::load(std::path::Path::new(path), &learn::inference_device()).unwrap();
-        // The network's training organ (the `liver_ar` dataset scenario): the 3k-T4 phantom, the
-        // normal displacement of its visible nodes as input.
+        // The 3k-T4 phantom of the `liver_ar` dataset scenario, the normal displacement of its
+        // visible nodes as input (the fit under test comes before the network).
         let phantom = mesh::phantom::liver_phantom(3000).unwrap();
         let visible = phantom.region("visible").unwrap().to_vec();
         let organ = Organ::new(phantom, None).unwrap();

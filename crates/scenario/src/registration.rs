@@ -193,6 +193,10 @@ pub struct MethodSpec {
     /// iterations`: e.g. the U-Net's real-time budget.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub iterations: Option<usize>,
+    /// Most iterations of a frame warm-started from the previous one, in place of
+    /// `[registration] warm_iterations`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub warm_iterations: Option<usize>,
     /// The network's iterations before the finite-element ones (`kind = "hybrid"` only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub network_iterations: Option<usize>,
@@ -304,8 +308,8 @@ impl CaseScenario {
                 }
                 _ => {}
             }
-            if method.iterations == Some(0) {
-                return bad(format!("method {name:?}: iterations must be at least 1"));
+            if method.iterations == Some(0) || method.warm_iterations == Some(0) {
+                return bad(format!("method {name:?}: iterations and warm_iterations must be at least 1"));
             }
             let slug = slug(name);
             if slug.is_empty() {

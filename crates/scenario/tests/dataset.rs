@@ -22,12 +22,12 @@ fn the_grid_ar_scenario_presses_the_immersed_phantom_by_centimetres() {
     }
 }
 
-/// A dataset regenerated from the built-in `liver_ar` scenario has the source identity recorded in the
+/// A dataset regenerated from the built-in `liver_ar_t10` scenario has the source identity recorded in the
 /// shipped network's split, so that `eval` finds its test samples and refuses its training ones
 /// (options added to the generator since must not change the manifest of a scenario without them).
 #[test]
-fn a_regenerated_liver_ar_dataset_is_the_shipped_networks_own() {
-    let (mut scenario, dir) = DatasetScenario::load(Path::new("liver_ar")).unwrap();
+fn a_regenerated_liver_ar_t10_dataset_is_the_shipped_networks_own() {
+    let (mut scenario, dir) = DatasetScenario::load(Path::new("liver_ar_t10")).unwrap();
     scenario.dataset.samples = 1;
     let tmp = tempfile::tempdir().unwrap();
     scenario.generator(&dir).unwrap().run(tmp.path(), &scenario.name, None, &|_, _| {}).unwrap();
