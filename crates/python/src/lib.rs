@@ -178,8 +178,9 @@ struct Registered {
 /// it was trained on (e.g. `liver_ar_t10` for the shipped `models/liver_ar`). `targets`: rest
 /// positions, a CSV file (x, y, z) or an array [k, 3], in `units`; default: the mesh's `markers`
 /// and `tumour` nodes. `units`: "m" or "mm", of the targets, every cloud and every result.
-/// `iterations`: most match-and-deform iterations per cloud (default: the library's). `rigid`: align the first cloud rigidly to the
-/// organ (trimmed ICP) and keep that pose; results are then in the cloud's frame.
+/// `iterations`: most match-and-deform iterations per cloud (default: the library's). `rigid`:
+/// align the first cloud rigidly to the organ (trimmed ICP) and keep that pose; results are then
+/// in the cloud's frame.
 #[pyclass(module = "augsim")]
 struct Registration {
     state: Mutex<WarmRegistration>,
