@@ -43,8 +43,9 @@ pub struct RegisterArgs {
     /// TRE is reported.
     #[arg(long)]
     truth: Option<PathBuf>,
-    /// Most match-and-deform iterations per frame (default: the library's, or the case's and its
-    /// methods'; given, it holds for every method of a case).
+    /// Most match-and-deform iterations per frame from rest (default: the library's for --fem, the
+    /// built-in case's real-time budget for --model, or the case's and its methods'; given, it holds
+    /// for every method of a case).
     #[arg(long)]
     iterations: Option<usize>,
     /// Rigid pre-alignment: trimmed point-to-plane ICP of the cloud to the organ's rest surface
@@ -115,7 +116,7 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
     } else {
         bail!("give --fem SCENARIO or --model MODEL --scenario SCENARIO (or --demo)");
     };
-    let RegistrationSetup { organ, mut deformer, method, default_targets } = setup;
+    let RegistrationSetup { organ, mut deformer, method, default_targets, options: defaults } = setup;
     let targets = match &args.targets {
         Some(p) => read_targets(p)?,
         None => default_targets,
@@ -134,7 +135,6 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
             Some(files.iter().map(|f| read_targets(f)).collect::<Result<Vec<_>, _>>()?)
         }
     };
-    let defaults = RegistrationOptions::default();
     let options = RegistrationOptions {
         iterations: args.iterations.unwrap_or(defaults.iterations),
         rigid: args.rigid.then(RigidOptions::default),

@@ -40,7 +40,8 @@ pub struct ServeArgs {
     /// (TRANSFORM `rigid`, with --rigid), status (STRING).
     #[arg(long, default_value = "targets,organ,transform,status")]
     outputs: String,
-    /// Most match-and-deform iterations per frame (default: the library's).
+    /// Most match-and-deform iterations of a client's first frame (default: the library's for --fem,
+    /// the `iterations` and `warm_iterations` of the built-in registration case's network for --model).
     #[arg(long)]
     iterations: Option<usize>,
     /// Rigid pre-alignment: each client's first cloud is aligned to the organ's rest surface
@@ -109,7 +110,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     if targets.is_empty() {
         bail!("no targets: give --targets, or a mesh with `markers` or `tumour` regions");
     }
-    let mut options = RegistrationOptions { rigid: args.rigid.then(RigidOptions::default), ..Default::default() };
+    let mut options = RegistrationOptions { rigid: args.rigid.then(RigidOptions::default), ..first.options.clone() };
     if let Some(n) = args.iterations {
         options.iterations = n;
     }

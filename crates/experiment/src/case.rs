@@ -13,7 +13,7 @@ use mesh::{Mesh, Point};
 use learn::data::generate::Input;
 use learn::TrainedModel;
 
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use register::{
     register_sequence, Deformer, FemDeformer, FrameOutcome, HybridDeformer, NetworkDeformer, Organ,
     RegistrationOptions, RigidTransform, Summary,
@@ -271,6 +271,22 @@ pub fn case_methods(scenario: &CaseScenario, network: Option<&Network>) -> Resul
         }
     }
     Ok(out)
+}
+
+/// The registration settings of `scenario`'s network method (its iteration budgets).
+pub fn network_options(scenario: &CaseScenario) -> Result<RegistrationOptions> {
+    let spec = scenario
+        .models
+        .method
+        .iter()
+        .find(|m| m.kind == MethodKind::Network)
+        .context("the registration case has no network method")?;
+    let options = &scenario.registration;
+    Ok(RegistrationOptions {
+        iterations: spec.iterations.unwrap_or(options.iterations),
+        warm_iterations: spec.warm_iterations.unwrap_or(options.warm_iterations),
+        ..options.clone()
+    })
 }
 
 /// A registration method of a comparison.

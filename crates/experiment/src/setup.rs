@@ -6,12 +6,12 @@ use std::path::Path;
 
 use anyhow::Result;
 use mesh::Point;
-use register::{Deformer, FemDeformer, Organ};
-use scenario::{DatasetScenario, StaticScenario};
+use register::{Deformer, FemDeformer, Organ, RegistrationOptions};
+use scenario::{CaseScenario, DatasetScenario, StaticScenario};
 
-use crate::case::{network_model, organ_of, Network};
+use crate::case::{network_model, network_options, organ_of, Network};
 
-/// The organ, what deforms it, the method's name and the default targets.
+/// The organ, what deforms it, the method's name, the default targets and registration settings.
 pub struct RegistrationSetup {
     /// The organ (its mesh and surface, in m).
     pub organ: Organ,
@@ -21,6 +21,9 @@ pub struct RegistrationSetup {
     pub method: String,
     /// The rest positions of the mesh's `markers` and `tumour` nodes (empty without such regions).
     pub default_targets: Vec<Point>,
+    /// The registration settings that suit the method: the library's for a FEM; for a network,
+    /// the real-time iteration budgets of the built-in registration case's network method.
+    pub options: RegistrationOptions,
 }
 
 /// FEM registration on the static scenario at `path` (a file or a built-in name): its mesh,
@@ -33,7 +36,7 @@ pub fn fem_setup(path: &Path) -> Result<RegistrationSetup> {
     let method = format!("FEM, {:?} ({:?} elements)", problem.material.law, problem.material.resolved_formulation());
     let stiffness = FemDeformer::default_stiffness(&problem);
     let deformer = Box::new(FemDeformer::new(problem, stiffness, scenario.solver.clone())?);
-    Ok(RegistrationSetup { organ, deformer, method, default_targets })
+    Ok(RegistrationSetup { organ, deformer, method, default_targets, options: RegistrationOptions::default() })
 }
 
 /// U-Net registration with the model at `model_path` (model.json) trained on the dataset
@@ -48,6 +51,7 @@ pub fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<Registra
         deformer: Box::new(deformer),
         method: format!("U-Net {}", model_path.display()),
         default_targets,
+        options: network_options(&CaseScenario::builtin())?,
     })
 }
 

@@ -17,11 +17,12 @@ use live::{ClientRegistration, Outputs, ServeOptions};
 use mesh::phantom::SurfacePatch;
 use mesh::stats::{max, mean, median, percentile};
 use register::{Deformer, Organ, RegistrationOptions};
-use scenario::registration::MethodKind;
 use scenario::CaseScenario;
 use serde::Serialize;
 
-use crate::case::{ar_network_model, corotational_model, synthetic_case, SyntheticCase, SHIPPED_MODEL};
+use crate::case::{
+    ar_network_model, corotational_model, network_options, synthetic_case, SyntheticCase, SHIPPED_MODEL,
+};
 use crate::{ExperimentResult, Name, Progress, Row, Size};
 
 /// Frames of the press and release.
@@ -223,22 +224,6 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         page_figures: vec![figure.into()],
         notes,
         values,
-    })
-}
-
-/// The registration settings of `scenario`'s network method (its iteration budgets).
-fn network_options(scenario: &CaseScenario) -> Result<RegistrationOptions> {
-    let spec = scenario
-        .models
-        .method
-        .iter()
-        .find(|m| m.kind == MethodKind::Network)
-        .context("the registration case has no network method")?;
-    let options = &scenario.registration;
-    Ok(RegistrationOptions {
-        iterations: spec.iterations.unwrap_or(options.iterations),
-        warm_iterations: spec.warm_iterations.unwrap_or(options.warm_iterations),
-        ..options.clone()
     })
 }
 

@@ -178,7 +178,8 @@ struct Registered {
 /// it was trained on (e.g. `liver_ar_t10` for the shipped `models/liver_ar`). `targets`: rest
 /// positions, a CSV file (x, y, z) or an array [k, 3], in `units`; default: the mesh's `markers`
 /// and `tumour` nodes. `units`: "m" or "mm", of the targets, every cloud and every result.
-/// `iterations`: most match-and-deform iterations per cloud (default: the library's). `rigid`:
+/// `iterations`: most match-and-deform iterations per cloud (default: the library's for a FEM,
+/// the built-in registration case's real-time budget for a U-Net). `rigid`:
 /// align the first cloud rigidly to the organ (trimmed ICP) and keep that pose; results are then
 /// in the cloud's frame.
 #[pyclass(module = "augsim")]
@@ -221,17 +222,17 @@ impl Registration {
             (None, Some(model), Some(scenario)) => Err((model, scenario)),
             _ => return Err(PyValueError::new_err("give fem=SCENARIO, or model=MODEL with scenario=SCENARIO")),
         };
-        let mut options =
-            RegistrationOptions { rigid: rigid.then(register::RigidOptions::default), ..Default::default() };
-        if let Some(n) = iterations {
-            options.iterations = n;
-        }
         let (state, method) = compute(py, move || {
-            options.validate()?;
             let setup = match method {
                 Ok(fem) => fem_setup(&fem)?,
                 Err((model, scenario)) => network_setup(&TrainedModel::json_path(&model), &scenario)?,
             };
+            let mut options =
+                RegistrationOptions { rigid: rigid.then(register::RigidOptions::default), ..setup.options.clone() };
+            if let Some(n) = iterations {
+                options.iterations = n;
+            }
+            options.validate()?;
             let targets = match given {
                 None => setup.default_targets,
                 Some(Ok(path)) => {
