@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
-use mesh::phantom::PhantomSpec;
+use mesh::phantom::{PhantomSpec, SurfacePatch};
 use mesh::{Mesh, Point};
 
 use learn::data::generate::Input;
@@ -163,6 +163,40 @@ pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
     fem_model(model_mesh()?, Material::new(Law::Corotational, 5000.0, 0.48))
 }
 
+/// A load of a registration case's truth and the camera's seed: the built-in case under another
+/// load, seen anew.
+pub(crate) struct CaseLoad {
+    /// Short description for the tables.
+    pub label: &'static str,
+    /// Tool force (N) and its direction.
+    pub force: f64,
+    pub direction: [f64; 3],
+    /// Where the tool pushes (`None`: the case's own patch, on the left lobe).
+    pub patch: Option<SurfacePatch>,
+    /// The camera's seed.
+    pub seed: u64,
+}
+
+impl CaseLoad {
+    /// `base` under this load, seen with this seed.
+    pub fn apply(&self, base: &CaseScenario) -> CaseScenario {
+        let mut scenario = base.clone();
+        scenario.truth.force = self.force;
+        scenario.truth.direction = self.direction;
+        scenario.truth.patch = self.patch.or(scenario.truth.patch);
+        scenario.camera.seed = self.seed;
+        scenario
+    }
+}
+
+/// A 2 cm patch on top of the right lobe.
+pub(crate) const RIGHT_LOBE: SurfacePatch =
+    SurfacePatch { from: [0.06, 0.02, 0.0], direction: [0.0, 0.0, 1.0], radius: 0.02 };
+
+/// A 2 cm patch on the front of the left lobe.
+pub(crate) const LEFT_LOBE_FRONT: SurfacePatch =
+    SurfacePatch { from: [-0.04, -0.025, 0.0], direction: [0.0, 0.0, 1.0], radius: 0.02 };
+
 /// The shipped augmented-reality network, relative to the directory an experiment runs from (the
 /// repository's).
 pub const SHIPPED_MODEL: &str = "models/liver_ar/model.json";
@@ -281,12 +315,16 @@ pub fn network_options(scenario: &CaseScenario) -> Result<RegistrationOptions> {
         .iter()
         .find(|m| m.kind == MethodKind::Network)
         .context("the registration case has no network method")?;
-    let options = &scenario.registration;
-    Ok(RegistrationOptions {
-        iterations: spec.iterations.unwrap_or(options.iterations),
-        warm_iterations: spec.warm_iterations.unwrap_or(options.warm_iterations),
+    Ok(with_budgets(&scenario.registration, spec.iterations, spec.warm_iterations))
+}
+
+/// `options` with a method's own iteration budgets, where it has them.
+fn with_budgets(options: &RegistrationOptions, iterations: Option<usize>, warm: Option<usize>) -> RegistrationOptions {
+    RegistrationOptions {
+        iterations: iterations.unwrap_or(options.iterations),
+        warm_iterations: warm.unwrap_or(options.warm_iterations),
         ..options.clone()
-    })
+    }
 }
 
 /// A registration method of a comparison.
@@ -336,11 +374,7 @@ pub fn compare(case: &SyntheticCase, methods: Vec<Method>, options: &Registratio
     methods
         .into_iter()
         .map(|mut m| {
-            let options = RegistrationOptions {
-                iterations: m.iterations.unwrap_or(options.iterations),
-                warm_iterations: m.warm_iterations.unwrap_or(options.warm_iterations),
-                ..options.clone()
-            };
+            let options = with_budgets(options, m.iterations, m.warm_iterations);
             let frames = case.frames.iter().map(|f| Ok(f.cloud.clone()));
             let result = register_sequence(
                 &m.organ,

@@ -6,61 +6,59 @@
 //! median of several runs, correspondence search included).
 
 use std::path::Path;
-use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use fem::{Formulation, Law, Material};
 use learn::TrainedModel;
-use mesh::phantom::SurfacePatch;
 use mesh::stats::{max, mean, median};
 use scenario::registration::MethodKind;
 use scenario::CaseScenario;
 use serde::Serialize;
 
-use crate::case::{ar_scenario, case_methods, compare, synthetic_case, Network, SHIPPED_MODEL};
+use crate::case::{
+    ar_scenario, case_methods, compare, synthetic_case, CaseLoad, Network, LEFT_LOBE_FRONT, RIGHT_LOBE, SHIPPED_MODEL,
+};
 use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 
-/// A held-out case: the truth's load and the camera's seed.
-struct Case {
-    label: &'static str,
-    /// Tool force (N) and its direction.
-    force: f64,
-    direction: [f64; 3],
-    /// Where the tool pushes (`None`: the built-in case's patch on the left lobe).
-    patch: Option<SurfacePatch>,
-    seed: u64,
-}
-
-const RIGHT_LOBE: SurfacePatch = SurfacePatch { from: [0.06, 0.02, 0.0], direction: [0.0, 0.0, 1.0], radius: 0.02 };
-const LEFT_FRONT: SurfacePatch = SurfacePatch { from: [-0.04, -0.025, 0.0], direction: [0.0, 0.0, 1.0], radius: 0.02 };
-
 /// The cases, fixed before any method was run on them.
-const CASES: [Case; 7] = [
-    Case { label: "press, left lobe, 2 N", force: 2.0, direction: [0.0, 0.0, -1.0], patch: None, seed: 21 },
-    Case {
+const CASES: [CaseLoad; 7] = [
+    CaseLoad { label: "press, left lobe, 2 N", force: 2.0, direction: [0.0, 0.0, -1.0], patch: None, seed: 21 },
+    CaseLoad {
         label: "press, right lobe, 2.5 N",
         force: 2.5,
         direction: [0.0, 0.0, -1.0],
         patch: Some(RIGHT_LOBE),
         seed: 22,
     },
-    Case { label: "lift, left lobe, 1.5 N", force: 1.5, direction: [0.0, 0.0, 1.0], patch: None, seed: 23 },
-    Case { label: "drag along x, left lobe, 1.5 N", force: 1.5, direction: [1.0, 0.0, -0.3], patch: None, seed: 24 },
-    Case {
+    CaseLoad { label: "lift, left lobe, 1.5 N", force: 1.5, direction: [0.0, 0.0, 1.0], patch: None, seed: 23 },
+    CaseLoad {
+        label: "drag along x, left lobe, 1.5 N",
+        force: 1.5,
+        direction: [1.0, 0.0, -0.3],
+        patch: None,
+        seed: 24,
+    },
+    CaseLoad {
         label: "drag along y, right lobe, 1.5 N",
         force: 1.5,
         direction: [0.0, 1.0, -0.2],
         patch: Some(RIGHT_LOBE),
         seed: 25,
     },
-    Case {
+    CaseLoad {
         label: "press, front of the left lobe, 1.5 N",
         force: 1.5,
         direction: [0.0, 0.0, -1.0],
-        patch: Some(LEFT_FRONT),
+        patch: Some(LEFT_LOBE_FRONT),
         seed: 26,
     },
-    Case { label: "oblique pull, left lobe, 1.5 N", force: 1.5, direction: [-0.5, 0.0, 1.0], patch: None, seed: 27 },
+    CaseLoad {
+        label: "oblique pull, left lobe, 1.5 N",
+        force: 1.5,
+        direction: [-0.5, 0.0, 1.0],
+        patch: None,
+        seed: 27,
+    },
 ];
 
 /// Points of each cloud (before the camera's outliers).
@@ -76,6 +74,13 @@ struct Outcome {
     times_ms: Vec<f64>,
     /// Why it failed.
     error: Option<String>,
+}
+
+impl Outcome {
+    /// The median time of a frame over the runs (ms).
+    fn time_ms(&self) -> f64 {
+        median(&mut self.times_ms.clone())
+    }
 }
 
 /// The truth of the held-out cases: the built-in case's, on about 5,000 T10 of Neo-Hookean tissue
@@ -108,7 +113,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
     let base = base_case()?;
     let model_path = Path::new(SHIPPED_MODEL);
     let model = match model_path.exists() {
-        true => Some(Arc::new(TrainedModel::load(model_path, &learn::inference_device())?)),
+        true => Some(TrainedModel::load(model_path, &learn::inference_device())?),
         false => None,
     };
     let network_scenario = ar_scenario();
@@ -125,11 +130,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
     let mut rows = Vec::new();
     for case in &CASES {
         progress(&format!("simulating the case {}", case.label));
-        let mut scenario = base.clone();
-        scenario.truth.force = case.force;
-        scenario.truth.direction = case.direction;
-        scenario.truth.patch = case.patch.or(scenario.truth.patch);
-        scenario.camera.seed = case.seed;
+        let scenario = case.apply(&base);
         let synthetic = synthetic_case(&scenario)?;
         let moved = mean(&register::target_errors(&synthetic.targets, &synthetic.peak().truth)) * 1e3;
         motion.push(moved);
@@ -154,12 +155,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
             .zip(&here)
             .map(|(method, o)| match (o.tre_mean_mm, o.tre_max_mm, &o.error) {
                 (Some(m), Some(x), None) => {
-                    format!(
-                        "{method} {} / {}, {}",
-                        fmt(m, 2, "mm"),
-                        fmt(x, 1, "mm"),
-                        fmt(median(&mut o.times_ms.clone()), 0, "ms")
-                    )
+                    format!("{method} {} / {}, {}", fmt(m, 2, "mm"), fmt(x, 1, "mm"), fmt(o.time_ms(), 0, "ms"))
                 }
                 (_, _, e) => format!("{method}: failed ({})", e.as_deref().unwrap_or("no TRE")),
             })
@@ -179,7 +175,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
         let ok: Vec<&Outcome> = cases.iter().filter(|o| o.error.is_none() && o.tre_mean_mm.is_some()).collect();
         let tre: Vec<f64> = ok.iter().filter_map(|o| o.tre_mean_mm).collect();
         let largest: Vec<f64> = ok.iter().filter_map(|o| o.tre_max_mm).collect();
-        let mut times: Vec<f64> = ok.iter().map(|o| median(&mut o.times_ms.clone())).collect();
+        let mut times: Vec<f64> = ok.iter().map(|o| o.time_ms()).collect();
         let failed = cases.len() - ok.len();
         means.push(if failed == 0 { mean(&tre) } else { f64::NAN });
         summary.push(Row::new(

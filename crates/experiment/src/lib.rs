@@ -77,7 +77,7 @@ pub enum Name {
     BeamSparse,
     /// Registration on a stream over OpenIGTLink: latency, frame rate and TRE per frame.
     Stream,
-    /// Registration on held-out cases: network, hybrid and FEM, TRE and time per frame.
+    /// Registration on held-out cases: the shipped network and the FEM, TRE and time per frame.
     HeldOut,
 }
 

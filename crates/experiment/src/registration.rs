@@ -4,11 +4,10 @@
 
 use std::path::Path;
 
-use crate::case::{case_methods, compare, synthetic_case, Network, TRUTH_TETS};
+use crate::case::{case_methods, compare, synthetic_case, CaseLoad, Network, LEFT_LOBE_FRONT, RIGHT_LOBE, TRUTH_TETS};
 use crate::sample_view::sample_on_mesh;
 use anyhow::{Context, Result};
 use learn::{Compute, Corruption};
-use mesh::phantom::SurfacePatch;
 use mesh::stats::{max, mean};
 use scenario::CaseScenario;
 
@@ -17,45 +16,26 @@ use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 
 use crate::case::AR_SCENARIO as LIVER_AR;
 
-/// A registration case: the shipped case's truth with another load.
-struct Variant {
-    /// Short description for the table.
-    label: &'static str,
-    /// Tool force (N) and its direction.
-    force: f64,
-    direction: [f64; 3],
-    /// Where the tool pushes (`None`: the shipped case's patch on the left lobe).
-    patch: Option<SurfacePatch>,
-    /// The camera's seed.
-    seed: u64,
-}
-
 /// The case the registration settings were chosen on (with the same patch at 1, 2 and 2.5 N):
 /// reported apart.
-const DESIGN: Variant = Variant { label: "1.5 N down, left lobe", force: 1.5, direction: DOWN, patch: None, seed: 1 };
+const DESIGN: CaseLoad = CaseLoad { label: "1.5 N down, left lobe", force: 1.5, direction: DOWN, patch: None, seed: 1 };
 
 const DOWN: [f64; 3] = [0.0, 0.0, -1.0];
 
 /// Held-out cases, fixed before any was registered: an oblique push, another spot of the left
 /// lobe, the right lobe, and a harder push of the design spot. The figures beside the published
 /// ones are over these only.
-const HELD_OUT: [Variant; 4] = [
-    Variant { label: "1.75 N oblique, left lobe", force: 1.75, direction: [0.4, 0.0, -1.0], patch: None, seed: 11 },
-    Variant {
-        label: "2.5 N down, right lobe",
-        force: 2.5,
-        direction: DOWN,
-        patch: Some(SurfacePatch { from: [0.06, 0.02, 0.0], direction: [0.0, 0.0, 1.0], radius: 0.02 }),
-        seed: 12,
-    },
-    Variant {
+const HELD_OUT: [CaseLoad; 4] = [
+    CaseLoad { label: "1.75 N oblique, left lobe", force: 1.75, direction: [0.4, 0.0, -1.0], patch: None, seed: 11 },
+    CaseLoad { label: "2.5 N down, right lobe", force: 2.5, direction: DOWN, patch: Some(RIGHT_LOBE), seed: 12 },
+    CaseLoad {
         label: "1.5 N down, left lobe front",
         force: 1.5,
         direction: DOWN,
-        patch: Some(SurfacePatch { from: [-0.04, -0.025, 0.0], direction: [0.0, 0.0, 1.0], radius: 0.02 }),
+        patch: Some(LEFT_LOBE_FRONT),
         seed: 13,
     },
-    Variant { label: "3 N down, left lobe", force: 3.0, direction: DOWN, patch: None, seed: 14 },
+    CaseLoad { label: "3 N down, left lobe", force: 3.0, direction: DOWN, patch: None, seed: 14 },
 ];
 
 /// One registration method's figures over the cases.
@@ -121,12 +101,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     for (k, variant) in std::iter::once(&DESIGN).chain(&HELD_OUT).enumerate() {
         let design = k == 0;
         progress(&format!("registering the case {}", variant.label));
-        let mut scenario = builtin.clone();
-        scenario.truth.force = variant.force;
-        scenario.truth.direction = variant.direction;
-        scenario.truth.patch = variant.patch.or(scenario.truth.patch);
-        scenario.camera.seed = variant.seed;
-        let case = synthetic_case(&scenario)?;
+        let case = synthetic_case(&variant.apply(&builtin))?;
         marker_count = case.targets.len();
         // Fresh methods per case: each registers from rest, with no state from the last case.
         let network = Network { model: &t.model, scenario: &data.scenario, dir: &data.scenario_dir };

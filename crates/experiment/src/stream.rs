@@ -14,14 +14,14 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, Context, Result};
 use live::client::Client;
 use live::{ClientRegistration, Outputs, ServeOptions};
-use mesh::phantom::SurfacePatch;
 use mesh::stats::{max, mean, median, percentile};
 use register::{Deformer, Organ, RegistrationOptions};
 use scenario::CaseScenario;
 use serde::Serialize;
 
 use crate::case::{
-    ar_network_model, corotational_model, network_options, synthetic_case, SyntheticCase, SHIPPED_MODEL,
+    ar_network_model, corotational_model, network_options, synthetic_case, SyntheticCase, LEFT_LOBE_FRONT,
+    SHIPPED_MODEL,
 };
 use crate::{ExperimentResult, Name, Progress, Row, Size};
 
@@ -59,7 +59,7 @@ pub fn press_and_release() -> CaseScenario {
     scenario.truth.frames = FRAMES;
     scenario.truth.force = 2.0;
     scenario.truth.direction = [0.3, 0.2, -1.0];
-    scenario.truth.patch = Some(SurfacePatch { from: [-0.04, -0.025, 0.0], direction: [0.0, 0.0, 1.0], radius: 0.02 });
+    scenario.truth.patch = Some(LEFT_LOBE_FRONT);
     scenario.camera.points = POINTS;
     scenario.camera.seed = 31;
     scenario
