@@ -14,37 +14,58 @@ use crate::{fmt, write_scenario, ExperimentResult, Headline, Name, Progress, Row
 /// Tetrahedra of the reference phantoms that make the observations (the published liver size for the Young's-modulus experiment;
 /// about 2.6 times the model's for the springs experiment).
 const YOUNG_REFERENCE_TETS: usize = 11_000;
-const SPRINGS_REFERENCE_TETS: usize = 3_000;
+const SPRINGS_REFERENCE: Phantom = Phantom::linear(3_000);
 /// The ROUKF Young's modulus experiment again with the filter's model at the published liver size, observed on a finer phantom.
 const YOUNG_PUBLISHED_MODEL_TETS: usize = 11_000;
 const YOUNG_PUBLISHED_REFERENCE_TETS: usize = 20_000;
+/// The ROUKF Young's modulus experiment again observed on quadratic tetrahedra (T10, F-bar at the scenario's ν) built
+/// from a phantom of this size: another mesh and another element, within a few per cent of a converged solution
+/// (`augsim experiment fem-convergence`).
+const YOUNG_QUADRATIC_REFERENCE: Phantom = Phantom { tets: 3_000, order: 2 };
+/// The ROUKF Young's modulus experiment again with the filter's model on quadratic tetrahedra built from a coarse
+/// phantom (about as many unknowns as the scenario's linear model), observed on [`YOUNG_QUADRATIC_REFERENCE`].
+const YOUNG_QUADRATIC_MODEL: Phantom = Phantom { tets: 1_150, order: 2 };
 
-/// Identification without inverse crime: synthetic tracks from the shipped scenario run on a finer phantom of
-/// `reference_tets` tetrahedra (`dir/reference-tracks`, reused when a completed earlier run with the same scenario,
-/// size and executable left them there), then the filter on the scenario's own mesh (or a phantom of `model_tets`)
-/// fed those tracks (`dir/run`) and, with `discrepancy`, again with a systematic model-discrepancy allowance
-/// (`dir/run-discrepancy`); `iterations` overrides the scenario's. Returns the reports (plain, then with the
-/// allowance) and the model's setup.
-#[allow(clippy::too_many_arguments)]
+/// A phantom of the identification experiments: its tetrahedra, and its element order (1, or 2 for T10).
+#[derive(Clone, Copy)]
+struct Phantom {
+    tets: usize,
+    order: u8,
+}
+
+impl Phantom {
+    const fn linear(tets: usize) -> Phantom {
+        Phantom { tets, order: 1 }
+    }
+}
+
+/// Identification without inverse crime: synthetic tracks from the shipped scenario run on the `reference_phantom`
+/// (`dir/reference-tracks`, reused when a completed earlier run with the same scenario, phantom and executable left
+/// them there), then the filter on the scenario's own mesh (or the `model` phantom) fed those tracks (`dir/run`)
+/// and, with `discrepancy`, again with a systematic model-discrepancy allowance (`dir/run-discrepancy`);
+/// `iterations` overrides the scenario's. Returns the reports (plain, then with the allowance), the model's setup
+/// and the reference mesh (its cells and element, e.g. "10795 T4").
 fn assimilate(
     dir: &Path,
     name: &str,
-    reference_tets: usize,
-    model_tets: Option<usize>,
+    reference_phantom: Phantom,
+    model: Option<Phantom>,
     iterations: Option<usize>,
     discrepancy: bool,
     progress: Progress,
-) -> Result<(Vec<Report>, Setup, usize)> {
+) -> Result<(Vec<Report>, Setup, String)> {
     let (path, text) = write_scenario(dir, name)?;
     let (mut scenario, scenario_dir) = AssimilationScenario::load(&path)?;
     scenario.iterations = iterations.or(scenario.iterations);
-    if let Some(n) = model_tets {
+    if let Some(model) = model {
         let MeshSource::Phantom { tets } = &mut scenario.mesh else {
             bail!("{name}: another phantom size needs the built-in phantom mesh");
         };
-        *tets = n;
+        *tets = model.tets;
+        scenario.material.order = model.order;
     }
-    let (law, order) = scenario.reference.as_ref().map_or((None, None), |r| (r.law, r.order));
+    let law = scenario.reference.as_ref().and_then(|r| r.law);
+    let (reference_tets, order) = (reference_phantom.tets, Some(reference_phantom.order));
     scenario.reference = Some(ReferenceSpec { mesh: MeshSource::Phantom { tets: reference_tets }, law, order });
     let reference = scenario.reference_scenario().context("the reference section was just set")?;
     let tracks = dir.join("reference-tracks");
@@ -52,7 +73,8 @@ fn assimilate(
     // The reference mesh's own cell count (the mesher reaches about the requested size).
     let cells_file = tracks.join("reference_cells.txt");
     let key = format!(
-        "{text}\n# reference phantom {reference_tets} T4, iterations {:?}, executable {}\n",
+        "{text}\n# reference phantom {reference_tets} T4, order {}, iterations {:?}, executable {}\n",
+        reference_phantom.order,
         reference.iterations,
         executable_stamp()
     );
@@ -108,7 +130,8 @@ fn assimilate(
         })?);
         setup.get_or_insert_with(|| experiment.setup().clone());
     }
-    Ok((reports, setup.context("no filter run")?, reference_cells))
+    let element = if reference_phantom.order == 2 { "T10" } else { "T4" };
+    Ok((reports, setup.context("no filter run")?, format!("{reference_cells} {element}")))
 }
 
 /// Size and modification time of the running executable: reference tracks made by another build are not reused.
@@ -133,30 +156,54 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
         Size::Paper => None,
     };
     let young = "roukf_young";
-    let (reports, setup, reference_cells) =
-        assimilate(dir, young, YOUNG_REFERENCE_TETS, None, iterations, true, progress)?;
-    let (fines, _, fine_reference_cells) = assimilate(
+    let (reports, setup, reference_mesh) =
+        assimilate(dir, young, Phantom::linear(YOUNG_REFERENCE_TETS), None, iterations, true, progress)?;
+    let (fines, _, fine_reference_mesh) = assimilate(
         &dir.join(format!("model-{YOUNG_PUBLISHED_MODEL_TETS}")),
         young,
-        YOUNG_PUBLISHED_REFERENCE_TETS,
-        Some(YOUNG_PUBLISHED_MODEL_TETS),
+        Phantom::linear(YOUNG_PUBLISHED_REFERENCE_TETS),
+        Some(Phantom::linear(YOUNG_PUBLISHED_MODEL_TETS)),
+        iterations,
+        true,
+        progress,
+    )?;
+    let (quadratics, _, quadratic_reference_mesh) = assimilate(
+        &dir.join("reference-t10"),
+        young,
+        YOUNG_QUADRATIC_REFERENCE,
+        None,
+        iterations,
+        true,
+        progress,
+    )?;
+    let (quadratic_models, _, _) = assimilate(
+        &dir.join("model-t10"),
+        young,
+        YOUNG_QUADRATIC_REFERENCE,
+        Some(YOUNG_QUADRATIC_MODEL),
         iterations,
         true,
         progress,
     )?;
     let (report, honest) = (&reports[0], &reports[1]);
     let (fine, fine_honest) = (&fines[0], &fines[1]);
+    let (quadratic, quadratic_honest) = (&quadratics[0], &quadratics[1]);
+    let (quadratic_model, quadratic_model_honest) = (&quadratic_models[0], &quadratic_models[1]);
     let mut rows = Vec::new();
     let runs = [
-        ("", report, reference_cells),
-        (", systematic discrepancy", honest, reference_cells),
-        (", 11k model", fine, fine_reference_cells),
-        (", 11k model, systematic discrepancy", fine_honest, fine_reference_cells),
+        ("", report, &reference_mesh),
+        (", systematic discrepancy", honest, &reference_mesh),
+        (", 11k model", fine, &fine_reference_mesh),
+        (", 11k model, systematic discrepancy", fine_honest, &fine_reference_mesh),
+        (", T10 reference", quadratic, &quadratic_reference_mesh),
+        (", T10 reference, systematic discrepancy", quadratic_honest, &quadratic_reference_mesh),
+        (", T10 model and reference", quadratic_model, &quadratic_reference_mesh),
+        (", T10 model and reference, systematic discrepancy", quadratic_model_honest, &quadratic_reference_mesh),
     ];
-    for (label, report, reference_cells) in runs {
+    for (label, report, reference_mesh) in runs {
         let y = report.young.as_ref().context("the Young scenario reported no Young's modulus")?;
         let truth = y.truth.context("the reference run's modulus is the truth")?;
-        let mesh = format!(" (model {} nodes, reference {reference_cells} T4)", report.nodes);
+        let mesh = format!(" (model {} nodes, reference {reference_mesh})", report.nodes);
         rows.extend([
             Row::new(
                 format!("estimated E (mean ± σ){label}"),
@@ -195,7 +242,7 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
     let headlines = vec![
         Headline::lower_is_better(
             format!(
-                "ROUKF Young's modulus: error of the estimate ({}-node model, {reference_cells}-T4 reference)",
+                "ROUKF Young's modulus: error of the estimate ({}-node model, {reference_mesh} reference)",
                 report.nodes
             ),
             100.0 * (y.mean - truth).abs() / truth,
@@ -222,7 +269,7 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
         notes: vec![
             format!(
                 "No inverse crime: the observations ({} noisy surface features) come from a reference run \
-                 with E = {:.0} Pa on a phantom of {reference_cells} T4; the filter's model is the \
+                 with E = {:.0} Pa on a phantom of {reference_mesh}; the filter's model is the \
                  scenario's {}-node phantom, onto whose surface {} features outside it were moved (at most {:.2} mm). \
                  {} sigma points. Published: ~11,000-tet liver.",
                 setup.features,
@@ -234,12 +281,22 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
             ),
             format!(
                 "The '11k model' rows: the same scenario with the filter's model a phantom of about \
-                 {YOUNG_PUBLISHED_MODEL_TETS} T4 (the published size, {} nodes) observed on one of {fine_reference_cells} T4. The \
+                 {YOUNG_PUBLISHED_MODEL_TETS} T4 (the published size, {} nodes) observed on one of {fine_reference_mesh}. The \
                  error is the model error of the filter's mesh (the same loads move the coarser phantom more or \
                  less than the finer one); σ only reflects the observation noise, and it shrinks with the \
                  number of observations while that bias stays.",
                 fine.nodes
             ),
+            format!(
+                "The 'T10 reference' rows: the same filter on the scenario's model, observed on quadratic tetrahedra \
+                 (T10, F-bar) built from a phantom of {quadratic_reference_mesh}: another mesh and another element, \
+                 within a few per cent of a converged solution (fem-convergence). The error is then the model error \
+                 of the filter's linear tetrahedra, which are stiffer than the converged solid."
+            ),
+            "The attachment and the push are regions of space (an elastic foundation over the phantom's `fixed` \
+             ball, a traction over the visible boundary inside its `push` ball), so the model and every reference \
+             solve the same problem and differ only by their discretisation."
+                .into(),
             "The 'systematic discrepancy' rows: the same filter runs ([filter] discrepancy = \"systematic\", \
              d = 1, in run-discrepancy/) with an allowance for model error added to σ: the misfit of all frames at \
              the estimate beyond the observation noise, assumed able to lie wholly along the modulus' sensitivity \
@@ -252,6 +309,8 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
             v.insert("discrepancy_report".into(), serde_json::to_value(honest)?);
             v.insert("published_size_report".into(), serde_json::to_value(fine)?);
             v.insert("published_size_discrepancy_report".into(), serde_json::to_value(fine_honest)?);
+            v.insert("quadratic_reference_report".into(), serde_json::to_value(quadratic)?);
+            v.insert("quadratic_reference_discrepancy_report".into(), serde_json::to_value(quadratic_honest)?);
             v
         },
     })
@@ -259,8 +318,8 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
 
 /// The ROUKF boundary springs experiment (the scenario's 300 iterations at both sizes: it takes seconds).
 pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
-    let (reports, setup, reference_cells) =
-        assimilate(dir, "roukf_springs", SPRINGS_REFERENCE_TETS, None, None, false, progress)?;
+    let (reports, setup, reference_mesh) =
+        assimilate(dir, "roukf_springs", SPRINGS_REFERENCE, None, None, false, progress)?;
     let report = &reports[0];
     let error = |label: &str| {
         report
@@ -305,7 +364,7 @@ pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<Expe
         notes: vec![format!(
             "{} springs on the hidden surface of a {}-node phantom, a tool prescribing displacement on a small \
              visible area (on each mesh its own nodes nearest the tool). No inverse crime: observations and \
-             assessment points come from a reference run on a phantom of {reference_cells} T4 ({} points moved \
+             assessment points come from a reference run on a phantom of {reference_mesh} ({} points moved \
              onto the model's surface, at most {:.2} mm); assessment errors are means over the run at {} internal \
              markers.",
             s.stiffness.len(),

@@ -94,15 +94,28 @@ impl Problem {
 
     /// Adds `total` (N) spread as a uniform traction over the part of the boundary inside
     /// `ball`, on the faces whose outward normal points against `facing` when given (e.g. the
-    /// side a camera looking along `facing` sees). Integrated with a 256-point rule on each face
-    /// near the ball (linear or quadratic triangles). Returns the loaded area (m²); an error
-    /// when it is empty.
+    /// side a camera looking along `facing` sees): [`Problem::patch_force_shares`] times `total`.
+    /// Returns the loaded area (m²); an error when it is empty.
     pub fn add_patch_force(&mut self, ball: &Ball, facing: Option<Point>, total: Point) -> Result<f64, FemError> {
-        check(ball)?;
         if !total.iter().all(|t| t.is_finite()) {
             return Err(FemError::Invalid(format!("patch force {total:?} must be finite")));
         }
-        let mut samples: Vec<(Vec<usize>, Vec<f64>, f64)> = Vec::new();
+        let (shares, area) = self.patch_force_shares(ball, facing)?;
+        for (n, s) in shares {
+            for (f, t) in self.f_ext[3 * n..3 * n + 3].iter_mut().zip(total) {
+                *f += t * s;
+            }
+        }
+        Ok(area)
+    }
+
+    /// Each node's share (summing to 1) of a total force spread as a uniform traction over the
+    /// part of the boundary inside `ball`, on the faces whose outward normal points against
+    /// `facing` when given, and the loaded area (m²). Integrated with a 256-point rule on each
+    /// face near the ball (linear or quadratic triangles); an error when the area is empty.
+    pub fn patch_force_shares(&self, ball: &Ball, facing: Option<Point>) -> Result<(Vec<(usize, f64)>, f64), FemError> {
+        check(ball)?;
+        let mut shares = std::collections::BTreeMap::<usize, f64>::new();
         let mut area = 0.0;
         for face in mesh::boundary_faces(&self.mesh) {
             if face.nodes.len() == 4 {
@@ -123,21 +136,16 @@ impl Problem {
                 let p: Point = std::array::from_fn(|d| (0..3).map(|a| l[a] * x[a][d]).sum());
                 if ball.contains(p) {
                     area += weight;
-                    samples.push((face.nodes.clone(), face_shape(l, face.nodes.len()), weight));
+                    for (&n, s) in face.nodes.iter().zip(face_shape(l, face.nodes.len())) {
+                        *shares.entry(n).or_default() += weight * s;
+                    }
                 }
             }
         }
         if area == 0.0 {
             return Err(FemError::Invalid(format!("the patch's ball {ball:?} holds no boundary face")));
         }
-        for (nodes, shape, weight) in samples {
-            for (&n, s) in nodes.iter().zip(shape) {
-                for (f, t) in self.f_ext[3 * n..3 * n + 3].iter_mut().zip(total) {
-                    *f += t / area * weight * s;
-                }
-            }
-        }
-        Ok(area)
+        Ok((shares.into_iter().map(|(n, s)| (n, s / area)).collect(), area))
     }
 }
 

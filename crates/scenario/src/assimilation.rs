@@ -9,6 +9,7 @@ use mesh::select::k_nearest;
 use mesh::{Mesh, NodeSelection, Point};
 use serde::Deserialize;
 
+use crate::problem::{Attachment, PatchForce};
 use crate::{fixed_problem, Fixed, Kind, MeshSource, Result, ScenarioError, ScenarioText};
 
 /// An assimilation scenario file.
@@ -30,9 +31,17 @@ pub struct AssimilationScenario {
     /// Nodes with zero displacement.
     #[serde(default)]
     pub fixed: Vec<Fixed>,
+    /// Elastic foundations over the part of the organ inside a ball: unlike fixed nodes, the same on every mesh,
+    /// so that the model and the reference solve the same problem.
+    #[serde(default)]
+    pub attachment: Vec<Attachment>,
     /// Known forces with a time profile.
     #[serde(default)]
     pub force: Vec<ForceSpec>,
+    /// Known forces spread as a uniform traction over the boundary inside a ball, with a time profile: unlike a
+    /// force on selected nodes, the same on every mesh.
+    #[serde(default)]
+    pub patch_force: Vec<PatchForceSpec>,
     /// Prescribed displacements (the tool) with a time profile.
     #[serde(default)]
     pub tool: Vec<ToolSpec>,
@@ -68,6 +77,17 @@ pub struct ForceSpec {
     pub select: NodeSelection,
     /// Total force at amplitude 1 (N).
     pub total: Point,
+    /// Amplitude over time.
+    pub profile: Profile,
+}
+
+/// A total force spread as a uniform traction over the boundary inside a ball ([`fem::Problem::patch_force_shares`]),
+/// times a profile.
+#[derive(Debug, Clone, Deserialize)]
+pub struct PatchForceSpec {
+    /// Where, and the total force at amplitude 1.
+    #[serde(flatten)]
+    pub force: PatchForce,
     /// Amplitude over time.
     pub profile: Profile,
 }
@@ -266,12 +286,24 @@ impl AssimilationScenario {
         let select = |s: &NodeSelection, what: &str, p: &Problem| {
             s.select(&p.mesh).map_err(|e| fail(format!("{what} selection: {e}")))
         };
+        for (k, a) in self.attachment.iter().enumerate() {
+            let ball = a.region.resolve().map_err(|e| fail(format!("attachment {}: {e}", k + 1)))?;
+            problem.add_foundation(&ball, a.stiffness).map_err(|e| fail(format!("attachment {}: {e}", k + 1)))?;
+        }
+        let pattern = |shares: Vec<(usize, f64)>, total: Point, profile: Profile| {
+            let forces = shares.into_iter().map(|(k, s)| (k, total.map(|c| c * s))).collect();
+            LoadPattern { profile, forces, displacements: vec![] }
+        };
         let mut loads = Vec::new();
         for f in &self.force {
             let nodes = select(&f.select, "force", &problem)?;
-            let shares = fem::force_shares(&problem.mesh, &nodes);
-            let forces = shares.into_iter().map(|(k, s)| (k, f.total.map(|c| c * s))).collect();
-            loads.push(LoadPattern { profile: f.profile, forces, displacements: vec![] });
+            loads.push(pattern(fem::force_shares(&problem.mesh, &nodes), f.total, f.profile));
+        }
+        for (k, f) in self.patch_force.iter().enumerate() {
+            let fail = |e: String| fail(format!("patch force {}: {e}", k + 1));
+            let (ball, facing) = f.force.place().map_err(fail)?;
+            let (shares, _) = problem.patch_force_shares(&ball, facing).map_err(|e| fail(e.to_string()))?;
+            loads.push(pattern(shares, f.force.total, f.profile));
         }
         let mut tool_nodes = Vec::new();
         for t in &self.tool {
@@ -308,6 +340,42 @@ impl AssimilationScenario {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The built-in Young's modulus scenario holds the phantom by a foundation over its `fixed` ball and loads it
+    /// with a time-profiled patch force: the pattern's nodal forces are a static patch force's, and sum to the total.
+    #[test]
+    fn geometric_attachments_and_patch_forces_hold_and_load_the_model() {
+        let text = crate::builtin("roukf_young").expect("built in");
+        let parse = |t: &str| AssimilationScenario::from_text(&ScenarioText::new(t, Path::new("young.toml")));
+        let scenario = parse(text).unwrap();
+        let mesh = mesh::PhantomSpec::default().mesh(1150).unwrap();
+        let (problem, loads, tools) = scenario.build_problem(mesh.clone()).unwrap();
+        assert!(problem.dirichlet.is_empty() && tools.is_empty(), "no node is fixed");
+        assert!(!problem.point_springs.is_empty(), "the foundation ties the fixed ball");
+        assert_eq!(loads.len(), 1);
+        let mut total = [0.0; 3];
+        let mut pattern = vec![0.0; 3 * mesh.nodes.len()];
+        for &(k, f) in &loads[0].forces {
+            for d in 0..3 {
+                total[d] += f[d];
+                pattern[3 * k + d] += f[d];
+            }
+        }
+        assert!((total[2] + 0.3).abs() < 1e-12 && total[0].abs() < 1e-12 && total[1].abs() < 1e-12, "{total:?}");
+        let spec = mesh::PhantomSpec::default();
+        let mut fixed = Problem::new(mesh, scenario.material);
+        fixed.add_patch_force(&spec.region_ball("push").unwrap(), Some(spec.view_direction), [0.0, 0.0, -0.3]).unwrap();
+        let gap = pattern.iter().zip(&fixed.f_ext).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(gap < 1e-15, "the pattern differs from the static patch force by {gap} N");
+        // An unknown key, a missing total and a ball that misses the organ are named.
+        let extra = text.replace("total = [0.0, 0.0, -0.3]", "total = [0.0, 0.0, -0.3]\ncentre = 1");
+        assert!(parse(&extra).is_err_and(|e| e.to_string().contains("unknown field `centre`")), "an unknown key passed");
+        let bad = text.replace("total = [0.0, 0.0, -0.3]", "totl = [0.0, 0.0, -0.3]");
+        assert!(parse(&bad).is_err_and(|e| e.to_string().contains("missing field `total`")), "a misspelt key passed");
+        let away = text.replace("phantom = \"push\"", "ball = { centre = [1.0, 1.0, 1.0], radius = 0.01 }");
+        let built = parse(&away).and_then(|s| s.build_problem(mesh::PhantomSpec::default().mesh(1150).unwrap()));
+        assert!(built.is_err_and(|e| e.to_string().contains("patch force 1")), "a ball off the organ passed");
+    }
 
     /// The reference run takes its own mesh, law and element order, and keeps the rest.
     #[test]

@@ -157,7 +157,7 @@ pub enum Scenario {
     /// `kind = "dataset"`.
     Dataset(DatasetScenario),
     /// `kind = "assimilation"`.
-    Assimilation(AssimilationScenario),
+    Assimilation(Box<AssimilationScenario>),
     /// `kind = "registration_case"`.
     RegistrationCase(CaseScenario),
 }
@@ -169,7 +169,7 @@ impl Scenario {
         let scenario = match source.kind()? {
             Kind::Static => Scenario::Static(StaticScenario::from_text(&source)?),
             Kind::Dataset => Scenario::Dataset(DatasetScenario::from_text(&source)?),
-            Kind::Assimilation => Scenario::Assimilation(AssimilationScenario::from_text(&source)?),
+            Kind::Assimilation => Scenario::Assimilation(Box::new(AssimilationScenario::from_text(&source)?)),
             Kind::RegistrationCase => Scenario::RegistrationCase(CaseScenario::from_text(&source)?),
         };
         Ok((scenario, source.dir))

@@ -107,7 +107,7 @@ pub struct SpaceBall {
 }
 
 impl SpaceBall {
-    fn resolve(&self) -> std::result::Result<Ball, String> {
+    pub(crate) fn resolve(&self) -> std::result::Result<Ball, String> {
         match (&self.ball, &self.phantom) {
             (Some(b), None) => Ok(*b),
             (None, Some(name)) => mesh::PhantomSpec::default().region_ball(name).map_err(|e| e.to_string()),
@@ -143,6 +143,24 @@ pub struct PatchForce {
     pub facing: Option<Point>,
     /// Total force (N).
     pub total: Point,
+}
+
+impl PatchForce {
+    /// The ball and the side of the boundary it loads: `facing`, else for the phantom's `push`
+    /// the side its camera sees and for `hidden` the side away from it, else every side.
+    /// An error when the ball or the total is not finite.
+    pub fn place(&self) -> std::result::Result<(Ball, Option<Point>), String> {
+        if !self.total.iter().all(|t| t.is_finite()) {
+            return Err(format!("total {:?} must be finite", self.total));
+        }
+        let view = mesh::PhantomSpec::default().view_direction;
+        let facing = self.facing.or(match self.region.phantom.as_deref() {
+            Some("push") => Some(view),
+            Some("hidden") => Some(view.map(|v| -v)),
+            _ => None,
+        });
+        Ok((self.region.resolve()?, facing))
+    }
 }
 
 /// Output settings.
@@ -203,13 +221,7 @@ impl StaticScenario {
             p.add_foundation(&ball, a.stiffness).map_err(|e| fail(format!("attachment {}: {e}", k + 1)))?;
         }
         for (k, f) in self.patch_force.iter().enumerate() {
-            let ball = f.region.resolve().map_err(|e| fail(format!("patch force {}: {e}", k + 1)))?;
-            let view = mesh::PhantomSpec::default().view_direction;
-            let facing = f.facing.or(match f.region.phantom.as_deref() {
-                Some("push") => Some(view),
-                Some("hidden") => Some(view.map(|v| -v)),
-                _ => None,
-            });
+            let (ball, facing) = f.place().map_err(|e| fail(format!("patch force {}: {e}", k + 1)))?;
             p.add_patch_force(&ball, facing, f.total).map_err(|e| fail(format!("patch force {}: {e}", k + 1)))?;
         }
         if let Some(g) = self.gravity {
