@@ -64,7 +64,7 @@ enum Command {
         /// Generate only part i of n (e.g. 0/8), for array jobs; join with `merge`.
         #[arg(long)]
         shard: Option<String>,
-        /// Override the number of samples.
+        /// Override the number of samples; more than a complete dataset in --out holds grows it.
         #[arg(long)]
         samples: Option<usize>,
     },

@@ -261,6 +261,36 @@ fn resumed_writing_equals_uninterrupted() {
     assert!(e.contains("cannot resume"), "{e}");
 }
 
+/// A spec asking for `samples` samples, as the generator records it.
+fn counted_spec(samples: u64) -> DatasetSpec {
+    DatasetSpec { metadata: serde_json::json!({"dataset": {"samples": samples, "cone": 90.0}}), ..spec(3, None) }
+}
+
+#[test]
+fn a_complete_dataset_grows_when_asked_for_more_samples() {
+    let (grown, whole) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    write(grown.path(), counted_spec(8), 0..8);
+    write(whole.path(), counted_spec(13), 0..13);
+    let mut w = DatasetWriter::create_or_resume(grown.path(), counted_spec(13)).unwrap();
+    assert_eq!(w.resume_from(), 8, "generation goes on after the samples held");
+    for i in 8..13 {
+        push(&mut w, i);
+    }
+    w.finish().unwrap();
+    let (a, b) = (Dataset::open(grown.path()).unwrap(), Dataset::open(whole.path()).unwrap());
+    assert_eq!(a.manifest().spec(), b.manifest().spec());
+    assert_eq!(a.manifest().failed, b.manifest().failed);
+    let (x, y) = (a.load_all().unwrap(), b.load_all().unwrap());
+    assert_eq!((&x.indices, &x.inputs, &x.targets, &x.masks), (&y.indices, &y.inputs, &y.targets, &y.masks));
+    assert_eq!(x.source, y.source);
+    // Fewer samples, or more of another spec, are no growth.
+    let e = DatasetWriter::create_or_resume(grown.path(), counted_spec(10)).err().unwrap().to_string();
+    assert!(e.contains("cannot resume"), "{e}");
+    let other = DatasetSpec { metadata: serde_json::json!({"dataset": {"samples": 20, "cone": 180.0}}), ..spec(3, None) };
+    let e = DatasetWriter::create_or_resume(grown.path(), other).err().unwrap().to_string();
+    assert!(e.contains("cannot resume"), "{e}");
+}
+
 #[test]
 fn writer_rejects_bad_samples() {
     let dir = tempfile::tempdir().unwrap();

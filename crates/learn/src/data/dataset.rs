@@ -67,6 +67,27 @@ pub struct DatasetSpec {
     pub metadata: serde_json::Value,
 }
 
+impl DatasetSpec {
+    /// The sample count the generator was asked for (`metadata.dataset.samples`), if recorded.
+    fn requested_samples(&self) -> Option<u64> {
+        self.metadata.get("dataset")?.get("samples")?.as_u64()
+    }
+
+    /// Whether `self` asks for more samples of the same whole (unsplit) dataset as `existing`:
+    /// everything else equal, so that the first samples stay those `existing` holds.
+    fn grows(&self, existing: &DatasetSpec) -> bool {
+        let without_count = |spec: &DatasetSpec| {
+            let mut spec = spec.clone();
+            if let Some(config) = spec.metadata.get_mut("dataset").and_then(|d| d.as_object_mut()) {
+                config.remove("samples");
+            }
+            spec
+        };
+        let larger = matches!((self.requested_samples(), existing.requested_samples()), (Some(a), Some(b)) if a > b);
+        larger && self.part.is_none() && existing.part.is_none() && without_count(self) == without_count(existing)
+    }
+}
+
 /// Units of the stored fields.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -620,7 +641,8 @@ pub struct DatasetWriter {
 
 impl DatasetWriter {
     /// Creates a new dataset in `dir`, or resumes the unfinished one there (whose spec must equal
-    /// `spec`). A complete dataset in `dir` is an error.
+    /// `spec`), or grows the one there when `spec` asks for more samples of it (its samples are
+    /// kept, and generation goes on after them). A complete dataset of the same spec is an error.
     pub fn create_or_resume(dir: &Path, spec: DatasetSpec) -> Result<DatasetWriter> {
         if spec.shard_size == 0 {
             return Err(LearnError::InvalidInput("shard_size must be at least 1".into()));
@@ -637,17 +659,24 @@ impl DatasetWriter {
         let manifest = if manifest_path.exists() {
             let dataset = Dataset::open(dir)?;
             let existing = dataset.manifest.spec();
-            if existing != spec {
+            let grows = spec.grows(&existing);
+            if existing != spec && !grows {
                 return Err(LearnError::manifest(
                     &manifest_path,
                     format!("cannot resume: the existing dataset was created with {existing:?}, not {spec:?}"),
                 ));
             }
-            if dataset.manifest.complete {
+            if dataset.manifest.complete && !grows {
                 return Err(LearnError::manifest(&manifest_path, "the dataset is already complete"));
             }
             dataset.check_files()?;
-            dataset.manifest
+            let mut manifest = dataset.manifest;
+            if grows {
+                manifest.metadata = spec.metadata;
+                manifest.complete = false;
+                manifest.write(&manifest_path)?;
+            }
+            manifest
         } else {
             std::fs::create_dir_all(dir).map_err(|e| LearnError::io(dir, e))?;
             let manifest = Manifest::new(&spec);
