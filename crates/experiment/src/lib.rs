@@ -165,6 +165,8 @@ pub enum Verdict {
     OnPar,
     /// Worse by more than [`ON_PAR`] (or, for a qualitative finding, not found).
     Worse,
+    /// Measured where nothing was published.
+    Unpublished,
 }
 
 impl Verdict {
@@ -174,6 +176,7 @@ impl Verdict {
             Verdict::Better => "better",
             Verdict::OnPar => "on par",
             Verdict::Worse => "worse",
+            Verdict::Unpublished => "measured",
         }
     }
 }
@@ -213,6 +216,11 @@ impl Headline {
             published: fmt(published, digits, unit),
             verdict,
         }
+    }
+
+    /// A figure of ours with no published counterpart.
+    pub fn measured(figure: impl Into<String>, ours: impl Into<String>) -> Self {
+        Headline { figure: figure.into(), ours: ours.into(), published: "—".into(), verdict: Verdict::Unpublished }
     }
 
     /// A qualitative finding of the publication (`published`) that our run reproduces or not.
