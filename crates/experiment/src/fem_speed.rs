@@ -409,9 +409,7 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
         .filter_map(|c| {
             let figure = format!("static solve, {}: setup + first solve", c.name);
             match c.published_ms {
-                Some(published) => {
-                    Some(Headline::lower_is_better(figure, c.setup_ms + c.first_ms, published, 0, "ms"))
-                }
+                Some(published) => Some(Headline::lower_is_better(figure, c.setup_ms + c.first_ms, published, 0, "ms")),
                 None if c.group.contains("T10") => Some(Headline::measured(
                     format!("{figure}; a frame"),
                     format!("{}; {}", fmt(c.setup_ms + c.first_ms, 0, "ms"), fmt(c.frame_ms, 0, "ms")),

@@ -167,15 +167,8 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
         true,
         progress,
     )?;
-    let (quadratics, _, quadratic_reference_mesh) = assimilate(
-        &dir.join("reference-t10"),
-        young,
-        YOUNG_QUADRATIC_REFERENCE,
-        None,
-        iterations,
-        true,
-        progress,
-    )?;
+    let (quadratics, _, quadratic_reference_mesh) =
+        assimilate(&dir.join("reference-t10"), young, YOUNG_QUADRATIC_REFERENCE, None, iterations, true, progress)?;
     let (quadratic_models, _, _) = assimilate(
         &dir.join("model-t10"),
         young,

@@ -42,7 +42,13 @@ const HELD_OUT: [CaseLoad; 4] = [
 /// than the held-out suite's (`augsim experiment held-out`). With the design case and the held-out
 /// pushes above, they are the cases a network is chosen on.
 const BEYOND_PUSHES: [CaseLoad; 3] = [
-    CaseLoad { label: "1.5 N up, right lobe", force: 1.5, direction: [0.0, 0.0, 1.0], patch: Some(RIGHT_LOBE), seed: 15 },
+    CaseLoad {
+        label: "1.5 N up, right lobe",
+        force: 1.5,
+        direction: [0.0, 0.0, 1.0],
+        patch: Some(RIGHT_LOBE),
+        seed: 15,
+    },
     CaseLoad {
         label: "1.5 N drag along -y, left lobe front",
         force: 1.5,
@@ -208,7 +214,8 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     }
     for m in &per_method {
         let beyond: Vec<f64> = m.beyond.iter().map(|b| b.0).collect();
-        let every: Vec<f64> = std::iter::once(m.design.0).chain(m.means.iter().copied()).chain(beyond.clone()).collect();
+        let every: Vec<f64> =
+            std::iter::once(m.design.0).chain(m.means.iter().copied()).chain(beyond.clone()).collect();
         rows.push(Row::new(
             format!("registration, {}: TRE mean over the cases beyond pushes; over every case", m.method),
             format!(

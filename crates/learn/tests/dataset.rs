@@ -286,7 +286,8 @@ fn a_complete_dataset_grows_when_asked_for_more_samples() {
     // Fewer samples, or more of another spec, are no growth.
     let e = DatasetWriter::create_or_resume(grown.path(), counted_spec(10)).err().unwrap().to_string();
     assert!(e.contains("cannot resume"), "{e}");
-    let other = DatasetSpec { metadata: serde_json::json!({"dataset": {"samples": 20, "cone": 180.0}}), ..spec(3, None) };
+    let other =
+        DatasetSpec { metadata: serde_json::json!({"dataset": {"samples": 20, "cone": 180.0}}), ..spec(3, None) };
     let e = DatasetWriter::create_or_resume(grown.path(), other).err().unwrap().to_string();
     assert!(e.contains("cannot resume"), "{e}");
 }

@@ -369,7 +369,10 @@ mod tests {
         assert!(gap < 1e-15, "the pattern differs from the static patch force by {gap} N");
         // An unknown key, a missing total and a ball that misses the organ are named.
         let extra = text.replace("total = [0.0, 0.0, -0.3]", "total = [0.0, 0.0, -0.3]\ncentre = 1");
-        assert!(parse(&extra).is_err_and(|e| e.to_string().contains("unknown field `centre`")), "an unknown key passed");
+        assert!(
+            parse(&extra).is_err_and(|e| e.to_string().contains("unknown field `centre`")),
+            "an unknown key passed"
+        );
         let bad = text.replace("total = [0.0, 0.0, -0.3]", "totl = [0.0, 0.0, -0.3]");
         assert!(parse(&bad).is_err_and(|e| e.to_string().contains("missing field `total`")), "a misspelt key passed");
         let away = text.replace("phantom = \"push\"", "ball = { centre = [1.0, 1.0, 1.0], radius = 0.01 }");
