@@ -328,11 +328,11 @@ fn demo(args: &RegisterArgs) -> Result<()> {
     let (t, c, m) = (&scenario.truth, &scenario.camera, &scenario.misalignment);
     println!("case       {}: {}", scenario.name, scenario.description);
     println!(
-        "truth      {:?} phantom (E = {} kPa, nu = {}) of about {} T4, fixed on `{}`, {} N along {:?} on `{}`",
+        "truth      {:?} phantom (E = {} kPa, nu = {}) of {}, fixed on `{}`, {} N along {:?} on `{}`",
         t.material.law,
         t.material.young * 1e-3,
         t.material.poisson,
-        t.tets,
+        t.mesh_words(),
         t.fixed,
         t.force,
         t.direction,

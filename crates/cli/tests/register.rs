@@ -27,11 +27,11 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
     let methods: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
     assert_eq!(methods, ["FEM co-rotational (3k T4)", "FEM SVK (3k T4)", "U-Net"], "{text}");
     // The figures README.md states for the demo (mean / max TRE, mm), within 5 %.
-    for (s, stated) in rows.iter().zip([(2.20, 7.46), (2.52, 8.56), (1.23, 2.85)]) {
+    for (s, stated) in rows.iter().zip([(2.94, 9.47), (3.52, 11.52), (1.43, 5.54)]) {
         let (tre, max) = (s["tre_mean_mm"].as_f64().unwrap(), s["tre_max_mm"].as_f64().unwrap());
         let near = |value: f64, stated: f64| (value - stated).abs() <= 0.05 * stated;
         assert!(near(tre, stated.0) && near(max, stated.1), "TRE {tre} / {max} mm, README: {stated:?}\n{text}");
-        assert!((s["no_deformation_tre_mean_mm"].as_f64().unwrap() - 14.45).abs() < 0.05, "{s}");
+        assert!((s["no_deformation_tre_mean_mm"].as_f64().unwrap() - 18.13).abs() < 0.05, "{s}");
         assert!(s["surface_residual_mm"].as_f64().unwrap() < 3.0, "{s}");
     }
     let table = std::fs::read_to_string(out.join("comparison.csv")).unwrap();

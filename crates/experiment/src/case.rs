@@ -121,7 +121,7 @@ pub fn synthetic_case(scenario: &CaseScenario) -> Result<SyntheticCase> {
 }
 
 /// The built-in case ([`CaseScenario::builtin`]: the Neo-Hookean phantom, E = 5 kPa, ν = 0.48,
-/// F-bar, of about [`TRUTH_TETS`] tetrahedra, fixed between the lobes) with its `push` patch
+/// on quadratic tetrahedra built from about [`TRUTH_TETS`] tetrahedra, fixed between the lobes) with its `push` patch
 /// pressed down by `force` N, seen by `camera` from `seed`, without misalignment.
 pub fn phantom_push(force: f64, camera: &CameraModel, seed: u64) -> Result<SyntheticCase> {
     let mut scenario = CaseScenario::builtin();

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use crate::case::{case_methods, compare, synthetic_case, CaseLoad, Network, LEFT_LOBE_FRONT, RIGHT_LOBE, TRUTH_TETS};
+use crate::case::{case_methods, compare, synthetic_case, CaseLoad, Network, LEFT_LOBE_FRONT, RIGHT_LOBE};
 use crate::sample_view::sample_on_mesh;
 use anyhow::{Context, Result};
 use learn::{Compute, Corruption};
@@ -303,7 +303,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
                 t.timing()
             ),
             format!(
-                "Registration cases: register_case's truth ({:?} phantom of about {TRUTH_TETS} T4, \
+                "Registration cases: register_case's truth ({:?} phantom of {}, \
                  another mesh and law than the models) under the loads listed; its camera along {:?} sees \
                  {} points with {} noise and {:.0} % outliers. The registration figures beside the published ones \
                  are over the {} held-out cases only (a failed method is counted apart); the design case, with \
@@ -312,6 +312,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
                  on the mean over every case here, never on `augsim experiment held-out`. A failed case is NaN in \
                  that mean. Published: ex vivo human liver.",
                 builtin.truth.material.law,
+                builtin.truth.mesh_words(),
                 builtin.camera.view,
                 builtin.camera.points,
                 fmt(builtin.camera.noise * 1e3, 1, "mm"),

@@ -139,7 +139,7 @@ fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
 /// Runs the experiment: the co-rotational FEM (3k T4) and the shipped network, when found.
 pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let scenario = press_and_release();
-    progress(&format!("simulating the press and release ({FRAMES} frames, truth of about {} T4)", scenario.truth.tets));
+    progress(&format!("simulating the press and release ({FRAMES} frames, truth of {})", scenario.truth.mesh_words()));
     let case = synthetic_case(&scenario)?;
     let options = scenario.registration.clone();
     let mut streams = Vec::new();
@@ -192,12 +192,14 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     plot_stream(&dir.join(figure), &rest, &streams)?;
     let notes = vec![
         format!(
-            "Case: the built-in registration case's truth (Neo-Hookean phantom, E = 5 kPa, ν = 0.48, about {} T4) \
+            "Case: the built-in registration case's truth (Neo-Hookean phantom, E = 5 kPa, ν = 0.48, {}) \
              pressed obliquely along {:?} on the front of the left lobe by a force rising to {} N and falling back \
              over {FRAMES} frames (sine), each frame seen anew by the camera ({POINTS} points, 1 mm noise, 5 % \
              outliers); the models are another mesh (3k T4) and law. The stream's settings were chosen on the \
              built-in case's own press and release, not on this one.",
-            scenario.truth.tets, scenario.truth.direction, scenario.truth.force
+            scenario.truth.mesh_words(),
+            scenario.truth.direction,
+            scenario.truth.force
         ),
         format!(
             "Server in this process, client over TCP on this machine (OpenIGTLink POLYDATA in mm; answers: POINT \

@@ -6,7 +6,7 @@ use std::path::Path;
 use augsim_experiment as experiment;
 use experiment::case::{camera_model, case_methods, synthetic_case};
 use experiment::simulate::{simulate_cloud, CameraModel};
-use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
+use fem::{Formulation, Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::Point;
 use register::{Organ, RegistrationOptions, RigidTransform};
 use scenario::registration::MethodKind;
@@ -26,7 +26,10 @@ fn the_builtin_case_is_the_documented_one() {
         "the file is the built-in text"
     );
     assert_eq!((s.truth.tets, s.models.tets), (experiment::case::TRUTH_TETS, experiment::case::MODEL_TETS));
-    assert_eq!(s.truth.material, Material::new(Law::NeoHookean, 5000.0, 0.48));
+    assert_eq!(
+        s.truth.material,
+        Material::new(Law::NeoHookean, 5000.0, 0.48).with_order(2).with_formulation(Formulation::Standard)
+    );
     assert_eq!((s.truth.force, s.truth.direction), (1.5, [0.0, 0.0, -1.0]));
     assert_eq!((s.truth.fixed.as_str(), s.truth.load.as_str(), s.truth.targets.as_str()), ("fixed", "push", "markers"));
     assert_eq!(s.truth.patch, None);

@@ -86,6 +86,11 @@ fn is_one(n: &usize) -> bool {
 }
 
 impl TruthSpec {
+    /// Its mesh in words: "about 9000 T4", or "about 9000 T10" for quadratic tetrahedra.
+    pub fn mesh_words(&self) -> String {
+        format!("about {} {}", self.tets, if self.material.order == 2 { "T10" } else { "T4" })
+    }
+
     /// The force of each frame (N), in order ([`TruthSpec::frames`]).
     pub fn frame_forces(&self) -> Vec<f64> {
         let n = self.frames;
