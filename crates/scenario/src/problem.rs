@@ -148,7 +148,7 @@ pub struct PatchForce {
 impl PatchForce {
     /// The ball and the side of the boundary it loads: `facing`, else for the phantom's `push`
     /// the side its camera sees and for `hidden` the side away from it, else every side.
-    /// An error when the ball or the total is not finite.
+    /// An error when the total is not finite, or the ball is not given exactly once.
     pub fn place(&self) -> std::result::Result<(Ball, Option<Point>), String> {
         if !self.total.iter().all(|t| t.is_finite()) {
             return Err(format!("total {:?} must be finite", self.total));
