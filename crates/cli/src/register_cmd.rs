@@ -10,7 +10,7 @@ use experiment::setup::{fem_setup, network_setup, RegistrationSetup};
 use mesh::io::{write_atomic_bytes, Field};
 use mesh::Point;
 use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
-use register::{register_sequence, Organ, RegistrationOptions, RigidOptions, RigidResult, RigidTransform, Summary};
+use register::{register_sequence, Organ, RigidOptions, RigidResult, RigidTransform, Summary};
 use scenario::registration::{slug, MethodKind, BUILTIN_CASE};
 use serde::Serialize;
 
@@ -116,7 +116,8 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
     } else {
         bail!("give --fem SCENARIO or --model MODEL --scenario SCENARIO (or --demo)");
     };
-    let RegistrationSetup { organ, mut deformer, method, default_targets, options: defaults } = setup;
+    let options = setup.options_with(args.iterations, args.rigid);
+    let RegistrationSetup { organ, mut deformer, method, default_targets, .. } = setup;
     let targets = match &args.targets {
         Some(p) => read_targets(p)?,
         None => default_targets,
@@ -134,11 +135,6 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
             }
             Some(files.iter().map(|f| read_targets(f)).collect::<Result<Vec<_>, _>>()?)
         }
-    };
-    let options = RegistrationOptions {
-        iterations: args.iterations.unwrap_or(defaults.iterations),
-        rigid: args.rigid.then(RigidOptions::default),
-        ..defaults
     };
     println!("method     {method}");
     print_organ(&organ, targets.len());

@@ -7,8 +7,6 @@ use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 use live::{ClientRegistration, Outputs, ServeOptions};
-use register::rigid::RigidOptions;
-use register::RegistrationOptions;
 
 use experiment::setup::{fem_setup, network_setup, RegistrationSetup};
 
@@ -110,10 +108,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     if targets.is_empty() {
         bail!("no targets: give --targets, or a mesh with `markers` or `tumour` regions");
     }
-    let mut options = RegistrationOptions { rigid: args.rigid.then(RigidOptions::default), ..first.options.clone() };
-    if let Some(n) = args.iterations {
-        options.iterations = n;
-    }
+    let options = first.options_with(args.iterations, args.rigid);
     options.validate()?;
     println!("method     {}", first.method);
     println!("organ      {} nodes, {} targets", first.organ.mesh().num_nodes(), targets.len());

@@ -26,6 +26,18 @@ pub struct RegistrationSetup {
     pub options: RegistrationOptions,
 }
 
+impl RegistrationSetup {
+    /// Its registration settings with a caller's choices: most iterations from rest, when given, and
+    /// a rigid pre-alignment of the first cloud.
+    pub fn options_with(&self, iterations: Option<usize>, rigid: bool) -> RegistrationOptions {
+        RegistrationOptions {
+            iterations: iterations.unwrap_or(self.options.iterations),
+            rigid: rigid.then(register::RigidOptions::default),
+            ..self.options.clone()
+        }
+    }
+}
+
 /// FEM registration on the static scenario at `path` (a file or a built-in name): its mesh,
 /// material, fixed nodes and solver, pulled by springs of the default stiffness.
 pub fn fem_setup(path: &Path) -> Result<RegistrationSetup> {

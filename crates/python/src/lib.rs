@@ -22,7 +22,6 @@ use numpy::{AllowTypeChange, IntoPyArray, PyArray2, PyArray3, PyArrayDyn, PyArra
 use pyo3::create_exception;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use register::RegistrationOptions;
 use scenario::{AssimilationScenario, StaticScenario};
 
 create_exception!(
@@ -227,11 +226,7 @@ impl Registration {
                 Ok(fem) => fem_setup(&fem)?,
                 Err((model, scenario)) => network_setup(&TrainedModel::json_path(&model), &scenario)?,
             };
-            let mut options =
-                RegistrationOptions { rigid: rigid.then(register::RigidOptions::default), ..setup.options.clone() };
-            if let Some(n) = iterations {
-                options.iterations = n;
-            }
+            let options = setup.options_with(iterations, rigid);
             options.validate()?;
             let targets = match given {
                 None => setup.default_targets,
