@@ -11,12 +11,13 @@ use anyhow::{Context, Result};
 use fem::{Formulation, Law, Material};
 use learn::TrainedModel;
 use mesh::stats::{max, mean, median};
-use scenario::registration::MethodKind;
+use scenario::registration::{MethodKind, MethodSpec};
 use scenario::CaseScenario;
 use serde::Serialize;
 
 use crate::case::{
-    ar_scenario, case_methods, compare, synthetic_case, CaseLoad, Network, LEFT_LOBE_FRONT, RIGHT_LOBE, SHIPPED_MODEL,
+    ar_scenario, case_methods, compare, network_options, synthetic_case, CaseLoad, Network, LEFT_LOBE_FRONT,
+    RIGHT_LOBE, SHIPPED_MODEL,
 };
 use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 
@@ -92,16 +93,19 @@ fn base_case() -> Result<CaseScenario> {
     scenario.truth.material =
         Material { order: 2, formulation: Formulation::Standard, ..Material::new(Law::NeoHookean, 4500.0, 0.49) };
     scenario.camera.points = POINTS;
-    let corotational = scenario
+    let corotational = corotational(&scenario).cloned().context("the built-in case has no co-rotational FEM method")?;
+    let network = scenario.models.method.iter().find(|m| m.kind == MethodKind::Network).cloned();
+    scenario.models.method = std::iter::once(corotational).chain(network).collect();
+    Ok(scenario)
+}
+
+/// The co-rotational FEM method of `scenario`.
+fn corotational(scenario: &CaseScenario) -> Option<&MethodSpec> {
+    scenario
         .models
         .method
         .iter()
         .find(|m| m.kind == MethodKind::Fem && m.material.is_some_and(|m| m.law == Law::Corotational))
-        .cloned()
-        .context("the built-in case has no co-rotational FEM method")?;
-    let network = scenario.models.method.iter().find(|m| m.kind == MethodKind::Network).cloned();
-    scenario.models.method = std::iter::once(corotational).chain(network).collect();
-    Ok(scenario)
 }
 
 /// Runs the experiment; quick: the median of 3 runs per frame time, paper: of 10.
@@ -206,22 +210,29 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
     if network.is_none() {
         summary.push(Row::new("U-Net", format!("skipped: {SHIPPED_MODEL} not found (run from the repository)"), ""));
     }
+    let fem = corotational(&base).and_then(|m| m.material).context("the held-out cases have no co-rotational FEM")?;
     let notes = vec![
         format!(
-            "Truth: the built-in registration case's phantom on about {} T10 (quadratic tetrahedra), Neo-Hookean, \
-             E = 4.5 kPa, ν = 0.49: another mesh, element, law and stiffness than every model; fixed between the \
+            "Truth: the built-in registration case's phantom of {} (quadratic tetrahedra), {:?}, \
+             E = {} kPa, ν = {}: another mesh, element, law and stiffness than every model; fixed between the \
              lobes; one tool force per case as listed. Camera along {:?}: {POINTS} points, {} noise, {:.0} % \
              outliers; no correspondences. None of these cases played a part in choosing a setting.",
-            base.truth.tets,
+            base.truth.mesh_words(),
+            base.truth.material.law,
+            base.truth.material.young * 1e-3,
+            base.truth.material.poisson,
             base.camera.view,
             fmt(base.camera.noise * 1e3, 1, "mm"),
             100.0 * base.camera.outliers
         ),
         format!(
-            "Methods: the co-rotational FEM (3k T4, E = 5 kPa, ν = 0.48) and the shipped network ({SHIPPED_MODEL}, \
-             at most {} iterations); each registers each case from rest. Time per frame: the median of {runs} runs with fresh methods, correspondence search included; \
-             one machine, only as quiet as it was.",
-            base.models.method.iter().find(|m| m.kind == MethodKind::Network).and_then(|m| m.iterations).unwrap_or(0)
+            "Methods: the co-rotational FEM ({} T4, E = {} kPa, ν = {}) and the shipped network ({SHIPPED_MODEL}, \
+             at most {} iterations); each registers each case from rest. Time per frame: the median of {runs} runs \
+             with fresh methods, correspondence search included; one machine, only as quiet as it was.",
+            base.models.tets,
+            fem.young * 1e-3,
+            fem.poisson,
+            network_options(&base)?.iterations
         ),
     ];
     let mut values = serde_json::Map::new();

@@ -39,8 +39,15 @@ impl Phantom {
     }
 }
 
-/// Identification without inverse crime: synthetic tracks from the shipped scenario run on the `reference_phantom`
-/// (`dir/reference-tracks`, reused when a completed earlier run with the same scenario, phantom and executable left
+/// The reference run behind a filter's observations: its phantom, and the directory of its tracks (shared by
+/// every filter run that observes the same phantom).
+struct Reference<'a> {
+    phantom: Phantom,
+    tracks: &'a Path,
+}
+
+/// Identification without inverse crime: synthetic tracks from the shipped scenario run on the `reference` phantom
+/// (in its tracks directory, reused when a completed earlier run with the same scenario, phantom and executable left
 /// them there), then the filter on the scenario's own mesh (or the `model` phantom) fed those tracks (`dir/run`)
 /// and, with `discrepancy`, again with a systematic model-discrepancy allowance (`dir/run-discrepancy`);
 /// `iterations` overrides the scenario's. Returns the reports (plain, then with the allowance), the model's setup
@@ -48,7 +55,7 @@ impl Phantom {
 fn assimilate(
     dir: &Path,
     name: &str,
-    reference_phantom: Phantom,
+    reference: &Reference,
     model: Option<Phantom>,
     iterations: Option<usize>,
     discrepancy: bool,
@@ -65,10 +72,11 @@ fn assimilate(
         scenario.material.order = model.order;
     }
     let law = scenario.reference.as_ref().and_then(|r| r.law);
+    let reference_phantom = reference.phantom;
     let (reference_tets, order) = (reference_phantom.tets, Some(reference_phantom.order));
+    let tracks = reference.tracks;
     scenario.reference = Some(ReferenceSpec { mesh: MeshSource::Phantom { tets: reference_tets }, law, order });
     let reference = scenario.reference_scenario().context("the reference section was just set")?;
-    let tracks = dir.join("reference-tracks");
     let stamp = tracks.join("complete.txt");
     // The reference mesh's own cell count (the mesher reaches about the requested size).
     let cells_file = tracks.join("reference_cells.txt");
@@ -92,7 +100,7 @@ fn assimilate(
             _ => {}
         }
         let run = Experiment::prepare(reference, &scenario_dir, None)?;
-        run.write_tracks(&tracks)?;
+        run.write_tracks(tracks)?;
         mesh::io::write_atomic_bytes(&cells_file, run.setup().cells.to_string().as_bytes())?;
         mesh::io::write_atomic_bytes(&stamp, key.as_bytes())?;
     }
@@ -156,28 +164,25 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
         Size::Paper => None,
     };
     let young = "roukf_young";
-    let (reports, setup, reference_mesh) =
-        assimilate(dir, young, Phantom::linear(YOUNG_REFERENCE_TETS), None, iterations, true, progress)?;
-    let (fines, _, fine_reference_mesh) = assimilate(
-        &dir.join(format!("model-{YOUNG_PUBLISHED_MODEL_TETS}")),
-        young,
-        Phantom::linear(YOUNG_PUBLISHED_REFERENCE_TETS),
-        Some(Phantom::linear(YOUNG_PUBLISHED_MODEL_TETS)),
-        iterations,
-        true,
-        progress,
-    )?;
+    let reference = Reference { phantom: Phantom::linear(YOUNG_REFERENCE_TETS), tracks: &dir.join("reference-tracks") };
+    let (reports, setup, reference_mesh) = assimilate(dir, young, &reference, None, iterations, true, progress)?;
+    let fine_dir = dir.join(format!("model-{YOUNG_PUBLISHED_MODEL_TETS}"));
+    let fine_reference = Reference {
+        phantom: Phantom::linear(YOUNG_PUBLISHED_REFERENCE_TETS),
+        tracks: &fine_dir.join("reference-tracks"),
+    };
+    let model = Some(Phantom::linear(YOUNG_PUBLISHED_MODEL_TETS));
+    let (fines, _, fine_reference_mesh) =
+        assimilate(&fine_dir, young, &fine_reference, model, iterations, true, progress)?;
+    // One quadratic reference run, observed by the linear model and by the quadratic one.
+    let quadratic_dir = dir.join("reference-t10");
+    let quadratic_reference =
+        Reference { phantom: YOUNG_QUADRATIC_REFERENCE, tracks: &quadratic_dir.join("reference-tracks") };
     let (quadratics, _, quadratic_reference_mesh) =
-        assimilate(&dir.join("reference-t10"), young, YOUNG_QUADRATIC_REFERENCE, None, iterations, true, progress)?;
-    let (quadratic_models, _, _) = assimilate(
-        &dir.join("model-t10"),
-        young,
-        YOUNG_QUADRATIC_REFERENCE,
-        Some(YOUNG_QUADRATIC_MODEL),
-        iterations,
-        true,
-        progress,
-    )?;
+        assimilate(&quadratic_dir, young, &quadratic_reference, None, iterations, true, progress)?;
+    let model = Some(YOUNG_QUADRATIC_MODEL);
+    let (quadratic_models, _, _) =
+        assimilate(&dir.join("model-t10"), young, &quadratic_reference, model, iterations, true, progress)?;
     let (report, honest) = (&reports[0], &reports[1]);
     let (fine, fine_honest) = (&fines[0], &fines[1]);
     let (quadratic, quadratic_honest) = (&quadratics[0], &quadratics[1]);
@@ -311,8 +316,8 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
 
 /// The ROUKF boundary springs experiment (the scenario's 300 iterations at both sizes: it takes seconds).
 pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
-    let (reports, setup, reference_mesh) =
-        assimilate(dir, "roukf_springs", SPRINGS_REFERENCE, None, None, false, progress)?;
+    let reference = Reference { phantom: SPRINGS_REFERENCE, tracks: &dir.join("reference-tracks") };
+    let (reports, setup, reference_mesh) = assimilate(dir, "roukf_springs", &reference, None, None, false, progress)?;
     let report = &reports[0];
     let error = |label: &str| {
         report

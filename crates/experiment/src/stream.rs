@@ -142,6 +142,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     progress(&format!("simulating the press and release ({FRAMES} frames, truth of {})", scenario.truth.mesh_words()));
     let case = synthetic_case(&scenario)?;
     let options = scenario.registration.clone();
+    let budgets = network_options(&scenario)?;
     let mut streams = Vec::new();
     progress("streaming to the co-rotational FEM");
     streams.push(stream_case("FEM co-rotational (3k T4), warm-started", &case, &options, corotational_model)?);
@@ -150,9 +151,8 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     if network_found {
         progress("streaming to the shipped network");
         let model = Arc::new(learn::TrainedModel::load(model_path, &learn::inference_device())?);
-        let network_options = network_options(&scenario)?;
         let make = move || ar_network_model(&model);
-        streams.push(stream_case("U-Net (models/liver_ar)", &case, &network_options, make)?);
+        streams.push(stream_case("U-Net (models/liver_ar)", &case, &budgets, make)?);
     }
     let rest: Vec<f64> =
         case.frames.iter().map(|f| mean(&register::target_errors(&case.targets, &f.truth)) * 1e3).collect();
@@ -192,11 +192,14 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     plot_stream(&dir.join(figure), &rest, &streams)?;
     let notes = vec![
         format!(
-            "Case: the built-in registration case's truth (Neo-Hookean phantom, E = 5 kPa, ν = 0.48, {}) \
+            "Case: the built-in registration case's truth ({:?} phantom, E = {} kPa, ν = {}, {}) \
              pressed obliquely along {:?} on the front of the left lobe by a force rising to {} N and falling back \
              over {FRAMES} frames (sine), each frame seen anew by the camera ({POINTS} points, 1 mm noise, 5 % \
              outliers); the models are another mesh (3k T4) and law. The stream's settings were chosen on the \
              built-in case's own press and release, not on this one.",
+            scenario.truth.material.law,
+            scenario.truth.material.young * 1e-3,
+            scenario.truth.material.poisson,
             scenario.truth.mesh_words(),
             scenario.truth.direction,
             scenario.truth.force
@@ -206,10 +209,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
              targets and STRING status). Each cloud is sent when the previous one is answered. A frame warm-started \
              from the previous one runs at most {} iterations for the FEM and {} for the network (the first frame, \
              from rest, up to {} and {}: the registration case's budgets).",
-            options.warm_iterations,
-            network_options(&scenario)?.warm_iterations,
-            options.iterations,
-            network_options(&scenario)?.iterations,
+            options.warm_iterations, budgets.warm_iterations, options.iterations, budgets.iterations,
         ),
         "Timings: one run on this machine; the figures are only as quiet as the machine was.".to_string(),
     ];
