@@ -1,6 +1,6 @@
 //! How far the U-Net registration of a case is from what its network can do. Three figures:
-//! - the shipped network given the *true* normal motion of its input nodes (the truth's
-//!   displacement at the network mesh's nodes): the best any matching loop could give it;
+//! - the shipped network given the *true* normal motion of its input nodes (the motion of the
+//!   truth's surface point nearest to each): the best any matching loop could give it;
 //! - the loop's surface fit computed on the *true* deformed surface: whether the truth is a
 //!   fixed point of matching and fitting;
 //! - the registration loop itself.
@@ -10,9 +10,8 @@
 
 use std::path::Path;
 
-use augsim_experiment::case::{ar_network_model, synthetic_case};
-use learn::data::generate::normal_part;
-use learn::{encode_points, GridToMesh, Predictor, TrainedModel};
+use augsim_experiment::case::{ar_network_model, ar_scenario, network_from_truth, synthetic_case, Network};
+use learn::TrainedModel;
 use mesh::Point;
 use register::{observe, register_frame, target_errors, RigidTransform};
 use scenario::CaseScenario;
@@ -65,16 +64,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("truth on the network's mesh            TRE {mean:.2} / {max:.2} mm (interpolation alone)");
 
     // The network given the true normal motion of its input nodes.
-    let visible = mesh.region("visible")?.to_vec();
-    let normals = mesh.surface_normals();
-    let points: Vec<Point> = visible.iter().map(|&n| mesh.nodes[n]).collect();
-    let along: Vec<Point> = visible.iter().map(|&n| normal_part(&truth_u[3 * n..3 * n + 3], normals[n])).collect();
-    let grid = model.placed_grid()?;
-    let prediction =
-        Predictor::new(&model, learn::Compute::Cpu)?.predict(&encode_points(&grid, &points, &along, false)?)?;
-    let (mean, max) = tre(&GridToMesh::new(&mesh, &grid)?.apply(&prediction)?);
+    let network = Network { model: &model, scenario: &ar_scenario(), dir: Path::new("") };
+    let errors = network_from_truth(&case, &network)?;
+    let (mean, max) = (1e3 * mesh::stats::mean(&errors), 1e3 * mesh::stats::max(&errors));
     println!("network, true normal motion in         TRE {mean:.2} / {max:.2} mm");
 
+    let visible = mesh.region("visible")?.to_vec();
+    let normals = mesh.surface_normals();
     // The loop's fit on the true deformed surface, against the true normal motion.
     let options = &scenario.registration;
     let view = options.view.or(Some(scenario.camera.view));

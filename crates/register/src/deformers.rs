@@ -140,6 +140,10 @@ pub struct NetworkDeformer {
     /// For a network of normal motion: the outward unit normal of the rest surface at each
     /// input node.
     normals: Option<Vec<mesh::Point>>,
+    /// Whether the network was trained on part of its input nodes (a sparsity corruption): it
+    /// then takes the input nodes the cloud observes, the others absent, rather than the
+    /// surface fit's extrapolation to them.
+    partial: bool,
 }
 
 /// Weight of the membrane penalty, relative to a matched cloud point's. Chosen on the design
@@ -216,6 +220,7 @@ impl NetworkDeformer {
             points: input_nodes.iter().map(|&n| mesh.nodes[n]).collect(),
             edges,
             normals,
+            partial: model.training.as_ref().is_some_and(|t| t.corruption.sparsity.is_some()),
         })
     }
 
@@ -291,6 +296,54 @@ impl NetworkDeformer {
         x.truncate(self.inputs.len());
         x
     }
+
+    /// The input nodes' rest positions, in the order of [`NetworkDeformer::predict`]'s surface.
+    pub fn input_points(&self) -> &[mesh::Point] {
+        &self.points
+    }
+
+    /// The network's displacement of the organ (3 per mesh node) from the displacement of its
+    /// input nodes: along their normals only for a network of normal motion; a network of the
+    /// full displacement keeps `surface` at its input nodes.
+    pub fn predict(&self, surface: &[[f64; 3]]) -> Result<Vec<f64>> {
+        self.predict_seen(surface, None)
+    }
+
+    /// [`NetworkDeformer::predict`] from the input nodes marked in `seen` only (all: `None`).
+    fn predict_seen(&self, surface: &[[f64; 3]], seen: Option<&[bool]>) -> Result<Vec<f64>> {
+        if surface.len() != self.inputs.len() {
+            return Err(RegisterError::Invalid(format!(
+                "{} input displacements for {} input nodes",
+                surface.len(),
+                self.inputs.len()
+            )));
+        }
+        let kept: Vec<usize> = (0..surface.len()).filter(|&i| seen.is_none_or(|s| s[i])).collect();
+        let points: Vec<mesh::Point> = kept.iter().map(|&i| self.points[i]).collect();
+        let values: Vec<mesh::Point> = match &self.normals {
+            Some(normals) => kept.iter().map(|&i| normal_part(&surface[i], normals[i])).collect(),
+            None => kept.iter().map(|&i| surface[i]).collect(),
+        };
+        let input = encode_points(&self.grid, &points, &values, false)?;
+        let mut u = self.to_mesh.apply(&self.predictor.predict(&input)?)?;
+        if self.normals.is_none() {
+            for (&n, s) in self.inputs.iter().zip(surface) {
+                u[3 * n..3 * n + 3].copy_from_slice(s);
+            }
+        }
+        Ok(u)
+    }
+
+    /// Which input nodes a match of `observations` moves.
+    fn observed_inputs(&self, observations: &Observations) -> Vec<bool> {
+        let mut seen = vec![false; self.inputs.len()];
+        for &(n, w) in observations.matches.iter().flat_map(|m| &m.stencil.0) {
+            if let Some(s) = seen.get_mut(self.local[n]).filter(|_| w > 0.0) {
+                *s = true;
+            }
+        }
+        seen
+    }
 }
 
 /// A match in the surface fit: its interpolation weights on the unknowns and its shift.
@@ -355,20 +408,9 @@ impl Deformer for NetworkDeformer {
             return Err(RegisterError::Invalid("no cloud point matches the network's input surface".into()));
         }
         let surface = self.surface_estimate(observations, previous);
-        match &self.normals {
-            Some(normals) => {
-                let along: Vec<mesh::Point> = surface.iter().zip(normals).map(|(s, &n)| normal_part(s, n)).collect();
-                let input = encode_points(&self.grid, &self.points, &along, false)?;
-                Ok(self.to_mesh.apply(&self.predictor.predict(&input)?)?)
-            }
-            None => {
-                let input = encode_points(&self.grid, &self.points, &surface, false)?;
-                let mut u = self.to_mesh.apply(&self.predictor.predict(&input)?)?;
-                for (&n, s) in self.inputs.iter().zip(&surface) {
-                    u[3 * n..3 * n + 3].copy_from_slice(s);
-                }
-                Ok(u)
-            }
+        match self.partial {
+            true => self.predict_seen(&surface, Some(&self.observed_inputs(observations))),
+            false => self.predict(&surface),
         }
     }
 }
@@ -466,5 +508,31 @@ mod tests {
         assert!(truth < -0.015, "the dent reaches a visible node: {truth}");
         assert!((fitted - truth).abs() < 0.05 * truth.abs(), "fit {fitted} against {truth}");
         assert!((fitted - truth).abs() < 0.5 * (mean - truth).abs(), "fit {fitted}, mean offset {mean}, truth {truth}");
+    }
+
+    /// Input nodes left out of `seen` are absent from a partial prediction: moving one of them
+    /// changes nothing, moving a seen one changes the organ's displacement.
+    #[test]
+    fn a_partial_prediction_takes_the_seen_input_nodes_only() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
+        let model = TrainedModel::load(std::path::Path::new(path), &learn::inference_device()).unwrap();
+        let phantom = mesh::phantom::liver_phantom(3000).unwrap();
+        let visible = phantom.region("visible").unwrap().to_vec();
+        let organ = Organ::new(phantom, None).unwrap();
+        let deformer = NetworkDeformer::new(&model, &organ, &visible, true).unwrap();
+        // The left half of the visible surface is seen; every input node pushed 1 cm down.
+        let seen: Vec<bool> = deformer.points.iter().map(|p| p[0] < 0.0).collect();
+        let (a, b) = (seen.iter().position(|&s| s).unwrap(), seen.iter().position(|&s| !s).unwrap());
+        let surface = vec![[0.0, 0.0, -0.01]; visible.len()];
+        let base = deformer.predict_seen(&surface, Some(&seen)).unwrap();
+        let moved = |i: usize| {
+            let mut s = surface.clone();
+            s[i] = [0.0, 0.0, -0.03];
+            deformer.predict_seen(&s, Some(&seen)).unwrap()
+        };
+        assert_eq!(moved(b), base, "an unseen input node changed the prediction");
+        let change = moved(a).iter().zip(&base).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+        assert!(change > 1e-5, "a seen input node moved 2 cm changed the prediction by {change} m only");
+        assert_ne!(deformer.predict(&surface).unwrap(), base, "the whole input and its left half predict the same");
     }
 }

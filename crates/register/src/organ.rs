@@ -1,8 +1,10 @@
 //! The preoperative organ: a volumetric mesh and its surface embedded in it.
 
+use mesh::bvh::SurfaceBvh;
 use mesh::embedding::MeshLocator;
 use mesh::{Mesh, Point, TriSurface};
 
+use crate::register::barycentric;
 use crate::{RegisterError, Result};
 
 /// Interpolation weights below this are rounding errors (see [`Stencil`]'s constructor).
@@ -98,6 +100,27 @@ impl Organ {
         }
     }
 
+    /// The displacement `u` (3 per mesh node) at the points of the rest surface nearest to
+    /// `points`: of another discretisation of the same organ, e.g. a model's surface nodes on a
+    /// truth's finer surface.
+    pub fn surface_displacement_at(&self, u: &[f64], points: &[Point]) -> Result<Vec<Point>> {
+        let surface = &self.surface;
+        let bvh = SurfaceBvh::new(surface)?;
+        let moved = displaced(&surface.vertices, &self.stencils, u);
+        Ok(points
+            .iter()
+            .map(|&p| {
+                let closest = bvh.closest_point(p);
+                let triangle = surface.triangles[closest.triangle];
+                let corners = triangle.map(|k| surface.vertices[k]);
+                let weights = barycentric(corners, closest.point);
+                std::array::from_fn(|d| {
+                    (0..3).map(|c| weights[c] * (moved[triangle[c]][d] - corners[c][d])).sum::<f64>()
+                })
+            })
+            .collect())
+    }
+
     /// Stencils of points inside the organ (e.g. targets); a point outside is an error naming it.
     pub fn locate(&self, points: &[Point], what: &str) -> Result<Vec<Stencil>> {
         points
@@ -122,4 +145,31 @@ pub fn displaced(rest: &[Point], stencils: &[Stencil], u: &[f64]) -> Vec<Point> 
             [p[0] + d[0], p[1] + d[1], p[2] + d[2]]
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A linear displacement field is linear on each flat surface triangle: read at the surface
+    /// nodes of a finer mesh of the same box, it is the field itself there, and a point off the
+    /// surface takes the value at its nearest surface point.
+    #[test]
+    fn the_surface_displacement_of_a_linear_field_is_exact_at_another_meshes_surface() {
+        let (lo, hi) = ([0.0, 0.0, 0.0], [0.04, 0.02, 0.01]);
+        let organ = Organ::new(mesh::generate::box_tet(lo, hi, [4, 2, 1]).unwrap(), None).unwrap();
+        let field = |p: Point| [0.1 * p[0] + 0.02 * p[2], -0.05 * p[1], 0.03 * p[0] + 0.2 * p[1] - 0.1 * p[2]];
+        let u: Vec<f64> = organ.mesh().nodes.iter().flat_map(|&p| field(p)).collect();
+        let finer = mesh::generate::box_tet(lo, hi, [7, 5, 3]).unwrap();
+        let points: Vec<Point> = finer.surface_nodes().iter().map(|&n| finer.nodes[n]).collect();
+        let got = organ.surface_displacement_at(&u, &points).unwrap();
+        for (p, g) in points.iter().zip(&got) {
+            let want = field(*p);
+            assert!((0..3).all(|d| (g[d] - want[d]).abs() < 1e-12), "at {p:?}: {g:?} against {want:?}");
+        }
+        // 5 mm above the top face, over its interior: the value on the face below.
+        let above = organ.surface_displacement_at(&u, &[[0.015, 0.007, 0.015]]).unwrap()[0];
+        let below = field([0.015, 0.007, 0.01]);
+        assert!((0..3).all(|d| (above[d] - below[d]).abs() < 1e-12), "{above:?} against {below:?}");
+    }
 }

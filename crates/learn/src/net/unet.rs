@@ -17,6 +17,8 @@ use burn::tensor::activation::relu;
 use burn::tensor::ops::PadMode;
 use burn::tensor::{Device, Tensor, TensorData};
 use mesh::io::write_atomic_bytes;
+
+use crate::data::corrupt::Corruption;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
@@ -362,6 +364,10 @@ pub struct TrainingInfo {
     pub fine_tuned_from: Option<String>,
     /// Whether the encoder was frozen.
     pub frozen_encoder: bool,
+    /// The corruption of its training inputs: with a sparsity, the network learned to take part
+    /// of its input nodes, the others absent.
+    #[serde(default)]
+    pub corruption: Corruption,
     /// The samples of this run: training, validation (checkpoint selection) and test.
     #[serde(default)]
     pub split: Split,

@@ -657,6 +657,7 @@ pub fn train(
             seed: config.seed,
             fine_tuned_from: start.fine_tuned_from,
             frozen_encoder: start.freeze,
+            corruption: config.train_corruption.clone(),
             split,
             pretraining: start.pretraining,
         }),
