@@ -258,12 +258,19 @@ fn mean_displacement(samples: &Samples) -> f64 {
     sum / count.max(1) as f64
 }
 
-fn split_note(t: &Trained, samples: usize) -> String {
+fn split_note(t: &Trained, data: &Generated) -> String {
     let [train, validation, test] = t.split;
     let timing = t.timing();
+    let manifest = data.dataset.manifest();
+    let drawn = manifest.num_samples + manifest.failed.len();
+    let failed = match manifest.failed.len() {
+        0 => String::new(),
+        n => format!(" ({n} of {drawn} draws without a solution, left out)"),
+    };
     format!(
-        "{samples} samples generated: {train} training, {validation} validation (checkpoint selection{}), \
+        "{} samples generated{failed}: {train} training, {validation} validation (checkpoint selection{}), \
          {test} test (every figure above); {timing}.",
+        manifest.num_samples,
         t.best_validation_step().map_or(String::new(), |it| format!(", best at step {it}")),
     )
 }
@@ -329,7 +336,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
         figures: vec![format!("{}/{}", model_dir(&recipe), crate::curve::CURVE_PNG), "errors.png".into()],
         page_figures: Vec::new(),
         notes: vec![
-            split_note(&t, samples),
+            split_note(&t, &data),
             format!(
                 "{} Neo-Hookean because SVK passes its compressive limit point under these loads; the largest \
                  displacement of our test set is in the table.",
@@ -385,7 +392,7 @@ pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<
         figures: vec![format!("{}/{}", model_dir(&recipe), crate::curve::CURVE_PNG), "errors.png".into()],
         page_figures: Vec::new(),
         notes: vec![
-            split_note(&t, samples),
+            split_note(&t, &data),
             format!("{} Noise is added to the visible inputs at evaluation only.", data.note()),
         ],
         values,
