@@ -254,6 +254,7 @@ def model_json(args, manifest, config, scales, best, split):
             "seed": args.seed,
             "fine_tuned_from": None,
             "frozen_encoder": False,
+            "corruption": {"sparsity": None, "noise_std": 0.0},  # trained on clean, whole inputs
             "split": split["record"],
         },
     }
