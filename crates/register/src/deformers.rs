@@ -408,9 +408,10 @@ impl Deformer for NetworkDeformer {
             return Err(RegisterError::Invalid("no cloud point matches the network's input surface".into()));
         }
         let surface = self.surface_estimate(observations, previous);
-        match self.partial {
-            true => self.predict_seen(&surface, Some(&self.observed_inputs(observations))),
-            false => self.predict(&surface),
+        if self.partial {
+            self.predict_seen(&surface, Some(&self.observed_inputs(observations)))
+        } else {
+            self.predict(&surface)
         }
     }
 }
