@@ -33,8 +33,9 @@ impl Generated {
             }
             _ => String::new(),
         };
+        let order = if m.order == 2 { " quadratic (T10)" } else { "" };
         format!(
-            "Data: {}.toml, {} ({:?}, E = {} Pa, ν = {}, {:?} elements){sparse}.",
+            "Data: {}.toml, {} ({:?}, E = {} Pa, ν = {}, {:?}{order} elements){sparse}.",
             s.name,
             s.description,
             m.law,
