@@ -10,7 +10,7 @@ is answered and reads the registered targets (POINT) and the status (STRING JSON
 frame is answered in order with a target registration error well below the unregistered one, that
 a cloud with a NaN gets an error status while the stream goes on, and prints the latency (send to
 status, median and p95), the sustained frame rate and the TRE per frame. AUGSIM_STREAM=full
-streams the built-in `register_case` (truth of 9,000 T4 made quadratic, T10) to a 3,000-T4 model instead. With
+streams the built-in `register_case` (truth of about 9,000 T10) to a 3,000-T4 model instead. With
 `--rigid`, the peak frame's cloud moved by a few centimetres comes back as a TRANSFORM `rigid` and
 targets in the cloud's frame.
 
@@ -34,7 +34,7 @@ import pyigtl
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_augsim_unet import augsim_bin  # noqa: E402  (needs no torch)
 # The stream: a press and release of FRAMES frames. By default the small test case on an 800-T4
-# model (seconds, in CI); AUGSIM_STREAM=full streams the built-in case (truth of 9,000 T10, 1,500
+# model (seconds, in CI); AUGSIM_STREAM=full streams the built-in case (truth of about 9,000 T10, 1,500
 # points per cloud) to a 3,000-T4 model.
 FRAMES = 40
 FULL = os.environ.get("AUGSIM_STREAM") == "full"

@@ -10,7 +10,7 @@
 
 use std::path::Path;
 
-use augsim_experiment::case::{ar_network_model, ar_scenario, network_from_truth, synthetic_case, Network};
+use augsim_experiment::case::{ar_network_model, network_from_truth, synthetic_case};
 use learn::TrainedModel;
 use mesh::Point;
 use register::{observe, register_frame, target_errors, RigidTransform};
@@ -64,8 +64,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("truth on the network's mesh            TRE {mean:.2} / {max:.2} mm (interpolation alone)");
 
     // The network given the true normal motion of its input nodes.
-    let network = Network { model: &model, scenario: &ar_scenario(), dir: Path::new("") };
-    let errors = network_from_truth(&case, &network)?;
+    let errors = network_from_truth(&case, &organ, &deformer)?;
     let (mean, max) = (1e3 * mesh::stats::mean(&errors), 1e3 * mesh::stats::max(&errors));
     println!("network, true normal motion in         TRE {mean:.2} / {max:.2} mm");
 

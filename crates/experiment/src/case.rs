@@ -252,14 +252,14 @@ pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
     Ok((organ, deformer))
 }
 
-/// The target errors (m) of `network` fed the truth's own motion of its input nodes at the
-/// case's peak frame, without a cloud: the network's error alone, apart from the surface fit's
-/// (the input nodes take the motion of the truth's surface point nearest to them).
-pub fn network_from_truth(case: &SyntheticCase, network: &Network) -> Result<Vec<f64>> {
-    let (organ, deformer) = network_model(network)?;
+/// The target errors (m) of a network model ([`network_model`]: its organ and deformer) fed the
+/// truth's own motion of its input nodes at the case's peak frame, without a cloud: the
+/// network's error alone, apart from the surface fit's (the input nodes take the motion of the
+/// truth's surface point nearest to them).
+pub fn network_from_truth(case: &SyntheticCase, organ: &Organ, network: &NetworkDeformer) -> Result<Vec<f64>> {
     let peak = case.peak();
-    let motion = case.truth_organ.surface_displacement_at(&peak.truth_u, deformer.input_points())?;
-    let u = deformer.predict(&motion)?;
+    let motion = case.truth_organ.surface_displacement_at(&peak.truth_u, network.input_points())?;
+    let u = network.predict(&motion)?;
     let stencils = organ.locate(&case.targets, "target")?;
     let moved: Vec<Point> =
         register::organ::displaced(&case.targets, &stencils, &u).into_iter().map(|p| case.pose.apply(p)).collect();

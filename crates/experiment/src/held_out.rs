@@ -16,8 +16,8 @@ use scenario::CaseScenario;
 use serde::Serialize;
 
 use crate::case::{
-    ar_scenario, case_methods, compare, network_from_truth, network_options, synthetic_case, CaseLoad, Network,
-    LEFT_LOBE_FRONT, RIGHT_LOBE, SHIPPED_MODEL,
+    ar_scenario, case_methods, compare, network_from_truth, network_model, network_options, synthetic_case, CaseLoad,
+    Network, LEFT_LOBE_FRONT, RIGHT_LOBE, SHIPPED_MODEL,
 };
 use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 
@@ -122,6 +122,8 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
     };
     let network_scenario = ar_scenario();
     let network = model.as_ref().map(|m| Network { model: m, scenario: &network_scenario, dir: Path::new("") });
+    // The network model the truth's surface motion is fed to (the diagnostic row).
+    let oracle = network.as_ref().map(network_model).transpose()?;
     let methods: Vec<String> = base
         .models
         .method
@@ -166,8 +168,8 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
                 (_, _, e) => format!("{method}: failed ({})", e.as_deref().unwrap_or("no TRE")),
             })
             .collect();
-        if let Some(network) = &network {
-            let errors = network_from_truth(&synthetic, network)?;
+        if let Some((organ, deformer)) = &oracle {
+            let errors = network_from_truth(&synthetic, organ, deformer)?;
             let (m, x) = (mean(&errors) * 1e3, max(&errors) * 1e3);
             cells.push(format!("U-Net fed the truth's surface motion {} / {}", fmt(m, 2, "mm"), fmt(x, 1, "mm")));
             from_truth.push((m, x));

@@ -2,9 +2,7 @@
 //! mesh with another law (no inverse crime): the hidden markers must be recovered.
 
 use augsim_experiment as experiment;
-use experiment::case::{
-    ar_network_model, ar_scenario, compare, corotational_model, network_from_truth, phantom_push, Method, Network,
-};
+use experiment::case::{ar_network_model, compare, corotational_model, network_from_truth, phantom_push, Method};
 use experiment::simulate::CameraModel;
 use fem::{Law, Material, Problem, SolverOptions};
 use register::organ::displaced;
@@ -55,6 +53,7 @@ fn network_tre(camera: &CameraModel) -> (f64, f64, f64) {
     let case = phantom_push(1.5, camera, 7).unwrap();
     let model = learn::TrainedModel::load(std::path::Path::new(MODEL), &learn::inference_device()).unwrap();
     let (organ, deformer) = ar_network_model(&model).unwrap();
+    let from_truth = network_from_truth(&case, &organ, &deformer).unwrap();
     let rows = compare(
         &case,
         vec![Method {
@@ -67,8 +66,6 @@ fn network_tre(camera: &CameraModel) -> (f64, f64, f64) {
         &RegistrationOptions::default(),
     );
     let errors = rows[0].result.as_ref().unwrap().outcomes[0].errors.clone().unwrap();
-    let network = Network { model: &model, scenario: &ar_scenario(), dir: std::path::Path::new("") };
-    let from_truth = network_from_truth(&case, &network).unwrap();
     (mean(&errors), mean(&target_errors(&case.targets, &case.peak().truth)), mean(&from_truth))
 }
 

@@ -338,8 +338,9 @@ impl NetworkDeformer {
     fn observed_inputs(&self, observations: &Observations) -> Vec<bool> {
         let mut seen = vec![false; self.inputs.len()];
         for &(n, w) in observations.matches.iter().flat_map(|m| &m.stencil.0) {
-            if let Some(s) = seen.get_mut(self.local[n]).filter(|_| w > 0.0) {
-                *s = true;
+            let i = self.local[n];
+            if w > 0.0 && i < seen.len() {
+                seen[i] = true;
             }
         }
         seen
@@ -403,16 +404,12 @@ fn conjugate_gradients(
 
 impl Deformer for NetworkDeformer {
     fn deform(&mut self, observations: &Observations, previous: &[f64], _iteration: usize) -> Result<Vec<f64>> {
-        let observes_an_input = |&(n, w): &(usize, f64)| w > 0.0 && self.local[n] < self.inputs.len();
-        if !observations.matches.iter().flat_map(|m| &m.stencil.0).any(observes_an_input) {
+        let seen = self.observed_inputs(observations);
+        if !seen.contains(&true) {
             return Err(RegisterError::Invalid("no cloud point matches the network's input surface".into()));
         }
         let surface = self.surface_estimate(observations, previous);
-        if self.partial {
-            self.predict_seen(&surface, Some(&self.observed_inputs(observations)))
-        } else {
-            self.predict(&surface)
-        }
+        self.predict_seen(&surface, self.partial.then_some(seen.as_slice()))
     }
 }
 
@@ -454,20 +451,26 @@ mod tests {
         }
     }
 
+    /// The shipped network on the 3k-T4 phantom of the `liver_ar` dataset scenario, the normal
+    /// displacement of its visible nodes as input.
+    fn shipped_network_on_phantom() -> (Organ, NetworkDeformer) {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
+        let model = TrainedModel::load(std::path::Path::new(path), &learn::inference_device()).unwrap();
+        let phantom = mesh::phantom::liver_phantom(3000).unwrap();
+        let visible = phantom.region("visible").unwrap().to_vec();
+        let organ = Organ::new(phantom, None).unwrap();
+        let deformer = NetworkDeformer::new(&model, &organ, &visible, true).unwrap();
+        (organ, deformer)
+    }
+
     /// A smooth dent (2 cm deep at the deepest visible node) pressed into the top of the left
     /// lobe, seen by a camera from above without noise: fitted to the matches themselves, the
     /// visible surface keeps the dent's depth (measured: 20.8 mm, fit 20.5 mm); each node's mean
     /// match offset, the fit before, flattens it (16.7 mm).
     #[test]
     fn the_surface_fit_keeps_the_depth_of_a_dent() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
-        let model = TrainedModel::load(std::path::Path::new(path), &learn::inference_device()).unwrap();
-        // The 3k-T4 phantom of the `liver_ar` dataset scenario, the normal displacement of its
-        // visible nodes as input (the fit under test comes before the network).
-        let phantom = mesh::phantom::liver_phantom(3000).unwrap();
-        let visible = phantom.region("visible").unwrap().to_vec();
-        let organ = Organ::new(phantom, None).unwrap();
-        let deformer = NetworkDeformer::new(&model, &organ, &visible, true).unwrap();
+        // The fit under test comes before the network.
+        let (organ, deformer) = shipped_network_on_phantom();
         let mesh = organ.mesh();
         let top = mesh.nodes.iter().map(|p| p[2]).fold(f64::MIN, f64::max);
         let centre = [-0.06, 0.005];
@@ -515,16 +518,11 @@ mod tests {
     /// changes nothing, moving a seen one changes the organ's displacement.
     #[test]
     fn a_partial_prediction_takes_the_seen_input_nodes_only() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
-        let model = TrainedModel::load(std::path::Path::new(path), &learn::inference_device()).unwrap();
-        let phantom = mesh::phantom::liver_phantom(3000).unwrap();
-        let visible = phantom.region("visible").unwrap().to_vec();
-        let organ = Organ::new(phantom, None).unwrap();
-        let deformer = NetworkDeformer::new(&model, &organ, &visible, true).unwrap();
+        let (_, deformer) = shipped_network_on_phantom();
         // The left half of the visible surface is seen; every input node pushed 1 cm down.
         let seen: Vec<bool> = deformer.points.iter().map(|p| p[0] < 0.0).collect();
         let (a, b) = (seen.iter().position(|&s| s).unwrap(), seen.iter().position(|&s| !s).unwrap());
-        let surface = vec![[0.0, 0.0, -0.01]; visible.len()];
+        let surface = vec![[0.0, 0.0, -0.01]; deformer.inputs.len()];
         let base = deformer.predict_seen(&surface, Some(&seen)).unwrap();
         let moved = |i: usize| {
             let mut s = surface.clone();

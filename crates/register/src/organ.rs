@@ -100,23 +100,30 @@ impl Organ {
         }
     }
 
+    /// The stencil of the point with barycentric coordinates `weights` in surface triangle
+    /// `triangle` (its vertices' stencils, weighted).
+    pub fn surface_point_stencil(&self, triangle: usize, weights: [f64; 3]) -> Stencil {
+        let corners = self.surface.triangles[triangle];
+        Stencil(
+            weights
+                .iter()
+                .zip(&corners)
+                .flat_map(|(b, &k)| self.stencils[k].0.iter().map(move |&(node, w)| (node, b * w)))
+                .collect(),
+        )
+    }
+
     /// The displacement `u` (3 per mesh node) at the points of the rest surface nearest to
     /// `points`: of another discretisation of the same organ, e.g. a model's surface nodes on a
     /// truth's finer surface.
     pub fn surface_displacement_at(&self, u: &[f64], points: &[Point]) -> Result<Vec<Point>> {
-        let surface = &self.surface;
-        let bvh = SurfaceBvh::new(surface)?;
-        let moved = displaced(&surface.vertices, &self.stencils, u);
+        let bvh = SurfaceBvh::new(&self.surface)?;
         Ok(points
             .iter()
             .map(|&p| {
                 let closest = bvh.closest_point(p);
-                let triangle = surface.triangles[closest.triangle];
-                let corners = triangle.map(|k| surface.vertices[k]);
-                let weights = barycentric(corners, closest.point);
-                std::array::from_fn(|d| {
-                    (0..3).map(|c| weights[c] * (moved[triangle[c]][d] - corners[c][d])).sum::<f64>()
-                })
+                let corners = self.surface.triangles[closest.triangle].map(|k| self.surface.vertices[k]);
+                self.surface_point_stencil(closest.triangle, barycentric(corners, closest.point)).vector(u)
             })
             .collect())
     }

@@ -240,12 +240,12 @@ pub fn observe(
     let (matches, limit) = closest_matches(&facing, cloud, options, capture)?;
     let mut obs = Observations { matches: Vec::with_capacity(cloud.len()) };
     let rest = &organ.surface().vertices;
-    let stencils = organ.surface_stencils();
     for (c, m) in cloud.iter().zip(&matches) {
         if m.distance > limit {
             continue;
         }
-        let tri = surface.triangles[original[m.triangle]];
+        let triangle = original[m.triangle];
+        let tri = surface.triangles[triangle];
         let corners = tri.map(|k| surface.vertices[k]);
         let bary = barycentric(corners, m.point);
         let normal = unit(mesh::cross(sub(corners[1], corners[0]), sub(corners[2], corners[0])));
@@ -256,11 +256,7 @@ pub fn observe(
             }
         }
         let shift = [c[0] - p0[0], c[1] - p0[1], c[2] - p0[2]];
-        let mut stencil = Vec::with_capacity(3);
-        for (b, &k) in bary.iter().zip(&tri) {
-            stencil.extend(stencils[k].0.iter().map(|&(node, w)| (node, b * w)));
-        }
-        obs.matches.push(PointMatch { stencil: Stencil(stencil), shift, normal });
+        obs.matches.push(PointMatch { stencil: organ.surface_point_stencil(triangle, bary), shift, normal });
     }
     Ok(obs)
 }
