@@ -60,7 +60,8 @@ struct PointGrid {
 }
 
 impl PointGrid {
-    /// Cells sized so that a cloud filling the box would put a few points in each.
+    /// Cells sized to hold a few points each where the cloud lies (in a volume, on a surface or
+    /// along a line).
     fn new(cloud: &[Point]) -> Self {
         let (mut origin, mut extent) = ([0.0; 3], [0.0; 3]);
         for d in 0..3 {
