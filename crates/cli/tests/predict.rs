@@ -122,3 +122,22 @@ magnitude = [0.05, 0.2]
     let e = augsim_err(&["predict", "net/model.json", "bad.csv"], d);
     assert!(e.contains("bad.csv:2") && e.contains("expected 6"), "{e}");
 }
+
+/// The shipped scenario-1 network (`models/liver_forces`, trained on the built-in
+/// `liver_forces_large`): the last ten draws of its scenario, solved anew, are held out from it
+/// (the split tests on the last draws); its error on them stays within twice its validation error.
+#[test]
+fn the_shipped_liver_forces_network_predicts_its_held_out_draws_solved_anew() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let model = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_forces/model.json");
+    augsim(&["generate", "liver_forces_large", "--shard", "199/200", "--out", "draws"], d);
+    let text = augsim(&["eval", model, "draws", "--out", "eval"], d);
+    let read =
+        |path: &Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap() };
+    let summary = read(&d.join("eval/summary.json"));
+    let validation = read(Path::new(model))["training"]["best_val_mean_error"].as_f64().unwrap();
+    let (samples, mean) = (summary["samples"].as_u64().unwrap(), summary["mean_m"].as_f64().unwrap());
+    assert!(samples >= 8, "a few of the ten draws may fail to solve, not most: {text}");
+    assert!(mean < 2.0 * validation, "ē {mean} m against a validation ē of {validation} m: {text}");
+}
