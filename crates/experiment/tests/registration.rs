@@ -181,14 +181,16 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
         network_iterations: Some(network_iterations),
     };
     scenario.models.method.retain(|m| m.kind == MethodKind::Network);
-    scenario.models.method.extend([hybrid(6, 6), hybrid(4, 6)]);
+    // The network's own cap on a frame from rest.
+    let cap = scenario.models.method[0].iterations.expect("the built-in U-Net's iteration cap");
+    scenario.models.method.extend([hybrid(cap, cap), hybrid(cap, cap + 2)]);
     scenario.validate().unwrap();
     let case = experiment::case::synthetic_case(&scenario).unwrap();
     let methods = experiment::case::case_methods(&scenario, Some(&network)).unwrap();
     let rows = compare(&case, methods, &scenario.registration);
     let u = |k: usize| rows[k].result.as_ref().unwrap().outcomes[0].registration.u.clone();
     assert_eq!(u(0), u(1), "all network iterations: the network's registration");
-    assert_ne!(u(1), u(2), "the FEM takes over after 4");
+    assert_ne!(u(1), u(2), "the FEM takes over after the network's iterations");
     // The network sees the T4 phantom's visible nodes only (it was trained on the quadratic
     // mesh's, mid-edge nodes included): the FEM after it does better than it alone.
     let tre = |k: usize| rows[k].result.as_ref().unwrap().summary.tre_mean_mm.unwrap();
