@@ -20,13 +20,29 @@
 //!
 //! For both measures M = α (I − ⅓ x yᵀ) with (α, x, y) = ((m̄/J)^⅓, F, F⁻ᵀ) for
 //! F-bar and (1, I, I) for B-bar, and φ = ϕ x with ϕ = α / (3 m̄) and ⅓.
+//!
+//! *Stabilised quadratic F-bar.* A T10 averages J over its own four points, and only the
+//! average then meets the volumetric stiffness: a point's own J is held by the shear modulus
+//! alone. Under compression by centimetres the tangent then loses positive definiteness
+//! (a spurious mode: on the liver phantom one point at J = 0.19 in an element whose mean is
+//! 0.93) and a quarter of the large-load draws of `liver_forces_large` found no solution; in
+//! bending a T10 with J constant per element is also far too soft (58 % off on a 10 × 1 × 1
+//! cantilever). So T10 adds a stabilising energy κ_s/2 Σ_q w_q d_q², d_q = g(m_q) − g(m̄)
+//! (g = ln for finite strain, g(m) = m for B-bar), with κ_s Lamé's λ of the same material at
+//! Poisson's ratio min(ν, [`FBAR_POISSON`]): the volumetric stiffness of a solid that does not
+//! lock acts at every point, only the excess over it is relaxed (a split of the bulk modulus
+//! between full and reduced integration, as in Hughes' selective integration). The energy
+//! vanishes under any homogeneous deformation (patch test) and rigid motion; with
+//! s_q = κ_s (w_q d_q g′_q − c_q g′(m̄) D), D = Σ_q w_q d_q, it adds s_q ∂m_q to g_q,
+//! s_q ∂²m_q + κ_s w_q (g′_q² + d_q g″_q) ∂m_q ⊗ ∂m_q to D_q, −κ_s g′(m̄) w_q g′_q ∂m_q to a_q and
+//! κ_s (g′(m̄)² V_P − g″(m̄) D) to γ.
 
 use std::ops::Range;
 
 use nalgebra::Matrix3;
 
 use crate::element::{mirror_upper_blocks, ElementGeometry};
-use crate::material::{cofactor, Law, Material, Tangent};
+use crate::material::{cofactor, Law, Material, Tangent, FBAR_POISSON};
 use crate::FemError;
 
 type V9 = [f64; 9];
@@ -96,18 +112,25 @@ struct Kinematics {
     /// Patch volume average of m.
     mean: f64,
     volume: f64,
+    /// The stabilising modulus κ_s ([`stabilization_modulus`]; 0: none).
+    kappa: f64,
+    /// D = Σ_q w_q (g(m_q) − g(m̄)) (with κ_s only).
+    deviation: f64,
 }
 
 /// Appends the patch's quadrature points to `points` and returns the patch's
-/// kinematics (m̄, volume); fails on an inverted element for the finite-strain laws.
+/// kinematics (m̄, volume, and D with a stabilising modulus `kappa` > 0); fails on an
+/// inverted element for the finite-strain laws.
 fn gather(
     geo: &ElementGeometry,
     patch: usize,
     law: Law,
+    kappa: f64,
     u: &[f64],
     points: &mut Vec<PatchPoint>,
 ) -> Result<Kinematics, FemError> {
     let linear = law == Law::Linear;
+    let start = points.len();
     let (mut volume, mut sum) = (0.0, 0.0);
     let nq = geo.points_per_element;
     for (slot, &e) in geo.patches.elements(patch).iter().enumerate() {
@@ -141,7 +164,21 @@ fn gather(
     if !(volume > 0.0) {
         return Err(FemError::Invalid(format!("patch {patch} has no volume")));
     }
-    Ok(Kinematics { linear, mean: sum / volume, volume })
+    let mut kin = Kinematics { linear, mean: sum / volume, volume, kappa, deviation: 0.0 };
+    if kin.kappa > 0.0 {
+        let g_mean = kin.g(kin.mean);
+        kin.deviation = points[start..].iter().map(|p| p.w * (kin.g(p.m) - g_mean)).sum();
+    }
+    Ok(kin)
+}
+
+/// The stabilising modulus κ_s of quadratic F-bar: Lamé's λ of the material with its Poisson's
+/// ratio capped at [`FBAR_POISSON`]; 0 for the other elements (see the module's doc).
+fn stabilization_modulus(geo: &ElementGeometry, material: &Material) -> f64 {
+    if geo.nodes_per_element != 10 {
+        return 0.0;
+    }
+    Material { poisson: material.poisson.min(FBAR_POISSON), ..*material }.lame().0
 }
 
 impl Kinematics {
@@ -173,6 +210,44 @@ impl Kinematics {
         }
     }
 
+    /// The measure's log for finite strain (g = ln m), itself for the linear law (g = m).
+    fn g(&self, m: f64) -> f64 {
+        if self.linear {
+            m
+        } else {
+            m.ln()
+        }
+    }
+
+    /// g′(m).
+    fn g1(&self, m: f64) -> f64 {
+        if self.linear {
+            1.0
+        } else {
+            1.0 / m
+        }
+    }
+
+    /// g″(m).
+    fn g2(&self, m: f64) -> f64 {
+        if self.linear {
+            0.0
+        } else {
+            -1.0 / (m * m)
+        }
+    }
+
+    /// The stabilisation's stress factor s_q = κ_s (w_q d_q g′(m_q) − c_q g′(m̄) D), with
+    /// d_q = g(m_q) − g(m̄): its force is s_q ∂m_q.
+    fn stabilization_factor(&self, p: &PatchPoint) -> f64 {
+        if self.kappa == 0.0 {
+            return 0.0;
+        }
+        let d = self.g(p.m) - self.g(self.mean);
+        let c = p.w / self.volume;
+        self.kappa * (p.w * d * self.g1(p.m) - c * self.g1(self.mean) * self.deviation)
+    }
+
     /// ϕ in φ = ∂Φ/∂m̄ = ϕ x.
     fn phi(&self, alpha: f64) -> f64 {
         if self.linear {
@@ -192,7 +267,7 @@ pub fn patch_gradients(
     u: &[f64],
 ) -> Result<Vec<Matrix3<f64>>, FemError> {
     let mut points = Vec::new();
-    let kin = gather(geo, patch, law, u, &mut points)?;
+    let kin = gather(geo, patch, law, 0.0, u, &mut points)?;
     Ok(points.iter().map(|p| kin.modified(p).0).collect())
 }
 
@@ -214,7 +289,7 @@ pub fn patch_forces(
     kinematics.clear();
     for patch in patches.clone() {
         let start = points.len();
-        let kin = gather(geo, patch, material.law, u, points)?;
+        let kin = gather(geo, patch, material.law, stabilization_modulus(geo, material), u, points)?;
         for p in &mut points[start..] {
             let (fbar, alpha) = kin.modified(p);
             p.alpha = alpha;
@@ -256,7 +331,8 @@ fn add_point_force(
 ) {
     let c = p.w / kin.volume;
     let xp = dot(&kin.x(p), &p.stress);
-    let (wa, dm_factor) = (p.w * p.alpha, sigma_bar * c - p.w * p.alpha * xp / (3.0 * kin.y_scale(p)));
+    let (wa, dm_factor) =
+        (p.w * p.alpha, sigma_bar * c - p.w * p.alpha * xp / (3.0 * kin.y_scale(p)) + kin.stabilization_factor(p));
     let g: V9 = std::array::from_fn(|r| wa * p.stress[r] + dm_factor * p.dm[r]);
     let npe = geo.nodes_per_element;
     let grads = &geo.grads[p.grads..p.grads + npe];
@@ -291,7 +367,7 @@ pub fn patch_force_tangent(
 ) -> Result<(), FemError> {
     let PatchScratch { points, tangents, .. } = scratch;
     points.clear();
-    let kin = gather(geo, patch, material.law, u, points)?;
+    let kin = gather(geo, patch, material.law, stabilization_modulus(geo, material), u, points)?;
     let ndof = f.len();
     // Stresses and tangents at F̄; σ̄ and γ.
     let (mut sigma_bar, mut gamma) = (0.0, 0.0);
@@ -311,6 +387,8 @@ pub fn patch_force_tangent(
             gamma -= p.w * 2.0 * alpha / (9.0 * kin.mean * kin.mean) * dot(&p.stress, &x);
         }
     }
+    // The stabilisation's share of γ: κ_s (g′(m̄)² V − g″(m̄) D).
+    gamma += kin.kappa * (kin.g1(kin.mean).powi(2) * kin.volume - kin.g2(kin.mean) * kin.deviation);
     f.fill(0.0);
     k.fill(0.0);
     let (mut a_bar, mut b_bar) = (vec![0.0; ndof], vec![0.0; ndof]);
@@ -338,6 +416,20 @@ pub fn patch_force_tangent(
         let phi = kin.phi(alpha);
         // a = w (Mᵀ A φ + P̄ : ∂²Φ/∂F∂m̄).
         let mut av: V9 = std::array::from_fn(|r| p.w * phi * alpha * (ax[r] - xax * y[r] / 3.0));
+        // The stabilisation: s_q ∂²m_q + κ_s w_q (g′(m_q)² + d_q g″(m_q)) ∂m_q ⊗ ∂m_q in D, and
+        // −κ_s g′(m̄) w_q g′(m_q) ∂m_q in a (s_q ∂²m_q with the finite-strain terms below).
+        let stabilization = kin.stabilization_factor(p);
+        if kin.kappa > 0.0 {
+            let d_q = kin.g(p.m) - kin.g(kin.mean);
+            let diagonal = kin.kappa * p.w * (kin.g1(p.m).powi(2) + d_q * kin.g2(p.m));
+            let coupling = -kin.kappa * kin.g1(kin.mean) * p.w * kin.g1(p.m);
+            for r in 0..9 {
+                for s in 0..9 {
+                    d[r][s] += diagonal * dm[r] * dm[s];
+                }
+                av[r] += coupling * dm[r];
+            }
+        }
         if !kin.linear {
             let finv = Matrix3::from_fn(|r, c| y[3 * c + r]);
             let tau = xp; // P̄ : F
@@ -352,7 +444,7 @@ pub fn patch_force_tangent(
                         + alpha * tau / 9.0 * y[r] * y[s]
                         + alpha * tau / 3.0 * t;
                     // ∂²J = J (y⊗y − T).
-                    d[r][s] += p.w * g_ff + sigma_bar * c * jac * (y[r] * y[s] - t);
+                    d[r][s] += p.w * g_ff + (sigma_bar * c + stabilization) * jac * (y[r] * y[s] - t);
                 }
                 av[r] += p.w * mt_p[r] / (3.0 * kin.mean);
             }

@@ -12,7 +12,9 @@
 //! uses them only as the initial inverse Hessian of its quasi-Newton iterations
 //! (every residual is evaluated in double precision), where a factor accurate to
 //! about cond(K) · 6e-8 serves as well as an exact one, at half the memory traffic
-//! and twice the SIMD width.
+//! and twice the SIMD width. A positive-definite matrix too ill-conditioned for that
+//! (single-precision LLᵀ meets a non-positive pivot, e.g. a slender beam at ν = 0.499)
+//! is factorised in double precision instead.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
@@ -33,6 +35,8 @@ enum Factor {
     None,
     Llt,
     Ldlt,
+    /// LLᵀ in double precision.
+    Llt64,
 }
 
 /// Which of the two numeric factors a call addresses.
@@ -80,6 +84,10 @@ pub struct SparseCholesky {
     row_idx: Vec<u32>,
     /// Factor values per slot.
     l_values: [Vec<f32>; 2],
+    /// Double-precision factor values per slot, allocated at their first use.
+    l_values64: [Vec<f64>; 2],
+    /// Workspace of the double-precision factorisation and solves, allocated with them.
+    mem64: Option<MemBuffer>,
     /// Matrix values or right-hand side in single precision.
     scratch: Vec<f32>,
     mem: MemBuffer,
@@ -183,6 +191,8 @@ impl SparseCholesky {
             row_idx: pattern.row_idx.clone(),
             symbolic,
             l_values,
+            l_values64: [Vec::new(), Vec::new()],
+            mem64: None,
             scratch,
             mem,
             factor: [Factor::None; 2],
@@ -200,7 +210,7 @@ impl SparseCholesky {
     /// Whether the slot's factorisation is LLᵀ (the matrix was positive definite);
     /// false after the LDLᵀ fallback or before any factorisation.
     pub fn is_positive_definite(&self, slot: Slot) -> bool {
-        self.factor[slot.index()] == Factor::Llt
+        matches!(self.factor[slot.index()], Factor::Llt | Factor::Llt64)
     }
 
     /// Whether the slot holds a factorisation.
@@ -220,31 +230,42 @@ impl SparseCholesky {
     }
 
     /// Numeric factorisation of the matrix with the given values (pattern order).
-    /// Tries LLᵀ; if the matrix is not positive definite (e.g. a buckling
-    /// tangent) falls back to LDLᵀ with the same symbolic structure.
+    /// Tries LLᵀ, in single then in double precision; if the matrix is not positive
+    /// definite (e.g. a buckling tangent) falls back to LDLᵀ with the same symbolic structure.
     pub fn factorize(&mut self, slot: Slot, values: &[f64]) -> Result<(), FemError> {
-        let n = self.symbolic.nrows();
-        let sym = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
+        self.factor[slot.index()] = Factor::None;
         self.scratch.clear();
         self.scratch.extend(values.iter().map(|&v| v as f32));
+        if self.factorize_f32(slot, false)? || self.factorize_llt64(slot, values)? {
+            return Ok(());
+        }
+        self.factorize_f32(slot, true)?;
+        Ok(())
+    }
+
+    /// LLᵀ, or LDLᵀ with `ldlt`, of the matrix in `scratch` in single precision into the slot;
+    /// false when LLᵀ finds it not positive definite.
+    fn factorize_f32(&mut self, slot: Slot, ldlt: bool) -> Result<bool, FemError> {
+        let n = self.symbolic.nrows();
+        let sym = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
         let a = SparseColMatRef::new(sym, self.scratch.as_slice());
         let stack = MemStack::new(&mut self.mem);
         let (l_values, factor) = (&mut self.l_values[slot.index()], &mut self.factor[slot.index()]);
-        *factor = Factor::None;
-        let llt = self.symbolic.factorize_numeric_llt(
-            l_values,
-            a,
-            Side::Lower,
-            LltRegularization::default(),
-            self.par,
-            stack,
-            Default::default(),
-        );
-        if llt.is_ok() {
-            *factor = Factor::Llt;
-            return Ok(());
+        if !ldlt {
+            let llt = self.symbolic.factorize_numeric_llt(
+                l_values,
+                a,
+                Side::Lower,
+                LltRegularization::default(),
+                self.par,
+                stack,
+                Default::default(),
+            );
+            if llt.is_ok() {
+                *factor = Factor::Llt;
+            }
+            return Ok(llt.is_ok());
         }
-        let stack = MemStack::new(&mut self.mem);
         self.symbolic
             .factorize_numeric_ldlt(
                 l_values,
@@ -257,12 +278,56 @@ impl SparseCholesky {
             )
             .map_err(|e| FemError::Factorization(format!("tangent stiffness is singular: {e:?}")))?;
         *factor = Factor::Ldlt;
-        Ok(())
+        Ok(true)
+    }
+
+    /// LLᵀ of the matrix in double precision into the slot; false when it is not positive definite.
+    fn factorize_llt64(&mut self, slot: Slot, values: &[f64]) -> Result<bool, FemError> {
+        let n = self.symbolic.nrows();
+        if self.mem64.is_none() {
+            let req = self
+                .symbolic
+                .factorize_numeric_llt_scratch::<f64>(self.par, Default::default())
+                .or(self.symbolic.solve_in_place_scratch::<f64>(1, self.par));
+            self.mem64 = Some(
+                MemBuffer::try_new(req)
+                    .map_err(|_| FemError::Factorization("out of memory for the factorisation workspace".into()))?,
+            );
+        }
+        let l_values = &mut self.l_values64[slot.index()];
+        l_values.resize(self.symbolic.len_val(), 0.0);
+        let sym = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
+        let a = SparseColMatRef::new(sym, values);
+        let stack = MemStack::new(self.mem64.as_mut().expect("allocated above"));
+        let llt = self.symbolic.factorize_numeric_llt(
+            l_values,
+            a,
+            Side::Lower,
+            LltRegularization::default(),
+            self.par,
+            stack,
+            Default::default(),
+        );
+        if llt.is_ok() {
+            self.factor[slot.index()] = Factor::Llt64;
+        }
+        Ok(llt.is_ok())
     }
 
     /// Solves A x = b in place with the slot's factorisation.
     pub fn solve_in_place(&mut self, slot: Slot, rhs: &mut [f64]) -> Result<(), FemError> {
         let n = rhs.len();
+        if self.factor[slot.index()] == Factor::Llt64 {
+            let stack = MemStack::new(self.mem64.as_mut().expect("allocated with the factor"));
+            let mat = MatMut::from_column_major_slice_mut(rhs, n, 1);
+            LltRef::new(&self.symbolic, &self.l_values64[slot.index()]).solve_in_place_with_conj(
+                Conj::No,
+                mat,
+                self.par,
+                stack,
+            );
+            return check_solution(rhs);
+        }
         self.scratch.clear();
         self.scratch.extend(rhs.iter().map(|&v| v as f32));
         let stack = MemStack::new(&mut self.mem);
@@ -275,14 +340,20 @@ impl SparseCholesky {
             Factor::Ldlt => {
                 LdltRef::new(&self.symbolic, l_values).solve_in_place_with_conj(Conj::No, mat, self.par, stack)
             }
+            Factor::Llt64 => unreachable!("solved above"),
             Factor::None => return Err(FemError::Factorization("solve before a successful factorisation".into())),
         }
         rhs.iter_mut().zip(&self.scratch).for_each(|(r, &x)| *r = f64::from(x));
-        if rhs.iter().any(|v| !v.is_finite()) {
-            return Err(FemError::NonFinite("solution of the linear system".into()));
-        }
-        Ok(())
+        check_solution(rhs)
     }
+}
+
+/// Fails when a solution of the linear system is not finite.
+fn check_solution(x: &[f64]) -> Result<(), FemError> {
+    if x.iter().any(|v| !v.is_finite()) {
+        return Err(FemError::NonFinite("solution of the linear system".into()));
+    }
+    Ok(())
 }
 
 /// Σ_j c_j² over the column counts c_j of the factor.

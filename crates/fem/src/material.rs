@@ -47,9 +47,10 @@ pub enum Formulation {
     Standard,
     /// F-bar (de Souza Neto et al. 1996, 2005): each quadrature point uses
     /// F̄ = (J̄/J)^⅓ F, whose volume ratio J̄ is the volume average of J over a
-    /// patch: the element itself for H8 (the Q1-P0 / mean-dilatation hexahedron)
-    /// and a group of about six face-adjacent tetrahedra for T4 (the F-bar-patch
-    /// tetrahedron). The linear law uses its small-strain form, B-bar.
+    /// patch: the element itself for H8 (the Q1-P0 / mean-dilatation hexahedron) and
+    /// T10 (stabilised: see [`crate::fbar`]), and a group of about six face-adjacent
+    /// tetrahedra for T4 (the F-bar-patch tetrahedron). The linear law uses its
+    /// small-strain form, B-bar.
     Fbar,
 }
 

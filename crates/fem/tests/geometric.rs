@@ -32,9 +32,11 @@ fn max_displacement(tets: usize, geometric: bool) -> f64 {
 #[test]
 fn geometric_regions_converge_across_four_meshes_where_node_sets_do_not() {
     let geometric: Vec<f64> = [3000, 5000, 11000, 20000].iter().map(|&n| max_displacement(n, true)).collect();
-    let (lo, hi) = geometric.iter().fold((f64::INFINITY, 0.0f64), |(l, h), &v| (l.min(v), h.max(v)));
-    // Measured: 7.071, 7.078, 7.124, 7.113 mm (0.75 % apart).
-    assert!(hi / lo - 1.0 < 0.015, "geometric regions: max |u| {geometric:?} m");
+    // Measured: 6.925, 6.960, 7.052, 7.066 mm: from below (a coarser mesh is stiffer), the two
+    // finest 0.2 % apart.
+    let monotone = geometric.windows(2).all(|w| w[1] >= w[0]);
+    assert!(monotone && geometric[3] / geometric[2] - 1.0 < 0.005, "geometric regions: max |u| {geometric:?} m");
+    assert!(geometric[3] / geometric[0] - 1.0 < 0.03, "geometric regions: max |u| {geometric:?} m");
     // The same ball and patch as node sets: 8.46 and 7.40 mm on the 3k and 11k meshes.
     let nodes = [max_displacement(3000, false), max_displacement(11000, false)];
     assert!(nodes[0] / nodes[1] - 1.0 > 0.1, "node sets: max |u| {nodes:?} m");

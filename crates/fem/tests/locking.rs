@@ -58,6 +58,19 @@ fn t10_does_not_lock_in_bending() {
     eprintln!("{table}");
 }
 
+/// The slender cantilever at ν = 0.499 on 30 × 3 × 3 cells of stabilised T10 F-bar, linear law:
+/// its stiffness matrix is positive definite but too ill-conditioned for a single-precision LLᵀ,
+/// so it is factorised in double precision, and the linear problem converges in one iteration.
+#[test]
+fn an_ill_conditioned_cantilever_is_factorised_in_double_precision() {
+    let (problem, tip) =
+        fem::verification::cantilever(CellKind::Tet10, [30, 3, 3], Law::Linear, Formulation::Fbar, 0.499).unwrap();
+    let solution = StaticSolver::new(problem).unwrap().solve(&SolverOptions::default()).unwrap();
+    assert!(solution.iterations <= 2, "{} iterations: {:?}", solution.iterations, solution.residuals);
+    let ratio = fem::verification::tip_deflection(&solution.u, &tip) / fem::verification::timoshenko_deflection(0.499);
+    assert!((ratio - 1.0).abs() < 0.05, "tip deflection / beam theory {ratio}");
+}
+
 /// Deformed volume: Σ over quadrature points of w det F (exact for T4; for H8 up to
 /// the 2×2×2 rule, which integrates det F of a trilinear map exactly).
 fn deformed_volume(m: &Mesh, u: &[f64]) -> f64 {

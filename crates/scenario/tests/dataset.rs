@@ -36,3 +36,25 @@ fn a_regenerated_liver_ar_t10_dataset_is_the_shipped_networks_own() {
     let model: serde_json::Value = serde_json::from_str(&model).unwrap();
     assert_eq!(Dataset::open(tmp.path()).unwrap().manifest().source_id(), model["training"]["split"]["source"]);
 }
+
+/// The large loads of `liver_forces_large` on stabilised T10 F-bar: each of the first ten draws
+/// finds a solution (on T10 F-bar with J constant per element, four of them stalled on a tangent
+/// that had lost positive definiteness), and moves the organ by centimetres.
+#[test]
+fn stabilised_t10_fbar_solves_the_large_load_draws() {
+    let (mut scenario, dir) = DatasetScenario::load(Path::new("liver_forces_large")).unwrap();
+    scenario.material.formulation = fem::Formulation::Fbar;
+    scenario.dataset.samples = 10;
+    let tmp = tempfile::tempdir().unwrap();
+    let manifest = scenario.generator(&dir).unwrap().run(tmp.path(), "fbar", None, &|_, _| {}).unwrap();
+    assert!(manifest.failed.is_empty(), "{:?}", manifest.failed);
+    let data = Dataset::open(tmp.path()).unwrap().load_all().unwrap();
+    let n = data.grid.nodes();
+    let largest = (0..data.len())
+        .flat_map(|i| {
+            let u = data.target(i);
+            (0..n).map(move |k| (0..3).map(|c| u[c * n + k].powi(2)).sum::<f32>().sqrt())
+        })
+        .fold(0.0, f32::max);
+    assert!(largest > 0.03, "largest displacement {largest} m");
+}
