@@ -14,7 +14,9 @@
 //! about cond(K) · 6e-8 serves as well as an exact one, at half the memory traffic
 //! and twice the SIMD width. A positive-definite matrix too ill-conditioned for that
 //! (single-precision LLᵀ meets a non-positive pivot, e.g. a slender beam at ν = 0.499)
-//! is factorised in double precision instead.
+//! is factorised in double precision instead, as is every matrix of a solve whose
+//! iterations on a single-precision factor did not converge
+//! ([`SparseCholesky::set_double_precision`]).
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
@@ -88,6 +90,8 @@ pub struct SparseCholesky {
     l_values64: [Vec<f64>; 2],
     /// Workspace of the double-precision factorisation and solves, allocated with them.
     mem64: Option<MemBuffer>,
+    /// Factorise in double precision from the start ([`SparseCholesky::set_double_precision`]).
+    double: bool,
     /// Matrix values or right-hand side in single precision.
     scratch: Vec<f32>,
     mem: MemBuffer,
@@ -193,6 +197,7 @@ impl SparseCholesky {
             l_values,
             l_values64: [Vec::new(), Vec::new()],
             mem64: None,
+            double: false,
             scratch,
             mem,
             factor: [Factor::None; 2],
@@ -236,11 +241,22 @@ impl SparseCholesky {
         self.factor[slot.index()] = Factor::None;
         self.scratch.clear();
         self.scratch.extend(values.iter().map(|&v| v as f32));
-        if self.factorize_f32(slot, false)? || self.factorize_llt64(slot, values)? {
-            return Ok(());
+        let positive_definite = if self.double {
+            self.factorize_llt64(slot, values)?
+        } else {
+            self.factorize_f32(slot, false)? || self.factorize_llt64(slot, values)?
+        };
+        if !positive_definite {
+            self.factorize_f32(slot, true)?;
         }
-        self.factorize_f32(slot, true)?;
         Ok(())
+    }
+
+    /// Whether the next factorisations of positive-definite matrices are made in double
+    /// precision from the start: for a solve whose single-precision factor, though it exists,
+    /// is too inaccurate for its iterations to converge.
+    pub fn set_double_precision(&mut self, double: bool) {
+        self.double = double;
     }
 
     /// LLᵀ, or LDLᵀ with `ldlt`, of the matrix in `scratch` in single precision into the slot;

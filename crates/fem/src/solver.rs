@@ -416,6 +416,7 @@ impl StaticSolver {
         start: Instant,
     ) -> Result<Solution, FemError> {
         self.problem.validate()?;
+        self.cholesky.set_double_precision(false);
         if !self.problem.dirichlet.keys().copied().eq(self.constrained_nodes.iter().copied()) {
             return Err(FemError::Invalid("the set of constrained nodes changed after the solver was built".into()));
         }
@@ -479,12 +480,18 @@ impl StaticSolver {
                     cuts = 0;
                     step = (2.0 * step).min(full_step);
                 }
-                Err(FemError::NotConverged { .. } | FemError::InvertedElement { .. } | FemError::Factorization(_))
-                    if cuts < options.max_step_cuts =>
-                {
+                Err(
+                    e @ (FemError::NotConverged { .. } | FemError::InvertedElement { .. } | FemError::Factorization(_)),
+                ) if cuts < options.max_step_cuts => {
                     latest_converged = false;
                     cuts += 1;
                     step *= 0.5;
+                    // Iterations that did not converge may have been held back by a single-precision
+                    // factor too inaccurate for the tangent's conditioning: the retries factorise in
+                    // double precision (the load's nonlinearity is what the cut itself addresses).
+                    if matches!(e, FemError::NotConverged { .. }) {
+                        self.cholesky.set_double_precision(true);
+                    }
                 }
                 Err(e) => return Err(self.diagnose(e, lambda, &trial, &u, &stats)),
             }
