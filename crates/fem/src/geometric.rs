@@ -8,8 +8,9 @@
 //! - [`Problem::add_patch_force`]: a total force spread as a uniform traction over the part of
 //!   the boundary inside a ball (and facing a given way).
 
-use mesh::{Ball, Cells, Point};
+use mesh::{Ball, Cells, Point, SpaceBall};
 use nalgebra::{DMatrix, SymmetricEigen};
+use serde::{Deserialize, Serialize};
 
 use crate::problem::{PointSpring, Problem};
 use crate::FemError;
@@ -20,6 +21,18 @@ fn check(ball: &Ball) -> Result<(), FemError> {
     } else {
         Err(FemError::Invalid(format!("ball {ball:?}: a finite centre and a positive radius")))
     }
+}
+
+/// An elastic foundation as a scenario gives it: the organ inside a ball tied to its rest position
+/// with a stiffness per volume ([`Problem::attach`]); unlike fixed nodes, the same on every mesh.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Attachment {
+    /// Where.
+    #[serde(flatten)]
+    pub region: SpaceBall,
+    /// Stiffness per volume of tissue (N/m per m³).
+    pub stiffness: f64,
 }
 
 /// Midpoints per direction of the collapsed-cube rule on a cell cut by the ball's sphere.
@@ -38,6 +51,12 @@ const GAUSS: [(f64, f64); 4] = [
 const FACE_POINTS: usize = 16;
 
 impl Problem {
+    /// Adds `attachment` ([`Problem::add_foundation`] on its resolved ball); returns the volume covered.
+    pub fn attach(&mut self, attachment: &Attachment) -> Result<f64, FemError> {
+        let ball = attachment.region.resolve().map_err(FemError::Invalid)?;
+        self.add_foundation(&ball, attachment.stiffness)
+    }
+
     /// Ties the part of the organ inside `ball` to its rest position with an elastic foundation
     /// of `stiffness` (N/m per m³ of tissue): energy ½ ∫ k |u|² dV over the exact intersection.
     /// Cells inside the ball are integrated exactly, cells cut by its sphere with a 12³-point

@@ -43,6 +43,7 @@ pub mod solver;
 pub mod verification;
 
 pub use element::ElementGeometry;
+pub use geometric::Attachment;
 pub use material::{Formulation, Law, Material};
 pub use problem::{force_shares, nodal_masses, PointSpring, Problem};
 pub use solver::{Solution, SolverOptions, StaticSolver, Timings};

@@ -132,3 +132,28 @@ impl Ball {
         crate::distance(x, self.centre) < self.radius
     }
 }
+
+/// A ball of space given in a scenario: explicitly, or the built-in phantom's ball behind one of its
+/// regions ([`crate::PhantomSpec::region_ball`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpaceBall {
+    /// The ball: `{ centre = [x, y, z], radius = r }` (m)...
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ball: Option<Ball>,
+    /// ... or the built-in phantom's ball behind `fixed`, `hidden` or `push`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub phantom: Option<String>,
+}
+
+impl SpaceBall {
+    /// The ball; an error unless exactly one of `ball` and `phantom` is given, or for an unknown
+    /// phantom region.
+    pub fn resolve(&self) -> Result<Ball, String> {
+        match (&self.ball, &self.phantom) {
+            (Some(b), None) => Ok(*b),
+            (None, Some(name)) => crate::PhantomSpec::default().region_ball(name).map_err(|e| e.to_string()),
+            _ => Err("give either `ball = { centre, radius }` or `phantom = \"fixed\" | \"hidden\" | \"push\"`".into()),
+        }
+    }
+}

@@ -3,13 +3,13 @@
 
 use std::path::{Path, PathBuf};
 
-use fem::{Law, Material, Problem, SolverOptions};
+use fem::{Attachment, Law, Material, Problem, SolverOptions};
 use filter::{Discrepancy, Execution, LoadPattern, Profile, SigmaPointSet, Transform};
 use mesh::select::k_nearest;
 use mesh::{Mesh, NodeSelection, Point};
 use serde::Deserialize;
 
-use crate::problem::{Attachment, PatchForce};
+use crate::problem::PatchForce;
 use crate::{fixed_problem, Fixed, Kind, MeshSource, Result, ScenarioError, ScenarioText};
 
 /// An assimilation scenario file.
@@ -287,8 +287,7 @@ impl AssimilationScenario {
             s.select(&p.mesh).map_err(|e| fail(format!("{what} selection: {e}")))
         };
         for (k, a) in self.attachment.iter().enumerate() {
-            let ball = a.region.resolve().map_err(|e| fail(format!("attachment {}: {e}", k + 1)))?;
-            problem.add_foundation(&ball, a.stiffness).map_err(|e| fail(format!("attachment {}: {e}", k + 1)))?;
+            problem.attach(a).map_err(|e| fail(format!("attachment {}: {e}", k + 1)))?;
         }
         let pattern = |shares: Vec<(usize, f64)>, total: Point, profile: Profile| {
             let forces = shares.into_iter().map(|(k, s)| (k, total.map(|c| c * s))).collect();

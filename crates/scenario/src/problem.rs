@@ -3,8 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
-use fem::{Material, Problem, SolverOptions};
-use mesh::{Ball, NodeSelection, Point};
+use fem::{Attachment, Material, Problem, SolverOptions};
+use mesh::{Ball, NodeSelection, Point, SpaceBall};
 use serde::Deserialize;
 
 use crate::{build_mesh, fixed_problem, Fixed, Kind, MeshSource, Result, ScenarioError, ScenarioText};
@@ -91,41 +91,6 @@ pub struct Traction {
     pub select: NodeSelection,
     /// Force per reference area (Pa).
     pub traction: Point,
-}
-
-/// A ball of space: given, or the phantom's ball behind one of its regions.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SpaceBall {
-    /// The ball: `{ centre = [x, y, z], radius = r }` (m)...
-    #[serde(default)]
-    pub ball: Option<Ball>,
-    /// ... or the built-in phantom's ball behind `fixed`, `hidden` or `push`
-    /// ([`mesh::PhantomSpec::region_ball`]).
-    #[serde(default)]
-    pub phantom: Option<String>,
-}
-
-impl SpaceBall {
-    pub(crate) fn resolve(&self) -> std::result::Result<Ball, String> {
-        match (&self.ball, &self.phantom) {
-            (Some(b), None) => Ok(*b),
-            (None, Some(name)) => mesh::PhantomSpec::default().region_ball(name).map_err(|e| e.to_string()),
-            _ => Err("give either `ball = { centre, radius }` or `phantom = \"fixed\" | \"hidden\" | \"push\"`".into()),
-        }
-    }
-}
-
-/// An elastic foundation: the organ inside a ball tied to its rest position with a stiffness
-/// per volume ([`Problem::add_foundation`]); unlike fixed nodes, the same on every mesh.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Attachment {
-    /// Where.
-    #[serde(flatten)]
-    pub region: SpaceBall,
-    /// Stiffness per volume of tissue (N/m per m³).
-    pub stiffness: f64,
 }
 
 /// A total force spread as a uniform traction over the boundary inside a ball
@@ -217,8 +182,7 @@ impl StaticScenario {
             }
         }
         for (k, a) in self.attachment.iter().enumerate() {
-            let ball = a.region.resolve().map_err(|e| fail(format!("attachment {}: {e}", k + 1)))?;
-            p.add_foundation(&ball, a.stiffness).map_err(|e| fail(format!("attachment {}: {e}", k + 1)))?;
+            p.attach(a).map_err(|e| fail(format!("attachment {}: {e}", k + 1)))?;
         }
         for (k, f) in self.patch_force.iter().enumerate() {
             let (ball, facing) = f.place().map_err(|e| fail(format!("patch force {}: {e}", k + 1)))?;

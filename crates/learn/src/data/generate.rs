@@ -54,7 +54,15 @@ pub struct DatasetConfig {
     pub grid: Option<[usize; 3]>,
     /// Alternative fixed node sets: each sample fixes one, drawn uniformly
     /// (one entry: always the same; e.g. the BC1/BC4/BC8 sets of the beam transfer-learning scenarios).
+    /// May be left out when `attachment` holds the organ.
+    #[serde(default)]
     pub fixed: Vec<NodeSelection>,
+    /// Elastic foundations over regions of space ([`fem::Attachment`]), holding the organ in every
+    /// sample (besides the fixed set drawn, if any): unlike a node set, the same problem on every
+    /// mesh. Left out of the manifest when empty, so that a dataset without them keeps its source
+    /// identity ([`crate::Manifest::source_id`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub attachment: Vec<fem::Attachment>,
     /// The random loads.
     pub load: Load,
     /// Adds a body force ρ·a to every sample, `a` of uniformly random direction and of
@@ -178,11 +186,13 @@ struct LoadNodes {
 }
 
 impl LoadNodes {
-    /// Checks `load` against the mesh and selects its nodes (`select` resolves a selection).
+    /// Checks `load` against the mesh and selects its nodes (`select` resolves a selection); a
+    /// patch centre drawn from the whole surface avoids the fixed nodes and the attachments.
     fn new(
         load: &Load,
         mesh: &Mesh,
         fixed_sets: &[Vec<usize>],
+        attachments: &[mesh::Ball],
         select: &dyn Fn(&NodeSelection) -> Result<Vec<usize>>,
     ) -> Result<LoadNodes> {
         if let Load::PatchForce { cone: Some(cone), .. } = load {
@@ -205,6 +215,7 @@ impl LoadNodes {
                         .iter()
                         .copied()
                         .filter(|n| fixed_sets.iter().all(|f| f.binary_search(n).is_err()))
+                        .filter(|&n| attachments.iter().all(|b| !b.contains(mesh.nodes[n])))
                         .collect(),
                 };
                 if c.is_empty() {
@@ -253,17 +264,31 @@ impl Generator {
         if config.samples == 0 {
             return Err(invalid("a dataset needs at least one sample"));
         }
-        if config.fixed.is_empty() {
-            return Err(invalid("at least one fixed node set is needed (a free organ has rigid-body modes)"));
+        if config.fixed.is_empty() && config.attachment.is_empty() {
+            return Err(invalid(
+                "at least one fixed node set or attachment is needed (a free organ has rigid-body modes)",
+            ));
         }
         let select = |s: &NodeSelection| s.select(&mesh).map_err(|e| invalid(format!("selection {s:?}: {e}")));
-        // Selections are sorted and free of repeats: membership tests below use binary search.
-        let fixed_sets = config.fixed.iter().map(select).collect::<Result<Vec<_>>>()?;
+        // Selections are sorted and free of repeats: membership tests below use binary search. Held
+        // by attachments alone, every sample "draws" the one empty set.
+        let mut fixed_sets = config.fixed.iter().map(select).collect::<Result<Vec<_>>>()?;
+        if fixed_sets.is_empty() {
+            fixed_sets.push(Vec::new());
+        }
+        let attachment_balls = config
+            .attachment
+            .iter()
+            .enumerate()
+            .map(|(k, a)| a.region.resolve().map_err(|e| invalid(format!("attachment {}: {e}", k + 1))))
+            .collect::<Result<Vec<_>>>()?;
         let normals = mesh.surface_normals();
         let loads = match &config.load {
             Load::Any(list) if list.is_empty() => return Err(invalid("`any` needs at least one load")),
-            Load::Any(list) => list.iter().map(|l| LoadNodes::new(l, &mesh, &fixed_sets, &select)).collect(),
-            one => LoadNodes::new(one, &mesh, &fixed_sets, &select).map(|l| vec![l]),
+            Load::Any(list) => {
+                list.iter().map(|l| LoadNodes::new(l, &mesh, &fixed_sets, &attachment_balls, &select)).collect()
+            }
+            one => LoadNodes::new(one, &mesh, &fixed_sets, &attachment_balls, &select).map(|l| vec![l]),
         }?;
         let observed = match &config.input {
             Input::Force => Vec::new(),
@@ -360,10 +385,13 @@ impl Generator {
         Ok(out)
     }
 
-    fn problem(&self, fixed: usize) -> Problem {
+    fn problem(&self, fixed: usize) -> std::result::Result<Problem, String> {
         let mut p = Problem::new(self.mesh.clone(), self.material);
         p.fix(&self.fixed_sets[fixed]);
-        p
+        for (k, a) in self.config.attachment.iter().enumerate() {
+            p.attach(a).map_err(|e| format!("attachment {}: {e}", k + 1))?;
+        }
+        Ok(p)
     }
 
     /// Generates sample `index`: draws loads, solves, encodes.
@@ -437,7 +465,7 @@ impl Generator {
             // The tool's nodes change from one sample to the next, and with them the system's
             // pattern: a solver of its own.
             Some((nodes, displacement)) => {
-                let mut problem = self.problem(fixed);
+                let mut problem = self.problem(fixed)?;
                 problem.prescribe(&nodes, displacement);
                 problem.f_ext.copy_from_slice(&f);
                 StaticSolver::new(problem).and_then(|mut s| s.solve(&self.solver_options))
@@ -446,7 +474,7 @@ impl Generator {
                 let solver = match solvers.entry(fixed) {
                     std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
                     std::collections::hash_map::Entry::Vacant(v) => {
-                        v.insert(StaticSolver::new(self.problem(fixed)).map_err(|e| e.to_string())?)
+                        v.insert(StaticSolver::new(self.problem(fixed)?).map_err(|e| e.to_string())?)
                     }
                 };
                 solver.problem_mut().f_ext.copy_from_slice(&f);
