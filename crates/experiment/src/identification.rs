@@ -288,8 +288,8 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
             format!(
                 "The 'T10 reference' rows: the same filter on the scenario's model, observed on quadratic tetrahedra \
                  (T10, F-bar) built from a phantom of {quadratic_reference_mesh}: another mesh and another element, \
-                 about 7.5 % off a converged solution under a small load (fem-convergence; linear tetrahedra: \
-                 24–41 %). The error is then mostly the model error \
+                 much closer to a converged solution than linear tetrahedra (by how much: fem-convergence). The \
+                 error is then mostly the model error \
                  of the filter's linear tetrahedra, which are stiffer than the converged solid."
             ),
             "The attachment and the push are regions of space (an elastic foundation over the phantom's `fixed` \

@@ -101,6 +101,8 @@ struct PatchPoint {
     dm: V9,
     /// Volume measure m(F): J or tr F − 3.
     m: f64,
+    /// d = g(m) − g(m̄), the deviation the stabilisation penalises (0 without it).
+    deviation: f64,
     alpha: f64,
     stress: V9,
 }
@@ -114,7 +116,7 @@ struct Kinematics {
     volume: f64,
     /// The stabilising modulus κ_s ([`stabilization_modulus`]; 0: none).
     kappa: f64,
-    /// D = Σ_q w_q (g(m_q) − g(m̄)) (with κ_s only).
+    /// D = Σ_q w_q d_q (with κ_s only).
     deviation: f64,
 }
 
@@ -156,6 +158,7 @@ fn gather(
                 f,
                 dm,
                 m,
+                deviation: 0.0,
                 alpha: 1.0,
                 stress: [0.0; 9],
             });
@@ -167,7 +170,10 @@ fn gather(
     let mut kin = Kinematics { linear, mean: sum / volume, volume, kappa, deviation: 0.0 };
     if kin.kappa > 0.0 {
         let g_mean = kin.g(kin.mean);
-        kin.deviation = points[start..].iter().map(|p| p.w * (kin.g(p.m) - g_mean)).sum();
+        for p in &mut points[start..] {
+            p.deviation = kin.g(p.m) - g_mean;
+            kin.deviation += p.w * p.deviation;
+        }
     }
     Ok(kin)
 }
@@ -237,15 +243,14 @@ impl Kinematics {
         }
     }
 
-    /// The stabilisation's stress factor s_q = κ_s (w_q d_q g′(m_q) − c_q g′(m̄) D), with
-    /// d_q = g(m_q) − g(m̄): its force is s_q ∂m_q.
+    /// The stabilisation's stress factor s_q = κ_s (w_q d_q g′(m_q) − c_q g′(m̄) D): its force is
+    /// s_q ∂m_q.
     fn stabilization_factor(&self, p: &PatchPoint) -> f64 {
         if self.kappa == 0.0 {
             return 0.0;
         }
-        let d = self.g(p.m) - self.g(self.mean);
         let c = p.w / self.volume;
-        self.kappa * (p.w * d * self.g1(p.m) - c * self.g1(self.mean) * self.deviation)
+        self.kappa * (p.w * p.deviation * self.g1(p.m) - c * self.g1(self.mean) * self.deviation)
     }
 
     /// ϕ in φ = ∂Φ/∂m̄ = ϕ x.
@@ -420,8 +425,7 @@ pub fn patch_force_tangent(
         // −κ_s g′(m̄) w_q g′(m_q) ∂m_q in a (s_q ∂²m_q with the finite-strain terms below).
         let stabilization = kin.stabilization_factor(p);
         if kin.kappa > 0.0 {
-            let d_q = kin.g(p.m) - kin.g(kin.mean);
-            let diagonal = kin.kappa * p.w * (kin.g1(p.m).powi(2) + d_q * kin.g2(p.m));
+            let diagonal = kin.kappa * p.w * (kin.g1(p.m).powi(2) + p.deviation * kin.g2(p.m));
             let coupling = -kin.kappa * kin.g1(kin.mean) * p.w * kin.g1(p.m);
             for r in 0..9 {
                 for s in 0..9 {

@@ -238,17 +238,48 @@ impl SparseCholesky {
     /// Tries LLᵀ, in single then in double precision; if the matrix is not positive
     /// definite (e.g. a buckling tangent) falls back to LDLᵀ with the same symbolic structure.
     pub fn factorize(&mut self, slot: Slot, values: &[f64]) -> Result<(), FemError> {
-        self.factor[slot.index()] = Factor::None;
+        let i = slot.index();
+        self.factor[i] = Factor::None;
+        let n = self.symbolic.nrows();
+        let sym = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
         self.scratch.clear();
         self.scratch.extend(values.iter().map(|&v| v as f32));
-        let positive_definite = if self.double {
-            self.factorize_llt64(slot, values)?
-        } else {
-            self.factorize_f32(slot, false)? || self.factorize_llt64(slot, values)?
-        };
-        if !positive_definite {
-            self.factorize_f32(slot, true)?;
+        let single = SparseColMatRef::new(sym, self.scratch.as_slice());
+        if !self.double && llt(&self.symbolic, &mut self.l_values[i], single, self.par, &mut self.mem) {
+            self.factor[i] = Factor::Llt;
+            return Ok(());
         }
+        let mem64 = match &mut self.mem64 {
+            Some(mem) => mem,
+            None => {
+                let req = self
+                    .symbolic
+                    .factorize_numeric_llt_scratch::<f64>(self.par, Default::default())
+                    .or(self.symbolic.solve_in_place_scratch::<f64>(1, self.par));
+                self.mem64.insert(
+                    MemBuffer::try_new(req)
+                        .map_err(|_| FemError::Factorization("out of memory for the factorisation workspace".into()))?,
+                )
+            }
+        };
+        self.l_values64[i].resize(self.symbolic.len_val(), 0.0);
+        let double = SparseColMatRef::new(sym, values);
+        if llt(&self.symbolic, &mut self.l_values64[i], double, self.par, mem64) {
+            self.factor[i] = Factor::Llt64;
+            return Ok(());
+        }
+        self.symbolic
+            .factorize_numeric_ldlt(
+                &mut self.l_values[i],
+                single,
+                Side::Lower,
+                LdltRegularization::default(),
+                self.par,
+                MemStack::new(&mut self.mem),
+                Default::default(),
+            )
+            .map_err(|e| FemError::Factorization(format!("tangent stiffness is singular: {e:?}")))?;
+        self.factor[i] = Factor::Ldlt;
         Ok(())
     }
 
@@ -257,77 +288,6 @@ impl SparseCholesky {
     /// is too inaccurate for its iterations to converge.
     pub fn set_double_precision(&mut self, double: bool) {
         self.double = double;
-    }
-
-    /// LLᵀ, or LDLᵀ with `ldlt`, of the matrix in `scratch` in single precision into the slot;
-    /// false when LLᵀ finds it not positive definite.
-    fn factorize_f32(&mut self, slot: Slot, ldlt: bool) -> Result<bool, FemError> {
-        let n = self.symbolic.nrows();
-        let sym = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
-        let a = SparseColMatRef::new(sym, self.scratch.as_slice());
-        let stack = MemStack::new(&mut self.mem);
-        let (l_values, factor) = (&mut self.l_values[slot.index()], &mut self.factor[slot.index()]);
-        if !ldlt {
-            let llt = self.symbolic.factorize_numeric_llt(
-                l_values,
-                a,
-                Side::Lower,
-                LltRegularization::default(),
-                self.par,
-                stack,
-                Default::default(),
-            );
-            if llt.is_ok() {
-                *factor = Factor::Llt;
-            }
-            return Ok(llt.is_ok());
-        }
-        self.symbolic
-            .factorize_numeric_ldlt(
-                l_values,
-                a,
-                Side::Lower,
-                LdltRegularization::default(),
-                self.par,
-                stack,
-                Default::default(),
-            )
-            .map_err(|e| FemError::Factorization(format!("tangent stiffness is singular: {e:?}")))?;
-        *factor = Factor::Ldlt;
-        Ok(true)
-    }
-
-    /// LLᵀ of the matrix in double precision into the slot; false when it is not positive definite.
-    fn factorize_llt64(&mut self, slot: Slot, values: &[f64]) -> Result<bool, FemError> {
-        let n = self.symbolic.nrows();
-        if self.mem64.is_none() {
-            let req = self
-                .symbolic
-                .factorize_numeric_llt_scratch::<f64>(self.par, Default::default())
-                .or(self.symbolic.solve_in_place_scratch::<f64>(1, self.par));
-            self.mem64 = Some(
-                MemBuffer::try_new(req)
-                    .map_err(|_| FemError::Factorization("out of memory for the factorisation workspace".into()))?,
-            );
-        }
-        let l_values = &mut self.l_values64[slot.index()];
-        l_values.resize(self.symbolic.len_val(), 0.0);
-        let sym = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
-        let a = SparseColMatRef::new(sym, values);
-        let stack = MemStack::new(self.mem64.as_mut().expect("allocated above"));
-        let llt = self.symbolic.factorize_numeric_llt(
-            l_values,
-            a,
-            Side::Lower,
-            LltRegularization::default(),
-            self.par,
-            stack,
-            Default::default(),
-        );
-        if llt.is_ok() {
-            self.factor[slot.index()] = Factor::Llt64;
-        }
-        Ok(llt.is_ok())
     }
 
     /// Solves A x = b in place with the slot's factorisation.
@@ -362,6 +322,19 @@ impl SparseCholesky {
         rhs.iter_mut().zip(&self.scratch).for_each(|(r, &x)| *r = f64::from(x));
         check_solution(rhs)
     }
+}
+
+/// LLᵀ of `a` into `l_values` with the symbolic structure; false when `a` is not positive definite.
+fn llt<T: faer::traits::ComplexField>(
+    symbolic: &SymbolicCholesky<u32>,
+    l_values: &mut [T],
+    a: SparseColMatRef<'_, u32, T>,
+    par: Par,
+    mem: &mut MemBuffer,
+) -> bool {
+    let regularization = LltRegularization::default();
+    let stack = MemStack::new(mem);
+    symbolic.factorize_numeric_llt(l_values, a, Side::Lower, regularization, par, stack, Default::default()).is_ok()
 }
 
 /// Fails when a solution of the linear system is not finite.

@@ -162,6 +162,8 @@ pub struct Generator {
     solver_options: SolverOptions,
     config: DatasetConfig,
     fixed_sets: Vec<Vec<usize>>,
+    /// The point springs of the attachments ([`DatasetConfig::attachment`]).
+    attachment_springs: Vec<fem::PointSpring>,
     /// The loads a sample draws from (one, or the alternatives of [`Load::Any`]).
     loads: Vec<LoadNodes>,
     normals: Vec<[f64; 3]>,
@@ -282,6 +284,12 @@ impl Generator {
             .enumerate()
             .map(|(k, a)| a.region.resolve().map_err(|e| invalid(format!("attachment {}: {e}", k + 1))))
             .collect::<Result<Vec<_>>>()?;
+        // The attachments' springs, integrated once for every sample.
+        let mut held = Problem::new(mesh.clone(), material);
+        for (k, (a, ball)) in config.attachment.iter().zip(&attachment_balls).enumerate() {
+            held.add_foundation(ball, a.stiffness).map_err(|e| invalid(format!("attachment {}: {e}", k + 1)))?;
+        }
+        let attachment_springs = held.point_springs;
         let normals = mesh.surface_normals();
         let loads = match &config.load {
             Load::Any(list) if list.is_empty() => return Err(invalid("`any` needs at least one load")),
@@ -327,6 +335,7 @@ impl Generator {
             solver_options,
             config,
             fixed_sets,
+            attachment_springs,
             loads,
             normals,
             material_share,
@@ -385,13 +394,11 @@ impl Generator {
         Ok(out)
     }
 
-    fn problem(&self, fixed: usize) -> std::result::Result<Problem, String> {
+    fn problem(&self, fixed: usize) -> Problem {
         let mut p = Problem::new(self.mesh.clone(), self.material);
         p.fix(&self.fixed_sets[fixed]);
-        for (k, a) in self.config.attachment.iter().enumerate() {
-            p.attach(a).map_err(|e| format!("attachment {}: {e}", k + 1))?;
-        }
-        Ok(p)
+        p.point_springs.extend_from_slice(&self.attachment_springs);
+        p
     }
 
     /// Generates sample `index`: draws loads, solves, encodes.
@@ -465,7 +472,7 @@ impl Generator {
             // The tool's nodes change from one sample to the next, and with them the system's
             // pattern: a solver of its own.
             Some((nodes, displacement)) => {
-                let mut problem = self.problem(fixed)?;
+                let mut problem = self.problem(fixed);
                 problem.prescribe(&nodes, displacement);
                 problem.f_ext.copy_from_slice(&f);
                 StaticSolver::new(problem).and_then(|mut s| s.solve(&self.solver_options))
@@ -474,7 +481,7 @@ impl Generator {
                 let solver = match solvers.entry(fixed) {
                     std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
                     std::collections::hash_map::Entry::Vacant(v) => {
-                        v.insert(StaticSolver::new(self.problem(fixed)?).map_err(|e| e.to_string())?)
+                        v.insert(StaticSolver::new(self.problem(fixed)).map_err(|e| e.to_string())?)
                     }
                 };
                 solver.problem_mut().f_ext.copy_from_slice(&f);
