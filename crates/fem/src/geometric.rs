@@ -24,7 +24,7 @@ fn check(ball: &Ball) -> Result<(), FemError> {
 }
 
 /// An elastic foundation as a scenario gives it: the organ inside a ball tied to its rest position
-/// with a stiffness per volume ([`Problem::attach`]); unlike fixed nodes, the same on every mesh.
+/// with a stiffness per volume ([`Problem::attach_all`]); unlike fixed nodes, the same on every mesh.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Attachment {
@@ -51,10 +51,20 @@ const GAUSS: [(f64, f64); 4] = [
 const FACE_POINTS: usize = 16;
 
 impl Problem {
-    /// Adds `attachment` ([`Problem::add_foundation`] on its resolved ball); returns the volume covered.
-    pub fn attach(&mut self, attachment: &Attachment) -> Result<f64, FemError> {
-        let ball = attachment.region.resolve().map_err(FemError::Invalid)?;
-        self.add_foundation(&ball, attachment.stiffness)
+    /// Adds each of `attachments` ([`Problem::add_foundation`] on its resolved ball); returns the
+    /// balls. An error names the attachment (numbered from 1).
+    pub fn attach_all(&mut self, attachments: &[Attachment]) -> Result<Vec<Ball>, FemError> {
+        let mut balls = Vec::with_capacity(attachments.len());
+        for (k, a) in attachments.iter().enumerate() {
+            let numbered = |m: String| FemError::Invalid(format!("attachment {}: {m}", k + 1));
+            let ball = a.region.resolve().map_err(numbered)?;
+            self.add_foundation(&ball, a.stiffness).map_err(|e| match e {
+                FemError::Invalid(m) => numbered(m),
+                e => numbered(e.to_string()),
+            })?;
+            balls.push(ball);
+        }
+        Ok(balls)
     }
 
     /// Ties the part of the organ inside `ball` to its rest position with an elastic foundation

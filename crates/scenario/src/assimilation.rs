@@ -286,9 +286,7 @@ impl AssimilationScenario {
         let select = |s: &NodeSelection, what: &str, p: &Problem| {
             s.select(&p.mesh).map_err(|e| fail(format!("{what} selection: {e}")))
         };
-        for (k, a) in self.attachment.iter().enumerate() {
-            problem.attach(a).map_err(|e| fail(format!("attachment {}: {e}", k + 1)))?;
-        }
+        problem.attach_all(&self.attachment).map_err(|e| fail(e.to_string()))?;
         let pattern = |shares: Vec<(usize, f64)>, total: Point, profile: Profile| {
             let forces = shares.into_iter().map(|(k, s)| (k, total.map(|c| c * s))).collect();
             LoadPattern { profile, forces, displacements: vec![] }

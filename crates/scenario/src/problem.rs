@@ -181,9 +181,7 @@ impl StaticScenario {
                 return Err(fail(format!("traction selection {:?} covers no boundary face", t.select)));
             }
         }
-        for (k, a) in self.attachment.iter().enumerate() {
-            p.attach(a).map_err(|e| fail(format!("attachment {}: {e}", k + 1)))?;
-        }
+        p.attach_all(&self.attachment).map_err(|e| fail(e.to_string()))?;
         for (k, f) in self.patch_force.iter().enumerate() {
             let (ball, facing) = f.place().map_err(|e| fail(format!("patch force {}: {e}", k + 1)))?;
             p.add_patch_force(&ball, facing, f.total).map_err(|e| fail(format!("patch force {}: {e}", k + 1)))?;

@@ -278,17 +278,9 @@ impl Generator {
         if fixed_sets.is_empty() {
             fixed_sets.push(Vec::new());
         }
-        let attachment_balls = config
-            .attachment
-            .iter()
-            .enumerate()
-            .map(|(k, a)| a.region.resolve().map_err(|e| invalid(format!("attachment {}: {e}", k + 1))))
-            .collect::<Result<Vec<_>>>()?;
         // The attachments' springs, integrated once for every sample.
         let mut held = Problem::new(mesh.clone(), material);
-        for (k, (a, ball)) in config.attachment.iter().zip(&attachment_balls).enumerate() {
-            held.add_foundation(ball, a.stiffness).map_err(|e| invalid(format!("attachment {}: {e}", k + 1)))?;
-        }
+        let attachment_balls = held.attach_all(&config.attachment).map_err(|e| invalid(e.to_string()))?;
         let attachment_springs = held.point_springs;
         let normals = mesh.surface_normals();
         let loads = match &config.load {
