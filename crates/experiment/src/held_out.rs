@@ -2,8 +2,9 @@
 //! tetrahedra), another law and another stiffness than every model (Neo-Hookean, E = 4.5 kPa,
 //! ν = 0.49), pressed, lifted, dragged and pulled on both lobes, each seen once by the camera
 //! (3,000 points). No setting of the registration or the networks was chosen on them. Each method
-//! registers each case from rest; TRE at the phantom's markers, and the time of a frame (the
-//! median of several runs, correspondence search included).
+//! registers each case from rest, then again as a stream (the tool's force rising and falling over
+//! [`STREAM_FRAMES`] frames, each warm-started from the last, as a navigation system streams them);
+//! TRE at the phantom's markers, and the time of a frame (correspondence search included).
 
 use std::path::Path;
 
@@ -65,6 +66,11 @@ const CASES: [CaseLoad; 7] = [
 /// Points of each cloud (before the camera's outliers).
 const POINTS: usize = 3000;
 
+/// Frames of each case registered as a stream: the tool's force rises to the case's and falls
+/// back (odd: the middle frame is the case's force), each frame seen anew and warm-started from
+/// the last, as a navigation system streams them.
+const STREAM_FRAMES: usize = 21;
+
 /// One method on one case.
 #[derive(Clone, Debug, Default, Serialize)]
 struct Outcome {
@@ -75,6 +81,69 @@ struct Outcome {
     times_ms: Vec<f64>,
     /// Why it failed.
     error: Option<String>,
+}
+
+/// The words for a method that failed on `failed` cases (none when it failed on none).
+fn failures(failed: usize) -> String {
+    match failed {
+        0 => String::new(),
+        n => format!("; failed on {n} of {} cases (not in these figures)", CASES.len()),
+    }
+}
+
+/// One method on one case registered as a stream.
+#[derive(Clone, Debug, Default, Serialize)]
+struct StreamOutcome {
+    /// TRE mean and largest at the peak frame (mm); `None` when the method failed.
+    peak_tre_mean_mm: Option<f64>,
+    peak_tre_max_mm: Option<f64>,
+    /// TRE mean over all targets and frames (mm).
+    tre_mean_mm: Option<f64>,
+    /// Median time of a frame over the stream (ms).
+    time_median_ms: f64,
+    /// Why it failed.
+    error: Option<String>,
+}
+
+impl StreamOutcome {
+    /// Its cell in a case's row.
+    fn cell(&self, method: &str) -> String {
+        match (self.peak_tre_mean_mm, self.peak_tre_max_mm, self.tre_mean_mm, &self.error) {
+            (Some(m), Some(x), Some(all), None) => format!(
+                "{method} {} / {}, {} over the frames, {}",
+                fmt(m, 2, "mm"),
+                fmt(x, 1, "mm"),
+                fmt(all, 2, "mm"),
+                fmt(self.time_median_ms, 0, "ms")
+            ),
+            (.., e) => format!("{method}: failed ({})", e.as_deref().unwrap_or("no TRE")),
+        }
+    }
+}
+
+/// The methods of `scenario` (with `network`) on its case as a press and release of
+/// [`STREAM_FRAMES`] frames, each frame warm-started from the last.
+fn register_stream(scenario: &CaseScenario, network: Option<&Network>) -> Result<Vec<StreamOutcome>> {
+    let mut streamed = scenario.clone();
+    streamed.truth.frames = STREAM_FRAMES;
+    let stream = synthetic_case(&streamed)?;
+    let compared = compare(&stream, case_methods(&streamed, network)?, &streamed.registration);
+    Ok(compared
+        .iter()
+        .map(|c| match &c.result {
+            Ok(r) => {
+                let peak = r.peak(&stream).tre_mm();
+                StreamOutcome {
+                    peak_tre_mean_mm: peak.map(|p| p.0),
+                    peak_tre_max_mm: peak.map(|p| p.1),
+                    tre_mean_mm: r.summary.tre_mean_mm,
+                    time_median_ms: r.summary.time_median_ms,
+                    error: None,
+                }
+            }
+            Err(e) => StreamOutcome { error: Some(format!("{e}")), ..StreamOutcome::default() },
+        })
+        .collect())
 }
 
 impl Outcome {
@@ -132,6 +201,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
         .map(|m| m.name.clone())
         .collect();
     let mut outcomes: Vec<Vec<Outcome>> = vec![Vec::new(); methods.len()];
+    let mut streams: Vec<Vec<StreamOutcome>> = vec![Vec::new(); methods.len()];
     let mut motion = Vec::new();
     // The network fed the truth's surface motion: TRE mean and max (mm) per case.
     let mut from_truth = Vec::new();
@@ -182,6 +252,21 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
         for (all, o) in outcomes.iter_mut().zip(here) {
             all.push(o);
         }
+        progress(&format!("simulating and registering the case {} as a stream ({STREAM_FRAMES} frames)", case.label));
+        let here = register_stream(&scenario, network.as_ref())?;
+        let cells: Vec<String> = methods.iter().zip(&here).map(|(method, o)| o.cell(method)).collect();
+        rows.push(Row::new(
+            format!(
+                "{}, as a stream of {STREAM_FRAMES} frames: TRE at the peak mean / max, TRE over the frames, time \
+                 per frame (median)",
+                case.label
+            ),
+            cells.join("; "),
+            "",
+        ));
+        for (all, o) in streams.iter_mut().zip(here) {
+            all.push(o);
+        }
     }
     let mut summary = vec![Row::new("no deformation: TRE mean over the cases", fmt(mean(&motion), 2, "mm"), "")];
     let mut means = Vec::new();
@@ -199,10 +284,33 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
                 fmt(mean(&tre), 2, "mm"),
                 fmt(max(&largest), 1, "mm"),
                 fmt(median(&mut times), 0, "ms"),
-                match failed {
-                    0 => String::new(),
-                    n => format!("; failed on {n} of {} cases (not in these figures)", CASES.len()),
-                }
+                failures(failed)
+            ),
+            "",
+        ));
+    }
+    let mut stream_means = Vec::new();
+    for (method, cases) in methods.iter().zip(&streams) {
+        let ok: Vec<&StreamOutcome> =
+            cases.iter().filter(|o| o.error.is_none() && o.peak_tre_mean_mm.is_some()).collect();
+        let peak: Vec<f64> = ok.iter().filter_map(|o| o.peak_tre_mean_mm).collect();
+        let largest: Vec<f64> = ok.iter().filter_map(|o| o.peak_tre_max_mm).collect();
+        let all: Vec<f64> = ok.iter().filter_map(|o| o.tre_mean_mm).collect();
+        let mut times: Vec<f64> = ok.iter().map(|o| o.time_median_ms).collect();
+        let failed = cases.len() - ok.len();
+        stream_means.push(if failed == 0 { mean(&peak) } else { f64::NAN });
+        summary.push(Row::new(
+            format!(
+                "{method}, each case as a stream of {STREAM_FRAMES} frames: TRE at the peak mean over the cases \
+                 (largest); TRE over all frames; time per frame (median over the cases)"
+            ),
+            format!(
+                "{} ({}); {}; {}{}",
+                fmt(mean(&peak), 2, "mm"),
+                fmt(max(&largest), 1, "mm"),
+                fmt(mean(&all), 2, "mm"),
+                fmt(median(&mut times), 0, "ms"),
+                failures(failed)
             ),
             "",
         ));
@@ -217,13 +325,25 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
         ));
     }
     summary.extend(rows);
-    let headlines = match (methods.iter().position(|m| m.starts_with("U-Net")), means.first()) {
-        (Some(k), Some(&fem)) => vec![Headline::finding(
-            format!("held-out registration, {} cases: TRE U-Net / co-rotational FEM", CASES.len()),
-            format!("{} / {}", fmt(means[k], 2, "mm"), fmt(fem, 2, "mm")),
-            "the U-Net as accurate as the FEM",
-            means[k] <= fem,
-        )],
+    let headlines = match (methods.iter().position(|m| m.starts_with("U-Net")), means.first(), stream_means.first()) {
+        (Some(k), Some(&fem), Some(&fem_stream)) => vec![
+            Headline::finding(
+                format!("held-out registration, {} cases: TRE U-Net / co-rotational FEM", CASES.len()),
+                format!("{} / {}", fmt(means[k], 2, "mm"), fmt(fem, 2, "mm")),
+                "the U-Net as accurate as the FEM",
+                means[k] <= fem,
+            ),
+            Headline::finding(
+                format!(
+                    "held-out registration as streams of {STREAM_FRAMES} frames, {} cases: TRE at the peak U-Net / \
+                     co-rotational FEM",
+                    CASES.len()
+                ),
+                format!("{} / {}", fmt(stream_means[k], 2, "mm"), fmt(fem_stream, 2, "mm")),
+                "the U-Net as accurate as the FEM",
+                stream_means[k] <= fem_stream,
+            ),
+        ],
         _ => Vec::new(),
     };
     if network.is_none() {
@@ -253,6 +373,17 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
             fem.poisson,
             network_options(&base)?.iterations
         ),
+        format!(
+            "Streams: each case again as a press and release of {STREAM_FRAMES} frames, as a navigation system \
+             streams them: frame k is pushed by F sin(πk/{}) (F the case's force, at the middle frame), each truth \
+             solved from the last and seen anew by the camera (seed + k − 1). Each method registers frame 1 from \
+             rest and every next frame warm-started from the last, with its warm budget (the FEM {} iterations, the \
+             network {}). TRE at the peak frame, and over all frames; time: the median over the stream's frames, one \
+             run.",
+            STREAM_FRAMES + 1,
+            corotational(&base).and_then(|m| m.warm_iterations).unwrap_or(base.registration.warm_iterations),
+            network_options(&base)?.warm_iterations,
+        ),
         "Diagnostic, not a method: the network fed the truth's own motion of its input nodes (each node takes \
          the motion of the truth's surface point nearest to it), as if the whole visible surface were seen and \
          fitted without error. What it leaves is the network's own error; the rest of the registered U-Net's is \
@@ -263,8 +394,9 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
     values.insert("cases".into(), serde_json::to_value(CASES.iter().map(|c| c.label).collect::<Vec<_>>())?);
     values.insert("no_deformation_tre_mm".into(), serde_json::to_value(&motion)?);
     values.insert("network_from_truth_tre_mm".into(), serde_json::to_value(&from_truth)?);
-    for (method, cases) in methods.iter().zip(&outcomes) {
+    for ((method, cases), stream) in methods.iter().zip(&outcomes).zip(&streams) {
         values.insert(method.clone(), serde_json::to_value(cases)?);
+        values.insert(format!("{method}, stream"), serde_json::to_value(stream)?);
     }
     Ok(ExperimentResult {
         name: Name::HeldOut,

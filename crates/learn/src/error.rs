@@ -50,6 +50,12 @@ pub enum LearnError {
     /// An argument that does not fit (wrong length, empty set, bad configuration value).
     #[error("invalid input: {0}")]
     InvalidInput(String),
+    /// A mesh that cannot be used (refined, embedded, sampled).
+    #[error(transparent)]
+    Mesh(#[from] mesh::MeshError),
+    /// A finite-element problem that cannot be set up.
+    #[error(transparent)]
+    Fem(#[from] fem::FemError),
 }
 
 impl From<mesh::io::WriteError> for LearnError {

@@ -262,7 +262,7 @@ impl Generator {
     /// quadratic elements (`material.order = 2`) the samples are solved, loaded and observed on
     /// the T10 mesh ([`Mesh::quadratic`]: the mesh's nodes, then its mid-edge nodes).
     pub fn new(mesh: Mesh, material: Material, solver_options: SolverOptions, config: DatasetConfig) -> Result<Self> {
-        let mesh = if material.order == 2 { mesh.quadratic().map_err(|e| invalid(e.to_string()))? } else { mesh };
+        let mesh = if material.order == 2 { mesh.quadratic()? } else { mesh };
         if config.samples == 0 {
             return Err(invalid("a dataset needs at least one sample"));
         }
@@ -280,7 +280,7 @@ impl Generator {
         }
         // The attachments' springs, integrated once for every sample.
         let mut held = Problem::new(mesh.clone(), material);
-        let attachment_balls = held.attach_all(&config.attachment).map_err(|e| invalid(e.to_string()))?;
+        let attachment_balls = held.attach_all(&config.attachment)?;
         let attachment_springs = held.point_springs;
         let normals = mesh.surface_normals();
         let loads = match &config.load {
@@ -317,7 +317,7 @@ impl Generator {
         let gravity = match config.gravity {
             Some(range) => {
                 check_range(&range, "gravity")?;
-                Some((range, fem::nodal_masses(&mesh, material.density).map_err(|e| invalid(e.to_string()))?))
+                Some((range, fem::nodal_masses(&mesh, material.density)?))
             }
             None => None,
         };
@@ -378,7 +378,7 @@ impl Generator {
                     let forces: Vec<[f64; 3]> = field.chunks_exact(3).map(|f| [f[0], f[1], f[2]]).collect();
                     out = encode_points(&embedding.grid, &self.mesh.nodes, &forces, true)?;
                 } else {
-                    let grid_field = embedding.map_nodal(field, 3).map_err(|e| invalid(e.to_string()))?;
+                    let grid_field = embedding.map_nodal(field, 3)?;
                     out.iter_mut().zip(&grid_field).for_each(|(o, v)| *o = *v as f32);
                 }
             }
@@ -690,8 +690,8 @@ fn lattice_encoding(mesh: &Mesh) -> Result<(Encoding, GridShape, GridPlacement)>
 
 fn embedded_encoding(mesh: &Mesh, dims: [usize; 3]) -> Result<(Encoding, GridShape, GridPlacement)> {
     let (lo, hi) = mesh.bounds();
-    let grid = Grid::covering(lo, hi, dims).map_err(|e| invalid(e.to_string()))?;
+    let grid = Grid::covering(lo, hi, dims)?;
     let placement = GridPlacement { origin: grid.origin, spacing: grid.spacing };
-    let embedding = Embedding::new(mesh, grid).map_err(|e| invalid(e.to_string()))?;
+    let embedding = Embedding::new(mesh, grid)?;
     Ok((Encoding::Embedded(embedding), GridShape::new(dims[0], dims[1], dims[2]), placement))
 }

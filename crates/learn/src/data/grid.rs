@@ -98,7 +98,7 @@ impl GridPlacement {
     /// The placed grid of `shape` nodes (checked: finite origin, positive spacing, ≥ 2 nodes
     /// per axis).
     pub fn grid(&self, shape: GridShape) -> Result<Grid> {
-        Grid::new(self.origin, self.spacing, shape.dims()).map_err(|e| LearnError::InvalidInput(e.to_string()))
+        Ok(Grid::new(self.origin, self.spacing, shape.dims())?)
     }
 }
 
@@ -118,7 +118,7 @@ pub fn encode_points(grid: &Grid, points: &[Point], values: &[[f64; 3]], force: 
         if pt.iter().chain(v).any(|x| !x.is_finite()) {
             return Err(LearnError::InvalidInput(format!("point {p}: non-finite position or value")));
         }
-        let corners = grid.corners(p, *pt).map_err(|e| LearnError::InvalidInput(e.to_string()))?;
+        let corners = grid.corners(p, *pt)?;
         if force {
             for (g, w) in corners {
                 for c in 0..CHANNELS {
@@ -157,8 +157,7 @@ pub struct GridToMesh {
 impl GridToMesh {
     /// The weights for the nodes of `organ` in `grid`; every node must lie in the grid's box.
     pub fn new(organ: &mesh::Mesh, grid: &Grid) -> Result<Self> {
-        let invalid = |e: mesh::MeshError| LearnError::InvalidInput(e.to_string());
-        let inside = mesh::embedding::Embedding::new(organ, grid.clone()).map_err(invalid)?.mask();
+        let inside = mesh::embedding::Embedding::new(organ, grid.clone())?.mask();
         let terms = organ
             .nodes
             .iter()
@@ -212,8 +211,7 @@ impl GridMesh {
     /// The mesh of `grid`.
     pub fn new(grid: &Grid) -> Result<Self> {
         let [nx, ny, nz] = grid.dims;
-        let mesh = mesh::box_hex(grid.origin, grid.upper(), [nx - 1, ny - 1, nz - 1])
-            .map_err(|e| LearnError::InvalidInput(e.to_string()))?;
+        let mesh = mesh::box_hex(grid.origin, grid.upper(), [nx - 1, ny - 1, nz - 1])?;
         Ok(GridMesh { mesh, shape: GridShape::from(grid.dims) })
     }
 

@@ -38,7 +38,7 @@ pub fn write_grid_sample(
     ];
     mesh::io::write_mesh(path, &grid_mesh.mesh, &fields).map_err(|e| match e {
         mesh::MeshError::Io { source, .. } => LearnError::io(path, source),
-        e => LearnError::InvalidInput(e.to_string()),
+        e => e.into(),
     })
 }
 
@@ -140,7 +140,7 @@ pub fn evaluate_at_points(
     }
     let at = |field: &[f32]| -> Result<Vec<f64>> {
         let f: Vec<f64> = field.iter().map(|v| f64::from(*v)).collect();
-        grid.interpolate(&f, CHANNELS, points).map_err(|e| LearnError::InvalidInput(e.to_string()))
+        Ok(grid.interpolate(&f, CHANNELS, points)?)
     };
     let norm3 = |v: &[f64]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     let (mut errors, mut no_motion) = (Vec::new(), Vec::new());
