@@ -7,7 +7,7 @@ use anyhow::{bail, Context, Result};
 use experiment::case::{ar_scenario, case_methods, compare, synthetic_case, Network, Registered};
 use experiment::picture::side_view;
 use experiment::setup::{fem_setup, network_setup, RegistrationSetup};
-use mesh::io::{write_atomic_bytes, Field};
+use mesh::io::{csv_field, write_atomic_bytes, Field};
 use mesh::Point;
 use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
 use register::{register_sequence, Organ, RigidOptions, RigidResult, RigidTransform, Summary};
@@ -402,9 +402,11 @@ fn demo(args: &RegisterArgs) -> Result<()> {
     if let Some(r) = rigid {
         print_rigid(r, Some(&case.pose));
     }
+    // The name column fits the longest method name.
+    let width = rows.iter().map(|r| r.method.chars().count()).max().unwrap_or(0).max(28);
     println!();
     println!(
-        "{:<28} {:>14} {:>13} {:>14} {:>10} {:>10} {:>10}",
+        "{:<width$} {:>14} {:>13} {:>14} {:>10} {:>10} {:>10}",
         "method", "TRE mean (mm)", "TRE max (mm)", "residual (mm)", "ms/frame", "p95 (ms)", "iterations"
     );
     let mut csv =
@@ -412,13 +414,12 @@ fn demo(args: &RegisterArgs) -> Result<()> {
     let mut row = |name: &str, values: [Option<f64>; 6], error: &str| {
         let [t, m, res, time, p95, it] = values.map(|v| v.map_or("-".to_string(), |v| format!("{v:.2}")));
         if error.is_empty() {
-            println!("{name:<28} {t:>14} {m:>13} {res:>14} {time:>10} {p95:>10} {it:>10}");
+            println!("{name:<width$} {t:>14} {m:>13} {res:>14} {time:>10} {p95:>10} {it:>10}");
         } else {
-            println!("{name:<28} failed: {error}");
+            println!("{name:<width$} failed: {error}");
         }
         let fields = values.map(|v| v.map_or(String::new(), |v| v.to_string()));
-        let error = if error.is_empty() { String::new() } else { format!("\"{}\"", error.replace('"', "\"\"")) };
-        csv.push_str(&format!("{name},{},{error}\n", fields.join(",")));
+        csv.push_str(&format!("{},{},{}\n", csv_field(name), fields.join(","), csv_field(error)));
     };
     if let Some(first) = registered.first() {
         let (rest, baseline) = (&first.summary, if rigid.is_some() { "rigid only (ICP)" } else { "no deformation" });

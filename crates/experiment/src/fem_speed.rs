@@ -366,9 +366,8 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
     )
     .chain(cases.iter().map(|c| {
         format!(
-            // The case names hold commas: quoted.
-            "\"{}\",{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
-            c.name,
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            mesh::io::csv_field(&c.name),
             c.dofs,
             c.iterations,
             c.factorizations,

@@ -3,7 +3,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use mesh::io::write_atomic_bytes;
+use mesh::io::{csv_field, write_atomic_bytes};
 use serde::{Deserialize, Serialize};
 
 use crate::{FilterError, Transform};
@@ -94,14 +94,5 @@ impl Trace {
         let text =
             serde_json::to_vec_pretty(self).map_err(|source| FilterError::Json { path: path.to_path_buf(), source })?;
         Ok(write_atomic_bytes(path, &text)?)
-    }
-}
-
-/// Quotes a CSV field when it contains a comma, quote or line break.
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
     }
 }

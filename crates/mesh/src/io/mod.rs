@@ -236,6 +236,16 @@ pub fn write_atomic(
     persist_atomic(path, write).map_err(|source| WriteError { path: path.to_path_buf(), source })
 }
 
+/// `text` as a CSV field (RFC 4180): quoted, its quotes doubled, when it holds a comma, a quote or a
+/// line break; as it is otherwise.
+pub fn csv_field(text: &str) -> String {
+    if text.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", text.replace('"', "\"\""))
+    } else {
+        text.to_string()
+    }
+}
+
 /// [`write_atomic`] of a whole buffer.
 pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     write_atomic(path, |w| w.write_all(bytes))
@@ -475,6 +485,15 @@ pub fn write_pvd(path: impl AsRef<Path>, steps: &[(f64, String)]) -> Result<(), 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn csv_fields_are_quoted_only_when_they_must_be() {
+        assert_eq!(csv_field("FEM co-rotational (3k T4)"), "FEM co-rotational (3k T4)");
+        assert_eq!(csv_field(""), "");
+        assert_eq!(csv_field("liver 5012 T4, Svk"), "\"liver 5012 T4, Svk\"");
+        assert_eq!(csv_field("a \"b\""), "\"a \"\"b\"\"\"");
+        assert_eq!(csv_field("two\nlines"), "\"two\nlines\"");
+    }
 
     #[test]
     fn atomic_writes_replace_whole_files_and_leave_nothing_behind_on_failure() {
