@@ -184,6 +184,17 @@ impl Verdict {
 /// Relative difference within which two figures are on par.
 pub const ON_PAR: f64 = 0.05;
 
+/// Ours against a reference where lower is better: on par within [`ON_PAR`], worse when not finite.
+fn lower_verdict(ours: f64, reference: f64) -> Verdict {
+    if !ours.is_finite() || ours > reference * (1.0 + ON_PAR) {
+        Verdict::Worse
+    } else if ours < reference * (1.0 - ON_PAR) {
+        Verdict::Better
+    } else {
+        Verdict::OnPar
+    }
+}
+
 /// A headline figure of an experiment: ours beside the published one, with the verdict.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Headline {
@@ -201,20 +212,29 @@ impl Headline {
     /// A figure where lower is better (an error, a time): ours and the published one in `unit`,
     /// shown with `digits` decimals.
     pub fn lower_is_better(figure: impl Into<String>, ours: f64, published: f64, digits: usize, unit: &str) -> Self {
-        let verdict = if !(ours.is_finite()) {
-            Verdict::Worse
-        } else if ours < published * (1.0 - ON_PAR) {
-            Verdict::Better
-        } else if ours > published * (1.0 + ON_PAR) {
-            Verdict::Worse
-        } else {
-            Verdict::OnPar
-        };
         Headline {
             figure: figure.into(),
             ours: fmt(ours, digits, unit),
             published: fmt(published, digits, unit),
-            verdict,
+            verdict: lower_verdict(ours, published),
+        }
+    }
+
+    /// An aim stated in words (`aim`, e.g. "as accurate as the FEM"), met when `ours` is no more than
+    /// `reference` (lower is better): better, on par or worse by the same [`ON_PAR`] rule as
+    /// [`Headline::lower_is_better`]; `shown` is how both figures read in the summary.
+    pub fn aim_lower(
+        figure: impl Into<String>,
+        shown: impl Into<String>,
+        aim: impl Into<String>,
+        ours: f64,
+        reference: f64,
+    ) -> Self {
+        Headline {
+            figure: figure.into(),
+            ours: shown.into(),
+            published: aim.into(),
+            verdict: lower_verdict(ours, reference),
         }
     }
 

@@ -82,6 +82,12 @@ fn the_readme_summary_and_the_results_page_come_from_the_same_results() {
     let verdicts: Vec<Verdict> = result.headlines.iter().map(|h| h.verdict).collect();
     assert_eq!(verdicts, [Verdict::Better, Verdict::OnPar, Verdict::Worse, Verdict::OnPar]);
     assert_eq!(Headline::lower_is_better("x", f64::NAN, 1.0, 1, "mm").verdict, Verdict::Worse);
+    let aim = |ours: f64| Headline::aim_lower("TRE a / b", "", "a as accurate as b", ours, 5.0).verdict;
+    assert_eq!(
+        [aim(3.6), aim(5.1), aim(6.2)],
+        [Verdict::Better, Verdict::OnPar, Verdict::Worse],
+        "an aim beaten is better"
+    );
     report::update_markdown(&readme, std::slice::from_ref(&result)).unwrap();
     let text = std::fs::read_to_string(&readme).unwrap();
     assert!(text.starts_with("# title\n\nbefore\n") && text.ends_with(&format!("{end}\nafter\n")));
