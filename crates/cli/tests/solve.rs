@@ -60,3 +60,16 @@ total = [0.0, 0.0, -1.0]
     assert!(text.contains("passed its compressive limit point at load factor 0."), "{text}");
     assert!(text.contains("element ") && text.contains("neo_hookean"), "{text}");
 }
+
+/// A missing scenario file is named, with the system's reason said once (not repeated by the
+/// error chain).
+#[test]
+fn a_missing_scenario_file_is_reported_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("missing.toml");
+    let (ok, text) = solve(&missing, &dir.path().join("out.vtu"));
+    assert!(!ok, "{text}");
+    let line = text.lines().find(|l| l.starts_with("error:")).unwrap_or_else(|| panic!("no error line:\n{text}"));
+    assert!(line.contains("missing.toml"), "{line}");
+    assert_eq!(line.matches("os error").count(), 1, "the reason said once: {line}");
+}

@@ -22,15 +22,14 @@ pub enum FilterError {
         found: usize,
     },
     /// `Model::step` failed for one sigma point (e.g. Newton did not converge).
-    #[error("model step failed for sigma point {sigma_point} at iteration {iteration}: {source}")]
+    #[error("model step failed for sigma point {sigma_point} at iteration {iteration}: {error}")]
     Model {
         /// Index of the sigma point (0-based, `0..=p`).
         sigma_point: usize,
         /// Filter iteration (1-based) that was being computed.
         iteration: usize,
         /// The model's own error.
-        #[source]
-        source: BoxedModelError,
+        error: BoxedModelError,
     },
     /// The observation or state vector of one sigma point contains NaN or infinity, or changed length.
     #[error("sigma point {sigma_point} at iteration {iteration}: {what}")]
@@ -59,27 +58,25 @@ pub enum FilterError {
         iteration: usize,
     },
     /// Reading or writing a file failed.
-    #[error("I/O error on {path}: {source}")]
+    #[error("I/O error on {path}: {error}")]
     Io {
         /// The file concerned.
         path: PathBuf,
         /// The underlying error.
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// Serialising a trace to JSON failed.
-    #[error("JSON serialisation for {path}: {source}")]
+    #[error("JSON serialisation for {path}: {error}")]
     Json {
         /// The file concerned.
         path: PathBuf,
         /// The underlying error.
-        #[source]
-        source: serde_json::Error,
+        error: serde_json::Error,
     },
 }
 
 impl From<mesh::io::WriteError> for FilterError {
     fn from(e: mesh::io::WriteError) -> Self {
-        FilterError::Io { path: e.path, source: e.source }
+        FilterError::Io { path: e.path, error: e.error }
     }
 }

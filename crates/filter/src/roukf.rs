@@ -491,7 +491,7 @@ impl<M: Model> Roukf<M> {
         let mut state_vectors = DMatrix::zeros(n, m);
         for (i, result) in results.into_iter().enumerate() {
             let (zi, xi) =
-                result.map_err(|e| FilterError::Model { sigma_point: i, iteration: k, source: Box::new(e) })?;
+                result.map_err(|e| FilterError::Model { sigma_point: i, iteration: k, error: Box::new(e) })?;
             let bad = |what: String| FilterError::SigmaPoint { sigma_point: i, iteration: k, what };
             if zi.len() != q {
                 return Err(bad(format!("observation has length {}, the measurement has {q}", zi.len())));

@@ -92,7 +92,7 @@ impl Trace {
     /// Writes the trace as pretty JSON to `path` atomically.
     pub fn write_json(&self, path: &Path) -> Result<(), FilterError> {
         let text =
-            serde_json::to_vec_pretty(self).map_err(|source| FilterError::Json { path: path.to_path_buf(), source })?;
+            serde_json::to_vec_pretty(self).map_err(|error| FilterError::Json { path: path.to_path_buf(), error })?;
         Ok(write_atomic_bytes(path, &text)?)
     }
 }

@@ -73,9 +73,9 @@ fn model_error_names_sigma_point_and_iteration_and_leaves_filter_unchanged() {
         let before = (roukf.mean().clone(), roukf.covariance(), roukf.sigma_states().to_vec(), roukf.trace().clone());
         let err = roukf.step(&z(1.0)).unwrap_err();
         match &err {
-            FilterError::Model { sigma_point, iteration, source } => {
+            FilterError::Model { sigma_point, iteration, error } => {
                 assert_eq!((*sigma_point, *iteration), (1, 3));
-                assert!(source.to_string().contains("Newton diverged"));
+                assert!(error.to_string().contains("Newton diverged"));
             }
             other => panic!("unexpected error {other:?}"),
         }

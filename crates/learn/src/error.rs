@@ -6,12 +6,12 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum LearnError {
     /// An operating-system I/O error on a file.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// The file or directory.
         path: PathBuf,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// A malformed or truncated `.npy` file.
     #[error("{path}: invalid .npy file: {message}")]
@@ -60,14 +60,14 @@ pub enum LearnError {
 
 impl From<mesh::io::WriteError> for LearnError {
     fn from(e: mesh::io::WriteError) -> Self {
-        LearnError::Io { path: e.path, source: e.source }
+        LearnError::Io { path: e.path, error: e.error }
     }
 }
 
 impl LearnError {
     /// Wraps an I/O error with the path it concerns.
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        LearnError::Io { path: path.into(), source }
+        LearnError::Io { path: path.into(), error: source }
     }
 
     /// A manifest error for `path`.

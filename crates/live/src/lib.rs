@@ -49,13 +49,12 @@ use register::{Deformer, FrameResult, Organ, RegistrationOptions, Tracker};
 #[derive(Debug, thiserror::Error)]
 pub enum LiveError {
     /// A socket could not be set up.
-    #[error("{what}: {source}")]
+    #[error("{what}: {error}")]
     Io {
         /// What was being done.
         what: String,
         /// Why it failed.
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
 }
 
@@ -236,7 +235,7 @@ pub fn serve(
 ) -> Result<()> {
     let io = |what: &str| {
         let what = what.to_string();
-        move |source| LiveError::Io { what, source }
+        move |error| LiveError::Io { what, error }
     };
     listener.set_nonblocking(true).map_err(io("listening"))?;
     let mut clients: Vec<Client> = Vec::new();

@@ -52,12 +52,12 @@ pub struct TriSurface {
 #[derive(Debug, thiserror::Error)]
 pub enum MeshError {
     /// An I/O failure on a named file.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: String,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// A file that could be opened but not understood.
     #[error("{path}: {message}")]

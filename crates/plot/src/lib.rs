@@ -51,12 +51,12 @@ pub enum PlotError {
         message: String,
     },
     /// Renaming the finished temporary file onto the target failed.
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}: {error}")]
     Io {
         /// The target file.
         path: PathBuf,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
 }
 
@@ -314,7 +314,7 @@ fn write_png(
     draw: impl FnOnce(&DrawingArea<BitMapBackend, Shift>) -> Result<(), String>,
 ) -> Result<(), PlotError> {
     register_fonts();
-    let io = |source: std::io::Error| PlotError::Io { path: path.to_path_buf(), source };
+    let io = |error: std::io::Error| PlotError::Io { path: path.to_path_buf(), error };
     let tmp = sibling_tempfile(path, ".tmp.png").map_err(io)?;
     let drawn = {
         let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();

@@ -78,12 +78,12 @@ pub enum ViewerError {
     #[error("invalid scene: {0}")]
     Invalid(String),
     /// Writing the file failed.
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}: {error}")]
     Io {
         /// The target file.
         path: PathBuf,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
 }
 
@@ -207,7 +207,7 @@ impl Scene {
 /// `path` when complete). Fails on an inconsistent scene (see [`Scene::validate`]) without touching `path`.
 pub fn write_html(path: &Path, scene: &Scene) -> Result<(), ViewerError> {
     let page = scene.to_html()?;
-    let io = |source: std::io::Error| ViewerError::Io { path: path.to_path_buf(), source };
+    let io = |error: std::io::Error| ViewerError::Io { path: path.to_path_buf(), error };
     let mut file = crate::sibling_tempfile(path, ".tmp").map_err(io)?;
     file.write_all(page.as_bytes()).map_err(io)?;
     file.as_file().sync_all().map_err(io)?;

@@ -6,12 +6,12 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum RegisterError {
     /// An operating-system I/O error on a file.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// The file or directory.
         path: PathBuf,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// A file whose content cannot be used (malformed, empty, wrong shape).
     #[error("{path}: {message}")]
@@ -37,14 +37,14 @@ pub enum RegisterError {
 
 impl From<mesh::io::WriteError> for RegisterError {
     fn from(e: mesh::io::WriteError) -> Self {
-        RegisterError::Io { path: e.path, source: e.source }
+        RegisterError::Io { path: e.path, error: e.error }
     }
 }
 
 impl RegisterError {
     /// An I/O error on `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        RegisterError::Io { path: path.into(), source }
+        RegisterError::Io { path: path.into(), error: source }
     }
 
     /// A format error in `path`.

@@ -110,7 +110,7 @@ impl ScenarioText {
                 let name = path.to_str().map(|s| s.trim_end_matches(".toml")).unwrap_or_default();
                 match builtin(name).filter(|_| bare) {
                     Some(text) => Ok(ScenarioText::builtin(name, text)),
-                    None => Err(ScenarioError::Io { path: path.to_path_buf(), source }),
+                    None => Err(ScenarioError::Io { path: path.to_path_buf(), error: source }),
                 }
             }
         }

@@ -57,7 +57,7 @@ pub enum AssimilationError {
 
 impl From<mesh::io::WriteError> for AssimilationError {
     fn from(e: mesh::io::WriteError) -> Self {
-        AssimilationError::file(&e.path, None, format!("cannot write: {}", e.source))
+        AssimilationError::file(&e.path, None, format!("cannot write: {}", e.error))
     }
 }
 

@@ -37,7 +37,7 @@ pub fn write_grid_sample(
         Field::point("mask", 1, grid_mesh.field(&mask, 1)?),
     ];
     mesh::io::write_mesh(path, &grid_mesh.mesh, &fields).map_err(|e| match e {
-        mesh::MeshError::Io { source, .. } => LearnError::io(path, source),
+        mesh::MeshError::Io { error, .. } => LearnError::io(path, error),
         e => e.into(),
     })
 }

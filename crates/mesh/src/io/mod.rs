@@ -204,22 +204,22 @@ fn parse_error(path: &Path, message: impl Into<String>) -> MeshError {
 
 /// Reads a whole file, mapping failures to [`MeshError::Io`].
 fn read_bytes(path: &Path) -> Result<Vec<u8>, MeshError> {
-    fs::read(path).map_err(|source| MeshError::Io { path: path.display().to_string(), source })
+    fs::read(path).map_err(|error| MeshError::Io { path: path.display().to_string(), error })
 }
 
 /// An atomic write that failed: the file it was to write and why (see [`write_atomic`]).
 #[derive(Debug, thiserror::Error)]
-#[error("{}: {source}", path.display())]
+#[error("{}: {error}", path.display())]
 pub struct WriteError {
     /// The file that was to be written.
     pub path: PathBuf,
     /// The underlying error.
-    pub source: std::io::Error,
+    pub error: std::io::Error,
 }
 
 impl From<WriteError> for MeshError {
     fn from(e: WriteError) -> Self {
-        MeshError::Io { path: e.path.display().to_string(), source: e.source }
+        MeshError::Io { path: e.path.display().to_string(), error: e.error }
     }
 }
 
@@ -233,7 +233,7 @@ pub fn write_atomic(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 ) -> Result<(), WriteError> {
-    persist_atomic(path, write).map_err(|source| WriteError { path: path.to_path_buf(), source })
+    persist_atomic(path, write).map_err(|error| WriteError { path: path.to_path_buf(), error })
 }
 
 /// `text` as a CSV field (RFC 4180): quoted, its quotes doubled, when it holds a comma, a quote or a
