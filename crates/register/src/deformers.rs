@@ -69,18 +69,27 @@ impl Deformer for FemDeformer {
         if observations.matches.is_empty() {
             return Err(RegisterError::Invalid("no cloud point matches the organ surface".into()));
         }
-        let ramp = 0.25f64.powi(STIFFNESS_RAMP.saturating_sub(iteration) as i32);
-        let k = ramp * self.stiffness / observations.matches.len() as f64;
-        let springs = &mut self.solver.problem_mut().point_springs;
-        springs.truncate(self.own_springs);
-        springs.extend(observations.matches.iter().map(|m| PointSpring {
-            nodes: m.stencil.0.clone(),
-            target: m.shift,
-            stiffness: ISOTROPIC_FRACTION * k,
-            normal: m.normal,
-            normal_stiffness: (1.0 - ISOTROPIC_FRACTION) * k,
-        }));
-        Ok(self.solver.solve_from(Some(previous), &self.options)?.u)
+        // A solve that fails (no equilibrium: the data springs would invert an element) is
+        // made again with springs a quarter as stiff, down to the ramp's first stiffness, so
+        // that a stream goes on where the model cannot follow the cloud all the way.
+        let mut softening = STIFFNESS_RAMP.saturating_sub(iteration);
+        loop {
+            let k = 0.25f64.powi(softening as i32) * self.stiffness / observations.matches.len() as f64;
+            let springs = &mut self.solver.problem_mut().point_springs;
+            springs.truncate(self.own_springs);
+            springs.extend(observations.matches.iter().map(|m| PointSpring {
+                nodes: m.stencil.0.clone(),
+                target: m.shift,
+                stiffness: ISOTROPIC_FRACTION * k,
+                normal: m.normal,
+                normal_stiffness: (1.0 - ISOTROPIC_FRACTION) * k,
+            }));
+            match self.solver.solve_from(Some(previous), &self.options) {
+                Ok(solution) => return Ok(solution.u),
+                Err(e) if softening >= STIFFNESS_RAMP => return Err(e.into()),
+                Err(_) => softening += 1,
+            }
+        }
     }
 }
 
@@ -449,6 +458,32 @@ mod tests {
             assert!((node_z(0.04) + 0.005).abs() < 1e-3, "frame {frame}: the top moved by {} m", node_z(0.04));
             start = Some(r.u);
         }
+    }
+
+    /// A block fixed at its base whose whole top is seen 5 cm lower, deeper than the block is
+    /// tall: at their full stiffness the data springs would crush it through itself, and a solve
+    /// of the loop finds no equilibrium (the frame used to end with that error); the springs are
+    /// softened, and the frame ends with the top pressed down as far as the tissue lets it.
+    #[test]
+    fn a_cloud_the_model_cannot_follow_softens_the_data_springs() {
+        let mesh = mesh::box_tet([0.0; 3], [0.04, 0.04, 0.04], [4, 4, 4]).unwrap();
+        let mut problem = Problem::new(mesh, fem::Material::new(fem::Law::Corotational, 5000.0, 0.45));
+        let base: Vec<usize> = (0..problem.mesh.nodes.len()).filter(|&n| problem.mesh.nodes[n][2] < 1e-9).collect();
+        problem.fix(&base);
+        let organ = Organ::new(problem.mesh.clone(), None).unwrap();
+        let stiffness = FemDeformer::default_stiffness(&problem);
+        let mut deformer = FemDeformer::new(problem, stiffness, SolverOptions::default()).unwrap();
+        let top = |p: &&mesh::Point| p[2] > 0.04 - 1e-9;
+        let cloud: Vec<mesh::Point> =
+            organ.surface().vertices.iter().filter(top).map(|p| [p[0], p[1], p[2] - 0.05]).collect();
+        let options = RegistrationOptions { view: Some([0.0, 0.0, -1.0]), ..RegistrationOptions::default() };
+        let r = register_frame(&organ, &mut deformer, &cloud, None, &options).unwrap();
+        let sunk: Vec<f64> = (0..organ.mesh().num_nodes())
+            .filter(|&n| organ.mesh().nodes[n][2] > 0.04 - 1e-9)
+            .map(|n| -r.u[3 * n + 2])
+            .collect();
+        let (mean, most) = (mesh::stats::mean(&sunk), mesh::stats::max(&sunk));
+        assert!(mean > 0.003 && most < 0.04, "the top sank by {mean} m on average, {most} m at most");
     }
 
     /// The shipped network on the 3k-T4 phantom of the `liver_ar` dataset scenario, the normal
