@@ -375,6 +375,12 @@ fn corrupt_shards_give_clear_errors() {
     std::fs::write(&mp, "{ not json").unwrap();
     let e = Dataset::open(dir.path()).unwrap_err().to_string();
     assert!(e.contains("invalid manifest JSON"), "{e}");
+    // A directory without a manifest, and none at all.
+    std::fs::remove_file(&mp).unwrap();
+    let e = Dataset::open(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("not a dataset") && e.contains("augsim generate"), "{e}");
+    let e = Dataset::open(&dir.path().join("absent")).unwrap_err().to_string();
+    assert!(e.contains("absent: no such directory"), "{e}");
 }
 
 #[test]

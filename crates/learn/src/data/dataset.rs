@@ -791,7 +791,15 @@ pub struct Dataset {
 impl Dataset {
     /// Opens the dataset in `dir` (reads and validates the manifest).
     pub fn open(dir: &Path) -> Result<Dataset> {
-        let manifest = Manifest::read(&dir.join(MANIFEST_FILE))?;
+        let path = dir.join(MANIFEST_FILE);
+        if !path.exists() {
+            let what = if dir.is_dir() { "not a dataset" } else { "no such directory" };
+            return Err(LearnError::manifest(
+                dir,
+                format!("{what} (a dataset holds a {MANIFEST_FILE}; `augsim generate` writes one)"),
+            ));
+        }
+        let manifest = Manifest::read(&path)?;
         Ok(Dataset { dir: dir.to_path_buf(), manifest })
     }
 
