@@ -66,8 +66,8 @@ impl From<mesh::io::WriteError> for LearnError {
 
 impl LearnError {
     /// Wraps an I/O error with the path it concerns.
-    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        LearnError::Io { path: path.into(), error: source }
+    pub(crate) fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
+        LearnError::Io { path: path.into(), error }
     }
 
     /// A manifest error for `path`.

@@ -43,8 +43,8 @@ impl From<mesh::io::WriteError> for RegisterError {
 
 impl RegisterError {
     /// An I/O error on `path`.
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        RegisterError::Io { path: path.into(), error: source }
+    pub fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
+        RegisterError::Io { path: path.into(), error }
     }
 
     /// A format error in `path`.

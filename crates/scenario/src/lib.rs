@@ -105,12 +105,12 @@ impl ScenarioText {
     pub fn read(path: &Path) -> Result<ScenarioText> {
         match std::fs::read_to_string(path) {
             Ok(text) => Ok(ScenarioText::new(&text, path)),
-            Err(source) => {
+            Err(error) => {
                 let bare = path.parent().is_none_or(|p| p.as_os_str().is_empty());
                 let name = path.to_str().map(|s| s.trim_end_matches(".toml")).unwrap_or_default();
                 match builtin(name).filter(|_| bare) {
                     Some(text) => Ok(ScenarioText::builtin(name, text)),
-                    None => Err(ScenarioError::Io { path: path.to_path_buf(), error: source }),
+                    None => Err(ScenarioError::Io { path: path.to_path_buf(), error }),
                 }
             }
         }
