@@ -416,6 +416,7 @@ impl StaticSolver {
         start: Instant,
     ) -> Result<Solution, FemError> {
         self.problem.validate()?;
+        self.problem.check_held()?;
         self.cholesky.set_double_precision(false);
         if !self.problem.dirichlet.keys().copied().eq(self.constrained_nodes.iter().copied()) {
             return Err(FemError::Invalid("the set of constrained nodes changed after the solver was built".into()));

@@ -366,6 +366,36 @@ fn warm_start_from_solution_needs_no_iteration() {
     assert!(sol.iterations <= 1, "warm start took {} iterations", sol.iterations);
 }
 
+/// A body that nothing holds (no fixed node, no spring), or that is held only along one line,
+/// has a singular stiffness: a solve refuses it before any iteration, saying why; three fixed
+/// nodes not on one line hold it.
+#[test]
+fn a_body_held_against_no_rigid_motion_is_refused() {
+    let m = box_tet([0.0; 3], [0.04, 0.02, 0.02], [4, 2, 2]).unwrap();
+    let material = Material::new(Law::NeoHookean, 5000.0, 0.45);
+    let mut floating = Problem::new(m.clone(), material);
+    floating.f_ext[2] = -0.01;
+    let solve = |problem: Problem| StaticSolver::new(problem).unwrap().solve(&SolverOptions::default());
+    let err = solve(floating.clone()).expect_err("a floating body is refused");
+    assert!(err.to_string().contains("nothing holds the body"), "{err}");
+
+    // Two corner nodes: the edge between them is an axis it can turn about.
+    let corner = |p: [f64; 3]| m.nodes.iter().position(|q| mesh::distance(*q, p) < 1e-12).unwrap();
+    let (a, b, c) = (corner([0.0; 3]), corner([0.04, 0.0, 0.0]), corner([0.0, 0.02, 0.0]));
+    let mut on_a_line = floating.clone();
+    on_a_line.fix(&[a, b]);
+    let err = solve(on_a_line.clone()).expect_err("a body held along a line is refused");
+    assert!(err.to_string().contains("only along one line"), "{err}");
+
+    // A third corner off that edge, or a spring on it, holds it.
+    let mut held = on_a_line.clone();
+    held.fix(&[c]);
+    assert!(solve(held).is_ok());
+    let mut tied = on_a_line;
+    tied.springs[c] = 10.0;
+    assert!(solve(tied).is_ok());
+}
+
 #[test]
 fn failures_are_reported_not_looped() {
     // Too few iterations allowed for a large load: a NotConverged error, not a hang.
