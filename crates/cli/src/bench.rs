@@ -6,7 +6,6 @@ use anyhow::Result;
 
 /// Runs every case `runs` times and prints medians: static solves, then U-Net prediction.
 pub fn run(runs: usize) -> Result<()> {
-    let runs = runs.max(1);
     println!("Static solves from rest, medians; the cases take turns. 'setup': building a solver (pattern,");
     println!("ordering, symbolic analysis, buffers) and 'first': its first solve, over as many new solvers as runs;");
     println!("'median': repeated solves from rest on the last (the rest tangent's factorisation is kept).");

@@ -379,7 +379,7 @@ pub fn predict(
     let predictor = learn::Predictor::new(&model, compute)?;
     let prediction = predictor.predict(&data)?;
     learn::data::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
-    let t = learn::time_prediction(&predictor, &data, 3, runs.max(1))?;
+    let t = learn::time_prediction(&predictor, &data, 3, runs)?;
     println!(
         "prediction {} runs: median {:.2} ms, mean {:.2} ± {:.2} ms, min {:.2}, max {:.2}",
         t.runs,

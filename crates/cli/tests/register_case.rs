@@ -171,5 +171,9 @@ fn bad_cases_flags_and_clouds_are_clear_errors() {
         "--out",
         out,
     ]);
-    assert!(!ok && text.contains("register_case_test.toml") && text.contains("iterations: 0"), "{text}");
+    assert!(
+        !ok && text.contains("register_case_test.toml")
+            && text.contains("registration: iterations = 0 must be at least 1"),
+        "{text}"
+    );
 }

@@ -101,32 +101,28 @@ impl Default for RegistrationOptions {
 }
 
 impl RegistrationOptions {
-    /// Checks the values.
+    /// Checks the values, naming the first that is out of its range.
     pub fn validate(&self) -> Result<()> {
-        let ok = self.iterations > 0
-            && self.warm_iterations > 0
-            && self.tolerance >= 0.0
-            && self.isolation_factor > 0.0
-            && self.outlier_factor > 0.0
-            && self.min_outlier_distance >= 0.0
-            && self.capture_distance >= 0.0
-            && self.capture_decay > 0.0
-            && self.capture_decay <= 1.0
-            && [
-                self.tolerance,
-                self.isolation_factor,
-                self.outlier_factor,
-                self.min_outlier_distance,
-                self.capture_distance,
-            ]
-            .iter()
-            .all(|v| v.is_finite());
-        let view_ok = self.view.is_none_or(|v| v.iter().all(|x| x.is_finite()) && mesh::dot(v, v) > 0.0);
-        if ok && view_ok {
-            self.rigid.as_ref().map_or(Ok(()), RigidOptions::validate)
-        } else {
-            Err(RegisterError::Invalid(format!("invalid registration options {self:?}")))
+        let counts = [("iterations", self.iterations), ("warm_iterations", self.warm_iterations)];
+        if let Some((name, _)) = counts.iter().find(|(_, n)| *n == 0) {
+            return Err(RegisterError::Invalid(format!("{name} = 0 must be at least 1")));
         }
+        let check = |name: &str, value: f64, ok: bool, rule: &str| match ok && value.is_finite() {
+            true => Ok(()),
+            false => Err(RegisterError::Invalid(format!("{name} = {value} must be {rule}"))),
+        };
+        let (nonnegative, positive) = ("non-negative and finite", "positive and finite");
+        check("tolerance", self.tolerance, self.tolerance >= 0.0, nonnegative)?;
+        check("isolation_factor", self.isolation_factor, self.isolation_factor > 0.0, positive)?;
+        check("outlier_factor", self.outlier_factor, self.outlier_factor > 0.0, positive)?;
+        check("min_outlier_distance", self.min_outlier_distance, self.min_outlier_distance >= 0.0, nonnegative)?;
+        check("capture_distance", self.capture_distance, self.capture_distance >= 0.0, nonnegative)?;
+        let decay = self.capture_decay;
+        check("capture_decay", decay, decay > 0.0 && decay <= 1.0, "in (0, 1]")?;
+        if let Some(v) = self.view.filter(|v| !(v.iter().all(|x| x.is_finite()) && mesh::dot(*v, *v) > 0.0)) {
+            return Err(RegisterError::Invalid(format!("view = {v:?} must be a finite, non-zero direction")));
+        }
+        self.rigid.as_ref().map_or(Ok(()), RigidOptions::validate)
     }
 }
 
@@ -348,6 +344,23 @@ mod tests {
 
     fn phantom_surface() -> TriSurface {
         mesh::boundary_surface(&mesh::phantom::liver_phantom(1500).unwrap()).compacted()
+    }
+
+    /// Out-of-range options are refused by the setting's name, its value and its range.
+    #[test]
+    fn invalid_options_name_the_setting() {
+        let base = RegistrationOptions::default();
+        assert!(base.validate().is_ok());
+        let cases = [
+            (RegistrationOptions { iterations: 0, ..base.clone() }, "iterations = 0 must be at least 1"),
+            (RegistrationOptions { capture_decay: 1.5, ..base.clone() }, "capture_decay = 1.5 must be in (0, 1]"),
+            (RegistrationOptions { tolerance: f64::NAN, ..base.clone() }, "tolerance = NaN must be non-negative"),
+            (RegistrationOptions { view: Some([0.0; 3]), ..base.clone() }, "view = [0.0, 0.0, 0.0] must be"),
+        ];
+        for (options, message) in cases {
+            let err = options.validate().unwrap_err().to_string();
+            assert!(err.starts_with(message), "{err}");
+        }
     }
 
     /// A cloud seen from above gives a view close to straight down; a cloud all around the
