@@ -110,7 +110,7 @@ enum Command {
         #[arg(long)]
         mesh: Option<PathBuf>,
         /// Timed runs after warm-up.
-        #[arg(long, default_value_t = 50, value_parser = at_least_one())]
+        #[arg(long, default_value_t = 50, value_parser = at_least_one)]
         runs: usize,
         /// Where the network runs.
         #[command(flatten)]
@@ -131,14 +131,17 @@ enum Command {
     /// Benchmarks of the static solver (median times, split by phase).
     Bench {
         /// Repetitions per case.
-        #[arg(short, long, default_value_t = 20, value_parser = at_least_one())]
+        #[arg(short, long, default_value_t = 20, value_parser = at_least_one)]
         runs: usize,
     },
 }
 
 /// A count of one or more (`--runs 0` is refused rather than run once).
-fn at_least_one() -> clap::builder::RangedU64ValueParser<usize> {
-    clap::builder::RangedU64ValueParser::new().range(1..)
+fn at_least_one(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(0) => Err("must be at least 1".into()),
+        parsed => parsed.map_err(|e| e.to_string()),
+    }
 }
 
 fn main() {

@@ -121,6 +121,8 @@ magnitude = [0.05, 0.2]
     std::fs::write(d.join("bad.csv"), "x,y,z,fx,fy,fz\n0,0,0,1,2\n").unwrap();
     let e = augsim_err(&["predict", "net/model.json", "bad.csv"], d);
     assert!(e.contains("bad.csv:2") && e.contains("expected 6"), "{e}");
+    let e = augsim_err(&["predict", "net/model.json", "cloud.csv", "--runs", "0"], d);
+    assert!(e.contains("'0' for '--runs <RUNS>': must be at least 1"), "{e}");
 }
 
 /// The shipped scenario-1 network (`models/liver_forces`, trained on the built-in
