@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 
 use indicatif::{ProgressBar, ProgressStyle};
-use learn::data::generate::Generator;
 use learn::{
     Compute, Corruption, Dataset, DatasetPart, Initialization, PredictInput, Sparsity, SplitPolicy, TrainConfig,
     TrainOptions, TrainedModel, UNetConfig,
@@ -21,9 +20,8 @@ pub fn generate(path: &Path, out: Option<&Path>, part: Option<&str>, samples: Op
         scenario.dataset.samples = n;
     }
     let part = part.map(parse_part).transpose()?;
-    let mesh = scenario.mesh(&dir)?;
     println!("scenario   {}: {}", scenario.name, scenario.description);
-    let generator = Generator::new(mesh, scenario.material, scenario.solver.clone(), scenario.dataset.clone())?;
+    let generator = scenario.generator(&dir)?;
     let mesh = generator.mesh();
     println!("mesh       {} nodes, {} {} cells", mesh.num_nodes(), mesh.cells.len(), mesh.cells.kind_name());
     let grid = generator.grid();

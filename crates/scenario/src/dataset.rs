@@ -47,9 +47,15 @@ impl DatasetScenario {
         crate::builtin_with(name, Self::from_text)
     }
 
-    /// Builds the mesh (paths relative to `dir`).
+    /// Builds the mesh the samples are solved on (paths relative to `dir`): quadratic
+    /// tetrahedra made from the given mesh when the material's order is 2.
     pub fn mesh(&self, dir: &Path) -> Result<Mesh> {
-        build_mesh(&self.mesh, dir).map_err(|e| ScenarioError::build(&self.name, format!("building the mesh: {e}")))
+        let mesh = build_mesh(&self.mesh, dir)
+            .map_err(|e| ScenarioError::build(&self.name, format!("building the mesh: {e}")))?;
+        match self.material.order {
+            2 => mesh.quadratic().map_err(|e| ScenarioError::build(&self.name, format!("quadratic elements: {e}"))),
+            _ => Ok(mesh),
+        }
     }
 
     /// Builds the mesh (paths relative to `dir`) and the sample generator.

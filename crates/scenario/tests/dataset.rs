@@ -35,6 +35,11 @@ fn a_regenerated_liver_ar_t10_dataset_is_the_shipped_networks_own() {
         .unwrap();
     let model: serde_json::Value = serde_json::from_str(&model).unwrap();
     assert_eq!(Dataset::open(tmp.path()).unwrap().manifest().source_id(), model["training"]["split"]["source"]);
+    // The scenario's mesh is the one its samples are solved on (what `augsim view` shows them on):
+    // the quadratic mesh of the generator, node for node.
+    let mesh = scenario.mesh(&dir).unwrap();
+    let solved = scenario.generator(&dir).unwrap().mesh().clone();
+    assert_eq!((mesh.cells.kind_name(), &mesh.nodes), (solved.cells.kind_name(), &solved.nodes));
 }
 
 /// The large loads of `liver_forces_large` on stabilised T10 F-bar: each of the first ten draws
