@@ -191,44 +191,48 @@ impl Problem {
     /// singular): the nodes that are prescribed or tied by a spring must include three not on
     /// one line. Without this, a forgotten `[[fixed]]` surfaces as a failed Newton solve.
     pub(crate) fn check_held(&self) -> Result<(), FemError> {
-        let tied = |n: usize| self.springs[n] > 0.0;
-        let anchors: Vec<Point> = self
-            .dirichlet
-            .keys()
-            .copied()
-            .chain((0..self.mesh.num_nodes()).filter(|&n| tied(n)))
-            .chain(
-                self.point_springs
-                    .iter()
-                    .filter(|s| s.stiffness + s.normal_stiffness > 0.0)
-                    .flat_map(|s| s.nodes.iter().filter(|(_, w)| *w != 0.0).map(|&(n, _)| n)),
-            )
-            .map(|n| self.mesh.nodes[n])
-            .collect();
-        let Some(&first) = anchors.first() else {
-            return Err(FemError::Invalid(
-                "nothing holds the body: no node is fixed, prescribed or tied by a spring, so it can move as a \
-                 rigid body; fix nodes (`[[fixed]]` in a scenario) or add springs"
-                    .into(),
-            ));
-        };
-        let far =
-            anchors.iter().copied().max_by(|a, b| mesh::distance(first, *a).total_cmp(&mesh::distance(first, *b)));
-        let span = far.map_or(0.0, |p| mesh::distance(first, p));
-        let axis = far.map_or([0.0; 3], |p| mesh::sub(p, first));
-        let off_axis = anchors
+        let tied = (0..self.mesh.num_nodes()).filter(|&n| self.springs[n] > 0.0);
+        let pulled = self
+            .point_springs
             .iter()
-            .map(|&p| mesh::norm(mesh::cross(axis, mesh::sub(p, first))) / span.max(f64::MIN_POSITIVE))
-            .fold(0.0, f64::max);
-        if off_axis <= 1e-6 * span {
-            let held = if span == 0.0 { "at a single point" } else { "only along one line" };
-            return Err(FemError::Invalid(format!(
-                "the body is held {held}: it can still rotate about it; fix (or tie by springs) at least three \
-                 nodes not on one line"
-            )));
-        }
-        Ok(())
+            .filter(|s| s.stiffness + s.normal_stiffness > 0.0)
+            .flat_map(|s| s.nodes.iter().filter(|(_, w)| *w != 0.0).map(|&(n, _)| n));
+        let anchors: Vec<Point> =
+            self.dirichlet.keys().copied().chain(tied).chain(pulled).map(|n| self.mesh.nodes[n]).collect();
+        held_by(&anchors)
     }
+
+    /// Whether the prescribed nodes alone hold the body (then it stays held whatever its springs).
+    pub(crate) fn held_by_constraints(&self) -> bool {
+        held_by(&self.dirichlet.keys().map(|&n| self.mesh.nodes[n]).collect::<Vec<_>>()).is_ok()
+    }
+}
+
+/// Whether points tied to their rest positions hold a body against rigid motion: three of them
+/// not on one line.
+fn held_by(anchors: &[Point]) -> Result<(), FemError> {
+    let Some(&first) = anchors.first() else {
+        return Err(FemError::Invalid(
+            "nothing holds the body: no node is fixed, prescribed or tied by a spring, so it can move as a rigid \
+             body; fix nodes (`[[fixed]]` in a scenario) or add springs"
+                .into(),
+        ));
+    };
+    let far = anchors.iter().copied().max_by(|a, b| mesh::distance(first, *a).total_cmp(&mesh::distance(first, *b)));
+    let span = far.map_or(0.0, |p| mesh::distance(first, p));
+    let axis = far.map_or([0.0; 3], |p| mesh::sub(p, first));
+    let off_axis = anchors
+        .iter()
+        .map(|&p| mesh::norm(mesh::cross(axis, mesh::sub(p, first))) / span.max(f64::MIN_POSITIVE))
+        .fold(0.0, f64::max);
+    if off_axis <= 1e-6 * span {
+        let held = if span == 0.0 { "at a single point" } else { "only along one line" };
+        return Err(FemError::Invalid(format!(
+            "the body is held {held}: it can still rotate about it; fix (or tie by springs) at least three nodes \
+             not on one line"
+        )));
+    }
+    Ok(())
 }
 
 /// Each node's share (summing to 1) of a total force applied as the uniform traction of

@@ -102,6 +102,8 @@ pub struct StaticSolver {
     /// What the rest slot's factor was computed with (material, springs).
     rest_key: Option<(Material, Vec<f64>, Vec<PointSpring>)>,
     constrained_nodes: Vec<usize>,
+    /// The constrained nodes alone hold the body against rigid motion (the set is frozen).
+    held_by_constraints: bool,
     work: Workspace,
     values: Vec<f64>,
     /// A tangent assembly and factorisation, in iterations (see [`refactorization_cost`]).
@@ -252,6 +254,7 @@ impl StaticSolver {
         let values = written_zeros(pattern.nnz());
         let work = Workspace::for_pattern(&geometry, &pattern);
         let constrained_nodes = problem.dirichlet.keys().copied().collect();
+        let held_by_constraints = problem.held_by_constraints();
         Ok(StaticSolver {
             problem,
             geometry,
@@ -259,6 +262,7 @@ impl StaticSolver {
             cholesky,
             rest_key: None,
             constrained_nodes,
+            held_by_constraints,
             work,
             values,
             refactorization_cost,
@@ -416,7 +420,9 @@ impl StaticSolver {
         start: Instant,
     ) -> Result<Solution, FemError> {
         self.problem.validate()?;
-        self.problem.check_held()?;
+        if !self.held_by_constraints {
+            self.problem.check_held()?;
+        }
         self.cholesky.set_double_precision(false);
         if !self.problem.dirichlet.keys().copied().eq(self.constrained_nodes.iter().copied()) {
             return Err(FemError::Invalid("the set of constrained nodes changed after the solver was built".into()));
