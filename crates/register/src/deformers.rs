@@ -78,7 +78,7 @@ impl Deformer for FemDeformer {
         // softer equilibrium the springs stiffen again, a quarter at a time, as far as a solve
         // succeeds.
         let wanted = STIFFNESS_RAMP.saturating_sub(iteration);
-        let (mut softening, mut start, mut reached) = (wanted, previous.to_vec(), None);
+        let (mut softening, mut reached): (usize, Option<Vec<f64>>) = (wanted, None);
         loop {
             let k = 0.25f64.powi(softening as i32) * self.stiffness / observations.matches.len() as f64;
             let springs = &mut self.solver.problem_mut().point_springs;
@@ -90,11 +90,10 @@ impl Deformer for FemDeformer {
                 normal: m.normal,
                 normal_stiffness: (1.0 - ISOTROPIC_FRACTION) * k,
             }));
-            match self.solver.solve_from(Some(&start), &self.options) {
+            match self.solver.solve_from(Some(reached.as_deref().unwrap_or(previous)), &self.options) {
                 Ok(solution) if softening == wanted => return Ok(solution.u),
                 Ok(solution) => {
                     softening -= 1;
-                    start.clone_from(&solution.u);
                     reached = Some(solution.u);
                 }
                 Err(e) => match reached {
