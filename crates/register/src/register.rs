@@ -107,10 +107,7 @@ impl RegistrationOptions {
         if let Some((name, _)) = counts.iter().find(|(_, n)| *n == 0) {
             return Err(RegisterError::Invalid(format!("{name} = 0 must be at least 1")));
         }
-        let check = |name: &str, value: f64, ok: bool, rule: &str| match ok && value.is_finite() {
-            true => Ok(()),
-            false => Err(RegisterError::Invalid(format!("{name} = {value} must be {rule}"))),
-        };
+        let check = check_setting;
         let (nonnegative, positive) = ("non-negative and finite", "positive and finite");
         check("tolerance", self.tolerance, self.tolerance >= 0.0, nonnegative)?;
         check("isolation_factor", self.isolation_factor, self.isolation_factor > 0.0, positive)?;
@@ -123,6 +120,15 @@ impl RegistrationOptions {
             return Err(RegisterError::Invalid(format!("view = {v:?} must be a finite, non-zero direction")));
         }
         self.rigid.as_ref().map_or(Ok(()), RigidOptions::validate)
+    }
+}
+
+/// `Ok` when a setting is `ok` and finite, else an error naming it, its value and the `rule`
+/// it breaks ("capture_decay = 1.5 must be in (0, 1]").
+pub(crate) fn check_setting(name: &str, value: f64, ok: bool, rule: &str) -> Result<()> {
+    match ok && value.is_finite() {
+        true => Ok(()),
+        false => Err(RegisterError::Invalid(format!("{name} = {value} must be {rule}"))),
     }
 }
 
@@ -356,6 +362,20 @@ mod tests {
             (RegistrationOptions { capture_decay: 1.5, ..base.clone() }, "capture_decay = 1.5 must be in (0, 1]"),
             (RegistrationOptions { tolerance: f64::NAN, ..base.clone() }, "tolerance = NaN must be non-negative"),
             (RegistrationOptions { view: Some([0.0; 3]), ..base.clone() }, "view = [0.0, 0.0, 0.0] must be"),
+            (
+                RegistrationOptions {
+                    rigid: Some(RigidOptions { keep: 0.0, ..RigidOptions::default() }),
+                    ..base.clone()
+                },
+                "rigid.keep = 0 must be in (0, 1]",
+            ),
+            (
+                RegistrationOptions {
+                    rigid: Some(RigidOptions { iterations: 0, ..RigidOptions::default() }),
+                    ..base.clone()
+                },
+                "rigid.iterations = 0 must be at least 1",
+            ),
         ];
         for (options, message) in cases {
             let err = options.validate().unwrap_err().to_string();

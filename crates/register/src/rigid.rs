@@ -18,6 +18,7 @@ use nalgebra::{Matrix6, Vector6};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::register::check_setting;
 use crate::{RegisterError, Result};
 
 /// Fewest cloud points a rigid alignment accepts (6 unknowns, and trimming drops some).
@@ -204,21 +205,15 @@ impl Default for RigidOptions {
 }
 
 impl RigidOptions {
-    /// Checks the values.
+    /// Checks the values, naming the first that is out of its range.
     pub fn validate(&self) -> Result<()> {
-        if self.iterations > 0
-            && self.keep > 0.0
-            && self.keep <= 1.0
-            && self.outlier_factor > 0.0
-            && self.tolerance >= 0.0
-            && self.tolerance.is_finite()
-        {
-            Ok(())
-        } else {
-            Err(RegisterError::Invalid(format!(
-                "invalid rigid options {self:?}: iterations > 0, keep in (0, 1], outlier_factor > 0, tolerance >= 0"
-            )))
+        if self.iterations == 0 {
+            return Err(RegisterError::Invalid("rigid.iterations = 0 must be at least 1".into()));
         }
+        check_setting("rigid.keep", self.keep, self.keep > 0.0 && self.keep <= 1.0, "in (0, 1]")?;
+        let factor = self.outlier_factor;
+        check_setting("rigid.outlier_factor", factor, factor > 0.0, "positive and finite")?;
+        check_setting("rigid.tolerance", self.tolerance, self.tolerance >= 0.0, "non-negative and finite")
     }
 }
 
