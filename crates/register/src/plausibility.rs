@@ -59,10 +59,17 @@ pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<()> {
             "the cloud spans {extent:.4} m, {ratio:.0} times the organ's {size:.4} m.{hint}"
         )));
     }
+    if extent == 0.0 {
+        return Err(RegisterError::Invalid(format!(
+            "the cloud's {} points lie at one place (its extent, 2nd to 98th percentile on each axis, is 0): \
+             it cannot be a view of the organ",
+            cloud.len()
+        )));
+    }
     if ratio < MIN_EXTENT_RATIO {
         return Err(RegisterError::Invalid(format!(
             "the cloud spans {extent:.3e} m, {ratio:.1e} of the organ's {size:.4} m: too small to be a view of it \
-             (metres given where millimetres are expected? a server in millimetres takes --units m)"
+             (metres given where millimetres are expected? a server takes --units m, the Python package units=\"m\")"
         )));
     }
     Ok(())
@@ -108,4 +115,25 @@ pub fn warnings(organ: &Organ, u: &[f64], far_share: f64) -> Vec<String> {
         ));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A view of the organ passes; the same points in millimetres, in kilometres or all at one
+    /// place are refused with what they probably are.
+    #[test]
+    fn clouds_that_cannot_be_a_view_are_refused_saying_why() {
+        let organ = Organ::new(mesh::generate::box_tet([0.0; 3], [0.1, 0.06, 0.04], [5, 3, 2]).unwrap(), None).unwrap();
+        let top: Vec<Point> = organ.mesh().nodes.iter().copied().filter(|p| p[2] > 0.039).collect();
+        assert!(check_extent(&organ, &top).is_ok());
+        let scaled = |s: f64| top.iter().map(|p| p.map(|c| s * c)).collect::<Vec<Point>>();
+        let message = |cloud: &[Point]| check_extent(&organ, cloud).unwrap_err().to_string();
+        assert!(message(&scaled(1e3)).contains("Is it in millimetres?"), "{}", message(&scaled(1e3)));
+        assert!(message(&scaled(1e-3)).contains("too small to be a view"), "{}", message(&scaled(1e-3)));
+        assert!(message(&scaled(1e6)).contains("not the organ's points"), "{}", message(&scaled(1e6)));
+        let one_place = vec![[0.05, 0.03, 0.04]; 100];
+        assert!(message(&one_place).starts_with("the cloud's 100 points lie at one place"), "{}", message(&one_place));
+    }
 }
