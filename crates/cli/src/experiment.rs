@@ -9,7 +9,7 @@ use experiment::{Name, Size};
 /// Arguments of `augsim experiment`.
 #[derive(Debug, Args)]
 pub struct ExperimentArgs {
-    /// fem-speed, fem-convergence, young, springs, liver-forces, liver-ar, beam-transfer, beam-sparse, stream,
+    /// fem-speed, fem-convergence, fem-peer (needs CalculiX), young, springs, liver-forces, liver-ar, beam-transfer, beam-sparse, stream,
     /// held-out, or all.
     pub name: String,
     /// quick (minutes on 2 cores) or paper (the published data sizes).

@@ -82,17 +82,24 @@ pub fn merge(out: &Path, parts: &[PathBuf]) -> Result<()> {
 #[derive(Debug, Clone, clap::Args)]
 pub struct CorruptionArgs {
     /// Keep a random visible patch of between MIN and MAX input nodes (e.g. 13,114).
-    #[arg(long, value_delimiter = ',', num_args = 2)]
-    pub sparse: Option<Vec<usize>>,
+    #[arg(long, value_name = "MIN,MAX", value_parser = node_range)]
+    pub sparse: Option<(usize, usize)>,
     /// Additive Gaussian noise on the visible input nodes: standard deviation in the input unit.
     #[arg(long, default_value_t = 0.0)]
     pub noise: f64,
 }
 
+/// Parses `MIN,MAX`, two node counts (their order is checked with the other corruption settings).
+fn node_range(text: &str) -> Result<(usize, usize), String> {
+    let parse = |s: &str| s.trim().parse::<usize>().map_err(|e| format!("'{s}' is not a node count: {e}"));
+    let (min, max) = text.split_once(',').ok_or_else(|| format!("expected MIN,MAX (e.g. 13,114), got '{text}'"))?;
+    Ok((parse(min)?, parse(max)?))
+}
+
 impl CorruptionArgs {
     fn corruption(&self) -> Corruption {
         Corruption {
-            sparsity: self.sparse.as_ref().map(|v| Sparsity::Patch { min_nodes: v[0], max_nodes: v[1] }),
+            sparsity: self.sparse.map(|(min_nodes, max_nodes)| Sparsity::Patch { min_nodes, max_nodes }),
             noise_std: self.noise,
         }
     }

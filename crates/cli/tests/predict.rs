@@ -72,6 +72,14 @@ magnitude = [0.05, 0.2]
     assert!(text.contains("held out   2 of 6 samples (the test split recorded in the model)"), "{text}");
     let errors = std::fs::read_to_string(d.join("eval/errors.csv")).unwrap();
     assert_eq!(errors.lines().count(), 3, "{errors}");
+    // Sparse, noisy input: MIN,MAX as the help says; a malformed or reversed range is refused.
+    let text =
+        augsim(&["eval", "net/model.json", "data", "--out", "eval_sparse", "--sparse", "2,20", "--noise", "1e-4"], d);
+    assert!(text.contains("held out   2 of 6 samples"), "{text}");
+    let e = augsim_err(&["eval", "net/model.json", "data", "--sparse", "20"], d);
+    assert!(e.contains("expected MIN,MAX (e.g. 13,114), got '20'"), "{e}");
+    let e = augsim_err(&["eval", "net/model.json", "data", "--sparse", "20,2"], d);
+    assert!(e.contains("patch sizes must satisfy 1 <= min <= max, got 20, 2"), "{e}");
 
     // Two point forces inside the organ's bounding box, one on a grid-cell corner.
     let model: serde_json::Value =

@@ -27,9 +27,11 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
 pub mod assimilation;
+pub mod calculix;
 pub mod case;
 pub mod curve;
 mod fem_convergence;
+mod fem_peer;
 mod fem_speed;
 mod held_out;
 mod identification;
@@ -63,6 +65,8 @@ pub enum Name {
     FemSpeed,
     /// Convergence of the elements under mesh refinement (error versus dofs and time).
     FemConvergence,
+    /// The static solver against CalculiX on the same problems (needs `ccx`).
+    FemPeer,
     /// Young's modulus of the liver identified by the ROUKF from tracked surface points.
     Young,
     /// Hidden boundary springs identified by the ROUKF.
@@ -83,9 +87,10 @@ pub enum Name {
 
 impl Name {
     /// Every experiment, in the order `all` runs them.
-    pub const ALL: [Name; 10] = [
+    pub const ALL: [Name; 11] = [
         Name::FemSpeed,
         Name::FemConvergence,
+        Name::FemPeer,
         Name::Young,
         Name::Springs,
         Name::LiverForces,
@@ -101,6 +106,7 @@ impl Name {
         match self {
             Name::FemSpeed => "fem-speed",
             Name::FemConvergence => "fem-convergence",
+            Name::FemPeer => "fem-peer",
             Name::Young => "young",
             Name::Springs => "springs",
             Name::LiverForces => "liver-forces",
@@ -117,6 +123,7 @@ impl Name {
         match self {
             Name::FemSpeed => "Static FEM on the liver: solve times",
             Name::FemConvergence => "FEM convergence under mesh refinement",
+            Name::FemPeer => "Static FEM against CalculiX",
             Name::Young => "ROUKF: Young's modulus",
             Name::Springs => "ROUKF: hidden boundary springs",
             Name::LiverForces => "U-Net: liver, nodal forces → displacement",
@@ -301,6 +308,7 @@ pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<Ex
     let mut result = match name {
         Name::FemSpeed => fem_speed::run(size, &dir, progress)?,
         Name::FemConvergence => fem_convergence::run(size, &dir, progress)?,
+        Name::FemPeer => fem_peer::run(size, &dir, progress)?,
         Name::Young => identification::young(size, &dir, progress)?,
         Name::Springs => identification::springs(size, &dir, progress)?,
         Name::LiverForces => learning::liver_forces(size, &dir, progress)?,

@@ -37,6 +37,7 @@ fn names_parse_and_unknown_ones_are_refused() {
         [
             "fem-speed",
             "fem-convergence",
+            "fem-peer",
             "young",
             "springs",
             "liver-forces",
