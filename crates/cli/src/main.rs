@@ -128,7 +128,7 @@ enum Command {
     /// Run a published experiment end to end (generate, train, identify, register, evaluate) and write
     /// result.json, PNG figures and the report (report.md, report.html) beside the published figures.
     Experiment(experiment::ExperimentArgs),
-    /// Benchmarks of the static solver (median times, split by phase).
+    /// Benchmarks of the static solver (median times, split by phase) and of the U-Net's prediction.
     Bench {
         /// Repetitions per case.
         #[arg(short, long, default_value_t = 20, value_parser = at_least_one)]

@@ -39,8 +39,8 @@ pub struct RegisterArgs {
     /// Targets at rest (CSV x,y,z, m); default: the mesh's `markers` and `tumour` regions.
     #[arg(long)]
     targets: Option<PathBuf>,
-    /// True deformed positions of the targets (CSV x,y,z, same order, in the cloud's frame): the
-    /// TRE is reported.
+    /// True deformed positions of the targets (CSV x,y,z, same order, in the cloud's frame), or a
+    /// directory of one such file per frame: the TRE is reported.
     #[arg(long)]
     truth: Option<PathBuf>,
     /// Most match-and-deform iterations per frame from rest (default: the library's for --fem, the

@@ -4,10 +4,11 @@
 //! The deck reproduces the problem exactly where CalculiX has the same model: the same nodes and
 //! cells (C3D4, C3D10 and C3D8 use augsim's node orders and quadrature: 1, 4 and 2×2×2 points),
 //! linear elasticity (`*ELASTIC`) or Saint-Venant-Kirchhoff (`*ELASTIC` under `NLGEOM`), the
-//! nodal forces (`*CLOAD`), the prescribed displacements (`*BOUNDARY`) and the nodal springs
-//! (`SPRING1` elements), then a second step of equilibrium iterations under the same load. Laws, formulations
-//! and terms CalculiX does not have (co-rotational, augsim's Neo-Hookean, F-bar, point springs,
-//! immersed-boundary cells) are refused rather than approximated.
+//! nodal forces (`*CLOAD`: forces, tractions and gravity as augsim integrates them), the prescribed
+//! displacements (`*BOUNDARY`) and the nodal springs (`SPRING1` elements), then a second step of
+//! equilibrium iterations under the same load. Laws, formulations and terms CalculiX does not have
+//! (co-rotational, augsim's Neo-Hookean, F-bar, point springs, immersed-boundary cells) are refused
+//! rather than approximated.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -43,8 +44,9 @@ fn element_type(kind: CellKind) -> &'static str {
     }
 }
 
-/// The problem as a CalculiX input deck (SI units, 13 significant digits: CalculiX reads at most 20 characters a number; node and element numbers are augsim's
-/// indices plus one). Fails for what CalculiX cannot reproduce exactly (see the module).
+/// The problem as a CalculiX input deck (SI units; 13 significant digits, as CalculiX reads at
+/// most 20 characters a number; node and element numbers are augsim's indices plus one). Fails
+/// for what CalculiX cannot reproduce exactly (see the module).
 pub fn input_deck(problem: &Problem) -> Result<String> {
     problem.validate()?;
     let material = &problem.material;
@@ -94,6 +96,13 @@ pub fn input_deck(problem: &Problem) -> Result<String> {
     for (set, dof, k) in &spring_sets {
         writeln!(deck, "*SPRING, ELSET={set}\n{dof}\n{k:.12e}")?;
     }
+    // The load in increments CalculiX sizes itself (from 5 %), then a second step under the same
+    // load: CalculiX accepts an increment on criteria of its own, which left 2 µm on a 9.5 cm
+    // bend; the second step's equilibrium iterations take it to the printed digits (7 nm).
+    let step = format!("*STEP{}, INC=10000\n*STATIC\n", if nonlinear { ", NLGEOM" } else { "" });
+    deck.push_str(&step);
+    deck.push_str("0.05, 1.0, 1e-6, 1.0\n");
+    // Prescribed displacements and loads rise with the step, as augsim's load factor scales them.
     if !problem.dirichlet.is_empty() {
         deck.push_str("*BOUNDARY\n");
         for (&n, value) in &problem.dirichlet {
@@ -102,12 +111,6 @@ pub fn input_deck(problem: &Problem) -> Result<String> {
             }
         }
     }
-    // The load in increments CalculiX sizes itself (from 5 %), then a second step under the same
-    // load: CalculiX accepts an increment on criteria of its own, which left 2 µm on a 9.5 cm
-    // bend; the second step's equilibrium iterations take it to the printed digits (7 nm).
-    let step = format!("*STEP{}, INC=10000\n*STATIC\n", if nonlinear { ", NLGEOM" } else { "" });
-    deck.push_str(&step);
-    deck.push_str("0.05, 1.0, 1e-6, 1.0\n");
     let forces: Vec<(usize, usize, f64)> = (0..problem.f_ext.len())
         .filter(|&i| problem.f_ext[i] != 0.0)
         .map(|i| (i / 3, i % 3, problem.f_ext[i]))
@@ -221,7 +224,7 @@ mod tests {
         assert!(deck.contains("*SPRING, ELSET=SPRING0D1\n1\n5.000000000000e0\n"), "{deck}");
         assert!(deck.contains("*CLOAD\n8, 3, -1.000000000000e0\n"), "{deck}");
         assert!(deck.contains("*BOUNDARY\n1, 1, 1, 0.000000000000e0\n1, 2, 2, 0.000000000000e0\n"), "{deck}");
-        let boundary = deck.split("*BOUNDARY\n").nth(1).unwrap().split("*STEP").next().unwrap();
+        let boundary = deck.split("*BOUNDARY\n").nth(1).unwrap().split("*CLOAD").next().unwrap();
         assert_eq!(boundary.lines().count(), 9, "three fixed nodes, three directions each");
         assert!(!input_deck(&cube(Law::Linear, 0.3)).unwrap().contains("NLGEOM"));
         let refused = |p: Problem| input_deck(&p).unwrap_err().to_string();
