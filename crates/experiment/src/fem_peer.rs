@@ -42,7 +42,7 @@ pub struct Agreement {
     pub max_difference: f64,
     /// The root mean square of those distances over the nodes (m).
     pub rms_difference: f64,
-    /// augsim: a new solver's setup and solve (s).
+    /// augsim: the solve (s), the solver's setup before it not counted.
     pub seconds: f64,
 }
 
