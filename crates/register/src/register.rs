@@ -107,15 +107,19 @@ impl RegistrationOptions {
         if let Some((name, _)) = counts.iter().find(|(_, n)| *n == 0) {
             return Err(RegisterError::Invalid(format!("{name} = 0 must be at least 1")));
         }
-        let check = check_setting;
         let (nonnegative, positive) = ("non-negative and finite", "positive and finite");
-        check("tolerance", self.tolerance, self.tolerance >= 0.0, nonnegative)?;
-        check("isolation_factor", self.isolation_factor, self.isolation_factor > 0.0, positive)?;
-        check("outlier_factor", self.outlier_factor, self.outlier_factor > 0.0, positive)?;
-        check("min_outlier_distance", self.min_outlier_distance, self.min_outlier_distance >= 0.0, nonnegative)?;
-        check("capture_distance", self.capture_distance, self.capture_distance >= 0.0, nonnegative)?;
+        check_setting("tolerance", self.tolerance, self.tolerance >= 0.0, nonnegative)?;
+        check_setting("isolation_factor", self.isolation_factor, self.isolation_factor > 0.0, positive)?;
+        check_setting("outlier_factor", self.outlier_factor, self.outlier_factor > 0.0, positive)?;
+        check_setting(
+            "min_outlier_distance",
+            self.min_outlier_distance,
+            self.min_outlier_distance >= 0.0,
+            nonnegative,
+        )?;
+        check_setting("capture_distance", self.capture_distance, self.capture_distance >= 0.0, nonnegative)?;
         let decay = self.capture_decay;
-        check("capture_decay", decay, decay > 0.0 && decay <= 1.0, "in (0, 1]")?;
+        check_setting("capture_decay", decay, decay > 0.0 && decay <= 1.0, "in (0, 1]")?;
         if let Some(v) = self.view.filter(|v| !(v.iter().all(|x| x.is_finite()) && mesh::dot(*v, *v) > 0.0)) {
             return Err(RegisterError::Invalid(format!("view = {v:?} must be a finite, non-zero direction")));
         }
