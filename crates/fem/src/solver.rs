@@ -507,8 +507,8 @@ impl StaticSolver {
     }
 
     /// Turns the failure of a Saint-Venant-Kirchhoff solve past its compressive
-    /// limit point into [`FemError::LimitPoint`]: the tangent was found indefinite,
-    /// or a quadrature point is compressed beyond the stretch 1/√3 where SVK's
+    /// limit point into [`FemError::LimitPoint`]: the failing attempt found the tangent
+    /// indefinite, or a quadrature point is compressed beyond the stretch 1/√3 where SVK's
     /// stress peaks. `lambda` is the last converged load factor, `trial` the
     /// failing iterate and `u` the last converged state.
     fn diagnose(&self, error: FemError, lambda: f64, trial: &[f64], u: &[f64], stats: &Stats) -> FemError {
@@ -545,6 +545,7 @@ impl StaticSolver {
         stats: &mut Stats,
     ) -> Result<(), FemError> {
         let ndof = u.len();
+        stats.indefinite = false;
         for (&n, v) in &self.problem.dirichlet {
             for d in 0..3 {
                 u[3 * n + d] = lambda * v[d];
@@ -834,7 +835,8 @@ struct Stats {
     iterations: usize,
     factorizations: usize,
     tangent_assemblies: usize,
-    /// A factorisation found the tangent indefinite (past a limit or bifurcation point).
+    /// A factorisation of the latest Newton attempt found the tangent indefinite (past a limit or
+    /// bifurcation point); an earlier attempt's, made far from equilibrium, says nothing of the failure.
     indefinite: bool,
     /// The kept factor was recomputed during this solve.
     refactorized: bool,

@@ -425,6 +425,26 @@ fn failures_are_reported_not_looped() {
     assert!(matches!(err, fem::FemError::NonFinite(_)), "{err}");
 }
 
+/// An SVK beam bent by 9 cm (T10, ν = 0.49) whose first full-load attempt meets an indefinite
+/// tangent far from equilibrium, then asked for a residual below round-off: the failure is a
+/// Newton one, not SVK's compressive limit point (no element is compressed anywhere near it).
+#[test]
+fn a_tolerance_below_round_off_is_not_diagnosed_as_a_limit_point() {
+    let (length, side) = (0.1, 0.02);
+    let m = mesh::box_mesh(CellKind::Tet4, [0.0; 3], [length, side, side], [10, 2, 2]).unwrap();
+    let end =
+        |x: f64| mesh::select::nodes_in_box(&m.nodes, [x - 1e-9, -1e-9, -1e-9], [x + 1e-9, 1.1 * side, 1.1 * side]);
+    let material = Material::new(Law::Svk, 5000.0, 0.49).with_order(2).with_formulation(Formulation::Standard);
+    let mut problem = Problem::new(m.clone(), material);
+    problem.fix(&end(0.0));
+    problem.add_force(&end(length), [0.0, 0.0, -0.025]);
+    let mut solver = StaticSolver::new(problem).unwrap();
+    let reachable = solver.solve(&SolverOptions { rtol: 1e-9, utol: 0.0, ..Default::default() }).unwrap();
+    assert!(reachable.u.iter().fold(0.0f64, |a, b| a.max(b.abs())) > 0.08);
+    let err = solver.solve(&SolverOptions { rtol: 1e-14, utol: 0.0, ..Default::default() }).unwrap_err();
+    assert!(matches!(err, fem::FemError::NotConverged { .. }), "{err}");
+}
+
 /// A total force is spread over a node set by tributary surface area, not in equal shares:
 /// on the top face of a 1 × 1 box with 4 × 2 cells, a corner node carries 1/32 of it, an
 /// node on an edge 1/16, an inner node 1/8; an interior node set falls back to equal shares.
