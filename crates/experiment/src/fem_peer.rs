@@ -53,21 +53,6 @@ impl Agreement {
     }
 }
 
-/// A cantilever of 10 × 2 × 2 cells of `kind` (T4 made T10 for `order` 2), 0.1 × 0.02 × 0.02 m
-/// (E = 5 kPa), clamped at x = 0, a downward `load` (N) on its free end.
-fn bent_beam(kind: CellKind, order: u8, law: Law, poisson: f64, load: f64) -> Result<Problem> {
-    let (length, side) = (0.1, 0.02);
-    let m = mesh::box_mesh(kind, [0.0; 3], [length, side, side], [10, 2, 2])?;
-    let end =
-        |x: f64| mesh::select::nodes_in_box(&m.nodes, [x - 1e-9, -1e-9, -1e-9], [x + 1e-9, side + 1e-9, side + 1e-9]);
-    let (clamp, tip) = (end(0.0), end(length));
-    let material = Material::new(law, 5000.0, poisson).with_order(order).with_formulation(Formulation::Standard);
-    let mut p = Problem::new(m, material);
-    p.fix(&clamp);
-    p.add_force(&tip, [0.0, 0.0, -load]);
-    Ok(p)
-}
-
 /// The built-in `liver` scenario (the phantom fixed between its lobes, an 800 Pa push on one
 /// lobe) on about `tets` tetrahedra with the standard formulation on elements of `order`, its
 /// law replaced by `law`.
@@ -95,8 +80,14 @@ fn problems(size: Size) -> Result<Vec<(String, Problem)>> {
     };
     let mut out = vec![
         ("verification cantilever 10 × 1 × 1 m, H8, linear, ν = 0.3".to_string(), cantilever),
-        ("beam 0.1 m bent by 0.05 N, H8, SVK, ν = 0.3".into(), bent_beam(CellKind::Hex8, 1, Law::Svk, 0.3, 0.05)?),
-        ("beam 0.1 m bent by 0.025 N, T10, SVK, ν = 0.49".into(), bent_beam(CellKind::Tet4, 2, Law::Svk, 0.49, 0.025)?),
+        (
+            "beam 0.1 m bent by 0.05 N, H8, SVK, ν = 0.3".into(),
+            verification::bent_beam(CellKind::Hex8, 1, Law::Svk, 0.3, 0.05)?,
+        ),
+        (
+            "beam 0.1 m bent by 0.025 N, T10, SVK, ν = 0.49".into(),
+            verification::bent_beam(CellKind::Tet4, 2, Law::Svk, 0.49, 0.025)?,
+        ),
         ("liver phantom 5,000 T4, linear, ν = 0.48, 800 Pa push".into(), liver(5000, Law::Linear, 1)?),
         ("liver phantom 5,000 T4, SVK, ν = 0.48, 800 Pa push".into(), liver(5000, Law::Svk, 1)?),
         ("liver phantom 5,000 T4, SVK, held by springs (50 N/m a node), 800 Pa push".into(), on_springs),
@@ -245,8 +236,8 @@ mod tests {
     fn bent_beams_match_the_stored_calculix_solutions() {
         let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/calculix");
         let beams = [
-            ("beam_h8_svk", bent_beam(CellKind::Hex8, 1, Law::Svk, 0.3, 0.05).unwrap()),
-            ("beam_t10_svk", bent_beam(CellKind::Tet4, 2, Law::Svk, 0.49, 0.025).unwrap()),
+            ("beam_h8_svk", verification::bent_beam(CellKind::Hex8, 1, Law::Svk, 0.3, 0.05).unwrap()),
+            ("beam_t10_svk", verification::bent_beam(CellKind::Tet4, 2, Law::Svk, 0.49, 0.025).unwrap()),
         ];
         for (name, problem) in beams {
             let stored = |ext: &str| std::fs::read_to_string(data.join(format!("{name}.{ext}"))).unwrap();

@@ -32,6 +32,22 @@ pub fn cantilever(
     Ok((problem, tip))
 }
 
+/// A cantilever of 10 × 2 × 2 cells of `kind` (T4 made T10 for `order` 2), 0.1 × 0.02 × 0.02 m
+/// (E = 5 kPa), clamped at x = 0, a downward `load` (N) on its free end: bent by centimetres
+/// under a few hundredths of a newton.
+pub fn bent_beam(kind: CellKind, order: u8, law: Law, poisson: f64, load: f64) -> Result<Problem, FemError> {
+    let (length, side) = (0.1, 0.02);
+    let m = mesh::box_mesh(kind, [0.0; 3], [length, side, side], [10, 2, 2])?;
+    let end =
+        |x: f64| mesh::select::nodes_in_box(&m.nodes, [x - 1e-9, -1e-9, -1e-9], [x + 1e-9, side + 1e-9, side + 1e-9]);
+    let (clamp, tip) = (end(0.0), end(length));
+    let material = Material::new(law, 5000.0, poisson).with_order(order).with_formulation(Formulation::Standard);
+    let mut p = Problem::new(m, material);
+    p.fix(&clamp);
+    p.add_force(&tip, [0.0, 0.0, -load]);
+    Ok(p)
+}
+
 /// The mean downward deflection of the `tip` nodes under the displacement `u`.
 pub fn tip_deflection(u: &[f64], tip: &[usize]) -> f64 {
     -tip.iter().map(|&n| u[3 * n + 2]).sum::<f64>() / tip.len() as f64

@@ -430,14 +430,7 @@ fn failures_are_reported_not_looped() {
 /// Newton one, not SVK's compressive limit point (no element is compressed anywhere near it).
 #[test]
 fn a_tolerance_below_round_off_is_not_diagnosed_as_a_limit_point() {
-    let (length, side) = (0.1, 0.02);
-    let m = mesh::box_mesh(CellKind::Tet4, [0.0; 3], [length, side, side], [10, 2, 2]).unwrap();
-    let end =
-        |x: f64| mesh::select::nodes_in_box(&m.nodes, [x - 1e-9, -1e-9, -1e-9], [x + 1e-9, 1.1 * side, 1.1 * side]);
-    let material = Material::new(Law::Svk, 5000.0, 0.49).with_order(2).with_formulation(Formulation::Standard);
-    let mut problem = Problem::new(m.clone(), material);
-    problem.fix(&end(0.0));
-    problem.add_force(&end(length), [0.0, 0.0, -0.025]);
+    let problem = fem::verification::bent_beam(CellKind::Tet4, 2, Law::Svk, 0.49, 0.025).unwrap();
     let mut solver = StaticSolver::new(problem).unwrap();
     let reachable = solver.solve(&SolverOptions { rtol: 1e-9, utol: 0.0, ..Default::default() }).unwrap();
     assert!(reachable.u.iter().fold(0.0f64, |a, b| a.max(b.abs())) > 0.08);
