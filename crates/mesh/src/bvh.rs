@@ -17,6 +17,8 @@
 //!
 //! Sign convention: [`SurfaceBvh::signed_distance`] is negative inside.
 
+use std::sync::OnceLock;
+
 use rayon::prelude::*;
 
 use crate::{cross, dot, norm, sub, MeshError, Point, TriSurface};
@@ -41,7 +43,7 @@ struct NodeBox {
 }
 
 /// A node's moments for the fast winding number (same index as its [`NodeBox`]).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 struct Node {
     /// Area-weighted centroid of the triangles.
     centre: Point,
@@ -73,7 +75,9 @@ pub struct SurfaceBvh {
     triangles: Vec<[usize; 3]>,
     order: Vec<u32>,
     boxes: Vec<NodeBox>,
-    nodes: Vec<Node>,
+    /// The winding-number moments, computed on the first winding-number query (a closest-point
+    /// search needs only the boxes).
+    moments: OnceLock<Vec<Node>>,
     /// The triangles' corners in `order`, for the closest-point search.
     corners: Vec<[Point; 3]>,
 }
@@ -105,7 +109,7 @@ impl SurfaceBvh {
             triangles: surface.triangles.clone(),
             order: (0..surface.triangles.len() as u32).collect(),
             boxes: Vec::with_capacity(2 * surface.triangles.len() / LEAF_SIZE + 2),
-            nodes: Vec::with_capacity(2 * surface.triangles.len() / LEAF_SIZE + 2),
+            moments: OnceLock::new(),
             corners: Vec::new(),
         };
         let centroids: Vec<Point> = bvh.triangles.iter().map(|t| centroid(t.map(|k| bvh.vertices[k]))).collect();
@@ -129,28 +133,31 @@ impl SurfaceBvh {
         self.triangles[t].map(|k| self.vertices[k])
     }
 
+    /// Fills `node` with the triangles `order[start..end]`: a leaf's box from its corners, an
+    /// inner node's from its children's (each corner is read once).
     fn build(&mut self, node: usize, start: usize, end: usize, centroids: &[Point]) {
         let mut lo = [f64::INFINITY; 3];
         let mut hi = [f64::NEG_INFINITY; 3];
+        if end - start <= LEAF_SIZE {
+            for &t in &self.order[start..end] {
+                for p in self.tri(t as usize) {
+                    for d in 0..3 {
+                        lo[d] = lo[d].min(p[d]);
+                        hi[d] = hi[d].max(p[d]);
+                    }
+                }
+            }
+            self.boxes[node] = NodeBox { lo, hi, first: start as u32, count: (end - start) as u32 };
+            return;
+        }
         let mut clo = [f64::INFINITY; 3];
         let mut chi = [f64::NEG_INFINITY; 3];
         for &t in &self.order[start..end] {
-            for p in self.tri(t as usize) {
-                for d in 0..3 {
-                    lo[d] = lo[d].min(p[d]);
-                    hi[d] = hi[d].max(p[d]);
-                }
-            }
             let c = centroids[t as usize];
             for d in 0..3 {
                 clo[d] = clo[d].min(c[d]);
                 chi[d] = chi[d].max(c[d]);
             }
-        }
-        if end - start <= LEAF_SIZE {
-            self.boxes[node] = NodeBox { lo, hi, first: start as u32, count: (end - start) as u32 };
-            self.leaf_moments(node);
-            return;
         }
         let axis = (0..3).max_by(|&a, &b| (chi[a] - clo[a]).total_cmp(&(chi[b] - clo[b]))).unwrap_or(0);
         let mid = (start + end) / 2;
@@ -160,20 +167,40 @@ impl SurfaceBvh {
         let left = self.boxes.len();
         self.push_node();
         self.push_node();
-        self.boxes[node] = NodeBox { lo, hi, first: left as u32, count: 0 };
         self.build(left, start, mid, centroids);
         self.build(left + 1, mid, end, centroids);
-        self.inner_moments(node, left);
+        let (a, b) = (&self.boxes[left], &self.boxes[left + 1]);
+        for d in 0..3 {
+            lo[d] = a.lo[d].min(b.lo[d]);
+            hi[d] = a.hi[d].max(b.hi[d]);
+        }
+        self.boxes[node] = NodeBox { lo, hi, first: left as u32, count: 0 };
     }
 
     /// Appends a node to be filled by [`build`](Self::build).
     fn push_node(&mut self) {
         self.boxes.push(NodeBox { lo: [0.0; 3], hi: [0.0; 3], first: 0, count: 0 });
-        self.nodes.push(Node { centre: [0.0; 3], radius: 0.0, dipole: [0.0; 3], moment: [[0.0; 3]; 3], area: 0.0 });
     }
 
-    fn leaf_moments(&mut self, node: usize) {
-        let (first, count) = (self.boxes[node].first as usize, self.boxes[node].count as usize);
+    /// The winding-number moments of every node, computed once. Children come after their
+    /// parent, so a pass from the last node to the first meets a node's children first.
+    fn moments(&self) -> &[Node] {
+        self.moments.get_or_init(|| {
+            let mut nodes = vec![Node::default(); self.boxes.len()];
+            for i in (0..self.boxes.len()).rev() {
+                let b = self.boxes[i];
+                nodes[i] = if b.count > 0 {
+                    self.leaf_moments(b)
+                } else {
+                    inner_moments(&nodes[b.first as usize], &nodes[b.first as usize + 1])
+                };
+            }
+            nodes
+        })
+    }
+
+    fn leaf_moments(&self, leaf: NodeBox) -> Node {
+        let (first, count) = (leaf.first as usize, leaf.count as usize);
         let mut area_sum = 0.0;
         let mut centre = [0.0; 3];
         let mut dipole = [0.0; 3];
@@ -191,8 +218,7 @@ impl SurfaceBvh {
         if area_sum > 0.0 {
             centre = centre.map(|c| c / area_sum);
         } else {
-            let (lo, hi) = (self.boxes[node].lo, self.boxes[node].hi);
-            centre = std::array::from_fn(|d| 0.5 * (lo[d] + hi[d]));
+            centre = box_centre(&leaf);
         }
         let mut moment = [[0.0; 3]; 3];
         let mut radius: f64 = 0.0;
@@ -209,51 +235,18 @@ impl SurfaceBvh {
                 radius = radius.max(norm(sub(q, centre)));
             }
         }
-        let nd = &mut self.nodes[node];
-        nd.centre = centre;
-        nd.radius = radius;
-        nd.dipole = dipole;
-        nd.moment = moment;
-        nd.area = area_sum;
-    }
-
-    fn inner_moments(&mut self, node: usize, left: usize) {
-        let (a, b) = (&self.nodes[left], &self.nodes[left + 1]);
-        let area = a.area + b.area;
-        let centre: Point = if area > 0.0 {
-            std::array::from_fn(|d| (a.area * a.centre[d] + b.area * b.centre[d]) / area)
-        } else {
-            std::array::from_fn(|d| 0.5 * (a.centre[d] + b.centre[d]))
-        };
-        let mut moment = [[0.0; 3]; 3];
-        let mut dipole = [0.0; 3];
-        let mut radius: f64 = 0.0;
-        for c in [a, b] {
-            let shift = sub(c.centre, centre);
-            for i in 0..3 {
-                dipole[i] += c.dipole[i];
-                for j in 0..3 {
-                    moment[i][j] += c.moment[i][j] + c.dipole[i] * shift[j];
-                }
-            }
-            radius = radius.max(norm(shift) + c.radius);
-        }
-        let nd = &mut self.nodes[node];
-        nd.centre = centre;
-        nd.radius = radius;
-        nd.dipole = dipole;
-        nd.moment = moment;
-        nd.area = area;
+        Node { centre, radius, dipole, moment, area: area_sum }
     }
 
     /// Generalised winding number at `q` (fast hierarchical evaluation):
     /// about 1 inside, 0 outside a closed outward-oriented surface.
     pub fn winding_number(&self, q: Point) -> f64 {
+        let nodes = self.moments();
         let mut w = 0.0;
         let mut stack: Vec<u32> = Vec::with_capacity(64);
         stack.push(0);
         while let Some(i) = stack.pop() {
-            let (nd, b) = (&self.nodes[i as usize], &self.boxes[i as usize]);
+            let (nd, b) = (&nodes[i as usize], &self.boxes[i as usize]);
             let r = sub(nd.centre, q);
             let d2 = dot(r, r);
             if d2 > (BETA * nd.radius) * (BETA * nd.radius) {
@@ -319,9 +312,9 @@ impl SurfaceBvh {
                 let (na, nb) = (&self.boxes[a as usize], &self.boxes[b as usize]);
                 let (da, db) = (box_dist2(na, q), box_dist2(nb, q));
                 // Visit the nearer child first (pushed last); a point inside
-                // both boxes goes first to the child whose centre is nearer.
+                // both boxes goes first to the child whose box centre is nearer.
                 let a_first = if da == db {
-                    let (ca, cb) = (sub(self.nodes[a as usize].centre, q), sub(self.nodes[b as usize].centre, q));
+                    let (ca, cb) = (sub(box_centre(na), q), sub(box_centre(nb), q));
                     dot(ca, ca) < dot(cb, cb)
                 } else {
                     da < db
@@ -426,6 +419,35 @@ impl SurfaceBvh {
             self.triangles[t]
         )))
     }
+}
+
+/// The moments of an inner node from its two children's.
+fn inner_moments(a: &Node, b: &Node) -> Node {
+    let area = a.area + b.area;
+    let centre: Point = if area > 0.0 {
+        std::array::from_fn(|d| (a.area * a.centre[d] + b.area * b.centre[d]) / area)
+    } else {
+        std::array::from_fn(|d| 0.5 * (a.centre[d] + b.centre[d]))
+    };
+    let mut moment = [[0.0; 3]; 3];
+    let mut dipole = [0.0; 3];
+    let mut radius: f64 = 0.0;
+    for c in [a, b] {
+        let shift = sub(c.centre, centre);
+        for i in 0..3 {
+            dipole[i] += c.dipole[i];
+            for j in 0..3 {
+                moment[i][j] += c.moment[i][j] + c.dipole[i] * shift[j];
+            }
+        }
+        radius = radius.max(norm(shift) + c.radius);
+    }
+    Node { centre, radius, dipole, moment, area }
+}
+
+/// The centre of a node's box.
+fn box_centre(b: &NodeBox) -> Point {
+    std::array::from_fn(|d| 0.5 * (b.lo[d] + b.hi[d]))
 }
 
 fn centroid(p: [Point; 3]) -> Point {

@@ -17,148 +17,102 @@ pub fn isolated_points(cloud: &[Point], factor: f64) -> Vec<bool> {
     if cloud.len() <= NEIGHBOURS {
         return vec![false; cloud.len()];
     }
-    let grid = PointGrid::new(cloud);
-    let spread: Vec<f64> = cloud.par_iter().map(|&p| grid.mean_neighbour_distance(cloud, p)).collect();
+    let tree = PointTree::new(cloud);
+    let spread: Vec<f64> = cloud.par_iter().map(|&p| tree.mean_neighbour_distance(p)).collect();
     let mut sorted = spread.clone();
     let median = mesh::stats::median(&mut sorted);
     spread.iter().map(|&d| d > factor * median).collect()
 }
 
-/// Most cells along one axis of a [`PointGrid`].
-const MAX_CELLS: i64 = 1024;
+/// Points per leaf of a [`PointTree`].
+const LEAF: usize = 8;
 
-/// Cubic cells of side `cell` over the box of `dims` cells from `origin`; a point beyond the box
-/// belongs to the nearest cell.
+/// A node of a [`PointTree`]; an inner node's left child follows it.
 #[derive(Clone, Copy)]
-struct Cells {
-    origin: Point,
-    cell: f64,
-    dims: [i64; 3],
+enum TreeNode {
+    /// The points `start..end` of the tree's order.
+    Leaf { start: u32, end: u32 },
+    /// Points below `at` along `axis` on the left, the others from node `right` on.
+    Split { axis: u8, at: f64, right: u32 },
 }
 
-impl Cells {
-    fn new(origin: Point, extent: Point, cell: f64) -> Cells {
-        Cells { origin, cell, dims: extent.map(|e| ((e / cell).ceil() as i64).clamp(1, MAX_CELLS)) }
-    }
-
-    fn index(&self, key: [i64; 3]) -> usize {
-        ((key[0] * self.dims[1] + key[1]) * self.dims[2] + key[2]) as usize
-    }
-
-    fn key(&self, p: Point) -> [i64; 3] {
-        std::array::from_fn(|d| (((p[d] - self.origin[d]) / self.cell).floor() as i64).clamp(0, self.dims[d] - 1))
-    }
+/// A k-d tree over a cloud (median splits along the widest axis) for the nearest-neighbour
+/// search: as fast on a camera's surface as in a volume, whatever the cloud's extent.
+struct PointTree {
+    /// The cloud's points, each leaf's contiguous.
+    points: Vec<Point>,
+    nodes: Vec<TreeNode>,
 }
 
-/// Points sorted into cubic cells over the cloud's bulk (the box of its 1st to 99th
-/// percentiles, widened by a tenth); a point beyond that box goes to the nearest cell.
-struct PointGrid {
-    cells: Cells,
-    /// The points of cell c are `order[starts[c]..starts[c + 1]]` (cells numbered x-major).
-    starts: Vec<u32>,
-    order: Vec<u32>,
-}
-
-impl PointGrid {
-    /// Cells sized to hold a few points each where the cloud lies (in a volume, on a surface or
-    /// along a line).
+impl PointTree {
     fn new(cloud: &[Point]) -> Self {
-        let (mut origin, mut extent) = ([0.0; 3], [0.0; 3]);
-        for d in 0..3 {
-            let mut x: Vec<f64> = cloud.iter().map(|p| p[d]).collect();
-            x.sort_by(f64::total_cmp);
-            let (lo, hi) = (x[x.len() / 100], x[x.len() - 1 - x.len() / 100]);
-            let margin = 0.1 * (hi - lo);
-            origin[d] = lo - margin;
-            extent[d] = (hi - lo + 2.0 * margin).max(1e-9);
-        }
-        // A few points per cell whether the cloud fills a volume, a surface or a line: at most the
-        // largest of the spacings it would have spread over its 3, 2 or 1 largest extents...
-        let mut sorted = extent;
-        sorted.sort_by(|a, b| b.total_cmp(a));
-        let n = cloud.len() as f64;
-        let coarse =
-            (1..=3).map(|d| (4.0 * sorted[..d].iter().product::<f64>() / n).powf(1.0 / d as f64)).fold(1e-9, f64::max);
-        // ... and, where the points crowd into a few of those cells (a camera's cloud is a
-        // surface in its box), less, as for a surface, down to the spacing of 8 cells per point
-        // over the box's volume.
-        let keys_at = |cell: f64| {
-            let cells = Cells::new(origin, extent, cell);
-            (cells, cloud.iter().map(|&p| cells.index(cells.key(p))).collect::<Vec<usize>>())
-        };
-        let mut occupied = keys_at(coarse).1;
-        occupied.sort_unstable();
-        occupied.dedup();
-        let per_cell = n / occupied.len() as f64;
-        let finest = (extent.iter().product::<f64>() / (8.0 * n)).cbrt();
-        let (cells, keys) = keys_at((coarse * (4.0 / per_cell).sqrt()).clamp(finest.min(coarse), coarse));
-        let count = cells.dims.iter().product::<i64>() as usize;
-        let mut grid = PointGrid { cells, starts: vec![0; count + 1], order: vec![0; cloud.len()] };
-        for &k in &keys {
-            grid.starts[k + 1] += 1;
-        }
-        for c in 0..count {
-            grid.starts[c + 1] += grid.starts[c];
-        }
-        let mut next = grid.starts.clone();
-        for (i, &k) in keys.iter().enumerate() {
-            grid.order[next[k] as usize] = i as u32;
-            next[k] += 1;
-        }
-        grid
+        let mut tree = PointTree { points: cloud.to_vec(), nodes: Vec::with_capacity(2 * cloud.len() / LEAF + 2) };
+        tree.split(0, cloud.len());
+        tree
     }
 
-    /// Mean distance from `p` (a point of `cloud`) to its [`NEIGHBOURS`] nearest other points:
-    /// cells are visited in growing cubic shells until the shell's inner distance exceeds the
-    /// farthest of the best found.
-    fn mean_neighbour_distance(&self, cloud: &[Point], p: Point) -> f64 {
-        let centre = self.cells.key(p);
+    /// Adds the subtree of the points `start..end`.
+    fn split(&mut self, start: usize, end: usize) {
+        let node = self.nodes.len();
+        self.nodes.push(TreeNode::Leaf { start: start as u32, end: end as u32 });
+        if end - start <= LEAF {
+            return;
+        }
+        let part = &mut self.points[start..end];
+        let (mut lo, mut hi) = (part[0], part[0]);
+        for p in part.iter() {
+            for d in 0..3 {
+                lo[d] = lo[d].min(p[d]);
+                hi[d] = hi[d].max(p[d]);
+            }
+        }
+        let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
+        let mid = part.len() / 2;
+        part.select_nth_unstable_by(mid, |a, b| a[axis].total_cmp(&b[axis]));
+        let at = part[mid][axis];
+        self.split(start, start + mid);
+        let right = self.nodes.len() as u32;
+        self.nodes[node] = TreeNode::Split { axis: axis as u8, at, right };
+        self.split(start + mid, end);
+    }
+
+    /// Mean distance from `p` (a point of the cloud) to its [`NEIGHBOURS`] nearest other points:
+    /// depth first, the nearer side first, skipping a side farther than the farthest kept.
+    fn mean_neighbour_distance(&self, p: Point) -> f64 {
         // Squared distances of the nearest found so far, sorted, the point itself included.
-        let mut best: Vec<f64> = Vec::with_capacity(NEIGHBOURS + 2);
-        let mut ring = 0i64;
-        loop {
-            // The cells of the shell inside the grid (its faces, each cell once): a whole column
-            // on the shell's sides, its two ends inside.
-            let span = |d: usize| (centre[d] - ring).max(0)..=(centre[d] + ring).min(self.cells.dims[d] - 1);
-            for x in span(0) {
-                for y in span(1) {
-                    if (x - centre[0]).abs() == ring || (y - centre[1]).abs() == ring {
-                        span(2).for_each(|z| self.scan_cell([x, y, z], cloud, p, &mut best));
-                    } else {
-                        for z in [centre[2] - ring, centre[2] + ring] {
-                            if (0..self.cells.dims[2]).contains(&z) {
-                                self.scan_cell([x, y, z], cloud, p, &mut best);
-                            }
+        let mut best = [f64::INFINITY; NEIGHBOURS + 1];
+        // Nodes to visit with a lower bound of their squared distance: at most one more than the
+        // depth, which median splits keep below log2(n) + 1.
+        let mut stack = [(0u32, 0.0f64); 128];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let (node, bound) = stack[top];
+            if bound >= best[NEIGHBOURS] {
+                continue;
+            }
+            match self.nodes[node as usize] {
+                TreeNode::Leaf { start, end } => {
+                    for q in &self.points[start as usize..end as usize] {
+                        let d2 = (0..3).map(|d| (q[d] - p[d]).powi(2)).sum::<f64>();
+                        if d2 < best[NEIGHBOURS] {
+                            let at = best.partition_point(|&b| b < d2);
+                            best.copy_within(at..NEIGHBOURS, at + 1);
+                            best[at] = d2;
                         }
                     }
                 }
+                TreeNode::Split { axis, at, right } => {
+                    let offset = p[axis as usize] - at;
+                    let (near, far) = if offset < 0.0 { (node + 1, right) } else { (right, node + 1) };
+                    stack[top] = (far, bound.max(offset * offset));
+                    stack[top + 1] = (near, bound);
+                    top += 2;
+                }
             }
-            // Every point not yet visited is at least `ring * cell` away (farther still if
-            // it lies beyond the grid); past the largest dimension, every cell was visited.
-            let reach = ring as f64 * self.cells.cell;
-            let all = ring >= self.cells.dims.into_iter().max().unwrap_or(1);
-            if all || (best.len() > NEIGHBOURS && best[NEIGHBOURS] <= reach * reach) {
-                break;
-            }
-            ring += 1;
         }
         // The point itself is the first entry, at distance 0.
         best[1..].iter().map(|d| d.sqrt()).sum::<f64>() / NEIGHBOURS as f64
-    }
-
-    /// Merges the squared distances from `p` to the points of cell `key` into `best` (sorted,
-    /// the [`NEIGHBOURS`] + 1 smallest kept).
-    fn scan_cell(&self, key: [i64; 3], cloud: &[Point], p: Point, best: &mut Vec<f64>) {
-        let c = self.cells.index(key);
-        for &j in &self.order[self.starts[c] as usize..self.starts[c + 1] as usize] {
-            let q = cloud[j as usize];
-            let d2 = (0..3).map(|d| (q[d] - p[d]).powi(2)).sum::<f64>();
-            if best.len() <= NEIGHBOURS || d2 < best[NEIGHBOURS] {
-                let at = best.partition_point(|&b| b < d2);
-                best.insert(at, d2);
-                best.truncate(NEIGHBOURS + 1);
-            }
-        }
     }
 }
 
@@ -202,8 +156,8 @@ mod tests {
         cloud
     }
 
-    /// The grid search returns the exact mean distance to the nearest neighbours, in a thin
-    /// volume and on a sampled surface (where the grid's cells shrink to the surface's spacing).
+    /// The tree search returns the exact mean distance to the nearest neighbours, in a thin
+    /// volume, on a sampled surface and along a line of doubled points.
     #[test]
     fn neighbour_distances_match_brute_force() {
         let slab: Vec<Point> = (0..300)
@@ -212,14 +166,16 @@ mod tests {
                 [(s * 0.618).fract(), (s * 0.414).fract() * 0.3, (s * 0.732).fract() * 0.05]
             })
             .collect();
-        for cloud in [slab, plane_with_floating_points()] {
-            let grid = PointGrid::new(&cloud);
+        // Points on a line, each twice: splits among equal coordinates.
+        let line: Vec<Point> = (0..200).map(|k| [(k / 2) as f64 * 1e-3, 0.0, 0.0]).collect();
+        for cloud in [slab, plane_with_floating_points(), line] {
+            let tree = PointTree::new(&cloud);
             for &p in cloud.iter().step_by(7) {
                 let mut d: Vec<f64> =
                     cloud.iter().map(|q| (0..3).map(|i| (q[i] - p[i]).powi(2)).sum::<f64>().sqrt()).collect();
                 d.sort_by(f64::total_cmp);
                 let brute = d[1..=NEIGHBOURS].iter().sum::<f64>() / NEIGHBOURS as f64;
-                assert!((grid.mean_neighbour_distance(&cloud, p) - brute).abs() < 1e-12);
+                assert!((tree.mean_neighbour_distance(p) - brute).abs() < 1e-12);
             }
         }
     }

@@ -3,7 +3,7 @@
 
 use std::time::{Duration, Instant};
 
-use mesh::bvh::SurfaceBvh;
+use mesh::bvh::{ClosestPoint, SurfaceBvh};
 use mesh::{sub, unit, Point, TriSurface};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -196,10 +196,14 @@ pub fn register_frame(
         iterations += 1;
         let iteration = first + iterations - 1;
         let capture = options.capture_distance * options.capture_decay.powi(iteration as i32);
+        // Estimating the view matches the cloud to the whole surface; those matches that fall
+        // on the facing triangles are the facing part's own.
+        let mut whole = None;
         if view.is_none() && iterations == 1 {
-            view = estimate_view(&surface, candidates, options, capture)?;
+            let (estimate, matches) = estimate_view(&surface, candidates, options, capture)?;
+            (view, whole) = (estimate, Some(matches));
         }
-        let observations = observe(organ, &surface, candidates, options, capture, view)?;
+        let observations = observe_from(organ, &surface, candidates, options, capture, view, whole)?;
         inliers = observations.matches.len();
         u = deformer.deform(&observations, &u, iteration)?;
         if u.len() != ndof || u.iter().any(|v| !v.is_finite()) {
@@ -242,8 +246,25 @@ pub fn observe(
     capture: f64,
     view: Option<Point>,
 ) -> Result<Observations> {
+    observe_from(organ, surface, cloud, options, capture, view, None)
+}
+
+/// [`observe`], given the cloud's closest points on the whole `surface` when already known.
+fn observe_from(
+    organ: &Organ,
+    surface: &TriSurface,
+    cloud: &[Point],
+    options: &RegistrationOptions,
+    capture: f64,
+    view: Option<Point>,
+    whole: Option<Vec<ClosestPoint>>,
+) -> Result<Observations> {
     let (facing, original) = facing_part(surface, view);
-    let (matches, limit) = closest_matches(&facing, cloud, options, capture)?;
+    let matches = match whole {
+        Some(whole) => facing_matches(&facing, &original, surface.triangles.len(), cloud, whole)?,
+        None => closest_points(&facing, cloud)?,
+    };
+    let limit = outlier_limit(&matches, options, capture);
     let mut obs = Observations { matches: Vec::with_capacity(cloud.len()) };
     let rest = &organ.surface().vertices;
     for (c, m) in cloud.iter().zip(&matches) {
@@ -267,19 +288,49 @@ pub fn observe(
     Ok(obs)
 }
 
-/// The closest point of `surface` to each cloud point, and the distance beyond which a
-/// match is an outlier: the larger of `capture` and the options' limits.
-fn closest_matches(
-    surface: &TriSurface,
-    cloud: &[Point],
-    options: &RegistrationOptions,
-    capture: f64,
-) -> Result<(Vec<mesh::bvh::ClosestPoint>, f64)> {
+/// The closest point of `surface` to each cloud point.
+fn closest_points(surface: &TriSurface, cloud: &[Point]) -> Result<Vec<ClosestPoint>> {
     let bvh = SurfaceBvh::new(surface)?;
-    let matches: Vec<_> = cloud.par_iter().map(|&c| bvh.closest_point(c)).collect();
+    Ok(cloud.par_iter().map(|&c| bvh.closest_point(c)).collect())
+}
+
+/// The closest point of `facing` (the triangles `original` of a surface of `triangles`
+/// triangles) to each cloud point, from the cloud's closest points on the whole surface: the
+/// closest of all triangles, when it faces the camera, is the closest facing one; only the
+/// points matched elsewhere are searched again.
+fn facing_matches(
+    facing: &TriSurface,
+    original: &[usize],
+    triangles: usize,
+    cloud: &[Point],
+    mut whole: Vec<ClosestPoint>,
+) -> Result<Vec<ClosestPoint>> {
+    let mut index = vec![None; triangles];
+    for (i, &t) in original.iter().enumerate() {
+        index[t] = Some(i);
+    }
+    let mut again = Vec::new();
+    for (i, m) in whole.iter_mut().enumerate() {
+        match index[m.triangle] {
+            Some(f) => m.triangle = f,
+            None => again.push(i),
+        }
+    }
+    if !again.is_empty() {
+        let points: Vec<Point> = again.iter().map(|&i| cloud[i]).collect();
+        for (i, m) in again.into_iter().zip(closest_points(facing, &points)?) {
+            whole[i] = m;
+        }
+    }
+    Ok(whole)
+}
+
+/// The distance beyond which a match is an outlier: the largest of `capture` and the options'
+/// limits, the one relative to the median match distance included.
+fn outlier_limit(matches: &[ClosestPoint], options: &RegistrationOptions, capture: f64) -> f64 {
     let mut distances: Vec<f64> = matches.iter().map(|m| m.distance).collect();
     let median = mesh::stats::median(&mut distances);
-    Ok((matches, (options.outlier_factor * median).max(options.min_outlier_distance).max(capture)))
+    (options.outlier_factor * median).max(options.min_outlier_distance).max(capture)
 }
 
 /// The triangles of `surface` that face a camera looking along `view` (all of them
@@ -301,14 +352,16 @@ const ONE_SIDED: f64 = 0.2;
 
 /// The direction a camera looks along, estimated from the cloud: the opposite of the mean
 /// outward normal of the surface triangles its inlier points match; `None` when the
-/// matched normals have no clear mean (a cloud all around the organ).
+/// matched normals have no clear mean (a cloud all around the organ). With it, the cloud's
+/// closest points on the whole surface.
 fn estimate_view(
     surface: &TriSurface,
     cloud: &[Point],
     options: &RegistrationOptions,
     capture: f64,
-) -> Result<Option<Point>> {
-    let (matches, limit) = closest_matches(surface, cloud, options, capture)?;
+) -> Result<(Option<Point>, Vec<ClosestPoint>)> {
+    let matches = closest_points(surface, cloud)?;
+    let limit = outlier_limit(&matches, options, capture);
     let (mut sum, mut count) = ([0.0; 3], 0usize);
     for m in matches.iter().filter(|m| m.distance <= limit) {
         let n = unit(mesh::surface::triangle_area_vector(surface, m.triangle));
@@ -316,7 +369,7 @@ fn estimate_view(
         count += 1;
     }
     let length = mesh::norm(sum);
-    Ok((count > 0 && length >= ONE_SIDED * count as f64).then(|| sum.map(|x| x / length)))
+    Ok(((count > 0 && length >= ONE_SIDED * count as f64).then(|| sum.map(|x| x / length)), matches))
 }
 
 /// Rejects an empty cloud or one with a non-finite coordinate.
@@ -395,10 +448,10 @@ mod tests {
         let options = RegistrationOptions::default();
         let top: Vec<Point> =
             sample_visible(&surface, [0.0, 0.0, -1.0], 800, 3).unwrap().into_iter().map(|s| s.point).collect();
-        let view = estimate_view(&surface, &top, &options, 0.05).unwrap().expect("a view");
+        let view = estimate_view(&surface, &top, &options, 0.05).unwrap().0.expect("a view");
         assert!(view[2] < -0.95, "{view:?}");
         let all: Vec<Point> = surface.vertices.clone();
-        assert_eq!(estimate_view(&surface, &all, &options, 0.05).unwrap(), None);
+        assert_eq!(estimate_view(&surface, &all, &options, 0.05).unwrap().0, None);
         // Matching is then restricted to the triangles facing the camera.
         let (facing, original) = facing_part(&surface, Some(view));
         assert!(facing.triangles.len() < surface.triangles.len() * 3 / 4);
@@ -407,5 +460,32 @@ mod tests {
             assert!(mesh::dot(mesh::surface::triangle_area_vector(&surface, o), view) < 0.0);
         }
         assert_eq!(facing_part(&surface, None).0.triangles.len(), surface.triangles.len());
+    }
+
+    /// Matching to the facing triangles from the matches to the whole surface finds the same
+    /// closest points as a search of the facing triangles alone, for points near the facing side,
+    /// near the far side (matched elsewhere first) and inside.
+    #[test]
+    fn facing_matches_from_the_whole_surface_are_the_facing_search() {
+        let surface = phantom_surface();
+        let view = [0.0, 0.0, -1.0];
+        let (facing, original) = facing_part(&surface, Some(view));
+        let cloud: Vec<Point> = surface
+            .vertices
+            .iter()
+            .enumerate()
+            .map(|(k, p)| {
+                let s = k as f64;
+                [p[0] + 4e-3 * (s * 0.618).fract() - 2e-3, p[1] + 4e-3 * (s * 0.414).fract() - 2e-3, p[2]]
+            })
+            .collect();
+        let whole = closest_points(&surface, &cloud).unwrap();
+        let elsewhere = whole.iter().filter(|m| !original.contains(&m.triangle)).count();
+        assert!(elsewhere > 100 && elsewhere < cloud.len() - 100, "{elsewhere} of {} matched elsewhere", cloud.len());
+        let reused = facing_matches(&facing, &original, surface.triangles.len(), &cloud, whole).unwrap();
+        let searched = closest_points(&facing, &cloud).unwrap();
+        for (a, b) in reused.iter().zip(&searched) {
+            assert!((a.distance - b.distance).abs() < 1e-15 && mesh::distance(a.point, b.point) < 1e-12, "{a:?} {b:?}");
+        }
     }
 }
