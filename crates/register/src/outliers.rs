@@ -37,7 +37,7 @@ enum TreeNode {
 }
 
 /// A k-d tree over a cloud (median splits along the widest axis) for the nearest-neighbour
-/// search: as fast on a camera's surface as in a volume, whatever the cloud's extent.
+/// search. Its splits follow the points, so a camera's surface, a volume or a line needs no cell size.
 struct PointTree {
     /// The cloud's points, each leaf's contiguous.
     points: Vec<Point>,
