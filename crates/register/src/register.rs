@@ -196,14 +196,17 @@ pub fn register_frame(
         iterations += 1;
         let iteration = first + iterations - 1;
         let capture = options.capture_distance * options.capture_decay.powi(iteration as i32);
-        // Estimating the view matches the cloud to the whole surface; those matches that fall
-        // on the facing triangles are the facing part's own.
-        let mut whole = None;
-        if view.is_none() && iterations == 1 {
-            let (estimate, matches) = estimate_view(&surface, candidates, options, capture)?;
-            (view, whole) = (estimate, Some(matches));
-        }
-        let observations = observe_from(organ, &surface, candidates, options, capture, view, whole)?;
+        let observations = if view.is_none() && iterations == 1 {
+            // The view is estimated from the matches to every triangle; those that fall on a
+            // facing triangle are the facing part's own.
+            let whole = closest_points(&surface, candidates)?;
+            view = estimate_view(&surface, &whole, outlier_limit(&whole, options, capture));
+            let (facing, original) = facing_part(&surface, view);
+            let matches = facing_matches(&facing, &original, surface.triangles.len(), candidates, whole)?;
+            observations(organ, &surface, candidates, &matches, &original, outlier_limit(&matches, options, capture))
+        } else {
+            observe(organ, &surface, candidates, options, capture, view)?
+        };
         inliers = observations.matches.len();
         u = deformer.deform(&observations, &u, iteration)?;
         if u.len() != ndof || u.iter().any(|v| !v.is_finite()) {
@@ -246,28 +249,24 @@ pub fn observe(
     capture: f64,
     view: Option<Point>,
 ) -> Result<Observations> {
-    observe_from(organ, surface, cloud, options, capture, view, None)
+    let (facing, original) = facing_part(surface, view);
+    let matches = closest_points(&facing, cloud)?;
+    Ok(observations(organ, surface, cloud, &matches, &original, outlier_limit(&matches, options, capture)))
 }
 
-/// [`observe`], given the cloud's closest points on the whole `surface` when already known.
-fn observe_from(
+/// The observations of the cloud points' `matches` on the triangles `original` of `surface`
+/// (a match's triangle indexes `original`), those farther than `limit` left out.
+fn observations(
     organ: &Organ,
     surface: &TriSurface,
     cloud: &[Point],
-    options: &RegistrationOptions,
-    capture: f64,
-    view: Option<Point>,
-    whole: Option<Vec<ClosestPoint>>,
-) -> Result<Observations> {
-    let (facing, original) = facing_part(surface, view);
-    let matches = match whole {
-        Some(whole) => facing_matches(&facing, &original, surface.triangles.len(), cloud, whole)?,
-        None => closest_points(&facing, cloud)?,
-    };
-    let limit = outlier_limit(&matches, options, capture);
+    matches: &[ClosestPoint],
+    original: &[usize],
+    limit: f64,
+) -> Observations {
     let mut obs = Observations { matches: Vec::with_capacity(cloud.len()) };
     let rest = &organ.surface().vertices;
-    for (c, m) in cloud.iter().zip(&matches) {
+    for (c, m) in cloud.iter().zip(matches) {
         if m.distance > limit {
             continue;
         }
@@ -285,7 +284,7 @@ fn observe_from(
         let shift = [c[0] - p0[0], c[1] - p0[1], c[2] - p0[2]];
         obs.matches.push(PointMatch { stencil: organ.surface_point_stencil(triangle, bary), shift, normal });
     }
-    Ok(obs)
+    obs
 }
 
 /// The closest point of `surface` to each cloud point.
@@ -350,18 +349,10 @@ fn facing_part(surface: &TriSurface, view: Option<Point>) -> (TriSurface, Vec<us
 /// as seen from one side (a cloud all around the organ has none).
 const ONE_SIDED: f64 = 0.2;
 
-/// The direction a camera looks along, estimated from the cloud: the opposite of the mean
-/// outward normal of the surface triangles its inlier points match; `None` when the
-/// matched normals have no clear mean (a cloud all around the organ). With it, the cloud's
-/// closest points on the whole surface.
-fn estimate_view(
-    surface: &TriSurface,
-    cloud: &[Point],
-    options: &RegistrationOptions,
-    capture: f64,
-) -> Result<(Option<Point>, Vec<ClosestPoint>)> {
-    let matches = closest_points(surface, cloud)?;
-    let limit = outlier_limit(&matches, options, capture);
+/// The direction a camera looks along, estimated from the cloud's `matches` on every triangle
+/// of `surface`: the opposite of the mean outward normal of the triangles matched within
+/// `limit`; `None` when the matched normals have no clear mean (a cloud all around the organ).
+fn estimate_view(surface: &TriSurface, matches: &[ClosestPoint], limit: f64) -> Option<Point> {
     let (mut sum, mut count) = ([0.0; 3], 0usize);
     for m in matches.iter().filter(|m| m.distance <= limit) {
         let n = unit(mesh::surface::triangle_area_vector(surface, m.triangle));
@@ -369,7 +360,7 @@ fn estimate_view(
         count += 1;
     }
     let length = mesh::norm(sum);
-    Ok(((count > 0 && length >= ONE_SIDED * count as f64).then(|| sum.map(|x| x / length)), matches))
+    (count > 0 && length >= ONE_SIDED * count as f64).then(|| sum.map(|x| x / length))
 }
 
 /// Rejects an empty cloud or one with a non-finite coordinate.
@@ -448,10 +439,14 @@ mod tests {
         let options = RegistrationOptions::default();
         let top: Vec<Point> =
             sample_visible(&surface, [0.0, 0.0, -1.0], 800, 3).unwrap().into_iter().map(|s| s.point).collect();
-        let view = estimate_view(&surface, &top, &options, 0.05).unwrap().0.expect("a view");
+        let view_of = |cloud: &[Point]| {
+            let matches = closest_points(&surface, cloud).unwrap();
+            estimate_view(&surface, &matches, outlier_limit(&matches, &options, 0.05))
+        };
+        let view = view_of(&top).expect("a view");
         assert!(view[2] < -0.95, "{view:?}");
         let all: Vec<Point> = surface.vertices.clone();
-        assert_eq!(estimate_view(&surface, &all, &options, 0.05).unwrap().0, None);
+        assert_eq!(view_of(&all), None);
         // Matching is then restricted to the triangles facing the camera.
         let (facing, original) = facing_part(&surface, Some(view));
         assert!(facing.triangles.len() < surface.triangles.len() * 3 / 4);
