@@ -32,7 +32,7 @@ const LEAF: usize = 8;
 enum TreeNode {
     /// The points `start..end` of the tree's order.
     Leaf { start: u32, end: u32 },
-    /// Points below `at` along `axis` on the left, the others from node `right` on.
+    /// Points at most `at` along `axis` on the left, at least `at` from node `right` on.
     Split { axis: u8, at: f64, right: u32 },
 }
 
