@@ -81,7 +81,8 @@ fn unet_prediction(runs: usize) -> Result<()> {
             training: None,
             net,
         };
-        let t = learn::time_prediction(&learn::Predictor::new(&model, learn::Compute::Cpu)?, &input, 3, runs)?;
+        let predictor = learn::Predictor::new(&model, learn::Compute::Cpu)?;
+        let t = learn::time_prediction(|x| predictor.predict(x), &input, 3, runs)?;
         println!(
             "{:<30} {:>10} {:>10.2} {:>10.2} {:>10.2}",
             base_channels,

@@ -5,9 +5,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 
 use indicatif::{ProgressBar, ProgressStyle};
+use learn::rom::RomConfig;
 use learn::{
-    Compute, Corruption, Dataset, DatasetPart, Initialization, PredictInput, Sparsity, SplitPolicy, TrainConfig,
-    TrainOptions, TrainedModel, UNetConfig,
+    Compute, Corruption, Dataset, DatasetPart, Initialization, Method, Model, PredictInput, Sparsity, SplitPolicy,
+    TrainConfig, TrainOptions, UNetConfig,
 };
 use mesh::io::{write_atomic_bytes, Field};
 
@@ -144,9 +145,25 @@ impl SplitArgs {
 pub struct TrainArgs {
     /// Dataset directory (from `augsim generate`).
     pub dataset: PathBuf,
-    /// Output directory (model.json, model.safetensors, checkpoint.bin, curve.csv, curve.png).
+    /// Output directory: the model directory (model.json and its arrays for `rom`; model.json,
+    /// model.safetensors, checkpoint.bin, curve.csv, curve.png for `unet`).
     #[arg(short, long)]
     pub out: PathBuf,
+    /// `unet` (the published 3D U-Net, trained by Adam) or `rom` (a reduced-order model: POD
+    /// basis and Gaussian-process regression, fitted in seconds).
+    #[arg(long, default_value = "unet")]
+    pub method: Method,
+    /// ROM: most POD modes (the number used is chosen on validation).
+    #[arg(long, default_value_t = RomConfig::default().max_modes)]
+    pub modes: usize,
+    /// ROM: corrupted copies of each training sample (with --noise / --sparse) in the regression's
+    /// training set.
+    #[arg(long, default_value_t = 0)]
+    pub noise_copies: usize,
+    /// ROM: most inducing points (above this many training samples the regression is a Nyström
+    /// approximation).
+    #[arg(long, default_value_t = RomConfig::default().max_inducing)]
+    pub inducing: usize,
     /// Optimiser steps.
     #[arg(long, default_value_t = 2000)]
     pub iterations: usize,
@@ -211,10 +228,13 @@ impl DeviceArgs {
 
 /// `augsim train`.
 pub fn train(args: &TrainArgs) -> Result<()> {
-    let compute = args.device.announce()?;
     let dataset = Dataset::open(&args.dataset)?;
     let all = dataset.load_all()?;
     let (split, [train, validation, test]) = args.split.policy().apply(&all)?;
+    if args.method == Method::Rom {
+        return train_rom(args, &dataset, split, [train, validation, test]);
+    }
+    let compute = args.device.announce()?;
     let init = match &args.init {
         Some(model) => Initialization::FineTune { model: model.clone(), freeze_encoder: args.freeze_encoder },
         None => Initialization::Scratch {
@@ -261,6 +281,64 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     Ok(())
 }
 
+/// `augsim train --method rom`.
+fn train_rom(
+    args: &TrainArgs,
+    dataset: &Dataset,
+    split: learn::Split,
+    [train, validation, test]: [learn::Samples; 3],
+) -> Result<()> {
+    println!(
+        "split      {} training, {} validation, {} test samples (held out, recorded in the model); grid {}",
+        train.len(),
+        validation.len(),
+        test.len(),
+        dataset.manifest().grid
+    );
+    let config = RomConfig {
+        max_modes: args.modes,
+        max_inducing: args.inducing,
+        noise_copies: args.noise_copies,
+        corruption: args.corruption.corruption(),
+        seed: args.seed,
+        ..RomConfig::default()
+    };
+    let manifest = dataset.manifest();
+    let context = learn::rom::Context {
+        placement: manifest.placement(),
+        input_unit: &manifest.units.input,
+        target_unit: &manifest.units.target,
+        split,
+    };
+    let (model, report) = learn::rom::fit(&train, &validation, &config, context)?;
+    model.save(&args.out)?;
+    let info = &model.info;
+    println!(
+        "basis      {} modes ({:.6} of the training targets' variance); input: {} principal components",
+        info.modes, report.energy, info.input_components
+    );
+    println!(
+        "regression {} kernel, length scale {:.4e} {}, noise {:.0e}; {} inducing points ({}); chosen on validation",
+        info.kernel.name(),
+        info.length_scale,
+        model.input_unit,
+        info.noise,
+        info.inducing,
+        if info.exact { "exact Gaussian process" } else { "Nyström" }
+    );
+    println!(
+        "validation mean e = {:.4} mm (max {:.4} mm); the basis alone {:.4} mm; uncertainty scaled by {:.3} for {:.1} % within 2σ",
+        report.val_mean_error * 1e3,
+        report.val_max_error * 1e3,
+        report.val_projection_error * 1e3,
+        info.calibration,
+        report.val_coverage * 100.0
+    );
+    println!("time       {:.1} s", info.seconds);
+    println!("wrote      {}", args.out.join(learn::MODEL_FILE).display());
+    Ok(())
+}
+
 /// `augsim eval`: errors on the samples held out from the model (its recorded test split of
 /// the dataset it was trained on, or every unseen sample of another dataset), per-sample CSV and
 /// the worst sample as VTK.
@@ -272,10 +350,10 @@ pub fn eval(
     out: &Path,
 ) -> Result<()> {
     let compute = device.announce()?;
-    let model = TrainedModel::load(model_path, &learn::inference_device())?;
+    let model = Model::load(model_path)?;
     let dataset = Dataset::open(dataset_dir)?;
-    if dataset.manifest().grid != model.grid {
-        bail!("the model was trained on grid {} but the dataset is on grid {}", model.grid, dataset.manifest().grid);
+    if dataset.manifest().grid != model.grid() {
+        bail!("the model was trained on grid {} but the dataset is on grid {}", model.grid(), dataset.manifest().grid);
     }
     let all = dataset.load_all()?;
     let test = model.held_out(&all)?;
@@ -296,7 +374,7 @@ pub fn eval(
     let placement = dataset.manifest().placement();
     let (report, tre) = match placement {
         Some(placement) if !markers.is_empty() => {
-            let grid = placement.grid(model.grid)?;
+            let grid = placement.grid(model.grid())?;
             let (report, tre) =
                 learn::evaluate_at_points(&model, &test, &corruption.corruption(), 0, &grid, &markers, compute)?;
             (report, Some(tre))
@@ -333,7 +411,7 @@ pub fn eval(
     write_atomic_bytes(&out.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
     let worst = test.get(s.worst);
     let input = learn::evaluation_input(&test, s.worst, &corruption.corruption(), 0)?;
-    let prediction = learn::Predictor::new(&model, compute)?.predict(&input)?;
+    let prediction = model.predictor(compute)?.predict(&input)?;
     let vtu = out.join("worst.vtu");
     let grid = dataset
         .manifest()
@@ -362,8 +440,8 @@ pub fn predict(
     device: DeviceArgs,
 ) -> Result<()> {
     let compute = device.announce()?;
-    let model = TrainedModel::load(model_path, &learn::inference_device())?;
-    let g = model.grid;
+    let model = Model::load(model_path)?;
+    let g = model.grid();
     let read = PredictInput::read(input)?;
     let points = match &read {
         PredictInput::Points(cloud) => Some(cloud.len()),
@@ -381,10 +459,10 @@ pub fn predict(
         };
         println!("points     {n} ({what}, {:.2} ms)", t0.elapsed().as_secs_f64() * 1e3);
     }
-    let predictor = learn::Predictor::new(&model, compute)?;
+    let predictor = model.predictor(compute)?;
     let prediction = predictor.predict(&data)?;
     learn::data::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
-    let t = learn::time_prediction(&predictor, &data, 3, runs)?;
+    let t = learn::time_prediction(|x| predictor.predict(x), &data, 3, runs)?;
     println!(
         "prediction {} runs: median {:.2} ms, mean {:.2} ± {:.2} ms, min {:.2}, max {:.2}",
         t.runs,

@@ -290,7 +290,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
     let report = learn::evaluate(&t.model, &t.test, &Corruption::default(), 0, Compute::Cpu)?;
     let predictor = learn::Predictor::new(&t.model, Compute::Cpu)?;
     let input = t.test.get(0).input;
-    let timing = learn::time_prediction(&predictor, &input, 3, 20)?;
+    let timing = learn::time_prediction(|x| predictor.predict(x), &input, 3, 20)?;
     error_histogram(&dir.join("errors.png"), "Liver forces: test-sample errors", &[("U-Net", &report)])?;
     let s = &report.stats;
     let mean = mean_displacement(&t.test);

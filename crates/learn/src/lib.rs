@@ -18,6 +18,8 @@
 //!   placement, splits, input corruption, point clouds as input.
 //! - [`net`]: the network — the 3D U-Net, its saved-model bundle, and the engines that run it
 //!   (burn on the CPU or a GPU, the repacked CPU inference engine, the hand-written backward pass).
+//! - [`rom`]: the reduced-order model (POD basis and Gaussian-process regression), the second
+//!   learned model beside the U-Net.
 //! - [`training`]: training (Adam, checkpoints, resume, fine-tuning), metrics, evaluation and the
 //!   learning curve.
 
@@ -26,7 +28,9 @@
 pub mod data;
 mod error;
 mod fsutil;
+pub mod model;
 pub mod net;
+pub mod rom;
 pub mod training;
 
 pub use data::corrupt::{Corruption, Sparsity};
@@ -38,6 +42,7 @@ pub use data::grid::{encode_points, GridMesh, GridPlacement, GridShape, GridToMe
 pub use data::points::{PointCloud, PredictInput};
 pub use data::split::{IndexSet, Split, SplitPolicy};
 pub use error::LearnError;
+pub use model::{LearnedModel, Method, Model, ModelPredictor, MODEL_FILE};
 pub use net::compute::Compute;
 pub use net::inference::InferenceNet;
 pub use net::predict::{time_prediction, Predictor, Timing};

@@ -131,7 +131,8 @@ fn tiny_unet_overfits_a_handful_of_samples() {
     assert!(evaluate_at_points(&out.model, &data, &Corruption::none(), 0, &placed, &[[9.0, 9.0, 9.0]], Compute::Cpu)
         .is_err());
 
-    let timing = time_prediction(&Predictor::new(&out.model, Compute::Cpu).unwrap(), data.input(0), 1, 3).unwrap();
+    let predictor = Predictor::new(&out.model, Compute::Cpu).unwrap();
+    let timing = time_prediction(|x| predictor.predict(x), data.input(0), 1, 3).unwrap();
     assert!(timing.min <= timing.median && timing.median <= timing.max && timing.runs == 3);
 }
 

@@ -123,6 +123,21 @@ pub fn write_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
     Ok(())
 }
 
+/// Writes f64 values of the given shape to `path` atomically (`<f8`, C order).
+pub fn write_f64(path: &Path, shape: &[usize], data: &[f64]) -> Result<()> {
+    check_len(shape, data.len())?;
+    let head = header("<f8", shape);
+    write_atomic(path, |w| {
+        w.write_all(&head)?;
+        for chunk in data.chunks(8192) {
+            let bytes: Vec<u8> = chunk.iter().flat_map(|x| x.to_le_bytes()).collect();
+            w.write_all(&bytes)?;
+        }
+        Ok(())
+    })?;
+    Ok(())
+}
+
 /// Writes u8 values of the given shape to `path` atomically (`|u1`, C order).
 pub fn write_u8(path: &Path, shape: &[usize], data: &[u8]) -> Result<()> {
     check_len(shape, data.len())?;

@@ -8,7 +8,7 @@ use mesh::Point;
 
 use crate::data::grid::encode_points;
 use crate::data::npy::{read_npy, NpyArray};
-use crate::net::unet::TrainedModel;
+use crate::model::LearnedModel;
 use crate::{LearnError, Result};
 
 /// Vectors at points (m; the vectors in the model's input unit: forces in N or displacements in m).
@@ -96,8 +96,8 @@ impl PredictInput {
     /// The network input of `model` (`[3, nx, ny, nz]` in its input unit): a grid tensor as it is, once its shape
     /// is checked; a point cloud put on the model's grid where it lies ([`encode_points`]: forces spread to the
     /// corners of their cell, displacements on their nearest grid node, by the model's input unit).
-    pub fn into_network_input(self, model: &TrainedModel) -> Result<Vec<f32>> {
-        let g = model.grid;
+    pub fn into_network_input(self, model: &impl LearnedModel) -> Result<Vec<f32>> {
+        let g = model.grid_shape();
         match self {
             PredictInput::Grid(array) if array.shape == [3, g.nx, g.ny, g.nz] => Ok(array.into_f32()),
             PredictInput::Grid(array) => Err(LearnError::InvalidInput(format!(

@@ -217,3 +217,60 @@ impl std::fmt::Display for SampleRole {
         })
     }
 }
+
+/// Which samples shaped a model: the split of its own run and those of the runs it was
+/// fine-tuned from (most recent first).
+#[derive(Clone, Copy, Debug)]
+pub struct Provenance<'a> {
+    /// The model's own run.
+    pub own: &'a Split,
+    /// The runs it was fine-tuned from.
+    pub earlier: &'a [Split],
+}
+
+impl<'a> Provenance<'a> {
+    /// Every split that shaped the model.
+    pub fn splits(self) -> impl Iterator<Item = &'a Split> {
+        std::iter::once(self.own).chain(self.earlier)
+    }
+
+    /// Fails when `samples` include samples any of these runs trained or validated on.
+    pub fn check_unseen(self, samples: &Samples) -> Result<()> {
+        self.splits().try_for_each(|split| split.check_unseen(samples))
+    }
+
+    /// Whether `samples` come from the data the model's own run was trained on.
+    pub fn trained_on(self, samples: &Samples) -> bool {
+        samples.source.is_some() && self.own.source == samples.source
+    }
+
+    /// What sample `index` of the data source `source` was to the model.
+    pub fn role(self, source: Option<&str>, index: u64) -> SampleRole {
+        let ours = |s: &Split| source.is_some() && s.source.as_deref() == source;
+        for split in self.splits().filter(|s| ours(s)) {
+            if split.train.contains(index) {
+                return SampleRole::Training;
+            }
+            if split.validation.contains(index) {
+                return SampleRole::Validation;
+            }
+        }
+        if ours(self.own) && self.own.test.contains(index) {
+            return SampleRole::Test;
+        }
+        SampleRole::Unseen
+    }
+
+    /// The samples held out from the model: from the data it was trained on, its recorded test
+    /// samples; from other data, every sample that no run behind it trained or validated on.
+    pub fn held_out(self, samples: &Samples) -> Result<Samples> {
+        if self.trained_on(samples) {
+            let [_, _, test] = self.own.apply(samples)?;
+            return Ok(test);
+        }
+        let seen =
+            |i: u64| matches!(self.role(samples.source.as_deref(), i), SampleRole::Training | SampleRole::Validation);
+        let positions: Vec<usize> = (0..samples.len()).filter(|&p| !seen(samples.indices[p])).collect();
+        samples.select(&positions)
+    }
+}

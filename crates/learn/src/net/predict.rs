@@ -169,19 +169,24 @@ impl Timing {
     }
 }
 
-/// Times [`Predictor::predict`] on `input` (including normalisation and the copy back):
-/// `warmup` untimed runs, then `runs` timed ones.
-pub fn time_prediction(predictor: &Predictor, input: &[f32], warmup: usize, runs: usize) -> Result<Timing> {
+/// Times `predict` (e.g. [`Predictor::predict`], normalisation and the copy back included) on
+/// `input`: `warmup` untimed runs, then `runs` timed ones.
+pub fn time_prediction(
+    predict: impl Fn(&[f32]) -> Result<Vec<f32>>,
+    input: &[f32],
+    warmup: usize,
+    runs: usize,
+) -> Result<Timing> {
     if runs == 0 {
         return Err(LearnError::InvalidInput("time_prediction needs at least one run".into()));
     }
     for _ in 0..warmup {
-        predictor.predict(input)?;
+        predict(input)?;
     }
     let mut d = Vec::with_capacity(runs);
     for _ in 0..runs {
         let t0 = Instant::now();
-        std::hint::black_box(predictor.predict(input)?);
+        std::hint::black_box(predict(input)?);
         d.push(t0.elapsed().as_secs_f64());
     }
     Timing::from_durations(d)

@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::dataset::{Normalization, Samples};
 use crate::data::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
-use crate::data::split::{SampleRole, Split};
+use crate::data::split::{Provenance, SampleRole, Split};
 use crate::fsutil::read;
 use crate::net::inference::{Block, InferenceNet, Packed};
 use crate::{LearnError, Result};
@@ -455,50 +455,32 @@ impl TrainedModel {
         Ok(write_atomic_bytes(json_path, text.as_bytes())?)
     }
 
+    /// The splits behind this model, when its training recorded them.
+    pub fn provenance(&self) -> Option<Provenance<'_>> {
+        self.training.as_ref().map(|t| Provenance { own: &t.split, earlier: &t.pretraining })
+    }
+
     /// Fails when `samples` include samples this model (or a model it was fine-tuned from) was
     /// trained or validated on; models without a recorded split pass.
     pub fn check_unseen(&self, samples: &Samples) -> Result<()> {
-        self.training.iter().flat_map(TrainingInfo::splits).try_for_each(|split| split.check_unseen(samples))
+        self.provenance().map_or(Ok(()), |p| p.check_unseen(samples))
     }
 
     /// Whether `samples` come from the data this model's own run was trained on (then its
     /// recorded test split is what [`held_out`](Self::held_out) gives).
     pub fn trained_on(&self, samples: &Samples) -> bool {
-        self.training.as_ref().is_some_and(|t| samples.source.is_some() && t.split.source == samples.source)
+        self.provenance().is_some_and(|p| p.trained_on(samples))
     }
 
-    /// What sample `index` of the data source `source` was to this model: trained or validated on
-    /// by any run behind it, in its own run's test split, or never seen.
+    /// What sample `index` of the data source `source` was to this model ([`Provenance::role`]).
     pub fn role(&self, source: Option<&str>, index: u64) -> SampleRole {
-        let Some(info) = &self.training else { return SampleRole::Unseen };
-        let ours = |s: &Split| source.is_some() && s.source.as_deref() == source;
-        for split in info.splits().filter(|s| ours(s)) {
-            if split.train.contains(index) {
-                return SampleRole::Training;
-            }
-            if split.validation.contains(index) {
-                return SampleRole::Validation;
-            }
-        }
-        if ours(&info.split) && info.split.test.contains(index) {
-            return SampleRole::Test;
-        }
-        SampleRole::Unseen
+        self.provenance().map_or(SampleRole::Unseen, |p| p.role(source, index))
     }
 
-    /// The samples of `samples` held out from this model: from the data it was trained on, its
-    /// recorded test samples; from other data, every sample that no run behind the model
-    /// trained or validated on (all of them, for a dataset it never saw).
+    /// The samples of `samples` held out from this model ([`Provenance::held_out`]; all of
+    /// them for a model without a recorded split).
     pub fn held_out(&self, samples: &Samples) -> Result<Samples> {
-        let Some(info) = &self.training else { return Ok(samples.clone()) };
-        if self.trained_on(samples) {
-            let [_, _, test] = info.split.apply(samples)?;
-            return Ok(test);
-        }
-        let seen =
-            |i: u64| matches!(self.role(samples.source.as_deref(), i), SampleRole::Training | SampleRole::Validation);
-        let positions: Vec<usize> = (0..samples.len()).filter(|&p| !seen(samples.indices[p])).collect();
-        samples.select(&positions)
+        self.provenance().map_or_else(|| Ok(samples.clone()), |p| p.held_out(samples))
     }
 
     /// The model JSON of `path`: `path/model.json` for a model directory, else `path` itself.

@@ -10,8 +10,7 @@ use serde::{Deserialize, Serialize};
 use crate::data::corrupt::{item_rng, Corruption, STREAM_EVAL_CORRUPTION};
 use crate::data::dataset::Samples;
 use crate::data::grid::{GridMesh, CHANNELS};
-use crate::net::predict::Predictor;
-use crate::net::unet::TrainedModel;
+use crate::model::LearnedModel;
 use crate::training::metrics::{mean_euclidean_error, ErrorStats, EvalReport};
 use crate::{Compute, LearnError, Result};
 use mesh::embedding::Grid;
@@ -46,7 +45,7 @@ pub fn write_grid_sample(
 /// from `seed` and the sample position) and returns the per-sample errors (m);
 /// `visit(position, prediction)` sees each prediction (m).
 pub(crate) fn evaluate_net(
-    predictor: &Predictor,
+    predict: impl Fn(&[f32]) -> Result<Vec<f32>>,
     samples: &Samples,
     corruption: &Corruption,
     seed: u64,
@@ -58,7 +57,7 @@ pub(crate) fn evaluate_net(
     let grid = samples.grid;
     let mut errors = Vec::with_capacity(samples.len());
     for p in 0..samples.len() {
-        let pred = predictor.predict(&evaluation_input(samples, p, corruption, seed)?)?;
+        let pred = predict(&evaluation_input(samples, p, corruption, seed)?)?;
         visit(p, &pred)?;
         errors.push(
             mean_euclidean_error(&pred, samples.target(p), samples.mask(p), grid)
@@ -82,7 +81,7 @@ pub fn evaluation_input(samples: &Samples, position: usize, corruption: &Corrupt
 /// std, max and the worst sample. Inputs are corrupted with `corruption`, one reproducible draw
 /// per sample from `seed`.
 pub fn evaluate(
-    model: &TrainedModel,
+    model: &impl LearnedModel,
     samples: &Samples,
     corruption: &Corruption,
     seed: u64,
@@ -90,15 +89,17 @@ pub fn evaluate(
 ) -> Result<EvalReport> {
     corruption.validate()?;
     check_samples(model, samples)?;
-    evaluate_net(&Predictor::new(model, compute)?, samples, corruption, seed, |_, _| Ok(()))
+    let predictor = model.predictor(compute)?;
+    evaluate_net(|x| predictor.predict(x), samples, corruption, seed, |_, _| Ok(()))
 }
 
 /// The samples must lie on the model's grid and be held out from its training and selection.
-fn check_samples(model: &TrainedModel, samples: &Samples) -> Result<()> {
-    if samples.grid != model.grid {
+fn check_samples(model: &impl LearnedModel, samples: &Samples) -> Result<()> {
+    if samples.grid != model.grid_shape() {
         return Err(LearnError::InvalidInput(format!(
             "samples are on grid {}, the model on grid {}",
-            samples.grid, model.grid
+            samples.grid,
+            model.grid_shape()
         )));
     }
     model.check_unseen(samples)
@@ -120,7 +121,7 @@ pub struct PointErrors {
 /// [`evaluate`], plus the errors at `points` (positions on `grid`, the model grid placed in
 /// space).
 pub fn evaluate_at_points(
-    model: &TrainedModel,
+    model: &impl LearnedModel,
     samples: &Samples,
     corruption: &Corruption,
     seed: u64,
@@ -144,14 +145,21 @@ pub fn evaluate_at_points(
     };
     let norm3 = |v: &[f64]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     let (mut errors, mut no_motion) = (Vec::new(), Vec::new());
-    let report = evaluate_net(&Predictor::new(model, compute)?, samples, corruption, seed, |p, pred| {
-        let (pred, reference) = (at(pred)?, at(samples.target(p))?);
-        for (a, b) in pred.chunks_exact(3).zip(reference.chunks_exact(3)) {
-            errors.push(norm3(&[a[0] - b[0], a[1] - b[1], a[2] - b[2]]));
-            no_motion.push(norm3(b));
-        }
-        Ok(())
-    })?;
+    let predictor = model.predictor(compute)?;
+    let report = evaluate_net(
+        |x| predictor.predict(x),
+        samples,
+        corruption,
+        seed,
+        |p, pred| {
+            let (pred, reference) = (at(pred)?, at(samples.target(p))?);
+            for (a, b) in pred.chunks_exact(3).zip(reference.chunks_exact(3)) {
+                errors.push(norm3(&[a[0] - b[0], a[1] - b[1], a[2] - b[2]]));
+                no_motion.push(norm3(b));
+            }
+            Ok(())
+        },
+    )?;
     let per_point_mean = (0..points.len())
         .map(|k| errors.iter().skip(k).step_by(points.len()).sum::<f64>() / samples.len() as f64)
         .collect();

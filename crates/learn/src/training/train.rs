@@ -194,7 +194,7 @@ pub struct TrainOutcome {
 }
 
 /// Names of the files in the output directory.
-pub const MODEL_FILE: &str = "model.json";
+pub use crate::model::MODEL_FILE;
 /// Checkpoint file name.
 pub const CHECKPOINT_FILE: &str = "checkpoint.bin";
 /// Learning-curve CSV file name.
@@ -596,7 +596,8 @@ pub fn train(
                 None
             } else {
                 let predictor = Predictor::from_net(&snapshot, options.compute, start.normalization, val.grid)?;
-                let report = evaluate_net(&predictor, val, &config.val_corruption, config.seed, |_, _| Ok(()))?;
+                let report =
+                    evaluate_net(|x| predictor.predict(x), val, &config.val_corruption, config.seed, |_, _| Ok(()))?;
                 Some(report.stats)
             };
             state.curve.push(CurveRow {

@@ -1,0 +1,270 @@
+//! A learned model of either kind, as a model directory holds it: the U-Net
+//! ([`TrainedModel`]) or the reduced-order model ([`ReducedModel`]). Everything that only
+//! predicts (evaluation, registration, the viewer, Python) takes a [`Model`].
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use mesh::embedding::Grid;
+use mesh::Mesh;
+
+use crate::data::corrupt::Corruption;
+use crate::data::dataset::Samples;
+use crate::data::grid::{GridPlacement, GridShape, GridToMesh};
+use crate::data::split::{Provenance, SampleRole};
+use crate::net::predict::Predictor;
+use crate::net::unet::TrainedModel;
+use crate::rom::ReducedModel;
+use crate::{Compute, LearnError, Result};
+
+/// The file of a model directory that describes the model.
+pub const MODEL_FILE: &str = "model.json";
+
+/// A learned model: the U-Net or the reduced-order model.
+#[derive(Clone, Debug)]
+pub enum Model {
+    /// The 3D U-Net.
+    UNet(Arc<TrainedModel>),
+    /// The reduced-order model (POD basis and Gaussian-process regression).
+    Reduced(Arc<ReducedModel>),
+}
+
+/// The kind of a learned model.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// The 3D U-Net (U-Mesh).
+    UNet,
+    /// The reduced-order model.
+    #[default]
+    Rom,
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Method::UNet => "unet",
+            Method::Rom => "rom",
+        })
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = LearnError;
+
+    fn from_str(s: &str) -> Result<Method> {
+        match s {
+            "unet" => Ok(Method::UNet),
+            "rom" => Ok(Method::Rom),
+            other => Err(LearnError::InvalidInput(format!("unknown method `{other}`: expected `rom` or `unet`"))),
+        }
+    }
+}
+
+impl Model {
+    /// The `model.json` of `path`: `path/model.json` for a model directory, else `path` itself.
+    pub fn json_path(path: &Path) -> PathBuf {
+        if path.is_dir() {
+            path.join(MODEL_FILE)
+        } else {
+            path.to_path_buf()
+        }
+    }
+
+    /// Loads the model of a model directory (or of its `model.json`), whichever kind it is.
+    pub fn load(path: &Path) -> Result<Model> {
+        let json = Model::json_path(path);
+        if ReducedModel::is_rom_file(&json) {
+            Ok(Model::Reduced(Arc::new(ReducedModel::load(&json)?)))
+        } else {
+            Ok(Model::UNet(Arc::new(TrainedModel::load(&json, &crate::inference_device())?)))
+        }
+    }
+
+    /// Which kind of model this is.
+    pub fn method(&self) -> Method {
+        match self {
+            Model::UNet(_) => Method::UNet,
+            Model::Reduced(_) => Method::Rom,
+        }
+    }
+
+    /// The grid of its training data.
+    pub fn grid(&self) -> GridShape {
+        match self {
+            Model::UNet(m) => m.grid,
+            Model::Reduced(m) => m.grid,
+        }
+    }
+
+    /// Where that grid lies, when known.
+    pub fn placement(&self) -> Option<GridPlacement> {
+        match self {
+            Model::UNet(m) => m.placement,
+            Model::Reduced(m) => m.placement,
+        }
+    }
+
+    /// The input unit ("N" or "m").
+    pub fn input_unit(&self) -> &str {
+        match self {
+            Model::UNet(m) => &m.input_unit,
+            Model::Reduced(m) => &m.input_unit,
+        }
+    }
+
+    /// The corruption its training inputs had.
+    pub fn training_corruption(&self) -> Corruption {
+        match self {
+            Model::UNet(m) => m.training.as_ref().map(|t| t.corruption.clone()).unwrap_or_default(),
+            Model::Reduced(m) => m.info.corruption.clone(),
+        }
+    }
+
+    /// The splits behind the model, when recorded.
+    pub fn provenance(&self) -> Option<Provenance<'_>> {
+        match self {
+            Model::UNet(m) => m.provenance(),
+            Model::Reduced(m) => Some(Provenance { own: &m.info.split, earlier: &[] }),
+        }
+    }
+
+    /// The model's grid placed in space; an error when the placement was not recorded.
+    pub fn placed_grid(&self) -> Result<Grid> {
+        self.placement()
+            .ok_or_else(|| {
+                LearnError::InvalidInput(
+                    "the model does not record where its grid lies (trained before grid placement was stored): retrain it"
+                        .into(),
+                )
+            })?
+            .grid(self.grid())
+    }
+
+    /// Whether the model takes nodal forces (N) rather than displacements (m).
+    pub fn takes_forces(&self) -> Result<bool> {
+        match self.input_unit() {
+            "N" => Ok(true),
+            "m" => Ok(false),
+            other => Err(LearnError::InvalidInput(format!(
+                "model input unit {other:?} is neither N (forces) nor m (displacements)"
+            ))),
+        }
+    }
+
+    /// A field on the model's grid interpolated to the nodes of `organ` ([`GridToMesh`]).
+    pub fn field_on_mesh(&self, field: &[f32], organ: &Mesh) -> Result<Vec<f64>> {
+        GridToMesh::new(organ, &self.placed_grid()?)?.apply(field)
+    }
+
+    /// Fails when `samples` include samples the model was trained or validated on.
+    pub fn check_unseen(&self, samples: &Samples) -> Result<()> {
+        self.provenance().map_or(Ok(()), |p| p.check_unseen(samples))
+    }
+
+    /// Whether `samples` come from the data the model was trained on.
+    pub fn trained_on(&self, samples: &Samples) -> bool {
+        self.provenance().is_some_and(|p| p.trained_on(samples))
+    }
+
+    /// What a sample was to the model.
+    pub fn role(&self, source: Option<&str>, index: u64) -> SampleRole {
+        self.provenance().map_or(SampleRole::Unseen, |p| p.role(source, index))
+    }
+
+    /// The samples held out from the model.
+    pub fn held_out(&self, samples: &Samples) -> Result<Samples> {
+        self.provenance().map_or_else(|| Ok(samples.clone()), |p| p.held_out(samples))
+    }
+
+    /// A predictor of this model on `compute` (the reduced-order model runs on the CPU only).
+    pub fn predictor(&self, compute: Compute) -> Result<ModelPredictor> {
+        match self {
+            Model::UNet(m) => m.as_ref().predictor(compute),
+            Model::Reduced(m) if compute == Compute::Cpu => Ok(ModelPredictor::Reduced(Arc::clone(m))),
+            Model::Reduced(_) => Err(LearnError::InvalidInput(format!(
+                "the reduced-order model runs on the CPU only (asked: {compute})"
+            ))),
+        }
+    }
+}
+
+/// What evaluation and point inputs need of a learned model, whichever kind: the U-Net as
+/// training returns it ([`TrainedModel`]) or a loaded [`Model`].
+pub trait LearnedModel {
+    /// The grid of its training data.
+    fn grid_shape(&self) -> GridShape;
+    /// The grid placed in space.
+    fn placed_grid(&self) -> Result<Grid>;
+    /// Whether it takes forces (N) rather than displacements (m).
+    fn takes_forces(&self) -> Result<bool>;
+    /// Fails when `samples` include samples it was trained or validated on.
+    fn check_unseen(&self, samples: &Samples) -> Result<()>;
+    /// A predictor on `compute`.
+    fn predictor(&self, compute: Compute) -> Result<ModelPredictor>;
+}
+
+impl LearnedModel for TrainedModel {
+    fn grid_shape(&self) -> GridShape {
+        self.grid
+    }
+    fn placed_grid(&self) -> Result<Grid> {
+        TrainedModel::placed_grid(self)
+    }
+    fn takes_forces(&self) -> Result<bool> {
+        TrainedModel::takes_forces(self)
+    }
+    fn check_unseen(&self, samples: &Samples) -> Result<()> {
+        TrainedModel::check_unseen(self, samples)
+    }
+    fn predictor(&self, compute: Compute) -> Result<ModelPredictor> {
+        Ok(ModelPredictor::UNet(Predictor::new(self, compute)?))
+    }
+}
+
+impl LearnedModel for Model {
+    fn grid_shape(&self) -> GridShape {
+        self.grid()
+    }
+    fn placed_grid(&self) -> Result<Grid> {
+        Model::placed_grid(self)
+    }
+    fn takes_forces(&self) -> Result<bool> {
+        Model::takes_forces(self)
+    }
+    fn check_unseen(&self, samples: &Samples) -> Result<()> {
+        Model::check_unseen(self, samples)
+    }
+    fn predictor(&self, compute: Compute) -> Result<ModelPredictor> {
+        Model::predictor(self, compute)
+    }
+}
+
+/// A model ready for repeated predictions.
+pub enum ModelPredictor {
+    /// The U-Net's predictor.
+    UNet(Predictor),
+    /// The reduced-order model.
+    Reduced(Arc<ReducedModel>),
+}
+
+impl ModelPredictor {
+    /// Predicts the displacement field (m, `[3, nx, ny, nz]`) for one input field on the
+    /// model's grid.
+    pub fn predict(&self, input: &[f32]) -> Result<Vec<f32>> {
+        match self {
+            ModelPredictor::UNet(p) => p.predict(input),
+            ModelPredictor::Reduced(m) => m.predict(input),
+        }
+    }
+
+    /// [`predict`](Self::predict) with the predicted standard deviation at each grid node
+    /// (`[nx, ny, nz]`, m), for a model that predicts one (the reduced-order model).
+    pub fn predict_with_std(&self, input: &[f32]) -> Result<(Vec<f32>, Option<Vec<f32>>)> {
+        match self {
+            ModelPredictor::UNet(p) => Ok((p.predict(input)?, None)),
+            ModelPredictor::Reduced(m) => m.predict_with_std(input).map(|p| (p.field, Some(p.std))),
+        }
+    }
+}

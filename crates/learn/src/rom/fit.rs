@@ -1,0 +1,445 @@
+//! Fitting a reduced-order model: the output basis, the input features, the choice of kernel,
+//! length scale, noise and number of modes on validation, and the calibration of the predicted
+//! uncertainty.
+
+use std::time::Instant;
+
+use faer::Mat;
+use serde::{Deserialize, Serialize};
+
+use super::linalg::{
+    kernel_matrix, leading_eigen, median_distance, mul, mul_t, principal_directions, row_norms2, training_par, Kernel,
+};
+use super::{ReducedModel, RomInfo};
+use crate::data::corrupt::{item_rng, Corruption, STREAM_EVAL_CORRUPTION, STREAM_TRAIN_CORRUPTION};
+use crate::data::dataset::Samples;
+use crate::data::grid::{GridPlacement, CHANNELS};
+use crate::data::split::Split;
+use crate::{LearnError, Result};
+
+/// Settings of a reduced-order model's fit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RomConfig {
+    /// Most POD modes of the output (the number used is chosen on validation).
+    pub max_modes: usize,
+    /// Most principal components of the input.
+    pub max_input_components: usize,
+    /// Share of the training inputs' energy the input components keep.
+    pub input_energy: f64,
+    /// Most inducing points: above this many training samples the regression is a Nyström
+    /// approximation on a seeded random subset of them.
+    pub max_inducing: usize,
+    /// Most training samples the POD basis is computed from (a seeded random subset above it).
+    pub pod_samples: usize,
+    /// Corrupted copies of each training sample added to the regression's training set (inputs
+    /// corrupted by `corruption`), so that it learns to read corrupted inputs.
+    pub noise_copies: usize,
+    /// The corruption of those copies and of the validation inputs.
+    pub corruption: Corruption,
+    /// Seed of the corruption draws and of the subsets.
+    pub seed: u64,
+}
+
+impl Default for RomConfig {
+    fn default() -> Self {
+        RomConfig {
+            max_modes: 256,
+            max_input_components: 256,
+            input_energy: 1.0 - 1e-5,
+            max_inducing: 3000,
+            pod_samples: 3000,
+            noise_copies: 0,
+            corruption: Corruption::none(),
+            seed: 0,
+        }
+    }
+}
+
+/// What a fit measured.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RomReport {
+    /// Share of the training targets' variance the chosen modes hold.
+    pub energy: f64,
+    /// Mean Euclidean error of the validation targets projected on the chosen basis (m): the
+    /// floor of the model.
+    pub val_projection_error: f64,
+    /// Mean Euclidean error of the validation predictions (m).
+    pub val_mean_error: f64,
+    /// Largest validation sample's mean Euclidean error (m).
+    pub val_max_error: f64,
+    /// Share of the validation nodes whose error lies within twice the calibrated standard
+    /// deviation (0.95 by construction, up to ties).
+    pub val_coverage: f64,
+    /// Every candidate tried: kernel, length scale, noise, modes, validation mean squared error of
+    /// the coefficients (m²).
+    pub candidates: Vec<(Kernel, f64, f64, usize, f64)>,
+}
+
+/// Candidate length scales, as multiples of the median distance between training features.
+const SCALES: [f64; 6] = [0.125, 0.25, 0.5, 1.0, 2.0, 4.0];
+/// Candidate noise ratios (noise variance over the kernel's).
+const NOISES: [f64; 6] = [1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1];
+/// Candidate numbers of modes (those up to the basis's size, and the whole basis).
+const MODES: [usize; 7] = [8, 16, 32, 64, 128, 256, 512];
+/// Eigenvalues of the inducing kernel matrix below this share of the largest are dropped.
+const KERNEL_RANK_TOLERANCE: f64 = 1e-10;
+/// Share of validation node errors within two calibrated standard deviations.
+const COVERAGE: f64 = 0.95;
+
+/// Where the samples lie and what they mean, for the model file.
+pub struct Context<'a> {
+    /// The grid's placement.
+    pub placement: Option<GridPlacement>,
+    /// Input unit.
+    pub input_unit: &'a str,
+    /// Target unit.
+    pub target_unit: &'a str,
+    /// The split the samples come from.
+    pub split: Split,
+}
+
+/// Fits a reduced-order model on `train`, choosing its hyper-parameters on `validation`.
+pub fn fit(
+    train: &Samples,
+    validation: &Samples,
+    config: &RomConfig,
+    context: Context<'_>,
+) -> Result<(ReducedModel, RomReport)> {
+    let start = Instant::now();
+    config.corruption.validate()?;
+    if train.len() < 2 || validation.is_empty() {
+        return Err(LearnError::InvalidInput(format!(
+            "a reduced-order model needs at least 2 training and 1 validation sample, got {} and {}",
+            train.len(),
+            validation.len()
+        )));
+    }
+    if validation.grid != train.grid {
+        return Err(LearnError::InvalidInput("training and validation samples lie on different grids".into()));
+    }
+    let grid = train.grid;
+    let n = train.len();
+    let grid_nodes = grid.nodes();
+    // The organ's nodes: any training mask.
+    let nodes: Vec<usize> = (0..grid_nodes).filter(|&v| (0..n).any(|i| train.mask(i)[v] == 1)).collect();
+    let out_entries: Vec<usize> = (0..CHANNELS).flat_map(|c| nodes.iter().map(move |&v| c * grid_nodes + v)).collect();
+    let targets = |s: &Samples| Mat::from_fn(s.len(), out_entries.len(), |i, e| f64::from(s.target(i)[out_entries[e]]));
+    let (y_train, y_val) = (targets(train), targets(validation));
+
+    // Output basis.
+    let output_mean: Vec<f64> = (0..y_train.ncols()).map(|e| y_train.col(e).iter().sum::<f64>() / n as f64).collect();
+    let centre = |y: &Mat<f64>| Mat::from_fn(y.nrows(), y.ncols(), |i, e| y[(i, e)] - output_mean[e]);
+    let (yc_train, yc_val) = (centre(&y_train), centre(&y_val));
+    let pod_rows = subset(n, config.pod_samples, config.seed);
+    let pod_x = Mat::from_fn(pod_rows.len(), yc_train.ncols(), |i, e| yc_train[(pod_rows[i], e)]);
+    let (pod_values, basis) = principal_directions(pod_x.as_ref(), config.max_modes, 1e-7)?;
+    if basis.nrows() == 0 {
+        return Err(LearnError::InvalidInput("the training targets do not vary: nothing to learn".into()));
+    }
+    let coeffs_train = mul_t(yc_train.as_ref(), basis.as_ref(), training_par());
+    let coeffs_val = mul_t(yc_val.as_ref(), basis.as_ref(), training_par());
+    // The validation targets' energy outside the basis, per sample.
+    let outside_val: Vec<f64> = (0..validation.len())
+        .map(|i| {
+            let total: f64 = yc_val.row(i).iter().map(|v| v * v).sum();
+            (total - coeffs_val.row(i).iter().map(|v| v * v).sum::<f64>()).max(0.0)
+        })
+        .collect();
+
+    // Input features.
+    let input_entries: Vec<usize> =
+        (0..grid.field_len()).filter(|&e| (0..n).any(|i| train.input(i)[e] != 0.0)).collect();
+    if input_entries.is_empty() {
+        return Err(LearnError::InvalidInput("every training input is zero: nothing to learn from".into()));
+    }
+    let read_inputs = |fields: &[Vec<f32>]| {
+        Mat::from_fn(fields.len(), input_entries.len(), |i, e| f64::from(fields[i][input_entries[e]]))
+    };
+    let clean: Vec<Vec<f32>> = (0..n).map(|i| train.input(i).to_vec()).collect();
+    let x_clean = read_inputs(&clean);
+    let input_mean: Vec<f64> = (0..x_clean.ncols()).map(|e| x_clean.col(e).iter().sum::<f64>() / n as f64).collect();
+    let centre_in = |x: &Mat<f64>| Mat::from_fn(x.nrows(), x.ncols(), |i, e| x[(i, e)] - input_mean[e]);
+    let (in_values, in_dirs) = principal_directions(centre_in(&x_clean).as_ref(), config.max_input_components, 1e-7)?;
+    let total: f64 = in_values.iter().sum();
+    let mut kept = 0.0;
+    let components = in_values
+        .iter()
+        .position(|v| {
+            kept += v;
+            kept >= config.input_energy * total
+        })
+        .map_or(in_values.len(), |p| p + 1);
+    let input_components = in_dirs.subrows(0, components).to_owned();
+    let features = |fields: &[Vec<f32>]| {
+        mul_t(centre_in(&read_inputs(fields)).as_ref(), input_components.as_ref(), training_par())
+    };
+
+    // The regression's training set: the samples, then their corrupted copies.
+    let mut fields = clean;
+    for copy in 0..config.noise_copies {
+        for i in 0..n {
+            let mut input = train.input(i).to_vec();
+            let item = (copy * n + i) as u64;
+            config.corruption.apply(&mut input, grid, &mut item_rng(config.seed, STREAM_TRAIN_CORRUPTION, item))?;
+            fields.push(input);
+        }
+    }
+    let f_train = features(&fields);
+    let y_coeffs = Mat::from_fn(f_train.nrows(), basis.nrows(), |i, j| coeffs_train[(i % n, j)]);
+    let val_fields: Vec<Vec<f32>> = (0..validation.len())
+        .map(|i| {
+            let mut input = validation.input(i).to_vec();
+            if !config.corruption.is_identity() {
+                let mut rng = item_rng(config.seed, STREAM_EVAL_CORRUPTION, i as u64);
+                config.corruption.apply(&mut input, grid, &mut rng)?;
+            }
+            Ok(input)
+        })
+        .collect::<Result<_>>()?;
+    let f_val = features(&val_fields);
+
+    // Inducing points: the clean training samples (a seeded subset above `max_inducing`).
+    let inducing_rows = subset(n, config.max_inducing, config.seed ^ 0x5eed);
+    let inducing = Mat::from_fn(inducing_rows.len(), components, |i, c| f_train[(inducing_rows[i], c)]);
+    let exact = inducing_rows.len() == n && config.noise_copies == 0;
+    let base_scale = median_distance(inducing.as_ref()).max(f64::MIN_POSITIVE);
+    let (z2, t2, v2) = (row_norms2(inducing.as_ref()), row_norms2(f_train.as_ref()), row_norms2(f_val.as_ref()));
+
+    // Choice on validation.
+    let mode_counts: Vec<usize> =
+        MODES.iter().copied().filter(|&r| r < basis.nrows()).chain(std::iter::once(basis.nrows())).collect();
+    let mut candidates = Vec::new();
+    let mut best: Option<(f64, Kernel, f64, f64, usize)> = None;
+    for kernel in [Kernel::Rbf, Kernel::Matern52] {
+        for &s in &SCALES {
+            let scale = s * base_scale;
+            let fitted = Regression::new(kernel, scale, &inducing, &z2, &f_train, &t2, &y_coeffs)?;
+            let k_val = kernel_matrix(kernel, scale, f_val.as_ref(), &v2, inducing.as_ref(), &z2, training_par());
+            for &noise in &NOISES {
+                let predicted = mul(k_val.as_ref(), fitted.weights(noise).as_ref(), training_par());
+                for &r in &mode_counts {
+                    let mse = (0..validation.len())
+                        .map(|i| {
+                            let inside: f64 = (0..r).map(|j| (coeffs_val[(i, j)] - predicted[(i, j)]).powi(2)).sum();
+                            let beyond: f64 = (r..basis.nrows()).map(|j| coeffs_val[(i, j)].powi(2)).sum();
+                            inside + beyond + outside_val[i]
+                        })
+                        .sum::<f64>()
+                        / validation.len() as f64;
+                    candidates.push((kernel, scale, noise, r, mse));
+                    if best.is_none_or(|b| mse < b.0) {
+                        best = Some((mse, kernel, scale, noise, r));
+                    }
+                }
+            }
+        }
+    }
+    let (_, kernel, scale, noise, modes) = best.ok_or_else(|| LearnError::InvalidInput("no candidate".into()))?;
+
+    // The chosen model.
+    let fitted = Regression::new(kernel, scale, &inducing, &z2, &f_train, &t2, &y_coeffs)?;
+    let weights = fitted.weights(noise).subcols(0, modes).to_owned();
+    let covariance = fitted.covariance(noise);
+    let amplitudes = fitted.amplitudes(noise, &y_coeffs);
+    let basis = basis.subrows(0, modes).to_owned();
+    let m = nodes.len();
+    let variance_weights: Vec<f64> = (0..m)
+        .map(|p| {
+            (0..CHANNELS).map(|c| (0..modes).map(|j| amplitudes[j] * basis[(j, c * m + p)].powi(2)).sum::<f64>()).sum()
+        })
+        .collect();
+    let project = mul(mul_t(yc_val.as_ref(), basis.as_ref(), training_par()).as_ref(), basis.as_ref(), training_par());
+    let floor: Vec<f64> = (0..m)
+        .map(|p| {
+            (0..validation.len())
+                .map(|i| (0..CHANNELS).map(|c| (yc_val[(i, c * m + p)] - project[(i, c * m + p)]).powi(2)).sum::<f64>())
+                .sum::<f64>()
+                / validation.len() as f64
+        })
+        .collect();
+    let energy = pod_values[..modes].iter().sum::<f64>() / pod_x.norm_l2().powi(2).max(f64::MIN_POSITIVE);
+
+    let mut model = ReducedModel {
+        grid,
+        placement: context.placement,
+        input_unit: context.input_unit.into(),
+        target_unit: context.target_unit.into(),
+        info: RomInfo {
+            kernel,
+            length_scale: scale,
+            noise,
+            modes,
+            input_components: components,
+            inducing: inducing.nrows(),
+            exact,
+            calibration: 1.0,
+            train_samples: n,
+            val_samples: validation.len(),
+            noise_copies: config.noise_copies,
+            corruption: config.corruption.clone(),
+            seed: config.seed,
+            val_mean_error: 0.0,
+            seconds: 0.0,
+            split: context.split,
+        },
+        input_entries,
+        input_mean,
+        input_components,
+        inducing,
+        inducing_norms: z2,
+        weights,
+        covariance,
+        nodes,
+        output_mean,
+        basis,
+        variance_weights,
+        floor,
+    };
+
+    // Validation errors, the projection floor and the calibration.
+    let (mut errors, mut ratios, mut floor_errors) = (Vec::new(), Vec::new(), Vec::new());
+    for (i, input) in val_fields.iter().enumerate() {
+        let k = model.kernel_row(input)?;
+        let (pred, std) = (model.reconstruct(&k), model.node_std(&k));
+        let node_error = |p: usize, v: &dyn Fn(usize) -> f64| {
+            (0..CHANNELS).map(|c| (v(c * m + p) - y_val[(i, c * m + p)]).powi(2)).sum::<f64>().sqrt()
+        };
+        let mut sum = 0.0;
+        let mut floor_sum = 0.0;
+        for p in 0..m {
+            let e = node_error(p, &|e| pred[e]);
+            sum += e;
+            floor_sum += node_error(p, &|e| project[(i, e)] + model.output_mean[e]);
+            ratios.push(e / (2.0 * std[p]).max(f64::MIN_POSITIVE));
+        }
+        errors.push(sum / m as f64);
+        floor_errors.push(floor_sum / m as f64);
+    }
+    let q = ((COVERAGE * ratios.len() as f64).ceil() as usize).clamp(1, ratios.len()) - 1;
+    let calibration = *ratios.select_nth_unstable_by(q, f64::total_cmp).1;
+    model.info.calibration = calibration.max(f64::MIN_POSITIVE);
+    let val_coverage = ratios.iter().filter(|&&r| r <= calibration).count() as f64 / ratios.len() as f64;
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    model.info.val_mean_error = mean(&errors);
+    model.info.seconds = start.elapsed().as_secs_f64();
+    let report = RomReport {
+        energy,
+        val_projection_error: mean(&floor_errors),
+        val_mean_error: mean(&errors),
+        val_max_error: errors.iter().copied().fold(0.0, f64::max),
+        val_coverage,
+        candidates,
+    };
+    Ok((model, report))
+}
+
+/// `count` of `0..n` (all when `count ≥ n`), a seeded random subset in increasing order.
+fn subset(n: usize, count: usize, seed: u64) -> Vec<usize> {
+    if count >= n {
+        return (0..n).collect();
+    }
+    let mut chosen = rand::seq::index::sample(&mut item_rng(seed, 0, 0), n, count).into_vec();
+    chosen.sort_unstable();
+    chosen
+}
+
+/// A kernel regression in Nyström form for one kernel and length scale, solved for every noise
+/// ratio at once: with `K_zz = V Λ Vᵀ` (inducing points) the features are `φ(x) = Λ^{-1/2} Vᵀ k_z(x)`,
+/// and with `Φᵀ Φ = U S Uᵀ` (training samples) the weights for a noise ratio λ are
+/// `T U (S + λ)⁻¹ Uᵀ Φᵀ Y`, `T = V Λ^{-1/2}`. With every training sample an inducing point this is
+/// the exact Gaussian-process mean `k(x)ᵀ (K + λ I)⁻¹ Y`.
+struct Regression {
+    /// `T U` (inducing × rank).
+    tu: Mat<f64>,
+    /// `S`.
+    s: Vec<f64>,
+    /// `Uᵀ Φᵀ Y` (rank × modes).
+    b: Mat<f64>,
+    /// Number of training samples.
+    n: usize,
+}
+
+impl Regression {
+    fn new(
+        kernel: Kernel,
+        scale: f64,
+        inducing: &Mat<f64>,
+        z2: &[f64],
+        train: &Mat<f64>,
+        t2: &[f64],
+        y: &Mat<f64>,
+    ) -> Result<Regression> {
+        let par = training_par();
+        let kzz = kernel_matrix(kernel, scale, inducing.as_ref(), z2, inducing.as_ref(), z2, par);
+        let (lambda, v) = leading_eigen(kzz.as_ref(), kzz.nrows(), KERNEL_RANK_TOLERANCE)?;
+        let t = Mat::from_fn(v.nrows(), v.ncols(), |i, j| v[(i, j)] / lambda[j].sqrt());
+        let knz = kernel_matrix(kernel, scale, train.as_ref(), t2, inducing.as_ref(), z2, par);
+        let phi = mul(knz.as_ref(), t.as_ref(), par);
+        let c = mul(phi.transpose(), phi.as_ref(), par);
+        let (s, u) = leading_eigen(c.as_ref(), c.nrows(), 0.0)?;
+        let b = mul(mul(u.transpose(), phi.transpose(), par).as_ref(), y.as_ref(), par);
+        let tu = mul(t.as_ref(), u.as_ref(), par);
+        Ok(Regression { tu, s, b, n: train.nrows() })
+    }
+
+    /// The weights `A` of the mean `k_z(x)ᵀ A` (inducing × modes) for noise ratio `noise`.
+    fn weights(&self, noise: f64) -> Mat<f64> {
+        let scaled = Mat::from_fn(self.b.nrows(), self.b.ncols(), |k, j| self.b[(k, j)] / (self.s[k] + noise));
+        mul(self.tu.as_ref(), scaled.as_ref(), training_par())
+    }
+
+    /// The matrix `G` of the unit-amplitude predictive variance `1 − k_z(x)ᵀ G k_z(x)`:
+    /// `T U diag(S / (S + λ)) Uᵀ Tᵀ`.
+    fn covariance(&self, noise: f64) -> Mat<f64> {
+        let scaled =
+            Mat::from_fn(self.tu.nrows(), self.tu.ncols(), |i, k| self.tu[(i, k)] * self.s[k] / (self.s[k] + noise));
+        mul_t(scaled.as_ref(), self.tu.as_ref(), training_par())
+    }
+
+    /// Each mode's amplitude (signal variance) by maximum marginal likelihood at noise ratio λ:
+    /// `yᵀ (Φ Φᵀ + λ I)⁻¹ y / n`, with `(Φ Φᵀ + λ I)⁻¹ = (I − Φ (C + λ)⁻¹ Φᵀ) / λ`.
+    fn amplitudes(&self, noise: f64, y: &Mat<f64>) -> Vec<f64> {
+        (0..y.ncols())
+            .map(|j| {
+                let yy: f64 = y.col(j).iter().map(|v| v * v).sum();
+                let explained: f64 = (0..self.s.len()).map(|k| self.b[(k, j)].powi(2) / (self.s[k] + noise)).sum();
+                ((yy - explained) / (noise * self.n as f64)).max(0.0)
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// With every training sample an inducing point, the Nyström solution is the exact
+    /// Gaussian-process mean `k(x)ᵀ (K + λ I)⁻¹ y`, computed here by a dense solve.
+    #[test]
+    fn the_regression_is_the_exact_gaussian_process_mean() {
+        let x = Mat::from_fn(12, 2, |i, d| ((i * 7 + d * 3) as f64 * 0.37).sin());
+        let y = Mat::from_fn(12, 2, |i, j| ((i + 2 * j) as f64 * 0.5).cos());
+        let x2 = row_norms2(x.as_ref());
+        let (kernel, scale, noise) = (Kernel::Matern52, 0.8, 1e-2);
+        let fitted = Regression::new(kernel, scale, &x, &x2, &x, &x2, &y).unwrap();
+        let a = fitted.weights(noise);
+        let k = kernel_matrix(kernel, scale, x.as_ref(), &x2, x.as_ref(), &x2, faer::Par::Seq);
+        let mut regularised = k.clone();
+        (0..12).for_each(|i| regularised[(i, i)] += noise);
+        use faer::linalg::solvers::Solve;
+        let alpha = regularised.llt(faer::Side::Lower).unwrap().solve(&y);
+        let diff = (&a - &alpha).norm_l2() / alpha.norm_l2();
+        assert!(diff < 1e-8, "relative difference {diff}");
+        // The predictive variance at a training point: 1 − kᵀ (K + λI)⁻¹ k.
+        let g = fitted.covariance(noise);
+        let k0: Vec<f64> = k.row(0).iter().copied().collect();
+        let exact = 1.0 - {
+            let kv = Mat::from_fn(12, 1, |i, _| k0[i]);
+            let sol = regularised.llt(faer::Side::Lower).unwrap().solve(&kv);
+            (0..12).map(|i| k0[i] * sol[(i, 0)]).sum::<f64>()
+        };
+        let ours = 1.0 - super::super::quadratic_form(g.as_ref(), &k0);
+        assert!((ours - exact).abs() < 1e-8, "variance {ours} against {exact}");
+    }
+}

@@ -1,0 +1,390 @@
+//! A reduced-order model (ROM): the second learned model beside the U-Net, trained on the same
+//! datasets with the same splits, in seconds on a CPU.
+//!
+//! * **Output basis** — proper orthogonal decomposition (POD) of the training targets: their mean
+//!   and leading principal directions over the grid nodes inside the organ (the method of
+//!   snapshots on faer's symmetric eigensolver). The number of modes is chosen on validation.
+//! * **Input features** — the nonzero entries of the training inputs, centred and projected on
+//!   their leading principal directions (enough to hold all but 1e-5 of their energy): a space in
+//!   which the kernel compares inputs, and which drops most of the noise of a corrupted input.
+//! * **Regression** — a Gaussian process from the features to the modal coefficients, all modes
+//!   sharing one kernel (squared exponential or Matérn 5/2), length scale and noise ratio, each its
+//!   own amplitude (the marginal-likelihood estimate). Kernel, length scale and noise are chosen
+//!   on validation (the coefficients' mean squared error). Large datasets use a Nyström (subset of
+//!   regressors) approximation: at most [`RomConfig::max_inducing`] training samples serve as the
+//!   inducing points; below that the regression is the exact Gaussian process.
+//! * **Uncertainty** — the predictive variance of the process, spread to every node through the
+//!   modes' amplitudes, plus the basis's own truncation error per node (measured on validation),
+//!   scaled by one factor chosen on validation so that 95 % of the validation nodes' errors fall
+//!   within two standard deviations.
+//!
+//! # Files
+//! A model directory holds `model.json` (format `augsim-rom`) and NumPy arrays, so that NumPy
+//! alone predicts with it:
+//! ```python
+//! import json, numpy as np
+//! d = "models/liver_ar_rom"; m = json.load(open(f"{d}/model.json")); a = lambda n: np.load(f"{d}/{n}.npy")
+//! x = input_field                                            # [3, nx, ny, nz], the model's input unit
+//! f = a("input_components") @ (x[a("input_mask").astype(bool)] - a("input_mean"))
+//! z = a("inducing"); d2 = ((z - f) ** 2).sum(1) / m["rom"]["length_scale"] ** 2
+//! k = np.exp(-0.5 * d2)                                      # "rbf"; "matern52": (1+r+r²/3)e^{-r}, r = √(5 d2)
+//! field = np.zeros(x.shape); mask = a("output_mask").astype(bool)
+//! field[:, mask] = (a("output_mean") + (k @ a("weights")) @ a("basis")).reshape(3, -1)
+//! sigma = np.zeros(x.shape[1:])                              # per node, m
+//! sigma[mask] = m["rom"]["calibration"] * np.sqrt(max(1 - k @ a("covariance") @ k, 0) * a("variance_weights") + a("floor"))
+//! ```
+
+mod fit;
+mod linalg;
+
+use std::path::{Path, PathBuf};
+
+use faer::{Mat, MatRef, Par};
+use serde::{Deserialize, Serialize};
+
+use crate::data::corrupt::Corruption;
+use crate::data::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
+use crate::data::npy::{read_npy, write_f32, write_f64, write_u8};
+use crate::data::split::Split;
+use crate::{LearnError, Result};
+
+pub use fit::{fit, Context, RomConfig, RomReport};
+pub use linalg::Kernel;
+
+/// The format name in a reduced-order model's `model.json`.
+pub const ROM_FORMAT: &str = "augsim-rom";
+const ROM_VERSION: u32 = 1;
+
+/// How a reduced-order model was trained and what it chose.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RomInfo {
+    /// The kernel.
+    pub kernel: Kernel,
+    /// Its length scale, in the input unit.
+    pub length_scale: f64,
+    /// The noise variance relative to the kernel's (the regression's ridge).
+    pub noise: f64,
+    /// Number of POD modes of the output.
+    pub modes: usize,
+    /// Number of principal components of the input the kernel compares.
+    pub input_components: usize,
+    /// Number of inducing points (the training samples when the regression is exact).
+    pub inducing: usize,
+    /// Whether the regression is the exact Gaussian process (else its Nyström approximation).
+    pub exact: bool,
+    /// The factor on the predicted standard deviation chosen on validation.
+    pub calibration: f64,
+    /// Training samples (without their corrupted copies) and validation samples.
+    pub train_samples: usize,
+    /// Validation samples.
+    pub val_samples: usize,
+    /// Corrupted copies of each training sample added to the training set.
+    pub noise_copies: usize,
+    /// The corruption of those copies and of the validation inputs.
+    pub corruption: Corruption,
+    /// Seed of the corruption draws and of the choice of inducing points.
+    pub seed: u64,
+    /// Mean Euclidean error on the validation samples (m).
+    pub val_mean_error: f64,
+    /// Wall-clock seconds of the fit.
+    pub seconds: f64,
+    /// Which samples trained, selected and test the model.
+    pub split: Split,
+}
+
+/// The contents of `model.json`.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RomFile {
+    format: String,
+    version: u32,
+    layout: String,
+    grid: GridShape,
+    placement: Option<GridPlacement>,
+    input_unit: String,
+    target_unit: String,
+    rom: RomInfo,
+}
+
+/// A trained reduced-order model (see the module documentation).
+#[derive(Clone, Debug)]
+pub struct ReducedModel {
+    /// Grid of the training data (prediction inputs must be on it).
+    pub grid: GridShape,
+    /// Where that grid lies in space, when known.
+    pub placement: Option<GridPlacement>,
+    /// Input unit ("N" or "m").
+    pub input_unit: String,
+    /// Target unit ("m").
+    pub target_unit: String,
+    /// How it was trained.
+    pub info: RomInfo,
+    /// Field entries (`[3, nx, ny, nz]` indices) the input features read.
+    input_entries: Vec<usize>,
+    input_mean: Vec<f64>,
+    /// `components × entries`.
+    input_components: Mat<f64>,
+    /// `inducing × components`, and their squared norms.
+    inducing: Mat<f64>,
+    inducing_norms: Vec<f64>,
+    /// `inducing × modes`: the coefficients are `k(x)ᵀ weights`.
+    weights: Mat<f64>,
+    /// `inducing × inducing`: the predictive variance is `1 − k(x)ᵀ covariance k(x)`.
+    covariance: Mat<f64>,
+    /// Grid nodes inside the organ (where the output lives), in increasing order.
+    nodes: Vec<usize>,
+    /// The output mean and the basis (`modes × 3·nodes`, channel-major over `nodes`).
+    output_mean: Vec<f64>,
+    basis: Mat<f64>,
+    /// Per node: Σ modes' amplitude² × basis² over the channels, and the truncation variance.
+    variance_weights: Vec<f64>,
+    floor: Vec<f64>,
+}
+
+/// A prediction with its uncertainty.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UncertainPrediction {
+    /// The displacement field, `[3, nx, ny, nz]` (m; zero outside the organ).
+    pub field: Vec<f32>,
+    /// The predicted standard deviation of the displacement's error at each grid node (m, the
+    /// root mean square of its Euclidean norm; zero outside the organ), `[nx, ny, nz]`.
+    pub std: Vec<f32>,
+}
+
+impl ReducedModel {
+    /// The modal coefficients and the kernel row of one input field.
+    fn kernel_row(&self, input: &[f32]) -> Result<Vec<f64>> {
+        let f = self.grid.field_len();
+        if input.len() != f {
+            return Err(LearnError::InvalidInput(format!(
+                "prediction input has {} values, expected {f} (3 channels on grid {})",
+                input.len(),
+                self.grid
+            )));
+        }
+        if input.iter().any(|v| !v.is_finite()) {
+            return Err(LearnError::InvalidInput("prediction input has a non-finite value".into()));
+        }
+        let x: Vec<f64> =
+            self.input_entries.iter().zip(&self.input_mean).map(|(&e, m)| f64::from(input[e]) - m).collect();
+        let features: Vec<f64> =
+            (0..self.input_components.nrows()).map(|c| dot_row(self.input_components.as_ref(), c, &x)).collect();
+        let norm: f64 = features.iter().map(|v| v * v).sum();
+        Ok((0..self.inducing.nrows())
+            .map(|i| {
+                let d2 = self.inducing_norms[i] + norm - 2.0 * dot_row(self.inducing.as_ref(), i, &features);
+                self.info.kernel.eval(d2, self.info.length_scale)
+            })
+            .collect())
+    }
+
+    /// The displacement on the organ's nodes (channel-major over [`Self::nodes`]) for a kernel row.
+    fn reconstruct(&self, k: &[f64]) -> Vec<f64> {
+        let modes = self.weights.ncols();
+        let coeffs: Vec<f64> =
+            (0..modes).map(|j| (0..k.len()).map(|i| k[i] * self.weights[(i, j)]).sum::<f64>()).collect();
+        let mut out = self.output_mean.clone();
+        for (j, c) in coeffs.iter().enumerate() {
+            self.basis.row(j).iter().zip(out.iter_mut()).for_each(|(b, o)| *o += c * b);
+        }
+        out
+    }
+
+    /// Scatters values on the organ's nodes (channel-major) into a `[channels, nx, ny, nz]` field.
+    fn scatter(&self, values: &[f64], channels: usize) -> Vec<f32> {
+        let n = self.grid.nodes();
+        let mut field = vec![0f32; channels * n];
+        for c in 0..channels {
+            for (p, &node) in self.nodes.iter().enumerate() {
+                field[c * n + node] = values[c * self.nodes.len() + p] as f32;
+            }
+        }
+        field
+    }
+
+    /// Predicts the displacement field (m, `[3, nx, ny, nz]`, zero outside the organ) for one
+    /// input field (`[3, nx, ny, nz]` on the model's grid, in the model's input unit).
+    pub fn predict(&self, input: &[f32]) -> Result<Vec<f32>> {
+        let k = self.kernel_row(input)?;
+        Ok(self.scatter(&self.reconstruct(&k), CHANNELS))
+    }
+
+    /// [`predict`](Self::predict) with the predicted standard deviation at every node.
+    pub fn predict_with_std(&self, input: &[f32]) -> Result<UncertainPrediction> {
+        let k = self.kernel_row(input)?;
+        let field = self.scatter(&self.reconstruct(&k), CHANNELS);
+        let std = self.scatter(&self.node_std(&k), 1);
+        Ok(UncertainPrediction { field, std })
+    }
+
+    /// The calibrated standard deviation on the organ's nodes for a kernel row.
+    fn node_std(&self, k: &[f64]) -> Vec<f64> {
+        let v = (1.0 - quadratic_form(self.covariance.as_ref(), k)).max(0.0);
+        self.variance_weights.iter().zip(&self.floor).map(|(w, f)| self.info.calibration * (v * w + f).sqrt()).collect()
+    }
+
+    /// Whether `json_path` (a `model.json`) holds a reduced-order model.
+    pub fn is_rom_file(json_path: &Path) -> bool {
+        #[derive(Deserialize)]
+        struct Head {
+            format: String,
+        }
+        std::fs::read_to_string(json_path)
+            .ok()
+            .and_then(|t| serde_json::from_str::<Head>(&t).ok())
+            .is_some_and(|h| h.format == ROM_FORMAT)
+    }
+
+    /// Saves the model as a directory: `dir/model.json` and its arrays beside it, each file
+    /// written atomically.
+    pub fn save(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).map_err(|e| LearnError::io(dir, e))?;
+        let (modes, entries) = (self.basis.nrows(), self.input_entries.len());
+        let mut input_mask = vec![0u8; self.grid.field_len()];
+        self.input_entries.iter().for_each(|&e| input_mask[e] = 1);
+        let mut output_mask = vec![0u8; self.grid.nodes()];
+        self.nodes.iter().for_each(|&n| output_mask[n] = 1);
+        let [nx, ny, nz] = self.grid.dims();
+        write_u8(&dir.join("input_mask.npy"), &[CHANNELS, nx, ny, nz], &input_mask)?;
+        write_u8(&dir.join("output_mask.npy"), &[nx, ny, nz], &output_mask)?;
+        write_f64(&dir.join("input_mean.npy"), &[entries], &self.input_mean)?;
+        write_matrix(&dir.join("input_components.npy"), self.input_components.as_ref())?;
+        write_matrix(&dir.join("inducing.npy"), self.inducing.as_ref())?;
+        write_matrix(&dir.join("weights.npy"), self.weights.as_ref())?;
+        write_matrix(&dir.join("covariance.npy"), self.covariance.as_ref())?;
+        let mean32: Vec<f32> = self.output_mean.iter().map(|&v| v as f32).collect();
+        write_f32(&dir.join("output_mean.npy"), &[mean32.len()], &mean32)?;
+        let basis32: Vec<f32> =
+            (0..modes).flat_map(|j| self.basis.row(j).iter().map(|&v| v as f32).collect::<Vec<_>>()).collect();
+        write_f32(&dir.join("basis.npy"), &[modes, self.basis.ncols()], &basis32)?;
+        write_f64(&dir.join("variance_weights.npy"), &[self.nodes.len()], &self.variance_weights)?;
+        write_f64(&dir.join("floor.npy"), &[self.nodes.len()], &self.floor)?;
+        let file = RomFile {
+            format: ROM_FORMAT.into(),
+            version: ROM_VERSION,
+            layout: LAYOUT.into(),
+            grid: self.grid,
+            placement: self.placement,
+            input_unit: self.input_unit.clone(),
+            target_unit: self.target_unit.clone(),
+            rom: self.info.clone(),
+        };
+        let path = dir.join("model.json");
+        let text = serde_json::to_string_pretty(&file)
+            .map_err(|e| LearnError::model(&path, format!("cannot serialize model file: {e}")))?;
+        Ok(mesh::io::write_atomic_bytes(&path, text.as_bytes())?)
+    }
+
+    /// Loads a model saved by [`save`](Self::save) from its `model.json`.
+    pub fn load(json_path: &Path) -> Result<ReducedModel> {
+        let text = std::fs::read_to_string(json_path).map_err(|e| LearnError::io(json_path, e))?;
+        let file: RomFile = serde_json::from_str(&text)
+            .map_err(|e| LearnError::model(json_path, format!("invalid model JSON: {e}")))?;
+        if file.format != ROM_FORMAT || file.version != ROM_VERSION {
+            return Err(LearnError::model(
+                json_path,
+                format!("format {:?} v{} is not {ROM_FORMAT:?} v{ROM_VERSION}", file.format, file.version),
+            ));
+        }
+        let dir = json_path.parent().unwrap_or(Path::new("."));
+        let arrays = Arrays { dir: dir.to_path_buf(), json: json_path.to_path_buf() };
+        let grid = file.grid;
+        let input_mask = read_npy(&dir.join("input_mask.npy"))?.into_mask(&dir.join("input_mask.npy"))?;
+        let output_mask = read_npy(&dir.join("output_mask.npy"))?.into_mask(&dir.join("output_mask.npy"))?;
+        if input_mask.len() != grid.field_len() || output_mask.len() != grid.nodes() {
+            return Err(arrays.bad("the masks do not match the grid"));
+        }
+        let input_entries: Vec<usize> = (0..input_mask.len()).filter(|&e| input_mask[e] == 1).collect();
+        let nodes: Vec<usize> = (0..output_mask.len()).filter(|&n| output_mask[n] == 1).collect();
+        let info = file.rom;
+        let (k, m, r) = (info.input_components, info.inducing, info.modes);
+        let model = ReducedModel {
+            input_mean: arrays.vector("input_mean", input_entries.len())?,
+            input_components: arrays.matrix("input_components", k, input_entries.len())?,
+            inducing: arrays.matrix("inducing", m, k)?,
+            weights: arrays.matrix("weights", m, r)?,
+            covariance: arrays.matrix("covariance", m, m)?,
+            output_mean: arrays.vector("output_mean", CHANNELS * nodes.len())?,
+            basis: arrays.matrix("basis", r, CHANNELS * nodes.len())?,
+            variance_weights: arrays.vector("variance_weights", nodes.len())?,
+            floor: arrays.vector("floor", nodes.len())?,
+            inducing_norms: Vec::new(),
+            input_entries,
+            nodes,
+            grid,
+            placement: file.placement,
+            input_unit: file.input_unit,
+            target_unit: file.target_unit,
+            info,
+        };
+        if !(model.info.length_scale > 0.0 && model.info.calibration > 0.0) {
+            return Err(arrays.bad("length scale and calibration must be positive"));
+        }
+        Ok(model.with_norms())
+    }
+
+    /// The model with the inducing points' squared norms computed.
+    fn with_norms(mut self) -> ReducedModel {
+        self.inducing_norms = linalg::row_norms2(self.inducing.as_ref());
+        self
+    }
+
+    /// The grid nodes inside the organ, where the model predicts.
+    pub fn nodes(&self) -> &[usize] {
+        &self.nodes
+    }
+}
+
+/// `row i of m · x`.
+fn dot_row(m: MatRef<'_, f64>, i: usize, x: &[f64]) -> f64 {
+    m.row(i).iter().zip(x).map(|(a, b)| a * b).sum()
+}
+
+/// `kᵀ M k` for a symmetric `M`.
+fn quadratic_form(m: MatRef<'_, f64>, k: &[f64]) -> f64 {
+    let mut mk = Mat::<f64>::zeros(m.nrows(), 1);
+    let kv = MatRef::from_column_major_slice(k, k.len(), 1);
+    faer::linalg::matmul::matmul(mk.as_mut(), faer::Accum::Replace, m, kv, 1.0, Par::Seq);
+    (0..k.len()).map(|i| k[i] * mk[(i, 0)]).sum()
+}
+
+/// Writes a matrix as a C-order `<f8` array.
+fn write_matrix(path: &Path, m: MatRef<'_, f64>) -> Result<()> {
+    let values: Vec<f64> = (0..m.nrows()).flat_map(|i| m.row(i).iter().copied().collect::<Vec<_>>()).collect();
+    write_f64(path, &[m.nrows(), m.ncols()], &values)
+}
+
+/// Reads the arrays of a model directory, checking their shapes.
+struct Arrays {
+    dir: PathBuf,
+    json: PathBuf,
+}
+
+impl Arrays {
+    fn bad(&self, message: impl Into<String>) -> LearnError {
+        LearnError::model(&self.json, message.into())
+    }
+
+    fn read(&self, name: &str, shape: &[usize]) -> Result<Vec<f64>> {
+        let path = self.dir.join(format!("{name}.npy"));
+        let array = read_npy(&path)?;
+        if array.shape != shape {
+            return Err(self.bad(format!("{name}.npy has shape {:?}, expected {shape:?}", array.shape)));
+        }
+        let values = array.into_f64();
+        if values.iter().any(|v| !v.is_finite()) {
+            return Err(self.bad(format!("{name}.npy has a non-finite value")));
+        }
+        Ok(values)
+    }
+
+    fn vector(&self, name: &str, n: usize) -> Result<Vec<f64>> {
+        self.read(name, &[n])
+    }
+
+    fn matrix(&self, name: &str, rows: usize, cols: usize) -> Result<Mat<f64>> {
+        let v = self.read(name, &[rows, cols])?;
+        Ok(Mat::from_fn(rows, cols, |i, j| v[i * cols + j]))
+    }
+}
