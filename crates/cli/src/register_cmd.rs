@@ -93,6 +93,9 @@ struct FrameSummary {
     tre_mean_mm: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     tre_max_mm: Option<f64>,
+    /// The predicted standard deviation at each target (mm), for a method that predicts one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    target_std_mm: Option<Vec<f64>>,
 }
 
 /// summary.json: the run's figures and each frame's.
@@ -160,6 +163,7 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
                 warnings: r.warnings.clone(),
                 tre_mean_mm: tre.map(|t| t.0),
                 tre_max_mm: tre.map(|t| t.1),
+                target_std_mm: o.target_std.as_ref().map(|s| s.iter().map(|v| v * 1e3).collect()),
             };
             println!(
                 "frame {i:<4} {} points ({} matched), {} iterations, surface residual {:.2} mm, {:.1} ms{}",
@@ -187,7 +191,19 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
         mesh::io::write_pvd(args.out.join("organ.pvd"), &steps)?;
     }
     let last = outcomes.last().context("no frame")?;
-    write_targets(&args.out.join("targets.csv"), &rest_in_cloud_frame(&targets, last.rigid.as_ref()), &last.targets)?;
+    write_targets(
+        &args.out.join("targets.csv"),
+        &rest_in_cloud_frame(&targets, last.rigid.as_ref()),
+        &last.targets,
+        last.target_std.as_deref(),
+    )?;
+    if let Some(std) = &last.target_std {
+        println!(
+            "std        predicted at the targets: mean {:.2} mm, max {:.2} mm (targets.csv, column std)",
+            mesh::stats::mean(std) * 1e3,
+            mesh::stats::max(std) * 1e3
+        );
+    }
     let summary = Summary::new(method, &outcomes)?;
     if let (Some(t), Some(m), Some(r)) = (summary.tre_mean_mm, summary.tre_max_mm, summary.no_deformation_tre_mean_mm) {
         println!("TRE        mean {t:.2} mm, max {m:.2} mm (without deformation: mean {r:.2} mm)");
@@ -273,10 +289,16 @@ fn print_organ(organ: &Organ, targets: usize) {
 }
 
 /// targets.csv: rest and registered position of each target.
-fn write_targets(path: &Path, rest: &[Point], registered: &[Point]) -> Result<()> {
-    let mut text = String::from("x0,y0,z0,x,y,z\n");
-    for (a, b) in rest.iter().zip(registered) {
-        text.push_str(&format!("{},{},{},{},{},{}\n", a[0], a[1], a[2], b[0], b[1], b[2]));
+/// With the method's predicted standard deviation of each target's error (m), when it predicts
+/// one, as a last column `std`.
+fn write_targets(path: &Path, rest: &[Point], registered: &[Point], std: Option<&[f64]>) -> Result<()> {
+    let mut text = String::from(if std.is_some() { "x0,y0,z0,x,y,z,std\n" } else { "x0,y0,z0,x,y,z\n" });
+    for (i, (a, b)) in rest.iter().zip(registered).enumerate() {
+        text.push_str(&format!("{},{},{},{},{},{}", a[0], a[1], a[2], b[0], b[1], b[2]));
+        if let Some(s) = std {
+            text.push_str(&format!(",{}", s[i]));
+        }
+        text.push('\n');
     }
     Ok(write_atomic_bytes(path, text.as_bytes())?)
 }
@@ -379,7 +401,7 @@ fn demo(args: &RegisterArgs) -> Result<()> {
     let model = if !wants_network {
         None
     } else if model_path.exists() {
-        Some(learn::TrainedModel::load(&model_path, &learn::inference_device())?)
+        Some(learn::Model::load(&model_path)?)
     } else {
         println!(
             "U-Net      skipped: {} not found (run from the repository root, or give --model)",
@@ -450,7 +472,7 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         let (m, u_cloud) = in_cloud_frame(reg.organ.mesh(), None, outcome.rigid.as_ref(), u);
         mesh::io::write_mesh(method_dir.join("organ.vtu"), &m, &[Field::point("displacement", 3, u_cloud)])?;
         let rest_targets = rest_in_cloud_frame(&case.targets, outcome.rigid.as_ref());
-        write_targets(&method_dir.join("targets.csv"), &rest_targets, &outcome.targets)?;
+        write_targets(&method_dir.join("targets.csv"), &rest_targets, &outcome.targets, outcome.target_std.as_deref())?;
         // The picture is drawn in the organ's frame: cloud, targets and truth moved back.
         let back = outcome.rigid.as_ref().map_or_else(RigidTransform::identity, |r| r.cloud_to_organ);
         let to_organ = |points: &[Point]| -> Vec<Point> { points.iter().map(|&p| back.apply(p)).collect() };

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use experiment::sample_view::{first_held_out, sample_on_mesh};
-use learn::{Dataset, TrainedModel};
+use learn::{Dataset, Model};
 use mesh::io::{Field, FieldLocation};
 use plot::viewer::{Layer, Scalar, Scene};
 
@@ -59,8 +59,8 @@ pub fn run(args: &ViewArgs) -> Result<()> {
 
 /// The scene of a dataset sample with the model's prediction.
 fn sample_scene(args: &ViewArgs, model_path: &Path, dataset_dir: &Path) -> Result<Scene> {
-    let model_json = TrainedModel::json_path(model_path);
-    let model = TrainedModel::load(&model_json, &learn::inference_device())?;
+    let model_json = Model::json_path(model_path);
+    let model = Model::load(&model_json)?;
     let dataset = Dataset::open(dataset_dir)?;
     let manifest = dataset.manifest();
     let (organ, from) = match (&args.mesh, &args.scenario) {

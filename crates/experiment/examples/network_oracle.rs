@@ -11,7 +11,7 @@
 use std::path::Path;
 
 use augsim_experiment::case::{ar_network_model, network_from_truth, synthetic_case};
-use learn::TrainedModel;
+use learn::Model;
 use mesh::Point;
 use register::{observe, register_frame, target_errors, RigidTransform};
 use scenario::CaseScenario;
@@ -31,7 +31,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if case.pose != RigidTransform::identity() {
         return Err("the oracle compares with the truth in the model's frame: remove the case's misalignment".into());
     }
-    let model = TrainedModel::load(Path::new(MODEL), &learn::inference_device())?;
+    let model = Model::load(Path::new(MODEL))?;
     let (organ, deformer) = ar_network_model(&model)?;
     let mesh = organ.mesh().clone();
     // The truth at each node of the network's mesh: interpolated in the finer mesh, or its nearest

@@ -11,7 +11,7 @@ use mesh::phantom::{PhantomSpec, SurfacePatch};
 use mesh::{Mesh, Point};
 
 use learn::data::generate::Input;
-use learn::TrainedModel;
+use learn::Model;
 
 use anyhow::{anyhow, bail, Context, Result};
 use register::{
@@ -227,7 +227,7 @@ pub fn organ_of(source: &MeshSource, mesh: Mesh) -> Result<Organ> {
 /// A trained network and the dataset scenario it was trained on.
 pub struct Network<'a> {
     /// The network.
-    pub model: &'a TrainedModel,
+    pub model: &'a Model,
     /// Its dataset scenario: the organ's mesh and the network's input nodes.
     pub scenario: &'a DatasetScenario,
     /// The scenario's directory (mesh paths are relative to it).
@@ -267,7 +267,7 @@ pub fn network_from_truth(case: &SyntheticCase, organ: &Organ, network: &Network
 }
 
 /// [`network_model`] of `model` trained on [`ar_scenario`] (e.g. the shipped `models/liver_ar`).
-pub fn ar_network_model(model: &TrainedModel) -> Result<(Organ, NetworkDeformer)> {
+pub fn ar_network_model(model: &Model) -> Result<(Organ, NetworkDeformer)> {
     network_model(&Network { model, scenario: &ar_scenario(), dir: Path::new("") })
 }
 

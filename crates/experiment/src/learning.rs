@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use anyhow::Result;
 use learn::{
     Compute, Corruption, CurveRow, Dataset, EvalReport, Initialization, Samples, SplitPolicy, TrainConfig,
-    TrainOptions, TrainedModel, UNetConfig,
+    Model, TrainOptions, UNetConfig,
 };
 use scenario::DatasetScenario;
 
@@ -126,7 +126,7 @@ pub(crate) fn model_dir(recipe: &Recipe) -> String {
 
 /// A trained network, its validation and held-out test samples and its learning curve.
 pub(crate) struct Trained {
-    pub model: TrainedModel,
+    pub model: Model,
     pub validation: Samples,
     pub test: Samples,
     pub split: [usize; 3],
@@ -137,7 +137,10 @@ pub(crate) struct Trained {
 impl Trained {
     /// The step whose weights were kept for their validation error (`None` without validation).
     pub fn best_validation_step(&self) -> Option<usize> {
-        self.model.training.as_ref().filter(|t| t.best_val_mean_error.is_some()).map(|t| t.best_iteration)
+        match &self.model {
+            Model::UNet(m) => m.training.as_ref().filter(|t| t.best_val_mean_error.is_some()).map(|t| t.best_iteration),
+            Model::Reduced(_) => None,
+        }
     }
 
     /// Seconds per training step, or that the model was trained by an earlier run of the
@@ -193,7 +196,7 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
     crate::curve::plot_learning_curve(&out.join(crate::curve::CURVE_PNG), &outcome.curve)?;
     Ok(Trained {
         split: [train.len(), validation.len(), test.len()],
-        model: outcome.model,
+        model: Model::UNet(std::sync::Arc::new(outcome.model)),
         validation,
         test,
         curve: outcome.curve,
@@ -288,7 +291,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
     let recipe = Recipe { channels, ..Recipe::new(iterations, samples / 10, samples / 5) };
     let t = train(&data.dataset, dir, &recipe, progress)?;
     let report = learn::evaluate(&t.model, &t.test, &Corruption::default(), 0, Compute::Cpu)?;
-    let predictor = learn::Predictor::new(&t.model, Compute::Cpu)?;
+    let predictor = t.model.predictor(Compute::Cpu)?;
     let input = t.test.get(0).input;
     let timing = learn::time_prediction(|x| predictor.predict(x), &input, 3, 20)?;
     error_histogram(&dir.join("errors.png"), "Liver forces: test-sample errors", &[("U-Net", &report)])?;

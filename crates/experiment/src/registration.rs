@@ -108,7 +108,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     let manifest = data.dataset.manifest();
     let markers = manifest.markers();
     let placement = manifest.placement().context("the liver_ar dataset records its grid placement")?;
-    let grid = placement.grid(t.model.grid)?;
+    let grid = placement.grid(t.model.grid())?;
     let (report, tre) =
         learn::evaluate_at_points(&t.model, &t.test, &Corruption::default(), 0, &grid, &markers, Compute::Cpu)?;
     error_histogram(

@@ -9,7 +9,7 @@ use mesh::embedding::Grid;
 use mesh::{stats, Mesh, Point};
 use plot::viewer::{Layer, PointLayer, Scalar, Scene};
 
-use learn::{Dataset, GridToMesh, LearnError, Manifest, Result, TrainedModel, CHANNELS};
+use learn::{Dataset, GridToMesh, LearnError, Manifest, Model, Result, CHANNELS};
 
 pub use learn::data::split::SampleRole;
 
@@ -35,16 +35,16 @@ pub struct SampleOnMesh {
 /// The sample of generation index `index` of `dataset` on `organ` (the volume mesh the dataset was generated on),
 /// with `model`'s prediction from the sample's uncorrupted input. The model must be on the dataset's grid, placed
 /// at the same place; the mesh must have the node and cell counts the dataset records and lie in the grid.
-pub fn sample_on_mesh(model: &TrainedModel, dataset: &Dataset, index: u64, organ: &Mesh) -> Result<SampleOnMesh> {
+pub fn sample_on_mesh(model: &Model, dataset: &Dataset, index: u64, organ: &Mesh) -> Result<SampleOnMesh> {
     let invalid = |m: String| LearnError::InvalidInput(m);
     let manifest = dataset.manifest();
-    if manifest.grid != model.grid {
-        return Err(invalid(format!("the model is on grid {}, the dataset on grid {}", model.grid, manifest.grid)));
+    if manifest.grid != model.grid() {
+        return Err(invalid(format!("the model is on grid {}, the dataset on grid {}", model.grid(), manifest.grid)));
     }
     let placement = manifest.placement().ok_or_else(|| {
         invalid(format!("{} does not record where its grid lies (grid_origin, grid_spacing)", dataset.dir().display()))
     })?;
-    if let Some(p) = model.placement {
+    if let Some(p) = model.placement() {
         let size = placement.spacing.iter().fold(0.0f64, |a, &s| a.max(s));
         let far = |a: [f64; 3], b: [f64; 3]| a.iter().zip(b).any(|(x, y)| (x - y).abs() > 1e-6 * size);
         if far(p.origin, placement.origin) || far(p.spacing, placement.spacing) {
@@ -77,7 +77,7 @@ pub fn sample_on_mesh(model: &TrainedModel, dataset: &Dataset, index: u64, organ
         }));
     };
     let samples = dataset.load_range(position..position + 1)?;
-    let prediction = model.predict(samples.input(0))?;
+    let prediction = model.predictor(learn::Compute::Cpu)?.predict(samples.input(0))?;
     let target = samples.target(0);
     let grid = placement.grid(manifest.grid)?;
     let to_mesh = GridToMesh::new(organ, &grid)?;
@@ -103,7 +103,7 @@ pub fn sample_on_mesh(model: &TrainedModel, dataset: &Dataset, index: u64, organ
 
 /// The generation index of the first sample of the dataset of `manifest` held out from `model` (a test sample
 /// of the model's recorded split, or one it never saw); `None` when all were trained or validated on.
-pub fn first_held_out(model: &TrainedModel, manifest: &Manifest) -> Option<u64> {
+pub fn first_held_out(model: &Model, manifest: &Manifest) -> Option<u64> {
     let source = manifest.source_id();
     manifest
         .shards

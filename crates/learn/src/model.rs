@@ -41,6 +41,16 @@ pub enum Method {
     Rom,
 }
 
+impl Method {
+    /// The method's name for people: "U-Net" or "ROM".
+    pub fn display_name(self) -> &'static str {
+        match self {
+            Method::UNet => "U-Net",
+            Method::Rom => "ROM",
+        }
+    }
+}
+
 impl fmt::Display for Method {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {

@@ -11,7 +11,8 @@
 //!   kept after it; targets and organ are then in the cloud's frame), STRING `status` (one line
 //!   of JSON: `frame`, `ms`,
 //!   `surface_residual`, `plausible` and `warnings` (see `register::plausibility`), `inliers`,
-//!   `points`, `iterations`, in the stream's unit; or `frame` and `error`).
+//!   `points`, `iterations`, and `target_std` (the predicted standard deviation at each target, for
+//!   the reduced-order model; else null), in the stream's unit; or `frame` and `error`).
 //!
 //! Each client has its own registration, warm-started from its previous frame. A client's clouds
 //! are registered one at a time; a cloud that arrives while one is being registered replaces any
@@ -183,6 +184,9 @@ pub struct RegisteredFrame {
     pub targets: Vec<Point>,
     /// The organ-to-cloud transform of the rigid pre-alignment, when the options ask for one.
     pub rigid: Option<RigidTransform>,
+    /// The predicted standard deviation of each target's error (m), for a method that predicts
+    /// one (the reduced-order model).
+    pub target_std: Option<Vec<f64>>,
 }
 
 impl RegisteredFrame {
@@ -209,7 +213,7 @@ impl WarmRegistration {
         let r = &mut self.registration;
         let tracked = self.tracker.register(&r.organ, r.deformer.as_mut(), cloud, &r.options)?;
         let rigid = tracked.rigid.as_ref().map(|t| t.organ_to_cloud());
-        Ok(RegisteredFrame { result: tracked.registration, targets: tracked.targets, rigid })
+        Ok(RegisteredFrame { result: tracked.registration, targets: tracked.targets, rigid, target_std: tracked.target_std })
     }
 
     /// Forgets the previous frame (and the rigid pose): the next one starts from the rest shape.
@@ -568,7 +572,7 @@ fn answer(
     }
     let start = Instant::now();
     let frame_result = registration.register(cloud).map_err(|e| e.to_string())?;
-    let RegisteredFrame { result, targets, rigid } = &frame_result;
+    let RegisteredFrame { result, targets, rigid, target_std } = &frame_result;
     let unit = options.unit;
     let to_wire = |p: &Point| p.map(|x| (x / unit) as f32);
     if options.outputs.targets {
@@ -598,6 +602,7 @@ fn answer(
         "inliers": result.inliers,
         "points": result.points,
         "iterations": result.iterations,
+        "target_std": target_std.as_ref().map(|s| s.iter().map(|v| v / unit).collect::<Vec<f64>>()),
     }));
     Ok(())
 }

@@ -13,12 +13,12 @@ use experiment::assimilation::{Experiment, OnlineFilter};
 use experiment::setup::{fem_setup, network_setup};
 use fem::{post, StaticSolver};
 use learn::data::npy::{NpyArray, NpyData};
-use learn::{PointCloud, PredictInput, TrainedModel};
+use learn::{Model, PointCloud, PredictInput};
 use live::{ClientRegistration, RegisteredFrame, WarmRegistration};
 use mesh::Point;
 use nalgebra::DVector;
 use numpy::ndarray::{Array2, Array3, ArrayD, IxDyn};
-use numpy::{AllowTypeChange, IntoPyArray, PyArray2, PyArray3, PyArrayDyn, PyArrayLikeDyn};
+use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayDyn, PyArrayLikeDyn};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -164,6 +164,10 @@ struct Registered {
     /// otherwise None.
     #[pyo3(get)]
     rigid: Option<Py<PyArray2<f64>>>,
+    /// The predicted standard deviation of each target's error, float64 [k], in `units`, for a
+    /// model that predicts one (the reduced-order model); otherwise None.
+    #[pyo3(get)]
+    target_std: Option<Py<PyArray1<f64>>>,
     /// Wall time of the registration (ms).
     #[pyo3(get)]
     ms: f64,
@@ -224,7 +228,7 @@ impl Registration {
         let (state, method) = compute(py, move || {
             let setup = match method {
                 Ok(fem) => fem_setup(&fem)?,
-                Err((model, scenario)) => network_setup(&TrainedModel::json_path(&model), &scenario)?,
+                Err((model, scenario)) => network_setup(&model, &scenario)?,
             };
             let options = setup.options_with(iterations, rigid);
             options.validate()?;
@@ -251,7 +255,7 @@ impl Registration {
     /// failed registration (the warm start is then kept).
     fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>) -> PyResult<Registered> {
         let cloud = points(cloud, "cloud", self.unit)?;
-        let RegisteredFrame { result, targets, rigid } = compute(py, || Ok(locked(&self.state)?.register(&cloud)?))?;
+        let RegisteredFrame { result, targets, rigid, target_std } = compute(py, || Ok(locked(&self.state)?.register(&cloud)?))?;
         let rigid = rigid.map(|t| {
             let rows = t.homogeneous(self.unit);
             Array2::from_shape_fn((4, 4), |(i, j)| rows[i][j]).into_pyarray(py).unbind()
@@ -265,6 +269,7 @@ impl Registration {
             iterations: result.iterations,
             warnings: result.warnings.clone(),
             rigid,
+            target_std: target_std.map(|s| s.iter().map(|v| v / self.unit).collect::<Vec<f64>>().into_pyarray(py).unbind()),
             ms: result.time.as_secs_f64() * 1e3,
         })
     }
@@ -314,10 +319,9 @@ fn predict<'py>(py: Python<'py>, model: PathBuf, input: &Bound<'py, PyAny>) -> P
         }),
     };
     let (grid, prediction) = compute(py, || {
-        let path = TrainedModel::json_path(&model);
-        let model = TrainedModel::load(&path, &learn::inference_device())?;
+        let model = Model::load(&model)?;
         let data = input.into_network_input(&model)?;
-        Ok((model.grid, model.predict(&data)?))
+        Ok((model.grid(), model.predictor(learn::Compute::Cpu)?.predict(&data)?))
     })?;
     let array = ArrayD::from_shape_vec(IxDyn(&[3, grid.nx, grid.ny, grid.nz]), prediction)
         .map_err(|e| AugsimError::new_err(format!("prediction of an unexpected size: {e}")))?;

@@ -4,7 +4,7 @@
 
 use fem::{PointSpring, Problem, SolverOptions, StaticSolver};
 use learn::data::generate::normal_part;
-use learn::{encode_points, GridToMesh, Predictor, TrainedModel};
+use learn::{encode_points, GridToMesh, Model, ModelPredictor};
 use mesh::embedding::Grid;
 
 use crate::organ::Organ;
@@ -147,7 +147,7 @@ impl Deformer for HybridDeformer {
 /// keep the fit (fed back, its own predictions at its inputs would drift along the surface,
 /// where no match corrects them).
 pub struct NetworkDeformer {
-    predictor: Predictor,
+    predictor: ModelPredictor,
     grid: Grid,
     to_mesh: GridToMesh,
     /// The input nodes (mesh numbering) and their positions.
@@ -166,6 +166,9 @@ pub struct NetworkDeformer {
     /// then takes the input nodes the cloud observes, the others absent, rather than the
     /// surface fit's extrapolation to them.
     partial: bool,
+    /// The predicted standard deviation of the last prediction's error on the grid (m), for a
+    /// model that predicts one.
+    last_std: Option<Vec<f32>>,
 }
 
 /// Weight of the membrane penalty, relative to a matched cloud point's. Chosen on the design
@@ -184,11 +187,11 @@ impl NetworkDeformer {
     /// The deformer of `model` for `organ` (meshed on the model's grid, or embedded in it);
     /// `input_nodes`: the mesh nodes whose displacement the network was trained to take, along
     /// the rest surface's normal only when `normal` (boundary nodes then).
-    pub fn new(model: &TrainedModel, organ: &Organ, input_nodes: &[usize], normal: bool) -> Result<NetworkDeformer> {
-        if model.input_unit != "m" {
+    pub fn new(model: &Model, organ: &Organ, input_nodes: &[usize], normal: bool) -> Result<NetworkDeformer> {
+        if model.input_unit() != "m" {
             return Err(RegisterError::Invalid(format!(
                 "the model takes {} on its input, registration needs a displacement model (m)",
-                model.input_unit
+                model.input_unit()
             )));
         }
         let grid = model.placed_grid()?;
@@ -233,7 +236,7 @@ impl NetworkDeformer {
             None
         };
         Ok(NetworkDeformer {
-            predictor: Predictor::new(model, learn::Compute::Cpu)?,
+            predictor: model.predictor(learn::Compute::Cpu)?,
             to_mesh: GridToMesh::new(mesh, &grid)?,
             grid,
             inputs: input_nodes.to_vec(),
@@ -242,7 +245,8 @@ impl NetworkDeformer {
             points: input_nodes.iter().map(|&n| mesh.nodes[n]).collect(),
             edges,
             normals,
-            partial: model.training.as_ref().is_some_and(|t| t.corruption.sparsity.is_some()),
+            partial: model.training_corruption().sparsity.is_some(),
+            last_std: None,
         })
     }
 
@@ -328,11 +332,12 @@ impl NetworkDeformer {
     /// input nodes: along their normals only for a network of normal motion; a network of the
     /// full displacement keeps `surface` at its input nodes.
     pub fn predict(&self, surface: &[[f64; 3]]) -> Result<Vec<f64>> {
-        self.predict_seen(surface, None)
+        Ok(self.predict_seen(surface, None)?.0)
     }
 
-    /// [`NetworkDeformer::predict`] from the input nodes marked in `seen` only (all: `None`).
-    fn predict_seen(&self, surface: &[[f64; 3]], seen: Option<&[bool]>) -> Result<Vec<f64>> {
+    /// [`NetworkDeformer::predict`] from the input nodes marked in `seen` only (all: `None`), with
+    /// the predicted standard deviation on the grid for a model that predicts one.
+    fn predict_seen(&self, surface: &[[f64; 3]], seen: Option<&[bool]>) -> Result<(Vec<f64>, Option<Vec<f32>>)> {
         if surface.len() != self.inputs.len() {
             return Err(RegisterError::Invalid(format!(
                 "{} input displacements for {} input nodes",
@@ -347,13 +352,14 @@ impl NetworkDeformer {
             None => kept.iter().map(|&i| surface[i]).collect(),
         };
         let input = encode_points(&self.grid, &points, &values, false)?;
-        let mut u = self.to_mesh.apply(&self.predictor.predict(&input)?)?;
+        let (field, std) = self.predictor.predict_with_std(&input)?;
+        let mut u = self.to_mesh.apply(&field)?;
         if self.normals.is_none() {
             for (&n, s) in self.inputs.iter().zip(surface) {
                 u[3 * n..3 * n + 3].copy_from_slice(s);
             }
         }
-        Ok(u)
+        Ok((u, std))
     }
 
     /// Which input nodes a match of `observations` moves.
@@ -431,7 +437,15 @@ impl Deformer for NetworkDeformer {
             return Err(RegisterError::Invalid("no cloud point matches the network's input surface".into()));
         }
         let surface = self.surface_estimate(observations, previous);
-        self.predict_seen(&surface, self.partial.then_some(seen.as_slice()))
+        let (u, std) = self.predict_seen(&surface, self.partial.then_some(seen.as_slice()))?;
+        self.last_std = std;
+        Ok(u)
+    }
+
+    fn uncertainty(&self, rest_points: &[mesh::Point]) -> Option<Result<Vec<f64>>> {
+        let std = self.last_std.as_ref()?;
+        let values: Vec<f64> = std.iter().map(|&v| f64::from(v)).collect();
+        Some(self.grid.interpolate(&values, 1, rest_points).map_err(RegisterError::from))
     }
 }
 
@@ -504,7 +518,7 @@ mod tests {
     /// displacement of its visible nodes as input.
     fn shipped_network_on_phantom() -> (Organ, NetworkDeformer) {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
-        let model = TrainedModel::load(std::path::Path::new(path), &learn::inference_device()).unwrap();
+        let model = Model::load(std::path::Path::new(path)).unwrap();
         let phantom = mesh::phantom::liver_phantom(3000).unwrap();
         let visible = phantom.region("visible").unwrap().to_vec();
         let organ = Organ::new(phantom, None).unwrap();
@@ -572,11 +586,11 @@ mod tests {
         let seen: Vec<bool> = deformer.points.iter().map(|p| p[0] < 0.0).collect();
         let (a, b) = (seen.iter().position(|&s| s).unwrap(), seen.iter().position(|&s| !s).unwrap());
         let surface = vec![[0.0, 0.0, -0.01]; deformer.inputs.len()];
-        let base = deformer.predict_seen(&surface, Some(&seen)).unwrap();
+        let base = deformer.predict_seen(&surface, Some(&seen)).unwrap().0;
         let moved = |i: usize| {
             let mut s = surface.clone();
             s[i] = [0.0, 0.0, -0.03];
-            deformer.predict_seen(&s, Some(&seen)).unwrap()
+            deformer.predict_seen(&s, Some(&seen)).unwrap().0
         };
         assert_eq!(moved(b), base, "an unseen input node changed the prediction");
         let change = moved(a).iter().zip(&base).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);

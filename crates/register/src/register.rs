@@ -37,6 +37,12 @@ pub trait Deformer {
     /// (from 0 for a frame registered from rest, from [`WARM_START_ITERATION`] for one
     /// warm-started from a previous frame); `previous` is the last estimate (a warm start).
     fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>>;
+
+    /// The predicted standard deviation (m) of the last estimate's error at `rest_points` (rest
+    /// positions inside the organ), for a deformer that predicts one (the reduced-order model).
+    fn uncertainty(&self, _rest_points: &[Point]) -> Option<Result<Vec<f64>>> {
+        None
+    }
 }
 
 /// The first iteration of a frame warm-started from a previous frame's estimate: its matches are

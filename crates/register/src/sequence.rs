@@ -30,6 +30,9 @@ pub struct FrameOutcome {
     pub rest_errors: Option<Vec<f64>>,
     /// The rigid pre-alignment, when the options ask for one.
     pub rigid: Option<RigidResult>,
+    /// The predicted standard deviation of each target's error (m), for a method that predicts
+    /// one.
+    pub target_std: Option<Vec<f64>>,
 }
 
 impl FrameOutcome {
@@ -60,6 +63,9 @@ pub struct Tracked {
     pub targets: Vec<Point>,
     /// The rigid pre-alignment, when the options ask for one.
     pub rigid: Option<RigidResult>,
+    /// The predicted standard deviation of each target's error (m), for a method that predicts
+    /// one.
+    pub target_std: Option<Vec<f64>>,
 }
 
 impl Tracker {
@@ -100,9 +106,10 @@ impl Tracker {
             let to_cloud = r.organ_to_cloud();
             targets.iter_mut().for_each(|p| *p = to_cloud.apply(*p));
         }
+        let target_std = deformer.uncertainty(&self.targets).transpose()?;
         self.warm = Some(registration.u.clone());
         self.rigid = rigid.clone();
-        Ok(Tracked { registration, targets, rigid })
+        Ok(Tracked { registration, targets, rigid, target_std })
     }
 
     /// Forgets the previous cloud and the pose: the next cloud starts from rest.
@@ -143,7 +150,7 @@ pub fn register_sequence(
             ),
             None => None,
         };
-        let Tracked { registration, targets: registered, rigid } =
+        let Tracked { registration, targets: registered, rigid, target_std } =
             tracker.register(organ, deformer, &cloud, options)?;
         let mut rest = targets.to_vec();
         if let Some(r) = &rigid {
@@ -156,6 +163,7 @@ pub fn register_sequence(
             targets: registered,
             registration,
             rigid,
+            target_std,
         };
         on_frame(i, &outcome)?;
         outcomes.push(outcome);
