@@ -414,7 +414,7 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         None => (ar_scenario(), PathBuf::new()),
     };
     let network = model.as_ref().map(|model| Network { model, scenario: &network_scenario, dir: &network_dir });
-    let methods = case_methods(&scenario, network.as_ref())?;
+    let methods = case_methods(&scenario, network.as_slice())?;
     let rows = compare(&case, methods, &scenario.registration);
     if rows.is_empty() {
         bail!("no method to compare");

@@ -201,6 +201,9 @@ pub(crate) const LEFT_LOBE_FRONT: SurfacePatch =
 /// repository's).
 pub const SHIPPED_MODEL: &str = "models/liver_ar/model.json";
 
+/// The shipped augmented-reality reduced-order model, trained on the same scenario.
+pub const SHIPPED_ROM: &str = "models/liver_ar_rom";
+
 /// The name of the built-in dataset scenario of the shipped AR network.
 pub const AR_SCENARIO: &str = "liver_ar_t10";
 
@@ -272,21 +275,21 @@ pub fn ar_network_model(model: &Model) -> Result<(Organ, NetworkDeformer)> {
 }
 
 /// The methods of the built-in case: the co-rotational FEM and the SVK FEM (E = 5 kPa, ν = 0.49,
-/// the law of the network's training data) on [`model_mesh`], and, when given, the U-Net
-/// `network`.
-pub fn methods(network: Option<&Network>) -> Result<Vec<Method>> {
-    case_methods(&CaseScenario::builtin(), network)
+/// the law of the network's training data) on [`model_mesh`], and the learned `networks`.
+pub fn methods(networks: &[Network]) -> Result<Vec<Method>> {
+    case_methods(&CaseScenario::builtin(), networks)
 }
 
 /// The methods of `scenario`, in its order: its FEM methods on the phantom of `models.tets`
-/// tetrahedra, its network methods with `network` (on its scenario's organ), left out when it
-/// is `None`.
-pub fn case_methods(scenario: &CaseScenario, network: Option<&Network>) -> Result<Vec<Method>> {
+/// tetrahedra; its network method once per learned model of `networks` (on its scenario's organ),
+/// named by the model's kind ("U-Net", "ROM"); its hybrid methods with the first of them. Network
+/// and hybrid methods are left out without a learned model.
+pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec<Method>> {
     let mesh = mesh::phantom::liver_phantom(scenario.models.tets)?;
     let mut out = Vec::new();
     for spec in &scenario.models.method {
         let (name, iterations, warm_iterations) = (spec.name.clone(), spec.iterations, spec.warm_iterations);
-        match (spec.kind, spec.material, network) {
+        match (spec.kind, spec.material, networks.first()) {
             (MethodKind::Fem, Some(material), _) => {
                 let (organ, deformer) = fem_model_fixed_on(mesh.clone(), material, &scenario.truth.fixed)?;
                 out.push(Method { name, organ, deformer: Box::new(deformer), iterations, warm_iterations });
@@ -294,9 +297,12 @@ pub fn case_methods(scenario: &CaseScenario, network: Option<&Network>) -> Resul
             (MethodKind::Fem, None, _) => {
                 bail!("method {name:?}: a FEM method needs a material")
             }
-            (MethodKind::Network, _, Some(network)) => {
-                let (organ, deformer) = network_model(network)?;
-                out.push(Method { name, organ, deformer: Box::new(deformer), iterations, warm_iterations });
+            (MethodKind::Network, _, Some(_)) => {
+                for network in networks {
+                    let (organ, deformer) = network_model(network)?;
+                    let name = network.model.method().display_name().to_string();
+                    out.push(Method { name, organ, deformer: Box::new(deformer), iterations, warm_iterations });
+                }
             }
             (MethodKind::Hybrid, Some(material), Some(network)) => {
                 let (organ, deformer) = network_model(network)?;

@@ -18,7 +18,7 @@ use serde::Serialize;
 
 use crate::case::{
     ar_scenario, case_methods, compare, network_from_truth, network_model, network_options, synthetic_case, CaseLoad,
-    Network, LEFT_LOBE_FRONT, RIGHT_LOBE, SHIPPED_MODEL,
+    Network, LEFT_LOBE_FRONT, RIGHT_LOBE, SHIPPED_MODEL, SHIPPED_ROM,
 };
 use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 
@@ -123,11 +123,11 @@ impl StreamOutcome {
 
 /// The methods of `scenario` (with `network`) on its case as a press and release of
 /// [`STREAM_FRAMES`] frames, each frame warm-started from the last.
-fn register_stream(scenario: &CaseScenario, network: Option<&Network>) -> Result<Vec<StreamOutcome>> {
+fn register_stream(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec<StreamOutcome>> {
     let mut streamed = scenario.clone();
     streamed.truth.frames = STREAM_FRAMES;
     let stream = synthetic_case(&streamed)?;
-    let compared = compare(&stream, case_methods(&streamed, network)?, &streamed.registration);
+    let compared = compare(&stream, case_methods(&streamed, networks)?, &streamed.registration);
     Ok(compared
         .iter()
         .map(|c| match &c.result {
@@ -184,22 +184,19 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
         Size::Paper => 10,
     };
     let base = base_case()?;
-    let model_path = Path::new(SHIPPED_MODEL);
-    let model = match model_path.exists() {
-        true => Some(Model::load(model_path)?),
-        false => None,
-    };
-    let network_scenario = ar_scenario();
-    let network = model.as_ref().map(|m| Network { model: m, scenario: &network_scenario, dir: Path::new("") });
-    // The network model the truth's surface motion is fed to (the diagnostic row).
-    let oracle = network.as_ref().map(network_model).transpose()?;
-    let methods: Vec<String> = base
-        .models
-        .method
+    // The shipped learned models that are there: the U-Net, the reduced-order model.
+    let models: Vec<Model> = [SHIPPED_MODEL, SHIPPED_ROM]
         .iter()
-        .filter(|m| network.is_some() || m.kind == MethodKind::Fem)
-        .map(|m| m.name.clone())
-        .collect();
+        .map(Path::new)
+        .filter(|p| p.exists())
+        .map(Model::load)
+        .collect::<learn::Result<_>>()?;
+    let network_scenario = ar_scenario();
+    let networks: Vec<Network> =
+        models.iter().map(|m| Network { model: m, scenario: &network_scenario, dir: Path::new("") }).collect();
+    // The U-Net the truth's surface motion is fed to (the diagnostic row).
+    let oracle = networks.iter().find(|n| n.model.method() == learn::Method::UNet).map(network_model).transpose()?;
+    let methods: Vec<String> = case_methods(&base, &networks)?.into_iter().map(|m| m.name).collect();
     let mut outcomes: Vec<Vec<Outcome>> = vec![Vec::new(); methods.len()];
     let mut streams: Vec<Vec<StreamOutcome>> = vec![Vec::new(); methods.len()];
     let mut motion = Vec::new();
@@ -216,7 +213,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
         for run in 0..runs {
             progress(&format!("registering the case {} ({}/{runs})", case.label, run + 1));
             // Fresh methods per run: each registers from rest, with nothing kept from the last.
-            let compared = compare(&synthetic, case_methods(&scenario, network.as_ref())?, &scenario.registration);
+            let compared = compare(&synthetic, case_methods(&scenario, &networks)?, &scenario.registration);
             for (outcome, c) in here.iter_mut().zip(&compared) {
                 match &c.result {
                     Ok(r) => {
@@ -253,7 +250,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
             all.push(o);
         }
         progress(&format!("simulating and registering the case {} as a stream ({STREAM_FRAMES} frames)", case.label));
-        let here = register_stream(&scenario, network.as_ref())?;
+        let here = register_stream(&scenario, &networks)?;
         let cells: Vec<String> = methods.iter().zip(&here).map(|(method, o)| o.cell(method)).collect();
         rows.push(Row::new(
             format!(
@@ -325,31 +322,36 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
         ));
     }
     summary.extend(rows);
-    let headlines = match (methods.iter().position(|m| m.starts_with("U-Net")), means.first(), stream_means.first()) {
-        (Some(k), Some(&fem), Some(&fem_stream)) => vec![
-            Headline::aim_lower(
-                format!("held-out registration, {} cases: TRE U-Net / co-rotational FEM", CASES.len()),
-                format!("{} / {}", fmt(means[k], 2, "mm"), fmt(fem, 2, "mm")),
-                "the U-Net as accurate as the FEM",
-                means[k],
-                fem,
+    let mut headlines = Vec::new();
+    for learned in ["U-Net", "ROM"] {
+        let (Some(k), Some(&fem), Some(&fem_stream)) =
+            (methods.iter().position(|m| m == learned), means.first(), stream_means.first())
+        else {
+            continue;
+        };
+        headlines.push(Headline::aim_lower(
+            format!("held-out registration, {} cases: TRE {learned} / co-rotational FEM", CASES.len()),
+            format!("{} / {}", fmt(means[k], 2, "mm"), fmt(fem, 2, "mm")),
+            format!("the {learned} as accurate as the FEM"),
+            means[k],
+            fem,
+        ));
+        headlines.push(Headline::aim_lower(
+            format!(
+                "held-out registration as streams of {STREAM_FRAMES} frames, {} cases: TRE at the peak {learned} / \
+                 co-rotational FEM",
+                CASES.len()
             ),
-            Headline::aim_lower(
-                format!(
-                    "held-out registration as streams of {STREAM_FRAMES} frames, {} cases: TRE at the peak U-Net / \
-                     co-rotational FEM",
-                    CASES.len()
-                ),
-                format!("{} / {}", fmt(stream_means[k], 2, "mm"), fmt(fem_stream, 2, "mm")),
-                "the U-Net as accurate as the FEM",
-                stream_means[k],
-                fem_stream,
-            ),
-        ],
-        _ => Vec::new(),
-    };
-    if network.is_none() {
-        summary.push(Row::new("U-Net", format!("skipped: {SHIPPED_MODEL} not found (run from the repository)"), ""));
+            format!("{} / {}", fmt(stream_means[k], 2, "mm"), fmt(fem_stream, 2, "mm")),
+            format!("the {learned} as accurate as the FEM"),
+            stream_means[k],
+            fem_stream,
+        ));
+    }
+    for (path, name) in [(SHIPPED_MODEL, "U-Net"), (SHIPPED_ROM, "ROM")] {
+        if !Path::new(path).exists() {
+            summary.push(Row::new(name, format!("skipped: {path} not found (run from the repository)"), ""));
+        }
     }
     let fem = corotational(&base).and_then(|m| m.material).context("the held-out cases have no co-rotational FEM")?;
     let notes = vec![
@@ -367,8 +369,9 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
             100.0 * base.camera.outliers
         ),
         format!(
-            "Methods: the co-rotational FEM ({} T4, E = {} kPa, ν = {}) and the shipped network ({SHIPPED_MODEL}, \
-             at most {} iterations); each registers each case from rest. Time per frame: the median of {runs} runs \
+            "Methods: the co-rotational FEM ({} T4, E = {} kPa, ν = {}), the shipped network ({SHIPPED_MODEL}) and \
+             the shipped reduced-order model ({SHIPPED_ROM}), the learned models at most {} iterations; each \
+             registers each case from rest. Time per frame: the median of {runs} runs \
              with fresh methods, correspondence search included; one machine, only as quiet as it was.",
             base.models.tets,
             fem.young * 1e-3,

@@ -138,7 +138,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         marker_count = case.targets.len();
         // Fresh methods per case: each registers from rest, with no state from the last case.
         let network = Network { model: &t.model, scenario: &data.scenario, dir: &data.scenario_dir };
-        let rows = compare(&case, case_methods(&builtin, Some(&network))?, &options);
+        let rows = compare(&case, case_methods(&builtin, &[network])?, &options);
         if per_method.is_empty() {
             per_method = rows.iter().map(|r| MethodTre { method: r.method.clone(), ..MethodTre::default() }).collect();
         }

@@ -129,7 +129,7 @@ fn a_method_s_own_iteration_cap_replaces_the_comparison_s() {
     let scenario = scenario::CaseScenario::load(&path).unwrap();
     let case = experiment::case::synthetic_case(&scenario).unwrap();
     let iterations = |cap: Option<usize>| {
-        let mut methods = experiment::case::case_methods(&scenario, None).unwrap();
+        let mut methods = experiment::case::case_methods(&scenario, &[]).unwrap();
         methods.truncate(1);
         methods[0].iterations = cap;
         let options = RegistrationOptions { iterations: 6, tolerance: 0.0, ..scenario.registration.clone() };
@@ -144,7 +144,7 @@ fn a_failing_method_is_reported_and_the_others_still_register() {
     let path = std::path::PathBuf::from("register_case_test");
     let scenario = scenario::CaseScenario::load(&path).unwrap();
     let case = experiment::case::synthetic_case(&scenario).unwrap();
-    let mut methods = experiment::case::case_methods(&scenario, None).unwrap();
+    let mut methods = experiment::case::case_methods(&scenario, &[]).unwrap();
     methods.truncate(1);
     let organ = methods[0].organ.clone();
     methods.insert(
@@ -186,7 +186,7 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     scenario.models.method.extend([hybrid(cap, cap), hybrid(cap, cap + 2)]);
     scenario.validate().unwrap();
     let case = experiment::case::synthetic_case(&scenario).unwrap();
-    let methods = experiment::case::case_methods(&scenario, Some(&network)).unwrap();
+    let methods = experiment::case::case_methods(&scenario, std::slice::from_ref(&network)).unwrap();
     let rows = compare(&case, methods, &scenario.registration);
     let u = |k: usize| rows[k].result.as_ref().unwrap().outcomes[0].registration.u.clone();
     assert_eq!(u(0), u(1), "all network iterations: the network's registration");

@@ -110,7 +110,7 @@ fn test_case() -> CaseScenario {
 /// alignment's errors (degrees, mm) against the case's pose when there is one.
 fn pipeline(scenario: &CaseScenario) -> (f64, f64, Option<(f64, f64)>) {
     let case = synthetic_case(scenario).unwrap();
-    let mut methods = case_methods(scenario, None).unwrap();
+    let mut methods = case_methods(scenario, &[]).unwrap();
     methods.truncate(1);
     let rows = compare(&case, methods, &scenario.registration);
     let registered = rows[0].result.as_ref().unwrap();
