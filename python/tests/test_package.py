@@ -6,35 +6,22 @@ Run: pytest -s python/tests (the augsim binary: $AUGSIM_BIN, default target/rele
 """
 
 import os
-import subprocess
 import sys
 
 import numpy as np
 import pytest
 
 import augsim
+from helpers import LIVER_AR, ROOT, make_case, run_augsim
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(os.path.dirname(HERE))
-sys.path.insert(0, os.path.dirname(HERE))
-from test_augsim_unet import augsim_bin  # noqa: E402  (needs no torch)
-from test_serve import make_case  # noqa: E402  (the server test's case and FEM model)
-
-LIVER_AR = os.path.join(ROOT, "models", "liver_ar")
 BEAM_ASSIMILATION = os.path.join(ROOT, "crates", "experiment", "tests", "data", "beam_assimilation.toml")
-
-
-def run(*args):
-    r = subprocess.run([augsim_bin(), *args], capture_output=True, text=True)
-    assert r.returncode == 0, r.stdout + r.stderr
-    return r.stdout
 
 
 def test_solve_beam_matches_the_command_line(tmp_path):
     s = augsim.solve("beam")
     assert s.points.shape == s.displacement.shape == (6 * 6 * 21, 3)
     assert s.points.dtype == s.displacement.dtype == np.float64
-    out = run("solve", "beam", "-o", str(tmp_path / "beam.vtu"))
+    out = run_augsim("solve", "beam", "-o", str(tmp_path / "beam.vtu"))
     line = next(l for l in out.splitlines() if l.startswith("max |u|"))
     cli_max = float(line.split()[2])
     norms = np.linalg.norm(s.displacement, axis=1)
@@ -143,14 +130,14 @@ def test_predict_matches_the_command_line(tmp_path):
     u = augsim.predict(LIVER_AR, grid)
     assert u.shape == grid.shape and u.dtype == np.float32
     np.save(tmp_path / "in.npy", grid)
-    run("predict", os.path.join(LIVER_AR, "model.json"), str(tmp_path / "in.npy"), "-o", str(tmp_path / "out.npy"),
+    run_augsim("predict", os.path.join(LIVER_AR, "model.json"), str(tmp_path / "in.npy"), "-o", str(tmp_path / "out.npy"),
         "--runs", "1")
     np.testing.assert_allclose(u, np.load(tmp_path / "out.npy"), rtol=0, atol=1e-7)
     # A cloud [N, 6]: displacements (m) at points of the organ, put on the grid as the CLI does.
     organ = augsim.Registration(model=LIVER_AR, scenario="liver_ar_t10").points
     cloud = np.hstack([organ[::50], np.full((len(organ[::50]), 3), 2e-3)])
     np.save(tmp_path / "cloud.npy", cloud)
-    run("predict", os.path.join(LIVER_AR, "model.json"), str(tmp_path / "cloud.npy"), "-o",
+    run_augsim("predict", os.path.join(LIVER_AR, "model.json"), str(tmp_path / "cloud.npy"), "-o",
         str(tmp_path / "cloud_out.npy"), "--runs", "1")
     u = augsim.predict(os.path.join(LIVER_AR, "model.json"), cloud)
     assert np.abs(u).max() > 1e-4

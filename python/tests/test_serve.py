@@ -14,13 +14,12 @@ streams the built-in `register_case` (truth of about 9,000 T10) to a 3,000-T4 mo
 `--rigid`, the peak frame's cloud moved by a few centimetres comes back as a TRANSFORM `rigid` and
 targets in the cloud's frame.
 
-Run: python3 -m venv .venv && .venv/bin/pip install pyigtl numpy && .venv/bin/python python/test_serve.py
-(AUGSIM_STREAM=full for the larger case)
-The augsim binary: $AUGSIM_BIN, default target/release/augsim. `.ci/run` runs it.
+Run: pip install pyigtl pytest numpy, then python -m pytest -s python/tests/test_serve.py from the
+repository root (AUGSIM_STREAM=full for the larger case; the augsim binary: $AUGSIM_BIN, default
+target/release/augsim). Without pyigtl it is skipped, saying so. `.ci/run` runs it.
 """
 
 import json
-import os
 import socket
 import subprocess
 import sys
@@ -29,59 +28,20 @@ import time
 import unittest
 
 import numpy as np
-import pyigtl
+import pytest
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from test_augsim_unet import augsim_bin  # noqa: E402  (needs no torch)
-# The stream: a press and release of FRAMES frames. By default the small test case on an 800-T4
-# model (seconds, in CI); AUGSIM_STREAM=full streams the built-in case (truth of about 9,000 T10, 1,500
-# points per cloud) to a 3,000-T4 model.
+from helpers import CASE, augsim_bin, make_case
+
+pyigtl = pytest.importorskip("pyigtl", reason="the server test needs pyigtl: pip install pyigtl (or ./python[test])")
+
+# The stream: a press and release of FRAMES frames of the case of helpers.py.
 FRAMES = 40
-FULL = os.environ.get("AUGSIM_STREAM") == "full"
-CASE = "register_case" if FULL else "register_case_test"
-MODEL = f"""kind = "static"
-name = "phantom"
-[mesh.phantom]
-tets = {3000 if FULL else 800}
-[material]
-law = "corotational"
-young = 5000.0
-poisson = 0.48
-[[fixed]]
-select = {{ region = "fixed" }}
-"""
 
 
 def free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def read_csv(path):
-    return np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)[:, :3]
-
-
-def make_case(tmp, frames=1):
-    """The registration case `case` made in `tmp` by `augsim register --case`, in mm: its cloud and
-    the targets' truth (of the peak frame), their rest positions, the rest positions as a CSV file,
-    the FEM model's scenario file; with `frames` > 1, the press and release's clouds and truths."""
-    r = subprocess.run([augsim_bin(), "register", "--case", CASE, "--frames", str(frames), "--out", str(tmp)],
-                       capture_output=True, text=True)
-    assert r.returncode == 0, r.stdout + r.stderr
-    made = {name: read_csv(os.path.join(tmp, "case", f"{name}.csv")) * 1e3  # m -> mm
-            for name in ("cloud", "truth")}
-    made["rest"] = read_csv(os.path.join(tmp, "case", "targets_rest.csv")) * 1e3
-    if frames > 1:
-        for kind in ("cloud", "truth"):
-            folder = os.path.join(tmp, "case", f"{kind}s")
-            made[f"{kind}s"] = [read_csv(os.path.join(folder, f)) * 1e3 for f in sorted(os.listdir(folder))]
-    made["targets"] = os.path.join(tmp, "targets_mm.csv")
-    np.savetxt(made["targets"], made["rest"], delimiter=",", header="x,y,z", comments="")
-    made["scenario"] = os.path.join(tmp, "model.toml")
-    with open(made["scenario"], "w", encoding="utf-8") as f:
-        f.write(MODEL)
-    return made
 
 
 def connected(test, port):
@@ -192,7 +152,3 @@ class ServeTest(unittest.TestCase):
               f"{', '.join(f'{t:.2f}' for t in tres)} mm", file=sys.stderr)
         self.assertLess(np.mean(tres), 0.3 * np.mean(unregistered))
         self.assertLess(tres[peak], 0.3 * unregistered[peak])
-
-
-if __name__ == "__main__":
-    unittest.main()

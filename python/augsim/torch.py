@@ -1,12 +1,15 @@
-#!/usr/bin/env python3
 """augsim's U-Net in PyTorch, rebuilt from a trained model directory.
 
-Depends on torch and numpy only (the safetensors file is parsed here). It reproduces
-``augsim predict`` on a grid tensor:
+Needs torch (``pip install "./python[torch]"``) and numpy; the safetensors file is parsed here. It
+reproduces ``augsim predict`` on a grid tensor:
 
-    import numpy as np, augsim_unet
-    model = augsim_unet.load("models/liver_ar")          # torch.nn.Module, eval mode, float32
-    u = augsim_unet.predict(model, np.load("input.npy"))  # [3, nx, ny, nz] displacement (m)
+    import numpy as np
+    from augsim.torch import load, predict
+    model = load("models/liver_ar")                  # torch.nn.Module, eval mode, float32
+    u = predict(model, np.load("input.npy"))         # [3, nx, ny, nz] displacement (m)
+
+:class:`UNet` is the one PyTorch definition of the network: ``python -m augsim.train`` trains it
+and ``bench/torch_unet_twin.py`` times it.
 
 A model directory holds ``model.json`` (format "augsim-unet" v1: U-Net configuration,
 normalisation, grid, units) and the weights file it names (``model.safetensors``), as written by
@@ -31,7 +34,7 @@ Conventions (crates/learn/src/net/unet.rs, net/inference.rs, net/predict.rs, dat
 Point-cloud inputs (``augsim predict`` on .csv or ``[N, 6]`` .npy) are not handled here: encode
 them on the grid with augsim first.
 
-Command line: ``python augsim_unet.py MODEL_DIR INPUT.npy OUTPUT.npy``.
+Command line: ``python -m augsim.torch MODEL_DIR INPUT.npy OUTPUT.npy``.
 """
 
 import json
@@ -204,10 +207,10 @@ def predict(model, grid_input):
 
 
 def main(argv=None):
-    """``python augsim_unet.py MODEL_DIR INPUT.npy OUTPUT.npy``: writes the prediction as .npy."""
+    """``python -m augsim.torch MODEL_DIR INPUT.npy OUTPUT.npy``: writes the prediction as .npy."""
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) != 3 or argv[0] in ("-h", "--help"):
-        print("usage: python augsim_unet.py MODEL_DIR INPUT.npy OUTPUT.npy\n"
+        print("usage: python -m augsim.torch MODEL_DIR INPUT.npy OUTPUT.npy\n"
               "  INPUT: grid tensor [3, nx, ny, nz] on the model grid (model input unit);\n"
               "  OUTPUT: float32 displacement [3, nx, ny, nz] (m), as `augsim predict` writes",
               file=sys.stderr)

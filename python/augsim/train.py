@@ -1,16 +1,15 @@
-#!/usr/bin/env python3
 """Trains augsim's U-Net with PyTorch (on GPUs when there are some) and writes a model directory
 that ``augsim eval``, ``augsim predict`` and ``augsim register`` load unchanged.
 
-    python python/train.py DATASET --out DIR [--iterations N] [--channels C] [--depth D]
+    python -m augsim.train DATASET --out DIR [--iterations N] [--channels C] [--depth D]
                            [--batch B] [--lr LR] [--final-lr LR] [--validate-every K]
                            [--validation-samples N | --validation-fraction F]
                            [--test-samples N | --test-fraction F] [--train-samples N]
                            [--seed S] [--device cuda|cpu]
-    torchrun --nproc_per_node=4 python/train.py ...        # data-parallel on 4 GPUs (DDP)
+    torchrun --nproc_per_node=4 -m augsim.train ...        # data-parallel on 4 GPUs (DDP)
 
 It follows ``augsim train``: the same architecture (``docs/method.md``, section 5.2; the module of
-``augsim_unet.py``), the same split rule (by generation index: the last samples test, those before
+``augsim.torch``), the same split rule (by generation index: the last samples test, those before
 them validate, the rest train; recorded in model.json with the dataset's identity, so that
 ``augsim eval`` evaluates on the test samples only), the same normalisation (one scale per field:
 the RMS vector norm of the training inputs over their non-zero nodes and of the training targets
@@ -20,7 +19,7 @@ Euclidean error. Batches are drawn by PyTorch's generator, so the run is reprodu
 but its batches differ from ``augsim train``'s. ``DIR/checkpoint.pt`` is written at every
 validation; rerunning the same command resumes from it.
 
-Needs torch and numpy (see python/README.md).
+Needs torch: ``pip install "./python[torch]"`` (see python/README.md).
 """
 
 import argparse
@@ -33,10 +32,8 @@ import time
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import augsim_unet  # noqa: E402
+from .torch import MODEL_FORMAT, MODEL_VERSION, UNet
 
 LAYOUT = ("[channel, x, y, z], C order, z fastest: index = ((c*nx + i)*ny + j)*nz + k; shards prepend the "
           "sample axis; masks are [x, y, z]")
@@ -235,8 +232,8 @@ def model_json(args, manifest, config, scales, best, split):
     if "grid_origin" in metadata and "grid_spacing" in metadata:
         placement = {"origin": metadata["grid_origin"], "spacing": metadata["grid_spacing"]}
     return {
-        "format": augsim_unet.MODEL_FORMAT,
-        "version": augsim_unet.MODEL_VERSION,
+        "format": MODEL_FORMAT,
+        "version": MODEL_VERSION,
         "layout": LAYOUT,
         "unet": config,
         "normalization": {"input_scale": scales[0], "target_scale": scales[1]},
@@ -261,7 +258,8 @@ def model_json(args, manifest, config, scales, best, split):
 
 
 def parse_args(argv):
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter)
+    p = argparse.ArgumentParser(prog="python -m augsim.train", description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("dataset", help="augsim dataset directory (from `augsim generate`)")
     p.add_argument("--out", required=True, help="model directory to write (model.json, model.safetensors)")
     p.add_argument("--iterations", type=int, default=2000, help="optimiser steps (default 2000)")
@@ -322,7 +320,7 @@ def main(argv=None):
     config = {"in_channels": 3, "out_channels": 3, "base_channels": args.channels, "depth": args.depth,
               "kernel_size": 3}
     torch.manual_seed(args.seed)
-    net = augsim_unet.UNet(**config)
+    net = UNet(**config)
     he_uniform_(net, torch.Generator().manual_seed(args.seed))
     net.to(device)
     model = torch.nn.parallel.DistributedDataParallel(net, device_ids=[device] if device.type == "cuda" else None) \

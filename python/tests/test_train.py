@@ -1,0 +1,99 @@
+"""Checks `python -m augsim.train` against augsim: a model it trains is one that augsim reads unchanged.
+
+On a small `augsim generate beam_target` dataset:
+- the dataset identity, the split and the normalisation it records are those `augsim train`
+  records for the same split options (identity and split exactly, scales to 1e-12);
+- a model it trains a few steps is predicted by `augsim predict` as by the PyTorch module
+  (max |difference| <= 1e-5 m and <= 1e-5 of the output scale);
+- `augsim eval` evaluates it on its recorded test samples only;
+- a killed run resumes from its checkpoint to the same weights as an uninterrupted one.
+
+Run: pip install "./python[torch,test]", then python -m pytest -s python/tests/test_train.py from
+the repository root (the augsim binary: $AUGSIM_BIN, default target/release/augsim). Without torch
+it is skipped, saying so.
+"""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from helpers import run_augsim
+
+pytest.importorskip("torch", reason='training with PyTorch needs torch: pip install "./python[torch]"')
+from augsim.torch import load, predict, read_safetensors  # noqa: E402
+from augsim.train import read_dataset  # noqa: E402
+
+SPLIT = ["--validation-samples", "6", "--test-samples", "10"]
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    path = tmp_path_factory.mktemp("train") / "data"
+    run_augsim("generate", "beam_target", "--out", path, "--samples", "40")
+    return path
+
+
+def train(data, out, *extra):
+    """Runs `python -m augsim.train` on `data` into `out`; the model.json it wrote."""
+    args = [str(data), "--out", str(out), "--channels", "4", "--depth", "2", "--validate-every", "5", "--seed", "3",
+            "--device", "cpu", *SPLIT, *extra]
+    r = subprocess.run([sys.executable, "-m", "augsim.train", *args], capture_output=True, text=True,
+                       cwd=os.path.dirname(out))
+    assert r.returncode == 0, f"python -m augsim.train failed:\n{r.stdout}\n{r.stderr}"
+    with open(os.path.join(out, "model.json"), encoding="utf-8") as f:
+        return json.load(f)
+
+
+def test_split_and_normalisation_are_augsim_s(data, tmp_path):
+    ours = train(data, tmp_path / "py_split", "--iterations", "1")
+    out = tmp_path / "augsim_split"
+    run_augsim("train", data, "--out", out, "--iterations", "1", "--channels", "4", "--depth", "2", *SPLIT)
+    with open(out / "model.json", encoding="utf-8") as f:
+        theirs = json.load(f)
+    assert ours["training"]["split"] == theirs["training"]["split"]
+    for key in ("input_scale", "target_scale"):
+        a, b = ours["normalization"][key], theirs["normalization"][key]
+        assert abs(a - b) <= 1e-12 * abs(b), key
+    for key in ("grid", "placement", "input_unit", "target_unit", "layout", "format", "version"):
+        assert ours[key] == theirs[key], key
+
+
+def test_augsim_predicts_and_evaluates_a_model_trained_here(data, tmp_path):
+    out = tmp_path / "py_model"
+    info = train(data, out, "--iterations", "20", "--final-lr", "1e-4")
+    assert info["training"]["best_iteration"] % 5 == 0
+    model = load(out)
+    _, _, inputs, _, _ = read_dataset(data)
+    x = np.ascontiguousarray(inputs[-1])
+    path_in, path_out = tmp_path / "in.npy", tmp_path / "out.npy"
+    np.save(path_in, x)
+    run_augsim("predict", out / "model.json", path_in, "-o", path_out, "--runs", "1")
+    want, got = np.load(path_out), predict(model, x)
+    scale = float(np.abs(want).max())
+    diff = float(np.abs(got.astype(np.float64) - want).max())
+    print(f"\naugsim predict vs PyTorch on the model augsim.train wrote: max |diff| {diff:.3e} m "
+          f"(output scale {scale:.3e} m)", file=sys.stderr)
+    assert scale > 0.0
+    assert diff <= 1e-5
+    assert diff <= 1e-5 * scale
+    text = run_augsim("eval", out / "model.json", data, "--out", out / "eval")
+    assert "held out   10 of 40 samples (the test split recorded in the model)" in text
+
+
+def test_a_resumed_run_ends_where_an_uninterrupted_one_does(data, tmp_path):
+    whole = tmp_path / "whole"
+    train(data, whole, "--iterations", "10")
+    parts = tmp_path / "parts"
+    train(data, parts, "--iterations", "5")
+    os.remove(parts / "model.json")
+    # The same command with more steps continues from the checkpoint of step 5.
+    train(data, parts, "--iterations", "10")
+    a = read_safetensors(whole / "model.safetensors")
+    b = read_safetensors(parts / "model.safetensors")
+    assert sorted(a) == sorted(b)
+    for name in a:
+        np.testing.assert_allclose(a[name], b[name], rtol=0, atol=1e-6, err_msg=name)
