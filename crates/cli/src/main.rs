@@ -81,7 +81,7 @@ enum Command {
     /// Evaluate a model on the samples held out from it (the test split recorded in the model, or a
     /// dataset it never saw): mean/std/max Euclidean error, worst sample as VTK.
     Eval {
-        /// Model JSON (model.json).
+        /// The model: its directory (a U-Net's or a reduced-order model's) or its model.json.
         model: PathBuf,
         /// Dataset directory.
         dataset: PathBuf,
@@ -97,7 +97,7 @@ enum Command {
     },
     /// Predict the displacement for a constraint tensor or a point cloud and time the network.
     Predict {
-        /// Model JSON (model.json).
+        /// The model: its directory (a U-Net's or a reduced-order model's) or its model.json.
         model: PathBuf,
         /// Input: a grid tensor (.npy [3, nx, ny, nz]) or a point cloud (.csv or .npy [N, 6]: x, y, z
         /// and the force (N) or displacement (m) at each point, as the model was trained).

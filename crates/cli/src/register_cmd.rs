@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use experiment::case::{ar_scenario, case_methods, compare, synthetic_case, Network, Registered};
+use experiment::case::{ar_scenario, case_methods, compare, synthetic_case, Network, Registered, SHIPPED_MODEL};
 use experiment::picture::side_view;
 use experiment::setup::{fem_setup, network_setup, RegistrationSetup};
 use mesh::io::{csv_field, write_atomic_bytes, Field};
@@ -27,8 +27,9 @@ pub struct RegisterArgs {
     /// FEM registration on this scenario's mesh, material (law, formulation) and fixed nodes.
     #[arg(long, conflicts_with = "model")]
     fem: Option<PathBuf>,
-    /// U-Net registration with this model (model.json); the organ comes from --scenario. With
-    /// --demo or --case: the network of the comparison (default: models/liver_ar/model.json).
+    /// Registration with this learned model (a U-Net's or a reduced-order model's directory, or its
+    /// model.json); the organ comes from --scenario. With --demo or --case: the learned model of the
+    /// comparison (default: the shipped U-Net, models/liver_ar).
     #[arg(long)]
     model: Option<PathBuf>,
     /// The dataset scenario the model was trained on, for --model (its mesh is the organ, its
@@ -303,8 +304,6 @@ fn write_targets(path: &Path, rest: &[Point], registered: &[Point], std: Option<
     Ok(write_atomic_bytes(path, text.as_bytes())?)
 }
 
-/// The shipped network for the built-in phantom (trained by the built-in `liver_ar_t10` scenario).
-const DEMO_MODEL: &str = "models/liver_ar/model.json";
 
 /// The comparison case of `--demo` (the built-in scenario) or `--case FILE`, with the command
 /// line's overrides.
@@ -397,7 +396,7 @@ fn demo(args: &RegisterArgs) -> Result<()> {
 
     let wants_network =
         scenario.models.method.iter().any(|m| matches!(m.kind, MethodKind::Network | MethodKind::Hybrid));
-    let model_path = args.model.clone().unwrap_or_else(|| PathBuf::from(DEMO_MODEL));
+    let model_path = args.model.clone().unwrap_or_else(|| PathBuf::from(SHIPPED_MODEL));
     let model = if !wants_network {
         None
     } else if model_path.exists() {

@@ -16,7 +16,8 @@ pub struct ServeArgs {
     /// FEM registration on this static scenario (a file or a built-in name).
     #[arg(long, conflicts_with = "model", required_unless_present = "model")]
     fem: Option<PathBuf>,
-    /// U-Net registration with this model (model.json); the organ comes from --scenario.
+    /// Registration with this learned model (a U-Net's or a reduced-order model's directory, or its
+    /// model.json); the organ comes from --scenario.
     #[arg(long, requires = "scenario")]
     model: Option<PathBuf>,
     /// The dataset scenario the model was trained on (a file or a built-in name, e.g. liver_ar_t10).
