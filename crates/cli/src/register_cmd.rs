@@ -304,7 +304,6 @@ fn write_targets(path: &Path, rest: &[Point], registered: &[Point], std: Option<
     Ok(write_atomic_bytes(path, text.as_bytes())?)
 }
 
-
 /// The comparison case of `--demo` (the built-in scenario) or `--case FILE`, with the command
 /// line's overrides.
 fn comparison_case(args: &RegisterArgs) -> Result<CaseScenario> {

@@ -7,8 +7,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use anyhow::Result;
 use learn::{
-    Compute, Corruption, CurveRow, Dataset, EvalReport, Initialization, Samples, SplitPolicy, TrainConfig,
-    Model, TrainOptions, UNetConfig,
+    Compute, Corruption, CurveRow, Dataset, EvalReport, Initialization, Model, Samples, SplitPolicy, TrainConfig,
+    TrainOptions, UNetConfig,
 };
 use scenario::DatasetScenario;
 

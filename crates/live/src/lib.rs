@@ -213,7 +213,12 @@ impl WarmRegistration {
         let r = &mut self.registration;
         let tracked = self.tracker.register(&r.organ, r.deformer.as_mut(), cloud, &r.options)?;
         let rigid = tracked.rigid.as_ref().map(|t| t.organ_to_cloud());
-        Ok(RegisteredFrame { result: tracked.registration, targets: tracked.targets, rigid, target_std: tracked.target_std })
+        Ok(RegisteredFrame {
+            result: tracked.registration,
+            targets: tracked.targets,
+            rigid,
+            target_std: tracked.target_std,
+        })
     }
 
     /// Forgets the previous frame (and the rigid pose): the next one starts from the rest shape.

@@ -255,7 +255,8 @@ impl Registration {
     /// failed registration (the warm start is then kept).
     fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>) -> PyResult<Registered> {
         let cloud = points(cloud, "cloud", self.unit)?;
-        let RegisteredFrame { result, targets, rigid, target_std } = compute(py, || Ok(locked(&self.state)?.register(&cloud)?))?;
+        let RegisteredFrame { result, targets, rigid, target_std } =
+            compute(py, || Ok(locked(&self.state)?.register(&cloud)?))?;
         let rigid = rigid.map(|t| {
             let rows = t.homogeneous(self.unit);
             Array2::from_shape_fn((4, 4), |(i, j)| rows[i][j]).into_pyarray(py).unbind()
@@ -269,7 +270,8 @@ impl Registration {
             iterations: result.iterations,
             warnings: result.warnings.clone(),
             rigid,
-            target_std: target_std.map(|s| s.iter().map(|v| v / self.unit).collect::<Vec<f64>>().into_pyarray(py).unbind()),
+            target_std: target_std
+                .map(|s| s.iter().map(|v| v / self.unit).collect::<Vec<f64>>().into_pyarray(py).unbind()),
             ms: result.time.as_secs_f64() * 1e3,
         })
     }

@@ -48,10 +48,11 @@ pub(crate) fn leading_eigen(m: MatRef<'_, f64>, max: usize, relative: f64) -> Re
 
 /// Principal directions of the rows of `x` (centred): the right singular vectors by the method of
 /// snapshots (eigenpairs of `x xᵀ`), as the rows of the result, with the squared singular values.
-/// Directions whose singular value is below `relative` of the largest are dropped; at most `max`.
+/// Directions whose singular value is below `relative` of the largest are dropped, and always those
+/// within the Gram matrix's round-off (eigenvalues below 1e-12 of the largest); at most `max`.
 pub(crate) fn principal_directions(x: MatRef<'_, f64>, max: usize, relative: f64) -> Result<(Vec<f64>, Mat<f64>)> {
     let gram = mul_t(x, x, training_par());
-    let (values, vectors) = leading_eigen(gram.as_ref(), max, relative * relative)?;
+    let (values, vectors) = leading_eigen(gram.as_ref(), max, (relative * relative).max(1e-12))?;
     // Row j of the directions: xᵀ v_j / σ_j.
     let mut directions = mul(vectors.transpose(), x, training_par());
     for (j, &v) in values.iter().enumerate() {

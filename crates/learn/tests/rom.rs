@@ -1,0 +1,126 @@
+//! The reduced-order model on a problem with a known answer: inputs and targets driven by two
+//! hidden parameters, the target a nonlinear function of them.
+
+use augsim_learn::rom::{fit, Context, RomConfig};
+use augsim_learn::{evaluate, Compute, Corruption, GridShape, Method, Model, Sample, Samples, SplitPolicy};
+
+/// Sample `index`: parameters (a, b) in [−1, 1]²; the input a·φ₁ + b·φ₂ on a patch of nodes (a
+/// "visible surface"); the target a smooth field a·ψ₁ + b·ψ₂ + a·b·ψ₃ + a²·ψ₄ (m) inside the mask.
+fn sample(grid: GridShape, index: u64) -> Sample {
+    let t = index as f64;
+    let (a, b) = ((t * 0.618_034).fract() * 2.0 - 1.0, (t * 0.754_877).fract() * 2.0 - 1.0);
+    let [nx, ny, nz] = grid.dims();
+    let mut input = vec![0f32; grid.field_len()];
+    let mut target = vec![0f32; grid.field_len()];
+    let mut mask = vec![0u8; grid.nodes()];
+    for i in 0..nx {
+        for j in 0..ny {
+            for k in 0..nz {
+                let (x, y, z) = (i as f64 / nx as f64, j as f64 / ny as f64, k as f64 / nz as f64);
+                let n = grid.node_index(i, j, k);
+                mask[n] = u8::from(i > 0 && i + 1 < nx);
+                if k + 1 == nz {
+                    input[grid.field_index(2, i, j, k)] = (0.01 * (a * (3.0 * x).sin() + b * (2.0 * y).cos())) as f32;
+                }
+                for c in 0..3 {
+                    let s = c as f64 + 1.0;
+                    let value = 0.01
+                        * (a * (s * x + z).sin() + b * (y - s * z).cos() + a * b * (x * y * s) + a * a * (z * s).cos());
+                    target[grid.field_index(c, i, j, k)] = value as f32 * f32::from(mask[n]);
+                }
+            }
+        }
+    }
+    Sample { index, input, target, mask }
+}
+
+fn samples(grid: GridShape, count: usize) -> Samples {
+    let mut s = Samples::new(grid);
+    for i in 0..count as u64 {
+        s.push(&sample(grid, i)).unwrap();
+    }
+    s.source = Some("two-parameter test".into());
+    s
+}
+
+#[test]
+fn a_smooth_two_parameter_family_is_learned_saved_and_evaluated() {
+    let grid = GridShape::new(8, 7, 5);
+    let all = samples(grid, 400);
+    let policy = SplitPolicy { validation_samples: Some(50), test_samples: Some(80), ..SplitPolicy::default() };
+    let (split, [train, validation, test]) = policy.apply(&all).unwrap();
+    let context = Context { placement: None, input_unit: "m", target_unit: "m", split };
+    let (model, report) = fit(&train, &validation, &RomConfig::default(), context).unwrap();
+    // The basis holds the targets (four fields span them); the regression learns the map.
+    assert!(model.info.modes >= 4, "{} modes", model.info.modes);
+    assert!(report.val_projection_error < 1e-6, "basis floor {}", report.val_projection_error);
+    let size = test.targets.iter().map(|v| f64::from(v.abs())).sum::<f64>() / test.targets.len() as f64;
+    let clean = Corruption::none();
+
+    // Saved and loaded as a model directory, it predicts the same fields and is known as a ROM.
+    let dir = tempfile::tempdir().unwrap();
+    model.save(dir.path()).unwrap();
+    let loaded = Model::load(dir.path()).unwrap();
+    assert_eq!(loaded.method(), Method::Rom);
+    let predictor = loaded.predictor(Compute::Cpu).unwrap();
+    let (field, std) = predictor.predict_with_std(test.input(0)).unwrap();
+    let direct = model.predict_with_std(test.input(0)).unwrap();
+    let largest = field.iter().zip(&direct.field).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(largest < 1e-6, "loaded and fitted models differ by {largest}");
+    let std = std.unwrap();
+    let mask = test.mask(0);
+    assert!(std.iter().zip(mask).all(|(s, &m)| if m == 1 { *s > 0.0 } else { *s == 0.0 }));
+
+    // Held-out error: a small share of the motion.
+    let report = evaluate(&loaded, &test, &clean, 0, Compute::Cpu).unwrap();
+    assert!(
+        report.stats.mean < 0.02 * size * 3f64.sqrt(),
+        "test ē {} against a mean |u| component of {size}",
+        report.stats.mean
+    );
+    // It refuses samples it was fitted or selected on.
+    assert!(evaluate(&loaded, &train, &clean, 0, Compute::Cpu).is_err());
+    assert_eq!(loaded.held_out(&all).unwrap(), test);
+
+    // The predicted standard deviation is calibrated on validation: on the test samples, most node
+    // errors lie within two of it.
+    let (mut within, mut total) = (0usize, 0usize);
+    let n = grid.nodes();
+    for p in 0..test.len() {
+        let (field, std) = predictor.predict_with_std(test.input(p)).unwrap();
+        let std = std.unwrap();
+        for v in (0..n).filter(|&v| test.mask(p)[v] == 1) {
+            let e = (0..3).map(|c| (field[c * n + v] - test.target(p)[c * n + v]).powi(2)).sum::<f32>().sqrt();
+            within += usize::from(e <= 2.0 * std[v]);
+            total += 1;
+        }
+    }
+    let share = within as f64 / total as f64;
+    assert!((0.8..=1.0).contains(&share), "{:.1} % of the test nodes within 2σ", 100.0 * share);
+}
+
+#[test]
+fn bad_input_is_refused_with_a_message() {
+    let grid = GridShape::new(6, 5, 4);
+    let all = samples(grid, 60);
+    let policy = SplitPolicy { validation_samples: Some(10), test_samples: Some(10), ..SplitPolicy::default() };
+    let (split, [train, validation, _]) = policy.apply(&all).unwrap();
+    let context = |split| Context { placement: None, input_unit: "m", target_unit: "m", split };
+    let (model, _) = fit(&train, &validation, &RomConfig::default(), context(split.clone())).unwrap();
+    let e = model.predict(&[0.0; 7]).unwrap_err().to_string();
+    assert!(e.contains("expected"), "{e}");
+    let mut input = train.input(0).to_vec();
+    input[3] = f32::NAN;
+    assert!(model.predict(&input).unwrap_err().to_string().contains("non-finite"));
+    // Nothing to learn: every target the same.
+    let mut flat = train.clone();
+    flat.targets.iter_mut().for_each(|v| *v = 0.5);
+    let e = fit(&flat, &validation, &RomConfig::default(), context(split)).unwrap_err().to_string();
+    assert!(e.contains("do not vary"), "{e}");
+    // A damaged model directory is refused, naming the array.
+    let dir = tempfile::tempdir().unwrap();
+    model.save(dir.path()).unwrap();
+    std::fs::write(dir.path().join("weights.npy"), b"not an array").unwrap();
+    let e = Model::load(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("weights.npy"), "{e}");
+}
