@@ -168,26 +168,21 @@ impl ReducedModel {
         }
         let x: Vec<f64> =
             self.input_entries.iter().zip(&self.input_mean).map(|(&e, m)| f64::from(input[e]) - m).collect();
-        let features: Vec<f64> =
-            (0..self.input_components.nrows()).map(|c| dot_row(self.input_components.as_ref(), c, &x)).collect();
+        let features = gemv(self.input_components.as_ref(), &x);
         let norm: f64 = features.iter().map(|v| v * v).sum();
-        Ok((0..self.inducing.nrows())
-            .map(|i| {
-                let d2 = self.inducing_norms[i] + norm - 2.0 * dot_row(self.inducing.as_ref(), i, &features);
-                self.info.kernel.eval(d2, self.info.length_scale)
-            })
+        let cross = gemv(self.inducing.as_ref(), &features);
+        Ok(cross
+            .iter()
+            .zip(&self.inducing_norms)
+            .map(|(c, z2)| self.info.kernel.eval(z2 + norm - 2.0 * c, self.info.length_scale))
             .collect())
     }
 
     /// The displacement on the organ's nodes (channel-major over [`Self::nodes`]) for a kernel row.
     fn reconstruct(&self, k: &[f64]) -> Vec<f64> {
-        let modes = self.weights.ncols();
-        let coeffs: Vec<f64> =
-            (0..modes).map(|j| (0..k.len()).map(|i| k[i] * self.weights[(i, j)]).sum::<f64>()).collect();
-        let mut out = self.output_mean.clone();
-        for (j, c) in coeffs.iter().enumerate() {
-            self.basis.row(j).iter().zip(out.iter_mut()).for_each(|(b, o)| *o += c * b);
-        }
+        let coeffs = gemv(self.weights.transpose(), k);
+        let mut out = gemv(self.basis.transpose(), &coeffs);
+        out.iter_mut().zip(&self.output_mean).for_each(|(o, m)| *o += m);
         out
     }
 
@@ -336,17 +331,17 @@ impl ReducedModel {
     }
 }
 
-/// `row i of m · x`.
-fn dot_row(m: MatRef<'_, f64>, i: usize, x: &[f64]) -> f64 {
-    m.row(i).iter().zip(x).map(|(a, b)| a * b).sum()
+/// `m · x`, on one thread (a single prediction is too small to share).
+fn gemv(m: MatRef<'_, f64>, x: &[f64]) -> Vec<f64> {
+    let mut out = Mat::<f64>::zeros(m.nrows(), 1);
+    let xv = MatRef::from_column_major_slice(x, x.len(), 1);
+    faer::linalg::matmul::matmul(out.as_mut(), faer::Accum::Replace, m, xv, 1.0, Par::Seq);
+    out.col(0).iter().copied().collect()
 }
 
 /// `kᵀ M k` for a symmetric `M`.
 fn quadratic_form(m: MatRef<'_, f64>, k: &[f64]) -> f64 {
-    let mut mk = Mat::<f64>::zeros(m.nrows(), 1);
-    let kv = MatRef::from_column_major_slice(k, k.len(), 1);
-    faer::linalg::matmul::matmul(mk.as_mut(), faer::Accum::Replace, m, kv, 1.0, Par::Seq);
-    (0..k.len()).map(|i| k[i] * mk[(i, 0)]).sum()
+    gemv(m, k).iter().zip(k).map(|(a, b)| a * b).sum()
 }
 
 /// Writes a matrix as a C-order `<f8` array.
