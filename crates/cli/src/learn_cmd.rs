@@ -397,6 +397,10 @@ pub fn eval(
             t.no_motion.max * 1e3
         );
     }
+    let coverage = learn::uncertainty_coverage(&model, &test, &corruption.corruption(), 0)?;
+    if let Some(c) = coverage {
+        println!("2σ         {:.1} % of the nodes' errors within twice the predicted standard deviation", c * 100.0);
+    }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut csv = String::from("index,error_m\n");
     for (i, e) in report.indices.iter().zip(&report.errors) {
@@ -406,7 +410,7 @@ pub fn eval(
     let summary = serde_json::json!({
         "model": model_path, "dataset": dataset_dir, "samples": test.len(),
         "mean_m": s.mean, "std_m": s.std, "max_m": s.max, "worst_index": report.worst_index(),
-        "corruption": corruption.corruption(), "marker_errors": tre,
+        "corruption": corruption.corruption(), "marker_errors": tre, "within_2_std": coverage,
     });
     write_atomic_bytes(&out.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
     let worst = test.get(s.worst);

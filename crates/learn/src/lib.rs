@@ -48,7 +48,9 @@ pub use net::inference::InferenceNet;
 pub use net::predict::{time_prediction, Predictor, Timing};
 pub use net::unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
 pub use training::curve::CurveRow;
-pub use training::evaluation::{evaluate, evaluate_at_points, evaluation_input, write_grid_sample, PointErrors};
+pub use training::evaluation::{
+    evaluate, evaluate_at_points, evaluation_input, uncertainty_coverage, write_grid_sample, PointErrors,
+};
 pub use training::metrics::{ErrorStats, EvalReport};
 pub use training::train::{train, Initialization, TrainConfig, TrainOptions, TrainOutcome};
 

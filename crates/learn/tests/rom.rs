@@ -2,7 +2,9 @@
 //! hidden parameters, the target a nonlinear function of them.
 
 use augsim_learn::rom::{fit, Context, RomConfig};
-use augsim_learn::{evaluate, Compute, Corruption, GridShape, Method, Model, Sample, Samples, SplitPolicy};
+use augsim_learn::{
+    evaluate, uncertainty_coverage, Compute, Corruption, GridShape, Method, Model, Sample, Samples, SplitPolicy,
+};
 
 /// Sample `index`: parameters (a, b) in [−1, 1]²; the input a·φ₁ + b·φ₂ on a patch of nodes (a
 /// "visible surface"); the target a smooth field a·ψ₁ + b·ψ₂ + a·b·ψ₃ + a²·ψ₄ (m) inside the mask.
@@ -84,18 +86,7 @@ fn a_smooth_two_parameter_family_is_learned_saved_and_evaluated() {
 
     // The predicted standard deviation is calibrated on validation: on the test samples, most node
     // errors lie within two of it.
-    let (mut within, mut total) = (0usize, 0usize);
-    let n = grid.nodes();
-    for p in 0..test.len() {
-        let (field, std) = predictor.predict_with_std(test.input(p)).unwrap();
-        let std = std.unwrap();
-        for v in (0..n).filter(|&v| test.mask(p)[v] == 1) {
-            let e = (0..3).map(|c| (field[c * n + v] - test.target(p)[c * n + v]).powi(2)).sum::<f32>().sqrt();
-            within += usize::from(e <= 2.0 * std[v]);
-            total += 1;
-        }
-    }
-    let share = within as f64 / total as f64;
+    let share = uncertainty_coverage(&loaded, &test, &clean, 0).unwrap().unwrap();
     assert!((0.8..=1.0).contains(&share), "{:.1} % of the test nodes within 2σ", 100.0 * share);
 }
 

@@ -172,3 +172,30 @@ pub fn evaluate_at_points(
         },
     ))
 }
+
+/// For a model that predicts its uncertainty (the reduced-order model): the share of the nodes
+/// of `samples` (inside their masks) whose error lies within twice the predicted standard
+/// deviation, inputs corrupted as [`evaluate`] corrupts them; `None` for a model that predicts
+/// none.
+pub fn uncertainty_coverage(
+    model: &crate::Model,
+    samples: &Samples,
+    corruption: &Corruption,
+    seed: u64,
+) -> Result<Option<f64>> {
+    check_samples(model, samples)?;
+    let predictor = model.predictor(Compute::Cpu)?;
+    let n = samples.grid.nodes();
+    let (mut within, mut total) = (0usize, 0usize);
+    for p in 0..samples.len() {
+        let (field, std) = predictor.predict_with_std(&evaluation_input(samples, p, corruption, seed)?)?;
+        let Some(std) = std else { return Ok(None) };
+        let target = samples.target(p);
+        for v in (0..n).filter(|&v| samples.mask(p)[v] == 1) {
+            let e2: f32 = (0..CHANNELS).map(|c| (field[c * n + v] - target[c * n + v]).powi(2)).sum();
+            within += usize::from(e2.sqrt() <= 2.0 * std[v]);
+            total += 1;
+        }
+    }
+    Ok((total > 0).then(|| within as f64 / total as f64))
+}
