@@ -231,8 +231,15 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let dataset = Dataset::open(&args.dataset)?;
     let all = dataset.load_all()?;
     let (split, [train, validation, test]) = args.split.policy().apply(&all)?;
+    println!(
+        "split      {} training, {} validation, {} test samples (held out, recorded in the model); grid {}",
+        train.len(),
+        validation.len(),
+        test.len(),
+        dataset.manifest().grid
+    );
     if args.method == Method::Rom {
-        return train_rom(args, &dataset, split, [train, validation, test]);
+        return train_rom(args, &dataset, split, [train, validation]);
     }
     let compute = args.device.announce()?;
     let init = match &args.init {
@@ -263,13 +270,6 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         test: split.test,
         compute,
     };
-    println!(
-        "split      {} training, {} validation, {} test samples (held out, recorded in the model); grid {}",
-        train.len(),
-        validation.len(),
-        test.len(),
-        dataset.manifest().grid
-    );
     let outcome = learn::train(&train, &validation, &init, &config, &options)?;
     let curve = args.out.join(experiment::curve::CURVE_PNG);
     experiment::curve::plot_learning_curve(&curve, &outcome.curve)?;
@@ -286,15 +286,8 @@ fn train_rom(
     args: &TrainArgs,
     dataset: &Dataset,
     split: learn::Split,
-    [train, validation, test]: [learn::Samples; 3],
+    [train, validation]: [learn::Samples; 2],
 ) -> Result<()> {
-    println!(
-        "split      {} training, {} validation, {} test samples (held out, recorded in the model); grid {}",
-        train.len(),
-        validation.len(),
-        test.len(),
-        dataset.manifest().grid
-    );
     let config = RomConfig {
         max_modes: args.modes,
         max_inducing: args.inducing,
