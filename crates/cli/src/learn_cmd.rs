@@ -196,7 +196,7 @@ pub struct TrainArgs {
 pub struct DeviceArgs {
     /// `cpu` (the repacked CPU engines, fastest on a CPU), `gpu` (burn on a GPU through wgpu: Vulkan,
     /// Metal or DX12; needs a build with `--features gpu`) or `cpu-burn` (burn's own kernels on the CPU: the GPU's code
-    /// path, slower).
+    /// path, slower; needs a build with `--features cpu-burn`).
     #[arg(long = "device", default_value = "cpu")]
     pub compute: Compute,
 }
@@ -272,7 +272,7 @@ pub fn eval(
     out: &Path,
 ) -> Result<()> {
     let compute = device.announce()?;
-    let model = TrainedModel::load(model_path, &learn::inference_device())?;
+    let model = TrainedModel::load(model_path)?;
     let dataset = Dataset::open(dataset_dir)?;
     if dataset.manifest().grid != model.grid {
         bail!("the model was trained on grid {} but the dataset is on grid {}", model.grid, dataset.manifest().grid);
@@ -362,7 +362,7 @@ pub fn predict(
     device: DeviceArgs,
 ) -> Result<()> {
     let compute = device.announce()?;
-    let model = TrainedModel::load(model_path, &learn::inference_device())?;
+    let model = TrainedModel::load(model_path)?;
     let g = model.grid;
     let read = PredictInput::read(input)?;
     let points = match &read {

@@ -379,7 +379,7 @@ fn demo(args: &RegisterArgs) -> Result<()> {
     let model = if !wants_network {
         None
     } else if model_path.exists() {
-        Some(learn::TrainedModel::load(&model_path, &learn::inference_device())?)
+        Some(learn::TrainedModel::load(&model_path)?)
     } else {
         println!(
             "U-Net      skipped: {} not found (run from the repository root, or give --model)",

@@ -60,7 +60,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
 /// The scene of a dataset sample with the model's prediction.
 fn sample_scene(args: &ViewArgs, model_path: &Path, dataset_dir: &Path) -> Result<Scene> {
     let model_json = TrainedModel::json_path(model_path);
-    let model = TrainedModel::load(&model_json, &learn::inference_device())?;
+    let model = TrainedModel::load(&model_json)?;
     let dataset = Dataset::open(dataset_dir)?;
     let manifest = dataset.manifest();
     let (organ, from) = match (&args.mesh, &args.scenario) {

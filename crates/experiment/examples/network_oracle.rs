@@ -31,7 +31,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if case.pose != RigidTransform::identity() {
         return Err("the oracle compares with the truth in the model's frame: remove the case's misalignment".into());
     }
-    let model = TrainedModel::load(Path::new(MODEL), &learn::inference_device())?;
+    let model = TrainedModel::load(Path::new(MODEL))?;
     let (organ, deformer) = ar_network_model(&model)?;
     let mesh = organ.mesh().clone();
     // The truth at each node of the network's mesh: interpolated in the finer mesh, or its nearest

@@ -186,7 +186,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
     let base = base_case()?;
     let model_path = Path::new(SHIPPED_MODEL);
     let model = match model_path.exists() {
-        true => Some(TrainedModel::load(model_path, &learn::inference_device())?),
+        true => Some(TrainedModel::load(model_path)?),
         false => None,
     };
     let network_scenario = ar_scenario();

@@ -55,7 +55,7 @@ pub fn fem_setup(path: &Path) -> Result<RegistrationSetup> {
 /// scenario at `scenario_path` (a file or a built-in name), whose mesh is the organ.
 pub fn network_setup(model_path: &Path, scenario_path: &Path) -> Result<RegistrationSetup> {
     let (scenario, dir) = DatasetScenario::load(scenario_path)?;
-    let model = learn::TrainedModel::load(model_path, &learn::inference_device())?;
+    let model = learn::TrainedModel::load(model_path)?;
     let (organ, deformer) = network_model(&Network { model: &model, scenario: &scenario, dir: &dir })?;
     let default_targets = region_targets(organ.mesh());
     Ok(RegistrationSetup {

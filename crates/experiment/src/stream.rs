@@ -150,7 +150,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     let network_found = model_path.exists();
     if network_found {
         progress("streaming to the shipped network");
-        let model = Arc::new(learn::TrainedModel::load(model_path, &learn::inference_device())?);
+        let model = Arc::new(learn::TrainedModel::load(model_path)?);
         let make = move || ar_network_model(&model);
         streams.push(stream_case("U-Net (models/liver_ar)", &case, &budgets, make)?);
     }

@@ -51,7 +51,7 @@ const MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/
 /// shipped U-Net's registration of the 1.5 N case.
 fn network_tre(camera: &CameraModel) -> (f64, f64, f64) {
     let case = phantom_push(1.5, camera, 7).unwrap();
-    let model = learn::TrainedModel::load(std::path::Path::new(MODEL), &learn::inference_device()).unwrap();
+    let model = learn::TrainedModel::load(std::path::Path::new(MODEL)).unwrap();
     let (organ, deformer) = ar_network_model(&model).unwrap();
     let from_truth = network_from_truth(&case, &organ, &deformer).unwrap();
     let rows = compare(
@@ -164,7 +164,7 @@ fn a_failing_method_is_reported_and_the_others_still_register() {
 #[test]
 fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     use scenario::registration::{MethodKind, MethodSpec};
-    let model = learn::TrainedModel::load(std::path::Path::new(MODEL), &learn::inference_device()).unwrap();
+    let model = learn::TrainedModel::load(std::path::Path::new(MODEL)).unwrap();
     // A hybrid needs the network on the FEM model's mesh: the 3k-T4 phantom of `liver_ar` (the
     // shipped network's grid covers it too).
     let network_scenario = scenario::DatasetScenario::builtin("liver_ar");
@@ -273,7 +273,7 @@ fn clouds_that_cannot_be_the_organ_are_refused_or_flagged() {
 /// the mid-edge nodes of the visible region are inputs too.
 #[test]
 fn the_network_of_a_t10_scenario_deforms_the_quadratic_mesh() {
-    let model = learn::TrainedModel::load(std::path::Path::new(MODEL), &learn::inference_device()).unwrap();
+    let model = learn::TrainedModel::load(std::path::Path::new(MODEL)).unwrap();
     let mut scenario = scenario::DatasetScenario::builtin("liver_ar");
     let network = |scenario: &scenario::DatasetScenario| {
         let n = experiment::case::Network { model: &model, scenario, dir: std::path::Path::new("") };

@@ -315,7 +315,7 @@ fn predict<'py>(py: Python<'py>, model: PathBuf, input: &Bound<'py, PyAny>) -> P
     };
     let (grid, prediction) = compute(py, || {
         let path = TrainedModel::json_path(&model);
-        let model = TrainedModel::load(&path, &learn::inference_device())?;
+        let model = TrainedModel::load(&path)?;
         let data = input.into_network_input(&model)?;
         Ok((model.grid, model.predict(&data)?))
     })?;

@@ -504,7 +504,7 @@ mod tests {
     /// displacement of its visible nodes as input.
     fn shipped_network_on_phantom() -> (Organ, NetworkDeformer) {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
-        let model = TrainedModel::load(std::path::Path::new(path), &learn::inference_device()).unwrap();
+        let model = TrainedModel::load(std::path::Path::new(path)).unwrap();
         let phantom = mesh::phantom::liver_phantom(3000).unwrap();
         let visible = phantom.region("visible").unwrap().to_vec();
         let organ = Organ::new(phantom, None).unwrap();
