@@ -69,7 +69,7 @@ fn unet_prediction(runs: usize) -> Result<()> {
     let input: Vec<f32> = (0..grid.field_len()).map(|i| ((i * 7919) % 2001) as f32 * 1e-3 - 1.0).collect();
     for base_channels in [8, 16] {
         let config = learn::UNetConfig { base_channels, ..learn::UNetConfig::default() };
-        let net = learn::UNet::new(&config, &learn::inference_device(), 0)?;
+        let net = learn::UNet::new(&config, 0)?;
         let params: usize = net.named_parameters().iter().map(|(_, v)| v.len()).sum();
         let model = learn::TrainedModel {
             config,

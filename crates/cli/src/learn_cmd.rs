@@ -213,7 +213,7 @@ pub struct TrainArgs {
 pub struct DeviceArgs {
     /// `cpu` (the repacked CPU engines, fastest on a CPU), `gpu` (burn on a GPU through wgpu: Vulkan,
     /// Metal or DX12; needs a build with `--features gpu`) or `cpu-burn` (burn's own kernels on the CPU: the GPU's code
-    /// path, slower).
+    /// path, slower; needs a build with `--features cpu-burn`).
     #[arg(long = "device", default_value = "cpu")]
     pub compute: Compute,
 }

@@ -1,4 +1,4 @@
-//! Learning for augsim: dataset format, 3D U-Net (burn), training with Adam, transfer learning,
+//! Learning for augsim: dataset format, 3D U-Net, training with Adam, transfer learning,
 //! input corruption, evaluation and timed prediction.
 //!
 //! # Grid tensor layout
@@ -17,7 +17,8 @@
 //! - [`data`]: datasets — the `.npy` format, sharded datasets, FEM generation, the grid and its
 //!   placement, splits, input corruption, point clouds as input.
 //! - [`net`]: the network — the 3D U-Net, its saved-model bundle, and the engines that run it
-//!   (burn on the CPU or a GPU, the repacked CPU inference engine, the hand-written backward pass).
+//!   (the repacked CPU inference engine, the hand-written backward pass, and with the `cpu-burn`
+//!   or `gpu` cargo feature burn on the CPU or a GPU).
 //! - [`rom`]: the reduced-order model (POD basis and Gaussian-process regression), the second
 //!   learned model beside the U-Net.
 //! - [`training`]: training (Adam, checkpoints, resume, fine-tuning), metrics, evaluation and the
@@ -46,7 +47,7 @@ pub use model::{LearnedModel, Method, Model, ModelPredictor, MODEL_FILE};
 pub use net::compute::Compute;
 pub use net::inference::InferenceNet;
 pub use net::predict::{time_prediction, Predictor, Timing};
-pub use net::unet::{TrainedModel, TrainingInfo, UNet, UNetConfig};
+pub use net::unet::{Gradients, TrainedModel, TrainingInfo, UNet, UNetConfig};
 pub use training::curve::CurveRow;
 pub use training::evaluation::{
     evaluate, evaluate_at_points, evaluation_input, uncertainty_coverage, write_grid_sample, PointErrors,
@@ -56,13 +57,3 @@ pub use training::train::{train, Initialization, TrainConfig, TrainOptions, Trai
 
 /// Result type of this crate.
 pub type Result<T> = std::result::Result<T, LearnError>;
-
-/// The device used for inference: burn's pure-Rust `flex` CPU backend.
-pub fn inference_device() -> burn::tensor::Device {
-    burn::tensor::Device::flex()
-}
-
-/// The device used for training: the `flex` CPU backend with autodiff enabled.
-pub fn training_device() -> burn::tensor::Device {
-    burn::tensor::Device::flex().autodiff()
-}

@@ -88,7 +88,7 @@ impl Model {
         if ReducedModel::is_rom_file(&json) {
             Ok(Model::Reduced(Arc::new(ReducedModel::load(&json)?)))
         } else {
-            Ok(Model::UNet(Arc::new(TrainedModel::load(&json, &crate::inference_device())?)))
+            Ok(Model::UNet(Arc::new(TrainedModel::load(&json)?)))
         }
     }
 

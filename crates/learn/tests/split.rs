@@ -5,8 +5,8 @@ mod common;
 
 use augsim_learn::training::train::MODEL_FILE;
 use augsim_learn::{
-    evaluate, inference_device, train, Compute, Corruption, GridShape, IndexSet, Initialization, Normalization,
-    Samples, Split, SplitPolicy, TrainConfig, TrainOptions, TrainedModel, UNetConfig,
+    evaluate, train, Compute, Corruption, GridShape, IndexSet, Initialization, Normalization, Samples, Split,
+    SplitPolicy, TrainConfig, TrainOptions, TrainedModel, UNetConfig,
 };
 use common::synthetic_sample;
 
@@ -117,7 +117,7 @@ fn models_record_their_split_and_evaluation_refuses_seen_samples() {
     let config = TrainConfig { iterations: 2, validate_every: 1, checkpoint_every: 2, ..TrainConfig::default() };
     let options = |name: &str| TrainOptions { test: split.test.clone(), ..TrainOptions::new(root.path().join(name)) };
     train(&train_set, &val, &init, &config, &options("a")).unwrap();
-    let model = TrainedModel::load(&root.path().join("a").join(MODEL_FILE), &inference_device()).unwrap();
+    let model = TrainedModel::load(&root.path().join("a").join(MODEL_FILE)).unwrap();
     assert_eq!(model.training.as_ref().unwrap().split, split);
     assert_eq!(model.held_out(&all).unwrap(), test);
 

@@ -6,9 +6,9 @@ mod common;
 use augsim_learn::training::metrics::{masked_mse_values, mean_euclidean_error};
 use augsim_learn::training::train::{CHECKPOINT_FILE, CURVE_CSV, MODEL_FILE};
 use augsim_learn::{
-    evaluate, evaluate_at_points, evaluation_input, inference_device, time_prediction, train, Compute, Corruption,
-    GridShape, Initialization, Normalization, Predictor, Samples, Sparsity, TrainConfig, TrainOptions, TrainedModel,
-    UNet, UNetConfig,
+    evaluate, evaluate_at_points, evaluation_input, time_prediction, train, Compute, Corruption, GridShape,
+    Initialization, Normalization, Predictor, Samples, Sparsity, TrainConfig, TrainOptions, TrainedModel, UNet,
+    UNetConfig,
 };
 use common::synthetic_samples;
 use mesh::embedding::Grid;
@@ -65,7 +65,7 @@ fn tiny_unet_overfits_a_handful_of_samples() {
         input_unit: "N".into(),
         target_unit: "m".into(),
         training: None,
-        net: UNet::new(unet, &inference_device(), config.seed).unwrap(),
+        net: UNet::new(unet, config.seed).unwrap(),
     };
     let (before, after) = (mse(&initial, &data), mse(&out.model, &data));
     assert!(after * 100.0 <= before, "masked MSE only fell from {before:e} to {after:e}");
@@ -74,7 +74,7 @@ fn tiny_unet_overfits_a_handful_of_samples() {
     let info = out.model.training.clone().unwrap();
     let best = out.curve.iter().filter_map(|r| r.val.map(|v| v.mean)).fold(f64::INFINITY, f64::min);
     assert_eq!(info.best_val_mean_error, Some(best));
-    let saved = TrainedModel::load(&dir.path().join(MODEL_FILE), &inference_device()).unwrap();
+    let saved = TrainedModel::load(&dir.path().join(MODEL_FILE)).unwrap();
     assert_eq!(saved.predict(data.input(0)).unwrap(), out.model.predict(data.input(0)).unwrap());
     let csv = std::fs::read_to_string(dir.path().join(CURVE_CSV)).unwrap();
     assert_eq!(csv.lines().count(), 4, "{csv}");
@@ -245,7 +245,7 @@ fn fine_tuning_with_a_frozen_encoder_leaves_it_unchanged() {
     let (pre_val, new_val) = (synthetic_samples(grid(), 20, 2), synthetic_samples(grid(), 60, 2));
     train(&pre_data, &pre_val, &scratch(2, 2, &pre_data), &config, &TrainOptions::new(&pre_dir)).unwrap();
     let pre_path = pre_dir.join(MODEL_FILE);
-    let pre = TrainedModel::load(&pre_path, &inference_device()).unwrap();
+    let pre = TrainedModel::load(&pre_path).unwrap();
 
     let finetune = |freeze: bool, name: &str| {
         let init = Initialization::FineTune { model: pre_path.clone(), freeze_encoder: freeze };
@@ -283,6 +283,7 @@ fn fine_tuning_with_a_frozen_encoder_leaves_it_unchanged() {
 /// burn's own kernels and autodiff ([`Compute::CpuBurn`]: the code path a GPU runs) train and
 /// predict as the repacked CPU engines do, up to rounding; a checkpoint written on one resumes on
 /// the other.
+#[cfg(feature = "cpu-burn")]
 #[test]
 fn burn_path_trains_and_predicts_as_the_cpu_engines_do() {
     let root = tempfile::tempdir().unwrap();
@@ -349,7 +350,7 @@ fn burn_path_trains_and_predicts_as_the_cpu_engines_do() {
 #[cfg(not(feature = "gpu"))]
 #[test]
 fn gpu_without_the_feature_is_a_clear_error() {
-    let e = Compute::Gpu.device().unwrap_err().to_string();
+    let e = Compute::Gpu.ensure_available().unwrap_err().to_string();
     assert!(e.contains("--features gpu"), "{e}");
     let root = tempfile::tempdir().unwrap();
     let data = synthetic_samples(grid(), 0, 2);
@@ -361,4 +362,32 @@ fn gpu_without_the_feature_is_a_clear_error() {
     assert_eq!("cpu-burn".parse::<Compute>().unwrap(), Compute::CpuBurn);
     let e = "tpu".parse::<Compute>().unwrap_err().to_string();
     assert!(e.contains("`cpu`, `gpu` or `cpu-burn`"), "{e}");
+}
+
+/// Asking for burn's CPU engine in a build without the `cpu-burn` feature is a clear error, in
+/// training and in prediction.
+#[cfg(not(feature = "cpu-burn"))]
+#[test]
+fn cpu_burn_without_the_feature_is_a_clear_error() {
+    let root = tempfile::tempdir().unwrap();
+    let data = synthetic_samples(grid(), 0, 2);
+    let options = TrainOptions { compute: Compute::CpuBurn, ..TrainOptions::new(root.path()) };
+    let e = train(&data, &Samples::new(grid()), &scratch(2, 1, &data), &TrainConfig::default(), &options)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("--features cpu-burn"), "{e}");
+    let Initialization::Scratch { unet, normalization, .. } = scratch(2, 1, &data) else { unreachable!() };
+    let model = TrainedModel {
+        config: unet.clone(),
+        normalization,
+        grid: grid(),
+        placement: None,
+        input_unit: "N".into(),
+        target_unit: "m".into(),
+        training: None,
+        net: UNet::new(&unet, 0).unwrap(),
+    };
+    let e = Predictor::new(&model, Compute::CpuBurn).err().unwrap().to_string();
+    assert!(e.contains("--features cpu-burn"), "{e}");
+    assert!(Compute::CpuBurn.describe().is_err());
 }

@@ -2,48 +2,68 @@
 
 mod common;
 
-use augsim_learn::{inference_device, GridPlacement, GridShape, Normalization, TrainedModel, UNet, UNetConfig};
-use burn::tensor::{Distribution, Tensor};
+use std::path::Path;
+
+use augsim_learn::{GridPlacement, GridShape, Normalization, TrainedModel, UNet, UNetConfig};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
 
 fn tiny(depth: usize) -> UNetConfig {
     UNetConfig { base_channels: 2, depth, ..UNetConfig::default() }
 }
 
+/// Seeded uniform values in [-1, 1).
+fn uniform(n: usize, seed: u64) -> Vec<f32> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
+}
+
 #[test]
 fn odd_grids_are_padded_and_cropped_back() {
-    let device = inference_device();
-    let net = UNet::new(&tiny(3), &device, 1).unwrap();
     assert_eq!(tiny(3).padded(21), 24);
     assert_eq!(tiny(3).padded(23), 24);
     assert_eq!(tiny(3).padded(24), 24);
-    let x = Tensor::<5>::random([2, 3, 21, 23, 21], Distribution::Uniform(-1.0, 1.0), &device);
-    assert_eq!(net.forward(x).dims(), [2, 3, 21, 23, 21]);
-    let x = Tensor::<5>::random([1, 3, 8, 8, 8], Distribution::Uniform(-1.0, 1.0), &device);
-    assert_eq!(net.forward(x).dims(), [1, 3, 8, 8, 8]);
-    let net1 = UNet::new(&tiny(1), &device, 1).unwrap();
-    let x = Tensor::<5>::random([1, 3, 5, 3, 7], Distribution::Uniform(-1.0, 1.0), &device);
-    assert_eq!(net1.forward(x).dims(), [1, 3, 5, 3, 7]);
+    for (depth, [nx, ny, nz]) in [(3, [21, 23, 21]), (3, [8, 8, 8]), (1, [5, 3, 7])] {
+        let net = UNet::new(&tiny(depth), 1).unwrap().to_inference().unwrap();
+        let grid = GridShape::new(nx, ny, nz);
+        let out = net.forward(&uniform(grid.field_len(), 2), grid).unwrap();
+        assert_eq!(out.len(), grid.field_len());
+        assert!(out.iter().all(|v| v.is_finite()) && out.iter().any(|v| *v != 0.0));
+    }
 }
 
 #[test]
 fn padding_does_not_leak_into_the_cropped_output_more_than_a_zero_input_would() {
     // The output on an odd grid equals the output on the grid explicitly zero-padded to the
     // multiple, cropped: the padding is plain zero padding.
-    let device = inference_device();
-    let net = UNet::new(&tiny(2), &device, 4).unwrap();
-    let x = Tensor::<5>::random([1, 3, 5, 6, 7], Distribution::Uniform(-1.0, 1.0), &device);
-    let direct = net.forward(x.clone()).into_data().try_to_vec::<f32>().unwrap();
-    let padded = Tensor::<5>::zeros([1, 3, 8, 8, 8], &device).slice_assign([0..1, 0..3, 0..5, 0..6, 0..7], x);
-    let full = net.forward(padded).slice([0..1, 0..3, 0..5, 0..6, 0..7]).into_data().try_to_vec::<f32>().unwrap();
-    assert_eq!(direct, full);
+    let net = UNet::new(&tiny(2), 4).unwrap().to_inference().unwrap();
+    let (small, full) = (GridShape::new(5, 6, 7), GridShape::new(8, 8, 8));
+    let x = uniform(small.field_len(), 5);
+    let direct = net.forward(&x, small).unwrap();
+    let mut padded = vec![0.0; full.field_len()];
+    let (n, m) = (small.nodes(), full.nodes());
+    for c in 0..3 {
+        for node in 0..n {
+            let [i, j, k] = small.node_coords(node);
+            padded[c * m + full.node_index(i, j, k)] = x[c * n + node];
+        }
+    }
+    let out = net.forward(&padded, full).unwrap();
+    let cropped: Vec<f32> = (0..3)
+        .flat_map(|c| (0..n).map(move |node| (c, node)))
+        .map(|(c, node)| {
+            let [i, j, k] = small.node_coords(node);
+            out[c * m + full.node_index(i, j, k)]
+        })
+        .collect();
+    assert_eq!(direct, cropped);
 }
 
 #[test]
 fn initialisation_is_seeded() {
-    let device = inference_device();
-    let a = UNet::new(&tiny(2), &device, 11).unwrap().named_parameters();
-    let b = UNet::new(&tiny(2), &device, 11).unwrap().named_parameters();
-    let c = UNet::new(&tiny(2), &device, 12).unwrap().named_parameters();
+    let a = UNet::new(&tiny(2), 11).unwrap().named_parameters();
+    let b = UNet::new(&tiny(2), 11).unwrap().named_parameters();
+    let c = UNet::new(&tiny(2), 12).unwrap().named_parameters();
     assert_eq!(a, b);
     assert_ne!(a, c);
     let names: Vec<&str> = a.iter().map(|(n, _)| n.as_str()).collect();
@@ -62,7 +82,6 @@ fn initialisation_is_seeded() {
 fn save_then_load_gives_identical_predictions() {
     let dir = tempfile::tempdir().unwrap();
     let grid = GridShape::new(9, 8, 7);
-    let device = inference_device();
     let config = tiny(2);
     let model = TrainedModel {
         config: config.clone(),
@@ -72,12 +91,12 @@ fn save_then_load_gives_identical_predictions() {
         input_unit: "N".into(),
         target_unit: "m".into(),
         training: None,
-        net: UNet::new(&config, &device, 3).unwrap(),
+        net: UNet::new(&config, 3).unwrap(),
     };
     let path = dir.path().join("m.json");
     model.save(&path).unwrap();
     assert!(dir.path().join("m.safetensors").exists());
-    let loaded = TrainedModel::load(&path, &device).unwrap();
+    let loaded = TrainedModel::load(&path).unwrap();
     assert_eq!(loaded.config, config);
     assert_eq!(loaded.normalization, model.normalization);
     assert_eq!(loaded.grid, grid);
@@ -94,9 +113,26 @@ fn save_then_load_gives_identical_predictions() {
     assert!(model.predict(&input[1..]).is_err());
     let json = std::fs::read_to_string(&path).unwrap();
     std::fs::write(&path, json.replace("\"base_channels\": 2", "\"base_channels\": 4")).unwrap();
-    let e = TrainedModel::load(&path, &device).unwrap_err().to_string();
+    let e = TrainedModel::load(&path).unwrap_err().to_string();
     assert!(e.contains("m.safetensors"), "{e}");
     std::fs::write(dir.path().join("m.safetensors"), b"garbage").unwrap();
     std::fs::write(&path, json).unwrap();
-    assert!(TrainedModel::load(&path, &device).is_err());
+    assert!(TrainedModel::load(&path).is_err());
+}
+
+/// The shipped models load, and their weights serialize back to the very bytes of their files.
+#[test]
+fn shipped_models_load_and_serialize_back_unchanged() {
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
+    for name in ["liver_ar", "liver_forces"] {
+        let dir = models.join(name);
+        let model = TrainedModel::load(&TrainedModel::json_path(&dir)).unwrap();
+        assert_eq!(model.net.config(), &model.config);
+        let bytes = std::fs::read(dir.join("model.safetensors")).unwrap();
+        assert!(model.net.to_safetensors().unwrap() == bytes, "{name}: weights serialize to other bytes");
+        let names: Vec<String> = model.net.named_parameters().into_iter().map(|(n, _)| n).collect();
+        assert_eq!(names.len(), 42);
+        assert_eq!(names[..3], ["encoder.0.conv1.weight", "encoder.0.conv1.bias", "encoder.0.conv2.weight"]);
+        assert_eq!(names[40..], ["head.weight", "head.bias"]);
+    }
 }

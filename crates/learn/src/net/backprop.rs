@@ -1,10 +1,11 @@
 //! Training gradients without autodiff: a forward pass that keeps the activations and a
 //! hand-written backward pass, both on the repacked CPU engine of [`crate::net::inference`].
 //!
-//! [`loss_and_gradients`] returns the masked MSE loss ([`masked_mse`](crate::training::metrics::masked_mse))
-//! of [`UNet::forward`] on a batch and the gradient of every trainable parameter, registered
-//! under the network's parameter ids, so that burn's optimiser takes them unchanged
-//! (`optim.step(lr, net, grads)`): checkpoints and Adam state are those of the autodiff path.
+//! [`loss_and_gradients`] returns the masked MSE loss
+//! ([`masked_mse_values`](crate::training::metrics::masked_mse_values)) of the network on a batch
+//! and the gradient of every trainable parameter, in the network's parameter order, for
+//! [`Adam::step`](crate::training::adam::Adam::step). They equal those of burn's autodiff (the
+//! `cpu-burn` feature's engine) up to summation order.
 //!
 //! Per layer, with activations channels-last and zero halos as in inference:
 //! - stride-1 convolution: the output gradient is zeroed where the (post-ReLU) output is not
@@ -29,16 +30,11 @@
 //!
 //! Samples run in parallel (rayon), with one gradient accumulator per thread, summed at the end;
 //! volumes are recycled through a small per-thread pool of buffers, since fresh allocations of
-//! their size cost page faults at every step. Parameters that do not require gradients (a frozen
-//! encoder) get none, and when no parameter of the contracting path requires one, its backward
-//! pass is skipped.
+//! their size cost page faults at every step. Parameters that are not trained (a frozen encoder)
+//! get no gradient, and then the backward pass of the contracting path is skipped.
 
 use std::cell::RefCell;
 
-use burn::module::{Param, ParamId};
-use burn::nn::conv::{Conv3d, ConvTranspose3d};
-use burn::optim::GradientsParams;
-use burn::tensor::{Device, Tensor, TensorData};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
 use rayon::prelude::*;
@@ -48,7 +44,7 @@ use crate::net::inference::{
     conv_layout, downsample, gather_patches, gather_plane, same_conv, tap_offsets, tap_view, upsample, Packed, Volume,
 };
 use crate::net::lanes::{has_avx512, vectorised};
-use crate::net::unet::{tensor_values, UNet};
+use crate::net::unet::{Gradients, LayerKind, LayerParams, Levels, UNet};
 use crate::net::winograd::{self, Winograd};
 use crate::{LearnError, Result};
 
@@ -56,12 +52,10 @@ use crate::{LearnError, Result};
 ///
 /// `inputs` is `[batch, in_channels, nx, ny, nz]`, `targets` `[batch, out_channels, nx, ny, nz]`
 /// and `masks` `[batch, 1, nx, ny, nz]` (weights, 0/1 in training), all in the grid layout,
-/// normalised as the network expects (as `train`'s batches are). The loss is
-/// [`masked_mse`](crate::training::metrics::masked_mse) of [`UNet::forward`]; the gradients equal burn's
-/// autodiff ones up to summation order, and are registered under the parameter ids of `net`
-/// (which must be on the training device, where its parameters require gradients) for
-/// [`ModuleOptimizer::step`](burn::optim::ModuleOptimizer::step). Parameters that do not
-/// require gradients (see [`UNet::freeze_encoder`]) are left out.
+/// normalised as the network expects (as `train`'s batches are). The loss is the mask-weighted
+/// mean over nodes of the squared error norm (as
+/// [`masked_mse_values`](crate::training::metrics::masked_mse_values)); parameters that are not
+/// trained (see [`UNet::freeze_encoder`]) get no gradient.
 pub fn loss_and_gradients(
     net: &UNet,
     inputs: &[f32],
@@ -69,7 +63,7 @@ pub fn loss_and_gradients(
     masks: &[f32],
     batch: usize,
     grid: GridShape,
-) -> Result<(f64, GradientsParams)> {
+) -> Result<(f64, Gradients)> {
     let prepared = Prepared::new(net, grid)?;
     let nodes = grid.nodes();
     let (c_in, c_out) = (prepared.in_channels, prepared.head.forward.c_out);
@@ -118,17 +112,15 @@ pub fn loss_and_gradients(
             (loss_a + loss_b, a)
         })
         .ok_or_else(|| LearnError::InvalidInput("gradients of an empty batch".into()))?;
-    Ok((loss / weight, prepared.register(grads)))
+    Ok((loss / weight, prepared.gradients(grads)))
 }
 
 /// Where one layer's gradients go.
 struct Slot {
-    /// The weight's id, when it requires a gradient.
-    weight: Option<ParamId>,
-    /// burn's weight shape.
+    /// Whether its parameters are trained.
+    trainable: bool,
+    /// The weight's shape.
     dims: [usize; 5],
-    /// The bias's id, when there is one and it requires a gradient.
-    bias: Option<ParamId>,
     /// Number of biases (output channels).
     biases: usize,
     /// The layout of the accumulated weight gradient: that of [`conv_layout`] with these
@@ -164,7 +156,7 @@ struct Layer {
     winograd: [Option<Winograd>; 2],
     /// Index of its [`Slot`] and [`Grad`].
     slot: usize,
-    /// Whether any of its parameters requires a gradient.
+    /// Whether its parameters are trained.
     trainable: bool,
 }
 
@@ -245,147 +237,89 @@ struct Prepared {
     decoder: Vec<[Layer; 2]>,
     head: Layer,
     slots: Vec<Slot>,
-    /// Whether a parameter of the contracting path requires a gradient.
+    /// Whether a parameter of the contracting path is trained.
     train_encoder: bool,
-    device: Device,
 }
 
-/// A layer to prepare.
-#[derive(Clone, Copy)]
-enum Spec<'a> {
-    /// A stride-1 convolution (kernel `k³`) whose input is the concatenation of that many
-    /// equal channel groups, on volumes of these sizes.
-    Same(&'a Conv3d, usize, [usize; 3]),
-    /// A 2×2×2 stride-2 convolution `[c_out, c_in, 2, 2, 2]`.
-    Down(&'a Conv3d),
-    /// A 2×2×2 stride-2 transposed convolution `[c_in, c_out, 2, 2, 2]`.
-    Up(&'a ConvTranspose3d),
-}
-
-fn values<const D: usize>(p: &Param<Tensor<D>>) -> Result<Vec<f32>> {
-    tensor_values(p.val())
-}
-
-/// Packs the layer of `spec` and describes its gradients (slot number `slot`).
-fn prepare(spec: Spec, slot: usize) -> Result<(Layer, Slot)> {
-    let (weight, bias) = match spec {
-        Spec::Same(c, ..) | Spec::Down(c) => (&c.weight, &c.bias),
-        Spec::Up(u) => (&u.weight, &u.bias),
-    };
-    let dims = weight.dims();
-    let values_w = values(weight)?;
-    let biases = if matches!(spec, Spec::Up(_)) { dims[1] } else { dims[0] };
-    let values_b = match bias {
-        Some(b) => values(b)?,
-        None => vec![0.0; biases],
-    };
-    let (forward, backward, layout) = match spec {
-        Spec::Same(_, parts, _) => {
-            let [c_out, c_in, kx, ky, kz] = dims;
-            if kx != ky || ky != kz || parts == 0 || c_in % parts != 0 {
-                return Err(LearnError::InvalidInput(format!(
-                    "convolution {c_out}x{c_in}x{kx}x{ky}x{kz} of {parts} parts"
-                )));
-            }
+/// Packs layer `p` (on volumes of `dims` interior nodes, for a stride-1 convolution) and
+/// describes its gradients.
+fn prepare(p: &LayerParams, dims: [usize; 3]) -> Result<(Layer, Slot)> {
+    let shape = p.layer.weight_shape();
+    let (weight, bias) = (p.weight, p.bias);
+    let (forward, backward, layout) = match p.layer.kind {
+        LayerKind::Conv { parts, .. } => {
+            let [c_out, c_in, kx, ky, kz] = shape;
             let taps = kx * ky * kz;
             let splits = vec![c_in / parts; parts];
             // `[c_in, c_out, taps]` with the taps reversed: the convolution from output to input.
-            let mut flipped = vec![0.0; values_w.len()];
+            let mut flipped = vec![0.0; weight.len()];
             for (ci, flipped) in flipped.chunks_exact_mut(c_out * taps).enumerate() {
                 for (co, flipped) in flipped.chunks_exact_mut(taps).enumerate() {
-                    let w = &values_w[(co * c_in + ci) * taps..][..taps];
+                    let w = &weight[(co * c_in + ci) * taps..][..taps];
                     for (f, w) in flipped.iter_mut().zip(w.iter().rev()) {
                         *f = *w;
                     }
                 }
             }
             (
-                Packed::conv(&values_w, &values_b, c_out, &splits, taps)?,
+                Packed::conv(weight, bias, c_out, &splits, taps)?,
                 Packed::conv(&flipped, &vec![0.0; c_in], c_in, &[c_out], taps)?,
                 (c_out, splits, taps),
             )
         }
-        Spec::Down(_) => {
-            let [c_out, c_in, ..] = dims;
+        LayerKind::Down => {
+            let [c_out, c_in, ..] = shape;
             (
-                Packed::conv(&values_w, &values_b, c_out, &[c_in], 8)?,
-                Packed::transposed(&values_w, &vec![0.0; c_in], c_out, c_in)?,
+                Packed::conv(weight, bias, c_out, &[c_in], 8)?,
+                Packed::transposed(weight, &vec![0.0; c_in], c_out, c_in)?,
                 (c_out, vec![c_in], 8),
             )
         }
-        Spec::Up(_) => {
-            let [c_in, c_out, ..] = dims;
+        LayerKind::Up => {
+            let [c_in, c_out, ..] = shape;
             (
-                Packed::transposed(&values_w, &values_b, c_in, c_out)?,
-                Packed::conv(&values_w, &vec![0.0; c_in], c_in, &[c_out], 8)?,
+                Packed::transposed(weight, bias, c_in, c_out)?,
+                Packed::conv(weight, &vec![0.0; c_in], c_in, &[c_out], 8)?,
                 (c_in, vec![c_out], 8),
             )
         }
     };
-    let slot_info = Slot {
-        weight: weight.is_require_grad().then_some(weight.id),
-        dims,
-        bias: bias.as_ref().filter(|b| b.is_require_grad()).map(|b| b.id),
-        biases,
-        layout,
-    };
-    let trainable = slot_info.weight.is_some() || slot_info.bias.is_some();
+    let slot = Slot { trainable: p.trainable, dims: shape, biases: p.layer.c_out, layout };
     // The Winograd transforms where the loops pay on the layer's volumes (see `conv`).
-    let fast = match spec {
-        Spec::Same(_, _, dims) => has_avx512() && winograd::tiles_pay(dims),
-        _ => false,
-    };
+    let fast = matches!(p.layer.kind, LayerKind::Conv { .. }) && has_avx512() && winograd::tiles_pay(dims);
     let transform = |p: &Packed| (fast && p.taps == 27).then(|| Winograd::new(&p.parts, p.c_out)).flatten();
     let winograd = [transform(&forward), transform(&backward)];
-    Ok((Layer { forward, backward, winograd, slot, trainable }, slot_info))
-}
-
-/// The next `N` prepared layers.
-fn take<const N: usize>(layers: &mut impl Iterator<Item = Layer>) -> Result<[Layer; N]> {
-    let taken: Vec<Layer> = layers.take(N).collect();
-    taken.try_into().map_err(|_| LearnError::InvalidInput("U-Net layers missing".into()))
+    Ok((Layer { forward, backward, winograd, slot: p.index, trainable: p.trainable }, slot))
 }
 
 impl Prepared {
     /// Packs every layer (in parallel) for inputs on `grid`.
     fn new(net: &UNet, grid: GridShape) -> Result<Prepared> {
-        let layers = net.layers();
-        let depth = layers.encoder.len();
+        let levels = net.levels()?;
+        let depth = net.depth();
         let m = 1usize << depth;
         let padded = grid.dims().map(|n| n.div_ceil(m) * m);
         let level = |l: usize| padded.map(|n| n >> l);
+        // Each layer with the size of its volumes, in layer order.
         let mut specs = Vec::new();
-        for (l, b) in layers.encoder.iter().enumerate() {
-            specs.extend([Spec::Same(b[0], 1, level(l)), Spec::Same(b[1], 1, level(l))]);
+        for (l, b) in levels.encoder.iter().enumerate() {
+            specs.extend(b.iter().map(|p| (p, level(l))));
         }
-        specs.extend(layers.down.iter().map(|d| Spec::Down(d)));
-        let bottom = level(depth);
-        specs.extend([Spec::Same(layers.bottleneck[0], 1, bottom), Spec::Same(layers.bottleneck[1], 1, bottom)]);
-        specs.extend(layers.up.iter().map(|u| Spec::Up(u)));
-        for (l, b) in layers.decoder.iter().enumerate() {
-            specs.extend([Spec::Same(b[0], 2, level(l)), Spec::Same(b[1], 1, level(l))]);
+        specs.extend(levels.down.iter().enumerate().map(|(l, p)| (p, level(l))));
+        specs.extend(levels.bottleneck.iter().map(|p| (p, level(depth))));
+        specs.extend(levels.up.iter().enumerate().map(|(l, p)| (p, level(l))));
+        for (l, b) in levels.decoder.iter().enumerate() {
+            specs.extend(b.iter().map(|p| (p, level(l))));
         }
-        specs.push(Spec::Same(layers.head, 1, padded));
-        let prepared =
-            specs.into_par_iter().enumerate().map(|(i, spec)| prepare(spec, i)).collect::<Result<Vec<_>>>()?;
+        specs.push((&levels.head, padded));
+        let prepared = specs.into_par_iter().map(|(p, dims)| prepare(p, dims)).collect::<Result<Vec<_>>>()?;
         let (built, slots): (Vec<Layer>, Vec<Slot>) = prepared.into_iter().unzip();
-        let mut built = built.into_iter();
-        let encoder = (0..depth).map(|_| take::<2>(&mut built)).collect::<Result<Vec<_>>>()?;
-        let down = (0..depth).map(|_| take::<1>(&mut built).map(|[l]| l)).collect::<Result<Vec<_>>>()?;
-        let bottleneck = take::<2>(&mut built)?;
-        let up = (0..depth).map(|_| take::<1>(&mut built).map(|[l]| l)).collect::<Result<Vec<_>>>()?;
-        let decoder = (0..depth).map(|_| take::<2>(&mut built)).collect::<Result<Vec<_>>>()?;
-        let [head] = take::<1>(&mut built)?;
+        let Levels { encoder, down, bottleneck, up, decoder, head } = Levels::new(depth, built)?;
         let train_encoder = encoder.iter().flatten().chain(&down).chain(&bottleneck).any(|l| l.trainable);
-        if !train_encoder && up.iter().chain(decoder.iter().flatten()).chain([&head]).all(|l| !l.trainable) {
-            return Err(LearnError::InvalidInput(
-                "no parameter requires a gradient (is the network on the training device?)".into(),
-            ));
-        }
         Ok(Prepared {
-            kernel: layers.bottleneck[0].weight.dims()[2],
+            kernel: net.config().kernel_size,
             padded,
-            in_channels: encoder.first().unwrap_or(&bottleneck)[0].forward.c_in,
+            in_channels: net.config().in_channels,
             encoder,
             down,
             bottleneck,
@@ -394,7 +328,6 @@ impl Prepared {
             head,
             slots,
             train_encoder,
-            device: layers.head.weight.val().device(),
         })
     }
 
@@ -412,7 +345,7 @@ impl Prepared {
         [mid, out]
     }
 
-    /// The forward pass of one sample (as [`UNet::forward`], padded).
+    /// The forward pass of one sample (as [`InferenceNet::forward`](crate::InferenceNet::forward), padded).
     fn forward(&self, input: Volume) -> Activations {
         let depth = self.encoder.len();
         let (mut encoder, mut down) = (Vec::with_capacity(depth), Vec::with_capacity(depth));
@@ -521,37 +454,24 @@ impl Prepared {
         spent
     }
 
-    /// The summed gradients as burn tensors under the parameter ids.
-    fn register(&self, grads: Vec<Grad>) -> GradientsParams {
-        type Entry<const D: usize> = Option<(ParamId, Tensor<D>)>;
-        let tensors: Vec<(Entry<5>, Entry<1>)> = self
+    /// The summed gradients in the parameter order and layouts of the network: per layer its
+    /// weight (reordered from the packed layout) and its bias, `None` for frozen layers.
+    fn gradients(&self, grads: Vec<Grad>) -> Gradients {
+        let per_layer: Vec<[Option<Vec<f32>>; 2]> = self
             .slots
             .par_iter()
             .zip(grads)
             .map(|(slot, g)| {
-                let weight = slot.weight.map(|id| {
-                    let mut values = vec![0.0; g.weight.len()];
-                    let (c_out, splits, taps) = &slot.layout;
-                    conv_layout(*c_out, splits, *taps, |w, p| values[w] = g.weight[p]);
-                    (id, Tensor::<5>::from_data(TensorData::new(values, slot.dims), &self.device).inner())
-                });
-                let n = g.bias.len();
-                let bias = slot
-                    .bias
-                    .map(|id| (id, Tensor::<1>::from_data(TensorData::new(g.bias, [n]), &self.device).inner()));
-                (weight, bias)
+                if !slot.trainable {
+                    return [None, None];
+                }
+                let mut weight = vec![0.0; g.weight.len()];
+                let (c_out, splits, taps) = &slot.layout;
+                conv_layout(*c_out, splits, *taps, |w, p| weight[w] = g.weight[p]);
+                [Some(weight), Some(g.bias)]
             })
             .collect();
-        let mut out = GradientsParams::new();
-        for (weight, bias) in tensors {
-            if let Some((id, t)) = weight {
-                out.register(id, t);
-            }
-            if let Some((id, t)) = bias {
-                out.register(id, t);
-            }
-        }
-        out
+        Gradients(per_layer.into_iter().flatten().collect())
     }
 }
 

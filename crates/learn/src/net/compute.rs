@@ -1,4 +1,4 @@
-//! Where the network runs: the CPU engines (default) or a GPU through burn.
+//! Where the network runs: the CPU engines (default) or burn, on a GPU or the CPU.
 //!
 //! * [`Compute::Cpu`]: prediction by the repacked GEMM engine ([`InferenceNet`](crate::InferenceNet)),
 //!   training by the hand-written backward pass ([`backprop`](crate::net::backprop)). Always available.
@@ -8,13 +8,15 @@
 //!   it is an error that says so.
 //! * [`Compute::CpuBurn`]: burn's own kernels and autodiff on the CPU (`flex`): the code path the
 //!   GPU runs, on any machine. Slower than [`Compute::Cpu`]; it is there to check that path
-//!   (tests compare it with the CPU engines) and as a fallback.
+//!   (tests compare it with the CPU engines) and as a fallback. Needs the `cpu-burn` cargo
+//!   feature (off by default; `gpu` implies it); otherwise choosing it is an error that says so.
 //!
 //! Weights, optimiser state and checkpoints are the same whichever runs them.
 
 use std::fmt;
 use std::str::FromStr;
 
+#[cfg(feature = "cpu-burn")]
 use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
@@ -29,7 +31,7 @@ pub enum Compute {
     Cpu,
     /// burn on a GPU through wgpu (`gpu` feature).
     Gpu,
-    /// burn's own kernels on the CPU: the GPU's code path, without a GPU.
+    /// burn's own kernels on the CPU: the GPU's code path, without a GPU (`cpu-burn` feature).
     CpuBurn,
 }
 
@@ -39,16 +41,28 @@ impl Compute {
         self != Compute::Cpu
     }
 
-    /// The burn device that holds the network: the GPU for [`Compute::Gpu`], else the CPU
+    /// Fails, saying which cargo feature to build with or which driver to install, when this
+    /// is not built in or (the GPU) not found.
+    pub fn ensure_available(self) -> Result<()> {
+        match self {
+            Compute::Cpu => Ok(()),
+            Compute::CpuBurn => cpu_burn_available(),
+            Compute::Gpu => gpu_available(),
+        }
+    }
+
+    /// The burn device that runs the network: the GPU for [`Compute::Gpu`], else the CPU
     /// (`flex`). An error when the GPU is asked for but not built in or not found.
+    #[cfg(feature = "cpu-burn")]
     pub fn device(self) -> Result<Device> {
         match self {
-            Compute::Cpu | Compute::CpuBurn => Ok(crate::inference_device()),
+            Compute::Cpu | Compute::CpuBurn => Ok(Device::flex()),
             Compute::Gpu => gpu_device(),
         }
     }
 
     /// [`device`](Self::device) with autodiff, for training.
+    #[cfg(feature = "cpu-burn")]
     pub fn training_device(self) -> Result<Device> {
         Ok(self.device()?.autodiff())
     }
@@ -58,7 +72,7 @@ impl Compute {
     pub fn describe(self) -> Result<String> {
         match self {
             Compute::Cpu => Ok("cpu (repacked engines)".into()),
-            Compute::CpuBurn => Ok("cpu (burn flex)".into()),
+            Compute::CpuBurn => cpu_burn_available().map(|()| "cpu (burn flex)".into()),
             Compute::Gpu => gpu_name(),
         }
     }
@@ -89,6 +103,25 @@ impl FromStr for Compute {
     }
 }
 
+#[cfg(feature = "cpu-burn")]
+fn cpu_burn_available() -> Result<()> {
+    Ok(())
+}
+
+#[cfg(not(feature = "cpu-burn"))]
+fn cpu_burn_available() -> Result<()> {
+    Err(LearnError::InvalidInput(
+        "this augsim was built without burn's CPU engine: rebuild with `cargo build --release --features cpu-burn` \
+         (or `--features gpu`), or use --device cpu"
+            .into(),
+    ))
+}
+
+#[cfg(feature = "gpu")]
+fn gpu_available() -> Result<()> {
+    gpu_device().map(drop)
+}
+
 #[cfg(feature = "gpu")]
 fn gpu_device() -> Result<Device> {
     use burn::tensor::{DeviceKind, DeviceType};
@@ -111,7 +144,7 @@ fn gpu_name() -> Result<String> {
 }
 
 #[cfg(not(feature = "gpu"))]
-fn gpu_device() -> Result<Device> {
+fn gpu_available() -> Result<()> {
     Err(LearnError::InvalidInput(
         "this augsim was built without GPU support: rebuild with `cargo build --release --features gpu` \
          (burn's wgpu backend), or use --device cpu"
@@ -119,7 +152,13 @@ fn gpu_device() -> Result<Device> {
     ))
 }
 
+/// Without the `gpu` feature: the error that says so.
+#[cfg(all(feature = "cpu-burn", not(feature = "gpu")))]
+fn gpu_device() -> Result<Device> {
+    gpu_available().map(|()| Device::flex())
+}
+
 #[cfg(not(feature = "gpu"))]
 fn gpu_name() -> Result<String> {
-    gpu_device().map(|_| String::new())
+    gpu_available().map(|()| String::new())
 }

@@ -1,15 +1,17 @@
-//! The network: the 3D U-Net ([`unet`], its architecture documented there and in
-//! `docs/method.md`) and the engines that run it.
+//! The network: the 3D U-Net ([`unet`]: its architecture, documented there and in
+//! `docs/method.md`, and its parameters) and the engines that run it.
 //!
-//! Four engines compute the same network from the same weights:
-//! - burn's own kernels and autodiff on the CPU (`flex`) — [`unet`];
-//! - burn on a GPU through wgpu (the `gpu` feature) — [`unet`], selected by [`compute`];
+//! Four engines compute the same network from the same parameters:
 //! - the repacked CPU inference engine (channels-last GEMMs, Winograd) — [`inference`];
-//! - the hand-written CPU backward pass used for training — [`backprop`].
+//! - the hand-written CPU backward pass used for training — [`backprop`];
+//! - burn's own kernels and autodiff on the CPU (`flex`; the `cpu-burn` feature) — `burn_unet`;
+//! - burn on a GPU through wgpu (the `gpu` feature) — `burn_unet`.
 //!
 //! [`compute`] chooses among them; [`predict`] times single predictions.
 
 pub mod backprop;
+#[cfg(feature = "cpu-burn")]
+pub mod burn_unet;
 pub mod compute;
 pub mod inference;
 pub(crate) mod lanes;

@@ -1,9 +1,8 @@
 //! Single predictions and prediction timing.
 
-use std::path::Path;
 use std::time::Instant;
 
-use burn::module::Module;
+#[cfg(feature = "cpu-burn")]
 use burn::tensor::{Device, Tensor, TensorData};
 use mesh::embedding::Grid;
 use mesh::Mesh;
@@ -11,14 +10,16 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::dataset::Normalization;
 use crate::data::grid::{GridShape, GridToMesh};
+#[cfg(feature = "cpu-burn")]
+use crate::net::burn_unet::{tensor_values, BurnUNet};
 use crate::net::inference::InferenceNet;
-use crate::net::unet::{tensor_values, TrainedModel, UNet};
+use crate::net::unet::{TrainedModel, UNet};
 use crate::Compute;
 use crate::{LearnError, Result};
 
 /// A trained model ready for repeated predictions, with its normalisation and grid: on the CPU
 /// its network repacked once for fast inference ([`InferenceNet`]), otherwise burn's network on
-/// the chosen device ([`Compute`]).
+/// the chosen device ([`Compute`], with the `cpu-burn` feature).
 pub struct Predictor {
     engine: Engine,
     normalization: Normalization,
@@ -32,37 +33,32 @@ enum Engine {
     /// The repacked CPU engine.
     Repacked(InferenceNet),
     /// burn's network on `device` (a GPU, or burn's CPU backend).
-    Burn { net: UNet, device: Device },
+    #[cfg(feature = "cpu-burn")]
+    Burn { net: BurnUNet, device: Device },
 }
 
 impl Predictor {
     /// Prepares `model` for prediction on `compute`: repacks it for the CPU engine, or copies
-    /// its weights to burn's device (an error when that device is not available).
+    /// its weights to burn's device (an error when that device is not built in or available).
     pub fn new(model: &TrainedModel, compute: Compute) -> Result<Predictor> {
-        if !compute.uses_burn() {
-            return Predictor::from_net(&model.net, compute, model.normalization, model.grid);
-        }
-        let net = model.net.copied_to(&model.config, &compute.device()?, Path::new("(model in memory)"))?;
-        Predictor::from_net(&net, compute, model.normalization, model.grid)
+        Predictor::from_net(&model.net, compute, model.normalization, model.grid)
     }
 
-    /// A predictor of `net` (for burn's engines already on `compute`'s device, as training
-    /// keeps it).
+    /// A predictor of `net` on `compute`.
     pub(crate) fn from_net(
         net: &UNet,
         compute: Compute,
         normalization: Normalization,
         grid: GridShape,
     ) -> Result<Predictor> {
-        let engine = if compute.uses_burn() {
-            let device = net.devices().into_iter().next().ok_or_else(|| {
-                LearnError::InvalidInput("the network has no parameters, so no device to run on".into())
-            })?;
-            Engine::Burn { net: net.clone(), device }
-        } else {
-            Engine::Repacked(net.to_inference()?)
-        };
-        Ok(Predictor { engine, normalization, grid })
+        compute.ensure_available()?;
+        #[cfg(feature = "cpu-burn")]
+        if compute.uses_burn() {
+            let device = compute.device()?;
+            let engine = Engine::Burn { net: BurnUNet::new(net, &device)?, device };
+            return Ok(Predictor { engine, normalization, grid });
+        }
+        Ok(Predictor { engine: Engine::Repacked(net.to_inference()?), normalization, grid })
     }
 
     /// Predicts the displacement field (m, `[3, nx, ny, nz]`) for one input field (`[3, nx, ny,
@@ -90,6 +86,7 @@ impl Predictor {
     fn forward_normalized(&self, x: Vec<f32>) -> Result<Vec<f32>> {
         match &self.engine {
             Engine::Repacked(net) => net.forward(&x, self.grid),
+            #[cfg(feature = "cpu-burn")]
             Engine::Burn { net, device } => {
                 let [nx, ny, nz] = self.grid.dims();
                 let c = x.len() / self.grid.nodes();

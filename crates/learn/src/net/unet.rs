@@ -1,33 +1,30 @@
-//! The 3D U-Net and the saved-model bundle.
+//! The 3D U-Net: its architecture, its parameters and the saved-model bundle.
 //!
-//! The architecture is described once, in `docs/method.md` (section 5.2); every engine ([`UNet`]
-//! here, [`crate::InferenceNet`], the backward pass of [`crate::net::backprop`]) and
-//! `python/augsim_unet.py` follow it.
+//! The architecture is described once, in `docs/method.md` (section 5.2), and in code by
+//! [`UNetConfig::layers`]: every engine ([`crate::InferenceNet`], the backward pass of
+//! [`crate::net::backprop`], burn's network of `burn_unet` with the `cpu-burn` feature) builds
+//! its layers from that list, and `python/augsim_unet.py` follows it.
 //!
-//! A saved model is a JSON file (configuration, normalisation, grid, units, training summary)
-//! and a safetensors file of the weights beside it.
+//! [`UNet`] holds the parameters: one named `f32` tensor per weight and bias, in the order of the
+//! layers (`encoder.0.conv1.weight`, `encoder.0.conv1.bias`, ...). A saved model is a JSON file
+//! (configuration, normalisation, grid, units, training summary) and a safetensors file of those
+//! tensors beside it.
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
-use burn::nn::conv::{Conv3d, Conv3dConfig, ConvTranspose3d, ConvTranspose3dConfig};
-use burn::nn::{Initializer, PaddingConfig3d};
-use burn::store::{ModuleSnapshot, SafetensorsStore};
-use burn::tensor::activation::relu;
-use burn::tensor::ops::PadMode;
-use burn::tensor::{Device, Tensor, TensorData};
 use mesh::io::write_atomic_bytes;
-
-use crate::data::corrupt::Corruption;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
+use safetensors::tensor::{Dtype, SafeTensors, TensorView};
 use serde::{Deserialize, Serialize};
 
+use crate::data::corrupt::Corruption;
 use crate::data::dataset::{Normalization, Samples};
 use crate::data::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::data::split::{Provenance, SampleRole, Split};
 use crate::fsutil::read;
-use crate::net::inference::{Block, InferenceNet, Packed};
+use crate::net::inference::{InferenceNet, Packed};
 use crate::{LearnError, Result};
 
 /// U-Net hyper-parameters.
@@ -77,172 +74,229 @@ impl UNetConfig {
     pub fn padded(&self, n: usize) -> usize {
         n.div_ceil(self.pad_multiple()) * self.pad_multiple()
     }
+
+    /// The layers, in parameter order: the two convolutions of each encoder level, the
+    /// down-sampling convolutions, the bottleneck's two convolutions, the up-sampling
+    /// convolutions, the two convolutions of each decoder level (level 0 first) and the head.
+    pub(crate) fn layers(&self) -> Vec<Layer> {
+        let (k, depth) = (self.kernel_size, self.depth);
+        let ch = |l: usize| self.base_channels << l;
+        let level_in = |l: usize| if l == 0 { self.in_channels } else { ch(l - 1) };
+        let layer = |name: String, kind: LayerKind, c_in: usize, c_out: usize| Layer { name, kind, c_in, c_out };
+        let conv = |parts: usize| LayerKind::Conv { kernel: k, parts };
+        let mut layers = Vec::with_capacity(6 * depth + 3);
+        for l in 0..depth {
+            layers.push(layer(format!("encoder.{l}.conv1"), conv(1), level_in(l), ch(l)));
+            layers.push(layer(format!("encoder.{l}.conv2"), conv(1), ch(l), ch(l)));
+        }
+        layers.extend((0..depth).map(|l| layer(format!("down.{l}"), LayerKind::Down, ch(l), ch(l))));
+        layers.push(layer("bottleneck.conv1".into(), conv(1), level_in(depth), ch(depth)));
+        layers.push(layer("bottleneck.conv2".into(), conv(1), ch(depth), ch(depth)));
+        layers.extend((0..depth).map(|l| layer(format!("up.{l}"), LayerKind::Up, ch(l + 1), ch(l))));
+        for l in 0..depth {
+            layers.push(layer(format!("decoder.{l}.conv1"), conv(2), 2 * ch(l), ch(l)));
+            layers.push(layer(format!("decoder.{l}.conv2"), conv(1), ch(l), ch(l)));
+        }
+        layers.push(layer("head".into(), LayerKind::Conv { kernel: 1, parts: 1 }, ch(0), self.out_channels));
+        layers
+    }
 }
 
-/// Two convolutions with ReLU.
-#[derive(Module, Debug)]
-struct ConvBlock {
-    conv1: Conv3d,
-    conv2: Conv3d,
+/// What a layer computes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum LayerKind {
+    /// A stride-1 convolution of size `kernel³` with zero padding `kernel / 2`, whose input is the
+    /// concatenation of `parts` equal channel groups (the decoder's up-sampled and skip features);
+    /// a ReLU follows, except after the head.
+    Conv {
+        /// Kernel size.
+        kernel: usize,
+        /// Input channel groups.
+        parts: usize,
+    },
+    /// A 2×2×2 stride-2 convolution (down-sampling).
+    Down,
+    /// A 2×2×2 stride-2 transposed convolution (up-sampling).
+    Up,
 }
 
-impl ConvBlock {
-    fn new(c_in: usize, c_out: usize, k: usize, device: &Device) -> Self {
-        let conv = |a: usize, b: usize| {
-            Conv3dConfig::new([a, b], [k, k, k])
-                .with_padding(PaddingConfig3d::Explicit(k / 2, k / 2, k / 2))
-                .with_initializer(Initializer::Zeros)
-                .init(device)
-        };
-        ConvBlock { conv1: conv(c_in, c_out), conv2: conv(c_out, c_out) }
+/// One layer of the U-Net: its parameters are `{name}.weight` and `{name}.bias`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct Layer {
+    /// The parameter path prefix (`encoder.0.conv1`, `down.1`, `head`, ...).
+    pub(crate) name: String,
+    /// What it computes.
+    pub(crate) kind: LayerKind,
+    /// Input channels.
+    pub(crate) c_in: usize,
+    /// Output channels.
+    pub(crate) c_out: usize,
+}
+
+impl Layer {
+    /// The weight's shape: `[c_out, c_in, k, k, k]` for a convolution, `[c_in, c_out, 2, 2, 2]`
+    /// for the transposed one (burn's and PyTorch's layouts).
+    pub(crate) fn weight_shape(&self) -> [usize; 5] {
+        match self.kind {
+            LayerKind::Conv { kernel: k, .. } => [self.c_out, self.c_in, k, k, k],
+            LayerKind::Down => [self.c_out, self.c_in, 2, 2, 2],
+            LayerKind::Up => [self.c_in, self.c_out, 2, 2, 2],
+        }
     }
 
-    fn forward(&self, x: Tensor<5>) -> Tensor<5> {
-        relu(self.conv2.forward(relu(self.conv1.forward(x))))
+    /// Whether it belongs to the contracting path (frozen by [`UNet::freeze_encoder`]).
+    fn in_encoder(&self) -> bool {
+        UNet::is_encoder_parameter(&self.name)
     }
 }
 
-/// The 3D U-Net (see the module documentation).
-#[derive(Module, Debug)]
+/// One item per layer, grouped as the U-Net's structure.
+pub(crate) struct Levels<T> {
+    /// The two convolutions of each encoder level.
+    pub(crate) encoder: Vec<[T; 2]>,
+    /// The down-sampling convolutions.
+    pub(crate) down: Vec<T>,
+    /// The bottleneck's two convolutions.
+    pub(crate) bottleneck: [T; 2],
+    /// The up-sampling convolutions, by level.
+    pub(crate) up: Vec<T>,
+    /// The two convolutions of each decoder level, by level.
+    pub(crate) decoder: Vec<[T; 2]>,
+    /// The 1×1×1 output convolution.
+    pub(crate) head: T,
+}
+
+impl<T> Levels<T> {
+    /// Groups the items of a network of `depth` levels, given in the order of
+    /// [`UNetConfig::layers`].
+    pub(crate) fn new(depth: usize, items: impl IntoIterator<Item = T>) -> Result<Levels<T>> {
+        let mut items = items.into_iter();
+        let mut take = || items.next().ok_or_else(|| LearnError::InvalidInput("U-Net layers missing".into()));
+        let encoder = (0..depth).map(|_| Ok([take()?, take()?])).collect::<Result<Vec<_>>>()?;
+        let down = (0..depth).map(|_| take()).collect::<Result<Vec<_>>>()?;
+        let bottleneck = [take()?, take()?];
+        let up = (0..depth).map(|_| take()).collect::<Result<Vec<_>>>()?;
+        let decoder = (0..depth).map(|_| Ok([take()?, take()?])).collect::<Result<Vec<_>>>()?;
+        let head = take()?;
+        if items.next().is_some() {
+            return Err(LearnError::InvalidInput("more layers than a U-Net of this depth has".into()));
+        }
+        Ok(Levels { encoder, down, bottleneck, up, decoder, head })
+    }
+}
+
+/// A layer with its parameters, as [`UNet::levels`] gives them.
+pub(crate) struct LayerParams<'a> {
+    /// The layer.
+    pub(crate) layer: &'a Layer,
+    /// Its weight, in the layout of [`Layer::weight_shape`].
+    pub(crate) weight: &'a [f32],
+    /// Its bias (`c_out` values).
+    pub(crate) bias: &'a [f32],
+    /// Whether its parameters are trained (not those of a frozen encoder).
+    pub(crate) trainable: bool,
+    /// Its position in [`UNetConfig::layers`]: its weight is parameter `2 · index`, its bias
+    /// `2 · index + 1`.
+    pub(crate) index: usize,
+}
+
+/// The parameters of a 3D U-Net (see the module documentation).
+#[derive(Clone, Debug, PartialEq)]
 pub struct UNet {
-    encoder: Vec<ConvBlock>,
-    down: Vec<Conv3d>,
-    bottleneck: ConvBlock,
-    up: Vec<ConvTranspose3d>,
-    decoder: Vec<ConvBlock>,
-    head: Conv3d,
+    config: UNetConfig,
+    layers: Vec<Layer>,
+    /// Parameter `2 i` is the weight of layer `i`, `2 i + 1` its bias.
+    values: Vec<Vec<f32>>,
+    frozen_encoder: bool,
 }
 
 /// Parameter-path prefixes of the contracting path (frozen by [`UNet::freeze_encoder`]).
 const ENCODER_PREFIXES: [&str; 3] = ["encoder.", "down.", "bottleneck."];
 
-/// The values of a float tensor, read back from its device.
-pub(crate) fn tensor_values<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>> {
-    t.into_data().try_into_vec_as::<f32>().map_err(|e| LearnError::InvalidInput(format!("cannot read a tensor: {e:?}")))
-}
-
 impl UNet {
-    /// A new network on `device`, with weights drawn from a generator seeded by `seed`
-    /// (He-uniform weights, zero biases), independent of the backend's global random state.
-    pub fn new(config: &UNetConfig, device: &Device, seed: u64) -> Result<UNet> {
-        config.validate()?;
-        let k = config.kernel_size;
-        let ch = |l: usize| config.base_channels << l;
-        let zeros = Initializer::Zeros;
-        let mut encoder = Vec::new();
-        let mut down = Vec::new();
-        let mut up = Vec::new();
-        let mut decoder = Vec::new();
-        for l in 0..config.depth {
-            let c_in = if l == 0 { config.in_channels } else { ch(l - 1) };
-            encoder.push(ConvBlock::new(c_in, ch(l), k, device));
-            down.push(
-                Conv3dConfig::new([ch(l), ch(l)], [2, 2, 2])
-                    .with_stride([2, 2, 2])
-                    .with_initializer(zeros.clone())
-                    .init(device),
-            );
-            up.push(
-                ConvTranspose3dConfig::new([ch(l + 1), ch(l)], [2, 2, 2])
-                    .with_stride([2, 2, 2])
-                    .with_initializer(zeros.clone())
-                    .init(device),
-            );
-            decoder.push(ConvBlock::new(2 * ch(l), ch(l), k, device));
+    /// A new network with weights drawn from a generator seeded by `seed`: He-uniform weights
+    /// (bound `√(6 / fan_in)`, fan-in from the weight's second dimension times the kernel
+    /// volume, as PyTorch does), drawn layer after layer in parameter order, and zero biases.
+    pub fn new(config: &UNetConfig, seed: u64) -> Result<UNet> {
+        let mut net = UNet::zeros(config)?;
+        let mut rng = StdRng::seed_from_u64(seed);
+        for (layer, weight) in net.layers.iter().zip(net.values.iter_mut().step_by(2)) {
+            let dims = layer.weight_shape();
+            let bound = (6.0 / (dims[1] * dims[2..].iter().product::<usize>()) as f64).sqrt();
+            weight.iter_mut().for_each(|w| *w = rng.random_range(-bound..bound) as f32);
         }
-        let bottleneck_in = if config.depth == 0 { config.in_channels } else { ch(config.depth - 1) };
-        let bottleneck = ConvBlock::new(bottleneck_in, ch(config.depth), k, device);
-        let head = Conv3dConfig::new([ch(0), config.out_channels], [1, 1, 1]).with_initializer(zeros).init(device);
-        let net = UNet { encoder, down, bottleneck, up, decoder, head };
-        Ok(net.map(&mut SeededInit { rng: StdRng::seed_from_u64(seed), fan_in: 1 }))
+        Ok(net)
+    }
+
+    /// A network of `config` with every parameter zero.
+    fn zeros(config: &UNetConfig) -> Result<UNet> {
+        config.validate()?;
+        let layers = config.layers();
+        let values =
+            layers.iter().flat_map(|l| [vec![0.0; l.weight_shape().iter().product()], vec![0.0; l.c_out]]).collect();
+        Ok(UNet { config: config.clone(), layers, values, frozen_encoder: false })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &UNetConfig {
+        &self.config
     }
 
     /// Number of down steps.
     pub fn depth(&self) -> usize {
-        self.encoder.len()
+        self.config.depth
     }
 
-    /// Runs the network on a batch `[batch, in_channels, nx, ny, nz]` (any grid size; padded
-    /// internally) and returns `[batch, out_channels, nx, ny, nz]`.
-    pub fn forward(&self, x: Tensor<5>) -> Tensor<5> {
-        let [batch, _, nx, ny, nz] = x.dims();
-        let m = 1usize << self.depth();
-        let pad = |n: usize| n.div_ceil(m) * m - n;
-        let (px, py, pz) = (pad(nx), pad(ny), pad(nz));
-        let mut h = if px + py + pz > 0 { x.pad([(0, px), (0, py), (0, pz)], PadMode::Constant(0.0)) } else { x };
-        let mut skips = Vec::with_capacity(self.depth());
-        for (block, down) in self.encoder.iter().zip(&self.down) {
-            h = block.forward(h);
-            skips.push(h.clone());
-            h = down.forward(h);
-        }
-        h = self.bottleneck.forward(h);
-        for l in (0..self.depth()).rev() {
-            h = self.up[l].forward(h);
-            h = Tensor::cat(vec![h, skips[l].clone()], 1);
-            h = self.decoder[l].forward(h);
-        }
-        let out = self.head.forward(h);
-        let channels = out.dims()[1];
-        if px + py + pz > 0 {
-            out.slice([0..batch, 0..channels, 0..nx, 0..ny, 0..nz])
-        } else {
-            out
-        }
+    /// Number of parameter values (weights and biases).
+    pub fn num_params(&self) -> usize {
+        self.values.iter().map(Vec::len).sum()
+    }
+
+    /// The layers with their parameters, grouped as the U-Net's structure.
+    pub(crate) fn levels(&self) -> Result<Levels<LayerParams<'_>>> {
+        let params = self.layers.iter().enumerate().map(|(index, layer)| LayerParams {
+            layer,
+            weight: &self.values[2 * index],
+            bias: &self.values[2 * index + 1],
+            trainable: !(self.frozen_encoder && layer.in_encoder()),
+            index,
+        });
+        Levels::new(self.depth(), params)
     }
 
     /// The network repacked for fast CPU inference (same results up to rounding).
     pub fn to_inference(&self) -> Result<InferenceNet> {
-        let values = tensor_values::<5>;
-        let bias = |b: &Option<Param<Tensor<1>>>, n: usize| -> Result<Vec<f32>> {
-            match b {
-                Some(b) => tensor_values(b.val()),
-                None => Ok(vec![0.0; n]),
-            }
+        let levels = self.levels()?;
+        let conv = |p: &LayerParams| -> Result<Packed> {
+            let [c_out, c_in, kx, ky, kz] = p.layer.weight_shape();
+            let parts = match p.layer.kind {
+                LayerKind::Conv { parts, .. } => parts,
+                LayerKind::Down | LayerKind::Up => 1,
+            };
+            Packed::conv(p.weight, p.bias, c_out, &vec![c_in / parts; parts], kx * ky * kz)
         };
-        // `parts`: the input is the concatenation of that many equal channel groups.
-        let conv = |c: &Conv3d, parts: usize| -> Result<Packed> {
-            let [c_out, c_in, kx, ky, kz] = c.weight.dims();
-            let splits = vec![c_in / parts; parts];
-            Packed::conv(&values(c.weight.val())?, &bias(&c.bias, c_out)?, c_out, &splits, kx * ky * kz)
-        };
-        let block = |b: &ConvBlock, parts: usize| -> Result<Block> { Ok([conv(&b.conv1, parts)?, conv(&b.conv2, 1)?]) };
-        let up = |u: &ConvTranspose3d| -> Result<Packed> {
-            let [c_in, c_out, ..] = u.weight.dims();
-            Packed::transposed(&values(u.weight.val())?, &bias(&u.bias, c_out)?, c_in, c_out)
-        };
+        let block = |b: &[LayerParams; 2]| -> Result<[Packed; 2]> { Ok([conv(&b[0])?, conv(&b[1])?]) };
+        let up = |p: &LayerParams| Packed::transposed(p.weight, p.bias, p.layer.c_in, p.layer.c_out);
         InferenceNet::new(
-            self.bottleneck.conv1.weight.dims()[2],
-            self.encoder.iter().map(|b| block(b, 1)).collect::<Result<_>>()?,
-            self.down.iter().map(|d| conv(d, 1)).collect::<Result<_>>()?,
-            block(&self.bottleneck, 1)?,
-            self.up.iter().map(up).collect::<Result<_>>()?,
-            self.decoder.iter().map(|b| block(b, 2)).collect::<Result<_>>()?,
-            conv(&self.head, 1)?,
+            self.config.kernel_size,
+            levels.encoder.iter().map(block).collect::<Result<_>>()?,
+            levels.down.iter().map(conv).collect::<Result<_>>()?,
+            block(&levels.bottleneck)?,
+            levels.up.iter().map(up).collect::<Result<_>>()?,
+            levels.decoder.iter().map(block).collect::<Result<_>>()?,
+            conv(&levels.head)?,
         )
-    }
-
-    /// The layers, for the hand-written backward pass of [`crate::net::backprop`].
-    pub(crate) fn layers(&self) -> Layers<'_> {
-        fn block(b: &ConvBlock) -> [&Conv3d; 2] {
-            [&b.conv1, &b.conv2]
-        }
-        Layers {
-            encoder: self.encoder.iter().map(block).collect(),
-            down: self.down.iter().collect(),
-            bottleneck: block(&self.bottleneck),
-            up: self.up.iter().collect(),
-            decoder: self.decoder.iter().map(block).collect(),
-            head: &self.head,
-        }
     }
 
     /// Stops gradient updates of the contracting path (encoder levels, down-sampling, bottleneck).
     pub fn freeze_encoder(mut self) -> Self {
-        self.encoder = self.encoder.no_grad();
-        self.down = self.down.no_grad();
-        self.bottleneck = self.bottleneck.no_grad();
+        self.frozen_encoder = true;
         self
+    }
+
+    /// Whether the contracting path is frozen ([`freeze_encoder`](Self::freeze_encoder)).
+    pub fn frozen_encoder(&self) -> bool {
+        self.frozen_encoder
     }
 
     /// Whether a parameter path (as in [`named_parameters`](Self::named_parameters)) belongs to
@@ -251,95 +305,131 @@ impl UNet {
         ENCODER_PREFIXES.iter().any(|p| path.starts_with(p))
     }
 
-    /// Every parameter with its path (`encoder.0.conv1.weight`, ...) and values, in module order.
+    /// Every parameter with its path (`encoder.0.conv1.weight`, ...) and values, in parameter
+    /// order.
     pub fn named_parameters(&self) -> Vec<(String, Vec<f32>)> {
-        let mut collector = NamedCollector { path: Vec::new(), out: Vec::new() };
-        self.visit(&mut collector);
-        collector.out
+        self.parameter_names().zip(&self.values).map(|(name, v)| (name, v.clone())).collect()
     }
 
-    /// Serializes the weights to safetensors bytes (deterministic: the same weights give the
-    /// same bytes).
+    /// The parameter paths, in parameter order.
+    pub(crate) fn parameter_names(&self) -> impl Iterator<Item = String> + '_ {
+        self.layers.iter().flat_map(|l| [format!("{}.weight", l.name), format!("{}.bias", l.name)])
+    }
+
+    /// The shape of parameter `p`.
+    pub(crate) fn parameter_shape(&self, p: usize) -> Vec<usize> {
+        let layer = &self.layers[p / 2];
+        if p.is_multiple_of(2) {
+            layer.weight_shape().to_vec()
+        } else {
+            vec![layer.c_out]
+        }
+    }
+
+    /// The values of every parameter, in parameter order.
+    pub(crate) fn values(&self) -> &[Vec<f32>] {
+        &self.values
+    }
+
+    /// The values of every parameter, to update them in place.
+    pub(crate) fn values_mut(&mut self) -> &mut [Vec<f32>] {
+        &mut self.values
+    }
+
+    /// Serializes the weights to safetensors bytes, one `F32` tensor per parameter under its
+    /// path, with the metadata `{"format": "safetensors"}` (deterministic: the same weights give
+    /// the same bytes).
     pub fn to_safetensors(&self) -> Result<Vec<u8>> {
-        // One metadata entry only: burn's default metadata is a HashMap whose serialized order
-        // varies between runs.
-        let mut store = SafetensorsStore::from_bytes(None).clear_metadata().metadata("format", "safetensors");
-        self.save_into(&mut store)
-            .map_err(|e| LearnError::InvalidInput(format!("cannot serialize weights to safetensors: {e}")))?;
-        store.get_bytes().map_err(|e| LearnError::InvalidInput(format!("cannot serialize weights to safetensors: {e}")))
+        write_safetensors(self.tensors(""), Some(HashMap::from([("format".into(), "safetensors".into())])))
     }
 
-    /// Builds a network of `config` on `device` and loads safetensors weights into it; `path`
-    /// only names the source in errors.
-    pub fn from_safetensors(config: &UNetConfig, bytes: Vec<u8>, device: &Device, path: &Path) -> Result<UNet> {
-        let mut net = UNet::new(config, device, 0)?;
-        let mut store = SafetensorsStore::from_bytes(Some(bytes));
-        let result = net
-            .load_from(&mut store)
-            .map_err(|e| LearnError::model(path, format!("cannot load weights for {config:?}: {e}")))?;
-        if !result.errors.is_empty() || !result.missing.is_empty() || !result.unused.is_empty() {
-            return Err(LearnError::model(path, format!("weights do not fit the configuration {config:?}: {result}")));
+    /// The parameters as named tensors (`prefix` + path), for [`write_safetensors`].
+    pub(crate) fn tensors<'a>(&'a self, prefix: &'a str) -> impl Iterator<Item = NamedTensor<'a>> + 'a {
+        self.parameter_names()
+            .zip(&self.values)
+            .enumerate()
+            .map(move |(p, (name, v))| (format!("{prefix}{name}"), self.parameter_shape(p), &v[..]))
+    }
+
+    /// A network of `config` with the weights of safetensors `bytes` (every parameter present
+    /// under its path with its shape, nothing else); `path` only names the source in errors.
+    pub fn from_safetensors(config: &UNetConfig, bytes: &[u8], path: &Path) -> Result<UNet> {
+        let tensors = SafeTensors::deserialize(bytes)
+            .map_err(|e| LearnError::model(path, format!("cannot read safetensors weights: {e}")))?;
+        let mut net = UNet::zeros(config)?;
+        net.load_tensors(&tensors, "", path)?;
+        let expected = net.values.len();
+        if tensors.len() != expected {
+            return Err(LearnError::model(
+                path,
+                format!(
+                    "weights do not fit the configuration {config:?}: {} tensors, expected {expected}",
+                    tensors.len()
+                ),
+            ));
         }
         Ok(net)
     }
 
-    /// A copy of this network (of `config`) on `device`, e.g. from the CPU to a GPU or back; `source` only names
-    /// where the weights came from in errors.
-    pub fn copied_to(&self, config: &UNetConfig, device: &Device, source: &Path) -> Result<UNet> {
-        UNet::from_safetensors(config, self.to_safetensors()?, device, source)
+    /// Replaces every parameter by the tensor `prefix` + its path of `tensors`.
+    pub(crate) fn load_tensors(&mut self, tensors: &SafeTensors, prefix: &str, path: &Path) -> Result<()> {
+        let names: Vec<String> = self.parameter_names().collect();
+        for (p, name) in names.iter().enumerate() {
+            let values = read_tensor(tensors, &format!("{prefix}{name}"), &self.parameter_shape(p)).map_err(|m| {
+                LearnError::model(path, format!("weights do not fit the configuration {:?}: {m}", self.config))
+            })?;
+            self.values[p] = values;
+        }
+        Ok(())
     }
 }
 
-/// Draws He-uniform weights and zero biases from a seeded generator.
-struct SeededInit {
-    rng: StdRng,
-    fan_in: usize,
-}
+/// A tensor to write: name, shape and values.
+pub(crate) type NamedTensor<'a> = (String, Vec<usize>, &'a [f32]);
 
-impl ModuleMapper for SeededInit {
-    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-        let shape = param.lazy_shape();
-        let dims = shape.clone().dims::<D>();
-        let count: usize = dims.iter().product();
-        let values: Vec<f32> = if D >= 3 {
-            // Weights: [c_out, c_in, k...] (conv) or [c_in, c_out, k...] (transposed): fan-in
-            // from dimension 1 times the kernel volume, as PyTorch does.
-            self.fan_in = dims[1] * dims[2..].iter().product::<usize>();
-            let bound = (6.0 / self.fan_in as f64).sqrt();
-            (0..count).map(|_| self.rng.random_range(-bound..bound) as f32).collect()
-        } else {
-            vec![0.0; count]
-        };
-        param.map(|old| {
-            let require_grad = old.is_require_grad();
-            let t = Tensor::<D>::from_data(TensorData::new(values, shape), &old.device());
-            if require_grad {
-                t.require_grad()
-            } else {
-                t
-            }
+/// Serializes `F32` tensors to safetensors bytes.
+pub(crate) fn write_safetensors<'a>(
+    tensors: impl IntoIterator<Item = NamedTensor<'a>>,
+    metadata: Option<HashMap<String, String>>,
+) -> Result<Vec<u8>> {
+    let bad = |e: safetensors::SafeTensorError| LearnError::InvalidInput(format!("cannot serialize safetensors: {e}"));
+    let tensors: Vec<(String, Vec<usize>, Vec<u8>)> = tensors
+        .into_iter()
+        .map(|(name, shape, values)| (name, shape, values.iter().flat_map(|v| v.to_le_bytes()).collect()))
+        .collect();
+    let views = tensors
+        .iter()
+        .map(|(name, shape, bytes)| {
+            Ok((name.as_str(), TensorView::new(Dtype::F32, shape.clone(), bytes).map_err(bad)?))
         })
-    }
+        .collect::<Result<Vec<_>>>()?;
+    safetensors::serialize(views, metadata).map_err(bad)
 }
 
-/// Collects parameter paths and values.
-struct NamedCollector {
-    path: Vec<String>,
-    out: Vec<(String, Vec<f32>)>,
+/// The values of the `F32` tensor `name` of `tensors`, which must have `shape`; the error says
+/// what is wrong.
+pub(crate) fn read_tensor(tensors: &SafeTensors, name: &str, shape: &[usize]) -> std::result::Result<Vec<f32>, String> {
+    let t = tensors.tensor(name).map_err(|_| format!("tensor {name} is missing"))?;
+    if t.dtype() != Dtype::F32 || t.shape() != shape {
+        return Err(format!("tensor {name} is {:?} {:?}, expected F32 {shape:?}", t.dtype(), t.shape()));
+    }
+    Ok(t.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
 }
 
-impl ModuleVisitor for NamedCollector {
-    fn enter_module(&mut self, name: &str, _container_type: &str) {
-        self.path.push(name.to_string());
+/// Gradients of a network's parameters, one entry per parameter in the order of
+/// [`UNet::named_parameters`]: `None` for a parameter that is not trained (a frozen encoder's).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gradients(pub Vec<Option<Vec<f32>>>);
+
+impl Gradients {
+    /// Number of parameters that have a gradient.
+    pub fn len(&self) -> usize {
+        self.0.iter().flatten().count()
     }
 
-    fn exit_module(&mut self, _name: &str, _container_type: &str) {
-        self.path.pop();
-    }
-
-    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-        let values = param.val().into_data().try_into_vec_as::<f32>().unwrap_or_default();
-        self.out.push((self.path.join("."), values));
+    /// Whether no parameter has a gradient.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
     }
 }
 
@@ -423,7 +513,7 @@ pub struct TrainedModel {
     pub target_unit: String,
     /// How it was trained.
     pub training: Option<TrainingInfo>,
-    /// The network (on the inference device).
+    /// The network's parameters.
     pub net: UNet,
 }
 
@@ -492,8 +582,8 @@ impl TrainedModel {
         }
     }
 
-    /// Loads a model saved by [`save`](Self::save) onto `device`.
-    pub fn load(json_path: &Path, device: &Device) -> Result<TrainedModel> {
+    /// Loads a model saved by [`save`](Self::save).
+    pub fn load(json_path: &Path) -> Result<TrainedModel> {
         let text = std::fs::read_to_string(json_path).map_err(|e| LearnError::io(json_path, e))?;
         let file: ModelFile = serde_json::from_str(&text)
             .map_err(|e| LearnError::model(json_path, format!("invalid model JSON: {e}")))?;
@@ -507,7 +597,7 @@ impl TrainedModel {
         file.normalization.validate().map_err(|e| LearnError::model(json_path, e.to_string()))?;
         let weights_path = weights_path(json_path, &file.weights)?;
         let bytes = read(&weights_path)?;
-        let net = UNet::from_safetensors(&file.unet, bytes, device, &weights_path)?;
+        let net = UNet::from_safetensors(&file.unet, &bytes, &weights_path)?;
         Ok(TrainedModel {
             config: file.unet,
             normalization: file.normalization,
@@ -531,21 +621,4 @@ fn weights_path(json_path: &Path, name: &str) -> Result<PathBuf> {
         ));
     }
     Ok(json_path.with_file_name(name))
-}
-
-/// The layers of a [`UNet`] (from `UNet::layers`), in the order of its fields, for the
-/// hand-written backward pass of [`crate::net::backprop`].
-pub(crate) struct Layers<'a> {
-    /// The two convolutions of each encoder level.
-    pub(crate) encoder: Vec<[&'a Conv3d; 2]>,
-    /// The stride-2 down-sampling convolutions.
-    pub(crate) down: Vec<&'a Conv3d>,
-    /// The bottleneck's two convolutions.
-    pub(crate) bottleneck: [&'a Conv3d; 2],
-    /// The stride-2 transposed (up-sampling) convolutions.
-    pub(crate) up: Vec<&'a ConvTranspose3d>,
-    /// The two convolutions of each decoder level.
-    pub(crate) decoder: Vec<[&'a Conv3d; 2]>,
-    /// The 1×1×1 output convolution.
-    pub(crate) head: &'a Conv3d,
 }

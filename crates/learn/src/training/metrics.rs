@@ -5,6 +5,7 @@
 //! - Error of one sample `e`: mean over its masked nodes of `‖u_pred − u_true‖` (m).
 //! - Over a set: mean `ē`, population standard deviation `σ(e)`, maximum, and the worst sample.
 
+#[cfg(feature = "cpu-burn")]
 use burn::tensor::Tensor;
 use serde::{Deserialize, Serialize};
 
@@ -12,7 +13,9 @@ use crate::data::grid::{GridShape, CHANNELS};
 use crate::{LearnError, Result};
 
 /// Masked MSE loss of a batch: `pred`, `target` `[B, 3, nx, ny, nz]`, `mask` `[B, 1, nx, ny, nz]`
-/// (0/1). Returns a one-element tensor; zero when the mask is empty.
+/// (0/1), as burn tensors (the `cpu-burn` feature). Returns a one-element tensor; zero when the
+/// mask is empty.
+#[cfg(feature = "cpu-burn")]
 pub fn masked_mse(pred: Tensor<5>, target: Tensor<5>, mask: Tensor<5>) -> Tensor<1> {
     let diff = pred - target;
     let squared_norm = diff.clone().mul(diff).sum_dim(1);
@@ -21,7 +24,8 @@ pub fn masked_mse(pred: Tensor<5>, target: Tensor<5>, mask: Tensor<5>) -> Tensor
     total.div(nodes)
 }
 
-/// Masked MSE of one or more samples given as plain arrays (same definition as [`masked_mse`]).
+/// Masked MSE of one or more samples given as plain arrays: the mean over masked nodes of the
+/// squared error norm (the training loss).
 pub fn masked_mse_values(pred: &[f32], target: &[f32], masks: &[u8], grid: GridShape) -> Result<f64> {
     let samples = check_lengths(pred, target, masks, grid)?;
     let n = grid.nodes();

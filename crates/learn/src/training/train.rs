@@ -1,9 +1,9 @@
-//! Training: Adam on the masked MSE, seeded, with validation, best-weights selection,
+//! Training: Adam ([`Adam`]) on the masked MSE, seeded, with validation, best-weights selection,
 //! resumable checkpoints, learning curves and transfer learning. On the CPU ([`Compute::Cpu`])
-//! gradients come from the hand-written backward pass of [`backprop`](crate::net::backprop), which
-//! equals burn's autodiff up to summation order; on a GPU (or [`Compute::CpuBurn`]) from burn's
-//! autodiff itself. burn keeps the model, the optimiser and their records either way, so a
-//! checkpoint written on one device resumes on the other.
+//! gradients come from the hand-written backward pass of [`backprop`](crate::net::backprop); on a
+//! GPU or [`Compute::CpuBurn`] (the `cpu-burn` feature) from burn's autodiff, equal up to
+//! summation order. The parameters, the optimiser and the checkpoints are the same either way, so
+//! a checkpoint written on one device resumes on the other.
 //!
 //! Reproducibility: weights are initialised from the seed; batch composition and training-time
 //! corruption come from counter-based generators (seed, iteration, batch slot), so the whole
@@ -14,18 +14,20 @@
 //!
 //! Files written in `out_dir`: `model.json` + `model.safetensors` (best weights, on completion),
 //! `checkpoint.bin` and `curve.csv` (iteration, train loss, validation mean error); the application
-//! draws the curve from [`TrainOutcome::curve`].
+//! draws the curve from [`TrainOutcome::curve`]. `checkpoint.bin` is the magic `AUGSIMCK`, then two
+//! sections, each its length (`u64`, little-endian) and its bytes: the JSON state, and a
+//! safetensors file of the model (`model.` + parameter path), Adam's moments (`adam.moment_1.`,
+//! `adam.moment_2.`) and the best weights so far (`best.`).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use burn::module::Module;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
-use burn::store::ModuleRecord;
-use burn::tensor::{Bytes, Device, Tensor, TensorData};
+#[cfg(feature = "cpu-burn")]
+use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use mesh::io::write_atomic_bytes;
 use rand::Rng;
+use safetensors::SafeTensors;
 use serde::{Deserialize, Serialize};
 
 use crate::data::corrupt::{item_rng, splitmix64, Corruption, STREAM_SHUFFLE, STREAM_TRAIN_CORRUPTION};
@@ -34,12 +36,14 @@ use crate::data::grid::{GridPlacement, GridShape};
 use crate::data::split::{IndexSet, Split};
 use crate::fsutil::read;
 use crate::net::backprop::loss_and_gradients;
+#[cfg(feature = "cpu-burn")]
+use crate::net::burn_unet::BurnUNet;
 use crate::net::predict::Predictor;
-use crate::net::unet::{tensor_values, TrainedModel, TrainingInfo, UNet, UNetConfig};
+use crate::net::unet::{read_tensor, write_safetensors, Gradients, TrainedModel, TrainingInfo, UNet, UNetConfig};
+use crate::training::adam::{Adam, Moments};
 use crate::training::curve::{write_curve_csv, CurveRow};
 use crate::training::evaluation::evaluate_net;
-use crate::training::metrics::masked_mse;
-use crate::{inference_device, Compute, LearnError, Result};
+use crate::{Compute, LearnError, Result};
 
 /// Training hyper-parameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -213,12 +217,12 @@ struct Start {
     pretraining: Vec<Split>,
 }
 
-fn resolve_start(init: &Initialization, seed: u64, device: &Device) -> Result<Start> {
+fn resolve_start(init: &Initialization, seed: u64) -> Result<Start> {
     match init {
         Initialization::Scratch { unet, normalization, input_unit } => {
             normalization.validate()?;
             Ok(Start {
-                net: UNet::new(unet, device, seed)?,
+                net: UNet::new(unet, seed)?,
                 config: unet.clone(),
                 normalization: *normalization,
                 input_unit: input_unit.clone(),
@@ -229,9 +233,8 @@ fn resolve_start(init: &Initialization, seed: u64, device: &Device) -> Result<St
             })
         }
         Initialization::FineTune { model, freeze_encoder } => {
-            let pre = TrainedModel::load(model, &inference_device())?;
-            let net = pre.net.copied_to(&pre.config, device, model)?;
-            let net = if *freeze_encoder { net.freeze_encoder() } else { net };
+            let pre = TrainedModel::load(model)?;
+            let net = if *freeze_encoder { pre.net.freeze_encoder() } else { pre.net };
             Ok(Start {
                 net,
                 config: pre.config,
@@ -308,24 +311,36 @@ fn batch(
     Ok(out)
 }
 
-/// The masked MSE loss of `net` on a batch and its gradients by burn's autodiff, on `device` (an
-/// autodiff device, where `net` lives): what a GPU runs. Equal to
-/// [`loss_and_gradients`](crate::net::backprop::loss_and_gradients) up to summation order.
-fn autodiff_loss_and_gradients(
-    net: &UNet,
-    b: &Batch,
-    batch: usize,
-    grid: GridShape,
-    device: &Device,
-) -> Result<(f64, GradientsParams)> {
-    let [nx, ny, nz] = grid.dims();
-    let tensor = |values: &[f32]| {
-        let channels = values.len() / (batch * grid.nodes());
-        Tensor::<5>::from_data(TensorData::new(values.to_vec(), [batch, channels, nx, ny, nz]), device)
-    };
-    let loss = masked_mse(net.forward(tensor(&b.inputs)), tensor(&b.targets), tensor(&b.masks));
-    let value = tensor_values(loss.clone())?.first().copied().unwrap_or(f32::NAN);
-    Ok((f64::from(value), GradientsParams::from_grads(loss.backward(), net)))
+/// What computes the gradients.
+enum GradientEngine {
+    /// The hand-written backward pass.
+    Backprop,
+    /// burn's autodiff on this (autodiff) device.
+    #[cfg(feature = "cpu-burn")]
+    Autodiff(Device),
+}
+
+impl GradientEngine {
+    /// The engine of `compute`: an error when it is not built in or not found.
+    fn new(compute: Compute) -> Result<GradientEngine> {
+        compute.ensure_available()?;
+        #[cfg(feature = "cpu-burn")]
+        if compute.uses_burn() {
+            return Ok(GradientEngine::Autodiff(compute.training_device()?));
+        }
+        Ok(GradientEngine::Backprop)
+    }
+
+    /// The masked MSE loss of `net` on a batch of `batch` samples and its gradients.
+    fn loss_and_gradients(&self, net: &UNet, b: &Batch, batch: usize, grid: GridShape) -> Result<(f64, Gradients)> {
+        match self {
+            GradientEngine::Backprop => loss_and_gradients(net, &b.inputs, &b.targets, &b.masks, batch, grid),
+            #[cfg(feature = "cpu-burn")]
+            GradientEngine::Autodiff(device) => {
+                BurnUNet::new(net, device)?.loss_and_gradients(&b.inputs, &b.targets, &b.masks, batch, grid, device)
+            }
+        }
+    }
 }
 
 /// Checkpoint metadata (the JSON section of `checkpoint.bin`).
@@ -343,40 +358,37 @@ struct CheckpointState {
     /// Training loss accumulated since the last curve row.
     loss_sum: f64,
     loss_count: usize,
+    /// Iteration of the best weights so far (stored in the checkpoint when set).
     best_iteration: Option<usize>,
     best_val: Option<f64>,
     curve: Vec<CurveRow>,
+    /// Adam's step count of each parameter (0: no state yet, no moments stored).
+    adam_steps: Vec<usize>,
 }
 
 const CHECKPOINT_MAGIC: &[u8; 8] = b"AUGSIMCK";
 const CHECKPOINT_FORMAT: &str = "augsim-checkpoint";
+const CHECKPOINT_VERSION: u32 = 2;
 
-fn record_error(path: &Path, what: &str, e: impl std::fmt::Display) -> LearnError {
-    LearnError::model(path, format!("{what}: {e}"))
-}
-
-fn write_checkpoint(
-    path: &Path,
-    state: &CheckpointState,
-    net: &UNet,
-    optim: &ModuleOptimizer,
-    best: Option<&UNet>,
-) -> Result<()> {
-    let json = serde_json::to_vec(state).map_err(|e| record_error(path, "cannot serialize checkpoint state", e))?;
-    let model = net.clone().into_record().into_bytes().map_err(|e| record_error(path, "cannot serialize model", e))?;
-    let opt = optim.into_bytes().map_err(|e| record_error(path, "cannot serialize optimizer state", e))?;
-    let best = match best {
-        Some(b) => b
-            .clone()
-            .into_record()
-            .into_bytes()
-            .map_err(|e| record_error(path, "cannot serialize best model", e))?
-            .to_vec(),
-        None => Vec::new(),
-    };
-    let mut out = Vec::with_capacity(8 + 32 + json.len() + model.len() + opt.len() + best.len());
+fn write_checkpoint(path: &Path, state: &CheckpointState, net: &UNet, adam: &Adam, best: Option<&UNet>) -> Result<()> {
+    let json = serde_json::to_vec(state)
+        .map_err(|e| LearnError::model(path, format!("cannot serialize checkpoint state: {e}")))?;
+    let names: Vec<String> = net.parameter_names().collect();
+    let moments = names.iter().enumerate().zip(&adam.moments).filter_map(|((p, name), m)| {
+        m.as_ref().map(|m| {
+            let shape = net.parameter_shape(p);
+            [
+                (format!("adam.moment_1.{name}"), shape.clone(), &m.moment_1[..]),
+                (format!("adam.moment_2.{name}"), shape, &m.moment_2[..]),
+            ]
+        })
+    });
+    let tensors =
+        net.tensors("model.").chain(moments.flatten()).chain(best.into_iter().flat_map(|b| b.tensors("best.")));
+    let tensors = write_safetensors(tensors, None)?;
+    let mut out = Vec::with_capacity(8 + 16 + json.len() + tensors.len());
     out.extend_from_slice(CHECKPOINT_MAGIC);
-    for section in [&json[..], &model[..], &opt[..], &best[..]] {
+    for section in [&json[..], &tensors[..]] {
         out.extend_from_slice(&(section.len() as u64).to_le_bytes());
         out.extend_from_slice(section);
     }
@@ -386,10 +398,8 @@ fn write_checkpoint(
 /// The sections of a checkpoint file.
 struct Checkpoint {
     state: CheckpointState,
-    model: Vec<u8>,
-    optimizer: Vec<u8>,
-    /// Empty when no best model was recorded yet.
-    best: Vec<u8>,
+    /// The safetensors section.
+    tensors: Vec<u8>,
 }
 
 fn read_checkpoint(path: &Path) -> Result<Checkpoint> {
@@ -400,7 +410,7 @@ fn read_checkpoint(path: &Path) -> Result<Checkpoint> {
     }
     let mut at = 8;
     let mut sections = Vec::new();
-    for _ in 0..4 {
+    for _ in 0..2 {
         let len_bytes: [u8; 8] =
             bytes.get(at..at + 8).and_then(|s| s.try_into().ok()).ok_or_else(|| bad("truncated"))?;
         let len = u64::from_le_bytes(len_bytes) as usize;
@@ -412,21 +422,41 @@ fn read_checkpoint(path: &Path) -> Result<Checkpoint> {
     if at != bytes.len() {
         return Err(bad("trailing bytes"));
     }
-    let best = sections.pop().unwrap_or_default();
-    let optimizer = sections.pop().unwrap_or_default();
-    let model = sections.pop().unwrap_or_default();
+    let tensors = sections.pop().unwrap_or_default();
     let json = sections.pop().unwrap_or_default();
     let state: CheckpointState = serde_json::from_slice(&json).map_err(|e| bad(&format!("state JSON: {e}")))?;
-    if state.format != CHECKPOINT_FORMAT || state.version != 1 {
+    if state.format != CHECKPOINT_FORMAT || state.version != CHECKPOINT_VERSION {
         return Err(bad("unknown checkpoint format or version"));
     }
-    Ok(Checkpoint { state, model, optimizer, best })
+    Ok(Checkpoint { state, tensors })
 }
 
-fn load_record_into(net: UNet, bytes: Vec<u8>, path: &Path) -> Result<UNet> {
-    let record =
-        ModuleRecord::from_bytes(Bytes::from_bytes_vec(bytes)).map_err(|e| record_error(path, "model record", e))?;
-    net.try_load_record(record).map_err(|e| record_error(path, "model record does not fit the network", e))
+/// Restores the model, Adam's state and the best weights (if recorded) of a checkpoint into
+/// `net` and `adam`; returns the best weights.
+fn restore(saved: &Checkpoint, net: &mut UNet, adam: &mut Adam, path: &Path) -> Result<Option<UNet>> {
+    let bad = |m: String| LearnError::model(path, format!("corrupt checkpoint: {m}"));
+    let tensors = SafeTensors::deserialize(&saved.tensors).map_err(|e| bad(format!("tensors: {e}")))?;
+    net.load_tensors(&tensors, "model.", path)?;
+    let steps = &saved.state.adam_steps;
+    if steps.len() != adam.moments.len() {
+        return Err(bad(format!("{} Adam states for {} parameters", steps.len(), adam.moments.len())));
+    }
+    let names: Vec<String> = net.parameter_names().collect();
+    for (p, (name, &time)) in names.iter().zip(steps).enumerate() {
+        adam.moments[p] = if time == 0 {
+            None
+        } else {
+            let shape = net.parameter_shape(p);
+            let moment = |which: &str| read_tensor(&tensors, &format!("adam.{which}.{name}"), &shape).map_err(&bad);
+            Some(Moments { time, moment_1: moment("moment_1")?, moment_2: moment("moment_2")? })
+        };
+    }
+    if saved.state.best_iteration.is_none() {
+        return Ok(None);
+    }
+    let mut best = net.clone();
+    best.load_tensors(&tensors, "best.", path)?;
+    Ok(Some(best))
 }
 
 fn indices_hash(samples: &Samples) -> u64 {
@@ -480,8 +510,8 @@ pub fn train(
     let split = held_out_split(train, val, &options.test)?;
     let out = &options.out_dir;
     std::fs::create_dir_all(out).map_err(|e| LearnError::io(out, e))?;
-    let device = options.compute.training_device()?;
-    let start = resolve_start(init, config.seed, &device)?;
+    let engine = GradientEngine::new(options.compute)?;
+    let start = resolve_start(init, config.seed)?;
     // Everything that shapes the trajectory, so that a checkpoint is only resumed into the
     // run it came from. The checkpoint interval is left out, and so is the iteration count
     // under a constant rate: such a finished run can be extended by resuming it with more.
@@ -501,10 +531,10 @@ pub fn train(
         "val": [val.len(), indices_hash(val)],
     });
     let mut net = start.net;
-    let mut optim = AdamConfig::new().init();
+    let mut adam = Adam::new(net.values().len());
     let mut state = CheckpointState {
         format: CHECKPOINT_FORMAT.into(),
-        version: 1,
+        version: CHECKPOINT_VERSION,
         fingerprint,
         iteration: 0,
         seed: config.seed,
@@ -513,6 +543,7 @@ pub fn train(
         best_iteration: None,
         best_val: None,
         curve: Vec::new(),
+        adam_steps: Vec::new(),
     };
     let mut best: Option<UNet> = None;
     let checkpoint_path = out.join(CHECKPOINT_FILE);
@@ -525,14 +556,7 @@ pub fn train(
                  use another output directory or start without resume",
             ));
         }
-        net = load_record_into(net, saved.model, &checkpoint_path)?;
-        optim = optim
-            .from_bytes(Bytes::from_bytes_vec(saved.optimizer))
-            .map_err(|e| record_error(&checkpoint_path, "optimizer state", e))?;
-        if !saved.best.is_empty() {
-            let fresh = UNet::new(&start.config, &inference_device(), 0)?;
-            best = Some(load_record_into(fresh, saved.best, &checkpoint_path)?);
-        }
+        best = restore(&saved, &mut net, &mut adam, &checkpoint_path)?;
         state = saved.state;
         if state.iteration > config.iterations {
             return Err(LearnError::model(
@@ -569,18 +593,14 @@ pub fn train(
         let b = batch(train, &positions, &start.normalization, &config.train_corruption, |slot| {
             item_rng(config.seed, STREAM_TRAIN_CORRUPTION, first + slot as u64)
         })?;
-        let (loss_value, grads) = if options.compute.uses_burn() {
-            autodiff_loss_and_gradients(&net, &b, positions.len(), train.grid, &device)?
-        } else {
-            loss_and_gradients(&net, &b.inputs, &b.targets, &b.masks, positions.len(), train.grid)?
-        };
+        let (loss_value, grads) = engine.loss_and_gradients(&net, &b, positions.len(), train.grid)?;
         if !loss_value.is_finite() {
             return Err(LearnError::InvalidInput(format!(
                 "training diverged at iteration {} (loss {loss_value}); lower the learning rate",
                 it + 1
             )));
         }
-        net = optim.step(config.learning_rate_at(it), net, grads);
+        adam.step(config.learning_rate_at(it), &mut net, &grads)?;
         step_time += t0.elapsed().as_secs_f64();
         steps += 1;
         state.iteration += 1;
@@ -591,7 +611,7 @@ pub fn train(
 
         let done = state.iteration == config.iterations;
         if state.iteration.is_multiple_of(config.validate_every) || done {
-            let snapshot = net.valid();
+            let snapshot = net.clone();
             let val_error = if val.is_empty() {
                 None
             } else {
@@ -625,7 +645,8 @@ pub fn train(
         }
         let stop = options.stop_after.is_some_and(|s| state.iteration >= s) && !done;
         if state.iteration.is_multiple_of(config.checkpoint_every) || done || stop {
-            write_checkpoint(&checkpoint_path, &state, &net, &optim, best.as_ref())?;
+            state.adam_steps = adam.moments.iter().map(|m| m.as_ref().map_or(0, |m| m.time)).collect();
+            write_checkpoint(&checkpoint_path, &state, &net, &adam, best.as_ref())?;
         }
         if stop {
             completed = false;
@@ -634,14 +655,7 @@ pub fn train(
     }
     progress.finish_and_clear();
 
-    let mut best_net = match best {
-        Some(b) => b,
-        None => net.valid(),
-    };
-    if options.compute == Compute::Gpu {
-        // The model is returned on the inference device, whatever trained it.
-        best_net = best_net.copied_to(&start.config, &inference_device(), &out.join(MODEL_FILE))?;
-    }
+    let best_net = best.unwrap_or(net);
     let model = TrainedModel {
         config: start.config,
         normalization: start.normalization,

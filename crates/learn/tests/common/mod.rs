@@ -72,3 +72,32 @@ pub fn synthetic_samples(grid: GridShape, first: u64, count: usize) -> Samples {
     }
     s
 }
+pub mod reference;
+
+/// Seeded uniform values in `[lo, hi)`: the same on every run.
+pub fn uniform(rng: &mut StdRng, n: usize, lo: f32, hi: f32) -> Vec<f32> {
+    (0..n).map(|_| rng.random_range(lo..hi)).collect()
+}
+
+/// The seeded network of `config` with every weight and bias moved by about ±0.1 (non-zero
+/// biases): one Adam step of rate 0.1 along seeded random gradients, which moves each parameter
+/// by about the rate.
+pub fn perturbed(config: &augsim_learn::UNetConfig) -> augsim_learn::UNet {
+    let mut net = augsim_learn::UNet::new(config, 7).unwrap();
+    let mut rng = StdRng::seed_from_u64(8);
+    let grads = augsim_learn::Gradients(
+        net.named_parameters().iter().map(|(_, v)| Some(uniform(&mut rng, v.len(), -1.0, 1.0))).collect(),
+    );
+    augsim_learn::training::adam::Adam::new(grads.0.len()).step(0.1, &mut net, &grads).unwrap();
+    net
+}
+
+/// A seeded batch `(x, y, mask)` of `batch` samples: uniform inputs and targets, a mask with
+/// zeros.
+pub fn batch_values(batch: usize, grid: GridShape) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+    let mut rng = StdRng::seed_from_u64(9);
+    let n = batch * grid.nodes();
+    let (x, y) = (uniform(&mut rng, 3 * n, -1.0, 1.0), uniform(&mut rng, 3 * n, -1.0, 1.0));
+    let mask = uniform(&mut rng, n, -1.0, 1.0).iter().map(|v| if *v > -0.5 { 1.0 } else { 0.0 }).collect();
+    (x, y, mask)
+}
