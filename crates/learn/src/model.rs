@@ -229,7 +229,7 @@ impl LearnedModel for TrainedModel {
         TrainedModel::check_unseen(self, samples)
     }
     fn predictor(&self, compute: Compute) -> Result<ModelPredictor> {
-        Ok(ModelPredictor::UNet(Predictor::new(self, compute)?))
+        Ok(ModelPredictor::UNet(Box::new(Predictor::new(self, compute)?)))
     }
 }
 
@@ -253,8 +253,8 @@ impl LearnedModel for Model {
 
 /// A model ready for repeated predictions.
 pub enum ModelPredictor {
-    /// The U-Net's predictor.
-    UNet(Predictor),
+    /// The U-Net's predictor (boxed: it holds the repacked network's buffers).
+    UNet(Box<Predictor>),
     /// The reduced-order model.
     Reduced(Arc<ReducedModel>),
 }

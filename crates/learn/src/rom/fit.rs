@@ -307,11 +307,11 @@ pub fn fit(
         };
         let mut sum = 0.0;
         let mut floor_sum = 0.0;
-        for p in 0..m {
+        for (p, s) in std.iter().enumerate() {
             let e = node_error(p, &|e| pred[e]);
             sum += e;
             floor_sum += node_error(p, &|e| project[(i, e)] + model.output_mean[e]);
-            ratios.push(e / (2.0 * std[p]).max(f64::MIN_POSITIVE));
+            ratios.push(e / (2.0 * s).max(f64::MIN_POSITIVE));
         }
         errors.push(sum / m as f64);
         floor_errors.push(floor_sum / m as f64);
