@@ -64,7 +64,6 @@ fn setup(method: &(Option<PathBuf>, Option<PathBuf>, Option<PathBuf>)) -> Result
     }
 }
 
-/// Set by SIGINT / SIGTERM: the server stops.
 /// The ROUKF of an assimilation scenario for each client (its experiment, with the reference run
 /// of synthetic observations, prepared once here).
 fn identification(path: &std::path::Path, unit: f64) -> Result<Arc<live::IdentificationFactory>> {
@@ -88,6 +87,7 @@ fn identification(path: &std::path::Path, unit: f64) -> Result<Arc<live::Identif
     }))
 }
 
+/// Set by SIGINT / SIGTERM: the server stops.
 static STOP: AtomicBool = AtomicBool::new(false);
 
 #[cfg(unix)]

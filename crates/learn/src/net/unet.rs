@@ -3,7 +3,7 @@
 //! The architecture is described once, in `docs/method.md` (section 5.2), and in code by
 //! [`UNetConfig::layers`]: every engine ([`crate::InferenceNet`], the backward pass of
 //! [`crate::net::backprop`], burn's network of `burn_unet` with the `cpu-burn` feature) builds
-//! its layers from that list, and `python/augsim_unet.py` follows it.
+//! its layers from that list, and `augsim.torch` (`python/augsim/torch.py`) follows it.
 //!
 //! [`UNet`] holds the parameters: one named `f32` tensor per weight and bias, in the order of the
 //! layers (`encoder.0.conv1.weight`, `encoder.0.conv1.bias`, ...). A saved model is a JSON file
