@@ -11,7 +11,7 @@ use mesh::Mesh;
 
 use crate::data::corrupt::Corruption;
 use crate::data::dataset::Samples;
-use crate::data::grid::{GridPlacement, GridShape, GridToMesh};
+use crate::data::grid::{input_is_force, placed_model_grid, GridPlacement, GridShape, GridToMesh};
 use crate::data::split::{Provenance, SampleRole};
 use crate::net::predict::Predictor;
 use crate::net::unet::TrainedModel;
@@ -142,25 +142,12 @@ impl Model {
 
     /// The model's grid placed in space; an error when the placement was not recorded.
     pub fn placed_grid(&self) -> Result<Grid> {
-        self.placement()
-            .ok_or_else(|| {
-                LearnError::InvalidInput(
-                    "the model does not record where its grid lies (trained before grid placement was stored): retrain it"
-                        .into(),
-                )
-            })?
-            .grid(self.grid())
+        placed_model_grid(self.placement(), self.grid())
     }
 
     /// Whether the model takes nodal forces (N) rather than displacements (m).
     pub fn takes_forces(&self) -> Result<bool> {
-        match self.input_unit() {
-            "N" => Ok(true),
-            "m" => Ok(false),
-            other => Err(LearnError::InvalidInput(format!(
-                "model input unit {other:?} is neither N (forces) nor m (displacements)"
-            ))),
-        }
+        input_is_force(self.input_unit())
     }
 
     /// A field on the model's grid interpolated to the nodes of `organ` ([`GridToMesh`]).

@@ -241,6 +241,45 @@ impl GridMesh {
     }
 }
 
+/// Checks one prediction input: a `[3, nx, ny, nz]` field on `grid`, every value finite.
+pub(crate) fn check_prediction_input(input: &[f32], grid: GridShape) -> Result<()> {
+    let f = grid.field_len();
+    if input.len() != f {
+        return Err(LearnError::InvalidInput(format!(
+            "prediction input has {} values, expected {f} (3 channels on grid {grid})",
+            input.len()
+        )));
+    }
+    if input.iter().any(|v| !v.is_finite()) {
+        return Err(LearnError::InvalidInput("prediction input has a non-finite value".into()));
+    }
+    Ok(())
+}
+
+/// A model's grid where it lies in space; an error for a model that does not record it.
+pub(crate) fn placed_model_grid(placement: Option<GridPlacement>, grid: GridShape) -> Result<Grid> {
+    placement
+        .ok_or_else(|| {
+            LearnError::InvalidInput(
+                "the model does not record where its grid lies (trained before grid placement was stored): retrain it"
+                    .into(),
+            )
+        })?
+        .grid(grid)
+}
+
+/// Whether a model's input unit is a force (N) rather than a displacement (m); any other unit is an
+/// error.
+pub(crate) fn input_is_force(unit: &str) -> Result<bool> {
+    match unit {
+        "N" => Ok(true),
+        "m" => Ok(false),
+        other => Err(LearnError::InvalidInput(format!(
+            "model input unit {other:?} is neither N (forces) nor m (displacements)"
+        ))),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

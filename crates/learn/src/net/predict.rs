@@ -9,7 +9,7 @@ use mesh::Mesh;
 use serde::{Deserialize, Serialize};
 
 use crate::data::dataset::Normalization;
-use crate::data::grid::{GridShape, GridToMesh};
+use crate::data::grid::{check_prediction_input, input_is_force, placed_model_grid, GridShape, GridToMesh};
 #[cfg(feature = "cpu-burn")]
 use crate::net::burn_unet::{tensor_values, BurnUNet};
 use crate::net::inference::InferenceNet;
@@ -65,17 +65,7 @@ impl Predictor {
     /// nz]` on the model's grid, in the model's input unit). Values outside the organ are
     /// meaningless; apply the mask.
     pub fn predict(&self, input: &[f32]) -> Result<Vec<f32>> {
-        let f = self.grid.field_len();
-        if input.len() != f {
-            return Err(LearnError::InvalidInput(format!(
-                "prediction input has {} values, expected {f} (3 channels on grid {})",
-                input.len(),
-                self.grid
-            )));
-        }
-        if input.iter().any(|v| !v.is_finite()) {
-            return Err(LearnError::InvalidInput("prediction input has a non-finite value".into()));
-        }
+        check_prediction_input(input, self.grid)?;
         let si = 1.0 / self.normalization.input_scale;
         let x: Vec<f32> = input.iter().map(|v| (f64::from(*v) * si) as f32).collect();
         let out = self.forward_normalized(x)?;
@@ -107,25 +97,13 @@ impl TrainedModel {
     /// The model's grid where it lies in space (needed to put points on it or to interpolate to a mesh); an
     /// error for a model trained before grid placement was recorded.
     pub fn placed_grid(&self) -> Result<Grid> {
-        let placement = self.placement.ok_or_else(|| {
-            LearnError::InvalidInput(
-                "the model does not record where its grid lies (trained before grid placement was stored): retrain it"
-                    .into(),
-            )
-        })?;
-        placement.grid(self.grid)
+        placed_model_grid(self.placement, self.grid)
     }
 
     /// Whether the network takes nodal forces (input unit N) rather than displacements (m); any other unit is an
     /// error.
     pub fn takes_forces(&self) -> Result<bool> {
-        match self.input_unit.as_str() {
-            "N" => Ok(true),
-            "m" => Ok(false),
-            other => Err(LearnError::InvalidInput(format!(
-                "model input unit {other:?} is neither N (forces) nor m (displacements)"
-            ))),
-        }
+        input_is_force(&self.input_unit)
     }
 
     /// A field on the model's grid (`[3, nx, ny, nz]`, e.g. a prediction) interpolated to the nodes of `organ`

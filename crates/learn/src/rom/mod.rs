@@ -43,7 +43,7 @@ use faer::{Mat, MatRef, Par};
 use serde::{Deserialize, Serialize};
 
 use crate::data::corrupt::Corruption;
-use crate::data::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
+use crate::data::grid::{check_prediction_input, GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::data::npy::{read_npy, write_f32, write_f64, write_u8};
 use crate::data::split::Split;
 use crate::{LearnError, Result};
@@ -155,17 +155,7 @@ pub struct UncertainPrediction {
 impl ReducedModel {
     /// The modal coefficients and the kernel row of one input field.
     fn kernel_row(&self, input: &[f32]) -> Result<Vec<f64>> {
-        let f = self.grid.field_len();
-        if input.len() != f {
-            return Err(LearnError::InvalidInput(format!(
-                "prediction input has {} values, expected {f} (3 channels on grid {})",
-                input.len(),
-                self.grid
-            )));
-        }
-        if input.iter().any(|v| !v.is_finite()) {
-            return Err(LearnError::InvalidInput("prediction input has a non-finite value".into()));
-        }
+        check_prediction_input(input, self.grid)?;
         let x: Vec<f64> =
             self.input_entries.iter().zip(&self.input_mean).map(|(&e, m)| f64::from(input[e]) - m).collect();
         let features = gemv(self.input_components.as_ref(), &x);
