@@ -104,17 +104,22 @@ magnitude = [0.05, 0.2]
     assert_eq!(u.values.len(), 3 * organ.num_nodes());
     assert!(u.values.iter().all(|v| v.is_finite()) && u.values.iter().any(|v| *v != 0.0));
 
-    // burn's own kernels (the GPU's code path) predict the same tensor; the GPU needs its feature.
-    let text = augsim(
-        &["predict", "net/model.json", "cloud.csv", "-o", "pred_burn.npy", "--runs", "1", "--device", "cpu-burn"],
-        d,
-    );
-    assert!(text.contains("device     cpu (burn flex)"), "{text}");
-    let read = |name: &str| learn::data::npy::read_npy(&d.join(name)).unwrap().into_f32();
-    let (repacked, burn) = (read("pred.npy"), read("pred_burn.npy"));
-    let scale = repacked.iter().fold(0f32, |m, v| m.max(v.abs()));
-    let diff = repacked.iter().zip(&burn).fold(0f32, |m, (a, b)| m.max((a - b).abs()));
-    assert!(scale > 0.0 && diff <= 1e-5 * scale, "cpu-burn differs by {diff:e} (scale {scale:e})");
+    // burn's own kernels (the GPU's code path) predict the same tensor; they and the GPU need their
+    // features.
+    let burn_args =
+        ["predict", "net/model.json", "cloud.csv", "-o", "pred_burn.npy", "--runs", "1", "--device", "cpu-burn"];
+    if cfg!(feature = "cpu-burn") {
+        let text = augsim(&burn_args, d);
+        assert!(text.contains("device     cpu (burn flex)"), "{text}");
+        let read = |name: &str| learn::data::npy::read_npy(&d.join(name)).unwrap().into_f32();
+        let (repacked, burn) = (read("pred.npy"), read("pred_burn.npy"));
+        let scale = repacked.iter().fold(0f32, |m, v| m.max(v.abs()));
+        let diff = repacked.iter().zip(&burn).fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+        assert!(scale > 0.0 && diff <= 1e-5 * scale, "cpu-burn differs by {diff:e} (scale {scale:e})");
+    } else {
+        let e = augsim_err(&burn_args, d);
+        assert!(e.contains("without burn's CPU engine") && e.contains("--features cpu-burn"), "{e}");
+    }
     if cfg!(not(feature = "gpu")) {
         let e = augsim_err(&["predict", "net/model.json", "cloud.csv", "--device", "gpu"], d);
         assert!(e.contains("built without GPU support") && e.contains("--features gpu"), "{e}");
