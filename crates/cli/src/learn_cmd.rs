@@ -6,6 +6,7 @@ use anyhow::{bail, Context, Result};
 
 use indicatif::{ProgressBar, ProgressStyle};
 use learn::rom::RomConfig;
+use learn::LearnedModel;
 use learn::{
     Compute, Corruption, Dataset, DatasetPart, Initialization, Method, Model, PredictInput, Sparsity, SplitPolicy,
     TrainConfig, TrainOptions, UNetConfig,

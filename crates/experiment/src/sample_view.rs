@@ -9,7 +9,7 @@ use mesh::embedding::Grid;
 use mesh::{stats, Mesh, Point};
 use plot::viewer::{Layer, PointLayer, Scalar, Scene};
 
-use learn::{Dataset, GridToMesh, LearnError, Manifest, Model, Result, CHANNELS};
+use learn::{Dataset, GridToMesh, LearnError, LearnedModel, Manifest, Model, Result, CHANNELS};
 
 pub use learn::data::split::SampleRole;
 

@@ -155,26 +155,6 @@ impl Model {
         GridToMesh::new(organ, &self.placed_grid()?)?.apply(field)
     }
 
-    /// Fails when `samples` include samples the model was trained or validated on.
-    pub fn check_unseen(&self, samples: &Samples) -> Result<()> {
-        self.provenance().map_or(Ok(()), |p| p.check_unseen(samples))
-    }
-
-    /// Whether `samples` come from the data the model was trained on.
-    pub fn trained_on(&self, samples: &Samples) -> bool {
-        self.provenance().is_some_and(|p| p.trained_on(samples))
-    }
-
-    /// What a sample was to the model.
-    pub fn role(&self, source: Option<&str>, index: u64) -> SampleRole {
-        self.provenance().map_or(SampleRole::Unseen, |p| p.role(source, index))
-    }
-
-    /// The samples held out from the model.
-    pub fn held_out(&self, samples: &Samples) -> Result<Samples> {
-        self.provenance().map_or_else(|| Ok(samples.clone()), |p| p.held_out(samples))
-    }
-
     /// A predictor of this model on `compute` (the reduced-order model runs on the CPU only).
     pub fn predictor(&self, compute: Compute) -> Result<ModelPredictor> {
         match self {
@@ -196,10 +176,33 @@ pub trait LearnedModel {
     fn placed_grid(&self) -> Result<Grid>;
     /// Whether it takes forces (N) rather than displacements (m).
     fn takes_forces(&self) -> Result<bool>;
-    /// Fails when `samples` include samples it was trained or validated on.
-    fn check_unseen(&self, samples: &Samples) -> Result<()>;
+    /// The splits behind it, when its training recorded them.
+    fn provenance(&self) -> Option<Provenance<'_>>;
     /// A predictor on `compute`.
     fn predictor(&self, compute: Compute) -> Result<ModelPredictor>;
+
+    /// Fails when `samples` include samples it (or a model it was fine-tuned from) was trained or
+    /// validated on; a model without a recorded split passes.
+    fn check_unseen(&self, samples: &Samples) -> Result<()> {
+        self.provenance().map_or(Ok(()), |p| p.check_unseen(samples))
+    }
+
+    /// Whether `samples` come from the data its own run was trained on (then its recorded test
+    /// split is what [`held_out`](Self::held_out) gives).
+    fn trained_on(&self, samples: &Samples) -> bool {
+        self.provenance().is_some_and(|p| p.trained_on(samples))
+    }
+
+    /// What a sample was to it ([`Provenance::role`]).
+    fn role(&self, source: Option<&str>, index: u64) -> SampleRole {
+        self.provenance().map_or(SampleRole::Unseen, |p| p.role(source, index))
+    }
+
+    /// The samples held out from it ([`Provenance::held_out`]; all of them without a recorded
+    /// split).
+    fn held_out(&self, samples: &Samples) -> Result<Samples> {
+        self.provenance().map_or_else(|| Ok(samples.clone()), |p| p.held_out(samples))
+    }
 }
 
 impl LearnedModel for TrainedModel {
@@ -212,8 +215,8 @@ impl LearnedModel for TrainedModel {
     fn takes_forces(&self) -> Result<bool> {
         TrainedModel::takes_forces(self)
     }
-    fn check_unseen(&self, samples: &Samples) -> Result<()> {
-        TrainedModel::check_unseen(self, samples)
+    fn provenance(&self) -> Option<Provenance<'_>> {
+        TrainedModel::provenance(self)
     }
     fn predictor(&self, compute: Compute) -> Result<ModelPredictor> {
         Ok(ModelPredictor::UNet(Box::new(Predictor::new(self, compute)?)))
@@ -230,8 +233,8 @@ impl LearnedModel for Model {
     fn takes_forces(&self) -> Result<bool> {
         Model::takes_forces(self)
     }
-    fn check_unseen(&self, samples: &Samples) -> Result<()> {
-        Model::check_unseen(self, samples)
+    fn provenance(&self) -> Option<Provenance<'_>> {
+        Model::provenance(self)
     }
     fn predictor(&self, compute: Compute) -> Result<ModelPredictor> {
         Model::predictor(self, compute)

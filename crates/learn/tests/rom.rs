@@ -2,6 +2,7 @@
 //! hidden parameters, the target a nonlinear function of them.
 
 use augsim_learn::rom::{fit, Context, RomConfig};
+use augsim_learn::LearnedModel;
 use augsim_learn::{
     evaluate, uncertainty_coverage, Compute, Corruption, GridShape, Method, Model, Sample, Samples, SplitPolicy,
 };

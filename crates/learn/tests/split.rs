@@ -4,6 +4,7 @@
 mod common;
 
 use augsim_learn::training::train::MODEL_FILE;
+use augsim_learn::LearnedModel;
 use augsim_learn::{
     evaluate, train, Compute, Corruption, GridShape, IndexSet, Initialization, Normalization, Samples, Split,
     SplitPolicy, TrainConfig, TrainOptions, TrainedModel, UNetConfig,

@@ -20,9 +20,9 @@ use safetensors::tensor::{Dtype, SafeTensors, TensorView};
 use serde::{Deserialize, Serialize};
 
 use crate::data::corrupt::Corruption;
-use crate::data::dataset::{Normalization, Samples};
+use crate::data::dataset::Normalization;
 use crate::data::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
-use crate::data::split::{Provenance, SampleRole, Split};
+use crate::data::split::{Provenance, Split};
 use crate::fsutil::read;
 use crate::net::inference::{InferenceNet, Packed};
 use crate::{LearnError, Result};
@@ -548,29 +548,6 @@ impl TrainedModel {
     /// The splits behind this model, when its training recorded them.
     pub fn provenance(&self) -> Option<Provenance<'_>> {
         self.training.as_ref().map(|t| Provenance { own: &t.split, earlier: &t.pretraining })
-    }
-
-    /// Fails when `samples` include samples this model (or a model it was fine-tuned from) was
-    /// trained or validated on; models without a recorded split pass.
-    pub fn check_unseen(&self, samples: &Samples) -> Result<()> {
-        self.provenance().map_or(Ok(()), |p| p.check_unseen(samples))
-    }
-
-    /// Whether `samples` come from the data this model's own run was trained on (then its
-    /// recorded test split is what [`held_out`](Self::held_out) gives).
-    pub fn trained_on(&self, samples: &Samples) -> bool {
-        self.provenance().is_some_and(|p| p.trained_on(samples))
-    }
-
-    /// What sample `index` of the data source `source` was to this model ([`Provenance::role`]).
-    pub fn role(&self, source: Option<&str>, index: u64) -> SampleRole {
-        self.provenance().map_or(SampleRole::Unseen, |p| p.role(source, index))
-    }
-
-    /// The samples of `samples` held out from this model ([`Provenance::held_out`]; all of
-    /// them for a model without a recorded split).
-    pub fn held_out(&self, samples: &Samples) -> Result<Samples> {
-        self.provenance().map_or_else(|| Ok(samples.clone()), |p| p.held_out(samples))
     }
 
     /// The model JSON of `path`: `path/model.json` for a model directory, else `path` itself.
