@@ -14,7 +14,7 @@ import pytest
 import augsim
 from helpers import LIVER_AR, ROOT, make_case, run_augsim
 
-BEAM_ASSIMILATION = os.path.join(ROOT, "crates", "experiment", "tests", "data", "beam_assimilation.toml")
+BEAM_ASSIMILATION = os.path.join(ROOT, "crates", "app", "tests", "data", "beam_assimilation.toml")
 
 
 def test_solve_beam_matches_the_command_line(tmp_path):
@@ -123,6 +123,28 @@ def test_registration_errors(case, tmp_path):
         augsim.Registration(model=LIVER_AR)
     with pytest.raises(augsim.AugsimError, match="target"):
         augsim.Registration(fem=case["scenario"], targets=[[10.0, 10.0, 10.0]])  # 10 m: outside the organ
+
+
+def test_a_unit_mistake_in_the_targets_is_named(case):
+    # Millimetres declared as metres: outside the organ, refused, naming the likely mistake.
+    with pytest.raises(augsim.AugsimError, match="given in mm where m were expected"):
+        augsim.Registration(fem=case["scenario"], targets=case["rest"], units="m")
+    # Metres declared as millimetres: 1,000 times too small, accepted with a warning naming it.
+    with pytest.warns(UserWarning, match="given in m where mm were expected"):
+        augsim.Registration(fem=case["scenario"], targets=case["rest"] * 1e-3, units="mm")
+
+
+def test_register_writes_what_the_command_line_writes(case, tmp_path):
+    reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm")
+    r = reg.register(case["cloud"], out=tmp_path / "out")
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["organ.vtu", "summary.json", "targets.csv"]
+    written = np.loadtxt(tmp_path / "out" / "targets.csv", delimiter=",", skiprows=1)
+    np.testing.assert_allclose(written[:, 3:6] * 1e3, r.targets, atol=1e-9)  # written in m
+    np.testing.assert_allclose(written[:, 0:3] * 1e3, case["rest"], atol=1e-9)
+    import json
+
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["frames"] == 1 and summary["per_frame"][0]["iterations"] == r.iterations
 
 
 def test_predict_matches_the_command_line(tmp_path):

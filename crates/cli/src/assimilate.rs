@@ -1,11 +1,11 @@
-//! `augsim assimilate`: parses the command line, runs a [`experiment::assimilation::Experiment`] and prints its
+//! `augsim assimilate`: parses the command line, runs a [`app::assimilation::Experiment`] and prints its
 //! setup, progress and results.
 
 use std::path::PathBuf;
 
 use anyhow::Result;
+use app::assimilation::{Experiment, ObservationFiles, Report};
 use clap::Args;
-use experiment::assimilation::{Experiment, ObservationFiles, Report};
 use filter::{Discrepancy, Execution, SigmaPointSet};
 use indicatif::{ProgressBar, ProgressStyle};
 use scenario::AssimilationScenario;

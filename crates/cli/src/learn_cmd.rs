@@ -272,8 +272,8 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         compute,
     };
     let outcome = learn::train(&train, &validation, &init, &config, &options)?;
-    let curve = args.out.join(experiment::curve::CURVE_PNG);
-    experiment::curve::plot_learning_curve(&curve, &outcome.curve)?;
+    let curve = args.out.join(app::curve::CURVE_PNG);
+    app::curve::plot_learning_curve(&curve, &outcome.curve)?;
     println!("steps      {} ({:.3} s per step)", outcome.iterations_done, outcome.mean_step_seconds);
     if let Some((it, Some(e))) = outcome.model.training.as_ref().map(|t| (t.best_iteration, t.best_val_mean_error)) {
         println!("best       validation mean e = {:.4} mm at iteration {it}", e * 1e3);

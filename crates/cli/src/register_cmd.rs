@@ -1,18 +1,16 @@
 //! `augsim register`: an intraoperative point cloud (or a sequence of them) in,
 //! the deformed organ and its targets out, with the TRE when the truth is known.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use experiment::case::{ar_scenario, case_methods, compare, synthetic_case, Network, Registered, SHIPPED_MODEL};
-use experiment::picture::side_view;
-use experiment::setup::{fem_setup, network_setup, RegistrationSetup};
-use mesh::io::{csv_field, write_atomic_bytes, Field};
+use app::case::{ar_scenario, case_methods, compare, synthetic_case, Network, Registered, SHIPPED_MODEL};
+use app::output::{baseline_name, comparison_values, write_comparison, RunWriter};
+use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
 use mesh::Point;
 use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
-use register::{register_sequence, Organ, RigidOptions, RigidResult, RigidTransform, Summary};
-use scenario::registration::{slug, MethodKind, BUILTIN_CASE};
-use serde::Serialize;
+use register::{Organ, RigidOptions, RigidResult, RigidTransform};
+use scenario::registration::{MethodKind, BUILTIN_CASE};
 
 use crate::solve::ms;
 use scenario::{CaseScenario, DatasetScenario};
@@ -80,55 +78,23 @@ pub struct RegisterArgs {
     misalign_mm: Option<f64>,
 }
 
-/// One frame's line of summary.json.
-#[derive(Serialize)]
-struct FrameSummary {
-    cloud: String,
-    points: usize,
-    inliers: usize,
-    iterations: usize,
-    surface_residual_mm: f64,
-    time_ms: f64,
-    warnings: Vec<String>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    tre_mean_mm: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    tre_max_mm: Option<f64>,
-    /// The predicted standard deviation at each target (mm), for a method that predicts one.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    target_std_mm: Option<Vec<f64>>,
-}
-
-/// summary.json: the run's figures and each frame's.
-#[derive(Serialize)]
-struct RunSummary {
-    #[serde(flatten)]
-    summary: Summary,
-    per_frame: Vec<FrameSummary>,
-}
-
 /// Runs the registration and writes the outputs.
 pub fn run(args: &RegisterArgs) -> Result<()> {
     if args.demo || args.case.is_some() {
         return demo(args);
     }
     let cloud_path = args.cloud.clone().context("a cloud is required")?;
-    let setup = if let Some(model) = &args.model {
-        network_setup(model, args.scenario.as_deref().context("--model needs --scenario (or --demo)")?)?
+    let method = if let Some(model) = &args.model {
+        let scenario = args.scenario.clone().context("--model needs --scenario (or --demo)")?;
+        MethodSpec::Learned { model: model.clone(), scenario }
     } else if let Some(fem) = &args.fem {
-        fem_setup(fem)?
+        MethodSpec::Fem(fem.clone())
     } else {
         bail!("give --fem SCENARIO or --model MODEL --scenario SCENARIO (or --demo)");
     };
-    let options = setup.options_with(args.iterations, args.rigid);
-    let RegistrationSetup { organ, mut deformer, method, default_targets, .. } = setup;
-    let targets = match &args.targets {
-        Some(p) => read_targets(p)?,
-        None => default_targets,
-    };
-    if targets.is_empty() {
-        bail!("no targets: give --targets, or a mesh with `markers` or `tumour` regions");
-    }
+    let targets = args.targets.clone().map_or(TargetsSpec::Regions, TargetsSpec::File);
+    let spec = RegistrationSpec { method, targets, unit: 1.0, iterations: args.iterations, rigid: args.rigid };
+    let mut registration = spec.build()?;
     let frames = read_frames(&cloud_path)?;
     let truths: Option<Vec<Vec<Point>>> = match &args.truth {
         None => None,
@@ -140,77 +106,50 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
             Some(files.iter().map(|f| read_targets(f)).collect::<Result<Vec<_>, _>>()?)
         }
     };
-    println!("method     {method}");
-    print_organ(&organ, targets.len());
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    let sequence = frames.len() > 1;
-    let (mut steps, mut rows) = (Vec::new(), Vec::new());
-    let clouds = frames.iter().map(|f| read_point_cloud(f));
-    let mut moved_mesh: Option<mesh::Mesh> = None;
-    let outcomes =
-        register_sequence(&organ, deformer.as_mut(), clouds, &targets, truths.as_deref(), &options, |i, o| {
-            if let (Some(rigid), None) = (&o.rigid, &moved_mesh) {
-                print_rigid(rigid, None);
-                moved_mesh = Some(rigid.organ_to_cloud().move_mesh(organ.mesh()));
-            }
-            let (r, tre) = (&o.registration, o.tre_mm());
-            let row = FrameSummary {
-                cloud: frames[i].display().to_string(),
-                points: r.points,
-                inliers: r.inliers,
-                iterations: r.iterations,
-                surface_residual_mm: r.surface_residual * 1e3,
-                time_ms: ms(r.time),
-                warnings: r.warnings.clone(),
-                tre_mean_mm: tre.map(|t| t.0),
-                tre_max_mm: tre.map(|t| t.1),
-                target_std_mm: o.target_std.as_ref().map(|s| s.iter().map(|v| v * 1e3).collect()),
-            };
-            println!(
-                "frame {i:<4} {} points ({} matched), {} iterations, surface residual {:.2} mm, {:.1} ms{}",
-                row.points,
-                row.inliers,
-                row.iterations,
-                row.surface_residual_mm,
-                row.time_ms,
-                row.tre_mean_mm.map_or(String::new(), |t| format!(
-                    ", TRE mean {t:.2} mm, max {:.2} mm",
-                    row.tre_max_mm.unwrap_or(0.0)
-                ))
-            );
-            for w in &row.warnings {
-                eprintln!("warning    frame {i}: {w}");
-            }
-            let name = if sequence { format!("organ_{i:04}.vtu") } else { "organ.vtu".into() };
-            let (m, u) = in_cloud_frame(organ.mesh(), moved_mesh.as_ref(), o.rigid.as_ref(), &r.u);
-            mesh::io::write_mesh(args.out.join(&name), &m, &[Field::point("displacement", 3, u)])?;
-            steps.push((i as f64, name));
-            rows.push(row);
-            Ok(())
-        })?;
-    if sequence {
-        mesh::io::write_pvd(args.out.join("organ.pvd"), &steps)?;
+    println!("method     {}", registration.method());
+    print_organ(registration.organ(), registration.targets().len());
+    for w in registration.warnings() {
+        eprintln!("warning    {w}");
     }
-    let last = outcomes.last().context("no frame")?;
-    write_targets(
-        &args.out.join("targets.csv"),
-        &rest_in_cloud_frame(&targets, last.rigid.as_ref()),
-        &last.targets,
-        last.target_std.as_deref(),
-    )?;
-    if let Some(std) = &last.target_std {
+    let sequence = frames.len() > 1;
+    let mut writer = RunWriter::new(&args.out, sequence)?;
+    let organ = registration.organ().clone();
+    let clouds = frames.iter().map(|f| read_point_cloud(f));
+    let mut rigid_printed = false;
+    let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, o| {
+        if let (Some(rigid), false) = (&o.rigid, rigid_printed) {
+            print_rigid(rigid, None);
+            rigid_printed = true;
+        }
+        let row = writer.frame(i, frames[i].display().to_string(), &organ, o).map_err(to_register_error)?;
+        println!(
+            "frame {i:<4} {} points ({} matched), {} iterations, surface residual {:.2} mm, {:.1} ms{}",
+            row.points,
+            row.inliers,
+            row.iterations,
+            row.surface_residual_mm,
+            row.time_ms,
+            row.tre_mean_mm.map_or(String::new(), |t| format!(
+                ", TRE mean {t:.2} mm, max {:.2} mm",
+                row.tre_max_mm.unwrap_or(0.0)
+            ))
+        );
+        for w in &row.warnings {
+            eprintln!("warning    frame {i}: {w}");
+        }
+        Ok(())
+    })?;
+    let summary = writer.finish(registration.method(), registration.targets(), &outcomes)?;
+    if let Some(std) = outcomes.last().and_then(|o| o.target_std.as_ref()) {
         println!(
             "std        predicted at the targets: mean {:.2} mm, max {:.2} mm (targets.csv, column std)",
             mesh::stats::mean(std) * 1e3,
             mesh::stats::max(std) * 1e3
         );
     }
-    let summary = Summary::new(method, &outcomes)?;
     if let (Some(t), Some(m), Some(r)) = (summary.tre_mean_mm, summary.tre_max_mm, summary.no_deformation_tre_mean_mm) {
         println!("TRE        mean {t:.2} mm, max {m:.2} mm (without deformation: mean {r:.2} mm)");
     }
-    let run = RunSummary { summary, per_frame: rows };
-    write_atomic_bytes(&args.out.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
     println!(
         "wrote      {} ({}, targets.csv, summary.json)",
         args.out.display(),
@@ -219,36 +158,9 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
     Ok(())
 }
 
-/// The organ mesh and a displacement in the cloud's frame: as given without a rigid alignment;
-/// with one, the mesh moved by it (`moved`, when already computed) and the displacement rotated.
-fn in_cloud_frame<'a>(
-    organ: &'a mesh::Mesh,
-    moved: Option<&'a mesh::Mesh>,
-    rigid: Option<&RigidResult>,
-    u: &[f64],
-) -> (std::borrow::Cow<'a, mesh::Mesh>, Vec<f64>) {
-    match rigid {
-        None => (std::borrow::Cow::Borrowed(organ), u.to_vec()),
-        Some(r) => {
-            let t = r.organ_to_cloud();
-            let m = match moved {
-                Some(m) => std::borrow::Cow::Borrowed(m),
-                None => std::borrow::Cow::Owned(t.move_mesh(organ)),
-            };
-            (m, t.rotate_field(u))
-        }
-    }
-}
-
-/// Rest targets in the cloud's frame (moved by the rigid alignment, if any).
-fn rest_in_cloud_frame(targets: &[Point], rigid: Option<&RigidResult>) -> Vec<Point> {
-    match rigid {
-        None => targets.to_vec(),
-        Some(r) => {
-            let t = r.organ_to_cloud();
-            targets.iter().map(|&p| t.apply(p)).collect()
-        }
-    }
+/// A writer's error as the registration loop's (its callback returns the loop's error type).
+fn to_register_error(e: anyhow::Error) -> register::RegisterError {
+    register::RegisterError::Invalid(format!("{e:#}"))
 }
 
 /// The rigid alignment's line, with its error against `truth` (the true organ → cloud
@@ -287,21 +199,6 @@ fn print_organ(organ: &Organ, targets: usize) {
         organ.mesh().cells.kind_name(),
         organ.surface().triangles.len(),
     );
-}
-
-/// targets.csv: rest and registered position of each target.
-/// With the method's predicted standard deviation of each target's error (m), when it predicts
-/// one, as a last column `std`.
-fn write_targets(path: &Path, rest: &[Point], registered: &[Point], std: Option<&[f64]>) -> Result<()> {
-    let mut text = String::from(if std.is_some() { "x0,y0,z0,x,y,z,std\n" } else { "x0,y0,z0,x,y,z\n" });
-    for (i, (a, b)) in rest.iter().zip(registered).enumerate() {
-        text.push_str(&format!("{},{},{},{},{},{}", a[0], a[1], a[2], b[0], b[1], b[2]));
-        if let Some(s) = std {
-            text.push_str(&format!(",{}", s[i]));
-        }
-        text.push('\n');
-    }
-    Ok(write_atomic_bytes(path, text.as_bytes())?)
 }
 
 /// The comparison case of `--demo` (the built-in scenario) or `--case FILE`, with the command
@@ -429,71 +326,29 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         "{:<width$} {:>14} {:>13} {:>14} {:>10} {:>10} {:>10}",
         "method", "TRE mean (mm)", "TRE max (mm)", "residual (mm)", "ms/frame", "p95 (ms)", "iterations"
     );
-    let mut csv =
-        String::from("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_median_ms,time_p95_ms,iterations,error\n");
-    let mut row = |name: &str, values: [Option<f64>; 6], error: &str| {
+    let row = |name: &str, values: [Option<f64>; 6], error: &str| {
         let [t, m, res, time, p95, it] = values.map(|v| v.map_or("-".to_string(), |v| format!("{v:.2}")));
         if error.is_empty() {
             println!("{name:<width$} {t:>14} {m:>13} {res:>14} {time:>10} {p95:>10} {it:>10}");
         } else {
             println!("{name:<width$} failed: {error}");
         }
-        let fields = values.map(|v| v.map_or(String::new(), |v| v.to_string()));
-        csv.push_str(&format!("{},{},{}\n", csv_field(name), fields.join(","), csv_field(error)));
     };
     if let Some(first) = registered.first() {
-        let (rest, baseline) = (&first.summary, if rigid.is_some() { "rigid only (ICP)" } else { "no deformation" });
-        row(baseline, [rest.no_deformation_tre_mean_mm, rest.no_deformation_tre_max_mm, None, None, None, None], "");
+        let s = &first.summary;
+        row(
+            baseline_name(first),
+            [s.no_deformation_tre_mean_mm, s.no_deformation_tre_max_mm, None, None, None, None],
+            "",
+        );
     }
     for r in &rows {
         match &r.result {
-            Ok(reg) => {
-                let s = &reg.summary;
-                let values = [
-                    s.tre_mean_mm,
-                    s.tre_max_mm,
-                    Some(s.surface_residual_mm),
-                    Some(s.time_median_ms),
-                    Some(s.time_p95_ms),
-                    Some(s.iterations),
-                ];
-                row(&r.method, values, "");
-            }
+            Ok(reg) => row(&r.method, comparison_values(&reg.summary), ""),
             Err(e) => row(&r.method, [None; 6], &e.to_string()),
         }
     }
-    for reg in &registered {
-        let (s, outcome) = (&reg.summary, reg.peak(&case));
-        let method_dir = args.out.join(slug(&s.method));
-        std::fs::create_dir_all(&method_dir).with_context(|| format!("creating {}", method_dir.display()))?;
-        let u = &outcome.registration.u;
-        let (m, u_cloud) = in_cloud_frame(reg.organ.mesh(), None, outcome.rigid.as_ref(), u);
-        mesh::io::write_mesh(method_dir.join("organ.vtu"), &m, &[Field::point("displacement", 3, u_cloud)])?;
-        let rest_targets = rest_in_cloud_frame(&case.targets, outcome.rigid.as_ref());
-        write_targets(&method_dir.join("targets.csv"), &rest_targets, &outcome.targets, outcome.target_std.as_deref())?;
-        // The picture is drawn in the organ's frame: cloud, targets and truth moved back.
-        let back = outcome.rigid.as_ref().map_or_else(RigidTransform::identity, |r| r.cloud_to_organ);
-        let to_organ = |points: &[Point]| -> Vec<Point> { points.iter().map(|&p| back.apply(p)).collect() };
-        let title = format!("{}: TRE mean {:.2} mm (side view)", s.method, s.tre_mean_mm.unwrap_or(f64::NAN));
-        side_view(
-            &method_dir.join("registration.png"),
-            &title,
-            &reg.organ,
-            u,
-            &to_organ(&peak.cloud),
-            &to_organ(&outcome.targets),
-            Some(&to_organ(&peak.truth)),
-        )?;
-    }
-    write_atomic_bytes(&args.out.join("comparison.csv"), csv.as_bytes())?;
-    let summaries: Vec<serde_json::Value> = rows
-        .iter()
-        .map(|r| match &r.result {
-            Ok(reg) => serde_json::to_value(&reg.summary),
-            Err(e) => Ok(serde_json::json!({ "method": r.method, "error": e.to_string() })),
-        })
-        .collect::<Result<_, _>>()?;
-    write_atomic_bytes(&args.out.join("summary.json"), serde_json::to_string_pretty(&summaries)?.as_bytes())?;
+    write_comparison(&args.out, &case, &rows)?;
     println!();
     println!(
         "wrote      {} (comparison.csv, summary.json; per method: organ.vtu, targets.csv, registration.png)",

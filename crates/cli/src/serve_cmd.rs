@@ -6,9 +6,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
-use live::{ClientRegistration, Outputs, ServeOptions};
-
-use experiment::setup::{fem_setup, network_setup, RegistrationSetup};
+use app::assimilation::{Experiment, OnlineFilter};
+use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
+use live::{Outputs, ServeOptions};
+use register::Registration;
 
 /// Options of `augsim serve`.
 #[derive(Debug, clap::Args)]
@@ -55,12 +56,19 @@ pub struct ServeArgs {
     assimilate: Option<PathBuf>,
 }
 
-/// The registration of `(fem scenario, model, dataset scenario)`: the FEM's or the network's.
-fn setup(method: &(Option<PathBuf>, Option<PathBuf>, Option<PathBuf>)) -> Result<RegistrationSetup> {
-    match method {
-        (Some(fem), _, _) => fem_setup(fem),
-        (None, Some(model), Some(scenario)) => network_setup(model, scenario),
-        _ => bail!("give --fem SCENARIO, or --model MODEL with --scenario SCENARIO"),
+/// The ROUKF on a stream: one step per `features` message.
+struct StreamFilter(OnlineFilter);
+
+impl live::Identification for StreamFilter {
+    fn features(&self) -> usize {
+        self.0.features()
+    }
+
+    fn step(
+        &mut self,
+        positions: &[mesh::Point],
+    ) -> std::result::Result<serde_json::Map<String, serde_json::Value>, String> {
+        self.0.step_points(positions)
     }
 }
 
@@ -68,8 +76,8 @@ fn setup(method: &(Option<PathBuf>, Option<PathBuf>, Option<PathBuf>)) -> Result
 /// of synthetic observations, prepared once here).
 fn identification(path: &std::path::Path, unit: f64) -> Result<Arc<live::IdentificationFactory>> {
     let (scenario, dir) = scenario::AssimilationScenario::load(path)?;
-    let experiment = Arc::new(experiment::assimilation::Experiment::prepare(scenario, &dir, None)?);
-    let filter = experiment::assimilation::OnlineFilter::new(&experiment)?;
+    let experiment = Arc::new(Experiment::prepare(scenario, &dir, None)?);
+    let filter = OnlineFilter::new(&experiment)?;
     println!(
         "identify   {} ({}) from {} features per step (POINT `features`, in the stream's unit of {unit} m)",
         path.display(),
@@ -81,9 +89,9 @@ fn identification(path: &std::path::Path, unit: f64) -> Result<Arc<live::Identif
     Ok(Arc::new(move || -> std::result::Result<Box<dyn live::Identification>, String> {
         let filter = match first.lock().map_err(|e| e.to_string())?.take() {
             Some(f) => f,
-            None => experiment::assimilation::OnlineFilter::new(&experiment).map_err(|e| e.to_string())?,
+            None => OnlineFilter::new(&experiment).map_err(|e| e.to_string())?,
         };
-        Ok(Box::new(filter))
+        Ok(Box::new(StreamFilter(filter)))
     }))
 }
 
@@ -97,35 +105,30 @@ extern "C" fn request_stop(_: libc::c_int) {
 
 /// Runs `augsim serve` until SIGINT or SIGTERM.
 pub fn run(args: &ServeArgs) -> Result<()> {
-    let unit = live::metres_per_unit(&args.units).map_err(anyhow::Error::msg).context("--units")?;
+    let unit = register::cloud::metres_per_unit(&args.units).map_err(anyhow::Error::msg).context("--units")?;
     let outputs = Outputs::parse(&args.outputs).map_err(anyhow::Error::msg).context("--outputs")?;
-    let method = (args.fem.clone(), args.model.clone(), args.scenario.clone());
-    // Built once here so that a bad model or scenario stops the command before it listens.
-    let first = setup(&method)?;
-    let targets = match &args.targets {
-        Some(path) => register::cloud::read_targets(path)?.into_iter().map(|p| p.map(|x| x * unit)).collect(),
-        None => first.default_targets.clone(),
+    let method = match (&args.fem, &args.model, &args.scenario) {
+        (Some(fem), _, _) => MethodSpec::Fem(fem.clone()),
+        (None, Some(model), Some(scenario)) => MethodSpec::Learned { model: model.clone(), scenario: scenario.clone() },
+        _ => bail!("give --fem SCENARIO, or --model MODEL with --scenario SCENARIO"),
     };
-    if targets.is_empty() {
-        bail!("no targets: give --targets, or a mesh with `markers` or `tumour` regions");
+    let targets = args.targets.clone().map_or(TargetsSpec::Regions, TargetsSpec::File);
+    let spec = RegistrationSpec { method, targets, unit, iterations: args.iterations, rigid: args.rigid };
+    // Built once here so that a bad model, scenario or targets file stops the command before it
+    // listens.
+    let first = spec.build()?;
+    println!("method     {}", first.method());
+    println!("organ      {} nodes, {} targets", first.organ().mesh().num_nodes(), first.targets().len());
+    for w in first.warnings() {
+        eprintln!("warning    {w}");
     }
-    let options = first.options_with(args.iterations, args.rigid);
-    options.validate()?;
-    println!("method     {}", first.method);
-    println!("organ      {} nodes, {} targets", first.organ.mesh().num_nodes(), targets.len());
     let first = std::sync::Mutex::new(Some(first));
-    let factory = move || -> std::result::Result<ClientRegistration, String> {
-        // The first client takes the setup built above; the others build their own.
-        let setup = match first.lock().map_err(|e| e.to_string())?.take() {
-            Some(s) => s,
-            None => setup(&method).map_err(|e| format!("{e:#}"))?,
-        };
-        Ok(ClientRegistration {
-            organ: setup.organ,
-            deformer: setup.deformer,
-            targets: targets.clone(),
-            options: options.clone(),
-        })
+    let factory = move || -> std::result::Result<Registration, String> {
+        // The first client takes the registration built above; the others build their own.
+        match first.lock().map_err(|e| e.to_string())?.take() {
+            Some(r) => Ok(r),
+            None => spec.build().map_err(|e| format!("{e:#}")),
+        }
     };
     let identification = match &args.assimilate {
         Some(path) => Some(identification(path, unit)?),

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use experiment::sample_view::{first_held_out, sample_on_mesh};
+use app::sample_view::{first_held_out, sample_on_mesh};
 use learn::{Dataset, Model};
 use mesh::io::{Field, FieldLocation};
 use plot::viewer::{Layer, Scalar, Scene};

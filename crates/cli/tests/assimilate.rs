@@ -20,7 +20,7 @@ fn synthetic_tracks_fed_back_and_bad_files() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     // The filter crate's test beam: 8 steps, Young's modulus from 10 tracked points, deformation every 4 steps.
-    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../experiment/tests/data/beam_assimilation.toml");
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../app/tests/data/beam_assimilation.toml");
     let s = scenario.to_str().unwrap();
     let synthetic = d.join("synthetic");
     let (ok, text) = assimilate(&[s, "-o", synthetic.to_str().unwrap()]);
@@ -50,7 +50,7 @@ fn synthetic_tracks_fed_back_and_bad_files() {
 fn star_sigma_points_from_the_command_line() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../experiment/tests/data/beam_assimilation.toml");
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../app/tests/data/beam_assimilation.toml");
     let s = scenario.to_str().unwrap();
     let star = d.join("star");
     let (ok, text) = assimilate(&[s, "--sigma-points", "star", "-o", star.to_str().unwrap()]);
@@ -69,7 +69,7 @@ fn star_sigma_points_from_the_command_line() {
 fn discrepancy_from_the_command_line() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../experiment/tests/data/beam_assimilation.toml");
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../app/tests/data/beam_assimilation.toml");
     let s = scenario.to_str().unwrap();
     let (plain, honest) = (d.join("plain"), d.join("honest"));
     let (ok, text) = assimilate(&[s, "-o", plain.to_str().unwrap()]);

@@ -8,11 +8,11 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use experiment::assimilation::Experiment;
+use app::assimilation::Experiment;
 use live::client::{Answer, Client};
 use scenario::AssimilationScenario;
 
-const SCENARIO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../experiment/tests/data/beam_assimilation.toml");
+const SCENARIO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../app/tests/data/beam_assimilation.toml");
 
 fn estimate(client: &mut Client) -> serde_json::Value {
     loop {

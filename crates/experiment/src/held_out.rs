@@ -16,11 +16,12 @@ use scenario::registration::{MethodKind, MethodSpec};
 use scenario::CaseScenario;
 use serde::Serialize;
 
-use crate::case::{
-    ar_scenario, case_methods, compare, network_from_truth, network_model, network_options, synthetic_case, CaseLoad,
-    Network, LEFT_LOBE_FRONT, RIGHT_LOBE, SHIPPED_MODEL, SHIPPED_ROM,
-};
+use crate::loads::{CaseLoad, LEFT_LOBE_FRONT, RIGHT_LOBE};
 use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
+use app::case::{
+    ar_scenario, case_methods, compare, network_from_truth, network_model, network_options, synthetic_case, Network,
+    SHIPPED_MODEL, SHIPPED_ROM,
+};
 
 /// The cases, fixed before any method was run on them.
 const CASES: [CaseLoad; 7] = [

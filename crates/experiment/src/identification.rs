@@ -3,8 +3,8 @@
 
 use std::path::Path;
 
-use crate::assimilation::{Experiment, ObservationFiles, Report, Setup};
 use anyhow::{bail, Context, Result};
+use app::assimilation::{Experiment, ObservationFiles, Report, Setup};
 use filter::Discrepancy;
 use scenario::assimilation::ReferenceSpec;
 use scenario::{AssimilationScenario, MeshSource};

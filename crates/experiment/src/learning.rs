@@ -193,7 +193,7 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
         ..TrainOptions::new(out.clone())
     };
     let outcome = learn::train(&train, &validation, &init, &config, &options)?;
-    crate::curve::plot_learning_curve(&out.join(crate::curve::CURVE_PNG), &outcome.curve)?;
+    app::curve::plot_learning_curve(&out.join(app::curve::CURVE_PNG), &outcome.curve)?;
     Ok(Trained {
         split: [train.len(), validation.len(), test.len()],
         model: Model::UNet(std::sync::Arc::new(outcome.model)),
@@ -337,7 +337,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
         size,
         seconds: 0.0,
         rows,
-        figures: vec![format!("{}/{}", model_dir(&recipe), crate::curve::CURVE_PNG), "errors.png".into()],
+        figures: vec![format!("{}/{}", model_dir(&recipe), app::curve::CURVE_PNG), "errors.png".into()],
         page_figures: Vec::new(),
         notes: vec![
             split_note(&t, &data),
@@ -393,7 +393,7 @@ pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<
         size,
         seconds: 0.0,
         rows,
-        figures: vec![format!("{}/{}", model_dir(&recipe), crate::curve::CURVE_PNG), "errors.png".into()],
+        figures: vec![format!("{}/{}", model_dir(&recipe), app::curve::CURVE_PNG), "errors.png".into()],
         page_figures: Vec::new(),
         notes: vec![
             split_note(&t, &data),

@@ -1,20 +1,9 @@
-//! The application layer of augsim: runs driven by scenario files, synthetic cases, pictures,
-//! and the published experiments with their reports. The algorithm crates (mesh, fem, filter,
-//! learn, register) know nothing of these.
-//!
-//! - [`assimilation`]: ROUKF identification experiments from an assimilation scenario
-//!   (synthetic observations or track files, traces, plots, the estimated deformation).
-//! - [`case`], [`simulate`], [`picture`]: synthetic registration cases on the phantom (truth
-//!   from a finer mesh and another law, a simulated camera cloud), the comparison of methods,
-//!   side-view pictures.
-//! - [`setup`]: a registration method (FEM or U-Net) from its scenario and model files.
-//! - [`curve`], [`sample_view`]: the learning curve as PNG; a dataset sample and a model's
-//!   prediction in the 3D viewer.
-//! - The published experiments ([`run`], [`Name`]): each generates its data, trains,
-//!   identifies or registers, evaluates on data that played no part in producing the model,
-//!   and writes `DIR/<name>/result.json` with its figures beside the published ones, plus PNG
-//!   figures. [`report`] gathers the results into `DIR/report.md`, `DIR/report.html`,
-//!   `docs/results.md` and the README's headline table.
+//! The published experiments of augsim, each against its published figures: ([`run`], [`Name`])
+//! each generates its data, trains, identifies or registers, evaluates on data that played no
+//! part in producing the model, and writes `DIR/<name>/result.json` with its figures beside the
+//! published ones, plus PNG figures. [`report`] gathers the results into `DIR/report.md`,
+//! `DIR/report.html`, `docs/results.md` and the README's headline table. They run on the
+//! application layer (`augsim-app`); only the command line links them.
 //!
 //! Every step of an experiment resumes after a kill: datasets and training resume from what is
 //! on disk, and an experiment whose `result.json` was written at the requested size is not run
@@ -26,22 +15,16 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
-pub mod assimilation;
 pub mod calculix;
-pub mod case;
-pub mod curve;
 mod fem_convergence;
 mod fem_peer;
 mod fem_speed;
 mod held_out;
 mod identification;
 mod learning;
-pub mod picture;
+mod loads;
 mod registration;
 pub mod report;
-pub mod sample_view;
-pub mod setup;
-pub mod simulate;
 pub mod stream;
 mod transfer;
 

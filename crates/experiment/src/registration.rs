@@ -4,9 +4,10 @@
 
 use std::path::Path;
 
-use crate::case::{case_methods, compare, synthetic_case, CaseLoad, Network, LEFT_LOBE_FRONT, RIGHT_LOBE};
-use crate::sample_view::sample_on_mesh;
+use crate::loads::{CaseLoad, LEFT_LOBE_FRONT, RIGHT_LOBE};
 use anyhow::{Context, Result};
+use app::case::{case_methods, compare, synthetic_case, Network};
+use app::sample_view::sample_on_mesh;
 use learn::{Compute, Corruption};
 use mesh::stats::{max, mean};
 use scenario::CaseScenario;
@@ -14,7 +15,7 @@ use scenario::CaseScenario;
 use crate::learning::{dataset, error_histogram, model_dir, train, Recipe};
 use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 
-use crate::case::AR_SCENARIO as LIVER_AR;
+use app::case::AR_SCENARIO as LIVER_AR;
 
 /// The case the registration settings were chosen on (with the same patch at 1, 2 and 2.5 N):
 /// reported apart.
@@ -296,7 +297,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         rows,
         figures: vec![
             "tre.png".into(),
-            format!("{}/{}", model_dir(&recipe), crate::curve::CURVE_PNG),
+            format!("{}/{}", model_dir(&recipe), app::curve::CURVE_PNG),
             "errors.png".into(),
             "viewer.html".into(),
         ],

@@ -13,17 +13,15 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context, Result};
 use live::client::Client;
-use live::{ClientRegistration, Outputs, ServeOptions};
+use live::{Outputs, ServeOptions};
 use mesh::stats::{max, mean, median, percentile};
-use register::{Deformer, Organ, RegistrationOptions};
+use register::{Deformer, Organ, Registration, RegistrationOptions};
 use scenario::CaseScenario;
 use serde::Serialize;
 
-use crate::case::{
-    ar_network_model, corotational_model, network_options, synthetic_case, SyntheticCase, LEFT_LOBE_FRONT,
-    SHIPPED_MODEL,
-};
+use crate::loads::LEFT_LOBE_FRONT;
 use crate::{ExperimentResult, Name, Progress, Row, Size};
+use app::case::{ar_network_model, corotational_model, network_options, synthetic_case, SyntheticCase, SHIPPED_MODEL};
 
 /// Frames of the press and release.
 const FRAMES: usize = 40;
@@ -75,14 +73,11 @@ pub fn stream_case<D: Deformer + Send + 'static>(
     let listener = TcpListener::bind("127.0.0.1:0").context("listening on a local port")?;
     let port = listener.local_addr()?.port();
     let (targets, options) = (case.targets.clone(), options.clone());
-    let factory = move || -> std::result::Result<ClientRegistration, String> {
+    let method_name = method.to_string();
+    let factory = move || -> std::result::Result<Registration, String> {
         let (organ, deformer) = make().map_err(|e| format!("{e:#}"))?;
-        Ok(ClientRegistration {
-            organ,
-            deformer: Box::new(deformer),
-            targets: targets.clone(),
-            options: options.clone(),
-        })
+        Registration::new(organ, Box::new(deformer), method_name.clone(), targets.clone(), options.clone())
+            .map_err(|e| e.to_string())
     };
     let serve_options = ServeOptions {
         unit: 1e-3,

@@ -43,8 +43,7 @@ use openigtlink_rust::protocol::header::Header;
 use openigtlink_rust::protocol::types::{PointElement, PointMessage, StringMessage, TransformMessage};
 use openigtlink_rust::protocol::{calculate_crc, IgtlMessage, Message};
 use polydata::PolyData;
-use register::rigid::RigidTransform;
-use register::{Deformer, FrameResult, Organ, RegistrationOptions, Tracker};
+use register::{Registration, Tracked};
 
 /// Errors of the server.
 #[derive(Debug, thiserror::Error)]
@@ -143,94 +142,8 @@ impl Default for ServeOptions {
     }
 }
 
-/// One client's registration: the organ, what deforms it, the targets and the loop's settings.
-pub struct ClientRegistration {
-    /// The organ (its mesh and surface, in m).
-    pub organ: Organ,
-    /// What deforms it.
-    pub deformer: Box<dyn Deformer + Send>,
-    /// The targets' rest positions (m).
-    pub targets: Vec<Point>,
-    /// The registration loop.
-    pub options: RegistrationOptions,
-}
-
-/// Builds a new client's [`ClientRegistration`].
-pub type RegistrationFactory = dyn Fn() -> std::result::Result<ClientRegistration, String> + Send + Sync;
-
-/// Metres per unit of a unit's name: `mm` (as 3D Slicer uses) or `m`.
-pub fn metres_per_unit(units: &str) -> std::result::Result<f64, String> {
-    match units {
-        "mm" => Ok(1e-3),
-        "m" => Ok(1.0),
-        other => Err(format!("must be mm or m, got '{other}'")),
-    }
-}
-
-/// A [`ClientRegistration`] under way: its targets located in the organ, each frame
-/// warm-started from the previous one, the rigid pose kept ([`register::Tracker`]: what the
-/// server does for each client).
-pub struct WarmRegistration {
-    registration: ClientRegistration,
-    tracker: Tracker,
-}
-
-/// One registered frame.
-pub struct RegisteredFrame {
-    /// The registration (displacement of the organ's nodes, iterations, residual, time; in m, in
-    /// the organ's frame).
-    pub result: FrameResult,
-    /// The registered targets, in the order given (m), in the cloud's frame.
-    pub targets: Vec<Point>,
-    /// The organ-to-cloud transform of the rigid pre-alignment, when the options ask for one.
-    pub rigid: Option<RigidTransform>,
-    /// The predicted standard deviation of each target's error (m), for a method that predicts
-    /// one (the reduced-order model).
-    pub target_std: Option<Vec<f64>>,
-}
-
-impl RegisteredFrame {
-    /// The registered organ surface (m), in the cloud's frame.
-    pub fn organ_surface(&self, organ: &Organ) -> mesh::TriSurface {
-        let mut surface = organ.deformed_surface(&self.result.u);
-        if let Some(t) = &self.rigid {
-            surface.vertices.iter_mut().for_each(|p| *p = t.apply(*p));
-        }
-        surface
-    }
-}
-
-impl WarmRegistration {
-    /// Locates the targets of `registration` in its organ (an error for a target outside it).
-    pub fn new(registration: ClientRegistration) -> register::Result<WarmRegistration> {
-        let tracker = Tracker::new(&registration.organ, &registration.targets)?;
-        Ok(WarmRegistration { registration, tracker })
-    }
-
-    /// Registers `cloud` (m) as [`Tracker::register`] does: from the previous frame, with the
-    /// pose of the first when the options ask for a rigid pre-alignment.
-    pub fn register(&mut self, cloud: &[Point]) -> register::Result<RegisteredFrame> {
-        let r = &mut self.registration;
-        let tracked = self.tracker.register(&r.organ, r.deformer.as_mut(), cloud, &r.options)?;
-        let rigid = tracked.rigid.as_ref().map(|t| t.organ_to_cloud());
-        Ok(RegisteredFrame {
-            result: tracked.registration,
-            targets: tracked.targets,
-            rigid,
-            target_std: tracked.target_std,
-        })
-    }
-
-    /// Forgets the previous frame (and the rigid pose): the next one starts from the rest shape.
-    pub fn reset(&mut self) {
-        self.tracker.reset();
-    }
-
-    /// The registration's organ, targets and settings.
-    pub fn registration(&self) -> &ClientRegistration {
-        &self.registration
-    }
-}
+/// Builds a new client's [`Registration`] (its organ, method, targets and settings).
+pub type RegistrationFactory = dyn Fn() -> std::result::Result<Registration, String> + Send + Sync;
 
 /// How long the accept loop sleeps between checks of the stop flag.
 const POLL: Duration = Duration::from_millis(20);
@@ -479,18 +392,10 @@ pub fn decode_body<T: Message>(header: &Header, body: &[u8]) -> std::result::Res
 /// Registers the newest cloud, frame after frame, and makes the identification steps, until the
 /// connection ends.
 fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
-    let registration = match factory() {
-        Ok(s) => s,
-        Err(e) => {
-            shared.send_status(&serde_json::json!({ "error": format!("setting up the registration: {e}") }));
-            shared.close();
-            return;
-        }
-    };
-    let mut registration = match WarmRegistration::new(registration) {
+    let mut registration = match factory() {
         Ok(r) => r,
         Err(e) => {
-            shared.send_status(&serde_json::json!({ "error": e.to_string() }));
+            shared.send_status(&serde_json::json!({ "error": format!("setting up the registration: {e}") }));
             shared.close();
             return;
         }
@@ -567,7 +472,7 @@ fn identify(
 /// Registers one cloud and sends the chosen answers.
 fn answer(
     shared: &Shared,
-    registration: &mut WarmRegistration,
+    registration: &mut Registration,
     frame: u64,
     cloud: &[Point],
 ) -> std::result::Result<(), String> {
@@ -576,8 +481,8 @@ fn answer(
         return Err(format!("cloud of {} points exceeds the limit of {}", cloud.len(), options.max_points));
     }
     let start = Instant::now();
-    let frame_result = registration.register(cloud).map_err(|e| e.to_string())?;
-    let RegisteredFrame { result, targets, rigid, target_std } = &frame_result;
+    let tracked = registration.register(cloud).map_err(|e| e.to_string())?;
+    let Tracked { registration: result, targets, rigid, target_std } = &tracked;
     let unit = options.unit;
     let to_wire = |p: &Point| p.map(|x| (x / unit) as f32);
     if options.outputs.targets {
@@ -589,13 +494,13 @@ fn answer(
         shared.send(PointMessage::new(points), "targets")?;
     }
     if options.outputs.organ {
-        let surface = frame_result.organ_surface(&registration.registration().organ);
+        let surface = tracked.organ_surface(registration.organ());
         let triangles = surface.triangles.iter().map(|t| t.map(|i| i as u32)).collect();
         let organ = PolyData { points: surface.vertices.iter().map(to_wire).collect(), triangles };
         shared.send(organ, "organ")?;
     }
-    if let (true, Some(t)) = (options.outputs.transform, rigid) {
-        let matrix = t.homogeneous(unit).map(|row| row.map(|x| x as f32));
+    if let (true, Some(r)) = (options.outputs.transform, rigid) {
+        let matrix = r.organ_to_cloud().homogeneous(unit).map(|row| row.map(|x| x as f32));
         shared.send(TransformMessage { matrix }, "rigid")?;
     }
     shared.send_status(&serde_json::json!({

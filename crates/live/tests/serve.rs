@@ -9,13 +9,13 @@ use std::time::Duration;
 
 use augsim_live::client::{Answer, Client};
 use augsim_live::polydata::PolyData;
-use augsim_live::{encode_message, serve, ClientRegistration, Outputs, ServeOptions, WarmRegistration};
+use augsim_live::{encode_message, serve, Outputs, ServeOptions};
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::select::nodes_in_box;
 use mesh::Point;
 use openigtlink_rust::protocol::calculate_crc;
 use openigtlink_rust::protocol::header::Header;
-use register::{FemDeformer, Organ, RegistrationOptions};
+use register::{FemDeformer, Organ, Registration, RegistrationOptions};
 
 const SIDE: f64 = 0.05;
 
@@ -44,13 +44,18 @@ fn pressed_cloud(pressure: f64) -> (Vec<[f32; 3]>, Point) {
     (cloud.collect(), std::array::from_fn(|d| (centre[d] + u[3 * k + d]) * 1e3))
 }
 
-fn cube_registration() -> Result<ClientRegistration, String> {
+fn cube_registration() -> Result<Registration, String> {
+    cube_registration_with(None)
+}
+
+/// The cube's registration, with a rigid pre-alignment when `rigid` is given.
+fn cube_registration_with(rigid: Option<register::RigidOptions>) -> Result<Registration, String> {
     let (problem, centre) = cube();
     let organ = Organ::new(problem.mesh.clone(), None).map_err(|e| e.to_string())?;
     let stiffness = FemDeformer::default_stiffness(&problem);
     let deformer = FemDeformer::new(problem, stiffness, SolverOptions::default()).map_err(|e| e.to_string())?;
-    let options = RegistrationOptions { view: Some([0.0, 0.0, -1.0]), ..RegistrationOptions::default() };
-    Ok(ClientRegistration { organ, deformer: Box::new(deformer), targets: vec![centre], options })
+    let options = RegistrationOptions { view: Some([0.0, 0.0, -1.0]), rigid, ..RegistrationOptions::default() };
+    Registration::new(organ, Box::new(deformer), "FEM", vec![centre], options).map_err(|e| e.to_string())
 }
 
 fn status(message: Option<Answer>) -> serde_json::Value {
@@ -192,23 +197,21 @@ fn outputs_parse_and_refuse_unknown_names() {
 /// frame keeps the pose.
 #[test]
 fn a_rigid_pre_alignment_answers_in_the_clouds_frame() {
-    let mut registration = cube_registration().unwrap();
-    registration.options.rigid = Some(register::RigidOptions::default());
+    let mut warm = cube_registration_with(Some(register::RigidOptions::default())).unwrap();
     let shift = [0.004, -0.003, 0.002];
-    let cloud: Vec<Point> = registration
-        .organ
+    let cloud: Vec<Point> = warm
+        .organ()
         .surface()
         .vertices
         .iter()
         .filter(|p| p[2] > 1e-6)
         .map(|p| std::array::from_fn(|d| p[d] + shift[d]))
         .collect();
-    let centre = registration.targets[0];
-    let mut warm = WarmRegistration::new(registration).unwrap();
+    let centre = warm.targets()[0];
     let mut poses = Vec::new();
     for frame in 0..2 {
         let answer = warm.register(&cloud).unwrap();
-        let t = answer.rigid.expect("a rigid transform");
+        let t = answer.rigid.expect("a rigid transform").organ_to_cloud();
         let moved = (0..3).map(|d| (t.translation[d] - shift[d]).abs()).fold(0.0, f64::max);
         assert!(moved < 1.5e-3, "frame {frame}: translation {:?} for a move of {shift:?}", t.translation);
         let target = answer.targets[0];

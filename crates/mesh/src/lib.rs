@@ -13,6 +13,7 @@ pub mod immersed;
 pub mod io;
 pub mod phantom;
 pub mod quadratic;
+pub mod repair;
 pub mod sampling;
 pub mod select;
 pub mod stats;
@@ -29,7 +30,7 @@ pub use immersed::{immersed_grid, immersed_surface, ImmersedGrid, ImmersedOption
 pub use phantom::{liver_phantom, PhantomSpec};
 pub use quadratic::{tet10_shape, tet10_shape_derivatives, TET10_EDGES};
 pub use sampling::{sample_visible, sample_visible_boundary, SurfaceSample};
-pub use select::{Ball, NodeSelection, SpaceBall};
+pub use select::{Ball, Camera, Near, NodeSelection, SpaceBall};
 pub use surface::{check_closed_manifold, SurfaceReport};
 pub use tetmesh::{
     mesh_surface, stuff, tet_quality, BoundaryFit, ImplicitDomain, SdfDomain, TetMeshOptions, TetQuality,

@@ -1,7 +1,10 @@
-//! Selecting nodes: by axis-aligned box, by list, by named region; the nearest node or the `k` nearest nodes
-//! to a point (linear scans, for the few queries that need no spatial index).
+//! Selecting nodes on any mesh: by axis-aligned box, by list, by named region (painted in
+//! ParaView, 3D Slicer or Gmsh and read with the mesh), the boundary surface, what a camera sees,
+//! a ball, the neighbourhood of landmarks, unions and intersections; the nearest node or the `k`
+//! nearest nodes to a point (linear scans, for the few queries that need no spatial index).
 
 use std::cmp::Ordering;
+use std::path::PathBuf;
 
 use crate::{dot, sub, Mesh, MeshError, Point};
 
@@ -22,11 +25,63 @@ pub enum NodeSelection {
     Region(String),
     /// Every node picked by any of the selections.
     Union(Vec<NodeSelection>),
+    /// The nodes picked by every one of the selections (e.g. `surface` and a `ball`).
+    Intersection(Vec<NodeSelection>),
+    /// Every node of the boundary surface.
+    Surface,
+    /// The boundary nodes a camera sees ([`Camera`]).
+    Facing(Camera),
+    /// The nodes inside a ball.
+    Ball(Ball),
+    /// The nodes within a distance of landmarks ([`Near`]).
+    Near(Near),
+}
+
+/// A camera looking at the organ: along a direction (far away) or from a position. A boundary
+/// node is seen when its surface normal is within `max_angle_deg` of the direction to the camera
+/// and the straight line from it to the camera crosses no other part of the surface
+/// (self-occlusion).
+#[derive(Clone, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Camera {
+    /// The direction the camera looks along (from the camera towards the organ)...
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub view: Option<Point>,
+    /// ... or the camera's position (m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position: Option<Point>,
+    /// The largest angle between a node's normal and the direction to the camera (degrees; 90 by
+    /// default: every node facing the camera).
+    #[serde(default = "default_max_angle")]
+    pub max_angle_deg: f64,
+}
+
+fn default_max_angle() -> f64 {
+    90.0
+}
+
+/// Landmarks (e.g. where ligaments attach, the hilum) and a distance: the nodes within
+/// `distance` of any of them; only boundary nodes with `surface = true`.
+#[derive(Clone, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Near {
+    /// The landmarks (m)...
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub points: Vec<Point>,
+    /// ... and / or a CSV file of them (header x, y, z; m); in a scenario, a relative path starts
+    /// at the scenario file's directory.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file: Option<PathBuf>,
+    /// The distance (m).
+    pub distance: f64,
+    /// Only nodes of the boundary surface.
+    #[serde(default)]
+    pub surface: bool,
 }
 
 impl NodeSelection {
-    /// The selected node indices, sorted and without repeats. An empty
-    /// selection is an error: it is almost always a wrongly placed box.
+    /// The selected node indices, sorted and without repeats. An empty selection is an error:
+    /// it is almost always a wrongly placed box or ball, or landmarks in another unit.
     pub fn select(&self, mesh: &Mesh) -> Result<Vec<usize>, MeshError> {
         let mut nodes = match self {
             NodeSelection::Box { min, max } => nodes_in_box(&mesh.nodes, *min, *max),
@@ -43,6 +98,19 @@ impl NodeSelection {
             NodeSelection::Union(parts) => {
                 parts.iter().map(|p| p.select(mesh)).collect::<Result<Vec<_>, _>>()?.into_iter().flatten().collect()
             }
+            NodeSelection::Intersection(parts) => {
+                let mut sets = parts.iter().map(|p| p.select(mesh));
+                let mut common = sets.next().unwrap_or_else(|| Ok(Vec::new()))?;
+                for set in sets {
+                    let set = set?;
+                    common.retain(|n| set.binary_search(n).is_ok());
+                }
+                common
+            }
+            NodeSelection::Surface => crate::topology::boundary_nodes(mesh),
+            NodeSelection::Facing(camera) => camera.seen_nodes(mesh)?,
+            NodeSelection::Ball(ball) => (0..mesh.num_nodes()).filter(|&n| ball.contains(mesh.nodes[n])).collect(),
+            NodeSelection::Near(near) => near.nodes(mesh)?,
         };
         nodes.sort_unstable();
         nodes.dedup();
@@ -50,6 +118,87 @@ impl NodeSelection {
             return Err(MeshError::Invalid(format!("selection {self:?} picks no node")));
         }
         Ok(nodes)
+    }
+}
+
+impl Camera {
+    /// The boundary nodes this camera sees, sorted.
+    pub fn seen_nodes(&self, mesh: &Mesh) -> Result<Vec<usize>, MeshError> {
+        let to_camera: Box<dyn Fn(Point) -> Point> = match (self.view, self.position) {
+            (Some(v), None) if v.iter().all(|x| x.is_finite()) && dot(v, v) > 0.0 => {
+                let away = crate::unit(v).map(|x| -x);
+                Box::new(move |_| away)
+            }
+            (None, Some(c)) if c.iter().all(|x| x.is_finite()) => Box::new(move |p| sub(c, p)),
+            _ => {
+                return Err(MeshError::Invalid(format!(
+                    "a camera needs either a finite, non-zero `view` direction or a `position`, got {self:?}"
+                )))
+            }
+        };
+        if !(self.max_angle_deg > 0.0 && self.max_angle_deg <= 180.0) {
+            return Err(MeshError::Invalid(format!("max_angle_deg = {} must be in (0, 180]", self.max_angle_deg)));
+        }
+        let surface = crate::topology::boundary_surface(mesh);
+        let bvh = crate::SurfaceBvh::new(&surface)?;
+        let (lo, hi) = mesh.bounds();
+        let diagonal = crate::norm(sub(hi, lo));
+        // Vertex normals: the area vectors of the triangles around each node, summed.
+        let mut normals = vec![[0.0; 3]; mesh.num_nodes()];
+        for t in 0..surface.triangles.len() {
+            let a = crate::surface::triangle_area_vector(&surface, t);
+            for &k in &surface.triangles[t] {
+                normals[k] = along(normals[k], a, 1.0);
+            }
+        }
+        let cos_max = self.max_angle_deg.to_radians().cos();
+        let seen = crate::topology::boundary_nodes(mesh)
+            .into_iter()
+            .filter(|&n| {
+                let (p, d) = (mesh.nodes[n], to_camera(mesh.nodes[n]));
+                let (ln, ld) = (crate::norm(normals[n]), crate::norm(d));
+                if !(ln > 0.0 && ld > 0.0) || dot(normals[n], d) <= cos_max * ln * ld {
+                    return false;
+                }
+                // The line of sight, from just off the surface to the camera (or far beyond the
+                // organ for a camera at infinity), must cross no triangle.
+                let dir = d.map(|x| x / ld);
+                let start = along(p, dir, 1e-6 * diagonal);
+                let end = match self.position {
+                    Some(c) => c,
+                    None => along(p, dir, 2.0 * diagonal),
+                };
+                bvh.segment_hits(start, end).is_empty()
+            })
+            .collect();
+        Ok(seen)
+    }
+}
+
+/// p + s d.
+fn along(p: Point, d: Point, s: f64) -> Point {
+    [p[0] + s * d[0], p[1] + s * d[1], p[2] + s * d[2]]
+}
+
+impl Near {
+    /// The nodes within the distance of the landmarks, sorted.
+    pub fn nodes(&self, mesh: &Mesh) -> Result<Vec<usize>, MeshError> {
+        if !(self.distance >= 0.0 && self.distance.is_finite()) {
+            return Err(MeshError::Invalid(format!("near: distance = {} must be non-negative", self.distance)));
+        }
+        let mut landmarks = self.points.clone();
+        if let Some(file) = &self.file {
+            landmarks.extend(crate::io::points::read_points_csv(file)?);
+        }
+        if landmarks.is_empty() {
+            return Err(MeshError::Invalid("near: no landmark (give `points` or a `file`)".into()));
+        }
+        let candidates =
+            if self.surface { crate::topology::boundary_nodes(mesh) } else { (0..mesh.num_nodes()).collect() };
+        Ok(candidates
+            .into_iter()
+            .filter(|&n| landmarks.iter().any(|&l| crate::distance(mesh.nodes[n], l) <= self.distance))
+            .collect())
     }
 }
 

@@ -1,7 +1,7 @@
 //! `augsim._augsim`, the native module of augsim's Python package (`python/`, built by maturin):
 //! static solves, registration of point clouds with a warm start between frames, U-Net
 //! predictions and the ROUKF one step at a time. Every call reuses what the command line does
-//! (scenario loaders, `experiment::setup`, `live::WarmRegistration`, `experiment::assimilation`);
+//! (scenario loaders, `app::registration`, `app::output`, `app::assimilation`);
 //! long computations run without the GIL, and augsim's errors, panics included, arrive in Python
 //! as `augsim.AugsimError` with augsim's message.
 
@@ -9,12 +9,12 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 
-use experiment::assimilation::{Experiment, OnlineFilter};
-use experiment::setup::{fem_setup, network_setup};
+use app::assimilation::{Experiment, OnlineFilter};
+use app::output::RunWriter;
+use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
 use fem::{post, StaticSolver};
 use learn::data::npy::{NpyArray, NpyData};
 use learn::{Model, PointCloud, PredictInput};
-use live::{ClientRegistration, RegisteredFrame, WarmRegistration};
 use mesh::Point;
 use nalgebra::DVector;
 use numpy::ndarray::{Array2, Array3, ArrayD, IxDyn};
@@ -22,6 +22,7 @@ use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayD
 use pyo3::create_exception;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
+use register::Tracked;
 use scenario::{AssimilationScenario, StaticScenario};
 
 create_exception!(
@@ -187,7 +188,7 @@ struct Registered {
 /// in the cloud's frame.
 #[pyclass(module = "augsim")]
 struct Registration {
-    state: Mutex<WarmRegistration>,
+    state: Mutex<register::Registration>,
     unit: f64,
     /// The method in words (e.g. "FEM, Corotational (Standard elements)").
     #[pyo3(get)]
@@ -212,53 +213,54 @@ impl Registration {
         iterations: Option<usize>,
         rigid: bool,
     ) -> PyResult<Self> {
-        let unit = live::metres_per_unit(units).map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
-        let given: Option<Result<PathBuf, Vec<Point>>> = match targets {
-            None => None,
-            Some(t) => Some(match t.extract::<PathBuf>() {
-                Ok(path) => Ok(path),
-                Err(_) => Err(points(t, "targets", unit)?),
-            }),
+        let unit = register::cloud::metres_per_unit(units).map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
+        let targets = match targets {
+            None => TargetsSpec::Regions,
+            Some(t) => match t.extract::<PathBuf>() {
+                Ok(path) => TargetsSpec::File(path),
+                Err(_) => TargetsSpec::Points(points(t, "targets", 1.0)?),
+            },
         };
         let method = match (fem, model, scenario) {
-            (Some(fem), None, None) => Ok(fem),
-            (None, Some(model), Some(scenario)) => Err((model, scenario)),
+            (Some(fem), None, None) => MethodSpec::Fem(fem),
+            (None, Some(model), Some(scenario)) => MethodSpec::Learned { model, scenario },
             _ => return Err(PyValueError::new_err("give fem=SCENARIO, or model=MODEL with scenario=SCENARIO")),
         };
-        let (state, method) = compute(py, move || {
-            let setup = match method {
-                Ok(fem) => fem_setup(&fem)?,
-                Err((model, scenario)) => network_setup(&model, &scenario)?,
-            };
-            let options = setup.options_with(iterations, rigid);
-            options.validate()?;
-            let targets = match given {
-                None => setup.default_targets,
-                Some(Ok(path)) => {
-                    register::cloud::read_targets(&path)?.into_iter().map(|p| p.map(|x| x * unit)).collect()
-                }
-                Some(Err(points)) => points,
-            };
-            if targets.is_empty() {
-                anyhow::bail!("no targets: give targets, or a mesh with `markers` or `tumour` regions");
-            }
-            let registration = ClientRegistration { organ: setup.organ, deformer: setup.deformer, targets, options };
-            Ok((WarmRegistration::new(registration)?, setup.method))
-        })?;
+        let spec = RegistrationSpec { method, targets, unit, iterations, rigid };
+        let state = compute(py, move || spec.build())?;
+        let warnings = state.warnings().iter().map(|w| format!("targets: {w}")).collect::<Vec<_>>();
+        for w in &warnings {
+            PyErr::warn(
+                py,
+                &py.get_type::<pyo3::exceptions::PyUserWarning>(),
+                &std::ffi::CString::new(w.as_str())?,
+                1,
+            )?;
+        }
+        let method = state.method().to_string();
         Ok(Registration { state: Mutex::new(state), unit, method, units: units.to_string() })
     }
 
     /// Registers a cloud of positions, float [N, 3] in `units` (no correspondences needed),
     /// starting from the previous cloud's registration. Returns a `Registered` (`targets`,
-    /// `displacement`, `surface_residual`, `inliers`, `iterations`, `warnings`, `ms`). Raises ValueError for
-    /// an array of another shape, AugsimError for a cloud augsim rejects (no point, a NaN) or a
-    /// failed registration (the warm start is then kept).
-    fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>) -> PyResult<Registered> {
+    /// `displacement`, `surface_residual`, `inliers`, `iterations`, `warnings`, `ms`). With `out`,
+    /// a directory, also writes there what `augsim register` writes: organ.vtu, targets.csv and
+    /// summary.json (in m, in the cloud's frame). Raises ValueError for an array of another shape,
+    /// AugsimError for a cloud augsim rejects (no point, a NaN) or a failed registration (the
+    /// warm start is then kept).
+    #[pyo3(signature = (cloud, *, out=None))]
+    fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>, out: Option<PathBuf>) -> PyResult<Registered> {
         let cloud = points(cloud, "cloud", self.unit)?;
-        let RegisteredFrame { result, targets, rigid, target_std } =
-            compute(py, || Ok(locked(&self.state)?.register(&cloud)?))?;
-        let rigid = rigid.map(|t| {
-            let rows = t.homogeneous(self.unit);
+        let Tracked { registration: result, targets, rigid, target_std } = compute(py, || {
+            let mut state = locked(&self.state)?;
+            let tracked = state.register(&cloud)?;
+            if let Some(dir) = &out {
+                write_frame(dir, &state, &tracked)?;
+            }
+            Ok(tracked)
+        })?;
+        let rigid = rigid.map(|r| {
+            let rows = r.organ_to_cloud().homogeneous(self.unit);
             Array2::from_shape_fn((4, 4), |(i, j)| rows[i][j]).into_pyarray(py).unbind()
         });
         Ok(Registered {
@@ -288,16 +290,32 @@ impl Registration {
     /// Rest positions of the organ's nodes, float64 [n, 3], in `units`.
     #[getter]
     fn points<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let nodes = compute(py, || Ok(locked(&self.state)?.registration().organ.mesh().nodes.clone()))?;
+        let nodes = compute(py, || Ok(locked(&self.state)?.organ().mesh().nodes.clone()))?;
         Ok(point_array(py, &nodes, self.unit))
     }
 
     /// Rest positions of the targets, float64 [k, 3], in `units`.
     #[getter]
     fn targets<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let targets = compute(py, || Ok(locked(&self.state)?.registration().targets.clone()))?;
+        let targets = compute(py, || Ok(locked(&self.state)?.targets().to_vec()))?;
         Ok(point_array(py, &targets, self.unit))
     }
+}
+
+/// Writes one registered cloud as `augsim register` does (organ.vtu, targets.csv, summary.json).
+fn write_frame(dir: &std::path::Path, registration: &register::Registration, tracked: &Tracked) -> anyhow::Result<()> {
+    let outcome = register::FrameOutcome {
+        registration: tracked.registration.clone(),
+        targets: tracked.targets.clone(),
+        errors: None,
+        rest_errors: None,
+        rigid: tracked.rigid.clone(),
+        target_std: tracked.target_std.clone(),
+    };
+    let mut writer = RunWriter::new(dir, false)?;
+    writer.frame(0, "python".into(), registration.organ(), &outcome)?;
+    writer.finish(registration.method(), registration.targets(), std::slice::from_ref(&outcome))?;
+    Ok(())
 }
 
 /// Predicts with a trained U-Net, as `augsim predict` does.

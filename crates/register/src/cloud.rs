@@ -25,10 +25,19 @@ fn is_cloud_file(path: &Path) -> bool {
     extension(path).is_some_and(|e| CLOUD_EXTENSIONS.contains(&e.as_str()))
 }
 
+/// Metres per unit of a unit's name: `mm` (as 3D Slicer uses) or `m`.
+pub fn metres_per_unit(units: &str) -> std::result::Result<f64, String> {
+    match units {
+        "mm" => Ok(1e-3),
+        "m" => Ok(1.0),
+        other => Err(format!("must be mm or m, got '{other}'")),
+    }
+}
+
 /// Reads a point cloud, choosing the format from the extension (`.csv`, `.npy` or `.ply`, any case).
 pub fn read_point_cloud(path: &Path) -> Result<Vec<Point>> {
     let points = match extension(path).as_deref() {
-        Some("csv") => read_csv(path)?,
+        Some("csv") => mesh::io::points::read_points_csv(path)?,
         Some("npy") => read_npy_cloud(path)?,
         Some("ply") => read_ply(path)?,
         _ => {
@@ -43,7 +52,7 @@ pub fn read_point_cloud(path: &Path) -> Result<Vec<Point>> {
 
 /// Reads target (or ground-truth) positions from a CSV file whose header names `x`, `y`, `z`.
 pub fn read_targets(path: &Path) -> Result<Vec<Point>> {
-    check_points(path, read_csv(path)?)
+    check_points(path, mesh::io::points::read_points_csv(path)?)
 }
 
 /// The clouds of a sequence: a file is a single frame; a directory gives its `.csv`, `.npy` and
@@ -87,31 +96,9 @@ pub fn write_ply_binary(path: &Path, points: &[Point]) -> Result<()> {
     Ok(())
 }
 
-/// Writes `points` as CSV with the header `x,y,z`, atomically; the values read back exactly.
+/// Writes points as CSV with the header `x,y,z` ([`mesh::io::points::write_points_csv`]).
 pub fn write_csv(path: &Path, points: &[Point]) -> Result<()> {
-    mesh::io::write_atomic(path, |w| {
-        writeln!(w, "x,y,z")?;
-        for p in points {
-            writeln!(w, "{},{},{}", Num(p[0]), Num(p[1]), Num(p[2]))?;
-        }
-        Ok(())
-    })?;
-    Ok(())
-}
-
-/// Shortest round-tripping text of a value: plain notation for ordinary magnitudes, scientific
-/// otherwise (both forms of Rust's formatting round-trip exactly).
-struct Num(f64);
-
-impl std::fmt::Display for Num {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let a = self.0.abs();
-        if a == 0.0 || (1e-4..1e15).contains(&a) {
-            write!(f, "{}", self.0)
-        } else {
-            write!(f, "{:e}", self.0)
-        }
-    }
+    Ok(mesh::io::points::write_points_csv(path, points)?)
 }
 
 /// Rejects an empty cloud and non-finite coordinates ([`crate::check_cloud`]), naming the file.
@@ -122,47 +109,6 @@ fn check_points(path: &Path, points: Vec<Point>) -> Result<Vec<Point>> {
 
 // ---------------------------------------------------------------------------------------------
 // CSV
-
-fn read_csv(path: &Path) -> Result<Vec<Point>> {
-    let text = fs::read_to_string(path).map_err(|e| RegisterError::io(path, e))?;
-    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
-    let err = |line: usize, message: String| RegisterError::format(path, format!("line {line}: {message}"));
-    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim()));
-    let (header_no, header) = lines
-        .by_ref()
-        .find(|(_, l)| !l.is_empty())
-        .ok_or_else(|| RegisterError::format(path, "no points (empty file, expected a header naming x, y, z)"))?;
-    let names: Vec<String> = header.split(',').map(|s| s.trim().to_ascii_lowercase()).collect();
-    let mut columns = [0usize; 3];
-    for (axis, name) in ["x", "y", "z"].iter().enumerate() {
-        let mut found = names.iter().enumerate().filter(|(_, n)| n == name).map(|(i, _)| i);
-        columns[axis] = found.next().ok_or_else(|| {
-            err(header_no, format!("header {header:?} has no '{name}' column (expected the columns x, y, z)"))
-        })?;
-        if found.next().is_some() {
-            return Err(err(header_no, format!("header {header:?} has more than one '{name}' column")));
-        }
-    }
-    let mut points = Vec::new();
-    for (line, text) in lines.filter(|(_, l)| !l.is_empty()) {
-        let fields: Vec<&str> = text.split(',').map(str::trim).collect();
-        if fields.len() != names.len() {
-            return Err(err(line, format!("{} fields, the header has {} columns", fields.len(), names.len())));
-        }
-        let mut p = [0.0; 3];
-        for (axis, &column) in columns.iter().enumerate() {
-            let name = ["x", "y", "z"][axis];
-            let field = fields[column];
-            let v: f64 = field.parse().map_err(|_| err(line, format!("{name} = {field:?} is not a number")))?;
-            if !v.is_finite() {
-                return Err(err(line, format!("{name} = {field:?} is not finite")));
-            }
-            p[axis] = v;
-        }
-        points.push(p);
-    }
-    Ok(points)
-}
 
 // ---------------------------------------------------------------------------------------------
 // NPY

@@ -61,4 +61,4 @@ pub use register::{
     WARM_START_ITERATION,
 };
 pub use rigid::{rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
-pub use sequence::{register_sequence, target_errors, FrameOutcome, Summary, Tracked, Tracker};
+pub use sequence::{target_errors, FrameOutcome, Registration, Summary, Tracked};

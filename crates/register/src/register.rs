@@ -165,7 +165,7 @@ pub struct FrameResult {
 }
 
 /// Registers `organ` to `cloud` (positions only, rigidly aligned: `options.rigid` is not used
-/// here, see [`crate::register_sequence`]), starting from `start` (a previous frame's
+/// here, see [`crate::Registration`]), starting from `start` (a previous frame's
 /// displacement) or from rest.
 pub fn register_frame(
     organ: &Organ,

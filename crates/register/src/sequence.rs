@@ -42,18 +42,25 @@ impl FrameOutcome {
     }
 }
 
-/// Clouds registered one after the other: each warm-started from the previous one's
-/// displacement; with a rigid pre-alignment in the options, the cloud's pose estimated on the
-/// first cloud (trimmed ICP to the organ's rest surface) and kept; the targets carried along in the
-/// cloud's frame. What [`register_sequence`] and a streaming server do per client.
-pub struct Tracker {
-    stencils: Vec<Stencil>,
+/// A registration under way: an organ, what deforms it, targets inside it and the loop's
+/// settings. Clouds are registered one after the other, each warm-started from the previous one's
+/// displacement; with a rigid pre-alignment in the options, the cloud's pose is estimated on the
+/// first cloud (trimmed ICP to the organ's rest surface) and kept; the targets are carried along
+/// in the cloud's frame. What `augsim register`, `augsim serve` (one per client), the Python
+/// `Registration` and the experiments run.
+pub struct Registration {
+    organ: Organ,
+    deformer: Box<dyn Deformer + Send>,
+    method: String,
     targets: Vec<Point>,
+    stencils: Vec<Stencil>,
+    options: RegistrationOptions,
+    warnings: Vec<String>,
     warm: Option<Vec<f64>>,
     rigid: Option<RigidResult>,
 }
 
-/// One cloud registered by a [`Tracker`].
+/// One cloud registered by a [`Registration`].
 #[derive(Clone, Debug)]
 pub struct Tracked {
     /// The registration (displacement in the organ's frame, iterations, residual, time: the
@@ -68,24 +75,86 @@ pub struct Tracked {
     pub target_std: Option<Vec<f64>>,
 }
 
-impl Tracker {
-    /// Locates `targets` (rest positions) in `organ`; an error names a target outside it.
-    pub fn new(organ: &Organ, targets: &[Point]) -> Result<Tracker> {
-        Ok(Tracker { stencils: organ.locate(targets, "target")?, targets: targets.to_vec(), warm: None, rigid: None })
+impl Tracked {
+    /// The registered organ surface, in the cloud's frame.
+    pub fn organ_surface(&self, organ: &Organ) -> mesh::TriSurface {
+        let mut surface = organ.deformed_surface(&self.registration.u);
+        if let Some(r) = &self.rigid {
+            let t = r.organ_to_cloud();
+            surface.vertices.iter_mut().for_each(|p| *p = t.apply(*p));
+        }
+        surface
+    }
+}
+
+impl Registration {
+    /// The registration of `organ` by `deformer` (`method`: its name in words) of the `targets`
+    /// (rest positions, m) with `options`. An error for invalid options, no target, or a target
+    /// outside the organ (naming the likely unit mistake when the targets fit the organ read in
+    /// the other unit); a set of targets much smaller than the organ is accepted with a warning
+    /// ([`Registration::warnings`]).
+    pub fn new(
+        organ: Organ,
+        deformer: Box<dyn Deformer + Send>,
+        method: impl Into<String>,
+        targets: Vec<Point>,
+        options: RegistrationOptions,
+    ) -> Result<Registration> {
+        options.validate()?;
+        if targets.is_empty() {
+            return Err(RegisterError::Invalid("no targets".into()));
+        }
+        let (stencils, warnings) = locate_targets(&organ, &targets)?;
+        Ok(Registration {
+            organ,
+            deformer,
+            method: method.into(),
+            targets,
+            stencils,
+            options,
+            warnings,
+            warm: None,
+            rigid: None,
+        })
     }
 
-    /// Registers `cloud` (in its own frame), starting from the previous cloud's displacement,
+    /// The organ (its mesh and surface, in m, at rest).
+    pub fn organ(&self) -> &Organ {
+        &self.organ
+    }
+
+    /// The organ, the registration ended.
+    pub fn into_organ(self) -> Organ {
+        self.organ
+    }
+
+    /// The method in words (e.g. `FEM, Corotational (Standard elements)`).
+    pub fn method(&self) -> &str {
+        &self.method
+    }
+
+    /// The targets' rest positions (m).
+    pub fn targets(&self) -> &[Point] {
+        &self.targets
+    }
+
+    /// The loop's settings.
+    pub fn options(&self) -> &RegistrationOptions {
+        &self.options
+    }
+
+    /// Why the targets may not be what was meant (e.g. a set far smaller than the organ: a unit
+    /// mistake); empty when they look right.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
+    /// Registers `cloud` (m, in its own frame), starting from the previous cloud's displacement,
     /// which it then replaces; a failed cloud leaves the warm start and the pose as they were.
-    pub fn register(
-        &mut self,
-        organ: &Organ,
-        deformer: &mut dyn Deformer,
-        cloud: &[Point],
-        options: &RegistrationOptions,
-    ) -> Result<Tracked> {
-        let (rigid, rigid_time) = match (&options.rigid, &self.rigid) {
+    pub fn register(&mut self, cloud: &[Point]) -> Result<Tracked> {
+        let (rigid, rigid_time) = match (&self.options.rigid, &self.rigid) {
             (Some(rigid_options), None) => {
-                let r = rigid_align(organ.surface(), cloud, rigid_options)?;
+                let r = rigid_align(self.organ.surface(), cloud, rigid_options)?;
                 let time = r.time;
                 (Some(r), time)
             }
@@ -99,14 +168,15 @@ impl Tracker {
             }
             None => cloud,
         };
-        let mut registration = register_frame(organ, deformer, in_organ, self.warm.as_deref(), options)?;
+        let mut registration =
+            register_frame(&self.organ, self.deformer.as_mut(), in_organ, self.warm.as_deref(), &self.options)?;
         registration.time += rigid_time;
         let mut targets = displaced(&self.targets, &self.stencils, &registration.u);
         if let Some(r) = &rigid {
             let to_cloud = r.organ_to_cloud();
             targets.iter_mut().for_each(|p| *p = to_cloud.apply(*p));
         }
-        let target_std = deformer.uncertainty(&self.targets).transpose()?;
+        let target_std = self.deformer.uncertainty(&self.targets).transpose()?;
         self.warm = Some(registration.u.clone());
         self.rigid = rigid.clone();
         Ok(Tracked { registration, targets, rigid, target_std })
@@ -117,61 +187,103 @@ impl Tracker {
         self.warm = None;
         self.rigid = None;
     }
+
+    /// Registers each cloud of `frames` in turn, each starting from the previous one's
+    /// displacement; `truths` (one list per frame, in the order of the targets, in the cloud's
+    /// frame) are the targets' true deformed positions. `on_frame` sees each frame as soon as it
+    /// is registered (to print or write it).
+    pub fn register_sequence(
+        &mut self,
+        frames: impl IntoIterator<Item = Result<Vec<Point>>>,
+        truths: Option<&[Vec<Point>]>,
+        mut on_frame: impl FnMut(usize, &FrameOutcome) -> Result<()>,
+    ) -> Result<Vec<FrameOutcome>> {
+        let n = self.targets.len();
+        if let Some((i, t)) = truths.into_iter().flatten().enumerate().find(|(_, t)| t.len() != n) {
+            return Err(RegisterError::Invalid(format!(
+                "the truth of frame {i} has {} points for {n} targets",
+                t.len()
+            )));
+        }
+        let mut outcomes: Vec<FrameOutcome> = Vec::new();
+        for (i, cloud) in frames.into_iter().enumerate() {
+            let cloud = cloud?;
+            let truth = match truths {
+                Some(t) => Some(
+                    t.get(i)
+                        .ok_or_else(|| RegisterError::Invalid(format!("no truth for frame {i} ({} given)", t.len())))?,
+                ),
+                None => None,
+            };
+            let Tracked { registration, targets: registered, rigid, target_std } = self.register(&cloud)?;
+            let mut rest = self.targets.clone();
+            if let Some(r) = &rigid {
+                let to_cloud = r.organ_to_cloud();
+                rest.iter_mut().for_each(|p| *p = to_cloud.apply(*p));
+            }
+            let outcome = FrameOutcome {
+                errors: truth.map(|t| target_errors(&registered, t)),
+                rest_errors: truth.map(|t| target_errors(&rest, t)),
+                targets: registered,
+                registration,
+                rigid,
+                target_std,
+            };
+            on_frame(i, &outcome)?;
+            outcomes.push(outcome);
+        }
+        if let Some(t) = truths.filter(|t| t.len() != outcomes.len()) {
+            return Err(RegisterError::Invalid(format!("{} truth lists for {} frames", t.len(), outcomes.len())));
+        }
+        Ok(outcomes)
+    }
 }
 
-/// Registers `organ` to each cloud of `frames` in turn, each frame starting from the previous
-/// one's displacement; `targets` are rest positions inside the organ, `truths` (one list per
-/// frame, in the order of `targets`, in the cloud's frame) their true deformed positions.
-/// `on_frame` sees each frame as soon as it is registered (to print or write it).
-pub fn register_sequence(
-    organ: &Organ,
-    deformer: &mut dyn Deformer,
-    frames: impl IntoIterator<Item = Result<Vec<Point>>>,
-    targets: &[Point],
-    truths: Option<&[Vec<Point>]>,
-    options: &RegistrationOptions,
-    mut on_frame: impl FnMut(usize, &FrameOutcome) -> Result<()>,
-) -> Result<Vec<FrameOutcome>> {
-    if let Some((i, t)) = truths.into_iter().flatten().enumerate().find(|(_, t)| t.len() != targets.len()) {
-        return Err(RegisterError::Invalid(format!(
-            "the truth of frame {i} has {} points for {} targets",
-            t.len(),
-            targets.len()
-        )));
-    }
-    let mut outcomes: Vec<FrameOutcome> = Vec::new();
-    let mut tracker = Tracker::new(organ, targets)?;
-    for (i, cloud) in frames.into_iter().enumerate() {
-        let cloud = cloud?;
-        let truth = match truths {
-            Some(t) => Some(
-                t.get(i)
-                    .ok_or_else(|| RegisterError::Invalid(format!("no truth for frame {i} ({} given)", t.len())))?,
-            ),
-            None => None,
-        };
-        let Tracked { registration, targets: registered, rigid, target_std } =
-            tracker.register(organ, deformer, &cloud, options)?;
-        let mut rest = targets.to_vec();
-        if let Some(r) = &rigid {
-            let to_cloud = r.organ_to_cloud();
-            rest.iter_mut().for_each(|p| *p = to_cloud.apply(*p));
+/// The share of the organ's extent below which a set of several targets is suspected of a unit
+/// mistake (metres read as millimetres shrink it 1,000 times).
+pub const SMALL_TARGET_EXTENT: f64 = 0.01;
+
+/// Stencils of the targets in the organ, and warnings about them. A target outside the organ is
+/// an error, which names the likely unit mistake when every target lies inside read 1,000 times
+/// smaller or larger; a set of targets whose extent is under [`SMALL_TARGET_EXTENT`] of the
+/// organ's is warned about.
+fn locate_targets(organ: &Organ, targets: &[Point]) -> Result<(Vec<Stencil>, Vec<String>)> {
+    let fits = |scale: f64| {
+        let scaled: Vec<Point> = targets.iter().map(|p| p.map(|x| x * scale)).collect();
+        organ.locate(&scaled, "target").is_ok()
+    };
+    let stencils = match organ.locate(targets, "target") {
+        Ok(s) => s,
+        Err(e) => {
+            let hint = if fits(1e-3) {
+                " (read as 1,000 times smaller, every target lies inside: were they given in mm where m were expected?)"
+            } else if fits(1e3) {
+                " (read as 1,000 times larger, every target lies inside: were they given in m where mm were expected?)"
+            } else {
+                ""
+            };
+            return Err(RegisterError::Invalid(format!("{e}{hint}")));
         }
-        let outcome = FrameOutcome {
-            errors: truth.map(|t| target_errors(&registered, t)),
-            rest_errors: truth.map(|t| target_errors(&rest, t)),
-            targets: registered,
-            registration,
-            rigid,
-            target_std,
-        };
-        on_frame(i, &outcome)?;
-        outcomes.push(outcome);
+    };
+    let (organ_extent, extent) = (diagonal(&organ.mesh().nodes), diagonal(targets));
+    let mut warnings = Vec::new();
+    if targets.len() > 1 && extent < SMALL_TARGET_EXTENT * organ_extent {
+        warnings.push(format!(
+            "the {} targets span {:.3} mm, under {:.0} % of the organ's {:.0} mm{}",
+            targets.len(),
+            extent * 1e3,
+            SMALL_TARGET_EXTENT * 100.0,
+            organ_extent * 1e3,
+            if fits(1e3) { ": were they given in m where mm were expected?" } else { "" }
+        ));
     }
-    if let Some(t) = truths.filter(|t| t.len() != outcomes.len()) {
-        return Err(RegisterError::Invalid(format!("{} truth lists for {} frames", t.len(), outcomes.len())));
-    }
-    Ok(outcomes)
+    Ok((stencils, warnings))
+}
+
+/// The diagonal of the bounding box of `points`.
+fn diagonal(points: &[Point]) -> f64 {
+    let (lo, hi) = mesh::bounds(points);
+    mesh::norm(mesh::sub(hi, lo))
 }
 
 /// Per-target distances (m) between two lists of positions of the same length.
@@ -260,5 +372,57 @@ impl Summary {
                 seen
             },
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::register::Observations;
+
+    /// A deformer that never moves the organ.
+    struct Still;
+
+    impl Deformer for Still {
+        fn deform(&mut self, _: &Observations, previous: &[f64], _: usize) -> Result<Vec<f64>> {
+            Ok(vec![0.0; previous.len()])
+        }
+    }
+
+    /// A 5 cm cube at the origin, registered by [`Still`] to the given targets (m).
+    fn cube_with(targets: Vec<Point>) -> Result<Registration> {
+        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap(), None).unwrap();
+        Registration::new(organ, Box::new(Still), "still", targets, RegistrationOptions::default())
+    }
+
+    #[test]
+    fn targets_in_the_organ_are_accepted_without_warning() {
+        let r = cube_with(vec![[0.01, 0.02, 0.03], [0.04, 0.01, 0.02]]).unwrap();
+        assert!(r.warnings().is_empty(), "{:?}", r.warnings());
+        assert_eq!(r.targets().len(), 2);
+    }
+
+    #[test]
+    fn millimetres_given_as_metres_are_refused_naming_the_unit() {
+        let e = cube_with(vec![[10.0, 20.0, 30.0], [40.0, 10.0, 20.0]]).err().expect("targets outside");
+        let message = e.to_string();
+        assert!(message.contains("outside the organ"), "{message}");
+        assert!(message.contains("given in mm where m were expected"), "{message}");
+    }
+
+    #[test]
+    fn metres_read_as_millimetres_are_warned_about() {
+        // 10 mm and 40 mm given in m but read as mm: 1,000 times too small, near the origin.
+        let r = cube_with(vec![[1e-5, 2e-5, 3e-5], [4e-5, 1e-5, 2e-5]]).unwrap();
+        let w = r.warnings().join("; ");
+        assert!(w.contains("under 1 % of the organ"), "{w}");
+        assert!(w.contains("given in m where mm were expected"), "{w}");
+    }
+
+    #[test]
+    fn targets_far_outside_in_any_unit_are_refused_without_a_hint() {
+        let message = cube_with(vec![[-5.0, 0.0, 0.0]]).err().expect("outside").to_string();
+        assert!(message.contains("outside the organ") && !message.contains("expected"), "{message}");
+        assert!(cube_with(Vec::new()).is_err(), "no target");
     }
 }

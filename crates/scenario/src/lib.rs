@@ -145,7 +145,41 @@ impl ScenarioText {
                 format!("this is a `{}` scenario; a `{}` scenario is needed here", kind.key(), expected.key()),
             ));
         }
+        let mut table: toml::Table =
+            toml::from_str(&body).map_err(|e| ScenarioError::invalid(&self.origin, e.to_string()))?;
+        if anchor_landmark_files(&mut table, &self.dir) {
+            // Parsed from the table (whose landmark files now start at the scenario's directory).
+            return toml::Value::Table(table)
+                .try_into()
+                .map_err(|e| ScenarioError::invalid(&self.origin, e.to_string()));
+        }
         toml::from_str(&body).map_err(|e| ScenarioError::invalid(&self.origin, e.to_string()))
+    }
+}
+
+/// Makes the relative `file` of every `near` selection (landmarks, [`mesh::Near`]) start at
+/// `dir`, the scenario's directory; whether any was found.
+fn anchor_landmark_files(table: &mut toml::Table, dir: &Path) -> bool {
+    let mut found = false;
+    for (key, value) in table.iter_mut() {
+        if key == "near" {
+            if let Some(toml::Value::String(file)) = value.as_table_mut().and_then(|t| t.get_mut("file")) {
+                if Path::new(file.as_str()).is_relative() {
+                    *file = dir.join(file.as_str()).to_string_lossy().into_owned();
+                }
+                found = true;
+            }
+        }
+        found |= anchor_in_value(value, dir);
+    }
+    found
+}
+
+fn anchor_in_value(value: &mut toml::Value, dir: &Path) -> bool {
+    match value {
+        toml::Value::Table(t) => anchor_landmark_files(t, dir),
+        toml::Value::Array(items) => items.iter_mut().fold(false, |found, v| anchor_in_value(v, dir) | found),
+        _ => false,
     }
 }
 

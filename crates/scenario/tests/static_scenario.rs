@@ -36,3 +36,41 @@ fn geometric_attachments_and_patch_forces_build_and_bad_ones_are_named() {
     let far = "ball = { centre = [1.0, 1.0, 1.0], radius = 0.01 }";
     assert!(e(far).contains("attachment 1") && e(far).contains("no part of the mesh"), "{}", e(far));
 }
+
+/// Selections on any mesh from a scenario file: the attached nodes near landmarks of a CSV file
+/// next to the scenario (its relative path starts at the scenario's directory, wherever the
+/// program runs), the load on what a camera above sees.
+#[test]
+fn landmark_and_camera_selections_in_a_scenario_file() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("patient")).unwrap();
+    std::fs::write(dir.path().join("patient/ligaments.csv"), "x,y,z\n0.0,0.0,0.0\n0.1,0.0,0.0\n").unwrap();
+    let text = r#"
+kind = "static"
+name = "landmarks"
+
+[mesh.box]
+min = [0.0, 0.0, 0.0]
+max = [0.1, 0.1, 0.1]
+cells = [4, 4, 4]
+element = "tet"
+
+[material]
+law = "corotational"
+young = 5000.0
+poisson = 0.45
+
+[[fixed]]
+select = { near = { file = "ligaments.csv", distance = 0.026, surface = true } }
+
+[[traction]]
+select = { facing = { view = [0.0, 0.0, -1.0] } }
+traction = [0.0, 0.0, -10.0]
+"#;
+    let path = dir.path().join("patient/scenario.toml");
+    std::fs::write(&path, text).unwrap();
+    let (scenario, base) = StaticScenario::load(&path).unwrap();
+    let problem = scenario.build_problem(&base).unwrap();
+    // Around each of the two bottom corners: the corner and its 3 neighbours on the boundary.
+    assert_eq!(problem.dirichlet.len(), 2 * 4, "{:?}", problem.dirichlet);
+}

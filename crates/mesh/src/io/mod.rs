@@ -24,6 +24,7 @@ mod scalar;
 mod surface_io;
 mod text;
 mod vtu;
+pub mod points;
 
 use std::fmt;
 use std::fs::{self, File};

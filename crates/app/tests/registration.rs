@@ -1,9 +1,8 @@
 //! Registration of the phantom to clouds of a deformation computed on another
 //! mesh with another law (no inverse crime): the hidden markers must be recovered.
 
-use augsim_experiment as experiment;
-use experiment::case::{ar_network_model, compare, corotational_model, network_from_truth, phantom_push, Method};
-use experiment::simulate::CameraModel;
+use augsim_app::case::{ar_network_model, compare, corotational_model, network_from_truth, phantom_push, Method};
+use augsim_app::simulate::CameraModel;
 use fem::{Law, Material, Problem, SolverOptions};
 use register::organ::displaced;
 use register::target_errors;
@@ -127,9 +126,9 @@ impl register::Deformer for Failing {
 fn a_method_s_own_iteration_cap_replaces_the_comparison_s() {
     let path = std::path::PathBuf::from("register_case_test");
     let scenario = scenario::CaseScenario::load(&path).unwrap();
-    let case = experiment::case::synthetic_case(&scenario).unwrap();
+    let case = augsim_app::case::synthetic_case(&scenario).unwrap();
     let iterations = |cap: Option<usize>| {
-        let mut methods = experiment::case::case_methods(&scenario, &[]).unwrap();
+        let mut methods = augsim_app::case::case_methods(&scenario, &[]).unwrap();
         methods.truncate(1);
         methods[0].iterations = cap;
         let options = RegistrationOptions { iterations: 6, tolerance: 0.0, ..scenario.registration.clone() };
@@ -143,8 +142,8 @@ fn a_method_s_own_iteration_cap_replaces_the_comparison_s() {
 fn a_failing_method_is_reported_and_the_others_still_register() {
     let path = std::path::PathBuf::from("register_case_test");
     let scenario = scenario::CaseScenario::load(&path).unwrap();
-    let case = experiment::case::synthetic_case(&scenario).unwrap();
-    let mut methods = experiment::case::case_methods(&scenario, &[]).unwrap();
+    let case = augsim_app::case::synthetic_case(&scenario).unwrap();
+    let mut methods = augsim_app::case::case_methods(&scenario, &[]).unwrap();
     methods.truncate(1);
     let organ = methods[0].organ.clone();
     methods.insert(
@@ -169,7 +168,7 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     // shipped network's grid covers it too).
     let network_scenario = scenario::DatasetScenario::builtin("liver_ar");
     let network =
-        experiment::case::Network { model: &model, scenario: &network_scenario, dir: std::path::Path::new("") };
+        augsim_app::case::Network { model: &model, scenario: &network_scenario, dir: std::path::Path::new("") };
     let mut scenario = scenario::CaseScenario::builtin();
     let material = Some(Material::new(Law::Corotational, 5000.0, 0.48));
     let hybrid = |network_iterations: usize, iterations: usize| MethodSpec {
@@ -185,8 +184,8 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     let cap = scenario.models.method[0].iterations.expect("the built-in U-Net's iteration cap");
     scenario.models.method.extend([hybrid(cap, cap), hybrid(cap, cap + 2)]);
     scenario.validate().unwrap();
-    let case = experiment::case::synthetic_case(&scenario).unwrap();
-    let methods = experiment::case::case_methods(&scenario, std::slice::from_ref(&network)).unwrap();
+    let case = augsim_app::case::synthetic_case(&scenario).unwrap();
+    let methods = augsim_app::case::case_methods(&scenario, std::slice::from_ref(&network)).unwrap();
     let rows = compare(&case, methods, &scenario.registration);
     let u = |k: usize| rows[k].result.as_ref().unwrap().outcomes[0].registration.u.clone();
     assert_eq!(u(0), u(1), "all network iterations: the network's registration");
@@ -223,7 +222,7 @@ fn a_warm_started_frame_starts_past_the_ramp() {
     }
     let (organ, _) = corotational_model().unwrap();
     let camera = CameraModel { view: [0.0, 0.0, -1.0], points: 300, noise: 0.0, outliers: 0.0 };
-    let cloud = experiment::simulate::simulate_cloud(organ.surface(), &camera, 3).unwrap();
+    let cloud = augsim_app::simulate::simulate_cloud(organ.surface(), &camera, 3).unwrap();
     let options = RegistrationOptions { iterations: 2, tolerance: 0.0, ..RegistrationOptions::default() };
     let mut cold = Recording(Vec::new());
     register_frame(&organ, &mut cold, &cloud, None, &options).unwrap();
@@ -276,8 +275,8 @@ fn the_network_of_a_t10_scenario_deforms_the_quadratic_mesh() {
     let model = learn::Model::load(std::path::Path::new(MODEL)).unwrap();
     let mut scenario = scenario::DatasetScenario::builtin("liver_ar");
     let network = |scenario: &scenario::DatasetScenario| {
-        let n = experiment::case::Network { model: &model, scenario, dir: std::path::Path::new("") };
-        experiment::case::network_model(&n).unwrap().0
+        let n = augsim_app::case::Network { model: &model, scenario, dir: std::path::Path::new("") };
+        augsim_app::case::network_model(&n).unwrap().0
     };
     let linear = network(&scenario);
     scenario.material = scenario.material.with_order(2);

@@ -3,11 +3,11 @@
 //! noisy cloud with outliers), then a co-rotational FEM of another mesh pulled onto the cloud by
 //! data springs, frame by frame; the target registration error at the hidden markers.
 //!
-//! `cargo run --release -p augsim-experiment --example register_cloud`
+//! `cargo run --release -p augsim-app --example register_cloud`
 
 use std::path::Path;
 
-use augsim_experiment::case::{corotational_model, synthetic_case};
+use augsim_app::case::{corotational_model, synthetic_case};
 use register::organ::displaced;
 use register::{register_frame, target_errors, RegistrationOptions};
 use scenario::CaseScenario;

@@ -3,8 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
-use augsim_experiment::assimilation::tracks::{RestPositions, Tracks};
-use augsim_experiment::assimilation::{Experiment, ObservationFiles, Report};
+use augsim_app::assimilation::tracks::{RestPositions, Tracks};
+use augsim_app::assimilation::{Experiment, ObservationFiles, Report};
 use filter::SigmaPointSet;
 use scenario::AssimilationScenario;
 

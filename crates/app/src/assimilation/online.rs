@@ -1,5 +1,5 @@
 //! The ROUKF of an assimilation experiment stepped with measurements as they arrive: from Python
-//! one step at a time, or on an OpenIGTLink stream ([`live::Identification`]).
+//! one step at a time, or on an OpenIGTLink stream ([`OnlineFilter::step_points`]).
 
 use filter::{FemModel, Roukf};
 use mesh::Point;
@@ -61,6 +61,19 @@ impl OnlineFilter {
         Ok(Estimate { iteration: self.iteration(), mean: self.mean(), std: self.std(), innovation })
     }
 
+    /// One step with the observed points' positions (m; NaN for a point not seen), the estimate
+    /// as JSON fields: `iteration`, `names`, `mean`, `std`, `innovation` (what a stream answers).
+    pub fn step_points(&mut self, positions: &[Point]) -> Result<serde_json::Map<String, serde_json::Value>, String> {
+        let e = self.step(positions.iter().flatten().copied().collect()).map_err(|e| e.to_string())?;
+        let mut fields = serde_json::Map::new();
+        fields.insert("iteration".into(), e.iteration.into());
+        fields.insert("names".into(), self.names.clone().into());
+        fields.insert("mean".into(), e.mean.into());
+        fields.insert("std".into(), e.std.into());
+        fields.insert("innovation".into(), e.innovation.into());
+        Ok(fields)
+    }
+
     /// Filter steps done.
     pub fn iteration(&self) -> usize {
         self.filter.iteration()
@@ -74,22 +87,5 @@ impl OnlineFilter {
     /// Their standard deviations.
     pub fn std(&self) -> Vec<f64> {
         self.filter.std_physical()
-    }
-}
-
-impl live::Identification for OnlineFilter {
-    fn features(&self) -> usize {
-        self.features
-    }
-
-    fn step(&mut self, positions: &[Point]) -> Result<serde_json::Map<String, serde_json::Value>, String> {
-        let e = OnlineFilter::step(self, positions.iter().flatten().copied().collect()).map_err(|e| e.to_string())?;
-        let mut fields = serde_json::Map::new();
-        fields.insert("iteration".into(), e.iteration.into());
-        fields.insert("names".into(), self.names.clone().into());
-        fields.insert("mean".into(), e.mean.into());
-        fields.insert("std".into(), e.std.into());
-        fields.insert("innovation".into(), e.innovation.into());
-        Ok(fields)
     }
 }

@@ -5,12 +5,12 @@
 //!   fixed point of matching and fitting;
 //! - the registration loop itself.
 //!
-//! `cargo run --release -p augsim-register --example network_oracle -- [CASE.toml] [FORCE]`
+//! `cargo run --release -p augsim-app --example network_oracle -- [CASE.toml] [FORCE]`
 //! (default: the built-in `register_case` scenario; FORCE in N replaces its force).
 
 use std::path::Path;
 
-use augsim_experiment::case::{ar_network_model, network_from_truth, synthetic_case};
+use augsim_app::case::{ar_network_model, network_from_truth, synthetic_case};
 use learn::Model;
 use mesh::Point;
 use register::{observe, register_frame, target_errors, RigidTransform};

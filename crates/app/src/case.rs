@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
-use mesh::phantom::{PhantomSpec, SurfacePatch};
+use mesh::phantom::PhantomSpec;
 use mesh::{Mesh, Point};
 
 use learn::data::generate::Input;
@@ -15,8 +15,8 @@ use learn::Model;
 
 use anyhow::{anyhow, bail, Context, Result};
 use register::{
-    register_sequence, Deformer, FemDeformer, FrameOutcome, HybridDeformer, NetworkDeformer, Organ,
-    RegistrationOptions, RigidTransform, Summary,
+    Deformer, FemDeformer, FrameOutcome, HybridDeformer, NetworkDeformer, Organ, Registration, RegistrationOptions,
+    RigidTransform, Summary,
 };
 use scenario::registration::{CameraSpec, MethodKind, Misalignment};
 use scenario::{CaseScenario, DatasetScenario, MeshSource};
@@ -163,43 +163,9 @@ pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
     fem_model(model_mesh()?, Material::new(Law::Corotational, 5000.0, 0.48))
 }
 
-/// A load of a registration case's truth and the camera's seed: the built-in case under another
-/// load, seen anew.
-pub(crate) struct CaseLoad {
-    /// Short description for the tables.
-    pub label: &'static str,
-    /// Tool force (N) and its direction.
-    pub force: f64,
-    pub direction: [f64; 3],
-    /// Where the tool pushes (`None`: the case's own patch, on the left lobe).
-    pub patch: Option<SurfacePatch>,
-    /// The camera's seed.
-    pub seed: u64,
-}
-
-impl CaseLoad {
-    /// `base` under this load, seen with this seed.
-    pub fn apply(&self, base: &CaseScenario) -> CaseScenario {
-        let mut scenario = base.clone();
-        scenario.truth.force = self.force;
-        scenario.truth.direction = self.direction;
-        scenario.truth.patch = self.patch.or(scenario.truth.patch);
-        scenario.camera.seed = self.seed;
-        scenario
-    }
-}
-
-/// A 2 cm patch on top of the right lobe.
-pub(crate) const RIGHT_LOBE: SurfacePatch =
-    SurfacePatch { from: [0.06, 0.02, 0.0], direction: [0.0, 0.0, 1.0], radius: 0.02 };
-
-/// A 2 cm patch on the front of the left lobe.
-pub(crate) const LEFT_LOBE_FRONT: SurfacePatch =
-    SurfacePatch { from: [-0.04, -0.025, 0.0], direction: [0.0, 0.0, 1.0], radius: 0.02 };
-
 /// The shipped augmented-reality network, relative to the directory an experiment runs from (the
 /// repository's).
-pub const SHIPPED_MODEL: &str = "models/liver_ar/model.json";
+pub const SHIPPED_MODEL: &str = "models/liver_ar";
 
 /// The shipped augmented-reality reduced-order model, trained on the same scenario.
 pub const SHIPPED_ROM: &str = "models/liver_ar_rom";
@@ -354,7 +320,7 @@ pub struct Method {
     /// The organ it deforms.
     pub organ: Organ,
     /// How it deforms.
-    pub deformer: Box<dyn Deformer>,
+    pub deformer: Box<dyn Deformer + Send>,
     /// Most match-and-deform iterations, in place of the comparison's (`None`: the comparison's).
     pub iterations: Option<usize>,
     /// Most iterations of a warm-started frame, in place of the comparison's (`None`: the comparison's).
@@ -393,22 +359,15 @@ pub fn compare(case: &SyntheticCase, methods: Vec<Method>, options: &Registratio
     let truths = case.truths();
     methods
         .into_iter()
-        .map(|mut m| {
+        .map(|m| {
             let options = with_budgets(options, m.iterations, m.warm_iterations);
             let frames = case.frames.iter().map(|f| Ok(f.cloud.clone()));
-            let result = register_sequence(
-                &m.organ,
-                m.deformer.as_mut(),
-                frames,
-                &case.targets,
-                Some(&truths),
-                &options,
-                |_, _| Ok(()),
-            )
-            .and_then(|outcomes| {
-                let summary = Summary::new(m.name.clone(), &outcomes)?;
-                Ok(Registered { summary, outcomes, organ: m.organ })
-            });
+            let result = Registration::new(m.organ, m.deformer, m.name.clone(), case.targets.clone(), options)
+                .and_then(|mut registration| {
+                    let outcomes = registration.register_sequence(frames, Some(&truths), |_, _| Ok(()))?;
+                    let summary = Summary::new(m.name.clone(), &outcomes)?;
+                    Ok(Registered { summary, outcomes, organ: registration.into_organ() })
+                });
             Compared { method: m.name, result }
         })
         .collect()

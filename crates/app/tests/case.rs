@@ -3,9 +3,8 @@
 
 use std::path::Path;
 
-use augsim_experiment as experiment;
-use experiment::case::{camera_model, case_methods, synthetic_case};
-use experiment::simulate::{simulate_cloud, CameraModel};
+use augsim_app::case::{camera_model, case_methods, synthetic_case};
+use augsim_app::simulate::{simulate_cloud, CameraModel};
 use fem::{Formulation, Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::Point;
 use register::{Organ, RegistrationOptions, RigidTransform};
@@ -25,7 +24,7 @@ fn the_builtin_case_is_the_documented_one() {
         CaseScenario::parse(builtin_text(), Path::new("register_case.toml")).unwrap(),
         "the file is the built-in text"
     );
-    assert_eq!((s.truth.tets, s.models.tets), (experiment::case::TRUTH_TETS, experiment::case::MODEL_TETS));
+    assert_eq!((s.truth.tets, s.models.tets), (augsim_app::case::TRUTH_TETS, augsim_app::case::MODEL_TETS));
     assert_eq!(
         s.truth.material,
         Material::new(Law::NeoHookean, 5000.0, 0.48).with_order(2).with_formulation(Formulation::Standard)

@@ -4,9 +4,8 @@
 
 use std::path::Path;
 
-use augsim_experiment as experiment;
-use experiment::case::{case_methods, compare, synthetic_case};
-use experiment::simulate::{simulate_cloud, CameraModel};
+use augsim_app::case::{case_methods, compare, synthetic_case};
+use augsim_app::simulate::{simulate_cloud, CameraModel};
 use mesh::sampling::sample_visible;
 use mesh::{Point, TriSurface};
 use register::{rigid_align, IcpMetric, Organ, RegistrationOptions, RigidOptions, RigidTransform};
@@ -14,7 +13,7 @@ use scenario::CaseScenario;
 
 /// The rest surface of the registration models' phantom (3,000 T4).
 fn rest_surface() -> TriSurface {
-    Organ::new(experiment::case::model_mesh().unwrap(), None).unwrap().surface().clone()
+    Organ::new(augsim_app::case::model_mesh().unwrap(), None).unwrap().surface().clone()
 }
 
 /// 8° about a skew axis, then 1 cm: the camera's frame against the model's.

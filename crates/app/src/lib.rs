@@ -1,0 +1,24 @@
+//! augsim's application layer, between the algorithm crates (mesh, fem, filter, learn, register,
+//! scenario) and the programs (the command line, the streaming server, the Python package):
+//!
+//! - [`registration`]: a registration set up from its files (a FEM scenario, or a learned model
+//!   and its dataset scenario; targets in their unit; settings), as `register`, `serve` and
+//!   Python build it; [`output`]: what a registration writes (organ.vtu, targets.csv,
+//!   summary.json) and what a comparison of methods writes.
+//! - [`case`], [`simulate`], [`picture`]: synthetic registration cases on the phantom (truth from
+//!   a finer mesh and another law, a simulated camera cloud), the comparison of methods,
+//!   side-view pictures.
+//! - [`assimilation`]: ROUKF identification from an assimilation scenario (synthetic
+//!   observations or track files, traces, plots, the estimated deformation), also one step at a
+//!   time for a stream.
+//! - [`curve`], [`sample_view`]: the learning curve as PNG; a dataset sample and a model's
+//!   prediction in the 3D viewer.
+
+pub mod assimilation;
+pub mod case;
+pub mod curve;
+pub mod output;
+pub mod picture;
+pub mod registration;
+pub mod sample_view;
+pub mod simulate;

@@ -1,0 +1,255 @@
+//! What a registration writes: the registered organ (organ.vtu, or organ.pvd and one .vtu per
+//! frame of a sequence), targets.csv (rest and registered positions, with the predicted standard
+//! deviation when the method gives one) and summary.json (the run's figures and each frame's),
+//! all in the cloud's frame; and what a comparison of methods on a synthetic case writes.
+
+use std::borrow::Cow;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use mesh::io::{csv_field, write_atomic_bytes, Field};
+use mesh::{Mesh, Point};
+use register::{FrameOutcome, Organ, RigidResult, RigidTransform, Summary};
+use scenario::registration::slug;
+use serde::Serialize;
+
+use crate::case::{Compared, Registered, SyntheticCase};
+use crate::picture::side_view;
+
+/// One frame's line of summary.json.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameSummary {
+    /// The cloud's file (or name).
+    pub cloud: String,
+    /// Points in the cloud.
+    pub points: usize,
+    /// Points matched (outliers rejected) in the last iteration.
+    pub inliers: usize,
+    /// Match-and-deform iterations.
+    pub iterations: usize,
+    /// Mean distance from the matched points to the registered surface (mm).
+    pub surface_residual_mm: f64,
+    /// Wall time (ms).
+    pub time_ms: f64,
+    /// Why the result may not be believed; empty when plausible.
+    pub warnings: Vec<String>,
+    /// Mean TRE (mm), when the truth is known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tre_mean_mm: Option<f64>,
+    /// Largest TRE (mm), when the truth is known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tre_max_mm: Option<f64>,
+    /// The predicted standard deviation at each target (mm), for a method that predicts one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub target_std_mm: Option<Vec<f64>>,
+}
+
+impl FrameSummary {
+    /// The line of the frame registered from `cloud`.
+    pub fn new(cloud: String, o: &FrameOutcome) -> FrameSummary {
+        let (r, tre) = (&o.registration, o.tre_mm());
+        FrameSummary {
+            cloud,
+            points: r.points,
+            inliers: r.inliers,
+            iterations: r.iterations,
+            surface_residual_mm: r.surface_residual * 1e3,
+            time_ms: r.time.as_secs_f64() * 1e3,
+            warnings: r.warnings.clone(),
+            tre_mean_mm: tre.map(|t| t.0),
+            tre_max_mm: tre.map(|t| t.1),
+            target_std_mm: o.target_std.as_ref().map(|s| s.iter().map(|v| v * 1e3).collect()),
+        }
+    }
+}
+
+/// summary.json: the run's figures and each frame's.
+#[derive(Serialize)]
+struct RunSummary<'a> {
+    #[serde(flatten)]
+    summary: &'a Summary,
+    per_frame: &'a [FrameSummary],
+}
+
+/// Writes a registration run into a directory, frame by frame, then its targets and summary.
+pub struct RunWriter {
+    dir: PathBuf,
+    sequence: bool,
+    /// The organ moved by the rigid alignment, once known (the same for every frame).
+    moved: Option<Mesh>,
+    steps: Vec<(f64, String)>,
+    rows: Vec<FrameSummary>,
+}
+
+impl RunWriter {
+    /// A writer into `dir` (created), for a sequence of frames (organ.pvd and one organ_NNNN.vtu
+    /// each) or a single cloud (organ.vtu).
+    pub fn new(dir: &Path, sequence: bool) -> Result<RunWriter> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        Ok(RunWriter { dir: dir.to_path_buf(), sequence, moved: None, steps: Vec::new(), rows: Vec::new() })
+    }
+
+    /// Writes frame `i` (registered from `cloud`) of `organ`; returns its summary line.
+    pub fn frame(&mut self, i: usize, cloud: String, organ: &Organ, outcome: &FrameOutcome) -> Result<&FrameSummary> {
+        if let (Some(r), None) = (&outcome.rigid, &self.moved) {
+            self.moved = Some(r.organ_to_cloud().move_mesh(organ.mesh()));
+        }
+        let name = if self.sequence { format!("organ_{i:04}.vtu") } else { "organ.vtu".into() };
+        let (m, u) = in_cloud_frame(organ.mesh(), self.moved.as_ref(), outcome.rigid.as_ref(), &outcome.registration.u);
+        mesh::io::write_mesh(self.dir.join(&name), &m, &[Field::point("displacement", 3, u)])?;
+        self.steps.push((i as f64, name));
+        self.rows.push(FrameSummary::new(cloud, outcome));
+        Ok(self.rows.last().expect("just pushed"))
+    }
+
+    /// Writes organ.pvd (for a sequence), targets.csv (of the last frame; `targets`: the rest
+    /// positions) and summary.json; returns the run's summary.
+    pub fn finish(self, method: &str, targets: &[Point], outcomes: &[FrameOutcome]) -> Result<Summary> {
+        if self.sequence {
+            mesh::io::write_pvd(self.dir.join("organ.pvd"), &self.steps)?;
+        }
+        let last = outcomes.last().context("no frame")?;
+        write_targets(
+            &self.dir.join("targets.csv"),
+            &rest_in_cloud_frame(targets, last.rigid.as_ref()),
+            &last.targets,
+            last.target_std.as_deref(),
+        )?;
+        let summary = Summary::new(method, outcomes)?;
+        let run = RunSummary { summary: &summary, per_frame: &self.rows };
+        write_atomic_bytes(&self.dir.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
+        Ok(summary)
+    }
+}
+
+/// The organ mesh and a displacement in the cloud's frame: as given without a rigid alignment;
+/// with one, the mesh moved by it (`moved`, when already computed) and the displacement rotated.
+pub fn in_cloud_frame<'a>(
+    organ: &'a Mesh,
+    moved: Option<&'a Mesh>,
+    rigid: Option<&RigidResult>,
+    u: &[f64],
+) -> (Cow<'a, Mesh>, Vec<f64>) {
+    match rigid {
+        None => (Cow::Borrowed(organ), u.to_vec()),
+        Some(r) => {
+            let t = r.organ_to_cloud();
+            let m = match moved {
+                Some(m) => Cow::Borrowed(m),
+                None => Cow::Owned(t.move_mesh(organ)),
+            };
+            (m, t.rotate_field(u))
+        }
+    }
+}
+
+/// Rest targets in the cloud's frame (moved by the rigid alignment, if any).
+pub fn rest_in_cloud_frame(targets: &[Point], rigid: Option<&RigidResult>) -> Vec<Point> {
+    match rigid {
+        None => targets.to_vec(),
+        Some(r) => {
+            let t = r.organ_to_cloud();
+            targets.iter().map(|&p| t.apply(p)).collect()
+        }
+    }
+}
+
+/// targets.csv: rest and registered position of each target (m), with the method's predicted
+/// standard deviation of each target's error (m), when it predicts one, as a last column `std`.
+pub fn write_targets(path: &Path, rest: &[Point], registered: &[Point], std: Option<&[f64]>) -> Result<()> {
+    let mut text = String::from(if std.is_some() { "x0,y0,z0,x,y,z,std\n" } else { "x0,y0,z0,x,y,z\n" });
+    for (i, (a, b)) in rest.iter().zip(registered).enumerate() {
+        text.push_str(&format!("{},{},{},{},{},{}", a[0], a[1], a[2], b[0], b[1], b[2]));
+        if let Some(s) = std {
+            text.push_str(&format!(",{}", s[i]));
+        }
+        text.push('\n');
+    }
+    Ok(write_atomic_bytes(path, text.as_bytes())?)
+}
+
+/// Writes a comparison of methods on a synthetic case into `dir`: comparison.csv (a row per
+/// method, after the baseline of not deforming, or of the rigid alignment alone),
+/// summary.json (each method's figures or error), and per registered method a directory (its
+/// name's slug) with organ.vtu, targets.csv and registration.png (a side view of the peak frame
+/// with the cloud, the registered targets and the truth).
+pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> Result<()> {
+    let registered: Vec<&Registered> = rows.iter().filter_map(|r| r.result.as_ref().ok()).collect();
+    let peak = case.peak();
+    let mut csv =
+        String::from("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_median_ms,time_p95_ms,iterations,error\n");
+    let mut row = |name: &str, values: [Option<f64>; 6], error: &str| {
+        let fields = values.map(|v| v.map_or(String::new(), |v| v.to_string()));
+        csv.push_str(&format!("{},{},{}\n", csv_field(name), fields.join(","), csv_field(error)));
+    };
+    if let Some(first) = registered.first() {
+        let s = &first.summary;
+        row(
+            baseline_name(first),
+            [s.no_deformation_tre_mean_mm, s.no_deformation_tre_max_mm, None, None, None, None],
+            "",
+        );
+    }
+    for r in rows {
+        match &r.result {
+            Ok(reg) => row(&r.method, comparison_values(&reg.summary), ""),
+            Err(e) => row(&r.method, [None; 6], &e.to_string()),
+        }
+    }
+    for reg in &registered {
+        let (s, outcome) = (&reg.summary, reg.peak(case));
+        let method_dir = dir.join(slug(&s.method));
+        std::fs::create_dir_all(&method_dir).with_context(|| format!("creating {}", method_dir.display()))?;
+        let u = &outcome.registration.u;
+        let (m, u_cloud) = in_cloud_frame(reg.organ.mesh(), None, outcome.rigid.as_ref(), u);
+        mesh::io::write_mesh(method_dir.join("organ.vtu"), &m, &[Field::point("displacement", 3, u_cloud)])?;
+        let rest_targets = rest_in_cloud_frame(&case.targets, outcome.rigid.as_ref());
+        write_targets(&method_dir.join("targets.csv"), &rest_targets, &outcome.targets, outcome.target_std.as_deref())?;
+        // The picture is drawn in the organ's frame: cloud, targets and truth moved back.
+        let back = outcome.rigid.as_ref().map_or_else(RigidTransform::identity, |r| r.cloud_to_organ);
+        let to_organ = |points: &[Point]| -> Vec<Point> { points.iter().map(|&p| back.apply(p)).collect() };
+        let title = format!("{}: TRE mean {:.2} mm (side view)", s.method, s.tre_mean_mm.unwrap_or(f64::NAN));
+        side_view(
+            &method_dir.join("registration.png"),
+            &title,
+            &reg.organ,
+            u,
+            &to_organ(&peak.cloud),
+            &to_organ(&outcome.targets),
+            Some(&to_organ(&peak.truth)),
+        )?;
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    write_atomic_bytes(&dir.join("comparison.csv"), csv.as_bytes())?;
+    let summaries: Vec<serde_json::Value> = rows
+        .iter()
+        .map(|r| match &r.result {
+            Ok(reg) => serde_json::to_value(&reg.summary),
+            Err(e) => Ok(serde_json::json!({ "method": r.method, "error": e.to_string() })),
+        })
+        .collect::<Result<_, _>>()?;
+    write_atomic_bytes(&dir.join("summary.json"), serde_json::to_string_pretty(&summaries)?.as_bytes())?;
+    Ok(())
+}
+
+/// The baseline row's name of a comparison: the rest shape, rigidly aligned when the methods were.
+pub fn baseline_name(registered: &Registered) -> &'static str {
+    if registered.outcomes[0].rigid.is_some() {
+        "rigid only (ICP)"
+    } else {
+        "no deformation"
+    }
+}
+
+/// A method's figures in a comparison's columns: TRE mean and max, surface residual (mm), median
+/// and 95th-percentile frame time (ms), iterations.
+pub fn comparison_values(s: &Summary) -> [Option<f64>; 6] {
+    [
+        s.tre_mean_mm,
+        s.tre_max_mm,
+        Some(s.surface_residual_mm),
+        Some(s.time_median_ms),
+        Some(s.time_p95_ms),
+        Some(s.iterations),
+    ]
+}

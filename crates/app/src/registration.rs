@@ -1,0 +1,112 @@
+//! A registration set up from its files, as `augsim register`, `augsim serve` and the Python
+//! package build it: the FEM of a static scenario, or a learned model (U-Net or reduced-order
+//! model) with the dataset scenario it was trained on; the targets from a file, from points or
+//! from the mesh's regions, in their unit; the loop's settings.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use mesh::Point;
+use register::{FemDeformer, Registration, RegistrationOptions};
+use scenario::{CaseScenario, DatasetScenario, StaticScenario};
+
+use crate::case::{network_model, network_options, organ_of, Network};
+
+/// What deforms the organ.
+#[derive(Clone, Debug)]
+pub enum MethodSpec {
+    /// The FEM of a static scenario (a file or a built-in name): its mesh, material, fixed nodes
+    /// and solver, pulled by springs of the default stiffness.
+    Fem(PathBuf),
+    /// A learned model (its directory or model.json) and the dataset scenario it was trained on
+    /// (a file or a built-in name), whose mesh is the organ.
+    Learned {
+        /// The model.
+        model: PathBuf,
+        /// Its dataset scenario.
+        scenario: PathBuf,
+    },
+}
+
+/// Where the targets come from.
+#[derive(Clone, Debug)]
+pub enum TargetsSpec {
+    /// The rest positions of the mesh's `markers` and `tumour` nodes.
+    Regions,
+    /// A CSV file (x, y, z) of rest positions, in the spec's unit.
+    File(PathBuf),
+    /// Rest positions, in the spec's unit.
+    Points(Vec<Point>),
+}
+
+/// A registration described by its files and settings; [`RegistrationSpec::build`] makes it.
+#[derive(Clone, Debug)]
+pub struct RegistrationSpec {
+    /// What deforms the organ.
+    pub method: MethodSpec,
+    /// The targets.
+    pub targets: TargetsSpec,
+    /// Metres per unit of the given targets (1e-3: mm); see [`register::cloud::metres_per_unit`].
+    pub unit: f64,
+    /// Most match-and-deform iterations from rest, in place of the method's default.
+    pub iterations: Option<usize>,
+    /// A rigid pre-alignment of the first cloud (trimmed ICP).
+    pub rigid: bool,
+}
+
+impl RegistrationSpec {
+    /// The registration: the method loaded, the targets read and located in the organ (an error
+    /// for one outside it, naming the likely unit mistake), the settings checked. The default
+    /// settings are the library's for a FEM; for a learned model, the real-time iteration budgets
+    /// of the built-in registration case's network method.
+    pub fn build(&self) -> Result<Registration> {
+        let (organ, deformer, method, options): (_, Box<dyn register::Deformer + Send>, _, _) = match &self.method {
+            MethodSpec::Fem(path) => {
+                let (scenario, dir) = StaticScenario::load(path)?;
+                let problem = scenario.build_problem(&dir)?;
+                let organ = organ_of(&scenario.mesh, problem.mesh.clone())?;
+                let method =
+                    format!("FEM, {:?} ({:?} elements)", problem.material.law, problem.material.resolved_formulation());
+                let stiffness = FemDeformer::default_stiffness(&problem);
+                let deformer = FemDeformer::new(problem, stiffness, scenario.solver.clone())?;
+                (organ, Box::new(deformer), method, RegistrationOptions::default())
+            }
+            MethodSpec::Learned { model: model_path, scenario } => {
+                let (scenario, dir) = DatasetScenario::load(scenario)?;
+                let model = learn::Model::load(model_path)?;
+                let (organ, deformer) = network_model(&Network { model: &model, scenario: &scenario, dir: &dir })?;
+                let method = format!("{} {}", model.method().display_name(), model_path.display());
+                (organ, Box::new(deformer), method, network_options(&CaseScenario::builtin())?)
+            }
+        };
+        let targets = match &self.targets {
+            TargetsSpec::Regions => region_targets(organ.mesh()),
+            TargetsSpec::File(path) => scaled(&register::cloud::read_targets(path)?, self.unit),
+            TargetsSpec::Points(points) => scaled(points, self.unit),
+        };
+        if targets.is_empty() {
+            anyhow::bail!("no targets: give a targets file, or a mesh with `markers` or `tumour` regions");
+        }
+        let options = RegistrationOptions {
+            iterations: self.iterations.unwrap_or(options.iterations),
+            rigid: self.rigid.then(register::RigidOptions::default),
+            ..options
+        };
+        options.validate()?;
+        let what = match &self.targets {
+            TargetsSpec::File(path) => format!("the targets of {}", path.display()),
+            _ => "the targets".into(),
+        };
+        Registration::new(organ, deformer, method, targets, options).with_context(|| what)
+    }
+}
+
+/// Points multiplied by `unit` (to metres).
+fn scaled(points: &[Point], unit: f64) -> Vec<Point> {
+    points.iter().map(|p| p.map(|x| x * unit)).collect()
+}
+
+/// Rest positions of the nodes of the `markers` and `tumour` regions, when the mesh has them.
+fn region_targets(m: &mesh::Mesh) -> Vec<Point> {
+    ["markers", "tumour"].iter().filter_map(|r| m.region(r).ok()).flatten().map(|&n| m.nodes[n]).collect()
+}
