@@ -1,21 +1,41 @@
 //! `augsim mesh`: a closed surface (or the built-in liver phantom) to a T4
-//! mesh or an immersed-boundary H8 grid, with a quality report.
+//! mesh or an immersed-boundary H8 grid, with a quality report. A surface is
+//! repaired first (as segmentations give them: holes, duplicated vertices,
+//! flipped triangles) and brought from its length unit to metres.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use mesh::io::Field;
 use mesh::phantom::PhantomSpec;
+use mesh::repair::{detect_unit, largest_extent, metres_per, repair_surface, LengthUnit, RepairOptions};
 use mesh::tetmesh::{tet_quality, BoundaryFit};
-use mesh::Mesh;
+use mesh::{Mesh, TriSurface};
+
+/// The length unit of a surface's coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Units {
+    /// Told from the organ's size (2 to 60 cm across).
+    Auto,
+    /// Millimetres.
+    Mm,
+    /// Metres.
+    M,
+}
 
 /// What to mesh and how.
 pub struct MeshArgs {
-    /// Closed surface (.obj, .stl, .vtk, .vtu); the phantom when `None`.
+    /// Organ surface (.obj, .stl, .vtk, .vtu); the phantom when `None`.
     pub surface: Option<PathBuf>,
-    /// Scale the surface so that its largest extent is this length (m), centred at the origin.
+    /// Scale the surface so that its largest extent is this length (m), centred at the origin;
+    /// overrides `units`.
     pub length: Option<f64>,
+    /// The unit of the surface's coordinates; the surface is scaled to metres about the origin
+    /// (its frame is kept).
+    pub units: Units,
+    /// Repair the surface first (otherwise it must be a closed 2-manifold as it is).
+    pub repair: bool,
     /// Target number of tetrahedra.
     pub tets: usize,
     /// Make an immersed hex grid with this cell size (m) instead of tetrahedra.
@@ -37,10 +57,7 @@ pub fn run(args: &MeshArgs) -> Result<()> {
             (spec.immersed(h)?.mesh, Some(spec.volume()))
         }
         (Some(path), immersed) => {
-            let mut surface = mesh::io::read_surface(path)?;
-            if let Some(l) = args.length {
-                surface.fit_to(l)?;
-            }
+            let surface = prepare_surface(path, args)?;
             match immersed {
                 None => {
                     let (m, _) = mesh::tetmesh::mesh_surface_to_count(&surface, args.tets, BoundaryFit::default())
@@ -57,9 +74,56 @@ pub fn run(args: &MeshArgs) -> Result<()> {
     let elapsed = start.elapsed();
     report(&mesh, reference)?;
     println!("time       {:.1} ms", elapsed.as_secs_f64() * 1e3);
-    write_with_regions(&args.output, &mesh)?;
+    write_mesh_file(&args.output, &mesh)?;
     println!("wrote      {}", args.output.display());
     Ok(())
+}
+
+/// Reads a surface, repairs it unless told not to, and brings it to metres: fitted to `length`
+/// when given, otherwise scaled from its unit (given or detected) about the origin.
+fn prepare_surface(path: &Path, args: &MeshArgs) -> Result<TriSurface> {
+    let mut surface = mesh::io::read_surface(path)?;
+    if args.repair {
+        let (repaired, report) = repair_surface(&surface, &RepairOptions::default())
+            .with_context(|| format!("repairing {} (see --no-repair)", path.display()))?;
+        let lines = report.lines();
+        if lines.is_empty() {
+            println!("repair     none needed");
+        }
+        for line in lines {
+            println!("repair     {line}");
+        }
+        for line in report.warnings() {
+            println!("warning    {line}");
+        }
+        surface = repaired;
+    }
+    if let Some(l) = args.length {
+        surface.fit_to(l)?;
+        return Ok(surface);
+    }
+    let extent = largest_extent(&surface);
+    let (unit, how) = match args.units {
+        Units::Auto => {
+            let unit =
+                detect_unit(&surface).map_err(|e| anyhow!("{}: {e} (--units mm or m, or --length)", path.display()))?;
+            (
+                unit,
+                format!(
+                    "detected: largest extent {}",
+                    if extent >= 1.0 { format!("{extent:.1}") } else { format!("{extent:.4}") }
+                ),
+            )
+        }
+        Units::Mm => (LengthUnit::Millimetre, "given".to_string()),
+        Units::M => (LengthUnit::Metre, "given".to_string()),
+    };
+    println!("units      {} ({how})", unit.symbol());
+    let scale = metres_per(unit);
+    if scale != 1.0 {
+        surface.transform([0.0; 3], scale);
+    }
+    Ok(surface)
 }
 
 fn report(mesh: &Mesh, reference: Option<f64>) -> Result<()> {
@@ -98,21 +162,14 @@ fn print_volume(volume: f64, reference: Option<f64>) {
     }
 }
 
-/// Writes the mesh; for VTK formats the regions become 0/1 point fields
-/// `region_<name>` and immersed cell fractions a cell field.
-pub fn write_with_regions(path: &Path, mesh: &Mesh) -> Result<()> {
+/// Writes the mesh with its regions (point data `region_<name>`, or Gmsh physical groups) and,
+/// for an immersed grid, its cells' volume fractions.
+fn write_mesh_file(path: &Path, mesh: &Mesh) -> Result<()> {
     let is_msh = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("msh"));
-    let mut fields = Vec::new();
-    if !is_msh {
-        for (name, nodes) in &mesh.regions {
-            let mut v = vec![0.0; mesh.num_nodes()];
-            nodes.iter().for_each(|&n| v[n] = 1.0);
-            fields.push(Field::point(format!("region_{name}"), 1, v));
-        }
-        if let Some(f) = &mesh.cell_fraction {
-            fields.push(Field::cell("volume_fraction", 1, f.clone()));
-        }
-    }
+    let fields: Vec<Field> = match &mesh.cell_fraction {
+        Some(f) if !is_msh => vec![Field::cell("volume_fraction", 1, f.clone())],
+        _ => Vec::new(),
+    };
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
