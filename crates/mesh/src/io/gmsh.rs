@@ -1,6 +1,9 @@
 //! Gmsh `.msh`: legacy (`$NOD`/`$ELM`), 2.x ASCII and 4.1 ASCII reading; 2.2 ASCII writing.
+//!
+//! Physical groups become named regions on reading and regions are written as physical groups:
+//! see the [module](super) documentation.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::io::Write;
 use std::path::Path;
 
@@ -78,19 +81,43 @@ impl Nodes {
     }
 }
 
-/// The volume elements of a file, with their tags and lines for error messages.
+/// A physical group: Gmsh identifies it by its dimension and its tag.
+type GroupKey = (u8, u64);
+
+/// The elements of one physical group.
+#[derive(Default)]
+struct Group {
+    /// Indices (into the node section) of the nodes of its elements, with repetitions.
+    nodes: Vec<usize>,
+    /// How many of its elements are volume elements.
+    volume_elements: usize,
+}
+
+/// The volume elements of a file, with their tags and lines for error messages, and the
+/// physical groups of all its elements.
 #[derive(Default)]
 struct Volume {
     kind: Option<(VolumeKind, usize)>,
     conn: Vec<usize>,
     tags: Vec<u64>,
     lines: Vec<usize>,
+    groups: BTreeMap<GroupKey, Group>,
+}
+
+/// The index of the node tagged `t`, referred to by element `tag`.
+fn node_index(line: &Line, nodes: &Nodes, tag: u64, t: u64) -> Result<usize, MeshError> {
+    nodes
+        .index
+        .get(&t)
+        .copied()
+        .ok_or_else(|| line.error(format!("element {tag} refers to node {t}, which is not in the node section")))
 }
 
 impl Volume {
-    /// Reads the node tags left on `line` for element `tag` of type `ty`; keeps linear and
-    /// quadratic tetrahedra and hexahedra, ignores lower-dimensional elements.
-    fn add(&mut self, line: &mut Line, tag: u64, ty: u32, nodes: &Nodes) -> Result<(), MeshError> {
+    /// Reads the node tags left on `line` for element `tag` of type `ty`, which belongs to the
+    /// physical groups tagged `physical` (none for 0); keeps linear and quadratic tetrahedra and
+    /// hexahedra, and of lower-dimensional elements only their nodes, when they are in a group.
+    fn add(&mut self, line: &mut Line, tag: u64, ty: u32, physical: &[u64], nodes: &Nodes) -> Result<(), MeshError> {
         let (dim, n, name) =
             element_type(ty).ok_or_else(|| line.error(format!("element {tag} has unknown element type {ty}")))?;
         if line.remaining() != n {
@@ -98,6 +125,17 @@ impl Volume {
                 .error(format!("element {tag} ({name}, type {ty}) has {} node tags, expected {n}", line.remaining())));
         }
         if dim < 3 {
+            if physical.iter().all(|&p| p == 0) {
+                return Ok(());
+            }
+            let mut element = Vec::with_capacity(n);
+            for _ in 0..n {
+                let t: u64 = line.parse("node tag")?;
+                element.push(node_index(line, nodes, tag, t)?);
+            }
+            for &p in physical.iter().filter(|&&p| p != 0) {
+                self.groups.entry((dim, p)).or_default().nodes.extend_from_slice(&element);
+            }
             return Ok(());
         }
         let kind = match ty {
@@ -125,10 +163,12 @@ impl Volume {
         let start = self.conn.len();
         for _ in 0..n {
             let t: u64 = line.parse("node tag")?;
-            let &i = nodes.index.get(&t).ok_or_else(|| {
-                line.error(format!("element {tag} refers to node {t}, which is not in the node section"))
-            })?;
-            self.conn.push(i);
+            self.conn.push(node_index(line, nodes, tag, t)?);
+        }
+        for &p in physical.iter().filter(|&&p| p != 0) {
+            let group = self.groups.entry((dim, p)).or_default();
+            group.nodes.extend_from_slice(&self.conn[start..]);
+            group.volume_elements += 1;
         }
         if kind == VolumeKind::Tet10 {
             // Gmsh numbers the mid-edge nodes of 3-2 and 3-1 the other way round from VTK.
@@ -141,7 +181,8 @@ impl Volume {
 }
 
 /// Reads a Gmsh mesh (legacy `$NOD`/`$ELM`, 2.x ASCII or 4.1 ASCII) and keeps its linear
-/// tetrahedra or hexahedra (see the [module](super) documentation for what is kept).
+/// tetrahedra or hexahedra; its physical groups become regions (see the [module](super)
+/// documentation for what is kept and how groups are named).
 pub fn read_gmsh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
     let path = path.as_ref();
     let bytes = read_bytes(path)?;
@@ -160,6 +201,8 @@ pub fn read_gmsh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
     };
     let mut nodes: Option<Nodes> = None;
     let mut volume: Option<Volume> = None;
+    let mut names: HashMap<GroupKey, String> = HashMap::new();
+    let mut entities: HashMap<(u32, i64), Vec<u64>> = HashMap::new();
     while let Some(line) = pending.take().or_else(|| lines.next_line()) {
         let name = line.text.trim();
         if !name.starts_with('$') {
@@ -181,9 +224,13 @@ pub fn read_gmsh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
                 return Err(line.error("a second element section"));
             }
             volume = Some(match format {
-                Format::V4 => read_elements_v4(&mut lines, &line, nodes)?,
+                Format::V4 => read_elements_v4(&mut lines, &line, nodes, &entities)?,
                 _ => read_elements_v2(&mut lines, &line, format, nodes)?,
             });
+        } else if name == "$PhysicalNames" {
+            read_physical_names(&mut lines, &line, &mut names)?;
+        } else if format == Format::V4 && name == "$Entities" {
+            entities = read_entities_v4(&mut lines, &line)?;
         } else {
             skip_section(&mut lines, &line)?;
         }
@@ -194,8 +241,104 @@ pub fn read_gmsh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
         return Err(parse_error(path, "no tetrahedra (type 4) or hexahedra (type 5): not a volume mesh"));
     };
     let describe = |i: usize| format!("element {} (line {})", volume.tags[i], volume.lines[i]);
-    let (mesh, _) = finish_volume(path, &nodes.coords, kind, volume.conn.clone(), &describe)?;
+    let (mut mesh, kept) = finish_volume(path, &nodes.coords, kind, volume.conn.clone(), &describe)?;
+    mesh.regions = physical_regions(&volume, &names, &kept, nodes.coords.len());
     Ok(mesh)
+}
+
+/// The regions of the physical groups of a file: one per group name (`physical_<tag>` for a group
+/// without one), holding the mesh nodes of the group's elements. A volume group that holds every
+/// volume element is the whole mesh, not a region. `kept` maps mesh nodes to file nodes.
+fn physical_regions(
+    volume: &Volume,
+    names: &HashMap<GroupKey, String>,
+    kept: &[usize],
+    file_nodes: usize,
+) -> BTreeMap<String, Vec<usize>> {
+    let mut mesh_index = vec![usize::MAX; file_nodes];
+    for (i, &f) in kept.iter().enumerate() {
+        mesh_index[f] = i;
+    }
+    let mut regions: BTreeMap<String, Vec<usize>> = BTreeMap::new();
+    for (key, group) in &volume.groups {
+        if group.volume_elements == volume.tags.len() {
+            continue;
+        }
+        let set: Vec<usize> = group.nodes.iter().map(|&f| mesh_index[f]).filter(|&i| i != usize::MAX).collect();
+        if set.is_empty() {
+            continue;
+        }
+        let name = names.get(key).cloned().unwrap_or_else(|| format!("physical_{}", key.1));
+        regions.entry(name).or_default().extend(set);
+    }
+    for set in regions.values_mut() {
+        set.sort_unstable();
+        set.dedup();
+    }
+    regions
+}
+
+/// `$PhysicalNames`: a count, then `dimension tag "name"` lines. A name is read between its
+/// first two double quotes (as Gmsh reads it), or is the rest of the line when unquoted.
+fn read_physical_names(
+    lines: &mut LineReader,
+    header: &Line,
+    names: &mut HashMap<GroupKey, String>,
+) -> Result<(), MeshError> {
+    let n = read_count(lines, "number of physical names")?;
+    for _ in 0..n {
+        let mut line = lines.expect(&format!("the {n} physical names declared at line {}", header.no + 1))?;
+        let dim: u8 = line.parse("physical group dimension")?;
+        let tag: u64 = line.parse("physical group tag")?;
+        if dim > 3 {
+            return Err(line.error(format!("physical group dimension {dim} is not 0, 1, 2 or 3")));
+        }
+        let rest = line.text.trim_start();
+        let rest = rest.split_once(char::is_whitespace).map_or("", |(_, r)| r).trim_start();
+        let rest = rest.split_once(char::is_whitespace).map_or("", |(_, r)| r).trim();
+        let name = match rest.strip_prefix('"') {
+            Some(quoted) => quoted.split('"').next().unwrap_or(""),
+            None => rest,
+        };
+        if !name.is_empty() {
+            names.insert((dim, tag), name.to_string());
+        }
+    }
+    expect_end(lines, "$EndPhysicalNames", &format!("after the {n} physical names declared at line {}", header.no + 1))
+}
+
+/// `$Entities` (4.1): the physical tags of each entity, by (dimension, entity tag). Each entity
+/// is one line: its tag, its coordinates (3 for a point, a bounding box of 6 otherwise), its
+/// physical tags, then its bounding entities (not needed).
+fn read_entities_v4(lines: &mut LineReader, header: &Line) -> Result<HashMap<(u32, i64), Vec<u64>>, MeshError> {
+    let mut line = lines.expect("the $Entities header")?;
+    let mut counts = [0usize; 4];
+    for (dim, count) in counts.iter_mut().enumerate() {
+        *count =
+            line.parse(["number of points", "number of curves", "number of surfaces", "number of volumes"][dim])?;
+    }
+    line.finish("the $Entities header")?;
+    let mut entities = HashMap::new();
+    for (dim, &count) in counts.iter().enumerate() {
+        for _ in 0..count {
+            let mut line = lines.expect(&format!("the entities declared at line {}", header.no + 1))?;
+            let tag: i64 = line.parse("entity tag")?;
+            for _ in 0..if dim == 0 { 3 } else { 6 } {
+                let _: f64 = line.parse("entity coordinate")?;
+            }
+            let n: usize = line.parse("number of physical tags")?;
+            let mut physical = Vec::with_capacity(n.min(line.remaining()));
+            for _ in 0..n {
+                let p: i64 = line.parse("physical tag")?;
+                physical.push(p.unsigned_abs());
+            }
+            if !physical.is_empty() {
+                entities.insert((dim as u32, tag), physical);
+            }
+        }
+    }
+    expect_end(lines, "$EndEntities", &format!("after the entities declared at line {}", header.no + 1))?;
+    Ok(entities)
 }
 
 /// Parses the body of `$MeshFormat` (after its header line) up to `$EndMeshFormat`.
@@ -291,8 +434,10 @@ fn read_elements_v2(lines: &mut LineReader, header: &Line, format: Format, nodes
         }
         let tag: u64 = line.parse("element tag")?;
         let ty: u32 = line.parse("element type")?;
+        // The physical group comes first: 0 (or no tag at all) for none.
+        let mut physical = 0i64;
         if format == Format::Legacy {
-            let _physical: i64 = line.parse("physical region")?;
+            physical = line.parse("physical region")?;
             let _elementary: i64 = line.parse("elementary region")?;
             let count: usize = line.parse("number of nodes")?;
             if count != line.remaining() {
@@ -300,11 +445,14 @@ fn read_elements_v2(lines: &mut LineReader, header: &Line, format: Format, nodes
             }
         } else {
             let tags: usize = line.parse("number of tags")?;
-            for _ in 0..tags {
-                let _: i64 = line.parse("element tag value")?;
+            for k in 0..tags {
+                let value: i64 = line.parse("element tag value")?;
+                if k == 0 {
+                    physical = value;
+                }
             }
         }
-        volume.add(&mut line, tag, ty, nodes)?;
+        volume.add(&mut line, tag, ty, &[physical.max(0) as u64], nodes)?;
     }
     expect_end(lines, end, &format!("after the {n} elements declared at line {}", header.no + 1))?;
     Ok(volume)
@@ -352,8 +500,14 @@ fn read_nodes_v4(lines: &mut LineReader, header: &Line) -> Result<Nodes, MeshErr
     Ok(nodes)
 }
 
-/// `$Elements` (4.1): a header, then entity blocks of elements of one type.
-fn read_elements_v4(lines: &mut LineReader, header: &Line, nodes: &Nodes) -> Result<Volume, MeshError> {
+/// `$Elements` (4.1): a header, then entity blocks of elements of one type, in the physical groups
+/// of their entity.
+fn read_elements_v4(
+    lines: &mut LineReader,
+    header: &Line,
+    nodes: &Nodes,
+    entities: &HashMap<(u32, i64), Vec<u64>>,
+) -> Result<Volume, MeshError> {
     let mut line = lines.expect("the $Elements header")?;
     let blocks: usize = line.parse("number of entity blocks")?;
     let total: usize = line.parse("number of elements")?;
@@ -365,15 +519,16 @@ fn read_elements_v4(lines: &mut LineReader, header: &Line, nodes: &Nodes) -> Res
     let mut read = 0;
     for _ in 0..blocks {
         let mut line = lines.expect("an element entity block")?;
-        let _dim: u32 = line.parse("entity dimension")?;
-        let _entity: i64 = line.parse("entity tag")?;
+        let dim: u32 = line.parse("entity dimension")?;
+        let entity: i64 = line.parse("entity tag")?;
         let ty: u32 = line.parse("element type")?;
         let n: usize = line.parse("number of elements in block")?;
         line.finish("the element block header")?;
+        let physical = entities.get(&(dim, entity)).map_or(&[][..], Vec::as_slice);
         for _ in 0..n {
             let mut line = lines.expect("elements")?;
             let tag: u64 = line.parse("element tag")?;
-            volume.add(&mut line, tag, ty, nodes)?;
+            volume.add(&mut line, tag, ty, physical, nodes)?;
         }
         read += n;
     }
@@ -385,12 +540,31 @@ fn read_elements_v4(lines: &mut LineReader, header: &Line, nodes: &Nodes) -> Res
     Ok(volume)
 }
 
-/// Writes a volume mesh as Gmsh 2.2 ASCII (node and element tags from 1, physical and
-/// elementary tag 1). Coordinates are written exactly.
+/// Writes a volume mesh as Gmsh 2.2 ASCII (node and element tags from 1, the cells in physical
+/// and elementary group 1). Coordinates are written exactly. Each non-empty region becomes a
+/// named 0-dimensional physical group (tags 1, 2, ... in name order) of point elements (type 15),
+/// one per region node, after the cells: `elm-number 15 2 physical elementary node`, the
+/// elementary tag being the group's. A region name must be non-empty, without double quotes or
+/// control characters, as `$PhysicalNames` holds it in quotes on one line.
 pub fn write_msh(path: impl AsRef<Path>, mesh: &Mesh) -> Result<(), MeshError> {
     let path = path.as_ref();
     let (_, k, mut conn) = mesh_cells_flat(mesh);
     check_for_writing(mesh.num_nodes(), mesh.cells.len(), &conn, &[])?;
+    let regions: Vec<(&String, &Vec<usize>)> = mesh.regions.iter().filter(|(_, set)| !set.is_empty()).collect();
+    for (name, set) in &regions {
+        if name.is_empty() || name.chars().any(|c| c == '"' || c.is_control()) {
+            return Err(MeshError::Invalid(format!(
+                "region name {name:?} cannot be a Gmsh physical name (empty, or holds a double quote or a control \
+                 character)"
+            )));
+        }
+        if let Some(&bad) = set.iter().find(|&&i| i >= mesh.num_nodes()) {
+            return Err(MeshError::Invalid(format!(
+                "region '{name}' refers to node {bad}, but there are {} nodes",
+                mesh.num_nodes()
+            )));
+        }
+    }
     let ty = match mesh.cells {
         Cells::Tet4(_) => 4,
         Cells::Hex8(_) => 5,
@@ -399,18 +573,34 @@ pub fn write_msh(path: impl AsRef<Path>, mesh: &Mesh) -> Result<(), MeshError> {
             11
         }
     };
+    let points: usize = regions.iter().map(|(_, set)| set.len()).sum();
     write_atomic(path, |w| {
-        writeln!(w, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n{}", mesh.num_nodes())?;
+        writeln!(w, "$MeshFormat\n2.2 0 8\n$EndMeshFormat")?;
+        if !regions.is_empty() {
+            writeln!(w, "$PhysicalNames\n{}", regions.len())?;
+            for (g, (name, _)) in regions.iter().enumerate() {
+                writeln!(w, "0 {} \"{name}\"", g + 1)?;
+            }
+            writeln!(w, "$EndPhysicalNames")?;
+        }
+        writeln!(w, "$Nodes\n{}", mesh.num_nodes())?;
         for (i, p) in mesh.nodes.iter().enumerate() {
             writeln!(w, "{} {} {} {}", i + 1, Num(p[0]), Num(p[1]), Num(p[2]))?;
         }
-        writeln!(w, "$EndNodes\n$Elements\n{}", mesh.cells.len())?;
+        writeln!(w, "$EndNodes\n$Elements\n{}", mesh.cells.len() + points)?;
         for (e, cell) in conn.chunks_exact(k).enumerate() {
             write!(w, "{} {ty} 2 1 1", e + 1)?;
             for &i in cell {
                 write!(w, " {}", i + 1)?;
             }
             writeln!(w)?;
+        }
+        let mut e = mesh.cells.len();
+        for (g, (_, set)) in regions.iter().enumerate() {
+            for &i in set.iter() {
+                e += 1;
+                writeln!(w, "{e} 15 2 {0} {0} {1}", g + 1, i + 1)?;
+            }
         }
         writeln!(w, "$EndElements")
     })

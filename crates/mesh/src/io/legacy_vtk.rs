@@ -5,9 +5,9 @@ use std::path::Path;
 
 use super::scalar::Scalar;
 use super::{
-    check_for_writing, check_surface, fan, finish_volume, mesh_cells_flat, parse_error, read_bytes, restrict_fields,
-    strip, write_atomic, Encoding, Field, FieldLocation, Num, VolumeKind, VTK_HEXAHEDRON, VTK_QUADRATIC_TETRA,
-    VTK_TETRA, VTK_VOXEL,
+    check_for_writing, check_surface, fan, finish_volume, mesh_cells_flat, parse_error, read_bytes,
+    regions_from_fields, restrict_fields, strip, write_atomic, Encoding, Field, FieldLocation, Num, VolumeKind,
+    VTK_HEXAHEDRON, VTK_QUADRATIC_TETRA, VTK_TETRA, VTK_VOXEL,
 };
 use crate::{Mesh, MeshError, Point, TriSurface};
 
@@ -530,7 +530,8 @@ fn vtk_cell_type(ty: u32) -> Option<(bool, &'static str)> {
 }
 
 /// The volume mesh of a parsed unstructured grid, with its fields restricted to the kept nodes
-/// and cells. Shared with the `.vtu` reader.
+/// and cells and its regions taken from them ([`regions_from_fields`]). Shared with the `.vtu`
+/// reader.
 pub(super) fn volume_from_cells(
     path: &Path,
     points: &[Point],
@@ -614,8 +615,9 @@ pub(super) fn volume_from_cells(
         }
     }
     let describe = |i: usize| format!("cell {}", kept_cells[i]);
-    let (mesh, kept_nodes) = finish_volume(path, points, kind, conn, &describe)?;
+    let (mut mesh, kept_nodes) = finish_volume(path, points, kind, conn, &describe)?;
     let fields = restrict_fields(fields, &kept_nodes, &kept_cells);
+    mesh.regions = regions_from_fields(&fields);
     Ok((mesh, fields))
 }
 

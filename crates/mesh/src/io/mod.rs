@@ -15,17 +15,47 @@
 //! [`write_atomic`] (a temporary file in the target directory, renamed onto the target), so a
 //! reader never sees a partial file; the other crates write their files with it too.
 //! Numbers are written in their shortest exact decimal form (ASCII) or as IEEE doubles (binary):
-//! reading back gives the same values. Named regions, `cell_fraction` and `node_normals` are not
-//! written; pass them as [`Field`]s where needed.
+//! reading back gives the same values. `cell_fraction` and `node_normals` are not written; pass
+//! them as [`Field`]s where needed.
+//!
+//! # Named regions
+//!
+//! The named node sets of [`Mesh::regions`] are read from and written to every volume format, so
+//! that a region painted in ParaView, 3D Slicer or Gmsh can be used:
+//!
+//! - `.vtu` and `.vtk`: a one-component point array named `region_<name>` is region `<name>`: the
+//!   nodes whose value is non-zero, precisely whose absolute value is over 0.5 (so a 0/1 mask
+//!   stored as floats or integers, or a 0/255 mask, works). An array with no such node makes no
+//!   region. A one-component point array named `regions` or `region` holds a label per node, as
+//!   a painting tool gives it: each non-zero label `k` (the value rounded to an integer) makes
+//!   region `label_<k>`. Two arrays giving the same region name add their nodes up. Other
+//!   arrays, cell arrays and arrays of several components make no region. The region arrays are
+//!   still returned as fields by [`read_vtu_with_fields`] and [`read_vtk_with_fields`].
+//!   [`region_fields`] gives the `region_<name>` 0/1 arrays of a mesh's regions; [`write_mesh`]
+//!   adds them to the fields it writes (so that reading its file back gives the same non-empty
+//!   regions), while [`write_vtu`] and [`write_vtk_legacy`] write only the fields they are given.
+//! - `.msh`: the physical groups of the elements of any dimension (points, lines, surfaces,
+//!   volumes) are regions: named by `$PhysicalNames` when it names the group, else
+//!   `physical_<tag>`, each holding the nodes of the group's elements (groups of the same name add
+//!   their nodes up). The physical group of an element is its first tag (2.x; 0 is none), its
+//!   physical region (legacy) or that of its entity in `$Entities` (4.1). A volume group that holds
+//!   every volume element is the whole mesh, not a region (Gmsh gives one to any volume mesh).
+//!   [`write_msh`] writes each non-empty region as a named 0-dimensional physical group of point
+//!   elements, one per node, which Gmsh opens and which is read back as the same region.
+//!
+//! Region nodes are mesh nodes: nodes that the reader drops (used by no volume cell) are left out
+//! of the regions, and the rest are renumbered with the mesh. A region with no node is not read.
 
 mod gmsh;
 mod legacy_vtk;
+pub mod points;
 mod scalar;
 mod surface_io;
 mod text;
 mod vtu;
-pub mod points;
 
+use std::borrow::Cow;
+use std::collections::BTreeMap;
 use std::fmt;
 use std::fs::{self, File};
 use std::io::{BufWriter, Write as _};
@@ -38,6 +68,79 @@ pub use legacy_vtk::{read_vtk, read_vtk_surface, read_vtk_with_fields, write_vtk
 pub use scalar::Scalar;
 pub use surface_io::{read_obj, read_stl, write_obj, write_stl};
 pub use vtu::{read_vtu, read_vtu_surface, read_vtu_with_fields, write_vtu, write_vtu_with};
+
+/// Prefix of the name of a point field that holds a region (see the [module](self) documentation).
+pub const REGION_FIELD_PREFIX: &str = "region_";
+
+/// The regions of a mesh as one-component point fields named `region_<name>`, 1 at the nodes of
+/// the region and 0 elsewhere, in name order: what [`write_mesh`] adds to a `.vtu` or `.vtk` file,
+/// and what to pass to [`write_vtu`] or [`write_vtk_legacy`] to keep the regions (a `.msh` file
+/// carries them itself: see [`write_msh`]). Characters not allowed in a VTK array name
+/// (whitespace, control characters, quotes and `<>&`) become `_`; two names that become the same
+/// make the writer fail. Node indices out of range are left out.
+pub fn region_fields(mesh: &Mesh) -> Vec<Field> {
+    let bad_char = |c: char| c.is_whitespace() || c.is_control() || "\"'<>&".contains(c);
+    mesh.regions
+        .iter()
+        .map(|(name, set)| {
+            let mut values = vec![0.0; mesh.num_nodes()];
+            for &i in set {
+                if let Some(v) = values.get_mut(i) {
+                    *v = 1.0;
+                }
+            }
+            let name: String = name.chars().map(|c| if bad_char(c) { '_' } else { c }).collect();
+            Field::point(format!("{REGION_FIELD_PREFIX}{name}"), 1, values)
+        })
+        .collect()
+}
+
+/// `fields` and, after them, the [`region_fields`] of `mesh` whose names no point field of
+/// `fields` has.
+fn with_region_fields<'a>(mesh: &Mesh, fields: &'a [Field]) -> Cow<'a, [Field]> {
+    if mesh.regions.is_empty() {
+        return Cow::Borrowed(fields);
+    }
+    let given = |f: &Field| fields.iter().any(|g| g.location == FieldLocation::Point && g.name == f.name);
+    let missing: Vec<Field> = region_fields(mesh).into_iter().filter(|f| !given(f)).collect();
+    if missing.is_empty() {
+        return Cow::Borrowed(fields);
+    }
+    Cow::Owned(fields.iter().cloned().chain(missing).collect())
+}
+
+/// Whether every field is one of the [`region_fields`] of `mesh`.
+fn is_region_fields_of(mesh: &Mesh, fields: &[Field]) -> bool {
+    let regions = region_fields(mesh);
+    fields.iter().all(|f| regions.contains(f))
+}
+
+/// The regions held by point fields, as read from `.vtu` and `.vtk` files: `region_<name>` masks
+/// and `regions` (or `region`) label arrays (see the [module](self) documentation). Each region's
+/// nodes are sorted; regions with no node are left out.
+pub fn regions_from_fields(fields: &[Field]) -> BTreeMap<String, Vec<usize>> {
+    let mut regions: BTreeMap<String, Vec<usize>> = BTreeMap::new();
+    for f in fields.iter().filter(|f| f.location == FieldLocation::Point && f.components == 1) {
+        if let Some(name) = f.name.strip_prefix(REGION_FIELD_PREFIX).filter(|n| !n.is_empty()) {
+            let set: Vec<usize> = (0..f.values.len()).filter(|&i| f.values[i].abs() > 0.5).collect();
+            if !set.is_empty() {
+                regions.entry(name.to_string()).or_default().extend(set);
+            }
+        } else if f.name == "regions" || f.name == "region" {
+            for (i, &v) in f.values.iter().enumerate() {
+                let label = v.round();
+                if label != 0.0 && label.is_finite() {
+                    regions.entry(format!("label_{label}")).or_default().push(i);
+                }
+            }
+        }
+    }
+    for set in regions.values_mut() {
+        set.sort_unstable();
+        set.dedup();
+    }
+    regions
+}
 
 /// Where the values of a [`Field`] live.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -152,14 +255,18 @@ pub fn read_mesh_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>
     }
 }
 
-/// Writes a volume mesh, choosing the format by extension: `.vtu` and `.vtk` (binary, with the
-/// fields) or `.msh` (Gmsh 2.2 ASCII, which takes no fields).
+/// Writes a volume mesh and its regions, choosing the format by extension: `.vtu` and `.vtk`
+/// (binary, with the fields, and the [`region_fields`] of the regions that `fields` does not
+/// already hold under the same name) or `.msh` (Gmsh 2.2 ASCII, with the regions as physical
+/// groups; it takes no fields but the mesh's own [`region_fields`]). Reading the file back gives
+/// the same non-empty regions. [`write_vtu`] and [`write_vtk_legacy`] write only the fields given.
 pub fn write_mesh(path: impl AsRef<Path>, mesh: &Mesh, fields: &[Field]) -> Result<(), MeshError> {
     let path = path.as_ref();
     match extension(path).as_str() {
-        "vtu" => write_vtu(path, mesh, fields),
-        "vtk" => write_vtk_legacy(path, mesh, fields),
+        "vtu" => write_vtu(path, mesh, &with_region_fields(mesh, fields)),
+        "vtk" => write_vtk_legacy(path, mesh, &with_region_fields(mesh, fields)),
         "msh" if fields.is_empty() => write_msh(path, mesh),
+        "msh" if is_region_fields_of(mesh, fields) => write_msh(path, mesh),
         "msh" => Err(MeshError::Invalid(format!(
             "{}: Gmsh output carries no fields; write .vtu or .vtk to keep them",
             path.display()
