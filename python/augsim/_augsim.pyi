@@ -46,6 +46,8 @@ class Registration:
         fem: Optional[_Path] = None,
         model: Optional[_Path] = None,
         scenario: Optional[_Path] = None,
+        patient: Optional[_Path] = None,
+        use_fem: bool = False,
         targets: Union[_Path, npt.ArrayLike, None] = None,
         units: str = "m",
         iterations: Optional[int] = None,

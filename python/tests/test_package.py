@@ -191,3 +191,40 @@ def test_roukf_converges_to_the_young_modulus():
         a.step(observations[0][:5])
     with pytest.raises(augsim.AugsimError, match="missing"):
         augsim.Assimilation(os.path.join(ROOT, "missing.toml"))
+
+
+def _box_obj(path, size):
+    """A closed box surface of `size` (mm), corner at a scanner-like origin, as OBJ."""
+    o = np.array([-120.0, 85.0, -310.0])
+    corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float) * size + o
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    with open(path, "w") as f:
+        for c in corners:
+            f.write("v %f %f %f\n" % tuple(c))
+        for a, b, c, d in quads:
+            f.write(f"f {a + 1} {b + 1} {c + 1}\nf {a + 1} {c + 1} {d + 1}\n")
+    return o
+
+
+def test_a_prepared_patient_registers(tmp_path):
+    size = np.array([200.0, 150.0, 100.0])
+    o = _box_obj(tmp_path / "organ.obj", size)
+    bottom = [o + [x, y, 0.0] for x in (0.0, size[0]) for y in (0.0, size[1])]
+    np.savetxt(tmp_path / "ligaments.csv", bottom, delimiter=",", header="x,y,z", comments="")
+    centre = o + size / 2
+    np.savetxt(tmp_path / "tumour.csv", [centre, centre + [20.0, 0.0, 0.0]], delimiter=",", header="x,y,z",
+               comments="")
+    camera = ",".join(str(v) for v in centre + [0.0, 0.0, 300.0])
+    out = run_augsim("prepare", str(tmp_path / "organ.obj"), "--camera", camera, "--attach",
+                     str(tmp_path / "ligaments.csv"), "--targets", str(tmp_path / "tumour.csv"), "--samples", "30",
+                     "--tets", "800", "--out", str(tmp_path / "patient"))
+    assert "step 6/6 report" in out and "units: mm" in out
+    reg = augsim.Registration(patient=tmp_path / "patient")
+    assert reg.method.startswith("ROM") and reg.targets.shape == (2, 3)
+    np.testing.assert_allclose(reg.targets * 1e3, [centre, centre + [20.0, 0.0, 0.0]], atol=1e-6)
+    # The organ's top face at rest: the targets stay where they are.
+    top = reg.points[reg.points[:, 2] > reg.points[:, 2].max() - 5e-3]
+    r = reg.register(top)
+    assert np.abs(r.targets - reg.targets).max() < 2e-3
+    with pytest.raises(ValueError, match="patient=DIR holds"):
+        augsim.Registration(patient=tmp_path / "patient", targets=[[0.0, 0.0, 0.0]])

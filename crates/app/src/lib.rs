@@ -5,6 +5,8 @@
 //!   and its dataset scenario; targets in their unit; settings), as `register`, `serve` and
 //!   Python build it; [`output`]: what a registration writes (organ.vtu, targets.csv,
 //!   summary.json) and what a comparison of methods writes.
+//! - [`prepare`]: a patient's organ from its segmented surface to a registration set-up (repair,
+//!   mesh, regions, scenarios, dataset, model, report), resumable.
 //! - [`case`], [`simulate`], [`picture`]: synthetic registration cases on the phantom (truth from
 //!   a finer mesh and another law, a simulated camera cloud), the comparison of methods,
 //!   side-view pictures.
@@ -19,6 +21,7 @@ pub mod case;
 pub mod curve;
 pub mod output;
 pub mod picture;
+pub mod prepare;
 pub mod registration;
 pub mod sample_view;
 pub mod simulate;

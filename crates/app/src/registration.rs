@@ -3,7 +3,7 @@
 //! model) with the dataset scenario it was trained on; the targets from a file, from points or
 //! from the mesh's regions, in their unit; the loop's settings.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use mesh::Point;
@@ -98,6 +98,42 @@ impl RegistrationSpec {
             _ => "the targets".into(),
         };
         Registration::new(organ, deformer, method, targets, options).with_context(|| what)
+    }
+}
+
+/// The file of a patient's registration set-up in the directory `augsim prepare` writes.
+pub const PATIENT_FILE: &str = "registration.toml";
+
+/// A patient's registration set-up ([`PATIENT_FILE`]): the learned model and its dataset
+/// scenario, the FEM alternative, the targets and their unit; paths relative to the file.
+#[derive(Clone, Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Patient {
+    model: PathBuf,
+    scenario: PathBuf,
+    fem: PathBuf,
+    targets: PathBuf,
+    units: String,
+}
+
+impl RegistrationSpec {
+    /// The registration set-up of the patient directory `dir` (written by `augsim prepare`): its
+    /// learned model, or its FEM with `fem`; its targets.
+    pub fn patient(dir: &Path, fem: bool, iterations: Option<usize>, rigid: bool) -> Result<RegistrationSpec> {
+        let path = dir.join(PATIENT_FILE);
+        let text = std::fs::read_to_string(&path).with_context(|| {
+            format!("reading {} (is {} a directory made by augsim prepare?)", path.display(), dir.display())
+        })?;
+        let p: Patient = toml::from_str(&text).with_context(|| format!("reading {}", path.display()))?;
+        let unit = register::cloud::metres_per_unit(&p.units)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("{}: units", path.display()))?;
+        let method = if fem {
+            MethodSpec::Fem(dir.join(p.fem))
+        } else {
+            MethodSpec::Learned { model: dir.join(p.model), scenario: dir.join(p.scenario) }
+        };
+        Ok(RegistrationSpec { method, targets: TargetsSpec::File(dir.join(p.targets)), unit, iterations, rigid })
     }
 }
 

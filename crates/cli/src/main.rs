@@ -5,6 +5,7 @@ mod bench;
 mod experiment;
 mod learn_cmd;
 mod mesh_cmd;
+mod prepare_cmd;
 mod register_cmd;
 mod serve_cmd;
 mod solve;
@@ -35,11 +36,20 @@ enum Command {
     },
     /// Mesh a closed surface (or the built-in liver phantom) with tetrahedra or an immersed hex grid.
     Mesh {
-        /// Closed surface (.obj, .stl, .vtk, .vtu); the liver phantom when omitted.
+        /// Organ surface (.obj, .stl, .vtk, .vtu), repaired first unless --no-repair; the liver phantom
+        /// when omitted.
         surface: Option<PathBuf>,
-        /// Centre the surface and scale its largest extent to this length (m).
+        /// Centre the surface and scale its largest extent to this length (m); overrides --units.
         #[arg(long)]
         length: Option<f64>,
+        /// Length unit of the surface's coordinates (auto: told from the organ's size); the
+        /// surface is scaled to metres about the origin, keeping its (e.g. CT scanner's) frame.
+        #[arg(long, value_enum, default_value_t = mesh_cmd::Units::Auto)]
+        units: mesh_cmd::Units,
+        /// Mesh the surface as it is, without repairing holes, duplicated vertices or flipped
+        /// triangles (it must then be a closed 2-manifold).
+        #[arg(long)]
+        no_repair: bool,
         /// Target number of tetrahedra.
         #[arg(long, default_value_t = 5000)]
         tets: usize,
@@ -116,6 +126,11 @@ enum Command {
         #[command(flatten)]
         device: learn_cmd::DeviceArgs,
     },
+    /// A patient's organ from its segmented surface to a registration set-up: repaired surface,
+    /// mesh, regions (what the camera sees, where the organ is held), scenario files, FEM
+    /// dataset, trained model, its test error and a report; resumable. Register and serve it with
+    /// `--patient DIR`.
+    Prepare(prepare_cmd::PrepareArgs),
     /// Register the organ to an intraoperative point cloud (no correspondences): deformed organ,
     /// registered targets and, given the truth, the target registration error.
     Register(register_cmd::RegisterArgs),
@@ -156,10 +171,11 @@ fn main() {
     let result: Result<()> = match cli.command {
         Command::Solve { scenario, output } => solve::run(&scenario, output.as_deref()),
         Command::Register(args) => register_cmd::run(&args),
+        Command::Prepare(args) => prepare_cmd::run(&args),
         Command::Serve(args) => serve_cmd::run(&args),
         Command::View(args) => view_cmd::run(&args),
-        Command::Mesh { surface, length, tets, immersed, output } => {
-            mesh_cmd::run(&mesh_cmd::MeshArgs { surface, length, tets, immersed, output })
+        Command::Mesh { surface, length, units, no_repair, tets, immersed, output } => {
+            mesh_cmd::run(&mesh_cmd::MeshArgs { surface, length, units, repair: !no_repair, tets, immersed, output })
         }
         Command::Assimilate(args) => assimilate::run(&args),
         Command::Generate { scenario, out, shard, samples } => {

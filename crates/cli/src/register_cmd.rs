@@ -22,6 +22,13 @@ pub struct RegisterArgs {
     /// .ply (ASCII or binary). A directory is a sequence of frames, in file-name order.
     #[arg(required_unless_present = "comparison")]
     cloud: Option<PathBuf>,
+    /// The registration set-up of a patient's organ, written by `augsim prepare`: its learned
+    /// model and targets (its FEM with --use-fem).
+    #[arg(long, conflicts_with_all = ["fem", "model", "scenario", "targets", "comparison"])]
+    patient: Option<PathBuf>,
+    /// With --patient: register with the patient's FEM rather than its learned model.
+    #[arg(long, requires = "patient")]
+    use_fem: bool,
     /// FEM registration on this scenario's mesh, material (law, formulation) and fixed nodes.
     #[arg(long, conflicts_with = "model")]
     fem: Option<PathBuf>,
@@ -84,16 +91,21 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
         return demo(args);
     }
     let cloud_path = args.cloud.clone().context("a cloud is required")?;
-    let method = if let Some(model) = &args.model {
-        let scenario = args.scenario.clone().context("--model needs --scenario (or --demo)")?;
-        MethodSpec::Learned { model: model.clone(), scenario }
-    } else if let Some(fem) = &args.fem {
-        MethodSpec::Fem(fem.clone())
-    } else {
-        bail!("give --fem SCENARIO or --model MODEL --scenario SCENARIO (or --demo)");
+    let spec = match &args.patient {
+        Some(dir) => RegistrationSpec::patient(dir, args.use_fem, args.iterations, args.rigid)?,
+        None => {
+            let method = if let Some(model) = &args.model {
+                let scenario = args.scenario.clone().context("--model needs --scenario (or --demo)")?;
+                MethodSpec::Learned { model: model.clone(), scenario }
+            } else if let Some(fem) = &args.fem {
+                MethodSpec::Fem(fem.clone())
+            } else {
+                bail!("give --patient DIR, --fem SCENARIO or --model MODEL --scenario SCENARIO (or --demo)");
+            };
+            let targets = args.targets.clone().map_or(TargetsSpec::Regions, TargetsSpec::File);
+            RegistrationSpec { method, targets, unit: 1.0, iterations: args.iterations, rigid: args.rigid }
+        }
     };
-    let targets = args.targets.clone().map_or(TargetsSpec::Regions, TargetsSpec::File);
-    let spec = RegistrationSpec { method, targets, unit: 1.0, iterations: args.iterations, rigid: args.rigid };
     let mut registration = spec.build()?;
     let frames = read_frames(&cloud_path)?;
     let truths: Option<Vec<Vec<Point>>> = match &args.truth {

@@ -14,8 +14,15 @@ use register::Registration;
 /// Options of `augsim serve`.
 #[derive(Debug, clap::Args)]
 pub struct ServeArgs {
+    /// The registration set-up of a patient's organ, written by `augsim prepare`: its learned
+    /// model and targets (its FEM with --use-fem).
+    #[arg(long, conflicts_with_all = ["fem", "model", "scenario", "targets"])]
+    patient: Option<PathBuf>,
+    /// With --patient: register with the patient's FEM rather than its learned model.
+    #[arg(long, requires = "patient")]
+    use_fem: bool,
     /// FEM registration on this static scenario (a file or a built-in name).
-    #[arg(long, conflicts_with = "model", required_unless_present = "model")]
+    #[arg(long, conflicts_with = "model", required_unless_present_any = ["model", "patient"])]
     fem: Option<PathBuf>,
     /// Registration with this learned model (a U-Net's or a reduced-order model's directory, or its
     /// model.json); the organ comes from --scenario.
@@ -107,13 +114,20 @@ extern "C" fn request_stop(_: libc::c_int) {
 pub fn run(args: &ServeArgs) -> Result<()> {
     let unit = register::cloud::metres_per_unit(&args.units).map_err(anyhow::Error::msg).context("--units")?;
     let outputs = Outputs::parse(&args.outputs).map_err(anyhow::Error::msg).context("--outputs")?;
-    let method = match (&args.fem, &args.model, &args.scenario) {
-        (Some(fem), _, _) => MethodSpec::Fem(fem.clone()),
-        (None, Some(model), Some(scenario)) => MethodSpec::Learned { model: model.clone(), scenario: scenario.clone() },
-        _ => bail!("give --fem SCENARIO, or --model MODEL with --scenario SCENARIO"),
+    let spec = match &args.patient {
+        Some(dir) => RegistrationSpec::patient(dir, args.use_fem, args.iterations, args.rigid)?,
+        None => {
+            let method = match (&args.fem, &args.model, &args.scenario) {
+                (Some(fem), _, _) => MethodSpec::Fem(fem.clone()),
+                (None, Some(model), Some(scenario)) => {
+                    MethodSpec::Learned { model: model.clone(), scenario: scenario.clone() }
+                }
+                _ => bail!("give --patient DIR, --fem SCENARIO, or --model MODEL with --scenario SCENARIO"),
+            };
+            let targets = args.targets.clone().map_or(TargetsSpec::Regions, TargetsSpec::File);
+            RegistrationSpec { method, targets, unit, iterations: args.iterations, rigid: args.rigid }
+        }
     };
-    let targets = args.targets.clone().map_or(TargetsSpec::Regions, TargetsSpec::File);
-    let spec = RegistrationSpec { method, targets, unit, iterations: args.iterations, rigid: args.rigid };
     // Built once here so that a bad model, scenario or targets file stops the command before it
     // listens.
     let first = spec.build()?;

@@ -177,8 +177,9 @@ struct Registered {
 /// Registration of intraoperative point clouds, as `augsim serve` does for each client: each
 /// cloud is warm-started from the previous one's registration.
 ///
-/// Either `fem`: a static scenario (file or built-in name, e.g. `liver`) whose FEM deforms the
-/// organ; or `model` (a model directory or its model.json) with `scenario`, the dataset scenario
+/// Either `patient`: a directory written by `augsim prepare` (its learned model and targets; its
+/// FEM with `use_fem=True`); or `fem`: a static scenario (file or built-in name, e.g. `liver`)
+/// whose FEM deforms the organ; or `model` (a model directory or its model.json) with `scenario`, the dataset scenario
 /// it was trained on (e.g. `liver_ar_t10` for the shipped `models/liver_ar`). `targets`: rest
 /// positions, a CSV file (x, y, z) or an array [k, 3], in `units`; default: the mesh's `markers`
 /// and `tumour` nodes. `units`: "m" or "mm", of the targets, every cloud and every result.
@@ -201,13 +202,15 @@ struct Registration {
 #[pymethods]
 impl Registration {
     #[new]
-    #[pyo3(signature = (*, fem=None, model=None, scenario=None, targets=None, units="m", iterations=None, rigid=false))]
+    #[pyo3(signature = (*, fem=None, model=None, scenario=None, patient=None, use_fem=false, targets=None, units="m", iterations=None, rigid=false))]
     #[allow(clippy::too_many_arguments)] // one per Python keyword argument
     fn new(
         py: Python<'_>,
         fem: Option<PathBuf>,
         model: Option<PathBuf>,
         scenario: Option<PathBuf>,
+        patient: Option<PathBuf>,
+        use_fem: bool,
         targets: Option<&Bound<'_, PyAny>>,
         units: &str,
         iterations: Option<usize>,
@@ -221,13 +224,25 @@ impl Registration {
                 Err(_) => TargetsSpec::Points(points(t, "targets", 1.0)?),
             },
         };
-        let method = match (fem, model, scenario) {
-            (Some(fem), None, None) => MethodSpec::Fem(fem),
-            (None, Some(model), Some(scenario)) => MethodSpec::Learned { model, scenario },
-            _ => return Err(PyValueError::new_err("give fem=SCENARIO, or model=MODEL with scenario=SCENARIO")),
+        let state = match (patient, fem, model, scenario, &targets) {
+            (Some(dir), None, None, None, TargetsSpec::Regions) => {
+                compute(py, move || RegistrationSpec::patient(&dir, use_fem, iterations, rigid)?.build())?
+            }
+            (None, fem, model, scenario, _) => {
+                let method = match (fem, model, scenario) {
+                    (Some(fem), None, None) => MethodSpec::Fem(fem),
+                    (None, Some(model), Some(scenario)) => MethodSpec::Learned { model, scenario },
+                    _ => {
+                        return Err(PyValueError::new_err(
+                            "give patient=DIR, fem=SCENARIO, or model=MODEL with scenario=SCENARIO",
+                        ))
+                    }
+                };
+                let spec = RegistrationSpec { method, targets, unit, iterations, rigid };
+                compute(py, move || spec.build())?
+            }
+            _ => return Err(PyValueError::new_err("patient=DIR holds its method and targets: give nothing else")),
         };
-        let spec = RegistrationSpec { method, targets, unit, iterations, rigid };
-        let state = compute(py, move || spec.build())?;
         let warnings = state.warnings().iter().map(|w| format!("targets: {w}")).collect::<Vec<_>>();
         for w in &warnings {
             PyErr::warn(

@@ -104,7 +104,7 @@ impl Registration {
         if targets.is_empty() {
             return Err(RegisterError::Invalid("no targets".into()));
         }
-        let (stencils, warnings) = locate_targets(&organ, &targets)?;
+        let (stencils, warnings) = organ.locate_targets(&targets)?;
         Ok(Registration {
             organ,
             deformer,
@@ -237,53 +237,6 @@ impl Registration {
         }
         Ok(outcomes)
     }
-}
-
-/// The share of the organ's extent below which a set of several targets is suspected of a unit
-/// mistake (metres read as millimetres shrink it 1,000 times).
-pub const SMALL_TARGET_EXTENT: f64 = 0.01;
-
-/// Stencils of the targets in the organ, and warnings about them. A target outside the organ is
-/// an error, which names the likely unit mistake when every target lies inside read 1,000 times
-/// smaller or larger; a set of targets whose extent is under [`SMALL_TARGET_EXTENT`] of the
-/// organ's is warned about.
-fn locate_targets(organ: &Organ, targets: &[Point]) -> Result<(Vec<Stencil>, Vec<String>)> {
-    let fits = |scale: f64| {
-        let scaled: Vec<Point> = targets.iter().map(|p| p.map(|x| x * scale)).collect();
-        organ.locate(&scaled, "target").is_ok()
-    };
-    let stencils = match organ.locate(targets, "target") {
-        Ok(s) => s,
-        Err(e) => {
-            let hint = if fits(1e-3) {
-                " (read as 1,000 times smaller, every target lies inside: were they given in mm where m were expected?)"
-            } else if fits(1e3) {
-                " (read as 1,000 times larger, every target lies inside: were they given in m where mm were expected?)"
-            } else {
-                ""
-            };
-            return Err(RegisterError::Invalid(format!("{e}{hint}")));
-        }
-    };
-    let (organ_extent, extent) = (diagonal(&organ.mesh().nodes), diagonal(targets));
-    let mut warnings = Vec::new();
-    if targets.len() > 1 && extent < SMALL_TARGET_EXTENT * organ_extent {
-        warnings.push(format!(
-            "the {} targets span {:.3} mm, under {:.0} % of the organ's {:.0} mm{}",
-            targets.len(),
-            extent * 1e3,
-            SMALL_TARGET_EXTENT * 100.0,
-            organ_extent * 1e3,
-            if fits(1e3) { ": were they given in m where mm were expected?" } else { "" }
-        ));
-    }
-    Ok((stencils, warnings))
-}
-
-/// The diagonal of the bounding box of `points`.
-fn diagonal(points: &[Point]) -> f64 {
-    let (lo, hi) = mesh::bounds(points);
-    mesh::norm(mesh::sub(hi, lo))
 }
 
 /// Per-target distances (m) between two lists of positions of the same length.

@@ -1,0 +1,578 @@
+//! A patient's organ from its segmented surface to a registration set-up, in one resumable run
+//! (`augsim prepare`):
+//!
+//! 1. **organ**: the surface read (STL, OBJ, VTK, VTU) in its unit (given, or detected from its
+//!    size), repaired ([`mesh::repair`]), meshed with tetrahedra; the nodes the camera sees
+//!    (`visible`, self-occlusion included) and those near the attachment landmarks (`attached`,
+//!    on the surface) selected; the targets located inside the organ (a unit mistake is named).
+//!    Written in metres, in the segmentation's frame: `surface.stl`, `organ.vtu` (the regions as
+//!    point data `region_visible`, `region_attached`), `attach.csv`, `targets.csv`.
+//! 2. **scenarios**, written out to be read and edited: `dataset.toml` (a tool pushing the
+//!    visible surface, the organ held at the landmarks, the input the visible surface's normal
+//!    displacement: the built-in `liver_ar`'s set-up on this organ), `static.toml` (the FEM
+//!    registration on the same mesh) and `registration.toml` (the set-up that `register`, `serve`
+//!    and Python take as `--patient DIR`).
+//! 3. **dataset**: the FEM draws (resumes where it stopped).
+//! 4. **model**: the reduced-order model (or the U-Net) trained on it.
+//! 5. **evaluation**: its error on the test split, which played no part in training it.
+//! 6. **validation**: registration of held-out cases, the learned model's and the FEM's, against
+//!    a truth they did not see: the same surface meshed anew, three times finer, with quadratic
+//!    tetrahedra (T10) and another law (Neo-Hookean against the dataset's), pushed by a tool at
+//!    four places of what the camera sees; the cloud is the truth's seen surface with 0.5 mm of
+//!    noise; the TRE at the targets.
+//! 7. **report**: `report.md`, with `regions.png` (the organ seen from the camera: what it
+//!    sees, where it is held, the targets) and the time of each step.
+//!
+//! `prepare.json` records the inputs and the steps done; a second run with the same inputs
+//! resumes after the last step done (the report is written anew), and one with other inputs is
+//! refused.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use mesh::io::points::{read_points_csv, write_points_csv};
+use mesh::io::write_atomic_bytes;
+use mesh::repair::{detect_unit, metres_per, repair_surface, RepairOptions};
+use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
+use mesh::{Camera, Mesh, Near, Point};
+use plot::{scatter_plot, PlotSpec, PointSet};
+use serde::{Deserialize, Serialize};
+
+use learn::LearnedModel;
+
+use crate::registration::PATIENT_FILE;
+
+/// What `augsim prepare` is given.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PrepareOptions {
+    /// The segmented surface (.stl, .obj, .vtk, .vtu).
+    pub surface: PathBuf,
+    /// The unit of the surface, the camera, the landmarks and the targets, "mm" or "m" (`None`:
+    /// detected from the surface's size).
+    pub units: Option<String>,
+    /// Where the laparoscope looks from, in the segmentation's frame.
+    pub camera: Point,
+    /// Landmarks where the organ is held (ligaments, the hilum): a CSV file (x, y, z).
+    pub attach: PathBuf,
+    /// Surface nodes within this distance (m) of a landmark are held.
+    pub attach_distance: f64,
+    /// The targets (tumour, vessels) at rest: a CSV file (x, y, z).
+    pub targets: PathBuf,
+    /// Tetrahedra of the organ's mesh (about).
+    pub tets: usize,
+    /// FEM draws of the dataset.
+    pub samples: usize,
+    /// The learned model: the reduced-order model or the U-Net.
+    pub method: learn::Method,
+    /// Seed of the draws and the training.
+    pub seed: u64,
+}
+
+impl PrepareOptions {
+    /// The options with the defaults for what is not given: held within 25 mm of the landmarks,
+    /// 3,000 tetrahedra, 2,000 draws, the reduced-order model, seed 2.
+    pub fn new(surface: PathBuf, camera: Point, attach: PathBuf, targets: PathBuf) -> PrepareOptions {
+        PrepareOptions {
+            surface,
+            units: None,
+            camera,
+            attach,
+            attach_distance: 0.025,
+            targets,
+            tets: 3000,
+            samples: 2000,
+            method: learn::Method::Rom,
+            seed: 2,
+        }
+    }
+}
+
+/// One step done.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepRecord {
+    /// The step's name.
+    pub name: String,
+    /// Its wall time (s).
+    pub seconds: f64,
+    /// What it did, one line each.
+    pub lines: Vec<String>,
+}
+
+/// `prepare.json`: the inputs and the steps done.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PrepareState {
+    /// `augsim-prepare`.
+    pub format: String,
+    /// The inputs, with paths made absolute.
+    pub options: PrepareOptions,
+    /// The steps done, in order.
+    pub steps: Vec<StepRecord>,
+}
+
+/// The file that records a preparation.
+pub const STATE_FILE: &str = "prepare.json";
+
+/// The steps, in order.
+pub const STEPS: [&str; 7] = ["organ", "scenarios", "dataset", "model", "evaluation", "validation", "report"];
+
+/// What a preparation tells its user as it goes.
+pub trait Progress: Sync {
+    /// A step starts (`index` of [`STEPS`]).
+    fn step(&self, index: usize, name: &str);
+    /// A line of what a step did.
+    fn line(&self, text: &str);
+    /// The dataset's draws: done of total.
+    fn samples(&self, done: u64, total: u64);
+}
+
+/// Prepares the organ of `options` into `dir` (see the module documentation); resumes after the
+/// steps already done there. Returns the record of every step.
+pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn Progress) -> Result<PrepareState> {
+    let options = absolute(options)?;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let state_path = dir.join(STATE_FILE);
+    let mut state = if state_path.exists() {
+        let state: PrepareState = serde_json::from_str(&std::fs::read_to_string(&state_path)?)
+            .with_context(|| format!("reading {}", state_path.display()))?;
+        if state.options != options {
+            bail!(
+                "{} was prepared from other inputs ({}); give another --out, or remove it to start again",
+                dir.display(),
+                state_path.display()
+            );
+        }
+        state
+    } else {
+        PrepareState { format: "augsim-prepare".into(), options: options.clone(), steps: Vec::new() }
+    };
+    for (index, name) in STEPS.iter().enumerate() {
+        // The report is written anew at every run; the other steps once.
+        if let Some(done) = state.steps.iter().find(|s| s.name == *name && *name != "report") {
+            progress.line(&format!("{name}: done before ({:.1} s), kept", done.seconds));
+            continue;
+        }
+        state.steps.retain(|s| s.name != *name);
+        progress.step(index, name);
+        let start = Instant::now();
+        let lines = match index {
+            0 => organ_step(&options, dir)?,
+            1 => scenarios_step(&options, dir)?,
+            2 => dataset_step(dir, progress)?,
+            3 => model_step(&options, dir)?,
+            4 => evaluation_step(dir)?,
+            5 => validation_step(&options, dir)?,
+            _ => report_step(&state, dir)?,
+        };
+        lines.iter().for_each(|l| progress.line(l));
+        state.steps.push(StepRecord { name: name.to_string(), seconds: start.elapsed().as_secs_f64(), lines });
+        write_atomic_bytes(&state_path, serde_json::to_string_pretty(&state)?.as_bytes())?;
+    }
+    Ok(state)
+}
+
+/// The options with their files' paths absolute (the record must not depend on where the
+/// program runs) and checked.
+fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
+    let full = |p: &Path| std::path::absolute(p).with_context(|| format!("resolving {}", p.display()));
+    for (what, path) in [("surface", &options.surface), ("landmarks", &options.attach), ("targets", &options.targets)] {
+        if !path.is_file() {
+            bail!("the {what} file {} does not exist", path.display());
+        }
+    }
+    if !(options.attach_distance > 0.0 && options.attach_distance.is_finite()) {
+        bail!("the attachment distance must be positive, got {} m", options.attach_distance);
+    }
+    if options.samples < 10 {
+        bail!("{} draws are too few to train and test a model (at least 10)", options.samples);
+    }
+    Ok(PrepareOptions {
+        surface: full(&options.surface)?,
+        attach: full(&options.attach)?,
+        targets: full(&options.targets)?,
+        ..options.clone()
+    })
+}
+
+/// Step 1: the surface repaired and meshed, the regions selected, the targets located.
+fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
+    let mut lines = Vec::new();
+    let mut surface = mesh::io::read_surface(&options.surface)?;
+    let scale = match &options.units {
+        Some(name) => register::cloud::metres_per_unit(name).map_err(anyhow::Error::msg).context("units")?,
+        None => {
+            let u = detect_unit(&surface).with_context(|| format!("the unit of {}", options.surface.display()))?;
+            lines.push(format!("units: {} (detected from the surface's size; give --units otherwise)", u.symbol()));
+            metres_per(u)
+        }
+    };
+    surface.vertices.iter_mut().for_each(|p| *p = p.map(|x| x * scale));
+    let (surface, repair) = repair_surface(&surface, &RepairOptions::default())
+        .with_context(|| format!("repairing {}", options.surface.display()))?;
+    if repair.changed() {
+        lines.extend(repair.lines().into_iter().map(|l| format!("repair: {l}")));
+        lines.extend(repair.warnings().into_iter().map(|w| format!("warning: {w}")));
+    } else {
+        lines.push("repair: nothing to repair (a closed, oriented, manifold surface)".into());
+    }
+    let to_metres = |points: Vec<Point>| -> Vec<Point> { points.into_iter().map(|p| p.map(|x| x * scale)).collect() };
+    let landmarks = to_metres(read_points_csv(&options.attach)?);
+    let targets = to_metres(read_points_csv(&options.targets)?);
+    let camera = options.camera.map(|x| x * scale);
+    let (mut organ, quality) = mesh_surface_to_count(&surface, options.tets, BoundaryFit::default())
+        .context("meshing the repaired surface")?;
+    let (lo, hi) = organ.bounds();
+    lines.push(format!(
+        "mesh: {} nodes, {} T4 (dihedral angles {:.1}–{:.1}°), {:.0} × {:.0} × {:.0} mm",
+        organ.num_nodes(),
+        organ.cells.len(),
+        quality.min_dihedral_deg,
+        quality.max_dihedral_deg,
+        (hi[0] - lo[0]) * 1e3,
+        (hi[1] - lo[1]) * 1e3,
+        (hi[2] - lo[2]) * 1e3
+    ));
+    let visible = Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&organ)?;
+    if visible.is_empty() {
+        bail!(
+            "the camera at {:?} sees no node of the organ: is it given in the surface's unit and frame?",
+            options.camera
+        );
+    }
+    let attached = Near { points: landmarks.clone(), file: None, distance: options.attach_distance, surface: true }
+        .nodes(&organ)?;
+    if attached.is_empty() {
+        bail!(
+            "no surface node lies within {} mm of the landmarks of {}: are they in the surface's unit and frame?",
+            options.attach_distance * 1e3,
+            options.attach.display()
+        );
+    }
+    let boundary = mesh::topology::boundary_nodes(&organ).len();
+    lines.push(format!(
+        "regions: the camera sees {} of {boundary} surface nodes; {} held near {} landmarks",
+        visible.len(),
+        attached.len(),
+        landmarks.len()
+    ));
+    let located = register::Organ::new(organ.clone(), None)?;
+    let (_, warnings) =
+        located.locate_targets(&targets).with_context(|| format!("the targets of {}", options.targets.display()))?;
+    lines.push(format!("targets: {} inside the organ", targets.len()));
+    lines.extend(warnings.into_iter().map(|w| format!("warning: {w}")));
+    organ.regions.insert("visible".into(), visible);
+    organ.regions.insert("attached".into(), attached);
+    mesh::io::write_surface(dir.join("surface.stl"), &surface)?;
+    // The regions as point data `region_visible`, `region_attached` (ParaView shows them; the
+    // mesh reads them back).
+    mesh::io::write_mesh(dir.join("organ.vtu"), &organ, &[])?;
+    write_points_csv(&dir.join("attach.csv"), &landmarks)?;
+    write_points_csv(&dir.join("targets.csv"), &targets)?;
+    write_points_csv(&dir.join("camera.csv"), &[camera])?;
+    Ok(lines)
+}
+
+/// The grid of the network's input and output: 32 nodes along the organ's longest side (about
+/// 6 mm apart on a liver), at least as fine along the others, each count a multiple of 8 (the
+/// U-Net halves it three times).
+fn grid_for(organ: &Mesh) -> [usize; 3] {
+    let (lo, hi) = organ.bounds();
+    let extent: Vec<f64> = (0..3).map(|d| hi[d] - lo[d]).collect();
+    let longest = extent.iter().copied().fold(0.0, f64::max);
+    std::array::from_fn(|d| ((32.0 * extent[d] / longest / 8.0).ceil() as usize).max(1) * 8)
+}
+
+/// Step 2: the scenario files.
+fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
+    let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
+    let camera = read_points_csv(&dir.join("camera.csv"))?[0];
+    let [nx, ny, nz] = grid_for(&organ);
+    let (lo, hi) = organ.bounds();
+    let longest = (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max);
+    // The tool's footprint: 3 cm on the phantom's 21 cm, in proportion on this organ.
+    let radius = 0.03 * longest / 0.21;
+    let name = options.surface.file_stem().map_or("organ".into(), |s| s.to_string_lossy().into_owned());
+    let camera_toml = format!("{{ facing = {{ position = [{}, {}, {}] }} }}", camera[0], camera[1], camera[2]);
+    let held =
+        format!("{{ near = {{ file = \"attach.csv\", distance = {}, surface = true }} }}", options.attach_distance);
+    let dataset = format!(
+        "# The organ of {surface}, as `augsim prepare` set it up: a tool pushing what the camera\n\
+         # sees, the organ held near the landmarks of attach.csv; the input is the visible surface's\n\
+         # displacement along its normal (what a camera's point cloud measures). Edit and rerun\n\
+         # `augsim generate` and `augsim train` to change it.\n\
+         kind = \"dataset\"\n\
+         name = \"{name}\"\n\
+         description = \"{name}: {tets} T4, Neo-Hookean, nu = 0.49, a tool pushing the visible surface\"\n\n\
+         [mesh.file]\npath = \"organ.vtu\"\n\n\
+         [material]\nlaw = \"neo_hookean\"\nyoung = 5000.0\npoisson = 0.49\n\n\
+         [dataset]\nsamples = {samples}\nseed = {seed}\nshard_size = 100\ngrid = [{nx}, {ny}, {nz}]\n\
+         fixed = [{held}]\n\
+         input = {{ displacement = {{ nodes = {camera_toml}, normal = true }} }}\n\n\
+         [dataset.load.patch_force]\ncentres = {camera_toml}\nradius = {radius:.4}\nmagnitude = [0.5, 3.5]\ncone = 90.0\n\n\
+         [solver]\nmax_step_cuts = 4\n",
+        surface = options.surface.display(),
+        tets = organ.cells.len(),
+        samples = options.samples,
+        seed = options.seed,
+    );
+    let fem = format!(
+        "# The FEM registration of the organ of {surface}: co-rotational tetrahedra, held near the\n\
+         # landmarks of attach.csv.\n\
+         kind = \"static\"\nname = \"{name}_fem\"\n\n\
+         [mesh.file]\npath = \"organ.vtu\"\n\n\
+         [material]\nlaw = \"corotational\"\nyoung = 5000.0\npoisson = 0.48\n\n\
+         [[fixed]]\nselect = {held}\n",
+        surface = options.surface.display(),
+    );
+    let patient = "# The registration set-up of this organ: `augsim register --patient DIR`, `augsim serve\n\
+         # --patient DIR`, `augsim.Registration(patient=DIR)`. Paths are relative to this file.\n\
+         model = \"model\"\nscenario = \"dataset.toml\"\nfem = \"static.toml\"\ntargets = \"targets.csv\"\nunits = \"m\"\n";
+    write_atomic_bytes(&dir.join("dataset.toml"), dataset.as_bytes())?;
+    write_atomic_bytes(&dir.join("static.toml"), fem.as_bytes())?;
+    write_atomic_bytes(&dir.join(PATIENT_FILE), patient.as_bytes())?;
+    Ok(vec![format!(
+        "scenarios: dataset.toml (grid {nx} × {ny} × {nz}, tool radius {:.0} mm), static.toml, {PATIENT_FILE}",
+        radius * 1e3
+    )])
+}
+
+/// Step 3: the FEM draws.
+fn dataset_step(dir: &Path, progress: &dyn Progress) -> Result<Vec<String>> {
+    let (scenario, base) = scenario::DatasetScenario::load(&dir.join("dataset.toml"))?;
+    let generator = scenario.generator(&base)?;
+    let start = Instant::now();
+    let manifest =
+        generator.run(&dir.join("dataset"), &scenario.name, None, &|done, total| progress.samples(done, total))?;
+    let seconds = start.elapsed().as_secs_f64();
+    Ok(vec![format!(
+        "dataset: {} draws solved, {} failed (reasons in dataset/manifest.json), {:.0} ms per draw",
+        manifest.num_samples,
+        manifest.failed.len(),
+        1e3 * seconds / manifest.num_samples.max(1) as f64
+    )])
+}
+
+/// Step 4: the learned model, on the split `augsim train` makes (the last 20 % held out for the
+/// test, the 10 % before them for validation).
+fn model_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
+    let dataset = learn::Dataset::open(&dir.join("dataset"))?;
+    let all = dataset.load_all()?;
+    let (split, [train, validation, test]) = learn::SplitPolicy::default().apply(&all)?;
+    let manifest = dataset.manifest();
+    let out = dir.join("model");
+    let split_line =
+        format!("split: {} training, {} validation, {} test draws", train.len(), validation.len(), test.len());
+    match options.method {
+        learn::Method::Rom => {
+            // Trained for registration: the inputs corrupted by 0.5 mm of noise, twice per draw.
+            let config = learn::rom::RomConfig {
+                noise_copies: 2,
+                corruption: learn::Corruption { sparsity: None, noise_std: 0.0005 },
+                seed: options.seed,
+                ..learn::rom::RomConfig::default()
+            };
+            let context = learn::rom::Context {
+                placement: manifest.placement(),
+                input_unit: &manifest.units.input,
+                target_unit: &manifest.units.target,
+                split,
+            };
+            let (model, report) = learn::rom::fit(&train, &validation, &config, context)?;
+            model.save(&out)?;
+            Ok(vec![
+                split_line,
+                format!(
+                    "model: reduced-order model, {} modes, {} kernel; validation ē {:.3} mm",
+                    model.info.modes,
+                    model.info.kernel.name(),
+                    report.val_mean_error * 1e3
+                ),
+            ])
+        }
+        learn::Method::UNet => {
+            let init = learn::Initialization::Scratch {
+                unet: learn::UNetConfig::default(),
+                normalization: learn::Normalization::from_samples(&train),
+                input_unit: manifest.units.input.clone(),
+            };
+            let config = learn::TrainConfig { seed: options.seed, ..learn::TrainConfig::default() };
+            let train_options = learn::TrainOptions {
+                out_dir: out,
+                resume: true,
+                progress: true,
+                stop_after: None,
+                placement: manifest.placement(),
+                test: split.test,
+                compute: learn::Compute::Cpu,
+            };
+            let outcome = learn::train(&train, &validation, &init, &config, &train_options)?;
+            Ok(vec![split_line, format!("model: U-Net, {} steps", outcome.iterations_done)])
+        }
+    }
+}
+
+/// Step 5: the model's error on the test split.
+fn evaluation_step(dir: &Path) -> Result<Vec<String>> {
+    let model = learn::Model::load(&dir.join("model"))?;
+    let dataset = learn::Dataset::open(&dir.join("dataset"))?;
+    let all = dataset.load_all()?;
+    let test = model.held_out(&all)?;
+    let report = learn::evaluate(&model, &test, &learn::Corruption::none(), 0, learn::Compute::Cpu)?;
+    let [mean, _, max] = report.summary_mm();
+    Ok(vec![format!(
+        "test: ē {mean:.3} mm, largest {max:.2} mm over the organ's grid nodes, {} held-out draws",
+        test.len()
+    )])
+}
+
+/// Tool pushes of the validation: where along what the camera sees (its spread across the line of
+/// sight, as a fraction) and the force (N).
+const VALIDATION_LOADS: [(f64, f64); 4] = [(0.2, 1.5), (0.4, 2.5), (0.6, 2.0), (0.8, 3.0)];
+
+/// Step 6: registration of held-out cases against a finer quadratic truth of another law.
+fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
+    use rand::SeedableRng;
+    use rand_distr::Distribution;
+
+    let surface = mesh::io::read_surface(dir.join("surface.stl"))?;
+    let camera = read_points_csv(&dir.join("camera.csv"))?[0];
+    let landmarks = read_points_csv(&dir.join("attach.csv"))?;
+    let targets = read_points_csv(&dir.join("targets.csv"))?;
+    let (coarse, _) = mesh_surface_to_count(&surface, 3 * options.tets, BoundaryFit::default())
+        .context("meshing the validation's truth")?;
+    let fine = coarse.quadratic()?;
+    let held = Near { points: landmarks, file: None, distance: options.attach_distance, surface: true }.nodes(&fine)?;
+    let seen = Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&fine)?;
+    let material = fem::Material {
+        formulation: fem::Formulation::Standard,
+        ..fem::Material::new(fem::Law::NeoHookean, 5000.0, 0.49).with_order(2)
+    };
+    let located = register::Organ::new(fine.clone(), None)?;
+    let (stencils, _) = located.locate_targets(&targets)?;
+    // Seen nodes ordered across the line of sight, to spread the pushes.
+    let centroid: Point =
+        std::array::from_fn(|d| fine.nodes.iter().map(|p| p[d]).sum::<f64>() / fine.num_nodes() as f64);
+    let axis = mesh::unit(mesh::sub(centroid, camera));
+    let across = mesh::unit(mesh::cross(if axis[2].abs() < 0.9 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] }, axis));
+    let mut order = seen.clone();
+    order.sort_by(|&a, &b| mesh::dot(fine.nodes[a], across).total_cmp(&mesh::dot(fine.nodes[b], across)));
+    let (lo, hi) = fine.bounds();
+    let radius = 0.03 * (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max) / 0.21;
+    let mut methods = [(false, Vec::new(), Vec::new()), (true, Vec::new(), Vec::new())];
+    let mut rest_errors = Vec::new();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
+    let noise = rand_distr::Normal::new(0.0, 0.0005).context("noise")?;
+    for &(at, force) in &VALIDATION_LOADS {
+        let centre = fine.nodes[order[((order.len() - 1) as f64 * at) as usize]];
+        let patch: Vec<usize> =
+            seen.iter().copied().filter(|&n| mesh::distance(fine.nodes[n], centre) < radius).collect();
+        let mut problem = fem::Problem::new(fine.clone(), material);
+        problem.fix(&held);
+        problem.add_force(&patch, mesh::unit(mesh::sub(centre, camera)).map(|x| x * force));
+        let solver = fem::SolverOptions { max_step_cuts: 6, ..fem::SolverOptions::default() };
+        let u = fem::StaticSolver::new(problem)?.solve(&solver).context("solving the validation's truth")?.u;
+        let truth = register::organ::displaced(&targets, &stencils, &u);
+        rest_errors.extend(register::target_errors(&targets, &truth));
+        let cloud: Vec<Point> = seen
+            .iter()
+            .map(|&n| std::array::from_fn(|d| fine.nodes[n][d] + u[3 * n + d] + noise.sample(&mut rng)))
+            .collect();
+        for (fem, errors, times) in methods.iter_mut() {
+            let mut registration = crate::registration::RegistrationSpec::patient(dir, *fem, None, false)?.build()?;
+            let tracked = registration.register(&cloud)?;
+            errors.extend(register::target_errors(&tracked.targets, &truth));
+            times.push(tracked.registration.time.as_secs_f64() * 1e3);
+        }
+    }
+    let mut lines = vec![format!(
+        "validation: {} pushes of {}–{} N on a truth of {} T10 ({} nodes, Neo-Hookean) meshed anew; clouds of {} \
+         seen nodes with 0.5 mm noise; TRE without deformation {:.2} mm",
+        VALIDATION_LOADS.len(),
+        VALIDATION_LOADS.iter().map(|l| l.1).fold(f64::INFINITY, f64::min),
+        VALIDATION_LOADS.iter().map(|l| l.1).fold(0.0, f64::max),
+        fine.cells.len(),
+        fine.num_nodes(),
+        seen.len(),
+        mesh::stats::mean(&rest_errors) * 1e3
+    )];
+    for (fem, errors, times) in &methods {
+        lines.push(format!(
+            "validation: {} TRE {:.2} mm (largest {:.2} mm), {:.0} ms per registration from rest",
+            if *fem { "FEM" } else { "learned model" },
+            mesh::stats::mean(errors) * 1e3,
+            mesh::stats::max(errors) * 1e3,
+            mesh::stats::mean(times)
+        ));
+    }
+    Ok(lines)
+}
+
+/// Step 7: the report page and its picture.
+fn report_step(state: &PrepareState, dir: &Path) -> Result<Vec<String>> {
+    let mesh = mesh::io::read_mesh(dir.join("organ.vtu"))?;
+    let camera = read_points_csv(&dir.join("camera.csv"))?[0];
+    let targets = read_points_csv(&dir.join("targets.csv"))?;
+    let in_region =
+        |name: &str| -> Result<Vec<Point>> { Ok(mesh.region(name)?.iter().map(|&n| mesh.nodes[n]).collect()) };
+    regions_picture(
+        &dir.join("regions.png"),
+        &mesh,
+        camera,
+        &in_region("visible")?,
+        &in_region("attached")?,
+        &targets,
+    )?;
+    let mut text = format!(
+        "# {}\n\nPrepared by `augsim prepare` from `{}`.\n\n![The organ seen from the camera](regions.png)\n\n\
+         | step | time (s) | what it did |\n| --- | ---: | --- |\n",
+        state.options.surface.file_stem().map_or("organ".into(), |s| s.to_string_lossy().into_owned()),
+        state.options.surface.display()
+    );
+    for step in &state.steps {
+        text.push_str(&format!("| {} | {:.1} | {} |\n", step.name, step.seconds, step.lines.join("<br>")));
+    }
+    let total: f64 = state.steps.iter().map(|s| s.seconds).sum();
+    text.push_str(&format!(
+        "\nTotal {total:.0} s before the report. Register with `augsim register CLOUD --patient {0}` or \
+         stream with `augsim serve --patient {0}`.\n",
+        dir.display()
+    ));
+    write_atomic_bytes(&dir.join("report.md"), text.as_bytes())?;
+    Ok(vec!["report: report.md, regions.png".into()])
+}
+
+/// The organ seen from the camera (a projection on the plane across its line of sight): the
+/// surface, what the camera sees, where the organ is held, the targets.
+fn regions_picture(
+    path: &Path,
+    organ: &Mesh,
+    camera: Point,
+    visible: &[Point],
+    attached: &[Point],
+    targets: &[Point],
+) -> Result<()> {
+    let (lo, hi) = organ.bounds();
+    let centre: Point = std::array::from_fn(|d| 0.5 * (lo[d] + hi[d]));
+    let axis = mesh::unit(mesh::sub(centre, camera));
+    // Two directions across the line of sight.
+    let helper = if axis[2].abs() < 0.9 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] };
+    let u = mesh::unit(mesh::cross(helper, axis));
+    let v = mesh::cross(axis, u);
+    let project = |points: &[Point]| -> Vec<(f64, f64)> {
+        points.iter().map(|p| (mesh::dot(mesh::sub(*p, centre), u), mesh::dot(mesh::sub(*p, centre), v))).collect()
+    };
+    let surface: Vec<Point> = mesh::topology::boundary_nodes(organ).into_iter().map(|n| organ.nodes[n]).collect();
+    let sets = [
+        PointSet { name: "surface".into(), points: project(&surface), radius: 1, color: 7 },
+        PointSet { name: "seen by the camera".into(), points: project(visible), radius: 2, color: 0 },
+        PointSet { name: "held (near the landmarks)".into(), points: project(attached), radius: 3, color: 2 },
+        PointSet { name: "targets".into(), points: project(targets), radius: 5, color: 1 },
+    ];
+    let spec = PlotSpec {
+        title: "The organ seen from the camera".into(),
+        x_label: "across the line of sight (m)".into(),
+        y_label: "(m)".into(),
+        log_y: false,
+    };
+    Ok(scatter_plot(path, &spec, &sets, &[])?)
+}

@@ -1,0 +1,130 @@
+//! `prepare` on a CT-derived liver (SOFA's liver-smooth, scaled to 20 cm, in mm, in a scanner's
+//! frame), damaged as segmentations are (holes, written as STL): repaired,
+//! meshed, its regions selected, a small dataset drawn, a reduced-order model trained and
+//! evaluated, and the registration set-up it writes registering a cloud of the organ at rest;
+//! resumed without redoing a step; refused with other inputs; a unit mistake named.
+
+use std::path::{Path, PathBuf};
+
+use augsim_app::prepare::{prepare, PrepareOptions, Progress, STATE_FILE, STEPS};
+use augsim_app::registration::RegistrationSpec;
+use mesh::Point;
+
+/// Scanner frame: the organ's corner sits here (mm).
+const ORIGIN: Point = [-120.0, 85.0, -310.0];
+
+struct Quiet;
+
+impl Progress for Quiet {
+    fn step(&self, _: usize, _: &str) {}
+    fn line(&self, text: &str) {
+        println!("{text}");
+    }
+    fn samples(&self, _: u64, _: u64) {}
+}
+
+fn write_csv(path: &Path, points: &[Point]) {
+    mesh::io::points::write_points_csv(path, points).unwrap();
+}
+
+/// The damaged surface (STL, mm), the camera (mm), the landmarks and targets files (mm).
+fn patient_files(dir: &Path) -> (PathBuf, Point, PathBuf, PathBuf) {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mesh/tests/data/liver-smooth.obj");
+    let mut surface = mesh::io::read_surface(&data).unwrap();
+    let (lo, hi) = mesh::bounds(&surface.vertices);
+    let scale = 200.0 / (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max);
+    surface.vertices.iter_mut().for_each(|p| *p = std::array::from_fn(|d| (p[d] - lo[d]) * scale + ORIGIN[d]));
+    let (lo, hi) = mesh::bounds(&surface.vertices);
+    let centre: Point = std::array::from_fn(|d| 0.5 * (lo[d] + hi[d]));
+    // Held at the back (lowest z), where four extreme vertices of the bottom layer lie.
+    let back: Vec<Point> = surface.vertices.iter().copied().filter(|p| p[2] < lo[2] + 0.08 * (hi[2] - lo[2])).collect();
+    let extreme = |key: fn(&Point) -> f64, most: bool| {
+        *back.iter().max_by(|a, b| if most { key(a).total_cmp(&key(b)) } else { key(b).total_cmp(&key(a)) }).unwrap()
+    };
+    let landmarks =
+        [extreme(|p| p[0], false), extreme(|p| p[0], true), extreme(|p| p[1], false), extreme(|p| p[1], true)];
+    // Two holes: two triangles removed (the STL reader merges the file's repeated vertices).
+    surface.triangles.drain(100..102);
+    let stl = dir.join("liver.stl");
+    mesh::io::write_surface(&stl, &surface).unwrap();
+    // Targets halfway between two surface vertices of the same column: inside.
+    let vertices = &surface.vertices;
+    let targets: Vec<Point> = (0..vertices.len())
+        .step_by(97)
+        .filter_map(|i| {
+            let p = vertices[i];
+            let other = vertices
+                .iter()
+                .filter(|q| (q[0] - p[0]).abs() < 4.0 && (q[1] - p[1]).abs() < 4.0 && (q[2] - p[2]).abs() > 40.0)
+                .min_by(|a, b| (a[2] - p[2]).abs().total_cmp(&(b[2] - p[2]).abs()))?;
+            Some(std::array::from_fn(|d| 0.5 * (p[d] + other[d])))
+        })
+        .take(3)
+        .collect();
+    assert!(!targets.is_empty());
+    write_csv(&dir.join("landmarks.csv"), &landmarks);
+    write_csv(&dir.join("targets.csv"), &targets);
+    let camera = [centre[0], centre[1], hi[2] + 250.0];
+    (stl, camera, dir.join("landmarks.csv"), dir.join("targets.csv"))
+}
+
+#[test]
+fn a_damaged_segmentation_to_a_registration_set_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let (surface, camera, attach, targets) = patient_files(dir.path());
+    let mut options = PrepareOptions::new(surface, camera, attach, targets.clone());
+    options.samples = 30;
+    options.tets = 800;
+    let out = dir.path().join("patient");
+    let state = prepare(&options, &out, &Quiet).unwrap();
+    assert_eq!(state.steps.iter().map(|s| s.name.as_str()).collect::<Vec<_>>(), STEPS);
+    let organ = &state.steps[0].lines;
+    assert!(organ.iter().any(|l| l.starts_with("units: mm")), "{organ:?}");
+    assert!(organ.iter().any(|l| l.starts_with("repair: filled 2 holes (3, 3 edges)")), "the holes: {organ:?}");
+    let validation = &state.steps[5].lines;
+    assert!(validation.iter().any(|l| l.starts_with("validation: FEM TRE")), "{validation:?}");
+    for file in ["organ.vtu", "dataset.toml", "static.toml", "registration.toml", "report.md", "regions.png"] {
+        assert!(out.join(file).exists(), "{file}");
+    }
+    // The regions travel with the mesh file: what ParaView shows is what the scenarios select.
+    let mesh = mesh::io::read_mesh(out.join("organ.vtu")).unwrap();
+    assert!(mesh.region("visible").unwrap().len() > 20 && mesh.region("attached").unwrap().len() > 5);
+
+    // The set-up registers: a cloud of the organ's surface at rest leaves the targets where they are.
+    for fem in [false, true] {
+        let mut registration = RegistrationSpec::patient(&out, fem, None, false).unwrap().build().unwrap();
+        let cloud: Vec<Point> = registration.organ().surface().vertices.iter().step_by(2).copied().collect();
+        let rest = registration.targets().to_vec();
+        let tracked = registration.register(&cloud).unwrap();
+        let moved = mesh::stats::max(&mesh::distances(&tracked.targets, &rest));
+        assert!(moved < 2e-3, "{}: targets moved {:.2} mm for a cloud at rest", registration.method(), moved * 1e3);
+    }
+
+    // Run again: every step kept; other inputs refused.
+    let again = prepare(&options, &out, &Quiet).unwrap();
+    let computed = |s: &augsim_app::prepare::PrepareState| s.steps[..STEPS.len() - 1].to_vec();
+    assert_eq!(computed(&again), computed(&state), "kept, not computed again");
+    assert_eq!(again.steps.last().unwrap().name, "report", "written anew");
+    options.samples = 40;
+    let refused = prepare(&options, &out, &Quiet).unwrap_err().to_string();
+    assert!(refused.contains("other inputs"), "{refused}");
+    std::fs::remove_file(out.join(STATE_FILE)).unwrap();
+}
+
+#[test]
+fn targets_in_another_unit_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let (surface, camera, attach, targets) = patient_files(dir.path());
+    // The targets written in m while the rest is in mm.
+    let in_metres: Vec<Point> =
+        mesh::io::points::read_points_csv(&targets).unwrap().iter().map(|p| p.map(|x| x * 1e-3)).collect();
+    write_csv(&targets, &in_metres);
+    let mut options = PrepareOptions::new(surface, camera, attach, targets);
+    options.samples = 30;
+    options.tets = 800;
+    let error = format!("{:#}", prepare(&options, &dir.path().join("patient"), &Quiet).unwrap_err());
+    assert!(
+        error.contains("outside the organ") && error.contains("were they given in m where mm were expected"),
+        "{error}"
+    );
+}

@@ -1,0 +1,96 @@
+//! `augsim prepare`: a patient's organ from its segmented surface to a registration set-up
+//! (see `augsim_app::prepare`).
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use app::prepare::{prepare, PrepareOptions, Progress, STEPS};
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Arguments of `augsim prepare`.
+#[derive(clap::Args)]
+pub struct PrepareArgs {
+    /// The segmented organ surface (.stl, .obj, .vtk, .vtu), as a segmentation gives it (holes,
+    /// duplicated vertices and flipped triangles are repaired).
+    surface: PathBuf,
+    /// Where the laparoscope looks from: X,Y,Z in the surface's unit and frame.
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    camera: [f64; 3],
+    /// Landmarks where the organ is held (ligaments, the hilum): CSV with a header x, y, z.
+    #[arg(long, value_name = "LANDMARKS.csv")]
+    attach: PathBuf,
+    /// Surface nodes within this distance (mm) of a landmark are held.
+    #[arg(long, default_value_t = 25.0)]
+    attach_mm: f64,
+    /// The targets at rest (tumour, vessels): CSV with a header x, y, z.
+    #[arg(long, value_name = "TARGETS.csv")]
+    targets: PathBuf,
+    /// Output directory (resumed when it holds a preparation of the same inputs).
+    #[arg(short, long)]
+    out: PathBuf,
+    /// Unit of the surface, camera, landmarks and targets: mm or m (default: told from the
+    /// surface's size).
+    #[arg(long)]
+    units: Option<String>,
+    /// FEM draws of the dataset.
+    #[arg(long, default_value_t = 2000)]
+    samples: usize,
+    /// The learned model: rom (the reduced-order model) or unet.
+    #[arg(long, default_value = "rom")]
+    method: learn::Method,
+    /// Tetrahedra of the organ's mesh (about).
+    #[arg(long, default_value_t = 3000)]
+    tets: usize,
+}
+
+/// `X,Y,Z` as three numbers.
+fn parse_point(text: &str) -> Result<[f64; 3], String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().map_err(|e| format!("{v:?}: {e}")))
+        .collect::<Result<_, _>>()?;
+    <[f64; 3]>::try_from(values).map_err(|v| format!("expected X,Y,Z, got {} values", v.len()))
+}
+
+/// Prints the steps, with a bar and the time left over the dataset's draws.
+struct Printer {
+    start: Instant,
+    bar: ProgressBar,
+}
+
+impl Progress for Printer {
+    fn step(&self, index: usize, name: &str) {
+        println!("step {}/{} {name} (at {:.0} s)", index + 1, STEPS.len(), self.start.elapsed().as_secs_f64());
+    }
+
+    fn line(&self, text: &str) {
+        self.bar.suspend(|| println!("           {text}"));
+    }
+
+    fn samples(&self, done: u64, total: u64) {
+        self.bar.set_length(total);
+        self.bar.set_position(done);
+    }
+}
+
+/// Runs `augsim prepare`.
+pub fn run(args: &PrepareArgs) -> Result<()> {
+    let mut options = PrepareOptions::new(args.surface.clone(), args.camera, args.attach.clone(), args.targets.clone());
+    options.units = args.units.clone();
+    options.attach_distance = args.attach_mm * 1e-3;
+    options.samples = args.samples;
+    options.method = args.method;
+    options.tets = args.tets;
+    let bar = ProgressBar::new(0).with_style(
+        ProgressStyle::with_template("           {bar:40} {pos}/{len} draws, {per_sec}, {eta} left")
+            .context("progress template")?,
+    );
+    let printer = Printer { start: Instant::now(), bar };
+    let state = prepare(&options, &args.out, &printer)?;
+    printer.bar.finish_and_clear();
+    let total: f64 = state.steps.iter().map(|s| s.seconds).sum();
+    println!("time       {total:.0} s over the steps ({} s this run)", printer.start.elapsed().as_secs());
+    println!("wrote      {} (report.md; register with `augsim register CLOUD --patient {0}`)", args.out.display());
+    Ok(())
+}

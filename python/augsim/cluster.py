@@ -1,0 +1,137 @@
+"""Generates a FEM dataset over a cluster with Dask: the draws split into shards (``augsim generate
+--shard i/n``), one task per shard on the cluster's workers, then joined (``augsim merge``) into the
+dataset a single machine would have written, bit for bit (each draw's load comes from the
+scenario's seed and the draw's index alone).
+
+    python -m augsim.cluster SCENARIO --out DIR [--samples N] [--shards S]
+                             [--local-workers K]                 # worker processes on this machine
+                             [--scheduler tcp://HOST:8786]        # a running Dask cluster
+                             [--slurm | --pbs] [--jobs J] [--cores C] [--memory 8GB] [--walltime 02:00:00]
+                                                                  # batch jobs via dask-jobqueue
+
+Dask rather than Ray: the tasks are independent runs of the ``augsim`` binary, which Dask schedules
+on a laptop (``LocalCluster``), on a running cluster, or as Slurm / PBS batch jobs (dask-jobqueue,
+which speaks to the queue directly) with the same few lines; both install from PyPI in seconds,
+pure Python. Each worker needs the ``augsim`` binary (``--augsim PATH``, default: ``augsim`` on the
+PATH) and sees the output directory (a shared file system on a cluster). A shard that stopped
+resumes where it stopped when the run is repeated (``augsim generate`` resumes), and the shards
+already complete are not run again.
+
+Needs dask: ``pip install "./python[cluster]"`` (with dask-jobqueue for --slurm / --pbs).
+"""
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+
+def shard_dir(out, index, count):
+    """The directory of shard ``index`` of ``count`` beside the dataset ``out``."""
+    return os.path.join(out + ".parts", f"part{index}of{count}")
+
+
+def _complete(directory):
+    try:
+        with open(os.path.join(directory, "manifest.json")) as f:
+            return json.load(f).get("complete", False)
+    except (OSError, ValueError):
+        return False
+
+
+def generate_shard(augsim, scenario, out, index, count, samples=None, threads=1):
+    """Runs ``augsim generate SCENARIO --shard index/count`` into its shard directory (on a worker);
+    returns the directory and the run's wall time (s)."""
+    directory = shard_dir(out, index, count)
+    if _complete(directory):
+        return directory, 0.0
+    command = [augsim, "generate", scenario, "--shard", f"{index}/{count}", "--out", directory]
+    if samples is not None:
+        command += ["--samples", str(samples)]
+    env = dict(os.environ, RAYON_NUM_THREADS=str(threads))
+    start = time.perf_counter()
+    run = subprocess.run(command, capture_output=True, text=True, env=env)
+    if run.returncode != 0:
+        raise RuntimeError(f"shard {index}/{count} failed:\n{run.stdout}{run.stderr}")
+    return directory, time.perf_counter() - start
+
+
+def make_cluster(args):
+    """The Dask cluster the options ask for, or None for a running scheduler."""
+    if args.scheduler:
+        return None
+    if args.slurm or args.pbs:
+        try:
+            import dask_jobqueue
+        except ImportError as e:
+            raise SystemExit("--slurm / --pbs need dask-jobqueue: pip install dask-jobqueue") from e
+        kind = dask_jobqueue.SLURMCluster if args.slurm else dask_jobqueue.PBSCluster
+        cluster = kind(cores=args.cores, processes=1, memory=args.memory, walltime=args.walltime)
+        cluster.scale(jobs=args.jobs)
+        return cluster
+    from dask.distributed import LocalCluster
+
+    return LocalCluster(n_workers=args.local_workers, threads_per_worker=1, processes=True,
+                        dashboard_address=None)
+
+
+def generate(args):
+    """Generates the shards on the cluster and merges them; returns the merge's output."""
+    from dask.distributed import Client, as_completed
+
+    out = os.path.abspath(args.out)
+    shards = args.shards or (args.local_workers if not (args.scheduler or args.slurm or args.pbs) else args.jobs)
+    cluster = make_cluster(args)
+    client = Client(args.scheduler) if cluster is None else Client(cluster)
+    try:
+        threads = args.cores if (args.slurm or args.pbs) else 1
+        futures = [client.submit(generate_shard, args.augsim, args.scenario, out, i, shards, args.samples, threads,
+                                 pure=False, key=f"shard-{i}-of-{shards}")
+                   for i in range(shards)]
+        start = time.perf_counter()
+        for done, future in enumerate(as_completed(futures), 1):
+            directory, seconds = future.result()
+            print(f"shard      {done}/{shards} done: {os.path.basename(directory)} ({seconds:.1f} s)", flush=True)
+        print(f"shards     {time.perf_counter() - start:.1f} s on the cluster", flush=True)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    parts = [shard_dir(out, i, shards) for i in range(shards)]
+    merged = subprocess.run([args.augsim, "merge", out, *parts], capture_output=True, text=True)
+    if merged.returncode != 0:
+        raise SystemExit(f"merging the shards failed:\n{merged.stdout}{merged.stderr}")
+    if not args.keep_parts:
+        shutil.rmtree(out + ".parts", ignore_errors=True)
+    return merged.stdout
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog="python -m augsim.cluster", description=__doc__.split("\n\n")[0])
+    p.add_argument("scenario", help="dataset scenario: a TOML file or a built-in name")
+    p.add_argument("--out", required=True, help="the dataset's directory")
+    p.add_argument("--samples", type=int, help="draws (default: the scenario's)")
+    p.add_argument("--shards", type=int, help="tasks (default: one per worker or job)")
+    p.add_argument("--augsim", default=shutil.which("augsim") or "augsim", help="the augsim binary on the workers")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--local-workers", type=int, default=2, help="worker processes on this machine")
+    where.add_argument("--scheduler", help="address of a running Dask scheduler")
+    where.add_argument("--slurm", action="store_true", help="Slurm batch jobs (dask-jobqueue)")
+    where.add_argument("--pbs", action="store_true", help="PBS batch jobs (dask-jobqueue)")
+    p.add_argument("--jobs", type=int, default=4, help="batch jobs (--slurm / --pbs)")
+    p.add_argument("--cores", type=int, default=4, help="cores per batch job")
+    p.add_argument("--memory", default="8GB", help="memory per batch job")
+    p.add_argument("--walltime", default="02:00:00", help="wall time per batch job")
+    p.add_argument("--keep-parts", action="store_true", help="keep the shard directories after the merge")
+    args = p.parse_args(argv)
+    if args.local_workers < 1 or (args.shards is not None and args.shards < 1):
+        p.error("--local-workers and --shards must be at least 1")
+    print(generate(args), end="")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

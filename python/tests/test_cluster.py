@@ -1,0 +1,38 @@
+"""Generation over a Dask cluster (python -m augsim.cluster) against one machine: two local worker
+processes, the draws split into shards and merged, give the dataset ``augsim generate`` writes
+alone, byte for byte. Needs dask (``pip install "./python[cluster]"``; `.ci/run` installs it)."""
+
+import filecmp
+import os
+
+import pytest
+
+from helpers import augsim_bin, run_augsim
+
+pytest.importorskip("dask.distributed", reason="needs dask: pip install './python[cluster]'")
+
+from augsim import cluster  # noqa: E402  (after the skip: the module needs dask to run)
+
+
+def _same_tree(a, b):
+    cmp = filecmp.dircmp(a, b)
+    assert not cmp.left_only and not cmp.right_only and not cmp.funny_files, (cmp.left_only, cmp.right_only)
+    _, mismatch, errors = filecmp.cmpfiles(a, b, cmp.common_files, shallow=False)
+    assert not mismatch and not errors, (mismatch, errors)
+    for sub in cmp.common_dirs:
+        _same_tree(os.path.join(a, sub), os.path.join(b, sub))
+
+
+def test_two_local_workers_write_the_single_machine_dataset(tmp_path):
+    single = tmp_path / "single"
+    run_augsim("generate", "liver_ar", "--samples", "24", "--out", str(single))
+    out = tmp_path / "cluster"
+    assert cluster.main(["liver_ar", "--samples", "24", "--local-workers", "2", "--out", str(out),
+                         "--augsim", augsim_bin()]) == 0
+    _same_tree(single, out)
+    assert not (tmp_path / "cluster.parts").exists(), "the shards are removed after the merge"
+
+
+def test_a_failing_shard_is_reported(tmp_path):
+    with pytest.raises(RuntimeError, match="shard 0/1 failed"):
+        cluster.generate_shard(augsim_bin(), str(tmp_path / "missing.toml"), str(tmp_path / "out"), 0, 1)
