@@ -56,7 +56,7 @@ enum Command {
         /// Build an immersed-boundary H8 grid with this cell size (m) instead.
         #[arg(long)]
         immersed: Option<f64>,
-        /// Output file (.vtu, .vtk or .msh).
+        /// Output file (.vtu, .vtk or .msh; .stl or .obj: the mesh's boundary surface).
         #[arg(short, long, default_value = "out/mesh.vtu")]
         output: PathBuf,
     },

@@ -163,9 +163,14 @@ fn print_volume(volume: f64, reference: Option<f64>) {
 }
 
 /// Writes the mesh with its regions (point data `region_<name>`, or Gmsh physical groups) and,
-/// for an immersed grid, its cells' volume fractions.
+/// for an immersed grid, its cells' volume fractions; to .stl or .obj, its boundary surface.
 fn write_mesh_file(path: &Path, mesh: &Mesh) -> Result<()> {
-    let is_msh = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("msh"));
+    let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    if extension == "stl" || extension == "obj" {
+        let surface = mesh::boundary_surface(mesh).compacted();
+        return mesh::io::write_surface(path, &surface).with_context(|| format!("writing {}", path.display()));
+    }
+    let is_msh = extension == "msh";
     let fields: Vec<Field> = match &mesh.cell_fraction {
         Some(f) if !is_msh => vec![Field::cell("volume_fraction", 1, f.clone())],
         _ => Vec::new(),
