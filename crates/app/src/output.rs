@@ -178,23 +178,9 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
     let peak = case.peak();
     let mut csv =
         String::from("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_median_ms,time_p95_ms,iterations,error\n");
-    let mut row = |name: &str, values: [Option<f64>; 6], error: &str| {
+    for (name, values, error) in comparison_rows(rows) {
         let fields = values.map(|v| v.map_or(String::new(), |v| v.to_string()));
-        csv.push_str(&format!("{},{},{}\n", csv_field(name), fields.join(","), csv_field(error)));
-    };
-    if let Some(first) = registered.first() {
-        let s = &first.summary;
-        row(
-            baseline_name(first),
-            [s.no_deformation_tre_mean_mm, s.no_deformation_tre_max_mm, None, None, None, None],
-            "",
-        );
-    }
-    for r in rows {
-        match &r.result {
-            Ok(reg) => row(&r.method, comparison_values(&reg.summary), ""),
-            Err(e) => row(&r.method, [None; 6], &e.to_string()),
-        }
+        csv.push_str(&format!("{},{},{}\n", csv_field(&name), fields.join(","), csv_field(&error)));
     }
     for reg in &registered {
         let (s, outcome) = (&reg.summary, reg.peak(case));
@@ -232,24 +218,37 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
     Ok(())
 }
 
-/// The baseline row's name of a comparison: the rest shape, rigidly aligned when the methods were.
-pub fn baseline_name(registered: &Registered) -> &'static str {
-    if registered.outcomes[0].rigid.is_some() {
-        "rigid only (ICP)"
-    } else {
-        "no deformation"
+/// The rows of a comparison: the baseline (not deforming, or the rigid alignment alone, when the
+/// methods aligned rigidly), then each method; each row its name, its figures (TRE mean and max,
+/// surface residual in mm, median and 95th-percentile frame time in ms, iterations) and its error
+/// (empty when it registered).
+pub fn comparison_rows(rows: &[Compared]) -> Vec<(String, [Option<f64>; 6], String)> {
+    let mut out = Vec::new();
+    if let Some(first) = rows.iter().find_map(|r| r.result.as_ref().ok()) {
+        let s = &first.summary;
+        let name = if first.outcomes[0].rigid.is_some() { "rigid only (ICP)" } else { "no deformation" };
+        out.push((
+            name.to_string(),
+            [s.no_deformation_tre_mean_mm, s.no_deformation_tre_max_mm, None, None, None, None],
+            String::new(),
+        ));
     }
-}
-
-/// A method's figures in a comparison's columns: TRE mean and max, surface residual (mm), median
-/// and 95th-percentile frame time (ms), iterations.
-pub fn comparison_values(s: &Summary) -> [Option<f64>; 6] {
-    [
-        s.tre_mean_mm,
-        s.tre_max_mm,
-        Some(s.surface_residual_mm),
-        Some(s.time_median_ms),
-        Some(s.time_p95_ms),
-        Some(s.iterations),
-    ]
+    for r in rows {
+        out.push(match &r.result {
+            Ok(reg) => {
+                let s = &reg.summary;
+                let values = [
+                    s.tre_mean_mm,
+                    s.tre_max_mm,
+                    Some(s.surface_residual_mm),
+                    Some(s.time_median_ms),
+                    Some(s.time_p95_ms),
+                    Some(s.iterations),
+                ];
+                (r.method.clone(), values, String::new())
+            }
+            Err(e) => (r.method.clone(), [None; 6], e.to_string()),
+        });
+    }
+    out
 }

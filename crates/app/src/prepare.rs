@@ -371,12 +371,7 @@ fn model_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
                 seed: options.seed,
                 ..learn::rom::RomConfig::default()
             };
-            let context = learn::rom::Context {
-                placement: manifest.placement(),
-                input_unit: &manifest.units.input,
-                target_unit: &manifest.units.target,
-                split,
-            };
+            let context = learn::rom::Context::of_dataset(manifest, split);
             let (model, report) = learn::rom::fit(&train, &validation, &config, context)?;
             model.save(&out)?;
             Ok(vec![

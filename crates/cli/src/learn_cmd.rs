@@ -298,12 +298,7 @@ fn train_rom(
         ..RomConfig::default()
     };
     let manifest = dataset.manifest();
-    let context = learn::rom::Context {
-        placement: manifest.placement(),
-        input_unit: &manifest.units.input,
-        target_unit: &manifest.units.target,
-        split,
-    };
+    let context = learn::rom::Context::of_dataset(manifest, split);
     let (model, report) = learn::rom::fit(&train, &validation, &config, context)?;
     model.save(&args.out)?;
     let info = &model.info;

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use app::case::{ar_scenario, case_methods, compare, synthetic_case, Network, Registered, SHIPPED_MODEL};
-use app::output::{baseline_name, comparison_values, write_comparison, RunWriter};
+use app::output::{comparison_rows, write_comparison, RunWriter};
 use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
 use mesh::Point;
 use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
@@ -338,26 +338,12 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         "{:<width$} {:>14} {:>13} {:>14} {:>10} {:>10} {:>10}",
         "method", "TRE mean (mm)", "TRE max (mm)", "residual (mm)", "ms/frame", "p95 (ms)", "iterations"
     );
-    let row = |name: &str, values: [Option<f64>; 6], error: &str| {
+    for (name, values, error) in comparison_rows(&rows) {
         let [t, m, res, time, p95, it] = values.map(|v| v.map_or("-".to_string(), |v| format!("{v:.2}")));
         if error.is_empty() {
             println!("{name:<width$} {t:>14} {m:>13} {res:>14} {time:>10} {p95:>10} {it:>10}");
         } else {
             println!("{name:<width$} failed: {error}");
-        }
-    };
-    if let Some(first) = registered.first() {
-        let s = &first.summary;
-        row(
-            baseline_name(first),
-            [s.no_deformation_tre_mean_mm, s.no_deformation_tre_max_mm, None, None, None, None],
-            "",
-        );
-    }
-    for r in &rows {
-        match &r.result {
-            Ok(reg) => row(&r.method, comparison_values(&reg.summary), ""),
-            Err(e) => row(&r.method, [None; 6], &e.to_string()),
         }
     }
     write_comparison(&args.out, &case, &rows)?;

@@ -25,7 +25,7 @@ use std::collections::BTreeMap;
 
 pub use bvh::SurfaceBvh;
 pub use embedding::{Embedding, Grid, Location, MeshLocator, MAX_CELL_NODES};
-pub use generate::{box_hex, box_mesh, box_tet};
+pub use generate::{box_hex, box_mesh, box_tet, icosphere};
 pub use immersed::{immersed_grid, immersed_surface, ImmersedGrid, ImmersedOptions};
 pub use phantom::{liver_phantom, PhantomSpec};
 pub use quadratic::{tet10_shape, tet10_shape_derivatives, TET10_EDGES};

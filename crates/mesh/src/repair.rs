@@ -991,67 +991,7 @@ impl BoxTree {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// An icosphere of radius r: the icosahedron subdivided `level` times, outward.
-    fn icosphere(r: f64, level: usize) -> TriSurface {
-        let t = (1.0 + 5f64.sqrt()) / 2.0;
-        let mut v: Vec<Point> = vec![
-            [-1.0, t, 0.0],
-            [1.0, t, 0.0],
-            [-1.0, -t, 0.0],
-            [1.0, -t, 0.0],
-            [0.0, -1.0, t],
-            [0.0, 1.0, t],
-            [0.0, -1.0, -t],
-            [0.0, 1.0, -t],
-            [t, 0.0, -1.0],
-            [t, 0.0, 1.0],
-            [-t, 0.0, -1.0],
-            [-t, 0.0, 1.0],
-        ];
-        let mut f: Vec<[usize; 3]> = vec![
-            [0, 11, 5],
-            [0, 5, 1],
-            [0, 1, 7],
-            [0, 7, 10],
-            [0, 10, 11],
-            [1, 5, 9],
-            [5, 11, 4],
-            [11, 10, 2],
-            [10, 7, 6],
-            [7, 1, 8],
-            [3, 9, 4],
-            [3, 4, 2],
-            [3, 2, 6],
-            [3, 6, 8],
-            [3, 8, 9],
-            [4, 9, 5],
-            [2, 4, 11],
-            [6, 2, 10],
-            [8, 6, 7],
-            [9, 8, 1],
-        ];
-        for _ in 0..level {
-            let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
-            let mut next = Vec::with_capacity(4 * f.len());
-            for tri in &f {
-                let m: [usize; 3] = std::array::from_fn(|e| {
-                    let (a, b) = (tri[e], tri[(e + 1) % 3]);
-                    *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                        v.push(std::array::from_fn(|d| 0.5 * (v[a][d] + v[b][d])));
-                        v.len() - 1
-                    })
-                });
-                next.push([tri[0], m[0], m[2]]);
-                next.push([tri[1], m[1], m[0]]);
-                next.push([tri[2], m[2], m[1]]);
-                next.push([m[0], m[1], m[2]]);
-            }
-            f = next;
-        }
-        let vertices = v.iter().map(|p| p.map(|c| c * r / norm(*p))).collect();
-        TriSurface { vertices, triangles: f }
-    }
+    use crate::icosphere;
 
     /// Level 2: 162 vertices, 320 triangles.
     fn sphere() -> TriSurface {

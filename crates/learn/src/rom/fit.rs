@@ -99,6 +99,18 @@ pub struct Context<'a> {
     pub split: Split,
 }
 
+impl<'a> Context<'a> {
+    /// The context of samples of the dataset described by `manifest`, split by `split`.
+    pub fn of_dataset(manifest: &'a crate::Manifest, split: Split) -> Context<'a> {
+        Context {
+            placement: manifest.placement(),
+            input_unit: &manifest.units.input,
+            target_unit: &manifest.units.target,
+            split,
+        }
+    }
+}
+
 /// Fits a reduced-order model on `train`, choosing its hyper-parameters on `validation`.
 pub fn fit(
     train: &Samples,
