@@ -5,11 +5,8 @@ use std::io::{Read, Write};
 use std::net::{TcpStream, ToSocketAddrs};
 use std::time::Duration;
 
-use openigtlink_rust::protocol::header::Header;
-use openigtlink_rust::protocol::types::{PointElement, PointMessage, StringMessage, TransformMessage};
-
+use crate::igtl::{decode_body, encode_message, Header, PointElement, PointMessage, StringMessage, TransformMessage};
 use crate::polydata::PolyData;
-use crate::{decode_body, encode_message};
 
 /// A message from the server.
 #[derive(Debug)]
@@ -51,7 +48,7 @@ impl Client {
 
     /// Sends a cloud (in the server's unit) as a POLYDATA message of device `cloud`.
     pub fn send_cloud(&mut self, points: Vec<[f32; 3]>) -> std::result::Result<(), String> {
-        self.send_bytes(&encode_message(PolyData { points, triangles: Vec::new() }, "cloud")?)
+        self.send_bytes(&encode_message(&PolyData { points, triangles: Vec::new() }, "cloud")?)
     }
 
     /// Sends points (in the server's unit) as a POINT message of device `device` (e.g. the
@@ -59,7 +56,7 @@ impl Client {
     pub fn send_points(&mut self, device: &str, points: &[[f32; 3]]) -> std::result::Result<(), String> {
         let elements =
             points.iter().enumerate().map(|(k, &p)| PointElement::new(format!("{device} {}", k + 1), device, p));
-        self.send_bytes(&encode_message(PointMessage::new(elements.collect()), device)?)
+        self.send_bytes(&encode_message(&PointMessage { points: elements.collect() }, device)?)
     }
 
     /// Sends raw bytes (e.g. a malformed message).
@@ -76,8 +73,7 @@ impl Client {
         let parsed = Header::decode(&header).map_err(|e| format!("malformed header: {e}"))?;
         let mut body = vec![0; parsed.body_size as usize];
         self.stream.read_exact(&mut body).map_err(|e| format!("truncated answer: {e}"))?;
-        let kind = parsed.type_name.as_str().map_err(|e| e.to_string())?;
-        Ok(Some(match kind {
+        Ok(Some(match parsed.type_name.as_str() {
             "POINT" => Answer::Targets(
                 decode_body::<PointMessage>(&parsed, &body)?.points.iter().map(|p| p.position).collect(),
             ),
@@ -85,9 +81,9 @@ impl Client {
             "TRANSFORM" => Answer::Rigid(decode_body::<TransformMessage>(&parsed, &body)?.matrix),
             "STRING" => {
                 let text: StringMessage = decode_body(&parsed, &body)?;
-                let json = serde_json::from_str(text.as_str()).map_err(|e| format!("a STRING is not JSON: {e}"))?;
+                let json = serde_json::from_str(&text.text).map_err(|e| format!("a STRING is not JSON: {e}"))?;
                 match parsed.device_name.as_str() {
-                    Ok("estimate") => Answer::Estimate(json),
+                    "estimate" => Answer::Estimate(json),
                     _ => Answer::Status(json),
                 }
             }

@@ -2,7 +2,7 @@
 //! headset application): an OpenIGTLink server that registers every point cloud it receives and
 //! answers with the registered targets, the deformed organ surface and a status line.
 //!
-//! Protocol (OpenIGTLink version 1–3, the `openigtlink-rust` crate's messages):
+//! Protocol (OpenIGTLink version 1–3, messages of [`igtl`] and [`polydata`]):
 //! - in: a point cloud as POLYDATA (its points; vertices optional) or POINT, device name `cloud`;
 //! - out, per cloud, in this order and as chosen by [`Outputs`]: POINT `targets` (the
 //!   registered targets, in the order given to the server), POLYDATA `organ` (the registered
@@ -30,6 +30,7 @@
 //! bounded.
 
 pub mod client;
+pub mod igtl;
 pub mod polydata;
 
 use std::io::{Read, Write};
@@ -38,10 +39,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
+pub use igtl::{decode_body, encode_message};
+use igtl::{Content, Header, PointElement, PointMessage, StringMessage, TransformMessage};
 use mesh::Point;
-use openigtlink_rust::protocol::header::Header;
-use openigtlink_rust::protocol::types::{PointElement, PointMessage, StringMessage, TransformMessage};
-use openigtlink_rust::protocol::{calculate_crc, IgtlMessage, Message};
 use polydata::PolyData;
 use register::{Registration, Tracked};
 
@@ -213,7 +213,7 @@ impl Shared {
         self.arrived.notify_all();
     }
 
-    fn send<T: Message>(&self, content: T, device: &str) -> std::result::Result<(), String> {
+    fn send<T: Content>(&self, content: &T, device: &str) -> std::result::Result<(), String> {
         let bytes = encode_message(content, device)?;
         let mut w = self.writer.lock().map_err(|_| "writer poisoned".to_string())?;
         w.write_all(&bytes).map_err(|e| e.to_string())
@@ -221,7 +221,7 @@ impl Shared {
 
     /// Sends one line of JSON as a STRING of `device`; a failed send ends the connection.
     fn send_json(&self, device: &str, json: &serde_json::Value) {
-        if self.send(StringMessage::utf8(json.to_string()), device).is_err() {
+        if self.send(&StringMessage::utf8(json.to_string()), device).is_err() {
             self.close();
         }
     }
@@ -329,64 +329,21 @@ fn read_message(stream: &mut TcpStream, max_body: u64) -> std::result::Result<In
         Err(e) => return Err(format!("reading a message: {e}")),
     }
     stream.read_exact(&mut header[1..]).map_err(|e| format!("truncated message header: {e}"))?;
-    let parsed = Header::decode(&header).map_err(|e| format!("malformed message header: {e}"))?;
-    if parsed.body_size > max_body {
-        return Err(format!("message body of {} bytes exceeds the limit of {max_body}", parsed.body_size));
+    let header = Header::decode(&header).map_err(|e| format!("malformed message header: {e}"))?;
+    if header.body_size > max_body {
+        return Err(format!("message body of {} bytes exceeds the limit of {max_body}", header.body_size));
     }
-    let mut data = header.to_vec();
-    data.resize(Header::SIZE + parsed.body_size as usize, 0);
-    stream.read_exact(&mut data[Header::SIZE..]).map_err(|e| format!("truncated message body: {e}"))?;
-    let kind = parsed.type_name.as_str().map_err(|e| format!("malformed message type: {e}"))?;
-    let device = parsed.device_name.as_str().ok();
-    if !matches!(device, Some("cloud" | "features")) || !matches!(kind, "POLYDATA" | "POINT") {
+    let mut body = vec![0; header.body_size as usize];
+    stream.read_exact(&mut body).map_err(|e| format!("truncated message body: {e}"))?;
+    let (kind, device) = (header.type_name.as_str(), header.device_name.as_str());
+    if !matches!(device, "cloud" | "features") || !matches!(kind, "POLYDATA" | "POINT") {
         return Ok(Incoming::Other);
     }
-    let body = &data[Header::SIZE..];
     let points = match kind {
-        "POLYDATA" => decode_body::<PolyData>(&parsed, body)?.points,
-        _ => decode_body::<PointMessage>(&parsed, body)?.points.iter().map(|p| p.position).collect(),
+        "POLYDATA" => decode_body::<PolyData>(&header, &body)?.points,
+        _ => decode_body::<PointMessage>(&header, &body)?.points.iter().map(|p| p.position).collect(),
     };
-    Ok(if device == Some("cloud") { Incoming::Cloud(points) } else { Incoming::Features(points) })
-}
-
-/// A message as bytes on the wire, with header version 1 (no extended header): what every
-/// OpenIGTLink client reads (3D Slicer, PLUS, pyigtl).
-pub fn encode_message<T: Message>(content: T, device: &str) -> std::result::Result<Vec<u8>, String> {
-    let mut bytes = IgtlMessage::new(content, device).and_then(|m| m.encode()).map_err(|e| e.to_string())?;
-    // The header's version field; the CRC covers the body only, which has no extended header.
-    bytes[..2].copy_from_slice(&1u16.to_be_bytes());
-    Ok(bytes)
-}
-
-/// The content of a message of type `T` from its header and body: the CRC checked, the
-/// content taken from between the extended header and the metadata for header version 2 (the
-/// whole body for version 1), then decoded. Errors say what is wrong; a malformed body never
-/// panics.
-pub fn decode_body<T: Message>(header: &Header, body: &[u8]) -> std::result::Result<T, String> {
-    let kind = T::message_type();
-    if calculate_crc(body) != header.crc {
-        return Err(format!("{kind} message: CRC mismatch"));
-    }
-    let content = if header.version < 2 {
-        body
-    } else {
-        let field =
-            |at: usize, n: usize| body.get(at..at + n).map(|b| b.iter().fold(0usize, |v, &x| v << 8 | x as usize));
-        let bad = || format!("{kind} message: malformed extended header");
-        let (ext, meta_header, meta) =
-            (field(0, 2).ok_or_else(bad)?, field(2, 2).ok_or_else(bad)?, field(4, 4).ok_or_else(bad)?);
-        let end = body.len().checked_sub(meta_header).and_then(|e| e.checked_sub(meta)).ok_or_else(bad)?;
-        if ext < 12 || ext > end {
-            return Err(bad());
-        }
-        &body[ext..end]
-    };
-    // A malformed body must end a connection, not the server: the decoder is guarded.
-    match std::panic::catch_unwind(|| T::decode_content(content)) {
-        Ok(Ok(message)) => Ok(message),
-        Ok(Err(e)) => Err(format!("malformed {kind} message: {e}")),
-        Err(_) => Err(format!("malformed {kind} message")),
-    }
+    Ok(if device == "cloud" { Incoming::Cloud(points) } else { Incoming::Features(points) })
 }
 
 /// Registers the newest cloud, frame after frame, and makes the identification steps, until the
@@ -491,17 +448,17 @@ fn answer(
             .enumerate()
             .map(|(k, p)| PointElement::new(format!("target {}", k + 1), "targets", to_wire(p)))
             .collect();
-        shared.send(PointMessage::new(points), "targets")?;
+        shared.send(&PointMessage { points }, "targets")?;
     }
     if options.outputs.organ {
         let surface = tracked.organ_surface(registration.organ());
         let triangles = surface.triangles.iter().map(|t| t.map(|i| i as u32)).collect();
         let organ = PolyData { points: surface.vertices.iter().map(to_wire).collect(), triangles };
-        shared.send(organ, "organ")?;
+        shared.send(&organ, "organ")?;
     }
     if let (true, Some(r)) = (options.outputs.transform, rigid) {
         let matrix = r.organ_to_cloud().homogeneous(unit).map(|row| row.map(|x| x as f32));
-        shared.send(TransformMessage { matrix }, "rigid")?;
+        shared.send(&TransformMessage { matrix }, "rigid")?;
     }
     shared.send_status(&serde_json::json!({
         "frame": frame,

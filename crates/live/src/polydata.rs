@@ -2,12 +2,9 @@
 //! Slicer's OpenIGTLinkIF, PLUS and pyigtl read and write it: a header of ten unsigned 32-bit
 //! counts (points; vertices, lines, polygons and triangle strips, each as a number of cells and a
 //! size in bytes; attributes), the points as big-endian 32-bit floats, then each cell list as
-//! `n, i1 … in` in unsigned 32-bit integers, then the attributes. The `openigtlink-rust` crate's
-//! own POLYDATA type lays the message out otherwise (a count before each list, no header), which
-//! these applications cannot read; this one replaces it.
+//! `n, i1 … in` in unsigned 32-bit integers, then the attributes.
 
-use openigtlink_rust::error::IgtlError;
-use openigtlink_rust::protocol::Message;
+use crate::igtl::Content;
 
 /// Bytes of the header: ten unsigned 32-bit counts.
 const HEADER: usize = 40;
@@ -21,13 +18,11 @@ pub struct PolyData {
     pub triangles: Vec<[u32; 3]>,
 }
 
-impl Message for PolyData {
-    fn message_type() -> &'static str {
-        "POLYDATA"
-    }
+impl Content for PolyData {
+    const TYPE: &'static str = "POLYDATA";
 
-    fn encode_content(&self) -> openigtlink_rust::error::Result<Vec<u8>> {
-        let too_many = |what: &str| IgtlError::InvalidHeader(format!("POLYDATA: too many {what} for 32-bit counts"));
+    fn encode(&self) -> Result<Vec<u8>, String> {
+        let too_many = |what: &str| format!("too many {what} for 32-bit counts");
         let n = u32::try_from(self.points.len()).map_err(|_| too_many("points"))?;
         let polygons = u32::try_from(self.triangles.len()).map_err(|_| too_many("triangles"))?;
         let polygon_bytes = polygons.checked_mul(16).ok_or_else(|| too_many("triangles"))?;
@@ -44,10 +39,9 @@ impl Message for PolyData {
         Ok(out)
     }
 
-    fn decode_content(data: &[u8]) -> openigtlink_rust::error::Result<Self> {
-        let bad = |why: String| IgtlError::InvalidHeader(format!("POLYDATA: {why}"));
+    fn decode(data: &[u8]) -> Result<PolyData, String> {
         if data.len() < HEADER {
-            return Err(bad(format!("{} bytes, shorter than its {HEADER}-byte header", data.len())));
+            return Err(format!("{} bytes, shorter than its {HEADER}-byte header", data.len()));
         }
         let word = |at: usize| u32::from_be_bytes([data[at], data[at + 1], data[at + 2], data[at + 3]]);
         let counts: Vec<u64> = (0..10).map(|k| u64::from(word(4 * k))).collect();
@@ -55,19 +49,18 @@ impl Message for PolyData {
         // Vertices, lines, polygons and strips: their sizes in bytes follow their counts.
         let cells: u64 = [2, 4, 6, 8].iter().map(|&k| counts[k]).sum();
         if points_end + cells > data.len() as u64 {
-            return Err(bad(format!(
+            return Err(format!(
                 "the header announces {} points and {cells} bytes of cells, more than the {} bytes sent",
                 counts[0],
                 data.len()
-            )));
+            ));
         }
         let points = data[HEADER..points_end as usize]
             .chunks_exact(12)
             .map(|c| std::array::from_fn(|d| f32::from_be_bytes([c[4 * d], c[4 * d + 1], c[4 * d + 2], c[4 * d + 3]])))
             .collect();
         let polygons_at = (points_end + counts[2] + counts[4]) as usize;
-        let triangles =
-            read_triangles(&data[polygons_at..polygons_at + counts[6] as usize], counts[5], counts[0]).map_err(bad)?;
+        let triangles = read_triangles(&data[polygons_at..polygons_at + counts[6] as usize], counts[5], counts[0])?;
         Ok(PolyData { points, triangles })
     }
 }
@@ -119,21 +112,21 @@ mod tests {
 
     #[test]
     fn the_standard_layout_is_read_and_written() {
-        let message = PolyData::decode_content(&by_hand()).unwrap();
+        let message = PolyData::decode(&by_hand()).unwrap();
         assert_eq!(message.points, [[0.0, 1.0, 2.0], [3.0, 4.0, 5.0], [6.0, 7.0, 8.5]]);
         assert_eq!(message.triangles, [[0, 1, 2]]);
-        let written = message.encode_content().unwrap();
+        let written = message.encode().unwrap();
         // Written back without the vertex cell: the counts say so, the rest is the same bytes.
         let mut expected = by_hand();
         expected.drain(76..84);
         expected[4..12].copy_from_slice(&[0; 8]);
         assert_eq!(written, expected);
-        assert_eq!(PolyData::decode_content(&written).unwrap(), message);
+        assert_eq!(PolyData::decode(&written).unwrap(), message);
     }
 
     #[test]
     fn malformed_messages_are_errors() {
-        let e = |b: &[u8]| PolyData::decode_content(b).unwrap_err().to_string();
+        let e = |b: &[u8]| PolyData::decode(b).unwrap_err();
         let good = by_hand();
         assert!(e(&good[..30]).contains("shorter than"));
         assert!(e(&good[..good.len() - 4]).contains("more than the"));

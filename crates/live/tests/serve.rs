@@ -8,13 +8,12 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use augsim_live::client::{Answer, Client};
+use augsim_live::igtl::{crc64, Header};
 use augsim_live::polydata::PolyData;
 use augsim_live::{encode_message, serve, Outputs, ServeOptions};
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::select::nodes_in_box;
 use mesh::Point;
-use openigtlink_rust::protocol::calculate_crc;
-use openigtlink_rust::protocol::header::Header;
 use register::{FemDeformer, Organ, Registration, RegistrationOptions};
 
 const SIDE: f64 = 0.05;
@@ -143,7 +142,7 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
     assert!(s["frame"] == 5 && s["error"].as_str().unwrap().contains("millimetres?"), "{s}");
 
     // Another client sends an oversized message, a third garbage: each is closed alone.
-    let mut huge = encode_message(PolyData { points: cloud.clone(), triangles: Vec::new() }, "cloud").unwrap();
+    let mut huge = encode_message(&PolyData { points: cloud.clone(), triangles: Vec::new() }, "cloud").unwrap();
     huge[42..50].copy_from_slice(&u64::MAX.to_be_bytes());
     let mut other = connect(port);
     other.send_bytes(&huge[..Header::SIZE]).unwrap();
@@ -151,9 +150,9 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
     assert!(s["error"].as_str().unwrap().contains("exceeds"), "{s}");
     assert!(other.receive().unwrap().is_none(), "the connection is closed");
     // A POLYDATA that claims 1,000 points and holds 2, with a correct CRC; then a corrupted one.
-    let mut lying = encode_message(PolyData { points: vec![[0.0; 3]; 2], triangles: Vec::new() }, "cloud").unwrap();
+    let mut lying = encode_message(&PolyData { points: vec![[0.0; 3]; 2], triangles: Vec::new() }, "cloud").unwrap();
     lying[Header::SIZE..Header::SIZE + 4].copy_from_slice(&1000u32.to_be_bytes());
-    let crc = calculate_crc(&lying[Header::SIZE..]);
+    let crc = crc64(&lying[Header::SIZE..]);
     lying[50..58].copy_from_slice(&crc.to_be_bytes());
     let mut garbage = connect(port);
     garbage.send_bytes(&lying).unwrap();
