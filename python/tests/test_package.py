@@ -218,7 +218,7 @@ def test_a_prepared_patient_registers(tmp_path):
     out = run_augsim("prepare", str(tmp_path / "organ.obj"), "--camera", camera, "--attach",
                      str(tmp_path / "ligaments.csv"), "--targets", str(tmp_path / "tumour.csv"), "--samples", "30",
                      "--tets", "800", "--out", str(tmp_path / "patient"))
-    assert "step 6/6 report" in out and "units: mm" in out
+    assert "step 7/7 report" in out and "units: mm" in out and "validation: FEM TRE" in out
     reg = augsim.Registration(patient=tmp_path / "patient")
     assert reg.method.startswith("ROM") and reg.targets.shape == (2, 3)
     np.testing.assert_allclose(reg.targets * 1e3, [centre, centre + [20.0, 0.0, 0.0]], atol=1e-6)
