@@ -364,7 +364,7 @@ pub fn compare(case: &SyntheticCase, methods: Vec<Method>, options: &Registratio
             let frames = case.frames.iter().map(|f| Ok(f.cloud.clone()));
             let result = Registration::new(m.organ, m.deformer, m.name.clone(), case.targets.clone(), options)
                 .and_then(|mut registration| {
-                    let outcomes = registration.register_sequence(frames, Some(&truths), |_, _| Ok(()))?;
+                    let outcomes = registration.register_sequence(frames, Some(&truths), |_, _, _| Ok(()))?;
                     let summary = Summary::new(m.name.clone(), &outcomes)?;
                     Ok(Registered { summary, outcomes, organ: registration.into_organ() })
                 });

@@ -17,8 +17,8 @@
 //! 5. **evaluation**: its error on the test split, which played no part in training it.
 //! 6. **validation**: registration of held-out cases, the learned model's and the FEM's, against
 //!    a truth they did not see: the same surface meshed anew, three times finer, with quadratic
-//!    tetrahedra (T10) and another law (Neo-Hookean against the dataset's), pushed by a tool at
-//!    four places of what the camera sees; the cloud is the truth's seen surface with 0.5 mm of
+//!    tetrahedra (T10, the dataset's Neo-Hookean law without its F-bar linear elements), pushed
+//!    by a tool at four places of what the camera sees; the cloud is the truth's seen surface with 0.5 mm of
 //!    noise; the TRE at the targets.
 //! 7. **report**: `report.md`, with `regions.png` (the organ seen from the camera: what it
 //!    sees, where it is held, the targets) and the time of each step.
@@ -282,15 +282,26 @@ fn grid_for(organ: &Mesh) -> [usize; 3] {
     std::array::from_fn(|d| ((32.0 * extent[d] / longest / 8.0).ceil() as usize).max(1) * 8)
 }
 
+/// The tool's footprint on `organ`: 3 cm on the phantom's 21 cm, in proportion to its longest side.
+fn tool_radius(organ: &Mesh) -> f64 {
+    let (lo, hi) = organ.bounds();
+    0.03 * (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max) / 0.21
+}
+
+/// Two unit directions across a line of sight along the unit vector `axis`, square to it and to
+/// each other.
+fn across_sight(axis: Point) -> (Point, Point) {
+    let helper = if axis[2].abs() < 0.9 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] };
+    let u = mesh::unit(mesh::cross(helper, axis));
+    (u, mesh::cross(axis, u))
+}
+
 /// Step 2: the scenario files.
 fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
     let camera = read_points_csv(&dir.join("camera.csv"))?[0];
     let [nx, ny, nz] = grid_for(&organ);
-    let (lo, hi) = organ.bounds();
-    let longest = (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max);
-    // The tool's footprint: 3 cm on the phantom's 21 cm, in proportion on this organ.
-    let radius = 0.03 * longest / 0.21;
+    let radius = tool_radius(&organ);
     let name = options.surface.file_stem().map_or("organ".into(), |s| s.to_string_lossy().into_owned());
     let camera_toml = format!("{{ facing = {{ position = [{}, {}, {}] }} }}", camera[0], camera[1], camera[2]);
     let held =
@@ -424,7 +435,7 @@ fn evaluation_step(dir: &Path) -> Result<Vec<String>> {
 /// sight, as a fraction) and the force (N).
 const VALIDATION_LOADS: [(f64, f64); 4] = [(0.2, 1.5), (0.4, 2.5), (0.6, 2.0), (0.8, 3.0)];
 
-/// Step 6: registration of held-out cases against a finer quadratic truth of another law.
+/// Step 6: registration of held-out cases against a finer quadratic truth on another mesh.
 fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     use rand::SeedableRng;
     use rand_distr::Distribution;
@@ -448,11 +459,10 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
     let centroid: Point =
         std::array::from_fn(|d| fine.nodes.iter().map(|p| p[d]).sum::<f64>() / fine.num_nodes() as f64);
     let axis = mesh::unit(mesh::sub(centroid, camera));
-    let across = mesh::unit(mesh::cross(if axis[2].abs() < 0.9 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] }, axis));
+    let (across, _) = across_sight(axis);
     let mut order = seen.clone();
     order.sort_by(|&a, &b| mesh::dot(fine.nodes[a], across).total_cmp(&mesh::dot(fine.nodes[b], across)));
-    let (lo, hi) = fine.bounds();
-    let radius = 0.03 * (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max) / 0.21;
+    let radius = tool_radius(&fine);
     let mut methods = [(false, Vec::new(), Vec::new()), (true, Vec::new(), Vec::new())];
     let mut rest_errors = Vec::new();
     let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
@@ -549,10 +559,7 @@ fn regions_picture(
     let (lo, hi) = organ.bounds();
     let centre: Point = std::array::from_fn(|d| 0.5 * (lo[d] + hi[d]));
     let axis = mesh::unit(mesh::sub(centre, camera));
-    // Two directions across the line of sight.
-    let helper = if axis[2].abs() < 0.9 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] };
-    let u = mesh::unit(mesh::cross(helper, axis));
-    let v = mesh::cross(axis, u);
+    let (u, v) = across_sight(axis);
     let project = |points: &[Point]| -> Vec<(f64, f64)> {
         points.iter().map(|p| (mesh::dot(mesh::sub(*p, centre), u), mesh::dot(mesh::sub(*p, centre), v))).collect()
     };

@@ -125,15 +125,14 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
     }
     let sequence = frames.len() > 1;
     let mut writer = RunWriter::new(&args.out, sequence)?;
-    let organ = registration.organ().clone();
     let clouds = frames.iter().map(|f| read_point_cloud(f));
     let mut rigid_printed = false;
-    let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, o| {
+    let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, organ, o| {
         if let (Some(rigid), false) = (&o.rigid, rigid_printed) {
             print_rigid(rigid, None);
             rigid_printed = true;
         }
-        let row = writer.frame(i, frames[i].display().to_string(), &organ, o).map_err(to_register_error)?;
+        let row = writer.frame(i, frames[i].display().to_string(), organ, o).map_err(to_register_error)?;
         println!(
             "frame {i:<4} {} points ({} matched), {} iterations, surface residual {:.2} mm, {:.1} ms{}",
             row.points,

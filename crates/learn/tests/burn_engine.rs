@@ -75,13 +75,7 @@ fn frozen_encoder_gets_no_gradients_from_either() {
 
 #[test]
 fn burn_network_has_the_parameters_and_forward_pass_of_the_inference_network() {
-    for (base_channels, depth, kernel_size, grid) in [
-        (4, 3, 3, [21, 23, 21]),
-        (3, 2, 3, [5, 6, 7]),
-        (2, 1, 5, [7, 4, 6]),
-        (3, 0, 3, [4, 5, 3]),
-        (2, 2, 1, [8, 8, 8]),
-    ] {
+    for (base_channels, depth, kernel_size, grid) in common::NETWORK_SHAPES {
         let config = UNetConfig { base_channels, depth, kernel_size, ..UNetConfig::default() };
         let net = perturbed(&config);
         let device = Device::flex();

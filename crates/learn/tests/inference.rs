@@ -7,15 +7,8 @@ use common::{batch_values, perturbed, reference};
 
 #[test]
 fn inference_network_matches_the_reference_forward_pass() {
-    for (base_channels, depth, kernel_size, grid) in [
-        (4, 3, 3, [21, 23, 21]),
-        (3, 2, 3, [5, 6, 7]),
-        (2, 1, 5, [7, 4, 6]),
-        (3, 0, 3, [4, 5, 3]),
-        (2, 2, 1, [8, 8, 8]),
-        // Channel counts of the SIMD and Winograd loops (on AVX-512 CPUs).
-        (16, 1, 3, [8, 8, 8]),
-    ] {
+    // With the channel counts of the SIMD and Winograd loops (on AVX-512 CPUs).
+    for (base_channels, depth, kernel_size, grid) in common::NETWORK_SHAPES.into_iter().chain([(16, 1, 3, [8, 8, 8])]) {
         let config = UNetConfig { base_channels, depth, kernel_size, ..UNetConfig::default() };
         let net = perturbed(&config);
         let g = GridShape::new(grid[0], grid[1], grid[2]);

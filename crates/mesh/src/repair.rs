@@ -323,6 +323,19 @@ impl LengthUnit {
     }
 }
 
+impl std::str::FromStr for LengthUnit {
+    type Err = String;
+
+    /// "mm" or "m".
+    fn from_str(name: &str) -> Result<LengthUnit, String> {
+        match name {
+            "mm" => Ok(LengthUnit::Millimetre),
+            "m" => Ok(LengthUnit::Metre),
+            other => Err(format!("must be mm or m, got '{other}'")),
+        }
+    }
+}
+
 /// Metres in one `unit` (the scale that brings coordinates in `unit` to metres).
 pub fn metres_per(unit: LengthUnit) -> f64 {
     match unit {

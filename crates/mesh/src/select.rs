@@ -152,8 +152,8 @@ impl Camera {
             }
         }
         let cos_max = self.max_angle_deg.to_radians().cos();
-        let seen = crate::topology::boundary_nodes(mesh)
-            .into_iter()
+        // Boundary nodes are those with a normal (interior nodes are in no boundary triangle).
+        let seen = (0..mesh.num_nodes())
             .filter(|&n| {
                 let (p, d) = (mesh.nodes[n], to_camera(mesh.nodes[n]));
                 let (ln, ld) = (crate::norm(normals[n]), crate::norm(d));

@@ -27,11 +27,7 @@ fn is_cloud_file(path: &Path) -> bool {
 
 /// Metres per unit of a unit's name: `mm` (as 3D Slicer uses) or `m`.
 pub fn metres_per_unit(units: &str) -> std::result::Result<f64, String> {
-    match units {
-        "mm" => Ok(1e-3),
-        "m" => Ok(1.0),
-        other => Err(format!("must be mm or m, got '{other}'")),
-    }
+    units.parse().map(mesh::repair::metres_per)
 }
 
 /// Reads a point cloud, choosing the format from the extension (`.csv`, `.npy` or `.ply`, any case).

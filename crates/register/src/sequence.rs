@@ -190,13 +190,13 @@ impl Registration {
 
     /// Registers each cloud of `frames` in turn, each starting from the previous one's
     /// displacement; `truths` (one list per frame, in the order of the targets, in the cloud's
-    /// frame) are the targets' true deformed positions. `on_frame` sees each frame as soon as it
-    /// is registered (to print or write it).
+    /// frame) are the targets' true deformed positions. `on_frame` sees each frame, with the
+    /// organ, as soon as it is registered (to print or write it).
     pub fn register_sequence(
         &mut self,
         frames: impl IntoIterator<Item = Result<Vec<Point>>>,
         truths: Option<&[Vec<Point>]>,
-        mut on_frame: impl FnMut(usize, &FrameOutcome) -> Result<()>,
+        mut on_frame: impl FnMut(usize, &Organ, &FrameOutcome) -> Result<()>,
     ) -> Result<Vec<FrameOutcome>> {
         let n = self.targets.len();
         if let Some((i, t)) = truths.into_iter().flatten().enumerate().find(|(_, t)| t.len() != n) {
@@ -229,7 +229,7 @@ impl Registration {
                 rigid,
                 target_std,
             };
-            on_frame(i, &outcome)?;
+            on_frame(i, &self.organ, &outcome)?;
             outcomes.push(outcome);
         }
         if let Some(t) = truths.filter(|t| t.len() != outcomes.len()) {

@@ -8,6 +8,11 @@ use augsim_learn::{GridShape, Sample, Samples};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
+/// Networks compared between engines: (base channels, depth, kernel size, grid), from a deep
+/// network on an odd grid to one without levels and a 1³ kernel.
+pub const NETWORK_SHAPES: [(usize, usize, usize, [usize; 3]); 5] =
+    [(4, 3, 3, [21, 23, 21]), (3, 2, 3, [5, 6, 7]), (2, 1, 5, [7, 4, 6]), (3, 0, 3, [4, 5, 3]), (2, 2, 1, [8, 8, 8])];
+
 /// An ellipsoid filling most of the grid.
 pub fn ellipsoid_mask(grid: GridShape) -> Vec<u8> {
     let [nx, ny, nz] = grid.dims();
