@@ -383,7 +383,7 @@ fn model_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
                 ..learn::rom::RomConfig::default()
             };
             let context = learn::rom::Context::of_dataset(manifest, split);
-            let (model, report) = learn::rom::fit(&train, &validation, &config, context)?;
+            let (model, report) = learn::rom::fit(&train, &validation, &config, context, None)?;
             model.save(&out)?;
             Ok(vec![
                 split_line,

@@ -165,6 +165,10 @@ pub struct TrainArgs {
     /// approximation).
     #[arg(long, default_value_t = RomConfig::default().max_inducing)]
     pub inducing: usize,
+    /// ROM, force inputs: the linear-elastic response at rest of the dataset's scenario (its file
+    /// or built-in name) as a physics prior; the regression learns what it leaves.
+    #[arg(long)]
+    pub prior: Option<PathBuf>,
     /// Optimiser steps.
     #[arg(long, default_value_t = 2000)]
     pub iterations: usize,
@@ -298,19 +302,32 @@ fn train_rom(
         ..RomConfig::default()
     };
     let manifest = dataset.manifest();
+    let mut prior = match &args.prior {
+        Some(path) => {
+            let (scenario, dir) = DatasetScenario::load(path)?;
+            Some(scenario.rest_response(&dir, manifest)?)
+        }
+        None => None,
+    };
     let context = learn::rom::Context::of_dataset(manifest, split);
-    let (model, report) = learn::rom::fit(&train, &validation, &config, context)?;
+    let (model, report) = learn::rom::fit(&train, &validation, &config, context, prior.as_mut())?;
     model.save(&args.out)?;
     let info = &model.info;
     println!(
-        "basis      {} modes ({:.6} of the training targets' variance); input: {} principal components",
-        info.modes, report.energy, info.input_components
+        "basis      {} modes ({:.6} of the training targets' variance); input: {} {}",
+        info.modes,
+        report.energy,
+        info.input_components,
+        if info.prior.is_some() { "modal coefficients of the prior" } else { "principal components" }
     );
+    if let Some(prior) = &info.prior {
+        println!("prior      {prior}");
+    }
     println!(
         "regression {} kernel, length scale {:.4e} {}, noise {:.0e}; {} inducing points ({}); chosen on validation",
         info.kernel.name(),
         info.length_scale,
-        model.input_unit,
+        if info.prior.is_some() { &model.target_unit } else { &model.input_unit },
         info.noise,
         info.inducing,
         if info.exact { "exact Gaussian process" } else { "Nyström" }

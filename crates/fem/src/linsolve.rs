@@ -283,6 +283,11 @@ impl SparseCholesky {
         Ok(())
     }
 
+    /// Whether the slot holds a double-precision factor.
+    pub fn is_double(&self, slot: Slot) -> bool {
+        self.factor[slot.index()] == Factor::Llt64
+    }
+
     /// Whether the next factorisations of positive-definite matrices are made in double
     /// precision from the start: for a solve whose single-precision factor, though it exists,
     /// is too inaccurate for its iterations to converge.

@@ -389,6 +389,40 @@ impl StaticSolver {
         f
     }
 
+    /// The linear response at rest: overwrites `f` (a load on every dof) with `u = K₀⁻¹ f`, `K₀` the
+    /// tangent at `u = 0` with the springs (the rest factor, made in double precision when not
+    /// current and kept); constrained dofs get 0. An error when `K₀` is not positive definite.
+    pub fn rest_solve(&mut self, f: &mut [f64]) -> Result<(), FemError> {
+        if f.len() != self.problem.num_dofs() {
+            return Err(FemError::Invalid(format!(
+                "a load of {} values for {} dofs",
+                f.len(),
+                self.problem.num_dofs()
+            )));
+        }
+        if !(self.rest_factor_current() && self.cholesky.is_double(Slot::Rest)) {
+            self.rest_key = None;
+            self.cholesky.set_double_precision(true);
+            let made = self.prepare_rest_factor(&mut Stats::default());
+            self.cholesky.set_double_precision(false);
+            made?;
+        }
+        if !self.cholesky.is_double(Slot::Rest) {
+            return Err(FemError::Factorization("the tangent at rest is not positive definite".into()));
+        }
+        let mut free = vec![0.0; self.pattern.num_free];
+        for (dof, value) in f.iter().enumerate() {
+            if let Some(i) = self.free_index(dof) {
+                free[i] = *value;
+            }
+        }
+        self.cholesky.solve_in_place(Slot::Rest, &mut free)?;
+        for (dof, value) in f.iter_mut().enumerate() {
+            *value = self.free_index(dof).map_or(0.0, |i| free[i]);
+        }
+        Ok(())
+    }
+
     /// Solves from the rest configuration.
     pub fn solve(&mut self, options: &SolverOptions) -> Result<Solution, FemError> {
         self.solve_from(None, options)

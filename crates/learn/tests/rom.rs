@@ -53,7 +53,7 @@ fn a_smooth_two_parameter_family_is_learned_saved_and_evaluated() {
     let policy = SplitPolicy { validation_samples: Some(50), test_samples: Some(80), ..SplitPolicy::default() };
     let (split, [train, validation, test]) = policy.apply(&all).unwrap();
     let context = Context { placement: None, input_unit: "m", target_unit: "m", split };
-    let (model, report) = fit(&train, &validation, &RomConfig::default(), context).unwrap();
+    let (model, report) = fit(&train, &validation, &RomConfig::default(), context, None).unwrap();
     // The basis holds the targets (four fields span them); the regression learns the map.
     assert!(model.info.modes >= 4, "{} modes", model.info.modes);
     assert!(report.val_projection_error < 1e-6, "basis floor {}", report.val_projection_error);
@@ -98,7 +98,7 @@ fn bad_input_is_refused_with_a_message() {
     let policy = SplitPolicy { validation_samples: Some(10), test_samples: Some(10), ..SplitPolicy::default() };
     let (split, [train, validation, _]) = policy.apply(&all).unwrap();
     let context = |split| Context { placement: None, input_unit: "m", target_unit: "m", split };
-    let (model, _) = fit(&train, &validation, &RomConfig::default(), context(split.clone())).unwrap();
+    let (model, _) = fit(&train, &validation, &RomConfig::default(), context(split.clone()), None).unwrap();
     let e = model.predict(&[0.0; 7]).unwrap_err().to_string();
     assert!(e.contains("expected"), "{e}");
     let mut input = train.input(0).to_vec();
@@ -107,7 +107,7 @@ fn bad_input_is_refused_with_a_message() {
     // Nothing to learn: every target the same.
     let mut flat = train.clone();
     flat.targets.iter_mut().for_each(|v| *v = 0.5);
-    let e = fit(&flat, &validation, &RomConfig::default(), context(split)).unwrap_err().to_string();
+    let e = fit(&flat, &validation, &RomConfig::default(), context(split), None).unwrap_err().to_string();
     assert!(e.contains("do not vary"), "{e}");
     // A damaged model directory is refused, naming the array.
     let dir = tempfile::tempdir().unwrap();

@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use crate::data::corrupt::item_rng;
 use crate::data::dataset::{DatasetPart, DatasetSpec, DatasetWriter, Manifest, Sample};
 use crate::data::grid::{encode_points, GridPlacement, GridShape};
+use crate::data::response::RestResponse;
 use crate::{LearnError, Result};
 
 /// Stream number of the load generator in [`item_rng`].
@@ -338,6 +339,65 @@ impl Generator {
             placement,
             mask,
         })
+    }
+
+    /// The linear-elastic response at rest of the dataset's problem (its material's tangent at
+    /// rest, fixed nodes and attachments), between the input's force field and the target's
+    /// displacement field on the grid: a physics prior for a reduced-order model. Force inputs and
+    /// a single fixed set only.
+    pub fn rest_response(&self) -> Result<RestResponse> {
+        if self.config.input != Input::Force {
+            return Err(invalid("the linear response at rest is a prior for force inputs only"));
+        }
+        if self.fixed_sets.len() != 1 {
+            return Err(invalid(format!(
+                "the linear response at rest needs one set of fixed nodes; the dataset draws among {}",
+                self.fixed_sets.len()
+            )));
+        }
+        let solver = StaticSolver::new(self.problem(0))?;
+        let grid_nodes = self.grid.nodes();
+        let nn = self.mesh.num_nodes();
+        let mut pull = vec![Vec::new(); nn];
+        let mut push = vec![Vec::new(); grid_nodes];
+        match &self.encoding {
+            Encoding::Lattice(node) => {
+                for (m, &g) in node.iter().enumerate() {
+                    pull[m].push((g, 1.0));
+                    push[g].push((m, 1.0));
+                }
+            }
+            Encoding::Embedded(embedding) => {
+                // The nodes a load may act on spread their forces to the corners of their grid cells:
+                // each grid node's force goes back to them by their shares of it.
+                let mut loaded: Vec<usize> = self.loads.iter().flat_map(|l| l.nodes.iter().copied()).collect();
+                loaded.sort_unstable();
+                loaded.dedup();
+                let mut spread = vec![0.0; grid_nodes];
+                let mut corners = Vec::with_capacity(loaded.len());
+                for &m in &loaded {
+                    let c = embedding.grid.corners(m, self.mesh.nodes[m])?;
+                    c.iter().for_each(|&(g, w)| spread[g] += w);
+                    corners.push((m, c));
+                }
+                for (m, c) in corners {
+                    pull[m] = c.into_iter().filter(|&(_, w)| w > 0.0).map(|(g, w)| (g, w / spread[g])).collect();
+                }
+                for (g, location) in embedding.locations.iter().enumerate() {
+                    if let Some(l) = location {
+                        push[g] = l.terms().collect();
+                    }
+                }
+            }
+        }
+        let m = &self.material;
+        let description = format!(
+            "the linear-elastic response at rest (E = {} Pa, ν = {}, {} nodes)",
+            m.young,
+            m.poisson,
+            self.mesh.num_nodes()
+        );
+        Ok(RestResponse::new(solver, grid_nodes, pull, push, description))
     }
 
     /// The mesh the samples are solved on (quadratic with `order = 2`).

@@ -7,6 +7,7 @@
 //! - [`split`]: train / validation / test splits, the policy that sizes them, and the held-out guard.
 //! - [`corrupt`]: sparse visible inputs and Gaussian noise.
 //! - [`points`]: point clouds (`.csv`, `.npy`) and grid tensors as prediction input.
+//! - [`response`]: the linear-elastic response at rest between grid fields, a physics prior.
 
 pub mod corrupt;
 pub mod dataset;
@@ -14,4 +15,5 @@ pub mod generate;
 pub mod grid;
 pub mod npy;
 pub mod points;
+pub mod response;
 pub mod split;

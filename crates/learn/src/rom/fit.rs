@@ -10,10 +10,11 @@ use serde::{Deserialize, Serialize};
 use super::linalg::{
     kernel_matrix, leading_eigen, median_distance, mul, mul_t, principal_directions, row_norms2, training_par, Kernel,
 };
-use super::{ReducedModel, RomInfo};
+use super::{Reader, ReducedModel, RomInfo};
 use crate::data::corrupt::{item_rng, Corruption, STREAM_EVAL_CORRUPTION, STREAM_TRAIN_CORRUPTION};
 use crate::data::dataset::Samples;
 use crate::data::grid::{GridPlacement, CHANNELS};
+use crate::data::response::RestResponse;
 use crate::data::split::Split;
 use crate::{LearnError, Result};
 
@@ -111,15 +112,19 @@ impl<'a> Context<'a> {
     }
 }
 
-/// Fits a reduced-order model on `train`, choosing its hyper-parameters on `validation`.
+/// Fits a reduced-order model on `train`, choosing its hyper-parameters on `validation`. With a
+/// `prior` (force inputs), the model adds the prior's modal coefficients to the regression, which
+/// learns the remainder, and the kernel compares inputs by their prior coefficients.
 pub fn fit(
     train: &Samples,
     validation: &Samples,
     config: &RomConfig,
     context: Context<'_>,
+    prior: Option<&mut RestResponse>,
 ) -> Result<(ReducedModel, RomReport)> {
     let start = Instant::now();
     config.corruption.validate()?;
+    let prior_description = prior.as_ref().map(|r| r.description().to_string());
     if train.len() < 2 || validation.is_empty() {
         return Err(LearnError::InvalidInput(format!(
             "a reduced-order model needs at least 2 training and 1 validation sample, got {} and {}",
@@ -172,19 +177,43 @@ pub fn fit(
     let x_clean = read_inputs(&clean);
     let input_mean: Vec<f64> = (0..x_clean.ncols()).map(|e| x_clean.col(e).iter().sum::<f64>() / n as f64).collect();
     let centre_in = |x: &Mat<f64>| Mat::from_fn(x.nrows(), x.ncols(), |i, e| x[(i, e)] - input_mean[e]);
-    let (in_values, in_dirs) = principal_directions(centre_in(&x_clean).as_ref(), config.max_input_components, 1e-7)?;
-    let total: f64 = in_values.iter().sum();
+    let x_centred = centre_in(&x_clean);
+    // The features: the inputs' leading principal directions or, with a prior, its leading modal
+    // coefficients (the prior's transpose applied to each mode: one solve per mode). Either keeps
+    // `input_energy` of the training inputs' energy in its space.
+    let (values, directions, prior_matrix) = match prior {
+        None => {
+            let (values, directions) = principal_directions(x_centred.as_ref(), config.max_input_components, 1e-7)?;
+            (values, directions, None)
+        }
+        Some(response) => {
+            let a = prior_coefficients_matrix(response, &basis, &out_entries, &input_entries, grid.field_len())?;
+            let p = mul_t(x_centred.as_ref(), a.as_ref(), training_par());
+            let values = (0..p.ncols()).map(|j| p.col(j).iter().map(|v| v * v).sum()).collect();
+            (values, a.subrows(0, a.nrows().min(config.max_input_components)).to_owned(), Some(a))
+        }
+    };
+    let total: f64 = values.iter().sum();
     let mut kept = 0.0;
-    let components = in_values
+    let components = values
         .iter()
         .position(|v| {
             kept += v;
             kept >= config.input_energy * total
         })
-        .map_or(in_values.len(), |p| p + 1);
-    let input_components = in_dirs.subrows(0, components).to_owned();
+        .map_or(directions.nrows(), |p| p + 1)
+        .min(directions.nrows());
+    let input_components = directions.subrows(0, components).to_owned();
     let features = |fields: &[Vec<f32>]| {
         mul_t(centre_in(&read_inputs(fields)).as_ref(), input_components.as_ref(), training_par())
+    };
+    // What the regression learns: the modal coefficients, less the prior's.
+    let residual = |coeffs: &Mat<f64>, fields: &[Vec<f32>], sample: &dyn Fn(usize) -> usize| {
+        let p =
+            prior_matrix.as_ref().map(|a| mul_t(centre_in(&read_inputs(fields)).as_ref(), a.as_ref(), training_par()));
+        Mat::from_fn(fields.len(), coeffs.ncols(), |i, j| {
+            coeffs[(sample(i), j)] - p.as_ref().map_or(0.0, |p| p[(i, j)])
+        })
     };
 
     // The regression's training set: the samples, then their corrupted copies.
@@ -198,7 +227,7 @@ pub fn fit(
         }
     }
     let f_train = features(&fields);
-    let y_coeffs = Mat::from_fn(f_train.nrows(), basis.nrows(), |i, j| coeffs_train[(i % n, j)]);
+    let y_coeffs = residual(&coeffs_train, &fields, &|i| i % n);
     let val_fields: Vec<Vec<f32>> = (0..validation.len())
         .map(|i| {
             let mut input = validation.input(i).to_vec();
@@ -210,6 +239,7 @@ pub fn fit(
         })
         .collect::<Result<_>>()?;
     let f_val = features(&val_fields);
+    let target_val = residual(&coeffs_val, &val_fields, &|i| i);
 
     // Inducing points: the clean training samples (a seeded subset above `max_inducing`).
     let inducing_rows = subset(n, config.max_inducing, config.seed ^ 0x5eed);
@@ -233,7 +263,7 @@ pub fn fit(
                 for &r in &mode_counts {
                     let mse = (0..validation.len())
                         .map(|i| {
-                            let inside: f64 = (0..r).map(|j| (coeffs_val[(i, j)] - predicted[(i, j)]).powi(2)).sum();
+                            let inside: f64 = (0..r).map(|j| (target_val[(i, j)] - predicted[(i, j)]).powi(2)).sum();
                             let beyond: f64 = (r..basis.nrows()).map(|j| coeffs_val[(i, j)].powi(2)).sum();
                             inside + beyond + outside_val[i]
                         })
@@ -291,13 +321,17 @@ pub fn fit(
             noise_copies: config.noise_copies,
             corruption: config.corruption.clone(),
             seed: config.seed,
+            prior: prior_description,
             val_mean_error: 0.0,
             seconds: 0.0,
             split: context.split,
         },
         input_entries,
         input_mean,
-        input_components,
+        reader: match prior_matrix {
+            None => Reader::Components(input_components),
+            Some(a) => Reader::Prior(a.subrows(0, modes.max(components)).to_owned()),
+        },
         inducing,
         inducing_norms: z2,
         weights,
@@ -312,8 +346,8 @@ pub fn fit(
     // Validation errors, the projection floor and the calibration.
     let (mut errors, mut ratios, mut floor_errors) = (Vec::new(), Vec::new(), Vec::new());
     for (i, input) in val_fields.iter().enumerate() {
-        let k = model.kernel_row(input)?;
-        let (pred, std) = (model.reconstruct(&k), model.node_std(&k));
+        let (k, prior) = model.kernel_row(input)?;
+        let (pred, std) = (model.reconstruct(&k, &prior), model.node_std(&k));
         let node_error = |p: usize, v: &dyn Fn(usize) -> f64| {
             (0..CHANNELS).map(|c| (v(c * m + p) - y_val[(i, c * m + p)]).powi(2)).sum::<f64>().sqrt()
         };
@@ -344,6 +378,26 @@ pub fn fit(
         candidates,
     };
     Ok((model, report))
+}
+
+/// The prior's modal coefficients as a matrix on the input entries (`modes × entries`): row `j`
+/// is the prior's transpose applied to mode `j` (its values at `out_entries` of a grid field of
+/// `field_len` values), read at `input_entries`.
+fn prior_coefficients_matrix(
+    response: &mut RestResponse,
+    basis: &Mat<f64>,
+    out_entries: &[usize],
+    input_entries: &[usize],
+    field_len: usize,
+) -> Result<Mat<f64>> {
+    let mut a = Mat::zeros(basis.nrows(), input_entries.len());
+    let mut mode = vec![0.0; field_len];
+    for j in 0..basis.nrows() {
+        out_entries.iter().enumerate().for_each(|(e, &entry)| mode[entry] = basis[(j, e)]);
+        let weights = response.adjoint(&mode)?;
+        input_entries.iter().enumerate().for_each(|(e, &entry)| a[(j, e)] = weights[entry]);
+    }
+    Ok(a)
 }
 
 /// `count` of `0..n` (all when `count ≥ n`), a seeded random subset in increasing order.

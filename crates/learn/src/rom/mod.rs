@@ -7,6 +7,10 @@
 //! * **Input features** — the nonzero entries of the training inputs, centred and projected on
 //!   their leading principal directions (enough to hold all but 1e-5 of their energy): a space in
 //!   which the kernel compares inputs, and which drops most of the noise of a corrupted input.
+//! * **Physics prior** (optional, force inputs) — the linear-elastic response at rest of the
+//!   dataset's problem ([`crate::data::response`]), in modal coefficients: a linear map of the
+//!   input (`prior.npy`) that the model adds to the regression, which learns the nonlinear
+//!   remainder; its leading coefficients are then the features the kernel compares.
 //! * **Regression** — a Gaussian process from the features to the modal coefficients, all modes
 //!   sharing one kernel (squared exponential or Matérn 5/2), length scale and noise ratio, each its
 //!   own amplitude (the marginal-likelihood estimate). Kernel, length scale and noise are chosen
@@ -25,11 +29,13 @@
 //! import json, numpy as np
 //! d = "models/liver_ar_rom"; m = json.load(open(f"{d}/model.json")); a = lambda n: np.load(f"{d}/{n}.npy")
 //! x = input_field                                            # [3, nx, ny, nz], the model's input unit
-//! f = a("input_components") @ (x[a("input_mask").astype(bool)] - a("input_mean"))
+//! v = x[a("input_mask").astype(bool)] - a("input_mean")
+//! f = a("input_components") @ v                              # with a prior: f = a("prior")[:m["rom"]["input_components"]] @ v
 //! z = a("inducing"); d2 = ((z - f) ** 2).sum(1) / m["rom"]["length_scale"] ** 2
 //! k = np.exp(-0.5 * d2)                                      # "rbf"; "matern52": (1+r+r²/3)e^{-r}, r = √(5 d2)
+//! c = k @ a("weights")                                       # with a prior: c += a("prior")[:m["rom"]["modes"]] @ v
 //! field = np.zeros(x.shape); mask = a("output_mask").astype(bool)
-//! field[:, mask] = (a("output_mean") + (k @ a("weights")) @ a("basis")).reshape(3, -1)
+//! field[:, mask] = (a("output_mean") + c @ a("basis")).reshape(3, -1)
 //! sigma = np.zeros(x.shape[1:])                              # per node, m
 //! sigma[mask] = m["rom"]["calibration"] * np.sqrt(max(1 - k @ a("covariance") @ k, 0) * a("variance_weights") + a("floor"))
 //! ```
@@ -85,6 +91,10 @@ pub struct RomInfo {
     pub corruption: Corruption,
     /// Seed of the corruption draws and of the choice of inducing points.
     pub seed: u64,
+    /// The physics prior whose modal coefficients the model adds to its regression (`prior.npy`),
+    /// if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior: Option<String>,
     /// Mean Euclidean error on the validation samples (m).
     pub val_mean_error: f64,
     /// Wall-clock seconds of the fit.
@@ -123,12 +133,12 @@ pub struct ReducedModel {
     /// Field entries (`[3, nx, ny, nz]` indices) the input features read.
     input_entries: Vec<usize>,
     input_mean: Vec<f64>,
-    /// `components × entries`.
-    input_components: Mat<f64>,
+    /// How the centred input is read.
+    reader: Reader,
     /// `inducing × components`, and their squared norms.
     inducing: Mat<f64>,
     inducing_norms: Vec<f64>,
-    /// `inducing × modes`: the coefficients are `k(x)ᵀ weights`.
+    /// `inducing × modes`: the coefficients are `k(x)ᵀ weights`, plus the prior's with a prior.
     weights: Mat<f64>,
     /// `inducing × inducing`: the predictive variance is `1 − k(x)ᵀ covariance k(x)`.
     covariance: Mat<f64>,
@@ -142,6 +152,18 @@ pub struct ReducedModel {
     floor: Vec<f64>,
 }
 
+/// How a model reads its centred input `x`: the features its kernel compares, and the prior's
+/// modal coefficients that it adds to the regression's.
+#[derive(Clone, Debug)]
+enum Reader {
+    /// The input's principal directions (`components × entries`): the features are `P x`.
+    Components(Mat<f64>),
+    /// A prior's modal coefficients `A x` (`rows × entries`, rows the larger of the modes and the
+    /// features): the first [`RomInfo::input_components`] are the features, the first
+    /// [`RomInfo::modes`] add to the coefficients.
+    Prior(Mat<f64>),
+}
+
 /// A prediction with its uncertainty.
 #[derive(Clone, Debug, PartialEq)]
 pub struct UncertainPrediction {
@@ -153,24 +175,34 @@ pub struct UncertainPrediction {
 }
 
 impl ReducedModel {
-    /// The modal coefficients and the kernel row of one input field.
-    fn kernel_row(&self, input: &[f32]) -> Result<Vec<f64>> {
+    /// The kernel row of one input field and the prior's modal coefficients (empty without one).
+    fn kernel_row(&self, input: &[f32]) -> Result<(Vec<f64>, Vec<f64>)> {
         check_prediction_input(input, self.grid)?;
         let x: Vec<f64> =
             self.input_entries.iter().zip(&self.input_mean).map(|(&e, m)| f64::from(input[e]) - m).collect();
-        let features = gemv(self.input_components.as_ref(), &x);
+        let (features, prior) = match &self.reader {
+            Reader::Components(p) => (gemv(p.as_ref(), &x), Vec::new()),
+            Reader::Prior(a) => {
+                let coefficients = gemv(a.as_ref(), &x);
+                let (features, modes) = (self.info.input_components, self.info.modes);
+                (coefficients[..features].to_vec(), coefficients[..modes].to_vec())
+            }
+        };
         let norm: f64 = features.iter().map(|v| v * v).sum();
         let cross = gemv(self.inducing.as_ref(), &features);
-        Ok(cross
+        let k = cross
             .iter()
             .zip(&self.inducing_norms)
             .map(|(c, z2)| self.info.kernel.eval(z2 + norm - 2.0 * c, self.info.length_scale))
-            .collect())
+            .collect();
+        Ok((k, prior))
     }
 
-    /// The displacement on the organ's nodes (channel-major over [`Self::nodes`]) for a kernel row.
-    fn reconstruct(&self, k: &[f64]) -> Vec<f64> {
-        let coeffs = gemv(self.weights.transpose(), k);
+    /// The displacement on the organ's nodes (channel-major over [`Self::nodes`]) for a kernel row
+    /// and the prior's coefficients.
+    fn reconstruct(&self, k: &[f64], prior: &[f64]) -> Vec<f64> {
+        let mut coeffs = gemv(self.weights.transpose(), k);
+        coeffs.iter_mut().zip(prior).for_each(|(c, p)| *c += p);
         let mut out = gemv(self.basis.transpose(), &coeffs);
         out.iter_mut().zip(&self.output_mean).for_each(|(o, m)| *o += m);
         out
@@ -191,14 +223,14 @@ impl ReducedModel {
     /// Predicts the displacement field (m, `[3, nx, ny, nz]`, zero outside the organ) for one
     /// input field (`[3, nx, ny, nz]` on the model's grid, in the model's input unit).
     pub fn predict(&self, input: &[f32]) -> Result<Vec<f32>> {
-        let k = self.kernel_row(input)?;
-        Ok(self.scatter(&self.reconstruct(&k), CHANNELS))
+        let (k, prior) = self.kernel_row(input)?;
+        Ok(self.scatter(&self.reconstruct(&k, &prior), CHANNELS))
     }
 
     /// [`predict`](Self::predict) with the predicted standard deviation at every node.
     pub fn predict_with_std(&self, input: &[f32]) -> Result<UncertainPrediction> {
-        let k = self.kernel_row(input)?;
-        let field = self.scatter(&self.reconstruct(&k), CHANNELS);
+        let (k, prior) = self.kernel_row(input)?;
+        let field = self.scatter(&self.reconstruct(&k, &prior), CHANNELS);
         let std = self.scatter(&self.node_std(&k), 1);
         Ok(UncertainPrediction { field, std })
     }
@@ -234,7 +266,21 @@ impl ReducedModel {
         write_u8(&dir.join("input_mask.npy"), &[CHANNELS, nx, ny, nz], &input_mask)?;
         write_u8(&dir.join("output_mask.npy"), &[nx, ny, nz], &output_mask)?;
         write_f64(&dir.join("input_mean.npy"), &[entries], &self.input_mean)?;
-        write_matrix(&dir.join("input_components.npy"), self.input_components.as_ref())?;
+        // The other reader's array, left by an earlier model in the directory, would mislead.
+        let stale =
+            dir.join(if matches!(self.reader, Reader::Prior(_)) { "input_components.npy" } else { "prior.npy" });
+        match std::fs::remove_file(&stale) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(LearnError::io(&stale, e)),
+            _ => {}
+        }
+        match &self.reader {
+            Reader::Components(p) => write_matrix(&dir.join("input_components.npy"), p.as_ref())?,
+            Reader::Prior(a) => {
+                let values: Vec<f32> =
+                    (0..a.nrows()).flat_map(|i| a.row(i).iter().map(|&v| v as f32).collect::<Vec<_>>()).collect();
+                write_f32(&dir.join("prior.npy"), &[a.nrows(), a.ncols()], &values)?;
+            }
+        }
         write_matrix(&dir.join("inducing.npy"), self.inducing.as_ref())?;
         write_matrix(&dir.join("weights.npy"), self.weights.as_ref())?;
         write_matrix(&dir.join("covariance.npy"), self.covariance.as_ref())?;
@@ -286,7 +332,10 @@ impl ReducedModel {
         let (k, m, r) = (info.input_components, info.inducing, info.modes);
         let model = ReducedModel {
             input_mean: arrays.vector("input_mean", input_entries.len())?,
-            input_components: arrays.matrix("input_components", k, input_entries.len())?,
+            reader: match info.prior {
+                None => Reader::Components(arrays.matrix("input_components", k, input_entries.len())?),
+                Some(_) => Reader::Prior(arrays.matrix("prior", k.max(r), input_entries.len())?),
+            },
             inducing: arrays.matrix("inducing", m, k)?,
             weights: arrays.matrix("weights", m, r)?,
             covariance: arrays.matrix("covariance", m, m)?,
