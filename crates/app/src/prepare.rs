@@ -435,7 +435,58 @@ fn evaluation_step(dir: &Path) -> Result<Vec<String>> {
 /// sight, as a fraction) and the force (N).
 const VALIDATION_LOADS: [(f64, f64); 4] = [(0.2, 1.5), (0.4, 2.5), (0.6, 2.0), (0.8, 3.0)];
 
-/// Step 6: registration of held-out cases against a finer quadratic truth on another mesh.
+/// The validation's truth: the organ's surface meshed anew with about `tets` tetrahedra made
+/// quadratic, Neo-Hookean, held where the organ is attached.
+struct Truth {
+    mesh: Mesh,
+    held: Vec<usize>,
+    seen: Vec<usize>,
+    stencils: Vec<register::Stencil>,
+    material: fem::Material,
+}
+
+impl Truth {
+    fn new(
+        surface: &mesh::TriSurface,
+        tets: usize,
+        camera: Point,
+        landmarks: &[Point],
+        targets: &[Point],
+        attach: f64,
+    ) -> Result<Truth> {
+        let (coarse, _) =
+            mesh_surface_to_count(surface, tets, BoundaryFit::default()).context("meshing the validation's truth")?;
+        let mesh = coarse.quadratic()?;
+        let held = Near { points: landmarks.to_vec(), file: None, distance: attach, surface: true }.nodes(&mesh)?;
+        let seen = Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&mesh)?;
+        let (stencils, _) = register::Organ::new(mesh.clone(), None)?.locate_targets(targets)?;
+        let material = fem::Material {
+            formulation: fem::Formulation::Standard,
+            ..fem::Material::new(fem::Law::NeoHookean, 5000.0, 0.49).with_order(2)
+        };
+        Ok(Truth { mesh, held, seen, stencils, material })
+    }
+
+    /// The displacement under a push of `force` (N) from `camera` on the seen nodes within
+    /// `radius` of `centre`.
+    fn push(&self, centre: Point, camera: Point, force: f64, radius: f64) -> Result<Vec<f64>> {
+        let patch: Vec<usize> =
+            self.seen.iter().copied().filter(|&n| mesh::distance(self.mesh.nodes[n], centre) < radius).collect();
+        let mut problem = fem::Problem::new(self.mesh.clone(), self.material);
+        problem.fix(&self.held);
+        problem.add_force(&patch, mesh::unit(mesh::sub(centre, camera)).map(|x| x * force));
+        let solver = fem::SolverOptions { max_step_cuts: 6, ..fem::SolverOptions::default() };
+        Ok(fem::StaticSolver::new(problem)?.solve(&solver).context("solving the validation's truth")?.u)
+    }
+
+    /// The targets moved by the displacement `u`.
+    fn targets(&self, targets: &[Point], u: &[f64]) -> Vec<Point> {
+        register::organ::displaced(targets, &self.stencils, u)
+    }
+}
+
+/// Step 6: registration of held-out cases against a finer quadratic truth on another mesh, and
+/// that truth's convergence under the largest push (against one meshed twice as finely again).
 fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     use rand::SeedableRng;
     use rand_distr::Distribution;
@@ -444,49 +495,39 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
     let camera = read_points_csv(&dir.join("camera.csv"))?[0];
     let landmarks = read_points_csv(&dir.join("attach.csv"))?;
     let targets = read_points_csv(&dir.join("targets.csv"))?;
-    let (coarse, _) = mesh_surface_to_count(&surface, 3 * options.tets, BoundaryFit::default())
-        .context("meshing the validation's truth")?;
-    let fine = coarse.quadratic()?;
-    let held = Near { points: landmarks, file: None, distance: options.attach_distance, surface: true }.nodes(&fine)?;
-    let seen = Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&fine)?;
-    let material = fem::Material {
-        formulation: fem::Formulation::Standard,
-        ..fem::Material::new(fem::Law::NeoHookean, 5000.0, 0.49).with_order(2)
-    };
-    let located = register::Organ::new(fine.clone(), None)?;
-    let (stencils, _) = located.locate_targets(&targets)?;
+    let truth = Truth::new(&surface, 3 * options.tets, camera, &landmarks, &targets, options.attach_distance)?;
+    let fine = &truth.mesh;
     // Seen nodes ordered across the line of sight, to spread the pushes.
     let centroid: Point =
         std::array::from_fn(|d| fine.nodes.iter().map(|p| p[d]).sum::<f64>() / fine.num_nodes() as f64);
     let axis = mesh::unit(mesh::sub(centroid, camera));
     let (across, _) = across_sight(axis);
-    let mut order = seen.clone();
+    let mut order = truth.seen.clone();
     order.sort_by(|&a, &b| mesh::dot(fine.nodes[a], across).total_cmp(&mesh::dot(fine.nodes[b], across)));
-    let radius = tool_radius(&fine);
+    let radius = tool_radius(fine);
     let mut methods = [(false, Vec::new(), Vec::new()), (true, Vec::new(), Vec::new())];
     let mut rest_errors = Vec::new();
     let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
     let noise = rand_distr::Normal::new(0.0, 0.0005).context("noise")?;
+    let mut largest: Option<(f64, Point, Vec<Point>)> = None;
     for &(at, force) in &VALIDATION_LOADS {
         let centre = fine.nodes[order[((order.len() - 1) as f64 * at) as usize]];
-        let patch: Vec<usize> =
-            seen.iter().copied().filter(|&n| mesh::distance(fine.nodes[n], centre) < radius).collect();
-        let mut problem = fem::Problem::new(fine.clone(), material);
-        problem.fix(&held);
-        problem.add_force(&patch, mesh::unit(mesh::sub(centre, camera)).map(|x| x * force));
-        let solver = fem::SolverOptions { max_step_cuts: 6, ..fem::SolverOptions::default() };
-        let u = fem::StaticSolver::new(problem)?.solve(&solver).context("solving the validation's truth")?.u;
-        let truth = register::organ::displaced(&targets, &stencils, &u);
-        rest_errors.extend(register::target_errors(&targets, &truth));
-        let cloud: Vec<Point> = seen
+        let u = truth.push(centre, camera, force, radius)?;
+        let moved = truth.targets(&targets, &u);
+        rest_errors.extend(register::target_errors(&targets, &moved));
+        let cloud: Vec<Point> = truth
+            .seen
             .iter()
             .map(|&n| std::array::from_fn(|d| fine.nodes[n][d] + u[3 * n + d] + noise.sample(&mut rng)))
             .collect();
         for (fem, errors, times) in methods.iter_mut() {
             let mut registration = crate::registration::RegistrationSpec::patient(dir, *fem, None, false)?.build()?;
             let tracked = registration.register(&cloud)?;
-            errors.extend(register::target_errors(&tracked.targets, &truth));
+            errors.extend(register::target_errors(&tracked.targets, &moved));
             times.push(tracked.registration.time.as_secs_f64() * 1e3);
+        }
+        if largest.as_ref().is_none_or(|l| force > l.0) {
+            largest = Some((force, centre, moved));
         }
     }
     let mut lines = vec![format!(
@@ -497,7 +538,7 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
         VALIDATION_LOADS.iter().map(|l| l.1).fold(0.0, f64::max),
         fine.cells.len(),
         fine.num_nodes(),
-        seen.len(),
+        truth.seen.len(),
         mesh::stats::mean(&rest_errors) * 1e3
     )];
     for (fem, errors, times) in &methods {
@@ -509,6 +550,20 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
             mesh::stats::mean(times)
         ));
     }
+    let (force, centre, moved) = largest.context("no validation push")?;
+    let finer = Truth::new(&surface, 6 * options.tets, camera, &landmarks, &targets, options.attach_distance)?;
+    let finer_moved = finer.targets(&targets, &finer.push(centre, camera, force, radius)?);
+    let change = register::target_errors(&moved, &finer_moved);
+    let motion = register::target_errors(&targets, &finer_moved);
+    lines.push(format!(
+        "validation: the truth's convergence under the {force} N push: meshed twice as finely again ({} T10), its \
+         targets move by {:.2} mm more or less (largest {:.2} mm; {:.1} % of their mean motion of {:.2} mm)",
+        finer.mesh.cells.len(),
+        mesh::stats::mean(&change) * 1e3,
+        mesh::stats::max(&change) * 1e3,
+        100.0 * mesh::stats::mean(&change) / mesh::stats::mean(&motion).max(f64::MIN_POSITIVE),
+        mesh::stats::mean(&motion) * 1e3
+    ));
     Ok(lines)
 }
 

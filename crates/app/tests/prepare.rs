@@ -83,6 +83,7 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     assert!(organ.iter().any(|l| l.starts_with("repair: filled 2 holes (3, 3 edges)")), "the holes: {organ:?}");
     let validation = &state.steps[5].lines;
     assert!(validation.iter().any(|l| l.starts_with("validation: FEM TRE")), "{validation:?}");
+    assert!(validation.iter().any(|l| l.starts_with("validation: the truth's convergence")), "{validation:?}");
     for file in ["organ.vtu", "dataset.toml", "static.toml", "registration.toml", "report.md", "regions.png"] {
         assert!(out.join(file).exists(), "{file}");
     }
