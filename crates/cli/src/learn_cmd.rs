@@ -351,6 +351,7 @@ fn train_rom(
 pub fn eval(
     model_path: &Path,
     dataset_dir: &Path,
+    project: Option<&Path>,
     corruption: &CorruptionArgs,
     device: DeviceArgs,
     out: &Path,
@@ -358,8 +359,32 @@ pub fn eval(
     let compute = device.announce()?;
     let model = Model::load(model_path)?;
     let dataset = Dataset::open(dataset_dir)?;
-    if dataset.manifest().grid != model.grid() {
-        bail!("the model was trained on grid {} but the dataset is on grid {}", model.grid(), dataset.manifest().grid);
+    match project {
+        Some(basis) => {
+            let projected = learn::Projected::new(model, &Model::load(basis)?)?;
+            println!("projected  on the basis of {} ({} modes)", basis.display(), projected.basis.info.modes);
+            evaluate_model(&projected, model_path, &dataset, dataset_dir, corruption, compute, out)
+        }
+        None => evaluate_model(&model, model_path, &dataset, dataset_dir, corruption, compute, out),
+    }
+}
+
+/// The body of `augsim eval` for a loaded model.
+fn evaluate_model(
+    model: &impl LearnedModel,
+    model_path: &Path,
+    dataset: &Dataset,
+    dataset_dir: &Path,
+    corruption: &CorruptionArgs,
+    compute: Compute,
+    out: &Path,
+) -> Result<()> {
+    if dataset.manifest().grid != model.grid_shape() {
+        bail!(
+            "the model was trained on grid {} but the dataset is on grid {}",
+            model.grid_shape(),
+            dataset.manifest().grid
+        );
     }
     let all = dataset.load_all()?;
     let test = model.held_out(&all)?;
@@ -380,12 +405,12 @@ pub fn eval(
     let placement = dataset.manifest().placement();
     let (report, tre) = match placement {
         Some(placement) if !markers.is_empty() => {
-            let grid = placement.grid(model.grid())?;
+            let grid = placement.grid(model.grid_shape())?;
             let (report, tre) =
-                learn::evaluate_at_points(&model, &test, &corruption.corruption(), 0, &grid, &markers, compute)?;
+                learn::evaluate_at_points(model, &test, &corruption.corruption(), 0, &grid, &markers, compute)?;
             (report, Some(tre))
         }
-        _ => (learn::evaluate(&model, &test, &corruption.corruption(), 0, compute)?, None),
+        _ => (learn::evaluate(model, &test, &corruption.corruption(), 0, compute)?, None),
     };
     let s = &report.stats;
     println!("samples    {}", test.len());
@@ -403,7 +428,7 @@ pub fn eval(
             t.no_motion.max * 1e3
         );
     }
-    let coverage = learn::uncertainty_coverage(&model, &test, &corruption.corruption(), 0)?;
+    let coverage = learn::uncertainty_coverage(model, &test, &corruption.corruption(), 0)?;
     if let Some(c) = coverage {
         println!("2σ         {:.1} % of the nodes' errors within twice the predicted standard deviation", c * 100.0);
     }

@@ -98,6 +98,10 @@ enum Command {
         /// Output directory (errors.csv, summary.json, worst.vtu).
         #[arg(short, long, default_value = "out/eval")]
         out: PathBuf,
+        /// Project the model's predictions on the basis of this reduced-order model (its directory),
+        /// trained on the same data.
+        #[arg(long)]
+        project: Option<PathBuf>,
         /// Input corruption.
         #[command(flatten)]
         corruption: learn_cmd::CorruptionArgs,
@@ -183,8 +187,8 @@ fn main() {
         }
         Command::Merge { out, parts } => learn_cmd::merge(&out, &parts),
         Command::Train(args) => learn_cmd::train(&args),
-        Command::Eval { model, dataset, out, corruption, device } => {
-            learn_cmd::eval(&model, &dataset, &corruption, device, &out)
+        Command::Eval { model, dataset, out, project, corruption, device } => {
+            learn_cmd::eval(&model, &dataset, project.as_deref(), &corruption, device, &out)
         }
         Command::Predict { model, input, output, mesh, runs, device } => {
             learn_cmd::predict(&model, &input, &output, mesh.as_deref(), runs, device)

@@ -43,7 +43,7 @@ pub use data::grid::{encode_points, GridMesh, GridPlacement, GridShape, GridToMe
 pub use data::points::{PointCloud, PredictInput};
 pub use data::split::{IndexSet, Split, SplitPolicy};
 pub use error::LearnError;
-pub use model::{LearnedModel, Method, Model, ModelPredictor, MODEL_FILE};
+pub use model::{LearnedModel, Method, Model, ModelPredictor, Projected, MODEL_FILE};
 pub use net::compute::Compute;
 pub use net::inference::InferenceNet;
 pub use net::predict::{time_prediction, Predictor, Timing};

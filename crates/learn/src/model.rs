@@ -247,6 +247,8 @@ pub enum ModelPredictor {
     UNet(Box<Predictor>),
     /// The reduced-order model.
     Reduced(Arc<ReducedModel>),
+    /// A model's predictions projected on a reduced-order model's basis ([`Projected`]).
+    Projected(Box<ModelPredictor>, Arc<ReducedModel>),
 }
 
 impl ModelPredictor {
@@ -256,6 +258,7 @@ impl ModelPredictor {
         match self {
             ModelPredictor::UNet(p) => p.predict(input),
             ModelPredictor::Reduced(m) => m.predict(input),
+            ModelPredictor::Projected(p, basis) => basis.project(&p.predict(input)?),
         }
     }
 
@@ -265,6 +268,52 @@ impl ModelPredictor {
         match self {
             ModelPredictor::UNet(p) => Ok((p.predict(input)?, None)),
             ModelPredictor::Reduced(m) => m.predict_with_std(input).map(|p| (p.field, Some(p.std))),
+            ModelPredictor::Projected(..) => Ok((self.predict(input)?, None)),
         }
+    }
+}
+
+/// A model whose predictions are projected on the basis of a reduced-order model trained on the
+/// same data (e.g. the U-Net's): what the basis cannot hold, the training targets never held.
+#[derive(Clone, Debug)]
+pub struct Projected {
+    /// The model.
+    pub model: Model,
+    /// The reduced-order model whose basis (and mean) the predictions are projected on.
+    pub basis: Arc<ReducedModel>,
+}
+
+impl Projected {
+    /// `model` projected on `basis`'s basis; both must be on one grid.
+    pub fn new(model: Model, basis: &Model) -> Result<Projected> {
+        let Model::Reduced(basis) = basis else {
+            return Err(LearnError::InvalidInput("the projection basis must be a reduced-order model's".into()));
+        };
+        if basis.grid != model.grid() {
+            return Err(LearnError::InvalidInput(format!(
+                "the model is on grid {}, the basis on grid {}",
+                model.grid(),
+                basis.grid
+            )));
+        }
+        Ok(Projected { model, basis: Arc::clone(basis) })
+    }
+}
+
+impl LearnedModel for Projected {
+    fn grid_shape(&self) -> GridShape {
+        self.model.grid()
+    }
+    fn placed_grid(&self) -> Result<Grid> {
+        self.model.placed_grid()
+    }
+    fn takes_forces(&self) -> Result<bool> {
+        self.model.takes_forces()
+    }
+    fn provenance(&self) -> Option<Provenance<'_>> {
+        self.model.provenance()
+    }
+    fn predictor(&self, compute: Compute) -> Result<ModelPredictor> {
+        Ok(ModelPredictor::Projected(Box::new(self.model.predictor(compute)?), Arc::clone(&self.basis)))
     }
 }

@@ -81,6 +81,16 @@ fn a_smooth_two_parameter_family_is_learned_saved_and_evaluated() {
         "test ē {} against a mean |u| component of {size}",
         report.stats.mean
     );
+    // Its own predictions lie on its basis: projected there they stay; so the model projected on
+    // itself evaluates as itself, and a field off the basis moves.
+    let projected = augsim_learn::Projected::new(loaded.clone(), &loaded).unwrap();
+    let again = evaluate(&projected, &test, &clean, 0, Compute::Cpu).unwrap();
+    assert!((again.stats.mean - report.stats.mean).abs() < 1e-6 * report.stats.mean, "{again:?}");
+    let mut off = direct.field.clone();
+    off[mask.iter().position(|&m| m == 1).unwrap()] += 1.0;
+    let back = model.project(&off).unwrap();
+    let moved = back.iter().zip(&direct.field).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(moved > 0.0 && moved < 1.0, "a unit spike off the basis comes back as {moved}");
     // It refuses samples it was fitted or selected on.
     assert!(evaluate(&loaded, &train, &clean, 0, Compute::Cpu).is_err());
     assert_eq!(loaded.held_out(&all).unwrap(), test);

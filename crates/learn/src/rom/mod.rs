@@ -241,6 +241,27 @@ impl ReducedModel {
         self.variance_weights.iter().zip(&self.floor).map(|(w, f)| self.info.calibration * (v * w + f).sqrt()).collect()
     }
 
+    /// The displacement field `field` (`[3, nx, ny, nz]`, m) projected on the model's basis: the
+    /// mean plus the field's components along the modes, on the organ's nodes (zero elsewhere).
+    pub fn project(&self, field: &[f32]) -> Result<Vec<f32>> {
+        let n = self.grid.nodes();
+        if field.len() != CHANNELS * n {
+            return Err(LearnError::InvalidInput(format!(
+                "a field of {} values, expected {CHANNELS} × {n}",
+                field.len()
+            )));
+        }
+        let centred: Vec<f64> = (0..CHANNELS)
+            .flat_map(|c| self.nodes.iter().map(move |&node| c * n + node))
+            .zip(&self.output_mean)
+            .map(|(e, mean)| f64::from(field[e]) - mean)
+            .collect();
+        let coefficients = gemv(self.basis.as_ref(), &centred);
+        let mut out = gemv(self.basis.transpose(), &coefficients);
+        out.iter_mut().zip(&self.output_mean).for_each(|(o, m)| *o += m);
+        Ok(self.scatter(&out, CHANNELS))
+    }
+
     /// Whether `json_path` (a `model.json`) holds a reduced-order model.
     pub fn is_rom_file(json_path: &Path) -> bool {
         #[derive(Deserialize)]

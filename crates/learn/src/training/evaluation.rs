@@ -178,7 +178,7 @@ pub fn evaluate_at_points(
 /// deviation, inputs corrupted as [`evaluate`] corrupts them; `None` for a model that predicts
 /// none.
 pub fn uncertainty_coverage(
-    model: &crate::Model,
+    model: &impl LearnedModel,
     samples: &Samples,
     corruption: &Corruption,
     seed: u64,
