@@ -47,7 +47,7 @@ class Registration:
         model: Optional[_Path] = None,
         scenario: Optional[_Path] = None,
         patient: Optional[_Path] = None,
-        use_fem: bool = False,
+        use_fem: Optional[bool] = None,
         targets: Union[_Path, npt.ArrayLike, None] = None,
         units: str = "m",
         iterations: Optional[int] = None,

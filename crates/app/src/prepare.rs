@@ -41,7 +41,7 @@ use serde::{Deserialize, Serialize};
 
 use learn::LearnedModel;
 
-use crate::registration::PATIENT_FILE;
+use crate::registration::{PatientMethod, RegistrationSpec, PATIENT_FILE};
 
 /// What `augsim prepare` is given.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -337,7 +337,8 @@ fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     );
     let patient = "# The registration set-up of this organ: `augsim register --patient DIR`, `augsim serve\n\
          # --patient DIR`, `augsim.Registration(patient=DIR)`. Paths are relative to this file.\n\
-         model = \"model\"\nscenario = \"dataset.toml\"\nfem = \"static.toml\"\ntargets = \"targets.csv\"\nunits = \"m\"\n";
+         # method: \"learned\" or \"fem\", the one that registered the validation's pushes the better.\n\
+         method = \"learned\"\nmodel = \"model\"\nscenario = \"dataset.toml\"\nfem = \"static.toml\"\ntargets = \"targets.csv\"\nunits = \"m\"\n";
     write_atomic_bytes(&dir.join("dataset.toml"), dataset.as_bytes())?;
     write_atomic_bytes(&dir.join("static.toml"), fem.as_bytes())?;
     write_atomic_bytes(&dir.join(PATIENT_FILE), patient.as_bytes())?;
@@ -521,7 +522,8 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
             .map(|&n| std::array::from_fn(|d| fine.nodes[n][d] + u[3 * n + d] + noise.sample(&mut rng)))
             .collect();
         for (fem, errors, times) in methods.iter_mut() {
-            let mut registration = crate::registration::RegistrationSpec::patient(dir, *fem, None, false)?.build()?;
+            let method = if *fem { PatientMethod::Fem } else { PatientMethod::Learned };
+            let mut registration = RegistrationSpec::patient(dir, Some(method), None, false)?.build()?;
             let tracked = registration.register(&cloud)?;
             errors.extend(register::target_errors(&tracked.targets, &moved));
             times.push(tracked.registration.time.as_secs_f64() * 1e3);
@@ -550,6 +552,23 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
             mesh::stats::mean(times)
         ));
     }
+    // The set-up registers with the method that did the better on these pushes.
+    let [learned, fem] = methods.each_ref().map(|(_, errors, _)| mesh::stats::mean(errors));
+    let chosen = if fem < learned { PatientMethod::Fem } else { PatientMethod::Learned };
+    let path = dir.join(PATIENT_FILE);
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let text: String = text
+        .lines()
+        .map(
+            |l| if l.starts_with("method = ") { format!("method = \"{}\"\n", chosen.name()) } else { format!("{l}\n") },
+        )
+        .collect();
+    write_atomic_bytes(&path, text.as_bytes())?;
+    lines.push(format!(
+        "validation: {PATIENT_FILE} registers with the {} (method = \"{}\"), the lower TRE on these pushes",
+        if chosen == PatientMethod::Fem { "FEM" } else { "learned model" },
+        chosen.name()
+    ));
     let (force, centre, moved) = largest.context("no validation push")?;
     let finer = Truth::new(&surface, 6 * options.tets, camera, &landmarks, &targets, options.attach_distance)?;
     let finer_moved = finer.targets(&targets, &finer.push(centre, camera, force, radius)?);

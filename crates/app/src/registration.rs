@@ -104,11 +104,45 @@ impl RegistrationSpec {
 /// The file of a patient's registration set-up in the directory `augsim prepare` writes.
 pub const PATIENT_FILE: &str = "registration.toml";
 
-/// A patient's registration set-up ([`PATIENT_FILE`]): the learned model and its dataset
-/// scenario, the FEM alternative, the targets and their unit; paths relative to the file.
+/// How a patient's organ is registered: with its learned model or with its FEM.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PatientMethod {
+    /// The learned model, on its dataset scenario.
+    #[default]
+    Learned,
+    /// The FEM of the static scenario.
+    Fem,
+}
+
+impl PatientMethod {
+    /// The method asked for on a command line: the FEM with `fem`, the learned model with
+    /// `learned`, otherwise (`None`) the set-up's own.
+    pub fn asked(fem: bool, learned: bool) -> Option<PatientMethod> {
+        match (fem, learned) {
+            (true, _) => Some(PatientMethod::Fem),
+            (false, true) => Some(PatientMethod::Learned),
+            (false, false) => None,
+        }
+    }
+
+    /// How the set-up file names it.
+    pub fn name(self) -> &'static str {
+        match self {
+            PatientMethod::Learned => "learned",
+            PatientMethod::Fem => "fem",
+        }
+    }
+}
+
+/// A patient's registration set-up ([`PATIENT_FILE`]): the method `augsim prepare` found the
+/// better on its validation, the learned model and its dataset scenario, the FEM alternative, the
+/// targets and their unit; paths relative to the file.
 #[derive(Clone, Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Patient {
+    #[serde(default)]
+    method: PatientMethod,
     model: PathBuf,
     scenario: PathBuf,
     fem: PathBuf,
@@ -117,9 +151,14 @@ struct Patient {
 }
 
 impl RegistrationSpec {
-    /// The registration set-up of the patient directory `dir` (written by `augsim prepare`): its
-    /// learned model, or its FEM with `fem`; its targets.
-    pub fn patient(dir: &Path, fem: bool, iterations: Option<usize>, rigid: bool) -> Result<RegistrationSpec> {
+    /// The registration set-up of the patient directory `dir` (written by `augsim prepare`): the
+    /// method it names, or `method` when given; its targets.
+    pub fn patient(
+        dir: &Path,
+        method: Option<PatientMethod>,
+        iterations: Option<usize>,
+        rigid: bool,
+    ) -> Result<RegistrationSpec> {
         let path = dir.join(PATIENT_FILE);
         let text = std::fs::read_to_string(&path).with_context(|| {
             format!("reading {} (is {} a directory made by augsim prepare?)", path.display(), dir.display())
@@ -128,10 +167,9 @@ impl RegistrationSpec {
         let unit = register::cloud::metres_per_unit(&p.units)
             .map_err(anyhow::Error::msg)
             .with_context(|| format!("{}: units", path.display()))?;
-        let method = if fem {
-            MethodSpec::Fem(dir.join(p.fem))
-        } else {
-            MethodSpec::Learned { model: dir.join(p.model), scenario: dir.join(p.scenario) }
+        let method = match method.unwrap_or(p.method) {
+            PatientMethod::Fem => MethodSpec::Fem(dir.join(p.fem)),
+            PatientMethod::Learned => MethodSpec::Learned { model: dir.join(p.model), scenario: dir.join(p.scenario) },
         };
         Ok(RegistrationSpec { method, targets: TargetsSpec::File(dir.join(p.targets)), unit, iterations, rigid })
     }

@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use augsim_app::prepare::{prepare, PrepareOptions, Progress, STATE_FILE, STEPS};
-use augsim_app::registration::RegistrationSpec;
+use augsim_app::registration::{PatientMethod, RegistrationSpec};
 use mesh::Point;
 
 /// Scanner frame: the organ's corner sits here (mm).
@@ -84,6 +84,16 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     let validation = &state.steps[5].lines;
     assert!(validation.iter().any(|l| l.starts_with("validation: FEM TRE")), "{validation:?}");
     assert!(validation.iter().any(|l| l.starts_with("validation: the truth's convergence")), "{validation:?}");
+    // The set-up names the method that registered the validation's pushes the better.
+    let chosen = validation.iter().find(|l| l.contains("registers with the")).expect("the chosen method");
+    let tre = |what: &str| -> f64 {
+        let line = validation.iter().find(|l| l.starts_with(&format!("validation: {what} TRE "))).unwrap();
+        line.split(" TRE ").nth(1).and_then(|r| r.split_whitespace().next()).unwrap().parse().unwrap()
+    };
+    let fem_better = tre("FEM") < tre("learned model");
+    assert_eq!(chosen.contains("registers with the FEM"), fem_better, "{validation:?}");
+    let set_up = std::fs::read_to_string(out.join("registration.toml")).unwrap();
+    assert!(set_up.contains(if fem_better { "method = \"fem\"" } else { "method = \"learned\"" }), "{set_up}");
     for file in ["organ.vtu", "dataset.toml", "static.toml", "registration.toml", "report.md", "regions.png"] {
         assert!(out.join(file).exists(), "{file}");
     }
@@ -93,7 +103,8 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
 
     // The set-up registers: a cloud of the organ's surface at rest leaves the targets where they are.
     for fem in [false, true] {
-        let mut registration = RegistrationSpec::patient(&out, fem, None, false).unwrap().build().unwrap();
+        let method = if fem { PatientMethod::Fem } else { PatientMethod::Learned };
+        let mut registration = RegistrationSpec::patient(&out, Some(method), None, false).unwrap().build().unwrap();
         let cloud: Vec<Point> = registration.organ().surface().vertices.iter().step_by(2).copied().collect();
         let rest = registration.targets().to_vec();
         let tracked = registration.register(&cloud).unwrap();

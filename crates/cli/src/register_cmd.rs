@@ -23,12 +23,15 @@ pub struct RegisterArgs {
     #[arg(required_unless_present = "comparison")]
     cloud: Option<PathBuf>,
     /// The registration set-up of a patient's organ, written by `augsim prepare`: its learned
-    /// model and targets (its FEM with --use-fem).
+    /// model or its FEM, whichever it found the better on its validation, and its targets.
     #[arg(long, conflicts_with_all = ["fem", "model", "scenario", "targets", "comparison"])]
     patient: Option<PathBuf>,
-    /// With --patient: register with the patient's FEM rather than its learned model.
+    /// With --patient: register with the patient's FEM, whichever its set-up names.
     #[arg(long, requires = "patient")]
     use_fem: bool,
+    /// With --patient: register with the patient's learned model, whichever its set-up names.
+    #[arg(long, requires = "patient", conflicts_with = "use_fem")]
+    use_model: bool,
     /// FEM registration on this scenario's mesh, material (law, formulation) and fixed nodes.
     #[arg(long, conflicts_with = "model")]
     fem: Option<PathBuf>,
@@ -92,7 +95,12 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
     }
     let cloud_path = args.cloud.clone().context("a cloud is required")?;
     let spec = match &args.patient {
-        Some(dir) => RegistrationSpec::patient(dir, args.use_fem, args.iterations, args.rigid)?,
+        Some(dir) => RegistrationSpec::patient(
+            dir,
+            app::registration::PatientMethod::asked(args.use_fem, args.use_model),
+            args.iterations,
+            args.rigid,
+        )?,
         None => {
             let method = if let Some(model) = &args.model {
                 let scenario = args.scenario.clone().context("--model needs --scenario (or --demo)")?;

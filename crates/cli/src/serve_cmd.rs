@@ -15,12 +15,15 @@ use register::Registration;
 #[derive(Debug, clap::Args)]
 pub struct ServeArgs {
     /// The registration set-up of a patient's organ, written by `augsim prepare`: its learned
-    /// model and targets (its FEM with --use-fem).
+    /// model or its FEM, whichever it found the better on its validation, and its targets.
     #[arg(long, conflicts_with_all = ["fem", "model", "scenario", "targets"])]
     patient: Option<PathBuf>,
-    /// With --patient: register with the patient's FEM rather than its learned model.
+    /// With --patient: register with the patient's FEM, whichever its set-up names.
     #[arg(long, requires = "patient")]
     use_fem: bool,
+    /// With --patient: register with the patient's learned model, whichever its set-up names.
+    #[arg(long, requires = "patient", conflicts_with = "use_fem")]
+    use_model: bool,
     /// FEM registration on this static scenario (a file or a built-in name).
     #[arg(long, conflicts_with = "model", required_unless_present_any = ["model", "patient"])]
     fem: Option<PathBuf>,
@@ -115,7 +118,12 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     let unit = register::cloud::metres_per_unit(&args.units).map_err(anyhow::Error::msg).context("--units")?;
     let outputs = Outputs::parse(&args.outputs).map_err(anyhow::Error::msg).context("--outputs")?;
     let spec = match &args.patient {
-        Some(dir) => RegistrationSpec::patient(dir, args.use_fem, args.iterations, args.rigid)?,
+        Some(dir) => RegistrationSpec::patient(
+            dir,
+            app::registration::PatientMethod::asked(args.use_fem, args.use_model),
+            args.iterations,
+            args.rigid,
+        )?,
         None => {
             let method = match (&args.fem, &args.model, &args.scenario) {
                 (Some(fem), _, _) => MethodSpec::Fem(fem.clone()),

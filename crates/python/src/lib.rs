@@ -11,7 +11,7 @@ use std::sync::{Mutex, MutexGuard};
 
 use app::assimilation::{Experiment, OnlineFilter};
 use app::output::RunWriter;
-use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
+use app::registration::{MethodSpec, PatientMethod, RegistrationSpec, TargetsSpec};
 use fem::{post, StaticSolver};
 use learn::data::npy::{NpyArray, NpyData};
 use learn::{Model, PointCloud, PredictInput};
@@ -177,9 +177,9 @@ struct Registered {
 /// Registration of intraoperative point clouds, as `augsim serve` does for each client: each
 /// cloud is warm-started from the previous one's registration.
 ///
-/// Either `patient`: a directory written by `augsim prepare` (its learned model and targets; its
-/// FEM with `use_fem=True`); or `fem`: a static scenario (file or built-in name, e.g. `liver`)
-/// whose FEM deforms the organ; or `model` (a model directory or its model.json) with `scenario`, the dataset scenario
+/// Either `patient`: a directory written by `augsim prepare` (the method it found the better on
+/// its validation and its targets; `use_fem=True` for its FEM, `False` for its learned model); or
+/// `fem`: a static scenario (file or built-in name, e.g. `liver`) whose FEM deforms the organ; or `model` (a model directory or its model.json) with `scenario`, the dataset scenario
 /// it was trained on (e.g. `liver_ar_t10` for the shipped `models/liver_ar`). `targets`: rest
 /// positions, a CSV file (x, y, z) or an array [k, 3], in `units`; default: the mesh's `markers`
 /// and `tumour` nodes. `units`: "m" or "mm", of the targets, every cloud and every result.
@@ -202,7 +202,7 @@ struct Registration {
 #[pymethods]
 impl Registration {
     #[new]
-    #[pyo3(signature = (*, fem=None, model=None, scenario=None, patient=None, use_fem=false, targets=None, units="m", iterations=None, rigid=false))]
+    #[pyo3(signature = (*, fem=None, model=None, scenario=None, patient=None, use_fem=None, targets=None, units="m", iterations=None, rigid=false))]
     #[allow(clippy::too_many_arguments)] // one per Python keyword argument
     fn new(
         py: Python<'_>,
@@ -210,7 +210,7 @@ impl Registration {
         model: Option<PathBuf>,
         scenario: Option<PathBuf>,
         patient: Option<PathBuf>,
-        use_fem: bool,
+        use_fem: Option<bool>,
         targets: Option<&Bound<'_, PyAny>>,
         units: &str,
         iterations: Option<usize>,
@@ -225,9 +225,15 @@ impl Registration {
             },
         };
         let state = match (patient, fem, model, scenario, &targets) {
-            (Some(dir), None, None, None, TargetsSpec::Regions) => {
-                compute(py, move || RegistrationSpec::patient(&dir, use_fem, iterations, rigid)?.build())?
-            }
+            (Some(dir), None, None, None, TargetsSpec::Regions) => compute(py, move || {
+                RegistrationSpec::patient(
+                    &dir,
+                    use_fem.map(|fem| if fem { PatientMethod::Fem } else { PatientMethod::Learned }),
+                    iterations,
+                    rigid,
+                )?
+                .build()
+            })?,
             (None, fem, model, scenario, _) => {
                 let method = match (fem, model, scenario) {
                     (Some(fem), None, None) => MethodSpec::Fem(fem),
