@@ -557,13 +557,11 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
     let chosen = if fem < learned { PatientMethod::Fem } else { PatientMethod::Learned };
     let path = dir.join(PATIENT_FILE);
     let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let text: String = text
-        .lines()
-        .map(
-            |l| if l.starts_with("method = ") { format!("method = \"{}\"\n", chosen.name()) } else { format!("{l}\n") },
-        )
-        .collect();
-    write_atomic_bytes(&path, text.as_bytes())?;
+    let mut set_up: Vec<&str> = text.lines().filter(|l| !l.starts_with("method = ")).collect();
+    let method = format!("method = \"{}\"", chosen.name());
+    let at = set_up.iter().position(|l| l.starts_with("model = ")).unwrap_or(set_up.len());
+    set_up.insert(at, &method);
+    write_atomic_bytes(&path, (set_up.join("\n") + "\n").as_bytes())?;
     lines.push(format!(
         "validation: {PATIENT_FILE} registers with the {} (method = \"{}\"), the lower TRE on these pushes",
         if chosen == PatientMethod::Fem { "FEM" } else { "learned model" },
