@@ -120,7 +120,7 @@ struct Case {
 
 /// The short name of a law and formulation, for plot labels.
 fn short(law: Law, formulation: Formulation) -> String {
-    let law = if law == Law::Corotational { "co-rot".to_string() } else { format!("{law:?}") };
+    let law = if law == Law::Corotational { "co-rot" } else { law.display_name() };
     let formulation = if formulation == Formulation::Fbar { "F-bar" } else { "std" };
     format!("{law} {formulation}")
 }
@@ -140,11 +140,18 @@ fn beam(law: Law, formulation: Formulation) -> Result<Case> {
     p.add_traction(&top_end, [0.0, 0.0, -1.0]);
     let form = p.material.resolved_formulation();
     Ok(Case {
-        name: format!("beam {}x{}x{} H8, {law:?}, {form:?}", BEAM_CELLS[0], BEAM_CELLS[1], BEAM_CELLS[2]),
+        name: format!(
+            "beam {}x{}x{} H8, {}, {}",
+            BEAM_CELLS[0],
+            BEAM_CELLS[1],
+            BEAM_CELLS[2],
+            law.display_name(),
+            form.display_name()
+        ),
         label: format!("beam {}", short(law, form)),
         published: "",
         published_ms: None,
-        group: format!("beam H8, {law:?}"),
+        group: format!("beam H8, {}", law.display_name()),
         fbar: form == Formulation::Fbar,
         load: 1.0,
         problem: p,
@@ -184,11 +191,11 @@ fn liver(tets: usize, order: u8, law: Law, formulation: Formulation, load: f64) 
     let thousands = (cells as f64 / 1000.0).round();
     let (kind, quadratic) = (p.mesh.cells.kind_name(), if order == 2 { " T10" } else { "" });
     Ok(Case {
-        name: format!("liver {cells} {kind}, {law:?}, {form:?}{scaled}"),
+        name: format!("liver {cells} {kind}, {}, {}{scaled}", law.display_name(), form.display_name()),
         label: format!("{thousands}k{quadratic} {}{}", short(law, form), scaled.replace(", load ", " ")),
         published,
         published_ms,
-        group: format!("{thousands}k liver{quadratic}, {law:?}"),
+        group: format!("{thousands}k liver{quadratic}, {}", law.display_name()),
         fbar: form == Formulation::Fbar,
         load,
         problem: p,

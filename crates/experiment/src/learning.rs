@@ -35,13 +35,13 @@ impl Generated {
         };
         let order = if m.order == 2 { " quadratic (T10)" } else { "" };
         format!(
-            "Data: {}.toml, {} ({:?}, E = {} Pa, ν = {}, {:?}{order} elements){sparse}.",
+            "Data: {}.toml, {} ({}, E = {} Pa, ν = {}, {}{order} elements){sparse}.",
             s.name,
             s.description,
-            m.law,
+            m.law.display_name(),
             m.young,
             m.poisson,
-            m.resolved_formulation()
+            m.resolved_formulation().display_name()
         )
     }
 }

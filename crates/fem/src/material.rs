@@ -29,6 +29,16 @@ pub enum Law {
 }
 
 impl Law {
+    /// The law's name for people: "linear", "co-rotational", "SVK", "Neo-Hookean".
+    pub fn display_name(self) -> &'static str {
+        match self {
+            Law::Linear => "linear",
+            Law::Corotational => "co-rotational",
+            Law::Svk => "SVK",
+            Law::NeoHookean => "Neo-Hookean",
+        }
+    }
+
     /// Whether the law is only defined for det F > 0 (all but linear).
     pub fn needs_positive_jacobian(self) -> bool {
         self != Law::Linear
@@ -52,6 +62,17 @@ pub enum Formulation {
     /// tetrahedra for T4 (the F-bar-patch tetrahedron). The linear law uses its
     /// small-strain form, B-bar.
     Fbar,
+}
+
+impl Formulation {
+    /// The formulation's name for people: "auto", "standard", "F-bar".
+    pub fn display_name(self) -> &'static str {
+        match self {
+            Formulation::Auto => "auto",
+            Formulation::Standard => "standard",
+            Formulation::Fbar => "F-bar",
+        }
+    }
 }
 
 /// Poisson's ratio from which [`Formulation::Auto`] selects F-bar.
