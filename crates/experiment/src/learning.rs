@@ -110,6 +110,18 @@ impl Recipe {
     }
 }
 
+impl Recipe {
+    /// The split of the recipe's data: its validation and test counts, its training samples.
+    pub fn split_policy(&self) -> SplitPolicy {
+        SplitPolicy {
+            validation_samples: Some(self.validation),
+            test_samples: Some(self.test),
+            train_samples: self.train_samples,
+            ..SplitPolicy::default()
+        }
+    }
+}
+
 /// The model directory of a recipe (relative to the experiment's directory): `model-<steps>-steps`, then
 /// `-<n>-samples` when it trains on part of the training split and `-fine-tuned` when it starts from a
 /// pre-trained model.
@@ -157,12 +169,7 @@ impl Trained {
 /// Trains (or resumes training) a U-Net on `dataset` into `dir/`[`model_dir`].
 pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Progress) -> Result<Trained> {
     let all = dataset.load_all()?;
-    let policy = SplitPolicy {
-        validation_samples: Some(recipe.validation),
-        test_samples: Some(recipe.test),
-        train_samples: recipe.train_samples,
-        ..SplitPolicy::default()
-    };
+    let policy = recipe.split_policy();
     let (split, [train, validation, test]) = policy.apply(&all)?;
     let init = match &recipe.fine_tune {
         Some(model) => Initialization::FineTune { model: model.clone(), freeze_encoder: false },
@@ -211,12 +218,7 @@ pub(crate) fn fit_rom_with_prior(
     recipe: &Recipe,
 ) -> Result<(std::sync::Arc<learn::rom::ReducedModel>, learn::rom::RomReport, f64)> {
     let all = data.dataset.load_all()?;
-    let policy = SplitPolicy {
-        validation_samples: Some(recipe.validation),
-        test_samples: Some(recipe.test),
-        train_samples: recipe.train_samples,
-        ..SplitPolicy::default()
-    };
+    let policy = recipe.split_policy();
     let (split, [train, validation, _]) = policy.apply(&all)?;
     let manifest = data.dataset.manifest();
     let start = std::time::Instant::now();
