@@ -108,9 +108,7 @@ impl Recipe {
             fine_tune: None,
         }
     }
-}
 
-impl Recipe {
     /// The split of the recipe's data: its validation and test counts, its training samples.
     pub fn split_policy(&self) -> SplitPolicy {
         SplitPolicy {
