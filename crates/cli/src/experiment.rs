@@ -40,11 +40,12 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
         println!("== {} ({})", name.as_str(), args.size);
         let result = experiment::run(name, size, &args.out, &|message| println!("   {message}"))?;
         println!("   {}: {:.0} s", result.name.title(), result.seconds);
-        let width = result.rows.iter().map(|r| r.quantity.chars().count()).max().unwrap_or(0);
-        for row in &result.rows {
+        let labels: Vec<String> = result.rows.iter().map(|r| r.label()).collect();
+        let width = labels.iter().map(|l| l.chars().count()).max().unwrap_or(0);
+        for (row, label) in result.rows.iter().zip(&labels) {
             let published =
                 if row.published.is_empty() { String::new() } else { format!("   (published: {})", row.published) };
-            println!("   {:<width$}  {}{published}", row.quantity, row.ours);
+            println!("   {label:<width$}  {}{published}", row.ours);
         }
     }
     let results = experiment::load_all(&args.out)?;

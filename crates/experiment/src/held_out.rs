@@ -72,6 +72,11 @@ const POINTS: usize = 3000;
 /// the last, as a navigation system streams them.
 const STREAM_FRAMES: usize = 21;
 
+/// The figure of each method registering the cases from rest.
+const FROM_REST: &str = "from rest: TRE mean over the cases (largest), time per frame (median over the cases)";
+/// The table of the cases registered from rest: a line per case, a column per method.
+const CASE_FROM_REST: &str = "case, from rest: TRE mean / max, time per frame";
+
 /// One method on one case.
 #[derive(Clone, Debug, Default, Serialize)]
 struct Outcome {
@@ -107,17 +112,17 @@ struct StreamOutcome {
 }
 
 impl StreamOutcome {
-    /// Its cell in a case's row.
-    fn cell(&self, method: &str) -> String {
+    /// Its cell in a case's line.
+    fn cell(&self) -> String {
         match (self.peak_tre_mean_mm, self.peak_tre_max_mm, self.tre_mean_mm, &self.error) {
             (Some(m), Some(x), Some(all), None) => format!(
-                "{method} {} / {}, {} over the frames, {}",
+                "{} / {}, {} over the frames, {}",
                 fmt(m, 2, "mm"),
                 fmt(x, 1, "mm"),
                 fmt(all, 2, "mm"),
                 fmt(self.time_median_ms, 0, "ms")
             ),
-            (.., e) => format!("{method}: failed ({})", e.as_deref().unwrap_or("no TRE")),
+            (.., e) => format!("failed ({})", e.as_deref().unwrap_or("no TRE")),
         }
     }
 }
@@ -204,6 +209,11 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
     // The network fed the truth's surface motion: TRE mean and max (mm) per case.
     let mut from_truth = Vec::new();
     let mut rows = Vec::new();
+    // The table of the cases registered as streams: a line per case, a column per method.
+    let case_as_stream = format!(
+        "case, as a stream of {STREAM_FRAMES} frames: TRE at the peak mean / max, TRE over the frames, time per \
+         frame (median)"
+    );
     for case in &CASES {
         progress(&format!("simulating the case {}", case.label));
         let scenario = case.apply(&base);
@@ -226,47 +236,37 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
                 }
             }
         }
-        let mut cells: Vec<String> = methods
-            .iter()
-            .zip(&here)
-            .map(|(method, o)| match (o.tre_mean_mm, o.tre_max_mm, &o.error) {
+        // A line per case in the table of cases from rest, a column per method.
+        let label = format!("{} (markers move {} on average)", case.label, fmt(moved, 1, "mm"));
+        for (method, o) in methods.iter().zip(&here) {
+            let cell = match (o.tre_mean_mm, o.tre_max_mm, &o.error) {
                 (Some(m), Some(x), None) => {
-                    format!("{method} {} / {}, {}", fmt(m, 2, "mm"), fmt(x, 1, "mm"), fmt(o.time_ms(), 0, "ms"))
+                    format!("{} / {}, {}", fmt(m, 2, "mm"), fmt(x, 1, "mm"), fmt(o.time_ms(), 0, "ms"))
                 }
-                (_, _, e) => format!("{method}: failed ({})", e.as_deref().unwrap_or("no TRE")),
-            })
-            .collect();
+                (_, _, e) => format!("failed ({})", e.as_deref().unwrap_or("no TRE")),
+            };
+            rows.push(Row::new(method, cell, "").of(CASE_FROM_REST, &label));
+        }
         if let Some((organ, deformer)) = &oracle {
             let errors = network_from_truth(&synthetic, organ, deformer)?;
             let (m, x) = (mean(&errors) * 1e3, max(&errors) * 1e3);
-            cells.push(format!("U-Net fed the truth's surface motion {} / {}", fmt(m, 2, "mm"), fmt(x, 1, "mm")));
+            let cell = format!("{} / {}", fmt(m, 2, "mm"), fmt(x, 1, "mm"));
+            rows.push(Row::new("U-Net fed the truth's surface motion", cell, "").of(CASE_FROM_REST, &label));
             from_truth.push((m, x));
         }
-        rows.push(Row::new(
-            format!("{} (markers move {} on average): TRE mean / max, time per frame", case.label, fmt(moved, 1, "mm")),
-            cells.join("; "),
-            "",
-        ));
         for (all, o) in outcomes.iter_mut().zip(here) {
             all.push(o);
         }
         progress(&format!("simulating and registering the case {} as a stream ({STREAM_FRAMES} frames)", case.label));
         let here = register_stream(&scenario, &networks)?;
-        let cells: Vec<String> = methods.iter().zip(&here).map(|(method, o)| o.cell(method)).collect();
-        rows.push(Row::new(
-            format!(
-                "{}, as a stream of {STREAM_FRAMES} frames: TRE at the peak mean / max, TRE over the frames, time \
-                 per frame (median)",
-                case.label
-            ),
-            cells.join("; "),
-            "",
-        ));
+        for (method, o) in methods.iter().zip(&here) {
+            rows.push(Row::new(method, o.cell(), "").of(&case_as_stream, case.label));
+        }
         for (all, o) in streams.iter_mut().zip(here) {
             all.push(o);
         }
     }
-    let mut summary = vec![Row::new("no deformation: TRE mean over the cases", fmt(mean(&motion), 2, "mm"), "")];
+    let mut summary = vec![Row::new(FROM_REST, fmt(mean(&motion), 2, "mm"), "").of("registration", "no deformation")];
     let mut means = Vec::new();
     for (method, cases) in methods.iter().zip(&outcomes) {
         let ok: Vec<&Outcome> = cases.iter().filter(|o| o.error.is_none() && o.tre_mean_mm.is_some()).collect();
@@ -275,18 +275,25 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
         let mut times: Vec<f64> = ok.iter().map(|o| o.time_ms()).collect();
         let failed = cases.len() - ok.len();
         means.push(if failed == 0 { mean(&tre) } else { f64::NAN });
-        summary.push(Row::new(
-            format!("{method}: TRE mean over the cases (largest), time per frame (median over the cases)"),
-            format!(
-                "{} ({}), {}{}",
-                fmt(mean(&tre), 2, "mm"),
-                fmt(max(&largest), 1, "mm"),
-                fmt(median(&mut times), 0, "ms"),
-                failures(failed)
-            ),
-            "",
-        ));
+        summary.push(
+            Row::new(
+                FROM_REST,
+                format!(
+                    "{} ({}), {}{}",
+                    fmt(mean(&tre), 2, "mm"),
+                    fmt(max(&largest), 1, "mm"),
+                    fmt(median(&mut times), 0, "ms"),
+                    failures(failed)
+                ),
+                "",
+            )
+            .of("registration", method),
+        );
     }
+    let as_streams = format!(
+        "each case as a stream of {STREAM_FRAMES} frames: TRE at the peak mean over the cases (largest); TRE over \
+         all frames; time per frame (median over the cases)"
+    );
     let mut stream_means = Vec::new();
     for (method, cases) in methods.iter().zip(&streams) {
         let ok: Vec<&StreamOutcome> =
@@ -297,30 +304,30 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
         let mut times: Vec<f64> = ok.iter().map(|o| o.time_median_ms).collect();
         let failed = cases.len() - ok.len();
         stream_means.push(if failed == 0 { mean(&peak) } else { f64::NAN });
-        summary.push(Row::new(
-            format!(
-                "{method}, each case as a stream of {STREAM_FRAMES} frames: TRE at the peak mean over the cases \
-                 (largest); TRE over all frames; time per frame (median over the cases)"
-            ),
-            format!(
-                "{} ({}); {}; {}{}",
-                fmt(mean(&peak), 2, "mm"),
-                fmt(max(&largest), 1, "mm"),
-                fmt(mean(&all), 2, "mm"),
-                fmt(median(&mut times), 0, "ms"),
-                failures(failed)
-            ),
-            "",
-        ));
+        summary.push(
+            Row::new(
+                &as_streams,
+                format!(
+                    "{} ({}); {}; {}{}",
+                    fmt(mean(&peak), 2, "mm"),
+                    fmt(max(&largest), 1, "mm"),
+                    fmt(mean(&all), 2, "mm"),
+                    fmt(median(&mut times), 0, "ms"),
+                    failures(failed)
+                ),
+                "",
+            )
+            .of("registration", method),
+        );
     }
     if !from_truth.is_empty() {
         let (tre, largest): (Vec<f64>, Vec<f64>) = from_truth.iter().copied().unzip();
-        summary.push(Row::new(
-            "U-Net fed the truth's motion of its input nodes, no cloud (the network's error alone, not a method): \
-             TRE mean over the cases (largest)",
-            format!("{} ({})", fmt(mean(&tre), 2, "mm"), fmt(max(&largest), 1, "mm")),
-            "",
-        ));
+        summary.push(
+            Row::new(FROM_REST, format!("{} ({})", fmt(mean(&tre), 2, "mm"), fmt(max(&largest), 1, "mm")), "").of(
+                "registration",
+                "U-Net fed the truth's motion of its input nodes, no cloud (the network's error alone, not a method)",
+            ),
+        );
     }
     summary.extend(rows);
     let mut headlines = Vec::new();
@@ -357,12 +364,12 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
     let fem = corotational(&base).and_then(|m| m.material).context("the held-out cases have no co-rotational FEM")?;
     let notes = vec![
         format!(
-            "Truth: the built-in registration case's phantom of {} (quadratic tetrahedra), {:?}, \
+            "Truth: the built-in registration case's phantom of {} (quadratic tetrahedra), {}, \
              E = {} kPa, ν = {}: another mesh, element, law and stiffness than every model; fixed between the \
              lobes; one tool force per case as listed. Camera along {:?}: {POINTS} points, {} noise, {:.0} % \
              outliers; no correspondences. None of these cases played a part in choosing a setting.",
             base.truth.mesh_words(),
-            base.truth.material.law,
+            base.truth.material.law.display_name(),
             base.truth.material.young * 1e-3,
             base.truth.material.poisson,
             base.camera.view,

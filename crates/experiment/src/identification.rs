@@ -189,51 +189,44 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
     let (quadratic_model, quadratic_model_honest) = (&quadratic_models[0], &quadratic_models[1]);
     let mut rows = Vec::new();
     let runs = [
-        ("", report, &reference_mesh),
-        (", systematic discrepancy", honest, &reference_mesh),
-        (", 11k model", fine, &fine_reference_mesh),
-        (", 11k model, systematic discrepancy", fine_honest, &fine_reference_mesh),
-        (", T10 reference", quadratic, &quadratic_reference_mesh),
-        (", T10 reference, systematic discrepancy", quadratic_honest, &quadratic_reference_mesh),
-        (", T10 model and reference", quadratic_model, &quadratic_reference_mesh),
-        (", T10 model and reference, systematic discrepancy", quadratic_model_honest, &quadratic_reference_mesh),
+        ("scenario's model and reference", report, &reference_mesh),
+        ("scenario's model and reference, systematic discrepancy", honest, &reference_mesh),
+        ("11k model", fine, &fine_reference_mesh),
+        ("11k model, systematic discrepancy", fine_honest, &fine_reference_mesh),
+        ("T10 reference", quadratic, &quadratic_reference_mesh),
+        ("T10 reference, systematic discrepancy", quadratic_honest, &quadratic_reference_mesh),
+        ("T10 model and reference", quadratic_model, &quadratic_reference_mesh),
+        ("T10 model and reference, systematic discrepancy", quadratic_model_honest, &quadratic_reference_mesh),
     ];
-    for (label, report, reference_mesh) in runs {
+    for (run, report, reference_mesh) in runs {
         let y = report.young.as_ref().context("the Young scenario reported no Young's modulus")?;
         let truth = y.truth.context("the reference run's modulus is the truth")?;
-        let mesh = format!(" (model {} nodes, reference {reference_mesh})", report.nodes);
-        rows.extend([
+        let mut figures = vec![
+            Row::new("model / reference", format!("{} nodes / {reference_mesh}", report.nodes), ""),
+            Row::new("estimated E (mean ± σ)", format!("{:.0} ± {:.0} Pa", y.mean, y.std), "4,992 ± 15 Pa"),
             Row::new(
-                format!("estimated E (mean ± σ){label}"),
-                format!("{:.0} ± {:.0} Pa", y.mean, y.std),
-                "4,992 ± 15 Pa",
-            ),
-            Row::new(
-                format!("error against the truth{label}"),
+                "error against the truth",
                 fmt(100.0 * (y.mean - truth) / truth, 2, "%"),
                 "−0.16 % (from 4,992 ± 15 Pa)",
             ),
-            Row::new(
-                format!("|error| / σ{label}"),
-                format!("{:.1}", (y.mean - truth).abs() / y.std),
-                "0.5 (from 4,992 ± 15 Pa)",
-            ),
-        ]);
+            Row::new("|error| / σ", format!("{:.1}", (y.mean - truth).abs() / y.std), "0.5 (from 4,992 ± 15 Pa)"),
+        ];
         if let (Some(noise), Some(misfit)) = (y.noise_std, y.misfit) {
-            rows.push(Row::new(format!("noise-only σ, misfit χ²/ν{label}"), format!("{noise:.0} Pa, {misfit:.3}"), ""));
+            figures.push(Row::new("noise-only σ, misfit χ²/ν", format!("{noise:.0} Pa, {misfit:.3}"), ""));
         }
-        rows.extend([
+        figures.extend([
             Row::new(
-                format!("within 1 % from iteration{label}"),
+                "within 1 % from iteration",
                 y.within_1_percent_from_iteration.map_or("never".into(), |k| k.to_string()),
                 "",
             ),
             Row::new(
-                format!("filter time{label}"),
-                format!("{} for {} iterations{mesh}", fmt(report.filter_seconds, 1, "s"), report.iterations),
+                "filter time",
+                format!("{} for {} iterations", fmt(report.filter_seconds, 1, "s"), report.iterations),
                 "500 s for 631 iterations",
             ),
         ]);
+        rows.extend(figures.into_iter().map(|row| row.of("filter run", run)));
     }
     let y = report.young.as_ref().context("the Young scenario reported no Young's modulus")?;
     let truth = y.truth.context("the reference run's modulus is the truth")?;

@@ -127,7 +127,10 @@ impl Name {
     }
 }
 
-/// One line of a result table: our figure beside the published one.
+/// One figure of a result: ours beside the published one, of the experiment as a whole or of one
+/// variant of it (a mesh, a method, a case). The reports show the rows without a variant as a table
+/// of quantities, and the rows of each [`Row::table`] as a table with one line per variant and one
+/// column per quantity ([`report`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Row {
     /// What is measured.
@@ -136,12 +139,41 @@ pub struct Row {
     pub ours: String,
     /// The published value, formatted, or empty where none was published.
     pub published: String,
+    /// The variant measured (e.g. "11k model"), or empty for the experiment as a whole.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub variant: String,
+    /// The table of variants the row belongs to, named by the heading of its variant column (e.g.
+    /// "filter run"); empty without a variant.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub table: String,
 }
 
 impl Row {
     /// A row; `published` may be empty.
     pub fn new(quantity: impl Into<String>, ours: impl Into<String>, published: impl Into<String>) -> Row {
-        Row { quantity: quantity.into(), ours: ours.into(), published: published.into() }
+        Row {
+            quantity: quantity.into(),
+            ours: ours.into(),
+            published: published.into(),
+            variant: String::new(),
+            table: String::new(),
+        }
+    }
+
+    /// The row as the figure of `variant` in the table `table` (the heading of its variant column).
+    pub fn of(mut self, table: impl Into<String>, variant: impl Into<String>) -> Row {
+        self.table = table.into();
+        self.variant = variant.into();
+        self
+    }
+
+    /// What the row measures, in words: its quantity, after its variant where it has one.
+    pub fn label(&self) -> String {
+        if self.variant.is_empty() {
+            self.quantity.clone()
+        } else {
+            format!("{}: {}", self.variant, self.quantity)
+        }
     }
 }
 

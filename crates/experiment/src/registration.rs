@@ -94,6 +94,9 @@ fn published(method: &str) -> (&'static str, Option<f64>) {
     }
 }
 
+/// The figure of each registration method on the held-out cases.
+const HELD_OUT_TRE: &str = "held-out cases: TRE mean (max), time per frame";
+
 /// Quick: 400 samples, 1,500 steps; paper: the shipped network's recipe (2,000 samples, 48,000 steps).
 pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let (samples, iterations) = match size {
@@ -144,12 +147,18 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
             per_method = rows.iter().map(|r| MethodTre { method: r.method.clone(), ..MethodTre::default() }).collect();
         }
         let motion = mean(&register::target_errors(&case.targets, &case.peak().truth)) * 1e3;
-        let mut cells = Vec::new();
+        let kind = match role {
+            Role::Design => "design case",
+            Role::HeldOut => "held-out case",
+            Role::BeyondPushes => "case beyond pushes",
+        };
+        let label = format!("{kind} {} (markers move {} on average)", variant.label, fmt(motion, 1, "mm"));
+        let cell = |method: &str, ours: String| Row::new(method, ours, "").of("case: TRE mean / max", &label);
         for (entry, r) in per_method.iter_mut().zip(&rows) {
             let s = match &r.result {
                 Ok(registered) => &registered.summary,
                 Err(e) => {
-                    cells.push(format!("{}: failed", r.method));
+                    case_rows.push(cell(&r.method, "failed".into()));
                     match role {
                         Role::Design => entry.design = (f64::NAN, f64::NAN),
                         Role::HeldOut => entry.failures.push(format!("{}: {e}", variant.label)),
@@ -159,7 +168,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
                 }
             };
             let (tre_mean, tre_max) = (s.tre_mean_mm.unwrap_or(f64::NAN), s.tre_max_mm.unwrap_or(f64::NAN));
-            cells.push(format!("{} {} / {}", r.method, fmt(tre_mean, 2, "mm"), fmt(tre_max, 1, "mm")));
+            case_rows.push(cell(&r.method, format!("{} / {}", fmt(tre_mean, 2, "mm"), fmt(tre_max, 1, "mm"))));
             match role {
                 Role::Design => entry.design = (tre_mean, tre_max),
                 Role::HeldOut => {
@@ -173,16 +182,6 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         if role == Role::HeldOut {
             no_motion.push(motion);
         }
-        let kind = match role {
-            Role::Design => "design case",
-            Role::HeldOut => "held-out case",
-            Role::BeyondPushes => "case beyond pushes",
-        };
-        case_rows.push(Row::new(
-            format!("{kind} {} (markers move {} on average): TRE mean / max", variant.label, fmt(motion, 1, "mm")),
-            cells.join("; "),
-            "",
-        ));
     }
     let mut rows = vec![
         Row::new(
@@ -195,23 +194,26 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
             format!("{} (no motion: {})", fmt(tre.errors.mean * 1e3, 2, "mm"), fmt(tre.no_motion.mean * 1e3, 1, "mm")),
             "",
         ),
-        Row::new("registration, no deformation: TRE", fmt(mean(&no_motion), 2, "mm"), ""),
+        Row::new(HELD_OUT_TRE, fmt(mean(&no_motion), 2, "mm"), "").of("registration", "no deformation"),
     ];
     for m in &per_method {
-        rows.push(Row::new(
-            format!("registration, {}: TRE mean (max), time per frame", m.method),
-            format!(
-                "{} ({}), {}{}",
-                fmt(mean(&m.means), 2, "mm"),
-                fmt(max(&m.maxima), 1, "mm"),
-                fmt(mean(&m.times), 0, "ms"),
-                match m.failures.len() {
-                    0 => String::new(),
-                    n => format!("; failed on {n} of {} cases", HELD_OUT.len()),
-                }
-            ),
-            published(&m.method).0,
-        ));
+        rows.push(
+            Row::new(
+                HELD_OUT_TRE,
+                format!(
+                    "{} ({}), {}{}",
+                    fmt(mean(&m.means), 2, "mm"),
+                    fmt(max(&m.maxima), 1, "mm"),
+                    fmt(mean(&m.times), 0, "ms"),
+                    match m.failures.len() {
+                        0 => String::new(),
+                        n => format!("; failed on {n} of {} cases", HELD_OUT.len()),
+                    }
+                ),
+                published(&m.method).0,
+            )
+            .of("registration", &m.method),
+        );
     }
     for m in &per_method {
         let beyond: Vec<f64> = m.beyond.iter().map(|b| b.0).collect();
@@ -221,19 +223,20 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
             0 => fmt(mean(&choice), 2, "mm"),
             n => format!("failed on {n} of {} cases", choice.len()),
         };
-        rows.push(Row::new(
-            format!(
-                "registration, {}: TRE mean over the cases beyond pushes (max); over the cases a network is chosen \
-                 on (design and beyond pushes)",
-                m.method
-            ),
-            format!(
-                "{} (max {}); {choice}",
-                fmt(mean(&beyond), 2, "mm"),
-                fmt(max(&m.beyond.iter().map(|b| b.1).collect::<Vec<_>>()), 1, "mm"),
-            ),
-            "",
-        ));
+        rows.extend([
+            Row::new(
+                "cases beyond pushes: TRE mean (max)",
+                format!(
+                    "{} (max {})",
+                    fmt(mean(&beyond), 2, "mm"),
+                    fmt(max(&m.beyond.iter().map(|b| b.1).collect::<Vec<_>>()), 1, "mm"),
+                ),
+                "",
+            )
+            .of("registration", &m.method),
+            Row::new("cases a network is chosen on (design and beyond pushes): TRE mean", choice, "")
+                .of("registration", &m.method),
+        ]);
     }
     let headlines = per_method
         .iter()
@@ -311,7 +314,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
                 t.timing()
             ),
             format!(
-                "Registration cases: register_case's truth ({:?} phantom of {}, \
+                "Registration cases: register_case's truth ({} phantom of {}, \
                  another mesh and law than the models) under the loads listed; its camera along {:?} sees \
                  {} points with {} noise and {:.0} % outliers. The registration figures beside the published ones \
                  are over the {} held-out cases only (a failed method is counted apart); the design case, with \
@@ -319,7 +322,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
                  {} cases beyond pushes (a lift, a drag, a pull) cover what surgery also does; a network is chosen \
                  on its mean over them and the design case, never on the held-out cases here or on `augsim \
                  experiment held-out`. Published: ex vivo human liver.",
-                builtin.truth.material.law,
+                builtin.truth.material.law.display_name(),
                 builtin.truth.mesh_words(),
                 builtin.camera.view,
                 builtin.camera.points,

@@ -2,7 +2,10 @@
 //! headline summary (one row per published figure: ours, published, better or worse) that opens
 //! every report and fills the README's generated section ([`update_markdown`]); `report.md` and
 //! `report.html` (the summary, then every table with its figures); the results page
-//! `docs/results.md` ([`results_page`]: the summary, then every table and its notes).
+//! `docs/results.md` ([`results_page`]: the summary, then every table and its notes). Every table,
+//! in Markdown and in HTML, comes from [`tables`]: a result's rows without a variant as one table
+//! of quantities, and the rows of each table of variants as one line per variant and one column
+//! per quantity.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -11,7 +14,7 @@ use anyhow::{bail, Context, Result};
 
 use plot::viewer::escape_html;
 
-use crate::{ExperimentResult, Size};
+use crate::{ExperimentResult, Row, Size};
 
 /// The experiments' references: where the published figures come from.
 const SOURCES: &str = "Published figures: Mendizabal, Márquez-Neila & Cotin, *Simulation of hyperelastic \
@@ -28,22 +31,170 @@ fn size_name(size: Size) -> &'static str {
     }
 }
 
-/// The headline summary: one row per published figure (ours, published, verdict).
-pub fn summary(results: &[ExperimentResult]) -> String {
-    let mut s = String::from("| figure | augsim | published | augsim is |\n| --- | --- | --- | --- |\n");
-    let cell = |text: &str| text.replace('|', "\\|");
-    for r in results {
-        for h in &r.headlines {
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} | {} |",
-                cell(&h.figure),
-                cell(&h.ours),
-                cell(&h.published),
-                h.verdict.word()
-            );
+/// A table of a report: the cells of its heading and of its lines, as plain text.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Table {
+    /// The heading's cells.
+    pub header: Vec<String>,
+    /// The lines' cells, as many as the heading's.
+    pub lines: Vec<Vec<String>>,
+}
+
+impl Table {
+    /// The table in Markdown, its pipes escaped.
+    pub fn markdown(&self) -> String {
+        let line = |cells: &[String]| {
+            let cells: Vec<String> = cells.iter().map(|c| c.replace('|', "\\|")).collect();
+            format!("| {} |\n", cells.join(" | "))
+        };
+        let mut s = line(&self.header);
+        s.push_str(&line(&vec!["---".to_string(); self.header.len()]));
+        for cells in &self.lines {
+            s.push_str(&line(cells));
+        }
+        s
+    }
+
+    /// The table in HTML, its text escaped.
+    pub fn html(&self) -> String {
+        let line = |tag: &str, cells: &[String]| {
+            let cells: String = cells.iter().map(|c| format!("<{tag}>{}</{tag}>", escape_html(c))).collect();
+            format!("<tr>{cells}</tr>\n")
+        };
+        let mut s = format!("<table>{}", line("th", &self.header));
+        for cells in &self.lines {
+            s.push_str(&line("td", cells));
+        }
+        s.push_str("</table>\n");
+        s
+    }
+}
+
+/// What a cell shows where there is nothing: no published figure, no figure of a variant.
+const NONE: &str = "—";
+
+/// The tables of a result's rows, in the order of their first rows: the rows without a variant in
+/// one table (quantity, augsim, published), and the rows of each [`Row::table`] in a table with
+/// one line per variant and one column per quantity. A quantity's published figure, where it is
+/// the same for every variant, is shown once, on a last line "published"; where it differs, each
+/// variant's is shown in a last column "published".
+pub fn tables(rows: &[Row]) -> Vec<Table> {
+    // The table of a row: `None` for the table of quantities.
+    fn key(r: &Row) -> Option<&str> {
+        (!r.variant.is_empty()).then_some(r.table.as_str())
+    }
+    let mut keys: Vec<Option<&str>> = Vec::new();
+    for r in rows {
+        if !keys.contains(&key(r)) {
+            keys.push(key(r));
         }
     }
+    keys.into_iter()
+        .map(|k| {
+            let rows: Vec<&Row> = rows.iter().filter(|r| key(r) == k).collect();
+            match k {
+                None => Table {
+                    header: vec!["quantity".into(), "augsim".into(), "published".into()],
+                    lines: rows
+                        .iter()
+                        .map(|r| vec![r.quantity.clone(), r.ours.clone(), or_none(&r.published)])
+                        .collect(),
+                },
+                Some(name) => variants_table(name, &rows),
+            }
+        })
+        .collect()
+}
+
+/// `text`, or [`NONE`] where it is empty.
+fn or_none(text: &str) -> String {
+    if text.is_empty() { NONE } else { text }.to_string()
+}
+
+/// The rows of the table of variants `name` (see [`tables`]).
+fn variants_table<'a>(name: &str, rows: &[&'a Row]) -> Table {
+    let (mut variants, mut quantities): (Vec<&str>, Vec<&str>) = (Vec::new(), Vec::new());
+    for (i, r) in rows.iter().enumerate() {
+        if !variants.contains(&r.variant.as_str()) {
+            variants.push(&r.variant);
+        }
+        if !quantities.contains(&r.quantity.as_str()) {
+            // Next to the quantity before it in its variant's rows, so that a quantity only some variants
+            // have keeps its place among the others.
+            let before = rows[..i].iter().rev().find(|p| p.variant == r.variant);
+            match before.and_then(|p| quantities.iter().position(|q| *q == p.quantity)) {
+                Some(k) => quantities.insert(k + 1, &r.quantity),
+                None => quantities.push(&r.quantity),
+            }
+        }
+    }
+    // The rows of a variant and quantity (one, unless an experiment wrote the same figure twice).
+    let cell = |variant: &'a str, quantity: &'a str| {
+        rows.iter().filter(move |r| r.variant == variant && r.quantity == quantity)
+    };
+    // Each quantity's published figure where every variant has the same.
+    let shared: Vec<Option<&str>> = quantities
+        .iter()
+        .map(|&q| {
+            let mut published = rows.iter().filter(|r| r.quantity == q).map(|r| r.published.as_str());
+            let first = published.next().unwrap_or_default();
+            published.all(|p| p == first).then_some(first)
+        })
+        .collect();
+    let column = shared.contains(&None);
+    let mut header: Vec<String> = std::iter::once(name).chain(quantities.iter().copied()).map(String::from).collect();
+    if column {
+        header.push("published".into());
+    }
+    let mut lines = Vec::new();
+    for &v in &variants {
+        let mut cells = vec![v.to_string()];
+        for &q in &quantities {
+            let ours: Vec<&str> = cell(v, q).map(|r| r.ours.as_str()).collect();
+            cells.push(if ours.is_empty() { NONE.to_string() } else { ours.join("; ") });
+        }
+        if column {
+            let own: Vec<(&str, &str)> = quantities
+                .iter()
+                .zip(&shared)
+                .filter(|(_, s)| s.is_none())
+                .flat_map(|(&q, _)| cell(v, q).map(move |r| (q, r.published.as_str())))
+                .filter(|(_, p)| !p.is_empty())
+                .collect();
+            cells.push(match own.as_slice() {
+                [] => NONE.to_string(),
+                [(_, p), rest @ ..] if rest.iter().all(|(_, o)| o == p) => p.to_string(),
+                _ => own.iter().map(|(q, p)| format!("{q}: {p}")).collect::<Vec<_>>().join("; "),
+            });
+        }
+        lines.push(cells);
+    }
+    if shared.iter().any(|p| p.is_some_and(|p| !p.is_empty())) {
+        let mut cells = vec!["published".to_string()];
+        cells.extend(shared.iter().map(|p| or_none(p.unwrap_or_default())));
+        if column {
+            cells.push(String::new());
+        }
+        lines.push(cells);
+    }
+    Table { header, lines }
+}
+
+/// The headline summary's table: one line per published figure (ours, published, verdict).
+fn summary_table(results: &[ExperimentResult]) -> Table {
+    Table {
+        header: ["figure", "augsim", "published", "augsim is"].map(String::from).to_vec(),
+        lines: results
+            .iter()
+            .flat_map(|r| &r.headlines)
+            .map(|h| vec![h.figure.clone(), h.ours.clone(), h.published.clone(), h.verdict.word().to_string()])
+            .collect(),
+    }
+}
+
+/// The headline summary: one row per published figure (ours, published, verdict).
+pub fn summary(results: &[ExperimentResult]) -> String {
+    let mut s = summary_table(results).markdown();
     let sizes: Vec<String> = results.iter().map(|r| format!("{} {}", r.name.as_str(), size_name(r.size))).collect();
     let _ = write!(
         s,
@@ -85,13 +236,10 @@ fn sections(results: &[ExperimentResult], heading: &str, figures: bool) -> Strin
         let _ = write!(s, "\n{heading} {}\n\n", r.name.title());
         let _ =
             writeln!(s, "`augsim experiment {} --size {}` ({:.0} s)\n", r.name.as_str(), size_name(r.size), r.seconds);
-        s.push_str("| quantity | augsim | published |\n| --- | --- | --- |\n");
-        for row in &r.rows {
-            let published = if row.published.is_empty() { "—" } else { &row.published };
-            let cell = |text: &str| text.replace('|', "\\|");
-            let _ = writeln!(s, "| {} | {} | {} |", cell(&row.quantity), cell(&row.ours), cell(published));
+        for table in tables(&r.rows) {
+            s.push_str(&table.markdown());
+            s.push('\n');
         }
-        s.push('\n');
         for note in &r.notes {
             let _ = writeln!(s, "- {note}");
         }
@@ -142,41 +290,22 @@ pub fn html(results: &[ExperimentResult]) -> String {
          table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 10px;text-align:left}\
          th{background:#f2f2f2}img{max-width:48%;margin:4px;border:1px solid #eee}code{background:#f6f6f6}\
          </style></head><body>\n<h1>augsim experiments</h1>\n<p>Each table puts our figure beside the published one; \
-         every figure is measured on data that played no part in producing it.</p>\n<h2>Summary</h2>\n\
-         <table><tr><th>figure</th><th>augsim</th><th>published</th><th>augsim is</th></tr>\n",
+         every figure is measured on data that played no part in producing it.</p>\n<h2>Summary</h2>\n",
     );
-    for h in results.iter().flat_map(|r| &r.headlines) {
+    s.push_str(&summary_table(results).html());
+    for r in results {
         let _ = writeln!(
             s,
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
-            escape_html(&h.figure),
-            escape_html(&h.ours),
-            escape_html(&h.published),
-            h.verdict.word()
-        );
-    }
-    s.push_str("</table>\n");
-    for r in results {
-        let _ = write!(
-            s,
-            "<h2>{}</h2>\n<p><code>augsim experiment {} --size {}</code> ({:.0} s)</p>\n<table><tr><th>quantity</th>\
-             <th>augsim</th><th>published</th></tr>\n",
+            "<h2>{}</h2>\n<p><code>augsim experiment {} --size {}</code> ({:.0} s)</p>",
             escape_html(r.name.title()),
             r.name.as_str(),
             size_name(r.size),
             r.seconds
         );
-        for row in &r.rows {
-            let published = if row.published.is_empty() { "—" } else { &row.published };
-            let _ = writeln!(
-                s,
-                "<tr><td>{}</td><td>{}</td><td>{}</td></tr>",
-                escape_html(&row.quantity),
-                escape_html(&row.ours),
-                escape_html(published)
-            );
+        for table in tables(&r.rows) {
+            s.push_str(&table.html());
         }
-        s.push_str("</table>\n<ul>\n");
+        s.push_str("<ul>\n");
         for note in &r.notes {
             let _ = writeln!(s, "<li>{}</li>", escape_html(note));
         }
@@ -228,4 +357,104 @@ pub fn write(root: &Path, results: &[ExperimentResult]) -> Result<[PathBuf; 2]> 
     mesh::io::write_atomic_bytes(&md, markdown(results).as_bytes())?;
     mesh::io::write_atomic_bytes(&page, html(results).as_bytes())?;
     Ok([md, page])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Name, Row};
+
+    fn markdown(rows: &[Row]) -> String {
+        tables(rows).iter().map(Table::markdown).collect::<Vec<_>>().join("\n")
+    }
+
+    /// Rows without a variant stay a table of quantities; the rows of a table of variants become one
+    /// line per variant and one column per quantity, with the published figures they share on a last
+    /// line, a quantity only some variants have in its place and "—" where a variant has none.
+    #[test]
+    fn variants_become_lines_and_quantities_columns() {
+        let run = |variant: &str, e: &str, sigma: Option<&str>| {
+            let mut rows = vec![Row::new("estimated E", e, "4,992 ± 15 Pa")];
+            rows.extend(sigma.map(|s| Row::new("noise-only σ", s, "")));
+            rows.push(Row::new("filter time", "2.4 s", "500 s"));
+            rows.into_iter().map(|r| r.of("filter run", variant)).collect::<Vec<_>>()
+        };
+        let rows: Vec<Row> = std::iter::once(Row::new("truth", "5000 Pa", ""))
+            .chain(run("scenario", "4458 ± 7 Pa", None))
+            .chain(run("11k model", "4811 ± 350 Pa", Some("6 Pa")))
+            .chain([Row::new("|error| / σ", "0.5", "a | b")])
+            .collect();
+        let expected = "\
+| quantity | augsim | published |
+| --- | --- | --- |
+| truth | 5000 Pa | — |
+| \\|error\\| / σ | 0.5 | a \\| b |
+
+| filter run | estimated E | noise-only σ | filter time |
+| --- | --- | --- | --- |
+| scenario | 4458 ± 7 Pa | — | 2.4 s |
+| 11k model | 4811 ± 350 Pa | 6 Pa | 2.4 s |
+| published | 4,992 ± 15 Pa | — | 500 s |
+";
+        assert_eq!(markdown(&rows), expected);
+    }
+
+    /// A quantity whose published figure differs between variants moves it into a last column,
+    /// one per variant; without any published figure there is neither that column nor the line.
+    #[test]
+    fn published_figures_that_differ_go_in_a_column() {
+        let rows = vec![
+            Row::new("first", "18.4 ms", "1,550 ms (SVK)").of("case", "liver, SVK"),
+            Row::new("frame", "2.6 ms", "").of("case", "liver, SVK"),
+            Row::new("first", "19.9 ms", "25 ms (co-rotational)").of("case", "liver, co-rotational"),
+            Row::new("frame", "3.4 ms", "").of("case", "liver, co-rotational"),
+            Row::new("first", "617.1 ms", "").of("case", "liver T10, SVK"),
+            Row::new("frame", "68.5 ms", "").of("case", "liver T10, SVK"),
+            Row::new("first", "1.24×", "").of("F-bar / standard", "beam"),
+        ];
+        let expected = "\
+| case | first | frame | published |
+| --- | --- | --- | --- |
+| liver, SVK | 18.4 ms | 2.6 ms | 1,550 ms (SVK) |
+| liver, co-rotational | 19.9 ms | 3.4 ms | 25 ms (co-rotational) |
+| liver T10, SVK | 617.1 ms | 68.5 ms | — |
+
+| F-bar / standard | first |
+| --- | --- |
+| beam | 1.24× |
+";
+        assert_eq!(markdown(&rows), expected);
+    }
+
+    /// The results page and the HTML report show the same tables: a section's tables one after the
+    /// other, then its notes.
+    #[test]
+    fn every_report_shows_the_tables_of_variants() {
+        let result = ExperimentResult {
+            name: Name::Young,
+            size: Size::Quick,
+            seconds: 61.0,
+            headlines: Vec::new(),
+            rows: vec![
+                Row::new("filter time", "2.4 s", "500 s").of("filter run", "scenario"),
+                Row::new("filter time", "5.8 s", "500 s").of("filter run", "11k model"),
+                Row::new("truth", "5000 Pa", ""),
+            ],
+            figures: Vec::new(),
+            page_figures: Vec::new(),
+            notes: vec!["A note.".into()],
+            values: serde_json::Map::new(),
+        };
+        let page = results_page(std::slice::from_ref(&result));
+        let section = "`augsim experiment young --size quick` (61 s)\n\n\
+                       | filter run | filter time |\n| --- | --- |\n| scenario | 2.4 s |\n| 11k model | 5.8 s |\n\
+                       | published | 500 s |\n\n| quantity | augsim | published |\n| --- | --- | --- |\n\
+                       | truth | 5000 Pa | — |\n\n- A note.\n";
+        assert!(page.ends_with(section), "{page}");
+        let html = html(std::slice::from_ref(&result));
+        assert!(html.contains(
+            "<table><tr><th>filter run</th><th>filter time</th></tr>\n<tr><td>scenario</td><td>2.4 s</td></tr>\n\
+             <tr><td>11k model</td><td>5.8 s</td></tr>\n<tr><td>published</td><td>500 s</td></tr>\n</table>\n"
+        ));
+    }
 }

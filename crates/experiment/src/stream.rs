@@ -131,6 +131,9 @@ fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
     Ok(s)
 }
 
+/// The TRE of a registration over the stream (and of no registration: the motion of the markers).
+const STREAM_TRE: &str = "TRE mean over frames (largest frame mean; largest)";
+
 /// Runs the experiment: the co-rotational FEM (3k T4) and the shipped network, when found.
 pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let scenario = press_and_release();
@@ -151,34 +154,35 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     }
     let rest: Vec<f64> =
         case.frames.iter().map(|f| mean(&register::target_errors(&case.targets, &f.truth)) * 1e3).collect();
-    let mut rows = vec![Row::new(
-        "no deformation: TRE mean over frames (largest frame mean)",
-        format!("{:.2} mm ({:.2} mm)", mean(&rest), max(&rest)),
-        "",
-    )];
+    let mut rows = vec![Row::new(STREAM_TRE, format!("{:.2} mm ({:.2} mm)", mean(&rest), max(&rest)), "")
+        .of("registration", "no deformation")];
     for s in &streams {
         let mut latency = s.latency_ms.clone();
         let mut server = s.server_ms.clone();
-        rows.push(Row::new(
-            format!("{}: latency median / p95", s.method),
-            format!("{:.1} / {:.1} ms", median(&mut latency), percentile(&s.latency_ms, 95.0)),
-            "",
-        ));
-        rows.push(Row::new(
-            format!("{}: server time median / p95; first frame", s.method),
-            format!("{:.1} / {:.1} ms; {:.1} ms", median(&mut server), percentile(&s.server_ms, 95.0), s.server_ms[0]),
-            "",
-        ));
-        rows.push(Row::new(
-            format!("{}: sustained rate", s.method),
-            format!("{:.1} frames/s", s.frames_per_second),
-            "",
-        ));
-        rows.push(Row::new(
-            format!("{}: TRE mean over frames (largest frame mean; largest)", s.method),
-            format!("{:.2} mm ({:.2} mm; {:.2} mm)", mean(&s.tre_mm), max(&s.tre_mm), max(&s.tre_max_mm)),
-            "",
-        ));
+        let figures = [
+            Row::new(
+                STREAM_TRE,
+                format!("{:.2} mm ({:.2} mm; {:.2} mm)", mean(&s.tre_mm), max(&s.tre_mm), max(&s.tre_max_mm)),
+                "",
+            ),
+            Row::new(
+                "latency median / p95",
+                format!("{:.1} / {:.1} ms", median(&mut latency), percentile(&s.latency_ms, 95.0)),
+                "",
+            ),
+            Row::new(
+                "server time median / p95; first frame",
+                format!(
+                    "{:.1} / {:.1} ms; {:.1} ms",
+                    median(&mut server),
+                    percentile(&s.server_ms, 95.0),
+                    s.server_ms[0]
+                ),
+                "",
+            ),
+            Row::new("sustained rate", format!("{:.1} frames/s", s.frames_per_second), ""),
+        ];
+        rows.extend(figures.map(|row| row.of("registration", &s.method)));
     }
     if !network_found {
         rows.push(Row::new("U-Net", format!("skipped: {SHIPPED_MODEL} not found (run from the repository)"), ""));
@@ -187,12 +191,12 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     plot_stream(&dir.join(figure), &rest, &streams)?;
     let notes = vec![
         format!(
-            "Case: the built-in registration case's truth ({:?} phantom, E = {} kPa, ν = {}, {}) \
+            "Case: the built-in registration case's truth ({} phantom, E = {} kPa, ν = {}, {}) \
              pressed obliquely along {:?} on the front of the left lobe by a force rising to {} N and falling back \
              over {FRAMES} frames (sine), each frame seen anew by the camera ({POINTS} points, 1 mm noise, 5 % \
              outliers); the models are another mesh (3k T4) and law. The stream's settings were chosen on the \
              built-in case's own press and release, not on this one.",
-            scenario.truth.material.law,
+            scenario.truth.material.law.display_name(),
             scenario.truth.material.young * 1e-3,
             scenario.truth.material.poisson,
             scenario.truth.mesh_words(),

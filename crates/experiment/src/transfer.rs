@@ -155,11 +155,14 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
         Row::new("pre-trained on BC4 (BC4's own test split)", stats_cell(&bc4_test), ""),
     ];
     for c in &crossings {
-        rows.push(Row::new(
-            format!("first validation step with ē ≤ {:.1} mm: fine-tuned / scratch, {few_n} samples", c.threshold_mm),
-            c.describe(iterations),
-            "fine-tuning about 20× sooner",
-        ));
+        rows.push(
+            Row::new(
+                format!("first validation step: fine-tuned / scratch, {few_n} samples"),
+                c.describe(iterations),
+                "fine-tuning about 20× sooner",
+            )
+            .of("validation ē ≤", format!("{:.1} mm", c.threshold_mm)),
+        );
     }
     rows.push(Row::new("largest displacement in the target test set", fmt(max_displacement(test) * 1e3, 1, "mm"), ""));
 
