@@ -204,16 +204,20 @@ pub fn fit(
         .map_or(directions.nrows(), |p| p + 1)
         .min(directions.nrows());
     let input_components = directions.subrows(0, components).to_owned();
-    let features = |fields: &[Vec<f32>]| {
-        mul_t(centre_in(&read_inputs(fields)).as_ref(), input_components.as_ref(), training_par())
-    };
-    // What the regression learns: the modal coefficients, less the prior's.
-    let residual = |coeffs: &Mat<f64>, fields: &[Vec<f32>], sample: &dyn Fn(usize) -> usize| {
-        let p =
-            prior_matrix.as_ref().map(|a| mul_t(centre_in(&read_inputs(fields)).as_ref(), a.as_ref(), training_par()));
-        Mat::from_fn(fields.len(), coeffs.ncols(), |i, j| {
+    // Each set of inputs read and centred once: its features, and what the regression learns for it
+    // (the modal coefficients of sample `sample(i)`, less the prior's; with a prior the features are
+    // the leading prior coefficients).
+    let read = |fields: &[Vec<f32>], coeffs: &Mat<f64>, sample: &dyn Fn(usize) -> usize| {
+        let x = centre_in(&read_inputs(fields));
+        let p = prior_matrix.as_ref().map(|a| mul_t(x.as_ref(), a.as_ref(), training_par()));
+        let features = match &p {
+            Some(p) => p.subcols(0, components).to_owned(),
+            None => mul_t(x.as_ref(), input_components.as_ref(), training_par()),
+        };
+        let targets = Mat::from_fn(fields.len(), coeffs.ncols(), |i, j| {
             coeffs[(sample(i), j)] - p.as_ref().map_or(0.0, |p| p[(i, j)])
-        })
+        });
+        (features, targets)
     };
 
     // The regression's training set: the samples, then their corrupted copies.
@@ -226,8 +230,7 @@ pub fn fit(
             fields.push(input);
         }
     }
-    let f_train = features(&fields);
-    let y_coeffs = residual(&coeffs_train, &fields, &|i| i % n);
+    let (f_train, y_coeffs) = read(&fields, &coeffs_train, &|i| i % n);
     let val_fields: Vec<Vec<f32>> = (0..validation.len())
         .map(|i| {
             let mut input = validation.input(i).to_vec();
@@ -238,8 +241,7 @@ pub fn fit(
             Ok(input)
         })
         .collect::<Result<_>>()?;
-    let f_val = features(&val_fields);
-    let target_val = residual(&coeffs_val, &val_fields, &|i| i);
+    let (f_val, target_val) = read(&val_fields, &coeffs_val, &|i| i);
 
     // Inducing points: the clean training samples (a seeded subset above `max_inducing`).
     let inducing_rows = subset(n, config.max_inducing, config.seed ^ 0x5eed);
