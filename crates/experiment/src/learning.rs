@@ -137,6 +137,9 @@ pub(crate) fn model_dir(recipe: &Recipe) -> String {
 /// A trained network, its validation and held-out test samples and its learning curve.
 pub(crate) struct Trained {
     pub model: Model,
+    /// The training samples and the split they come from (recorded in the model).
+    pub train: Samples,
+    pub record: learn::Split,
     pub validation: Samples,
     pub test: Samples,
     pub split: [usize; 3],
@@ -202,6 +205,8 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
     Ok(Trained {
         split: [train.len(), validation.len(), test.len()],
         model: Model::UNet(std::sync::Arc::new(outcome.model)),
+        train,
+        record: split,
         validation,
         test,
         curve: outcome.curve,
@@ -209,21 +214,19 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
     })
 }
 
-/// A reduced-order model fitted on the split of `recipe` (the U-Net's), with the linear-elastic
-/// response at rest of the data's scenario as its physics prior; its fit time (s).
+/// A reduced-order model fitted on the training and validation samples of the network `t` (its
+/// split), with the linear-elastic response at rest of the data's scenario as its physics prior;
+/// its fit time (s).
 pub(crate) fn fit_rom_with_prior(
     data: &Generated,
-    recipe: &Recipe,
+    t: &Trained,
 ) -> Result<(std::sync::Arc<learn::rom::ReducedModel>, learn::rom::RomReport, f64)> {
-    let all = data.dataset.load_all()?;
-    let policy = recipe.split_policy();
-    let (split, [train, validation, _]) = policy.apply(&all)?;
     let manifest = data.dataset.manifest();
     let start = std::time::Instant::now();
     let mut prior = data.scenario.rest_response(&data.scenario_dir, manifest)?;
-    let context = learn::rom::Context::of_dataset(manifest, split);
-    let (model, report) =
-        learn::rom::fit(&train, &validation, &learn::rom::RomConfig::default(), context, Some(&mut prior))?;
+    let context = learn::rom::Context::of_dataset(manifest, t.record.clone());
+    let config = learn::rom::RomConfig::default();
+    let (model, report) = learn::rom::fit(&t.train, &t.validation, &config, context, Some(&mut prior))?;
     Ok((std::sync::Arc::new(model), report, start.elapsed().as_secs_f64()))
 }
 
@@ -319,7 +322,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
     let timing = learn::time_prediction(|x| predictor.predict(x), &input, 3, 20)?;
     // The reduced-order model on the same split, and the U-Net's predictions projected on its basis.
     progress("fitting the reduced-order model with the linear-elastic prior");
-    let (fitted, rom_fit, rom_seconds) = fit_rom_with_prior(&data, &recipe)?;
+    let (fitted, rom_fit, rom_seconds) = fit_rom_with_prior(&data, &t)?;
     let rom = Model::Reduced(fitted.clone());
     let rom_report = learn::evaluate(&rom, &t.test, &Corruption::default(), 0, Compute::Cpu)?;
     let rom_predictor = rom.predictor(Compute::Cpu)?;
