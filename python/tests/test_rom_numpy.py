@@ -41,7 +41,8 @@ def numpy_predict(d, x):
     rom = m["rom"]
     v = x[a("input_mask").astype(bool)] - a("input_mean")
     prior = rom.get("prior") is not None
-    f = (a("prior")[: rom["input_components"]] if prior else a("input_components")) @ v
+    r = a("prior") if prior else a("input_components")
+    f = a("feature_scales") * (r[: rom["input_components"]] @ v)
     z = a("inducing")
     d2 = ((z - f) ** 2).sum(1) / rom["length_scale"] ** 2
     if rom["kernel"] == "rbf":

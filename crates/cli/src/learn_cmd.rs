@@ -324,11 +324,12 @@ fn train_rom(
         println!("prior      {prior}");
     }
     println!(
-        "regression {} kernel, length scale {:.4e} {}, noise {:.0e}; {} inducing points ({}); chosen on validation",
+        "regression {} kernel, length scale {:.4e} {}, noise {:.0e}, features scaled by their spread^-{}; {} inducing points ({}); chosen on validation",
         info.kernel.name(),
         info.length_scale,
         if info.prior.is_some() { &model.target_unit } else { &model.input_unit },
         info.noise,
+        info.feature_exponent,
         info.inducing,
         if info.exact { "exact Gaussian process" } else { "Nyström" }
     );

@@ -72,11 +72,31 @@ pub struct RomReport {
     /// Share of the validation nodes whose error lies within twice the calibrated standard
     /// deviation (0.95 by construction, up to ties).
     pub val_coverage: f64,
-    /// Every candidate tried: kernel, length scale, noise, modes, validation mean squared error of
-    /// the coefficients (m²).
-    pub candidates: Vec<(Kernel, f64, f64, usize, f64)>,
+    /// Every candidate tried, with its validation error.
+    pub candidates: Vec<Candidate>,
 }
 
+/// One set of hyper-parameters tried on validation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Candidate {
+    /// The features' scaling exponent ([`RomInfo::feature_exponent`]).
+    pub feature_exponent: f64,
+    /// The kernel.
+    pub kernel: Kernel,
+    /// Its length scale.
+    pub length_scale: f64,
+    /// The noise ratio.
+    pub noise: f64,
+    /// The number of modes.
+    pub modes: usize,
+    /// Mean over the validation samples of their root-mean-square node error (m).
+    pub val_error: f64,
+}
+
+/// Candidate exponents of the features' scaling: each feature is divided by its training spread
+/// (relative to the first feature's) to this power. 0 compares the features as they are, in
+/// which the leading ones dominate; ¼ gives the smaller ones more say.
+const FEATURE_EXPONENTS: [f64; 2] = [0.0, 0.25];
 /// Candidate length scales, as multiples of the median distance between training features.
 const SCALES: [f64; 6] = [0.125, 0.25, 0.5, 1.0, 2.0, 4.0];
 /// Candidate noise ratios (noise variance over the kernel's).
@@ -245,44 +265,56 @@ pub fn fit(
 
     // Inducing points: the clean training samples (a seeded subset above `max_inducing`).
     let inducing_rows = subset(n, config.max_inducing, config.seed ^ 0x5eed);
-    let inducing = Mat::from_fn(inducing_rows.len(), components, |i, c| f_train[(inducing_rows[i], c)]);
     let exact = inducing_rows.len() == n && config.noise_copies == 0;
-    let base_scale = median_distance(inducing.as_ref()).max(f64::MIN_POSITIVE);
-    let (z2, t2, v2) = (row_norms2(inducing.as_ref()), row_norms2(f_train.as_ref()), row_norms2(f_val.as_ref()));
+    let spread: Vec<f64> = (0..components)
+        .map(|j| {
+            let mean = (0..n).map(|i| f_train[(i, j)]).sum::<f64>() / n as f64;
+            ((0..n).map(|i| (f_train[(i, j)] - mean).powi(2)).sum::<f64>() / n as f64).sqrt()
+        })
+        .collect();
 
-    // Choice on validation.
+    // Choice on validation, by each sample's root-mean-square node error (inside the chosen
+    // modes, beyond them and outside the basis).
     let mode_counts: Vec<usize> =
         MODES.iter().copied().filter(|&r| r < basis.nrows()).chain(std::iter::once(basis.nrows())).collect();
-    let mut candidates = Vec::new();
-    let mut best: Option<(f64, Kernel, f64, f64, usize)> = None;
-    for kernel in [Kernel::Rbf, Kernel::Matern52] {
-        for &s in &SCALES {
-            let scale = s * base_scale;
-            let fitted = Regression::new(kernel, scale, &inducing, &z2, &f_train, &t2, &y_coeffs)?;
-            let k_val = kernel_matrix(kernel, scale, f_val.as_ref(), &v2, inducing.as_ref(), &z2, training_par());
-            for &noise in &NOISES {
-                let predicted = mul(k_val.as_ref(), fitted.weights(noise).as_ref(), training_par());
-                for &r in &mode_counts {
-                    let mse = (0..validation.len())
-                        .map(|i| {
-                            let inside: f64 = (0..r).map(|j| (target_val[(i, j)] - predicted[(i, j)]).powi(2)).sum();
-                            let beyond: f64 = (r..basis.nrows()).map(|j| coeffs_val[(i, j)].powi(2)).sum();
-                            inside + beyond + outside_val[i]
-                        })
-                        .sum::<f64>()
-                        / validation.len() as f64;
-                    candidates.push((kernel, scale, noise, r, mse));
-                    if best.is_none_or(|b| mse < b.0) {
-                        best = Some((mse, kernel, scale, noise, r));
+    let node_entries = out_entries.len() as f64 / CHANNELS as f64;
+    let mut candidates: Vec<Candidate> = Vec::new();
+    for &feature_exponent in &FEATURE_EXPONENTS {
+        let features = Features::new(&f_train, &f_val, feature_scales(&spread, feature_exponent), &inducing_rows);
+        for kernel in [Kernel::Rbf, Kernel::Matern52] {
+            for &s in &SCALES {
+                let length_scale = s * features.base_scale;
+                let fitted = features.regression(kernel, length_scale, &y_coeffs)?;
+                let k_val = features.validation_kernel(kernel, length_scale);
+                for &noise in &NOISES {
+                    let predicted = mul(k_val.as_ref(), fitted.weights(noise).as_ref(), training_par());
+                    for &modes in &mode_counts {
+                        let val_error = (0..validation.len())
+                            .map(|i| {
+                                let inside: f64 =
+                                    (0..modes).map(|j| (target_val[(i, j)] - predicted[(i, j)]).powi(2)).sum();
+                                let beyond: f64 = (modes..basis.nrows()).map(|j| coeffs_val[(i, j)].powi(2)).sum();
+                                ((inside + beyond + outside_val[i]) / node_entries).sqrt()
+                            })
+                            .sum::<f64>()
+                            / validation.len() as f64;
+                        candidates.push(Candidate { feature_exponent, kernel, length_scale, noise, modes, val_error });
                     }
                 }
             }
         }
     }
-    let (_, kernel, scale, noise, modes) = best.ok_or_else(|| LearnError::InvalidInput("no candidate".into()))?;
+    let chosen = candidates
+        .iter()
+        .min_by(|a, b| a.val_error.total_cmp(&b.val_error))
+        .cloned()
+        .ok_or_else(|| LearnError::InvalidInput("no candidate".into()))?;
+    let Candidate { feature_exponent, kernel, length_scale: scale, noise, modes, .. } = chosen;
 
     // The chosen model.
-    let fitted = Regression::new(kernel, scale, &inducing, &z2, &f_train, &t2, &y_coeffs)?;
+    let scales = feature_scales(&spread, feature_exponent);
+    let features = Features::new(&f_train, &f_val, scales.clone(), &inducing_rows);
+    let fitted = features.regression(kernel, scale, &y_coeffs)?;
     let weights = fitted.weights(noise).subcols(0, modes).to_owned();
     let covariance = fitted.covariance(noise);
     let amplitudes = fitted.amplitudes(noise, &y_coeffs);
@@ -315,7 +347,8 @@ pub fn fit(
             noise,
             modes,
             input_components: components,
-            inducing: inducing.nrows(),
+            feature_exponent,
+            inducing: features.inducing.nrows(),
             exact,
             calibration: 1.0,
             train_samples: n,
@@ -334,8 +367,9 @@ pub fn fit(
             None => Reader::Components(input_components),
             Some(a) => Reader::Prior(a.subrows(0, modes.max(components)).to_owned()),
         },
-        inducing,
-        inducing_norms: z2,
+        feature_scales: scales,
+        inducing_norms: features.inducing_norms,
+        inducing: features.inducing,
         weights,
         covariance,
         nodes,
@@ -380,6 +414,61 @@ pub fn fit(
         candidates,
     };
     Ok((model, report))
+}
+
+/// The scale of each feature for a scaling exponent: its spread relative to the first feature's,
+/// to the power `-exponent` (all ones for 0, and for features that do not vary).
+fn feature_scales(spread: &[f64], exponent: f64) -> Vec<f64> {
+    let first = spread.first().copied().unwrap_or(1.0);
+    spread.iter().map(|&s| if s > 0.0 && first > 0.0 { (s / first).powf(-exponent) } else { 1.0 }).collect()
+}
+
+/// The training and validation features scaled for one exponent, the inducing points among
+/// them, the squared norms of each and the median distance between inducing points.
+struct Features {
+    /// Whether the inducing points are the training samples, in order.
+    exact: bool,
+    train: Mat<f64>,
+    validation: Mat<f64>,
+    inducing: Mat<f64>,
+    train_norms: Vec<f64>,
+    validation_norms: Vec<f64>,
+    inducing_norms: Vec<f64>,
+    base_scale: f64,
+}
+
+impl Features {
+    fn new(train: &Mat<f64>, validation: &Mat<f64>, scales: Vec<f64>, inducing_rows: &[usize]) -> Features {
+        let exact = inducing_rows.len() == train.nrows();
+        let scaled = |f: &Mat<f64>| Mat::from_fn(f.nrows(), f.ncols(), |i, j| f[(i, j)] * scales[j]);
+        let (train, validation) = (scaled(train), scaled(validation));
+        let inducing = Mat::from_fn(inducing_rows.len(), train.ncols(), |i, j| train[(inducing_rows[i], j)]);
+        Features {
+            exact,
+            train_norms: row_norms2(train.as_ref()),
+            validation_norms: row_norms2(validation.as_ref()),
+            inducing_norms: row_norms2(inducing.as_ref()),
+            base_scale: median_distance(inducing.as_ref()).max(f64::MIN_POSITIVE),
+            train,
+            validation,
+            inducing,
+        }
+    }
+
+    /// The regression of `y` on the training features.
+    fn regression(&self, kernel: Kernel, scale: f64, y: &Mat<f64>) -> Result<Regression> {
+        if self.exact {
+            Regression::exact(kernel, scale, &self.train, &self.train_norms, y)
+        } else {
+            Regression::new(kernel, scale, &self.inducing, &self.inducing_norms, &self.train, &self.train_norms, y)
+        }
+    }
+
+    /// The kernel between the validation features and the inducing points.
+    fn validation_kernel(&self, kernel: Kernel, scale: f64) -> Mat<f64> {
+        let (v, z) = (self.validation.as_ref(), self.inducing.as_ref());
+        kernel_matrix(kernel, scale, v, &self.validation_norms, z, &self.inducing_norms, training_par())
+    }
 }
 
 /// The prior's modal coefficients as a matrix on the input entries (`modes × entries`): row `j`
@@ -451,6 +540,18 @@ impl Regression {
         Ok(Regression { tu, s, b, n: train.nrows() })
     }
 
+    /// [`new`](Self::new) when the inducing points are the training samples: then `Φ = V Λ^{1/2}`,
+    /// so `S = Λ`, `U = I` and `Φᵀ Y = Λ^{1/2} Vᵀ Y`, and one eigendecomposition does.
+    fn exact(kernel: Kernel, scale: f64, train: &Mat<f64>, t2: &[f64], y: &Mat<f64>) -> Result<Regression> {
+        let par = training_par();
+        let k = kernel_matrix(kernel, scale, train.as_ref(), t2, train.as_ref(), t2, par);
+        let (lambda, v) = leading_eigen(k.as_ref(), k.nrows(), KERNEL_RANK_TOLERANCE)?;
+        let vty = mul(v.transpose(), y.as_ref(), par);
+        let b = Mat::from_fn(vty.nrows(), vty.ncols(), |i, j| vty[(i, j)] * lambda[i].sqrt());
+        let tu = Mat::from_fn(v.nrows(), v.ncols(), |i, j| v[(i, j)] / lambda[j].sqrt());
+        Ok(Regression { tu, s: lambda, b, n: train.nrows() })
+    }
+
     /// The weights `A` of the mean `k_z(x)ᵀ A` (inducing × modes) for noise ratio `noise`.
     fn weights(&self, noise: f64) -> Mat<f64> {
         let scaled = Mat::from_fn(self.b.nrows(), self.b.ncols(), |k, j| self.b[(k, j)] / (self.s[k] + noise));
@@ -482,8 +583,8 @@ impl Regression {
 mod tests {
     use super::*;
 
-    /// With every training sample an inducing point, the Nyström solution is the exact
-    /// Gaussian-process mean `k(x)ᵀ (K + λ I)⁻¹ y`, computed here by a dense solve.
+    /// With every training sample an inducing point, the Nyström solution and its shortcut are the
+    /// exact Gaussian-process mean `k(x)ᵀ (K + λ I)⁻¹ y`, computed here by a dense solve.
     #[test]
     fn the_regression_is_the_exact_gaussian_process_mean() {
         let x = Mat::from_fn(12, 2, |i, d| ((i * 7 + d * 3) as f64 * 0.37).sin());
@@ -499,6 +600,12 @@ mod tests {
         let alpha = regularised.llt(faer::Side::Lower).unwrap().solve(&y);
         let diff = (&a - &alpha).norm_l2() / alpha.norm_l2();
         assert!(diff < 1e-8, "relative difference {diff}");
+        let shortcut = Regression::exact(kernel, scale, &x, &x2, &y).unwrap();
+        let diff = (&shortcut.weights(noise) - &alpha).norm_l2() / alpha.norm_l2();
+        assert!(diff < 1e-8, "the exact shortcut: relative difference {diff}");
+        assert!((&shortcut.covariance(noise) - &fitted.covariance(noise)).norm_l2() < 1e-8);
+        let (ours, theirs) = (shortcut.amplitudes(noise, &y), fitted.amplitudes(noise, &y));
+        assert!(ours.iter().zip(&theirs).all(|(a, b)| (a - b).abs() < 1e-8 * b.abs().max(1.0)), "{ours:?} {theirs:?}");
         // The predictive variance at a training point: 1 − kᵀ (K + λI)⁻¹ k.
         let g = fitted.covariance(noise);
         let k0: Vec<f64> = k.row(0).iter().copied().collect();

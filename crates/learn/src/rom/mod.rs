@@ -7,14 +7,17 @@
 //! * **Input features** — the nonzero entries of the training inputs, centred and projected on
 //!   their leading principal directions (enough to hold all but 1e-5 of their energy): a space in
 //!   which the kernel compares inputs, and which drops most of the noise of a corrupted input.
+//!   Each feature may be divided by its training spread to a power (0 or ¼, chosen on
+//!   validation), giving the smaller ones more say.
 //! * **Physics prior** (optional, force inputs) — the linear-elastic response at rest of the
 //!   dataset's problem ([`crate::data::response`]), in modal coefficients: a linear map of the
 //!   input (`prior.npy`) that the model adds to the regression, which learns the nonlinear
 //!   remainder; its leading coefficients are then the features the kernel compares.
 //! * **Regression** — a Gaussian process from the features to the modal coefficients, all modes
 //!   sharing one kernel (squared exponential or Matérn 5/2), length scale and noise ratio, each its
-//!   own amplitude (the marginal-likelihood estimate). Kernel, length scale and noise are chosen
-//!   on validation (the coefficients' mean squared error). Large datasets use a Nyström (subset of
+//!   own amplitude (the marginal-likelihood estimate). Kernel, length scale, noise, the number of
+//!   modes and the features' scaling are chosen on validation (the mean over its samples of their
+//!   root-mean-square node error). Large datasets use a Nyström (subset of
 //!   regressors) approximation: at most [`RomConfig::max_inducing`] training samples serve as the
 //!   inducing points; below that the regression is the exact Gaussian process.
 //! * **Uncertainty** — the predictive variance of the process, spread to every node through the
@@ -30,7 +33,8 @@
 //! d = "models/liver_ar_rom"; m = json.load(open(f"{d}/model.json")); a = lambda n: np.load(f"{d}/{n}.npy")
 //! x = input_field                                            # [3, nx, ny, nz], the model's input unit
 //! v = x[a("input_mask").astype(bool)] - a("input_mean")
-//! f = a("input_components") @ v                              # with a prior: f = a("prior")[:m["rom"]["input_components"]] @ v
+//! r = a("prior") if m["rom"].get("prior") else a("input_components")
+//! f = a("feature_scales") * (r[:m["rom"]["input_components"]] @ v)
 //! z = a("inducing"); d2 = ((z - f) ** 2).sum(1) / m["rom"]["length_scale"] ** 2
 //! k = np.exp(-0.5 * d2)                                      # "rbf"; "matern52": (1+r+r²/3)e^{-r}, r = √(5 d2)
 //! c = k @ a("weights")                                       # with a prior: c += a("prior")[:m["rom"]["modes"]] @ v
@@ -54,7 +58,7 @@ use crate::data::npy::{read_npy, write_f32, write_f64, write_u8};
 use crate::data::split::Split;
 use crate::{LearnError, Result};
 
-pub use fit::{fit, Context, RomConfig, RomReport};
+pub use fit::{fit, Candidate, Context, RomConfig, RomReport};
 pub use linalg::Kernel;
 
 /// The format name in a reduced-order model's `model.json`.
@@ -75,6 +79,9 @@ pub struct RomInfo {
     pub modes: usize,
     /// Number of principal components of the input the kernel compares.
     pub input_components: usize,
+    /// The features' scaling: each is divided by its training spread, relative to the first
+    /// feature's, to this power (`feature_scales.npy`).
+    pub feature_exponent: f64,
     /// Number of inducing points (the training samples when the regression is exact).
     pub inducing: usize,
     /// Whether the regression is the exact Gaussian process (else its Nyström approximation).
@@ -135,6 +142,8 @@ pub struct ReducedModel {
     input_mean: Vec<f64>,
     /// How the centred input is read.
     reader: Reader,
+    /// The factor on each feature (`components`).
+    feature_scales: Vec<f64>,
     /// `inducing × components`, and their squared norms.
     inducing: Mat<f64>,
     inducing_norms: Vec<f64>,
@@ -188,6 +197,7 @@ impl ReducedModel {
                 (coefficients[..features].to_vec(), coefficients[..modes].to_vec())
             }
         };
+        let features: Vec<f64> = features.iter().zip(&self.feature_scales).map(|(f, s)| f * s).collect();
         let norm: f64 = features.iter().map(|v| v * v).sum();
         let cross = gemv(self.inducing.as_ref(), &features);
         let k = cross
@@ -302,6 +312,7 @@ impl ReducedModel {
                 write_f32(&dir.join("prior.npy"), &[a.nrows(), a.ncols()], &values)?;
             }
         }
+        write_f64(&dir.join("feature_scales.npy"), &[self.feature_scales.len()], &self.feature_scales)?;
         write_matrix(&dir.join("inducing.npy"), self.inducing.as_ref())?;
         write_matrix(&dir.join("weights.npy"), self.weights.as_ref())?;
         write_matrix(&dir.join("covariance.npy"), self.covariance.as_ref())?;
@@ -357,6 +368,7 @@ impl ReducedModel {
                 None => Reader::Components(arrays.matrix("input_components", k, input_entries.len())?),
                 Some(_) => Reader::Prior(arrays.matrix("prior", k.max(r), input_entries.len())?),
             },
+            feature_scales: arrays.vector("feature_scales", k)?,
             inducing: arrays.matrix("inducing", m, k)?,
             weights: arrays.matrix("weights", m, r)?,
             covariance: arrays.matrix("covariance", m, m)?,
