@@ -214,19 +214,20 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
     })
 }
 
-/// A reduced-order model fitted on the training and validation samples of the network `t` (its
-/// split), with the linear-elastic response at rest of the data's scenario as its physics prior;
-/// its fit time (s).
-pub(crate) fn fit_rom_with_prior(
+/// A reduced-order model fitted with `config` on the training and validation samples of the
+/// network `t` (its split), with the linear-elastic response at rest of the data's scenario as its
+/// physics prior when `prior` is set; its fit report and time (s).
+pub(crate) fn fit_rom(
     data: &Generated,
     t: &Trained,
+    config: &learn::rom::RomConfig,
+    prior: bool,
 ) -> Result<(std::sync::Arc<learn::rom::ReducedModel>, learn::rom::RomReport, f64)> {
     let manifest = data.dataset.manifest();
     let start = std::time::Instant::now();
-    let mut prior = data.scenario.rest_response(&data.scenario_dir, manifest)?;
+    let mut response = if prior { Some(data.scenario.rest_response(&data.scenario_dir, manifest)?) } else { None };
     let context = learn::rom::Context::of_dataset(manifest, t.record.clone());
-    let config = learn::rom::RomConfig::default();
-    let (model, report) = learn::rom::fit(&t.train, &t.validation, &config, context, Some(&mut prior))?;
+    let (model, report) = learn::rom::fit(&t.train, &t.validation, config, context, response.as_mut())?;
     Ok((std::sync::Arc::new(model), report, start.elapsed().as_secs_f64()))
 }
 
@@ -322,7 +323,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
     let timing = learn::time_prediction(|x| predictor.predict(x), &input, 3, 20)?;
     // The reduced-order model on the same split, and the U-Net's predictions projected on its basis.
     progress("fitting the reduced-order model with the linear-elastic prior");
-    let (fitted, rom_fit, rom_seconds) = fit_rom_with_prior(&data, &t)?;
+    let (fitted, rom_fit, rom_seconds) = fit_rom(&data, &t, &learn::rom::RomConfig::default(), true)?;
     let rom = Model::Reduced(fitted.clone());
     let rom_report = learn::evaluate(&rom, &t.test, &Corruption::default(), 0, Compute::Cpu)?;
     let rom_predictor = rom.predictor(Compute::Cpu)?;

@@ -8,11 +8,11 @@ use crate::loads::{CaseLoad, LEFT_LOBE_FRONT, RIGHT_LOBE};
 use anyhow::{Context, Result};
 use app::case::{case_methods, compare, synthetic_case, Network};
 use app::sample_view::sample_on_mesh;
-use learn::{Compute, Corruption};
+use learn::{Compute, Corruption, Model};
 use mesh::stats::{max, mean};
 use scenario::CaseScenario;
 
-use crate::learning::{dataset, error_histogram, model_dir, train, Recipe};
+use crate::learning::{dataset, error_histogram, fit_rom, model_dir, train, Recipe};
 use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 
 use app::case::AR_SCENARIO as LIVER_AR;
@@ -115,10 +115,23 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     let grid = placement.grid(t.model.grid())?;
     let (report, tre) =
         learn::evaluate_at_points(&t.model, &t.test, &Corruption::default(), 0, &grid, &markers, Compute::Cpu)?;
+    // The reduced-order model on the same split, trained on inputs as noisy as the U-Net's.
+    progress("fitting the reduced-order model");
+    let config = learn::rom::RomConfig { noise_copies: 2, corruption: recipe.corruption.clone(), ..Default::default() };
+    let (fitted, _, rom_seconds) = fit_rom(&data, &t, &config, false)?;
+    let rom = Model::Reduced(fitted);
+    let (rom_report, rom_tre) =
+        learn::evaluate_at_points(&rom, &t.test, &Corruption::default(), 0, &grid, &markers, Compute::Cpu)?;
+    let input = t.test.get(0).input;
+    let [unet_ms, rom_ms] = [&t.model, &rom].map(|model| -> Result<f64> {
+        let predictor = model.predictor(Compute::Cpu)?;
+        Ok(learn::time_prediction(|x| predictor.predict(x), &input, 3, 20)?.median * 1e3)
+    });
+    let (unet_ms, rom_ms) = (unet_ms?, rom_ms?);
     error_histogram(
         &dir.join("errors.png"),
         "Augmented-reality registration: test-sample errors",
-        &[("U-Net", &report)],
+        &[("U-Net", &report), ("reduced-order model", &rom_report)],
     )?;
     // The first test sample in the 3D viewer.
     // The mesh its samples were solved on (quadratic for a T10 scenario).
@@ -141,8 +154,9 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         let case = synthetic_case(&variant.apply(&builtin))?;
         marker_count = case.targets.len();
         // Fresh methods per case: each registers from rest, with no state from the last case.
-        let network = Network { model: &t.model, scenario: &data.scenario, dir: &data.scenario_dir };
-        let rows = compare(&case, case_methods(&builtin, &[network])?, &options);
+        let networks =
+            [&t.model, &rom].map(|model| Network { model, scenario: &data.scenario, dir: &data.scenario_dir });
+        let rows = compare(&case, case_methods(&builtin, &networks)?, &options);
         if per_method.is_empty() {
             per_method = rows.iter().map(|r| MethodTre { method: r.method.clone(), ..MethodTre::default() }).collect();
         }
@@ -192,6 +206,26 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         Row::new(
             "network on the test samples: TRE at the markers",
             format!("{} (no motion: {})", fmt(tre.errors.mean * 1e3, 2, "mm"), fmt(tre.no_motion.mean * 1e3, 1, "mm")),
+            "",
+        ),
+        Row::new(
+            "network: prediction (one sample); training",
+            format!("{} (CPU, median of 20); {iterations} steps", fmt(unet_ms, 2, "ms")),
+            "",
+        ),
+        Row::new(
+            "reduced-order model on the test samples: ē (max)",
+            format!("{} ({})", fmt(rom_report.stats.mean * 1e3, 2, "mm"), fmt(rom_report.stats.max * 1e3, 1, "mm")),
+            "",
+        ),
+        Row::new(
+            "reduced-order model on the test samples: TRE at the markers",
+            fmt(rom_tre.errors.mean * 1e3, 2, "mm"),
+            "",
+        ),
+        Row::new(
+            "reduced-order model: prediction (one sample); fit",
+            format!("{} (CPU, median of 20); {:.0} s", fmt(rom_ms, 2, "ms"), rom_seconds),
             "",
         ),
         Row::new(HELD_OUT_TRE, fmt(mean(&no_motion), 2, "mm"), "").of("registration", "no deformation"),
@@ -273,6 +307,11 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     let mut values = serde_json::Map::new();
     values.insert("test".into(), serde_json::to_value(report.stats)?);
     values.insert("test_marker_tre".into(), serde_json::to_value(tre.errors)?);
+    values.insert("prediction_ms".into(), unet_ms.into());
+    values.insert("rom_test".into(), serde_json::to_value(rom_report.stats)?);
+    values.insert("rom_test_marker_tre".into(), serde_json::to_value(rom_tre.errors)?);
+    values.insert("rom_prediction_ms".into(), rom_ms.into());
+    values.insert("rom_fit_seconds".into(), rom_seconds.into());
     for m in &per_method {
         values.insert(
             m.method.clone(),
@@ -312,6 +351,11 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
                 recipe.channels,
                 1e3 * recipe.corruption.noise_std,
                 t.timing()
+            ),
+            format!(
+                "Reduced-order model (`augsim train --method rom`): fitted on the network's training and validation \
+                 samples, with {} copies of each whose inputs carry the same noise, and tested on its test samples.",
+                config.noise_copies
             ),
             format!(
                 "Registration cases: register_case's truth ({} phantom of {}, \

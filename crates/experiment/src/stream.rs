@@ -21,7 +21,9 @@ use serde::Serialize;
 
 use crate::loads::LEFT_LOBE_FRONT;
 use crate::{ExperimentResult, Name, Progress, Row, Size};
-use app::case::{ar_network_model, corotational_model, network_options, synthetic_case, SyntheticCase, SHIPPED_MODEL};
+use app::case::{
+    ar_network_model, corotational_model, network_options, synthetic_case, SyntheticCase, SHIPPED_MODEL, SHIPPED_ROM,
+};
 
 /// Frames of the press and release.
 const FRAMES: usize = 40;
@@ -134,7 +136,7 @@ fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
 /// The TRE of a registration over the stream (and of no registration: the motion of the markers).
 const STREAM_TRE: &str = "TRE mean over frames (largest frame mean; largest)";
 
-/// Runs the experiment: the co-rotational FEM (3k T4) and the shipped network, when found.
+/// Runs the experiment: the co-rotational FEM (3k T4) and the shipped learned models, when found.
 pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let scenario = press_and_release();
     progress(&format!("simulating the press and release ({FRAMES} frames, truth of {})", scenario.truth.mesh_words()));
@@ -144,13 +146,17 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     let mut streams = Vec::new();
     progress("streaming to the co-rotational FEM");
     streams.push(stream_case("FEM co-rotational (3k T4), warm-started", &case, &options, corotational_model)?);
-    let model_path = Path::new(SHIPPED_MODEL);
-    let network_found = model_path.exists();
-    if network_found {
-        progress("streaming to the shipped network");
-        let model = Arc::new(learn::Model::load(model_path)?);
+    // The shipped learned models that are there: the U-Net, the reduced-order model.
+    let mut missing = Vec::new();
+    for (path, method) in [(SHIPPED_MODEL, "U-Net (models/liver_ar)"), (SHIPPED_ROM, "ROM (models/liver_ar_rom)")] {
+        if !Path::new(path).exists() {
+            missing.push(path);
+            continue;
+        }
+        progress(&format!("streaming to the shipped {method}"));
+        let model = Arc::new(learn::Model::load(Path::new(path))?);
         let make = move || ar_network_model(&model);
-        streams.push(stream_case("U-Net (models/liver_ar)", &case, &budgets, make)?);
+        streams.push(stream_case(method, &case, &budgets, make)?);
     }
     let rest: Vec<f64> =
         case.frames.iter().map(|f| mean(&register::target_errors(&case.targets, &f.truth)) * 1e3).collect();
@@ -184,8 +190,8 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         ];
         rows.extend(figures.map(|row| row.of("registration", &s.method)));
     }
-    if !network_found {
-        rows.push(Row::new("U-Net", format!("skipped: {SHIPPED_MODEL} not found (run from the repository)"), ""));
+    for path in missing {
+        rows.push(Row::new("learned model", format!("skipped: {path} not found (run from the repository)"), ""));
     }
     let figure = "stream.png";
     plot_stream(&dir.join(figure), &rest, &streams)?;
@@ -206,7 +212,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         format!(
             "Server in this process, client over TCP on this machine (OpenIGTLink POLYDATA in mm; answers: POINT \
              targets and STRING status). Each cloud is sent when the previous one is answered. A frame warm-started \
-             from the previous one runs at most {} iterations for the FEM and {} for the network (the first frame, \
+             from the previous one runs at most {} iterations for the FEM and {} for the learned models (the first frame, \
              from rest, up to {} and {}: the registration case's budgets).",
             options.warm_iterations, budgets.warm_iterations, options.iterations, budgets.iterations,
         ),
