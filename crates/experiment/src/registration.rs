@@ -12,7 +12,7 @@ use learn::{Compute, Corruption, Model};
 use mesh::stats::{max, mean};
 use scenario::CaseScenario;
 
-use crate::learning::{dataset, error_histogram, fit_rom, model_dir, train, Recipe};
+use crate::learning::{dataset, error_histogram, fit_rom, model_dir, prediction_seconds, train, Recipe};
 use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 
 use app::case::AR_SCENARIO as LIVER_AR;
@@ -123,11 +123,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     let (rom_report, rom_tre) =
         learn::evaluate_at_points(&rom, &t.test, &Corruption::default(), 0, &grid, &markers, Compute::Cpu)?;
     let input = t.test.get(0).input;
-    let [unet_ms, rom_ms] = [&t.model, &rom].map(|model| -> Result<f64> {
-        let predictor = model.predictor(Compute::Cpu)?;
-        Ok(learn::time_prediction(|x| predictor.predict(x), &input, 3, 20)?.median * 1e3)
-    });
-    let (unet_ms, rom_ms) = (unet_ms?, rom_ms?);
+    let (unet_ms, rom_ms) = (prediction_seconds(&t.model, &input)? * 1e3, prediction_seconds(&rom, &input)? * 1e3);
     error_histogram(
         &dir.join("errors.png"),
         "Augmented-reality registration: test-sample errors",

@@ -265,7 +265,6 @@ pub fn fit(
 
     // Inducing points: the clean training samples (a seeded subset above `max_inducing`).
     let inducing_rows = subset(n, config.max_inducing, config.seed ^ 0x5eed);
-    let exact = inducing_rows.len() == n && config.noise_copies == 0;
     let spread: Vec<f64> = (0..components)
         .map(|j| {
             let mean = (0..n).map(|i| f_train[(i, j)]).sum::<f64>() / n as f64;
@@ -279,8 +278,12 @@ pub fn fit(
         MODES.iter().copied().filter(|&r| r < basis.nrows()).chain(std::iter::once(basis.nrows())).collect();
     let node_entries = out_entries.len() as f64 / CHANNELS as f64;
     let mut candidates: Vec<Candidate> = Vec::new();
-    for &feature_exponent in &FEATURE_EXPONENTS {
-        let features = Features::new(&f_train, &f_val, feature_scales(&spread, feature_exponent), &inducing_rows);
+    let mut scalings: Vec<Features> = FEATURE_EXPONENTS
+        .iter()
+        .map(|&exponent| Features::new(&f_train, &f_val, &spread, exponent, &inducing_rows))
+        .collect();
+    for features in &scalings {
+        let feature_exponent = features.exponent;
         for kernel in [Kernel::Rbf, Kernel::Matern52] {
             for &s in &SCALES {
                 let length_scale = s * features.base_scale;
@@ -312,8 +315,11 @@ pub fn fit(
     let Candidate { feature_exponent, kernel, length_scale: scale, noise, modes, .. } = chosen;
 
     // The chosen model.
-    let scales = feature_scales(&spread, feature_exponent);
-    let features = Features::new(&f_train, &f_val, scales.clone(), &inducing_rows);
+    let at = scalings
+        .iter()
+        .position(|f| f.exponent == feature_exponent)
+        .ok_or_else(|| LearnError::InvalidInput("no candidate".into()))?;
+    let features = scalings.swap_remove(at);
     let fitted = features.regression(kernel, scale, &y_coeffs)?;
     let weights = fitted.weights(noise).subcols(0, modes).to_owned();
     let covariance = fitted.covariance(noise);
@@ -349,7 +355,7 @@ pub fn fit(
             input_components: components,
             feature_exponent,
             inducing: features.inducing.nrows(),
-            exact,
+            exact: features.exact,
             calibration: 1.0,
             train_samples: n,
             val_samples: validation.len(),
@@ -367,7 +373,7 @@ pub fn fit(
             None => Reader::Components(input_components),
             Some(a) => Reader::Prior(a.subrows(0, modes.max(components)).to_owned()),
         },
-        feature_scales: scales,
+        feature_scales: features.scales,
         inducing_norms: features.inducing_norms,
         inducing: features.inducing,
         weights,
@@ -423,9 +429,12 @@ fn feature_scales(spread: &[f64], exponent: f64) -> Vec<f64> {
     spread.iter().map(|&s| if s > 0.0 && first > 0.0 { (s / first).powf(-exponent) } else { 1.0 }).collect()
 }
 
-/// The training and validation features scaled for one exponent, the inducing points among
-/// them, the squared norms of each and the median distance between inducing points.
+/// The training and validation features scaled for one exponent (each by its spread, see
+/// [`feature_scales`]), the inducing points among them, the squared norms of each and the median distance between inducing points.
 struct Features {
+    /// The scaling exponent and the factor on each feature.
+    exponent: f64,
+    scales: Vec<f64>,
     /// Whether the inducing points are the training samples, in order.
     exact: bool,
     train: Mat<f64>,
@@ -438,12 +447,20 @@ struct Features {
 }
 
 impl Features {
-    fn new(train: &Mat<f64>, validation: &Mat<f64>, scales: Vec<f64>, inducing_rows: &[usize]) -> Features {
+    fn new(
+        train: &Mat<f64>,
+        validation: &Mat<f64>,
+        spread: &[f64],
+        exponent: f64,
+        inducing_rows: &[usize],
+    ) -> Features {
+        let scales = feature_scales(spread, exponent);
         let exact = inducing_rows.len() == train.nrows();
         let scaled = |f: &Mat<f64>| Mat::from_fn(f.nrows(), f.ncols(), |i, j| f[(i, j)] * scales[j]);
         let (train, validation) = (scaled(train), scaled(validation));
         let inducing = Mat::from_fn(inducing_rows.len(), train.ncols(), |i, j| train[(inducing_rows[i], j)]);
         Features {
+            exponent,
             exact,
             train_norms: row_norms2(train.as_ref()),
             validation_norms: row_norms2(validation.as_ref()),
@@ -452,6 +469,7 @@ impl Features {
             train,
             validation,
             inducing,
+            scales,
         }
     }
 

@@ -189,7 +189,7 @@ impl ReducedModel {
         check_prediction_input(input, self.grid)?;
         let x: Vec<f64> =
             self.input_entries.iter().zip(&self.input_mean).map(|(&e, m)| f64::from(input[e]) - m).collect();
-        let (features, prior) = match &self.reader {
+        let (mut features, prior) = match &self.reader {
             Reader::Components(p) => (gemv(p.as_ref(), &x), Vec::new()),
             Reader::Prior(a) => {
                 let coefficients = gemv(a.as_ref(), &x);
@@ -197,7 +197,7 @@ impl ReducedModel {
                 (coefficients[..features].to_vec(), coefficients[..modes].to_vec())
             }
         };
-        let features: Vec<f64> = features.iter().zip(&self.feature_scales).map(|(f, s)| f * s).collect();
+        features.iter_mut().zip(&self.feature_scales).for_each(|(f, s)| *f *= s);
         let norm: f64 = features.iter().map(|v| v * v).sum();
         let cross = gemv(self.inducing.as_ref(), &features);
         let k = cross
