@@ -83,7 +83,16 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     assert!(organ.iter().any(|l| l.starts_with("repair: filled 2 holes (3, 3 edges)")), "the holes: {organ:?}");
     let validation = &state.steps[5].lines;
     assert!(validation.iter().any(|l| l.starts_with("validation: FEM TRE")), "{validation:?}");
-    assert!(validation.iter().any(|l| l.starts_with("validation: the truth's convergence")), "{validation:?}");
+    // The truth the cases are registered against is the mesh the last convergence check accepted
+    // (the coarser of its two when converged, the finer otherwise).
+    let check = validation.iter().rfind(|l| l.starts_with("validation: the truth's convergence under")).unwrap();
+    let counts: Vec<&str> = check.split(" T10").map(|part| part.rsplit(' ').next().unwrap()).take(2).collect();
+    let used = if check.ends_with("converged (at most 10 %)") { counts[0] } else { counts[1] };
+    assert!(validation.iter().any(|l| l.contains(&format!("on a truth of {used} T10"))), "{validation:?}");
+    // Its four pushes are kept, solved or not, for a validation run again.
+    let kept = std::fs::read_dir(out.join(augsim_app::prepare::TRUTH_DIR)).unwrap();
+    let prefix = format!("truth-{used}-");
+    assert_eq!(kept.filter(|f| f.as_ref().unwrap().file_name().to_string_lossy().starts_with(&prefix)).count(), 4);
     // The set-up names the method that registered the validation's pushes the better.
     let chosen = validation.iter().find(|l| l.contains("registers with the")).expect("the chosen method");
     let tre = |what: &str| -> f64 {
