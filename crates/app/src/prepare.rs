@@ -483,9 +483,9 @@ impl Truth {
     }
 
     /// [`Truth::push`], kept in `dir` (`truth-<T10>-<push>-<force>N.npy`, or `.failed` with why it found
-    /// no equilibrium) and read back from there when kept by an earlier run: the truths' solves
-    /// are most of the validation's time. The error of a push without equilibrium is returned
-    /// as the inner one; the outer one is an I/O error.
+    /// no equilibrium) and read back from there when kept by an earlier run (then with `true`):
+    /// the truths' solves are most of the validation's time. The error of a push without
+    /// equilibrium is returned as the inner one; the outer one is an I/O error.
     fn push_kept(
         &self,
         dir: &Path,
@@ -494,19 +494,19 @@ impl Truth {
         camera: Point,
         force: f64,
         radius: f64,
-    ) -> Result<std::result::Result<Vec<f64>, String>> {
+    ) -> Result<(Solution, bool)> {
         let stem = format!("truth-{}-{push}-{force}N", self.mesh.cells.len());
         let (solved, failed) = (dir.join(format!("{stem}.npy")), dir.join(format!("{stem}.failed")));
         if let Ok(kept) = learn::data::npy::read_npy(&solved) {
             let u = kept.into_f64();
             if u.len() == 3 * self.mesh.num_nodes() {
-                return Ok(Ok(u));
+                return Ok((Ok(u), true));
             }
         }
         if let Ok(why) = std::fs::read_to_string(&failed) {
-            return Ok(Err(why));
+            return Ok((Err(why), true));
         }
-        Ok(match self.push(centre, camera, force, radius) {
+        let solution = match self.push(centre, camera, force, radius) {
             Ok(u) => {
                 learn::data::npy::write_f64(&solved, &[u.len() / 3, 3], &u)?;
                 Ok(u)
@@ -516,7 +516,8 @@ impl Truth {
                 write_atomic_bytes(&failed, why.as_bytes())?;
                 Err(why)
             }
-        })
+        };
+        Ok((solution, false))
     }
 
     /// The targets moved by the displacement `u`.
@@ -535,54 +536,32 @@ const TRUTH_TOLERANCE: f64 = 0.1;
 /// The sub-directory where the validation keeps its truths' solutions.
 pub const TRUTH_DIR: &str = "validation";
 
-/// Each push's displacement on a truth, or why it found no equilibrium under it.
-type Solutions = Vec<std::result::Result<Vec<f64>, String>>;
+/// A push's displacement on a truth, or why it found no equilibrium under it.
+type Solution = std::result::Result<Vec<f64>, String>;
 
-/// Step 6: registration of held-out cases against a quadratic truth on another mesh, refined
-/// until converged: meshed with 3, 6 or 12 times the organ's tetrahedra, the first whose targets
-/// move by at most [`TRUTH_TOLERANCE`] under its largest push on a mesh twice as fine (the finest
-/// reached otherwise, and the report says so).
-fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
-    use rand::SeedableRng;
-    use rand_distr::Distribution;
+/// Each push's [`Solution`].
+type Solutions = Vec<Solution>;
 
-    let surface = mesh::io::read_surface(dir.join("surface.stl"))?;
-    let camera = read_points_csv(&dir.join("camera.csv"))?[0];
-    let landmarks = read_points_csv(&dir.join("attach.csv"))?;
-    let targets = read_points_csv(&dir.join("targets.csv"))?;
-    let truth_of = |level: usize| {
-        Truth::new(&surface, level * options.tets, camera, &landmarks, &targets, options.attach_distance)
-    };
-    let mut truth = truth_of(TRUTH_LEVELS[0])?;
-    // The pushes, at seen nodes of the coarsest truth ordered across the line of sight.
-    let coarse = &truth.mesh;
-    let centroid: Point =
-        std::array::from_fn(|d| coarse.nodes.iter().map(|p| p[d]).sum::<f64>() / coarse.num_nodes() as f64);
-    let axis = mesh::unit(mesh::sub(centroid, camera));
-    let (across, _) = across_sight(axis);
-    let mut order = truth.seen.clone();
-    order.sort_by(|&a, &b| mesh::dot(coarse.nodes[a], across).total_cmp(&mesh::dot(coarse.nodes[b], across)));
-    let radius = tool_radius(coarse);
-    let loads: Vec<(f64, Point)> = VALIDATION_LOADS
-        .iter()
-        .map(|&(at, force)| (force, coarse.nodes[order[((order.len() - 1) as f64 * at) as usize]]))
-        .collect();
-    let kept = dir.join(TRUTH_DIR);
-    std::fs::create_dir_all(&kept).with_context(|| format!("creating {}", kept.display()))?;
-    let solve = |truth: &Truth, push: usize| -> Result<std::result::Result<Vec<f64>, String>> {
-        let (force, centre) = loads[push];
-        truth.push_kept(&kept, push, centre, camera, force, radius)
-    };
+/// The validation's truth refined until converged, from `truth` (the coarsest of
+/// [`TRUTH_LEVELS`], `truth_of` meshing the others): its largest push that a mesh twice as fine
+/// also solves is solved again there; while the `targets` move by more than
+/// [`TRUTH_TOLERANCE`] of their motion, the finer mesh becomes the truth. Returns the truth, its
+/// solutions of the `loads` (force, centre) by `solve`, and a report line per check.
+fn converged_truth(
+    mut truth: Truth,
+    truth_of: &dyn Fn(usize) -> Result<Truth>,
+    solve: &dyn Fn(&Truth, usize) -> Result<Solution>,
+    targets: &[Point],
+    loads: &[(f64, Point)],
+) -> Result<(Truth, Solutions, Vec<String>)> {
     let mut solutions: Solutions = (0..loads.len()).map(|p| solve(&truth, p)).collect::<Result<_>>()?;
     let mut lines = Vec::new();
-    // The truth's convergence: its largest solved push again on a mesh twice as fine; refined
-    // while the targets move by more than the tolerance.
     for (i, &level) in TRUTH_LEVELS.iter().enumerate().skip(1) {
         let finer = truth_of(level)?;
         let mut by_force: Vec<(usize, &Vec<f64>)> =
             solutions.iter().enumerate().filter_map(|(p, s)| s.as_ref().ok().map(|u| (p, u))).collect();
         by_force.sort_by(|a, b| loads[b.0].0.total_cmp(&loads[a.0].0));
-        let mut finer_solutions: Vec<Option<std::result::Result<Vec<f64>, String>>> = vec![None; loads.len()];
+        let mut finer_solutions: Vec<Option<Solution>> = vec![None; loads.len()];
         let mut unsolved = Vec::new();
         let mut checked = None;
         for (p, u) in by_force {
@@ -610,10 +589,10 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
             ));
             break;
         };
-        let moved = truth.targets(&targets, u);
-        let finer_moved = finer.targets(&targets, &finer_u);
+        let moved = truth.targets(targets, u);
+        let finer_moved = finer.targets(targets, &finer_u);
         let change = register::target_errors(&moved, &finer_moved);
-        let motion = mesh::stats::mean(&register::target_errors(&targets, &finer_moved));
+        let motion = mesh::stats::mean(&register::target_errors(targets, &finer_moved));
         let share = mesh::stats::mean(&change) / motion.max(f64::MIN_POSITIVE);
         let converged = share <= TRUTH_TOLERANCE;
         let last = i + 1 == TRUTH_LEVELS.len();
@@ -647,10 +626,52 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
             .collect::<Result<_>>()?;
         truth = finer;
     }
+    Ok((truth, solutions, lines))
+}
 
-    // Registration of each push the truth solved; one it found no equilibrium under is left out,
-    // and the report says so.
-    // Per method: FEM or not, the target errors, the times (ms), the pushes it failed on.
+/// Step 6: registration of held-out cases against a quadratic truth on another mesh, refined
+/// until converged: meshed with 3, 6 or 12 times the organ's tetrahedra, the first whose targets
+/// move by at most [`TRUTH_TOLERANCE`] under its largest push on a mesh twice as fine (the finest
+/// reached otherwise, and the report says so).
+fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
+    use rand::SeedableRng;
+    use rand_distr::Distribution;
+
+    let surface = mesh::io::read_surface(dir.join("surface.stl"))?;
+    let camera = read_points_csv(&dir.join("camera.csv"))?[0];
+    let landmarks = read_points_csv(&dir.join("attach.csv"))?;
+    let targets = read_points_csv(&dir.join("targets.csv"))?;
+    let truth_of = |level: usize| {
+        Truth::new(&surface, level * options.tets, camera, &landmarks, &targets, options.attach_distance)
+    };
+    let truth = truth_of(TRUTH_LEVELS[0])?;
+    // The pushes, at seen nodes of the coarsest truth ordered across the line of sight.
+    let coarse = &truth.mesh;
+    let centroid: Point =
+        std::array::from_fn(|d| coarse.nodes.iter().map(|p| p[d]).sum::<f64>() / coarse.num_nodes() as f64);
+    let axis = mesh::unit(mesh::sub(centroid, camera));
+    let (across, _) = across_sight(axis);
+    let mut order = truth.seen.clone();
+    order.sort_by(|&a, &b| mesh::dot(coarse.nodes[a], across).total_cmp(&mesh::dot(coarse.nodes[b], across)));
+    let radius = tool_radius(coarse);
+    let loads: Vec<(f64, Point)> = VALIDATION_LOADS
+        .iter()
+        .map(|&(at, force)| (force, coarse.nodes[order[((order.len() - 1) as f64 * at) as usize]]))
+        .collect();
+    let kept = dir.join(TRUTH_DIR);
+    std::fs::create_dir_all(&kept).with_context(|| format!("creating {}", kept.display()))?;
+    let read_back = std::cell::Cell::new(0);
+    let solve = |truth: &Truth, push: usize| -> Result<Solution> {
+        let (force, centre) = loads[push];
+        let (solution, kept) = truth.push_kept(&kept, push, centre, camera, force, radius)?;
+        read_back.set(read_back.get() + usize::from(kept));
+        Ok(solution)
+    };
+    let (truth, solutions, mut lines) = converged_truth(truth, &truth_of, &solve, &targets, &loads)?;
+
+    // Registration of each push the truth solved (one it found no equilibrium under is left out,
+    // and the report says so). Per method: FEM or not, the target errors, the times (ms), the
+    // pushes it failed on.
     let mut methods = [(false, Vec::new(), Vec::new(), Vec::new()), (true, Vec::new(), Vec::new(), Vec::new())];
     let mut rest_errors = Vec::new();
     let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
@@ -700,6 +721,13 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
         truth.seen.len(),
         mesh::stats::mean(&rest_errors) * 1e3
     ));
+    if read_back.get() > 0 {
+        lines.push(format!(
+            "validation: {} of the truths' solves read back from {TRUTH_DIR}/, made by an earlier run (this step's \
+             time leaves them out)",
+            read_back.get()
+        ));
+    }
     if !left_out.is_empty() {
         lines.push(format!(
             "validation: left out, the truth finding no equilibrium under them: {}",

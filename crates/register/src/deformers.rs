@@ -35,6 +35,11 @@ pub const ISOTROPIC_FRACTION: f64 = 0.05;
 /// Iterations over which the data springs reach their stiffness, ×4 per iteration.
 pub const STIFFNESS_RAMP: usize = 3;
 
+/// Most quarterings of the data springs' stiffness a failed solve is made again with: below the
+/// ramp's first stiffness too (to 4⁻⁶ of the stiffness), for a first match so poor that even the
+/// ramp's first springs would invert an element.
+pub const MAX_SOFTENING: usize = STIFFNESS_RAMP + 3;
+
 /// The loosest relative residual a solve of the registration loop is taken to: the next
 /// iteration matches again and solves again. On the press-and-release stream of the
 /// registration case (40 frames, 4 iterations per frame) 1e-3, 1e-4 and 1e-6 gave the same TRE
@@ -73,10 +78,9 @@ impl Deformer for FemDeformer {
             return Err(RegisterError::Invalid("no cloud point matches the organ surface".into()));
         }
         // A solve that fails (no equilibrium: the data springs would invert an element) is
-        // made again with springs a quarter as stiff, down to the ramp's first stiffness, so
-        // that a stream goes on where the model cannot follow the cloud all the way; from the
-        // softer equilibrium the springs stiffen again, a quarter at a time, as far as a solve
-        // succeeds.
+        // made again with springs a quarter as stiff, down to [`MAX_SOFTENING`], so that a
+        // stream goes on where the model cannot follow the cloud all the way; from the softer
+        // equilibrium the springs stiffen again, a quarter at a time, as far as a solve succeeds.
         let wanted = STIFFNESS_RAMP.saturating_sub(iteration);
         let (mut softening, mut reached): (usize, Option<Vec<f64>>) = (wanted, None);
         loop {
@@ -98,7 +102,7 @@ impl Deformer for FemDeformer {
                 }
                 Err(e) => match reached {
                     Some(u) => return Ok(u),
-                    None if softening >= STIFFNESS_RAMP => return Err(e.into()),
+                    None if softening >= MAX_SOFTENING => return Err(e.into()),
                     None => softening += 1,
                 },
             }
