@@ -217,14 +217,17 @@ def test_a_prepared_patient_registers(tmp_path):
     camera = ",".join(str(v) for v in centre + [0.0, 0.0, 300.0])
     out = run_augsim("prepare", str(tmp_path / "organ.obj"), "--camera", camera, "--attach",
                      str(tmp_path / "ligaments.csv"), "--targets", str(tmp_path / "tumour.csv"), "--samples", "30",
-                     "--tets", "800", "--out", str(tmp_path / "patient"))
+                     "--tets", "500", "--out", str(tmp_path / "patient"))
     assert "step 7/7 report" in out and "units: mm" in out and "validation: FEM TRE" in out
-    reg = augsim.Registration(patient=tmp_path / "patient")
-    assert reg.method.startswith("ROM") and reg.targets.shape == (2, 3)
-    np.testing.assert_allclose(reg.targets * 1e3, [centre, centre + [20.0, 0.0, 0.0]], atol=1e-6)
-    # The organ's top face at rest: the targets stay where they are.
-    top = reg.points[reg.points[:, 2] > reg.points[:, 2].max() - 5e-3]
-    r = reg.register(top)
-    assert np.abs(r.targets - reg.targets).max() < 2e-3
+    # By default the method the validation chose (registration.toml names it); use_fem=False: the ROM.
+    chosen = "FEM" if 'method = "fem"' in (tmp_path / "patient" / "registration.toml").read_text() else "ROM"
+    for use_fem, method in ((None, chosen), (False, "ROM")):
+        reg = augsim.Registration(patient=tmp_path / "patient", use_fem=use_fem)
+        assert reg.method.startswith(method) and reg.targets.shape == (2, 3), reg.method
+        np.testing.assert_allclose(reg.targets * 1e3, [centre, centre + [20.0, 0.0, 0.0]], atol=1e-6)
+        # The organ's top face at rest: the targets stay where they are.
+        top = reg.points[reg.points[:, 2] > reg.points[:, 2].max() - 5e-3]
+        r = reg.register(top)
+        assert np.abs(r.targets - reg.targets).max() < 2e-3
     with pytest.raises(ValueError, match="patient=DIR holds"):
         augsim.Registration(patient=tmp_path / "patient", targets=[[0.0, 0.0, 0.0]])
