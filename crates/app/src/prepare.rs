@@ -526,6 +526,15 @@ impl Truth {
     }
 }
 
+/// A tool push of the validation: where along what the camera sees (a fraction, see
+/// [`VALIDATION_LOADS`]), its force (N) and the seen node it is centred on.
+#[derive(Clone, Copy)]
+struct Push {
+    at: f64,
+    force: f64,
+    centre: Point,
+}
+
 /// The truth's meshes, in multiples of the organ's tetrahedra, coarsest first.
 const TRUTH_LEVELS: [usize; 3] = [3, 6, 12];
 
@@ -546,22 +555,22 @@ type Solutions = Vec<Solution>;
 /// [`TRUTH_LEVELS`], `truth_of` meshing the others): its largest push that a mesh twice as fine
 /// also solves is solved again there; while the `targets` move by more than
 /// [`TRUTH_TOLERANCE`] of their motion, the finer mesh becomes the truth. Returns the truth, its
-/// solutions of the `loads` (force, centre) by `solve`, and a report line per check.
+/// solutions of the `pushes` by `solve`, and a report line per check.
 fn converged_truth(
     mut truth: Truth,
     truth_of: &dyn Fn(usize) -> Result<Truth>,
     solve: &dyn Fn(&Truth, usize) -> Result<Solution>,
     targets: &[Point],
-    loads: &[(f64, Point)],
+    pushes: &[Push],
 ) -> Result<(Truth, Solutions, Vec<String>)> {
-    let mut solutions: Solutions = (0..loads.len()).map(|p| solve(&truth, p)).collect::<Result<_>>()?;
+    let mut solutions: Solutions = (0..pushes.len()).map(|p| solve(&truth, p)).collect::<Result<_>>()?;
     let mut lines = Vec::new();
     for (i, &level) in TRUTH_LEVELS.iter().enumerate().skip(1) {
         let finer = truth_of(level)?;
         let mut by_force: Vec<(usize, &Vec<f64>)> =
             solutions.iter().enumerate().filter_map(|(p, s)| s.as_ref().ok().map(|u| (p, u))).collect();
-        by_force.sort_by(|a, b| loads[b.0].0.total_cmp(&loads[a.0].0));
-        let mut finer_solutions: Vec<Option<Solution>> = vec![None; loads.len()];
+        by_force.sort_by(|a, b| pushes[b.0].force.total_cmp(&pushes[a.0].force));
+        let mut finer_solutions: Vec<Option<Solution>> = vec![None; pushes.len()];
         let mut unsolved = Vec::new();
         let mut checked = None;
         for (p, u) in by_force {
@@ -572,7 +581,7 @@ fn converged_truth(
                     break;
                 }
                 Err(e) => {
-                    unsolved.push(format!("{} N ({e})", loads[p].0));
+                    unsolved.push(format!("{} N ({e})", pushes[p].force));
                     finer_solutions[p] = Some(Err(e));
                 }
             }
@@ -607,7 +616,7 @@ fn converged_truth(
         lines.push(format!(
             "validation: the truth's convergence under the {} N push: {} T10 against {} T10, its targets move by \
              {:.2} mm more or less (largest {:.2} mm; {:.1} % of their mean motion of {:.2} mm){unsolved}; {verdict}",
-            loads[p].0,
+            pushes[p].force,
             truth.mesh.cells.len(),
             finer.mesh.cells.len(),
             mesh::stats::mean(&change) * 1e3,
@@ -627,6 +636,33 @@ fn converged_truth(
         truth = finer;
     }
     Ok((truth, solutions, lines))
+}
+
+/// One method's registrations of the validation's pushes.
+#[derive(Default)]
+struct MethodRun {
+    method: PatientMethod,
+    /// The target errors (m) of the pushes it registered.
+    errors: Vec<f64>,
+    times_ms: Vec<f64>,
+    /// The pushes it failed on, and why.
+    failed: Vec<String>,
+}
+
+impl MethodRun {
+    /// Lower is better: the pushes it failed on, then its mean TRE.
+    fn rank(&self) -> (usize, f64) {
+        let tre = if self.errors.is_empty() { f64::INFINITY } else { mesh::stats::mean(&self.errors) };
+        (self.failed.len(), tre)
+    }
+}
+
+/// How the report names a method.
+fn method_name(method: PatientMethod) -> &'static str {
+    match method {
+        PatientMethod::Fem => "FEM",
+        PatientMethod::Learned => "learned model",
+    }
 }
 
 /// Step 6: registration of held-out cases against a quadratic truth on another mesh, refined
@@ -654,31 +690,31 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
     let mut order = truth.seen.clone();
     order.sort_by(|&a, &b| mesh::dot(coarse.nodes[a], across).total_cmp(&mesh::dot(coarse.nodes[b], across)));
     let radius = tool_radius(coarse);
-    let loads: Vec<(f64, Point)> = VALIDATION_LOADS
+    let pushes: Vec<Push> = VALIDATION_LOADS
         .iter()
-        .map(|&(at, force)| (force, coarse.nodes[order[((order.len() - 1) as f64 * at) as usize]]))
+        .map(|&(at, force)| Push { at, force, centre: coarse.nodes[order[((order.len() - 1) as f64 * at) as usize]] })
         .collect();
     let kept = dir.join(TRUTH_DIR);
     std::fs::create_dir_all(&kept).with_context(|| format!("creating {}", kept.display()))?;
     let read_back = std::cell::Cell::new(0);
     let solve = |truth: &Truth, push: usize| -> Result<Solution> {
-        let (force, centre) = loads[push];
+        let Push { force, centre, .. } = pushes[push];
         let (solution, kept) = truth.push_kept(&kept, push, centre, camera, force, radius)?;
         read_back.set(read_back.get() + usize::from(kept));
         Ok(solution)
     };
-    let (truth, solutions, mut lines) = converged_truth(truth, &truth_of, &solve, &targets, &loads)?;
+    let (truth, solutions, mut lines) = converged_truth(truth, &truth_of, &solve, &targets, &pushes)?;
 
     // Registration of each push the truth solved (one it found no equilibrium under is left out,
-    // and the report says so). Per method: FEM or not, the target errors, the times (ms), the
-    // pushes it failed on.
-    let mut methods = [(false, Vec::new(), Vec::new(), Vec::new()), (true, Vec::new(), Vec::new(), Vec::new())];
+    // and the report says so).
+    let mut methods =
+        [PatientMethod::Learned, PatientMethod::Fem].map(|method| MethodRun { method, ..MethodRun::default() });
     let mut rest_errors = Vec::new();
     let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
     let noise = rand_distr::Normal::new(0.0, 0.0005).context("noise")?;
     let mut forces = Vec::new();
     let mut left_out = Vec::new();
-    for ((&(force, _), solution), &(at, _)) in loads.iter().zip(&solutions).zip(&VALIDATION_LOADS) {
+    for (&Push { at, force, .. }, solution) in pushes.iter().zip(&solutions) {
         let u = match solution {
             Ok(u) => u,
             Err(e) => {
@@ -694,15 +730,14 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
             .iter()
             .map(|&n| std::array::from_fn(|d| fine.nodes[n][d] + u[3 * n + d] + noise.sample(&mut rng)))
             .collect();
-        for (fem, errors, times, failed) in methods.iter_mut() {
-            let method = if *fem { PatientMethod::Fem } else { PatientMethod::Learned };
-            let mut registration = RegistrationSpec::patient(dir, Some(method), None, false)?.build()?;
+        for run in methods.iter_mut() {
+            let mut registration = RegistrationSpec::patient(dir, Some(run.method), None, false)?.build()?;
             match registration.register(&cloud) {
                 Ok(tracked) => {
-                    errors.extend(register::target_errors(&tracked.targets, &moved));
-                    times.push(tracked.registration.time.as_secs_f64() * 1e3);
+                    run.errors.extend(register::target_errors(&tracked.targets, &moved));
+                    run.times_ms.push(tracked.registration.time.as_secs_f64() * 1e3);
                 }
-                Err(e) => failed.push(format!("{force} N ({e:#})")),
+                Err(e) => run.failed.push(format!("{force} N ({e:#})")),
             }
         }
         forces.push(force);
@@ -734,34 +769,28 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
             left_out.join("; ")
         ));
     }
-    for (fem, errors, times, failed) in &methods {
-        let name = if *fem { "FEM" } else { "learned model" };
-        if errors.is_empty() {
-            lines.push(format!("validation: {name} failed on every push: {}", failed.join("; ")));
+    for run in &methods {
+        let name = method_name(run.method);
+        if run.errors.is_empty() {
+            lines.push(format!("validation: {name} failed on every push: {}", run.failed.join("; ")));
             continue;
         }
-        let failed = if failed.is_empty() {
+        let failed = if run.failed.is_empty() {
             String::new()
         } else {
-            format!("; failed on {} of {} pushes: {}", failed.len(), forces.len(), failed.join("; "))
+            format!("; failed on {} of {} pushes: {}", run.failed.len(), forces.len(), run.failed.join("; "))
         };
         lines.push(format!(
             "validation: {name} TRE {:.2} mm (largest {:.2} mm), {:.0} ms per registration from rest{failed}",
-            mesh::stats::mean(errors) * 1e3,
-            mesh::stats::max(errors) * 1e3,
-            mesh::stats::mean(times)
+            mesh::stats::mean(&run.errors) * 1e3,
+            mesh::stats::max(&run.errors) * 1e3,
+            mesh::stats::mean(&run.times_ms)
         ));
     }
     // The set-up registers with the method that did the better on these pushes: the one that
     // failed on fewer, then the one with the lower TRE.
-    let [learned, fem] = methods.each_ref().map(|(_, errors, _, failed)| {
-        (failed.len(), if errors.is_empty() { f64::INFINITY } else { mesh::stats::mean(errors) })
-    });
-    let chosen = if fem.0 < learned.0 || (fem.0 == learned.0 && fem.1 < learned.1) {
-        PatientMethod::Fem
-    } else {
-        PatientMethod::Learned
-    };
+    let [learned, fem] = methods.each_ref().map(MethodRun::rank);
+    let chosen = if fem < learned { PatientMethod::Fem } else { PatientMethod::Learned };
     let path = dir.join(PATIENT_FILE);
     let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
     let mut set_up: Vec<&str> = text.lines().filter(|l| !l.starts_with("method = ")).collect();
@@ -771,7 +800,7 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
     write_atomic_bytes(&path, (set_up.join("\n") + "\n").as_bytes())?;
     lines.push(format!(
         "validation: {PATIENT_FILE} registers with the {} (method = \"{}\"), the better on these pushes",
-        if chosen == PatientMethod::Fem { "FEM" } else { "learned model" },
+        method_name(chosen),
         chosen.name()
     ));
     Ok(lines)

@@ -430,7 +430,8 @@ fn feature_scales(spread: &[f64], exponent: f64) -> Vec<f64> {
 }
 
 /// The training and validation features scaled for one exponent (each by its spread, see
-/// [`feature_scales`]), the inducing points among them, the squared norms of each and the median distance between inducing points.
+/// [`feature_scales`]), the inducing points among them, the squared norms of each and the median
+/// distance between inducing points.
 struct Features {
     /// The scaling exponent and the factor on each feature.
     exponent: f64,
