@@ -189,22 +189,91 @@ impl Problem {
 
     /// Refuses a body that nothing holds against rigid motion (its stiffness would be
     /// singular): the nodes that are prescribed or tied by a spring must include three not on
-    /// one line. Without this, a forgotten `[[fixed]]` surfaces as a failed Newton solve.
-    pub(crate) fn check_held(&self) -> Result<(), FemError> {
+    /// one line, and so must every piece of the mesh that hangs on the rest by an edge or a
+    /// vertex ([`Pieces`]), counting the nodes it shares with pieces already held. Without this,
+    /// a forgotten `[[fixed]]` or a tetrahedron hanging by a vertex surfaces as a failed Newton
+    /// solve ("element inverted").
+    pub(crate) fn check_held(&self, pieces: &Pieces) -> Result<(), FemError> {
+        let mut anchored = vec![false; self.mesh.num_nodes()];
         let tied = (0..self.mesh.num_nodes()).filter(|&n| self.springs[n] > 0.0);
         let pulled = self
             .point_springs
             .iter()
             .filter(|s| s.stiffness + s.normal_stiffness > 0.0)
             .flat_map(|s| s.nodes.iter().filter(|(_, w)| *w != 0.0).map(|&(n, _)| n));
-        let anchors: Vec<Point> =
-            self.dirichlet.keys().copied().chain(tied).chain(pulled).map(|n| self.mesh.nodes[n]).collect();
-        held_by(&anchors)
+        self.dirichlet.keys().copied().chain(tied).chain(pulled).for_each(|n| anchored[n] = true);
+        self.check_anchored(pieces, anchored)
     }
 
     /// Whether the prescribed nodes alone hold the body (then it stays held whatever its springs).
-    pub(crate) fn held_by_constraints(&self) -> bool {
-        held_by(&self.dirichlet.keys().map(|&n| self.mesh.nodes[n]).collect::<Vec<_>>()).is_ok()
+    pub(crate) fn held_by_constraints(&self, pieces: &Pieces) -> bool {
+        let mut anchored = vec![false; self.mesh.num_nodes()];
+        self.dirichlet.keys().for_each(|&n| anchored[n] = true);
+        self.check_anchored(pieces, anchored).is_ok()
+    }
+
+    /// [`Problem::check_held`] with the anchored nodes given: pieces are held one after the
+    /// other, each by its anchored nodes and those it shares with a piece held before it.
+    fn check_anchored(&self, pieces: &Pieces, mut anchored: Vec<bool>) -> Result<(), FemError> {
+        let points = |nodes: &[usize], anchored: &[bool]| -> Vec<Point> {
+            nodes.iter().filter(|&&n| anchored[n]).map(|&n| self.mesh.nodes[n]).collect()
+        };
+        if pieces.nodes.len() == 1 {
+            return held_by(&points(&pieces.nodes[0], &anchored));
+        }
+        let mut held = vec![false; pieces.nodes.len()];
+        while let Some(p) = (0..held.len()).find(|&p| !held[p] && held_by(&points(&pieces.nodes[p], &anchored)).is_ok())
+        {
+            held[p] = true;
+            pieces.nodes[p].iter().for_each(|&n| anchored[n] = true);
+        }
+        let loose: Vec<usize> = (0..held.len()).filter(|&p| !held[p]).collect();
+        let Some(&first) = loose.first() else { return Ok(()) };
+        if loose.len() == held.len() {
+            // Nothing holds any piece: say so as for a body in one piece.
+            let all: Vec<usize> = (0..self.mesh.num_nodes()).collect();
+            held_by(&points(&all, &anchored))?;
+        }
+        let cells: usize = loose.iter().map(|&p| pieces.cells[p].len()).sum();
+        let volume: f64 = loose.iter().flat_map(|&p| &pieces.cells[p]).map(|&c| self.mesh.cell_volume(c)).sum();
+        let corner = self.mesh.nodes[pieces.nodes[first][0]];
+        Err(FemError::Invalid(format!(
+            "{cells} element(s) ({:.2} % of the volume) in {} piece(s) of the mesh hang on the rest by an edge or a \
+             vertex, and nothing else holds them: they can rotate freely (the first, of {} element(s) from element {}, \
+             at node ({:.4}, {:.4}, {:.4}) m); remesh the organ (e.g. more tetrahedra: `augsim mesh` and `prepare` drop \
+             such small pieces), or fix or tie nodes of each piece",
+            100.0 * volume / self.mesh.volume(),
+            loose.len(),
+            pieces.cells[first].len(),
+            pieces.cells[first][0],
+            corner[0],
+            corner[1],
+            corner[2],
+        )))
+    }
+}
+
+/// The pieces of a mesh that must each be held: its cells joined through shared faces
+/// ([`mesh::face_connected_pieces`]), with each piece's nodes.
+#[derive(Clone, Debug)]
+pub(crate) struct Pieces {
+    cells: Vec<Vec<usize>>,
+    nodes: Vec<Vec<usize>>,
+}
+
+impl Pieces {
+    pub(crate) fn of(mesh: &Mesh) -> Self {
+        let cells = mesh::face_connected_pieces(mesh);
+        let nodes = cells
+            .iter()
+            .map(|piece| {
+                let mut nodes: Vec<usize> = piece.iter().flat_map(|&c| mesh.cells.cell(c).iter().copied()).collect();
+                nodes.sort_unstable();
+                nodes.dedup();
+                nodes
+            })
+            .collect();
+        Pieces { cells, nodes }
     }
 }
 

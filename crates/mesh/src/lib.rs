@@ -33,9 +33,10 @@ pub use sampling::{sample_visible, sample_visible_boundary, SurfaceSample};
 pub use select::{Ball, Camera, Near, NodeSelection, SpaceBall};
 pub use surface::{check_closed_manifold, SurfaceReport};
 pub use tetmesh::{
-    mesh_surface, stuff, tet_quality, BoundaryFit, ImplicitDomain, SdfDomain, TetMeshOptions, TetQuality,
+    mesh_surface, stuff, tet_quality, without_small_pieces, BoundaryFit, ImplicitDomain, SdfDomain, TetMeshOptions,
+    TetQuality,
 };
-pub use topology::{boundary_faces, boundary_nodes, boundary_surface, BoundaryFace};
+pub use topology::{boundary_faces, boundary_nodes, boundary_surface, face_connected_pieces, BoundaryFace};
 
 /// A point or vector in 3D, in metres.
 pub type Point = [f64; 3];

@@ -1,4 +1,4 @@
-//! Boundary faces of a volume mesh.
+//! Boundary faces of a volume mesh, and the pieces its cells form through shared faces.
 
 use std::collections::HashMap;
 
@@ -59,6 +59,63 @@ pub fn boundary_faces(mesh: &Mesh) -> Vec<BoundaryFace> {
         .collect()
 }
 
+/// The cells grouped into pieces joined through shared faces: two cells sharing a face are in
+/// the same piece, two that share only an edge or a vertex may not be. A piece that hangs on the
+/// rest by an edge or a vertex can rotate about it at no cost of energy (a mechanism), unless
+/// something else holds it. Each piece's cells in increasing order; the pieces ordered by their
+/// first cell.
+pub fn face_connected_pieces(mesh: &Mesh) -> Vec<Vec<usize>> {
+    let faces: Vec<(usize, Vec<usize>)> = match &mesh.cells {
+        Cells::Tet4(c) => c
+            .iter()
+            .enumerate()
+            .flat_map(|(e, t)| TET_FACES.iter().map(move |f| (e, f.iter().map(|&k| t[k]).collect())))
+            .collect(),
+        Cells::Hex8(c) => c
+            .iter()
+            .enumerate()
+            .flat_map(|(e, h)| HEX_FACES.iter().map(move |f| (e, f.iter().map(|&k| h[k]).collect())))
+            .collect(),
+        Cells::Tet10(c) => c
+            .iter()
+            .enumerate()
+            .flat_map(|(e, t)| TET_FACES.iter().map(move |f| (e, f.iter().map(|&k| t[k]).collect())))
+            .collect(),
+    };
+    let mut parent: Vec<usize> = (0..mesh.cells.len()).collect();
+    fn root(parent: &mut [usize], mut a: usize) -> usize {
+        while parent[a] != a {
+            parent[a] = parent[parent[a]];
+            a = parent[a];
+        }
+        a
+    }
+    let mut first_cell: HashMap<Vec<usize>, usize> = HashMap::with_capacity(faces.len());
+    for (cell, mut key) in faces {
+        key.sort_unstable();
+        match first_cell.entry(key) {
+            std::collections::hash_map::Entry::Occupied(o) => {
+                let (a, b) = (root(&mut parent, *o.get()), root(&mut parent, cell));
+                parent[a.max(b)] = a.min(b);
+            }
+            std::collections::hash_map::Entry::Vacant(v) => {
+                v.insert(cell);
+            }
+        }
+    }
+    let mut index = vec![usize::MAX; parent.len()];
+    let mut pieces: Vec<Vec<usize>> = Vec::new();
+    for cell in 0..parent.len() {
+        let r = root(&mut parent, cell);
+        if index[r] == usize::MAX {
+            index[r] = pieces.len();
+            pieces.push(Vec::new());
+        }
+        pieces[index[r]].push(cell);
+    }
+    pieces
+}
+
 /// Sorted indices of the nodes on the boundary.
 pub fn boundary_nodes(mesh: &Mesh) -> Vec<usize> {
     let mut nodes: Vec<usize> = boundary_faces(mesh).into_iter().flat_map(|f| f.nodes).collect();
@@ -80,4 +137,46 @@ pub fn boundary_surface(mesh: &Mesh) -> TriSurface {
         })
         .collect();
     TriSurface { vertices: mesh.nodes.clone(), triangles }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A T4 mesh of the given tetrahedra, each turned to positive orientation.
+    fn oriented(nodes: &[crate::Point], tets: &[[usize; 4]]) -> Mesh {
+        let tets = tets
+            .iter()
+            .map(|&t| {
+                let q = t.map(|k| nodes[k]);
+                if crate::tet_volume(q[0], q[1], q[2], q[3]) < 0.0 {
+                    [t[0], t[1], t[3], t[2]]
+                } else {
+                    t
+                }
+            })
+            .collect();
+        Mesh::new(nodes.to_vec(), Cells::Tet4(tets)).unwrap()
+    }
+
+    #[test]
+    fn cells_sharing_only_an_edge_or_a_vertex_are_separate_pieces() {
+        let nodes = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 1.0, 1.0],
+            [-1.0, 0.0, 0.0],
+            [0.0, -1.0, 0.0],
+            [0.0, 0.0, -1.0],
+            [1.0, 1.0, -1.0],
+        ];
+        // Tetrahedra 0 and 1 share the face 1-2-3, 3 shares 1-2-4 with 1; 2 hangs on node 0 alone.
+        let mesh = oriented(&nodes, &[[0, 1, 2, 3], [1, 2, 4, 3], [0, 5, 7, 6], [1, 2, 8, 4]]);
+        assert_eq!(face_connected_pieces(&mesh), vec![vec![0, 1, 3], vec![2]]);
+        // Now 3 shares only the edge 1-2 with the others.
+        let mesh = oriented(&nodes, &[[0, 1, 2, 3], [1, 2, 4, 3], [0, 5, 7, 6], [1, 2, 8, 5]]);
+        assert_eq!(face_connected_pieces(&mesh), vec![vec![0, 1], vec![2], vec![3]]);
+    }
 }

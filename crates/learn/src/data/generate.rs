@@ -258,6 +258,15 @@ fn invalid(msg: impl Into<String>) -> LearnError {
     LearnError::InvalidInput(msg.into())
 }
 
+/// What a draw applies: its fixed set, nodal forces, the nodes a tool moves and by how much,
+/// and the nodes it observes.
+struct Draw {
+    fixed: usize,
+    f: Vec<f64>,
+    tool: Option<(Vec<usize>, Point)>,
+    observed: Vec<usize>,
+}
+
 impl Generator {
     /// Prepares the encoding and node sets; checks the configuration against the mesh. With
     /// quadratic elements (`material.order = 2`) the samples are solved, loaded and observed on
@@ -453,9 +462,8 @@ impl Generator {
         p
     }
 
-    /// Generates sample `index`: draws loads, solves, encodes.
-    /// `solvers` caches one solver per fixed set for the block of `index`.
-    fn sample(&self, index: u64, solvers: &mut HashMap<usize, StaticSolver>) -> std::result::Result<Sample, String> {
+    /// The loads and observed nodes of draw `index` (a function of the seed and the index alone).
+    fn draw(&self, index: u64) -> std::result::Result<Draw, String> {
         let mut rng = item_rng(self.config.seed, LOAD_STREAM, index);
         let fixed = rng.random_range(0..self.fixed_sets.len());
         let nn = self.mesh.num_nodes();
@@ -520,6 +528,26 @@ impl Generator {
             }
             _ => self.observed.clone(),
         };
+        Ok(Draw { fixed, f, tool, observed })
+    }
+
+    /// The static problem of draw `index`, as [`Generator::run`] solves it: to solve it
+    /// elsewhere, or with another solver.
+    pub fn draw_problem(&self, index: u64) -> std::result::Result<Problem, String> {
+        let Draw { fixed, f, tool, .. } = self.draw(index)?;
+        let mut problem = self.problem(fixed);
+        if let Some((nodes, displacement)) = tool {
+            problem.prescribe(&nodes, displacement);
+        }
+        problem.f_ext.copy_from_slice(&f);
+        Ok(problem)
+    }
+
+    /// Generates sample `index`: draws loads, solves, encodes.
+    /// `solvers` caches one solver per fixed set for the block of `index`.
+    fn sample(&self, index: u64, solvers: &mut HashMap<usize, StaticSolver>) -> std::result::Result<Sample, String> {
+        let Draw { fixed, f, tool, observed } = self.draw(index)?;
+        let nn = self.mesh.num_nodes();
         let solution = match tool {
             // The tool's nodes change from one sample to the next, and with them the system's
             // pattern: a solver of its own.

@@ -1,0 +1,143 @@
+//! augsim's static solver against CalculiX on two real livers, Neo-Hookean at ν = 0.49, held near
+//! their back and pushed: augsim's standard T4 and T10 against CalculiX's C3D4 and C3D10 on the
+//! same meshes, fixed nodes and nodal loads (`tests/data/real_organs/README.md`). CalculiX's
+//! Neo-Hookean law has the same shear and bulk moduli as augsim's but another volumetric energy
+//! (see [`calculix`]): the two agree to within a few per cent, not to the last digit.
+//!
+//! The stored CalculiX solutions are remade, with CalculiX on the PATH, by
+//! `cargo test --release -p augsim-experiment --test real_organs -- --ignored`.
+
+use std::path::{Path, PathBuf};
+
+use augsim_experiment::calculix;
+use fem::{Formulation, Law, Material, Problem, SolverOptions, StaticSolver};
+use mesh::select::{Ball, Near, NodeSelection};
+use mesh::Mesh;
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real_organs").join(name)
+}
+
+/// A liver, where it is held and where it is pushed.
+struct Organ {
+    name: &'static str,
+    held: NodeSelection,
+    push: Ball,
+    direction: [f64; 3],
+}
+
+fn organs() -> [Organ; 2] {
+    [
+        // A liver segmented from a public CT scan (AMOS), held within 25 mm of three landmarks on its
+        // back, pushed on its front.
+        Organ {
+            name: "amos_liver",
+            held: NodeSelection::Near(Near {
+                points: Vec::new(),
+                file: Some(data("amos_liver_attach.csv")),
+                distance: 0.025,
+                surface: true,
+            }),
+            push: Ball { centre: [0.0, -0.09, 0.0], radius: 0.03 },
+            direction: [0.0, 1.0, 0.0],
+        },
+        // SOFA's liver (CT-derived), 20 cm long, held along its top, the tip of its right lobe pushed sideways.
+        Organ {
+            name: "sofa_liver",
+            held: NodeSelection::Intersection(vec![
+                NodeSelection::Surface,
+                NodeSelection::Box { min: [-0.03, 0.055, -1.0], max: [0.03, 1.0, 1.0] },
+            ]),
+            push: Ball { centre: [0.09, 0.04, 0.0], radius: 0.025 },
+            direction: [0.0, 0.0, 1.0],
+        },
+    ]
+}
+
+/// The organ's mesh as read, and without the pieces that hang on it by an edge or a vertex.
+fn meshes(organ: &Organ) -> (Mesh, Mesh) {
+    let read = mesh::io::read_mesh(data(&format!("{}.vtu", organ.name))).unwrap();
+    let whole = mesh::without_small_pieces(read.clone()).unwrap();
+    (read, whole)
+}
+
+/// The organ pushed by `force` newtons, Neo-Hookean (E 5 kPa, ν 0.49), standard elements of `order`.
+fn problem(organ: &Organ, mesh: Mesh, force: f64, order: u8) -> Problem {
+    let material =
+        Material::new(Law::NeoHookean, 5000.0, 0.49).with_order(order).with_formulation(Formulation::Standard);
+    let mut p = Problem::new(mesh, material);
+    let held = organ.held.select(&p.mesh).unwrap();
+    p.fix(&held);
+    let pushed = NodeSelection::Ball(organ.push).select(&p.mesh).unwrap();
+    p.add_force(&pushed, organ.direction.map(|d| d * force));
+    p
+}
+
+/// The cases: organ, force (N), element order.
+const CASES: [(usize, f64, u8); 6] = [(0, 0.2, 1), (0, 1.0, 1), (0, 0.2, 2), (1, 0.5, 1), (1, 2.0, 1), (1, 0.5, 2)];
+
+fn reference(organ: &Organ, force: f64, order: u8) -> PathBuf {
+    data(&format!("{}_{force}N_{}.dat", organ.name, if order == 1 { "c3d4" } else { "c3d10" }))
+}
+
+fn max_norm(u: &[f64]) -> f64 {
+    u.chunks_exact(3).map(|c| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()).fold(0.0, f64::max)
+}
+
+/// A tetrahedron that hangs on the rest of the mesh by a vertex (as meshing left one in the AMOS
+/// liver) can turn about it freely: the solve is refused, saying where, instead of failing with an
+/// inverted element; without it, the same problem solves.
+#[test]
+fn a_tetrahedron_hanging_by_a_vertex_is_refused_and_the_mesh_without_it_solves() {
+    let organ = &organs()[0];
+    let (read, whole) = meshes(organ);
+    assert_eq!((read.num_nodes(), read.cells.len()), (830, 3058));
+    assert_eq!((whole.num_nodes(), whole.cells.len()), (827, 3056), "two one-element pieces dropped");
+    let error = StaticSolver::new(problem(organ, read, 0.2, 1)).unwrap().solve(&SolverOptions::default()).unwrap_err();
+    let message = error.to_string();
+    assert!(
+        message.contains("hang on the rest by an edge or a vertex") && message.contains("element 2479"),
+        "{message}"
+    );
+    let solution = StaticSolver::new(problem(organ, whole, 0.2, 1)).unwrap().solve(&SolverOptions::default()).unwrap();
+    assert!(max_norm(&solution.u) > 1e-3);
+}
+
+/// augsim's solution of every case is within 1 % of CalculiX's: its largest displacement, and the
+/// root-mean-square difference of the nodal displacements relative to it.
+#[test]
+fn real_livers_deform_as_calculix_computes() {
+    let organs = organs();
+    for (o, force, order) in CASES {
+        let organ = &organs[o];
+        let p = problem(organ, meshes(organ).1, force, order);
+        let dat = std::fs::read_to_string(reference(organ, force, order)).unwrap();
+        let peer = calculix::read_displacements(&dat, p.mesh.num_nodes()).unwrap();
+        let ours = StaticSolver::new(p).unwrap().solve(&SolverOptions::default()).unwrap().u;
+        let (a, b) = (max_norm(&ours), max_norm(&peer));
+        let rms = (ours.iter().zip(&peer).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / (ours.len() / 3) as f64).sqrt();
+        let case = format!(
+            "{} {force} N, order {order}: augsim {:.2} mm, CalculiX {:.2} mm, rms {:.3} mm",
+            organ.name,
+            1e3 * a,
+            1e3 * b,
+            1e3 * rms
+        );
+        println!("{case}");
+        assert!((a - b).abs() <= 0.01 * b && rms <= 0.01 * b, "{case}");
+    }
+}
+
+/// Writes the CalculiX solutions the test above compares with (needs `ccx`).
+#[test]
+#[ignore]
+fn write_calculix_references() {
+    let organs = organs();
+    for (o, force, order) in CASES {
+        let organ = &organs[o];
+        let p = problem(organ, meshes(organ).1, force, order);
+        let dir = tempfile::tempdir().unwrap();
+        calculix::solve(&p, dir.path()).unwrap();
+        std::fs::copy(dir.path().join("peer.dat"), reference(organ, force, order)).unwrap();
+    }
+}
