@@ -234,6 +234,13 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
         (hi[1] - lo[1]) * 1e3,
         (hi[2] - lo[2]) * 1e3
     ));
+    if quality.pieces > 1 {
+        lines.push(format!(
+            "warning: the mesh is in {} pieces joined only by edges or vertices (a part thinner than its \
+             tetrahedra): a piece that nothing holds makes every FEM solve fail; mesh it finer (--tets)",
+            quality.pieces
+        ));
+    }
     let visible = Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&organ)?;
     if visible.is_empty() {
         bail!(

@@ -137,6 +137,9 @@ fn report(mesh: &Mesh, reference: Option<f64>) -> Result<()> {
                 bail!("{} inverted tetrahedra", q.inverted);
             }
             println!("dihedral   min {:.1}°, max {:.1}°", q.min_dihedral_deg, q.max_dihedral_deg);
+            if q.pieces > 1 {
+                println!("warning    {} pieces joined only by edges or vertices: mesh finer (--tets)", q.pieces);
+            }
             print_volume(q.volume, q.reference_volume);
         }
         mesh::Cells::Tet10(_) => print_volume(mesh.volume(), reference),

@@ -107,3 +107,22 @@ fn a_dataset_held_by_an_attachment_solves_the_draws_of_one_held_by_fixed_nodes()
     let err = scenario.generator(&dir).err().expect("an attachment without a region").to_string();
     assert!(err.contains("attachment 1"), "{err}");
 }
+
+/// A dataset whose first draws fail for one reason stops after them with that reason and what to
+/// change, instead of solving every draw: here the phantom is held at a single node, about which
+/// it can turn.
+#[test]
+fn a_generation_whose_first_draws_fail_stops_and_says_what_to_change() {
+    let (mut scenario, dir) = DatasetScenario::load(Path::new("liver_forces")).unwrap();
+    scenario.dataset.samples = 2000;
+    scenario.dataset.fixed = vec![mesh::NodeSelection::List(vec![0])];
+    let tmp = tempfile::tempdir().unwrap();
+    let error = scenario.generator(&dir).unwrap().run(tmp.path(), "held_at_a_point", None, &|_, _| {}).unwrap_err();
+    let message = error.to_string();
+    assert!(message.contains("of the first") && message.contains("held at a single point"), "{message}");
+    assert!(message.contains("Change the attachments or the mesh"), "{message}");
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("manifest.json")).unwrap()).unwrap();
+    let failed = manifest["failed"].as_array().unwrap().len();
+    assert!((16..2000).contains(&failed), "{failed} draws failed before the stop");
+}

@@ -773,6 +773,12 @@ impl DatasetWriter {
         self.manifest.write(&self.dir.join(MANIFEST_FILE))
     }
 
+    /// Commits what is pending and leaves the dataset unfinished: a later run resumes after it.
+    pub fn stop(mut self) -> Result<Manifest> {
+        self.commit()?;
+        Ok(self.manifest)
+    }
+
     /// Commits what is pending and marks the dataset complete.
     pub fn finish(mut self) -> Result<Manifest> {
         self.manifest.complete = true;

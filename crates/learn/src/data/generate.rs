@@ -642,7 +642,8 @@ impl Generator {
     }
 
     /// Generates indices `range` into `dir` (resuming an unfinished dataset
-    /// there), calling `progress(done, total)` after each batch.
+    /// there), calling `progress(done, total)` after each batch. Stops with an error when most of
+    /// its first draws fail ([`EARLY_DRAWS`]), saying why and what to change.
     pub fn run(
         &self,
         dir: &Path,
@@ -680,6 +681,7 @@ impl Generator {
         let threads = rayon::current_num_threads() as u64;
         let batch = (self.config.shard_size as u64).div_ceil(BLOCK).div_ceil(threads) * threads;
         let mut next = start;
+        let mut failures: Vec<String> = Vec::new();
         progress(next - range.start as u64, total - range.start as u64);
         while next < total {
             let end = ((next / BLOCK + batch) * BLOCK).min(total);
@@ -689,14 +691,55 @@ impl Generator {
             for (i, r) in results.into_iter().flatten() {
                 match r {
                     Ok(s) => writer.push(&s)?,
-                    Err(reason) => writer.push_failure(i, reason)?,
+                    Err(reason) => {
+                        failures.push(reason.clone());
+                        writer.push_failure(i, reason)?;
+                    }
                 }
+            }
+            if let Some(why) = failing_early(&failures, end - start) {
+                writer.stop()?;
+                return Err(invalid(why));
             }
             next = end;
             progress(next - range.start as u64, total - range.start as u64);
         }
         writer.finish()
     }
+}
+
+/// A generation stops when, after at least this many draws, more than half of them failed: the
+/// draws fail for a reason of the set-up (loads, attachments, mesh), and the rest would fail too.
+pub const EARLY_DRAWS: u64 = 16;
+
+/// Why a generation that has failed on most of its first `done` draws should stop (at least
+/// [`EARLY_DRAWS`] draws, more than half failed), with the most common reason and what to change;
+/// `None` while it goes well.
+fn failing_early(failures: &[String], done: u64) -> Option<String> {
+    if done < EARLY_DRAWS || 2 * failures.len() as u64 <= done {
+        return None;
+    }
+    // Reasons of one kind differ only by their numbers (element, load factor, residual).
+    let kind = |reason: &str| -> String { reason.chars().filter(|c| !c.is_ascii_digit()).collect() };
+    let mut counts: HashMap<String, (usize, &str)> = HashMap::new();
+    for reason in failures {
+        counts.entry(kind(reason)).or_insert((0, reason)).0 += 1;
+    }
+    let (count, example) = counts.into_values().max_by_key(|(count, _)| *count)?;
+    let advice = if example.contains("hang on the rest") || example.contains("held") {
+        "the attachments or the mesh: hold the organ at three places or more, not on one line, and mesh it \
+         again (more tetrahedra)"
+    } else if example.contains("inverted") || example.contains("did not converge") || example.contains("limit point") {
+        "the loads (a smaller force or tool depth range in the scenario's [dataset.load]), or the attachments \
+         (an organ held at one small place swings far); check one draw's problem with `augsim solve`"
+    } else {
+        "the scenario's loads, attachments or mesh"
+    };
+    Some(format!(
+        "{} of the first {done} draws failed, {count} of them as \"{example}\": stopped, the rest would fail \
+         too (every reason is in the dataset's manifest.json). Change {advice}",
+        failures.len()
+    ))
 }
 
 fn check_range(r: &[f64; 2], what: &str) -> Result<()> {
