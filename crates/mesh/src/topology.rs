@@ -23,9 +23,9 @@ pub struct BoundaryFace {
     pub nodes: Vec<usize>,
 }
 
-/// All faces that belong to exactly one cell, in cell order.
-pub fn boundary_faces(mesh: &Mesh) -> Vec<BoundaryFace> {
-    let faces: Vec<(usize, Vec<usize>)> = match &mesh.cells {
+/// Every face of every cell, outward, with its cell, in cell order.
+fn cell_faces(mesh: &Mesh) -> Vec<(usize, Vec<usize>)> {
+    match &mesh.cells {
         Cells::Tet4(c) => c
             .iter()
             .enumerate()
@@ -41,7 +41,12 @@ pub fn boundary_faces(mesh: &Mesh) -> Vec<BoundaryFace> {
             .enumerate()
             .flat_map(|(e, t)| TET10_FACES.iter().map(move |f| (e, f.iter().map(|&k| t[k]).collect())))
             .collect(),
-    };
+    }
+}
+
+/// All faces that belong to exactly one cell, in cell order.
+pub fn boundary_faces(mesh: &Mesh) -> Vec<BoundaryFace> {
+    let faces = cell_faces(mesh);
     let mut count: HashMap<Vec<usize>, u32> = HashMap::with_capacity(faces.len());
     for (_, f) in &faces {
         let mut key = f.clone();
@@ -65,23 +70,7 @@ pub fn boundary_faces(mesh: &Mesh) -> Vec<BoundaryFace> {
 /// something else holds it. Each piece's cells in increasing order; the pieces ordered by their
 /// first cell.
 pub fn face_connected_pieces(mesh: &Mesh) -> Vec<Vec<usize>> {
-    let faces: Vec<(usize, Vec<usize>)> = match &mesh.cells {
-        Cells::Tet4(c) => c
-            .iter()
-            .enumerate()
-            .flat_map(|(e, t)| TET_FACES.iter().map(move |f| (e, f.iter().map(|&k| t[k]).collect())))
-            .collect(),
-        Cells::Hex8(c) => c
-            .iter()
-            .enumerate()
-            .flat_map(|(e, h)| HEX_FACES.iter().map(move |f| (e, f.iter().map(|&k| h[k]).collect())))
-            .collect(),
-        Cells::Tet10(c) => c
-            .iter()
-            .enumerate()
-            .flat_map(|(e, t)| TET_FACES.iter().map(move |f| (e, f.iter().map(|&k| t[k]).collect())))
-            .collect(),
-    };
+    let faces = cell_faces(mesh);
     let mut parent: Vec<usize> = (0..mesh.cells.len()).collect();
     fn root(parent: &mut [usize], mut a: usize) -> usize {
         while parent[a] != a {

@@ -531,18 +531,6 @@ impl Generator {
         Ok(Draw { fixed, f, tool, observed })
     }
 
-    /// The static problem of draw `index`, as [`Generator::run`] solves it: to solve it
-    /// elsewhere, or with another solver.
-    pub fn draw_problem(&self, index: u64) -> std::result::Result<Problem, String> {
-        let Draw { fixed, f, tool, .. } = self.draw(index)?;
-        let mut problem = self.problem(fixed);
-        if let Some((nodes, displacement)) = tool {
-            problem.prescribe(&nodes, displacement);
-        }
-        problem.f_ext.copy_from_slice(&f);
-        Ok(problem)
-    }
-
     /// Generates sample `index`: draws loads, solves, encodes.
     /// `solvers` caches one solver per fixed set for the block of `index`.
     fn sample(&self, index: u64, solvers: &mut HashMap<usize, StaticSolver>) -> std::result::Result<Sample, String> {
