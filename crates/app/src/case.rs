@@ -15,8 +15,8 @@ use learn::Model;
 
 use anyhow::{anyhow, bail, Context, Result};
 use register::{
-    Deformer, FemDeformer, FrameOutcome, HybridDeformer, NetworkDeformer, Organ, Registration, RegistrationOptions,
-    RigidTransform, Summary,
+    shape, Deformer, FemDeformer, FrameOutcome, HybridDeformer, NetworkDeformer, Organ, Registration,
+    RegistrationOptions, RigidTransform, ShapeDeformer, ShapeOptions, Summary,
 };
 use scenario::registration::{CameraSpec, MethodKind, Misalignment};
 use scenario::{CaseScenario, DatasetScenario, MeshSource};
@@ -235,6 +235,32 @@ pub fn network_from_truth(case: &SyntheticCase, organ: &Organ, network: &Network
     Ok(register::target_errors(&moved, &peak.truth))
 }
 
+/// The registration of a learned model on its scenario's organ, its loop's settings from
+/// `options` (the case's settings for its learned models): a model with a basis (the reduced-order
+/// model) fits its shape space ([`ShapeDeformer`], with its own loop budgets); the U-Net fits a
+/// membrane to the matches and predicts from it ([`NetworkDeformer`]).
+pub fn learned_registration(network: &Network, options: &RegistrationOptions) -> Result<LearnedRegistration> {
+    let (organ, membrane) = network_model(network)?;
+    Ok(match network.model {
+        Model::Reduced(_) => {
+            let space = register::model_shape_space(network.model, &organ)?;
+            let deformer = ShapeDeformer::new(space, &organ, ShapeOptions::default())?;
+            LearnedRegistration { organ, deformer: Box::new(deformer), options: shape::loop_options(options) }
+        }
+        Model::UNet(_) => LearnedRegistration { organ, deformer: Box::new(membrane), options: options.clone() },
+    })
+}
+
+/// A learned model's registration method ([`learned_registration`]).
+pub struct LearnedRegistration {
+    /// Its scenario's organ.
+    pub organ: Organ,
+    /// How it deforms.
+    pub deformer: Box<dyn Deformer + Send>,
+    /// The loop's settings.
+    pub options: RegistrationOptions,
+}
+
 /// [`network_model`] of `model` trained on [`ar_scenario`] (e.g. the shipped `models/liver_ar`).
 pub fn ar_network_model(model: &Model) -> Result<(Organ, NetworkDeformer)> {
     network_model(&Network { model, scenario: &ar_scenario(), dir: Path::new("") })
@@ -258,16 +284,24 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
         match (spec.kind, spec.material, networks.first()) {
             (MethodKind::Fem, Some(material), _) => {
                 let (organ, deformer) = fem_model_fixed_on(mesh.clone(), material, &scenario.truth.fixed)?;
-                out.push(Method { name, organ, deformer: Box::new(deformer), iterations, warm_iterations });
+                out.push(Method { name, organ, deformer: Box::new(deformer), iterations, warm_iterations, max_points: None });
             }
             (MethodKind::Fem, None, _) => {
                 bail!("method {name:?}: a FEM method needs a material")
             }
             (MethodKind::Network, _, Some(_)) => {
+                let budgets = with_budgets(&scenario.registration, iterations, warm_iterations, None);
                 for network in networks {
-                    let (organ, deformer) = network_model(network)?;
+                    let learned = learned_registration(network, &budgets)?;
                     let name = network.model.method().display_name().to_string();
-                    out.push(Method { name, organ, deformer: Box::new(deformer), iterations, warm_iterations });
+                    if matches!(network.model, Model::Reduced(_)) {
+                        // The match-and-membrane loop of the same model, beside its shape fit.
+                        let (organ, deformer) = network_model(network)?;
+                        let name = format!("{name}, membrane loop");
+                        out.push(Method::with_options(name, organ, Box::new(deformer), &budgets));
+                    }
+                    let LearnedRegistration { organ, deformer, options } = learned;
+                    out.push(Method::with_options(name, organ, deformer, &options));
                 }
             }
             (MethodKind::Hybrid, Some(material), Some(network)) => {
@@ -283,8 +317,8 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
                     );
                 }
                 let network_iterations = spec.network_iterations.unwrap_or(1);
-                let deformer = HybridDeformer::new(deformer, fem, network_iterations)?;
-                out.push(Method { name, organ, deformer: Box::new(deformer), iterations, warm_iterations });
+                let deformer = HybridDeformer::new(Box::new(deformer), fem, network_iterations)?;
+                out.push(Method { name, organ, deformer: Box::new(deformer), iterations, warm_iterations, max_points: None });
             }
             (MethodKind::Hybrid, None, _) => bail!("method {name:?}: a hybrid method needs a material"),
             (MethodKind::Network | MethodKind::Hybrid, _, None) => {}
@@ -301,14 +335,20 @@ pub fn network_options(scenario: &CaseScenario) -> Result<RegistrationOptions> {
         .iter()
         .find(|m| m.kind == MethodKind::Network)
         .context("the registration case has no network method")?;
-    Ok(with_budgets(&scenario.registration, spec.iterations, spec.warm_iterations))
+    Ok(with_budgets(&scenario.registration, spec.iterations, spec.warm_iterations, None))
 }
 
-/// `options` with a method's own iteration budgets, where it has them.
-fn with_budgets(options: &RegistrationOptions, iterations: Option<usize>, warm: Option<usize>) -> RegistrationOptions {
+/// `options` with a method's own iteration budgets and points, where it has them.
+fn with_budgets(
+    options: &RegistrationOptions,
+    iterations: Option<usize>,
+    warm: Option<usize>,
+    max_points: Option<usize>,
+) -> RegistrationOptions {
     RegistrationOptions {
         iterations: iterations.unwrap_or(options.iterations),
         warm_iterations: warm.unwrap_or(options.warm_iterations),
+        max_points: max_points.or(options.max_points),
         ..options.clone()
     }
 }
@@ -325,6 +365,29 @@ pub struct Method {
     pub iterations: Option<usize>,
     /// Most iterations of a warm-started frame, in place of the comparison's (`None`: the comparison's).
     pub warm_iterations: Option<usize>,
+    /// Most cloud points matched per iteration, in place of the comparison's (`None`: the
+    /// comparison's).
+    pub max_points: Option<usize>,
+}
+
+impl Method {
+    /// The method `name` of `organ` and `deformer`, with the iteration budgets and points of
+    /// `options`.
+    pub fn with_options(
+        name: String,
+        organ: Organ,
+        deformer: Box<dyn Deformer + Send>,
+        options: &RegistrationOptions,
+    ) -> Method {
+        Method {
+            name,
+            organ,
+            deformer,
+            iterations: Some(options.iterations),
+            warm_iterations: Some(options.warm_iterations),
+            max_points: options.max_points,
+        }
+    }
 }
 
 /// One method's registration of a comparison case.
@@ -360,7 +423,7 @@ pub fn compare(case: &SyntheticCase, methods: Vec<Method>, options: &Registratio
     methods
         .into_iter()
         .map(|m| {
-            let options = with_budgets(options, m.iterations, m.warm_iterations);
+            let options = with_budgets(options, m.iterations, m.warm_iterations, m.max_points);
             let frames = case.frames.iter().map(|f| Ok(f.cloud.clone()));
             let result = Registration::new(m.organ, m.deformer, m.name.clone(), case.targets.clone(), options)
                 .and_then(|mut registration| {

@@ -10,7 +10,7 @@ use mesh::Point;
 use register::{FemDeformer, Registration, RegistrationOptions};
 use scenario::{CaseScenario, DatasetScenario, StaticScenario};
 
-use crate::case::{network_model, network_options, organ_of, Network};
+use crate::case::{learned_registration, network_options, organ_of, Network};
 
 /// What deforms the organ.
 #[derive(Clone, Debug)]
@@ -74,9 +74,10 @@ impl RegistrationSpec {
             MethodSpec::Learned { model: model_path, scenario } => {
                 let (scenario, dir) = DatasetScenario::load(scenario)?;
                 let model = learn::Model::load(model_path)?;
-                let (organ, deformer) = network_model(&Network { model: &model, scenario: &scenario, dir: &dir })?;
+                let network = Network { model: &model, scenario: &scenario, dir: &dir };
+                let learned = learned_registration(&network, &network_options(&CaseScenario::builtin())?)?;
                 let method = format!("{} {}", model.method().display_name(), model_path.display());
-                (organ, Box::new(deformer), method, network_options(&CaseScenario::builtin())?)
+                (learned.organ, learned.deformer, method, learned.options)
             }
         };
         let targets = match &self.targets {

@@ -61,6 +61,7 @@ fn network_tre(camera: &CameraModel) -> (f64, f64, f64) {
             deformer: Box::new(deformer),
             iterations: None,
             warm_iterations: None,
+            max_points: None,
         }],
         &RegistrationOptions::default(),
     );
@@ -148,7 +149,14 @@ fn a_failing_method_is_reported_and_the_others_still_register() {
     let organ = methods[0].organ.clone();
     methods.insert(
         0,
-        Method { name: "failing".into(), organ, deformer: Box::new(Failing), iterations: None, warm_iterations: None },
+        Method {
+            name: "failing".into(),
+            organ,
+            deformer: Box::new(Failing),
+            iterations: None,
+            warm_iterations: None,
+            max_points: None,
+        },
     );
     let rows = compare(&case, methods, &scenario.registration);
     assert_eq!(rows.len(), 2);

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use app::case::{ar_scenario, case_methods, compare, synthetic_case, Network, Registered, SHIPPED_MODEL};
+use app::case::{ar_scenario, case_methods, compare, synthetic_case, Network, Registered, SHIPPED_MODEL, SHIPPED_ROM};
 use app::output::{comparison_rows, write_comparison, RunWriter};
 use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
 use mesh::Point;
@@ -311,24 +311,26 @@ fn demo(args: &RegisterArgs) -> Result<()> {
 
     let wants_network =
         scenario.models.method.iter().any(|m| matches!(m.kind, MethodKind::Network | MethodKind::Hybrid));
-    let model_path = args.model.clone().unwrap_or_else(|| PathBuf::from(SHIPPED_MODEL));
-    let model = if !wants_network {
-        None
-    } else if model_path.exists() {
-        Some(learn::Model::load(&model_path)?)
-    } else {
-        println!(
-            "U-Net      skipped: {} not found (run from the repository root, or give --model)",
-            model_path.display()
-        );
-        None
+    // The model given, or the shipped U-Net and reduced-order model.
+    let paths = match &args.model {
+        Some(path) => vec![path.clone()],
+        None => vec![PathBuf::from(SHIPPED_MODEL), PathBuf::from(SHIPPED_ROM)],
     };
+    let mut models = Vec::new();
+    for path in paths.iter().filter(|_| wants_network) {
+        if path.exists() {
+            models.push(learn::Model::load(path)?);
+        } else {
+            println!("model      skipped: {} not found (run from the repository root, or give --model)", path.display());
+        }
+    }
     let (network_scenario, network_dir) = match &args.scenario {
         Some(path) => DatasetScenario::load(path)?,
         None => (ar_scenario(), PathBuf::new()),
     };
-    let network = model.as_ref().map(|model| Network { model, scenario: &network_scenario, dir: &network_dir });
-    let methods = case_methods(&scenario, network.as_slice())?;
+    let networks: Vec<Network> =
+        models.iter().map(|model| Network { model, scenario: &network_scenario, dir: &network_dir }).collect();
+    let methods = case_methods(&scenario, &networks)?;
     let rows = compare(&case, methods, &scenario.registration);
     if rows.is_empty() {
         bail!("no method to compare");

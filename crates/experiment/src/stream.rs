@@ -22,7 +22,8 @@ use serde::Serialize;
 use crate::loads::LEFT_LOBE_FRONT;
 use crate::{ExperimentResult, Name, Progress, Row, Size};
 use app::case::{
-    ar_network_model, corotational_model, network_options, synthetic_case, SyntheticCase, SHIPPED_MODEL, SHIPPED_ROM,
+    ar_scenario, corotational_model, learned_registration, network_options, synthetic_case, Network, SyntheticCase,
+    SHIPPED_MODEL, SHIPPED_ROM,
 };
 
 /// Frames of the press and release.
@@ -66,11 +67,11 @@ pub fn press_and_release() -> CaseScenario {
 }
 
 /// Streams `case` to a server of `make` (a new registration per client) and measures it.
-pub fn stream_case<D: Deformer + Send + 'static>(
+pub fn stream_case(
     method: &str,
     case: &SyntheticCase,
     options: &RegistrationOptions,
-    make: impl Fn() -> Result<(Organ, D)> + Send + Sync + 'static,
+    make: impl Fn() -> Result<(Organ, Box<dyn Deformer + Send>)> + Send + Sync + 'static,
 ) -> Result<Stream> {
     let listener = TcpListener::bind("127.0.0.1:0").context("listening on a local port")?;
     let port = listener.local_addr()?.port();
@@ -78,7 +79,7 @@ pub fn stream_case<D: Deformer + Send + 'static>(
     let method_name = method.to_string();
     let factory = move || -> std::result::Result<Registration, String> {
         let (organ, deformer) = make().map_err(|e| format!("{e:#}"))?;
-        Registration::new(organ, Box::new(deformer), method_name.clone(), targets.clone(), options.clone())
+        Registration::new(organ, deformer, method_name.clone(), targets.clone(), options.clone())
             .map_err(|e| e.to_string())
     };
     let serve_options = ServeOptions {
@@ -145,7 +146,8 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     let budgets = network_options(&scenario)?;
     let mut streams = Vec::new();
     progress("streaming to the co-rotational FEM");
-    streams.push(stream_case("FEM co-rotational (3k T4), warm-started", &case, &options, corotational_model)?);
+    let fem = || corotational_model().map(|(organ, deformer)| (organ, Box::new(deformer) as Box<dyn Deformer + Send>));
+    streams.push(stream_case("FEM co-rotational (3k T4), warm-started", &case, &options, fem)?);
     // The shipped learned models that are there: the U-Net, the reduced-order model.
     let mut missing = Vec::new();
     for (path, method) in [(SHIPPED_MODEL, "U-Net (models/liver_ar)"), (SHIPPED_ROM, "ROM (models/liver_ar_rom)")] {
@@ -155,8 +157,13 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         }
         progress(&format!("streaming to the shipped {method}"));
         let model = Arc::new(learn::Model::load(Path::new(path))?);
-        let make = move || ar_network_model(&model);
-        streams.push(stream_case(method, &case, &budgets, make)?);
+        let budgets = budgets.clone();
+        let learned = move |model: &learn::Model| {
+            learned_registration(&Network { model, scenario: &ar_scenario(), dir: Path::new("") }, &budgets)
+        };
+        let options = learned(&model)?.options;
+        let make = move || learned(&model).map(|l| (l.organ, l.deformer));
+        streams.push(stream_case(method, &case, &options, make)?);
     }
     let rest: Vec<f64> =
         case.frames.iter().map(|f| mean(&register::target_errors(&case.targets, &f.truth)) * 1e3).collect();

@@ -110,20 +110,25 @@ impl Deformer for FemDeformer {
     }
 }
 
-/// The U-Net for the first iterations of a frame, then the finite-element model from its
-/// estimate: the network brings the surface near the cloud in a few milliseconds, so that the
+/// A learned model (the U-Net, or a shape-space fit) for the first iterations of a frame, then
+/// the finite-element model from its estimate: the network brings the surface near the cloud in a few milliseconds, so that the
 /// matches the finite-element model is pulled by are already good and its springs can take their
 /// full stiffness at once.
 pub struct HybridDeformer {
-    network: NetworkDeformer,
+    network: Box<dyn Deformer + Send>,
     fem: FemDeformer,
     network_iterations: usize,
 }
 
 impl HybridDeformer {
-    /// `network` for the first `network_iterations` iterations of a frame (at least 1), `fem`
+    /// `network` (a learned model's deformer) for the first `network_iterations` iterations of a
+    /// frame (at least 1), `fem`
     /// (on the same organ) after them.
-    pub fn new(network: NetworkDeformer, fem: FemDeformer, network_iterations: usize) -> Result<HybridDeformer> {
+    pub fn new(
+        network: Box<dyn Deformer + Send>,
+        fem: FemDeformer,
+        network_iterations: usize,
+    ) -> Result<HybridDeformer> {
         if network_iterations == 0 {
             return Err(RegisterError::Invalid("a hybrid registration needs at least one network iteration".into()));
         }
@@ -132,6 +137,11 @@ impl HybridDeformer {
 }
 
 impl Deformer for HybridDeformer {
+    fn start_frame(&mut self, warm: bool) {
+        self.network.start_frame(warm);
+        self.fem.start_frame(warm);
+    }
+
     fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>> {
         match iteration.checked_sub(self.network_iterations) {
             None => self.network.deform(observations, previous, iteration),
@@ -446,7 +456,7 @@ impl Deformer for NetworkDeformer {
         Ok(u)
     }
 
-    fn uncertainty(&self, rest_points: &[mesh::Point]) -> Option<Result<Vec<f64>>> {
+    fn uncertainty(&self, rest_points: &[mesh::Point], _stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
         let std = self.last_std.as_ref()?;
         let values: Vec<f64> = std.iter().map(|&v| f64::from(v)).collect();
         Some(self.grid.interpolate(&values, 1, rest_points).map_err(RegisterError::from))

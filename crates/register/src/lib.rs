@@ -53,6 +53,7 @@ pub mod plausibility;
 pub mod register;
 pub mod rigid;
 pub mod sequence;
+pub mod shape;
 
 pub use deformers::{FemDeformer, HybridDeformer, NetworkDeformer};
 pub use organ::{Organ, Stencil};
@@ -61,4 +62,5 @@ pub use register::{
     WARM_START_ITERATION,
 };
 pub use rigid::{rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
+pub use shape::{model_shape_space, ShapeDeformer, ShapeOptions, ShapeSpace};
 pub use sequence::{target_errors, FrameOutcome, Registration, Summary, Tracked};

@@ -29,6 +29,10 @@ pub struct PointMatch {
     pub shift: Point,
     /// Unit normal of the matched triangle, deformed.
     pub normal: Point,
+    /// The matched triangle of the organ's surface, and the point's barycentric coordinates in it.
+    pub triangle: usize,
+    /// The barycentric coordinates.
+    pub weights: [f64; 3],
 }
 
 /// A model that gives the organ's nodal displacement (3 per node) explaining observations.
@@ -38,9 +42,13 @@ pub trait Deformer {
     /// warm-started from a previous frame); `previous` is the last estimate (a warm start).
     fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>>;
 
+    /// A frame begins: warm-started from the previous frame's estimate (`warm`) or from rest.
+    fn start_frame(&mut self, _warm: bool) {}
+
     /// The predicted standard deviation (m) of the last estimate's error at `rest_points` (rest
-    /// positions inside the organ), for a deformer that predicts one (the reduced-order model).
-    fn uncertainty(&self, _rest_points: &[Point]) -> Option<Result<Vec<f64>>> {
+    /// positions inside the organ, moved by the mesh nodes of `stencils`), for a deformer that
+    /// predicts one (the learned models).
+    fn uncertainty(&self, _rest_points: &[Point], _stencils: &[Stencil]) -> Option<Result<Vec<f64>>> {
         None
     }
 }
@@ -87,6 +95,11 @@ pub struct RegistrationOptions {
     /// the lobe's underside). `None`: estimated from the cloud at the first iteration.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub view: Option<Point>,
+    /// Most cloud points matched at each iteration and in the frame's residual: an evenly spaced
+    /// subset of the cloud when it has more (`None`: every point). A fit of a few dozen shape
+    /// coefficients needs far fewer points than a cloud holds, and matching is most of its time.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_points: Option<usize>,
 }
 
 impl Default for RegistrationOptions {
@@ -102,6 +115,7 @@ impl Default for RegistrationOptions {
             capture_decay: 0.93,
             rigid: None,
             view: None,
+            max_points: None,
         }
     }
 }
@@ -126,6 +140,9 @@ impl RegistrationOptions {
         check_setting("capture_distance", self.capture_distance, self.capture_distance >= 0.0, nonnegative)?;
         let decay = self.capture_decay;
         check_setting("capture_decay", decay, decay > 0.0 && decay <= 1.0, "in (0, 1]")?;
+        if self.max_points == Some(0) {
+            return Err(RegisterError::Invalid("max_points = 0 must be at least 1".into()));
+        }
         if let Some(v) = self.view.filter(|v| !(v.iter().all(|x| x.is_finite()) && mesh::dot(*v, *v) > 0.0)) {
             return Err(RegisterError::Invalid(format!("view = {v:?} must be a finite, non-zero direction")));
         }
@@ -149,14 +166,15 @@ pub struct FrameResult {
     pub u: Vec<f64>,
     /// Match-and-deform iterations run.
     pub iterations: usize,
-    /// Mean distance from the cloud points to the registered surface (m), all points.
+    /// Mean distance from the cloud points to the registered surface (m), all points (those of
+    /// [`RegistrationOptions::max_points`] when it limits them).
     pub surface_residual: f64,
     /// The share of the cloud's points left farther than [`crate::plausibility::FAR_DISTANCE`] from the
     /// registered surface.
     pub far_share: f64,
     /// Why the result may not be believed ([`crate::plausibility::warnings`]); empty when plausible.
     pub warnings: Vec<String>,
-    /// Cloud points.
+    /// Cloud points (matched: see [`RegistrationOptions::max_points`]).
     pub points: usize,
     /// Cloud points kept as matches in the last iteration.
     pub inliers: usize,
@@ -186,6 +204,15 @@ pub fn register_frame(
         None => vec![0.0; ndof],
     };
     crate::plausibility::check_extent(organ, cloud)?;
+    let subset: Vec<Point>;
+    let cloud = match options.max_points {
+        Some(most) if cloud.len() > most => {
+            subset = (0..most).map(|i| cloud[i * cloud.len() / most]).collect();
+            &subset
+        }
+        _ => cloud,
+    };
+    deformer.start_frame(start.is_some());
     let mut surface = organ.deformed_surface(&u);
     let mut iterations = 0;
     let mut inliers = 0;
@@ -288,7 +315,13 @@ fn observations(
             }
         }
         let shift = [c[0] - p0[0], c[1] - p0[1], c[2] - p0[2]];
-        obs.matches.push(PointMatch { stencil: organ.surface_point_stencil(triangle, bary), shift, normal });
+        obs.matches.push(PointMatch {
+            stencil: organ.surface_point_stencil(triangle, bary),
+            shift,
+            normal,
+            triangle,
+            weights: bary,
+        });
     }
     obs
 }

@@ -176,7 +176,7 @@ impl Registration {
             let to_cloud = r.organ_to_cloud();
             targets.iter_mut().for_each(|p| *p = to_cloud.apply(*p));
         }
-        let target_std = self.deformer.uncertainty(&self.targets).transpose()?;
+        let target_std = self.deformer.uncertainty(&self.targets, &self.stencils).transpose()?;
         self.warm = Some(registration.u.clone());
         self.rigid = rigid.clone();
         Ok(Tracked { registration, targets, rigid, target_std })

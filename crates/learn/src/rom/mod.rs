@@ -272,6 +272,58 @@ impl ReducedModel {
         Ok(self.scatter(&out, CHANNELS))
     }
 
+    /// The model's shape space on its grid: the output mean and each mode as `[3, nx, ny, nz]`
+    /// fields (m, zero outside the organ), and the prior of the modal coefficients — the mean and
+    /// covariance (`modes × modes`, row-major) of the regression's coefficients at its inducing
+    /// points (the training samples, or a subset of them): `k(Z, Z) · weights`, plus the physics
+    /// prior's coefficients where the features hold them.
+    pub fn shape_space(&self) -> Result<GridShapeSpace> {
+        let modes = self.info.modes;
+        let mut coefficients = linalg::kernel_matrix(
+            self.info.kernel,
+            self.info.length_scale,
+            self.inducing.as_ref(),
+            &self.inducing_norms,
+            self.inducing.as_ref(),
+            &self.inducing_norms,
+            Par::rayon(0),
+        );
+        coefficients = linalg::mul(coefficients.as_ref(), self.weights.as_ref(), Par::rayon(0));
+        if matches!(self.reader, Reader::Prior(_)) {
+            // The prior's coefficients are the leading features, unscaled; only as many as there are
+            // features can be recovered.
+            if self.info.input_components < modes {
+                return Err(LearnError::InvalidInput(format!(
+                    "the model's physics prior has {modes} modes but its inducing points hold {} of them: its \
+                     coefficients' prior cannot be recovered",
+                    self.info.input_components
+                )));
+            }
+            for i in 0..coefficients.nrows() {
+                for j in 0..modes {
+                    coefficients[(i, j)] += self.inducing[(i, j)] / self.feature_scales[j];
+                }
+            }
+        }
+        let m = coefficients.nrows();
+        if m < 2 {
+            return Err(LearnError::InvalidInput("a shape prior needs at least two inducing points".into()));
+        }
+        let mean: Vec<f64> = (0..modes).map(|j| coefficients.col(j).iter().sum::<f64>() / m as f64).collect();
+        let centred = Mat::from_fn(m, modes, |i, j| coefficients[(i, j)] - mean[j]);
+        let covariance = linalg::mul(centred.transpose(), centred.as_ref(), Par::rayon(0));
+        let field = |values: &[f64]| self.scatter(values, CHANNELS);
+        Ok(GridShapeSpace {
+            mean_field: field(&self.output_mean),
+            mode_fields: (0..modes).map(|j| field(&self.basis.row(j).iter().copied().collect::<Vec<_>>())).collect(),
+            prior_mean: mean,
+            prior_covariance: (0..modes * modes)
+                .map(|e| covariance[(e / modes, e % modes)] / (m - 1) as f64)
+                .collect(),
+            floor: self.scatter(&self.floor, 1),
+        })
+    }
+
     /// Whether `json_path` (a `model.json`) holds a reduced-order model.
     pub fn is_rom_file(json_path: &Path) -> bool {
         #[derive(Deserialize)]
@@ -401,6 +453,23 @@ impl ReducedModel {
     pub fn nodes(&self) -> &[usize] {
         &self.nodes
     }
+}
+
+/// A reduced-order model's shape space on its grid ([`ReducedModel::shape_space`]): the
+/// displacement `mean + Σ_j c_j mode_j`, and a Gaussian prior of the coefficients `c`.
+#[derive(Clone, Debug)]
+pub struct GridShapeSpace {
+    /// The output mean, `[3, nx, ny, nz]` (m).
+    pub mean_field: Vec<f32>,
+    /// Each mode, `[3, nx, ny, nz]` (m per unit coefficient).
+    pub mode_fields: Vec<Vec<f32>>,
+    /// The coefficients' prior mean.
+    pub prior_mean: Vec<f64>,
+    /// Their prior covariance, `modes × modes`, row-major.
+    pub prior_covariance: Vec<f64>,
+    /// The basis's truncation variance at each grid node (m², `[nx, ny, nz]`): what no
+    /// combination of the modes holds, measured on validation.
+    pub floor: Vec<f32>,
 }
 
 /// `m · x`, on one thread (a single prediction is too small to share).

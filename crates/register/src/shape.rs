@@ -1,0 +1,540 @@
+//! Registration in a learned model's shape space: the organ's displacement is the model's mean
+//! plus a combination of its modes, `u(c) = ū + Φ c`, linear in the coefficients `c`, and so is
+//! every point of its surface. Each iteration of the registration loop matches the cloud to the
+//! current surface; [`ShapeDeformer`] then solves the small Bayesian problem
+//!
+//! ```text
+//! minimise over c   Σ_i ρ(n_i · (x_i − s_i(c)) / σ)  +  (c − μ)ᵀ Λ⁻¹ (c − μ)
+//! ```
+//!
+//! (point to plane, `x_i` a cloud point, `s_i(c)` the surface point it matched, `n_i` its
+//! normal, ρ Huber's loss at 2σ; `μ, Λ` the prior of the coefficients: the model's training
+//! coefficients from rest, the previous frame's posterior, widened, on a stream). The modes are
+//! fitted coarse to fine (the leading few first, then more) for the capture range of large
+//! motions. The posterior covariance `(Jᵀ W J / σ² + Λ⁻¹)⁻¹` gives the standard deviation of every
+//! target: the registration's own, not the regression's.
+
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+use crate::organ::{Organ, Stencil};
+use crate::register::{check_setting, Deformer, Observations};
+use crate::{RegisterError, Result};
+
+/// A model's shape space on the organ's mesh: the mean displacement and the modes, whitened by the
+/// prior of their coefficients (`u = mean + Σ_j z_j mode_j`, `z ~ N(0, I)` a priori), leading
+/// directions of the prior first.
+#[derive(Clone, Debug)]
+pub struct ShapeSpace {
+    /// The prior's mean displacement (m, 3 per mesh node).
+    mean: Vec<f64>,
+    /// The whitened modes, node-major rows: `basis[(3 n + d) · modes + j]` (m per unit of `z_j`).
+    basis: Vec<f64>,
+    modes: usize,
+    /// What the modes cannot hold, per mesh node (m²).
+    floor: Vec<f64>,
+}
+
+/// Eigenvalues of the prior covariance below this share of the largest are dropped.
+const PRIOR_RANK_TOLERANCE: f64 = 1e-10;
+
+impl ShapeSpace {
+    /// The shape space of `mean` (3 per mesh node) and `modes` (each 3 per mesh node), the
+    /// coefficients a priori of mean `prior_mean` and covariance `prior_covariance` (row-major,
+    /// symmetric positive semi-definite); `floor`: the variance the modes leave out at each node
+    /// (m²).
+    pub fn new(
+        mean: Vec<f64>,
+        modes: &[Vec<f64>],
+        prior_mean: &[f64],
+        prior_covariance: &[f64],
+        floor: Vec<f64>,
+    ) -> Result<ShapeSpace> {
+        let (r, ndof) = (modes.len(), mean.len());
+        if r == 0 || prior_mean.len() != r || prior_covariance.len() != r * r || floor.len() * 3 != ndof {
+            return Err(RegisterError::Invalid(format!(
+                "a shape space of {r} modes needs {r} prior means, {r}×{r} covariances and a floor per node \
+                 (got {}, {} and {} for {} values of the mean)",
+                prior_mean.len(),
+                prior_covariance.len(),
+                floor.len(),
+                ndof
+            )));
+        }
+        if let Some(j) = modes.iter().position(|m| m.len() != ndof) {
+            return Err(RegisterError::Invalid(format!("mode {j} has {} values, the mean {ndof}", modes[j].len())));
+        }
+        let values = mean.iter().chain(modes.iter().flatten()).chain(prior_mean).chain(prior_covariance);
+        if values.chain(&floor).any(|v| !v.is_finite()) {
+            return Err(RegisterError::Invalid("the shape space has a non-finite value".into()));
+        }
+        let covariance = DMatrix::from_row_slice(r, r, prior_covariance);
+        let eigen = nalgebra::SymmetricEigen::new((&covariance + covariance.transpose()) * 0.5);
+        let mut order: Vec<usize> = (0..r).collect();
+        order.sort_by(|&a, &b| eigen.eigenvalues[b].total_cmp(&eigen.eigenvalues[a]));
+        let largest = eigen.eigenvalues[order[0]];
+        if !(largest > 0.0) {
+            return Err(RegisterError::Invalid("the prior of the shape coefficients has no variance".into()));
+        }
+        order.retain(|&k| eigen.eigenvalues[k] > PRIOR_RANK_TOLERANCE * largest);
+        // Whitened direction k: Σ_j V_jk √λ_k mode_j.
+        let whitening: Vec<Vec<f64>> = order
+            .iter()
+            .map(|&k| {
+                let scale = eigen.eigenvalues[k].sqrt();
+                (0..r).map(|j| eigen.eigenvectors[(j, k)] * scale).collect()
+            })
+            .collect();
+        let modes_kept = whitening.len();
+        let mut basis = vec![0.0; ndof * modes_kept];
+        let mut shifted = mean;
+        for (j, mode) in modes.iter().enumerate() {
+            for (row, &value) in mode.iter().enumerate() {
+                shifted[row] += prior_mean[j] * value;
+                if value != 0.0 {
+                    let out = &mut basis[row * modes_kept..(row + 1) * modes_kept];
+                    out.iter_mut().zip(&whitening).for_each(|(o, w)| *o += w[j] * value);
+                }
+            }
+        }
+        Ok(ShapeSpace { mean: shifted, basis, modes: modes_kept, floor })
+    }
+
+    /// The number of (whitened) modes.
+    pub fn modes(&self) -> usize {
+        self.modes
+    }
+
+    /// The number of mesh nodes.
+    pub fn nodes(&self) -> usize {
+        self.floor.len()
+    }
+
+    /// The displacement (3 per mesh node) of the whitened coefficients `z` (the first `z.len()`
+    /// modes; the others at their prior mean, 0).
+    pub fn displacement(&self, z: &[f64]) -> Vec<f64> {
+        let mut u = self.mean.clone();
+        for (row, value) in u.iter_mut().enumerate() {
+            let b = &self.basis[row * self.modes..row * self.modes + z.len()];
+            *value += b.iter().zip(z).map(|(b, z)| b * z).sum::<f64>();
+        }
+        u
+    }
+
+    /// The first `k` modes at a point of stencil `stencil`, along `direction`: `Σ_j w_j dᵀ B_j`
+    /// into `out`; returns `dᵀ` of the mean there.
+    fn along(&self, stencil: &Stencil, direction: [f64; 3], out: &mut [f64]) -> f64 {
+        out.iter_mut().for_each(|o| *o = 0.0);
+        let mut mean = 0.0;
+        for &(node, w) in &stencil.0 {
+            for (d, &nd) in direction.iter().enumerate() {
+                let (row, f) = (3 * node + d, w * nd);
+                if f == 0.0 {
+                    continue;
+                }
+                mean += f * self.mean[row];
+                let b = &self.basis[row * self.modes..row * self.modes + out.len()];
+                out.iter_mut().zip(b).for_each(|(o, b)| *o += f * b);
+            }
+        }
+        mean
+    }
+}
+
+/// Iterations of a frame from rest: two per stage of [`ShapeOptions::schedule`]'s default, coarse
+/// to fine, then four of the finest.
+pub const SHAPE_ITERATIONS: usize = 8;
+
+/// Iterations of a frame warm-started from the previous one (all modes, from its posterior).
+pub const SHAPE_WARM_ITERATIONS: usize = 2;
+
+/// Cloud points matched per iteration (an evenly spaced subset of a larger cloud).
+pub const SHAPE_POINTS: usize = 1000;
+
+/// The registration loop's settings for a shape-space fit: `base` with its iteration budgets and
+/// the points it matches.
+pub fn loop_options(base: &crate::RegistrationOptions) -> crate::RegistrationOptions {
+    crate::RegistrationOptions {
+        iterations: SHAPE_ITERATIONS,
+        warm_iterations: SHAPE_WARM_ITERATIONS,
+        max_points: Some(SHAPE_POINTS),
+        ..base.clone()
+    }
+}
+
+/// Settings of the shape-space fit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ShapeOptions {
+    /// The standard deviation of a match's point-to-plane residual (m): the cloud's noise and
+    /// what the model's modes cannot follow.
+    pub sigma: f64,
+    /// The modes fitted at each iteration of a frame from rest, coarse to fine; past the list,
+    /// `max_modes`.
+    pub schedule: Vec<usize>,
+    /// Most modes fitted (the leading ones of the prior).
+    pub max_modes: usize,
+    /// On a stream, the previous frame's posterior is widened by this standard deviation (in
+    /// units of the prior's) before it becomes the next frame's prior.
+    pub widening: f64,
+    /// The factor on the posterior's standard deviation at the targets (chosen on validation
+    /// registrations, so that their errors fall within 2σ as often as a Gaussian's would).
+    pub calibration: f64,
+}
+
+impl Default for ShapeOptions {
+    fn default() -> Self {
+        ShapeOptions { sigma: 0.007, schedule: vec![8, 8, 32, 32], max_modes: 64, widening: 0.3, calibration: 1.0 }
+    }
+}
+
+impl ShapeOptions {
+    /// Checks the values, naming the first that is out of its range.
+    pub fn validate(&self) -> Result<()> {
+        let positive = "positive and finite";
+        check_setting("sigma", self.sigma, self.sigma > 0.0, positive)?;
+        check_setting("widening", self.widening, self.widening >= 0.0, "non-negative and finite")?;
+        check_setting("calibration", self.calibration, self.calibration > 0.0, positive)?;
+        if self.max_modes == 0 || self.schedule.contains(&0) {
+            return Err(RegisterError::Invalid("max_modes and the schedule's modes must be at least 1".into()));
+        }
+        Ok(())
+    }
+}
+
+/// The prior of a frame's whitened coefficients: `N(mean, precision⁻¹)`.
+#[derive(Clone, Debug)]
+struct Prior {
+    mean: DVector<f64>,
+    precision: DMatrix<f64>,
+}
+
+impl Prior {
+    /// The model's own prior on the first `k` coefficients: `N(0, I)`.
+    fn standard(k: usize) -> Prior {
+        Prior { mean: DVector::zeros(k), precision: DMatrix::identity(k, k) }
+    }
+}
+
+/// The shape-space registration of a [`ShapeSpace`] (see the module documentation).
+pub struct ShapeDeformer {
+    space: ShapeSpace,
+    options: ShapeOptions,
+    /// The mean displacement and the modes at the organ's surface vertices (as [`ShapeSpace`]'s
+    /// at the mesh nodes): a match's row of the fit is read from its triangle's three vertices.
+    surface_mean: Vec<f64>,
+    surface_basis: Vec<f64>,
+    triangles: Vec<[usize; 3]>,
+    /// The current whitened coefficients (all modes fitted so far; the rest at 0).
+    z: Vec<f64>,
+    /// Their posterior covariance after the last fit.
+    posterior: Option<DMatrix<f64>>,
+    /// The prior of the frame under way, over [`ShapeDeformer::fitted`] modes.
+    prior: Prior,
+    /// Whether the frame under way is warm-started (all modes from its first iteration).
+    warm: bool,
+}
+
+/// Huber's threshold, in units of σ.
+const HUBER: f64 = 2.0;
+
+impl ShapeDeformer {
+    /// The deformer of `space` (on `organ`'s mesh) with `options`.
+    pub fn new(space: ShapeSpace, organ: &Organ, options: ShapeOptions) -> Result<ShapeDeformer> {
+        options.validate()?;
+        if space.nodes() != organ.mesh().num_nodes() {
+            return Err(RegisterError::Invalid(format!(
+                "the shape space has {} nodes, the organ's mesh {}",
+                space.nodes(),
+                organ.mesh().num_nodes()
+            )));
+        }
+        let r = space.modes;
+        let stencils = organ.surface_stencils();
+        let mut surface_mean = vec![0.0; 3 * stencils.len()];
+        let mut surface_basis = vec![0.0; 3 * stencils.len() * r];
+        for (v, stencil) in stencils.iter().enumerate() {
+            for d in 0..3 {
+                let mut direction = [0.0; 3];
+                direction[d] = 1.0;
+                let row = 3 * v + d;
+                surface_mean[row] = space.along(stencil, direction, &mut surface_basis[row * r..(row + 1) * r]);
+            }
+        }
+        let k = options.max_modes.min(r);
+        Ok(ShapeDeformer {
+            surface_mean,
+            surface_basis,
+            triangles: organ.surface().triangles.clone(),
+            space,
+            options,
+            z: Vec::new(),
+            posterior: None,
+            prior: Prior::standard(k),
+            warm: false,
+        })
+    }
+
+    /// The first `out.len()` modes at a match (the point of barycentric `weights` in surface
+    /// `triangle`) along `normal`, into `out`; returns the mean's part along it.
+    fn surface_row(&self, triangle: usize, weights: [f64; 3], normal: [f64; 3], out: &mut [f64]) -> f64 {
+        let r = self.space.modes;
+        out.iter_mut().for_each(|o| *o = 0.0);
+        let mut mean = 0.0;
+        for (&vertex, b) in self.triangles[triangle].iter().zip(weights) {
+            for (d, n) in normal.iter().enumerate() {
+                let (row, f) = (3 * vertex + d, b * n);
+                if f == 0.0 {
+                    continue;
+                }
+                mean += f * self.surface_mean[row];
+                let basis = &self.surface_basis[row * r..row * r + out.len()];
+                out.iter_mut().zip(basis).for_each(|(o, b)| *o += f * b);
+            }
+        }
+        mean
+    }
+
+    /// The modes fitted at all.
+    fn fitted(&self) -> usize {
+        self.options.max_modes.min(self.space.modes)
+    }
+
+    /// The modes fitted at `iteration` of the frame under way.
+    fn active(&self, iteration: usize) -> usize {
+        let wanted = match self.warm {
+            true => self.fitted(),
+            false => self.options.schedule.get(iteration).copied().unwrap_or(self.fitted()),
+        };
+        wanted.min(self.fitted())
+    }
+
+    /// The shape space.
+    pub fn space(&self) -> &ShapeSpace {
+        &self.space
+    }
+
+    /// The posterior of the first `k` coefficients given `observations`, from the current
+    /// coefficients (Huber's weights at their residuals): its mean and covariance.
+    fn fit(&self, observations: &Observations, k: usize) -> Result<(DVector<f64>, DMatrix<f64>)> {
+        let n = observations.matches.len();
+        let mut jacobian = faer::Mat::<f64>::zeros(n, k);
+        let mut rhs = DVector::<f64>::zeros(n);
+        let mut row = vec![0.0; k];
+        let sigma = self.options.sigma;
+        let current: Vec<f64> = (0..k).map(|j| self.z.get(j).copied().unwrap_or(0.0)).collect();
+        for (i, m) in observations.matches.iter().enumerate() {
+            let mean = self.surface_row(m.triangle, m.weights, m.normal, &mut row);
+            let y = mesh::dot(m.normal, m.shift) - mean;
+            let residual = y - row.iter().zip(&current).map(|(a, b)| a * b).sum::<f64>();
+            // Huber: weight 1 within the threshold, threshold / |residual| beyond.
+            let weight = (HUBER * sigma / residual.abs()).min(1.0).sqrt() / sigma;
+            row.iter().enumerate().for_each(|(j, r)| jacobian[(i, j)] = weight * r);
+            rhs[i] = weight * y;
+        }
+        let mut product = faer::Mat::<f64>::zeros(k, k);
+        let jt = jacobian.transpose();
+        faer::linalg::matmul::matmul(product.as_mut(), faer::Accum::Replace, jt, jacobian.as_ref(), 1.0, faer::Par::rayon(0));
+        let jty: Vec<f64> = (0..k).map(|j| jacobian.col(j).iter().zip(rhs.iter()).map(|(a, b)| a * b).sum()).collect();
+        let prior = self.prior_of(k);
+        let hessian = DMatrix::from_fn(k, k, |a, b| product[(a, b)]) + &prior.precision;
+        let gradient = DVector::from_vec(jty) + &prior.precision * &prior.mean;
+        let cholesky = hessian
+            .cholesky()
+            .ok_or_else(|| RegisterError::Invalid("the shape fit's normal equations are not positive definite".into()))?;
+        let z = cholesky.solve(&gradient);
+        if std::env::var("SHAPE_DEBUG").is_ok() {
+            let mut r: Vec<f64> = (0..n).map(|i| (rhs[i] - (0..k).map(|j| jacobian[(i, j)] * z[j]).sum::<f64>()).abs() * sigma).collect();
+            let med = mesh::stats::median(&mut r);
+            let rms = (r.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt();
+            eprintln!("  fit k={k} n={n}: weighted residual median {:.2} mm, rms {:.2} mm", med * 1e3, rms * 1e3);
+        }
+        Ok((z, cholesky.inverse()))
+    }
+
+    /// The frame's prior of its first `k` coefficients: the frame's own over all the fitted
+    /// modes, the model's over fewer (a frame from rest, coarse to fine).
+    fn prior_of(&self, k: usize) -> Prior {
+        match k == self.prior.mean.len() {
+            true => self.prior.clone(),
+            false => Prior::standard(k),
+        }
+    }
+}
+
+impl Deformer for ShapeDeformer {
+    fn start_frame(&mut self, warm: bool) {
+        let k = self.fitted();
+        self.warm = warm && self.posterior.is_some();
+        self.prior = match (&self.posterior, self.warm) {
+            (Some(posterior), true) => {
+                let widened = posterior + DMatrix::identity(k, k) * self.options.widening.powi(2);
+                let mean = DVector::from_iterator(k, (0..k).map(|j| self.z.get(j).copied().unwrap_or(0.0)));
+                let precision = widened.try_inverse().unwrap_or_else(|| DMatrix::identity(k, k));
+                Prior { mean, precision }
+            }
+            _ => {
+                self.z.clear();
+                Prior::standard(k)
+            }
+        };
+    }
+
+    fn deform(&mut self, observations: &Observations, _previous: &[f64], iteration: usize) -> Result<Vec<f64>> {
+        if observations.matches.is_empty() {
+            return Err(RegisterError::Invalid("no cloud point matches the organ surface".into()));
+        }
+        let k = self.active(iteration);
+        let (z, covariance) = self.fit(observations, k)?;
+        self.z = z.iter().copied().collect();
+        // The modes not fitted yet keep their prior: unit variance, no correlation.
+        let all = self.fitted();
+        let mut posterior = DMatrix::identity(all, all);
+        posterior.view_mut((0, 0), (k, k)).copy_from(&covariance);
+        self.posterior = Some(posterior);
+        Ok(self.space.displacement(&self.z))
+    }
+
+    fn uncertainty(&self, _rest_points: &[mesh::Point], stencils: &[Stencil]) -> Option<Result<Vec<f64>>> {
+        let posterior = self.posterior.as_ref()?;
+        let k = posterior.nrows();
+        let mut rows = vec![vec![0.0; k]; 3];
+        let std = stencils
+            .iter()
+            .map(|s| {
+                for (d, row) in rows.iter_mut().enumerate() {
+                    let mut direction = [0.0; 3];
+                    direction[d] = 1.0;
+                    self.space.along(s, direction, row);
+                }
+                let variance: f64 = rows
+                    .iter()
+                    .map(|r| {
+                        let v = DVector::from_column_slice(r);
+                        (v.transpose() * posterior * &v)[(0, 0)]
+                    })
+                    .sum();
+                let floor: f64 = s.0.iter().map(|&(n, w)| w * self.space.floor[n]).sum();
+                self.options.calibration * (variance + floor).max(0.0).sqrt()
+            })
+            .collect();
+        Some(Ok(std))
+    }
+}
+
+/// The shape space of a learned model with a basis (the reduced-order model) on `organ`'s mesh,
+/// which must lie in the model's grid.
+pub fn model_shape_space(model: &learn::Model, organ: &Organ) -> Result<ShapeSpace> {
+    let learn::Model::Reduced(rom) = model else {
+        return Err(RegisterError::Invalid("a shape-space registration needs a model with a basis (a ROM)".into()));
+    };
+    let space = rom.shape_space()?;
+    let to_mesh = learn::GridToMesh::new(organ.mesh(), &model.placed_grid()?)?;
+    let mean = to_mesh.apply(&space.mean_field)?;
+    let modes: Vec<Vec<f64>> = space.mode_fields.iter().map(|f| to_mesh.apply(f)).collect::<learn::Result<_>>()?;
+    // The floor as the first channel of a field, interpolated like the modes.
+    let cells = space.floor.len();
+    let mut floor_field = vec![0f32; 3 * cells];
+    floor_field[..cells].copy_from_slice(&space.floor);
+    let floor: Vec<f64> = to_mesh.apply(&floor_field)?.chunks(3).map(|c| c[0].max(0.0)).collect();
+    ShapeSpace::new(mean, &modes, &space.prior_mean, &space.prior_covariance, floor)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::register::{register_frame, RegistrationOptions};
+
+    /// A 4 cm cube and three smooth modes of it: a vertical press growing with height, a shear,
+    /// and a bulge of the top; the prior correlates the first two.
+    fn cube_space() -> (Organ, Vec<Vec<f64>>, ShapeSpace) {
+        let cube = mesh::box_tet([0.0; 3], [0.04; 3], [4, 4, 4]).unwrap();
+        let organ = Organ::new(cube, None).unwrap();
+        let field = |f: &dyn Fn(mesh::Point) -> mesh::Point| -> Vec<f64> {
+            organ.mesh().nodes.iter().flat_map(|&p| f(p)).collect()
+        };
+        let modes = vec![
+            field(&|p| [0.0, 0.0, -0.2 * p[2]]),
+            field(&|p| [0.2 * p[2], 0.0, 0.0]),
+            field(&|p| [0.0, 0.0, 0.01 * (p[2] / 0.04).powi(2) * (1.0 - ((p[0] - 0.02) / 0.02).powi(2))]),
+        ];
+        let covariance = [1.0, 0.5, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 0.25];
+        let nodes = organ.mesh().num_nodes();
+        let space = ShapeSpace::new(vec![0.0; 3 * nodes], &modes, &[0.1, 0.0, 0.0], &covariance, vec![0.0; nodes])
+            .unwrap();
+        (organ, modes, space)
+    }
+
+    /// Whitening keeps the prior: the whitened modes' outer products sum to Φ Λ Φᵀ, and the mean
+    /// is shifted by Φ μ.
+    #[test]
+    fn the_whitened_modes_hold_the_prior_covariance() {
+        let (organ, modes, space) = cube_space();
+        assert_eq!(space.modes(), 3);
+        let covariance = [[1.0, 0.5, 0.0], [0.5, 1.0, 0.0], [0.0, 0.0, 0.25]];
+        let top = organ.mesh().nodes.iter().position(|p| p == &[0.04, 0.04, 0.04]).unwrap();
+        for (a, b) in [(3 * top, 3 * top), (3 * top + 2, 3 * top), (3 * top + 2, 3 * top + 2)] {
+            let whitened: f64 = (0..3).map(|k| space.basis[a * 3 + k] * space.basis[b * 3 + k]).sum();
+            let prior: f64 =
+                (0..3).flat_map(|i| (0..3).map(move |j| (i, j))).map(|(i, j)| modes[i][a] * covariance[i][j] * modes[j][b]).sum();
+            assert!((whitened - prior).abs() < 1e-15, "rows {a}, {b}: {whitened} against {prior}");
+        }
+        assert!((space.mean[3 * top + 2] - 0.1 * modes[0][3 * top + 2]).abs() < 1e-15);
+    }
+
+    /// A cube deformed within its shape space and seen from above (positions only): the fit
+    /// finds the displacement of its hidden centre, and the posterior's σ there is smaller than
+    /// the prior's.
+    #[test]
+    fn a_displacement_in_the_shape_space_is_recovered_from_a_cloud() {
+        let (organ, modes, space) = cube_space();
+        let truth: Vec<f64> =
+            (0..modes[0].len()).map(|i| 0.1 * modes[0][i] + 0.6 * modes[0][i] - 0.4 * modes[1][i] + 0.3 * modes[2][i]).collect();
+        let rest = organ.surface().vertices.clone();
+        let cloud: Vec<mesh::Point> = organ
+            .deformed_surface(&truth)
+            .vertices
+            .into_iter()
+            .zip(&rest)
+            .filter(|(_, r)| r[2] > 0.04 - 1e-9)
+            .map(|(p, _)| p)
+            .collect();
+        let options = ShapeOptions { sigma: 2e-4, schedule: vec![1, 2], ..ShapeOptions::default() };
+        let mut deformer = ShapeDeformer::new(space, &organ, options).unwrap();
+        assert!(deformer.uncertainty(&[], &[]).is_none(), "no σ before a fit");
+        let loop_options = RegistrationOptions { view: Some([0.0, 0.0, -1.0]), iterations: 8, ..Default::default() };
+        let frame = register_frame(&organ, &mut deformer, &cloud, None, &loop_options).unwrap();
+        let centre = organ.mesh().nodes.iter().position(|p| p == &[0.02, 0.02, 0.02]).unwrap();
+        let error: f64 = (0..3).map(|d| (frame.u[3 * centre + d] - truth[3 * centre + d]).powi(2)).sum::<f64>().sqrt();
+        let motion: f64 = (0..3).map(|d| truth[3 * centre + d].powi(2)).sum::<f64>().sqrt();
+        assert!(motion > 2e-3 && error < 0.05 * motion, "error {error:.2e} m at the centre, which moved {motion:.2e} m");
+        let stencil = Stencil(vec![(centre, 1.0)]);
+        let sigma = deformer.uncertainty(&[], &[stencil.clone()]).unwrap().unwrap()[0];
+        let mut prior = ShapeDeformer::new(deformer.space.clone(), &organ, ShapeOptions::default()).unwrap();
+        prior.posterior = Some(DMatrix::identity(3, 3));
+        let prior_sigma = prior.uncertainty(&[], &[stencil]).unwrap().unwrap()[0];
+        assert!(sigma < 0.5 * prior_sigma, "σ {sigma:.2e} m after the fit, {prior_sigma:.2e} m before");
+    }
+
+    /// On a stream the next frame starts from the last one's posterior: the same cloud seen again
+    /// adds to what the first frame knew, so the estimate comes no farther from the truth and its σ
+    /// shrinks.
+    #[test]
+    fn a_warm_frame_starts_from_the_last_posterior() {
+        let (organ, modes, space) = cube_space();
+        let truth: Vec<f64> = modes[0].iter().zip(&modes[2]).map(|(a, b)| 0.8 * a + 0.5 * b).collect();
+        let cloud = organ.deformed_surface(&truth).vertices;
+        let options = ShapeOptions { widening: 0.0, ..ShapeOptions::default() };
+        let mut deformer = ShapeDeformer::new(space, &organ, options).unwrap();
+        let loop_options = RegistrationOptions { iterations: 40, warm_iterations: 40, tolerance: 1e-7, ..Default::default() };
+        let error = |u: &[f64]| u.iter().zip(&truth).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let top = Stencil(vec![(organ.mesh().nodes.iter().position(|p| p == &[0.04, 0.04, 0.04]).unwrap(), 1.0)]);
+        let first = register_frame(&organ, &mut deformer, &cloud, None, &loop_options).unwrap();
+        let sigma_first = deformer.uncertainty(&[], &[top.clone()]).unwrap().unwrap()[0];
+        let second = register_frame(&organ, &mut deformer, &cloud, Some(&first.u), &loop_options).unwrap();
+        let sigma_second = deformer.uncertainty(&[], &[top]).unwrap().unwrap()[0];
+        assert!(error(&second.u) <= error(&first.u) + 1e-9, "{} then {}", error(&first.u), error(&second.u));
+        // A frame from rest would give the same σ again (same cloud, same prior).
+        assert!(sigma_second < 0.95 * sigma_first, "σ {sigma_first:.2e} m, then {sigma_second:.2e} m");
+    }
+}
