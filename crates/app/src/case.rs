@@ -243,8 +243,9 @@ pub fn learned_registration(network: &Network, options: &RegistrationOptions) ->
     let (organ, membrane) = network_model(network)?;
     Ok(match network.model {
         Model::Reduced(_) => {
-            let space = register::model_shape_space(network.model, &organ)?;
-            let deformer = ShapeDeformer::new(space, &organ, ShapeOptions::default())?;
+            let shape = ShapeOptions::default();
+            let space = register::model_shape_space(network.model, &organ, shape.max_modes)?;
+            let deformer = ShapeDeformer::new(space, &organ, shape)?;
             LearnedRegistration { organ, deformer: Box::new(deformer), options: shape::loop_options(options) }
         }
         Model::UNet(_) => LearnedRegistration { organ, deformer: Box::new(membrane), options: options.clone() },

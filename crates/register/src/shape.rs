@@ -343,12 +343,6 @@ impl ShapeDeformer {
             .cholesky()
             .ok_or_else(|| RegisterError::Invalid("the shape fit's normal equations are not positive definite".into()))?;
         let z = cholesky.solve(&gradient);
-        if std::env::var("SHAPE_DEBUG").is_ok() {
-            let mut r: Vec<f64> = (0..n).map(|i| (rhs[i] - (0..k).map(|j| jacobian[(i, j)] * z[j]).sum::<f64>()).abs() * sigma).collect();
-            let med = mesh::stats::median(&mut r);
-            let rms = (r.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt();
-            eprintln!("  fit k={k} n={n}: weighted residual median {:.2} mm, rms {:.2} mm", med * 1e3, rms * 1e3);
-        }
         Ok((z, cholesky.inverse()))
     }
 
@@ -422,13 +416,13 @@ impl Deformer for ShapeDeformer {
     }
 }
 
-/// The shape space of a learned model with a basis (the reduced-order model) on `organ`'s mesh,
-/// which must lie in the model's grid.
-pub fn model_shape_space(model: &learn::Model, organ: &Organ) -> Result<ShapeSpace> {
+/// The shape space of a learned model with a basis (the reduced-order model), its leading `modes`
+/// modes at most, on `organ`'s mesh, which must lie in the model's grid.
+pub fn model_shape_space(model: &learn::Model, organ: &Organ, modes: usize) -> Result<ShapeSpace> {
     let learn::Model::Reduced(rom) = model else {
         return Err(RegisterError::Invalid("a shape-space registration needs a model with a basis (a ROM)".into()));
     };
-    let space = rom.shape_space()?;
+    let space = rom.shape_space(modes)?;
     let to_mesh = learn::GridToMesh::new(organ.mesh(), &model.placed_grid()?)?;
     let mean = to_mesh.apply(&space.mean_field)?;
     let modes: Vec<Vec<f64>> = space.mode_fields.iter().map(|f| to_mesh.apply(f)).collect::<learn::Result<_>>()?;

@@ -272,13 +272,13 @@ impl ReducedModel {
         Ok(self.scatter(&out, CHANNELS))
     }
 
-    /// The model's shape space on its grid: the output mean and each mode as `[3, nx, ny, nz]`
-    /// fields (m, zero outside the organ), and the prior of the modal coefficients — the mean and
-    /// covariance (`modes × modes`, row-major) of the regression's coefficients at its inducing
-    /// points (the training samples, or a subset of them): `k(Z, Z) · weights`, plus the physics
-    /// prior's coefficients where the features hold them.
-    pub fn shape_space(&self) -> Result<GridShapeSpace> {
-        let modes = self.info.modes;
+    /// The model's shape space on its grid, its leading `modes` modes at most: the output mean and
+    /// each mode as `[3, nx, ny, nz]` fields (m, zero outside the organ), and the prior of the modal
+    /// coefficients — the mean and covariance (`modes × modes`, row-major) of the regression's
+    /// coefficients at its inducing points (the training samples, or a subset of them):
+    /// `k(Z, Z) · weights`, plus the physics prior's coefficients where the features hold them.
+    pub fn shape_space(&self, modes: usize) -> Result<GridShapeSpace> {
+        let modes = modes.min(self.info.modes);
         let mut coefficients = linalg::kernel_matrix(
             self.info.kernel,
             self.info.length_scale,
@@ -288,14 +288,14 @@ impl ReducedModel {
             &self.inducing_norms,
             Par::rayon(0),
         );
-        coefficients = linalg::mul(coefficients.as_ref(), self.weights.as_ref(), Par::rayon(0));
+        coefficients = linalg::mul(coefficients.as_ref(), self.weights.subcols(0, modes), Par::rayon(0));
         if matches!(self.reader, Reader::Prior(_)) {
             // The prior's coefficients are the leading features, unscaled; only as many as there are
             // features can be recovered.
             if self.info.input_components < modes {
                 return Err(LearnError::InvalidInput(format!(
-                    "the model's physics prior has {modes} modes but its inducing points hold {} of them: its \
-                     coefficients' prior cannot be recovered",
+                    "the shape space of {modes} modes of a model with a physics prior needs as many features, it has \
+                     {}: ask for fewer modes",
                     self.info.input_components
                 )));
             }
