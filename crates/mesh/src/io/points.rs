@@ -92,15 +92,13 @@ pub fn read_points(path: impl AsRef<Path>) -> Result<LabelledPoints, MeshError> 
     }
 }
 
-/// Reads the points of a CSV file (see the [module](self) documentation): in metres when the
-/// header names their unit (`x_mm`), as written otherwise; labels, descriptions and frame are
-/// dropped. Every error names the file and, for its content, the line: no header, a header
-/// without `x`, `y` or `z`, a line with another number of fields, a value that is not a finite
-/// number.
+/// Reads the points of a points file ([`read_points`]; CSV for any extension but `.fcsv` and
+/// `.json`): in metres when the file names their unit (`.fcsv`, `.mrk.json`, a CSV header
+/// `x_mm`), as written otherwise; labels, descriptions and frame are dropped. Every error names
+/// the file and, for its content, the line: no header, a header without `x`, `y` or `z`, a line
+/// with another number of fields, a value that is not a finite number.
 pub fn read_points_csv(path: &Path) -> Result<Vec<Point>, MeshError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|error| MeshError::Io { path: path.display().to_string(), error })?;
-    let mut points = read_table(path, text.strip_prefix('\u{feff}').unwrap_or(&text), false)?;
+    let mut points = read_points(path)?;
     points.convert(None, LengthUnit::Metre, LengthUnit::Metre);
     Ok(points.points)
 }
