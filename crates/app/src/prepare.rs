@@ -241,7 +241,7 @@ struct Inputs {
 /// and the camera, each in the unit and frame its file names, else the surface's; all brought to
 /// metres and to the surface's frame (or, when its header names none, the first named).
 fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inputs> {
-    let (surface, surface_frame) = read_surface_with_frame(&options.surface)?;
+    let (mut surface, surface_frame) = read_surface_with_frame(&options.surface)?;
     let unit = match &options.units {
         Some(name) => name.parse::<LengthUnit>().map_err(anyhow::Error::msg).context("units")?,
         None => {
@@ -268,7 +268,6 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
         (None, Some(f)) => format!("frame: {f} (named by the points' files; the surface's header names none)"),
         (None, None) => "frame: not named by any input (SPACE= header, .fcsv, .mrk.json): all taken as given".into(),
     });
-    let mut surface = surface;
     surface.vertices.iter_mut().for_each(|p| *p = p.map(|x| x * metres_per(unit)));
     Ok(Inputs { surface, landmarks, targets, camera, frame })
 }
