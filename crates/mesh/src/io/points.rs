@@ -420,7 +420,8 @@ pub fn write_fcsv(path: impl AsRef<Path>, points: &LabelledPoints) -> Result<(),
 
 /// Writes points as Slicer's markups JSON (`.mrk.json`, one point list), atomically: each
 /// point's label and description; the points' frame as `coordinateSystem` and their unit as
-/// `coordinateUnits` when named (Slicer takes LPS and millimetres when they are not).
+/// `coordinateUnits` when named (Slicer takes LPS and millimetres when they are not). Slicer
+/// works in millimetres: convert the points to them ([`LabelledPoints::convert`]) for Slicer.
 pub fn write_markups_json(path: impl AsRef<Path>, points: &LabelledPoints) -> Result<(), MeshError> {
     let path = path.as_ref();
     check_points(points)?;
