@@ -159,6 +159,8 @@ fn stl_and_vtk_headers_name_the_frame_as_slicer_writes_it() {
     augsim_mesh::io::write_surface(&plain, &surface).unwrap();
     assert_eq!(surface_frame(&plain).unwrap(), None);
     assert_eq!(surface_frame(dir.path().join("any.obj")).unwrap(), None);
+    let indented = put(dir.path(), "indented.stl", "\n  solid liver SPACE=RAS\nendsolid liver SPACE=RAS\n");
+    assert_eq!(surface_frame(indented).unwrap(), Some(Frame::Ras));
     let obj = dir.path().join("out.obj");
     assert!(write_surface_in_frame(&obj, &surface, Frame::Lps).unwrap_err().to_string().contains(".vtk or .stl"));
     assert_eq!(read_surface(slicer("tetrahedron_lps.stl")).unwrap(), surface, "the plain reader reads the same");

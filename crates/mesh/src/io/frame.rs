@@ -3,9 +3,11 @@
 //! which a surface file's header names one.
 
 use std::fmt;
+use std::fs::File;
+use std::io::Read as _;
 use std::path::Path;
 
-use super::{parse_error, read_bytes};
+use super::parse_error;
 use crate::{MeshError, Point, TriSurface};
 
 /// An anatomical coordinate frame, named by where its axes point: RAS has x towards the patient's
@@ -83,23 +85,30 @@ pub fn frame_in_header(header: &str) -> Result<Option<Frame>, String> {
 /// Other formats (OBJ, VTU) name none.
 pub fn surface_frame(path: impl AsRef<Path>) -> Result<Option<Frame>, MeshError> {
     let path = path.as_ref();
-    let header = match super::extension(path).as_str() {
-        "stl" => {
-            let bytes = read_bytes(path)?;
-            let ascii = bytes.trim_ascii_start().get(..5).is_some_and(|s| s.eq_ignore_ascii_case(b"solid"));
-            let end = if ascii { bytes.iter().position(|&b| b == b'\n').unwrap_or(bytes.len()) } else { 80 };
-            String::from_utf8_lossy(&bytes[..end.min(bytes.len())]).into_owned()
+    let kind = super::extension(path);
+    if kind != "stl" && kind != "vtk" {
+        return Ok(None);
+    }
+    // The headers are short: a binary STL's is 80 bytes, a VTK title at most 256 characters.
+    let mut start = Vec::with_capacity(HEADER_BYTES);
+    let io = |error| MeshError::Io { path: path.display().to_string(), error };
+    File::open(path).and_then(|f| f.take(HEADER_BYTES as u64).read_to_end(&mut start)).map_err(io)?;
+    let line = |text: &'_ [u8], n: usize| text.split(|&b| b == b'\n').nth(n).unwrap_or_default().to_vec();
+    let header = if kind == "stl" {
+        let trimmed = start.trim_ascii_start();
+        if trimmed.get(..5).is_some_and(|s| s.eq_ignore_ascii_case(b"solid")) {
+            line(trimmed, 0)
+        } else {
+            start[..start.len().min(80)].to_vec()
         }
-        "vtk" => {
-            let bytes = read_bytes(path)?;
-            let mut lines = bytes.split(|&b| b == b'\n');
-            lines.next();
-            String::from_utf8_lossy(lines.next().unwrap_or_default()).into_owned()
-        }
-        _ => return Ok(None),
+    } else {
+        line(&start, 1)
     };
-    frame_in_header(&header).map_err(|message| parse_error(path, message))
+    frame_in_header(&String::from_utf8_lossy(&header)).map_err(|message| parse_error(path, message))
 }
+
+/// How much of a file [`surface_frame`] reads.
+const HEADER_BYTES: usize = 1024;
 
 /// Reads a surface ([`super::read_surface`]) and the frame its header names ([`surface_frame`]).
 pub fn read_surface_with_frame(path: impl AsRef<Path>) -> Result<(TriSurface, Option<Frame>), MeshError> {
