@@ -5,6 +5,8 @@
 //!   and its dataset scenario; targets in their unit; settings), as `register`, `serve` and
 //!   Python build it; [`output`]: what a registration writes (organ.vtu, targets.csv,
 //!   summary.json) and what a comparison of methods writes.
+//! - [`points`]: points read at a command's boundary (CSV, 3D Slicer's `.fcsv` and `.mrk.json`,
+//!   clouds as `.npy` and `.ply`) in its working frame (RAS or LPS) and unit.
 //! - [`prepare`]: a patient's organ from its segmented surface to a registration set-up (repair,
 //!   mesh, regions, scenarios, dataset, model, report), resumable.
 //! - [`case`], [`simulate`], [`picture`]: synthetic registration cases on the phantom (truth from
@@ -21,6 +23,7 @@ pub mod case;
 pub mod curve;
 pub mod output;
 pub mod picture;
+pub mod points;
 pub mod prepare;
 pub mod registration;
 pub mod sample_view;

@@ -2,11 +2,15 @@
 //! (`augsim prepare`):
 //!
 //! 1. **organ**: the surface read (STL, OBJ, VTK, VTU) in its unit (given, or detected from its
-//!    size), repaired ([`mesh::repair`]), meshed with tetrahedra; the nodes the camera sees
+//!    size) and frame (`SPACE=` in its header), the landmarks, targets and camera in theirs
+//!    (3D Slicer's `.fcsv` and `.mrk.json` name them; see [`crate::points`]), repaired
+//!    ([`mesh::repair`]), meshed with tetrahedra; the nodes the camera sees
 //!    (`visible`, self-occlusion included) and those near the attachment landmarks (`attached`,
 //!    on the surface) selected; the targets located inside the organ (a unit mistake is named).
-//!    Written in metres, in the segmentation's frame: `surface.stl`, `organ.vtu` (the regions as
-//!    point data `region_visible`, `region_attached`), `attach.csv`, `targets.csv`.
+//!    Written in metres, in the segmentation's frame: `surface.stl` (its header naming the frame
+//!    when known), `organ.vtu` (the regions as point data `region_visible`, `region_attached`),
+//!    `attach.csv`, `targets.csv` (with the points' labels, `x_m` headers, and the frame in a
+//!    `# CoordinateSystem` line when known).
 //! 2. **scenarios**, written out to be read and edited: `dataset.toml` (a tool pushing the
 //!    visible surface, the organ held at the landmarks, the input the visible surface's normal
 //!    displacement: the built-in `liver_ar`'s set-up on this organ), `static.toml` (the FEM
@@ -33,9 +37,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use mesh::io::points::{read_points_csv, write_points_csv};
-use mesh::io::write_atomic_bytes;
-use mesh::repair::{detect_unit, metres_per, repair_surface, RepairOptions};
+use mesh::io::points::{read_points_csv, write_points, write_points_csv, LabelledPoints};
+use mesh::io::{read_surface_with_frame, write_atomic_bytes, Frame};
+use mesh::repair::{detect_unit, metres_per, repair_surface, LengthUnit, RepairOptions};
 use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
 use mesh::{Camera, Mesh, Near, Point};
 use plot::{scatter_plot, PlotSpec, PointSet};
@@ -43,6 +47,7 @@ use serde::{Deserialize, Serialize};
 
 use learn::LearnedModel;
 
+use crate::points::PointInput;
 use crate::registration::{PatientMethod, RegistrationSpec, PATIENT_FILE};
 
 /// What `augsim prepare` is given.
@@ -54,12 +59,13 @@ pub struct PrepareOptions {
     /// detected from the surface's size).
     pub units: Option<String>,
     /// Where the laparoscope looks from, in the segmentation's frame.
-    pub camera: Point,
-    /// Landmarks where the organ is held (ligaments, the hilum): a CSV file (x, y, z).
+    pub camera: CameraAt,
+    /// Landmarks where the organ is held (ligaments, the hilum): a points file (CSV x, y, z,
+    /// `.fcsv`, `.mrk.json`).
     pub attach: PathBuf,
     /// Surface nodes within this distance (m) of a landmark are held.
     pub attach_distance: f64,
-    /// The targets (tumour, vessels) at rest: a CSV file (x, y, z).
+    /// The targets (tumour, vessels) at rest: a points file (CSV x, y, z, `.fcsv`, `.mrk.json`).
     pub targets: PathBuf,
     /// Tetrahedra of the organ's mesh (about).
     pub tets: usize,
@@ -74,11 +80,11 @@ pub struct PrepareOptions {
 impl PrepareOptions {
     /// The options with the defaults for what is not given: held within 25 mm of the landmarks,
     /// 3,000 tetrahedra, 2,000 draws, the reduced-order model, seed 2.
-    pub fn new(surface: PathBuf, camera: Point, attach: PathBuf, targets: PathBuf) -> PrepareOptions {
+    pub fn new(surface: PathBuf, camera: impl Into<CameraAt>, attach: PathBuf, targets: PathBuf) -> PrepareOptions {
         PrepareOptions {
             surface,
             units: None,
-            camera,
+            camera: camera.into(),
             attach,
             attach_distance: 0.025,
             targets,
@@ -87,6 +93,23 @@ impl PrepareOptions {
             method: learn::Method::Rom,
             seed: 2,
         }
+    }
+}
+
+/// Where the camera is: a point, or a points file holding one (CSV, `.fcsv`, `.mrk.json`, in the
+/// frame and unit it names, else the surface's).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum CameraAt {
+    /// The point, in the surface's unit and frame.
+    Point(Point),
+    /// A file of one point.
+    File(PathBuf),
+}
+
+impl From<Point> for CameraAt {
+    fn from(p: Point) -> CameraAt {
+        CameraAt::Point(p)
     }
 }
 
@@ -177,7 +200,12 @@ pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn Progress) ->
 /// program runs) and checked.
 fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
     let full = |p: &Path| std::path::absolute(p).with_context(|| format!("resolving {}", p.display()));
-    for (what, path) in [("surface", &options.surface), ("landmarks", &options.attach), ("targets", &options.targets)] {
+    let camera = match &options.camera {
+        CameraAt::File(path) => Some(("camera", path)),
+        CameraAt::Point(_) => None,
+    };
+    let files = [("surface", &options.surface), ("landmarks", &options.attach), ("targets", &options.targets)];
+    for (what, path) in files.into_iter().chain(camera) {
         if !path.is_file() {
             bail!("the {what} file {} does not exist", path.display());
         }
@@ -192,23 +220,63 @@ fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
         surface: full(&options.surface)?,
         attach: full(&options.attach)?,
         targets: full(&options.targets)?,
+        camera: match &options.camera {
+            CameraAt::File(path) => CameraAt::File(full(path)?),
+            at => at.clone(),
+        },
         ..options.clone()
     })
+}
+
+/// The organ's inputs in metres and in the surface's frame (see [`crate::points`]).
+struct Inputs {
+    surface: mesh::TriSurface,
+    landmarks: LabelledPoints,
+    targets: LabelledPoints,
+    camera: Point,
+    frame: Option<Frame>,
+}
+
+/// Reads the surface in its unit (given or detected) and frame, and the landmarks, the targets
+/// and the camera, each in the unit and frame its file names, else the surface's; all brought to
+/// metres and to the surface's frame (or, when its header names none, the first named).
+fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inputs> {
+    let (mut surface, surface_frame) = read_surface_with_frame(&options.surface)?;
+    let unit = match &options.units {
+        Some(name) => name.parse::<LengthUnit>().map_err(anyhow::Error::msg).context("units")?,
+        None => {
+            let u = detect_unit(&surface).with_context(|| format!("the unit of {}", options.surface.display()))?;
+            lines.push(format!("units: {} (detected from the surface's size; give --units otherwise)", u.symbol()));
+            u
+        }
+    };
+    let mut input = PointInput::new(surface_frame, LengthUnit::Metre, unit);
+    let read =
+        |input: &mut PointInput, path: &Path| input.read(path).with_context(|| format!("reading {}", path.display()));
+    let landmarks = read(&mut input, &options.attach)?;
+    let targets = read(&mut input, &options.targets)?;
+    let camera = match &options.camera {
+        CameraAt::Point(p) => p.map(|x| x * metres_per(unit)),
+        CameraAt::File(path) => match read(&mut input, path)?.points.as_slice() {
+            [p] => *p,
+            other => bail!("{}: the camera is one point, the file holds {}", path.display(), other.len()),
+        },
+    };
+    let frame = input.frame;
+    lines.push(match (surface_frame, frame) {
+        (Some(f), _) => format!("frame: {f} (the surface's header)"),
+        (None, Some(f)) => format!("frame: {f} (named by the points' files; the surface's header names none)"),
+        (None, None) => "frame: not named by any input (SPACE= header, .fcsv, .mrk.json): all taken as given".into(),
+    });
+    surface.vertices.iter_mut().for_each(|p| *p = p.map(|x| x * metres_per(unit)));
+    Ok(Inputs { surface, landmarks, targets, camera, frame })
 }
 
 /// Step 1: the surface repaired and meshed, the regions selected, the targets located.
 fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let mut lines = Vec::new();
-    let mut surface = mesh::io::read_surface(&options.surface)?;
-    let scale = match &options.units {
-        Some(name) => register::cloud::metres_per_unit(name).map_err(anyhow::Error::msg).context("units")?,
-        None => {
-            let u = detect_unit(&surface).with_context(|| format!("the unit of {}", options.surface.display()))?;
-            lines.push(format!("units: {} (detected from the surface's size; give --units otherwise)", u.symbol()));
-            metres_per(u)
-        }
-    };
-    surface.vertices.iter_mut().for_each(|p| *p = p.map(|x| x * scale));
+    let Inputs { surface, landmarks: labelled_landmarks, targets: labelled_targets, camera, frame } =
+        read_inputs(options, &mut lines)?;
     let (surface, repair) = repair_surface(&surface, &RepairOptions::default())
         .with_context(|| format!("repairing {}", options.surface.display()))?;
     if repair.changed() {
@@ -217,10 +285,8 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     } else {
         lines.push("repair: nothing to repair (a closed, oriented, manifold surface)".into());
     }
-    let to_metres = |points: Vec<Point>| -> Vec<Point> { points.into_iter().map(|p| p.map(|x| x * scale)).collect() };
-    let landmarks = to_metres(read_points_csv(&options.attach)?);
-    let targets = to_metres(read_points_csv(&options.targets)?);
-    let camera = options.camera.map(|x| x * scale);
+    let landmarks = labelled_landmarks.points.clone();
+    let targets = labelled_targets.points.clone();
     let (mut organ, quality) = mesh_surface_to_count(&surface, options.tets, BoundaryFit::default())
         .context("meshing the repaired surface")?;
     let (lo, hi) = organ.bounds();
@@ -244,8 +310,8 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let visible = Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&organ)?;
     if visible.is_empty() {
         bail!(
-            "the camera at {:?} sees no node of the organ: is it given in the surface's unit and frame?",
-            options.camera
+            "the camera at {:?} mm sees no node of the organ: is it given in the surface's unit and frame?",
+            camera.map(|x| x * 1e3)
         );
     }
     let attached = Near { points: landmarks.clone(), file: None, distance: options.attach_distance, surface: true }
@@ -271,12 +337,16 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     lines.extend(warnings.into_iter().map(|w| format!("warning: {w}")));
     organ.regions.insert("visible".into(), visible);
     organ.regions.insert("attached".into(), attached);
-    mesh::io::write_surface(dir.join("surface.stl"), &surface)?;
+    match frame {
+        Some(frame) => mesh::io::write_surface_in_frame(dir.join("surface.stl"), &surface, frame)?,
+        None => mesh::io::write_surface(dir.join("surface.stl"), &surface)?,
+    }
     // The regions as point data `region_visible`, `region_attached` (ParaView shows them; the
     // mesh reads them back).
     mesh::io::write_mesh(dir.join("organ.vtu"), &organ, &[])?;
-    write_points_csv(&dir.join("attach.csv"), &landmarks)?;
-    write_points_csv(&dir.join("targets.csv"), &targets)?;
+    // In metres, in the organ's frame, with their labels: what `register` reads back.
+    write_points(dir.join("attach.csv"), &LabelledPoints { frame, ..labelled_landmarks })?;
+    write_points(dir.join("targets.csv"), &LabelledPoints { frame, ..labelled_targets })?;
     write_points_csv(&dir.join("camera.csv"), &[camera])?;
     Ok(lines)
 }

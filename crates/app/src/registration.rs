@@ -33,7 +33,8 @@ pub enum MethodSpec {
 pub enum TargetsSpec {
     /// The rest positions of the mesh's `markers` and `tumour` nodes.
     Regions,
-    /// A CSV file (x, y, z) of rest positions, in the spec's unit.
+    /// A points file (CSV, `.fcsv`, `.mrk.json`) of rest positions, in the unit it names or else
+    /// in the spec's.
     File(PathBuf),
     /// Rest positions, in the spec's unit.
     Points(Vec<Point>),
@@ -82,7 +83,7 @@ impl RegistrationSpec {
         };
         let targets = match &self.targets {
             TargetsSpec::Regions => region_targets(organ.mesh()),
-            TargetsSpec::File(path) => scaled(&register::cloud::read_targets(path)?, self.unit),
+            TargetsSpec::File(path) => crate::points::read_targets(path, self.unit)?,
             TargetsSpec::Points(points) => scaled(points, self.unit),
         };
         if targets.is_empty() {

@@ -1,13 +1,17 @@
 //! `prepare` on a CT-derived liver (SOFA's liver-smooth, scaled to 20 cm, in mm, in a scanner's
-//! frame), damaged as segmentations are (holes, written as STL): repaired,
+//! frame), damaged as segmentations are (holes, written as STL), its points saved as 3D Slicer
+//! saves them (the frame named in each file, landmarks in RAS, the rest in LPS): repaired,
 //! meshed, its regions selected, a small dataset drawn, a reduced-order model trained and
 //! evaluated, and the registration set-up it writes registering a cloud of the organ at rest;
 //! resumed without redoing a step; refused with other inputs; a unit mistake named.
 
 use std::path::{Path, PathBuf};
 
-use augsim_app::prepare::{prepare, PrepareOptions, Progress, STATE_FILE, STEPS};
+use augsim_app::prepare::{prepare, CameraAt, PrepareOptions, Progress, STATE_FILE, STEPS};
 use augsim_app::registration::{PatientMethod, RegistrationSpec};
+use mesh::io::points::{read_points, write_points, LabelledPoints};
+use mesh::io::Frame;
+use mesh::repair::LengthUnit;
 use mesh::Point;
 
 /// Scanner frame: the organ's corner sits here (mm).
@@ -27,8 +31,11 @@ fn write_csv(path: &Path, points: &[Point]) {
     mesh::io::points::write_points_csv(path, points).unwrap();
 }
 
-/// The damaged surface (STL, mm), the camera (mm), the landmarks and targets files (mm).
-fn patient_files(dir: &Path) -> (PathBuf, Point, PathBuf, PathBuf) {
+/// The damaged surface (STL, mm), the camera (mm), the landmarks and targets files (mm): plain CSV
+/// and a point, or, `slicer`, as 3D Slicer saves them: the surface naming its frame (LPS) in its
+/// header, the landmarks as `.mrk.json` in RAS, the targets as `.fcsv` in LPS, the camera as
+/// `.fcsv`, with labels.
+fn patient_files(dir: &Path, slicer: bool) -> (PathBuf, CameraAt, PathBuf, PathBuf) {
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mesh/tests/data/liver-smooth.obj");
     let mut surface = mesh::io::read_surface(&data).unwrap();
     let (lo, hi) = mesh::bounds(&surface.vertices);
@@ -46,7 +53,11 @@ fn patient_files(dir: &Path) -> (PathBuf, Point, PathBuf, PathBuf) {
     // Two holes: two triangles removed (the STL reader merges the file's repeated vertices).
     surface.triangles.drain(100..102);
     let stl = dir.join("liver.stl");
-    mesh::io::write_surface(&stl, &surface).unwrap();
+    if slicer {
+        mesh::io::write_surface_in_frame(&stl, &surface, Frame::Lps).unwrap();
+    } else {
+        mesh::io::write_surface(&stl, &surface).unwrap();
+    }
     // Targets halfway between two surface vertices of the same column: inside.
     let vertices = &surface.vertices;
     let targets: Vec<Point> = (0..vertices.len())
@@ -62,16 +73,31 @@ fn patient_files(dir: &Path) -> (PathBuf, Point, PathBuf, PathBuf) {
         .take(3)
         .collect();
     assert!(!targets.is_empty());
-    write_csv(&dir.join("landmarks.csv"), &landmarks);
-    write_csv(&dir.join("targets.csv"), &targets);
     let camera = [centre[0], centre[1], hi[2] + 250.0];
-    (stl, camera, dir.join("landmarks.csv"), dir.join("targets.csv"))
+    if !slicer {
+        write_csv(&dir.join("landmarks.csv"), &landmarks);
+        write_csv(&dir.join("targets.csv"), &targets);
+        return (stl, camera.into(), dir.join("landmarks.csv"), dir.join("targets.csv"));
+    }
+    let labelled = |points: &[Point], frame: Frame, name: &str| {
+        let mut p = LabelledPoints::new(points.to_vec());
+        p.labels = (1..=points.len()).map(|i| format!("{name} {i}")).collect();
+        (p.frame, p.unit) = (Some(Frame::Lps), Some(LengthUnit::Millimetre));
+        p.convert(Some(frame), LengthUnit::Millimetre, LengthUnit::Millimetre);
+        p
+    };
+    let files = [("landmarks.mrk.json", Frame::Ras), ("targets.fcsv", Frame::Lps), ("camera.fcsv", Frame::Lps)];
+    let [attach, target_file, camera_file] = files.map(|(name, _)| dir.join(name));
+    write_points(&attach, &labelled(&landmarks, files[0].1, "ligament")).unwrap();
+    write_points(&target_file, &labelled(&targets, files[1].1, "target")).unwrap();
+    write_points(&camera_file, &labelled(&[camera], files[2].1, "laparoscope")).unwrap();
+    (stl, CameraAt::File(camera_file), attach, target_file)
 }
 
 #[test]
 fn a_damaged_segmentation_to_a_registration_set_up() {
     let dir = tempfile::tempdir().unwrap();
-    let (surface, camera, attach, targets) = patient_files(dir.path());
+    let (surface, camera, attach, targets) = patient_files(dir.path(), true);
     let mut options = PrepareOptions::new(surface, camera, attach, targets.clone());
     options.samples = 30;
     options.tets = 800;
@@ -80,6 +106,18 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     assert_eq!(state.steps.iter().map(|s| s.name.as_str()).collect::<Vec<_>>(), STEPS);
     let organ = &state.steps[0].lines;
     assert!(organ.iter().any(|l| l.starts_with("units: mm")), "{organ:?}");
+    assert!(organ.iter().any(|l| l == "frame: LPS (the surface's header)"), "{organ:?}");
+    // Written in m and LPS, labels kept: the landmarks given in RAS are where the LPS ones are.
+    assert_eq!(mesh::io::surface_frame(out.join("surface.stl")).unwrap(), Some(Frame::Lps));
+    let written = read_points(out.join("targets.csv")).unwrap();
+    assert_eq!((written.frame, written.unit), (Some(Frame::Lps), Some(LengthUnit::Metre)));
+    assert_eq!(written.labels, ["target 1", "target 2", "target 3"][..written.points.len()]);
+    let mut given = read_points(&targets).unwrap();
+    given.convert(Some(Frame::Lps), LengthUnit::Metre, LengthUnit::Metre);
+    assert_eq!(written.points, given.points);
+    let mut held = read_points(dir.path().join("landmarks.mrk.json")).unwrap();
+    held.convert(Some(Frame::Lps), LengthUnit::Metre, LengthUnit::Metre);
+    assert_eq!((read_points(out.join("attach.csv")).unwrap().points, held.frame), (held.points, Some(Frame::Lps)));
     assert!(organ.iter().any(|l| l.starts_with("repair: filled 2 holes (3, 3 edges)")), "the holes: {organ:?}");
     let validation = &state.steps[5].lines;
     assert!(validation.iter().any(|l| l.starts_with("validation: FEM TRE")), "{validation:?}");
@@ -135,7 +173,7 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
 #[test]
 fn targets_in_another_unit_are_named() {
     let dir = tempfile::tempdir().unwrap();
-    let (surface, camera, attach, targets) = patient_files(dir.path());
+    let (surface, camera, attach, targets) = patient_files(dir.path(), false);
     // The targets written in m while the rest is in mm.
     let in_metres: Vec<Point> =
         mesh::io::points::read_points_csv(&targets).unwrap().iter().map(|p| p.map(|x| x * 1e-3)).collect();

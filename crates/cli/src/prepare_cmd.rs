@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use app::prepare::{prepare, PrepareOptions, Progress, STEPS};
+use app::prepare::{prepare, CameraAt, PrepareOptions, Progress, STEPS};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `augsim prepare`.
@@ -14,17 +14,20 @@ pub struct PrepareArgs {
     /// The segmented organ surface (.stl, .obj, .vtk, .vtu), as a segmentation gives it (holes,
     /// duplicated vertices and flipped triangles are repaired).
     surface: PathBuf,
-    /// Where the laparoscope looks from: X,Y,Z in the surface's unit and frame.
-    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
-    camera: [f64; 3],
-    /// Landmarks where the organ is held (ligaments, the hilum): CSV with a header x, y, z.
-    #[arg(long, value_name = "LANDMARKS.csv")]
+    /// Where the laparoscope looks from: X,Y,Z in the surface's unit and frame, or a points file
+    /// of one point (.csv, 3D Slicer's .fcsv or .mrk.json).
+    #[arg(long, value_parser = parse_camera, allow_hyphen_values = true)]
+    camera: CameraAt,
+    /// Landmarks where the organ is held (ligaments, the hilum): CSV with a header x, y, z, or
+    /// 3D Slicer's .fcsv or .mrk.json (in the frame and unit they name).
+    #[arg(long, value_name = "LANDMARKS")]
     attach: PathBuf,
     /// Surface nodes within this distance (mm) of a landmark are held.
     #[arg(long, default_value_t = 25.0)]
     attach_mm: f64,
-    /// The targets at rest (tumour, vessels): CSV with a header x, y, z.
-    #[arg(long, value_name = "TARGETS.csv")]
+    /// The targets at rest (tumour, vessels): CSV with a header x, y, z, or .fcsv or .mrk.json
+    /// (their labels are kept).
+    #[arg(long, value_name = "TARGETS")]
     targets: PathBuf,
     /// Output directory (resumed when it holds a preparation of the same inputs).
     #[arg(short, long)]
@@ -44,13 +47,14 @@ pub struct PrepareArgs {
     tets: usize,
 }
 
-/// `X,Y,Z` as three numbers.
-fn parse_point(text: &str) -> Result<[f64; 3], String> {
-    let values: Vec<f64> = text
-        .split(',')
-        .map(|v| v.trim().parse::<f64>().map_err(|e| format!("{v:?}: {e}")))
-        .collect::<Result<_, _>>()?;
-    <[f64; 3]>::try_from(values).map_err(|v| format!("expected X,Y,Z, got {} values", v.len()))
+/// `X,Y,Z` as three numbers, or else a file.
+fn parse_camera(text: &str) -> Result<CameraAt, String> {
+    let values: Vec<f64> = match text.split(',').map(|v| v.trim().parse::<f64>()).collect() {
+        Ok(values) => values,
+        Err(_) if std::path::Path::new(text).is_file() => return Ok(CameraAt::File(PathBuf::from(text))),
+        Err(e) => return Err(format!("expected X,Y,Z or a points file, got {text:?} ({e})")),
+    };
+    <[f64; 3]>::try_from(values).map(CameraAt::Point).map_err(|v| format!("expected X,Y,Z, got {} values", v.len()))
 }
 
 /// Prints the steps, with a bar and the time left over the dataset's draws.
@@ -76,7 +80,8 @@ impl Progress for Printer {
 
 /// Runs `augsim prepare`.
 pub fn run(args: &PrepareArgs) -> Result<()> {
-    let mut options = PrepareOptions::new(args.surface.clone(), args.camera, args.attach.clone(), args.targets.clone());
+    let mut options =
+        PrepareOptions::new(args.surface.clone(), args.camera.clone(), args.attach.clone(), args.targets.clone());
     options.units = args.units.clone();
     options.attach_distance = args.attach_mm * 1e-3;
     options.samples = args.samples;

@@ -6,9 +6,11 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 use app::case::{ar_scenario, case_methods, compare, synthetic_case, Network, Registered, SHIPPED_MODEL, SHIPPED_ROM};
 use app::output::{comparison_rows, write_comparison, RunWriter};
+use app::points::{targets_frame, PointInput};
 use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
+use mesh::repair::{metres_per, LengthUnit};
 use mesh::Point;
-use register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
+use register::cloud::{read_frames, write_csv};
 use register::{Organ, RigidOptions, RigidResult, RigidTransform};
 use scenario::registration::{MethodKind, BUILTIN_CASE};
 
@@ -18,8 +20,9 @@ use scenario::{CaseScenario, DatasetScenario};
 /// Arguments of `augsim register`.
 #[derive(clap::Args)]
 pub struct RegisterArgs {
-    /// Intraoperative cloud, positions only (m): .csv with a header naming x, y, z; .npy [N, 3];
-    /// .ply (ASCII or binary). A directory is a sequence of frames, in file-name order.
+    /// Intraoperative cloud, positions only (in --units): .csv with a header naming x, y, z;
+    /// 3D Slicer's .fcsv or .mrk.json (their own frame and unit); .npy [N, 3]; .ply (ASCII or
+    /// binary). A directory is a sequence of frames, in file-name order (.csv, .npy, .ply).
     #[arg(required_unless_present = "comparison")]
     cloud: Option<PathBuf>,
     /// The registration set-up of a patient's organ, written by `augsim prepare`: its learned
@@ -45,13 +48,18 @@ pub struct RegisterArgs {
     /// liver_ar_t10.
     #[arg(long)]
     scenario: Option<PathBuf>,
-    /// Targets at rest (CSV x,y,z, m); default: the mesh's `markers` and `tumour` regions.
+    /// Targets at rest (CSV x,y,z in --units, .fcsv or .mrk.json); default: the mesh's `markers`
+    /// and `tumour` regions.
     #[arg(long)]
     targets: Option<PathBuf>,
-    /// True deformed positions of the targets (CSV x,y,z, same order, in the cloud's frame), or a
-    /// directory of one such file per frame: the TRE is reported.
+    /// True deformed positions of the targets (CSV x,y,z in --units, .fcsv or .mrk.json; same
+    /// order), or a directory of one such file per frame: the TRE is reported.
     #[arg(long)]
     truth: Option<PathBuf>,
+    /// Unit of the clouds, targets and truth whose files name none: mm or m. Files that name
+    /// their frame (RAS, LPS) are brought into the targets' (a patient's) frame.
+    #[arg(long, default_value = "m")]
+    units: LengthUnit,
     /// Most match-and-deform iterations per frame from rest (default: the library's for --fem, the
     /// built-in case's real-time budget for --model, or the case's and its methods'; given, it holds
     /// for every method of a case).
@@ -111,10 +119,12 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
                 bail!("give --patient DIR, --fem SCENARIO or --model MODEL --scenario SCENARIO (or --demo)");
             };
             let targets = args.targets.clone().map_or(TargetsSpec::Regions, TargetsSpec::File);
-            RegistrationSpec { method, targets, unit: 1.0, iterations: args.iterations, rigid: args.rigid }
+            let unit = metres_per(args.units);
+            RegistrationSpec { method, targets, unit, iterations: args.iterations, rigid: args.rigid }
         }
     };
     let mut registration = spec.build()?;
+    let mut input = PointInput::new(targets_frame(&spec.targets)?, LengthUnit::Metre, args.units);
     let frames = read_frames(&cloud_path)?;
     let truths: Option<Vec<Vec<Point>>> = match &args.truth {
         None => None,
@@ -123,7 +133,7 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
             if files.len() != frames.len() {
                 bail!("{} truth file(s) for {} cloud frame(s)", files.len(), frames.len());
             }
-            Some(files.iter().map(|f| read_targets(f)).collect::<Result<Vec<_>, _>>()?)
+            Some(files.iter().map(|f| Ok(input.read(f)?.points)).collect::<Result<Vec<_>>>()?)
         }
     };
     println!("method     {}", registration.method());
@@ -133,7 +143,7 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
     }
     let sequence = frames.len() > 1;
     let mut writer = RunWriter::new(&args.out, sequence)?;
-    let clouds = frames.iter().map(|f| read_point_cloud(f));
+    let clouds = frames.iter().map(|f| input.read_cloud(f));
     let mut rigid_printed = false;
     let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, organ, o| {
         if let (Some(rigid), false) = (&o.rigid, rigid_printed) {

@@ -767,8 +767,11 @@ fn write_cells(w: &mut impl Write, conn: &[usize], k: usize, encoding: Encoding)
 
 /// Writes a whole legacy file: `UNSTRUCTURED_GRID` when `grid_type` is given, else `POLYDATA`
 /// with `k`-gon polygons.
+/// `title` is the header line (line 2): one line, at most 256 characters.
+#[allow(clippy::too_many_arguments)]
 fn write_legacy(
     path: &Path,
+    title: &str,
     nodes: &[Point],
     conn: &[usize],
     k: usize,
@@ -784,7 +787,7 @@ fn write_legacy(
     let mode = if encoding == Encoding::Binary { "BINARY" } else { "ASCII" };
     let dataset = if grid_type.is_some() { "UNSTRUCTURED_GRID" } else { "POLYDATA" };
     write_atomic(path, |w| {
-        write!(w, "# vtk DataFile Version 3.0\naugsim\n{mode}\nDATASET {dataset}\nPOINTS {} double\n", nodes.len())?;
+        write!(w, "# vtk DataFile Version 3.0\n{title}\n{mode}\nDATASET {dataset}\nPOINTS {} double\n", nodes.len())?;
         write_reals(w, nodes.iter().flatten().copied(), encoding, 3)?;
         match grid_type {
             Some(ty) => {
@@ -842,11 +845,19 @@ pub fn write_vtk_legacy_with(
     encoding: Encoding,
 ) -> Result<(), MeshError> {
     let (ty, k, conn) = mesh_cells_flat(mesh);
-    write_legacy(path.as_ref(), &mesh.nodes, &conn, k, Some(ty), fields, encoding)
+    write_legacy(path.as_ref(), "augsim", &mesh.nodes, &conn, k, Some(ty), fields, encoding)
 }
 
 /// Writes a surface as a binary legacy VTK `POLYDATA` of triangles.
 pub(super) fn write_surface_vtk(path: &Path, surface: &TriSurface) -> Result<(), MeshError> {
+    write_surface_vtk_titled(path, surface, "augsim")
+}
+
+/// [`write_surface_vtk`] with `title` as the header line (one line of at most 256 characters).
+pub(super) fn write_surface_vtk_titled(path: &Path, surface: &TriSurface, title: &str) -> Result<(), MeshError> {
+    if title.contains(['\n', '\r']) || title.len() > 256 {
+        return Err(MeshError::Invalid(format!("a legacy VTK title is one line of at most 256 characters: {title:?}")));
+    }
     let conn = check_surface(surface)?;
-    write_legacy(path, &surface.vertices, &conn, 3, None, &[], Encoding::Binary)
+    write_legacy(path, title, &surface.vertices, &conn, 3, None, &[], Encoding::Binary)
 }

@@ -11,6 +11,11 @@
 //! merged exactly), legacy VTK `.vtk` (`POLYDATA` or `UNSTRUCTURED_GRID`) and `.vtu`; polygons are
 //! split into triangle fans and triangle strips into triangles. All vertices are kept.
 //!
+//! The frame a surface file names (`SPACE=LPS` or `SPACE=RAS` in an STL or legacy VTK header, as
+//! 3D Slicer writes it) is read by [`read_surface_with_frame`] and written by
+//! [`write_surface_in_frame`]; points with labels, frame and unit (CSV, Slicer's `.fcsv` and
+//! `.mrk.json`) by the [`points`] module.
+//!
 //! Writers ([`write_vtu`], [`write_vtk_legacy`], [`write_msh`], [`write_surface`]) go through
 //! [`write_atomic`] (a temporary file in the target directory, renamed onto the target), so a
 //! reader never sees a partial file; the other crates write their files with it too.
@@ -46,6 +51,7 @@
 //! Region nodes are mesh nodes: nodes that the reader drops (used by no volume cell) are left out
 //! of the regions, and the rest are renumbered with the mesh. A region with no node is not read.
 
+mod frame;
 mod gmsh;
 mod legacy_vtk;
 pub mod points;
@@ -63,6 +69,7 @@ use std::path::{Path, PathBuf};
 
 use crate::{Cells, Mesh, MeshError, Point, TriSurface, HEX_TO_TETS};
 
+pub use frame::{frame_in_header, read_surface_with_frame, surface_frame, write_surface_in_frame, Frame};
 pub use gmsh::{read_gmsh, write_msh};
 pub use legacy_vtk::{read_vtk, read_vtk_surface, read_vtk_with_fields, write_vtk_legacy, write_vtk_legacy_with};
 pub use scalar::Scalar;

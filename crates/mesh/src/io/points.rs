@@ -1,58 +1,470 @@
-//! Points as CSV: a header naming the columns `x`, `y` and `z` (any order, any case, other
-//! columns ignored), one point per line; what clouds, targets and landmarks are written in.
+//! Points on disk, with a label per point and, where the file names them, their frame and unit:
+//!
+//! - **CSV**: a header naming the columns `x`, `y` and `z` (any order, any case), or `x_mm`,
+//!   `y_mm`, `z_mm` (or `_m`), which name the unit; a `label`, `name` or `id` column gives each
+//!   point's label, a `description` or `desc` column its description; other columns are ignored.
+//!   Fields may be quoted (RFC 4180). Comment lines starting with `#` may come before the header,
+//!   `# CoordinateSystem = LPS` (or `RAS`) among them.
+//! - **`.fcsv`**: 3D Slicer's markups fiducial CSV (4.x and 5.x): `# CoordinateSystem = LPS`,
+//!   `RAS`, or the older numeric codes `0` (RAS) and `1` (LPS) (no such line: RAS, as Slicer wrote
+//!   before it had one); `# columns = id,x,y,z,ow,ox,oy,oz,vis,sel,lock,label,desc,associatedNodeID`
+//!   names the columns; always millimetres.
+//! - **`.mrk.json`**: 3D Slicer's markups JSON: each markup's `coordinateSystem` (`LPS` when
+//!   absent, as Slicer reads it), `coordinateUnits` (`mm` when absent) and `controlPoints` with
+//!   their `position`, `label` and `description`; points whose `positionStatus` is `undefined`
+//!   (placeholders not yet placed) are left out. Markups of several frames or units are brought to
+//!   the first's.
+//!
+//! Every error names the file and the line (CSV) or the control point (JSON).
 
 use std::io::Write as _;
 use std::path::Path;
 
-use super::{write_atomic, WriteError};
+use serde_json::Value;
+
+use super::frame::Frame;
+use super::{csv_field, extension, parse_error, write_atomic, WriteError};
+use crate::repair::{metres_per, LengthUnit};
 use crate::{MeshError, Point};
 
-/// Reads the points of a CSV file. Every error names the file and, for its content, the line:
-/// no header, a header without `x`, `y` or `z`, a line with another number of fields, a value
-/// that is not a finite number.
-pub fn read_points_csv(path: &Path) -> Result<Vec<Point>, MeshError> {
+/// Points with a label and a description each (empty when the file gives none), and the frame and
+/// unit their file names (`None` when it names none).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LabelledPoints {
+    /// The positions.
+    pub points: Vec<Point>,
+    /// One label per point ("" for none).
+    pub labels: Vec<String>,
+    /// One description per point ("" for none).
+    pub descriptions: Vec<String>,
+    /// The frame the file names.
+    pub frame: Option<Frame>,
+    /// The unit the file names.
+    pub unit: Option<LengthUnit>,
+}
+
+impl LabelledPoints {
+    /// Points without labels, frame or unit.
+    pub fn new(points: Vec<Point>) -> LabelledPoints {
+        let n = points.len();
+        LabelledPoints {
+            points,
+            labels: vec![String::new(); n],
+            descriptions: vec![String::new(); n],
+            ..Default::default()
+        }
+    }
+
+    /// The label of point `i`, `None` when it has none (or there is no point `i`).
+    pub fn label(&self, i: usize) -> Option<&str> {
+        self.labels.get(i).map(String::as_str).filter(|l| !l.is_empty())
+    }
+
+    /// Brings the points into `frame` (x and y negated when their own frame is the other one;
+    /// points of no named frame are taken as being in `frame` already; `None` leaves them as they
+    /// are) and into `unit`, from their own unit or, when the file named none, from `assumed`.
+    pub fn convert(&mut self, frame: Option<Frame>, unit: LengthUnit, assumed: LengthUnit) {
+        if let Some(to) = frame {
+            if let Some(from) = self.frame {
+                from.convert_all(to, &mut self.points);
+            }
+            self.frame = Some(to);
+        }
+        let scale = metres_per(self.unit.unwrap_or(assumed)) / metres_per(unit);
+        if scale != 1.0 {
+            self.points.iter_mut().for_each(|p| *p = p.map(|x| x * scale));
+        }
+        self.unit = Some(unit);
+    }
+}
+
+/// Reads points, choosing the format by extension: `.fcsv`, `.mrk.json` (or any `.json`), and CSV
+/// for any other (see the [module](self) documentation).
+pub fn read_points(path: impl AsRef<Path>) -> Result<LabelledPoints, MeshError> {
+    let path = path.as_ref();
     let text =
         std::fs::read_to_string(path).map_err(|error| MeshError::Io { path: path.display().to_string(), error })?;
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
-    let err = |line: usize, message: String| MeshError::Parse {
-        path: path.display().to_string(),
-        message: format!("line {line}: {message}"),
-    };
-    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim()));
-    let (header_no, header) = lines.by_ref().find(|(_, l)| !l.is_empty()).ok_or_else(|| MeshError::Parse {
-        path: path.display().to_string(),
-        message: "no points (empty file, expected a header naming x, y, z)".into(),
-    })?;
-    let names: Vec<String> = header.split(',').map(|s| s.trim().to_ascii_lowercase()).collect();
-    let mut columns = [0usize; 3];
-    for (axis, name) in ["x", "y", "z"].iter().enumerate() {
-        let mut found = names.iter().enumerate().filter(|(_, n)| n == name).map(|(i, _)| i);
-        columns[axis] = found.next().ok_or_else(|| {
-            err(header_no, format!("header {header:?} has no '{name}' column (expected the columns x, y, z)"))
-        })?;
-        if found.next().is_some() {
-            return Err(err(header_no, format!("header {header:?} has more than one '{name}' column")));
+    match extension(path).as_str() {
+        "fcsv" => read_table(path, text, true),
+        "json" => read_markups_json(path, text),
+        _ => read_table(path, text, false),
+    }
+}
+
+/// Reads the points of a points file ([`read_points`]; CSV for any extension but `.fcsv` and
+/// `.json`): in metres when the file names their unit (`.fcsv`, `.mrk.json`, a CSV header
+/// `x_mm`), as written otherwise; labels, descriptions and frame are dropped. Every error names
+/// the file and, for its content, the line: no header, a header without `x`, `y` or `z`, a line
+/// with another number of fields, a value that is not a finite number.
+pub fn read_points_csv(path: &Path) -> Result<Vec<Point>, MeshError> {
+    let mut points = read_points(path)?;
+    points.convert(None, LengthUnit::Metre, LengthUnit::Metre);
+    Ok(points.points)
+}
+
+/// The columns of a table: where x, y, z, the label and the description are, and the unit.
+struct Columns {
+    xyz: [usize; 3],
+    label: Option<usize>,
+    description: Option<usize>,
+    unit: Option<LengthUnit>,
+}
+
+impl Columns {
+    /// Finds the columns in the (lower-case) header names; `err` makes an error of the header's line.
+    fn find(names: &[String], err: &dyn Fn(String) -> MeshError) -> Result<Columns, MeshError> {
+        let mut xyz = [0usize; 3];
+        let mut unit = None;
+        for (axis, name) in ["x", "y", "z"].into_iter().enumerate() {
+            let mut found = names.iter().enumerate().filter_map(|(i, n)| {
+                let suffix = n.strip_prefix(name)?;
+                let u = match suffix {
+                    "" => None,
+                    "_mm" => Some(LengthUnit::Millimetre),
+                    "_m" => Some(LengthUnit::Metre),
+                    _ => return None,
+                };
+                Some((i, u))
+            });
+            let (column, u) = found.next().ok_or_else(|| {
+                err(format!("the header has no '{name}' column (expected the columns x, y, z, or x_mm, y_mm, z_mm)"))
+            })?;
+            if found.next().is_some() {
+                return Err(err(format!("the header has more than one '{name}' column")));
+            }
+            if axis > 0 && u != unit {
+                return Err(err("the x, y and z columns name different units".into()));
+            }
+            (xyz[axis], unit) = (column, u);
+        }
+        let position = |candidates: &[&str]| candidates.iter().find_map(|c| names.iter().position(|n| n == c));
+        Ok(Columns {
+            xyz,
+            label: position(&["label", "name", "id"]),
+            description: position(&["description", "desc"]),
+            unit,
+        })
+    }
+}
+
+/// Reads CSV text, or Slicer's `.fcsv` when `fcsv` (columns named by the `# columns =` comment,
+/// RAS when no `# CoordinateSystem` line, millimetres).
+fn read_table(path: &Path, text: &str, fcsv: bool) -> Result<LabelledPoints, MeshError> {
+    let err = |line: usize, message: String| parse_error(path, format!("line {line}: {message}"));
+    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim())).filter(|(_, l)| !l.is_empty()).peekable();
+    let (mut frame, mut columns_line) = (None, None);
+    while let Some(&(no, line)) = lines.peek().filter(|(_, l)| l.starts_with('#')) {
+        lines.next();
+        let Some((key, value)) = line.trim_start_matches('#').split_once('=') else { continue };
+        match key.trim().to_ascii_lowercase().as_str() {
+            "coordinatesystem" => frame = Some(coordinate_system(value).map_err(|m| err(no, m))?),
+            "columns" => columns_line = Some((no, value.trim())),
+            _ => {}
         }
     }
-    let mut points = Vec::new();
-    for (line, text) in lines.filter(|(_, l)| !l.is_empty()) {
-        let fields: Vec<&str> = text.split(',').map(str::trim).collect();
+    let (header_no, header) = match columns_line {
+        Some(c) => c,
+        None if fcsv => return Err(parse_error(path, "no '# columns = …' line: not a Slicer markups .fcsv file")),
+        None => {
+            lines.next().ok_or_else(|| parse_error(path, "no points (empty file, expected a header naming x, y, z)"))?
+        }
+    };
+    let names: Vec<String> =
+        split_csv(header).map_err(|m| err(header_no, m))?.iter().map(|s| s.to_ascii_lowercase()).collect();
+    let columns = Columns::find(&names, &|m| err(header_no, format!("{m} in {header:?}")))?;
+    let mut out = LabelledPoints {
+        frame: if fcsv { frame.or(Some(Frame::Ras)) } else { frame },
+        unit: if fcsv { Some(LengthUnit::Millimetre) } else { columns.unit },
+        ..Default::default()
+    };
+    for (line, text) in lines.filter(|(_, l)| !l.starts_with('#')) {
+        let fields = split_csv(text).map_err(|m| err(line, m))?;
         if fields.len() != names.len() {
             return Err(err(line, format!("{} fields, the header has {} columns", fields.len(), names.len())));
         }
         let mut p = [0.0; 3];
-        for (axis, &column) in columns.iter().enumerate() {
-            let name = ["x", "y", "z"][axis];
-            let field = fields[column];
-            let v: f64 = field.parse().map_err(|_| err(line, format!("{name} = {field:?} is not a number")))?;
-            if !v.is_finite() {
-                return Err(err(line, format!("{name} = {field:?} is not finite")));
-            }
-            p[axis] = v;
+        for (axis, &column) in columns.xyz.iter().enumerate() {
+            p[axis] = number(&fields[column]).map_err(|m| err(line, format!("{} {m}", ["x", "y", "z"][axis])))?;
         }
-        points.push(p);
+        out.points.push(p);
+        let field = |c: Option<usize>| c.map_or_else(String::new, |c| fields[c].clone());
+        out.labels.push(field(columns.label));
+        out.descriptions.push(field(columns.description));
     }
-    Ok(points)
+    Ok(out)
+}
+
+/// A finite number, or what is wrong with `text`.
+fn number(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(format!("= {text:?} is not finite")),
+        Err(_) => Err(format!("= {text:?} is not a number")),
+    }
+}
+
+/// The frame of an `.fcsv` `CoordinateSystem` value: `LPS`, `RAS`, or Slicer's older codes
+/// `0` (RAS) and `1` (LPS).
+fn coordinate_system(value: &str) -> Result<Frame, String> {
+    match value.trim() {
+        "0" => Ok(Frame::Ras),
+        "1" => Ok(Frame::Lps),
+        "2" => Err("CoordinateSystem = 2 (IJK, voxel indices) is not supported: save the points in LPS or RAS".into()),
+        other => other.parse(),
+    }
+}
+
+/// The fields of a CSV line, trimmed; a field in double quotes may hold commas and doubled quotes.
+fn split_csv(line: &str) -> Result<Vec<String>, String> {
+    let mut fields = Vec::new();
+    let mut chars = line.chars().peekable();
+    loop {
+        while chars.next_if(|c| *c == ' ' || *c == '\t').is_some() {}
+        let mut field = String::new();
+        if chars.next_if_eq(&'"').is_some() {
+            loop {
+                match chars.next() {
+                    Some('"') if chars.next_if_eq(&'"').is_some() => field.push('"'),
+                    Some('"') => break,
+                    Some(c) => field.push(c),
+                    None => return Err(format!("field {} opens a quote that is not closed", fields.len() + 1)),
+                }
+            }
+            while chars.next_if(|c| *c == ' ' || *c == '\t').is_some() {}
+            if chars.peek().is_some_and(|c| *c != ',') {
+                return Err(format!("field {} has text after its closing quote", fields.len() + 1));
+            }
+        } else {
+            while let Some(c) = chars.next_if(|c| *c != ',') {
+                field.push(c);
+            }
+            field.truncate(field.trim_end().len());
+        }
+        fields.push(field);
+        if chars.next().is_none() {
+            return Ok(fields);
+        }
+    }
+}
+
+/// Reads the control points of Slicer's markups JSON.
+fn read_markups_json(path: &Path, text: &str) -> Result<LabelledPoints, MeshError> {
+    let root: Value = serde_json::from_str(text).map_err(|e| parse_error(path, format!("not valid JSON: {e}")))?;
+    let markups = root
+        .get("markups")
+        .and_then(Value::as_array)
+        .ok_or_else(|| parse_error(path, "no \"markups\" list: not a Slicer markups (.mrk.json) file"))?;
+    let mut out: Option<LabelledPoints> = None;
+    for (m, markup) in markups.iter().enumerate() {
+        let mut points = read_markup(markup, m).map_err(|message| parse_error(path, message))?;
+        match &mut out {
+            None => out = Some(points),
+            Some(all) => {
+                points.convert(all.frame, all.unit.unwrap_or(LengthUnit::Millimetre), LengthUnit::Millimetre);
+                all.points.append(&mut points.points);
+                all.labels.append(&mut points.labels);
+                all.descriptions.append(&mut points.descriptions);
+            }
+        }
+    }
+    out.ok_or_else(|| parse_error(path, "the \"markups\" list is empty"))
+}
+
+/// The points of markup `m` of a markups JSON file, or what is wrong (naming the point).
+fn read_markup(markup: &Value, m: usize) -> Result<LabelledPoints, String> {
+    let at = format!("markups[{m}]");
+    let text_of = |key: &str| -> Result<Option<&str>, String> {
+        match markup.get(key) {
+            None | Some(Value::Null) => Ok(None),
+            Some(Value::String(s)) => Ok(Some(s.as_str())),
+            Some(other) => Err(format!("{at}.{key} is {other}, not a string")),
+        }
+    };
+    let frame = text_of("coordinateSystem")?.map_or(Ok(Frame::Lps), str::parse).map_err(|e| format!("{at}: {e}"))?;
+    let unit = text_of("coordinateUnits")?
+        .map_or(Ok(LengthUnit::Millimetre), str::parse)
+        .map_err(|e| format!("{at}: coordinateUnits {e}"))?;
+    let mut out = LabelledPoints { frame: Some(frame), unit: Some(unit), ..Default::default() };
+    let points = match markup.get("controlPoints") {
+        None | Some(Value::Null) => return Ok(out),
+        Some(Value::Array(points)) => points,
+        Some(_) => return Err(format!("{at}.controlPoints is not a list")),
+    };
+    for (i, point) in points.iter().enumerate() {
+        let text = |key: &str| point.get(key).and_then(Value::as_str).unwrap_or_default().to_string();
+        let label = text("label");
+        let name = if label.is_empty() {
+            format!("{at}.controlPoints[{i}]")
+        } else {
+            format!("{at}.controlPoints[{i}] ({label})")
+        };
+        if text("positionStatus") == "undefined" {
+            continue;
+        }
+        let position = point.get("position").ok_or_else(|| format!("{name}: no position"))?;
+        let values: Vec<f64> = position
+            .as_array()
+            .map(|a| a.iter().filter_map(Value::as_f64).collect())
+            .filter(|v: &Vec<f64>| v.len() == 3 && position.as_array().is_some_and(|a| a.len() == 3))
+            .ok_or_else(|| format!("{name}: position {position} is not 3 numbers"))?;
+        if values.iter().any(|v| !v.is_finite()) {
+            return Err(format!("{name}: position {position} is not finite"));
+        }
+        out.points.push([values[0], values[1], values[2]]);
+        out.labels.push(label);
+        out.descriptions.push(text("description"));
+    }
+    Ok(out)
+}
+
+/// Writes points with their labels, choosing the format by extension: `.fcsv`
+/// ([`write_fcsv`]), `.mrk.json` ([`write_markups_json`]), else CSV: a `label` column when a
+/// point has a label, `x`, `y`, `z` with the unit's suffix when the unit is known (`x_mm`), a
+/// `description` column when a point has one, and a first line `# CoordinateSystem = …` when the
+/// frame is known. Reading the file back with [`read_points`] gives the same points.
+pub fn write_points(path: impl AsRef<Path>, points: &LabelledPoints) -> Result<(), MeshError> {
+    let path = path.as_ref();
+    let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    if name.ends_with(".fcsv") {
+        write_fcsv(path, points)
+    } else if name.ends_with(".json") {
+        write_markups_json(path, points)
+    } else {
+        write_labelled_csv(path, points)
+    }
+}
+
+/// Checks that a point list can be written: labels and descriptions per point, finite positions.
+fn check_points(points: &LabelledPoints) -> Result<(), MeshError> {
+    let n = points.points.len();
+    let describe = |k: usize| if k == n || k == 0 { String::new() } else { format!(" ({k} for {n} points)") };
+    if points.labels.len() != n && !points.labels.is_empty() {
+        return Err(MeshError::Invalid(format!("one label per point, or none{}", describe(points.labels.len()))));
+    }
+    if points.descriptions.len() != n && !points.descriptions.is_empty() {
+        let k = points.descriptions.len();
+        return Err(MeshError::Invalid(format!("one description per point, or none{}", describe(k))));
+    }
+    if let Some(i) = points.points.iter().position(|p| p.iter().any(|v| !v.is_finite())) {
+        return Err(MeshError::Invalid(format!("point {i} is not finite: {:?}", points.points[i])));
+    }
+    Ok(())
+}
+
+/// The label and the description of point `i` ("" when there are none).
+fn texts(points: &LabelledPoints, i: usize) -> (&str, &str) {
+    let label = points.labels.get(i).map_or("", String::as_str);
+    (label, points.descriptions.get(i).map_or("", String::as_str))
+}
+
+fn write_labelled_csv(path: &Path, points: &LabelledPoints) -> Result<(), MeshError> {
+    check_points(points)?;
+    let labelled = points.labels.iter().any(|l| !l.is_empty());
+    let described = points.descriptions.iter().any(|d| !d.is_empty());
+    let suffix = points.unit.map_or(String::new(), |u| format!("_{}", u.symbol()));
+    write_atomic(path, |w| {
+        if let Some(frame) = points.frame {
+            writeln!(w, "# CoordinateSystem = {frame}")?;
+        }
+        let mut header: Vec<String> = ["x", "y", "z"].iter().map(|a| format!("{a}{suffix}")).collect();
+        if labelled {
+            header.insert(0, "label".into());
+        }
+        if described {
+            header.push("description".into());
+        }
+        writeln!(w, "{}", header.join(","))?;
+        for (i, p) in points.points.iter().enumerate() {
+            let (label, description) = texts(points, i);
+            let mut row: Vec<String> = p.iter().map(|&v| Num(v).to_string()).collect();
+            if labelled {
+                row.insert(0, csv_field(label));
+            }
+            if described {
+                row.push(csv_field(description));
+            }
+            writeln!(w, "{}", row.join(","))?;
+        }
+        Ok(())
+    })?;
+    Ok(())
+}
+
+/// Writes points as Slicer's markups fiducial CSV (`.fcsv`, version 4.11, which Slicer 4.11 and
+/// later read), atomically: in millimetres (converted from the points' unit; none named:
+/// millimetres), in the points' frame, which must be named.
+pub fn write_fcsv(path: impl AsRef<Path>, points: &LabelledPoints) -> Result<(), MeshError> {
+    let path = path.as_ref();
+    check_points(points)?;
+    let frame = points.frame.ok_or_else(|| {
+        MeshError::Invalid(format!(
+            "{}: an .fcsv file names its frame: give the points one (LPS or RAS)",
+            path.display()
+        ))
+    })?;
+    let scale = metres_per(points.unit.unwrap_or(LengthUnit::Millimetre)) / metres_per(LengthUnit::Millimetre);
+    write_atomic(path, |w| {
+        writeln!(w, "# Markups fiducial file version = 4.11")?;
+        writeln!(w, "# CoordinateSystem = {frame}")?;
+        writeln!(w, "# columns = id,x,y,z,ow,ox,oy,oz,vis,sel,lock,label,desc,associatedNodeID")?;
+        for (i, p) in points.points.iter().enumerate() {
+            let [x, y, z] = p.map(|v| Num(v * scale));
+            let (label, description) = texts(points, i);
+            writeln!(w, "{},{x},{y},{z},0,0,0,1,1,1,0,{},{},", i + 1, csv_field(label), csv_field(description))?;
+        }
+        Ok(())
+    })?;
+    Ok(())
+}
+
+/// Writes points as Slicer's markups JSON (`.mrk.json`, one point list), atomically: each
+/// point's label and description; the points' frame as `coordinateSystem` and their unit as
+/// `coordinateUnits` when named (Slicer takes LPS and millimetres when they are not). Slicer
+/// works in millimetres: convert the points to them ([`LabelledPoints::convert`]) for Slicer.
+pub fn write_markups_json(path: impl AsRef<Path>, points: &LabelledPoints) -> Result<(), MeshError> {
+    let path = path.as_ref();
+    check_points(points)?;
+    let control: Vec<Value> = points
+        .points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let (label, description) = texts(points, i);
+            serde_json::json!({
+                "id": (i + 1).to_string(),
+                "label": label,
+                "description": description,
+                "associatedNodeID": "",
+                "position": p,
+                "orientation": [-1.0, -0.0, -0.0, -0.0, -1.0, -0.0, 0.0, 0.0, 1.0],
+                "selected": true,
+                "locked": false,
+                "visibility": true,
+                "positionStatus": "defined",
+            })
+        })
+        .collect();
+    let mut markup = serde_json::json!({ "type": "Fiducial" });
+    if let Some(frame) = points.frame {
+        markup["coordinateSystem"] = frame.name().into();
+    }
+    if let Some(unit) = points.unit {
+        markup["coordinateUnits"] = unit.symbol().into();
+    }
+    markup["locked"] = false.into();
+    markup["labelFormat"] = "%N-%d".into();
+    markup["controlPoints"] = control.into();
+    markup["measurements"] = Value::Array(Vec::new());
+    let root = serde_json::json!({
+        "@schema": "https://raw.githubusercontent.com/slicer/slicer/master/Modules/Loadable/Markups/Resources/Schema/markups-schema-v1.0.3.json#",
+        "markups": [markup],
+    });
+    write_atomic(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, &root)?;
+        writeln!(w)
+    })?;
+    Ok(())
 }
 
 /// Writes `points` as CSV with the header `x,y,z`, atomically; the values read back exactly.
@@ -78,5 +490,34 @@ impl std::fmt::Display for Num {
         } else {
             write!(f, "{:e}", self.0)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_lines_split_at_commas_outside_quotes() {
+        assert_eq!(split_csv("a, b ,c").unwrap(), ["a", "b", "c"]);
+        assert_eq!(split_csv("1,\"F, 1\",\"say \"\"hi\"\"\",").unwrap(), ["1", "F, 1", "say \"hi\"", ""]);
+        assert_eq!(split_csv("").unwrap(), [""]);
+        assert!(split_csv("1,\"open").unwrap_err().contains("field 2"));
+        assert!(split_csv("\"a\"b,c").unwrap_err().contains("after its closing quote"));
+    }
+
+    #[test]
+    fn conversion_takes_the_named_unit_and_frame_or_the_assumed_ones() {
+        let mut p = LabelledPoints::new(vec![[1.0, 2.0, 3.0]]);
+        p.frame = Some(Frame::Ras);
+        p.unit = Some(LengthUnit::Millimetre);
+        p.convert(Some(Frame::Lps), LengthUnit::Metre, LengthUnit::Metre);
+        assert_eq!(p.points, [[-1e-3, -2e-3, 3e-3]]);
+        assert_eq!((p.frame, p.unit), (Some(Frame::Lps), Some(LengthUnit::Metre)));
+        let mut q = LabelledPoints::new(vec![[1.0, 2.0, 3.0]]);
+        q.convert(Some(Frame::Lps), LengthUnit::Metre, LengthUnit::Millimetre);
+        assert_eq!(q.points, [[1e-3, 2e-3, 3e-3]], "no named frame: taken as the target frame");
+        q.convert(None, LengthUnit::Metre, LengthUnit::Millimetre);
+        assert_eq!(q.points, [[1e-3, 2e-3, 3e-3]], "a named unit wins over the assumed one");
     }
 }

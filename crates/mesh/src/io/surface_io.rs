@@ -215,12 +215,23 @@ fn read_stl_ascii(path: &Path, text: &str) -> Result<TriSurface, MeshError> {
 
 /// Writes a surface as binary STL (single precision, unit facet normals from the vertex order).
 pub fn write_stl(path: impl AsRef<Path>, surface: &TriSurface) -> Result<(), MeshError> {
+    write_stl_titled(path.as_ref(), surface, "augsim binary STL")
+}
+
+/// [`write_stl`] with `title` at the start of the 80-byte header (ASCII, at most 80 bytes, not
+/// starting with `solid`, which would make the file look like an ASCII STL).
+pub(super) fn write_stl_titled(path: &Path, surface: &TriSurface, title: &str) -> Result<(), MeshError> {
+    if !title.is_ascii() || title.len() > 80 || title.trim_start().to_ascii_lowercase().starts_with("solid") {
+        return Err(MeshError::Invalid(format!(
+            "a binary STL header is ASCII, at most 80 bytes, not `solid…`: {title:?}"
+        )));
+    }
     check_surface(surface)?;
     let count = u32::try_from(surface.triangles.len())
         .map_err(|_| MeshError::Invalid("too many triangles for binary STL".into()))?;
-    write_atomic(path.as_ref(), |w| {
+    write_atomic(path, |w| {
         let mut header = [b' '; 80];
-        header[..17].copy_from_slice(b"augsim binary STL");
+        header[..title.len()].copy_from_slice(title.as_bytes());
         w.write_all(&header)?;
         w.write_all(&count.to_le_bytes())?;
         for t in &surface.triangles {

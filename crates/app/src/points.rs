@@ -1,0 +1,119 @@
+//! Points read at a command's boundary, in any of the formats a user has (CSV, 3D Slicer's
+//! `.fcsv` and `.mrk.json`, and for clouds `.npy` and `.ply`), brought into the one frame and the
+//! one unit the command works in.
+//!
+//! The frame policy: a command works in the frame of its organ (a surface's `SPACE=` header, or
+//! the frame its targets file names). Points whose file names the other frame (RAS or LPS) are
+//! converted (x and y negated); points whose file names none are taken as being in the working
+//! frame. When the organ's frame is not known, the first point file to name one gives it.
+//! Units: a file that names its unit (`.fcsv`, `.mrk.json`, CSV headers `x_mm`) is read in it;
+//! other files in the unit the user gives (`--units`).
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use mesh::io::points::{read_points, LabelledPoints};
+use mesh::io::Frame;
+use mesh::repair::{metres_per, LengthUnit};
+use mesh::Point;
+
+use crate::registration::TargetsSpec;
+
+/// Where points read by a command go: its working frame (once known) and its working unit, and
+/// the unit of files that name none.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointInput {
+    /// The working frame: `None` until the organ or a file names one.
+    pub frame: Option<Frame>,
+    /// The unit the command works in.
+    pub unit: LengthUnit,
+    /// The unit of files that name none (the user's `--units`).
+    pub given: LengthUnit,
+}
+
+impl PointInput {
+    /// An input into `frame` (when known) and `unit`, files naming no unit being in `given`.
+    pub fn new(frame: Option<Frame>, unit: LengthUnit, given: LengthUnit) -> PointInput {
+        PointInput { frame, unit, given }
+    }
+
+    /// Reads a points file (CSV, `.fcsv`, `.mrk.json`) with its labels, in the working frame and
+    /// unit; its own frame becomes the working frame when there was none.
+    pub fn read(&mut self, path: &Path) -> Result<LabelledPoints> {
+        Ok(self.place(read_points(path)?))
+    }
+
+    /// Points read from a file, in the working frame and unit (their frame becoming the working
+    /// frame when there was none).
+    fn place(&mut self, mut points: LabelledPoints) -> LabelledPoints {
+        self.frame = self.frame.or(points.frame);
+        points.convert(self.frame, self.unit, self.given);
+        points
+    }
+
+    /// Reads an intraoperative cloud: a points file as [`PointInput::read`], or `.npy` and `.ply`
+    /// (which name neither frame nor unit) in the given unit. An empty cloud is an error.
+    pub fn read_cloud(&mut self, path: &Path) -> register::Result<Vec<Point>> {
+        let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+        let points = if name.ends_with(".npy") || name.ends_with(".ply") {
+            let scale = metres_per(self.given) / metres_per(self.unit);
+            register::cloud::read_point_cloud(path)?.into_iter().map(|p| p.map(|x| x * scale)).collect()
+        } else {
+            self.place(read_points(path)?).points
+        };
+        register::check_cloud(&points).map_err(|e| register::RegisterError::format(path, e.to_string()))?;
+        Ok(points)
+    }
+}
+
+/// The rest positions of a targets file (CSV, `.fcsv`, `.mrk.json`) in metres: in the unit the
+/// file names, else `unit` metres per unit; as they are in their own frame (which is the
+/// working frame: see [`targets_frame`]).
+pub fn read_targets(path: &Path, unit: f64) -> Result<Vec<Point>> {
+    let points = read_points(path)?;
+    let scale = points.unit.map_or(unit, metres_per);
+    Ok(points.points.iter().map(|p| p.map(|x| x * scale)).collect())
+}
+
+/// The frame that a registration's targets file names (a patient's, as `augsim prepare` writes
+/// it, or the user's), `None` for other targets: the frame the registration works in.
+pub fn targets_frame(targets: &TargetsSpec) -> Result<Option<Frame>> {
+    match targets {
+        TargetsSpec::File(path) => {
+            Ok(read_points(path).with_context(|| format!("the targets of {}", path.display()))?.frame)
+        }
+        TargetsSpec::Regions | TargetsSpec::Points(_) => Ok(None),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clouds_and_points_come_in_the_working_frame_and_unit() {
+        let dir = tempfile::tempdir().unwrap();
+        let ras = dir.path().join("cloud.mrk.json");
+        std::fs::write(
+            &ras,
+            r#"{"markups": [{"coordinateSystem": "RAS", "controlPoints": [{"label": "p", "position": [10, 20, 30]}]}]}"#,
+        )
+        .unwrap();
+        let plain = dir.path().join("truth.csv");
+        std::fs::write(&plain, "x,y,z\n1,2,3\n").unwrap();
+        let mut input = PointInput::new(Some(Frame::Lps), LengthUnit::Metre, LengthUnit::Millimetre);
+        assert_eq!(input.read_cloud(&ras).unwrap(), [[-0.01, -0.02, 0.03]]);
+        assert_eq!(input.read(&plain).unwrap().points, [[1e-3, 2e-3, 3e-3]], "no named unit: the given one");
+        // No working frame: the first file to name one gives it.
+        let mut input = PointInput::new(None, LengthUnit::Millimetre, LengthUnit::Millimetre);
+        assert_eq!(input.read(&plain).unwrap().points, [[1.0, 2.0, 3.0]]);
+        assert_eq!(input.read(&ras).unwrap().labels, ["p"]);
+        assert_eq!(input.frame, Some(Frame::Ras));
+        let empty = dir.path().join("empty.csv");
+        std::fs::write(&empty, "x,y,z\n").unwrap();
+        assert!(input.read_cloud(&empty).is_err());
+        std::fs::write(&plain, "label,x_mm,y_mm,z_mm\nT,1,2,3\n").unwrap();
+        assert_eq!(read_targets(&plain, 1.0).unwrap(), [[1e-3, 2e-3, 3e-3]], "the named unit wins");
+        assert_eq!(targets_frame(&TargetsSpec::File(ras)).unwrap(), Some(Frame::Ras));
+    }
+}

@@ -1,0 +1,158 @@
+//! Patient coordinate frames: RAS (3D Slicer's internal frame, the one OpenIGTLink streams) and
+//! LPS (DICOM's, in which Slicer 4.11 and later save models and markups), and the `SPACE=` tag by
+//! which a surface file's header names one.
+
+use std::fmt;
+use std::fs::File;
+use std::io::Read as _;
+use std::path::Path;
+
+use super::parse_error;
+use crate::{MeshError, Point, TriSurface};
+
+/// An anatomical coordinate frame, named by where its axes point: RAS has x towards the patient's
+/// right, y anterior, z superior; LPS has x towards the left, y posterior, z superior. The two
+/// differ by the sign of x and y.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub enum Frame {
+    /// Right, anterior, superior: 3D Slicer's internal frame and OpenIGTLink's.
+    #[serde(rename = "RAS")]
+    Ras,
+    /// Left, posterior, superior: DICOM's, and the frame of Slicer's files since 4.11.
+    #[serde(rename = "LPS")]
+    Lps,
+}
+
+impl Frame {
+    /// Its name: "RAS" or "LPS".
+    pub fn name(self) -> &'static str {
+        match self {
+            Frame::Ras => "RAS",
+            Frame::Lps => "LPS",
+        }
+    }
+
+    /// `p`, given in this frame, in frame `to` (x and y negated when the frames differ).
+    pub fn convert(self, to: Frame, p: Point) -> Point {
+        if self == to {
+            p
+        } else {
+            [-p[0], -p[1], p[2]]
+        }
+    }
+
+    /// Converts `points` from this frame to frame `to` in place.
+    pub fn convert_all(self, to: Frame, points: &mut [Point]) {
+        if self != to {
+            points.iter_mut().for_each(|p| *p = self.convert(to, *p));
+        }
+    }
+}
+
+impl fmt::Display for Frame {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Frame {
+    type Err = String;
+
+    /// "RAS" or "LPS", any case.
+    fn from_str(name: &str) -> Result<Frame, String> {
+        match name.trim().to_ascii_uppercase().as_str() {
+            "RAS" => Ok(Frame::Ras),
+            "LPS" => Ok(Frame::Lps),
+            other => Err(format!("unknown coordinate system '{other}' (expected RAS or LPS)")),
+        }
+    }
+}
+
+/// The frame that a header names by a `SPACE=RAS` or `SPACE=LPS` tag (any case), as 3D Slicer
+/// writes it in the header of STL and legacy VTK files; `None` without a tag, an error for a
+/// tag naming another frame.
+pub fn frame_in_header(header: &str) -> Result<Option<Frame>, String> {
+    let upper = header.to_ascii_uppercase();
+    let Some(at) = upper.find("SPACE=") else {
+        return Ok(None);
+    };
+    let value: String = upper[at + 6..].chars().take_while(char::is_ascii_alphanumeric).collect();
+    value.parse().map(Some).map_err(|e| format!("header tag SPACE={value}: {e}"))
+}
+
+/// The frame a surface file names in its header: `SPACE=` in the 80-byte header of a binary STL
+/// or the `solid` line of an ASCII one, or in the title line (line 2) of a legacy VTK file.
+/// Other formats (OBJ, VTU) name none.
+pub fn surface_frame(path: impl AsRef<Path>) -> Result<Option<Frame>, MeshError> {
+    let path = path.as_ref();
+    let kind = super::extension(path);
+    if kind != "stl" && kind != "vtk" {
+        return Ok(None);
+    }
+    // The headers are short: a binary STL's is 80 bytes, a VTK title at most 256 characters.
+    let mut start = Vec::with_capacity(HEADER_BYTES);
+    let io = |error| MeshError::Io { path: path.display().to_string(), error };
+    File::open(path).and_then(|f| f.take(HEADER_BYTES as u64).read_to_end(&mut start)).map_err(io)?;
+    let line = |text: &'_ [u8], n: usize| text.split(|&b| b == b'\n').nth(n).unwrap_or_default().to_vec();
+    let header = if kind == "stl" {
+        let trimmed = start.trim_ascii_start();
+        if trimmed.get(..5).is_some_and(|s| s.eq_ignore_ascii_case(b"solid")) {
+            line(trimmed, 0)
+        } else {
+            start[..start.len().min(80)].to_vec()
+        }
+    } else {
+        line(&start, 1)
+    };
+    frame_in_header(&String::from_utf8_lossy(&header)).map_err(|message| parse_error(path, message))
+}
+
+/// How much of a file [`surface_frame`] reads.
+const HEADER_BYTES: usize = 1024;
+
+/// Reads a surface ([`super::read_surface`]) and the frame its header names ([`surface_frame`]).
+pub fn read_surface_with_frame(path: impl AsRef<Path>) -> Result<(TriSurface, Option<Frame>), MeshError> {
+    let path = path.as_ref();
+    let frame = surface_frame(path)?;
+    Ok((super::read_surface(path)?, frame))
+}
+
+/// Writes a surface with its frame named in the header as 3D Slicer reads it: `.vtk` (binary
+/// `POLYDATA`, title `augsim SPACE=…`) or `.stl` (binary, header `augsim binary STL SPACE=…`).
+/// Other formats have no such header: an error.
+pub fn write_surface_in_frame(path: impl AsRef<Path>, surface: &TriSurface, frame: Frame) -> Result<(), MeshError> {
+    let path = path.as_ref();
+    let title = format!("augsim SPACE={frame}");
+    match super::extension(path).as_str() {
+        "vtk" => super::legacy_vtk::write_surface_vtk_titled(path, surface, &title),
+        "stl" => super::surface_io::write_stl_titled(path, surface, &format!("augsim binary STL SPACE={frame}")),
+        _ => Err(parse_error(path, format!("cannot name the frame {frame} in this format: write .vtk or .stl"))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lps_and_ras_differ_by_the_sign_of_x_and_y() {
+        let p = [1.0, -2.0, 3.0];
+        assert_eq!(Frame::Lps.convert(Frame::Ras, p), [-1.0, 2.0, 3.0]);
+        assert_eq!(Frame::Ras.convert(Frame::Lps, Frame::Lps.convert(Frame::Ras, p)), p);
+        assert_eq!(Frame::Ras.convert(Frame::Ras, p), p);
+        let mut points = vec![p, [0.5, 0.0, -1.0]];
+        Frame::Ras.convert_all(Frame::Lps, &mut points);
+        assert_eq!(points, [[-1.0, 2.0, 3.0], [-0.5, -0.0, -1.0]]);
+        assert_eq!("lps".parse::<Frame>(), Ok(Frame::Lps));
+        assert!("IJK".parse::<Frame>().unwrap_err().contains("IJK"));
+    }
+
+    #[test]
+    fn space_tags_are_found_anywhere_in_a_header() {
+        assert_eq!(frame_in_header("solid SPACE=LPS"), Ok(Some(Frame::Lps)));
+        assert_eq!(frame_in_header("3D Slicer output. space=ras"), Ok(Some(Frame::Ras)));
+        assert_eq!(frame_in_header("SPACE=RAS\0\0\0"), Ok(Some(Frame::Ras)));
+        assert_eq!(frame_in_header("vtk output"), Ok(None));
+        assert!(frame_in_header("SPACE=IJK").unwrap_err().contains("SPACE=IJK"));
+    }
+}

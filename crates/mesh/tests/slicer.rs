@@ -1,0 +1,223 @@
+//! 3D Slicer's files: markups (`.fcsv`, `.mrk.json`) as Slicer 4.10 to 5.x write them, CSV
+//! points with labels and units, the `SPACE=` frame of STL and VTK headers.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use augsim_mesh::io::points::{
+    read_points, read_points_csv, write_fcsv, write_markups_json, write_points, LabelledPoints,
+};
+use augsim_mesh::io::{read_surface, read_surface_with_frame, surface_frame, write_surface_in_frame, Frame};
+use augsim_mesh::repair::LengthUnit;
+use augsim_mesh::MeshError;
+
+fn slicer(name: &str) -> PathBuf {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/slicer")).join(name)
+}
+
+/// Writes `text` to `name` in `dir` and returns the path.
+fn put(dir: &Path, name: &str, text: impl AsRef<[u8]>) -> PathBuf {
+    let path = dir.join(name);
+    fs::write(&path, text).unwrap();
+    path
+}
+
+/// The error message of a failed read (panics if the read succeeded).
+fn message<T: std::fmt::Debug>(result: Result<T, MeshError>) -> String {
+    result.expect_err("reading should fail").to_string()
+}
+
+#[test]
+fn fcsv_of_slicer_4_11_gives_points_labels_descriptions_lps_and_millimetres() {
+    let p = read_points(slicer("landmarks.fcsv")).unwrap();
+    assert_eq!(p.points, [[-61.8216, -142.0372, -118.5], [-12.3051, -198.4416, -80.25], [-104.75, -120.1, -140.0625]]);
+    assert_eq!(p.labels, ["hilum", "falciform ligament", "IVC \"upper\""]);
+    assert_eq!(p.descriptions, ["", "held, near the umbilical fissure", ""]);
+    assert_eq!((p.frame, p.unit), (Some(Frame::Lps), Some(LengthUnit::Millimetre)));
+    assert_eq!(p.label(0), Some("hilum"));
+    let camera = read_points(slicer("camera.fcsv")).unwrap();
+    assert_eq!((camera.points, camera.labels), (vec![[-40.5, -260.0, -60.0]], vec!["laparoscope".to_string()]));
+}
+
+#[test]
+fn fcsv_of_older_slicer_with_numeric_coordinate_system_is_ras_and_converts_to_lps() {
+    let mut ras = read_points(slicer("landmarks_ras_4.10.fcsv")).unwrap();
+    assert_eq!(ras.frame, Some(Frame::Ras));
+    ras.convert(Some(Frame::Lps), LengthUnit::Millimetre, LengthUnit::Metre);
+    let lps = read_points(slicer("landmarks.fcsv")).unwrap();
+    assert_eq!((&ras.points, &ras.labels, ras.frame), (&lps.points, &lps.labels, lps.frame));
+    // `# CoordinateSystem = 1` is LPS; no such line (before Slicer 4.6): RAS.
+    let dir = tempfile::tempdir().unwrap();
+    let columns = "# columns = id,x,y,z,ow,ox,oy,oz,vis,sel,lock,label,desc,associatedNodeID\n";
+    let row = "0,1,2,3,0,0,0,1,1,1,0,F-1,,\n";
+    let one = put(
+        dir.path(),
+        "one.fcsv",
+        format!("# Markups fiducial file version = 4.6\n# CoordinateSystem = 1\n{columns}{row}"),
+    );
+    assert_eq!(read_points(one).unwrap().frame, Some(Frame::Lps));
+    let none = put(dir.path(), "none.fcsv", format!("# Markups fiducial file version = 4.4\n{columns}{row}"));
+    assert_eq!(read_points(none).unwrap().frame, Some(Frame::Ras));
+}
+
+#[test]
+fn mrk_json_of_slicer_5_gives_defined_points_with_labels_frame_and_units() {
+    let p = read_points(slicer("targets.mrk.json")).unwrap();
+    assert_eq!(p.points, [[-70.25, -160.5, -101.0], [-55.0, -150.125, -112.5], [-80.0, -140.75, -95.5]]);
+    assert_eq!(p.labels, ["tumour", "portal bifurcation", "hepatic vein"], "the undefined F-3 is left out");
+    assert_eq!(p.descriptions, ["segment VIII", "", ""]);
+    assert_eq!((p.frame, p.unit), (Some(Frame::Lps), Some(LengthUnit::Millimetre)));
+    // The documentation's minimal file: no units (millimetres), several markups brought to the first's frame.
+    let dir = tempfile::tempdir().unwrap();
+    let two = put(
+        dir.path(),
+        "two.mrk.json",
+        r#"{"markups": [{"type": "Fiducial", "coordinateSystem": "RAS", "controlPoints": [{"label": "a", "position": [1, 2, 3]}]},
+                       {"type": "Fiducial", "coordinateSystem": "LPS", "coordinateUnits": "m", "controlPoints": [{"position": [0.001, 0.002, 0.003]}]}]}"#,
+    );
+    let p = read_points(two).unwrap();
+    assert_eq!((p.frame, p.unit), (Some(Frame::Ras), Some(LengthUnit::Millimetre)));
+    assert_eq!(p.points, [[1.0, 2.0, 3.0], [-1.0, -2.0, 3.0]]);
+    assert_eq!(p.labels, ["a", ""]);
+}
+
+#[test]
+fn csv_points_keep_their_labels_and_the_unit_their_header_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let mm = put(dir.path(), "mm.csv", "id,x_mm,y_mm,z_mm,std\nT1,10,20,30,0.5\n\"T2, deep\",-1,0,1e1,1\n");
+    let p = read_points(&mm).unwrap();
+    assert_eq!(
+        (p.labels.clone(), p.unit, p.frame),
+        (vec!["T1".into(), "T2, deep".into()], Some(LengthUnit::Millimetre), None)
+    );
+    assert_eq!(read_points_csv(&mm).unwrap(), [[0.01, 0.02, 0.03], [-0.001, 0.0, 0.01]], "in metres");
+    let m = put(dir.path(), "m.csv", "# CoordinateSystem = RAS\nlabel,X_M,Y_M,Z_M\na,0.1,0.2,0.3\n");
+    let p = read_points(&m).unwrap();
+    assert_eq!(
+        (p.points, p.labels, p.frame, p.unit),
+        (vec![[0.1, 0.2, 0.3]], vec!["a".into()], Some(Frame::Ras), Some(LengthUnit::Metre))
+    );
+    let plain = put(dir.path(), "plain.csv", "z,y,x\n3,2,1\n");
+    let p = read_points(&plain).unwrap();
+    assert_eq!((p.points, p.labels, p.unit), (vec![[1.0, 2.0, 3.0]], vec![String::new()], None));
+}
+
+#[test]
+fn labels_descriptions_frame_and_unit_round_trip_through_every_points_format() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut points = read_points(slicer("targets.mrk.json")).unwrap();
+    points.descriptions[1] = "sigma 1.25 mm, \"calibrated\"".into();
+    for name in ["out.mrk.json", "out.fcsv", "out.csv"] {
+        let path = dir.path().join(name);
+        write_points(&path, &points).unwrap();
+        assert_eq!(read_points(&path).unwrap(), points, "{name}");
+    }
+    // Metres are written as such in JSON and CSV, and as millimetres in .fcsv.
+    points.convert(Some(Frame::Ras), LengthUnit::Metre, LengthUnit::Metre);
+    let json = dir.path().join("m.mrk.json");
+    write_markups_json(&json, &points).unwrap();
+    assert_eq!(read_points(&json).unwrap(), points);
+    let fcsv = dir.path().join("m.fcsv");
+    write_fcsv(&fcsv, &points).unwrap();
+    let mut back = read_points(&fcsv).unwrap();
+    assert_eq!(back.unit, Some(LengthUnit::Millimetre));
+    back.convert(None, LengthUnit::Metre, LengthUnit::Metre);
+    for (a, b) in back.points.iter().zip(&points.points) {
+        assert!((0..3).all(|d| (a[d] - b[d]).abs() < 1e-15), "{a:?} {b:?}");
+    }
+    // Points of no frame cannot go to .fcsv, which names one; bare points go to CSV as x,y,z.
+    let bare = LabelledPoints::new(vec![[1.0, 2.0, 3.0]]);
+    assert!(write_fcsv(dir.path().join("bare.fcsv"), &bare).unwrap_err().to_string().contains("names its frame"));
+    write_points(dir.path().join("bare.csv"), &bare).unwrap();
+    assert_eq!(fs::read_to_string(dir.path().join("bare.csv")).unwrap(), "x,y,z\n1,2,3\n");
+    let bad = LabelledPoints { labels: vec!["a".into(), "b".into()], ..bare };
+    assert!(write_points(dir.path().join("bad.mrk.json"), &bad)
+        .unwrap_err()
+        .to_string()
+        .contains("one label per point"));
+}
+
+#[test]
+fn stl_and_vtk_headers_name_the_frame_as_slicer_writes_it() {
+    let (surface, frame) = read_surface_with_frame(slicer("tetrahedron_lps.stl")).unwrap();
+    assert_eq!((surface.triangles.len(), frame), (4, Some(Frame::Lps)));
+    let (vtk, frame) = read_surface_with_frame(slicer("tetrahedron_ras.vtk")).unwrap();
+    assert_eq!((vtk.vertices.len(), frame), (4, Some(Frame::Ras)));
+    let dir = tempfile::tempdir().unwrap();
+    for (name, frame) in [("out.vtk", Frame::Lps), ("out.stl", Frame::Ras)] {
+        let path = dir.path().join(name);
+        write_surface_in_frame(&path, &surface, frame).unwrap();
+        let (back, read) = read_surface_with_frame(&path).unwrap();
+        assert_eq!((back.triangles.len(), read), (4, Some(frame)), "{name}");
+    }
+    let written = fs::read(dir.path().join("out.stl")).unwrap();
+    assert!(written.starts_with(b"augsim binary STL SPACE=RAS"));
+    let vtk_header = fs::read(dir.path().join("out.vtk")).unwrap();
+    assert!(vtk_header.starts_with(b"# vtk DataFile Version 3.0\naugsim SPACE=LPS\n"));
+    // No tag: no frame; OBJ and VTU name none; a frame cannot be put in an OBJ.
+    let plain = dir.path().join("plain.stl");
+    augsim_mesh::io::write_surface(&plain, &surface).unwrap();
+    assert_eq!(surface_frame(&plain).unwrap(), None);
+    assert_eq!(surface_frame(dir.path().join("any.obj")).unwrap(), None);
+    let indented = put(dir.path(), "indented.stl", "\n  solid liver SPACE=RAS\nendsolid liver SPACE=RAS\n");
+    assert_eq!(surface_frame(indented).unwrap(), Some(Frame::Ras));
+    let obj = dir.path().join("out.obj");
+    assert!(write_surface_in_frame(&obj, &surface, Frame::Lps).unwrap_err().to_string().contains(".vtk or .stl"));
+    assert_eq!(read_surface(slicer("tetrahedron_lps.stl")).unwrap(), surface, "the plain reader reads the same");
+}
+
+#[test]
+fn malformed_slicer_files_are_refused_naming_the_file_and_the_line_or_point() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = "# Markups fiducial file version = 4.11\n# CoordinateSystem = LPS\n\
+                  # columns = id,x,y,z,ow,ox,oy,oz,vis,sel,lock,label,desc,associatedNodeID\n";
+    let cases: Vec<(PathBuf, &str)> = vec![
+        (
+            put(d, "bad.fcsv", format!("{header}0,1,2,3,0,0,0,1,1,1,0,F-1,,\n1,1,two,3,0,0,0,1,1,1,0,F-2,,\n")),
+            "line 5: y = \"two\" is not a number",
+        ),
+        (put(d, "short.fcsv", format!("{header}0,1,2,3,0,0,0,1\n")), "line 4: 8 fields, the header has 14 columns"),
+        (put(d, "ijk.fcsv", header.replace("LPS", "2")), "line 2: CoordinateSystem = 2 (IJK"),
+        (put(d, "xyz.fcsv", header.replace("LPS", "XYZ")), "line 2: unknown coordinate system 'XYZ'"),
+        (put(d, "nocolumns.fcsv", "# Markups fiducial file version = 4.11\n0,1,2,3\n"), "no '# columns = …' line"),
+        (put(d, "quote.fcsv", format!("{header}0,1,2,3,0,0,0,1,1,1,0,\"F-1,,\n")), "line 4: field 12 opens a quote"),
+        (put(d, "units.csv", "x_mm,y_m,z_mm\n1,2,3\n"), "line 1: the x, y and z columns name different units"),
+        (put(d, "inf.csv", "x,y,z\n1,inf,3\n"), "line 2: y = \"inf\" is not finite"),
+        (put(d, "syntax.mrk.json", "{\"markups\": [\n{\"type\": \"Fiducial\",,}]}"), "not valid JSON: "),
+        (put(d, "other.mrk.json", "{\"nodes\": []}"), "no \"markups\" list"),
+        (
+            put(d, "frame.mrk.json", r#"{"markups": [{"coordinateSystem": "IJK", "controlPoints": []}]}"#),
+            "markups[0]: unknown coordinate system 'IJK'",
+        ),
+        (
+            put(d, "unit.mrk.json", r#"{"markups": [{"coordinateUnits": "cm", "controlPoints": []}]}"#),
+            "markups[0]: coordinateUnits must be mm or m, got 'cm'",
+        ),
+        (
+            put(d, "nopos.mrk.json", r#"{"markups": [{"controlPoints": [{"label": "A"}, {"label": "B"}]}]}"#),
+            "markups[0].controlPoints[0] (A): no position",
+        ),
+        (
+            put(
+                d,
+                "pos.mrk.json",
+                r#"{"markups": [{"controlPoints": [{"position": [1, 2, 3]}, {"position": [1, "2", 3]}]}]}"#,
+            ),
+            "markups[0].controlPoints[1]: position [1,\"2\",3] is not 3 numbers",
+        ),
+        (put(d, "space.stl", "solid SPACE=IJK\nendsolid\n"), "header tag SPACE=IJK: unknown coordinate system"),
+    ];
+    for (path, expected) in cases {
+        let e = if path.extension().unwrap() == "stl" {
+            message(surface_frame(&path))
+        } else {
+            message(read_points(&path))
+        };
+        assert!(e.starts_with(&path.display().to_string()), "{e}");
+        assert!(e.contains(expected), "{}: {e}\nexpected: {expected}", path.display());
+    }
+    // A JSON syntax error gives its line.
+    let e = message(read_points(d.join("syntax.mrk.json")));
+    assert!(e.contains("line 2"), "{e}");
+}
