@@ -503,7 +503,7 @@ mod tests {
         let motion: f64 = (0..3).map(|d| truth[3 * centre + d].powi(2)).sum::<f64>().sqrt();
         assert!(motion > 2e-3 && error < 0.05 * motion, "error {error:.2e} m at the centre, which moved {motion:.2e} m");
         let stencil = Stencil(vec![(centre, 1.0)]);
-        let sigma = deformer.uncertainty(&[], &[stencil.clone()]).unwrap().unwrap()[0];
+        let sigma = deformer.uncertainty(&[], std::slice::from_ref(&stencil)).unwrap().unwrap()[0];
         let mut prior = ShapeDeformer::new(deformer.space.clone(), &organ, ShapeOptions::default()).unwrap();
         prior.posterior = Some(DMatrix::identity(3, 3));
         let prior_sigma = prior.uncertainty(&[], &[stencil]).unwrap().unwrap()[0];
@@ -524,7 +524,7 @@ mod tests {
         let error = |u: &[f64]| u.iter().zip(&truth).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         let top = Stencil(vec![(organ.mesh().nodes.iter().position(|p| p == &[0.04, 0.04, 0.04]).unwrap(), 1.0)]);
         let first = register_frame(&organ, &mut deformer, &cloud, None, &loop_options).unwrap();
-        let sigma_first = deformer.uncertainty(&[], &[top.clone()]).unwrap().unwrap()[0];
+        let sigma_first = deformer.uncertainty(&[], std::slice::from_ref(&top)).unwrap().unwrap()[0];
         let second = register_frame(&organ, &mut deformer, &cloud, Some(&first.u), &loop_options).unwrap();
         let sigma_second = deformer.uncertainty(&[], &[top]).unwrap().unwrap()[0];
         assert!(error(&second.u) <= error(&first.u) + 1e-9, "{} then {}", error(&first.u), error(&second.u));
