@@ -280,6 +280,14 @@ pub struct Summary {
     /// The frames' warnings, each once, in order of first appearance (prefixed by the frame when
     /// there are several).
     pub warnings: Vec<String>,
+    /// The mean predicted standard deviation σ of the targets' error (mm), for a method that
+    /// predicts one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub target_std_mean_mm: Option<f64>,
+    /// The share of the targets whose error was within 2σ, when the truth is known and the method
+    /// predicts σ (a Gaussian's: 95 %).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub within_two_std: Option<f64>,
 }
 
 impl Summary {
@@ -294,7 +302,13 @@ impl Summary {
         };
         let mm =
             |v: &Option<Vec<f64>>, stat: fn(&[f64]) -> f64| v.as_ref().filter(|v| !v.is_empty()).map(|v| stat(v) * 1e3);
-        let (errors, rest) = (all(|o| &o.errors), all(|o| &o.rest_errors));
+        let (errors, rest, std) = (all(|o| &o.errors), all(|o| &o.rest_errors), all(|o| &o.target_std));
+        let within = match (&errors, &std) {
+            (Some(e), Some(s)) if !e.is_empty() && e.len() == s.len() => {
+                Some(e.iter().zip(s).filter(|(e, s)| **e <= 2.0 * **s).count() as f64 / e.len() as f64)
+            }
+            _ => None,
+        };
         let per_frame = |f: fn(&FrameOutcome) -> f64| outcomes.iter().map(f).sum::<f64>() / n as f64;
         let mut times: Vec<f64> = outcomes.iter().map(|o| o.registration.time.as_secs_f64() * 1e3).collect();
         Ok(Summary {
@@ -312,6 +326,8 @@ impl Summary {
             iterations: per_frame(|o| o.registration.iterations as f64),
             rigid: outcomes[0].rigid.as_ref().map(RigidSummary::from),
             plausible: outcomes.iter().all(|o| o.registration.warnings.is_empty()),
+            target_std_mean_mm: mm(&std, mean),
+            within_two_std: within,
             warnings: {
                 let mut seen = Vec::new();
                 for (k, o) in outcomes.iter().enumerate() {
