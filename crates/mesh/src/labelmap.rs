@@ -22,8 +22,9 @@ use std::collections::BTreeMap;
 use std::io::Read;
 use std::path::Path;
 
+use crate::isosurface::{mask_surface, ExtractOptions, ExtractReport};
 use crate::volume::VoxelMask;
-use crate::MeshError;
+use crate::{MeshError, TriSurface};
 
 /// The world frame of a labelmap's coordinates (millimetres, the scanner's axes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -518,5 +519,319 @@ impl Labelmap {
             )));
         }
         Ok((VoxelMask { dims: self.dims, inside, affine: self.affine }, description))
+    }
+}
+
+/// Writes a labelmap as a single-file NIfTI-1 (gzipped when the name ends in .gz): 16-bit
+/// labels (32-bit when they do not fit), the affine as the sform, code 1 (scanner). Only an
+/// RAS labelmap of one layer can be written (NIfTI's world is RAS).
+pub fn write_nifti(path: impl AsRef<Path>, map: &Labelmap) -> Result<(), MeshError> {
+    let path = path.as_ref();
+    let fail = |m: &str| Err(MeshError::Invalid(format!("{}: {m}", path.display())));
+    if map.frame != Frame::Ras || map.layers != 1 {
+        return fail("NIfTI holds one layer of labels in RAS");
+    }
+    if map.dims.iter().any(|&n| n == 0 || n > i16::MAX as usize) || map.labels.len() != map.dims.iter().product() {
+        return fail("bad dimensions");
+    }
+    let wide = map.labels.iter().any(|&l| l < i16::MIN as i64 || l > i16::MAX as i64);
+    if map.labels.iter().any(|&l| l < i32::MIN as i64 || l > i32::MAX as i64) {
+        return fail("labels beyond 32 bits");
+    }
+    let mut header = vec![0u8; 352];
+    let mut put = |offset: usize, bytes: &[u8]| header[offset..offset + bytes.len()].copy_from_slice(bytes);
+    put(0, &348i32.to_le_bytes());
+    let dims = [3, map.dims[0] as i16, map.dims[1] as i16, map.dims[2] as i16, 1, 1, 1, 1];
+    dims.iter().enumerate().for_each(|(d, n)| put(40 + 2 * d, &n.to_le_bytes()));
+    put(70, &(if wide { 8i16 } else { 4i16 }).to_le_bytes());
+    put(72, &(if wide { 32i16 } else { 16i16 }).to_le_bytes());
+    let spacing = map.spacing();
+    let pixdim = [1.0, spacing[0], spacing[1], spacing[2], 1.0, 1.0, 1.0, 1.0];
+    pixdim.iter().enumerate().for_each(|(d, x)| put(76 + 4 * d, &(*x as f32).to_le_bytes()));
+    put(108, &352f32.to_le_bytes());
+    put(112, &1f32.to_le_bytes());
+    put(123, &[10]); // xyzt_units: mm and s
+    put(254, &1i16.to_le_bytes());
+    for r in 0..3 {
+        (0..4).for_each(|c| put(280 + 16 * r + 4 * c, &(map.affine[r][c] as f32).to_le_bytes()));
+    }
+    put(344, b"n+1\0");
+    for &l in &map.labels {
+        if wide {
+            header.extend_from_slice(&(l as i32).to_le_bytes());
+        } else {
+            header.extend_from_slice(&(l as i16).to_le_bytes());
+        }
+    }
+    write_maybe_gzipped(path, header, path.to_string_lossy().to_ascii_lowercase().ends_with(".gz"))
+}
+
+/// Writes a labelmap as a NRRD file with gzipped 16-bit labels (32-bit when they do not fit), its
+/// frame as the `space` and its segments as 3D Slicer's `Segment{i}_...` pairs.
+pub fn write_nrrd(path: impl AsRef<Path>, map: &Labelmap) -> Result<(), MeshError> {
+    let path = path.as_ref();
+    let wide = map.labels.iter().any(|&l| l < i16::MIN as i64 || l > i16::MAX as i64);
+    if map.labels.len() != map.layers * map.dims.iter().product::<usize>()
+        || map.labels.iter().any(|&l| l < i32::MIN as i64 || l > i32::MAX as i64)
+    {
+        return Err(MeshError::Invalid(format!("{}: bad labelmap (size or 32-bit labels)", path.display())));
+    }
+    let vector = |v: [f64; 3]| format!("({},{},{})", v[0], v[1], v[2]);
+    let axes: Vec<String> = (0..3).map(|c| vector(std::array::from_fn(|r| map.affine[r][c]))).collect();
+    let layered = map.layers > 1;
+    let mut text = format!(
+        "NRRD0004\n# written by augsim\ntype: {}\ndimension: {}\nspace: {}\nsizes: {}{} {} {}\n\
+         space directions: {}{}\nkinds: {}domain domain domain\nendian: little\nencoding: gzip\n\
+         space origin: {}\n",
+        if wide { "int" } else { "short" },
+        if layered { 4 } else { 3 },
+        match map.frame {
+            Frame::Ras => "right-anterior-superior",
+            Frame::Lps => "left-posterior-superior",
+        },
+        if layered { format!("{} ", map.layers) } else { String::new() },
+        map.dims[0],
+        map.dims[1],
+        map.dims[2],
+        if layered { "none " } else { "" },
+        axes.join(" "),
+        if layered { "list " } else { "" },
+        vector(std::array::from_fn(|r| map.affine[r][3])),
+    );
+    for (i, (name, layer, label)) in map.segments.iter().enumerate() {
+        text += &format!("Segment{i}_Name:={name}\nSegment{i}_LabelValue:={label}\nSegment{i}_Layer:={layer}\n");
+    }
+    text.push('\n');
+    let mut data = Vec::with_capacity(map.labels.len() * 4);
+    for &l in &map.labels {
+        if wide {
+            data.extend_from_slice(&(l as i32).to_le_bytes());
+        } else {
+            data.extend_from_slice(&(l as i16).to_le_bytes());
+        }
+    }
+    let compressed = gzip(path, &data)?;
+    std::fs::write(path, [text.into_bytes(), compressed].concat()).map_err(|error| io_error(path, error))
+}
+
+fn io_error(path: &Path, error: std::io::Error) -> MeshError {
+    MeshError::Io { path: path.display().to_string(), error }
+}
+
+/// Writes `bytes` to `path`, gzipped or not.
+fn write_maybe_gzipped(path: &Path, bytes: Vec<u8>, compress: bool) -> Result<(), MeshError> {
+    let bytes = if compress { gzip(path, &bytes)? } else { bytes };
+    std::fs::write(path, bytes).map_err(|error| io_error(path, error))
+}
+
+/// `bytes` gzipped (`path` names the file in an error).
+fn gzip(path: &Path, bytes: &[u8]) -> Result<Vec<u8>, MeshError> {
+    let mut encoder = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    std::io::Write::write_all(&mut encoder, bytes).map_err(|error| io_error(path, error))?;
+    encoder.finish().map_err(|error| io_error(path, error))
+}
+
+/// An organ's surface extracted from a labelmap ([`read_labelmap_surface`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LabelSurface {
+    /// The closed surface, in millimetres in the labelmap's world frame.
+    pub surface: TriSurface,
+    /// The world frame.
+    pub frame: Frame,
+    /// The label chosen, e.g. "label 5 ('liver')".
+    pub label: String,
+    /// The voxel size along i, j, k (mm).
+    pub spacing: [f64; 3],
+    /// What the extraction did.
+    pub extract: ExtractReport,
+}
+
+impl LabelSurface {
+    /// What was read and extracted, one line each.
+    pub fn lines(&self) -> Vec<String> {
+        let e = &self.extract;
+        let [a, b, c] = self.spacing;
+        let mut lines = vec![format!(
+            "{}: {} voxels of {a:.2} × {b:.2} × {c:.2} mm, in the scanner's {} frame (mm)",
+            self.label,
+            e.voxels,
+            self.frame.name()
+        )];
+        if let Some(largest) = e.dropped_pieces.first() {
+            lines.push(format!(
+                "kept the largest piece; dropped {} smaller (the largest of {largest} voxels)",
+                e.dropped_pieces.len()
+            ));
+        }
+        if e.filled_voxels > 0 {
+            lines.push(format!("filled cavities of {} voxels", e.filled_voxels));
+        }
+        lines.push(format!(
+            "surface: {} triangles (decimated from {}), {:.1} mL ({:+.1} % from the voxels)",
+            self.surface.triangles.len(),
+            e.extracted_triangles,
+            e.volume * 1e-3,
+            100.0 * (e.volume / e.voxel_volume - 1.0)
+        ));
+        lines
+    }
+}
+
+/// Reads a labelmap and extracts the closed surface of one label (a number, or a segment name
+/// the file carries), in millimetres in the file's world frame.
+pub fn read_labelmap_surface(
+    path: impl AsRef<Path>,
+    label: &str,
+    options: &ExtractOptions,
+) -> Result<LabelSurface, MeshError> {
+    let path = path.as_ref();
+    let map = read_labelmap(path)?;
+    let (mask, label) = map.select(label).map_err(|e| parse_error(path, e.to_string()))?;
+    let (surface, extract) = mask_surface(&mask, options).map_err(|e| parse_error(path, e.to_string()))?;
+    Ok(LabelSurface { surface, frame: map.frame, label, spacing: map.spacing(), extract })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{norm, sub, Point};
+
+    /// A labelmap of two balls (labels 5 and 2) at world positions given in `frame`, with
+    /// anisotropic voxels and the x axis flipped.
+    fn two_balls(frame: Frame) -> (Labelmap, Point) {
+        let dims = [52, 44, 16];
+        // Spacings exact in f32, as NIfTI stores them.
+        let affine = [[-0.75, 0.0, 0.0, 60.0], [0.0, 0.875, 0.0, -100.0], [0.0, 0.0, 2.5, 200.0]];
+        let (organ, other): (Point, Point) = ([40.0, -82.0, 220.0], [25.0, -80.0, 215.0]);
+        let mut labels = Vec::new();
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let p: Point = std::array::from_fn(|r| {
+                        affine[r][0] * i as f64 + affine[r][1] * j as f64 + affine[r][2] * k as f64 + affine[r][3]
+                    });
+                    labels.push(if norm(sub(p, organ)) <= 10.0 {
+                        5
+                    } else if norm(sub(p, other)) <= 3.0 {
+                        2
+                    } else {
+                        0
+                    });
+                }
+            }
+        }
+        let segments = vec![("liver".to_string(), 0, 5), ("tumour".to_string(), 0, 2)];
+        (Labelmap { dims, layers: 1, labels, affine, frame, segments }, organ)
+    }
+
+    fn centroid(s: &TriSurface) -> Point {
+        std::array::from_fn(|d| s.vertices.iter().map(|p| p[d]).sum::<f64>() / s.vertices.len() as f64)
+    }
+
+    #[test]
+    fn a_nifti_labelmap_round_trips_and_its_organ_lands_at_its_scanner_position() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, centre) = two_balls(Frame::Ras);
+        for name in ["seg.nii.gz", "seg.nii"] {
+            let path = dir.path().join(name);
+            write_nifti(&path, &map).unwrap();
+            let back = read_labelmap(&path).unwrap();
+            assert!(back == Labelmap { segments: Vec::new(), ..map.clone() }, "{:?}", back.affine);
+            let organ = read_labelmap_surface(&path, "5", &ExtractOptions::default()).unwrap();
+            assert_eq!(organ.frame, Frame::Ras);
+            let c = centroid(&organ.surface);
+            assert!(norm(sub(c, centre)) < 0.5, "{c:?} vs {centre:?}");
+            let exact = 4.0 / 3.0 * std::f64::consts::PI * 1000.0;
+            assert!((organ.extract.volume / exact - 1.0).abs() < 0.05, "{}", organ.extract.volume);
+            assert!(organ.lines()[0].starts_with("label 5: "), "{:?}", organ.lines());
+        }
+    }
+
+    #[test]
+    fn a_slicer_segmentation_round_trips_and_lps_flips_x_and_y() {
+        let dir = tempfile::tempdir().unwrap();
+        let (ras, centre) = two_balls(Frame::Ras);
+        // The same voxels in LPS: the first two rows of the affine change sign.
+        let mut lps = Labelmap { frame: Frame::Lps, ..ras.clone() };
+        (0..2).for_each(|r| lps.affine[r].iter_mut().for_each(|x| *x = -*x));
+        let path = dir.path().join("seg.seg.nrrd");
+        write_nrrd(&path, &lps).unwrap();
+        assert!(read_labelmap(&path).unwrap() == lps);
+        let organ = read_labelmap_surface(&path, "Liver", &ExtractOptions::default()).unwrap();
+        assert_eq!((organ.frame, organ.label.as_str()), (Frame::Lps, "label 5 ('liver')"));
+        let c = centroid(&organ.surface);
+        let expected = [-centre[0], -centre[1], centre[2]];
+        assert!(norm(sub(c, expected)) < 0.5, "{c:?} vs {expected:?}");
+        let error =
+            |choice: &str| read_labelmap_surface(&path, choice, &ExtractOptions::default()).unwrap_err().to_string();
+        let absent = error("7");
+        assert!(absent.contains("label 7 is not in the labelmap") && absent.contains("5 ('liver',"), "{absent}");
+        assert!(error("kidney").contains("no segment is named 'kidney'; labels present: 2 ('tumour',"));
+        assert!(error("0").contains("not in the labelmap"));
+    }
+
+    #[test]
+    fn layered_segments_are_chosen_by_name() {
+        let (single, _) = two_balls(Frame::Lps);
+        // Two layers: the liver in layer 0, an overlapping vessel (also label 5) in layer 1.
+        let labels: Vec<i64> = single.labels.iter().flat_map(|&l| [l, if l == 2 { 5 } else { 0 }]).collect();
+        let segments = vec![("liver".into(), 0, 5), ("vessel".into(), 1, 5)];
+        let map = Labelmap { layers: 2, labels, segments, ..single.clone() };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("layers.seg.nrrd");
+        write_nrrd(&path, &map).unwrap();
+        let back = read_labelmap(&path).unwrap();
+        assert!(back == map);
+        let (vessel, name) = back.select("vessel").unwrap();
+        assert_eq!(name, "label 5 ('vessel')");
+        assert_eq!(vessel.count(), single.labels.iter().filter(|&&l| l == 2).count());
+        assert!(back.select("5").unwrap_err().to_string().contains("in 2 layers: choose the segment by name"));
+    }
+
+    #[test]
+    fn a_qform_header_gives_its_rotation_and_flip() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Ras);
+        let path = dir.path().join("q.nii");
+        write_nifti(&path, &map).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        // No sform; a qform turning half a turn about z, with qfac -1 (k flipped), offset (1,2,3).
+        bytes[254..256].copy_from_slice(&0i16.to_le_bytes());
+        bytes[252..254].copy_from_slice(&1i16.to_le_bytes());
+        bytes[76..80].copy_from_slice(&(-1f32).to_le_bytes());
+        for (o, x) in [(256, 0f32), (260, 0.0), (264, 1.0), (268, 1.0), (272, 2.0), (276, 3.0)] {
+            bytes[o..o + 4].copy_from_slice(&x.to_le_bytes());
+        }
+        std::fs::write(&path, bytes).unwrap();
+        let back = read_labelmap(&path).unwrap();
+        let expected = [[-0.75, 0.0, 0.0, 1.0], [0.0, -0.875, 0.0, 2.0], [0.0, 0.0, -2.5, 3.0]];
+        for r in 0..3 {
+            for c in 0..4 {
+                assert!((back.affine[r][c] - expected[r][c]).abs() < 1e-6, "{:?}", back.affine);
+            }
+        }
+    }
+
+    #[test]
+    fn bad_files_are_refused_clearly() {
+        let dir = tempfile::tempdir().unwrap();
+        let write = |name: &str, bytes: &[u8]| {
+            let p = dir.path().join(name);
+            std::fs::write(&p, bytes).unwrap();
+            read_labelmap(&p).unwrap_err().to_string()
+        };
+        assert!(write("a.nii", b"short").contains("too short"));
+        assert!(write("b.nii", &[0u8; 400]).contains("not a NIfTI-1 file"));
+        assert!(write("c.nrrd", b"P3\n").contains("not a NRRD file"));
+        let header = "NRRD0004\ntype: short\ndimension: 3\nsizes: 2 2 2\nspace: left-posterior-superior\n\
+                      space directions: (1,0,0) (0,1,0) (0,0,1)\nencoding: raw\n\n";
+        assert!(write("d.nrrd", header.as_bytes()).contains("the data hold 0 bytes, 16 expected"));
+        let zeros = [header.as_bytes(), &[0u8; 16]].concat();
+        assert!(write("e.nrrd", &zeros).contains("empty"));
+        let floats = header.replace("short", "float");
+        let values: Vec<u8> = (0..8).flat_map(|i| (i as f32 * 0.3).to_le_bytes()).collect();
+        assert!(write("f.nrrd", &[floats.as_bytes(), &values].concat()).contains("not a label"));
+        let scanner = header.replace("left-posterior-superior", "scanner-xyz");
+        assert!(write("g.nrrd", scanner.as_bytes()).contains("space 'scanner-xyz' is not supported"));
     }
 }
