@@ -50,6 +50,8 @@ pub struct ExtractReport {
     pub filled_voxels: usize,
     /// Triangles extracted, before decimation.
     pub extracted_triangles: usize,
+    /// Triangles of the result.
+    pub triangles: usize,
     /// The enclosed volume of the result (world unit cubed).
     pub volume: f64,
     /// The volume of the kept voxels (world unit cubed).
@@ -84,6 +86,7 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
         dropped_pieces: pieces,
         filled_voxels,
         extracted_triangles,
+        triangles: surface.triangles.len(),
         volume: checked.volume,
         voxel_volume: (voxels + filled_voxels) as f64 * mask.voxel_volume(),
     };

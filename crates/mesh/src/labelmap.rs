@@ -228,7 +228,7 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
             *l = v as i64;
         }
     }
-    let affine = nifti_affine(i16_at(252), i16_at(254), &pixdim, |o| f32_at(o))?;
+    let affine = nifti_affine(i16_at(252), i16_at(254), &pixdim, f32_at)?;
     Ok(Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new() })
 }
 
@@ -805,11 +805,8 @@ mod tests {
         std::fs::write(&path, bytes).unwrap();
         let back = read_labelmap(&path).unwrap();
         let expected = [[-0.75, 0.0, 0.0, 1.0], [0.0, -0.875, 0.0, 2.0], [0.0, 0.0, -2.5, 3.0]];
-        for r in 0..3 {
-            for c in 0..4 {
-                assert!((back.affine[r][c] - expected[r][c]).abs() < 1e-6, "{:?}", back.affine);
-            }
-        }
+        let close = back.affine.iter().flatten().zip(expected.iter().flatten()).all(|(a, b)| (a - b).abs() < 1e-6);
+        assert!(close, "{:?}", back.affine);
     }
 
     #[test]

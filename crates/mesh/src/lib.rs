@@ -16,6 +16,7 @@ pub mod isosurface;
 pub mod labelmap;
 pub mod phantom;
 pub mod quadratic;
+pub mod rebuild;
 pub mod repair;
 pub mod sampling;
 pub mod select;

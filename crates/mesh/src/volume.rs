@@ -15,6 +15,7 @@ use std::collections::VecDeque;
 
 use rayon::prelude::*;
 
+use crate::bvh::SurfaceBvh;
 use crate::labelmap::determinant;
 use crate::{bounds, MeshError, Point, TriSurface};
 
@@ -193,6 +194,10 @@ impl VoxelMask {
 /// surface an odd number of times before it: a hole or a doubled part spoils the parity along
 /// the rays through it, which the two other axes outvote. The grid is shifted by a fraction of a
 /// voxel so that no ray runs through the vertices of a surface built on round coordinates.
+/// Where shells overlap (a lobe exported as its own closed surface, crossing the rest), parity
+/// sees an even number of crossings; a voxel that the surface surrounds along every axis is
+/// then inside when the surface winds around it at least twice (its generalised winding number,
+/// signed by the surface's enclosed volume, is at least 1.5).
 pub fn voxelise_surface(surface: &TriSurface, voxel: f64) -> Result<VoxelMask, MeshError> {
     let nv = surface.vertices.len();
     if surface.triangles.is_empty() {
@@ -235,18 +240,36 @@ pub fn voxelise_surface(surface: &TriSurface, voxel: f64) -> Result<VoxelMask, M
         .map(|t| t.map(|k| std::array::from_fn(|d| (surface.vertices[k][d] - origin[d]) / voxel)))
         .collect();
     let mut votes = vec![0u8; mask.inside.len()];
+    let mut enclosed = vec![0u8; mask.inside.len()];
     for axis in 0..3 {
-        for (n, odd) in parities(&corners, dims, axis).into_iter().enumerate() {
+        for (n, (odd, between)) in parities(&corners, dims, axis).into_iter().enumerate() {
             votes[n] += odd as u8;
+            enclosed[n] += between as u8;
         }
     }
-    let inside = votes.iter().map(|&v| v >= 2).collect();
+    let mut inside: Vec<bool> = votes.iter().map(|&v| v >= 2).collect();
+    // Where shells overlap, parity counts two crossings: outside. The winding number (of the
+    // surface as oriented, its sign taken from its volume) counts two: inside.
+    let candidates: Vec<usize> = (0..inside.len()).filter(|&n| !inside[n] && enclosed[n] == 3).collect();
+    if !candidates.is_empty() {
+        let sign = surface.enclosed_volume().signum();
+        let bvh = SurfaceBvh::new(surface)?;
+        let wound: Vec<bool> = candidates
+            .par_iter()
+            .map(|&n| {
+                let ijk = [n % dims[0], (n / dims[0]) % dims[1], n / (dims[0] * dims[1])];
+                sign * bvh.winding_number(mask.world(ijk.map(|x| x as f64))) >= 1.5
+            })
+            .collect();
+        candidates.iter().zip(wound).filter(|(_, w)| *w).for_each(|(&n, _)| inside[n] = true);
+    }
     Ok(VoxelMask { inside, ..mask })
 }
 
 /// For each voxel, whether the ray along `axis` from the grid's start crosses the triangles
-/// (corners in voxel units) an odd number of times before reaching it.
-fn parities(corners: &[[Point; 3]], dims: [usize; 3], axis: usize) -> Vec<bool> {
+/// (corners in voxel units) an odd number of times before reaching it, and whether the surface
+/// lies both before and after it along the ray.
+fn parities(corners: &[[Point; 3]], dims: [usize; 3], axis: usize) -> Vec<(bool, bool)> {
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
     let (nu, nv) = (dims[u], dims[v]);
     let mut hits: Vec<Vec<f64>> = vec![Vec::new(); nu * nv];
@@ -272,7 +295,7 @@ fn parities(corners: &[[Point; 3]], dims: [usize; 3], axis: usize) -> Vec<bool> 
             }
         }
     }
-    let lines: Vec<Vec<bool>> = hits
+    let lines: Vec<Vec<(bool, bool)>> = hits
         .into_par_iter()
         .map(|mut line| {
             line.sort_unstable_by(f64::total_cmp);
@@ -282,12 +305,12 @@ fn parities(corners: &[[Point; 3]], dims: [usize; 3], axis: usize) -> Vec<bool> 
                     while crossed < line.len() && line[crossed] < s as f64 {
                         crossed += 1;
                     }
-                    crossed % 2 == 1
+                    (crossed % 2 == 1, crossed > 0 && crossed < line.len())
                 })
                 .collect()
         })
         .collect();
-    let mut odd = vec![false; dims.iter().product()];
+    let mut odd = vec![(false, false); dims.iter().product()];
     for (line, values) in lines.iter().enumerate() {
         let (a, b) = (line % nu, line / nu);
         for (s, &o) in values.iter().enumerate() {
