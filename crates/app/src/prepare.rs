@@ -2,7 +2,10 @@
 //! (`augsim prepare`):
 //!
 //! 1. **organ**: the surface read (STL, OBJ, VTK, VTU) in its unit (given, or detected from its
-//!    size), repaired ([`mesh::repair`]), meshed with tetrahedra; the nodes the camera sees
+//!    size), repaired ([`mesh::repair`], through voxels when local repair cannot mend it:
+//!    [`mesh::rebuild`]), or a label of a segmentation's labelmap (NIfTI, NRRD: in mm, in the
+//!    scanner's frame the file states, RAS or LPS) extracted as a closed surface
+//!    ([`mesh::labelmap`]); meshed with tetrahedra; the nodes the camera sees
 //!    (`visible`, self-occlusion included) and those near the attachment landmarks (`attached`,
 //!    on the surface) selected; the targets located inside the organ (a unit mistake is named).
 //!    Written in metres, in the segmentation's frame: `surface.stl`, `organ.vtu` (the regions as
@@ -35,9 +38,12 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use mesh::io::points::{read_points_csv, write_points_csv};
 use mesh::io::write_atomic_bytes;
-use mesh::repair::{detect_unit, metres_per, repair_surface, RepairOptions};
+use mesh::isosurface::ExtractOptions;
+use mesh::labelmap::{is_labelmap, read_labelmap_surface};
+use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
+use mesh::repair::{detect_unit, metres_per, RepairOptions};
 use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
-use mesh::{Camera, Mesh, Near, Point};
+use mesh::{Camera, Mesh, Near, Point, TriSurface};
 use plot::{scatter_plot, PlotSpec, PointSet};
 use serde::{Deserialize, Serialize};
 
@@ -48,10 +54,14 @@ use crate::registration::{PatientMethod, RegistrationSpec, PATIENT_FILE};
 /// What `augsim prepare` is given.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PrepareOptions {
-    /// The segmented surface (.stl, .obj, .vtk, .vtu).
+    /// The segmented surface (.stl, .obj, .vtk, .vtu) or labelmap (.nii, .nii.gz, .nrrd,
+    /// .seg.nrrd).
     pub surface: PathBuf,
+    /// The labelmap's label: a number or a segment name (`None`: the only label it holds).
+    #[serde(default)]
+    pub label: Option<String>,
     /// The unit of the surface, the camera, the landmarks and the targets, "mm" or "m" (`None`:
-    /// detected from the surface's size).
+    /// detected from the surface's size; a labelmap's is mm).
     pub units: Option<String>,
     /// Where the laparoscope looks from, in the segmentation's frame.
     pub camera: Point,
@@ -77,6 +87,7 @@ impl PrepareOptions {
     pub fn new(surface: PathBuf, camera: Point, attach: PathBuf, targets: PathBuf) -> PrepareOptions {
         PrepareOptions {
             surface,
+            label: None,
             units: None,
             camera,
             attach,
@@ -198,25 +209,7 @@ fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
 
 /// Step 1: the surface repaired and meshed, the regions selected, the targets located.
 fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
-    let mut lines = Vec::new();
-    let mut surface = mesh::io::read_surface(&options.surface)?;
-    let scale = match &options.units {
-        Some(name) => register::cloud::metres_per_unit(name).map_err(anyhow::Error::msg).context("units")?,
-        None => {
-            let u = detect_unit(&surface).with_context(|| format!("the unit of {}", options.surface.display()))?;
-            lines.push(format!("units: {} (detected from the surface's size; give --units otherwise)", u.symbol()));
-            metres_per(u)
-        }
-    };
-    surface.vertices.iter_mut().for_each(|p| *p = p.map(|x| x * scale));
-    let (surface, repair) = repair_surface(&surface, &RepairOptions::default())
-        .with_context(|| format!("repairing {}", options.surface.display()))?;
-    if repair.changed() {
-        lines.extend(repair.lines().into_iter().map(|l| format!("repair: {l}")));
-        lines.extend(repair.warnings().into_iter().map(|w| format!("warning: {w}")));
-    } else {
-        lines.push("repair: nothing to repair (a closed, oriented, manifold surface)".into());
-    }
+    let (surface, scale, mut lines) = organ_surface(options)?;
     let to_metres = |points: Vec<Point>| -> Vec<Point> { points.into_iter().map(|p| p.map(|x| x * scale)).collect() };
     let landmarks = to_metres(read_points_csv(&options.attach)?);
     let targets = to_metres(read_points_csv(&options.targets)?);
@@ -279,6 +272,47 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     write_points_csv(&dir.join("targets.csv"), &targets)?;
     write_points_csv(&dir.join("camera.csv"), &[camera])?;
     Ok(lines)
+}
+
+/// The organ's closed surface in metres, the scale from the inputs' unit to metres, and what was
+/// done: a labelmap's label extracted (in mm, in the file's scanner frame), or a surface repaired
+/// (through voxels when local repair cannot mend it).
+fn organ_surface(options: &PrepareOptions) -> Result<(TriSurface, f64, Vec<String>)> {
+    let path = &options.surface;
+    let mut lines = Vec::new();
+    if is_labelmap(path) {
+        if options.units.as_deref().is_some_and(|u| u != "mm") {
+            bail!("{} is a labelmap, whose unit is the millimetre: leave out --units or give mm", path.display());
+        }
+        let organ = read_labelmap_surface(path, options.label.as_deref(), &ExtractOptions::default())?;
+        lines.extend(organ.lines().into_iter().map(|l| format!("labelmap: {l}")));
+        lines.push(format!(
+            "frame: the scanner's {} frame of {}, in mm: the camera, landmarks and targets are taken in it",
+            organ.frame.name(),
+            path.file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned())
+        ));
+        let mut surface = organ.surface;
+        surface.vertices.iter_mut().for_each(|p| *p = p.map(|x| x * 1e-3));
+        return Ok((surface, 1e-3, lines));
+    }
+    if let Some(label) = &options.label {
+        bail!("--label {label} chooses a label of a labelmap (.nii, .nii.gz, .nrrd), not of {}", path.display());
+    }
+    let mut surface = mesh::io::read_surface(path)?;
+    let scale = match &options.units {
+        Some(name) => register::cloud::metres_per_unit(name).map_err(anyhow::Error::msg).context("units")?,
+        None => {
+            let u = detect_unit(&surface).with_context(|| format!("the unit of {}", path.display()))?;
+            lines.push(format!("units: {} (detected from the surface's size; give --units otherwise)", u.symbol()));
+            metres_per(u)
+        }
+    };
+    surface.vertices.iter_mut().for_each(|p| *p = p.map(|x| x * scale));
+    let (surface, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
+        .with_context(|| format!("repairing {}", path.display()))?;
+    lines.extend(route.lines(Some(1e3)).into_iter().map(|l| format!("repair: {l}")));
+    lines.extend(route.warnings().into_iter().map(|w| format!("warning: {w}")));
+    Ok((surface, scale, lines))
 }
 
 /// The grid of the network's input and output: 32 nodes along the organ's longest side (about

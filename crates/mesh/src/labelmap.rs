@@ -678,15 +678,27 @@ impl LabelSurface {
 }
 
 /// Reads a labelmap and extracts the closed surface of one label (a number, or a segment name
-/// the file carries), in millimetres in the file's world frame.
+/// the file carries), in millimetres in the file's world frame. Without a label, the file must
+/// hold only one.
 pub fn read_labelmap_surface(
     path: impl AsRef<Path>,
-    label: &str,
+    label: Option<&str>,
     options: &ExtractOptions,
 ) -> Result<LabelSurface, MeshError> {
     let path = path.as_ref();
     let map = read_labelmap(path)?;
-    let (mask, label) = map.select(label).map_err(|e| parse_error(path, e.to_string()))?;
+    let present = map.present();
+    let label = match (label, &present[..]) {
+        (Some(label), _) => label.to_string(),
+        (None, [(_, only, _, _)]) => only.to_string(),
+        (None, _) => {
+            return Err(parse_error(
+                path,
+                format!("holds several labels: choose one with --label (labels present: {})", map.present_text()),
+            ))
+        }
+    };
+    let (mask, label) = map.select(&label).map_err(|e| parse_error(path, e.to_string()))?;
     let (surface, extract) = mask_surface(&mask, options).map_err(|e| parse_error(path, e.to_string()))?;
     Ok(LabelSurface { surface, frame: map.frame, label, spacing: map.spacing(), extract })
 }
@@ -737,7 +749,7 @@ mod tests {
             write_nifti(&path, &map).unwrap();
             let back = read_labelmap(&path).unwrap();
             assert!(back == Labelmap { segments: Vec::new(), ..map.clone() }, "{:?}", back.affine);
-            let organ = read_labelmap_surface(&path, "5", &ExtractOptions::default()).unwrap();
+            let organ = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
             assert_eq!(organ.frame, Frame::Ras);
             let c = centroid(&organ.surface);
             assert!(norm(sub(c, centre)) < 0.5, "{c:?} vs {centre:?}");
@@ -757,17 +769,20 @@ mod tests {
         let path = dir.path().join("seg.seg.nrrd");
         write_nrrd(&path, &lps).unwrap();
         assert!(read_labelmap(&path).unwrap() == lps);
-        let organ = read_labelmap_surface(&path, "Liver", &ExtractOptions::default()).unwrap();
+        let organ = read_labelmap_surface(&path, Some("Liver"), &ExtractOptions::default()).unwrap();
         assert_eq!((organ.frame, organ.label.as_str()), (Frame::Lps, "label 5 ('liver')"));
         let c = centroid(&organ.surface);
         let expected = [-centre[0], -centre[1], centre[2]];
         assert!(norm(sub(c, expected)) < 0.5, "{c:?} vs {expected:?}");
-        let error =
-            |choice: &str| read_labelmap_surface(&path, choice, &ExtractOptions::default()).unwrap_err().to_string();
+        let error = |choice: &str| {
+            read_labelmap_surface(&path, Some(choice), &ExtractOptions::default()).unwrap_err().to_string()
+        };
         let absent = error("7");
         assert!(absent.contains("label 7 is not in the labelmap") && absent.contains("5 ('liver',"), "{absent}");
         assert!(error("kidney").contains("no segment is named 'kidney'; labels present: 2 ('tumour',"));
         assert!(error("0").contains("not in the labelmap"));
+        let unchosen = read_labelmap_surface(&path, None, &ExtractOptions::default()).unwrap_err().to_string();
+        assert!(unchosen.contains("holds several labels: choose one with --label"), "{unchosen}");
     }
 
     #[test]

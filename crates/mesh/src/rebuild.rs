@@ -67,9 +67,10 @@ pub enum Route {
 }
 
 impl Route {
-    /// What was done, one line each; lengths are given in mm, `mm_per_unit` being the millimetres
-    /// in one unit of the surface's coordinates.
-    pub fn lines(&self, mm_per_unit: f64) -> Vec<String> {
+    /// What was done, one line each; lengths are given in mm when `mm_per_unit` (the
+    /// millimetres in one unit of the surface's coordinates) is known, otherwise in the surface's
+    /// unit.
+    pub fn lines(&self, mm_per_unit: Option<f64>) -> Vec<String> {
         match self {
             Route::Local(report) => {
                 let mut lines = vec!["route: local repair".to_string()];
@@ -81,7 +82,10 @@ impl Route {
                 lines
             }
             Route::Volumetric(r) => {
-                let mm = |x: f64| format!("{:.2} mm", x * mm_per_unit);
+                let mm = |x: f64| match mm_per_unit {
+                    Some(scale) => format!("{:.2} mm", x * scale),
+                    None => format!("{} (the surface's unit)", number(x)),
+                };
                 let e = &r.extract;
                 let mut lines = vec![
                     format!("route: volumetric (local repair cannot mend it: {})", r.reason),
@@ -244,7 +248,7 @@ mod tests {
             / (12.0 * d);
         let expected = a.enclosed_volume() + b.enclosed_volume() + c.enclosed_volume()
             - lens * a.enclosed_volume() / (4.0 / 3.0 * PI * r1.powi(3));
-        let lines = route.lines(1.0);
+        let lines = route.lines(Some(1.0));
         eprintln!(
             "{lines:#?}\nvolume {volume:.0}, expected {expected:.0} ({:+.2} %)",
             100.0 * (volume / expected - 1.0)
@@ -263,7 +267,7 @@ mod tests {
         let (result, route) = repair_or_rebuild(&s, &RepairOptions::default(), &RebuildOptions::default()).unwrap();
         assert!(matches!(&route, Route::Local(r) if r.holes_filled == vec![3]));
         assert_eq!(result.triangles.len(), 1280);
-        assert_eq!(route.lines(1.0)[0], "route: local repair");
+        assert_eq!(route.lines(Some(1.0))[0], "route: local repair");
     }
 
     #[test]
