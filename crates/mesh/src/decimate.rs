@@ -12,10 +12,10 @@ use std::collections::BinaryHeap;
 use crate::{cross, dot, norm, sub, Point, TriSurface};
 
 /// The surface with about `target` triangles (never fewer than 8; unchanged when it has no more
-/// than `target`), by quadric edge collapse. The surface must be a closed 2-manifold; the result
+/// than `target`, or too many vertices to number in 32 bits), by quadric edge collapse. The surface must be a closed 2-manifold; the result
 /// is one too.
 pub fn decimate(surface: &TriSurface, target: usize) -> TriSurface {
-    if surface.triangles.len() <= target {
+    if surface.triangles.len() <= target || surface.vertices.len() >= u32::MAX as usize {
         return surface.clone();
     }
     let mut state = Decimator::new(surface);
@@ -40,13 +40,13 @@ fn error(q: &Quadric, p: Point) -> f64 {
         + q[9]
 }
 
-/// A candidate collapse of edge (a, b) to `target`, valid while both ends keep their versions.
+/// A candidate collapse of edge (a, b) (to the point [`Decimator::best`] gives), valid while
+/// both ends keep their versions. Small, as the heap holds millions.
 struct Candidate {
     cost: f64,
-    a: usize,
-    b: usize,
+    a: u32,
+    b: u32,
     versions: (u32, u32),
-    target: Point,
 }
 
 impl PartialEq for Candidate {
@@ -123,21 +123,25 @@ impl Decimator {
         state
     }
 
-    /// Queues the collapse of edge (a, b) at its best point.
+    /// Queues the collapse of edge (a, b).
     fn push(&mut self, a: usize, b: usize) {
+        let (_, cost) = self.best(a, b);
+        let versions = (self.version[a], self.version[b]);
+        self.heap.push(Candidate { cost, a: a as u32, b: b as u32, versions });
+    }
+
+    /// The point to collapse edge (a, b) to, and its quadric error.
+    fn best(&self, a: usize, b: usize) -> (Point, f64) {
         let q: Quadric = std::array::from_fn(|i| self.quadrics[a][i] + self.quadrics[b][i]);
         let (pa, pb) = (self.points[a], self.points[b]);
         let middle = std::array::from_fn(|d| 0.5 * (pa[d] + pb[d]));
-        let mut candidates = vec![pa, pb, middle];
-        if let Some(p) = optimum(&q).filter(|&p| norm(sub(p, middle)) <= norm(sub(pa, pb))) {
-            candidates.insert(0, p);
-        }
-        let (target, cost) = candidates
+        let optimal = optimum(&q).filter(|&p| norm(sub(p, middle)) <= norm(sub(pa, pb)));
+        let candidates = optimal.into_iter().chain([pa, pb, middle]);
+        candidates
             .into_iter()
             .map(|p| (p, error(&q, p)))
             .min_by(|x, y| x.1.total_cmp(&y.1))
-            .expect("candidates are never empty");
-        self.heap.push(Candidate { cost, a, b, versions: (self.version[a], self.version[b]), target });
+            .expect("candidates are never empty")
     }
 
     /// The live vertices around `v` (without `v`), sorted.
@@ -208,10 +212,14 @@ impl Decimator {
     fn run(&mut self, target: usize) {
         while self.live > target {
             let Some(c) = self.heap.pop() else { break };
-            if (self.version[c.a], self.version[c.b]) != c.versions || !self.allowed(c.a, c.b, c.target) {
+            let (a, b) = (c.a as usize, c.b as usize);
+            if (self.version[a], self.version[b]) != c.versions {
                 continue;
             }
-            self.collapse(c.a, c.b, c.target);
+            let (target, _) = self.best(a, b);
+            if self.allowed(a, b, target) {
+                self.collapse(a, b, target);
+            }
         }
     }
 

@@ -72,6 +72,9 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
     let voxels = pieces.remove(0);
     let filled_voxels = mask.fill_cavities();
     let mask = mask.cropped(2).ok_or_else(|| MeshError::Invalid("the mask is empty".into()))?;
+    if mask.inside.len() > 400_000_000 {
+        return Err(MeshError::Invalid(format!("the organ spans too many voxels ({:?})", mask.dims)));
+    }
     let field = smoothed(&mask);
     let surface = largest_piece(&march(&field, mask.dims, 0.5));
     let extracted_triangles = surface.triangles.len();
@@ -120,7 +123,8 @@ fn march(field: &[f32], dims: [usize; 3], level: f32) -> TriSurface {
     let [nx, ny, nz] = dims;
     let index = |p: [usize; 3]| p[0] + nx * (p[1] + ny * p[2]);
     let mut surface = TriSurface::default();
-    let mut on_edge: HashMap<(usize, usize), usize> = HashMap::new();
+    // The vertex on each edge of the triangulation, by its lower end and its direction.
+    let mut on_edge = vec![u32::MAX; 7 * field.len()];
     for k in 0..nz.saturating_sub(1) {
         for j in 0..ny.saturating_sub(1) {
             for i in 0..nx.saturating_sub(1) {
@@ -151,19 +155,23 @@ fn tetrahedron(
     level: f32,
     index: &impl Fn([usize; 3]) -> usize,
     surface: &mut TriSurface,
-    on_edge: &mut HashMap<(usize, usize), usize>,
+    on_edge: &mut [u32],
 ) {
     let ids = tet.map(index);
     let (inside, outside): (Vec<usize>, Vec<usize>) = (0..4).partition(|&c| field[ids[c]] > level);
     let mut vertex = |a: usize, b: usize| -> usize {
-        let key = (ids[a].min(ids[b]), ids[a].max(ids[b]));
-        *on_edge.entry(key).or_insert_with(|| {
+        // Corners along the path from (0,0,0) to (1,1,1): the later one is above in every axis.
+        let (low, high) = (a.min(b), a.max(b));
+        let direction: usize = (0..3).map(|d| (tet[high][d] - tet[low][d]) << d).sum();
+        let key = 7 * ids[low] + direction - 1;
+        if on_edge[key] == u32::MAX {
             let (fa, fb) = (field[ids[a]] as f64, field[ids[b]] as f64);
             let t = ((level as f64 - fa) / (fb - fa)).clamp(0.02, 0.98);
             let p = std::array::from_fn(|d| tet[a][d] as f64 + t * (tet[b][d] as f64 - tet[a][d] as f64));
+            on_edge[key] = surface.vertices.len() as u32;
             surface.vertices.push(p);
-            surface.vertices.len() - 1
-        })
+        }
+        on_edge[key] as usize
     };
     let polygon: Vec<usize> = match (inside.len(), outside.len()) {
         (1, 3) => outside.iter().map(|&o| vertex(inside[0], o)).collect(),

@@ -54,13 +54,13 @@ pub struct Labelmap {
     /// Layers of a layered segmentation (1 for an ordinary labelmap).
     pub layers: usize,
     /// The labels, layer fastest, then i, then j, then k.
-    pub labels: Vec<i64>,
+    pub labels: Vec<i32>,
     /// Voxel index (i, j, k) to world (mm): `x = A[..3] · (i, j, k) + A[3]`, row by row.
     pub affine: [[f64; 4]; 3],
     /// The frame of the world coordinates.
     pub frame: Frame,
     /// Named segments the file carries: (name, layer, label).
-    pub segments: Vec<(String, usize, i64)>,
+    pub segments: Vec<(String, usize, i32)>,
 }
 
 fn parse_error(path: &Path, message: impl Into<String>) -> MeshError {
@@ -127,9 +127,9 @@ impl Scalar {
         }
     }
 
-    /// The values of `data` as labels (floats rounded; a non-integral or non-finite one is an
-    /// error: a labelmap holds labels, not intensities).
-    fn labels(self, data: &[u8], count: usize, little: bool) -> Result<Vec<i64>, String> {
+    /// The values of `data` as labels (a non-integral or non-finite float is an error: a labelmap
+    /// holds labels, not intensities; so is one beyond 32 bits).
+    fn labels(self, data: &[u8], count: usize, little: bool) -> Result<Vec<i32>, String> {
         let size = self.size();
         if data.len() < count * size {
             return Err(format!("the data hold {} bytes, {} expected ({count} voxels)", data.len(), count * size));
@@ -145,20 +145,20 @@ impl Scalar {
         (0..count)
             .map(|i| {
                 let w = word(i);
-                let float = |x: f64| -> Result<i64, String> {
-                    if x.is_finite() && x == x.round() && x.abs() < 1e15 {
-                        Ok(x as i64)
+                let float = |x: f64| -> Result<i32, String> {
+                    if x.is_finite() && x == x.round() && x.abs() <= i32::MAX as f64 {
+                        Ok(x as i32)
                     } else {
                         Err(format!("voxel {i} holds {x}, not a label (a labelmap holds whole numbers)"))
                     }
                 };
                 match self {
-                    Scalar::U8 => Ok(w[0] as i64),
-                    Scalar::I8 => Ok(w[0] as i8 as i64),
-                    Scalar::I16 => Ok(i16::from_le_bytes([w[0], w[1]]) as i64),
-                    Scalar::U16 => Ok(u16::from_le_bytes([w[0], w[1]]) as i64),
-                    Scalar::I32 => Ok(i32::from_le_bytes([w[0], w[1], w[2], w[3]]) as i64),
-                    Scalar::U32 => Ok(u32::from_le_bytes([w[0], w[1], w[2], w[3]]) as i64),
+                    Scalar::U8 => Ok(w[0] as i32),
+                    Scalar::I8 => Ok(w[0] as i8 as i32),
+                    Scalar::I16 => Ok(i16::from_le_bytes([w[0], w[1]]) as i32),
+                    Scalar::U16 => Ok(u16::from_le_bytes([w[0], w[1]]) as i32),
+                    Scalar::I32 => Ok(i32::from_le_bytes([w[0], w[1], w[2], w[3]])),
+                    Scalar::U32 => float(u32::from_le_bytes([w[0], w[1], w[2], w[3]]) as f64),
                     Scalar::F32 => float(f32::from_le_bytes([w[0], w[1], w[2], w[3]]) as f64),
                     Scalar::F64 => float(f64::from_le_bytes(w)),
                 }
@@ -225,7 +225,10 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
             if v != v.round() {
                 return Err(format!("scaled value {v} is not a label (scl_slope {slope}, scl_inter {intercept})"));
             }
-            *l = v as i64;
+            if v.abs() > i32::MAX as f64 {
+                return Err(format!("scaled value {v} is beyond 32 bits"));
+            }
+            *l = v as i32;
         }
     }
     let affine = nifti_affine(i16_at(252), i16_at(254), &pixdim, f32_at)?;
@@ -419,12 +422,12 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
 }
 
 /// Slicer's segments: `Segment{i}_Name`, `Segment{i}_LabelValue`, `Segment{i}_Layer`.
-fn slicer_segments(pairs: &BTreeMap<String, String>) -> Result<Vec<(String, usize, i64)>, String> {
+fn slicer_segments(pairs: &BTreeMap<String, String>) -> Result<Vec<(String, usize, i32)>, String> {
     let mut segments = Vec::new();
     for i in 0.. {
         let Some(name) = pairs.get(&format!("Segment{i}_Name")) else { break };
         let get = |key: &str, default: &str| pairs.get(&format!("Segment{i}_{key}")).cloned().unwrap_or(default.into());
-        let label = get("LabelValue", "1").parse::<i64>().map_err(|e| format!("Segment{i}_LabelValue: {e}"))?;
+        let label = get("LabelValue", "1").parse::<i32>().map_err(|e| format!("Segment{i}_LabelValue: {e}"))?;
         let layer = get("Layer", "0").parse::<usize>().map_err(|e| format!("Segment{i}_Layer: {e}"))?;
         segments.push((name.clone(), layer, label));
     }
@@ -438,8 +441,8 @@ impl Labelmap {
     }
 
     /// The labels present (other than 0), each with its voxel count and its name if it has one.
-    pub fn present(&self) -> Vec<(usize, i64, usize, Option<String>)> {
-        let mut counts: BTreeMap<(usize, i64), usize> = BTreeMap::new();
+    pub fn present(&self) -> Vec<(usize, i32, usize, Option<String>)> {
+        let mut counts: BTreeMap<(usize, i32), usize> = BTreeMap::new();
         for (n, &l) in self.labels.iter().enumerate() {
             if l != 0 {
                 *counts.entry((n % self.layers, l)).or_default() += 1;
@@ -471,13 +474,14 @@ impl Labelmap {
     }
 
     /// The voxels of one label, chosen by number ("5") or by segment name ("liver", any case),
-    /// as a mask in the labelmap's grid and world frame. Returns the mask and a description of
+    /// as a mask in the labelmap's world frame, its grid cut to the label's box with one voxel
+    /// around. Returns the mask and a description of
     /// the choice ("label 5 ('liver')"). An absent label or name is an error that lists those
     /// present; a number matching segments of several layers must be chosen by name.
     pub fn select(&self, choice: &str) -> Result<(VoxelMask, String), MeshError> {
         let choice = choice.trim();
         let present = self.present();
-        let (layer, label) = if let Ok(label) = choice.parse::<i64>() {
+        let (layer, label) = if let Ok(label) = choice.parse::<i32>() {
             let layers: Vec<usize> = present.iter().filter(|p| p.1 == label).map(|p| p.0).collect();
             match layers[..] {
                 [layer] if label != 0 => (layer, label),
@@ -512,13 +516,12 @@ impl Labelmap {
             Some(n) => format!("label {label} ('{n}')"),
             None => format!("label {label}"),
         };
-        if !inside.contains(&true) {
-            return Err(MeshError::Invalid(format!(
-                "{description} has no voxel; labels present: {}",
-                self.present_text()
-            )));
+        match (VoxelMask { dims: self.dims, inside, affine: self.affine }).cropped(1) {
+            Some(mask) => Ok((mask, description)),
+            None => {
+                Err(MeshError::Invalid(format!("{description} has no voxel; labels present: {}", self.present_text())))
+            }
         }
-        Ok((VoxelMask { dims: self.dims, inside, affine: self.affine }, description))
     }
 }
 
@@ -534,10 +537,7 @@ pub fn write_nifti(path: impl AsRef<Path>, map: &Labelmap) -> Result<(), MeshErr
     if map.dims.iter().any(|&n| n == 0 || n > i16::MAX as usize) || map.labels.len() != map.dims.iter().product() {
         return fail("bad dimensions");
     }
-    let wide = map.labels.iter().any(|&l| l < i16::MIN as i64 || l > i16::MAX as i64);
-    if map.labels.iter().any(|&l| l < i32::MIN as i64 || l > i32::MAX as i64) {
-        return fail("labels beyond 32 bits");
-    }
+    let wide = map.labels.iter().any(|&l| l < i16::MIN as i32 || l > i16::MAX as i32);
     let mut header = vec![0u8; 352];
     let mut put = |offset: usize, bytes: &[u8]| header[offset..offset + bytes.len()].copy_from_slice(bytes);
     put(0, &348i32.to_le_bytes());
@@ -558,7 +558,7 @@ pub fn write_nifti(path: impl AsRef<Path>, map: &Labelmap) -> Result<(), MeshErr
     put(344, b"n+1\0");
     for &l in &map.labels {
         if wide {
-            header.extend_from_slice(&(l as i32).to_le_bytes());
+            header.extend_from_slice(&l.to_le_bytes());
         } else {
             header.extend_from_slice(&(l as i16).to_le_bytes());
         }
@@ -570,11 +570,9 @@ pub fn write_nifti(path: impl AsRef<Path>, map: &Labelmap) -> Result<(), MeshErr
 /// frame as the `space` and its segments as 3D Slicer's `Segment{i}_...` pairs.
 pub fn write_nrrd(path: impl AsRef<Path>, map: &Labelmap) -> Result<(), MeshError> {
     let path = path.as_ref();
-    let wide = map.labels.iter().any(|&l| l < i16::MIN as i64 || l > i16::MAX as i64);
-    if map.labels.len() != map.layers * map.dims.iter().product::<usize>()
-        || map.labels.iter().any(|&l| l < i32::MIN as i64 || l > i32::MAX as i64)
-    {
-        return Err(MeshError::Invalid(format!("{}: bad labelmap (size or 32-bit labels)", path.display())));
+    let wide = map.labels.iter().any(|&l| l < i16::MIN as i32 || l > i16::MAX as i32);
+    if map.labels.len() != map.layers * map.dims.iter().product::<usize>() {
+        return Err(MeshError::Invalid(format!("{}: bad labelmap size", path.display())));
     }
     let vector = |v: [f64; 3]| format!("({},{},{})", v[0], v[1], v[2]);
     let axes: Vec<String> = (0..3).map(|c| vector(std::array::from_fn(|r| map.affine[r][c]))).collect();
@@ -605,7 +603,7 @@ pub fn write_nrrd(path: impl AsRef<Path>, map: &Labelmap) -> Result<(), MeshErro
     let mut data = Vec::with_capacity(map.labels.len() * 4);
     for &l in &map.labels {
         if wide {
-            data.extend_from_slice(&(l as i32).to_le_bytes());
+            data.extend_from_slice(&l.to_le_bytes());
         } else {
             data.extend_from_slice(&(l as i16).to_le_bytes());
         }
@@ -789,7 +787,7 @@ mod tests {
     fn layered_segments_are_chosen_by_name() {
         let (single, _) = two_balls(Frame::Lps);
         // Two layers: the liver in layer 0, an overlapping vessel (also label 5) in layer 1.
-        let labels: Vec<i64> = single.labels.iter().flat_map(|&l| [l, if l == 2 { 5 } else { 0 }]).collect();
+        let labels: Vec<i32> = single.labels.iter().flat_map(|&l| [l, if l == 2 { 5 } else { 0 }]).collect();
         let segments = vec![("liver".into(), 0, 5), ("vessel".into(), 1, 5)];
         let map = Labelmap { layers: 2, labels, segments, ..single.clone() };
         let dir = tempfile::tempdir().unwrap();
