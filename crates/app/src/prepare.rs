@@ -913,3 +913,72 @@ fn regions_picture(
     };
     Ok(scatter_plot(path, &spec, &sets, &[])?)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The shipped labelmaps of the liver phantom (its origin at (−80, 30, −140) mm in RAS).
+    fn labelmap(name: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../mesh/tests/data").join(name)
+    }
+
+    /// The organ step's options on `file`, the landmarks, targets and camera given in RAS (mm)
+    /// and turned to LPS when `lps`.
+    fn options(dir: &Path, file: &str, label: &str, lps: bool) -> PrepareOptions {
+        let frame = |p: Point| if lps { [-p[0], -p[1], p[2]] } else { p };
+        let landmarks = [[-115.0, 30.0, -183.0], [-45.0, 30.0, -183.0], [-80.0, 0.0, -183.0], [-80.0, 60.0, -183.0]];
+        // The centres of the two lobes.
+        let targets = [[-45.0, 30.0, -140.0], [-125.0, 35.0, -135.0]];
+        write_points_csv(&dir.join("attach.csv"), &landmarks.map(frame)).unwrap();
+        write_points_csv(&dir.join("targets.csv"), &targets.map(frame)).unwrap();
+        let mut options = PrepareOptions::new(
+            labelmap(file),
+            frame([-80.0, 30.0, 150.0]),
+            dir.join("attach.csv"),
+            dir.join("targets.csv"),
+        );
+        options.label = Some(label.into());
+        options.tets = 800;
+        options
+    }
+
+    #[test]
+    fn a_labelmap_is_prepared_in_its_scanner_frame() {
+        for (file, label, lps) in [("liver_labels.nii.gz", "5", false), ("liver_labels.seg.nrrd", "liver", true)] {
+            let dir = tempfile::tempdir().unwrap();
+            let lines = organ_step(&options(dir.path(), file, label, lps), dir.path()).unwrap();
+            let frame = if lps { "LPS" } else { "RAS" };
+            assert!(
+                lines.iter().any(|l| l.starts_with(&format!("frame: the scanner's {frame} frame of {file}"))),
+                "{lines:?}"
+            );
+            assert!(lines.iter().any(|l| l == "targets: 2 inside the organ"), "{lines:?}");
+            // The organ stays where the scanner saw it: the phantom spans x from −180 to 20 mm
+            // (RAS), y from −40 to 100, z from −185 to −95.
+            let organ = mesh::io::read_mesh(dir.path().join("organ.vtu")).unwrap();
+            let (lo, hi) = organ.bounds();
+            let sign = if lps { -1.0 } else { 1.0 };
+            let middle: Point = std::array::from_fn(|d| 0.5e3 * (lo[d] + hi[d]));
+            let expected = [sign * -80.0, sign * 30.0, -140.0];
+            assert!(mesh::distance(middle, expected) < 3.0, "{file}: centre {middle:?}, {expected:?} expected");
+        }
+    }
+
+    #[test]
+    fn targets_in_the_wrong_frame_and_a_wrong_unit_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        // RAS targets for an LPS segmentation: outside the organ.
+        let mut wrong = options(dir.path(), "liver_labels.seg.nrrd", "liver", true);
+        write_points_csv(&wrong.targets, &[[-45.0, 30.0, -140.0]]).unwrap();
+        let error = format!("{:#}", organ_step(&wrong, dir.path()).unwrap_err());
+        assert!(error.contains("the targets of"), "{error}");
+        wrong.units = Some("m".into());
+        let error = organ_step(&wrong, dir.path()).unwrap_err().to_string();
+        assert!(error.contains("is a labelmap, whose unit is the millimetre"), "{error}");
+        let mut surface = options(dir.path(), "liver_labels.nii.gz", "5", false);
+        surface.surface = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mesh/tests/data/liver.obj");
+        let error = organ_step(&surface, dir.path()).unwrap_err().to_string();
+        assert!(error.contains("--label 5 chooses a label of a labelmap"), "{error}");
+    }
+}
