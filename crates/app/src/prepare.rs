@@ -339,13 +339,29 @@ fn across_sight(axis: Point) -> (Point, Point) {
     (u, mesh::cross(axis, u))
 }
 
+/// The organ's name: its file's name without the extension (.seg.nrrd and .nii.gz whole).
+fn organ_name(path: &Path) -> String {
+    let file = path.file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned());
+    let lower = file.to_ascii_lowercase();
+    let cut = [".seg.nrrd", ".nii.gz"].iter().find(|e| lower.ends_with(*e)).map(|e| file.len() - e.len());
+    let name = match cut {
+        Some(end) => file[..end].to_string(),
+        None => path.file_stem().map_or(String::new(), |s| s.to_string_lossy().into_owned()),
+    };
+    if name.is_empty() {
+        "organ".into()
+    } else {
+        name
+    }
+}
+
 /// Step 2: the scenario files.
 fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
     let camera = read_points_csv(&dir.join("camera.csv"))?[0];
     let [nx, ny, nz] = grid_for(&organ);
     let radius = tool_radius(&organ);
-    let name = options.surface.file_stem().map_or("organ".into(), |s| s.to_string_lossy().into_owned());
+    let name = organ_name(&options.surface);
     let camera_toml = format!("{{ facing = {{ position = [{}, {}, {}] }} }}", camera[0], camera[1], camera[2]);
     let held =
         format!("{{ near = {{ file = \"attach.csv\", distance = {}, surface = true }} }}", options.attach_distance);
@@ -962,6 +978,15 @@ mod tests {
             let middle: Point = std::array::from_fn(|d| 0.5e3 * (lo[d] + hi[d]));
             let expected = [sign * -80.0, sign * 30.0, -140.0];
             assert!(mesh::distance(middle, expected) < 3.0, "{file}: centre {middle:?}, {expected:?} expected");
+        }
+    }
+
+    #[test]
+    fn organs_are_named_after_their_files() {
+        for (file, name) in
+            [("a/liver.stl", "liver"), ("seg.nii.gz", "seg"), ("Liver.seg.nrrd", "Liver"), (".nii.gz", "organ")]
+        {
+            assert_eq!(organ_name(Path::new(file)), name);
         }
     }
 

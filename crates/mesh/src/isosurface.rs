@@ -42,7 +42,7 @@ impl Default for ExtractOptions {
 /// What [`mask_surface`] did.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ExtractReport {
-    /// Voxels of the largest piece, kept.
+    /// Voxels of the largest piece, kept, with its cavities filled.
     pub voxels: usize,
     /// Sizes (voxels) of the smaller pieces dropped, largest first.
     pub dropped_pieces: Vec<usize>,
