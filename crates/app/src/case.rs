@@ -285,7 +285,14 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
         match (spec.kind, spec.material, networks.first()) {
             (MethodKind::Fem, Some(material), _) => {
                 let (organ, deformer) = fem_model_fixed_on(mesh.clone(), material, &scenario.truth.fixed)?;
-                out.push(Method { name, organ, deformer: Box::new(deformer), iterations, warm_iterations, max_points: None });
+                out.push(Method {
+                    name,
+                    organ,
+                    deformer: Box::new(deformer),
+                    iterations,
+                    warm_iterations,
+                    max_points: None,
+                });
             }
             (MethodKind::Fem, None, _) => {
                 bail!("method {name:?}: a FEM method needs a material")
@@ -319,7 +326,14 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
                 }
                 let network_iterations = spec.network_iterations.unwrap_or(1);
                 let deformer = HybridDeformer::new(Box::new(deformer), fem, network_iterations)?;
-                out.push(Method { name, organ, deformer: Box::new(deformer), iterations, warm_iterations, max_points: None });
+                out.push(Method {
+                    name,
+                    organ,
+                    deformer: Box::new(deformer),
+                    iterations,
+                    warm_iterations,
+                    max_points: None,
+                });
             }
             (MethodKind::Hybrid, None, _) => bail!("method {name:?}: a hybrid method needs a material"),
             (MethodKind::Network | MethodKind::Hybrid, _, None) => {}

@@ -4,7 +4,10 @@
 //! 1. **organ**: the surface read (STL, OBJ, VTK, VTU) in its unit (given, or detected from its
 //!    size) and frame (`SPACE=` in its header), the landmarks, targets and camera in theirs
 //!    (3D Slicer's `.fcsv` and `.mrk.json` name them; see [`crate::points`]), repaired
-//!    ([`mesh::repair`]), meshed with tetrahedra; the nodes the camera sees
+//!    ([`mesh::repair`], through voxels when local repair cannot mend it: [`mesh::rebuild`]), or a
+//!    label of a segmentation's labelmap (NIfTI, NRRD: in mm, in the scanner's frame the file
+//!    states, RAS or LPS) extracted as a closed surface ([`mesh::labelmap`]); meshed with
+//!    tetrahedra; the nodes the camera sees
 //!    (`visible`, self-occlusion included) and those near the attachment landmarks (`attached`,
 //!    on the surface) selected; the targets located inside the organ (a unit mistake is named).
 //!    Written in metres, in the segmentation's frame: `surface.stl` (its header naming the frame
@@ -39,9 +42,12 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use mesh::io::points::{read_points_csv, write_points, write_points_csv, LabelledPoints};
 use mesh::io::{read_surface_with_frame, write_atomic_bytes, Frame};
-use mesh::repair::{detect_unit, metres_per, repair_surface, LengthUnit, RepairOptions};
+use mesh::isosurface::ExtractOptions;
+use mesh::labelmap::{is_labelmap, read_labelmap_surface};
+use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
+use mesh::repair::{detect_unit, metres_per, LengthUnit, RepairOptions};
 use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
-use mesh::{Camera, Mesh, Near, Point};
+use mesh::{Camera, Mesh, Near, Point, TriSurface};
 use plot::{scatter_plot, PlotSpec, PointSet};
 use serde::{Deserialize, Serialize};
 
@@ -53,10 +59,14 @@ use crate::registration::{PatientMethod, RegistrationSpec, PATIENT_FILE};
 /// What `augsim prepare` is given.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PrepareOptions {
-    /// The segmented surface (.stl, .obj, .vtk, .vtu).
+    /// The segmented surface (.stl, .obj, .vtk, .vtu) or labelmap (.nii, .nii.gz, .nrrd,
+    /// .seg.nrrd).
     pub surface: PathBuf,
+    /// The labelmap's label: a number or a segment name (`None`: the only label it holds).
+    #[serde(default)]
+    pub label: Option<String>,
     /// The unit of the surface, the camera, the landmarks and the targets, "mm" or "m" (`None`:
-    /// detected from the surface's size).
+    /// detected from the surface's size; a labelmap's is mm).
     pub units: Option<String>,
     /// Where the laparoscope looks from, in the segmentation's frame.
     pub camera: CameraAt,
@@ -83,6 +93,7 @@ impl PrepareOptions {
     pub fn new(surface: PathBuf, camera: impl Into<CameraAt>, attach: PathBuf, targets: PathBuf) -> PrepareOptions {
         PrepareOptions {
             surface,
+            label: None,
             units: None,
             camera: camera.into(),
             attach,
@@ -241,15 +252,7 @@ struct Inputs {
 /// and the camera, each in the unit and frame its file names, else the surface's; all brought to
 /// metres and to the surface's frame (or, when its header names none, the first named).
 fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inputs> {
-    let (mut surface, surface_frame) = read_surface_with_frame(&options.surface)?;
-    let unit = match &options.units {
-        Some(name) => name.parse::<LengthUnit>().map_err(anyhow::Error::msg).context("units")?,
-        None => {
-            let u = detect_unit(&surface).with_context(|| format!("the unit of {}", options.surface.display()))?;
-            lines.push(format!("units: {} (detected from the surface's size; give --units otherwise)", u.symbol()));
-            u
-        }
-    };
+    let (mut surface, surface_frame, unit) = read_surface_input(options, lines)?;
     let mut input = PointInput::new(surface_frame, LengthUnit::Metre, unit);
     let read =
         |input: &mut PointInput, path: &Path| input.read(path).with_context(|| format!("reading {}", path.display()));
@@ -264,7 +267,7 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
     };
     let frame = input.frame;
     lines.push(match (surface_frame, frame) {
-        (Some(f), _) => format!("frame: {f} (the surface's header)"),
+        (Some(f), _) => format!("frame: {f} (named by {})", options.surface.display()),
         (None, Some(f)) => format!("frame: {f} (named by the points' files; the surface's header names none)"),
         (None, None) => "frame: not named by any input (SPACE= header, .fcsv, .mrk.json): all taken as given".into(),
     });
@@ -277,14 +280,10 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let mut lines = Vec::new();
     let Inputs { surface, landmarks: labelled_landmarks, targets: labelled_targets, camera, frame } =
         read_inputs(options, &mut lines)?;
-    let (surface, repair) = repair_surface(&surface, &RepairOptions::default())
+    let (surface, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
         .with_context(|| format!("repairing {}", options.surface.display()))?;
-    if repair.changed() {
-        lines.extend(repair.lines().into_iter().map(|l| format!("repair: {l}")));
-        lines.extend(repair.warnings().into_iter().map(|w| format!("warning: {w}")));
-    } else {
-        lines.push("repair: nothing to repair (a closed, oriented, manifold surface)".into());
-    }
+    lines.extend(route.lines(Some(1e3)).into_iter().map(|l| format!("repair: {l}")));
+    lines.extend(route.warnings().into_iter().map(|w| format!("warning: {w}")));
     let landmarks = labelled_landmarks.points.clone();
     let targets = labelled_targets.points.clone();
     let (mut organ, quality) = mesh_surface_to_count(&surface, options.tets, BoundaryFit::default())
@@ -351,6 +350,37 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     Ok(lines)
 }
 
+/// The organ's surface in its own unit, with its frame and unit: a label of a labelmap extracted
+/// (in mm, in the file's scanner frame), or a surface file (its frame in a `SPACE=` header, its
+/// unit given or detected from its size).
+fn read_surface_input(
+    options: &PrepareOptions,
+    lines: &mut Vec<String>,
+) -> Result<(TriSurface, Option<Frame>, LengthUnit)> {
+    let path = &options.surface;
+    if is_labelmap(path) {
+        if options.units.as_deref().is_some_and(|u| u != "mm") {
+            bail!("{} is a labelmap, whose unit is the millimetre: leave out --units or give mm", path.display());
+        }
+        let organ = read_labelmap_surface(path, options.label.as_deref(), &ExtractOptions::default())?;
+        lines.extend(organ.lines().into_iter().map(|l| format!("labelmap: {l}")));
+        return Ok((organ.surface, Some(organ.frame), LengthUnit::Millimetre));
+    }
+    if let Some(label) = &options.label {
+        bail!("--label {label} chooses a label of a labelmap (.nii, .nii.gz, .nrrd), not of {}", path.display());
+    }
+    let (surface, frame) = read_surface_with_frame(path)?;
+    let unit = match &options.units {
+        Some(name) => name.parse::<LengthUnit>().map_err(anyhow::Error::msg).context("units")?,
+        None => {
+            let u = detect_unit(&surface).with_context(|| format!("the unit of {}", path.display()))?;
+            lines.push(format!("units: {} (detected from the surface's size; give --units otherwise)", u.symbol()));
+            u
+        }
+    };
+    Ok((surface, frame, unit))
+}
+
 /// The grid of the network's input and output: 32 nodes along the organ's longest side (about
 /// 6 mm apart on a liver), at least as fine along the others, each count a multiple of 8 (the
 /// U-Net halves it three times).
@@ -375,13 +405,29 @@ fn across_sight(axis: Point) -> (Point, Point) {
     (u, mesh::cross(axis, u))
 }
 
+/// The organ's name: its file's name without the extension (.seg.nrrd and .nii.gz whole).
+fn organ_name(path: &Path) -> String {
+    let file = path.file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned());
+    let lower = file.to_ascii_lowercase();
+    let cut = [".seg.nrrd", ".nii.gz"].iter().find(|e| lower.ends_with(*e)).map(|e| file.len() - e.len());
+    let name = match cut {
+        Some(end) => file[..end].to_string(),
+        None => path.file_stem().map_or(String::new(), |s| s.to_string_lossy().into_owned()),
+    };
+    if name.is_empty() {
+        "organ".into()
+    } else {
+        name
+    }
+}
+
 /// Step 2: the scenario files.
 fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
     let camera = read_points_csv(&dir.join("camera.csv"))?[0];
     let [nx, ny, nz] = grid_for(&organ);
     let radius = tool_radius(&organ);
-    let name = options.surface.file_stem().map_or("organ".into(), |s| s.to_string_lossy().into_owned());
+    let name = organ_name(&options.surface);
     let camera_toml = format!("{{ facing = {{ position = [{}, {}, {}] }} }}", camera[0], camera[1], camera[2]);
     let held =
         format!("{{ near = {{ file = \"attach.csv\", distance = {}, surface = true }} }}", options.attach_distance);
@@ -948,4 +994,79 @@ fn regions_picture(
         log_y: false,
     };
     Ok(scatter_plot(path, &spec, &sets, &[])?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The shipped labelmaps of the liver phantom (its origin at (−80, 30, −140) mm in RAS).
+    fn labelmap(name: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../mesh/tests/data").join(name)
+    }
+
+    /// The organ step's options on `file`, the landmarks, targets and camera given in RAS (mm)
+    /// and turned to LPS when `lps`.
+    fn options(dir: &Path, file: &str, label: &str, lps: bool) -> PrepareOptions {
+        let frame = |p: Point| if lps { [-p[0], -p[1], p[2]] } else { p };
+        let landmarks = [[-115.0, 30.0, -183.0], [-45.0, 30.0, -183.0], [-80.0, 0.0, -183.0], [-80.0, 60.0, -183.0]];
+        // The centres of the two lobes.
+        let targets = [[-45.0, 30.0, -140.0], [-125.0, 35.0, -135.0]];
+        write_points_csv(&dir.join("attach.csv"), &landmarks.map(frame)).unwrap();
+        write_points_csv(&dir.join("targets.csv"), &targets.map(frame)).unwrap();
+        let mut options = PrepareOptions::new(
+            labelmap(file),
+            frame([-80.0, 30.0, 150.0]),
+            dir.join("attach.csv"),
+            dir.join("targets.csv"),
+        );
+        options.label = Some(label.into());
+        options.tets = 800;
+        options
+    }
+
+    #[test]
+    fn a_labelmap_is_prepared_in_its_scanner_frame() {
+        for (file, label, lps) in [("liver_labels.nii.gz", "5", false), ("liver_labels.seg.nrrd", "liver", true)] {
+            let dir = tempfile::tempdir().unwrap();
+            let lines = organ_step(&options(dir.path(), file, label, lps), dir.path()).unwrap();
+            let frame = if lps { "LPS" } else { "RAS" };
+            assert!(lines.iter().any(|l| l.starts_with(&format!("frame: {frame} (named by"))), "{lines:?}");
+            assert!(lines.iter().any(|l| l == "targets: 2 inside the organ"), "{lines:?}");
+            // The organ stays where the scanner saw it: the phantom spans x from −180 to 20 mm
+            // (RAS), y from −40 to 100, z from −185 to −95.
+            let organ = mesh::io::read_mesh(dir.path().join("organ.vtu")).unwrap();
+            let (lo, hi) = organ.bounds();
+            let sign = if lps { -1.0 } else { 1.0 };
+            let middle: Point = std::array::from_fn(|d| 0.5e3 * (lo[d] + hi[d]));
+            let expected = [sign * -80.0, sign * 30.0, -140.0];
+            assert!(mesh::distance(middle, expected) < 3.0, "{file}: centre {middle:?}, {expected:?} expected");
+        }
+    }
+
+    #[test]
+    fn organs_are_named_after_their_files() {
+        for (file, name) in
+            [("a/liver.stl", "liver"), ("seg.nii.gz", "seg"), ("Liver.seg.nrrd", "Liver"), (".nii.gz", "organ")]
+        {
+            assert_eq!(organ_name(Path::new(file)), name);
+        }
+    }
+
+    #[test]
+    fn targets_in_the_wrong_frame_and_a_wrong_unit_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        // RAS targets for an LPS segmentation: outside the organ.
+        let mut wrong = options(dir.path(), "liver_labels.seg.nrrd", "liver", true);
+        write_points_csv(&wrong.targets, &[[-45.0, 30.0, -140.0]]).unwrap();
+        let error = format!("{:#}", organ_step(&wrong, dir.path()).unwrap_err());
+        assert!(error.contains("the targets of"), "{error}");
+        wrong.units = Some("m".into());
+        let error = organ_step(&wrong, dir.path()).unwrap_err().to_string();
+        assert!(error.contains("is a labelmap, whose unit is the millimetre"), "{error}");
+        let mut surface = options(dir.path(), "liver_labels.nii.gz", "5", false);
+        surface.surface = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mesh/tests/data/liver.obj");
+        let error = organ_step(&surface, dir.path()).unwrap_err().to_string();
+        assert!(error.contains("--label 5 chooses a label of a labelmap"), "{error}");
+    }
 }

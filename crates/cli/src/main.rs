@@ -36,9 +36,14 @@ enum Command {
     },
     /// Mesh a closed surface (or the built-in liver phantom) with tetrahedra or an immersed hex grid.
     Mesh {
-        /// Organ surface (.obj, .stl, .vtk, .vtu), repaired first unless --no-repair; the liver phantom
-        /// when omitted.
+        /// Organ surface (.obj, .stl, .vtk, .vtu), repaired first unless --no-repair (through voxels
+        /// when local repair cannot mend it), or a segmentation's labelmap (.nii, .nii.gz, .nrrd,
+        /// .seg.nrrd, in mm, the scanner's frame kept); the liver phantom when omitted.
         surface: Option<PathBuf>,
+        /// The labelmap's label: a number (e.g. 5, TotalSegmentator's liver) or a segment name
+        /// (3D Slicer's); needed when the file holds several.
+        #[arg(long)]
+        label: Option<String>,
         /// Centre the surface and scale its largest extent to this length (m); overrides --units.
         #[arg(long)]
         length: Option<f64>,
@@ -178,8 +183,9 @@ fn main() {
         Command::Prepare(args) => prepare_cmd::run(&args),
         Command::Serve(args) => serve_cmd::run(&args),
         Command::View(args) => view_cmd::run(&args),
-        Command::Mesh { surface, length, units, no_repair, tets, immersed, output } => {
-            mesh_cmd::run(&mesh_cmd::MeshArgs { surface, length, units, repair: !no_repair, tets, immersed, output })
+        Command::Mesh { surface, label, length, units, no_repair, tets, immersed, output } => {
+            let repair = !no_repair;
+            mesh_cmd::run(&mesh_cmd::MeshArgs { surface, label, length, units, repair, tets, immersed, output })
         }
         Command::Assimilate(args) => assimilate::run(&args),
         Command::Generate { scenario, out, shard, samples } => {

@@ -1,15 +1,19 @@
-//! `augsim mesh`: a closed surface (or the built-in liver phantom) to a T4
-//! mesh or an immersed-boundary H8 grid, with a quality report. A surface is
-//! repaired first (as segmentations give them: holes, duplicated vertices,
-//! flipped triangles) and brought from its length unit to metres.
+//! `augsim mesh`: a closed surface, a segmentation's labelmap (or the built-in liver phantom) to
+//! a T4 mesh or an immersed-boundary H8 grid, with a quality report. A surface is repaired first
+//! (as segmentations give them: holes, duplicated vertices, flipped triangles; through voxels
+//! when local repair cannot mend it) and brought from its length unit to metres; a labelmap's
+//! label is extracted as a closed surface in millimetres, in the file's scanner frame.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
 use mesh::io::Field;
+use mesh::isosurface::ExtractOptions;
+use mesh::labelmap::{is_labelmap, read_labelmap_surface};
 use mesh::phantom::PhantomSpec;
-use mesh::repair::{detect_unit, largest_extent, metres_per, repair_surface, LengthUnit, RepairOptions};
+use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
+use mesh::repair::{detect_unit, largest_extent, metres_per, LengthUnit, RepairOptions};
 use mesh::tetmesh::{tet_quality, BoundaryFit};
 use mesh::{Mesh, TriSurface};
 
@@ -26,8 +30,11 @@ pub enum Units {
 
 /// What to mesh and how.
 pub struct MeshArgs {
-    /// Organ surface (.obj, .stl, .vtk, .vtu); the phantom when `None`.
+    /// Organ surface (.obj, .stl, .vtk, .vtu) or labelmap (.nii, .nii.gz, .nrrd, .seg.nrrd); the
+    /// phantom when `None`.
     pub surface: Option<PathBuf>,
+    /// The labelmap's label: a number or a segment name (needed when it holds several).
+    pub label: Option<String>,
     /// Scale the surface so that its largest extent is this length (m), centred at the origin;
     /// overrides `units`.
     pub length: Option<f64>,
@@ -80,48 +87,71 @@ pub fn run(args: &MeshArgs) -> Result<()> {
 }
 
 /// Reads a surface, repairs it unless told not to, and brings it to metres: fitted to `length`
-/// when given, otherwise scaled from its unit (given or detected) about the origin.
+/// when given, otherwise scaled from its unit (given or detected) about the origin. A labelmap's
+/// label is extracted instead, in millimetres.
 fn prepare_surface(path: &Path, args: &MeshArgs) -> Result<TriSurface> {
+    if is_labelmap(path) {
+        return labelmap_surface(path, args);
+    }
+    if args.label.is_some() {
+        bail!("--label chooses a label of a labelmap (.nii, .nii.gz, .nrrd, .seg.nrrd), not of {}", path.display());
+    }
     let mut surface = mesh::io::read_surface(path)?;
-    if args.repair {
-        let (repaired, report) = repair_surface(&surface, &RepairOptions::default())
-            .with_context(|| format!("repairing {} (see --no-repair)", path.display()))?;
-        let lines = report.lines();
-        if lines.is_empty() {
-            println!("repair     none needed");
+    let extent = largest_extent(&surface);
+    let unit = match (args.length, args.units) {
+        (Some(_), _) => None,
+        (None, Units::Auto) => {
+            let unit =
+                detect_unit(&surface).map_err(|e| anyhow!("{}: {e} (--units mm or m, or --length)", path.display()))?;
+            let shown = if extent >= 1.0 { format!("{extent:.1}") } else { format!("{extent:.4}") };
+            Some((unit, format!("detected: largest extent {shown}")))
         }
-        for line in lines {
+        (None, Units::Mm) => Some((LengthUnit::Millimetre, "given".to_string())),
+        (None, Units::M) => Some((LengthUnit::Metre, "given".to_string())),
+    };
+    if args.repair {
+        let (repaired, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
+            .with_context(|| format!("repairing {} (see --no-repair)", path.display()))?;
+        for line in route.lines(unit.as_ref().map(|(u, _)| 1e3 * metres_per(*u))) {
             println!("repair     {line}");
         }
-        for line in report.warnings() {
+        for line in route.warnings() {
             println!("warning    {line}");
         }
         surface = repaired;
     }
     if let Some(l) = args.length {
         surface.fit_to(l)?;
-        return Ok(surface);
     }
-    let extent = largest_extent(&surface);
-    let (unit, how) = match args.units {
-        Units::Auto => {
-            let unit =
-                detect_unit(&surface).map_err(|e| anyhow!("{}: {e} (--units mm or m, or --length)", path.display()))?;
-            (
-                unit,
-                format!(
-                    "detected: largest extent {}",
-                    if extent >= 1.0 { format!("{extent:.1}") } else { format!("{extent:.4}") }
-                ),
-            )
+    if let Some((unit, how)) = unit {
+        println!("units      {} ({how})", unit.symbol());
+        let scale = metres_per(unit);
+        if scale != 1.0 {
+            surface.transform([0.0; 3], scale);
         }
-        Units::Mm => (LengthUnit::Millimetre, "given".to_string()),
-        Units::M => (LengthUnit::Metre, "given".to_string()),
-    };
-    println!("units      {} ({how})", unit.symbol());
-    let scale = metres_per(unit);
-    if scale != 1.0 {
-        surface.transform([0.0; 3], scale);
+    }
+    Ok(surface)
+}
+
+/// The closed surface of a labelmap's label, in metres (from the file's millimetres, in its
+/// scanner frame), or fitted to `length`.
+fn labelmap_surface(path: &Path, args: &MeshArgs) -> Result<TriSurface> {
+    if args.units == Units::M {
+        bail!("{} is a labelmap, whose unit is the millimetre: leave out --units m", path.display());
+    }
+    let organ = read_labelmap_surface(path, args.label.as_deref(), &ExtractOptions::default())?;
+    for line in organ.lines() {
+        println!("labelmap   {line}");
+    }
+    let mut surface = organ.surface;
+    match args.length {
+        Some(l) => {
+            surface.fit_to(l)?;
+        }
+        None => {
+            println!("units      mm (the labelmap's); frame {} kept", organ.frame.name());
+            surface.transform([0.0; 3], 1e-3);
+        }
     }
     Ok(surface)
 }

@@ -11,11 +11,17 @@ use indicatif::{ProgressBar, ProgressStyle};
 /// Arguments of `augsim prepare`.
 #[derive(clap::Args)]
 pub struct PrepareArgs {
-    /// The segmented organ surface (.stl, .obj, .vtk, .vtu), as a segmentation gives it (holes,
-    /// duplicated vertices and flipped triangles are repaired).
+    /// The segmented organ: a surface (.stl, .obj, .vtk, .vtu) as a segmentation gives it (holes,
+    /// duplicated vertices and flipped triangles are repaired; what local repair cannot mend is
+    /// rebuilt through voxels), or a labelmap (.nii, .nii.gz from TotalSegmentator, .seg.nrrd
+    /// from 3D Slicer; in mm, in the scanner's frame the file states, RAS or LPS).
     surface: PathBuf,
-    /// Where the laparoscope looks from: X,Y,Z in the surface's unit and frame, or a points file
-    /// of one point (.csv, 3D Slicer's .fcsv or .mrk.json).
+    /// The labelmap's label: a number (TotalSegmentator's liver is 5) or a segment name (3D
+    /// Slicer's); needed when it holds several.
+    #[arg(long)]
+    label: Option<String>,
+    /// Where the laparoscope looks from: X,Y,Z in the surface's unit and frame (a labelmap's: mm,
+    /// its scanner frame), or a points file of one point (.csv, 3D Slicer's .fcsv or .mrk.json).
     #[arg(long, value_parser = parse_camera, allow_hyphen_values = true)]
     camera: CameraAt,
     /// Landmarks where the organ is held (ligaments, the hilum): CSV with a header x, y, z, or
@@ -83,6 +89,7 @@ pub fn run(args: &PrepareArgs) -> Result<()> {
     let mut options =
         PrepareOptions::new(args.surface.clone(), args.camera.clone(), args.attach.clone(), args.targets.clone());
     options.units = args.units.clone();
+    options.label = args.label.clone();
     options.attach_distance = args.attach_mm * 1e-3;
     options.samples = args.samples;
     options.method = args.method;

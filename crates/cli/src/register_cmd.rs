@@ -331,7 +331,10 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         if path.exists() {
             models.push(learn::Model::load(path)?);
         } else {
-            println!("model      skipped: {} not found (run from the repository root, or give --model)", path.display());
+            println!(
+                "model      skipped: {} not found (run from the repository root, or give --model)",
+                path.display()
+            );
         }
     }
     let (network_scenario, network_dir) = match &args.scenario {

@@ -7,12 +7,16 @@
 //! its four corners, then the mid-edge nodes of edges 0-1, 1-2, 0-2, 0-3, 1-3, 2-3.
 
 pub mod bvh;
+pub mod decimate;
 pub mod embedding;
 pub mod generate;
 pub mod immersed;
 pub mod io;
+pub mod isosurface;
+pub mod labelmap;
 pub mod phantom;
 pub mod quadratic;
+pub mod rebuild;
 pub mod repair;
 pub mod sampling;
 pub mod select;
@@ -20,6 +24,7 @@ pub mod stats;
 pub mod surface;
 pub mod tetmesh;
 pub mod topology;
+pub mod volume;
 
 use std::collections::BTreeMap;
 

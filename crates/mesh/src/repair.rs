@@ -20,6 +20,8 @@
 //!    the triangles cross others (by default the 1 % the mesher tolerates,
 //!    [`MAX_OVERLAP_FRACTION`]), otherwise reported and left in place.
 //!
+//! What local repair cannot mend goes through voxels instead: see [`crate::rebuild`].
+//!
 //! [`detect_unit`] tells a surface in metres from one in millimetres by the size of an organ.
 
 use std::collections::{HashMap, HashSet};
@@ -147,27 +149,7 @@ impl RepairReport {
 /// their coordinates and their order.
 pub fn repair_surface(surface: &TriSurface, options: &RepairOptions) -> Result<(TriSurface, RepairReport), MeshError> {
     let nv = surface.vertices.len();
-    if surface.triangles.is_empty() {
-        return Err(invalid("surface has no triangles"));
-    }
-    if !(options.merge_tolerance >= 0.0 && options.merge_tolerance.is_finite()) {
-        return Err(invalid(format!(
-            "merge tolerance must be finite and non-negative, got {}",
-            options.merge_tolerance
-        )));
-    }
-    for (t, tri) in surface.triangles.iter().enumerate() {
-        if let Some(&bad) = tri.iter().find(|&&k| k >= nv) {
-            return Err(invalid(format!("triangle {t} refers to vertex {bad}, but there are {nv} vertices")));
-        }
-    }
-    let mut used = vec![false; nv];
-    for tri in &surface.triangles {
-        tri.iter().for_each(|&k| used[k] = true);
-    }
-    if let Some(v) = (0..nv).find(|&v| used[v] && surface.vertices[v].iter().any(|c| !c.is_finite())) {
-        return Err(invalid(format!("vertex {v} has a non-finite coordinate {:?}", surface.vertices[v])));
-    }
+    let used = check_input(surface, options)?;
     let used_points: Vec<Point> = (0..nv).filter(|&v| used[v]).map(|v| surface.vertices[v]).collect();
     let (lo, hi) = bounds(&used_points);
     let diagonal = norm(sub(hi, lo));
@@ -256,6 +238,34 @@ pub fn repair_surface(surface: &TriSurface, options: &RepairOptions) -> Result<(
     }
     report.crossings = crossings;
     Ok((repaired, report))
+}
+
+/// Refuses what no repair can use: no triangles, out-of-range indices, non-finite coordinates,
+/// a bad merge tolerance. Returns which vertices the triangles use.
+pub(crate) fn check_input(surface: &TriSurface, options: &RepairOptions) -> Result<Vec<bool>, MeshError> {
+    let nv = surface.vertices.len();
+    if surface.triangles.is_empty() {
+        return Err(invalid("surface has no triangles"));
+    }
+    if !(options.merge_tolerance >= 0.0 && options.merge_tolerance.is_finite()) {
+        return Err(invalid(format!(
+            "merge tolerance must be finite and non-negative, got {}",
+            options.merge_tolerance
+        )));
+    }
+    for (t, tri) in surface.triangles.iter().enumerate() {
+        if let Some(&bad) = tri.iter().find(|&&k| k >= nv) {
+            return Err(invalid(format!("triangle {t} refers to vertex {bad}, but there are {nv} vertices")));
+        }
+    }
+    let mut used = vec![false; nv];
+    for tri in &surface.triangles {
+        tri.iter().for_each(|&k| used[k] = true);
+    }
+    if let Some(v) = (0..nv).find(|&v| used[v] && surface.vertices[v].iter().any(|c| !c.is_finite())) {
+        return Err(invalid(format!("vertex {v} has a non-finite coordinate {:?}", surface.vertices[v])));
+    }
+    Ok(used)
 }
 
 /// The pairs (i < j, sorted) of triangles that intersect, other than neighbours.
@@ -395,7 +405,7 @@ fn message(e: &MeshError) -> String {
 }
 
 /// A number with six significant digits, without trailing zeros.
-fn number(x: f64) -> String {
+pub(crate) fn number(x: f64) -> String {
     if x == 0.0 || !x.is_finite() {
         return x.to_string();
     }

@@ -62,5 +62,5 @@ pub use register::{
     WARM_START_ITERATION,
 };
 pub use rigid::{rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
-pub use shape::{model_shape_space, ShapeDeformer, ShapeOptions, ShapeSpace};
 pub use sequence::{target_errors, FrameOutcome, Registration, Summary, Tracked};
+pub use shape::{model_shape_space, ShapeDeformer, ShapeOptions, ShapeSpace};

@@ -334,14 +334,21 @@ impl ShapeDeformer {
         }
         let mut product = faer::Mat::<f64>::zeros(k, k);
         let jt = jacobian.transpose();
-        faer::linalg::matmul::matmul(product.as_mut(), faer::Accum::Replace, jt, jacobian.as_ref(), 1.0, faer::Par::rayon(0));
+        faer::linalg::matmul::matmul(
+            product.as_mut(),
+            faer::Accum::Replace,
+            jt,
+            jacobian.as_ref(),
+            1.0,
+            faer::Par::rayon(0),
+        );
         let jty: Vec<f64> = (0..k).map(|j| jacobian.col(j).iter().zip(rhs.iter()).map(|(a, b)| a * b).sum()).collect();
         let prior = self.prior_of(k);
         let hessian = DMatrix::from_fn(k, k, |a, b| product[(a, b)]) + &prior.precision;
         let gradient = DVector::from_vec(jty) + &prior.precision * &prior.mean;
-        let cholesky = hessian
-            .cholesky()
-            .ok_or_else(|| RegisterError::Invalid("the shape fit's normal equations are not positive definite".into()))?;
+        let cholesky = hessian.cholesky().ok_or_else(|| {
+            RegisterError::Invalid("the shape fit's normal equations are not positive definite".into())
+        })?;
         let z = cholesky.solve(&gradient);
         Ok((z, cholesky.inverse()))
     }
@@ -454,8 +461,8 @@ mod tests {
         ];
         let covariance = [1.0, 0.5, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 0.25];
         let nodes = organ.mesh().num_nodes();
-        let space = ShapeSpace::new(vec![0.0; 3 * nodes], &modes, &[0.1, 0.0, 0.0], &covariance, vec![0.0; nodes])
-            .unwrap();
+        let space =
+            ShapeSpace::new(vec![0.0; 3 * nodes], &modes, &[0.1, 0.0, 0.0], &covariance, vec![0.0; nodes]).unwrap();
         (organ, modes, space)
     }
 
@@ -469,8 +476,10 @@ mod tests {
         let top = organ.mesh().nodes.iter().position(|p| p == &[0.04, 0.04, 0.04]).unwrap();
         for (a, b) in [(3 * top, 3 * top), (3 * top + 2, 3 * top), (3 * top + 2, 3 * top + 2)] {
             let whitened: f64 = (0..3).map(|k| space.basis[a * 3 + k] * space.basis[b * 3 + k]).sum();
-            let prior: f64 =
-                (0..3).flat_map(|i| (0..3).map(move |j| (i, j))).map(|(i, j)| modes[i][a] * covariance[i][j] * modes[j][b]).sum();
+            let prior: f64 = (0..3)
+                .flat_map(|i| (0..3).map(move |j| (i, j)))
+                .map(|(i, j)| modes[i][a] * covariance[i][j] * modes[j][b])
+                .sum();
             assert!((whitened - prior).abs() < 1e-15, "rows {a}, {b}: {whitened} against {prior}");
         }
         assert!((space.mean[3 * top + 2] - 0.1 * modes[0][3 * top + 2]).abs() < 1e-15);
@@ -482,8 +491,9 @@ mod tests {
     #[test]
     fn a_displacement_in_the_shape_space_is_recovered_from_a_cloud() {
         let (organ, modes, space) = cube_space();
-        let truth: Vec<f64> =
-            (0..modes[0].len()).map(|i| 0.1 * modes[0][i] + 0.6 * modes[0][i] - 0.4 * modes[1][i] + 0.3 * modes[2][i]).collect();
+        let truth: Vec<f64> = (0..modes[0].len())
+            .map(|i| 0.1 * modes[0][i] + 0.6 * modes[0][i] - 0.4 * modes[1][i] + 0.3 * modes[2][i])
+            .collect();
         let rest = organ.surface().vertices.clone();
         let cloud: Vec<mesh::Point> = organ
             .deformed_surface(&truth)
@@ -501,7 +511,10 @@ mod tests {
         let centre = organ.mesh().nodes.iter().position(|p| p == &[0.02, 0.02, 0.02]).unwrap();
         let error: f64 = (0..3).map(|d| (frame.u[3 * centre + d] - truth[3 * centre + d]).powi(2)).sum::<f64>().sqrt();
         let motion: f64 = (0..3).map(|d| truth[3 * centre + d].powi(2)).sum::<f64>().sqrt();
-        assert!(motion > 2e-3 && error < 0.05 * motion, "error {error:.2e} m at the centre, which moved {motion:.2e} m");
+        assert!(
+            motion > 2e-3 && error < 0.05 * motion,
+            "error {error:.2e} m at the centre, which moved {motion:.2e} m"
+        );
         let stencil = Stencil(vec![(centre, 1.0)]);
         let sigma = deformer.uncertainty(&[], std::slice::from_ref(&stencil)).unwrap().unwrap()[0];
         let mut prior = ShapeDeformer::new(deformer.space.clone(), &organ, ShapeOptions::default()).unwrap();
@@ -520,7 +533,8 @@ mod tests {
         let cloud = organ.deformed_surface(&truth).vertices;
         let options = ShapeOptions { widening: 0.0, ..ShapeOptions::default() };
         let mut deformer = ShapeDeformer::new(space, &organ, options).unwrap();
-        let loop_options = RegistrationOptions { iterations: 40, warm_iterations: 40, tolerance: 1e-7, ..Default::default() };
+        let loop_options =
+            RegistrationOptions { iterations: 40, warm_iterations: 40, tolerance: 1e-7, ..Default::default() };
         let error = |u: &[f64]| u.iter().zip(&truth).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         let top = Stencil(vec![(organ.mesh().nodes.iter().position(|p| p == &[0.04, 0.04, 0.04]).unwrap(), 1.0)]);
         let first = register_frame(&organ, &mut deformer, &cloud, None, &loop_options).unwrap();

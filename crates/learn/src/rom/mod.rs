@@ -317,9 +317,7 @@ impl ReducedModel {
             mean_field: field(&self.output_mean),
             mode_fields: (0..modes).map(|j| field(&self.basis.row(j).iter().copied().collect::<Vec<_>>())).collect(),
             prior_mean: mean,
-            prior_covariance: (0..modes * modes)
-                .map(|e| covariance[(e / modes, e % modes)] / (m - 1) as f64)
-                .collect(),
+            prior_covariance: (0..modes * modes).map(|e| covariance[(e / modes, e % modes)] / (m - 1) as f64).collect(),
             floor: self.scatter(&self.floor, 1),
         })
     }

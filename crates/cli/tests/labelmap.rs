@@ -1,0 +1,118 @@
+//! `augsim mesh` and `augsim prepare` on segmentations as tools write them: a NIfTI labelmap
+//! (label chosen by number, the organ kept at its place in the scanner's frame), a 3D Slicer
+//! segmentation (label chosen by name), a label that is not there, and a broken surface export
+//! (overlapping pieces glued at a vertex, holes) that only the volumetric route gets through.
+
+use std::path::Path;
+use std::process::Command;
+
+use mesh::labelmap::{write_nifti, Frame, Labelmap};
+use mesh::{norm, sub, Point};
+
+/// Runs `augsim` with `args`, returns (success, stdout + stderr).
+fn augsim(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_augsim")).args(args).output().unwrap();
+    (out.status.success(), format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr)))
+}
+
+/// The organ's centre in the scanner's RAS frame (mm).
+const CENTRE: Point = [-60.0, 20.0, -100.0];
+/// Its semi-axes (mm).
+const AXES: Point = [45.0, 30.0, 20.0];
+
+/// An ellipsoid (label 5) and a ball beside it (label 1) in voxels of 1.25 × 1.25 × 3 mm.
+fn labelmap() -> Labelmap {
+    let dims = [90, 56, 18];
+    let affine = [[1.25, 0.0, 0.0, -117.5], [0.0, 1.25, 0.0, -15.0], [0.0, 0.0, 3.0, -126.0]];
+    let mut labels = Vec::new();
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let p: Point = std::array::from_fn(|r| affine[r][r] * [i, j, k][r] as f64 + affine[r][3]);
+                let e: f64 = (0..3).map(|d| ((p[d] - CENTRE[d]) / AXES[d]).powi(2)).sum();
+                labels.push(if e <= 1.0 {
+                    5
+                } else if norm(sub(p, [-5.0, 20.0, -100.0])) < 6.0 {
+                    1
+                } else {
+                    0
+                });
+            }
+        }
+    }
+    Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new() }
+}
+
+#[test]
+fn a_nifti_labelmap_is_meshed_in_the_scanner_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let seg = dir.path().join("seg.nii.gz");
+    write_nifti(&seg, &labelmap()).unwrap();
+    let out = dir.path().join("organ.vtu");
+    let (ok, text) =
+        augsim(&["mesh", seg.to_str().unwrap(), "--label", "5", "--tets", "2000", "-o", out.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    assert!(text.contains("labelmap   label 5: "), "{text}");
+    assert!(text.contains("units      mm (the labelmap's); frame RAS kept"), "{text}");
+    let organ = mesh::io::read_mesh(&out).unwrap();
+    let (lo, hi) = organ.bounds();
+    for d in 0..3 {
+        let middle = 0.5e3 * (lo[d] + hi[d]);
+        assert!((middle - CENTRE[d]).abs() < 1.0, "axis {d}: centre {middle} mm, {CENTRE:?} expected");
+        assert!((0.5e3 * (hi[d] - lo[d]) - AXES[d]).abs() < 1.5, "axis {d}: {lo:?} {hi:?}");
+    }
+    let exact = 4.0 / 3.0 * std::f64::consts::PI * AXES.iter().product::<f64>() * 1e-9;
+    assert!((organ.volume() / exact - 1.0).abs() < 0.04, "{} vs {exact}", organ.volume());
+
+    let (ok, text) = augsim(&["mesh", seg.to_str().unwrap(), "--label", "3", "-o", out.to_str().unwrap()]);
+    assert!(!ok && text.contains("label 3 is not in the labelmap; labels present: 1 ("), "{text}");
+    let (ok, text) = augsim(&["mesh", seg.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    assert!(!ok && text.contains("holds several labels: choose one with --label"), "{text}");
+}
+
+#[test]
+fn a_slicer_segmentation_is_chosen_by_name() {
+    let seg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mesh/tests/data/liver_labels.seg.nrrd");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("organ.vtu");
+    let (ok, text) =
+        augsim(&["mesh", seg.to_str().unwrap(), "--label", "liver", "--tets", "1500", "-o", out.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    assert!(text.contains("labelmap   label 5 ('liver'): ") && text.contains("frame LPS kept"), "{text}");
+}
+
+/// Two overlapping spheres (mm), a small one glued to the first at a vertex, three holes, as OBJ.
+fn write_broken_export(path: &Path) {
+    let mut text = String::new();
+    let mut base = 1;
+    let a = mesh::icosphere(60.0, 3);
+    let top = a.vertices.iter().copied().max_by(|p, q| p[2].total_cmp(&q[2])).unwrap();
+    for (r, centre) in [(60.0, [0.0; 3]), (40.0, [70.0, 0.0, 0.0]), (15.0, [top[0], top[1], top[2] + 15.0])] {
+        let s = mesh::icosphere(r, 3);
+        for p in &s.vertices {
+            text += &format!("v {} {} {}\n", p[0] + centre[0], p[1] + centre[1], p[2] + centre[2]);
+        }
+        for (t, tri) in s.triangles.iter().enumerate() {
+            if r == 60.0 && [10, 200, 400].contains(&t) {
+                continue;
+            }
+            text += &format!("f {} {} {}\n", tri[0] + base, tri[1] + base, tri[2] + base);
+        }
+        base += s.vertices.len();
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+#[test]
+fn a_broken_export_goes_through_the_volumetric_route() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("broken.obj");
+    write_broken_export(&obj);
+    let out = dir.path().join("organ.vtu");
+    let (ok, text) = augsim(&["mesh", obj.to_str().unwrap(), "--tets", "2000", "-o", out.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    assert!(text.contains("repair     route: volumetric (local repair cannot mend it: non-manifold vertex"), "{text}");
+    assert!(text.contains("repair     distance to the input surface: mean "), "{text}");
+    let (ok, text) = augsim(&["mesh", obj.to_str().unwrap(), "--label", "5", "-o", out.to_str().unwrap()]);
+    assert!(!ok && text.contains("--label chooses a label of a labelmap"), "{text}");
+}

@@ -1,0 +1,831 @@
+//! Segmentations as labelmaps: NIfTI-1 (`.nii`, `.nii.gz`, as TotalSegmentator writes them) and
+//! NRRD (`.nrrd`, `.seg.nrrd`, as 3D Slicer saves segmentations).
+//!
+//! A labelmap is a 3D grid of integer labels (0 is the background) with the affine map from voxel
+//! indices (i, j, k) to world coordinates in millimetres, read from the header: spacing (voxels
+//! may be anisotropic), orientation and origin. The world frame is the scanner's, as the file
+//! states it ([`Frame`]): NIfTI's is always RAS (x towards the patient's right, y anterior, z
+//! superior); NRRD's is its `space` field, LPS for DICOM-derived data and most of
+//! Slicer's files. Points given with the organ (camera, landmarks, targets) must be in this frame.
+//!
+//! [`Labelmap::select`] picks one label, by number or by a segment name the file carries (Slicer's
+//! `Segment{i}_Name`), as a [`VoxelMask`]; [`crate::isosurface::mask_surface`] turns the mask into
+//! a closed surface.
+//!
+//! Supported: NIfTI-1 single files (`n+1`), either byte order, gzipped or not, data types u8,
+//! i8, i16, u16, i32, u32, f32, f64, the sform (preferred) or qform affine; NRRD with attached
+//! data, `raw` or `gzip` encoding, the same types, `space` LPS or RAS (or their long names),
+//! `space directions` and `space origin`, and Slicer's layered segmentations (a first `list`
+//! axis of layers).
+
+use std::collections::BTreeMap;
+use std::io::Read;
+use std::path::Path;
+
+use crate::isosurface::{mask_surface, ExtractOptions, ExtractReport};
+use crate::volume::VoxelMask;
+use crate::{MeshError, TriSurface};
+
+pub use crate::io::Frame;
+
+/// A labelmap read from a file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Labelmap {
+    /// Voxels along i, j, k.
+    pub dims: [usize; 3],
+    /// Layers of a layered segmentation (1 for an ordinary labelmap).
+    pub layers: usize,
+    /// The labels, layer fastest, then i, then j, then k.
+    pub labels: Vec<i32>,
+    /// Voxel index (i, j, k) to world (mm): `x = A[..3] · (i, j, k) + A[3]`, row by row.
+    pub affine: [[f64; 4]; 3],
+    /// The frame of the world coordinates.
+    pub frame: Frame,
+    /// Named segments the file carries: (name, layer, label).
+    pub segments: Vec<(String, usize, i32)>,
+}
+
+fn parse_error(path: &Path, message: impl Into<String>) -> MeshError {
+    MeshError::Parse { path: path.display().to_string(), message: message.into() }
+}
+
+/// True when `path` names a labelmap by its extension (.nii, .nii.gz, .nrrd, .seg.nrrd).
+pub fn is_labelmap(path: &Path) -> bool {
+    let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    name.ends_with(".nii") || name.ends_with(".nii.gz") || name.ends_with(".nrrd")
+}
+
+/// Reads a NIfTI or NRRD labelmap, chosen by the file's extension.
+pub fn read_labelmap(path: impl AsRef<Path>) -> Result<Labelmap, MeshError> {
+    let path = path.as_ref();
+    let bytes = std::fs::read(path).map_err(|error| MeshError::Io { path: path.display().to_string(), error })?;
+    let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let map = if name.ends_with(".nrrd") {
+        parse_nrrd(&bytes).map_err(|m| parse_error(path, m))?
+    } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        parse_nifti(&gunzip_if_needed(bytes).map_err(|m| parse_error(path, m))?).map_err(|m| parse_error(path, m))?
+    } else {
+        return Err(parse_error(path, "not a labelmap: expected .nii, .nii.gz, .nrrd or .seg.nrrd"));
+    };
+    if map.labels.iter().all(|&l| l == 0) {
+        return Err(parse_error(path, "the labelmap is empty: every voxel is 0 (background)"));
+    }
+    Ok(map)
+}
+
+/// The bytes, decompressed when they start with gzip's magic number.
+fn gunzip_if_needed(bytes: Vec<u8>) -> Result<Vec<u8>, String> {
+    if bytes.starts_with(&[0x1f, 0x8b]) {
+        let mut out = Vec::new();
+        flate2::read::MultiGzDecoder::new(&bytes[..])
+            .read_to_end(&mut out)
+            .map_err(|e| format!("cannot decompress (gzip): {e}"))?;
+        Ok(out)
+    } else {
+        Ok(bytes)
+    }
+}
+
+/// A voxel type of the files.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Scalar {
+    U8,
+    I8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn size(self) -> usize {
+        match self {
+            Scalar::U8 | Scalar::I8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::F64 => 8,
+        }
+    }
+
+    /// The values of `data` as labels (a non-integral or non-finite float is an error: a labelmap
+    /// holds labels, not intensities; so is one beyond 32 bits).
+    fn labels(self, data: &[u8], count: usize, little: bool) -> Result<Vec<i32>, String> {
+        let size = self.size();
+        if data.len() < count * size {
+            return Err(format!("the data hold {} bytes, {} expected ({count} voxels)", data.len(), count * size));
+        }
+        let word = |i: usize| -> [u8; 8] {
+            let mut w = [0u8; 8];
+            w[..size].copy_from_slice(&data[i * size..(i + 1) * size]);
+            if !little {
+                w[..size].reverse();
+            }
+            w
+        };
+        (0..count)
+            .map(|i| {
+                let w = word(i);
+                let float = |x: f64| -> Result<i32, String> {
+                    if x.is_finite() && x == x.round() && x.abs() <= i32::MAX as f64 {
+                        Ok(x as i32)
+                    } else {
+                        Err(format!("voxel {i} holds {x}, not a label (a labelmap holds whole numbers)"))
+                    }
+                };
+                match self {
+                    Scalar::U8 => Ok(w[0] as i32),
+                    Scalar::I8 => Ok(w[0] as i8 as i32),
+                    Scalar::I16 => Ok(i16::from_le_bytes([w[0], w[1]]) as i32),
+                    Scalar::U16 => Ok(u16::from_le_bytes([w[0], w[1]]) as i32),
+                    Scalar::I32 => Ok(i32::from_le_bytes([w[0], w[1], w[2], w[3]])),
+                    Scalar::U32 => float(u32::from_le_bytes([w[0], w[1], w[2], w[3]]) as f64),
+                    Scalar::F32 => float(f32::from_le_bytes([w[0], w[1], w[2], w[3]]) as f64),
+                    Scalar::F64 => float(f64::from_le_bytes(w)),
+                }
+            })
+            .collect()
+    }
+}
+
+/// Parses a NIfTI-1 single file (header, then the voxels at `vox_offset`).
+fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
+    if bytes.len() < 352 {
+        return Err(format!("too short for a NIfTI-1 file ({} bytes)", bytes.len()));
+    }
+    let little = match (i32::from_le_bytes(bytes[0..4].try_into().unwrap()), &bytes[344..348]) {
+        (348, _) => true,
+        (_, _) if i32::from_be_bytes(bytes[0..4].try_into().unwrap()) == 348 => false,
+        _ => return Err("not a NIfTI-1 file (the header size is not 348; NIfTI-2 is not supported)".into()),
+    };
+    if &bytes[344..348] != b"n+1\0" {
+        return Err("not a single-file NIfTI-1 (magic is not \"n+1\"; a .hdr/.img pair is not supported)".into());
+    }
+    let i16_at = |o: usize| {
+        let b = [bytes[o], bytes[o + 1]];
+        if little {
+            i16::from_le_bytes(b)
+        } else {
+            i16::from_be_bytes(b)
+        }
+    };
+    let f32_at = |o: usize| {
+        let b: [u8; 4] = bytes[o..o + 4].try_into().unwrap();
+        (if little { f32::from_le_bytes(b) } else { f32::from_be_bytes(b) }) as f64
+    };
+    let dim: Vec<i64> = (0..8).map(|d| i16_at(40 + 2 * d) as i64).collect();
+    if !(3..=7).contains(&dim[0]) || (4..=dim[0] as usize).any(|d| dim[d] != 1) {
+        return Err(format!("expected a 3D volume, got dimensions {:?}", &dim[1..=dim[0].clamp(1, 7) as usize]));
+    }
+    if dim[1..4].iter().any(|&n| n < 1) {
+        return Err(format!("bad dimensions {:?}", &dim[1..4]));
+    }
+    let dims = [dim[1] as usize, dim[2] as usize, dim[3] as usize];
+    let scalar = match i16_at(70) {
+        2 => Scalar::U8,
+        4 => Scalar::I16,
+        8 => Scalar::I32,
+        16 => Scalar::F32,
+        64 => Scalar::F64,
+        256 => Scalar::I8,
+        512 => Scalar::U16,
+        768 => Scalar::U32,
+        other => return Err(format!("data type {other} is not supported (u8, i8, i16, u16, i32, u32, f32, f64)")),
+    };
+    let pixdim: Vec<f64> = (0..8).map(|d| f32_at(76 + 4 * d)).collect();
+    let offset = f32_at(108);
+    if !(offset >= 348.0) || offset as usize > bytes.len() {
+        return Err(format!("bad voxel offset {offset}"));
+    }
+    let count = dims.iter().product::<usize>();
+    let mut labels = scalar.labels(&bytes[offset as usize..], count, little)?;
+    let (slope, intercept) = (f32_at(112), f32_at(116));
+    if slope != 0.0 && (slope != 1.0 || intercept != 0.0) {
+        for l in labels.iter_mut() {
+            let v = *l as f64 * slope + intercept;
+            if v != v.round() {
+                return Err(format!("scaled value {v} is not a label (scl_slope {slope}, scl_inter {intercept})"));
+            }
+            if v.abs() > i32::MAX as f64 {
+                return Err(format!("scaled value {v} is beyond 32 bits"));
+            }
+            *l = v as i32;
+        }
+    }
+    let affine = nifti_affine(i16_at(252), i16_at(254), &pixdim, f32_at)?;
+    Ok(Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new() })
+}
+
+/// The voxel-to-world affine of a NIfTI header: the sform when its code is set, otherwise the
+/// qform (quaternion, offsets, spacing and qfac), otherwise the spacing alone.
+fn nifti_affine(
+    qform_code: i16,
+    sform_code: i16,
+    pixdim: &[f64],
+    f32_at: impl Fn(usize) -> f64,
+) -> Result<[[f64; 4]; 3], String> {
+    let affine = if sform_code > 0 {
+        std::array::from_fn(|r| std::array::from_fn(|c| f32_at(280 + 16 * r + 4 * c)))
+    } else if qform_code > 0 {
+        let (b, c, d) = (f32_at(256), f32_at(260), f32_at(264));
+        let a = (1.0 - (b * b + c * c + d * d)).max(0.0).sqrt();
+        let rotation = [
+            [a * a + b * b - c * c - d * d, 2.0 * (b * c - a * d), 2.0 * (b * d + a * c)],
+            [2.0 * (b * c + a * d), a * a + c * c - b * b - d * d, 2.0 * (c * d - a * b)],
+            [2.0 * (b * d - a * c), 2.0 * (c * d + a * b), a * a + d * d - b * b - c * c],
+        ];
+        let qfac = if pixdim[0] < 0.0 { -1.0 } else { 1.0 };
+        let spacing = [pixdim[1], pixdim[2], qfac * pixdim[3]];
+        let offset = [f32_at(268), f32_at(272), f32_at(276)];
+        std::array::from_fn(|r| std::array::from_fn(|c| if c < 3 { rotation[r][c] * spacing[c] } else { offset[r] }))
+    } else {
+        std::array::from_fn(|r| std::array::from_fn(|c| if c == r { pixdim[r + 1] } else { 0.0 }))
+    };
+    check_affine(&affine)?;
+    Ok(affine)
+}
+
+/// Refuses an affine with non-finite entries or without volume (a zero spacing).
+fn check_affine(affine: &[[f64; 4]; 3]) -> Result<(), String> {
+    if affine.iter().flatten().any(|x| !x.is_finite()) {
+        return Err(format!("the voxel-to-world map has a non-finite entry: {affine:?}"));
+    }
+    if determinant(affine).abs() < 1e-12 {
+        return Err(format!("the voxel-to-world map is singular (a zero spacing?): {affine:?}"));
+    }
+    Ok(())
+}
+
+/// The determinant of the affine's linear part (the voxel volume, signed).
+pub fn determinant(a: &[[f64; 4]; 3]) -> f64 {
+    a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+        + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
+}
+
+/// The header of a NRRD file, its fields by lower-case name and its key-value pairs.
+struct NrrdHeader {
+    fields: BTreeMap<String, String>,
+    pairs: BTreeMap<String, String>,
+}
+
+/// Splits a NRRD file into its header and its data (after the blank line).
+fn nrrd_header(bytes: &[u8]) -> Result<(NrrdHeader, &[u8]), String> {
+    if !bytes.starts_with(b"NRRD000") {
+        return Err("not a NRRD file (it does not start with NRRD000x)".into());
+    }
+    let mut header = NrrdHeader { fields: BTreeMap::new(), pairs: BTreeMap::new() };
+    let mut at = 0;
+    let mut first = true;
+    loop {
+        let Some(end) = bytes[at..].iter().position(|&b| b == b'\n') else {
+            return Err("the header does not end (no blank line before the data)".into());
+        };
+        let line = String::from_utf8_lossy(&bytes[at..at + end]).trim_end_matches('\r').to_string();
+        at += end + 1;
+        if first {
+            first = false;
+            continue;
+        }
+        if line.is_empty() {
+            break;
+        }
+        if line.starts_with('#') {
+            continue;
+        }
+        if let Some((key, value)) = line.split_once(":=") {
+            header.pairs.insert(key.trim().to_string(), value.trim().to_string());
+        } else if let Some((key, value)) = line.split_once(": ") {
+            header.fields.insert(key.trim().to_ascii_lowercase(), value.trim().to_string());
+        } else {
+            return Err(format!("header line {line:?} is neither 'field: value' nor 'key:=value'"));
+        }
+    }
+    Ok((header, &bytes[at..]))
+}
+
+impl NrrdHeader {
+    fn field(&self, name: &str) -> Result<&str, String> {
+        self.fields.get(name).map(String::as_str).ok_or_else(|| format!("the header has no '{name}' field"))
+    }
+}
+
+/// Parses "(x,y,z)" vectors of a NRRD field; "none" gives `None`.
+fn nrrd_vectors(text: &str) -> Result<Vec<Option<[f64; 3]>>, String> {
+    text.split_whitespace()
+        .map(|word| {
+            if word == "none" {
+                return Ok(None);
+            }
+            let inner =
+                word.strip_prefix('(').and_then(|w| w.strip_suffix(')')).ok_or(format!("bad vector {word:?}"))?;
+            let values: Vec<f64> = inner
+                .split(',')
+                .map(|v| v.trim().parse::<f64>())
+                .collect::<Result<_, _>>()
+                .map_err(|e| format!("{word:?}: {e}"))?;
+            <[f64; 3]>::try_from(values).map(Some).map_err(|_| format!("{word:?} is not a 3D vector"))
+        })
+        .collect()
+}
+
+/// The type of a NRRD `type` field.
+fn nrrd_scalar(name: &str) -> Result<Scalar, String> {
+    Ok(match name {
+        "uchar" | "unsigned char" | "uint8" | "uint8_t" => Scalar::U8,
+        "signed char" | "int8" | "int8_t" => Scalar::I8,
+        "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => Scalar::I16,
+        "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => Scalar::U16,
+        "int" | "signed int" | "int32" | "int32_t" => Scalar::I32,
+        "uint" | "unsigned int" | "uint32" | "uint32_t" => Scalar::U32,
+        "float" => Scalar::F32,
+        "double" => Scalar::F64,
+        other => return Err(format!("type '{other}' is not supported")),
+    })
+}
+
+/// Parses a NRRD file with attached data.
+fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
+    let (header, data) = nrrd_header(bytes)?;
+    if header.fields.contains_key("data file") || header.fields.contains_key("datafile") {
+        return Err("detached data ('data file') is not supported: save the segmentation as one .nrrd".into());
+    }
+    let scalar = nrrd_scalar(header.field("type")?)?;
+    let sizes: Vec<usize> = header
+        .field("sizes")?
+        .split_whitespace()
+        .map(|s| s.parse::<usize>().map_err(|e| format!("sizes: {s:?}: {e}")))
+        .collect::<Result<_, _>>()?;
+    let (layers, dims) = match sizes[..] {
+        [a, b, c] => (1, [a, b, c]),
+        [l, a, b, c] => (l, [a, b, c]),
+        _ => return Err(format!("expected a 3D volume (or layers of one), got sizes {sizes:?}")),
+    };
+    if layers == 0 || dims.contains(&0) {
+        return Err(format!("bad sizes {sizes:?}"));
+    }
+    let frame = match header.field("space")?.to_ascii_lowercase().as_str() {
+        "left-posterior-superior" | "lps" => Frame::Lps,
+        "right-anterior-superior" | "ras" => Frame::Ras,
+        other => {
+            return Err(format!(
+                "space '{other}' is not supported (left-posterior-superior or right-anterior-superior)"
+            ))
+        }
+    };
+    let directions = nrrd_vectors(header.field("space directions")?)?;
+    let axes: Vec<[f64; 3]> = directions.iter().flatten().copied().collect();
+    if axes.len() != 3 || directions.len() != sizes.len() {
+        return Err(format!("'space directions' must give one vector per spatial axis, got {directions:?}"));
+    }
+    let origin = match header.fields.get("space origin") {
+        Some(text) => nrrd_vectors(text)?.first().copied().flatten().ok_or("bad 'space origin'")?,
+        None => [0.0; 3],
+    };
+    let affine: [[f64; 4]; 3] =
+        std::array::from_fn(|r| std::array::from_fn(|c| if c < 3 { axes[c][r] } else { origin[r] }));
+    check_affine(&affine)?;
+    let little = header.fields.get("endian").is_none_or(|e| e == "little");
+    let raw = match header.field("encoding")? {
+        "raw" => data.to_vec(),
+        "gzip" | "gz" => gunzip_if_needed(data.to_vec())?,
+        other => return Err(format!("encoding '{other}' is not supported (raw or gzip)")),
+    };
+    let skip =
+        header.fields.get("byte skip").map_or(Ok(0), |s| s.parse::<i64>()).map_err(|e| format!("byte skip: {e}"))?;
+    let raw = match skip {
+        0 => &raw[..],
+        -1 => &raw[raw.len().saturating_sub(layers * dims.iter().product::<usize>() * scalar.size())..],
+        s if s > 0 && (s as usize) < raw.len() => &raw[s as usize..],
+        s => return Err(format!("bad byte skip {s}")),
+    };
+    let labels = scalar.labels(raw, layers * dims.iter().product::<usize>(), little)?;
+    Ok(Labelmap { dims, layers, labels, affine, frame, segments: slicer_segments(&header.pairs)? })
+}
+
+/// Slicer's segments: `Segment{i}_Name`, `Segment{i}_LabelValue`, `Segment{i}_Layer`.
+fn slicer_segments(pairs: &BTreeMap<String, String>) -> Result<Vec<(String, usize, i32)>, String> {
+    let mut segments = Vec::new();
+    for i in 0.. {
+        let Some(name) = pairs.get(&format!("Segment{i}_Name")) else { break };
+        let get = |key: &str, default: &str| pairs.get(&format!("Segment{i}_{key}")).cloned().unwrap_or(default.into());
+        let label = get("LabelValue", "1").parse::<i32>().map_err(|e| format!("Segment{i}_LabelValue: {e}"))?;
+        let layer = get("Layer", "0").parse::<usize>().map_err(|e| format!("Segment{i}_Layer: {e}"))?;
+        segments.push((name.clone(), layer, label));
+    }
+    Ok(segments)
+}
+
+impl Labelmap {
+    /// The size of a voxel along i, j and k (mm).
+    pub fn spacing(&self) -> [f64; 3] {
+        std::array::from_fn(|c| (0..3).map(|r| self.affine[r][c].powi(2)).sum::<f64>().sqrt())
+    }
+
+    /// The labels present (other than 0), each with its voxel count and its name if it has one.
+    pub fn present(&self) -> Vec<(usize, i32, usize, Option<String>)> {
+        let mut counts: BTreeMap<(usize, i32), usize> = BTreeMap::new();
+        for (n, &l) in self.labels.iter().enumerate() {
+            if l != 0 {
+                *counts.entry((n % self.layers, l)).or_default() += 1;
+            }
+        }
+        counts
+            .into_iter()
+            .map(|((layer, label), count)| {
+                let name = self.segments.iter().find(|s| s.1 == layer && s.2 == label).map(|s| s.0.clone());
+                (layer, label, count, name)
+            })
+            .collect()
+    }
+
+    /// A list of the labels present for messages, e.g. "1 (liver, 5120 voxels), 2 (842 voxels)".
+    pub fn present_text(&self) -> String {
+        let items: Vec<String> = self
+            .present()
+            .into_iter()
+            .map(|(layer, label, count, name)| {
+                let layer = if self.layers > 1 { format!(" layer {layer},") } else { String::new() };
+                match name {
+                    Some(n) => format!("{label} ('{n}',{layer} {count} voxels)"),
+                    None => format!("{label} ({}{count} voxels)", layer.trim_start().trim_end_matches(',')),
+                }
+            })
+            .collect();
+        items.join(", ")
+    }
+
+    /// The voxels of one label, chosen by number ("5") or by segment name ("liver", any case),
+    /// as a mask in the labelmap's world frame, its grid cut to the label's box with one voxel
+    /// around. Returns the mask and a description of
+    /// the choice ("label 5 ('liver')"). An absent label or name is an error that lists those
+    /// present; a number matching segments of several layers must be chosen by name.
+    pub fn select(&self, choice: &str) -> Result<(VoxelMask, String), MeshError> {
+        let choice = choice.trim();
+        let present = self.present();
+        let (layer, label) = if let Ok(label) = choice.parse::<i32>() {
+            let layers: Vec<usize> = present.iter().filter(|p| p.1 == label).map(|p| p.0).collect();
+            match layers[..] {
+                [layer] if label != 0 => (layer, label),
+                [_, _, ..] => {
+                    return Err(MeshError::Invalid(format!(
+                        "label {label} is in {} layers: choose the segment by name; labels present: {}",
+                        layers.len(),
+                        self.present_text()
+                    )))
+                }
+                _ => {
+                    return Err(MeshError::Invalid(format!(
+                        "label {choice} is not in the labelmap; labels present: {}",
+                        self.present_text()
+                    )))
+                }
+            }
+        } else {
+            match self.segments.iter().find(|s| s.0.eq_ignore_ascii_case(choice)) {
+                Some(s) => (s.1, s.2),
+                None => {
+                    return Err(MeshError::Invalid(format!(
+                        "no segment is named '{choice}'; labels present: {}",
+                        self.present_text()
+                    )))
+                }
+            }
+        };
+        let name = self.segments.iter().find(|s| s.1 == layer && s.2 == label).map(|s| s.0.clone());
+        let inside: Vec<bool> = self.labels.iter().skip(layer).step_by(self.layers).map(|&l| l == label).collect();
+        let description = match name {
+            Some(n) => format!("label {label} ('{n}')"),
+            None => format!("label {label}"),
+        };
+        match (VoxelMask { dims: self.dims, inside, affine: self.affine }).cropped(1) {
+            Some(mask) => Ok((mask, description)),
+            None => {
+                Err(MeshError::Invalid(format!("{description} has no voxel; labels present: {}", self.present_text())))
+            }
+        }
+    }
+}
+
+/// Writes a labelmap as a single-file NIfTI-1 (gzipped when the name ends in .gz): 16-bit
+/// labels (32-bit when they do not fit), the affine as the sform, code 1 (scanner). Only an
+/// RAS labelmap of one layer can be written (NIfTI's world is RAS).
+pub fn write_nifti(path: impl AsRef<Path>, map: &Labelmap) -> Result<(), MeshError> {
+    let path = path.as_ref();
+    let fail = |m: &str| Err(MeshError::Invalid(format!("{}: {m}", path.display())));
+    if map.frame != Frame::Ras || map.layers != 1 {
+        return fail("NIfTI holds one layer of labels in RAS");
+    }
+    if map.dims.iter().any(|&n| n == 0 || n > i16::MAX as usize)
+        || map.labels.len() != map.dims.iter().product::<usize>()
+    {
+        return fail("bad dimensions");
+    }
+    let wide = map.labels.iter().any(|&l| l < i16::MIN as i32 || l > i16::MAX as i32);
+    let mut header = vec![0u8; 352];
+    let mut put = |offset: usize, bytes: &[u8]| header[offset..offset + bytes.len()].copy_from_slice(bytes);
+    put(0, &348i32.to_le_bytes());
+    let dims = [3, map.dims[0] as i16, map.dims[1] as i16, map.dims[2] as i16, 1, 1, 1, 1];
+    dims.iter().enumerate().for_each(|(d, n)| put(40 + 2 * d, &n.to_le_bytes()));
+    put(70, &(if wide { 8i16 } else { 4i16 }).to_le_bytes());
+    put(72, &(if wide { 32i16 } else { 16i16 }).to_le_bytes());
+    let spacing = map.spacing();
+    let pixdim = [1.0, spacing[0], spacing[1], spacing[2], 1.0, 1.0, 1.0, 1.0];
+    pixdim.iter().enumerate().for_each(|(d, x)| put(76 + 4 * d, &(*x as f32).to_le_bytes()));
+    put(108, &352f32.to_le_bytes());
+    put(112, &1f32.to_le_bytes());
+    put(123, &[10]); // xyzt_units: mm and s
+    put(254, &1i16.to_le_bytes());
+    for r in 0..3 {
+        (0..4).for_each(|c| put(280 + 16 * r + 4 * c, &(map.affine[r][c] as f32).to_le_bytes()));
+    }
+    put(344, b"n+1\0");
+    for &l in &map.labels {
+        if wide {
+            header.extend_from_slice(&l.to_le_bytes());
+        } else {
+            header.extend_from_slice(&(l as i16).to_le_bytes());
+        }
+    }
+    write_maybe_gzipped(path, header, path.to_string_lossy().to_ascii_lowercase().ends_with(".gz"))
+}
+
+/// Writes a labelmap as a NRRD file with gzipped 16-bit labels (32-bit when they do not fit), its
+/// frame as the `space` and its segments as 3D Slicer's `Segment{i}_...` pairs.
+pub fn write_nrrd(path: impl AsRef<Path>, map: &Labelmap) -> Result<(), MeshError> {
+    let path = path.as_ref();
+    let wide = map.labels.iter().any(|&l| l < i16::MIN as i32 || l > i16::MAX as i32);
+    if map.labels.len() != map.layers * map.dims.iter().product::<usize>() {
+        return Err(MeshError::Invalid(format!("{}: bad labelmap size", path.display())));
+    }
+    let vector = |v: [f64; 3]| format!("({},{},{})", v[0], v[1], v[2]);
+    let axes: Vec<String> = (0..3).map(|c| vector(std::array::from_fn(|r| map.affine[r][c]))).collect();
+    let layered = map.layers > 1;
+    let mut text = format!(
+        "NRRD0004\n# written by augsim\ntype: {}\ndimension: {}\nspace: {}\nsizes: {}{} {} {}\n\
+         space directions: {}{}\nkinds: {}domain domain domain\nendian: little\nencoding: gzip\n\
+         space origin: {}\n",
+        if wide { "int" } else { "short" },
+        if layered { 4 } else { 3 },
+        match map.frame {
+            Frame::Ras => "right-anterior-superior",
+            Frame::Lps => "left-posterior-superior",
+        },
+        if layered { format!("{} ", map.layers) } else { String::new() },
+        map.dims[0],
+        map.dims[1],
+        map.dims[2],
+        if layered { "none " } else { "" },
+        axes.join(" "),
+        if layered { "list " } else { "" },
+        vector(std::array::from_fn(|r| map.affine[r][3])),
+    );
+    for (i, (name, layer, label)) in map.segments.iter().enumerate() {
+        text += &format!("Segment{i}_Name:={name}\nSegment{i}_LabelValue:={label}\nSegment{i}_Layer:={layer}\n");
+    }
+    text.push('\n');
+    let mut data = Vec::with_capacity(map.labels.len() * 4);
+    for &l in &map.labels {
+        if wide {
+            data.extend_from_slice(&l.to_le_bytes());
+        } else {
+            data.extend_from_slice(&(l as i16).to_le_bytes());
+        }
+    }
+    let compressed = gzip(path, &data)?;
+    std::fs::write(path, [text.into_bytes(), compressed].concat()).map_err(|error| io_error(path, error))
+}
+
+fn io_error(path: &Path, error: std::io::Error) -> MeshError {
+    MeshError::Io { path: path.display().to_string(), error }
+}
+
+/// Writes `bytes` to `path`, gzipped or not.
+fn write_maybe_gzipped(path: &Path, bytes: Vec<u8>, compress: bool) -> Result<(), MeshError> {
+    let bytes = if compress { gzip(path, &bytes)? } else { bytes };
+    std::fs::write(path, bytes).map_err(|error| io_error(path, error))
+}
+
+/// `bytes` gzipped (`path` names the file in an error).
+fn gzip(path: &Path, bytes: &[u8]) -> Result<Vec<u8>, MeshError> {
+    let mut encoder = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    std::io::Write::write_all(&mut encoder, bytes).map_err(|error| io_error(path, error))?;
+    encoder.finish().map_err(|error| io_error(path, error))
+}
+
+/// An organ's surface extracted from a labelmap ([`read_labelmap_surface`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LabelSurface {
+    /// The closed surface, in millimetres in the labelmap's world frame.
+    pub surface: TriSurface,
+    /// The world frame.
+    pub frame: Frame,
+    /// The label chosen, e.g. "label 5 ('liver')".
+    pub label: String,
+    /// The voxel size along i, j, k (mm).
+    pub spacing: [f64; 3],
+    /// What the extraction did.
+    pub extract: ExtractReport,
+}
+
+impl LabelSurface {
+    /// What was read and extracted, one line each.
+    pub fn lines(&self) -> Vec<String> {
+        let e = &self.extract;
+        let [a, b, c] = self.spacing;
+        let mut lines = vec![format!(
+            "{}: {} voxels of {a:.2} × {b:.2} × {c:.2} mm, in the scanner's {} frame (mm)",
+            self.label,
+            e.voxels,
+            self.frame.name()
+        )];
+        if let Some(largest) = e.dropped_pieces.first() {
+            lines.push(format!(
+                "kept the largest piece; dropped {} smaller (the largest of {largest} voxels)",
+                e.dropped_pieces.len()
+            ));
+        }
+        if e.filled_voxels > 0 {
+            lines.push(format!("filled cavities of {} voxels", e.filled_voxels));
+        }
+        lines.push(format!(
+            "surface: {} triangles (decimated from {}), {:.1} mL ({:+.1} % from the voxels)",
+            self.surface.triangles.len(),
+            e.extracted_triangles,
+            e.volume * 1e-3,
+            100.0 * (e.volume / e.voxel_volume - 1.0)
+        ));
+        lines
+    }
+}
+
+/// Reads a labelmap and extracts the closed surface of one label (a number, or a segment name
+/// the file carries), in millimetres in the file's world frame. Without a label, the file must
+/// hold only one.
+pub fn read_labelmap_surface(
+    path: impl AsRef<Path>,
+    label: Option<&str>,
+    options: &ExtractOptions,
+) -> Result<LabelSurface, MeshError> {
+    let path = path.as_ref();
+    let map = read_labelmap(path)?;
+    let present = map.present();
+    let label = match (label, &present[..]) {
+        (Some(label), _) => label.to_string(),
+        (None, [(_, only, _, _)]) => only.to_string(),
+        (None, _) => {
+            return Err(parse_error(
+                path,
+                format!("holds several labels: choose one with --label (labels present: {})", map.present_text()),
+            ))
+        }
+    };
+    let (mask, label) = map.select(&label).map_err(|e| parse_error(path, e.to_string()))?;
+    let (surface, extract) = mask_surface(&mask, options).map_err(|e| parse_error(path, e.to_string()))?;
+    Ok(LabelSurface { surface, frame: map.frame, label, spacing: map.spacing(), extract })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{norm, sub, Point};
+
+    /// A labelmap of two balls (labels 5 and 2) at world positions given in `frame`, with
+    /// anisotropic voxels and the x axis flipped.
+    fn two_balls(frame: Frame) -> (Labelmap, Point) {
+        let dims = [52, 44, 16];
+        // Spacings exact in f32, as NIfTI stores them.
+        let affine = [[-0.75, 0.0, 0.0, 60.0], [0.0, 0.875, 0.0, -100.0], [0.0, 0.0, 2.5, 200.0]];
+        let (organ, other): (Point, Point) = ([40.0, -82.0, 220.0], [25.0, -80.0, 215.0]);
+        let mut labels = Vec::new();
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let p: Point = std::array::from_fn(|r| {
+                        affine[r][0] * i as f64 + affine[r][1] * j as f64 + affine[r][2] * k as f64 + affine[r][3]
+                    });
+                    labels.push(if norm(sub(p, organ)) <= 10.0 {
+                        5
+                    } else if norm(sub(p, other)) <= 3.0 {
+                        2
+                    } else {
+                        0
+                    });
+                }
+            }
+        }
+        let segments = vec![("liver".to_string(), 0, 5), ("tumour".to_string(), 0, 2)];
+        (Labelmap { dims, layers: 1, labels, affine, frame, segments }, organ)
+    }
+
+    fn centroid(s: &TriSurface) -> Point {
+        std::array::from_fn(|d| s.vertices.iter().map(|p| p[d]).sum::<f64>() / s.vertices.len() as f64)
+    }
+
+    #[test]
+    fn a_nifti_labelmap_round_trips_and_its_organ_lands_at_its_scanner_position() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, centre) = two_balls(Frame::Ras);
+        for name in ["seg.nii.gz", "seg.nii"] {
+            let path = dir.path().join(name);
+            write_nifti(&path, &map).unwrap();
+            let back = read_labelmap(&path).unwrap();
+            assert!(back == Labelmap { segments: Vec::new(), ..map.clone() }, "{:?}", back.affine);
+            let organ = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+            assert_eq!(organ.frame, Frame::Ras);
+            let c = centroid(&organ.surface);
+            assert!(norm(sub(c, centre)) < 0.5, "{c:?} vs {centre:?}");
+            let exact = 4.0 / 3.0 * std::f64::consts::PI * 1000.0;
+            assert!((organ.extract.volume / exact - 1.0).abs() < 0.05, "{}", organ.extract.volume);
+            assert!(organ.lines()[0].starts_with("label 5: "), "{:?}", organ.lines());
+        }
+    }
+
+    #[test]
+    fn a_slicer_segmentation_round_trips_and_lps_flips_x_and_y() {
+        let dir = tempfile::tempdir().unwrap();
+        let (ras, centre) = two_balls(Frame::Ras);
+        // The same voxels in LPS: the first two rows of the affine change sign.
+        let mut lps = Labelmap { frame: Frame::Lps, ..ras.clone() };
+        (0..2).for_each(|r| lps.affine[r].iter_mut().for_each(|x| *x = -*x));
+        let path = dir.path().join("seg.seg.nrrd");
+        write_nrrd(&path, &lps).unwrap();
+        assert!(read_labelmap(&path).unwrap() == lps);
+        let organ = read_labelmap_surface(&path, Some("Liver"), &ExtractOptions::default()).unwrap();
+        assert_eq!((organ.frame, organ.label.as_str()), (Frame::Lps, "label 5 ('liver')"));
+        let c = centroid(&organ.surface);
+        let expected = [-centre[0], -centre[1], centre[2]];
+        assert!(norm(sub(c, expected)) < 0.5, "{c:?} vs {expected:?}");
+        let error = |choice: &str| {
+            read_labelmap_surface(&path, Some(choice), &ExtractOptions::default()).unwrap_err().to_string()
+        };
+        let absent = error("7");
+        assert!(absent.contains("label 7 is not in the labelmap") && absent.contains("5 ('liver',"), "{absent}");
+        assert!(error("kidney").contains("no segment is named 'kidney'; labels present: 2 ('tumour',"));
+        assert!(error("0").contains("not in the labelmap"));
+        let unchosen = read_labelmap_surface(&path, None, &ExtractOptions::default()).unwrap_err().to_string();
+        assert!(unchosen.contains("holds several labels: choose one with --label"), "{unchosen}");
+    }
+
+    #[test]
+    fn layered_segments_are_chosen_by_name() {
+        let (single, _) = two_balls(Frame::Lps);
+        // Two layers: the liver in layer 0, an overlapping vessel (also label 5) in layer 1.
+        let labels: Vec<i32> = single.labels.iter().flat_map(|&l| [l, if l == 2 { 5 } else { 0 }]).collect();
+        let segments = vec![("liver".into(), 0, 5), ("vessel".into(), 1, 5)];
+        let map = Labelmap { layers: 2, labels, segments, ..single.clone() };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("layers.seg.nrrd");
+        write_nrrd(&path, &map).unwrap();
+        let back = read_labelmap(&path).unwrap();
+        assert!(back == map);
+        let (vessel, name) = back.select("vessel").unwrap();
+        assert_eq!(name, "label 5 ('vessel')");
+        assert_eq!(vessel.count(), single.labels.iter().filter(|&&l| l == 2).count());
+        assert!(back.select("5").unwrap_err().to_string().contains("in 2 layers: choose the segment by name"));
+    }
+
+    #[test]
+    fn a_qform_header_gives_its_rotation_and_flip() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Ras);
+        let path = dir.path().join("q.nii");
+        write_nifti(&path, &map).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        // No sform; a qform turning half a turn about z, with qfac -1 (k flipped), offset (1,2,3).
+        bytes[254..256].copy_from_slice(&0i16.to_le_bytes());
+        bytes[252..254].copy_from_slice(&1i16.to_le_bytes());
+        bytes[76..80].copy_from_slice(&(-1f32).to_le_bytes());
+        for (o, x) in [(256, 0f32), (260, 0.0), (264, 1.0), (268, 1.0), (272, 2.0), (276, 3.0)] {
+            bytes[o..o + 4].copy_from_slice(&x.to_le_bytes());
+        }
+        std::fs::write(&path, bytes).unwrap();
+        let back = read_labelmap(&path).unwrap();
+        let expected = [[-0.75, 0.0, 0.0, 1.0], [0.0, -0.875, 0.0, 2.0], [0.0, 0.0, -2.5, 3.0]];
+        let close = back.affine.iter().flatten().zip(expected.iter().flatten()).all(|(a, b)| (a - b).abs() < 1e-6);
+        assert!(close, "{:?}", back.affine);
+    }
+
+    #[test]
+    fn bad_files_are_refused_clearly() {
+        let dir = tempfile::tempdir().unwrap();
+        let write = |name: &str, bytes: &[u8]| {
+            let p = dir.path().join(name);
+            std::fs::write(&p, bytes).unwrap();
+            read_labelmap(&p).unwrap_err().to_string()
+        };
+        assert!(write("a.nii", b"short").contains("too short"));
+        assert!(write("b.nii", &[0u8; 400]).contains("not a NIfTI-1 file"));
+        assert!(write("c.nrrd", b"P3\n").contains("not a NRRD file"));
+        let header = "NRRD0004\ntype: short\ndimension: 3\nsizes: 2 2 2\nspace: left-posterior-superior\n\
+                      space directions: (1,0,0) (0,1,0) (0,0,1)\nencoding: raw\n\n";
+        assert!(write("d.nrrd", header.as_bytes()).contains("the data hold 0 bytes, 16 expected"));
+        let zeros = [header.as_bytes(), &[0u8; 16]].concat();
+        assert!(write("e.nrrd", &zeros).contains("empty"));
+        let floats = header.replace("short", "float");
+        let values: Vec<u8> = (0..8).flat_map(|i| (i as f32 * 0.3).to_le_bytes()).collect();
+        assert!(write("f.nrrd", &[floats.as_bytes(), &values].concat()).contains("not a label"));
+        let scanner = header.replace("left-posterior-superior", "scanner-xyz");
+        assert!(write("g.nrrd", scanner.as_bytes()).contains("space 'scanner-xyz' is not supported"));
+    }
+}

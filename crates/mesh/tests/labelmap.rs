@@ -1,0 +1,116 @@
+//! The labelmaps shipped in `tests/data` (a TotalSegmentator-style NIfTI and a 3D Slicer
+//! `.seg.nrrd` of the liver phantom, synthetic): what their generator writes, and the liver
+//! extracted whole, at its place in the scanner's frame (RAS for NIfTI, LPS for the NRRD).
+//!
+//! To write them anew: `AUGSIM_WRITE_TEST_DATA=1 cargo test --release -p augsim-mesh --test labelmap`.
+
+use std::path::{Path, PathBuf};
+
+use augsim_mesh::isosurface::ExtractOptions;
+use augsim_mesh::labelmap::{read_labelmap, read_labelmap_surface, write_nifti, write_nrrd, Frame, Labelmap};
+use augsim_mesh::phantom::PhantomSpec;
+use augsim_mesh::surface::check_closed_manifold;
+use augsim_mesh::{norm, sub, Point};
+
+fn data(name: &str) -> PathBuf {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data")).join(name)
+}
+
+/// Where the phantom's origin lies in the scanner's RAS frame (mm): the patient's right, as a
+/// liver is.
+const PLACE: Point = [-80.0, 30.0, -140.0];
+
+/// The liver phantom (label 5) and a kidney-sized ball below it (label 2) in voxels of
+/// 1.5 × 1.5 × 4 mm, the i axis running to the patient's left (as CT scanners write it), in RAS.
+fn phantom_labelmap() -> Labelmap {
+    let phantom = PhantomSpec::default();
+    let (lo, hi) = augsim_mesh::tetmesh::ImplicitDomain::bounds(&phantom);
+    let spacing = [1.5, 1.5, 4.0];
+    let kidney: Point = [PLACE[0] - 20.0, PLACE[1] + 10.0, PLACE[2] + 1e3 * lo[2] - 28.0];
+    // Rounded to quarter millimetres, exact in NIfTI's 32-bit floats.
+    let start: Point =
+        [PLACE[0] + 1e3 * hi[0] + 6.0, PLACE[1] + 1e3 * lo[1] - 6.0, kidney[2] - 36.0].map(|x| (4.0 * x).round() / 4.0);
+    let dims: [usize; 3] = std::array::from_fn(|d| {
+        let top = if d == 2 { PLACE[2] + 1e3 * hi[2] + 12.0 } else { PLACE[d] + 1e3 * hi[d] + 6.0 };
+        let bottom = if d == 0 { PLACE[0] + 1e3 * lo[0] - 6.0 } else { start[d] };
+        ((top - bottom) / spacing[d]).ceil() as usize
+    });
+    let affine =
+        [[-spacing[0], 0.0, 0.0, start[0]], [0.0, spacing[1], 0.0, start[1]], [0.0, 0.0, spacing[2], start[2]]];
+    let mut labels = Vec::with_capacity(dims.iter().product());
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let p: Point = std::array::from_fn(|r| affine[r][r] * [i, j, k][r] as f64 + affine[r][3]);
+                let local = std::array::from_fn(|d| 1e-3 * (p[d] - PLACE[d]));
+                labels.push(if phantom.signed_distance(local) < 0.0 {
+                    5
+                } else if norm(sub(p, kidney)) < 28.0 {
+                    2
+                } else {
+                    0
+                });
+            }
+        }
+    }
+    let segments = vec![("liver".into(), 0, 5), ("kidney".into(), 0, 2)];
+    Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments }
+}
+
+/// The same voxels in LPS, as 3D Slicer's DICOM-derived files hold them.
+fn in_lps(map: &Labelmap) -> Labelmap {
+    let mut lps = Labelmap { frame: Frame::Lps, ..map.clone() };
+    (0..2).for_each(|r| lps.affine[r].iter_mut().for_each(|x| *x = -*x));
+    lps
+}
+
+#[test]
+fn shipped_labelmaps_are_what_their_generator_writes() {
+    let map = phantom_labelmap();
+    if std::env::var_os("AUGSIM_WRITE_TEST_DATA").is_some() {
+        write_nifti(data("liver_labels.nii.gz"), &Labelmap { segments: Vec::new(), ..map.clone() }).unwrap();
+        write_nrrd(data("liver_labels.seg.nrrd"), &in_lps(&map)).unwrap();
+    }
+    let nifti = read_labelmap(data("liver_labels.nii.gz")).unwrap();
+    assert!(nifti == Labelmap { segments: Vec::new(), ..map.clone() }, "the NIfTI differs from its generator");
+    let nrrd = read_labelmap(data("liver_labels.seg.nrrd")).unwrap();
+    assert!(nrrd == in_lps(&map), "the NRRD differs from its generator");
+    assert_eq!(nifti.dims, [153, 113, 46]);
+}
+
+/// The mean of the vertices.
+fn centre(points: &[Point]) -> Point {
+    std::array::from_fn(|d| points.iter().map(|p| p[d]).sum::<f64>() / points.len() as f64)
+}
+
+#[test]
+fn the_shipped_liver_comes_back_whole_at_its_place() {
+    let phantom = PhantomSpec::default();
+    let exact = phantom.volume() * 1e9;
+    let options = ExtractOptions::default();
+    let ras = read_labelmap_surface(data("liver_labels.nii.gz"), Some("5"), &options).unwrap();
+    let report = check_closed_manifold(&ras.surface).unwrap();
+    let error = report.volume / exact - 1.0;
+    println!(
+        "{:#?}\nvolume {:.1} mL, the phantom's {:.1} mL ({:+.2} %)",
+        ras.lines(),
+        report.volume * 1e-3,
+        exact * 1e-3,
+        100.0 * error
+    );
+    assert!(error.abs() < 0.03, "{error}");
+    assert_eq!(ras.frame, Frame::Ras);
+    // The extent within a voxel of the phantom's, at its place.
+    let (lo, hi) = augsim_mesh::bounds(&ras.surface.vertices);
+    let (plo, phi) = augsim_mesh::tetmesh::ImplicitDomain::bounds(&phantom);
+    let margin = 0.25 * phantom.blend + 1e-3;
+    for d in 0..3 {
+        let (want_lo, want_hi) = (PLACE[d] + 1e3 * (plo[d] + margin), PLACE[d] + 1e3 * (phi[d] - margin));
+        let voxel = [1.5, 1.5, 4.0][d];
+        assert!((lo[d] - want_lo).abs() < voxel && (hi[d] - want_hi).abs() < voxel, "axis {d}: {lo:?} {hi:?}");
+    }
+    let lps = read_labelmap_surface(data("liver_labels.seg.nrrd"), Some("Liver"), &options).unwrap();
+    assert_eq!((lps.frame, lps.label.as_str()), (Frame::Lps, "label 5 ('liver')"));
+    let (a, b) = (centre(&ras.surface.vertices), centre(&lps.surface.vertices));
+    assert!(norm(sub(b, [-a[0], -a[1], a[2]])) < 1e-6, "{a:?} vs {b:?}");
+}
