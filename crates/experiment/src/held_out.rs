@@ -85,6 +85,10 @@ struct Outcome {
     tre_max_mm: Option<f64>,
     /// Time of the frame in each run (ms).
     times_ms: Vec<f64>,
+    /// The mean predicted σ at the targets (mm) and the share of the targets within 2σ, for a
+    /// method that predicts σ.
+    std_mean_mm: Option<f64>,
+    within_two_std: Option<f64>,
     /// Why it failed.
     error: Option<String>,
 }
@@ -94,6 +98,18 @@ fn failures(failed: usize) -> String {
     match failed {
         0 => String::new(),
         n => format!("; failed on {n} of {} cases (not in these figures)", CASES.len()),
+    }
+}
+
+/// The words for the predicted σ of a method over its cases (each case's mean σ in mm and share of
+/// targets within 2σ): none for a method that predicts no σ.
+fn coverage(cases: impl Iterator<Item = (Option<f64>, Option<f64>)>) -> String {
+    let (std, within): (Vec<f64>, Vec<f64>) = cases.filter_map(|(s, w)| s.zip(w)).unzip();
+    match std.is_empty() {
+        true => String::new(),
+        false => {
+            format!("; σ {} mean, {:.0} % of the targets within 2σ", fmt(mean(&std), 2, "mm"), 100.0 * mean(&within))
+        }
     }
 }
 
@@ -107,6 +123,9 @@ struct StreamOutcome {
     tre_mean_mm: Option<f64>,
     /// Median time of a frame over the stream (ms).
     time_median_ms: f64,
+    /// The mean predicted σ at the targets over the frames (mm) and the share within 2σ.
+    std_mean_mm: Option<f64>,
+    within_two_std: Option<f64>,
     /// Why it failed.
     error: Option<String>,
 }
@@ -144,6 +163,8 @@ fn register_stream(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec<
                     peak_tre_max_mm: peak.map(|p| p.1),
                     tre_mean_mm: r.summary.tre_mean_mm,
                     time_median_ms: r.summary.time_median_ms,
+                    std_mean_mm: r.summary.target_std_mean_mm,
+                    within_two_std: r.summary.within_two_std,
                     error: None,
                 }
             }
@@ -231,6 +252,8 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
                         outcome.tre_mean_mm = r.summary.tre_mean_mm;
                         outcome.tre_max_mm = r.summary.tre_max_mm;
                         outcome.times_ms.push(r.summary.time_ms);
+                        outcome.std_mean_mm = r.summary.target_std_mean_mm;
+                        outcome.within_two_std = r.summary.within_two_std;
                     }
                     Err(e) => outcome.error = Some(format!("{e}")),
                 }
@@ -279,10 +302,11 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
             Row::new(
                 FROM_REST,
                 format!(
-                    "{} ({}), {}{}",
+                    "{} ({}), {}{}{}",
                     fmt(mean(&tre), 2, "mm"),
                     fmt(max(&largest), 1, "mm"),
                     fmt(median(&mut times), 0, "ms"),
+                    coverage(ok.iter().map(|o| (o.std_mean_mm, o.within_two_std))),
                     failures(failed)
                 ),
                 "",
@@ -308,11 +332,12 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
             Row::new(
                 &as_streams,
                 format!(
-                    "{} ({}); {}; {}{}",
+                    "{} ({}); {}; {}{}{}",
                     fmt(mean(&peak), 2, "mm"),
                     fmt(max(&largest), 1, "mm"),
                     fmt(mean(&all), 2, "mm"),
                     fmt(median(&mut times), 0, "ms"),
+                    coverage(ok.iter().map(|o| (o.std_mean_mm, o.within_two_std))),
                     failures(failed)
                 ),
                 "",
@@ -378,12 +403,16 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
         ),
         format!(
             "Methods: the co-rotational FEM ({} T4, E = {} kPa, ν = {}), the shipped network ({SHIPPED_MODEL}) and \
-             the shipped reduced-order model ({SHIPPED_ROM}), the learned models at most {} iterations; each \
+             the shipped reduced-order model ({SHIPPED_ROM}): \"ROM\" fits the coefficients of its modes to the \
+             cloud (its shape space, {} iterations coarse to fine, {} points matched per iteration), \"ROM, membrane \
+             loop\" fits a membrane to the matches and predicts from it, as the U-Net does ({} iterations); each \
              registers each case from rest. Time per frame: the median of {runs} runs \
              with fresh methods, correspondence search included; one machine, only as quiet as it was.",
             base.models.tets,
             fem.young * 1e-3,
             fem.poisson,
+            register::shape::SHAPE_ITERATIONS,
+            register::shape::SHAPE_POINTS,
             network_options(&base)?.iterations
         ),
         format!(
@@ -391,11 +420,12 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
              streams them: frame k is pushed by F sin(πk/{}) (F the case's force, at the middle frame), each truth \
              solved from the last and seen anew by the camera (seed + k − 1). Each method registers frame 1 from \
              rest and every next frame warm-started from the last, with its warm budget (the FEM {} iterations, the \
-             network {}). TRE at the peak frame, and over all frames; time: the median over the stream's frames, one \
+             U-Net and the membrane loop {}, the shape fit {}, its prior the last frame's posterior). TRE at the peak frame, and over all frames; time: the median over the stream's frames, one \
              run.",
             STREAM_FRAMES + 1,
             corotational(&base).and_then(|m| m.warm_iterations).unwrap_or(base.registration.warm_iterations),
             network_options(&base)?.warm_iterations,
+            register::shape::SHAPE_WARM_ITERATIONS,
         ),
         "Diagnostic, not a method: the network fed the truth's own motion of its input nodes (each node takes \
          the motion of the truth's surface point nearest to it), as if the whole visible surface were seen and \
