@@ -282,17 +282,12 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
     let mut out = Vec::new();
     for spec in &scenario.models.method {
         let (name, iterations, warm_iterations) = (spec.name.clone(), spec.iterations, spec.warm_iterations);
+        let method =
+            |name, organ, deformer| Method { name, organ, deformer, iterations, warm_iterations, max_points: None };
         match (spec.kind, spec.material, networks.first()) {
             (MethodKind::Fem, Some(material), _) => {
                 let (organ, deformer) = fem_model_fixed_on(mesh.clone(), material, &scenario.truth.fixed)?;
-                out.push(Method {
-                    name,
-                    organ,
-                    deformer: Box::new(deformer),
-                    iterations,
-                    warm_iterations,
-                    max_points: None,
-                });
+                out.push(method(name, organ, Box::new(deformer)));
             }
             (MethodKind::Fem, None, _) => {
                 bail!("method {name:?}: a FEM method needs a material")
@@ -326,14 +321,7 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
                 }
                 let network_iterations = spec.network_iterations.unwrap_or(1);
                 let deformer = HybridDeformer::new(Box::new(deformer), fem, network_iterations)?;
-                out.push(Method {
-                    name,
-                    organ,
-                    deformer: Box::new(deformer),
-                    iterations,
-                    warm_iterations,
-                    max_points: None,
-                });
+                out.push(method(name, organ, Box::new(deformer)));
             }
             (MethodKind::Hybrid, None, _) => bail!("method {name:?}: a hybrid method needs a material"),
             (MethodKind::Network | MethodKind::Hybrid, _, None) => {}

@@ -58,6 +58,24 @@ pub struct ExtractReport {
     pub voxel_volume: f64,
 }
 
+impl ExtractReport {
+    /// What was done to the mask before extraction, one line each: the smaller pieces dropped,
+    /// the cavities filled (none when neither).
+    pub fn cleaning_lines(&self) -> Vec<String> {
+        let mut lines = Vec::new();
+        if let Some(largest) = self.dropped_pieces.first() {
+            lines.push(format!(
+                "kept the largest piece; dropped {} smaller (the largest of {largest} voxels)",
+                self.dropped_pieces.len()
+            ));
+        }
+        if self.filled_voxels > 0 {
+            lines.push(format!("filled cavities of {} voxels", self.filled_voxels));
+        }
+        lines
+    }
+}
+
 /// The closed surface of a voxel mask in world coordinates (see the module's documentation).
 /// An empty mask is an error.
 pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSurface, ExtractReport), MeshError> {

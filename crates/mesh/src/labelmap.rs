@@ -639,15 +639,7 @@ impl LabelSurface {
             e.voxels,
             self.frame.name()
         )];
-        if let Some(largest) = e.dropped_pieces.first() {
-            lines.push(format!(
-                "kept the largest piece; dropped {} smaller (the largest of {largest} voxels)",
-                e.dropped_pieces.len()
-            ));
-        }
-        if e.filled_voxels > 0 {
-            lines.push(format!("filled cavities of {} voxels", e.filled_voxels));
-        }
+        lines.extend(e.cleaning_lines());
         lines.push(format!(
             "surface: {} triangles (decimated from {}), {:.1} mL ({:+.1} % from the voxels)",
             self.surface.triangles.len(),

@@ -97,15 +97,7 @@ impl Route {
                         e.triangles
                     ),
                 ];
-                if let Some(largest) = e.dropped_pieces.first() {
-                    lines.push(format!(
-                        "dropped {} smaller pieces (the largest of {largest} voxels)",
-                        e.dropped_pieces.len()
-                    ));
-                }
-                if e.filled_voxels > 0 {
-                    lines.push(format!("filled cavities of {} voxels", e.filled_voxels));
-                }
+                lines.extend(e.cleaning_lines());
                 lines.push(format!(
                     "distance to the input surface: mean {}, largest {}",
                     mm(r.mean_distance),
