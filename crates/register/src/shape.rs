@@ -322,11 +322,6 @@ impl ShapeDeformer {
         wanted.min(self.fitted())
     }
 
-    /// The shape space.
-    pub fn space(&self) -> &ShapeSpace {
-        &self.space
-    }
-
     /// The posterior of the first `k` coefficients given `observations`, from the current
     /// coefficients (Huber's weights at their residuals): its mean and covariance.
     fn fit(&self, observations: &Observations, k: usize) -> Result<(DVector<f64>, DMatrix<f64>)> {
