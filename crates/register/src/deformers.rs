@@ -151,6 +151,47 @@ impl Deformer for HybridDeformer {
     }
 }
 
+/// One deformer for frames registered from rest, another for frames warm-started from the last
+/// (a stream): e.g. a shape-space fit, whose coarse-to-fine capture a frame from rest needs, and
+/// the membrane loop, which follows a stream's small frame-to-frame motion.
+pub struct RestAndStream {
+    from_rest: Box<dyn Deformer + Send>,
+    streamed: Box<dyn Deformer + Send>,
+    /// Whether the frame under way is warm-started, and whether the last frame was.
+    warm: bool,
+}
+
+impl RestAndStream {
+    /// `from_rest` for frames from rest, `streamed` for warm-started frames (both on one organ).
+    pub fn new(from_rest: Box<dyn Deformer + Send>, streamed: Box<dyn Deformer + Send>) -> RestAndStream {
+        RestAndStream { from_rest, streamed, warm: false }
+    }
+}
+
+impl Deformer for RestAndStream {
+    fn start_frame(&mut self, warm: bool) {
+        self.warm = warm;
+        match warm {
+            true => self.streamed.start_frame(true),
+            false => self.from_rest.start_frame(false),
+        }
+    }
+
+    fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>> {
+        match self.warm {
+            true => self.streamed.deform(observations, previous, iteration),
+            false => self.from_rest.deform(observations, previous, iteration),
+        }
+    }
+
+    fn uncertainty(&self, rest_points: &[mesh::Point], stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
+        match self.warm {
+            true => self.streamed.uncertainty(rest_points, stencils),
+            false => self.from_rest.uncertainty(rest_points, stencils),
+        }
+    }
+}
+
 /// U-Net registration. The displacement of the network's input nodes (the visible surface) is
 /// first fitted to the matches: the surface it interpolates passes near each matched cloud
 /// point (least squares), with a membrane penalty on neighbouring nodes' differences, unseen

@@ -55,7 +55,7 @@ pub mod rigid;
 pub mod sequence;
 pub mod shape;
 
-pub use deformers::{FemDeformer, HybridDeformer, NetworkDeformer};
+pub use deformers::{FemDeformer, HybridDeformer, NetworkDeformer, RestAndStream};
 pub use organ::{Organ, Stencil};
 pub use register::{
     check_cloud, observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions,
