@@ -569,6 +569,28 @@ mod tests {
         assert!(mean > 0.001 && most < 0.04, "the top sank by {mean} m on average, {most} m at most");
     }
 
+    /// A deformer that moves every node by its own constant offset along z.
+    struct Offset(f64);
+
+    impl Deformer for Offset {
+        fn deform(&mut self, _: &Observations, previous: &[f64], _: usize) -> Result<Vec<f64>> {
+            Ok((0..previous.len()).map(|i| if i % 3 == 2 { self.0 } else { 0.0 }).collect())
+        }
+    }
+
+    /// A frame from rest is the first deformer's, a warm-started frame the second's.
+    #[test]
+    fn frames_from_rest_and_streamed_frames_go_to_their_own_deformers() {
+        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.04; 3], [2, 2, 2]).unwrap(), None).unwrap();
+        let cloud = organ.surface().vertices.clone();
+        let mut deformer = RestAndStream::new(Box::new(Offset(1e-3)), Box::new(Offset(2e-3)));
+        let options = RegistrationOptions { iterations: 1, warm_iterations: 1, ..RegistrationOptions::default() };
+        let rest = register_frame(&organ, &mut deformer, &cloud, None, &options).unwrap();
+        let warm = register_frame(&organ, &mut deformer, &cloud, Some(&rest.u), &options).unwrap();
+        assert_eq!((rest.u[2], warm.u[2]), (1e-3, 2e-3));
+        assert_eq!(register_frame(&organ, &mut deformer, &cloud, None, &options).unwrap().u[2], 1e-3);
+    }
+
     /// The shipped network on the 3k-T4 phantom of the `liver_ar` dataset scenario, the normal
     /// displacement of its visible nodes as input.
     fn shipped_network_on_phantom() -> (Organ, NetworkDeformer) {
