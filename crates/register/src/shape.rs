@@ -121,24 +121,38 @@ impl ShapeSpace {
         u
     }
 
-    /// The first `k` modes at a point of stencil `stencil`, along `direction`: `Σ_j w_j dᵀ B_j`
-    /// into `out`; returns `dᵀ` of the mean there.
+    /// The first `out.len()` modes at a point of stencil `stencil`, along `direction`: `Σ_j w_j
+    /// dᵀ B_j` into `out`; returns `dᵀ` of the mean there.
     fn along(&self, stencil: &Stencil, direction: [f64; 3], out: &mut [f64]) -> f64 {
-        out.iter_mut().for_each(|o| *o = 0.0);
-        let mut mean = 0.0;
-        for &(node, w) in &stencil.0 {
-            for (d, &nd) in direction.iter().enumerate() {
-                let (row, f) = (3 * node + d, w * nd);
-                if f == 0.0 {
-                    continue;
-                }
-                mean += f * self.mean[row];
-                let b = &self.basis[row * self.modes..row * self.modes + out.len()];
-                out.iter_mut().zip(b).for_each(|(o, b)| *o += f * b);
-            }
-        }
-        mean
+        combine(&self.mean, &self.basis, self.modes, stencil.0.iter().copied(), direction, out)
     }
+}
+
+/// The first `out.len()` columns of the weighted rows of a node-major field `mean` (3 per point)
+/// and its `modes` columns `basis` (row-major), at the points and weights of `terms`, along
+/// `direction`: into `out` the modes' part, returned the mean's.
+fn combine(
+    mean: &[f64],
+    basis: &[f64],
+    modes: usize,
+    terms: impl Iterator<Item = (usize, f64)>,
+    direction: [f64; 3],
+    out: &mut [f64],
+) -> f64 {
+    out.iter_mut().for_each(|o| *o = 0.0);
+    let mut along = 0.0;
+    for (point, w) in terms {
+        for (d, &nd) in direction.iter().enumerate() {
+            let (row, f) = (3 * point + d, w * nd);
+            if f == 0.0 {
+                continue;
+            }
+            along += f * mean[row];
+            let b = &basis[row * modes..row * modes + out.len()];
+            out.iter_mut().zip(b).for_each(|(o, b)| *o += f * b);
+        }
+    }
+    along
 }
 
 /// Iterations of a frame from rest: the six of [`ShapeOptions::schedule`]'s default, coarse to
@@ -291,21 +305,8 @@ impl ShapeDeformer {
     /// The first `out.len()` modes at a match (the point of barycentric `weights` in surface
     /// `triangle`) along `normal`, into `out`; returns the mean's part along it.
     fn surface_row(&self, triangle: usize, weights: [f64; 3], normal: [f64; 3], out: &mut [f64]) -> f64 {
-        let r = self.space.modes;
-        out.iter_mut().for_each(|o| *o = 0.0);
-        let mut mean = 0.0;
-        for (&vertex, b) in self.triangles[triangle].iter().zip(weights) {
-            for (d, n) in normal.iter().enumerate() {
-                let (row, f) = (3 * vertex + d, b * n);
-                if f == 0.0 {
-                    continue;
-                }
-                mean += f * self.surface_mean[row];
-                let basis = &self.surface_basis[row * r..row * r + out.len()];
-                out.iter_mut().zip(basis).for_each(|(o, b)| *o += f * b);
-            }
-        }
-        mean
+        let corners = self.triangles[triangle].into_iter().zip(weights);
+        combine(&self.surface_mean, &self.surface_basis, self.space.modes, corners, normal, out)
     }
 
     /// The modes fitted at all.
@@ -327,7 +328,7 @@ impl ShapeDeformer {
     fn fit(&self, observations: &Observations, k: usize) -> Result<(DVector<f64>, DMatrix<f64>)> {
         let n = observations.matches.len();
         let mut jacobian = faer::Mat::<f64>::zeros(n, k);
-        let mut rhs = DVector::<f64>::zeros(n);
+        let mut rhs = vec![0.0; n];
         let mut row = vec![0.0; k];
         let sigma = self.options.sigma;
         let current: Vec<f64> = (0..k).map(|j| self.z.get(j).copied().unwrap_or(0.0)).collect();
@@ -350,7 +351,7 @@ impl ShapeDeformer {
             1.0,
             faer::Par::rayon(0),
         );
-        let jty: Vec<f64> = (0..k).map(|j| jacobian.col(j).iter().zip(rhs.iter()).map(|(a, b)| a * b).sum()).collect();
+        let jty: Vec<f64> = (0..k).map(|j| jacobian.col(j).iter().zip(&rhs).map(|(a, b)| a * b).sum()).collect();
         let prior = self.prior_of(k);
         let hessian = DMatrix::from_fn(k, k, |a, b| product[(a, b)]) + &prior.precision;
         let gradient = DVector::from_vec(jty) + &prior.precision * &prior.mean;
