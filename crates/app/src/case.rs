@@ -250,10 +250,27 @@ pub fn learned_registration(network: &Network, options: &RegistrationOptions) ->
             let space = register::model_shape_space(network.model, &organ, shape.max_modes)?;
             let fit = ShapeDeformer::new(space, &organ, shape)?;
             let deformer = RestAndStream::new(Box::new(fit), Box::new(membrane));
-            LearnedRegistration { organ, deformer: Box::new(deformer), options: shape::loop_options(options) }
+            LearnedRegistration {
+                organ,
+                deformer: Box::new(deformer),
+                options: learned_options(network.model, options),
+            }
         }
-        Model::UNet(_) => LearnedRegistration { organ, deformer: Box::new(membrane), options: options.clone() },
+        Model::UNet(_) => LearnedRegistration {
+            organ,
+            deformer: Box::new(membrane),
+            options: learned_options(network.model, options),
+        },
     })
+}
+
+/// The loop's settings of a learned model's registration ([`learned_registration`]), from the
+/// case's settings for its learned models: a model with a basis takes the shape fit's budgets.
+pub fn learned_options(model: &Model, options: &RegistrationOptions) -> RegistrationOptions {
+    match model {
+        Model::Reduced(_) => shape::loop_options(options),
+        Model::UNet(_) => options.clone(),
+    }
 }
 
 /// A learned model's registration method ([`learned_registration`]).

@@ -22,8 +22,8 @@ use serde::Serialize;
 use crate::loads::LEFT_LOBE_FRONT;
 use crate::{ExperimentResult, Name, Progress, Row, Size};
 use app::case::{
-    ar_scenario, corotational_model, learned_registration, network_options, synthetic_case, Network, SyntheticCase,
-    SHIPPED_MODEL, SHIPPED_ROM,
+    ar_scenario, corotational_model, learned_options, learned_registration, network_options, synthetic_case, Network,
+    SyntheticCase, SHIPPED_MODEL, SHIPPED_ROM,
 };
 
 /// Frames of the press and release.
@@ -157,11 +157,11 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         }
         progress(&format!("streaming to the shipped {method}"));
         let model = Arc::new(learn::Model::load(Path::new(path))?);
+        let options = learned_options(&model, &budgets);
         let budgets = budgets.clone();
         let learned = move |model: &learn::Model| {
             learned_registration(&Network { model, scenario: &ar_scenario(), dir: Path::new("") }, &budgets)
         };
-        let options = learned(&model)?.options;
         let make = move || learned(&model).map(|l| (l.organ, l.deformer));
         streams.push(stream_case(method, &case, &options, make)?);
     }
