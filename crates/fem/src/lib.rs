@@ -88,6 +88,18 @@ pub enum FemError {
         /// The last load factor reached.
         load_factor: f64,
     },
+    /// The load path turned back: the smallest load step past the last equilibrium found none,
+    /// even with a long descent.
+    #[error("no equilibrium found beyond load factor {load_factor:.3}: the response there was {softening:.1} % as stiff as at rest (a limit point of the load path: past it the body snaps or gives way under this load), and {iterations} further iterations found none; lower the load, hold the body more firmly, or push with a displacement")]
+    NoEquilibrium {
+        /// The last load factor reached.
+        load_factor: f64,
+        /// The stiffness of the last load step against that of the first, in per cent (NaN when
+        /// fewer than two steps converged).
+        softening: f64,
+        /// Iterations of the last attempt.
+        iterations: usize,
+    },
     /// A NaN or infinity appeared.
     #[error("non-finite value in {0}")]
     NonFinite(String),

@@ -236,6 +236,58 @@ fn predict(u: &[f64], previous: Option<&(f64, Vec<f64>)>, lambda: f64, target: f
 /// with these halvings, 97.
 const MAX_INVERSION_HALVINGS: usize = 30;
 
+/// Iterations of the last attempt at a load step whose smallest step failed (see
+/// [`Budget::Patient`]). The AMOS liver's quadratic mesh pushed by 1 N (the experiment crate's
+/// `tests/real_organs.rs`) stops at load factor 0.918 under force control; with one such attempt
+/// it solves, in 1,056 iterations over 13 load steps.
+const PATIENT_ITERATIONS: usize = 1000;
+
+/// How many iterations a Newton sequence may take.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Budget {
+    /// `max_iterations`, cut short when the residuals stall ([`stalled`]).
+    Normal,
+    /// [`PATIENT_ITERATIONS`], never cut short: the residual of a descent towards an equilibrium
+    /// far away (a snap past a limit point) may stay flat for long while the energy falls.
+    Patient,
+}
+
+/// The converged states of a load-stepped solve, as far as the load's work-conjugate
+/// displacement q = f·u / |f| tells: how much the response has softened.
+struct LoadPath {
+    /// The load at load factor 1, normalised (empty when there is none).
+    direction: Vec<f64>,
+    /// (load factor, q) of the first and the last two converged states.
+    first: Option<(f64, f64)>,
+    last: [Option<(f64, f64)>; 2],
+}
+
+impl LoadPath {
+    fn new(load: Vec<f64>) -> Self {
+        let size = norm(&load);
+        let direction = if size > 0.0 { load.iter().map(|f| f / size).collect() } else { Vec::new() };
+        LoadPath { direction, first: None, last: [None, None] }
+    }
+
+    /// Records the converged state `u` at load factor `lambda`.
+    fn record(&mut self, lambda: f64, u: &[f64]) {
+        let q = if self.direction.is_empty() { norm(u) } else { dot(&self.direction, u) };
+        self.first.get_or_insert((lambda, q));
+        self.last = [self.last[1], Some((lambda, q))];
+    }
+
+    /// The stiffness dλ/dq of the last step over that of the first (from rest), in per cent; NaN
+    /// before two steps.
+    fn softening(&self) -> f64 {
+        match (self.first, self.last) {
+            (Some((l0, q0)), [Some((l1, q1)), Some((l2, q2))]) if q0 != 0.0 && q2 != q1 => {
+                100.0 * ((l2 - l1) / (q2 - q1)) / (l0 / q0)
+            }
+            _ => f64::NAN,
+        }
+    }
+}
+
 /// Principal stretch at which Saint-Venant-Kirchhoff's uniaxial compressive stress peaks.
 const SVK_LIMIT_STRETCH: f64 = 0.577_350_269_189_625_8;
 
@@ -490,7 +542,7 @@ impl StaticSolver {
             } else {
                 Start::Kept
             };
-            if self.newton(&mut u, 1.0, from, options, &mut stats).is_ok() {
+            if self.newton(&mut u, 1.0, from, options, Budget::Normal, &mut stats).is_ok() {
                 self.latest_slow = !stats.refactorized
                     && stats.iterations as f64 > self.refactorization_cost + FRESH_FACTOR_ITERATIONS;
                 return Ok(stats.finish(u, 1, start));
@@ -506,6 +558,7 @@ impl StaticSolver {
         let mut step = full_step;
         let mut cuts = 0;
         let mut steps = 0;
+        let mut path = LoadPath::new(self.loads());
         while lambda < 1.0 {
             let target = (lambda + step).min(1.0);
             if target <= lambda {
@@ -523,15 +576,35 @@ impl StaticSolver {
                 (false, true) => Start::Fresh,
                 (false, false) => Start::Rest,
             };
-            match self.newton(&mut trial, target, from, options, &mut stats) {
+            let mut target = target;
+            let mut attempt = self.newton(&mut trial, target, from, options, Budget::Normal, &mut stats);
+            let patient = attempt.is_err() && cuts == options.max_step_cuts && lambda > 0.0;
+            if patient {
+                // The smallest step failed too: near a limit point of the load path. Past it the
+                // body snaps to an equilibrium far away, which a descent may need hundreds of
+                // iterations to reach: one patient attempt at a whole step, from the last
+                // equilibrium.
+                target = (lambda + full_step).min(1.0);
+                trial.copy_from_slice(&u);
+                attempt = self.newton(&mut trial, target, Start::Fresh, options, Budget::Patient, &mut stats);
+                if let Err(FemError::NotConverged { .. } | FemError::InvertedElement { .. }) = attempt {
+                    return Err(FemError::NoEquilibrium {
+                        load_factor: lambda,
+                        softening: path.softening(),
+                        iterations: PATIENT_ITERATIONS,
+                    });
+                }
+            }
+            match attempt {
                 Ok(()) => {
+                    path.record(target, &trial);
                     latest_converged = true;
                     previous = Some((lambda, std::mem::replace(&mut u, trial)));
                     lambda = target;
                     steps += 1;
                     // Grow back towards the requested step after a cut.
+                    step = if patient { full_step } else { (2.0 * step).min(full_step) };
                     cuts = 0;
-                    step = (2.0 * step).min(full_step);
                 }
                 Err(
                     e @ (FemError::NotConverged { .. } | FemError::InvertedElement { .. } | FemError::Factorization(_)),
@@ -588,6 +661,7 @@ impl StaticSolver {
         lambda: f64,
         from: Start,
         opt: &SolverOptions,
+        budget: Budget,
         stats: &mut Stats,
     ) -> Result<(), FemError> {
         let ndof = u.len();
@@ -626,7 +700,11 @@ impl StaticSolver {
         let mut refresh = from == Start::Fresh || !(slot == Slot::Rest || (opt.reuse_factorization && latest));
         let (mut last_ratio, mut since_refresh, mut undamped) = (1.0f64, 0usize, 0usize);
         let first_residual = stats.residuals.len();
-        for it in 0..=opt.max_iterations {
+        let last_iteration = match budget {
+            Budget::Normal => opt.max_iterations,
+            Budget::Patient => PATIENT_ITERATIONS,
+        };
+        for it in 0..=last_iteration {
             let scale = ext_norm.max(norm(&f_int));
             let rel = if scale > 0.0 { res / scale } else { 0.0 };
             stats.residuals.push(rel);
@@ -637,7 +715,11 @@ impl StaticSolver {
             if rel <= opt.rtol || (inc_ok && rel <= opt.rtol.sqrt()) {
                 return Ok(());
             }
-            if it == opt.max_iterations || stalled(&stats.residuals[first_residual..]) {
+            let stop = match budget {
+                Budget::Normal => it == opt.max_iterations || stalled(&stats.residuals[first_residual..]),
+                Budget::Patient => it == PATIENT_ITERATIONS,
+            };
+            if stop {
                 return Err(FemError::NotConverged { load_factor: lambda, iterations: it, residual: rel });
             }
             stats.iterations += 1;
