@@ -304,31 +304,27 @@ impl Inputs {
         if entries.is_empty() {
             return Err(LearnError::InvalidInput("every training input is zero: nothing to learn from".into()));
         }
-        let mut inputs = Inputs { entries, mean: Vec::new(), components: 0, directions: Mat::zeros(0, 0), prior: None };
-        let x_clean = inputs.matrix(clean);
+        let x_clean = input_matrix(&entries, clean);
         let n = clean.len();
-        inputs.mean = (0..x_clean.ncols()).map(|e| x_clean.col(e).iter().sum::<f64>() / n as f64).collect();
-        let x_centred = inputs.centre(&x_clean);
-        let (values, directions) = match prior {
-            None => principal_directions(x_centred.as_ref(), config.max_input_components, 1e-7)?,
+        let mean: Vec<f64> = (0..x_clean.ncols()).map(|e| x_clean.col(e).iter().sum::<f64>() / n as f64).collect();
+        let x_centred = centred(&x_clean, &mean);
+        let (values, directions, prior) = match prior {
+            None => {
+                let (values, directions) = principal_directions(x_centred.as_ref(), config.max_input_components, 1e-7)?;
+                (values, directions, None)
+            }
             Some(response) => {
-                let a = prior_coefficients_matrix(
-                    response,
-                    &outputs.basis,
-                    &outputs.entries,
-                    &inputs.entries,
-                    grid.field_len(),
-                )?;
+                let a =
+                    prior_coefficients_matrix(response, &outputs.basis, &outputs.entries, &entries, grid.field_len())?;
                 let p = mul_t(x_centred.as_ref(), a.as_ref(), training_par());
                 let values = (0..p.ncols()).map(|j| p.col(j).iter().map(|v| v * v).sum()).collect();
                 let directions = a.subrows(0, a.nrows().min(config.max_input_components)).to_owned();
-                inputs.prior = Some(a);
-                (values, directions)
+                (values, directions, Some(a))
             }
         };
         let total: f64 = values.iter().sum();
         let mut kept = 0.0;
-        inputs.components = values
+        let components = values
             .iter()
             .position(|v| {
                 kept += v;
@@ -336,25 +332,15 @@ impl Inputs {
             })
             .map_or(directions.nrows(), |p| p + 1)
             .min(directions.nrows());
-        inputs.directions = directions.subrows(0, inputs.components).to_owned();
-        Ok(inputs)
-    }
-
-    /// The varying entries of `fields`, a row per field.
-    fn matrix(&self, fields: &[Vec<f32>]) -> Mat<f64> {
-        Mat::from_fn(fields.len(), self.entries.len(), |i, e| f64::from(fields[i][self.entries[e]]))
-    }
-
-    /// `x` less the training mean.
-    fn centre(&self, x: &Mat<f64>) -> Mat<f64> {
-        Mat::from_fn(x.nrows(), x.ncols(), |i, e| x[(i, e)] - self.mean[e])
+        let directions = directions.subrows(0, components).to_owned();
+        Ok(Inputs { entries, mean, components, directions, prior })
     }
 
     /// A set of inputs read and centred once: its features, and what the regression learns for
     /// it (the modal coefficients of sample `sample(i)`, less the prior's; with a prior the
     /// features are the leading prior coefficients).
     fn read(&self, fields: &[Vec<f32>], coeffs: &Mat<f64>, sample: &dyn Fn(usize) -> usize) -> (Mat<f64>, Mat<f64>) {
-        let x = self.centre(&self.matrix(fields));
+        let x = centred(&input_matrix(&self.entries, fields), &self.mean);
         let p = self.prior.as_ref().map(|a| mul_t(x.as_ref(), a.as_ref(), training_par()));
         let features = match &p {
             Some(p) => p.subcols(0, self.components).to_owned(),
@@ -365,6 +351,16 @@ impl Inputs {
         });
         (features, targets)
     }
+}
+
+/// The `entries` of `fields`, a row per field.
+fn input_matrix(entries: &[usize], fields: &[Vec<f32>]) -> Mat<f64> {
+    Mat::from_fn(fields.len(), entries.len(), |i, e| f64::from(fields[i][entries[e]]))
+}
+
+/// `x` less `mean` (one per column).
+fn centred(x: &Mat<f64>, mean: &[f64]) -> Mat<f64> {
+    Mat::from_fn(x.nrows(), x.ncols(), |i, e| x[(i, e)] - mean[e])
 }
 
 /// The regression's training inputs: the clean samples, then `noise_copies` corrupted copies of them.
