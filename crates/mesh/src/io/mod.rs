@@ -14,7 +14,8 @@
 //! The frame a surface file names (`SPACE=LPS` or `SPACE=RAS` in an STL or legacy VTK header, as
 //! 3D Slicer writes it) is read by [`read_surface_with_frame`] and written by
 //! [`write_surface_in_frame`]; points with labels, frame and unit (CSV, Slicer's `.fcsv` and
-//! `.mrk.json`) by the [`points`] module.
+//! `.mrk.json`) by the [`points`] module. Every CSV file of the project is read and written by
+//! the [`csv`] module.
 //!
 //! Writers ([`write_vtu`], [`write_vtk_legacy`], [`write_msh`], [`write_surface`]) go through
 //! [`write_atomic`] (a temporary file in the target directory, renamed onto the target), so a
