@@ -157,15 +157,13 @@ pub fn rest_in_cloud_frame(targets: &[Point], rigid: Option<&RigidResult>) -> Ve
 /// targets.csv: rest and registered position of each target (m), with the method's predicted
 /// standard deviation of each target's error (m), when it predicts one, as a last column `std`.
 pub fn write_targets(path: &Path, rest: &[Point], registered: &[Point], std: Option<&[f64]>) -> Result<()> {
-    let mut text = String::from(if std.is_some() { "x0,y0,z0,x,y,z,std\n" } else { "x0,y0,z0,x,y,z\n" });
-    for (i, (a, b)) in rest.iter().zip(registered).enumerate() {
-        text.push_str(&format!("{},{},{},{},{},{}", a[0], a[1], a[2], b[0], b[1], b[2]));
-        if let Some(s) = std {
-            text.push_str(&format!(",{}", s[i]));
-        }
-        text.push('\n');
-    }
-    Ok(write_atomic_bytes(path, text.as_bytes())?)
+    let header = ["x0", "y0", "z0", "x", "y", "z", "std"];
+    let header = &header[..if std.is_some() { 7 } else { 6 }];
+    let rows = rest.iter().zip(registered).enumerate().map(|(i, (a, b))| {
+        let values = a.iter().chain(b).chain(std.map(|s| &s[i]));
+        values.map(f64::to_string).collect::<Vec<_>>()
+    });
+    Ok(mesh::io::csv::write_csv(path, &[], header, rows)?)
 }
 
 /// Writes a comparison of methods on a synthetic case into `dir`: comparison.csv (a row per

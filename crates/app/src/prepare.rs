@@ -892,24 +892,33 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
             left_out.join("; ")
         ));
     }
-    for run in &methods {
-        let name = method_name(run.method);
-        if run.errors.is_empty() {
-            lines.push(format!("validation: {name} failed on every push: {}", run.failed.join("; ")));
-            continue;
-        }
-        let failed = if run.failed.is_empty() {
-            String::new()
-        } else {
-            format!("; failed on {} of {} pushes: {}", run.failed.len(), forces.len(), run.failed.join("; "))
-        };
-        lines.push(format!(
-            "validation: {name} TRE {:.2} mm (largest {:.2} mm), {:.0} ms per registration from rest{failed}",
-            mesh::stats::mean(&run.errors) * 1e3,
-            mesh::stats::max(&run.errors) * 1e3,
-            mesh::stats::mean(&run.times_ms)
-        ));
+    lines.extend(methods.iter().map(|run| method_line(run, forces.len())));
+    lines.push(record_better_method(dir, &methods)?);
+    Ok(lines)
+}
+
+/// The validation's line on one method's registrations of `pushes` pushes.
+fn method_line(run: &MethodRun, pushes: usize) -> String {
+    let name = method_name(run.method);
+    if run.errors.is_empty() {
+        return format!("validation: {name} failed on every push: {}", run.failed.join("; "));
     }
+    let failed = if run.failed.is_empty() {
+        String::new()
+    } else {
+        format!("; failed on {} of {} pushes: {}", run.failed.len(), pushes, run.failed.join("; "))
+    };
+    format!(
+        "validation: {name} TRE {:.2} mm (largest {:.2} mm), {:.0} ms per registration from rest{failed}",
+        mesh::stats::mean(&run.errors) * 1e3,
+        mesh::stats::max(&run.errors) * 1e3,
+        mesh::stats::mean(&run.times_ms)
+    )
+}
+
+/// Writes into the patient file the method that did the better on the validation's pushes;
+/// returns the validation's line on it.
+fn record_better_method(dir: &Path, methods: &[MethodRun; 2]) -> Result<String> {
     // The set-up registers with the method that did the better on these pushes: the one that
     // failed on fewer, then the one with the lower TRE.
     let [learned, fem] = methods.each_ref().map(MethodRun::rank);
@@ -921,12 +930,11 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
     let at = set_up.iter().position(|l| l.starts_with("model = ")).unwrap_or(set_up.len());
     set_up.insert(at, &method);
     write_atomic_bytes(&path, (set_up.join("\n") + "\n").as_bytes())?;
-    lines.push(format!(
+    Ok(format!(
         "validation: {PATIENT_FILE} registers with the {} (method = \"{}\"), the better on these pushes",
         method_name(chosen),
         chosen.name()
-    ));
-    Ok(lines)
+    ))
 }
 
 /// Step 7: the report page and its picture.

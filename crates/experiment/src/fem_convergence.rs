@@ -195,143 +195,15 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     let mut points = Vec::new();
     let mut references = Vec::new();
     for poisson in [0.3, 0.49, 0.499] {
-        let problem = format!("cantilever, ν = {poisson}");
-        let mut solved = Vec::new();
-        for element in ELEMENTS {
-            for &k in levels {
-                let cells = [10 * k, k, k];
-                progress(&format!("fem-convergence: {problem}, {} on {}x{}x{}", element.label(), cells[0], k, k));
-                let (value, dofs, ms) = cantilever(element, cells, poisson)?;
-                solved.push((element, format!("{}x{}x{}", cells[0], k, k), value, dofs, ms));
-            }
-        }
-        let t10: Vec<f64> = solved.iter().filter(|s| s.0 == ELEMENTS[2]).map(|s| s.2).collect();
-        let n = t10.len();
-        let h = [n - 3, n - 2, n - 1].map(|i| 1.0 / levels[i] as f64);
-        let last = [t10[n - 3], t10[n - 2], t10[n - 1]];
-        let (value, source) = match richardson(last, h) {
-            Some((p, c)) => {
-                (last[2] + c * (last[2] - last[1]), format!("Richardson extrapolation of T10, order {p:.2}"))
-            }
-            None => (last[2], "finest T10 mesh (no monotone convergence of order ≥ 1: no extrapolation)".into()),
-        };
-        let source = format!(
-            "{source}; Timoshenko beam theory {:.4e} m ({:+.2} %)",
-            verification::timoshenko_deflection(poisson),
-            100.0 * (verification::timoshenko_deflection(poisson) / value - 1.0)
-        );
-        references.push(Reference { problem: problem.clone(), value, source });
-        let in_reference = |e: Element, k: usize| e == ELEMENTS[2] && k >= n - 3;
-        points.extend(solved.into_iter().enumerate().map(|(i, (e, mesh, v, dofs, ms))| ConvergencePoint {
-            problem: problem.clone(),
-            element: e.label(),
-            mesh,
-            dofs,
-            ms,
-            value: v,
-            error: (v / value - 1.0).abs(),
-            in_reference: in_reference(e, i % levels.len()),
-        }));
+        references.push(cantilever_study(poisson, levels, progress, &mut points)?);
     }
     // The phantom: the probes lie inside every mesh; the reference is the Richardson extrapolation
     // of T10 at each probe, with h ∝ (cells)^(-1/3) (the meshes are not nested), or the finest T10.
-    let meshes = sizes.iter().map(|&t| mesh::liver_phantom(t)).collect::<Result<Vec<_>, _>>()?;
-    let probe_points = probes(&PhantomSpec::default(), &meshes)?;
-    let problem = "liver phantom, SVK, ν = 0.48".to_string();
-    let mut solved = Vec::new();
-    for element in ELEMENTS.into_iter().filter(|e| e.kind != CellKind::Hex8) {
-        for (&tets, m) in sizes.iter().zip(&meshes) {
-            progress(&format!("fem-convergence: phantom, {} on {tets} tetrahedra", element.label()));
-            let (at, dofs, ms) = phantom(element, m.clone(), &probe_points)?;
-            solved.push((element, tets, at, dofs, ms));
-        }
-    }
-    let n = sizes.len();
-    let t10: Vec<&Vec<Point>> = solved.iter().filter(|s| s.0 == ELEMENTS[2]).map(|s| &s.2).collect();
-    let h = [n - 3, n - 2, n - 1].map(|i| (meshes[i].cells.len() as f64).powf(-1.0 / 3.0));
-    let (reference, entering, how) = match richardson([n - 3, n - 2, n - 1].map(|i| rms(t10[i])), h) {
-        Some((p, c)) => {
-            let field = t10[n - 1].iter().zip(t10[n - 2]).map(|(f, m)| std::array::from_fn(|d| f[d] + c * (f[d] - m[d])));
-            let meshes = format!("{}, {} and {} tetrahedra", sizes[n - 3], sizes[n - 2], sizes[n - 1]);
-            (field.collect::<Vec<Point>>(), &sizes[n - 3..], format!("Richardson extrapolation of T10 on {meshes} (h ∝ cells^-1/3), order {p:.2}, at each probe"))
-        }
-        None => (t10[n - 1].clone(), &sizes[n - 1..], format!("T10 on the finest phantom ({} tetrahedra; no monotone convergence of order ≥ 1 on the three finest: no extrapolation)", sizes[n - 1])),
-    };
-    let scale = rms(&reference);
-    references.push(Reference {
-        problem: problem.clone(),
-        value: scale,
-        source: format!("{how}; RMS displacement at {} probes 5 mm or more inside", probe_points.len()),
-    });
-    for (e, tets, at, dofs, ms) in solved {
-        let diff: Vec<Point> = at.iter().zip(&reference).map(|(a, r)| mesh::sub(*a, *r)).collect();
-        points.push(ConvergencePoint {
-            problem: problem.clone(),
-            element: e.label(),
-            mesh: format!("{tets} tets"),
-            dofs,
-            ms,
-            value: rms(&at),
-            error: rms(&diff) / scale,
-            in_reference: e == ELEMENTS[2] && entering.contains(&tets),
-        });
-    }
+    references.push(phantom_study(sizes, progress, &mut points)?);
     let problems: Vec<String> = references.iter().map(|r| r.problem.clone()).collect();
-    let mut cheapest = Vec::new();
-    for p in &problems {
-        for tolerance in [0.01, 0.05] {
-            let choice = points
-                .iter()
-                .filter(|c| &c.problem == p && c.error <= tolerance && !c.in_reference)
-                .min_by(|a, b| a.ms.total_cmp(&b.ms))
-                .cloned();
-            cheapest.push(Cheapest { problem: p.clone(), tolerance, choice });
-        }
-    }
-    let mut figures = Vec::new();
-    for (file, p) in [("cantilever_049.png", &problems[1]), ("phantom.png", &problems[3])] {
-        for (suffix, x_label, x) in [
-            (
-                "",
-                "degrees of freedom (log10)",
-                (|c: &ConvergencePoint| (c.dofs as f64).log10()) as fn(&ConvergencePoint) -> f64,
-            ),
-            ("_time", "setup and solve time, ms (log10)", |c: &ConvergencePoint| c.ms.log10()),
-        ] {
-            let name = file.replace(".png", &format!("{suffix}.png"));
-            plot_errors(&dir.join(&name), p, x_label, x, &points)?;
-            figures.push(name);
-        }
-    }
-    let mut rows = Vec::new();
-    for c in &cheapest {
-        let ours = match &c.choice {
-            Some(p) => {
-                format!("{} ({}, {} dofs, {:.0} ms, error {:.2} %)", p.element, p.mesh, p.dofs, p.ms, 100.0 * p.error)
-            }
-            None => "none of the meshes".into(),
-        };
-        rows.push(
-            Row::new(format!("cheapest within {:.0} %", 100.0 * c.tolerance), ours, "").of("problem", &c.problem),
-        );
-    }
-    // A table of errors per problem: a line per element, a column per mesh.
-    for p in &points {
-        rows.push(
-            Row::new(
-                &p.mesh,
-                format!(
-                    "{:.2} % ({} dofs, {:.0} ms){}",
-                    100.0 * p.error,
-                    p.dofs,
-                    p.ms,
-                    if p.in_reference { ", enters the reference" } else { "" }
-                ),
-                "",
-            )
-            .of(format!("{}: error", p.problem), &p.element),
-        );
-    }
+    let cheapest = cheapest(&problems, &points);
+    let figures = plot_studies(dir, &problems, &points)?;
+    let rows = rows(&cheapest, &points);
     let notes = vec![
         "Cantilever 10 × 1 × 1 m, E = 1 kPa, linear law (B-bar for F-bar), clamped at x = 0, a small downward end \
          traction; quantity: mean tip deflection; meshes of 10k × k × k cells (H8, or 6 T4 / T10 per cell)."
@@ -366,6 +238,167 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
             .collect(),
         values,
     })
+}
+
+/// The cantilever of Poisson's ratio `poisson` on every element and refinement of `levels`: its
+/// solves pushed on `points`, and its reference (the Richardson extrapolation of T10, or its
+/// finest mesh).
+fn cantilever_study(
+    poisson: f64,
+    levels: &[usize],
+    progress: Progress,
+    points: &mut Vec<ConvergencePoint>,
+) -> Result<Reference> {
+    let problem = format!("cantilever, ν = {poisson}");
+    let mut solved = Vec::new();
+    for element in ELEMENTS {
+        for &k in levels {
+            let cells = [10 * k, k, k];
+            progress(&format!("fem-convergence: {problem}, {} on {}x{}x{}", element.label(), cells[0], k, k));
+            let (value, dofs, ms) = cantilever(element, cells, poisson)?;
+            solved.push((element, format!("{}x{}x{}", cells[0], k, k), value, dofs, ms));
+        }
+    }
+    let t10: Vec<f64> = solved.iter().filter(|s| s.0 == ELEMENTS[2]).map(|s| s.2).collect();
+    let n = t10.len();
+    let h = [n - 3, n - 2, n - 1].map(|i| 1.0 / levels[i] as f64);
+    let last = [t10[n - 3], t10[n - 2], t10[n - 1]];
+    let (value, source) = match richardson(last, h) {
+        Some((p, c)) => (last[2] + c * (last[2] - last[1]), format!("Richardson extrapolation of T10, order {p:.2}")),
+        None => (last[2], "finest T10 mesh (no monotone convergence of order ≥ 1: no extrapolation)".into()),
+    };
+    let source = format!(
+        "{source}; Timoshenko beam theory {:.4e} m ({:+.2} %)",
+        verification::timoshenko_deflection(poisson),
+        100.0 * (verification::timoshenko_deflection(poisson) / value - 1.0)
+    );
+    let in_reference = |e: Element, k: usize| e == ELEMENTS[2] && k >= n - 3;
+    points.extend(solved.into_iter().enumerate().map(|(i, (e, mesh, v, dofs, ms))| ConvergencePoint {
+        problem: problem.clone(),
+        element: e.label(),
+        mesh,
+        dofs,
+        ms,
+        value: v,
+        error: (v / value - 1.0).abs(),
+        in_reference: in_reference(e, i % levels.len()),
+    }));
+    Ok(Reference { problem, value, source })
+}
+
+/// The phantom on every tetrahedral element and mesh of `sizes` tetrahedra: its solves pushed on
+/// `points`, and its reference (the RMS displacement at the probes of the Richardson
+/// extrapolation of T10 at each probe, or of the finest T10).
+fn phantom_study(sizes: &[usize], progress: Progress, points: &mut Vec<ConvergencePoint>) -> Result<Reference> {
+    let meshes = sizes.iter().map(|&t| mesh::liver_phantom(t)).collect::<Result<Vec<_>, _>>()?;
+    let probe_points = probes(&PhantomSpec::default(), &meshes)?;
+    let problem = "liver phantom, SVK, ν = 0.48".to_string();
+    let mut solved = Vec::new();
+    for element in ELEMENTS.into_iter().filter(|e| e.kind != CellKind::Hex8) {
+        for (&tets, m) in sizes.iter().zip(&meshes) {
+            progress(&format!("fem-convergence: phantom, {} on {tets} tetrahedra", element.label()));
+            let (at, dofs, ms) = phantom(element, m.clone(), &probe_points)?;
+            solved.push((element, tets, at, dofs, ms));
+        }
+    }
+    let n = sizes.len();
+    let t10: Vec<&Vec<Point>> = solved.iter().filter(|s| s.0 == ELEMENTS[2]).map(|s| &s.2).collect();
+    let h = [n - 3, n - 2, n - 1].map(|i| (meshes[i].cells.len() as f64).powf(-1.0 / 3.0));
+    let (reference, entering, how) = match richardson([n - 3, n - 2, n - 1].map(|i| rms(t10[i])), h) {
+        Some((p, c)) => {
+            let field = t10[n - 1].iter().zip(t10[n - 2]).map(|(f, m)| std::array::from_fn(|d| f[d] + c * (f[d] - m[d])));
+            let meshes = format!("{}, {} and {} tetrahedra", sizes[n - 3], sizes[n - 2], sizes[n - 1]);
+            (field.collect::<Vec<Point>>(), &sizes[n - 3..], format!("Richardson extrapolation of T10 on {meshes} (h ∝ cells^-1/3), order {p:.2}, at each probe"))
+        }
+        None => (t10[n - 1].clone(), &sizes[n - 1..], format!("T10 on the finest phantom ({} tetrahedra; no monotone convergence of order ≥ 1 on the three finest: no extrapolation)", sizes[n - 1])),
+    };
+    let scale = rms(&reference);
+    let source = format!("{how}; RMS displacement at {} probes 5 mm or more inside", probe_points.len());
+    for (e, tets, at, dofs, ms) in solved {
+        let diff: Vec<Point> = at.iter().zip(&reference).map(|(a, r)| mesh::sub(*a, *r)).collect();
+        points.push(ConvergencePoint {
+            problem: problem.clone(),
+            element: e.label(),
+            mesh: format!("{tets} tets"),
+            dofs,
+            ms,
+            value: rms(&at),
+            error: rms(&diff) / scale,
+            in_reference: e == ELEMENTS[2] && entering.contains(&tets),
+        });
+    }
+    Ok(Reference { problem, value: scale, source })
+}
+
+/// The cheapest solve (not entering the reference) within 1 % and within 5 % on each problem.
+fn cheapest(problems: &[String], points: &[ConvergencePoint]) -> Vec<Cheapest> {
+    let mut cheapest = Vec::new();
+    for p in problems {
+        for tolerance in [0.01, 0.05] {
+            let choice = points
+                .iter()
+                .filter(|c| &c.problem == p && c.error <= tolerance && !c.in_reference)
+                .min_by(|a, b| a.ms.total_cmp(&b.ms))
+                .cloned();
+            cheapest.push(Cheapest { problem: p.clone(), tolerance, choice });
+        }
+    }
+    cheapest
+}
+
+/// The error plots of the cantilever at ν = 0.49 and of the phantom, against the dofs and against
+/// the time; returns their file names.
+fn plot_studies(dir: &Path, problems: &[String], points: &[ConvergencePoint]) -> Result<Vec<String>> {
+    let mut figures = Vec::new();
+    for (file, p) in [("cantilever_049.png", &problems[1]), ("phantom.png", &problems[3])] {
+        for (suffix, x_label, x) in [
+            (
+                "",
+                "degrees of freedom (log10)",
+                (|c: &ConvergencePoint| (c.dofs as f64).log10()) as fn(&ConvergencePoint) -> f64,
+            ),
+            ("_time", "setup and solve time, ms (log10)", |c: &ConvergencePoint| c.ms.log10()),
+        ] {
+            let name = file.replace(".png", &format!("{suffix}.png"));
+            plot_errors(&dir.join(&name), p, x_label, x, points)?;
+            figures.push(name);
+        }
+    }
+    Ok(figures)
+}
+
+/// The rows: the cheapest solve within each tolerance, and a table of errors per problem.
+fn rows(cheapest: &[Cheapest], points: &[ConvergencePoint]) -> Vec<Row> {
+    let mut rows = Vec::new();
+    for c in cheapest {
+        let ours = match &c.choice {
+            Some(p) => {
+                format!("{} ({}, {} dofs, {:.0} ms, error {:.2} %)", p.element, p.mesh, p.dofs, p.ms, 100.0 * p.error)
+            }
+            None => "none of the meshes".into(),
+        };
+        rows.push(
+            Row::new(format!("cheapest within {:.0} %", 100.0 * c.tolerance), ours, "").of("problem", &c.problem),
+        );
+    }
+    // A table of errors per problem: a line per element, a column per mesh.
+    for p in points {
+        rows.push(
+            Row::new(
+                &p.mesh,
+                format!(
+                    "{:.2} % ({} dofs, {:.0} ms){}",
+                    100.0 * p.error,
+                    p.dofs,
+                    p.ms,
+                    if p.in_reference { ", enters the reference" } else { "" }
+                ),
+                "",
+            )
+            .of(format!("{}: error", p.problem), &p.element),
+        );
+    }
+    rows
 }
 
 /// The relative error (%) of every element on `problem` against `x` of each solve, one line per element.

@@ -12,6 +12,7 @@ use anyhow::{Context, Result};
 use fem::{Formulation, Law, Material};
 use learn::Model;
 use mesh::stats::{max, mean, median};
+use register::{NetworkDeformer, Organ};
 use scenario::registration::{MethodKind, MethodSpec};
 use scenario::CaseScenario;
 use serde::Serialize;
@@ -224,28 +225,102 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
     // The U-Net the truth's surface motion is fed to (the diagnostic row).
     let oracle = networks.iter().find(|n| n.model.method() == learn::Method::UNet).map(network_model).transpose()?;
     let methods: Vec<String> = case_methods(&base, &networks)?.into_iter().map(|m| m.name).collect();
-    let mut outcomes: Vec<Vec<Outcome>> = vec![Vec::new(); methods.len()];
-    let mut streams: Vec<Vec<StreamOutcome>> = vec![Vec::new(); methods.len()];
-    let mut motion = Vec::new();
-    // The network fed the truth's surface motion: TRE mean and max (mm) per case.
-    let mut from_truth = Vec::new();
-    let mut rows = Vec::new();
-    // The table of the cases registered as streams: a line per case, a column per method.
-    let case_as_stream = format!(
-        "case, as a stream of {STREAM_FRAMES} frames: TRE at the peak mean / max, TRE over the frames, time per \
-         frame (median)"
-    );
+    let mut cases = Cases::new(methods.len());
     for case in &CASES {
+        cases.register(case, &base, &networks, &methods, oracle.as_ref(), runs, progress)?;
+    }
+    let mut summary =
+        vec![Row::new(FROM_REST, fmt(mean(&cases.motion), 2, "mm"), "").of("registration", "no deformation")];
+    let means = from_rest_rows(&methods, &cases.outcomes, &mut summary);
+    let stream_means = stream_rows(&methods, &cases.streams, &mut summary);
+    if !cases.from_truth.is_empty() {
+        let (tre, largest): (Vec<f64>, Vec<f64>) = cases.from_truth.iter().copied().unzip();
+        summary.push(
+            Row::new(FROM_REST, format!("{} ({})", fmt(mean(&tre), 2, "mm"), fmt(max(&largest), 1, "mm")), "").of(
+                "registration",
+                "U-Net fed the truth's motion of its input nodes, no cloud (the network's error alone, not a method)",
+            ),
+        );
+    }
+    summary.extend(std::mem::take(&mut cases.rows));
+    let headlines = headlines(&methods, &means, &stream_means);
+    for (path, name) in [(SHIPPED_MODEL, "U-Net"), (SHIPPED_ROM, "ROM")] {
+        if !Path::new(path).exists() {
+            summary.push(Row::new(name, format!("skipped: {path} not found (run from the repository)"), ""));
+        }
+    }
+    let notes = notes(&base, runs)?;
+    let mut values = serde_json::Map::new();
+    values.insert("cases".into(), serde_json::to_value(CASES.iter().map(|c| c.label).collect::<Vec<_>>())?);
+    values.insert("no_deformation_tre_mm".into(), serde_json::to_value(&cases.motion)?);
+    values.insert("network_from_truth_tre_mm".into(), serde_json::to_value(&cases.from_truth)?);
+    for ((method, outcomes), stream) in methods.iter().zip(&cases.outcomes).zip(&cases.streams) {
+        values.insert(method.clone(), serde_json::to_value(outcomes)?);
+        values.insert(format!("{method}, stream"), serde_json::to_value(stream)?);
+    }
+    Ok(ExperimentResult {
+        name: Name::HeldOut,
+        size,
+        seconds: 0.0,
+        headlines,
+        rows: summary,
+        figures: Vec::new(),
+        page_figures: Vec::new(),
+        notes,
+        values,
+    })
+}
+
+/// What the cases gave, as they are registered.
+struct Cases {
+    /// Per method, its outcome from rest on each case.
+    outcomes: Vec<Vec<Outcome>>,
+    /// Per method, its outcome on each case as a stream.
+    streams: Vec<Vec<StreamOutcome>>,
+    /// The markers' mean motion in each case (mm): the TRE of not deforming.
+    motion: Vec<f64>,
+    /// The network fed the truth's surface motion: TRE mean and max (mm) per case.
+    from_truth: Vec<(f64, f64)>,
+    /// The tables of the cases: from rest, and as streams (a line per case, a column per method).
+    rows: Vec<Row>,
+}
+
+impl Cases {
+    /// No case yet, for `methods` methods.
+    fn new(methods: usize) -> Cases {
+        Cases {
+            outcomes: vec![Vec::new(); methods],
+            streams: vec![Vec::new(); methods],
+            motion: Vec::new(),
+            from_truth: Vec::new(),
+            rows: Vec::new(),
+        }
+    }
+
+    /// Simulates `case` (the `base` scenario under its load) and registers it with every method
+    /// (named `methods`), `runs` times from rest and once as a stream; with an `oracle`, feeds the
+    /// truth's surface motion to it too.
+    #[allow(clippy::too_many_arguments)]
+    fn register(
+        &mut self,
+        case: &CaseLoad,
+        base: &CaseScenario,
+        networks: &[Network],
+        methods: &[String],
+        oracle: Option<&(Organ, NetworkDeformer)>,
+        runs: usize,
+        progress: Progress,
+    ) -> Result<()> {
         progress(&format!("simulating the case {}", case.label));
-        let scenario = case.apply(&base);
+        let scenario = case.apply(base);
         let synthetic = synthetic_case(&scenario)?;
         let moved = mean(&register::target_errors(&synthetic.targets, &synthetic.peak().truth)) * 1e3;
-        motion.push(moved);
+        self.motion.push(moved);
         let mut here = vec![Outcome::default(); methods.len()];
         for run in 0..runs {
             progress(&format!("registering the case {} ({}/{runs})", case.label, run + 1));
             // Fresh methods per run: each registers from rest, with nothing kept from the last.
-            let compared = compare(&synthetic, case_methods(&scenario, &networks)?, &scenario.registration);
+            let compared = compare(&synthetic, case_methods(&scenario, networks)?, &scenario.registration);
             for (outcome, c) in here.iter_mut().zip(&compared) {
                 match &c.result {
                     Ok(r) => {
@@ -268,30 +343,40 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
                 }
                 (_, _, e) => format!("failed ({})", e.as_deref().unwrap_or("no TRE")),
             };
-            rows.push(Row::new(method, cell, "").of(CASE_FROM_REST, &label));
+            self.rows.push(Row::new(method, cell, "").of(CASE_FROM_REST, &label));
         }
-        if let Some((organ, deformer)) = &oracle {
+        if let Some((organ, deformer)) = oracle {
             let errors = network_from_truth(&synthetic, organ, deformer)?;
             let (m, x) = (mean(&errors) * 1e3, max(&errors) * 1e3);
             let cell = format!("{} / {}", fmt(m, 2, "mm"), fmt(x, 1, "mm"));
-            rows.push(Row::new("U-Net fed the truth's surface motion", cell, "").of(CASE_FROM_REST, &label));
-            from_truth.push((m, x));
+            self.rows.push(Row::new("U-Net fed the truth's surface motion", cell, "").of(CASE_FROM_REST, &label));
+            self.from_truth.push((m, x));
         }
-        for (all, o) in outcomes.iter_mut().zip(here) {
+        for (all, o) in self.outcomes.iter_mut().zip(here) {
             all.push(o);
         }
         progress(&format!("simulating and registering the case {} as a stream ({STREAM_FRAMES} frames)", case.label));
-        let here = register_stream(&scenario, &networks)?;
+        let here = register_stream(&scenario, networks)?;
+        // The table of the cases registered as streams: a line per case, a column per method.
+        let case_as_stream = format!(
+            "case, as a stream of {STREAM_FRAMES} frames: TRE at the peak mean / max, TRE over the frames, time per \
+             frame (median)"
+        );
         for (method, o) in methods.iter().zip(&here) {
-            rows.push(Row::new(method, o.cell(), "").of(&case_as_stream, case.label));
+            self.rows.push(Row::new(method, o.cell(), "").of(&case_as_stream, case.label));
         }
-        for (all, o) in streams.iter_mut().zip(here) {
+        for (all, o) in self.streams.iter_mut().zip(here) {
             all.push(o);
         }
+        Ok(())
     }
-    let mut summary = vec![Row::new(FROM_REST, fmt(mean(&motion), 2, "mm"), "").of("registration", "no deformation")];
+}
+
+/// A summary row per method of its registrations from rest over the cases, pushed on `summary`;
+/// returns each method's mean TRE (NaN where it failed on a case).
+fn from_rest_rows(methods: &[String], outcomes: &[Vec<Outcome>], summary: &mut Vec<Row>) -> Vec<f64> {
     let mut means = Vec::new();
-    for (method, cases) in methods.iter().zip(&outcomes) {
+    for (method, cases) in methods.iter().zip(outcomes) {
         let ok: Vec<&Outcome> = cases.iter().filter(|o| o.error.is_none() && o.tre_mean_mm.is_some()).collect();
         let tre: Vec<f64> = ok.iter().filter_map(|o| o.tre_mean_mm).collect();
         let largest: Vec<f64> = ok.iter().filter_map(|o| o.tre_max_mm).collect();
@@ -314,12 +399,18 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
             .of("registration", method),
         );
     }
+    means
+}
+
+/// A summary row per method of its registrations as streams over the cases, pushed on
+/// `summary`; returns each method's mean TRE at the peak (NaN where it failed on a case).
+fn stream_rows(methods: &[String], streams: &[Vec<StreamOutcome>], summary: &mut Vec<Row>) -> Vec<f64> {
     let as_streams = format!(
         "each case as a stream of {STREAM_FRAMES} frames: TRE at the peak mean over the cases (largest); TRE over \
          all frames; time per frame (median over the cases)"
     );
     let mut stream_means = Vec::new();
-    for (method, cases) in methods.iter().zip(&streams) {
+    for (method, cases) in methods.iter().zip(streams) {
         let ok: Vec<&StreamOutcome> =
             cases.iter().filter(|o| o.error.is_none() && o.peak_tre_mean_mm.is_some()).collect();
         let peak: Vec<f64> = ok.iter().filter_map(|o| o.peak_tre_mean_mm).collect();
@@ -345,16 +436,12 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
             .of("registration", method),
         );
     }
-    if !from_truth.is_empty() {
-        let (tre, largest): (Vec<f64>, Vec<f64>) = from_truth.iter().copied().unzip();
-        summary.push(
-            Row::new(FROM_REST, format!("{} ({})", fmt(mean(&tre), 2, "mm"), fmt(max(&largest), 1, "mm")), "").of(
-                "registration",
-                "U-Net fed the truth's motion of its input nodes, no cloud (the network's error alone, not a method)",
-            ),
-        );
-    }
-    summary.extend(rows);
+    stream_means
+}
+
+/// Each learned model's TRE against the co-rotational FEM's (the first method), from rest and as
+/// streams.
+fn headlines(methods: &[String], means: &[f64], stream_means: &[f64]) -> Vec<Headline> {
     let mut headlines = Vec::new();
     for learned in ["U-Net", "ROM"] {
         let (Some(k), Some(&fem), Some(&fem_stream)) =
@@ -381,13 +468,14 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
             fem_stream,
         ));
     }
-    for (path, name) in [(SHIPPED_MODEL, "U-Net"), (SHIPPED_ROM, "ROM")] {
-        if !Path::new(path).exists() {
-            summary.push(Row::new(name, format!("skipped: {path} not found (run from the repository)"), ""));
-        }
-    }
-    let fem = corotational(&base).and_then(|m| m.material).context("the held-out cases have no co-rotational FEM")?;
-    let notes = vec![
+    headlines
+}
+
+/// The notes: the truth, the methods, the streams and the diagnostic row (`runs`: the runs per
+/// frame time).
+fn notes(base: &CaseScenario, runs: usize) -> Result<Vec<String>> {
+    let fem = corotational(base).and_then(|m| m.material).context("the held-out cases have no co-rotational FEM")?;
+    Ok(vec![
         format!(
             "Truth: the built-in registration case's phantom of {} (quadratic tetrahedra), {}, \
              E = {} kPa, ν = {}: another mesh, element, law and stiffness than every model; fixed between the \
@@ -413,7 +501,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
             fem.poisson,
             register::shape::SHAPE_ITERATIONS,
             register::shape::SHAPE_POINTS,
-            network_options(&base)?.iterations
+            network_options(base)?.iterations
         ),
         format!(
             "Streams: each case again as a press and release of {STREAM_FRAMES} frames, as a navigation system \
@@ -423,8 +511,8 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
              U-Net and the membrane loop {}, the shape fit {}, its prior the last frame's posterior). TRE at the peak frame, and over all frames; time: the median over the stream's frames, one \
              run.",
             STREAM_FRAMES + 1,
-            corotational(&base).and_then(|m| m.warm_iterations).unwrap_or(base.registration.warm_iterations),
-            network_options(&base)?.warm_iterations,
+            corotational(base).and_then(|m| m.warm_iterations).unwrap_or(base.registration.warm_iterations),
+            network_options(base)?.warm_iterations,
             register::shape::SHAPE_WARM_ITERATIONS,
         ),
         "Diagnostic, not a method: the network fed the truth's own motion of its input nodes (each node takes \
@@ -432,24 +520,5 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
          fitted without error. What it leaves is the network's own error; the rest of the registered U-Net's is \
          the cloud's and the surface fit's."
             .into(),
-    ];
-    let mut values = serde_json::Map::new();
-    values.insert("cases".into(), serde_json::to_value(CASES.iter().map(|c| c.label).collect::<Vec<_>>())?);
-    values.insert("no_deformation_tre_mm".into(), serde_json::to_value(&motion)?);
-    values.insert("network_from_truth_tre_mm".into(), serde_json::to_value(&from_truth)?);
-    for ((method, cases), stream) in methods.iter().zip(&outcomes).zip(&streams) {
-        values.insert(method.clone(), serde_json::to_value(cases)?);
-        values.insert(format!("{method}, stream"), serde_json::to_value(stream)?);
-    }
-    Ok(ExperimentResult {
-        name: Name::HeldOut,
-        size,
-        seconds: 0.0,
-        headlines,
-        rows: summary,
-        figures: Vec::new(),
-        page_figures: Vec::new(),
-        notes,
-        values,
-    })
+    ])
 }

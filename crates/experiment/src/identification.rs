@@ -157,6 +157,65 @@ fn values(report: &Report) -> Result<serde_json::Map<String, serde_json::Value>>
     Ok(values)
 }
 
+/// The figures of one filter run of the Young's modulus experiment (`reference_mesh`: the
+/// reference's mesh in words), as rows of that run.
+fn filter_run_rows(run: &str, report: &Report, reference_mesh: &str) -> Result<Vec<Row>> {
+    let y = report.young.as_ref().context("the Young scenario reported no Young's modulus")?;
+    let truth = y.truth.context("the reference run's modulus is the truth")?;
+    let mut figures = vec![
+        Row::new("model / reference", format!("{} nodes / {reference_mesh}", report.nodes), ""),
+        Row::new("estimated E (mean ± σ)", format!("{:.0} ± {:.0} Pa", y.mean, y.std), "4,992 ± 15 Pa"),
+        Row::new(
+            "error against the truth",
+            fmt(100.0 * (y.mean - truth) / truth, 2, "%"),
+            "−0.16 % (from 4,992 ± 15 Pa)",
+        ),
+        Row::new("|error| / σ", format!("{:.1}", (y.mean - truth).abs() / y.std), "0.5 (from 4,992 ± 15 Pa)"),
+    ];
+    if let (Some(noise), Some(misfit)) = (y.noise_std, y.misfit) {
+        figures.push(Row::new("noise-only σ, misfit χ²/ν", format!("{noise:.0} Pa, {misfit:.3}"), ""));
+    }
+    figures.extend([
+        Row::new(
+            "within 1 % from iteration",
+            y.within_1_percent_from_iteration.map_or("never".into(), |k| k.to_string()),
+            "",
+        ),
+        Row::new(
+            "filter time",
+            format!("{} for {} iterations", fmt(report.filter_seconds, 1, "s"), report.iterations),
+            "500 s for 631 iterations",
+        ),
+    ]);
+    Ok(figures.into_iter().map(|row| row.of("filter run", run)).collect())
+}
+
+/// The headlines of the Young's modulus experiment: the error and the time of the scenario's run
+/// (`reference_mesh`: its reference's mesh in words).
+fn young_headlines(report: &Report, reference_mesh: &str) -> Result<Vec<Headline>> {
+    let y = report.young.as_ref().context("the Young scenario reported no Young's modulus")?;
+    let truth = y.truth.context("the reference run's modulus is the truth")?;
+    Ok(vec![
+        Headline::lower_is_better(
+            format!(
+                "ROUKF Young's modulus: error of the estimate ({}-node model, {reference_mesh} reference)",
+                report.nodes
+            ),
+            100.0 * (y.mean - truth).abs() / truth,
+            0.16,
+            2,
+            "%",
+        ),
+        Headline::lower_is_better(
+            format!("ROUKF Young's modulus: filter time ({} iterations; published 631)", report.iterations),
+            report.filter_seconds,
+            500.0,
+            1,
+            "s",
+        ),
+    ])
+}
+
 /// The ROUKF Young's modulus experiment (quick: 200 filter iterations; paper: the scenario's 600).
 pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let iterations = match size {
@@ -199,56 +258,9 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
         ("T10 model and reference, systematic discrepancy", quadratic_model_honest, &quadratic_reference_mesh),
     ];
     for (run, report, reference_mesh) in runs {
-        let y = report.young.as_ref().context("the Young scenario reported no Young's modulus")?;
-        let truth = y.truth.context("the reference run's modulus is the truth")?;
-        let mut figures = vec![
-            Row::new("model / reference", format!("{} nodes / {reference_mesh}", report.nodes), ""),
-            Row::new("estimated E (mean ± σ)", format!("{:.0} ± {:.0} Pa", y.mean, y.std), "4,992 ± 15 Pa"),
-            Row::new(
-                "error against the truth",
-                fmt(100.0 * (y.mean - truth) / truth, 2, "%"),
-                "−0.16 % (from 4,992 ± 15 Pa)",
-            ),
-            Row::new("|error| / σ", format!("{:.1}", (y.mean - truth).abs() / y.std), "0.5 (from 4,992 ± 15 Pa)"),
-        ];
-        if let (Some(noise), Some(misfit)) = (y.noise_std, y.misfit) {
-            figures.push(Row::new("noise-only σ, misfit χ²/ν", format!("{noise:.0} Pa, {misfit:.3}"), ""));
-        }
-        figures.extend([
-            Row::new(
-                "within 1 % from iteration",
-                y.within_1_percent_from_iteration.map_or("never".into(), |k| k.to_string()),
-                "",
-            ),
-            Row::new(
-                "filter time",
-                format!("{} for {} iterations", fmt(report.filter_seconds, 1, "s"), report.iterations),
-                "500 s for 631 iterations",
-            ),
-        ]);
-        rows.extend(figures.into_iter().map(|row| row.of("filter run", run)));
+        rows.extend(filter_run_rows(run, report, reference_mesh)?);
     }
-    let y = report.young.as_ref().context("the Young scenario reported no Young's modulus")?;
-    let truth = y.truth.context("the reference run's modulus is the truth")?;
-    let headlines = vec![
-        Headline::lower_is_better(
-            format!(
-                "ROUKF Young's modulus: error of the estimate ({}-node model, {reference_mesh} reference)",
-                report.nodes
-            ),
-            100.0 * (y.mean - truth).abs() / truth,
-            0.16,
-            2,
-            "%",
-        ),
-        Headline::lower_is_better(
-            format!("ROUKF Young's modulus: filter time ({} iterations; published 631)", report.iterations),
-            report.filter_seconds,
-            500.0,
-            1,
-            "s",
-        ),
-    ];
+    let headlines = young_headlines(report, &reference_mesh)?;
     Ok(ExperimentResult {
         headlines,
         name: Name::Young,

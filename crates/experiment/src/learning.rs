@@ -312,6 +312,28 @@ fn split_note(t: &Trained, data: &Generated) -> String {
     )
 }
 
+/// The headlines of the liver forces experiment: the U-Net's test error (`s`), the reduced-order
+/// model's (`r`), and the time of one prediction (`prediction`, s).
+fn liver_forces_headlines(s: &learn::ErrorStats, r: &learn::ErrorStats, prediction: f64) -> Vec<Headline> {
+    vec![
+        Headline::lower_is_better("liver, forces → displacement: test ē", s.mean * 1e3, 0.0694, 3, "mm"),
+        Headline::lower_is_better(
+            "liver, forces → displacement: test ē, reduced-order model with the linear-elastic prior",
+            r.mean * 1e3,
+            0.0694,
+            3,
+            "mm",
+        ),
+        Headline::lower_is_better(
+            "liver, forces → displacement: prediction of one sample (ours: 2 CPU cores; published: GPU)",
+            prediction * 1e3,
+            3.47,
+            2,
+            "ms",
+        ),
+    ]
+}
+
 /// The liver forces experiment (quick: 300 samples, 600 steps of an 8-channel network; paper: the
 /// published 2,000 samples, 100,000 steps (the published count) of a 16-channel network, about
 /// 2.5 hours on 2 cores).
@@ -388,23 +410,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
             "",
         ),
     ];
-    let headlines = vec![
-        Headline::lower_is_better("liver, forces → displacement: test ē", s.mean * 1e3, 0.0694, 3, "mm"),
-        Headline::lower_is_better(
-            "liver, forces → displacement: test ē, reduced-order model with the linear-elastic prior",
-            r.mean * 1e3,
-            0.0694,
-            3,
-            "mm",
-        ),
-        Headline::lower_is_better(
-            "liver, forces → displacement: prediction of one sample (ours: 2 CPU cores; published: GPU)",
-            prediction * 1e3,
-            3.47,
-            2,
-            "ms",
-        ),
-    ];
+    let headlines = liver_forces_headlines(s, r, prediction);
     let mut values = serde_json::Map::new();
     values.insert("test".into(), serde_json::to_value(report.stats)?);
     values.insert("prediction_seconds".into(), prediction.into());

@@ -77,21 +77,8 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
         validate_every: VALIDATE_EVERY,
         ..Recipe::new(iterations, VALIDATION, samples - TRAIN - VALIDATION)
     };
-    let (bc4_dir, target_dir) = (dir.join("bc4"), dir.join("target"));
-    let bc4 = dataset(&bc4_dir, "beam_bc4", samples, progress)?;
-    let target = dataset(&target_dir, "beam_target", samples, progress)?;
-
-    progress("BC4: pre-training");
-    let pre = train(&bc4.dataset, &bc4_dir, &recipe, progress)?;
-    let pre_path = bc4_dir.join(model_dir(&recipe)).join(learn::training::train::MODEL_FILE);
-    // The path is part of the fine-tuning run's identity: the same however `dir` was spelled.
-    let pre_path =
-        std::fs::canonicalize(&pre_path).with_context(|| format!("finding the pre-trained {}", pre_path.display()))?;
-    progress(&format!("target: from scratch on the training split, from scratch on {FEW} samples, fine-tuned on them"));
-    let full = train(&target.dataset, &target_dir, &recipe, progress)?;
-    let few = Recipe { train_samples: Some(FEW), ..recipe.clone() };
-    let scratch = train(&target.dataset, &target_dir, &few, progress)?;
-    let tuned = train(&target.dataset, &target_dir, &Recipe { fine_tune: Some(pre_path), ..few }, progress)?;
+    let runs = Runs::train(dir, samples, &recipe, progress)?;
+    let Runs { pre, full, scratch, tuned } = &runs;
 
     // The target runs share their validation and test samples (the 100-sample runs use part of the training split).
     let clean = Corruption::default();
@@ -116,29 +103,16 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
         })
         .collect();
 
-    let [train_n, validation_n, test_n] = full.split;
     let few_n = scratch.split[0];
-    let full_label = format!("scratch, {train_n} samples");
-    let scratch_label = format!("scratch, {few_n} samples");
-    let tuned_label = format!("pre-trained on BC4, fine-tuned on the {few_n}");
-    let mm_points = |curve: &[(usize, f64)]| curve.iter().map(|&(step, e)| (step as f64, e * 1e3)).collect();
-    // In the order of the histogram, so that each strategy has the same colour in both figures.
-    let series = [
-        (full_label.clone(), mm_points(&validation_curve(&full.curve))),
-        (scratch_label.clone(), mm_points(&scratch_curve)),
-        (tuned_label.clone(), mm_points(&tuned_curve)),
-    ]
-    .map(|(name, points)| plot::Series { name, points, band: None });
-    let spec = plot::PlotSpec {
-        title: "Beam transfer: validation error on the target against training step".into(),
-        x_label: "training step (0: the pre-trained network before fine-tuning)".into(),
-        y_label: format!("validation ē over {validation_n} samples (mm)"),
-        log_y: false,
-    };
-    plot::line_plot(&dir.join("curves.png"), &spec, &series)?;
-    error_histogram(
-        &dir.join("errors.png"),
-        "Beam transfer: target test-sample errors by strategy",
+    let [full_label, scratch_label, tuned_label] = runs.labels();
+    plot_strategies(
+        dir,
+        [
+            (full_label.as_str(), &validation_curve(&full.curve)),
+            (scratch_label.as_str(), &scratch_curve),
+            (tuned_label.as_str(), &tuned_curve),
+        ],
+        full.split[1],
         &[
             (full_label.as_str(), &full_test),
             (scratch_label.as_str(), &scratch_test),
@@ -165,47 +139,7 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
         );
     }
     rows.push(Row::new("largest displacement in the target test set", fmt(max_displacement(test) * 1e3, 1, "mm"), ""));
-
-    let best = |t: &Trained| t.best_validation_step().map_or("—".to_string(), |step| step.to_string());
-    let timed: Vec<f64> = [&pre, &full, &scratch, &tuned].iter().map(|t| t.step_seconds).filter(|&s| s > 0.0).collect();
-    let step_time = if timed.is_empty() {
-        String::new()
-    } else {
-        format!("; {:.3} s per training step", timed.iter().sum::<f64>() / timed.len() as f64)
-    };
-    let notes = vec![
-        format!(
-            "BC4 and target: {samples} samples each, split by generation index into {train_n} training, {validation_n} \
-             validation (checkpoint selection only) and {test_n} test samples; the {few_n}-sample runs use the first \
-             {few_n} target training samples. Every figure above is on the target's {test_n} test samples (BC4's own \
-             row: BC4's), which played no part in training or selection."
-        ),
-        format!(
-            "Each run: {iterations} steps, {} channels, Adam from {:e} falling to {:e} along a half cosine, validated \
-             every {VALIDATE_EVERY} steps; best validation at step {} (pre-training), {} ({full_label}), {} \
-             ({scratch_label}), {} (fine-tuned){step_time}.",
-            recipe.channels,
-            recipe.learning_rate,
-            recipe.final_learning_rate,
-            best(&pre),
-            best(&full),
-            best(&scratch),
-            best(&tuned)
-        ),
-        format!(
-            "Speed-up: the first validation step at which each {few_n}-sample run's validation ē (the curves of \
-             curves.png, {validation_n} target validation samples, every {VALIDATE_EVERY} steps, so each step is known \
-             to within {VALIDATE_EVERY}) falls to the threshold; step 0 of fine-tuning is the pre-trained network \
-             ({} on the validation samples). The ratio is the scratch run's step over the fine-tuned run's; each run \
-             has one seed and noisy curves, so the steps are indicative.",
-            fmt(pre_validation * 1e3, 3, "mm")
-        ),
-        "Beam 4 × 1 × 1 m (20×5×5 H8), SVK, Y = 300 Pa, ν = 0.4, a downward force of 0–0.3 N on a patch of radius 0.5 m on the \
-         top face; input: the top-face displacement. BC4: each sample fixes one of four adjacent 1 m cuboids of the \
-         bottom face; target: the cuboid x ∈ [1.5, 2.5] m. Not run: 16,128 samples from scratch (published 0.45 mm), \
-         fine-tuning on 1,209 (0.52 mm), BC1 and BC8 pre-training."
-            .into(),
-    ];
+    let notes = runs.notes(samples, iterations, &recipe, pre_validation);
 
     let headlines = vec![
         Headline::lower_is_better(
@@ -246,6 +180,126 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
         notes,
         values,
     })
+}
+
+/// The four training runs: pre-training on BC4, and on the target from scratch on its training
+/// split, from scratch on [`FEW`] samples, and fine-tuned from the pre-trained network on them.
+struct Runs {
+    pre: Trained,
+    full: Trained,
+    scratch: Trained,
+    tuned: Trained,
+}
+
+impl Runs {
+    /// Generates the BC4 and the target datasets of `samples` samples each in `dir` and trains
+    /// the four runs there.
+    fn train(dir: &Path, samples: usize, recipe: &Recipe, progress: Progress) -> Result<Runs> {
+        let (bc4_dir, target_dir) = (dir.join("bc4"), dir.join("target"));
+        let bc4 = dataset(&bc4_dir, "beam_bc4", samples, progress)?;
+        let target = dataset(&target_dir, "beam_target", samples, progress)?;
+
+        progress("BC4: pre-training");
+        let pre = train(&bc4.dataset, &bc4_dir, recipe, progress)?;
+        let pre_path = bc4_dir.join(model_dir(recipe)).join(learn::training::train::MODEL_FILE);
+        // The path is part of the fine-tuning run's identity: the same however `dir` was spelled.
+        let pre_path = std::fs::canonicalize(&pre_path)
+            .with_context(|| format!("finding the pre-trained {}", pre_path.display()))?;
+        progress(&format!(
+            "target: from scratch on the training split, from scratch on {FEW} samples, fine-tuned on them"
+        ));
+        let full = train(&target.dataset, &target_dir, recipe, progress)?;
+        let few = Recipe { train_samples: Some(FEW), ..recipe.clone() };
+        let scratch = train(&target.dataset, &target_dir, &few, progress)?;
+        let tuned = train(&target.dataset, &target_dir, &Recipe { fine_tune: Some(pre_path), ..few }, progress)?;
+        Ok(Runs { pre, full, scratch, tuned })
+    }
+
+    /// The names of the target strategies: from scratch on the training split, from scratch on
+    /// the few samples, fine-tuned on them.
+    fn labels(&self) -> [String; 3] {
+        let (train_n, few_n) = (self.full.split[0], self.scratch.split[0]);
+        [
+            format!("scratch, {train_n} samples"),
+            format!("scratch, {few_n} samples"),
+            format!("pre-trained on BC4, fine-tuned on the {few_n}"),
+        ]
+    }
+
+    /// The notes: the data, the runs, the speed-up (`pre_validation`: the pre-trained network's
+    /// validation ē on the target, m) and the beam.
+    fn notes(&self, samples: usize, iterations: usize, recipe: &Recipe, pre_validation: f64) -> Vec<String> {
+        let [train_n, validation_n, test_n] = self.full.split;
+        let few_n = self.scratch.split[0];
+        let [full_label, scratch_label, _] = self.labels();
+        let best = |t: &Trained| t.best_validation_step().map_or("—".to_string(), |step| step.to_string());
+        let timed: Vec<f64> = [&self.pre, &self.full, &self.scratch, &self.tuned]
+            .iter()
+            .map(|t| t.step_seconds)
+            .filter(|&s| s > 0.0)
+            .collect();
+        let step_time = if timed.is_empty() {
+            String::new()
+        } else {
+            format!("; {:.3} s per training step", timed.iter().sum::<f64>() / timed.len() as f64)
+        };
+        vec![
+            format!(
+                "BC4 and target: {samples} samples each, split by generation index into {train_n} training, {validation_n} \
+                 validation (checkpoint selection only) and {test_n} test samples; the {few_n}-sample runs use the first \
+                 {few_n} target training samples. Every figure above is on the target's {test_n} test samples (BC4's own \
+                 row: BC4's), which played no part in training or selection."
+            ),
+            format!(
+                "Each run: {iterations} steps, {} channels, Adam from {:e} falling to {:e} along a half cosine, validated \
+                 every {VALIDATE_EVERY} steps; best validation at step {} (pre-training), {} ({full_label}), {} \
+                 ({scratch_label}), {} (fine-tuned){step_time}.",
+                recipe.channels,
+                recipe.learning_rate,
+                recipe.final_learning_rate,
+                best(&self.pre),
+                best(&self.full),
+                best(&self.scratch),
+                best(&self.tuned)
+            ),
+            format!(
+                "Speed-up: the first validation step at which each {few_n}-sample run's validation ē (the curves of \
+                 curves.png, {validation_n} target validation samples, every {VALIDATE_EVERY} steps, so each step is known \
+                 to within {VALIDATE_EVERY}) falls to the threshold; step 0 of fine-tuning is the pre-trained network \
+                 ({} on the validation samples). The ratio is the scratch run's step over the fine-tuned run's; each run \
+                 has one seed and noisy curves, so the steps are indicative.",
+                fmt(pre_validation * 1e3, 3, "mm")
+            ),
+            "Beam 4 × 1 × 1 m (20×5×5 H8), SVK, Y = 300 Pa, ν = 0.4, a downward force of 0–0.3 N on a patch of radius 0.5 m on the \
+             top face; input: the top-face displacement. BC4: each sample fixes one of four adjacent 1 m cuboids of the \
+             bottom face; target: the cuboid x ∈ [1.5, 2.5] m. Not run: 16,128 samples from scratch (published 0.45 mm), \
+             fine-tuning on 1,209 (0.52 mm), BC1 and BC8 pre-training."
+                .into(),
+        ]
+    }
+}
+
+/// `curves.png`: the validation curve of each target strategy (`validation_n` samples);
+/// `errors.png`: the histogram of the test errors of each strategy and of the pre-trained network.
+fn plot_strategies(
+    dir: &Path,
+    curves: [(&str, &[(usize, f64)]); 3],
+    validation_n: usize,
+    reports: &[(&str, &EvalReport)],
+) -> Result<()> {
+    let mm_points = |curve: &[(usize, f64)]| curve.iter().map(|&(step, e)| (step as f64, e * 1e3)).collect();
+    // In the order of the histogram, so that each strategy has the same colour in both figures.
+    let series =
+        curves.map(|(name, curve)| plot::Series { name: name.to_string(), points: mm_points(curve), band: None });
+    let spec = plot::PlotSpec {
+        title: "Beam transfer: validation error on the target against training step".into(),
+        x_label: "training step (0: the pre-trained network before fine-tuning)".into(),
+        y_label: format!("validation ē over {validation_n} samples (mm)"),
+        log_y: false,
+    };
+    plot::line_plot(&dir.join("curves.png"), &spec, &series)?;
+    error_histogram(&dir.join("errors.png"), "Beam transfer: target test-sample errors by strategy", reports)?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -359,6 +359,63 @@ fn check_finite(geo: &ElementGeometry, patch: usize, f: &[f64]) -> Result<(), Fe
     Ok(())
 }
 
+/// The second derivatives of patch point `p` (of tangent `tangent` = ∂P/∂F at F̄) in the
+/// patch's consistent tangent: D, on its own deformation gradient, and a, coupling it to the
+/// patch's mean m̄ (`sigma_bar`: σ̄).
+fn point_terms(kin: &Kinematics, p: &PatchPoint, tangent: &Tangent, sigma_bar: f64) -> (Tangent, V9) {
+    let (x, dm) = (kin.x(p), &p.dm);
+    let c = p.w / kin.volume;
+    let alpha = p.alpha;
+    let xp = dot(&x, &p.stress);
+    let y = dm.map(|v| v / kin.y_scale(p));
+    let mt_p: V9 = std::array::from_fn(|r| alpha * (p.stress[r] - xp * y[r] / 3.0));
+    // D = w (Mᵀ A M + P̄ : ∂²Φ/∂F²) + σ̄ c ∂²m.
+    let ax = mat_vec(tangent, &x);
+    let xax = dot(&x, &ax);
+    let a2 = alpha * alpha;
+    let mut d: Tangent = std::array::from_fn(|r| {
+        std::array::from_fn(|s| {
+            p.w * a2 * (tangent[r][s] - (ax[r] * y[s] + y[r] * ax[s]) / 3.0 + xax * y[r] * y[s] / 9.0)
+        })
+    });
+    let phi = kin.phi(alpha);
+    // a = w (Mᵀ A φ + P̄ : ∂²Φ/∂F∂m̄).
+    let mut av: V9 = std::array::from_fn(|r| p.w * phi * alpha * (ax[r] - xax * y[r] / 3.0));
+    // The stabilisation: s_q ∂²m_q + κ_s w_q (g′(m_q)² + d_q g″(m_q)) ∂m_q ⊗ ∂m_q in D, and
+    // −κ_s g′(m̄) w_q g′(m_q) ∂m_q in a (s_q ∂²m_q with the finite-strain terms below).
+    let stabilization = kin.stabilization_factor(p);
+    if kin.kappa > 0.0 {
+        let diagonal = kin.kappa * p.w * (kin.g1(p.m).powi(2) + p.deviation * kin.g2(p.m));
+        let coupling = -kin.kappa * kin.g1(kin.mean) * p.w * kin.g1(p.m);
+        for r in 0..9 {
+            for s in 0..9 {
+                d[r][s] += diagonal * dm[r] * dm[s];
+            }
+            av[r] += coupling * dm[r];
+        }
+    }
+    if !kin.linear {
+        let finv = Matrix3::from_fn(|r, c| y[3 * c + r]);
+        let tau = xp; // P̄ : F
+        let jac = p.m;
+        for r in 0..9 {
+            let (i, jj) = (r / 3, r % 3);
+            for s in 0..9 {
+                let (kk, l) = (s / 3, s % 3);
+                let t = finv[(jj, kk)] * finv[(l, i)];
+                // P̄ : ∂²Φ/∂F² = −α/3 (P̄⊗y + y⊗P̄) + α τ/9 y⊗y + α τ/3 T.
+                let g_ff = -alpha / 3.0 * (p.stress[r] * y[s] + y[r] * p.stress[s])
+                    + alpha * tau / 9.0 * y[r] * y[s]
+                    + alpha * tau / 3.0 * t;
+                // ∂²J = J (y⊗y − T).
+                d[r][s] += p.w * g_ff + (sigma_bar * c + stabilization) * jac * (y[r] * y[s] - t);
+            }
+            av[r] += p.w * mt_p[r] / (3.0 * kin.mean);
+        }
+    }
+    (d, av)
+}
+
 /// Internal force (`f`, 3 per patch node) and consistent tangent `k` (row-major, local dof
 /// `3a + i` over the patch's nodes) of patch `patch`.
 pub fn patch_force_tangent(
@@ -400,59 +457,10 @@ pub fn patch_force_tangent(
     let npe = geo.nodes_per_element;
     for (q, p) in points.iter().enumerate() {
         add_point_force(geo, patch, &kin, p, sigma_bar, f);
-        let (x, dm) = (kin.x(p), &p.dm);
-        let c = p.w / kin.volume;
-        let alpha = p.alpha;
-        let xp = dot(&x, &p.stress);
+        let (dm, c) = (&p.dm, p.w / kin.volume);
         let grads = &geo.grads[p.grads..p.grads + npe];
         let local = geo.patches.local_nodes(patch, p.slot);
-        let y = dm.map(|v| v / kin.y_scale(p));
-        let mt_p: V9 = std::array::from_fn(|r| alpha * (p.stress[r] - xp * y[r] / 3.0));
-        // D = w (Mᵀ A M + P̄ : ∂²Φ/∂F²) + σ̄ c ∂²m.
-        let tangent = &tangents[q];
-        let ax = mat_vec(tangent, &x);
-        let xax = dot(&x, &ax);
-        let a2 = alpha * alpha;
-        let mut d: Tangent = std::array::from_fn(|r| {
-            std::array::from_fn(|s| {
-                p.w * a2 * (tangent[r][s] - (ax[r] * y[s] + y[r] * ax[s]) / 3.0 + xax * y[r] * y[s] / 9.0)
-            })
-        });
-        let phi = kin.phi(alpha);
-        // a = w (Mᵀ A φ + P̄ : ∂²Φ/∂F∂m̄).
-        let mut av: V9 = std::array::from_fn(|r| p.w * phi * alpha * (ax[r] - xax * y[r] / 3.0));
-        // The stabilisation: s_q ∂²m_q + κ_s w_q (g′(m_q)² + d_q g″(m_q)) ∂m_q ⊗ ∂m_q in D, and
-        // −κ_s g′(m̄) w_q g′(m_q) ∂m_q in a (s_q ∂²m_q with the finite-strain terms below).
-        let stabilization = kin.stabilization_factor(p);
-        if kin.kappa > 0.0 {
-            let diagonal = kin.kappa * p.w * (kin.g1(p.m).powi(2) + p.deviation * kin.g2(p.m));
-            let coupling = -kin.kappa * kin.g1(kin.mean) * p.w * kin.g1(p.m);
-            for r in 0..9 {
-                for s in 0..9 {
-                    d[r][s] += diagonal * dm[r] * dm[s];
-                }
-                av[r] += coupling * dm[r];
-            }
-        }
-        if !kin.linear {
-            let finv = Matrix3::from_fn(|r, c| y[3 * c + r]);
-            let tau = xp; // P̄ : F
-            let jac = p.m;
-            for r in 0..9 {
-                let (i, jj) = (r / 3, r % 3);
-                for s in 0..9 {
-                    let (kk, l) = (s / 3, s % 3);
-                    let t = finv[(jj, kk)] * finv[(l, i)];
-                    // P̄ : ∂²Φ/∂F² = −α/3 (P̄⊗y + y⊗P̄) + α τ/9 y⊗y + α τ/3 T.
-                    let g_ff = -alpha / 3.0 * (p.stress[r] * y[s] + y[r] * p.stress[s])
-                        + alpha * tau / 9.0 * y[r] * y[s]
-                        + alpha * tau / 3.0 * t;
-                    // ∂²J = J (y⊗y − T).
-                    d[r][s] += p.w * g_ff + (sigma_bar * c + stabilization) * jac * (y[r] * y[s] - t);
-                }
-                av[r] += p.w * mt_p[r] / (3.0 * kin.mean);
-            }
-        }
+        let (d, av) = point_terms(&kin, p, &tangents[q], sigma_bar);
         let bv: V9 = dm.map(|v| c * v);
         for (a, &la) in local.iter().enumerate() {
             let ga = grads[a];

@@ -300,6 +300,8 @@ struct Joint<M: Model> {
 
 /// What one sigma point returns from the prediction: observation and (joint mode) state vector.
 type SigmaOutput = (DVector<f64>, Option<DVector<f64>>);
+/// The sigma points' parameters (reduced space) and their model states.
+type Sampled<S> = (Vec<DVector<f64>>, Vec<S>);
 
 /// Reduced-order unscented Kalman filter over the parameters of a [`Model`] (see the module documentation).
 pub struct Roukf<M: Model> {
@@ -430,86 +432,9 @@ impl<M: Model> Roukf<M> {
         let p = self.sigma.dim();
         let m = self.sigma.count();
         let q = z.len();
-        if available.len() != q {
-            return Err(FilterError::DimensionMismatch {
-                what: "availability mask vs. measurement".into(),
-                expected: q,
-                found: available.len(),
-            });
-        }
-        let mut inv_std = self.inverse_observation_std(q)?;
-        if z.iter().zip(available).any(|(v, &a)| a && !v.is_finite()) {
-            return Err(FilterError::NonFinite { what: "measurement z".into(), iteration: k });
-        }
-        for (w, &a) in inv_std.iter_mut().zip(available) {
-            if !a {
-                *w = 0.0;
-            }
-        }
-
-        // Sampling.
-        let offsets = self
-            .sigma
-            .offsets(&self.u_chol)
-            .ok_or_else(|| FilterError::NotPositiveDefinite { what: "U".into(), iteration: k })?
-            / self.config.forgetting.sqrt();
-        let thetas: Vec<DVector<f64>> = (0..m).map(|i| &self.theta + &self.l_theta * offsets.column(i)).collect();
-        let mut physical: Vec<Vec<f64>> = Vec::with_capacity(m);
-        for (i, t) in thetas.iter().enumerate() {
-            let phys: Vec<f64> =
-                t.iter().zip(&self.config.parameters).map(|(v, s)| s.transform.to_physical(*v)).collect();
-            if phys.iter().any(|v| !v.is_finite()) {
-                return Err(FilterError::SigmaPoint {
-                    sigma_point: i,
-                    iteration: k,
-                    what: format!("non-finite physical parameters {phys:?}"),
-                });
-            }
-            physical.push(phys);
-        }
-        let mut states = self.states.clone();
-        if let Some(joint) = &self.joint {
-            for (i, state) in states.iter_mut().enumerate() {
-                let x = &joint.x + &joint.l_x * offsets.column(i);
-                (joint.set)(&self.model, state, &x);
-            }
-        }
-
-        // Prediction.
-        let model = &self.model;
-        let get = self.joint.as_ref().map(|j| j.get);
-        let run = |(i, state): (usize, &mut M::State)| -> Result<SigmaOutput, M::Error> {
-            model.step(state, &physical[i], k)?;
-            Ok((model.observe(state), get.map(|g| g(model, state))))
-        };
-        let results: Vec<Result<SigmaOutput, M::Error>> = match self.config.execution {
-            Execution::Parallel => states.par_iter_mut().enumerate().map(run).collect(),
-            Execution::Sequential => states.iter_mut().enumerate().map(run).collect(),
-        };
-        let mut observations = DMatrix::zeros(q, m);
-        let n = self.joint.as_ref().map_or(0, |j| j.x.len());
-        let mut state_vectors = DMatrix::zeros(n, m);
-        for (i, result) in results.into_iter().enumerate() {
-            let (zi, xi) =
-                result.map_err(|e| FilterError::Model { sigma_point: i, iteration: k, error: Box::new(e) })?;
-            let bad = |what: String| FilterError::SigmaPoint { sigma_point: i, iteration: k, what };
-            if zi.len() != q {
-                return Err(bad(format!("observation has length {}, the measurement has {q}", zi.len())));
-            }
-            if zi.iter().any(|v| !v.is_finite()) {
-                return Err(bad("observation contains NaN or infinity".into()));
-            }
-            observations.set_column(i, &zi);
-            if let Some(xi) = xi {
-                if xi.len() != n {
-                    return Err(bad(format!("state vector has length {}, expected {n}", xi.len())));
-                }
-                if xi.iter().any(|v| !v.is_finite()) {
-                    return Err(bad("state vector contains NaN or infinity".into()));
-                }
-                state_vectors.set_column(i, &xi);
-            }
-        }
+        let inv_std = self.measurement_weights(z, available, k)?;
+        let (thetas, mut states) = self.sample(k)?;
+        let (observations, state_vectors) = self.predict(&mut states, &thetas, k, q)?;
         let mut theta_matrix = DMatrix::zeros(p, m);
         for (i, t) in thetas.iter().enumerate() {
             theta_matrix.set_column(i, t);
@@ -585,6 +510,110 @@ impl<M: Model> Roukf<M> {
         let record = self.record(Some(innovation.norm()), Some(start.elapsed().as_secs_f64()));
         self.trace.records.push(record);
         Ok(self.trace.records.last().expect("a record was just pushed"))
+    }
+
+    /// The weight `1/σ_obs` of each component of measurement `z` at iteration `k`, 0 for those not
+    /// `available`; checks the mask's length and the available components' finiteness.
+    fn measurement_weights(&self, z: &DVector<f64>, available: &[bool], k: usize) -> Result<DVector<f64>, FilterError> {
+        let q = z.len();
+        if available.len() != q {
+            return Err(FilterError::DimensionMismatch {
+                what: "availability mask vs. measurement".into(),
+                expected: q,
+                found: available.len(),
+            });
+        }
+        let mut inv_std = self.inverse_observation_std(q)?;
+        if z.iter().zip(available).any(|(v, &a)| a && !v.is_finite()) {
+            return Err(FilterError::NonFinite { what: "measurement z".into(), iteration: k });
+        }
+        for (w, &a) in inv_std.iter_mut().zip(available) {
+            if !a {
+                *w = 0.0;
+            }
+        }
+        Ok(inv_std)
+    }
+
+    /// Sampling at iteration `k`: the sigma points' parameters (reduced space), and a copy of the
+    /// model states with the joint state, if any, set to each sigma point's.
+    fn sample(&self, k: usize) -> Result<Sampled<M::State>, FilterError> {
+        let m = self.sigma.count();
+        let offsets = self
+            .sigma
+            .offsets(&self.u_chol)
+            .ok_or_else(|| FilterError::NotPositiveDefinite { what: "U".into(), iteration: k })?
+            / self.config.forgetting.sqrt();
+        let thetas: Vec<DVector<f64>> = (0..m).map(|i| &self.theta + &self.l_theta * offsets.column(i)).collect();
+        let mut states = self.states.clone();
+        if let Some(joint) = &self.joint {
+            for (i, state) in states.iter_mut().enumerate() {
+                let x = &joint.x + &joint.l_x * offsets.column(i);
+                (joint.set)(&self.model, state, &x);
+            }
+        }
+        Ok((thetas, states))
+    }
+
+    /// Prediction at iteration `k`: steps every sigma point's state with its physical parameters
+    /// (from `thetas`) and observes it. Returns the observations (a column of length `q` per sigma
+    /// point) and, with a joint state, the state vectors (a column per sigma point; else empty).
+    fn predict(
+        &self,
+        states: &mut [M::State],
+        thetas: &[DVector<f64>],
+        k: usize,
+        q: usize,
+    ) -> Result<(DMatrix<f64>, DMatrix<f64>), FilterError> {
+        let m = thetas.len();
+        let mut physical: Vec<Vec<f64>> = Vec::with_capacity(m);
+        for (i, t) in thetas.iter().enumerate() {
+            let phys: Vec<f64> =
+                t.iter().zip(&self.config.parameters).map(|(v, s)| s.transform.to_physical(*v)).collect();
+            if phys.iter().any(|v| !v.is_finite()) {
+                return Err(FilterError::SigmaPoint {
+                    sigma_point: i,
+                    iteration: k,
+                    what: format!("non-finite physical parameters {phys:?}"),
+                });
+            }
+            physical.push(phys);
+        }
+        let model = &self.model;
+        let get = self.joint.as_ref().map(|j| j.get);
+        let run = |(i, state): (usize, &mut M::State)| -> Result<SigmaOutput, M::Error> {
+            model.step(state, &physical[i], k)?;
+            Ok((model.observe(state), get.map(|g| g(model, state))))
+        };
+        let results: Vec<Result<SigmaOutput, M::Error>> = match self.config.execution {
+            Execution::Parallel => states.par_iter_mut().enumerate().map(run).collect(),
+            Execution::Sequential => states.iter_mut().enumerate().map(run).collect(),
+        };
+        let mut observations = DMatrix::zeros(q, m);
+        let n = self.joint.as_ref().map_or(0, |j| j.x.len());
+        let mut state_vectors = DMatrix::zeros(n, m);
+        for (i, result) in results.into_iter().enumerate() {
+            let (zi, xi) =
+                result.map_err(|e| FilterError::Model { sigma_point: i, iteration: k, error: Box::new(e) })?;
+            let bad = |what: String| FilterError::SigmaPoint { sigma_point: i, iteration: k, what };
+            if zi.len() != q {
+                return Err(bad(format!("observation has length {}, the measurement has {q}", zi.len())));
+            }
+            if zi.iter().any(|v| !v.is_finite()) {
+                return Err(bad("observation contains NaN or infinity".into()));
+            }
+            observations.set_column(i, &zi);
+            if let Some(xi) = xi {
+                if xi.len() != n {
+                    return Err(bad(format!("state vector has length {}, expected {n}", xi.len())));
+                }
+                if xi.iter().any(|v| !v.is_finite()) {
+                    return Err(bad("state vector contains NaN or infinity".into()));
+                }
+                state_vectors.set_column(i, &xi);
+            }
+        }
+        Ok((observations, state_vectors))
     }
 
     /// `1/σ_obs` for an observation of length `q`.

@@ -528,6 +528,24 @@ fn segment_triangle(p: [Point; 3], a: Point, dir: Point) -> Option<f64> {
     (0.0..=1.0).contains(&t).then_some(t)
 }
 
+/// Barycentric coordinates of `p` (a point of the triangle's plane, e.g. from
+/// [`closest_on_triangle`]) in triangle `t`, clamped to the triangle; a degenerate triangle gives
+/// its first corner.
+pub fn triangle_barycentric(t: [Point; 3], p: Point) -> [f64; 3] {
+    let e0 = sub(t[1], t[0]);
+    let e1 = sub(t[2], t[0]);
+    let e2 = sub(p, t[0]);
+    let (d00, d01, d11) = (dot(e0, e0), dot(e0, e1), dot(e1, e1));
+    let (d20, d21) = (dot(e2, e0), dot(e2, e1));
+    let den = d00 * d11 - d01 * d01;
+    if !(den.abs() > 0.0) {
+        return [1.0, 0.0, 0.0];
+    }
+    let v = ((d11 * d20 - d01 * d21) / den).clamp(0.0, 1.0);
+    let w = ((d00 * d21 - d01 * d20) / den).clamp(0.0, 1.0 - v);
+    [1.0 - v - w, v, w]
+}
+
 /// Closest point of triangle `p` to `q` (Ericson, Real-Time Collision Detection 5.1.5).
 pub fn closest_on_triangle(p: [Point; 3], q: Point) -> Point {
     let [a, b, c] = p;

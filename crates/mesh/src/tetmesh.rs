@@ -523,39 +523,273 @@ struct Cut {
 /// (see the module documentation). All elements are positively oriented and
 /// every boundary node lies on the boundary of the domain.
 pub fn stuff(domain: &dyn ImplicitDomain, opts: &TetMeshOptions) -> Result<Mesh, MeshError> {
-    let h = opts.size;
-    if !(h > 0.0 && h.is_finite()) {
-        return Err(MeshError::Invalid(format!("element size must be positive and finite, got {h}")));
-    }
-    for (name, a, max) in [("alpha_long", opts.alpha_long, 0.5), ("alpha_short", opts.alpha_short, 0.5)] {
-        if !(0.0..max).contains(&a) {
-            return Err(MeshError::Invalid(format!("{name} must be in [0, {max}), got {a}")));
-        }
-    }
-    let (lo, hi) = domain.bounds();
-    if (0..3).any(|d| !(lo[d].is_finite() && hi[d].is_finite() && hi[d] >= lo[d])) {
-        return Err(MeshError::Invalid(format!("domain bounds {lo:?}..{hi:?} are not a finite box")));
-    }
-    let n: [usize; 3] = std::array::from_fn(|d| ((hi[d] - lo[d]) / h).ceil() as usize + 2);
-    let cells = n[0] as f64 * n[1] as f64 * n[2] as f64;
-    if cells > 2.0e8 {
+    let lat = Lattice::covering(domain, opts)?;
+    let stuffing = Stuffing::new(domain, lat, opts)?;
+    let (nodes, tets) = stuffing.compact(&stuffing.tetrahedra(domain)?)?;
+    if tets.is_empty() {
         return Err(MeshError::Invalid(format!(
-            "element size {h} m is too small for the domain ({:.0} lattice cubes)",
-            cells
+            "the domain produced no element at size {} m: is it empty or thinner than the element size?",
+            opts.size
         )));
     }
-    let lat =
-        Lattice { origin: std::array::from_fn(|d| lo[d] - h), h, n, num_corners: (n[0] + 1) * (n[1] + 1) * (n[2] + 1) };
-    let nv = lat.num_vertices();
+    let mut mesh = without_small_pieces(Mesh::new(nodes, Cells::Tet4(tets))?)?;
+    if opts.fit == BoundaryFit::VolumePreserving {
+        preserve_volume(&mut mesh, domain);
+    }
+    Ok(mesh)
+}
 
-    // 1. Values at the lattice vertices.
-    let mut val: Vec<f64> = (0..nv as u32).into_par_iter().map(|v| domain.lattice_value(lat.position(v))).collect();
-    if let Some(v) = val.iter().position(|f| !f.is_finite()) {
-        return Err(MeshError::Invalid(format!("the domain function is not finite at {:?}", lat.position(v as u32))));
+impl Lattice {
+    /// The lattice of spacing `opts.size` over the domain's bounds, a cube beyond them on every
+    /// side; checks the options and the bounds.
+    fn covering(domain: &dyn ImplicitDomain, opts: &TetMeshOptions) -> Result<Lattice, MeshError> {
+        let h = opts.size;
+        if !(h > 0.0 && h.is_finite()) {
+            return Err(MeshError::Invalid(format!("element size must be positive and finite, got {h}")));
+        }
+        for (name, a, max) in [("alpha_long", opts.alpha_long, 0.5), ("alpha_short", opts.alpha_short, 0.5)] {
+            if !(0.0..max).contains(&a) {
+                return Err(MeshError::Invalid(format!("{name} must be in [0, {max}), got {a}")));
+            }
+        }
+        let (lo, hi) = domain.bounds();
+        if (0..3).any(|d| !(lo[d].is_finite() && hi[d].is_finite() && hi[d] >= lo[d])) {
+            return Err(MeshError::Invalid(format!("domain bounds {lo:?}..{hi:?} are not a finite box")));
+        }
+        let n: [usize; 3] = std::array::from_fn(|d| ((hi[d] - lo[d]) / h).ceil() as usize + 2);
+        let cells = n[0] as f64 * n[1] as f64 * n[2] as f64;
+        if cells > 2.0e8 {
+            return Err(MeshError::Invalid(format!(
+                "element size {h} m is too small for the domain ({:.0} lattice cubes)",
+                cells
+            )));
+        }
+        let origin = std::array::from_fn(|d| lo[d] - h);
+        Ok(Lattice { origin, h, n, num_corners: (n[0] + 1) * (n[1] + 1) * (n[2] + 1) })
+    }
+}
+
+/// The lattice with the domain's values at its vertices, the cut points on its edges, and the
+/// vertices warped onto a cut point. Candidate node ids: lattice vertex `v`, or `nv + e` for cut
+/// point `e`.
+struct Stuffing {
+    lat: Lattice,
+    /// The domain's value at each vertex (0 once warped).
+    val: Vec<f64>,
+    cuts: Vec<Cut>,
+    /// The cut points incident to vertex `v`: `incident[start[v]..start[v + 1]]`.
+    start: Vec<usize>,
+    incident: Vec<u32>,
+    /// The cut point each vertex is warped to (`u32::MAX`: not warped).
+    warped_to: Vec<u32>,
+}
+
+impl Stuffing {
+    /// Steps 1 to 3: the values at the lattice vertices, the cut points on the edges with a
+    /// strict sign change, and the warping of vertices near a cut point onto it.
+    fn new(domain: &dyn ImplicitDomain, lat: Lattice, opts: &TetMeshOptions) -> Result<Stuffing, MeshError> {
+        let nv = lat.num_vertices();
+        let val: Vec<f64> = (0..nv as u32).into_par_iter().map(|v| domain.lattice_value(lat.position(v))).collect();
+        if let Some(v) = val.iter().position(|f| !f.is_finite()) {
+            return Err(MeshError::Invalid(format!(
+                "the domain function is not finite at {:?}",
+                lat.position(v as u32)
+            )));
+        }
+        let cuts = cut_points(domain, &lat, &val);
+        let mut start = vec![0usize; nv + 1];
+        for c in &cuts {
+            start[c.u as usize + 1] += 1;
+            start[c.v as usize + 1] += 1;
+        }
+        for i in 0..nv {
+            start[i + 1] += start[i];
+        }
+        let mut fill = start.clone();
+        let mut incident = vec![0u32; start[nv]];
+        for (e, c) in cuts.iter().enumerate() {
+            for w in [c.u, c.v] {
+                incident[fill[w as usize]] = e as u32;
+                fill[w as usize] += 1;
+            }
+        }
+        let mut stuffing = Stuffing { lat, val, cuts, start, incident, warped_to: vec![u32::MAX; nv] };
+        stuffing.warp(opts);
+        Ok(stuffing)
     }
 
-    // 2. Cut points on the edges with a strict sign change.
-    let edges: Vec<(u32, u32)> = (0..nv as u32)
+    /// Warps each vertex onto its nearest cut point closer than `alpha` times its edge's length,
+    /// among the edges whose ends are not warped yet.
+    fn warp(&mut self, opts: &TetMeshOptions) {
+        let h = self.lat.h;
+        for v in 0..self.lat.num_vertices() {
+            let pv = self.lat.position(v as u32);
+            let mut best: Option<(f64, u32)> = None;
+            for &e in &self.incident[self.start[v]..self.start[v + 1]] {
+                let c = &self.cuts[e as usize];
+                if self.warped_to[c.u as usize] != u32::MAX || self.warped_to[c.v as usize] != u32::MAX {
+                    continue;
+                }
+                let (alpha, len) = if is_black(&self.lat, c.u, c.v) {
+                    (opts.alpha_long, h)
+                } else {
+                    (opts.alpha_short, 0.5 * 3f64.sqrt() * h)
+                };
+                let dv = sub(c.point, pv);
+                let dist = dot(dv, dv).sqrt();
+                if dist < alpha * len && best.is_none_or(|(b, _)| dist < b) {
+                    best = Some((dist, e));
+                }
+            }
+            if let Some((_, e)) = best {
+                self.warped_to[v] = e;
+                self.val[v] = 0.0;
+            }
+        }
+    }
+
+    /// Whether cut point `e` survives the warping (neither end of its edge warped).
+    fn alive(&self, e: u32) -> bool {
+        let c = &self.cuts[e as usize];
+        self.warped_to[c.u as usize] == u32::MAX && self.warped_to[c.v as usize] == u32::MAX
+    }
+
+    /// The sign of the domain's value at vertex `v`.
+    fn sign(&self, v: u32) -> i8 {
+        let f = self.val[v as usize];
+        if f < 0.0 {
+            -1
+        } else if f > 0.0 {
+            1
+        } else {
+            0
+        }
+    }
+
+    /// The candidate node id of the surviving cut point on lattice edge (u, v).
+    fn cut(&self, u: u32, v: u32) -> Result<u32, MeshError> {
+        self.incident[self.start[u as usize]..self.start[u as usize + 1]]
+            .iter()
+            .copied()
+            .find(|&e| {
+                let c = &self.cuts[e as usize];
+                (c.u == v || c.v == v) && self.alive(e)
+            })
+            .map(|e| self.lat.num_vertices() as u32 + e)
+            .ok_or_else(|| {
+                MeshError::Invalid(format!("isosurface stuffing: missing cut point on lattice edge ({u}, {v})"))
+            })
+    }
+
+    /// Where lattice vertex `v` lies after the warping.
+    fn warped_pos(&self, v: u32) -> Point {
+        match self.warped_to[v as usize] {
+            u32::MAX => self.lat.position(v),
+            e => self.cuts[e as usize].point,
+        }
+    }
+
+    /// Step 4: fills the BCC tetrahedra (each pair of neighbouring centres with the four corners
+    /// around their shared face), in candidate node ids.
+    fn tetrahedra(&self, domain: &dyn ImplicitDomain) -> Result<Vec<[u32; 4]>, MeshError> {
+        let (lat, n) = (&self.lat, self.lat.n);
+        let mut out: Vec<[u32; 4]> = Vec::new();
+        for axis in 0..3 {
+            let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
+            let mut m = n;
+            m[axis] -= 1;
+            for k in 0..m[2] {
+                for j in 0..m[1] {
+                    for i in 0..m[0] {
+                        let c1 = [i, j, k];
+                        let mut c2 = c1;
+                        c2[axis] += 1;
+                        let v1 = lat.centre(c1[0], c1[1], c1[2]);
+                        let v2 = lat.centre(c2[0], c2[1], c2[2]);
+                        let mut f = [0usize; 3];
+                        let corners: [u32; 4] = std::array::from_fn(|q| {
+                            let (db, dc) = [(0, 0), (1, 0), (1, 1), (0, 1)][q];
+                            f[axis] = c1[axis] + 1;
+                            f[b] = c1[b] + db;
+                            f[c] = c1[c] + dc;
+                            lat.corner(f[0], f[1], f[2])
+                        });
+                        for q in 0..4 {
+                            let tet = [v1, v2, corners[q], corners[(q + 1) % 4]];
+                            let s = tet.map(|v| self.sign(v));
+                            if s.iter().all(|&x| x > 0) {
+                                continue;
+                            }
+                            fill_bcc_tet(lat, tet, s, &|u, v| self.cut(u, v), &mut out, |t| {
+                                let p = t.map(|v| self.warped_pos(v));
+                                let centre: Point =
+                                    std::array::from_fn(|d| 0.25 * (p[0][d] + p[1][d] + p[2][d] + p[3][d]));
+                                domain.contains(centre)
+                            })?;
+                        }
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Step 5: the nodes used by `out`, numbered compactly, and its tetrahedra oriented in the
+    /// reference (unwarped) geometry; an error when one is inverted after the warping.
+    fn compact(&self, out: &[[u32; 4]]) -> Result<(Vec<Point>, Vec<[usize; 4]>), MeshError> {
+        let nv = self.lat.num_vertices();
+        let mut id = vec![u32::MAX; nv + self.cuts.len()];
+        for t in out {
+            for &v in t {
+                id[v as usize] = 0;
+            }
+        }
+        let mut nodes = Vec::new();
+        let mut ref_pos = Vec::new();
+        for (cand, slot) in id.iter_mut().enumerate() {
+            if *slot == u32::MAX {
+                continue;
+            }
+            *slot = nodes.len() as u32;
+            if cand < nv {
+                nodes.push(self.warped_pos(cand as u32));
+                ref_pos.push(self.lat.position(cand as u32));
+            } else {
+                let p = self.cuts[cand - nv].point;
+                nodes.push(p);
+                ref_pos.push(p);
+            }
+        }
+        let mut tets = Vec::with_capacity(out.len());
+        let mut inverted = Vec::new();
+        for t in out {
+            let mut t = t.map(|v| id[v as usize] as usize);
+            let r = t.map(|k| ref_pos[k]);
+            if crate::tet_volume(r[0], r[1], r[2], r[3]) < 0.0 {
+                t.swap(2, 3);
+            }
+            let p = t.map(|k| nodes[k]);
+            let vol = crate::tet_volume(p[0], p[1], p[2], p[3]);
+            if !(vol > 0.0) {
+                inverted.push((tets.len(), vol));
+            }
+            tets.push(t);
+        }
+        if let Some(&(e, vol)) = inverted.first() {
+            return Err(MeshError::Invalid(format!(
+                "isosurface stuffing produced {} inverted tetrahedra (first: element {e}, volume {vol:.3e}); \
+                 try another element size",
+                inverted.len()
+            )));
+        }
+        Ok((nodes, tets))
+    }
+}
+
+/// The cut points: the boundary point on each lattice edge whose ends have strictly opposite
+/// signs (`val`: the domain's values at the vertices).
+fn cut_points(domain: &dyn ImplicitDomain, lat: &Lattice, val: &[f64]) -> Vec<Cut> {
+    let edges: Vec<(u32, u32)> = (0..lat.num_vertices() as u32)
         .into_par_iter()
         .flat_map_iter(|u| {
             let d = lat.doubled(u);
@@ -582,182 +816,13 @@ pub fn stuff(domain: &dyn ImplicitDomain, opts: &TetMeshOptions) -> Result<Mesh,
             out
         })
         .collect();
-    let cuts: Vec<Cut> = edges
+    edges
         .par_iter()
         .map(|&(u, v)| {
             let point = domain.boundary_point(lat.position(u), val[u as usize], lat.position(v), val[v as usize]);
             Cut { u, v, point }
         })
-        .collect();
-
-    // 3. Warping.
-    let mut start = vec![0usize; nv + 1];
-    for c in &cuts {
-        start[c.u as usize + 1] += 1;
-        start[c.v as usize + 1] += 1;
-    }
-    for i in 0..nv {
-        start[i + 1] += start[i];
-    }
-    let mut fill = start.clone();
-    let mut incident = vec![0u32; start[nv]];
-    for (e, c) in cuts.iter().enumerate() {
-        for w in [c.u, c.v] {
-            incident[fill[w as usize]] = e as u32;
-            fill[w as usize] += 1;
-        }
-    }
-    let mut warped_to: Vec<u32> = vec![u32::MAX; nv];
-    for v in 0..nv {
-        let pv = lat.position(v as u32);
-        let mut best: Option<(f64, u32)> = None;
-        for &e in &incident[start[v]..start[v + 1]] {
-            let c = &cuts[e as usize];
-            if warped_to[c.u as usize] != u32::MAX || warped_to[c.v as usize] != u32::MAX {
-                continue;
-            }
-            let (alpha, len) =
-                if is_black(&lat, c.u, c.v) { (opts.alpha_long, h) } else { (opts.alpha_short, 0.5 * 3f64.sqrt() * h) };
-            let dv = sub(c.point, pv);
-            let dist = dot(dv, dv).sqrt();
-            if dist < alpha * len && best.is_none_or(|(b, _)| dist < b) {
-                best = Some((dist, e));
-            }
-        }
-        if let Some((_, e)) = best {
-            warped_to[v] = e;
-            val[v] = 0.0;
-        }
-    }
-    let alive = |e: u32| {
-        let c = &cuts[e as usize];
-        warped_to[c.u as usize] == u32::MAX && warped_to[c.v as usize] == u32::MAX
-    };
-
-    // 4. Fill the BCC tetrahedra. Candidate node ids: lattice vertex v, or
-    // nv + e for cut point e.
-    let sign = |v: u32| -> i8 {
-        let f = val[v as usize];
-        if f < 0.0 {
-            -1
-        } else if f > 0.0 {
-            1
-        } else {
-            0
-        }
-    };
-    let cut = |u: u32, v: u32| -> Result<u32, MeshError> {
-        incident[start[u as usize]..start[u as usize + 1]]
-            .iter()
-            .copied()
-            .find(|&e| {
-                let c = &cuts[e as usize];
-                (c.u == v || c.v == v) && alive(e)
-            })
-            .map(|e| nv as u32 + e)
-            .ok_or_else(|| {
-                MeshError::Invalid(format!("isosurface stuffing: missing cut point on lattice edge ({u}, {v})"))
-            })
-    };
-    let warped_pos = |v: u32| -> Point {
-        match warped_to[v as usize] {
-            u32::MAX => lat.position(v),
-            e => cuts[e as usize].point,
-        }
-    };
-    let mut out: Vec<[u32; 4]> = Vec::new();
-    for axis in 0..3 {
-        let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
-        let mut m = n;
-        m[axis] -= 1;
-        for k in 0..m[2] {
-            for j in 0..m[1] {
-                for i in 0..m[0] {
-                    let c1 = [i, j, k];
-                    let mut c2 = c1;
-                    c2[axis] += 1;
-                    let v1 = lat.centre(c1[0], c1[1], c1[2]);
-                    let v2 = lat.centre(c2[0], c2[1], c2[2]);
-                    let mut f = [0usize; 3];
-                    let corners: [u32; 4] = std::array::from_fn(|q| {
-                        let (db, dc) = [(0, 0), (1, 0), (1, 1), (0, 1)][q];
-                        f[axis] = c1[axis] + 1;
-                        f[b] = c1[b] + db;
-                        f[c] = c1[c] + dc;
-                        lat.corner(f[0], f[1], f[2])
-                    });
-                    for q in 0..4 {
-                        let tet = [v1, v2, corners[q], corners[(q + 1) % 4]];
-                        let s = tet.map(sign);
-                        if s.iter().all(|&x| x > 0) {
-                            continue;
-                        }
-                        fill_bcc_tet(&lat, tet, s, &cut, &mut out, |t| {
-                            let p = t.map(warped_pos);
-                            let centre: Point = std::array::from_fn(|d| 0.25 * (p[0][d] + p[1][d] + p[2][d] + p[3][d]));
-                            domain.contains(centre)
-                        })?;
-                    }
-                }
-            }
-        }
-    }
-
-    // 5. Compact numbering, orientation in the reference geometry, inversion check.
-    let mut id = vec![u32::MAX; nv + cuts.len()];
-    for t in &out {
-        for &v in t {
-            id[v as usize] = 0;
-        }
-    }
-    let mut nodes = Vec::new();
-    let mut ref_pos = Vec::new();
-    for (cand, slot) in id.iter_mut().enumerate() {
-        if *slot == u32::MAX {
-            continue;
-        }
-        *slot = nodes.len() as u32;
-        if cand < nv {
-            nodes.push(warped_pos(cand as u32));
-            ref_pos.push(lat.position(cand as u32));
-        } else {
-            let p = cuts[cand - nv].point;
-            nodes.push(p);
-            ref_pos.push(p);
-        }
-    }
-    let mut tets = Vec::with_capacity(out.len());
-    let mut inverted = Vec::new();
-    for t in &out {
-        let mut t = t.map(|v| id[v as usize] as usize);
-        let r = t.map(|k| ref_pos[k]);
-        if crate::tet_volume(r[0], r[1], r[2], r[3]) < 0.0 {
-            t.swap(2, 3);
-        }
-        let p = t.map(|k| nodes[k]);
-        let vol = crate::tet_volume(p[0], p[1], p[2], p[3]);
-        if !(vol > 0.0) {
-            inverted.push((tets.len(), vol));
-        }
-        tets.push(t);
-    }
-    if let Some(&(e, vol)) = inverted.first() {
-        return Err(MeshError::Invalid(format!(
-            "isosurface stuffing produced {} inverted tetrahedra (first: element {e}, volume {vol:.3e}); \
-             try another element size",
-            inverted.len()
-        )));
-    }
-    if tets.is_empty() {
-        return Err(MeshError::Invalid(format!(
-            "the domain produced no element at size {h} m: is it empty or thinner than the element size?"
-        )));
-    }
-    let mut mesh = without_small_pieces(Mesh::new(nodes, Cells::Tet4(tets))?)?;
-    if opts.fit == BoundaryFit::VolumePreserving {
-        preserve_volume(&mut mesh, domain);
-    }
-    Ok(mesh)
+        .collect()
 }
 
 /// A piece of a stuffed mesh (its tetrahedra joined through faces: [`face_connected_pieces`])

@@ -97,9 +97,9 @@ pub fn write_csv(path: &Path, points: &[Point]) -> Result<()> {
     Ok(mesh::io::points::write_points_csv(path, points)?)
 }
 
-/// Rejects an empty cloud and non-finite coordinates ([`crate::check_cloud`]), naming the file.
+/// Rejects an empty cloud and non-finite coordinates ([`crate::checks::check_cloud`]), naming the file.
 fn check_points(path: &Path, points: Vec<Point>) -> Result<Vec<Point>> {
-    crate::check_cloud(&points).map_err(|e| RegisterError::format(path, e.to_string()))?;
+    crate::checks::check_cloud(&points).map_err(|e| RegisterError::format(path, e.to_string()))?;
     Ok(points)
 }
 

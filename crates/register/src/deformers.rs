@@ -7,8 +7,8 @@ use learn::data::generate::normal_part;
 use learn::{encode_points, GridToMesh, Model, ModelPredictor};
 use mesh::embedding::Grid;
 
+use crate::frame::{Deformer, Observations};
 use crate::organ::Organ;
-use crate::register::{Deformer, Observations};
 use crate::{RegisterError, Result};
 
 /// Finite-element registration: every matched surface point is tied by a zero-length spring
@@ -507,7 +507,7 @@ impl Deformer for NetworkDeformer {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::register::{observe, register_frame, RegistrationOptions};
+    use crate::frame::{observe, register_frame, RegistrationOptions};
 
     /// A block held only by an elastic foundation over its bottom centimetre, its top pressed
     /// down 5 mm: the

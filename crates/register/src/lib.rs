@@ -46,21 +46,22 @@ pub mod cloud;
 mod error;
 
 pub use error::{RegisterError, Result};
+mod checks;
 mod deformers;
+pub mod frame;
 pub mod organ;
 pub mod outliers;
 pub mod plausibility;
-pub mod register;
+pub mod registration;
 pub mod rigid;
-pub mod sequence;
 pub mod shape;
 
+pub use checks::check_cloud;
 pub use deformers::{FemDeformer, HybridDeformer, NetworkDeformer, RestAndStream};
-pub use organ::{Organ, Stencil};
-pub use register::{
-    check_cloud, observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions,
-    WARM_START_ITERATION,
+pub use frame::{
+    observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions, WARM_START_ITERATION,
 };
+pub use organ::{Organ, Stencil};
+pub use registration::{target_errors, FrameOutcome, Registration, Summary, Tracked};
 pub use rigid::{rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
-pub use sequence::{target_errors, FrameOutcome, Registration, Summary, Tracked};
 pub use shape::{model_shape_space, ShapeDeformer, ShapeOptions, ShapeSpace};

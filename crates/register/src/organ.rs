@@ -1,10 +1,9 @@
 //! The preoperative organ: a volumetric mesh and its surface embedded in it.
 
-use mesh::bvh::SurfaceBvh;
+use mesh::bvh::{triangle_barycentric, SurfaceBvh};
 use mesh::embedding::MeshLocator;
 use mesh::{Mesh, Point, TriSurface};
 
-use crate::register::barycentric;
 use crate::{RegisterError, Result};
 
 /// Interpolation weights below this are rounding errors (see [`Stencil`]'s constructor).
@@ -123,7 +122,7 @@ impl Organ {
             .map(|&p| {
                 let closest = bvh.closest_point(p);
                 let corners = self.surface.triangles[closest.triangle].map(|k| self.surface.vertices[k]);
-                self.surface_point_stencil(closest.triangle, barycentric(corners, closest.point)).vector(u)
+                self.surface_point_stencil(closest.triangle, triangle_barycentric(corners, closest.point)).vector(u)
             })
             .collect())
     }

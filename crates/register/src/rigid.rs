@@ -18,7 +18,7 @@ use nalgebra::{Matrix6, Vector6};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::register::check_setting;
+use crate::checks::check_setting;
 use crate::{RegisterError, Result};
 
 /// Fewest cloud points a rigid alignment accepts (6 unknowns, and trimming drops some).
@@ -248,7 +248,7 @@ impl RigidResult {
 pub fn rigid_align(surface: &TriSurface, cloud: &[Point], options: &RigidOptions) -> Result<RigidResult> {
     let t0 = Instant::now();
     options.validate()?;
-    crate::check_cloud(cloud)?;
+    crate::checks::check_cloud(cloud)?;
     let n = cloud.len();
     let kept = ((options.keep * n as f64).ceil() as usize).min(n);
     if n < MIN_POINTS || kept < 6 {
@@ -262,7 +262,7 @@ pub fn rigid_align(surface: &TriSurface, cloud: &[Point], options: &RigidOptions
     let vertex_normals = surface.vertex_normals();
     let smooth_normal = |triangle: usize, p: Point| {
         let tri = surface.triangles[triangle];
-        let b = crate::register::barycentric(tri.map(|k| surface.vertices[k]), p);
+        let b = mesh::bvh::triangle_barycentric(tri.map(|k| surface.vertices[k]), p);
         mesh::unit(std::array::from_fn(|d| (0..3).map(|c| b[c] * vertex_normals[tri[c]][d]).sum()))
     };
     let mut transform = RigidTransform::identity();

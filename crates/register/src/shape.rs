@@ -17,8 +17,9 @@
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
+use crate::checks::check_setting;
+use crate::frame::{Deformer, Observations};
 use crate::organ::{Organ, Stencil};
-use crate::register::{check_setting, Deformer, Observations};
 use crate::{RegisterError, Result};
 
 /// A model's shape space on the organ's mesh: the mean displacement and the modes, whitened by the
@@ -453,7 +454,7 @@ pub fn model_shape_space(model: &learn::Model, organ: &Organ, modes: usize) -> R
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::register::{register_frame, RegistrationOptions};
+    use crate::frame::{register_frame, RegistrationOptions};
 
     /// A 4 cm cube and three smooth modes of it: a vertical press growing with height, a shear,
     /// and a bulge of the top; the prior correlates the first two.

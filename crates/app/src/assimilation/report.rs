@@ -242,20 +242,13 @@ pub(super) fn assessment(
     points: usize,
     out_dir: &Path,
 ) -> Result<Vec<AssessmentCase>, AssimilationError> {
-    let mut csv = String::from("step");
-    for (label, _) in cases {
-        csv.push_str(&format!(",{label}_mean_error_m"));
-    }
-    csv.push('\n');
+    let columns: Vec<String> = cases.iter().map(|(label, _)| format!("{label}_mean_error_m")).collect();
+    let header: Vec<&str> = std::iter::once("step").chain(columns.iter().map(String::as_str)).collect();
     let steps = cases.iter().map(|c| c.1.len()).min().unwrap_or(0);
-    for k in 0..steps {
-        csv.push_str(&(k + 1).to_string());
-        for (_, e) in cases {
-            csv.push_str(&format!(",{}", e[k]));
-        }
-        csv.push('\n');
-    }
-    write_atomic_bytes(&out_dir.join("assessment.csv"), csv.as_bytes())?;
+    let rows = (0..steps).map(|k| {
+        std::iter::once((k + 1).to_string()).chain(cases.iter().map(|(_, e)| e[k].to_string())).collect::<Vec<_>>()
+    });
+    mesh::io::csv::write_csv(&out_dir.join("assessment.csv"), &[], &header, rows)?;
     let mut summary = Vec::new();
     let mut series = Vec::new();
     for (label, errors) in cases {

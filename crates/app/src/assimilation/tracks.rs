@@ -8,9 +8,9 @@
 //! Every error names the file and, where there is one, the line.
 
 use std::collections::{BTreeMap, HashMap};
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
+use mesh::io::csv::{CsvError, Dialect, Row, Table};
 use mesh::Point;
 use nalgebra::DVector;
 
@@ -40,12 +40,13 @@ impl Tracks {
         let mut tracks = Tracks { path: path.to_path_buf(), ids: Vec::new(), lines: Vec::new(), positions: Vec::new() };
         let mut index: HashMap<String, usize> = HashMap::new();
         let mut first_line: HashMap<(usize, usize), usize> = HashMap::new();
-        for (line, fields) in rows(path, TRACK_HEADER)? {
+        for row in rows(path, TRACK_HEADER)? {
+            let (line, fields) = (row.line, &row.fields);
             let bad = |message: String| AssimilationError::file(path, Some(line), message);
             let frame: usize =
                 fields[0].parse().map_err(|_| bad(format!("frame `{}` is not a whole number ≥ 0", fields[0])))?;
             let id = fields[1].as_str();
-            let point = coordinates(&fields[2..], path, line)?;
+            let point = coordinates(&row, path)?;
             let j = *index.entry(id.to_string()).or_insert_with(|| {
                 tracks.ids.push(id.to_string());
                 tracks.lines.push(line);
@@ -157,16 +158,17 @@ impl RestPositions {
     pub fn read(path: &Path) -> Result<Self, AssimilationError> {
         let mut positions = HashMap::new();
         let mut lines: HashMap<String, usize> = HashMap::new();
-        for (line, fields) in rows(path, REST_HEADER)? {
-            let point = coordinates(&fields[1..], path, line)?;
-            if let Some(earlier) = lines.insert(fields[0].clone(), line) {
+        for row in rows(path, REST_HEADER)? {
+            let point = coordinates(&row, path)?;
+            let id = &row.fields[0];
+            if let Some(earlier) = lines.insert(id.clone(), row.line) {
                 return Err(AssimilationError::file(
                     path,
-                    Some(line),
-                    format!("feature `{}` is already given on line {earlier}", fields[0]),
+                    Some(row.line),
+                    format!("feature `{id}` is already given on line {earlier}"),
                 ));
             }
-            positions.insert(fields[0].clone(), point);
+            positions.insert(id.clone(), point);
         }
         Ok(RestPositions { path: path.to_path_buf(), positions })
     }
@@ -187,70 +189,52 @@ pub fn write_tracks(path: &Path, ids: &[String], frames: &[DVector<f64>]) -> Res
     if let Some(id) = ids.iter().find(|id| id.is_empty() || id.contains([',', '\n', '\r']) || id.trim() != *id) {
         return Err(AssimilationError::Setup(format!("feature id `{id}` cannot be written to a CSV field")));
     }
-    mesh::io::write_atomic(path, |w| {
-        writeln!(w, "{TRACK_HEADER}")?;
-        for (f, z) in frames.iter().enumerate() {
-            for (j, id) in ids.iter().enumerate() {
-                let p = [z[3 * j], z[3 * j + 1], z[3 * j + 2]];
-                if p.iter().all(|v| v.is_finite()) {
-                    writeln!(w, "{f},{id},{},{},{}", p[0], p[1], p[2])?;
-                }
-            }
-        }
-        Ok(())
-    })?;
+    let rows = frames.iter().enumerate().flat_map(|(f, z)| {
+        ids.iter().enumerate().filter_map(move |(j, id)| {
+            let p = [z[3 * j], z[3 * j + 1], z[3 * j + 2]];
+            p.iter()
+                .all(|v| v.is_finite())
+                .then(|| vec![f.to_string(), id.clone(), p[0].to_string(), p[1].to_string(), p[2].to_string()])
+        })
+    });
+    let header: Vec<&str> = TRACK_HEADER.split(',').collect();
+    mesh::io::csv::write_csv(path, &[], &header, rows)?;
     Ok(())
 }
 
-/// The data rows of a CSV file whose first non-blank line is `header` (compared without case and spaces): the
-/// 1-based line number and the trimmed fields (as many as the header has, the id field non-empty).
-fn rows(path: &Path, header: &str) -> Result<Vec<(usize, Vec<String>)>, AssimilationError> {
+/// The data rows of a CSV file ([`mesh::io::csv`]) whose header is `header` (compared without case and
+/// spaces): the 1-based line number and the fields (as many as the header has, the id field non-empty).
+fn rows(path: &Path, header: &str) -> Result<Vec<Row>, AssimilationError> {
     let text =
         std::fs::read_to_string(path).map_err(|e| AssimilationError::file(path, None, format!("cannot read: {e}")))?;
-    let mut out = Vec::new();
-    let expected: Vec<&str> = header.split(',').collect();
-    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim_start_matches('\u{feff}').trim()));
-    let (first, found) = lines.by_ref().find(|(_, l)| !l.is_empty()).ok_or_else(|| {
+    let table_error = |e: CsvError| AssimilationError::file(path, e.line, e.message);
+    let table = Table::parse(&text, &Dialect::CSV).map_err(table_error)?;
+    let first = table.header_line.ok_or_else(|| {
         AssimilationError::file(path, None, format!("the file is empty: expected the header `{header}`"))
     })?;
-    let names: Vec<String> = found.split(',').map(|f| f.trim().to_ascii_lowercase()).collect();
-    if names != expected {
+    let found = table.names.join(",");
+    if found != header {
         return Err(AssimilationError::file(
             path,
             Some(first),
             format!("the header must be `{header}`, found `{found}`"),
         ));
     }
-    for (line, l) in lines.filter(|(_, l)| !l.is_empty()) {
-        let fields: Vec<&str> = l.split(',').map(str::trim).collect();
-        if fields.len() != expected.len() {
-            return Err(AssimilationError::file(
-                path,
-                Some(line),
-                format!("{} fields, expected {} ({header})", fields.len(), expected.len()),
-            ));
-        }
-        let id = expected.iter().position(|&n| n == "id").map_or("", |i| fields[i]);
-        if id.is_empty() {
-            return Err(AssimilationError::file(path, Some(line), "empty id".into()));
-        }
-        out.push((line, fields.into_iter().map(str::to_string).collect()));
+    table.check_widths().map_err(table_error)?;
+    let id = table.column("id");
+    if let Some(row) = table.rows.iter().find(|r| id.is_some_and(|i| r.fields[i].is_empty())) {
+        return Err(AssimilationError::file(path, Some(row.line), "empty id".into()));
     }
-    if out.is_empty() {
+    if table.rows.is_empty() {
         return Err(AssimilationError::file(path, None, format!("no data rows after the header `{header}`")));
     }
-    Ok(out)
+    Ok(table.rows)
 }
 
-/// The three coordinates `x, y, z` of a row (finite numbers).
-fn coordinates(fields: &[String], path: &Path, line: usize) -> Result<Point, AssimilationError> {
-    let mut p = [0.0; 3];
-    for (d, (v, name)) in fields.iter().zip(["x", "y", "z"]).enumerate() {
-        p[d] = v.parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| {
-            AssimilationError::file(path, Some(line), format!("{name} = `{v}` is not a finite number"))
-        })?;
-    }
-    Ok(p)
+/// The point in the last three fields `x, y, z` of a row (finite numbers).
+fn coordinates(row: &Row, path: &Path) -> Result<Point, AssimilationError> {
+    let n = row.fields.len();
+    row.point([n - 3, n - 2, n - 1]).map_err(|e| AssimilationError::file(path, e.line, e.message))
 }
 
 #[cfg(test)]

@@ -4,6 +4,7 @@
 
 use std::path::Path;
 
+use mesh::io::csv::{number, Dialect, Header, Table};
 use mesh::Point;
 
 use crate::data::grid::encode_points;
@@ -21,24 +22,30 @@ pub struct PointCloud {
 }
 
 impl PointCloud {
-    /// Parses CSV text with six numbers per line (x, y, z, vx, vy, vz), separated by commas or semicolons; blank
-    /// lines are skipped and a first line that is not numbers is a header. `path` names the text in errors, with
-    /// the line number.
+    /// Parses CSV text ([`mesh::io::csv`]) with six numbers per line (x, y, z, vx, vy, vz), separated by commas
+    /// or semicolons; blank lines and empty fields are skipped and a first line that is not numbers is a header.
+    /// `path` names the text in errors, with the line number.
     pub fn parse_csv(text: &str, path: &Path) -> Result<PointCloud> {
-        let bad =
-            |line: usize, message: String| LearnError::Input { path: path.to_path_buf(), line: Some(line), message };
+        let bad = |line: Option<usize>, message: String| LearnError::Input { path: path.to_path_buf(), line, message };
+        let dialect = Dialect { separators: &[',', ';'], header: Header::Optional };
+        let table = Table::parse(text, &dialect).map_err(|e| bad(e.line, e.message))?;
         let mut rows = Vec::new();
-        for (l, line) in text.lines().enumerate() {
-            let fields: Vec<&str> = line.split([',', ';']).map(str::trim).filter(|f| !f.is_empty()).collect();
+        for row in &table.rows {
+            let fields: Vec<&String> = row.fields.iter().filter(|f| !f.is_empty()).collect();
             if fields.is_empty() {
                 continue;
             }
-            match fields.iter().map(|f| f.parse::<f64>()).collect::<std::result::Result<Vec<f64>, _>>() {
-                Ok(v) if v.len() == 6 => rows.push([v[0], v[1], v[2], v[3], v[4], v[5]]),
-                Ok(v) => return Err(bad(l + 1, format!("{} numbers, expected 6 (x, y, z, vx, vy, vz)", v.len()))),
-                Err(_) if l == 0 => {} // header
-                Err(e) => return Err(bad(l + 1, e.to_string())),
+            if fields.len() != 6 {
+                let message = format!("{} numbers, expected 6 (x, y, z, vx, vy, vz)", fields.len());
+                return Err(bad(Some(row.line), message));
             }
+            let mut values = [0.0; 6];
+            for (value, (field, name)) in
+                values.iter_mut().zip(fields.into_iter().zip(["x", "y", "z", "vx", "vy", "vz"]))
+            {
+                *value = number(field).map_err(|m| bad(Some(row.line), format!("{name} {m}")))?;
+            }
+            rows.push(values);
         }
         Ok(PointCloud::from_rows(&rows))
     }

@@ -13,7 +13,7 @@ use super::linalg::{
 use super::{Reader, ReducedModel, RomInfo};
 use crate::data::corrupt::{item_rng, Corruption, STREAM_EVAL_CORRUPTION, STREAM_TRAIN_CORRUPTION};
 use crate::data::dataset::Samples;
-use crate::data::grid::{GridPlacement, CHANNELS};
+use crate::data::grid::{GridPlacement, GridShape, CHANNELS};
 use crate::data::response::RestResponse;
 use crate::data::split::Split;
 use crate::{LearnError, Result};
@@ -155,237 +155,360 @@ pub fn fit(
     if validation.grid != train.grid {
         return Err(LearnError::InvalidInput("training and validation samples lie on different grids".into()));
     }
-    let grid = train.grid;
     let n = train.len();
-    let grid_nodes = grid.nodes();
-    // The organ's nodes: any training mask.
-    let nodes: Vec<usize> = (0..grid_nodes).filter(|&v| (0..n).any(|i| train.mask(i)[v] == 1)).collect();
-    let out_entries: Vec<usize> = (0..CHANNELS).flat_map(|c| nodes.iter().map(move |&v| c * grid_nodes + v)).collect();
-    let targets = |s: &Samples| Mat::from_fn(s.len(), out_entries.len(), |i, e| f64::from(s.target(i)[out_entries[e]]));
-    let (y_train, y_val) = (targets(train), targets(validation));
-
-    // Output basis.
-    let output_mean: Vec<f64> = (0..y_train.ncols()).map(|e| y_train.col(e).iter().sum::<f64>() / n as f64).collect();
-    let centre = |y: &Mat<f64>| Mat::from_fn(y.nrows(), y.ncols(), |i, e| y[(i, e)] - output_mean[e]);
-    let (yc_train, yc_val) = (centre(&y_train), centre(&y_val));
-    let pod_rows = subset(n, config.pod_samples, config.seed);
-    let pod_x = Mat::from_fn(pod_rows.len(), yc_train.ncols(), |i, e| yc_train[(pod_rows[i], e)]);
-    let (pod_values, basis) = principal_directions(pod_x.as_ref(), config.max_modes, 1e-7)?;
-    if basis.nrows() == 0 {
-        return Err(LearnError::InvalidInput("the training targets do not vary: nothing to learn".into()));
-    }
-    let coeffs_train = mul_t(yc_train.as_ref(), basis.as_ref(), training_par());
-    let coeffs_val = mul_t(yc_val.as_ref(), basis.as_ref(), training_par());
-    // The validation targets' energy outside the basis, per sample.
-    let outside_val: Vec<f64> = (0..validation.len())
-        .map(|i| {
-            let total: f64 = yc_val.row(i).iter().map(|v| v * v).sum();
-            (total - coeffs_val.row(i).iter().map(|v| v * v).sum::<f64>()).max(0.0)
-        })
-        .collect();
-
-    // Input features.
-    let input_entries: Vec<usize> =
-        (0..grid.field_len()).filter(|&e| (0..n).any(|i| train.input(i)[e] != 0.0)).collect();
-    if input_entries.is_empty() {
-        return Err(LearnError::InvalidInput("every training input is zero: nothing to learn from".into()));
-    }
-    let read_inputs = |fields: &[Vec<f32>]| {
-        Mat::from_fn(fields.len(), input_entries.len(), |i, e| f64::from(fields[i][input_entries[e]]))
-    };
+    let outputs = Outputs::new(train, validation, config)?;
     let clean: Vec<Vec<f32>> = (0..n).map(|i| train.input(i).to_vec()).collect();
-    let x_clean = read_inputs(&clean);
-    let input_mean: Vec<f64> = (0..x_clean.ncols()).map(|e| x_clean.col(e).iter().sum::<f64>() / n as f64).collect();
-    let centre_in = |x: &Mat<f64>| Mat::from_fn(x.nrows(), x.ncols(), |i, e| x[(i, e)] - input_mean[e]);
-    let x_centred = centre_in(&x_clean);
-    // The features: the inputs' leading principal directions or, with a prior, its leading modal
-    // coefficients (the prior's transpose applied to each mode: one solve per mode). Either keeps
-    // `input_energy` of the training inputs' energy in its space.
-    let (values, directions, prior_matrix) = match prior {
-        None => {
-            let (values, directions) = principal_directions(x_centred.as_ref(), config.max_input_components, 1e-7)?;
-            (values, directions, None)
-        }
-        Some(response) => {
-            let a = prior_coefficients_matrix(response, &basis, &out_entries, &input_entries, grid.field_len())?;
-            let p = mul_t(x_centred.as_ref(), a.as_ref(), training_par());
-            let values = (0..p.ncols()).map(|j| p.col(j).iter().map(|v| v * v).sum()).collect();
-            (values, a.subrows(0, a.nrows().min(config.max_input_components)).to_owned(), Some(a))
-        }
-    };
-    let total: f64 = values.iter().sum();
-    let mut kept = 0.0;
-    let components = values
-        .iter()
-        .position(|v| {
-            kept += v;
-            kept >= config.input_energy * total
-        })
-        .map_or(directions.nrows(), |p| p + 1)
-        .min(directions.nrows());
-    let input_components = directions.subrows(0, components).to_owned();
-    // Each set of inputs read and centred once: its features, and what the regression learns for it
-    // (the modal coefficients of sample `sample(i)`, less the prior's; with a prior the features are
-    // the leading prior coefficients).
-    let read = |fields: &[Vec<f32>], coeffs: &Mat<f64>, sample: &dyn Fn(usize) -> usize| {
-        let x = centre_in(&read_inputs(fields));
-        let p = prior_matrix.as_ref().map(|a| mul_t(x.as_ref(), a.as_ref(), training_par()));
-        let features = match &p {
-            Some(p) => p.subcols(0, components).to_owned(),
-            None => mul_t(x.as_ref(), input_components.as_ref(), training_par()),
-        };
-        let targets = Mat::from_fn(fields.len(), coeffs.ncols(), |i, j| {
-            coeffs[(sample(i), j)] - p.as_ref().map_or(0.0, |p| p[(i, j)])
-        });
-        (features, targets)
-    };
-
-    // The regression's training set: the samples, then their corrupted copies.
-    let mut fields = clean;
-    for copy in 0..config.noise_copies {
-        for i in 0..n {
-            let mut input = train.input(i).to_vec();
-            let item = (copy * n + i) as u64;
-            config.corruption.apply(&mut input, grid, &mut item_rng(config.seed, STREAM_TRAIN_CORRUPTION, item))?;
-            fields.push(input);
-        }
-    }
-    let (f_train, y_coeffs) = read(&fields, &coeffs_train, &|i| i % n);
-    let val_fields: Vec<Vec<f32>> = (0..validation.len())
-        .map(|i| {
-            let mut input = validation.input(i).to_vec();
-            if !config.corruption.is_identity() {
-                let mut rng = item_rng(config.seed, STREAM_EVAL_CORRUPTION, i as u64);
-                config.corruption.apply(&mut input, grid, &mut rng)?;
-            }
-            Ok(input)
-        })
-        .collect::<Result<_>>()?;
-    let (f_val, target_val) = read(&val_fields, &coeffs_val, &|i| i);
+    let inputs = Inputs::new(train.grid, &clean, config, &outputs, prior)?;
+    let fields = with_corrupted_copies(clean, train, config)?;
+    let (f_train, y_coeffs) = inputs.read(&fields, &outputs.coeffs_train, &|i| i % n);
+    let val_fields = validation_inputs(validation, config)?;
+    let (f_val, target_val) = inputs.read(&val_fields, &outputs.coeffs_val, &|i| i);
 
     // Inducing points: the clean training samples (a seeded subset above `max_inducing`).
     let inducing_rows = subset(n, config.max_inducing, config.seed ^ 0x5eed);
-    let spread: Vec<f64> = (0..components)
+    let spread: Vec<f64> = (0..inputs.components)
         .map(|j| {
             let mean = (0..n).map(|i| f_train[(i, j)]).sum::<f64>() / n as f64;
             ((0..n).map(|i| (f_train[(i, j)] - mean).powi(2)).sum::<f64>() / n as f64).sqrt()
         })
         .collect();
-
-    // Choice on validation, by each sample's root-mean-square node error (inside the chosen
-    // modes, beyond them and outside the basis).
-    let mode_counts: Vec<usize> =
-        MODES.iter().copied().filter(|&r| r < basis.nrows()).chain(std::iter::once(basis.nrows())).collect();
-    let node_entries = out_entries.len() as f64 / CHANNELS as f64;
-    let mut candidates: Vec<Candidate> = Vec::new();
     let mut scalings: Vec<Features> = FEATURE_EXPONENTS
         .iter()
         .map(|&exponent| Features::new(&f_train, &f_val, &spread, exponent, &inducing_rows))
         .collect();
-    for features in &scalings {
+    let candidates = validation_candidates(&scalings, &outputs, &y_coeffs, &target_val)?;
+    let chosen = candidates
+        .iter()
+        .min_by(|a, b| a.val_error.total_cmp(&b.val_error))
+        .cloned()
+        .ok_or_else(|| LearnError::InvalidInput("no candidate".into()))?;
+    let at = scalings
+        .iter()
+        .position(|f| f.exponent == chosen.feature_exponent)
+        .ok_or_else(|| LearnError::InvalidInput("no candidate".into()))?;
+    let features = scalings.swap_remove(at);
+    let info = RomInfo {
+        kernel: chosen.kernel,
+        length_scale: chosen.length_scale,
+        noise: chosen.noise,
+        modes: chosen.modes,
+        input_components: inputs.components,
+        feature_exponent: chosen.feature_exponent,
+        inducing: features.inducing.nrows(),
+        exact: features.exact,
+        calibration: 1.0,
+        train_samples: n,
+        val_samples: validation.len(),
+        noise_copies: config.noise_copies,
+        corruption: config.corruption.clone(),
+        seed: config.seed,
+        prior: prior_description,
+        val_mean_error: 0.0,
+        seconds: 0.0,
+        split: context.split.clone(),
+    };
+    let energy = outputs.pod_values[..chosen.modes].iter().sum::<f64>() / outputs.pod_energy;
+    let (mut model, project) = chosen_model(train.grid, &context, info, inputs, features, &outputs, &y_coeffs)?;
+    let report = calibrate(&mut model, &val_fields, &outputs.y_val, &project, energy, candidates)?;
+    model.info.seconds = start.elapsed().as_secs_f64();
+    Ok((model, report))
+}
+
+/// The training targets' output basis: the organ's grid nodes (those of any training mask), the
+/// target entries on them, their mean, the POD basis and the targets' modal coefficients.
+struct Outputs {
+    /// The organ's grid nodes.
+    nodes: Vec<usize>,
+    /// The target entries read, channel by channel over `nodes`.
+    entries: Vec<usize>,
+    /// The validation targets.
+    y_val: Mat<f64>,
+    /// The validation targets less the training mean.
+    yc_val: Mat<f64>,
+    /// The training targets' mean.
+    mean: Vec<f64>,
+    /// The POD's eigenvalues, and the squared norm of the samples it was computed from.
+    pod_values: Vec<f64>,
+    pod_energy: f64,
+    /// The POD basis (a mode per row).
+    basis: Mat<f64>,
+    /// The modal coefficients of the training and the validation targets.
+    coeffs_train: Mat<f64>,
+    coeffs_val: Mat<f64>,
+    /// The validation targets' energy outside the basis, per sample.
+    outside_val: Vec<f64>,
+}
+
+impl Outputs {
+    fn new(train: &Samples, validation: &Samples, config: &RomConfig) -> Result<Outputs> {
+        let grid_nodes = train.grid.nodes();
+        let n = train.len();
+        let nodes: Vec<usize> = (0..grid_nodes).filter(|&v| (0..n).any(|i| train.mask(i)[v] == 1)).collect();
+        let entries: Vec<usize> = (0..CHANNELS).flat_map(|c| nodes.iter().map(move |&v| c * grid_nodes + v)).collect();
+        let targets = |s: &Samples| Mat::from_fn(s.len(), entries.len(), |i, e| f64::from(s.target(i)[entries[e]]));
+        let (y_train, y_val) = (targets(train), targets(validation));
+        let mean: Vec<f64> = (0..y_train.ncols()).map(|e| y_train.col(e).iter().sum::<f64>() / n as f64).collect();
+        let centre = |y: &Mat<f64>| Mat::from_fn(y.nrows(), y.ncols(), |i, e| y[(i, e)] - mean[e]);
+        let (yc_train, yc_val) = (centre(&y_train), centre(&y_val));
+        let pod_rows = subset(n, config.pod_samples, config.seed);
+        let pod_x = Mat::from_fn(pod_rows.len(), yc_train.ncols(), |i, e| yc_train[(pod_rows[i], e)]);
+        let (pod_values, basis) = principal_directions(pod_x.as_ref(), config.max_modes, 1e-7)?;
+        if basis.nrows() == 0 {
+            return Err(LearnError::InvalidInput("the training targets do not vary: nothing to learn".into()));
+        }
+        let coeffs_train = mul_t(yc_train.as_ref(), basis.as_ref(), training_par());
+        let coeffs_val = mul_t(yc_val.as_ref(), basis.as_ref(), training_par());
+        let outside_val: Vec<f64> = (0..validation.len())
+            .map(|i| {
+                let total: f64 = yc_val.row(i).iter().map(|v| v * v).sum();
+                (total - coeffs_val.row(i).iter().map(|v| v * v).sum::<f64>()).max(0.0)
+            })
+            .collect();
+        Ok(Outputs {
+            nodes,
+            entries,
+            y_val,
+            yc_val,
+            mean,
+            pod_values,
+            pod_energy: pod_x.norm_l2().powi(2).max(f64::MIN_POSITIVE),
+            basis,
+            coeffs_train,
+            coeffs_val,
+            outside_val,
+        })
+    }
+}
+
+/// The input features: the input entries that vary, their training mean, and the directions
+/// that make features of them (the inputs' leading principal directions or, with a prior, its
+/// leading modal coefficients: the prior's transpose applied to each mode, one solve per mode),
+/// as many as keep `input_energy` of the training inputs' energy in their space.
+struct Inputs {
+    entries: Vec<usize>,
+    mean: Vec<f64>,
+    components: usize,
+    directions: Mat<f64>,
+    prior: Option<Mat<f64>>,
+}
+
+impl Inputs {
+    fn new(
+        grid: GridShape,
+        clean: &[Vec<f32>],
+        config: &RomConfig,
+        outputs: &Outputs,
+        prior: Option<&mut RestResponse>,
+    ) -> Result<Inputs> {
+        let entries: Vec<usize> = (0..grid.field_len()).filter(|&e| clean.iter().any(|x| x[e] != 0.0)).collect();
+        if entries.is_empty() {
+            return Err(LearnError::InvalidInput("every training input is zero: nothing to learn from".into()));
+        }
+        let x_clean = input_matrix(&entries, clean);
+        let n = clean.len();
+        let mean: Vec<f64> = (0..x_clean.ncols()).map(|e| x_clean.col(e).iter().sum::<f64>() / n as f64).collect();
+        let x_centred = centred(&x_clean, &mean);
+        let (values, directions, prior) = match prior {
+            None => {
+                let (values, directions) = principal_directions(x_centred.as_ref(), config.max_input_components, 1e-7)?;
+                (values, directions, None)
+            }
+            Some(response) => {
+                let a =
+                    prior_coefficients_matrix(response, &outputs.basis, &outputs.entries, &entries, grid.field_len())?;
+                let p = mul_t(x_centred.as_ref(), a.as_ref(), training_par());
+                let values = (0..p.ncols()).map(|j| p.col(j).iter().map(|v| v * v).sum()).collect();
+                let directions = a.subrows(0, a.nrows().min(config.max_input_components)).to_owned();
+                (values, directions, Some(a))
+            }
+        };
+        let total: f64 = values.iter().sum();
+        let mut kept = 0.0;
+        let components = values
+            .iter()
+            .position(|v| {
+                kept += v;
+                kept >= config.input_energy * total
+            })
+            .map_or(directions.nrows(), |p| p + 1)
+            .min(directions.nrows());
+        let directions = directions.subrows(0, components).to_owned();
+        Ok(Inputs { entries, mean, components, directions, prior })
+    }
+
+    /// A set of inputs read and centred once: its features, and what the regression learns for
+    /// it (the modal coefficients of sample `sample(i)`, less the prior's; with a prior the
+    /// features are the leading prior coefficients).
+    fn read(&self, fields: &[Vec<f32>], coeffs: &Mat<f64>, sample: &dyn Fn(usize) -> usize) -> (Mat<f64>, Mat<f64>) {
+        let x = centred(&input_matrix(&self.entries, fields), &self.mean);
+        let p = self.prior.as_ref().map(|a| mul_t(x.as_ref(), a.as_ref(), training_par()));
+        let features = match &p {
+            Some(p) => p.subcols(0, self.components).to_owned(),
+            None => mul_t(x.as_ref(), self.directions.as_ref(), training_par()),
+        };
+        let targets = Mat::from_fn(fields.len(), coeffs.ncols(), |i, j| {
+            coeffs[(sample(i), j)] - p.as_ref().map_or(0.0, |p| p[(i, j)])
+        });
+        (features, targets)
+    }
+}
+
+/// The `entries` of `fields`, a row per field.
+fn input_matrix(entries: &[usize], fields: &[Vec<f32>]) -> Mat<f64> {
+    Mat::from_fn(fields.len(), entries.len(), |i, e| f64::from(fields[i][entries[e]]))
+}
+
+/// `x` less `mean` (one per column).
+fn centred(x: &Mat<f64>, mean: &[f64]) -> Mat<f64> {
+    Mat::from_fn(x.nrows(), x.ncols(), |i, e| x[(i, e)] - mean[e])
+}
+
+/// The regression's training inputs: the clean samples, then `noise_copies` corrupted copies of them.
+fn with_corrupted_copies(mut fields: Vec<Vec<f32>>, train: &Samples, config: &RomConfig) -> Result<Vec<Vec<f32>>> {
+    let n = train.len();
+    for copy in 0..config.noise_copies {
+        for i in 0..n {
+            let mut input = train.input(i).to_vec();
+            let item = (copy * n + i) as u64;
+            config.corruption.apply(
+                &mut input,
+                train.grid,
+                &mut item_rng(config.seed, STREAM_TRAIN_CORRUPTION, item),
+            )?;
+            fields.push(input);
+        }
+    }
+    Ok(fields)
+}
+
+/// The validation inputs, corrupted as the model's inputs will be.
+fn validation_inputs(validation: &Samples, config: &RomConfig) -> Result<Vec<Vec<f32>>> {
+    (0..validation.len())
+        .map(|i| {
+            let mut input = validation.input(i).to_vec();
+            if !config.corruption.is_identity() {
+                let mut rng = item_rng(config.seed, STREAM_EVAL_CORRUPTION, i as u64);
+                config.corruption.apply(&mut input, validation.grid, &mut rng)?;
+            }
+            Ok(input)
+        })
+        .collect()
+}
+
+/// Every candidate's validation error: each sample's root-mean-square node error (inside the
+/// candidate's modes, beyond them and outside the basis), averaged over the samples.
+fn validation_candidates(
+    scalings: &[Features],
+    outputs: &Outputs,
+    y_coeffs: &Mat<f64>,
+    target_val: &Mat<f64>,
+) -> Result<Vec<Candidate>> {
+    let basis_size = outputs.basis.nrows();
+    let mode_counts: Vec<usize> =
+        MODES.iter().copied().filter(|&r| r < basis_size).chain(std::iter::once(basis_size)).collect();
+    let node_entries = outputs.entries.len() as f64 / CHANNELS as f64;
+    let samples = target_val.nrows();
+    let mut candidates: Vec<Candidate> = Vec::new();
+    for features in scalings {
         let feature_exponent = features.exponent;
         for kernel in [Kernel::Rbf, Kernel::Matern52] {
             for &s in &SCALES {
                 let length_scale = s * features.base_scale;
-                let fitted = features.regression(kernel, length_scale, &y_coeffs)?;
+                let fitted = features.regression(kernel, length_scale, y_coeffs)?;
                 let k_val = features.validation_kernel(kernel, length_scale);
                 for &noise in &NOISES {
                     let predicted = mul(k_val.as_ref(), fitted.weights(noise).as_ref(), training_par());
                     for &modes in &mode_counts {
-                        let val_error = (0..validation.len())
+                        let val_error = (0..samples)
                             .map(|i| {
                                 let inside: f64 =
                                     (0..modes).map(|j| (target_val[(i, j)] - predicted[(i, j)]).powi(2)).sum();
-                                let beyond: f64 = (modes..basis.nrows()).map(|j| coeffs_val[(i, j)].powi(2)).sum();
-                                ((inside + beyond + outside_val[i]) / node_entries).sqrt()
+                                let beyond: f64 = (modes..basis_size).map(|j| outputs.coeffs_val[(i, j)].powi(2)).sum();
+                                ((inside + beyond + outputs.outside_val[i]) / node_entries).sqrt()
                             })
                             .sum::<f64>()
-                            / validation.len() as f64;
+                            / samples as f64;
                         candidates.push(Candidate { feature_exponent, kernel, length_scale, noise, modes, val_error });
                     }
                 }
             }
         }
     }
-    let chosen = candidates
-        .iter()
-        .min_by(|a, b| a.val_error.total_cmp(&b.val_error))
-        .cloned()
-        .ok_or_else(|| LearnError::InvalidInput("no candidate".into()))?;
-    let Candidate { feature_exponent, kernel, length_scale: scale, noise, modes, .. } = chosen;
+    Ok(candidates)
+}
 
-    // The chosen model.
-    let at = scalings
-        .iter()
-        .position(|f| f.exponent == feature_exponent)
-        .ok_or_else(|| LearnError::InvalidInput("no candidate".into()))?;
-    let features = scalings.swap_remove(at);
-    let fitted = features.regression(kernel, scale, &y_coeffs)?;
+/// The model of the chosen hyper-parameters (`info`), and the validation targets (centred)
+/// projected on its basis.
+fn chosen_model(
+    grid: GridShape,
+    context: &Context<'_>,
+    info: RomInfo,
+    inputs: Inputs,
+    features: Features,
+    outputs: &Outputs,
+    y_coeffs: &Mat<f64>,
+) -> Result<(ReducedModel, Mat<f64>)> {
+    let (modes, noise) = (info.modes, info.noise);
+    let fitted = features.regression(info.kernel, info.length_scale, y_coeffs)?;
     let weights = fitted.weights(noise).subcols(0, modes).to_owned();
     let covariance = fitted.covariance(noise);
-    let amplitudes = fitted.amplitudes(noise, &y_coeffs);
-    let basis = basis.subrows(0, modes).to_owned();
-    let m = nodes.len();
+    let amplitudes = fitted.amplitudes(noise, y_coeffs);
+    let basis = outputs.basis.subrows(0, modes).to_owned();
+    let m = outputs.nodes.len();
     let variance_weights: Vec<f64> = (0..m)
         .map(|p| {
             (0..CHANNELS).map(|c| (0..modes).map(|j| amplitudes[j] * basis[(j, c * m + p)].powi(2)).sum::<f64>()).sum()
         })
         .collect();
+    let yc_val = &outputs.yc_val;
     let project = mul(mul_t(yc_val.as_ref(), basis.as_ref(), training_par()).as_ref(), basis.as_ref(), training_par());
     let floor: Vec<f64> = (0..m)
         .map(|p| {
-            (0..validation.len())
+            (0..yc_val.nrows())
                 .map(|i| (0..CHANNELS).map(|c| (yc_val[(i, c * m + p)] - project[(i, c * m + p)]).powi(2)).sum::<f64>())
                 .sum::<f64>()
-                / validation.len() as f64
+                / yc_val.nrows() as f64
         })
         .collect();
-    let energy = pod_values[..modes].iter().sum::<f64>() / pod_x.norm_l2().powi(2).max(f64::MIN_POSITIVE);
-
-    let mut model = ReducedModel {
+    let reader = match inputs.prior {
+        None => Reader::Components(inputs.directions),
+        Some(a) => Reader::Prior(a.subrows(0, modes.max(info.input_components)).to_owned()),
+    };
+    let model = ReducedModel {
         grid,
         placement: context.placement,
         input_unit: context.input_unit.into(),
         target_unit: context.target_unit.into(),
-        info: RomInfo {
-            kernel,
-            length_scale: scale,
-            noise,
-            modes,
-            input_components: components,
-            feature_exponent,
-            inducing: features.inducing.nrows(),
-            exact: features.exact,
-            calibration: 1.0,
-            train_samples: n,
-            val_samples: validation.len(),
-            noise_copies: config.noise_copies,
-            corruption: config.corruption.clone(),
-            seed: config.seed,
-            prior: prior_description,
-            val_mean_error: 0.0,
-            seconds: 0.0,
-            split: context.split,
-        },
-        input_entries,
-        input_mean,
-        reader: match prior_matrix {
-            None => Reader::Components(input_components),
-            Some(a) => Reader::Prior(a.subrows(0, modes.max(components)).to_owned()),
-        },
+        info,
+        input_entries: inputs.entries,
+        input_mean: inputs.mean,
+        reader,
         feature_scales: features.scales,
         inducing_norms: features.inducing_norms,
         inducing: features.inducing,
         weights,
         covariance,
-        nodes,
-        output_mean,
+        nodes: outputs.nodes.clone(),
+        output_mean: outputs.mean.clone(),
         basis,
         variance_weights,
         floor,
     };
+    Ok((model, project))
+}
 
-    // Validation errors, the projection floor and the calibration.
+/// The validation errors of `model`, the projection floor (`project`: the centred validation
+/// targets projected on the model's basis) and the calibration of its standard deviation, set
+/// in the model; the report of the fit, with the basis's `energy` and the `candidates` tried.
+fn calibrate(
+    model: &mut ReducedModel,
+    val_fields: &[Vec<f32>],
+    y_val: &Mat<f64>,
+    project: &Mat<f64>,
+    energy: f64,
+    candidates: Vec<Candidate>,
+) -> Result<RomReport> {
+    let m = model.nodes.len();
     let (mut errors, mut ratios, mut floor_errors) = (Vec::new(), Vec::new(), Vec::new());
     for (i, input) in val_fields.iter().enumerate() {
         let (k, prior) = model.kernel_row(input)?;
@@ -410,16 +533,14 @@ pub fn fit(
     let val_coverage = ratios.iter().filter(|&&r| r <= calibration).count() as f64 / ratios.len() as f64;
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     model.info.val_mean_error = mean(&errors);
-    model.info.seconds = start.elapsed().as_secs_f64();
-    let report = RomReport {
+    Ok(RomReport {
         energy,
         val_projection_error: mean(&floor_errors),
         val_mean_error: mean(&errors),
         val_max_error: errors.iter().copied().fold(0.0, f64::max),
         val_coverage,
         candidates,
-    };
-    Ok((model, report))
+    })
 }
 
 /// The scale of each feature for a scaling exponent: its spread relative to the first feature's,

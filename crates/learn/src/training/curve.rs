@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use mesh::io::write_atomic_bytes;
+use mesh::io::csv::write_csv;
 use serde::{Deserialize, Serialize};
 
 use crate::training::metrics::ErrorStats;
@@ -24,10 +24,13 @@ pub struct CurveRow {
 /// `iteration,train_loss,val_mean_error_m,val_std_error_m,val_max_error_m` (validation columns
 /// empty without validation samples).
 pub fn write_curve_csv(path: &Path, curve: &[CurveRow]) -> Result<()> {
-    let mut text = String::from("iteration,train_loss,val_mean_error_m,val_std_error_m,val_max_error_m\n");
-    for r in curve {
-        let val = r.val.map(|v| format!("{:e},{:e},{:e}", v.mean, v.std, v.max)).unwrap_or_else(|| ",,".into());
-        text.push_str(&format!("{},{:e},{val}\n", r.iteration, r.train_loss));
-    }
-    Ok(write_atomic_bytes(path, text.as_bytes())?)
+    let header = ["iteration", "train_loss", "val_mean_error_m", "val_std_error_m", "val_max_error_m"];
+    let rows = curve.iter().map(|r| {
+        let val = r.val.map_or([String::new(), String::new(), String::new()], |v| {
+            [format!("{:e}", v.mean), format!("{:e}", v.std), format!("{:e}", v.max)]
+        });
+        let [mean, std, max] = val;
+        [r.iteration.to_string(), format!("{:e}", r.train_loss), mean, std, max]
+    });
+    Ok(write_csv(path, &[], &header, rows)?)
 }

@@ -204,9 +204,8 @@ pub const CHECKPOINT_FILE: &str = "checkpoint.bin";
 /// Learning-curve CSV file name.
 pub const CURVE_CSV: &str = "curve.csv";
 
-/// The resolved starting point.
+/// The resolved starting point, beside its network.
 struct Start {
-    net: UNet,
     config: UNetConfig,
     normalization: Normalization,
     input_unit: String,
@@ -217,12 +216,11 @@ struct Start {
     pretraining: Vec<Split>,
 }
 
-fn resolve_start(init: &Initialization, seed: u64) -> Result<Start> {
+fn resolve_start(init: &Initialization, seed: u64) -> Result<(UNet, Start)> {
     match init {
         Initialization::Scratch { unet, normalization, input_unit } => {
             normalization.validate()?;
-            Ok(Start {
-                net: UNet::new(unet, seed)?,
+            let start = Start {
                 config: unet.clone(),
                 normalization: *normalization,
                 input_unit: input_unit.clone(),
@@ -230,13 +228,13 @@ fn resolve_start(init: &Initialization, seed: u64) -> Result<Start> {
                 fine_tuned_from: None,
                 freeze: false,
                 pretraining: Vec::new(),
-            })
+            };
+            Ok((UNet::new(unet, seed)?, start))
         }
         Initialization::FineTune { model, freeze_encoder } => {
             let pre = TrainedModel::load(model)?;
             let net = if *freeze_encoder { pre.net.freeze_encoder() } else { pre.net };
-            Ok(Start {
-                net,
+            let start = Start {
                 config: pre.config,
                 normalization: pre.normalization,
                 input_unit: pre.input_unit,
@@ -244,7 +242,8 @@ fn resolve_start(init: &Initialization, seed: u64) -> Result<Start> {
                 fine_tuned_from: Some(model.display().to_string()),
                 freeze: *freeze_encoder,
                 pretraining: pre.training.map(|t| t.splits().cloned().collect()).unwrap_or_default(),
-            })
+            };
+            Ok((net, start))
         }
     }
 }
@@ -511,62 +510,13 @@ pub fn train(
     let out = &options.out_dir;
     std::fs::create_dir_all(out).map_err(|e| LearnError::io(out, e))?;
     let engine = GradientEngine::new(options.compute)?;
-    let start = resolve_start(init, config.seed)?;
-    // Everything that shapes the trajectory, so that a checkpoint is only resumed into the
-    // run it came from. The checkpoint interval is left out, and so is the iteration count
-    // under a constant rate: such a finished run can be extended by resuming it with more.
-    let mut trajectory = serde_json::to_value(config)
-        .map_err(|e| LearnError::InvalidInput(format!("cannot serialize the training config: {e}")))?;
-    if let Some(map) = trajectory.as_object_mut() {
-        if config.final_learning_rate.is_none() {
-            map.remove("iterations");
-        }
-        map.remove("checkpoint_every");
-    }
-    let fingerprint = serde_json::json!({
-        "config": trajectory,
-        "init": init,
-        "grid": train.grid,
-        "train": [train.len(), indices_hash(train)],
-        "val": [val.len(), indices_hash(val)],
-    });
-    let mut net = start.net;
+    let (mut net, start) = resolve_start(init, config.seed)?;
     let mut adam = Adam::new(net.values().len());
-    let mut state = CheckpointState {
-        format: CHECKPOINT_FORMAT.into(),
-        version: CHECKPOINT_VERSION,
-        fingerprint,
-        iteration: 0,
-        seed: config.seed,
-        loss_sum: 0.0,
-        loss_count: 0,
-        best_iteration: None,
-        best_val: None,
-        curve: Vec::new(),
-        adam_steps: Vec::new(),
-    };
+    let mut state = CheckpointState::new(config, fingerprint(train, val, init, config)?);
     let mut best: Option<UNet> = None;
     let checkpoint_path = out.join(CHECKPOINT_FILE);
     if options.resume && checkpoint_path.exists() {
-        let saved = read_checkpoint(&checkpoint_path)?;
-        if saved.state.fingerprint != state.fingerprint {
-            return Err(LearnError::model(
-                &checkpoint_path,
-                "checkpoint is from a different setup (configuration, initialisation or data); \
-                 use another output directory or start without resume",
-            ));
-        }
-        best = restore(&saved, &mut net, &mut adam, &checkpoint_path)?;
-        state = saved.state;
-        if state.iteration > config.iterations {
-            return Err(LearnError::model(
-                &checkpoint_path,
-                format!(
-                    "checkpoint is at iteration {}, beyond the {} iterations asked for",
-                    state.iteration, config.iterations
-                ),
-            ));
-        }
+        best = resume(&checkpoint_path, config, &mut state, &mut net, &mut adam)?;
     }
 
     let progress = if options.progress {
@@ -612,35 +562,12 @@ pub fn train(
         let done = state.iteration == config.iterations;
         if state.iteration.is_multiple_of(config.validate_every) || done {
             let snapshot = net.clone();
-            let val_error = if val.is_empty() {
-                None
-            } else {
-                let predictor = Predictor::from_net(&snapshot, options.compute, start.normalization, val.grid)?;
-                let report =
-                    evaluate_net(|x| predictor.predict(x), val, &config.val_corruption, config.seed, |_, _| Ok(()))?;
-                Some(report.stats)
-            };
-            state.curve.push(CurveRow {
-                iteration: state.iteration,
-                train_loss: state.loss_sum / state.loss_count.max(1) as f64,
-                val: val_error,
-            });
-            state.loss_sum = 0.0;
-            state.loss_count = 0;
-            let val_mean = val_error.map(|v| v.mean);
-            let improved = match (val_mean, state.best_val) {
-                (None, _) => true,
-                (Some(e), Some(b)) => e < b,
-                (Some(_), None) => true,
-            };
-            if improved {
-                state.best_val = val_mean;
-                state.best_iteration = Some(state.iteration);
+            if state.validate(&snapshot, val, &start.normalization, config, options.compute)? {
                 best = Some(snapshot);
             }
             write_curve_csv(&out.join(CURVE_CSV), &state.curve)?;
-            if let Some(e) = val_mean {
-                progress.set_message(format!("loss {loss_value:.3e} val {:.4} mm", e * 1e3));
+            if let Some(e) = state.curve.last().and_then(|row| row.val) {
+                progress.set_message(format!("loss {loss_value:.3e} val {:.4} mm", e.mean * 1e3));
             }
         }
         let stop = options.stop_after.is_some_and(|s| state.iteration >= s) && !done;
@@ -655,8 +582,153 @@ pub fn train(
     }
     progress.finish_and_clear();
 
-    let best_net = best.unwrap_or(net);
-    let model = TrainedModel {
+    let model = trained_model(start, best.unwrap_or(net), train, val, config, options, &state, split);
+    let model_path = out.join(MODEL_FILE);
+    if completed {
+        model.save(&model_path)?;
+    }
+    if !state.curve.is_empty() {
+        write_curve_csv(&out.join(CURVE_CSV), &state.curve)?;
+    }
+    Ok(TrainOutcome {
+        model,
+        curve: state.curve,
+        iterations_done: state.iteration,
+        completed,
+        model_path,
+        mean_step_seconds: if steps > 0 { step_time / steps as f64 } else { 0.0 },
+    })
+}
+
+/// Everything that shapes the trajectory, so that a checkpoint is only resumed into the run it
+/// came from. The checkpoint interval is left out, and so is the iteration count under a constant
+/// rate: such a finished run can be extended by resuming it with more.
+fn fingerprint(
+    train: &Samples,
+    val: &Samples,
+    init: &Initialization,
+    config: &TrainConfig,
+) -> Result<serde_json::Value> {
+    let mut trajectory = serde_json::to_value(config)
+        .map_err(|e| LearnError::InvalidInput(format!("cannot serialize the training config: {e}")))?;
+    if let Some(map) = trajectory.as_object_mut() {
+        if config.final_learning_rate.is_none() {
+            map.remove("iterations");
+        }
+        map.remove("checkpoint_every");
+    }
+    Ok(serde_json::json!({
+        "config": trajectory,
+        "init": init,
+        "grid": train.grid,
+        "train": [train.len(), indices_hash(train)],
+        "val": [val.len(), indices_hash(val)],
+    }))
+}
+
+/// Resumes from the checkpoint at `path` into `state`, `net` and `adam`: it must be of the same
+/// setup (`state`'s fingerprint) and not beyond the iterations asked for. Returns the best
+/// weights it holds.
+fn resume(
+    path: &Path,
+    config: &TrainConfig,
+    state: &mut CheckpointState,
+    net: &mut UNet,
+    adam: &mut Adam,
+) -> Result<Option<UNet>> {
+    let saved = read_checkpoint(path)?;
+    if saved.state.fingerprint != state.fingerprint {
+        return Err(LearnError::model(
+            path,
+            "checkpoint is from a different setup (configuration, initialisation or data); \
+             use another output directory or start without resume",
+        ));
+    }
+    let best = restore(&saved, net, adam, path)?;
+    *state = saved.state;
+    if state.iteration > config.iterations {
+        return Err(LearnError::model(
+            path,
+            format!(
+                "checkpoint is at iteration {}, beyond the {} iterations asked for",
+                state.iteration, config.iterations
+            ),
+        ));
+    }
+    Ok(best)
+}
+
+impl CheckpointState {
+    /// The state of a run that has not started.
+    fn new(config: &TrainConfig, fingerprint: serde_json::Value) -> CheckpointState {
+        CheckpointState {
+            format: CHECKPOINT_FORMAT.into(),
+            version: CHECKPOINT_VERSION,
+            fingerprint,
+            iteration: 0,
+            seed: config.seed,
+            loss_sum: 0.0,
+            loss_count: 0,
+            best_iteration: None,
+            best_val: None,
+            curve: Vec::new(),
+            adam_steps: Vec::new(),
+        }
+    }
+
+    /// Validates `net` on `val` (when there are validation samples), adds the learning curve's
+    /// row and restarts the loss sums; returns whether `net` is the best so far (always, without
+    /// validation samples).
+    fn validate(
+        &mut self,
+        net: &UNet,
+        val: &Samples,
+        normalization: &Normalization,
+        config: &TrainConfig,
+        compute: Compute,
+    ) -> Result<bool> {
+        let val_error = if val.is_empty() {
+            None
+        } else {
+            let predictor = Predictor::from_net(net, compute, *normalization, val.grid)?;
+            let report =
+                evaluate_net(|x| predictor.predict(x), val, &config.val_corruption, config.seed, |_, _| Ok(()))?;
+            Some(report.stats)
+        };
+        self.curve.push(CurveRow {
+            iteration: self.iteration,
+            train_loss: self.loss_sum / self.loss_count.max(1) as f64,
+            val: val_error,
+        });
+        self.loss_sum = 0.0;
+        self.loss_count = 0;
+        let val_mean = val_error.map(|v| v.mean);
+        let improved = match (val_mean, self.best_val) {
+            (None, _) => true,
+            (Some(e), Some(b)) => e < b,
+            (Some(_), None) => true,
+        };
+        if improved {
+            self.best_val = val_mean;
+            self.best_iteration = Some(self.iteration);
+        }
+        Ok(improved)
+    }
+}
+
+/// The model trained from `start` to `state`, with the weights `net`.
+#[allow(clippy::too_many_arguments)]
+fn trained_model(
+    start: Start,
+    net: UNet,
+    train: &Samples,
+    val: &Samples,
+    config: &TrainConfig,
+    options: &TrainOptions,
+    state: &CheckpointState,
+    split: Split,
+) -> TrainedModel {
+    TrainedModel {
         config: start.config,
         normalization: start.normalization,
         grid: train.grid,
@@ -676,21 +748,6 @@ pub fn train(
             split,
             pretraining: start.pretraining,
         }),
-        net: best_net,
-    };
-    let model_path = out.join(MODEL_FILE);
-    if completed {
-        model.save(&model_path)?;
+        net,
     }
-    if !state.curve.is_empty() {
-        write_curve_csv(&out.join(CURVE_CSV), &state.curve)?;
-    }
-    Ok(TrainOutcome {
-        model,
-        curve: state.curve,
-        iterations_done: state.iteration,
-        completed,
-        model_path,
-        mean_step_seconds: if steps > 0 { step_time / steps as f64 } else { 0.0 },
-    })
 }

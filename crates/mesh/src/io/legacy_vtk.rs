@@ -355,39 +355,89 @@ impl<'a> Reader<'a> {
             parse_error(self.path, format!("line {header}: {keyword} has unsupported data type '{name}'"))
         })
     }
+    /// The header: the magic line, the title, the format (ASCII or BINARY, taken by the reader)
+    /// and the dataset type (UNSTRUCTURED_GRID or POLYDATA), which it returns.
+    fn dataset(&mut self) -> Result<String, MeshError> {
+        let magic = self.read_line();
+        if !magic.to_ascii_lowercase().starts_with(b"# vtk datafile") {
+            return Err(parse_error(self.path, format!("line 1: not a legacy VTK file: '{}'", show(magic))));
+        }
+        if self.pos >= self.data.len() {
+            return Err(parse_error(self.path, "file ends after line 1 (truncated file?)"));
+        }
+        self.read_line();
+        let mode = String::from_utf8_lossy(self.read_line()).trim().to_ascii_uppercase();
+        self.binary = match mode.as_str() {
+            "ASCII" => false,
+            "BINARY" => true,
+            _ => return Err(parse_error(self.path, format!("line 3: expected ASCII or BINARY, found '{mode}'"))),
+        };
+        let line = self.line;
+        let keyword = self.token().map(|t| String::from_utf8_lossy(t).to_ascii_uppercase());
+        let args = self.header_args();
+        let dataset = match (keyword.as_deref(), args.first()) {
+            (Some("DATASET"), Some(d)) => d.to_ascii_uppercase(),
+            _ => return Err(parse_error(self.path, format!("line {line}: expected DATASET, found {keyword:?}"))),
+        };
+        if dataset != "UNSTRUCTURED_GRID" && dataset != "POLYDATA" {
+            return Err(parse_error(
+                self.path,
+                format!("line {line}: DATASET {dataset} is not supported (UNSTRUCTURED_GRID or POLYDATA are)"),
+            ));
+        }
+        Ok(dataset)
+    }
+
+    /// An attribute section (`SCALARS`, `VECTORS`, …) of the data section `location` (its
+    /// location and tuple count), whose header (`keyword` and `args`) is on line `header`.
+    fn attribute(
+        &mut self,
+        keyword: &str,
+        args: &[String],
+        header: usize,
+        location: Option<(FieldLocation, usize)>,
+    ) -> Result<Field, MeshError> {
+        let (at, count) =
+            location.ok_or_else(|| self.error(format!("{keyword} outside a POINT_DATA or CELL_DATA section")))?;
+        let name = args.first().cloned().unwrap_or_default();
+        let (components, scalar) = match keyword {
+            "SCALARS" => {
+                let components = match args.get(2) {
+                    Some(_) => self.counts::<1>("SCALARS", &args[2..], header)?[0],
+                    None => 1,
+                };
+                (components, self.scalar(args.get(1), "SCALARS", header)?)
+            }
+            "COLOR_SCALARS" => {
+                let [c] = self.counts::<1>("COLOR_SCALARS", &args[1.min(args.len())..], header)?;
+                (c, if self.binary { Scalar::U8 } else { Scalar::F64 })
+            }
+            "TEXTURE_COORDINATES" => {
+                let [c] = self.counts::<1>("TEXTURE_COORDINATES", &args[1.min(args.len())..], header)?;
+                (c, self.scalar(args.get(2), keyword, header)?)
+            }
+            "TENSORS" => (9, self.scalar(args.get(1), keyword, header)?),
+            "TENSORS6" => (6, self.scalar(args.get(1), keyword, header)?),
+            _ => (3, self.scalar(args.get(1), keyword, header)?),
+        };
+        if keyword == "SCALARS" && self.peek_keyword().as_deref() == Some("LOOKUP_TABLE") {
+            self.token();
+            self.header_args();
+        }
+        let what = format!("{keyword} {name}");
+        let mut values = self.values(self.product(count, components, header)?, scalar, &what, header)?;
+        if keyword == "COLOR_SCALARS" && self.binary {
+            values.iter_mut().for_each(|v| *v /= 255.0);
+        }
+        Ok(Field { name, location: at, components, values })
+    }
 }
 
 /// Parses a whole legacy VTK file.
 fn parse(path: &Path) -> Result<Parsed, MeshError> {
     let data = read_bytes(path)?;
     let mut r = Reader { path, data: &data, pos: 0, line: 1, binary: false, last: None };
-    let magic = r.read_line();
-    if !magic.to_ascii_lowercase().starts_with(b"# vtk datafile") {
-        return Err(parse_error(path, format!("line 1: not a legacy VTK file: '{}'", show(magic))));
-    }
-    if r.pos >= data.len() {
-        return Err(parse_error(path, "file ends after line 1 (truncated file?)"));
-    }
-    r.read_line();
-    let mode = String::from_utf8_lossy(r.read_line()).trim().to_ascii_uppercase();
-    r.binary = match mode.as_str() {
-        "ASCII" => false,
-        "BINARY" => true,
-        _ => return Err(parse_error(path, format!("line 3: expected ASCII or BINARY, found '{mode}'"))),
-    };
-    let line = r.line;
-    let keyword = r.token().map(|t| String::from_utf8_lossy(t).to_ascii_uppercase());
-    let args = r.header_args();
-    let dataset = match (keyword.as_deref(), args.first()) {
-        (Some("DATASET"), Some(d)) => d.to_ascii_uppercase(),
-        _ => return Err(parse_error(path, format!("line {line}: expected DATASET, found {keyword:?}"))),
-    };
-    if dataset != "UNSTRUCTURED_GRID" && dataset != "POLYDATA" {
-        return Err(parse_error(
-            path,
-            format!("line {line}: DATASET {dataset} is not supported (UNSTRUCTURED_GRID or POLYDATA are)"),
-        ));
-    }
+    let dataset = r.dataset()?;
     let mut parsed = Parsed { dataset, points: None, cells: Vec::new(), types: None, fields: Vec::new() };
     let mut location: Option<(FieldLocation, usize)> = None;
     while let Some(token) = r.token() {
@@ -424,39 +474,7 @@ fn parse(path: &Path) -> Result<Parsed, MeshError> {
                 location = Some((at, n));
             }
             "SCALARS" | "COLOR_SCALARS" | "VECTORS" | "NORMALS" | "TENSORS" | "TENSORS6" | "TEXTURE_COORDINATES" => {
-                let (at, count) =
-                    location.ok_or_else(|| r.error(format!("{keyword} outside a POINT_DATA or CELL_DATA section")))?;
-                let name = args.first().cloned().unwrap_or_default();
-                let (components, scalar) = match keyword.as_str() {
-                    "SCALARS" => {
-                        let components = match args.get(2) {
-                            Some(_) => r.counts::<1>("SCALARS", &args[2..], header)?[0],
-                            None => 1,
-                        };
-                        (components, r.scalar(args.get(1), "SCALARS", header)?)
-                    }
-                    "COLOR_SCALARS" => {
-                        let [c] = r.counts::<1>("COLOR_SCALARS", &args[1.min(args.len())..], header)?;
-                        (c, if r.binary { Scalar::U8 } else { Scalar::F64 })
-                    }
-                    "TEXTURE_COORDINATES" => {
-                        let [c] = r.counts::<1>("TEXTURE_COORDINATES", &args[1.min(args.len())..], header)?;
-                        (c, r.scalar(args.get(2), &keyword, header)?)
-                    }
-                    "TENSORS" => (9, r.scalar(args.get(1), &keyword, header)?),
-                    "TENSORS6" => (6, r.scalar(args.get(1), &keyword, header)?),
-                    _ => (3, r.scalar(args.get(1), &keyword, header)?),
-                };
-                if keyword == "SCALARS" && r.peek_keyword().as_deref() == Some("LOOKUP_TABLE") {
-                    r.token();
-                    r.header_args();
-                }
-                let what = format!("{keyword} {name}");
-                let mut values = r.values(r.product(count, components, header)?, scalar, &what, header)?;
-                if keyword == "COLOR_SCALARS" && r.binary {
-                    values.iter_mut().for_each(|v| *v /= 255.0);
-                }
-                parsed.fields.push(Field { name, location: at, components, values });
+                parsed.fields.push(r.attribute(&keyword, &args, header, location)?);
             }
             "LOOKUP_TABLE" => {
                 let [size] = r.counts::<1>("LOOKUP_TABLE", &args[1.min(args.len())..], header)?;

@@ -14,7 +14,8 @@
 //! The frame a surface file names (`SPACE=LPS` or `SPACE=RAS` in an STL or legacy VTK header, as
 //! 3D Slicer writes it) is read by [`read_surface_with_frame`] and written by
 //! [`write_surface_in_frame`]; points with labels, frame and unit (CSV, Slicer's `.fcsv` and
-//! `.mrk.json`) by the [`points`] module.
+//! `.mrk.json`) by the [`points`] module. Every CSV file of the project is read and written by
+//! the [`csv`] module.
 //!
 //! Writers ([`write_vtu`], [`write_vtk_legacy`], [`write_msh`], [`write_surface`]) go through
 //! [`write_atomic`] (a temporary file in the target directory, renamed onto the target), so a
@@ -51,6 +52,7 @@
 //! Region nodes are mesh nodes: nodes that the reader drops (used by no volume cell) are left out
 //! of the regions, and the rest are renumbered with the mesh. A region with no node is not read.
 
+pub mod csv;
 mod frame;
 mod gmsh;
 mod legacy_vtk;
@@ -69,6 +71,7 @@ use std::path::{Path, PathBuf};
 
 use crate::{Cells, Mesh, MeshError, Point, TriSurface, HEX_TO_TETS};
 
+pub use csv::csv_field;
 pub use frame::{frame_in_header, read_surface_with_frame, surface_frame, write_surface_in_frame, Frame};
 pub use gmsh::{read_gmsh, write_msh};
 pub use legacy_vtk::{read_vtk, read_vtk_surface, read_vtk_with_fields, write_vtk_legacy, write_vtk_legacy_with};
@@ -351,16 +354,6 @@ pub fn write_atomic(
     persist_atomic(path, write).map_err(|error| WriteError { path: path.to_path_buf(), error })
 }
 
-/// `text` as a CSV field (RFC 4180): quoted, its quotes doubled, when it holds a comma, a quote or a
-/// line break; as it is otherwise.
-pub fn csv_field(text: &str) -> String {
-    if text.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", text.replace('"', "\"\""))
-    } else {
-        text.to_string()
-    }
-}
-
 /// [`write_atomic`] of a whole buffer.
 pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     write_atomic(path, |w| w.write_all(bytes))
@@ -600,15 +593,6 @@ pub fn write_pvd(path: impl AsRef<Path>, steps: &[(f64, String)]) -> Result<(), 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn csv_fields_are_quoted_only_when_they_must_be() {
-        assert_eq!(csv_field("FEM co-rotational (3k T4)"), "FEM co-rotational (3k T4)");
-        assert_eq!(csv_field(""), "");
-        assert_eq!(csv_field("liver 5012 T4, Svk"), "\"liver 5012 T4, Svk\"");
-        assert_eq!(csv_field("a \"b\""), "\"a \"\"b\"\"\"");
-        assert_eq!(csv_field("two\nlines"), "\"two\nlines\"");
-    }
 
     #[test]
     fn atomic_writes_replace_whole_files_and_leave_nothing_behind_on_failure() {

@@ -22,8 +22,9 @@ use std::path::Path;
 
 use serde_json::Value;
 
+use super::csv::{csv_field, write_csv, CsvError, Dialect, Header, Table};
 use super::frame::Frame;
-use super::{csv_field, extension, parse_error, write_atomic, WriteError};
+use super::{extension, parse_error, write_atomic, WriteError};
 use crate::repair::{metres_per, LengthUnit};
 use crate::{MeshError, Point};
 
@@ -112,8 +113,8 @@ struct Columns {
 }
 
 impl Columns {
-    /// Finds the columns in the (lower-case) header names; `err` makes an error of the header's line.
-    fn find(names: &[String], err: &dyn Fn(String) -> MeshError) -> Result<Columns, MeshError> {
+    /// Finds the columns in the (lower-case) header names.
+    fn find(names: &[String]) -> Result<Columns, String> {
         let mut xyz = [0usize; 3];
         let mut unit = None;
         for (axis, name) in ["x", "y", "z"].into_iter().enumerate() {
@@ -128,13 +129,13 @@ impl Columns {
                 Some((i, u))
             });
             let (column, u) = found.next().ok_or_else(|| {
-                err(format!("the header has no '{name}' column (expected the columns x, y, z, or x_mm, y_mm, z_mm)"))
+                format!("the header has no '{name}' column (expected the columns x, y, z, or x_mm, y_mm, z_mm)")
             })?;
             if found.next().is_some() {
-                return Err(err(format!("the header has more than one '{name}' column")));
+                return Err(format!("the header has more than one '{name}' column"));
             }
             if axis > 0 && u != unit {
-                return Err(err("the x, y and z columns name different units".into()));
+                return Err("the x, y and z columns name different units".into());
             }
             (xyz[axis], unit) = (column, u);
         }
@@ -149,59 +150,38 @@ impl Columns {
 }
 
 /// Reads CSV text, or Slicer's `.fcsv` when `fcsv` (columns named by the `# columns =` comment,
-/// RAS when no `# CoordinateSystem` line, millimetres).
+/// RAS when no `# CoordinateSystem` line, millimetres); a CSV file with a `# columns =` comment
+/// is read as `.fcsv` names its columns.
 fn read_table(path: &Path, text: &str, fcsv: bool) -> Result<LabelledPoints, MeshError> {
-    let err = |line: usize, message: String| parse_error(path, format!("line {line}: {message}"));
-    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim())).filter(|(_, l)| !l.is_empty()).peekable();
-    let (mut frame, mut columns_line) = (None, None);
-    while let Some(&(no, line)) = lines.peek().filter(|(_, l)| l.starts_with('#')) {
-        lines.next();
-        let Some((key, value)) = line.trim_start_matches('#').split_once('=') else { continue };
-        match key.trim().to_ascii_lowercase().as_str() {
-            "coordinatesystem" => frame = Some(coordinate_system(value).map_err(|m| err(no, m))?),
-            "columns" => columns_line = Some((no, value.trim())),
-            _ => {}
-        }
+    let table_error = |e: CsvError| parse_error(path, e.to_string());
+    let by_comment = Dialect { header: Header::Comment("columns"), ..Dialect::CSV };
+    let mut table = Table::parse(text, if fcsv { &by_comment } else { &Dialect::CSV }).map_err(table_error)?;
+    if !fcsv && table.settings.iter().any(|s| s.key == "columns") {
+        table = Table::parse(text, &by_comment).map_err(table_error)?;
     }
-    let (header_no, header) = match columns_line {
-        Some(c) => c,
-        None if fcsv => return Err(parse_error(path, "no '# columns = …' line: not a Slicer markups .fcsv file")),
-        None => {
-            lines.next().ok_or_else(|| parse_error(path, "no points (empty file, expected a header naming x, y, z)"))?
-        }
-    };
-    let names: Vec<String> =
-        split_csv(header).map_err(|m| err(header_no, m))?.iter().map(|s| s.to_ascii_lowercase()).collect();
-    let columns = Columns::find(&names, &|m| err(header_no, format!("{m} in {header:?}")))?;
+    let mut frame = None;
+    for setting in table.settings.iter().filter(|s| s.key == "coordinatesystem") {
+        frame = Some(coordinate_system(&setting.value).map_err(|m| table_error(CsvError::at(setting.line, m)))?);
+    }
+    let header_line = table
+        .header_line
+        .ok_or_else(|| parse_error(path, "no points (empty file, expected a header naming x, y, z)"))?;
+    let header = table.names.join(",");
+    let columns = Columns::find(&table.names)
+        .map_err(|m| table_error(CsvError::at(header_line, format!("{m} in {header:?}"))))?;
+    table.check_widths().map_err(table_error)?;
     let mut out = LabelledPoints {
         frame: if fcsv { frame.or(Some(Frame::Ras)) } else { frame },
         unit: if fcsv { Some(LengthUnit::Millimetre) } else { columns.unit },
         ..Default::default()
     };
-    for (line, text) in lines.filter(|(_, l)| !l.starts_with('#')) {
-        let fields = split_csv(text).map_err(|m| err(line, m))?;
-        if fields.len() != names.len() {
-            return Err(err(line, format!("{} fields, the header has {} columns", fields.len(), names.len())));
-        }
-        let mut p = [0.0; 3];
-        for (axis, &column) in columns.xyz.iter().enumerate() {
-            p[axis] = number(&fields[column]).map_err(|m| err(line, format!("{} {m}", ["x", "y", "z"][axis])))?;
-        }
-        out.points.push(p);
-        let field = |c: Option<usize>| c.map_or_else(String::new, |c| fields[c].clone());
+    for row in &table.rows {
+        out.points.push(row.point(columns.xyz).map_err(table_error)?);
+        let field = |c: Option<usize>| c.map_or_else(String::new, |c| row.fields[c].clone());
         out.labels.push(field(columns.label));
         out.descriptions.push(field(columns.description));
     }
     Ok(out)
-}
-
-/// A finite number, or what is wrong with `text`.
-fn number(text: &str) -> Result<f64, String> {
-    match text.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(v),
-        Ok(_) => Err(format!("= {text:?} is not finite")),
-        Err(_) => Err(format!("= {text:?} is not a number")),
-    }
 }
 
 /// The frame of an `.fcsv` `CoordinateSystem` value: `LPS`, `RAS`, or Slicer's older codes
@@ -212,39 +192,6 @@ fn coordinate_system(value: &str) -> Result<Frame, String> {
         "1" => Ok(Frame::Lps),
         "2" => Err("CoordinateSystem = 2 (IJK, voxel indices) is not supported: save the points in LPS or RAS".into()),
         other => other.parse(),
-    }
-}
-
-/// The fields of a CSV line, trimmed; a field in double quotes may hold commas and doubled quotes.
-fn split_csv(line: &str) -> Result<Vec<String>, String> {
-    let mut fields = Vec::new();
-    let mut chars = line.chars().peekable();
-    loop {
-        while chars.next_if(|c| *c == ' ' || *c == '\t').is_some() {}
-        let mut field = String::new();
-        if chars.next_if_eq(&'"').is_some() {
-            loop {
-                match chars.next() {
-                    Some('"') if chars.next_if_eq(&'"').is_some() => field.push('"'),
-                    Some('"') => break,
-                    Some(c) => field.push(c),
-                    None => return Err(format!("field {} opens a quote that is not closed", fields.len() + 1)),
-                }
-            }
-            while chars.next_if(|c| *c == ' ' || *c == '\t').is_some() {}
-            if chars.peek().is_some_and(|c| *c != ',') {
-                return Err(format!("field {} has text after its closing quote", fields.len() + 1));
-            }
-        } else {
-            while let Some(c) = chars.next_if(|c| *c != ',') {
-                field.push(c);
-            }
-            field.truncate(field.trim_end().len());
-        }
-        fields.push(field);
-        if chars.next().is_none() {
-            return Ok(fields);
-        }
     }
 }
 
@@ -363,31 +310,27 @@ fn write_labelled_csv(path: &Path, points: &LabelledPoints) -> Result<(), MeshEr
     let labelled = points.labels.iter().any(|l| !l.is_empty());
     let described = points.descriptions.iter().any(|d| !d.is_empty());
     let suffix = points.unit.map_or(String::new(), |u| format!("_{}", u.symbol()));
-    write_atomic(path, |w| {
-        if let Some(frame) = points.frame {
-            writeln!(w, "# CoordinateSystem = {frame}")?;
-        }
-        let mut header: Vec<String> = ["x", "y", "z"].iter().map(|a| format!("{a}{suffix}")).collect();
+    let comments: Vec<String> = points.frame.iter().map(|frame| format!("CoordinateSystem = {frame}")).collect();
+    let xyz: Vec<String> = ["x", "y", "z"].iter().map(|a| format!("{a}{suffix}")).collect();
+    let mut header: Vec<&str> = xyz.iter().map(String::as_str).collect();
+    if labelled {
+        header.insert(0, "label");
+    }
+    if described {
+        header.push("description");
+    }
+    let rows = points.points.iter().enumerate().map(|(i, p)| {
+        let (label, description) = texts(points, i);
+        let mut row: Vec<String> = p.iter().map(|&v| Num(v).to_string()).collect();
         if labelled {
-            header.insert(0, "label".into());
+            row.insert(0, label.to_string());
         }
         if described {
-            header.push("description".into());
+            row.push(description.to_string());
         }
-        writeln!(w, "{}", header.join(","))?;
-        for (i, p) in points.points.iter().enumerate() {
-            let (label, description) = texts(points, i);
-            let mut row: Vec<String> = p.iter().map(|&v| Num(v).to_string()).collect();
-            if labelled {
-                row.insert(0, csv_field(label));
-            }
-            if described {
-                row.push(csv_field(description));
-            }
-            writeln!(w, "{}", row.join(","))?;
-        }
-        Ok(())
-    })?;
+        row
+    });
+    write_csv(path, &comments, &header, rows)?;
     Ok(())
 }
 
@@ -469,13 +412,7 @@ pub fn write_markups_json(path: impl AsRef<Path>, points: &LabelledPoints) -> Re
 
 /// Writes `points` as CSV with the header `x,y,z`, atomically; the values read back exactly.
 pub fn write_points_csv(path: &Path, points: &[Point]) -> Result<(), WriteError> {
-    write_atomic(path, |w| {
-        writeln!(w, "x,y,z")?;
-        for p in points {
-            writeln!(w, "{},{},{}", Num(p[0]), Num(p[1]), Num(p[2]))?;
-        }
-        Ok(())
-    })
+    write_csv(path, &[], &["x", "y", "z"], points.iter().map(|p| p.map(|v| Num(v).to_string())))
 }
 
 /// Shortest round-tripping text of a value: plain notation for ordinary magnitudes, scientific
@@ -496,15 +433,6 @@ impl std::fmt::Display for Num {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn csv_lines_split_at_commas_outside_quotes() {
-        assert_eq!(split_csv("a, b ,c").unwrap(), ["a", "b", "c"]);
-        assert_eq!(split_csv("1,\"F, 1\",\"say \"\"hi\"\"\",").unwrap(), ["1", "F, 1", "say \"hi\"", ""]);
-        assert_eq!(split_csv("").unwrap(), [""]);
-        assert!(split_csv("1,\"open").unwrap_err().contains("field 2"));
-        assert!(split_csv("\"a\"b,c").unwrap_err().contains("after its closing quote"));
-    }
 
     #[test]
     fn conversion_takes_the_named_unit_and_frame_or_the_assumed_ones() {

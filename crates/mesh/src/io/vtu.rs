@@ -243,6 +243,96 @@ fn parse_tag(data: &[u8], lt: usize) -> Result<Tag, String> {
     Ok((name, attrs, self_closing, end + 1))
 }
 
+/// An opening tag's name and attributes.
+struct OpenTag<'t> {
+    name: &'t str,
+    attrs: &'t [(String, String)],
+}
+
+impl OpenTag<'_> {
+    /// The value of attribute `key`, if any.
+    fn attr(&self, key: &str) -> Option<&str> {
+        self.attrs.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str())
+    }
+
+    /// Attribute `key` as a count.
+    fn count(&self, key: &str) -> Result<usize, String> {
+        let v = self.attr(key).ok_or_else(|| format!("<{}> has no {key}", self.name))?;
+        v.trim().parse().map_err(|_| format!("{key}=\"{v}\" is not a count"))
+    }
+
+    /// The declaration of a `<DataArray>` in `parent`, whose tag starts at `lt` and ends at `end`.
+    fn array(
+        &self,
+        data: &[u8],
+        parent: String,
+        self_closing: bool,
+        lt: usize,
+        end: usize,
+    ) -> Result<ArrayDecl, String> {
+        let content = if self_closing {
+            end..end
+        } else {
+            let close = find(data, end, b"<").ok_or("<DataArray> is not closed (truncated file?)")?;
+            end..close
+        };
+        Ok(ArrayDecl {
+            parent,
+            name: self.attr("Name").unwrap_or("").to_string(),
+            ty: self.attr("type").unwrap_or("").to_string(),
+            components: match self.attr("NumberOfComponents") {
+                Some(_) => self.count("NumberOfComponents")?,
+                None => 1,
+            },
+            format: self.attr("format").unwrap_or("ascii").to_string(),
+            offset: match self.attr("offset") {
+                Some(_) => Some(self.count("offset")?),
+                None => None,
+            },
+            content,
+            at: lt,
+        })
+    }
+
+    /// The encoding (raw or not: base64) and the byte range of the `<AppendedData>` whose tag ends
+    /// at `end`.
+    fn appended(&self, data: &[u8], end: usize) -> Result<(bool, Range<usize>), String> {
+        let raw = match self.attr("encoding") {
+            Some("raw") => true,
+            Some("base64") => false,
+            other => return Err(format!("AppendedData encoding {other:?} is not raw or base64")),
+        };
+        let start = find(data, end, b"_").ok_or("AppendedData has no '_' marker (truncated file?)")?;
+        let stop = data
+            .windows(b"</AppendedData>".len())
+            .rposition(|w| w == b"</AppendedData>")
+            .filter(|&p| p > start)
+            .ok_or("AppendedData is not closed (truncated file?)")?;
+        Ok((raw, start + 1..stop))
+    }
+}
+
+impl VtuFile<'_> {
+    /// Takes the byte order, the header type and the compressor from the `<VTKFile>` tag.
+    fn set_format(&mut self, tag: &OpenTag) -> Result<(), String> {
+        if tag.attr("type") != Some("UnstructuredGrid") {
+            return Err(format!("type {:?} is not UnstructuredGrid", tag.attr("type").unwrap_or("")));
+        }
+        self.big_endian = tag.attr("byte_order") == Some("BigEndian");
+        self.header64 = match tag.attr("header_type") {
+            None | Some("UInt32") => false,
+            Some("UInt64") => true,
+            Some(other) => return Err(format!("unsupported header_type {other}")),
+        };
+        self.zlib = match tag.attr("compressor") {
+            None | Some("") => false,
+            Some("vtkZLibDataCompressor") => true,
+            Some(other) => return Err(format!("compressor {other} is not supported (zlib or none are)")),
+        };
+        Ok(())
+    }
+}
+
 /// Finds the elements of a `.vtu` file that matter.
 fn scan<'a>(path: &'a Path, data: &'a [u8]) -> Result<VtuFile<'a>, MeshError> {
     let at_error = |at: usize, m: String| parse_error(path, format!("line {}: {m}", line_at(data, at)));
@@ -289,78 +379,26 @@ fn scan<'a>(path: &'a Path, data: &'a [u8]) -> Result<VtuFile<'a>, MeshError> {
             continue;
         }
         let (name, attrs, self_closing, end) = parse_tag(data, lt).map_err(|m| at_error(lt, m))?;
-        let attr = |key: &str| attrs.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str());
-        let count = |key: &str| -> Result<usize, MeshError> {
-            let v = attr(key).ok_or_else(|| at_error(lt, format!("<{name}> has no {key}")))?;
-            v.trim().parse().map_err(|_| at_error(lt, format!("{key}=\"{v}\" is not a count")))
-        };
+        let tag = OpenTag { name: &name, attrs: &attrs };
         match name.as_str() {
             "VTKFile" => {
                 seen_file = true;
-                if attr("type") != Some("UnstructuredGrid") {
-                    return Err(at_error(lt, format!("type {:?} is not UnstructuredGrid", attr("type").unwrap_or(""))));
-                }
-                file.big_endian = attr("byte_order") == Some("BigEndian");
-                file.header64 = match attr("header_type") {
-                    None | Some("UInt32") => false,
-                    Some("UInt64") => true,
-                    Some(other) => return Err(at_error(lt, format!("unsupported header_type {other}"))),
-                };
-                file.zlib = match attr("compressor") {
-                    None | Some("") => false,
-                    Some("vtkZLibDataCompressor") => true,
-                    Some(other) => {
-                        return Err(at_error(lt, format!("compressor {other} is not supported (zlib or none are)")))
-                    }
-                };
+                file.set_format(&tag).map_err(|m| at_error(lt, m))?;
             }
             "Piece" => {
                 pieces += 1;
                 if pieces > 1 {
                     return Err(at_error(lt, "a second <Piece>: only single-piece files are supported".into()));
                 }
-                file.points = count("NumberOfPoints")?;
-                file.cells = count("NumberOfCells")?;
+                file.points = tag.count("NumberOfPoints").map_err(|m| at_error(lt, m))?;
+                file.cells = tag.count("NumberOfCells").map_err(|m| at_error(lt, m))?;
             }
             "DataArray" => {
-                let content = if self_closing {
-                    end..end
-                } else {
-                    let close = find(data, end, b"<")
-                        .ok_or_else(|| at_error(lt, "<DataArray> is not closed (truncated file?)".into()))?;
-                    end..close
-                };
-                file.arrays.push(ArrayDecl {
-                    parent: stack.last().map(|(n, _)| n.clone()).unwrap_or_default(),
-                    name: attr("Name").unwrap_or("").to_string(),
-                    ty: attr("type").unwrap_or("").to_string(),
-                    components: match attr("NumberOfComponents") {
-                        Some(_) => count("NumberOfComponents")?,
-                        None => 1,
-                    },
-                    format: attr("format").unwrap_or("ascii").to_string(),
-                    offset: match attr("offset") {
-                        Some(_) => Some(count("offset")?),
-                        None => None,
-                    },
-                    content,
-                    at: lt,
-                });
+                let parent = stack.last().map(|(n, _)| n.clone()).unwrap_or_default();
+                file.arrays.push(tag.array(data, parent, self_closing, lt, end).map_err(|m| at_error(lt, m))?);
             }
             "AppendedData" => {
-                let raw = match attr("encoding") {
-                    Some("raw") => true,
-                    Some("base64") => false,
-                    other => return Err(at_error(lt, format!("AppendedData encoding {other:?} is not raw or base64"))),
-                };
-                let start = find(data, end, b"_")
-                    .ok_or_else(|| at_error(lt, "AppendedData has no '_' marker (truncated file?)".into()))?;
-                let stop = data
-                    .windows(b"</AppendedData>".len())
-                    .rposition(|w| w == b"</AppendedData>")
-                    .filter(|&p| p > start)
-                    .ok_or_else(|| at_error(lt, "AppendedData is not closed (truncated file?)".into()))?;
-                file.appended = Some((raw, start + 1..stop));
+                file.appended = Some(tag.appended(data, end).map_err(|m| at_error(lt, m))?);
                 stack.clear();
                 break;
             }

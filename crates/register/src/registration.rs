@@ -10,8 +10,8 @@ use mesh::stats::{max, mean};
 use mesh::Point;
 use serde::Serialize;
 
+use crate::frame::{register_frame, Deformer, FrameResult, RegistrationOptions};
 use crate::organ::{displaced, Organ, Stencil};
-use crate::register::{register_frame, Deformer, FrameResult, RegistrationOptions};
 use crate::rigid::{rigid_align, RigidResult, RigidSummary};
 use crate::{RegisterError, Result};
 
@@ -347,7 +347,7 @@ impl Summary {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::register::Observations;
+    use crate::frame::Observations;
 
     /// A deformer that never moves the organ.
     struct Still;

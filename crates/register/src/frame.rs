@@ -8,6 +8,7 @@ use mesh::{sub, unit, Point, TriSurface};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::checks::{check_cloud, check_setting};
 use crate::organ::{Organ, Stencil};
 use crate::rigid::RigidOptions;
 use crate::{RegisterError, Result};
@@ -147,15 +148,6 @@ impl RegistrationOptions {
             return Err(RegisterError::Invalid(format!("view = {v:?} must be a finite, non-zero direction")));
         }
         self.rigid.as_ref().map_or(Ok(()), RigidOptions::validate)
-    }
-}
-
-/// `Ok` when a setting is `ok` and finite, else an error naming it, its value and the `rule`
-/// it breaks ("capture_decay = 1.5 must be in (0, 1]").
-pub(crate) fn check_setting(name: &str, value: f64, ok: bool, rule: &str) -> Result<()> {
-    match ok && value.is_finite() {
-        true => Ok(()),
-        false => Err(RegisterError::Invalid(format!("{name} = {value} must be {rule}"))),
     }
 }
 
@@ -306,7 +298,7 @@ fn observations(
         let triangle = original[m.triangle];
         let tri = surface.triangles[triangle];
         let corners = tri.map(|k| surface.vertices[k]);
-        let bary = barycentric(corners, m.point);
+        let bary = mesh::bvh::triangle_barycentric(corners, m.point);
         let normal = unit(mesh::cross(sub(corners[1], corners[0]), sub(corners[2], corners[0])));
         let mut p0 = [0.0; 3];
         for (b, &k) in bary.iter().zip(&tri) {
@@ -400,34 +392,6 @@ fn estimate_view(surface: &TriSurface, matches: &[ClosestPoint], limit: f64) -> 
     }
     let length = mesh::norm(sum);
     (count > 0 && length >= ONE_SIDED * count as f64).then(|| sum.map(|x| x / length))
-}
-
-/// Rejects an empty cloud or one with a non-finite coordinate.
-pub fn check_cloud(cloud: &[Point]) -> Result<()> {
-    if cloud.is_empty() {
-        return Err(RegisterError::Invalid("no points (the point cloud is empty)".into()));
-    }
-    if let Some(i) = cloud.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
-        return Err(RegisterError::Invalid(format!("point {i} has a non-finite coordinate {:?}", cloud[i])));
-    }
-    Ok(())
-}
-
-/// Barycentric coordinates of `p` (a point of the triangle's plane) in triangle `t`,
-/// clamped to the triangle.
-pub(crate) fn barycentric(t: [Point; 3], p: Point) -> [f64; 3] {
-    let e0 = sub(t[1], t[0]);
-    let e1 = sub(t[2], t[0]);
-    let e2 = sub(p, t[0]);
-    let (d00, d01, d11) = (mesh::dot(e0, e0), mesh::dot(e0, e1), mesh::dot(e1, e1));
-    let (d20, d21) = (mesh::dot(e2, e0), mesh::dot(e2, e1));
-    let den = d00 * d11 - d01 * d01;
-    if !(den.abs() > 0.0) {
-        return [1.0, 0.0, 0.0];
-    }
-    let v = ((d11 * d20 - d01 * d21) / den).clamp(0.0, 1.0);
-    let w = ((d00 * d21 - d01 * d20) / den).clamp(0.0, 1.0 - v);
-    [1.0 - v - w, v, w]
 }
 
 #[cfg(test)]
