@@ -1,7 +1,8 @@
 //! What a registration writes: the registered organ (organ.vtu, or organ.pvd and one .vtu per
 //! frame of a sequence), targets.csv (rest and registered positions, with the predicted standard
 //! deviation when the method gives one) and summary.json (the run's figures and each frame's),
-//! all in the cloud's frame; and what a comparison of methods on a synthetic case writes.
+//! all in the cloud's frame; and what a comparison of methods on a synthetic case writes; each
+//! run in a folder of its own ([`run_dir`]).
 
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
@@ -9,12 +10,39 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use mesh::io::{csv_field, write_atomic_bytes, Field};
 use mesh::{Mesh, Point};
+use register::cloud::write_csv;
 use register::{FrameOutcome, Organ, RigidResult, RigidTransform, Summary};
 use scenario::registration::slug;
 use serde::Serialize;
 
 use crate::case::{Compared, Registered, SyntheticCase};
 use crate::picture::side_view;
+
+/// The folder of a run's results: `out` when the user names one, refused when it already holds
+/// an earlier run's (its summary.json), so that two runs' files are never mixed; otherwise a
+/// fresh numbered folder under `parent` (`001`, `002`, …: the first free number), created. The
+/// flag says whether the folder is a fresh numbered one.
+pub fn run_dir(out: Option<&Path>, parent: &Path) -> Result<(PathBuf, bool)> {
+    if let Some(dir) = out {
+        if dir.join("summary.json").exists() {
+            anyhow::bail!(
+                "{} holds the results of an earlier run (summary.json): give another --out, or remove it",
+                dir.display()
+            );
+        }
+        return Ok((dir.to_path_buf(), false));
+    }
+    std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
+    for n in 1..=99_999 {
+        let dir = parent.join(format!("{n:03}"));
+        match std::fs::create_dir(&dir) {
+            Ok(()) => return Ok((dir, true)),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e).with_context(|| format!("creating {}", dir.display())),
+        }
+    }
+    anyhow::bail!("{} holds 99,999 runs: give --out", parent.display())
+}
 
 /// One frame's line of summary.json.
 #[derive(Clone, Debug, Serialize)]
@@ -166,6 +194,23 @@ pub fn write_targets(path: &Path, rest: &[Point], registered: &[Point], std: Opt
         text.push('\n');
     }
     Ok(write_atomic_bytes(path, text.as_bytes())?)
+}
+
+/// Writes a synthetic case's files into `dir`: cloud.csv and truth.csv (of the peak frame),
+/// targets_rest.csv and, for a case of several frames, clouds/cloud_NNNN.csv and
+/// truths/truth_NNNN.csv of every frame (m).
+pub fn write_case(dir: &Path, case: &SyntheticCase) -> Result<()> {
+    let peak = case.peak();
+    write_csv(&dir.join("cloud.csv"), &peak.cloud)?;
+    write_csv(&dir.join("targets_rest.csv"), &case.targets)?;
+    write_csv(&dir.join("truth.csv"), &peak.truth)?;
+    if case.frames.len() > 1 {
+        for (k, frame) in case.frames.iter().enumerate() {
+            write_csv(&dir.join("clouds").join(format!("cloud_{k:04}.csv")), &frame.cloud)?;
+            write_csv(&dir.join("truths").join(format!("truth_{k:04}.csv")), &frame.truth)?;
+        }
+    }
+    Ok(())
 }
 
 /// Writes a comparison of methods on a synthetic case into `dir`: comparison.csv (a row per

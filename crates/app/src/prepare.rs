@@ -45,7 +45,8 @@ use mesh::io::{read_surface_with_frame, write_atomic_bytes, Frame};
 use mesh::isosurface::ExtractOptions;
 use mesh::labelmap::{is_labelmap, read_labelmap_surface};
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
-use mesh::repair::{detect_unit, metres_per, LengthUnit, RepairOptions};
+use mesh::repair::{detect_unit, RepairOptions};
+use mesh::unit::{LengthUnit, UnitOrAuto};
 use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
 use mesh::{Camera, Mesh, Near, Point, TriSurface};
 use plot::{scatter_plot, PlotSpec, PointSet};
@@ -65,9 +66,9 @@ pub struct PrepareOptions {
     /// The labelmap's label: a number or a segment name (`None`: the only label it holds).
     #[serde(default)]
     pub label: Option<String>,
-    /// The unit of the surface, the camera, the landmarks and the targets, "mm" or "m" (`None`:
-    /// detected from the surface's size; a labelmap's is mm).
-    pub units: Option<String>,
+    /// The unit of the surface, the camera, the landmarks and the targets (`None`: detected from
+    /// the surface's size; a labelmap's is mm).
+    pub units: UnitOrAuto,
     /// Where the laparoscope looks from, in the segmentation's frame.
     pub camera: CameraAt,
     /// Landmarks where the organ is held (ligaments, the hilum): a points file (CSV x, y, z,
@@ -259,7 +260,7 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
     let landmarks = read(&mut input, &options.attach)?;
     let targets = read(&mut input, &options.targets)?;
     let camera = match &options.camera {
-        CameraAt::Point(p) => p.map(|x| x * metres_per(unit)),
+        CameraAt::Point(p) => p.map(|x| x * unit.metres()),
         CameraAt::File(path) => match read(&mut input, path)?.points.as_slice() {
             [p] => *p,
             other => bail!("{}: the camera is one point, the file holds {}", path.display(), other.len()),
@@ -271,7 +272,7 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
         (None, Some(f)) => format!("frame: {f} (named by the points' files; the surface's header names none)"),
         (None, None) => "frame: not named by any input (SPACE= header, .fcsv, .mrk.json): all taken as given".into(),
     });
-    surface.vertices.iter_mut().for_each(|p| *p = p.map(|x| x * metres_per(unit)));
+    surface.vertices.iter_mut().for_each(|p| *p = p.map(|x| x * unit.metres()));
     Ok(Inputs { surface, landmarks, targets, camera, frame })
 }
 
@@ -359,7 +360,7 @@ fn read_surface_input(
 ) -> Result<(TriSurface, Option<Frame>, LengthUnit)> {
     let path = &options.surface;
     if is_labelmap(path) {
-        if options.units.as_deref().is_some_and(|u| u != "mm") {
+        if options.units.is_some_and(|u| u != LengthUnit::Millimetre) {
             bail!("{} is a labelmap, whose unit is the millimetre: leave out --units or give mm", path.display());
         }
         let organ = read_labelmap_surface(path, options.label.as_deref(), &ExtractOptions::default())?;
@@ -370,8 +371,8 @@ fn read_surface_input(
         bail!("--label {label} chooses a label of a labelmap (.nii, .nii.gz, .nrrd), not of {}", path.display());
     }
     let (surface, frame) = read_surface_with_frame(path)?;
-    let unit = match &options.units {
-        Some(name) => name.parse::<LengthUnit>().map_err(anyhow::Error::msg).context("units")?,
+    let unit = match options.units {
+        Some(unit) => unit,
         None => {
             let u = detect_unit(&surface).with_context(|| format!("the unit of {}", path.display()))?;
             lines.push(format!("units: {} (detected from the surface's size; give --units otherwise)", u.symbol()));
@@ -1061,7 +1062,7 @@ mod tests {
         write_points_csv(&wrong.targets, &[[-45.0, 30.0, -140.0]]).unwrap();
         let error = format!("{:#}", organ_step(&wrong, dir.path()).unwrap_err());
         assert!(error.contains("the targets of"), "{error}");
-        wrong.units = Some("m".into());
+        wrong.units = Some(LengthUnit::Metre);
         let error = organ_step(&wrong, dir.path()).unwrap_err().to_string();
         assert!(error.contains("is a labelmap, whose unit is the millimetre"), "{error}");
         let mut surface = options(dir.path(), "liver_labels.nii.gz", "5", false);

@@ -11,6 +11,7 @@ use augsim_live::client::{Answer, Client};
 use augsim_live::igtl::{crc64, Header};
 use augsim_live::polydata::PolyData;
 use augsim_live::{encode_message, serve, Outputs, ServeOptions};
+use mesh::unit::LengthUnit;
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::select::nodes_in_box;
 use mesh::Point;
@@ -94,7 +95,7 @@ fn connect(port: u16) -> Client {
 
 #[test]
 fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
-    let server = Server::start(ServeOptions::default());
+    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, ..ServeOptions::default() });
     let port = server.port;
 
     // A cloud in millimetres: the registered target is the pressed centre.
@@ -245,7 +246,7 @@ impl augsim_live::Identification for SlowMean {
 #[test]
 fn features_step_the_identification_in_order_with_a_bounded_backlog() {
     let factory: Arc<augsim_live::IdentificationFactory> = Arc::new(|| Ok(Box::new(SlowMean)));
-    let server = Server::start(ServeOptions { identification: Some(factory), ..ServeOptions::default() });
+    let server = Server::start(ServeOptions { identification: Some(factory), units: LengthUnit::Millimetre, ..ServeOptions::default() });
     let mut client = connect(server.port);
     let burst = 3 * augsim_live::MAX_PENDING_STEPS;
     for k in 0..burst {
@@ -272,7 +273,7 @@ fn features_step_the_identification_in_order_with_a_bounded_backlog() {
     assert_eq!(client.until_status().unwrap().status["frame"], 1);
     // A server without identification answers features with an error.
     server.stop();
-    let server = Server::start(ServeOptions::default());
+    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, ..ServeOptions::default() });
     let mut client = connect(server.port);
     client.send_points("features", &[[0.0; 3]; 2]).unwrap();
     match client.receive().unwrap() {

@@ -24,6 +24,7 @@ pub mod stats;
 pub mod surface;
 pub mod tetmesh;
 pub mod topology;
+pub mod unit;
 pub mod volume;
 
 use std::collections::BTreeMap;

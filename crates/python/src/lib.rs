@@ -11,10 +11,11 @@ use std::sync::{Mutex, MutexGuard};
 
 use app::assimilation::{Experiment, OnlineFilter};
 use app::output::RunWriter;
-use app::registration::{MethodSpec, PatientMethod, RegistrationSpec, TargetsSpec};
-use fem::{post, StaticSolver};
+use app::registration::{RegistrationChoice, TargetsSpec};
+use fem::post;
 use learn::data::npy::{NpyArray, NpyData};
 use learn::{Model, PointCloud, PredictInput};
+use mesh::unit::LengthUnit;
 use mesh::Point;
 use nalgebra::DVector;
 use numpy::ndarray::{Array2, Array3, ArrayD, IxDyn};
@@ -23,7 +24,7 @@ use pyo3::create_exception;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use register::Tracked;
-use scenario::{AssimilationScenario, StaticScenario};
+use scenario::AssimilationScenario;
 
 create_exception!(
     _augsim,
@@ -119,10 +120,8 @@ struct Solution {
 #[pyfunction]
 fn solve(py: Python<'_>, scenario: PathBuf) -> PyResult<Solution> {
     let (nodes, sol) = compute(py, || {
-        let (scenario, dir) = StaticScenario::load(&scenario)?;
-        let problem = scenario.build_problem(&dir)?;
-        let nodes = problem.mesh.nodes.clone();
-        Ok((nodes, StaticSolver::new(problem)?.solve(&scenario.solver)?))
+        let solved = app::solve::solve_scenario(&scenario)?;
+        Ok((solved.solver.problem().mesh.nodes.clone(), solved.solution))
     })?;
     Ok(Solution {
         points: point_array(py, &nodes, 1.0).unbind(),
@@ -190,6 +189,7 @@ struct Registered {
 #[pyclass(module = "augsim")]
 struct Registration {
     state: Mutex<register::Registration>,
+    /// Metres per unit of clouds, targets and results.
     unit: f64,
     /// The method in words (e.g. "FEM, Corotational (Standard elements)").
     #[pyo3(get)]
@@ -216,39 +216,28 @@ impl Registration {
         iterations: Option<usize>,
         rigid: bool,
     ) -> PyResult<Self> {
-        let unit = register::cloud::metres_per_unit(units).map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
+        let units: LengthUnit = units.parse().map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
         let targets = match targets {
-            None => TargetsSpec::Regions,
-            Some(t) => match t.extract::<PathBuf>() {
+            None => None,
+            Some(t) => Some(match t.extract::<PathBuf>() {
                 Ok(path) => TargetsSpec::File(path),
                 Err(_) => TargetsSpec::Points(points(t, "targets", 1.0)?),
-            },
+            }),
         };
-        let state = match (patient, fem, model, scenario, &targets) {
-            (Some(dir), None, None, None, TargetsSpec::Regions) => compute(py, move || {
-                RegistrationSpec::patient(
-                    &dir,
-                    use_fem.map(|fem| if fem { PatientMethod::Fem } else { PatientMethod::Learned }),
-                    iterations,
-                    rigid,
-                )?
-                .build()
-            })?,
-            (None, fem, model, scenario, _) => {
-                let method = match (fem, model, scenario) {
-                    (Some(fem), None, None) => MethodSpec::Fem(fem),
-                    (None, Some(model), Some(scenario)) => MethodSpec::Learned { model, scenario },
-                    _ => {
-                        return Err(PyValueError::new_err(
-                            "give patient=DIR, fem=SCENARIO, or model=MODEL with scenario=SCENARIO",
-                        ))
-                    }
-                };
-                let spec = RegistrationSpec { method, targets, unit, iterations, rigid };
-                compute(py, move || spec.build())?
-            }
-            _ => return Err(PyValueError::new_err("patient=DIR holds its method and targets: give nothing else")),
+        let choice = RegistrationChoice {
+            patient,
+            use_fem: use_fem == Some(true),
+            use_model: use_fem == Some(false),
+            fem,
+            model,
+            scenario,
+            targets,
+            units,
+            iterations,
+            rigid,
         };
+        choice.check().map_err(PyValueError::new_err)?;
+        let state = compute(py, move || choice.spec()?.build())?;
         let warnings = state.warnings().iter().map(|w| format!("targets: {w}")).collect::<Vec<_>>();
         for w in &warnings {
             PyErr::warn(
@@ -259,7 +248,7 @@ impl Registration {
             )?;
         }
         let method = state.method().to_string();
-        Ok(Registration { state: Mutex::new(state), unit, method, units: units.to_string() })
+        Ok(Registration { state: Mutex::new(state), unit: units.metres(), method, units: units.to_string() })
     }
 
     /// Registers a cloud of positions, float [N, 3] in `units` (no correspondences needed),
