@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use mesh::io::{csv_field, write_atomic_bytes, Field};
+use mesh::unit::mm;
 use mesh::{Mesh, Point};
 use register::cloud::write_csv;
 use register::{FrameOutcome, Organ, RigidResult, RigidTransform, Summary};
@@ -67,9 +68,10 @@ pub struct FrameSummary {
     /// Largest TRE (mm), when the truth is known.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tre_max_mm: Option<f64>,
-    /// The predicted standard deviation at each target (mm), for a method that predicts one.
+    /// The predicted standard deviation σ of each target's error (mm), for a method that
+    /// predicts one.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub target_std_mm: Option<Vec<f64>>,
+    pub target_sigma_mm: Option<Vec<f64>>,
 }
 
 impl FrameSummary {
@@ -81,12 +83,12 @@ impl FrameSummary {
             points: r.points,
             inliers: r.inliers,
             iterations: r.iterations,
-            surface_residual_mm: r.surface_residual * 1e3,
+            surface_residual_mm: mm(r.surface_residual),
             time_ms: r.time.as_secs_f64() * 1e3,
             warnings: r.warnings.clone(),
             tre_mean_mm: tre.map(|t| t.0),
             tre_max_mm: tre.map(|t| t.1),
-            target_std_mm: o.target_std.as_ref().map(|s| s.iter().map(|v| v * 1e3).collect()),
+            target_sigma_mm: o.target_std.as_ref().map(|s| s.iter().map(|&v| mm(v)).collect()),
         }
     }
 }
@@ -131,8 +133,14 @@ impl RunWriter {
     }
 
     /// Writes organ.pvd (for a sequence), targets.csv (of the last frame; `targets`: the rest
-    /// positions) and summary.json; returns the run's summary.
-    pub fn finish(self, method: &str, targets: &[Point], outcomes: &[FrameOutcome]) -> Result<Summary> {
+    /// positions, `labels`: theirs, or none) and summary.json; returns the run's summary.
+    pub fn finish(
+        self,
+        method: &str,
+        targets: &[Point],
+        labels: &[String],
+        outcomes: &[FrameOutcome],
+    ) -> Result<Summary> {
         if self.sequence {
             mesh::io::write_pvd(self.dir.join("organ.pvd"), &self.steps)?;
         }
@@ -142,6 +150,7 @@ impl RunWriter {
             &rest_in_cloud_frame(targets, last.rigid.as_ref()),
             &last.targets,
             last.target_std.as_deref(),
+            labels,
         )?;
         let summary = Summary::new(method, outcomes)?;
         let run = RunSummary { summary: &summary, per_frame: &self.rows };
@@ -182,14 +191,33 @@ pub fn rest_in_cloud_frame(targets: &[Point], rigid: Option<&RigidResult>) -> Ve
     }
 }
 
-/// targets.csv: rest and registered position of each target (m), with the method's predicted
-/// standard deviation of each target's error (m), when it predicts one, as a last column `std`.
-pub fn write_targets(path: &Path, rest: &[Point], registered: &[Point], std: Option<&[f64]>) -> Result<()> {
-    let mut text = String::from(if std.is_some() { "x0,y0,z0,x,y,z,std\n" } else { "x0,y0,z0,x,y,z\n" });
+/// targets.csv: rest and registered position of each target (m: columns `x0_m, y0_m, z0_m,
+/// x_m, y_m, z_m`), with the method's predicted standard deviation σ of each target's error (m),
+/// when it predicts one, as a column `sigma_m`, and the targets' labels, when they have any, as a
+/// last column `label`.
+pub fn write_targets(
+    path: &Path,
+    rest: &[Point],
+    registered: &[Point],
+    sigma: Option<&[f64]>,
+    labels: &[String],
+) -> Result<()> {
+    let labelled = labels.len() == rest.len() && labels.iter().any(|l| !l.is_empty());
+    let mut text = String::from("x0_m,y0_m,z0_m,x_m,y_m,z_m");
+    if sigma.is_some() {
+        text.push_str(",sigma_m");
+    }
+    if labelled {
+        text.push_str(",label");
+    }
+    text.push('\n');
     for (i, (a, b)) in rest.iter().zip(registered).enumerate() {
         text.push_str(&format!("{},{},{},{},{},{}", a[0], a[1], a[2], b[0], b[1], b[2]));
-        if let Some(s) = std {
+        if let Some(s) = sigma {
             text.push_str(&format!(",{}", s[i]));
+        }
+        if labelled {
+            text.push_str(&format!(",{}", csv_field(&labels[i])));
         }
         text.push('\n');
     }
@@ -235,7 +263,8 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         let (m, u_cloud) = in_cloud_frame(reg.organ.mesh(), None, outcome.rigid.as_ref(), u);
         mesh::io::write_mesh(method_dir.join("organ.vtu"), &m, &[Field::point("displacement", 3, u_cloud)])?;
         let rest_targets = rest_in_cloud_frame(&case.targets, outcome.rigid.as_ref());
-        write_targets(&method_dir.join("targets.csv"), &rest_targets, &outcome.targets, outcome.target_std.as_deref())?;
+        let sigma = outcome.target_std.as_deref();
+        write_targets(&method_dir.join("targets.csv"), &rest_targets, &outcome.targets, sigma, &[])?;
         // The picture is drawn in the organ's frame: cloud, targets and truth moved back.
         let back = outcome.rigid.as_ref().map_or_else(RigidTransform::identity, |r| r.cloud_to_organ);
         let to_organ = |points: &[Point]| -> Vec<Point> { points.iter().map(|&p| back.apply(p)).collect() };
@@ -296,4 +325,42 @@ pub fn comparison_rows(rows: &[Compared]) -> Vec<(String, [Option<f64>; 6], Stri
         });
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_run_gets_a_folder_of_its_own() {
+        let dir = tempfile::tempdir().unwrap();
+        let parent = dir.path().join("runs");
+        let (first, fresh) = run_dir(None, &parent).unwrap();
+        assert!(fresh && first == parent.join("001") && first.is_dir());
+        assert_eq!(run_dir(None, &parent).unwrap().0, parent.join("002"));
+        let given = dir.path().join("mine");
+        assert_eq!(run_dir(Some(&given), &parent).unwrap(), (given.clone(), false));
+        std::fs::create_dir_all(&given).unwrap();
+        std::fs::write(given.join("summary.json"), "{}").unwrap();
+        let e = run_dir(Some(&given), &parent).unwrap_err().to_string();
+        assert!(e.contains("holds the results of an earlier run"), "{e}");
+    }
+
+    #[test]
+    fn targets_csv_names_its_unit_sigma_and_labels() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("targets.csv");
+        let (rest, moved) = ([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [[0.0, 0.0, 0.5], [1.0, 0.0, 0.5]]);
+        write_targets(&path, &rest, &moved, Some(&[0.001, 0.002]), &["T1".into(), "deep, left".into()]).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(
+            text,
+            "x0_m,y0_m,z0_m,x_m,y_m,z_m,sigma_m,label\n0,0,0,0,0,0.5,0.001,T1\n1,0,0,1,0,0.5,0.002,\"deep, left\"\n"
+        );
+        // Read back as points: the registered positions, in metres, with their labels.
+        let back = mesh::io::points::read_points(&path).unwrap();
+        assert_eq!((back.points, back.labels), (moved.to_vec(), vec!["T1".to_string(), "deep, left".to_string()]));
+        write_targets(&path, &rest, &moved, None, &["".into(), "".into()]).unwrap();
+        assert!(std::fs::read_to_string(&path).unwrap().starts_with("x0_m,y0_m,z0_m,x_m,y_m,z_m\n0,0,0,"));
+    }
 }

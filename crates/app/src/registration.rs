@@ -217,6 +217,15 @@ impl RegistrationSpec {
         };
         Registration::new(organ, deformer, method, targets, options).with_context(|| what)
     }
+
+    /// The targets' labels, in order: a targets file's (empty strings where it gives none); none
+    /// for other targets.
+    pub fn target_labels(&self) -> Result<Vec<String>> {
+        match &self.targets {
+            TargetsSpec::File(path) => Ok(mesh::io::points::read_points(path)?.labels),
+            TargetsSpec::Regions | TargetsSpec::Points(_) => Ok(Vec::new()),
+        }
+    }
 }
 
 /// The file of a patient's registration set-up in the directory `augsim prepare` writes.
@@ -286,7 +295,13 @@ impl RegistrationSpec {
             PatientMethod::Fem => MethodSpec::Fem(dir.join(p.fem)),
             PatientMethod::Learned => MethodSpec::Learned { model: dir.join(p.model), scenario: dir.join(p.scenario) },
         };
-        Ok(RegistrationSpec { method, targets: TargetsSpec::File(dir.join(p.targets)), units: p.units, iterations, rigid })
+        Ok(RegistrationSpec {
+            method,
+            targets: TargetsSpec::File(dir.join(p.targets)),
+            units: p.units,
+            iterations,
+            rigid,
+        })
     }
 }
 
@@ -316,11 +331,8 @@ mod tests {
         assert!(matches!(&spec.method, MethodSpec::Fem(p) if p == Path::new("beam")));
         assert!(matches!(&spec.targets, TargetsSpec::Points(p) if p == &[[1.0, 2.0, 3.0]]));
         assert_eq!((spec.units, spec.iterations, spec.rigid), (LengthUnit::Millimetre, Some(7), true));
-        let learned = RegistrationChoice {
-            model: Some("m".into()),
-            scenario: Some("s".into()),
-            ..RegistrationChoice::default()
-        };
+        let learned =
+            RegistrationChoice { model: Some("m".into()), scenario: Some("s".into()), ..RegistrationChoice::default() };
         let spec = learned.spec().unwrap();
         assert!(matches!(&spec.method, MethodSpec::Learned { model, scenario }
             if model == Path::new("m") && scenario == Path::new("s")));
@@ -336,11 +348,8 @@ mod tests {
         assert!(model_alone.spec().unwrap_err().to_string().contains("model MODEL with scenario SCENARIO"));
         let both = RegistrationChoice { model: Some("m".into()), ..fem() };
         assert_eq!(both.check().unwrap_err(), "give fem or model, not both");
-        let patient_and_more = RegistrationChoice {
-            patient: Some("p".into()),
-            targets: Some(TargetsSpec::Regions),
-            ..fem()
-        };
+        let patient_and_more =
+            RegistrationChoice { patient: Some("p".into()), targets: Some(TargetsSpec::Regions), ..fem() };
         assert_eq!(
             patient_and_more.check().unwrap_err(),
             "patient DIR holds its method and targets: leave out fem, targets"

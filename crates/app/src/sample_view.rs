@@ -198,7 +198,8 @@ pub fn organ_mesh(
             Ok((mesh::io::read_mesh(path).with_context(|| format!("reading {}", path.display()))?, path.to_path_buf()))
         }
         None => {
-            let path = scenario.map_or_else(|| std::path::PathBuf::from(&manifest.scenario), std::path::Path::to_path_buf);
+            let path =
+                scenario.map_or_else(|| std::path::PathBuf::from(&manifest.scenario), std::path::Path::to_path_buf);
             let (scenario, dir) = scenario::DatasetScenario::load(&path)
                 .context("the organ's mesh: give the dataset's scenario (--scenario) or its mesh (--mesh)")?;
             Ok((scenario.mesh(&dir)?, path))

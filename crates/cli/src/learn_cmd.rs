@@ -282,7 +282,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     app::curve::plot_learning_curve(&curve, &outcome.curve)?;
     println!("steps      {} ({:.3} s per step)", outcome.iterations_done, outcome.mean_step_seconds);
     if let Some((it, Some(e))) = outcome.model.training.as_ref().map(|t| (t.best_iteration, t.best_val_mean_error)) {
-        println!("best       validation mean e = {:.4} mm at iteration {it}", e * 1e3);
+        println!("best       validation mean e = {:.4} mm at iteration {it}", mm(e));
     }
     println!("wrote      {}", outcome.model_path.display());
     Ok(())
@@ -337,9 +337,9 @@ fn train_rom(
     );
     println!(
         "validation mean e = {:.4} mm (max {:.4} mm); the basis alone {:.4} mm; uncertainty scaled by {:.3} for {:.1} % within 2σ",
-        report.val_mean_error * 1e3,
-        report.val_max_error * 1e3,
-        report.val_projection_error * 1e3,
+        mm(report.val_mean_error),
+        mm(report.val_max_error),
+        mm(report.val_projection_error),
         info.calibration,
         report.val_coverage * 100.0
     );
@@ -471,7 +471,7 @@ pub fn predict(
         let vtu = output.with_extension("vtu");
         mesh::io::write_mesh(&vtu, &organ, &[Field::point("displacement", 3, u)])
             .with_context(|| format!("writing {}", vtu.display()))?;
-        println!("mesh       {} nodes, max |u| {:.3} mm", organ.num_nodes(), max * 1e3);
+        println!("mesh       {} nodes, max |u| {:.3} mm", organ.num_nodes(), mm(max));
         println!("wrote      {}", vtu.display());
     }
     Ok(())

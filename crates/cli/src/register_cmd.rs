@@ -8,7 +8,7 @@ use app::case::{ar_scenario, case_methods, compare, comparison_models, synthetic
 use app::output::{comparison_rows, run_dir, write_case, write_comparison, RunWriter};
 use app::points::{targets_frame, PointInput};
 use app::registration::RegistrationChoice;
-use mesh::unit::LengthUnit;
+use mesh::unit::{mm, LengthUnit};
 use mesh::Point;
 use register::cloud::read_frames;
 use register::{Organ, RigidOptions, RigidResult, RigidTransform};
@@ -39,7 +39,8 @@ pub struct RegisterArgs {
     /// Built-in comparison case (register_case, which describes it): a phantom
     /// truth pushed down (--force) and seen from above, registered by each of the case's methods
     /// (FEM models on another mesh, the shipped U-Net and reduced-order model, or --model on
-    /// --scenario, default liver_ar_t10); prints the comparison.
+    /// --scenario, default liver_ar_t10); prints the comparison. --iterations and --rigid then
+    /// hold for every method of the case.
     #[arg(long, group = "comparison", conflicts_with = "patient")]
     demo: bool,
     /// The comparison of --demo on this case scenario (TOML, as register_case).
@@ -124,12 +125,12 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
         }
         Ok(())
     })?;
-    let summary = writer.finish(registration.method(), registration.targets(), &outcomes)?;
-    if let Some(std) = outcomes.last().and_then(|o| o.target_std.as_ref()) {
+    let summary = writer.finish(registration.method(), registration.targets(), &spec.target_labels()?, &outcomes)?;
+    if let Some(sigma) = outcomes.last().and_then(|o| o.target_std.as_ref()) {
         println!(
-            "std        predicted at the targets: mean {:.2} mm, max {:.2} mm (targets.csv, column std)",
-            mesh::stats::mean(std) * 1e3,
-            mesh::stats::max(std) * 1e3
+            "sigma      predicted at the targets: mean {:.2} mm, max {:.2} mm (targets.csv, column sigma_m)",
+            mm(mesh::stats::mean(sigma)),
+            mm(mesh::stats::max(sigma))
         );
     }
     if let (Some(t), Some(m), Some(r)) = (summary.tre_mean_mm, summary.tre_max_mm, summary.no_deformation_tre_mean_mm) {
@@ -156,12 +157,12 @@ fn print_rigid(r: &RigidResult, truth: Option<&RigidTransform>) {
         "rigid      ICP: organ -> cloud rotation {:.2} deg, translation {:.2} mm; {} iterations{}, {} of {} points \
          kept, rms {:.2} mm, {:.1} ms",
         t.angle().to_degrees(),
-        t.translation_norm() * 1e3,
+        mm(t.translation_norm()),
         r.iterations,
         if r.converged { "" } else { " (not converged)" },
         r.kept,
         r.points,
-        r.rms * 1e3,
+        mm(r.rms),
         ms(r.time)
     );
     if let Some(truth) = truth {
@@ -169,9 +170,9 @@ fn print_rigid(r: &RigidResult, truth: Option<&RigidTransform>) {
         println!(
             "           against the case's true misalignment ({:.2} deg, {:.2} mm): {:.2} deg, {:.2} mm off",
             truth.angle().to_degrees(),
-            truth.translation_norm() * 1e3,
+            mm(truth.translation_norm()),
             angle.to_degrees(),
-            shift * 1e3
+            mm(shift)
         );
     }
 }
@@ -240,7 +241,7 @@ fn demo(args: &RegisterArgs, out: &Path) -> Result<()> {
         "camera     along {:?}: {} points on the visible surface, {} mm noise, {} % outliers (seed {})",
         c.view,
         c.points,
-        c.noise * 1e3,
+        mm(c.noise),
         c.outliers * 1e2,
         c.seed
     );
@@ -270,11 +271,8 @@ fn demo(args: &RegisterArgs, out: &Path) -> Result<()> {
 
     let wants_network =
         scenario.models.method.iter().any(|m| matches!(m.kind, MethodKind::Network | MethodKind::Hybrid));
-    let (models, missing) = if wants_network {
-        comparison_models(args.registration.model.as_deref())?
-    } else {
-        (Vec::new(), Vec::new())
-    };
+    let (models, missing) =
+        if wants_network { comparison_models(args.registration.model.as_deref())? } else { (Vec::new(), Vec::new()) };
     for path in missing {
         println!("model      skipped: {} not found (run from the repository root, or give --model)", path.display());
     }

@@ -61,9 +61,8 @@ fn identification(path: &std::path::Path, units: LengthUnit) -> Result<Arc<live:
         filter.names().join(", "),
         filter.features()
     );
-    let filters = live::first_then_build(Some(filter), move || {
-        OnlineFilter::new(&experiment).map_err(|e| e.to_string())
-    });
+    let filters =
+        live::first_then_build(Some(filter), move || OnlineFilter::new(&experiment).map_err(|e| e.to_string()));
     Ok(Arc::new(move || -> std::result::Result<Box<dyn live::Identification>, String> {
         Ok(Box::new(StreamFilter(filters()?)))
     }))
@@ -104,9 +103,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         libc::signal(libc::SIGINT, request_stop as *const () as libc::sighandler_t);
         libc::signal(libc::SIGTERM, request_stop as *const () as libc::sighandler_t);
     }
-    println!(
-        "listening  {address} (OpenIGTLink; clouds as POLYDATA or POINT named `cloud`, in {units}); Ctrl-C stops"
-    );
+    println!("listening  {address} (OpenIGTLink; clouds as POLYDATA or POINT named `cloud`, in {units}); Ctrl-C stops");
     let serve_options = ServeOptions { units, outputs, identification, ..ServeOptions::default() };
     live::serve(listener, Arc::new(factory), serve_options, &STOP)?;
     println!("stopped");

@@ -124,8 +124,7 @@ fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
         }
         let targets = targets.ok_or_else(|| anyhow!("{method}, frame {k}: no targets"))?;
         let registered: Vec<mesh::Point> = targets.iter().map(|p| p.map(|x| from_mm(f64::from(x)))).collect();
-        let errors: Vec<f64> =
-            register::target_errors(&registered, &frame.truth).into_iter().map(mm).collect();
+        let errors: Vec<f64> = register::target_errors(&registered, &frame.truth).into_iter().map(mm).collect();
         s.tre_mm.push(mean(&errors));
         s.tre_max_mm.push(max(&errors));
         s.server_ms.push(status["ms"].as_f64().unwrap_or(f64::NAN));

@@ -11,7 +11,7 @@
 //!   kept after it; targets and organ are then in the cloud's frame), STRING `status` (one line
 //!   of JSON: `frame`, `ms`,
 //!   `surface_residual`, `plausible` and `warnings` (see `register::plausibility`), `inliers`,
-//!   `points`, `iterations`, and `target_std` (the predicted standard deviation at each target, for
+//!   `points`, `iterations`, and `target_sigma` (the predicted standard deviation σ at each target, for
 //!   the reduced-order model; else null), in the stream's unit; or `frame` and `error`).
 //!
 //! Each client has its own registration, warm-started from its previous frame. A client's clouds
@@ -484,7 +484,7 @@ fn answer(
         "inliers": result.inliers,
         "points": result.points,
         "iterations": result.iterations,
-        "target_std": target_std.as_ref().map(|s| s.iter().map(|&v| units.from_metres(v)).collect::<Vec<f64>>()),
+        "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| units.from_metres(v)).collect::<Vec<f64>>()),
     }));
     Ok(())
 }

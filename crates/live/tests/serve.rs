@@ -11,9 +11,9 @@ use augsim_live::client::{Answer, Client};
 use augsim_live::igtl::{crc64, Header};
 use augsim_live::polydata::PolyData;
 use augsim_live::{encode_message, serve, Outputs, ServeOptions};
-use mesh::unit::LengthUnit;
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::select::nodes_in_box;
+use mesh::unit::LengthUnit;
 use mesh::Point;
 use register::{FemDeformer, Organ, Registration, RegistrationOptions};
 
@@ -246,7 +246,11 @@ impl augsim_live::Identification for SlowMean {
 #[test]
 fn features_step_the_identification_in_order_with_a_bounded_backlog() {
     let factory: Arc<augsim_live::IdentificationFactory> = Arc::new(|| Ok(Box::new(SlowMean)));
-    let server = Server::start(ServeOptions { identification: Some(factory), units: LengthUnit::Millimetre, ..ServeOptions::default() });
+    let server = Server::start(ServeOptions {
+        identification: Some(factory),
+        units: LengthUnit::Millimetre,
+        ..ServeOptions::default()
+    });
     let mut client = connect(server.port);
     let burst = 3 * augsim_live::MAX_PENDING_STEPS;
     for k in 0..burst {

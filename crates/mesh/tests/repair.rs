@@ -7,9 +7,9 @@ use std::time::Instant;
 
 use augsim_mesh::io::{read_stl, read_surface, write_stl};
 use augsim_mesh::repair::{detect_unit, repair_surface, self_intersections, RepairOptions};
-use augsim_mesh::unit::LengthUnit;
 use augsim_mesh::surface::check_closed_manifold;
 use augsim_mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
+use augsim_mesh::unit::LengthUnit;
 use augsim_mesh::TriSurface;
 
 fn data(name: &str) -> PathBuf {

@@ -167,7 +167,7 @@ struct Registered {
     /// The predicted standard deviation of each target's error, float64 [k], in `units`, for a
     /// model that predicts one (the reduced-order model); otherwise None.
     #[pyo3(get)]
-    target_std: Option<Py<PyArray1<f64>>>,
+    target_sigma: Option<Py<PyArray1<f64>>>,
     /// Wall time of the registration (ms).
     #[pyo3(get)]
     ms: f64,
@@ -282,7 +282,7 @@ impl Registration {
             iterations: result.iterations,
             warnings: result.warnings.clone(),
             rigid,
-            target_std: target_std
+            target_sigma: target_std
                 .map(|s| s.iter().map(|v| v / self.unit).collect::<Vec<f64>>().into_pyarray(py).unbind()),
             ms: result.time.as_secs_f64() * 1e3,
         })
@@ -324,7 +324,7 @@ fn write_frame(dir: &std::path::Path, registration: &register::Registration, tra
     };
     let mut writer = RunWriter::new(dir, false)?;
     writer.frame(0, "python".into(), registration.organ(), &outcome)?;
-    writer.finish(registration.method(), registration.targets(), std::slice::from_ref(&outcome))?;
+    writer.finish(registration.method(), registration.targets(), &[], std::slice::from_ref(&outcome))?;
     Ok(())
 }
 
