@@ -229,5 +229,5 @@ def test_a_prepared_patient_registers(tmp_path):
         top = reg.points[reg.points[:, 2] > reg.points[:, 2].max() - 5e-3]
         r = reg.register(top)
         assert np.abs(r.targets - reg.targets).max() < 2e-3
-    with pytest.raises(ValueError, match="patient=DIR holds"):
+    with pytest.raises(ValueError, match="patient DIR holds its method and targets: leave out targets"):
         augsim.Registration(patient=tmp_path / "patient", targets=[[0.0, 0.0, 0.0]])

@@ -286,3 +286,24 @@ fn features_step_the_identification_in_order_with_a_bounded_backlog() {
     }
     server.stop();
 }
+
+/// The factory hands the prebuilt object to the first client and builds one for each next one;
+/// a build's error reaches the client that asked.
+#[test]
+fn the_first_client_takes_the_prebuilt_object_and_the_next_ones_their_own() {
+    let built = std::sync::atomic::AtomicUsize::new(0);
+    let factory = augsim_live::first_then_build(Some("prebuilt".to_string()), || {
+        let n = built.fetch_add(1, Ordering::SeqCst) + 1;
+        if n < 3 {
+            Ok(format!("built {n}"))
+        } else {
+            Err("no more".to_string())
+        }
+    });
+    assert_eq!(factory().unwrap(), "prebuilt");
+    assert_eq!(factory().unwrap(), "built 1");
+    assert_eq!(factory().unwrap(), "built 2");
+    assert_eq!(factory().unwrap_err(), "no more");
+    let without = augsim_live::first_then_build(None, || Ok(7));
+    assert_eq!((without().unwrap(), without().unwrap()), (7, 7));
+}
