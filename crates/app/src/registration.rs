@@ -75,8 +75,8 @@ pub struct RegistrationChoice {
     #[arg(long, value_name = "TARGETS", value_parser = targets_file)]
     pub targets: Option<TargetsSpec>,
     /// Unit of the coordinates given and given back whose files name none (clouds, targets,
-    /// truth, results): mm or m. Default m, augsim's unit, on every front; files that name their
-    /// unit (.fcsv, .mrk.json, CSV columns x_mm) are read in it.
+    /// truth, results): mm or m, the same default (m, augsim's unit) on every front; files that
+    /// name their unit (.fcsv, .mrk.json, CSV columns x_mm) are read in it.
     #[arg(long, default_value_t = LengthUnit::DEFAULT)]
     pub units: LengthUnit,
     /// Most match-and-deform iterations of the first cloud, from rest (default: the library's for
