@@ -145,6 +145,16 @@ def test_register_writes_what_the_command_line_writes(case, tmp_path):
 
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["frames"] == 1 and summary["per_frame"][0]["iterations"] == r.iterations
+    assert (tmp_path / "out" / "targets.csv").read_text().startswith("x0_m,y0_m,z0_m,x_m,y_m,z_m\n")
+    # Labelled targets keep their labels in targets.csv.
+    labelled = tmp_path / "labelled_mm.csv"
+    rows = [f"T{k},{p[0]},{p[1]},{p[2]}" for k, p in enumerate(case["rest"])]
+    labelled.write_text("label,x,y,z\n" + "\n".join(rows) + "\n")
+    reg = augsim.Registration(fem=case["scenario"], targets=labelled, units="mm")
+    reg.register(case["cloud"], out=tmp_path / "labelled")
+    lines = (tmp_path / "labelled" / "targets.csv").read_text().splitlines()
+    assert lines[0] == "x0_m,y0_m,z0_m,x_m,y_m,z_m,label"
+    assert [line.rsplit(",", 1)[1] for line in lines[1:]] == [f"T{k}" for k in range(len(case["rest"]))]
 
 
 def test_predict_matches_the_command_line(tmp_path):

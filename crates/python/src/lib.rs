@@ -191,6 +191,8 @@ struct Registration {
     state: Mutex<register::Registration>,
     /// Metres per unit of clouds, targets and results.
     unit: f64,
+    /// The targets' labels (those of a targets file; none otherwise), for targets.csv.
+    labels: Vec<String>,
     /// The method in words (e.g. "FEM, Corotational (Standard elements)").
     #[pyo3(get)]
     method: String,
@@ -237,7 +239,10 @@ impl Registration {
             rigid,
         };
         choice.check().map_err(PyValueError::new_err)?;
-        let state = compute(py, move || choice.spec()?.build())?;
+        let (state, labels) = compute(py, move || {
+            let spec = choice.spec()?;
+            Ok((spec.build()?, spec.target_labels()?))
+        })?;
         let warnings = state.warnings().iter().map(|w| format!("targets: {w}")).collect::<Vec<_>>();
         for w in &warnings {
             PyErr::warn(
@@ -248,7 +253,7 @@ impl Registration {
             )?;
         }
         let method = state.method().to_string();
-        Ok(Registration { state: Mutex::new(state), unit: units.metres(), method, units: units.to_string() })
+        Ok(Registration { state: Mutex::new(state), unit: units.metres(), labels, method, units: units.to_string() })
     }
 
     /// Registers a cloud of positions, float [N, 3] in `units` (no correspondences needed),
@@ -265,7 +270,7 @@ impl Registration {
             let mut state = locked(&self.state)?;
             let tracked = state.register(&cloud)?;
             if let Some(dir) = &out {
-                write_frame(dir, &state, &tracked)?;
+                write_frame(dir, &state, &self.labels, &tracked)?;
             }
             Ok(tracked)
         })?;
@@ -313,7 +318,12 @@ impl Registration {
 }
 
 /// Writes one registered cloud as `augsim register` does (organ.vtu, targets.csv, summary.json).
-fn write_frame(dir: &std::path::Path, registration: &register::Registration, tracked: &Tracked) -> anyhow::Result<()> {
+fn write_frame(
+    dir: &std::path::Path,
+    registration: &register::Registration,
+    labels: &[String],
+    tracked: &Tracked,
+) -> anyhow::Result<()> {
     let outcome = register::FrameOutcome {
         registration: tracked.registration.clone(),
         targets: tracked.targets.clone(),
@@ -324,7 +334,7 @@ fn write_frame(dir: &std::path::Path, registration: &register::Registration, tra
     };
     let mut writer = RunWriter::new(dir, false)?;
     writer.frame(0, "python".into(), registration.organ(), &outcome)?;
-    writer.finish(registration.method(), registration.targets(), &[], std::slice::from_ref(&outcome))?;
+    writer.finish(registration.method(), registration.targets(), labels, std::slice::from_ref(&outcome))?;
     Ok(())
 }
 
