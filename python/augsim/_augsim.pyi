@@ -32,7 +32,7 @@ class Registered:
     iterations: int
     warnings: list[str]
     rigid: Optional[npt.NDArray[np.float64]]
-    target_std: Optional[npt.NDArray[np.float64]]
+    target_sigma: Optional[npt.NDArray[np.float64]]
     ms: float
 
 class Registration:

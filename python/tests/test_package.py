@@ -117,9 +117,9 @@ def test_registration_errors(case, tmp_path):
     missing = str(tmp_path / "missing.toml")
     with pytest.raises(augsim.AugsimError, match="missing.toml"):
         augsim.Registration(fem=missing)
-    with pytest.raises(ValueError, match="units"):
+    with pytest.raises(ValueError, match="units: must be mm or m, got 'cm'"):
         augsim.Registration(fem=case["scenario"], units="cm")
-    with pytest.raises(ValueError, match="fem=SCENARIO"):
+    with pytest.raises(ValueError, match="fem SCENARIO"):
         augsim.Registration(model=LIVER_AR)
     with pytest.raises(augsim.AugsimError, match="target"):
         augsim.Registration(fem=case["scenario"], targets=[[10.0, 10.0, 10.0]])  # 10 m: outside the organ
@@ -145,6 +145,16 @@ def test_register_writes_what_the_command_line_writes(case, tmp_path):
 
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["frames"] == 1 and summary["per_frame"][0]["iterations"] == r.iterations
+    assert (tmp_path / "out" / "targets.csv").read_text().startswith("x0_m,y0_m,z0_m,x_m,y_m,z_m\n")
+    # Labelled targets keep their labels in targets.csv.
+    labelled = tmp_path / "labelled_mm.csv"
+    rows = [f"T{k},{p[0]},{p[1]},{p[2]}" for k, p in enumerate(case["rest"])]
+    labelled.write_text("label,x,y,z\n" + "\n".join(rows) + "\n")
+    reg = augsim.Registration(fem=case["scenario"], targets=labelled, units="mm")
+    reg.register(case["cloud"], out=tmp_path / "labelled")
+    lines = (tmp_path / "labelled" / "targets.csv").read_text().splitlines()
+    assert lines[0] == "x0_m,y0_m,z0_m,x_m,y_m,z_m,label"
+    assert [line.rsplit(",", 1)[1] for line in lines[1:]] == [f"T{k}" for k in range(len(case["rest"]))]
 
 
 def test_predict_matches_the_command_line(tmp_path):
@@ -229,5 +239,5 @@ def test_a_prepared_patient_registers(tmp_path):
         top = reg.points[reg.points[:, 2] > reg.points[:, 2].max() - 5e-3]
         r = reg.register(top)
         assert np.abs(r.targets - reg.targets).max() < 2e-3
-    with pytest.raises(ValueError, match="patient=DIR holds"):
+    with pytest.raises(ValueError, match="patient DIR holds its method and targets: leave out targets"):
         augsim.Registration(patient=tmp_path / "patient", targets=[[0.0, 0.0, 0.0]])

@@ -61,7 +61,7 @@ class ServeTest(unittest.TestCase):
         case = make_case(tmp, frames)
         port = free_port()
         server = subprocess.Popen([augsim_bin(), "serve", "--fem", case["scenario"], "--targets", case["targets"],
-                                   "--port", str(port)] + options, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                   "--port", str(port), "--units", "mm"] + options, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                   text=True)
         try:
             exchange(port, case)

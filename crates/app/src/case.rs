@@ -4,7 +4,7 @@
 //! The case and its methods are described by a [`CaseScenario`]
 //! (the built-in `register_case` scenario is the built-in one).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::phantom::PhantomSpec;
@@ -375,6 +375,25 @@ fn with_budgets(
         max_points: max_points.or(options.max_points),
         ..options.clone()
     }
+}
+
+/// The learned models of a comparison: `model` when given, otherwise the shipped U-Net and
+/// reduced-order model ([`SHIPPED_MODEL`], [`SHIPPED_ROM`], relative to the repository's root);
+/// with the shipped ones not found (skipped).
+pub fn comparison_models(model: Option<&Path>) -> Result<(Vec<Model>, Vec<PathBuf>)> {
+    let paths = match model {
+        Some(path) => vec![path.to_path_buf()],
+        None => vec![PathBuf::from(SHIPPED_MODEL), PathBuf::from(SHIPPED_ROM)],
+    };
+    let (mut models, mut missing) = (Vec::new(), Vec::new());
+    for path in paths {
+        if path.exists() {
+            models.push(Model::load(&path)?);
+        } else {
+            missing.push(path);
+        }
+    }
+    Ok((models, missing))
 }
 
 /// A registration method of a comparison.

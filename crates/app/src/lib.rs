@@ -1,12 +1,13 @@
 //! augsim's application layer, between the algorithm crates (mesh, fem, filter, learn, register,
 //! scenario) and the programs (the command line, the streaming server, the Python package):
 //!
-//! - [`registration`]: a registration set up from its files (a FEM scenario, or a learned model
-//!   and its dataset scenario; targets in their unit; settings), as `register`, `serve` and
-//!   Python build it; [`output`]: what a registration writes (organ.vtu, targets.csv,
+//! - [`registration`]: a registration set up from the user's choices (a patient's set-up, a FEM
+//!   scenario, or a learned model and its dataset scenario; targets in their unit; settings), the
+//!   one way `register`, `serve` and Python build it; [`output`]: what a registration writes (organ.vtu, targets.csv,
 //!   summary.json) and what a comparison of methods writes.
 //! - [`points`]: points read at a command's boundary (CSV, 3D Slicer's `.fcsv` and `.mrk.json`,
 //!   clouds as `.npy` and `.ply`) in its working frame (RAS or LPS) and unit.
+//! - [`meshing`]: an organ's volume mesh from its surface, a labelmap's label or the phantom.
 //! - [`prepare`]: a patient's organ from its segmented surface to a registration set-up (repair,
 //!   mesh, regions, scenarios, dataset, model, report), resumable.
 //! - [`case`], [`simulate`], [`picture`]: synthetic registration cases on the phantom (truth from
@@ -15,12 +16,16 @@
 //! - [`assimilation`]: ROUKF identification from an assimilation scenario (synthetic
 //!   observations or track files, traces, plots, the estimated deformation), also one step at a
 //!   time for a stream.
+//! - [`solve`]: a static scenario solved, with the fields written for ParaView; [`evaluation`]:
+//!   a learned model's errors on the samples held out from it, and the files `eval` writes.
 //! - [`curve`], [`sample_view`]: the learning curve as PNG; a dataset sample and a model's
 //!   prediction in the 3D viewer.
 
 pub mod assimilation;
 pub mod case;
 pub mod curve;
+pub mod evaluation;
+pub mod meshing;
 pub mod output;
 pub mod picture;
 pub mod points;
@@ -28,3 +33,4 @@ pub mod prepare;
 pub mod registration;
 pub mod sample_view;
 pub mod simulate;
+pub mod solve;

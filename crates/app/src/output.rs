@@ -1,20 +1,49 @@
 //! What a registration writes: the registered organ (organ.vtu, or organ.pvd and one .vtu per
 //! frame of a sequence), targets.csv (rest and registered positions, with the predicted standard
 //! deviation when the method gives one) and summary.json (the run's figures and each frame's),
-//! all in the cloud's frame; and what a comparison of methods on a synthetic case writes.
+//! all in the cloud's frame; and what a comparison of methods on a synthetic case writes; each
+//! run in a folder of its own ([`run_dir`]).
 
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use mesh::io::{csv_field, write_atomic_bytes, Field};
+use mesh::length::mm;
 use mesh::{Mesh, Point};
+use register::cloud::write_csv;
 use register::{FrameOutcome, Organ, RigidResult, RigidTransform, Summary};
 use scenario::registration::slug;
 use serde::Serialize;
 
 use crate::case::{Compared, Registered, SyntheticCase};
 use crate::picture::side_view;
+
+/// The folder of a run's results: `out` when the user names one, refused when it already holds
+/// an earlier run's (its summary.json), so that two runs' files are never mixed; otherwise a
+/// fresh numbered folder under `parent` (`001`, `002`, …: the first free number), created. The
+/// flag says whether the folder is a fresh numbered one.
+pub fn run_dir(out: Option<&Path>, parent: &Path) -> Result<(PathBuf, bool)> {
+    if let Some(dir) = out {
+        if dir.join("summary.json").exists() {
+            anyhow::bail!(
+                "{} holds the results of an earlier run (summary.json): give another --out, or remove it",
+                dir.display()
+            );
+        }
+        return Ok((dir.to_path_buf(), false));
+    }
+    std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
+    for n in 1..=99_999 {
+        let dir = parent.join(format!("{n:03}"));
+        match std::fs::create_dir(&dir) {
+            Ok(()) => return Ok((dir, true)),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e).with_context(|| format!("creating {}", dir.display())),
+        }
+    }
+    anyhow::bail!("{} holds 99,999 runs: give --out", parent.display())
+}
 
 /// One frame's line of summary.json.
 #[derive(Clone, Debug, Serialize)]
@@ -39,9 +68,10 @@ pub struct FrameSummary {
     /// Largest TRE (mm), when the truth is known.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tre_max_mm: Option<f64>,
-    /// The predicted standard deviation at each target (mm), for a method that predicts one.
+    /// The predicted standard deviation σ of each target's error (mm), for a method that
+    /// predicts one.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub target_std_mm: Option<Vec<f64>>,
+    pub target_sigma_mm: Option<Vec<f64>>,
 }
 
 impl FrameSummary {
@@ -53,12 +83,12 @@ impl FrameSummary {
             points: r.points,
             inliers: r.inliers,
             iterations: r.iterations,
-            surface_residual_mm: r.surface_residual * 1e3,
+            surface_residual_mm: mm(r.surface_residual),
             time_ms: r.time.as_secs_f64() * 1e3,
             warnings: r.warnings.clone(),
             tre_mean_mm: tre.map(|t| t.0),
             tre_max_mm: tre.map(|t| t.1),
-            target_std_mm: o.target_std.as_ref().map(|s| s.iter().map(|v| v * 1e3).collect()),
+            target_sigma_mm: o.target_std.as_ref().map(|s| s.iter().map(|&v| mm(v)).collect()),
         }
     }
 }
@@ -103,8 +133,14 @@ impl RunWriter {
     }
 
     /// Writes organ.pvd (for a sequence), targets.csv (of the last frame; `targets`: the rest
-    /// positions) and summary.json; returns the run's summary.
-    pub fn finish(self, method: &str, targets: &[Point], outcomes: &[FrameOutcome]) -> Result<Summary> {
+    /// positions, `labels`: theirs, or none) and summary.json; returns the run's summary.
+    pub fn finish(
+        self,
+        method: &str,
+        targets: &[Point],
+        labels: &[String],
+        outcomes: &[FrameOutcome],
+    ) -> Result<Summary> {
         if self.sequence {
             mesh::io::write_pvd(self.dir.join("organ.pvd"), &self.steps)?;
         }
@@ -114,6 +150,7 @@ impl RunWriter {
             &rest_in_cloud_frame(targets, last.rigid.as_ref()),
             &last.targets,
             last.target_std.as_deref(),
+            labels,
         )?;
         let summary = Summary::new(method, outcomes)?;
         let run = RunSummary { summary: &summary, per_frame: &self.rows };
@@ -154,16 +191,44 @@ pub fn rest_in_cloud_frame(targets: &[Point], rigid: Option<&RigidResult>) -> Ve
     }
 }
 
-/// targets.csv: rest and registered position of each target (m), with the method's predicted
-/// standard deviation of each target's error (m), when it predicts one, as a last column `std`.
-pub fn write_targets(path: &Path, rest: &[Point], registered: &[Point], std: Option<&[f64]>) -> Result<()> {
-    let header = ["x0", "y0", "z0", "x", "y", "z", "std"];
-    let header = &header[..if std.is_some() { 7 } else { 6 }];
+/// targets.csv: rest and registered position of each target (m: columns `x0_m, y0_m, z0_m,
+/// x_m, y_m, z_m`), with the method's predicted standard deviation σ of each target's error (m),
+/// when it predicts one, as a column `sigma_m`, and the targets' labels, when they have any, as a
+/// last column `label`.
+pub fn write_targets(
+    path: &Path,
+    rest: &[Point],
+    registered: &[Point],
+    sigma: Option<&[f64]>,
+    labels: &[String],
+) -> Result<()> {
+    let labelled = labels.len() == rest.len() && labels.iter().any(|l| !l.is_empty());
+    let mut header = vec!["x0_m", "y0_m", "z0_m", "x_m", "y_m", "z_m"];
+    header.extend(sigma.map(|_| "sigma_m"));
+    header.extend(labelled.then_some("label"));
     let rows = rest.iter().zip(registered).enumerate().map(|(i, (a, b))| {
-        let values = a.iter().chain(b).chain(std.map(|s| &s[i]));
-        values.map(f64::to_string).collect::<Vec<_>>()
+        let mut row: Vec<String> = a.iter().chain(b).chain(sigma.map(|s| &s[i])).map(f64::to_string).collect();
+        row.extend(labelled.then(|| labels[i].clone()));
+        row
     });
-    Ok(mesh::io::csv::write_csv(path, &[], header, rows)?)
+    Ok(mesh::io::csv::write_csv(path, &[], &header, rows)?)
+}
+
+/// Writes a synthetic case's files into `dir`: cloud.csv and truth.csv (of the peak frame),
+/// targets_rest.csv and, for a case of several frames, clouds/cloud_NNNN.csv and
+/// truths/truth_NNNN.csv of every frame (m).
+pub fn write_case(dir: &Path, case: &SyntheticCase) -> Result<()> {
+    let peak = case.peak();
+    write_csv(&dir.join("cloud.csv"), &peak.cloud)?;
+    write_csv(&dir.join("targets_rest.csv"), &case.targets)?;
+    write_csv(&dir.join("truth.csv"), &peak.truth)?;
+    if case.frames.len() > 1 {
+        for (k, frame) in case.frames.iter().enumerate() {
+            write_csv(&dir.join("clouds").join(format!("cloud_{k:04}.csv")), &frame.cloud)?;
+            write_csv(&dir.join("truths").join(format!("truth_{k:04}.csv")), &frame.truth)?;
+        }
+    }
+    Ok(())
 }
 
 /// Writes a comparison of methods on a synthetic case into `dir`: comparison.csv (a row per
@@ -188,7 +253,8 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         let (m, u_cloud) = in_cloud_frame(reg.organ.mesh(), None, outcome.rigid.as_ref(), u);
         mesh::io::write_mesh(method_dir.join("organ.vtu"), &m, &[Field::point("displacement", 3, u_cloud)])?;
         let rest_targets = rest_in_cloud_frame(&case.targets, outcome.rigid.as_ref());
-        write_targets(&method_dir.join("targets.csv"), &rest_targets, &outcome.targets, outcome.target_std.as_deref())?;
+        let sigma = outcome.target_std.as_deref();
+        write_targets(&method_dir.join("targets.csv"), &rest_targets, &outcome.targets, sigma, &[])?;
         // The picture is drawn in the organ's frame: cloud, targets and truth moved back.
         let back = outcome.rigid.as_ref().map_or_else(RigidTransform::identity, |r| r.cloud_to_organ);
         let to_organ = |points: &[Point]| -> Vec<Point> { points.iter().map(|&p| back.apply(p)).collect() };
@@ -249,4 +315,42 @@ pub fn comparison_rows(rows: &[Compared]) -> Vec<(String, [Option<f64>; 6], Stri
         });
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_run_gets_a_folder_of_its_own() {
+        let dir = tempfile::tempdir().unwrap();
+        let parent = dir.path().join("runs");
+        let (first, fresh) = run_dir(None, &parent).unwrap();
+        assert!(fresh && first == parent.join("001") && first.is_dir());
+        assert_eq!(run_dir(None, &parent).unwrap().0, parent.join("002"));
+        let given = dir.path().join("mine");
+        assert_eq!(run_dir(Some(&given), &parent).unwrap(), (given.clone(), false));
+        std::fs::create_dir_all(&given).unwrap();
+        std::fs::write(given.join("summary.json"), "{}").unwrap();
+        let e = run_dir(Some(&given), &parent).unwrap_err().to_string();
+        assert!(e.contains("holds the results of an earlier run"), "{e}");
+    }
+
+    #[test]
+    fn targets_csv_names_its_unit_sigma_and_labels() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("targets.csv");
+        let (rest, moved) = ([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [[0.0, 0.0, 0.5], [1.0, 0.0, 0.5]]);
+        write_targets(&path, &rest, &moved, Some(&[0.001, 0.002]), &["T1".into(), "deep, left".into()]).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(
+            text,
+            "x0_m,y0_m,z0_m,x_m,y_m,z_m,sigma_m,label\n0,0,0,0,0,0.5,0.001,T1\n1,0,0,1,0,0.5,0.002,\"deep, left\"\n"
+        );
+        // Read back as points: the registered positions, in metres, with their labels.
+        let back = mesh::io::points::read_points(&path).unwrap();
+        assert_eq!((back.points, back.labels), (moved.to_vec(), vec!["T1".to_string(), "deep, left".to_string()]));
+        write_targets(&path, &rest, &moved, None, &["".into(), "".into()]).unwrap();
+        assert!(std::fs::read_to_string(&path).unwrap().starts_with("x0_m,y0_m,z0_m,x_m,y_m,z_m\n0,0,0,"));
+    }
 }

@@ -14,7 +14,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use mesh::io::points::{read_points, LabelledPoints};
 use mesh::io::Frame;
-use mesh::repair::{metres_per, LengthUnit};
+use mesh::length::LengthUnit;
 use mesh::Point;
 
 use crate::registration::TargetsSpec;
@@ -56,7 +56,7 @@ impl PointInput {
     pub fn read_cloud(&mut self, path: &Path) -> register::Result<Vec<Point>> {
         let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
         let points = if name.ends_with(".npy") || name.ends_with(".ply") {
-            let scale = metres_per(self.given) / metres_per(self.unit);
+            let scale = self.given.metres() / self.unit.metres();
             register::cloud::read_point_cloud(path)?.into_iter().map(|p| p.map(|x| x * scale)).collect()
         } else {
             self.place(read_points(path)?).points
@@ -67,12 +67,12 @@ impl PointInput {
 }
 
 /// The rest positions of a targets file (CSV, `.fcsv`, `.mrk.json`) in metres: in the unit the
-/// file names, else `unit` metres per unit; as they are in their own frame (which is the
-/// working frame: see [`targets_frame`]).
-pub fn read_targets(path: &Path, unit: f64) -> Result<Vec<Point>> {
+/// file names, else in `unit`; as they are in their own frame (which is the working frame: see
+/// [`targets_frame`]).
+pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<Vec<Point>> {
     let points = read_points(path)?;
-    let scale = points.unit.map_or(unit, metres_per);
-    Ok(points.points.iter().map(|p| p.map(|x| x * scale)).collect())
+    let unit = points.unit.unwrap_or(unit);
+    Ok(points.points.iter().map(|&p| unit.point_to_metres(p)).collect())
 }
 
 /// The frame that a registration's targets file names (a patient's, as `augsim prepare` writes
@@ -113,7 +113,7 @@ mod tests {
         std::fs::write(&empty, "x,y,z\n").unwrap();
         assert!(input.read_cloud(&empty).is_err());
         std::fs::write(&plain, "label,x_mm,y_mm,z_mm\nT,1,2,3\n").unwrap();
-        assert_eq!(read_targets(&plain, 1.0).unwrap(), [[1e-3, 2e-3, 3e-3]], "the named unit wins");
+        assert_eq!(read_targets(&plain, LengthUnit::Metre).unwrap(), [[1e-3, 2e-3, 3e-3]], "the named unit wins");
         assert_eq!(targets_frame(&TargetsSpec::File(ras)).unwrap(), Some(Frame::Ras));
     }
 }

@@ -44,8 +44,9 @@ use mesh::io::points::{read_points_csv, write_points, write_points_csv, Labelled
 use mesh::io::{read_surface_with_frame, write_atomic_bytes, Frame};
 use mesh::isosurface::ExtractOptions;
 use mesh::labelmap::{is_labelmap, read_labelmap_surface};
+use mesh::length::{mm, LengthUnit, UnitOrAuto};
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
-use mesh::repair::{detect_unit, metres_per, LengthUnit, RepairOptions};
+use mesh::repair::{detect_unit, RepairOptions};
 use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
 use mesh::{Camera, Mesh, Near, Point, TriSurface};
 use plot::{scatter_plot, PlotSpec, PointSet};
@@ -65,9 +66,9 @@ pub struct PrepareOptions {
     /// The labelmap's label: a number or a segment name (`None`: the only label it holds).
     #[serde(default)]
     pub label: Option<String>,
-    /// The unit of the surface, the camera, the landmarks and the targets, "mm" or "m" (`None`:
-    /// detected from the surface's size; a labelmap's is mm).
-    pub units: Option<String>,
+    /// The unit of the surface, the camera, the landmarks and the targets (`None`: detected from
+    /// the surface's size; a labelmap's is mm).
+    pub units: UnitOrAuto,
     /// Where the laparoscope looks from, in the segmentation's frame.
     pub camera: CameraAt,
     /// Landmarks where the organ is held (ligaments, the hilum): a points file (CSV x, y, z,
@@ -259,7 +260,7 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
     let landmarks = read(&mut input, &options.attach)?;
     let targets = read(&mut input, &options.targets)?;
     let camera = match &options.camera {
-        CameraAt::Point(p) => p.map(|x| x * metres_per(unit)),
+        CameraAt::Point(p) => unit.point_to_metres(*p),
         CameraAt::File(path) => match read(&mut input, path)?.points.as_slice() {
             [p] => *p,
             other => bail!("{}: the camera is one point, the file holds {}", path.display(), other.len()),
@@ -271,7 +272,7 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
         (None, Some(f)) => format!("frame: {f} (named by the points' files; the surface's header names none)"),
         (None, None) => "frame: not named by any input (SPACE= header, .fcsv, .mrk.json): all taken as given".into(),
     });
-    surface.vertices.iter_mut().for_each(|p| *p = p.map(|x| x * metres_per(unit)));
+    surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(*p));
     Ok(Inputs { surface, landmarks, targets, camera, frame })
 }
 
@@ -282,7 +283,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
         read_inputs(options, &mut lines)?;
     let (surface, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
         .with_context(|| format!("repairing {}", options.surface.display()))?;
-    lines.extend(route.lines(Some(1e3)).into_iter().map(|l| format!("repair: {l}")));
+    lines.extend(route.lines(Some(mm(LengthUnit::Metre.metres()))).into_iter().map(|l| format!("repair: {l}")));
     lines.extend(route.warnings().into_iter().map(|w| format!("warning: {w}")));
     let landmarks = labelled_landmarks.points.clone();
     let targets = labelled_targets.points.clone();
@@ -295,9 +296,9 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
         organ.cells.len(),
         quality.min_dihedral_deg,
         quality.max_dihedral_deg,
-        (hi[0] - lo[0]) * 1e3,
-        (hi[1] - lo[1]) * 1e3,
-        (hi[2] - lo[2]) * 1e3
+        mm(hi[0] - lo[0]),
+        mm(hi[1] - lo[1]),
+        mm(hi[2] - lo[2])
     ));
     if quality.pieces > 1 {
         lines.push(format!(
@@ -310,7 +311,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     if visible.is_empty() {
         bail!(
             "the camera at {:?} mm sees no node of the organ: is it given in the surface's unit and frame?",
-            camera.map(|x| x * 1e3)
+            camera.map(mm)
         );
     }
     let attached = Near { points: landmarks.clone(), file: None, distance: options.attach_distance, surface: true }
@@ -318,7 +319,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     if attached.is_empty() {
         bail!(
             "no surface node lies within {} mm of the landmarks of {}: are they in the surface's unit and frame?",
-            options.attach_distance * 1e3,
+            mm(options.attach_distance),
             options.attach.display()
         );
     }
@@ -359,7 +360,7 @@ fn read_surface_input(
 ) -> Result<(TriSurface, Option<Frame>, LengthUnit)> {
     let path = &options.surface;
     if is_labelmap(path) {
-        if options.units.as_deref().is_some_and(|u| u != "mm") {
+        if options.units.is_some_and(|u| u != LengthUnit::Millimetre) {
             bail!("{} is a labelmap, whose unit is the millimetre: leave out --units or give mm", path.display());
         }
         let organ = read_labelmap_surface(path, options.label.as_deref(), &ExtractOptions::default())?;
@@ -370,8 +371,8 @@ fn read_surface_input(
         bail!("--label {label} chooses a label of a labelmap (.nii, .nii.gz, .nrrd), not of {}", path.display());
     }
     let (surface, frame) = read_surface_with_frame(path)?;
-    let unit = match &options.units {
-        Some(name) => name.parse::<LengthUnit>().map_err(anyhow::Error::msg).context("units")?,
+    let unit = match options.units {
+        Some(unit) => unit,
         None => {
             let u = detect_unit(&surface).with_context(|| format!("the unit of {}", path.display()))?;
             lines.push(format!("units: {} (detected from the surface's size; give --units otherwise)", u.symbol()));
@@ -469,7 +470,7 @@ fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     write_atomic_bytes(&dir.join(PATIENT_FILE), patient.as_bytes())?;
     Ok(vec![format!(
         "scenarios: dataset.toml (grid {nx} × {ny} × {nz}, tool radius {:.0} mm), static.toml, {PATIENT_FILE}",
-        radius * 1e3
+        mm(radius)
     )])
 }
 
@@ -517,7 +518,7 @@ fn model_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
                     "model: reduced-order model, {} modes, {} kernel; validation ē {:.3} mm",
                     model.info.modes,
                     model.info.kernel.name(),
-                    report.val_mean_error * 1e3
+                    mm(report.val_mean_error)
                 ),
             ])
         }
@@ -742,10 +743,10 @@ fn converged_truth(
             pushes[p].force,
             truth.mesh.cells.len(),
             finer.mesh.cells.len(),
-            mesh::stats::mean(&change) * 1e3,
-            mesh::stats::max(&change) * 1e3,
+            mm(mesh::stats::mean(&change)),
+            mm(mesh::stats::max(&change)),
             100.0 * share,
-            motion * 1e3
+            mm(motion)
         ));
         if converged {
             break;
@@ -877,7 +878,7 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
         truth.mesh.cells.len(),
         truth.mesh.num_nodes(),
         truth.seen.len(),
-        mesh::stats::mean(&rest_errors) * 1e3
+        mm(mesh::stats::mean(&rest_errors))
     ));
     if read_back.get() > 0 {
         lines.push(format!(
@@ -910,8 +911,8 @@ fn method_line(run: &MethodRun, pushes: usize) -> String {
     };
     format!(
         "validation: {name} TRE {:.2} mm (largest {:.2} mm), {:.0} ms per registration from rest{failed}",
-        mesh::stats::mean(&run.errors) * 1e3,
-        mesh::stats::max(&run.errors) * 1e3,
+        mm(mesh::stats::mean(&run.errors)),
+        mm(mesh::stats::max(&run.errors)),
         mesh::stats::mean(&run.times_ms)
     )
 }
@@ -1069,7 +1070,7 @@ mod tests {
         write_points_csv(&wrong.targets, &[[-45.0, 30.0, -140.0]]).unwrap();
         let error = format!("{:#}", organ_step(&wrong, dir.path()).unwrap_err());
         assert!(error.contains("the targets of"), "{error}");
-        wrong.units = Some("m".into());
+        wrong.units = Some(LengthUnit::Metre);
         let error = organ_step(&wrong, dir.path()).unwrap_err().to_string();
         assert!(error.contains("is a labelmap, whose unit is the millimetre"), "{error}");
         let mut surface = options(dir.path(), "liver_labels.nii.gz", "5", false);

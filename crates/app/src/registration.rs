@@ -1,11 +1,14 @@
-//! A registration set up from its files, as `augsim register`, `augsim serve` and the Python
-//! package build it: the FEM of a static scenario, or a learned model (U-Net or reduced-order
-//! model) with the dataset scenario it was trained on; the targets from a file, from points or
-//! from the mesh's regions, in their unit; the loop's settings.
+//! A registration set up from the user's choices, the one way `augsim register`, `augsim serve`
+//! and the Python package build it: [`RegistrationChoice`] (what the user asks for: a patient's
+//! set-up, a FEM or a learned model, targets, unit, settings) gives a [`RegistrationSpec`] (the
+//! FEM of a static scenario, or a learned model (U-Net or reduced-order model) with the dataset
+//! scenario it was trained on; the targets from a file, from points or from the mesh's regions,
+//! in their unit; the loop's settings), which builds the registration.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use mesh::length::LengthUnit;
 use mesh::Point;
 use register::{FemDeformer, Registration, RegistrationOptions};
 use scenario::{CaseScenario, DatasetScenario, StaticScenario};
@@ -40,6 +43,119 @@ pub enum TargetsSpec {
     Points(Vec<Point>),
 }
 
+/// The user's choices of a registration: the arguments of `augsim register` and `augsim serve`
+/// (flattened into each) and the keywords of Python's `augsim.Registration`, with the same
+/// names. [`RegistrationChoice::spec`] turns them into a [`RegistrationSpec`].
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct RegistrationChoice {
+    /// The registration set-up of a patient's organ, written by `augsim prepare`: its learned
+    /// model or its FEM, whichever it found the better on its validation, and its targets.
+    #[arg(long, conflicts_with_all = ["fem", "model", "scenario", "targets"])]
+    pub patient: Option<PathBuf>,
+    /// With --patient: register with the patient's FEM, whichever its set-up names.
+    #[arg(long, requires = "patient")]
+    pub use_fem: bool,
+    /// With --patient: register with the patient's learned model, whichever its set-up names.
+    #[arg(long, requires = "patient", conflicts_with = "use_fem")]
+    pub use_model: bool,
+    /// FEM registration on this static scenario (a file or a built-in name): its mesh, material
+    /// (law, formulation), fixed nodes and solver.
+    #[arg(long, conflicts_with = "model")]
+    pub fem: Option<PathBuf>,
+    /// Registration with this learned model (a U-Net's or a reduced-order model's directory, or
+    /// its model.json); the organ comes from --scenario.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// The dataset scenario the model was trained on (a file or a built-in name, e.g.
+    /// liver_ar_t10): its mesh is the organ, its observed nodes the model's input.
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Targets at rest: a points file (CSV x,y,z in --units, .fcsv or .mrk.json); default: the
+    /// mesh's `markers` and `tumour` regions.
+    #[arg(long, value_name = "TARGETS", value_parser = targets_file)]
+    pub targets: Option<TargetsSpec>,
+    /// Unit of the coordinates given and given back whose files name none (clouds, targets,
+    /// truth, results): mm or m, the same default (m, augsim's unit) on every front; files that
+    /// name their unit (.fcsv, .mrk.json, CSV columns x_mm) are read in it.
+    #[arg(long, default_value_t = LengthUnit::DEFAULT)]
+    pub units: LengthUnit,
+    /// Most match-and-deform iterations of the first cloud, from rest (default: the library's for
+    /// a FEM, the built-in registration case's real-time budget for a learned model).
+    #[arg(long)]
+    pub iterations: Option<usize>,
+    /// Rigid pre-alignment: the first cloud is aligned to the organ's rest surface (trimmed
+    /// point-to-plane ICP) before the deformable iterations and the pose kept for the next
+    /// clouds; targets and organ are then given back in the cloud's frame.
+    #[arg(long)]
+    pub rigid: bool,
+}
+
+/// A targets file argument.
+fn targets_file(path: &str) -> Result<TargetsSpec, String> {
+    Ok(TargetsSpec::File(PathBuf::from(path)))
+}
+
+impl RegistrationChoice {
+    /// Whether the choices fit together (the command line's parser checks the same): one way of
+    /// deforming the organ (a patient's set-up, a FEM, or a learned model with its scenario),
+    /// nothing else beside a patient's set-up, which holds its method and targets.
+    pub fn check(&self) -> Result<(), String> {
+        let given = |name: &str, yes: bool| yes.then(|| name.to_string());
+        if self.patient.is_some() {
+            let others: Vec<String> = [
+                given("fem", self.fem.is_some()),
+                given("model", self.model.is_some()),
+                given("scenario", self.scenario.is_some()),
+                given("targets", self.targets.is_some()),
+            ]
+            .into_iter()
+            .flatten()
+            .collect();
+            if !others.is_empty() {
+                return Err(format!("patient DIR holds its method and targets: leave out {}", others.join(", ")));
+            }
+            if self.use_fem && self.use_model {
+                return Err("use_fem and use_model ask for different methods: give one".into());
+            }
+            return Ok(());
+        }
+        if self.use_fem || self.use_model {
+            return Err("use_fem and use_model choose a patient's method: give patient DIR".into());
+        }
+        self.method().map(|_| ())
+    }
+
+    /// The method given without a patient's set-up.
+    fn method(&self) -> Result<MethodSpec, String> {
+        match (&self.fem, &self.model, &self.scenario) {
+            (Some(fem), None, _) => Ok(MethodSpec::Fem(fem.clone())),
+            (None, Some(model), Some(scenario)) => {
+                Ok(MethodSpec::Learned { model: model.clone(), scenario: scenario.clone() })
+            }
+            (Some(_), Some(_), _) => Err("give fem or model, not both".into()),
+            _ => Err("give patient DIR, fem SCENARIO, or model MODEL with scenario SCENARIO".into()),
+        }
+    }
+
+    /// The registration's spec: a patient's set-up read (the method it names, or the one asked
+    /// for with `use_fem` / `use_model`), or the method and targets given; an error, as
+    /// [`RegistrationChoice::check`] gives, when the choices do not fit together.
+    pub fn spec(&self) -> Result<RegistrationSpec> {
+        self.check().map_err(anyhow::Error::msg)?;
+        if let Some(dir) = &self.patient {
+            let method = PatientMethod::asked(self.use_fem, self.use_model);
+            return RegistrationSpec::patient(dir, method, self.iterations, self.rigid);
+        }
+        Ok(RegistrationSpec {
+            method: self.method().map_err(anyhow::Error::msg)?,
+            targets: self.targets.clone().unwrap_or(TargetsSpec::Regions),
+            units: self.units,
+            iterations: self.iterations,
+            rigid: self.rigid,
+        })
+    }
+}
+
 /// A registration described by its files and settings; [`RegistrationSpec::build`] makes it.
 #[derive(Clone, Debug)]
 pub struct RegistrationSpec {
@@ -47,8 +163,8 @@ pub struct RegistrationSpec {
     pub method: MethodSpec,
     /// The targets.
     pub targets: TargetsSpec,
-    /// Metres per unit of the given targets (1e-3: mm); see [`register::cloud::metres_per_unit`].
-    pub unit: f64,
+    /// The unit of the given targets (of a file's when it names none).
+    pub units: LengthUnit,
     /// Most match-and-deform iterations from rest, in place of the method's default.
     pub iterations: Option<usize>,
     /// A rigid pre-alignment of the first cloud (trimmed ICP).
@@ -83,8 +199,8 @@ impl RegistrationSpec {
         };
         let targets = match &self.targets {
             TargetsSpec::Regions => region_targets(organ.mesh()),
-            TargetsSpec::File(path) => crate::points::read_targets(path, self.unit)?,
-            TargetsSpec::Points(points) => scaled(points, self.unit),
+            TargetsSpec::File(path) => crate::points::read_targets(path, self.units)?,
+            TargetsSpec::Points(points) => points.iter().map(|&p| self.units.point_to_metres(p)).collect(),
         };
         if targets.is_empty() {
             anyhow::bail!("no targets: give a targets file, or a mesh with `markers` or `tumour` regions");
@@ -100,6 +216,15 @@ impl RegistrationSpec {
             _ => "the targets".into(),
         };
         Registration::new(organ, deformer, method, targets, options).with_context(|| what)
+    }
+
+    /// The targets' labels, in order: a targets file's (empty strings where it gives none); none
+    /// for other targets.
+    pub fn target_labels(&self) -> Result<Vec<String>> {
+        match &self.targets {
+            TargetsSpec::File(path) => Ok(mesh::io::points::read_points(path)?.labels),
+            TargetsSpec::Regions | TargetsSpec::Points(_) => Ok(Vec::new()),
+        }
     }
 }
 
@@ -149,7 +274,7 @@ struct Patient {
     scenario: PathBuf,
     fem: PathBuf,
     targets: PathBuf,
-    units: String,
+    units: LengthUnit,
 }
 
 impl RegistrationSpec {
@@ -166,23 +291,72 @@ impl RegistrationSpec {
             format!("reading {} (is {} a directory made by augsim prepare?)", path.display(), dir.display())
         })?;
         let p: Patient = toml::from_str(&text).with_context(|| format!("reading {}", path.display()))?;
-        let unit = register::cloud::metres_per_unit(&p.units)
-            .map_err(anyhow::Error::msg)
-            .with_context(|| format!("{}: units", path.display()))?;
         let method = match method.unwrap_or(p.method) {
             PatientMethod::Fem => MethodSpec::Fem(dir.join(p.fem)),
             PatientMethod::Learned => MethodSpec::Learned { model: dir.join(p.model), scenario: dir.join(p.scenario) },
         };
-        Ok(RegistrationSpec { method, targets: TargetsSpec::File(dir.join(p.targets)), unit, iterations, rigid })
+        Ok(RegistrationSpec {
+            method,
+            targets: TargetsSpec::File(dir.join(p.targets)),
+            units: p.units,
+            iterations,
+            rigid,
+        })
     }
-}
-
-/// Points multiplied by `unit` (to metres).
-fn scaled(points: &[Point], unit: f64) -> Vec<Point> {
-    points.iter().map(|p| p.map(|x| x * unit)).collect()
 }
 
 /// Rest positions of the nodes of the `markers` and `tumour` regions, when the mesh has them.
 fn region_targets(m: &mesh::Mesh) -> Vec<Point> {
     ["markers", "tumour"].iter().filter_map(|r| m.region(r).ok()).flatten().map(|&n| m.nodes[n]).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fem() -> RegistrationChoice {
+        RegistrationChoice { fem: Some("beam".into()), ..RegistrationChoice::default() }
+    }
+
+    #[test]
+    fn choices_give_the_spec_of_their_method_targets_and_unit() {
+        let choice = RegistrationChoice {
+            targets: Some(TargetsSpec::Points(vec![[1.0, 2.0, 3.0]])),
+            units: LengthUnit::Millimetre,
+            iterations: Some(7),
+            rigid: true,
+            ..fem()
+        };
+        let spec = choice.spec().unwrap();
+        assert!(matches!(&spec.method, MethodSpec::Fem(p) if p == Path::new("beam")));
+        assert!(matches!(&spec.targets, TargetsSpec::Points(p) if p == &[[1.0, 2.0, 3.0]]));
+        assert_eq!((spec.units, spec.iterations, spec.rigid), (LengthUnit::Millimetre, Some(7), true));
+        let learned =
+            RegistrationChoice { model: Some("m".into()), scenario: Some("s".into()), ..RegistrationChoice::default() };
+        let spec = learned.spec().unwrap();
+        assert!(matches!(&spec.method, MethodSpec::Learned { model, scenario }
+            if model == Path::new("m") && scenario == Path::new("s")));
+        assert!(matches!(spec.targets, TargetsSpec::Regions));
+        assert_eq!(spec.units, LengthUnit::DEFAULT);
+    }
+
+    #[test]
+    fn choices_that_do_not_fit_together_are_refused_by_name() {
+        let none = RegistrationChoice::default();
+        assert_eq!(none.check().unwrap_err(), "give patient DIR, fem SCENARIO, or model MODEL with scenario SCENARIO");
+        let model_alone = RegistrationChoice { model: Some("m".into()), ..RegistrationChoice::default() };
+        assert!(model_alone.spec().unwrap_err().to_string().contains("model MODEL with scenario SCENARIO"));
+        let both = RegistrationChoice { model: Some("m".into()), ..fem() };
+        assert_eq!(both.check().unwrap_err(), "give fem or model, not both");
+        let patient_and_more =
+            RegistrationChoice { patient: Some("p".into()), targets: Some(TargetsSpec::Regions), ..fem() };
+        assert_eq!(
+            patient_and_more.check().unwrap_err(),
+            "patient DIR holds its method and targets: leave out fem, targets"
+        );
+        let use_fem_alone = RegistrationChoice { use_fem: true, ..fem() };
+        assert!(use_fem_alone.check().unwrap_err().contains("give patient DIR"));
+        let missing = RegistrationChoice { patient: Some("no/such/dir".into()), ..RegistrationChoice::default() };
+        assert!(missing.spec().unwrap_err().to_string().contains("augsim prepare"));
+    }
 }

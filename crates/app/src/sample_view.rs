@@ -2,6 +2,8 @@
 //! sample's target) and a model's prediction at the mesh nodes and at the dataset's internal markers, and the
 //! 3D viewer scene that shows them ([`plot::viewer`]).
 //!
+//! Also the scene of a mesh file's displacement fields ([`mesh_file_scene`]).
+//!
 //! Both fields come from the grid the same way ([`GridToMesh`] at the nodes, trilinear interpolation at the
 //! markers), so their difference is the network's error alone, not that of the grid encoding.
 
@@ -180,6 +182,84 @@ impl SampleOnMesh {
             points,
         }
     }
+}
+
+/// The organ's volume mesh of a dataset's sample: read from `mesh` when given, otherwise built
+/// from the dataset scenario `scenario` (default: the built-in one the manifest names); with the
+/// path it came from.
+pub fn organ_mesh(
+    mesh: Option<&std::path::Path>,
+    scenario: Option<&std::path::Path>,
+    manifest: &Manifest,
+) -> anyhow::Result<(Mesh, std::path::PathBuf)> {
+    use anyhow::Context;
+    match mesh {
+        Some(path) => {
+            Ok((mesh::io::read_mesh(path).with_context(|| format!("reading {}", path.display()))?, path.to_path_buf()))
+        }
+        None => {
+            let path =
+                scenario.map_or_else(|| std::path::PathBuf::from(&manifest.scenario), std::path::Path::to_path_buf);
+            let (scenario, dir) = scenario::DatasetScenario::load(&path)
+                .context("the organ's mesh: give the dataset's scenario (--scenario) or its mesh (--mesh)")?;
+            Ok((scenario.mesh(&dir)?, path))
+        }
+    }
+}
+
+/// The scene of a mesh file: its boundary at rest and moved by each 3-component point field (m),
+/// coloured by the error when it has `reference` and `prediction` fields (as `eval` writes), else
+/// by the first one's magnitude (mm); with the names of those fields.
+pub fn mesh_file_scene(path: &std::path::Path) -> anyhow::Result<(Scene, Vec<String>)> {
+    use anyhow::Context;
+    use mesh::io::{Field, FieldLocation};
+    let (organ, fields) =
+        mesh::io::read_mesh_with_fields(path).with_context(|| format!("reading {}", path.display()))?;
+    let vectors: Vec<&Field> = fields
+        .iter()
+        .filter(|f| f.location == FieldLocation::Point && f.components == 3 && f.num_tuples() == organ.num_nodes())
+        .collect();
+    let field = |name: &str| vectors.iter().find(|f| f.name == name);
+    let magnitude = |v: &[f64]| -> Vec<f64> {
+        v.chunks_exact(3).map(|c| mesh::length::mm((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt())).collect()
+    };
+    let colour = match (field("reference"), field("prediction"), vectors.first()) {
+        (Some(r), Some(p), _) => Some(Scalar {
+            name: "prediction error".into(),
+            unit: "mm".into(),
+            values: magnitude(&p.values.iter().zip(&r.values).map(|(a, b)| a - b).collect::<Vec<_>>()),
+        }),
+        (_, _, Some(f)) => {
+            Some(Scalar { name: format!("|{}|", f.name), unit: "mm".into(), values: magnitude(&f.values) })
+        }
+        _ => None,
+    };
+    let surface = mesh::boundary_surface(&organ);
+    let names = vectors.iter().map(|f| f.name.clone()).collect();
+    let scene = Scene {
+        title: path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+        notes: vec![format!("{} nodes, {} {} cells", organ.num_nodes(), organ.cells.len(), organ.cells.kind_name())],
+        triangles: surface.triangles.iter().map(|t| t.map(|i| i as u32)).collect(),
+        layers: vectors
+            .iter()
+            .map(|f| Layer {
+                name: f.name.clone(),
+                positions: organ
+                    .nodes
+                    .iter()
+                    .enumerate()
+                    .map(|(n, p)| {
+                        let u = f.tuple(n);
+                        [p[0] + u[0], p[1] + u[1], p[2] + u[2]]
+                    })
+                    .collect(),
+            })
+            .collect(),
+        rest: organ.nodes,
+        colour,
+        points: Vec::new(),
+    };
+    Ok((scene, names))
 }
 
 #[cfg(test)]

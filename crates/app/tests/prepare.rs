@@ -11,7 +11,7 @@ use augsim_app::prepare::{prepare, CameraAt, PrepareOptions, Progress, STATE_FIL
 use augsim_app::registration::{PatientMethod, RegistrationSpec};
 use mesh::io::points::{read_points, write_points, LabelledPoints};
 use mesh::io::Frame;
-use mesh::repair::LengthUnit;
+use mesh::length::LengthUnit;
 use mesh::Point;
 
 /// Scanner frame: the organ's corner sits here (mm).

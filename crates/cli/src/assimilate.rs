@@ -8,6 +8,7 @@ use app::assimilation::{Experiment, ObservationFiles, Report};
 use clap::Args;
 use filter::{Discrepancy, Execution, SigmaPointSet};
 use indicatif::{ProgressBar, ProgressStyle};
+use mesh::length::mm;
 use scenario::AssimilationScenario;
 
 /// Arguments of `augsim assimilate`.
@@ -119,7 +120,7 @@ pub fn run(args: &AssimilateArgs) -> Result<()> {
             "reference    {} steps in {:.2} s, max |u| = {:.2} mm, on {}",
             s.iterations,
             r.seconds,
-            1e3 * r.max_displacement,
+            mm(r.max_displacement),
             if r.inverse_crime {
                 "the filter's own model (an inverse crime: add a [reference] section with another mesh)".to_string()
             } else {
@@ -130,7 +131,7 @@ pub fn run(args: &AssimilateArgs) -> Result<()> {
                     r.cells,
                     r.law,
                     s.projected,
-                    1e3 * s.max_projection
+                    mm(s.max_projection)
                 )
             }
         ),
@@ -141,7 +142,7 @@ pub fn run(args: &AssimilateArgs) -> Result<()> {
             f.observations.display(),
             s.occluded,
             s.projected,
-            1e3 * s.max_projection
+            mm(s.max_projection)
         ),
         (None, None) => {}
     }
@@ -218,12 +219,7 @@ fn print_report(r: &Report) {
         );
     }
     for c in &r.assessment {
-        println!(
-            "assessment   {:<10} mean error {:.3} mm (max {:.3} mm)",
-            c.label,
-            1e3 * c.mean_error,
-            1e3 * c.max_error
-        );
+        println!("assessment   {:<10} mean error {:.3} mm (max {:.3} mm)", c.label, mm(c.mean_error), mm(c.max_error));
     }
     println!("wall time    {:.2} s in all", r.total_seconds);
 }

@@ -3,6 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+use app::evaluation::{evaluate_held_out, write_evaluation};
 
 use indicatif::{ProgressBar, ProgressStyle};
 use learn::rom::RomConfig;
@@ -11,7 +12,8 @@ use learn::{
     Compute, Corruption, Dataset, DatasetPart, Initialization, Method, Model, PredictInput, Sparsity, SplitPolicy,
     TrainConfig, TrainOptions, UNetConfig,
 };
-use mesh::io::{write_atomic_bytes, Field};
+use mesh::io::Field;
+use mesh::length::mm;
 
 use scenario::DatasetScenario;
 
@@ -280,7 +282,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     app::curve::plot_learning_curve(&curve, &outcome.curve)?;
     println!("steps      {} ({:.3} s per step)", outcome.iterations_done, outcome.mean_step_seconds);
     if let Some((it, Some(e))) = outcome.model.training.as_ref().map(|t| (t.best_iteration, t.best_val_mean_error)) {
-        println!("best       validation mean e = {:.4} mm at iteration {it}", e * 1e3);
+        println!("best       validation mean e = {:.4} mm at iteration {it}", mm(e));
     }
     println!("wrote      {}", outcome.model_path.display());
     Ok(())
@@ -335,9 +337,9 @@ fn train_rom(
     );
     println!(
         "validation mean e = {:.4} mm (max {:.4} mm); the basis alone {:.4} mm; uncertainty scaled by {:.3} for {:.1} % within 2σ",
-        report.val_mean_error * 1e3,
-        report.val_max_error * 1e3,
-        report.val_projection_error * 1e3,
+        mm(report.val_mean_error),
+        mm(report.val_max_error),
+        mm(report.val_projection_error),
         info.calibration,
         report.val_coverage * 100.0
     );
@@ -370,7 +372,7 @@ pub fn eval(
     }
 }
 
-/// The body of `augsim eval` for a loaded model.
+/// The body of `augsim eval` for a loaded model: evaluates, prints and writes.
 fn evaluate_model(
     model: &impl LearnedModel,
     model_path: &Path,
@@ -380,87 +382,38 @@ fn evaluate_model(
     compute: Compute,
     out: &Path,
 ) -> Result<()> {
-    if dataset.manifest().grid != model.grid_shape() {
-        bail!(
-            "the model was trained on grid {} but the dataset is on grid {}",
-            model.grid_shape(),
-            dataset.manifest().grid
-        );
-    }
-    let all = dataset.load_all()?;
-    let test = model.held_out(&all)?;
-    if test.is_empty() {
-        bail!("{} holds no sample held out from this model (no test split recorded for it)", dataset_dir.display());
-    }
+    let corruption = corruption.corruption();
+    let e = evaluate_held_out(model, dataset, dataset_dir, &corruption, compute)?;
     println!(
         "held out   {} of {} samples ({})",
-        test.len(),
-        all.len(),
-        if model.trained_on(&all) {
+        e.test.len(),
+        e.total,
+        if e.recorded_split {
             "the test split recorded in the model"
         } else {
             "those no run behind the model trained or validated on"
         }
     );
-    let markers = dataset.manifest().markers();
-    let placement = dataset.manifest().placement();
-    let (report, tre) = match placement {
-        Some(placement) if !markers.is_empty() => {
-            let grid = placement.grid(model.grid_shape())?;
-            let (report, tre) =
-                learn::evaluate_at_points(model, &test, &corruption.corruption(), 0, &grid, &markers, compute)?;
-            (report, Some(tre))
-        }
-        _ => (learn::evaluate(model, &test, &corruption.corruption(), 0, compute)?, None),
-    };
-    let s = &report.stats;
-    println!("samples    {}", test.len());
-    println!("mean e     {:.4e} m ({:.3} mm)", s.mean, s.mean * 1e3);
-    println!("std e      {:.4e} m ({:.3} mm)", s.std, s.std * 1e3);
-    println!("max e      {:.4e} m ({:.3} mm), sample index {}", s.max, s.max * 1e3, report.worst_index());
-    if let Some(t) = &tre {
+    let s = &e.report.stats;
+    println!("samples    {}", e.test.len());
+    println!("mean e     {:.4e} m ({:.3} mm)", s.mean, mm(s.mean));
+    println!("std e      {:.4e} m ({:.3} mm)", s.std, mm(s.std));
+    println!("max e      {:.4e} m ({:.3} mm), sample index {}", s.max, mm(s.max), e.report.worst_index());
+    if let Some((markers, t)) = &e.markers {
         println!(
-            "TRE        {} markers: mean {:.3} mm, std {:.3} mm, max {:.3} mm (no-motion baseline: mean {:.3} mm, max {:.3} mm)",
-            markers.len(),
-            t.errors.mean * 1e3,
-            t.errors.std * 1e3,
-            t.errors.max * 1e3,
-            t.no_motion.mean * 1e3,
-            t.no_motion.max * 1e3
+            "TRE        {markers} markers: mean {:.3} mm, std {:.3} mm, max {:.3} mm (no-motion baseline: mean {:.3} mm, max {:.3} mm)",
+            mm(t.errors.mean),
+            mm(t.errors.std),
+            mm(t.errors.max),
+            mm(t.no_motion.mean),
+            mm(t.no_motion.max)
         );
     }
-    let coverage = learn::uncertainty_coverage(model, &test, &corruption.corruption(), 0)?;
-    if let Some(c) = coverage {
+    if let Some(c) = e.coverage {
         println!("2σ         {:.1} % of the nodes' errors within twice the predicted standard deviation", c * 100.0);
     }
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let mut csv = String::from("index,error_m\n");
-    for (i, e) in report.indices.iter().zip(&report.errors) {
-        csv.push_str(&format!("{i},{e:e}\n"));
-    }
-    write_atomic_bytes(&out.join("errors.csv"), csv.as_bytes())?;
-    let summary = serde_json::json!({
-        "model": model_path, "dataset": dataset_dir, "samples": test.len(),
-        "mean_m": s.mean, "std_m": s.std, "max_m": s.max, "worst_index": report.worst_index(),
-        "corruption": corruption.corruption(), "marker_errors": tre, "within_2_std": coverage,
-    });
-    write_atomic_bytes(&out.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
-    let worst = test.get(s.worst);
-    let input = learn::evaluation_input(&test, s.worst, &corruption.corruption(), 0)?;
-    let prediction = model.predictor(compute)?.predict(&input)?;
-    let vtu = out.join("worst.vtu");
-    let grid = dataset
-        .manifest()
-        .placement()
-        .context("the dataset manifest has no grid_origin/grid_spacing")?
-        .grid(dataset.manifest().grid)?;
-    learn::write_grid_sample(&vtu, &grid, &input, &worst.target, &prediction, &worst.mask)?;
-    println!(
-        "wrote      {}, {}, {}",
-        out.join("errors.csv").display(),
-        out.join("summary.json").display(),
-        vtu.display()
-    );
+    let [errors, summary, vtu] = write_evaluation(out, model, model_path, dataset, &e, compute)?;
+    println!("wrote      {}, {}, {}", errors.display(), summary.display(), vtu.display());
     Ok(())
 }
 
@@ -518,7 +471,7 @@ pub fn predict(
         let vtu = output.with_extension("vtu");
         mesh::io::write_mesh(&vtu, &organ, &[Field::point("displacement", 3, u)])
             .with_context(|| format!("writing {}", vtu.display()))?;
-        println!("mesh       {} nodes, max |u| {:.3} mm", organ.num_nodes(), max * 1e3);
+        println!("mesh       {} nodes, max |u| {:.3} mm", organ.num_nodes(), mm(max));
         println!("wrote      {}", vtu.display());
     }
     Ok(())

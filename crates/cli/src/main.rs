@@ -2,7 +2,7 @@
 
 mod assimilate;
 mod bench;
-mod experiment;
+mod experiment_cmd;
 mod learn_cmd;
 mod mesh_cmd;
 mod prepare_cmd;
@@ -47,10 +47,11 @@ enum Command {
         /// Centre the surface and scale its largest extent to this length (m); overrides --units.
         #[arg(long)]
         length: Option<f64>,
-        /// Length unit of the surface's coordinates (auto: told from the organ's size); the
-        /// surface is scaled to metres about the origin, keeping its (e.g. CT scanner's) frame.
-        #[arg(long, value_enum, default_value_t = mesh_cmd::Units::Auto)]
-        units: mesh_cmd::Units,
+        /// Length unit of the surface's coordinates: mm, m, or auto (told from the organ's size,
+        /// 2 to 60 cm across); the surface is scaled to metres about the origin, keeping its
+        /// (e.g. CT scanner's) frame.
+        #[arg(long, default_value = "auto", value_parser = mesh::length::parse_unit_or_auto)]
+        units: mesh::length::UnitOrAuto,
         /// Mesh the surface as it is, without repairing holes, duplicated vertices or flipped
         /// triangles (it must then be a closed 2-manifold).
         #[arg(long)]
@@ -151,7 +152,7 @@ enum Command {
     View(view_cmd::ViewArgs),
     /// Run a published experiment end to end (generate, train, identify, register, evaluate) and write
     /// result.json, PNG figures and the report (report.md, report.html) beside the published figures.
-    Experiment(experiment::ExperimentArgs),
+    Experiment(experiment_cmd::ExperimentArgs),
     /// Benchmarks of the static solver (median times, split by phase) and of the U-Net's prediction.
     Bench {
         /// Repetitions per case.
@@ -185,7 +186,7 @@ fn main() {
         Command::View(args) => view_cmd::run(&args),
         Command::Mesh { surface, label, length, units, no_repair, tets, immersed, output } => {
             let repair = !no_repair;
-            mesh_cmd::run(&mesh_cmd::MeshArgs { surface, label, length, units, repair, tets, immersed, output })
+            mesh_cmd::run(&app::meshing::MeshOptions { surface, label, length, units, repair, tets, immersed }, &output)
         }
         Command::Assimilate(args) => assimilate::run(&args),
         Command::Generate { scenario, out, shard, samples } => {
@@ -199,7 +200,7 @@ fn main() {
         Command::Predict { model, input, output, mesh, runs, device } => {
             learn_cmd::predict(&model, &input, &output, mesh.as_deref(), runs, device)
         }
-        Command::Experiment(args) => experiment::run(&args),
+        Command::Experiment(args) => experiment_cmd::run(&args),
         Command::Bench { runs } => bench::run(runs),
     };
     if let Err(e) = result {

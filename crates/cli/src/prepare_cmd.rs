@@ -38,10 +38,10 @@ pub struct PrepareArgs {
     /// Output directory (resumed when it holds a preparation of the same inputs).
     #[arg(short, long)]
     out: PathBuf,
-    /// Unit of the surface, camera, landmarks and targets: mm or m (default: told from the
+    /// Unit of the surface, camera, landmarks and targets: mm, m, or auto (told from the
     /// surface's size).
-    #[arg(long)]
-    units: Option<String>,
+    #[arg(long, default_value = "auto", value_parser = mesh::length::parse_unit_or_auto)]
+    units: mesh::length::UnitOrAuto,
     /// FEM draws of the dataset.
     #[arg(long, default_value_t = 2000)]
     samples: usize,
@@ -88,9 +88,9 @@ impl Progress for Printer {
 pub fn run(args: &PrepareArgs) -> Result<()> {
     let mut options =
         PrepareOptions::new(args.surface.clone(), args.camera.clone(), args.attach.clone(), args.targets.clone());
-    options.units = args.units.clone();
+    options.units = args.units;
     options.label = args.label.clone();
-    options.attach_distance = args.attach_mm * 1e-3;
+    options.attach_distance = mesh::length::from_mm(args.attach_mm);
     options.samples = args.samples;
     options.method = args.method;
     options.tets = args.tets;

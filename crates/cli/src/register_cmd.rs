@@ -1,16 +1,16 @@
 //! `augsim register`: an intraoperative point cloud (or a sequence of them) in,
 //! the deformed organ and its targets out, with the TRE when the truth is known.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use app::case::{ar_scenario, case_methods, compare, synthetic_case, Network, Registered, SHIPPED_MODEL, SHIPPED_ROM};
-use app::output::{comparison_rows, write_comparison, RunWriter};
+use app::case::{ar_scenario, case_methods, compare, comparison_models, synthetic_case, Network, Registered};
+use app::output::{comparison_rows, run_dir, write_case, write_comparison, RunWriter};
 use app::points::{targets_frame, PointInput};
-use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
-use mesh::repair::{metres_per, LengthUnit};
+use app::registration::RegistrationChoice;
+use mesh::length::{mm, LengthUnit};
 use mesh::Point;
-use register::cloud::{read_frames, write_csv};
+use register::cloud::read_frames;
 use register::{Organ, RigidOptions, RigidResult, RigidTransform};
 use scenario::registration::{MethodKind, BUILTIN_CASE};
 
@@ -25,61 +25,26 @@ pub struct RegisterArgs {
     /// binary). A directory is a sequence of frames, in file-name order (.csv, .npy, .ply).
     #[arg(required_unless_present = "comparison")]
     cloud: Option<PathBuf>,
-    /// The registration set-up of a patient's organ, written by `augsim prepare`: its learned
-    /// model or its FEM, whichever it found the better on its validation, and its targets.
-    #[arg(long, conflicts_with_all = ["fem", "model", "scenario", "targets", "comparison"])]
-    patient: Option<PathBuf>,
-    /// With --patient: register with the patient's FEM, whichever its set-up names.
-    #[arg(long, requires = "patient")]
-    use_fem: bool,
-    /// With --patient: register with the patient's learned model, whichever its set-up names.
-    #[arg(long, requires = "patient", conflicts_with = "use_fem")]
-    use_model: bool,
-    /// FEM registration on this scenario's mesh, material (law, formulation) and fixed nodes.
-    #[arg(long, conflicts_with = "model")]
-    fem: Option<PathBuf>,
-    /// Registration with this learned model (a U-Net's or a reduced-order model's directory, or its
-    /// model.json); the organ comes from --scenario. With --demo or --case: the learned model of the
-    /// comparison (default: the shipped U-Net, models/liver_ar).
-    #[arg(long)]
-    model: Option<PathBuf>,
-    /// The dataset scenario the model was trained on, for --model (its mesh is the organ, its
-    /// observed nodes the network's input); with --demo or --case, default: the shipped
-    /// liver_ar_t10.
-    #[arg(long)]
-    scenario: Option<PathBuf>,
-    /// Targets at rest (CSV x,y,z in --units, .fcsv or .mrk.json); default: the mesh's `markers`
-    /// and `tumour` regions.
-    #[arg(long)]
-    targets: Option<PathBuf>,
+    #[command(flatten)]
+    registration: RegistrationChoice,
     /// True deformed positions of the targets (CSV x,y,z in --units, .fcsv or .mrk.json; same
     /// order), or a directory of one such file per frame: the TRE is reported.
     #[arg(long)]
     truth: Option<PathBuf>,
-    /// Unit of the clouds, targets and truth whose files name none: mm or m. Files that name
-    /// their frame (RAS, LPS) are brought into the targets' (a patient's) frame.
-    #[arg(long, default_value = "m")]
-    units: LengthUnit,
-    /// Most match-and-deform iterations per frame from rest (default: the library's for --fem, the
-    /// built-in case's real-time budget for --model, or the case's and its methods'; given, it holds
-    /// for every method of a case).
-    #[arg(long)]
-    iterations: Option<usize>,
-    /// Rigid pre-alignment: trimmed point-to-plane ICP of the cloud to the organ's rest surface
-    /// before the deformable iterations (on the first frame of a sequence); targets, organ.vtu and
-    /// the TRE are then in the cloud's frame, and summary.json gives the organ → cloud transform.
-    #[arg(long)]
-    rigid: bool,
-    /// Output directory: organ.vtu (organ.pvd for a sequence), targets.csv, summary.json.
-    #[arg(short, long, default_value = "out/register")]
-    out: PathBuf,
+    /// Output directory: organ.vtu (organ.pvd for a sequence), targets.csv, summary.json; one
+    /// that holds an earlier run's results is refused (runs are never mixed). Default: a fresh
+    /// numbered folder under out/register (out/register/001, 002, …).
+    #[arg(short, long)]
+    out: Option<PathBuf>,
     /// Built-in comparison case (register_case, which describes it): a phantom
     /// truth pushed down (--force) and seen from above, registered by each of the case's methods
-    /// (FEM models on another mesh, the shipped U-Net); prints the comparison.
-    #[arg(long, group = "comparison")]
+    /// (FEM models on another mesh, the shipped U-Net and reduced-order model, or --model on
+    /// --scenario, default liver_ar_t10); prints the comparison. --iterations and --rigid then
+    /// hold for every method of the case.
+    #[arg(long, group = "comparison", conflicts_with = "patient")]
     demo: bool,
     /// The comparison of --demo on this case scenario (TOML, as register_case).
-    #[arg(long, group = "comparison", value_name = "CASE.toml")]
+    #[arg(long, group = "comparison", value_name = "CASE.toml", conflicts_with = "patient")]
     case: Option<PathBuf>,
     /// The force (N) pushing the case's truth (default: the case's).
     #[arg(long, requires = "comparison")]
@@ -96,35 +61,27 @@ pub struct RegisterArgs {
     misalign_mm: Option<f64>,
 }
 
-/// Runs the registration and writes the outputs.
+/// Where runs go when --out is not given, each in a numbered folder of its own.
+const RUNS: &str = "out/register";
+
+/// Runs the registration (or the comparison) and writes the outputs into a folder of the run's
+/// own; a fresh numbered folder is removed again when the run fails before writing into it.
 pub fn run(args: &RegisterArgs) -> Result<()> {
-    if args.demo || args.case.is_some() {
-        return demo(args);
+    let (out, fresh) = run_dir(args.out.as_deref(), Path::new(RUNS))?;
+    let result = if args.demo || args.case.is_some() { demo(args, &out) } else { register(args, &out) };
+    if result.is_err() && fresh {
+        // Only an empty folder is removed.
+        let _ = std::fs::remove_dir(&out);
     }
+    result
+}
+
+/// Registers the cloud (or sequence) of the command line into `out`.
+fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     let cloud_path = args.cloud.clone().context("a cloud is required")?;
-    let spec = match &args.patient {
-        Some(dir) => RegistrationSpec::patient(
-            dir,
-            app::registration::PatientMethod::asked(args.use_fem, args.use_model),
-            args.iterations,
-            args.rigid,
-        )?,
-        None => {
-            let method = if let Some(model) = &args.model {
-                let scenario = args.scenario.clone().context("--model needs --scenario (or --demo)")?;
-                MethodSpec::Learned { model: model.clone(), scenario }
-            } else if let Some(fem) = &args.fem {
-                MethodSpec::Fem(fem.clone())
-            } else {
-                bail!("give --patient DIR, --fem SCENARIO or --model MODEL --scenario SCENARIO (or --demo)");
-            };
-            let targets = args.targets.clone().map_or(TargetsSpec::Regions, TargetsSpec::File);
-            let unit = metres_per(args.units);
-            RegistrationSpec { method, targets, unit, iterations: args.iterations, rigid: args.rigid }
-        }
-    };
+    let spec = args.registration.spec()?;
     let mut registration = spec.build()?;
-    let mut input = PointInput::new(targets_frame(&spec.targets)?, LengthUnit::Metre, args.units);
+    let mut input = PointInput::new(targets_frame(&spec.targets)?, LengthUnit::Metre, args.registration.units);
     let frames = read_frames(&cloud_path)?;
     let truths: Option<Vec<Vec<Point>>> = match &args.truth {
         None => None,
@@ -142,7 +99,7 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
         eprintln!("warning    {w}");
     }
     let sequence = frames.len() > 1;
-    let mut writer = RunWriter::new(&args.out, sequence)?;
+    let mut writer = RunWriter::new(out, sequence)?;
     let clouds = frames.iter().map(|f| input.read_cloud(f));
     let mut rigid_printed = false;
     let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, organ, o| {
@@ -168,12 +125,12 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
         }
         Ok(())
     })?;
-    let summary = writer.finish(registration.method(), registration.targets(), &outcomes)?;
-    if let Some(std) = outcomes.last().and_then(|o| o.target_std.as_ref()) {
+    let summary = writer.finish(registration.method(), registration.targets(), &spec.target_labels()?, &outcomes)?;
+    if let Some(sigma) = outcomes.last().and_then(|o| o.target_std.as_ref()) {
         println!(
-            "std        predicted at the targets: mean {:.2} mm, max {:.2} mm (targets.csv, column std)",
-            mesh::stats::mean(std) * 1e3,
-            mesh::stats::max(std) * 1e3
+            "sigma      predicted at the targets: mean {:.2} mm, max {:.2} mm (targets.csv, column sigma_m)",
+            mm(mesh::stats::mean(sigma)),
+            mm(mesh::stats::max(sigma))
         );
     }
     if let (Some(t), Some(m), Some(r)) = (summary.tre_mean_mm, summary.tre_max_mm, summary.no_deformation_tre_mean_mm) {
@@ -181,7 +138,7 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
     }
     println!(
         "wrote      {} ({}, targets.csv, summary.json)",
-        args.out.display(),
+        out.display(),
         if sequence { "organ.pvd" } else { "organ.vtu" }
     );
     Ok(())
@@ -200,12 +157,12 @@ fn print_rigid(r: &RigidResult, truth: Option<&RigidTransform>) {
         "rigid      ICP: organ -> cloud rotation {:.2} deg, translation {:.2} mm; {} iterations{}, {} of {} points \
          kept, rms {:.2} mm, {:.1} ms",
         t.angle().to_degrees(),
-        t.translation_norm() * 1e3,
+        mm(t.translation_norm()),
         r.iterations,
         if r.converged { "" } else { " (not converged)" },
         r.kept,
         r.points,
-        r.rms * 1e3,
+        mm(r.rms),
         ms(r.time)
     );
     if let Some(truth) = truth {
@@ -213,9 +170,9 @@ fn print_rigid(r: &RigidResult, truth: Option<&RigidTransform>) {
         println!(
             "           against the case's true misalignment ({:.2} deg, {:.2} mm): {:.2} deg, {:.2} mm off",
             truth.angle().to_degrees(),
-            truth.translation_norm() * 1e3,
+            mm(truth.translation_norm()),
             angle.to_degrees(),
-            shift * 1e3
+            mm(shift)
         );
     }
 }
@@ -249,12 +206,12 @@ fn comparison_case(args: &RegisterArgs) -> Result<CaseScenario> {
     if let Some(mm) = args.misalign_mm {
         scenario.misalignment.translation_mm = mm;
     }
-    if let Some(iterations) = args.iterations {
+    if let Some(iterations) = args.registration.iterations {
         // Given on the command line, it holds for every method.
         scenario.registration.iterations = iterations;
         scenario.models.method.iter_mut().for_each(|m| m.iterations = None);
     }
-    if args.rigid && scenario.registration.rigid.is_none() {
+    if args.registration.rigid && scenario.registration.rigid.is_none() {
         scenario.registration.rigid = Some(RigidOptions::default());
     }
     let origin =
@@ -265,7 +222,7 @@ fn comparison_case(args: &RegisterArgs) -> Result<CaseScenario> {
 
 /// `--demo` and `--case`: simulates the case, registers it with each method and prints the
 /// comparison.
-fn demo(args: &RegisterArgs) -> Result<()> {
+fn demo(args: &RegisterArgs, out: &Path) -> Result<()> {
     let scenario = comparison_case(args)?;
     let (t, c, m) = (&scenario.truth, &scenario.camera, &scenario.misalignment);
     println!("case       {}: {}", scenario.name, scenario.description);
@@ -284,7 +241,7 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         "camera     along {:?}: {} points on the visible surface, {} mm noise, {} % outliers (seed {})",
         c.view,
         c.points,
-        c.noise * 1e3,
+        mm(c.noise),
         c.outliers * 1e2,
         c.seed
     );
@@ -295,16 +252,9 @@ fn demo(args: &RegisterArgs) -> Result<()> {
         );
     }
     let case = synthetic_case(&scenario)?;
-    let dir = args.out.join("case");
-    let peak = case.peak();
-    write_csv(&dir.join("cloud.csv"), &peak.cloud)?;
-    write_csv(&dir.join("targets_rest.csv"), &case.targets)?;
-    write_csv(&dir.join("truth.csv"), &peak.truth)?;
+    let dir = out.join("case");
+    write_case(&dir, &case)?;
     if case.frames.len() > 1 {
-        for (k, frame) in case.frames.iter().enumerate() {
-            write_csv(&dir.join("clouds").join(format!("cloud_{k:04}.csv")), &frame.cloud)?;
-            write_csv(&dir.join("truths").join(format!("truth_{k:04}.csv")), &frame.truth)?;
-        }
         let forces: Vec<String> = case.frames.iter().map(|f| format!("{:.2}", f.force)).collect();
         println!(
             "frames     {}: forces {} N, each frame warm-started from the previous one",
@@ -321,23 +271,12 @@ fn demo(args: &RegisterArgs) -> Result<()> {
 
     let wants_network =
         scenario.models.method.iter().any(|m| matches!(m.kind, MethodKind::Network | MethodKind::Hybrid));
-    // The model given, or the shipped U-Net and reduced-order model.
-    let paths = match &args.model {
-        Some(path) => vec![path.clone()],
-        None => vec![PathBuf::from(SHIPPED_MODEL), PathBuf::from(SHIPPED_ROM)],
-    };
-    let mut models = Vec::new();
-    for path in paths.iter().filter(|_| wants_network) {
-        if path.exists() {
-            models.push(learn::Model::load(path)?);
-        } else {
-            println!(
-                "model      skipped: {} not found (run from the repository root, or give --model)",
-                path.display()
-            );
-        }
+    let (models, missing) =
+        if wants_network { comparison_models(args.registration.model.as_deref())? } else { (Vec::new(), Vec::new()) };
+    for path in missing {
+        println!("model      skipped: {} not found (run from the repository root, or give --model)", path.display());
     }
-    let (network_scenario, network_dir) = match &args.scenario {
+    let (network_scenario, network_dir) = match &args.registration.scenario {
         Some(path) => DatasetScenario::load(path)?,
         None => (ar_scenario(), PathBuf::new()),
     };
@@ -368,11 +307,11 @@ fn demo(args: &RegisterArgs) -> Result<()> {
             println!("{name:<width$} failed: {error}");
         }
     }
-    write_comparison(&args.out, &case, &rows)?;
+    write_comparison(out, &case, &rows)?;
     println!();
     println!(
         "wrote      {} (comparison.csv, summary.json; per method: organ.vtu, targets.csv, registration.png)",
-        args.out.display()
+        out.display()
     );
     Ok(())
 }

@@ -2,16 +2,15 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
-use fem::{post, StaticSolver};
-use mesh::io::Field;
-
-use scenario::StaticScenario;
+use anyhow::Result;
+use app::solve::solve_scenario;
+use fem::post;
 
 /// Runs the scenario and writes the result; prints a summary.
 pub fn run(path: &Path, output: Option<&Path>) -> Result<()> {
-    let (scenario, dir) = StaticScenario::load(path)?;
-    let problem = scenario.build_problem(&dir)?;
+    let solved = solve_scenario(path)?;
+    let (scenario, solver, sol) = (&solved.scenario, &solved.solver, &solved.solution);
+    let (geo, p) = (solver.geometry(), solver.problem());
     println!(
         "scenario   {}{}",
         scenario.name,
@@ -19,26 +18,14 @@ pub fn run(path: &Path, output: Option<&Path>) -> Result<()> {
     );
     println!(
         "mesh       {} nodes, {} {} cells, {:.4e} m³",
-        problem.mesh.num_nodes(),
-        problem.mesh.cells.len(),
-        problem.mesh.cells.kind_name(),
-        problem.mesh.volume()
+        p.mesh.num_nodes(),
+        p.mesh.cells.len(),
+        p.mesh.cells.kind_name(),
+        p.mesh.volume()
     );
-    let mut solver = StaticSolver::new(problem)?;
     let (free, nnz) = solver.system_size();
-    let sol = solver.solve(&scenario.solver).context("static solve")?;
     let out = output.map(Path::to_path_buf).unwrap_or_else(|| scenario.output_path());
-    let geo = solver.geometry();
-    let p = solver.problem();
-    let fields = [
-        Field::point("displacement", 3, sol.u.clone()),
-        Field::cell("green_strain", 6, post::green_strain(geo, &p.material, &sol.u)?),
-        Field::cell("von_mises", 1, post::von_mises(geo, &p.material, &sol.u)?),
-    ];
-    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    mesh::io::write_mesh(&out, &p.mesh, &fields).with_context(|| format!("writing {}", out.display()))?;
+    solved.write(&out)?;
     let t = sol.timings;
     println!(
         "material   {:?} ({:?} elements), E = {} Pa, nu = {}",

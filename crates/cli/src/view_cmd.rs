@@ -5,12 +5,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use app::sample_view::{first_held_out, sample_on_mesh};
+use app::sample_view::{first_held_out, mesh_file_scene, organ_mesh, sample_on_mesh};
 use learn::{Dataset, Model};
-use mesh::io::{Field, FieldLocation};
-use plot::viewer::{Layer, Scalar, Scene};
-
-use scenario::DatasetScenario;
+use plot::viewer::Scene;
 
 /// Options of `augsim view`.
 #[derive(Debug, clap::Args)]
@@ -62,17 +59,7 @@ fn sample_scene(args: &ViewArgs, model_path: &Path, dataset_dir: &Path) -> Resul
     let model = Model::load(model_path)?;
     let dataset = Dataset::open(dataset_dir)?;
     let manifest = dataset.manifest();
-    let (organ, from) = match (&args.mesh, &args.scenario) {
-        (Some(path), _) => {
-            (mesh::io::read_mesh(path).with_context(|| format!("reading {}", path.display()))?, path.clone())
-        }
-        (None, given) => {
-            let path = given.clone().unwrap_or_else(|| PathBuf::from(&manifest.scenario));
-            let (scenario, dir) = DatasetScenario::load(&path)
-                .context("the organ's mesh: give the dataset's scenario (--scenario) or its mesh (--mesh)")?;
-            (scenario.mesh(&dir)?, path)
-        }
-    };
+    let (organ, from) = organ_mesh(args.mesh.as_deref(), args.scenario.as_deref(), manifest)?;
     let index = match args.sample {
         Some(i) => i,
         None => first_held_out(&model, manifest)
@@ -94,61 +81,14 @@ fn sample_scene(args: &ViewArgs, model_path: &Path, dataset_dir: &Path) -> Resul
     Ok(scene)
 }
 
-/// The scene of a mesh file: its boundary at rest and moved by each 3-component point field.
+/// The scene of a mesh file's displacement fields.
 fn file_scene(path: &Path) -> Result<Scene> {
-    let (organ, fields) =
-        mesh::io::read_mesh_with_fields(path).with_context(|| format!("reading {}", path.display()))?;
-    let vectors: Vec<&Field> = fields
-        .iter()
-        .filter(|f| f.location == FieldLocation::Point && f.components == 3 && f.num_tuples() == organ.num_nodes())
-        .collect();
-    let field = |name: &str| vectors.iter().find(|f| f.name == name);
-    let magnitude = |v: &[f64]| -> Vec<f64> {
-        v.chunks_exact(3).map(|c| 1e3 * (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()).collect()
-    };
-    let colour = match (field("reference"), field("prediction"), vectors.first()) {
-        (Some(r), Some(p), _) => Some(Scalar {
-            name: "prediction error".into(),
-            unit: "mm".into(),
-            values: magnitude(&p.values.iter().zip(&r.values).map(|(a, b)| a - b).collect::<Vec<_>>()),
-        }),
-        (_, _, Some(f)) => {
-            Some(Scalar { name: format!("|{}|", f.name), unit: "mm".into(), values: magnitude(&f.values) })
-        }
-        _ => None,
-    };
-    let surface = mesh::boundary_surface(&organ);
+    let (scene, fields) = mesh_file_scene(path)?;
     println!(
         "mesh       {} nodes, {} surface triangles; displacement fields: {}",
-        organ.num_nodes(),
-        surface.triangles.len(),
-        if vectors.is_empty() {
-            "none".into()
-        } else {
-            vectors.iter().map(|f| f.name.as_str()).collect::<Vec<_>>().join(", ")
-        }
+        scene.rest.len(),
+        scene.triangles.len(),
+        if fields.is_empty() { "none".into() } else { fields.join(", ") }
     );
-    Ok(Scene {
-        title: path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
-        notes: vec![format!("{} nodes, {} {} cells", organ.num_nodes(), organ.cells.len(), organ.cells.kind_name())],
-        triangles: surface.triangles.iter().map(|t| t.map(|i| i as u32)).collect(),
-        layers: vectors
-            .iter()
-            .map(|f| Layer {
-                name: f.name.clone(),
-                positions: organ
-                    .nodes
-                    .iter()
-                    .enumerate()
-                    .map(|(n, p)| {
-                        let u = f.tuple(n);
-                        [p[0] + u[0], p[1] + u[1], p[2] + u[2]]
-                    })
-                    .collect(),
-            })
-            .collect(),
-        rest: organ.nodes,
-        colour,
-        points: Vec::new(),
-    })
+    Ok(scene)
 }

@@ -74,6 +74,16 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
     assert!(seq_out.join("organ.pvd").exists() && seq_out.join("organ_0001.vtu").exists());
     let summary = json(&seq_out.join("summary.json"));
     assert_eq!((summary["frames"].as_u64(), summary["per_frame"].as_array().unwrap().len()), (Some(2), 2));
+    // A second run into the same folder is refused: two runs' files are never mixed.
+    let (ok, text) = augsim(
+        &[
+            &["register", seq.to_str().unwrap()],
+            &common[..],
+            &["--truth", truth.to_str().unwrap(), "--out", seq_out.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(!ok && text.contains("holds the results of an earlier run"), "{text}");
 
     // Errors: a truth file for a two-frame sequence, an empty cloud, a target outside the organ.
     let (ok, text) = augsim(
@@ -100,4 +110,30 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
         far.to_str().unwrap(),
     ]);
     assert!(!ok && text.contains("target 0") && text.contains("outside"), "{text}");
+}
+
+/// Every command that reads lengths parses `--units` the same way: mm or m (auto where an
+/// organ's surface gives the scale), and refuses another unit before doing anything.
+#[test]
+fn units_are_parsed_the_same_by_every_command() {
+    for command in
+        [&["register", "cloud.csv", "--fem", "beam", "--units", "cm"][..], &["serve", "--fem", "beam", "--units", "cm"]]
+    {
+        let (ok, text) = augsim(command);
+        assert!(!ok && text.contains("invalid value 'cm' for '--units"), "{command:?}: {text}");
+        assert!(text.contains("must be mm or m, got 'cm'"), "{command:?}: {text}");
+    }
+    for command in [
+        &["mesh", "organ.stl"][..],
+        &["prepare", "organ.stl", "--camera", "0,0,1", "--attach", "a.csv", "--targets", "t.csv", "--out", "o"],
+    ] {
+        let command = [command, &["--units", "cm"]].concat();
+        let (ok, text) = augsim(&command);
+        assert!(!ok && text.contains("must be mm, m or auto, got 'cm'"), "{command:?}: {text}");
+    }
+    // Without a way of deforming the organ, register and serve say what to give.
+    for command in [&["register", "cloud.csv"][..], &["serve", "--port", "0"]] {
+        let (ok, text) = augsim(command);
+        assert!(!ok && text.contains("give patient DIR, fem SCENARIO, or model MODEL"), "{command:?}: {text}");
+    }
 }

@@ -30,7 +30,7 @@ fn the_roukf_steps_with_features_sent_over_openigtlink() {
     let targets = dir.path().join("targets.csv");
     std::fs::write(&targets, "x,y,z\n1000,500,500\n").unwrap();
     let mut server = Command::new(env!("CARGO_BIN_EXE_augsim"))
-        .args(["serve", "--fem", "beam", "--targets", targets.to_str().unwrap(), "--port", "0"])
+        .args(["serve", "--fem", "beam", "--targets", targets.to_str().unwrap(), "--port", "0", "--units", "mm"])
         .args(["--assimilate", SCENARIO])
         .stdout(Stdio::piped())
         .spawn()

@@ -8,7 +8,7 @@ use std::process::Command;
 
 use mesh::io::points::{read_points, read_points_csv, write_points, write_points_csv, LabelledPoints};
 use mesh::io::Frame;
-use mesh::repair::LengthUnit;
+use mesh::length::LengthUnit;
 
 fn augsim(args: &[&str]) -> (bool, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_augsim")).args(args).output().expect("augsim runs");

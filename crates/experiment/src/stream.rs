@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, Context, Result};
 use live::client::Client;
 use live::{Outputs, ServeOptions};
+use mesh::length::{from_mm, mm, LengthUnit};
 use mesh::stats::{max, mean, median, percentile};
 use register::{Deformer, Organ, Registration, RegistrationOptions};
 use scenario::CaseScenario;
@@ -77,13 +78,13 @@ pub fn stream_case(
     let port = listener.local_addr()?.port();
     let (targets, options) = (case.targets.clone(), options.clone());
     let method_name = method.to_string();
-    let factory = move || -> std::result::Result<Registration, String> {
+    let factory = live::first_then_build(None, move || {
         let (organ, deformer) = make().map_err(|e| format!("{e:#}"))?;
         Registration::new(organ, deformer, method_name.clone(), targets.clone(), options.clone())
             .map_err(|e| e.to_string())
-    };
+    });
     let serve_options = ServeOptions {
-        unit: 1e-3,
+        units: LengthUnit::Millimetre,
         outputs: Outputs { targets: true, organ: false, transform: false, status: true },
         ..ServeOptions::default()
     };
@@ -113,7 +114,7 @@ fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
     };
     let began = Instant::now();
     for (k, frame) in case.frames.iter().enumerate() {
-        let cloud: Vec<[f32; 3]> = frame.cloud.iter().map(|p| p.map(|x| (x * 1e3) as f32)).collect();
+        let cloud: Vec<[f32; 3]> = frame.cloud.iter().map(|p| p.map(|x| mm(x) as f32)).collect();
         let sent = Instant::now();
         client.send_cloud(cloud).map_err(|e| anyhow!(e))?;
         let live::client::Frame { targets, status } = client.until_status().map_err(|e| anyhow!(e))?;
@@ -122,9 +123,8 @@ fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
             return Err(anyhow!("{method}, frame {k}: the server answered {e}"));
         }
         let targets = targets.ok_or_else(|| anyhow!("{method}, frame {k}: no targets"))?;
-        let registered: Vec<mesh::Point> = targets.iter().map(|p| p.map(|x| f64::from(x) * 1e-3)).collect();
-        let errors: Vec<f64> =
-            register::target_errors(&registered, &frame.truth).into_iter().map(|e| e * 1e3).collect();
+        let registered: Vec<mesh::Point> = targets.iter().map(|p| p.map(|x| from_mm(f64::from(x)))).collect();
+        let errors: Vec<f64> = register::target_errors(&registered, &frame.truth).into_iter().map(mm).collect();
         s.tre_mm.push(mean(&errors));
         s.tre_max_mm.push(max(&errors));
         s.server_ms.push(status["ms"].as_f64().unwrap_or(f64::NAN));
@@ -166,7 +166,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         streams.push(stream_case(method, &case, &options, make)?);
     }
     let rest: Vec<f64> =
-        case.frames.iter().map(|f| mean(&register::target_errors(&case.targets, &f.truth)) * 1e3).collect();
+        case.frames.iter().map(|f| mm(mean(&register::target_errors(&case.targets, &f.truth)))).collect();
     let mut rows = vec![Row::new(STREAM_TRE, format!("{:.2} mm ({:.2} mm)", mean(&rest), max(&rest)), "")
         .of("registration", "no deformation")];
     for s in &streams {

@@ -11,7 +11,7 @@
 //!   kept after it; targets and organ are then in the cloud's frame), STRING `status` (one line
 //!   of JSON: `frame`, `ms`,
 //!   `surface_residual`, `plausible` and `warnings` (see `register::plausibility`), `inliers`,
-//!   `points`, `iterations`, and `target_std` (the predicted standard deviation at each target, for
+//!   `points`, `iterations`, and `target_sigma` (the predicted standard deviation σ at each target, for
 //!   the reduced-order model; else null), in the stream's unit; or `frame` and `error`).
 //!
 //! Each client has its own registration, warm-started from its previous frame. A client's clouds
@@ -41,6 +41,7 @@ use std::time::{Duration, Instant};
 
 pub use igtl::{decode_body, encode_message};
 use igtl::{Content, Header, PointElement, PointMessage, StringMessage, TransformMessage};
+use mesh::length::LengthUnit;
 use mesh::Point;
 use polydata::PolyData;
 use register::{Registration, Tracked};
@@ -117,8 +118,8 @@ pub const MAX_PENDING_STEPS: usize = 16;
 /// Settings of the server.
 #[derive(Clone)]
 pub struct ServeOptions {
-    /// Metres per unit of the coordinates on the wire (0.001: millimetres, as 3D Slicer uses).
-    pub unit: f64,
+    /// The unit of the coordinates on the wire (3D Slicer sends millimetres).
+    pub units: LengthUnit,
     /// The answers sent for each cloud.
     pub outputs: Outputs,
     /// Largest message body accepted (bytes); a larger one closes the connection.
@@ -133,7 +134,7 @@ pub struct ServeOptions {
 impl Default for ServeOptions {
     fn default() -> Self {
         ServeOptions {
-            unit: 1e-3,
+            units: LengthUnit::DEFAULT,
             outputs: Outputs::ALL,
             max_message_bytes: 64 << 20,
             max_points: 200_000,
@@ -144,6 +145,20 @@ impl Default for ServeOptions {
 
 /// Builds a new client's [`Registration`] (its organ, method, targets and settings).
 pub type RegistrationFactory = dyn Fn() -> std::result::Result<Registration, String> + Send + Sync;
+
+/// A factory of a client's object (a registration, an identification): the first client takes
+/// `first` (built beforehand, e.g. to stop on a bad set-up before listening), each next one gets
+/// its own from `build`.
+pub fn first_then_build<T: Send>(
+    first: Option<T>,
+    build: impl Fn() -> std::result::Result<T, String> + Send + Sync,
+) -> impl Fn() -> std::result::Result<T, String> + Send + Sync {
+    let first = Mutex::new(first);
+    move || match first.lock().map_err(|e| e.to_string())?.take() {
+        Some(made) => Ok(made),
+        None => build(),
+    }
+}
 
 /// How long the accept loop sleeps between checks of the stop flag.
 const POLL: Duration = Duration::from_millis(20);
@@ -274,7 +289,7 @@ impl Client {
 fn read_messages(mut stream: TcpStream, shared: &Shared) {
     let (mut frame, mut step) = (0u64, 0u64);
     let to_metres = |points: Vec<[f32; 3]>| -> Vec<Point> {
-        points.into_iter().map(|p| p.map(|x| f64::from(x) * shared.options.unit)).collect()
+        points.into_iter().map(|p| shared.options.units.point_to_metres(p.map(f64::from))).collect()
     };
     while !shared.closed.load(Ordering::SeqCst) {
         match read_message(&mut stream, shared.options.max_message_bytes) {
@@ -440,8 +455,8 @@ fn answer(
     let start = Instant::now();
     let tracked = registration.register(cloud).map_err(|e| e.to_string())?;
     let Tracked { registration: result, targets, rigid, target_std } = &tracked;
-    let unit = options.unit;
-    let to_wire = |p: &Point| p.map(|x| (x / unit) as f32);
+    let units = options.units;
+    let to_wire = |p: &Point| units.point_from_metres(*p).map(|x| x as f32);
     if options.outputs.targets {
         let points = targets
             .iter()
@@ -457,19 +472,19 @@ fn answer(
         shared.send(&organ, "organ")?;
     }
     if let (true, Some(r)) = (options.outputs.transform, rigid) {
-        let matrix = r.organ_to_cloud().homogeneous(unit).map(|row| row.map(|x| x as f32));
+        let matrix = r.organ_to_cloud().homogeneous(units.metres()).map(|row| row.map(|x| x as f32));
         shared.send(&TransformMessage { matrix }, "rigid")?;
     }
     shared.send_status(&serde_json::json!({
         "frame": frame,
         "ms": start.elapsed().as_secs_f64() * 1e3,
-        "surface_residual": result.surface_residual / unit,
+        "surface_residual": units.from_metres(result.surface_residual),
         "plausible": result.warnings.is_empty(),
         "warnings": result.warnings,
         "inliers": result.inliers,
         "points": result.points,
         "iterations": result.iterations,
-        "target_std": target_std.as_ref().map(|s| s.iter().map(|v| v / unit).collect::<Vec<f64>>()),
+        "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| units.from_metres(v)).collect::<Vec<f64>>()),
     }));
     Ok(())
 }

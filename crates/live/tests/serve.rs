@@ -12,6 +12,7 @@ use augsim_live::igtl::{crc64, Header};
 use augsim_live::polydata::PolyData;
 use augsim_live::{encode_message, serve, Outputs, ServeOptions};
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
+use mesh::length::LengthUnit;
 use mesh::select::nodes_in_box;
 use mesh::Point;
 use register::{FemDeformer, Organ, Registration, RegistrationOptions};
@@ -94,7 +95,7 @@ fn connect(port: u16) -> Client {
 
 #[test]
 fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
-    let server = Server::start(ServeOptions::default());
+    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, ..ServeOptions::default() });
     let port = server.port;
 
     // A cloud in millimetres: the registered target is the pressed centre.
@@ -245,7 +246,11 @@ impl augsim_live::Identification for SlowMean {
 #[test]
 fn features_step_the_identification_in_order_with_a_bounded_backlog() {
     let factory: Arc<augsim_live::IdentificationFactory> = Arc::new(|| Ok(Box::new(SlowMean)));
-    let server = Server::start(ServeOptions { identification: Some(factory), ..ServeOptions::default() });
+    let server = Server::start(ServeOptions {
+        identification: Some(factory),
+        units: LengthUnit::Millimetre,
+        ..ServeOptions::default()
+    });
     let mut client = connect(server.port);
     let burst = 3 * augsim_live::MAX_PENDING_STEPS;
     for k in 0..burst {
@@ -272,7 +277,7 @@ fn features_step_the_identification_in_order_with_a_bounded_backlog() {
     assert_eq!(client.until_status().unwrap().status["frame"], 1);
     // A server without identification answers features with an error.
     server.stop();
-    let server = Server::start(ServeOptions::default());
+    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, ..ServeOptions::default() });
     let mut client = connect(server.port);
     client.send_points("features", &[[0.0; 3]; 2]).unwrap();
     match client.receive().unwrap() {
@@ -280,4 +285,25 @@ fn features_step_the_identification_in_order_with_a_bounded_backlog() {
         other => panic!("expected an estimate, got {other:?}"),
     }
     server.stop();
+}
+
+/// The factory hands the prebuilt object to the first client and builds one for each next one;
+/// a build's error reaches the client that asked.
+#[test]
+fn the_first_client_takes_the_prebuilt_object_and_the_next_ones_their_own() {
+    let built = std::sync::atomic::AtomicUsize::new(0);
+    let factory = augsim_live::first_then_build(Some("prebuilt".to_string()), || {
+        let n = built.fetch_add(1, Ordering::SeqCst) + 1;
+        if n < 3 {
+            Ok(format!("built {n}"))
+        } else {
+            Err("no more".to_string())
+        }
+    });
+    assert_eq!(factory().unwrap(), "prebuilt");
+    assert_eq!(factory().unwrap(), "built 1");
+    assert_eq!(factory().unwrap(), "built 2");
+    assert_eq!(factory().unwrap_err(), "no more");
+    let without = augsim_live::first_then_build(None, || Ok(7));
+    assert_eq!((without().unwrap(), without().unwrap()), (7, 7));
 }

@@ -14,6 +14,7 @@ pub mod immersed;
 pub mod io;
 pub mod isosurface;
 pub mod labelmap;
+pub mod length;
 pub mod phantom;
 pub mod quadratic;
 pub mod rebuild;

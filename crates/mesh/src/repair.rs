@@ -28,6 +28,7 @@ use std::collections::{HashMap, HashSet};
 
 use rayon::prelude::*;
 
+use crate::length::LengthUnit;
 use crate::surface::check_closed_manifold;
 use crate::tetmesh::MAX_OVERLAP_FRACTION;
 use crate::{bounds, cross, dot, norm, sub, MeshError, Point, TriSurface};
@@ -312,46 +313,6 @@ pub fn self_intersections(surface: &TriSurface) -> Vec<(usize, usize)> {
         .collect();
     pairs.sort_unstable();
     pairs
-}
-
-/// A length unit of surface coordinates.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum LengthUnit {
-    /// Metres (augsim's unit).
-    Metre,
-    /// Millimetres (the usual unit of medical images).
-    Millimetre,
-}
-
-impl LengthUnit {
-    /// Its symbol: "m" or "mm".
-    pub fn symbol(self) -> &'static str {
-        match self {
-            LengthUnit::Metre => "m",
-            LengthUnit::Millimetre => "mm",
-        }
-    }
-}
-
-impl std::str::FromStr for LengthUnit {
-    type Err = String;
-
-    /// "mm" or "m".
-    fn from_str(name: &str) -> Result<LengthUnit, String> {
-        match name {
-            "mm" => Ok(LengthUnit::Millimetre),
-            "m" => Ok(LengthUnit::Metre),
-            other => Err(format!("must be mm or m, got '{other}'")),
-        }
-    }
-}
-
-/// Metres in one `unit` (the scale that brings coordinates in `unit` to metres).
-pub fn metres_per(unit: LengthUnit) -> f64 {
-    match unit {
-        LengthUnit::Metre => 1.0,
-        LengthUnit::Millimetre => 1e-3,
-    }
 }
 
 /// The largest extent of the bounding box of the vertices the triangles use (0 when none;
@@ -1312,8 +1273,6 @@ mod tests {
         cm.transform([0.0; 3], 100.0);
         let e = detect_unit(&cm).unwrap_err().to_string();
         assert!(e.contains("largest extent is 10,") && e.contains("give the unit explicitly"), "{e}");
-        assert_eq!(metres_per(LengthUnit::Millimetre) * 1000.0, metres_per(LengthUnit::Metre));
-        assert_eq!((LengthUnit::Metre.symbol(), LengthUnit::Millimetre.symbol()), ("m", "mm"));
     }
 
     #[test]

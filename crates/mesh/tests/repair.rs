@@ -6,7 +6,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use augsim_mesh::io::{read_stl, read_surface, write_stl};
-use augsim_mesh::repair::{detect_unit, metres_per, repair_surface, self_intersections, LengthUnit, RepairOptions};
+use augsim_mesh::length::LengthUnit;
+use augsim_mesh::repair::{detect_unit, repair_surface, self_intersections, RepairOptions};
 use augsim_mesh::surface::check_closed_manifold;
 use augsim_mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
 use augsim_mesh::TriSurface;
@@ -168,7 +169,7 @@ fn a_damaged_liver_in_mm_is_repaired_and_meshes() {
     // Millimetres, scaled to metres about the origin (the frame is kept), then meshed.
     assert_eq!(detect_unit(&repaired).unwrap(), LengthUnit::Millimetre);
     let mut metres = repaired.clone();
-    metres.transform([0.0; 3], metres_per(LengthUnit::Millimetre));
+    metres.transform([0.0; 3], LengthUnit::Millimetre.metres());
     assert_eq!(detect_unit(&metres).unwrap(), LengthUnit::Metre);
     let (mesh, q) = mesh_surface_to_count(&metres, 3000, BoundaryFit::default()).unwrap();
     println!("meshed     {q}");

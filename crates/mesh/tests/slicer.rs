@@ -8,7 +8,7 @@ use augsim_mesh::io::points::{
     read_points, read_points_csv, write_fcsv, write_markups_json, write_points, LabelledPoints,
 };
 use augsim_mesh::io::{read_surface, read_surface_with_frame, surface_frame, write_surface_in_frame, Frame};
-use augsim_mesh::repair::LengthUnit;
+use augsim_mesh::length::LengthUnit;
 use augsim_mesh::MeshError;
 
 fn slicer(name: &str) -> PathBuf {

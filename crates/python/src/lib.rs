@@ -11,10 +11,11 @@ use std::sync::{Mutex, MutexGuard};
 
 use app::assimilation::{Experiment, OnlineFilter};
 use app::output::RunWriter;
-use app::registration::{MethodSpec, PatientMethod, RegistrationSpec, TargetsSpec};
-use fem::{post, StaticSolver};
+use app::registration::{RegistrationChoice, TargetsSpec};
+use fem::post;
 use learn::data::npy::{NpyArray, NpyData};
 use learn::{Model, PointCloud, PredictInput};
+use mesh::length::LengthUnit;
 use mesh::Point;
 use nalgebra::DVector;
 use numpy::ndarray::{Array2, Array3, ArrayD, IxDyn};
@@ -23,7 +24,7 @@ use pyo3::create_exception;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use register::Tracked;
-use scenario::{AssimilationScenario, StaticScenario};
+use scenario::AssimilationScenario;
 
 create_exception!(
     _augsim,
@@ -119,10 +120,8 @@ struct Solution {
 #[pyfunction]
 fn solve(py: Python<'_>, scenario: PathBuf) -> PyResult<Solution> {
     let (nodes, sol) = compute(py, || {
-        let (scenario, dir) = StaticScenario::load(&scenario)?;
-        let problem = scenario.build_problem(&dir)?;
-        let nodes = problem.mesh.nodes.clone();
-        Ok((nodes, StaticSolver::new(problem)?.solve(&scenario.solver)?))
+        let solved = app::solve::solve_scenario(&scenario)?;
+        Ok((solved.solver.problem().mesh.nodes.clone(), solved.solution))
     })?;
     Ok(Solution {
         points: point_array(py, &nodes, 1.0).unbind(),
@@ -168,7 +167,7 @@ struct Registered {
     /// The predicted standard deviation of each target's error, float64 [k], in `units`, for a
     /// model that predicts one (the reduced-order model); otherwise None.
     #[pyo3(get)]
-    target_std: Option<Py<PyArray1<f64>>>,
+    target_sigma: Option<Py<PyArray1<f64>>>,
     /// Wall time of the registration (ms).
     #[pyo3(get)]
     ms: f64,
@@ -190,7 +189,10 @@ struct Registered {
 #[pyclass(module = "augsim")]
 struct Registration {
     state: Mutex<register::Registration>,
+    /// Metres per unit of clouds, targets and results.
     unit: f64,
+    /// The targets' labels (those of a targets file; none otherwise), for targets.csv.
+    labels: Vec<String>,
     /// The method in words (e.g. "FEM, Corotational (Standard elements)").
     #[pyo3(get)]
     method: String,
@@ -216,39 +218,31 @@ impl Registration {
         iterations: Option<usize>,
         rigid: bool,
     ) -> PyResult<Self> {
-        let unit = register::cloud::metres_per_unit(units).map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
+        let units: LengthUnit = units.parse().map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
         let targets = match targets {
-            None => TargetsSpec::Regions,
-            Some(t) => match t.extract::<PathBuf>() {
+            None => None,
+            Some(t) => Some(match t.extract::<PathBuf>() {
                 Ok(path) => TargetsSpec::File(path),
                 Err(_) => TargetsSpec::Points(points(t, "targets", 1.0)?),
-            },
+            }),
         };
-        let state = match (patient, fem, model, scenario, &targets) {
-            (Some(dir), None, None, None, TargetsSpec::Regions) => compute(py, move || {
-                RegistrationSpec::patient(
-                    &dir,
-                    use_fem.map(|fem| if fem { PatientMethod::Fem } else { PatientMethod::Learned }),
-                    iterations,
-                    rigid,
-                )?
-                .build()
-            })?,
-            (None, fem, model, scenario, _) => {
-                let method = match (fem, model, scenario) {
-                    (Some(fem), None, None) => MethodSpec::Fem(fem),
-                    (None, Some(model), Some(scenario)) => MethodSpec::Learned { model, scenario },
-                    _ => {
-                        return Err(PyValueError::new_err(
-                            "give patient=DIR, fem=SCENARIO, or model=MODEL with scenario=SCENARIO",
-                        ))
-                    }
-                };
-                let spec = RegistrationSpec { method, targets, unit, iterations, rigid };
-                compute(py, move || spec.build())?
-            }
-            _ => return Err(PyValueError::new_err("patient=DIR holds its method and targets: give nothing else")),
+        let choice = RegistrationChoice {
+            patient,
+            use_fem: use_fem == Some(true),
+            use_model: use_fem == Some(false),
+            fem,
+            model,
+            scenario,
+            targets,
+            units,
+            iterations,
+            rigid,
         };
+        choice.check().map_err(PyValueError::new_err)?;
+        let (state, labels) = compute(py, move || {
+            let spec = choice.spec()?;
+            Ok((spec.build()?, spec.target_labels()?))
+        })?;
         let warnings = state.warnings().iter().map(|w| format!("targets: {w}")).collect::<Vec<_>>();
         for w in &warnings {
             PyErr::warn(
@@ -259,7 +253,7 @@ impl Registration {
             )?;
         }
         let method = state.method().to_string();
-        Ok(Registration { state: Mutex::new(state), unit, method, units: units.to_string() })
+        Ok(Registration { state: Mutex::new(state), unit: units.metres(), labels, method, units: units.to_string() })
     }
 
     /// Registers a cloud of positions, float [N, 3] in `units` (no correspondences needed),
@@ -276,7 +270,7 @@ impl Registration {
             let mut state = locked(&self.state)?;
             let tracked = state.register(&cloud)?;
             if let Some(dir) = &out {
-                write_frame(dir, &state, &tracked)?;
+                write_frame(dir, &state, &self.labels, &tracked)?;
             }
             Ok(tracked)
         })?;
@@ -293,7 +287,7 @@ impl Registration {
             iterations: result.iterations,
             warnings: result.warnings.clone(),
             rigid,
-            target_std: target_std
+            target_sigma: target_std
                 .map(|s| s.iter().map(|v| v / self.unit).collect::<Vec<f64>>().into_pyarray(py).unbind()),
             ms: result.time.as_secs_f64() * 1e3,
         })
@@ -324,7 +318,12 @@ impl Registration {
 }
 
 /// Writes one registered cloud as `augsim register` does (organ.vtu, targets.csv, summary.json).
-fn write_frame(dir: &std::path::Path, registration: &register::Registration, tracked: &Tracked) -> anyhow::Result<()> {
+fn write_frame(
+    dir: &std::path::Path,
+    registration: &register::Registration,
+    labels: &[String],
+    tracked: &Tracked,
+) -> anyhow::Result<()> {
     let outcome = register::FrameOutcome {
         registration: tracked.registration.clone(),
         targets: tracked.targets.clone(),
@@ -335,7 +334,7 @@ fn write_frame(dir: &std::path::Path, registration: &register::Registration, tra
     };
     let mut writer = RunWriter::new(dir, false)?;
     writer.frame(0, "python".into(), registration.organ(), &outcome)?;
-    writer.finish(registration.method(), registration.targets(), std::slice::from_ref(&outcome))?;
+    writer.finish(registration.method(), registration.targets(), labels, std::slice::from_ref(&outcome))?;
     Ok(())
 }
 

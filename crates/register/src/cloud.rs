@@ -25,11 +25,6 @@ fn is_cloud_file(path: &Path) -> bool {
     extension(path).is_some_and(|e| CLOUD_EXTENSIONS.contains(&e.as_str()))
 }
 
-/// Metres per unit of a unit's name: `mm` (as 3D Slicer uses) or `m`.
-pub fn metres_per_unit(units: &str) -> std::result::Result<f64, String> {
-    units.parse().map(mesh::repair::metres_per)
-}
-
 /// Reads a point cloud, choosing the format from the extension (`.csv`, `.npy` or `.ply`, any case).
 pub fn read_point_cloud(path: &Path) -> Result<Vec<Point>> {
     let points = match extension(path).as_deref() {

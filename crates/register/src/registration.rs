@@ -282,11 +282,11 @@ pub struct Summary {
     pub warnings: Vec<String>,
     /// The mean predicted standard deviation σ of the targets' error (mm), for a method that
     /// predicts one.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none", rename = "target_sigma_mean_mm")]
     pub target_std_mean_mm: Option<f64>,
     /// The share of the targets whose error was within 2σ, when the truth is known and the method
     /// predicts σ (a Gaussian's: 95 %).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none", rename = "within_two_sigma")]
     pub within_two_std: Option<f64>,
 }
 

@@ -25,7 +25,7 @@ use serde_json::Value;
 use super::csv::{csv_field, write_csv, CsvError, Dialect, Header, Table};
 use super::frame::Frame;
 use super::{extension, parse_error, write_atomic, WriteError};
-use crate::repair::{metres_per, LengthUnit};
+use crate::length::LengthUnit;
 use crate::{MeshError, Point};
 
 /// Points with a label and a description each (empty when the file gives none), and the frame and
@@ -71,7 +71,7 @@ impl LabelledPoints {
             }
             self.frame = Some(to);
         }
-        let scale = metres_per(self.unit.unwrap_or(assumed)) / metres_per(unit);
+        let scale = self.unit.unwrap_or(assumed).metres() / unit.metres();
         if scale != 1.0 {
             self.points.iter_mut().for_each(|p| *p = p.map(|x| x * scale));
         }
@@ -346,7 +346,7 @@ pub fn write_fcsv(path: impl AsRef<Path>, points: &LabelledPoints) -> Result<(),
             path.display()
         ))
     })?;
-    let scale = metres_per(points.unit.unwrap_or(LengthUnit::Millimetre)) / metres_per(LengthUnit::Millimetre);
+    let scale = points.unit.unwrap_or(LengthUnit::Millimetre).metres() / LengthUnit::Millimetre.metres();
     write_atomic(path, |w| {
         writeln!(w, "# Markups fiducial file version = 4.11")?;
         writeln!(w, "# CoordinateSystem = {frame}")?;

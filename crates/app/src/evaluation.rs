@@ -1,0 +1,115 @@
+//! A learned model evaluated on the samples of a dataset held out from it, as `augsim eval`
+//! runs it, and what it writes: `errors.csv` (each sample's error, m), `summary.json` (the
+//! figures) and `worst.vtu` (the worst sample's input, target and prediction on the grid).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use learn::{Compute, Corruption, Dataset, EvalReport, LearnedModel, PointErrors, Samples};
+use mesh::io::write_atomic_bytes;
+
+/// A model's errors on the held-out samples of a dataset.
+pub struct Evaluation {
+    /// The dataset's directory.
+    pub dataset_dir: PathBuf,
+    /// How the inputs were corrupted.
+    pub corruption: Corruption,
+    /// Samples in the dataset.
+    pub total: usize,
+    /// The held-out samples.
+    pub test: Samples,
+    /// Whether they are the test split recorded in the model (otherwise: the samples no run
+    /// behind the model trained or validated on).
+    pub recorded_split: bool,
+    /// Each sample's error and their statistics.
+    pub report: EvalReport,
+    /// The errors at the dataset's markers (their count and statistics), when it has markers and
+    /// a placed grid.
+    pub markers: Option<(usize, PointErrors)>,
+    /// Share of the nodes' errors within twice the predicted standard deviation, for a model that
+    /// predicts one.
+    pub coverage: Option<f64>,
+}
+
+/// Evaluates `model` on the samples of `dataset` (opened from `dataset_dir`) held out from it,
+/// inputs corrupted by `corruption`. An error when the grids differ or no sample is held out.
+pub fn evaluate_held_out(
+    model: &impl LearnedModel,
+    dataset: &Dataset,
+    dataset_dir: &Path,
+    corruption: &Corruption,
+    compute: Compute,
+) -> Result<Evaluation> {
+    if dataset.manifest().grid != model.grid_shape() {
+        bail!(
+            "the model was trained on grid {} but the dataset is on grid {}",
+            model.grid_shape(),
+            dataset.manifest().grid
+        );
+    }
+    let all = dataset.load_all()?;
+    let test = model.held_out(&all)?;
+    if test.is_empty() {
+        bail!("{} holds no sample held out from this model (no test split recorded for it)", dataset_dir.display());
+    }
+    let markers = dataset.manifest().markers();
+    let (report, at_markers) = match dataset.manifest().placement() {
+        Some(placement) if !markers.is_empty() => {
+            let grid = placement.grid(model.grid_shape())?;
+            let (report, errors) = learn::evaluate_at_points(model, &test, corruption, 0, &grid, &markers, compute)?;
+            (report, Some((markers.len(), errors)))
+        }
+        _ => (learn::evaluate(model, &test, corruption, 0, compute)?, None),
+    };
+    let coverage = learn::uncertainty_coverage(model, &test, corruption, 0)?;
+    Ok(Evaluation {
+        dataset_dir: dataset_dir.to_path_buf(),
+        corruption: corruption.clone(),
+        total: all.len(),
+        recorded_split: model.trained_on(&all),
+        test,
+        report,
+        markers: at_markers,
+        coverage,
+    })
+}
+
+/// Writes an evaluation into `out` (created): errors.csv, summary.json and worst.vtu (the worst
+/// sample predicted again); returns their paths.
+pub fn write_evaluation(
+    out: &Path,
+    model: &impl LearnedModel,
+    model_path: &Path,
+    dataset: &Dataset,
+    evaluation: &Evaluation,
+    compute: Compute,
+) -> Result<[PathBuf; 3]> {
+    let (report, s) = (&evaluation.report, &evaluation.report.stats);
+    let corruption = &evaluation.corruption;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut csv = String::from("index,error_m\n");
+    for (i, e) in report.indices.iter().zip(&report.errors) {
+        csv.push_str(&format!("{i},{e:e}\n"));
+    }
+    let errors = out.join("errors.csv");
+    write_atomic_bytes(&errors, csv.as_bytes())?;
+    let summary = serde_json::json!({
+        "model": model_path, "dataset": evaluation.dataset_dir, "samples": evaluation.test.len(),
+        "mean_m": s.mean, "std_m": s.std, "max_m": s.max, "worst_index": report.worst_index(),
+        "corruption": corruption, "marker_errors": evaluation.markers.as_ref().map(|(_, e)| e),
+        "within_2_std": evaluation.coverage,
+    });
+    let summary_path = out.join("summary.json");
+    write_atomic_bytes(&summary_path, serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    let worst = evaluation.test.get(s.worst);
+    let input = learn::evaluation_input(&evaluation.test, s.worst, corruption, 0)?;
+    let prediction = model.predictor(compute)?.predict(&input)?;
+    let vtu = out.join("worst.vtu");
+    let grid = dataset
+        .manifest()
+        .placement()
+        .context("the dataset manifest has no grid_origin/grid_spacing")?
+        .grid(dataset.manifest().grid)?;
+    learn::write_grid_sample(&vtu, &grid, &input, &worst.target, &prediction, &worst.mask)?;
+    Ok([errors, summary_path, vtu])
+}

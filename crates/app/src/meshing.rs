@@ -1,0 +1,211 @@
+//! An organ's volume mesh, as `augsim mesh` makes it: from a closed surface (repaired first, as
+//! segmentations give them: holes, duplicated vertices, flipped triangles; through voxels when
+//! local repair cannot mend it; brought from its length unit to metres), from a label of a
+//! segmentation's labelmap (extracted as a closed surface in millimetres, in the file's scanner
+//! frame), or the built-in liver phantom; T4 or an immersed-boundary H8 grid.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Context, Result};
+use mesh::io::Field;
+use mesh::isosurface::ExtractOptions;
+use mesh::labelmap::{is_labelmap, read_labelmap_surface};
+use mesh::length::{mm, LengthUnit, UnitOrAuto};
+use mesh::phantom::PhantomSpec;
+use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
+use mesh::repair::{detect_unit, largest_extent, RepairOptions};
+use mesh::tetmesh::BoundaryFit;
+use mesh::{Mesh, TriSurface};
+
+/// What to mesh and how.
+#[derive(Clone, Debug)]
+pub struct MeshOptions {
+    /// Organ surface (.obj, .stl, .vtk, .vtu) or labelmap (.nii, .nii.gz, .nrrd, .seg.nrrd); the
+    /// phantom when `None`.
+    pub surface: Option<PathBuf>,
+    /// The labelmap's label: a number or a segment name (needed when it holds several).
+    pub label: Option<String>,
+    /// Scale the surface so that its largest extent is this length (m), centred at the origin;
+    /// overrides `units`.
+    pub length: Option<f64>,
+    /// The unit of the surface's coordinates (`None`: told from the organ's size); the surface is
+    /// scaled to metres about the origin (its frame is kept).
+    pub units: UnitOrAuto,
+    /// Repair the surface first (otherwise it must be a closed 2-manifold as it is).
+    pub repair: bool,
+    /// Target number of tetrahedra.
+    pub tets: usize,
+    /// Make an immersed hex grid with this cell size (m) instead of tetrahedra.
+    pub immersed: Option<f64>,
+}
+
+/// A volume mesh and how it was made.
+#[derive(Debug)]
+pub struct Meshed {
+    /// The mesh, in metres.
+    pub mesh: Mesh,
+    /// The volume of the domain it meshes (the phantom's or the surface's), when known.
+    pub reference_volume: Option<f64>,
+    /// What was done on the way, each a topic (`labelmap`, `repair`, `warning`, `units`) and a
+    /// line, in order.
+    pub notes: Vec<(&'static str, String)>,
+}
+
+/// Meshes the organ of `options`.
+pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
+    let mut notes = Vec::new();
+    let (mesh, reference_volume) = match (&options.surface, options.immersed) {
+        (None, None) => {
+            let spec = PhantomSpec::default();
+            (spec.mesh(options.tets)?, Some(spec.volume()))
+        }
+        (None, Some(h)) => {
+            let spec = PhantomSpec::default();
+            (spec.immersed(h)?.mesh, Some(spec.volume()))
+        }
+        (Some(path), immersed) => {
+            let surface = organ_surface(path, options, &mut notes)?;
+            let volume = Some(surface.enclosed_volume().abs());
+            let mesh = match immersed {
+                None => {
+                    mesh::tetmesh::mesh_surface_to_count(&surface, options.tets, BoundaryFit::default())
+                        .with_context(|| format!("meshing {}", path.display()))?
+                        .0
+                }
+                Some(h) => {
+                    let opts = mesh::immersed::ImmersedOptions::with_spacing(h);
+                    mesh::immersed::immersed_surface(&surface, &opts)?.mesh
+                }
+            };
+            (mesh, volume)
+        }
+    };
+    Ok(Meshed { mesh, reference_volume, notes })
+}
+
+/// Reads a surface, repairs it unless told not to, and brings it to metres: fitted to `length`
+/// when given, otherwise scaled from its unit (given or detected) about the origin. A labelmap's
+/// label is extracted instead, in millimetres.
+fn organ_surface(path: &Path, options: &MeshOptions, notes: &mut Vec<(&'static str, String)>) -> Result<TriSurface> {
+    if is_labelmap(path) {
+        return labelmap_surface(path, options, notes);
+    }
+    if options.label.is_some() {
+        bail!("--label chooses a label of a labelmap (.nii, .nii.gz, .nrrd, .seg.nrrd), not of {}", path.display());
+    }
+    let mut surface = mesh::io::read_surface(path)?;
+    let extent = largest_extent(&surface);
+    let unit = match (options.length, options.units) {
+        (Some(_), _) => None,
+        (None, None) => {
+            let unit =
+                detect_unit(&surface).map_err(|e| anyhow!("{}: {e} (--units mm or m, or --length)", path.display()))?;
+            let shown = if extent >= 1.0 { format!("{extent:.1}") } else { format!("{extent:.4}") };
+            Some((unit, format!("detected: largest extent {shown}")))
+        }
+        (None, Some(unit)) => Some((unit, "given".to_string())),
+    };
+    if options.repair {
+        let (repaired, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
+            .with_context(|| format!("repairing {} (see --no-repair)", path.display()))?;
+        notes.extend(route.lines(unit.as_ref().map(|(u, _)| mm(u.metres()))).into_iter().map(|l| ("repair", l)));
+        notes.extend(route.warnings().into_iter().map(|l| ("warning", l)));
+        surface = repaired;
+    }
+    if let Some(l) = options.length {
+        surface.fit_to(l)?;
+    }
+    if let Some((unit, how)) = unit {
+        notes.push(("units", format!("{} ({how})", unit.symbol())));
+        if unit != LengthUnit::Metre {
+            surface.transform([0.0; 3], unit.metres());
+        }
+    }
+    Ok(surface)
+}
+
+/// The closed surface of a labelmap's label, in metres (from the file's millimetres, in its
+/// scanner frame), or fitted to `length`.
+fn labelmap_surface(path: &Path, options: &MeshOptions, notes: &mut Vec<(&'static str, String)>) -> Result<TriSurface> {
+    if options.units == Some(LengthUnit::Metre) {
+        bail!("{} is a labelmap, whose unit is the millimetre: leave out --units m", path.display());
+    }
+    let organ = read_labelmap_surface(path, options.label.as_deref(), &ExtractOptions::default())?;
+    notes.extend(organ.lines().into_iter().map(|l| ("labelmap", l)));
+    let mut surface = organ.surface;
+    match options.length {
+        Some(l) => {
+            surface.fit_to(l)?;
+        }
+        None => {
+            notes.push(("units", format!("mm (the labelmap's); frame {} kept", organ.frame.name())));
+            surface.transform([0.0; 3], LengthUnit::Millimetre.metres());
+        }
+    }
+    Ok(surface)
+}
+
+/// An immersed grid's organ volume (each cell's volume times its volume fraction; 1 where the
+/// mesh has none) and its cells cut by the surface (fraction below 1).
+pub fn immersed_fill(mesh: &Mesh) -> (f64, usize) {
+    let fraction = mesh.cell_fraction.as_deref().unwrap_or(&[]);
+    let organ = (0..mesh.cells.len()).map(|c| mesh.cell_volume(c) * fraction.get(c).copied().unwrap_or(1.0)).sum();
+    (organ, fraction.iter().filter(|&&f| f < 1.0).count())
+}
+
+/// Writes the mesh with its regions (point data `region_<name>`, or Gmsh physical groups) and,
+/// for an immersed grid, its cells' volume fractions (not in `.msh`); to .stl or .obj, its
+/// boundary surface. The directory is created.
+pub fn write_mesh_file(path: &Path, mesh: &Mesh) -> Result<()> {
+    let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    if extension == "stl" || extension == "obj" {
+        let surface = mesh::boundary_surface(mesh).compacted();
+        return mesh::io::write_surface(path, &surface).with_context(|| format!("writing {}", path.display()));
+    }
+    let fields: Vec<Field> = match &mesh.cell_fraction {
+        Some(f) if extension != "msh" => vec![Field::cell("volume_fraction", 1, f.clone())],
+        _ => Vec::new(),
+    };
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    mesh::io::write_mesh(path, mesh, &fields).with_context(|| format!("writing {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn phantom(immersed: Option<f64>) -> MeshOptions {
+        MeshOptions { surface: None, label: None, length: None, units: None, repair: true, tets: 800, immersed }
+    }
+
+    #[test]
+    fn an_immersed_phantom_fills_about_its_volume_and_keeps_its_fractions() {
+        let meshed = mesh_organ(&phantom(Some(0.02))).unwrap();
+        let (organ, cut) = immersed_fill(&meshed.mesh);
+        let reference = meshed.reference_volume.unwrap();
+        assert!((organ - reference).abs() < 0.1 * reference, "{organ} vs {reference}");
+        assert!(cut > 0 && cut < meshed.mesh.cells.len());
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("grid/organ.vtu");
+        write_mesh_file(&path, &meshed.mesh).unwrap();
+        let (_, fields) = mesh::io::read_mesh_with_fields(&path).unwrap();
+        assert!(fields.iter().any(|f| f.name == "volume_fraction"));
+    }
+
+    #[test]
+    fn a_surface_in_millimetres_is_meshed_in_metres_and_a_wrong_label_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let sphere = mesh::generate::icosphere(40.0, 2);
+        let path = dir.path().join("ball.stl");
+        mesh::io::write_surface(&path, &sphere).unwrap();
+        let options = MeshOptions { surface: Some(path.clone()), repair: false, ..phantom(None) };
+        let meshed = mesh_organ(&options).unwrap();
+        let (lo, hi) = meshed.mesh.bounds();
+        assert!((hi[0] - lo[0] - 0.08).abs() < 0.01, "{lo:?} {hi:?}");
+        assert!(meshed.notes.iter().any(|(topic, line)| *topic == "units" && line.starts_with("mm (detected")));
+        let labelled = MeshOptions { label: Some("5".into()), ..options };
+        assert!(mesh_organ(&labelled).unwrap_err().to_string().contains("--label chooses a label of a labelmap"));
+    }
+}

@@ -1,0 +1,165 @@
+//! Length units of the coordinates users give and get back.
+//!
+//! augsim computes in metres. Coordinates read from a user (surfaces, clouds, targets, landmarks,
+//! streamed points) are in a [`LengthUnit`]: millimetres, as medical images and 3D Slicer use, or
+//! metres. Every front (command line, server, Python) parses it with [`LengthUnit::from_str`]
+//! and takes [`LengthUnit::DEFAULT`], the metre, when none is given; a file that names its unit
+//! (`.fcsv`, `.mrk.json`, a CSV header `x_mm`) is read in its own. Where an organ's surface is
+//! read, `auto` ([`parse_unit_or_auto`]) tells the unit from the organ's size instead.
+
+use std::fmt;
+use std::str::FromStr;
+
+use crate::Point;
+
+/// A length unit of coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum LengthUnit {
+    /// Metres (augsim's unit), `m`.
+    Metre,
+    /// Millimetres (the usual unit of medical images and of 3D Slicer), `mm`.
+    Millimetre,
+}
+
+impl LengthUnit {
+    /// The unit of coordinates when none is given, on every front: the metre, the unit augsim
+    /// computes and writes in, so that a number without a unit means the same everywhere.
+    pub const DEFAULT: LengthUnit = LengthUnit::Metre;
+
+    /// Its symbol: "m" or "mm" (what [`LengthUnit::from_str`] reads).
+    pub fn symbol(self) -> &'static str {
+        match self {
+            LengthUnit::Metre => "m",
+            LengthUnit::Millimetre => "mm",
+        }
+    }
+
+    /// Metres in one unit (the scale that brings coordinates in this unit to metres).
+    pub fn metres(self) -> f64 {
+        match self {
+            LengthUnit::Metre => 1.0,
+            LengthUnit::Millimetre => 1e-3,
+        }
+    }
+
+    /// A length in this unit, in metres.
+    pub fn to_metres(self, length: f64) -> f64 {
+        length * self.metres()
+    }
+
+    /// A length in metres, in this unit.
+    pub fn from_metres(self, metres: f64) -> f64 {
+        metres / self.metres()
+    }
+
+    /// A point in this unit, in metres.
+    pub fn point_to_metres(self, p: Point) -> Point {
+        p.map(|x| self.to_metres(x))
+    }
+
+    /// A point in metres, in this unit.
+    pub fn point_from_metres(self, p: Point) -> Point {
+        p.map(|x| self.from_metres(x))
+    }
+}
+
+impl Default for LengthUnit {
+    fn default() -> LengthUnit {
+        LengthUnit::DEFAULT
+    }
+}
+
+impl fmt::Display for LengthUnit {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.symbol())
+    }
+}
+
+impl FromStr for LengthUnit {
+    type Err = String;
+
+    /// "mm" or "m".
+    fn from_str(name: &str) -> Result<LengthUnit, String> {
+        match name {
+            "mm" => Ok(LengthUnit::Millimetre),
+            "m" => Ok(LengthUnit::Metre),
+            other => Err(format!("must be mm or m, got '{other}'")),
+        }
+    }
+}
+
+impl TryFrom<String> for LengthUnit {
+    type Error = String;
+
+    fn try_from(name: String) -> Result<LengthUnit, String> {
+        name.parse()
+    }
+}
+
+impl From<LengthUnit> for String {
+    fn from(unit: LengthUnit) -> String {
+        unit.symbol().to_string()
+    }
+}
+
+/// A unit given, or `None`: told from the organ's size (see [`crate::repair::detect_unit`]).
+pub type UnitOrAuto = Option<LengthUnit>;
+
+/// "mm", "m" or "auto" (`None`), where an organ's surface gives its scale.
+pub fn parse_unit_or_auto(name: &str) -> Result<UnitOrAuto, String> {
+    match name {
+        "auto" => Ok(None),
+        _ => name.parse().map(Some).map_err(|_| format!("must be mm, m or auto, got '{name}'")),
+    }
+}
+
+/// A length in metres, in millimetres (as reports and file columns give them).
+pub fn mm(metres: f64) -> f64 {
+    LengthUnit::Millimetre.from_metres(metres)
+}
+
+/// A length in millimetres, in metres.
+pub fn from_mm(millimetres: f64) -> f64 {
+    LengthUnit::Millimetre.to_metres(millimetres)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn symbols_parse_back_and_scale_to_metres() {
+        for unit in [LengthUnit::Metre, LengthUnit::Millimetre] {
+            assert_eq!(unit.symbol().parse::<LengthUnit>().unwrap(), unit);
+            assert_eq!(unit.to_string(), unit.symbol());
+            assert_eq!(parse_unit_or_auto(unit.symbol()).unwrap(), Some(unit));
+            assert!((unit.from_metres(unit.to_metres(2.5)) - 2.5).abs() < 1e-12);
+        }
+        assert_eq!(LengthUnit::Millimetre.metres() * 1000.0, LengthUnit::Metre.metres());
+        assert_eq!(LengthUnit::Millimetre.point_to_metres([10.0, 20.0, -5.0]), [0.01, 0.02, -0.005]);
+        assert!((mm(0.0125) - 12.5).abs() < 1e-12 && (from_mm(12.5) - 0.0125).abs() < 1e-15);
+        assert_eq!(LengthUnit::default(), LengthUnit::Metre);
+    }
+
+    #[test]
+    fn other_names_are_refused_with_the_choices() {
+        assert_eq!("cm".parse::<LengthUnit>().unwrap_err(), "must be mm or m, got 'cm'");
+        assert_eq!("auto".parse::<LengthUnit>().unwrap_err(), "must be mm or m, got 'auto'");
+        assert_eq!(parse_unit_or_auto("auto").unwrap(), None);
+        assert_eq!(parse_unit_or_auto("MM").unwrap_err(), "must be mm, m or auto, got 'MM'");
+    }
+
+    #[test]
+    fn serialised_as_its_symbol() {
+        #[derive(serde::Serialize, serde::Deserialize)]
+        struct S {
+            units: LengthUnit,
+        }
+        let text = serde_json::to_string(&S { units: LengthUnit::Millimetre }).unwrap();
+        assert_eq!(text, r#"{"units":"mm"}"#);
+        assert_eq!(serde_json::from_str::<S>(r#"{"units":"m"}"#).unwrap().units, LengthUnit::Metre);
+        let err = serde_json::from_str::<S>(r#"{"units":"cm"}"#).err().unwrap().to_string();
+        assert!(err.contains("must be mm or m"), "{err}");
+    }
+}
