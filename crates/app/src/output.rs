@@ -1,15 +1,18 @@
 //! What a registration writes: the registered organ (organ.vtu, or organ.pvd and one .vtu per
 //! frame of a sequence), targets.csv (rest and registered positions, with the predicted standard
 //! deviation when the method gives one) and summary.json (the run's figures and each frame's),
-//! all in the cloud's frame; and what a comparison of methods on a synthetic case writes; each
+//! all in the cloud's frame; for 3D Slicer, the registered targets as markups (targets.mrk.json)
+//! and the deformed organ's surface (organ_deformed.vtk), in millimetres and naming their frame;
+//! and what a comparison of methods on a synthetic case writes; each
 //! run in a folder of its own ([`run_dir`]).
 
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use mesh::io::{csv_field, write_atomic_bytes, Field};
-use mesh::length::mm;
+use mesh::io::points::{write_markups_json, LabelledPoints};
+use mesh::io::{csv_field, write_atomic_bytes, write_surface_in_frame, Field, Frame};
+use mesh::length::{mm, LengthUnit};
 use mesh::{Mesh, Point};
 use register::cloud::write_csv;
 use register::{FrameOutcome, Organ, RigidResult, RigidTransform, Summary};
@@ -107,6 +110,8 @@ pub struct RunWriter {
     sequence: bool,
     /// The organ moved by the rigid alignment, once known (the same for every frame).
     moved: Option<Mesh>,
+    /// The last frame's organ (in the cloud's frame) and displacement.
+    last: Option<(Mesh, Vec<f64>)>,
     steps: Vec<(f64, String)>,
     rows: Vec<FrameSummary>,
 }
@@ -116,7 +121,7 @@ impl RunWriter {
     /// each) or a single cloud (organ.vtu).
     pub fn new(dir: &Path, sequence: bool) -> Result<RunWriter> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        Ok(RunWriter { dir: dir.to_path_buf(), sequence, moved: None, steps: Vec::new(), rows: Vec::new() })
+        Ok(RunWriter { dir: dir.to_path_buf(), sequence, moved: None, last: None, steps: Vec::new(), rows: Vec::new() })
     }
 
     /// Writes frame `i` (registered from `cloud`) of `organ`; returns its summary line.
@@ -126,19 +131,26 @@ impl RunWriter {
         }
         let name = if self.sequence { format!("organ_{i:04}.vtu") } else { "organ.vtu".into() };
         let (m, u) = in_cloud_frame(organ.mesh(), self.moved.as_ref(), outcome.rigid.as_ref(), &outcome.registration.u);
-        mesh::io::write_mesh(self.dir.join(&name), &m, &[Field::point("displacement", 3, u)])?;
+        mesh::io::write_mesh(self.dir.join(&name), &m, &[Field::point("displacement", 3, u.clone())])?;
+        match &mut self.last {
+            Some((_, last)) => *last = u,
+            None => self.last = Some((m.into_owned(), u)),
+        }
         self.steps.push((i as f64, name));
         self.rows.push(FrameSummary::new(cloud, outcome));
         Ok(self.rows.last().expect("just pushed"))
     }
 
     /// Writes organ.pvd (for a sequence), targets.csv (of the last frame; `targets`: the rest
-    /// positions, `labels`: theirs, or none) and summary.json; returns the run's summary.
+    /// positions, `labels`: theirs, or none), the last frame for 3D Slicer (targets.mrk.json and
+    /// organ_deformed.vtk, in `frame` when known: the frame the cloud is in) and summary.json;
+    /// returns the run's summary.
     pub fn finish(
         self,
         method: &str,
         targets: &[Point],
         labels: &[String],
+        frame: Option<Frame>,
         outcomes: &[FrameOutcome],
     ) -> Result<Summary> {
         if self.sequence {
@@ -152,6 +164,16 @@ impl RunWriter {
             last.target_std.as_deref(),
             labels,
         )?;
+        write_targets_for_slicer(
+            &self.dir.join("targets.mrk.json"),
+            &last.targets,
+            last.target_std.as_deref(),
+            labels,
+            frame,
+        )?;
+        if let Some((organ, u)) = &self.last {
+            write_deformed_surface(&self.dir.join("organ_deformed.vtk"), organ, u, frame)?;
+        }
         let summary = Summary::new(method, outcomes)?;
         let run = RunSummary { summary: &summary, per_frame: &self.rows };
         write_atomic_bytes(&self.dir.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
@@ -212,6 +234,44 @@ pub fn write_targets(
         row
     });
     Ok(mesh::io::csv::write_csv(path, &[], &header, rows)?)
+}
+
+/// The registered targets as 3D Slicer markups (`.mrk.json`), in millimetres and in `frame` when
+/// known: each target's label (`target-N` where it has none) and σ in its description.
+pub fn write_targets_for_slicer(
+    path: &Path,
+    registered: &[Point],
+    sigma: Option<&[f64]>,
+    labels: &[String],
+    frame: Option<Frame>,
+) -> Result<()> {
+    let millimetres = LengthUnit::Millimetre;
+    let points = LabelledPoints {
+        points: registered.iter().map(|&p| millimetres.point_from_metres(p)).collect(),
+        labels: (0..registered.len())
+            .map(|i| labels.get(i).filter(|l| !l.is_empty()).cloned().unwrap_or_else(|| format!("target-{}", i + 1)))
+            .collect(),
+        descriptions: (0..registered.len())
+            .map(|i| sigma.map_or(String::new(), |s| format!("sigma {:.2} mm", mm(s[i]))))
+            .collect(),
+        frame,
+        unit: Some(millimetres),
+    };
+    Ok(write_markups_json(path, &points)?)
+}
+
+/// The boundary of `organ` moved by `u` (m), as a surface in millimetres (`.vtk`), its header
+/// naming `frame` when known (3D Slicer reads `SPACE=` there).
+pub fn write_deformed_surface(path: &Path, organ: &Mesh, u: &[f64], frame: Option<Frame>) -> Result<()> {
+    let mut surface = mesh::boundary_surface(organ);
+    for (v, d) in surface.vertices.iter_mut().zip(u.chunks_exact(3)) {
+        *v = LengthUnit::Millimetre.point_from_metres([v[0] + d[0], v[1] + d[1], v[2] + d[2]]);
+    }
+    match frame {
+        Some(frame) => write_surface_in_frame(path, &surface, frame)?,
+        None => mesh::io::write_surface(path, &surface)?,
+    }
+    Ok(())
 }
 
 /// Writes a synthetic case's files into `dir`: cloud.csv and truth.csv (of the peak frame),

@@ -125,7 +125,8 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
         }
         Ok(())
     })?;
-    let summary = writer.finish(registration.method(), registration.targets(), &spec.target_labels()?, &outcomes)?;
+    let labels = spec.target_labels()?;
+    let summary = writer.finish(registration.method(), registration.targets(), &labels, input.frame, &outcomes)?;
     if let Some(sigma) = outcomes.last().and_then(|o| o.target_std.as_ref()) {
         println!(
             "sigma      predicted at the targets: mean {:.2} mm, max {:.2} mm (targets.csv, column sigma_m)",

@@ -1,7 +1,8 @@
 //! `augsim register` with a 3D Slicer user's files: the README's cloud as `.mrk.json` in RAS and
 //! mm, its targets as `.fcsv` in LPS and mm, its truth as a CSV whose header names mm; and the
 //! same cloud, targets and truth as plain CSV in mm with `--units mm`. Both give the targets and
-//! the TRE of the same registration done all in metres and LPS (the examples' frame taken as LPS).
+//! the TRE of the same registration done all in metres and LPS (the examples' frame taken as LPS);
+//! the run gives Slicer back its targets and the deformed organ in mm and in its frame.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -80,6 +81,21 @@ fn slicer_files_and_millimetres_register_as_metres_do() {
         }
         assert!((other_tre - tre).abs() < 1e-6, "{name}: TRE {other_tre} against {tre} mm");
     }
+    // What goes back to Slicer: the registered targets as markups in mm, in the frame the
+    // targets named (LPS), with their labels; the deformed surface in mm, naming the same frame.
+    let markups = read_points(d.join("slicer/targets.mrk.json")).unwrap();
+    assert_eq!((markups.frame, markups.unit), (Some(Frame::Lps), Some(mm)));
+    assert_eq!(markups.labels, (1..=targets.len()).map(|i| format!("marker {i}")).collect::<Vec<_>>());
+    for (a, b) in markups.points.iter().zip(&targets) {
+        assert!((0..3).all(|k| (a[k] - 1e3 * b[k]).abs() < 1e-6), "{a:?} mm against {b:?} m");
+    }
+    let (surface, frame) = mesh::io::read_surface_with_frame(d.join("slicer/organ_deformed.vtk")).unwrap();
+    assert_eq!(frame, Some(Frame::Lps));
+    let extent = |k: usize| {
+        let values = surface.vertices.iter().map(|v| v[k]);
+        values.clone().fold(f64::MIN, f64::max) - values.fold(f64::MAX, f64::min)
+    };
+    assert!((100.0..400.0).contains(&extent(0)), "the deformed surface spans {} in x: not mm", extent(0));
     // And near the examples' own metres (a last-bit change of the cloud moves the FEM's targets
     // by up to a few tenths of a millimetre).
     let (_, examples_tre) =

@@ -334,7 +334,7 @@ fn write_frame(
     };
     let mut writer = RunWriter::new(dir, false)?;
     writer.frame(0, "python".into(), registration.organ(), &outcome)?;
-    writer.finish(registration.method(), registration.targets(), labels, std::slice::from_ref(&outcome))?;
+    writer.finish(registration.method(), registration.targets(), labels, None, std::slice::from_ref(&outcome))?;
     Ok(())
 }
 
