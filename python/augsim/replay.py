@@ -1,0 +1,145 @@
+"""Streams a recorded sequence of intraoperative clouds to ``augsim serve`` over OpenIGTLink, as a
+tracker would, and prints what comes back: a way to try a 3D Slicer set-up without a laparoscope.
+
+    python -m augsim.replay FRAMES_DIR [--host 127.0.0.1] [--port 18944] [--rate 20]
+                            [--units m|mm] [--send-units mm|m] [--out DIR] [--loop N]
+
+``FRAMES_DIR`` holds one cloud per file, replayed in the order of their names: CSV with an x, y, z
+header (``augsim register --case ... --frames N`` writes such a folder, ``case/clouds``), or
+``.npy`` arrays of shape (n, 3). Their unit is ``--units`` (m by default, as everywhere in augsim);
+each cloud is sent in ``--send-units`` (mm by default, what Slicer sends: give ``augsim serve`` the
+same ``--units``) as a POLYDATA message of device ``cloud``, at most ``--rate`` clouds a second,
+each once the server has answered the one before. The registered targets (POINT ``targets``) and
+the status (STRING ``status``, JSON) of each frame are read back; ``--out DIR`` writes each frame's
+targets as ``targets_NNNN.csv`` (in ``--send-units``, labelled columns ``x_mm``...). Each frame's
+line gives the points sent, the round trip and the server's time; a frame the server refused
+prints its reason, and the replay goes on.
+
+Needs pyigtl (3D Slicer's Python OpenIGTLink client): ``pip install pyigtl`` or
+``pip install "./python[live]"``.
+"""
+
+import argparse
+import glob
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+_SCALE = {"m": 1.0, "mm": 1e-3}
+
+
+def read_cloud(path):
+    """A cloud file as an (n, 3) float array: ``.npy``, or CSV whose first line is a header."""
+    if path.lower().endswith(".npy"):
+        cloud = np.load(path)
+    else:
+        cloud = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)[:, :3]
+    cloud = np.asarray(cloud, dtype=float)
+    if cloud.ndim != 2 or cloud.shape[1] != 3 or len(cloud) == 0:
+        raise ValueError(f"{path}: a cloud must be n x 3 points, got shape {cloud.shape}")
+    return cloud
+
+
+def frame_files(directory):
+    """The cloud files of a recorded sequence, in the order of their names."""
+    if not os.path.isdir(directory):
+        raise ValueError(f"{directory} is not a directory of clouds")
+    files = sorted(f for pattern in ("*.csv", "*.npy") for f in glob.glob(os.path.join(directory, pattern)))
+    if not files:
+        raise ValueError(f"{directory} holds no .csv or .npy cloud")
+    return files
+
+
+def connect(host, port, timeout=30.0):
+    """A pyigtl client connected to ``host:port``."""
+    import pyigtl
+
+    client = pyigtl.OpenIGTLinkClient(host=host, port=port)
+    deadline = time.time() + timeout
+    while not client.is_connected() and time.time() < deadline:
+        time.sleep(0.05)
+    if not client.is_connected():
+        client.stop()
+        raise ConnectionError(f"no OpenIGTLink server answered at {host}:{port} (is `augsim serve` running?)")
+    return client
+
+
+def replay(files, client, scale, rate=None, out=None, unit="mm", timeout=60.0, report=print):
+    """Sends each cloud of ``files`` (multiplied by ``scale``) and waits for its answer; returns one
+    record per frame: the file, the points sent, the round trip (ms), the server's status (a dict)
+    and the registered targets (an array, or None when the server refused the cloud)."""
+    import pyigtl
+
+    period = 1.0 / rate if rate else 0.0
+    records = []
+    for k, path in enumerate(files):
+        began = time.perf_counter()
+        cloud = read_cloud(path) * scale
+        client.send_message(pyigtl.PolyDataMessage(points=cloud.astype(np.float32), device_name="cloud"), wait=True)
+        status_message = client.wait_for_message("status", timeout=timeout)
+        if status_message is None:
+            raise TimeoutError(f"frame {k}: no status from the server within {timeout} s")
+        status = json.loads(status_message.string)
+        targets = None
+        if "error" not in status:
+            message = client.wait_for_message("targets", timeout=timeout)
+            targets = None if message is None else np.asarray(message.positions, dtype=float)
+        trip = (time.perf_counter() - began) * 1e3
+        if targets is not None and out:
+            os.makedirs(out, exist_ok=True)
+            header = ",".join(f"{axis}_{unit}" for axis in "xyz")
+            np.savetxt(os.path.join(out, f"targets_{k:04d}.csv"), targets, delimiter=",", header=header, comments="")
+        record = {"file": path, "points": len(cloud), "round_trip_ms": trip, "status": status, "targets": targets}
+        records.append(record)
+        if "error" in status:
+            report(f"frame {k:<4} {os.path.basename(path)}: refused: {status['error']}")
+        else:
+            server = f", server {status['ms']:.1f} ms" if "ms" in status else ""
+            report(f"frame {k:<4} {os.path.basename(path)}: {len(cloud)} points, round trip {trip:.1f} ms{server}")
+        left = period - (time.perf_counter() - began)
+        if left > 0:
+            time.sleep(left)
+    return records
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="python -m augsim.replay", description=__doc__.split("\n\n")[0])
+    parser.add_argument("frames", help="a directory of clouds (.csv with an x, y, z header, or .npy), one per frame")
+    parser.add_argument("--host", default="127.0.0.1")
+    parser.add_argument("--port", type=int, default=18944, help="the server's port (OpenIGTLink's: 18944)")
+    parser.add_argument("--rate", type=float, default=20.0, help="at most this many clouds a second (0: no limit)")
+    parser.add_argument("--units", choices=sorted(_SCALE), default="m", help="the unit of the files")
+    parser.add_argument("--send-units", choices=sorted(_SCALE), default="mm",
+                        help="the unit sent (give `augsim serve` the same --units)")
+    parser.add_argument("--out", help="writes each frame's registered targets here")
+    parser.add_argument("--loop", type=int, default=1, help="replays the sequence this many times")
+    args = parser.parse_args(argv)
+    try:
+        import pyigtl  # noqa: F401
+    except ImportError:
+        raise SystemExit("the replay needs pyigtl: pip install pyigtl")
+    try:
+        files = frame_files(args.frames) * max(args.loop, 1)
+    except ValueError as e:
+        raise SystemExit(str(e))
+    scale = _SCALE[args.units] / _SCALE[args.send_units]
+    client = connect(args.host, args.port)
+    try:
+        records = replay(files, client, scale, rate=args.rate, out=args.out, unit=args.send_units)
+    finally:
+        client.stop()
+    answered = [r for r in records if r["targets"] is not None]
+    trips = [r["round_trip_ms"] for r in answered]
+    if trips:
+        print(f"{len(answered)} of {len(records)} frames registered; round trip median {np.median(trips):.1f} ms, "
+              f"p95 {np.percentile(trips, 95):.1f} ms")
+    else:
+        print(f"none of {len(records)} frames was registered")
+    return 0 if answered else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

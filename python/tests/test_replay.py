@@ -1,0 +1,80 @@
+#!/usr/bin/env python3
+"""`python -m augsim.replay`: a recorded press and release (the server test's case, 8 frames, its
+clouds in metres as `augsim register --case` writes them) replayed to `augsim serve --units mm` as a
+tracker would; each frame comes back registered, the targets written per frame in mm, much nearer
+their truth than at rest; a cloud file the server refuses is reported and the replay goes on.
+
+Run: python -m pytest -s python/tests/test_replay.py (needs pyigtl; `.ci/run` runs it).
+"""
+
+import os
+import shutil
+import subprocess
+import tempfile
+import unittest
+
+import numpy as np
+import pytest
+
+from helpers import augsim_bin, make_case
+
+pytest.importorskip("pyigtl", reason="the replay needs pyigtl: pip install pyigtl (or ./python[test])")
+
+from augsim import replay  # noqa: E402
+from test_serve import free_port  # noqa: E402
+
+FRAMES = 8
+
+
+class ReplayTest(unittest.TestCase):
+    def test_a_recorded_sequence_is_replayed_to_the_server(self):
+        with tempfile.TemporaryDirectory(prefix="augsim_replay_test_") as tmp:
+            case = make_case(tmp, FRAMES)
+            frames = os.path.join(tmp, "case", "clouds")
+            # A cloud the server refuses (a NaN), recorded between two good ones.
+            refused = os.path.join(tmp, "with_nan")
+            shutil.copytree(frames, refused)
+            bad = np.loadtxt(os.path.join(frames, "cloud_0000.csv"), delimiter=",", skiprows=1)
+            bad[0, 0] = np.nan
+            np.savetxt(os.path.join(refused, "cloud_0000b.csv"), bad, delimiter=",", header="x,y,z", comments="")
+            port = free_port()
+            server = subprocess.Popen([augsim_bin(), "serve", "--fem", case["scenario"], "--targets", case["targets"],
+                                       "--port", str(port), "--units", "mm"], stdout=subprocess.PIPE,
+                                      stderr=subprocess.STDOUT, text=True)
+            out = os.path.join(tmp, "targets")
+            lines = []
+            try:
+                client = replay.connect("127.0.0.1", port)
+                try:
+                    files = replay.frame_files(refused)
+                    records = replay.replay(files, client, scale=1e3, rate=0, out=out, report=lines.append)
+                finally:
+                    client.stop()
+            finally:
+                server.send_signal(2)
+                log, _ = server.communicate(timeout=30)
+            self.assertEqual(server.returncode, 0, log)
+            written = sorted(os.listdir(out))
+            self.assertEqual(len(written), FRAMES, written)
+            with open(os.path.join(out, written[0]), encoding="utf-8") as f:
+                self.assertEqual(f.readline().strip(), "x_mm,y_mm,z_mm")
+        self.assertEqual(len(records), FRAMES + 1)
+        self.assertIn("refused", lines[1])
+        self.assertIn("finite", records[1]["status"]["error"])
+        self.assertIsNone(records[1]["targets"])
+        good = [r for k, r in enumerate(records) if k != 1]
+        self.assertTrue(all(r["targets"] is not None for r in good), lines)
+        tres = [np.linalg.norm(r["targets"] - truth, axis=1).mean() for r, truth in zip(good, case["truths"])]
+        unregistered = [np.linalg.norm(case["rest"] - truth, axis=1).mean() for truth in case["truths"]]
+        peak = int(np.argmax(unregistered))
+        print(f"\nreplay of {FRAMES} frames: TRE at the peak {tres[peak]:.2f} mm (unregistered "
+              f"{unregistered[peak]:.2f} mm); " + "; ".join(lines[:3]))
+        self.assertLess(tres[peak], 0.3 * unregistered[peak])
+
+    def test_a_folder_without_clouds_is_a_clear_error(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            with self.assertRaisesRegex(ValueError, "holds no .csv or .npy cloud"):
+                replay.frame_files(tmp)
+            with self.assertRaises(SystemExit) as stop:
+                replay.main([os.path.join(tmp, "missing")])
+            self.assertIn("is not a directory", str(stop.exception))
