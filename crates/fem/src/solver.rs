@@ -588,11 +588,10 @@ impl StaticSolver {
                 trial.copy_from_slice(&u);
                 attempt = self.newton(&mut trial, target, Start::Fresh, options, Budget::Patient, &mut stats);
                 if let Err(FemError::NotConverged { .. } | FemError::InvertedElement { .. }) = attempt {
-                    return Err(FemError::NoEquilibrium {
-                        load_factor: lambda,
-                        softening: path.softening(),
-                        iterations: PATIENT_ITERATIONS,
-                    });
+                    let softening = path.softening();
+                    let none = FemError::NoEquilibrium { load_factor: lambda, softening, iterations: PATIENT_ITERATIONS };
+                    // Saint-Venant-Kirchhoff's own limit point is told as such.
+                    return Err(self.diagnose(none, lambda, &trial, &u, &stats));
                 }
             }
             match attempt {
