@@ -7,9 +7,10 @@ use anyhow::Result;
 use app::assimilation::{Experiment, ObservationFiles, Report};
 use clap::Args;
 use filter::{Discrepancy, Execution, SigmaPointSet};
-use indicatif::{ProgressBar, ProgressStyle};
 use mesh::length::mm;
 use scenario::AssimilationScenario;
+
+use crate::bar::Bar;
 
 /// Arguments of `augsim assimilate`.
 #[derive(Debug, Args)]
@@ -147,13 +148,9 @@ pub fn run(args: &AssimilateArgs) -> Result<()> {
         (None, None) => {}
     }
 
-    let bar = ProgressBar::new(s.iterations as u64);
-    bar.set_style(ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise} < {eta_precise}] {msg}")?);
-    let report = experiment.run(&out_dir, |p| {
-        bar.set_message(p.message.clone());
-        bar.set_position(p.iteration as u64);
-    });
-    bar.finish_and_clear();
+    let bar = Bar::new("iterations", "");
+    let report = experiment.run(&out_dir, &bar);
+    bar.finish();
     print_report(&report?);
     println!(
         "wrote        {}/{{trace.csv, trace.json, summary.json, deformation.pvd, *.png}}{}",

@@ -6,6 +6,8 @@ use anyhow::{bail, Result};
 use clap::Args;
 use experiment::{Name, Size};
 
+use crate::bar::Bar;
+
 /// Arguments of `augsim experiment`.
 #[derive(Debug, Args)]
 pub struct ExperimentArgs {
@@ -38,7 +40,10 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
     let names = if args.name == "all" { Name::ALL.to_vec() } else { vec![Name::parse(&args.name)?] };
     for name in names {
         println!("== {} ({})", name.as_str(), args.size);
-        let result = experiment::run(name, size, &args.out, &|message| println!("   {message}"))?;
+        let bar = Bar::new("steps", "   ");
+        let result = experiment::run(name, size, &args.out, &bar);
+        bar.finish();
+        let result = result?;
         println!("   {}: {:.0} s", result.name.title(), result.seconds);
         let labels: Vec<String> = result.rows.iter().map(|r| r.label()).collect();
         let width = labels.iter().map(|l| l.chars().count()).max().unwrap_or(0);

@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use app::evaluation::{evaluate_held_out, write_evaluation};
 
-use indicatif::{ProgressBar, ProgressStyle};
 use learn::rom::RomConfig;
 use learn::LearnedModel;
 use learn::{
@@ -16,6 +15,8 @@ use mesh::io::Field;
 use mesh::length::mm;
 
 use scenario::DatasetScenario;
+
+use crate::bar::Bar;
 
 /// `augsim generate`.
 pub fn generate(path: &Path, out: Option<&Path>, part: Option<&str>, samples: Option<usize>) -> Result<()> {
@@ -40,16 +41,10 @@ pub fn generate(path: &Path, out: Option<&Path>, part: Option<&str>, samples: Op
         None => PathBuf::from(format!("out/{}", scenario.name)),
         Some(p) => PathBuf::from(format!("out/{}.part{}of{}", scenario.name, p.index, p.count)),
     });
-    let bar = ProgressBar::new(0).with_style(
-        ProgressStyle::with_template("{spinner} {bar:40} {pos}/{len} samples, {per_sec}, eta {eta}")
-            .expect("valid template"),
-    );
+    let bar = Bar::new("samples", "");
     let start = std::time::Instant::now();
-    let manifest = generator.run(&out, &scenario.name, part, &|done, total| {
-        bar.set_length(total);
-        bar.set_position(done);
-    })?;
-    bar.finish_and_clear();
+    let manifest = generator.run(&out, &scenario.name, part, &bar)?;
+    bar.finish();
     let secs = start.elapsed().as_secs_f64();
     println!("samples    {} written, {} failed (reasons in the manifest)", manifest.num_samples, manifest.failed.len());
     println!("time       {:.1} s ({:.1} ms per sample)", secs, 1e3 * secs / manifest.num_samples.max(1) as f64);
@@ -271,13 +266,15 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let options = TrainOptions {
         out_dir: args.out.clone(),
         resume: !args.restart,
-        progress: true,
         stop_after: None,
         placement: dataset.manifest().placement(),
         test: split.test,
         compute,
     };
-    let outcome = learn::train(&train, &validation, &init, &config, &options)?;
+    let bar = Bar::new("steps", "");
+    let outcome = learn::train(&train, &validation, &init, &config, &options, &bar);
+    bar.finish();
+    let outcome = outcome?;
     let curve = args.out.join(app::curve::CURVE_PNG);
     app::curve::plot_learning_curve(&curve, &outcome.curve)?;
     println!("steps      {} ({:.3} s per step)", outcome.iterations_done, outcome.mean_step_seconds);

@@ -1,6 +1,7 @@
 //! `augsim`: data-driven simulation for augmented surgery.
 
 mod assimilate;
+mod bar;
 mod bench;
 mod experiment_cmd;
 mod learn_cmd;

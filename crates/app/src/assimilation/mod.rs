@@ -28,7 +28,7 @@ use std::path::Path;
 
 pub use online::{Estimate, OnlineFilter};
 pub use report::{AssessmentCase, FilterTimes, Report, SpringsReport, YoungReport};
-pub use run::{Experiment, ObservationFiles, Progress, Reference, Setup};
+pub use run::{Experiment, ObservationFiles, Reference, Setup};
 
 /// Errors of an assimilation experiment.
 #[derive(Debug, thiserror::Error)]

@@ -91,17 +91,6 @@ pub struct Reference {
     pub max_displacement: f64,
 }
 
-/// Progress after one filter iteration.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Progress {
-    /// Iterations done.
-    pub iteration: usize,
-    /// Iterations in all.
-    pub iterations: usize,
-    /// The current estimate in words (e.g. `E = 4979.1 ± 4.2 Pa, |innovation| = 1.2e-3 m`).
-    pub message: String,
-}
-
 /// One measurement: stacked positions (x, y, z per point) and which components were measured.
 #[derive(Debug, Clone)]
 struct Frame {
@@ -460,9 +449,10 @@ impl Experiment {
         Ok(())
     }
 
-    /// Runs the filter and writes the outputs into `out_dir` (see the module documentation); `progress` is called
-    /// after every iteration.
-    pub fn run(&self, out_dir: &Path, mut progress: impl FnMut(&Progress)) -> Result<Report, AssimilationError> {
+    /// Runs the filter and writes the outputs into `out_dir` (see the module documentation); reports
+    /// every iteration to `progress`, with the current estimate in words (e.g.
+    /// `E = 4979.1 ± 4.2 Pa, |innovation| = 1.2e-3 m`).
+    pub fn run(&self, out_dir: &Path, progress: &dyn learn::Progress) -> Result<Report, AssimilationError> {
         std::fs::create_dir_all(out_dir).context(|| format!("cannot create {}", out_dir.display()))?;
         self.write_tracks(&out_dir.join("tracks"))?;
         let iterations = self.measurements.len();
@@ -505,11 +495,8 @@ impl Experiment {
                 frames.push((k as f64, file));
                 spent.writing += t_write.elapsed().as_secs_f64();
             }
-            progress(&Progress {
-                iteration: k,
-                iterations,
-                message: self.progress_message(&roukf.mean_physical(), &roukf.std_physical(), innovation),
-            });
+            let note = self.progress_message(&roukf.mean_physical(), &roukf.std_physical(), innovation);
+            progress.advance(k as u64, iterations as u64, &note);
         }
         let filter_seconds = t_filter.elapsed().as_secs_f64();
         let sigma_count = roukf.sigma_points().count();
