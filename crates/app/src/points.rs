@@ -11,13 +11,11 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use mesh::io::points::{read_points, LabelledPoints};
 use mesh::io::Frame;
 use mesh::length::LengthUnit;
 use mesh::Point;
-
-use crate::registration::TargetsSpec;
 
 /// Where points read by a command go: its working frame (once known) and its working unit, and
 /// the unit of files that name none.
@@ -68,22 +66,11 @@ impl PointInput {
 
 /// The rest positions of a targets file (CSV, `.fcsv`, `.mrk.json`) in metres: in the unit the
 /// file names, else in `unit`; as they are in their own frame (which is the working frame: see
-/// [`targets_frame`]).
+/// [`TargetsSpec::frame`](crate::registration::TargetsSpec::frame)).
 pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<Vec<Point>> {
     let points = read_points(path)?;
     let unit = points.unit.unwrap_or(unit);
     Ok(points.points.iter().map(|&p| unit.point_to_metres(p)).collect())
-}
-
-/// The frame that a registration's targets file names (a patient's, as `augsim prepare` writes
-/// it, or the user's), `None` for other targets: the frame the registration works in.
-pub fn targets_frame(targets: &TargetsSpec) -> Result<Option<Frame>> {
-    match targets {
-        TargetsSpec::File(path) => {
-            Ok(read_points(path).with_context(|| format!("the targets of {}", path.display()))?.frame)
-        }
-        TargetsSpec::Regions | TargetsSpec::Points(_) => Ok(None),
-    }
 }
 
 #[cfg(test)]
@@ -114,6 +101,5 @@ mod tests {
         assert!(input.read_cloud(&empty).is_err());
         std::fs::write(&plain, "label,x_mm,y_mm,z_mm\nT,1,2,3\n").unwrap();
         assert_eq!(read_targets(&plain, LengthUnit::Metre).unwrap(), [[1e-3, 2e-3, 3e-3]], "the named unit wins");
-        assert_eq!(targets_frame(&TargetsSpec::File(ras)).unwrap(), Some(Frame::Ras));
     }
 }

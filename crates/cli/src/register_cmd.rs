@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use app::case::{ar_scenario, case_methods, compare, comparison_models, synthetic_case, Network, Registered};
 use app::output::{comparison_rows, run_dir, write_case, write_comparison, RunWriter};
-use app::points::{targets_frame, PointInput};
+use app::points::PointInput;
 use app::registration::RegistrationChoice;
 use mesh::length::{mm, LengthUnit};
 use mesh::Point;
@@ -81,7 +81,7 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     let cloud_path = args.cloud.clone().context("a cloud is required")?;
     let spec = args.registration.spec()?;
     let mut registration = spec.build()?;
-    let mut input = PointInput::new(targets_frame(&spec.targets)?, LengthUnit::Metre, args.registration.units);
+    let mut input = PointInput::new(spec.targets.frame()?, LengthUnit::Metre, args.registration.units);
     let frames = read_frames(&cloud_path)?;
     let truths: Option<Vec<Vec<Point>>> = match &args.truth {
         None => None,

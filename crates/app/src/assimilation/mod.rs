@@ -27,8 +27,8 @@ pub mod tracks;
 use std::path::Path;
 
 pub use online::{Estimate, OnlineFilter};
-pub use report::{AssessmentCase, FilterTimes, Report, SpringsReport, YoungReport};
-pub use run::{Experiment, ObservationFiles, Reference, Setup};
+pub use report::{AssessmentCase, FilterTimes, Reference, Report, SpringsReport, YoungReport};
+pub use run::{Experiment, ObservationFiles, Setup};
 
 /// Errors of an assimilation experiment.
 #[derive(Debug, thiserror::Error)]

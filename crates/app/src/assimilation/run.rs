@@ -10,7 +10,7 @@ use mesh::{Mesh, MeshLocator, Point, SurfaceBvh};
 use nalgebra::DVector;
 use serde::Serialize;
 
-use super::report::{self, FilterTimes, Report};
+use super::report::{self, FilterTimes, Reference, Report};
 use super::tracks::{write_tracks, RestPositions, Tracks};
 use super::{AssimilationError, Context};
 
@@ -72,23 +72,6 @@ pub struct Setup {
     pub max_projection: f64,
     /// The reference run (synthetic observations only).
     pub reference: Option<Reference>,
-}
-
-/// The reference run that synthesises the observations.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Reference {
-    /// It ran on the filter's own model (mesh and law). `false` with a `[reference]` section.
-    pub inverse_crime: bool,
-    /// Nodes of its mesh.
-    pub nodes: usize,
-    /// Cells of its mesh.
-    pub cells: usize,
-    /// Its constitutive law.
-    pub law: fem::Law,
-    /// Wall-clock time (s).
-    pub seconds: f64,
-    /// Largest nodal displacement over all steps (m).
-    pub max_displacement: f64,
 }
 
 /// One measurement: stacked positions (x, y, z per point) and which components were measured.
