@@ -49,6 +49,16 @@ impl PointInput {
         points
     }
 
+    /// Reads the true target positions of a run of `frames` clouds: one points file, or a
+    /// directory of one file per frame (in file-name order), as [`PointInput::read`].
+    pub fn read_truths(&mut self, path: &Path, frames: usize) -> Result<Vec<Vec<Point>>> {
+        let files = if path.is_dir() { register::cloud::read_frames(path)? } else { vec![path.to_path_buf()] };
+        if files.len() != frames {
+            anyhow::bail!("{} truth file(s) for {frames} cloud frame(s)", files.len());
+        }
+        files.iter().map(|f| Ok(self.read(f)?.points)).collect()
+    }
+
     /// Reads an intraoperative cloud: a points file as [`PointInput::read`], or `.npy` and `.ply`
     /// (which name neither frame nor unit) in the given unit. An empty cloud is an error.
     pub fn read_cloud(&mut self, path: &Path) -> register::Result<Vec<Point>> {
@@ -96,6 +106,8 @@ mod tests {
         assert_eq!(input.read(&plain).unwrap().points, [[1.0, 2.0, 3.0]]);
         assert_eq!(input.read(&ras).unwrap().labels, ["p"]);
         assert_eq!(input.frame, Some(Frame::Ras));
+        assert_eq!(input.read_truths(&plain, 1).unwrap(), [[[1.0, 2.0, 3.0]]]);
+        assert!(input.read_truths(&plain, 2).unwrap_err().to_string().contains("1 truth file(s) for 2 cloud frame(s)"));
         let empty = dir.path().join("empty.csv");
         std::fs::write(&empty, "x,y,z\n").unwrap();
         assert!(input.read_cloud(&empty).is_err());

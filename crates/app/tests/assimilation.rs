@@ -29,7 +29,12 @@ fn scenario(dir: &Path, name: &str, text: &str) -> (AssimilationScenario, PathBu
 
 fn run(dir: &Path, text: &str, files: Option<&ObservationFiles>, out: &str) -> (Report, Vec<Vec<u64>>) {
     let (sc, base) = scenario(dir, &format!("{out}.toml"), text);
+    let sigma = sc.filter.sigma_points;
     let experiment = Experiment::prepare(sc, &base, files).unwrap();
+    let setup = experiment.setup().lines(sigma, files);
+    assert!(setup[0].starts_with("mesh ") && setup[1].contains(&format!("{sigma} sigma points")), "{setup:?}");
+    let source = if files.is_some() { "tracks " } else { "reference " };
+    assert!(setup.len() == 3 && setup[2].starts_with(source), "{setup:?}");
     let calls = std::sync::atomic::AtomicUsize::new(0);
     let count = |done: u64, total: u64, note: &str| {
         let call = calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
@@ -67,6 +72,10 @@ fn tracks_written_by_a_synthetic_run_give_the_same_estimate() {
     assert!(synthetic.synthetic);
     let young = synthetic.young.as_ref().unwrap();
     assert!((young.mean - 5000.0).abs() < 0.01 * 5000.0, "{young:?}");
+    let lines = synthetic.lines();
+    assert!(lines[0].starts_with(&format!("filter       {} iterations", synthetic.iterations)), "{lines:?}");
+    assert!(lines.iter().any(|l| l.starts_with("young        μ = ") && l.contains("(truth 5000 Pa")), "{lines:?}");
+    assert!(lines.last().unwrap().starts_with("wall time"), "{lines:?}");
     // The estimated deformation of steps 4 and 8 as a ParaView series.
     assert_eq!(synthetic.deformation_frames, 2);
     let pvd = std::fs::read_to_string(dir.path().join("synthetic/deformation.pvd")).unwrap();

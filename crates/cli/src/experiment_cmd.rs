@@ -44,14 +44,7 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
         let result = experiment::run(name, size, &args.out, &bar);
         bar.finish();
         let result = result?;
-        println!("   {}: {:.0} s", result.name.title(), result.seconds);
-        let labels: Vec<String> = result.rows.iter().map(|r| r.label()).collect();
-        let width = labels.iter().map(|l| l.chars().count()).max().unwrap_or(0);
-        for (row, label) in result.rows.iter().zip(&labels) {
-            let published =
-                if row.published.is_empty() { String::new() } else { format!("   (published: {})", row.published) };
-            println!("   {label:<width$}  {}{published}", row.ours);
-        }
+        result.lines().iter().for_each(|l| println!("   {l}"));
     }
     let results = experiment::load_all(&args.out)?;
     let [md, html] = experiment::report::write(&args.out, &results)?;

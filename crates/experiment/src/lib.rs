@@ -15,6 +15,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+pub mod bench;
 pub mod calculix;
 mod fem_convergence;
 mod fem_peer;
@@ -28,7 +29,7 @@ pub mod report;
 pub mod stream;
 mod transfer;
 
-pub use fem_speed::{fbar_ratios, measure as measure_fem_speed, CaseTiming, Ratio, FRAME_LOAD_STEP};
+pub use fem_speed::{CaseTiming, Ratio, FRAME_LOAD_STEP};
 
 /// How large an experiment is run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -300,6 +301,22 @@ pub struct ExperimentResult {
     pub notes: Vec<String>,
     /// The raw numbers behind the table, by name (SI units unless the name says otherwise).
     pub values: serde_json::Map<String, serde_json::Value>,
+}
+
+impl ExperimentResult {
+    /// The result in words, as printed after a run: its time, then each row's figure beside the
+    /// published one (labels in a column as wide as the longest).
+    pub fn lines(&self) -> Vec<String> {
+        let labels: Vec<String> = self.rows.iter().map(|r| r.label()).collect();
+        let width = labels.iter().map(|l| l.chars().count()).max().unwrap_or(0);
+        let mut lines = vec![format!("{}: {:.0} s", self.name.title(), self.seconds)];
+        for (row, label) in self.rows.iter().zip(&labels) {
+            let published =
+                if row.published.is_empty() { String::new() } else { format!("   (published: {})", row.published) };
+            lines.push(format!("{label:<width$}  {}{published}", row.ours));
+        }
+        lines
+    }
 }
 
 /// The result file of an experiment.

@@ -15,6 +15,9 @@ fn springs_experiment_writes_a_result_resumes_and_reports() {
     for figure in &result.figures {
         assert!(root.path().join("springs").join(figure).exists(), "{figure} missing");
     }
+    let lines = result.lines();
+    assert_eq!(lines.len(), result.rows.len() + 1);
+    assert!(lines[0].starts_with(result.name.title()) && lines[1].starts_with(&result.rows[0].label()), "{lines:?}");
     // A second run finds the result and does not run again.
     let again = experiment::run(Name::Springs, Size::Quick, root.path(), &learn::Silent).unwrap();
     assert_eq!(again, result);
