@@ -40,7 +40,7 @@ fn synthetic_tracks_fed_back_and_bad_files() {
     std::fs::write(&bad, "frame,id,x,y,z\n0,f0,0.05,0.01,0.02\n1,f0,0.05,oops,0.02\n").unwrap();
     let (ok, text) = assimilate(&[s, "--observations", bad.to_str().unwrap(), "-o", d.join("bad").to_str().unwrap()]);
     assert!(!ok);
-    assert!(text.contains(&format!("error: {}:3: y = `oops` is not a finite number", bad.display())), "{text}");
+    assert!(text.contains(&format!("error: {}:3: y = \"oops\" is not a number", bad.display())), "{text}");
     // Track options need --observations.
     let (ok, text) = assimilate(&[s, "--controls", bad.to_str().unwrap()]);
     assert!(!ok && text.contains("--observations"), "{text}");
