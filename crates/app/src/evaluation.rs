@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use learn::{Compute, Corruption, Dataset, EvalReport, LearnedModel, PointErrors, Samples};
 use mesh::io::write_atomic_bytes;
+use mesh::length::mm;
 
 /// A model's errors on the held-out samples of a dataset.
 pub struct Evaluation {
@@ -29,6 +30,64 @@ pub struct Evaluation {
     /// Share of the nodes' errors within twice the predicted standard deviation, for a model that
     /// predicts one.
     pub coverage: Option<f64>,
+}
+
+/// Interpolates a prediction of `model` (from `model_path`) to the nodes of the volume mesh in
+/// `mesh_path` (in the training mesh's frame) and writes it as the point field `displacement`
+/// into `vtu`; returns the line that describes it (nodes, largest displacement).
+pub fn prediction_on_mesh(
+    model: &learn::Model,
+    model_path: &Path,
+    prediction: &[f32],
+    mesh_path: &Path,
+    vtu: &Path,
+) -> Result<String> {
+    let organ = mesh::io::read_mesh(mesh_path).with_context(|| format!("reading {}", mesh_path.display()))?;
+    let u = model
+        .field_on_mesh(prediction, &organ)
+        .with_context(|| format!("{} on {}", model_path.display(), mesh_path.display()))?;
+    let max = u.chunks(3).map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()).fold(0.0, f64::max);
+    mesh::io::write_mesh(vtu, &organ, &[mesh::io::Field::point("displacement", 3, u)])
+        .with_context(|| format!("writing {}", vtu.display()))?;
+    Ok(format!("mesh       {} nodes, max |u| {:.3} mm", organ.num_nodes(), mm(max)))
+}
+
+impl Evaluation {
+    /// The evaluation in words: the held-out samples, the error statistics, the TRE at the
+    /// markers and the σ coverage when known.
+    pub fn lines(&self) -> Vec<String> {
+        let s = &self.report.stats;
+        let held_out = if self.recorded_split {
+            "the test split recorded in the model"
+        } else {
+            "those no run behind the model trained or validated on"
+        };
+        let mut lines = vec![
+            format!("held out   {} of {} samples ({held_out})", self.test.len(), self.total),
+            format!("samples    {}", self.test.len()),
+            format!("mean e     {:.4e} m ({:.3} mm)", s.mean, mm(s.mean)),
+            format!("std e      {:.4e} m ({:.3} mm)", s.std, mm(s.std)),
+            format!("max e      {:.4e} m ({:.3} mm), sample index {}", s.max, mm(s.max), self.report.worst_index()),
+        ];
+        if let Some((markers, t)) = &self.markers {
+            lines.push(format!(
+                "TRE        {markers} markers: mean {:.3} mm, std {:.3} mm, max {:.3} mm (no-motion baseline: mean \
+                 {:.3} mm, max {:.3} mm)",
+                mm(t.errors.mean),
+                mm(t.errors.std),
+                mm(t.errors.max),
+                mm(t.no_motion.mean),
+                mm(t.no_motion.max)
+            ));
+        }
+        if let Some(c) = self.coverage {
+            lines.push(format!(
+                "2σ         {:.1} % of the nodes' errors within twice the predicted standard deviation",
+                c * 100.0
+            ));
+        }
+        lines
+    }
 }
 
 /// Evaluates `model` on the samples of `dataset` (opened from `dataset_dir`) held out from it,
@@ -112,4 +171,31 @@ pub fn write_evaluation(
         .grid(dataset.manifest().grid)?;
     learn::write_grid_sample(&vtu, &grid, &input, &worst.target, &prediction, &worst.mask)?;
     Ok([errors, summary_path, vtu])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_evaluation_in_words() {
+        let evaluation = Evaluation {
+            dataset_dir: PathBuf::from("data"),
+            corruption: Corruption::none(),
+            total: 10,
+            test: Samples::new(learn::GridShape::new(2, 2, 2)),
+            recorded_split: true,
+            report: EvalReport::new(vec![0.001, 0.003], vec![8, 9]).unwrap(),
+            markers: None,
+            coverage: Some(0.9),
+        };
+        let lines = evaluation.lines();
+        assert_eq!(lines[0], "held out   0 of 10 samples (the test split recorded in the model)");
+        assert_eq!(lines[2], "mean e     2.0000e-3 m (2.000 mm)");
+        assert_eq!(lines[4], "max e      3.0000e-3 m (3.000 mm), sample index 9");
+        assert_eq!(
+            lines.last().unwrap(),
+            "2σ         90.0 % of the nodes' errors within twice the predicted standard deviation"
+        );
+    }
 }

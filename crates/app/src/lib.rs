@@ -4,7 +4,8 @@
 //! - [`registration`]: a registration set up from the user's choices (a patient's set-up, a FEM
 //!   scenario, or a learned model and its dataset scenario; targets in their unit; settings), the
 //!   one way `register`, `serve` and Python build it; [`output`]: what a registration writes (organ.vtu, targets.csv,
-//!   summary.json) and what a comparison of methods writes.
+//!   summary.json) and what a comparison of methods writes; [`printout`]: the lines printed about
+//!   a registration run and a comparison.
 //! - [`points`]: points read at a command's boundary (CSV, 3D Slicer's `.fcsv` and `.mrk.json`,
 //!   clouds as `.npy` and `.ply`) in its working frame (RAS or LPS) and unit.
 //! - [`meshing`]: an organ's volume mesh from its surface, a labelmap's label or the phantom.
@@ -17,7 +18,8 @@
 //!   observations or track files, traces, plots, the estimated deformation), also one step at a
 //!   time for a stream.
 //! - [`solve`]: a static scenario solved, with the fields written for ParaView; [`evaluation`]:
-//!   a learned model's errors on the samples held out from it, and the files `eval` writes.
+//!   a learned model's errors on the samples held out from it, and the files `eval` writes;
+//!   [`training`]: a reduced-order model fitted on a dataset's split.
 //! - [`curve`], [`sample_view`]: the learning curve as PNG; a dataset sample and a model's
 //!   prediction in the 3D viewer.
 
@@ -30,7 +32,9 @@ pub mod output;
 pub mod picture;
 pub mod points;
 pub mod prepare;
+pub mod printout;
 pub mod registration;
 pub mod sample_view;
 pub mod simulate;
 pub mod solve;
+pub mod training;

@@ -172,6 +172,52 @@ pub fn write_mesh_file(path: &Path, mesh: &Mesh) -> Result<()> {
     mesh::io::write_mesh(path, mesh, &fields).with_context(|| format!("writing {}", path.display()))
 }
 
+impl Meshed {
+    /// The mesh in words: size, extent, quality (tetrahedra) or fill (immersed cells), volume
+    /// against the domain's, regions. Inverted tetrahedra are an error.
+    pub fn report(&self) -> Result<Vec<String>> {
+        let (mesh, reference) = (&self.mesh, self.reference_volume);
+        let (lo, hi) = mesh.bounds();
+        let mut lines = vec![
+            format!("mesh       {} nodes, {} {} cells", mesh.num_nodes(), mesh.cells.len(), mesh.cells.kind_name()),
+            format!("extent     {:.4} × {:.4} × {:.4} m", hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]),
+        ];
+        let volume = match &mesh.cells {
+            mesh::Cells::Tet4(_) => {
+                let q = mesh::tetmesh::tet_quality(mesh, reference)?;
+                if q.inverted > 0 {
+                    bail!("{} inverted tetrahedra", q.inverted);
+                }
+                lines.push(format!("dihedral   min {:.1}°, max {:.1}°", q.min_dihedral_deg, q.max_dihedral_deg));
+                if q.pieces > 1 {
+                    lines.push(format!(
+                        "warning    {} pieces joined only by edges or vertices: mesh finer (--tets)",
+                        q.pieces
+                    ));
+                }
+                volume_line(q.volume, q.reference_volume)
+            }
+            mesh::Cells::Tet10(_) => volume_line(mesh.volume(), reference),
+            mesh::Cells::Hex8(_) => {
+                let (organ, cut) = immersed_fill(mesh);
+                lines.push(format!("cells      {} fully inside, {cut} cut by the surface", mesh.cells.len() - cut));
+                volume_line(organ, reference)
+            }
+        };
+        lines.push(volume);
+        lines.extend(mesh.regions.iter().map(|(name, nodes)| format!("region     {name}: {} nodes", nodes.len())));
+        Ok(lines)
+    }
+}
+
+/// The volume's line, against the domain's when known.
+fn volume_line(volume: f64, reference: Option<f64>) -> String {
+    match reference {
+        Some(r) => format!("volume     {volume:.4e} m³ (domain {r:.4e} m³, {:+.2} %)", 100.0 * (volume - r) / r),
+        None => format!("volume     {volume:.4e} m³"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -187,6 +233,10 @@ mod tests {
         let reference = meshed.reference_volume.unwrap();
         assert!((organ - reference).abs() < 0.1 * reference, "{organ} vs {reference}");
         assert!(cut > 0 && cut < meshed.mesh.cells.len());
+        let report = meshed.report().unwrap();
+        let fill = format!("cells      {} fully inside, {cut} cut by the surface", meshed.mesh.cells.len() - cut);
+        assert_eq!(report[2], fill, "{report:?}");
+        assert!(report[3].starts_with("volume     ") && report[3].contains("domain"), "{report:?}");
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("grid/organ.vtu");
         write_mesh_file(&path, &meshed.mesh).unwrap();
@@ -204,6 +254,8 @@ mod tests {
         let meshed = mesh_organ(&options).unwrap();
         let (lo, hi) = meshed.mesh.bounds();
         assert!((hi[0] - lo[0] - 0.08).abs() < 0.01, "{lo:?} {hi:?}");
+        let report = meshed.report().unwrap();
+        assert!(report[2].starts_with("dihedral   min "), "{report:?}");
         assert!(meshed.notes.iter().any(|(topic, line)| *topic == "units" && line.starts_with("mm (detected")));
         let labelled = MeshOptions { label: Some("5".into()), ..options };
         assert!(mesh_organ(&labelled).unwrap_err().to_string().contains("--label chooses a label of a labelmap"));

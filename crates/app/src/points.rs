@@ -11,13 +11,11 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use mesh::io::points::{read_points, LabelledPoints};
 use mesh::io::Frame;
 use mesh::length::LengthUnit;
 use mesh::Point;
-
-use crate::registration::TargetsSpec;
 
 /// Where points read by a command go: its working frame (once known) and its working unit, and
 /// the unit of files that name none.
@@ -51,6 +49,16 @@ impl PointInput {
         points
     }
 
+    /// Reads the true target positions of a run of `frames` clouds: one points file, or a
+    /// directory of one file per frame (in file-name order), as [`PointInput::read`].
+    pub fn read_truths(&mut self, path: &Path, frames: usize) -> Result<Vec<Vec<Point>>> {
+        let files = if path.is_dir() { register::cloud::read_frames(path)? } else { vec![path.to_path_buf()] };
+        if files.len() != frames {
+            anyhow::bail!("{} truth file(s) for {frames} cloud frame(s)", files.len());
+        }
+        files.iter().map(|f| Ok(self.read(f)?.points)).collect()
+    }
+
     /// Reads an intraoperative cloud: a points file as [`PointInput::read`], or `.npy` and `.ply`
     /// (which name neither frame nor unit) in the given unit. An empty cloud is an error.
     pub fn read_cloud(&mut self, path: &Path) -> register::Result<Vec<Point>> {
@@ -68,22 +76,11 @@ impl PointInput {
 
 /// The rest positions of a targets file (CSV, `.fcsv`, `.mrk.json`) in metres: in the unit the
 /// file names, else in `unit`; as they are in their own frame (which is the working frame: see
-/// [`targets_frame`]).
+/// [`TargetsSpec::frame`](crate::registration::TargetsSpec::frame)).
 pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<Vec<Point>> {
     let points = read_points(path)?;
     let unit = points.unit.unwrap_or(unit);
     Ok(points.points.iter().map(|&p| unit.point_to_metres(p)).collect())
-}
-
-/// The frame that a registration's targets file names (a patient's, as `augsim prepare` writes
-/// it, or the user's), `None` for other targets: the frame the registration works in.
-pub fn targets_frame(targets: &TargetsSpec) -> Result<Option<Frame>> {
-    match targets {
-        TargetsSpec::File(path) => {
-            Ok(read_points(path).with_context(|| format!("the targets of {}", path.display()))?.frame)
-        }
-        TargetsSpec::Regions | TargetsSpec::Points(_) => Ok(None),
-    }
 }
 
 #[cfg(test)]
@@ -109,11 +106,12 @@ mod tests {
         assert_eq!(input.read(&plain).unwrap().points, [[1.0, 2.0, 3.0]]);
         assert_eq!(input.read(&ras).unwrap().labels, ["p"]);
         assert_eq!(input.frame, Some(Frame::Ras));
+        assert_eq!(input.read_truths(&plain, 1).unwrap(), [[[1.0, 2.0, 3.0]]]);
+        assert!(input.read_truths(&plain, 2).unwrap_err().to_string().contains("1 truth file(s) for 2 cloud frame(s)"));
         let empty = dir.path().join("empty.csv");
         std::fs::write(&empty, "x,y,z\n").unwrap();
         assert!(input.read_cloud(&empty).is_err());
         std::fs::write(&plain, "label,x_mm,y_mm,z_mm\nT,1,2,3\n").unwrap();
         assert_eq!(read_targets(&plain, LengthUnit::Metre).unwrap(), [[1e-3, 2e-3, 3e-3]], "the named unit wins");
-        assert_eq!(targets_frame(&TargetsSpec::File(ras)).unwrap(), Some(Frame::Ras));
     }
 }

@@ -153,19 +153,17 @@ pub const STATE_FILE: &str = "prepare.json";
 /// The steps, in order.
 pub const STEPS: [&str; 7] = ["organ", "scenarios", "dataset", "model", "evaluation", "validation", "report"];
 
-/// What a preparation tells its user as it goes.
-pub trait Progress: Sync {
+/// What a preparation tells its user as it goes: the steps as they start, on top of the lines of
+/// what each step did and the advance of its dataset's draws and its training
+/// ([`learn::Progress`]).
+pub trait PrepareProgress: learn::Progress {
     /// A step starts (`index` of [`STEPS`]).
     fn step(&self, index: usize, name: &str);
-    /// A line of what a step did.
-    fn line(&self, text: &str);
-    /// The dataset's draws: done of total.
-    fn samples(&self, done: u64, total: u64);
 }
 
 /// Prepares the organ of `options` into `dir` (see the module documentation); resumes after the
 /// steps already done there. Returns the record of every step.
-pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn Progress) -> Result<PrepareState> {
+pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgress) -> Result<PrepareState> {
     let options = absolute(options)?;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let state_path = dir.join(STATE_FILE);
@@ -196,7 +194,7 @@ pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn Progress) ->
             0 => organ_step(&options, dir)?,
             1 => scenarios_step(&options, dir)?,
             2 => dataset_step(dir, progress)?,
-            3 => model_step(&options, dir)?,
+            3 => model_step(&options, dir, progress)?,
             4 => evaluation_step(dir)?,
             5 => validation_step(&options, dir)?,
             _ => report_step(&state, dir)?,
@@ -475,12 +473,11 @@ fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
 }
 
 /// Step 3: the FEM draws.
-fn dataset_step(dir: &Path, progress: &dyn Progress) -> Result<Vec<String>> {
+fn dataset_step(dir: &Path, progress: &dyn learn::Progress) -> Result<Vec<String>> {
     let (scenario, base) = scenario::DatasetScenario::load(&dir.join("dataset.toml"))?;
     let generator = scenario.generator(&base)?;
     let start = Instant::now();
-    let manifest =
-        generator.run(&dir.join("dataset"), &scenario.name, None, &|done, total| progress.samples(done, total))?;
+    let manifest = generator.run(&dir.join("dataset"), &scenario.name, None, progress)?;
     let seconds = start.elapsed().as_secs_f64();
     Ok(vec![format!(
         "dataset: {} draws solved, {} failed (reasons in dataset/manifest.json), {:.0} ms per draw",
@@ -492,7 +489,7 @@ fn dataset_step(dir: &Path, progress: &dyn Progress) -> Result<Vec<String>> {
 
 /// Step 4: the learned model, on the split `augsim train` makes (the last 20 % held out for the
 /// test, the 10 % before them for validation).
-fn model_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
+fn model_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::Progress) -> Result<Vec<String>> {
     let dataset = learn::Dataset::open(&dir.join("dataset"))?;
     let all = dataset.load_all()?;
     let (split, [train, validation, test]) = learn::SplitPolicy::default().apply(&all)?;
@@ -532,13 +529,12 @@ fn model_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
             let train_options = learn::TrainOptions {
                 out_dir: out,
                 resume: true,
-                progress: true,
                 stop_after: None,
                 placement: manifest.placement(),
                 test: split.test,
                 compute: learn::Compute::Cpu,
             };
-            let outcome = learn::train(&train, &validation, &init, &config, &train_options)?;
+            let outcome = learn::train(&train, &validation, &init, &config, &train_options, progress)?;
             Ok(vec![split_line, format!("model: U-Net, {} steps", outcome.iterations_done)])
         }
     }

@@ -90,6 +90,19 @@ pub struct RegistrationChoice {
     pub rigid: bool,
 }
 
+impl TargetsSpec {
+    /// The frame that a targets file names (a patient's, as `augsim prepare` writes it, or the
+    /// user's), `None` for other targets: the frame the registration works in.
+    pub fn frame(&self) -> Result<Option<mesh::io::Frame>> {
+        match self {
+            TargetsSpec::File(path) => Ok(mesh::io::points::read_points(path)
+                .with_context(|| format!("the targets of {}", path.display()))?
+                .frame),
+            TargetsSpec::Regions | TargetsSpec::Points(_) => Ok(None),
+        }
+    }
+}
+
 /// A targets file argument.
 fn targets_file(path: &str) -> Result<TargetsSpec, String> {
     Ok(TargetsSpec::File(PathBuf::from(path)))
@@ -316,6 +329,20 @@ mod tests {
 
     fn fem() -> RegistrationChoice {
         RegistrationChoice { fem: Some("beam".into()), ..RegistrationChoice::default() }
+    }
+
+    #[test]
+    fn a_targets_file_names_the_working_frame() {
+        let dir = tempfile::tempdir().unwrap();
+        let ras = dir.path().join("targets.mrk.json");
+        std::fs::write(
+            &ras,
+            r#"{"markups": [{"coordinateSystem": "RAS", "controlPoints": [{"label": "t", "position": [1, 2, 3]}]}]}"#,
+        )
+        .unwrap();
+        assert_eq!(TargetsSpec::File(ras).frame().unwrap(), Some(mesh::io::Frame::Ras));
+        assert_eq!(TargetsSpec::Regions.frame().unwrap(), None);
+        assert!(TargetsSpec::File(dir.path().join("missing.csv")).frame().is_err());
     }
 
     #[test]

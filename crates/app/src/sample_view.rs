@@ -207,6 +207,42 @@ pub fn organ_mesh(
     }
 }
 
+/// The viewer's scene of sample `index` (default: the first held out from the model) of the
+/// dataset in `dataset_dir` on the organ ([`organ_mesh`] of `mesh` or `scenario`), the model of
+/// `model_path` predicting it; with the lines that describe it.
+pub fn dataset_sample_scene(
+    model_path: &std::path::Path,
+    dataset_dir: &std::path::Path,
+    index: Option<u64>,
+    mesh: Option<&std::path::Path>,
+    scenario: Option<&std::path::Path>,
+) -> anyhow::Result<(Scene, Vec<String>)> {
+    use anyhow::Context;
+    let model = Model::load(model_path)?;
+    let dataset = Dataset::open(dataset_dir)?;
+    let manifest = dataset.manifest();
+    let (organ, from) = organ_mesh(mesh, scenario, manifest)?;
+    let index = match index {
+        Some(i) => i,
+        None => first_held_out(&model, manifest)
+            .with_context(|| format!("{} holds no sample held out from the model", dataset_dir.display()))?,
+    };
+    let sample = sample_on_mesh(&model, &dataset, index, &organ)?;
+    let scene =
+        sample.scene(&organ, &format!("{}, sample {index}: U-Net prediction vs FEM reference", manifest.scenario));
+    let mut lines = vec![
+        format!("sample     {index} of {} ({} sample of this model)", dataset_dir.display(), sample.role),
+        format!(
+            "mesh       {} nodes, {} surface triangles ({})",
+            organ.num_nodes(),
+            scene.triangles.len(),
+            from.display()
+        ),
+    ];
+    lines.extend(scene.notes.iter().skip(1).map(|note| format!("           {note}")));
+    Ok((scene, lines))
+}
+
 /// The scene of a mesh file: its boundary at rest and moved by each 3-component point field (m),
 /// coloured by the error when it has `reference` and `prediction` fields (as `eval` writes), else
 /// by the first one's magnitude (mm); with the names of those fields.

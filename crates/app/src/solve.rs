@@ -49,6 +49,57 @@ impl Solved {
     }
 }
 
+impl Solved {
+    /// The solve in words: scenario, mesh, material, system, solver, largest displacement and
+    /// time.
+    pub fn lines(&self) -> Vec<String> {
+        let (scenario, solver, sol) = (&self.scenario, &self.solver, &self.solution);
+        let (geo, p) = (solver.geometry(), solver.problem());
+        let (free, nnz) = solver.system_size();
+        let t = sol.timings;
+        let about = if scenario.description.is_empty() { String::new() } else { format!(": {}", scenario.description) };
+        vec![
+            format!("scenario   {}{about}", scenario.name),
+            format!(
+                "mesh       {} nodes, {} {} cells, {:.4e} m³",
+                p.mesh.num_nodes(),
+                p.mesh.cells.len(),
+                p.mesh.cells.kind_name(),
+                p.mesh.volume()
+            ),
+            format!(
+                "material   {:?} ({:?} elements), E = {} Pa, nu = {}",
+                p.material.law, geo.formulation, p.material.young, p.material.poisson
+            ),
+            format!(
+                "system     {} dofs, {free} free, {nnz} stored non-zeros, {} ordering",
+                p.num_dofs(),
+                solver.ordering().name()
+            ),
+            format!(
+                "solver     {} iterations, {} factorisation(s), {} load step(s), final relative residual {:.2e}",
+                sol.iterations,
+                sol.factorizations,
+                sol.load_steps,
+                sol.residuals.last().copied().unwrap_or(0.0)
+            ),
+            format!("max |u|    {:.4e} m", post::max_displacement(&sol.u)),
+            format!(
+                "time       {:.1} ms (assembly {:.1}, factorisation {:.1}, solve {:.1})",
+                ms(t.total),
+                ms(t.assembly),
+                ms(t.factorization),
+                ms(t.solve)
+            ),
+        ]
+    }
+}
+
+/// Milliseconds of a duration.
+pub fn ms(d: std::time::Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -66,5 +117,9 @@ mod tests {
         let out = dir.path().join("sub/beam.vtu");
         solved.write(&out).unwrap();
         assert_eq!(mesh::io::read_mesh(&out).unwrap().num_nodes(), mesh.num_nodes());
+        let lines = solved.lines();
+        assert!(lines[0].starts_with("scenario   beam"), "{lines:?}");
+        assert!(lines[1].starts_with(&format!("mesh       {} nodes", mesh.num_nodes())), "{lines:?}");
+        assert!(lines.iter().any(|l| l.starts_with("max |u|    ")) && lines.len() == 7, "{lines:?}");
     }
 }

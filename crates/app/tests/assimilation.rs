@@ -29,10 +29,20 @@ fn scenario(dir: &Path, name: &str, text: &str) -> (AssimilationScenario, PathBu
 
 fn run(dir: &Path, text: &str, files: Option<&ObservationFiles>, out: &str) -> (Report, Vec<Vec<u64>>) {
     let (sc, base) = scenario(dir, &format!("{out}.toml"), text);
+    let sigma = sc.filter.sigma_points;
     let experiment = Experiment::prepare(sc, &base, files).unwrap();
-    let mut calls = 0;
-    let report = experiment.run(&dir.join(out), |_| calls += 1).unwrap();
-    assert_eq!(calls, report.iterations);
+    let setup = experiment.setup().lines(sigma, files);
+    assert!(setup[0].starts_with("mesh ") && setup[1].contains(&format!("{sigma} sigma points")), "{setup:?}");
+    let source = if files.is_some() { "tracks " } else { "reference " };
+    assert!(setup.len() == 3 && setup[2].starts_with(source), "{setup:?}");
+    let calls = std::sync::atomic::AtomicUsize::new(0);
+    let count = |done: u64, total: u64, note: &str| {
+        let call = calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        assert_eq!(done, call as u64);
+        assert!(done <= total && !note.is_empty());
+    };
+    let report = experiment.run(&dir.join(out), &count).unwrap();
+    assert_eq!(calls.into_inner(), report.iterations);
     let trace: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join(out).join("trace.json")).unwrap()).unwrap();
     let means = trace["records"]
@@ -62,6 +72,10 @@ fn tracks_written_by_a_synthetic_run_give_the_same_estimate() {
     assert!(synthetic.synthetic);
     let young = synthetic.young.as_ref().unwrap();
     assert!((young.mean - 5000.0).abs() < 0.01 * 5000.0, "{young:?}");
+    let lines = synthetic.lines();
+    assert!(lines[0].starts_with(&format!("filter       {} iterations", synthetic.iterations)), "{lines:?}");
+    assert!(lines.iter().any(|l| l.starts_with("young        μ = ") && l.contains("(truth 5000 Pa")), "{lines:?}");
+    assert!(lines.last().unwrap().starts_with("wall time"), "{lines:?}");
     // The estimated deformation of steps 4 and 8 as a ParaView series.
     assert_eq!(synthetic.deformation_frames, 2);
     let pvd = std::fs::read_to_string(dir.path().join("synthetic/deformation.pvd")).unwrap();
@@ -110,7 +124,7 @@ fn tracks_written_by_a_synthetic_run_give_the_same_estimate() {
     let (sc, base) = scenario(dir.path(), "occluded.toml", &beam);
     let experiment = Experiment::prepare(sc, &base, Some(&split)).unwrap();
     assert_eq!(experiment.setup().occluded, 1);
-    let report = experiment.run(&dir.path().join("occluded"), |_| ()).unwrap();
+    let report = experiment.run(&dir.path().join("occluded"), &learn::Silent).unwrap();
     let (e, e0) = (report.young.unwrap().mean, young.mean);
     assert!(e != e0 && (e - e0).abs() < 1e-3 * e0, "{e} vs {e0}");
 }
@@ -128,14 +142,14 @@ fn tool_tracks_as_controls_reproduce_the_tool() {
     let (sc, base) = scenario(dir.path(), "controlled.toml", &beam);
     let experiment = Experiment::prepare(sc, &base, Some(&files(&tracks, true))).unwrap();
     assert_eq!(experiment.setup().control_nodes, 6);
-    let read = experiment.run(&dir.path().join("controlled"), |_| ()).unwrap();
+    let read = experiment.run(&dir.path().join("controlled"), &learn::Silent).unwrap();
     let (a, b) = (synthetic.young.unwrap(), read.young.unwrap());
     assert!((a.mean - b.mean).abs() < 1e-9 * a.mean && (a.std - b.std).abs() < 1e-9 * a.std, "{a:?} vs {b:?}");
     // Without the controls the beam moves differently and the estimate is off.
     let (sc, base) = scenario(dir.path(), "uncontrolled.toml", &beam);
     let report = Experiment::prepare(sc, &base, Some(&files(&tracks, false)))
         .unwrap()
-        .run(&dir.path().join("uncontrolled"), |_| ())
+        .run(&dir.path().join("uncontrolled"), &learn::Silent)
         .unwrap();
     assert!((report.young.unwrap().mean - a.mean).abs() > 1e-3 * a.mean);
 }
@@ -225,7 +239,7 @@ fn star_sigma_points_from_the_scenario() {
     let (sc, base) = scenario(dir.path(), "star.toml", &star_text);
     let experiment = Experiment::prepare(sc, &base, None).unwrap();
     assert_eq!((experiment.setup().parameters, experiment.setup().sigma_points), (1, 3));
-    let star = experiment.run(&dir.path().join("star"), |_| ()).unwrap();
+    let star = experiment.run(&dir.path().join("star"), &learn::Silent).unwrap();
     assert_eq!((star.sigma_points, star.sigma_point_set), (3, SigmaPointSet::Star));
     let summary = std::fs::read_to_string(dir.path().join("star/summary.json")).unwrap();
     assert!(summary.contains("\"sigma_point_set\": \"star\""), "{summary}");
@@ -293,7 +307,7 @@ fn discrepancy_from_the_scenario_file() {
         let path = dir.path().join(format!("{name}.toml"));
         std::fs::write(&path, text).unwrap();
         let (sc, base) = AssimilationScenario::load(&path).unwrap();
-        Experiment::prepare(sc, &base, None).unwrap().run(&dir.path().join(name), |_| ())
+        Experiment::prepare(sc, &base, None).unwrap().run(&dir.path().join(name), &learn::Silent)
     };
     let plain = run("plain", &beam).unwrap().young.unwrap();
     let honest = run("honest", &format!("{beam}[filter]\ndiscrepancy = \"systematic\"\n")).unwrap().young.unwrap();

@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
-use augsim_app::prepare::{prepare, CameraAt, PrepareOptions, Progress, STATE_FILE, STEPS};
+use augsim_app::prepare::{prepare, CameraAt, PrepareOptions, PrepareProgress, STATE_FILE, STEPS};
 use augsim_app::registration::{PatientMethod, RegistrationSpec};
 use mesh::io::points::{read_points, write_points, LabelledPoints};
 use mesh::io::Frame;
@@ -19,12 +19,15 @@ const ORIGIN: Point = [-120.0, 85.0, -310.0];
 
 struct Quiet;
 
-impl Progress for Quiet {
-    fn step(&self, _: usize, _: &str) {}
+impl learn::Progress for Quiet {
+    fn advance(&self, _: u64, _: u64, _: &str) {}
     fn line(&self, text: &str) {
         println!("{text}");
     }
-    fn samples(&self, _: u64, _: u64) {}
+}
+
+impl PrepareProgress for Quiet {
+    fn step(&self, _: usize, _: &str) {}
 }
 
 fn write_csv(path: &Path, points: &[Point]) {

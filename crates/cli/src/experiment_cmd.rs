@@ -6,6 +6,8 @@ use anyhow::{bail, Result};
 use clap::Args;
 use experiment::{Name, Size};
 
+use crate::bar::Bar;
+
 /// Arguments of `augsim experiment`.
 #[derive(Debug, Args)]
 pub struct ExperimentArgs {
@@ -38,15 +40,11 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
     let names = if args.name == "all" { Name::ALL.to_vec() } else { vec![Name::parse(&args.name)?] };
     for name in names {
         println!("== {} ({})", name.as_str(), args.size);
-        let result = experiment::run(name, size, &args.out, &|message| println!("   {message}"))?;
-        println!("   {}: {:.0} s", result.name.title(), result.seconds);
-        let labels: Vec<String> = result.rows.iter().map(|r| r.label()).collect();
-        let width = labels.iter().map(|l| l.chars().count()).max().unwrap_or(0);
-        for (row, label) in result.rows.iter().zip(&labels) {
-            let published =
-                if row.published.is_empty() { String::new() } else { format!("   (published: {})", row.published) };
-            println!("   {label:<width$}  {}{published}", row.ours);
-        }
+        let bar = Bar::new("steps", "   ");
+        let result = experiment::run(name, size, &args.out, &bar);
+        bar.finish();
+        let result = result?;
+        result.lines().iter().for_each(|l| println!("   {l}"));
     }
     let results = experiment::load_all(&args.out)?;
     let [md, html] = experiment::report::write(&args.out, &results)?;

@@ -3,19 +3,20 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use app::evaluation::{evaluate_held_out, write_evaluation};
+use app::evaluation::{evaluate_held_out, prediction_on_mesh, write_evaluation};
+use app::training::{fit_rom, rom_lines};
 
-use indicatif::{ProgressBar, ProgressStyle};
 use learn::rom::RomConfig;
 use learn::LearnedModel;
 use learn::{
     Compute, Corruption, Dataset, DatasetPart, Initialization, Method, Model, PredictInput, Sparsity, SplitPolicy,
     TrainConfig, TrainOptions, UNetConfig,
 };
-use mesh::io::Field;
 use mesh::length::mm;
 
 use scenario::DatasetScenario;
+
+use crate::bar::Bar;
 
 /// `augsim generate`.
 pub fn generate(path: &Path, out: Option<&Path>, part: Option<&str>, samples: Option<usize>) -> Result<()> {
@@ -40,16 +41,10 @@ pub fn generate(path: &Path, out: Option<&Path>, part: Option<&str>, samples: Op
         None => PathBuf::from(format!("out/{}", scenario.name)),
         Some(p) => PathBuf::from(format!("out/{}.part{}of{}", scenario.name, p.index, p.count)),
     });
-    let bar = ProgressBar::new(0).with_style(
-        ProgressStyle::with_template("{spinner} {bar:40} {pos}/{len} samples, {per_sec}, eta {eta}")
-            .expect("valid template"),
-    );
+    let bar = Bar::new("samples", "");
     let start = std::time::Instant::now();
-    let manifest = generator.run(&out, &scenario.name, part, &|done, total| {
-        bar.set_length(total);
-        bar.set_position(done);
-    })?;
-    bar.finish_and_clear();
+    let manifest = generator.run(&out, &scenario.name, part, &bar)?;
+    bar.finish();
     let secs = start.elapsed().as_secs_f64();
     println!("samples    {} written, {} failed (reasons in the manifest)", manifest.num_samples, manifest.failed.len());
     println!("time       {:.1} s ({:.1} ms per sample)", secs, 1e3 * secs / manifest.num_samples.max(1) as f64);
@@ -271,13 +266,15 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let options = TrainOptions {
         out_dir: args.out.clone(),
         resume: !args.restart,
-        progress: true,
         stop_after: None,
         placement: dataset.manifest().placement(),
         test: split.test,
         compute,
     };
-    let outcome = learn::train(&train, &validation, &init, &config, &options)?;
+    let bar = Bar::new("steps", "");
+    let outcome = learn::train(&train, &validation, &init, &config, &options, &bar);
+    bar.finish();
+    let outcome = outcome?;
     let curve = args.out.join(app::curve::CURVE_PNG);
     app::curve::plot_learning_curve(&curve, &outcome.curve)?;
     println!("steps      {} ({:.3} s per step)", outcome.iterations_done, outcome.mean_step_seconds);
@@ -289,12 +286,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
 }
 
 /// `augsim train --method rom`.
-fn train_rom(
-    args: &TrainArgs,
-    dataset: &Dataset,
-    split: learn::Split,
-    [train, validation]: [learn::Samples; 2],
-) -> Result<()> {
+fn train_rom(args: &TrainArgs, dataset: &Dataset, split: learn::Split, samples: [learn::Samples; 2]) -> Result<()> {
     let config = RomConfig {
         max_modes: args.modes,
         max_inducing: args.inducing,
@@ -303,47 +295,8 @@ fn train_rom(
         seed: args.seed,
         ..RomConfig::default()
     };
-    let manifest = dataset.manifest();
-    let mut prior = match &args.prior {
-        Some(path) => {
-            let (scenario, dir) = DatasetScenario::load(path)?;
-            Some(scenario.rest_response(&dir, manifest)?)
-        }
-        None => None,
-    };
-    let context = learn::rom::Context::of_dataset(manifest, split);
-    let (model, report) = learn::rom::fit(&train, &validation, &config, context, prior.as_mut())?;
-    model.save(&args.out)?;
-    let info = &model.info;
-    println!(
-        "basis      {} modes ({:.6} of the training targets' variance); input: {} {}",
-        info.modes,
-        report.energy,
-        info.input_components,
-        if info.prior.is_some() { "modal coefficients of the prior" } else { "principal components" }
-    );
-    if let Some(prior) = &info.prior {
-        println!("prior      {prior}");
-    }
-    println!(
-        "regression {} kernel, length scale {:.4e} {}, noise {:.0e}, features scaled by their spread^-{}; {} inducing points ({}); chosen on validation",
-        info.kernel.name(),
-        info.length_scale,
-        if info.prior.is_some() { &model.target_unit } else { &model.input_unit },
-        info.noise,
-        info.feature_exponent,
-        info.inducing,
-        if info.exact { "exact Gaussian process" } else { "Nyström" }
-    );
-    println!(
-        "validation mean e = {:.4} mm (max {:.4} mm); the basis alone {:.4} mm; uncertainty scaled by {:.3} for {:.1} % within 2σ",
-        mm(report.val_mean_error),
-        mm(report.val_max_error),
-        mm(report.val_projection_error),
-        info.calibration,
-        report.val_coverage * 100.0
-    );
-    println!("time       {:.1} s", info.seconds);
+    let (model, report) = fit_rom(dataset, split, samples, &config, args.prior.as_deref(), &args.out)?;
+    rom_lines(&model, &report).iter().for_each(|l| println!("{l}"));
     println!("wrote      {}", args.out.join(learn::MODEL_FILE).display());
     Ok(())
 }
@@ -384,34 +337,7 @@ fn evaluate_model(
 ) -> Result<()> {
     let corruption = corruption.corruption();
     let e = evaluate_held_out(model, dataset, dataset_dir, &corruption, compute)?;
-    println!(
-        "held out   {} of {} samples ({})",
-        e.test.len(),
-        e.total,
-        if e.recorded_split {
-            "the test split recorded in the model"
-        } else {
-            "those no run behind the model trained or validated on"
-        }
-    );
-    let s = &e.report.stats;
-    println!("samples    {}", e.test.len());
-    println!("mean e     {:.4e} m ({:.3} mm)", s.mean, mm(s.mean));
-    println!("std e      {:.4e} m ({:.3} mm)", s.std, mm(s.std));
-    println!("max e      {:.4e} m ({:.3} mm), sample index {}", s.max, mm(s.max), e.report.worst_index());
-    if let Some((markers, t)) = &e.markers {
-        println!(
-            "TRE        {markers} markers: mean {:.3} mm, std {:.3} mm, max {:.3} mm (no-motion baseline: mean {:.3} mm, max {:.3} mm)",
-            mm(t.errors.mean),
-            mm(t.errors.std),
-            mm(t.errors.max),
-            mm(t.no_motion.mean),
-            mm(t.no_motion.max)
-        );
-    }
-    if let Some(c) = e.coverage {
-        println!("2σ         {:.1} % of the nodes' errors within twice the predicted standard deviation", c * 100.0);
-    }
+    e.lines().iter().for_each(|l| println!("{l}"));
     let [errors, summary, vtu] = write_evaluation(out, model, model_path, dataset, &e, compute)?;
     println!("wrote      {}, {}, {}", errors.display(), summary.display(), vtu.display());
     Ok(())
@@ -463,15 +389,8 @@ pub fn predict(
     );
     println!("wrote      {}", output.display());
     if let Some(mesh_path) = mesh_path {
-        let organ = mesh::io::read_mesh(mesh_path).with_context(|| format!("reading {}", mesh_path.display()))?;
-        let u = model
-            .field_on_mesh(&prediction, &organ)
-            .with_context(|| format!("{} on {}", model_path.display(), mesh_path.display()))?;
-        let max = u.chunks(3).map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()).fold(0.0, f64::max);
         let vtu = output.with_extension("vtu");
-        mesh::io::write_mesh(&vtu, &organ, &[Field::point("displacement", 3, u)])
-            .with_context(|| format!("writing {}", vtu.display()))?;
-        println!("mesh       {} nodes, max |u| {:.3} mm", organ.num_nodes(), mm(max));
+        println!("{}", prediction_on_mesh(&model, model_path, &prediction, mesh_path, &vtu)?);
         println!("wrote      {}", vtu.display());
     }
     Ok(())

@@ -1,6 +1,7 @@
 //! `augsim`: data-driven simulation for augmented surgery.
 
 mod assimilate;
+mod bar;
 mod bench;
 mod experiment_cmd;
 mod learn_cmd;
@@ -69,7 +70,7 @@ enum Command {
     /// ROUKF identification of Young's modulus and/or boundary springs from tracked surface points (synthetic,
     /// or CSV track files); writes traces (CSV, JSON), the estimated deformation (.pvd), assessment errors and
     /// PNG plots.
-    Assimilate(assimilate::AssimilateArgs),
+    Assimilate(app::assimilation::AssimilationChoice),
     /// Generate a FEM dataset (random loads → grid input/target pairs); resumable, splittable.
     Generate {
         /// Dataset scenario: a TOML file, or the name of a built-in one (e.g. liver_forces).

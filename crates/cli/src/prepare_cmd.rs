@@ -4,9 +4,10 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
-use app::prepare::{prepare, CameraAt, PrepareOptions, Progress, STEPS};
-use indicatif::{ProgressBar, ProgressStyle};
+use anyhow::Result;
+use app::prepare::{prepare, CameraAt, PrepareOptions, PrepareProgress, STEPS};
+
+use crate::bar::Bar;
 
 /// Arguments of `augsim prepare`.
 #[derive(clap::Args)]
@@ -63,24 +64,26 @@ fn parse_camera(text: &str) -> Result<CameraAt, String> {
     <[f64; 3]>::try_from(values).map(CameraAt::Point).map_err(|v| format!("expected X,Y,Z, got {} values", v.len()))
 }
 
-/// Prints the steps, with a bar and the time left over the dataset's draws.
+/// Prints the steps, with a bar and the time left over the dataset's draws and the training.
 struct Printer {
     start: Instant,
-    bar: ProgressBar,
+    bar: Bar,
 }
 
-impl Progress for Printer {
-    fn step(&self, index: usize, name: &str) {
-        println!("step {}/{} {name} (at {:.0} s)", index + 1, STEPS.len(), self.start.elapsed().as_secs_f64());
+impl learn::Progress for Printer {
+    fn advance(&self, done: u64, total: u64, note: &str) {
+        self.bar.advance(done, total, note);
     }
 
     fn line(&self, text: &str) {
-        self.bar.suspend(|| println!("           {text}"));
+        self.bar.line(text);
     }
+}
 
-    fn samples(&self, done: u64, total: u64) {
-        self.bar.set_length(total);
-        self.bar.set_position(done);
+impl PrepareProgress for Printer {
+    fn step(&self, index: usize, name: &str) {
+        let at = self.start.elapsed().as_secs_f64();
+        self.bar.print(&format!("step {}/{} {name} (at {at:.0} s)", index + 1, STEPS.len()));
     }
 }
 
@@ -94,13 +97,9 @@ pub fn run(args: &PrepareArgs) -> Result<()> {
     options.samples = args.samples;
     options.method = args.method;
     options.tets = args.tets;
-    let bar = ProgressBar::new(0).with_style(
-        ProgressStyle::with_template("           {bar:40} {pos}/{len} draws, {per_sec}, {eta} left")
-            .context("progress template")?,
-    );
-    let printer = Printer { start: Instant::now(), bar };
+    let printer = Printer { start: Instant::now(), bar: Bar::new("", "           ") };
     let state = prepare(&options, &args.out, &printer)?;
-    printer.bar.finish_and_clear();
+    printer.bar.finish();
     let total: f64 = state.steps.iter().map(|s| s.seconds).sum();
     println!("time       {total:.0} s over the steps ({} s this run)", printer.start.elapsed().as_secs());
     println!("wrote      {} (report.md; register with `augsim register CLOUD --patient {0}`)", args.out.display());

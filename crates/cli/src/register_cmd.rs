@@ -5,16 +5,15 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use app::case::{ar_scenario, case_methods, compare, comparison_models, synthetic_case, Network, Registered};
-use app::output::{comparison_rows, run_dir, write_case, write_comparison, RunWriter};
-use app::points::{targets_frame, PointInput};
+use app::output::{run_dir, write_case, write_comparison, RunWriter};
+use app::points::PointInput;
+use app::printout::{case_files_lines, case_lines, comparison_table, frame_line, organ_line, rigid_lines, run_lines};
 use app::registration::RegistrationChoice;
-use mesh::length::{mm, LengthUnit};
-use mesh::Point;
+use mesh::length::LengthUnit;
 use register::cloud::read_frames;
-use register::{Organ, RigidOptions, RigidResult, RigidTransform};
+use register::RigidOptions;
 use scenario::registration::{MethodKind, BUILTIN_CASE};
 
-use crate::solve::ms;
 use scenario::{CaseScenario, DatasetScenario};
 
 /// Arguments of `augsim register`.
@@ -81,20 +80,11 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     let cloud_path = args.cloud.clone().context("a cloud is required")?;
     let spec = args.registration.spec()?;
     let mut registration = spec.build()?;
-    let mut input = PointInput::new(targets_frame(&spec.targets)?, LengthUnit::Metre, args.registration.units);
+    let mut input = PointInput::new(spec.targets.frame()?, LengthUnit::Metre, args.registration.units);
     let frames = read_frames(&cloud_path)?;
-    let truths: Option<Vec<Vec<Point>>> = match &args.truth {
-        None => None,
-        Some(p) => {
-            let files = if p.is_dir() { read_frames(p)? } else { vec![p.clone()] };
-            if files.len() != frames.len() {
-                bail!("{} truth file(s) for {} cloud frame(s)", files.len(), frames.len());
-            }
-            Some(files.iter().map(|f| Ok(input.read(f)?.points)).collect::<Result<Vec<_>>>()?)
-        }
-    };
+    let truths = args.truth.as_ref().map(|p| input.read_truths(p, frames.len())).transpose()?;
     println!("method     {}", registration.method());
-    print_organ(registration.organ(), registration.targets().len());
+    println!("{}", organ_line(registration.organ(), registration.targets().len()));
     for w in registration.warnings() {
         eprintln!("warning    {w}");
     }
@@ -104,22 +94,11 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     let mut rigid_printed = false;
     let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, organ, o| {
         if let (Some(rigid), false) = (&o.rigid, rigid_printed) {
-            print_rigid(rigid, None);
+            print_lines(&rigid_lines(rigid, None));
             rigid_printed = true;
         }
         let row = writer.frame(i, frames[i].display().to_string(), organ, o).map_err(to_register_error)?;
-        println!(
-            "frame {i:<4} {} points ({} matched), {} iterations, surface residual {:.2} mm, {:.1} ms{}",
-            row.points,
-            row.inliers,
-            row.iterations,
-            row.surface_residual_mm,
-            row.time_ms,
-            row.tre_mean_mm.map_or(String::new(), |t| format!(
-                ", TRE mean {t:.2} mm, max {:.2} mm",
-                row.tre_max_mm.unwrap_or(0.0)
-            ))
-        );
+        println!("{}", frame_line(i, row));
         for w in &row.warnings {
             eprintln!("warning    frame {i}: {w}");
         }
@@ -127,18 +106,9 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     })?;
     let labels = spec.target_labels()?;
     let summary = writer.finish(registration.method(), registration.targets(), &labels, input.frame, &outcomes)?;
-    if let Some(sigma) = outcomes.last().and_then(|o| o.target_std.as_ref()) {
-        println!(
-            "sigma      predicted at the targets: mean {:.2} mm, max {:.2} mm (targets.csv, column sigma_m)",
-            mm(mesh::stats::mean(sigma)),
-            mm(mesh::stats::max(sigma))
-        );
-    }
-    if let (Some(t), Some(m), Some(r)) = (summary.tre_mean_mm, summary.tre_max_mm, summary.no_deformation_tre_mean_mm) {
-        println!("TRE        mean {t:.2} mm, max {m:.2} mm (without deformation: mean {r:.2} mm)");
-    }
+    print_lines(&run_lines(&outcomes, &summary));
     println!(
-        "wrote      {} ({}, targets.csv, summary.json)",
+        "wrote      {} ({}, targets.csv, summary.json; for 3D Slicer: organ_deformed.vtk, targets.mrk.json)",
         out.display(),
         if sequence { "organ.pvd" } else { "organ.vtu" }
     );
@@ -150,42 +120,9 @@ fn to_register_error(e: anyhow::Error) -> register::RegisterError {
     register::RegisterError::Invalid(format!("{e:#}"))
 }
 
-/// The rigid alignment's line, with its error against `truth` (the true organ → cloud
-/// transform) when known.
-fn print_rigid(r: &RigidResult, truth: Option<&RigidTransform>) {
-    let t = r.organ_to_cloud();
-    println!(
-        "rigid      ICP: organ -> cloud rotation {:.2} deg, translation {:.2} mm; {} iterations{}, {} of {} points \
-         kept, rms {:.2} mm, {:.1} ms",
-        t.angle().to_degrees(),
-        mm(t.translation_norm()),
-        r.iterations,
-        if r.converged { "" } else { " (not converged)" },
-        r.kept,
-        r.points,
-        mm(r.rms),
-        ms(r.time)
-    );
-    if let Some(truth) = truth {
-        let (angle, shift) = t.error_to(truth);
-        println!(
-            "           against the case's true misalignment ({:.2} deg, {:.2} mm): {:.2} deg, {:.2} mm off",
-            truth.angle().to_degrees(),
-            mm(truth.translation_norm()),
-            angle.to_degrees(),
-            mm(shift)
-        );
-    }
-}
-
-fn print_organ(organ: &Organ, targets: usize) {
-    println!(
-        "organ      {} nodes, {} {} cells; surface of {} triangles; {targets} targets",
-        organ.mesh().num_nodes(),
-        organ.mesh().cells.len(),
-        organ.mesh().cells.kind_name(),
-        organ.surface().triangles.len(),
-    );
+/// Prints lines built by the application layer.
+fn print_lines(lines: &[String]) {
+    lines.iter().for_each(|l| println!("{l}"));
 }
 
 /// The comparison case of `--demo` (the built-in scenario) or `--case FILE`, with the command
@@ -225,50 +162,11 @@ fn comparison_case(args: &RegisterArgs) -> Result<CaseScenario> {
 /// comparison.
 fn demo(args: &RegisterArgs, out: &Path) -> Result<()> {
     let scenario = comparison_case(args)?;
-    let (t, c, m) = (&scenario.truth, &scenario.camera, &scenario.misalignment);
-    println!("case       {}: {}", scenario.name, scenario.description);
-    println!(
-        "truth      {:?} phantom (E = {} kPa, nu = {}) of {}, fixed on `{}`, {} N along {:?} on `{}`",
-        t.material.law,
-        t.material.young * 1e-3,
-        t.material.poisson,
-        t.mesh_words(),
-        t.fixed,
-        t.force,
-        t.direction,
-        t.load
-    );
-    println!(
-        "camera     along {:?}: {} points on the visible surface, {} mm noise, {} % outliers (seed {})",
-        c.view,
-        c.points,
-        mm(c.noise),
-        c.outliers * 1e2,
-        c.seed
-    );
-    if m.rotation_deg != 0.0 || m.translation_mm != 0.0 {
-        println!(
-            "misaligned camera frame: {} deg about {:?}, then {} mm along {:?}",
-            m.rotation_deg, m.axis, m.translation_mm, m.direction
-        );
-    }
+    print_lines(&case_lines(&scenario));
     let case = synthetic_case(&scenario)?;
     let dir = out.join("case");
     write_case(&dir, &case)?;
-    if case.frames.len() > 1 {
-        let forces: Vec<String> = case.frames.iter().map(|f| format!("{:.2}", f.force)).collect();
-        println!(
-            "frames     {}: forces {} N, each frame warm-started from the previous one",
-            forces.len(),
-            forces.join(" ")
-        );
-        println!(
-            "case       {} (cloud.csv, truth.csv: the peak frame; clouds/, truths/: every frame; targets_rest.csv)",
-            dir.display()
-        );
-    } else {
-        println!("case       {} (cloud.csv, targets_rest.csv, truth.csv)", dir.display());
-    }
+    print_lines(&case_files_lines(&case, &dir));
 
     let wants_network =
         scenario.models.method.iter().any(|m| matches!(m.kind, MethodKind::Network | MethodKind::Hybrid));
@@ -291,23 +189,9 @@ fn demo(args: &RegisterArgs, out: &Path) -> Result<()> {
     let registered: Vec<&Registered> = rows.iter().filter_map(|r| r.result.as_ref().ok()).collect();
     let rigid = registered.first().and_then(|r| r.outcomes[0].rigid.as_ref());
     if let Some(r) = rigid {
-        print_rigid(r, Some(&case.pose));
+        print_lines(&rigid_lines(r, Some(&case.pose)));
     }
-    // The name column fits the longest method name.
-    let width = rows.iter().map(|r| r.method.chars().count()).max().unwrap_or(0).max(28);
-    println!();
-    println!(
-        "{:<width$} {:>14} {:>13} {:>14} {:>10} {:>10} {:>10}",
-        "method", "TRE mean (mm)", "TRE max (mm)", "residual (mm)", "ms/frame", "p95 (ms)", "iterations"
-    );
-    for (name, values, error) in comparison_rows(&rows) {
-        let [t, m, res, time, p95, it] = values.map(|v| v.map_or("-".to_string(), |v| format!("{v:.2}")));
-        if error.is_empty() {
-            println!("{name:<width$} {t:>14} {m:>13} {res:>14} {time:>10} {p95:>10} {it:>10}");
-        } else {
-            println!("{name:<width$} failed: {error}");
-        }
-    }
+    print_lines(&comparison_table(&rows));
     write_comparison(out, &case, &rows)?;
     println!();
     println!(

@@ -5,8 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use app::sample_view::{first_held_out, mesh_file_scene, organ_mesh, sample_on_mesh};
-use learn::{Dataset, Model};
+use app::sample_view::{dataset_sample_scene, mesh_file_scene};
 use plot::viewer::Scene;
 
 /// Options of `augsim view`.
@@ -43,7 +42,12 @@ pub struct ViewArgs {
 pub fn run(args: &ViewArgs) -> Result<()> {
     let scene = match (&args.vtu, &args.model, &args.dataset) {
         (Some(file), _, _) => file_scene(file)?,
-        (None, Some(model), Some(dataset)) => sample_scene(args, model, dataset)?,
+        (None, Some(model), Some(dataset)) => {
+            let (scene, lines) =
+                dataset_sample_scene(model, dataset, args.sample, args.mesh.as_deref(), args.scenario.as_deref())?;
+            lines.iter().for_each(|l| println!("{l}"));
+            scene
+        }
         _ => bail!("give --model and --dataset (a dataset sample), or --vtu FILE (a mesh file with displacements)"),
     };
     if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -52,33 +56,6 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     plot::viewer::write_html(&args.out, &scene)?;
     println!("wrote      {} (open it in a browser)", args.out.display());
     Ok(())
-}
-
-/// The scene of a dataset sample with the model's prediction.
-fn sample_scene(args: &ViewArgs, model_path: &Path, dataset_dir: &Path) -> Result<Scene> {
-    let model = Model::load(model_path)?;
-    let dataset = Dataset::open(dataset_dir)?;
-    let manifest = dataset.manifest();
-    let (organ, from) = organ_mesh(args.mesh.as_deref(), args.scenario.as_deref(), manifest)?;
-    let index = match args.sample {
-        Some(i) => i,
-        None => first_held_out(&model, manifest)
-            .with_context(|| format!("{} holds no sample held out from the model", dataset_dir.display()))?,
-    };
-    let sample = sample_on_mesh(&model, &dataset, index, &organ)?;
-    let scene =
-        sample.scene(&organ, &format!("{}, sample {index}: U-Net prediction vs FEM reference", manifest.scenario));
-    println!("sample     {index} of {} ({} sample of this model)", dataset_dir.display(), sample.role);
-    println!(
-        "mesh       {} nodes, {} surface triangles ({})",
-        organ.num_nodes(),
-        scene.triangles.len(),
-        from.display()
-    );
-    for note in scene.notes.iter().skip(1) {
-        println!("           {note}");
-    }
-    Ok(scene)
 }
 
 /// The scene of a mesh file's displacement fields.

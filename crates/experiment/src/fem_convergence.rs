@@ -254,7 +254,7 @@ fn cantilever_study(
     for element in ELEMENTS {
         for &k in levels {
             let cells = [10 * k, k, k];
-            progress(&format!("fem-convergence: {problem}, {} on {}x{}x{}", element.label(), cells[0], k, k));
+            progress.line(&format!("fem-convergence: {problem}, {} on {}x{}x{}", element.label(), cells[0], k, k));
             let (value, dofs, ms) = cantilever(element, cells, poisson)?;
             solved.push((element, format!("{}x{}x{}", cells[0], k, k), value, dofs, ms));
         }
@@ -296,7 +296,7 @@ fn phantom_study(sizes: &[usize], progress: Progress, points: &mut Vec<Convergen
     let mut solved = Vec::new();
     for element in ELEMENTS.into_iter().filter(|e| e.kind != CellKind::Hex8) {
         for (&tets, m) in sizes.iter().zip(&meshes) {
-            progress(&format!("fem-convergence: phantom, {} on {tets} tetrahedra", element.label()));
+            progress.line(&format!("fem-convergence: phantom, {} on {tets} tetrahedra", element.label()));
             let (at, dofs, ms) = phantom(element, m.clone(), &probe_points)?;
             solved.push((element, tets, at, dofs, ms));
         }

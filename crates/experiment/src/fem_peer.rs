@@ -159,7 +159,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     let version = calculix::version()?;
     let mut cases = Vec::new();
     for (k, (description, problem)) in problems(size)?.into_iter().enumerate() {
-        progress(&format!("fem-peer: {description} ({} dofs)", problem.num_dofs()));
+        progress.line(&format!("fem-peer: {description} ({} dofs)", problem.num_dofs()));
         let case_dir = dir.join(format!("case{}", k + 1));
         let peer = calculix::solve(&problem, &case_dir).with_context(|| format!("CalculiX on {description}"))?;
         cases.push(compare(&description, problem, &peer)?);

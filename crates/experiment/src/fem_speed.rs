@@ -374,7 +374,7 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
         Size::Paper => (20, true),
     };
     let cases = measure(runs, large, &mut |c| {
-        progress(&format!(
+        progress.line(&format!(
             "{}: first {:.1} ms, median {:.1} ms, frame {:.1} ms",
             c.name, c.first_ms, c.median_ms, c.frame_ms
         ))

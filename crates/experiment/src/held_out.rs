@@ -311,14 +311,14 @@ impl Cases {
         runs: usize,
         progress: Progress,
     ) -> Result<()> {
-        progress(&format!("simulating the case {}", case.label));
+        progress.line(&format!("simulating the case {}", case.label));
         let scenario = case.apply(base);
         let synthetic = synthetic_case(&scenario)?;
         let moved = mean(&register::target_errors(&synthetic.targets, &synthetic.peak().truth)) * 1e3;
         self.motion.push(moved);
         let mut here = vec![Outcome::default(); methods.len()];
         for run in 0..runs {
-            progress(&format!("registering the case {} ({}/{runs})", case.label, run + 1));
+            progress.line(&format!("registering the case {} ({}/{runs})", case.label, run + 1));
             // Fresh methods per run: each registers from rest, with nothing kept from the last.
             let compared = compare(&synthetic, case_methods(&scenario, networks)?, &scenario.registration);
             for (outcome, c) in here.iter_mut().zip(&compared) {
@@ -355,7 +355,8 @@ impl Cases {
         for (all, o) in self.outcomes.iter_mut().zip(here) {
             all.push(o);
         }
-        progress(&format!("simulating and registering the case {} as a stream ({STREAM_FRAMES} frames)", case.label));
+        progress
+            .line(&format!("simulating and registering the case {} as a stream ({STREAM_FRAMES} frames)", case.label));
         let here = register_stream(&scenario, networks)?;
         // The table of the cases registered as streams: a line per case, a column per method.
         let case_as_stream = format!(

@@ -9,7 +9,7 @@ use filter::Discrepancy;
 use scenario::assimilation::ReferenceSpec;
 use scenario::{AssimilationScenario, MeshSource};
 
-use crate::{fmt, write_scenario, ExperimentResult, Headline, Name, Progress, Row, Size};
+use crate::{fmt, write_scenario, ExperimentResult, Headline, Name, Progress, Row, Size, Tenths};
 
 /// Tetrahedra of the reference phantoms that make the observations (the published liver size for the Young's-modulus experiment;
 /// about 2.6 times the model's for the springs experiment).
@@ -87,12 +87,12 @@ fn assimilate(
         executable_stamp()
     );
     if std::fs::read_to_string(&stamp).is_ok_and(|k| k == key) && cells_file.exists() {
-        progress(&format!(
+        progress.line(&format!(
             "{name}: reference tracks of a {reference_tets}-tet phantom reused from {}",
             tracks.display()
         ));
     } else {
-        progress(&format!("{name}: reference run on a {reference_tets}-tet phantom"));
+        progress.line(&format!("{name}: reference run on a {reference_tets}-tet phantom"));
         match std::fs::remove_file(&stamp) {
             Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
                 return Err(e).with_context(|| format!("cannot remove {}", stamp.display()));
@@ -128,14 +128,8 @@ fn assimilate(
         let mut scenario = scenario.clone();
         scenario.filter.discrepancy = kind;
         let experiment = Experiment::prepare(scenario, &scenario_dir, Some(&files))?;
-        let total = experiment.setup().iterations;
-        let mut last = 0;
-        reports.push(experiment.run(&dir.join(run), |p| {
-            if p.iteration >= last + total.div_ceil(10) || p.iteration == total {
-                last = p.iteration;
-                progress(&format!("{name} ({run}): iteration {}/{total} {}", p.iteration, p.message));
-            }
-        })?);
+        let tenths = Tenths::new(progress, format!("{name} ({run})"), "iterations");
+        reports.push(experiment.run(&dir.join(run), &tenths)?);
         setup.get_or_insert_with(|| experiment.setup().clone());
     }
     let element = if reference_phantom.order == 2 { "T10" } else { "T4" };

@@ -3,7 +3,6 @@
 //! and evaluated on the test samples only.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use anyhow::Result;
 use learn::{
@@ -12,7 +11,7 @@ use learn::{
 };
 use scenario::DatasetScenario;
 
-use crate::{fmt, write_scenario, ExperimentResult, Headline, Name, Progress, Row, Size};
+use crate::{fmt, write_scenario, ExperimentResult, Headline, Name, Progress, Row, Size, Tenths};
 
 /// A generated dataset and the scenario it came from.
 pub(crate) struct Generated {
@@ -59,15 +58,9 @@ pub(crate) fn dataset(dir: &Path, name: &str, samples: usize, progress: Progress
         }
     }
     let generator = scenario.generator(&scenario_dir)?;
-    let step = (samples as u64).div_ceil(10).max(1);
-    let next = AtomicU64::new(step);
-    let manifest = generator.run(&data, &scenario.name, None, &|done, total| {
-        if done >= next.load(Ordering::Relaxed) || done == total {
-            next.store(done + step, Ordering::Relaxed);
-            progress(&format!("{}: {done}/{total} samples", scenario.name));
-        }
-    })?;
-    progress(&format!("{}: {} samples, {} failed", scenario.name, manifest.num_samples, manifest.failed.len()));
+    let tenths = Tenths::new(progress, scenario.name.clone(), "samples");
+    let manifest = generator.run(&data, &scenario.name, None, &tenths)?;
+    progress.line(&format!("{}: {} samples, {} failed", scenario.name, manifest.num_samples, manifest.failed.len()));
     Ok(Generated { dataset: Dataset::open(&data)?, scenario, scenario_dir })
 }
 
@@ -181,7 +174,7 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
         },
     };
     let start = if recipe.fine_tune.is_some() { "fine-tuning" } else { "from scratch" };
-    progress(&format!("training {} steps {start} on {} samples", recipe.iterations, train.len()));
+    progress.line(&format!("training {} steps {start} on {} samples", recipe.iterations, train.len()));
     let config = TrainConfig {
         iterations: recipe.iterations,
         batch_size: 4,
@@ -195,12 +188,11 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
     };
     let out = dir.join(model_dir(recipe));
     let options = TrainOptions {
-        progress: true,
         placement: dataset.manifest().placement(),
         test: split.test.clone(),
         ..TrainOptions::new(out.clone())
     };
-    let outcome = learn::train(&train, &validation, &init, &config, &options)?;
+    let outcome = learn::train(&train, &validation, &init, &config, &options, progress)?;
     app::curve::plot_learning_curve(&out.join(app::curve::CURVE_PNG), &outcome.curve)?;
     Ok(Trained {
         split: [train.len(), validation.len(), test.len()],
@@ -349,7 +341,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
     let input = t.test.get(0).input;
     let prediction = prediction_seconds(&t.model, &input)?;
     // The reduced-order model on the same split, and the U-Net's predictions projected on its basis.
-    progress("fitting the reduced-order model with the linear-elastic prior");
+    progress.line("fitting the reduced-order model with the linear-elastic prior");
     let (fitted, rom_fit, rom_seconds) = fit_rom(&data, &t, &learn::rom::RomConfig::default(), true)?;
     let rom = Model::Reduced(fitted.clone());
     let rom_report = learn::evaluate(&rom, &t.test, &Corruption::default(), 0, Compute::Cpu)?;

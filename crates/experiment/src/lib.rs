@@ -15,6 +15,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+pub mod bench;
 pub mod calculix;
 mod fem_convergence;
 mod fem_peer;
@@ -28,7 +29,7 @@ pub mod report;
 pub mod stream;
 mod transfer;
 
-pub use fem_speed::{fbar_ratios, measure as measure_fem_speed, CaseTiming, Ratio, FRAME_LOAD_STEP};
+pub use fem_speed::{CaseTiming, Ratio, FRAME_LOAD_STEP};
 
 /// How large an experiment is run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -302,11 +303,58 @@ pub struct ExperimentResult {
     pub values: serde_json::Map<String, serde_json::Value>,
 }
 
+impl ExperimentResult {
+    /// The result in words, as printed after a run: its time, then each row's figure beside the
+    /// published one (labels in a column as wide as the longest).
+    pub fn lines(&self) -> Vec<String> {
+        let labels: Vec<String> = self.rows.iter().map(|r| r.label()).collect();
+        let width = labels.iter().map(|l| l.chars().count()).max().unwrap_or(0);
+        let mut lines = vec![format!("{}: {:.0} s", self.name.title(), self.seconds)];
+        for (row, label) in self.rows.iter().zip(&labels) {
+            let published =
+                if row.published.is_empty() { String::new() } else { format!("   (published: {})", row.published) };
+            lines.push(format!("{label:<width$}  {}{published}", row.ours));
+        }
+        lines
+    }
+}
+
 /// The result file of an experiment.
 pub const RESULT_FILE: &str = "result.json";
 
-/// Progress messages of a long run (the CLI prints them).
-pub type Progress<'a> = &'a (dyn Fn(&str) + Sync);
+/// Where a long run reports: its lines (the CLI prints them) and the advance of its trainings.
+pub type Progress<'a> = &'a dyn learn::Progress;
+
+/// Reports the advance of a long part of a run (a dataset, a filter run) as a line at every tenth
+/// of it: `label: done/total unit note`.
+struct Tenths<'a> {
+    progress: Progress<'a>,
+    label: String,
+    unit: &'static str,
+    next: std::sync::atomic::AtomicU64,
+}
+
+impl<'a> Tenths<'a> {
+    fn new(progress: Progress<'a>, label: String, unit: &'static str) -> Self {
+        Tenths { progress, label, unit, next: std::sync::atomic::AtomicU64::new(0) }
+    }
+}
+
+impl learn::Progress for Tenths<'_> {
+    fn advance(&self, done: u64, total: u64, note: &str) {
+        use std::sync::atomic::Ordering::Relaxed;
+        let tenth = total.div_ceil(10).max(1);
+        if done > 0 && (done >= self.next.load(Relaxed).max(tenth) || done == total) {
+            self.next.store(done + tenth, Relaxed);
+            let note = if note.is_empty() { String::new() } else { format!(" {note}") };
+            self.progress.line(&format!("{}: {done}/{total} {}{note}", self.label, self.unit));
+        }
+    }
+
+    fn line(&self, text: &str) {
+        self.progress.line(text);
+    }
+}
 
 /// Runs experiment `name` at `size` under `root/<name>/` (resuming what is there) and writes
 /// its `result.json`. A result already written at the same size is returned as it is.
@@ -314,7 +362,11 @@ pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<Ex
     let dir = root.join(name.as_str());
     if let Some(done) = load(&dir)? {
         if done.size == size {
-            progress(&format!("{}: already done at this size ({})", name.as_str(), dir.join(RESULT_FILE).display()));
+            progress.line(&format!(
+                "{}: already done at this size ({})",
+                name.as_str(),
+                dir.join(RESULT_FILE).display()
+            ));
             return Ok(done);
         }
     }

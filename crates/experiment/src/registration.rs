@@ -112,7 +112,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     };
     let t = train(&data.dataset, dir, &recipe, progress)?;
     // The reduced-order model on the same split, trained on inputs as noisy as the U-Net's.
-    progress("fitting the reduced-order model");
+    progress.line("fitting the reduced-order model");
     let config = learn::rom::RomConfig { noise_copies: 2, corruption: recipe.corruption.clone(), ..Default::default() };
     let (fitted, _, rom_seconds) = fit_rom(&data, &t, &config, false)?;
     let rom = Model::Reduced(fitted);
@@ -291,7 +291,7 @@ fn register_cases(builtin: &CaseScenario, networks: &[Network<'_>; 2], progress:
         .chain(HELD_OUT.iter().map(|c| (Role::HeldOut, c)))
         .chain(BEYOND_PUSHES.iter().map(|c| (Role::BeyondPushes, c)));
     for (role, variant) in cases {
-        progress(&format!("registering the case {}", variant.label));
+        progress.line(&format!("registering the case {}", variant.label));
         let case = synthetic_case(&variant.apply(builtin))?;
         figures.marker_count = case.targets.len();
         // Fresh methods per case: each registers from rest, with no state from the last case.

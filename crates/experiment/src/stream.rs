@@ -140,12 +140,13 @@ const STREAM_TRE: &str = "TRE mean over frames (largest frame mean; largest)";
 /// Runs the experiment: the co-rotational FEM (3k T4) and the shipped learned models, when found.
 pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let scenario = press_and_release();
-    progress(&format!("simulating the press and release ({FRAMES} frames, truth of {})", scenario.truth.mesh_words()));
+    progress
+        .line(&format!("simulating the press and release ({FRAMES} frames, truth of {})", scenario.truth.mesh_words()));
     let case = synthetic_case(&scenario)?;
     let options = scenario.registration.clone();
     let budgets = network_options(&scenario)?;
     let mut streams = Vec::new();
-    progress("streaming to the co-rotational FEM");
+    progress.line("streaming to the co-rotational FEM");
     let fem = || corotational_model().map(|(organ, deformer)| (organ, Box::new(deformer) as Box<dyn Deformer + Send>));
     streams.push(stream_case("FEM co-rotational (3k T4), warm-started", &case, &options, fem)?);
     // The shipped learned models that are there: the U-Net, the reduced-order model.
@@ -155,7 +156,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
             missing.push(path);
             continue;
         }
-        progress(&format!("streaming to the shipped {method}"));
+        progress.line(&format!("streaming to the shipped {method}"));
         let model = Arc::new(learn::Model::load(Path::new(path))?);
         let options = learned_options(&model, &budgets);
         let budgets = budgets.clone();

@@ -199,13 +199,13 @@ impl Runs {
         let bc4 = dataset(&bc4_dir, "beam_bc4", samples, progress)?;
         let target = dataset(&target_dir, "beam_target", samples, progress)?;
 
-        progress("BC4: pre-training");
+        progress.line("BC4: pre-training");
         let pre = train(&bc4.dataset, &bc4_dir, recipe, progress)?;
         let pre_path = bc4_dir.join(model_dir(recipe)).join(learn::training::train::MODEL_FILE);
         // The path is part of the fine-tuning run's identity: the same however `dir` was spelled.
         let pre_path = std::fs::canonicalize(&pre_path)
             .with_context(|| format!("finding the pre-trained {}", pre_path.display()))?;
-        progress(&format!(
+        progress.line(&format!(
             "target: from scratch on the training split, from scratch on {FEW} samples, fine-tuned on them"
         ));
         let full = train(&target.dataset, &target_dir, recipe, progress)?;

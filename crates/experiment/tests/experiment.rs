@@ -6,7 +6,7 @@ use augsim_experiment::{self as experiment, Name, Size};
 #[test]
 fn springs_experiment_writes_a_result_resumes_and_reports() {
     let root = tempfile::tempdir().unwrap();
-    let result = experiment::run(Name::Springs, Size::Quick, root.path(), &|_| {}).unwrap();
+    let result = experiment::run(Name::Springs, Size::Quick, root.path(), &learn::Silent).unwrap();
     let value = |row: usize| -> f64 { result.rows[row].ours.trim_end_matches(" mm").parse().unwrap() };
     let (estimated, fixed, free) = (value(0), value(1), value(2));
     println!("assessment errors: estimated {estimated} mm, fixed {fixed} mm, free {free} mm");
@@ -15,8 +15,11 @@ fn springs_experiment_writes_a_result_resumes_and_reports() {
     for figure in &result.figures {
         assert!(root.path().join("springs").join(figure).exists(), "{figure} missing");
     }
+    let lines = result.lines();
+    assert_eq!(lines.len(), result.rows.len() + 1);
+    assert!(lines[0].starts_with(result.name.title()) && lines[1].starts_with(&result.rows[0].label()), "{lines:?}");
     // A second run finds the result and does not run again.
-    let again = experiment::run(Name::Springs, Size::Quick, root.path(), &|_| {}).unwrap();
+    let again = experiment::run(Name::Springs, Size::Quick, root.path(), &learn::Silent).unwrap();
     assert_eq!(again, result);
     let all = experiment::load_all(root.path()).unwrap();
     assert_eq!(all, vec![result.clone()]);

@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 
+use fem::FemError;
+
 /// Boxed error of a model, as carried by [`FilterError::Model`].
 pub type BoxedModelError = Box<dyn std::error::Error + Send + Sync + 'static>;
 
@@ -79,4 +81,15 @@ impl From<mesh::io::WriteError> for FilterError {
     fn from(e: mesh::io::WriteError) -> Self {
         FilterError::Io { path: e.path, error: e.error }
     }
+}
+
+/// Errors of the finite-element model adapter ([`crate::FemModel`]) and its tracked points.
+#[derive(Debug, thiserror::Error)]
+pub enum FemModelError {
+    /// The solve failed (no convergence, inverted element, invalid parameter value, ...).
+    #[error(transparent)]
+    Fem(#[from] FemError),
+    /// Inconsistent model definition or use.
+    #[error("invalid FEM model: {0}")]
+    Invalid(String),
 }

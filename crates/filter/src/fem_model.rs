@@ -10,24 +10,14 @@
 
 use std::sync::{Mutex, PoisonError};
 
-use fem::{FemError, Problem, SolverOptions, StaticSolver, Timings};
+use fem::{Problem, SolverOptions, StaticSolver, Timings};
 use mesh::Point;
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
+use crate::error::FemModelError;
 use crate::observation::{tracked_positions, TrackedPoint};
 use crate::{Model, SigmaPointSet};
-
-/// Errors of the finite-element model adapter.
-#[derive(Debug, thiserror::Error)]
-pub enum FemModelError {
-    /// The solve failed (no convergence, inverted element, invalid parameter value, ...).
-    #[error(transparent)]
-    Fem(#[from] FemError),
-    /// Inconsistent model definition or use.
-    #[error("invalid FEM model: {0}")]
-    Invalid(String),
-}
 
 /// How the physical value θ_j of one filter parameter enters the problem.
 #[derive(Debug, Clone, PartialEq)]

@@ -63,8 +63,8 @@ mod sigma;
 mod trace;
 mod transform;
 
-pub use error::{BoxedModelError, FilterError};
-pub use fem_model::{ControlPath, FemModel, FemModelError, FemParameter, FemState, LoadPattern, Profile};
+pub use error::{BoxedModelError, FemModelError, FilterError};
+pub use fem_model::{ControlPath, FemModel, FemParameter, FemState, LoadPattern, Profile};
 pub use model::{Model, VectorState};
 pub use observation::TrackedPoint;
 pub use roukf::{Discrepancy, Execution, ObservationNoise, ParameterSpec, Roukf, RoukfConfig};

@@ -8,7 +8,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-use crate::FemModelError;
+use crate::error::FemModelError;
 
 /// A material point of the mesh: a fixed combination of the displacements of the nodes of the cell that holds it
 /// (e.g. a surface feature point), or a node itself.

@@ -23,6 +23,8 @@
 //!   learned model beside the U-Net.
 //! - [`training`]: training (Adam, checkpoints, resume, fine-tuning), metrics, evaluation and the
 //!   learning curve.
+//! - [`Progress`]: how generation and training (and the application's long runs) report how far
+//!   they have come, for the caller to draw.
 
 #![warn(missing_docs)]
 
@@ -31,6 +33,7 @@ mod error;
 mod fsutil;
 pub mod model;
 pub mod net;
+mod progress;
 pub mod rom;
 pub mod training;
 
@@ -48,6 +51,7 @@ pub use net::compute::Compute;
 pub use net::inference::InferenceNet;
 pub use net::predict::{time_prediction, Predictor, Timing};
 pub use net::unet::{Gradients, TrainedModel, TrainingInfo, UNet, UNetConfig};
+pub use progress::{Progress, Silent};
 pub use training::curve::CurveRow;
 pub use training::evaluation::{
     evaluate, evaluate_at_points, evaluation_input, uncertainty_coverage, write_grid_sample, PointErrors,

@@ -132,7 +132,7 @@ fn embedded_encoding_reproduces_linear_fields_and_total_force() {
 fn samples_show_a_sparse_sub_domain_and_a_full_target() {
     let g = beam_generator(6);
     let tmp = tempfile::tempdir().unwrap();
-    let manifest = g.run(tmp.path(), "beam", None, &|_, _| {}).unwrap();
+    let manifest = g.run(tmp.path(), "beam", None, &augsim_learn::Silent).unwrap();
     assert_eq!(manifest.num_samples + manifest.failed.len(), 6);
     assert!(manifest.num_samples >= 5, "failures: {:?}", manifest.failed);
     // The samples carry a visible sparse sub-domain of the top face and a full target.
@@ -146,7 +146,7 @@ fn samples_show_a_sparse_sub_domain_and_a_full_target() {
 }
 
 /// Runs `g` in a rayon pool of `threads` threads.
-fn run_in_pool(threads: usize, g: &Generator, dir: &Path, progress: &(dyn Fn(u64, u64) + Sync)) {
+fn run_in_pool(threads: usize, g: &Generator, dir: &Path, progress: &dyn augsim_learn::Progress) {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
     pool.install(|| g.run(dir, "beam", None, progress)).unwrap();
 }
@@ -159,18 +159,18 @@ fn generation_is_bit_identical_for_any_thread_count_and_after_a_kill() {
     let g = beam_generator_with_shards(40, 5);
     let tmp = tempfile::tempdir().unwrap();
     let dir = |name: &str| tmp.path().join(name);
-    run_in_pool(1, &g, &dir("one"), &|_, _| {});
+    run_in_pool(1, &g, &dir("one"), &augsim_learn::Silent);
     let reference = files(&dir("one"));
     assert!(Dataset::open(&dir("one")).unwrap().len() >= 35);
     for threads in [2, 3] {
         let out = dir(&format!("threads{threads}"));
-        run_in_pool(threads, &g, &out, &|_, _| {});
+        run_in_pool(threads, &g, &out, &augsim_learn::Silent);
         assert!(files(&out) == reference, "{threads} threads must give the bytes of 1 thread");
     }
     // Killed after its first batch with 1 thread, resumed with 3.
     let resumed = dir("resumed");
     let killed = catch_unwind(AssertUnwindSafe(|| {
-        run_in_pool(1, &g, &resumed, &|done, _| {
+        run_in_pool(1, &g, &resumed, &|done: u64, _: u64, _: &str| {
             if done > 0 {
                 panic!("simulated kill");
             }
@@ -179,7 +179,7 @@ fn generation_is_bit_identical_for_any_thread_count_and_after_a_kill() {
     assert!(killed.is_err());
     let partial = Dataset::open(&resumed).unwrap().manifest().next_index;
     assert!(partial > 0 && partial < 40, "resume at index {partial}");
-    run_in_pool(3, &g, &resumed, &|_, _| {});
+    run_in_pool(3, &g, &resumed, &augsim_learn::Silent);
     assert!(files(&resumed) == reference, "a resumed generation must give the bytes of an uninterrupted one");
 }
 
@@ -189,11 +189,11 @@ fn split_generation_merges_into_the_full_dataset() {
     let g = beam_generator_with_shards(20, 5);
     let tmp = tempfile::tempdir().unwrap();
     let full = tmp.path().join("full");
-    run_in_pool(1, &g, &full, &|_, _| {});
+    run_in_pool(1, &g, &full, &augsim_learn::Silent);
     let parts: Vec<_> = (0..3)
         .map(|i| {
             let dir = tmp.path().join(format!("part{i}"));
-            g.run(&dir, "beam", Some(DatasetPart { index: i, count: 3 }), &|_, _| {}).unwrap();
+            g.run(&dir, "beam", Some(DatasetPart { index: i, count: 3 }), &augsim_learn::Silent).unwrap();
             dir
         })
         .collect();
@@ -288,7 +288,7 @@ fn beam_dataset(
     material.density = 10.0;
     let g = Generator::new(mesh, material, SolverOptions::default(), config).unwrap();
     let tmp = tempfile::tempdir().unwrap();
-    let manifest = g.run(tmp.path(), "beam", None, &|_, _| {}).unwrap();
+    let manifest = g.run(tmp.path(), "beam", None, &augsim_learn::Silent).unwrap();
     assert!(manifest.failed.is_empty(), "{:?}", manifest.failed);
     Dataset::open(tmp.path()).unwrap().load_all().unwrap()
 }
@@ -418,6 +418,6 @@ fn quadratic_tetrahedra_are_solved_and_encoded_as_such() {
         }
     }
     let dir = tempfile::tempdir().unwrap();
-    let manifest = g.run(dir.path(), "t10", None, &|_, _| {}).unwrap();
+    let manifest = g.run(dir.path(), "t10", None, &augsim_learn::Silent).unwrap();
     assert_eq!((manifest.num_samples, manifest.failed.len()), (2, 0), "{:?}", manifest.failed);
 }

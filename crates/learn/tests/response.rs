@@ -39,7 +39,7 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 fn the_response_of_a_linear_datasets_input_is_its_target() {
     let g = box_generator(Material::new(Law::Linear, 5000.0, 0.45), [9, 5, 5], 3);
     let dir = tempfile::tempdir().unwrap();
-    g.run(dir.path(), "box", None, &|_, _| {}).unwrap();
+    g.run(dir.path(), "box", None, &augsim_learn::Silent).unwrap();
     let samples = Dataset::open(dir.path()).unwrap().load_all().unwrap();
     let mut response = g.rest_response().unwrap();
     for i in 0..samples.len() {
@@ -75,7 +75,7 @@ fn the_adjoint_is_the_transpose() {
 fn with_the_prior_a_linear_dataset_is_learned_to_its_basis() {
     let g = box_generator(Material::new(Law::Linear, 5000.0, 0.45), [9, 5, 5], 60);
     let dir = tempfile::tempdir().unwrap();
-    g.run(dir.path(), "box", None, &|_, _| {}).unwrap();
+    g.run(dir.path(), "box", None, &augsim_learn::Silent).unwrap();
     let all = Dataset::open(dir.path()).unwrap().load_all().unwrap();
     let policy = SplitPolicy { validation_samples: Some(10), test_samples: Some(10), ..SplitPolicy::default() };
     let (split, [train, validation, _]) = policy.apply(&all).unwrap();

@@ -6,7 +6,7 @@ mod common;
 use augsim_learn::training::train::MODEL_FILE;
 use augsim_learn::LearnedModel;
 use augsim_learn::{
-    evaluate, train, Compute, Corruption, GridShape, IndexSet, Initialization, Normalization, Samples, Split,
+    evaluate, train, Compute, Corruption, GridShape, IndexSet, Initialization, Normalization, Samples, Silent, Split,
     SplitPolicy, TrainConfig, TrainOptions, TrainedModel, UNetConfig,
 };
 use common::synthetic_sample;
@@ -117,7 +117,7 @@ fn models_record_their_split_and_evaluation_refuses_seen_samples() {
     };
     let config = TrainConfig { iterations: 2, validate_every: 1, checkpoint_every: 2, ..TrainConfig::default() };
     let options = |name: &str| TrainOptions { test: split.test.clone(), ..TrainOptions::new(root.path().join(name)) };
-    train(&train_set, &val, &init, &config, &options("a")).unwrap();
+    train(&train_set, &val, &init, &config, &options("a"), &Silent).unwrap();
     let model = TrainedModel::load(&root.path().join("a").join(MODEL_FILE)).unwrap();
     assert_eq!(model.training.as_ref().unwrap().split, split);
     assert_eq!(model.held_out(&all).unwrap(), test);
@@ -134,22 +134,30 @@ fn models_record_their_split_and_evaluation_refuses_seen_samples() {
     assert_eq!(model.held_out(&other).unwrap(), other);
 
     // Overlapping roles are refused before training.
-    let e = train(&train_set, &train_set, &init, &config, &options("b")).unwrap_err().to_string();
+    let e = train(&train_set, &train_set, &init, &config, &options("b"), &Silent).unwrap_err().to_string();
     assert!(e.contains("both a training and a validation sample"), "{e}");
     let overlapping = TrainOptions { test: IndexSet::from_indices(&[4, 8]), ..options("c") };
-    let e = train(&train_set, &val, &init, &config, &overlapping).unwrap_err().to_string();
+    let e = train(&train_set, &val, &init, &config, &overlapping, &Silent).unwrap_err().to_string();
     assert!(e.contains("sample 4 is both a training and a test sample"), "{e}");
-    let e = train(&train_set, &other.select(&[8]).unwrap(), &init, &config, &options("d")).unwrap_err().to_string();
+    let e = train(&train_set, &other.select(&[8]).unwrap(), &init, &config, &options("d"), &Silent)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("different data"), "{e}");
 
     // Fine-tuned on another dataset, the model still remembers what it was pre-trained on.
     let beam = Split::last(&other, 2, 2).unwrap();
     let [beam_train, beam_val, beam_test] = beam.apply(&other).unwrap();
     let fine = Initialization::FineTune { model: root.path().join("a").join(MODEL_FILE), freeze_encoder: false };
-    let tuned =
-        train(&beam_train, &beam_val, &fine, &config, &TrainOptions { test: beam.test.clone(), ..options("e") })
-            .unwrap()
-            .model;
+    let tuned = train(
+        &beam_train,
+        &beam_val,
+        &fine,
+        &config,
+        &TrainOptions { test: beam.test.clone(), ..options("e") },
+        &Silent,
+    )
+    .unwrap()
+    .model;
     let info = tuned.training.as_ref().unwrap();
     assert_eq!((&info.split, &info.pretraining[..]), (&beam, &[split.clone()][..]));
     assert_eq!(tuned.held_out(&other).unwrap(), beam_test);

@@ -7,7 +7,7 @@ use augsim_learn::training::metrics::{masked_mse_values, mean_euclidean_error};
 use augsim_learn::training::train::{CHECKPOINT_FILE, CURVE_CSV, MODEL_FILE};
 use augsim_learn::{
     evaluate, evaluate_at_points, evaluation_input, time_prediction, train, Compute, Corruption, GridShape,
-    Initialization, Normalization, Predictor, Samples, Sparsity, TrainConfig, TrainOptions, TrainedModel, UNet,
+    Initialization, Normalization, Predictor, Samples, Silent, Sparsity, TrainConfig, TrainOptions, TrainedModel, UNet,
     UNetConfig,
 };
 use common::synthetic_samples;
@@ -51,9 +51,14 @@ fn tiny_unet_overfits_a_handful_of_samples() {
         ..TrainConfig::default()
     };
     let val = synthetic_samples(grid(), 10, 2);
-    let out = train(&data, &val, &init, &config, &TrainOptions::new(dir.path())).unwrap();
+    let last = std::sync::Mutex::new((0, 0, String::new()));
+    let record = |done: u64, total: u64, note: &str| *last.lock().unwrap() = (done, total, note.to_string());
+    let out = train(&data, &val, &init, &config, &TrainOptions::new(dir.path()), &record).unwrap();
     assert!(out.completed);
     assert_eq!(out.iterations_done, 600);
+    let (done, total, note) = last.into_inner().unwrap();
+    assert_eq!((done, total), (600, 600));
+    assert!(note.starts_with("loss ") && note.contains(" val "), "{note}");
 
     // The same network before training (same seed, same normalisation).
     let Initialization::Scratch { unet, normalization, .. } = &init else { unreachable!() };
@@ -172,17 +177,23 @@ fn resumed_training_equals_uninterrupted() {
         val_corruption: Corruption { sparsity: None, noise_std: 0.02 },
     };
     let (a, b) = (root.path().join("a"), root.path().join("b"));
-    let full = train(&train_set, &val, &init, &config, &TrainOptions::new(&a)).unwrap();
+    let full = train(&train_set, &val, &init, &config, &TrainOptions::new(&a), &Silent).unwrap();
 
     // Interrupted after iteration 6 (checkpoint), then resumed.
-    let stopped =
-        train(&train_set, &val, &init, &config, &TrainOptions { stop_after: Some(6), ..TrainOptions::new(&b) })
-            .unwrap();
+    let stopped = train(
+        &train_set,
+        &val,
+        &init,
+        &config,
+        &TrainOptions { stop_after: Some(6), ..TrainOptions::new(&b) },
+        &Silent,
+    )
+    .unwrap();
     assert!(!stopped.completed);
     assert_eq!(stopped.iterations_done, 6);
     assert!(!b.join(MODEL_FILE).exists());
     assert!(b.join(CHECKPOINT_FILE).exists());
-    let resumed = train(&train_set, &val, &init, &config, &TrainOptions::new(&b)).unwrap();
+    let resumed = train(&train_set, &val, &init, &config, &TrainOptions::new(&b), &Silent).unwrap();
     assert!(resumed.completed);
     assert_eq!(resumed.curve, full.curve);
     let (pa, pb) = (full.model.net.named_parameters(), resumed.model.net.named_parameters());
@@ -200,32 +211,39 @@ fn resumed_training_equals_uninterrupted() {
 
     // Extending the finished run to 16 iterations equals a run of 16 from the start.
     let longer = TrainConfig { iterations: 16, ..config.clone() };
-    let extended = train(&train_set, &val, &init, &longer, &TrainOptions::new(&b)).unwrap();
-    let full16 = train(&train_set, &val, &init, &longer, &TrainOptions::new(root.path().join("c"))).unwrap();
+    let extended = train(&train_set, &val, &init, &longer, &TrainOptions::new(&b), &Silent).unwrap();
+    let full16 = train(&train_set, &val, &init, &longer, &TrainOptions::new(root.path().join("c")), &Silent).unwrap();
     assert_eq!(extended.curve, full16.curve);
     assert_eq!(extended.model.net.named_parameters(), full16.model.net.named_parameters());
     let shorter = TrainConfig { iterations: 8, ..config.clone() };
-    let e = train(&train_set, &val, &init, &shorter, &TrainOptions::new(&b)).unwrap_err().to_string();
+    let e = train(&train_set, &val, &init, &shorter, &TrainOptions::new(&b), &Silent).unwrap_err().to_string();
     assert!(e.contains("beyond"), "{e}");
 
     // With a cosine schedule the rate depends on the iteration count: extending is refused.
     let cosine = TrainConfig { final_learning_rate: Some(1e-4), ..config.clone() };
     let cosine_dir = root.path().join("d");
-    train(&train_set, &val, &init, &cosine, &TrainOptions::new(&cosine_dir)).unwrap();
-    let e = train(&train_set, &val, &init, &TrainConfig { iterations: 16, ..cosine }, &TrainOptions::new(&cosine_dir))
-        .unwrap_err()
-        .to_string();
+    train(&train_set, &val, &init, &cosine, &TrainOptions::new(&cosine_dir), &Silent).unwrap();
+    let e = train(
+        &train_set,
+        &val,
+        &init,
+        &TrainConfig { iterations: 16, ..cosine },
+        &TrainOptions::new(&cosine_dir),
+        &Silent,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("different setup"), "{e}");
 
     // A checkpoint from another setup is refused.
     let other = TrainConfig { learning_rate: 2e-3, ..config.clone() };
-    let e = train(&train_set, &val, &init, &other, &TrainOptions::new(&b)).unwrap_err().to_string();
+    let e = train(&train_set, &val, &init, &other, &TrainOptions::new(&b), &Silent).unwrap_err().to_string();
     assert!(e.contains("different setup"), "{e}");
     // A corrupt checkpoint gives a clear error.
     let ck = b.join(CHECKPOINT_FILE);
     let bytes = std::fs::read(&ck).unwrap();
     std::fs::write(&ck, &bytes[..bytes.len() / 2]).unwrap();
-    let e = train(&train_set, &val, &init, &config, &TrainOptions::new(&b)).unwrap_err().to_string();
+    let e = train(&train_set, &val, &init, &config, &TrainOptions::new(&b), &Silent).unwrap_err().to_string();
     assert!(e.contains("checkpoint.bin") && e.contains("truncated"), "{e}");
 }
 
@@ -243,13 +261,13 @@ fn fine_tuning_with_a_frozen_encoder_leaves_it_unchanged() {
     };
     let pre_dir = root.path().join("pre");
     let (pre_val, new_val) = (synthetic_samples(grid(), 20, 2), synthetic_samples(grid(), 60, 2));
-    train(&pre_data, &pre_val, &scratch(2, 2, &pre_data), &config, &TrainOptions::new(&pre_dir)).unwrap();
+    train(&pre_data, &pre_val, &scratch(2, 2, &pre_data), &config, &TrainOptions::new(&pre_dir), &Silent).unwrap();
     let pre_path = pre_dir.join(MODEL_FILE);
     let pre = TrainedModel::load(&pre_path).unwrap();
 
     let finetune = |freeze: bool, name: &str| {
         let init = Initialization::FineTune { model: pre_path.clone(), freeze_encoder: freeze };
-        train(&new_data, &new_val, &init, &config, &TrainOptions::new(root.path().join(name))).unwrap()
+        train(&new_data, &new_val, &init, &config, &TrainOptions::new(root.path().join(name)), &Silent).unwrap()
     };
     let frozen = finetune(true, "frozen");
     assert_eq!(frozen.model.normalization, pre.normalization);
@@ -299,8 +317,8 @@ fn burn_path_trains_and_predicts_as_the_cpu_engines_do() {
         ..TrainConfig::default()
     };
     let on = |compute: Compute, name: &str| TrainOptions { compute, ..TrainOptions::new(root.path().join(name)) };
-    let cpu = train(&data, &val, &init, &config, &on(Compute::Cpu, "cpu")).unwrap();
-    let burn = train(&data, &val, &init, &config, &on(Compute::CpuBurn, "burn")).unwrap();
+    let cpu = train(&data, &val, &init, &config, &on(Compute::Cpu, "cpu"), &Silent).unwrap();
+    let burn = train(&data, &val, &init, &config, &on(Compute::CpuBurn, "burn"), &Silent).unwrap();
     assert_eq!(cpu.curve.len(), burn.curve.len());
     for (a, b) in cpu.curve.iter().zip(&burn.curve) {
         let rel = (a.train_loss - b.train_loss).abs() / a.train_loss;
@@ -339,8 +357,8 @@ fn burn_path_trains_and_predicts_as_the_cpu_engines_do() {
     // Stopped on burn's path, resumed on the CPU engines: the same run up to rounding.
     let mixed = root.path().join("mixed");
     let stopped = TrainOptions { stop_after: Some(4), ..on(Compute::CpuBurn, "mixed") };
-    assert!(!train(&data, &val, &init, &config, &stopped).unwrap().completed);
-    let resumed = train(&data, &val, &init, &config, &TrainOptions::new(&mixed)).unwrap();
+    assert!(!train(&data, &val, &init, &config, &stopped, &Silent).unwrap().completed);
+    let resumed = train(&data, &val, &init, &config, &TrainOptions::new(&mixed), &Silent).unwrap();
     assert!(resumed.completed);
     let last = |o: &augsim_learn::TrainOutcome| o.curve.last().unwrap().val.unwrap().mean;
     assert!((last(&resumed) - last(&cpu)).abs() <= 1e-4 * last(&cpu));
@@ -355,7 +373,7 @@ fn gpu_without_the_feature_is_a_clear_error() {
     let root = tempfile::tempdir().unwrap();
     let data = synthetic_samples(grid(), 0, 2);
     let options = TrainOptions { compute: Compute::Gpu, ..TrainOptions::new(root.path()) };
-    let e = train(&data, &Samples::new(grid()), &scratch(2, 1, &data), &TrainConfig::default(), &options)
+    let e = train(&data, &Samples::new(grid()), &scratch(2, 1, &data), &TrainConfig::default(), &options, &Silent)
         .unwrap_err()
         .to_string();
     assert!(e.contains("without GPU support"), "{e}");
@@ -372,7 +390,7 @@ fn cpu_burn_without_the_feature_is_a_clear_error() {
     let root = tempfile::tempdir().unwrap();
     let data = synthetic_samples(grid(), 0, 2);
     let options = TrainOptions { compute: Compute::CpuBurn, ..TrainOptions::new(root.path()) };
-    let e = train(&data, &Samples::new(grid()), &scratch(2, 1, &data), &TrainConfig::default(), &options)
+    let e = train(&data, &Samples::new(grid()), &scratch(2, 1, &data), &TrainConfig::default(), &options, &Silent)
         .unwrap_err()
         .to_string();
     assert!(e.contains("--features cpu-burn"), "{e}");

@@ -23,7 +23,7 @@ use std::io::Read;
 use std::path::Path;
 
 use crate::isosurface::{mask_surface, ExtractOptions, ExtractReport};
-use crate::volume::VoxelMask;
+use crate::volume::{determinant, VoxelMask};
 use crate::{MeshError, TriSurface};
 
 pub use crate::io::Frame;
@@ -255,12 +255,6 @@ fn check_affine(affine: &[[f64; 4]; 3]) -> Result<(), String> {
         return Err(format!("the voxel-to-world map is singular (a zero spacing?): {affine:?}"));
     }
     Ok(())
-}
-
-/// The determinant of the affine's linear part (the voxel volume, signed).
-pub fn determinant(a: &[[f64; 4]; 3]) -> f64 {
-    a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
-        + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
 }
 
 /// The header of a NRRD file, its fields by lower-case name and its key-value pairs.

@@ -16,7 +16,6 @@ use std::collections::VecDeque;
 use rayon::prelude::*;
 
 use crate::bvh::SurfaceBvh;
-use crate::labelmap::determinant;
 use crate::{bounds, MeshError, Point, TriSurface};
 
 /// The 14 neighbours of a voxel (see the module's documentation).
@@ -36,6 +35,12 @@ const NEIGHBOURS: [[i64; 3]; 14] = [
     [1, 1, 1],
     [-1, -1, -1],
 ];
+
+/// The determinant of a voxel-to-world affine's linear part (the voxel volume, signed).
+pub fn determinant(a: &[[f64; 4]; 3]) -> f64 {
+    a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+        + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
+}
 
 /// The voxels inside an organ.
 #[derive(Clone, Debug, PartialEq)]

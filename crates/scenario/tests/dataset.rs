@@ -11,7 +11,7 @@ fn the_grid_ar_scenario_presses_the_immersed_phantom_by_centimetres() {
     scenario.dataset.samples = 2;
     let g = scenario.generator(&dir).unwrap();
     let tmp = tempfile::tempdir().unwrap();
-    let manifest = g.run(tmp.path(), "liver_ar_grid", None, &|_, _| {}).unwrap();
+    let manifest = g.run(tmp.path(), "liver_ar_grid", None, &learn::Silent).unwrap();
     assert!(manifest.failed.is_empty(), "{:?}", manifest.failed);
     let data = Dataset::open(tmp.path()).unwrap().load_all().unwrap();
     let n = data.grid.nodes();
@@ -30,7 +30,7 @@ fn a_regenerated_liver_ar_t10_dataset_is_the_shipped_networks_own() {
     let (mut scenario, dir) = DatasetScenario::load(Path::new("liver_ar_t10")).unwrap();
     scenario.dataset.samples = 1;
     let tmp = tempfile::tempdir().unwrap();
-    scenario.generator(&dir).unwrap().run(tmp.path(), &scenario.name, None, &|_, _| {}).unwrap();
+    scenario.generator(&dir).unwrap().run(tmp.path(), &scenario.name, None, &learn::Silent).unwrap();
     let model = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/liver_ar/model.json"))
         .unwrap();
     let model: serde_json::Value = serde_json::from_str(&model).unwrap();
@@ -51,7 +51,7 @@ fn stabilised_t10_fbar_solves_the_large_load_draws() {
     scenario.material.formulation = fem::Formulation::Fbar;
     scenario.dataset.samples = 10;
     let tmp = tempfile::tempdir().unwrap();
-    let manifest = scenario.generator(&dir).unwrap().run(tmp.path(), "fbar", None, &|_, _| {}).unwrap();
+    let manifest = scenario.generator(&dir).unwrap().run(tmp.path(), "fbar", None, &learn::Silent).unwrap();
     assert!(manifest.failed.is_empty(), "{:?}", manifest.failed);
     let data = Dataset::open(tmp.path()).unwrap().load_all().unwrap();
     let n = data.grid.nodes();
@@ -85,7 +85,7 @@ fn a_dataset_held_by_an_attachment_solves_the_draws_of_one_held_by_fixed_nodes()
         let (mut scenario, dir) = DatasetScenario::load(&path).unwrap();
         scenario.dataset.samples = 3;
         let out = tmp.path().join(name);
-        let manifest = scenario.generator(&dir).unwrap().run(&out, name, None, &|_, _| {}).unwrap();
+        let manifest = scenario.generator(&dir).unwrap().run(&out, name, None, &learn::Silent).unwrap();
         assert!(manifest.failed.is_empty(), "{name}: {:?}", manifest.failed);
         let data = Dataset::open(&out).unwrap().load_all().unwrap();
         let n = data.grid.nodes();
@@ -117,7 +117,7 @@ fn a_generation_whose_first_draws_fail_stops_and_says_what_to_change() {
     scenario.dataset.samples = 2000;
     scenario.dataset.fixed = vec![mesh::NodeSelection::List(vec![0])];
     let tmp = tempfile::tempdir().unwrap();
-    let error = scenario.generator(&dir).unwrap().run(tmp.path(), "held_at_a_point", None, &|_, _| {}).unwrap_err();
+    let error = scenario.generator(&dir).unwrap().run(tmp.path(), "held_at_a_point", None, &learn::Silent).unwrap_err();
     let message = error.to_string();
     assert!(message.contains("of the first") && message.contains("held at a single point"), "{message}");
     assert!(message.contains("Change the attachments or the mesh"), "{message}");

@@ -19,6 +19,8 @@
 //! filter's time went ([`FilterTimes`]: the FEM solves' assembly, factorisations and triangular solves, and the
 //! writing of the deformation).
 
+mod choice;
+mod lines;
 mod online;
 mod report;
 mod run;
@@ -26,9 +28,10 @@ pub mod tracks;
 
 use std::path::Path;
 
+pub use choice::AssimilationChoice;
 pub use online::{Estimate, OnlineFilter};
-pub use report::{AssessmentCase, FilterTimes, Report, SpringsReport, YoungReport};
-pub use run::{Experiment, ObservationFiles, Progress, Reference, Setup};
+pub use report::{AssessmentCase, FilterTimes, Reference, Report, SpringsReport, YoungReport};
+pub use run::{Experiment, ObservationFiles, Setup};
 
 /// Errors of an assimilation experiment.
 #[derive(Debug, thiserror::Error)]

@@ -7,8 +7,25 @@ use mesh::io::write_atomic_bytes;
 use plot::{line_plot, PlotSpec, Series};
 use serde::Serialize;
 
-use super::{AssimilationError, Context, Reference};
+use super::{AssimilationError, Context};
 use filter::{Execution, SigmaPointSet, Trace};
+
+/// The reference run that synthesises the observations.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Reference {
+    /// It ran on the filter's own model (mesh and law). `false` with a `[reference]` section.
+    pub inverse_crime: bool,
+    /// Nodes of its mesh.
+    pub nodes: usize,
+    /// Cells of its mesh.
+    pub cells: usize,
+    /// Its constitutive law.
+    pub law: fem::Law,
+    /// Wall-clock time (s).
+    pub seconds: f64,
+    /// Largest nodal displacement over all steps (m).
+    pub max_displacement: f64,
+}
 
 /// The results of a run (also written as `summary.json`).
 #[derive(Debug, Clone, PartialEq, Serialize)]

@@ -10,7 +10,7 @@ use mesh::{Mesh, MeshLocator, Point, SurfaceBvh};
 use nalgebra::DVector;
 use serde::Serialize;
 
-use super::report::{self, FilterTimes, Report};
+use super::report::{self, FilterTimes, Reference, Report};
 use super::tracks::{write_tracks, RestPositions, Tracks};
 use super::{AssimilationError, Context};
 
@@ -72,34 +72,6 @@ pub struct Setup {
     pub max_projection: f64,
     /// The reference run (synthetic observations only).
     pub reference: Option<Reference>,
-}
-
-/// The reference run that synthesises the observations.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Reference {
-    /// It ran on the filter's own model (mesh and law). `false` with a `[reference]` section.
-    pub inverse_crime: bool,
-    /// Nodes of its mesh.
-    pub nodes: usize,
-    /// Cells of its mesh.
-    pub cells: usize,
-    /// Its constitutive law.
-    pub law: fem::Law,
-    /// Wall-clock time (s).
-    pub seconds: f64,
-    /// Largest nodal displacement over all steps (m).
-    pub max_displacement: f64,
-}
-
-/// Progress after one filter iteration.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Progress {
-    /// Iterations done.
-    pub iteration: usize,
-    /// Iterations in all.
-    pub iterations: usize,
-    /// The current estimate in words (e.g. `E = 4979.1 ± 4.2 Pa, |innovation| = 1.2e-3 m`).
-    pub message: String,
 }
 
 /// One measurement: stacked positions (x, y, z per point) and which components were measured.
@@ -460,9 +432,10 @@ impl Experiment {
         Ok(())
     }
 
-    /// Runs the filter and writes the outputs into `out_dir` (see the module documentation); `progress` is called
-    /// after every iteration.
-    pub fn run(&self, out_dir: &Path, mut progress: impl FnMut(&Progress)) -> Result<Report, AssimilationError> {
+    /// Runs the filter and writes the outputs into `out_dir` (see the module documentation); reports
+    /// every iteration to `progress`, with the current estimate in words (e.g.
+    /// `E = 4979.1 ± 4.2 Pa, |innovation| = 1.2e-3 m`).
+    pub fn run(&self, out_dir: &Path, progress: &dyn learn::Progress) -> Result<Report, AssimilationError> {
         std::fs::create_dir_all(out_dir).context(|| format!("cannot create {}", out_dir.display()))?;
         self.write_tracks(&out_dir.join("tracks"))?;
         let iterations = self.measurements.len();
@@ -505,11 +478,8 @@ impl Experiment {
                 frames.push((k as f64, file));
                 spent.writing += t_write.elapsed().as_secs_f64();
             }
-            progress(&Progress {
-                iteration: k,
-                iterations,
-                message: self.progress_message(&roukf.mean_physical(), &roukf.std_physical(), innovation),
-            });
+            let note = self.progress_message(&roukf.mean_physical(), &roukf.std_physical(), innovation);
+            progress.advance(k as u64, iterations as u64, &note);
         }
         let filter_seconds = t_filter.elapsed().as_secs_f64();
         let sigma_count = roukf.sigma_points().count();

@@ -28,6 +28,7 @@ use crate::data::corrupt::item_rng;
 use crate::data::dataset::{DatasetPart, DatasetSpec, DatasetWriter, Manifest, Sample};
 use crate::data::grid::{encode_points, GridPlacement, GridShape};
 use crate::data::response::RestResponse;
+use crate::progress::Progress;
 use crate::{LearnError, Result};
 
 /// Stream number of the load generator in [`item_rng`].
@@ -630,15 +631,9 @@ impl Generator {
     }
 
     /// Generates indices `range` into `dir` (resuming an unfinished dataset
-    /// there), calling `progress(done, total)` after each batch. Stops with an error when most of
+    /// there), reporting the draws done to `progress` after each batch. Stops with an error when most of
     /// its first draws fail ([`EARLY_DRAWS`]), saying why and what to change.
-    pub fn run(
-        &self,
-        dir: &Path,
-        name: &str,
-        part: Option<DatasetPart>,
-        progress: &(dyn Fn(u64, u64) + Sync),
-    ) -> Result<Manifest> {
+    pub fn run(&self, dir: &Path, name: &str, part: Option<DatasetPart>, progress: &dyn Progress) -> Result<Manifest> {
         let range = part_range(self.config.samples, part.as_ref())?;
         let spec = DatasetSpec {
             scenario: name.to_string(),
@@ -670,7 +665,7 @@ impl Generator {
         let batch = (self.config.shard_size as u64).div_ceil(BLOCK).div_ceil(threads) * threads;
         let mut next = start;
         let mut failures: Vec<String> = Vec::new();
-        progress(next - range.start as u64, total - range.start as u64);
+        progress.advance(next - range.start as u64, total - range.start as u64, "");
         while next < total {
             let end = ((next / BLOCK + batch) * BLOCK).min(total);
             let keep = next..end;
@@ -690,7 +685,7 @@ impl Generator {
                 return Err(invalid(why));
             }
             next = end;
-            progress(next - range.start as u64, total - range.start as u64);
+            progress.advance(next - range.start as u64, total - range.start as u64, "");
         }
         writer.finish()
     }

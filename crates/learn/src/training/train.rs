@@ -24,7 +24,6 @@ use std::time::Instant;
 
 #[cfg(feature = "cpu-burn")]
 use burn::tensor::Device;
-use indicatif::{ProgressBar, ProgressStyle};
 use mesh::io::write_atomic_bytes;
 use rand::Rng;
 use safetensors::SafeTensors;
@@ -40,6 +39,7 @@ use crate::net::backprop::loss_and_gradients;
 use crate::net::burn_unet::BurnUNet;
 use crate::net::predict::Predictor;
 use crate::net::unet::{read_tensor, write_safetensors, Gradients, TrainedModel, TrainingInfo, UNet, UNetConfig};
+use crate::progress::Progress;
 use crate::training::adam::{Adam, Moments};
 use crate::training::curve::{write_curve_csv, CurveRow};
 use crate::training::evaluation::evaluate_net;
@@ -148,8 +148,6 @@ pub struct TrainOptions {
     pub out_dir: PathBuf,
     /// Continue from `out_dir/checkpoint.bin` if it exists (it must be from the same setup).
     pub resume: bool,
-    /// Show a progress bar.
-    pub progress: bool,
     /// Stop after this iteration as if interrupted (checkpoint written, no model file); a later
     /// run with `resume` continues. For time-sliced training and tests.
     pub stop_after: Option<usize>,
@@ -165,13 +163,12 @@ pub struct TrainOptions {
 }
 
 impl TrainOptions {
-    /// Options writing to `out_dir`, resuming if possible, without progress bar, placement or
-    /// recorded test samples, on the CPU.
+    /// Options writing to `out_dir`, resuming if possible, without placement or recorded test
+    /// samples, on the CPU.
     pub fn new(out_dir: impl Into<PathBuf>) -> Self {
         TrainOptions {
             out_dir: out_dir.into(),
             resume: true,
-            progress: false,
             stop_after: None,
             placement: None,
             test: IndexSet::default(),
@@ -488,13 +485,15 @@ fn held_out_split(train: &Samples, val: &Samples, test: &IndexSet) -> Result<Spl
 }
 
 /// Trains a U-Net on `train`, validating on `val` (may be empty: then the last weights are
-/// kept). See the module documentation for files, reproducibility and resume.
+/// kept), reporting the iterations done and the loss to `progress`. See the module documentation
+/// for files, reproducibility and resume.
 pub fn train(
     train: &Samples,
     val: &Samples,
     init: &Initialization,
     config: &TrainConfig,
     options: &TrainOptions,
+    progress: &dyn Progress,
 ) -> Result<TrainOutcome> {
     config.validate()?;
     if train.is_empty() {
@@ -519,17 +518,8 @@ pub fn train(
         best = resume(&checkpoint_path, config, &mut state, &mut net, &mut adam)?;
     }
 
-    let progress = if options.progress {
-        let bar = ProgressBar::new(config.iterations as u64);
-        if let Ok(style) = ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise}<{eta_precise}] {msg}")
-        {
-            bar.set_style(style);
-        }
-        bar
-    } else {
-        ProgressBar::hidden()
-    };
-    progress.set_position(state.iteration as u64);
+    let total = config.iterations as u64;
+    progress.advance(state.iteration as u64, total, "");
 
     let mut shuffler = Shuffler { seed: config.seed, n: train.len(), epoch: None, perm: Vec::new() };
     let mut step_time = 0.0;
@@ -556,8 +546,7 @@ pub fn train(
         state.iteration += 1;
         state.loss_sum += loss_value;
         state.loss_count += 1;
-        progress.set_position(state.iteration as u64);
-        progress.set_message(format!("loss {loss_value:.3e}"));
+        let mut note = format!("loss {loss_value:.3e}");
 
         let done = state.iteration == config.iterations;
         if state.iteration.is_multiple_of(config.validate_every) || done {
@@ -567,9 +556,10 @@ pub fn train(
             }
             write_curve_csv(&out.join(CURVE_CSV), &state.curve)?;
             if let Some(e) = state.curve.last().and_then(|row| row.val) {
-                progress.set_message(format!("loss {loss_value:.3e} val {:.4} mm", e.mean * 1e3));
+                note = format!("loss {loss_value:.3e} val {:.4} mm", mesh::length::mm(e.mean));
             }
         }
+        progress.advance(state.iteration as u64, total, &note);
         let stop = options.stop_after.is_some_and(|s| state.iteration >= s) && !done;
         if state.iteration.is_multiple_of(config.checkpoint_every) || done || stop {
             state.adam_steps = adam.moments.iter().map(|m| m.as_ref().map_or(0, |m| m.time)).collect();
@@ -580,7 +570,6 @@ pub fn train(
             break;
         }
     }
-    progress.finish_and_clear();
 
     let model = trained_model(start, best.unwrap_or(net), train, val, config, options, &state, split);
     let model_path = out.join(MODEL_FILE);

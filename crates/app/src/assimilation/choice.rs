@@ -1,0 +1,137 @@
+//! The user's choices of an assimilation run, as `augsim assimilate` takes them: the scenario,
+//! the settings that override the scenario file's, and the track files.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use filter::{Discrepancy, Execution, SigmaPointSet};
+use scenario::AssimilationScenario;
+
+use super::ObservationFiles;
+
+/// The user's choices of an assimilation run: the arguments of `augsim assimilate` (its scenario
+/// and what overrides the scenario's settings). [`AssimilationChoice::scenario`] applies them.
+#[derive(Debug, Clone, clap::Args)]
+pub struct AssimilationChoice {
+    /// Assimilation scenario: a TOML file, or the name of a built-in one (e.g. roukf_young).
+    pub scenario: PathBuf,
+    /// Number of filter iterations (default: the scenario's; with --observations, all frames).
+    #[arg(long)]
+    pub iterations: Option<usize>,
+    /// Evaluate the sigma points one after the other instead of in parallel.
+    #[arg(long)]
+    pub sequential: bool,
+    /// Output directory; default out/<name>.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Tracked features instead of synthetic ones: CSV `frame,id,x,y,z` (m; frame 0 = rest, frame k = step k).
+    #[arg(long)]
+    pub observations: Option<PathBuf>,
+    /// Rest positions of the tracked features: CSV `id,x,y,z` (default: their frame-0 rows).
+    #[arg(long, requires = "observations")]
+    pub features: Option<PathBuf>,
+    /// Tracked tool features (CSV `frame,id,x,y,z`): displacement prescribed on the nearest free surface node.
+    #[arg(long, requires = "observations")]
+    pub controls: Option<PathBuf>,
+    /// Tracked assessment points (CSV `frame,id,x,y,z`): the estimated deformation's error is reported there.
+    #[arg(long, requires = "observations")]
+    pub assessment: Option<PathBuf>,
+    /// The scenario's parameter values are the truth behind the tracks (e.g. tracks of a synthetic run on a finer
+    /// mesh): report the estimate's error against them.
+    #[arg(long, requires = "observations")]
+    pub known_truth: bool,
+    /// Forgetting factor in (0, 1]: the parameter covariance is divided by it before every step (default: the
+    /// scenario's filter.forgetting, else 1 = none).
+    #[arg(long)]
+    pub forgetting: Option<f64>,
+    /// Sigma points: `simplex` (p + 1) or `star` (2p + 1) (default: the scenario's filter.sigma_points, else
+    /// simplex).
+    #[arg(long, value_name = "SET")]
+    pub sigma_points: Option<SigmaPointSet>,
+    /// Allowance for model error in the reported σ: `none`, `independent` (the misfit beyond the observation noise
+    /// as extra white noise) or `systematic` (a model error that may lie along the parameters' sensitivity)
+    /// (default: the scenario's filter.discrepancy, else none).
+    #[arg(long, value_name = "KIND")]
+    pub discrepancy: Option<Discrepancy>,
+    /// Degrees of freedom d ≥ 1 of a systematic discrepancy (default: the scenario's filter.discrepancy_dof, else 1).
+    #[arg(long, value_name = "D")]
+    pub discrepancy_dof: Option<f64>,
+    /// Write the estimated deformation every N steps (default: the scenario's output.every, else 1).
+    #[arg(long)]
+    pub every: Option<usize>,
+}
+
+impl AssimilationChoice {
+    /// The scenario (with the directory its paths are relative to), the choices that override
+    /// its settings applied.
+    pub fn scenario(&self) -> Result<(AssimilationScenario, PathBuf)> {
+        let (mut sc, dir) = AssimilationScenario::load(&self.scenario)?;
+        if self.iterations.is_some() {
+            sc.iterations = self.iterations;
+        }
+        if self.sequential {
+            sc.filter.execution = Execution::Sequential;
+        }
+        if let Some(rho) = self.forgetting {
+            sc.filter.forgetting = rho;
+        }
+        if let Some(set) = self.sigma_points {
+            sc.filter.sigma_points = set;
+        }
+        if let Some(kind) = self.discrepancy {
+            sc.filter.discrepancy = kind;
+        }
+        if let Some(d) = self.discrepancy_dof {
+            sc.filter.discrepancy_dof = d;
+        }
+        if self.every.is_some() {
+            sc.output.every = self.every;
+        }
+        Ok((sc, dir))
+    }
+
+    /// The track files that replace the synthetic observations, when given.
+    pub fn files(&self) -> Option<ObservationFiles> {
+        self.observations.as_ref().map(|observations| ObservationFiles {
+            observations: observations.clone(),
+            features: self.features.clone(),
+            controls: self.controls.clone(),
+            assessment: self.assessment.clone(),
+            known_truth: self.known_truth,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_choices_override_the_scenario_settings() {
+        let choice = AssimilationChoice {
+            scenario: PathBuf::from("roukf_young"),
+            iterations: Some(3),
+            sequential: true,
+            output: None,
+            observations: None,
+            features: None,
+            controls: None,
+            assessment: None,
+            known_truth: false,
+            forgetting: Some(0.9),
+            sigma_points: Some(SigmaPointSet::Star),
+            discrepancy: None,
+            discrepancy_dof: Some(2.0),
+            every: Some(5),
+        };
+        let (sc, _) = choice.scenario().unwrap();
+        assert_eq!((sc.iterations, sc.output.every), (Some(3), Some(5)));
+        assert_eq!(sc.filter.execution, Execution::Sequential);
+        assert_eq!((sc.filter.forgetting, sc.filter.discrepancy_dof), (0.9, 2.0));
+        assert_eq!(sc.filter.sigma_points, SigmaPointSet::Star);
+        assert!(choice.files().is_none());
+        let tracked = AssimilationChoice { observations: Some("obs.csv".into()), known_truth: true, ..choice };
+        let files = tracked.files().unwrap();
+        assert!(files.known_truth && files.observations == std::path::Path::new("obs.csv"));
+    }
+}

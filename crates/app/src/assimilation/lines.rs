@@ -1,0 +1,135 @@
+//! The lines a front prints for an assimilation: its set-up before the run and its results after.
+
+use filter::SigmaPointSet;
+use mesh::length::mm;
+
+use super::{ObservationFiles, Report, Setup};
+
+impl Setup {
+    /// The set-up in words: mesh, constraints and points, and where the observations come from
+    /// (the reference run, or the track files `files`); `sigma` is the filter's sigma-point set.
+    pub fn lines(&self, sigma: SigmaPointSet, files: Option<&ObservationFiles>) -> Vec<String> {
+        let s = self;
+        let mut lines = vec![
+            format!("mesh         {} nodes, {} {} cells", s.nodes, s.cells, s.cell_kind),
+            format!(
+                "setup        {} constrained nodes ({} tool, {} tracked tool), {} feature points, {} assessment \
+                 points, {} parameter(s), {} {sigma} sigma points",
+                s.constrained_nodes,
+                s.tool_nodes,
+                s.control_nodes,
+                s.features,
+                s.assessment_points,
+                s.parameters,
+                s.sigma_points,
+            ),
+        ];
+        match (&s.reference, files) {
+            (Some(r), _) => lines.push(format!(
+                "reference    {} steps in {:.2} s, max |u| = {:.2} mm, on {}",
+                s.iterations,
+                r.seconds,
+                mm(r.max_displacement),
+                if r.inverse_crime {
+                    "the filter's own model (an inverse crime: add a [reference] section with another mesh)".to_string()
+                } else {
+                    format!(
+                        "a reference of its own: {} nodes, {} cells, {:?} ({} tracked points moved onto the \
+                         model's surface, at most {:.2} mm)",
+                        r.nodes,
+                        r.cells,
+                        r.law,
+                        s.projected,
+                        mm(s.max_projection)
+                    )
+                }
+            )),
+            (None, Some(f)) => lines.push(format!(
+                "tracks       {} frames from {}, {} occluded feature observations, {} points outside the mesh \
+                 moved onto its surface (at most {:.2} mm)",
+                s.iterations,
+                f.observations.display(),
+                s.occluded,
+                s.projected,
+                mm(s.max_projection)
+            )),
+            (None, None) => {}
+        }
+        lines
+    }
+}
+
+impl Report {
+    /// The results in words: the filter's speed and where its time went, the estimates (against
+    /// the truth when known), the assessment errors and the wall time.
+    pub fn lines(&self) -> Vec<String> {
+        let r = self;
+        let t = &r.filter_times;
+        let mut lines = vec![
+            format!(
+                "filter       {} iterations in {:.2} s: {:.2} ms per iteration (median {:.2} ms), {:.2} Newton \
+                 iterations per solve, {:?}",
+                r.iterations,
+                r.filter_seconds,
+                1e3 * r.seconds_per_iteration_mean,
+                1e3 * r.seconds_per_iteration_median,
+                r.newton_iterations_per_solve,
+                r.execution
+            ),
+            format!(
+                "time         FEM solves {:.2} s summed over the sigma points (assembly {:.2} s, {:.2} \
+                 factorisations per solve {:.2} s, triangular solves {:.2} s), writing the deformation {:.2} s",
+                t.solves, t.assembly, t.factorizations_per_solve, t.factorization, t.triangular_solves, t.writing
+            ),
+        ];
+        if let Some(y) = &r.young {
+            let truth = match y.truth {
+                Some(t) => format!(
+                    " (truth {t:.0} Pa, error {:+.2} %), within 1 % {}",
+                    100.0 * (y.mean - t) / t,
+                    match (y.within_1_percent_from_iteration, y.within_1_percent_after_seconds) {
+                        (Some(k), Some(t)) => format!("from iteration {k} on ({t:.2} s of filter time)"),
+                        (Some(k), None) => format!("from iteration {k} on"),
+                        _ => "never (so far)".to_string(),
+                    }
+                ),
+                None => String::new(),
+            };
+            lines.push(format!("young        μ = {:.1} ± {:.1} Pa{truth}", y.mean, y.std));
+            if let (Some(noise), Some(misfit)) = (y.noise_std, y.misfit) {
+                lines.push(format!(
+                    "discrepancy  σ = {:.1} Pa from the observation noise alone; misfit χ²/ν = {misfit:.3} \
+                     (effective observation noise {:.2} × nominal)",
+                    noise,
+                    misfit.sqrt()
+                ));
+            }
+        }
+        if let Some(s) = &r.springs {
+            let n = s.stiffness.len() as f64;
+            let truth = match (&s.truth, s.rms_error) {
+                (Some(t), Some(rms)) => format!(
+                    ": RMS error {rms:.1} N/m (true values 0..{:.1} N/m)",
+                    t.iter().copied().fold(0.0, f64::max)
+                ),
+                _ => String::new(),
+            };
+            lines.push(format!(
+                "springs      {} stiffnesses{truth}, mean {:.1} N/m, mean σ {:.1} N/m",
+                s.stiffness.len(),
+                s.stiffness.iter().sum::<f64>() / n,
+                s.std.iter().sum::<f64>() / n
+            ));
+        }
+        for c in &r.assessment {
+            lines.push(format!(
+                "assessment   {:<10} mean error {:.3} mm (max {:.3} mm)",
+                c.label,
+                mm(c.mean_error),
+                mm(c.max_error)
+            ));
+        }
+        lines.push(format!("wall time    {:.2} s in all", r.total_seconds));
+        lines
+    }
+}

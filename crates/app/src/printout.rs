@@ -1,0 +1,159 @@
+//! The lines the fronts print about a registration run and a comparison case: built here from the
+//! domain's results, printed by the front.
+
+use std::path::Path;
+
+use mesh::length::mm;
+use register::{FrameOutcome, Organ, RigidResult, RigidTransform, Summary};
+use scenario::CaseScenario;
+
+use crate::case::{Compared, SyntheticCase};
+use crate::output::{comparison_rows, FrameSummary};
+use crate::solve::ms;
+
+/// The organ's line: its mesh, its surface and its number of targets.
+pub fn organ_line(organ: &Organ, targets: usize) -> String {
+    format!(
+        "organ      {} nodes, {} {} cells; surface of {} triangles; {targets} targets",
+        organ.mesh().num_nodes(),
+        organ.mesh().cells.len(),
+        organ.mesh().cells.kind_name(),
+        organ.surface().triangles.len(),
+    )
+}
+
+/// The rigid alignment's lines, with its error against `truth` (the true organ → cloud
+/// transform) when known.
+pub fn rigid_lines(r: &RigidResult, truth: Option<&RigidTransform>) -> Vec<String> {
+    let t = r.organ_to_cloud();
+    let mut lines = vec![format!(
+        "rigid      ICP: organ -> cloud rotation {:.2} deg, translation {:.2} mm; {} iterations{}, {} of {} \
+         points kept, rms {:.2} mm, {:.1} ms",
+        t.angle().to_degrees(),
+        mm(t.translation_norm()),
+        r.iterations,
+        if r.converged { "" } else { " (not converged)" },
+        r.kept,
+        r.points,
+        mm(r.rms),
+        ms(r.time)
+    )];
+    if let Some(truth) = truth {
+        let (angle, shift) = t.error_to(truth);
+        lines.push(format!(
+            "           against the case's true misalignment ({:.2} deg, {:.2} mm): {:.2} deg, {:.2} mm off",
+            truth.angle().to_degrees(),
+            mm(truth.translation_norm()),
+            angle.to_degrees(),
+            mm(shift)
+        ));
+    }
+    lines
+}
+
+/// Frame `i`'s line: points, iterations, residual, time and the TRE when known.
+pub fn frame_line(i: usize, row: &FrameSummary) -> String {
+    format!(
+        "frame {i:<4} {} points ({} matched), {} iterations, surface residual {:.2} mm, {:.1} ms{}",
+        row.points,
+        row.inliers,
+        row.iterations,
+        row.surface_residual_mm,
+        row.time_ms,
+        row.tre_mean_mm
+            .map_or(String::new(), |t| format!(", TRE mean {t:.2} mm, max {:.2} mm", row.tre_max_mm.unwrap_or(0.0)))
+    )
+}
+
+/// The run's closing figures: the σ predicted at the targets (last frame) and the TRE when known.
+pub fn run_lines(outcomes: &[FrameOutcome], summary: &Summary) -> Vec<String> {
+    let mut lines = Vec::new();
+    if let Some(sigma) = outcomes.last().and_then(|o| o.target_std.as_ref()) {
+        lines.push(format!(
+            "sigma      predicted at the targets: mean {:.2} mm, max {:.2} mm (targets.csv, column sigma_m)",
+            mm(mesh::stats::mean(sigma)),
+            mm(mesh::stats::max(sigma))
+        ));
+    }
+    if let (Some(t), Some(m), Some(r)) = (summary.tre_mean_mm, summary.tre_max_mm, summary.no_deformation_tre_mean_mm) {
+        lines.push(format!("TRE        mean {t:.2} mm, max {m:.2} mm (without deformation: mean {r:.2} mm)"));
+    }
+    lines
+}
+
+/// A comparison case in words: its truth, its camera and its misalignment.
+pub fn case_lines(scenario: &CaseScenario) -> Vec<String> {
+    let (t, c, m) = (&scenario.truth, &scenario.camera, &scenario.misalignment);
+    let mut lines = vec![
+        format!("case       {}: {}", scenario.name, scenario.description),
+        format!(
+            "truth      {:?} phantom (E = {} kPa, nu = {}) of {}, fixed on `{}`, {} N along {:?} on `{}`",
+            t.material.law,
+            t.material.young * 1e-3,
+            t.material.poisson,
+            t.mesh_words(),
+            t.fixed,
+            t.force,
+            t.direction,
+            t.load
+        ),
+        format!(
+            "camera     along {:?}: {} points on the visible surface, {} mm noise, {} % outliers (seed {})",
+            c.view,
+            c.points,
+            mm(c.noise),
+            c.outliers * 1e2,
+            c.seed
+        ),
+    ];
+    if m.rotation_deg != 0.0 || m.translation_mm != 0.0 {
+        lines.push(format!(
+            "misaligned camera frame: {} deg about {:?}, then {} mm along {:?}",
+            m.rotation_deg, m.axis, m.translation_mm, m.direction
+        ));
+    }
+    lines
+}
+
+/// The simulated case's frames and where they were written (`dir`).
+pub fn case_files_lines(case: &SyntheticCase, dir: &Path) -> Vec<String> {
+    if case.frames.len() > 1 {
+        let forces: Vec<String> = case.frames.iter().map(|f| format!("{:.2}", f.force)).collect();
+        vec![
+            format!(
+                "frames     {}: forces {} N, each frame warm-started from the previous one",
+                forces.len(),
+                forces.join(" ")
+            ),
+            format!(
+                "case       {} (cloud.csv, truth.csv: the peak frame; clouds/, truths/: every frame; \
+                 targets_rest.csv)",
+                dir.display()
+            ),
+        ]
+    } else {
+        vec![format!("case       {} (cloud.csv, targets_rest.csv, truth.csv)", dir.display())]
+    }
+}
+
+/// The comparison's table: a blank line, the header, then the baseline and each method (its
+/// figures, or why it failed); the name column fits the longest method name.
+pub fn comparison_table(rows: &[Compared]) -> Vec<String> {
+    let width = rows.iter().map(|r| r.method.chars().count()).max().unwrap_or(0).max(28);
+    let mut lines = vec![
+        String::new(),
+        format!(
+            "{:<width$} {:>14} {:>13} {:>14} {:>10} {:>10} {:>10}",
+            "method", "TRE mean (mm)", "TRE max (mm)", "residual (mm)", "ms/frame", "p95 (ms)", "iterations"
+        ),
+    ];
+    for (name, values, error) in comparison_rows(rows) {
+        let [t, m, res, time, p95, it] = values.map(|v| v.map_or("-".to_string(), |v| format!("{v:.2}")));
+        lines.push(if error.is_empty() {
+            format!("{name:<width$} {t:>14} {m:>13} {res:>14} {time:>10} {p95:>10} {it:>10}")
+        } else {
+            format!("{name:<width$} failed: {error}")
+        });
+    }
+    lines
+}

@@ -1,0 +1,43 @@
+//! The terminal's progress bar: every command draws the progress of its long runs through [`Bar`].
+
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// A progress bar on the terminal counting `unit`s, with the library's note beside it; lines are
+/// printed above it, indented.
+pub struct Bar {
+    bar: ProgressBar,
+    indent: &'static str,
+}
+
+impl Bar {
+    /// A bar counting `unit` (e.g. "samples"; none when empty), drawn from the first report on; lines printed
+    /// after `indent`.
+    pub fn new(unit: &str, indent: &'static str) -> Self {
+        let unit = if unit.is_empty() { String::new() } else { format!(" {unit}") };
+        let template = format!("{indent}{{bar:40}} {{pos}}/{{len}}{unit}, {{per_sec}}, {{eta}} left  {{msg}}");
+        let style = ProgressStyle::with_template(&template).unwrap_or_else(|_| ProgressStyle::default_bar());
+        Bar { bar: ProgressBar::new(0).with_style(style), indent }
+    }
+
+    /// Prints `text` above the bar, not indented.
+    pub fn print(&self, text: &str) {
+        self.bar.suspend(|| println!("{text}"));
+    }
+
+    /// Removes the bar from the terminal.
+    pub fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
+}
+
+impl learn::Progress for Bar {
+    fn advance(&self, done: u64, total: u64, note: &str) {
+        self.bar.set_length(total);
+        self.bar.set_position(done);
+        self.bar.set_message(note.to_string());
+    }
+
+    fn line(&self, text: &str) {
+        self.print(&format!("{}{text}", self.indent));
+    }
+}
