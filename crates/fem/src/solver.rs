@@ -207,6 +207,16 @@ const STALL_ITERATIONS: usize = 12;
 /// See [`STALL_ITERATIONS`].
 const STALL_PROGRESS: f64 = 0.9;
 
+/// The iterations left to shrink a residual by `factor` at a `rate` of convergence per iteration
+/// (infinite when it does not converge).
+fn iterations_left(rate: f64, factor: f64) -> f64 {
+    if rate < 1.0 {
+        (factor.ln() / rate.ln()).max(0.0)
+    } else {
+        f64::INFINITY
+    }
+}
+
 /// Whether the residuals of an iteration sequence (relative, in order) have stalled.
 fn stalled(residuals: &[f64]) -> bool {
     let Some(split) = residuals.len().checked_sub(STALL_ITERATIONS).filter(|&s| s > 0) else {
@@ -589,7 +599,8 @@ impl StaticSolver {
                 attempt = self.newton(&mut trial, target, Start::Fresh, options, Budget::Patient, &mut stats);
                 if let Err(FemError::NotConverged { .. } | FemError::InvertedElement { .. }) = attempt {
                     let softening = path.softening();
-                    let none = FemError::NoEquilibrium { load_factor: lambda, softening, iterations: PATIENT_ITERATIONS };
+                    let none =
+                        FemError::NoEquilibrium { load_factor: lambda, softening, iterations: PATIENT_ITERATIONS };
                     // Saint-Venant-Kirchhoff's own limit point is told as such.
                     return Err(self.diagnose(none, lambda, &trial, &u, &stats));
                 }
@@ -683,13 +694,11 @@ impl StaticSolver {
         let mut r_old = vec![0.0; nf];
         let mut trial = u.to_vec();
         let mut bfgs = Bfgs::new(if opt.reuse_factorization { opt.bfgs_memory } else { 0 });
-        // The first factor: the rest tangent's (kept while the material and
-        // springs are unchanged, it serves every solve from rest), or the last
-        // factor computed. A warm start without a last factor takes the rest
-        // factor only while it is current: one to be made anew is made at the
-        // warm start instead, where it is a better preconditioner, and kept (the
-        // springs of a registration change at every solve: a rest factor made
-        // for each would never serve twice).
+        // The first factor: the rest tangent's (kept while the material and springs are unchanged,
+        // it serves every solve from rest), or the last factor computed. A warm start without a
+        // last factor takes the rest factor only while it is current: one to be made anew is made
+        // at the warm start instead, where it is a better preconditioner, and kept (the springs of
+        // a registration change at every solve: a rest factor made for each would never serve).
         let latest = self.cholesky.is_factorized(Slot::Latest);
         let want_rest = from == Start::Rest || (!latest && self.rest_factor_current());
         let mut slot = Slot::Latest;
@@ -699,9 +708,9 @@ impl StaticSolver {
         let mut refresh = from == Start::Fresh || !(slot == Slot::Rest || (opt.reuse_factorization && latest));
         let (mut last_ratio, mut since_refresh, mut undamped) = (1.0f64, 0usize, 0usize);
         let first_residual = stats.residuals.len();
-        let last_iteration = match budget {
-            Budget::Normal => opt.max_iterations,
-            Budget::Patient => PATIENT_ITERATIONS,
+        let (last_iteration, stall_rule) = match budget {
+            Budget::Normal => (opt.max_iterations, true),
+            Budget::Patient => (PATIENT_ITERATIONS, false),
         };
         for it in 0..=last_iteration {
             let scale = ext_norm.max(norm(&f_int));
@@ -714,11 +723,7 @@ impl StaticSolver {
             if rel <= opt.rtol || (inc_ok && rel <= opt.rtol.sqrt()) {
                 return Ok(());
             }
-            let stop = match budget {
-                Budget::Normal => it == opt.max_iterations || stalled(&stats.residuals[first_residual..]),
-                Budget::Patient => it == PATIENT_ITERATIONS,
-            };
-            if stop {
+            if it == last_iteration || (stall_rule && stalled(&stats.residuals[first_residual..])) {
                 return Err(FemError::NotConverged { load_factor: lambda, iterations: it, residual: rel });
             }
             stats.iterations += 1;
@@ -764,9 +769,8 @@ impl StaticSolver {
                 since_refresh >= JUDGE_ITERATIONS
             };
             if opt.reuse_factorization && judged {
-                let rate = (ratio * last_ratio).sqrt();
-                let target = opt.rtol * ext_norm.max(norm(&f_int));
-                let left = if rate < 1.0 { ((target / res_new).ln() / rate.ln()).max(0.0) } else { f64::INFINITY };
+                let left =
+                    iterations_left((ratio * last_ratio).sqrt(), opt.rtol * ext_norm.max(norm(&f_int)) / res_new);
                 if left > self.refactorization_cost + REFRESH_ITERATIONS {
                     refresh = true;
                     since_refresh = 0;
