@@ -137,11 +137,17 @@ def test_a_unit_mistake_in_the_targets_is_named(case):
 def test_register_writes_what_the_command_line_writes(case, tmp_path):
     reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm")
     r = reg.register(case["cloud"], out=tmp_path / "out")
-    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["organ.vtu", "summary.json", "targets.csv"]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
+        "organ.vtu", "organ_deformed.vtk", "summary.json", "targets.csv", "targets.mrk.json"]
+    import json
+
+    # For 3D Slicer: the registered targets as markups in mm.
+    markups = json.loads((tmp_path / "out" / "targets.mrk.json").read_text())["markups"][0]
+    assert markups["coordinateUnits"] == "mm"
+    np.testing.assert_allclose([p["position"] for p in markups["controlPoints"]], r.targets, atol=1e-6)
     written = np.loadtxt(tmp_path / "out" / "targets.csv", delimiter=",", skiprows=1)
     np.testing.assert_allclose(written[:, 3:6] * 1e3, r.targets, atol=1e-9)  # written in m
     np.testing.assert_allclose(written[:, 0:3] * 1e3, case["rest"], atol=1e-9)
-    import json
 
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["frames"] == 1 and summary["per_frame"][0]["iterations"] == r.iterations
