@@ -97,7 +97,7 @@ pub enum FemError {
         /// The stiffness of the last load step against that of the first, in per cent (NaN when
         /// fewer than two steps converged).
         softening: f64,
-        /// Iterations of the last attempt.
+        /// Iterations the last attempt took before it failed.
         iterations: usize,
     },
     /// A NaN or infinity appeared.

@@ -596,11 +596,11 @@ impl StaticSolver {
                 // equilibrium.
                 target = (lambda + full_step).min(1.0);
                 trial.copy_from_slice(&u);
+                let before = stats.iterations;
                 attempt = self.newton(&mut trial, target, Start::Fresh, options, Budget::Patient, &mut stats);
                 if let Err(FemError::NotConverged { .. } | FemError::InvertedElement { .. }) = attempt {
-                    let softening = path.softening();
-                    let none =
-                        FemError::NoEquilibrium { load_factor: lambda, softening, iterations: PATIENT_ITERATIONS };
+                    let (softening, iterations) = (path.softening(), stats.iterations - before);
+                    let none = FemError::NoEquilibrium { load_factor: lambda, softening, iterations };
                     // Saint-Venant-Kirchhoff's own limit point is told as such.
                     return Err(self.diagnose(none, lambda, &trial, &u, &stats));
                 }
