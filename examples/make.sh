@@ -10,20 +10,19 @@ work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 cd "$work"
 
-# CSV x,y,z rows scaled by $1 and printed with the format $2 (the header kept).
-scaled() {
-    awk -F, -v scale="$1" -v fmt="$2" \
-        'NR == 1 { print; next } { printf fmt "," fmt "," fmt "\n", $1 * scale, $2 * scale, $3 * scale }' "$3"
+# CSV x,y,z rows in metres, printed in millimetres with the format $1 under a header naming them.
+in_mm() {
+    awk -F, -v fmt="$1" \
+        'NR == 1 { print "x_mm,y_mm,z_mm"; next } { printf fmt "," fmt "," fmt "\n", $1 * 1000, $2 * 1000, $3 * 1000 }' "$2"
 }
 
 # The built-in registration case of `augsim register --demo`: the liver phantom pushed down by 1.5 N
 # (Neo-Hookean, about 9,000 T10) seen from above by a camera (1 mm noise, 5 % outliers), and its 10
 # hidden markers. Run outside the repository, so the U-Net is skipped: only the case is kept.
 "$augsim" register --demo --out demo >/dev/null
-scaled 1 "%.5f" demo/case/cloud.csv >"$here/cloud.csv"
-scaled 1 "%.6f" demo/case/targets_rest.csv >"$here/targets.csv"
-scaled 1000 "%.3f" demo/case/targets_rest.csv >"$here/targets_mm.csv"
-scaled 1 "%.6f" demo/case/truth.csv >"$here/truth.csv"
+in_mm "%.2f" demo/case/cloud.csv >"$here/cloud.csv"
+in_mm "%.3f" demo/case/targets_rest.csv >"$here/targets.csv"
+in_mm "%.3f" demo/case/truth.csv >"$here/truth.csv"
 
 # Tracked surface points of the built-in ROUKF scenario roukf_young (synthetic, 40 steps).
 "$augsim" assimilate roukf_young --iterations 40 -o young >/dev/null
@@ -32,7 +31,7 @@ awk -F, 'NR == 1 { print; next } { printf "%s,%s,%.6f,%.6f,%.6f\n", $1, $2, $3, 
 # A segmented organ for `augsim prepare`: the phantom's surface as a segmentation gives it, in mm
 # in a scanner's frame (the phantom moved by (35, -60, -180) mm), with two holes, as ASCII STL
 # (every vertex repeated); where it is held (4 points of the phantom's `fixed` region, between the
-# lobes), the camera above it, and the demo's markers, cloud and truth in that frame.
+# lobes), the camera above it, and the demo's markers, cloud and truth in that frame, all in mm.
 "$augsim" mesh --tets 3000 -o phantom.stl >/dev/null
 python3 - "$here" <<'PY'
 import struct, sys
@@ -50,17 +49,17 @@ with open(f"{here}/organ.stl", "w") as f:
             f.write("  vertex %.4f %.4f %.4f\n" % tuple(1000.0 * v[3 + 3 * i + d] + shift[d] for d in range(3)))
         f.write(" endloop\nendfacet\n")
     f.write("endsolid organ\n")
-def shifted(src, dst, unit, fmt):
-    """The points of src moved into the scanner's frame; unit: metres per unit of the file."""
-    rows = [[float(x) for x in l.split(",")] for l in open(src).read().split()[1:]]
-    with open(dst, "w") as f:
-        f.write("x,y,z\n")
+def shifted(name, fmt):
+    """The points of name (mm) moved into the scanner's frame, as organ_name."""
+    rows = [[float(x) for x in l.split(",")] for l in open(f"{here}/{name}").read().split()[1:]]
+    with open(f"{here}/organ_{name}", "w") as f:
+        f.write("x_mm,y_mm,z_mm\n")
         for r in rows:
-            f.write(",".join(fmt % (r[d] + shift[d] * 1e-3 / unit) for d in range(3)) + "\n")
-shifted(f"{here}/targets_mm.csv", f"{here}/organ_targets_mm.csv", 1e-3, "%.3f")
-shifted(f"{here}/cloud.csv", f"{here}/organ_cloud.csv", 1.0, "%.5f")
-shifted(f"{here}/truth.csv", f"{here}/organ_truth.csv", 1.0, "%.6f")
-with open(f"{here}/organ_ligaments_mm.csv", "w") as f:
-    f.write("x,y,z\n-8.25,-61.38,-202.25\n51.08,-61.38,-215.70\n23.33,-89.12,-207.89\n9.54,-31.71,-203.40\n")
+            f.write(",".join(fmt % (r[d] + shift[d]) for d in range(3)) + "\n")
+shifted("targets.csv", "%.3f")
+shifted("cloud.csv", "%.2f")
+shifted("truth.csv", "%.3f")
+with open(f"{here}/organ_ligaments.csv", "w") as f:
+    f.write("x_mm,y_mm,z_mm\n-8.25,-61.38,-202.25\n51.08,-61.38,-215.70\n23.33,-89.12,-207.89\n9.54,-31.71,-203.40\n")
 PY
-echo "wrote $here: cloud.csv, targets.csv, targets_mm.csv, truth.csv, tracks.csv, organ*"
+echo "wrote $here: cloud.csv, targets.csv, truth.csv, tracks.csv, organ*"

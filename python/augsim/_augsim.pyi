@@ -38,6 +38,7 @@ class Registered:
 class Registration:
     method: str
     units: str
+    frame: Optional[str]
     points: npt.NDArray[np.float64]
     targets: npt.NDArray[np.float64]
     def __init__(
@@ -49,7 +50,8 @@ class Registration:
         patient: Optional[_Path] = None,
         use_fem: Optional[bool] = None,
         targets: Union[_Path, npt.ArrayLike, None] = None,
-        units: str = "m",
+        units: Optional[str] = None,
+        frame: Optional[str] = None,
         iterations: Optional[int] = None,
         rigid: bool = False,
     ) -> None: ...

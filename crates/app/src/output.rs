@@ -108,6 +108,8 @@ struct RunSummary<'a> {
 pub struct RunWriter {
     dir: PathBuf,
     sequence: bool,
+    /// The unit of targets.csv.
+    unit: LengthUnit,
     /// The organ moved by the rigid alignment, once known (the same for every frame).
     moved: Option<Mesh>,
     /// The last frame's organ (in the cloud's frame) and displacement.
@@ -118,10 +120,19 @@ pub struct RunWriter {
 
 impl RunWriter {
     /// A writer into `dir` (created), for a sequence of frames (organ.pvd and one organ_NNNN.vtu
-    /// each) or a single cloud (organ.vtu).
-    pub fn new(dir: &Path, sequence: bool) -> Result<RunWriter> {
+    /// each) or a single cloud (organ.vtu), its targets.csv in `unit` (the organ's meshes stay in
+    /// metres, the files for 3D Slicer in millimetres).
+    pub fn new(dir: &Path, sequence: bool, unit: LengthUnit) -> Result<RunWriter> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        Ok(RunWriter { dir: dir.to_path_buf(), sequence, moved: None, last: None, steps: Vec::new(), rows: Vec::new() })
+        Ok(RunWriter {
+            dir: dir.to_path_buf(),
+            sequence,
+            unit,
+            moved: None,
+            last: None,
+            steps: Vec::new(),
+            rows: Vec::new(),
+        })
     }
 
     /// Writes frame `i` (registered from `cloud`) of `organ`; returns its summary line.
@@ -163,6 +174,7 @@ impl RunWriter {
             &last.targets,
             last.target_std.as_deref(),
             labels,
+            self.unit,
         )?;
         write_targets_for_slicer(
             &self.dir.join("targets.mrk.json"),
@@ -223,13 +235,17 @@ pub fn write_targets(
     registered: &[Point],
     sigma: Option<&[f64]>,
     labels: &[String],
+    unit: LengthUnit,
 ) -> Result<()> {
     let labelled = labels.len() == rest.len() && labels.iter().any(|l| !l.is_empty());
-    let mut header = vec!["x0_m", "y0_m", "z0_m", "x_m", "y_m", "z_m"];
-    header.extend(sigma.map(|_| "sigma_m"));
-    header.extend(labelled.then_some("label"));
+    let symbol = unit.symbol();
+    let mut header: Vec<String> = ["x0", "y0", "z0", "x", "y", "z"].iter().map(|c| format!("{c}_{symbol}")).collect();
+    header.extend(sigma.map(|_| format!("sigma_{symbol}")));
+    header.extend(labelled.then(|| "label".to_string()));
+    let header: Vec<&str> = header.iter().map(String::as_str).collect();
     let rows = rest.iter().zip(registered).enumerate().map(|(i, (a, b))| {
-        let mut row: Vec<String> = a.iter().chain(b).chain(sigma.map(|s| &s[i])).map(f64::to_string).collect();
+        let values = a.iter().chain(b).chain(sigma.map(|s| &s[i]));
+        let mut row: Vec<String> = values.map(|&v| unit.from_metres(v).to_string()).collect();
         row.extend(labelled.then(|| labels[i].clone()));
         row
     });
@@ -314,7 +330,7 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         mesh::io::write_mesh(method_dir.join("organ.vtu"), &m, &[Field::point("displacement", 3, u_cloud)])?;
         let rest_targets = rest_in_cloud_frame(&case.targets, outcome.rigid.as_ref());
         let sigma = outcome.target_std.as_deref();
-        write_targets(&method_dir.join("targets.csv"), &rest_targets, &outcome.targets, sigma, &[])?;
+        write_targets(&method_dir.join("targets.csv"), &rest_targets, &outcome.targets, sigma, &[], LengthUnit::Metre)?;
         // The picture is drawn in the organ's frame: cloud, targets and truth moved back.
         let back = outcome.rigid.as_ref().map_or_else(RigidTransform::identity, |r| r.cloud_to_organ);
         let to_organ = |points: &[Point]| -> Vec<Point> { points.iter().map(|&p| back.apply(p)).collect() };
@@ -401,7 +417,8 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("targets.csv");
         let (rest, moved) = ([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [[0.0, 0.0, 0.5], [1.0, 0.0, 0.5]]);
-        write_targets(&path, &rest, &moved, Some(&[0.001, 0.002]), &["T1".into(), "deep, left".into()]).unwrap();
+        let labels = ["T1".to_string(), "deep, left".to_string()];
+        write_targets(&path, &rest, &moved, Some(&[0.001, 0.002]), &labels, LengthUnit::Metre).unwrap();
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(
             text,
@@ -410,7 +427,12 @@ mod tests {
         // Read back as points: the registered positions, in metres, with their labels.
         let back = mesh::io::points::read_points(&path).unwrap();
         assert_eq!((back.points, back.labels), (moved.to_vec(), vec!["T1".to_string(), "deep, left".to_string()]));
-        write_targets(&path, &rest, &moved, None, &["".into(), "".into()]).unwrap();
+        write_targets(&path, &rest, &moved, None, &["".into(), "".into()], LengthUnit::Metre).unwrap();
         assert!(std::fs::read_to_string(&path).unwrap().starts_with("x0_m,y0_m,z0_m,x_m,y_m,z_m\n0,0,0,"));
+        // In millimetres: the header names them, and the points read back are where they were.
+        write_targets(&path, &rest, &moved, Some(&[0.001, 0.002]), &labels, LengthUnit::Millimetre).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(text.starts_with("x0_mm,y0_mm,z0_mm,x_mm,y_mm,z_mm,sigma_mm,label\n0,0,0,0,0,500,1,T1\n"), "{text}");
+        assert_eq!(mesh::io::points::read_points_csv(&path).unwrap(), moved);
     }
 }

@@ -5,7 +5,8 @@
 //! The frame policy: a command works in the frame of its organ (a surface's `SPACE=` header, or
 //! the frame its targets file names). Points whose file names the other frame (RAS or LPS) are
 //! converted (x and y negated); points whose file names none are taken as being in the working
-//! frame. When the organ's frame is not known, the first point file to name one gives it.
+//! frame, or in the frame the user gives (`--frame`). When the organ's frame is not known, the
+//! first point file to name one gives it.
 //! Units: a file that names its unit (`.fcsv`, `.mrk.json`, CSV headers `x_mm`) is read in it;
 //! other files in the unit the user gives (`--units`).
 
@@ -13,7 +14,7 @@ use std::path::Path;
 
 use anyhow::Result;
 use mesh::io::points::{read_points, LabelledPoints};
-use mesh::io::Frame;
+use mesh::io::{Frame, FrameChange};
 use mesh::length::LengthUnit;
 use mesh::Point;
 
@@ -27,12 +28,19 @@ pub struct PointInput {
     pub unit: LengthUnit,
     /// The unit of files that name none (the user's `--units`).
     pub given: LengthUnit,
+    /// The frame of files that name none (the user's `--frame`; `None`: the working frame).
+    pub given_frame: Option<Frame>,
 }
 
 impl PointInput {
     /// An input into `frame` (when known) and `unit`, files naming no unit being in `given`.
     pub fn new(frame: Option<Frame>, unit: LengthUnit, given: LengthUnit) -> PointInput {
-        PointInput { frame, unit, given }
+        PointInput { frame, unit, given, given_frame: None }
+    }
+
+    /// The same input, files that name no frame being in `frame` (`None`: the working frame).
+    pub fn with_given_frame(self, frame: Option<Frame>) -> PointInput {
+        PointInput { given_frame: frame, ..self }
     }
 
     /// Reads a points file (CSV, `.fcsv`, `.mrk.json`) with its labels, in the working frame and
@@ -44,6 +52,7 @@ impl PointInput {
     /// Points read from a file, in the working frame and unit (their frame becoming the working
     /// frame when there was none).
     fn place(&mut self, mut points: LabelledPoints) -> LabelledPoints {
+        points.frame = points.frame.or(self.given_frame);
         self.frame = self.frame.or(points.frame);
         points.convert(self.frame, self.unit, self.given);
         points
@@ -65,7 +74,8 @@ impl PointInput {
         let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
         let points = if name.ends_with(".npy") || name.ends_with(".ply") {
             let scale = self.given.metres() / self.unit.metres();
-            register::cloud::read_point_cloud(path)?.into_iter().map(|p| p.map(|x| x * scale)).collect()
+            let change = FrameChange::between(self.given_frame, self.frame);
+            register::cloud::read_point_cloud(path)?.into_iter().map(|p| change.point(p.map(|x| x * scale))).collect()
         } else {
             self.place(read_points(path)?).points
         };
@@ -108,6 +118,13 @@ mod tests {
         assert_eq!(input.frame, Some(Frame::Ras));
         assert_eq!(input.read_truths(&plain, 1).unwrap(), [[[1.0, 2.0, 3.0]]]);
         assert!(input.read_truths(&plain, 2).unwrap_err().to_string().contains("1 truth file(s) for 2 cloud frame(s)"));
+        // Files that name no frame, in the frame given.
+        let mut input = PointInput::new(Some(Frame::Lps), LengthUnit::Millimetre, LengthUnit::Millimetre)
+            .with_given_frame(Some(Frame::Ras));
+        assert_eq!(input.read(&plain).unwrap().points, [[-1.0, -2.0, 3.0]]);
+        let npy = dir.path().join("cloud.npy");
+        learn::data::npy::write_f64(&npy, &[1, 3], &[1.0, 2.0, 3.0]).unwrap();
+        assert_eq!(input.read_cloud(&npy).unwrap(), [[-1.0, -2.0, 3.0]]);
         let empty = dir.path().join("empty.csv");
         std::fs::write(&empty, "x,y,z\n").unwrap();
         assert!(input.read_cloud(&empty).is_err());

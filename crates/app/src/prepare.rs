@@ -380,6 +380,17 @@ fn read_surface_input(
     Ok((surface, frame, unit))
 }
 
+/// The unit of the user's files: the one given, a labelmap's millimetre, or the one detected from
+/// the surface's size (as [`read_surface_input`] finds it).
+fn input_unit(options: &PrepareOptions) -> Result<LengthUnit> {
+    let path = &options.surface;
+    match options.units {
+        Some(unit) => Ok(unit),
+        None if is_labelmap(path) => Ok(LengthUnit::Millimetre),
+        None => detect_unit(&mesh::io::read_surface(path)?).with_context(|| format!("the unit of {}", path.display())),
+    }
+}
+
 /// The grid of the network's input and output: 32 nodes along the organ's longest side (about
 /// 6 mm apart on a liver), at least as fine along the others, each count a multiple of 8 (the
 /// U-Net halves it three times).
@@ -459,10 +470,16 @@ fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
          [[fixed]]\nselect = {held}\n",
         surface = options.surface.display(),
     );
-    let patient = "# The registration set-up of this organ: `augsim register --patient DIR`, `augsim serve\n\
+    let patient = format!(
+        "# The registration set-up of this organ: `augsim register --patient DIR`, `augsim serve\n\
          # --patient DIR`, `augsim.Registration(patient=DIR)`. Paths are relative to this file.\n\
          # method: \"learned\" or \"fem\", the one that registered the validation's pushes the better.\n\
-         method = \"learned\"\nmodel = \"model\"\nscenario = \"dataset.toml\"\nfem = \"static.toml\"\ntargets = \"targets.csv\"\nunits = \"m\"\n";
+         # input_units: the unit of the files it was prepared from, in which points whose files name\n\
+         # none are read and results given back.\n\
+         method = \"learned\"\nmodel = \"model\"\nscenario = \"dataset.toml\"\nfem = \"static.toml\"\ntargets = \"targets.csv\"\nunits = \"m\"\n\
+         input_units = \"{}\"\n",
+        input_unit(options)?.symbol()
+    );
     write_atomic_bytes(&dir.join("dataset.toml"), dataset.as_bytes())?;
     write_atomic_bytes(&dir.join("static.toml"), fem.as_bytes())?;
     write_atomic_bytes(&dir.join(PATIENT_FILE), patient.as_bytes())?;

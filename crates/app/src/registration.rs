@@ -8,6 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use mesh::io::Frame;
 use mesh::length::LengthUnit;
 use mesh::Point;
 use register::{FemDeformer, Registration, RegistrationOptions};
@@ -75,10 +76,16 @@ pub struct RegistrationChoice {
     #[arg(long, value_name = "TARGETS", value_parser = targets_file)]
     pub targets: Option<TargetsSpec>,
     /// Unit of the coordinates given and given back whose files name none (clouds, targets,
-    /// truth, results): mm or m, the same default (m, augsim's unit) on every front; files that
-    /// name their unit (.fcsv, .mrk.json, CSV columns x_mm) are read in it.
-    #[arg(long, default_value_t = LengthUnit::DEFAULT)]
-    pub units: LengthUnit,
+    /// truth, results): mm or m. Default: a patient's own (the unit of the files `augsim prepare`
+    /// was given), else m (augsim's unit) on every front. Files that name their unit (.fcsv,
+    /// .mrk.json, CSV columns x_mm) are read in it.
+    #[arg(long)]
+    pub units: Option<LengthUnit>,
+    /// Frame (RAS or LPS) of the points given whose files name none (clouds, truth; a stream's
+    /// coordinates), converted into the organ's frame and results converted back. Default: the
+    /// organ's own frame; `serve`: RAS, the frame OpenIGTLink streams in.
+    #[arg(long)]
+    pub frame: Option<Frame>,
     /// Most match-and-deform iterations of the first cloud, from rest (default: the library's for
     /// a FEM, the built-in registration case's real-time budget for a learned model).
     #[arg(long)]
@@ -93,7 +100,7 @@ pub struct RegistrationChoice {
 impl TargetsSpec {
     /// The frame that a targets file names (a patient's, as `augsim prepare` writes it, or the
     /// user's), `None` for other targets: the frame the registration works in.
-    pub fn frame(&self) -> Result<Option<mesh::io::Frame>> {
+    pub fn frame(&self) -> Result<Option<Frame>> {
         match self {
             TargetsSpec::File(path) => Ok(mesh::io::points::read_points(path)
                 .with_context(|| format!("the targets of {}", path.display()))?
@@ -157,12 +164,18 @@ impl RegistrationChoice {
         self.check().map_err(anyhow::Error::msg)?;
         if let Some(dir) = &self.patient {
             let method = PatientMethod::asked(self.use_fem, self.use_model);
-            return RegistrationSpec::patient(dir, method, self.iterations, self.rigid);
+            let mut spec = RegistrationSpec::patient(dir, method, self.iterations, self.rigid)?;
+            spec.given_units = self.units.unwrap_or(spec.given_units);
+            spec.given_frame = self.frame;
+            return Ok(spec);
         }
+        let units = self.units.unwrap_or(LengthUnit::DEFAULT);
         Ok(RegistrationSpec {
             method: self.method().map_err(anyhow::Error::msg)?,
             targets: self.targets.clone().unwrap_or(TargetsSpec::Regions),
-            units: self.units,
+            units,
+            given_units: units,
+            given_frame: self.frame,
             iterations: self.iterations,
             rigid: self.rigid,
         })
@@ -178,6 +191,11 @@ pub struct RegistrationSpec {
     pub targets: TargetsSpec,
     /// The unit of the given targets (of a file's when it names none).
     pub units: LengthUnit,
+    /// The unit of the points given and given back whose files name none: clouds, truth, results
+    /// (a patient's: the unit of the files it was prepared from).
+    pub given_units: LengthUnit,
+    /// The frame of the points given whose files name none (`None`: the organ's).
+    pub given_frame: Option<Frame>,
     /// Most match-and-deform iterations from rest, in place of the method's default.
     pub iterations: Option<usize>,
     /// A rigid pre-alignment of the first cloud (trimmed ICP).
@@ -229,6 +247,12 @@ impl RegistrationSpec {
             _ => "the targets".into(),
         };
         Registration::new(organ, deformer, method, targets, options).with_context(|| what)
+    }
+
+    /// The frame the registration works in: the one its targets file names (see
+    /// [`TargetsSpec::frame`]), `None` when unknown.
+    pub fn frame(&self) -> Result<Option<Frame>> {
+        self.targets.frame()
     }
 
     /// The targets' labels, in order: a targets file's (empty strings where it gives none); none
@@ -288,11 +312,15 @@ struct Patient {
     fem: PathBuf,
     targets: PathBuf,
     units: LengthUnit,
+    /// The unit of the files the set-up was prepared from (set-ups of older versions name none).
+    #[serde(default)]
+    input_units: Option<LengthUnit>,
 }
 
 impl RegistrationSpec {
     /// The registration set-up of the patient directory `dir` (written by `augsim prepare`): the
-    /// method it names, or `method` when given; its targets.
+    /// method it names, or `method` when given; its targets; the unit of its inputs for the points
+    /// given and given back.
     pub fn patient(
         dir: &Path,
         method: Option<PatientMethod>,
@@ -312,6 +340,8 @@ impl RegistrationSpec {
             method,
             targets: TargetsSpec::File(dir.join(p.targets)),
             units: p.units,
+            given_units: p.input_units.unwrap_or(LengthUnit::DEFAULT),
+            given_frame: None,
             iterations,
             rigid,
         })
@@ -349,7 +379,8 @@ mod tests {
     fn choices_give_the_spec_of_their_method_targets_and_unit() {
         let choice = RegistrationChoice {
             targets: Some(TargetsSpec::Points(vec![[1.0, 2.0, 3.0]])),
-            units: LengthUnit::Millimetre,
+            units: Some(LengthUnit::Millimetre),
+            frame: Some(Frame::Ras),
             iterations: Some(7),
             rigid: true,
             ..fem()
@@ -358,13 +389,15 @@ mod tests {
         assert!(matches!(&spec.method, MethodSpec::Fem(p) if p == Path::new("beam")));
         assert!(matches!(&spec.targets, TargetsSpec::Points(p) if p == &[[1.0, 2.0, 3.0]]));
         assert_eq!((spec.units, spec.iterations, spec.rigid), (LengthUnit::Millimetre, Some(7), true));
+        assert_eq!((spec.given_units, spec.given_frame), (LengthUnit::Millimetre, Some(Frame::Ras)));
+        assert_eq!(spec.frame().unwrap(), None, "targets as points name no frame");
         let learned =
             RegistrationChoice { model: Some("m".into()), scenario: Some("s".into()), ..RegistrationChoice::default() };
         let spec = learned.spec().unwrap();
         assert!(matches!(&spec.method, MethodSpec::Learned { model, scenario }
             if model == Path::new("m") && scenario == Path::new("s")));
         assert!(matches!(spec.targets, TargetsSpec::Regions));
-        assert_eq!(spec.units, LengthUnit::DEFAULT);
+        assert_eq!((spec.units, spec.given_units), (LengthUnit::DEFAULT, LengthUnit::DEFAULT));
     }
 
     #[test]

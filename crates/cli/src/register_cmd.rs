@@ -80,7 +80,8 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     let cloud_path = args.cloud.clone().context("a cloud is required")?;
     let spec = args.registration.spec()?;
     let mut registration = spec.build()?;
-    let mut input = PointInput::new(spec.targets.frame()?, LengthUnit::Metre, args.registration.units);
+    let mut input =
+        PointInput::new(spec.frame()?, LengthUnit::Metre, spec.given_units).with_given_frame(spec.given_frame);
     let frames = read_frames(&cloud_path)?;
     let truths = args.truth.as_ref().map(|p| input.read_truths(p, frames.len())).transpose()?;
     println!("method     {}", registration.method());
@@ -89,7 +90,7 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
         eprintln!("warning    {w}");
     }
     let sequence = frames.len() > 1;
-    let mut writer = RunWriter::new(out, sequence)?;
+    let mut writer = RunWriter::new(out, sequence, spec.given_units)?;
     let clouds = frames.iter().map(|f| input.read_cloud(f));
     let mut rigid_printed = false;
     let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, organ, o| {

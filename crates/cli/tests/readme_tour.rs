@@ -64,10 +64,10 @@ fn serve(command: &str, dir: &Path) {
             break rest.split([':', ' ']).nth(1).unwrap().parse().unwrap();
         }
     };
-    let targets_mm = command.split_whitespace().skip_while(|w| *w != "--targets").nth(1).expect("--targets");
-    let expected = csv_rows(&dir.join(targets_mm)).len();
-    let cloud: Vec<[f32; 3]> =
-        csv_rows(&dir.join("examples/cloud.csv")).iter().map(|p| p.map(|x| (x * 1e3) as f32)).collect();
+    let targets = command.split_whitespace().skip_while(|w| *w != "--targets").nth(1).expect("--targets");
+    let expected = csv_rows(&dir.join(targets)).len();
+    assert!(command.contains("--units mm"), "`{command}`: the example cloud is sent in mm");
+    let cloud: Vec<[f32; 3]> = csv_rows(&dir.join("examples/cloud.csv")).iter().map(|p| p.map(|x| x as f32)).collect();
     let mut client = Client::connect(("127.0.0.1", port), Duration::from_secs(120)).unwrap();
     client.send_cloud(cloud).unwrap();
     let frame = client.until_status().unwrap();
@@ -88,6 +88,11 @@ fn every_command_of_the_readme_tour_runs_as_written() {
     }
     for command in tour_commands() {
         assert!(command.starts_with("augsim "), "a tour command that is not augsim's: `{command}`");
+        // Every points file of the tour is in mm, and says so in its header.
+        for file in command.split_whitespace().filter(|w| w.starts_with("examples/") && w.ends_with(".csv")) {
+            let text = std::fs::read_to_string(Path::new(REPOSITORY).join(file)).unwrap();
+            assert!(text.starts_with("x_mm,y_mm,z_mm\n"), "{file}: its header does not name mm");
+        }
         let began = Instant::now();
         if command.starts_with("augsim serve ") {
             serve(&command, dir.path());

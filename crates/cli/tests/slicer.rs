@@ -102,3 +102,100 @@ fn slicer_files_and_millimetres_register_as_metres_do() {
         register(&example("cloud.csv"), &example("targets.csv"), &example("truth.csv"), &d.join("examples"), &[]);
     assert!((examples_tre - tre).abs() < 0.05, "TRE {tre} against {examples_tre} mm");
 }
+
+/// A 3D Slicer user's round trip: the organ as an LPS surface (`SPACE=LPS` STL), its landmarks and
+/// targets as `.mrk.json` in LPS, the camera as `.fcsv`; `prepare` at a small size; then
+/// `register --patient` with a cloud saved in RAS and mm. The targets come back as `.mrk.json` in
+/// LPS and mm, where the same registration done all in metres and LPS puts them; the deformed
+/// surface comes back in LPS and mm, on the cloud.
+#[test]
+fn a_slicer_users_files_prepare_register_and_come_back_in_their_frame_and_unit() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (mm, m) = (LengthUnit::Millimetre, LengthUnit::Metre);
+    let path = |p: &Path| p.to_str().unwrap().to_string();
+    let in_lps_mm = |name: &str, label: &str| {
+        let mut p = read_points(example(name)).unwrap();
+        p.convert(None, mm, mm);
+        p.frame = Some(Frame::Lps);
+        p.labels = (1..=p.points.len()).map(|i| format!("{label} {i}")).collect();
+        p
+    };
+    let surface = mesh::io::read_surface(example("organ.stl")).unwrap();
+    mesh::io::write_surface_in_frame(d.join("liver.stl"), &surface, Frame::Lps).unwrap();
+    write_points(d.join("landmarks.mrk.json"), &in_lps_mm("organ_ligaments.csv", "ligament")).unwrap();
+    write_points(d.join("targets.mrk.json"), &in_lps_mm("organ_targets.csv", "tumour")).unwrap();
+    let mut camera = LabelledPoints::new(vec![[35.0, -60.0, 120.0]]);
+    (camera.frame, camera.unit) = (Some(Frame::Lps), Some(mm));
+    write_points(d.join("camera.fcsv"), &camera).unwrap();
+    let prepare = [
+        "prepare",
+        &path(&d.join("liver.stl")),
+        "--camera",
+        &path(&d.join("camera.fcsv")),
+        "--attach",
+        &path(&d.join("landmarks.mrk.json")),
+        "--targets",
+        &path(&d.join("targets.mrk.json")),
+        "--samples",
+        "40",
+        "--tets",
+        "800",
+        "--out",
+        &path(&d.join("patient")),
+    ];
+    let (ok, text) = augsim(&prepare);
+    assert!(ok && text.contains("frame: LPS (named by"), "{text}");
+
+    // The cloud in RAS and mm as Slicer saves it; the same cloud in LPS and m, given the very values
+    // the conversion gives (so that the two registrations see the same numbers).
+    let mut cloud = in_lps_mm("organ_cloud.csv", "p");
+    cloud.convert(Some(Frame::Ras), mm, mm);
+    write_points(d.join("cloud.mrk.json"), &cloud).unwrap();
+    let mut in_metres = read_points(d.join("cloud.mrk.json")).unwrap();
+    in_metres.convert(Some(Frame::Lps), m, mm);
+    write_points_csv(&d.join("cloud_m.csv"), &in_metres.points).unwrap();
+    let mut truth = in_lps_mm("organ_truth.csv", "tumour");
+    write_points(d.join("truth.mrk.json"), &truth).unwrap();
+    truth.convert(Some(Frame::Lps), m, mm);
+    write_points_csv(&d.join("truth_m.csv"), &truth.points).unwrap();
+    let run = |cloud: &str, truth: &str, out: &str, extra: &[&str]| -> serde_json::Value {
+        let [cloud, patient, truth, out] = [cloud, "patient", truth, out].map(|name| path(&d.join(name)));
+        let args = [&["register", &cloud, "--patient", &patient, "--truth", &truth, "--out", &out][..], extra].concat();
+        let (ok, text) = augsim(&args);
+        assert!(ok, "{text}");
+        serde_json::from_str(&std::fs::read_to_string(Path::new(&out).join("summary.json")).unwrap()).unwrap()
+    };
+    let slicer = run("cloud.mrk.json", "truth.mrk.json", "slicer", &[]);
+    let metres = run("cloud_m.csv", "truth_m.csv", "metres", &["--units", "m"]);
+
+    let markups = read_points(d.join("slicer/targets.mrk.json")).unwrap();
+    assert_eq!((markups.frame, markups.unit), (Some(Frame::Lps), Some(mm)));
+    assert_eq!(markups.labels, in_lps_mm("organ_targets.csv", "tumour").labels, "the targets' labels kept");
+    let in_m = read_points(d.join("metres/targets.csv")).unwrap();
+    assert_eq!(in_m.unit, Some(m), "--units m: targets.csv in m");
+    assert_eq!(markups.points.len(), in_m.points.len());
+    for (a, b) in markups.points.iter().zip(&in_m.points) {
+        assert!((0..3).all(|k| (a[k] - 1e3 * b[k]).abs() < 0.01), "{a:?} mm against {b:?} m");
+    }
+    let tre = |s: &serde_json::Value| s["tre_mean_mm"].as_f64().unwrap();
+    assert!((tre(&slicer) - tre(&metres)).abs() < 0.01, "TRE {} against {} mm", tre(&slicer), tre(&metres));
+    let csv = std::fs::read_to_string(d.join("slicer/targets.csv")).unwrap();
+    assert!(csv.starts_with("x0_mm,y0_mm,z0_mm,x_mm,y_mm,z_mm"), "the patient's own unit: {csv}");
+
+    // The deformed surface: LPS and mm, and on the cloud (closer to it than the organ at rest).
+    let (deformed, frame) = mesh::io::read_surface_with_frame(d.join("slicer/organ_deformed.vtk")).unwrap();
+    assert_eq!(frame, Some(Frame::Lps));
+    let mut rest = mesh::io::read_surface(d.join("patient/surface.stl")).unwrap();
+    rest.vertices.iter_mut().for_each(|p| *p = p.map(|x| x * 1e3));
+    let cloud_lps = in_lps_mm("organ_cloud.csv", "p").points;
+    let median_distance = |surface: &mesh::TriSurface| {
+        let bvh = mesh::bvh::SurfaceBvh::new(surface).unwrap();
+        let mut d: Vec<f64> = cloud_lps.iter().map(|&p| bvh.distance(p)).collect();
+        d.sort_by(f64::total_cmp);
+        d[d.len() / 2]
+    };
+    let (on, off) = (median_distance(&deformed), median_distance(&rest));
+    println!("TRE {:.3} mm; the cloud's median distance {on:.2} mm to the result, {off:.2} mm at rest", tre(&slicer));
+    assert!(on < 3.0 && on < 0.5 * off, "median distance of the cloud: {on:.2} mm to the result, {off:.2} mm at rest");
+}

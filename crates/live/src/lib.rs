@@ -41,6 +41,7 @@ use std::time::{Duration, Instant};
 
 pub use igtl::{decode_body, encode_message};
 use igtl::{Content, Header, PointElement, PointMessage, StringMessage, TransformMessage};
+use mesh::io::FrameChange;
 use mesh::length::LengthUnit;
 use mesh::Point;
 use polydata::PolyData;
@@ -120,6 +121,8 @@ pub const MAX_PENDING_STEPS: usize = 16;
 pub struct ServeOptions {
     /// The unit of the coordinates on the wire (3D Slicer sends millimetres).
     pub units: LengthUnit,
+    /// From the frame of the coordinates on the wire (3D Slicer sends RAS) to the organ's.
+    pub frame: FrameChange,
     /// The answers sent for each cloud.
     pub outputs: Outputs,
     /// Largest message body accepted (bytes); a larger one closes the connection.
@@ -135,6 +138,7 @@ impl Default for ServeOptions {
     fn default() -> Self {
         ServeOptions {
             units: LengthUnit::DEFAULT,
+            frame: FrameChange::default(),
             outputs: Outputs::ALL,
             max_message_bytes: 64 << 20,
             max_points: 200_000,
@@ -289,7 +293,8 @@ impl Client {
 fn read_messages(mut stream: TcpStream, shared: &Shared) {
     let (mut frame, mut step) = (0u64, 0u64);
     let to_metres = |points: Vec<[f32; 3]>| -> Vec<Point> {
-        points.into_iter().map(|p| shared.options.units.point_to_metres(p.map(f64::from))).collect()
+        let ServeOptions { units, frame, .. } = shared.options;
+        points.into_iter().map(|p| frame.point(units.point_to_metres(p.map(f64::from)))).collect()
     };
     while !shared.closed.load(Ordering::SeqCst) {
         match read_message(&mut stream, shared.options.max_message_bytes) {
@@ -455,8 +460,8 @@ fn answer(
     let start = Instant::now();
     let tracked = registration.register(cloud).map_err(|e| e.to_string())?;
     let Tracked { registration: result, targets, rigid, target_std } = &tracked;
-    let units = options.units;
-    let to_wire = |p: &Point| units.point_from_metres(*p).map(|x| x as f32);
+    let (units, change) = (options.units, options.frame);
+    let to_wire = |p: &Point| units.point_from_metres(change.point(*p)).map(|x| x as f32);
     if options.outputs.targets {
         let points = targets
             .iter()
@@ -472,7 +477,7 @@ fn answer(
         shared.send(&organ, "organ")?;
     }
     if let (true, Some(r)) = (options.outputs.transform, rigid) {
-        let matrix = r.organ_to_cloud().homogeneous(units.metres()).map(|row| row.map(|x| x as f32));
+        let matrix = change.transform(r.organ_to_cloud().homogeneous(units.metres())).map(|row| row.map(|x| x as f32));
         shared.send(&TransformMessage { matrix }, "rigid")?;
     }
     shared.send_status(&serde_json::json!({

@@ -12,6 +12,7 @@ use augsim_live::igtl::{crc64, Header};
 use augsim_live::polydata::PolyData;
 use augsim_live::{encode_message, serve, Outputs, ServeOptions};
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
+use mesh::io::{Frame, FrameChange};
 use mesh::length::LengthUnit;
 use mesh::select::nodes_in_box;
 use mesh::Point;
@@ -178,6 +179,32 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
 
     server.stop();
     assert!(client.receive().unwrap().is_none(), "the server closed the connection when it stopped");
+}
+
+/// A stream in the other frame (RAS against an LPS organ): the cloud is brought into the organ's
+/// frame, and the target and the organ go back in the stream's.
+#[test]
+fn clouds_in_another_frame_are_answered_in_theirs() {
+    let frame = FrameChange::between(Some(Frame::Ras), Some(Frame::Lps));
+    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, frame, ..ServeOptions::default() });
+    let (cloud, truth) = pressed_cloud(300.0);
+    let flip = |p: [f32; 3]| frame.point(p.map(f64::from));
+    let mut client = connect(server.port);
+    client.send_cloud(cloud.iter().map(|&p| flip(p).map(|x| x as f32)).collect()).unwrap();
+    let target = match client.receive().unwrap() {
+        Some(Answer::Targets(m)) => m[0].map(f64::from),
+        other => panic!("expected the targets POINT, got {other:?}"),
+    };
+    let motion = (truth[2] - SIDE * 1e3 / 2.0).abs();
+    let truth = frame.point(truth);
+    let error = (0..3).map(|d| (target[d] - truth[d]).powi(2)).sum::<f64>().sqrt();
+    assert!(error < 0.25 * motion, "target {target:?} for {truth:?} in the stream's frame");
+    match client.receive().unwrap() {
+        Some(Answer::Organ(m)) => assert!(m.points.iter().all(|p| p[0] <= 1.0 && p[1] <= 1.0), "in the stream's frame"),
+        other => panic!("expected the organ POLYDATA, got {other:?}"),
+    }
+    drop(client);
+    server.stop();
 }
 
 #[test]

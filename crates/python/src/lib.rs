@@ -15,6 +15,7 @@ use app::registration::{RegistrationChoice, TargetsSpec};
 use fem::post;
 use learn::data::npy::{NpyArray, NpyData};
 use learn::{Model, PointCloud, PredictInput};
+use mesh::io::{Frame, FrameChange};
 use mesh::length::LengthUnit;
 use mesh::Point;
 use nalgebra::DVector;
@@ -181,7 +182,10 @@ struct Registered {
 /// `fem`: a static scenario (file or built-in name, e.g. `liver`) whose FEM deforms the organ; or `model` (a model directory or its model.json) with `scenario`, the dataset scenario
 /// it was trained on (e.g. `liver_ar_t10` for the shipped `models/liver_ar`). `targets`: rest
 /// positions, a CSV file (x, y, z) or an array [k, 3], in `units`; default: the mesh's `markers`
-/// and `tumour` nodes. `units`: "m" or "mm", of the targets, every cloud and every result.
+/// and `tumour` nodes. `units`: "m" or "mm", of the targets, every cloud and every result
+/// (default: a patient's own unit, else "m"). `frame`: "RAS" or "LPS", the frame of every cloud
+/// and every result, converted from and to the organ's when it names one (a patient's, or a
+/// targets file's); default: the organ's.
 /// `iterations`: most match-and-deform iterations per cloud (default: the library's for a FEM,
 /// the built-in registration case's real-time budget for a U-Net). `rigid`:
 /// align the first cloud rigidly to the organ (trimmed ICP) and keep that pose; results are then
@@ -189,8 +193,12 @@ struct Registered {
 #[pyclass(module = "augsim")]
 struct Registration {
     state: Mutex<register::Registration>,
-    /// Metres per unit of clouds, targets and results.
-    unit: f64,
+    /// The unit of clouds, targets and results.
+    unit: LengthUnit,
+    /// From the frame of clouds and results to the organ's, and back.
+    change: FrameChange,
+    /// The organ's frame, when known (that of the files `out` writes).
+    organ_frame: Option<Frame>,
     /// The targets' labels (those of a targets file; none otherwise), for targets.csv.
     labels: Vec<String>,
     /// The method in words (e.g. "FEM, Corotational (Standard elements)").
@@ -199,12 +207,16 @@ struct Registration {
     /// The units of clouds, targets and results ("m" or "mm").
     #[pyo3(get)]
     units: String,
+    /// The frame of clouds and results ("RAS", "LPS"), or None where neither the organ nor the
+    /// user names one.
+    #[pyo3(get)]
+    frame: Option<String>,
 }
 
 #[pymethods]
 impl Registration {
     #[new]
-    #[pyo3(signature = (*, fem=None, model=None, scenario=None, patient=None, use_fem=None, targets=None, units="m", iterations=None, rigid=false))]
+    #[pyo3(signature = (*, fem=None, model=None, scenario=None, patient=None, use_fem=None, targets=None, units=None, frame=None, iterations=None, rigid=false))]
     #[allow(clippy::too_many_arguments)] // one per Python keyword argument
     fn new(
         py: Python<'_>,
@@ -214,11 +226,15 @@ impl Registration {
         patient: Option<PathBuf>,
         use_fem: Option<bool>,
         targets: Option<&Bound<'_, PyAny>>,
-        units: &str,
+        units: Option<&str>,
+        frame: Option<&str>,
         iterations: Option<usize>,
         rigid: bool,
     ) -> PyResult<Self> {
-        let units: LengthUnit = units.parse().map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
+        let units: Option<LengthUnit> =
+            units.map(str::parse).transpose().map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
+        let frame: Option<Frame> =
+            frame.map(str::parse).transpose().map_err(|e| PyValueError::new_err(format!("frame: {e}")))?;
         let targets = match targets {
             None => None,
             Some(t) => Some(match t.extract::<PathBuf>() {
@@ -235,14 +251,17 @@ impl Registration {
             scenario,
             targets,
             units,
+            frame,
             iterations,
             rigid,
         };
         choice.check().map_err(PyValueError::new_err)?;
-        let (state, labels) = compute(py, move || {
+        let (state, labels, spec, organ_frame) = compute(py, move || {
             let spec = choice.spec()?;
-            Ok((spec.build()?, spec.target_labels()?))
+            let organ_frame = spec.frame()?;
+            Ok((spec.build()?, spec.target_labels()?, spec, organ_frame))
         })?;
+        let change = FrameChange::between(spec.given_frame, organ_frame);
         let warnings = state.warnings().iter().map(|w| format!("targets: {w}")).collect::<Vec<_>>();
         for w in &warnings {
             PyErr::warn(
@@ -253,42 +272,54 @@ impl Registration {
             )?;
         }
         let method = state.method().to_string();
-        Ok(Registration { state: Mutex::new(state), unit: units.metres(), labels, method, units: units.to_string() })
+        let units = spec.given_units;
+        Ok(Registration {
+            state: Mutex::new(state),
+            unit: units,
+            change,
+            organ_frame,
+            labels,
+            method,
+            units: units.to_string(),
+            frame: spec.given_frame.or(organ_frame).map(|f| f.to_string()),
+        })
     }
 
     /// Registers a cloud of positions, float [N, 3] in `units` (no correspondences needed),
     /// starting from the previous cloud's registration. Returns a `Registered` (`targets`,
     /// `displacement`, `surface_residual`, `inliers`, `iterations`, `warnings`, `ms`). With `out`,
-    /// a directory, also writes there what `augsim register` writes: organ.vtu, targets.csv and
-    /// summary.json (in m, in the cloud's frame). Raises ValueError for an array of another shape,
+    /// a directory, also writes there what `augsim register` writes: organ.vtu (m), targets.csv (in
+    /// `units`), summary.json, and for 3D Slicer targets.mrk.json and organ_deformed.vtk (mm), all
+    /// in the organ's frame. Raises ValueError for an array of another shape,
     /// AugsimError for a cloud augsim rejects (no point, a NaN) or a failed registration (the
     /// warm start is then kept).
     #[pyo3(signature = (cloud, *, out=None))]
     fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>, out: Option<PathBuf>) -> PyResult<Registered> {
-        let cloud = points(cloud, "cloud", self.unit)?;
+        let cloud: Vec<Point> =
+            points(cloud, "cloud", self.unit.metres())?.into_iter().map(|p| self.change.point(p)).collect();
         let Tracked { registration: result, targets, rigid, target_std } = compute(py, || {
             let mut state = locked(&self.state)?;
             let tracked = state.register(&cloud)?;
             if let Some(dir) = &out {
-                write_frame(dir, &state, &self.labels, &tracked)?;
+                write_frame(dir, &state, &self.labels, (self.unit, self.organ_frame), &tracked)?;
             }
             Ok(tracked)
         })?;
         let rigid = rigid.map(|r| {
-            let rows = r.organ_to_cloud().homogeneous(self.unit);
+            let rows = self.change.transform(r.organ_to_cloud().homogeneous(self.unit.metres()));
             Array2::from_shape_fn((4, 4), |(i, j)| rows[i][j]).into_pyarray(py).unbind()
         });
         Ok(Registered {
-            targets: point_array(py, &targets, self.unit).unbind(),
-            displacement: nodal(py, &result.u, self.unit).unbind(),
-            surface_residual: result.surface_residual / self.unit,
+            targets: self.point_array(py, &targets).unbind(),
+            displacement: self.point_array(py, result.u.as_chunks::<3>().0).unbind(),
+            surface_residual: self.unit.from_metres(result.surface_residual),
             inliers: result.inliers,
             points: result.points,
             iterations: result.iterations,
             warnings: result.warnings.clone(),
             rigid,
             target_sigma: target_std
-                .map(|s| s.iter().map(|v| v / self.unit).collect::<Vec<f64>>().into_pyarray(py).unbind()),
+                .map(|s| s.iter().map(|&v| self.unit.from_metres(v)).collect::<Vec<f64>>().into_pyarray(py).unbind()),
             ms: result.time.as_secs_f64() * 1e3,
         })
     }
@@ -306,22 +337,33 @@ impl Registration {
     #[getter]
     fn points<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let nodes = compute(py, || Ok(locked(&self.state)?.organ().mesh().nodes.clone()))?;
-        Ok(point_array(py, &nodes, self.unit))
+        Ok(self.point_array(py, &nodes))
     }
 
     /// Rest positions of the targets, float64 [k, 3], in `units`.
     #[getter]
     fn targets<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let targets = compute(py, || Ok(locked(&self.state)?.targets().to_vec()))?;
-        Ok(point_array(py, &targets, self.unit))
+        Ok(self.point_array(py, &targets))
     }
 }
 
-/// Writes one registered cloud as `augsim register` does (organ.vtu, targets.csv, summary.json).
+impl Registration {
+    /// Points (or vectors) of the organ's frame, in m, as an `[N, 3]` array in the registration's
+    /// frame and unit.
+    fn point_array<'py>(&self, py: Python<'py>, points: &[Point]) -> Bound<'py, PyArray2<f64>> {
+        let changed: Vec<Point> = points.iter().map(|&p| self.change.point(p)).collect();
+        point_array(py, &changed, self.unit.metres())
+    }
+}
+
+/// Writes one registered cloud as `augsim register` does (organ.vtu, targets.csv in `unit`,
+/// summary.json, and for 3D Slicer targets.mrk.json and organ_deformed.vtk in `frame`).
 fn write_frame(
     dir: &std::path::Path,
     registration: &register::Registration,
     labels: &[String],
+    (unit, frame): (LengthUnit, Option<Frame>),
     tracked: &Tracked,
 ) -> anyhow::Result<()> {
     let outcome = register::FrameOutcome {
@@ -332,9 +374,9 @@ fn write_frame(
         rigid: tracked.rigid.clone(),
         target_std: tracked.target_std.clone(),
     };
-    let mut writer = RunWriter::new(dir, false)?;
+    let mut writer = RunWriter::new(dir, false, unit)?;
     writer.frame(0, "python".into(), registration.organ(), &outcome)?;
-    writer.finish(registration.method(), registration.targets(), labels, None, std::slice::from_ref(&outcome))?;
+    writer.finish(registration.method(), registration.targets(), labels, frame, std::slice::from_ref(&outcome))?;
     Ok(())
 }
 

@@ -49,6 +49,42 @@ impl Frame {
     }
 }
 
+/// The change from the frame points are given in to the frame an organ is in: x and y negated
+/// when both frames are known and differ, nothing otherwise. It is its own inverse, so the same
+/// change brings results back.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FrameChange {
+    flips: bool,
+}
+
+impl FrameChange {
+    /// The change from `from` to `to` (none when either is unknown).
+    pub fn between(from: Option<Frame>, to: Option<Frame>) -> FrameChange {
+        FrameChange { flips: matches!((from, to), (Some(a), Some(b)) if a != b) }
+    }
+
+    /// Whether it negates x and y.
+    pub fn flips(self) -> bool {
+        self.flips
+    }
+
+    /// A point (or a vector) changed.
+    pub fn point(self, p: Point) -> Point {
+        if self.flips {
+            [-p[0], -p[1], p[2]]
+        } else {
+            p
+        }
+    }
+
+    /// A rigid transform (homogeneous 4 × 4, acting on points of the one frame) as it acts on
+    /// points of the other: S M S with S = diag(−1, −1, 1, 1) when the change flips.
+    pub fn transform(self, m: [[f64; 4]; 4]) -> [[f64; 4]; 4] {
+        let s = |i: usize| if self.flips && i < 2 { -1.0 } else { 1.0 };
+        std::array::from_fn(|i| std::array::from_fn(|j| s(i) * s(j) * m[i][j]))
+    }
+}
+
 impl fmt::Display for Frame {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
@@ -140,6 +176,16 @@ mod tests {
         assert_eq!(Frame::Lps.convert(Frame::Ras, p), [-1.0, 2.0, 3.0]);
         assert_eq!(Frame::Ras.convert(Frame::Lps, Frame::Lps.convert(Frame::Ras, p)), p);
         assert_eq!(Frame::Ras.convert(Frame::Ras, p), p);
+        let change = FrameChange::between(Some(Frame::Ras), Some(Frame::Lps));
+        assert_eq!(change.point(p), Frame::Ras.convert(Frame::Lps, p));
+        assert_eq!(FrameChange::between(None, Some(Frame::Lps)), FrameChange::default(), "an unknown frame: no change");
+        assert!(!FrameChange::between(Some(Frame::Lps), Some(Frame::Lps)).flips());
+        // A transform changed acts on changed points as the transform on the points.
+        let m = [[0.0, -1.0, 0.0, 1.0], [1.0, 0.0, 0.0, 2.0], [0.0, 0.0, 1.0, 3.0], [0.0, 0.0, 0.0, 1.0]];
+        let apply = |m: [[f64; 4]; 4], p: Point| {
+            std::array::from_fn::<f64, 3, _>(|i| (0..3).map(|j| m[i][j] * p[j]).sum::<f64>() + m[i][3])
+        };
+        assert_eq!(apply(change.transform(m), change.point(p)), change.point(apply(m, p)));
         let mut points = vec![p, [0.5, 0.0, -1.0]];
         Frame::Ras.convert_all(Frame::Lps, &mut points);
         assert_eq!(points, [[-1.0, 2.0, 3.0], [-0.5, -0.0, -1.0]]);
