@@ -163,6 +163,28 @@ def test_register_writes_what_the_command_line_writes(case, tmp_path):
     assert [line.rsplit(",", 1)[1] for line in lines[1:]] == [f"T{k}" for k in range(len(case["rest"]))]
 
 
+def test_clouds_and_results_in_another_frame(case, tmp_path):
+    """Targets saved by 3D Slicer in LPS name the organ's frame; clouds given in RAS (frame="RAS")
+    register as the same clouds in LPS do, and the results come back in RAS."""
+    import json
+
+    points = [{"label": f"T{k}", "position": list(p)} for k, p in enumerate(case["rest"])]
+    markups = {"markups": [{"type": "Fiducial", "coordinateSystem": "LPS", "coordinateUnits": "mm",
+                            "controlPoints": points}]}
+    targets = tmp_path / "targets.mrk.json"
+    targets.write_text(json.dumps(markups))
+    flip = np.array([-1.0, -1.0, 1.0])
+    lps = augsim.Registration(fem=case["scenario"], targets=targets, units="mm")
+    ras = augsim.Registration(fem=case["scenario"], targets=targets, units="mm", frame="RAS")
+    assert (lps.frame, ras.frame) == ("LPS", "RAS")
+    np.testing.assert_allclose(ras.targets, case["rest"] * flip, atol=1e-9)
+    a, b = lps.register(case["cloud"]), ras.register(case["cloud"] * flip)
+    np.testing.assert_allclose(b.targets, a.targets * flip, atol=1e-9)
+    np.testing.assert_allclose(b.displacement, a.displacement * flip, atol=1e-9)
+    with pytest.raises(ValueError, match="frame"):
+        augsim.Registration(fem=case["scenario"], targets=targets, frame="XYZ")
+
+
 def test_predict_matches_the_command_line(tmp_path):
     grid = np.random.default_rng(2).normal(0.0, 1e-3, (3, 24, 24, 16)).astype(np.float32)
     u = augsim.predict(LIVER_AR, grid)
@@ -238,12 +260,14 @@ def test_a_prepared_patient_registers(tmp_path):
     # By default the method the validation chose (registration.toml names it); use_fem=False: the ROM.
     chosen = "FEM" if 'method = "fem"' in (tmp_path / "patient" / "registration.toml").read_text() else "ROM"
     for use_fem, method in ((None, chosen), (False, "ROM")):
+        # In the patient's own unit (its files were in mm), in no named frame.
         reg = augsim.Registration(patient=tmp_path / "patient", use_fem=use_fem)
         assert reg.method.startswith(method) and reg.targets.shape == (2, 3), reg.method
-        np.testing.assert_allclose(reg.targets * 1e3, [centre, centre + [20.0, 0.0, 0.0]], atol=1e-6)
+        assert (reg.units, reg.frame) == ("mm", None)
+        np.testing.assert_allclose(reg.targets, [centre, centre + [20.0, 0.0, 0.0]], atol=1e-6)
         # The organ's top face at rest: the targets stay where they are.
-        top = reg.points[reg.points[:, 2] > reg.points[:, 2].max() - 5e-3]
+        top = reg.points[reg.points[:, 2] > reg.points[:, 2].max() - 5.0]
         r = reg.register(top)
-        assert np.abs(r.targets - reg.targets).max() < 2e-3
+        assert np.abs(r.targets - reg.targets).max() < 2.0
     with pytest.raises(ValueError, match="patient DIR holds its method and targets: leave out targets"):
         augsim.Registration(patient=tmp_path / "patient", targets=[[0.0, 0.0, 0.0]])

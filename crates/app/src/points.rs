@@ -6,7 +6,8 @@
 //! the frame its targets file names). Points whose file names the other frame (RAS or LPS) are
 //! converted (x and y negated); points whose file names none are taken as being in the working
 //! frame, or in the frame the user gives (`--frame`). When the organ's frame is not known, the
-//! first point file to name one gives it.
+//! first point file to name one gives it, and a later file that names the other frame is refused:
+//! which of the two the organ is in cannot be told.
 //! Units: a file that names its unit (`.fcsv`, `.mrk.json`, CSV headers `x_mm`) is read in it;
 //! other files in the unit the user gives (`--units`).
 
@@ -30,12 +31,14 @@ pub struct PointInput {
     pub given: LengthUnit,
     /// The frame of files that name none (the user's `--frame`; `None`: the working frame).
     pub given_frame: Option<Frame>,
+    /// What named the working frame when the organ did not: a file, or `--frame`.
+    named_by: Option<String>,
 }
 
 impl PointInput {
     /// An input into `frame` (when known) and `unit`, files naming no unit being in `given`.
     pub fn new(frame: Option<Frame>, unit: LengthUnit, given: LengthUnit) -> PointInput {
-        PointInput { frame, unit, given, given_frame: None }
+        PointInput { frame, unit, given, given_frame: None, named_by: None }
     }
 
     /// The same input, files that name no frame being in `frame` (`None`: the working frame).
@@ -46,16 +49,31 @@ impl PointInput {
     /// Reads a points file (CSV, `.fcsv`, `.mrk.json`) with its labels, in the working frame and
     /// unit; its own frame becomes the working frame when there was none.
     pub fn read(&mut self, path: &Path) -> Result<LabelledPoints> {
-        Ok(self.place(read_points(path)?))
+        self.place(path, read_points(path)?)
     }
 
-    /// Points read from a file, in the working frame and unit (their frame becoming the working
-    /// frame when there was none).
-    fn place(&mut self, mut points: LabelledPoints) -> LabelledPoints {
+    /// Points read from `path`, in the working frame and unit (their frame becoming the working
+    /// frame when there was none); an error when the organ names no frame and they name another
+    /// than the file that gave the working frame.
+    fn place(&mut self, path: &Path, mut points: LabelledPoints) -> Result<LabelledPoints> {
+        let namer = match (points.frame, self.given_frame) {
+            (Some(_), _) => path.display().to_string(),
+            (None, Some(given)) => format!("--frame {given}"),
+            (None, None) => String::new(),
+        };
         points.frame = points.frame.or(self.given_frame);
+        match (points.frame, self.frame, &self.named_by) {
+            (Some(own), Some(working), Some(first)) if own != working => anyhow::bail!(
+                "{namer} gives the frame {own} where {first} gave {working}, and the organ names none: which \
+                 one is the organ in? Name its frame (a SPACE= header, a targets file from 3D Slicer), or give \
+                 every point in one frame"
+            ),
+            (Some(_), None, _) => self.named_by = Some(namer),
+            _ => {}
+        }
         self.frame = self.frame.or(points.frame);
         points.convert(self.frame, self.unit, self.given);
-        points
+        Ok(points)
     }
 
     /// Reads the true target positions of a run of `frames` clouds: one points file, or a
@@ -77,7 +95,7 @@ impl PointInput {
             let change = FrameChange::between(self.given_frame, self.frame);
             register::cloud::read_point_cloud(path)?.into_iter().map(|p| change.point(p.map(|x| x * scale))).collect()
         } else {
-            self.place(read_points(path)?).points
+            self.place(path, read_points(path)?).map_err(|e| register::RegisterError::Invalid(format!("{e:#}")))?.points
         };
         register::check_cloud(&points).map_err(|e| register::RegisterError::format(path, e.to_string()))?;
         Ok(points)
@@ -116,6 +134,19 @@ mod tests {
         assert_eq!(input.read(&plain).unwrap().points, [[1.0, 2.0, 3.0]]);
         assert_eq!(input.read(&ras).unwrap().labels, ["p"]);
         assert_eq!(input.frame, Some(Frame::Ras));
+        // The organ names no frame and a file named RAS: one naming LPS cannot be placed.
+        let lps = dir.path().join("truth.fcsv");
+        let mut points = LabelledPoints::new(vec![[1.0, 2.0, 3.0]]);
+        points.frame = Some(Frame::Lps);
+        mesh::io::points::write_points(&lps, &points).unwrap();
+        let refused = input.read(&lps).unwrap_err().to_string();
+        assert!(
+            refused.contains("gives the frame LPS where") && refused.contains("cloud.mrk.json gave RAS"),
+            "{refused}"
+        );
+        // Where the organ names its frame, the other one is converted.
+        let mut input = PointInput::new(Some(Frame::Ras), LengthUnit::Millimetre, LengthUnit::Millimetre);
+        assert_eq!(input.read(&lps).unwrap().points, [[-1.0, -2.0, 3.0]]);
         assert_eq!(input.read_truths(&plain, 1).unwrap(), [[[1.0, 2.0, 3.0]]]);
         assert!(input.read_truths(&plain, 2).unwrap_err().to_string().contains("1 truth file(s) for 2 cloud frame(s)"));
         // Files that name no frame, in the frame given.
