@@ -146,12 +146,12 @@ def test_register_writes_what_the_command_line_writes(case, tmp_path):
     assert markups["coordinateUnits"] == "mm"
     np.testing.assert_allclose([p["position"] for p in markups["controlPoints"]], r.targets, atol=1e-6)
     written = np.loadtxt(tmp_path / "out" / "targets.csv", delimiter=",", skiprows=1)
-    np.testing.assert_allclose(written[:, 3:6] * 1e3, r.targets, atol=1e-9)  # written in m
-    np.testing.assert_allclose(written[:, 0:3] * 1e3, case["rest"], atol=1e-9)
+    np.testing.assert_allclose(written[:, 3:6], r.targets, atol=1e-9)  # written in the registration's mm
+    np.testing.assert_allclose(written[:, 0:3], case["rest"], atol=1e-9)
 
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["frames"] == 1 and summary["per_frame"][0]["iterations"] == r.iterations
-    assert (tmp_path / "out" / "targets.csv").read_text().startswith("x0_m,y0_m,z0_m,x_m,y_m,z_m\n")
+    assert (tmp_path / "out" / "targets.csv").read_text().startswith("x0_mm,y0_mm,z0_mm,x_mm,y_mm,z_mm\n")
     # Labelled targets keep their labels in targets.csv.
     labelled = tmp_path / "labelled_mm.csv"
     rows = [f"T{k},{p[0]},{p[1]},{p[2]}" for k, p in enumerate(case["rest"])]
@@ -159,7 +159,7 @@ def test_register_writes_what_the_command_line_writes(case, tmp_path):
     reg = augsim.Registration(fem=case["scenario"], targets=labelled, units="mm")
     reg.register(case["cloud"], out=tmp_path / "labelled")
     lines = (tmp_path / "labelled" / "targets.csv").read_text().splitlines()
-    assert lines[0] == "x0_m,y0_m,z0_m,x_m,y_m,z_m,label"
+    assert lines[0] == "x0_mm,y0_mm,z0_mm,x_mm,y_mm,z_mm,label"
     assert [line.rsplit(",", 1)[1] for line in lines[1:]] == [f"T{k}" for k in range(len(case["rest"]))]
 
 

@@ -203,6 +203,13 @@ pub struct RegistrationSpec {
 }
 
 impl RegistrationSpec {
+    /// The registration of `method` with `targets` (in metres, the files' own unit where they name
+    /// one), in the method's default settings, given points in metres and in the organ's frame.
+    pub fn new(method: MethodSpec, targets: TargetsSpec) -> RegistrationSpec {
+        let units = LengthUnit::Metre;
+        RegistrationSpec { method, targets, units, given_units: units, given_frame: None, iterations: None, rigid: false }
+    }
+
     /// The registration: the method loaded, the targets read and located in the organ (an error
     /// for one outside it, naming the likely unit mistake), the settings checked. The default
     /// settings are the library's for a FEM; for a learned model, the real-time iteration budgets

@@ -16,16 +16,16 @@ use live::client::Client;
 use live::{Outputs, ServeOptions};
 use mesh::length::{from_mm, mm, LengthUnit};
 use mesh::stats::{max, mean, median, percentile};
-use register::{Deformer, Organ, Registration, RegistrationOptions};
 use scenario::CaseScenario;
 use serde::Serialize;
 
 use crate::loads::LEFT_LOBE_FRONT;
 use crate::{ExperimentResult, Name, Progress, Row, Size};
-use app::case::{
-    ar_scenario, corotational_model, learned_options, learned_registration, network_options, synthetic_case, Network,
-    SyntheticCase, SHIPPED_MODEL, SHIPPED_ROM,
-};
+use app::case::{network_options, synthetic_case, SyntheticCase, AR_SCENARIO, SHIPPED_MODEL, SHIPPED_ROM};
+use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
+
+/// The static scenario of the FEM streamed: the registration case's co-rotational model (3k T4).
+const FEM_SCENARIO: &str = "liver_corotational";
 
 /// Frames of the press and release.
 const FRAMES: usize = 40;
@@ -67,22 +67,13 @@ pub fn press_and_release() -> CaseScenario {
     scenario
 }
 
-/// Streams `case` to a server of `make` (a new registration per client) and measures it.
-pub fn stream_case(
-    method: &str,
-    case: &SyntheticCase,
-    options: &RegistrationOptions,
-    make: impl Fn() -> Result<(Organ, Box<dyn Deformer + Send>)> + Send + Sync + 'static,
-) -> Result<Stream> {
+/// Streams `case` to a server of `deformed_by` (a new registration per client, with the case's
+/// targets, set up as `augsim serve` sets one up) and measures it.
+pub fn stream_case(method: &str, case: &SyntheticCase, deformed_by: MethodSpec) -> Result<Stream> {
     let listener = TcpListener::bind("127.0.0.1:0").context("listening on a local port")?;
     let port = listener.local_addr()?.port();
-    let (targets, options) = (case.targets.clone(), options.clone());
-    let method_name = method.to_string();
-    let factory = live::first_then_build(None, move || {
-        let (organ, deformer) = make().map_err(|e| format!("{e:#}"))?;
-        Registration::new(organ, deformer, method_name.clone(), targets.clone(), options.clone())
-            .map_err(|e| e.to_string())
-    });
+    let spec = RegistrationSpec::new(deformed_by, TargetsSpec::Points(case.targets.clone()));
+    let factory = live::first_then_build(None, move || spec.build().map_err(|e| format!("{e:#}")));
     let serve_options = ServeOptions {
         units: LengthUnit::Millimetre,
         outputs: Outputs { targets: true, organ: false, transform: false, status: true },
@@ -147,8 +138,8 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     let budgets = network_options(&scenario)?;
     let mut streams = Vec::new();
     progress.line("streaming to the co-rotational FEM");
-    let fem = || corotational_model().map(|(organ, deformer)| (organ, Box::new(deformer) as Box<dyn Deformer + Send>));
-    streams.push(stream_case("FEM co-rotational (3k T4), warm-started", &case, &options, fem)?);
+    let fem = MethodSpec::Fem(FEM_SCENARIO.into());
+    streams.push(stream_case("FEM co-rotational (3k T4), warm-started", &case, fem)?);
     // The shipped learned models that are there: the U-Net, the reduced-order model.
     let mut missing = Vec::new();
     for (path, method) in [(SHIPPED_MODEL, "U-Net (models/liver_ar)"), (SHIPPED_ROM, "ROM (models/liver_ar_rom)")] {
@@ -157,14 +148,8 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
             continue;
         }
         progress.line(&format!("streaming to the shipped {method}"));
-        let model = Arc::new(learn::Model::load(Path::new(path))?);
-        let options = learned_options(&model, &budgets);
-        let budgets = budgets.clone();
-        let learned = move |model: &learn::Model| {
-            learned_registration(&Network { model, scenario: &ar_scenario(), dir: Path::new("") }, &budgets)
-        };
-        let make = move || learned(&model).map(|l| (l.organ, l.deformer));
-        streams.push(stream_case(method, &case, &options, make)?);
+        let learned = MethodSpec::Learned { model: path.into(), scenario: AR_SCENARIO.into() };
+        streams.push(stream_case(method, &case, learned)?);
     }
     let rest: Vec<f64> =
         case.frames.iter().map(|f| mm(mean(&register::target_errors(&case.targets, &f.truth)))).collect();
@@ -263,4 +248,24 @@ fn plot_stream(path: &Path, rest: &[f64], streams: &[Stream]) -> Result<()> {
     };
     plot::line_plot(path, &spec, &series)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use register::RegistrationOptions;
+    use scenario::registration::MethodKind;
+    use scenario::{MeshSource, StaticScenario};
+
+    /// The streams are set up as `augsim serve` sets them up, in each method's default settings,
+    /// which are the registration case's; the FEM is the case's co-rotational model.
+    #[test]
+    fn the_streamed_methods_are_the_registration_cases() {
+        let case = press_and_release();
+        assert_eq!(case.registration, RegistrationOptions::default());
+        let (fem, _) = StaticScenario::load(Path::new(FEM_SCENARIO)).unwrap();
+        let model = case.models.method.iter().find(|m| m.kind == MethodKind::Fem).unwrap();
+        assert_eq!(Some(fem.material), model.material);
+        assert!(matches!(fem.mesh, MeshSource::Phantom { tets } if tets == case.models.tets));
+    }
 }

@@ -211,7 +211,7 @@ impl Scenario {
 }
 
 /// The built-in scenarios: `(name, text)`, the files of this crate's `scenarios/` directory.
-pub const BUILTIN: [(&str, &str); 19] = [
+pub const BUILTIN: [(&str, &str); 20] = [
     ("beam", include_str!("../scenarios/beam.toml")),
     ("beam_bc1", include_str!("../scenarios/beam_bc1.toml")),
     ("beam_bc4", include_str!("../scenarios/beam_bc4.toml")),
@@ -223,6 +223,7 @@ pub const BUILTIN: [(&str, &str); 19] = [
     ("liver_ar", include_str!("../scenarios/liver_ar.toml")),
     ("liver_ar_grid", include_str!("../scenarios/liver_ar_grid.toml")),
     ("liver_ar_t10", include_str!("../scenarios/liver_ar_t10.toml")),
+    ("liver_corotational", include_str!("../scenarios/liver_corotational.toml")),
     ("liver_forces", include_str!("../scenarios/liver_forces.toml")),
     ("liver_forces_large", include_str!("../scenarios/liver_forces_large.toml")),
     ("liver_large", include_str!("../scenarios/liver_large.toml")),
