@@ -26,7 +26,7 @@ in_mm "%.3f" demo/case/truth.csv >"$here/truth.csv"
 
 # Tracked surface points of the built-in ROUKF scenario roukf_young (synthetic, 40 steps).
 "$augsim" assimilate roukf_young --iterations 40 -o young >/dev/null
-awk -F, 'NR == 1 { print; next } { printf "%s,%s,%.6f,%.6f,%.6f\n", $1, $2, $3, $4, $5 }' \
+awk -F, 'NR == 1 { print "frame,id,x_mm,y_mm,z_mm"; next } { printf "%s,%s,%.3f,%.3f,%.3f\n", $1, $2, $3 * 1000, $4 * 1000, $5 * 1000 }' \
     young/tracks/observations.csv >"$here/tracks.csv"
 # A segmented organ for `augsim prepare`: the phantom's surface as a segmentation gives it, in mm
 # in a scanner's frame (the phantom moved by (35, -60, -180) mm), with two holes, as ASCII STL

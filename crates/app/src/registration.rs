@@ -207,7 +207,15 @@ impl RegistrationSpec {
     /// one), in the method's default settings, given points in metres and in the organ's frame.
     pub fn new(method: MethodSpec, targets: TargetsSpec) -> RegistrationSpec {
         let units = LengthUnit::Metre;
-        RegistrationSpec { method, targets, units, given_units: units, given_frame: None, iterations: None, rigid: false }
+        RegistrationSpec {
+            method,
+            targets,
+            units,
+            given_units: units,
+            given_frame: None,
+            iterations: None,
+            rigid: false,
+        }
     }
 
     /// The registration: the method loaded, the targets read and located in the organ (an error

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use augsim_app::assimilation::tracks::{RestPositions, Tracks};
 use augsim_app::assimilation::{Experiment, ObservationFiles, Report};
 use filter::SigmaPointSet;
+use mesh::length::LengthUnit;
 use scenario::AssimilationScenario;
 
 /// The test scenario (see its header).
@@ -61,6 +62,7 @@ fn files(tracks: &Path, controls: bool) -> ObservationFiles {
         controls: controls.then(|| tracks.join("controls.csv")),
         assessment: Some(tracks.join("assessment.csv")),
         known_truth: false,
+        units: LengthUnit::Metre,
     }
 }
 
@@ -115,6 +117,7 @@ fn tracks_written_by_a_synthetic_run_give_the_same_estimate() {
         controls: None,
         assessment: None,
         known_truth: false,
+        units: LengthUnit::Metre,
     };
     assert_eq!(run(dir.path(), &beam, Some(&split), "split").1, expected);
 
@@ -136,7 +139,7 @@ fn tool_tracks_as_controls_reproduce_the_tool() {
     let with_tool = format!("{beam}{TOOL}");
     let (synthetic, _) = run(dir.path(), &with_tool, None, "synthetic");
     let tracks = dir.path().join("synthetic/tracks");
-    let controls = Tracks::read(&tracks.join("controls.csv")).unwrap();
+    let controls = Tracks::read(&tracks.join("controls.csv"), LengthUnit::Metre).unwrap();
     assert_eq!(controls.ids.len(), 6, "the tool's nodes");
     // The same beam without the scenario's tool, driven by the tracked tool instead.
     let (sc, base) = scenario(dir.path(), "controlled.toml", &beam);
@@ -158,7 +161,7 @@ fn tool_tracks_as_controls_reproduce_the_tool() {
 fn track_error(dir: &Path, text: &str) -> String {
     let path = dir.join("bad.csv");
     std::fs::write(&path, text).unwrap();
-    Tracks::read(&path).unwrap_err().to_string()
+    Tracks::read(&path, LengthUnit::Metre).unwrap_err().to_string()
 }
 
 #[test]
@@ -187,22 +190,31 @@ fn bad_track_files_are_named_with_their_line() {
     }
     // Header case and spaces, a byte-order mark, CRLF line ends and blank lines are accepted.
     std::fs::write(d.join("ok.csv"), "\u{feff}Frame, ID, x, y, z\r\n0,a,0,0,0\r\n\r\n2,a,0.001,0,0\r\n").unwrap();
-    let ok = Tracks::read(&d.join("ok.csv")).unwrap();
+    let ok = Tracks::read(&d.join("ok.csv"), LengthUnit::Metre).unwrap();
     assert_eq!((ok.last_frame(), ok.position(0, 1), ok.position(0, 2)), (2, None, Some([0.001, 0.0, 0.0])));
+    // Units: the header's, else the one given.
+    std::fs::write(d.join("mm.csv"), "frame,id,x_mm,y_mm,z_mm\n0,a,1,2,3\n").unwrap();
+    let mm = Tracks::read(&d.join("mm.csv"), LengthUnit::Metre).unwrap();
+    assert_eq!(mm.position(0, 0), Some([0.001, 0.002, 0.003]));
+    let given = Tracks::read(&d.join("ok.csv"), LengthUnit::Millimetre).unwrap();
+    assert_eq!(given.position(0, 2), Some([1e-6, 0.0, 0.0]));
+    std::fs::write(d.join("mixed.csv"), "frame,id,x_mm,y,z\n0,a,1,2,3\n").unwrap();
+    let err = Tracks::read(&d.join("mixed.csv"), LengthUnit::Metre).unwrap_err().to_string();
+    assert!(err.contains("the header must be `frame,id,x,y,z`"), "{err}");
 
     // Rest positions: unknown ids, repeated ids, a missing frame 0.
     std::fs::write(d.join("features.csv"), "id,x,y,z\na,0.01,0.01,0.01\n").unwrap();
-    let features = RestPositions::read(&d.join("features.csv")).unwrap();
+    let features = RestPositions::read(&d.join("features.csv"), LengthUnit::Metre).unwrap();
     std::fs::write(d.join("tracks.csv"), "frame,id,x,y,z\n1,a,0,0,0\n1,b,0,0,0\n").unwrap();
-    let tracks = Tracks::read(&d.join("tracks.csv")).unwrap();
+    let tracks = Tracks::read(&d.join("tracks.csv"), LengthUnit::Metre).unwrap();
     let err = tracks.rest_positions(Some(&features)).unwrap_err().to_string();
     assert!(err.contains("tracks.csv:3: unknown id `b`") && err.contains("features.csv"), "{err}");
     let err = tracks.rest_positions(None).unwrap_err().to_string();
     assert!(err.contains("tracks.csv:2: feature `a` has no frame-0 row"), "{err}");
     std::fs::write(d.join("features.csv"), "id,x,y,z\na,0,0,0\na,1,1,1\n").unwrap();
-    let err = RestPositions::read(&d.join("features.csv")).unwrap_err().to_string();
+    let err = RestPositions::read(&d.join("features.csv"), LengthUnit::Metre).unwrap_err().to_string();
     assert!(err.contains("features.csv:3: feature `a` is already given on line 2"), "{err}");
-    let err = RestPositions::read(&d.join("missing.csv")).unwrap_err().to_string();
+    let err = RestPositions::read(&d.join("missing.csv"), LengthUnit::Metre).unwrap_err().to_string();
     assert!(err.contains("missing.csv: cannot read"), "{err}");
 
     // Through an experiment: a feature outside the organ, named with its line.

@@ -6,6 +6,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use app::assimilation::{Experiment, ObservationFiles, Report, Setup};
 use filter::Discrepancy;
+use mesh::length::LengthUnit;
 use scenario::assimilation::ReferenceSpec;
 use scenario::{AssimilationScenario, MeshSource};
 
@@ -116,6 +117,7 @@ fn assimilate(
         controls: None,
         assessment: Some(tracks.join("assessment.csv")).filter(|p| p.exists()),
         known_truth: true,
+        units: LengthUnit::Metre,
     };
     let mut reports = Vec::new();
     let mut setup = None;

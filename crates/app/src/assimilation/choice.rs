@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use filter::{Discrepancy, Execution, SigmaPointSet};
+use mesh::length::LengthUnit;
 use scenario::AssimilationScenario;
 
 use super::ObservationFiles;
@@ -24,7 +25,8 @@ pub struct AssimilationChoice {
     /// Output directory; default out/<name>.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
-    /// Tracked features instead of synthetic ones: CSV `frame,id,x,y,z` (m; frame 0 = rest, frame k = step k).
+    /// Tracked features instead of synthetic ones: CSV `frame,id,x,y,z` (in --units, or x_mm, y_mm, z_mm; frame 0 =
+    /// rest, frame k = step k).
     #[arg(long)]
     pub observations: Option<PathBuf>,
     /// Rest positions of the tracked features: CSV `id,x,y,z` (default: their frame-0 rows).
@@ -40,6 +42,9 @@ pub struct AssimilationChoice {
     /// mesh): report the estimate's error against them.
     #[arg(long, requires = "observations")]
     pub known_truth: bool,
+    /// Unit of the track files whose header names none: mm or m (the default, as on every front).
+    #[arg(long, default_value_t = LengthUnit::DEFAULT, requires = "observations")]
+    pub units: LengthUnit,
     /// Forgetting factor in (0, 1]: the parameter covariance is divided by it before every step (default: the
     /// scenario's filter.forgetting, else 1 = none).
     #[arg(long)]
@@ -98,6 +103,7 @@ impl AssimilationChoice {
             controls: self.controls.clone(),
             assessment: self.assessment.clone(),
             known_truth: self.known_truth,
+            units: self.units,
         })
     }
 }
@@ -118,6 +124,7 @@ mod tests {
             controls: None,
             assessment: None,
             known_truth: false,
+            units: LengthUnit::Millimetre,
             forgetting: Some(0.9),
             sigma_points: Some(SigmaPointSet::Star),
             discrepancy: None,
@@ -133,5 +140,6 @@ mod tests {
         let tracked = AssimilationChoice { observations: Some("obs.csv".into()), known_truth: true, ..choice };
         let files = tracked.files().unwrap();
         assert!(files.known_truth && files.observations == std::path::Path::new("obs.csv"));
+        assert_eq!(files.units, LengthUnit::Millimetre);
     }
 }

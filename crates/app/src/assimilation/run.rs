@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use fem::Problem;
 use mesh::io::Field;
+use mesh::length::LengthUnit;
 use mesh::select::nearest;
 use mesh::{Mesh, MeshLocator, Point, SurfaceBvh};
 use nalgebra::DVector;
@@ -37,6 +38,8 @@ pub struct ObservationFiles {
     /// The scenario's parameter values are the truth behind the tracks (e.g. tracks written by a synthetic run on
     /// another mesh): the report gives the errors against them.
     pub known_truth: bool,
+    /// The unit of the files whose header names none (`x,y,z` rather than `x_mm,y_mm,z_mm`).
+    pub units: LengthUnit,
 }
 
 /// Summary of a prepared experiment.
@@ -308,10 +311,11 @@ impl Experiment {
     /// Measurements, controls and assessment points from track files; control nodes are constrained in the base
     /// problem.
     fn read_files(&mut self, locator: &MeshLocator, files: &ObservationFiles) -> Result<(), AssimilationError> {
-        let read = |path: &Option<PathBuf>| path.as_deref().map(Tracks::read).transpose();
+        let units = files.units;
+        let read = |path: &Option<PathBuf>| path.as_deref().map(|p| Tracks::read(p, units)).transpose();
         let tracks = TrackSet {
-            rest: files.features.as_deref().map(RestPositions::read).transpose()?,
-            observations: Tracks::read(&files.observations)?,
+            rest: files.features.as_deref().map(|p| RestPositions::read(p, units)).transpose()?,
+            observations: Tracks::read(&files.observations, units)?,
             controls: read(&files.controls)?,
             assessment: read(&files.assessment)?,
         };

@@ -1,4 +1,5 @@
-//! Tracked features in CSV files (metres, one header line, comma-separated, blank lines ignored):
+//! Tracked features in CSV files (one header line, comma-separated, blank lines ignored), in the unit that
+//! the header names (`x_mm,y_mm,z_mm` or `x_m,y_m,z_m`), else in the unit given (`--units`, metres by default):
 //!
 //! * tracks (observations, controls, assessment points): header `frame,id,x,y,z`, one row per feature and frame.
 //!   Frame 0 is the rest configuration; frames 1, 2, … are the filter's time steps. A feature without a row in a
@@ -11,6 +12,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
 use mesh::io::csv::{CsvError, Dialect, Row, Table};
+use mesh::length::LengthUnit;
 use mesh::Point;
 use nalgebra::DVector;
 
@@ -35,18 +37,20 @@ pub struct Tracks {
 }
 
 impl Tracks {
-    /// Reads a track file (header `frame,id,x,y,z`).
-    pub fn read(path: &Path) -> Result<Self, AssimilationError> {
+    /// Reads a track file (header `frame,id,x,y,z`) into metres, from the unit its header names or else from
+    /// `unit`.
+    pub fn read(path: &Path, unit: LengthUnit) -> Result<Self, AssimilationError> {
         let mut tracks = Tracks { path: path.to_path_buf(), ids: Vec::new(), lines: Vec::new(), positions: Vec::new() };
         let mut index: HashMap<String, usize> = HashMap::new();
         let mut first_line: HashMap<(usize, usize), usize> = HashMap::new();
-        for row in rows(path, TRACK_HEADER)? {
+        let (rows, unit) = rows(path, TRACK_HEADER, unit)?;
+        for row in rows {
             let (line, fields) = (row.line, &row.fields);
             let bad = |message: String| AssimilationError::file(path, Some(line), message);
             let frame: usize =
                 fields[0].parse().map_err(|_| bad(format!("frame `{}` is not a whole number ≥ 0", fields[0])))?;
             let id = fields[1].as_str();
-            let point = coordinates(&row, path)?;
+            let point = unit.point_to_metres(coordinates(&row, path)?);
             let j = *index.entry(id.to_string()).or_insert_with(|| {
                 tracks.ids.push(id.to_string());
                 tracks.lines.push(line);
@@ -154,12 +158,14 @@ pub struct RestPositions {
 }
 
 impl RestPositions {
-    /// Reads a rest-position file (header `id,x,y,z`); an id given twice is an error.
-    pub fn read(path: &Path) -> Result<Self, AssimilationError> {
+    /// Reads a rest-position file (header `id,x,y,z`) into metres, from the unit its header names or else from
+    /// `unit`; an id given twice is an error.
+    pub fn read(path: &Path, unit: LengthUnit) -> Result<Self, AssimilationError> {
         let mut positions = HashMap::new();
         let mut lines: HashMap<String, usize> = HashMap::new();
-        for row in rows(path, REST_HEADER)? {
-            let point = coordinates(&row, path)?;
+        let (rows, unit) = rows(path, REST_HEADER, unit)?;
+        for row in rows {
+            let point = unit.point_to_metres(coordinates(&row, path)?);
             let id = &row.fields[0];
             if let Some(earlier) = lines.insert(id.clone(), row.line) {
                 return Err(AssimilationError::file(
@@ -204,7 +210,9 @@ pub fn write_tracks(path: &Path, ids: &[String], frames: &[DVector<f64>]) -> Res
 
 /// The data rows of a CSV file ([`mesh::io::csv`]) whose header is `header` (compared without case and
 /// spaces): the 1-based line number and the fields (as many as the header has, the id field non-empty).
-fn rows(path: &Path, header: &str) -> Result<Vec<Row>, AssimilationError> {
+/// The data rows of a file with the columns of `header` (its coordinates may name their unit) and the
+/// unit of its coordinates: the one the header names, else `given`.
+fn rows(path: &Path, header: &str, given: LengthUnit) -> Result<(Vec<Row>, LengthUnit), AssimilationError> {
     let text =
         std::fs::read_to_string(path).map_err(|e| AssimilationError::file(path, None, format!("cannot read: {e}")))?;
     let table_error = |e: CsvError| AssimilationError::file(path, e.line, e.message);
@@ -213,11 +221,21 @@ fn rows(path: &Path, header: &str) -> Result<Vec<Row>, AssimilationError> {
         AssimilationError::file(path, None, format!("the file is empty: expected the header `{header}`"))
     })?;
     let found = table.names.join(",");
-    if found != header {
+    let n = table.names.len();
+    let unit = mesh::io::points::coordinate_unit(&table.names[n.saturating_sub(3)..]).ok().flatten();
+    // The header without the unit its coordinates name.
+    let suffix = unit.map(|u| format!("_{}", u.symbol()));
+    let plain: Vec<&str> = (table.names.iter().enumerate())
+        .map(|(i, c)| match &suffix {
+            Some(suffix) if i + 3 >= n => c.strip_suffix(suffix.as_str()).unwrap_or(c),
+            _ => c,
+        })
+        .collect();
+    if plain.join(",") != header {
         return Err(AssimilationError::file(
             path,
             Some(first),
-            format!("the header must be `{header}`, found `{found}`"),
+            format!("the header must be `{header}` (or name the unit: x_mm, y_mm, z_mm), found `{found}`"),
         ));
     }
     table.check_widths().map_err(table_error)?;
@@ -228,7 +246,7 @@ fn rows(path: &Path, header: &str) -> Result<Vec<Row>, AssimilationError> {
     if table.rows.is_empty() {
         return Err(AssimilationError::file(path, None, format!("no data rows after the header `{header}`")));
     }
-    Ok(table.rows)
+    Ok((table.rows, unit.unwrap_or(given)))
 }
 
 /// The point in the last three fields `x, y, z` of a row (finite numbers).
@@ -254,7 +272,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("tracks.csv");
         write_tracks(&path, &ids, &frames).unwrap();
-        let read = Tracks::read(&path).unwrap();
+        let read = Tracks::read(&path, LengthUnit::Metre).unwrap();
         let made = Tracks::from_frames(path, &ids, &frames);
         // Ids come in order of first appearance in the file: `b` (frame 0) before `a` (frame 1).
         assert_eq!(read.ids, ["b", "a"]);

@@ -104,6 +104,12 @@ pub fn read_points_csv(path: &Path) -> Result<Vec<Point>, MeshError> {
     Ok(points.points)
 }
 
+/// The unit that the coordinate columns of a header name (`x_mm, y_mm, z_mm` or `x_m, …`), `None`
+/// for plain `x, y, z`; an error for a header without them or naming different units.
+pub fn coordinate_unit(names: &[String]) -> Result<Option<LengthUnit>, String> {
+    Columns::find(names).map(|c| c.unit)
+}
+
 /// The columns of a table: where x, y, z, the label and the description are, and the unit.
 struct Columns {
     xyz: [usize; 3],
