@@ -6,7 +6,8 @@ tracker would, and prints what comes back: a way to try a 3D Slicer set-up witho
 
 ``FRAMES_DIR`` holds one cloud per file, replayed in the order of their names: CSV with an x, y, z
 header (``augsim register --case ... --frames N`` writes such a folder, ``case/clouds``), or
-``.npy`` arrays of shape (n, 3). Their unit is ``--units`` (m by default, as everywhere in augsim);
+``.npy`` arrays of shape (n, 3). Their unit is the one a CSV header names (``x_mm``), else ``--units``
+(m by default, as everywhere in augsim);
 each cloud is sent in ``--send-units`` (mm by default, what Slicer sends: give ``augsim serve`` the
 same ``--units``) as a POLYDATA message of device ``cloud``, at most ``--rate`` clouds a second,
 each once the server has answered the one before. The registered targets (POINT ``targets``) and
@@ -31,13 +32,20 @@ import numpy as np
 _SCALE = {"m": 1.0, "mm": 1e-3}
 
 
-def read_cloud(path):
-    """A cloud file as an (n, 3) float array: ``.npy``, or CSV whose first line is a header."""
+def read_cloud(path, units="m"):
+    """A cloud file as an (n, 3) float array in metres: ``.npy`` in ``units``, or CSV whose first line
+    is a header, in the unit its columns name (``x_mm``, ``x_m``), else in ``units``."""
+    unit = units
     if path.lower().endswith(".npy"):
         cloud = np.load(path)
     else:
+        with open(path, encoding="utf-8-sig") as f:
+            header = [c.strip().lower() for c in f.readline().split(",")]
+        named = {c[2:] for c in header[:3] if c[:2] in ("x_", "y_", "z_")}
+        if len(named) == 1 and next(iter(named)) in _SCALE:
+            unit = next(iter(named))
         cloud = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)[:, :3]
-    cloud = np.asarray(cloud, dtype=float)
+    cloud = np.asarray(cloud, dtype=float) * _SCALE[unit]
     if cloud.ndim != 2 or cloud.shape[1] != 3 or len(cloud) == 0:
         raise ValueError(f"{path}: a cloud must be n x 3 points, got shape {cloud.shape}")
     return cloud
@@ -67,17 +75,18 @@ def connect(host, port, timeout=30.0):
     return client
 
 
-def replay(files, client, scale, rate=None, out=None, unit="mm", timeout=60.0, report=print):
-    """Sends each cloud of ``files`` (multiplied by ``scale``) and waits for its answer; returns one
-    record per frame: the file, the points sent, the round trip (ms), the server's status (a dict)
-    and the registered targets (an array, or None when the server refused the cloud)."""
+def replay(files, client, units="m", rate=None, out=None, unit="mm", timeout=60.0, report=print):
+    """Sends each cloud of ``files`` (read in ``units`` where they name none, sent in ``unit``) and
+    waits for its answer; returns one record per frame: the file, the points sent, the round trip
+    (ms), the server's status (a dict) and the registered targets (an array, or None when the server
+    refused the cloud)."""
     import pyigtl
 
     period = 1.0 / rate if rate else 0.0
     records = []
     for k, path in enumerate(files):
         began = time.perf_counter()
-        cloud = read_cloud(path) * scale
+        cloud = read_cloud(path, units) / _SCALE[unit]
         client.send_message(pyigtl.PolyDataMessage(points=cloud.astype(np.float32), device_name="cloud"), wait=True)
         status_message = client.wait_for_message("status", timeout=timeout)
         if status_message is None:
@@ -125,10 +134,9 @@ def main(argv=None):
         files = frame_files(args.frames) * max(args.loop, 1)
     except ValueError as e:
         raise SystemExit(str(e))
-    scale = _SCALE[args.units] / _SCALE[args.send_units]
     client = connect(args.host, args.port)
     try:
-        records = replay(files, client, scale, rate=args.rate, out=args.out, unit=args.send_units)
+        records = replay(files, client, args.units, rate=args.rate, out=args.out, unit=args.send_units)
     finally:
         client.stop()
     answered = [r for r in records if r["targets"] is not None]

@@ -47,7 +47,7 @@ class ReplayTest(unittest.TestCase):
                 client = replay.connect("127.0.0.1", port)
                 try:
                     files = replay.frame_files(refused)
-                    records = replay.replay(files, client, scale=1e3, rate=0, out=out, report=lines.append)
+                    records = replay.replay(files, client, units="m", rate=0, out=out, report=lines.append)
                 finally:
                     client.stop()
             finally:
@@ -78,3 +78,12 @@ class ReplayTest(unittest.TestCase):
             with self.assertRaises(SystemExit) as stop:
                 replay.main([os.path.join(tmp, "missing")])
             self.assertIn("is not a directory", str(stop.exception))
+
+
+def test_a_cloud_file_is_read_in_the_unit_its_header_names(tmp_path):
+    named, plain = tmp_path / "named.csv", tmp_path / "plain.csv"
+    named.write_text("x_mm,y_mm,z_mm\n10,20,30\n")
+    plain.write_text("x,y,z\n10,20,30\n")
+    np.testing.assert_allclose(replay.read_cloud(str(named), "m"), [[0.01, 0.02, 0.03]])
+    np.testing.assert_allclose(replay.read_cloud(str(plain), "mm"), [[0.01, 0.02, 0.03]])
+    np.testing.assert_allclose(replay.read_cloud(str(plain), "m"), [[10.0, 20.0, 30.0]])
