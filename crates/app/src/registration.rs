@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use mesh::io::Frame;
+use mesh::io::{Frame, FrameChange};
 use mesh::length::LengthUnit;
 use mesh::Point;
 use register::{FemDeformer, Registration, RegistrationOptions};
@@ -270,6 +270,21 @@ impl RegistrationSpec {
         self.targets.frame()
     }
 
+    /// A stream's frame change: from the frame given (else RAS, the frame OpenIGTLink sends) to
+    /// the organ's, and back; with a line that says what is done.
+    pub fn stream_frame(&self) -> Result<(FrameChange, String)> {
+        let stream = self.given_frame.unwrap_or(Frame::Ras);
+        let organ = self.frame()?;
+        let line = match organ {
+            Some(organ) if organ != stream => {
+                format!("the stream's {stream} converted to the organ's {organ} (x and y negated), and back")
+            }
+            Some(organ) => format!("{organ}, the stream's and the organ's"),
+            None => format!("the organ names none: the stream's coordinates ({stream}) taken as the organ's"),
+        };
+        Ok((FrameChange::between(Some(stream), organ), line))
+    }
+
     /// The targets' labels, in order: a targets file's (empty strings where it gives none); none
     /// for other targets.
     pub fn target_labels(&self) -> Result<Vec<String>> {
@@ -385,7 +400,16 @@ mod tests {
             r#"{"markups": [{"coordinateSystem": "RAS", "controlPoints": [{"label": "t", "position": [1, 2, 3]}]}]}"#,
         )
         .unwrap();
-        assert_eq!(TargetsSpec::File(ras).frame().unwrap(), Some(mesh::io::Frame::Ras));
+        assert_eq!(TargetsSpec::File(ras.clone()).frame().unwrap(), Some(Frame::Ras));
+        // A stream is RAS unless given otherwise; converted only where the organ names another.
+        let spec = |targets, given_frame| RegistrationSpec {
+            given_frame,
+            ..RegistrationSpec::new(MethodSpec::Fem("beam".into()), targets)
+        };
+        let flips = |s: RegistrationSpec| s.stream_frame().unwrap().0.flips();
+        assert!(!flips(spec(TargetsSpec::File(ras.clone()), None)));
+        assert!(flips(spec(TargetsSpec::File(ras), Some(Frame::Lps))));
+        assert!(!flips(spec(TargetsSpec::Regions, Some(Frame::Lps))), "the organ names no frame");
         assert_eq!(TargetsSpec::Regions.frame().unwrap(), None);
         assert!(TargetsSpec::File(dir.path().join("missing.csv")).frame().is_err());
     }

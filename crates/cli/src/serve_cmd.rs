@@ -9,7 +9,6 @@ use anyhow::{Context, Result};
 use app::assimilation::{Experiment, OnlineFilter};
 use app::registration::RegistrationChoice;
 use live::{Outputs, ServeOptions};
-use mesh::io::{Frame, FrameChange};
 use mesh::length::LengthUnit;
 
 /// Options of `augsim serve`.
@@ -69,17 +68,6 @@ fn identification(path: &std::path::Path, units: LengthUnit) -> Result<Arc<live:
     }))
 }
 
-/// What the server does with the stream's frame.
-fn frame_line(wire: Frame, organ: Option<Frame>) -> String {
-    match organ {
-        Some(organ) if organ != wire => {
-            format!("frame      the stream's {wire} converted to the organ's {organ} (x and y negated), and back")
-        }
-        Some(organ) => format!("frame      {organ}, the stream's and the organ's"),
-        None => format!("frame      the organ names none: the stream's coordinates ({wire}) taken as the organ's"),
-    }
-}
-
 /// Set by SIGINT / SIGTERM: the server stops.
 static STOP: AtomicBool = AtomicBool::new(false);
 
@@ -93,16 +81,13 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     let outputs = Outputs::parse(&args.outputs).map_err(anyhow::Error::msg).context("--outputs")?;
     let spec = args.registration.spec()?;
     let units = spec.given_units;
-    // The stream's frame: the one given, else RAS (what OpenIGTLink sends).
-    let wire = spec.given_frame.unwrap_or(Frame::Ras);
-    let organ_frame = spec.frame()?;
-    let frame = FrameChange::between(Some(wire), organ_frame);
+    let (frame, frame_line) = spec.stream_frame()?;
     // Built once here so that a bad model, scenario or targets file stops the command before it
     // listens.
     let first = spec.build()?;
     println!("method     {}", first.method());
     println!("organ      {} nodes, {} targets", first.organ().mesh().num_nodes(), first.targets().len());
-    println!("{}", frame_line(wire, organ_frame));
+    println!("frame      {frame_line}");
     for w in first.warnings() {
         eprintln!("warning    {w}");
     }
