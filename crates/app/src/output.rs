@@ -112,8 +112,8 @@ pub struct RunWriter {
     unit: LengthUnit,
     /// The organ moved by the rigid alignment, once known (the same for every frame).
     moved: Option<Mesh>,
-    /// The last frame's organ (in the cloud's frame) and displacement.
-    last: Option<(Mesh, Vec<f64>)>,
+    /// The last frame's registered organ surface, in the cloud's frame.
+    last: Option<mesh::TriSurface>,
     steps: Vec<(f64, String)>,
     rows: Vec<FrameSummary>,
 }
@@ -142,11 +142,8 @@ impl RunWriter {
         }
         let name = if self.sequence { format!("organ_{i:04}.vtu") } else { "organ.vtu".into() };
         let (m, u) = in_cloud_frame(organ.mesh(), self.moved.as_ref(), outcome.rigid.as_ref(), &outcome.registration.u);
-        mesh::io::write_mesh(self.dir.join(&name), &m, &[Field::point("displacement", 3, u.clone())])?;
-        match &mut self.last {
-            Some((_, last)) => *last = u,
-            None => self.last = Some((m.into_owned(), u)),
-        }
+        mesh::io::write_mesh(self.dir.join(&name), &m, &[Field::point("displacement", 3, u)])?;
+        self.last = Some(register::organ_surface(organ, &outcome.registration.u, outcome.rigid.as_ref()));
         self.steps.push((i as f64, name));
         self.rows.push(FrameSummary::new(cloud, outcome));
         Ok(self.rows.last().expect("just pushed"))
@@ -183,8 +180,8 @@ impl RunWriter {
             labels,
             frame,
         )?;
-        if let Some((organ, u)) = &self.last {
-            write_deformed_surface(&self.dir.join("organ_deformed.vtk"), organ, u, frame)?;
+        if let Some(surface) = &self.last {
+            write_deformed_surface(&self.dir.join("organ_deformed.vtk"), surface, frame)?;
         }
         let summary = Summary::new(method, outcomes)?;
         let run = RunSummary { summary: &summary, per_frame: &self.rows };
@@ -276,13 +273,11 @@ pub fn write_targets_for_slicer(
     Ok(write_markups_json(path, &points)?)
 }
 
-/// The boundary of `organ` moved by `u` (m), as a surface in millimetres (`.vtk`), its header
-/// naming `frame` when known (3D Slicer reads `SPACE=` there).
-pub fn write_deformed_surface(path: &Path, organ: &Mesh, u: &[f64], frame: Option<Frame>) -> Result<()> {
-    let mut surface = mesh::boundary_surface(organ);
-    for (v, d) in surface.vertices.iter_mut().zip(u.chunks_exact(3)) {
-        *v = LengthUnit::Millimetre.point_from_metres([v[0] + d[0], v[1] + d[1], v[2] + d[2]]);
-    }
+/// A registered organ surface (m) in millimetres (`.vtk`), its header naming `frame` when known
+/// (3D Slicer reads `SPACE=` there).
+pub fn write_deformed_surface(path: &Path, surface: &mesh::TriSurface, frame: Option<Frame>) -> Result<()> {
+    let mut surface = surface.clone();
+    surface.vertices.iter_mut().for_each(|v| *v = LengthUnit::Millimetre.point_from_metres(*v));
     match frame {
         Some(frame) => write_surface_in_frame(path, &surface, frame)?,
         None => mesh::io::write_surface(path, &surface)?,

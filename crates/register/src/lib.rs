@@ -62,6 +62,6 @@ pub use frame::{
     observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions, WARM_START_ITERATION,
 };
 pub use organ::{Organ, Stencil};
-pub use registration::{target_errors, FrameOutcome, Registration, Summary, Tracked};
+pub use registration::{organ_surface, target_errors, FrameOutcome, Registration, Summary, Tracked};
 pub use rigid::{rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
 pub use shape::{model_shape_space, ShapeDeformer, ShapeOptions, ShapeSpace};

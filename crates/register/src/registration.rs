@@ -78,13 +78,19 @@ pub struct Tracked {
 impl Tracked {
     /// The registered organ surface, in the cloud's frame.
     pub fn organ_surface(&self, organ: &Organ) -> mesh::TriSurface {
-        let mut surface = organ.deformed_surface(&self.registration.u);
-        if let Some(r) = &self.rigid {
-            let t = r.organ_to_cloud();
-            surface.vertices.iter_mut().for_each(|p| *p = t.apply(*p));
-        }
-        surface
+        organ_surface(organ, &self.registration.u, self.rigid.as_ref())
     }
+}
+
+/// The surface of `organ` displaced by `u`, in the cloud's frame (moved by the rigid alignment,
+/// if any).
+pub fn organ_surface(organ: &Organ, u: &[f64], rigid: Option<&RigidResult>) -> mesh::TriSurface {
+    let mut surface = organ.deformed_surface(u);
+    if let Some(r) = rigid {
+        let t = r.organ_to_cloud();
+        surface.vertices.iter_mut().for_each(|p| *p = t.apply(*p));
+    }
+    surface
 }
 
 impl Registration {
