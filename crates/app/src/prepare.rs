@@ -582,6 +582,8 @@ struct Truth {
     held: Vec<usize>,
     seen: Vec<usize>,
     stencils: Vec<register::Stencil>,
+    /// The targets outside the mesh, which follow its nearest surface point, and how far out they lie.
+    outside: Vec<(usize, f64)>,
     material: fem::Material,
 }
 
@@ -599,12 +601,17 @@ impl Truth {
         let mesh = coarse.quadratic()?;
         let held = Near { points: landmarks.to_vec(), file: None, distance: attach, surface: true }.nodes(&mesh)?;
         let seen = Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&mesh)?;
-        let (stencils, _) = register::Organ::new(mesh.clone(), None)?.locate_targets(targets)?;
+        // A target near the surface may lie just outside this mesh, whose boundary is not the
+        // organ mesh's: within an element's size it follows the nearest surface point.
+        let size = (mesh.volume() / mesh.cells.len() as f64).cbrt();
+        let located = register::Organ::new(mesh.clone(), None)?.locate_near(targets, size, "target")?;
+        let outside = located.iter().enumerate().filter(|(_, (_, d))| *d > 0.0).map(|(i, (_, d))| (i, *d)).collect();
+        let stencils = located.into_iter().map(|(s, _)| s).collect();
         let material = fem::Material {
             formulation: fem::Formulation::Standard,
             ..fem::Material::new(fem::Law::NeoHookean, 5000.0, 0.49).with_order(2)
         };
-        Ok(Truth { mesh, held, seen, stencils, material })
+        Ok(Truth { mesh, held, seen, stencils, outside, material })
     }
 
     /// The displacement under a push of `force` (N) from `camera` on the seen nodes within
@@ -893,6 +900,12 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
         truth.seen.len(),
         mm(mesh::stats::mean(&rest_errors))
     ));
+    for &(target, distance) in &truth.outside {
+        lines.push(format!(
+            "validation: target {target} lies {:.2} mm outside the truth's mesh and follows its nearest surface point",
+            mm(distance)
+        ));
+    }
     if read_back.get() > 0 {
         lines.push(format!(
             "validation: {} of the truths' solves read back from {TRUTH_DIR}/, made by an earlier run (this step's \

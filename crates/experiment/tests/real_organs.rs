@@ -136,9 +136,12 @@ fn real_livers_deform_as_calculix_computes() {
 /// The AMOS liver's quadratic mesh pushed by 1 N: force control follows it to load factor 0.918,
 /// where its response has softened to a few per cent of its stiffness at rest and CalculiX stops
 /// too ("increment size smaller than minimum"). Past that limit point the organ swings on to an
-/// equilibrium more than 20 cm away, which the solver's last, patient attempt at a whole load step
+/// equilibrium more than 20 cm away, which the solver's patient attempt at a whole load step
 /// reaches: the state it returns balances the load (to 1e-4 of it: the solver accepts a small
-/// last increment at a relative residual of up to 1e-3).
+/// last increment at a relative residual of up to 1e-3). It gets there in 905 iterations and 172
+/// factorisations; with the patient attempt made only as the last resort, after load steps had
+/// crept towards the limit point, and a refactorisation every second iteration of a sequence that
+/// does not converge, it took 1,056 and 363.
 #[test]
 fn past_its_limit_point_a_hanging_liver_swings_on_to_an_equilibrium() {
     let organ = &organs()[0];
@@ -147,6 +150,8 @@ fn past_its_limit_point_a_hanging_liver_swings_on_to_an_equilibrium() {
     let mut solver = StaticSolver::new(p).unwrap();
     let solution = solver.solve(&SolverOptions::default()).unwrap();
     assert!(max_norm(&solution.u) > 0.2, "moved {} m", max_norm(&solution.u));
+    let cost = format!("{} iterations, {} factorisations", solution.iterations, solution.factorizations);
+    assert!(solution.iterations < 1000 && solution.factorizations < 250, "{cost}");
     let internal = solver.internal_force(&solution.u).unwrap();
     let free: Vec<usize> = (0..load.len()).filter(|&d| solver.free_index(d).is_some()).collect();
     let residual = free.iter().map(|&d| (internal[d] - load[d]).powi(2)).sum::<f64>().sqrt();

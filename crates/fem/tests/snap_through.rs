@@ -32,8 +32,8 @@ fn arch(force: f64, load_steps: usize) -> Result<(f64, Solution), FemError> {
 }
 
 /// Below its limit load (between 1.5 and 2 N) the arch bends by a fraction of its rise; above it,
-/// it snaps through to hang below its supports. Load-stepped in 20 steps, the solve passes the
-/// limit point and reaches the same snapped equilibrium as one full step does.
+/// it snaps through to hang below its supports. Load-stepped in 20 steps (or more, where a step is
+/// cut), the solve passes the limit point and reaches the same snapped equilibrium as one full step does.
 #[test]
 fn a_shallow_arch_snaps_through_past_its_limit_load_whether_load_stepped_or_not() {
     let (before, _) = arch(1.5, 1).unwrap();
@@ -41,6 +41,6 @@ fn a_shallow_arch_snaps_through_past_its_limit_load_whether_load_stepped_or_not(
     let (at_once, _) = arch(2.0, 1).unwrap();
     assert!(at_once > RISE + THICK, "past the limit load the crown moves {at_once} m: not snapped through");
     let (stepped, solution) = arch(2.0, 20).unwrap();
-    assert_eq!(solution.load_steps, 20);
+    assert!(solution.load_steps >= 20, "{} load steps", solution.load_steps);
     assert!((stepped - at_once).abs() < 1e-6 * at_once, "stepped {stepped} m, at once {at_once} m");
 }

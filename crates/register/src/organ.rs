@@ -117,14 +117,41 @@ impl Organ {
     /// truth's finer surface.
     pub fn surface_displacement_at(&self, u: &[f64], points: &[Point]) -> Result<Vec<Point>> {
         let bvh = SurfaceBvh::new(&self.surface)?;
-        Ok(points
+        Ok(points.iter().map(|&p| self.nearest_surface_stencil(&bvh, p).0.vector(u)).collect())
+    }
+
+    /// The stencil of the rest surface's point nearest to `p` (`bvh` over the surface), and its
+    /// distance.
+    fn nearest_surface_stencil(&self, bvh: &SurfaceBvh, p: Point) -> (Stencil, f64) {
+        let closest = bvh.closest_point(p);
+        let corners = self.surface.triangles[closest.triangle].map(|k| self.surface.vertices[k]);
+        let stencil = self.surface_point_stencil(closest.triangle, triangle_barycentric(corners, closest.point));
+        (stencil, closest.distance)
+    }
+
+    /// Stencils of points of the same organ's other discretisation (e.g. targets inside the
+    /// organ a model was set up on, in a truth meshed anew), each with how far outside this mesh
+    /// it lies (0 inside): a point outside, by at most `tolerance`, follows the surface's nearest
+    /// point.
+    pub fn locate_near(&self, points: &[Point], tolerance: f64, what: &str) -> Result<Vec<(Stencil, f64)>> {
+        let bvh = SurfaceBvh::new(&self.surface)?;
+        points
             .iter()
-            .map(|&p| {
-                let closest = bvh.closest_point(p);
-                let corners = self.surface.triangles[closest.triangle].map(|k| self.surface.vertices[k]);
-                self.surface_point_stencil(closest.triangle, triangle_barycentric(corners, closest.point)).vector(u)
+            .enumerate()
+            .map(|(i, &p)| {
+                if let Some(location) = self.locator.locate(p) {
+                    return Ok((Stencil::of(&location), 0.0));
+                }
+                let (stencil, distance) = self.nearest_surface_stencil(&bvh, p);
+                if !(distance <= tolerance) {
+                    return Err(RegisterError::Invalid(format!(
+                        "{what} {i} at {p:?} lies {:.2} mm outside the organ mesh",
+                        distance * 1e3
+                    )));
+                }
+                Ok((stencil, distance))
             })
-            .collect())
+            .collect()
     }
 
     /// Stencils of points inside the organ (e.g. targets); a point outside is an error naming it.
@@ -227,5 +254,26 @@ mod tests {
         let above = organ.surface_displacement_at(&u, &[[0.015, 0.007, 0.015]]).unwrap()[0];
         let below = field([0.015, 0.007, 0.01]);
         assert!((0..3).all(|d| (above[d] - below[d]).abs() < 1e-12), "{above:?} against {below:?}");
+    }
+
+    /// A point inside is located in its element; one 2 mm above the top face follows the face's
+    /// point below it when the tolerance allows 3 mm, and is refused, with its distance, when it
+    /// allows 1 mm.
+    #[test]
+    fn a_point_just_outside_follows_the_nearest_surface_point_within_the_tolerance() {
+        let (lo, hi) = ([0.0, 0.0, 0.0], [0.04, 0.02, 0.01]);
+        let organ = Organ::new(mesh::generate::box_tet(lo, hi, [4, 2, 1]).unwrap(), None).unwrap();
+        let field = |p: Point| [0.1 * p[0] + 0.02 * p[2], -0.05 * p[1], 0.03 * p[0] + 0.2 * p[1] - 0.1 * p[2]];
+        let u: Vec<f64> = organ.mesh().nodes.iter().flat_map(|&p| field(p)).collect();
+        let (inside, above) = ([0.013, 0.011, 0.004], [0.013, 0.011, 0.012]);
+        let located = organ.locate_near(&[inside, above], 0.003, "target").unwrap();
+        assert_eq!(located[0].1, 0.0);
+        assert!((located[1].1 - 0.002).abs() < 1e-12, "{}", located[1].1);
+        for ((stencil, _), at) in located.iter().zip([inside, [0.013, 0.011, 0.01]]) {
+            let (got, want) = (stencil.vector(&u), field(at));
+            assert!((0..3).all(|d| (got[d] - want[d]).abs() < 1e-12), "{got:?} against {want:?}");
+        }
+        let error = organ.locate_near(&[inside, above], 0.001, "target").unwrap_err().to_string();
+        assert!(error.contains("target 1") && error.contains("2.00 mm outside"), "{error}");
     }
 }
