@@ -90,7 +90,7 @@ pub enum FemError {
     },
     /// The load path turned back: the smallest load step past the last equilibrium found none,
     /// even with a long descent.
-    #[error("no equilibrium found beyond load factor {load_factor:.3}: the response there was {softening:.1} % as stiff as at rest (a limit point of the load path: past it the body snaps or gives way under this load), and {iterations} further iterations found none; lower the load, hold the body more firmly, or push with a displacement")]
+    #[error("no equilibrium found beyond load factor {load_factor:.3}{}, and {iterations} further iterations found none; lower the load, hold the body more firmly, or push with a displacement", stiffness_note(*.softening))]
     NoEquilibrium {
         /// The last load factor reached.
         load_factor: f64,
@@ -112,4 +112,17 @@ pub enum FemError {
     /// A mesh error.
     #[error(transparent)]
     Mesh(#[from] mesh::MeshError),
+}
+
+/// What [`FemError::NoEquilibrium`] says of the load path: a limit point where its last steps had
+/// softened (the stiffness known), nothing where fewer than two steps converged.
+fn stiffness_note(softening: f64) -> String {
+    if softening.is_finite() {
+        format!(
+            ": the response there was {softening:.1} % as stiff as at rest (a limit point of the load path: past it the \
+             body snaps or gives way under this load)"
+        )
+    } else {
+        String::new()
+    }
 }
