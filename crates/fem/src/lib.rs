@@ -114,14 +114,21 @@ pub enum FemError {
     Mesh(#[from] mesh::MeshError),
 }
 
+/// The stiffness of a load path's last step, in per cent of that at rest, under which a failure to
+/// go on is told as a limit point (the AMOS liver pushed by 1 N reaches 2 % there).
+const LIMIT_POINT_STIFFNESS: f64 = 25.0;
+
 /// What [`FemError::NoEquilibrium`] says of the load path: a limit point where its last steps had
-/// softened (the stiffness known), nothing where fewer than two steps converged.
+/// softened to under [`LIMIT_POINT_STIFFNESS`] per cent of the stiffness at rest, no sign of one
+/// where they had not, nothing where fewer than two steps converged.
 fn stiffness_note(softening: f64) -> String {
-    if softening.is_finite() {
+    if softening < LIMIT_POINT_STIFFNESS {
         format!(
             ": the response there was {softening:.1} % as stiff as at rest (a limit point of the load path: past it the \
              body snaps or gives way under this load)"
         )
+    } else if softening.is_finite() {
+        format!(": the response there was still {softening:.1} % as stiff as at rest (no sign of a limit point)")
     } else {
         String::new()
     }

@@ -46,14 +46,17 @@ fn a_shallow_arch_snaps_through_past_its_limit_load_whether_load_stepped_or_not(
 }
 
 /// A solve that finds no equilibrium names a limit point only where its load path was seen to
-/// soften (two converged steps at least), and says what to change either way.
+/// soften (two converged steps at least, the last far less stiff than the first), and says what
+/// to change either way.
 #[test]
 fn no_equilibrium_names_a_limit_point_only_where_the_path_was_seen_to_soften() {
     let softened = FemError::NoEquilibrium { load_factor: 0.918, softening: 2.04, iterations: 1000 }.to_string();
     assert!(softened.contains("0.918") && softened.contains("2.0 % as stiff") && softened.contains("limit point"));
+    let stiff = FemError::NoEquilibrium { load_factor: 0.094, softening: 69.2, iterations: 10 }.to_string();
+    assert!(stiff.contains("69.2 % as stiff") && stiff.contains("no sign of a limit point"), "{stiff}");
     let unknown = FemError::NoEquilibrium { load_factor: 0.125, softening: f64::NAN, iterations: 74 }.to_string();
     assert!(!unknown.contains("NaN") && !unknown.contains("limit point"), "{unknown}");
-    for message in [softened, unknown] {
+    for message in [softened, stiff, unknown] {
         assert!(message.contains("further iterations found none") && message.contains("lower the load"), "{message}");
     }
 }
