@@ -234,15 +234,28 @@ pub fn displaced(rest: &[Point], stencils: &[Stencil], u: &[f64]) -> Vec<Point> 
 mod tests {
     use super::*;
 
+    /// The corners of the box of the tests (m).
+    const BOX: (Point, Point) = ([0.0, 0.0, 0.0], [0.04, 0.02, 0.01]);
+
+    /// A linear displacement field.
+    fn field(p: Point) -> Point {
+        [0.1 * p[0] + 0.02 * p[2], -0.05 * p[1], 0.03 * p[0] + 0.2 * p[1] - 0.1 * p[2]]
+    }
+
+    /// The box meshed by 4 × 2 × 1 cubes of tetrahedra, and [`field`] at its nodes.
+    fn box_organ() -> (Organ, Vec<f64>) {
+        let organ = Organ::new(mesh::generate::box_tet(BOX.0, BOX.1, [4, 2, 1]).unwrap(), None).unwrap();
+        let u = organ.mesh().nodes.iter().flat_map(|&p| field(p)).collect();
+        (organ, u)
+    }
+
     /// A linear displacement field is linear on each flat surface triangle: read at the surface
     /// nodes of a finer mesh of the same box, it is the field itself there, and a point off the
     /// surface takes the value at its nearest surface point.
     #[test]
     fn the_surface_displacement_of_a_linear_field_is_exact_at_another_meshes_surface() {
-        let (lo, hi) = ([0.0, 0.0, 0.0], [0.04, 0.02, 0.01]);
-        let organ = Organ::new(mesh::generate::box_tet(lo, hi, [4, 2, 1]).unwrap(), None).unwrap();
-        let field = |p: Point| [0.1 * p[0] + 0.02 * p[2], -0.05 * p[1], 0.03 * p[0] + 0.2 * p[1] - 0.1 * p[2]];
-        let u: Vec<f64> = organ.mesh().nodes.iter().flat_map(|&p| field(p)).collect();
+        let (lo, hi) = BOX;
+        let (organ, u) = box_organ();
         let finer = mesh::generate::box_tet(lo, hi, [7, 5, 3]).unwrap();
         let points: Vec<Point> = finer.surface_nodes().iter().map(|&n| finer.nodes[n]).collect();
         let got = organ.surface_displacement_at(&u, &points).unwrap();
@@ -261,10 +274,7 @@ mod tests {
     /// allows 1 mm.
     #[test]
     fn a_point_just_outside_follows_the_nearest_surface_point_within_the_tolerance() {
-        let (lo, hi) = ([0.0, 0.0, 0.0], [0.04, 0.02, 0.01]);
-        let organ = Organ::new(mesh::generate::box_tet(lo, hi, [4, 2, 1]).unwrap(), None).unwrap();
-        let field = |p: Point| [0.1 * p[0] + 0.02 * p[2], -0.05 * p[1], 0.03 * p[0] + 0.2 * p[1] - 0.1 * p[2]];
-        let u: Vec<f64> = organ.mesh().nodes.iter().flat_map(|&p| field(p)).collect();
+        let (organ, u) = box_organ();
         let (inside, above) = ([0.013, 0.011, 0.004], [0.013, 0.011, 0.012]);
         let located = organ.locate_near(&[inside, above], 0.003, "target").unwrap();
         assert_eq!(located[0].1, 0.0);
