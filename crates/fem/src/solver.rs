@@ -551,17 +551,8 @@ impl StaticSolver {
         options: &SolverOptions,
         start: Instant,
     ) -> Result<Solution, FemError> {
-        self.problem.validate()?;
-        if !self.held_by_constraints {
-            self.problem.check_held(&self.pieces)?;
-        }
+        self.check_problem()?;
         self.cholesky.set_double_precision(false);
-        if !self.problem.dirichlet.keys().copied().eq(self.constrained_nodes.iter().copied()) {
-            return Err(FemError::Invalid("the set of constrained nodes changed after the solver was built".into()));
-        }
-        if self.problem.material.resolved_formulation() != self.geometry.formulation {
-            return Err(FemError::Invalid("the element formulation changed after the solver was built".into()));
-        }
         let ndof = self.problem.num_dofs();
         let mut stats = Stats::default();
         if let Some(u0) = u0 {
@@ -672,6 +663,22 @@ impl StaticSolver {
         Ok(stats.finish(u, steps, start))
     }
 
+    /// Checks the problem (valid, every piece held) and that its constrained nodes and element
+    /// formulation are still those the solver was built for.
+    fn check_problem(&self) -> Result<(), FemError> {
+        self.problem.validate()?;
+        if !self.held_by_constraints {
+            self.problem.check_held(&self.pieces)?;
+        }
+        if !self.problem.dirichlet.keys().copied().eq(self.constrained_nodes.iter().copied()) {
+            return Err(FemError::Invalid("the set of constrained nodes changed after the solver was built".into()));
+        }
+        if self.problem.material.resolved_formulation() != self.geometry.formulation {
+            return Err(FemError::Invalid("the element formulation changed after the solver was built".into()));
+        }
+        Ok(())
+    }
+
     /// Turns the failure of a Saint-Venant-Kirchhoff solve past its compressive
     /// limit point into [`FemError::LimitPoint`]: the failing attempt found the tangent
     /// indefinite, or a quadrature point is compressed beyond the stretch 1/√3 where SVK's
@@ -765,19 +772,7 @@ impl StaticSolver {
             }
             stats.iterations += 1;
             if refresh {
-                let t = Instant::now();
-                self.evaluate(u, &mut f_int, true)?;
-                stats.tangent_assemblies += 1;
-                stats.timings.assembly += t.elapsed();
-                let t = Instant::now();
-                self.latest_stale = it > 0 && rel > STALE_RESIDUAL;
-                self.latest_spring_stiffness = self.problem.point_spring_stiffness();
-                self.latest_slow = false;
-                self.cholesky.factorize(Slot::Latest, &self.values)?;
-                stats.indefinite |= !self.cholesky.is_positive_definite(Slot::Latest);
-                stats.refactorized = true;
-                stats.factorizations += 1;
-                stats.timings.factorization += t.elapsed();
+                self.refactorize(u, &mut f_int, it > 0 && rel > STALE_RESIDUAL, stats)?;
                 bfgs.clear();
                 refresh = !opt.reuse_factorization;
                 slot = Slot::Latest;
@@ -830,6 +825,25 @@ impl StaticSolver {
             u.copy_from_slice(&trial);
         }
         unreachable!("the loop returns at its last iteration")
+    }
+
+    /// Assembles the tangent at `u` (and the internal force into `f_int`) and factorises it into
+    /// the latest slot; `stale`: the iterate is far from equilibrium (see [`STALE_RESIDUAL`]).
+    fn refactorize(&mut self, u: &[f64], f_int: &mut [f64], stale: bool, stats: &mut Stats) -> Result<(), FemError> {
+        let t = Instant::now();
+        self.evaluate(u, f_int, true)?;
+        stats.tangent_assemblies += 1;
+        stats.timings.assembly += t.elapsed();
+        let t = Instant::now();
+        self.latest_stale = stale;
+        self.latest_spring_stiffness = self.problem.point_spring_stiffness();
+        self.latest_slow = false;
+        self.cholesky.factorize(Slot::Latest, &self.values)?;
+        stats.indefinite |= !self.cholesky.is_positive_definite(Slot::Latest);
+        stats.refactorized = true;
+        stats.factorizations += 1;
+        stats.timings.factorization += t.elapsed();
+        Ok(())
     }
 
     /// Whether the point springs' total stiffness left the range of [`SPRING_SCALE_CHANGE`]
