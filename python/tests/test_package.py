@@ -33,7 +33,9 @@ def test_solve_beam_matches_the_command_line(tmp_path):
     assert fixed.sum() == 6 * 6 and np.abs(s.displacement[fixed]).max() == 0.0
     tip = s.points[:, 0] > 4.0 - 1e-9
     assert (s.displacement[tip, 2] < -0.45).all()
-    assert 0 < s.residual < 1e-6 and s.load_steps >= 1
+    # Converged: a relative residual under rtol (1e-6), or a last increment under utol at one under
+    # its square root.
+    assert 0 < s.residual <= 1e-3 and s.load_steps >= 1
 
 
 @pytest.fixture(scope="module")
