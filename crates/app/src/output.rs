@@ -15,7 +15,7 @@ use mesh::io::{csv_field, write_atomic_bytes, write_surface_in_frame, Field, Fra
 use mesh::length::{mm, LengthUnit};
 use mesh::{Mesh, Point};
 use register::cloud::write_csv;
-use register::{FrameOutcome, Organ, RigidResult, RigidTransform, Summary};
+use register::{FrameOutcome, Organ, Registration, RigidResult, RigidTransform, Summary};
 use scenario::registration::slug;
 use serde::Serialize;
 
@@ -112,8 +112,6 @@ pub struct RunWriter {
     unit: LengthUnit,
     /// The organ moved by the rigid alignment, once known (the same for every frame).
     moved: Option<Mesh>,
-    /// The last frame's registered organ surface, in the cloud's frame.
-    last: Option<mesh::TriSurface>,
     steps: Vec<(f64, String)>,
     rows: Vec<FrameSummary>,
 }
@@ -124,15 +122,7 @@ impl RunWriter {
     /// metres, the files for 3D Slicer in millimetres).
     pub fn new(dir: &Path, sequence: bool, unit: LengthUnit) -> Result<RunWriter> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        Ok(RunWriter {
-            dir: dir.to_path_buf(),
-            sequence,
-            unit,
-            moved: None,
-            last: None,
-            steps: Vec::new(),
-            rows: Vec::new(),
-        })
+        Ok(RunWriter { dir: dir.to_path_buf(), sequence, unit, moved: None, steps: Vec::new(), rows: Vec::new() })
     }
 
     /// Writes frame `i` (registered from `cloud`) of `organ`; returns its summary line.
@@ -143,20 +133,18 @@ impl RunWriter {
         let name = if self.sequence { format!("organ_{i:04}.vtu") } else { "organ.vtu".into() };
         let (m, u) = in_cloud_frame(organ.mesh(), self.moved.as_ref(), outcome.rigid.as_ref(), &outcome.registration.u);
         mesh::io::write_mesh(self.dir.join(&name), &m, &[Field::point("displacement", 3, u)])?;
-        self.last = Some(register::organ_surface(organ, &outcome.registration.u, outcome.rigid.as_ref()));
         self.steps.push((i as f64, name));
         self.rows.push(FrameSummary::new(cloud, outcome));
         Ok(self.rows.last().expect("just pushed"))
     }
 
-    /// Writes organ.pvd (for a sequence), targets.csv (of the last frame; `targets`: the rest
-    /// positions, `labels`: theirs, or none), the last frame for 3D Slicer (targets.mrk.json and
-    /// organ_deformed.vtk, in `frame` when known: the frame the cloud is in) and summary.json;
-    /// returns the run's summary.
+    /// Writes organ.pvd (for a sequence), targets.csv (of the last frame of `registration`;
+    /// `labels`: its targets', or none), the last frame for 3D Slicer (targets.mrk.json and
+    /// organ_deformed.vtk, its registered surface, in `frame` when known: the frame the cloud is
+    /// in) and summary.json; returns the run's summary.
     pub fn finish(
         self,
-        method: &str,
-        targets: &[Point],
+        registration: &Registration,
         labels: &[String],
         frame: Option<Frame>,
         outcomes: &[FrameOutcome],
@@ -167,7 +155,7 @@ impl RunWriter {
         let last = outcomes.last().context("no frame")?;
         write_targets(
             &self.dir.join("targets.csv"),
-            &rest_in_cloud_frame(targets, last.rigid.as_ref()),
+            &rest_in_cloud_frame(registration.targets(), last.rigid.as_ref()),
             &last.targets,
             last.target_std.as_deref(),
             labels,
@@ -180,10 +168,9 @@ impl RunWriter {
             labels,
             frame,
         )?;
-        if let Some(surface) = &self.last {
-            write_deformed_surface(&self.dir.join("organ_deformed.vtk"), surface, frame)?;
-        }
-        let summary = Summary::new(method, outcomes)?;
+        let surface = register::organ_surface(registration.organ(), &last.registration.u, last.rigid.as_ref());
+        write_deformed_surface(&self.dir.join("organ_deformed.vtk"), &surface, frame)?;
+        let summary = Summary::new(registration.method(), outcomes)?;
         let run = RunSummary { summary: &summary, per_frame: &self.rows };
         write_atomic_bytes(&self.dir.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
         Ok(summary)

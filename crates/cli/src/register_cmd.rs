@@ -106,7 +106,7 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
         Ok(())
     })?;
     let labels = spec.target_labels()?;
-    let summary = writer.finish(registration.method(), registration.targets(), &labels, input.frame, &outcomes)?;
+    let summary = writer.finish(&registration, &labels, input.frame, &outcomes)?;
     print_lines(&run_lines(&outcomes, &summary));
     println!(
         "wrote      {} ({}, targets.csv, summary.json; for 3D Slicer: organ_deformed.vtk, targets.mrk.json)",

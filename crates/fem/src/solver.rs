@@ -589,7 +589,8 @@ impl StaticSolver {
         // (the load factor it started from, its iterations).
         let (mut early_patient, mut patient_failed) = (true, None);
         while lambda < 1.0 {
-            let target = (lambda + step).min(1.0);
+            let mut target = (lambda + step).min(1.0);
+            let tried = target - lambda;
             let mut trial = predict(&u, previous.as_ref(), lambda, target);
             // Start from the rest tangent unless this solve already refactorised
             // at a converged state; after a failure, from a new tangent at the last
@@ -599,7 +600,6 @@ impl StaticSolver {
                 (false, true) => Start::Fresh,
                 (false, false) => Start::Rest,
             };
-            let (mut target, tried) = (target, target - lambda);
             let mut attempt = self.newton(&mut trial, target, from, options, Budget::Normal, &mut stats);
             // Near a limit point of the load path, a step cut once fails again. Past it the body
             // snaps to an equilibrium far away, which a descent may need hundreds of iterations to

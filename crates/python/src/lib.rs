@@ -376,7 +376,7 @@ fn write_frame(
     };
     let mut writer = RunWriter::new(dir, false, unit)?;
     writer.frame(0, "python".into(), registration.organ(), &outcome)?;
-    writer.finish(registration.method(), registration.targets(), labels, frame, std::slice::from_ref(&outcome))?;
+    writer.finish(registration, labels, frame, std::slice::from_ref(&outcome))?;
     Ok(())
 }
 
