@@ -6,21 +6,22 @@
 
 use std::path::{Path, PathBuf};
 
-use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
+use fem::{Material, Problem, SolverOptions, StaticSolver};
 use mesh::phantom::PhantomSpec;
-use mesh::{Mesh, Point};
+use mesh::{Mesh, NodeSelection, Point};
 
 use learn::data::generate::Input;
 use learn::Model;
 
 use anyhow::{anyhow, bail, Context, Result};
 use register::{
-    shape, Deformer, FemDeformer, FrameOutcome, HybridDeformer, NetworkDeformer, Organ, Registration,
-    RegistrationOptions, RestAndStream, RigidTransform, ShapeDeformer, ShapeOptions, Summary,
+    shape, Deformer, FemDeformer, FrameOutcome, NetworkDeformer, Organ, RegisterError, RegistrationOptions,
+    RestAndStream, RigidTransform, ShapeDeformer, ShapeOptions, Summary,
 };
 use scenario::registration::{CameraSpec, MethodKind, Misalignment};
-use scenario::{CaseScenario, DatasetScenario, MeshSource};
+use scenario::{CaseScenario, DatasetScenario, Fixed, MeshSource, StaticScenario};
 
+use crate::registration::{MethodSpec, ModelSource, RegistrationSpec, ScenarioSource, TargetsSpec};
 use crate::simulate::{simulate_cloud, CameraModel};
 
 /// Tetrahedra of the ground-truth phantom of the built-in case.
@@ -141,26 +142,28 @@ pub fn model_mesh() -> Result<Mesh> {
     Ok(mesh::phantom::liver_phantom(MODEL_TETS)?)
 }
 
-/// A FEM registration model for [`phantom_push`] on `mesh` (a phantom, e.g. [`model_mesh`])
-/// with `material`, fixed between the lobes, with the default data stiffness.
-pub fn fem_model(mesh: Mesh, material: Material) -> Result<(Organ, FemDeformer)> {
-    fem_model_fixed_on(mesh, material, "fixed")
-}
-
-/// [`fem_model`] fixed on the region `fixed`; the organ is the problem's mesh (quadratic when the
-/// material asks for it).
-fn fem_model_fixed_on(mesh: Mesh, material: Material, fixed: &str) -> Result<(Organ, FemDeformer)> {
-    let mut problem = Problem::new(mesh, material);
-    let fixed = problem.mesh.region(fixed)?.to_vec();
-    problem.fix(&fixed);
+/// The FEM registration model of a static scenario (paths relative to `dir`): its problem's mesh
+/// (quadratic when the material asks for it) as the organ, pulled by data springs of the default
+/// stiffness, with the scenario's solver.
+pub fn fem_model(scenario: &StaticScenario, dir: &Path) -> Result<(Organ, FemDeformer)> {
+    let problem = scenario.build_problem(dir)?;
+    let organ = organ_of(&scenario.mesh, problem.mesh.clone())?;
     let stiffness = FemDeformer::default_stiffness(&problem);
-    Ok((Organ::new(problem.mesh.clone(), None)?, FemDeformer::new(problem, stiffness, SolverOptions::default())?))
+    Ok((organ, FemDeformer::new(problem, stiffness, scenario.solver.clone())?))
 }
 
 /// The co-rotational registration model (E = 5 kPa, ν = 0.48: another law than the truth's) on
-/// [`model_mesh`].
+/// [`model_mesh`], fixed between the lobes: the built-in static scenario `liver_corotational`.
 pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
-    fem_model(model_mesh()?, Material::new(Law::Corotational, 5000.0, 0.48))
+    fem_model(&StaticScenario::builtin("liver_corotational"), Path::new(""))
+}
+
+/// The FEM of `scenario`'s method `name` of `material`: the phantom of `models.tets` linear
+/// tetrahedra (quadratic when the material asks for it), fixed on the truth's fixed region.
+pub fn fem_scenario(scenario: &CaseScenario, name: &str, material: Material) -> StaticScenario {
+    let fixed = Fixed { select: NodeSelection::Region(scenario.truth.fixed.clone()) };
+    let source = MeshSource::Phantom { tets: scenario.models.tets };
+    StaticScenario { fixed: vec![fixed], ..StaticScenario::new(name, source, material) }
 }
 
 /// The shipped augmented-reality network, relative to the directory an experiment runs from (the
@@ -201,6 +204,14 @@ pub struct Network<'a> {
     pub scenario: &'a DatasetScenario,
     /// The scenario's directory (mesh paths are relative to it).
     pub dir: &'a Path,
+}
+
+impl Network<'_> {
+    /// The model and its scenario, in memory, as a method's spec takes them.
+    pub fn sources(&self) -> (ModelSource, ScenarioSource<DatasetScenario>) {
+        let scenario = ScenarioSource::Given { scenario: Box::new(self.scenario.clone()), dir: self.dir.to_path_buf() };
+        (ModelSource::Given(self.model.clone()), scenario)
+    }
 }
 
 /// The U-Net registration model of a network: its scenario's organ, the network fed with the
@@ -294,55 +305,46 @@ pub fn methods(networks: &[Network]) -> Result<Vec<Method>> {
     case_methods(&CaseScenario::builtin(), networks)
 }
 
-/// The methods of `scenario`, in its order: its FEM methods on the phantom of `models.tets`
-/// tetrahedra; its network method once per learned model of `networks` (on its scenario's organ),
-/// named by the model's kind ("U-Net", "ROM"); its hybrid methods with the first of them. Network
-/// and hybrid methods are left out without a learned model.
+/// The methods of `scenario`, in its order, each with the case's loop settings and its own
+/// iteration budgets: its FEM methods ([`fem_scenario`]); its network method once per learned
+/// model of `networks` (on its scenario's organ), named by the model's kind ("U-Net", "ROM"), a
+/// reduced-order model twice: its match-and-membrane loop ("ROM, membrane loop") and its shape fit;
+/// its hybrid methods with the first of them. Network and hybrid methods are left out without a
+/// learned model.
 pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec<Method>> {
-    let mesh = mesh::phantom::liver_phantom(scenario.models.tets)?;
     let mut out = Vec::new();
     for spec in &scenario.models.method {
-        let (name, iterations, warm_iterations) = (spec.name.clone(), spec.iterations, spec.warm_iterations);
-        let method =
-            |name, organ, deformer| Method { name, organ, deformer, iterations, warm_iterations, max_points: None };
+        let name = spec.name.clone();
+        let options = with_budgets(&scenario.registration, spec.iterations, spec.warm_iterations, None);
+        let fem = |material| ScenarioSource::Given {
+            scenario: Box::new(fem_scenario(scenario, &name, material)),
+            dir: PathBuf::new(),
+        };
         match (spec.kind, spec.material, networks.first()) {
             (MethodKind::Fem, Some(material), _) => {
-                let (organ, deformer) = fem_model_fixed_on(mesh.clone(), material, &scenario.truth.fixed)?;
-                out.push(method(name, organ, Box::new(deformer)));
+                out.push(Method { method: MethodSpec::Fem(fem(material)), name, options });
             }
             (MethodKind::Fem, None, _) => {
                 bail!("method {name:?}: a FEM method needs a material")
             }
             (MethodKind::Network, _, Some(_)) => {
-                let budgets = with_budgets(&scenario.registration, iterations, warm_iterations, None);
                 for network in networks {
-                    let learned = learned_registration(network, &budgets)?;
                     let name = network.model.method().display_name().to_string();
+                    let (model, trained_on) = network.sources();
+                    let learned =
+                        |membrane| MethodSpec::Learned { model: model.clone(), scenario: trained_on.clone(), membrane };
                     if matches!(network.model, Model::Reduced(_)) {
-                        // The match-and-membrane loop of the same model, beside its shape fit.
-                        let (organ, deformer) = network_model(network)?;
                         let name = format!("{name}, membrane loop");
-                        out.push(Method::with_options(name, organ, Box::new(deformer), &budgets));
+                        out.push(Method { name, method: learned(true), options: options.clone() });
                     }
-                    let LearnedRegistration { organ, deformer, options } = learned;
-                    out.push(Method::with_options(name, organ, deformer, &options));
+                    out.push(Method { name, method: learned(false), options: options.clone() });
                 }
             }
             (MethodKind::Hybrid, Some(material), Some(network)) => {
-                let (organ, deformer) = network_model(network)?;
-                let (fem_organ, fem) = fem_model_fixed_on(mesh.clone(), material, &scenario.truth.fixed)?;
-                if fem_organ.mesh().nodes != organ.mesh().nodes {
-                    bail!(
-                        "method {name:?}: the network's organ ({} nodes) is not the FEM model's mesh (the phantom of \
-                         {} T4, {} nodes): a hybrid needs a network trained on the model's own mesh",
-                        organ.mesh().num_nodes(),
-                        scenario.models.tets,
-                        fem_organ.mesh().num_nodes()
-                    );
-                }
+                let (model, trained_on) = network.sources();
                 let network_iterations = spec.network_iterations.unwrap_or(1);
-                let deformer = HybridDeformer::new(Box::new(deformer), fem, network_iterations)?;
-                out.push(method(name, organ, Box::new(deformer)));
+                let method = MethodSpec::Hybrid { model, scenario: trained_on, fem: fem(material), network_iterations };
+                out.push(Method { name, method, options });
             }
             (MethodKind::Hybrid, None, _) => bail!("method {name:?}: a hybrid method needs a material"),
             (MethodKind::Network | MethodKind::Hybrid, _, None) => {}
@@ -396,39 +398,24 @@ pub fn comparison_models(model: Option<&Path>) -> Result<(Vec<Model>, Vec<PathBu
     Ok((models, missing))
 }
 
-/// A registration method of a comparison.
+/// A registration method of a comparison: its name, what deforms the organ and the loop's
+/// settings; [`Method::spec`] sets it up at a case's targets.
+#[derive(Clone, Debug)]
 pub struct Method {
     /// Name in the table.
     pub name: String,
-    /// The organ it deforms.
-    pub organ: Organ,
-    /// How it deforms.
-    pub deformer: Box<dyn Deformer + Send>,
-    /// Most match-and-deform iterations, in place of the comparison's (`None`: the comparison's).
-    pub iterations: Option<usize>,
-    /// Most iterations of a warm-started frame, in place of the comparison's (`None`: the comparison's).
-    pub warm_iterations: Option<usize>,
-    /// Most cloud points matched per iteration, in place of the comparison's (`None`: the
-    /// comparison's).
-    pub max_points: Option<usize>,
+    /// What deforms the organ.
+    pub method: MethodSpec,
+    /// The loop's settings: the comparison's, with the method's own iteration budgets.
+    pub options: RegistrationOptions,
 }
 
 impl Method {
-    /// The method `name` of `organ` and `deformer`, with the iteration budgets and points of
-    /// `options`.
-    pub fn with_options(
-        name: String,
-        organ: Organ,
-        deformer: Box<dyn Deformer + Send>,
-        options: &RegistrationOptions,
-    ) -> Method {
-        Method {
-            name,
-            organ,
-            deformer,
-            iterations: Some(options.iterations),
-            warm_iterations: Some(options.warm_iterations),
-            max_points: options.max_points,
+    /// The method's registration of `targets` (rest positions, m).
+    pub fn spec(&self, targets: &[Point]) -> RegistrationSpec {
+        RegistrationSpec {
+            options: Some(self.options.clone()),
+            ..RegistrationSpec::new(self.method.clone(), TargetsSpec::Points(targets.to_vec()))
         }
     }
 }
@@ -459,22 +446,60 @@ pub struct Compared {
     pub result: register::Result<Registered>,
 }
 
-/// Registers the case's clouds with each method (the first frame from rest, each next one
-/// warm-started from the previous one), in order.
-pub fn compare(case: &SyntheticCase, methods: Vec<Method>, options: &RegistrationOptions) -> Vec<Compared> {
+/// Registers the case's clouds with each method at the case's targets, in order: each set up anew
+/// ([`RegistrationSpec::build`]), the first frame from rest, each next one warm-started from the
+/// previous one. A method that cannot be set up fails as one that fails to register does.
+pub fn compare(case: &SyntheticCase, methods: &[Method]) -> Vec<Compared> {
     let truths = case.truths();
-    methods
-        .into_iter()
-        .map(|m| {
-            let options = with_budgets(options, m.iterations, m.warm_iterations, m.max_points);
-            let frames = case.frames.iter().map(|f| Ok(f.cloud.clone()));
-            let result = Registration::new(m.organ, m.deformer, m.name.clone(), case.targets.clone(), options)
-                .and_then(|mut registration| {
-                    let outcomes = registration.register_sequence(frames, Some(&truths), |_, _, _| Ok(()))?;
-                    let summary = Summary::new(m.name.clone(), &outcomes)?;
-                    Ok(Registered { summary, outcomes, organ: registration.into_organ() })
-                });
-            Compared { method: m.name, result }
-        })
-        .collect()
+    let register = |m: &Method| -> register::Result<Registered> {
+        let mut registration = m.spec(&case.targets).build().map_err(|e| RegisterError::Invalid(format!("{e:#}")))?;
+        let frames = case.frames.iter().map(|f| Ok(f.cloud.clone()));
+        let outcomes = registration.register_sequence(frames, Some(&truths), |_, _, _| Ok(()))?;
+        let summary = Summary::new(m.name.clone(), &outcomes)?;
+        Ok(Registered { summary, outcomes, organ: registration.into_organ() })
+    };
+    methods.iter().map(|m| Compared { method: m.name.clone(), result: register(m) }).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fem::Law;
+
+    /// The case's FEM of a method is the phantom of `models.tets` T4 (T10 for a quadratic
+    /// material) with the method's material, fixed on the truth's fixed region, solved with the
+    /// default solver; the built-in case's co-rotational one is the built-in `liver_corotational`.
+    #[test]
+    fn a_case_s_fem_is_the_phantom_of_the_method_s_material_fixed_on_the_truth_s_region() {
+        let mut case = CaseScenario::builtin();
+        case.models.tets = 400;
+        case.truth.fixed = "visible".into();
+        let quadratic = Material { order: 2, ..Material::new(Law::NeoHookean, 4500.0, 0.49) };
+        for material in [Material::new(Law::Svk, 5000.0, 0.49), quadratic] {
+            let scenario = fem_scenario(&case, "method", material);
+            assert_eq!(scenario.solver, SolverOptions::default());
+            let problem = scenario.build_problem(Path::new("")).unwrap();
+            let mut expected = Problem::new(mesh::phantom::liver_phantom(400).unwrap(), material);
+            let fixed = expected.mesh.region("visible").unwrap().to_vec();
+            expected.fix(&fixed);
+            assert_eq!(problem.mesh, expected.mesh);
+            assert_eq!(problem.material, expected.material);
+            assert!(!problem.dirichlet.is_empty() && problem.dirichlet == expected.dirichlet);
+            assert_eq!((problem.springs, problem.f_ext), (expected.springs, expected.f_ext));
+            assert!(problem.point_springs.is_empty());
+        }
+        let builtin = CaseScenario::builtin();
+        let corotational = builtin
+            .models
+            .method
+            .iter()
+            .find(|m| m.material.is_some_and(|m| m.law == Law::Corotational))
+            .expect("the built-in case has a co-rotational FEM");
+        let ours = fem_scenario(&builtin, &corotational.name, corotational.material.unwrap());
+        let shipped = StaticScenario::builtin("liver_corotational");
+        assert_eq!(ours.solver, shipped.solver);
+        let (ours, shipped) =
+            (ours.build_problem(Path::new("")).unwrap(), shipped.build_problem(Path::new("")).unwrap());
+        assert_eq!((ours.mesh, ours.material, ours.dirichlet), (shipped.mesh, shipped.material, shipped.dirichlet));
+    }
 }

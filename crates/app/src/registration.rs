@@ -1,35 +1,184 @@
-//! A registration set up from the user's choices, the one way `augsim register`, `augsim serve`
-//! and the Python package build it: [`RegistrationChoice`] (what the user asks for: a patient's
-//! set-up, a FEM or a learned model, targets, unit, settings) gives a [`RegistrationSpec`] (the
-//! FEM of a static scenario, or a learned model (U-Net or reduced-order model) with the dataset
-//! scenario it was trained on; the targets from a file, from points or from the mesh's regions,
-//! in their unit; the loop's settings), which builds the registration.
+//! A registration set up from the user's choices, the one way `augsim register`, `augsim serve`,
+//! the Python package and the comparisons ([`crate::case::compare`]) build it:
+//! [`RegistrationChoice`] (what the user asks for: a patient's set-up, a FEM or a learned model,
+//! targets, unit, settings) gives a [`RegistrationSpec`] (the FEM of a static scenario, a learned
+//! model (U-Net or reduced-order model) with the dataset scenario it was trained on, or a hybrid
+//! of the two, each from files or in memory; the targets from a file, from points or from the
+//! mesh's regions, in their unit; the loop's settings), which builds the registration.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use learn::Model;
 use mesh::io::{Frame, FrameChange};
 use mesh::length::LengthUnit;
 use mesh::Point;
-use register::{FemDeformer, Registration, RegistrationOptions};
-use scenario::{CaseScenario, DatasetScenario, StaticScenario};
+use register::{Deformer, HybridDeformer, Organ, Registration, RegistrationOptions};
+use scenario::{CaseScenario, DatasetScenario, MeshSource, StaticScenario};
 
-use crate::case::{learned_registration, network_options, organ_of, Network};
+use crate::case::{fem_model, learned_registration, network_model, network_options, LearnedRegistration, Network};
 
 /// What deforms the organ.
 #[derive(Clone, Debug)]
 pub enum MethodSpec {
-    /// The FEM of a static scenario (a file or a built-in name): its mesh, material, fixed nodes
-    /// and solver, pulled by springs of the default stiffness.
-    Fem(PathBuf),
-    /// A learned model (its directory or model.json) and the dataset scenario it was trained on
-    /// (a file or a built-in name), whose mesh is the organ.
+    /// The FEM of a static scenario: its mesh, material, fixed nodes and solver, pulled by
+    /// springs of the default stiffness.
+    Fem(ScenarioSource<StaticScenario>),
+    /// A learned model and the dataset scenario it was trained on, whose mesh is the organ.
     Learned {
         /// The model.
-        model: PathBuf,
+        model: ModelSource,
         /// Its dataset scenario.
-        scenario: PathBuf,
+        scenario: ScenarioSource<DatasetScenario>,
+        /// The match-and-membrane loop alone (what a U-Net does), in place of a reduced-order
+        /// model's shape fit ([`learned_registration`]).
+        membrane: bool,
     },
+    /// A learned model's match-and-membrane loop for the first `network_iterations` of a frame,
+    /// then the FEM from its estimate ([`HybridDeformer`]): the model's organ must be the FEM's
+    /// mesh.
+    Hybrid {
+        /// The model.
+        model: ModelSource,
+        /// Its dataset scenario.
+        scenario: ScenarioSource<DatasetScenario>,
+        /// The FEM's static scenario.
+        fem: ScenarioSource<StaticScenario>,
+        /// The network's iterations of a frame before the FEM's (at least 1).
+        network_iterations: usize,
+    },
+}
+
+impl MethodSpec {
+    /// The FEM of the static scenario `path` (a file or a built-in name).
+    pub fn fem(path: impl Into<PathBuf>) -> MethodSpec {
+        MethodSpec::Fem(ScenarioSource::File(path.into()))
+    }
+
+    /// The learned model `model` (its directory or model.json) with the dataset scenario
+    /// `scenario` (a file or a built-in name), registering as the model does.
+    pub fn learned(model: impl Into<PathBuf>, scenario: impl Into<PathBuf>) -> MethodSpec {
+        MethodSpec::Learned {
+            model: ModelSource::File(model.into()),
+            scenario: ScenarioSource::File(scenario.into()),
+            membrane: false,
+        }
+    }
+}
+
+/// A method's scenario: a file (or a built-in name), or a scenario already in memory.
+#[derive(Clone, Debug)]
+pub enum ScenarioSource<T> {
+    /// A scenario file, or a built-in scenario's name.
+    File(PathBuf),
+    /// A scenario in memory.
+    Given {
+        /// The scenario.
+        scenario: Box<T>,
+        /// The directory its relative paths start from.
+        dir: PathBuf,
+    },
+}
+
+impl<T: Clone> ScenarioSource<T> {
+    /// The scenario and its directory; a file is read with `load`.
+    fn read(&self, load: impl Fn(&Path) -> scenario::Result<(T, PathBuf)>) -> Result<(T, PathBuf)> {
+        Ok(match self {
+            ScenarioSource::File(path) => load(path)?,
+            ScenarioSource::Given { scenario, dir } => (T::clone(scenario), dir.clone()),
+        })
+    }
+}
+
+/// A learned model: its file, or a model in memory (e.g. just trained).
+#[derive(Clone, Debug)]
+pub enum ModelSource {
+    /// A U-Net's or a reduced-order model's directory, or its model.json.
+    File(PathBuf),
+    /// A model in memory.
+    Given(Model),
+}
+
+impl ModelSource {
+    /// The model, and its kind and file in words.
+    fn load(&self) -> Result<(Model, String)> {
+        Ok(match self {
+            ModelSource::File(path) => {
+                let model = Model::load(path)?;
+                let words = format!("{} {}", model.method().display_name(), path.display());
+                (model, words)
+            }
+            ModelSource::Given(model) => (model.clone(), model.method().display_name().to_string()),
+        })
+    }
+}
+
+/// A method loaded: its organ, how it deforms, the method in words, the loop's settings.
+struct Loaded {
+    organ: Organ,
+    deformer: Box<dyn Deformer + Send>,
+    method: String,
+    options: RegistrationOptions,
+}
+
+impl MethodSpec {
+    /// The method loaded, with the loop's settings `options` (the method's defaults when `None`).
+    fn load(&self, options: Option<&RegistrationOptions>) -> Result<Loaded> {
+        let defaults = || options.cloned().unwrap_or_default();
+        Ok(match self {
+            MethodSpec::Fem(source) => {
+                let (scenario, dir) = source.read(StaticScenario::load)?;
+                let (organ, deformer) = fem_model(&scenario, &dir)?;
+                let m = scenario.material;
+                let method = format!("FEM, {:?} ({:?} elements)", m.law, m.resolved_formulation());
+                Loaded { organ, deformer: Box::new(deformer), method, options: defaults() }
+            }
+            MethodSpec::Learned { model, scenario, membrane } => {
+                let (model, words) = model.load()?;
+                let (scenario, dir) = scenario.read(DatasetScenario::load)?;
+                let network = Network { model: &model, scenario: &scenario, dir: &dir };
+                let options = match options {
+                    Some(options) => options.clone(),
+                    None => network_options(&CaseScenario::builtin())?,
+                };
+                if *membrane {
+                    let (organ, deformer) = network_model(&network)?;
+                    let method = format!("{words}, membrane loop");
+                    Loaded { organ, deformer: Box::new(deformer), method, options }
+                } else {
+                    let LearnedRegistration { organ, deformer, options } = learned_registration(&network, &options)?;
+                    Loaded { organ, deformer, method: words, options }
+                }
+            }
+            MethodSpec::Hybrid { model, scenario, fem, network_iterations } => {
+                let (model, words) = model.load()?;
+                let (scenario, dir) = scenario.read(DatasetScenario::load)?;
+                let (organ, network) = network_model(&Network { model: &model, scenario: &scenario, dir: &dir })?;
+                let (fem, fem_dir) = fem.read(StaticScenario::load)?;
+                let (fem_organ, deformer) = fem_model(&fem, &fem_dir)?;
+                if fem_organ.mesh().nodes != organ.mesh().nodes {
+                    anyhow::bail!(
+                        "the network's organ ({} nodes) is not the FEM model's mesh ({}, {} nodes): a hybrid needs a \
+                         network trained on the model's own mesh",
+                        organ.mesh().num_nodes(),
+                        mesh_words(&fem),
+                        fem_organ.mesh().num_nodes()
+                    );
+                }
+                let deformer = HybridDeformer::new(Box::new(network), deformer, *network_iterations)?;
+                let method = format!("{words} for {network_iterations} iterations, then FEM, {:?}", fem.material.law);
+                Loaded { organ, deformer: Box::new(deformer), method, options: defaults() }
+            }
+        })
+    }
+}
+
+/// The mesh of a FEM's scenario in words: the phantom's size, or the scenario's name.
+fn mesh_words(scenario: &StaticScenario) -> String {
+    match scenario.mesh {
+        MeshSource::Phantom { tets } => format!("the phantom of {tets} T4"),
+        _ => format!("the mesh of {}", scenario.name),
+    }
 }
 
 /// Where the targets come from.
@@ -148,10 +297,8 @@ impl RegistrationChoice {
     /// The method given without a patient's set-up.
     fn method(&self) -> Result<MethodSpec, String> {
         match (&self.fem, &self.model, &self.scenario) {
-            (Some(fem), None, _) => Ok(MethodSpec::Fem(fem.clone())),
-            (None, Some(model), Some(scenario)) => {
-                Ok(MethodSpec::Learned { model: model.clone(), scenario: scenario.clone() })
-            }
+            (Some(fem), None, _) => Ok(MethodSpec::fem(fem)),
+            (None, Some(model), Some(scenario)) => Ok(MethodSpec::learned(model, scenario)),
             (Some(_), Some(_), _) => Err("give fem or model, not both".into()),
             _ => Err("give patient DIR, fem SCENARIO, or model MODEL with scenario SCENARIO".into()),
         }
@@ -178,6 +325,7 @@ impl RegistrationChoice {
             given_frame: self.frame,
             iterations: self.iterations,
             rigid: self.rigid,
+            options: None,
         })
     }
 }
@@ -198,8 +346,12 @@ pub struct RegistrationSpec {
     pub given_frame: Option<Frame>,
     /// Most match-and-deform iterations from rest, in place of the method's default.
     pub iterations: Option<usize>,
-    /// A rigid pre-alignment of the first cloud (trimmed ICP).
+    /// A rigid pre-alignment of the first cloud (trimmed ICP), where the loop's settings have none.
     pub rigid: bool,
+    /// The loop's settings, in place of the method's defaults (a comparison's: its case's, with
+    /// the method's iteration budgets); a reduced-order model's shape fit takes its own budgets
+    /// ([`register::shape::loop_options`]).
+    pub options: Option<RegistrationOptions>,
 }
 
 impl RegistrationSpec {
@@ -215,34 +367,16 @@ impl RegistrationSpec {
             given_frame: None,
             iterations: None,
             rigid: false,
+            options: None,
         }
     }
 
     /// The registration: the method loaded, the targets read and located in the organ (an error
     /// for one outside it, naming the likely unit mistake), the settings checked. The default
-    /// settings are the library's for a FEM; for a learned model, the real-time iteration budgets
-    /// of the built-in registration case's network method.
+    /// settings are the library's for a FEM and a hybrid; for a learned model, the real-time
+    /// iteration budgets of the built-in registration case's network method.
     pub fn build(&self) -> Result<Registration> {
-        let (organ, deformer, method, options): (_, Box<dyn register::Deformer + Send>, _, _) = match &self.method {
-            MethodSpec::Fem(path) => {
-                let (scenario, dir) = StaticScenario::load(path)?;
-                let problem = scenario.build_problem(&dir)?;
-                let organ = organ_of(&scenario.mesh, problem.mesh.clone())?;
-                let method =
-                    format!("FEM, {:?} ({:?} elements)", problem.material.law, problem.material.resolved_formulation());
-                let stiffness = FemDeformer::default_stiffness(&problem);
-                let deformer = FemDeformer::new(problem, stiffness, scenario.solver.clone())?;
-                (organ, Box::new(deformer), method, RegistrationOptions::default())
-            }
-            MethodSpec::Learned { model: model_path, scenario } => {
-                let (scenario, dir) = DatasetScenario::load(scenario)?;
-                let model = learn::Model::load(model_path)?;
-                let network = Network { model: &model, scenario: &scenario, dir: &dir };
-                let learned = learned_registration(&network, &network_options(&CaseScenario::builtin())?)?;
-                let method = format!("{} {}", model.method().display_name(), model_path.display());
-                (learned.organ, learned.deformer, method, learned.options)
-            }
-        };
+        let Loaded { organ, deformer, method, options } = self.method.load(self.options.as_ref())?;
         let targets = match &self.targets {
             TargetsSpec::Regions => region_targets(organ.mesh()),
             TargetsSpec::File(path) => crate::points::read_targets(path, self.units)?,
@@ -253,7 +387,7 @@ impl RegistrationSpec {
         }
         let options = RegistrationOptions {
             iterations: self.iterations.unwrap_or(options.iterations),
-            rigid: self.rigid.then(register::RigidOptions::default),
+            rigid: options.rigid.or_else(|| self.rigid.then(register::RigidOptions::default)),
             ..options
         };
         options.validate()?;
@@ -363,8 +497,8 @@ impl RegistrationSpec {
         })?;
         let p: Patient = toml::from_str(&text).with_context(|| format!("reading {}", path.display()))?;
         let method = match method.unwrap_or(p.method) {
-            PatientMethod::Fem => MethodSpec::Fem(dir.join(p.fem)),
-            PatientMethod::Learned => MethodSpec::Learned { model: dir.join(p.model), scenario: dir.join(p.scenario) },
+            PatientMethod::Fem => MethodSpec::fem(dir.join(p.fem)),
+            PatientMethod::Learned => MethodSpec::learned(dir.join(p.model), dir.join(p.scenario)),
         };
         Ok(RegistrationSpec {
             method,
@@ -374,6 +508,7 @@ impl RegistrationSpec {
             given_frame: None,
             iterations,
             rigid,
+            options: None,
         })
     }
 }
@@ -404,7 +539,7 @@ mod tests {
         // A stream is RAS unless given otherwise; converted only where the organ names another.
         let spec = |targets, given_frame| RegistrationSpec {
             given_frame,
-            ..RegistrationSpec::new(MethodSpec::Fem("beam".into()), targets)
+            ..RegistrationSpec::new(MethodSpec::fem("beam"), targets)
         };
         let flips = |s: RegistrationSpec| s.stream_frame().unwrap().0.flips();
         assert!(!flips(spec(TargetsSpec::File(ras.clone()), None)));
@@ -425,7 +560,7 @@ mod tests {
             ..fem()
         };
         let spec = choice.spec().unwrap();
-        assert!(matches!(&spec.method, MethodSpec::Fem(p) if p == Path::new("beam")));
+        assert!(matches!(&spec.method, MethodSpec::Fem(ScenarioSource::File(p)) if p == Path::new("beam")));
         assert!(matches!(&spec.targets, TargetsSpec::Points(p) if p == &[[1.0, 2.0, 3.0]]));
         assert_eq!((spec.units, spec.iterations, spec.rigid), (LengthUnit::Millimetre, Some(7), true));
         assert_eq!((spec.given_units, spec.given_frame), (LengthUnit::Millimetre, Some(Frame::Ras)));
@@ -433,7 +568,8 @@ mod tests {
         let learned =
             RegistrationChoice { model: Some("m".into()), scenario: Some("s".into()), ..RegistrationChoice::default() };
         let spec = learned.spec().unwrap();
-        assert!(matches!(&spec.method, MethodSpec::Learned { model, scenario }
+        assert!(matches!(&spec.method, MethodSpec::Learned {
+            model: ModelSource::File(model), scenario: ScenarioSource::File(scenario), membrane: false }
             if model == Path::new("m") && scenario == Path::new("s")));
         assert!(matches!(spec.targets, TargetsSpec::Regions));
         assert_eq!((spec.units, spec.given_units), (LengthUnit::DEFAULT, LengthUnit::DEFAULT));

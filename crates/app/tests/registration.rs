@@ -1,7 +1,10 @@
 //! Registration of the phantom to clouds of a deformation computed on another
 //! mesh with another law (no inverse crime): the hidden markers must be recovered.
 
-use augsim_app::case::{ar_network_model, compare, corotational_model, network_from_truth, phantom_push, Method};
+use augsim_app::case::{
+    ar_network_model, compare, corotational_model, network_from_truth, phantom_push, Method, AR_SCENARIO,
+};
+use augsim_app::registration::MethodSpec;
 use augsim_app::simulate::CameraModel;
 use fem::{Law, Material, Problem, SolverOptions};
 use register::organ::displaced;
@@ -53,18 +56,8 @@ fn network_tre(camera: &CameraModel) -> (f64, f64, f64) {
     let model = learn::Model::load(std::path::Path::new(MODEL)).unwrap();
     let (organ, deformer) = ar_network_model(&model).unwrap();
     let from_truth = network_from_truth(&case, &organ, &deformer).unwrap();
-    let rows = compare(
-        &case,
-        vec![Method {
-            name: "U-Net".into(),
-            organ,
-            deformer: Box::new(deformer),
-            iterations: None,
-            warm_iterations: None,
-            max_points: None,
-        }],
-        &RegistrationOptions::default(),
-    );
+    let method = MethodSpec::learned(MODEL, AR_SCENARIO);
+    let rows = compare(&case, &[Method { name: "U-Net".into(), method, options: RegistrationOptions::default() }]);
     let errors = rows[0].result.as_ref().unwrap().outcomes[0].errors.clone().unwrap();
     (mean(&errors), mean(&target_errors(&case.targets, &case.peak().truth)), mean(&from_truth))
 }
@@ -114,55 +107,50 @@ fn bad_clouds_and_targets_are_clear_errors() {
     assert!(e.contains("start displacement"), "{e}");
 }
 
-/// A deformer that always fails, as an SVK model pulled past its limit point would.
-struct Failing;
-
-impl register::Deformer for Failing {
-    fn deform(&mut self, _: &register::Observations, _: &[f64], _: usize) -> register::Result<Vec<f64>> {
-        Err(register::RegisterError::Invalid("this model always fails".into()))
-    }
-}
-
 #[test]
 fn a_method_s_own_iteration_cap_replaces_the_comparison_s() {
     let path = std::path::PathBuf::from("register_case_test");
     let scenario = scenario::CaseScenario::load(&path).unwrap();
     let case = augsim_app::case::synthetic_case(&scenario).unwrap();
     let iterations = |cap: Option<usize>| {
+        let mut scenario = scenario.clone();
+        scenario.registration = RegistrationOptions { iterations: 6, tolerance: 0.0, ..scenario.registration };
+        scenario.models.method[0].iterations = cap;
         let mut methods = augsim_app::case::case_methods(&scenario, &[]).unwrap();
         methods.truncate(1);
-        methods[0].iterations = cap;
-        let options = RegistrationOptions { iterations: 6, tolerance: 0.0, ..scenario.registration.clone() };
-        compare(&case, methods, &options)[0].result.as_ref().expect("the FEM method registers").summary.iterations
+        compare(&case, &methods)[0].result.as_ref().expect("the FEM method registers").summary.iterations
     };
     assert_eq!(iterations(None), 6.0, "the comparison's");
     assert_eq!(iterations(Some(2)), 2.0, "the method's");
 }
 
+/// A method that fails to register (a FEM whose solver may take no Newton iteration, as an SVK
+/// model pulled past its limit point fails) and one that cannot be set up (a missing scenario)
+/// are reported; the others still register.
 #[test]
 fn a_failing_method_is_reported_and_the_others_still_register() {
+    use augsim_app::registration::ScenarioSource;
     let path = std::path::PathBuf::from("register_case_test");
     let scenario = scenario::CaseScenario::load(&path).unwrap();
     let case = augsim_app::case::synthetic_case(&scenario).unwrap();
     let mut methods = augsim_app::case::case_methods(&scenario, &[]).unwrap();
     methods.truncate(1);
-    let organ = methods[0].organ.clone();
-    methods.insert(
-        0,
-        Method {
-            name: "failing".into(),
-            organ,
-            deformer: Box::new(Failing),
-            iterations: None,
-            warm_iterations: None,
-            max_points: None,
-        },
-    );
-    let rows = compare(&case, methods, &scenario.registration);
-    assert_eq!(rows.len(), 2);
-    let e = rows[0].result.as_ref().err().expect("the failing method fails").to_string();
-    assert!(rows[0].method == "failing" && e.contains("always fails"), "{e}");
-    let s = &rows[1].result.as_ref().expect("the FEM method registers").summary;
+    let MethodSpec::Fem(ScenarioSource::Given { scenario: fem, dir }) = &methods[0].method else {
+        panic!("the case's FEM is a static scenario in memory")
+    };
+    let mut stalled = fem.clone();
+    stalled.solver.max_iterations = 0;
+    let stalled = MethodSpec::Fem(ScenarioSource::Given { scenario: stalled, dir: dir.clone() });
+    let failing = [("stalled", stalled), ("missing", MethodSpec::fem("no_such_scenario.toml"))]
+        .map(|(name, method)| Method { name: name.into(), method, ..methods[0].clone() });
+    methods.splice(0..0, failing);
+    let rows = compare(&case, &methods);
+    assert_eq!(rows.len(), 3);
+    let error = |k: usize| rows[k].result.as_ref().err().expect("the method fails").to_string();
+    assert_eq!((rows[0].method.as_str(), rows[1].method.as_str()), ("stalled", "missing"));
+    assert!(error(0).contains("did not converge"), "{}", error(0));
+    assert!(error(1).contains("no_such_scenario.toml"), "{}", error(1));
+    let s = &rows[2].result.as_ref().expect("the FEM method registers").summary;
     assert!(s.tre_mean_mm.unwrap() < s.no_deformation_tre_mean_mm.unwrap());
 }
 
@@ -194,7 +182,7 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     scenario.validate().unwrap();
     let case = augsim_app::case::synthetic_case(&scenario).unwrap();
     let methods = augsim_app::case::case_methods(&scenario, std::slice::from_ref(&network)).unwrap();
-    let rows = compare(&case, methods, &scenario.registration);
+    let rows = compare(&case, &methods);
     let u = |k: usize| rows[k].result.as_ref().unwrap().outcomes[0].registration.u.clone();
     assert_eq!(u(0), u(1), "all network iterations: the network's registration");
     assert_ne!(u(1), u(2), "the FEM takes over after the network's iterations");
@@ -203,6 +191,12 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     let tre = |k: usize| rows[k].result.as_ref().unwrap().summary.tre_mean_mm.unwrap();
     let s = &rows[2].result.as_ref().unwrap().summary;
     assert!(tre(2) < 0.7 * s.no_deformation_tre_mean_mm.unwrap() && tre(2) < tre(1), "{s:?}, network {}", tre(1));
+    // A network on another organ than the FEM's mesh (the shipped one's T10 phantom) is refused.
+    let t10 = augsim_app::case::ar_scenario();
+    let other = augsim_app::case::Network { model: &model, scenario: &t10, dir: std::path::Path::new("") };
+    let mismatched = augsim_app::case::case_methods(&scenario, &[other]).unwrap();
+    let e = compare(&case, &mismatched[1..2]).remove(0).result.err().expect("a hybrid on another mesh").to_string();
+    assert!(e.contains("is not the FEM model's mesh (the phantom of 3000 T4"), "{e}");
     // Hybrid scenarios are checked: network iterations are needed, and only hybrids take them.
     let mut bad = scenario.clone();
     bad.models.method[1].network_iterations = None;

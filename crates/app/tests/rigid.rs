@@ -111,7 +111,7 @@ fn pipeline(scenario: &CaseScenario) -> (f64, f64, Option<(f64, f64)>) {
     let case = synthetic_case(scenario).unwrap();
     let mut methods = case_methods(scenario, &[]).unwrap();
     methods.truncate(1);
-    let rows = compare(&case, methods, &scenario.registration);
+    let rows = compare(&case, &methods);
     let registered = rows[0].result.as_ref().unwrap();
     let s = &registered.summary;
     let rigid = registered.outcomes[0].rigid.as_ref().map(|r| {

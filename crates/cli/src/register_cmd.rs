@@ -182,8 +182,7 @@ fn demo(args: &RegisterArgs, out: &Path) -> Result<()> {
     };
     let networks: Vec<Network> =
         models.iter().map(|model| Network { model, scenario: &network_scenario, dir: &network_dir }).collect();
-    let methods = case_methods(&scenario, &networks)?;
-    let rows = compare(&case, methods, &scenario.registration);
+    let rows = compare(&case, &case_methods(&scenario, &networks)?);
     if rows.is_empty() {
         bail!("no method to compare");
     }

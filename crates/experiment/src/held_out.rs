@@ -153,7 +153,7 @@ fn register_stream(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec<
     let mut streamed = scenario.clone();
     streamed.truth.frames = STREAM_FRAMES;
     let stream = synthetic_case(&streamed)?;
-    let compared = compare(&stream, case_methods(&streamed, networks)?, &streamed.registration);
+    let compared = compare(&stream, &case_methods(&streamed, networks)?);
     Ok(compared
         .iter()
         .map(|c| match &c.result {
@@ -317,10 +317,11 @@ impl Cases {
         let moved = mean(&register::target_errors(&synthetic.targets, &synthetic.peak().truth)) * 1e3;
         self.motion.push(moved);
         let mut here = vec![Outcome::default(); methods.len()];
+        let specs = case_methods(&scenario, networks)?;
         for run in 0..runs {
             progress.line(&format!("registering the case {} ({}/{runs})", case.label, run + 1));
-            // Fresh methods per run: each registers from rest, with nothing kept from the last.
-            let compared = compare(&synthetic, case_methods(&scenario, networks)?, &scenario.registration);
+            // Each method set up anew: it registers from rest, with nothing kept from the last run.
+            let compared = compare(&synthetic, &specs);
             for (outcome, c) in here.iter_mut().zip(&compared) {
                 match &c.result {
                     Ok(r) => {

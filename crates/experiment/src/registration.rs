@@ -285,17 +285,17 @@ struct CaseFigures {
 /// Registers the design case, the held-out cases and the cases beyond pushes (the shipped case
 /// `builtin` under each load) with its methods and the `networks`.
 fn register_cases(builtin: &CaseScenario, networks: &[Network<'_>; 2], progress: Progress) -> Result<CaseFigures> {
-    let options = builtin.registration.clone();
     let mut figures = CaseFigures { per_method: Vec::new(), no_motion: Vec::new(), marker_count: 0, rows: Vec::new() };
     let cases = std::iter::once((Role::Design, &DESIGN))
         .chain(HELD_OUT.iter().map(|c| (Role::HeldOut, c)))
         .chain(BEYOND_PUSHES.iter().map(|c| (Role::BeyondPushes, c)));
+    let methods = case_methods(builtin, networks)?;
     for (role, variant) in cases {
         progress.line(&format!("registering the case {}", variant.label));
         let case = synthetic_case(&variant.apply(builtin))?;
         figures.marker_count = case.targets.len();
-        // Fresh methods per case: each registers from rest, with no state from the last case.
-        let rows = compare(&case, case_methods(builtin, networks)?, &options);
+        // Each method set up anew: it registers from rest, with no state from the last case.
+        let rows = compare(&case, &methods);
         if figures.per_method.is_empty() {
             figures.per_method =
                 rows.iter().map(|r| MethodTre { method: r.method.clone(), ..MethodTre::default() }).collect();

@@ -138,7 +138,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     let budgets = network_options(&scenario)?;
     let mut streams = Vec::new();
     progress.line("streaming to the co-rotational FEM");
-    let fem = MethodSpec::Fem(FEM_SCENARIO.into());
+    let fem = MethodSpec::fem(FEM_SCENARIO);
     streams.push(stream_case("FEM co-rotational (3k T4), warm-started", &case, fem)?);
     // The shipped learned models that are there: the U-Net, the reduced-order model.
     let mut missing = Vec::new();
@@ -148,7 +148,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
             continue;
         }
         progress.line(&format!("streaming to the shipped {method}"));
-        let learned = MethodSpec::Learned { model: path.into(), scenario: AR_SCENARIO.into() };
+        let learned = MethodSpec::learned(path, AR_SCENARIO);
         streams.push(stream_case(method, &case, learned)?);
     }
     let rest: Vec<f64> =

@@ -137,6 +137,32 @@ pub struct Output {
 }
 
 impl StaticScenario {
+    /// The scenario `name` of the mesh of `source` and `material` alone: no fixed nodes, loads or
+    /// springs, the default solver and output.
+    pub fn new(name: impl Into<String>, source: MeshSource, material: Material) -> StaticScenario {
+        StaticScenario {
+            name: name.into(),
+            description: String::new(),
+            mesh: source,
+            material,
+            fixed: Vec::new(),
+            prescribed: Vec::new(),
+            springs: Vec::new(),
+            force: Vec::new(),
+            traction: Vec::new(),
+            attachment: Vec::new(),
+            patch_force: Vec::new(),
+            gravity: None,
+            solver: SolverOptions::default(),
+            output: Output::default(),
+        }
+    }
+
+    /// The built-in static scenario `name` (e.g. `liver_corotational`); panics when there is none.
+    pub fn builtin(name: &str) -> StaticScenario {
+        crate::builtin_with(name, Self::from_text)
+    }
+
     /// Reads and parses a scenario file (or a built-in scenario); returns it with the directory
     /// that its relative paths start from.
     pub fn load(path: &Path) -> Result<(Self, PathBuf)> {
