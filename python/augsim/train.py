@@ -9,8 +9,8 @@ that ``augsim eval``, ``augsim predict`` and ``augsim register`` load unchanged.
     torchrun --nproc_per_node=4 -m augsim.train ...        # data-parallel on 4 GPUs (DDP)
 
 It follows ``augsim train``: the same architecture (``docs/method.md``, section 5.2; the module of
-``augsim.torch``), the same split rule (by generation index: the last samples test, those before
-them validate, the rest train; recorded in model.json with the dataset's identity, so that
+``augsim.torch``), the same split rule (by generation index: the last uniform draws test, those
+before them validate, the rest and every σ-chosen draw train; recorded in model.json with the dataset's identity, so that
 ``augsim eval`` evaluates on the test samples only), the same normalisation (one scale per field:
 the RMS vector norm of the training inputs over their non-zero nodes and of the training targets
 over the organ), the same loss (masked MSE in normalised units), Adam (β = 0.9, 0.999, ε = 1e-5)
@@ -35,6 +35,8 @@ import torch
 
 from .torch import MODEL_FORMAT, MODEL_VERSION, UNet
 
+# Generation index of augsim's first candidate draw: σ-chosen draws (`augsim generate --chosen-by`) lie from here on.
+CANDIDATE_BASE = 1 << 40
 LAYOUT = ("[channel, x, y, z], C order, z fastest: index = ((c*nx + i)*ny + j)*nz + k; shards prepend the "
           "sample axis; masks are [x, y, z]")
 
@@ -140,13 +142,19 @@ def index_ranges(indices):
     return ranges
 
 
-def split_positions(n, validation, test):
-    """Positions (in index order) of the training, validation and test samples: the last `test`,
-    the `validation` before them, the rest."""
+def split_positions(indices, validation, test):
+    """Positions, in the order of the sorted generation indices `indices`, of the training, validation and
+    test samples: the last `test` uniform draws, the `validation` before them, the rest (σ-chosen draws,
+    from CANDIDATE_BASE on, always train)."""
+    n, uniform = len(indices), int(np.count_nonzero(np.asarray(indices) < CANDIDATE_BASE))
     if validation + test >= n:
         raise ValueError(f"{validation} validation and {test} test samples leave no training sample out of {n}")
-    cut = n - validation - test
-    return np.arange(cut), np.arange(cut, cut + validation), np.arange(cut + validation, n)
+    if validation + test > uniform:
+        raise ValueError(f"{validation} validation and {test} test samples asked, but only {uniform} of the {n} "
+                         "samples are uniform draws (σ-chosen draws are never held out)")
+    cut = uniform - validation - test
+    train = np.concatenate([np.arange(cut), np.arange(uniform, n)])
+    return train, np.arange(cut, cut + validation), np.arange(cut + validation, uniform)
 
 
 def normalization(inputs, targets, masks):
@@ -303,9 +311,9 @@ def main(argv=None):
     say = print if rank == 0 else (lambda *a, **k: None)
 
     manifest, indices, inputs, targets, masks = read_dataset(args.dataset)
-    n = len(indices)
-    count = lambda fraction, given: given if given is not None else int(round(n * fraction))  # noqa: E731
-    train, val, test = split_positions(n, count(args.validation_fraction, args.validation_samples),
+    uniform = int(np.count_nonzero(indices < CANDIDATE_BASE))
+    count = lambda fraction, given: given if given is not None else int(round(uniform * fraction))  # noqa: E731
+    train, val, test = split_positions(indices, count(args.validation_fraction, args.validation_samples),
                                        count(args.test_fraction, args.test_samples))
     record = {"source": source_id(manifest), "train": index_ranges(indices[train]),
               "validation": index_ranges(indices[val]), "test": index_ranges(indices[test])}

@@ -17,6 +17,8 @@
 //! - [`assimilation`]: ROUKF identification from an assimilation scenario (synthetic
 //!   observations or track files, traces, plots, the estimated deformation), also one step at a
 //!   time for a stream.
+//! - [`generation`]: a dataset generated as `augsim generate` asks (uniform draws, then draws
+//!   chosen where a reduced-order model is least sure).
 //! - [`solve`]: a static scenario solved, with the fields written for ParaView; [`evaluation`]:
 //!   a learned model's errors on the samples held out from it, and the files `eval` writes;
 //!   [`training`]: a reduced-order model fitted on a dataset's split.
@@ -27,6 +29,7 @@ pub mod assimilation;
 pub mod case;
 pub mod curve;
 pub mod evaluation;
+pub mod generation;
 pub mod meshing;
 pub mod output;
 pub mod picture;

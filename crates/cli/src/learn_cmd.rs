@@ -2,66 +2,28 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use app::evaluation::{evaluate_held_out, prediction_on_mesh, write_evaluation};
+use app::generation::GenerateArgs;
 use app::training::{fit_rom, rom_lines};
 
 use learn::rom::RomConfig;
 use learn::LearnedModel;
 use learn::{
-    Compute, Corruption, Dataset, DatasetPart, Initialization, Method, Model, PredictInput, Sparsity, SplitPolicy,
-    TrainConfig, TrainOptions, UNetConfig,
+    Compute, Corruption, Dataset, Initialization, Method, Model, PredictInput, Sparsity, SplitPolicy, TrainConfig,
+    TrainOptions, UNetConfig,
 };
 use mesh::length::mm;
-
-use scenario::DatasetScenario;
 
 use crate::bar::Bar;
 
 /// `augsim generate`.
-pub fn generate(path: &Path, out: Option<&Path>, part: Option<&str>, samples: Option<usize>) -> Result<()> {
-    let (mut scenario, dir) = DatasetScenario::load(path)?;
-    if let Some(n) = samples {
-        scenario.dataset.samples = n;
-    }
-    let part = part.map(parse_part).transpose()?;
-    println!("scenario   {}: {}", scenario.name, scenario.description);
-    let generator = scenario.generator(&dir)?;
-    let mesh = generator.mesh();
-    println!("mesh       {} nodes, {} {} cells", mesh.num_nodes(), mesh.cells.len(), mesh.cells.kind_name());
-    let grid = generator.grid();
-    println!(
-        "grid       {} × {} × {} ({} nodes inside)",
-        grid.nx,
-        grid.ny,
-        grid.nz,
-        generator.mask().iter().filter(|&&m| m == 1).count()
-    );
-    let out = out.map(Path::to_path_buf).unwrap_or_else(|| match &part {
-        None => PathBuf::from(format!("out/{}", scenario.name)),
-        Some(p) => PathBuf::from(format!("out/{}.part{}of{}", scenario.name, p.index, p.count)),
-    });
+pub fn generate(args: &GenerateArgs) -> Result<()> {
     let bar = Bar::new("samples", "");
-    let start = std::time::Instant::now();
-    let manifest = generator.run(&out, &scenario.name, part, &bar)?;
+    let lines = app::generation::generate(args, &bar);
     bar.finish();
-    let secs = start.elapsed().as_secs_f64();
-    println!("samples    {} written, {} failed (reasons in the manifest)", manifest.num_samples, manifest.failed.len());
-    println!("time       {:.1} s ({:.1} ms per sample)", secs, 1e3 * secs / manifest.num_samples.max(1) as f64);
-    println!("wrote      {}", out.display());
+    lines?.iter().for_each(|l| println!("{l}"));
     Ok(())
-}
-
-fn parse_part(s: &str) -> Result<DatasetPart> {
-    let (i, n) = s.split_once('/').with_context(|| format!("--shard expects i/n, got '{s}'"))?;
-    let part = DatasetPart {
-        index: i.trim().parse().context("shard index")?,
-        count: n.trim().parse().context("shard count")?,
-    };
-    if part.count == 0 || part.index >= part.count {
-        bail!("--shard {s}: need 0 ≤ i < n");
-    }
-    Ok(part)
 }
 
 /// `augsim merge`.
@@ -104,18 +66,19 @@ impl CorruptionArgs {
     }
 }
 
-/// How `train` splits the dataset (by generation index: the last samples are the test set, the
-/// ones before them the validation set, the rest the training set); see [`SplitPolicy`].
+/// How `train` splits the dataset (by generation index: the last uniform samples are the test set,
+/// the ones before them the validation set, the rest and every σ-chosen draw the training set); see
+/// [`SplitPolicy`].
 #[derive(Debug, Clone, clap::Args)]
 pub struct SplitArgs {
-    /// Fraction of the dataset held out as the test set (its last samples).
+    /// Fraction of the dataset's uniform draws held out as the test set (its last ones).
     #[arg(long, default_value_t = 0.2)]
     pub test_fraction: f64,
     /// Number of test samples; overrides --test-fraction.
     #[arg(long)]
     pub test_samples: Option<usize>,
-    /// Fraction of the dataset used for validation (checkpoint selection): the samples before the
-    /// test set.
+    /// Fraction of the dataset's uniform draws used for validation (checkpoint selection): those
+    /// before the test set.
     #[arg(long, default_value_t = 0.1)]
     pub validation_fraction: f64,
     /// Number of validation samples; overrides --validation-fraction.

@@ -71,20 +71,9 @@ enum Command {
     /// or CSV track files); writes traces (CSV, JSON), the estimated deformation (.pvd), assessment errors and
     /// PNG plots.
     Assimilate(app::assimilation::AssimilationChoice),
-    /// Generate a FEM dataset (random loads → grid input/target pairs); resumable, splittable.
-    Generate {
-        /// Dataset scenario: a TOML file, or the name of a built-in one (e.g. liver_forces).
-        scenario: PathBuf,
-        /// Output directory; default out/<name> (or out/<name>.part<i>of<n>).
-        #[arg(short, long)]
-        out: Option<PathBuf>,
-        /// Generate only part i of n (e.g. 0/8), for array jobs; join with `merge`.
-        #[arg(long)]
-        shard: Option<String>,
-        /// Override the number of samples; more than a complete dataset in --out holds grows it.
-        #[arg(long)]
-        samples: Option<usize>,
-    },
+    /// Generate a FEM dataset (random loads → grid input/target pairs); resumable, splittable; optionally
+    /// with draws chosen where a reduced-order model is least sure (--chosen-by).
+    Generate(app::generation::GenerateArgs),
     /// Merge dataset parts written with `generate --shard i/n`.
     Merge {
         /// Output directory.
@@ -190,9 +179,7 @@ fn main() {
             mesh_cmd::run(&app::meshing::MeshOptions { surface, label, length, units, repair, tets, immersed }, &output)
         }
         Command::Assimilate(args) => assimilate::run(&args),
-        Command::Generate { scenario, out, shard, samples } => {
-            learn_cmd::generate(&scenario, out.as_deref(), shard.as_deref(), samples)
-        }
+        Command::Generate(args) => learn_cmd::generate(&args),
         Command::Merge { out, parts } => learn_cmd::merge(&out, &parts),
         Command::Train(args) => learn_cmd::train(&args),
         Command::Eval { model, dataset, out, project, corruption, device } => {

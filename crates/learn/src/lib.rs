@@ -37,6 +37,7 @@ mod progress;
 pub mod rom;
 pub mod training;
 
+pub use data::chosen::{ChoiceRecipe, ChosenDraws, ChosenRound, CANDIDATE_BASE};
 pub use data::corrupt::{Corruption, Sparsity};
 pub use data::dataset::{
     merge_datasets, Dataset, DatasetPart, DatasetSpec, DatasetWriter, FailedSample, Manifest, Normalization, Sample,

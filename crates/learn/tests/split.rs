@@ -7,7 +7,7 @@ use augsim_learn::training::train::MODEL_FILE;
 use augsim_learn::LearnedModel;
 use augsim_learn::{
     evaluate, train, Compute, Corruption, GridShape, IndexSet, Initialization, Normalization, Samples, Silent, Split,
-    SplitPolicy, TrainConfig, TrainOptions, TrainedModel, UNetConfig,
+    SplitPolicy, TrainConfig, TrainOptions, TrainedModel, UNetConfig, CANDIDATE_BASE,
 };
 use common::synthetic_sample;
 
@@ -48,6 +48,25 @@ fn splits_are_disjoint_cover_the_samples_and_store_compactly() {
     // Nothing left for training, or samples of another source, are errors.
     assert!(Split::last(&all, 4, 6).is_err());
     assert!(split.apply(&samples(&[0, 1], "beam")).is_err());
+}
+
+#[test]
+fn sigma_chosen_draws_always_train() {
+    // Ten uniform draws, then draws chosen among candidates (from CANDIDATE_BASE on).
+    let b = CANDIDATE_BASE;
+    let mut indices: Vec<u64> = (0..10).collect();
+    indices.extend([b + 3, b + 9, b + 40]);
+    let all = samples(&indices, "liver");
+    let split = Split::last(&all, 2, 3).unwrap();
+    let [train, val, test] = split.apply(&all).unwrap();
+    assert_eq!((val.indices, test.indices), (vec![5, 6], vec![7, 8, 9]));
+    assert_eq!(train.indices, [0, 1, 2, 3, 4, b + 3, b + 9, b + 40]);
+    // Held-out fractions are of the uniform draws: as if the chosen ones were not there.
+    let uniform = samples(&indices[..10], "liver");
+    assert_eq!(SplitPolicy::default().split(&all).unwrap().test, SplitPolicy::default().split(&uniform).unwrap().test);
+    // Only uniform draws can be held out.
+    let e = Split::last(&all, 5, 6).unwrap_err().to_string();
+    assert!(e.contains("only 10 of the 13 samples are uniform"), "{e}");
 }
 
 #[test]

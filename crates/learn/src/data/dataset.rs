@@ -15,7 +15,8 @@
 //! place, so a killed writer leaves a consistent dataset that [`DatasetWriter::create_or_resume`]
 //! continues. Samples carry their generation index (the random seed of a sample is derived from
 //! the dataset seed and this index by the generator), and a generation that failed is recorded
-//! with its reason instead of a sample.
+//! with its reason instead of a sample. A dataset with σ-chosen draws ([`crate::data::chosen`])
+//! records how they were chosen in its manifest and keeps the models that chose them in `chosen/`.
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -24,6 +25,7 @@ use mesh::io::write_atomic_bytes;
 use mesh::Point;
 use serde::{Deserialize, Serialize};
 
+use crate::data::chosen::ChosenDraws;
 use crate::data::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::data::npy;
 use crate::{LearnError, Result};
@@ -309,6 +311,10 @@ pub struct Manifest {
     pub shards: Vec<ShardInfo>,
     /// Free-form scenario parameters.
     pub metadata: serde_json::Value,
+    /// How the σ-chosen draws after the uniform ones were chosen, round by round
+    /// (`augsim generate --chosen-by`); absent when every draw is uniform.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chosen: Option<ChosenDraws>,
 }
 
 impl Manifest {
@@ -325,7 +331,7 @@ impl Manifest {
         self.metadata.get("markers").and_then(|m| serde_json::from_value(m.clone()).ok()).unwrap_or_default()
     }
 
-    fn new(spec: &DatasetSpec) -> Self {
+    pub(crate) fn new(spec: &DatasetSpec) -> Self {
         Manifest {
             format: FORMAT.into(),
             version: VERSION,
@@ -344,6 +350,7 @@ impl Manifest {
             failed: Vec::new(),
             shards: Vec::new(),
             metadata: spec.metadata.clone(),
+            chosen: None,
         }
     }
 
@@ -358,8 +365,7 @@ impl Manifest {
             config.remove("shard_size");
         }
         let key = serde_json::json!([self.grid, self.units, metadata]).to_string();
-        let hash = key.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3));
-        format!("{}/seed {}/{hash:016x}", self.scenario, self.seed)
+        format!("{}/seed {}/{:016x}", self.scenario, self.seed, fnv1a(key.as_bytes()))
     }
 
     /// The specification this dataset was created with.
@@ -440,6 +446,9 @@ impl Manifest {
         if total != self.num_samples {
             return err(format!("num_samples is {} but the shards hold {total}", self.num_samples));
         }
+        if let Some(chosen) = &self.chosen {
+            chosen.validate().or_else(err)?;
+        }
         let max_failed = self.failed.iter().map(|f| f.index).max();
         if let Some(m) = last.into_iter().chain(max_failed).max() {
             if m >= self.next_index {
@@ -448,6 +457,11 @@ impl Manifest {
         }
         Ok(())
     }
+}
+
+/// The 64-bit FNV-1a hash of `bytes`.
+pub(crate) fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3))
 }
 
 /// One sample: input field, target field (both `[3, nx, ny, nz]`) and mask (`[nx, ny, nz]`).
@@ -660,6 +674,13 @@ impl DatasetWriter {
             let dataset = Dataset::open(dir)?;
             let existing = dataset.manifest.spec();
             let grows = spec.grows(&existing);
+            if grows && dataset.manifest.chosen.is_some() {
+                return Err(LearnError::manifest(
+                    &manifest_path,
+                    "the dataset holds σ-chosen draws after its uniform ones: its uniform draws cannot grow \
+                     (generate a larger uniform dataset, then choose draws again)",
+                ));
+            }
             if existing != spec && !grows {
                 return Err(LearnError::manifest(
                     &manifest_path,
@@ -691,6 +712,41 @@ impl DatasetWriter {
             pending_failures: Vec::new(),
             last_index,
         })
+    }
+
+    /// Opens the dataset in `dir`, created with `spec`, complete or not, to append draws after its
+    /// last one (the σ-chosen draws after its uniform ones); it is unfinished until
+    /// [`finish`](Self::finish).
+    pub fn append(dir: &Path, spec: &DatasetSpec) -> Result<DatasetWriter> {
+        let dataset = Dataset::open(dir)?;
+        let manifest_path = dir.join(MANIFEST_FILE);
+        let existing = dataset.manifest.spec();
+        if existing != *spec {
+            let why = if spec.grows(&existing) && dataset.manifest.chosen.is_some() {
+                "it holds σ-chosen draws after its uniform ones, which cannot grow".to_string()
+            } else {
+                format!("it was created with {existing:?}, not {spec:?}")
+            };
+            return Err(LearnError::manifest(&manifest_path, format!("cannot add draws to this dataset: {why}")));
+        }
+        dataset.check_files()?;
+        let mut manifest = dataset.manifest;
+        manifest.complete = false;
+        manifest.write(&manifest_path)?;
+        let last_index = manifest.next_index.checked_sub(1);
+        Ok(DatasetWriter {
+            dir: dir.to_path_buf(),
+            pending: Samples::new(manifest.grid),
+            manifest,
+            pending_failures: Vec::new(),
+            last_index,
+        })
+    }
+
+    /// Records how the σ-chosen draws are chosen, and commits what is pending with it.
+    pub fn set_chosen(&mut self, chosen: ChosenDraws) -> Result<()> {
+        self.manifest.chosen = Some(chosen);
+        self.commit()
     }
 
     /// First generation index not yet committed: where a resumed generation starts.
@@ -732,8 +788,9 @@ impl DatasetWriter {
         Ok(())
     }
 
-    /// Writes the pending samples as a new shard (if any) and commits the manifest.
-    fn commit(&mut self) -> Result<()> {
+    /// Writes the pending samples as a new shard (if any) and commits the manifest: a later run
+    /// resumes after them.
+    pub fn commit(&mut self) -> Result<()> {
         if !self.pending.is_empty() {
             let name = format!("shard_{:05}", self.manifest.shards.len());
             let grid = self.manifest.grid;
@@ -1012,6 +1069,12 @@ pub fn merge_datasets(parts: &[PathBuf], out: &Path, shard_size: Option<usize>) 
             return Err(LearnError::manifest(
                 &manifest_path,
                 "dataset is not complete; finish or resume its generation first",
+            ));
+        }
+        if m.chosen.is_some() {
+            return Err(LearnError::manifest(
+                &manifest_path,
+                "dataset holds σ-chosen draws, which are chosen one round after another and not merged",
             ));
         }
         let spec = m.spec();

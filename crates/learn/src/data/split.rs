@@ -4,10 +4,13 @@
 //! A split is fixed by generation indices, not by positions, so it survives re-sharding and
 //! merging; together with the dataset's [source](crate::Manifest::source_id) it names exactly
 //! the samples that shaped a model (its training samples set the weights and the
-//! normalisation, its validation samples chose the checkpoint).
+//! normalisation, its validation samples chose the checkpoint). Validation and test samples are
+//! uniform draws only: a σ-chosen draw ([`crate::data::chosen`]) is not a draw of the loads to
+//! come, and always trains.
 
 use serde::{Deserialize, Serialize};
 
+use crate::data::chosen::is_uniform;
 use crate::data::dataset::Samples;
 use crate::{LearnError, Result};
 
@@ -55,9 +58,10 @@ impl IndexSet {
 }
 
 /// How many samples [`Split::last`] holds out, as `augsim train` takes them: each held-out set is a fraction of
-/// all the samples (rounded to the nearest count) unless a count is given; the last samples are the test set, the
-/// ones before them the validation set, the rest the training set, of which only the first `train_samples` may be
-/// used (e.g. 100 for transfer learning).
+/// the uniform samples (all of them, unless some draws were σ-chosen; rounded to the nearest count) unless a count
+/// is given; the last uniform samples are the test set, the ones before them the validation set, the rest (and
+/// every σ-chosen sample) the training set, of which only the first `train_samples` may be used (e.g. 100 for
+/// transfer learning).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SplitPolicy {
@@ -89,13 +93,14 @@ impl Default for SplitPolicy {
 impl SplitPolicy {
     /// The split of `samples` ([`Split::last`] with this policy's validation and test counts).
     pub fn split(&self, samples: &Samples) -> Result<Split> {
+        let uniform = samples.indices.iter().filter(|&&i| is_uniform(i)).count();
         let count = |fraction: f64, given: Option<usize>, what: &str| -> Result<usize> {
             if !(0.0..1.0).contains(&fraction) {
                 return Err(LearnError::InvalidInput(format!(
                     "the {what} fraction must lie in [0, 1), got {fraction}"
                 )));
             }
-            Ok(given.unwrap_or((samples.len() as f64 * fraction).round() as usize))
+            Ok(given.unwrap_or((uniform as f64 * fraction).round() as usize))
         };
         let test = count(self.test_fraction, self.test_samples, "test")?;
         let validation = count(self.validation_fraction, self.validation_samples, "validation")?;
@@ -137,9 +142,10 @@ pub struct Split {
 }
 
 impl Split {
-    /// Splits `samples` in index order: the last `test` samples for testing, the `validation`
-    /// samples before them for validation, the rest for training (samples are drawn
-    /// independently, so their order carries no information).
+    /// Splits `samples` in index order: the last `test` uniform samples for testing, the
+    /// `validation` uniform samples before them for validation, the rest for training (uniform
+    /// samples are drawn independently, so their order carries no information), σ-chosen samples
+    /// included: they were chosen for the model's doubts, and would not measure it fairly.
     pub fn last(samples: &Samples, validation: usize, test: usize) -> Result<Split> {
         let n = samples.len();
         if validation + test >= n {
@@ -149,11 +155,20 @@ impl Split {
         }
         let mut indices = samples.indices.clone();
         indices.sort_unstable();
-        let (train, rest) = indices.split_at(n - validation - test);
+        // Uniform draws come first in index order.
+        let uniform = indices.partition_point(|&i| is_uniform(i));
+        if validation + test > uniform {
+            return Err(LearnError::InvalidInput(format!(
+                "{validation} validation and {test} test samples asked, but only {uniform} of the {n} samples are \
+                 uniform draws (σ-chosen draws are never held out)"
+            )));
+        }
+        let (head, chosen) = indices.split_at(uniform);
+        let (train, rest) = head.split_at(uniform - validation - test);
         let (val, test) = rest.split_at(validation);
         Ok(Split {
             source: samples.source.clone(),
-            train: IndexSet::from_indices(train),
+            train: IndexSet::from_indices(&[train, chosen].concat()),
             validation: IndexSet::from_indices(val),
             test: IndexSet::from_indices(test),
         })

@@ -206,6 +206,7 @@ pub fn fit(
         val_mean_error: 0.0,
         seconds: 0.0,
         split: context.split.clone(),
+        fit: Some(config.clone()),
     };
     let energy = outputs.pod_values[..chosen.modes].iter().sum::<f64>() / outputs.pod_energy;
     let (mut model, project) = chosen_model(train.grid, &context, info, inputs, features, &outputs, &y_coeffs)?;

@@ -108,6 +108,10 @@ pub struct RomInfo {
     pub seconds: f64,
     /// Which samples trained, selected and test the model.
     pub split: Split,
+    /// The fit's settings, with which it is fitted again on more draws (`augsim generate
+    /// --chosen-by`); absent in models saved before they were recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit: Option<RomConfig>,
 }
 
 /// The contents of `model.json`.

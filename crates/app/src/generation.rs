@@ -1,0 +1,110 @@
+//! A dataset generated as `augsim generate` asks: a dataset scenario's uniform draws, whole or
+//! one part of them, and then, if asked, draws chosen where a reduced-order model is least sure.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Result;
+use learn::data::chosen::is_uniform;
+use learn::{ChoiceRecipe, DatasetPart, Progress};
+use scenario::DatasetScenario;
+
+/// The arguments of `augsim generate`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct GenerateArgs {
+    /// Dataset scenario: a TOML file, or the name of a built-in one (e.g. liver_forces).
+    pub scenario: PathBuf,
+    /// Output directory; default out/<name> (or out/<name>.part<i>of<n>).
+    #[arg(short, long)]
+    pub out: Option<PathBuf>,
+    /// Generate only part i of n (e.g. 0/8), for array jobs; join with `merge`.
+    #[arg(long, value_parser = parse_part)]
+    pub shard: Option<DatasetPart>,
+    /// Override the number of samples; more than a complete dataset in --out holds grows it.
+    #[arg(long)]
+    pub samples: Option<usize>,
+    /// After the uniform draws, draws where this reduced-order model (trained on them: `augsim
+    /// train DIR --method rom`) is least sure: each round ranks --candidates drawn loads by its
+    /// predicted σ (the mean over the organ's grid nodes), solves the --chosen highest, and fits
+    /// the model again (its own settings; kept in DIR/chosen) for the next round. Force inputs.
+    #[arg(long, value_name = "MODEL_DIR", conflicts_with = "shard")]
+    pub chosen_by: Option<PathBuf>,
+    /// With --chosen-by: draws chosen, and solved, per round.
+    #[arg(long, default_value_t = 100, requires = "chosen_by")]
+    pub chosen: usize,
+    /// With --chosen-by: rounds (rerun with more to add rounds).
+    #[arg(long, default_value_t = 1, requires = "chosen_by")]
+    pub rounds: usize,
+    /// With --chosen-by: candidates ranked per round [default: 20 per chosen draw].
+    #[arg(long, requires = "chosen_by")]
+    pub candidates: Option<usize>,
+}
+
+/// Parses `i/n`, part `i` of `n`.
+fn parse_part(s: &str) -> Result<DatasetPart, String> {
+    let (i, n) = s.split_once('/').ok_or_else(|| format!("expected i/n (e.g. 0/8), got '{s}'"))?;
+    let number = |t: &str| t.trim().parse::<usize>().map_err(|e| format!("'{t}' in '{s}': {e}"));
+    let part = DatasetPart { index: number(i)?, count: number(n)? };
+    if part.count == 0 || part.index >= part.count {
+        return Err(format!("{s}: need 0 ≤ i < n"));
+    }
+    Ok(part)
+}
+
+/// Generates the dataset `args` asks for, resuming one left unfinished; reports to `progress` the
+/// scenario, mesh and grid in lines, the draws, and each round of chosen draws. Returns the
+/// summary in lines.
+pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<String>> {
+    let (mut scenario, dir) = DatasetScenario::load(&args.scenario)?;
+    if let Some(n) = args.samples {
+        scenario.dataset.samples = n;
+    }
+    let recipe = match &args.chosen_by {
+        Some(model) => {
+            let candidates = args.candidates.unwrap_or(20 * args.chosen);
+            Some(ChoiceRecipe::new(model, args.chosen, candidates, args.rounds)?)
+        }
+        None => None,
+    };
+    progress.line(&format!("scenario   {}: {}", scenario.name, scenario.description));
+    let generator = scenario.generator(&dir)?;
+    let mesh = generator.mesh();
+    progress.line(&format!(
+        "mesh       {} nodes, {} {} cells",
+        mesh.num_nodes(),
+        mesh.cells.len(),
+        mesh.cells.kind_name()
+    ));
+    let (grid, inside) = (generator.grid(), generator.mask().iter().filter(|&&m| m == 1).count());
+    progress.line(&format!("grid       {} × {} × {} ({inside} nodes inside)", grid.nx, grid.ny, grid.nz));
+    let out = args.out.clone().unwrap_or_else(|| match &args.shard {
+        None => PathBuf::from(format!("out/{}", scenario.name)),
+        Some(p) => PathBuf::from(format!("out/{}.part{}of{}", scenario.name, p.index, p.count)),
+    });
+    let start = Instant::now();
+    let manifest = match &recipe {
+        None => generator.run(&out, &scenario.name, args.shard.clone(), progress)?,
+        Some(recipe) => generator.run_chosen(&out, &scenario.name, recipe, progress)?,
+    };
+    let secs = start.elapsed().as_secs_f64();
+    let mut lines = vec![format!(
+        "samples    {} written, {} failed (reasons in the manifest)",
+        manifest.num_samples,
+        manifest.failed.len()
+    )];
+    if let Some(chosen) = &manifest.chosen {
+        let count: usize = chosen.rounds.iter().map(|r| r.indices.len()).sum();
+        let failed = manifest.failed.iter().filter(|f| !is_uniform(f.index)).count();
+        lines.push(format!(
+            "chosen     {count} draws where the model was least sure, in {} rounds ({failed} of them failed)",
+            chosen.rounds.len()
+        ));
+    }
+    lines.push(format!(
+        "time       {:.1} s ({:.1} ms per sample)",
+        secs,
+        1e3 * secs / manifest.num_samples.max(1) as f64
+    ));
+    lines.push(format!("wrote      {}", out.display()));
+    Ok(lines)
+}
