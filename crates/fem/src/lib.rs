@@ -2,7 +2,8 @@
 //! Saint-Venant-Kirchhoff and Neo-Hookean materials on T4 and H8 meshes,
 //! standard or locking-free (F-bar) for nearly incompressible tissue,
 //! Dirichlet conditions, springs, nodal forces, tractions and gravity, and a
-//! static quasi-Newton solver (L-BFGS on a kept sparse Cholesky factorisation).
+//! static quasi-Newton solver (L-BFGS on a kept sparse Cholesky factorisation) with an
+//! arc-length continuation where force control finds no equilibrium.
 //!
 //! Units are SI: m, Pa, N, kg/m³. Displacement vectors hold 3 values per node
 //! (x, y, z of node 0, then node 1, ...).
@@ -46,7 +47,7 @@ pub use element::ElementGeometry;
 pub use geometric::Attachment;
 pub use material::{Formulation, Law, Material};
 pub use problem::{force_shares, nodal_masses, PointSpring, Problem};
-pub use solver::{Solution, SolverOptions, StaticSolver, Timings};
+pub use solver::{Continuation, Solution, SolverOptions, StaticSolver, Timings};
 
 /// `n` zeros, written now: a buffer made so has its pages touched when it is built rather than
 /// at its first use (`vec![0.0; n]` may take untouched zero pages from the operating system).

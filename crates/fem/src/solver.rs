@@ -1,6 +1,7 @@
 //! Static equilibrium: find u with f_int(u) + K_s u = λ f_ext on the free dofs,
 //! for load factors λ stepping to 1 (a step that fails is halved, and the step
-//! grows back after successes), with a line search on the energy.
+//! grows back after successes), with a line search on the energy; where that finds no
+//! equilibrium, the path is followed on by arc length (Riks; see `docs/method.md` § 2.5).
 //!
 //! Each iteration solves with a kept factorisation of the tangent, corrected by
 //! limited-memory BFGS updates (the factor is the initial inverse Hessian of the
@@ -21,6 +22,8 @@ use crate::material::{Law, Material};
 use crate::post::effective_gradients;
 use crate::problem::{Pieces, PointSpring, Problem};
 use crate::{written_zeros, FemError};
+
+mod continuation;
 
 /// Settings of the Newton-Raphson solver.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -43,6 +46,24 @@ pub struct SolverOptions {
     pub reuse_factorization: bool,
     /// BFGS correction pairs kept (0: plain modified Newton on the kept factor).
     pub bfgs_memory: usize,
+    /// How the load path is followed.
+    pub continuation: Continuation,
+}
+
+/// How a solve follows the load path from rest to the whole load.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Continuation {
+    /// Force control (load steps, cut where they fail, a patient attempt past a limit point);
+    /// where it finds no equilibrium, an arc-length continuation from its last one.
+    #[default]
+    Force,
+    /// Arc length from rest (Riks; `docs/method.md` § 2.5): the body moved by steps of a set length, the
+    /// load factor following; for a soft body that swings from where it is held.
+    ArcLength,
+    /// Force control alone: a solve that fails there fails at once (cheaper where failures are
+    /// expected and a failed sample is dropped).
+    ForceOnly,
 }
 
 impl Default for SolverOptions {
@@ -56,6 +77,7 @@ impl Default for SolverOptions {
             max_step_cuts: 8,
             reuse_factorization: true,
             bfgs_memory: 12,
+            continuation: Continuation::Force,
         }
     }
 }
@@ -426,6 +448,26 @@ impl StaticSolver {
         (i != u32::MAX).then_some(i as usize)
     }
 
+    /// The free dofs' values of a vector over all dofs.
+    fn free_part(&self, full: &[f64]) -> Vec<f64> {
+        let mut free = vec![0.0; self.pattern.num_free];
+        for (dof, value) in full.iter().enumerate() {
+            if let Some(i) = self.free_index(dof) {
+                free[i] = *value;
+            }
+        }
+        free
+    }
+
+    /// `full += scale × free` on the free dofs.
+    fn add_free(&self, full: &mut [f64], free: &[f64], scale: f64) {
+        for (dof, value) in full.iter_mut().enumerate() {
+            if let Some(i) = self.free_index(dof) {
+                *value += scale * free[i];
+            }
+        }
+    }
+
     fn evaluate(&mut self, u: &[f64], f: &mut [f64], tangent: bool) -> Result<(), FemError> {
         let values = tangent.then_some(self.values.as_mut_slice());
         assemble(&self.geometry, &self.pattern, &self.problem.material, u, f, values, &mut self.work)?;
@@ -508,12 +550,7 @@ impl StaticSolver {
         if !self.cholesky.is_double(Slot::Rest) {
             return Err(FemError::Factorization("the tangent at rest is not positive definite".into()));
         }
-        let mut free = vec![0.0; self.pattern.num_free];
-        for (dof, value) in f.iter().enumerate() {
-            if let Some(i) = self.free_index(dof) {
-                free[i] = *value;
-            }
-        }
+        let mut free = self.free_part(f);
         self.cholesky.solve_in_place(Slot::Rest, &mut free)?;
         for (dof, value) in f.iter_mut().enumerate() {
             *value = self.free_index(dof).map_or(0.0, |i| free[i]);
@@ -556,20 +593,7 @@ impl StaticSolver {
         let ndof = self.problem.num_dofs();
         let mut stats = Stats::default();
         if let Some(u0) = u0 {
-            if u0.len() != ndof || u0.iter().any(|v| !v.is_finite()) {
-                return Err(FemError::Invalid(format!("warm start must hold {ndof} finite values")));
-            }
-            let mut u = u0.to_vec();
-            // A kept factor assembled far from equilibrium, or with point springs of another
-            // scale, is replaced by one at the warm start.
-            let from = if self.latest_stale || self.latest_slow || self.spring_scale_changed() {
-                Start::Fresh
-            } else {
-                Start::Kept
-            };
-            if self.newton(&mut u, 1.0, from, options, Budget::Normal, &mut stats).is_ok() {
-                self.latest_slow = !stats.refactorized
-                    && stats.iterations as f64 > self.refactorization_cost + FRESH_FACTOR_ITERATIONS;
+            if let Some(u) = self.warm_attempt(u0, options, &mut stats)? {
                 return Ok(stats.finish(u, 1, start));
             }
         }
@@ -585,6 +609,15 @@ impl StaticSolver {
         let mut cuts = 0;
         let mut steps = 0;
         let mut path = LoadPath::new(self.loads());
+        if options.continuation == Continuation::ArcLength {
+            if !self.arc_length_applies() {
+                return Err(FemError::Invalid(
+                    "an arc-length continuation scales loads, not prescribed displacements".into(),
+                ));
+            }
+            let steps = self.arc_length(&mut u, &mut lambda, &mut path, options, &mut stats)?;
+            return Ok(stats.finish(u, steps, start));
+        }
         // Whether the early patient attempt is still to be made; the last failed patient attempt
         // (the load factor it started from, its iterations).
         let (mut early_patient, mut patient_failed) = (true, None);
@@ -622,16 +655,6 @@ impl StaticSolver {
                     patient_failed = Some((lambda, stats.iterations - before));
                 }
             }
-            if let (
-                true,
-                Some((at, iterations)),
-                Err(FemError::NotConverged { .. } | FemError::InvertedElement { .. }),
-            ) = (last_resort, patient_failed, &attempt)
-            {
-                let none = FemError::NoEquilibrium { load_factor: at, softening: path.softening(), iterations };
-                // Saint-Venant-Kirchhoff's own limit point is told as such.
-                return Err(self.diagnose(none, lambda, &trial, &u, &stats));
-            }
             match attempt {
                 Ok(()) => {
                     path.record(target, &trial);
@@ -657,10 +680,78 @@ impl StaticSolver {
                         self.cholesky.set_double_precision(true);
                     }
                 }
+                Err(e @ (FemError::NotConverged { .. } | FemError::InvertedElement { .. })) => {
+                    let failure = match patient_failed {
+                        Some((at, iterations)) => {
+                            FemError::NoEquilibrium { load_factor: at, softening: path.softening(), iterations }
+                        }
+                        None => e,
+                    };
+                    return match self.past_force_control(failure, &mut u, &mut lambda, &mut path, options, &mut stats) {
+                        Ok(arc_steps) => Ok(stats.finish(u, steps + arc_steps, start)),
+                        // Saint-Venant-Kirchhoff's own limit point is told as such.
+                        Err(e) => Err(self.diagnose(e, lambda, &trial, &u, &stats)),
+                    };
+                }
                 Err(e) => return Err(self.diagnose(e, lambda, &trial, &u, &stats)),
             }
         }
         Ok(stats.finish(u, steps, start))
+    }
+
+    /// Where force control found no equilibrium beyond load factor `lambda` (`failure`), the
+    /// path followed on by arc length from the last one, `u` (see [`continuation`]): the steps it
+    /// took; `failure` where the continuation is not to be made, does not apply or made no step.
+    fn past_force_control(
+        &mut self,
+        failure: FemError,
+        u: &mut Vec<f64>,
+        lambda: &mut f64,
+        path: &mut LoadPath,
+        options: &SolverOptions,
+        stats: &mut Stats,
+    ) -> Result<usize, FemError> {
+        if options.continuation != Continuation::Force || !self.arc_length_applies() {
+            return Err(failure);
+        }
+        let (from, indefinite) = (*lambda, stats.indefinite);
+        match self.arc_length(u, lambda, path, options, stats) {
+            // Not a step further: force control's own failure says more (a tolerance below
+            // round-off, too few iterations allowed), and what its last attempt found.
+            Err(FemError::NoEquilibrium { load_factor, .. }) if load_factor <= from => {
+                stats.indefinite = indefinite;
+                Err(failure)
+            }
+            other => other,
+        }
+    }
+
+    /// The whole load applied at once from the warm start `u0`: the equilibrium, or `None` where
+    /// the attempt failed.
+    fn warm_attempt(
+        &mut self,
+        u0: &[f64],
+        options: &SolverOptions,
+        stats: &mut Stats,
+    ) -> Result<Option<Vec<f64>>, FemError> {
+        let ndof = self.problem.num_dofs();
+        if u0.len() != ndof || u0.iter().any(|v| !v.is_finite()) {
+            return Err(FemError::Invalid(format!("warm start must hold {ndof} finite values")));
+        }
+        let mut u = u0.to_vec();
+        // A kept factor assembled far from equilibrium, or with point springs of another
+        // scale, is replaced by one at the warm start.
+        let from = if self.latest_stale || self.latest_slow || self.spring_scale_changed() {
+            Start::Fresh
+        } else {
+            Start::Kept
+        };
+        if self.newton(&mut u, 1.0, from, options, Budget::Normal, stats).is_err() {
+            return Ok(None);
+        }
+        self.latest_slow =
+            !stats.refactorized && stats.iterations as f64 > self.refactorization_cost + FRESH_FACTOR_ITERATIONS;
+        Ok(Some(u))
     }
 
     /// Checks the problem (valid, every piece held) and that its constrained nodes and element
@@ -907,11 +998,7 @@ impl StaticSolver {
         let (mut attempt, mut halvings) = (0, 0);
         loop {
             trial.copy_from_slice(u);
-            for (dof, t) in trial.iter_mut().enumerate() {
-                if let Some(i) = self.free_index(dof) {
-                    *t += alpha * du[i];
-                }
-            }
+            self.add_free(trial, du, alpha);
             let t = Instant::now();
             let eval = self.evaluate(trial, f_int, false);
             stats.timings.assembly += t.elapsed();

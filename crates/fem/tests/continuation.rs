@@ -1,0 +1,97 @@
+//! The arc-length continuation against force control: where both find the equilibrium, the same
+//! one; past a limit point it stops there and says so; it refuses what it cannot scale.
+
+use augsim_fem as fem;
+use fem::{Continuation, FemError, Formulation, Law, Material, Problem, Solution, SolverOptions, StaticSolver};
+
+/// A soft block (12 × 6 × 4 cm, Neo-Hookean, E 5 kPa, ν 0.49, 1,728 T4) held by a 2 cm strip of
+/// its back, and pushed sideways at its far end by `force` newtons: it swings from the strip.
+fn hanging_block(force: f64) -> Problem {
+    let mesh = mesh::box_tet([0.0; 3], [0.12, 0.06, 0.04], [12, 6, 4]).unwrap();
+    let held: Vec<usize> =
+        (0..mesh.num_nodes()).filter(|&n| mesh.nodes[n][1] > 0.06 - 1e-9 && mesh.nodes[n][0] < 0.02 + 1e-9).collect();
+    let end: Vec<usize> =
+        (0..mesh.num_nodes()).filter(|&n| mesh.nodes[n][0] > 0.12 - 1e-9 && mesh.nodes[n][1] < 1e-9).collect();
+    let material = Material::new(Law::NeoHookean, 5000.0, 0.49).with_formulation(Formulation::Standard);
+    let mut problem = Problem::new(mesh, material);
+    problem.fix(&held);
+    problem.add_force(&end, [0.0, 0.0, force]);
+    problem
+}
+
+/// A shallow arch (20 cm span, 3 cm rise, 1 cm thick; Neo-Hookean, E 1 MPa, ν 0.3) clamped at both
+/// ends and pushed down at its crown by `force` newtons (its limit load lies between 1.5 and 2 N);
+/// and its crown's nodes.
+fn arch(force: f64) -> (Problem, Vec<usize>) {
+    let (span, rise, thick) = (0.2, 0.03, 0.01);
+    let mut mesh = mesh::box_tet([-span / 2.0, 0.0, 0.0], [span / 2.0, thick, 0.02], [40, 2, 2]).unwrap();
+    for p in &mut mesh.nodes {
+        p[1] += rise * (1.0 - (2.0 * p[0] / span).powi(2));
+    }
+    let ends: Vec<usize> = (0..mesh.num_nodes()).filter(|&n| mesh.nodes[n][0].abs() > span / 2.0 - 1e-9).collect();
+    let crown: Vec<usize> = (0..mesh.num_nodes())
+        .filter(|&n| mesh.nodes[n][0].abs() < 1e-9 && mesh.nodes[n][1] > rise + thick - 1e-9)
+        .collect();
+    let material = Material::new(Law::NeoHookean, 1e6, 0.3).with_formulation(Formulation::Standard);
+    let mut problem = Problem::new(mesh, material);
+    problem.fix(&ends);
+    problem.add_force(&crown, [0.0, -force, 0.0]);
+    (problem, crown)
+}
+
+fn solve(problem: Problem, continuation: Continuation) -> Result<Solution, FemError> {
+    StaticSolver::new(problem)?.solve(&SolverOptions { continuation, ..SolverOptions::default() })
+}
+
+/// The largest difference between two displacement fields over the largest motion.
+fn relative_difference(a: &[f64], b: &[f64]) -> f64 {
+    let largest = a.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    a.iter().zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / largest
+}
+
+/// Swung by 1 N through about 16 cm, the block reaches the same equilibrium by arc length from rest
+/// as by force control, in many more, shorter steps.
+#[test]
+fn an_arc_length_continuation_reaches_the_equilibrium_that_force_control_finds() {
+    let force = solve(hanging_block(1.0), Continuation::ForceOnly).unwrap();
+    let arc = solve(hanging_block(1.0), Continuation::ArcLength).unwrap();
+    let largest = force.u.chunks(3).map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()).fold(0.0, f64::max);
+    assert!(largest > 0.1, "the block moved {largest} m: not a large motion");
+    let difference = relative_difference(&force.u, &arc.u);
+    assert!(difference < 1e-5, "arc length and force control differ by {difference:e} of the motion");
+    assert!(arc.load_steps > 10 * force.load_steps, "{} arc steps, {} load steps", arc.load_steps, force.load_steps);
+    // The arch below its limit load, likewise.
+    let (arch_force, _) = solve(arch(1.5).0, Continuation::ForceOnly).map(|s| (s.u, ())).unwrap();
+    let arch_arc = solve(arch(1.5).0, Continuation::ArcLength).unwrap();
+    let difference = relative_difference(&arch_force, &arch_arc.u);
+    assert!(difference < 1e-5, "the arch by arc length and by force control differs by {difference:e}");
+}
+
+/// Past the arch's limit load the continuation, which follows stable equilibria only, stops at the
+/// limit point (between 1.5 and 2 N, so between load factors 0.75 and 1 of a 2 N push) and names
+/// it; force control's patient attempt finds the equilibrium the arch snaps to.
+#[test]
+fn the_continuation_stops_at_a_limit_point_and_names_it() {
+    let (problem, crown) = arch(2.0);
+    match solve(problem.clone(), Continuation::ArcLength) {
+        Err(e @ FemError::NoEquilibrium { load_factor, .. }) => {
+            assert!((0.75..1.0).contains(&load_factor), "stopped at load factor {load_factor}");
+            assert!(e.to_string().contains("a limit point"), "{e}");
+        }
+        other => panic!("the arch went past its limit load by arc length: {:?}", other.map(|s| s.load_steps)),
+    }
+    let snapped = solve(problem, Continuation::Force).unwrap();
+    let crown_down = -crown.iter().map(|&n| snapped.u[3 * n + 1]).sum::<f64>() / crown.len() as f64;
+    assert!(crown_down > 0.04, "the crown moved down {crown_down} m: not snapped through");
+}
+
+/// The load factor scales loads: a prescribed displacement is refused with a clear error.
+#[test]
+fn an_arc_length_continuation_refuses_prescribed_displacements() {
+    let mut problem = hanging_block(0.1);
+    problem.prescribe(&[0], [0.001, 0.0, 0.0]);
+    match solve(problem, Continuation::ArcLength) {
+        Err(FemError::Invalid(message)) => assert!(message.contains("prescribed displacements"), "{message}"),
+        other => panic!("expected a refusal, got {:?}", other.map(|s| s.load_steps)),
+    }
+}
