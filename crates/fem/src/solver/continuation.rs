@@ -78,13 +78,18 @@ impl StaticSolver {
             softening: path.softening(),
             iterations: stats.iterations - start_iterations,
         };
+        // `current`: the latest factor is the tangent's at `u` (an attempt that failed without
+        // refactorising leaves it so), and `tangent` its response to the load.
+        let (mut tangent, mut current) = (load.clone(), false);
         while steps < MAX_STEPS {
-            self.refactorize(u, &mut f_int, false, stats)?;
-            if !self.cholesky.is_positive_definite(Slot::Latest) {
-                return Err(none(*lambda, path, stats));
+            if !current {
+                self.refactorize(u, &mut f_int, false, stats)?;
+                if !self.cholesky.is_positive_definite(Slot::Latest) {
+                    return Err(none(*lambda, path, stats));
+                }
+                tangent.copy_from_slice(&load);
+                self.cholesky.solve_in_place(Slot::Latest, &mut tangent)?;
             }
-            let mut tangent = load.clone();
-            self.cholesky.solve_in_place(Slot::Latest, &mut tangent)?;
             let length = norm(&tangent);
             if !(length > 0.0) {
                 return Err(FemError::Invalid("an arc-length continuation without a load".into()));
@@ -97,7 +102,10 @@ impl StaticSolver {
                 // The rest of the load in one force-controlled step from the tangent's prediction.
                 let mut trial = u.clone();
                 self.add_free(&mut trial, &tangent, 1.0 - *lambda);
-                if self.newton(&mut trial, 1.0, Start::Kept, opt, Budget::Normal, stats).is_ok() {
+                let factorizations = stats.factorizations;
+                let finished = self.newton(&mut trial, 1.0, Start::Kept, opt, Budget::Normal, stats);
+                current = stats.factorizations == factorizations;
+                if finished.is_ok() {
                     path.record(1.0, &trial);
                     *u = trial;
                     *lambda = 1.0;
@@ -106,7 +114,10 @@ impl StaticSolver {
                 arc = 0.5 * (1.0 - *lambda) * length;
                 continue;
             }
-            match self.arc_step(u, *lambda, &tangent, arc / length, &load, opt, stats) {
+            let factorizations = stats.factorizations;
+            let step = self.arc_step(u, *lambda, &tangent, arc / length, &load, opt, stats);
+            current = stats.factorizations == factorizations;
+            match step {
                 // The path turns back: a limit point of the load (past it the body snaps).
                 Ok(step) if step.lambda < *lambda => {
                     path.record(step.lambda, &step.u);
@@ -116,7 +127,7 @@ impl StaticSolver {
                     path.record(step.lambda, &step.u);
                     *u = step.u;
                     *lambda = step.lambda;
-                    steps += 1;
+                    (steps, current) = (steps + 1, false);
                     arc *= (WANTED_ITERATIONS / step.iterations.max(1) as f64).sqrt().clamp(0.5, 2.0);
                 }
                 Err(FemError::NotConverged { .. } | FemError::InvertedElement { .. }) if arc > smallest => {
