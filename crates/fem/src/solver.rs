@@ -245,6 +245,13 @@ fn iterations_left(rate: f64, factor: f64) -> f64 {
 /// 1e-16 E L², well below the 1e-12 E L² that the default relative tolerance then asks for.
 const FORCE_FLOOR: f64 = 1e-6;
 
+/// Whether an iterate has converged: its relative residual `rel` under `rtol`, or under √rtol
+/// after a last increment of length `step` (`None` before the first) under `utol` of `u`'s.
+fn converged(opt: &SolverOptions, rel: f64, step: Option<f64>, u: &[f64]) -> bool {
+    let small_step = step.is_some_and(|s| s <= opt.utol * norm(u).max(f64::MIN_POSITIVE));
+    rel <= opt.rtol || (small_step && rel <= opt.rtol.sqrt())
+}
+
 /// Whether the residuals of an iteration sequence (relative, in order) have stalled.
 fn stalled(residuals: &[f64]) -> bool {
     let Some(split) = residuals.len().checked_sub(STALL_ITERATIONS).filter(|&s| s > 0) else {
@@ -854,8 +861,7 @@ impl StaticSolver {
             if !rel.is_finite() {
                 return Err(FemError::NonFinite(format!("residual at iteration {it}")));
             }
-            let inc_ok = it > 0 && norm(&du) <= opt.utol * norm(u).max(f64::MIN_POSITIVE);
-            if rel <= opt.rtol || (inc_ok && rel <= opt.rtol.sqrt()) {
+            if converged(opt, rel, (it > 0).then(|| norm(&du)), u) {
                 return Ok(());
             }
             if it == last_iteration || (stall_rule && stalled(&stats.residuals[first_residual..])) {

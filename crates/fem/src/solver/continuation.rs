@@ -13,7 +13,7 @@
 //! It follows stable equilibria only (the tangent positive definite where a step starts): past a
 //! limit point the body snaps, which the patient attempt of force control finds.
 
-use super::{dot, norm, Budget, LoadPath, Start, StaticSolver, Stats};
+use super::{converged, dot, norm, Budget, LoadPath, Start, StaticSolver, Stats};
 use crate::linsolve::Slot;
 use crate::{FemError, SolverOptions};
 
@@ -42,6 +42,13 @@ const INVERSION_HALVINGS: usize = 20;
 /// trial state (modified Newton otherwise: the factor made where the step started).
 const REFRESH_RATIO: f64 = 0.25;
 
+/// The whole load (at load factor 1): over all dofs, its free part, and that part's norm.
+struct Load {
+    full: Vec<f64>,
+    free: Vec<f64>,
+    norm: f64,
+}
+
 /// A corrector step: the state, its load factor and the iterations taken.
 struct Corrected {
     u: Vec<f64>,
@@ -69,7 +76,9 @@ impl StaticSolver {
         opt: &SolverOptions,
         stats: &mut Stats,
     ) -> Result<usize, FemError> {
-        let load = self.free_part(&self.loads());
+        let full = self.loads();
+        let free = self.free_part(&full);
+        let load = Load { norm: norm(&free), full, free };
         let mut f_int = vec![0.0; u.len()];
         let (mut arc, mut smallest) = (f64::NAN, 0.0);
         let (start_iterations, mut steps) = (stats.iterations, 0);
@@ -80,14 +89,14 @@ impl StaticSolver {
         };
         // `current`: the latest factor is the tangent's at `u` (an attempt that failed without
         // refactorising leaves it so), and `tangent` its response to the load.
-        let (mut tangent, mut current) = (load.clone(), false);
+        let (mut tangent, mut current) = (load.free.clone(), false);
         while steps < MAX_STEPS {
             if !current {
                 self.refactorize(u, &mut f_int, false, stats)?;
                 if !self.cholesky.is_positive_definite(Slot::Latest) {
                     return Err(none(*lambda, path, stats));
                 }
-                tangent.copy_from_slice(&load);
+                tangent.copy_from_slice(&load.free);
                 self.cholesky.solve_in_place(Slot::Latest, &mut tangent)?;
             }
             let length = norm(&tangent);
@@ -143,7 +152,7 @@ impl StaticSolver {
     }
 
     /// One arc-length step from the equilibrium `u` at `lambda`: the predictor `dlambda` ×
-    /// `tangent` (the tangent's response to `load`, the free part of the whole load), then
+    /// `tangent` (the tangent's response to the free part of `load`), then
     /// corrections on the plane normal to it, each refactorising where the last converged slowly.
     #[allow(clippy::too_many_arguments)]
     fn arc_step(
@@ -152,39 +161,38 @@ impl StaticSolver {
         lambda: f64,
         tangent: &[f64],
         dlambda: f64,
-        load: &[f64],
+        load: &Load,
         opt: &SolverOptions,
         stats: &mut Stats,
     ) -> Result<Corrected, FemError> {
         let predictor: Vec<f64> = tangent.iter().map(|t| dlambda * t).collect();
         let arc = norm(&predictor);
-        let (load_norm, floor) = (norm(load), self.force_floor());
+        let floor = self.force_floor();
         let mut trial = u.to_vec();
         self.add_free(&mut trial, &predictor, 1.0);
         let mut lam = lambda + dlambda;
         let mut f_int = vec![0.0; u.len()];
         self.evaluate(&trial, &mut f_int, false)?;
-        let loads = self.loads();
         let mut response = tangent.to_vec();
-        let (mut r, mut last, mut last_rel) = (vec![0.0; load.len()], f64::INFINITY, f64::INFINITY);
-        let mut step_norm = f64::INFINITY;
+        let (mut r, mut last, mut last_rel) = (vec![0.0; load.free.len()], f64::INFINITY, f64::INFINITY);
+        let (mut f_ext, mut candidate) = (vec![0.0; u.len()], trial.clone());
+        let mut step_norm = None;
         let iterations = STEP_ITERATIONS.min(opt.max_iterations);
         for it in 0..iterations {
-            let f_ext: Vec<f64> = loads.iter().map(|f| lam * f).collect();
+            f_ext.iter_mut().zip(&load.full).for_each(|(e, f)| *e = lam * f);
             let res = self.residual(&f_int, &f_ext, &mut r);
-            let rel = res / (lam.abs() * load_norm).max(norm(&f_int)).max(floor);
+            let rel = res / (lam.abs() * load.norm).max(norm(&f_int)).max(floor);
             stats.residuals.push(rel);
             if !rel.is_finite() {
                 return Err(FemError::NonFinite(format!("residual of an arc-length step at load factor {lam:.4}")));
             }
-            let small_step = step_norm <= opt.utol * norm(&trial).max(f64::MIN_POSITIVE);
-            if rel <= opt.rtol || (small_step && rel <= opt.rtol.sqrt()) {
+            if converged(opt, rel, step_norm, &trial) {
                 return Ok(Corrected { u: trial, lambda: lam, iterations: it });
             }
             stats.iterations += 1;
             if it > 0 && res > REFRESH_RATIO * last {
                 self.refactorize(&trial, &mut f_int, false, stats)?;
-                response.copy_from_slice(load);
+                response.copy_from_slice(&load.free);
                 self.cholesky.solve_in_place(Slot::Latest, &mut response)?;
             }
             (last, last_rel) = (res, rel);
@@ -195,7 +203,6 @@ impl StaticSolver {
             let dlam = -dot(&predictor, &correction) / dot(&predictor, &response);
             correction.iter_mut().zip(&response).for_each(|(c, v)| *c += dlam * v);
             let mut scale = (arc / norm(&correction)).min(1.0);
-            let mut candidate = trial.clone();
             for halving in 0..=INVERSION_HALVINGS {
                 candidate.copy_from_slice(&trial);
                 self.add_free(&mut candidate, &correction, scale);
@@ -205,8 +212,8 @@ impl StaticSolver {
                     Err(_) => scale *= 0.5,
                 }
             }
-            step_norm = scale * norm(&correction);
-            trial = candidate;
+            step_norm = Some(scale * norm(&correction));
+            std::mem::swap(&mut trial, &mut candidate);
             lam += scale * dlam;
         }
         Err(FemError::NotConverged { load_factor: lam, iterations, residual: last_rel })
