@@ -271,6 +271,16 @@ impl ModelPredictor {
             ModelPredictor::Projected(..) => Ok((self.predict(input)?, None)),
         }
     }
+
+    /// The predicted standard deviation alone at each grid node (`[nx, ny, nz]`, m) for one input
+    /// field, for a model that predicts one: a registration asks for it once per frame, after the
+    /// iterations that needed the displacement only.
+    pub fn predict_std(&self, input: &[f32]) -> Result<Option<Vec<f32>>> {
+        match self {
+            ModelPredictor::Reduced(m) => m.predict_std(input).map(Some),
+            ModelPredictor::UNet(_) | ModelPredictor::Projected(..) => Ok(None),
+        }
+    }
 }
 
 /// A model whose predictions are projected on the basis of a reduced-order model trained on the

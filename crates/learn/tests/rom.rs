@@ -71,6 +71,7 @@ fn a_smooth_two_parameter_family_is_learned_saved_and_evaluated() {
     let largest = field.iter().zip(&direct.field).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
     assert!(largest < 1e-6, "loaded and fitted models differ by {largest}");
     let std = std.unwrap();
+    assert_eq!(predictor.predict_std(test.input(0)).unwrap().as_ref(), Some(&std), "the standard deviation alone");
     let mask = test.mask(0);
     assert!(std.iter().zip(mask).all(|(s, &m)| if m == 1 { *s > 0.0 } else { *s == 0.0 }));
 

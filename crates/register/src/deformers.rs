@@ -221,9 +221,9 @@ pub struct NetworkDeformer {
     /// then takes the input nodes the cloud observes, the others absent, rather than the
     /// surface fit's extrapolation to them.
     partial: bool,
-    /// The predicted standard deviation of the last prediction's error on the grid (m), for a
-    /// model that predicts one.
-    last_std: Option<Vec<f32>>,
+    /// The input field of the last prediction, whose predicted standard deviation
+    /// [`Deformer::uncertainty`] gives (computed there: the iterations need the displacement only).
+    last_input: Option<Vec<f32>>,
 }
 
 /// Weight of the membrane penalty, relative to a matched cloud point's. Chosen on the design
@@ -301,7 +301,7 @@ impl NetworkDeformer {
             edges,
             normals,
             partial: model.training_corruption().sparsity.is_some(),
-            last_std: None,
+            last_input: None,
         })
     }
 
@@ -391,8 +391,8 @@ impl NetworkDeformer {
     }
 
     /// [`NetworkDeformer::predict`] from the input nodes marked in `seen` only (all: `None`), with
-    /// the predicted standard deviation on the grid for a model that predicts one.
-    fn predict_seen(&self, surface: &[[f64; 3]], seen: Option<&[bool]>) -> Result<(Vec<f64>, Option<Vec<f32>>)> {
+    /// the input field it gave the model.
+    fn predict_seen(&self, surface: &[[f64; 3]], seen: Option<&[bool]>) -> Result<(Vec<f64>, Vec<f32>)> {
         if surface.len() != self.inputs.len() {
             return Err(RegisterError::Invalid(format!(
                 "{} input displacements for {} input nodes",
@@ -407,14 +407,13 @@ impl NetworkDeformer {
             None => kept.iter().map(|&i| surface[i]).collect(),
         };
         let input = encode_points(&self.grid, &points, &values, false)?;
-        let (field, std) = self.predictor.predict_with_std(&input)?;
-        let mut u = self.to_mesh.apply(&field)?;
+        let mut u = self.to_mesh.apply(&self.predictor.predict(&input)?)?;
         if self.normals.is_none() {
             for (&n, s) in self.inputs.iter().zip(surface) {
                 u[3 * n..3 * n + 3].copy_from_slice(s);
             }
         }
-        Ok((u, std))
+        Ok((u, input))
     }
 
     /// Which input nodes a match of `observations` moves.
@@ -492,13 +491,16 @@ impl Deformer for NetworkDeformer {
             return Err(RegisterError::Invalid("no cloud point matches the network's input surface".into()));
         }
         let surface = self.surface_estimate(observations, previous);
-        let (u, std) = self.predict_seen(&surface, self.partial.then_some(seen.as_slice()))?;
-        self.last_std = std;
+        let (u, input) = self.predict_seen(&surface, self.partial.then_some(seen.as_slice()))?;
+        self.last_input = Some(input);
         Ok(u)
     }
 
     fn uncertainty(&self, rest_points: &[mesh::Point], _stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
-        let std = self.last_std.as_ref()?;
+        let std = match self.predictor.predict_std(self.last_input.as_ref()?) {
+            Ok(std) => std?,
+            Err(e) => return Some(Err(e.into())),
+        };
         let values: Vec<f64> = std.iter().map(|&v| f64::from(v)).collect();
         Some(self.grid.interpolate(&values, 1, rest_points).map_err(RegisterError::from))
     }

@@ -249,6 +249,13 @@ impl ReducedModel {
         Ok(UncertainPrediction { field, std })
     }
 
+    /// The predicted standard deviation alone (`[nx, ny, nz]`, m, zero outside the organ) for one
+    /// input field: [`predict_with_std`](Self::predict_with_std)'s without the displacement.
+    pub fn predict_std(&self, input: &[f32]) -> Result<Vec<f32>> {
+        let (k, _) = self.kernel_row(input)?;
+        Ok(self.scatter(&self.node_std(&k), 1))
+    }
+
     /// The calibrated standard deviation on the organ's nodes for a kernel row.
     fn node_std(&self, k: &[f64]) -> Vec<f64> {
         let v = (1.0 - quadratic_form(self.covariance.as_ref(), k)).max(0.0);
