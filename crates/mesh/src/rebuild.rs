@@ -253,6 +253,29 @@ mod tests {
     }
 
     #[test]
+    fn a_decimation_fold_goes_through_the_volumetric_route() {
+        // A quadric decimation that does not keep the topology folds a flap of two triangles back
+        // to back onto an edge of the surface, as CT liver exports so decimated show.
+        let sphere = icosphere(30.0, 4);
+        let mut folded = sphere.clone();
+        let [a, b, _] = folded.triangles[0];
+        let tip = folded.vertices[a].map(|x| 1.3 * x);
+        folded.vertices.push(tip);
+        let c = folded.vertices.len() - 1;
+        folded.triangles.extend([[a, b, c], [b, a, c]]);
+        let refused = repair_surface(&folded, &RepairOptions::default()).unwrap_err().to_string();
+        assert!(refused.contains("non-manifold edge") && refused.contains("cannot be repaired"), "{refused}");
+        let (result, route) =
+            repair_or_rebuild(&folded, &RepairOptions::default(), &RebuildOptions::default()).unwrap();
+        let Route::Volumetric(report) = &route else { panic!("{route:?}") };
+        let volume = check_closed_manifold(&result).unwrap().volume;
+        let expected = sphere.enclosed_volume();
+        assert!((volume / expected - 1.0).abs() < 0.03, "{volume} vs {expected}");
+        assert!(report.reason.contains("non-manifold edge"), "{}", report.reason);
+        assert!(report.mean_distance < 0.3 * report.voxel, "{report:?}");
+    }
+
+    #[test]
     fn a_mendable_surface_takes_the_local_route() {
         let mut s = icosphere(30.0, 3);
         s.triangles.remove(10);
