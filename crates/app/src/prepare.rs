@@ -900,6 +900,7 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
         truth.seen.len(),
         mm(mesh::stats::mean(&rest_errors))
     ));
+    lines.extend(swing_line(mesh::stats::mean(&rest_errors), &truth.mesh, truth.held.len()));
     for &(target, distance) in &truth.outside {
         lines.push(format!(
             "validation: target {target} lies {:.2} mm outside the truth's mesh and follows its nearest surface point",
@@ -922,6 +923,28 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
     lines.extend(methods.iter().map(|run| method_line(run, forces.len())));
     lines.push(record_better_method(dir, &methods)?);
     Ok(lines)
+}
+
+/// Above this share of the organ's longest side, the targets' mean motion under the validation's
+/// pushes is that of an organ swinging from where it is held, not of tissue deformed by a tool.
+const SWING_SHARE: f64 = 0.25;
+
+/// The validation's warning when its targets move on average by `motion` (m) more than
+/// [`SWING_SHARE`] of `organ`'s longest side, held at `held` nodes: what to change.
+fn swing_line(motion: f64, organ: &Mesh, held: usize) -> Option<String> {
+    let (lo, hi) = organ.bounds();
+    let longest = (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max);
+    (motion > SWING_SHARE * longest).then(|| {
+        format!(
+            "validation: the targets move by {:.0} mm on average, {:.0} % of the organ's {:.0} mm: held at {held} nodes \
+             near the landmarks, it swings rather than deforms under these pushes, and a registration is judged on \
+             that swing; hold it over more of its attachments (more landmarks, a larger --attach-mm) for the motions \
+             of surgery",
+            mm(motion),
+            100.0 * motion / longest,
+            mm(longest)
+        )
+    })
 }
 
 /// The validation's line on one method's registrations of `pushes` pushes.
@@ -1034,6 +1057,15 @@ fn regions_picture(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_organ_that_swings_under_the_validation_pushes_is_told_so() {
+        let organ = mesh::box_tet([0.0; 3], [0.2, 0.1, 0.1], [2, 1, 1]).unwrap();
+        assert_eq!(swing_line(0.049, &organ, 14), None, "a quarter of its 200 mm is not yet a swing");
+        let line = swing_line(0.163, &organ, 14).unwrap();
+        assert!(line.contains("move by 163 mm on average, 82 % of the organ's 200 mm: held at 14 nodes"), "{line}");
+        assert!(line.contains("--attach-mm"), "{line}");
+    }
 
     /// The shipped labelmaps of the liver phantom (its origin at (−80, 30, −140) mm in RAS).
     fn labelmap(name: &str) -> PathBuf {
