@@ -287,16 +287,13 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let targets = labelled_targets.points.clone();
     let (mut organ, quality) = mesh_surface_to_count(&surface, options.tets, BoundaryFit::default())
         .context("meshing the repaired surface")?;
-    let (lo, hi) = organ.bounds();
+    let [x, y, z] = extent(&organ).map(mm);
     lines.push(format!(
-        "mesh: {} nodes, {} T4 (dihedral angles {:.1}–{:.1}°), {:.0} × {:.0} × {:.0} mm",
+        "mesh: {} nodes, {} T4 (dihedral angles {:.1}–{:.1}°), {x:.0} × {y:.0} × {z:.0} mm",
         organ.num_nodes(),
         organ.cells.len(),
         quality.min_dihedral_deg,
         quality.max_dihedral_deg,
-        mm(hi[0] - lo[0]),
-        mm(hi[1] - lo[1]),
-        mm(hi[2] - lo[2])
     ));
     if quality.pieces > 1 {
         lines.push(format!(
@@ -395,16 +392,25 @@ fn input_unit(options: &PrepareOptions) -> Result<LengthUnit> {
 /// 6 mm apart on a liver), at least as fine along the others, each count a multiple of 8 (the
 /// U-Net halves it three times).
 fn grid_for(organ: &Mesh) -> [usize; 3] {
-    let (lo, hi) = organ.bounds();
-    let extent: Vec<f64> = (0..3).map(|d| hi[d] - lo[d]).collect();
+    let extent = extent(organ);
     let longest = extent.iter().copied().fold(0.0, f64::max);
     std::array::from_fn(|d| ((32.0 * extent[d] / longest / 8.0).ceil() as usize).max(1) * 8)
 }
 
+/// The sides of `organ`'s bounding box (m).
+fn extent(organ: &Mesh) -> [f64; 3] {
+    let (lo, hi) = organ.bounds();
+    std::array::from_fn(|d| hi[d] - lo[d])
+}
+
+/// The longest side of `organ`'s bounding box (m).
+fn longest_side(organ: &Mesh) -> f64 {
+    extent(organ).into_iter().fold(0.0, f64::max)
+}
+
 /// The tool's footprint on `organ`: 3 cm on the phantom's 21 cm, in proportion to its longest side.
 fn tool_radius(organ: &Mesh) -> f64 {
-    let (lo, hi) = organ.bounds();
-    0.03 * (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max) / 0.21
+    0.03 * longest_side(organ) / 0.21
 }
 
 /// Two unit directions across a line of sight along the unit vector `axis`, square to it and to
@@ -932,8 +938,7 @@ const SWING_SHARE: f64 = 0.25;
 /// The validation's warning when its targets move on average by `motion` (m) more than
 /// [`SWING_SHARE`] of `organ`'s longest side, held at `held` nodes: what to change.
 fn swing_line(motion: f64, organ: &Mesh, held: usize) -> Option<String> {
-    let (lo, hi) = organ.bounds();
-    let longest = (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max);
+    let longest = longest_side(organ);
     (motion > SWING_SHARE * longest).then(|| {
         format!(
             "validation: the targets move by {:.0} mm on average, {:.0} % of the organ's {:.0} mm: held at {held} nodes \
