@@ -74,8 +74,10 @@ pub struct PrepareOptions {
     /// Landmarks where the organ is held (ligaments, the hilum): a points file (CSV x, y, z,
     /// `.fcsv`, `.mrk.json`).
     pub attach: PathBuf,
-    /// Surface nodes within this distance (m) of a landmark are held.
-    pub attach_distance: f64,
+    /// Surface nodes within this distance (m) of a landmark are held (`None`: the distance that
+    /// holds [`HELD_SHARE`] of the organ's surface).
+    #[serde(default)]
+    pub attach_distance: Option<f64>,
     /// The targets (tumour, vessels) at rest: a points file (CSV x, y, z, `.fcsv`, `.mrk.json`).
     pub targets: PathBuf,
     /// Tetrahedra of the organ's mesh (about).
@@ -89,8 +91,8 @@ pub struct PrepareOptions {
 }
 
 impl PrepareOptions {
-    /// The options with the defaults for what is not given: held within 25 mm of the landmarks,
-    /// 3,000 tetrahedra, 2,000 draws, the reduced-order model, seed 2.
+    /// The options with the defaults for what is not given: held near the landmarks over
+    /// [`HELD_SHARE`] of the organ's surface, 3,000 tetrahedra, 2,000 draws, the reduced-order model, seed 2.
     pub fn new(surface: PathBuf, camera: impl Into<CameraAt>, attach: PathBuf, targets: PathBuf) -> PrepareOptions {
         PrepareOptions {
             surface,
@@ -98,7 +100,7 @@ impl PrepareOptions {
             units: None,
             camera: camera.into(),
             attach,
-            attach_distance: 0.025,
+            attach_distance: None,
             targets,
             tets: 3000,
             samples: 2000,
@@ -220,8 +222,8 @@ fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
             bail!("the {what} file {} does not exist", path.display());
         }
     }
-    if !(options.attach_distance > 0.0 && options.attach_distance.is_finite()) {
-        bail!("the attachment distance must be positive, got {} m", options.attach_distance);
+    if let Some(distance) = options.attach_distance.filter(|d| !(*d > 0.0 && d.is_finite())) {
+        bail!("the attachment distance must be positive, got {distance} m");
     }
     if options.samples < 10 {
         bail!("{} draws are too few to train and test a model (at least 10)", options.samples);
@@ -309,20 +311,25 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
             camera.map(mm)
         );
     }
-    let attached = Near { points: landmarks.clone(), file: None, distance: options.attach_distance, surface: true }
-        .nodes(&organ)?;
+    let distance = hold_distance(options, &organ, &landmarks)?;
+    let attached = Near { points: landmarks.clone(), file: None, distance, surface: true }.nodes(&organ)?;
     if attached.is_empty() {
         bail!(
             "no surface node lies within {} mm of the landmarks of {}: are they in the surface's unit and frame?",
-            mm(options.attach_distance),
+            mm(distance),
             options.attach.display()
         );
     }
     let boundary = mesh::topology::boundary_nodes(&organ).len();
+    let share = match options.attach_distance {
+        Some(_) => String::new(),
+        None => format!(", {:.0} % of its surface", 100.0 * HELD_SHARE),
+    };
     lines.push(format!(
-        "regions: the camera sees {} of {boundary} surface nodes; {} held near {} landmarks",
+        "regions: the camera sees {} of {boundary} surface nodes; {} held within {:.1} mm of {} landmarks{share}",
         visible.len(),
         attached.len(),
+        mm(distance),
         landmarks.len()
     ));
     let located = register::Organ::new(organ.clone(), None)?;
@@ -437,6 +444,20 @@ fn organ_name(path: &Path) -> String {
     }
 }
 
+/// The share of the organ's surface held near its landmarks by default: what SOFA's liver
+/// scenario holds (25 mm around its four ligaments), whatever the organ's size. A fixed distance
+/// holds a large organ by a smaller part of itself, and it swings from it.
+pub const HELD_SHARE: f64 = 0.12;
+
+/// The distance (m) from the landmarks within which `organ`'s surface nodes are held: the one
+/// given, or the one that holds [`HELD_SHARE`] of its surface.
+fn hold_distance(options: &PrepareOptions, organ: &Mesh, landmarks: &[Point]) -> Result<f64> {
+    match options.attach_distance {
+        Some(distance) => Ok(distance),
+        None => Ok(mesh::distance_holding_share(organ, landmarks, HELD_SHARE)?),
+    }
+}
+
 /// Step 2: the scenario files.
 fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
@@ -445,8 +466,8 @@ fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let radius = tool_radius(&organ);
     let name = organ_name(&options.surface);
     let camera_toml = format!("{{ facing = {{ position = [{}, {}, {}] }} }}", camera[0], camera[1], camera[2]);
-    let held =
-        format!("{{ near = {{ file = \"attach.csv\", distance = {}, surface = true }} }}", options.attach_distance);
+    let distance = hold_distance(options, &organ, &read_points_csv(&dir.join("attach.csv"))?)?;
+    let held = format!("{{ near = {{ file = \"attach.csv\", distance = {distance}, surface = true }} }}");
     let dataset = format!(
         "# The organ of {surface}, as `augsim prepare` set it up: a tool pushing what the camera\n\
          # sees, the organ held near the landmarks of attach.csv; the input is the visible surface's\n\
@@ -827,9 +848,8 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
     let camera = read_points_csv(&dir.join("camera.csv"))?[0];
     let landmarks = read_points_csv(&dir.join("attach.csv"))?;
     let targets = read_points_csv(&dir.join("targets.csv"))?;
-    let truth_of = |level: usize| {
-        Truth::new(&surface, level * options.tets, camera, &landmarks, &targets, options.attach_distance)
-    };
+    let distance = hold_distance(options, &mesh::io::read_mesh(dir.join("organ.vtu"))?, &landmarks)?;
+    let truth_of = |level: usize| Truth::new(&surface, level * options.tets, camera, &landmarks, &targets, distance);
     let truth = truth_of(TRUTH_LEVELS[0])?;
     // The pushes, at seen nodes of the coarsest truth ordered across the line of sight.
     let coarse = &truth.mesh;

@@ -150,6 +150,22 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     // The regions travel with the mesh file: what ParaView shows is what the scenarios select.
     let mesh = mesh::io::read_mesh(out.join("organ.vtu")).unwrap();
     assert!(mesh.region("visible").unwrap().len() > 20 && mesh.region("attached").unwrap().len() > 5);
+    // Held by default over 12 % of its surface: the distance the organ step reports is the one
+    // both scenarios hold the organ at, and it selects the region the mesh file carries.
+    let line = organ.iter().find(|l| l.starts_with("regions:")).unwrap();
+    assert!(line.ends_with("landmarks, 12 % of its surface"), "{line}");
+    let reported: f64 = line.split(" held within ").nth(1).unwrap().split(" mm").next().unwrap().parse().unwrap();
+    let distance_in = |file: &str| -> f64 {
+        let text = std::fs::read_to_string(out.join(file)).unwrap();
+        text.split("distance = ").nth(1).unwrap().split(',').next().unwrap().parse().unwrap()
+    };
+    let distance = distance_in("dataset.toml");
+    assert_eq!(distance_in("static.toml"), distance);
+    assert!((distance * 1e3 - reported).abs() <= 0.05, "{distance} m against the report's {reported} mm");
+    let landmarks = read_points(out.join("attach.csv")).unwrap().points;
+    let near = mesh::Near { points: landmarks.clone(), file: None, distance, surface: true }.nodes(&mesh).unwrap();
+    assert_eq!(near.as_slice(), mesh.region("attached").unwrap());
+    assert_eq!(distance, mesh::distance_holding_share(&mesh, &landmarks, 0.12).unwrap());
 
     // The set-up registers: a cloud of the organ's surface at rest leaves the targets where they are.
     for fem in [false, true] {

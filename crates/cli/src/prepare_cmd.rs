@@ -29,9 +29,10 @@ pub struct PrepareArgs {
     /// 3D Slicer's .fcsv or .mrk.json (in the frame and unit they name).
     #[arg(long, value_name = "LANDMARKS")]
     attach: PathBuf,
-    /// Surface nodes within this distance (mm) of a landmark are held.
-    #[arg(long, default_value_t = 25.0)]
-    attach_mm: f64,
+    /// Surface nodes within this distance (mm) of a landmark are held [default: the distance that
+    /// holds 12 % of the organ's surface, as SOFA's liver scenario does]
+    #[arg(long)]
+    attach_mm: Option<f64>,
     /// The targets at rest (tumour, vessels): CSV with a header x, y, z, or .fcsv or .mrk.json
     /// (their labels are kept).
     #[arg(long, value_name = "TARGETS")]
@@ -93,7 +94,7 @@ pub fn run(args: &PrepareArgs) -> Result<()> {
         PrepareOptions::new(args.surface.clone(), args.camera.clone(), args.attach.clone(), args.targets.clone());
     options.units = args.units;
     options.label = args.label.clone();
-    options.attach_distance = mesh::length::from_mm(args.attach_mm);
+    options.attach_distance = args.attach_mm.map(mesh::length::from_mm);
     options.samples = args.samples;
     options.method = args.method;
     options.tets = args.tets;

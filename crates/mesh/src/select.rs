@@ -202,6 +202,43 @@ impl Near {
     }
 }
 
+/// The smallest distance from the `landmarks` within which the boundary nodes carry `share` (0–1]
+/// of the boundary's area, each node a third of the boundary triangles it is a corner of: the
+/// distance of [`Near`] that holds that share of an organ's surface, whatever the organ's size. It
+/// lies half-way between the last node it takes and the next, so that [`Near`] selects the same
+/// nodes whatever the rounding.
+pub fn distance_holding_share(mesh: &Mesh, landmarks: &[Point], share: f64) -> Result<f64, MeshError> {
+    if !(share > 0.0 && share <= 1.0) {
+        return Err(MeshError::Invalid(format!("the share of the surface to hold must be in (0, 1], got {share}")));
+    }
+    if landmarks.is_empty() {
+        return Err(MeshError::Invalid("no landmark to hold the surface near".into()));
+    }
+    let surface = crate::topology::boundary_surface(mesh);
+    let mut area = vec![0.0; mesh.num_nodes()];
+    for (t, triangle) in surface.triangles.iter().enumerate() {
+        let third = crate::norm(crate::surface::triangle_area_vector(&surface, t)) / 3.0;
+        triangle.iter().for_each(|&k| area[k] += third);
+    }
+    let mut by_distance: Vec<(f64, usize)> = crate::topology::boundary_nodes(mesh)
+        .into_iter()
+        .map(|n| (landmarks.iter().map(|&l| crate::distance(mesh.nodes[n], l)).fold(f64::INFINITY, f64::min), n))
+        .collect();
+    by_distance.sort_unstable_by(closer);
+    let total: f64 = area.iter().sum();
+    if !(total > 0.0) {
+        return Err(MeshError::Invalid("the mesh's boundary has no area".into()));
+    }
+    let mut held = 0.0;
+    for (i, &(d, n)) in by_distance.iter().enumerate() {
+        held += area[n];
+        if held >= share * total * (1.0 - 1e-12) {
+            return Ok(by_distance.get(i + 1).map_or(d, |&(next, _)| 0.5 * (d + next)));
+        }
+    }
+    Ok(by_distance.last().map_or(0.0, |&(d, _)| d))
+}
+
 /// Indices of the points inside the closed box [min, max].
 pub fn nodes_in_box(points: &[Point], min: Point, max: Point) -> Vec<usize> {
     points
@@ -262,6 +299,36 @@ mod tests {
         let with_nan = [[f64::NAN, 0.0, 0.0], [9.0, 0.0, 0.0]];
         assert_eq!(k_nearest(&with_nan, 0..2, p, 2), vec![1, 0]);
         assert_eq!(nearest(&with_nan, 0..2, p), Some(1));
+    }
+
+    #[test]
+    fn a_share_of_a_face_is_held_within_the_disc_of_that_area() {
+        // A unit cube held near the centre of its bottom face: within r < 0.5 only that face is
+        // near, and the disc of radius r holds π r² of the 6 m² boundary.
+        let cube = crate::box_mesh(crate::CellKind::Tet4, [0.0; 3], [1.0; 3], [20, 20, 20]).unwrap();
+        let centre = [0.5, 0.5, 0.0];
+        let h = 0.05;
+        for share in [0.02, 0.05, 0.1] {
+            let exact = (6.0 * share / std::f64::consts::PI).sqrt();
+            let r = distance_holding_share(&cube, &[centre], share).unwrap();
+            assert!((r - exact).abs() < h, "share {share}: {r} against the disc's {exact}");
+            // Near at that distance holds the nodes that make up the share, and none farther.
+            let held = Near { points: vec![centre], file: None, distance: r, surface: true }.nodes(&cube).unwrap();
+            let farthest = held.iter().map(|&n| crate::distance(cube.nodes[n], centre)).fold(0.0, f64::max);
+            assert!(farthest <= r && r - farthest < h, "{farthest} {r}");
+        }
+        // The quadratic mesh of the same cube holds the same disc.
+        let quadratic = cube.quadratic().unwrap();
+        let (r1, r2) = (
+            distance_holding_share(&cube, &[centre], 0.05).unwrap(),
+            distance_holding_share(&quadratic, &[centre], 0.05).unwrap(),
+        );
+        assert!((r1 - r2).abs() < h, "{r1} {r2}");
+        // The whole surface is held at the farthest corner's distance.
+        let all = distance_holding_share(&cube, &[centre], 1.0).unwrap();
+        assert!((all - 1.5f64.sqrt()).abs() < 1e-12, "{all}");
+        assert!(distance_holding_share(&cube, &[centre], 0.0).is_err());
+        assert!(distance_holding_share(&cube, &[], 0.1).is_err());
     }
 }
 
