@@ -321,16 +321,16 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
         );
     }
     let boundary = mesh::topology::boundary_nodes(&organ).len();
-    let share = match options.attach_distance {
-        Some(_) => String::new(),
-        None => format!(", {:.0} % of its surface", 100.0 * HELD_SHARE),
-    };
+    let area = mesh::boundary_node_areas(&organ);
+    let held_share = attached.iter().map(|&n| area[n]).sum::<f64>() / area.iter().sum::<f64>();
     lines.push(format!(
-        "regions: the camera sees {} of {boundary} surface nodes; {} held within {:.1} mm of {} landmarks{share}",
+        "regions: the camera sees {} of {boundary} surface nodes; {} held within {:.1} mm of {} landmarks, {:.0} % of \
+         its surface",
         visible.len(),
         attached.len(),
         mm(distance),
-        landmarks.len()
+        landmarks.len(),
+        100.0 * held_share
     ));
     let located = register::Organ::new(organ.clone(), None)?;
     let (_, warnings) =

@@ -165,7 +165,7 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     let landmarks = read_points(out.join("attach.csv")).unwrap().points;
     let near = mesh::Near { points: landmarks.clone(), file: None, distance, surface: true }.nodes(&mesh).unwrap();
     assert_eq!(near.as_slice(), mesh.region("attached").unwrap());
-    assert_eq!(distance, mesh::distance_holding_share(&mesh, &landmarks, 0.12).unwrap());
+    assert_eq!(distance, mesh::distance_holding_share(&mesh, &landmarks, augsim_app::prepare::HELD_SHARE).unwrap());
 
     // The set-up registers: a cloud of the organ's surface at rest leaves the targets where they are.
     for fem in [false, true] {

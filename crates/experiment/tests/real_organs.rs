@@ -40,8 +40,7 @@ fn organs() -> [Organ; 3] {
     };
     // The distance at which the AMOS liver is held over the share of its surface `prepare` holds.
     let landmarks = mesh::io::points::read_points_csv(&data("amos_liver_attach.csv")).unwrap();
-    let whole = mesh::without_small_pieces(read_mesh("amos_liver")).unwrap();
-    let share = mesh::distance_holding_share(&whole, &landmarks, app::prepare::HELD_SHARE).unwrap();
+    let share = mesh::distance_holding_share(&whole("amos_liver"), &landmarks, app::prepare::HELD_SHARE).unwrap();
     [
         // A liver segmented from a public CT scan (AMOS), held within 25 mm of three landmarks on its
         // back, pushed on its front.
@@ -81,9 +80,12 @@ fn read_mesh(stem: &str) -> Mesh {
 
 /// The organ's mesh as read, and without the pieces that hang on it by an edge or a vertex.
 fn meshes(organ: &Organ) -> (Mesh, Mesh) {
-    let read = read_mesh(organ.mesh);
-    let whole = mesh::without_small_pieces(read.clone()).unwrap();
-    (read, whole)
+    (read_mesh(organ.mesh), whole(organ.mesh))
+}
+
+/// The mesh without the pieces that hang on it by an edge or a vertex.
+fn whole(stem: &str) -> Mesh {
+    mesh::without_small_pieces(read_mesh(stem)).unwrap()
 }
 
 /// The organ pushed by `force` newtons, Neo-Hookean (E 5 kPa, ν 0.49), standard elements of `order`.

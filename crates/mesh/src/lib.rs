@@ -36,7 +36,7 @@ pub use immersed::{immersed_grid, immersed_surface, ImmersedGrid, ImmersedOption
 pub use phantom::{liver_phantom, PhantomSpec};
 pub use quadratic::{tet10_shape, tet10_shape_derivatives, TET10_EDGES};
 pub use sampling::{sample_visible, sample_visible_boundary, SurfaceSample};
-pub use select::{distance_holding_share, Ball, Camera, Near, NodeSelection, SpaceBall};
+pub use select::{boundary_node_areas, distance_holding_share, Ball, Camera, Near, NodeSelection, SpaceBall};
 pub use surface::{check_closed_manifold, SurfaceReport};
 pub use tetmesh::{
     mesh_surface, stuff, tet_quality, without_small_pieces, BoundaryFit, ImplicitDomain, SdfDomain, TetMeshOptions,

@@ -203,7 +203,7 @@ impl Near {
 }
 
 /// The smallest distance from the `landmarks` within which the boundary nodes carry `share` (0–1]
-/// of the boundary's area, each node a third of the boundary triangles it is a corner of: the
+/// of the boundary's area ([`boundary_node_areas`]): the
 /// distance of [`Near`] that holds that share of an organ's surface, whatever the organ's size. It
 /// lies half-way between the last node it takes and the next, so that [`Near`] selects the same
 /// nodes whatever the rounding.
@@ -214,14 +214,9 @@ pub fn distance_holding_share(mesh: &Mesh, landmarks: &[Point], share: f64) -> R
     if landmarks.is_empty() {
         return Err(MeshError::Invalid("no landmark to hold the surface near".into()));
     }
-    let surface = crate::topology::boundary_surface(mesh);
-    let mut area = vec![0.0; mesh.num_nodes()];
-    for (t, triangle) in surface.triangles.iter().enumerate() {
-        let third = crate::norm(crate::surface::triangle_area_vector(&surface, t)) / 3.0;
-        triangle.iter().for_each(|&k| area[k] += third);
-    }
-    let mut by_distance: Vec<(f64, usize)> = crate::topology::boundary_nodes(mesh)
-        .into_iter()
+    let area = boundary_node_areas(mesh);
+    let mut by_distance: Vec<(f64, usize)> = (0..mesh.num_nodes())
+        .filter(|&n| area[n] > 0.0)
         .map(|n| (landmarks.iter().map(|&l| crate::distance(mesh.nodes[n], l)).fold(f64::INFINITY, f64::min), n))
         .collect();
     by_distance.sort_unstable_by(closer);
@@ -237,6 +232,18 @@ pub fn distance_holding_share(mesh: &Mesh, landmarks: &[Point], share: f64) -> R
         }
     }
     Ok(by_distance.last().map_or(0.0, |&(d, _)| d))
+}
+
+/// Each node's share of the boundary's area (m²): a third of each boundary triangle it is a corner
+/// of ([`crate::topology::boundary_surface`]'s, quadratic faces split in four); 0 off the boundary.
+pub fn boundary_node_areas(mesh: &Mesh) -> Vec<f64> {
+    let surface = crate::topology::boundary_surface(mesh);
+    let mut area = vec![0.0; mesh.num_nodes()];
+    for (t, triangle) in surface.triangles.iter().enumerate() {
+        let third = crate::norm(crate::surface::triangle_area_vector(&surface, t)) / 3.0;
+        triangle.iter().for_each(|&k| area[k] += third);
+    }
+    area
 }
 
 /// Indices of the points inside the closed box [min, max].
