@@ -25,7 +25,8 @@
 //! 6. **validation**: registration of held-out cases, the learned model's and the FEM's, against
 //!    a truth they did not see: the same surface meshed anew with quadratic tetrahedra (T10, the
 //!    dataset's Neo-Hookean law without its F-bar linear elements), 3, 6 or 12 times finer (the
-//!    first whose targets move by at most 10 % on a mesh twice as fine), pushed
+//!    first whose targets move by at most 10 % on a mesh twice as fine, under the push that moves
+//!    them most), pushed
 //!    by a tool at four places of what the camera sees; the cloud is the truth's seen surface with 0.5 mm of
 //!    noise; the TRE at the targets. The truths' solutions are kept in `validation/`, so that a
 //!    validation run again does not solve them again.
@@ -240,9 +241,12 @@ fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
     })
 }
 
-/// The organ's inputs in metres and in the surface's frame (see [`crate::points`]).
+/// The organ's inputs in the surface's frame (see [`crate::points`]): the surface in its file's
+/// `unit` (it is repaired there, so that what the repair reports is in that unit), the points in
+/// metres.
 struct Inputs {
     surface: mesh::TriSurface,
+    unit: LengthUnit,
     landmarks: LabelledPoints,
     targets: LabelledPoints,
     camera: Point,
@@ -251,9 +255,9 @@ struct Inputs {
 
 /// Reads the surface in its unit (given or detected) and frame, and the landmarks, the targets
 /// and the camera, each in the unit and frame its file names, else the surface's; all brought to
-/// metres and to the surface's frame (or, when its header names none, the first named).
+/// the surface's frame (or, when its header names none, the first named), the points to metres.
 fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inputs> {
-    let (mut surface, surface_frame, unit) = read_surface_input(options, lines)?;
+    let (surface, surface_frame, unit) = read_surface_input(options, lines)?;
     let mut input = PointInput::new(surface_frame, LengthUnit::Metre, unit);
     let read =
         |input: &mut PointInput, path: &Path| input.read(path).with_context(|| format!("reading {}", path.display()));
@@ -272,18 +276,18 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
         (None, Some(f)) => format!("frame: {f} (named by the points' files; the surface's header names none)"),
         (None, None) => "frame: not named by any input (SPACE= header, .fcsv, .mrk.json): all taken as given".into(),
     });
-    surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(*p));
-    Ok(Inputs { surface, landmarks, targets, camera, frame })
+    Ok(Inputs { surface, unit, landmarks, targets, camera, frame })
 }
 
 /// Step 1: the surface repaired and meshed, the regions selected, the targets located.
 fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let mut lines = Vec::new();
-    let Inputs { surface, landmarks: labelled_landmarks, targets: labelled_targets, camera, frame } =
+    let Inputs { surface, unit, landmarks: labelled_landmarks, targets: labelled_targets, camera, frame } =
         read_inputs(options, &mut lines)?;
-    let (surface, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
+    let (mut surface, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
         .with_context(|| format!("repairing {}", options.surface.display()))?;
-    lines.extend(route.lines(Some(mm(LengthUnit::Metre.metres()))).into_iter().map(|l| format!("repair: {l}")));
+    lines.extend(route.lines(Some(mm(unit.metres()))).into_iter().map(|l| format!("repair: {l}")));
+    surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(*p));
     lines.extend(route.warnings().into_iter().map(|w| format!("warning: {w}")));
     let landmarks = labelled_landmarks.points.clone();
     let targets = labelled_targets.points.clone();
@@ -723,8 +727,8 @@ type Solution = std::result::Result<Vec<f64>, String>;
 type Solutions = Vec<Solution>;
 
 /// The validation's truth refined until converged, from `truth` (the coarsest of
-/// [`TRUTH_LEVELS`], `truth_of` meshing the others): its largest push that a mesh twice as fine
-/// also solves is solved again there; while the `targets` move by more than
+/// [`TRUTH_LEVELS`], `truth_of` meshing the others): of its pushes that a mesh twice as fine
+/// also solves, the one that moves the targets most is solved again there; while the `targets` move by more than
 /// [`TRUTH_TOLERANCE`] of their motion, the finer mesh becomes the truth. Returns the truth, its
 /// solutions of the `pushes` by `solve`, and a report line per check.
 fn converged_truth(
@@ -738,13 +742,19 @@ fn converged_truth(
     let mut lines = Vec::new();
     for (i, &level) in TRUTH_LEVELS.iter().enumerate().skip(1) {
         let finer = truth_of(level)?;
-        let mut by_force: Vec<(usize, &Vec<f64>)> =
-            solutions.iter().enumerate().filter_map(|(p, s)| s.as_ref().ok().map(|u| (p, u))).collect();
-        by_force.sort_by(|a, b| pushes[b.0].force.total_cmp(&pushes[a.0].force));
+        // The push that moves the targets most is the check: a push that hardly moves them would
+        // judge the mesh on a motion of the order of its own discretisation error.
+        let mut by_motion: Vec<(usize, &Vec<f64>, f64)> = solutions
+            .iter()
+            .enumerate()
+            .filter_map(|(p, s)| s.as_ref().ok().map(|u| (p, u)))
+            .map(|(p, u)| (p, u, mesh::stats::mean(&register::target_errors(targets, &truth.targets(targets, u)))))
+            .collect();
+        by_motion.sort_by(|a, b| b.2.total_cmp(&a.2));
         let mut finer_solutions: Vec<Option<Solution>> = vec![None; pushes.len()];
         let mut unsolved = Vec::new();
         let mut checked = None;
-        for (p, u) in by_force {
+        for (p, u, _) in by_motion {
             match solve(&finer, p)? {
                 Ok(finer_u) => {
                     finer_solutions[p] = Some(Ok(finer_u.clone()));
@@ -838,8 +848,8 @@ fn method_name(method: PatientMethod) -> &'static str {
 
 /// Step 6: registration of held-out cases against a quadratic truth on another mesh, refined
 /// until converged: meshed with 3, 6 or 12 times the organ's tetrahedra, the first whose targets
-/// move by at most [`TRUTH_TOLERANCE`] under its largest push on a mesh twice as fine (the finest
-/// reached otherwise, and the report says so).
+/// move by at most [`TRUTH_TOLERANCE`] on a mesh twice as fine under the push that moves them most
+/// (the finest reached otherwise, and the report says so).
 fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     use rand::SeedableRng;
     use rand_distr::Distribution;
@@ -1134,6 +1144,33 @@ mod tests {
             let expected = [sign * -80.0, sign * 30.0, -140.0];
             assert!(mesh::distance(middle, expected) < 3.0, "{file}: centre {middle:?}, {expected:?} expected");
         }
+    }
+
+    #[test]
+    fn a_broken_export_is_rebuilt_and_its_defect_named_in_the_file_s_unit() {
+        let dir = tempfile::tempdir().unwrap();
+        let export = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mesh/tests/data/broken_export.obj");
+        write_points_csv(&dir.path().join("attach.csv"), &[[0.0, 0.0, -60.0], [70.0, 0.0, -40.0], [-42.0, 0.0, -42.0]])
+            .unwrap();
+        write_points_csv(&dir.path().join("targets.csv"), &[[0.0, 0.0, 0.0], [70.0, 0.0, 0.0]]).unwrap();
+        let mut options = PrepareOptions::new(
+            export.clone(),
+            [0.0, 0.0, 300.0],
+            dir.path().join("attach.csv"),
+            dir.path().join("targets.csv"),
+        );
+        options.units = Some(LengthUnit::Millimetre);
+        options.tets = 800;
+        let lines = organ_step(&options, dir.path()).unwrap();
+        // The defect as local repair names it on the file as read (mm), not on the surface in metres.
+        let as_read = mesh::io::read_surface(&export).unwrap();
+        let Err(mesh::MeshError::Invalid(defect)) = mesh::repair::repair_surface(&as_read, &RepairOptions::default())
+        else {
+            panic!("local repair mends the broken export")
+        };
+        let route = format!("repair: route: volumetric (local repair cannot mend it: {defect})");
+        assert!(lines.contains(&route), "{route} expected in {lines:?}");
+        assert!(lines.iter().any(|l| l == "targets: 2 inside the organ"), "{lines:?}");
     }
 
     #[test]

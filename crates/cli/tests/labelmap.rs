@@ -81,33 +81,10 @@ fn a_slicer_segmentation_is_chosen_by_name() {
     assert!(text.contains("labelmap   label 5 ('liver'): ") && text.contains("frame LPS kept"), "{text}");
 }
 
-/// Two overlapping spheres (mm), a small one glued to the first at a vertex, three holes, as OBJ.
-fn write_broken_export(path: &Path) {
-    let mut text = String::new();
-    let mut base = 1;
-    let a = mesh::icosphere(60.0, 3);
-    let top = a.vertices.iter().copied().max_by(|p, q| p[2].total_cmp(&q[2])).unwrap();
-    for (r, centre) in [(60.0, [0.0; 3]), (40.0, [70.0, 0.0, 0.0]), (15.0, [top[0], top[1], top[2] + 15.0])] {
-        let s = mesh::icosphere(r, 3);
-        for p in &s.vertices {
-            text += &format!("v {} {} {}\n", p[0] + centre[0], p[1] + centre[1], p[2] + centre[2]);
-        }
-        for (t, tri) in s.triangles.iter().enumerate() {
-            if r == 60.0 && [10, 200, 400].contains(&t) {
-                continue;
-            }
-            text += &format!("f {} {} {}\n", tri[0] + base, tri[1] + base, tri[2] + base);
-        }
-        base += s.vertices.len();
-    }
-    std::fs::write(path, text).unwrap();
-}
-
 #[test]
 fn a_broken_export_goes_through_the_volumetric_route() {
     let dir = tempfile::tempdir().unwrap();
-    let obj = dir.path().join("broken.obj");
-    write_broken_export(&obj);
+    let obj = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mesh/tests/data/broken_export.obj");
     let out = dir.path().join("organ.vtu");
     let (ok, text) = augsim(&["mesh", obj.to_str().unwrap(), "--tets", "2000", "-o", out.to_str().unwrap()]);
     assert!(ok, "{text}");

@@ -1,6 +1,9 @@
 //! Repair of segmented organ surfaces on the SOFA livers, damaged the way segmentations are:
 //! holes, a triangle soup (as STL stores it), flipped, degenerate and repeated triangles, in
-//! millimetres; then the repaired surface is meshed.
+//! millimetres; then the repaired surface is meshed. And the shipped broken export, which local
+//! repair refuses.
+//!
+//! To write `broken_export.obj` anew: `AUGSIM_WRITE_TEST_DATA=1 cargo test --release -p augsim-mesh --test repair`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -216,4 +219,38 @@ fn the_other_sofa_surfaces() {
     let e = repair_surface(&read_surface(data("liver.vtk")).unwrap(), &RepairOptions::default()).unwrap_err();
     let e = e.to_string();
     assert!(e.contains("4 separate pieces (9988, 4, 4, 4 triangles): keep the organ only"), "{e}");
+}
+
+/// The broken export's text (OBJ, mm): two overlapping spheres, a small one glued to the first
+/// at a vertex, three holes.
+fn broken_export() -> String {
+    let mut text = String::new();
+    let mut base = 1;
+    let a = augsim_mesh::icosphere(60.0, 3);
+    let top = a.vertices.iter().copied().max_by(|p, q| p[2].total_cmp(&q[2])).unwrap();
+    for (r, centre) in [(60.0, [0.0; 3]), (40.0, [70.0, 0.0, 0.0]), (15.0, [top[0], top[1], top[2] + 15.0])] {
+        let s = augsim_mesh::icosphere(r, 3);
+        for p in &s.vertices {
+            text += &format!("v {} {} {}\n", p[0] + centre[0], p[1] + centre[1], p[2] + centre[2]);
+        }
+        for (t, tri) in s.triangles.iter().enumerate() {
+            if r == 60.0 && [10, 200, 400].contains(&t) {
+                continue;
+            }
+            text += &format!("f {} {} {}\n", tri[0] + base, tri[1] + base, tri[2] + base);
+        }
+        base += s.vertices.len();
+    }
+    text
+}
+
+#[test]
+fn the_shipped_broken_export_is_what_its_generator_writes_and_local_repair_refuses_it() {
+    let text = broken_export();
+    if std::env::var_os("AUGSIM_WRITE_TEST_DATA").is_some() {
+        std::fs::write(data("broken_export.obj"), &text).unwrap();
+    }
+    assert!(std::fs::read_to_string(data("broken_export.obj")).unwrap() == text, "the file differs from its generator");
+    let e = repair_surface(&read_surface(data("broken_export.obj")).unwrap(), &RepairOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("non-manifold vertex"), "{e}");
 }
