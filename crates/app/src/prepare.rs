@@ -41,7 +41,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use mesh::io::points::{read_points_csv, write_points, write_points_csv, LabelledPoints};
+use mesh::io::points::{read_points_csv, write_points, LabelledPoints};
 use mesh::io::{read_surface_with_frame, write_atomic_bytes, Frame};
 use mesh::isosurface::ExtractOptions;
 use mesh::labelmap::{is_labelmap, read_labelmap_surface};
@@ -353,7 +353,8 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     // In metres, in the organ's frame, with their labels: what `register` reads back.
     write_points(dir.join("attach.csv"), &LabelledPoints { frame, ..labelled_landmarks })?;
     write_points(dir.join("targets.csv"), &LabelledPoints { frame, ..labelled_targets })?;
-    write_points_csv(&dir.join("camera.csv"), &[camera])?;
+    let camera = LabelledPoints { frame, unit: Some(LengthUnit::Metre), ..LabelledPoints::new(vec![camera]) };
+    write_points(dir.join("camera.csv"), &camera)?;
     Ok(lines)
 }
 
@@ -1092,6 +1093,7 @@ fn regions_picture(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mesh::io::points::write_points_csv;
 
     #[test]
     fn an_organ_that_swings_under_the_validation_pushes_is_told_so() {

@@ -121,6 +121,13 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     let mut held = read_points(dir.path().join("landmarks.mrk.json")).unwrap();
     held.convert(Some(Frame::Lps), LengthUnit::Metre, LengthUnit::Metre);
     assert_eq!((read_points(out.join("attach.csv")).unwrap().points, held.frame), (held.points, Some(Frame::Lps)));
+    let mut seen_from = read_points(dir.path().join("camera.fcsv")).unwrap();
+    seen_from.convert(Some(Frame::Lps), LengthUnit::Metre, LengthUnit::Metre);
+    let written = read_points(out.join("camera.csv")).unwrap();
+    assert_eq!(
+        (written.points, written.frame, written.unit),
+        (seen_from.points, Some(Frame::Lps), Some(LengthUnit::Metre))
+    );
     assert!(organ.iter().any(|l| l.starts_with("repair: filled 2 holes (3, 3 edges)")), "the holes: {organ:?}");
     let validation = &state.steps[5].lines;
     assert!(validation.iter().any(|l| l.starts_with("validation: FEM TRE")), "{validation:?}");

@@ -90,6 +90,7 @@ fn a_broken_export_goes_through_the_volumetric_route() {
     assert!(ok, "{text}");
     assert!(text.contains("repair     route: volumetric (local repair cannot mend it: non-manifold vertex"), "{text}");
     assert!(text.contains("repair     distance to the input surface: mean "), "{text}");
+    assert!(text.contains("repair     enclosed volume: ") && text.contains(" mL ("), "{text}");
     let (ok, text) = augsim(&["mesh", obj.to_str().unwrap(), "--label", "5", "-o", out.to_str().unwrap()]);
     assert!(!ok && text.contains("--label chooses a label of a labelmap"), "{text}");
 }

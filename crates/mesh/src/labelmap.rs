@@ -635,11 +635,10 @@ impl LabelSurface {
         )];
         lines.extend(e.cleaning_lines());
         lines.push(format!(
-            "surface: {} triangles (decimated from {}), {:.1} mL ({:+.1} % from the voxels)",
+            "surface: {} triangles (decimated from {}), {}",
             self.surface.triangles.len(),
             e.extracted_triangles,
-            e.volume * 1e-3,
-            100.0 * (e.volume / e.voxel_volume - 1.0)
+            e.volume_text(Some(1.0))
         ));
         lines
     }

@@ -98,6 +98,7 @@ impl Route {
                     ),
                 ];
                 lines.extend(e.cleaning_lines());
+                lines.push(format!("enclosed volume: {}", e.volume_text(mm_per_unit)));
                 lines.push(format!(
                     "distance to the input surface: mean {}, largest {}",
                     mm(r.mean_distance),
@@ -250,6 +251,11 @@ mod tests {
         assert!(report.mean_distance < 0.3 * report.voxel && report.max_distance < 2.0 * report.voxel, "{report:?}");
         assert!(lines[0].starts_with("route: volumetric (local repair cannot mend it: "));
         assert!(lines.last().unwrap().starts_with("distance to the input surface: mean "));
+        // The organ is kept whole: its volume lies within 3 % of the voxels it was extracted from.
+        let e = &report.extract;
+        assert!((e.volume / e.voxel_volume - 1.0).abs() < 0.03, "{e:?}");
+        let change = format!("{:+.1} % from the voxels)", 100.0 * (e.volume / e.voxel_volume - 1.0));
+        assert!(lines.iter().any(|l| l.starts_with("enclosed volume: ") && l.ends_with(&change)), "{lines:?}");
     }
 
     #[test]
