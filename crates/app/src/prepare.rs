@@ -26,9 +26,8 @@
 //!    a truth they did not see: the same surface meshed anew with quadratic tetrahedra (T10, the
 //!    dataset's Neo-Hookean law without its F-bar linear elements), 3, 6 or 12 times finer (the
 //!    first whose targets move by at most 10 % on a mesh twice as fine, under the push that moves
-//!    them most), pushed
-//!    by a tool at four places of what the camera sees; the cloud is the truth's seen surface with 0.5 mm of
-//!    noise; the TRE at the targets. The truths' solutions are kept in `validation/`, so that a
+//!    them most), pushed by a tool at four places of what the camera sees; the cloud is the
+//!    truth's seen surface with 0.5 mm of noise; the TRE at the targets. The truths' solutions are kept in `validation/`, so that a
 //!    validation run again does not solve them again.
 //! 7. **report**: `report.md`, with `regions.png` (the organ seen from the camera: what it
 //!    sees, where it is held, the targets) and the time of each step.
@@ -729,9 +728,9 @@ type Solutions = Vec<Solution>;
 
 /// The validation's truth refined until converged, from `truth` (the coarsest of
 /// [`TRUTH_LEVELS`], `truth_of` meshing the others): of its pushes that a mesh twice as fine
-/// also solves, the one that moves the targets most is solved again there; while the `targets` move by more than
-/// [`TRUTH_TOLERANCE`] of their motion, the finer mesh becomes the truth. Returns the truth, its
-/// solutions of the `pushes` by `solve`, and a report line per check.
+/// also solves, the one that moves the targets most is solved again there; while the `targets`
+/// move by more than [`TRUTH_TOLERANCE`] of their motion, the finer mesh becomes the truth.
+/// Returns the truth, its solutions of the `pushes` by `solve`, and a report line per check.
 fn converged_truth(
     mut truth: Truth,
     truth_of: &dyn Fn(usize) -> Result<Truth>,
