@@ -27,8 +27,8 @@
 //!    dataset's Neo-Hookean law without its F-bar linear elements), 3, 6 or 12 times finer (the
 //!    first whose targets move by at most 10 % on a mesh twice as fine, under the push that moves
 //!    them most), pushed by a tool at four places of what the camera sees; the cloud is the
-//!    truth's seen surface with 0.5 mm of noise; the TRE at the targets. The truths' solutions are kept in `validation/`, so that a
-//!    validation run again does not solve them again.
+//!    truth's seen surface with 0.5 mm of noise; the TRE at the targets. The truths' solutions
+//!    are kept in `validation/`, so that a validation run again does not solve them again.
 //! 7. **report**: `report.md`, with `regions.png` (the organ seen from the camera: what it
 //!    sees, where it is held, the targets) and the time of each step.
 //!
@@ -323,8 +323,9 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
             options.attach.display()
         );
     }
-    let boundary = mesh::topology::boundary_nodes(&organ).len();
+    // The boundary nodes are those with a share of the surface: one pass over its faces.
     let area = mesh::boundary_node_areas(&organ);
+    let boundary = area.iter().filter(|&&a| a > 0.0).count();
     let held_share = attached.iter().map(|&n| area[n]).sum::<f64>() / area.iter().sum::<f64>();
     lines.push(format!(
         "regions: the camera sees {} of {boundary} surface nodes; {} held within {:.1} mm of {} landmarks, {:.0} % of \
@@ -747,8 +748,10 @@ fn converged_truth(
         let mut by_motion: Vec<(usize, &Vec<f64>, f64)> = solutions
             .iter()
             .enumerate()
-            .filter_map(|(p, s)| s.as_ref().ok().map(|u| (p, u)))
-            .map(|(p, u)| (p, u, mesh::stats::mean(&register::target_errors(targets, &truth.targets(targets, u)))))
+            .filter_map(|(p, s)| {
+                let u = s.as_ref().ok()?;
+                Some((p, u, mesh::stats::mean(&register::target_errors(targets, &truth.targets(targets, u)))))
+            })
             .collect();
         by_motion.sort_by(|a, b| b.2.total_cmp(&a.2));
         let mut finer_solutions: Vec<Option<Solution>> = vec![None; pushes.len()];
