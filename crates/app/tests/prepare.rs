@@ -129,6 +129,14 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
         (seen_from.points, Some(Frame::Lps), Some(LengthUnit::Metre))
     );
     assert!(organ.iter().any(|l| l.starts_with("repair: filled 2 holes (3, 3 edges)")), "the holes: {organ:?}");
+    // The draws' motion, read from the shards, against the statistics the generator kept as it
+    // wrote them: the mean of the displacements' lengths is at most their root mean square.
+    let dataset = &state.steps[2].lines;
+    let motion = dataset.iter().find(|l| l.starts_with("dataset: the draws move the organ by")).unwrap();
+    let [mean, p90, largest] = [" by ", " most ", "largest by "]
+        .map(|before| -> f64 { motion.split(before).nth(1).unwrap().split(" mm").next().unwrap().parse().unwrap() });
+    let rms = learn::Dataset::open(&out.join("dataset")).unwrap().manifest().statistics.targets.rms_norm * 1e3;
+    assert!(0.0 < mean && mean <= rms + 0.05 && mean <= largest && p90 <= largest, "{motion}; RMS {rms:.2} mm");
     let validation = &state.steps[5].lines;
     assert!(validation.iter().any(|l| l.starts_with("validation: FEM TRE")), "{validation:?}");
     // The truth the cases are registered against is the mesh the last convergence check accepted
