@@ -198,7 +198,7 @@ pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgr
             2 => dataset_step(dir, progress)?,
             3 => model_step(&options, dir, progress)?,
             4 => evaluation_step(dir)?,
-            5 => validation_step(&options, dir)?,
+            5 => validation_step(&options, dir, progress)?,
             _ => report_step(&state, dir)?,
         };
         lines.iter().for_each(|l| progress.line(l));
@@ -887,7 +887,7 @@ fn method_name(method: PatientMethod) -> &'static str {
 /// until converged: meshed with 3, 6 or 12 times the organ's tetrahedra, the first whose targets
 /// move by at most [`TRUTH_TOLERANCE`] on a mesh twice as fine under the push that moves them most
 /// (the finest reached otherwise, and the report says so).
-fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
+fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::Progress) -> Result<Vec<String>> {
     use rand::SeedableRng;
     use rand_distr::Distribution;
 
@@ -914,10 +914,20 @@ fn validation_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> 
     let kept = dir.join(TRUTH_DIR);
     std::fs::create_dir_all(&kept).with_context(|| format!("creating {}", kept.display()))?;
     let read_back = std::cell::Cell::new(0);
+    // Each solve is told as it ends: on the finest truths one takes an hour.
     let solve = |truth: &Truth, push: usize| -> Result<Solution> {
         let Push { force, centre, .. } = pushes[push];
+        let start = Instant::now();
         let (solution, kept) = truth.push_kept(&kept, push, centre, camera, force, radius)?;
         read_back.set(read_back.get() + usize::from(kept));
+        if !kept {
+            progress.line(&format!(
+                "validation: the {force} N push on a truth of {} T10 {} in {:.0} s",
+                truth.mesh.cells.len(),
+                if solution.is_ok() { "solved" } else { "found no equilibrium" },
+                start.elapsed().as_secs_f64()
+            ));
+        }
         Ok(solution)
     };
     let (truth, solutions, mut lines) = converged_truth(truth, &truth_of, &solve, &targets, &pushes)?;

@@ -17,17 +17,32 @@ use mesh::Point;
 /// Scanner frame: the organ's corner sits here (mm).
 const ORIGIN: Point = [-120.0, 85.0, -310.0];
 
-struct Quiet;
+/// Prints the lines `prepare` tells as it goes, and keeps them.
+#[derive(Default)]
+struct Told(std::sync::Mutex<Vec<String>>);
 
-impl learn::Progress for Quiet {
+impl learn::Progress for Told {
     fn advance(&self, _: u64, _: u64, _: &str) {}
     fn line(&self, text: &str) {
         println!("{text}");
+        self.0.lock().unwrap().push(text.to_string());
     }
 }
 
-impl PrepareProgress for Quiet {
+impl PrepareProgress for Told {
     fn step(&self, _: usize, _: &str) {}
+}
+
+impl Told {
+    /// The lines told of the validation's solves as they ended.
+    fn solves(&self) -> usize {
+        self.0
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|l| l.starts_with("validation: the ") && l.contains(" push on a truth of "))
+            .count()
+    }
 }
 
 fn write_csv(path: &Path, points: &[Point]) {
@@ -105,7 +120,8 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     options.samples = 30;
     options.tets = 800;
     let out = dir.path().join("patient");
-    let state = prepare(&options, &out, &Quiet).unwrap();
+    let told = Told::default();
+    let state = prepare(&options, &out, &told).unwrap();
     assert_eq!(state.steps.iter().map(|s| s.name.as_str()).collect::<Vec<_>>(), STEPS);
     let organ = &state.steps[0].lines;
     assert!(organ.iter().any(|l| l.starts_with("units: mm")), "{organ:?}");
@@ -146,9 +162,14 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     let used = if check.ends_with("converged (at most 10 %)") { counts[0] } else { counts[1] };
     assert!(validation.iter().any(|l| l.contains(&format!("on a truth of {used} T10"))), "{validation:?}");
     // Its four pushes are kept, solved or not, for a validation run again.
-    let kept = std::fs::read_dir(out.join(augsim_app::prepare::TRUTH_DIR)).unwrap();
+    let kept: Vec<String> = std::fs::read_dir(out.join(augsim_app::prepare::TRUTH_DIR))
+        .unwrap()
+        .map(|f| f.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
     let prefix = format!("truth-{used}-");
-    assert_eq!(kept.filter(|f| f.as_ref().unwrap().file_name().to_string_lossy().starts_with(&prefix)).count(), 4);
+    assert_eq!(kept.iter().filter(|f| f.starts_with(&prefix)).count(), 4);
+    // Each solve was told as it ended, one line for each solution kept.
+    assert_eq!(told.solves(), kept.len(), "{kept:?}");
     // The set-up names the method that registered the validation's pushes the better.
     let chosen = validation.iter().find(|l| l.contains("registers with the")).expect("the chosen method");
     let tre = |what: &str| -> f64 {
@@ -194,12 +215,12 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     }
 
     // Run again: every step kept; other inputs refused.
-    let again = prepare(&options, &out, &Quiet).unwrap();
+    let again = prepare(&options, &out, &Told::default()).unwrap();
     let computed = |s: &augsim_app::prepare::PrepareState| s.steps[..STEPS.len() - 1].to_vec();
     assert_eq!(computed(&again), computed(&state), "kept, not computed again");
     assert_eq!(again.steps.last().unwrap().name, "report", "written anew");
     options.samples = 40;
-    let refused = prepare(&options, &out, &Quiet).unwrap_err().to_string();
+    let refused = prepare(&options, &out, &Told::default()).unwrap_err().to_string();
     assert!(refused.contains("other inputs"), "{refused}");
     std::fs::remove_file(out.join(STATE_FILE)).unwrap();
 }
@@ -215,7 +236,7 @@ fn targets_in_another_unit_are_named() {
     let mut options = PrepareOptions::new(surface, camera, attach, targets);
     options.samples = 30;
     options.tets = 800;
-    let error = format!("{:#}", prepare(&options, &dir.path().join("patient"), &Quiet).unwrap_err());
+    let error = format!("{:#}", prepare(&options, &dir.path().join("patient"), &Told::default()).unwrap_err());
     assert!(
         error.contains("outside the organ") && error.contains("were they given in m where mm were expected"),
         "{error}"
