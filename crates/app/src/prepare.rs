@@ -19,7 +19,8 @@
 //!    displacement: the built-in `liver_ar`'s set-up on this organ), `static.toml` (the FEM
 //!    registration on the same mesh) and `registration.toml` (the set-up that `register`, `serve`
 //!    and Python take as `--patient DIR`).
-//! 3. **dataset**: the FEM draws (resumes where it stopped).
+//! 3. **dataset**: the FEM draws (resumes where it stopped), and how far they move the organ: an
+//!    organ that swings from where it is held is named here, before the validation's hours.
 //! 4. **model**: the reduced-order model (or the U-Net) trained on it.
 //! 5. **evaluation**: its error on the test split, which played no part in training it.
 //! 6. **validation**: registration of held-out cases, the learned model's and the FEM's, against
@@ -27,8 +28,9 @@
 //!    dataset's Neo-Hookean law without its F-bar linear elements), 3, 6 or 12 times finer (the
 //!    first whose targets move by at most 10 % on a mesh twice as fine, under the push that moves
 //!    them most), pushed by a tool at four places of what the camera sees; the cloud is the
-//!    truth's seen surface with 0.5 mm of noise; the TRE at the targets. The truths' solutions
-//!    are kept in `validation/`, so that a validation run again does not solve them again.
+//!    truth's seen surface with 0.5 mm of noise; the TRE at the targets. Each truth solve is told
+//!    as it ends; their solutions are kept in `validation/`, so that a validation run again does
+//!    not solve them again.
 //! 7. **report**: `report.md`, with `regions.png` (the organ seen from the camera: what it
 //!    sees, where it is held, the targets) and the time of each step.
 //!
