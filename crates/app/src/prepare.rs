@@ -885,6 +885,21 @@ fn method_name(method: PatientMethod) -> &'static str {
     }
 }
 
+/// The validation's pushes ([`VALIDATION_LOADS`]), at seen nodes of the `coarsest` truth ordered
+/// across the line of sight from `camera`.
+fn validation_pushes(coarsest: &Truth, camera: Point) -> Vec<Push> {
+    let mesh = &coarsest.mesh;
+    let centroid: Point =
+        std::array::from_fn(|d| mesh.nodes.iter().map(|p| p[d]).sum::<f64>() / mesh.num_nodes() as f64);
+    let (across, _) = across_sight(mesh::unit(mesh::sub(centroid, camera)));
+    let mut order = coarsest.seen.clone();
+    order.sort_by(|&a, &b| mesh::dot(mesh.nodes[a], across).total_cmp(&mesh::dot(mesh.nodes[b], across)));
+    VALIDATION_LOADS
+        .iter()
+        .map(|&(at, force)| Push { at, force, centre: mesh.nodes[order[((order.len() - 1) as f64 * at) as usize]] })
+        .collect()
+}
+
 /// Step 6: registration of held-out cases against a quadratic truth on another mesh, refined
 /// until converged: meshed with 3, 6 or 12 times the organ's tetrahedra, the first whose targets
 /// move by at most [`TRUTH_TOLERANCE`] on a mesh twice as fine under the push that moves them most
@@ -900,19 +915,8 @@ fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::P
     let distance = hold_distance(options, &mesh::io::read_mesh(dir.join("organ.vtu"))?, &landmarks)?;
     let truth_of = |level: usize| Truth::new(&surface, level * options.tets, camera, &landmarks, &targets, distance);
     let truth = truth_of(TRUTH_LEVELS[0])?;
-    // The pushes, at seen nodes of the coarsest truth ordered across the line of sight.
-    let coarse = &truth.mesh;
-    let centroid: Point =
-        std::array::from_fn(|d| coarse.nodes.iter().map(|p| p[d]).sum::<f64>() / coarse.num_nodes() as f64);
-    let axis = mesh::unit(mesh::sub(centroid, camera));
-    let (across, _) = across_sight(axis);
-    let mut order = truth.seen.clone();
-    order.sort_by(|&a, &b| mesh::dot(coarse.nodes[a], across).total_cmp(&mesh::dot(coarse.nodes[b], across)));
-    let radius = tool_radius(coarse);
-    let pushes: Vec<Push> = VALIDATION_LOADS
-        .iter()
-        .map(|&(at, force)| Push { at, force, centre: coarse.nodes[order[((order.len() - 1) as f64 * at) as usize]] })
-        .collect();
+    let pushes = validation_pushes(&truth, camera);
+    let radius = tool_radius(&truth.mesh);
     let kept = dir.join(TRUTH_DIR);
     std::fs::create_dir_all(&kept).with_context(|| format!("creating {}", kept.display()))?;
     let read_back = std::cell::Cell::new(0);
