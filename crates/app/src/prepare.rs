@@ -548,7 +548,10 @@ fn dataset_step(dir: &Path, progress: &dyn learn::Progress) -> Result<Vec<String
             mm(mesh::stats::max(&motions))
         ),
     ];
-    lines.extend(swing_warning("the draws", mean, &organ).map(|w| format!("dataset: {w}")));
+    // Said here, before the validation: a swinging truth converges slowly, on its finest meshes.
+    lines.extend(swing_warning("the draws", mean, &organ).map(|w| {
+        format!("dataset: {w}; the validation's truth may then need its finest meshes, whose solves are its longest")
+    }));
     Ok(lines)
 }
 
@@ -1027,9 +1030,8 @@ fn swing_warning(what: &str, motion: f64, organ: &Mesh) -> Option<String> {
     (motion > SWING_SHARE * longest).then(|| {
         format!(
             "{what} move by {:.0} mm on average, {:.0} % of the organ's {:.0} mm: held near the landmarks only, it \
-             swings rather than deforms under these pushes, a registration is judged on that swing, and the \
-             validation's truth may need its finest meshes (hours); hold it over more of its attachments (more \
-             landmarks, a larger --attach-mm) for the motions of surgery",
+             swings rather than deforms under these pushes, and a registration is judged on that swing; hold it \
+             over more of its attachments (more landmarks, a larger --attach-mm) for the motions of surgery",
             mm(motion),
             100.0 * motion / longest,
             mm(longest)

@@ -204,8 +204,8 @@ impl Near {
 
 /// The smallest distance from the `landmarks` within which the boundary nodes carry `share` (0–1]
 /// of the boundary's area ([`boundary_node_areas`]): the distance of [`Near`] that holds that
-/// share of an organ's surface, whatever the organ's size. It lies half-way between the last node it takes and the next, so that [`Near`] selects the same
-/// nodes whatever the rounding.
+/// share of an organ's surface, whatever the organ's size. It lies half-way between the last node
+/// it takes and the next, so that [`Near`] selects the same nodes whatever the rounding.
 pub fn distance_holding_share(mesh: &Mesh, landmarks: &[Point], share: f64) -> Result<f64, MeshError> {
     if !(share > 0.0 && share <= 1.0) {
         return Err(MeshError::Invalid(format!("the share of the surface to hold must be in (0, 1], got {share}")));
