@@ -143,11 +143,15 @@ enum Command {
     /// Run a published experiment end to end (generate, train, identify, register, evaluate) and write
     /// result.json, PNG figures and the report (report.md, report.html) beside the published figures.
     Experiment(experiment_cmd::ExperimentArgs),
-    /// Benchmarks of the static solver (median times, split by phase) and of the U-Net's prediction.
+    /// Benchmarks of the static solver (median times, split by phase), of the U-Net's prediction and
+    /// of registration frames (every method, beside the co-rotational FEM).
     Bench {
         /// Repetitions per case.
         #[arg(short, long, default_value_t = 20, value_parser = at_least_one)]
         runs: usize,
+        /// The tables to run: solves, prediction, registration (default: all of them).
+        #[arg(value_parser = |name: &str| name.parse::<experiment::bench::Table>())]
+        tables: Vec<experiment::bench::Table>,
     },
 }
 
@@ -189,7 +193,7 @@ fn main() {
             learn_cmd::predict(&model, &input, &output, mesh.as_deref(), runs, device)
         }
         Command::Experiment(args) => experiment_cmd::run(&args),
-        Command::Bench { runs } => bench::run(runs),
+        Command::Bench { runs, tables } => bench::run(runs, &tables),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -1,14 +1,70 @@
 //! `augsim bench`'s tables: median static-solve times, split into assembly, factorisation and
 //! triangular solves (the cases of the fem-speed experiment); single-sample U-Net prediction
-//! times. Each line goes to `print` as soon as it is measured.
+//! times; registration frames of every method, from rest and streamed, beside the co-rotational
+//! FEM's in the same run. Each line goes to `print` as soon as it is measured.
 
-use anyhow::Result;
+use anyhow::{Context, Result};
+use app::case::{case_methods, compare, synthetic_case, Network};
+use mesh::stats::median;
 
 use crate::fem_speed::{fbar_ratios, measure, CaseTiming, FRAME_LOAD_STEP};
+use crate::held_out::{base_case, shipped_models, CASES, POINTS};
 
-/// Runs every case `runs` times and gives the tables' lines to `print`: static solves, then
-/// U-Net prediction.
-pub fn bench(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
+/// A table of `augsim bench`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Table {
+    /// Static solves, split by phase, and F-bar's cost.
+    Solves,
+    /// Single-sample U-Net prediction.
+    Prediction,
+    /// Registration frames of every method, from rest and streamed.
+    Registration,
+}
+
+impl Table {
+    /// Every table, in the order `augsim bench` prints them.
+    pub const ALL: [Table; 3] = [Table::Solves, Table::Prediction, Table::Registration];
+
+    /// Its name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Table::Solves => "solves",
+            Table::Prediction => "prediction",
+            Table::Registration => "registration",
+        }
+    }
+}
+
+impl std::str::FromStr for Table {
+    type Err = String;
+
+    fn from_str(name: &str) -> std::result::Result<Table, String> {
+        Table::ALL.into_iter().find(|t| t.name() == name).ok_or_else(|| {
+            let names: Vec<&str> = Table::ALL.iter().map(|t| t.name()).collect();
+            format!("no table '{name}': the tables are {}", names.join(", "))
+        })
+    }
+}
+
+/// Runs every case of `tables` `runs` times and gives the tables' lines to `print`, a blank line
+/// between tables.
+pub fn bench(runs: usize, tables: &[Table], print: &mut dyn FnMut(&str)) -> Result<()> {
+    for (k, table) in tables.iter().enumerate() {
+        if k > 0 {
+            print("");
+        }
+        match table {
+            Table::Solves => static_solves(runs, print)?,
+            Table::Prediction => unet_prediction(runs, print)?,
+            Table::Registration => registration_frames(runs, print)?,
+        }
+    }
+    Ok(())
+}
+
+/// Static solves from rest and as frames of a sequence, each case `runs` times: medians, split by
+/// phase, then F-bar's cost over the standard element.
+fn static_solves(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
     print("Static solves from rest, medians; the cases take turns. 'setup': building a solver (pattern,");
     print("ordering, symbolic analysis, buffers) and 'first': its first solve, over as many new solvers as runs;");
     print("'median': repeated solves from rest on the last (the rest tangent's factorisation is kept).");
@@ -40,8 +96,68 @@ pub fn bench(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
     for r in fbar_ratios(&cases) {
         print(&format!("{:<62} {:>6.2}× {:>8.2}× {:>6.2}×", r.pair, r.first, r.from_rest, r.frame));
     }
-    print("");
-    unet_prediction(runs, print)
+    Ok(())
+}
+
+/// Frames of the streamed registration in [`registration_frames`]: a press and release.
+const BENCH_STREAM_FRAMES: usize = 11;
+
+/// Registration frames on the first held-out case (a cloud of [`POINTS`] points, no
+/// correspondences) by every method of the case (the shipped learned models where they are
+/// found): median wall time of a frame from rest over `runs` registrations, each method set up
+/// anew, and of the warm-started frames of one press-and-release stream; each with its ratio to
+/// the co-rotational FEM's, measured in the same run.
+fn registration_frames(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
+    let load = &CASES[0];
+    let scenario = load.apply(&base_case()?);
+    let models = shipped_models()?;
+    let trained_on = app::case::ar_scenario();
+    let networks: Vec<Network> =
+        models.iter().map(|model| Network { model, scenario: &trained_on, dir: std::path::Path::new("") }).collect();
+    let methods = case_methods(&scenario, &networks)?;
+    let single = synthetic_case(&scenario)?;
+    let mut stream_scenario = scenario.clone();
+    stream_scenario.truth.frames = BENCH_STREAM_FRAMES;
+    let streamed = synthetic_case(&stream_scenario)?;
+    print(&format!(
+        "Registration frames, {} ({POINTS} points): median of {runs} frames from rest (each method set up anew) and of the \
+         {} warm-started frames of a press and release; ×FEM: the ratio to the co-rotational FEM's median.",
+        load.label,
+        BENCH_STREAM_FRAMES - 1
+    ));
+    print(&format!(
+        "{:<32} {:>13} {:>7} {:>13} {:>7} {:>9}",
+        "method", "from rest ms", "×FEM", "streamed ms", "×FEM", "TRE mm"
+    ));
+    let mut from_rest = vec![Vec::new(); methods.len()];
+    let mut tre = vec![f64::NAN; methods.len()];
+    for _ in 0..runs {
+        for ((times, tre), c) in from_rest.iter_mut().zip(&mut tre).zip(compare(&single, &methods)) {
+            let r = c.result.with_context(|| format!("{} from rest", c.method))?;
+            times.push(r.outcomes[0].registration.time.as_secs_f64() * 1e3);
+            *tre = r.summary.tre_mean_mm.unwrap_or(f64::NAN);
+        }
+    }
+    let mut warm = Vec::new();
+    for c in compare(&streamed, &methods) {
+        let r = c.result.with_context(|| format!("{} streamed", c.method))?;
+        warm.push(r.outcomes[1..].iter().map(|o| o.registration.time.as_secs_f64() * 1e3).collect::<Vec<f64>>());
+    }
+    let rest_ms: Vec<f64> = from_rest.iter_mut().map(|t| median(t)).collect();
+    let warm_ms: Vec<f64> = warm.iter_mut().map(|t| median(t)).collect();
+    // The first method of the case is the co-rotational FEM (base_case).
+    for (k, m) in methods.iter().enumerate() {
+        print(&format!(
+            "{:<32} {:>13.1} {:>6.2}× {:>13.1} {:>6.2}× {:>9.2}",
+            m.name,
+            rest_ms[k],
+            rest_ms[k] / rest_ms[0],
+            warm_ms[k],
+            warm_ms[k] / warm_ms[0],
+            tre[k]
+        ));
+    }
+    Ok(())
 }
 
 /// A static-solve case's row of the table.

@@ -25,7 +25,7 @@ use app::case::{
 };
 
 /// The cases, fixed before any method was run on them.
-const CASES: [CaseLoad; 7] = [
+pub(crate) const CASES: [CaseLoad; 7] = [
     CaseLoad { label: "press, left lobe, 2 N", force: 2.0, direction: [0.0, 0.0, -1.0], patch: None, seed: 21 },
     CaseLoad {
         label: "press, right lobe, 2.5 N",
@@ -66,7 +66,7 @@ const CASES: [CaseLoad; 7] = [
 ];
 
 /// Points of each cloud (before the camera's outliers).
-const POINTS: usize = 3000;
+pub(crate) const POINTS: usize = 3000;
 
 /// Frames of each case registered as a stream: the tool's force rises to the case's and falls
 /// back (odd: the middle frame is the case's force), each frame seen anew and warm-started from
@@ -184,7 +184,9 @@ impl Outcome {
 /// The truth of the held-out cases: the built-in case's, on about 5,000 T10 of Neo-Hookean tissue
 /// (E = 4.5 kPa, ν = 0.49), its camera seeing [`POINTS`] points; its methods: the co-rotational FEM,
 /// and the shipped network.
-fn base_case() -> Result<CaseScenario> {
+/// The built-in case as the held-out cases see it: the truth's finer quadratic Neo-Hookean
+/// phantom, a cloud of [`POINTS`], the co-rotational FEM and the network method.
+pub(crate) fn base_case() -> Result<CaseScenario> {
     let mut scenario = CaseScenario::builtin();
     scenario.truth.tets = 5000;
     scenario.truth.material =
@@ -194,6 +196,17 @@ fn base_case() -> Result<CaseScenario> {
     let network = scenario.models.method.iter().find(|m| m.kind == MethodKind::Network).cloned();
     scenario.models.method = std::iter::once(corotational).chain(network).collect();
     Ok(scenario)
+}
+
+/// The shipped learned models that are there (run from the repository): the U-Net, the
+/// reduced-order model.
+pub(crate) fn shipped_models() -> Result<Vec<Model>> {
+    Ok([SHIPPED_MODEL, SHIPPED_ROM]
+        .iter()
+        .map(Path::new)
+        .filter(|p| p.exists())
+        .map(Model::load)
+        .collect::<learn::Result<_>>()?)
 }
 
 /// The co-rotational FEM method of `scenario`.
@@ -212,13 +225,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
         Size::Paper => 10,
     };
     let base = base_case()?;
-    // The shipped learned models that are there: the U-Net, the reduced-order model.
-    let models: Vec<Model> = [SHIPPED_MODEL, SHIPPED_ROM]
-        .iter()
-        .map(Path::new)
-        .filter(|p| p.exists())
-        .map(Model::load)
-        .collect::<learn::Result<_>>()?;
+    let models = shipped_models()?;
     let network_scenario = ar_scenario();
     let networks: Vec<Network> =
         models.iter().map(|m| Network { model: m, scenario: &network_scenario, dir: Path::new("") }).collect();

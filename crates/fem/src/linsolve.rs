@@ -124,6 +124,19 @@ impl std::fmt::Debug for SparseCholesky {
     }
 }
 
+/// The single-precision factorisation's and solve's workspace with `par`, every page written once
+/// (so that the first factorisations do not pay for the operating system's first touch).
+fn workspace(symbolic: &SymbolicCholesky<u32>, par: Par) -> Result<MemBuffer, FemError> {
+    let req = symbolic
+        .factorize_numeric_llt_scratch::<f32>(par, Default::default())
+        .or(symbolic.factorize_numeric_ldlt_scratch::<f32>(par, Default::default()))
+        .or(symbolic.solve_in_place_scratch::<f32>(1, par));
+    let mut mem = MemBuffer::try_new(req)
+        .map_err(|_| FemError::Factorization("out of memory for the factorisation workspace".into()))?;
+    mem.fill(std::mem::MaybeUninit::new(0));
+    Ok(mem)
+}
+
 /// Factorisations with fewer multiply-adds than this run on one thread: below
 /// it, faer's parallel supernodal factorisation spends more on scheduling small
 /// supernodes than it gains (measured: 3.5k dofs, 0.2 G multiply-adds, 2.5×
@@ -193,15 +206,9 @@ impl SparseCholesky {
         };
         let work = factorization_work(&symbolic);
         let par = if work < PARALLEL_WORK { Par::Seq } else { Par::rayon(0) };
-        let req = symbolic
-            .factorize_numeric_llt_scratch::<f32>(par, Default::default())
-            .or(symbolic.factorize_numeric_ldlt_scratch::<f32>(par, Default::default()))
-            .or(symbolic.solve_in_place_scratch::<f32>(1, par));
-        let mut mem = MemBuffer::try_new(req)
-            .map_err(|_| FemError::Factorization("out of memory for the factorisation workspace".into()))?;
+        let mem = workspace(&symbolic, par)?;
         // Every buffer is written once here, so that the first factorisations do not pay for the
         // operating system's first touch of their pages.
-        mem.fill(std::mem::MaybeUninit::new(0));
         let l_values = [written_zeros(symbolic.len_val()), written_zeros(symbolic.len_val())];
         let scratch = written_zeros(pattern.nnz().max(pattern.num_free));
         let diagonal = (0..pattern.num_free).map(|c| pattern.diag(c)).collect();
@@ -221,6 +228,18 @@ impl SparseCholesky {
             par,
             ordering: chosen,
         })
+    }
+
+    /// Factorises and solves on one thread, however large the work: the results then do not depend
+    /// on the number of threads (faer's parallel factorisation splits its sums by it). For callers
+    /// that run many solves side by side, as dataset generation does.
+    pub fn set_single_threaded(&mut self) -> Result<(), FemError> {
+        if self.par != Par::Seq {
+            self.par = Par::Seq;
+            self.mem = workspace(&self.symbolic, Par::Seq)?;
+            self.mem64 = None;
+        }
+        Ok(())
     }
 
     /// The fill-reducing ordering in use ([`Ordering::Amd`] or [`Ordering::NestedDissection`]).

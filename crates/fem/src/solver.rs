@@ -355,6 +355,15 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 }
 
 impl StaticSolver {
+    /// [`StaticSolver::new`], its factorisations on one thread however large: its solutions do not
+    /// depend on the number of threads, bit for bit. For many solves side by side (a dataset's
+    /// draws), which fill the threads without help.
+    pub fn single_threaded(problem: Problem) -> Result<Self, FemError> {
+        let mut solver = StaticSolver::new(problem)?;
+        solver.cholesky.set_single_threaded()?;
+        Ok(solver)
+    }
+
     /// Prepares geometry, pattern and symbolic factorisation for the problem.
     pub fn new(problem: Problem) -> Result<Self, FemError> {
         problem.validate()?;

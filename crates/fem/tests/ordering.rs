@@ -196,3 +196,24 @@ fn nested_dissection_on_several_threads_at_once_is_the_sequential_one() {
         assert!(got.iter().all(|g| *g == want), "an ordering computed beside others differs from the lone one");
     }
 }
+
+/// A factorisation set to one thread gives the same bits in a pool of one thread and in one of
+/// three, on a system large enough to be factorised in parallel otherwise.
+#[test]
+fn a_single_threaded_factorisation_does_not_depend_on_the_pool() {
+    let solve_in = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| {
+            let mut p = cube_pattern(15);
+            let mut cholesky = SparseCholesky::with_ordering(&mut p, Ordering::Amd).unwrap();
+            assert!(cholesky.factorization_work() > ND_WORK, "parallel by default");
+            cholesky.set_single_threaded().unwrap();
+            cholesky.factorize(Slot::Latest, &dominant_values(&p)).unwrap();
+            let mut x = global_rhs(&p);
+            cholesky.solve_in_place(Slot::Latest, &mut x).unwrap();
+            x
+        })
+    };
+    let one = solve_in(1);
+    assert!(one == solve_in(3), "one thread and three must give the same bits");
+}

@@ -6,10 +6,11 @@
 //! produces the same samples. Samples are solved in parallel (rayon) by blocks
 //! of [`BLOCK`] consecutive indices: a block's samples are solved in index order
 //! by solvers created for that block (one per fixed set), which keep their
-//! symbolic analysis and factorisations from one solve to the next. A sample's
-//! solution thus depends on its index alone, bit for bit, whatever the number
-//! of threads and wherever a resumed or split generation starts (it solves the
-//! block's earlier samples again first). A sample whose solve fails is recorded
+//! symbolic analysis and factorisations from one solve to the next, each on one
+//! thread ([`StaticSolver::single_threaded`]: the blocks fill the threads). A
+//! sample's solution thus depends on its index alone, bit for bit, whatever the
+//! number of threads and wherever a resumed or split generation starts (it
+//! solves the block's earlier samples again first). A sample whose solve fails is recorded
 //! in the manifest with its reason. Draws chosen where a reduced-order model is least sure follow
 //! the uniform ones ([`Generator::run_chosen`], in [`crate::data::chosen`]).
 
@@ -559,13 +560,13 @@ impl Generator {
                 let mut problem = self.problem(fixed);
                 problem.prescribe(&nodes, displacement);
                 problem.f_ext.copy_from_slice(&f);
-                StaticSolver::new(problem).and_then(|mut s| s.solve(&self.solver_options))
+                StaticSolver::single_threaded(problem).and_then(|mut s| s.solve(&self.solver_options))
             }
             None => {
                 let solver = match solvers.entry(fixed) {
                     std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
                     std::collections::hash_map::Entry::Vacant(v) => {
-                        v.insert(StaticSolver::new(self.problem(fixed)).map_err(|e| e.to_string())?)
+                        v.insert(StaticSolver::single_threaded(self.problem(fixed)).map_err(|e| e.to_string())?)
                     }
                 };
                 solver.problem_mut().f_ext.copy_from_slice(&f);
