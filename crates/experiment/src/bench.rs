@@ -224,6 +224,17 @@ fn unet_prediction(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
 mod tests {
     use super::*;
 
+    /// A table is named on the command line by its name, and an unknown name is refused with
+    /// the list of names.
+    #[test]
+    fn tables_are_named_by_their_names() {
+        for table in Table::ALL {
+            assert_eq!(table.name().parse::<Table>(), Ok(table));
+        }
+        let err = "frames".parse::<Table>().unwrap_err();
+        assert_eq!(err, "no table 'frames': the tables are solves, prediction, registration");
+    }
+
     #[test]
     fn the_unet_table_has_a_row_per_network_size() {
         let mut lines = Vec::new();
