@@ -421,3 +421,34 @@ fn quadratic_tetrahedra_are_solved_and_encoded_as_such() {
     let manifest = g.run(dir.path(), "t10", None, &augsim_learn::Silent).unwrap();
     assert_eq!((manifest.num_samples, manifest.failed.len()), (2, 0), "{:?}", manifest.failed);
 }
+
+/// On a mesh whose factorisation is large enough to run in parallel alone (a cube of 18³ cells of
+/// T4, 20k dofs), a draw's bytes do not depend on the number of threads either: each draw
+/// factorises on one thread.
+#[test]
+fn a_large_mesh_gives_the_same_bytes_on_any_number_of_threads() {
+    let mesh = mesh::box_tet([0.0; 3], [1.0; 3], [18; 3]).unwrap();
+    let geometry = fem::ElementGeometry::new(&mesh, fem::Formulation::Standard).unwrap();
+    let constrained: Vec<bool> = (0..3 * mesh.nodes.len()).map(|dof| mesh.nodes[dof / 3][2] == 0.0).collect();
+    let mut pattern = fem::assembly::Pattern::new(&geometry, constrained.len(), &constrained).unwrap();
+    let work = fem::linsolve::SparseCholesky::new(&mut pattern).unwrap().factorization_work();
+    assert!(work > fem::linsolve::ND_WORK, "factorised in parallel by default: {work:.2e} multiply-adds");
+    let config = DatasetConfig {
+        samples: 3,
+        seed: 7,
+        shard_size: 3,
+        grid: None,
+        fixed: vec![bottom(0.0, 1.0)],
+        attachment: vec![],
+        load: Load::PatchForce { centres: Some(top()), radius: 0.3, magnitude: [1.0, 5.0], cone: None },
+        gravity: None,
+        input: Input::Displacement { nodes: top(), sparse: None, normal: false },
+    };
+    let g = Generator::new(mesh, Material::new(Law::Linear, 300.0, 0.4), SolverOptions::default(), config).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let (one, three) = (tmp.path().join("one"), tmp.path().join("three"));
+    run_in_pool(1, &g, &one, &augsim_learn::Silent);
+    run_in_pool(3, &g, &three, &augsim_learn::Silent);
+    assert_eq!(Dataset::open(&one).unwrap().len(), 3);
+    assert!(files(&one) == files(&three), "3 threads must give the bytes of 1 thread");
+}
