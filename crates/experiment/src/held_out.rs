@@ -184,8 +184,6 @@ impl Outcome {
 /// The truth of the held-out cases: the built-in case's, on about 5,000 T10 of Neo-Hookean tissue
 /// (E = 4.5 kPa, ν = 0.49), its camera seeing [`POINTS`] points; its methods: the co-rotational FEM,
 /// and the shipped network.
-/// The built-in case as the held-out cases see it: the truth's finer quadratic Neo-Hookean
-/// phantom, a cloud of [`POINTS`], the co-rotational FEM and the network method.
 pub(crate) fn base_case() -> Result<CaseScenario> {
     let mut scenario = CaseScenario::builtin();
     scenario.truth.tets = 5000;
