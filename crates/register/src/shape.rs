@@ -121,12 +121,8 @@ impl ShapeSpace {
         let mut u = self.mean.clone();
         // Rows in parallel, each summed alone: the same bits on any number of threads. On the
         // liver's 14,889 rows, 64 modes: 0.3 ms on two threads against 0.65 ms on one.
-        u.par_chunks_mut(ROWS_PER_TASK).enumerate().for_each(|(chunk, values)| {
-            for (i, value) in values.iter_mut().enumerate() {
-                let row = chunk * ROWS_PER_TASK + i;
-                let b = &self.basis[row * self.modes..row * self.modes + z.len()];
-                *value += b.iter().zip(z).map(|(b, z)| b * z).sum::<f64>();
-            }
+        u.par_iter_mut().zip(self.basis.par_chunks(self.modes)).with_min_len(ROWS_PER_TASK).for_each(|(value, row)| {
+            *value += row.iter().zip(z).map(|(b, z)| b * z).sum::<f64>();
         });
         u
     }
