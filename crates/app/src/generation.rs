@@ -87,11 +87,19 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
         Some(recipe) => generator.run_chosen(&out, &scenario.name, recipe, progress)?,
     };
     let secs = start.elapsed().as_secs_f64();
-    let mut lines = vec![format!(
-        "samples    {} written, {} failed (reasons in the manifest)",
-        manifest.num_samples,
-        manifest.failed.len()
-    )];
+    let drawn = manifest.num_samples + manifest.failed.len();
+    let mut lines = vec![match (&args.shard, drawn) {
+        (Some(p), 0) => format!(
+            "samples    none: draws are shared out in whole blocks, and {} draws leave part {}/{} without one \
+             (fewer parts give each one)",
+            scenario.dataset.samples, p.index, p.count
+        ),
+        _ => format!(
+            "samples    {} written, {} failed (reasons in the manifest)",
+            manifest.num_samples,
+            manifest.failed.len()
+        ),
+    }];
     if let Some(chosen) = &manifest.chosen {
         let count: usize = chosen.rounds.iter().map(|r| r.indices.len()).sum();
         let failed = manifest.failed.iter().filter(|f| !is_uniform(f.index)).count();
@@ -100,11 +108,10 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
             chosen.rounds.len()
         ));
     }
-    lines.push(format!(
-        "time       {:.1} s ({:.1} ms per sample)",
-        secs,
-        1e3 * secs / manifest.num_samples.max(1) as f64
-    ));
+    lines.push(match drawn {
+        0 => format!("time       {secs:.1} s"),
+        _ => format!("time       {:.1} s ({:.1} ms per draw)", secs, 1e3 * secs / drawn as f64),
+    });
     lines.push(format!("wrote      {}", out.display()));
     Ok(lines)
 }

@@ -4,6 +4,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
 
 use augsim_learn::data::generate::{DatasetConfig, Generator, Input, Load};
+use augsim_learn::data::generate::part_range;
 use augsim_learn::{merge_datasets, Dataset, DatasetPart};
 use fem::{Law, Material, SolverOptions};
 use mesh::NodeSelection;
@@ -184,19 +185,42 @@ fn generation_is_bit_identical_for_any_thread_count_and_after_a_kill() {
 }
 
 #[test]
+fn parts_are_runs_of_whole_blocks_that_cover_every_draw_once() {
+    for (samples, count) in [(70, 5), (70, 2), (64, 8), (20, 3), (1, 4), (5_200, 7)] {
+        let ranges: Vec<_> =
+            (0..count).map(|index| part_range(samples, Some(&DatasetPart { index, count })).unwrap()).collect();
+        // Consecutive, from 0 to the last draw.
+        assert_eq!(ranges[0].start, 0);
+        assert_eq!(ranges[count - 1].end, samples);
+        assert!(ranges.windows(2).all(|w| w[0].end == w[1].start), "{samples} in {count}: {ranges:?}");
+        // Each part starts on a block (of 32) and holds whole blocks but for the dataset's last.
+        assert!(ranges.iter().all(|r| r.start % 32 == 0 && (r.end % 32 == 0 || r.end == samples)), "{ranges:?}");
+        // The blocks shared out evenly: part sizes in blocks differ by one at most.
+        let blocks: Vec<usize> = ranges.iter().map(|r| r.len().div_ceil(32)).collect();
+        let (least, most) = (blocks.iter().min().unwrap(), blocks.iter().max().unwrap());
+        assert!(most - least <= 1, "{samples} in {count}: {blocks:?}");
+    }
+    assert!(part_range(10, Some(&DatasetPart { index: 2, count: 2 })).is_err());
+    assert!(part_range(10, Some(&DatasetPart { index: 0, count: 0 })).is_err());
+}
+
+#[test]
 fn split_generation_merges_into_the_full_dataset() {
-    // Parts 0..6, 6..13 and 13..20: the later ones start inside a block of samples.
-    let g = beam_generator_with_shards(20, 5);
+    // 70 draws are 3 blocks of 32 (the last one short) in 5 parts: parts 1, 3 and 4 hold a block
+    // each, parts 0 and 2 none; the empty parts are complete datasets and merge as well.
+    let g = beam_generator_with_shards(70, 5);
     let tmp = tempfile::tempdir().unwrap();
     let full = tmp.path().join("full");
     run_in_pool(1, &g, &full, &augsim_learn::Silent);
-    let parts: Vec<_> = (0..3)
+    let parts: Vec<_> = (0..5)
         .map(|i| {
             let dir = tmp.path().join(format!("part{i}"));
-            g.run(&dir, "beam", Some(DatasetPart { index: i, count: 3 }), &augsim_learn::Silent).unwrap();
+            g.run(&dir, "beam", Some(DatasetPart { index: i, count: 5 }), &augsim_learn::Silent).unwrap();
             dir
         })
         .collect();
+    let sizes: Vec<usize> = parts.iter().map(|p| Dataset::open(p).unwrap().len()).collect();
+    assert_eq!(sizes, [0, 32, 0, 32, 6]);
     let merged = tmp.path().join("merged");
     merge_datasets(&parts, &merged, None).unwrap();
     let a = Dataset::open(&full).unwrap().load_all().unwrap();
