@@ -24,10 +24,11 @@ def _same_tree(a, b):
 
 
 def test_two_local_workers_write_the_single_machine_dataset(tmp_path):
+    # 40 draws are two blocks of 32 (the second short): a shard each.
     single = tmp_path / "single"
-    run_augsim("generate", "liver_ar", "--samples", "24", "--out", str(single))
+    run_augsim("generate", "liver_ar", "--samples", "40", "--out", str(single))
     out = tmp_path / "cluster"
-    assert cluster.main(["liver_ar", "--samples", "24", "--local-workers", "2", "--out", str(out),
+    assert cluster.main(["liver_ar", "--samples", "40", "--local-workers", "2", "--out", str(out),
                          "--augsim", augsim_bin()]) == 0
     _same_tree(single, out)
     assert not (tmp_path / "cluster.parts").exists(), "the shards are removed after the merge"

@@ -3,8 +3,8 @@
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
 
-use augsim_learn::data::generate::{DatasetConfig, Generator, Input, Load};
 use augsim_learn::data::generate::part_range;
+use augsim_learn::data::generate::{DatasetConfig, Generator, Input, Load};
 use augsim_learn::{merge_datasets, Dataset, DatasetPart};
 use fem::{Law, Material, SolverOptions};
 use mesh::NodeSelection;

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::checks::{check_cloud, check_setting};
 use crate::organ::{Organ, Stencil};
+use crate::outliers::PointTree;
 use crate::rigid::RigidOptions;
 use crate::{RegisterError, Result};
 
@@ -59,6 +60,30 @@ pub trait Deformer {
 /// (past the finite-element springs' stiffness ramp and the first, widest capture distances).
 pub const WARM_START_ITERATION: usize = 3;
 
+/// Which frames of a registration match both ways ([`RegistrationOptions::two_way`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TwoWay {
+    /// None: each cloud point is matched to the surface, and that is all.
+    #[default]
+    Never,
+    /// The frames warm-started from the previous one (a stream).
+    Streamed,
+    /// Every frame.
+    Always,
+}
+
+impl TwoWay {
+    /// Whether a frame (`warm`: warm-started from the previous one) matches both ways.
+    pub fn applies(self, warm: bool) -> bool {
+        match self {
+            TwoWay::Never => false,
+            TwoWay::Streamed => warm,
+            TwoWay::Always => true,
+        }
+    }
+}
+
 /// Settings of the registration loop.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -101,6 +126,11 @@ pub struct RegistrationOptions {
     /// coefficients needs far fewer points than a cloud holds, and matching is most of its time.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_points: Option<usize>,
+    /// Which frames match both ways: besides each cloud point to the surface, each vertex of the
+    /// surface that faces the camera and lies over the cloud to its nearest cloud point
+    /// ([`seen_surface_matches`]), so that the seen part of the organ is held to the cloud as well
+    /// as the cloud to the organ.
+    pub two_way: TwoWay,
 }
 
 impl Default for RegistrationOptions {
@@ -117,6 +147,7 @@ impl Default for RegistrationOptions {
             rigid: None,
             view: None,
             max_points: None,
+            two_way: TwoWay::Never,
         }
     }
 }
@@ -213,6 +244,7 @@ pub fn register_frame(
     let isolated = crate::outliers::isolated_points(cloud, options.isolation_factor);
     let kept: Vec<Point> = cloud.iter().zip(&isolated).filter(|(_, &i)| !i).map(|(p, _)| *p).collect();
     let candidates = if kept.is_empty() { cloud } else { &kept };
+    let cloud_tree = options.two_way.applies(start.is_some()).then(|| CloudTree::new(candidates));
     let (first, most) = match start {
         Some(_) => (WARM_START_ITERATION, options.iterations.min(options.warm_iterations)),
         None => (0, options.iterations),
@@ -221,7 +253,7 @@ pub fn register_frame(
         iterations += 1;
         let iteration = first + iterations - 1;
         let capture = options.capture_distance * options.capture_decay.powi(iteration as i32);
-        let observations = if view.is_none() && iterations == 1 {
+        let mut observations = if view.is_none() && iterations == 1 {
             // The view is estimated from the matches to every triangle; those that fall on a
             // facing triangle are the facing part's own.
             let whole = closest_points(&surface, candidates)?;
@@ -233,6 +265,9 @@ pub fn register_frame(
             observe(organ, &surface, candidates, options, capture, view)?
         };
         inliers = observations.matches.len();
+        if let Some(tree) = &cloud_tree {
+            observations.matches.extend(seen_surface_matches(organ, &surface, tree, view, options, capture));
+        }
         u = deformer.deform(&observations, &u, iteration)?;
         if u.len() != ndof || u.iter().any(|v| !v.is_finite()) {
             return Err(RegisterError::Invalid("the deformer returned a displacement that is not finite".into()));
@@ -318,6 +353,74 @@ fn observations(
     obs
 }
 
+/// A cloud's points for the nearest-point search, with their spacing: the median over the points
+/// of the mean distance to their nearest neighbours.
+pub struct CloudTree {
+    tree: PointTree,
+    spacing: f64,
+}
+
+impl CloudTree {
+    /// The tree of `cloud` (at least one point).
+    pub fn new(cloud: &[Point]) -> CloudTree {
+        let tree = PointTree::new(cloud);
+        let spacing = crate::outliers::median_neighbour_distance(&tree, cloud);
+        CloudTree { tree, spacing }
+    }
+}
+
+/// The matches of the seen surface to the cloud: each vertex of `surface` on a triangle facing a
+/// camera looking along `view` (every vertex without one) to its nearest cloud point, kept when
+/// that point lies within the cloud's spacing of the vertex's normal line (the vertex is over the
+/// cloud, not beyond its edge, where the nearest point would drag it sideways) and within the
+/// outlier limit of the options and `capture`. A match's normal is the vertex's, its surface point
+/// the vertex (weight 1 at one corner of a facing triangle).
+pub fn seen_surface_matches(
+    organ: &Organ,
+    surface: &TriSurface,
+    cloud: &CloudTree,
+    view: Option<Point>,
+    options: &RegistrationOptions,
+    capture: f64,
+) -> Vec<PointMatch> {
+    let mut corner = vec![None; surface.vertices.len()];
+    for t in facing_triangles(surface, view) {
+        for (k, &v) in surface.triangles[t].iter().enumerate() {
+            corner[v].get_or_insert((t, k));
+        }
+    }
+    let normals = surface.vertex_normals();
+    let seen: Vec<(usize, (usize, usize))> = corner.iter().enumerate().filter_map(|(v, c)| c.map(|c| (v, c))).collect();
+    let over: Vec<(usize, (usize, usize), Point, f64)> = seen
+        .par_iter()
+        .filter_map(|&(v, c)| {
+            let (x, distance) = cloud.tree.nearest(surface.vertices[v]);
+            let offset = sub(x, surface.vertices[v]);
+            let along = mesh::dot(offset, normals[v]);
+            let across = (distance * distance - along * along).max(0.0).sqrt();
+            (across <= cloud.spacing).then_some((v, c, x, distance))
+        })
+        .collect();
+    let mut distances: Vec<f64> = over.iter().map(|m| m.3).collect();
+    let median = mesh::stats::median(&mut distances);
+    let limit = (options.outlier_factor * median).max(options.min_outlier_distance).max(capture);
+    let rest = &organ.surface().vertices;
+    over.into_iter()
+        .filter(|m| m.3 <= limit)
+        .map(|(v, (triangle, k), x, _)| {
+            let mut weights = [0.0; 3];
+            weights[k] = 1.0;
+            PointMatch {
+                stencil: organ.surface_point_stencil(triangle, weights),
+                shift: sub(x, rest[v]),
+                normal: normals[v],
+                triangle,
+                weights,
+            }
+        })
+        .collect()
+}
+
 /// The closest point of `surface` to each cloud point.
 fn closest_points(surface: &TriSurface, cloud: &[Point]) -> Result<Vec<ClosestPoint>> {
     let bvh = SurfaceBvh::new(surface)?;
@@ -366,14 +469,20 @@ fn outlier_limit(matches: &[ClosestPoint], options: &RegistrationOptions, captur
 /// The triangles of `surface` that face a camera looking along `view` (all of them
 /// when there is no view), as a surface of their own, with each one's index in `surface`.
 fn facing_part(surface: &TriSurface, view: Option<Point>) -> (TriSurface, Vec<usize>) {
-    let original: Vec<usize> = match view {
+    let original = facing_triangles(surface, view);
+    let triangles = original.iter().map(|&t| surface.triangles[t]).collect();
+    (TriSurface { vertices: surface.vertices.clone(), triangles }, original)
+}
+
+/// The triangles of `surface` that face a camera looking along `view` (all of them when there is
+/// no view).
+fn facing_triangles(surface: &TriSurface, view: Option<Point>) -> Vec<usize> {
+    match view {
         Some(v) => (0..surface.triangles.len())
             .filter(|&t| mesh::dot(mesh::surface::triangle_area_vector(surface, t), v) < 0.0)
             .collect(),
         None => (0..surface.triangles.len()).collect(),
-    };
-    let triangles = original.iter().map(|&t| surface.triangles[t]).collect();
-    (TriSurface { vertices: surface.vertices.clone(), triangles }, original)
+    }
 }
 
 /// Smallest length of the mean unit normal of the matched triangles for the cloud to count
@@ -485,5 +594,44 @@ mod tests {
         for (a, b) in reused.iter().zip(&searched) {
             assert!((a.distance - b.distance).abs() < 1e-15 && mesh::distance(a.point, b.point) < 1e-12, "{a:?} {b:?}");
         }
+    }
+
+    /// A partial view (the top of the phantom's left half, lifted by 3 mm): the seen surface is
+    /// matched to the cloud where it lies under the cloud, with the lift along each vertex's
+    /// normal, and nowhere beyond the cloud's edge, where the nearest cloud point lies aside.
+    #[test]
+    fn the_seen_surface_is_matched_to_the_cloud_over_the_cloud_only() {
+        let organ = Organ::new(mesh::phantom::liver_phantom(1500).unwrap(), None).unwrap();
+        let surface = organ.surface().clone();
+        let view = [0.0, 0.0, -1.0];
+        let (lo, hi) = mesh::bounds(&surface.vertices);
+        let edge = 0.5 * (lo[0] + hi[0]);
+        let lift = [0.0, 0.0, 3e-3];
+        let cloud: Vec<Point> = sample_visible(&surface, view, 1500, 5)
+            .unwrap()
+            .into_iter()
+            .map(|s| s.point)
+            .filter(|p| p[0] < edge)
+            .map(|p| [p[0] + lift[0], p[1] + lift[1], p[2] + lift[2]])
+            .collect();
+        let tree = CloudTree::new(&cloud);
+        assert!(tree.spacing > 1e-3 && tree.spacing < 1e-2, "spacing {}", tree.spacing);
+        let options = RegistrationOptions::default();
+        let matches = seen_surface_matches(&organ, &surface, &tree, Some(view), &options, 0.05);
+        let rest = &surface.vertices;
+        let vertex = |m: &PointMatch| surface.triangles[m.triangle][m.weights.iter().position(|&w| w == 1.0).unwrap()];
+        // Every match is a vertex under the cloud: none beyond its edge by more than its spacing.
+        let beyond = matches.iter().filter(|m| rest[vertex(m)][0] > edge + tree.spacing).count();
+        assert_eq!(beyond, 0, "{beyond} of {} matches beyond the cloud's edge", matches.len());
+        // Most of the facing vertices well inside the cloud's part are matched.
+        let facing: std::collections::BTreeSet<usize> =
+            facing_triangles(&surface, Some(view)).into_iter().flat_map(|t| surface.triangles[t]).collect();
+        let inside = facing.iter().filter(|&&v| rest[v][0] < edge - 0.02).count();
+        assert!(matches.len() > inside * 3 / 4, "{} matches, {inside} facing vertices inside", matches.len());
+        // Each match asks for the lift along its normal (point to plane), to the sampling's error.
+        let mut errors: Vec<f64> =
+            matches.iter().map(|m| (mesh::dot(m.shift, m.normal) - mesh::dot(lift, m.normal)).abs()).collect();
+        let median = mesh::stats::median(&mut errors);
+        assert!(median < 5e-4, "median point-to-plane error {median}");
     }
 }

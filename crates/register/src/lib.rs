@@ -59,7 +59,8 @@ pub mod shape;
 pub use checks::check_cloud;
 pub use deformers::{FemDeformer, HybridDeformer, NetworkDeformer, RestAndStream};
 pub use frame::{
-    observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions, WARM_START_ITERATION,
+    observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions, TwoWay,
+    WARM_START_ITERATION,
 };
 pub use organ::{Organ, Stencil};
 pub use registration::{organ_surface, target_errors, FrameOutcome, Registration, Summary, Tracked};

@@ -24,6 +24,17 @@ pub fn isolated_points(cloud: &[Point], factor: f64) -> Vec<bool> {
     spread.iter().map(|&d| d > factor * median).collect()
 }
 
+/// The median over `cloud`'s points (those of `tree`) of their mean distance to their
+/// [`NEIGHBOURS`] nearest neighbours: the cloud's spacing (0 for a cloud of at most [`NEIGHBOURS`]
+/// points).
+pub(crate) fn median_neighbour_distance(tree: &PointTree, cloud: &[Point]) -> f64 {
+    if cloud.len() <= NEIGHBOURS {
+        return 0.0;
+    }
+    let mut spread: Vec<f64> = cloud.par_iter().map(|&p| tree.mean_neighbour_distance(p)).collect();
+    mesh::stats::median(&mut spread)
+}
+
 /// Points per leaf of a [`PointTree`].
 const LEAF: usize = 8;
 
@@ -38,14 +49,15 @@ enum TreeNode {
 
 /// A k-d tree over a cloud (median splits along the widest axis) for the nearest-neighbour
 /// search. Its splits follow the points, so a camera's surface, a volume or a line needs no cell size.
-struct PointTree {
+pub(crate) struct PointTree {
     /// The cloud's points, each leaf's contiguous.
     points: Vec<Point>,
     nodes: Vec<TreeNode>,
 }
 
 impl PointTree {
-    fn new(cloud: &[Point]) -> Self {
+    /// The tree of `cloud`'s points.
+    pub(crate) fn new(cloud: &[Point]) -> Self {
         let mut tree = PointTree { points: cloud.to_vec(), nodes: Vec::with_capacity(2 * cloud.len() / LEAF + 2) };
         tree.split(0, cloud.len());
         tree
@@ -76,11 +88,24 @@ impl PointTree {
         self.split(start + mid, end);
     }
 
-    /// Mean distance from `p` (a point of the cloud) to its [`NEIGHBOURS`] nearest other points:
-    /// depth first, the nearer side first, skipping a side farther than the farthest kept.
+    /// Mean distance from `p` (a point of the cloud) to its [`NEIGHBOURS`] nearest other points.
     fn mean_neighbour_distance(&self, p: Point) -> f64 {
-        // Squared distances of the nearest found so far, sorted, the point itself included.
-        let mut best = [f64::INFINITY; NEIGHBOURS + 1];
+        // The point itself is the first entry, at distance 0.
+        let best = self.nearest_k::<{ NEIGHBOURS + 1 }>(p);
+        best[1..].iter().map(|(d2, _)| d2.sqrt()).sum::<f64>() / NEIGHBOURS as f64
+    }
+
+    /// The cloud's point nearest to `p`, and its distance.
+    pub(crate) fn nearest(&self, p: Point) -> (Point, f64) {
+        let [(d2, at)] = self.nearest_k::<1>(p);
+        (self.points[at], d2.sqrt())
+    }
+
+    /// The squared distances from `p` to its `K` nearest points of the cloud, nearest first, with
+    /// their places in the tree's order: depth first, the nearer side first, skipping a side
+    /// farther than the farthest kept.
+    fn nearest_k<const K: usize>(&self, p: Point) -> [(f64, usize); K] {
+        let mut best = [(f64::INFINITY, 0); K];
         // Nodes to visit with a lower bound of their squared distance: at most one more than the
         // depth, which median splits keep below log2(n) + 1.
         let mut stack = [(0u32, 0.0f64); 128];
@@ -88,17 +113,18 @@ impl PointTree {
         while top > 0 {
             top -= 1;
             let (node, bound) = stack[top];
-            if bound >= best[NEIGHBOURS] {
+            if bound >= best[K - 1].0 {
                 continue;
             }
             match self.nodes[node as usize] {
                 TreeNode::Leaf { start, end } => {
-                    for q in &self.points[start as usize..end as usize] {
+                    for at in start as usize..end as usize {
+                        let q = self.points[at];
                         let d2 = (0..3).map(|d| (q[d] - p[d]).powi(2)).sum::<f64>();
-                        if d2 < best[NEIGHBOURS] {
-                            let at = best.partition_point(|&b| b < d2);
-                            best.copy_within(at..NEIGHBOURS, at + 1);
-                            best[at] = d2;
+                        if d2 < best[K - 1].0 {
+                            let slot = best.partition_point(|&(b, _)| b < d2);
+                            best.copy_within(slot..K - 1, slot + 1);
+                            best[slot] = (d2, at);
                         }
                     }
                 }
@@ -111,8 +137,7 @@ impl PointTree {
                 }
             }
         }
-        // The point itself is the first entry, at distance 0.
-        best[1..].iter().map(|d| d.sqrt()).sum::<f64>() / NEIGHBOURS as f64
+        best
     }
 }
 
@@ -156,8 +181,8 @@ mod tests {
         cloud
     }
 
-    /// The tree search returns the exact mean distance to the nearest neighbours, in a thin
-    /// volume, on a sampled surface and along a line of doubled points.
+    /// The tree search returns the exact mean distance to the nearest neighbours and the exact
+    /// nearest point, in a thin volume, on a sampled surface and along a line of doubled points.
     #[test]
     fn neighbour_distances_match_brute_force() {
         let slab: Vec<Point> = (0..300)
@@ -176,6 +201,15 @@ mod tests {
                 d.sort_by(f64::total_cmp);
                 let brute = d[1..=NEIGHBOURS].iter().sum::<f64>() / NEIGHBOURS as f64;
                 assert!((tree.mean_neighbour_distance(p) - brute).abs() < 1e-12);
+            }
+            // The nearest point to places off the cloud, as a brute-force search finds it.
+            for k in 0..50 {
+                let s = k as f64;
+                let p = [(s * 0.377).fract() * 1.2 - 0.1, (s * 0.291).fract() * 0.5, (s * 0.853).fract() * 0.2 - 0.1];
+                let distance = |q: &Point| (0..3).map(|i| (q[i] - p[i]).powi(2)).sum::<f64>().sqrt();
+                let brute = cloud.iter().map(distance).fold(f64::INFINITY, f64::min);
+                let (q, d) = tree.nearest(p);
+                assert!((d - brute).abs() < 1e-12 && (distance(&q) - d).abs() < 1e-12, "{d} against {brute}");
             }
         }
     }

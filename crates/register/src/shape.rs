@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::checks::check_setting;
-use crate::frame::{Deformer, Observations};
+use crate::frame::{Deformer, Observations, TwoWay};
 use crate::organ::{Organ, Stencil};
 use crate::{RegisterError, Result};
 
@@ -175,13 +175,16 @@ pub const SHAPE_WARM_ITERATIONS: usize = 2;
 /// cases (1,500-point clouds) 1,000 points gave 3.10 mm, all of them 2.50 mm.
 pub const SHAPE_POINTS: usize = 2000;
 
-/// The registration loop's settings for a shape-space fit: `base` with its iteration budgets and
-/// the points it matches.
+/// The registration loop's settings for a shape-space fit: `base` with its iteration budgets, the
+/// points it matches, and matches both ways on a stream's frames ([`TwoWay::Streamed`]). On the
+/// design cases streamed (21 frames each), matching both ways brought the TRE at the peak from 2.88
+/// to 2.68 mm on average (over the frames 1.80 → 1.71 mm); from rest it did not pay (2.34 → 2.42 mm).
 pub fn loop_options(base: &crate::RegistrationOptions) -> crate::RegistrationOptions {
     crate::RegistrationOptions {
         iterations: SHAPE_ITERATIONS,
         warm_iterations: SHAPE_WARM_ITERATIONS,
         max_points: Some(SHAPE_POINTS),
+        two_way: TwoWay::Streamed,
         ..base.clone()
     }
 }
