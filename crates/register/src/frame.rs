@@ -127,9 +127,9 @@ pub struct RegistrationOptions {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_points: Option<usize>,
     /// Which frames match both ways: besides each cloud point to the surface, each vertex of the
-    /// surface that faces the camera and lies over the cloud to its nearest cloud point
-    /// ([`seen_surface_matches`]), so that the seen part of the organ is held to the cloud as well
-    /// as the cloud to the organ.
+    /// surface that faces the camera to its nearest cloud point, where that point lies within the
+    /// cloud's spacing of the vertex's normal line (over the cloud, not beyond its edge), so that
+    /// the seen part of the organ is held to the cloud as well as the cloud to the organ.
     pub two_way: TwoWay,
 }
 
@@ -355,14 +355,14 @@ fn observations(
 
 /// A cloud's points for the nearest-point search, with their spacing: the median over the points
 /// of the mean distance to their nearest neighbours.
-pub struct CloudTree {
+struct CloudTree {
     tree: PointTree,
     spacing: f64,
 }
 
 impl CloudTree {
     /// The tree of `cloud` (at least one point).
-    pub fn new(cloud: &[Point]) -> CloudTree {
+    fn new(cloud: &[Point]) -> CloudTree {
         let tree = PointTree::new(cloud);
         let spacing = crate::outliers::median_neighbour_distance(&tree, cloud);
         CloudTree { tree, spacing }
@@ -375,7 +375,7 @@ impl CloudTree {
 /// cloud, not beyond its edge, where the nearest point would drag it sideways) and within the
 /// outlier limit of the options and `capture`. A match's normal is the vertex's, its surface point
 /// the vertex (weight 1 at one corner of a facing triangle).
-pub fn seen_surface_matches(
+fn seen_surface_matches(
     organ: &Organ,
     surface: &TriSurface,
     cloud: &CloudTree,

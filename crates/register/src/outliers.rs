@@ -17,10 +17,8 @@ pub fn isolated_points(cloud: &[Point], factor: f64) -> Vec<bool> {
     if cloud.len() <= NEIGHBOURS {
         return vec![false; cloud.len()];
     }
-    let tree = PointTree::new(cloud);
-    let spread: Vec<f64> = cloud.par_iter().map(|&p| tree.mean_neighbour_distance(p)).collect();
-    let mut sorted = spread.clone();
-    let median = mesh::stats::median(&mut sorted);
+    let spread = neighbour_distances(&PointTree::new(cloud), cloud);
+    let median = mesh::stats::median(&mut spread.clone());
     spread.iter().map(|&d| d > factor * median).collect()
 }
 
@@ -31,8 +29,13 @@ pub(crate) fn median_neighbour_distance(tree: &PointTree, cloud: &[Point]) -> f6
     if cloud.len() <= NEIGHBOURS {
         return 0.0;
     }
-    let mut spread: Vec<f64> = cloud.par_iter().map(|&p| tree.mean_neighbour_distance(p)).collect();
-    mesh::stats::median(&mut spread)
+    mesh::stats::median(&mut neighbour_distances(tree, cloud))
+}
+
+/// Each of `cloud`'s points' (those of `tree`) mean distance to its [`NEIGHBOURS`] nearest
+/// neighbours.
+fn neighbour_distances(tree: &PointTree, cloud: &[Point]) -> Vec<f64> {
+    cloud.par_iter().map(|&p| tree.mean_neighbour_distance(p)).collect()
 }
 
 /// Points per leaf of a [`PointTree`].
