@@ -515,8 +515,8 @@ fn notes(base: &CaseScenario, runs: usize) -> Result<Vec<String>> {
              streams them: frame k is pushed by F sin(πk/{}) (F the case's force, at the middle frame), each truth \
              solved from the last and seen anew by the camera (seed + k − 1). Each method registers frame 1 from \
              rest and every next frame warm-started from the last, with its warm budget (the FEM {} iterations, the \
-             U-Net and \"ROM, membrane loop\" {}); \"ROM\" runs the membrane loop on those frames too ({} \
-             iterations), matching both ways: the surface it sees over the cloud is matched to the cloud as well. \
+             U-Net and \"ROM, membrane loop\" {}, \"ROM\" {} of the membrane loop); the U-Net and \"ROM\" match \
+             both ways on those frames: the surface they see over the cloud is matched to the cloud as well. \
              TRE at the peak frame, and over all frames; time: the median over the stream's frames, one run.",
             STREAM_FRAMES + 1,
             corotational(base).and_then(|m| m.warm_iterations).unwrap_or(base.registration.warm_iterations),

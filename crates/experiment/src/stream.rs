@@ -205,8 +205,8 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         format!(
             "Server in this process, client over TCP on this machine (OpenIGTLink POLYDATA in mm; answers: POINT \
              targets and STRING status). Each cloud is sent when the previous one is answered. A frame warm-started \
-             from the previous one runs at most {} iterations for the FEM and {} for the learned models (the first frame, \
-             from rest, up to {} and {}: the registration case's budgets).",
+             from the previous one runs at most {} iterations for the FEM and {} for the learned models, which match \
+             both ways on those frames (the first frame, from rest, up to {} and {}: the registration case's budgets).",
             options.warm_iterations, budgets.warm_iterations, options.iterations, budgets.iterations,
         ),
         "Timings: one run on this machine; the figures are only as quiet as the machine was.".to_string(),
