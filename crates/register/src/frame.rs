@@ -241,10 +241,10 @@ pub fn register_frame(
     let mut inliers = 0;
     let mut view = options.view.map(unit);
     // The points that may be matched: all but the isolated ones.
-    let isolated = crate::outliers::isolated_points(cloud, options.isolation_factor);
+    let (isolated, spacing) = crate::outliers::isolation(cloud, options.isolation_factor);
     let kept: Vec<Point> = cloud.iter().zip(&isolated).filter(|(_, &i)| !i).map(|(p, _)| *p).collect();
     let candidates = if kept.is_empty() { cloud } else { &kept };
-    let cloud_tree = options.two_way.applies(start.is_some()).then(|| CloudTree::new(candidates));
+    let cloud_tree = options.two_way.applies(start.is_some()).then(|| CloudTree::new(candidates, spacing));
     let (first, most) = match start {
         Some(_) => (WARM_START_ITERATION, options.iterations.min(options.warm_iterations)),
         None => (0, options.iterations),
@@ -353,19 +353,16 @@ fn observations(
     obs
 }
 
-/// A cloud's points for the nearest-point search, with their spacing: the median over the points
-/// of the mean distance to their nearest neighbours.
+/// A cloud's points for the nearest-point search, with their spacing ([`crate::outliers::isolation`]).
 struct CloudTree {
     tree: PointTree,
     spacing: f64,
 }
 
 impl CloudTree {
-    /// The tree of `cloud` (at least one point).
-    fn new(cloud: &[Point]) -> CloudTree {
-        let tree = PointTree::new(cloud);
-        let spacing = crate::outliers::median_neighbour_distance(&tree, cloud);
-        CloudTree { tree, spacing }
+    /// The tree of `cloud` (at least one point), whose spacing is `spacing`.
+    fn new(cloud: &[Point], spacing: f64) -> CloudTree {
+        CloudTree { tree: PointTree::new(cloud), spacing }
     }
 }
 
@@ -607,6 +604,7 @@ mod tests {
         let (lo, hi) = mesh::bounds(&surface.vertices);
         let edge = 0.5 * (lo[0] + hi[0]);
         let lift = [0.0, 0.0, 3e-3];
+        let options = RegistrationOptions::default();
         let cloud: Vec<Point> = sample_visible(&surface, view, 1500, 5)
             .unwrap()
             .into_iter()
@@ -614,9 +612,10 @@ mod tests {
             .filter(|p| p[0] < edge)
             .map(|p| [p[0] + lift[0], p[1] + lift[1], p[2] + lift[2]])
             .collect();
-        let tree = CloudTree::new(&cloud);
+        let (isolated, spacing) = crate::outliers::isolation(&cloud, options.isolation_factor);
+        assert!(!isolated.contains(&true));
+        let tree = CloudTree::new(&cloud, spacing);
         assert!(tree.spacing > 1e-3 && tree.spacing < 1e-2, "spacing {}", tree.spacing);
-        let options = RegistrationOptions::default();
         let matches = seen_surface_matches(&organ, &surface, &tree, Some(view), &options, 0.05);
         let rest = &surface.vertices;
         let vertex = |m: &PointMatch| surface.triangles[m.triangle][m.weights.iter().position(|&w| w == 1.0).unwrap()];

@@ -14,28 +14,23 @@ pub const NEIGHBOURS: usize = 8;
 /// than any surface sample. Returns `true` for an outlier; a cloud of at most [`NEIGHBOURS`]
 /// points has none.
 pub fn isolated_points(cloud: &[Point], factor: f64) -> Vec<bool> {
+    isolation(cloud, factor).0
+}
+
+/// [`isolated_points`], and the spacing of the points kept: the median of their mean distance to
+/// their [`NEIGHBOURS`] nearest neighbours (of all the points' when none is kept; 0 for a cloud of at
+/// most [`NEIGHBOURS`] points).
+pub(crate) fn isolation(cloud: &[Point], factor: f64) -> (Vec<bool>, f64) {
     if cloud.len() <= NEIGHBOURS {
-        return vec![false; cloud.len()];
+        return (vec![false; cloud.len()], 0.0);
     }
-    let spread = neighbour_distances(&PointTree::new(cloud), cloud);
+    let tree = PointTree::new(cloud);
+    let spread: Vec<f64> = cloud.par_iter().map(|&p| tree.mean_neighbour_distance(p)).collect();
     let median = mesh::stats::median(&mut spread.clone());
-    spread.iter().map(|&d| d > factor * median).collect()
-}
-
-/// The median over `cloud`'s points (those of `tree`) of their mean distance to their
-/// [`NEIGHBOURS`] nearest neighbours: the cloud's spacing (0 for a cloud of at most [`NEIGHBOURS`]
-/// points).
-pub(crate) fn median_neighbour_distance(tree: &PointTree, cloud: &[Point]) -> f64 {
-    if cloud.len() <= NEIGHBOURS {
-        return 0.0;
-    }
-    mesh::stats::median(&mut neighbour_distances(tree, cloud))
-}
-
-/// Each of `cloud`'s points' (those of `tree`) mean distance to its [`NEIGHBOURS`] nearest
-/// neighbours.
-fn neighbour_distances(tree: &PointTree, cloud: &[Point]) -> Vec<f64> {
-    cloud.par_iter().map(|&p| tree.mean_neighbour_distance(p)).collect()
+    let flags: Vec<bool> = spread.iter().map(|&d| d > factor * median).collect();
+    let mut kept: Vec<f64> = spread.iter().zip(&flags).filter(|(_, &f)| !f).map(|(&d, _)| d).collect();
+    let spacing = if kept.is_empty() { median } else { mesh::stats::median(&mut kept) };
+    (flags, spacing)
 }
 
 /// Points per leaf of a [`PointTree`].
@@ -154,8 +149,20 @@ mod tests {
     fn floating_points_over_a_sampled_plane_are_isolated() {
         let cloud = plane_with_floating_points();
         let surface = 40 * 40;
-        let flags = isolated_points(&cloud, 3.0);
+        let (flags, spacing) = isolation(&cloud, 3.0);
+        assert_eq!(flags, isolated_points(&cloud, 3.0));
         assert_eq!(flags[..surface].iter().filter(|&&f| f).count(), 0, "a surface point was flagged");
+        // The spacing is the kept points' median mean distance to their nearest neighbours, by brute
+        // force (the floating points left out).
+        let mut kept: Vec<f64> = (0..cloud.len())
+            .filter(|&i| !flags[i])
+            .map(|i| {
+                let mut d: Vec<f64> = cloud.iter().map(|q| mesh::distance(*q, cloud[i])).collect();
+                d.sort_by(f64::total_cmp);
+                d[1..=NEIGHBOURS].iter().sum::<f64>() / NEIGHBOURS as f64
+            })
+            .collect();
+        assert!((spacing - mesh::stats::median(&mut kept)).abs() < 1e-12, "spacing {spacing}");
         // Every point more than 2 cm (five sample spacings) off the plane; nearer ones may
         // pass for samples (they are then ordinary far matches).
         let far: Vec<bool> = (surface..cloud.len()).filter(|&i| cloud[i][2] > 0.02).map(|i| flags[i]).collect();
