@@ -47,6 +47,7 @@ class Registration:
         fem: Optional[_Path] = None,
         model: Optional[_Path] = None,
         scenario: Optional[_Path] = None,
+        shape_model: Optional[_Path] = None,
         patient: Optional[_Path] = None,
         use_fem: Optional[bool] = None,
         targets: Union[_Path, npt.ArrayLike, None] = None,

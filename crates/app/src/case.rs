@@ -15,13 +15,13 @@ use learn::Model;
 
 use anyhow::{anyhow, bail, Context, Result};
 use register::{
-    shape, Deformer, FemDeformer, FrameOutcome, NetworkDeformer, Organ, RegisterError, RegistrationOptions,
-    RestAndStream, RigidTransform, ShapeDeformer, ShapeOptions, Summary, TwoWay,
+    shape, Deformer, FemDeformer, FrameOutcome, HybridDeformer, NetworkDeformer, Organ, RegisterError,
+    RegistrationOptions, RestAndStream, RigidTransform, ShapeDeformer, ShapeOptions, Summary, TwoWay,
 };
 use scenario::registration::{CameraSpec, MethodKind, Misalignment};
 use scenario::{CaseScenario, DatasetScenario, Fixed, MeshSource, StaticScenario};
 
-use crate::registration::{MethodSpec, ModelSource, RegistrationSpec, ScenarioSource, TargetsSpec};
+use crate::registration::{LearnedWay, MethodSpec, ModelSource, RegistrationSpec, ScenarioSource, TargetsSpec};
 use crate::simulate::{simulate_cloud, CameraModel};
 
 /// Tetrahedra of the ground-truth phantom of the built-in case.
@@ -252,40 +252,51 @@ pub fn network_from_truth(case: &SyntheticCase, organ: &Organ, network: &Network
 /// and runs the match-and-membrane loop on a stream's warm-started frames ([`RestAndStream`]): on
 /// the design case streamed (21 frames, 2 N) the shape fit alone left 5.52 mm at the peak and 3.55
 /// mm over the frames, with the membrane loop on the stream 4.12 and 2.23 mm. The U-Net fits a
-/// membrane to the matches and predicts from it ([`NetworkDeformer`]).
-pub fn learned_registration(network: &Network, options: &RegistrationOptions) -> Result<LearnedRegistration> {
+/// membrane to the matches and predicts from it ([`NetworkDeformer`]); given a `basis` (a
+/// reduced-order model), it predicts from the shape fit of that model's shape space on a frame from
+/// rest ([`HybridDeformer`], [`NETWORK_AFTER_FIT`]).
+pub fn learned_registration(
+    network: &Network,
+    basis: Option<&Model>,
+    options: &RegistrationOptions,
+) -> Result<LearnedRegistration> {
     let (organ, membrane) = network_model(network)?;
-    Ok(match network.model {
-        Model::Reduced(_) => {
-            let shape = ShapeOptions::default();
-            let space = register::model_shape_space(network.model, &organ, shape.max_modes)?;
-            let fit = ShapeDeformer::new(space, &organ, shape)?;
-            let deformer = RestAndStream::new(Box::new(fit), Box::new(membrane));
-            LearnedRegistration {
-                organ,
-                deformer: Box::new(deformer),
-                options: learned_options(network.model, options),
-            }
+    let shape_fit = |model: &Model| -> Result<ShapeDeformer> {
+        let shape = ShapeOptions::default();
+        let space = register::model_shape_space(model, &organ, shape.max_modes)?;
+        Ok(ShapeDeformer::new(space, &organ, shape)?)
+    };
+    let (deformer, options): (Box<dyn Deformer + Send>, _) = match (network.model, basis) {
+        (Model::Reduced(_), None) => {
+            let fit = shape_fit(network.model)?;
+            (Box::new(RestAndStream::new(Box::new(fit), Box::new(membrane))), shape::loop_options(options))
         }
-        Model::UNet(_) => LearnedRegistration {
-            organ,
-            deformer: Box::new(membrane),
-            options: learned_options(network.model, options),
-        },
-    })
+        (Model::Reduced(_), Some(_)) => {
+            bail!("a reduced-order model fits its own shape space: another model's basis is for a U-Net")
+        }
+        // One way from rest, both ways on a stream's frames: on the design cases streamed (21 frames
+        // each), matching both ways brought the U-Net's TRE at the peak from 2.41 to 1.98 mm on
+        // average (better on all 7 cases); from rest it changed little (2.48 → 2.42 mm, better on 3,
+        // worse on 2).
+        (Model::UNet(_), None) => {
+            (Box::new(membrane), RegistrationOptions { two_way: TwoWay::Streamed, ..options.clone() })
+        }
+        (Model::UNet(_), Some(basis)) => {
+            let hybrid = HybridDeformer::new(Box::new(shape_fit(basis)?), Box::new(membrane), shape::SHAPE_ITERATIONS)?;
+            let options = shape::loop_options(options);
+            let iterations = shape::SHAPE_ITERATIONS + NETWORK_AFTER_FIT;
+            (Box::new(hybrid), RegistrationOptions { iterations, ..options })
+        }
+    };
+    Ok(LearnedRegistration { organ, deformer, options })
 }
 
-/// The loop's settings of a learned model's registration ([`learned_registration`]), from the
-/// case's settings for its learned models: a model with a basis takes the shape fit's budgets,
-/// the U-Net matches both ways on a stream's frames. On the design cases streamed (21 frames each),
-/// matching both ways brought the U-Net's TRE at the peak from 2.41 to 1.98 mm on average (better
-/// on all 7 cases); from rest it changed little (2.48 → 2.42 mm, better on 3, worse on 2).
-pub fn learned_options(model: &Model, options: &RegistrationOptions) -> RegistrationOptions {
-    match model {
-        Model::Reduced(_) => shape::loop_options(options),
-        Model::UNet(_) => RegistrationOptions { two_way: TwoWay::Streamed, ..options.clone() },
-    }
-}
+/// The U-Net's iterations after the shape fit of a reduced-order model's basis, on a frame from
+/// rest ([`learned_registration`]). On the design cases (the built-in case pressed at 1–2.5 N,
+/// lifted, dragged and pulled), one and two gave 1.95 mm (two at 1.5× the time); the shape fit
+/// alone 2.34 mm, the U-Net alone 2.48 mm, the reduced-order model's own membrane loop after the
+/// fit 2.60 mm (one iteration) and 2.76 mm (two).
+pub const NETWORK_AFTER_FIT: usize = 1;
 
 /// A learned model's registration method ([`learned_registration`]).
 pub struct LearnedRegistration {
@@ -312,8 +323,9 @@ pub fn methods(networks: &[Network]) -> Result<Vec<Method>> {
 /// iteration budgets: its FEM methods ([`fem_scenario`]); its network method once per learned
 /// model of `networks` (on its scenario's organ), named by the model's kind ("U-Net", "ROM"), a
 /// reduced-order model twice: its match-and-membrane loop ("ROM, membrane loop") and its shape fit;
-/// its hybrid methods with the first of them. Network and hybrid methods are left out without a
-/// learned model.
+/// a U-Net twice when a reduced-order model is given too: alone, and predicting from that model's
+/// shape fit ("U-Net after the ROM's shape fit"); its hybrid methods with the first reduced-order model (its shape space holds on the FEM's mesh),
+/// else the first network. Network and hybrid methods are left out without a learned model.
 pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec<Method>> {
     let mut out = Vec::new();
     for spec in &scenario.models.method {
@@ -323,7 +335,8 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
             scenario: Box::new(fem_scenario(scenario, &name, material)),
             dir: PathBuf::new(),
         };
-        match (spec.kind, spec.material, networks.first()) {
+        let hybrid_model = networks.iter().find(|n| matches!(n.model, Model::Reduced(_))).or(networks.first());
+        match (spec.kind, spec.material, hybrid_model) {
             (MethodKind::Fem, Some(material), _) => {
                 out.push(Method { method: MethodSpec::Fem(fem(material)), name, options });
             }
@@ -331,16 +344,21 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
                 bail!("method {name:?}: a FEM method needs a material")
             }
             (MethodKind::Network, _, Some(_)) => {
+                let basis = networks.iter().find(|n| matches!(n.model, Model::Reduced(_)));
                 for network in networks {
                     let name = network.model.method().display_name().to_string();
                     let (model, trained_on) = network.sources();
-                    let learned =
-                        |membrane| MethodSpec::Learned { model: model.clone(), scenario: trained_on.clone(), membrane };
+                    let learned = |way| MethodSpec::Learned { model: model.clone(), scenario: trained_on.clone(), way };
                     if matches!(network.model, Model::Reduced(_)) {
                         let name = format!("{name}, membrane loop");
-                        out.push(Method { name, method: learned(true), options: options.clone() });
+                        out.push(Method { name, method: learned(LearnedWay::Membrane), options: options.clone() });
                     }
-                    out.push(Method { name, method: learned(false), options: options.clone() });
+                    out.push(Method { name: name.clone(), method: learned(LearnedWay::Own), options: options.clone() });
+                    if let (Model::UNet(_), Some(basis)) = (network.model, basis) {
+                        let way = LearnedWay::AfterShapeFit(basis.sources().0);
+                        let name = format!("{name} after the {}'s shape fit", basis.model.method().display_name());
+                        out.push(Method { name, method: learned(way), options: options.clone() });
+                    }
                 }
             }
             (MethodKind::Hybrid, Some(material), Some(network)) => {

@@ -13,7 +13,7 @@ use learn::Model;
 use mesh::io::{Frame, FrameChange};
 use mesh::length::LengthUnit;
 use mesh::Point;
-use register::{Deformer, HybridDeformer, Organ, Registration, RegistrationOptions};
+use register::{Deformer, HybridDeformer, Organ, Registration, RegistrationOptions, ShapeDeformer, ShapeOptions};
 use scenario::{CaseScenario, DatasetScenario, MeshSource, StaticScenario};
 
 use crate::case::{fem_model, learned_registration, network_model, network_options, LearnedRegistration, Network};
@@ -30,23 +30,36 @@ pub enum MethodSpec {
         model: ModelSource,
         /// Its dataset scenario.
         scenario: ScenarioSource<DatasetScenario>,
-        /// The match-and-membrane loop alone (what a U-Net does), in place of a reduced-order
-        /// model's shape fit ([`learned_registration`]).
-        membrane: bool,
+        /// How it registers.
+        way: LearnedWay,
     },
-    /// A learned model's match-and-membrane loop for the first `network_iterations` of a frame,
-    /// then the FEM from its estimate ([`HybridDeformer`]): the model's organ must be the FEM's
-    /// mesh.
+    /// A learned model for the first `network_iterations` of a frame from rest, then the FEM from
+    /// its estimate, and the FEM alone on a stream's frames ([`HybridDeformer`]), on the FEM's
+    /// organ: a reduced-order model's shape fit there (its modes interpolated from its grid), a
+    /// U-Net's match-and-membrane loop (its organ must be the FEM's mesh).
     Hybrid {
         /// The model.
         model: ModelSource,
-        /// Its dataset scenario.
+        /// Its dataset scenario (a U-Net's organ and input nodes).
         scenario: ScenarioSource<DatasetScenario>,
         /// The FEM's static scenario.
         fem: ScenarioSource<StaticScenario>,
-        /// The network's iterations of a frame before the FEM's (at least 1).
+        /// The learned model's iterations of a frame from rest before the FEM's (at least 1).
         network_iterations: usize,
     },
+}
+
+/// How a learned model registers.
+#[derive(Clone, Debug)]
+pub enum LearnedWay {
+    /// As the model does ([`learned_registration`]): a reduced-order model fits its shape space
+    /// from rest, a U-Net fits a membrane to the matches and predicts from it.
+    Own,
+    /// The match-and-membrane loop alone (what a U-Net does), for a reduced-order model too.
+    Membrane,
+    /// A U-Net predicting from the shape fit of another model's basis (a reduced-order model's
+    /// shape space) on a frame from rest, from its own loop on a stream's frames.
+    AfterShapeFit(ModelSource),
 }
 
 impl MethodSpec {
@@ -61,7 +74,7 @@ impl MethodSpec {
         MethodSpec::Learned {
             model: ModelSource::File(model.into()),
             scenario: ScenarioSource::File(scenario.into()),
-            membrane: false,
+            way: LearnedWay::Own,
         }
     }
 }
@@ -133,7 +146,7 @@ impl MethodSpec {
                 let method = format!("FEM, {:?} ({:?} elements)", m.law, m.resolved_formulation());
                 Loaded { organ, deformer: Box::new(deformer), method, options: defaults() }
             }
-            MethodSpec::Learned { model, scenario, membrane } => {
+            MethodSpec::Learned { model, scenario, way } => {
                 let (model, words) = model.load()?;
                 let (scenario, dir) = scenario.read(DatasetScenario::load)?;
                 let network = Network { model: &model, scenario: &scenario, dir: &dir };
@@ -141,31 +154,58 @@ impl MethodSpec {
                     Some(options) => options.clone(),
                     None => network_options(&CaseScenario::builtin())?,
                 };
-                if *membrane {
-                    let (organ, deformer) = network_model(&network)?;
-                    let method = format!("{words}, membrane loop");
-                    Loaded { organ, deformer: Box::new(deformer), method, options }
-                } else {
-                    let LearnedRegistration { organ, deformer, options } = learned_registration(&network, &options)?;
-                    Loaded { organ, deformer, method: words, options }
+                match way {
+                    LearnedWay::Membrane => {
+                        let (organ, deformer) = network_model(&network)?;
+                        let method = format!("{words}, membrane loop");
+                        Loaded { organ, deformer: Box::new(deformer), method, options }
+                    }
+                    LearnedWay::Own => {
+                        let LearnedRegistration { organ, deformer, options } =
+                            learned_registration(&network, None, &options)?;
+                        Loaded { organ, deformer, method: words, options }
+                    }
+                    LearnedWay::AfterShapeFit(basis) => {
+                        let (basis, basis_words) = basis.load()?;
+                        let LearnedRegistration { organ, deformer, options } =
+                            learned_registration(&network, Some(&basis), &options)?;
+                        Loaded {
+                            organ,
+                            deformer,
+                            method: format!("{words} after the shape fit of {basis_words}"),
+                            options,
+                        }
+                    }
                 }
             }
             MethodSpec::Hybrid { model, scenario, fem, network_iterations } => {
                 let (model, words) = model.load()?;
-                let (scenario, dir) = scenario.read(DatasetScenario::load)?;
-                let (organ, network) = network_model(&Network { model: &model, scenario: &scenario, dir: &dir })?;
                 let (fem, fem_dir) = fem.read(StaticScenario::load)?;
-                let (fem_organ, deformer) = fem_model(&fem, &fem_dir)?;
-                if fem_organ.mesh().nodes != organ.mesh().nodes {
-                    anyhow::bail!(
-                        "the network's organ ({} nodes) is not the FEM model's mesh ({}, {} nodes): a hybrid needs a \
-                         network trained on the model's own mesh",
-                        organ.mesh().num_nodes(),
-                        mesh_words(&fem),
-                        fem_organ.mesh().num_nodes()
-                    );
-                }
-                let deformer = HybridDeformer::new(Box::new(network), deformer, *network_iterations)?;
+                let (organ, deformer) = fem_model(&fem, &fem_dir)?;
+                let learned: Box<dyn Deformer + Send> = match &model {
+                    // The shape space holds on any mesh inside the model's grid: the FEM's own.
+                    Model::Reduced(_) => {
+                        let shape = ShapeOptions::default();
+                        let space = register::model_shape_space(&model, &organ, shape.max_modes)?;
+                        Box::new(ShapeDeformer::new(space, &organ, shape)?)
+                    }
+                    Model::UNet(_) => {
+                        let (scenario, dir) = scenario.read(DatasetScenario::load)?;
+                        let (network_organ, network) =
+                            network_model(&Network { model: &model, scenario: &scenario, dir: &dir })?;
+                        if network_organ.mesh().nodes != organ.mesh().nodes {
+                            anyhow::bail!(
+                                "the network's organ ({} nodes) is not the FEM model's mesh ({}, {} nodes): a hybrid \
+                                 needs a network trained on the model's own mesh",
+                                network_organ.mesh().num_nodes(),
+                                mesh_words(&fem),
+                                organ.mesh().num_nodes()
+                            );
+                        }
+                        Box::new(network)
+                    }
+                };
+                let deformer = HybridDeformer::new(learned, Box::new(deformer), *network_iterations)?;
                 let method = format!("{words} for {network_iterations} iterations, then FEM, {:?}", fem.material.law);
                 Loaded { organ, deformer: Box::new(deformer), method, options: defaults() }
             }
@@ -200,7 +240,7 @@ pub enum TargetsSpec {
 pub struct RegistrationChoice {
     /// The registration set-up of a patient's organ, written by `augsim prepare`: its learned
     /// model or its FEM, whichever it found the better on its validation, and its targets.
-    #[arg(long, conflicts_with_all = ["fem", "model", "scenario", "targets"])]
+    #[arg(long, conflicts_with_all = ["fem", "model", "scenario", "targets", "shape_model"])]
     pub patient: Option<PathBuf>,
     /// With --patient: register with the patient's FEM, whichever its set-up names.
     #[arg(long, requires = "patient")]
@@ -220,6 +260,11 @@ pub struct RegistrationChoice {
     /// liver_ar_t10): its mesh is the organ, its observed nodes the model's input.
     #[arg(long)]
     pub scenario: Option<PathBuf>,
+    /// With --model a U-Net: a reduced-order model (its directory or model.json) whose shape space
+    /// is fitted to a cloud registered from rest first; the U-Net then predicts from the surface
+    /// that fit found (a stream's next clouds: the U-Net's own loop).
+    #[arg(long, requires = "model")]
+    pub shape_model: Option<PathBuf>,
     /// Targets at rest: a points file (CSV x,y,z in --units, .fcsv or .mrk.json); default: the
     /// mesh's `markers` and `tumour` regions.
     #[arg(long, value_name = "TARGETS", value_parser = targets_file)]
@@ -276,6 +321,7 @@ impl RegistrationChoice {
                 given("model", self.model.is_some()),
                 given("scenario", self.scenario.is_some()),
                 given("targets", self.targets.is_some()),
+                given("shape_model", self.shape_model.is_some()),
             ]
             .into_iter()
             .flatten()
@@ -296,9 +342,19 @@ impl RegistrationChoice {
 
     /// The method given without a patient's set-up.
     fn method(&self) -> Result<MethodSpec, String> {
+        if self.shape_model.is_some() && self.model.is_none() {
+            return Err("shape_model is the basis of a model's registration: give model MODEL (a U-Net) too".into());
+        }
         match (&self.fem, &self.model, &self.scenario) {
             (Some(fem), None, _) => Ok(MethodSpec::fem(fem)),
-            (None, Some(model), Some(scenario)) => Ok(MethodSpec::learned(model, scenario)),
+            (None, Some(model), Some(scenario)) => Ok(match &self.shape_model {
+                None => MethodSpec::learned(model, scenario),
+                Some(basis) => MethodSpec::Learned {
+                    model: ModelSource::File(model.clone()),
+                    scenario: ScenarioSource::File(scenario.clone()),
+                    way: LearnedWay::AfterShapeFit(ModelSource::File(basis.clone())),
+                },
+            }),
             (Some(_), Some(_), _) => Err("give fem or model, not both".into()),
             _ => Err("give patient DIR, fem SCENARIO, or model MODEL with scenario SCENARIO".into()),
         }
@@ -569,10 +625,13 @@ mod tests {
             RegistrationChoice { model: Some("m".into()), scenario: Some("s".into()), ..RegistrationChoice::default() };
         let spec = learned.spec().unwrap();
         assert!(matches!(&spec.method, MethodSpec::Learned {
-            model: ModelSource::File(model), scenario: ScenarioSource::File(scenario), membrane: false }
+            model: ModelSource::File(model), scenario: ScenarioSource::File(scenario), way: LearnedWay::Own }
             if model == Path::new("m") && scenario == Path::new("s")));
         assert!(matches!(spec.targets, TargetsSpec::Regions));
         assert_eq!((spec.units, spec.given_units), (LengthUnit::DEFAULT, LengthUnit::DEFAULT));
+        let after_fit = RegistrationChoice { shape_model: Some("rom".into()), ..learned };
+        assert!(matches!(&after_fit.spec().unwrap().method, MethodSpec::Learned {
+            way: LearnedWay::AfterShapeFit(ModelSource::File(basis)), .. } if basis == Path::new("rom")));
     }
 
     #[test]
@@ -583,6 +642,8 @@ mod tests {
         assert!(model_alone.spec().unwrap_err().to_string().contains("model MODEL with scenario SCENARIO"));
         let both = RegistrationChoice { model: Some("m".into()), ..fem() };
         assert_eq!(both.check().unwrap_err(), "give fem or model, not both");
+        let basis_alone = RegistrationChoice { shape_model: Some("rom".into()), ..fem() };
+        assert!(basis_alone.check().unwrap_err().contains("give model MODEL (a U-Net) too"));
         let patient_and_more =
             RegistrationChoice { patient: Some("p".into()), targets: Some(TargetsSpec::Regions), ..fem() };
         assert_eq!(

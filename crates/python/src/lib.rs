@@ -216,13 +216,14 @@ struct Registration {
 #[pymethods]
 impl Registration {
     #[new]
-    #[pyo3(signature = (*, fem=None, model=None, scenario=None, patient=None, use_fem=None, targets=None, units=None, frame=None, iterations=None, rigid=false))]
+    #[pyo3(signature = (*, fem=None, model=None, scenario=None, shape_model=None, patient=None, use_fem=None, targets=None, units=None, frame=None, iterations=None, rigid=false))]
     #[allow(clippy::too_many_arguments)] // one per Python keyword argument
     fn new(
         py: Python<'_>,
         fem: Option<PathBuf>,
         model: Option<PathBuf>,
         scenario: Option<PathBuf>,
+        shape_model: Option<PathBuf>,
         patient: Option<PathBuf>,
         use_fem: Option<bool>,
         targets: Option<&Bound<'_, PyAny>>,
@@ -249,6 +250,7 @@ impl Registration {
             fem,
             model,
             scenario,
+            shape_model,
             targets,
             units,
             frame,

@@ -110,43 +110,67 @@ impl Deformer for FemDeformer {
     }
 }
 
-/// A learned model (the U-Net, or a shape-space fit) for the first iterations of a frame, then
-/// the finite-element model from its estimate: the network brings the surface near the cloud in a few milliseconds, so that the
-/// matches the finite-element model is pulled by are already good and its springs can take their
-/// full stiffness at once.
+/// A learned model (a shape-space fit, or the U-Net) for the first iterations of a frame from rest,
+/// then another deformer from its estimate, as on a frame warm-started from the last: the
+/// finite-element model (the learned model brings the surface near the cloud in milliseconds, so
+/// that the matches the springs pull on are already good, and the springs take their full stiffness
+/// at once), or a learned model's match-and-membrane loop (the U-Net predicting from the surface
+/// the shape fit found). A warm-started frame (a stream) starts near the cloud already: the second
+/// deformer alone registers it.
 pub struct HybridDeformer {
-    network: Box<dyn Deformer + Send>,
-    fem: FemDeformer,
-    network_iterations: usize,
+    first: Box<dyn Deformer + Send>,
+    then: Box<dyn Deformer + Send>,
+    first_iterations: usize,
+    /// Whether the frame under way is warm-started.
+    warm: bool,
+    /// Whether the last estimate is the second deformer's.
+    last_is_then: bool,
 }
 
+// The second deformer goes on as on a warm-started frame: past the data springs' stiffness ramp.
+const _: () = assert!(crate::frame::WARM_START_ITERATION >= STIFFNESS_RAMP);
+
 impl HybridDeformer {
-    /// `network` (a learned model's deformer) for the first `network_iterations` iterations of a
-    /// frame (at least 1), `fem`
-    /// (on the same organ) after them.
+    /// `first` (a learned model's deformer) for the first `first_iterations` iterations of a frame
+    /// from rest (at least 1), `then` (on the same organ) after them and on warm-started frames.
     pub fn new(
-        network: Box<dyn Deformer + Send>,
-        fem: FemDeformer,
-        network_iterations: usize,
+        first: Box<dyn Deformer + Send>,
+        then: Box<dyn Deformer + Send>,
+        first_iterations: usize,
     ) -> Result<HybridDeformer> {
-        if network_iterations == 0 {
-            return Err(RegisterError::Invalid("a hybrid registration needs at least one network iteration".into()));
+        if first_iterations == 0 {
+            return Err(RegisterError::Invalid(
+                "a hybrid registration needs at least one iteration of its first model".into(),
+            ));
         }
-        Ok(HybridDeformer { network, fem, network_iterations })
+        Ok(HybridDeformer { first, then, first_iterations, warm: false, last_is_then: false })
     }
 }
 
 impl Deformer for HybridDeformer {
     fn start_frame(&mut self, warm: bool) {
-        self.network.start_frame(warm);
-        self.fem.start_frame(warm);
+        self.warm = warm;
+        self.first.start_frame(warm);
+        self.then.start_frame(warm);
     }
 
     fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>> {
-        match iteration.checked_sub(self.network_iterations) {
-            None => self.network.deform(observations, previous, iteration),
-            // Past the ramp: the network's estimate is a good start, the springs are stiff at once.
-            Some(k) => self.fem.deform(observations, previous, STIFFNESS_RAMP + k),
+        let then = match (self.warm, iteration.checked_sub(self.first_iterations)) {
+            (false, None) => None,
+            (false, Some(k)) => Some(crate::frame::WARM_START_ITERATION + k),
+            (true, _) => Some(iteration),
+        };
+        self.last_is_then = then.is_some();
+        match then {
+            None => self.first.deform(observations, previous, iteration),
+            Some(iteration) => self.then.deform(observations, previous, iteration),
+        }
+    }
+
+    fn uncertainty(&self, rest_points: &[mesh::Point], stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
+        match self.last_is_then {
+            true => self.then.uncertainty(rest_points, stencils),
+            false => self.first.uncertainty(rest_points, stencils),
         }
     }
 }
@@ -591,6 +615,58 @@ mod tests {
         let warm = register_frame(&organ, &mut deformer, &cloud, Some(&rest.u), &options).unwrap();
         assert_eq!((rest.u[2], warm.u[2]), (1e-3, 2e-3));
         assert_eq!(register_frame(&organ, &mut deformer, &cloud, None, &options).unwrap().u[2], 1e-3);
+    }
+
+    /// A hybrid deforms a frame from rest with the learned model for its first iterations, then
+    /// with the FEM, its springs stiff at once; a warm-started frame (a stream) with the FEM alone.
+    #[test]
+    fn a_hybrid_gives_a_stream_s_frames_to_the_fem_alone() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        use std::sync::Arc;
+        /// A learned model that counts its calls and leaves the estimate where it is.
+        struct Counting(Arc<AtomicUsize>);
+        impl Deformer for Counting {
+            fn deform(&mut self, _: &Observations, previous: &[f64], _: usize) -> Result<Vec<f64>> {
+                self.0.fetch_add(1, Ordering::SeqCst);
+                Ok(previous.to_vec())
+            }
+        }
+        let mesh = mesh::box_tet([0.0; 3], [0.04; 3], [3, 3, 3]).unwrap();
+        let mut problem = Problem::new(mesh, fem::Material::new(fem::Law::Corotational, 5000.0, 0.45));
+        problem.fix(&mesh::select::nodes_in_box(&problem.mesh.nodes, [-1.0, -1.0, -1e-6], [1.0, 1.0, 1e-6]));
+        let organ = Organ::new(problem.mesh.clone(), None).unwrap();
+        let stiffness = FemDeformer::default_stiffness(&problem);
+        let fem = || FemDeformer::new(problem.clone(), stiffness, SolverOptions::default()).unwrap();
+        let calls = Arc::new(AtomicUsize::new(0));
+        let network_iterations = 5;
+        let mut hybrid =
+            HybridDeformer::new(Box::new(Counting(calls.clone())), Box::new(fem()), network_iterations).unwrap();
+        // The top pressed down 2 mm, seen from above.
+        let view = [0.0, 0.0, -1.0];
+        let cloud: Vec<mesh::Point> = organ
+            .surface()
+            .vertices
+            .iter()
+            .filter(|p| p[2] > 0.04 - 1e-9)
+            .map(|p| [p[0], p[1], p[2] - 0.002])
+            .collect();
+        let observations =
+            observe(&organ, organ.surface(), &cloud, &RegistrationOptions::default(), 0.05, Some(view)).unwrap();
+        let rest = vec![0.0; 3 * organ.mesh().num_nodes()];
+        let same = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(a, b)| (a - b).abs() < 1e-12);
+        let lowest = |u: &[f64]| u.iter().skip(2).step_by(3).copied().fold(0.0, f64::min);
+        hybrid.start_frame(false);
+        for iteration in 0..network_iterations {
+            assert_eq!(hybrid.deform(&observations, &rest, iteration).unwrap(), rest);
+        }
+        let polished = hybrid.deform(&observations, &rest, network_iterations).unwrap();
+        assert_eq!(calls.load(Ordering::SeqCst), network_iterations, "the FEM after the network's iterations");
+        assert!(same(&polished, &fem().deform(&observations, &rest, STIFFNESS_RAMP).unwrap()), "springs stiff at once");
+        assert!(lowest(&polished) < -1e-3, "the FEM presses the top: {} m", lowest(&polished));
+        hybrid.start_frame(true);
+        let warm = hybrid.deform(&observations, &rest, crate::WARM_START_ITERATION).unwrap();
+        assert_eq!(calls.load(Ordering::SeqCst), network_iterations, "no network on a stream's frame");
+        assert!(same(&warm, &polished), "the FEM alone, its springs stiff");
     }
 
     /// The shipped network on the 3k-T4 phantom of the `liver_ar` dataset scenario, the normal

@@ -217,8 +217,10 @@ pub enum MethodKind {
     /// The U-Net given to the comparison (`augsim register --model`), trained on this phantom
     /// with the normal displacement of its `visible` region as input; left out when none is given.
     Network,
-    /// The U-Net for `network_iterations`, then the finite-element model of `material` from its
-    /// estimate; left out when no network is given.
+    /// A learned model for the first `network_iterations` of a frame from rest, then the
+    /// finite-element model of `material` from its estimate (and alone on a stream's frames): the
+    /// first reduced-order model given (its shape fit, on the FEM's mesh), else the U-Net (which
+    /// must have been trained on the FEM's mesh); left out when no learned model is given.
     Hybrid,
 }
 
