@@ -463,7 +463,7 @@ fn stream_rows(methods: &[String], streams: &[Vec<StreamOutcome>], summary: &mut
 /// streams.
 fn headlines(methods: &[String], means: &[f64], stream_means: &[f64]) -> Vec<Headline> {
     let mut headlines = Vec::new();
-    for learned in ["U-Net", "ROM"] {
+    for learned in ["U-Net", "ROM", "U-Net after the ROM's shape fit"] {
         let (Some(k), Some(&fem), Some(&fem_stream)) =
             (methods.iter().position(|m| m == learned), means.first(), stream_means.first())
         else {
