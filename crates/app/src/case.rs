@@ -261,14 +261,9 @@ pub fn learned_registration(
     options: &RegistrationOptions,
 ) -> Result<LearnedRegistration> {
     let (organ, membrane) = network_model(network)?;
-    let shape_fit = |model: &Model| -> Result<ShapeDeformer> {
-        let shape = ShapeOptions::default();
-        let space = register::model_shape_space(model, &organ, shape.max_modes)?;
-        Ok(ShapeDeformer::new(space, &organ, shape)?)
-    };
     let (deformer, options): (Box<dyn Deformer + Send>, _) = match (network.model, basis) {
         (Model::Reduced(_), None) => {
-            let fit = shape_fit(network.model)?;
+            let fit = shape_fit(network.model, &organ)?;
             (Box::new(RestAndStream::new(Box::new(fit), Box::new(membrane))), shape::loop_options(options))
         }
         (Model::Reduced(_), Some(_)) => {
@@ -282,13 +277,22 @@ pub fn learned_registration(
             (Box::new(membrane), RegistrationOptions { two_way: TwoWay::Streamed, ..options.clone() })
         }
         (Model::UNet(_), Some(basis)) => {
-            let hybrid = HybridDeformer::new(Box::new(shape_fit(basis)?), Box::new(membrane), shape::SHAPE_ITERATIONS)?;
+            let fit = shape_fit(basis, &organ)?;
+            let hybrid = HybridDeformer::new(Box::new(fit), Box::new(membrane), shape::SHAPE_ITERATIONS)?;
             let options = shape::loop_options(options);
             let iterations = shape::SHAPE_ITERATIONS + NETWORK_AFTER_FIT;
             (Box::new(hybrid), RegistrationOptions { iterations, ..options })
         }
     };
     Ok(LearnedRegistration { organ, deformer, options })
+}
+
+/// The shape fit of `model`'s shape space (a model with a basis) on `organ`, whose mesh must lie in
+/// the model's grid, in the default settings.
+pub fn shape_fit(model: &Model, organ: &Organ) -> Result<ShapeDeformer> {
+    let shape = ShapeOptions::default();
+    let space = register::model_shape_space(model, organ, shape.max_modes)?;
+    Ok(ShapeDeformer::new(space, organ, shape)?)
 }
 
 /// The U-Net's iterations after the shape fit of a reduced-order model's basis, on a frame from
@@ -324,10 +328,12 @@ pub fn methods(networks: &[Network]) -> Result<Vec<Method>> {
 /// model of `networks` (on its scenario's organ), named by the model's kind ("U-Net", "ROM"), a
 /// reduced-order model twice: its match-and-membrane loop ("ROM, membrane loop") and its shape fit;
 /// a U-Net twice when a reduced-order model is given too: alone, and predicting from that model's
-/// shape fit ("U-Net after the ROM's shape fit"); its hybrid methods with the first reduced-order model (its shape space holds on the FEM's mesh),
-/// else the first network. Network and hybrid methods are left out without a learned model.
+/// shape fit ("U-Net after the ROM's shape fit"); its hybrid methods with the first reduced-order
+/// model (its shape space holds on the FEM's mesh), else the first network. Network and hybrid
+/// methods are left out without a learned model.
 pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec<Method>> {
     let mut out = Vec::new();
+    let reduced = networks.iter().find(|n| matches!(n.model, Model::Reduced(_)));
     for spec in &scenario.models.method {
         let name = spec.name.clone();
         let options = with_budgets(&scenario.registration, spec.iterations, spec.warm_iterations, None);
@@ -335,8 +341,7 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
             scenario: Box::new(fem_scenario(scenario, &name, material)),
             dir: PathBuf::new(),
         };
-        let hybrid_model = networks.iter().find(|n| matches!(n.model, Model::Reduced(_))).or(networks.first());
-        match (spec.kind, spec.material, hybrid_model) {
+        match (spec.kind, spec.material, reduced.or(networks.first())) {
             (MethodKind::Fem, Some(material), _) => {
                 out.push(Method { method: MethodSpec::Fem(fem(material)), name, options });
             }
@@ -344,7 +349,6 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
                 bail!("method {name:?}: a FEM method needs a material")
             }
             (MethodKind::Network, _, Some(_)) => {
-                let basis = networks.iter().find(|n| matches!(n.model, Model::Reduced(_)));
                 for network in networks {
                     let name = network.model.method().display_name().to_string();
                     let (model, trained_on) = network.sources();
@@ -354,7 +358,7 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
                         out.push(Method { name, method: learned(LearnedWay::Membrane), options: options.clone() });
                     }
                     out.push(Method { name: name.clone(), method: learned(LearnedWay::Own), options: options.clone() });
-                    if let (Model::UNet(_), Some(basis)) = (network.model, basis) {
+                    if let (Model::UNet(_), Some(basis)) = (network.model, reduced) {
                         let way = LearnedWay::AfterShapeFit(basis.sources().0);
                         let name = format!("{name} after the {}'s shape fit", basis.model.method().display_name());
                         out.push(Method { name, method: learned(way), options: options.clone() });

@@ -13,10 +13,12 @@ use learn::Model;
 use mesh::io::{Frame, FrameChange};
 use mesh::length::LengthUnit;
 use mesh::Point;
-use register::{Deformer, HybridDeformer, Organ, Registration, RegistrationOptions, ShapeDeformer, ShapeOptions};
+use register::{Deformer, HybridDeformer, Organ, Registration, RegistrationOptions};
 use scenario::{CaseScenario, DatasetScenario, MeshSource, StaticScenario};
 
-use crate::case::{fem_model, learned_registration, network_model, network_options, LearnedRegistration, Network};
+use crate::case::{
+    fem_model, learned_registration, network_model, network_options, shape_fit, LearnedRegistration, Network,
+};
 
 /// What deforms the organ.
 #[derive(Clone, Debug)]
@@ -75,6 +77,20 @@ impl MethodSpec {
             model: ModelSource::File(model.into()),
             scenario: ScenarioSource::File(scenario.into()),
             way: LearnedWay::Own,
+        }
+    }
+
+    /// The U-Net `model` with the dataset scenario `scenario`, predicting from the shape fit of the
+    /// reduced-order model `basis` on a frame from rest ([`LearnedWay::AfterShapeFit`]).
+    pub fn learned_after_shape_fit(
+        model: impl Into<PathBuf>,
+        scenario: impl Into<PathBuf>,
+        basis: impl Into<PathBuf>,
+    ) -> MethodSpec {
+        MethodSpec::Learned {
+            model: ModelSource::File(model.into()),
+            scenario: ScenarioSource::File(scenario.into()),
+            way: LearnedWay::AfterShapeFit(ModelSource::File(basis.into())),
         }
     }
 }
@@ -184,11 +200,7 @@ impl MethodSpec {
                 let (organ, deformer) = fem_model(&fem, &fem_dir)?;
                 let learned: Box<dyn Deformer + Send> = match &model {
                     // The shape space holds on any mesh inside the model's grid: the FEM's own.
-                    Model::Reduced(_) => {
-                        let shape = ShapeOptions::default();
-                        let space = register::model_shape_space(&model, &organ, shape.max_modes)?;
-                        Box::new(ShapeDeformer::new(space, &organ, shape)?)
-                    }
+                    Model::Reduced(_) => Box::new(shape_fit(&model, &organ)?),
                     Model::UNet(_) => {
                         let (scenario, dir) = scenario.read(DatasetScenario::load)?;
                         let (network_organ, network) =
@@ -349,11 +361,7 @@ impl RegistrationChoice {
             (Some(fem), None, _) => Ok(MethodSpec::fem(fem)),
             (None, Some(model), Some(scenario)) => Ok(match &self.shape_model {
                 None => MethodSpec::learned(model, scenario),
-                Some(basis) => MethodSpec::Learned {
-                    model: ModelSource::File(model.clone()),
-                    scenario: ScenarioSource::File(scenario.clone()),
-                    way: LearnedWay::AfterShapeFit(ModelSource::File(basis.clone())),
-                },
+                Some(basis) => MethodSpec::learned_after_shape_fit(model, scenario, basis),
             }),
             (Some(_), Some(_), _) => Err("give fem or model, not both".into()),
             _ => Err("give patient DIR, fem SCENARIO, or model MODEL with scenario SCENARIO".into()),

@@ -128,7 +128,8 @@ fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
 /// The TRE of a registration over the stream (and of no registration: the motion of the markers).
 const STREAM_TRE: &str = "TRE mean over frames (largest frame mean; largest)";
 
-/// Runs the experiment: the co-rotational FEM (3k T4) and the shipped learned models, when found.
+/// Runs the experiment: the co-rotational FEM (3k T4) and the shipped learned models, when found (the
+/// U-Net after the ROM's shape fit when both are).
 pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let scenario = press_and_release();
     progress
@@ -149,6 +150,12 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         }
         progress.line(&format!("streaming to the shipped {method}"));
         let learned = MethodSpec::learned(path, AR_SCENARIO);
+        streams.push(stream_case(method, &case, learned)?);
+    }
+    if missing.is_empty() {
+        let method = "U-Net after the ROM's shape fit";
+        progress.line(&format!("streaming to the shipped {method}"));
+        let learned = MethodSpec::learned_after_shape_fit(SHIPPED_MODEL, AR_SCENARIO, SHIPPED_ROM);
         streams.push(stream_case(method, &case, learned)?);
     }
     let rest: Vec<f64> =
