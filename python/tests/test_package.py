@@ -87,6 +87,18 @@ def test_registration_with_the_unet(case):
     assert np.linalg.norm(r.targets - case["truth"], axis=1).mean() < 0.5 * unregistered
 
 
+def test_registration_with_the_unet_after_the_rom_s_shape_fit(case):
+    rom = os.path.join(ROOT, "models", "liver_ar_rom")
+    reg = augsim.Registration(model=LIVER_AR, scenario="liver_ar_t10", shape_model=rom, targets=case["rest"],
+                              units="mm")
+    assert reg.method.startswith("U-Net") and "after the shape fit of ROM" in reg.method
+    r = reg.register(case["cloud"])
+    unregistered = np.linalg.norm(case["rest"] - case["truth"], axis=1).mean()
+    assert np.linalg.norm(r.targets - case["truth"], axis=1).mean() < 0.5 * unregistered
+    with pytest.raises(ValueError, match="give model MODEL"):
+        augsim.Registration(fem=case["scenario"], shape_model=rom)
+
+
 def test_a_rigid_pre_alignment_answers_in_the_clouds_frame(case):
     shift = np.array([20.0, -15.0, 10.0])
     reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm", rigid=True)
