@@ -150,7 +150,10 @@ impl HybridDeformer {
 impl Deformer for HybridDeformer {
     fn start_frame(&mut self, warm: bool) {
         self.warm = warm;
-        self.first.start_frame(warm);
+        // A warm-started frame is the second deformer's alone.
+        if !warm {
+            self.first.start_frame(false);
+        }
         self.then.start_frame(warm);
     }
 

@@ -257,10 +257,17 @@ pub fn register_frame(
             // The view is estimated from the matches to every triangle; those that fall on a
             // facing triangle are the facing part's own.
             let whole = closest_points(&surface, candidates)?;
-            view = estimate_view(&surface, &whole, outlier_limit(&whole, options, capture));
+            view = estimate_view(&surface, &whole, outlier_limit(whole.iter().map(|m| m.distance), options, capture));
             let (facing, original) = facing_part(&surface, view);
             let matches = facing_matches(&facing, &original, surface.triangles.len(), candidates, whole)?;
-            observations(organ, &surface, candidates, &matches, &original, outlier_limit(&matches, options, capture))
+            observations(
+                organ,
+                &surface,
+                candidates,
+                &matches,
+                &original,
+                outlier_limit(matches.iter().map(|m| m.distance), options, capture),
+            )
         } else {
             observe(organ, &surface, candidates, options, capture, view)?
         };
@@ -311,7 +318,14 @@ pub fn observe(
 ) -> Result<Observations> {
     let (facing, original) = facing_part(surface, view);
     let matches = closest_points(&facing, cloud)?;
-    Ok(observations(organ, surface, cloud, &matches, &original, outlier_limit(&matches, options, capture)))
+    Ok(observations(
+        organ,
+        surface,
+        cloud,
+        &matches,
+        &original,
+        outlier_limit(matches.iter().map(|m| m.distance), options, capture),
+    ))
 }
 
 /// The observations of the cloud points' `matches` on the triangles `original` of `surface`
@@ -398,9 +412,7 @@ fn seen_surface_matches(
             (across <= cloud.spacing).then_some((v, c, x, distance))
         })
         .collect();
-    let mut distances: Vec<f64> = over.iter().map(|m| m.3).collect();
-    let median = mesh::stats::median(&mut distances);
-    let limit = (options.outlier_factor * median).max(options.min_outlier_distance).max(capture);
+    let limit = outlier_limit(over.iter().map(|m| m.3), options, capture);
     let rest = &organ.surface().vertices;
     over.into_iter()
         .filter(|m| m.3 <= limit)
@@ -456,9 +468,9 @@ fn facing_matches(
 }
 
 /// The distance beyond which a match is an outlier: the largest of `capture` and the options'
-/// limits, the one relative to the median match distance included.
-fn outlier_limit(matches: &[ClosestPoint], options: &RegistrationOptions, capture: f64) -> f64 {
-    let mut distances: Vec<f64> = matches.iter().map(|m| m.distance).collect();
+/// limits, the one relative to the median of the matches' `distances` included.
+fn outlier_limit(distances: impl Iterator<Item = f64>, options: &RegistrationOptions, capture: f64) -> f64 {
+    let mut distances: Vec<f64> = distances.collect();
     let median = mesh::stats::median(&mut distances);
     (options.outlier_factor * median).max(options.min_outlier_distance).max(capture)
 }
@@ -550,7 +562,7 @@ mod tests {
             sample_visible(&surface, [0.0, 0.0, -1.0], 800, 3).unwrap().into_iter().map(|s| s.point).collect();
         let view_of = |cloud: &[Point]| {
             let matches = closest_points(&surface, cloud).unwrap();
-            estimate_view(&surface, &matches, outlier_limit(&matches, &options, 0.05))
+            estimate_view(&surface, &matches, outlier_limit(matches.iter().map(|m| m.distance), &options, 0.05))
         };
         let view = view_of(&top).expect("a view");
         assert!(view[2] < -0.95, "{view:?}");

@@ -11,16 +11,11 @@ pub const NEIGHBOURS: usize = 8;
 /// Marks the points whose mean distance to their [`NEIGHBOURS`] nearest neighbours exceeds
 /// `factor` times the median of that distance over the cloud: on a surface sampled every few
 /// millimetres, a point floating in the volume is several times farther from its neighbours
-/// than any surface sample. Returns `true` for an outlier; a cloud of at most [`NEIGHBOURS`]
-/// points has none.
-pub fn isolated_points(cloud: &[Point], factor: f64) -> Vec<bool> {
-    isolation(cloud, factor).0
-}
-
-/// [`isolated_points`], and the spacing of the points kept: the median of their mean distance to
-/// their [`NEIGHBOURS`] nearest neighbours (of all the points' when none is kept; 0 for a cloud of at
-/// most [`NEIGHBOURS`] points).
-pub(crate) fn isolation(cloud: &[Point], factor: f64) -> (Vec<bool>, f64) {
+/// than any surface sample. Returns `true` for an outlier (a cloud of at most [`NEIGHBOURS`]
+/// points has none), and the spacing of the points kept: the median of their mean distance to
+/// their nearest neighbours (of all the points' when none is kept; 0 for a cloud of at most
+/// [`NEIGHBOURS`] points).
+pub fn isolation(cloud: &[Point], factor: f64) -> (Vec<bool>, f64) {
     if cloud.len() <= NEIGHBOURS {
         return (vec![false; cloud.len()], 0.0);
     }
@@ -150,7 +145,6 @@ mod tests {
         let cloud = plane_with_floating_points();
         let surface = 40 * 40;
         let (flags, spacing) = isolation(&cloud, 3.0);
-        assert_eq!(flags, isolated_points(&cloud, 3.0));
         assert_eq!(flags[..surface].iter().filter(|&&f| f).count(), 0, "a surface point was flagged");
         // The spacing is the kept points' median mean distance to their nearest neighbours, by brute
         // force (the floating points left out).
@@ -228,10 +222,10 @@ mod tests {
     /// than any other).
     #[test]
     fn tiny_clouds_and_far_points() {
-        assert_eq!(isolated_points(&[[0.0; 3], [1.0, 0.0, 0.0]], 3.0), vec![false, false]);
+        assert_eq!(isolation(&[[0.0; 3], [1.0, 0.0, 0.0]], 3.0).0, vec![false, false]);
         let mut cloud: Vec<Point> = (0..400).map(|k| [(k % 20) as f64 * 1e-3, (k / 20) as f64 * 1e-3, 0.0]).collect();
         cloud.push([1000.0, 0.0, 0.0]);
-        let flags = isolated_points(&cloud, 3.0);
+        let flags = isolation(&cloud, 3.0).0;
         assert!(flags[400] && !flags[..400].iter().any(|&f| f));
     }
 }
