@@ -50,6 +50,7 @@ class Registration:
         shape_model: Optional[_Path] = None,
         patient: Optional[_Path] = None,
         use_fem: Optional[bool] = None,
+        use_hybrid: bool = False,
         targets: Union[_Path, npt.ArrayLike, None] = None,
         units: Optional[str] = None,
         frame: Optional[str] = None,

@@ -6,6 +6,7 @@ Run: pytest -s python/tests (the augsim binary: $AUGSIM_BIN, default target/rele
 """
 
 import os
+import re
 import sys
 
 import numpy as np
@@ -271,12 +272,15 @@ def test_a_prepared_patient_registers(tmp_path):
                      str(tmp_path / "ligaments.csv"), "--targets", str(tmp_path / "tumour.csv"), "--samples", "30",
                      "--tets", "500", "--out", str(tmp_path / "patient"))
     assert "step 7/7 report" in out and "units: mm" in out and "validation: FEM TRE" in out
-    # By default the method the validation chose (registration.toml names it); use_fem=False: the ROM.
-    chosen = "FEM" if 'method = "fem"' in (tmp_path / "patient" / "registration.toml").read_text() else "ROM"
-    for use_fem, method in ((None, chosen), (False, "ROM")):
+    # By default the method the validation chose (registration.toml names it); use_fem=False: the ROM;
+    # use_hybrid=True: the ROM from rest, then the FEM.
+    set_up = (tmp_path / "patient" / "registration.toml").read_text()
+    chosen = re.search(r'^method = "(\w+)"', set_up, re.M).group(1)
+    for method, asked in ((chosen, {}), ("learned", {"use_fem": False}), ("hybrid", {"use_hybrid": True})):
         # In the patient's own unit (its files were in mm), in no named frame.
-        reg = augsim.Registration(patient=tmp_path / "patient", use_fem=use_fem)
-        assert reg.method.startswith(method) and reg.targets.shape == (2, 3), reg.method
+        reg = augsim.Registration(patient=tmp_path / "patient", **asked)
+        assert reg.method.startswith("FEM" if method == "fem" else "ROM"), reg.method
+        assert ("then FEM" in reg.method) == (method == "hybrid") and reg.targets.shape == (2, 3), reg.method
         assert (reg.units, reg.frame) == ("mm", None)
         np.testing.assert_allclose(reg.targets, [centre, centre + [20.0, 0.0, 0.0]], atol=1e-6)
         # The organ's top face at rest: the targets stay where they are.

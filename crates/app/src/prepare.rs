@@ -23,14 +23,15 @@
 //!    organ that swings from where it is held is named here, before the validation's hours.
 //! 4. **model**: the reduced-order model (or the U-Net) trained on it.
 //! 5. **evaluation**: its error on the test split, which played no part in training it.
-//! 6. **validation**: registration of held-out cases, the learned model's and the FEM's, against
+//! 6. **validation**: registration of held-out cases, the learned model's, the FEM's and the
+//!    hybrid's (the learned model from rest, then the FEM from its estimate), against
 //!    a truth they did not see: the same surface meshed anew with quadratic tetrahedra (T10, the
 //!    dataset's Neo-Hookean law without its F-bar linear elements), 3, 6 or 12 times finer (the
 //!    first whose targets move by at most 10 % on a mesh twice as fine, under the push that moves
 //!    them most), pushed by a tool at four places of what the camera sees; the cloud is the
 //!    truth's seen surface with 0.5 mm of noise; the TRE at the targets. Each truth solve is told
 //!    as it ends; their solutions are kept in `validation/`, so that a validation run again does
-//!    not solve them again.
+//!    not solve them again. `registration.toml` names the method with the lowest TRE.
 //! 7. **report**: `report.md`, with `regions.png` (the organ seen from the camera: what it
 //!    sees, where it is held, the targets) and the time of each step.
 //!
@@ -507,7 +508,8 @@ fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let patient = format!(
         "# The registration set-up of this organ: `augsim register --patient DIR`, `augsim serve\n\
          # --patient DIR`, `augsim.Registration(patient=DIR)`. Paths are relative to this file.\n\
-         # method: \"learned\" or \"fem\", the one that registered the validation's pushes the better.\n\
+         # method: \"learned\", \"fem\" or \"hybrid\" (the learned model from rest, then the FEM), the one\n\
+         # that registered the validation's pushes the best.\n\
          # input_units: the unit of the files it was prepared from, in which points whose files name\n\
          # none are read and results given back.\n\
          method = \"learned\"\nmodel = \"model\"\nscenario = \"dataset.toml\"\nfem = \"static.toml\"\ntargets = \"targets.csv\"\nunits = \"m\"\n\
@@ -885,6 +887,7 @@ fn method_name(method: PatientMethod) -> &'static str {
     match method {
         PatientMethod::Fem => "FEM",
         PatientMethod::Learned => "learned model",
+        PatientMethod::Hybrid => "learned model, then FEM (hybrid)",
     }
 }
 
@@ -943,8 +946,8 @@ fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::P
 
     // Registration of each push the truth solved (one it found no equilibrium under is left out,
     // and the report says so).
-    let mut methods =
-        [PatientMethod::Learned, PatientMethod::Fem].map(|method| MethodRun { method, ..MethodRun::default() });
+    let mut methods = [PatientMethod::Learned, PatientMethod::Fem, PatientMethod::Hybrid]
+        .map(|method| MethodRun { method, ..MethodRun::default() });
     let mut rest_errors = Vec::new();
     let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
     let noise = rand_distr::Normal::new(0.0, 0.0005).context("noise")?;
@@ -1058,13 +1061,16 @@ fn method_line(run: &MethodRun, pushes: usize) -> String {
     )
 }
 
-/// Writes into the patient file the method that did the better on the validation's pushes;
+/// Writes into the patient file the method that did the best on the validation's pushes;
 /// returns the validation's line on it.
-fn record_better_method(dir: &Path, methods: &[MethodRun; 2]) -> Result<String> {
-    // The set-up registers with the method that did the better on these pushes: the one that
-    // failed on fewer, then the one with the lower TRE.
-    let [learned, fem] = methods.each_ref().map(MethodRun::rank);
-    let chosen = if fem < learned { PatientMethod::Fem } else { PatientMethod::Learned };
+fn record_better_method(dir: &Path, methods: &[MethodRun]) -> Result<String> {
+    // The set-up registers with the method that did the best on these pushes: the one that
+    // failed on fewer, then the one with the lower TRE; on a tie the first.
+    let chosen = methods
+        .iter()
+        .min_by(|a, b| a.rank().partial_cmp(&b.rank()).unwrap_or(std::cmp::Ordering::Equal))
+        .context("no method was validated")?
+        .method;
     let path = dir.join(PATIENT_FILE);
     let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
     let mut set_up: Vec<&str> = text.lines().filter(|l| !l.starts_with("method = ")).collect();
@@ -1073,7 +1079,7 @@ fn record_better_method(dir: &Path, methods: &[MethodRun; 2]) -> Result<String> 
     set_up.insert(at, &method);
     write_atomic_bytes(&path, (set_up.join("\n") + "\n").as_bytes())?;
     Ok(format!(
-        "validation: {PATIENT_FILE} registers with the {} (method = \"{}\"), the better on these pushes",
+        "validation: {PATIENT_FILE} registers with the {} (method = \"{}\"), the best on these pushes",
         method_name(chosen),
         chosen.name()
     ))

@@ -13,11 +13,12 @@ use learn::Model;
 use mesh::io::{Frame, FrameChange};
 use mesh::length::LengthUnit;
 use mesh::Point;
-use register::{Deformer, HybridDeformer, Organ, Registration, RegistrationOptions};
+use register::{shape, Deformer, HybridDeformer, Organ, Registration, RegistrationOptions};
 use scenario::{CaseScenario, DatasetScenario, MeshSource, StaticScenario};
 
 use crate::case::{
     fem_model, learned_registration, network_model, network_options, shape_fit, LearnedRegistration, Network,
+    POLISH_ITERATIONS,
 };
 
 /// What deforms the organ.
@@ -46,8 +47,10 @@ pub enum MethodSpec {
         scenario: ScenarioSource<DatasetScenario>,
         /// The FEM's static scenario.
         fem: ScenarioSource<StaticScenario>,
-        /// The learned model's iterations of a frame from rest before the FEM's (at least 1).
-        network_iterations: usize,
+        /// The learned model's iterations of a frame from rest before the FEM's (at least 1;
+        /// `None`: a reduced-order model's shape fit, [`shape::SHAPE_ITERATIONS`], or a U-Net's
+        /// first iteration).
+        network_iterations: Option<usize>,
     },
 }
 
@@ -196,6 +199,10 @@ impl MethodSpec {
             }
             MethodSpec::Hybrid { model, scenario, fem, network_iterations } => {
                 let (model, words) = model.load()?;
+                let network_iterations = network_iterations.unwrap_or(match model {
+                    Model::Reduced(_) => shape::SHAPE_ITERATIONS,
+                    Model::UNet(_) => 1,
+                });
                 let (fem, fem_dir) = fem.read(StaticScenario::load)?;
                 let (organ, deformer) = fem_model(&fem, &fem_dir)?;
                 let learned: Box<dyn Deformer + Send> = match &model {
@@ -217,9 +224,14 @@ impl MethodSpec {
                         Box::new(network)
                     }
                 };
-                let deformer = HybridDeformer::new(learned, Box::new(deformer), *network_iterations)?;
+                let deformer = HybridDeformer::new(learned, Box::new(deformer), network_iterations)?;
                 let method = format!("{words} for {network_iterations} iterations, then FEM, {:?}", fem.material.law);
-                Loaded { organ, deformer: Box::new(deformer), method, options: defaults() }
+                // By default the FEM polishes the learned estimate for a few iterations.
+                let options = options.cloned().unwrap_or(RegistrationOptions {
+                    iterations: network_iterations + POLISH_ITERATIONS,
+                    ..RegistrationOptions::default()
+                });
+                Loaded { organ, deformer: Box::new(deformer), method, options }
             }
         })
     }
@@ -251,7 +263,8 @@ pub enum TargetsSpec {
 #[derive(Clone, Debug, Default, clap::Args)]
 pub struct RegistrationChoice {
     /// The registration set-up of a patient's organ, written by `augsim prepare`: its learned
-    /// model or its FEM, whichever it found the better on its validation, and its targets.
+    /// model, its FEM or the two in turn, whichever it found the best on its validation, and its
+    /// targets.
     #[arg(long, conflicts_with_all = ["fem", "model", "scenario", "targets", "shape_model"])]
     pub patient: Option<PathBuf>,
     /// With --patient: register with the patient's FEM, whichever its set-up names.
@@ -260,6 +273,10 @@ pub struct RegistrationChoice {
     /// With --patient: register with the patient's learned model, whichever its set-up names.
     #[arg(long, requires = "patient", conflicts_with = "use_fem")]
     pub use_model: bool,
+    /// With --patient: register with the patient's learned model from rest, then its FEM from that
+    /// estimate (the FEM alone on a stream's next clouds), whichever its set-up names.
+    #[arg(long, requires = "patient", conflicts_with_all = ["use_fem", "use_model"])]
+    pub use_hybrid: bool,
     /// FEM registration on this static scenario (a file or a built-in name): its mesh, material
     /// (law, formulation), fixed nodes and solver.
     #[arg(long, conflicts_with = "model")]
@@ -341,15 +358,20 @@ impl RegistrationChoice {
             if !others.is_empty() {
                 return Err(format!("patient DIR holds its method and targets: leave out {}", others.join(", ")));
             }
-            if self.use_fem && self.use_model {
-                return Err("use_fem and use_model ask for different methods: give one".into());
+            if self.uses() > 1 {
+                return Err("use_fem, use_model and use_hybrid ask for different methods: give one".into());
             }
             return Ok(());
         }
-        if self.use_fem || self.use_model {
-            return Err("use_fem and use_model choose a patient's method: give patient DIR".into());
+        if self.uses() > 0 {
+            return Err("use_fem, use_model and use_hybrid choose a patient's method: give patient DIR".into());
         }
         self.method().map(|_| ())
+    }
+
+    /// How many of a patient's methods are asked for.
+    fn uses(&self) -> usize {
+        [self.use_fem, self.use_model, self.use_hybrid].into_iter().filter(|&u| u).count()
     }
 
     /// The method given without a patient's set-up.
@@ -369,12 +391,12 @@ impl RegistrationChoice {
     }
 
     /// The registration's spec: a patient's set-up read (the method it names, or the one asked
-    /// for with `use_fem` / `use_model`), or the method and targets given; an error, as
+    /// for with `use_fem` / `use_model` / `use_hybrid`), or the method and targets given; an error, as
     /// [`RegistrationChoice::check`] gives, when the choices do not fit together.
     pub fn spec(&self) -> Result<RegistrationSpec> {
         self.check().map_err(anyhow::Error::msg)?;
         if let Some(dir) = &self.patient {
-            let method = PatientMethod::asked(self.use_fem, self.use_model);
+            let method = PatientMethod::asked(self.use_fem, self.use_model, self.use_hybrid);
             let mut spec = RegistrationSpec::patient(dir, method, self.iterations, self.rigid)?;
             spec.given_units = self.units.unwrap_or(spec.given_units);
             spec.given_frame = self.frame;
@@ -496,7 +518,7 @@ impl RegistrationSpec {
 /// The file of a patient's registration set-up in the directory `augsim prepare` writes.
 pub const PATIENT_FILE: &str = "registration.toml";
 
-/// How a patient's organ is registered: with its learned model or with its FEM.
+/// How a patient's organ is registered: with its learned model, its FEM, or both in turn.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum PatientMethod {
@@ -505,17 +527,18 @@ pub enum PatientMethod {
     Learned,
     /// The FEM of the static scenario.
     Fem,
+    /// The learned model from rest (a reduced-order model's shape fit, on the FEM's mesh), then
+    /// the FEM from its estimate; the FEM alone on a stream's frames ([`MethodSpec::Hybrid`]).
+    Hybrid,
 }
 
 impl PatientMethod {
     /// The method asked for on a command line: the FEM with `fem`, the learned model with
-    /// `learned`, otherwise (`None`) the set-up's own.
-    pub fn asked(fem: bool, learned: bool) -> Option<PatientMethod> {
-        match (fem, learned) {
-            (true, _) => Some(PatientMethod::Fem),
-            (false, true) => Some(PatientMethod::Learned),
-            (false, false) => None,
-        }
+    /// `learned`, the hybrid with `hybrid`, otherwise (`None`) the set-up's own.
+    pub fn asked(fem: bool, learned: bool, hybrid: bool) -> Option<PatientMethod> {
+        [(fem, PatientMethod::Fem), (learned, PatientMethod::Learned), (hybrid, PatientMethod::Hybrid)]
+            .into_iter()
+            .find_map(|(asked, method)| asked.then_some(method))
     }
 
     /// How the set-up file names it.
@@ -523,12 +546,13 @@ impl PatientMethod {
         match self {
             PatientMethod::Learned => "learned",
             PatientMethod::Fem => "fem",
+            PatientMethod::Hybrid => "hybrid",
         }
     }
 }
 
 /// A patient's registration set-up ([`PATIENT_FILE`]): the method `augsim prepare` found the
-/// better on its validation, the learned model and its dataset scenario, the FEM alternative, the
+/// best on its validation, the learned model and its dataset scenario, the FEM alternative, the
 /// targets and their unit; paths relative to the file.
 #[derive(Clone, Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -563,6 +587,12 @@ impl RegistrationSpec {
         let method = match method.unwrap_or(p.method) {
             PatientMethod::Fem => MethodSpec::fem(dir.join(p.fem)),
             PatientMethod::Learned => MethodSpec::learned(dir.join(p.model), dir.join(p.scenario)),
+            PatientMethod::Hybrid => MethodSpec::Hybrid {
+                model: ModelSource::File(dir.join(p.model)),
+                scenario: ScenarioSource::File(dir.join(p.scenario)),
+                fem: ScenarioSource::File(dir.join(p.fem)),
+                network_iterations: None,
+            },
         };
         Ok(RegistrationSpec {
             method,
@@ -658,8 +688,13 @@ mod tests {
             patient_and_more.check().unwrap_err(),
             "patient DIR holds its method and targets: leave out fem, targets"
         );
-        let use_fem_alone = RegistrationChoice { use_fem: true, ..fem() };
-        assert!(use_fem_alone.check().unwrap_err().contains("give patient DIR"));
+        let use_hybrid_alone = RegistrationChoice { use_hybrid: true, ..fem() };
+        assert!(use_hybrid_alone.check().unwrap_err().contains("give patient DIR"));
+        let patient = || RegistrationChoice { patient: Some("p".into()), ..RegistrationChoice::default() };
+        let two_methods = RegistrationChoice { use_fem: true, use_hybrid: true, ..patient() };
+        assert!(two_methods.check().unwrap_err().contains("give one"));
+        assert_eq!(PatientMethod::asked(false, false, true), Some(PatientMethod::Hybrid));
+        assert_eq!(PatientMethod::asked(false, false, false), None);
         let missing = RegistrationChoice { patient: Some("no/such/dir".into()), ..RegistrationChoice::default() };
         assert!(missing.spec().unwrap_err().to_string().contains("augsim prepare"));
     }

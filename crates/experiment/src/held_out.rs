@@ -21,7 +21,7 @@ use crate::loads::{CaseLoad, LEFT_LOBE_FRONT, RIGHT_LOBE};
 use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 use app::case::{
     ar_scenario, case_methods, compare, network_from_truth, network_model, network_options, synthetic_case, Network,
-    NETWORK_AFTER_FIT, SHIPPED_MODEL, SHIPPED_ROM,
+    NETWORK_AFTER_FIT, POLISH_ITERATIONS, SHIPPED_MODEL, SHIPPED_ROM,
 };
 
 /// The cases, fixed before any method was run on them.
@@ -202,12 +202,6 @@ pub(crate) fn base_case() -> Result<CaseScenario> {
     scenario.models.method = std::iter::once(corotational).chain(network).chain([polish]).collect();
     Ok(scenario)
 }
-
-/// The co-rotational FEM's iterations after the shape fit of the hybrid method. On the design cases
-/// (the built-in case pressed at 1–2.5 N, lifted, dragged and pulled; from rest), 1, 2, 3 and 4
-/// iterations gave a mean TRE of 2.40, 2.38, 2.40 and 2.41 mm, the shape fit alone on the FEM's
-/// mesh 2.73 mm (on the model's own quadratic mesh 2.34 mm), the FEM alone 2.94 mm.
-const POLISH_ITERATIONS: usize = 2;
 
 /// The shipped learned models that are there (run from the repository): the U-Net, the
 /// reduced-order model.

@@ -81,6 +81,9 @@ pub(crate) struct Recipe {
     pub train_samples: Option<usize>,
     /// Fine-tune this pre-trained model (its `model.json`) instead of starting from scratch.
     pub fine_tune: Option<PathBuf>,
+    /// A shipped network (its directory, from the repository's root) evaluated instead of a
+    /// training when its record is this recipe's run on this split: hours of training not run again.
+    pub shipped: Option<PathBuf>,
 }
 
 impl Recipe {
@@ -99,6 +102,23 @@ impl Recipe {
             corruption: Corruption::default(),
             train_samples: None,
             fine_tune: None,
+            shipped: None,
+        }
+    }
+
+    /// The training run: batches of 4, the recipe's steps, learning rates and corruption, checkpoints
+    /// at every validation.
+    pub fn train_config(&self) -> TrainConfig {
+        TrainConfig {
+            iterations: self.iterations,
+            batch_size: 4,
+            learning_rate: self.learning_rate,
+            final_learning_rate: Some(self.final_learning_rate),
+            seed: SEED,
+            validate_every: self.validate_every,
+            checkpoint_every: self.validate_every,
+            train_corruption: self.corruption.clone(),
+            val_corruption: self.corruption.clone(),
         }
     }
 
@@ -138,6 +158,8 @@ pub(crate) struct Trained {
     pub split: [usize; 3],
     pub curve: Vec<CurveRow>,
     pub step_seconds: f64,
+    /// The shipped network evaluated in place of a training ([`Recipe::shipped`]).
+    pub shipped: Option<PathBuf>,
 }
 
 impl Trained {
@@ -149,10 +171,20 @@ impl Trained {
         }
     }
 
+    /// The learning curve's PNG (from the experiment's directory), unless the network was shipped.
+    pub fn curve_figure(&self, recipe: &Recipe) -> Option<String> {
+        self.shipped.is_none().then(|| format!("{}/{}", model_dir(recipe), app::curve::CURVE_PNG))
+    }
+
     /// Seconds per training step, or that the model was trained by an earlier run of the
-    /// experiment (read back, not timed: the experiment's time then leaves training out).
+    /// experiment or shipped (read back, not timed: the experiment's time then leaves training out).
     pub fn timing(&self) -> String {
-        if self.step_seconds > 0.0 {
+        if let Some(path) = &self.shipped {
+            format!(
+                "the shipped {}, whose record is this recipe's run on this split, evaluated, not trained again",
+                path.display()
+            )
+        } else if self.step_seconds > 0.0 {
             format!("{:.3} s per training step", self.step_seconds)
         } else {
             "trained by an earlier run, so not timed here".into()
@@ -165,6 +197,21 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
     let all = dataset.load_all()?;
     let policy = recipe.split_policy();
     let (split, [train, validation, test]) = policy.apply(&all)?;
+    if let Some((path, model)) = shipped_run(recipe, &split)? {
+        progress
+            .line(&format!("evaluating the shipped {}: its record is this recipe's run on this split", path.display()));
+        return Ok(Trained {
+            split: [train.len(), validation.len(), test.len()],
+            model,
+            train,
+            record: split,
+            validation,
+            test,
+            curve: Vec::new(),
+            step_seconds: 0.0,
+            shipped: Some(path),
+        });
+    }
     let init = match &recipe.fine_tune {
         Some(model) => Initialization::FineTune { model: model.clone(), freeze_encoder: false },
         None => Initialization::Scratch {
@@ -175,17 +222,7 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
     };
     let start = if recipe.fine_tune.is_some() { "fine-tuning" } else { "from scratch" };
     progress.line(&format!("training {} steps {start} on {} samples", recipe.iterations, train.len()));
-    let config = TrainConfig {
-        iterations: recipe.iterations,
-        batch_size: 4,
-        learning_rate: recipe.learning_rate,
-        final_learning_rate: Some(recipe.final_learning_rate),
-        seed: 0,
-        validate_every: recipe.validate_every,
-        checkpoint_every: recipe.validate_every,
-        train_corruption: recipe.corruption.clone(),
-        val_corruption: recipe.corruption.clone(),
-    };
+    let config = recipe.train_config();
     let out = dir.join(model_dir(recipe));
     let options = TrainOptions {
         placement: dataset.manifest().placement(),
@@ -203,7 +240,32 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
         test,
         curve: outcome.curve,
         step_seconds: outcome.mean_step_seconds,
+        shipped: None,
     })
+}
+
+/// The training seed of every recipe.
+const SEED: u64 = 0;
+
+/// The recipe's shipped network, when it is there (run from the repository's root) and its record
+/// is this recipe's run on `split`: from scratch, the same seed, steps, channels, input corruption
+/// and samples.
+fn shipped_run(recipe: &Recipe, split: &learn::Split) -> Result<Option<(PathBuf, Model)>> {
+    let Some(path) = recipe.shipped.as_ref().filter(|p| Model::json_path(p).is_file()) else {
+        return Ok(None);
+    };
+    let Model::UNet(network) = Model::load(path)? else { return Ok(None) };
+    let same = recipe.fine_tune.is_none()
+        && recipe.train_samples.is_none()
+        && network.config.base_channels == recipe.channels
+        && network.training.as_ref().is_some_and(|t| {
+            t.iterations == recipe.iterations
+                && t.seed == SEED
+                && t.fine_tuned_from.is_none()
+                && t.corruption == recipe.corruption
+                && t.split == *split
+        });
+    Ok(same.then(|| (path.clone(), Model::UNet(network))))
 }
 
 /// A reduced-order model fitted with `config` on the training and validation samples of the
@@ -335,7 +397,11 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
         Size::Paper => (2000, 100_000, 16),
     };
     let data = dataset(dir, "liver_forces_large", samples, progress)?;
-    let recipe = Recipe { channels, ..Recipe::new(iterations, samples / 10, samples / 5) };
+    let recipe = Recipe {
+        channels,
+        shipped: (size == Size::Paper).then(|| PathBuf::from("models/liver_forces")),
+        ..Recipe::new(iterations, samples / 10, samples / 5)
+    };
     let t = train(&data.dataset, dir, &recipe, progress)?;
     let report = learn::evaluate(&t.model, &t.test, &Corruption::default(), 0, Compute::Cpu)?;
     let input = t.test.get(0).input;
@@ -417,7 +483,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
         size,
         seconds: 0.0,
         rows,
-        figures: vec![format!("{}/{}", model_dir(&recipe), app::curve::CURVE_PNG), "errors.png".into()],
+        figures: t.curve_figure(&recipe).into_iter().chain(["errors.png".into()]).collect(),
         page_figures: Vec::new(),
         notes: vec![
             split_note(&t, &data),
@@ -478,7 +544,7 @@ pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<
         size,
         seconds: 0.0,
         rows,
-        figures: vec![format!("{}/{}", model_dir(&recipe), app::curve::CURVE_PNG), "errors.png".into()],
+        figures: t.curve_figure(&recipe).into_iter().chain(["errors.png".into()]).collect(),
         page_figures: Vec::new(),
         notes: vec![
             split_note(&t, &data),
@@ -503,5 +569,46 @@ mod tests {
         assert_eq!(displacement_magnitudes(&samples).collect::<Vec<_>>(), vec![5.0, 1.0]);
         assert_eq!(max_displacement(&samples), 5.0);
         assert_eq!(mean_displacement(&samples), 3.0);
+    }
+
+    /// A shipped network stands in for a training only when its record is the recipe's run on the
+    /// same split: another split, width, step count or input noise trains anew.
+    #[test]
+    fn a_shipped_network_stands_in_only_for_its_own_recipe_and_split() {
+        let grid = GridShape::new(4, 4, 4);
+        let mut all = Samples::new(grid);
+        for index in 0..8u64 {
+            let input = (0..grid.field_len()).map(|k| ((k as u64 * 7 + index) % 5) as f32).collect();
+            let target = (0..grid.field_len()).map(|k| 1e-3 * ((k as u64 + index) % 3) as f32).collect();
+            all.push(&Sample { index, input, target, mask: vec![1; grid.nodes()] }).unwrap();
+        }
+        all.source = Some("toy/seed 0/0".into());
+        let recipe = Recipe { channels: 2, ..Recipe::new(2, 2, 2) };
+        let (split, [train, validation, _]) = recipe.split_policy().apply(&all).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let init = Initialization::Scratch {
+            unet: UNetConfig { base_channels: recipe.channels, depth: 1, ..UNetConfig::default() },
+            normalization: learn::Normalization::from_samples(&train),
+            input_unit: "N".into(),
+        };
+        let options = TrainOptions { test: split.test.clone(), ..TrainOptions::new(dir.path().to_path_buf()) };
+        learn::train(&train, &validation, &init, &recipe.train_config(), &options, &learn::Silent).unwrap();
+
+        let shipped = Recipe { shipped: Some(dir.path().to_path_buf()), ..recipe.clone() };
+        let (path, model) = shipped_run(&shipped, &split).unwrap().expect("the shipped network's own run");
+        assert_eq!(path, dir.path());
+        assert!(matches!(model, Model::UNet(_)));
+        let (other_split, _) = Recipe::new(2, 1, 2).split_policy().apply(&all).unwrap();
+        assert_ne!(other_split, split);
+        let noisy = Corruption { noise_std: 1e-3, ..Corruption::default() };
+        for (what, recipe, split) in [
+            ("another split", shipped.clone(), &other_split),
+            ("another width", Recipe { channels: 4, ..shipped.clone() }, &split),
+            ("more steps", Recipe { iterations: 3, ..shipped.clone() }, &split),
+            ("noisy inputs", Recipe { corruption: noisy, ..shipped.clone() }, &split),
+            ("no shipped network", Recipe { shipped: Some(dir.path().join("absent")), ..shipped.clone() }, &split),
+        ] {
+            assert!(shipped_run(&recipe, split).unwrap().is_none(), "{what}");
+        }
     }
 }

@@ -12,9 +12,7 @@ use learn::{Compute, Corruption, EvalReport, Model, PointErrors};
 use mesh::stats::{max, mean};
 use scenario::CaseScenario;
 
-use crate::learning::{
-    dataset, error_histogram, fit_rom, model_dir, prediction_seconds, train, Generated, Recipe, Trained,
-};
+use crate::learning::{dataset, error_histogram, fit_rom, prediction_seconds, train, Generated, Recipe, Trained};
 use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 
 use app::case::AR_SCENARIO as LIVER_AR;
@@ -153,12 +151,11 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         size,
         seconds: 0.0,
         rows,
-        figures: vec![
-            "tre.png".into(),
-            format!("{}/{}", model_dir(&recipe), app::curve::CURVE_PNG),
-            "errors.png".into(),
-            "viewer.html".into(),
-        ],
+        figures: ["tre.png".into()]
+            .into_iter()
+            .chain(t.curve_figure(&recipe))
+            .chain(["errors.png".into(), "viewer.html".into()])
+            .collect(),
         page_figures: Vec::new(),
         notes: vec![
             format!(

@@ -178,7 +178,8 @@ struct Registered {
 /// cloud is warm-started from the previous one's registration.
 ///
 /// Either `patient`: a directory written by `augsim prepare` (the method it found the better on
-/// its validation and its targets; `use_fem=True` for its FEM, `False` for its learned model); or
+/// its validation and its targets; `use_fem=True` for its FEM, `False` for its learned model,
+/// `use_hybrid=True` for its learned model from rest then its FEM); or
 /// `fem`: a static scenario (file or built-in name, e.g. `liver`) whose FEM deforms the organ; or `model` (a model directory or its model.json) with `scenario`, the dataset scenario
 /// it was trained on (e.g. `liver_ar_t10` for the shipped `models/liver_ar`). `targets`: rest
 /// positions, a CSV file (x, y, z) or an array [k, 3], in `units`; default: the mesh's `markers`
@@ -216,7 +217,7 @@ struct Registration {
 #[pymethods]
 impl Registration {
     #[new]
-    #[pyo3(signature = (*, fem=None, model=None, scenario=None, shape_model=None, patient=None, use_fem=None, targets=None, units=None, frame=None, iterations=None, rigid=false))]
+    #[pyo3(signature = (*, fem=None, model=None, scenario=None, shape_model=None, patient=None, use_fem=None, use_hybrid=false, targets=None, units=None, frame=None, iterations=None, rigid=false))]
     #[allow(clippy::too_many_arguments)] // one per Python keyword argument
     fn new(
         py: Python<'_>,
@@ -226,6 +227,7 @@ impl Registration {
         shape_model: Option<PathBuf>,
         patient: Option<PathBuf>,
         use_fem: Option<bool>,
+        use_hybrid: bool,
         targets: Option<&Bound<'_, PyAny>>,
         units: Option<&str>,
         frame: Option<&str>,
@@ -247,6 +249,7 @@ impl Registration {
             patient,
             use_fem: use_fem == Some(true),
             use_model: use_fem == Some(false),
+            use_hybrid,
             fem,
             model,
             scenario,
