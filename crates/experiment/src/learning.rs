@@ -180,8 +180,14 @@ impl Trained {
     /// experiment or shipped (read back, not timed: the experiment's time then leaves training out).
     pub fn timing(&self) -> String {
         if let Some(path) = &self.shipped {
+            let [train, validation] = match &self.model {
+                Model::UNet(network) => network.training.as_ref().map_or([0; 2], |t| [t.train_samples, t.val_samples]),
+                Model::Reduced(_) => [0; 2],
+            };
             format!(
-                "the shipped {}, whose record is this recipe's run on this split, evaluated, not trained again",
+                "the network is the shipped {}, this recipe's run on these draws as they solved when it was trained \
+                 ({train} training and {validation} validation samples, none of them among the test samples here), \
+                 evaluated, not trained again",
                 path.display()
             )
         } else if self.step_seconds > 0.0 {
@@ -197,9 +203,11 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
     let all = dataset.load_all()?;
     let policy = recipe.split_policy();
     let (split, [train, validation, test]) = policy.apply(&all)?;
-    if let Some((path, model)) = shipped_run(recipe, &split)? {
-        progress
-            .line(&format!("evaluating the shipped {}: its record is this recipe's run on this split", path.display()));
+    if let Some((path, model)) = shipped_run(recipe, &split, &test)? {
+        progress.line(&format!(
+            "evaluating the shipped {}: this recipe's run on these draws, none of the test samples seen",
+            path.display()
+        ));
         return Ok(Trained {
             split: [train.len(), validation.len(), test.len()],
             model,
@@ -248,9 +256,10 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
 const SEED: u64 = 0;
 
 /// The recipe's shipped network, when it is there (run from the repository's root) and its record
-/// is this recipe's run on `split`: from scratch, the same seed, steps, channels, input corruption
-/// and samples.
-fn shipped_run(recipe: &Recipe, split: &learn::Split) -> Result<Option<(PathBuf, Model)>> {
+/// is this recipe's run on the draws of `split`: from scratch, the same seed, steps, channels and
+/// input corruption, on the same data source, and none of the `test` samples among those it was
+/// trained or selected on (a draw that failed when it was trained and solves now is one it never saw).
+fn shipped_run(recipe: &Recipe, split: &learn::Split, test: &Samples) -> Result<Option<(PathBuf, Model)>> {
     let Some(path) = recipe.shipped.as_ref().filter(|p| Model::json_path(p).is_file()) else {
         return Ok(None);
     };
@@ -263,7 +272,8 @@ fn shipped_run(recipe: &Recipe, split: &learn::Split) -> Result<Option<(PathBuf,
                 && t.seed == SEED
                 && t.fine_tuned_from.is_none()
                 && t.corruption == recipe.corruption
-                && t.split == *split
+                && t.split.source == split.source
+                && t.split.check_unseen(test).is_ok()
         });
     Ok(same.then(|| (path.clone(), Model::UNet(network))))
 }
@@ -358,11 +368,16 @@ fn split_note(t: &Trained, data: &Generated) -> String {
         0 => String::new(),
         n => format!(" ({n} of {drawn} draws without a solution, left out)"),
     };
+    // A shipped network's checkpoint was chosen on its own validation samples (its timing says).
+    let selection = match (&t.shipped, t.best_validation_step()) {
+        (Some(_), _) => String::new(),
+        (None, Some(step)) => format!(" (checkpoint selection, best at step {step})"),
+        (None, None) => " (checkpoint selection)".into(),
+    };
     format!(
-        "{} samples generated{failed}: {train} training, {validation} validation (checkpoint selection{}), \
-         {test} test (every figure above); {timing}.",
+        "{} samples generated{failed}: {train} training, {validation} validation{selection}, {test} test (every \
+         figure above); {timing}.",
         manifest.num_samples,
-        t.best_validation_step().map_or(String::new(), |it| format!(", best at step {it}")),
     )
 }
 
@@ -492,8 +507,8 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
                  displacement of our test set is in the table.",
                 data.note()
             ),
-            "The reduced-order model (`augsim train --method rom --prior`) is fitted on the U-Net's training and \
-             validation samples and tested on its test samples: a POD basis, the linear-elastic response at rest of \
+            "The reduced-order model (`augsim train --method rom --prior`) is fitted on the training and validation \
+             samples above and tested on the test samples: a POD basis, the linear-elastic response at rest of \
              the scenario's FEM as a prior, and a Gaussian process on what the prior leaves. The U-Net's projection \
              on that basis keeps only what the training targets span."
                 .into(),
@@ -572,9 +587,10 @@ mod tests {
     }
 
     /// A shipped network stands in for a training only when its record is the recipe's run on the
-    /// same split: another split, width, step count or input noise trains anew.
+    /// same draws and it never saw the test samples: a test sample it was selected on, other draws,
+    /// another width, step count or input noise train anew.
     #[test]
-    fn a_shipped_network_stands_in_only_for_its_own_recipe_and_split() {
+    fn a_shipped_network_stands_in_only_for_its_own_recipe_and_unseen_test_samples() {
         let grid = GridShape::new(4, 4, 4);
         let mut all = Samples::new(grid);
         for index in 0..8u64 {
@@ -584,7 +600,7 @@ mod tests {
         }
         all.source = Some("toy/seed 0/0".into());
         let recipe = Recipe { channels: 2, ..Recipe::new(2, 2, 2) };
-        let (split, [train, validation, _]) = recipe.split_policy().apply(&all).unwrap();
+        let (split, [train, validation, test]) = recipe.split_policy().apply(&all).unwrap();
         let dir = tempfile::tempdir().unwrap();
         let init = Initialization::Scratch {
             unet: UNetConfig { base_channels: recipe.channels, depth: 1, ..UNetConfig::default() },
@@ -595,20 +611,33 @@ mod tests {
         learn::train(&train, &validation, &init, &recipe.train_config(), &options, &learn::Silent).unwrap();
 
         let shipped = Recipe { shipped: Some(dir.path().to_path_buf()), ..recipe.clone() };
-        let (path, model) = shipped_run(&shipped, &split).unwrap().expect("the shipped network's own run");
+        let (path, model) = shipped_run(&shipped, &split, &test).unwrap().expect("the shipped network's own run");
         assert_eq!(path, dir.path());
         assert!(matches!(model, Model::UNet(_)));
-        let (other_split, _) = Recipe::new(2, 1, 2).split_policy().apply(&all).unwrap();
-        assert_ne!(other_split, split);
+        // Another validation count, the same test samples: still none it saw.
+        let split_of = |all: &Samples, validation, test| {
+            let (split, [_, _, test]) = Recipe::new(2, validation, test).split_policy().apply(all).unwrap();
+            (split, test)
+        };
+        let (fewer, fewer_test) = split_of(&all, 1, 2);
+        assert_ne!(fewer, split);
+        assert!(shipped_run(&shipped, &fewer, &fewer_test).unwrap().is_some());
+        let seen = split_of(&all, 2, 3);
+        let other_draws = split_of(&Samples { source: Some("toy/seed 1/0".into()), ..all.clone() }, 2, 2);
         let noisy = Corruption { noise_std: 1e-3, ..Corruption::default() };
-        for (what, recipe, split) in [
-            ("another split", shipped.clone(), &other_split),
-            ("another width", Recipe { channels: 4, ..shipped.clone() }, &split),
-            ("more steps", Recipe { iterations: 3, ..shipped.clone() }, &split),
-            ("noisy inputs", Recipe { corruption: noisy, ..shipped.clone() }, &split),
-            ("no shipped network", Recipe { shipped: Some(dir.path().join("absent")), ..shipped.clone() }, &split),
+        for (what, recipe, (split, test)) in [
+            ("a test sample it was selected on", shipped.clone(), &seen),
+            ("other draws", shipped.clone(), &other_draws),
+            ("another width", Recipe { channels: 4, ..shipped.clone() }, &(split.clone(), test.clone())),
+            ("more steps", Recipe { iterations: 3, ..shipped.clone() }, &(split.clone(), test.clone())),
+            ("noisy inputs", Recipe { corruption: noisy, ..shipped.clone() }, &(split.clone(), test.clone())),
+            (
+                "no shipped network",
+                Recipe { shipped: Some(dir.path().join("absent")), ..shipped.clone() },
+                &(split.clone(), test.clone()),
+            ),
         ] {
-            assert!(shipped_run(&recipe, split).unwrap().is_none(), "{what}");
+            assert!(shipped_run(&recipe, split, test).unwrap().is_none(), "{what}");
         }
     }
 }
