@@ -117,14 +117,20 @@ impl Deformer for FemDeformer {
 /// at once), or a learned model's match-and-membrane loop (the U-Net predicting from the surface
 /// the shape fit found). A warm-started frame (a stream) starts near the cloud already: the second
 /// deformer alone registers it.
+///
+/// σ: the second deformer's own, else, on a frame from rest, the expected distance of the second's
+/// estimate to the truth under the first's posterior: with the first's error of standard deviation
+/// σ₁ and the second moving its estimate by Δ, √(σ₁² + |Δ|²).
 pub struct HybridDeformer {
     first: Box<dyn Deformer + Send>,
     then: Box<dyn Deformer + Send>,
     first_iterations: usize,
     /// Whether the frame under way is warm-started.
     warm: bool,
-    /// Whether the last estimate is the second deformer's.
-    last_is_then: bool,
+    /// The first deformer's last estimate of the frame from rest under way.
+    first_estimate: Option<Vec<f64>>,
+    /// The second deformer's last estimate, when the last estimate is its own.
+    then_estimate: Option<Vec<f64>>,
 }
 
 // The second deformer goes on as on a warm-started frame: past the data springs' stiffness ramp.
@@ -143,13 +149,15 @@ impl HybridDeformer {
                 "a hybrid registration needs at least one iteration of its first model".into(),
             ));
         }
-        Ok(HybridDeformer { first, then, first_iterations, warm: false, last_is_then: false })
+        Ok(HybridDeformer { first, then, first_iterations, warm: false, first_estimate: None, then_estimate: None })
     }
 }
 
 impl Deformer for HybridDeformer {
     fn start_frame(&mut self, warm: bool) {
         self.warm = warm;
+        self.first_estimate = None;
+        self.then_estimate = None;
         // A warm-started frame is the second deformer's alone.
         if !warm {
             self.first.start_frame(false);
@@ -163,18 +171,35 @@ impl Deformer for HybridDeformer {
             (false, Some(k)) => Some(crate::frame::WARM_START_ITERATION + k),
             (true, _) => Some(iteration),
         };
-        self.last_is_then = then.is_some();
+        let u = match then {
+            None => self.first.deform(observations, previous, iteration)?,
+            Some(iteration) => self.then.deform(observations, previous, iteration)?,
+        };
         match then {
-            None => self.first.deform(observations, previous, iteration),
-            Some(iteration) => self.then.deform(observations, previous, iteration),
+            None => self.first_estimate = Some(u.clone()),
+            Some(_) => self.then_estimate = Some(u.clone()),
         }
+        Ok(u)
     }
 
     fn uncertainty(&self, rest_points: &[mesh::Point], stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
-        match self.last_is_then {
-            true => self.then.uncertainty(rest_points, stencils),
-            false => self.first.uncertainty(rest_points, stencils),
+        let Some(then) = &self.then_estimate else { return self.first.uncertainty(rest_points, stencils) };
+        if let Some(own) = self.then.uncertainty(rest_points, stencils) {
+            return Some(own);
         }
+        let first = self.first_estimate.as_ref()?;
+        let sigma = match self.first.uncertainty(rest_points, stencils)? {
+            Ok(sigma) => sigma,
+            Err(e) => return Some(Err(e)),
+        };
+        Some(Ok(sigma
+            .iter()
+            .zip(stencils)
+            .map(|(s, stencil)| {
+                let moved = mesh::sub(stencil.vector(then), stencil.vector(first));
+                (s * s + mesh::dot(moved, moved)).sqrt()
+            })
+            .collect()))
     }
 }
 
@@ -620,6 +645,51 @@ mod tests {
         assert_eq!(register_frame(&organ, &mut deformer, &cloud, None, &options).unwrap().u[2], 1e-3);
     }
 
+    /// The observations of a block's top pressed down 2 mm, seen from above.
+    fn top_pressed(organ: &Organ) -> Observations {
+        let top = organ.surface().vertices.iter().filter(|p| p[2] > 0.04 - 1e-9);
+        let cloud: Vec<mesh::Point> = top.map(|p| [p[0], p[1], p[2] - 0.002]).collect();
+        observe(organ, organ.surface(), &cloud, &RegistrationOptions::default(), 0.05, Some([0.0, 0.0, -1.0])).unwrap()
+    }
+
+    /// A hybrid whose second deformer predicts no σ gives, from rest, the first's σ widened by how
+    /// far the second moved each point: √(σ₁² + |Δ|²); on a stream's frame, none.
+    #[test]
+    fn a_hybrid_widens_its_first_deformer_s_sigma_by_the_second_s_move() {
+        /// Moves every node by `by` from the last estimate; σ 1 mm at every point when `sigma`.
+        struct Shift {
+            by: mesh::Point,
+            sigma: bool,
+        }
+        impl Deformer for Shift {
+            fn deform(&mut self, _: &Observations, previous: &[f64], _: usize) -> Result<Vec<f64>> {
+                Ok(previous.iter().enumerate().map(|(k, u)| u + self.by[k % 3]).collect())
+            }
+            fn uncertainty(&self, points: &[mesh::Point], _: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
+                self.sigma.then(|| Ok(vec![1e-3; points.len()]))
+            }
+        }
+        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.04; 3], [2, 2, 2]).unwrap(), None).unwrap();
+        let observations = top_pressed(&organ);
+        let first = Shift { by: [0.0, 0.0, -1e-3], sigma: true };
+        let then = Shift { by: [3e-3, 0.0, 0.0], sigma: false };
+        let mut hybrid = HybridDeformer::new(Box::new(first), Box::new(then), 1).unwrap();
+        let points = [[0.01, 0.02, 0.03]];
+        let stencils = [crate::Stencil(vec![(0, 0.5), (1, 0.5)])];
+        let sigma = |hybrid: &HybridDeformer| hybrid.uncertainty(&points, &stencils).map(|s| s.unwrap()[0]);
+        hybrid.start_frame(false);
+        let rest = vec![0.0; 3 * organ.mesh().num_nodes()];
+        let fitted = hybrid.deform(&observations, &rest, 0).unwrap();
+        assert_eq!(sigma(&hybrid), Some(1e-3), "the first deformer's own");
+        let moved = hybrid.deform(&observations, &fitted, 1).unwrap();
+        hybrid.deform(&observations, &moved, 2).unwrap();
+        let expected = (1e-3f64.powi(2) + 6e-3f64.powi(2)).sqrt();
+        assert!((sigma(&hybrid).unwrap() - expected).abs() < 1e-12, "{:?} against {expected}", sigma(&hybrid));
+        hybrid.start_frame(true);
+        hybrid.deform(&observations, &moved, crate::WARM_START_ITERATION).unwrap();
+        assert_eq!(sigma(&hybrid), None, "a stream's frame is the second's alone, and it predicts none");
+    }
+
     /// A hybrid deforms a frame from rest with the learned model for its first iterations, then
     /// with the FEM, its springs stiff at once; a warm-started frame (a stream) with the FEM alone.
     #[test]
@@ -644,17 +714,7 @@ mod tests {
         let network_iterations = 5;
         let mut hybrid =
             HybridDeformer::new(Box::new(Counting(calls.clone())), Box::new(fem()), network_iterations).unwrap();
-        // The top pressed down 2 mm, seen from above.
-        let view = [0.0, 0.0, -1.0];
-        let cloud: Vec<mesh::Point> = organ
-            .surface()
-            .vertices
-            .iter()
-            .filter(|p| p[2] > 0.04 - 1e-9)
-            .map(|p| [p[0], p[1], p[2] - 0.002])
-            .collect();
-        let observations =
-            observe(&organ, organ.surface(), &cloud, &RegistrationOptions::default(), 0.05, Some(view)).unwrap();
+        let observations = top_pressed(&organ);
         let rest = vec![0.0; 3 * organ.mesh().num_nodes()];
         let same = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(a, b)| (a - b).abs() < 1e-12);
         let lowest = |u: &[f64]| u.iter().skip(2).step_by(3).copied().fold(0.0, f64::min);
