@@ -1018,7 +1018,7 @@ fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::P
         ));
     }
     lines.extend(methods.iter().map(|run| method_line(run, forces.len())));
-    lines.push(record_better_method(dir, &methods)?);
+    lines.push(record_best_method(dir, &methods)?);
     Ok(lines)
 }
 
@@ -1063,7 +1063,7 @@ fn method_line(run: &MethodRun, pushes: usize) -> String {
 
 /// Writes into the patient file the method that did the best on the validation's pushes;
 /// returns the validation's line on it.
-fn record_better_method(dir: &Path, methods: &[MethodRun]) -> Result<String> {
+fn record_best_method(dir: &Path, methods: &[MethodRun]) -> Result<String> {
     // The set-up registers with the method that did the best on these pushes: the one that
     // failed on fewer, then the one with the lower TRE; on a tie the first.
     let chosen = methods

@@ -177,7 +177,7 @@ struct Registered {
 /// Registration of intraoperative point clouds, as `augsim serve` does for each client: each
 /// cloud is warm-started from the previous one's registration.
 ///
-/// Either `patient`: a directory written by `augsim prepare` (the method it found the better on
+/// Either `patient`: a directory written by `augsim prepare` (the method it found the best on
 /// its validation and its targets; `use_fem=True` for its FEM, `False` for its learned model,
 /// `use_hybrid=True` for its learned model from rest then its FEM); or
 /// `fem`: a static scenario (file or built-in name, e.g. `liver`) whose FEM deforms the organ; or `model` (a model directory or its model.json) with `scenario`, the dataset scenario
