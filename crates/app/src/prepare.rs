@@ -869,6 +869,8 @@ struct MethodRun {
     method: PatientMethod,
     /// The target errors (m) of the pushes it registered.
     errors: Vec<f64>,
+    /// The predicted σ (m) at the targets of those pushes, for a method that predicts one.
+    std: Vec<f64>,
     times_ms: Vec<f64>,
     /// The pushes it failed on, and why.
     failed: Vec<String>,
@@ -974,6 +976,7 @@ fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::P
             match registration.register(&cloud) {
                 Ok(tracked) => {
                     run.errors.extend(register::target_errors(&tracked.targets, &moved));
+                    run.std.extend(tracked.target_std.iter().flatten());
                     run.times_ms.push(tracked.registration.time.as_secs_f64() * 1e3);
                 }
                 Err(e) => run.failed.push(format!("{force} N ({e:#})")),
@@ -1053,8 +1056,12 @@ fn method_line(run: &MethodRun, pushes: usize) -> String {
     } else {
         format!("; failed on {} of {} pushes: {}", run.failed.len(), pushes, run.failed.join("; "))
     };
+    // σ, where the method predicts it at every target: how well it held on these pushes.
+    let sigma = register::within_two_std(&run.errors, &run.std).map_or(String::new(), |within| {
+        format!("; σ {:.2} mm mean, {:.0} % of the targets within 2σ", mm(mesh::stats::mean(&run.std)), 100.0 * within)
+    });
     format!(
-        "validation: {name} TRE {:.2} mm (largest {:.2} mm), {:.0} ms per registration from rest{failed}",
+        "validation: {name} TRE {:.2} mm (largest {:.2} mm), {:.0} ms per registration from rest{sigma}{failed}",
         mm(mesh::stats::mean(&run.errors)),
         mm(mesh::stats::max(&run.errors)),
         mesh::stats::mean(&run.times_ms)

@@ -63,6 +63,6 @@ pub use frame::{
     WARM_START_ITERATION,
 };
 pub use organ::{Organ, Stencil};
-pub use registration::{organ_surface, target_errors, FrameOutcome, Registration, Summary, Tracked};
+pub use registration::{organ_surface, target_errors, within_two_std, FrameOutcome, Registration, Summary, Tracked};
 pub use rigid::{rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
 pub use shape::{model_shape_space, ShapeDeformer, ShapeOptions, ShapeSpace};

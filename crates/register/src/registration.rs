@@ -250,6 +250,13 @@ pub fn target_errors(registered: &[Point], truth: &[Point]) -> Vec<f64> {
     mesh::distances(registered, truth)
 }
 
+/// The share of the target `errors` within twice their predicted standard deviation `std` (a
+/// Gaussian's: 95 %); `None` when there are none, or they do not pair up.
+pub fn within_two_std(errors: &[f64], std: &[f64]) -> Option<f64> {
+    (!errors.is_empty() && errors.len() == std.len())
+        .then(|| errors.iter().zip(std).filter(|(e, s)| **e <= 2.0 * **s).count() as f64 / errors.len() as f64)
+}
+
 /// The figures of a registration run, over all its frames.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Summary {
@@ -309,12 +316,7 @@ impl Summary {
         let mm =
             |v: &Option<Vec<f64>>, stat: fn(&[f64]) -> f64| v.as_ref().filter(|v| !v.is_empty()).map(|v| stat(v) * 1e3);
         let (errors, rest, std) = (all(|o| &o.errors), all(|o| &o.rest_errors), all(|o| &o.target_std));
-        let within = match (&errors, &std) {
-            (Some(e), Some(s)) if !e.is_empty() && e.len() == s.len() => {
-                Some(e.iter().zip(s).filter(|(e, s)| **e <= 2.0 * **s).count() as f64 / e.len() as f64)
-            }
-            _ => None,
-        };
+        let within = errors.as_deref().zip(std.as_deref()).and_then(|(e, s)| within_two_std(e, s));
         let per_frame = |f: fn(&FrameOutcome) -> f64| outcomes.iter().map(f).sum::<f64>() / n as f64;
         let mut times: Vec<f64> = outcomes.iter().map(|o| o.registration.time.as_secs_f64() * 1e3).collect();
         Ok(Summary {
