@@ -214,6 +214,11 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     for method in [PatientMethod::Learned, PatientMethod::Fem, PatientMethod::Hybrid] {
         let mut registration = RegistrationSpec::patient(&out, Some(method), None, false).unwrap().build().unwrap();
         assert_eq!(registration.method().contains("then FEM"), method == PatientMethod::Hybrid, "{method:?}");
+        if method == PatientMethod::Hybrid {
+            // The ROM's shape fit, then the FEM's polish.
+            let iterations = register::shape::SHAPE_ITERATIONS + augsim_app::case::POLISH_ITERATIONS;
+            assert_eq!(registration.options().iterations, iterations);
+        }
         let cloud: Vec<Point> = registration.organ().surface().vertices.iter().step_by(2).copied().collect();
         let rest = registration.targets().to_vec();
         let tracked = registration.register(&cloud).unwrap();
