@@ -127,9 +127,9 @@ pub struct HybridDeformer {
     first_iterations: usize,
     /// Whether the frame under way is warm-started.
     warm: bool,
-    /// The first deformer's last estimate of the frame from rest under way.
+    /// On a frame from rest, once the second deformer has taken over: the estimate it started from
+    /// (the first's last) and its own last, whose difference widens the first's σ.
     first_estimate: Option<Vec<f64>>,
-    /// The second deformer's last estimate, when the last estimate is its own.
     then_estimate: Option<Vec<f64>>,
 }
 
@@ -171,23 +171,24 @@ impl Deformer for HybridDeformer {
             (false, Some(k)) => Some(crate::frame::WARM_START_ITERATION + k),
             (true, _) => Some(iteration),
         };
-        let u = match then {
-            None => self.first.deform(observations, previous, iteration)?,
-            Some(iteration) => self.then.deform(observations, previous, iteration)?,
-        };
-        match then {
-            None => self.first_estimate = Some(u.clone()),
-            Some(_) => self.then_estimate = Some(u.clone()),
+        let Some(iteration) = then else { return self.first.deform(observations, previous, iteration) };
+        let u = self.then.deform(observations, previous, iteration)?;
+        // Kept for σ on a frame from rest only: a stream's frames copy nothing.
+        if !self.warm {
+            self.first_estimate.get_or_insert_with(|| previous.to_vec());
+            self.then_estimate = Some(u.clone());
         }
         Ok(u)
     }
 
     fn uncertainty(&self, rest_points: &[mesh::Point], stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
-        let Some(then) = &self.then_estimate else { return self.first.uncertainty(rest_points, stencils) };
+        if !self.warm && self.then_estimate.is_none() {
+            return self.first.uncertainty(rest_points, stencils);
+        }
         if let Some(own) = self.then.uncertainty(rest_points, stencils) {
             return Some(own);
         }
-        let first = self.first_estimate.as_ref()?;
+        let (first, then) = (self.first_estimate.as_ref()?, self.then_estimate.as_ref()?);
         let sigma = match self.first.uncertainty(rest_points, stencils)? {
             Ok(sigma) => sigma,
             Err(e) => return Some(Err(e)),
