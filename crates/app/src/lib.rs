@@ -7,7 +7,7 @@
 //!   summary.json) and what a comparison of methods writes; [`printout`]: the lines printed about
 //!   a registration run and a comparison.
 //! - [`points`]: points read at a command's boundary (CSV, 3D Slicer's `.fcsv` and `.mrk.json`,
-//!   clouds as `.npy` and `.ply`) in its working frame (RAS or LPS) and unit.
+//!   clouds as `.npy`, `.ply` and model files) in its working frame (RAS or LPS) and unit.
 //! - [`meshing`]: an organ's volume mesh from its surface, a labelmap's label or the phantom.
 //! - [`prepare`]: a patient's organ from its segmented surface to a registration set-up (repair,
 //!   mesh, regions, scenarios, dataset, model, report), resumable.

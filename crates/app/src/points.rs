@@ -1,9 +1,10 @@
 //! Points read at a command's boundary, in any of the formats a user has (CSV, 3D Slicer's
-//! `.fcsv` and `.mrk.json`, and for clouds `.npy` and `.ply`), brought into the one frame and the
-//! one unit the command works in.
+//! `.fcsv` and `.mrk.json`, and for clouds `.npy`, `.ply` and the points of a model file: `.vtk`,
+//! `.vtu`, `.stl`, `.obj`), brought into the one frame and the one unit the command works in.
 //!
 //! The frame policy: a command works in the frame of its organ (a surface's `SPACE=` header, or
-//! the frame its targets file names). Points whose file names the other frame (RAS or LPS) are
+//! the frame its targets file names). Points whose file names the other frame (RAS or LPS; a
+//! model file in its `SPACE=` header, as 3D Slicer writes it) are
 //! converted (x and y negated); points whose file names none are taken as being in the working
 //! frame, or in the frame the user gives (`--frame`). When the organ's frame is not known, the
 //! first point file to name one gives it, and a later file that names the other frame is refused:
@@ -15,7 +16,7 @@ use std::path::Path;
 
 use anyhow::Result;
 use mesh::io::points::{read_points, LabelledPoints};
-use mesh::io::{Frame, FrameChange};
+use mesh::io::Frame;
 use mesh::length::LengthUnit;
 use mesh::Point;
 
@@ -86,17 +87,19 @@ impl PointInput {
         files.iter().map(|f| Ok(self.read(f)?.points)).collect()
     }
 
-    /// Reads an intraoperative cloud: a points file as [`PointInput::read`], or `.npy` and `.ply`
-    /// (which name neither frame nor unit) in the given unit. An empty cloud is an error.
+    /// Reads an intraoperative cloud: a points file as [`PointInput::read`], or a cloud in one of
+    /// the other [`register::cloud::CLOUD_EXTENSIONS`] (which name no unit; a model file's
+    /// `SPACE=` header names its frame) in the given unit. An empty cloud is an error.
     pub fn read_cloud(&mut self, path: &Path) -> register::Result<Vec<Point>> {
-        let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-        let points = if name.ends_with(".npy") || name.ends_with(".ply") {
-            let scale = self.given.metres() / self.unit.metres();
-            let change = FrameChange::between(self.given_frame, self.frame);
-            register::cloud::read_point_cloud(path)?.into_iter().map(|p| change.point(p.map(|x| x * scale))).collect()
+        let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+        let points = if extension != "csv" && register::cloud::CLOUD_EXTENSIONS.contains(&extension.as_str()) {
+            let mut points = LabelledPoints::new(register::cloud::read_point_cloud(path)?);
+            points.frame = mesh::io::surface_frame(path)?;
+            points
         } else {
-            self.place(path, read_points(path)?).map_err(|e| register::RegisterError::Invalid(format!("{e:#}")))?.points
+            read_points(path)?
         };
+        let points = self.place(path, points).map_err(|e| register::RegisterError::Invalid(format!("{e:#}")))?.points;
         register::check_cloud(&points).map_err(|e| register::RegisterError::format(path, e.to_string()))?;
         Ok(points)
     }
@@ -161,5 +164,36 @@ mod tests {
         assert!(input.read_cloud(&empty).is_err());
         std::fs::write(&plain, "label,x_mm,y_mm,z_mm\nT,1,2,3\n").unwrap();
         assert_eq!(read_targets(&plain, LengthUnit::Metre).unwrap(), [[1e-3, 2e-3, 3e-3]], "the named unit wins");
+    }
+
+    #[test]
+    fn a_cloud_saved_as_a_model_comes_in_the_frame_its_header_names() {
+        let dir = tempfile::tempdir().unwrap();
+        let triangle = mesh::TriSurface {
+            vertices: vec![[10.0, 20.0, 30.0], [11.0, 20.0, 30.0], [10.0, 21.0, 30.0]],
+            triangles: vec![[0, 1, 2]],
+        };
+        let ras = dir.path().join("cloud.vtk");
+        mesh::io::write_surface_in_frame(&ras, &triangle, Frame::Ras).unwrap();
+        let mut input = PointInput::new(Some(Frame::Lps), LengthUnit::Metre, LengthUnit::Millimetre);
+        assert_eq!(
+            input.read_cloud(&ras).unwrap(),
+            [[-0.010, -0.020, 0.030], [-0.011, -0.020, 0.030], [-0.010, -0.021, 0.030]],
+            "RAS millimetres into LPS metres"
+        );
+        // A model file without a header names no frame: the working one (or --frame).
+        let obj = dir.path().join("cloud.obj");
+        mesh::io::write_obj(&obj, &triangle).unwrap();
+        assert_eq!(input.read_cloud(&obj).unwrap()[0], [0.010, 0.020, 0.030]);
+        let mut input = input.with_given_frame(Some(Frame::Ras));
+        assert_eq!(input.read_cloud(&obj).unwrap()[0], [-0.010, -0.020, 0.030]);
+        // Where the organ names no frame, the model's header gives it.
+        let mut input = PointInput::new(None, LengthUnit::Millimetre, LengthUnit::Millimetre);
+        assert_eq!(input.read_cloud(&ras).unwrap()[0], [10.0, 20.0, 30.0]);
+        assert_eq!(input.frame, Some(Frame::Ras));
+        let garbage = dir.path().join("cloud.stl");
+        std::fs::write(&garbage, "solid x\nendsolid x\n").unwrap();
+        let refused = input.read_cloud(&garbage).unwrap_err().to_string();
+        assert!(refused.contains("cloud.stl"), "{refused}");
     }
 }

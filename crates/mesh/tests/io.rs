@@ -9,9 +9,9 @@ use base64::engine::general_purpose::STANDARD as BASE64;
 use base64::Engine as _;
 
 use augsim_mesh::io::{
-    read_gmsh, read_mesh, read_mesh_with_fields, read_obj, read_stl, read_surface, read_vtk, read_vtk_with_fields,
-    read_vtu_with_fields, write_mesh, write_msh, write_obj, write_stl, write_surface, write_vtk_legacy,
-    write_vtk_legacy_with, write_vtu, write_vtu_with, Encoding, Field, FieldLocation,
+    read_gmsh, read_mesh, read_mesh_with_fields, read_obj, read_stl, read_surface, read_vertices, read_vtk,
+    read_vtk_with_fields, read_vtu_with_fields, write_mesh, write_msh, write_obj, write_stl, write_surface,
+    write_vtk_legacy, write_vtk_legacy_with, write_vtu, write_vtu_with, Encoding, Field, FieldLocation,
 };
 use augsim_mesh::{box_hex, box_tet, Cells, Mesh, MeshError, TriSurface};
 
@@ -163,6 +163,40 @@ fn surfaces_load_with_their_counts() {
         assert_eq!((s.vertices.len(), s.triangles.len()), (vertices, triangles), "{file}");
         assert!(s.triangles.iter().flatten().all(|&i| i < s.vertices.len()));
     }
+}
+
+#[test]
+fn the_points_of_a_model_file_are_read_whatever_its_cells() {
+    let dir = tempfile::tempdir().unwrap();
+    // A cloud saved as a model: vertices only, or VTK vertices.
+    let obj = put(dir.path(), "cloud.obj", "# cloud\nv 1 2 3\nv 4 5 6\n");
+    assert_eq!(read_vertices(&obj).unwrap(), [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+    assert!(message(read_obj(&obj)).contains("no faces"), "a surface needs faces");
+    let vtk = put(
+        dir.path(),
+        "cloud.vtk",
+        "# vtk DataFile Version 3.0\ncloud SPACE=RAS\nASCII\nDATASET POLYDATA\nPOINTS 2 float\n1 2 3 4 5 6\n\
+         VERTICES 2 4\n1 0\n1 1\n",
+    );
+    assert_eq!(read_vertices(&vtk).unwrap(), [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+    // A surface's and a volume mesh's points: an STL's corners once each, a grid's nodes in order.
+    let corners = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let tetrahedron = TriSurface { vertices: corners, triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]] };
+    let stl = dir.path().join("tetrahedron.stl");
+    write_stl(&stl, &tetrahedron).unwrap();
+    let mut read = read_vertices(&stl).unwrap();
+    read.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    assert_eq!(read, [[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]], "12 corners, 4 points");
+    let mesh = tet_box();
+    let vtu = dir.path().join("box.vtu");
+    write_vtu(&vtu, &mesh, &[]).unwrap();
+    assert_eq!(read_vertices(&vtu).unwrap(), mesh.nodes);
+    let legacy = dir.path().join("box.vtk");
+    write_vtk_legacy(&legacy, &mesh, &[]).unwrap();
+    assert_eq!(read_vertices(&legacy).unwrap(), mesh.nodes);
+    assert!(message(read_vertices(dir.path().join("cloud.xyz"))).contains("unknown surface extension"));
+    let empty = put(dir.path(), "empty.vtk", "# vtk DataFile Version 3.0\nempty\nASCII\nDATASET POLYDATA\n");
+    assert!(message(read_vertices(&empty)).contains("no POINTS"));
 }
 
 #[test]

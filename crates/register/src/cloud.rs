@@ -1,5 +1,7 @@
 //! Point clouds on disk: CSV with a header naming `x`, `y`, `z`; NumPy `.npy` arrays of shape
-//! `[N, 3]`; PLY (ASCII or binary, either byte order). Coordinates are in metres.
+//! `[N, 3]`; PLY (ASCII or binary, either byte order); the points of a surface or mesh file
+//! (`.obj`, `.stl`, `.vtk`, `.vtu`: a cloud saved as a model, as 3D Slicer saves one), whatever its
+//! cells. Coordinates are in metres.
 //!
 //! Every reader rejects an empty cloud and non-finite coordinates, and every error names the
 //! file (and, for text, the line).
@@ -14,27 +16,35 @@ use mesh::Point;
 use crate::{RegisterError, Result};
 
 /// The file extensions (lower case) that [`read_point_cloud`] understands.
-pub const CLOUD_EXTENSIONS: [&str; 3] = ["csv", "npy", "ply"];
+pub const CLOUD_EXTENSIONS: [&str; 7] = ["csv", "npy", "ply", "obj", "stl", "vtk", "vtu"];
 
 /// The lower-case extension of `path`, if any.
 fn extension(path: &Path) -> Option<String> {
     path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase)
 }
 
+/// The cloud formats as a user reads them: ".csv, .npy, … or .vtu".
+fn cloud_formats() -> String {
+    let [first @ .., last] = CLOUD_EXTENSIONS.map(|e| format!(".{e}"));
+    format!("{} or {last}", first.join(", "))
+}
+
 fn is_cloud_file(path: &Path) -> bool {
     extension(path).is_some_and(|e| CLOUD_EXTENSIONS.contains(&e.as_str()))
 }
 
-/// Reads a point cloud, choosing the format from the extension (`.csv`, `.npy` or `.ply`, any case).
+/// Reads a point cloud, choosing the format from the extension (any of [`CLOUD_EXTENSIONS`], any
+/// case).
 pub fn read_point_cloud(path: &Path) -> Result<Vec<Point>> {
     let points = match extension(path).as_deref() {
         Some("csv") => mesh::io::points::read_points_csv(path)?,
         Some("npy") => read_npy_cloud(path)?,
         Some("ply") => read_ply(path)?,
+        Some("obj" | "stl" | "vtk" | "vtu") => mesh::io::read_vertices(path)?,
         _ => {
             return Err(RegisterError::format(
                 path,
-                "unsupported point-cloud format: expected a .csv, .npy or .ply file",
+                format!("unsupported point-cloud format: expected a {} file", cloud_formats()),
             ))
         }
     };
@@ -46,8 +56,8 @@ pub fn read_targets(path: &Path) -> Result<Vec<Point>> {
     check_points(path, mesh::io::points::read_points_csv(path)?)
 }
 
-/// The clouds of a sequence: a file is a single frame; a directory gives its `.csv`, `.npy` and
-/// `.ply` files sorted by file name (an error if there are none).
+/// The clouds of a sequence: a file is a single frame; a directory gives its files of the
+/// [`CLOUD_EXTENSIONS`] sorted by file name (an error if there are none).
 pub fn read_frames(path: &Path) -> Result<Vec<PathBuf>> {
     let meta = fs::metadata(path).map_err(|e| RegisterError::io(path, e))?;
     if !meta.is_dir() {
@@ -62,7 +72,7 @@ pub fn read_frames(path: &Path) -> Result<Vec<PathBuf>> {
         }
     }
     if frames.is_empty() {
-        return Err(RegisterError::format(path, "directory holds no point cloud (.csv, .npy or .ply file)"));
+        return Err(RegisterError::format(path, format!("directory holds no point cloud ({} file)", cloud_formats())));
     }
     frames.sort_by(|a, b| a.file_name().cmp(&b.file_name()));
     Ok(frames)

@@ -251,7 +251,7 @@ fn ply_errors() {
 fn unsupported_extension_lists_the_supported_ones() {
     let dir = tempfile::tempdir().unwrap();
     let path = write(dir.path(), "cloud.xyz", "1 2 3\n");
-    assert_contains(&error(read_point_cloud(&path)), &["cloud.xyz", ".csv", ".npy", ".ply"]);
+    assert_contains(&error(read_point_cloud(&path)), &["cloud.xyz", ".csv, .npy, .ply, .obj, .stl, .vtk or .vtu file"]);
     let path = write(dir.path(), "noext", "1 2 3\n");
     assert_contains(&error(read_point_cloud(&path)), &[".csv", ".npy", ".ply"]);
 }
@@ -264,8 +264,10 @@ fn frames_of_a_directory_and_of_a_file() {
     let a = dir.path().join("a.csv");
     write_csv(&a, &[[4.0, 5.0, 6.0]]).unwrap();
     write(dir.path(), "notes.txt", "not a cloud");
+    let c = write(dir.path(), "c.obj", "v 7 8 9\n");
     fs::create_dir(dir.path().join("sub.csv")).unwrap();
-    assert_eq!(read_frames(dir.path()).unwrap(), vec![a.clone(), b]);
+    assert_eq!(read_frames(dir.path()).unwrap(), vec![a.clone(), b, c.clone()]);
+    assert_eq!(read_point_cloud(&c).unwrap(), [[7.0, 8.0, 9.0]], "a model file's points");
     assert_eq!(read_frames(&a).unwrap(), vec![a]);
 
     let empty = tempfile::tempdir().unwrap();

@@ -703,6 +703,11 @@ pub fn read_vtk_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>)
     volume_from_cells(path, &points, &cells, &types, parsed.fields)
 }
 
+/// The `POINTS` of a legacy VTK file of any dataset, whatever its cells (a point cloud).
+pub(super) fn read_vtk_points(path: &Path) -> Result<Vec<Point>, MeshError> {
+    parse(path)?.points.ok_or_else(|| parse_error(path, "no POINTS section"))
+}
+
 /// Reads the triangles of a legacy VTK file as a surface: `POLYDATA` polygons and triangle
 /// strips, or the triangles, quads and polygons of an `UNSTRUCTURED_GRID`. All points are kept.
 pub fn read_vtk_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {

@@ -297,6 +297,20 @@ pub fn read_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
     }
 }
 
+/// The points of a surface or mesh file whatever its cells, as a point cloud saved in one of
+/// these formats has them: `.obj` (its `v` lines), `.stl` (its triangles' corners, each shared one
+/// once), `.vtk` (the `POINTS` of any dataset) and `.vtu` (its `<Points>`).
+pub fn read_vertices(path: impl AsRef<Path>) -> Result<Vec<Point>, MeshError> {
+    let path = path.as_ref();
+    match extension(path).as_str() {
+        "obj" => surface_io::read_obj_vertices(path),
+        "stl" => Ok(read_stl(path)?.vertices),
+        "vtk" => legacy_vtk::read_vtk_points(path),
+        "vtu" => vtu::read_vtu_points(path),
+        _ => Err(parse_error(path, "unknown surface extension (expected .obj, .stl, .vtk or .vtu)")),
+    }
+}
+
 /// Writes a triangle surface, choosing the format by extension: `.vtu` (binary), `.vtk` (binary
 /// `POLYDATA`), `.obj`, `.stl` (binary, single precision).
 pub fn write_surface(path: impl AsRef<Path>, surface: &TriSurface) -> Result<(), MeshError> {

@@ -13,6 +13,20 @@ use crate::{cross, sub, MeshError, Point, TriSurface};
 /// Normals, texture coordinates, groups and materials are ignored.
 pub fn read_obj(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
     let path = path.as_ref();
+    let surface = parse_obj(path)?;
+    if surface.triangles.is_empty() {
+        return Err(parse_error(path, "no faces ('f' lines)"));
+    }
+    Ok(surface)
+}
+
+/// The vertices (`v` lines) of a Wavefront OBJ file, with or without faces (a point cloud).
+pub(super) fn read_obj_vertices(path: &Path) -> Result<Vec<Point>, MeshError> {
+    Ok(parse_obj(path)?.vertices)
+}
+
+/// The vertices and the faces (fanned into triangles) of a Wavefront OBJ file, checked.
+fn parse_obj(path: &Path) -> Result<TriSurface, MeshError> {
     let bytes = read_bytes(path)?;
     let text = String::from_utf8_lossy(&bytes);
     let mut lines = LineReader::new(path, &text);
@@ -48,9 +62,6 @@ pub fn read_obj(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
             }
             _ => {}
         }
-    }
-    if surface.triangles.is_empty() {
-        return Err(parse_error(path, "no faces ('f' lines)"));
     }
     Ok(surface)
 }

@@ -688,6 +688,11 @@ pub fn read_vtu_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>)
     volume_from_cells(path, &points, &cells, &types, fields)
 }
 
+/// The `<Points>` of a `.vtu` file, whatever its cells (a point cloud).
+pub(super) fn read_vtu_points(path: &Path) -> Result<Vec<Point>, MeshError> {
+    Ok(load(path)?.0)
+}
+
 /// Reads the triangles, quads and polygons of a `.vtu` unstructured grid as a surface.
 pub fn read_vtu_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
     let path = path.as_ref();
