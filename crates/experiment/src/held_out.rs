@@ -190,17 +190,24 @@ pub(crate) fn base_case() -> Result<CaseScenario> {
     scenario.truth.material =
         Material { order: 2, formulation: Formulation::Standard, ..Material::new(Law::NeoHookean, 4500.0, 0.49) };
     scenario.camera.points = POINTS;
+    let polish = rom_polish(&scenario)?;
     let corotational = corotational(&scenario).cloned().context("the built-in case has no co-rotational FEM method")?;
     let network = scenario.models.method.iter().find(|m| m.kind == MethodKind::Network).cloned();
-    let polish = MethodSpec {
+    scenario.models.method = std::iter::once(corotational).chain(network).chain([polish]).collect();
+    Ok(scenario)
+}
+
+/// The hybrid of `scenario`'s reduced-order model and co-rotational FEM: the shape fit's
+/// iterations from rest, then [`POLISH_ITERATIONS`] of the FEM.
+pub(crate) fn rom_polish(scenario: &CaseScenario) -> Result<MethodSpec> {
+    let corotational = corotational(scenario).context("the case has no co-rotational FEM method")?;
+    Ok(MethodSpec {
         name: "ROM, then FEM polish".into(),
         kind: MethodKind::Hybrid,
         iterations: Some(register::shape::SHAPE_ITERATIONS + POLISH_ITERATIONS),
         network_iterations: Some(register::shape::SHAPE_ITERATIONS),
         ..corotational.clone()
-    };
-    scenario.models.method = std::iter::once(corotational).chain(network).chain([polish]).collect();
-    Ok(scenario)
+    })
 }
 
 /// The shipped learned models that are there (run from the repository): the U-Net, the

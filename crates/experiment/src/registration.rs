@@ -12,6 +12,7 @@ use learn::{Compute, Corruption, EvalReport, Model, PointErrors};
 use mesh::stats::{max, mean};
 use scenario::CaseScenario;
 
+use crate::held_out::rom_polish;
 use crate::learning::{dataset, error_histogram, fit_rom, prediction_seconds, train, Generated, Recipe, Trained};
 use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
 
@@ -122,8 +123,10 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     )?;
     write_test_viewer(dir, &data, &t)?;
 
-    // The shipped comparison case (its camera, truth, registration settings and methods) under each load.
-    let builtin = CaseScenario::builtin();
+    // The shipped comparison case (its camera, truth, registration settings and methods, and the
+    // reduced-order model polished by the co-rotational FEM) under each load.
+    let mut builtin = CaseScenario::builtin();
+    builtin.models.method.push(rom_polish(&builtin)?);
     let networks = [&t.model, &rom].map(|model| Network { model, scenario: &data.scenario, dir: &data.scenario_dir });
     let cases = register_cases(&builtin, &networks, progress)?;
     let per_method = &cases.per_method;
