@@ -181,6 +181,11 @@ mod tests {
             [[-0.010, -0.020, 0.030], [-0.011, -0.020, 0.030], [-0.010, -0.021, 0.030]],
             "RAS millimetres into LPS metres"
         );
+        let ply = dir.path().join("cloud.ply");
+        let header = "ply\nformat ascii 1.0\ncomment SPACE=RAS\nelement vertex 1\nproperty float x\n\
+                      property float y\nproperty float z\nend_header\n";
+        std::fs::write(&ply, format!("{header}10 20 30\n")).unwrap();
+        assert_eq!(input.read_cloud(&ply).unwrap(), [[-0.010, -0.020, 0.030]], "a PLY's comment names its frame");
         // A model file without a header names no frame: the working one (or --frame).
         let obj = dir.path().join("cloud.obj");
         mesh::io::write_obj(&obj, &triangle).unwrap();

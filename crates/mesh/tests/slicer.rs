@@ -158,7 +158,17 @@ fn stl_and_vtk_headers_name_the_frame_as_slicer_writes_it() {
     let plain = dir.path().join("plain.stl");
     augsim_mesh::io::write_surface(&plain, &surface).unwrap();
     assert_eq!(surface_frame(&plain).unwrap(), None);
-    assert_eq!(surface_frame(dir.path().join("any.obj")).unwrap(), None);
+    assert_eq!(surface_frame(dir.path().join("any.vtu")).unwrap(), None);
+    // Slicer's OBJ and PLY writers put the tag in a comment.
+    let obj = put(dir.path(), "slicer.obj", "# wavefront obj file\n# 3D Slicer output. SPACE=LPS\nv 1 2 3\n");
+    assert_eq!(surface_frame(obj).unwrap(), Some(Frame::Lps));
+    let ply = "ply\nformat ascii 1.0\ncomment VTK generated PLY File\ncomment SPACE=RAS\nelement vertex 1\n\
+               property float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n";
+    assert_eq!(surface_frame(put(dir.path(), "slicer.ply", ply)).unwrap(), Some(Frame::Ras));
+    let after = ply.replace("comment SPACE=RAS\n", "") + "comment SPACE=LPS\n";
+    assert_eq!(surface_frame(put(dir.path(), "body.ply", after)).unwrap(), None, "only the header's comments");
+    let plain_obj = put(dir.path(), "plain.obj", "v 1 2 3 # SPACE=LPS\n");
+    assert_eq!(surface_frame(plain_obj).unwrap(), None, "only comment lines");
     let indented = put(dir.path(), "indented.stl", "\n  solid liver SPACE=RAS\nendsolid liver SPACE=RAS\n");
     assert_eq!(surface_frame(indented).unwrap(), Some(Frame::Ras));
     let obj = dir.path().join("out.obj");

@@ -116,29 +116,37 @@ pub fn frame_in_header(header: &str) -> Result<Option<Frame>, String> {
     value.parse().map(Some).map_err(|e| format!("header tag SPACE={value}: {e}"))
 }
 
-/// The frame a surface file names in its header: `SPACE=` in the 80-byte header of a binary STL
-/// or the `solid` line of an ASCII one, or in the title line (line 2) of a legacy VTK file.
-/// Other formats (OBJ, VTU) name none.
+/// The frame a surface file names in its header, where 3D Slicer writes it: `SPACE=` in the
+/// 80-byte header of a binary STL or the `solid` line of an ASCII one, in the title line (line 2)
+/// of a legacy VTK file, in the `#` comments of an OBJ or the `comment` lines of a PLY header.
+/// Other formats (VTU) name none.
 pub fn surface_frame(path: impl AsRef<Path>) -> Result<Option<Frame>, MeshError> {
     let path = path.as_ref();
     let kind = super::extension(path);
-    if kind != "stl" && kind != "vtk" {
+    if !["stl", "vtk", "obj", "ply"].contains(&kind.as_str()) {
         return Ok(None);
     }
     // The headers are short: a binary STL's is 80 bytes, a VTK title at most 256 characters.
     let mut start = Vec::with_capacity(HEADER_BYTES);
     let io = |error| MeshError::Io { path: path.display().to_string(), error };
     File::open(path).and_then(|f| f.take(HEADER_BYTES as u64).read_to_end(&mut start)).map_err(io)?;
-    let line = |text: &'_ [u8], n: usize| text.split(|&b| b == b'\n').nth(n).unwrap_or_default().to_vec();
-    let header = if kind == "stl" {
-        let trimmed = start.trim_ascii_start();
-        if trimmed.get(..5).is_some_and(|s| s.eq_ignore_ascii_case(b"solid")) {
-            line(trimmed, 0)
-        } else {
-            start[..start.len().min(80)].to_vec()
+    let lines = || start.split(|&b| b == b'\n').map(<[u8]>::trim_ascii);
+    let comments = |prefix: &[u8]| -> Vec<u8> {
+        let header = lines().take_while(|l| !l.eq_ignore_ascii_case(b"end_header"));
+        header.filter(|l| l.starts_with(prefix)).flat_map(|l| [l, b"\n"].concat()).collect()
+    };
+    let header = match kind.as_str() {
+        "stl" => {
+            let trimmed = start.trim_ascii_start();
+            if trimmed.get(..5).is_some_and(|s| s.eq_ignore_ascii_case(b"solid")) {
+                trimmed.split(|&b| b == b'\n').next().unwrap_or_default().to_vec()
+            } else {
+                start[..start.len().min(80)].to_vec()
+            }
         }
-    } else {
-        line(&start, 1)
+        "vtk" => lines().nth(1).unwrap_or_default().to_vec(),
+        "obj" => comments(b"#"),
+        _ => comments(b"comment"),
     };
     frame_in_header(&String::from_utf8_lossy(&header)).map_err(|message| parse_error(path, message))
 }
