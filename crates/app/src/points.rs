@@ -87,12 +87,11 @@ impl PointInput {
         files.iter().map(|f| Ok(self.read(f)?.points)).collect()
     }
 
-    /// Reads an intraoperative cloud: a points file as [`PointInput::read`], or a cloud in one of
-    /// the other [`register::cloud::CLOUD_EXTENSIONS`] (which name no unit; a model file's
-    /// `SPACE=` header names its frame) in the given unit. An empty cloud is an error.
+    /// Reads an intraoperative cloud: a points file as [`PointInput::read`], or a cloud of
+    /// positions alone ([`register::cloud::holds_positions_only`]: it names no unit; a model
+    /// file's `SPACE=` tag names its frame) in the given unit. An empty cloud is an error.
     pub fn read_cloud(&mut self, path: &Path) -> register::Result<Vec<Point>> {
-        let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-        let points = if extension != "csv" && register::cloud::CLOUD_EXTENSIONS.contains(&extension.as_str()) {
+        let points = if register::cloud::holds_positions_only(path) {
             let mut points = LabelledPoints::new(register::cloud::read_point_cloud(path)?);
             points.frame = mesh::io::surface_frame(path)?;
             points

@@ -29,6 +29,12 @@ fn cloud_formats() -> String {
     format!("{} or {last}", first.join(", "))
 }
 
+/// Whether `path` is a cloud of positions alone, naming no unit: any of the
+/// [`CLOUD_EXTENSIONS`] but CSV (whose header may name a unit and carry labels).
+pub fn holds_positions_only(path: &Path) -> bool {
+    extension(path).is_some_and(|e| e != "csv" && CLOUD_EXTENSIONS.contains(&e.as_str()))
+}
+
 fn is_cloud_file(path: &Path) -> bool {
     extension(path).is_some_and(|e| CLOUD_EXTENSIONS.contains(&e.as_str()))
 }

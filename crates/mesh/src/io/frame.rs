@@ -136,14 +136,10 @@ pub fn surface_frame(path: impl AsRef<Path>) -> Result<Option<Frame>, MeshError>
         header.filter(|l| l.starts_with(prefix)).flat_map(|l| [l, b"\n"].concat()).collect()
     };
     let header = match kind.as_str() {
-        "stl" => {
-            let trimmed = start.trim_ascii_start();
-            if trimmed.get(..5).is_some_and(|s| s.eq_ignore_ascii_case(b"solid")) {
-                trimmed.split(|&b| b == b'\n').next().unwrap_or_default().to_vec()
-            } else {
-                start[..start.len().min(80)].to_vec()
-            }
-        }
+        "stl" => match lines().find(|l| !l.is_empty()) {
+            Some(solid) if solid.get(..5).is_some_and(|s| s.eq_ignore_ascii_case(b"solid")) => solid.to_vec(),
+            _ => start[..start.len().min(80)].to_vec(),
+        },
         "vtk" => lines().nth(1).unwrap_or_default().to_vec(),
         "obj" => comments(b"#"),
         _ => comments(b"comment"),

@@ -285,6 +285,9 @@ pub fn write_mesh(path: impl AsRef<Path>, mesh: &Mesh, fields: &[Field]) -> Resu
     }
 }
 
+/// The error of a surface reader given another extension.
+const UNKNOWN_SURFACE: &str = "unknown surface extension (expected .obj, .stl, .vtk or .vtu)";
+
 /// Reads a triangle surface, choosing the format by extension: `.obj`, `.stl`, `.vtk`, `.vtu`.
 pub fn read_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
     let path = path.as_ref();
@@ -293,7 +296,7 @@ pub fn read_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
         "stl" => read_stl(path),
         "vtk" => read_vtk_surface(path),
         "vtu" => read_vtu_surface(path),
-        _ => Err(parse_error(path, "unknown surface extension (expected .obj, .stl, .vtk or .vtu)")),
+        _ => Err(parse_error(path, UNKNOWN_SURFACE)),
     }
 }
 
@@ -307,7 +310,7 @@ pub fn read_vertices(path: impl AsRef<Path>) -> Result<Vec<Point>, MeshError> {
         "stl" => Ok(read_stl(path)?.vertices),
         "vtk" => legacy_vtk::read_vtk_points(path),
         "vtu" => vtu::read_vtu_points(path),
-        _ => Err(parse_error(path, "unknown surface extension (expected .obj, .stl, .vtk or .vtu)")),
+        _ => Err(parse_error(path, UNKNOWN_SURFACE)),
     }
 }
 
