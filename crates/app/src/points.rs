@@ -185,6 +185,15 @@ mod tests {
                       property float y\nproperty float z\nend_header\n";
         std::fs::write(&ply, format!("{header}10 20 30\n")).unwrap();
         assert_eq!(input.read_cloud(&ply).unwrap(), [[-0.010, -0.020, 0.030]], "a PLY's comment names its frame");
+        let vtp = dir.path().join("cloud.vtp");
+        let space = "<FieldData><Array type=\"String\" Name=\"SPACE\" NumberOfTuples=\"1\" format=\"ascii\">\
+                     82 65 83 0</Array></FieldData>";
+        let piece = "<Piece NumberOfPoints=\"1\" NumberOfVerts=\"0\" NumberOfPolys=\"0\"><Points>\
+                     <DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">10 20 30</DataArray>\
+                     </Points></Piece>";
+        let xml = format!("<VTKFile type=\"PolyData\"><PolyData>{space}{piece}</PolyData></VTKFile>");
+        std::fs::write(&vtp, xml).unwrap();
+        assert_eq!(input.read_cloud(&vtp).unwrap(), [[-0.010, -0.020, 0.030]], "a VTP's field data names its frame");
         // A model file without a header names no frame: the working one (or --frame).
         let obj = dir.path().join("cloud.obj");
         mesh::io::write_obj(&obj, &triangle).unwrap();

@@ -1,8 +1,8 @@
 //! A patient's organ from its segmented surface to a registration set-up, in one resumable run
 //! (`augsim prepare`):
 //!
-//! 1. **organ**: the surface read (STL, OBJ, VTK, VTU) in its unit (given, or detected from its
-//!    size) and frame (`SPACE=` in its header), the landmarks, targets and camera in theirs
+//! 1. **organ**: the surface read (STL, OBJ, PLY, VTK, VTP, VTU) in its unit (given, or detected
+//!    from its size) and frame (`SPACE=` in its header or field data), the landmarks, targets and camera in theirs
 //!    (3D Slicer's `.fcsv` and `.mrk.json` name them; see [`crate::points`]), repaired
 //!    ([`mesh::repair`], through voxels when local repair cannot mend it: [`mesh::rebuild`]), or a
 //!    label of a segmentation's labelmap (NIfTI, NRRD: in mm, in the scanner's frame the file
@@ -63,7 +63,7 @@ use crate::registration::{PatientMethod, RegistrationSpec, PATIENT_FILE};
 /// What `augsim prepare` is given.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PrepareOptions {
-    /// The segmented surface (.stl, .obj, .vtk, .vtu) or labelmap (.nii, .nii.gz, .nrrd,
+    /// The segmented surface (.stl, .obj, .ply, .vtk, .vtp, .vtu) or labelmap (.nii, .nii.gz, .nrrd,
     /// .seg.nrrd).
     pub surface: PathBuf,
     /// The labelmap's label: a number or a segment name (`None`: the only label it holds).

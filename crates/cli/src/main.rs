@@ -37,7 +37,7 @@ enum Command {
     },
     /// Mesh a closed surface (or the built-in liver phantom) with tetrahedra or an immersed hex grid.
     Mesh {
-        /// Organ surface (.obj, .stl, .vtk, .vtu), repaired first unless --no-repair (through voxels
+        /// Organ surface (.obj, .stl, .ply, .vtk, .vtp, .vtu), repaired first unless --no-repair (through voxels
         /// when local repair cannot mend it), or a segmentation's labelmap (.nii, .nii.gz, .nrrd,
         /// .seg.nrrd, in mm, the scanner's frame kept); the liver phantom when omitted.
         surface: Option<PathBuf>,

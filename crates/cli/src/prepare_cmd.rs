@@ -12,7 +12,7 @@ use crate::bar::Bar;
 /// Arguments of `augsim prepare`.
 #[derive(clap::Args)]
 pub struct PrepareArgs {
-    /// The segmented organ: a surface (.stl, .obj, .vtk, .vtu) as a segmentation gives it (holes,
+    /// The segmented organ: a surface (.stl, .obj, .ply, .vtk, .vtp, .vtu) as a segmentation gives it (holes,
     /// duplicated vertices and flipped triangles are repaired; what local repair cannot mend is
     /// rebuilt through voxels), or a labelmap (.nii, .nii.gz from TotalSegmentator, .seg.nrrd
     /// from 3D Slicer; in mm, in the scanner's frame the file states, RAS or LPS).

@@ -21,9 +21,9 @@ use scenario::{CaseScenario, DatasetScenario};
 pub struct RegisterArgs {
     /// Intraoperative cloud, positions only (in --units): .csv with a header naming x, y, z;
     /// 3D Slicer's .fcsv or .mrk.json (their own frame and unit); .npy [N, 3]; the points of a
-    /// model file, .ply (ASCII or binary), .vtk, .vtu, .stl or .obj (in the frame a SPACE= tag
-    /// names, as Slicer writes it). A directory is a sequence of frames, in file-name order (.csv, .npy, .ply, .vtk,
-    /// .vtu, .stl, .obj).
+    /// model file, .ply (ASCII or binary), .vtk, .vtp, .vtu, .stl or .obj (in the frame its SPACE=
+    /// tag or field names, as Slicer writes it). A directory is a sequence of frames, in file-name
+    /// order (any of these but .fcsv and .mrk.json).
     #[arg(required_unless_present = "comparison")]
     cloud: Option<PathBuf>,
     #[command(flatten)]

@@ -22,6 +22,7 @@ use std::collections::BTreeMap;
 use std::io::Read;
 use std::path::Path;
 
+use crate::io::Scalar;
 use crate::isosurface::{mask_surface, ExtractOptions, ExtractReport};
 use crate::volume::{determinant, VoxelMask};
 use crate::{MeshError, TriSurface};
@@ -86,67 +87,24 @@ fn gunzip_if_needed(bytes: Vec<u8>) -> Result<Vec<u8>, String> {
     }
 }
 
-/// A voxel type of the files.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Scalar {
-    U8,
-    I8,
-    I16,
-    U16,
-    I32,
-    U32,
-    F32,
-    F64,
-}
-
-impl Scalar {
-    fn size(self) -> usize {
-        match self {
-            Scalar::U8 | Scalar::I8 => 1,
-            Scalar::I16 | Scalar::U16 => 2,
-            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
-            Scalar::F64 => 8,
-        }
+/// The voxels of `data` as labels, `count` values of type `ty` in the given byte order (a
+/// non-integral or non-finite float is an error: a labelmap holds labels, not intensities; so is
+/// one beyond 32 bits).
+fn labels(ty: Scalar, data: &[u8], count: usize, little: bool) -> Result<Vec<i32>, String> {
+    let size = ty.size();
+    if data.len() < count * size {
+        return Err(format!("the data hold {} bytes, {} expected ({count} voxels)", data.len(), count * size));
     }
-
-    /// The values of `data` as labels (a non-integral or non-finite float is an error: a labelmap
-    /// holds labels, not intensities; so is one beyond 32 bits).
-    fn labels(self, data: &[u8], count: usize, little: bool) -> Result<Vec<i32>, String> {
-        let size = self.size();
-        if data.len() < count * size {
-            return Err(format!("the data hold {} bytes, {} expected ({count} voxels)", data.len(), count * size));
-        }
-        let word = |i: usize| -> [u8; 8] {
-            let mut w = [0u8; 8];
-            w[..size].copy_from_slice(&data[i * size..(i + 1) * size]);
-            if !little {
-                w[..size].reverse();
+    (0..count)
+        .map(|i| {
+            let x = ty.decode(&data[i * size..(i + 1) * size], !little);
+            if x == x.round() && (f64::from(i32::MIN)..=f64::from(i32::MAX)).contains(&x) {
+                Ok(x as i32)
+            } else {
+                Err(format!("voxel {i} holds {x}, not a label (a labelmap holds whole numbers)"))
             }
-            w
-        };
-        (0..count)
-            .map(|i| {
-                let w = word(i);
-                let float = |x: f64| -> Result<i32, String> {
-                    if x.is_finite() && x == x.round() && x.abs() <= i32::MAX as f64 {
-                        Ok(x as i32)
-                    } else {
-                        Err(format!("voxel {i} holds {x}, not a label (a labelmap holds whole numbers)"))
-                    }
-                };
-                match self {
-                    Scalar::U8 => Ok(w[0] as i32),
-                    Scalar::I8 => Ok(w[0] as i8 as i32),
-                    Scalar::I16 => Ok(i16::from_le_bytes([w[0], w[1]]) as i32),
-                    Scalar::U16 => Ok(u16::from_le_bytes([w[0], w[1]]) as i32),
-                    Scalar::I32 => Ok(i32::from_le_bytes([w[0], w[1], w[2], w[3]])),
-                    Scalar::U32 => float(u32::from_le_bytes([w[0], w[1], w[2], w[3]]) as f64),
-                    Scalar::F32 => float(f32::from_le_bytes([w[0], w[1], w[2], w[3]]) as f64),
-                    Scalar::F64 => float(f64::from_le_bytes(w)),
-                }
-            })
-            .collect()
-    }
+        })
+        .collect()
 }
 
 /// Parses a NIfTI-1 single file (header, then the voxels at `vox_offset`).
@@ -199,7 +157,7 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
         return Err(format!("bad voxel offset {offset}"));
     }
     let count = dims.iter().product::<usize>();
-    let mut labels = scalar.labels(&bytes[offset as usize..], count, little)?;
+    let mut labels = labels(scalar, &bytes[offset as usize..], count, little)?;
     let (slope, intercept) = (f32_at(112), f32_at(116));
     if slope != 0.0 && (slope != 1.0 || intercept != 0.0) {
         for l in labels.iter_mut() {
@@ -393,7 +351,7 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
         s if s > 0 && (s as usize) < raw.len() => &raw[s as usize..],
         s => return Err(format!("bad byte skip {s}")),
     };
-    let labels = scalar.labels(raw, layers * dims.iter().product::<usize>(), little)?;
+    let labels = labels(scalar, raw, layers * dims.iter().product::<usize>(), little)?;
     Ok(Labelmap { dims, layers, labels, affine, frame, segments: slicer_segments(&header.pairs)? })
 }
 

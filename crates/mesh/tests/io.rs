@@ -623,7 +623,8 @@ fn corrupted_vtu_files_give_located_errors() {
             "past the",
         ),
         ("lzma.vtu", b.replace("\"UInt64\"", "\"UInt64\" compressor=\"vtkLZMADataCompressor\""), "not supported"),
-        ("poly.vtu", b.replace("type=\"UnstructuredGrid\"", "type=\"PolyData\""), "not UnstructuredGrid"),
+        ("poly.vtu", b.replace("type=\"UnstructuredGrid\"", "type=\"PolyData\""), "PolyData holds a surface"),
+        ("image.vtu", b.replace("type=\"UnstructuredGrid\"", "type=\"ImageData\""), "not UnstructuredGrid or PolyData"),
         ("tags.vtu", b.replace("</Points>", "</Cells>"), "</Cells> closes <Points>"),
         ("empty.vtu", String::new(), "no <VTKFile>"),
     ];

@@ -1,5 +1,6 @@
 //! 3D Slicer's files: markups (`.fcsv`, `.mrk.json`) as Slicer 4.10 to 5.x write them, CSV
-//! points with labels and units, the `SPACE=` frame of STL and VTK headers.
+//! points with labels and units, the `SPACE=` frame of STL, VTK, OBJ and PLY headers and of VTK
+//! XML field data; its models as `.vtp`, `.vtu` and `.ply` (written by VTK's own writers).
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -7,7 +8,9 @@ use std::path::{Path, PathBuf};
 use augsim_mesh::io::points::{
     read_points, read_points_csv, write_fcsv, write_markups_json, write_points, LabelledPoints,
 };
-use augsim_mesh::io::{read_surface, read_surface_with_frame, surface_frame, write_surface_in_frame, Frame};
+use augsim_mesh::io::{
+    read_surface, read_surface_with_frame, read_vertices, surface_frame, write_surface, write_surface_in_frame, Frame,
+};
 use augsim_mesh::length::LengthUnit;
 use augsim_mesh::MeshError;
 
@@ -154,11 +157,13 @@ fn stl_and_vtk_headers_name_the_frame_as_slicer_writes_it() {
     assert!(written.starts_with(b"augsim binary STL SPACE=RAS"));
     let vtk_header = fs::read(dir.path().join("out.vtk")).unwrap();
     assert!(vtk_header.starts_with(b"# vtk DataFile Version 3.0\naugsim SPACE=LPS\n"));
-    // No tag: no frame; OBJ and VTU name none; a frame cannot be put in an OBJ.
+    // No tag: no frame; a frame cannot be put in an OBJ.
     let plain = dir.path().join("plain.stl");
-    augsim_mesh::io::write_surface(&plain, &surface).unwrap();
+    write_surface(&plain, &surface).unwrap();
     assert_eq!(surface_frame(&plain).unwrap(), None);
-    assert_eq!(surface_frame(dir.path().join("any.vtu")).unwrap(), None);
+    let vtu = dir.path().join("plain.vtu");
+    write_surface(&vtu, &surface).unwrap();
+    assert_eq!(surface_frame(&vtu).unwrap(), None, "a .vtu without a SPACE field");
     // Slicer's OBJ and PLY writers put the tag in a comment.
     let obj = put(dir.path(), "slicer.obj", "# wavefront obj file\n# 3D Slicer output. SPACE=LPS\nv 1 2 3\n");
     assert_eq!(surface_frame(obj).unwrap(), Some(Frame::Lps));
@@ -174,6 +179,86 @@ fn stl_and_vtk_headers_name_the_frame_as_slicer_writes_it() {
     let obj = dir.path().join("out.obj");
     assert!(write_surface_in_frame(&obj, &surface, Frame::Lps).unwrap_err().to_string().contains(".vtk or .stl"));
     assert_eq!(read_surface(slicer("tetrahedron_lps.stl")).unwrap(), surface, "the plain reader reads the same");
+}
+
+/// The tetrahedron `write_vtk_files.py` writes.
+const TETRAHEDRON: [[f64; 3]; 4] = [[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 20.0, 0.0], [0.0, 0.0, 30.0]];
+const TETRAHEDRON_TRIANGLES: [[usize; 3]; 4] = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+
+/// Triangles each turned to start at its smallest index, then sorted: equal for the same
+/// oriented triangles in any order.
+fn oriented_set(triangles: &[[usize; 3]]) -> Vec<[usize; 3]> {
+    let mut set: Vec<[usize; 3]> = triangles
+        .iter()
+        .map(|t| {
+            let k = (0..3).min_by_key(|&k| t[k]).unwrap();
+            [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
+        })
+        .collect();
+    set.sort();
+    set
+}
+
+#[test]
+fn vtp_vtu_and_ply_models_as_slicer_writes_them_give_the_surface_and_its_frame() {
+    for (file, frame) in [
+        ("tetrahedron_ras.vtp", Some(Frame::Ras)),
+        ("tetrahedron_lps_ascii.vtp", Some(Frame::Lps)),
+        ("tetrahedron_lps.vtu", Some(Frame::Lps)),
+        ("tetrahedron_ras.ply", Some(Frame::Ras)),
+        ("tetrahedron_lps_ascii.ply", Some(Frame::Lps)),
+        ("tetrahedron_strips.vtp", None),
+    ] {
+        let (surface, read) = read_surface_with_frame(slicer(file)).unwrap();
+        assert_eq!(read, frame, "{file}");
+        assert_eq!(surface.vertices, TETRAHEDRON, "{file}");
+        assert_eq!(oriented_set(&surface.triangles), oriented_set(&TETRAHEDRON_TRIANGLES), "{file}");
+        assert_eq!(read_vertices(slicer(file)).unwrap(), TETRAHEDRON, "{file}: its points");
+    }
+    // A cloud saved as a model: its points, and no surface.
+    let cloud = slicer("cloud_ras.vtp");
+    assert_eq!(read_vertices(&cloud).unwrap(), [[1.5, -2.0, 3.0], [4.0, 5.25, -6.0], [-7.0, 8.0, 9.5]]);
+    assert_eq!(surface_frame(&cloud).unwrap(), Some(Frame::Ras));
+    assert!(message(read_surface(&cloud)).contains("no triangles"));
+}
+
+#[test]
+fn broken_vtp_and_ply_models_are_refused_naming_the_file_and_what_is_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let ascii_vtp = fs::read_to_string(slicer("tetrahedron_lps_ascii.vtp")).unwrap();
+    let compressed = fs::read(slicer("tetrahedron_ras.vtp")).unwrap();
+    let ply = fs::read_to_string(slicer("tetrahedron_lps_ascii.ply")).unwrap();
+    let cut = put(d, "cut.vtp", &compressed[..compressed.len() - 200]);
+    let cases: Vec<(PathBuf, &str)> = vec![
+        // "IJK" in the field data's characters.
+        (put(d, "ijk.vtp", ascii_vtp.replace("76 80 83 0", "73 74 75 0")), "field data: header tag SPACE=IJK"),
+        (put(d, "number.vtp", ascii_vtp.replace("type=\"String\"", "type=\"Int32\"")), "type Int32 is not String"),
+        (put(d, "offset.vtp", ascii_vtp.replace("3 6 9 12", "3 6 13 12")), "<Polys> cell 2: offset 13"),
+        (put(d, "index.vtp", ascii_vtp.replace("0 3 2 1 2 3", "0 3 2 1 2 4")), "refers to point 4"),
+        (put(d, "image.vtp", ascii_vtp.replace("\"PolyData\" version", "\"ImageData\" version")), "ImageData"),
+        (cut.clone(), "truncated"),
+        (
+            put(
+                d,
+                "cloud.ply",
+                ply.replace("element face 4\n", "").replace("property list uchar int vertex_indices\n", ""),
+            ),
+            "no 'face' element",
+        ),
+        (put(d, "face.ply", ply.replace("3 1 2 3", "3 1 2 9")), "refers to point 9"),
+        (put(d, "short.ply", ply.replace("3 1 2 3 \n", "")), "face 3 of 4"),
+        (
+            put(d, "float.ply", ply.replace("uchar int vertex_indices", "uchar float vertex_indices")),
+            "not a list of integers",
+        ),
+    ];
+    for (path, expected) in cases {
+        let e = message(read_surface_with_frame(&path));
+        assert!(e.starts_with(&path.display().to_string()), "{e}");
+        assert!(e.contains(expected), "{}: {e}\nexpected: {expected}", path.display());
+    }
+    assert!(message(read_vertices(&cut)).contains("truncated"), "the points of a cut file");
 }
 
 #[test]

@@ -3,7 +3,8 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use augsim_register::cloud::{read_frames, read_point_cloud, read_targets, write_csv, write_ply_binary};
+use augsim_register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
+use mesh::io::write_ply_points;
 use mesh::Point;
 
 fn sample() -> Vec<Point> {
@@ -76,7 +77,7 @@ fn csv_with_extra_columns_in_another_order() {
 fn ply_binary_round_trip_is_exact() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("cloud.ply");
-    write_ply_binary(&path, &sample()).unwrap();
+    write_ply_points(&path, &sample()).unwrap();
     let back = read_point_cloud(&path).unwrap();
     assert_eq!(back.len(), sample().len());
     for (a, b) in back.iter().zip(sample()) {
@@ -204,7 +205,7 @@ fn ply_errors() {
 
     // Truncated binary PLY written by the writer.
     let path = dir.path().join("cut.ply");
-    write_ply_binary(&path, &[[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]).unwrap();
+    write_ply_points(&path, &[[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]).unwrap();
     let bytes = fs::read(&path).unwrap();
     fs::write(&path, &bytes[..bytes.len() - 12]).unwrap();
     assert_contains(&error(read_point_cloud(&path)), &["cut.ply", "unexpected end of file", "vertex 2 of 3"]);
@@ -239,7 +240,7 @@ fn ply_errors() {
     let path = write(dir.path(), "nan.ply", format!("{head}1 2 3\n4 nan 6\n"));
     assert_contains(&error(read_point_cloud(&path)), &["point 1", "non-finite"]);
     let path = dir.path().join("empty.ply");
-    write_ply_binary(&path, &[]).unwrap();
+    write_ply_points(&path, &[]).unwrap();
     assert_contains(&error(read_point_cloud(&path)), &["no points"]);
 
     // Not a PLY file at all.
@@ -251,7 +252,10 @@ fn ply_errors() {
 fn unsupported_extension_lists_the_supported_ones() {
     let dir = tempfile::tempdir().unwrap();
     let path = write(dir.path(), "cloud.xyz", "1 2 3\n");
-    assert_contains(&error(read_point_cloud(&path)), &["cloud.xyz", ".csv, .npy, .ply, .obj, .stl, .vtk or .vtu file"]);
+    assert_contains(
+        &error(read_point_cloud(&path)),
+        &["cloud.xyz", ".csv, .npy, .ply, .obj, .stl, .vtk, .vtp or .vtu file"],
+    );
     let path = write(dir.path(), "noext", "1 2 3\n");
     assert_contains(&error(read_point_cloud(&path)), &[".csv", ".npy", ".ply"]);
 }
@@ -260,7 +264,7 @@ fn unsupported_extension_lists_the_supported_ones() {
 fn frames_of_a_directory_and_of_a_file() {
     let dir = tempfile::tempdir().unwrap();
     let b = dir.path().join("b.ply");
-    write_ply_binary(&b, &[[1.0, 2.0, 3.0]]).unwrap();
+    write_ply_points(&b, &[[1.0, 2.0, 3.0]]).unwrap();
     let a = dir.path().join("a.csv");
     write_csv(&a, &[[4.0, 5.0, 6.0]]).unwrap();
     write(dir.path(), "notes.txt", "not a cloud");

@@ -37,7 +37,7 @@ pub enum MeshSource {
         #[serde(default)]
         min_fraction: f64,
     },
-    /// A closed surface (.obj, .stl, .vtk) meshed with tetrahedra; the path is
+    /// A closed surface (.obj, .stl, .ply, .vtk, .vtp, .vtu) meshed with tetrahedra; the path is
     /// relative to the scenario file.
     Surface {
         /// Path of the surface.

@@ -116,13 +116,16 @@ pub fn frame_in_header(header: &str) -> Result<Option<Frame>, String> {
     value.parse().map(Some).map_err(|e| format!("header tag SPACE={value}: {e}"))
 }
 
-/// The frame a surface file names in its header, where 3D Slicer writes it: `SPACE=` in the
-/// 80-byte header of a binary STL or the `solid` line of an ASCII one, in the title line (line 2)
-/// of a legacy VTK file, in the `#` comments of an OBJ or the `comment` lines of a PLY header.
-/// Other formats (VTU) name none.
+/// The frame a surface file names, where 3D Slicer writes it: `SPACE=` in the 80-byte header
+/// of a binary STL or the `solid` line of an ASCII one, in the title line (line 2) of a legacy
+/// VTK file, in the `#` comments of an OBJ or the `comment` lines of a PLY header; the string
+/// array `SPACE` of a `.vtp` or `.vtu` file's field data. Other formats name none.
 pub fn surface_frame(path: impl AsRef<Path>) -> Result<Option<Frame>, MeshError> {
     let path = path.as_ref();
     let kind = super::extension(path);
+    if kind == "vtp" || kind == "vtu" {
+        return super::vtk_xml::xml_frame(path);
+    }
     if !["stl", "vtk", "obj", "ply"].contains(&kind.as_str()) {
         return Ok(None);
     }

@@ -7,7 +7,7 @@ use super::scalar::Scalar;
 use super::{
     check_for_writing, check_surface, fan, finish_volume, mesh_cells_flat, parse_error, read_bytes,
     regions_from_fields, restrict_fields, strip, write_atomic, Encoding, Field, FieldLocation, Num, VolumeKind,
-    VTK_HEXAHEDRON, VTK_QUADRATIC_TETRA, VTK_TETRA, VTK_VOXEL,
+    VTK_HEXAHEDRON, VTK_POLYGON, VTK_QUADRATIC_TETRA, VTK_TETRA, VTK_TRIANGLE_STRIP, VTK_VOXEL,
 };
 use crate::{Mesh, MeshError, Point, TriSurface};
 
@@ -717,8 +717,8 @@ pub fn read_vtk_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError>
     if parsed.dataset == "POLYDATA" {
         let cells = parsed.cells.iter().flat_map(|(key, list)| {
             let ty = match key.as_str() {
-                "POLYGONS" => 7,
-                "TRIANGLE_STRIPS" => 6,
+                "POLYGONS" => VTK_POLYGON.into(),
+                "TRIANGLE_STRIPS" => VTK_TRIANGLE_STRIP.into(),
                 _ => 0,
             };
             (0..list.len()).map(move |i| (ty, list.cell(i)))

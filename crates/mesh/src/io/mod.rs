@@ -8,11 +8,13 @@
 //! volume is an error.
 //!
 //! Surfaces ([`TriSurface`]) are read from `.obj`, `.stl` (ASCII or binary, duplicate vertices
-//! merged exactly), legacy VTK `.vtk` (`POLYDATA` or `UNSTRUCTURED_GRID`) and `.vtu`; polygons are
-//! split into triangle fans and triangle strips into triangles. All vertices are kept.
+//! merged exactly), `.ply` (ASCII or binary), legacy VTK `.vtk` (`POLYDATA` or
+//! `UNSTRUCTURED_GRID`), `.vtp` and `.vtu`; polygons are split into triangle fans and triangle
+//! strips into triangles. All vertices are kept.
 //!
-//! The frame a surface file names (`SPACE=LPS` or `SPACE=RAS` in an STL or legacy VTK header, as
-//! 3D Slicer writes it) is read by [`read_surface_with_frame`] and written by
+//! The frame a surface file names (`SPACE=LPS` or `SPACE=RAS` where 3D Slicer writes it: in an
+//! STL, OBJ, PLY or legacy VTK header, in a `.vtp` or `.vtu` file's field data) is read by
+//! [`read_surface_with_frame`] and written by
 //! [`write_surface_in_frame`]; points with labels, frame and unit (CSV, Slicer's `.fcsv` and
 //! `.mrk.json`) by the [`points`] module. Every CSV file of the project is read and written by
 //! the [`csv`] module.
@@ -56,11 +58,12 @@ pub mod csv;
 mod frame;
 mod gmsh;
 mod legacy_vtk;
+mod ply;
 pub mod points;
 mod scalar;
 mod surface_io;
 mod text;
-mod vtu;
+mod vtk_xml;
 
 use std::borrow::Cow;
 use std::collections::BTreeMap;
@@ -75,9 +78,10 @@ pub use csv::csv_field;
 pub use frame::{frame_in_header, read_surface_with_frame, surface_frame, write_surface_in_frame, Frame, FrameChange};
 pub use gmsh::{read_gmsh, write_msh};
 pub use legacy_vtk::{read_vtk, read_vtk_surface, read_vtk_with_fields, write_vtk_legacy, write_vtk_legacy_with};
+pub use ply::write_ply_points;
 pub use scalar::Scalar;
 pub use surface_io::{read_obj, read_stl, write_obj, write_stl};
-pub use vtu::{read_vtu, read_vtu_surface, read_vtu_with_fields, write_vtu, write_vtu_with};
+pub use vtk_xml::{read_vtu, read_vtu_with_fields, write_vtu, write_vtu_with};
 
 /// Prefix of the name of a point field that holds a region (see the [module](self) documentation).
 pub const REGION_FIELD_PREFIX: &str = "region_";
@@ -286,30 +290,34 @@ pub fn write_mesh(path: impl AsRef<Path>, mesh: &Mesh, fields: &[Field]) -> Resu
 }
 
 /// The error of a surface reader given another extension.
-const UNKNOWN_SURFACE: &str = "unknown surface extension (expected .obj, .stl, .vtk or .vtu)";
+const UNKNOWN_SURFACE: &str = "unknown surface extension (expected .obj, .stl, .ply, .vtk, .vtp or .vtu)";
 
-/// Reads a triangle surface, choosing the format by extension: `.obj`, `.stl`, `.vtk`, `.vtu`.
+/// Reads a triangle surface, choosing the format by extension: `.obj`, `.stl`, `.ply` (its
+/// faces), `.vtk`, `.vtp`, `.vtu`.
 pub fn read_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
     let path = path.as_ref();
     match extension(path).as_str() {
         "obj" => read_obj(path),
         "stl" => read_stl(path),
+        "ply" => ply::read_ply_surface(path),
         "vtk" => read_vtk_surface(path),
-        "vtu" => read_vtu_surface(path),
+        "vtp" | "vtu" => vtk_xml::read_xml_surface(path),
         _ => Err(parse_error(path, UNKNOWN_SURFACE)),
     }
 }
 
 /// The points of a surface or mesh file whatever its cells, as a point cloud saved in one of
 /// these formats has them: `.obj` (its `v` lines), `.stl` (its triangles' corners, each shared one
-/// once), `.vtk` (the `POINTS` of any dataset) and `.vtu` (its `<Points>`).
+/// once), `.ply` (its `vertex` element), `.vtk` (the `POINTS` of any dataset), `.vtp` and `.vtu`
+/// (their `<Points>`).
 pub fn read_vertices(path: impl AsRef<Path>) -> Result<Vec<Point>, MeshError> {
     let path = path.as_ref();
     match extension(path).as_str() {
         "obj" => surface_io::read_obj_vertices(path),
         "stl" => Ok(read_stl(path)?.vertices),
+        "ply" => ply::read_ply_vertices(path),
         "vtk" => legacy_vtk::read_vtk_points(path),
-        "vtu" => vtu::read_vtu_points(path),
+        "vtp" | "vtu" => vtk_xml::read_xml_points(path),
         _ => Err(parse_error(path, UNKNOWN_SURFACE)),
     }
 }
@@ -319,7 +327,7 @@ pub fn read_vertices(path: impl AsRef<Path>) -> Result<Vec<Point>, MeshError> {
 pub fn write_surface(path: impl AsRef<Path>, surface: &TriSurface) -> Result<(), MeshError> {
     let path = path.as_ref();
     match extension(path).as_str() {
-        "vtu" => vtu::write_surface_vtu(path, surface),
+        "vtu" => vtk_xml::write_surface_vtu(path, surface),
         "vtk" => legacy_vtk::write_surface_vtk(path, surface),
         "obj" => write_obj(path, surface),
         "stl" => write_stl(path, surface),
@@ -451,8 +459,16 @@ fn check_surface(surface: &TriSurface) -> Result<Vec<usize>, MeshError> {
     Ok(conn)
 }
 
+/// VTK cell type of a set of vertices.
+const VTK_POLY_VERTEX: u8 = 2;
+/// VTK cell type of a polyline.
+const VTK_POLY_LINE: u8 = 4;
 /// VTK cell type of a triangle.
 const VTK_TRIANGLE: u8 = 5;
+/// VTK cell type of a triangle strip.
+const VTK_TRIANGLE_STRIP: u8 = 6;
+/// VTK cell type of a polygon.
+const VTK_POLYGON: u8 = 7;
 /// VTK cell type of a linear tetrahedron.
 const VTK_TETRA: u8 = 10;
 /// VTK cell type of an axis-aligned voxel (a hexahedron with another node order).

@@ -1,4 +1,5 @@
-//! Binary scalar types of mesh and point-cloud files (legacy VTK, PLY): their size and decoding.
+//! Binary scalar types of mesh, point-cloud and image files (legacy VTK, VTK XML, PLY, NIfTI and
+//! NRRD labelmaps): their size and decoding.
 //! Each format names the types its own way and parses those names itself.
 
 /// A binary scalar type.

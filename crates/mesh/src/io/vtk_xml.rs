@@ -1,9 +1,12 @@
-//! VTK XML unstructured grids (`.vtu`).
+//! VTK XML files: unstructured grids (`.vtu`) and poly data (`.vtp`).
 //!
-//! Written with Float64 values and Int64 connectivity, ASCII or base64 (UInt64 headers). Read:
-//! one `Piece`, arrays in `ascii`, `binary` (base64) or `appended` (raw or base64) form, UInt32
-//! or UInt64 headers, either byte order, uncompressed or zlib-compressed: what ParaView, VTK and
-//! meshio write. Every array is checked against its declared size.
+//! Written: `.vtu`, with Float64 values and Int64 connectivity, ASCII or base64 (UInt64 headers).
+//! Read: either type, one `Piece`, arrays in `ascii`, `binary` (base64) or `appended` (raw or
+//! base64) form, UInt32 or UInt64 headers, either byte order, uncompressed or zlib-compressed:
+//! what ParaView, VTK, 3D Slicer and meshio write. Every array is checked against its declared
+//! size. Poly data's cells are its vertices, lines, polygons and triangle strips, in that order
+//! (VTK's). A string array of the field data is read where it names the frame (`SPACE`, as 3D
+//! Slicer writes it).
 
 use std::io::Write;
 use std::path::Path;
@@ -16,8 +19,8 @@ use base64::Engine as _;
 
 use super::legacy_vtk::{surface_from_cells, volume_from_cells};
 use super::{
-    check_for_writing, check_surface, mesh_cells_flat, parse_error, write_atomic, Encoding, Field, FieldLocation, Num,
-    VTK_TRIANGLE,
+    check_for_writing, check_surface, frame_in_header, mesh_cells_flat, parse_error, write_atomic, Encoding, Field,
+    FieldLocation, Frame, Num, Scalar, VTK_POLYGON, VTK_POLY_LINE, VTK_POLY_VERTEX, VTK_TRIANGLE, VTK_TRIANGLE_STRIP,
 };
 use crate::{Mesh, MeshError, Point, TriSurface};
 
@@ -166,9 +169,26 @@ const CUT_HEADER: &str = "the binary header is cut short (truncated file?)";
 /// Message for binary data that ends before its header says.
 const CUT_DATA: &str = "the data is shorter than its header announces (truncated file?)";
 
-/// A `<DataArray>` of the file.
+/// The scalar type of a VTK XML type name; a `String` array's characters are bytes.
+fn scalar(name: &str) -> Option<Scalar> {
+    Some(match name {
+        "Int8" => Scalar::I8,
+        "UInt8" | "String" => Scalar::U8,
+        "Int16" => Scalar::I16,
+        "UInt16" => Scalar::U16,
+        "Int32" => Scalar::I32,
+        "UInt32" => Scalar::U32,
+        "Int64" => Scalar::I64,
+        "UInt64" => Scalar::U64,
+        "Float32" => Scalar::F32,
+        "Float64" => Scalar::F64,
+        _ => return None,
+    })
+}
+
+/// A `<DataArray>` (or, in `<FieldData>`, an `<Array>`) of the file.
 struct ArrayDecl {
-    /// The enclosing element (`Points`, `Cells`, `PointData`, `CellData`, ...).
+    /// The enclosing element (`Points`, `Cells`, `Polys`, `PointData`, `CellData`, `FieldData`, ...).
     parent: String,
     name: String,
     ty: String,
@@ -181,15 +201,26 @@ struct ArrayDecl {
     at: usize,
 }
 
-/// The structure of a `.vtu` file: its settings, sizes, arrays and appended data.
-struct VtuFile<'a> {
+/// The sections of poly data's cells in VTK's order: element, count attribute, VTK cell type.
+const POLY_SECTIONS: [(&str, &str, u8); 4] = [
+    ("Verts", "NumberOfVerts", VTK_POLY_VERTEX),
+    ("Lines", "NumberOfLines", VTK_POLY_LINE),
+    ("Polys", "NumberOfPolys", VTK_POLYGON),
+    ("Strips", "NumberOfStrips", VTK_TRIANGLE_STRIP),
+];
+
+/// The structure of a VTK XML file: its settings, sizes, arrays and appended data.
+struct XmlFile<'a> {
     path: &'a Path,
     data: &'a [u8],
+    /// Poly data (`.vtp`), not an unstructured grid.
+    poly: bool,
     header64: bool,
     big_endian: bool,
     zlib: bool,
     points: usize,
-    cells: usize,
+    /// The number of cells of an unstructured grid, or of each of the [`POLY_SECTIONS`].
+    cell_counts: Vec<usize>,
     arrays: Vec<ArrayDecl>,
     /// Appended data: (raw, byte range after the `_` marker).
     appended: Option<(bool, Range<usize>)>,
@@ -312,12 +343,15 @@ impl OpenTag<'_> {
     }
 }
 
-impl VtuFile<'_> {
-    /// Takes the byte order, the header type and the compressor from the `<VTKFile>` tag.
+impl XmlFile<'_> {
+    /// Takes the dataset type, the byte order, the header type and the compressor from the
+    /// `<VTKFile>` tag.
     fn set_format(&mut self, tag: &OpenTag) -> Result<(), String> {
-        if tag.attr("type") != Some("UnstructuredGrid") {
-            return Err(format!("type {:?} is not UnstructuredGrid", tag.attr("type").unwrap_or("")));
-        }
+        self.poly = match tag.attr("type") {
+            Some("UnstructuredGrid") => false,
+            Some("PolyData") => true,
+            other => return Err(format!("type {:?} is not UnstructuredGrid or PolyData", other.unwrap_or(""))),
+        };
         self.big_endian = tag.attr("byte_order") == Some("BigEndian");
         self.header64 = match tag.attr("header_type") {
             None | Some("UInt32") => false,
@@ -333,17 +367,18 @@ impl VtuFile<'_> {
     }
 }
 
-/// Finds the elements of a `.vtu` file that matter.
-fn scan<'a>(path: &'a Path, data: &'a [u8]) -> Result<VtuFile<'a>, MeshError> {
+/// Finds the elements of a VTK XML file that matter.
+fn scan<'a>(path: &'a Path, data: &'a [u8]) -> Result<XmlFile<'a>, MeshError> {
     let at_error = |at: usize, m: String| parse_error(path, format!("line {}: {m}", line_at(data, at)));
-    let mut file = VtuFile {
+    let mut file = XmlFile {
         path,
         data,
         header64: false,
         big_endian: false,
+        poly: false,
         zlib: false,
         points: 0,
-        cells: 0,
+        cell_counts: Vec::new(),
         arrays: Vec::new(),
         appended: None,
     };
@@ -391,9 +426,16 @@ fn scan<'a>(path: &'a Path, data: &'a [u8]) -> Result<VtuFile<'a>, MeshError> {
                     return Err(at_error(lt, "a second <Piece>: only single-piece files are supported".into()));
                 }
                 file.points = tag.count("NumberOfPoints").map_err(|m| at_error(lt, m))?;
-                file.cells = tag.count("NumberOfCells").map_err(|m| at_error(lt, m))?;
+                file.cell_counts = match file.poly {
+                    true => POLY_SECTIONS
+                        .iter()
+                        .map(|(_, key, _)| if tag.attr(key).is_some() { tag.count(key) } else { Ok(0) })
+                        .collect::<Result<_, _>>(),
+                    false => tag.count("NumberOfCells").map(|n| vec![n]),
+                }
+                .map_err(|m| at_error(lt, m))?;
             }
-            "DataArray" => {
+            "DataArray" | "Array" => {
                 let parent = stack.last().map(|(n, _)| n.clone()).unwrap_or_default();
                 file.arrays.push(tag.array(data, parent, self_closing, lt, end).map_err(|m| at_error(lt, m))?);
             }
@@ -424,7 +466,7 @@ fn scan<'a>(path: &'a Path, data: &'a [u8]) -> Result<VtuFile<'a>, MeshError> {
     Ok(file)
 }
 
-impl VtuFile<'_> {
+impl XmlFile<'_> {
     /// An unsigned integer of the header type at the start of `b`.
     fn header_uint(&self, b: &[u8]) -> Option<usize> {
         let n = if self.header64 { 8 } else { 4 };
@@ -524,13 +566,8 @@ impl VtuFile<'_> {
     /// The values of an array as `f64`.
     fn values(&self, a: &ArrayDecl) -> Result<Vec<f64>, MeshError> {
         let fail = |m: String| self.array_error(a, m);
-        let size = match a.ty.as_str() {
-            "Int8" | "UInt8" => 1,
-            "Int16" | "UInt16" => 2,
-            "Int32" | "UInt32" | "Float32" => 4,
-            "Int64" | "UInt64" | "Float64" => 8,
-            other => return Err(fail(format!("unsupported type '{other}'"))),
-        };
+        let ty = scalar(&a.ty).ok_or_else(|| fail(format!("unsupported type '{}'", a.ty)))?;
+        let size = ty.size();
         if a.format == "ascii" {
             let text = String::from_utf8_lossy(&self.data[a.content.clone()]);
             return text
@@ -563,30 +600,7 @@ impl VtuFile<'_> {
         if bytes.len() % size != 0 {
             return Err(fail(format!("{} bytes is not a whole number of {} values", bytes.len(), a.ty)));
         }
-        Ok(bytes
-            .chunks_exact(size)
-            .map(|c| {
-                let mut w = [0u8; 8];
-                if self.big_endian {
-                    w[..size].copy_from_slice(&c.iter().rev().copied().collect::<Vec<_>>());
-                } else {
-                    w[..size].copy_from_slice(c);
-                }
-                let (b2, b4) = ([w[0], w[1]], [w[0], w[1], w[2], w[3]]);
-                match a.ty.as_str() {
-                    "Int8" => w[0] as i8 as f64,
-                    "UInt8" => w[0] as f64,
-                    "Int16" => i16::from_le_bytes(b2) as f64,
-                    "UInt16" => u16::from_le_bytes(b2) as f64,
-                    "Int32" => i32::from_le_bytes(b4) as f64,
-                    "UInt32" => u32::from_le_bytes(b4) as f64,
-                    "Float32" => f32::from_le_bytes(b4) as f64,
-                    "Int64" => i64::from_le_bytes(w) as f64,
-                    "UInt64" => u64::from_le_bytes(w) as f64,
-                    _ => f64::from_le_bytes(w),
-                }
-            })
-            .collect())
+        Ok(bytes.chunks_exact(size).map(|c| ty.decode(c, self.big_endian)).collect())
     }
 
     /// An error about array `a`, with its line.
@@ -608,13 +622,13 @@ impl VtuFile<'_> {
         Ok(values)
     }
 
-    /// The array named `name` in `<Cells>`, as indices.
-    fn cell_array(&self, name: &str, count: Option<usize>) -> Result<Vec<usize>, MeshError> {
+    /// The array named `name` in `<section>`, as indices.
+    fn cell_array(&self, section: &str, name: &str, count: Option<usize>) -> Result<Vec<usize>, MeshError> {
         let a = self
             .arrays
             .iter()
-            .find(|a| a.parent == "Cells" && a.name == name)
-            .ok_or_else(|| parse_error(self.path, format!("<Cells> has no '{name}' array")))?;
+            .find(|a| a.parent == section && a.name == name)
+            .ok_or_else(|| parse_error(self.path, format!("<{section}> has no '{name}' array")))?;
         let values = match count {
             Some(n) => self.sized(a, n)?,
             None => self.values(a)?,
@@ -628,15 +642,53 @@ impl VtuFile<'_> {
             })
             .collect()
     }
+
+    /// The `count` cells of `<section>` (its connectivity cut at its offsets), appended to
+    /// `cells`.
+    fn read_cells(&self, section: &str, count: usize, cells: &mut Vec<Vec<usize>>) -> Result<(), MeshError> {
+        if count == 0 {
+            return Ok(());
+        }
+        let connectivity = self.cell_array(section, "connectivity", None)?;
+        let mut start = 0;
+        for (c, end) in self.cell_array(section, "offsets", Some(count))?.into_iter().enumerate() {
+            if end < start || end > connectivity.len() {
+                let m = format!(
+                    "<{section}> cell {c}: offset {end} is out of order or past the {} connectivity entries",
+                    connectivity.len()
+                );
+                return Err(parse_error(self.path, m));
+            }
+            cells.push(connectivity[start..end].to_vec());
+            start = end;
+        }
+        Ok(())
+    }
+
+    /// The text of the field data's string array `name` (up to its first NUL), if there is one.
+    fn field_text(&self, name: &str) -> Result<Option<String>, MeshError> {
+        let Some(a) = self.arrays.iter().find(|a| a.parent == "FieldData" && a.name == name) else {
+            return Ok(None);
+        };
+        if a.ty != "String" {
+            return Err(self.array_error(a, format!("type {} is not String", a.ty)));
+        }
+        let bytes: Vec<u8> = self.values(a)?.into_iter().take_while(|&c| c != 0.0).map(|c| c as u8).collect();
+        Ok(Some(String::from_utf8_lossy(&bytes).into_owned()))
+    }
 }
 
-/// The unstructured grid of a `.vtu` file: points, cells, cell types and data arrays.
+/// The cells of a VTK XML file: an unstructured grid's, or poly data's.
 type Grid = (Vec<Point>, Vec<Vec<usize>>, Vec<u32>, Vec<Field>);
 
-/// Reads a `.vtu` file into plain arrays.
-fn load(path: &Path) -> Result<Grid, MeshError> {
+/// Reads a `.vtu` or `.vtp` file into plain arrays: points, cells, their VTK types and the
+/// point and cell data. Poly data is refused where a `volume` is wanted.
+fn load(path: &Path, volume: bool) -> Result<Grid, MeshError> {
     let data = super::read_bytes(path)?;
     let file = scan(path, &data)?;
+    if volume && file.poly {
+        return Err(parse_error(path, "PolyData holds a surface, not a volume mesh (read it as a surface)"));
+    }
     let points_array =
         file.arrays.iter().find(|a| a.parent == "Points").ok_or_else(|| parse_error(path, "no <Points> DataArray"))?;
     if points_array.components != 3 {
@@ -644,28 +696,23 @@ fn load(path: &Path) -> Result<Grid, MeshError> {
     }
     let xyz = file.sized(points_array, file.points)?;
     let points: Vec<Point> = xyz.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    let connectivity = file.cell_array("connectivity", None)?;
-    let offsets = file.cell_array("offsets", Some(file.cells))?;
-    let types: Vec<u32> =
-        file.cell_array("types", Some(file.cells))?.iter().map(|&t| t.min(u32::MAX as usize) as u32).collect();
-    let mut cells = Vec::with_capacity(file.cells);
-    let mut start = 0;
-    for (c, &end) in offsets.iter().enumerate() {
-        if end < start || end > connectivity.len() {
-            return Err(parse_error(
-                path,
-                format!(
-                    "cell {c}: offset {end} is out of order or past the {} connectivity entries",
-                    connectivity.len()
-                ),
-            ));
+    let num_cells = file.cell_counts.iter().sum();
+    let mut cells = Vec::with_capacity(num_cells);
+    let types: Vec<u32> = if file.poly {
+        let mut types = Vec::with_capacity(num_cells);
+        for ((section, _, ty), &count) in POLY_SECTIONS.iter().zip(&file.cell_counts) {
+            file.read_cells(section, count, &mut cells)?;
+            types.resize(cells.len(), u32::from(*ty));
         }
-        cells.push(connectivity[start..end].to_vec());
-        start = end;
-    }
+        types
+    } else {
+        file.read_cells("Cells", num_cells, &mut cells)?;
+        let types = file.cell_array("Cells", "types", Some(num_cells))?;
+        types.iter().map(|&t| t.min(u32::MAX as usize) as u32).collect()
+    };
     let mut fields = Vec::new();
     for (parent, location, count) in
-        [("PointData", FieldLocation::Point, file.points), ("CellData", FieldLocation::Cell, file.cells)]
+        [("PointData", FieldLocation::Point, file.points), ("CellData", FieldLocation::Cell, num_cells)]
     {
         for a in file.arrays.iter().filter(|a| a.parent == parent) {
             let values = file.sized(a, count)?;
@@ -684,18 +731,28 @@ pub fn read_vtu(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
 /// nodes and cells.
 pub fn read_vtu_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>), MeshError> {
     let path = path.as_ref();
-    let (points, cells, types, fields) = load(path)?;
+    let (points, cells, types, fields) = load(path, true)?;
     volume_from_cells(path, &points, &cells, &types, fields)
 }
 
-/// The `<Points>` of a `.vtu` file, whatever its cells (a point cloud).
-pub(super) fn read_vtu_points(path: &Path) -> Result<Vec<Point>, MeshError> {
-    Ok(load(path)?.0)
+/// The `<Points>` of a `.vtu` or `.vtp` file, whatever its cells (a point cloud).
+pub(super) fn read_xml_points(path: &Path) -> Result<Vec<Point>, MeshError> {
+    Ok(load(path, false)?.0)
 }
 
-/// Reads the triangles, quads and polygons of a `.vtu` unstructured grid as a surface.
-pub fn read_vtu_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
-    let path = path.as_ref();
-    let (points, cells, types, _) = load(path)?;
+/// Reads the triangles, quads, polygons and triangle strips of a `.vtu` or `.vtp` file as a
+/// surface.
+pub(super) fn read_xml_surface(path: &Path) -> Result<TriSurface, MeshError> {
+    let (points, cells, types, _) = load(path, false)?;
     surface_from_cells(path, points, types.iter().zip(&cells).map(|(&t, c)| (t, c.as_slice())))
+}
+
+/// The frame a `.vtu` or `.vtp` file names in its field data's string array `SPACE`, as 3D
+/// Slicer writes it (`RAS` or `LPS`); `None` without one.
+pub(super) fn xml_frame(path: &Path) -> Result<Option<Frame>, MeshError> {
+    let data = super::read_bytes(path)?;
+    let Some(space) = scan(path, &data)?.field_text("SPACE")? else {
+        return Ok(None);
+    };
+    frame_in_header(&format!("SPACE={}", space.trim())).map_err(|m| parse_error(path, format!("field data: {m}")))
 }
