@@ -122,19 +122,23 @@ impl Deformer for FemDeformer {
 /// the shape fit found). A warm-started frame (a stream) starts near the cloud already: the second
 /// deformer alone registers it.
 ///
-/// σ: the second deformer's own, else, on a frame from rest, the expected distance of the second's
-/// estimate to the truth under the first's posterior: with the first's error of standard deviation
-/// σ₁ and the second moving its estimate by Δ, √(σ₁² + |Δ|²).
+/// σ: the second deformer's own, else the expected distance of the second's estimate to the truth
+/// under the first's posterior: with the first's error of standard deviation σ₁ and the second's
+/// estimate Δ away from the first's, √(σ₁² + |Δ|²). On a frame from rest the first's estimate is
+/// the one the second started from; on a warm-started frame, the first fits once (from its own
+/// last posterior, as on a stream) to the matches of the second's last iteration when σ is asked.
 pub struct HybridDeformer {
     first: Box<dyn Deformer + Send>,
     then: Box<dyn Deformer + Send>,
     first_iterations: usize,
     /// Whether the frame under way is warm-started.
     warm: bool,
-    /// On a frame from rest, once the second deformer has taken over: the estimate it started from
-    /// (the first's last) and its own last, whose difference widens the first's σ.
+    /// Once the second deformer has taken over: the first's estimate and the second's last, whose
+    /// difference widens the first's σ.
     first_estimate: Option<Vec<f64>>,
     then_estimate: Option<Vec<f64>>,
+    /// On a warm-started frame: the matches of the second deformer's last iteration.
+    last_observations: Option<Observations>,
 }
 
 // The second deformer goes on as on a warm-started frame: past the data springs' stiffness ramp.
@@ -153,7 +157,15 @@ impl HybridDeformer {
                 "a hybrid registration needs at least one iteration of its first model".into(),
             ));
         }
-        Ok(HybridDeformer { first, then, first_iterations, warm: false, first_estimate: None, then_estimate: None })
+        Ok(HybridDeformer {
+            first,
+            then,
+            first_iterations,
+            warm: false,
+            first_estimate: None,
+            then_estimate: None,
+            last_observations: None,
+        })
     }
 }
 
@@ -162,10 +174,9 @@ impl Deformer for HybridDeformer {
         self.warm = warm;
         self.first_estimate = None;
         self.then_estimate = None;
-        // A warm-started frame is the second deformer's alone.
-        if !warm {
-            self.first.start_frame(false);
-        }
+        self.last_observations = None;
+        // On a warm-started frame the first deformer only fits for σ.
+        self.first.start_frame(warm);
         self.then.start_frame(warm);
     }
 
@@ -177,20 +188,26 @@ impl Deformer for HybridDeformer {
         };
         let Some(iteration) = then else { return self.first.deform(observations, previous, iteration) };
         let u = self.then.deform(observations, previous, iteration)?;
-        // Kept for σ on a frame from rest only: a stream's frames copy nothing.
-        if !self.warm {
-            self.first_estimate.get_or_insert_with(|| previous.to_vec());
-            self.then_estimate = Some(u.clone());
+        match self.warm {
+            true => self.last_observations = Some(observations.clone()),
+            false => _ = self.first_estimate.get_or_insert_with(|| previous.to_vec()),
         }
+        self.then_estimate = Some(u.clone());
         Ok(u)
     }
 
-    fn uncertainty(&self, rest_points: &[mesh::Point], stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
+    fn uncertainty(&mut self, rest_points: &[mesh::Point], stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
         if !self.warm && self.then_estimate.is_none() {
             return self.first.uncertainty(rest_points, stencils);
         }
         if let Some(own) = self.then.uncertainty(rest_points, stencils) {
             return Some(own);
+        }
+        if let (Some(observations), Some(then)) = (self.last_observations.take(), &self.then_estimate) {
+            match self.first.deform(&observations, then, crate::WARM_START_ITERATION) {
+                Ok(u) => self.first_estimate = Some(u),
+                Err(e) => return Some(Err(e)),
+            }
         }
         let (first, then) = (self.first_estimate.as_ref()?, self.then_estimate.as_ref()?);
         let sigma = match self.first.uncertainty(rest_points, stencils)? {
@@ -241,7 +258,7 @@ impl Deformer for RestAndStream {
         }
     }
 
-    fn uncertainty(&self, rest_points: &[mesh::Point], stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
+    fn uncertainty(&mut self, rest_points: &[mesh::Point], stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
         match self.warm {
             true => self.streamed.uncertainty(rest_points, stencils),
             false => self.from_rest.uncertainty(rest_points, stencils),
@@ -553,7 +570,7 @@ impl Deformer for NetworkDeformer {
         Ok(u)
     }
 
-    fn uncertainty(&self, rest_points: &[mesh::Point], _stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
+    fn uncertainty(&mut self, rest_points: &[mesh::Point], _stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
         let std = match self.predictor.predict_std(self.last_input.as_ref()?) {
             Ok(std) => std?,
             Err(e) => return Some(Err(e.into())),
@@ -658,7 +675,8 @@ mod tests {
     }
 
     /// A hybrid whose second deformer predicts no σ gives, from rest, the first's σ widened by how
-    /// far the second moved each point: √(σ₁² + |Δ|²); on a stream's frame, none.
+    /// far the second moved each point: √(σ₁² + |Δ|²); on a stream's frame, the first's σ widened
+    /// by the distance from the first's fit to the last matches to the second's estimate.
     #[test]
     fn a_hybrid_widens_its_first_deformer_s_sigma_by_the_second_s_move() {
         /// Moves every node by `by` from the last estimate; σ 1 mm at every point when `sigma`.
@@ -670,7 +688,7 @@ mod tests {
             fn deform(&mut self, _: &Observations, previous: &[f64], _: usize) -> Result<Vec<f64>> {
                 Ok(previous.iter().enumerate().map(|(k, u)| u + self.by[k % 3]).collect())
             }
-            fn uncertainty(&self, points: &[mesh::Point], _: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
+            fn uncertainty(&mut self, points: &[mesh::Point], _: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
                 self.sigma.then(|| Ok(vec![1e-3; points.len()]))
             }
         }
@@ -681,18 +699,24 @@ mod tests {
         let mut hybrid = HybridDeformer::new(Box::new(first), Box::new(then), 1).unwrap();
         let points = [[0.01, 0.02, 0.03]];
         let stencils = [crate::Stencil(vec![(0, 0.5), (1, 0.5)])];
-        let sigma = |hybrid: &HybridDeformer| hybrid.uncertainty(&points, &stencils).map(|s| s.unwrap()[0]);
+        let sigma = |hybrid: &mut HybridDeformer| hybrid.uncertainty(&points, &stencils).map(|s| s.unwrap()[0]);
         hybrid.start_frame(false);
         let rest = vec![0.0; 3 * organ.mesh().num_nodes()];
         let fitted = hybrid.deform(&observations, &rest, 0).unwrap();
-        assert_eq!(sigma(&hybrid), Some(1e-3), "the first deformer's own");
+        assert_eq!(sigma(&mut hybrid), Some(1e-3), "the first deformer's own");
         let moved = hybrid.deform(&observations, &fitted, 1).unwrap();
         hybrid.deform(&observations, &moved, 2).unwrap();
         let expected = (1e-3f64.powi(2) + 6e-3f64.powi(2)).sqrt();
-        assert!((sigma(&hybrid).unwrap() - expected).abs() < 1e-12, "{:?} against {expected}", sigma(&hybrid));
+        let from_rest = sigma(&mut hybrid).unwrap();
+        assert!((from_rest - expected).abs() < 1e-12, "{from_rest} against {expected}");
         hybrid.start_frame(true);
-        hybrid.deform(&observations, &moved, crate::WARM_START_ITERATION).unwrap();
-        assert_eq!(sigma(&hybrid), None, "a stream's frame is the second's alone, and it predicts none");
+        let streamed = hybrid.deform(&observations, &moved, crate::WARM_START_ITERATION).unwrap();
+        // The first fits from the second's estimate, 1 mm down: Δ is that 1 mm.
+        let expected = (1e-3f64.powi(2) + 1e-3f64.powi(2)).sqrt();
+        let on_stream = sigma(&mut hybrid).unwrap();
+        assert!((on_stream - expected).abs() < 1e-12, "{on_stream} against {expected}");
+        assert_eq!(sigma(&mut hybrid), Some(on_stream), "asked again, the same σ");
+        assert_eq!(hybrid.deform(&observations, &streamed, crate::WARM_START_ITERATION + 1).unwrap().len(), rest.len());
     }
 
     /// A hybrid deforms a frame from rest with the learned model for its first iterations, then

@@ -50,7 +50,7 @@ pub trait Deformer {
     /// The predicted standard deviation (m) of the last estimate's error at `rest_points` (rest
     /// positions inside the organ, moved by the mesh nodes of `stencils`), for a deformer that
     /// predicts one (the learned models).
-    fn uncertainty(&self, _rest_points: &[Point], _stencils: &[Stencil]) -> Option<Result<Vec<f64>>> {
+    fn uncertainty(&mut self, _rest_points: &[Point], _stencils: &[Stencil]) -> Option<Result<Vec<f64>>> {
         None
     }
 }

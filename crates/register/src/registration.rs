@@ -182,7 +182,10 @@ impl Registration {
             let to_cloud = r.organ_to_cloud();
             targets.iter_mut().for_each(|p| *p = to_cloud.apply(*p));
         }
+        // σ is part of the frame's work, and of its time.
+        let sigma_start = std::time::Instant::now();
         let target_std = self.deformer.uncertainty(&self.targets, &self.stencils).transpose()?;
+        registration.time += sigma_start.elapsed();
         self.warm = Some(registration.u.clone());
         self.rigid = rigid.clone();
         Ok(Tracked { registration, targets, rigid, target_std })

@@ -414,7 +414,7 @@ impl Deformer for ShapeDeformer {
         Ok(self.space.displacement(&self.z))
     }
 
-    fn uncertainty(&self, _rest_points: &[mesh::Point], stencils: &[Stencil]) -> Option<Result<Vec<f64>>> {
+    fn uncertainty(&mut self, _rest_points: &[mesh::Point], stencils: &[Stencil]) -> Option<Result<Vec<f64>>> {
         let posterior = self.posterior.as_ref()?;
         let k = posterior.nrows();
         let mut rows = vec![vec![0.0; k]; 3];
