@@ -29,9 +29,12 @@
 //!    dataset's Neo-Hookean law without its F-bar linear elements), 3, 6 or 12 times finer (the
 //!    first whose targets move by at most 10 % on a mesh twice as fine, under the push that moves
 //!    them most), pushed by a tool at four places of what the camera sees; the cloud is the
-//!    truth's seen surface with 0.5 mm of noise; the TRE at the targets. Each truth solve is told
-//!    as it ends; their solutions are kept in `validation/`, so that a validation run again does
-//!    not solve them again. `registration.toml` names the method with the lowest TRE.
+//!    truth's seen surface with 0.5 mm of noise; the TRE at the targets, each push registered from
+//!    rest and as a stream (the tool pressing in by quarters of its force, each frame warm-started
+//!    from the last). Each truth solve is told as it ends; their solutions are kept in
+//!    `validation/`, so that a validation run again does not solve them again.
+//!    `registration.toml` names the method least worse than the FEM from rest and on the streams
+//!    (the FEM itself unless another is no worse on either), then the lowest TRE from rest.
 //! 7. **report**: `report.md`, with `regions.png` (the organ seen from the camera: what it
 //!    sees, where it is held, the targets) and the time of each step.
 //!
@@ -741,6 +744,14 @@ impl Truth {
     fn targets(&self, targets: &[Point], u: &[f64]) -> Vec<Point> {
         register::organ::displaced(targets, &self.stencils, u)
     }
+
+    /// The cloud the camera gives of the truth displaced by `u`: its seen nodes, each coordinate
+    /// with a draw of `noise`.
+    fn cloud(&self, u: &[f64], noise: &rand_distr::Normal<f64>, rng: &mut rand::rngs::StdRng) -> Vec<Point> {
+        use rand_distr::Distribution;
+        let nodes = &self.mesh.nodes;
+        self.seen.iter().map(|&n| std::array::from_fn(|d| nodes[n][d] + u[3 * n + d] + noise.sample(rng))).collect()
+    }
 }
 
 /// A tool push of the validation: where along what the camera sees (a fraction, see
@@ -863,24 +874,123 @@ fn converged_truth(
     Ok((truth, solutions, lines))
 }
 
-/// One method's registrations of the validation's pushes.
+/// The shares of a push's force at the frames of its stream: the tool pressing in by quarters.
+const STREAM_SHARES: [f64; 4] = [0.25, 0.5, 0.75, 1.0];
+
+/// A method's registrations of one kind: each push from rest, or each push as a stream.
 #[derive(Default)]
-struct MethodRun {
-    method: PatientMethod,
-    /// The target errors (m) of the pushes it registered.
+struct Registered {
+    /// The target errors (m) of the frames it registered.
     errors: Vec<f64>,
-    /// The predicted σ (m) at the targets of those pushes, for a method that predicts one.
+    /// The predicted σ (m) at the targets of those frames, for a method that predicts one.
     std: Vec<f64>,
+    /// The time of each frame timed (ms).
     times_ms: Vec<f64>,
     /// The pushes it failed on, and why.
     failed: Vec<String>,
 }
 
+impl Registered {
+    /// Adds a registered frame: its targets' errors against their true positions `moved`, their
+    /// σ and, when `timed`, its time.
+    fn add(&mut self, tracked: &register::Tracked, moved: &[Point], timed: bool) {
+        self.errors.extend(register::target_errors(&tracked.targets, moved));
+        self.std.extend(tracked.target_std.iter().flatten());
+        if timed {
+            self.times_ms.push(tracked.registration.time.as_secs_f64() * 1e3);
+        }
+    }
+
+    /// The mean TRE (m); infinite with no frame registered.
+    fn tre(&self) -> f64 {
+        if self.errors.is_empty() {
+            f64::INFINITY
+        } else {
+            mesh::stats::mean(&self.errors)
+        }
+    }
+
+    /// The TRE, σ and failures in words, after `what` (how the pushes were registered) and the
+    /// time of a frame (`timing`: which frames were timed).
+    fn words(&self, what: &str, timing: &str) -> String {
+        let failed = match self.failed.len() {
+            0 => String::new(),
+            n => format!(", failed on {n}: {}", self.failed.join("; ")),
+        };
+        if self.errors.is_empty() {
+            return format!("{what} failed on every push: {}", self.failed.join("; "));
+        }
+        // σ, where the method predicts it at every target: how well it held on these pushes.
+        let sigma = register::within_two_std(&self.errors, &self.std).map_or(String::new(), |within| {
+            format!(
+                ", σ {:.2} mm mean, {:.0} % of the targets within 2σ",
+                mm(mesh::stats::mean(&self.std)),
+                100.0 * within
+            )
+        });
+        format!(
+            "{what} TRE {:.2} mm (largest {:.2} mm), {:.0} ms {timing}{sigma}{failed}",
+            mm(mesh::stats::mean(&self.errors)),
+            mm(mesh::stats::max(&self.errors)),
+            mesh::stats::mean(&self.times_ms)
+        )
+    }
+}
+
+/// One method's registrations of the validation's pushes.
+#[derive(Default)]
+struct MethodRun {
+    method: PatientMethod,
+    /// Each push registered from rest.
+    rest: Registered,
+    /// Each push registered as a stream of [`STREAM_SHARES`] of its force.
+    streamed: Registered,
+}
+
 impl MethodRun {
-    /// Lower is better: the pushes it failed on, then its mean TRE.
-    fn rank(&self) -> (usize, f64) {
-        let tre = if self.errors.is_empty() { f64::INFINITY } else { mesh::stats::mean(&self.errors) };
-        (self.failed.len(), tre)
+    /// Registers one push's `cloud` from rest (the targets' true positions: `moved`).
+    fn register_from_rest(&mut self, dir: &Path, force: f64, moved: &[Point], cloud: &[Point]) -> Result<()> {
+        let mut registration = RegistrationSpec::patient(dir, Some(self.method), None, false)?.build()?;
+        match registration.register(cloud) {
+            Ok(tracked) => self.rest.add(&tracked, moved, true),
+            Err(e) => self.rest.failed.push(format!("{force} N ({e:#})")),
+        }
+        Ok(())
+    }
+
+    /// Registers the frames of one push's stream (each the targets' true positions and the
+    /// cloud), each warm-started from the last; the first frame is from rest, and untimed.
+    fn register_stream(&mut self, dir: &Path, force: f64, frames: &[(Vec<Point>, Vec<Point>)]) -> Result<()> {
+        let mut registration = RegistrationSpec::patient(dir, Some(self.method), None, false)?.build()?;
+        for (k, (moved, cloud)) in frames.iter().enumerate() {
+            match registration.register(cloud) {
+                Ok(tracked) => self.streamed.add(&tracked, moved, k > 0),
+                Err(e) => {
+                    self.streamed.failed.push(format!("{force} N, frame {} ({e:#})", k + 1));
+                    break;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Lower is better: the pushes it failed on (from rest and as streams); then how it compares
+    /// with the FEM's run `fem`, the larger of its TRE's ratios to the FEM's from rest and on the
+    /// streams (a method worse than the FEM on either is no better than it); then its TRE from
+    /// rest.
+    fn rank(&self, fem: &MethodRun) -> (usize, f64, f64) {
+        let ratio = |a: &Registered, b: &Registered| {
+            let r = a.tre() / b.tre();
+            if r.is_nan() {
+                1.0
+            } else {
+                r
+            }
+        };
+        let streams = !(self.streamed.errors.is_empty() && fem.streamed.errors.is_empty());
+        let stream_ratio = if streams { ratio(&self.streamed, &fem.streamed) } else { 0.0 };
+        let failures = self.rest.failed.len() + self.streamed.failed.len();
+        (failures, ratio(&self.rest, &fem.rest).max(stream_ratio), self.rest.tre())
     }
 }
 
@@ -914,7 +1024,6 @@ fn validation_pushes(coarsest: &Truth, camera: Point) -> Vec<Push> {
 /// (the finest reached otherwise, and the report says so).
 fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::Progress) -> Result<Vec<String>> {
     use rand::SeedableRng;
-    use rand_distr::Distribution;
 
     let surface = mesh::io::read_surface(dir.join("surface.stl"))?;
     let camera = read_points_csv(&dir.join("camera.csv"))?[0];
@@ -929,8 +1038,8 @@ fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::P
     std::fs::create_dir_all(&kept).with_context(|| format!("creating {}", kept.display()))?;
     let read_back = std::cell::Cell::new(0);
     // Each solve is told as it ends: on the finest truths one takes an hour.
-    let solve = |truth: &Truth, push: usize| -> Result<Solution> {
-        let Push { force, centre, .. } = pushes[push];
+    let solve_at = |truth: &Truth, push: usize, force: f64| -> Result<Solution> {
+        let centre = pushes[push].centre;
         let start = Instant::now();
         let (solution, kept) = truth.push_kept(&kept, push, centre, camera, force, radius)?;
         read_back.set(read_back.get() + usize::from(kept));
@@ -944,6 +1053,7 @@ fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::P
         }
         Ok(solution)
     };
+    let solve = |truth: &Truth, push: usize| solve_at(truth, push, pushes[push].force);
     let (truth, solutions, mut lines) = converged_truth(truth, &truth_of, &solve, &targets, &pushes)?;
 
     // Registration of each push the truth solved (one it found no equilibrium under is left out,
@@ -951,11 +1061,14 @@ fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::P
     let mut methods = [PatientMethod::Learned, PatientMethod::Fem, PatientMethod::Hybrid]
         .map(|method| MethodRun { method, ..MethodRun::default() });
     let mut rest_errors = Vec::new();
-    let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
+    // The streams' noise is drawn apart, so that the clouds from rest do not depend on them.
+    let (mut rng, mut stream_rng) =
+        (rand::rngs::StdRng::seed_from_u64(options.seed), rand::rngs::StdRng::seed_from_u64(options.seed ^ 1));
     let noise = rand_distr::Normal::new(0.0, 0.0005).context("noise")?;
     let mut forces = Vec::new();
     let mut left_out = Vec::new();
-    for (&Push { at, force, .. }, solution) in pushes.iter().zip(&solutions) {
+    let mut streams_left_out = Vec::new();
+    for (p, (&Push { at, force, .. }, solution)) in pushes.iter().zip(&solutions).enumerate() {
         let u = match solution {
             Ok(u) => u,
             Err(e) => {
@@ -965,24 +1078,24 @@ fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::P
         };
         let moved = truth.targets(&targets, u);
         rest_errors.extend(register::target_errors(&targets, &moved));
-        let fine = &truth.mesh;
-        let cloud: Vec<Point> = truth
-            .seen
-            .iter()
-            .map(|&n| std::array::from_fn(|d| fine.nodes[n][d] + u[3 * n + d] + noise.sample(&mut rng)))
-            .collect();
-        for run in methods.iter_mut() {
-            let mut registration = RegistrationSpec::patient(dir, Some(run.method), None, false)?.build()?;
-            match registration.register(&cloud) {
-                Ok(tracked) => {
-                    run.errors.extend(register::target_errors(&tracked.targets, &moved));
-                    run.std.extend(tracked.target_std.iter().flatten());
-                    run.times_ms.push(tracked.registration.time.as_secs_f64() * 1e3);
+        let cloud = truth.cloud(u, &noise, &mut rng);
+        methods.iter_mut().try_for_each(|run| run.register_from_rest(dir, force, &moved, &cloud))?;
+        forces.push(force);
+        // The same push as a stream: the tool pressing in by quarters of its force.
+        let mut frames = Vec::new();
+        for share in STREAM_SHARES {
+            let solution = if share == 1.0 { Ok(u.clone()) } else { solve_at(&truth, p, share * force)? };
+            match solution {
+                Ok(u) => frames.push((truth.targets(&targets, &u), truth.cloud(&u, &noise, &mut stream_rng))),
+                Err(e) => {
+                    streams_left_out.push(format!("{force} N's stream, its {} N frame ({e})", share * force));
+                    break;
                 }
-                Err(e) => run.failed.push(format!("{force} N ({e:#})")),
             }
         }
-        forces.push(force);
+        if frames.len() == STREAM_SHARES.len() {
+            methods.iter_mut().try_for_each(|run| run.register_stream(dir, force, &frames))?;
+        }
     }
     if forces.is_empty() {
         bail!("the validation's truth found no equilibrium under any push: {}", left_out.join("; "));
@@ -1014,13 +1127,14 @@ fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::P
             read_back.get()
         ));
     }
-    if !left_out.is_empty() {
+    for (what, pushes) in [("", &left_out), ("streams ", &streams_left_out)].into_iter().filter(|(_, p)| !p.is_empty())
+    {
         lines.push(format!(
-            "validation: left out, the truth finding no equilibrium under them: {}",
-            left_out.join("; ")
+            "validation: {what}left out, the truth finding no equilibrium under them: {}",
+            pushes.join("; ")
         ));
     }
-    lines.extend(methods.iter().map(|run| method_line(run, forces.len())));
+    lines.extend(methods.iter().flat_map(method_lines));
     lines.push(record_best_method(dir, &methods)?);
     Ok(lines)
 }
@@ -1045,37 +1159,25 @@ fn swing_warning(what: &str, motion: f64, organ: &Mesh) -> Option<String> {
     })
 }
 
-/// The validation's line on one method's registrations of `pushes` pushes.
-fn method_line(run: &MethodRun, pushes: usize) -> String {
+/// The validation's lines on one method's registrations: from rest, and as streams.
+fn method_lines(run: &MethodRun) -> [String; 2] {
     let name = method_name(run.method);
-    if run.errors.is_empty() {
-        return format!("validation: {name} failed on every push: {}", run.failed.join("; "));
-    }
-    let failed = if run.failed.is_empty() {
-        String::new()
-    } else {
-        format!("; failed on {} of {} pushes: {}", run.failed.len(), pushes, run.failed.join("; "))
-    };
-    // σ, where the method predicts it at every target: how well it held on these pushes.
-    let sigma = register::within_two_std(&run.errors, &run.std).map_or(String::new(), |within| {
-        format!("; σ {:.2} mm mean, {:.0} % of the targets within 2σ", mm(mesh::stats::mean(&run.std)), 100.0 * within)
-    });
-    format!(
-        "validation: {name} TRE {:.2} mm (largest {:.2} mm), {:.0} ms per registration from rest{sigma}{failed}",
-        mm(mesh::stats::mean(&run.errors)),
-        mm(mesh::stats::max(&run.errors)),
-        mesh::stats::mean(&run.times_ms)
-    )
+    let streams = format!("{name} as streams of {} frames", STREAM_SHARES.len());
+    [
+        format!("validation: {}", run.rest.words(name, "per registration from rest")),
+        format!("validation: {}", run.streamed.words(&streams, "per warm-started frame")),
+    ]
 }
 
 /// Writes into the patient file the method that did the best on the validation's pushes;
 /// returns the validation's line on it.
 fn record_best_method(dir: &Path, methods: &[MethodRun]) -> Result<String> {
-    // The set-up registers with the method that did the best on these pushes: the one that
-    // failed on fewer, then the one with the lower TRE; on a tie the first.
+    // The set-up registers with the method that did the best on these pushes, from rest and
+    // on streams ([`MethodRun::rank`]); on a tie the first.
+    let fem = methods.iter().find(|run| run.method == PatientMethod::Fem).context("the FEM was not validated")?;
     let chosen = methods
         .iter()
-        .min_by(|a, b| a.rank().partial_cmp(&b.rank()).unwrap_or(std::cmp::Ordering::Equal))
+        .min_by(|a, b| a.rank(fem).partial_cmp(&b.rank(fem)).unwrap_or(std::cmp::Ordering::Equal))
         .context("no method was validated")?
         .method;
     let path = dir.join(PATIENT_FILE);
@@ -1086,7 +1188,8 @@ fn record_best_method(dir: &Path, methods: &[MethodRun]) -> Result<String> {
     set_up.insert(at, &method);
     write_atomic_bytes(&path, (set_up.join("\n") + "\n").as_bytes())?;
     Ok(format!(
-        "validation: {PATIENT_FILE} registers with the {} (method = \"{}\"), the best on these pushes",
+        "validation: {PATIENT_FILE} registers with the {} (method = \"{}\"), the best on these pushes, from rest \
+         and as streams",
         method_name(chosen),
         chosen.name()
     ))
