@@ -177,8 +177,8 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     // Each solve was told as it ended, one line for each solution kept.
     assert_eq!(told.solves(), kept.len(), "{kept:?}");
     // The set-up names the method that registered the validation's pushes the best, from rest and
-    // as streams: the one whose TRE is the least worse than the FEM's on either (then the lower
-    // from rest).
+    // as streams: of those no worse than the FEM (within 5 %) both ways, the lowest mean ratio of
+    // its TRE to the FEM's.
     let chosen = validation.iter().find(|l| l.contains("registers with the")).expect("the chosen method");
     let line = |what: &str| validation.iter().find(|l| l.starts_with(&format!("validation: {what} TRE "))).unwrap();
     let tre = |what: &str| -> f64 {
@@ -188,9 +188,12 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     assert!(validation.iter().all(|l| !l.contains("failed on")), "{validation:?}");
     let (fem_rest, fem_stream) = (tre("FEM"), tre(&streamed("FEM")));
     let (best, _) = [("learned", "learned model"), ("fem", "FEM"), ("hybrid", "learned model, then FEM (hybrid)")]
-        .map(|(name, words)| (name, ((tre(words) / fem_rest).max(tre(&streamed(words)) / fem_stream), tre(words))))
+        .map(|(name, words)| {
+            let ratios = [tre(words) / fem_rest, tre(&streamed(words)) / fem_stream];
+            (name, (ratios.iter().any(|&r| r > 1.05), ratios[0] + ratios[1]))
+        })
         .into_iter()
-        .fold(("", (f64::INFINITY, 0.0)), |best, method| if method.1 < best.1 { method } else { best });
+        .fold(("", (true, f64::INFINITY)), |best, method| if method.1 < best.1 { method } else { best });
     // The ROM predicts σ, from rest and on a stream, and the validation says how well it held; the
     // FEM predicts none.
     assert!(line("learned model").contains("of the targets within 2σ"), "{validation:?}");
