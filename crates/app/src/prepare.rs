@@ -921,8 +921,10 @@ impl Registered {
             0 => String::new(),
             n => format!(", failed on {n}: {}", self.failed.join("; ")),
         };
-        if self.errors.is_empty() {
-            return format!("{what} failed on every push: {}", self.failed.join("; "));
+        match (self.errors.is_empty(), self.failed.is_empty()) {
+            (true, true) => return format!("{what}: none registered"),
+            (true, false) => return format!("{what} failed on every push: {}", self.failed.join("; ")),
+            _ => {}
         }
         // σ, where the method predicts it at every target: how well it held on these pushes.
         let sigma = register::within_two_std(&self.errors, &self.std).map_or(String::new(), |within| {
