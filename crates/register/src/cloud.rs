@@ -43,7 +43,7 @@ pub fn read_point_cloud(path: &Path) -> Result<Vec<Point>> {
     let points = match extension(path).as_deref() {
         Some("csv") => mesh::io::points::read_points_csv(path)?,
         Some("npy") => read_npy_cloud(path)?,
-        Some("ply" | "obj" | "stl" | "vtk" | "vtp" | "vtu") => mesh::io::read_vertices(path)?,
+        Some(model) if CLOUD_EXTENSIONS.contains(&model) => mesh::io::read_vertices(path)?,
         _ => {
             return Err(RegisterError::format(
                 path,

@@ -126,18 +126,18 @@ impl Deformer for FemDeformer {
 /// under the first's posterior: with the first's error of standard deviation σ₁ and the second's
 /// estimate Δ away from the first's, √(σ₁² + |Δ|²). On a frame from rest the first's estimate is
 /// the one the second started from; on a warm-started frame, the first fits once (from its own
-/// last posterior, as on a stream) to the matches of the second's last iteration when σ is asked.
+/// last posterior, as on a stream) to the matches of the frame's last iteration when σ is asked.
 pub struct HybridDeformer {
     first: Box<dyn Deformer + Send>,
     then: Box<dyn Deformer + Send>,
     first_iterations: usize,
     /// Whether the frame under way is warm-started.
     warm: bool,
-    /// Once the second deformer has taken over: the first's estimate and the second's last, whose
-    /// difference widens the first's σ.
+    /// Once the second deformer has taken over: the first's estimate, and (at the frame's end) the
+    /// second's, whose difference widens the first's σ.
     first_estimate: Option<Vec<f64>>,
     then_estimate: Option<Vec<f64>>,
-    /// On a warm-started frame: the matches of the second deformer's last iteration.
+    /// At the end of a warm-started frame: the matches of its last iteration.
     last_observations: Option<Observations>,
 }
 
@@ -187,13 +187,21 @@ impl Deformer for HybridDeformer {
             (true, _) => Some(iteration),
         };
         let Some(iteration) = then else { return self.first.deform(observations, previous, iteration) };
-        let u = self.then.deform(observations, previous, iteration)?;
-        match self.warm {
-            true => self.last_observations = Some(observations.clone()),
-            false => _ = self.first_estimate.get_or_insert_with(|| previous.to_vec()),
+        if !self.warm {
+            self.first_estimate.get_or_insert_with(|| previous.to_vec());
         }
-        self.then_estimate = Some(u.clone());
-        Ok(u)
+        self.then.deform(observations, previous, iteration)
+    }
+
+    fn end_frame(&mut self, observations: &Observations, u: &[f64]) {
+        // Kept for σ once the second deformer has registered: on a frame from rest after the
+        // first's iterations, on a warm-started frame always.
+        if self.warm || self.first_estimate.is_some() {
+            self.then_estimate = Some(u.to_vec());
+        }
+        if self.warm {
+            self.last_observations = Some(observations.clone());
+        }
     }
 
     fn uncertainty(&mut self, rest_points: &[mesh::Point], stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
@@ -705,18 +713,19 @@ mod tests {
         let fitted = hybrid.deform(&observations, &rest, 0).unwrap();
         assert_eq!(sigma(&mut hybrid), Some(1e-3), "the first deformer's own");
         let moved = hybrid.deform(&observations, &fitted, 1).unwrap();
-        hybrid.deform(&observations, &moved, 2).unwrap();
+        let last = hybrid.deform(&observations, &moved, 2).unwrap();
+        hybrid.end_frame(&observations, &last);
         let expected = (1e-3f64.powi(2) + 6e-3f64.powi(2)).sqrt();
         let from_rest = sigma(&mut hybrid).unwrap();
         assert!((from_rest - expected).abs() < 1e-12, "{from_rest} against {expected}");
         hybrid.start_frame(true);
-        let streamed = hybrid.deform(&observations, &moved, crate::WARM_START_ITERATION).unwrap();
+        let streamed = hybrid.deform(&observations, &last, crate::WARM_START_ITERATION).unwrap();
+        hybrid.end_frame(&observations, &streamed);
         // The first fits from the second's estimate, 1 mm down: Δ is that 1 mm.
         let expected = (1e-3f64.powi(2) + 1e-3f64.powi(2)).sqrt();
         let on_stream = sigma(&mut hybrid).unwrap();
         assert!((on_stream - expected).abs() < 1e-12, "{on_stream} against {expected}");
         assert_eq!(sigma(&mut hybrid), Some(on_stream), "asked again, the same σ");
-        assert_eq!(hybrid.deform(&observations, &streamed, crate::WARM_START_ITERATION + 1).unwrap().len(), rest.len());
     }
 
     /// A hybrid deforms a frame from rest with the learned model for its first iterations, then

@@ -47,6 +47,9 @@ pub trait Deformer {
     /// A frame begins: warm-started from the previous frame's estimate (`warm`) or from rest.
     fn start_frame(&mut self, _warm: bool) {}
 
+    /// A frame ends: `observations` are the matches of its last iteration, `u` its estimate.
+    fn end_frame(&mut self, _observations: &Observations, _u: &[f64]) {}
+
     /// The predicted standard deviation (m) of the last estimate's error at `rest_points` (rest
     /// positions inside the organ, moved by the mesh nodes of `stencils`), for a deformer that
     /// predicts one (the learned models).
@@ -249,6 +252,7 @@ pub fn register_frame(
         Some(_) => (WARM_START_ITERATION, options.iterations.min(options.warm_iterations)),
         None => (0, options.iterations),
     };
+    let mut last_observations = None;
     while iterations < most {
         iterations += 1;
         let iteration = first + iterations - 1;
@@ -279,6 +283,7 @@ pub fn register_frame(
         if u.len() != ndof || u.iter().any(|v| !v.is_finite()) {
             return Err(RegisterError::Invalid("the deformer returned a displacement that is not finite".into()));
         }
+        last_observations = Some(observations);
         let next = organ.deformed_surface(&u);
         let moved =
             next.vertices.iter().zip(&surface.vertices).map(|(a, b)| mesh::distance(*a, *b)).fold(0.0, f64::max);
@@ -286,6 +291,9 @@ pub fn register_frame(
         if moved <= options.tolerance {
             break;
         }
+    }
+    if let Some(observations) = &last_observations {
+        deformer.end_frame(observations, &u);
     }
     let bvh = SurfaceBvh::new(&surface)?;
     let distances: Vec<f64> = cloud.par_iter().map(|&c| bvh.distance(c)).collect();

@@ -153,11 +153,17 @@ pub fn surface_frame(path: impl AsRef<Path>) -> Result<Option<Frame>, MeshError>
 /// How much of a file [`surface_frame`] reads.
 const HEADER_BYTES: usize = 1024;
 
-/// Reads a surface ([`super::read_surface`]) and the frame its header names ([`surface_frame`]).
+/// Reads a surface ([`super::read_surface`]) and the frame it names ([`surface_frame`]); a
+/// `.vtp` or `.vtu` file, which names it in its body, is read once for both.
 pub fn read_surface_with_frame(path: impl AsRef<Path>) -> Result<(TriSurface, Option<Frame>), MeshError> {
     let path = path.as_ref();
-    let frame = surface_frame(path)?;
-    Ok((super::read_surface(path)?, frame))
+    match super::extension(path).as_str() {
+        "vtp" | "vtu" => super::vtk_xml::read_xml_surface(path),
+        _ => {
+            let frame = surface_frame(path)?;
+            Ok((super::read_surface(path)?, frame))
+        }
+    }
 }
 
 /// Writes a surface with its frame named in the header as 3D Slicer reads it: `.vtk` (binary

@@ -678,48 +678,76 @@ impl XmlFile<'_> {
     }
 }
 
-/// The cells of a VTK XML file: an unstructured grid's, or poly data's.
-type Grid = (Vec<Point>, Vec<Vec<usize>>, Vec<u32>, Vec<Field>);
-
-/// Reads a `.vtu` or `.vtp` file into plain arrays: points, cells, their VTK types and the
-/// point and cell data. Poly data is refused where a `volume` is wanted.
-fn load(path: &Path, volume: bool) -> Result<Grid, MeshError> {
+/// Reads and scans a `.vtu` or `.vtp` file, then takes from it what `take` reads.
+fn with_file<T>(path: &Path, take: impl FnOnce(&XmlFile) -> Result<T, MeshError>) -> Result<T, MeshError> {
     let data = super::read_bytes(path)?;
-    let file = scan(path, &data)?;
-    if volume && file.poly {
-        return Err(parse_error(path, "PolyData holds a surface, not a volume mesh (read it as a surface)"));
-    }
-    let points_array =
-        file.arrays.iter().find(|a| a.parent == "Points").ok_or_else(|| parse_error(path, "no <Points> DataArray"))?;
-    if points_array.components != 3 {
-        return Err(parse_error(path, "<Points> must have 3 components"));
-    }
-    let xyz = file.sized(points_array, file.points)?;
-    let points: Vec<Point> = xyz.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    let num_cells = file.cell_counts.iter().sum();
-    let mut cells = Vec::with_capacity(num_cells);
-    let types: Vec<u32> = if file.poly {
-        let mut types = Vec::with_capacity(num_cells);
-        for ((section, _, ty), &count) in POLY_SECTIONS.iter().zip(&file.cell_counts) {
-            file.read_cells(section, count, &mut cells)?;
-            types.resize(cells.len(), u32::from(*ty));
+    take(&scan(path, &data)?)
+}
+
+impl XmlFile<'_> {
+    /// The `<Points>`.
+    fn points(&self) -> Result<Vec<Point>, MeshError> {
+        let points_array = self
+            .arrays
+            .iter()
+            .find(|a| a.parent == "Points")
+            .ok_or_else(|| parse_error(self.path, "no <Points> DataArray"))?;
+        if points_array.components != 3 {
+            return Err(parse_error(self.path, "<Points> must have 3 components"));
         }
-        types
-    } else {
-        file.read_cells("Cells", num_cells, &mut cells)?;
-        let types = file.cell_array("Cells", "types", Some(num_cells))?;
-        types.iter().map(|&t| t.min(u32::MAX as usize) as u32).collect()
-    };
-    let mut fields = Vec::new();
-    for (parent, location, count) in
-        [("PointData", FieldLocation::Point, file.points), ("CellData", FieldLocation::Cell, num_cells)]
-    {
-        for a in file.arrays.iter().filter(|a| a.parent == parent) {
-            let values = file.sized(a, count)?;
-            fields.push(Field { name: a.name.clone(), location, components: a.components, values });
-        }
+        let xyz = self.sized(points_array, self.points)?;
+        Ok(xyz.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
     }
-    Ok((points, cells, types, fields))
+
+    /// The cells and their VTK types: an unstructured grid's, or poly data's.
+    fn cells(&self) -> Result<(Vec<Vec<usize>>, Vec<u32>), MeshError> {
+        let num_cells = self.cell_counts.iter().sum();
+        let mut cells = Vec::with_capacity(num_cells);
+        let types: Vec<u32> = if self.poly {
+            let mut types = Vec::with_capacity(num_cells);
+            for ((section, _, ty), &count) in POLY_SECTIONS.iter().zip(&self.cell_counts) {
+                self.read_cells(section, count, &mut cells)?;
+                types.resize(cells.len(), u32::from(*ty));
+            }
+            types
+        } else {
+            self.read_cells("Cells", num_cells, &mut cells)?;
+            let types = self.cell_array("Cells", "types", Some(num_cells))?;
+            types.iter().map(|&t| t.min(u32::MAX as usize) as u32).collect()
+        };
+        Ok((cells, types))
+    }
+
+    /// The point and cell data arrays.
+    fn fields(&self) -> Result<Vec<Field>, MeshError> {
+        let num_cells = self.cell_counts.iter().sum();
+        let mut fields = Vec::new();
+        for (parent, location, count) in
+            [("PointData", FieldLocation::Point, self.points), ("CellData", FieldLocation::Cell, num_cells)]
+        {
+            for a in self.arrays.iter().filter(|a| a.parent == parent) {
+                let values = self.sized(a, count)?;
+                fields.push(Field { name: a.name.clone(), location, components: a.components, values });
+            }
+        }
+        Ok(fields)
+    }
+
+    /// The triangles, quads, polygons and triangle strips as a surface.
+    fn surface(&self) -> Result<TriSurface, MeshError> {
+        let (cells, types) = self.cells()?;
+        surface_from_cells(self.path, self.points()?, types.iter().zip(&cells).map(|(&t, c)| (t, c.as_slice())))
+    }
+
+    /// The frame the field data's string array `SPACE` names, as 3D Slicer writes it (`RAS` or
+    /// `LPS`); `None` without one.
+    fn frame(&self) -> Result<Option<Frame>, MeshError> {
+        let Some(space) = self.field_text("SPACE")? else {
+            return Ok(None);
+        };
+        frame_in_header(&format!("SPACE={}", space.trim()))
+            .map_err(|m| parse_error(self.path, format!("field data: {m}")))
+    }
 }
 
 /// Reads a `.vtu` unstructured grid as a volume mesh of tetrahedra or hexahedra.
@@ -731,28 +759,27 @@ pub fn read_vtu(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
 /// nodes and cells.
 pub fn read_vtu_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>), MeshError> {
     let path = path.as_ref();
-    let (points, cells, types, fields) = load(path, true)?;
-    volume_from_cells(path, &points, &cells, &types, fields)
+    with_file(path, |file| {
+        if file.poly {
+            return Err(parse_error(path, "PolyData holds a surface, not a volume mesh (read it as a surface)"));
+        }
+        let (cells, types) = file.cells()?;
+        volume_from_cells(path, &file.points()?, &cells, &types, file.fields()?)
+    })
 }
 
 /// The `<Points>` of a `.vtu` or `.vtp` file, whatever its cells (a point cloud).
 pub(super) fn read_xml_points(path: &Path) -> Result<Vec<Point>, MeshError> {
-    Ok(load(path, false)?.0)
+    with_file(path, |file| file.points())
 }
 
 /// Reads the triangles, quads, polygons and triangle strips of a `.vtu` or `.vtp` file as a
-/// surface.
-pub(super) fn read_xml_surface(path: &Path) -> Result<TriSurface, MeshError> {
-    let (points, cells, types, _) = load(path, false)?;
-    surface_from_cells(path, points, types.iter().zip(&cells).map(|(&t, c)| (t, c.as_slice())))
+/// surface, and the frame its field data names ([`XmlFile::frame`]), from one read of the file.
+pub(super) fn read_xml_surface(path: &Path) -> Result<(TriSurface, Option<Frame>), MeshError> {
+    with_file(path, |file| Ok((file.surface()?, file.frame()?)))
 }
 
-/// The frame a `.vtu` or `.vtp` file names in its field data's string array `SPACE`, as 3D
-/// Slicer writes it (`RAS` or `LPS`); `None` without one.
+/// The frame a `.vtu` or `.vtp` file names in its field data ([`XmlFile::frame`]).
 pub(super) fn xml_frame(path: &Path) -> Result<Option<Frame>, MeshError> {
-    let data = super::read_bytes(path)?;
-    let Some(space) = scan(path, &data)?.field_text("SPACE")? else {
-        return Ok(None);
-    };
-    frame_in_header(&format!("SPACE={}", space.trim())).map_err(|m| parse_error(path, format!("field data: {m}")))
+    with_file(path, |file| file.frame())
 }
