@@ -51,7 +51,11 @@ enum Factor {
 /// its back and pushed by 2.5 N, the tangent went indefinite half-way; the steps of unpivoted
 /// LDLᵀ there were 26 m long, and every load step failed ("element inverted"), while CalculiX
 /// solved the same problem (173 mm).
-const DIAGONAL_SHIFTS: [f64; 7] = [1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0];
+pub const DIAGONAL_SHIFTS: [f64; 7] = [1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0];
+
+/// The index of the shift tried first on a solve's first indefinite matrix (1e-3, the middle of
+/// [`DIAGONAL_SHIFTS`]).
+const FIRST_SHIFT: usize = 3;
 
 /// Which of the two numeric factors a call addresses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -102,10 +106,15 @@ pub struct SparseCholesky {
     l_values: [Vec<f32>; 2],
     /// Double-precision factor values per slot, allocated at their first use.
     l_values64: [Vec<f64>; 2],
+    /// The values a diagonal shift's attempt factorises into (see [`SparseCholesky::factorize`]).
+    spare64: Vec<f64>,
     /// Workspace of the double-precision factorisation and solves, allocated with them.
     mem64: Option<MemBuffer>,
     /// Factorise in double precision from the start ([`SparseCholesky::set_double_precision`]).
     double: bool,
+    /// The index in [`DIAGONAL_SHIFTS`] where the search for an indefinite matrix's shift starts:
+    /// one below the last shift needed.
+    next_shift: usize,
     /// Matrix values or right-hand side in single precision.
     scratch: Vec<f32>,
     mem: MemBuffer,
@@ -219,8 +228,10 @@ impl SparseCholesky {
             symbolic,
             l_values,
             l_values64: [Vec::new(), Vec::new()],
+            spare64: Vec::new(),
             mem64: None,
             double: false,
+            next_shift: FIRST_SHIFT,
             scratch,
             mem,
             factor: [Factor::None; 2],
@@ -306,15 +317,42 @@ impl SparseCholesky {
             return Ok(());
         }
         let mut shifted = values.to_vec();
-        for tau in DIAGONAL_SHIFTS {
+        self.spare64.resize(self.symbolic.len_val(), 0.0);
+        // An attempt factorises into the spare values, which become the slot's on success: the
+        // slot holds the smallest shift's factor found so far, whatever attempt failed after it.
+        let mut positive = |k: usize| {
+            let tau = DIAGONAL_SHIFTS[k];
             for &p in &self.diagonal {
                 shifted[p] = values[p] + tau * values[p].abs();
             }
             let matrix = SparseColMatRef::new(sym, shifted.as_slice());
-            if llt(&self.symbolic, &mut self.l_values64[i], matrix, self.par, mem64) {
-                self.factor[i] = Factor::Shifted64;
-                return Ok(());
+            let ok = llt(&self.symbolic, &mut self.spare64, matrix, self.par, mem64);
+            if ok {
+                std::mem::swap(&mut self.spare64, &mut self.l_values64[i]);
             }
+            ok
+        };
+        // The smallest shift that makes the matrix positive definite, searched from one below the
+        // last shift needed: down while a smaller one succeeds, else up. A larger shift only adds
+        // to a positive diagonal, so where the search starts changes its cost, never the shift it
+        // finds. On 16 T10 draws of `liver_ar_t10` (52 indefinite tangents, where a failed attempt
+        // costs about a third of a successful one), the search from the smallest shift up took
+        // 4.6 failed attempts per tangent, this one 1.6 failed and 1.3 successful: the draws were
+        // 12 % faster, their results the same bits.
+        let start = self.next_shift;
+        let found = if positive(start) {
+            let mut k = start;
+            while k > 0 && positive(k - 1) {
+                k -= 1;
+            }
+            Some(k)
+        } else {
+            (start + 1..DIAGONAL_SHIFTS.len()).find(|&k| positive(k))
+        };
+        self.next_shift = found.map_or(DIAGONAL_SHIFTS.len() - 1, |k| k.saturating_sub(1));
+        if found.is_some() {
+            self.factor[i] = Factor::Shifted64;
+            return Ok(());
         }
         self.symbolic
             .factorize_numeric_ldlt(
@@ -341,6 +379,14 @@ impl SparseCholesky {
     /// is too inaccurate for its iterations to converge.
     pub fn set_double_precision(&mut self, double: bool) {
         self.double = double;
+    }
+
+    /// Forgets what the earlier factorisations taught: double precision from the start, and
+    /// where the search for a diagonal shift starts. A new solve's factors then depend on its
+    /// own matrices alone, not on the solves before it.
+    pub fn forget_history(&mut self) {
+        self.double = false;
+        self.next_shift = FIRST_SHIFT;
     }
 
     /// Solves A x = b in place with the slot's factorisation.

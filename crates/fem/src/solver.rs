@@ -605,7 +605,7 @@ impl StaticSolver {
         start: Instant,
     ) -> Result<Solution, FemError> {
         self.check_problem()?;
-        self.cholesky.set_double_precision(false);
+        self.cholesky.forget_history();
         let ndof = self.problem.num_dofs();
         let mut stats = Stats::default();
         if let Some(u0) = u0 {

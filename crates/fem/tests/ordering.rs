@@ -1,9 +1,9 @@
-//! Fill-reducing orderings of the sparse Cholesky factorisation: METIS's nested dissection
-//! against faer's approximate minimum degree.
+//! The sparse Cholesky factorisation: its fill-reducing orderings (METIS's nested dissection
+//! against faer's approximate minimum degree) and its diagonal shift of indefinite matrices.
 
 use augsim_fem as fem;
 use fem::assembly::Pattern;
-use fem::linsolve::{Ordering, Slot, SparseCholesky, BOTH_ORDERINGS_DOFS, ND_WORK};
+use fem::linsolve::{Ordering, Slot, SparseCholesky, BOTH_ORDERINGS_DOFS, DIAGONAL_SHIFTS, ND_WORK};
 use fem::{ElementGeometry, Formulation};
 use mesh::box_tet;
 
@@ -216,4 +216,64 @@ fn a_single_threaded_factorisation_does_not_depend_on_the_pool() {
     };
     let one = solve_in(1);
     assert!(one == solve_in(3), "one thread and three must give the same bits");
+}
+
+/// An indefinite matrix is factorised with the smallest of [`DIAGONAL_SHIFTS`] that makes it
+/// positive definite, wherever the search starts: the same bits after matrices that needed a
+/// larger shift, a smaller one or none, and a factor that solves the shifted system.
+#[test]
+fn an_indefinite_matrix_gets_the_smallest_shift_whatever_came_before() {
+    // Each factoriser renumbers its pattern in the same order (AMD, deterministic).
+    let mut p = cube_pattern(6);
+    let mut history = SparseCholesky::new(&mut p).unwrap();
+    // The dominant matrix's smallest eigenvalue is 1: lowering its diagonal by `c` > 1 makes it
+    // indefinite, the more so the larger `c`.
+    let lowered = |c: f64| {
+        let mut values = dominant_values(&p);
+        (0..p.num_free).for_each(|i| values[p.diag(i)] -= c);
+        values
+    };
+    let shifted = |values: &[f64], tau: f64| {
+        let mut values = values.to_vec();
+        (0..p.num_free).for_each(|i| values[p.diag(i)] += tau * values[p.diag(i)].abs());
+        values
+    };
+    // The smallest shift, by factorising every shifted matrix on a factoriser of its own (one
+    // that is not positive definite is shifted again, or fails).
+    let smallest = |values: &[f64]| {
+        DIAGONAL_SHIFTS.into_iter().find(|&tau| {
+            let mut alone = SparseCholesky::new(&mut cube_pattern(6)).unwrap();
+            alone.factorize(Slot::Latest, &shifted(values, tau)).is_ok() && alone.is_positive_definite(Slot::Latest)
+        })
+    };
+    let solve = |cholesky: &mut SparseCholesky, values: &[f64]| {
+        cholesky.factorize(Slot::Latest, values).unwrap();
+        let mut x = global_rhs(&p);
+        cholesky.solve_in_place(Slot::Latest, &mut x).unwrap();
+        x
+    };
+    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let mut seen = Vec::new();
+    for c in [1.02, 6.0, 1.5, 1.02, 0.5, 12.0, 1.5] {
+        let values = lowered(c);
+        let x = solve(&mut history, &values);
+        let fresh = solve(&mut SparseCholesky::new(&mut cube_pattern(6)).unwrap(), &values);
+        assert!(x == fresh, "c = {c}: the factor depends on the matrices factorised before");
+        let rhs = global_rhs(&p);
+        // A positive-definite matrix is factorised in single precision, a shifted one in double.
+        let (solved, tolerance) = match smallest(&values) {
+            _ if c < 1.0 => (values.clone(), 1e-5),
+            Some(tau) => {
+                assert!(!history.is_positive_definite(Slot::Latest), "c = {c}: taken as positive definite");
+                seen.push(tau);
+                (shifted(&values, tau), 1e-9)
+            }
+            None => panic!("c = {c}: no shift makes the matrix positive definite"),
+        };
+        let r: Vec<f64> = multiply(&p, &solved, &x).iter().zip(&rhs).map(|(a, b)| a - b).collect();
+        assert!(norm(&r) < tolerance * norm(&rhs), "c = {c}: relative residual {:.2e}", norm(&r) / norm(&rhs));
+    }
+    println!("shifts needed: {seen:?}");
+    seen.dedup();
+    assert!(seen.len() >= 3, "the cases must need different shifts: {seen:?}");
 }
