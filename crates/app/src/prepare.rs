@@ -954,25 +954,20 @@ struct MethodRun {
 }
 
 impl MethodRun {
-    /// Registers one push's `cloud` from rest (the targets' true positions: `moved`).
-    fn register_from_rest(&mut self, dir: &Path, force: f64, moved: &[Point], cloud: &[Point]) -> Result<()> {
+    /// Registers one push's frames (each the targets' true positions and the cloud), the first
+    /// from rest and each next one warm-started from the last: a single frame from rest, timed,
+    /// or a stream (into `streamed`), whose warm-started frames alone are timed. A failed frame
+    /// ends them.
+    fn register(&mut self, dir: &Path, force: f64, frames: &[(&[Point], &[Point])]) -> Result<()> {
         let mut registration = RegistrationSpec::patient(dir, Some(self.method), None, false)?.build()?;
-        match registration.register(cloud) {
-            Ok(tracked) => self.rest.add(&tracked, moved, true),
-            Err(e) => self.rest.failed.push(format!("{force} N ({e:#})")),
-        }
-        Ok(())
-    }
-
-    /// Registers the frames of one push's stream (each the targets' true positions and the
-    /// cloud), each warm-started from the last; the first frame is from rest, and untimed.
-    fn register_stream(&mut self, dir: &Path, force: f64, frames: &[(Vec<Point>, Vec<Point>)]) -> Result<()> {
-        let mut registration = RegistrationSpec::patient(dir, Some(self.method), None, false)?.build()?;
-        for (k, (moved, cloud)) in frames.iter().enumerate() {
+        let stream = frames.len() > 1;
+        let into = if stream { &mut self.streamed } else { &mut self.rest };
+        for (k, &(moved, cloud)) in frames.iter().enumerate() {
             match registration.register(cloud) {
-                Ok(tracked) => self.streamed.add(&tracked, moved, k > 0),
+                Ok(tracked) => into.add(&tracked, moved, !stream || k > 0),
                 Err(e) => {
-                    self.streamed.failed.push(format!("{force} N, frame {} ({e:#})", k + 1));
+                    let frame = if stream { format!(", frame {}", k + 1) } else { String::new() };
+                    into.failed.push(format!("{force} N{frame} ({e:#})"));
                     break;
                 }
             }
@@ -1087,7 +1082,7 @@ fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::P
         let moved = truth.targets(&targets, u);
         rest_errors.extend(register::target_errors(&targets, &moved));
         let cloud = truth.cloud(u, &noise, &mut rng);
-        methods.iter_mut().try_for_each(|run| run.register_from_rest(dir, force, &moved, &cloud))?;
+        methods.iter_mut().try_for_each(|run| run.register(dir, force, &[(&moved, &cloud)]))?;
         forces.push(force);
         // The same push as a stream: the tool pressing in by quarters of its force.
         let mut frames = Vec::new();
@@ -1102,7 +1097,8 @@ fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::P
             }
         }
         if frames.len() == STREAM_SHARES.len() {
-            methods.iter_mut().try_for_each(|run| run.register_stream(dir, force, &frames))?;
+            let frames: Vec<(&[Point], &[Point])> = frames.iter().map(|(m, c)| (m.as_slice(), c.as_slice())).collect();
+            methods.iter_mut().try_for_each(|run| run.register(dir, force, &frames))?;
         }
     }
     if forces.is_empty() {

@@ -193,14 +193,14 @@ impl Deformer for HybridDeformer {
         self.then.deform(observations, previous, iteration)
     }
 
-    fn end_frame(&mut self, observations: &Observations, u: &[f64]) {
+    fn end_frame(&mut self, observations: Observations, u: &[f64]) {
         // Kept for σ once the second deformer has registered: on a frame from rest after the
         // first's iterations, on a warm-started frame always.
         if self.warm || self.first_estimate.is_some() {
             self.then_estimate = Some(u.to_vec());
         }
         if self.warm {
-            self.last_observations = Some(observations.clone());
+            self.last_observations = Some(observations);
         }
     }
 
@@ -714,13 +714,13 @@ mod tests {
         assert_eq!(sigma(&mut hybrid), Some(1e-3), "the first deformer's own");
         let moved = hybrid.deform(&observations, &fitted, 1).unwrap();
         let last = hybrid.deform(&observations, &moved, 2).unwrap();
-        hybrid.end_frame(&observations, &last);
+        hybrid.end_frame(observations.clone(), &last);
         let expected = (1e-3f64.powi(2) + 6e-3f64.powi(2)).sqrt();
         let from_rest = sigma(&mut hybrid).unwrap();
         assert!((from_rest - expected).abs() < 1e-12, "{from_rest} against {expected}");
         hybrid.start_frame(true);
         let streamed = hybrid.deform(&observations, &last, crate::WARM_START_ITERATION).unwrap();
-        hybrid.end_frame(&observations, &streamed);
+        hybrid.end_frame(observations.clone(), &streamed);
         // The first fits from the second's estimate, 1 mm down: Δ is that 1 mm.
         let expected = (1e-3f64.powi(2) + 1e-3f64.powi(2)).sqrt();
         let on_stream = sigma(&mut hybrid).unwrap();

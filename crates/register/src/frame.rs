@@ -48,7 +48,7 @@ pub trait Deformer {
     fn start_frame(&mut self, _warm: bool) {}
 
     /// A frame ends: `observations` are the matches of its last iteration, `u` its estimate.
-    fn end_frame(&mut self, _observations: &Observations, _u: &[f64]) {}
+    fn end_frame(&mut self, _observations: Observations, _u: &[f64]) {}
 
     /// The predicted standard deviation (m) of the last estimate's error at `rest_points` (rest
     /// positions inside the organ, moved by the mesh nodes of `stencils`), for a deformer that
@@ -292,7 +292,7 @@ pub fn register_frame(
             break;
         }
     }
-    if let Some(observations) = &last_observations {
+    if let Some(observations) = last_observations {
         deformer.end_frame(observations, &u);
     }
     let bvh = SurfaceBvh::new(&surface)?;

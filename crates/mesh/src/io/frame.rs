@@ -158,7 +158,7 @@ const HEADER_BYTES: usize = 1024;
 pub fn read_surface_with_frame(path: impl AsRef<Path>) -> Result<(TriSurface, Option<Frame>), MeshError> {
     let path = path.as_ref();
     match super::extension(path).as_str() {
-        "vtp" | "vtu" => super::vtk_xml::read_xml_surface(path),
+        "vtp" | "vtu" => super::vtk_xml::read_xml_surface_with_frame(path),
         _ => {
             let frame = surface_frame(path)?;
             Ok((super::read_surface(path)?, frame))

@@ -301,7 +301,7 @@ pub fn read_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
         "stl" => read_stl(path),
         "ply" => ply::read_ply_surface(path),
         "vtk" => read_vtk_surface(path),
-        "vtp" | "vtu" => Ok(vtk_xml::read_xml_surface(path)?.0),
+        "vtp" | "vtu" => vtk_xml::read_xml_surface(path),
         _ => Err(parse_error(path, UNKNOWN_SURFACE)),
     }
 }

@@ -676,15 +676,7 @@ impl XmlFile<'_> {
         let bytes: Vec<u8> = self.values(a)?.into_iter().take_while(|&c| c != 0.0).map(|c| c as u8).collect();
         Ok(Some(String::from_utf8_lossy(&bytes).into_owned()))
     }
-}
 
-/// Reads and scans a `.vtu` or `.vtp` file, then takes from it what `take` reads.
-fn with_file<T>(path: &Path, take: impl FnOnce(&XmlFile) -> Result<T, MeshError>) -> Result<T, MeshError> {
-    let data = super::read_bytes(path)?;
-    take(&scan(path, &data)?)
-}
-
-impl XmlFile<'_> {
     /// The `<Points>`.
     fn points(&self) -> Result<Vec<Point>, MeshError> {
         let points_array = self
@@ -750,6 +742,12 @@ impl XmlFile<'_> {
     }
 }
 
+/// Reads and scans a `.vtu` or `.vtp` file, then takes from it what `take` reads.
+fn with_file<T>(path: &Path, take: impl FnOnce(&XmlFile) -> Result<T, MeshError>) -> Result<T, MeshError> {
+    let data = super::read_bytes(path)?;
+    take(&scan(path, &data)?)
+}
+
 /// Reads a `.vtu` unstructured grid as a volume mesh of tetrahedra or hexahedra.
 pub fn read_vtu(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
     Ok(read_vtu_with_fields(path)?.0)
@@ -774,8 +772,14 @@ pub(super) fn read_xml_points(path: &Path) -> Result<Vec<Point>, MeshError> {
 }
 
 /// Reads the triangles, quads, polygons and triangle strips of a `.vtu` or `.vtp` file as a
-/// surface, and the frame its field data names ([`XmlFile::frame`]), from one read of the file.
-pub(super) fn read_xml_surface(path: &Path) -> Result<(TriSurface, Option<Frame>), MeshError> {
+/// surface.
+pub(super) fn read_xml_surface(path: &Path) -> Result<TriSurface, MeshError> {
+    with_file(path, |file| file.surface())
+}
+
+/// [`read_xml_surface`] and the frame the file's field data names ([`XmlFile::frame`]), from one
+/// read of the file.
+pub(super) fn read_xml_surface_with_frame(path: &Path) -> Result<(TriSurface, Option<Frame>), MeshError> {
     with_file(path, |file| Ok((file.surface()?, file.frame()?)))
 }
 
