@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use app::case::{case_methods, compare, synthetic_case, Network};
 use mesh::stats::median;
 
-use crate::fem_speed::{fbar_ratios, measure, CaseTiming, FRAME_LOAD_STEP};
+use crate::fem_speed::{fbar_ratios, measure, reference_ms, CaseTiming, FRAME_LOAD_STEP};
 use crate::held_out::{base_case, shipped_models, CASES, POINTS};
 
 /// A table of `augsim bench`.
@@ -95,6 +95,17 @@ fn static_solves(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
     print(&format!("{:<62} {:>7} {:>9} {:>7}", "pair", "first", "from rest", "frame"));
     for r in fbar_ratios(&cases) {
         print(&format!("{:<62} {:>6.2}× {:>8.2}× {:>6.2}×", r.pair, r.first, r.from_rest, r.frame));
+    }
+    if let Some(reference) = reference_ms(&cases) {
+        print("");
+        print(&format!(
+            "Over the reference, the co-rotational standard 5k liver's median from rest ({reference:.2} ms in this run):"
+        ));
+        print(&format!("{:<62} {:>7} {:>9} {:>7}", "case", "first", "from rest", "frame"));
+        for c in &cases {
+            let [first, from_rest, frame] = [c.first_ms, c.median_ms, c.frame_ms].map(|ms| ms / reference);
+            print(&format!("{:<62} {first:>6.2}× {from_rest:>8.2}× {frame:>6.2}×", c.name));
+        }
     }
     Ok(())
 }

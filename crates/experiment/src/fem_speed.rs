@@ -34,6 +34,9 @@ pub struct CaseTiming {
     /// The factor on the group's nominal load.
     #[serde(default = "one")]
     pub load: f64,
+    /// Whether the case is the run's reference (see [`reference_ms`]).
+    #[serde(default)]
+    pub reference: bool,
     /// Degrees of freedom.
     pub dofs: usize,
     /// Newton iterations of the last solve from rest.
@@ -105,8 +108,35 @@ pub fn fbar_ratios(cases: &[CaseTiming]) -> Vec<Ratio> {
     out
 }
 
+/// The reference time of a run (ms): the median solve from rest of its reference case, the
+/// co-rotational standard 5k-tet liver (the registration's FEM), measured among the other cases.
+/// Every time is also given as a multiple of it, which varies less than milliseconds from one
+/// host (or day) to another.
+pub(crate) fn reference_ms(cases: &[CaseTiming]) -> Option<f64> {
+    cases.iter().find(|c| c.reference).map(|c| c.median_ms)
+}
+
+/// `ms` with its multiple of the run's reference time, e.g. "564.0 ms (39.1×)".
+fn with_ratio(ms: f64, digits: usize, reference_ms: Option<f64>) -> String {
+    match reference_ms {
+        Some(r) if r > 0.0 => {
+            let ratio = ms / r;
+            // Three significant digits.
+            let decimals = if ratio < 9.995 {
+                2
+            } else if ratio < 99.95 {
+                1
+            } else {
+                0
+            };
+            format!("{} ({ratio:.decimals$}×)", fmt(ms, digits, "ms"))
+        }
+        _ => fmt(ms, digits, "ms"),
+    }
+}
+
 /// A case to time: its name, its label for plots, the published time it compares with, its
-/// group (mesh and law), formulation and load factor, the problem.
+/// group (mesh and law), formulation and load factor, whether it is the reference, the problem.
 struct Case {
     name: String,
     label: String,
@@ -115,6 +145,7 @@ struct Case {
     group: String,
     fbar: bool,
     load: f64,
+    reference: bool,
     problem: Problem,
 }
 
@@ -154,6 +185,7 @@ fn beam(law: Law, formulation: Formulation) -> Result<Case> {
         group: format!("beam H8, {}", law.display_name()),
         fbar: form == Formulation::Fbar,
         load: 1.0,
+        reference: false,
         problem: p,
     })
 }
@@ -198,6 +230,7 @@ fn liver(tets: usize, order: u8, law: Law, formulation: Formulation, load: f64) 
         group: format!("{thousands}k liver{quadratic}, {}", law.display_name()),
         fbar: form == Formulation::Fbar,
         load,
+        reference: (tets, order, law, form, load) == (5000, 1, Law::Corotational, Formulation::Standard, 1.0),
         problem: p,
     })
 }
@@ -293,7 +326,7 @@ pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> R
     }
     let mut out = Vec::new();
     for Timed {
-        case: Case { name, label, published, published_ms, group, fbar, load, problem },
+        case: Case { name, label, published, published_ms, group, fbar, load, reference, problem },
         runs,
         mut solver,
         mut setups,
@@ -315,6 +348,7 @@ pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> R
             group,
             fbar,
             load,
+            reference,
             dofs,
             iterations: last.iterations,
             factorizations: last.factorizations,
@@ -380,14 +414,15 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
         ))
     })?;
     // One line per case (the published time beside its first solve), then F-bar over the standard element.
+    let reference = reference_ms(&cases);
     let rows = cases
         .iter()
         .flat_map(|c| {
             [
-                Row::new("setup", fmt(c.setup_ms, 1, "ms"), ""),
-                Row::new("first", fmt(c.first_ms, 1, "ms"), &c.published),
-                Row::new("from rest", fmt(c.median_ms, 1, "ms"), ""),
-                Row::new("frame", fmt(c.frame_ms, 1, "ms"), ""),
+                Row::new("setup", with_ratio(c.setup_ms, 1, reference), ""),
+                Row::new("first", with_ratio(c.first_ms, 1, reference), &c.published),
+                Row::new("from rest", with_ratio(c.median_ms, 1, reference), ""),
+                Row::new("frame", with_ratio(c.frame_ms, 1, reference), ""),
             ]
             .map(|row| row.of("case", &c.name))
         })
@@ -420,10 +455,18 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
         .filter_map(|c| {
             let figure = format!("static solve, {}: setup + first solve", c.name);
             match c.published_ms {
-                Some(published) => Some(Headline::lower_is_better(figure, c.setup_ms + c.first_ms, published, 0, "ms")),
+                Some(published) => {
+                    let whole = c.setup_ms + c.first_ms;
+                    let headline = Headline::lower_is_better(figure, whole, published, 0, "ms");
+                    Some(Headline { ours: with_ratio(whole, 0, reference), ..headline })
+                }
                 None if c.group.contains("T10") => Some(Headline::measured(
                     format!("{figure}; a frame"),
-                    format!("{}; {}", fmt(c.setup_ms + c.first_ms, 0, "ms"), fmt(c.frame_ms, 0, "ms")),
+                    format!(
+                        "{}; {}",
+                        with_ratio(c.setup_ms + c.first_ms, 0, reference),
+                        with_ratio(c.frame_ms, 0, reference)
+                    ),
                 )),
                 None => None,
             }
@@ -440,7 +483,7 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
         figures: vec!["timings.png".into()],
         page_figures: Vec::new(),
         notes: vec![
-            format!("{runs} runs per case on this machine, medians; 'setup': building a solver (sparse pattern, ordering, symbolic analysis, buffers) and 'first': its first solve from rest, medians over as many new solvers; 'from rest': repeated solves with the rest tangent's factor kept, the cases taking turns; 'frame': one frame of a load varying by {:.0} % per frame, warm-started.", 100.0 * FRAME_LOAD_STEP),
+            format!("{runs} runs per case on this machine, medians; 'setup': building a solver (sparse pattern, ordering, symbolic analysis, buffers) and 'first': its first solve from rest, medians over as many new solvers; 'from rest': repeated solves with the rest tangent's factor kept, the cases taking turns; 'frame': one frame of a load varying by {:.0} % per frame, warm-started. (N×): the time over the reference, the co-rotational standard 5k liver's solve from rest in the same run{}, which varies less than milliseconds from host to host.", 100.0 * FRAME_LOAD_STEP, reference.map_or(String::new(), |r| format!(" ({})", fmt(r, 1, "ms")))),
             format!(
                 "Liver: the built-in phantom, E = {} Pa, ν = {}, {} Pa on one lobe. The published times are for a \
                  ~5k-tet liver on the authors' machine.",
@@ -483,6 +526,7 @@ mod tests {
             group: group.into(),
             fbar,
             load,
+            reference: false,
             dofs: 1,
             iterations: 1,
             factorizations: 1,
@@ -512,6 +556,26 @@ mod tests {
         for (r, e) in ratios.iter().zip(expected) {
             assert!((r.from_rest - e).abs() < 1e-12 && (r.first - e).abs() < 1e-12 && (r.frame - e).abs() < 1e-12);
         }
+    }
+
+    /// Of the liver cases, only the co-rotational standard T4 one under the nominal load is the
+    /// reference; a time carries its multiple of the reference's.
+    #[test]
+    fn one_liver_case_is_the_reference_and_times_carry_their_ratio() {
+        let cases = [
+            (1, Law::Corotational, Formulation::Standard, 1.0),
+            (1, Law::Corotational, Formulation::Fbar, 1.0),
+            (1, Law::Svk, Formulation::Standard, 1.0),
+            (1, Law::Corotational, Formulation::Standard, EQUAL_DEFORMATION_LOAD),
+            (2, Law::Corotational, Formulation::Standard, 1.0),
+        ];
+        let flags = cases.map(|(order, law, form, load)| liver(5000, order, law, form, load).unwrap().reference);
+        assert_eq!(flags, [true, false, false, false, false]);
+        assert_eq!(with_ratio(564.0, 1, Some(14.4)), "564.0 ms (39.2×)");
+        assert_eq!(with_ratio(7.2, 1, Some(14.4)), "7.2 ms (0.50×)");
+        assert_eq!(with_ratio(7.2, 1, None), "7.2 ms");
+        assert_eq!(with_ratio(143.9, 0, Some(14.4)), "144 ms (9.99×)");
+        assert_eq!(with_ratio(3715.0, 0, Some(28.1)), "3715 ms (132×)");
     }
 
     /// The equal-deformation case must deform the standard element as far as F-bar (within
