@@ -109,14 +109,15 @@ pub fn fbar_ratios(cases: &[CaseTiming]) -> Vec<Ratio> {
 }
 
 /// The reference time of a run (ms): the median solve from rest of its reference case, the
-/// co-rotational standard 5k-tet liver (the registration's FEM), measured among the other cases.
+/// co-rotational standard 5k-tet liver (the law and element of the registration's FEM), measured
+/// among the other cases.
 /// Every time is also given as a multiple of it, which varies less than milliseconds from one
 /// host (or day) to another.
 pub(crate) fn reference_ms(cases: &[CaseTiming]) -> Option<f64> {
     cases.iter().find(|c| c.reference).map(|c| c.median_ms)
 }
 
-/// `ms` with its multiple of the run's reference time, e.g. "564.0 ms (39.1×)".
+/// `ms` with its multiple of the run's reference time, e.g. "564.0 ms (39.2×)".
 fn with_ratio(ms: f64, digits: usize, reference_ms: Option<f64>) -> String {
     match reference_ms {
         Some(r) if r > 0.0 => {
