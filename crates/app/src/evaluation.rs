@@ -32,26 +32,6 @@ pub struct Evaluation {
     pub coverage: Option<f64>,
 }
 
-/// Interpolates a prediction of `model` (from `model_path`) to the nodes of the volume mesh in
-/// `mesh_path` (in the training mesh's frame) and writes it as the point field `displacement`
-/// into `vtu`; returns the line that describes it (nodes, largest displacement).
-pub fn prediction_on_mesh(
-    model: &learn::Model,
-    model_path: &Path,
-    prediction: &[f32],
-    mesh_path: &Path,
-    vtu: &Path,
-) -> Result<String> {
-    let organ = mesh::io::read_mesh(mesh_path).with_context(|| format!("reading {}", mesh_path.display()))?;
-    let u = model
-        .field_on_mesh(prediction, &organ)
-        .with_context(|| format!("{} on {}", model_path.display(), mesh_path.display()))?;
-    let max = u.chunks(3).map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()).fold(0.0, f64::max);
-    mesh::io::write_mesh(vtu, &organ, &[mesh::io::Field::point("displacement", 3, u)])
-        .with_context(|| format!("writing {}", vtu.display()))?;
-    Ok(format!("mesh       {} nodes, max |u| {:.3} mm", organ.num_nodes(), mm(max)))
-}
-
 impl Evaluation {
     /// The evaluation in words: the held-out samples, the error statistics, the TRE at the
     /// markers and the σ coverage when known.

@@ -21,7 +21,9 @@
 //!   chosen where a reduced-order model is least sure).
 //! - [`solve`]: a static scenario solved, with the fields written for ParaView; [`evaluation`]:
 //!   a learned model's errors on the samples held out from it, and the files `eval` writes;
-//!   [`training`]: a reduced-order model fitted on a dataset's split.
+//!   [`training`]: a U-Net (with its learning curve) or a reduced-order model trained on a
+//!   dataset's split, the one way `train`, `prepare` and the experiments train; [`prediction`]: a
+//!   model's prediction from a file, as `predict` makes it.
 //! - [`curve`], [`sample_view`]: the learning curve as PNG; a dataset sample and a model's
 //!   prediction in the 3D viewer.
 
@@ -34,6 +36,7 @@ pub mod meshing;
 pub mod output;
 pub mod picture;
 pub mod points;
+pub mod prediction;
 pub mod prepare;
 pub mod printout;
 pub mod registration;

@@ -63,6 +63,7 @@ use learn::LearnedModel;
 
 use crate::points::PointInput;
 use crate::registration::{PatientMethod, RegistrationSpec, PATIENT_FILE};
+use crate::training::{train_unet, UNetRun, UNetStart};
 
 /// What `augsim prepare` is given.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -614,21 +615,10 @@ fn model_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::Progre
             ])
         }
         learn::Method::UNet => {
-            let init = learn::Initialization::Scratch {
-                unet: learn::UNetConfig::default(),
-                normalization: learn::Normalization::from_samples(&train),
-                input_unit: manifest.units.input.clone(),
-            };
+            let start = UNetStart::Scratch(learn::UNetConfig::default());
             let config = learn::TrainConfig { seed: options.seed, ..learn::TrainConfig::default() };
-            let train_options = learn::TrainOptions {
-                out_dir: out,
-                resume: true,
-                stop_after: None,
-                placement: manifest.placement(),
-                test: split.test,
-                compute: learn::Compute::Cpu,
-            };
-            let outcome = learn::train(&train, &validation, &init, &config, &train_options, progress)?;
+            let run = UNetRun { out, resume: true, compute: learn::Compute::Cpu };
+            let outcome = train_unet(&dataset, &split, [&train, &validation], start, &config, run, progress)?;
             Ok(vec![split_line, format!("model: U-Net, {} steps", outcome.iterations_done)])
         }
     }

@@ -2,17 +2,15 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
-use app::evaluation::{evaluate_held_out, prediction_on_mesh, write_evaluation};
+use anyhow::Result;
+use app::evaluation::{evaluate_held_out, write_evaluation};
 use app::generation::GenerateArgs;
-use app::training::{fit_rom, rom_lines};
+use app::prediction::predict_file;
+use app::training::{fit_rom, rom_lines, train_unet, UNetRun, UNetStart};
 
 use learn::rom::RomConfig;
 use learn::LearnedModel;
-use learn::{
-    Compute, Corruption, Dataset, Initialization, Method, Model, PredictInput, Sparsity, SplitPolicy, TrainConfig,
-    TrainOptions, UNetConfig,
-};
+use learn::{Compute, Corruption, Dataset, Method, Model, Sparsity, SplitPolicy, TrainConfig, UNetConfig};
 use mesh::length::mm;
 
 use crate::bar::Bar;
@@ -207,13 +205,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         return train_rom(args, &dataset, split, [train, validation]);
     }
     let compute = args.device.announce()?;
-    let init = match &args.init {
-        Some(model) => Initialization::FineTune { model: model.clone(), freeze_encoder: args.freeze_encoder },
-        None => Initialization::Scratch {
-            unet: UNetConfig { base_channels: args.channels, depth: args.depth, ..UNetConfig::default() },
-            normalization: learn::Normalization::from_samples(&train),
-            input_unit: dataset.manifest().units.input.clone(),
-        },
+    let start = match &args.init {
+        Some(model) => UNetStart::FineTune { model: model.clone(), freeze_encoder: args.freeze_encoder },
+        None => {
+            UNetStart::Scratch(UNetConfig { base_channels: args.channels, depth: args.depth, ..UNetConfig::default() })
+        }
     };
     let config = TrainConfig {
         iterations: args.iterations,
@@ -226,20 +222,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         train_corruption: args.corruption.corruption(),
         val_corruption: args.corruption.corruption(),
     };
-    let options = TrainOptions {
-        out_dir: args.out.clone(),
-        resume: !args.restart,
-        stop_after: None,
-        placement: dataset.manifest().placement(),
-        test: split.test,
-        compute,
-    };
+    let run = UNetRun { out: args.out.clone(), resume: !args.restart, compute };
     let bar = Bar::new("steps", "");
-    let outcome = learn::train(&train, &validation, &init, &config, &options, &bar);
+    let outcome = train_unet(&dataset, &split, [&train, &validation], start, &config, run, &bar);
     bar.finish();
     let outcome = outcome?;
-    let curve = args.out.join(app::curve::CURVE_PNG);
-    app::curve::plot_learning_curve(&curve, &outcome.curve)?;
     println!("steps      {} ({:.3} s per step)", outcome.iterations_done, outcome.mean_step_seconds);
     if let Some((it, Some(e))) = outcome.model.training.as_ref().map(|t| (t.best_iteration, t.best_val_mean_error)) {
         println!("best       validation mean e = {:.4} mm at iteration {it}", mm(e));
@@ -318,43 +305,6 @@ pub fn predict(
     device: DeviceArgs,
 ) -> Result<()> {
     let compute = device.announce()?;
-    let model = Model::load(model_path)?;
-    let g = model.grid();
-    let read = PredictInput::read(input)?;
-    let points = match &read {
-        PredictInput::Points(cloud) => Some(cloud.len()),
-        PredictInput::Grid(_) => None,
-    };
-    let t0 = std::time::Instant::now();
-    let data = read
-        .into_network_input(&model)
-        .with_context(|| format!("{} as the input of {}", input.display(), model_path.display()))?;
-    if let Some(n) = points {
-        let what = if model.takes_forces()? {
-            "forces spread to the grid"
-        } else {
-            "displacements on their nearest grid nodes"
-        };
-        println!("points     {n} ({what}, {:.2} ms)", t0.elapsed().as_secs_f64() * 1e3);
-    }
-    let predictor = model.predictor(compute)?;
-    let prediction = predictor.predict(&data)?;
-    learn::data::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
-    let t = learn::time_prediction(|x| predictor.predict(x), &data, 3, runs)?;
-    println!(
-        "prediction {} runs: median {:.2} ms, mean {:.2} ± {:.2} ms, min {:.2}, max {:.2}",
-        t.runs,
-        t.median * 1e3,
-        t.mean * 1e3,
-        t.std * 1e3,
-        t.min * 1e3,
-        t.max * 1e3
-    );
-    println!("wrote      {}", output.display());
-    if let Some(mesh_path) = mesh_path {
-        let vtu = output.with_extension("vtu");
-        println!("{}", prediction_on_mesh(&model, model_path, &prediction, mesh_path, &vtu)?);
-        println!("wrote      {}", vtu.display());
-    }
+    predict_file(model_path, input, output, mesh_path, runs, compute)?.iter().for_each(|l| println!("{l}"));
     Ok(())
 }

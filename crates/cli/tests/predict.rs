@@ -66,6 +66,7 @@ magnitude = [0.05, 0.2]
     );
     assert!(text.contains("split      3 training, 1 validation, 2 test samples"), "{text}");
     assert!(text.contains("best       validation"), "{text}");
+    assert!(d.join("net/curve.png").is_file(), "the learning curve is drawn beside the model");
 
     // The model records its split; eval reports on its test samples only.
     let text = augsim(&["eval", "net/model.json", "data", "--out", "eval"], d);

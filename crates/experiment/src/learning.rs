@@ -5,10 +5,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
-use learn::{
-    Compute, Corruption, CurveRow, Dataset, EvalReport, Initialization, Model, Samples, SplitPolicy, TrainConfig,
-    TrainOptions, UNetConfig,
-};
+use app::training::{train_unet, UNetRun, UNetStart};
+use learn::{Compute, Corruption, CurveRow, Dataset, EvalReport, Model, Samples, SplitPolicy, TrainConfig, UNetConfig};
 use scenario::DatasetScenario;
 
 use crate::{fmt, write_scenario, ExperimentResult, Headline, Name, Progress, Row, Size, Tenths};
@@ -220,25 +218,14 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
             shipped: Some(path),
         });
     }
-    let init = match &recipe.fine_tune {
-        Some(model) => Initialization::FineTune { model: model.clone(), freeze_encoder: false },
-        None => Initialization::Scratch {
-            unet: UNetConfig { base_channels: recipe.channels, ..UNetConfig::default() },
-            normalization: learn::Normalization::from_samples(&train),
-            input_unit: dataset.manifest().units.input.clone(),
-        },
+    let start = match &recipe.fine_tune {
+        Some(model) => UNetStart::FineTune { model: model.clone(), freeze_encoder: false },
+        None => UNetStart::Scratch(UNetConfig { base_channels: recipe.channels, ..UNetConfig::default() }),
     };
-    let start = if recipe.fine_tune.is_some() { "fine-tuning" } else { "from scratch" };
-    progress.line(&format!("training {} steps {start} on {} samples", recipe.iterations, train.len()));
-    let config = recipe.train_config();
-    let out = dir.join(model_dir(recipe));
-    let options = TrainOptions {
-        placement: dataset.manifest().placement(),
-        test: split.test.clone(),
-        ..TrainOptions::new(out.clone())
-    };
-    let outcome = learn::train(&train, &validation, &init, &config, &options, progress)?;
-    app::curve::plot_learning_curve(&out.join(app::curve::CURVE_PNG), &outcome.curve)?;
+    let how = if recipe.fine_tune.is_some() { "fine-tuning" } else { "from scratch" };
+    progress.line(&format!("training {} steps {how} on {} samples", recipe.iterations, train.len()));
+    let run = UNetRun { out: dir.join(model_dir(recipe)), resume: true, compute: Compute::Cpu };
+    let outcome = train_unet(dataset, &split, [&train, &validation], start, &recipe.train_config(), run, progress)?;
     Ok(Trained {
         split: [train.len(), validation.len(), test.len()],
         model: Model::UNet(std::sync::Arc::new(outcome.model)),
@@ -572,7 +559,7 @@ pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
-    use learn::{GridShape, Sample};
+    use learn::{GridShape, Initialization, Sample, TrainOptions};
 
     /// A node's displacement components are a channel apart, and nodes outside the organ do not count.
     #[test]

@@ -1,0 +1,85 @@
+//! A learned model's prediction from a file, as `augsim predict` makes it: a grid tensor or a
+//! point cloud in, the displacement tensor out (`.npy`), timed, and interpolated to a mesh's nodes
+//! where one is given.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use learn::{Compute, Model, PredictInput};
+use mesh::length::mm;
+
+/// Predicts with the model at `model_path` from `input` (a grid tensor, `.npy` `[3, nx, ny, nz]`,
+/// or a point cloud, `.csv` or `.npy` `[N, 6]`: x, y, z and the vector in the model's input unit)
+/// on `compute`, writes the displacement tensor to `output`, times `runs` predictions, and with
+/// `mesh_path` writes the displacement interpolated to that mesh's nodes beside the tensor
+/// (`.vtu`). Returns what it did, in lines.
+pub fn predict_file(
+    model_path: &Path,
+    input: &Path,
+    output: &Path,
+    mesh_path: Option<&Path>,
+    runs: usize,
+    compute: Compute,
+) -> Result<Vec<String>> {
+    let model = Model::load(model_path)?;
+    let g = model.grid();
+    let read = PredictInput::read(input)?;
+    let points = match &read {
+        PredictInput::Points(cloud) => Some(cloud.len()),
+        PredictInput::Grid(_) => None,
+    };
+    let t0 = Instant::now();
+    let data = read
+        .into_network_input(&model)
+        .with_context(|| format!("{} as the input of {}", input.display(), model_path.display()))?;
+    let mut lines = Vec::new();
+    if let Some(n) = points {
+        let what = if model.takes_forces()? {
+            "forces spread to the grid"
+        } else {
+            "displacements on their nearest grid nodes"
+        };
+        lines.push(format!("points     {n} ({what}, {:.2} ms)", t0.elapsed().as_secs_f64() * 1e3));
+    }
+    let predictor = model.predictor(compute)?;
+    let prediction = predictor.predict(&data)?;
+    learn::data::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
+    let t = learn::time_prediction(|x| predictor.predict(x), &data, 3, runs)?;
+    lines.push(format!(
+        "prediction {} runs: median {:.2} ms, mean {:.2} ± {:.2} ms, min {:.2}, max {:.2}",
+        t.runs,
+        t.median * 1e3,
+        t.mean * 1e3,
+        t.std * 1e3,
+        t.min * 1e3,
+        t.max * 1e3
+    ));
+    lines.push(format!("wrote      {}", output.display()));
+    if let Some(mesh_path) = mesh_path {
+        let vtu = output.with_extension("vtu");
+        lines.push(prediction_on_mesh(&model, model_path, &prediction, mesh_path, &vtu)?);
+        lines.push(format!("wrote      {}", vtu.display()));
+    }
+    Ok(lines)
+}
+
+/// Interpolates a prediction of `model` (from `model_path`) to the nodes of the volume mesh in
+/// `mesh_path` (in the training mesh's frame) and writes it as the point field `displacement`
+/// into `vtu`; returns the line that describes it (nodes, largest displacement).
+fn prediction_on_mesh(
+    model: &learn::Model,
+    model_path: &Path,
+    prediction: &[f32],
+    mesh_path: &Path,
+    vtu: &Path,
+) -> Result<String> {
+    let organ = mesh::io::read_mesh(mesh_path).with_context(|| format!("reading {}", mesh_path.display()))?;
+    let u = model
+        .field_on_mesh(prediction, &organ)
+        .with_context(|| format!("{} on {}", model_path.display(), mesh_path.display()))?;
+    let max = u.chunks(3).map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()).fold(0.0, f64::max);
+    mesh::io::write_mesh(vtu, &organ, &[mesh::io::Field::point("displacement", 3, u)])
+        .with_context(|| format!("writing {}", vtu.display()))?;
+    Ok(format!("mesh       {} nodes, max |u| {:.3} mm", organ.num_nodes(), mm(max)))
+}
