@@ -68,7 +68,7 @@ pub fn predict_file(
 /// `mesh_path` (in the training mesh's frame) and writes it as the point field `displacement`
 /// into `vtu`; returns the line that describes it (nodes, largest displacement).
 fn prediction_on_mesh(
-    model: &learn::Model,
+    model: &Model,
     model_path: &Path,
     prediction: &[f32],
     mesh_path: &Path,
