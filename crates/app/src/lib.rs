@@ -13,7 +13,7 @@
 //!   mesh, regions, scenarios, dataset, model, report), resumable.
 //! - [`case`], [`simulate`], [`picture`]: synthetic registration cases on the phantom (truth from
 //!   a finer mesh and another law, a simulated camera cloud), the comparison of methods,
-//!   side-view pictures.
+//!   side-view pictures; [`comparison`]: a comparison case run end to end (`register --demo`).
 //! - [`assimilation`]: ROUKF identification from an assimilation scenario (synthetic
 //!   observations or track files, traces, plots, the estimated deformation), also one step at a
 //!   time for a stream.
@@ -29,6 +29,7 @@
 
 pub mod assimilation;
 pub mod case;
+pub mod comparison;
 pub mod curve;
 pub mod evaluation;
 pub mod generation;

@@ -3,18 +3,19 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
-use app::case::{ar_scenario, case_methods, compare, comparison_models, synthetic_case, Network, Registered};
-use app::output::{run_dir, write_case, write_comparison, RunWriter};
+use anyhow::{Context, Result};
+use app::comparison::{run_comparison, LearnedModels};
+use app::output::{run_dir, RunWriter};
 use app::points::PointInput;
-use app::printout::{case_files_lines, case_lines, comparison_table, frame_line, organ_line, rigid_lines, run_lines};
+use app::printout::{frame_line, organ_line, rigid_lines, run_lines};
 use app::registration::RegistrationChoice;
 use mesh::length::LengthUnit;
 use register::cloud::read_frames;
 use register::RigidOptions;
-use scenario::registration::{MethodKind, BUILTIN_CASE};
+use scenario::registration::BUILTIN_CASE;
+use scenario::CaseScenario;
 
-use scenario::{CaseScenario, DatasetScenario};
+use crate::bar::Bar;
 
 /// Arguments of `augsim register`.
 #[derive(clap::Args)]
@@ -165,36 +166,12 @@ fn comparison_case(args: &RegisterArgs) -> Result<CaseScenario> {
 /// comparison.
 fn demo(args: &RegisterArgs, out: &Path) -> Result<()> {
     let scenario = comparison_case(args)?;
-    print_lines(&case_lines(&scenario));
-    let case = synthetic_case(&scenario)?;
-    let dir = out.join("case");
-    write_case(&dir, &case)?;
-    print_lines(&case_files_lines(&case, &dir));
-
-    let wants_network =
-        scenario.models.method.iter().any(|m| matches!(m.kind, MethodKind::Network | MethodKind::Hybrid));
-    let (models, missing) =
-        if wants_network { comparison_models(args.registration.model.as_deref())? } else { (Vec::new(), Vec::new()) };
-    for path in missing {
-        println!("model      skipped: {} not found (run from the repository root, or give --model)", path.display());
-    }
-    let (network_scenario, network_dir) = match &args.registration.scenario {
-        Some(path) => DatasetScenario::load(path)?,
-        None => (ar_scenario(), PathBuf::new()),
-    };
-    let networks: Vec<Network> =
-        models.iter().map(|model| Network { model, scenario: &network_scenario, dir: &network_dir }).collect();
-    let rows = compare(&case, &case_methods(&scenario, &networks)?);
-    if rows.is_empty() {
-        bail!("no method to compare");
-    }
-    let registered: Vec<&Registered> = rows.iter().filter_map(|r| r.result.as_ref().ok()).collect();
-    let rigid = registered.first().and_then(|r| r.outcomes[0].rigid.as_ref());
-    if let Some(r) = rigid {
-        print_lines(&rigid_lines(r, Some(&case.pose)));
-    }
-    print_lines(&comparison_table(&rows));
-    write_comparison(out, &case, &rows)?;
+    let learned =
+        LearnedModels { model: args.registration.model.as_deref(), scenario: args.registration.scenario.as_deref() };
+    let bar = Bar::new("methods", "");
+    let rows = run_comparison(&scenario, learned, out, &bar);
+    bar.finish();
+    rows?;
     println!();
     println!(
         "wrote      {} (comparison.csv, summary.json; per method: organ.vtu, targets.csv, registration.png)",
