@@ -1,6 +1,6 @@
 //! `augsim bench`'s tables: median static-solve times, split into assembly, factorisation and
 //! triangular solves (the cases of the fem-speed experiment); single-sample U-Net prediction
-//! times; registration frames of every method, from rest and streamed, beside the co-rotational
+//! times, also over the reference solve ([`crate::reference`]); registration frames of every method, from rest and streamed, beside the co-rotational
 //! FEM's in the same run. Each line goes to `print` as soon as it is measured.
 
 use anyhow::{Context, Result};
@@ -197,10 +197,14 @@ fn case_row(c: &CaseTiming) -> String {
 /// random: the time does not depend on their values.
 fn unet_prediction(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
     let grid = learn::GridShape::new(21, 23, 21);
-    print(&format!("U-Net prediction, one sample on the liver grid {grid}, depth 3, after 3 warm-up runs:"));
+    let reference_ms = crate::reference::measure()?;
+    print(&format!("U-Net prediction, one sample on the liver grid {grid}, depth 3, after 3 warm-up runs; 'ref':"));
     print(&format!(
-        "{:<30} {:>10} {:>10} {:>10} {:>10}",
-        "first-layer channels", "params", "median ms", "min ms", "max ms"
+        "the median over the reference, the co-rotational 5k liver's solve from rest ({reference_ms:.1} ms here):"
+    ));
+    print(&format!(
+        "{:<30} {:>10} {:>10} {:>10} {:>10} {:>8}",
+        "first-layer channels", "params", "median ms", "min ms", "max ms", "ref"
     ));
     let input: Vec<f32> = (0..grid.field_len()).map(|i| ((i * 7919) % 2001) as f32 * 1e-3 - 1.0).collect();
     for base_channels in [8, 16] {
@@ -220,12 +224,13 @@ fn unet_prediction(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
         let predictor = learn::Predictor::new(&model, learn::Compute::Cpu)?;
         let t = learn::time_prediction(|x| predictor.predict(x), &input, 3, runs)?;
         print(&format!(
-            "{:<30} {:>10} {:>10.2} {:>10.2} {:>10.2}",
+            "{:<30} {:>10} {:>10.2} {:>10.2} {:>10.2} {:>7.2}×",
             base_channels,
             params,
             t.median * 1e3,
             t.min * 1e3,
-            t.max * 1e3
+            t.max * 1e3,
+            t.median * 1e3 / reference_ms
         ));
     }
     Ok(())
@@ -246,12 +251,23 @@ mod tests {
         assert_eq!(err, "no table 'frames': the tables are solves, prediction, registration");
     }
 
+    /// A row per network size, each with its median also over the run's reference time.
     #[test]
     fn the_unet_table_has_a_row_per_network_size() {
         let mut lines = Vec::new();
         unet_prediction(1, &mut |l| lines.push(l.to_string())).unwrap();
-        assert_eq!(lines.len(), 4, "{lines:?}");
+        assert_eq!(lines.len(), 5, "{lines:?}");
         assert!(lines[0].starts_with("U-Net prediction, one sample on the liver grid"), "{lines:?}");
-        assert!(lines[2].starts_with('8') && lines[3].starts_with("16"), "{lines:?}");
+        assert!(lines[3].starts_with('8') && lines[4].starts_with("16"), "{lines:?}");
+        // Each row's last column is its median over the reference time the header states.
+        let stated = lines[1].rsplit_once('(').and_then(|(_, r)| r.split_once(" ms here")).unwrap().0;
+        let reference: f64 = stated.parse().unwrap();
+        for row in &lines[3..] {
+            let columns: Vec<&str> = row.split_whitespace().collect();
+            let median: f64 = columns[2].parse().unwrap();
+            let ratio: f64 = columns[5].trim_end_matches('×').parse().unwrap();
+            let expected = median / reference;
+            assert!((ratio - expected).abs() <= 0.01 + 0.01 * expected, "{row}: reference {reference} ms");
+        }
     }
 }

@@ -11,7 +11,7 @@ use fem::{verification, Formulation, Law, Material, Problem, SolverOptions, Stat
 use mesh::{CellKind, Mesh, MeshLocator, PhantomSpec, Point};
 use serde::{Deserialize, Serialize};
 
-use crate::{ExperimentResult, Name, Progress, Row, Size};
+use crate::{reference, ExperimentResult, Name, Progress, Row, Size};
 
 /// An element: its cells and formulation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -192,6 +192,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         Size::Quick => &[3000, 5000, 11000],
         Size::Paper => &[3000, 5000, 11000, 20000],
     };
+    let reference_ms = reference::measure()?;
     let mut points = Vec::new();
     let mut references = Vec::new();
     for poisson in [0.3, 0.49, 0.499] {
@@ -203,7 +204,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     let problems: Vec<String> = references.iter().map(|r| r.problem.clone()).collect();
     let cheapest = cheapest(&problems, &points);
     let figures = plot_studies(dir, &problems, &points)?;
-    let rows = rows(&cheapest, &points);
+    let rows = rows(&cheapest, &points, reference_ms);
     let notes = vec![
         "Cantilever 10 × 1 × 1 m, E = 1 kPa, linear law (B-bar for F-bar), clamped at x = 0, a small downward end \
          traction; quantity: mean tip deflection; meshes of 10k × k × k cells (H8, or 6 T4 / T10 per cell)."
@@ -214,7 +215,10 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
              regions of space, integrated exactly, so every mesh solves the same problem (the meshes are not nested); \
              quantity: the displacement at the probes (relative RMS error against the reference)."
         ),
-        "Times: a new solver's setup and first solve (ms), on this machine, one run each.".to_string(),
+        format!(
+            "Times: a new solver's setup and first solve (ms), on this machine, one run each. {}",
+            reference::note(Some(reference_ms))
+        ),
         "Solves that enter a reference (the three finest T10 solves of a problem, or the finest alone where they do \
          not converge at an order of at least 1) are marked; their errors are not independent of it, and they are \
          no candidates for the cheapest element."
@@ -224,6 +228,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     values.insert("points".into(), serde_json::to_value(&points)?);
     values.insert("references".into(), serde_json::to_value(&references)?);
     values.insert("cheapest".into(), serde_json::to_value(&cheapest)?);
+    values.insert("reference_ms".into(), reference_ms.into());
     Ok(ExperimentResult {
         name: Name::FemConvergence,
         size,
@@ -367,13 +372,15 @@ fn plot_studies(dir: &Path, problems: &[String], points: &[ConvergencePoint]) ->
     Ok(figures)
 }
 
-/// The rows: the cheapest solve within each tolerance, and a table of errors per problem.
-fn rows(cheapest: &[Cheapest], points: &[ConvergencePoint]) -> Vec<Row> {
+/// The rows: the cheapest solve within each tolerance, and a table of errors per problem; times
+/// with their multiple of the run's reference time.
+fn rows(cheapest: &[Cheapest], points: &[ConvergencePoint], reference_ms: f64) -> Vec<Row> {
+    let ms = |p: &ConvergencePoint| reference::ms(p.ms, 0, Some(reference_ms));
     let mut rows = Vec::new();
     for c in cheapest {
         let ours = match &c.choice {
             Some(p) => {
-                format!("{} ({}, {} dofs, {:.0} ms, error {:.2} %)", p.element, p.mesh, p.dofs, p.ms, 100.0 * p.error)
+                format!("{} ({}, {} dofs, {}, error {:.2} %)", p.element, p.mesh, p.dofs, ms(p), 100.0 * p.error)
             }
             None => "none of the meshes".into(),
         };
@@ -387,10 +394,10 @@ fn rows(cheapest: &[Cheapest], points: &[ConvergencePoint]) -> Vec<Row> {
             Row::new(
                 &p.mesh,
                 format!(
-                    "{:.2} % ({} dofs, {:.0} ms){}",
+                    "{:.2} % ({} dofs, {}){}",
                     100.0 * p.error,
                     p.dofs,
-                    p.ms,
+                    ms(p),
                     if p.in_reference { ", enters the reference" } else { "" }
                 ),
                 "",

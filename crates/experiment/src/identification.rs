@@ -10,7 +10,7 @@ use mesh::length::LengthUnit;
 use scenario::assimilation::ReferenceSpec;
 use scenario::{AssimilationScenario, MeshSource};
 
-use crate::{fmt, write_scenario, ExperimentResult, Headline, Name, Progress, Row, Size, Tenths};
+use crate::{fmt, reference, write_scenario, ExperimentResult, Headline, Name, Progress, Row, Size, Tenths};
 
 /// Tetrahedra of the reference phantoms that make the observations (the published liver size for the Young's-modulus experiment;
 /// about 2.6 times the model's for the springs experiment).
@@ -147,15 +147,17 @@ fn executable_stamp() -> String {
     }
 }
 
-fn values(report: &Report) -> Result<serde_json::Map<String, serde_json::Value>> {
+/// The raw numbers of a filter run: its report and the run's reference time (ms).
+fn values(report: &Report, reference_ms: f64) -> Result<serde_json::Map<String, serde_json::Value>> {
     let mut values = serde_json::Map::new();
     values.insert("report".into(), serde_json::to_value(report)?);
+    values.insert("reference_ms".into(), reference_ms.into());
     Ok(values)
 }
 
 /// The figures of one filter run of the Young's modulus experiment (`reference_mesh`: the
-/// reference's mesh in words), as rows of that run.
-fn filter_run_rows(run: &str, report: &Report, reference_mesh: &str) -> Result<Vec<Row>> {
+/// reference's mesh in words; `reference_ms`: the run's reference time), as rows of that run.
+fn filter_run_rows(run: &str, report: &Report, reference_mesh: &str, reference_ms: f64) -> Result<Vec<Row>> {
     let y = report.young.as_ref().context("the Young scenario reported no Young's modulus")?;
     let truth = y.truth.context("the reference run's modulus is the truth")?;
     let mut figures = vec![
@@ -177,18 +179,20 @@ fn filter_run_rows(run: &str, report: &Report, reference_mesh: &str) -> Result<V
             y.within_1_percent_from_iteration.map_or("never".into(), |k| k.to_string()),
             "",
         ),
-        Row::new(
-            "filter time",
-            format!("{} for {} iterations", fmt(report.filter_seconds, 1, "s"), report.iterations),
-            "500 s for 631 iterations",
-        ),
+        filter_time_row(report, reference_ms, "500 s for 631 iterations"),
     ]);
     Ok(figures.into_iter().map(|row| row.of("filter run", run)).collect())
 }
 
+/// The row of a filter run's time, with its multiple of the run's reference time.
+fn filter_time_row(report: &Report, reference_ms: f64, published: &str) -> Row {
+    let time = reference::seconds(report.filter_seconds, 1, Some(reference_ms));
+    Row::new("filter time", format!("{time} for {} iterations", report.iterations), published)
+}
+
 /// The headlines of the Young's modulus experiment: the error and the time of the scenario's run
-/// (`reference_mesh`: its reference's mesh in words).
-fn young_headlines(report: &Report, reference_mesh: &str) -> Result<Vec<Headline>> {
+/// (`reference_mesh`: its reference's mesh in words; `reference_ms`: the run's reference time).
+fn young_headlines(report: &Report, reference_mesh: &str, reference_ms: f64) -> Result<Vec<Headline>> {
     let y = report.young.as_ref().context("the Young scenario reported no Young's modulus")?;
     let truth = y.truth.context("the reference run's modulus is the truth")?;
     Ok(vec![
@@ -202,13 +206,16 @@ fn young_headlines(report: &Report, reference_mesh: &str) -> Result<Vec<Headline
             2,
             "%",
         ),
-        Headline::lower_is_better(
-            format!("ROUKF Young's modulus: filter time ({} iterations; published 631)", report.iterations),
-            report.filter_seconds,
-            500.0,
-            1,
-            "s",
-        ),
+        Headline {
+            ours: reference::seconds(report.filter_seconds, 1, Some(reference_ms)),
+            ..Headline::lower_is_better(
+                format!("ROUKF Young's modulus: filter time ({} iterations; published 631)", report.iterations),
+                report.filter_seconds,
+                500.0,
+                1,
+                "s",
+            )
+        },
     ])
 }
 
@@ -218,6 +225,7 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
         Size::Quick => Some(200),
         Size::Paper => None,
     };
+    let reference_ms = reference::measure()?;
     let young = "roukf_young";
     let reference = Reference { phantom: Phantom::linear(YOUNG_REFERENCE_TETS), tracks: &dir.join("reference-tracks") };
     let (reports, setup, reference_mesh) = assimilate(dir, young, &reference, None, iterations, true, progress)?;
@@ -254,9 +262,9 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
         ("T10 model and reference, systematic discrepancy", quadratic_model_honest, &quadratic_reference_mesh),
     ];
     for (run, report, reference_mesh) in runs {
-        rows.extend(filter_run_rows(run, report, reference_mesh)?);
+        rows.extend(filter_run_rows(run, report, reference_mesh, reference_ms)?);
     }
-    let headlines = young_headlines(report, &reference_mesh)?;
+    let headlines = young_headlines(report, &reference_mesh, reference_ms)?;
     Ok(ExperimentResult {
         headlines,
         name: Name::Young,
@@ -303,9 +311,10 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
              (σ² += excess χ² × the inverse information). The estimate is the plain filter's."
                 .into(),
             "The scenario (roukf_young.toml) is written beside the result.".into(),
+            reference::note(Some(reference_ms)),
         ],
         values: {
-            let mut v = values(report)?;
+            let mut v = values(report, reference_ms)?;
             v.insert("discrepancy_report".into(), serde_json::to_value(honest)?);
             v.insert("published_size_report".into(), serde_json::to_value(fine)?);
             v.insert("published_size_discrepancy_report".into(), serde_json::to_value(fine_honest)?);
@@ -318,6 +327,7 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
 
 /// The ROUKF boundary springs experiment (the scenario's 300 iterations at both sizes: it takes seconds).
 pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
+    let reference_ms = reference::measure()?;
     let reference = Reference { phantom: SPRINGS_REFERENCE, tracks: &dir.join("reference-tracks") };
     let (reports, setup, reference_mesh) = assimilate(dir, "roukf_springs", &reference, None, None, false, progress)?;
     let report = &reports[0];
@@ -337,11 +347,7 @@ pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<Expe
     if let Some(rms) = s.rms_error {
         rows.push(Row::new("spring stiffness RMS error", fmt(rms, 2, "N/m"), ""));
     }
-    rows.push(Row::new(
-        "filter time",
-        format!("{} for {} iterations", fmt(report.filter_seconds, 1, "s"), report.iterations),
-        "",
-    ));
+    rows.push(filter_time_row(report, reference_ms, ""));
     let mean_error = |label: &str| report.assessment.iter().find(|c| c.label == label).map(|c| c.mean_error);
     let holds = match (mean_error("estimated"), mean_error("fixed"), mean_error("free")) {
         (Some(e), Some(fixed), Some(free)) => e < fixed && e < free,
@@ -361,18 +367,21 @@ pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<Expe
         rows,
         figures: vec!["run/springs.png".into(), "run/springs_final.png".into(), "run/assessment.png".into()],
         page_figures: Vec::new(),
-        notes: vec![format!(
-            "{} springs on the hidden surface of a {}-node phantom, a tool prescribing displacement on a small \
+        notes: vec![
+            format!(
+                "{} springs on the hidden surface of a {}-node phantom, a tool prescribing displacement on a small \
              visible area (on each mesh its own nodes nearest the tool). No inverse crime: observations and \
              assessment points come from a reference run on a phantom of {reference_mesh} ({} points moved \
              onto the model's surface, at most {:.2} mm); assessment errors are means over the run at {} internal \
              markers.",
-            s.stiffness.len(),
-            report.nodes,
-            setup.projected,
-            1e3 * setup.max_projection,
-            setup.assessment_points
-        )],
-        values: values(report)?,
+                s.stiffness.len(),
+                report.nodes,
+                setup.projected,
+                1e3 * setup.max_projection,
+                setup.assessment_points
+            ),
+            reference::note(Some(reference_ms)),
+        ],
+        values: values(report, reference_ms)?,
     })
 }

@@ -24,6 +24,7 @@ mod held_out;
 mod identification;
 mod learning;
 mod loads;
+mod reference;
 mod registration;
 pub mod report;
 pub mod stream;

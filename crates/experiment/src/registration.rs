@@ -14,7 +14,7 @@ use scenario::CaseScenario;
 
 use crate::held_out::rom_polish;
 use crate::learning::{dataset, error_histogram, fit_rom, prediction_seconds, train, Generated, Recipe, Trained};
-use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
+use crate::{fmt, reference, ExperimentResult, Headline, Name, Progress, Row, Size};
 
 use app::case::AR_SCENARIO as LIVER_AR;
 
@@ -166,7 +166,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
                  {iterations} steps, {} channels, {} mm training noise; {}.",
                 recipe.channels,
                 1e3 * recipe.corruption.noise_std,
-                t.timing()
+                t.timing(test.reference_ms)
             ),
             format!(
                 "Reduced-order model (`augsim train --method rom`): fitted on the network's training and validation \
@@ -174,6 +174,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
                 config.noise_copies
             ),
             cases_note(&builtin),
+            reference::note(Some(test.reference_ms)),
         ],
         values,
     })
@@ -190,6 +191,8 @@ struct TestFigures {
     rom_ms: f64,
     /// The time the reduced-order model's fit took (s).
     rom_seconds: f64,
+    /// The run's reference time (ms), measured beside the predictions.
+    reference_ms: f64,
 }
 
 impl TestFigures {
@@ -204,8 +207,9 @@ impl TestFigures {
         let (rom_report, rom_tre) =
             learn::evaluate_at_points(rom, &t.test, &Corruption::default(), 0, &grid, &markers, Compute::Cpu)?;
         let input = t.test.get(0).input;
+        let reference_ms = reference::measure()?;
         let (unet_ms, rom_ms) = (prediction_seconds(&t.model, &input)? * 1e3, prediction_seconds(rom, &input)? * 1e3);
-        Ok(TestFigures { report, tre, unet_ms, rom_report, rom_tre, rom_ms, rom_seconds })
+        Ok(TestFigures { report, tre, unet_ms, rom_report, rom_tre, rom_ms, rom_seconds, reference_ms })
     }
 
     /// The rows of the figures (`iterations`: the network's training steps).
@@ -223,7 +227,10 @@ impl TestFigures {
             ),
             Row::new(
                 "network: prediction (one sample); training",
-                format!("{} (CPU, median of 20); {iterations} steps", fmt(self.unet_ms, 2, "ms")),
+                format!(
+                    "{} (CPU, median of 20); {iterations} steps",
+                    reference::ms(self.unet_ms, 2, Some(self.reference_ms))
+                ),
                 "",
             ),
             Row::new("reduced-order model on the test samples: ē (max)", mean_and_max(&self.rom_report), ""),
@@ -234,7 +241,11 @@ impl TestFigures {
             ),
             Row::new(
                 "reduced-order model: prediction (one sample); fit",
-                format!("{} (CPU, median of 20); {:.0} s", fmt(self.rom_ms, 2, "ms"), self.rom_seconds),
+                format!(
+                    "{} (CPU, median of 20); {}",
+                    reference::ms(self.rom_ms, 2, Some(self.reference_ms)),
+                    reference::seconds(self.rom_seconds, 0, Some(self.reference_ms))
+                ),
                 "",
             ),
         ]
@@ -250,6 +261,7 @@ impl TestFigures {
         values.insert("rom_test_marker_tre".into(), serde_json::to_value(self.rom_tre.errors)?);
         values.insert("rom_prediction_ms".into(), self.rom_ms.into());
         values.insert("rom_fit_seconds".into(), self.rom_seconds.into());
+        values.insert("reference_ms".into(), self.reference_ms.into());
         Ok(values)
     }
 }

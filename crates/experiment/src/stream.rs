@@ -20,7 +20,7 @@ use scenario::CaseScenario;
 use serde::Serialize;
 
 use crate::loads::LEFT_LOBE_FRONT;
-use crate::{ExperimentResult, Name, Progress, Row, Size};
+use crate::{reference, ExperimentResult, Name, Progress, Row, Size};
 use app::case::{network_options, synthetic_case, SyntheticCase, AR_SCENARIO, SHIPPED_MODEL, SHIPPED_ROM};
 use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
 
@@ -160,6 +160,8 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     }
     let rest: Vec<f64> =
         case.frames.iter().map(|f| mm(mean(&register::target_errors(&case.targets, &f.truth)))).collect();
+    let reference_ms = Some(reference::measure()?);
+    let ms = |v: f64| reference::ms(v, 1, reference_ms);
     let mut rows = vec![Row::new(STREAM_TRE, format!("{:.2} mm ({:.2} mm)", mean(&rest), max(&rest)), "")
         .of("registration", "no deformation")];
     for s in &streams {
@@ -173,17 +175,12 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
             ),
             Row::new(
                 "latency median / p95",
-                format!("{:.1} / {:.1} ms", median(&mut latency), percentile(&s.latency_ms, 95.0)),
+                format!("{} / {}", ms(median(&mut latency)), ms(percentile(&s.latency_ms, 95.0))),
                 "",
             ),
             Row::new(
                 "server time median / p95; first frame",
-                format!(
-                    "{:.1} / {:.1} ms; {:.1} ms",
-                    median(&mut server),
-                    percentile(&s.server_ms, 95.0),
-                    s.server_ms[0]
-                ),
+                format!("{} / {}; {}", ms(median(&mut server)), ms(percentile(&s.server_ms, 95.0)), ms(s.server_ms[0])),
                 "",
             ),
             Row::new("sustained rate", format!("{:.1} frames/s", s.frames_per_second), ""),
@@ -216,11 +213,15 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
              both ways on those frames (the first frame, from rest, up to {} and {}: the registration case's budgets).",
             options.warm_iterations, budgets.warm_iterations, options.iterations, budgets.iterations,
         ),
-        "Timings: one run on this machine; the figures are only as quiet as the machine was.".to_string(),
+        format!(
+            "Timings: one run on this machine; the figures are only as quiet as the machine was. {}",
+            reference::note(reference_ms)
+        ),
     ];
     let mut values = serde_json::Map::new();
     values.insert("streams".into(), serde_json::to_value(&streams)?);
     values.insert("no_deformation_tre_mm".into(), serde_json::to_value(&rest)?);
+    values.insert("reference_ms".into(), serde_json::to_value(reference_ms)?);
     Ok(ExperimentResult {
         name: Name::Stream,
         size,

@@ -11,7 +11,7 @@ use learn::{Compute, Corruption, CurveRow, EvalReport};
 use serde::Serialize;
 
 use crate::learning::{dataset, error_histogram, max_displacement, model_dir, train, Recipe, Trained};
-use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
+use crate::{fmt, reference, ExperimentResult, Headline, Name, Progress, Row, Size};
 
 /// Training samples of each dataset, as published (the test set is what remains after validation).
 const TRAIN: usize = 1209;
@@ -139,7 +139,8 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
         );
     }
     rows.push(Row::new("largest displacement in the target test set", fmt(max_displacement(test) * 1e3, 1, "mm"), ""));
-    let notes = runs.notes(samples, iterations, &recipe, pre_validation);
+    let reference_ms = reference::measure()?;
+    let notes = runs.notes(samples, iterations, &recipe, pre_validation, reference_ms);
 
     let headlines = vec![
         Headline::lower_is_better(
@@ -227,8 +228,16 @@ impl Runs {
     }
 
     /// The notes: the data, the runs, the speed-up (`pre_validation`: the pre-trained network's
-    /// validation ē on the target, m) and the beam.
-    fn notes(&self, samples: usize, iterations: usize, recipe: &Recipe, pre_validation: f64) -> Vec<String> {
+    /// validation ē on the target, m; times with their multiple of `reference_ms`, the run's
+    /// reference time) and the beam.
+    fn notes(
+        &self,
+        samples: usize,
+        iterations: usize,
+        recipe: &Recipe,
+        pre_validation: f64,
+        reference_ms: f64,
+    ) -> Vec<String> {
         let [train_n, validation_n, test_n] = self.full.split;
         let few_n = self.scratch.split[0];
         let [full_label, scratch_label, _] = self.labels();
@@ -241,7 +250,8 @@ impl Runs {
         let step_time = if timed.is_empty() {
             String::new()
         } else {
-            format!("; {:.3} s per training step", timed.iter().sum::<f64>() / timed.len() as f64)
+            let step = timed.iter().sum::<f64>() / timed.len() as f64;
+            format!("; {} per training step", reference::seconds(step, 3, Some(reference_ms)))
         };
         vec![
             format!(
@@ -275,6 +285,7 @@ impl Runs {
              bottom face; target: the cuboid x ∈ [1.5, 2.5] m. Not run: 16,128 samples from scratch (published 0.45 mm), \
              fine-tuning on 1,209 (0.52 mm), BC1 and BC8 pre-training."
                 .into(),
+            reference::note(Some(reference_ms)),
         ]
     }
 }
