@@ -1,7 +1,8 @@
 //! What a registration writes: the registered organ (organ.vtu, or organ.pvd and one .vtu per
 //! frame of a sequence), targets.csv (rest and registered positions, with the predicted standard
 //! deviation when the method gives one) and summary.json (the run's figures and each frame's),
-//! all in the cloud's frame; for 3D Slicer, the registered targets as markups (targets.mrk.json)
+//! all in the cloud's frame (the frame the clouds were given in, which targets.csv and
+//! summary.json name when known); for 3D Slicer, the registered targets as markups (targets.mrk.json)
 //! and the deformed organ's surface (organ_deformed.vtk), in millimetres and naming their frame;
 //! and what a comparison of methods on a synthetic case writes; each
 //! run in a folder of its own ([`run_dir`]).
@@ -11,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use mesh::io::points::{write_markups_json, LabelledPoints};
-use mesh::io::{csv_field, write_atomic_bytes, write_surface_in_frame, Field, Frame};
+use mesh::io::{csv_field, write_atomic_bytes, write_surface_in_frame, Field, Frame, FrameChange};
 use mesh::length::{mm, LengthUnit};
 use mesh::{Mesh, Point};
 use register::cloud::write_csv;
@@ -99,6 +100,9 @@ impl FrameSummary {
 /// summary.json: the run's figures and each frame's.
 #[derive(Serialize)]
 struct RunSummary<'a> {
+    /// The frame of the results' coordinates, when known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    frame: Option<Frame>,
     #[serde(flatten)]
     summary: &'a Summary,
     per_frame: &'a [FrameSummary],
@@ -110,6 +114,10 @@ pub struct RunWriter {
     sequence: bool,
     /// The unit of targets.csv.
     unit: LengthUnit,
+    /// The frame the clouds were given in (`--frame`), when given: the results' frame.
+    given: Option<Frame>,
+    /// From the organ's frame to the results'.
+    change: FrameChange,
     /// The organ moved by the rigid alignment, once known (the same for every frame).
     moved: Option<Mesh>,
     steps: Vec<(f64, String)>,
@@ -119,10 +127,32 @@ pub struct RunWriter {
 impl RunWriter {
     /// A writer into `dir` (created), for a sequence of frames (organ.pvd and one organ_NNNN.vtu
     /// each) or a single cloud (organ.vtu), its targets.csv in `unit` (the organ's meshes stay in
-    /// metres, the files for 3D Slicer in millimetres).
-    pub fn new(dir: &Path, sequence: bool, unit: LengthUnit) -> Result<RunWriter> {
+    /// metres, the files for 3D Slicer in millimetres). `(organ, given)`: the organ's frame and
+    /// the one the clouds were given in (`--frame`), each when known; the results are written in
+    /// the clouds' frame, converted from the organ's (in the organ's when none was given).
+    pub fn new(
+        dir: &Path,
+        sequence: bool,
+        unit: LengthUnit,
+        (organ, given): (Option<Frame>, Option<Frame>),
+    ) -> Result<RunWriter> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        Ok(RunWriter { dir: dir.to_path_buf(), sequence, unit, moved: None, steps: Vec::new(), rows: Vec::new() })
+        let change = FrameChange::between(organ, given.or(organ));
+        Ok(RunWriter {
+            dir: dir.to_path_buf(),
+            sequence,
+            unit,
+            given,
+            change,
+            moved: None,
+            steps: Vec::new(),
+            rows: Vec::new(),
+        })
+    }
+
+    /// `points` from the organ's frame to the results'.
+    fn converted(&self, points: &[Point]) -> Vec<Point> {
+        points.iter().map(|&p| self.change.point(p)).collect()
     }
 
     /// Writes frame `i` (registered from `cloud`) of `organ`; returns its summary line.
@@ -132,6 +162,14 @@ impl RunWriter {
         }
         let name = if self.sequence { format!("organ_{i:04}.vtu") } else { "organ.vtu".into() };
         let (m, u) = in_cloud_frame(organ.mesh(), self.moved.as_ref(), outcome.rigid.as_ref(), &outcome.registration.u);
+        let (m, u) = if self.change.flips() {
+            let mut m = m.into_owned();
+            m.nodes = self.converted(&m.nodes);
+            let u: Vec<f64> = u.chunks_exact(3).flat_map(|v| self.change.point([v[0], v[1], v[2]])).collect();
+            (Cow::Owned(m), u)
+        } else {
+            (m, u)
+        };
         mesh::io::write_mesh(self.dir.join(&name), &m, &[Field::point("displacement", 3, u)])?;
         self.steps.push((i as f64, name));
         self.rows.push(FrameSummary::new(cloud, outcome));
@@ -140,38 +178,37 @@ impl RunWriter {
 
     /// Writes organ.pvd (for a sequence), targets.csv (of the last frame of `registration`;
     /// `labels`: its targets', or none), the last frame for 3D Slicer (targets.mrk.json and
-    /// organ_deformed.vtk, its registered surface, in `frame` when known: the frame the cloud is
-    /// in) and summary.json; returns the run's summary.
+    /// organ_deformed.vtk, its registered surface) and summary.json, all in the results' frame,
+    /// which they name when known (the clouds' frame given, else `working`: the frame the
+    /// registration worked in, once the organ or a file named one); returns the run's summary.
     pub fn finish(
         self,
         registration: &Registration,
         labels: &[String],
-        frame: Option<Frame>,
+        working: Option<Frame>,
         outcomes: &[FrameOutcome],
     ) -> Result<Summary> {
+        let frame = self.given.or(working);
         if self.sequence {
             mesh::io::write_pvd(self.dir.join("organ.pvd"), &self.steps)?;
         }
         let last = outcomes.last().context("no frame")?;
+        let registered = self.converted(&last.targets);
+        let sigma = last.target_std.as_deref();
         write_targets(
             &self.dir.join("targets.csv"),
-            &rest_in_cloud_frame(registration.targets(), last.rigid.as_ref()),
-            &last.targets,
-            last.target_std.as_deref(),
+            &self.converted(&rest_in_cloud_frame(registration.targets(), last.rigid.as_ref())),
+            &registered,
+            sigma,
             labels,
-            self.unit,
+            (self.unit, frame),
         )?;
-        write_targets_for_slicer(
-            &self.dir.join("targets.mrk.json"),
-            &last.targets,
-            last.target_std.as_deref(),
-            labels,
-            frame,
-        )?;
-        let surface = register::organ_surface(registration.organ(), &last.registration.u, last.rigid.as_ref());
+        write_targets_for_slicer(&self.dir.join("targets.mrk.json"), &registered, sigma, labels, frame)?;
+        let mut surface = register::organ_surface(registration.organ(), &last.registration.u, last.rigid.as_ref());
+        surface.vertices = self.converted(&surface.vertices);
         write_deformed_surface(&self.dir.join("organ_deformed.vtk"), &surface, frame)?;
         let summary = Summary::new(registration.method(), outcomes)?;
-        let run = RunSummary { summary: &summary, per_frame: &self.rows };
+        let run = RunSummary { frame, summary: &summary, per_frame: &self.rows };
         write_atomic_bytes(&self.dir.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
         Ok(summary)
     }
@@ -209,17 +246,18 @@ pub fn rest_in_cloud_frame(targets: &[Point], rigid: Option<&RigidResult>) -> Ve
     }
 }
 
-/// targets.csv: rest and registered position of each target (m: columns `x0_m, y0_m, z0_m,
-/// x_m, y_m, z_m`), with the method's predicted standard deviation σ of each target's error (m),
-/// when it predicts one, as a column `sigma_m`, and the targets' labels, when they have any, as a
-/// last column `label`.
+/// targets.csv: rest and registered position of each target (in `unit`, e.g. m: columns `x0_m,
+/// y0_m, z0_m, x_m, y_m, z_m`), with the method's predicted standard deviation σ of each target's
+/// error, when it predicts one, as a column `sigma_m`, and the targets' labels, when they have
+/// any, as a last column `label`; a first line `# CoordinateSystem = RAS` (or LPS) names `frame`
+/// when known, as 3D Slicer's files do.
 pub fn write_targets(
     path: &Path,
     rest: &[Point],
     registered: &[Point],
     sigma: Option<&[f64]>,
     labels: &[String],
-    unit: LengthUnit,
+    (unit, frame): (LengthUnit, Option<Frame>),
 ) -> Result<()> {
     let labelled = labels.len() == rest.len() && labels.iter().any(|l| !l.is_empty());
     let symbol = unit.symbol();
@@ -233,7 +271,8 @@ pub fn write_targets(
         row.extend(labelled.then(|| labels[i].clone()));
         row
     });
-    Ok(mesh::io::csv::write_csv(path, &[], &header, rows)?)
+    let settings: Vec<String> = frame.map(|f| format!("CoordinateSystem = {f}")).into_iter().collect();
+    Ok(mesh::io::csv::write_csv(path, &settings, &header, rows)?)
 }
 
 /// The registered targets as 3D Slicer markups (`.mrk.json`), in millimetres and in `frame` when
@@ -312,7 +351,8 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         mesh::io::write_mesh(method_dir.join("organ.vtu"), &m, &[Field::point("displacement", 3, u_cloud)])?;
         let rest_targets = rest_in_cloud_frame(&case.targets, outcome.rigid.as_ref());
         let sigma = outcome.target_std.as_deref();
-        write_targets(&method_dir.join("targets.csv"), &rest_targets, &outcome.targets, sigma, &[], LengthUnit::Metre)?;
+        let csv = method_dir.join("targets.csv");
+        write_targets(&csv, &rest_targets, &outcome.targets, sigma, &[], (LengthUnit::Metre, None))?;
         // The picture is drawn in the organ's frame: cloud, targets and truth moved back.
         let back = outcome.rigid.as_ref().map_or_else(RigidTransform::identity, |r| r.cloud_to_organ);
         let to_organ = |points: &[Point]| -> Vec<Point> { points.iter().map(|&p| back.apply(p)).collect() };
@@ -400,7 +440,7 @@ mod tests {
         let path = dir.path().join("targets.csv");
         let (rest, moved) = ([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [[0.0, 0.0, 0.5], [1.0, 0.0, 0.5]]);
         let labels = ["T1".to_string(), "deep, left".to_string()];
-        write_targets(&path, &rest, &moved, Some(&[0.001, 0.002]), &labels, LengthUnit::Metre).unwrap();
+        write_targets(&path, &rest, &moved, Some(&[0.001, 0.002]), &labels, (LengthUnit::Metre, None)).unwrap();
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(
             text,
@@ -409,12 +449,17 @@ mod tests {
         // Read back as points: the registered positions, in metres, with their labels.
         let back = mesh::io::points::read_points(&path).unwrap();
         assert_eq!((back.points, back.labels), (moved.to_vec(), vec!["T1".to_string(), "deep, left".to_string()]));
-        write_targets(&path, &rest, &moved, None, &["".into(), "".into()], LengthUnit::Metre).unwrap();
+        write_targets(&path, &rest, &moved, None, &["".into(), "".into()], (LengthUnit::Metre, None)).unwrap();
         assert!(std::fs::read_to_string(&path).unwrap().starts_with("x0_m,y0_m,z0_m,x_m,y_m,z_m\n0,0,0,"));
         // In millimetres: the header names them, and the points read back are where they were.
-        write_targets(&path, &rest, &moved, Some(&[0.001, 0.002]), &labels, LengthUnit::Millimetre).unwrap();
+        write_targets(&path, &rest, &moved, Some(&[0.001, 0.002]), &labels, (LengthUnit::Millimetre, None)).unwrap();
         let text = std::fs::read_to_string(&path).unwrap();
         assert!(text.starts_with("x0_mm,y0_mm,z0_mm,x_mm,y_mm,z_mm,sigma_mm,label\n0,0,0,0,0,500,1,T1\n"), "{text}");
         assert_eq!(mesh::io::points::read_points_csv(&path).unwrap(), moved);
+        // A known frame is named on a first line, as 3D Slicer's files do, and read back.
+        write_targets(&path, &rest, &moved, None, &labels, (LengthUnit::Millimetre, Some(Frame::Lps))).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(text.starts_with("# CoordinateSystem = LPS\nx0_mm,"), "{text}");
+        assert_eq!(mesh::io::points::read_points(&path).unwrap().frame, Some(Frame::Lps));
     }
 }

@@ -305,8 +305,9 @@ pub struct RegistrationChoice {
     #[arg(long)]
     pub units: Option<LengthUnit>,
     /// Frame (RAS or LPS) of the points given whose files name none (clouds, truth; a stream's
-    /// coordinates), converted into the organ's frame and results converted back. Default: the
-    /// organ's own frame; `serve`: RAS, the frame OpenIGTLink streams in.
+    /// coordinates), converted into the organ's frame and results converted back (every file
+    /// `register` writes, which name it). Default: the organ's own frame; `serve`: RAS, the frame
+    /// OpenIGTLink streams in.
     #[arg(long)]
     pub frame: Option<Frame>,
     /// Most match-and-deform iterations of the first cloud, from rest (default: the library's for

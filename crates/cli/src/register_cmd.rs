@@ -93,7 +93,7 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
         eprintln!("warning    {w}");
     }
     let sequence = frames.len() > 1;
-    let mut writer = RunWriter::new(out, sequence, spec.given_units)?;
+    let mut writer = RunWriter::new(out, sequence, spec.given_units, (spec.frame()?, spec.given_frame))?;
     let clouds = frames.iter().map(|f| input.read_cloud(f));
     let mut rigid_printed = false;
     let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, organ, o| {

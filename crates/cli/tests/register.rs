@@ -110,6 +110,47 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
         far.to_str().unwrap(),
     ]);
     assert!(!ok && text.contains("target 0") && text.contains("outside"), "{text}");
+
+    // The frame: targets naming RAS, the cloud given in LPS (--frame LPS) comes back in LPS.
+    let points = |path: &Path| -> Vec<Vec<f64>> {
+        let text = std::fs::read_to_string(path).unwrap();
+        let rows = text.lines().filter(|l| !l.starts_with('#')).skip(1);
+        rows.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect()
+    };
+    let write = |path: &Path, header: &str, rows: &[Vec<f64>], sign: f64| {
+        let flip = |r: &Vec<f64>| format!("{},{},{}", sign * r[0], sign * r[1], r[2]);
+        std::fs::write(path, format!("{header}x,y,z\n{}\n", rows.iter().map(flip).collect::<Vec<_>>().join("\n")))
+            .unwrap();
+    };
+    let ras_targets = dir.path().join("targets_ras.csv");
+    write(&ras_targets, "# CoordinateSystem = RAS\n", &points(&targets), 1.0);
+    let lps_cloud = dir.path().join("cloud_lps.csv");
+    write(&lps_cloud, "", &points(&out.join("case/cloud.csv")), -1.0);
+    let run = |cloud: &Path, frame: &[&str], name: &str| {
+        let run_out = dir.path().join(name);
+        let (ok, text) = augsim(
+            &[
+                &["register", cloud.to_str().unwrap(), "--fem", "liver", "--targets", ras_targets.to_str().unwrap()],
+                frame,
+                &["--out", run_out.to_str().unwrap()],
+            ]
+            .concat(),
+        );
+        assert!(ok, "{text}");
+        run_out
+    };
+    let (ras, lps) = (run(&out.join("case/cloud.csv"), &[], "ras"), run(&lps_cloud, &["--frame", "LPS"], "lps"));
+    for (dir, frame) in [(&ras, "RAS"), (&lps, "LPS")] {
+        let csv = std::fs::read_to_string(dir.join("targets.csv")).unwrap();
+        assert!(csv.starts_with(&format!("# CoordinateSystem = {frame}\n")), "{csv}");
+        assert_eq!(json(&dir.join("summary.json"))["frame"], frame);
+        let markups = std::fs::read_to_string(dir.join("targets.mrk.json")).unwrap();
+        assert!(markups.contains(&format!("\"coordinateSystem\": \"{frame}\"")), "{markups}");
+    }
+    for (a, b) in points(&ras.join("targets.csv")).iter().zip(points(&lps.join("targets.csv"))) {
+        let back = [-b[3], -b[4], b[5]];
+        assert!((0..3).all(|d| (a[3 + d] - back[d]).abs() < 1e-9), "{a:?} against {b:?} in LPS");
+    }
 }
 
 /// Every command that reads lengths parses `--units` the same way: mm or m (auto where an

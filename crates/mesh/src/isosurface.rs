@@ -31,11 +31,14 @@ pub struct ExtractOptions {
     pub smoothing_iterations: usize,
     /// Triangles of the result, about (default 20,000); a surface with fewer is kept as it is.
     pub target_triangles: usize,
+    /// A second piece of at least this fraction of the largest's voxels means the mask is not
+    /// one organ: refused (default 0.2). Smaller pieces are dropped.
+    pub max_second_piece: f64,
 }
 
 impl Default for ExtractOptions {
     fn default() -> Self {
-        ExtractOptions { smoothing_iterations: 20, target_triangles: 20_000 }
+        ExtractOptions { smoothing_iterations: 20, target_triangles: 20_000, max_second_piece: 0.2 }
     }
 }
 
@@ -99,6 +102,15 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
     let mut pieces = mask.keep_largest();
     if pieces.is_empty() {
         return Err(MeshError::Invalid("the mask is empty: no voxel is inside".into()));
+    }
+    if let [first, second, ..] = pieces[..] {
+        if second as f64 >= options.max_second_piece * first as f64 {
+            let shown: Vec<String> = pieces.iter().take(5).map(|n| n.to_string()).collect();
+            return Err(MeshError::Invalid(format!(
+                "several pieces of similar size ({} voxels): not one organ; keep the organ only",
+                shown.join(", ")
+            )));
+        }
     }
     let voxels = pieces.remove(0);
     let filled_voxels = mask.fill_cavities();

@@ -3,7 +3,8 @@
 //!
 //! A labelmap is a 3D grid of integer labels (0 is the background) with the affine map from voxel
 //! indices (i, j, k) to world coordinates in millimetres, read from the header: spacing (voxels
-//! may be anisotropic), orientation and origin. The world frame is the scanner's, as the file
+//! may be anisotropic), orientation and origin, in the unit the header names (NIfTI's
+//! `xyzt_units`, NRRD's `space units`: m, mm or µm; mm when it names none), converted to mm. The world frame is the scanner's, as the file
 //! states it ([`Frame`]): NIfTI's is always RAS (x towards the patient's right, y anterior, z
 //! superior); NRRD's is its `space` field, LPS for DICOM-derived data and most of
 //! Slicer's files. Points given with the organ (camera, landmarks, targets) must be in this frame.
@@ -172,7 +173,35 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
         }
     }
     let affine = nifti_affine(i16_at(252), i16_at(254), &pixdim, f32_at)?;
+    let affine = in_millimetres(affine, nifti_unit_mm(bytes[123])?);
     Ok(Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new() })
+}
+
+/// The millimetres in a NIfTI spatial unit (the low three bits of `xyzt_units`): metre, mm,
+/// micron; an unknown unit (0) is taken as mm, as 3D Slicer and ITK read it.
+fn nifti_unit_mm(xyzt_units: u8) -> Result<f64, String> {
+    match xyzt_units & 0x07 {
+        0 | 2 => Ok(1.0),
+        1 => Ok(1000.0),
+        3 => Ok(1e-3),
+        other => Err(format!("spatial unit code {other} in xyzt_units is not a length (1: m, 2: mm, 3: µm)")),
+    }
+}
+
+/// The millimetres in a NRRD `space units` entry ("mm", "m", "cm", "um", "µm", "micron").
+fn nrrd_unit_mm(unit: &str) -> Result<f64, String> {
+    match unit.trim_matches('"').trim() {
+        "mm" | "" => Ok(1.0),
+        "m" => Ok(1000.0),
+        "cm" => Ok(10.0),
+        "um" | "µm" | "micron" => Ok(1e-3),
+        other => Err(format!("space unit {other:?} is not supported (mm, m, cm, um)")),
+    }
+}
+
+/// A voxel-to-world affine whose world unit is `mm_per_unit` millimetres, in millimetres.
+fn in_millimetres(affine: [[f64; 4]; 3], mm_per_unit: f64) -> [[f64; 4]; 3] {
+    affine.map(|row| row.map(|x| x * mm_per_unit))
 }
 
 /// The voxel-to-world affine of a NIfTI header: the sform when its code is set, otherwise the
@@ -313,9 +342,12 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
         [l, a, b, c] => (l, [a, b, c]),
         _ => return Err(format!("expected a 3D volume (or layers of one), got sizes {sizes:?}")),
     };
-    if layers == 0 || dims.contains(&0) {
+    // The bytes of the voxels must be countable (a corrupt header may overflow them).
+    let bytes = sizes.iter().try_fold(scalar.size(), |n, &s| n.checked_mul(s)).filter(|&n| n <= isize::MAX as usize);
+    if layers == 0 || dims.contains(&0) || bytes.is_none() {
         return Err(format!("bad sizes {sizes:?}"));
     }
+    let count = layers * dims.iter().product::<usize>();
     let frame = match header.field("space")?.to_ascii_lowercase().as_str() {
         "left-posterior-superior" | "lps" => Frame::Lps,
         "right-anterior-superior" | "ras" => Frame::Ras,
@@ -337,6 +369,16 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
     let affine: [[f64; 4]; 3] =
         std::array::from_fn(|r| std::array::from_fn(|c| if c < 3 { axes[c][r] } else { origin[r] }));
     check_affine(&affine)?;
+    let affine = match header.fields.get("space units") {
+        Some(text) => {
+            let units: Vec<f64> = text.split_whitespace().map(nrrd_unit_mm).collect::<Result<_, _>>()?;
+            match units[..] {
+                [a, b, c] if a == b && b == c => in_millimetres(affine, a),
+                _ => return Err(format!("'space units' must name one unit for the three axes, got {text}")),
+            }
+        }
+        None => affine,
+    };
     let little = header.fields.get("endian").is_none_or(|e| e == "little");
     let raw = match header.field("encoding")? {
         "raw" => data.to_vec(),
@@ -347,11 +389,11 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
         header.fields.get("byte skip").map_or(Ok(0), |s| s.parse::<i64>()).map_err(|e| format!("byte skip: {e}"))?;
     let raw = match skip {
         0 => &raw[..],
-        -1 => &raw[raw.len().saturating_sub(layers * dims.iter().product::<usize>() * scalar.size())..],
+        -1 => &raw[raw.len().saturating_sub(count * scalar.size())..],
         s if s > 0 && (s as usize) < raw.len() => &raw[s as usize..],
         s => return Err(format!("bad byte skip {s}")),
     };
-    let labels = labels(scalar, raw, layers * dims.iter().product::<usize>(), little)?;
+    let labels = labels(scalar, raw, count, little)?;
     Ok(Labelmap { dims, layers, labels, affine, frame, segments: slicer_segments(&header.pairs)? })
 }
 
@@ -411,7 +453,8 @@ impl Labelmap {
     /// as a mask in the labelmap's world frame, its grid cut to the label's box with one voxel
     /// around. Returns the mask and a description of
     /// the choice ("label 5 ('liver')"). An absent label or name is an error that lists those
-    /// present; a number matching segments of several layers must be chosen by name.
+    /// present; a number matching segments of several layers must be chosen by name, and a name
+    /// that several segments carry is refused.
     pub fn select(&self, choice: &str) -> Result<(VoxelMask, String), MeshError> {
         let choice = choice.trim();
         let present = self.present();
@@ -434,9 +477,18 @@ impl Labelmap {
                 }
             }
         } else {
-            match self.segments.iter().find(|s| s.0.eq_ignore_ascii_case(choice)) {
-                Some(s) => (s.1, s.2),
-                None => {
+            let named: Vec<&(String, usize, i32)> =
+                self.segments.iter().filter(|s| s.0.eq_ignore_ascii_case(choice)).collect();
+            match named[..] {
+                [s] => (s.1, s.2),
+                [_, _, ..] => {
+                    return Err(MeshError::Invalid(format!(
+                        "{} segments are named '{choice}': rename them apart (labels present: {})",
+                        named.len(),
+                        self.present_text()
+                    )))
+                }
+                [] => {
                     return Err(MeshError::Invalid(format!(
                         "no segment is named '{choice}'; labels present: {}",
                         self.present_text()
@@ -770,5 +822,84 @@ mod tests {
         assert!(write("f.nrrd", &[floats.as_bytes(), &values].concat()).contains("not a label"));
         let scanner = header.replace("left-posterior-superior", "scanner-xyz");
         assert!(write("g.nrrd", scanner.as_bytes()).contains("space 'scanner-xyz' is not supported"));
+        // Sizes whose voxels overflow a byte count, and units that are not lengths.
+        let huge = header.replace("sizes: 2 2 2", "sizes: 9223372036854775809 2 1");
+        assert!(write("h.nrrd", huge.as_bytes()).contains("bad sizes"));
+        let seconds = header.replace("encoding", "space units: \"s\" \"s\" \"s\"\nencoding");
+        assert!(write("i.nrrd", seconds.as_bytes()).contains("space unit \"s\" is not supported"));
+        let mixed = header.replace("encoding", "space units: \"mm\" \"m\" \"mm\"\nencoding");
+        assert!(write("j.nrrd", mixed.as_bytes()).contains("one unit for the three axes"));
+    }
+
+    /// The unit a header names (NIfTI's `xyzt_units`, NRRD's `space units`) scales the world to
+    /// millimetres; a NIfTI file naming none is read in mm.
+    #[test]
+    fn the_header_s_unit_is_converted_to_millimetres() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Ras);
+        let path = dir.path().join("u.nii");
+        write_nifti(&path, &map).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let in_metres = |affine: [[f64; 4]; 3]| affine.map(|row| row.map(|x| ((x * 1e-3) as f32) as f64));
+        for (code, scale) in [(0u8, 1.0), (2, 1.0), (1, 1e3), (3, 1e-3)] {
+            let mut bytes = bytes.clone();
+            // Metres and microns: the header's affine in that unit, so that the world is the same.
+            let stored = match code {
+                1 => in_metres(map.affine),
+                3 => map.affine.map(|row| row.map(|x| x * 1e3)),
+                _ => map.affine,
+            };
+            for (r, row) in stored.iter().enumerate() {
+                for (c, x) in row.iter().enumerate() {
+                    bytes[280 + 16 * r + 4 * c..][..4].copy_from_slice(&(*x as f32).to_le_bytes());
+                }
+            }
+            bytes[123] = code | 8;
+            std::fs::write(&path, &bytes).unwrap();
+            let back = read_labelmap(&path).unwrap().affine;
+            let close = back.iter().flatten().zip(map.affine.iter().flatten()).all(|(a, b)| (a - b).abs() < 1e-3);
+            assert!(close, "unit code {code} (×{scale} mm): {back:?}");
+        }
+        let mut seconds = bytes;
+        seconds[123] = 5;
+        std::fs::write(&path, &seconds).unwrap();
+        assert!(read_labelmap(&path).unwrap_err().to_string().contains("spatial unit code 5"));
+        // NRRD in metres: the same world as in mm.
+        let nrrd = dir.path().join("m.nrrd");
+        let metres = Labelmap { affine: in_metres(map.affine), ..map.clone() };
+        write_nrrd(&nrrd, &metres).unwrap();
+        let text = std::fs::read(&nrrd).unwrap();
+        let at = text.windows(10).position(|w| w == b"encoding: ").unwrap();
+        let with_units = [&text[..at], b"space units: \"m\" \"m\" \"m\"\n", &text[at..]].concat();
+        std::fs::write(&nrrd, with_units).unwrap();
+        let back = read_labelmap(&nrrd).unwrap().affine;
+        let close = back.iter().flatten().zip(map.affine.iter().flatten()).all(|(a, b)| (a - b).abs() < 1e-3);
+        assert!(close, "{back:?}");
+    }
+
+    /// A label split into two pieces of similar size is not one organ; a segment name carried
+    /// by two segments is ambiguous.
+    #[test]
+    fn a_label_in_two_similar_pieces_and_a_shared_name_are_refused() {
+        let (mut map, _) = two_balls(Frame::Ras);
+        // The tumour ball relabelled as a second, smaller liver piece: dropped below 20 %.
+        let twice: Vec<i32> = map.labels.iter().map(|&l| if l == 2 { 5 } else { l }).collect();
+        let (mask, _) = Labelmap { labels: twice, ..map.clone() }.select("5").unwrap();
+        let (_, report) = mask_surface(&mask, &ExtractOptions::default()).unwrap();
+        assert_eq!(report.dropped_pieces.len(), 1);
+        // Two balls of the same size, both label 5: refused.
+        let (dims, centres) = ([40, 20, 20], [[10.0, 10.0, 10.0], [30.0, 10.0, 10.0]]);
+        let labels: Vec<i32> = (0..dims[2])
+            .flat_map(|k| (0..dims[1]).flat_map(move |j| (0..dims[0]).map(move |i| [i, j, k].map(|x| x as f64))))
+            .map(|p| if centres.iter().any(|&c| norm(sub(p, c)) <= 6.0) { 5 } else { 0 })
+            .collect();
+        let affine = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
+        let twins = Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new() };
+        let (mask, _) = twins.select("5").unwrap();
+        let e = mask_surface(&mask, &ExtractOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("several pieces of similar size"), "{e}");
+        map.segments.push(("Liver".into(), 0, 2));
+        let e = map.select("liver").unwrap_err().to_string();
+        assert!(e.contains("2 segments are named 'liver'"), "{e}");
     }
 }

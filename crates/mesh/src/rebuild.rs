@@ -29,16 +29,13 @@ use crate::{bounds, MeshError, Point, TriSurface};
 pub struct RebuildOptions {
     /// Voxels along the largest extent (default 150).
     pub voxels_across: usize,
-    /// A second piece of at least this fraction of the largest's voxels means the surface is
-    /// not one organ: refused (default 0.2).
-    pub max_second_piece: f64,
-    /// The extraction's smoothing and decimation.
+    /// The extraction's smoothing and decimation, and the largest second piece it accepts.
     pub extract: ExtractOptions,
 }
 
 impl Default for RebuildOptions {
     fn default() -> Self {
-        RebuildOptions { voxels_across: 150, max_second_piece: 0.2, extract: ExtractOptions::default() }
+        RebuildOptions { voxels_across: 150, extract: ExtractOptions::default() }
     }
 }
 
@@ -166,26 +163,15 @@ pub fn rebuild_surface(
     }
     let voxel = largest / options.voxels_across.max(10) as f64;
     let mask = voxelise_surface(surface, voxel)?;
-    let mut pieces = mask.clone();
-    let sizes = pieces.keep_largest();
-    match sizes[..] {
-        [] => {
-            return Err(MeshError::Invalid(format!(
-                "the surface encloses no volume at {} voxels (flat or open on every side): not an organ",
-                number(voxel)
-            )))
-        }
-        [first, second, ..] if second as f64 >= options.max_second_piece * first as f64 => {
-            let shown: Vec<String> = sizes.iter().take(5).map(|n| n.to_string()).collect();
-            return Err(MeshError::Invalid(format!(
-                "the surface holds several pieces of similar size ({} voxels of {}): keep the organ only",
-                shown.join(", "),
-                number(voxel)
-            )));
-        }
-        _ => {}
+    if !mask.inside.contains(&true) {
+        return Err(MeshError::Invalid(format!(
+            "the surface encloses no volume at {} voxels (flat or open on every side): not an organ",
+            number(voxel)
+        )));
     }
-    let (rebuilt, extract) = mask_surface(&mask, &options.extract)?;
+    // Refused there when it holds several pieces of similar size.
+    let (rebuilt, extract) = mask_surface(&mask, &options.extract)
+        .map_err(|e| MeshError::Invalid(format!("the surface, voxelised at {}: {e}", number(voxel))))?;
     let bvh = SurfaceBvh::new(surface)?;
     let distances: Vec<f64> = rebuilt.vertices.par_iter().map(|&p| bvh.distance(p)).collect();
     let mean_distance = distances.iter().sum::<f64>() / distances.len() as f64;

@@ -82,6 +82,14 @@ fn mrk_json_of_slicer_5_gives_defined_points_with_labels_frame_and_units() {
     assert_eq!((p.frame, p.unit), (Some(Frame::Ras), Some(LengthUnit::Millimetre)));
     assert_eq!(p.points, [[1.0, 2.0, 3.0], [-1.0, -2.0, 3.0]]);
     assert_eq!(p.labels, ["a", ""]);
+    // The unit coded as the schema also allows it: [code, scheme, meaning].
+    let coded = put(
+        dir.path(),
+        "coded.mrk.json",
+        r#"{"markups": [{"coordinateUnits": ["m", "UCUM", "meter"], "controlPoints": [{"position": [0.1, 0.2, 0.3]}]}]}"#,
+    );
+    let p = read_points(coded).unwrap();
+    assert_eq!((p.unit, p.points), (Some(LengthUnit::Metre), vec![[0.1, 0.2, 0.3]]));
 }
 
 #[test]

@@ -198,8 +198,9 @@ struct Registration {
     unit: LengthUnit,
     /// From the frame of clouds and results to the organ's, and back.
     change: FrameChange,
-    /// The organ's frame, when known (that of the files `out` writes).
-    organ_frame: Option<Frame>,
+    /// The organ's frame and the one clouds are given in (`frame`), each when known: the files
+    /// `out` writes are in the clouds' frame, else the organ's.
+    frames: (Option<Frame>, Option<Frame>),
     /// The targets' labels (those of a targets file; none otherwise), for targets.csv.
     labels: Vec<String>,
     /// The method in words (e.g. "FEM, Corotational (Standard elements)").
@@ -282,7 +283,7 @@ impl Registration {
             state: Mutex::new(state),
             unit: units,
             change,
-            organ_frame,
+            frames: (organ_frame, spec.given_frame),
             labels,
             method,
             units: units.to_string(),
@@ -295,7 +296,7 @@ impl Registration {
     /// `displacement`, `surface_residual`, `inliers`, `iterations`, `warnings`, `ms`). With `out`,
     /// a directory, also writes there what `augsim register` writes: organ.vtu (m), targets.csv (in
     /// `units`), summary.json, and for 3D Slicer targets.mrk.json and organ_deformed.vtk (mm), all
-    /// in the organ's frame. Raises ValueError for an array of another shape,
+    /// in the clouds' frame (`frame`; default: the organ's), which they name when known. Raises ValueError for an array of another shape,
     /// AugsimError for a cloud augsim rejects (no point, a NaN) or a failed registration (the
     /// warm start is then kept).
     #[pyo3(signature = (cloud, *, out=None))]
@@ -306,7 +307,7 @@ impl Registration {
             let mut state = locked(&self.state)?;
             let tracked = state.register(&cloud)?;
             if let Some(dir) = &out {
-                write_frame(dir, &state, &self.labels, (self.unit, self.organ_frame), &tracked)?;
+                write_frame(dir, &state, &self.labels, (self.unit, self.frames), &tracked)?;
             }
             Ok(tracked)
         })?;
@@ -363,12 +364,13 @@ impl Registration {
 }
 
 /// Writes one registered cloud as `augsim register` does (organ.vtu, targets.csv in `unit`,
-/// summary.json, and for 3D Slicer targets.mrk.json and organ_deformed.vtk in `frame`).
+/// summary.json, and for 3D Slicer targets.mrk.json and organ_deformed.vtk), in the clouds' frame
+/// of `(organ, given)` frames ([`RunWriter::new`]).
 fn write_frame(
     dir: &std::path::Path,
     registration: &register::Registration,
     labels: &[String],
-    (unit, frame): (LengthUnit, Option<Frame>),
+    (unit, (organ, given)): (LengthUnit, (Option<Frame>, Option<Frame>)),
     tracked: &Tracked,
 ) -> anyhow::Result<()> {
     let outcome = register::FrameOutcome {
@@ -379,9 +381,9 @@ fn write_frame(
         rigid: tracked.rigid.clone(),
         target_std: tracked.target_std.clone(),
     };
-    let mut writer = RunWriter::new(dir, false, unit)?;
+    let mut writer = RunWriter::new(dir, false, unit, (organ, given))?;
     writer.frame(0, "python".into(), registration.organ(), &outcome)?;
-    writer.finish(registration, labels, frame, std::slice::from_ref(&outcome))?;
+    writer.finish(registration, labels, organ, std::slice::from_ref(&outcome))?;
     Ok(())
 }
 

@@ -175,19 +175,26 @@ pub const SMALL_TARGET_EXTENT: f64 = 0.01;
 
 impl Organ {
     /// Stencils of the targets in the organ, and warnings about them. A target outside the organ
-    /// is an error, which names the likely unit mistake when every target lies inside read 1,000
-    /// times smaller or larger; a set of targets whose extent is under [`SMALL_TARGET_EXTENT`] of
-    /// the organ's is warned about.
+    /// is an error, which names the likely mistake when every target lies inside with x and y
+    /// negated (a frame mix-up, RAS and LPS), or read 1,000 times smaller or larger (a unit
+    /// mistake) and spread over at least [`SMALL_TARGET_EXTENT`] of the organ (points merely
+    /// shrunk onto an organ around the origin tell nothing); a set of targets whose extent is
+    /// under [`SMALL_TARGET_EXTENT`] of the organ's is warned about.
     pub fn locate_targets(&self, targets: &[Point]) -> Result<(Vec<Stencil>, Vec<String>)> {
         let organ = self;
+        let (organ_extent, extent) = (diagonal(&organ.mesh().nodes), diagonal(targets));
+        let inside = |moved: Vec<Point>| organ.locate(&moved, "target").is_ok();
         let fits = |scale: f64| {
-            let scaled: Vec<Point> = targets.iter().map(|p| p.map(|x| x * scale)).collect();
-            organ.locate(&scaled, "target").is_ok()
+            let spread = targets.len() < 2 || scale * extent >= SMALL_TARGET_EXTENT * organ_extent;
+            spread && inside(targets.iter().map(|p| p.map(|x| x * scale)).collect())
         };
         let stencils = match organ.locate(targets, "target") {
             Ok(s) => s,
             Err(e) => {
-                let hint = if fits(1e-3) {
+                let hint = if inside(targets.iter().map(|p| [-p[0], -p[1], p[2]]).collect()) {
+                    " (with x and y negated every target lies inside: are they in LPS where the organ is in RAS, \
+                     or the reverse?)"
+                } else if fits(1e-3) {
                     " (read as 1,000 times smaller, every target lies inside: were they given in mm where m were expected?)"
                 } else if fits(1e3) {
                     " (read as 1,000 times larger, every target lies inside: were they given in m where mm were expected?)"
@@ -197,7 +204,6 @@ impl Organ {
                 return Err(RegisterError::Invalid(format!("{e}{hint}")));
             }
         };
-        let (organ_extent, extent) = (diagonal(&organ.mesh().nodes), diagonal(targets));
         let mut warnings = Vec::new();
         if targets.len() > 1 && extent < SMALL_TARGET_EXTENT * organ_extent {
             warnings.push(format!(

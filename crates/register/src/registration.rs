@@ -400,6 +400,22 @@ mod tests {
     }
 
     #[test]
+    fn targets_in_the_other_frame_are_refused_naming_the_frame() {
+        let e = cube_with(vec![[-0.01, -0.02, 0.03], [-0.04, -0.01, 0.02]]).err().expect("targets outside");
+        let message = e.to_string();
+        assert!(message.contains("with x and y negated") && message.contains("LPS"), "{message}");
+        assert!(!message.contains("expected?"), "no unit hint: {message}");
+    }
+
+    /// Targets 30 cm off, read 1,000 times smaller, all fall near the origin, inside the cube:
+    /// that says nothing of their unit.
+    #[test]
+    fn targets_shifted_away_get_no_unit_hint() {
+        let message = cube_with(vec![[0.01, 0.02, 0.33], [0.04, 0.01, 0.32]]).err().expect("outside").to_string();
+        assert!(message.contains("outside the organ") && !message.contains("expected"), "{message}");
+    }
+
+    #[test]
     fn targets_far_outside_in_any_unit_are_refused_without_a_hint() {
         let message = cube_with(vec![[-5.0, 0.0, 0.0]]).err().expect("outside").to_string();
         assert!(message.contains("outside the organ") && !message.contains("expected"), "{message}");

@@ -10,7 +10,8 @@
 //!   before it had one); `# columns = id,x,y,z,ow,ox,oy,oz,vis,sel,lock,label,desc,associatedNodeID`
 //!   names the columns; always millimetres.
 //! - **`.mrk.json`**: 3D Slicer's markups JSON: each markup's `coordinateSystem` (`LPS` when
-//!   absent, as Slicer reads it), `coordinateUnits` (`mm` when absent) and `controlPoints` with
+//!   absent, as Slicer reads it), `coordinateUnits` (`mm` when absent; also coded, `["mm", "UCUM",
+//!   "millimeter"]`) and `controlPoints` with
 //!   their `position`, `label` and `description`; points whose `positionStatus` is `undefined`
 //!   (placeholders not yet placed) are left out. Markups of several frames or units are brought to
 //!   the first's.
@@ -235,9 +236,14 @@ fn read_markup(markup: &Value, m: usize) -> Result<LabelledPoints, String> {
         }
     };
     let frame = text_of("coordinateSystem")?.map_or(Ok(Frame::Lps), str::parse).map_err(|e| format!("{at}: {e}"))?;
-    let unit = text_of("coordinateUnits")?
-        .map_or(Ok(LengthUnit::Millimetre), str::parse)
-        .map_err(|e| format!("{at}: coordinateUnits {e}"))?;
+    // A unit code alone ("mm"), or coded as the schema also allows: [code, scheme, meaning].
+    let unit = match markup.get("coordinateUnits") {
+        Some(Value::Array(coded)) => coded.first().and_then(Value::as_str).map(Some).ok_or_else(|| {
+            format!("{at}.coordinateUnits is {}, not [code, scheme, meaning]", Value::Array(coded.clone()))
+        })?,
+        _ => text_of("coordinateUnits")?,
+    };
+    let unit = unit.map_or(Ok(LengthUnit::Millimetre), str::parse).map_err(|e| format!("{at}: coordinateUnits {e}"))?;
     let mut out = LabelledPoints { frame: Some(frame), unit: Some(unit), ..Default::default() };
     let points = match markup.get("controlPoints") {
         None | Some(Value::Null) => return Ok(out),
