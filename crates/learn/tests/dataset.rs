@@ -126,12 +126,54 @@ fn npy_reads_numpy_f64_and_rejects_bad_files() {
     std::fs::write(&p, b"hello world, this is text").unwrap();
     let e = npy::read_npy(&p).unwrap_err().to_string();
     assert!(e.contains("magic"), "{e}");
-    // Fortran order.
-    std::fs::write(&p, numpy_file("<f8", "True", "(1, 2)", &data)).unwrap();
-    assert!(npy::read_npy(&p).unwrap_err().to_string().contains("Fortran"));
-    // Unsupported dtype.
-    std::fs::write(&p, numpy_file("<i8", "False", "(1, 2)", &data)).unwrap();
-    assert!(npy::read_npy(&p).unwrap_err().to_string().contains("unsupported dtype"));
+    // Unsupported dtypes.
+    for descr in ["<c16", "<f2", "<U3", "O"] {
+        std::fs::write(&p, numpy_file(descr, "False", "(1, 2)", &data)).unwrap();
+        assert!(npy::read_npy(&p).unwrap_err().to_string().contains("unsupported dtype"), "{descr}");
+    }
+}
+
+/// `np.save` of a transposed array writes Fortran order, of big-endian or integer data their
+/// own dtype: each is read back in C order as the same values.
+#[test]
+fn npy_reads_fortran_order_big_endian_and_integers() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("a.npy");
+    // The array [[1, 2, 3], [4, 5, -6]] (shape (2, 3)), in C order.
+    let values = [1.0, 2.0, 3.0, 4.0, 5.0, -6.0];
+    let fortran = [1.0, 4.0, 2.0, 5.0, 3.0, -6.0];
+    let f8 = |v: &[f64], big: bool| -> Vec<u8> {
+        v.iter().flat_map(|x| if big { x.to_be_bytes() } else { x.to_le_bytes() }).collect()
+    };
+    let cases: Vec<(&str, &str, Vec<u8>)> = vec![
+        ("<f8", "True", f8(&fortran, false)),
+        (">f8", "False", f8(&values, true)),
+        (">f8", "True", f8(&fortran, true)),
+        ("<i8", "False", values.iter().flat_map(|&x| (x as i64).to_le_bytes()).collect()),
+        (">i4", "True", fortran.iter().flat_map(|&x| (x as i32).to_be_bytes()).collect()),
+        ("<i2", "False", values.iter().flat_map(|&x| (x as i16).to_le_bytes()).collect()),
+        ("<f4", "True", fortran.iter().flat_map(|&x| (x as f32).to_le_bytes()).collect()),
+    ];
+    for (descr, order, bytes) in cases {
+        std::fs::write(&p, numpy_file(descr, order, "(2, 3)", &bytes)).unwrap();
+        let a = npy::read_npy(&p).unwrap();
+        assert_eq!(a.shape, vec![2, 3], "{descr} {order}");
+        assert_eq!(a.into_f64(), values, "{descr}, Fortran order {order}");
+    }
+    // Three axes in Fortran order: element (i, j, k) at i + 2 j + 4 k.
+    let shape = [2usize, 2, 3];
+    let c_order: Vec<f64> = (0..12).map(f64::from).collect();
+    let mut stored = vec![0.0; 12];
+    for i in 0..2 {
+        for j in 0..2 {
+            for k in 0..3 {
+                stored[i + 2 * j + 4 * k] = c_order[(i * 2 + j) * 3 + k];
+            }
+        }
+    }
+    std::fs::write(&p, numpy_file("<f8", "True", "(2, 2, 3)", &f8(&stored, false))).unwrap();
+    let a = npy::read_npy(&p).unwrap();
+    assert_eq!((a.shape.clone(), a.into_f64()), (shape.to_vec(), c_order));
 }
 
 #[test]

@@ -1,8 +1,10 @@
 //! Minimal NumPy `.npy` reader and writer.
 //!
 //! Writes format version 1.0 with little-endian `<f4` (f32) or `|u1` (u8) data in C order,
-//! readable by `numpy.load`. Reads versions 1.0–3.0 with `<f4`, `<f8`, `|u1`/`<u1` or `|b1`
-//! data in C order; anything else, and any truncation, is a clear error naming the file.
+//! readable by `numpy.load`. Reads versions 1.0–3.0 with float (`f4`, `f8`), integer (`i1`–`i8`,
+//! `u1`–`u8`, read as f64) or bool (`b1`) data in either byte order and in C or Fortran order
+//! (as `np.save` writes a transposed array), given back in C order; anything else, and any
+//! truncation, is a clear error naming the file.
 
 use std::io::Write;
 use std::path::Path;
@@ -17,11 +19,11 @@ const MAGIC: &[u8] = b"\x93NUMPY";
 /// The element data of an `.npy` array.
 #[derive(Clone, Debug, PartialEq)]
 pub enum NpyData {
-    /// `<f4` values.
+    /// `f4` values.
     F32(Vec<f32>),
-    /// `<f8` values.
+    /// `f8` values, or integers wider than a byte or signed.
     F64(Vec<f64>),
-    /// `|u1` values (or `|b1`, stored as 0/1).
+    /// `u1` values (or `b1`, stored as 0/1).
     U8(Vec<u8>),
 }
 
@@ -225,19 +227,82 @@ fn parse_header(header: &str) -> std::result::Result<(String, bool, Vec<usize>),
     Ok((descr, fortran, shape))
 }
 
+/// The type of an element: its kind (`f`, `i`, `u`, `b`), its size in bytes and its byte order.
+struct Element {
+    kind: char,
+    item: usize,
+    big_endian: bool,
+}
+
+/// Parses a `descr` such as `<f8`, `>i4`, `|u1`, `|b1`.
+fn element(descr: &str) -> std::result::Result<Element, String> {
+    let unsupported =
+        || format!("unsupported dtype {descr:?} (expected floats f4/f8, integers i1–i8/u1–u8 or bool b1)");
+    let mut chars = descr.chars();
+    let (order, kind) = (chars.next().ok_or_else(unsupported)?, chars.next().ok_or_else(unsupported)?);
+    let item: usize = chars.as_str().parse().map_err(|_| unsupported())?;
+    let supported = match kind {
+        'f' => matches!(item, 4 | 8),
+        'i' | 'u' => matches!(item, 1 | 2 | 4 | 8),
+        'b' => item == 1,
+        _ => false,
+    };
+    let big_endian = match order {
+        '>' => true,
+        '<' | '|' | '=' => false,
+        _ => return Err(unsupported()),
+    };
+    if !supported {
+        return Err(unsupported());
+    }
+    Ok(Element { kind, item, big_endian })
+}
+
+impl Element {
+    /// The value of one element's bytes.
+    fn value(&self, bytes: &[u8]) -> f64 {
+        let mut b = [0u8; 8];
+        b[..self.item].copy_from_slice(bytes);
+        if self.big_endian {
+            b[..self.item].reverse();
+        }
+        let signed = |bits: u32| (i64::from_le_bytes(b) << (64 - bits)) >> (64 - bits);
+        match (self.kind, self.item) {
+            ('f', 4) => f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+            ('f', _) => f64::from_le_bytes(b),
+            ('i', n) => signed(8 * n as u32) as f64,
+            _ => u64::from_le_bytes(b) as f64,
+        }
+    }
+}
+
+/// The C-order position of each element of an array of `shape` stored in Fortran order.
+fn fortran_to_c(shape: &[usize]) -> Vec<usize> {
+    let count: usize = shape.iter().product();
+    let mut strides = vec![1; shape.len()];
+    for d in 1..shape.len() {
+        strides[d] = strides[d - 1] * shape[d - 1];
+    }
+    (0..count)
+        .map(|c| {
+            // The C-order index `c` as a multi-index, last axis fastest, then its Fortran offset.
+            let mut rest = c;
+            let mut offset = 0;
+            for d in (0..shape.len()).rev() {
+                offset += (rest % shape[d]) * strides[d];
+                rest /= shape[d];
+            }
+            offset
+        })
+        .collect()
+}
+
 fn parse(bytes: &[u8]) -> std::result::Result<NpyArray, String> {
     let (header, data) = split_header(bytes)?;
     let (descr, fortran, shape) = parse_header(header)?;
-    if fortran {
-        return Err("Fortran-ordered arrays are not supported (save with C order)".into());
-    }
     let count: usize = shape.iter().product();
-    let item = match descr.as_str() {
-        "<f4" => 4,
-        "<f8" => 8,
-        "|u1" | "<u1" | "|b1" => 1,
-        other => return Err(format!("unsupported dtype {other:?} (expected '<f4', '<f8', '|u1' or '|b1')")),
-    };
+    let element = element(&descr)?;
+    let item = element.item;
     let needed = count * item;
     if data.len() < needed {
         return Err(format!(
@@ -248,14 +313,12 @@ fn parse(bytes: &[u8]) -> std::result::Result<NpyArray, String> {
     if data.len() > needed {
         return Err(format!("{} trailing bytes after the data of shape {shape:?} ({descr})", data.len() - needed));
     }
-    let data = match item {
-        4 => NpyData::F32(data.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()),
-        8 => NpyData::F64(
-            data.chunks_exact(8)
-                .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
-                .collect(),
-        ),
-        _ => NpyData::U8(data.to_vec()),
+    let order: Vec<usize> = if fortran { fortran_to_c(&shape) } else { (0..count).collect() };
+    let at = |k: usize| &data[k * item..(k + 1) * item];
+    let data = match (element.kind, item) {
+        ('f', 4) => NpyData::F32(order.iter().map(|&k| element.value(at(k)) as f32).collect()),
+        ('u' | 'b', 1) => NpyData::U8(order.iter().map(|&k| data[k]).collect()),
+        _ => NpyData::F64(order.iter().map(|&k| element.value(at(k))).collect()),
     };
     Ok(NpyArray { shape, data })
 }
