@@ -121,6 +121,12 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
     let field = smoothed(&mask);
     let surface = largest_piece(&march(&field, mask.dims, 0.5));
     let extracted_triangles = surface.triangles.len();
+    if extracted_triangles == 0 {
+        // The smoothing before extraction shrinks a piece a few voxels across to nothing.
+        return Err(MeshError::Invalid(format!(
+            "the largest piece, {voxels} voxel(s), is too small to give a surface: not an organ (the wrong label?)"
+        )));
+    }
     let mut surface = TriSurface { vertices: surface.vertices.iter().map(|&p| mask.world(p)).collect(), ..surface };
     surface.orient_outward();
     taubin_smooth(&mut surface, options.smoothing_iterations);
@@ -379,7 +385,7 @@ mod tests {
     }
 
     #[test]
-    fn pieces_and_cavities_are_reported_and_an_empty_mask_refused() {
+    fn pieces_and_cavities_are_reported_and_an_empty_mask_or_a_speck_refused() {
         let big = |p: Point| norm(p) <= 8.0 && norm(p) > 3.0;
         let small = |p: Point| norm(sub(p, [13.0, 0.0, 0.0])) <= 2.0;
         let m = mask([36, 20, 20], [1.0; 3], [-10.0, -10.0, -10.0], |p| big(p) || small(p));
@@ -391,5 +397,8 @@ mod tests {
         assert!((check_closed_manifold(&s).unwrap().volume / exact - 1.0).abs() < 0.05);
         let empty = mask([5; 3], [1.0; 3], [0.0; 3], |_| false);
         assert!(mask_surface(&empty, &ExtractOptions::default()).unwrap_err().to_string().contains("empty"));
+        let speck = mask([5; 3], [1.0; 3], [0.0; 3], |p| p == [2.0; 3]);
+        let e = mask_surface(&speck, &ExtractOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("1 voxel(s), is too small to give a surface"), "{e}");
     }
 }

@@ -125,6 +125,7 @@ pub fn repair_or_rebuild(
     rebuild: &RebuildOptions,
 ) -> Result<(TriSurface, Route), MeshError> {
     crate::repair::check_input(surface, repair)?;
+    refuse_flat(surface)?;
     match repair_surface(surface, repair) {
         Ok((repaired, report)) => Ok((repaired, Route::Local(report))),
         Err(e) => {
@@ -138,18 +139,13 @@ pub fn repair_or_rebuild(
     }
 }
 
-/// The surface rebuilt through voxels (see the module's documentation); `reason` says why.
-/// Refused with a clear error: an empty or flat surface, one that encloses no volume, several
-/// pieces of similar size.
-pub fn rebuild_surface(
-    surface: &TriSurface,
-    reason: String,
-    options: &RebuildOptions,
-) -> Result<(TriSurface, RebuildReport), MeshError> {
+/// Refuses a surface without triangles or flat (its smallest extent under 1/1000 of its
+/// largest: it encloses no organ); returns its largest extent.
+fn refuse_flat(surface: &TriSurface) -> Result<f64, MeshError> {
     let used: Vec<Point> =
         surface.triangles.iter().flatten().filter_map(|&k| surface.vertices.get(k).copied()).collect();
     if used.is_empty() {
-        return Err(MeshError::Invalid("surface has no triangles: nothing to rebuild".into()));
+        return Err(MeshError::Invalid("surface has no triangles: nothing to mesh".into()));
     }
     let largest = largest_extent(surface);
     let (lo, hi) = bounds(&used);
@@ -161,6 +157,18 @@ pub fn rebuild_surface(
             number(smallest)
         )));
     }
+    Ok(largest)
+}
+
+/// The surface rebuilt through voxels (see the module's documentation); `reason` says why.
+/// Refused with a clear error: an empty or flat surface, one that encloses no volume, several
+/// pieces of similar size.
+pub fn rebuild_surface(
+    surface: &TriSurface,
+    reason: String,
+    options: &RebuildOptions,
+) -> Result<(TriSurface, RebuildReport), MeshError> {
+    let largest = refuse_flat(surface)?;
     let voxel = largest / options.voxels_across.max(10) as f64;
     let mask = voxelise_surface(surface, voxel)?;
     if !mask.inside.contains(&true) {
@@ -298,6 +306,9 @@ mod tests {
             triangles: vec![[0, 1, 2], [0, 2, 3]],
         };
         assert!(error(&square).contains("flat"), "{}", error(&square));
+        // Closed, both sides of the square: local repair finds nothing to mend, but no organ.
+        let pillow = TriSurface { triangles: vec![[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]], ..square };
+        assert!(error(&pillow).contains("the surface is flat"), "{}", error(&pillow));
         assert!(error(&TriSurface::default()).contains("no triangles"));
     }
 }
