@@ -15,7 +15,7 @@
 //!
 //! Supported: NIfTI-1 single files (`n+1`), either byte order, gzipped or not, data types u8,
 //! i8, i16, u16, i32, u32, f32, f64, the sform (preferred) or qform affine; NRRD with attached
-//! data, `raw` or `gzip` encoding, the same types, `space` LPS or RAS (or their long names),
+//! data, `raw`, `gzip` or `ascii` encoding, the same types, `space` LPS or RAS (or their long names),
 //! `space directions` and `space origin`, and Slicer's layered segmentations (a first `list`
 //! axis of layers).
 
@@ -380,10 +380,15 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
         None => affine,
     };
     let little = header.fields.get("endian").is_none_or(|e| e == "little");
+    let segments = slicer_segments(&header.pairs)?;
     let raw = match header.field("encoding")? {
+        "ascii" | "text" | "txt" => {
+            let labels = ascii_labels(data, count)?;
+            return Ok(Labelmap { dims, layers, labels, affine, frame, segments });
+        }
         "raw" => data.to_vec(),
         "gzip" | "gz" => gunzip_if_needed(data.to_vec())?,
-        other => return Err(format!("encoding '{other}' is not supported (raw or gzip)")),
+        other => return Err(format!("encoding '{other}' is not supported (raw, gzip or ascii)")),
     };
     let skip =
         header.fields.get("byte skip").map_or(Ok(0), |s| s.parse::<i64>()).map_err(|e| format!("byte skip: {e}"))?;
@@ -394,7 +399,24 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
         s => return Err(format!("bad byte skip {s}")),
     };
     let labels = labels(scalar, raw, count, little)?;
-    Ok(Labelmap { dims, layers, labels, affine, frame, segments: slicer_segments(&header.pairs)? })
+    Ok(Labelmap { dims, layers, labels, affine, frame, segments })
+}
+
+/// The `count` labels of NRRD's ascii encoding: numbers separated by white space.
+fn ascii_labels(data: &[u8], count: usize) -> Result<Vec<i32>, String> {
+    let text = std::str::from_utf8(data).map_err(|_| "ascii data that are not text".to_string())?;
+    let labels = text
+        .split_whitespace()
+        .enumerate()
+        .map(|(i, word)| match word.parse::<f64>() {
+            Ok(x) if x == x.round() && (f64::from(i32::MIN)..=f64::from(i32::MAX)).contains(&x) => Ok(x as i32),
+            _ => Err(format!("voxel {i} holds {word:?}, not a label (a labelmap holds whole numbers)")),
+        })
+        .collect::<Result<Vec<i32>, String>>()?;
+    if labels.len() != count {
+        return Err(format!("the ascii data hold {} values, {count} expected", labels.len()));
+    }
+    Ok(labels)
 }
 
 /// Slicer's segments: `Segment{i}_Name`, `Segment{i}_LabelValue`, `Segment{i}_Layer`.
@@ -829,6 +851,16 @@ mod tests {
         assert!(write("i.nrrd", seconds.as_bytes()).contains("space unit \"s\" is not supported"));
         let mixed = header.replace("encoding", "space units: \"mm\" \"m\" \"mm\"\nencoding");
         assert!(write("j.nrrd", mixed.as_bytes()).contains("one unit for the three axes"));
+        // Ascii data: read as numbers, their count checked.
+        let ascii = header.replace("encoding: raw", "encoding: ascii");
+        let read = |name: &str, data: &str| {
+            let p = dir.path().join(name);
+            std::fs::write(&p, format!("{ascii}{data}")).unwrap();
+            read_labelmap(&p)
+        };
+        assert_eq!(read("k.nrrd", "0 0 0 1\n0 1 1 0\n").unwrap().labels, [0, 0, 0, 1, 0, 1, 1, 0]);
+        assert!(read("l.nrrd", "0 0 1").unwrap_err().to_string().contains("hold 3 values, 8 expected"));
+        assert!(read("m.nrrd", "0 0 1 x 0 0 0 0").unwrap_err().to_string().contains("voxel 3 holds \"x\""));
     }
 
     /// The unit a header names (NIfTI's `xyzt_units`, NRRD's `space units`) scales the world to
