@@ -735,6 +735,11 @@ mod tests {
         (Labelmap { dims, layers: 1, labels, affine, frame, segments }, organ)
     }
 
+    /// Whether two affines agree entry by entry within `tolerance`.
+    fn close(a: &[[f64; 4]; 3], b: &[[f64; 4]; 3], tolerance: f64) -> bool {
+        a.iter().flatten().zip(b.iter().flatten()).all(|(x, y)| (x - y).abs() < tolerance)
+    }
+
     fn centroid(s: &TriSurface) -> Point {
         std::array::from_fn(|d| s.vertices.iter().map(|p| p[d]).sum::<f64>() / s.vertices.len() as f64)
     }
@@ -819,8 +824,7 @@ mod tests {
         std::fs::write(&path, bytes).unwrap();
         let back = read_labelmap(&path).unwrap();
         let expected = [[-0.75, 0.0, 0.0, 1.0], [0.0, -0.875, 0.0, 2.0], [0.0, 0.0, -2.5, 3.0]];
-        let close = back.affine.iter().flatten().zip(expected.iter().flatten()).all(|(a, b)| (a - b).abs() < 1e-6);
-        assert!(close, "{:?}", back.affine);
+        assert!(close(&back.affine, &expected, 1e-6), "{:?}", back.affine);
     }
 
     #[test]
@@ -889,8 +893,7 @@ mod tests {
             bytes[123] = code | 8;
             std::fs::write(&path, &bytes).unwrap();
             let back = read_labelmap(&path).unwrap().affine;
-            let close = back.iter().flatten().zip(map.affine.iter().flatten()).all(|(a, b)| (a - b).abs() < 1e-3);
-            assert!(close, "unit code {code} (×{scale} mm): {back:?}");
+            assert!(close(&back, &map.affine, 1e-3), "unit code {code} (×{scale} mm): {back:?}");
         }
         let mut seconds = bytes;
         seconds[123] = 5;
@@ -905,8 +908,7 @@ mod tests {
         let with_units = [&text[..at], b"space units: \"m\" \"m\" \"m\"\n", &text[at..]].concat();
         std::fs::write(&nrrd, with_units).unwrap();
         let back = read_labelmap(&nrrd).unwrap().affine;
-        let close = back.iter().flatten().zip(map.affine.iter().flatten()).all(|(a, b)| (a - b).abs() < 1e-3);
-        assert!(close, "{back:?}");
+        assert!(close(&back, &map.affine, 1e-3), "{back:?}");
     }
 
     /// A label split into two pieces of similar size is not one organ; a segment name carried
