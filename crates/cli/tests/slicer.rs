@@ -181,7 +181,8 @@ fn a_slicer_users_files_prepare_register_and_come_back_in_their_frame_and_unit()
     let tre = |s: &serde_json::Value| s["tre_mean_mm"].as_f64().unwrap();
     assert!((tre(&slicer) - tre(&metres)).abs() < 0.01, "TRE {} against {} mm", tre(&slicer), tre(&metres));
     let csv = std::fs::read_to_string(d.join("slicer/targets.csv")).unwrap();
-    assert!(csv.starts_with("x0_mm,y0_mm,z0_mm,x_mm,y_mm,z_mm"), "the patient's own unit: {csv}");
+    let own = "# CoordinateSystem = LPS\nx0_mm,y0_mm,z0_mm,x_mm,y_mm,z_mm";
+    assert!(csv.starts_with(own), "the patient's own unit and frame: {csv}");
 
     // The deformed surface: LPS and mm, and on the cloud (closer to it than the organ at rest).
     let (deformed, frame) = mesh::io::read_surface_with_frame(d.join("slicer/organ_deformed.vtk")).unwrap();
