@@ -193,9 +193,18 @@ def test_clouds_and_results_in_another_frame(case, tmp_path):
     ras = augsim.Registration(fem=case["scenario"], targets=targets, units="mm", frame="RAS")
     assert (lps.frame, ras.frame) == ("LPS", "RAS")
     np.testing.assert_allclose(ras.targets, case["rest"] * flip, atol=1e-9)
-    a, b = lps.register(case["cloud"]), ras.register(case["cloud"] * flip)
+    a, b = lps.register(case["cloud"]), ras.register(case["cloud"] * flip, out=tmp_path / "ras")
     np.testing.assert_allclose(b.targets, a.targets * flip, atol=1e-9)
     np.testing.assert_allclose(b.displacement, a.displacement * flip, atol=1e-9)
+    # The files written are in the clouds' frame too, and name it.
+    csv = (tmp_path / "ras" / "targets.csv").read_text().splitlines()
+    assert csv[0] == "# CoordinateSystem = RAS", csv[0]
+    written = np.loadtxt(csv[2:], delimiter=",", usecols=(3, 4, 5))
+    np.testing.assert_allclose(written, b.targets, atol=1e-9)
+    written = json.loads((tmp_path / "ras" / "targets.mrk.json").read_text())["markups"][0]
+    assert written["coordinateSystem"] == "RAS"
+    np.testing.assert_allclose([p["position"] for p in written["controlPoints"]], b.targets, atol=1e-6)
+    assert json.loads((tmp_path / "ras" / "summary.json").read_text())["frame"] == "RAS"
     with pytest.raises(ValueError, match="frame"):
         augsim.Registration(fem=case["scenario"], targets=targets, frame="XYZ")
 
