@@ -78,7 +78,7 @@ fn prediction_on_mesh(
     let u = model
         .field_on_mesh(prediction, &organ)
         .with_context(|| format!("{} on {}", model_path.display(), mesh_path.display()))?;
-    let max = u.chunks(3).map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()).fold(0.0, f64::max);
+    let max = fem::post::max_displacement(&u);
     mesh::io::write_mesh(vtu, &organ, &[mesh::io::Field::point("displacement", 3, u)])
         .with_context(|| format!("writing {}", vtu.display()))?;
     Ok(format!("mesh       {} nodes, max |u| {:.3} mm", organ.num_nodes(), mm(max)))

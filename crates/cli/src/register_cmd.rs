@@ -83,8 +83,10 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     let cloud_path = args.cloud.clone().context("a cloud is required")?;
     let spec = args.registration.spec()?;
     let mut registration = spec.build()?;
+    // The frame its targets file names, read once.
+    let organ_frame = spec.frame()?;
     let mut input =
-        PointInput::new(spec.frame()?, LengthUnit::Metre, spec.given_units).with_given_frame(spec.given_frame);
+        PointInput::new(organ_frame, LengthUnit::Metre, spec.given_units).with_given_frame(spec.given_frame);
     let frames = read_frames(&cloud_path)?;
     let truths = args.truth.as_ref().map(|p| input.read_truths(p, frames.len())).transpose()?;
     println!("method     {}", registration.method());
@@ -93,7 +95,7 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
         eprintln!("warning    {w}");
     }
     let sequence = frames.len() > 1;
-    let mut writer = RunWriter::new(out, sequence, spec.given_units, (spec.frame()?, spec.given_frame))?;
+    let mut writer = RunWriter::new(out, sequence, spec.given_units, (organ_frame, spec.given_frame))?;
     let clouds = frames.iter().map(|f| input.read_cloud(f));
     let mut rigid_printed = false;
     let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, organ, o| {

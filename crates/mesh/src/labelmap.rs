@@ -4,8 +4,8 @@
 //! A labelmap is a 3D grid of integer labels (0 is the background) with the affine map from voxel
 //! indices (i, j, k) to world coordinates in millimetres, read from the header: spacing (voxels
 //! may be anisotropic), orientation and origin, in the unit the header names (NIfTI's
-//! `xyzt_units`, NRRD's `space units`: m, mm or µm; mm when it names none), converted to mm. The world frame is the scanner's, as the file
-//! states it ([`Frame`]): NIfTI's is always RAS (x towards the patient's right, y anterior, z
+//! `xyzt_units`, NRRD's `space units`: m, mm or µm; mm when it names none), converted to mm. The
+//! world frame is the scanner's, as the file states it ([`Frame`]): NIfTI's is always RAS (x towards the patient's right, y anterior, z
 //! superior); NRRD's is its `space` field, LPS for DICOM-derived data and most of
 //! Slicer's files. Points given with the organ (camera, landmarks, targets) must be in this frame.
 //!
@@ -15,9 +15,9 @@
 //!
 //! Supported: NIfTI-1 single files (`n+1`), either byte order, gzipped or not, data types u8,
 //! i8, i16, u16, i32, u32, f32, f64, the sform (preferred) or qform affine; NRRD with attached
-//! data, `raw`, `gzip` or `ascii` encoding, the same types, `space` LPS or RAS (or their long names),
-//! `space directions` and `space origin`, and Slicer's layered segmentations (a first `list`
-//! axis of layers).
+//! data, `raw`, `gzip` or `ascii` encoding, the same types, `space` LPS or RAS (or their long
+//! names), `space directions`, `space origin` and `space units`, and Slicer's layered
+//! segmentations (a first `list` axis of layers).
 
 use std::collections::BTreeMap;
 use std::io::Read;
@@ -96,16 +96,16 @@ fn labels(ty: Scalar, data: &[u8], count: usize, little: bool) -> Result<Vec<i32
     if data.len() < count * size {
         return Err(format!("the data hold {} bytes, {} expected ({count} voxels)", data.len(), count * size));
     }
-    (0..count)
-        .map(|i| {
-            let x = ty.decode(&data[i * size..(i + 1) * size], !little);
-            if x == x.round() && (f64::from(i32::MIN)..=f64::from(i32::MAX)).contains(&x) {
-                Ok(x as i32)
-            } else {
-                Err(format!("voxel {i} holds {x}, not a label (a labelmap holds whole numbers)"))
-            }
-        })
-        .collect()
+    (0..count).map(|i| label(i, ty.decode(&data[i * size..(i + 1) * size], !little))).collect()
+}
+
+/// Voxel `i`'s value `x` as a label (a labelmap holds whole numbers).
+fn label(i: usize, x: f64) -> Result<i32, String> {
+    if x == x.round() && (f64::from(i32::MIN)..=f64::from(i32::MAX)).contains(&x) {
+        Ok(x as i32)
+    } else {
+        Err(format!("voxel {i} holds {x}, not a label (a labelmap holds whole numbers)"))
+    }
 }
 
 /// Parses a NIfTI-1 single file (header, then the voxels at `vox_offset`).
@@ -343,8 +343,8 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
         _ => return Err(format!("expected a 3D volume (or layers of one), got sizes {sizes:?}")),
     };
     // The bytes of the voxels must be countable (a corrupt header may overflow them).
-    let bytes = sizes.iter().try_fold(scalar.size(), |n, &s| n.checked_mul(s)).filter(|&n| n <= isize::MAX as usize);
-    if layers == 0 || dims.contains(&0) || bytes.is_none() {
+    let bytes = sizes.iter().try_fold(scalar.size(), |n, &s| n.checked_mul(s));
+    if layers == 0 || dims.contains(&0) || bytes.is_none_or(|n| n > isize::MAX as usize) {
         return Err(format!("bad sizes {sizes:?}"));
     }
     let count = layers * dims.iter().product::<usize>();
@@ -408,9 +408,9 @@ fn ascii_labels(data: &[u8], count: usize) -> Result<Vec<i32>, String> {
     let labels = text
         .split_whitespace()
         .enumerate()
-        .map(|(i, word)| match word.parse::<f64>() {
-            Ok(x) if x == x.round() && (f64::from(i32::MIN)..=f64::from(i32::MAX)).contains(&x) => Ok(x as i32),
-            _ => Err(format!("voxel {i} holds {word:?}, not a label (a labelmap holds whole numbers)")),
+        .map(|(i, word)| {
+            let x = word.parse::<f64>().map_err(|_| format!("voxel {i} holds {word:?}, not a number"))?;
+            label(i, x)
         })
         .collect::<Result<Vec<i32>, String>>()?;
     if labels.len() != count {

@@ -9,7 +9,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use mesh::io::write_atomic;
+use mesh::io::{write_atomic, Scalar};
 
 use crate::fsutil::read;
 use crate::{LearnError, Result};
@@ -227,51 +227,42 @@ fn parse_header(header: &str) -> std::result::Result<(String, bool, Vec<usize>),
     Ok((descr, fortran, shape))
 }
 
-/// The type of an element: its kind (`f`, `i`, `u`, `b`), its size in bytes and its byte order.
-struct Element {
-    kind: char,
-    item: usize,
-    big_endian: bool,
-}
-
-/// Parses a `descr` such as `<f8`, `>i4`, `|u1`, `|b1`.
-fn element(descr: &str) -> std::result::Result<Element, String> {
+/// The scalar type and byte order (big-endian or not) of a `descr` such as `<f8`, `>i4`, `|u1`
+/// or `|b1` (a bool is read as a u1).
+fn element(descr: &str) -> std::result::Result<(Scalar, bool), String> {
     let unsupported =
         || format!("unsupported dtype {descr:?} (expected floats f4/f8, integers i1–i8/u1–u8 or bool b1)");
-    let mut chars = descr.chars();
-    let (order, kind) = (chars.next().ok_or_else(unsupported)?, chars.next().ok_or_else(unsupported)?);
-    let item: usize = chars.as_str().parse().map_err(|_| unsupported())?;
-    let supported = match kind {
-        'f' => matches!(item, 4 | 8),
-        'i' | 'u' => matches!(item, 1 | 2 | 4 | 8),
-        'b' => item == 1,
-        _ => false,
-    };
-    let big_endian = match order {
-        '>' => true,
-        '<' | '|' | '=' => false,
+    let (order, ty) = (descr.get(..1).unwrap_or_default(), descr.get(1..).unwrap_or_default());
+    let scalar = match ty {
+        "f4" => Scalar::F32,
+        "f8" => Scalar::F64,
+        "i1" => Scalar::I8,
+        "i2" => Scalar::I16,
+        "i4" => Scalar::I32,
+        "i8" => Scalar::I64,
+        "u1" | "b1" => Scalar::U8,
+        "u2" => Scalar::U16,
+        "u4" => Scalar::U32,
+        "u8" => Scalar::U64,
         _ => return Err(unsupported()),
     };
-    if !supported {
-        return Err(unsupported());
+    match order {
+        ">" => Ok((scalar, true)),
+        "<" | "|" | "=" => Ok((scalar, false)),
+        _ => Err(unsupported()),
     }
-    Ok(Element { kind, item, big_endian })
 }
 
-impl Element {
-    /// The value of one element's bytes.
-    fn value(&self, bytes: &[u8]) -> f64 {
-        let mut b = [0u8; 8];
-        b[..self.item].copy_from_slice(bytes);
-        if self.big_endian {
-            b[..self.item].reverse();
+impl NpyData {
+    /// The values taken in `order` (the position of each one in `self`).
+    fn reordered(self, order: &[usize]) -> NpyData {
+        fn pick<T: Copy>(v: &[T], order: &[usize]) -> Vec<T> {
+            order.iter().map(|&k| v[k]).collect()
         }
-        let signed = |bits: u32| (i64::from_le_bytes(b) << (64 - bits)) >> (64 - bits);
-        match (self.kind, self.item) {
-            ('f', 4) => f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
-            ('f', _) => f64::from_le_bytes(b),
-            ('i', n) => signed(8 * n as u32) as f64,
-            _ => u64::from_le_bytes(b) as f64,
+        match self {
+            NpyData::F32(v) => NpyData::F32(pick(&v, order)),
+            NpyData::F64(v) => NpyData::F64(pick(&v, order)),
+            NpyData::U8(v) => NpyData::U8(pick(&v, order)),
         }
     }
 }
@@ -301,8 +292,8 @@ fn parse(bytes: &[u8]) -> std::result::Result<NpyArray, String> {
     let (header, data) = split_header(bytes)?;
     let (descr, fortran, shape) = parse_header(header)?;
     let count: usize = shape.iter().product();
-    let element = element(&descr)?;
-    let item = element.item;
+    let (scalar, big_endian) = element(&descr)?;
+    let item = scalar.size();
     let needed = count * item;
     if data.len() < needed {
         return Err(format!(
@@ -313,12 +304,23 @@ fn parse(bytes: &[u8]) -> std::result::Result<NpyArray, String> {
     if data.len() > needed {
         return Err(format!("{} trailing bytes after the data of shape {shape:?} ({descr})", data.len() - needed));
     }
-    let order: Vec<usize> = if fortran { fortran_to_c(&shape) } else { (0..count).collect() };
-    let at = |k: usize| &data[k * item..(k + 1) * item];
-    let data = match (element.kind, item) {
-        ('f', 4) => NpyData::F32(order.iter().map(|&k| element.value(at(k)) as f32).collect()),
-        ('u' | 'b', 1) => NpyData::U8(order.iter().map(|&k| data[k]).collect()),
-        _ => NpyData::F64(order.iter().map(|&k| element.value(at(k))).collect()),
+    let data = match scalar {
+        Scalar::F32 => NpyData::F32(
+            data.chunks_exact(4)
+                .map(|c| {
+                    let b = [c[0], c[1], c[2], c[3]];
+                    if big_endian {
+                        f32::from_be_bytes(b)
+                    } else {
+                        f32::from_le_bytes(b)
+                    }
+                })
+                .collect(),
+        ),
+        Scalar::U8 => NpyData::U8(data.to_vec()),
+        _ => NpyData::F64(data.chunks_exact(item).map(|c| scalar.decode(c, big_endian)).collect()),
     };
+    // Fortran order stores the first axis fastest: taken back into C order.
+    let data = if fortran { data.reordered(&fortran_to_c(&shape)) } else { data };
     Ok(NpyArray { shape, data })
 }
