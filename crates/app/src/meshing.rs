@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
-use mesh::io::Field;
+use mesh::io::{Field, Frame};
 use mesh::isosurface::ExtractOptions;
 use mesh::labelmap::{is_labelmap, read_labelmap_surface};
 use mesh::length::{mm, LengthUnit, UnitOrAuto};
@@ -46,6 +46,9 @@ pub struct Meshed {
     pub mesh: Mesh,
     /// The volume of the domain it meshes (the phantom's or the surface's), when known.
     pub reference_volume: Option<f64>,
+    /// The frame its input names (a labelmap's, a surface's `SPACE=` header), which the mesh is
+    /// in; `None` when it names none or the mesh was fitted to a length.
+    pub frame: Option<Frame>,
     /// What was done on the way, each a topic (`labelmap`, `repair`, `warning`, `units`) and a
     /// line, in order.
     pub notes: Vec<(&'static str, String)>,
@@ -54,17 +57,17 @@ pub struct Meshed {
 /// Meshes the organ of `options`.
 pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
     let mut notes = Vec::new();
-    let (mesh, reference_volume) = match (&options.surface, options.immersed) {
+    let (mesh, reference_volume, frame) = match (&options.surface, options.immersed) {
         (None, None) => {
             let spec = PhantomSpec::default();
-            (spec.mesh(options.tets)?, Some(spec.volume()))
+            (spec.mesh(options.tets)?, Some(spec.volume()), None)
         }
         (None, Some(h)) => {
             let spec = PhantomSpec::default();
-            (spec.immersed(h)?.mesh, Some(spec.volume()))
+            (spec.immersed(h)?.mesh, Some(spec.volume()), None)
         }
         (Some(path), immersed) => {
-            let surface = organ_surface(path, options, &mut notes)?;
+            let (surface, frame) = organ_surface(path, options, &mut notes)?;
             let volume = Some(surface.enclosed_volume().abs());
             let mesh = match immersed {
                 None => {
@@ -77,23 +80,28 @@ pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
                     mesh::immersed::immersed_surface(&surface, &opts)?.mesh
                 }
             };
-            (mesh, volume)
+            (mesh, volume, frame)
         }
     };
-    Ok(Meshed { mesh, reference_volume, notes })
+    Ok(Meshed { mesh, reference_volume, frame, notes })
 }
 
 /// Reads a surface, repairs it unless told not to, and brings it to metres: fitted to `length`
 /// when given, otherwise scaled from its unit (given or detected) about the origin. A labelmap's
-/// label is extracted instead, in millimetres.
-fn organ_surface(path: &Path, options: &MeshOptions, notes: &mut Vec<(&'static str, String)>) -> Result<TriSurface> {
+/// label is extracted instead, in millimetres. With it, the frame it is in (see
+/// [`Meshed::frame`]).
+fn organ_surface(
+    path: &Path,
+    options: &MeshOptions,
+    notes: &mut Vec<(&'static str, String)>,
+) -> Result<(TriSurface, Option<Frame>)> {
     if is_labelmap(path) {
         return labelmap_surface(path, options, notes);
     }
     if options.label.is_some() {
         bail!("--label chooses a label of a labelmap (.nii, .nii.gz, .nrrd, .seg.nrrd), not of {}", path.display());
     }
-    let mut surface = mesh::io::read_surface(path)?;
+    let (mut surface, frame) = mesh::io::read_surface_with_frame(path)?;
     let extent = largest_extent(&surface);
     let unit = match (options.length, options.units) {
         (Some(_), _) => None,
@@ -121,12 +129,16 @@ fn organ_surface(path: &Path, options: &MeshOptions, notes: &mut Vec<(&'static s
             surface.transform([0.0; 3], unit.metres());
         }
     }
-    Ok(surface)
+    Ok((surface, frame.filter(|_| options.length.is_none())))
 }
 
 /// The closed surface of a labelmap's label, in metres (from the file's millimetres, in its
-/// scanner frame), or fitted to `length`.
-fn labelmap_surface(path: &Path, options: &MeshOptions, notes: &mut Vec<(&'static str, String)>) -> Result<TriSurface> {
+/// scanner frame, which comes with it), or fitted to `length` (no frame).
+fn labelmap_surface(
+    path: &Path,
+    options: &MeshOptions,
+    notes: &mut Vec<(&'static str, String)>,
+) -> Result<(TriSurface, Option<Frame>)> {
     if options.units == Some(LengthUnit::Metre) {
         bail!("{} is a labelmap, whose unit is the millimetre: leave out --units m", path.display());
     }
@@ -136,13 +148,14 @@ fn labelmap_surface(path: &Path, options: &MeshOptions, notes: &mut Vec<(&'stati
     match options.length {
         Some(l) => {
             surface.fit_to(l)?;
+            Ok((surface, None))
         }
         None => {
             notes.push(("units", format!("mm (the labelmap's); frame {} kept", organ.frame.name())));
             surface.transform([0.0; 3], LengthUnit::Millimetre.metres());
+            Ok((surface, Some(organ.frame)))
         }
     }
-    Ok(surface)
 }
 
 /// An immersed grid's organ volume (each cell's volume times its volume fraction; 1 where the
@@ -153,14 +166,24 @@ pub fn immersed_fill(mesh: &Mesh) -> (f64, usize) {
     (organ, fraction.iter().filter(|&&f| f < 1.0).count())
 }
 
-/// Writes the mesh with its regions (point data `region_<name>`, or Gmsh physical groups) and,
-/// for an immersed grid, its cells' volume fractions (not in `.msh`); to .stl or .obj, its
-/// boundary surface. The directory is created.
-pub fn write_mesh_file(path: &Path, mesh: &Mesh) -> Result<()> {
+/// Writes the mesh in metres with its regions (point data `region_<name>`, or Gmsh physical
+/// groups) and, for an immersed grid, its cells' volume fractions (not in `.msh`); to .stl or
+/// .obj, its boundary surface in millimetres, as 3D Slicer and surface tools read them, an STL
+/// naming `frame` in its header when known. The directory is created. Returns what was written,
+/// in words.
+pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result<String> {
     let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let context = || format!("writing {}", path.display());
     if extension == "stl" || extension == "obj" {
-        let surface = mesh::boundary_surface(mesh).compacted();
-        return mesh::io::write_surface(path, &surface).with_context(|| format!("writing {}", path.display()));
+        let mut surface = mesh::boundary_surface(mesh).compacted();
+        surface.vertices.iter_mut().for_each(|v| *v = LengthUnit::Millimetre.point_from_metres(*v));
+        let frame = frame.filter(|_| extension == "stl");
+        match frame {
+            Some(frame) => mesh::io::write_surface_in_frame(path, &surface, frame).with_context(context)?,
+            None => mesh::io::write_surface(path, &surface).with_context(context)?,
+        }
+        let named = frame.map_or(String::new(), |f| format!(", frame {f} named"));
+        return Ok(format!("its boundary surface, in mm{named}"));
     }
     let fields: Vec<Field> = match &mesh.cell_fraction {
         Some(f) if extension != "msh" => vec![Field::cell("volume_fraction", 1, f.clone())],
@@ -169,7 +192,8 @@ pub fn write_mesh_file(path: &Path, mesh: &Mesh) -> Result<()> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    mesh::io::write_mesh(path, mesh, &fields).with_context(|| format!("writing {}", path.display()))
+    mesh::io::write_mesh(path, mesh, &fields).with_context(context)?;
+    Ok("in m".into())
 }
 
 impl Meshed {
@@ -239,7 +263,7 @@ mod tests {
         assert!(report[3].starts_with("volume     ") && report[3].contains("domain"), "{report:?}");
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("grid/organ.vtu");
-        write_mesh_file(&path, &meshed.mesh).unwrap();
+        assert_eq!(write_mesh_file(&path, &meshed.mesh, meshed.frame).unwrap(), "in m");
         let (_, fields) = mesh::io::read_mesh_with_fields(&path).unwrap();
         assert!(fields.iter().any(|f| f.name == "volume_fraction"));
     }
@@ -259,5 +283,39 @@ mod tests {
         assert!(meshed.notes.iter().any(|(topic, line)| *topic == "units" && line.starts_with("mm (detected")));
         let labelled = MeshOptions { label: Some("5".into()), ..options };
         assert!(mesh_organ(&labelled).unwrap_err().to_string().contains("--label chooses a label of a labelmap"));
+    }
+
+    #[test]
+    fn a_mesh_gives_back_its_boundary_surface_in_millimetres_in_the_frame_its_input_names() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut ball = mesh::generate::icosphere(40.0, 2);
+        ball.transform([60.0, -120.0, -30.0], 1.0);
+        let path = dir.path().join("ball_lps.stl");
+        mesh::io::write_surface_in_frame(&path, &ball, Frame::Lps).unwrap();
+        let options = MeshOptions { surface: Some(path), repair: false, ..phantom(None) };
+        let meshed = mesh_organ(&options).unwrap();
+        assert_eq!(meshed.frame, Some(Frame::Lps));
+        let out = dir.path().join("out.stl");
+        assert_eq!(
+            write_mesh_file(&out, &meshed.mesh, meshed.frame).unwrap(),
+            "its boundary surface, in mm, frame LPS named"
+        );
+        let (back, frame) = mesh::io::read_surface_with_frame(&out).unwrap();
+        assert_eq!(frame, Some(Frame::Lps));
+        let (lo, hi) = mesh::bounds(&back.vertices);
+        for k in 0..3 {
+            let centre = [-60.0, 120.0, 30.0][k];
+            assert!(
+                (hi[k] - lo[k] - 80.0).abs() < 8.0 && ((hi[k] + lo[k]) / 2.0 - centre).abs() < 1.0,
+                "{lo:?} {hi:?}"
+            );
+        }
+        // Fitted to a length, it is no longer where its input was: no frame named.
+        let fitted = mesh_organ(&MeshOptions { length: Some(0.1), ..options }).unwrap();
+        assert_eq!(fitted.frame, None);
+        let obj = dir.path().join("out.obj");
+        assert_eq!(write_mesh_file(&obj, &fitted.mesh, fitted.frame).unwrap(), "its boundary surface, in mm");
+        let extent = largest_extent(&mesh::io::read_surface(&obj).unwrap());
+        assert!((extent - 100.0).abs() < 1.0, "{extent}");
     }
 }

@@ -295,6 +295,7 @@ pub fn write_targets_for_slicer(
             .collect(),
         frame,
         unit: Some(millimetres),
+        ..Default::default()
     };
     Ok(write_markups_json(path, &points)?)
 }

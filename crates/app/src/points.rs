@@ -34,12 +34,14 @@ pub struct PointInput {
     pub given_frame: Option<Frame>,
     /// What named the working frame when the organ did not: a file, or `--frame`.
     named_by: Option<String>,
+    /// What the files read hold that was left out (control points not placed), a line each.
+    pub warnings: Vec<String>,
 }
 
 impl PointInput {
     /// An input into `frame` (when known) and `unit`, files naming no unit being in `given`.
     pub fn new(frame: Option<Frame>, unit: LengthUnit, given: LengthUnit) -> PointInput {
-        PointInput { frame, unit, given, given_frame: None, named_by: None }
+        PointInput { frame, unit, given, given_frame: None, named_by: None, warnings: Vec::new() }
     }
 
     /// The same input, files that name no frame being in `frame` (`None`: the working frame).
@@ -57,6 +59,7 @@ impl PointInput {
     /// frame when there was none); an error when the organ names no frame and they name another
     /// than the file that gave the working frame.
     fn place(&mut self, path: &Path, mut points: LabelledPoints) -> Result<LabelledPoints> {
+        self.warnings.extend(unplaced_warning(path, &points));
         let namer = match (points.frame, self.given_frame) {
             (Some(_), _) => path.display().to_string(),
             (None, Some(given)) => format!("--frame {given}"),
@@ -106,11 +109,17 @@ impl PointInput {
 
 /// The rest positions of a targets file (CSV, `.fcsv`, `.mrk.json`) in metres: in the unit the
 /// file names, else in `unit`; as they are in their own frame (which is the working frame: see
-/// [`TargetsSpec::frame`](crate::registration::TargetsSpec::frame)).
-pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<Vec<Point>> {
+/// [`TargetsSpec::frame`](crate::registration::TargetsSpec::frame)). With them, the warning
+/// naming its control points left out as not placed, if any.
+pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<(Vec<Point>, Option<String>)> {
     let points = read_points(path)?;
     let unit = points.unit.unwrap_or(unit);
-    Ok(points.points.iter().map(|&p| unit.point_to_metres(p)).collect())
+    Ok((points.points.iter().map(|&p| unit.point_to_metres(p)).collect(), unplaced_warning(path, &points)))
+}
+
+/// The warning that `points`, read from `path`, left out control points not placed.
+fn unplaced_warning(path: &Path, points: &LabelledPoints) -> Option<String> {
+    points.unplaced_warning().map(|w| format!("{}: {w}", path.display()))
 }
 
 #[cfg(test)]
@@ -123,13 +132,20 @@ mod tests {
         let ras = dir.path().join("cloud.mrk.json");
         std::fs::write(
             &ras,
-            r#"{"markups": [{"coordinateSystem": "RAS", "controlPoints": [{"label": "p", "position": [10, 20, 30]}]}]}"#,
+            r#"{"markups": [{"coordinateSystem": "RAS", "controlPoints": [{"label": "p", "position": [10, 20, 30]},
+                {"label": "q", "position": [0, 0, 0], "positionStatus": "undefined"}]}]}"#,
         )
         .unwrap();
+        let unplaced = format!(
+            "{}: 1 control point not placed in 3D Slicer (positionStatus undefined) is left out: q",
+            ras.display()
+        );
+        assert_eq!(read_targets(&ras, LengthUnit::Metre).unwrap(), (vec![[0.01, 0.02, 0.03]], Some(unplaced.clone())));
         let plain = dir.path().join("truth.csv");
         std::fs::write(&plain, "x,y,z\n1,2,3\n").unwrap();
         let mut input = PointInput::new(Some(Frame::Lps), LengthUnit::Metre, LengthUnit::Millimetre);
         assert_eq!(input.read_cloud(&ras).unwrap(), [[-0.01, -0.02, 0.03]]);
+        assert_eq!(input.warnings, [unplaced], "the placeholder left out, said");
         assert_eq!(input.read(&plain).unwrap().points, [[1e-3, 2e-3, 3e-3]], "no named unit: the given one");
         // No working frame: the first file to name one gives it.
         let mut input = PointInput::new(None, LengthUnit::Millimetre, LengthUnit::Millimetre);
@@ -162,7 +178,7 @@ mod tests {
         std::fs::write(&empty, "x,y,z\n").unwrap();
         assert!(input.read_cloud(&empty).is_err());
         std::fs::write(&plain, "label,x_mm,y_mm,z_mm\nT,1,2,3\n").unwrap();
-        assert_eq!(read_targets(&plain, LengthUnit::Metre).unwrap(), [[1e-3, 2e-3, 3e-3]], "the named unit wins");
+        assert_eq!(read_targets(&plain, LengthUnit::Metre).unwrap().0, [[1e-3, 2e-3, 3e-3]], "the named unit wins");
     }
 
     #[test]

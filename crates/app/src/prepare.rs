@@ -283,6 +283,7 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
         (None, Some(f)) => format!("frame: {f} (named by the points' files; the surface's header names none)"),
         (None, None) => "frame: not named by any input (SPACE= header, .fcsv, .mrk.json): all taken as given".into(),
     });
+    lines.extend(input.warnings.iter().map(|w| format!("warning: {w}")));
     Ok(Inputs { surface, unit, landmarks, targets, camera, frame })
 }
 

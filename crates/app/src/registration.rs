@@ -464,10 +464,10 @@ impl RegistrationSpec {
     /// iteration budgets of the built-in registration case's network method.
     pub fn build(&self) -> Result<Registration> {
         let Loaded { organ, deformer, method, options } = self.method.load(self.options.as_ref())?;
-        let targets = match &self.targets {
-            TargetsSpec::Regions => region_targets(organ.mesh()),
+        let (targets, unplaced) = match &self.targets {
+            TargetsSpec::Regions => (region_targets(organ.mesh()), None),
             TargetsSpec::File(path) => crate::points::read_targets(path, self.units)?,
-            TargetsSpec::Points(points) => points.iter().map(|&p| self.units.point_to_metres(p)).collect(),
+            TargetsSpec::Points(points) => (points.iter().map(|&p| self.units.point_to_metres(p)).collect(), None),
         };
         if targets.is_empty() {
             anyhow::bail!("no targets: give a targets file, or a mesh with `markers` or `tumour` regions");
@@ -482,7 +482,9 @@ impl RegistrationSpec {
             TargetsSpec::File(path) => format!("the targets of {}", path.display()),
             _ => "the targets".into(),
         };
-        Registration::new(organ, deformer, method, targets, options).with_context(|| what)
+        let mut registration = Registration::new(organ, deformer, method, targets, options).with_context(|| what)?;
+        unplaced.into_iter().for_each(|w| registration.warn(w));
+        Ok(registration)
     }
 
     /// The frame the registration works in: the one its targets file names (see
@@ -642,6 +644,27 @@ mod tests {
         assert!(!flips(spec(TargetsSpec::Regions, Some(Frame::Lps))), "the organ names no frame");
         assert_eq!(TargetsSpec::Regions.frame().unwrap(), None);
         assert!(TargetsSpec::File(dir.path().join("missing.csv")).frame().is_err());
+    }
+
+    #[test]
+    fn control_points_left_out_as_not_placed_are_said_among_the_registrations_warnings() {
+        let dir = tempfile::tempdir().unwrap();
+        let targets = dir.path().join("targets.mrk.json");
+        std::fs::write(
+            &targets,
+            r#"{"markups": [{"coordinateUnits": "mm", "controlPoints": [{"label": "T-1", "position": [2500, 500, 500]},
+                {"label": "T-2", "position": [0, 0, 0], "positionStatus": "undefined"}]}]}"#,
+        )
+        .unwrap();
+        let registration =
+            RegistrationSpec::new(MethodSpec::fem("beam"), TargetsSpec::File(targets.clone())).build().unwrap();
+        assert_eq!(registration.targets(), [[2.5, 0.5, 0.5]]);
+        let said = format!("{}: 1 control point not placed in 3D Slicer", targets.display());
+        assert!(
+            registration.warnings().iter().any(|w| w.starts_with(&said) && w.ends_with(": T-2")),
+            "{:?}",
+            registration.warnings()
+        );
     }
 
     #[test]

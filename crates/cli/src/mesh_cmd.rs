@@ -17,7 +17,7 @@ pub fn run(options: &MeshOptions, output: &Path) -> Result<()> {
     }
     meshed.report()?.iter().for_each(|l| println!("{l}"));
     println!("time       {:.1} ms", elapsed.as_secs_f64() * 1e3);
-    write_mesh_file(output, &meshed.mesh)?;
-    println!("wrote      {}", output.display());
+    let written = write_mesh_file(output, &meshed.mesh, meshed.frame)?;
+    println!("wrote      {} ({written})", output.display());
     Ok(())
 }

@@ -110,6 +110,9 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
         }
         Ok(())
     })?;
+    for w in &input.warnings {
+        eprintln!("warning    {w}");
+    }
     let labels = spec.target_labels()?;
     let summary = writer.finish(&registration, &labels, input.frame, &outcomes)?;
     print_lines(&run_lines(&outcomes, &summary));

@@ -5,9 +5,7 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use augsim_mesh::io::points::{
-    read_points, read_points_csv, write_fcsv, write_markups_json, write_points, LabelledPoints,
-};
+use augsim_mesh::io::points::{read_points, read_points_csv, write_fcsv, write_points, LabelledPoints};
 use augsim_mesh::io::{
     read_surface, read_surface_with_frame, read_vertices, surface_frame, write_surface, write_surface_in_frame, Frame,
 };
@@ -68,6 +66,11 @@ fn mrk_json_of_slicer_5_gives_defined_points_with_labels_frame_and_units() {
     let p = read_points(slicer("targets.mrk.json")).unwrap();
     assert_eq!(p.points, [[-70.25, -160.5, -101.0], [-55.0, -150.125, -112.5], [-80.0, -140.75, -95.5]]);
     assert_eq!(p.labels, ["tumour", "portal bifurcation", "hepatic vein"], "the undefined F-3 is left out");
+    assert_eq!(p.unplaced, ["F-3"]);
+    assert_eq!(
+        p.unplaced_warning().unwrap(),
+        "1 control point not placed in 3D Slicer (positionStatus undefined) is left out: F-3"
+    );
     assert_eq!(p.descriptions, ["segment VIII", "", ""]);
     assert_eq!((p.frame, p.unit), (Some(Frame::Lps), Some(LengthUnit::Millimetre)));
     // The documentation's minimal file: no units (millimetres), several markups brought to the first's frame.
@@ -76,12 +79,23 @@ fn mrk_json_of_slicer_5_gives_defined_points_with_labels_frame_and_units() {
         dir.path(),
         "two.mrk.json",
         r#"{"markups": [{"type": "Fiducial", "coordinateSystem": "RAS", "controlPoints": [{"label": "a", "position": [1, 2, 3]}]},
-                       {"type": "Fiducial", "coordinateSystem": "LPS", "coordinateUnits": "m", "controlPoints": [{"position": [0.001, 0.002, 0.003]}]}]}"#,
+                       {"type": "Fiducial", "coordinateSystem": "LPS", "coordinateUnits": "m", "controlPoints": [{"position": [0.001, 0.002, 0.003]},
+                         {"position": [0, 0, 0], "positionStatus": "undefined"}]}]}"#,
     );
     let p = read_points(two).unwrap();
     assert_eq!((p.frame, p.unit), (Some(Frame::Ras), Some(LengthUnit::Millimetre)));
     assert_eq!(p.points, [[1.0, 2.0, 3.0], [-1.0, -2.0, 3.0]]);
     assert_eq!(p.labels, ["a", ""]);
+    assert_eq!(p.unplaced, ["markups[1].controlPoints[1]"], "an unlabelled placeholder named by its place");
+    // Microns, which Slicer's schema allows beside millimetres.
+    let um = put(
+        dir.path(),
+        "um.mrk.json",
+        r#"{"markups": [{"coordinateUnits": "um", "controlPoints": [{"position": [1500, -20, 3]}]}]}"#,
+    );
+    let p = read_points(um).unwrap();
+    assert_eq!(p.unplaced_warning(), None);
+    assert_eq!((p.unit, p.points), (Some(LengthUnit::Millimetre), vec![[1.5, -0.02, 0.003]]));
     // The unit coded as the schema also allows it: [code, scheme, meaning].
     let coded = put(
         dir.path(),
@@ -118,23 +132,30 @@ fn labels_descriptions_frame_and_unit_round_trip_through_every_points_format() {
     let dir = tempfile::tempdir().unwrap();
     let mut points = read_points(slicer("targets.mrk.json")).unwrap();
     points.descriptions[1] = "sigma 1.25 mm, \"calibrated\"".into();
+    // What is written is the placed points.
+    points.unplaced.clear();
     for name in ["out.mrk.json", "out.fcsv", "out.csv"] {
         let path = dir.path().join(name);
         write_points(&path, &points).unwrap();
         assert_eq!(read_points(&path).unwrap(), points, "{name}");
     }
-    // Metres are written as such in JSON and CSV, and as millimetres in .fcsv.
+    // Metres are written as such in CSV, and as millimetres in Slicer's files (its markups schema
+    // knows mm and um only).
     points.convert(Some(Frame::Ras), LengthUnit::Metre, LengthUnit::Metre);
-    let json = dir.path().join("m.mrk.json");
-    write_markups_json(&json, &points).unwrap();
-    assert_eq!(read_points(&json).unwrap(), points);
-    let fcsv = dir.path().join("m.fcsv");
-    write_fcsv(&fcsv, &points).unwrap();
-    let mut back = read_points(&fcsv).unwrap();
-    assert_eq!(back.unit, Some(LengthUnit::Millimetre));
-    back.convert(None, LengthUnit::Metre, LengthUnit::Metre);
-    for (a, b) in back.points.iter().zip(&points.points) {
-        assert!((0..3).all(|d| (a[d] - b[d]).abs() < 1e-15), "{a:?} {b:?}");
+    let csv = dir.path().join("m.csv");
+    write_points(&csv, &points).unwrap();
+    assert_eq!(read_points(&csv).unwrap(), points);
+    for name in ["m.mrk.json", "m.fcsv"] {
+        let path = dir.path().join(name);
+        write_points(&path, &points).unwrap();
+        let mut back = read_points(&path).unwrap();
+        assert_eq!((back.unit, back.frame), (Some(LengthUnit::Millimetre), Some(Frame::Ras)), "{name}");
+        assert!(name.ends_with(".fcsv") || fs::read_to_string(&path).unwrap().contains(r#""coordinateUnits": "mm""#));
+        back.convert(None, LengthUnit::Metre, LengthUnit::Metre);
+        assert_eq!(back.labels, points.labels);
+        for (a, b) in back.points.iter().zip(&points.points) {
+            assert!((0..3).all(|d| (a[d] - b[d]).abs() < 1e-15), "{name}: {a:?} {b:?}");
+        }
     }
     // Points of no frame cannot go to .fcsv, which names one; bare points go to CSV as x,y,z.
     let bare = LabelledPoints::new(vec![[1.0, 2.0, 3.0]]);

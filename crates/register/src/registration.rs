@@ -155,6 +155,12 @@ impl Registration {
         &self.warnings
     }
 
+    /// Adds a warning about the targets, one found where they were read (e.g. points of their
+    /// file left out).
+    pub fn warn(&mut self, warning: impl Into<String>) {
+        self.warnings.push(warning.into());
+    }
+
     /// Registers `cloud` (m, in its own frame), starting from the previous cloud's displacement,
     /// which it then replaces; a failed cloud leaves the warm start and the pose as they were.
     pub fn register(&mut self, cloud: &[Point]) -> Result<Tracked> {

@@ -10,11 +10,11 @@
 //!   before it had one); `# columns = id,x,y,z,ow,ox,oy,oz,vis,sel,lock,label,desc,associatedNodeID`
 //!   names the columns; always millimetres.
 //! - **`.mrk.json`**: 3D Slicer's markups JSON: each markup's `coordinateSystem` (`LPS` when
-//!   absent, as Slicer reads it), `coordinateUnits` (`mm` when absent; also coded, `["mm", "UCUM",
-//!   "millimeter"]`) and `controlPoints` with
+//!   absent, as Slicer reads it), `coordinateUnits` (`mm` when absent, `um` read as mm, `m`; also
+//!   coded, `["mm", "UCUM", "millimeter"]`) and `controlPoints` with
 //!   their `position`, `label` and `description`; points whose `positionStatus` is `undefined`
-//!   (placeholders not yet placed) are left out. Markups of several frames or units are brought to
-//!   the first's.
+//!   (placeholders not yet placed) are left out and named in [`LabelledPoints::unplaced`].
+//!   Markups of several frames or units are brought to the first's.
 //!
 //! Every error names the file and the line (CSV) or the control point (JSON).
 
@@ -43,6 +43,9 @@ pub struct LabelledPoints {
     pub frame: Option<Frame>,
     /// The unit the file names.
     pub unit: Option<LengthUnit>,
+    /// The control points left out because 3D Slicer has not placed them (`.mrk.json`
+    /// `positionStatus: undefined`), by label (or place in the file when unlabelled).
+    pub unplaced: Vec<String>,
 }
 
 impl LabelledPoints {
@@ -60,6 +63,19 @@ impl LabelledPoints {
     /// The label of point `i`, `None` when it has none (or there is no point `i`).
     pub fn label(&self, i: usize) -> Option<&str> {
         self.labels.get(i).map(String::as_str).filter(|l| !l.is_empty())
+    }
+
+    /// A warning naming the control points left out as not placed, `None` when there are none.
+    pub fn unplaced_warning(&self) -> Option<String> {
+        let n = self.unplaced.len();
+        (n > 0).then(|| {
+            let (count, verb) =
+                if n == 1 { ("1 control point".to_string(), "is") } else { (format!("{n} control points"), "are") };
+            format!(
+                "{count} not placed in 3D Slicer (positionStatus undefined) {verb} left out: {}",
+                self.unplaced.join(", ")
+            )
+        })
     }
 
     /// Brings the points into `frame` (x and y negated when their own frame is the other one;
@@ -219,6 +235,7 @@ fn read_markups_json(path: &Path, text: &str) -> Result<LabelledPoints, MeshErro
                 all.points.append(&mut points.points);
                 all.labels.append(&mut points.labels);
                 all.descriptions.append(&mut points.descriptions);
+                all.unplaced.append(&mut points.unplaced);
             }
         }
     }
@@ -243,6 +260,11 @@ fn read_markup(markup: &Value, m: usize) -> Result<LabelledPoints, String> {
         })?,
         _ => text_of("coordinateUnits")?,
     };
+    // Slicer's schema allows microns beside millimetres: read as millimetres.
+    let (unit, scale) = match unit {
+        Some("um" | "µm") => (None, 1e-3),
+        unit => (unit, 1.0),
+    };
     let unit = unit.map_or(Ok(LengthUnit::Millimetre), str::parse).map_err(|e| format!("{at}: coordinateUnits {e}"))?;
     let mut out = LabelledPoints { frame: Some(frame), unit: Some(unit), ..Default::default() };
     let points = match markup.get("controlPoints") {
@@ -259,6 +281,7 @@ fn read_markup(markup: &Value, m: usize) -> Result<LabelledPoints, String> {
             format!("{at}.controlPoints[{i}] ({label})")
         };
         if text("positionStatus") == "undefined" {
+            out.unplaced.push(if label.is_empty() { name } else { label });
             continue;
         }
         let position = point.get("position").ok_or_else(|| format!("{name}: no position"))?;
@@ -270,7 +293,7 @@ fn read_markup(markup: &Value, m: usize) -> Result<LabelledPoints, String> {
         if values.iter().any(|v| !v.is_finite()) {
             return Err(format!("{name}: position {position} is not finite"));
         }
-        out.points.push([values[0], values[1], values[2]]);
+        out.points.push([values[0] * scale, values[1] * scale, values[2] * scale]);
         out.labels.push(label);
         out.descriptions.push(text("description"));
     }
@@ -358,7 +381,7 @@ pub fn write_fcsv(path: impl AsRef<Path>, points: &LabelledPoints) -> Result<(),
             path.display()
         ))
     })?;
-    let scale = points.unit.unwrap_or(LengthUnit::Millimetre).metres() / LengthUnit::Millimetre.metres();
+    let scale = millimetres_per_unit(points);
     write_atomic(path, |w| {
         writeln!(w, "# Markups fiducial file version = 4.11")?;
         writeln!(w, "# CoordinateSystem = {frame}")?;
@@ -374,18 +397,20 @@ pub fn write_fcsv(path: impl AsRef<Path>, points: &LabelledPoints) -> Result<(),
 }
 
 /// Writes points as Slicer's markups JSON (`.mrk.json`, one point list), atomically: each
-/// point's label and description; the points' frame as `coordinateSystem` and their unit as
-/// `coordinateUnits` when named (Slicer takes LPS and millimetres when they are not). Slicer
-/// works in millimetres: convert the points to them ([`LabelledPoints::convert`]) for Slicer.
+/// point's label and description; the points' frame as `coordinateSystem` when named (Slicer
+/// takes LPS when it is not); in millimetres, the unit Slicer's markups schema knows (converted
+/// from the points' unit, then named as `coordinateUnits`; none named: millimetres).
 pub fn write_markups_json(path: impl AsRef<Path>, points: &LabelledPoints) -> Result<(), MeshError> {
     let path = path.as_ref();
     check_points(points)?;
+    let scale = millimetres_per_unit(points);
     let control: Vec<Value> = points
         .points
         .iter()
         .enumerate()
         .map(|(i, p)| {
             let (label, description) = texts(points, i);
+            let p = p.map(|v| v * scale);
             serde_json::json!({
                 "id": (i + 1).to_string(),
                 "label": label,
@@ -404,8 +429,8 @@ pub fn write_markups_json(path: impl AsRef<Path>, points: &LabelledPoints) -> Re
     if let Some(frame) = points.frame {
         markup["coordinateSystem"] = frame.name().into();
     }
-    if let Some(unit) = points.unit {
-        markup["coordinateUnits"] = unit.symbol().into();
+    if points.unit.is_some() {
+        markup["coordinateUnits"] = LengthUnit::Millimetre.symbol().into();
     }
     markup["locked"] = false.into();
     markup["labelFormat"] = "%N-%d".into();
@@ -420,6 +445,12 @@ pub fn write_markups_json(path: impl AsRef<Path>, points: &LabelledPoints) -> Re
         writeln!(w)
     })?;
     Ok(())
+}
+
+/// The factor that brings `points` to millimetres, the unit 3D Slicer's files hold (1 when they
+/// name no unit: taken as millimetres).
+fn millimetres_per_unit(points: &LabelledPoints) -> f64 {
+    points.unit.map_or(1.0, |u| u.metres() / LengthUnit::Millimetre.metres())
 }
 
 /// Writes `points` as CSV with the header `x,y,z`, atomically; the values read back exactly.
