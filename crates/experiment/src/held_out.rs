@@ -18,7 +18,7 @@ use scenario::CaseScenario;
 use serde::Serialize;
 
 use crate::loads::{CaseLoad, LEFT_LOBE_FRONT, RIGHT_LOBE};
-use crate::{fmt, ExperimentResult, Headline, Name, Progress, Row, Size};
+use crate::{fmt, reference, ExperimentResult, Headline, Name, Progress, Row, Size};
 use app::case::{
     ar_scenario, case_methods, compare, network_from_truth, network_model, network_options, synthetic_case, Network,
     NETWORK_AFTER_FIT, POLISH_ITERATIONS, SHIPPED_MODEL, SHIPPED_ROM,
@@ -132,15 +132,15 @@ struct StreamOutcome {
 }
 
 impl StreamOutcome {
-    /// Its cell in a case's line.
-    fn cell(&self) -> String {
+    /// Its cell in a case's line, its time also over the run's reference (ms).
+    fn cell(&self, reference_ms: f64) -> String {
         match (self.peak_tre_mean_mm, self.peak_tre_max_mm, self.tre_mean_mm, &self.error) {
             (Some(m), Some(x), Some(all), None) => format!(
                 "{} / {}, {} over the frames, {}",
                 fmt(m, 2, "mm"),
                 fmt(x, 1, "mm"),
                 fmt(all, 2, "mm"),
-                fmt(self.time_median_ms, 0, "ms")
+                reference::ms(self.time_median_ms, 0, Some(reference_ms))
             ),
             (.., e) => format!("failed ({})", e.as_deref().unwrap_or("no TRE")),
         }
@@ -236,6 +236,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
         Size::Quick => 3,
         Size::Paper => 10,
     };
+    let reference_ms = reference::measure()?;
     let base = base_case()?;
     let models = shipped_models()?;
     let network_scenario = ar_scenario();
@@ -244,14 +245,14 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
     // The U-Net the truth's surface motion is fed to (the diagnostic row).
     let oracle = networks.iter().find(|n| n.model.method() == learn::Method::UNet).map(network_model).transpose()?;
     let methods: Vec<String> = case_methods(&base, &networks)?.into_iter().map(|m| m.name).collect();
-    let mut cases = Cases::new(methods.len());
+    let mut cases = Cases::new(methods.len(), reference_ms);
     for case in &CASES {
         cases.register(case, &base, &networks, &methods, oracle.as_ref(), runs, progress)?;
     }
     let mut summary =
         vec![Row::new(FROM_REST, fmt(mean(&cases.motion), 2, "mm"), "").of("registration", "no deformation")];
-    let means = from_rest_rows(&methods, &cases.outcomes, &mut summary);
-    let stream_means = stream_rows(&methods, &cases.streams, &mut summary);
+    let means = from_rest_rows(&methods, &cases.outcomes, reference_ms, &mut summary);
+    let stream_means = stream_rows(&methods, &cases.streams, reference_ms, &mut summary);
     if !cases.from_truth.is_empty() {
         let (tre, largest): (Vec<f64>, Vec<f64>) = cases.from_truth.iter().copied().unzip();
         summary.push(
@@ -268,8 +269,9 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
             summary.push(Row::new(name, format!("skipped: {path} not found (run from the repository)"), ""));
         }
     }
-    let notes = notes(&base, runs)?;
+    let notes = notes(&base, runs, reference_ms)?;
     let mut values = serde_json::Map::new();
+    values.insert("reference_ms".into(), reference_ms.into());
     values.insert("cases".into(), serde_json::to_value(CASES.iter().map(|c| c.label).collect::<Vec<_>>())?);
     values.insert("no_deformation_tre_mm".into(), serde_json::to_value(&cases.motion)?);
     values.insert("network_from_truth_tre_mm".into(), serde_json::to_value(&cases.from_truth)?);
@@ -302,17 +304,20 @@ struct Cases {
     from_truth: Vec<(f64, f64)>,
     /// The tables of the cases: from rest, and as streams (a line per case, a column per method).
     rows: Vec<Row>,
+    /// The run's reference time (ms), which each time is also given over.
+    reference_ms: f64,
 }
 
 impl Cases {
-    /// No case yet, for `methods` methods.
-    fn new(methods: usize) -> Cases {
+    /// No case yet, for `methods` methods, with the run's reference time (ms).
+    fn new(methods: usize, reference_ms: f64) -> Cases {
         Cases {
             outcomes: vec![Vec::new(); methods],
             streams: vec![Vec::new(); methods],
             motion: Vec::new(),
             from_truth: Vec::new(),
             rows: Vec::new(),
+            reference_ms,
         }
     }
 
@@ -359,7 +364,8 @@ impl Cases {
         for (method, o) in methods.iter().zip(&here) {
             let cell = match (o.tre_mean_mm, o.tre_max_mm, &o.error) {
                 (Some(m), Some(x), None) => {
-                    format!("{} / {}, {}", fmt(m, 2, "mm"), fmt(x, 1, "mm"), fmt(o.time_ms(), 0, "ms"))
+                    let time = reference::ms(o.time_ms(), 0, Some(self.reference_ms));
+                    format!("{} / {}, {time}", fmt(m, 2, "mm"), fmt(x, 1, "mm"))
                 }
                 (_, _, e) => format!("failed ({})", e.as_deref().unwrap_or("no TRE")),
             };
@@ -384,7 +390,7 @@ impl Cases {
              frame (median)"
         );
         for (method, o) in methods.iter().zip(&here) {
-            self.rows.push(Row::new(method, o.cell(), "").of(&case_as_stream, case.label));
+            self.rows.push(Row::new(method, o.cell(self.reference_ms), "").of(&case_as_stream, case.label));
         }
         for (all, o) in self.streams.iter_mut().zip(here) {
             all.push(o);
@@ -393,9 +399,15 @@ impl Cases {
     }
 }
 
-/// A summary row per method of its registrations from rest over the cases, pushed on `summary`;
-/// returns each method's mean TRE (NaN where it failed on a case).
-fn from_rest_rows(methods: &[String], outcomes: &[Vec<Outcome>], summary: &mut Vec<Row>) -> Vec<f64> {
+/// A summary row per method of its registrations from rest over the cases (times also over
+/// `reference_ms`), pushed on `summary`; returns each method's mean TRE (NaN where it failed on a
+/// case).
+fn from_rest_rows(
+    methods: &[String],
+    outcomes: &[Vec<Outcome>],
+    reference_ms: f64,
+    summary: &mut Vec<Row>,
+) -> Vec<f64> {
     let mut means = Vec::new();
     for (method, cases) in methods.iter().zip(outcomes) {
         let ok: Vec<&Outcome> = cases.iter().filter(|o| o.error.is_none() && o.tre_mean_mm.is_some()).collect();
@@ -411,7 +423,7 @@ fn from_rest_rows(methods: &[String], outcomes: &[Vec<Outcome>], summary: &mut V
                     "{} ({}), {}{}{}",
                     fmt(mean(&tre), 2, "mm"),
                     fmt(max(&largest), 1, "mm"),
-                    fmt(median(&mut times), 0, "ms"),
+                    reference::ms(median(&mut times), 0, Some(reference_ms)),
                     coverage(ok.iter().map(|o| (o.std_mean_mm, o.within_two_std))),
                     failures(failed)
                 ),
@@ -423,9 +435,15 @@ fn from_rest_rows(methods: &[String], outcomes: &[Vec<Outcome>], summary: &mut V
     means
 }
 
-/// A summary row per method of its registrations as streams over the cases, pushed on
-/// `summary`; returns each method's mean TRE at the peak (NaN where it failed on a case).
-fn stream_rows(methods: &[String], streams: &[Vec<StreamOutcome>], summary: &mut Vec<Row>) -> Vec<f64> {
+/// A summary row per method of its registrations as streams over the cases (times also over
+/// `reference_ms`), pushed on `summary`; returns each method's mean TRE at the peak (NaN where it
+/// failed on a case).
+fn stream_rows(
+    methods: &[String],
+    streams: &[Vec<StreamOutcome>],
+    reference_ms: f64,
+    summary: &mut Vec<Row>,
+) -> Vec<f64> {
     let as_streams = format!(
         "each case as a stream of {STREAM_FRAMES} frames: TRE at the peak mean over the cases (largest); TRE over \
          all frames; time per frame (median over the cases)"
@@ -448,7 +466,7 @@ fn stream_rows(methods: &[String], streams: &[Vec<StreamOutcome>], summary: &mut
                     fmt(mean(&peak), 2, "mm"),
                     fmt(max(&largest), 1, "mm"),
                     fmt(mean(&all), 2, "mm"),
-                    fmt(median(&mut times), 0, "ms"),
+                    reference::ms(median(&mut times), 0, Some(reference_ms)),
                     coverage(ok.iter().map(|o| (o.std_mean_mm, o.within_two_std))),
                     failures(failed)
                 ),
@@ -492,9 +510,9 @@ fn headlines(methods: &[String], means: &[f64], stream_means: &[f64]) -> Vec<Hea
     headlines
 }
 
-/// The notes: the truth, the methods, the streams and the diagnostic row (`runs`: the runs per
-/// frame time).
-fn notes(base: &CaseScenario, runs: usize) -> Result<Vec<String>> {
+/// The notes: the truth, the methods, the streams, the diagnostic row (`runs`: the runs per
+/// frame time) and the reference time (`reference_ms`).
+fn notes(base: &CaseScenario, runs: usize, reference_ms: f64) -> Result<Vec<String>> {
     let fem = corotational(base).and_then(|m| m.material).context("the held-out cases have no co-rotational FEM")?;
     Ok(vec![
         format!(
@@ -549,5 +567,6 @@ fn notes(base: &CaseScenario, runs: usize) -> Result<Vec<String>> {
          fitted without error. What it leaves is the network's own error; the rest of the registered U-Net's is \
          the cloud's and the surface fit's."
             .into(),
+        reference::note(Some(reference_ms)),
     ])
 }
