@@ -304,7 +304,8 @@ fn read_markup(markup: &Value, m: usize) -> Result<LabelledPoints, String> {
 /// ([`write_fcsv`]), `.mrk.json` ([`write_markups_json`]), else CSV: a `label` column when a
 /// point has a label, `x`, `y`, `z` with the unit's suffix when the unit is known (`x_mm`), a
 /// `description` column when a point has one, and a first line `# CoordinateSystem = …` when the
-/// frame is known. Reading the file back with [`read_points`] gives the same points.
+/// frame is known. Reading the file back with [`read_points`] gives the same points (Slicer's
+/// files in millimetres).
 pub fn write_points(path: impl AsRef<Path>, points: &LabelledPoints) -> Result<(), MeshError> {
     let path = path.as_ref();
     let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
