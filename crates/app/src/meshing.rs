@@ -174,6 +174,9 @@ pub fn immersed_fill(mesh: &Mesh) -> (f64, usize) {
 pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result<String> {
     let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     let context = || format!("writing {}", path.display());
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     if extension == "stl" || extension == "obj" {
         let mut surface = mesh::boundary_surface(mesh).compacted();
         surface.vertices.iter_mut().for_each(|v| *v = LengthUnit::Millimetre.point_from_metres(*v));
@@ -189,9 +192,6 @@ pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result
         Some(f) if extension != "msh" => vec![Field::cell("volume_fraction", 1, f.clone())],
         _ => Vec::new(),
     };
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
     mesh::io::write_mesh(path, mesh, &fields).with_context(context)?;
     Ok("in m".into())
 }
@@ -295,7 +295,7 @@ mod tests {
         let options = MeshOptions { surface: Some(path), repair: false, ..phantom(None) };
         let meshed = mesh_organ(&options).unwrap();
         assert_eq!(meshed.frame, Some(Frame::Lps));
-        let out = dir.path().join("out.stl");
+        let out = dir.path().join("new/out.stl");
         assert_eq!(
             write_mesh_file(&out, &meshed.mesh, meshed.frame).unwrap(),
             "its boundary surface, in mm, frame LPS named"
