@@ -470,7 +470,14 @@ impl RegistrationSpec {
             TargetsSpec::Points(points) => (points.iter().map(|&p| self.units.point_to_metres(p)).collect(), None),
         };
         if targets.is_empty() {
-            anyhow::bail!("no targets: give a targets file, or a mesh with `markers` or `tumour` regions");
+            match &self.targets {
+                TargetsSpec::File(path) => anyhow::bail!(
+                    "{} holds no targets{}",
+                    path.display(),
+                    if unplaced.is_some() { " (none of its control points is placed in 3D Slicer)" } else { "" }
+                ),
+                _ => anyhow::bail!("no targets: give a targets file, or a mesh with `markers` or `tumour` regions"),
+            }
         }
         let options = RegistrationOptions {
             iterations: self.iterations.unwrap_or(options.iterations),
@@ -659,6 +666,11 @@ mod tests {
         let registration =
             RegistrationSpec::new(MethodSpec::fem("beam"), TargetsSpec::File(targets.clone())).build().unwrap();
         assert_eq!(registration.targets(), [[2.5, 0.5, 0.5]]);
+        let empty = dir.path().join("empty.csv");
+        std::fs::write(&empty, "x,y,z\n").unwrap();
+        let error =
+            RegistrationSpec::new(MethodSpec::fem("beam"), TargetsSpec::File(empty.clone())).build().err().unwrap();
+        assert_eq!(error.to_string(), format!("{} holds no targets", empty.display()));
         let said = format!("{}: 1 control point not placed in 3D Slicer", targets.display());
         assert!(
             registration.warnings().iter().any(|w| w.starts_with(&said) && w.ends_with(": T-2")),

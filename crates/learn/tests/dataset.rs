@@ -122,6 +122,10 @@ fn npy_reads_numpy_f64_and_rejects_bad_files() {
     longer.push(0);
     std::fs::write(&p, &longer).unwrap();
     assert!(npy::read_npy(&p).unwrap_err().to_string().contains("trailing"));
+    // A shape whose byte count wraps around to the data's (2^61 + 1 rows of 2 f8: 2^65 + 16 bytes).
+    std::fs::write(&p, numpy_file("<f8", "False", "(2305843009213693953, 2)", &data)).unwrap();
+    let e = npy::read_npy(&p).unwrap_err().to_string();
+    assert!(e.contains("more bytes than any file can"), "{e}");
     // Not an npy file.
     std::fs::write(&p, b"hello world, this is text").unwrap();
     let e = npy::read_npy(&p).unwrap_err().to_string();

@@ -135,7 +135,11 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
     };
     let dim: Vec<i64> = (0..8).map(|d| i16_at(40 + 2 * d) as i64).collect();
     if !(3..=7).contains(&dim[0]) || (4..=dim[0] as usize).any(|d| dim[d] != 1) {
-        return Err(format!("expected a 3D volume, got dimensions {:?}", &dim[1..=dim[0].clamp(1, 7) as usize]));
+        return Err(format!(
+            "expected a 3D volume, got dimensions {:?} (read {}-endian, as the header size says)",
+            &dim[1..=dim[0].clamp(1, 7) as usize],
+            if little { "little" } else { "big" }
+        ));
     }
     if dim[1..4].iter().any(|&n| n < 1) {
         return Err(format!("bad dimensions {:?}", &dim[1..4]));
@@ -215,8 +219,17 @@ fn nifti_affine(
     let affine = if sform_code > 0 {
         std::array::from_fn(|r| std::array::from_fn(|c| f32_at(280 + 16 * r + 4 * c)))
     } else if qform_code > 0 {
-        let (b, c, d) = (f32_at(256), f32_at(260), f32_at(264));
-        let a = (1.0 - (b * b + c * c + d * d)).max(0.0).sqrt();
+        let (mut b, mut c, mut d) = (f32_at(256), f32_at(260), f32_at(264));
+        // As nifti1_io reads it: where b² + c² + d² reaches 1, a = 0 and (b, c, d) is normalised,
+        // so that the quaternion is a rotation and leaves the spacing as it is.
+        let norm2 = b * b + c * c + d * d;
+        let a = if 1.0 - norm2 < 1e-7 {
+            let scale = 1.0 / norm2.sqrt();
+            (b, c, d) = (b * scale, c * scale, d * scale);
+            0.0
+        } else {
+            (1.0 - norm2).sqrt()
+        };
         let rotation = [
             [a * a + b * b - c * c - d * d, 2.0 * (b * c - a * d), 2.0 * (b * d + a * c)],
             [2.0 * (b * c + a * d), a * a + c * c - b * b - d * d, 2.0 * (c * d - a * b)],
@@ -335,8 +348,12 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
     let sizes: Vec<usize> = header
         .field("sizes")?
         .split_whitespace()
-        .map(|s| s.parse::<usize>().map_err(|e| format!("sizes: {s:?}: {e}")))
+        .map(|s| s.parse::<usize>().map_err(|_| format!("sizes: {s:?} is not a number of voxels")))
         .collect::<Result<_, _>>()?;
+    let dimension = header.field("dimension")?;
+    if dimension.parse::<usize>().ok() != Some(sizes.len()) {
+        return Err(format!("dimension: {dimension}, but 'sizes' gives {} axes", sizes.len()));
+    }
     let (layers, dims) = match sizes[..] {
         [a, b, c] => (1, [a, b, c]),
         [l, a, b, c] => (l, [a, b, c]),
@@ -360,7 +377,12 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
     let directions = nrrd_vectors(header.field("space directions")?)?;
     let axes: Vec<[f64; 3]> = directions.iter().flatten().copied().collect();
     if axes.len() != 3 || directions.len() != sizes.len() {
-        return Err(format!("'space directions' must give one vector per spatial axis, got {directions:?}"));
+        return Err(format!(
+            "'space directions' must give one vector per spatial axis (3, and 'none' per other axis of \
+             'sizes', which has {}), got '{}'",
+            sizes.len(),
+            header.field("space directions")?
+        ));
     }
     let origin = match header.fields.get("space origin") {
         Some(text) => nrrd_vectors(text)?.first().copied().flatten().ok_or("bad 'space origin'")?,
@@ -821,9 +843,15 @@ mod tests {
         for (o, x) in [(256, 0f32), (260, 0.0), (264, 1.0), (268, 1.0), (272, 2.0), (276, 3.0)] {
             bytes[o..o + 4].copy_from_slice(&x.to_le_bytes());
         }
-        std::fs::write(&path, bytes).unwrap();
+        std::fs::write(&path, &bytes).unwrap();
         let back = read_labelmap(&path).unwrap();
         let expected = [[-0.75, 0.0, 0.0, 1.0], [0.0, -0.875, 0.0, 2.0], [0.0, 0.0, -2.5, 3.0]];
+        assert!(close(&back.affine, &expected, 1e-6), "{:?}", back.affine);
+        // A quaternion longer than a rotation's is normalised (as nifti1_io does), not let scale
+        // the voxels.
+        bytes[264..268].copy_from_slice(&2f32.to_le_bytes());
+        std::fs::write(&path, &bytes).unwrap();
+        let back = read_labelmap(&path).unwrap();
         assert!(close(&back.affine, &expected, 1e-6), "{:?}", back.affine);
     }
 
@@ -855,6 +883,11 @@ mod tests {
         assert!(write("i.nrrd", seconds.as_bytes()).contains("space unit \"s\" is not supported"));
         let mixed = header.replace("encoding", "space units: \"mm\" \"m\" \"mm\"\nencoding");
         assert!(write("j.nrrd", mixed.as_bytes()).contains("one unit for the three axes"));
+        // A dimension that is not the number of sizes, a size that is no count.
+        let dimension = header.replace("dimension: 3", "dimension: 99");
+        assert!(write("j1.nrrd", dimension.as_bytes()).contains("dimension: 99, but 'sizes' gives 3 axes"));
+        let negative = header.replace("sizes: 2 2 2", "sizes: 2 -153 2");
+        assert!(write("j2.nrrd", negative.as_bytes()).contains("sizes: \"-153\" is not a number of voxels"));
         // Ascii data: read as numbers, their count checked.
         let ascii = header.replace("encoding: raw", "encoding: ascii");
         let read = |name: &str, data: &str| {

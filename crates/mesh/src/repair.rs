@@ -5,7 +5,7 @@
 //! repeated triangles, triangles facing the wrong way and small holes. [`repair_surface`] fixes
 //! these, in this order:
 //!
-//! 1. refuses non-finite coordinates and out-of-range indices;
+//! 1. refuses non-finite or absurdly large coordinates and out-of-range indices;
 //! 2. merges vertices closer than a tolerance (spatial hashing, in index order: deterministic);
 //! 3. drops triangles that repeat a vertex or have no area, and triangles that repeat another's
 //!    three vertices; then the vertices no triangle uses;
@@ -144,8 +144,8 @@ impl RepairReport {
 /// documentation for the steps), and says what was changed.
 ///
 /// Refused, with a message that says what and where (vertex numbers are those of the input):
-/// non-finite coordinates, out-of-range indices, non-manifold edges and vertices, a
-/// non-orientable surface, several pieces, a hole of more than `max_hole_edges` edges,
+/// non-finite or absurdly large coordinates, out-of-range indices, non-manifold edges and
+/// vertices, a non-orientable surface, several pieces, a hole of more than `max_hole_edges` edges,
 /// self-intersections of more than `max_crossing_fraction` of the triangles. The vertices keep
 /// their coordinates and their order.
 pub fn repair_surface(surface: &TriSurface, options: &RepairOptions) -> Result<(TriSurface, RepairReport), MeshError> {
@@ -241,8 +241,8 @@ pub fn repair_surface(surface: &TriSurface, options: &RepairOptions) -> Result<(
     Ok((repaired, report))
 }
 
-/// Refuses what no repair can use: no triangles, out-of-range indices, non-finite coordinates,
-/// a bad merge tolerance. Returns which vertices the triangles use.
+/// Refuses what no repair can use: no triangles, out-of-range indices, non-finite coordinates or
+/// ones beyond [`MAX_COORDINATE`], a bad merge tolerance. Returns which vertices the triangles use.
 pub(crate) fn check_input(surface: &TriSurface, options: &RepairOptions) -> Result<Vec<bool>, MeshError> {
     let nv = surface.vertices.len();
     if surface.triangles.is_empty() {
@@ -266,8 +266,20 @@ pub(crate) fn check_input(surface: &TriSurface, options: &RepairOptions) -> Resu
     if let Some(v) = (0..nv).find(|&v| used[v] && surface.vertices[v].iter().any(|c| !c.is_finite())) {
         return Err(invalid(format!("vertex {v} has a non-finite coordinate {:?}", surface.vertices[v])));
     }
+    if let Some(v) = (0..nv).find(|&v| used[v] && surface.vertices[v].iter().any(|c| c.abs() > MAX_COORDINATE)) {
+        return Err(invalid(format!(
+            "vertex {v} lies at {:?}, beyond {MAX_COORDINATE:e} from the origin in every length unit an organ \
+             is given in: a damaged file?",
+            surface.vertices[v]
+        )));
+    }
     Ok(used)
 }
+
+/// The largest coordinate magnitude a surface to repair may have (in its own unit, whatever it
+/// is: a million kilometres in m, a thousand in mm). Beyond about 1e75 the products of four
+/// coordinates that the geometric tests form overflow to infinity, and repair then never ends.
+const MAX_COORDINATE: f64 = 1e9;
 
 /// The pairs (i < j, sorted) of triangles that intersect, other than neighbours.
 ///
@@ -1252,6 +1264,10 @@ mod tests {
         let mut s = sphere();
         s.vertices[7][1] = f64::NAN;
         assert!(error(&s).contains("vertex 7 has a non-finite coordinate"));
+        // Every vertex far out (as a damaged file gives): refused at once, where repair never ended.
+        let mut s = sphere();
+        s.transform([0.0; 3], 1e160);
+        assert!(error(&s).contains("vertex 0 lies at") && error(&s).contains("a damaged file?"), "{}", error(&s));
         let mut s = sphere();
         s.triangles[4][2] = 500;
         assert!(error(&s).contains("triangle 4 refers to vertex 500, but there are 162 vertices"));

@@ -337,6 +337,8 @@ fn corrupted_vtk_files_give_located_errors() {
     assert!(m.contains("cell 1 is a wedge"), "{m}");
     let m = message(read_mesh(put(d, "unknown.vtk", with_line(&text, types_line + 2, "99"))));
     assert!(m.contains("unknown VTK cell type 99"), "{m}");
+    let m = message(read_mesh(put(d, "nodataset.vtk", with_line(&text, 4, ""))));
+    assert!(m.contains("line 4: expected DATASET, found 'POINTS'"), "{m}");
     let m = message(read_mesh(put(d, "notvtk.vtk", "solid x\n")));
     assert!(m.contains("line 1") && m.contains("not a legacy VTK file"), "{m}");
     let m = message(read_mesh(data("liver.vtk")));

@@ -13,13 +13,24 @@ pub(crate) fn check_setting(name: &str, value: f64, ok: bool, rule: &str) -> Res
     }
 }
 
-/// Rejects an empty cloud or one with a non-finite coordinate.
+/// The largest coordinate magnitude of a cloud point, in its unit (m or mm): a thousand
+/// kilometres in m, one in mm, beyond any tracker's or camera's reach.
+const MAX_COORDINATE: f64 = 1e6;
+
+/// Rejects an empty cloud or one with a non-finite coordinate, or one beyond [`MAX_COORDINATE`]
+/// (a damaged file: one such point would make every distance to the cloud meaningless).
 pub fn check_cloud(cloud: &[Point]) -> Result<()> {
     if cloud.is_empty() {
         return Err(RegisterError::Invalid("no points (the point cloud is empty)".into()));
     }
     if let Some(i) = cloud.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
         return Err(RegisterError::Invalid(format!("point {i} has a non-finite coordinate {:?}", cloud[i])));
+    }
+    if let Some(i) = cloud.iter().position(|p| p.iter().any(|x| x.abs() > MAX_COORDINATE)) {
+        return Err(RegisterError::Invalid(format!(
+            "point {i} lies at {:?}, beyond {MAX_COORDINATE:e} from the origin in m or mm: a damaged file?",
+            cloud[i]
+        )));
     }
     Ok(())
 }

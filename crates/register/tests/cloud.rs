@@ -12,7 +12,7 @@ fn sample() -> Vec<Point> {
         [0.0, -0.0, 1.0],
         [0.1, 1.0 / 3.0, -123456.789],
         [1e-300, f64::MIN_POSITIVE, 5e-324],
-        [-0.0123456789012345, 2.5e17, std::f64::consts::PI],
+        [-0.0123456789012345, 987654.321, std::f64::consts::PI],
     ]
 }
 
@@ -168,6 +168,11 @@ fn npy_of_wrong_shape_or_with_nan_is_rejected() {
     let path = dir.path().join("nan.npy");
     learn::data::npy::write_f32(&path, &[2, 3], &[0.0, 0.0, 0.0, 1.0, f32::NAN, 2.0]).unwrap();
     assert_contains(&error(read_point_cloud(&path)), &["point 1", "non-finite"]);
+
+    // One point out of reach (a damaged file), which would make every distance to the cloud inf.
+    let path = dir.path().join("far.npy");
+    learn::data::npy::write_f64(&path, &[2, 3], &[0.1, 0.0, 0.0, 1e30, 0.0, 0.0]).unwrap();
+    assert_contains(&error(read_point_cloud(&path)), &["point 1", "a damaged file?"]);
 
     let path = dir.path().join("empty.npy");
     learn::data::npy::write_f32(&path, &[0, 3], &[]).unwrap();

@@ -201,10 +201,14 @@ impl StaticScenario {
             let nodes = pick(&f.select, "force", &p)?;
             p.add_force(&nodes, f.total);
         }
-        for t in &self.traction {
+        for (k, t) in self.traction.iter().enumerate() {
             let nodes = pick(&t.select, "traction", &p)?;
             if p.add_traction(&nodes, t.traction) == 0.0 {
-                return Err(fail(format!("traction selection {:?} covers no boundary face", t.select)));
+                return Err(fail(format!(
+                    "traction {}: its selection ({} nodes) covers no whole boundary face of the mesh",
+                    k + 1,
+                    nodes.len()
+                )));
             }
         }
         p.attach_all(&self.attachment).map_err(|e| fail(e.to_string()))?;

@@ -291,10 +291,12 @@ fn fortran_to_c(shape: &[usize]) -> Vec<usize> {
 fn parse(bytes: &[u8]) -> std::result::Result<NpyArray, String> {
     let (header, data) = split_header(bytes)?;
     let (descr, fortran, shape) = parse_header(header)?;
-    let count: usize = shape.iter().product();
     let (scalar, big_endian) = element(&descr)?;
     let item = scalar.size();
-    let needed = count * item;
+    let needed = shape
+        .iter()
+        .try_fold(item, |n, &d| n.checked_mul(d))
+        .ok_or_else(|| format!("shape {shape:?} of {descr} holds more bytes than any file can: a damaged header?"))?;
     if data.len() < needed {
         return Err(format!(
             "truncated: shape {shape:?} of {descr} needs {needed} data bytes, the file has {}",

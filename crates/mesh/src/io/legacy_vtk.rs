@@ -377,7 +377,10 @@ impl<'a> Reader<'a> {
         let args = self.header_args();
         let dataset = match (keyword.as_deref(), args.first()) {
             (Some("DATASET"), Some(d)) => d.to_ascii_uppercase(),
-            _ => return Err(parse_error(self.path, format!("line {line}: expected DATASET, found {keyword:?}"))),
+            _ => {
+                let found = keyword.map_or("the end of the file".to_string(), |k| format!("'{k}'"));
+                return Err(parse_error(self.path, format!("line {line}: expected DATASET, found {found}")));
+            }
         };
         if dataset != "UNSTRUCTURED_GRID" && dataset != "POLYDATA" {
             return Err(parse_error(
