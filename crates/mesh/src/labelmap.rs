@@ -847,8 +847,8 @@ mod tests {
         let back = read_labelmap(&path).unwrap();
         let expected = [[-0.75, 0.0, 0.0, 1.0], [0.0, -0.875, 0.0, 2.0], [0.0, 0.0, -2.5, 3.0]];
         assert!(close(&back.affine, &expected, 1e-6), "{:?}", back.affine);
-        // A quaternion longer than a rotation's is normalised (as nifti1_io does), not let scale
-        // the voxels.
+        // A quaternion longer than a rotation's is normalised (as nifti1_io does) rather than let
+        // scale the voxels.
         bytes[264..268].copy_from_slice(&2f32.to_le_bytes());
         std::fs::write(&path, &bytes).unwrap();
         let back = read_labelmap(&path).unwrap();

@@ -268,8 +268,8 @@ pub(crate) fn check_input(surface: &TriSurface, options: &RepairOptions) -> Resu
     }
     if let Some(v) = (0..nv).find(|&v| used[v] && surface.vertices[v].iter().any(|c| c.abs() > MAX_COORDINATE)) {
         return Err(invalid(format!(
-            "vertex {v} lies at {:?}, beyond {MAX_COORDINATE:e} from the origin in every length unit an organ \
-             is given in: a damaged file?",
+            "vertex {v} lies at {:?}: a coordinate beyond {MAX_COORDINATE:e}, out of reach in any length unit \
+             (a damaged file?)",
             surface.vertices[v]
         )));
     }

@@ -28,7 +28,7 @@ pub fn check_cloud(cloud: &[Point]) -> Result<()> {
     }
     if let Some(i) = cloud.iter().position(|p| p.iter().any(|x| x.abs() > MAX_COORDINATE)) {
         return Err(RegisterError::Invalid(format!(
-            "point {i} lies at {:?}, beyond {MAX_COORDINATE:e} from the origin in m or mm: a damaged file?",
+            "point {i} lies at {:?}: a coordinate beyond {MAX_COORDINATE:e}, out of reach in m or mm (a damaged file?)",
             cloud[i]
         )));
     }
