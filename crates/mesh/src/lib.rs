@@ -325,6 +325,11 @@ pub fn bounds(points: &[Point]) -> (Point, Point) {
     (lo, hi)
 }
 
+/// The largest coordinate magnitude a mesh or a surface to repair may have (in its own unit,
+/// whatever it is: a million kilometres in m, a thousand in mm). Beyond about 1e75 the products of
+/// four coordinates that geometric tests form overflow to infinity, and repair then never ends.
+pub(crate) const MAX_COORDINATE: f64 = 1e9;
+
 /// Signed volume of the tetrahedron (a, b, c, d): positive when
 /// (b−a)·((c−a)×(d−a)) > 0.
 pub fn tet_volume(a: Point, b: Point, c: Point, d: Point) -> f64 {

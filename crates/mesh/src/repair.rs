@@ -242,7 +242,8 @@ pub fn repair_surface(surface: &TriSurface, options: &RepairOptions) -> Result<(
 }
 
 /// Refuses what no repair can use: no triangles, out-of-range indices, non-finite coordinates or
-/// ones beyond [`MAX_COORDINATE`], a bad merge tolerance. Returns which vertices the triangles use.
+/// ones beyond [`crate::MAX_COORDINATE`], a bad merge tolerance. Returns which vertices the
+/// triangles use.
 pub(crate) fn check_input(surface: &TriSurface, options: &RepairOptions) -> Result<Vec<bool>, MeshError> {
     let nv = surface.vertices.len();
     if surface.triangles.is_empty() {
@@ -266,20 +267,16 @@ pub(crate) fn check_input(surface: &TriSurface, options: &RepairOptions) -> Resu
     if let Some(v) = (0..nv).find(|&v| used[v] && surface.vertices[v].iter().any(|c| !c.is_finite())) {
         return Err(invalid(format!("vertex {v} has a non-finite coordinate {:?}", surface.vertices[v])));
     }
-    if let Some(v) = (0..nv).find(|&v| used[v] && surface.vertices[v].iter().any(|c| c.abs() > MAX_COORDINATE)) {
+    if let Some(v) = (0..nv).find(|&v| used[v] && surface.vertices[v].iter().any(|c| c.abs() > crate::MAX_COORDINATE)) {
         return Err(invalid(format!(
-            "vertex {v} lies at {:?}: a coordinate beyond {MAX_COORDINATE:e}, out of reach in any length unit \
+            "vertex {v} lies at {:?}: a coordinate beyond {:e}, out of reach in any length unit \
              (a damaged file?)",
-            surface.vertices[v]
+            surface.vertices[v],
+            crate::MAX_COORDINATE
         )));
     }
     Ok(used)
 }
-
-/// The largest coordinate magnitude a surface to repair may have (in its own unit, whatever it
-/// is: a million kilometres in m, a thousand in mm). Beyond about 1e75 the products of four
-/// coordinates that the geometric tests form overflow to infinity, and repair then never ends.
-const MAX_COORDINATE: f64 = 1e9;
 
 /// The pairs (i < j, sorted) of triangles that intersect, other than neighbours.
 ///

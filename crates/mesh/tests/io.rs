@@ -258,6 +258,9 @@ fn corrupted_gmsh_files_give_located_errors() {
 
     let m = message(read_mesh(put(d, "garbled.msh", with_line(&liver, 10, "8 0.1 2.x5 3"))));
     assert!(m.contains("line 10") && m.contains("2.x5"), "{m}");
+    // A node out of reach (its elements' volumes overflowed and were called zero).
+    let m = message(read_mesh(put(d, "far.msh", with_line(&liver, 3, "1 -0.979259 1e308 2.61245"))));
+    assert!(m.contains("a coordinate beyond 1e9") && m.contains("a damaged file?"), "{m}");
 
     let m = message(read_mesh(put(d, "range.msh", with_line(&liver, 187, "1 4 1 1 4 128 141 138 9999"))));
     assert!(m.contains("line 187") && m.contains("node 9999"), "{m}");

@@ -535,6 +535,17 @@ fn finish_volume(
     if let Some(i) = nodes.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
         return Err(parse_error(path, format!("node {} has a non-finite coordinate {:?}", kept[i], nodes[i])));
     }
+    if let Some(i) = nodes.iter().position(|p| p.iter().any(|c| c.abs() > crate::MAX_COORDINATE)) {
+        return Err(parse_error(
+            path,
+            format!(
+                "node {} lies at {:?}: a coordinate beyond {:e}, out of reach in any length unit (a damaged file?)",
+                kept[i],
+                nodes[i],
+                crate::MAX_COORDINATE
+            ),
+        ));
+    }
     for i in &mut conn {
         *i = new_index[*i];
     }
