@@ -330,6 +330,19 @@ pub fn bounds(points: &[Point]) -> (Point, Point) {
 /// four coordinates that geometric tests form overflow to infinity, and repair then never ends.
 pub(crate) const MAX_COORDINATE: f64 = 1e9;
 
+/// What makes `p` no point of an organ's in any length unit, `None` when nothing does: a
+/// non-finite coordinate, or one beyond `bound` (a damaged file), in words that follow the point's
+/// name ("vertex 7 has a non-finite coordinate …").
+pub fn coordinate_fault(p: &Point, bound: f64) -> Option<String> {
+    if p.iter().any(|c| !c.is_finite()) {
+        Some(format!("has a non-finite coordinate {p:?}"))
+    } else if p.iter().any(|c| c.abs() > bound) {
+        Some(format!("lies at {p:?}: a coordinate beyond {bound:e}, out of reach (a damaged file?)"))
+    } else {
+        None
+    }
+}
+
 /// Signed volume of the tetrahedron (a, b, c, d): positive when
 /// (b−a)·((c−a)×(d−a)) > 0.
 pub fn tet_volume(a: Point, b: Point, c: Point, d: Point) -> f64 {

@@ -264,16 +264,9 @@ pub(crate) fn check_input(surface: &TriSurface, options: &RepairOptions) -> Resu
     for tri in &surface.triangles {
         tri.iter().for_each(|&k| used[k] = true);
     }
-    if let Some(v) = (0..nv).find(|&v| used[v] && surface.vertices[v].iter().any(|c| !c.is_finite())) {
-        return Err(invalid(format!("vertex {v} has a non-finite coordinate {:?}", surface.vertices[v])));
-    }
-    if let Some(v) = (0..nv).find(|&v| used[v] && surface.vertices[v].iter().any(|c| c.abs() > crate::MAX_COORDINATE)) {
-        return Err(invalid(format!(
-            "vertex {v} lies at {:?}: a coordinate beyond {:e}, out of reach in any length unit \
-             (a damaged file?)",
-            surface.vertices[v],
-            crate::MAX_COORDINATE
-        )));
+    let fault = |v: usize| crate::coordinate_fault(&surface.vertices[v], crate::MAX_COORDINATE).map(|f| (v, f));
+    if let Some((v, fault)) = (0..nv).filter(|&v| used[v]).find_map(fault) {
+        return Err(invalid(format!("vertex {v} {fault}")));
     }
     Ok(used)
 }

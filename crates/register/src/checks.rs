@@ -23,14 +23,10 @@ pub fn check_cloud(cloud: &[Point]) -> Result<()> {
     if cloud.is_empty() {
         return Err(RegisterError::Invalid("no points (the point cloud is empty)".into()));
     }
-    if let Some(i) = cloud.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
-        return Err(RegisterError::Invalid(format!("point {i} has a non-finite coordinate {:?}", cloud[i])));
-    }
-    if let Some(i) = cloud.iter().position(|p| p.iter().any(|x| x.abs() > MAX_COORDINATE)) {
-        return Err(RegisterError::Invalid(format!(
-            "point {i} lies at {:?}: a coordinate beyond {MAX_COORDINATE:e}, out of reach in m or mm (a damaged file?)",
-            cloud[i]
-        )));
+    if let Some((i, fault)) =
+        cloud.iter().enumerate().find_map(|(i, p)| mesh::coordinate_fault(p, MAX_COORDINATE).map(|f| (i, f)))
+    {
+        return Err(RegisterError::Invalid(format!("point {i} {fault}")));
     }
     Ok(())
 }

@@ -532,19 +532,9 @@ fn finish_volume(
         }
     }
     let nodes: Vec<Point> = kept.iter().map(|&i| file_nodes[i]).collect();
-    if let Some(i) = nodes.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
-        return Err(parse_error(path, format!("node {} has a non-finite coordinate {:?}", kept[i], nodes[i])));
-    }
-    if let Some(i) = nodes.iter().position(|p| p.iter().any(|c| c.abs() > crate::MAX_COORDINATE)) {
-        return Err(parse_error(
-            path,
-            format!(
-                "node {} lies at {:?}: a coordinate beyond {:e}, out of reach in any length unit (a damaged file?)",
-                kept[i],
-                nodes[i],
-                crate::MAX_COORDINATE
-            ),
-        ));
+    let fault = |(i, p): (usize, &Point)| crate::coordinate_fault(p, crate::MAX_COORDINATE).map(|f| (i, f));
+    if let Some((i, fault)) = nodes.iter().enumerate().find_map(fault) {
+        return Err(parse_error(path, format!("node {} {fault}", kept[i])));
     }
     for i in &mut conn {
         *i = new_index[*i];
