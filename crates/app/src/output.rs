@@ -176,15 +176,14 @@ impl RunWriter {
         Ok(self.rows.last().expect("just pushed"))
     }
 
-    /// Writes organ.pvd (for a sequence), targets.csv (of the last frame of `registration`;
-    /// `labels`: its targets', or none), the last frame for 3D Slicer (targets.mrk.json and
+    /// Writes organ.pvd (for a sequence), targets.csv (of the last frame of `registration`, with
+    /// its targets' labels), the last frame for 3D Slicer (targets.mrk.json and
     /// organ_deformed.vtk, its registered surface) and summary.json, all in the results' frame,
     /// which they name when known (the clouds' frame given, else `working`: the frame the
     /// registration worked in, once the organ or a file named one); returns the run's summary.
     pub fn finish(
         self,
         registration: &Registration,
-        labels: &[String],
         working: Option<Frame>,
         outcomes: &[FrameOutcome],
     ) -> Result<Summary> {
@@ -195,6 +194,7 @@ impl RunWriter {
         let last = outcomes.last().context("no frame")?;
         let registered = self.converted(&last.targets);
         let sigma = last.target_std.as_deref();
+        let labels = registration.target_labels();
         write_targets(
             &self.dir.join("targets.csv"),
             &self.converted(&rest_in_cloud_frame(registration.targets(), last.rigid.as_ref())),

@@ -107,14 +107,16 @@ impl PointInput {
     }
 }
 
-/// The rest positions of a targets file (CSV, `.fcsv`, `.mrk.json`) in metres: in the unit the
-/// file names, else in `unit`; as they are in their own frame (which is the working frame: see
-/// [`TargetsSpec::frame`](crate::registration::TargetsSpec::frame)). With them, the warning
-/// naming its control points left out as not placed, if any.
-pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<(Vec<Point>, Option<String>)> {
-    let points = read_points(path)?;
-    let unit = points.unit.unwrap_or(unit);
-    Ok((points.points.iter().map(|&p| unit.point_to_metres(p)).collect(), unplaced_warning(path, &points)))
+/// A targets file (CSV, `.fcsv`, `.mrk.json`) with its rest positions in metres: read in the unit
+/// the file names, else in `unit`; as they are in their own frame, which the file may name (the
+/// frame the registration works in). With them, the warning naming its control points left out
+/// as not placed, if any.
+pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<(LabelledPoints, Option<String>)> {
+    let mut points = read_points(path)?;
+    let warning = unplaced_warning(path, &points);
+    let unit = points.unit.replace(LengthUnit::Metre).unwrap_or(unit);
+    points.points.iter_mut().for_each(|p| *p = unit.point_to_metres(*p));
+    Ok((points, warning))
 }
 
 /// The warning that `points`, read from `path`, left out control points not placed.
@@ -140,7 +142,12 @@ mod tests {
             "{}: 1 control point not placed in 3D Slicer (positionStatus undefined) is left out: q",
             ras.display()
         );
-        assert_eq!(read_targets(&ras, LengthUnit::Metre).unwrap(), (vec![[0.01, 0.02, 0.03]], Some(unplaced.clone())));
+        let (targets, warning) = read_targets(&ras, LengthUnit::Metre).unwrap();
+        assert_eq!((targets.points, targets.labels), (vec![[0.01, 0.02, 0.03]], vec!["p".to_string()]));
+        assert_eq!(
+            (targets.frame, targets.unit, warning),
+            (Some(Frame::Ras), Some(LengthUnit::Metre), Some(unplaced.clone()))
+        );
         let plain = dir.path().join("truth.csv");
         std::fs::write(&plain, "x,y,z\n1,2,3\n").unwrap();
         let mut input = PointInput::new(Some(Frame::Lps), LengthUnit::Metre, LengthUnit::Millimetre);
@@ -178,7 +185,11 @@ mod tests {
         std::fs::write(&empty, "x,y,z\n").unwrap();
         assert!(input.read_cloud(&empty).is_err());
         std::fs::write(&plain, "label,x_mm,y_mm,z_mm\nT,1,2,3\n").unwrap();
-        assert_eq!(read_targets(&plain, LengthUnit::Metre).unwrap().0, [[1e-3, 2e-3, 3e-3]], "the named unit wins");
+        assert_eq!(
+            read_targets(&plain, LengthUnit::Metre).unwrap().0.points,
+            [[1e-3, 2e-3, 3e-3]],
+            "the named unit wins"
+        );
     }
 
     #[test]

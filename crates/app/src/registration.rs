@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use learn::Model;
+use mesh::io::points::LabelledPoints;
 use mesh::io::{Frame, FrameChange};
 use mesh::length::LengthUnit;
 use mesh::Point;
@@ -321,19 +322,6 @@ pub struct RegistrationChoice {
     pub rigid: bool,
 }
 
-impl TargetsSpec {
-    /// The frame that a targets file names (a patient's, as `augsim prepare` writes it, or the
-    /// user's), `None` for other targets: the frame the registration works in.
-    pub fn frame(&self) -> Result<Option<Frame>> {
-        match self {
-            TargetsSpec::File(path) => Ok(mesh::io::points::read_points(path)
-                .with_context(|| format!("the targets of {}", path.display()))?
-                .frame),
-            TargetsSpec::Regions | TargetsSpec::Points(_) => Ok(None),
-        }
-    }
-}
-
 /// A targets file argument.
 fn targets_file(path: &str) -> Result<TargetsSpec, String> {
     Ok(TargetsSpec::File(PathBuf::from(path)))
@@ -465,11 +453,13 @@ impl RegistrationSpec {
     pub fn build(&self) -> Result<Registration> {
         let Loaded { organ, deformer, method, options } = self.method.load(self.options.as_ref())?;
         let (targets, unplaced) = match &self.targets {
-            TargetsSpec::Regions => (region_targets(organ.mesh()), None),
+            TargetsSpec::Regions => (LabelledPoints::new(region_targets(organ.mesh())), None),
             TargetsSpec::File(path) => crate::points::read_targets(path, self.units)?,
-            TargetsSpec::Points(points) => (points.iter().map(|&p| self.units.point_to_metres(p)).collect(), None),
+            TargetsSpec::Points(points) => {
+                (LabelledPoints::new(points.iter().map(|&p| self.units.point_to_metres(p)).collect()), None)
+            }
         };
-        if targets.is_empty() {
+        if targets.points.is_empty() {
             match &self.targets {
                 TargetsSpec::File(path) => anyhow::bail!(
                     "{} holds no targets{}",
@@ -489,22 +479,20 @@ impl RegistrationSpec {
             TargetsSpec::File(path) => format!("the targets of {}", path.display()),
             _ => "the targets".into(),
         };
-        let mut registration = Registration::new(organ, deformer, method, targets, options).with_context(|| what)?;
+        let LabelledPoints { points, labels, frame, .. } = targets;
+        let mut registration = Registration::new(organ, deformer, method, points, options)
+            .and_then(|r| r.named(labels, frame))
+            .with_context(|| what)?;
         unplaced.into_iter().for_each(|w| registration.warn(w));
         Ok(registration)
     }
 
-    /// The frame the registration works in: the one its targets file names (see
-    /// [`TargetsSpec::frame`]), `None` when unknown.
-    pub fn frame(&self) -> Result<Option<Frame>> {
-        self.targets.frame()
-    }
-
     /// A stream's frame change: from the frame given (else RAS, the frame OpenIGTLink sends) to
-    /// the organ's, and back; with a line that says what is done.
-    pub fn stream_frame(&self) -> Result<(FrameChange, String)> {
+    /// `organ`'s, the frame its registration works in ([`Registration::frame`]), and back; with a
+    /// line that says what is done.
+    pub fn stream_frame(&self, organ: &Registration) -> (FrameChange, String) {
         let stream = self.given_frame.unwrap_or(Frame::Ras);
-        let organ = self.frame()?;
+        let organ = organ.frame();
         let line = match organ {
             Some(organ) if organ != stream => {
                 format!("the stream's {stream} converted to the organ's {organ} (x and y negated), and back")
@@ -512,16 +500,7 @@ impl RegistrationSpec {
             Some(organ) => format!("{organ}, the stream's and the organ's"),
             None => format!("the organ names none: the stream's coordinates ({stream}) taken as the organ's"),
         };
-        Ok((FrameChange::between(Some(stream), organ), line))
-    }
-
-    /// The targets' labels, in order: a targets file's (empty strings where it gives none); none
-    /// for other targets.
-    pub fn target_labels(&self) -> Result<Vec<String>> {
-        match &self.targets {
-            TargetsSpec::File(path) => Ok(mesh::io::points::read_points(path)?.labels),
-            TargetsSpec::Regions | TargetsSpec::Points(_) => Ok(Vec::new()),
-        }
+        (FrameChange::between(Some(stream), organ), line)
     }
 }
 
@@ -631,26 +610,28 @@ mod tests {
     }
 
     #[test]
-    fn a_targets_file_names_the_working_frame() {
+    fn a_targets_file_names_the_working_frame_and_the_targets() {
         let dir = tempfile::tempdir().unwrap();
         let ras = dir.path().join("targets.mrk.json");
         std::fs::write(
             &ras,
-            r#"{"markups": [{"coordinateSystem": "RAS", "controlPoints": [{"label": "t", "position": [1, 2, 3]}]}]}"#,
+            r#"{"markups": [{"coordinateSystem": "RAS", "controlPoints": [{"label": "t", "position": [2500, 500, 500]}]}]}"#,
         )
         .unwrap();
-        assert_eq!(TargetsSpec::File(ras.clone()).frame().unwrap(), Some(Frame::Ras));
-        // A stream is RAS unless given otherwise; converted only where the organ names another.
         let spec = |targets, given_frame| RegistrationSpec {
             given_frame,
             ..RegistrationSpec::new(MethodSpec::fem("beam"), targets)
         };
-        let flips = |s: RegistrationSpec| s.stream_frame().unwrap().0.flips();
-        assert!(!flips(spec(TargetsSpec::File(ras.clone()), None)));
-        assert!(flips(spec(TargetsSpec::File(ras), Some(Frame::Lps))));
-        assert!(!flips(spec(TargetsSpec::Regions, Some(Frame::Lps))), "the organ names no frame");
-        assert_eq!(TargetsSpec::Regions.frame().unwrap(), None);
-        assert!(TargetsSpec::File(dir.path().join("missing.csv")).frame().is_err());
+        let named = spec(TargetsSpec::File(ras.clone()), None).build().unwrap();
+        assert_eq!((named.frame(), named.target_labels()), (Some(Frame::Ras), &["t".to_string()][..]));
+        let points = spec(TargetsSpec::Points(vec![[2.5, 0.5, 0.5]]), None).build().unwrap();
+        assert_eq!((points.frame(), points.target_labels()), (None, &[String::new()][..]));
+        // A stream is RAS unless given otherwise; converted only where the organ names another.
+        let flips = |given, organ: &Registration| spec(TargetsSpec::Regions, given).stream_frame(organ).0.flips();
+        assert!(!flips(None, &named));
+        assert!(flips(Some(Frame::Lps), &named));
+        assert!(!flips(Some(Frame::Lps), &points), "the organ names no frame");
+        assert!(spec(TargetsSpec::File(dir.path().join("missing.csv")), None).build().is_err());
     }
 
     #[test]
@@ -694,7 +675,6 @@ mod tests {
         assert!(matches!(&spec.targets, TargetsSpec::Points(p) if p == &[[1.0, 2.0, 3.0]]));
         assert_eq!((spec.units, spec.iterations, spec.rigid), (LengthUnit::Millimetre, Some(7), true));
         assert_eq!((spec.given_units, spec.given_frame), (LengthUnit::Millimetre, Some(Frame::Ras)));
-        assert_eq!(spec.frame().unwrap(), None, "targets as points name no frame");
         let learned =
             RegistrationChoice { model: Some("m".into()), scenario: Some("s".into()), ..RegistrationChoice::default() };
         let spec = learned.spec().unwrap();

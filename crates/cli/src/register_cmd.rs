@@ -83,8 +83,7 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     let cloud_path = args.cloud.clone().context("a cloud is required")?;
     let spec = args.registration.spec()?;
     let mut registration = spec.build()?;
-    // The frame its targets file names, read once.
-    let organ_frame = spec.frame()?;
+    let organ_frame = registration.frame();
     let mut input =
         PointInput::new(organ_frame, LengthUnit::Metre, spec.given_units).with_given_frame(spec.given_frame);
     let frames = read_frames(&cloud_path)?;
@@ -113,8 +112,7 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     for w in &input.warnings {
         eprintln!("warning    {w}");
     }
-    let labels = spec.target_labels()?;
-    let summary = writer.finish(&registration, &labels, input.frame, &outcomes)?;
+    let summary = writer.finish(&registration, input.frame, &outcomes)?;
     print_lines(&run_lines(&outcomes, &summary));
     println!(
         "wrote      {} ({}, targets.csv, summary.json; for 3D Slicer: organ_deformed.vtk, targets.mrk.json)",

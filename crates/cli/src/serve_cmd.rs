@@ -81,10 +81,10 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     let outputs = Outputs::parse(&args.outputs).map_err(anyhow::Error::msg).context("--outputs")?;
     let spec = args.registration.spec()?;
     let units = spec.given_units;
-    let (frame, frame_line) = spec.stream_frame()?;
     // Built once here so that a bad model, scenario or targets file stops the command before it
     // listens.
     let first = spec.build()?;
+    let (frame, frame_line) = spec.stream_frame(&first);
     println!("method     {}", first.method());
     println!("organ      {} nodes, {} targets", first.organ().mesh().num_nodes(), first.targets().len());
     println!("frame      {frame_line}");

@@ -201,8 +201,6 @@ struct Registration {
     /// The organ's frame and the one clouds are given in (`frame`), each when known: the files
     /// `out` writes are in the clouds' frame, else the organ's.
     frames: (Option<Frame>, Option<Frame>),
-    /// The targets' labels (those of a targets file; none otherwise), for targets.csv.
-    labels: Vec<String>,
     /// The method in words (e.g. "FEM, Corotational (Standard elements)").
     #[pyo3(get)]
     method: String,
@@ -262,11 +260,11 @@ impl Registration {
             rigid,
         };
         choice.check().map_err(PyValueError::new_err)?;
-        let (state, labels, spec, organ_frame) = compute(py, move || {
+        let (state, spec) = compute(py, move || {
             let spec = choice.spec()?;
-            let organ_frame = spec.frame()?;
-            Ok((spec.build()?, spec.target_labels()?, spec, organ_frame))
+            Ok((spec.build()?, spec))
         })?;
+        let organ_frame = state.frame();
         let change = FrameChange::between(spec.given_frame, organ_frame);
         let warnings = state.warnings().iter().map(|w| format!("targets: {w}")).collect::<Vec<_>>();
         for w in &warnings {
@@ -284,7 +282,6 @@ impl Registration {
             unit: units,
             change,
             frames: (organ_frame, spec.given_frame),
-            labels,
             method,
             units: units.to_string(),
             frame: spec.given_frame.or(organ_frame).map(|f| f.to_string()),
@@ -307,7 +304,7 @@ impl Registration {
             let mut state = locked(&self.state)?;
             let tracked = state.register(&cloud)?;
             if let Some(dir) = &out {
-                write_frame(dir, &state, &self.labels, (self.unit, self.frames), &tracked)?;
+                write_frame(dir, &state, (self.unit, self.frames), &tracked)?;
             }
             Ok(tracked)
         })?;
@@ -369,7 +366,6 @@ impl Registration {
 fn write_frame(
     dir: &std::path::Path,
     registration: &register::Registration,
-    labels: &[String],
     (unit, (organ, given)): (LengthUnit, (Option<Frame>, Option<Frame>)),
     tracked: &Tracked,
 ) -> anyhow::Result<()> {
@@ -383,7 +379,7 @@ fn write_frame(
     };
     let mut writer = RunWriter::new(dir, false, unit, (organ, given))?;
     writer.frame(0, "python".into(), registration.organ(), &outcome)?;
-    writer.finish(registration, labels, organ, std::slice::from_ref(&outcome))?;
+    writer.finish(registration, organ, std::slice::from_ref(&outcome))?;
     Ok(())
 }
 

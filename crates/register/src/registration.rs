@@ -6,6 +6,7 @@
 //! (the transform estimated on the first frame, kept for the sequence), registered there, and
 //! the registered targets are moved back: targets and errors are in the cloud's frame.
 
+use mesh::io::Frame;
 use mesh::stats::{max, mean};
 use mesh::Point;
 use serde::Serialize;
@@ -53,6 +54,8 @@ pub struct Registration {
     deformer: Box<dyn Deformer + Send>,
     method: String,
     targets: Vec<Point>,
+    labels: Vec<String>,
+    frame: Option<Frame>,
     stencils: Vec<Stencil>,
     options: RegistrationOptions,
     warnings: Vec<String>,
@@ -115,7 +118,9 @@ impl Registration {
             organ,
             deformer,
             method: method.into(),
+            labels: vec![String::new(); targets.len()],
             targets,
+            frame: None,
             stencils,
             options,
             warnings,
@@ -142,6 +147,28 @@ impl Registration {
     /// The targets' rest positions (m).
     pub fn targets(&self) -> &[Point] {
         &self.targets
+    }
+
+    /// The targets named: one label each (a targets file's, "" where it gives none), and the
+    /// frame (RAS or LPS) that the organ and its targets are in, where known; an error for a
+    /// number of labels other than the targets'.
+    pub fn named(mut self, labels: Vec<String>, frame: Option<Frame>) -> Result<Registration> {
+        if labels.len() != self.targets.len() {
+            return Err(RegisterError::Invalid(format!("{} labels for {} targets", labels.len(), self.targets.len())));
+        }
+        self.labels = labels;
+        self.frame = frame;
+        Ok(self)
+    }
+
+    /// The targets' labels, in order ("" for a target not named: [`Registration::named`]).
+    pub fn target_labels(&self) -> &[String] {
+        &self.labels
+    }
+
+    /// The frame (RAS or LPS) of the organ and its targets, `None` when unknown.
+    pub fn frame(&self) -> Option<Frame> {
+        self.frame
     }
 
     /// The loop's settings.
@@ -386,6 +413,11 @@ mod tests {
         let r = cube_with(vec![[0.01, 0.02, 0.03], [0.04, 0.01, 0.02]]).unwrap();
         assert!(r.warnings().is_empty(), "{:?}", r.warnings());
         assert_eq!(r.targets().len(), 2);
+        assert_eq!((r.target_labels(), r.frame()), (&[String::new(), String::new()][..], None), "not named");
+        let named = r.named(vec!["A".into(), "B".into()], Some(Frame::Lps)).unwrap();
+        assert_eq!((named.target_labels(), named.frame()), (&["A".to_string(), "B".to_string()][..], Some(Frame::Lps)));
+        let one_label = named.named(vec!["A".into()], None).err().expect("a label short").to_string();
+        assert!(one_label.contains("1 labels for 2 targets"), "{one_label}");
     }
 
     #[test]
