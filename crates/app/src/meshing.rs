@@ -178,13 +178,8 @@ pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     if extension == "stl" || extension == "obj" {
-        let mut surface = mesh::boundary_surface(mesh).compacted();
-        surface.vertices.iter_mut().for_each(|v| *v = LengthUnit::Millimetre.point_from_metres(*v));
         let frame = frame.filter(|_| extension == "stl");
-        match frame {
-            Some(frame) => mesh::io::write_surface_in_frame(path, &surface, frame).with_context(context)?,
-            None => mesh::io::write_surface(path, &surface).with_context(context)?,
-        }
+        write_surface_in_mm(path, &mesh::boundary_surface(mesh).compacted(), frame).with_context(context)?;
         let named = frame.map_or(String::new(), |f| format!(", frame {f} named"));
         return Ok(format!("its boundary surface, in mm{named}"));
     }
@@ -194,6 +189,18 @@ pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result
     };
     mesh::io::write_mesh(path, mesh, &fields).with_context(context)?;
     Ok("in m".into())
+}
+
+/// Writes a surface given in metres in millimetres, as 3D Slicer and surface tools read it (.stl,
+/// .obj, .vtk), naming `frame` in its header when known (.stl, .vtk).
+pub fn write_surface_in_mm(path: &Path, surface: &TriSurface, frame: Option<Frame>) -> Result<()> {
+    let vertices = surface.vertices.iter().map(|&v| LengthUnit::Millimetre.point_from_metres(v)).collect();
+    let surface = TriSurface { vertices, triangles: surface.triangles.clone() };
+    match frame {
+        Some(frame) => mesh::io::write_surface_in_frame(path, &surface, frame)?,
+        None => mesh::io::write_surface(path, &surface)?,
+    }
+    Ok(())
 }
 
 impl Meshed {

@@ -10,8 +10,8 @@
 //!    tetrahedra; the nodes the camera sees
 //!    (`visible`, self-occlusion included) and those near the attachment landmarks (`attached`,
 //!    on the surface) selected; the targets located inside the organ (a unit mistake is named).
-//!    Written in metres, in the segmentation's frame: `surface.stl` (its header naming the frame
-//!    when known), `organ.vtu` (the regions as point data `region_visible`, `region_attached`),
+//!    Written in the segmentation's frame: `surface.stl` in millimetres, for 3D Slicer (its
+//!    header naming the frame when known); in metres `organ.vtu` (the regions as point data `region_visible`, `region_attached`),
 //!    `attach.csv`, `targets.csv` (with the points' labels, `x_m` headers, and the frame in a
 //!    `# CoordinateSystem` line when known).
 //! 2. **scenarios**, written out to be read and edited: `dataset.toml` (a tool pushing the
@@ -53,7 +53,7 @@ use mesh::isosurface::ExtractOptions;
 use mesh::labelmap::{is_labelmap, read_labelmap_surface};
 use mesh::length::{mm, LengthUnit, UnitOrAuto};
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
-use mesh::repair::{detect_unit, RepairOptions};
+use mesh::repair::{detect_unit, largest_extent, RepairOptions};
 use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
 use mesh::{Camera, Mesh, Near, Point, TriSurface};
 use plot::{scatter_plot, PlotSpec, PointSet};
@@ -61,6 +61,7 @@ use serde::{Deserialize, Serialize};
 
 use learn::LearnedModel;
 
+use crate::meshing::write_surface_in_mm;
 use crate::points::PointInput;
 use crate::registration::{PatientMethod, RegistrationSpec, PATIENT_FILE};
 use crate::training::{train_unet, UNetRun, UNetStart};
@@ -159,6 +160,9 @@ pub struct PrepareState {
 
 /// The file that records a preparation.
 pub const STATE_FILE: &str = "prepare.json";
+
+/// The organ's surface in a prepared directory: in millimetres, in the segmentation's frame.
+pub const SURFACE_FILE: &str = "surface.stl";
 
 /// The steps, in order.
 pub const STEPS: [&str; 7] = ["organ", "scenarios", "dataset", "model", "evaluation", "validation", "report"];
@@ -352,10 +356,8 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     lines.extend(warnings.into_iter().map(|w| format!("warning: {w}")));
     organ.regions.insert("visible".into(), visible);
     organ.regions.insert("attached".into(), attached);
-    match frame {
-        Some(frame) => mesh::io::write_surface_in_frame(dir.join("surface.stl"), &surface, frame)?,
-        None => mesh::io::write_surface(dir.join("surface.stl"), &surface)?,
-    }
+    // In millimetres, for 3D Slicer (which shows it over the CT where the frame is named).
+    write_surface_in_mm(&dir.join(SURFACE_FILE), &surface, frame)?;
     // The regions as point data `region_visible`, `region_attached` (ParaView shows them; the
     // mesh reads them back).
     mesh::io::write_mesh(dir.join("organ.vtu"), &organ, &[])?;
@@ -997,6 +999,29 @@ fn method_name(method: PatientMethod) -> &'static str {
     }
 }
 
+/// The organ's surface (`surface.stl`) in metres, the unit it is in (mm, or m) told by the size of
+/// the organ's mesh (in m), which it must match.
+fn read_organ_surface(dir: &Path, organ: &Mesh) -> Result<TriSurface> {
+    let path = dir.join(SURFACE_FILE);
+    let mut surface = mesh::io::read_surface(&path)?;
+    let (lo, hi) = organ.bounds();
+    let (extent, organ_extent) = (largest_extent(&surface), (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max));
+    let unit = [LengthUnit::Millimetre, LengthUnit::Metre]
+        .into_iter()
+        .find(|u| (extent * u.metres() / organ_extent - 1.0).abs() < 0.1)
+        .with_context(|| {
+            format!(
+                "{} (largest extent {extent:.4}, in mm or m) does not match organ.vtu ({} mm): remove {} and \
+                 prepare it again",
+                path.display(),
+                mm(organ_extent),
+                dir.display()
+            )
+        })?;
+    surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(*p));
+    Ok(surface)
+}
+
 /// The validation's pushes ([`VALIDATION_LOADS`]), at seen nodes of the `coarsest` truth ordered
 /// across the line of sight from `camera`.
 fn validation_pushes(coarsest: &Truth, camera: Point) -> Vec<Push> {
@@ -1019,11 +1044,12 @@ fn validation_pushes(coarsest: &Truth, camera: Point) -> Vec<Push> {
 fn validation_step(options: &PrepareOptions, dir: &Path, progress: &dyn learn::Progress) -> Result<Vec<String>> {
     use rand::SeedableRng;
 
-    let surface = mesh::io::read_surface(dir.join("surface.stl"))?;
+    let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
+    let surface = read_organ_surface(dir, &organ)?;
     let camera = read_points_csv(&dir.join("camera.csv"))?[0];
     let landmarks = read_points_csv(&dir.join("attach.csv"))?;
     let targets = read_points_csv(&dir.join("targets.csv"))?;
-    let distance = hold_distance(options, &mesh::io::read_mesh(dir.join("organ.vtu"))?, &landmarks)?;
+    let distance = hold_distance(options, &organ, &landmarks)?;
     let truth_of = |level: usize| Truth::new(&surface, level * options.tets, camera, &landmarks, &targets, distance);
     let truth = truth_of(TRUTH_LEVELS[0])?;
     let pushes = validation_pushes(&truth, camera);
@@ -1340,6 +1366,24 @@ mod tests {
         let route = format!("repair: route: volumetric (local repair cannot mend it: {defect})");
         assert!(lines.contains(&route), "{route} expected in {lines:?}");
         assert!(lines.iter().any(|l| l == "targets: 2 inside the organ"), "{lines:?}");
+    }
+
+    #[test]
+    fn the_organ_s_surface_is_read_back_in_metres_from_either_unit() {
+        let dir = tempfile::tempdir().unwrap();
+        let organ = mesh::box_tet([0.0; 3], [0.1, 0.05, 0.04], [4, 2, 2]).unwrap();
+        let surface = mesh::boundary_surface(&organ).compacted();
+        write_surface_in_mm(&dir.path().join(SURFACE_FILE), &surface, None).unwrap();
+        let read = read_organ_surface(dir.path(), &organ).unwrap();
+        let off = |s: &TriSurface| {
+            s.vertices.iter().zip(&surface.vertices).map(|(a, b)| mesh::distance(*a, *b)).fold(0.0, f64::max)
+        };
+        assert!(off(&read) < 1e-8, "read back {} m off (STL holds f32)", off(&read));
+        mesh::io::write_surface(dir.path().join(SURFACE_FILE), &surface).unwrap();
+        assert!(off(&read_organ_surface(dir.path(), &organ).unwrap()) < 1e-8, "in metres");
+        let twice = mesh::box_tet([0.0; 3], [0.2, 0.1, 0.08], [4, 2, 2]).unwrap();
+        let refused = read_organ_surface(dir.path(), &twice).unwrap_err().to_string();
+        assert!(refused.contains("does not match organ.vtu (200 mm)"), "{refused}");
     }
 
     #[test]

@@ -126,8 +126,14 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     let organ = &state.steps[0].lines;
     assert!(organ.iter().any(|l| l.starts_with("units: mm")), "{organ:?}");
     assert!(organ.iter().any(|l| l.starts_with("frame: LPS (named by")), "{organ:?}");
-    // Written in m and LPS, labels kept: the landmarks given in RAS are where the LPS ones are.
+    // The points written in m and LPS, labels kept: the landmarks given in RAS are where the LPS ones are.
     assert_eq!(mesh::io::surface_frame(out.join("surface.stl")).unwrap(), Some(Frame::Lps));
+    // The surface in mm (for 3D Slicer), the organ's mesh in m.
+    let (surface, organ_mesh) =
+        (mesh::io::read_surface(out.join("surface.stl")).unwrap(), mesh::io::read_mesh(out.join("organ.vtu")).unwrap());
+    let extent = |p: (Point, Point)| (0..3).map(|d| p.1[d] - p.0[d]).fold(0.0, f64::max);
+    let (in_mm, in_m) = (extent(mesh::bounds(&surface.vertices)), extent(organ_mesh.bounds()));
+    assert!((in_mm / (1e3 * in_m) - 1.0).abs() < 0.02, "surface {in_mm} mm across, organ {in_m} m");
     let written = read_points(out.join("targets.csv")).unwrap();
     assert_eq!((written.frame, written.unit), (Some(Frame::Lps), Some(LengthUnit::Metre)));
     assert_eq!(written.labels, ["target 1", "target 2", "target 3"][..written.points.len()]);

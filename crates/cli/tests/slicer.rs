@@ -187,8 +187,7 @@ fn a_slicer_users_files_prepare_register_and_come_back_in_their_frame_and_unit()
     // The deformed surface: LPS and mm, and on the cloud (closer to it than the organ at rest).
     let (deformed, frame) = mesh::io::read_surface_with_frame(d.join("slicer/organ_deformed.vtk")).unwrap();
     assert_eq!(frame, Some(Frame::Lps));
-    let mut rest = mesh::io::read_surface(d.join("patient/surface.stl")).unwrap();
-    rest.vertices.iter_mut().for_each(|p| *p = p.map(|x| x * 1e3));
+    let rest = mesh::io::read_surface(d.join("patient/surface.stl")).unwrap();
     let cloud_lps = in_lps_mm("organ_cloud.csv", "p").points;
     let median_distance = |surface: &mesh::TriSurface| {
         let bvh = mesh::bvh::SurfaceBvh::new(surface).unwrap();
