@@ -11,7 +11,7 @@ use scenario::StaticScenario;
 use serde::{Deserialize, Serialize};
 
 use crate::calculix;
-use crate::{ExperimentResult, Headline, Name, Progress, Row, Size};
+use crate::{reference, ExperimentResult, Headline, Name, Progress, Row, Size};
 
 /// The largest difference, relative to the largest displacement, under which the two solutions
 /// are the same: CalculiX prints 7 significant digits, and both solve to tight tolerances.
@@ -132,22 +132,24 @@ fn compare(description: &str, problem: Problem, peer: &calculix::PeerSolution) -
     Ok(PeerCase { problem: description.to_string(), dofs, calculix_seconds: peer.seconds, calculix_inverted, augsim })
 }
 
-/// The table line of a case.
-fn row(c: &PeerCase) -> Row {
+/// The table line of a case, its times with their multiple of the reference (`reference_ms`).
+fn row(c: &PeerCase, reference_ms: f64) -> Row {
+    let reference_ms = Some(reference_ms);
+    let calculix_time = reference::seconds(c.calculix_seconds, 2, reference_ms);
     let calculix = match &c.calculix_inverted {
-        Some(at) => format!("CalculiX {:.2} s, its solution inverted ({at})", c.calculix_seconds),
-        None => format!("CalculiX {:.2} s", c.calculix_seconds),
+        Some(at) => format!("CalculiX {calculix_time}, its solution inverted ({at})"),
+        None => format!("CalculiX {calculix_time}"),
     };
     let ours = match &c.augsim {
         Ok(a) => format!(
             "largest difference {:.2e} m at most {:.1} mm displacement ({:.1e} of it; RMS {:.1e} m); {} dofs, \
-             augsim {:.2} s, {calculix}",
+             augsim {}, {calculix}",
             a.max_difference,
             1e3 * a.max_displacement,
             a.relative(),
             a.rms_difference,
             c.dofs,
-            a.seconds
+            reference::seconds(a.seconds, 2, reference_ms)
         ),
         Err(e) => format!("augsim finds no solution: {e}; {} dofs, {calculix}", c.dofs),
     };
@@ -157,6 +159,7 @@ fn row(c: &PeerCase) -> Row {
 /// Runs the comparison.
 pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let version = calculix::version()?;
+    let reference_ms = reference::measure()?;
     let mut cases = Vec::new();
     for (k, (description, problem)) in problems(size)?.into_iter().enumerate() {
         progress.line(&format!("fem-peer: {description} ({} dofs)", problem.num_dofs()));
@@ -187,7 +190,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         "the same solution",
         worst <= SAME_SOLUTION && unexplained == 0,
     );
-    let rows = cases.iter().map(row).collect();
+    let rows = cases.iter().map(|c| row(c, reference_ms)).collect();
     let notes = vec![
         format!(
             "CalculiX {version} (`ccx`, C3D4 / C3D10 / C3D8 with the same quadrature as augsim's elements: 1, 4 and 8 \
@@ -208,10 +211,12 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
          steps the load in increments, then iterates again under the full load, where augsim solves in one Newton \
          solve: they say nothing of either solver's speed."
             .to_string(),
+        reference::note(Some(reference_ms)),
     ];
     let mut values = serde_json::Map::new();
     values.insert("calculix_version".into(), version.clone().into());
     values.insert("cases".into(), serde_json::to_value(&cases)?);
+    values.insert("reference_ms".into(), reference_ms.into());
     Ok(ExperimentResult {
         name: Name::FemPeer,
         size,
