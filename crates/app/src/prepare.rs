@@ -11,9 +11,9 @@
 //!    (`visible`, self-occlusion included) and those near the attachment landmarks (`attached`,
 //!    on the surface) selected; the targets located inside the organ (a unit mistake is named).
 //!    Written in the segmentation's frame: `surface.stl` in millimetres, for 3D Slicer (its
-//!    header naming the frame when known); in metres `organ.vtu` (the regions as point data `region_visible`, `region_attached`),
-//!    `attach.csv`, `targets.csv` (with the points' labels, `x_m` headers, and the frame in a
-//!    `# CoordinateSystem` line when known).
+//!    header naming the frame when known); in metres `organ.vtu` (the regions as point data
+//!    `region_visible`, `region_attached`), `attach.csv`, `targets.csv` (with the points'
+//!    labels, `x_m` headers, and the frame in a `# CoordinateSystem` line when known).
 //! 2. **scenarios**, written out to be read and edited: `dataset.toml` (a tool pushing the
 //!    visible surface, the organ held at the landmarks, the input the visible surface's normal
 //!    displacement: the built-in `liver_ar`'s set-up on this organ), `static.toml` (the FEM
