@@ -41,6 +41,7 @@ class Registration:
     frame: Optional[str]
     points: npt.NDArray[np.float64]
     targets: npt.NDArray[np.float64]
+    target_labels: list[str]
     def __init__(
         self,
         *,

@@ -196,6 +196,7 @@ def test_clouds_and_results_in_another_frame(case, tmp_path):
     with pytest.warns(UserWarning, match="T-later"):
         ras = augsim.Registration(fem=case["scenario"], targets=targets, units="mm", frame="RAS")
     assert (lps.frame, ras.frame) == ("LPS", "RAS")
+    assert lps.target_labels == [f"T{k}" for k in range(len(case["rest"]))], "the file's labels, the placeholder left out"
     np.testing.assert_allclose(ras.targets, case["rest"] * flip, atol=1e-9)
     a, b = lps.register(case["cloud"]), ras.register(case["cloud"] * flip, out=tmp_path / "ras")
     np.testing.assert_allclose(b.targets, a.targets * flip, atol=1e-9)

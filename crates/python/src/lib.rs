@@ -349,6 +349,12 @@ impl Registration {
         let targets = compute(py, || Ok(locked(&self.state)?.targets().to_vec()))?;
         Ok(self.point_array(py, &targets))
     }
+
+    /// The targets' labels, in the order of `targets`: a targets file's ("" where it gives none).
+    #[getter]
+    fn target_labels(&self, py: Python<'_>) -> PyResult<Vec<String>> {
+        compute(py, || Ok(locked(&self.state)?.target_labels().to_vec()))
+    }
 }
 
 impl Registration {
