@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use learn::{Compute, Corruption, Dataset, EvalReport, LearnedModel, PointErrors, Samples};
+use learn::{Compute, Corruption, Dataset, EvalReport, LearnedModel, Model, PointErrors, Samples};
 use mesh::io::write_atomic_bytes;
 use mesh::length::mm;
 
@@ -151,6 +151,48 @@ pub fn write_evaluation(
         .grid(dataset.manifest().grid)?;
     learn::write_grid_sample(&vtu, &grid, &input, &worst.target, &prediction, &worst.mask)?;
     Ok([errors, summary_path, vtu])
+}
+
+/// `augsim eval`: `model_path`'s model (projected on the basis of the reduced-order model
+/// `project`, when given) evaluated on the samples of `dataset_dir` held out from it, inputs
+/// corrupted by `corruption`, and written into `out` ([`write_evaluation`]); returns it in lines.
+pub fn eval(
+    model_path: &Path,
+    dataset_dir: &Path,
+    project: Option<&Path>,
+    corruption: &Corruption,
+    compute: Compute,
+    out: &Path,
+) -> Result<Vec<String>> {
+    let model = Model::load(model_path)?;
+    let dataset = Dataset::open(dataset_dir)?;
+    match project {
+        Some(basis) => {
+            let projected = learn::Projected::new(model, &Model::load(basis)?)?;
+            let mut lines =
+                vec![format!("projected  on the basis of {} ({} modes)", basis.display(), projected.basis.info.modes)];
+            lines.extend(evaluate_into(&projected, model_path, &dataset, dataset_dir, corruption, compute, out)?);
+            Ok(lines)
+        }
+        None => evaluate_into(&model, model_path, &dataset, dataset_dir, corruption, compute, out),
+    }
+}
+
+/// [`eval`] for a loaded model: evaluated, written, in lines.
+fn evaluate_into(
+    model: &impl LearnedModel,
+    model_path: &Path,
+    dataset: &Dataset,
+    dataset_dir: &Path,
+    corruption: &Corruption,
+    compute: Compute,
+    out: &Path,
+) -> Result<Vec<String>> {
+    let e = evaluate_held_out(model, dataset, dataset_dir, corruption, compute)?;
+    let [errors, summary, vtu] = write_evaluation(out, model, model_path, dataset, &e, compute)?;
+    let mut lines = e.lines();
+    lines.push(format!("wrote      {}, {}, {}", errors.display(), summary.display(), vtu.display()));
+    Ok(lines)
 }
 
 #[cfg(test)]

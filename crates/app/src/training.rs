@@ -1,16 +1,233 @@
-//! A model trained on a dataset's split, as `augsim train` trains it: a U-Net (from scratch or
-//! fine-tuned, with its learning curve), or a reduced-order model and its fit in words.
+//! A model trained on a dataset's split, as `augsim train` trains it (its arguments, with those
+//! of the input corruption and the device that `eval` and `predict` share): a U-Net (from
+//! scratch or fine-tuned, with its learning curve), or a reduced-order model and its fit in words.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use learn::rom::{ReducedModel, RomConfig, RomReport};
 use learn::{
-    Compute, Dataset, Initialization, Normalization, Progress, Samples, Split, TrainConfig, TrainOptions, TrainOutcome,
-    UNetConfig,
+    Compute, Corruption, Dataset, Initialization, Method, Normalization, Progress, Samples, Sparsity, Split,
+    SplitPolicy, TrainConfig, TrainOptions, TrainOutcome, UNetConfig,
 };
 use mesh::length::mm;
 use scenario::DatasetScenario;
+
+/// Input corruption, shared by `train` (training and validation inputs) and `eval`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct CorruptionArgs {
+    /// Keep a random visible patch of between MIN and MAX input nodes (e.g. 13,114).
+    #[arg(long, value_name = "MIN,MAX", value_parser = node_range)]
+    pub sparse: Option<(usize, usize)>,
+    /// Additive Gaussian noise on the visible input nodes: standard deviation in the input unit.
+    #[arg(long, default_value_t = 0.0)]
+    pub noise: f64,
+}
+
+/// Parses `MIN,MAX`, two node counts (their order is checked with the other corruption settings).
+fn node_range(text: &str) -> Result<(usize, usize), String> {
+    let parse = |s: &str| s.trim().parse::<usize>().map_err(|e| format!("'{s}' is not a node count: {e}"));
+    let (min, max) = text.split_once(',').ok_or_else(|| format!("expected MIN,MAX (e.g. 13,114), got '{text}'"))?;
+    Ok((parse(min)?, parse(max)?))
+}
+
+impl CorruptionArgs {
+    /// The corruption asked for.
+    pub fn corruption(&self) -> Corruption {
+        Corruption {
+            sparsity: self.sparse.map(|(min_nodes, max_nodes)| Sparsity::Patch { min_nodes, max_nodes }),
+            noise_std: self.noise,
+        }
+    }
+}
+
+/// How `train` splits the dataset (by generation index: the last uniform samples are the test set,
+/// the ones before them the validation set, the rest and every σ-chosen draw the training set); see
+/// [`SplitPolicy`].
+#[derive(Debug, Clone, clap::Args)]
+pub struct SplitArgs {
+    /// Fraction of the dataset's uniform draws held out as the test set (its last ones).
+    #[arg(long, default_value_t = 0.2)]
+    pub test_fraction: f64,
+    /// Number of test samples; overrides --test-fraction.
+    #[arg(long)]
+    pub test_samples: Option<usize>,
+    /// Fraction of the dataset's uniform draws used for validation (checkpoint selection): those
+    /// before the test set.
+    #[arg(long, default_value_t = 0.1)]
+    pub validation_fraction: f64,
+    /// Number of validation samples; overrides --validation-fraction.
+    #[arg(long)]
+    pub validation_samples: Option<usize>,
+    /// Use only the first N training samples (e.g. 100 for transfer learning).
+    #[arg(long)]
+    pub train_samples: Option<usize>,
+}
+
+impl SplitArgs {
+    fn policy(&self) -> SplitPolicy {
+        SplitPolicy {
+            test_fraction: self.test_fraction,
+            test_samples: self.test_samples,
+            validation_fraction: self.validation_fraction,
+            validation_samples: self.validation_samples,
+            train_samples: self.train_samples,
+        }
+    }
+}
+
+/// Options of `augsim train`.
+#[derive(Debug, clap::Args)]
+pub struct TrainArgs {
+    /// Dataset directory (from `augsim generate`).
+    pub dataset: PathBuf,
+    /// Output directory: the model directory (model.json and its arrays for `rom`; model.json,
+    /// model.safetensors, checkpoint.bin, curve.csv, curve.png for `unet`).
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// `unet` (the published 3D U-Net, trained by Adam) or `rom` (a reduced-order model: POD
+    /// basis and Gaussian-process regression, fitted in seconds).
+    #[arg(long, default_value = "unet")]
+    pub method: Method,
+    /// ROM: most POD modes (the number used is chosen on validation).
+    #[arg(long, default_value_t = RomConfig::default().max_modes)]
+    pub modes: usize,
+    /// ROM: corrupted copies of each training sample (with --noise / --sparse) in the regression's
+    /// training set.
+    #[arg(long, default_value_t = 0)]
+    pub noise_copies: usize,
+    /// ROM: most inducing points (above this many training samples the regression is a Nyström
+    /// approximation).
+    #[arg(long, default_value_t = RomConfig::default().max_inducing)]
+    pub inducing: usize,
+    /// ROM, force inputs: the linear-elastic response at rest of the dataset's scenario (its file
+    /// or built-in name) as a physics prior; the regression learns what it leaves.
+    #[arg(long)]
+    pub prior: Option<PathBuf>,
+    /// Optimiser steps.
+    #[arg(long, default_value_t = 2000)]
+    pub iterations: usize,
+    /// Samples per step.
+    #[arg(long, default_value_t = 4)]
+    pub batch: usize,
+    /// Adam learning rate.
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// Let the learning rate fall to this value along a half cosine over the iterations.
+    #[arg(long)]
+    pub final_lr: Option<f64>,
+    /// Channels of the first U-Net level.
+    #[arg(long, default_value_t = 16)]
+    pub channels: usize,
+    /// Down-sampling steps of the U-Net.
+    #[arg(long, default_value_t = 3)]
+    pub depth: usize,
+    /// Fine-tune this pre-trained model (model.json) instead of starting from scratch.
+    #[arg(long)]
+    pub init: Option<PathBuf>,
+    /// With --init: keep the encoder fixed.
+    #[arg(long)]
+    pub freeze_encoder: bool,
+    /// Validate (and keep the best model) every K steps.
+    #[arg(long, default_value_t = 100)]
+    pub validate_every: usize,
+    /// Seed of weights, batches and corruption.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Start afresh instead of resuming from out/checkpoint.bin.
+    #[arg(long)]
+    pub restart: bool,
+    /// Train / validation / test split.
+    #[command(flatten)]
+    pub split: SplitArgs,
+    /// Input corruption.
+    #[command(flatten)]
+    pub corruption: CorruptionArgs,
+    /// Where the network trains.
+    #[command(flatten)]
+    pub device: DeviceArgs,
+}
+
+/// `--device`: where the network runs.
+#[derive(Debug, Clone, Copy, clap::Args)]
+pub struct DeviceArgs {
+    /// `cpu` (the repacked CPU engines, fastest on a CPU), `gpu` (burn on a GPU through wgpu: Vulkan,
+    /// Metal or DX12; needs a build with `--features gpu`) or `cpu-burn` (burn's own kernels on the CPU: the GPU's code
+    /// path, slower; needs a build with `--features cpu-burn`).
+    #[arg(long = "device", default_value = "cpu")]
+    pub compute: Compute,
+}
+
+impl DeviceArgs {
+    /// The device, checked, and which it is in a line.
+    pub fn described(self) -> Result<(Compute, String)> {
+        Ok((self.compute, format!("device     {}", self.compute.describe()?)))
+    }
+}
+
+/// Trains what `augsim train` asks for on its dataset's split: a U-Net (resumed from its
+/// checkpoint unless `restart`) or a reduced-order model. Tells `progress` the split and the
+/// device in lines, and the training's advance; returns the outcome in lines.
+pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
+    let dataset = Dataset::open(&args.dataset)?;
+    let all = dataset.load_all()?;
+    let (split, [train, validation, test]) = args.split.policy().apply(&all)?;
+    progress.line(&format!(
+        "split      {} training, {} validation, {} test samples (held out, recorded in the model); grid {}",
+        train.len(),
+        validation.len(),
+        test.len(),
+        dataset.manifest().grid
+    ));
+    if args.method == Method::Rom {
+        return train_rom(args, &dataset, split, [train, validation]);
+    }
+    let (compute, device) = args.device.described()?;
+    progress.line(&device);
+    let start = match &args.init {
+        Some(model) => UNetStart::FineTune { model: model.clone(), freeze_encoder: args.freeze_encoder },
+        None => {
+            UNetStart::Scratch(UNetConfig { base_channels: args.channels, depth: args.depth, ..UNetConfig::default() })
+        }
+    };
+    let config = TrainConfig {
+        iterations: args.iterations,
+        batch_size: args.batch,
+        learning_rate: args.lr,
+        final_learning_rate: args.final_lr,
+        seed: args.seed,
+        validate_every: args.validate_every,
+        checkpoint_every: args.validate_every,
+        train_corruption: args.corruption.corruption(),
+        val_corruption: args.corruption.corruption(),
+    };
+    let run = UNetRun { out: args.out.clone(), resume: !args.restart, compute };
+    let outcome = train_unet(&dataset, &split, [&train, &validation], start, &config, run, progress)?;
+    let mut lines =
+        vec![format!("steps      {} ({:.3} s per step)", outcome.iterations_done, outcome.mean_step_seconds)];
+    if let Some((it, Some(e))) = outcome.model.training.as_ref().map(|t| (t.best_iteration, t.best_val_mean_error)) {
+        lines.push(format!("best       validation mean e = {:.4} mm at iteration {it}", mm(e)));
+    }
+    lines.push(format!("wrote      {}", outcome.model_path.display()));
+    Ok(lines)
+}
+
+/// `train` for a reduced-order model: fitted on the training samples, chosen on the validation
+/// ones; its fit in lines.
+fn train_rom(args: &TrainArgs, dataset: &Dataset, split: Split, samples: [Samples; 2]) -> Result<Vec<String>> {
+    let config = RomConfig {
+        max_modes: args.modes,
+        max_inducing: args.inducing,
+        noise_copies: args.noise_copies,
+        corruption: args.corruption.corruption(),
+        seed: args.seed,
+        ..RomConfig::default()
+    };
+    let (model, report) = fit_rom(dataset, split, samples, &config, args.prior.as_deref(), &args.out)?;
+    let mut lines = rom_lines(&model, &report);
+    lines.push(format!("wrote      {}", args.out.join(learn::MODEL_FILE).display()));
+    Ok(lines)
+}
 
 /// Where a U-Net's training starts.
 pub enum UNetStart {

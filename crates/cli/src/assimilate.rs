@@ -4,7 +4,7 @@
 use anyhow::Result;
 use app::assimilation::{AssimilationChoice, Experiment};
 
-use crate::bar::Bar;
+use crate::bar::{print_lines, Bar};
 
 /// Runs `augsim assimilate`.
 pub fn run(args: &AssimilationChoice) -> Result<()> {
@@ -18,11 +18,8 @@ pub fn run(args: &AssimilationChoice) -> Result<()> {
     );
     let sigma_set = sc.filter.sigma_points;
     let experiment = Experiment::prepare(sc, &dir, files.as_ref())?;
-    experiment.setup().lines(sigma_set, files.as_ref()).iter().for_each(|l| println!("{l}"));
-    let bar = Bar::new("iterations", "");
-    let report = experiment.run(&out_dir, &bar);
-    bar.finish();
-    report?.lines().iter().for_each(|l| println!("{l}"));
+    print_lines(&experiment.setup().lines(sigma_set, files.as_ref()));
+    print_lines(&Bar::during("iterations", |bar| experiment.run(&out_dir, bar))?.lines());
     println!(
         "wrote        {}/{{trace.csv, trace.json, summary.json, deformation.pvd, *.png}}{}",
         out_dir.display(),

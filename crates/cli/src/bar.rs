@@ -1,4 +1,5 @@
-//! The terminal's progress bar: every command draws the progress of its long runs through [`Bar`].
+//! The terminal: every command draws the progress of its long runs through [`Bar`] and prints
+//! the lines the application layer builds through [`print_lines`].
 
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -19,6 +20,15 @@ impl Bar {
         Bar { bar: ProgressBar::new(0).with_style(style), indent }
     }
 
+    /// Runs `work` under a new bar counting `unit` (see [`Bar::new`]), which is removed from the
+    /// terminal when the work ends, whether it failed or not.
+    pub fn during<T>(unit: &str, work: impl FnOnce(&Bar) -> T) -> T {
+        let bar = Bar::new(unit, "");
+        let result = work(&bar);
+        bar.finish();
+        result
+    }
+
     /// Prints `text` above the bar, not indented.
     pub fn print(&self, text: &str) {
         self.bar.suspend(|| println!("{text}"));
@@ -28,6 +38,11 @@ impl Bar {
     pub fn finish(&self) {
         self.bar.finish_and_clear();
     }
+}
+
+/// Prints lines built by the application layer.
+pub fn print_lines(lines: &[String]) {
+    lines.iter().for_each(|l| println!("{l}"));
 }
 
 impl learn::Progress for Bar {

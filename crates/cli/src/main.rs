@@ -84,7 +84,7 @@ enum Command {
         parts: Vec<PathBuf>,
     },
     /// Train a U-Net on a dataset (from scratch or fine-tuning a pre-trained model); resumable.
-    Train(learn_cmd::TrainArgs),
+    Train(app::training::TrainArgs),
     /// Evaluate a model on the samples held out from it (the test split recorded in the model, or a
     /// dataset it never saw): mean/std/max Euclidean error, worst sample as VTK.
     Eval {
@@ -101,10 +101,10 @@ enum Command {
         project: Option<PathBuf>,
         /// Input corruption.
         #[command(flatten)]
-        corruption: learn_cmd::CorruptionArgs,
+        corruption: app::training::CorruptionArgs,
         /// Where the network runs.
         #[command(flatten)]
-        device: learn_cmd::DeviceArgs,
+        device: app::training::DeviceArgs,
     },
     /// Predict the displacement for a constraint tensor or a point cloud and time the network.
     Predict {
@@ -125,7 +125,7 @@ enum Command {
         runs: usize,
         /// Where the network runs.
         #[command(flatten)]
-        device: learn_cmd::DeviceArgs,
+        device: app::training::DeviceArgs,
     },
     /// A patient's organ from its segmented surface to a registration set-up: repaired surface,
     /// mesh, regions (what the camera sees, where the organ is held), scenario files, FEM

@@ -7,6 +7,8 @@ use std::time::Instant;
 use anyhow::Result;
 use app::meshing::{mesh_organ, write_mesh_file, MeshOptions};
 
+use crate::bar::print_lines;
+
 /// Runs the command: meshes, prints the report and writes `output`.
 pub fn run(options: &MeshOptions, output: &Path) -> Result<()> {
     let start = Instant::now();
@@ -15,7 +17,7 @@ pub fn run(options: &MeshOptions, output: &Path) -> Result<()> {
     for (topic, line) in &meshed.notes {
         println!("{topic:<10} {line}");
     }
-    meshed.report()?.iter().for_each(|l| println!("{l}"));
+    print_lines(&meshed.report()?);
     println!("time       {:.1} ms", elapsed.as_secs_f64() * 1e3);
     let written = write_mesh_file(output, &meshed.mesh, meshed.frame)?;
     println!("wrote      {} ({written})", output.display());

@@ -15,7 +15,7 @@ use register::RigidOptions;
 use scenario::registration::BUILTIN_CASE;
 use scenario::CaseScenario;
 
-use crate::bar::Bar;
+use crate::bar::{print_lines, Bar};
 
 /// Arguments of `augsim register`.
 #[derive(clap::Args)]
@@ -127,11 +127,6 @@ fn to_register_error(e: anyhow::Error) -> register::RegisterError {
     register::RegisterError::Invalid(format!("{e:#}"))
 }
 
-/// Prints lines built by the application layer.
-fn print_lines(lines: &[String]) {
-    lines.iter().for_each(|l| println!("{l}"));
-}
-
 /// The comparison case of `--demo` (the built-in scenario) or `--case FILE`, with the command
 /// line's overrides.
 fn comparison_case(args: &RegisterArgs) -> Result<CaseScenario> {
@@ -171,10 +166,7 @@ fn demo(args: &RegisterArgs, out: &Path) -> Result<()> {
     let scenario = comparison_case(args)?;
     let learned =
         LearnedModels { model: args.registration.model.as_deref(), scenario: args.registration.scenario.as_deref() };
-    let bar = Bar::new("methods", "");
-    let rows = run_comparison(&scenario, learned, out, &bar);
-    bar.finish();
-    rows?;
+    Bar::during("methods", |bar| run_comparison(&scenario, learned, out, bar))?;
     println!();
     println!(
         "wrote      {} (comparison.csv, summary.json; per method: organ.vtu, targets.csv, registration.png)",

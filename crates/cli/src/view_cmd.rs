@@ -8,6 +8,8 @@ use anyhow::{bail, Context, Result};
 use app::sample_view::{dataset_sample_scene, mesh_file_scene};
 use plot::viewer::Scene;
 
+use crate::bar::print_lines;
+
 /// Options of `augsim view`.
 #[derive(Debug, clap::Args)]
 pub struct ViewArgs {
@@ -45,7 +47,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         (None, Some(model), Some(dataset)) => {
             let (scene, lines) =
                 dataset_sample_scene(model, dataset, args.sample, args.mesh.as_deref(), args.scenario.as_deref())?;
-            lines.iter().for_each(|l| println!("{l}"));
+            print_lines(&lines);
             scene
         }
         _ => bail!("give --model and --dataset (a dataset sample), or --vtu FILE (a mesh file with displacements)"),
