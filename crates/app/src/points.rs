@@ -113,9 +113,8 @@ impl PointInput {
 /// as not placed, if any.
 pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<(LabelledPoints, Option<String>)> {
     let mut points = read_points(path)?;
+    points.convert(None, LengthUnit::Metre, unit);
     let warning = unplaced_warning(path, &points);
-    let unit = points.unit.replace(LengthUnit::Metre).unwrap_or(unit);
-    points.points.iter_mut().for_each(|p| *p = unit.point_to_metres(*p));
     Ok((points, warning))
 }
 

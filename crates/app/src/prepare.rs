@@ -1004,8 +1004,7 @@ fn method_name(method: PatientMethod) -> &'static str {
 fn read_organ_surface(dir: &Path, organ: &Mesh) -> Result<TriSurface> {
     let path = dir.join(SURFACE_FILE);
     let mut surface = mesh::io::read_surface(&path)?;
-    let (lo, hi) = organ.bounds();
-    let (extent, organ_extent) = (largest_extent(&surface), (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max));
+    let (extent, organ_extent) = (largest_extent(&surface), longest_side(organ));
     let unit = [LengthUnit::Millimetre, LengthUnit::Metre]
         .into_iter()
         .find(|u| (extent * u.metres() / organ_extent - 1.0).abs() < 0.1)

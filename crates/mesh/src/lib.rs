@@ -330,10 +330,19 @@ pub fn bounds(points: &[Point]) -> (Point, Point) {
 /// four coordinates that geometric tests form overflow to infinity, and repair then never ends.
 pub(crate) const MAX_COORDINATE: f64 = 1e9;
 
-/// What makes `p` no point of an organ's in any length unit, `None` when nothing does: a
-/// non-finite coordinate, or one beyond `bound` (a damaged file), in words that follow the point's
-/// name ("vertex 7 has a non-finite coordinate …").
-pub fn coordinate_fault(p: &Point, bound: f64) -> Option<String> {
+/// The first of `points` (each with its number) that is no point of an organ's in any length unit,
+/// with what is wrong with it: a non-finite coordinate, or one beyond `bound` (a damaged file), in
+/// words that follow the point's name ("vertex 7 has a non-finite coordinate …"); `None` when
+/// every point is sound.
+pub fn coordinate_fault<'a>(
+    points: impl IntoIterator<Item = (usize, &'a Point)>,
+    bound: f64,
+) -> Option<(usize, String)> {
+    points.into_iter().find_map(|(i, p)| point_fault(p, bound).map(|fault| (i, fault)))
+}
+
+/// What is wrong with one point for [`coordinate_fault`], `None` when nothing is.
+fn point_fault(p: &Point, bound: f64) -> Option<String> {
     if p.iter().any(|c| !c.is_finite()) {
         Some(format!("has a non-finite coordinate {p:?}"))
     } else if p.iter().any(|c| c.abs() > bound) {

@@ -264,8 +264,8 @@ pub(crate) fn check_input(surface: &TriSurface, options: &RepairOptions) -> Resu
     for tri in &surface.triangles {
         tri.iter().for_each(|&k| used[k] = true);
     }
-    let fault = |v: usize| crate::coordinate_fault(&surface.vertices[v], crate::MAX_COORDINATE).map(|f| (v, f));
-    if let Some((v, fault)) = (0..nv).filter(|&v| used[v]).find_map(fault) {
+    let used_vertices = surface.vertices.iter().enumerate().filter(|&(v, _)| used[v]);
+    if let Some((v, fault)) = crate::coordinate_fault(used_vertices, crate::MAX_COORDINATE) {
         return Err(invalid(format!("vertex {v} {fault}")));
     }
     Ok(used)

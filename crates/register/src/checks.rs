@@ -23,9 +23,7 @@ pub fn check_cloud(cloud: &[Point]) -> Result<()> {
     if cloud.is_empty() {
         return Err(RegisterError::Invalid("no points (the point cloud is empty)".into()));
     }
-    if let Some((i, fault)) =
-        cloud.iter().enumerate().find_map(|(i, p)| mesh::coordinate_fault(p, MAX_COORDINATE).map(|f| (i, f)))
-    {
+    if let Some((i, fault)) = mesh::coordinate_fault(cloud.iter().enumerate(), MAX_COORDINATE) {
         return Err(RegisterError::Invalid(format!("point {i} {fault}")));
     }
     Ok(())

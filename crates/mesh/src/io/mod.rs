@@ -532,8 +532,7 @@ fn finish_volume(
         }
     }
     let nodes: Vec<Point> = kept.iter().map(|&i| file_nodes[i]).collect();
-    let fault = |(i, p): (usize, &Point)| crate::coordinate_fault(p, crate::MAX_COORDINATE).map(|f| (i, f));
-    if let Some((i, fault)) = nodes.iter().enumerate().find_map(fault) {
+    if let Some((i, fault)) = crate::coordinate_fault(nodes.iter().enumerate(), crate::MAX_COORDINATE) {
         return Err(parse_error(path, format!("node {} {fault}", kept[i])));
     }
     for i in &mut conn {
