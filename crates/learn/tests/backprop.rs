@@ -55,6 +55,30 @@ fn gradients_are_the_derivatives_of_the_loss() {
     }
 }
 
+/// A seed trains the same network on any number of threads: a batch's gradients are the same
+/// bits on 1, 2 and 3 threads (rayon's splits of a batch depend on the threads).
+#[test]
+fn gradients_do_not_depend_on_the_threads() {
+    let config = UNetConfig { base_channels: 3, depth: 1, ..UNetConfig::default() };
+    let net = perturbed(&config);
+    let (batch, grid) = (5, GridShape::new(6, 5, 4));
+    let (x, y, mask) = batch_values(batch, grid);
+    let on = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| loss_and_gradients(&net, &x, &y, &mask, batch, grid).unwrap())
+    };
+    let (loss, grads) = on(1);
+    assert!(loss > 0.0);
+    for threads in [2, 3] {
+        let (other_loss, other) = on(threads);
+        assert_eq!(other_loss.to_bits(), loss.to_bits(), "loss on {threads} threads");
+        for (g, h) in grads.0.iter().zip(&other.0) {
+            let bits = |g: &Option<Vec<f32>>| g.as_ref().map(|v| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
+            assert_eq!(bits(g), bits(h), "gradients on {threads} threads");
+        }
+    }
+}
+
 #[test]
 fn frozen_encoder_gets_no_gradients() {
     let config = UNetConfig { base_channels: 3, depth: 2, ..UNetConfig::default() };

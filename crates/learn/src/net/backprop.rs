@@ -48,6 +48,11 @@ use crate::net::unet::{Gradients, LayerKind, LayerParams, Levels, UNet};
 use crate::net::winograd::{self, Winograd};
 use crate::{LearnError, Result};
 
+/// Samples of a batch whose gradients one accumulator sums before the accumulators are added:
+/// the batch's samples run in parallel in groups of this many (two threads on the default batch
+/// of 4).
+const SAMPLES_PER_ACCUMULATOR: usize = 2;
+
 /// The masked MSE loss of `net` on a batch and the gradients of its trainable parameters.
 ///
 /// `inputs` is `[batch, in_channels, nx, ny, nz]`, `targets` `[batch, out_channels, nx, ny, nz]`
@@ -85,14 +90,16 @@ pub fn loss_and_gradients(
     let scale = (2.0 / weight) as f32;
     let padded = prepared.padded;
     let halo = prepared.kernel / 2;
-    // One gradient accumulator per thread.
-    let per_thread = batch.div_ceil(rayon::current_num_threads());
-    let (loss, grads) = (0..batch)
-        .into_par_iter()
-        .with_min_len(per_thread)
-        .fold(
-            || (0.0, prepared.zero_grads()),
-            |(loss, mut grads), s| {
+    // One gradient accumulator per fixed group of samples, the groups summed in order: the
+    // same sums in the same order on any number of threads, so that a seed trains the same
+    // network on any machine with the same instruction set.
+    let samples: Vec<usize> = (0..batch).collect();
+    let groups: Vec<(f64, Vec<Grad>)> = samples
+        .par_chunks(SAMPLES_PER_ACCUMULATOR)
+        .map(|group| {
+            let mut grads = prepared.zero_grads();
+            let mut loss = 0.0;
+            for &s in group {
                 let input = Volume::from_field(&inputs[s * c_in * nodes..][..c_in * nodes], c_in, grid, padded, halo);
                 let activations = prepared.forward(input);
                 let target = &targets[s * c_out * nodes..][..c_out * nodes];
@@ -100,18 +107,22 @@ pub fn loss_and_gradients(
                     output_gradient(&activations.output, target, &masks[s * nodes..][..nodes], grid, scale);
                 let spent = prepared.backward(&activations, d_output, &mut grads);
                 recycle(spent.into_iter().chain(activations.into_volumes()));
-                (loss + sample_loss, grads)
-            },
-        )
-        .reduce_with(|(loss_a, mut a), (loss_b, b)| {
-            vectorised(|| {
-                for (ga, gb) in a.iter_mut().zip(&b) {
-                    ga.add(gb);
-                }
-            });
-            (loss_a + loss_b, a)
+                loss += sample_loss;
+            }
+            (loss, grads)
         })
-        .ok_or_else(|| LearnError::InvalidInput("gradients of an empty batch".into()))?;
+        .collect();
+    let mut groups = groups.into_iter();
+    let (mut loss, mut grads) =
+        groups.next().ok_or_else(|| LearnError::InvalidInput("gradients of an empty batch".into()))?;
+    for (group_loss, group_grads) in groups {
+        vectorised(|| {
+            for (ga, gb) in grads.iter_mut().zip(&group_grads) {
+                ga.add(gb);
+            }
+        });
+        loss += group_loss;
+    }
     Ok((loss / weight, prepared.gradients(grads)))
 }
 
