@@ -14,7 +14,7 @@ use scenario::DatasetScenario;
 pub struct GenerateArgs {
     /// Dataset scenario: a TOML file, or the name of a built-in one (e.g. liver_forces).
     pub scenario: PathBuf,
-    /// Output directory; default out/<name> (or out/<name>.part<i>of<n>).
+    /// Output directory; default `out/<name>` (or `out/<name>.part<i>of<n>`).
     #[arg(short, long)]
     pub out: Option<PathBuf>,
     /// Generate only part i of n (e.g. 0/8), for array jobs; join with `merge`.

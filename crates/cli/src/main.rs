@@ -31,7 +31,7 @@ enum Command {
     Solve {
         /// Static scenario: a TOML file, or the name of a built-in one (e.g. beam).
         scenario: PathBuf,
-        /// Output file (.vtu or .vtk); default out/<name>.vtu.
+        /// Output file (.vtu or .vtk); default `out/<name>.vtu`.
         #[arg(short, long)]
         output: Option<PathBuf>,
     },

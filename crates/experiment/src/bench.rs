@@ -1,6 +1,6 @@
 //! `augsim bench`'s tables: median static-solve times, split into assembly, factorisation and
 //! triangular solves (the cases of the fem-speed experiment); single-sample U-Net prediction
-//! times, also over the reference solve ([`crate::reference`]); registration frames of every
+//! times, also over the reference solve (the `reference` module); registration frames of every
 //! method, from rest and streamed, beside the co-rotational FEM's in the same run. Each line goes
 //! to `print` as soon as it is measured.
 

@@ -34,7 +34,7 @@ pub struct CaseTiming {
     /// The factor on the group's nominal load.
     #[serde(default = "one")]
     pub load: f64,
-    /// Whether the case is the run's reference (see [`reference_ms`]).
+    /// Whether the case is the run's reference (see `reference_ms`).
     #[serde(default)]
     pub reference: bool,
     /// Degrees of freedom.

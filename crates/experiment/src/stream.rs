@@ -55,7 +55,7 @@ pub struct Stream {
 /// A press and release held out from the choice of the stream's settings (`warm_iterations`,
 /// the registration tolerance: chosen on the built-in case's own press and release): the built-in
 /// case's truth, camera and models pressing obliquely by up to 2 N on the front of the left lobe,
-/// seen with another seed, in [`FRAMES`] frames of [`POINTS`] points.
+/// seen with another seed, in `FRAMES` frames of `POINTS` points.
 pub fn press_and_release() -> CaseScenario {
     let mut scenario = CaseScenario::builtin();
     scenario.truth.frames = FRAMES;

@@ -47,19 +47,19 @@ fn hex_cells(n: [usize; 3]) -> Vec<[usize; 8]> {
     cells
 }
 
-/// A box [lo, hi] meshed with n[0]×n[1]×n[2] trilinear hexahedra.
+/// A box `[lo, hi]` meshed with `n[0]×n[1]×n[2]` trilinear hexahedra.
 pub fn box_hex(lo: Point, hi: Point, n: [usize; 3]) -> Result<Mesh, MeshError> {
     Mesh::new(lattice(lo, hi, n)?, Cells::Hex8(hex_cells(n)))
 }
 
-/// A box [lo, hi] with n[0]×n[1]×n[2] hexahedra each split into 6 tetrahedra
+/// A box `[lo, hi]` with `n[0]×n[1]×n[2]` hexahedra each split into 6 tetrahedra
 /// (a conforming split along each cube's main diagonal).
 pub fn box_tet(lo: Point, hi: Point, n: [usize; 3]) -> Result<Mesh, MeshError> {
     let tets = hex_cells(n).iter().flat_map(|h| HEX_TO_TETS.map(|t| t.map(|k| h[k]))).collect();
     Mesh::new(lattice(lo, hi, n)?, Cells::Tet4(tets))
 }
 
-/// A box [lo, hi] with n[0]×n[1]×n[2] cells of the given kind: hexahedra ([`box_hex`]), or
+/// A box `[lo, hi]` with `n[0]×n[1]×n[2]` cells of the given kind: hexahedra ([`box_hex`]), or
 /// hexahedra split into 6 tetrahedra ([`box_tet`]), linear or quadratic ([`Mesh::quadratic`]).
 pub fn box_mesh(kind: CellKind, lo: Point, hi: Point, n: [usize; 3]) -> Result<Mesh, MeshError> {
     match kind {

@@ -17,7 +17,7 @@ pub(crate) fn check_setting(name: &str, value: f64, ok: bool, rule: &str) -> Res
 /// kilometres in m, one in mm, beyond any tracker's or camera's reach.
 const MAX_COORDINATE: f64 = 1e6;
 
-/// Rejects an empty cloud or one with a non-finite coordinate, or one beyond [`MAX_COORDINATE`]
+/// Rejects an empty cloud or one with a non-finite coordinate, or one beyond `MAX_COORDINATE`
 /// (a damaged file: one such point would make every distance to the cloud meaningless).
 pub fn check_cloud(cloud: &[Point]) -> Result<()> {
     if cloud.is_empty() {

@@ -15,7 +15,7 @@ use crate::{RegisterError, Result};
 /// to its cloud point (a [`PointSpring`] on the nodes that move it, mostly point to plane);
 /// the organ's own boundary conditions (fixed nodes, its springs and point springs) hold the
 /// rest. The scenario's loads are dropped: the intraoperative loads are unknown, the data stand
-/// in for them. The springs stiffen over the first iterations of a frame ([`STIFFNESS_RAMP`]): the
+/// in for them. The springs stiffen over the first iterations of a frame (`STIFFNESS_RAMP`): the
 /// first matches of a large deformation are poor, and stiff springs pulling towards them would
 /// crush elements.
 pub struct FemDeformer {
@@ -49,7 +49,7 @@ pub const REGISTRATION_RTOL: f64 = 1e-3;
 impl FemDeformer {
     /// The deformer of `problem` (its mesh must be the organ's) with data springs of
     /// `stiffness` N/m in total, shared by the matched cloud points, solved with `options`, their
-    /// residual tolerance relaxed to [`REGISTRATION_RTOL`] when tighter, and under force control
+    /// residual tolerance relaxed to `REGISTRATION_RTOL` when tighter, and under force control
     /// alone, without load-step cuts ([`Continuation::ForceOnly`]): a solve that fails is made again
     /// with softer springs, then stiffened from the softer equilibrium, in a fraction of the seconds
     /// that halving the load from rest, or an arc-length continuation past the failure, can take (on

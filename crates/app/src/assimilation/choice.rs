@@ -22,7 +22,7 @@ pub struct AssimilationChoice {
     /// Evaluate the sigma points one after the other instead of in parallel.
     #[arg(long)]
     pub sequential: bool,
-    /// Output directory; default out/<name>.
+    /// Output directory; default `out/<name>`.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// Tracked features instead of synthetic ones: CSV `frame,id,x,y,z` (in --units, or x_mm, y_mm, z_mm; frame 0 =

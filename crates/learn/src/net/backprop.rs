@@ -10,12 +10,12 @@
 //! Per layer, with activations channels-last and zero halos as in inference:
 //! - stride-1 convolution: the output gradient is zeroed where the (post-ReLU) output is not
 //!   positive (not for the head); the input gradient is the same kind of convolution of it with
-//!   the flipped, channel-transposed weights ([`same_conv`]); the weight gradient of (x, y) tap
+//!   the flipped, channel-transposed weights (`same_conv`); the weight gradient of (x, y) tap
 //!   offset `(a, b)` is, per x-plane, the transposed strided input view of the forward pass times
 //!   the gradient plane; the bias gradient is the gradient summed over nodes;
 //! - 2×2×2 stride-2 convolution: its input gradient is the transposed convolution with the same
-//!   weight array ([`upsample`]), and the transposed convolution's input gradient is the stride-2
-//!   convolution with the same weight array ([`downsample`]); both weight gradients are sums of
+//!   weight array (`upsample`), and the transposed convolution's input gradient is the stride-2
+//!   convolution with the same weight array (`downsample`); both weight gradients are sums of
 //!   gathered 2×2×2 patches (transposed) times coarse planes.
 //!
 //! Where the CPU has AVX-512 and a layer's output channels are a multiple of 8, the stride-1
@@ -25,7 +25,7 @@
 //! of the layer below is applied as the input gradient is stored. (The AVX-512 intrinsics are
 //! stable since Rust 1.89.) Where all channel counts are multiples of 16 and the volume has at
 //! least 16 tiles of 2×2×2 nodes per x-plane pair, the 3×3×3 convolutions and weight gradients
-//! take the Winograd F(2³, 3³) loops of [`crate::net::winograd`] instead: 64 products per tile and
+//! take the Winograd F(2³, 3³) loops of the `winograd` module instead: 64 products per tile and
 //! channel pair instead of 216.
 //!
 //! Samples run in parallel (rayon), with one gradient accumulator per thread, summed at the end;

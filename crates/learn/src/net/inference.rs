@@ -7,8 +7,8 @@
 //! output and one (x, y) tap offset, the inputs of all output nodes and all z taps form a
 //! strided view of the stored data (rows overlap), so the layer is `kernel²` accumulated matrix
 //! products (faer) per plane. The 2×2×2 down- and up-sampling gather their small patches.
-//! Planes run in parallel (rayon). The result equals [`UNet::forward`](crate::UNet::forward) up
-//! to floating-point summation order (checked by the tests): 3× faster than burn on 2 cores
+//! Planes run in parallel (rayon). The result equals a plain `f64` forward pass up to
+//! floating-point summation order (checked by the tests): 3× faster than burn on 2 cores
 //! for the liver network with 8 first-layer channels.
 
 use faer::linalg::matmul::matmul;

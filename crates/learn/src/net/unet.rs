@@ -1,7 +1,7 @@
 //! The 3D U-Net: its architecture, its parameters and the saved-model bundle.
 //!
 //! The architecture is described once, in `docs/method.md` (section 5.2), and in code by
-//! [`UNetConfig::layers`]: every engine ([`crate::InferenceNet`], the backward pass of
+//! `UNetConfig::layers`: every engine ([`crate::InferenceNet`], the backward pass of
 //! [`crate::net::backprop`], burn's network of `burn_unet` with the `cpu-burn` feature) builds
 //! its layers from that list, and `augsim.torch` (`python/augsim/torch.py`) follows it.
 //!
