@@ -107,7 +107,7 @@ pub struct TrainArgs {
     /// Optimiser steps.
     #[arg(long, default_value_t = 2000)]
     pub iterations: usize,
-    /// Samples per step.
+    /// Samples per step (at most the training samples).
     #[arg(long, default_value_t = 4)]
     pub batch: usize,
     /// Adam learning rate.

@@ -117,6 +117,15 @@ fn bad_input_is_refused_with_a_message() {
     let mut input = train.input(0).to_vec();
     input[3] = f32::NAN;
     assert!(model.predict(&input).unwrap_err().to_string().contains("non-finite"));
+    // Settings that leave nothing to fit.
+    for (config, what) in [
+        (RomConfig { max_modes: 0, ..RomConfig::default() }, "at least one of its modes"),
+        (RomConfig { max_inducing: 0, ..RomConfig::default() }, "at least one of its inducing points"),
+        (RomConfig { input_energy: 0.0, ..RomConfig::default() }, "input energy"),
+    ] {
+        let e = fit(&train, &validation, &config, context(split.clone()), None).unwrap_err().to_string();
+        assert!(e.contains(what), "{e}");
+    }
     // Nothing to learn: every target the same.
     let mut flat = train.clone();
     flat.targets.iter_mut().for_each(|v| *v = 0.5);

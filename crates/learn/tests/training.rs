@@ -156,6 +156,26 @@ fn cosine_learning_rate_falls_from_first_to_final() {
     assert!(bad.validate().unwrap_err().to_string().contains("final_learning_rate"));
 }
 
+/// A batch larger than the training set is the training set: a batch of 1,000 on 3 samples
+/// trains the very network a batch of 3 does (not 1,000 samples a step, most of them repeats).
+#[test]
+fn a_batch_is_at_most_the_training_set() {
+    let root = tempfile::tempdir().unwrap();
+    let train_set = synthetic_samples(grid(), 0, 3);
+    let init = scratch(2, 1, &train_set);
+    let config =
+        TrainConfig { iterations: 3, batch_size: 3, validate_every: 3, checkpoint_every: 3, ..TrainConfig::default() };
+    let run = |config: &TrainConfig, dir: &str| {
+        train(&train_set, &Samples::new(grid()), &init, config, &TrainOptions::new(root.path().join(dir)), &Silent)
+            .unwrap()
+    };
+    let whole = run(&config, "whole");
+    let large = run(&TrainConfig { batch_size: 1000, ..config.clone() }, "large");
+    assert_eq!(whole.model.net.named_parameters(), large.model.net.named_parameters());
+    let two = run(&TrainConfig { batch_size: 2, ..config }, "two");
+    assert_ne!(whole.model.net.named_parameters(), two.model.net.named_parameters());
+}
+
 #[test]
 fn resumed_training_equals_uninterrupted() {
     let root = tempfile::tempdir().unwrap();

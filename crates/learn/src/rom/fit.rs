@@ -57,6 +57,31 @@ impl Default for RomConfig {
     }
 }
 
+impl RomConfig {
+    /// Checks the values: at least one mode, input component, inducing point and POD sample, an
+    /// energy share in (0, 1], and the corruption's.
+    pub fn validate(&self) -> Result<()> {
+        let counts = [
+            ("modes", self.max_modes),
+            ("input components", self.max_input_components),
+            ("inducing points", self.max_inducing),
+            ("POD samples", self.pod_samples),
+        ];
+        if let Some((what, _)) = counts.iter().find(|(_, n)| *n == 0) {
+            return Err(LearnError::InvalidInput(format!(
+                "reduced-order model: at least one of its {what} is needed, got 0"
+            )));
+        }
+        if !(self.input_energy > 0.0 && self.input_energy <= 1.0) {
+            return Err(LearnError::InvalidInput(format!(
+                "reduced-order model: the input energy kept must lie in (0, 1], got {}",
+                self.input_energy
+            )));
+        }
+        self.corruption.validate()
+    }
+}
+
 /// What a fit measured.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RomReport {
@@ -143,7 +168,7 @@ pub fn fit(
     prior: Option<&mut RestResponse>,
 ) -> Result<(ReducedModel, RomReport)> {
     let start = Instant::now();
-    config.corruption.validate()?;
+    config.validate()?;
     let prior_description = prior.as_ref().map(|r| r.description().to_string());
     if train.len() < 2 || validation.is_empty() {
         return Err(LearnError::InvalidInput(format!(

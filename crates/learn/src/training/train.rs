@@ -51,7 +51,8 @@ use crate::{Compute, LearnError, Result};
 pub struct TrainConfig {
     /// Number of optimizer steps.
     pub iterations: usize,
-    /// Samples per step.
+    /// Samples per step (at most the training samples: a smaller training set is a step's whole
+    /// batch).
     pub batch_size: usize,
     /// Adam learning rate (at the first iteration).
     pub learning_rate: f64,
@@ -522,14 +523,16 @@ pub fn train(
     progress.advance(state.iteration as u64, total, "");
 
     let mut shuffler = Shuffler { seed: config.seed, n: train.len(), epoch: None, perm: Vec::new() };
+    // No step takes more samples than the training set holds.
+    let batch_size = config.batch_size.min(train.len());
     let mut step_time = 0.0;
     let mut steps = 0usize;
     let mut completed = true;
     while state.iteration < config.iterations {
         let it = state.iteration;
         let t0 = Instant::now();
-        let first = (it * config.batch_size) as u64;
-        let positions: Vec<usize> = (0..config.batch_size as u64).map(|b| shuffler.position(first + b)).collect();
+        let first = (it * batch_size) as u64;
+        let positions: Vec<usize> = (0..batch_size as u64).map(|b| shuffler.position(first + b)).collect();
         let b = batch(train, &positions, &start.normalization, &config.train_corruption, |slot| {
             item_rng(config.seed, STREAM_TRAIN_CORRUPTION, first + slot as u64)
         })?;
