@@ -43,10 +43,10 @@ enum Command {
         surface: Option<PathBuf>,
         /// The labelmap's label: a number (e.g. 5, TotalSegmentator's liver) or a segment name
         /// (3D Slicer's); needed when the file holds several.
-        #[arg(long)]
+        #[arg(long, requires = "surface")]
         label: Option<String>,
         /// Centre the surface and scale its largest extent to this length (m); overrides --units.
-        #[arg(long)]
+        #[arg(long, requires = "surface")]
         length: Option<f64>,
         /// Length unit of the surface's coordinates: mm, m, or auto (told from the organ's size,
         /// 2 to 60 cm across); the surface is scaled to metres about the origin, keeping its
@@ -55,7 +55,7 @@ enum Command {
         units: mesh::length::UnitOrAuto,
         /// Mesh the surface as it is, without repairing holes, duplicated vertices or flipped
         /// triangles (it must then be a closed 2-manifold).
-        #[arg(long)]
+        #[arg(long, requires = "surface")]
         no_repair: bool,
         /// Target number of tetrahedra.
         #[arg(long, default_value_t = 5000)]

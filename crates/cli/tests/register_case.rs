@@ -176,4 +176,7 @@ fn bad_cases_flags_and_clouds_are_clear_errors() {
             && text.contains("registration: iterations = 0 must be at least 1"),
         "{text}"
     );
+    let case = scenario("register_case_test.toml");
+    let (ok, text) = augsim(&["register", "--case", case.to_str().unwrap(), "--misalign-deg", "400", "--out", out]);
+    assert!(!ok && text.contains("misalignment.rotation_deg = 400 must lie in [-180, 180]"), "{text}");
 }

@@ -11,8 +11,8 @@ use augsim_mesh::phantom::{liver_phantom, PhantomSpec};
 use augsim_mesh::sampling::{interpolate_samples, sample_visible, sample_visible_boundary};
 use augsim_mesh::surface::check_closed_manifold;
 use augsim_mesh::tetmesh::{
-    dihedral_angles, mesh_surface, mesh_surface_to_count, stuff, tet_quality, BoundaryFit, ImplicitDomain, SdfDomain,
-    TetMeshOptions,
+    dihedral_angles, mesh_surface, mesh_surface_to_count, stuff, stuff_to_count, tet_quality, BoundaryFit,
+    ImplicitDomain, SdfDomain, TetMeshOptions,
 };
 use augsim_mesh::{boundary_nodes, box_hex, icosphere, Cells, Mesh, Point};
 use rand::rngs::StdRng;
@@ -142,6 +142,12 @@ fn stuffing_rejects_bad_sizes_and_empty_domains() {
     let empty = SdfDomain::new(|_: Point| 1.0, [0.0; 3], [1.0; 3]);
     let err = stuff(&empty, &TetMeshOptions::with_size(0.2)).unwrap_err().to_string();
     assert!(err.contains("no element"), "{err}");
+    // A count beyond the bound is refused before any memory is taken (100 million would take
+    // about 60 GB).
+    for (count, what) in [(5, "too small"), (100_000_000, "too large (at most 20000000")] {
+        let err = stuff_to_count(&dom, count, None, BoundaryFit::default()).unwrap_err().to_string();
+        assert!(err.contains(what), "{err}");
+    }
 }
 
 #[test]

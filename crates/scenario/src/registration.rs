@@ -144,7 +144,7 @@ fn default_seed() -> u64 {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Misalignment {
-    /// Rotation angle (degrees).
+    /// Rotation angle (degrees, in [-180, 180]).
     pub rotation_deg: f64,
     /// Rotation axis.
     pub axis: Point,
@@ -284,6 +284,9 @@ impl CaseScenario {
         let m = &self.misalignment;
         if !(m.rotation_deg.is_finite() && m.translation_mm.is_finite() && finite(m.axis) && finite(m.direction)) {
             return bad(format!("misalignment {m:?} must be finite"));
+        }
+        if m.rotation_deg.abs() > 180.0 {
+            return bad(format!("misalignment.rotation_deg = {} must lie in [-180, 180]", m.rotation_deg));
         }
         m.transform().map_err(|e| format!("misalignment: {e}"))?;
         if self.models.method.is_empty() {
