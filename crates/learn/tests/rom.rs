@@ -122,6 +122,7 @@ fn bad_input_is_refused_with_a_message() {
         (RomConfig { max_modes: 0, ..RomConfig::default() }, "at least one of its modes"),
         (RomConfig { max_inducing: 0, ..RomConfig::default() }, "at least one of its inducing points"),
         (RomConfig { input_energy: 0.0, ..RomConfig::default() }, "input energy"),
+        (RomConfig { noise_copies: 1_000_000_000_000, ..RomConfig::default() }, "corrupted copies of each would take"),
     ] {
         let e = fit(&train, &validation, &config, context(split.clone()), None).unwrap_err().to_string();
         assert!(e.contains(what), "{e}");

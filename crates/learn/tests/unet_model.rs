@@ -78,6 +78,23 @@ fn initialisation_is_seeded() {
     assert!(w.iter().all(|v| v.abs() <= bound) && w.iter().any(|v| v.abs() > 0.8 * bound));
 }
 
+/// Networks too large for memory are refused before any allocation, with the count; the
+/// published network (16 channels, depth 3) is far inside the bound.
+#[test]
+fn oversized_networks_are_refused() {
+    let published = UNet::new(&UNetConfig::default(), 0).unwrap();
+    let count: usize = published.named_parameters().iter().map(|(_, v)| v.len()).sum();
+    assert!((1_000_000..2_000_000).contains(&count), "{count}");
+    for (config, what) in [
+        (UNetConfig { base_channels: 100_000, ..UNetConfig::default() }, "100000 channels"),
+        (UNetConfig { kernel_size: 1001, ..UNetConfig::default() }, "kernel_size 1001"),
+        (UNetConfig { base_channels: 1000, ..UNetConfig::default() }, "parameters, more than 100000000"),
+    ] {
+        let e = UNet::new(&config, 0).unwrap_err().to_string();
+        assert!(e.contains(what), "{e}");
+    }
+}
+
 #[test]
 fn save_then_load_gives_identical_predictions() {
     let dir = tempfile::tempdir().unwrap();

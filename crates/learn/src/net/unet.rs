@@ -49,8 +49,17 @@ impl Default for UNetConfig {
     }
 }
 
+/// The most channels of any level's input, output or first level that [`UNetConfig::validate`]
+/// accepts.
+pub const MAX_CHANNELS: usize = 4096;
+/// The largest kernel [`UNetConfig::validate`] accepts.
+pub const MAX_KERNEL: usize = 15;
+/// The most parameters [`UNetConfig::validate`] accepts: 400 MB of weights (the published
+/// network has 16 first-level channels and depth 3: about 1.4 million).
+pub const MAX_PARAMETERS: usize = 100_000_000;
+
 impl UNetConfig {
-    /// Checks the values.
+    /// Checks the values: channels, depth and kernel, and a parameter count that fits in memory.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(LearnError::InvalidInput(format!("U-Net config: {m}")));
         if self.in_channels == 0 || self.out_channels == 0 || self.base_channels == 0 {
@@ -61,6 +70,21 @@ impl UNetConfig {
         }
         if self.kernel_size.is_multiple_of(2) {
             return bad(format!("kernel_size {} must be odd", self.kernel_size));
+        }
+        let largest = self.in_channels.max(self.out_channels).max(self.base_channels);
+        if largest > MAX_CHANNELS || self.kernel_size > MAX_KERNEL {
+            return bad(format!(
+                "{largest} channels and kernel_size {} exceed the bounds ({MAX_CHANNELS} channels, kernel {MAX_KERNEL})",
+                self.kernel_size
+            ));
+        }
+        let parameters: usize =
+            self.layers().iter().map(|l| l.weight_shape().iter().product::<usize>() + l.c_out).sum();
+        if parameters > MAX_PARAMETERS {
+            return bad(format!(
+                "{parameters} parameters, more than {MAX_PARAMETERS} (about 4 bytes each for the weights, and \
+                 several times that in training): fewer channels, a smaller depth or kernel"
+            ));
         }
         Ok(())
     }

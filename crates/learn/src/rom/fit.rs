@@ -118,6 +118,10 @@ pub struct Candidate {
     pub val_error: f64,
 }
 
+/// The most memory the regression's training inputs (the training samples' and their corrupted
+/// copies') may take: 8 GB (the shipped models' fits take under 1 GB).
+const MAX_INPUT_BYTES: usize = 8_000_000_000;
+
 /// Candidate exponents of the features' scaling: each feature is divided by its training spread
 /// (relative to the first feature's) to this power. 0 compares the features as they are, in
 /// which the leading ones dominate; ¼ gives the smaller ones more say.
@@ -181,6 +185,16 @@ pub fn fit(
         return Err(LearnError::InvalidInput("training and validation samples lie on different grids".into()));
     }
     let n = train.len();
+    let inputs = n.saturating_mul(config.noise_copies.saturating_add(1));
+    let bytes = inputs.saturating_mul(train.grid.field_len()).saturating_mul(size_of::<f32>());
+    if bytes > MAX_INPUT_BYTES {
+        return Err(LearnError::InvalidInput(format!(
+            "{n} training inputs and {} corrupted copies of each would take {:.1} GB, more than {} GB: fewer copies",
+            config.noise_copies,
+            bytes as f64 / 1e9,
+            MAX_INPUT_BYTES / 1_000_000_000
+        )));
+    }
     let outputs = Outputs::new(train, validation, config)?;
     let clean: Vec<Vec<f32>> = (0..n).map(|i| train.input(i).to_vec()).collect();
     let inputs = Inputs::new(train.grid, &clean, config, &outputs, prior)?;
