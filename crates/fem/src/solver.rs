@@ -66,6 +66,24 @@ pub enum Continuation {
     ForceOnly,
 }
 
+impl SolverOptions {
+    /// Checks the values: at least one load step and one iteration, tolerances finite and not
+    /// negative (a residual tolerance above zero).
+    pub fn validate(&self) -> Result<(), FemError> {
+        let bad = |m: String| Err(FemError::Invalid(format!("solver: {m}")));
+        if self.load_steps == 0 || self.max_iterations == 0 {
+            return bad(format!(
+                "load_steps = {} and max_iterations = {} must be at least 1",
+                self.load_steps, self.max_iterations
+            ));
+        }
+        if !(self.rtol > 0.0 && self.rtol.is_finite() && self.utol >= 0.0 && self.utol.is_finite()) {
+            return bad(format!("rtol = {} must be > 0 and utol = {} >= 0, both finite", self.rtol, self.utol));
+        }
+        Ok(())
+    }
+}
+
 impl Default for SolverOptions {
     fn default() -> Self {
         SolverOptions {
@@ -604,6 +622,7 @@ impl StaticSolver {
         options: &SolverOptions,
         start: Instant,
     ) -> Result<Solution, FemError> {
+        options.validate()?;
         self.check_problem()?;
         self.cholesky.forget_history();
         let ndof = self.problem.num_dofs();
@@ -619,7 +638,7 @@ impl StaticSolver {
         let mut u = vec![0.0; ndof];
         let mut previous: Option<(f64, Vec<f64>)> = None;
         let mut lambda = 0.0;
-        let full_step = 1.0 / options.load_steps.max(1) as f64;
+        let full_step = 1.0 / options.load_steps as f64;
         let mut step = full_step;
         let smallest_step = full_step * 0.5f64.powi(options.max_step_cuts.min(60) as i32);
         let mut cuts = 0;

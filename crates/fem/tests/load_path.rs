@@ -146,3 +146,21 @@ fn an_arc_length_continuation_refuses_prescribed_displacements() {
         other => panic!("expected a refusal, got {:?}", other.map(|s| s.load_steps)),
     }
 }
+
+/// Solver settings that cannot follow a load path are refused, naming the setting.
+#[test]
+fn settings_that_cannot_solve_are_refused() {
+    let default = SolverOptions::default();
+    for (options, what) in [
+        (SolverOptions { load_steps: 0, ..default.clone() }, "load_steps = 0"),
+        (SolverOptions { max_iterations: 0, ..default.clone() }, "max_iterations = 0"),
+        (SolverOptions { rtol: 0.0, ..default.clone() }, "rtol = 0"),
+        (SolverOptions { utol: f64::NAN, ..default.clone() }, "utol = NaN"),
+    ] {
+        let mut solver = StaticSolver::new(hanging_block(0.01)).unwrap();
+        match solver.solve(&options) {
+            Err(FemError::Invalid(message)) => assert!(message.contains(what), "{message}"),
+            other => panic!("{what}: expected a refusal, got {:?}", other.map(|s| s.load_steps)),
+        }
+    }
+}

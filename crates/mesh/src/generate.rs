@@ -2,16 +2,24 @@
 
 use std::collections::HashMap;
 
-use crate::{norm, CellKind, Cells, Mesh, MeshError, Point, TriSurface, HEX_TO_TETS};
+use crate::{norm, CellKind, Cells, Mesh, MeshError, Point, TriSurface, HEX_TO_TETS, MAX_CELLS};
 
 /// Node index of grid point (i, j, k) in an (nx+1)×(ny+1)×(nz+1) lattice, x fastest.
 fn lattice_index(n: [usize; 3], i: usize, j: usize, k: usize) -> usize {
     i + (n[0] + 1) * (j + (n[1] + 1) * k)
 }
 
-fn lattice(lo: Point, hi: Point, n: [usize; 3]) -> Result<Vec<Point>, MeshError> {
+/// The lattice of a box `[lo, hi]` cut into `n` boxes, each to be meshed with `per_box` cells;
+/// an error for an empty box or more than [`MAX_CELLS`] cells.
+fn lattice(lo: Point, hi: Point, n: [usize; 3], per_box: usize) -> Result<Vec<Point>, MeshError> {
     if n.contains(&0) || (0..3).any(|d| !(hi[d] > lo[d])) {
         return Err(MeshError::Invalid(format!("box {lo:?}..{hi:?} with {n:?} cells is empty")));
+    }
+    let cells = n.iter().fold(per_box as u128, |c, &k| c * k as u128);
+    if cells > MAX_CELLS as u128 {
+        return Err(MeshError::Invalid(format!(
+            "box with {n:?} divisions makes {cells} cells, more than {MAX_CELLS} (the memory of a workstation)"
+        )));
     }
     let mut nodes = Vec::with_capacity((n[0] + 1) * (n[1] + 1) * (n[2] + 1));
     for k in 0..=n[2] {
@@ -49,14 +57,15 @@ fn hex_cells(n: [usize; 3]) -> Vec<[usize; 8]> {
 
 /// A box `[lo, hi]` meshed with `n[0]×n[1]×n[2]` trilinear hexahedra.
 pub fn box_hex(lo: Point, hi: Point, n: [usize; 3]) -> Result<Mesh, MeshError> {
-    Mesh::new(lattice(lo, hi, n)?, Cells::Hex8(hex_cells(n)))
+    Mesh::new(lattice(lo, hi, n, 1)?, Cells::Hex8(hex_cells(n)))
 }
 
 /// A box `[lo, hi]` with `n[0]×n[1]×n[2]` hexahedra each split into 6 tetrahedra
 /// (a conforming split along each cube's main diagonal).
 pub fn box_tet(lo: Point, hi: Point, n: [usize; 3]) -> Result<Mesh, MeshError> {
+    let nodes = lattice(lo, hi, n, HEX_TO_TETS.len())?;
     let tets = hex_cells(n).iter().flat_map(|h| HEX_TO_TETS.map(|t| t.map(|k| h[k]))).collect();
-    Mesh::new(lattice(lo, hi, n)?, Cells::Tet4(tets))
+    Mesh::new(nodes, Cells::Tet4(tets))
 }
 
 /// A box `[lo, hi]` with `n[0]×n[1]×n[2]` cells of the given kind: hexahedra ([`box_hex`]), or

@@ -52,7 +52,7 @@ use rayon::prelude::*;
 use crate::bvh::SurfaceBvh;
 use crate::surface::check_closed_manifold;
 use crate::topology::face_connected_pieces;
-use crate::{cross, dot, sub, Cells, Mesh, MeshError, Point, TriSurface};
+use crate::{cross, dot, sub, Cells, Mesh, MeshError, Point, TriSurface, MAX_CELLS};
 
 /// Warp threshold for black (axis-parallel) lattice edges, from the paper.
 pub const ALPHA_LONG: f64 = 0.24999;
@@ -419,10 +419,6 @@ pub fn surface_domain(surface: &TriSurface) -> Result<(SurfaceBvh, f64), MeshErr
     Ok((bvh, s.enclosed_volume()))
 }
 
-/// The most tetrahedra [`stuff_to_count`] makes: about 12 GB while meshing (measured: 120 MB for
-/// 200,000), and far beyond what the FEM's direct solver handles on a workstation.
-pub const MAX_TETS: usize = 20_000_000;
-
 /// Stuffs `domain` with lattice spacings chosen so that the mesh has about
 /// `target` tetrahedra: a first guess from `volume` (or half the bounding
 /// box), then secant steps on log(count) against log(size), at most six
@@ -437,9 +433,9 @@ pub fn stuff_to_count(
     if target < 10 {
         return Err(MeshError::Invalid(format!("target element count {target} is too small (at least 10)")));
     }
-    if target > MAX_TETS {
+    if target > MAX_CELLS {
         return Err(MeshError::Invalid(format!(
-            "target element count {target} is too large (at most {MAX_TETS}: meshing takes about 600 bytes a \
+            "target element count {target} is too large (at most {MAX_CELLS}: meshing takes about 600 bytes a \
              tetrahedron, a FEM on them many times more)"
         )));
     }

@@ -14,7 +14,7 @@ use augsim_mesh::tetmesh::{
     dihedral_angles, mesh_surface, mesh_surface_to_count, stuff, stuff_to_count, tet_quality, BoundaryFit,
     ImplicitDomain, SdfDomain, TetMeshOptions,
 };
-use augsim_mesh::{boundary_nodes, box_hex, icosphere, Cells, Mesh, Point};
+use augsim_mesh::{boundary_nodes, box_hex, box_tet, icosphere, Cells, Mesh, Point};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
@@ -148,6 +148,11 @@ fn stuffing_rejects_bad_sizes_and_empty_domains() {
         let err = stuff_to_count(&dom, count, None, BoundaryFit::default()).unwrap_err().to_string();
         assert!(err.contains(what), "{err}");
     }
+    // So are boxes of too many cells: 500 million hexahedra, 6 × 27 million tetrahedra.
+    let err = box_hex([0.0; 3], [1.0; 3], [2000, 500, 500]).unwrap_err().to_string();
+    assert!(err.contains("makes 500000000 cells, more than 20000000"), "{err}");
+    let err = box_tet([0.0; 3], [1.0; 3], [300; 3]).unwrap_err().to_string();
+    assert!(err.contains("makes 162000000 cells"), "{err}");
 }
 
 #[test]
