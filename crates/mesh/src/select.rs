@@ -79,6 +79,37 @@ pub struct Near {
     pub surface: bool,
 }
 
+impl std::fmt::Display for NodeSelection {
+    /// The selection in words, for messages: `box [0.0, 0.0, 0.0] to [1.0, 1.0, 1.0]`, `ball of
+    /// radius 0.03 m about [...]`, `region 'visible'`, `union of (...; ...)`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let parts = |f: &mut std::fmt::Formatter<'_>, what: &str, parts: &[NodeSelection]| {
+            let listed: Vec<String> = parts.iter().map(ToString::to_string).collect();
+            write!(f, "{what} of ({})", listed.join("; "))
+        };
+        match self {
+            NodeSelection::Box { min, max } => write!(f, "box {min:?} to {max:?}"),
+            NodeSelection::List(list) if list.len() <= 6 => write!(f, "nodes {list:?}"),
+            NodeSelection::List(list) => write!(f, "{} listed nodes (from {})", list.len(), list[0]),
+            NodeSelection::Region(name) => write!(f, "region '{name}'"),
+            NodeSelection::Union(list) => parts(f, "union", list),
+            NodeSelection::Intersection(list) => parts(f, "intersection", list),
+            NodeSelection::Surface => write!(f, "surface"),
+            NodeSelection::Facing(camera) => match (camera.view, camera.position) {
+                (Some(view), _) => write!(f, "surface facing a camera looking along {view:?}"),
+                (None, Some(position)) => write!(f, "surface facing a camera at {position:?}"),
+                (None, None) => write!(f, "surface facing a camera with neither view nor position"),
+            },
+            NodeSelection::Ball(ball) => write!(f, "ball of radius {} m about {:?}", ball.radius, ball.centre),
+            NodeSelection::Near(near) => {
+                let file = near.file.as_ref().map(|p| format!(" and those of {}", p.display())).unwrap_or_default();
+                let surface = if near.surface { "surface nodes" } else { "nodes" };
+                write!(f, "{surface} within {} m of {} landmarks{file}", near.distance, near.points.len())
+            }
+        }
+    }
+}
+
 impl NodeSelection {
     /// The selected node indices, sorted and without repeats. An empty selection is an error:
     /// it is almost always a wrongly placed box or ball, or landmarks in another unit.
@@ -115,7 +146,7 @@ impl NodeSelection {
         nodes.sort_unstable();
         nodes.dedup();
         if nodes.is_empty() {
-            return Err(MeshError::Invalid(format!("selection {self:?} picks no node")));
+            return Err(MeshError::Invalid(format!("selection {self} picks no node")));
         }
         Ok(nodes)
     }
@@ -131,9 +162,13 @@ impl Camera {
             }
             (None, Some(c)) if c.iter().all(|x| x.is_finite()) => Box::new(move |p| sub(c, p)),
             _ => {
+                let given = |p: Option<Point>| p.map_or_else(|| "none".to_string(), |p| format!("{p:?}"));
                 return Err(MeshError::Invalid(format!(
-                    "a camera needs either a finite, non-zero `view` direction or a `position`, got {self:?}"
-                )))
+                    "a camera needs either a finite, non-zero `view` direction or a `position`, got view {} and \
+                     position {}",
+                    given(self.view),
+                    given(self.position)
+                )));
             }
         };
         if !(self.max_angle_deg > 0.0 && self.max_angle_deg <= 180.0) {

@@ -70,8 +70,21 @@ fn selections_that_cannot_work_say_why() {
     let m = cube();
     let error = |s: NodeSelection| s.select(&m).unwrap_err().to_string();
     assert!(error(camera(None, None, 90.0)).contains("a camera needs"));
-    assert!(error(camera(Some([0.0; 3]), None, 90.0)).contains("a camera needs"));
-    assert!(error(NodeSelection::Ball(Ball { centre: [1.0; 3], radius: 0.01 })).contains("picks no node"));
+    let e = error(camera(Some([0.0; 3]), None, 90.0));
+    assert!(e.contains("a camera needs") && e.contains("got view [0.0, 0.0, 0.0] and position none"), "{e}");
+    // An empty selection is named in words, as a scenario file gives it.
+    let ball = NodeSelection::Ball(Ball { centre: [1.0; 3], radius: 0.01 });
+    let e = error(ball.clone());
+    assert!(e.contains("selection ball of radius 0.01 m about [1.0, 1.0, 1.0] picks no node"), "{e}");
+    let away = NodeSelection::Box { min: [9.0; 3], max: [10.0; 3] };
+    let e = error(NodeSelection::Union(vec![NodeSelection::Surface, away.clone()]));
+    assert!(e.contains("selection box [9.0, 9.0, 9.0] to [10.0, 10.0, 10.0] picks no node"), "{e}");
+    let both = NodeSelection::Intersection(vec![away, ball, NodeSelection::Region("visible".into())]);
+    assert_eq!(
+        both.to_string(),
+        "intersection of (box [9.0, 9.0, 9.0] to [10.0, 10.0, 10.0]; ball of radius 0.01 m about [1.0, 1.0, 1.0]; \
+         region 'visible')"
+    );
     let missing =
         NodeSelection::Near(Near { points: vec![], file: Some("missing.csv".into()), distance: 0.01, surface: false });
     assert!(error(missing).contains("missing.csv"));

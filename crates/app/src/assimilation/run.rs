@@ -610,7 +610,7 @@ fn unknowns(sc: &AssimilationScenario, mesh: &Mesh) -> Result<Unknowns, Assimila
             }
             if !hit {
                 return Err(AssimilationError::Setup(format!(
-                    "springs.truth selection {:?} picks no node of the springs region",
+                    "springs.truth selection {} picks no node of the springs region",
                     t.select
                 )));
             }

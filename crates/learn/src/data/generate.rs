@@ -289,7 +289,7 @@ impl Generator {
                 "at least one fixed node set or attachment is needed (a free organ has rigid-body modes)",
             ));
         }
-        let select = |s: &NodeSelection| s.select(&mesh).map_err(|e| invalid(format!("selection {s:?}: {e}")));
+        let select = |s: &NodeSelection| s.select(&mesh).map_err(|e| invalid(format!("selection {s}: {e}")));
         // Selections are sorted and free of repeats: membership tests below use binary search. Held
         // by attachments alone, every sample "draws" the one empty set.
         let mut fixed_sets = config.fixed.iter().map(select).collect::<Result<Vec<_>>>()?;
