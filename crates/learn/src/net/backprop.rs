@@ -28,10 +28,11 @@
 //! take the Winograd F(2³, 3³) loops of the `winograd` module instead: 64 products per tile and
 //! channel pair instead of 216.
 //!
-//! Samples run in parallel (rayon), with one gradient accumulator per thread, summed at the end;
-//! volumes are recycled through a small per-thread pool of buffers, since fresh allocations of
-//! their size cost page faults at every step. Parameters that are not trained (a frozen encoder)
-//! get no gradient, and then the backward pass of the contracting path is skipped.
+//! Samples run in parallel (rayon) in fixed groups, one gradient accumulator per group, the
+//! groups summed in order (the same bits on any number of threads); volumes are recycled through
+//! a small per-thread pool of buffers, since fresh allocations of their size cost page faults at
+//! every step. Parameters that are not trained (a frozen encoder) get no gradient, and then the
+//! backward pass of the contracting path is skipped.
 
 use std::cell::RefCell;
 

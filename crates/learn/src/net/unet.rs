@@ -74,7 +74,7 @@ impl UNetConfig {
         let largest = self.in_channels.max(self.out_channels).max(self.base_channels);
         if largest > MAX_CHANNELS || self.kernel_size > MAX_KERNEL {
             return bad(format!(
-                "{largest} channels and kernel_size {} exceed the bounds ({MAX_CHANNELS} channels, kernel {MAX_KERNEL})",
+                "{largest} channels or kernel_size {}: beyond {MAX_CHANNELS} channels or kernel {MAX_KERNEL}",
                 self.kernel_size
             ));
         }
