@@ -94,13 +94,12 @@ pub fn loss_and_gradients(
     // One gradient accumulator per fixed group of samples, the groups summed in order: the
     // same sums in the same order on any number of threads, so that a seed trains the same
     // network on any machine with the same instruction set.
-    let samples: Vec<usize> = (0..batch).collect();
-    let groups: Vec<(f64, Vec<Grad>)> = samples
-        .par_chunks(SAMPLES_PER_ACCUMULATOR)
-        .map(|group| {
+    let groups: Vec<(f64, Vec<Grad>)> = (0..batch.div_ceil(SAMPLES_PER_ACCUMULATOR))
+        .into_par_iter()
+        .map(|g| {
             let mut grads = prepared.zero_grads();
             let mut loss = 0.0;
-            for &s in group {
+            for s in g * SAMPLES_PER_ACCUMULATOR..((g + 1) * SAMPLES_PER_ACCUMULATOR).min(batch) {
                 let input = Volume::from_field(&inputs[s * c_in * nodes..][..c_in * nodes], c_in, grid, padded, halo);
                 let activations = prepared.forward(input);
                 let target = &targets[s * c_out * nodes..][..c_out * nodes];
@@ -113,17 +112,17 @@ pub fn loss_and_gradients(
             (loss, grads)
         })
         .collect();
-    let mut groups = groups.into_iter();
-    let (mut loss, mut grads) =
-        groups.next().ok_or_else(|| LearnError::InvalidInput("gradients of an empty batch".into()))?;
-    for (group_loss, group_grads) in groups {
-        vectorised(|| {
-            for (ga, gb) in grads.iter_mut().zip(&group_grads) {
-                ga.add(gb);
-            }
-        });
-        loss += group_loss;
-    }
+    let (loss, grads) = groups
+        .into_iter()
+        .reduce(|(loss_a, mut a), (loss_b, b)| {
+            vectorised(|| {
+                for (ga, gb) in a.iter_mut().zip(&b) {
+                    ga.add(gb);
+                }
+            });
+            (loss_a + loss_b, a)
+        })
+        .ok_or_else(|| LearnError::InvalidInput("gradients of an empty batch".into()))?;
     Ok((loss / weight, prepared.gradients(grads)))
 }
 

@@ -78,8 +78,7 @@ impl UNetConfig {
                 self.kernel_size
             ));
         }
-        let parameters: usize =
-            self.layers().iter().map(|l| l.weight_shape().iter().product::<usize>() + l.c_out).sum();
+        let parameters: usize = self.layers().iter().map(|l| l.weight_len() + l.c_out).sum();
         if parameters > MAX_PARAMETERS {
             return bad(format!(
                 "{parameters} parameters, more than {MAX_PARAMETERS} (about 4 bytes each for the weights, and \
@@ -166,6 +165,11 @@ impl Layer {
             LayerKind::Down => [self.c_out, self.c_in, 2, 2, 2],
             LayerKind::Up => [self.c_in, self.c_out, 2, 2, 2],
         }
+    }
+
+    /// The number of its weights (its biases are `c_out`).
+    pub(crate) fn weight_len(&self) -> usize {
+        self.weight_shape().iter().product()
     }
 
     /// Whether it belongs to the contracting path (frozen by [`UNet::freeze_encoder`]).
@@ -256,8 +260,7 @@ impl UNet {
     fn zeros(config: &UNetConfig) -> Result<UNet> {
         config.validate()?;
         let layers = config.layers();
-        let values =
-            layers.iter().flat_map(|l| [vec![0.0; l.weight_shape().iter().product()], vec![0.0; l.c_out]]).collect();
+        let values = layers.iter().flat_map(|l| [vec![0.0; l.weight_len()], vec![0.0; l.c_out]]).collect();
         Ok(UNet { config: config.clone(), layers, values, frozen_encoder: false })
     }
 

@@ -185,8 +185,8 @@ pub fn fit(
         return Err(LearnError::InvalidInput("training and validation samples lie on different grids".into()));
     }
     let n = train.len();
-    let inputs = n.saturating_mul(config.noise_copies.saturating_add(1));
-    let bytes = inputs.saturating_mul(train.grid.field_len()).saturating_mul(size_of::<f32>());
+    let field_count = n.saturating_mul(config.noise_copies.saturating_add(1));
+    let bytes = field_count.saturating_mul(train.grid.field_len()).saturating_mul(size_of::<f32>());
     if bytes > MAX_INPUT_BYTES {
         return Err(LearnError::InvalidInput(format!(
             "{n} training inputs and {} corrupted copies of each would take {:.1} GB, more than {} GB: fewer copies",
