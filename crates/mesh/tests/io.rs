@@ -802,6 +802,9 @@ fn random_corruptions_never_panic() {
     let surface = read_surface(data("liver.obj")).unwrap();
     write_stl(d.join("b.stl"), &surface).unwrap();
     sources.push(("b.stl".into(), fs::read(d.join("b.stl")).unwrap()));
+    for f in ["tetrahedron_lps_ascii.ply", "tetrahedron_ras.ply", "tetrahedron_lps_ascii.vtp", "tetrahedron_ras.vtp"] {
+        sources.push((f.to_string(), fs::read(data(&format!("slicer/{f}"))).unwrap()));
+    }
     let ascii_stl = "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid t\n";
     sources.push(("a.stl".into(), ascii_stl.as_bytes().to_vec()));
 
@@ -836,4 +839,77 @@ fn random_corruptions_never_panic() {
             let _ = read_surface(&path);
         }
     }
+}
+
+/// Every integer of a file's text replaced in turn by counts no file can hold: each read returns
+/// (an error, or a mesh where the number was not a count) and never aborts on an allocation sized
+/// by the header, as a PLY face's list count and a VTP's `NumberOfPolys` once did.
+#[test]
+fn counts_beyond_any_file_never_abort() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mesh = box_tet([0.0; 3], [1.0; 3], [1, 1, 1]).unwrap();
+    write_vtu_with(d.join("a.vtu"), &mesh, &fields_for(&mesh), Encoding::Ascii).unwrap();
+    write_vtk_legacy_with(d.join("a.vtk"), &mesh, &fields_for(&mesh), Encoding::Ascii).unwrap();
+    write_msh(d.join("a.msh"), &mesh).unwrap();
+    let msh4 = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$PhysicalNames\n1\n3 1 \"liver\"\n$EndPhysicalNames\n\
+        $Entities\n0 0 0 1\n1 0 0 0 1 1 1 1 1 0\n$EndEntities\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n\
+        0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 1 1 1\n3 1 4 1\n1 1 2 3 4\n$EndElements\n";
+    assert_eq!(read_mesh(put(d, "a4.msh", msh4)).unwrap().cells.len(), 1);
+    let mut raw_nrrd = b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nspace: left-posterior-superior\n\
+        space directions: (1,0,0) (0,1,0) (0,0,1)\nspace origin: (0,0,0)\nencoding: raw\n\n"
+        .to_vec();
+    raw_nrrd.extend([0, 1, 1, 0, 1, 0, 0, 1]);
+    fs::write(d.join("raw.nrrd"), raw_nrrd).unwrap();
+    let slicer = |f: &str| data(&format!("slicer/{f}"));
+    let sources = [
+        slicer("tetrahedron_lps_ascii.ply"),
+        slicer("tetrahedron_ras.ply"),
+        slicer("tetrahedron_lps_ascii.vtp"),
+        slicer("tetrahedron_strips.vtp"),
+        slicer("tetrahedron_ras.vtk"),
+        slicer("landmarks.fcsv"),
+        slicer("targets.mrk.json"),
+        d.join("a4.msh"),
+        d.join("a.msh"),
+        d.join("a.vtu"),
+        d.join("a.vtk"),
+        d.join("raw.nrrd"),
+    ];
+    let counts = ["4294967299", "1000000000000", "4611686018427387904", "18446744073709551615", "1e30"];
+    for source in &sources {
+        let bytes = fs::read(source).unwrap();
+        let name = source.file_name().unwrap().to_string_lossy().into_owned();
+        let path = d.join(format!("huge_{name}"));
+        // The text part: a binary PLY's data follows its header.
+        let text_end = bytes.windows(11).position(|w| w == b"end_header\n").map_or(bytes.len(), |i| i + 11);
+        let mut start = 0;
+        while let Some(first) = bytes[start..text_end].iter().position(u8::is_ascii_digit) {
+            let first = start + first;
+            let end = bytes[first..].iter().position(|b| !b.is_ascii_digit()).map_or(bytes.len(), |n| first + n);
+            // A count is a whole number: the digits of a decimal are left alone.
+            let decimal = |b: Option<&u8>| b.is_some_and(|b| b".eE+-".contains(b));
+            if decimal(first.checked_sub(1).map(|i| &bytes[i])) || decimal(bytes.get(end)) {
+                start = end;
+                continue;
+            }
+            for count in counts {
+                fs::write(&path, [&bytes[..first], count.as_bytes(), &bytes[end..]].concat()).unwrap();
+                // Either result is fine; a panic or an abort fails the test.
+                let _ = match name.rsplit('.').next().unwrap() {
+                    "fcsv" | "json" => augsim_mesh::io::points::read_points(&path).map(drop),
+                    "nrrd" => augsim_mesh::labelmap::read_labelmap(&path).map(drop),
+                    _ => read_mesh_with_fields(&path).map(drop).and(read_surface(&path).map(drop)),
+                };
+            }
+            start = end;
+        }
+    }
+    // The two that aborted, by name.
+    let ply = fs::read_to_string(slicer("tetrahedron_lps_ascii.ply")).unwrap();
+    let ply = ply.replace("list uchar int", "list uint int").replacen("\n3 0 2 1", "\n4000000000 0 2 1", 1);
+    assert!(message(read_surface(put(d, "list.ply", ply))).contains("face"));
+    let vtp = fs::read_to_string(slicer("tetrahedron_lps_ascii.vtp")).unwrap();
+    let vtp = vtp.replacen("NumberOfPolys=\"4\"", "NumberOfPolys=\"1000000000000\"", 1);
+    assert!(message(read_surface(put(d, "polys.vtp", vtp))).contains("offsets"));
 }

@@ -299,7 +299,8 @@ fn parse(bytes: &[u8], want_faces: bool) -> Result<(Vec<Point>, Vec<Vec<usize>>)
                         if n < 0.0 || n.fract() != 0.0 {
                             return Err(context(&reader, format!("bad list length {n}")));
                         }
-                        let mut list = Vec::with_capacity(if role == Role::Face { n as usize } else { 0 });
+                        // Not reserved from `n`: a count the data does not hold fails at its end.
+                        let mut list = Vec::new();
                         for _ in 0..n as usize {
                             let v = reader.value(*item_ty).map_err(|m| context(&reader, m))?;
                             if role == Role::Face {

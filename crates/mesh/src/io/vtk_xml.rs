@@ -434,6 +434,9 @@ fn scan<'a>(path: &'a Path, data: &'a [u8]) -> Result<XmlFile<'a>, MeshError> {
                     false => tag.count("NumberOfCells").map(|n| vec![n]),
                 }
                 .map_err(|m| at_error(lt, m))?;
+                if file.cell_counts.iter().try_fold(0usize, |sum, &n| sum.checked_add(n)).is_none() {
+                    return Err(at_error(lt, "its cell counts add up past any file's size".into()));
+                }
             }
             "DataArray" | "Array" => {
                 let parent = stack.last().map(|(n, _)| n.clone()).unwrap_or_default();
@@ -694,9 +697,10 @@ impl XmlFile<'_> {
     /// The cells and their VTK types: an unstructured grid's, or poly data's.
     fn cells(&self) -> Result<(Vec<Vec<usize>>, Vec<u32>), MeshError> {
         let num_cells = self.cell_counts.iter().sum();
-        let mut cells = Vec::with_capacity(num_cells);
+        // Not reserved from the declared counts: a count the arrays do not hold is an error below.
+        let mut cells = Vec::new();
         let types: Vec<u32> = if self.poly {
-            let mut types = Vec::with_capacity(num_cells);
+            let mut types = Vec::new();
             for ((section, _, ty), &count) in POLY_SECTIONS.iter().zip(&self.cell_counts) {
                 self.read_cells(section, count, &mut cells)?;
                 types.resize(cells.len(), u32::from(*ty));
