@@ -23,7 +23,7 @@
 
 use rayon::prelude::*;
 
-use crate::{bounds, Cells, Mesh, MeshError, Point};
+use crate::{bounds, Cells, Mesh, MeshError, Point, MAX_CELLS};
 
 /// Tolerance on barycentric / reference coordinates for "inside".
 const INSIDE_TOL: f64 = 1e-10;
@@ -40,7 +40,8 @@ pub struct Grid {
 }
 
 impl Grid {
-    /// A grid, checked: positive finite spacing, at least 2 nodes per axis.
+    /// A grid, checked: positive finite spacing, at least 2 nodes per axis, at most [`MAX_CELLS`]
+    /// nodes.
     pub fn new(origin: Point, spacing: [f64; 3], dims: [usize; 3]) -> Result<Self, MeshError> {
         if origin.iter().any(|c| !c.is_finite()) || spacing.iter().any(|&s| !(s > 0.0 && s.is_finite())) {
             return Err(MeshError::Invalid(format!(
@@ -49,6 +50,12 @@ impl Grid {
         }
         if dims.iter().any(|&n| n < 2) {
             return Err(MeshError::Invalid(format!("grid needs at least 2 nodes per axis, got {dims:?}")));
+        }
+        let nodes = dims.iter().fold(1u128, |n, &k| n * k as u128);
+        if nodes > MAX_CELLS as u128 {
+            return Err(MeshError::Invalid(format!(
+                "a grid of {dims:?} nodes has {nodes}, more than {MAX_CELLS} (the memory of a workstation)"
+            )));
         }
         Ok(Grid { origin, spacing, dims })
     }

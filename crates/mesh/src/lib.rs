@@ -363,7 +363,7 @@ pub fn tet_volume(a: Point, b: Point, c: Point, d: Point) -> f64 {
 
 /// The most cells a mesh that augsim makes (tetrahedra stuffed into a domain, a box's cells) may
 /// have: about 12 GB while meshing (measured: 120 MB for 200,000 tetrahedra), and far beyond what
-/// the FEM's direct solver handles on a workstation.
+/// the FEM's direct solver handles on a workstation. Also the most nodes of a [`Grid`].
 pub const MAX_CELLS: usize = 20_000_000;
 
 /// A split of an H8 cell (VTK order) into 6 positively oriented tetrahedra

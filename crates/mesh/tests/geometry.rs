@@ -604,6 +604,13 @@ fn visible_surface_sampling() {
 fn grid_layout_and_errors() {
     assert!(Grid::new([0.0; 3], [1.0; 3], [1, 2, 2]).is_err());
     assert!(Grid::new([0.0; 3], [0.0, 1.0, 1.0], [2, 2, 2]).is_err());
+    // More nodes than a workstation holds (a dataset's `grid = [1000000000000, 24, 16]`, and one
+    // whose count overflows 64 bits) is an error before anything is allocated.
+    for dims in [[1_000_000_000_000, 24, 16], [1 << 62, 24, 16], [272, 272, 271]] {
+        let e = Grid::covering([0.0; 3], [1.0; 3], dims).unwrap_err().to_string();
+        assert!(e.contains("more than 20000000"), "{e}");
+    }
+    assert!(Grid::covering([0.0; 3], [1.0; 3], [271, 271, 271]).is_ok());
     let g = Grid::covering([0.0; 3], [1.0, 2.0, 3.0], [2, 3, 4]).unwrap();
     assert_eq!(g.node_index(1, 2, 3), 23);
     assert_eq!(g.tensor_index(1, 0, 0, 1), 25);
