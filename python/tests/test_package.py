@@ -256,6 +256,12 @@ def test_roukf_converges_to_the_young_modulus():
     assert a.std[0] < 0.1 * 5000.0
     with pytest.raises(ValueError, match=r"shape \[10, 3\]"):
         a.step(observations[0][:5])
+    # A damaged measurement (a coordinate past a thousand kilometres) is refused, not assimilated.
+    far = observations[0].copy()
+    far[3, 1] = 1e300
+    with pytest.raises(augsim.AugsimError, match="observed point 3 has the coordinate 1e300.*out of reach"):
+        a.step(far)
+    assert a.iteration == len(observations)
     with pytest.raises(augsim.AugsimError, match="missing"):
         augsim.Assimilation(os.path.join(ROOT, "missing.toml"))
 

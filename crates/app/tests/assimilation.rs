@@ -176,6 +176,10 @@ fn bad_track_files_are_named_with_their_line() {
         ("frame,name,x,y,z\n0,a,0,0,0\n", format!("{bad}:1: the header must be `frame,id,x,y,z`")),
         ("frame,id,x,y,z\n0,a,0,0,0\n1,a,0,abc,0\n", format!("{bad}:3: y = \"abc\" is not a number")),
         ("frame,id,x,y,z\n0,a,0,0,NaN\n", format!("{bad}:2: z = \"NaN\" is not finite")),
+        (
+            "frame,id,x,y,z\n0,a,0,0,0\n1,a,1e300,0,0\n",
+            format!("{bad}:3: the point lies at [1e300, 0.0, 0.0]: a coordinate beyond 1e6, out of reach"),
+        ),
         ("frame,id,x,y,z\n\n-1,a,0,0,0\n", format!("{bad}:3: frame `-1` is not a whole number")),
         ("frame,id,x,y,z\n0,a,0,0\n", format!("{bad}:2: 4 fields, the header has 5 columns")),
         ("frame,id,x,y,z\n0, ,0,0,0\n", format!("{bad}:2: empty id")),

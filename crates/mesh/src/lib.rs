@@ -330,6 +330,11 @@ pub fn bounds(points: &[Point]) -> (Point, Point) {
 /// four coordinates that geometric tests form overflow to infinity, and repair then never ends.
 pub(crate) const MAX_COORDINATE: f64 = 1e9;
 
+/// The largest coordinate magnitude of a measured point (a cloud's, a tracked feature's), in its
+/// unit (m or mm): a thousand kilometres in m, one in mm, beyond any tracker's or camera's reach.
+/// One such point, from a damaged file, would make every distance to it meaningless.
+pub const MAX_MEASURED_COORDINATE: f64 = 1e6;
+
 /// The first of `points` (each with its number) that is no point of an organ's in any length unit,
 /// with what is wrong with it: a non-finite coordinate, or one beyond `bound` (a damaged file), in
 /// words that follow the point's name ("vertex 7 has a non-finite coordinate …"); `None` when

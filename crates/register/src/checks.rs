@@ -13,17 +13,13 @@ pub(crate) fn check_setting(name: &str, value: f64, ok: bool, rule: &str) -> Res
     }
 }
 
-/// The largest coordinate magnitude of a cloud point, in its unit (m or mm): a thousand
-/// kilometres in m, one in mm, beyond any tracker's or camera's reach.
-const MAX_COORDINATE: f64 = 1e6;
-
-/// Rejects an empty cloud or one with a non-finite coordinate, or one beyond `MAX_COORDINATE`
-/// (a damaged file: one such point would make every distance to the cloud meaningless).
+/// Rejects an empty cloud or one with a non-finite coordinate, or one beyond
+/// [`mesh::MAX_MEASURED_COORDINATE`] (a damaged file).
 pub fn check_cloud(cloud: &[Point]) -> Result<()> {
     if cloud.is_empty() {
         return Err(RegisterError::Invalid("no points (the point cloud is empty)".into()));
     }
-    if let Some((i, fault)) = mesh::coordinate_fault(cloud.iter().enumerate(), MAX_COORDINATE) {
+    if let Some((i, fault)) = mesh::coordinate_fault(cloud.iter().enumerate(), mesh::MAX_MEASURED_COORDINATE) {
         return Err(RegisterError::Invalid(format!("point {i} {fault}")));
     }
     Ok(())

@@ -154,8 +154,12 @@ impl Organ {
             .collect()
     }
 
-    /// Stencils of points inside the organ (e.g. targets); a point outside is an error naming it.
+    /// Stencils of points inside the organ (e.g. targets); a point outside, or not finite, is an
+    /// error naming it.
     pub fn locate(&self, points: &[Point], what: &str) -> Result<Vec<Stencil>> {
+        if let Some((i, fault)) = mesh::coordinate_fault(points.iter().enumerate(), mesh::MAX_MEASURED_COORDINATE) {
+            return Err(RegisterError::Invalid(format!("{what} {i} {fault}")));
+        }
         points
             .iter()
             .enumerate()

@@ -55,6 +55,15 @@ impl OnlineFilter {
                 self.features
             )));
         }
+        // NaN is a component not measured; any other value must be a position within reach.
+        let bound = mesh::MAX_MEASURED_COORDINATE;
+        if let Some(k) = z.iter().position(|v| !v.is_nan() && !(v.abs() <= bound)) {
+            return Err(AssimilationError::Setup(format!(
+                "observed point {} has the coordinate {}: not finite or beyond {bound:e} m, out of reach",
+                k / 3,
+                z[k]
+            )));
+        }
         let available: Vec<bool> = z.iter().map(|v| !v.is_nan()).collect();
         let record = self.filter.step_partial(&DVector::from_vec(z), &available).context(|| "a filter step".into())?;
         let innovation = record.innovation_norm.unwrap_or(0.0);

@@ -249,10 +249,15 @@ fn rows(path: &Path, header: &str, given: LengthUnit) -> Result<(Vec<Row>, Lengt
     Ok((table.rows, unit.unwrap_or(given)))
 }
 
-/// The point in the last three fields `x, y, z` of a row (finite numbers).
+/// The point in the last three fields `x, y, z` of a row (finite numbers, none beyond
+/// [`mesh::MAX_MEASURED_COORDINATE`]).
 fn coordinates(row: &Row, path: &Path) -> Result<Point, AssimilationError> {
     let n = row.fields.len();
-    row.point([n - 3, n - 2, n - 1]).map_err(|e| AssimilationError::file(path, e.line, e.message))
+    let p = row.point([n - 3, n - 2, n - 1]).map_err(|e| AssimilationError::file(path, e.line, e.message))?;
+    match mesh::coordinate_fault([(0, &p)], mesh::MAX_MEASURED_COORDINATE) {
+        Some((_, fault)) => Err(AssimilationError::file(path, Some(row.line), format!("the point {fault}"))),
+        None => Ok(p),
+    }
 }
 
 #[cfg(test)]
