@@ -97,16 +97,21 @@ impl LabelledPoints {
 }
 
 /// Reads points, choosing the format by extension: `.fcsv`, `.mrk.json` (or any `.json`), and CSV
-/// for any other (see the [module](self) documentation).
+/// for any other (see the [module](self) documentation). A point beyond
+/// [`MAX_MEASURED_COORDINATE`](crate::MAX_MEASURED_COORDINATE) is an error (a damaged file).
 pub fn read_points(path: impl AsRef<Path>) -> Result<LabelledPoints, MeshError> {
     let path = path.as_ref();
     let text =
         std::fs::read_to_string(path).map_err(|error| MeshError::Io { path: path.display().to_string(), error })?;
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
-    match extension(path).as_str() {
+    let points = match extension(path).as_str() {
         "fcsv" => read_table(path, text, true),
         "json" => read_markups_json(path, text),
         _ => read_table(path, text, false),
+    }?;
+    match crate::coordinate_fault(points.points.iter().enumerate(), crate::MAX_MEASURED_COORDINATE) {
+        Some((i, fault)) => Err(parse_error(path, format!("point {i} {fault}"))),
+        None => Ok(points),
     }
 }
 
