@@ -59,7 +59,7 @@ impl OnlineFilter {
         let bound = mesh::MAX_MEASURED_COORDINATE;
         if let Some(k) = z.iter().position(|v| !v.is_nan() && !(v.abs() <= bound)) {
             return Err(AssimilationError::Setup(format!(
-                "observed point {} has the coordinate {}: not finite or beyond {bound:e} m, out of reach",
+                "observed point {} has the coordinate {:e}: not finite or beyond {bound:e} m, out of reach",
                 k / 3,
                 z[k]
             )));
