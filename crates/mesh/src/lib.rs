@@ -335,6 +335,12 @@ pub(crate) const MAX_COORDINATE: f64 = 1e9;
 /// One such point, from a damaged file, would make every distance to it meaningless.
 pub const MAX_MEASURED_COORDINATE: f64 = 1e6;
 
+/// The first of measured `points` (a cloud, tracked features, targets, landmarks) that is not
+/// finite or lies beyond [`MAX_MEASURED_COORDINATE`], with its index, as [`coordinate_fault`].
+pub fn measured_fault(points: &[Point]) -> Option<(usize, String)> {
+    coordinate_fault(points.iter().enumerate(), MAX_MEASURED_COORDINATE)
+}
+
 /// The first of `points` (each with its number) that is no point of an organ's in any length unit,
 /// with what is wrong with it: a non-finite coordinate, or one beyond `bound` (a damaged file), in
 /// words that follow the point's name ("vertex 7 has a non-finite coordinate …"); `None` when

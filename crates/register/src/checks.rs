@@ -19,7 +19,7 @@ pub fn check_cloud(cloud: &[Point]) -> Result<()> {
     if cloud.is_empty() {
         return Err(RegisterError::Invalid("no points (the point cloud is empty)".into()));
     }
-    if let Some((i, fault)) = mesh::coordinate_fault(cloud.iter().enumerate(), mesh::MAX_MEASURED_COORDINATE) {
+    if let Some((i, fault)) = mesh::measured_fault(cloud) {
         return Err(RegisterError::Invalid(format!("point {i} {fault}")));
     }
     Ok(())

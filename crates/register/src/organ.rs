@@ -157,7 +157,7 @@ impl Organ {
     /// Stencils of points inside the organ (e.g. targets); a point outside, or not finite, is an
     /// error naming it.
     pub fn locate(&self, points: &[Point], what: &str) -> Result<Vec<Stencil>> {
-        if let Some((i, fault)) = mesh::coordinate_fault(points.iter().enumerate(), mesh::MAX_MEASURED_COORDINATE) {
+        if let Some((i, fault)) = mesh::measured_fault(points) {
             return Err(RegisterError::Invalid(format!("{what} {i} {fault}")));
         }
         points

@@ -254,7 +254,7 @@ fn rows(path: &Path, header: &str, given: LengthUnit) -> Result<(Vec<Row>, Lengt
 fn coordinates(row: &Row, path: &Path) -> Result<Point, AssimilationError> {
     let n = row.fields.len();
     let p = row.point([n - 3, n - 2, n - 1]).map_err(|e| AssimilationError::file(path, e.line, e.message))?;
-    match mesh::coordinate_fault([(0, &p)], mesh::MAX_MEASURED_COORDINATE) {
+    match mesh::measured_fault(&[p]) {
         Some((_, fault)) => Err(AssimilationError::file(path, Some(row.line), format!("the point {fault}"))),
         None => Ok(p),
     }

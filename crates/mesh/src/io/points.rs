@@ -109,7 +109,7 @@ pub fn read_points(path: impl AsRef<Path>) -> Result<LabelledPoints, MeshError> 
         "json" => read_markups_json(path, text),
         _ => read_table(path, text, false),
     }?;
-    match crate::coordinate_fault(points.points.iter().enumerate(), crate::MAX_MEASURED_COORDINATE) {
+    match crate::measured_fault(&points.points) {
         Some((i, fault)) => Err(parse_error(path, format!("point {i} {fault}"))),
         None => Ok(points),
     }
