@@ -270,13 +270,12 @@ struct Inputs {
 fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inputs> {
     let (surface, surface_frame, unit) = read_surface_input(options, lines)?;
     let mut input = PointInput::new(surface_frame, LengthUnit::Metre, unit);
-    let read =
-        |input: &mut PointInput, path: &Path| input.read(path).with_context(|| format!("reading {}", path.display()));
-    let landmarks = read(&mut input, &options.attach)?;
-    let targets = read(&mut input, &options.targets)?;
+    // Each error of a points file names the file.
+    let landmarks = input.read(&options.attach)?;
+    let targets = input.read(&options.targets)?;
     let camera = match &options.camera {
         CameraAt::Point(p) => unit.point_to_metres(*p),
-        CameraAt::File(path) => match read(&mut input, path)?.points.as_slice() {
+        CameraAt::File(path) => match input.read(path)?.points.as_slice() {
             [p] => *p,
             other => bail!("{}: the camera is one point, the file holds {}", path.display(), other.len()),
         },

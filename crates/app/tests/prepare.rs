@@ -276,3 +276,17 @@ fn targets_in_another_unit_are_named() {
         "{error}"
     );
 }
+
+#[test]
+fn a_damaged_points_file_is_named_once_with_its_point() {
+    let dir = tempfile::tempdir().unwrap();
+    let (surface, camera, attach, targets) = patient_files(dir.path(), false);
+    let mut far = mesh::io::points::read_points_csv(&targets).unwrap();
+    far[1][0] = 1e300;
+    write_csv(&targets, &far);
+    let options = PrepareOptions::new(surface, camera, attach, targets.clone());
+    let error = format!("{:#}", prepare(&options, &dir.path().join("patient"), &Told::default()).unwrap_err());
+    let name = targets.display().to_string();
+    assert_eq!(error.matches(&name).count(), 1, "{error}");
+    assert!(error.contains("point 1 lies at [1e300") && error.contains("beyond 1e6"), "{error}");
+}

@@ -132,7 +132,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
     let per_method = &cases.per_method;
     let mut rows = test.rows(iterations);
     rows.push(Row::new(HELD_OUT_TRE, fmt(mean(&cases.no_motion), 2, "mm"), "").of("registration", "no deformation"));
-    rows.extend(method_rows(per_method));
+    rows.extend(method_rows(per_method, test.reference_ms));
     let headlines = per_method
         .iter()
         .filter_map(|m| {
@@ -352,9 +352,9 @@ fn register_cases(builtin: &CaseScenario, networks: &[Network<'_>; 2], progress:
     Ok(figures)
 }
 
-/// Each method's rows: on the held-out cases, on the cases beyond pushes, and on those a network
-/// is chosen on.
-fn method_rows(per_method: &[MethodTre]) -> Vec<Row> {
+/// Each method's rows: on the held-out cases (with the time per frame and its multiple of
+/// `reference_ms`), on the cases beyond pushes, and on those a network is chosen on.
+fn method_rows(per_method: &[MethodTre], reference_ms: f64) -> Vec<Row> {
     let mut rows = Vec::new();
     for m in per_method {
         rows.push(
@@ -364,7 +364,7 @@ fn method_rows(per_method: &[MethodTre]) -> Vec<Row> {
                     "{} ({}), {}{}",
                     fmt(mean(&m.means), 2, "mm"),
                     fmt(max(&m.maxima), 1, "mm"),
-                    fmt(mean(&m.times), 0, "ms"),
+                    reference::ms(mean(&m.times), 0, Some(reference_ms)),
                     match m.failures.len() {
                         0 => String::new(),
                         n => format!("; failed on {n} of {} cases", HELD_OUT.len()),
