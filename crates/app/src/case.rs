@@ -74,6 +74,18 @@ impl SyntheticCase {
     pub fn truths(&self) -> Vec<Vec<Point>> {
         self.frames.iter().map(|f| f.truth.clone()).collect()
     }
+
+    /// The same truth seen by `camera`: each frame's cloud drawn anew from its deformed surface
+    /// (frame `k` from `seed + k`) and moved by the case's pose. Another view of a case costs no
+    /// solve of its truth.
+    pub fn seen_by(mut self, camera: &CameraModel, seed: u64) -> Result<SyntheticCase> {
+        for (k, frame) in self.frames.iter_mut().enumerate() {
+            let surface = self.truth_organ.deformed_surface(&frame.truth_u);
+            frame.cloud = simulate_cloud(&surface, camera, seed + k as u64)?;
+            frame.cloud.iter_mut().for_each(|x| *x = self.pose.apply(*x));
+        }
+        Ok(self)
+    }
 }
 
 /// The case of `scenario`: the phantom of `truth.tets` tetrahedra and `truth.material`, fixed on
@@ -100,25 +112,18 @@ pub fn synthetic_case(scenario: &CaseScenario) -> Result<SyntheticCase> {
     let camera = &scenario.camera;
     let mut solver = StaticSolver::new(p)?;
     let mut frames: Vec<CaseFrame> = Vec::with_capacity(t.frames);
-    for (k, force) in t.frame_forces().into_iter().enumerate() {
+    for force in t.frame_forces() {
         let problem = solver.problem_mut();
         problem.f_ext.iter_mut().for_each(|f| *f = 0.0);
         problem.add_force(&load, t.direction.map(|d| d / len * force));
         let start = frames.last().map(|f| f.truth_u.as_slice());
         let u = solver.solve_from(start, &SolverOptions::default())?.u;
         let nodes = &solver.problem().mesh.nodes;
-        let mut truth: Vec<Point> =
-            markers.iter().map(|&n| std::array::from_fn(|d| nodes[n][d] + u[3 * n + d])).collect();
-        let seed = camera.seed + k as u64;
-        let mut cloud = simulate_cloud(&organ.deformed_surface(&u), &camera_model(camera), seed)?;
-        if pose != RigidTransform::identity() {
-            for x in cloud.iter_mut().chain(truth.iter_mut()) {
-                *x = pose.apply(*x);
-            }
-        }
-        frames.push(CaseFrame { force, cloud, truth, truth_u: u });
+        let truth: Vec<Point> =
+            markers.iter().map(|&n| pose.apply(std::array::from_fn(|d| nodes[n][d] + u[3 * n + d]))).collect();
+        frames.push(CaseFrame { force, cloud: Vec::new(), truth, truth_u: u });
     }
-    Ok(SyntheticCase { frames, targets, pose, truth_organ: organ })
+    SyntheticCase { frames, targets, pose, truth_organ: organ }.seen_by(&camera_model(camera), camera.seed)
 }
 
 /// The built-in case ([`CaseScenario::builtin`]: the Neo-Hookean phantom, E = 5 kPa, ν = 0.48,

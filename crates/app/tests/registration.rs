@@ -15,11 +15,19 @@ fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len() as f64
 }
 
+/// The built-in phantom pushed by 1.5 N (the markers move by 14 mm on average), seen by `camera`
+/// from seed 7: its truth is solved once for every test here.
+fn pushed(camera: &CameraModel) -> augsim_app::case::SyntheticCase {
+    static TRUTH: std::sync::OnceLock<augsim_app::case::SyntheticCase> = std::sync::OnceLock::new();
+    let any = CameraModel { view: [0.0, 0.0, -1.0], points: 10, noise: 0.0, outliers: 0.0 };
+    let truth = TRUTH.get_or_init(|| phantom_push(1.5, &any, 7).unwrap());
+    truth.clone().seen_by(camera, 7).unwrap()
+}
+
 /// (TRE, no-deformation TRE, surface residual) in m of a co-rotational FEM
-/// registration on a coarser phantom, for the truth pushed by 1.5 N (the
-/// markers move by 14 mm on average).
+/// registration on a coarser phantom, for the truth of [`pushed`].
 fn fem_tre(camera: &CameraModel) -> (f64, f64, f64) {
-    let case = phantom_push(1.5, camera, 7).unwrap();
+    let case = pushed(camera);
     let (organ, mut deformer) = corotational_model().unwrap();
     let stencils = organ.locate(&case.targets, "target").unwrap();
     let frame =
@@ -55,7 +63,7 @@ const ROM: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar_ro
 /// (TRE, no-deformation TRE, TRE of the network fed the truth's surface motion) in m of the
 /// shipped U-Net's registration of the 1.5 N case.
 fn network_tre(camera: &CameraModel) -> (f64, f64, f64) {
-    let case = phantom_push(1.5, camera, 7).unwrap();
+    let case = pushed(camera);
     let model = learn::Model::load(std::path::Path::new(MODEL)).unwrap();
     let (organ, deformer) = ar_network_model(&model).unwrap();
     let from_truth = network_from_truth(&case, &organ, &deformer).unwrap();
@@ -288,7 +296,7 @@ fn a_warm_started_frame_starts_past_the_ramp() {
 #[test]
 fn clouds_that_cannot_be_the_organ_are_refused_or_flagged() {
     let camera = CameraModel { view: [0.0, 0.0, -1.0], points: 1500, noise: 1e-3, outliers: 0.05 };
-    let case = phantom_push(1.5, &camera, 7).unwrap();
+    let case = pushed(&camera);
     let (organ, mut deformer) = corotational_model().unwrap();
     let opts = RegistrationOptions::default();
     let mut register = |cloud: &[[f64; 3]]| register_frame(&organ, &mut deformer, cloud, None, &opts);
