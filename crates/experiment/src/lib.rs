@@ -371,6 +371,7 @@ pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<Ex
             return Ok(done);
         }
     }
+    let resumed = holds_earlier_work(&dir);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let start = Instant::now();
     let mut result = match name {
@@ -387,9 +388,21 @@ pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<Ex
         Name::HeldOut => held_out::run(size, &dir, progress)?,
     };
     result.seconds = start.elapsed().as_secs_f64();
+    if resumed {
+        result.notes.push(format!(
+            "Its folder held an earlier run's work when this run started: what it could reuse from there \
+             (draws, a network's checkpoint) is not counted in its {:.0} s.",
+            result.seconds
+        ));
+    }
     let json = serde_json::to_string_pretty(&result)?;
     mesh::io::write_atomic_bytes(&dir.join(RESULT_FILE), json.as_bytes())?;
     Ok(result)
+}
+
+/// Whether `dir` holds anything (an earlier run's work, which the steps that resume reuse).
+fn holds_earlier_work(dir: &Path) -> bool {
+    std::fs::read_dir(dir).is_ok_and(|mut entries| entries.next().is_some())
 }
 
 /// The result in `dir`, if one was written.
@@ -428,4 +441,20 @@ fn write_scenario(dir: &Path, name: &str) -> Result<(PathBuf, &'static str)> {
 /// `v` formatted with `digits` decimals and `unit`.
 fn fmt(v: f64, digits: usize, unit: &str) -> String {
     format!("{v:.digits$} {unit}").trim_end().to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_folder_with_files_holds_earlier_work_an_empty_or_missing_one_not() {
+        let root = tempfile::tempdir().unwrap();
+        let dir = root.path().join("liver-ar");
+        assert!(!holds_earlier_work(&dir));
+        std::fs::create_dir(&dir).unwrap();
+        assert!(!holds_earlier_work(&dir));
+        std::fs::write(dir.join("liver_ar_t10.toml"), "").unwrap();
+        assert!(holds_earlier_work(&dir));
+    }
 }
