@@ -224,13 +224,8 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
         None => UNetStart::Scratch(UNetConfig { base_channels: recipe.channels, ..UNetConfig::default() }),
     };
     let how = if recipe.fine_tune.is_some() { "fine-tuning" } else { "from scratch" };
+    progress.line(&format!("training {} steps {how} on {} samples", recipe.iterations, train.len()));
     let run = UNetRun { out: dir.join(model_dir(recipe)), resume: true, compute: Compute::Cpu };
-    let resumed = if run.out.join(learn::training::train::CHECKPOINT_FILE).exists() {
-        format!(", resuming {}", run.out.display())
-    } else {
-        String::new()
-    };
-    progress.line(&format!("training {} steps {how} on {} samples{resumed}", recipe.iterations, train.len()));
     let outcome = train_unet(dataset, &split, [&train, &validation], start, &recipe.train_config(), run, progress)?;
     Ok(Trained {
         split: [train.len(), validation.len(), test.len()],

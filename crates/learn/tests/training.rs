@@ -176,6 +176,17 @@ fn a_batch_is_at_most_the_training_set() {
     assert_ne!(whole.model.net.named_parameters(), two.model.net.named_parameters());
 }
 
+/// A progress that keeps the lines it is told.
+#[derive(Default)]
+struct Lines(std::sync::Mutex<Vec<String>>);
+
+impl augsim_learn::Progress for Lines {
+    fn advance(&self, _: u64, _: u64, _: &str) {}
+    fn line(&self, text: &str) {
+        self.0.lock().unwrap().push(text.to_string());
+    }
+}
+
 #[test]
 fn resumed_training_equals_uninterrupted() {
     let root = tempfile::tempdir().unwrap();
@@ -213,7 +224,10 @@ fn resumed_training_equals_uninterrupted() {
     assert_eq!(stopped.iterations_done, 6);
     assert!(!b.join(MODEL_FILE).exists());
     assert!(b.join(CHECKPOINT_FILE).exists());
-    let resumed = train(&train_set, &val, &init, &config, &TrainOptions::new(&b), &Silent).unwrap();
+    let told = Lines::default();
+    let resumed = train(&train_set, &val, &init, &config, &TrainOptions::new(&b), &told).unwrap();
+    let said = told.0.lock().unwrap().clone();
+    assert_eq!(said, [format!("resuming {} at step 6 of 12", b.join(CHECKPOINT_FILE).display())]);
     assert!(resumed.completed);
     assert_eq!(resumed.curve, full.curve);
     let (pa, pb) = (full.model.net.named_parameters(), resumed.model.net.named_parameters());

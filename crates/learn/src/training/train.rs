@@ -517,6 +517,12 @@ pub fn train(
     let checkpoint_path = out.join(CHECKPOINT_FILE);
     if options.resume && checkpoint_path.exists() {
         best = resume(&checkpoint_path, config, &mut state, &mut net, &mut adam)?;
+        progress.line(&format!(
+            "resuming {} at step {} of {}",
+            checkpoint_path.display(),
+            state.iteration,
+            config.iterations
+        ));
     }
 
     let total = config.iterations as u64;
