@@ -1,0 +1,606 @@
+//! Step 6 of `prepare`, the validation: held-out pushes of the organ solved on a quadratic truth
+//! meshed anew and refined until converged, registered by the learned model, the FEM and the
+//! hybrid, from rest and as streams; the set-up keeps the best of them.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use mesh::io::points::read_points_csv;
+use mesh::io::write_atomic_bytes;
+use mesh::length::{mm, LengthUnit};
+use mesh::repair::largest_extent;
+use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
+use mesh::{Camera, Mesh, Near, Point, TriSurface};
+
+use super::{across_sight, hold_distance, longest_side, swing_warning, tool_radius, PrepareOptions, SURFACE_FILE};
+use crate::registration::{PatientMethod, RegistrationSpec, PATIENT_FILE};
+
+/// Tool pushes of the validation: where along what the camera sees (its spread across the line of
+/// sight, as a fraction) and the force (N).
+const VALIDATION_LOADS: [(f64, f64); 4] = [(0.2, 1.5), (0.4, 2.5), (0.6, 2.0), (0.8, 3.0)];
+
+/// The validation's truth: the organ's surface meshed anew with about `tets` tetrahedra made
+/// quadratic, Neo-Hookean, held where the organ is attached.
+struct Truth {
+    mesh: Mesh,
+    held: Vec<usize>,
+    seen: Vec<usize>,
+    stencils: Vec<register::Stencil>,
+    /// The targets outside the mesh, which follow its nearest surface point, and how far out they lie.
+    outside: Vec<(usize, f64)>,
+    material: fem::Material,
+}
+
+impl Truth {
+    fn new(
+        surface: &mesh::TriSurface,
+        tets: usize,
+        camera: Point,
+        landmarks: &[Point],
+        targets: &[Point],
+        attach: f64,
+    ) -> Result<Truth> {
+        let (coarse, _) =
+            mesh_surface_to_count(surface, tets, BoundaryFit::default()).context("meshing the validation's truth")?;
+        let mesh = coarse.quadratic()?;
+        let held = Near { points: landmarks.to_vec(), file: None, distance: attach, surface: true }.nodes(&mesh)?;
+        let seen = Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&mesh)?;
+        // A target near the surface may lie just outside this mesh, whose boundary is not the
+        // organ mesh's: within an element's size it follows the nearest surface point.
+        let size = (mesh.volume() / mesh.cells.len() as f64).cbrt();
+        let located = register::Organ::new(mesh.clone(), None)?.locate_near(targets, size, "target")?;
+        let outside = located.iter().enumerate().filter(|(_, (_, d))| *d > 0.0).map(|(i, (_, d))| (i, *d)).collect();
+        let stencils = located.into_iter().map(|(s, _)| s).collect();
+        let material = fem::Material {
+            formulation: fem::Formulation::Standard,
+            ..fem::Material::new(fem::Law::NeoHookean, 5000.0, 0.49).with_order(2)
+        };
+        Ok(Truth { mesh, held, seen, stencils, outside, material })
+    }
+
+    /// The displacement under a push of `force` (N) from `camera` on the seen nodes within
+    /// `radius` of `centre`.
+    fn push(&self, centre: Point, camera: Point, force: f64, radius: f64) -> Result<Vec<f64>> {
+        let patch: Vec<usize> =
+            self.seen.iter().copied().filter(|&n| mesh::distance(self.mesh.nodes[n], centre) < radius).collect();
+        let mut problem = fem::Problem::new(self.mesh.clone(), self.material);
+        problem.fix(&self.held);
+        problem.add_force(&patch, mesh::unit(mesh::sub(centre, camera)).map(|x| x * force));
+        let solver =
+            fem::SolverOptions { load_steps: TRUTH_LOAD_STEPS, max_step_cuts: 6, ..fem::SolverOptions::default() };
+        Ok(fem::StaticSolver::new(problem)?.solve(&solver).context("solving the validation's truth")?.u)
+    }
+
+    /// [`Truth::push`], kept in `dir` (`truth-<T10>-<push>-<force>N.npy`, or `.failed` with why it found
+    /// no equilibrium) and read back from there when kept by an earlier run (then with `true`):
+    /// the truths' solves are most of the validation's time. The error of a push without
+    /// equilibrium is returned as the inner one; the outer one is an I/O error.
+    fn push_kept(
+        &self,
+        dir: &Path,
+        push: usize,
+        centre: Point,
+        camera: Point,
+        force: f64,
+        radius: f64,
+    ) -> Result<(Solution, bool)> {
+        let stem = format!("truth-{}-{push}-{force}N", self.mesh.cells.len());
+        let (solved, failed) = (dir.join(format!("{stem}.npy")), dir.join(format!("{stem}.failed")));
+        if let Ok(kept) = learn::data::npy::read_npy(&solved) {
+            let u = kept.into_f64();
+            if u.len() == 3 * self.mesh.num_nodes() {
+                return Ok((Ok(u), true));
+            }
+        }
+        if let Ok(why) = std::fs::read_to_string(&failed) {
+            return Ok((Err(why), true));
+        }
+        let solution = match self.push(centre, camera, force, radius) {
+            Ok(u) => {
+                learn::data::npy::write_f64(&solved, &[u.len() / 3, 3], &u)?;
+                Ok(u)
+            }
+            Err(e) => {
+                let why = format!("{e:#}");
+                write_atomic_bytes(&failed, why.as_bytes())?;
+                Err(why)
+            }
+        };
+        Ok((solution, false))
+    }
+
+    /// The targets moved by the displacement `u`.
+    fn targets(&self, targets: &[Point], u: &[f64]) -> Vec<Point> {
+        register::organ::displaced(targets, &self.stencils, u)
+    }
+
+    /// The cloud the camera gives of the truth displaced by `u`: its seen nodes, each coordinate
+    /// with a draw of `noise`.
+    fn cloud(&self, u: &[f64], noise: &rand_distr::Normal<f64>, rng: &mut rand::rngs::StdRng) -> Vec<Point> {
+        use rand_distr::Distribution;
+        let nodes = &self.mesh.nodes;
+        self.seen.iter().map(|&n| std::array::from_fn(|d| nodes[n][d] + u[3 * n + d] + noise.sample(rng))).collect()
+    }
+}
+
+/// A tool push of the validation: where along what the camera sees (a fraction, see
+/// [`VALIDATION_LOADS`]), its force (N) and the seen node it is centred on.
+#[derive(Clone, Copy)]
+struct Push {
+    at: f64,
+    force: f64,
+    centre: Point,
+}
+
+/// Load steps of a truth's solve. The pushes move the organ by centimetres, where a whole push at
+/// once costs more Newton iterations (and factorisations) than quarters of it: on the tour's
+/// organ, the 3 N push on 3,046 T10 took 13.0 s at once, 5.2 s in quarters, and on 6,037 T10
+/// 43.4 against 36.5 s.
+const TRUTH_LOAD_STEPS: usize = 4;
+
+/// The truth's meshes, in multiples of the organ's tetrahedra, coarsest first.
+const TRUTH_LEVELS: [usize; 3] = [3, 6, 12];
+
+/// A truth is converged when, meshed twice as finely, its targets move by at most this share of
+/// their motion.
+const TRUTH_TOLERANCE: f64 = 0.1;
+
+/// The sub-directory where the validation keeps its truths' solutions.
+pub const TRUTH_DIR: &str = "validation";
+
+/// A push's displacement on a truth, or why it found no equilibrium under it.
+type Solution = std::result::Result<Vec<f64>, String>;
+
+/// Each push's [`Solution`].
+type Solutions = Vec<Solution>;
+
+/// The validation's truth refined until converged, from `truth` (the coarsest of
+/// [`TRUTH_LEVELS`], `truth_of` meshing the others): of its pushes that a mesh twice as fine
+/// also solves, the one that moves the targets most is solved again there; while the `targets`
+/// move by more than [`TRUTH_TOLERANCE`] of their motion, the finer mesh becomes the truth.
+/// Returns the truth, its solutions of the `pushes` by `solve`, and a report line per check.
+fn converged_truth(
+    mut truth: Truth,
+    truth_of: &dyn Fn(usize) -> Result<Truth>,
+    solve: &dyn Fn(&Truth, usize) -> Result<Solution>,
+    targets: &[Point],
+    pushes: &[Push],
+) -> Result<(Truth, Solutions, Vec<String>)> {
+    let mut solutions: Solutions = (0..pushes.len()).map(|p| solve(&truth, p)).collect::<Result<_>>()?;
+    let mut lines = Vec::new();
+    for (i, &level) in TRUTH_LEVELS.iter().enumerate().skip(1) {
+        let finer = truth_of(level)?;
+        // The push that moves the targets most is the check: a push that hardly moves them would
+        // judge the mesh on a motion of the order of its own discretisation error.
+        let mut by_motion: Vec<(usize, &Vec<f64>, f64)> = solutions
+            .iter()
+            .enumerate()
+            .filter_map(|(p, s)| {
+                let u = s.as_ref().ok()?;
+                Some((p, u, mesh::stats::mean(&register::target_errors(targets, &truth.targets(targets, u)))))
+            })
+            .collect();
+        by_motion.sort_by(|a, b| b.2.total_cmp(&a.2));
+        let mut finer_solutions: Vec<Option<Solution>> = vec![None; pushes.len()];
+        let mut unsolved = Vec::new();
+        let mut checked = None;
+        for (p, u, _) in by_motion {
+            match solve(&finer, p)? {
+                Ok(finer_u) => {
+                    finer_solutions[p] = Some(Ok(finer_u.clone()));
+                    checked = Some((p, u, finer_u));
+                    break;
+                }
+                Err(e) => {
+                    unsolved.push(format!("{} N ({e})", pushes[p].force));
+                    finer_solutions[p] = Some(Err(e));
+                }
+            }
+        }
+        let unsolved = if unsolved.is_empty() {
+            String::new()
+        } else {
+            format!("; the finer mesh found no equilibrium under {}", unsolved.join(", "))
+        };
+        let Some((p, u, finer_u)) = checked else {
+            lines.push(format!(
+                "validation: the truth's convergence not checked: meshed twice as finely again ({} T10){unsolved}",
+                finer.mesh.cells.len()
+            ));
+            break;
+        };
+        let moved = truth.targets(targets, u);
+        let finer_moved = finer.targets(targets, &finer_u);
+        let change = register::target_errors(&moved, &finer_moved);
+        let motion = mesh::stats::mean(&register::target_errors(targets, &finer_moved));
+        let share = mesh::stats::mean(&change) / motion.max(f64::MIN_POSITIVE);
+        let converged = share <= TRUTH_TOLERANCE;
+        let last = i + 1 == TRUTH_LEVELS.len();
+        let verdict = match (converged, last) {
+            (true, _) => format!("converged (at most {:.0} %)", 100.0 * TRUTH_TOLERANCE),
+            (false, false) => "not converged: the truth is meshed twice as finely".into(),
+            (false, true) => format!(
+                "not converged to {:.0} %: the truth is the finer mesh, the finest tried",
+                100.0 * TRUTH_TOLERANCE
+            ),
+        };
+        lines.push(format!(
+            "validation: the truth's convergence under the {} N push: {} T10 against {} T10, its targets move by \
+             {:.2} mm more or less (largest {:.2} mm; {:.1} % of their mean motion of {:.2} mm){unsolved}; {verdict}",
+            pushes[p].force,
+            truth.mesh.cells.len(),
+            finer.mesh.cells.len(),
+            mm(mesh::stats::mean(&change)),
+            mm(mesh::stats::max(&change)),
+            100.0 * share,
+            mm(motion)
+        ));
+        if converged {
+            break;
+        }
+        // The finer mesh becomes the truth: its pushes not yet solved are solved now.
+        solutions = finer_solutions
+            .into_iter()
+            .enumerate()
+            .map(|(p, known)| known.map_or_else(|| solve(&finer, p), Ok))
+            .collect::<Result<_>>()?;
+        truth = finer;
+    }
+    Ok((truth, solutions, lines))
+}
+
+/// A method whose TRE is within this share of the FEM's is on par with it, not worse.
+const ON_PAR: f64 = 0.05;
+
+/// The shares of a push's force at the frames of its stream: the tool pressing in by quarters.
+const STREAM_SHARES: [f64; 4] = [0.25, 0.5, 0.75, 1.0];
+
+/// A method's registrations of one kind: each push from rest, or each push as a stream.
+#[derive(Default)]
+struct Registered {
+    /// The target errors (m) of the frames it registered.
+    errors: Vec<f64>,
+    /// The predicted σ (m) at the targets of those frames, for a method that predicts one.
+    std: Vec<f64>,
+    /// The time of each frame timed (ms).
+    times_ms: Vec<f64>,
+    /// The pushes it failed on, and why.
+    failed: Vec<String>,
+}
+
+impl Registered {
+    /// Adds a registered frame: its targets' errors against their true positions `moved`, their
+    /// σ and, when `timed`, its time.
+    fn add(&mut self, tracked: &register::Tracked, moved: &[Point], timed: bool) {
+        self.errors.extend(register::target_errors(&tracked.targets, moved));
+        self.std.extend(tracked.target_std.iter().flatten());
+        if timed {
+            self.times_ms.push(tracked.registration.time.as_secs_f64() * 1e3);
+        }
+    }
+
+    /// The mean TRE (m); infinite with no frame registered.
+    fn tre(&self) -> f64 {
+        if self.errors.is_empty() {
+            f64::INFINITY
+        } else {
+            mesh::stats::mean(&self.errors)
+        }
+    }
+
+    /// The TRE, σ and failures in words, after `what` (how the pushes were registered) and the
+    /// time of a frame (`timing`: which frames were timed).
+    fn words(&self, what: &str, timing: &str) -> String {
+        let failed = match self.failed.len() {
+            0 => String::new(),
+            n => format!(", failed on {n}: {}", self.failed.join("; ")),
+        };
+        match (self.errors.is_empty(), self.failed.is_empty()) {
+            (true, true) => return format!("{what}: none registered"),
+            (true, false) => return format!("{what} failed on every push: {}", self.failed.join("; ")),
+            _ => {}
+        }
+        // σ, where the method predicts it at every target: how well it held on these pushes.
+        let sigma = register::within_two_std(&self.errors, &self.std).map_or(String::new(), |within| {
+            format!(
+                ", σ {:.2} mm mean, {:.0} % of the targets within 2σ",
+                mm(mesh::stats::mean(&self.std)),
+                100.0 * within
+            )
+        });
+        format!(
+            "{what} TRE {:.2} mm (largest {:.2} mm), {:.0} ms {timing}{sigma}{failed}",
+            mm(mesh::stats::mean(&self.errors)),
+            mm(mesh::stats::max(&self.errors)),
+            mesh::stats::mean(&self.times_ms)
+        )
+    }
+}
+
+/// One method's registrations of the validation's pushes.
+#[derive(Default)]
+struct MethodRun {
+    method: PatientMethod,
+    /// Each push registered from rest.
+    rest: Registered,
+    /// Each push registered as a stream of [`STREAM_SHARES`] of its force.
+    streamed: Registered,
+}
+
+impl MethodRun {
+    /// Registers one push's frames (each the targets' true positions and the cloud), the first
+    /// from rest and each next one warm-started from the last: a single frame from rest, timed,
+    /// or a stream (into `streamed`), whose warm-started frames alone are timed. A failed frame
+    /// ends them.
+    fn register(&mut self, dir: &Path, force: f64, frames: &[(&[Point], &[Point])]) -> Result<()> {
+        let mut registration = RegistrationSpec::patient(dir, Some(self.method), None, false)?.build()?;
+        let stream = frames.len() > 1;
+        let into = if stream { &mut self.streamed } else { &mut self.rest };
+        for (k, &(moved, cloud)) in frames.iter().enumerate() {
+            match registration.register(cloud) {
+                Ok(tracked) => into.add(&tracked, moved, !stream || k > 0),
+                Err(e) => {
+                    let frame = if stream { format!(", frame {}", k + 1) } else { String::new() };
+                    into.failed.push(format!("{force} N{frame} ({e:#})"));
+                    break;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Lower is better: the pushes it failed on (from rest and as streams); then whether it is
+    /// worse than the FEM's run `fem` from rest or on the streams (its TRE over the FEM's by more
+    /// than [`ON_PAR`]); then the mean of its TRE's ratios to the FEM's, from rest and on the
+    /// streams.
+    fn rank(&self, fem: &MethodRun) -> (usize, bool, f64) {
+        let ratio = |a: &Registered, b: &Registered| {
+            let r = a.tre() / b.tre();
+            if r.is_nan() {
+                1.0
+            } else {
+                r
+            }
+        };
+        let mut ratios = vec![ratio(&self.rest, &fem.rest)];
+        if !(self.streamed.errors.is_empty() && fem.streamed.errors.is_empty()) {
+            ratios.push(ratio(&self.streamed, &fem.streamed));
+        }
+        let failures = self.rest.failed.len() + self.streamed.failed.len();
+        (failures, ratios.iter().any(|&r| r > 1.0 + ON_PAR), mesh::stats::mean(&ratios))
+    }
+}
+
+/// How the report names a method.
+fn method_name(method: PatientMethod) -> &'static str {
+    match method {
+        PatientMethod::Fem => "FEM",
+        PatientMethod::Learned => "learned model",
+        PatientMethod::Hybrid => "learned model, then FEM (hybrid)",
+    }
+}
+
+/// The organ's surface (`surface.stl`) in metres, the unit it is in (mm, or m) told by the size of
+/// the organ's mesh (in m), which it must match.
+fn read_organ_surface(dir: &Path, organ: &Mesh) -> Result<TriSurface> {
+    let path = dir.join(SURFACE_FILE);
+    let mut surface = mesh::io::read_surface(&path)?;
+    let (extent, organ_extent) = (largest_extent(&surface), longest_side(organ));
+    let unit = [LengthUnit::Millimetre, LengthUnit::Metre]
+        .into_iter()
+        .find(|u| (extent * u.metres() / organ_extent - 1.0).abs() < 0.1)
+        .with_context(|| {
+            format!(
+                "{} (largest extent {extent:.4}, in mm or m) does not match organ.vtu ({} mm): remove {} and \
+                 prepare it again",
+                path.display(),
+                mm(organ_extent),
+                dir.display()
+            )
+        })?;
+    surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(*p));
+    Ok(surface)
+}
+
+/// The validation's pushes ([`VALIDATION_LOADS`]), at seen nodes of the `coarsest` truth ordered
+/// across the line of sight from `camera`.
+fn validation_pushes(coarsest: &Truth, camera: Point) -> Vec<Push> {
+    let mesh = &coarsest.mesh;
+    let centroid: Point =
+        std::array::from_fn(|d| mesh.nodes.iter().map(|p| p[d]).sum::<f64>() / mesh.num_nodes() as f64);
+    let (across, _) = across_sight(mesh::unit(mesh::sub(centroid, camera)));
+    let mut order = coarsest.seen.clone();
+    order.sort_by(|&a, &b| mesh::dot(mesh.nodes[a], across).total_cmp(&mesh::dot(mesh.nodes[b], across)));
+    VALIDATION_LOADS
+        .iter()
+        .map(|&(at, force)| Push { at, force, centre: mesh.nodes[order[((order.len() - 1) as f64 * at) as usize]] })
+        .collect()
+}
+
+/// Step 6: registration of held-out cases against a quadratic truth on another mesh, refined
+/// until converged: meshed with 3, 6 or 12 times the organ's tetrahedra, the first whose targets
+/// move by at most [`TRUTH_TOLERANCE`] on a mesh twice as fine under the push that moves them most
+/// (the finest reached otherwise, and the report says so).
+pub(super) fn validation_step(
+    options: &PrepareOptions,
+    dir: &Path,
+    progress: &dyn learn::Progress,
+) -> Result<Vec<String>> {
+    use rand::SeedableRng;
+
+    let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
+    let surface = read_organ_surface(dir, &organ)?;
+    let camera = read_points_csv(&dir.join("camera.csv"))?[0];
+    let landmarks = read_points_csv(&dir.join("attach.csv"))?;
+    let targets = read_points_csv(&dir.join("targets.csv"))?;
+    let distance = hold_distance(options, &organ, &landmarks)?;
+    let truth_of = |level: usize| Truth::new(&surface, level * options.tets, camera, &landmarks, &targets, distance);
+    let truth = truth_of(TRUTH_LEVELS[0])?;
+    let pushes = validation_pushes(&truth, camera);
+    let radius = tool_radius(&truth.mesh);
+    let kept = dir.join(TRUTH_DIR);
+    std::fs::create_dir_all(&kept).with_context(|| format!("creating {}", kept.display()))?;
+    let read_back = std::cell::Cell::new(0);
+    // Each solve is told as it ends: on the finest truths one takes an hour.
+    let solve_at = |truth: &Truth, push: usize, force: f64| -> Result<Solution> {
+        let centre = pushes[push].centre;
+        let start = Instant::now();
+        let (solution, kept) = truth.push_kept(&kept, push, centre, camera, force, radius)?;
+        read_back.set(read_back.get() + usize::from(kept));
+        if !kept {
+            progress.line(&format!(
+                "validation: the {force} N push on a truth of {} T10 {} in {:.0} s",
+                truth.mesh.cells.len(),
+                if solution.is_ok() { "solved" } else { "found no equilibrium" },
+                start.elapsed().as_secs_f64()
+            ));
+        }
+        Ok(solution)
+    };
+    let solve = |truth: &Truth, push: usize| solve_at(truth, push, pushes[push].force);
+    let (truth, solutions, mut lines) = converged_truth(truth, &truth_of, &solve, &targets, &pushes)?;
+
+    // Registration of each push the truth solved (one it found no equilibrium under is left out,
+    // and the report says so).
+    let mut methods = [PatientMethod::Learned, PatientMethod::Fem, PatientMethod::Hybrid]
+        .map(|method| MethodRun { method, ..MethodRun::default() });
+    let mut rest_errors = Vec::new();
+    // The streams' noise is drawn apart, so that the clouds from rest do not depend on them.
+    let (mut rng, mut stream_rng) =
+        (rand::rngs::StdRng::seed_from_u64(options.seed), rand::rngs::StdRng::seed_from_u64(options.seed ^ 1));
+    let noise = rand_distr::Normal::new(0.0, 0.0005).context("noise")?;
+    let mut forces = Vec::new();
+    let mut left_out = Vec::new();
+    let mut streams_left_out = Vec::new();
+    for (p, (&Push { at, force, .. }, solution)) in pushes.iter().zip(&solutions).enumerate() {
+        let u = match solution {
+            Ok(u) => u,
+            Err(e) => {
+                left_out.push(format!("{force} N at {:.0} % across the view ({e})", 100.0 * at));
+                continue;
+            }
+        };
+        let moved = truth.targets(&targets, u);
+        rest_errors.extend(register::target_errors(&targets, &moved));
+        let cloud = truth.cloud(u, &noise, &mut rng);
+        methods.iter_mut().try_for_each(|run| run.register(dir, force, &[(&moved, &cloud)]))?;
+        forces.push(force);
+        // The same push as a stream: the tool pressing in by quarters of its force.
+        let mut frames = Vec::new();
+        for share in STREAM_SHARES {
+            let solution = if share == 1.0 { Ok(u.clone()) } else { solve_at(&truth, p, share * force)? };
+            match solution {
+                Ok(u) => frames.push((truth.targets(&targets, &u), truth.cloud(&u, &noise, &mut stream_rng))),
+                Err(e) => {
+                    streams_left_out.push(format!("{force} N's stream, its {} N frame ({e})", share * force));
+                    break;
+                }
+            }
+        }
+        if frames.len() == STREAM_SHARES.len() {
+            let frames: Vec<(&[Point], &[Point])> = frames.iter().map(|(m, c)| (m.as_slice(), c.as_slice())).collect();
+            methods.iter_mut().try_for_each(|run| run.register(dir, force, &frames))?;
+        }
+    }
+    if forces.is_empty() {
+        bail!("the validation's truth found no equilibrium under any push: {}", left_out.join("; "));
+    }
+    lines.push(format!(
+        "validation: {} pushes of {}–{} N on a truth of {} T10 ({} nodes, Neo-Hookean) meshed anew; clouds of {} \
+         seen nodes with 0.5 mm noise; TRE without deformation {:.2} mm",
+        forces.len(),
+        forces.iter().copied().fold(f64::INFINITY, f64::min),
+        forces.iter().copied().fold(0.0, f64::max),
+        truth.mesh.cells.len(),
+        truth.mesh.num_nodes(),
+        truth.seen.len(),
+        mm(mesh::stats::mean(&rest_errors))
+    ));
+    lines.extend(
+        swing_warning("the targets", mesh::stats::mean(&rest_errors), &truth.mesh).map(|w| format!("validation: {w}")),
+    );
+    for &(target, distance) in &truth.outside {
+        lines.push(format!(
+            "validation: target {target} lies {:.2} mm outside the truth's mesh and follows its nearest surface point",
+            mm(distance)
+        ));
+    }
+    if read_back.get() > 0 {
+        lines.push(format!(
+            "validation: {} of the truths' solves read back from {TRUTH_DIR}/, made by an earlier run (this step's \
+             time leaves them out)",
+            read_back.get()
+        ));
+    }
+    for (what, pushes) in [("", &left_out), ("streams ", &streams_left_out)].into_iter().filter(|(_, p)| !p.is_empty())
+    {
+        lines.push(format!(
+            "validation: {what}left out, the truth finding no equilibrium under them: {}",
+            pushes.join("; ")
+        ));
+    }
+    lines.extend(methods.iter().flat_map(method_lines));
+    lines.push(record_best_method(dir, &methods)?);
+    Ok(lines)
+}
+
+/// The validation's lines on one method's registrations: from rest, and as streams.
+fn method_lines(run: &MethodRun) -> [String; 2] {
+    let name = method_name(run.method);
+    let streams = format!("{name} as streams of {} frames", STREAM_SHARES.len());
+    [
+        format!("validation: {}", run.rest.words(name, "per registration from rest")),
+        format!("validation: {}", run.streamed.words(&streams, "per warm-started frame")),
+    ]
+}
+
+/// Writes into the patient file the method that did the best on the validation's pushes;
+/// returns the validation's line on it.
+fn record_best_method(dir: &Path, methods: &[MethodRun]) -> Result<String> {
+    // The set-up registers with the method that did the best on these pushes, from rest and
+    // on streams ([`MethodRun::rank`]); on a tie the first.
+    let fem = methods.iter().find(|run| run.method == PatientMethod::Fem).context("the FEM was not validated")?;
+    let chosen = methods
+        .iter()
+        .min_by(|a, b| a.rank(fem).partial_cmp(&b.rank(fem)).unwrap_or(std::cmp::Ordering::Equal))
+        .context("no method was validated")?
+        .method;
+    let path = dir.join(PATIENT_FILE);
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let mut set_up: Vec<&str> = text.lines().filter(|l| !l.starts_with("method = ")).collect();
+    let method = format!("method = \"{}\"", chosen.name());
+    let at = set_up.iter().position(|l| l.starts_with("model = ")).unwrap_or(set_up.len());
+    set_up.insert(at, &method);
+    write_atomic_bytes(&path, (set_up.join("\n") + "\n").as_bytes())?;
+    Ok(format!(
+        "validation: {PATIENT_FILE} registers with the {} (method = \"{}\"), the best on these pushes, from rest \
+         and as streams",
+        method_name(chosen),
+        chosen.name()
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::meshing::write_surface_in_mm;
+
+    #[test]
+    fn the_organ_s_surface_is_read_back_in_metres_from_either_unit() {
+        let dir = tempfile::tempdir().unwrap();
+        let organ = mesh::box_tet([0.0; 3], [0.1, 0.05, 0.04], [4, 2, 2]).unwrap();
+        let surface = mesh::boundary_surface(&organ).compacted();
+        write_surface_in_mm(&dir.path().join(SURFACE_FILE), &surface, None).unwrap();
+        let read = read_organ_surface(dir.path(), &organ).unwrap();
+        let off = |s: &TriSurface| {
+            s.vertices.iter().zip(&surface.vertices).map(|(a, b)| mesh::distance(*a, *b)).fold(0.0, f64::max)
+        };
+        assert!(off(&read) < 1e-8, "read back {} m off (STL holds f32)", off(&read));
+        mesh::io::write_surface(dir.path().join(SURFACE_FILE), &surface).unwrap();
+        assert!(off(&read_organ_surface(dir.path(), &organ).unwrap()) < 1e-8, "in metres");
+        let twice = mesh::box_tet([0.0; 3], [0.2, 0.1, 0.08], [4, 2, 2]).unwrap();
+        let refused = read_organ_surface(dir.path(), &twice).unwrap_err().to_string();
+        assert!(refused.contains("does not match organ.vtu (200 mm)"), "{refused}");
+    }
+}
