@@ -43,7 +43,11 @@ import struct
 import sys
 
 import numpy as np
-import torch
+
+try:
+    import torch
+except ImportError as e:
+    raise ImportError('augsim.torch needs PyTorch: pip install "./python[torch]" (python/README.md)') from e
 import torch.nn as nn
 import torch.nn.functional as F
 

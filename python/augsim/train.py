@@ -31,7 +31,11 @@ import sys
 import time
 
 import numpy as np
-import torch
+
+try:
+    import torch
+except ImportError as e:
+    raise SystemExit('python -m augsim.train needs PyTorch: pip install "./python[torch]" (python/README.md)') from e
 
 from .torch import MODEL_FORMAT, MODEL_VERSION, UNet
 

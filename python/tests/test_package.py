@@ -5,8 +5,10 @@ Run: pytest -s python/tests (the augsim binary: $AUGSIM_BIN, default target/rele
 `.ci/run` runs them).
 """
 
+import importlib.util
 import os
 import re
+import subprocess
 import sys
 
 import numpy as np
@@ -309,3 +311,13 @@ def test_a_prepared_patient_registers(tmp_path):
         assert np.abs(r.targets - reg.targets).max() < 2.0
     with pytest.raises(ValueError, match="patient DIR holds its method and targets: leave out targets"):
         augsim.Registration(patient=tmp_path / "patient", targets=[[0.0, 0.0, 0.0]])
+
+
+def test_the_pytorch_parts_without_torch_say_what_to_install():
+    if importlib.util.find_spec("torch") is not None:
+        pytest.skip("torch is installed: nothing to say")
+    run = subprocess.run([sys.executable, "-m", "augsim.train", "--help"], capture_output=True, text=True)
+    assert run.returncode == 1, run.stdout + run.stderr
+    assert run.stderr.strip() == 'python -m augsim.train needs PyTorch: pip install "./python[torch]" (python/README.md)'
+    with pytest.raises(ImportError, match=r'augsim.torch needs PyTorch: pip install "\./python\[torch\]"'):
+        import augsim.torch  # noqa: F401

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use mesh::length::mm;
+use mesh::length::{mm, LengthUnit};
 use register::{FrameOutcome, Organ, RigidResult, RigidTransform, Summary};
 use scenario::CaseScenario;
 
@@ -65,14 +65,16 @@ pub fn frame_line(i: usize, row: &FrameSummary) -> String {
     )
 }
 
-/// The run's closing figures: the σ predicted at the targets (last frame) and the TRE when known.
-pub fn run_lines(outcomes: &[FrameOutcome], summary: &Summary) -> Vec<String> {
+/// The run's closing figures: the σ predicted at the targets (last frame; targets.csv has it in
+/// `unit`) and the TRE when known.
+pub fn run_lines(outcomes: &[FrameOutcome], summary: &Summary, unit: LengthUnit) -> Vec<String> {
     let mut lines = Vec::new();
     if let Some(sigma) = outcomes.last().and_then(|o| o.target_std.as_ref()) {
         lines.push(format!(
-            "sigma      predicted at the targets: mean {:.2} mm, max {:.2} mm (targets.csv, column sigma_m)",
+            "sigma      predicted at the targets: mean {:.2} mm, max {:.2} mm (targets.csv, column sigma_{})",
             mm(mesh::stats::mean(sigma)),
-            mm(mesh::stats::max(sigma))
+            mm(mesh::stats::max(sigma)),
+            unit.symbol()
         ));
     }
     if let (Some(t), Some(m), Some(r)) = (summary.tre_mean_mm, summary.tre_max_mm, summary.no_deformation_tre_mean_mm) {

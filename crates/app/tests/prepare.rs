@@ -255,7 +255,7 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     assert_eq!(again.steps.last().unwrap().name, "report", "written anew");
     options.samples = 40;
     let refused = prepare(&options, &out, &Told::default()).unwrap_err().to_string();
-    assert!(refused.contains("other inputs"), "{refused}");
+    assert!(refused.contains("other inputs") && refused.contains("samples 30 there, 40 now"), "{refused}");
     std::fs::remove_file(out.join(STATE_FILE)).unwrap();
 }
 
@@ -273,6 +273,24 @@ fn targets_in_another_unit_are_named() {
     let error = format!("{:#}", prepare(&options, &dir.path().join("patient"), &Told::default()).unwrap_err());
     assert!(
         error.contains("outside the organ") && error.contains("were they given in m where mm were expected"),
+        "{error}"
+    );
+}
+
+#[test]
+fn landmarks_in_another_unit_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let (surface, camera, attach, targets) = patient_files(dir.path(), false);
+    // The landmarks written in m while the rest is in mm.
+    let in_metres: Vec<Point> =
+        mesh::io::points::read_points_csv(&attach).unwrap().iter().map(|p| p.map(|x| x * 1e-3)).collect();
+    write_csv(&attach, &in_metres);
+    let mut options = PrepareOptions::new(surface, camera, attach, targets);
+    options.samples = 30;
+    options.tets = 800;
+    let error = format!("{:#}", prepare(&options, &dir.path().join("patient"), &Told::default()).unwrap_err());
+    assert!(
+        error.contains("the landmarks of") && error.contains("were they given in m where mm were expected?"),
         "{error}"
     );
 }

@@ -113,7 +113,7 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
         eprintln!("warning    {w}");
     }
     let summary = writer.finish(&registration, input.frame, &outcomes)?;
-    print_lines(&run_lines(&outcomes, &summary));
+    print_lines(&run_lines(&outcomes, &summary, spec.given_units));
     println!(
         "wrote      {} ({}, targets.csv, summary.json; for 3D Slicer: organ_deformed.vtk, targets.mrk.json)",
         out.display(),

@@ -124,6 +124,13 @@ pub fn from_mm(millimetres: f64) -> f64 {
     LengthUnit::Millimetre.to_metres(millimetres)
 }
 
+/// A point given in metres as a message shows it, in millimetres to six significant digits:
+/// `(92.603, -55.448, -209.771) mm`.
+pub fn point_in_mm(p: Point) -> String {
+    let [x, y, z] = p.map(|c| crate::repair::number(mm(c)));
+    format!("({x}, {y}, {z}) mm")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -138,6 +145,7 @@ mod tests {
         }
         assert_eq!(LengthUnit::Millimetre.metres() * 1000.0, LengthUnit::Metre.metres());
         assert_eq!(LengthUnit::Millimetre.point_to_metres([10.0, 20.0, -5.0]), [0.01, 0.02, -0.005]);
+        assert_eq!(point_in_mm([0.092603, -5.5448e-8, 0.0]), "(92.603, -0.000055448, 0) mm");
         assert!((mm(0.0125) - 12.5).abs() < 1e-12 && (from_mm(12.5) - 0.0125).abs() < 1e-15);
         assert_eq!(LengthUnit::default(), LengthUnit::Metre);
     }

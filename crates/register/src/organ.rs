@@ -2,6 +2,7 @@
 
 use mesh::bvh::{triangle_barycentric, SurfaceBvh};
 use mesh::embedding::MeshLocator;
+use mesh::length::point_in_mm;
 use mesh::{Mesh, Point, TriSurface};
 
 use crate::{RegisterError, Result};
@@ -145,7 +146,8 @@ impl Organ {
                 let (stencil, distance) = self.nearest_surface_stencil(&bvh, p);
                 if !(distance <= tolerance) {
                     return Err(RegisterError::Invalid(format!(
-                        "{what} {i} at {p:?} lies {:.2} mm outside the organ mesh",
+                        "{what} {i} at {} lies {:.2} mm outside the organ mesh",
+                        point_in_mm(p),
                         distance * 1e3
                     )));
                 }
@@ -164,62 +166,116 @@ impl Organ {
             .iter()
             .enumerate()
             .map(|(i, &p)| {
-                self.locator
-                    .locate(p)
-                    .map(|l| Stencil::of(&l))
-                    .ok_or_else(|| RegisterError::Invalid(format!("{what} {i} at {p:?} is outside the organ mesh")))
+                self.locator.locate(p).map(|l| Stencil::of(&l)).ok_or_else(|| {
+                    RegisterError::Invalid(format!("{what} {i} at {} is outside the organ mesh", point_in_mm(p)))
+                })
             })
             .collect()
     }
 }
 
-/// The share of the organ's extent below which a set of several targets is suspected of a unit
-/// mistake (metres read as millimetres shrink it 1,000 times).
+/// The share of the organ's extent below which a set of several targets (or landmarks) is
+/// suspected of a unit mistake (metres read as millimetres shrink it 1,000 times).
 pub const SMALL_TARGET_EXTENT: f64 = 0.01;
+
+/// Landmarks outside the organ by more than this share of its extent are refused: they are
+/// points on its surface, where it is held.
+pub const LANDMARK_REACH: f64 = 0.15;
 
 impl Organ {
     /// Stencils of the targets in the organ, and warnings about them. A target outside the organ
-    /// is an error, which names the likely mistake when every target lies inside with x and y
-    /// negated (a frame mix-up, RAS and LPS), or read 1,000 times smaller or larger (a unit
-    /// mistake) and spread over at least [`SMALL_TARGET_EXTENT`] of the organ (points merely
-    /// shrunk onto an organ around the origin tell nothing); a set of targets whose extent is
-    /// under [`SMALL_TARGET_EXTENT`] of the organ's is warned about.
+    /// is an error, which names the likely mistake ([`likely_mistake`]); a set of targets whose
+    /// extent is under [`SMALL_TARGET_EXTENT`] of the organ's is warned about.
     pub fn locate_targets(&self, targets: &[Point]) -> Result<(Vec<Stencil>, Vec<String>)> {
-        let organ = self;
-        let (organ_extent, extent) = (diagonal(&organ.mesh().nodes), diagonal(targets));
-        let inside = |moved: Vec<Point>| organ.locate(&moved, "target").is_ok();
-        let fits = |scale: f64| {
-            let spread = targets.len() < 2 || scale * extent >= SMALL_TARGET_EXTENT * organ_extent;
-            spread && inside(targets.iter().map(|p| p.map(|x| x * scale)).collect())
-        };
-        let stencils = match organ.locate(targets, "target") {
-            Ok(s) => s,
-            Err(e) => {
-                let hint = if inside(targets.iter().map(|p| [-p[0], -p[1], p[2]]).collect()) {
-                    " (with x and y negated every target lies inside: are they in LPS where the organ is in RAS, \
-                     or the reverse?)"
-                } else if fits(1e-3) {
-                    " (read as 1,000 times smaller, every target lies inside: were they given in mm where m were expected?)"
-                } else if fits(1e3) {
-                    " (read as 1,000 times larger, every target lies inside: were they given in m where mm were expected?)"
-                } else {
-                    ""
-                };
-                return Err(RegisterError::Invalid(format!("{e}{hint}")));
-            }
-        };
-        let mut warnings = Vec::new();
-        if targets.len() > 1 && extent < SMALL_TARGET_EXTENT * organ_extent {
-            warnings.push(format!(
-                "the {} targets span {:.3} mm, under {:.0} % of the organ's {:.0} mm{}",
-                targets.len(),
-                extent * 1e3,
-                SMALL_TARGET_EXTENT * 100.0,
-                organ_extent * 1e3,
-                if fits(1e3) { ": were they given in m where mm were expected?" } else { "" }
-            ));
+        let inside = |moved: &[Point]| self.locate(moved, "target").is_ok();
+        let stencils = self.locate(targets, "target").map_err(|e| {
+            let hint = likely_mistake(targets, self.extent(), "every target lies inside", inside);
+            RegisterError::Invalid(format!("{e}{hint}"))
+        })?;
+        Ok((stencils, self.spread_warnings(targets, "targets", inside)))
+    }
+
+    /// Checks that the landmarks where the organ is held lie on its surface or inside it: one
+    /// outside by more than [`LANDMARK_REACH`] of its extent is an error naming it and the likely
+    /// mistake ([`likely_mistake`]); so is a set of landmarks spread over less than
+    /// [`SMALL_TARGET_EXTENT`] of the organ that, read 1,000 times larger, lies on it. Returns
+    /// warnings: a set of landmarks so small otherwise.
+    pub fn check_landmarks(&self, landmarks: &[Point]) -> Result<Vec<String>> {
+        if let Some((i, fault)) = mesh::measured_fault(landmarks) {
+            return Err(RegisterError::Invalid(format!("landmark {i} {fault}")));
         }
-        Ok((stencils, warnings))
+        let bvh = SurfaceBvh::new(&self.surface)?;
+        let reach = LANDMARK_REACH * self.extent();
+        let outside = |p: Point| bvh.signed_distance(p).max(0.0);
+        let held = |moved: &[Point]| moved.iter().all(|&p| outside(p) <= reach);
+        let farthest = landmarks.iter().map(|&p| outside(p)).enumerate().max_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((i, distance)) = farthest.filter(|&(_, d)| !(d <= reach)) {
+            return Err(RegisterError::Invalid(format!(
+                "landmark {i} at {} lies {:.1} mm outside the organ, farther than {:.0} % of its {:.0} mm (its box's \
+                 diagonal; landmarks are points on its surface, where it is held){}",
+                point_in_mm(landmarks[i]),
+                distance * 1e3,
+                LANDMARK_REACH * 100.0,
+                self.extent() * 1e3,
+                likely_mistake(landmarks, self.extent(), "every landmark lies on the organ", held)
+            )));
+        }
+        let warnings = self.spread_warnings(landmarks, "landmarks", held);
+        if let Some(warning) = warnings.iter().find(|w| w.ends_with(READ_LARGER)) {
+            return Err(RegisterError::Invalid(warning.clone()));
+        }
+        Ok(warnings)
+    }
+
+    /// The diagonal of the bounding box of the organ's mesh.
+    pub fn extent(&self) -> f64 {
+        diagonal(&self.mesh.nodes)
+    }
+
+    /// The warning when several `points` (`what`: "targets") span less than
+    /// [`SMALL_TARGET_EXTENT`] of the organ, which ends with [`READ_LARGER`] when, read 1,000
+    /// times larger, they lie where `fits` wants them.
+    fn spread_warnings(&self, points: &[Point], what: &str, fits: impl Fn(&[Point]) -> bool) -> Vec<String> {
+        let (organ_extent, extent) = (self.extent(), diagonal(points));
+        if points.len() < 2 || extent >= SMALL_TARGET_EXTENT * organ_extent {
+            return Vec::new();
+        }
+        vec![format!(
+            "the {} {what} span {:.3} mm, under {:.0} % of the organ's {:.0} mm (its box's diagonal){}",
+            points.len(),
+            extent * 1e3,
+            SMALL_TARGET_EXTENT * 100.0,
+            organ_extent * 1e3,
+            if scaled_fits(points, 1e3, organ_extent, &fits) { READ_LARGER } else { "" }
+        )]
+    }
+}
+
+/// How [`Organ::spread_warnings`] ends when the points, read 1,000 times larger, fit.
+const READ_LARGER: &str = ": were they given in m where mm were expected?";
+
+/// Whether `points` scaled by `scale` lie where `fits` wants them, spread (when several) over at
+/// least [`SMALL_TARGET_EXTENT`] of the organ's extent: points merely shrunk onto an organ around
+/// the origin tell nothing.
+fn scaled_fits(points: &[Point], scale: f64, organ_extent: f64, fits: impl Fn(&[Point]) -> bool) -> bool {
+    let spread = points.len() < 2 || scale * diagonal(points) >= SMALL_TARGET_EXTENT * organ_extent;
+    spread && fits(&points.iter().map(|p| p.map(|x| x * scale)).collect::<Vec<_>>())
+}
+
+/// The likely mistake behind `points` that do not lie where `fits` wants them (in an organ of
+/// extent `organ_extent`), as the end of an error message: that with x and y negated (a frame
+/// mix-up, RAS and LPS), or read 1,000 times smaller or larger (a unit mistake), `claim` holds.
+/// Empty when none of these fits.
+pub fn likely_mistake(points: &[Point], organ_extent: f64, claim: &str, fits: impl Fn(&[Point]) -> bool) -> String {
+    let negated: Vec<Point> = points.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
+    if fits(&negated) {
+        format!(" (with x and y negated {claim}: are they in LPS where the organ is in RAS, or the reverse?)")
+    } else if scaled_fits(points, 1e-3, organ_extent, &fits) {
+        format!(" (read as 1,000 times smaller, {claim}: were they given in mm where m were expected?)")
+    } else if scaled_fits(points, 1e3, organ_extent, &fits) {
+        format!(" (read as 1,000 times larger, {claim}: were they given in m where mm were expected?)")
+    } else {
+        String::new()
     }
 }
 
@@ -277,6 +333,25 @@ mod tests {
         let above = organ.surface_displacement_at(&u, &[[0.015, 0.007, 0.015]]).unwrap()[0];
         let below = field([0.015, 0.007, 0.01]);
         assert!((0..3).all(|d| (above[d] - below[d]).abs() < 1e-12), "{above:?} against {below:?}");
+    }
+
+    /// Landmarks on the surface or inside pass; one far outside is refused by name and distance; the same
+    /// landmarks 1,000 times too small (metres read as millimetres, all at the box's corner) or
+    /// with x and y negated (LPS for RAS) are refused with the likely mistake.
+    #[test]
+    fn landmarks_outside_the_organ_are_refused_with_the_likely_mistake() {
+        let (organ, _) = box_organ();
+        let on = vec![[0.0, 0.01, 0.005], [0.04, 0.012, 0.005], [0.02, 0.02, 0.004], [0.02, 0.01, 0.005]];
+        assert_eq!(organ.check_landmarks(&on).unwrap(), Vec::<String>::new());
+        let refused = |points: &[Point]| organ.check_landmarks(points).unwrap_err().to_string();
+        let mut far = on.clone();
+        far.push([0.02, 0.01, 0.05]);
+        let error = refused(&far);
+        assert!(error.starts_with("landmark 4 at (20, 10, 50) mm lies 40.0 mm outside the organ"), "{error}");
+        let small: Vec<Point> = on.iter().map(|p| p.map(|x| x * 1e-3)).collect();
+        assert!(refused(&small).ends_with("were they given in m where mm were expected?"), "{}", refused(&small));
+        let negated: Vec<Point> = on.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
+        assert!(refused(&negated).contains("with x and y negated every landmark lies on the organ"));
     }
 
     /// A point inside is located in its element; one 2 mm above the top face follows the face's

@@ -37,26 +37,22 @@ fn robust_extent(points: &[Point]) -> f64 {
     sum.sqrt()
 }
 
-/// The organ's extent: the diagonal of its rest bounding box (m).
-pub fn organ_extent(organ: &Organ) -> f64 {
-    let (lo, hi) = organ.mesh().bounds();
-    mesh::distance(lo, hi)
-}
-
 /// Refuses a (non-empty, finite) cloud whose extent cannot be a view of the organ, saying what it
 /// probably is.
 pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<()> {
-    let (size, extent) = (organ_extent(organ), robust_extent(cloud));
+    let (size, extent) = (organ.extent(), robust_extent(cloud));
     let ratio = extent / size;
     if ratio > MAX_EXTENT_RATIO {
         let hint = if looks_like_millimetres(organ, cloud)? {
-            " Is it in millimetres? Divided by 1000 it lies on the organ's surface: registration works in the \
-             organ's unit, metres (a server or the Python package takes --units mm / units=\"mm\")."
+            " Is it in millimetres? Divided by 1000 it lies on the organ's surface: give its unit as mm (--units mm, \
+             units=\"mm\" in Python)."
         } else {
             " It cannot be a view of the organ: wrong units, or not the organ's points."
         };
         return Err(RegisterError::Invalid(format!(
-            "the cloud spans {extent:.4} m, {ratio:.0} times the organ's {size:.4} m.{hint}"
+            "the cloud, read in metres, spans {extent:.1} m, {ratio:.0} times the organ's {:.0} mm (its box's \
+             diagonal).{hint}",
+            size * 1e3
         )));
     }
     if extent == 0.0 {
@@ -68,8 +64,10 @@ pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<()> {
     }
     if ratio < MIN_EXTENT_RATIO {
         return Err(RegisterError::Invalid(format!(
-            "the cloud spans {extent:.3e} m, {ratio:.1e} of the organ's {size:.4} m: too small to be a view of it \
-             (metres given where millimetres are expected? a server takes --units m, the Python package units=\"m\")"
+            "the cloud spans {:.3e} mm, {ratio:.1e} of the organ's {:.0} mm (its box's diagonal): too small to be a \
+             view of it (in metres, read as millimetres? give its unit as m: --units m, units=\"m\" in Python)",
+            extent * 1e3,
+            size * 1e3
         )));
     }
     Ok(())
@@ -79,7 +77,7 @@ pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<()> {
 /// organ's, its median distance to the rest surface within [`MILLIMETRE_FIT`] of the organ's size.
 fn looks_like_millimetres(organ: &Organ, cloud: &[Point]) -> Result<bool> {
     let metres: Vec<Point> = cloud.iter().map(|p| p.map(|c| 1e-3 * c)).collect();
-    let size = organ_extent(organ);
+    let size = organ.extent();
     if robust_extent(&metres) > MAX_EXTENT_RATIO * size {
         return Ok(false);
     }
@@ -96,7 +94,7 @@ pub fn far_share(distances: &[f64]) -> f64 {
 /// What a registered frame says about itself: the warnings (empty when the result is plausible)
 /// given the share of its cloud left unfitted ([`far_share`]) and its displacement `u`.
 pub fn warnings(organ: &Organ, u: &[f64], far_share: f64) -> Vec<String> {
-    let size = organ_extent(organ);
+    let size = organ.extent();
     let motion = u.chunks_exact(3).map(|d| mesh::norm([d[0], d[1], d[2]])).fold(0.0, f64::max);
     let mut out = Vec::new();
     if far_share > SUSPECT_FAR_SHARE {
@@ -109,7 +107,8 @@ pub fn warnings(organ: &Organ, u: &[f64], far_share: f64) -> Vec<String> {
     }
     if motion > SUSPECT_MOTION * size {
         out.push(format!(
-            "the organ moves by up to {:.0} mm, over half its size ({:.0} mm): not a plausible deformation",
+            "the organ moves by up to {:.0} mm, over half its size ({:.0} mm, its box's diagonal): not a plausible \
+             deformation",
             motion * 1e3,
             size * 1e3
         ));

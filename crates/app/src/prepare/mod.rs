@@ -51,7 +51,7 @@ use mesh::io::points::{read_points_csv, write_points, LabelledPoints};
 use mesh::io::{read_surface_with_frame, write_atomic_bytes, Frame};
 use mesh::isosurface::ExtractOptions;
 use mesh::labelmap::{is_labelmap, read_labelmap_surface};
-use mesh::length::{mm, LengthUnit, UnitOrAuto};
+use mesh::length::{mm, point_in_mm, LengthUnit, UnitOrAuto};
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
 use mesh::repair::{detect_unit, RepairOptions};
 use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
@@ -189,9 +189,10 @@ pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgr
             .with_context(|| format!("reading {}", state_path.display()))?;
         if state.options != options {
             bail!(
-                "{} was prepared from other inputs ({}); give another --out, or remove it to start again",
+                "{} was prepared from other inputs ({}: {}); give another --out, or remove it to start again",
                 dir.display(),
-                state_path.display()
+                state_path.display(),
+                differences(&state.options, &options)?.join(", ")
             );
         }
         state
@@ -221,6 +222,22 @@ pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgr
         write_atomic_bytes(&state_path, serde_json::to_string_pretty(&state)?.as_bytes())?;
     }
     Ok(state)
+}
+
+/// The inputs that differ between a preparation's recorded options and new ones, in words
+/// (`samples 300 there, 40 now`).
+fn differences(recorded: &PrepareOptions, new: &PrepareOptions) -> Result<Vec<String>> {
+    let fields = |o: &PrepareOptions| match serde_json::to_value(o) {
+        Ok(serde_json::Value::Object(fields)) => Ok(fields),
+        other => bail!("the options as JSON: {other:?}"),
+    };
+    let (recorded, new) = (fields(recorded)?, fields(new)?);
+    let null = serde_json::Value::Null;
+    Ok(recorded
+        .iter()
+        .filter(|(name, value)| new.get(*name) != Some(value))
+        .map(|(name, value)| format!("{name} {value} there, {} now", new.get(name).unwrap_or(&null)))
+        .collect())
 }
 
 /// The options with their files' paths absolute (the record must not depend on where the
@@ -325,10 +342,14 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let visible = Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&organ)?;
     if visible.is_empty() {
         bail!(
-            "the camera at {:?} mm sees no node of the organ: is it given in the surface's unit and frame?",
-            camera.map(mm)
+            "the camera at {} sees no node of the organ: is it given in the surface's unit and frame?",
+            point_in_mm(camera)
         );
     }
+    let located = register::Organ::new(organ.clone(), None)?;
+    let landmark_warnings = located
+        .check_landmarks(&landmarks)
+        .with_context(|| format!("the landmarks of {}", options.attach.display()))?;
     let distance = hold_distance(options, &organ, &landmarks)?;
     let attached = Near { points: landmarks.clone(), file: None, distance, surface: true }.nodes(&organ)?;
     if attached.is_empty() {
@@ -351,7 +372,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
         landmarks.len(),
         100.0 * held_share
     ));
-    let located = register::Organ::new(organ.clone(), None)?;
+    lines.extend(landmark_warnings.into_iter().map(|w| format!("warning: {w}")));
     let (_, warnings) =
         located.locate_targets(&targets).with_context(|| format!("the targets of {}", options.targets.display()))?;
     lines.push(format!("targets: {} inside the organ", targets.len()));
@@ -653,7 +674,7 @@ fn swing_warning(what: &str, motion: f64, organ: &Mesh) -> Option<String> {
     let longest = longest_side(organ);
     (motion > SWING_SHARE * longest).then(|| {
         format!(
-            "{what} move by {:.0} mm on average, {:.0} % of the organ's {:.0} mm: held near the landmarks only, it \
+            "{what} move by {:.0} mm on average, {:.0} % of the organ's longest side ({:.0} mm): held near the landmarks only, it \
              swings rather than deforms under these pushes, and a registration is judged on that swing; hold it \
              over more of its attachments (more landmarks, a larger --attach-mm) for the motions of surgery",
             mm(motion),
@@ -740,7 +761,10 @@ mod tests {
         let organ = mesh::box_tet([0.0; 3], [0.2, 0.1, 0.1], [2, 1, 1]).unwrap();
         assert_eq!(swing_warning("the targets", 0.019, &organ), None, "a tenth of its 200 mm is not yet a swing");
         let line = swing_warning("the targets", 0.163, &organ).unwrap();
-        assert!(line.starts_with("the targets move by 163 mm on average, 82 % of the organ's 200 mm"), "{line}");
+        assert!(
+            line.starts_with("the targets move by 163 mm on average, 82 % of the organ's longest side (200 mm)"),
+            "{line}"
+        );
         assert!(line.contains("--attach-mm"), "{line}");
     }
 

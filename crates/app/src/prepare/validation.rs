@@ -518,7 +518,7 @@ pub(super) fn validation_step(
         mm(mesh::stats::mean(&rest_errors))
     ));
     lines.extend(
-        swing_warning("the targets", mesh::stats::mean(&rest_errors), &truth.mesh).map(|w| format!("validation: {w}")),
+        swing_warning("the targets", mesh::stats::mean(&rest_errors), &organ).map(|w| format!("validation: {w}")),
     );
     for &(target, distance) in &truth.outside {
         lines.push(format!(
