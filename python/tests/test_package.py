@@ -98,7 +98,7 @@ def test_registration_with_the_unet_after_the_rom_s_shape_fit(case):
     r = reg.register(case["cloud"])
     unregistered = np.linalg.norm(case["rest"] - case["truth"], axis=1).mean()
     assert np.linalg.norm(r.targets - case["truth"], axis=1).mean() < 0.5 * unregistered
-    with pytest.raises(ValueError, match="give model MODEL"):
+    with pytest.raises(ValueError, match="give --model MODEL"):
         augsim.Registration(fem=case["scenario"], shape_model=rom)
 
 
@@ -309,7 +309,7 @@ def test_a_prepared_patient_registers(tmp_path):
         top = reg.points[reg.points[:, 2] > reg.points[:, 2].max() - 5.0]
         r = reg.register(top)
         assert np.abs(r.targets - reg.targets).max() < 2.0
-    with pytest.raises(ValueError, match="patient DIR holds its method and targets: leave out targets"):
+    with pytest.raises(ValueError, match="patient DIR holds its method and targets: leave out --targets"):
         augsim.Registration(patient=tmp_path / "patient", targets=[[0.0, 0.0, 0.0]])
 
 

@@ -109,7 +109,7 @@ fn organ_surface(
             let unit =
                 detect_unit(&surface).map_err(|e| anyhow!("{}: {e} (--units mm or m, or --length)", path.display()))?;
             let shown = if extent >= 1.0 { format!("{extent:.1}") } else { format!("{extent:.4}") };
-            Some((unit, format!("detected: largest extent {shown}")))
+            Some((unit, format!("detected: largest extent {shown} in the file's unit")))
         }
         (None, Some(unit)) => Some((unit, "given".to_string())),
     };

@@ -327,6 +327,20 @@ fn targets_file(path: &str) -> Result<TargetsSpec, String> {
     Ok(TargetsSpec::File(PathBuf::from(path)))
 }
 
+/// The choices of a patient's method.
+const PATIENT_METHODS: [&str; 3] = ["use_fem", "use_model", "use_hybrid"];
+
+/// What a registration needs when no way of deforming the organ is given.
+const NO_METHOD: &str = "give --patient DIR, --fem SCENARIO, or --model MODEL with --scenario SCENARIO (in Python: \
+                         patient=, fem=, or model= with scenario=)";
+
+/// Choices as both fronts name them: `--shape-model (shape_model= in Python)`.
+fn options_named(names: &[&str]) -> String {
+    let flags: Vec<String> = names.iter().map(|n| format!("--{}", n.replace('_', "-"))).collect();
+    let keywords: Vec<String> = names.iter().map(|n| format!("{n}=")).collect();
+    format!("{} ({} in Python)", flags.join(", "), keywords.join(", "))
+}
+
 impl RegistrationChoice {
     /// Whether the choices fit together (the command line's parser checks the same): one way of
     /// deforming the organ (a patient's set-up, a FEM, or a learned model with its scenario),
@@ -345,15 +359,22 @@ impl RegistrationChoice {
             .flatten()
             .collect();
             if !others.is_empty() {
-                return Err(format!("patient DIR holds its method and targets: leave out {}", others.join(", ")));
+                let others: Vec<&str> = others.iter().map(String::as_str).collect();
+                return Err(format!(
+                    "--patient DIR holds its method and targets: leave out {}",
+                    options_named(&others)
+                ));
             }
             if self.uses() > 1 {
-                return Err("use_fem, use_model and use_hybrid ask for different methods: give one".into());
+                return Err(format!("{} ask for different methods: give one", options_named(&PATIENT_METHODS)));
             }
             return Ok(());
         }
         if self.uses() > 0 {
-            return Err("use_fem, use_model and use_hybrid choose a patient's method: give patient DIR".into());
+            return Err(format!(
+                "{} choose a patient's method: give --patient DIR (patient= in Python)",
+                options_named(&PATIENT_METHODS)
+            ));
         }
         self.method().map(|_| ())
     }
@@ -366,7 +387,10 @@ impl RegistrationChoice {
     /// The method given without a patient's set-up.
     fn method(&self) -> Result<MethodSpec, String> {
         if self.shape_model.is_some() && self.model.is_none() {
-            return Err("shape_model is the basis of a model's registration: give model MODEL (a U-Net) too".into());
+            return Err(format!(
+                "{} is the basis of a model's registration: give --model MODEL (a U-Net) too",
+                options_named(&["shape_model"])
+            ));
         }
         match (&self.fem, &self.model, &self.scenario) {
             (Some(fem), None, _) => Ok(MethodSpec::fem(fem)),
@@ -374,8 +398,8 @@ impl RegistrationChoice {
                 None => MethodSpec::learned(model, scenario),
                 Some(basis) => MethodSpec::learned_after_shape_fit(model, scenario, basis),
             }),
-            (Some(_), Some(_), _) => Err("give fem or model, not both".into()),
-            _ => Err("give patient DIR, fem SCENARIO, or model MODEL with scenario SCENARIO".into()),
+            (Some(_), Some(_), _) => Err("give --fem or --model, not both (fem= or model= in Python)".into()),
+            _ => Err(NO_METHOD.into()),
         }
     }
 
@@ -691,21 +715,23 @@ mod tests {
     #[test]
     fn choices_that_do_not_fit_together_are_refused_by_name() {
         let none = RegistrationChoice::default();
-        assert_eq!(none.check().unwrap_err(), "give patient DIR, fem SCENARIO, or model MODEL with scenario SCENARIO");
+        assert_eq!(none.check().unwrap_err(), NO_METHOD);
         let model_alone = RegistrationChoice { model: Some("m".into()), ..RegistrationChoice::default() };
-        assert!(model_alone.spec().unwrap_err().to_string().contains("model MODEL with scenario SCENARIO"));
+        assert!(model_alone.spec().unwrap_err().to_string().contains("--model MODEL with --scenario SCENARIO"));
         let both = RegistrationChoice { model: Some("m".into()), ..fem() };
-        assert_eq!(both.check().unwrap_err(), "give fem or model, not both");
+        assert_eq!(both.check().unwrap_err(), "give --fem or --model, not both (fem= or model= in Python)");
         let basis_alone = RegistrationChoice { shape_model: Some("rom".into()), ..fem() };
-        assert!(basis_alone.check().unwrap_err().contains("give model MODEL (a U-Net) too"));
+        let error = basis_alone.check().unwrap_err();
+        assert!(error.starts_with("--shape-model (shape_model= in Python) is the basis"), "{error}");
+        assert!(error.ends_with("give --model MODEL (a U-Net) too"), "{error}");
         let patient_and_more =
             RegistrationChoice { patient: Some("p".into()), targets: Some(TargetsSpec::Regions), ..fem() };
         assert_eq!(
             patient_and_more.check().unwrap_err(),
-            "patient DIR holds its method and targets: leave out fem, targets"
+            "--patient DIR holds its method and targets: leave out --fem, --targets (fem=, targets= in Python)"
         );
         let use_hybrid_alone = RegistrationChoice { use_hybrid: true, ..fem() };
-        assert!(use_hybrid_alone.check().unwrap_err().contains("give patient DIR"));
+        assert!(use_hybrid_alone.check().unwrap_err().contains("give --patient DIR (patient= in Python)"));
         let patient = || RegistrationChoice { patient: Some("p".into()), ..RegistrationChoice::default() };
         let two_methods = RegistrationChoice { use_fem: true, use_hybrid: true, ..patient() };
         assert!(two_methods.check().unwrap_err().contains("give one"));

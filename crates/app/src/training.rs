@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{bail, ensure, Result};
 use learn::rom::{ReducedModel, RomConfig, RomReport};
 use learn::{
     Compute, Corruption, Dataset, Initialization, Method, Normalization, Progress, Samples, Sparsity, Split,
@@ -105,31 +105,32 @@ pub struct TrainArgs {
     #[arg(long)]
     pub prior: Option<PathBuf>,
     /// Optimiser steps.
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = UNET_DEFAULTS.iterations)]
     pub iterations: usize,
     /// Samples per step (at most the training samples).
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = UNET_DEFAULTS.batch)]
     pub batch: usize,
     /// Adam learning rate.
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = UNET_DEFAULTS.lr)]
     pub lr: f64,
     /// Let the learning rate fall to this value along a half cosine over the iterations.
     #[arg(long)]
     pub final_lr: Option<f64>,
     /// Channels of the first U-Net level.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = UNET_DEFAULTS.channels)]
     pub channels: usize,
     /// Down-sampling steps of the U-Net.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = UNET_DEFAULTS.depth)]
     pub depth: usize,
-    /// Fine-tune this pre-trained model (model.json) instead of starting from scratch.
+    /// Fine-tune this pre-trained U-Net (its directory or model.json; trained on inputs of the
+    /// dataset's kind) instead of starting from scratch.
     #[arg(long)]
     pub init: Option<PathBuf>,
     /// With --init: keep the encoder fixed.
-    #[arg(long)]
+    #[arg(long, requires = "init")]
     pub freeze_encoder: bool,
     /// Validate (and keep the best model) every K steps.
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = UNET_DEFAULTS.validate_every)]
     pub validate_every: usize,
     /// Seed of weights, batches and corruption.
     #[arg(long, default_value_t = 0)]
@@ -146,6 +147,48 @@ pub struct TrainArgs {
     /// Where the network trains.
     #[command(flatten)]
     pub device: DeviceArgs,
+}
+
+/// The U-Net's training settings of `augsim train` by default.
+struct UNetDefaults {
+    iterations: usize,
+    batch: usize,
+    lr: f64,
+    channels: usize,
+    depth: usize,
+    validate_every: usize,
+}
+
+const UNET_DEFAULTS: UNetDefaults =
+    UNetDefaults { iterations: 2000, batch: 4, lr: 1e-3, channels: 16, depth: 3, validate_every: 100 };
+
+impl TrainArgs {
+    /// The options given that the chosen method does not use, by flag: a U-Net's training
+    /// settings for a reduced-order model, a reduced-order model's for a U-Net.
+    fn unused_options(&self) -> Vec<&'static str> {
+        let d = &UNET_DEFAULTS;
+        let rom = RomConfig::default();
+        let given = match self.method {
+            Method::Rom => vec![
+                ("--iterations", self.iterations != d.iterations),
+                ("--batch", self.batch != d.batch),
+                ("--lr", self.lr != d.lr),
+                ("--final-lr", self.final_lr.is_some()),
+                ("--channels", self.channels != d.channels),
+                ("--depth", self.depth != d.depth),
+                ("--init", self.init.is_some()),
+                ("--validate-every", self.validate_every != d.validate_every),
+                ("--restart", self.restart),
+            ],
+            Method::UNet => vec![
+                ("--modes", self.modes != rom.max_modes),
+                ("--noise-copies", self.noise_copies != rom.noise_copies),
+                ("--inducing", self.inducing != rom.max_inducing),
+                ("--prior", self.prior.is_some()),
+            ],
+        };
+        given.into_iter().filter(|(_, given)| *given).map(|(flag, _)| flag).collect()
+    }
 }
 
 /// `--device`: where the network runs.
@@ -169,6 +212,15 @@ impl DeviceArgs {
 /// checkpoint unless `restart`) or a reduced-order model. Tells `progress` the split and the
 /// device in lines, and the training's advance; returns the outcome in lines.
 pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
+    let unused = args.unused_options();
+    if !unused.is_empty() {
+        let (this, other) = match args.method {
+            Method::Rom => ("a reduced-order model (--method rom)", "a U-Net's"),
+            Method::UNet => ("a U-Net (--method unet, the default)", "a reduced-order model's (--method rom)"),
+        };
+        let (are, them) = if unused.len() == 1 { ("is", "it") } else { ("are", "them") };
+        bail!("{} {are} {other}: {this} does not use {them}", unused.join(", "));
+    }
     let dataset = Dataset::open(&args.dataset)?;
     let all = dataset.load_all()?;
     let (split, [train, validation, test]) = args.split.policy().apply(&all)?;
@@ -267,7 +319,23 @@ pub fn train_unet(
             normalization: Normalization::from_samples(train),
             input_unit: manifest.units.input.clone(),
         },
-        UNetStart::FineTune { model, freeze_encoder } => Initialization::FineTune { model, freeze_encoder },
+        UNetStart::FineTune { model, freeze_encoder } => {
+            let model = learn::Model::json_path(&model);
+            let pre = learn::Model::load(&model)?;
+            ensure!(
+                pre.method() == Method::UNet,
+                "{} is a reduced-order model: a U-Net's training starts from a U-Net",
+                model.display()
+            );
+            ensure!(
+                pre.input_unit() == manifest.units.input,
+                "{} was trained on inputs in {}, the dataset's are in {}: fine-tuning needs inputs of the same kind",
+                model.display(),
+                pre.input_unit(),
+                manifest.units.input
+            );
+            Initialization::FineTune { model, freeze_encoder }
+        }
     };
     let options = TrainOptions {
         out_dir: run.out,

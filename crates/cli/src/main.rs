@@ -32,7 +32,7 @@ enum Command {
         /// Static scenario: a TOML file, or the name of a built-in one (e.g. beam).
         scenario: PathBuf,
         /// Output file (.vtu or .vtk); default `out/<name>.vtu`.
-        #[arg(short, long)]
+        #[arg(short, long, value_parser = extension_of(&["vtu", "vtk"]))]
         output: Option<PathBuf>,
     },
     /// Mesh a closed surface (or the built-in liver phantom) with tetrahedra or an immersed hex grid.
@@ -65,7 +65,7 @@ enum Command {
         immersed: Option<f64>,
         /// Output file (.vtu, .vtk or .msh, in m; .stl or .obj: the mesh's boundary surface in mm, an
         /// STL naming the input's frame, as 3D Slicer reads it).
-        #[arg(short, long, default_value = "out/mesh.vtu")]
+        #[arg(short, long, default_value = "out/mesh.vtu", value_parser = extension_of(&["vtu", "vtk", "msh", "stl", "obj"]))]
         output: PathBuf,
     },
     /// ROUKF identification of Young's modulus and/or boundary springs from tracked surface points (synthetic,
@@ -111,7 +111,8 @@ enum Command {
         /// The model: its directory (a U-Net's or a reduced-order model's) or its model.json.
         model: PathBuf,
         /// Input: a grid tensor (.npy [3, nx, ny, nz]) or a point cloud (.csv or .npy [N, 6]: x, y, z
-        /// and the force (N) or displacement (m) at each point, as the model was trained).
+        /// and the force (N) or displacement (m) at each point, as the model was trained; in mm where
+        /// a CSV header names them so: x_mm, y_mm, z_mm, and ux_mm, uy_mm, uz_mm).
         input: PathBuf,
         /// Output tensor (.npy [3, nx, ny, nz], m).
         #[arg(short, long, default_value = "out/prediction.npy")]
@@ -161,6 +162,19 @@ fn at_least_one(text: &str) -> Result<usize, String> {
     match text.parse::<usize>() {
         Ok(0) => Err("must be at least 1".into()),
         parsed => parsed.map_err(|e| e.to_string()),
+    }
+}
+
+/// A parser of paths with one of the `allowed` extensions (lower case), refusing others before
+/// any work is done.
+fn extension_of(allowed: &'static [&'static str]) -> impl Fn(&str) -> Result<PathBuf, String> + Clone {
+    move |text: &str| {
+        let path = PathBuf::from(text);
+        let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+        match allowed.contains(&extension.as_str()) {
+            true => Ok(path),
+            false => Err(format!("expected a file ending in .{}", allowed.join(", ."))),
+        }
     }
 }
 

@@ -175,6 +175,6 @@ fn units_are_parsed_the_same_by_every_command() {
     // Without a way of deforming the organ, register and serve say what to give.
     for command in [&["register", "cloud.csv"][..], &["serve", "--port", "0"]] {
         let (ok, text) = augsim(command);
-        assert!(!ok && text.contains("give patient DIR, fem SCENARIO, or model MODEL"), "{command:?}: {text}");
+        assert!(!ok && text.contains("give --patient DIR, --fem SCENARIO, or --model MODEL"), "{command:?}: {text}");
     }
 }

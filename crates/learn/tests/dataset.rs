@@ -331,11 +331,15 @@ fn a_complete_dataset_grows_when_asked_for_more_samples() {
     assert_eq!(x.source, y.source);
     // Fewer samples, or more of another spec, are no growth.
     let e = DatasetWriter::create_or_resume(grown.path(), counted_spec(10)).err().unwrap().to_string();
-    assert!(e.contains("cannot resume"), "{e}");
+    assert!(
+        e.contains("cannot resume: it was made for 13 draws: --samples grows a dataset but does not shrink"),
+        "{e}"
+    );
     let other =
         DatasetSpec { metadata: serde_json::json!({"dataset": {"samples": 20, "cone": 180.0}}), ..spec(3, None) };
     let e = DatasetWriter::create_or_resume(grown.path(), other).err().unwrap().to_string();
-    assert!(e.contains("cannot resume"), "{e}");
+    let differences = "metadata.dataset.cone 90.0 there, 180.0 now; metadata.dataset.samples 13 there, 20 now";
+    assert!(e.contains(&format!("cannot resume: it was created otherwise ({differences})")), "{e}");
 }
 
 #[test]

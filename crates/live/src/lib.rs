@@ -292,6 +292,7 @@ impl Client {
 /// steps to come, for the registration thread.
 fn read_messages(mut stream: TcpStream, shared: &Shared) {
     let (mut frame, mut step) = (0u64, 0u64);
+    let mut ignored = std::collections::HashSet::new();
     let to_metres = |points: Vec<[f32; 3]>| -> Vec<Point> {
         let ServeOptions { units, frame, .. } = shared.options;
         points.into_iter().map(|p| frame.point(units.point_to_metres(p.map(f64::from)))).collect()
@@ -317,7 +318,17 @@ fn read_messages(mut stream: TcpStream, shared: &Shared) {
                 drop(waiting);
                 shared.arrived.notify_one();
             }
-            Ok(Incoming::Other) => {}
+            Ok(Incoming::Other { kind, device }) => {
+                // Said once per kind and device: a navigation system may send other messages often.
+                if ignored.insert((kind.clone(), device.clone())) {
+                    let warning = format!(
+                        "a {kind} message from device '{device}' is ignored: clouds come as POLYDATA or POINT from \
+                         device 'cloud', tracked features from 'features'"
+                    );
+                    eprintln!("augsim serve: {warning}");
+                    shared.send_status(&serde_json::json!({ "warnings": [warning] }));
+                }
+            }
             Ok(Incoming::Closed) => break,
             Err(e) => {
                 shared.send_status(&serde_json::json!({ "error": e }));
@@ -334,8 +345,8 @@ enum Incoming {
     Cloud(Vec<[f32; 3]>),
     /// The points of a `features` POLYDATA or POINT message (wire units).
     Features(Vec<[f32; 3]>),
-    /// Any other message (ignored).
-    Other,
+    /// Any other message (ignored): its type and device name.
+    Other { kind: String, device: String },
     /// The peer closed the connection between messages.
     Closed,
 }
@@ -357,7 +368,7 @@ fn read_message(stream: &mut TcpStream, max_body: u64) -> std::result::Result<In
     stream.read_exact(&mut body).map_err(|e| format!("truncated message body: {e}"))?;
     let (kind, device) = (header.type_name.as_str(), header.device_name.as_str());
     if !matches!(device, "cloud" | "features") || !matches!(kind, "POLYDATA" | "POINT") {
-        return Ok(Incoming::Other);
+        return Ok(Incoming::Other { kind: kind.to_string(), device: device.to_string() });
     }
     let points = match kind {
         "POLYDATA" => decode_body::<PolyData>(&header, &body)?.points,

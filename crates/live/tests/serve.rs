@@ -142,6 +142,12 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
     client.send_cloud(cloud.iter().map(|p| p.map(|x| x * 1e3)).collect()).unwrap();
     let s = status(client.receive().unwrap());
     assert!(s["frame"] == 5 && s["error"].as_str().unwrap().contains("millimetres?"), "{s}");
+    // Points from another device: said once (the targets of the next cloud come next), ignored.
+    for _ in 0..2 {
+        client.send_points("tool", &cloud[..3]).unwrap();
+    }
+    let s = status(client.receive().unwrap());
+    assert!(s["warnings"][0].as_str().unwrap().starts_with("a POINT message from device 'tool' is ignored"), "{s}");
 
     // Another client sends an oversized message, a third garbage: each is closed alone.
     let mut huge = encode_message(&PolyData { points: cloud.clone(), triangles: Vec::new() }, "cloud").unwrap();

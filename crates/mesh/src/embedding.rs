@@ -23,6 +23,7 @@
 
 use rayon::prelude::*;
 
+use crate::length::{mm, point_in_mm};
 use crate::{bounds, Cells, Mesh, MeshError, Point, MAX_CELLS};
 
 /// Tolerance on barycentric / reference coordinates for "inside".
@@ -124,10 +125,14 @@ impl Grid {
             let last = (self.dims[d] - 1) as f64;
             let tol = 1e-9 * last.max(1.0);
             if !(f >= -tol && f <= last + tol) {
+                let (lo, hi) = (self.origin, self.upper());
+                let out = (0..3).map(|d| (lo[d] - p[d]).max(p[d] - hi[d]).max(0.0)).fold(0.0, f64::max);
                 return Err(MeshError::Invalid(format!(
-                    "point {index} {p:?} is outside the grid box {:?}..{:?}",
-                    self.origin,
-                    self.upper()
+                    "point {index} at {} lies {} mm outside the grid box {}..{}",
+                    point_in_mm(p),
+                    crate::repair::number(mm(out)),
+                    point_in_mm(lo),
+                    point_in_mm(hi)
                 )));
             }
             let f = f.clamp(0.0, last);

@@ -13,6 +13,18 @@ pub enum ScenarioError {
         /// Why.
         error: std::io::Error,
     },
+    /// A bare name that is neither a readable file nor a built-in scenario's name.
+    #[error(
+        "cannot read scenario {}: {error}; nor is it a built-in scenario's name ({})",
+        path.display(),
+        crate::BUILTIN.map(|(name, _)| name).join(", ")
+    )]
+    Unknown {
+        /// The name given.
+        path: PathBuf,
+        /// Why it could not be read as a file.
+        error: std::io::Error,
+    },
     /// The text is not a valid scenario of its kind, or its values are unusable.
     #[error("invalid scenario {origin}: {message}")]
     Invalid {

@@ -108,9 +108,10 @@ impl ScenarioText {
             Err(error) => {
                 let bare = path.parent().is_none_or(|p| p.as_os_str().is_empty());
                 let name = path.to_str().map(|s| s.trim_end_matches(".toml")).unwrap_or_default();
-                match builtin(name).filter(|_| bare) {
-                    Some(text) => Ok(ScenarioText::builtin(name, text)),
-                    None => Err(ScenarioError::Io { path: path.to_path_buf(), error }),
+                match (builtin(name), bare) {
+                    (Some(text), true) => Ok(ScenarioText::builtin(name, text)),
+                    (None, true) => Err(ScenarioError::Unknown { path: path.to_path_buf(), error }),
+                    (_, false) => Err(ScenarioError::Io { path: path.to_path_buf(), error }),
                 }
             }
         }
@@ -354,9 +355,11 @@ mod tests {
     }
 
     #[test]
-    fn a_missing_file_that_is_no_builtin_is_an_io_error() {
+    fn a_missing_file_that_is_no_builtin_is_an_error_naming_the_built_in_ones() {
         let err = ScenarioText::read(Path::new("no_such_scenario")).unwrap_err().to_string();
-        assert!(err.contains("no_such_scenario"), "{err}");
+        assert!(err.starts_with("cannot read scenario no_such_scenario: "), "{err}");
+        let builtins = "nor is it a built-in scenario's name (beam, beam_bc1, ";
+        assert!(err.contains(builtins) && err.ends_with(", roukf_springs, roukf_young)"), "{err}");
         let err = ScenarioText::read(Path::new("dir/beam.toml")).unwrap_err();
         assert!(matches!(err, ScenarioError::Io { .. }), "a path with a directory never falls back to a built-in");
     }

@@ -67,9 +67,11 @@ pub struct TruthSpec {
     /// The phantom region whose nodes are the targets (their rest positions).
     #[serde(default = "default_targets")]
     pub targets: String,
-    /// Frames of a press and release: frame k of n (k = 1…n) is pushed by
-    /// force · sin(π k / (n + 1)), rising to `force` mid-way (odd n) and falling back, each seen
-    /// by the camera with the seed `camera.seed + k − 1`. 1 (the default): one frame at `force`.
+    /// Frames of a press and release: the force rises to `force` at frame m = ⌈n / 2⌉ and falls
+    /// back, frame k of n (k = 1…n) pushed by force · sin(π/2 · k / m) up to m and
+    /// force · sin(π/2 · (n + 1 − k) / (n + 1 − m)) after it (for odd n, force · sin(π k / (n + 1))
+    /// throughout), each seen by the camera with the seed `camera.seed + k − 1`. 1 (the default):
+    /// one frame at `force`.
     #[serde(default = "default_frames", skip_serializing_if = "is_one")]
     pub frames: usize,
 }
@@ -97,7 +99,12 @@ impl TruthSpec {
         if n == 1 {
             return vec![self.force];
         }
-        (1..=n).map(|k| self.force * (std::f64::consts::PI * k as f64 / (n + 1) as f64).sin()).collect()
+        let peak = n.div_ceil(2);
+        let share = |k: usize| match k <= peak {
+            true => k as f64 / peak as f64,
+            false => (n + 1 - k) as f64 / (n + 1 - peak) as f64,
+        };
+        (1..=n).map(|k| self.force * (std::f64::consts::FRAC_PI_2 * share(k)).sin()).collect()
     }
 }
 

@@ -1,4 +1,4 @@
-//! Static scenarios build the problems they describe.
+//! Scenarios build the problems they describe: static problems, and a registration case's frames.
 
 use std::path::Path;
 
@@ -73,4 +73,39 @@ traction = [0.0, 0.0, -10.0]
     let problem = scenario.build_problem(&base).unwrap();
     // Around each of the two bottom corners: the corner and its 3 neighbours on the boundary.
     assert_eq!(problem.dirichlet.len(), 2 * 4, "{:?}", problem.dirichlet);
+}
+
+/// The static scenario `docs/usage.md` shows describes the built-in `beam`'s problem: the same
+/// fixed nodes and the same loads on its free end.
+#[test]
+fn the_usage_page_s_example_scenario_is_the_built_in_beam() {
+    let page = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/usage.md")).unwrap();
+    let start = page.find("```toml\nkind = \"static\"").expect("the page's static example") + "```toml\n".len();
+    let text = &page[start..start + page[start..].find("```").unwrap()];
+    let example = StaticScenario::parse(text, Path::new("usage.toml")).unwrap().build_problem(Path::new(".")).unwrap();
+    let beam = StaticScenario::builtin("beam").build_problem(Path::new(".")).unwrap();
+    assert_eq!(example.mesh.nodes, beam.mesh.nodes);
+    assert_eq!(example.dirichlet, beam.dirichlet);
+    assert!(example.f_ext.iter().any(|&f| f != 0.0), "the example loads the beam");
+    assert_eq!(example.f_ext, beam.f_ext);
+}
+
+/// A case's press and release reaches its force at frame ⌈n / 2⌉ for any number of frames n, and
+/// keeps the sine profile sin(π k / (n + 1)) for odd n.
+#[test]
+fn a_press_and_release_reaches_the_case_s_force_for_any_number_of_frames() {
+    let mut truth = augsim_scenario::CaseScenario::builtin().truth;
+    for n in 2..=8 {
+        truth.frames = n;
+        let forces = truth.frame_forces();
+        assert_eq!(forces.len(), n);
+        assert!((forces[n.div_ceil(2) - 1] - truth.force).abs() < 1e-12, "{n} frames: {forces:?}");
+        assert!(forces.iter().all(|&f| f > 0.0 && f <= truth.force + 1e-12), "{n} frames: {forces:?}");
+        if n % 2 == 1 {
+            for (k, f) in (1..).zip(&forces) {
+                let sine = truth.force * (std::f64::consts::PI * k as f64 / (n + 1) as f64).sin();
+                assert!((f - sine).abs() < 1e-12, "{n} frames, frame {k}: {f} against {sine}");
+            }
+        }
+    }
 }

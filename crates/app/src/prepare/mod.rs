@@ -192,7 +192,8 @@ pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgr
                 "{} was prepared from other inputs ({}: {}); give another --out, or remove it to start again",
                 dir.display(),
                 state_path.display(),
-                differences(&state.options, &options)?.join(", ")
+                learn::json_differences(&serde_json::to_value(&state.options)?, &serde_json::to_value(&options)?)
+                    .join("; ")
             );
         }
         state
@@ -222,22 +223,6 @@ pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgr
         write_atomic_bytes(&state_path, serde_json::to_string_pretty(&state)?.as_bytes())?;
     }
     Ok(state)
-}
-
-/// The inputs that differ between a preparation's recorded options and new ones, in words
-/// (`samples 300 there, 40 now`).
-fn differences(recorded: &PrepareOptions, new: &PrepareOptions) -> Result<Vec<String>> {
-    let fields = |o: &PrepareOptions| match serde_json::to_value(o) {
-        Ok(serde_json::Value::Object(fields)) => Ok(fields),
-        other => bail!("the options as JSON: {other:?}"),
-    };
-    let (recorded, new) = (fields(recorded)?, fields(new)?);
-    let null = serde_json::Value::Null;
-    Ok(recorded
-        .iter()
-        .filter(|(name, value)| new.get(*name) != Some(value))
-        .map(|(name, value)| format!("{name} {value} there, {} now", new.get(name).unwrap_or(&null)))
-        .collect())
 }
 
 /// The options with their files' paths absolute (the record must not depend on where the

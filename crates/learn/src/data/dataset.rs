@@ -78,6 +78,12 @@ impl DatasetSpec {
     /// Whether `self` asks for more samples of the same whole (unsplit) dataset as `existing`:
     /// everything else equal, so that the first samples stay those `existing` holds.
     fn grows(&self, existing: &DatasetSpec) -> bool {
+        let larger = matches!((self.requested_samples(), existing.requested_samples()), (Some(a), Some(b)) if a > b);
+        larger && self.same_but_count(existing)
+    }
+
+    /// Whether `self` and `other` are the same whole (unsplit) dataset but for the sample count.
+    fn same_but_count(&self, other: &DatasetSpec) -> bool {
         let without_count = |spec: &DatasetSpec| {
             let mut spec = spec.clone();
             if let Some(config) = spec.metadata.get_mut("dataset").and_then(|d| d.as_object_mut()) {
@@ -85,8 +91,49 @@ impl DatasetSpec {
             }
             spec
         };
-        let larger = matches!((self.requested_samples(), existing.requested_samples()), (Some(a), Some(b)) if a > b);
-        larger && self.part.is_none() && existing.part.is_none() && without_count(self) == without_count(existing)
+        self.part.is_none() && other.part.is_none() && without_count(self) == without_count(other)
+    }
+}
+
+/// Where two records (JSON: a dataset's spec, a preparation's options) differ, in words, one line
+/// per differing value with its dotted path: `metadata.dataset.samples 12 there, 5 now`.
+pub fn json_differences(recorded: &serde_json::Value, new: &serde_json::Value) -> Vec<String> {
+    fn walk(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>) {
+        use serde_json::Value::{Null, Object};
+        match (a, b) {
+            (Object(a), Object(b)) => {
+                let mut keys: Vec<&String> = a.keys().chain(b.keys().filter(|k| !a.contains_key(*k))).collect();
+                keys.sort();
+                for key in keys {
+                    let path = if path.is_empty() { key.clone() } else { format!("{path}.{key}") };
+                    walk(&path, a.get(key).unwrap_or(&Null), b.get(key).unwrap_or(&Null), out);
+                }
+            }
+            _ if a != b => out.push(format!("{path} {a} there, {b} now")),
+            _ => {}
+        }
+    }
+    let mut out = Vec::new();
+    walk("", recorded, new, &mut out);
+    out
+}
+
+impl DatasetSpec {
+    /// Why a dataset created with `self` cannot take `new`'s draws, in words: what differs (see
+    /// [`json_differences`]), and that a dataset grows but does not shrink.
+    fn mismatch(&self, new: &DatasetSpec) -> String {
+        let as_json = |spec: &DatasetSpec| serde_json::to_value(spec).unwrap_or(serde_json::Value::Null);
+        let mut why =
+            format!("it was created otherwise ({})", json_differences(&as_json(self), &as_json(new)).join("; "));
+        if let (Some(held), Some(asked)) = (self.requested_samples(), new.requested_samples()) {
+            if asked < held && self.same_but_count(new) {
+                why = format!(
+                    "it was made for {held} draws: --samples grows a dataset but does not shrink it (train on fewer \
+                     with `augsim train --train-samples`, or give another --out)"
+                );
+            }
+        }
+        why
     }
 }
 
@@ -684,7 +731,7 @@ impl DatasetWriter {
             if existing != spec && !grows {
                 return Err(LearnError::manifest(
                     &manifest_path,
-                    format!("cannot resume: the existing dataset was created with {existing:?}, not {spec:?}"),
+                    format!("cannot resume: {}", existing.mismatch(&spec)),
                 ));
             }
             if dataset.manifest.complete && !grows {
@@ -725,7 +772,7 @@ impl DatasetWriter {
             let why = if spec.grows(&existing) && dataset.manifest.chosen.is_some() {
                 "it holds σ-chosen draws after its uniform ones, which cannot grow".to_string()
             } else {
-                format!("it was created with {existing:?}, not {spec:?}")
+                existing.mismatch(spec)
             };
             return Err(LearnError::manifest(&manifest_path, format!("cannot add draws to this dataset: {why}")));
         }

@@ -1,6 +1,7 @@
 //! The regular grid and the one tensor layout used everywhere.
 
 use mesh::embedding::Grid;
+use mesh::length::point_in_mm;
 use mesh::Point;
 use serde::{Deserialize, Serialize};
 
@@ -154,18 +155,35 @@ pub struct GridToMesh {
     terms: Vec<Vec<(usize, f64)>>,
 }
 
+/// A mesh node outside the grid's box by at most this many grid spacings takes the values at the
+/// box's nearest point: another mesh of the training organ (finer or coarser) may stick out of the
+/// box fitted around the training mesh by a fraction of a cell.
+pub const OUTSIDE_CELLS: f64 = 0.5;
+
 impl GridToMesh {
-    /// The weights for the nodes of `organ` in `grid`; every node must lie in the grid's box.
+    /// The weights for the nodes of `organ` in `grid`; every node must lie in the grid's box, or
+    /// outside it by at most [`OUTSIDE_CELLS`].
     pub fn new(organ: &mesh::Mesh, grid: &Grid) -> Result<Self> {
         let inside = mesh::embedding::Embedding::new(organ, grid.clone())?.mask();
+        let (lo, hi) = (grid.origin, grid.upper());
         let terms = organ
             .nodes
             .iter()
             .enumerate()
             .map(|(m, p)| {
-                let corners = grid
-                    .corners(m, *p)
-                    .map_err(|e| LearnError::InvalidInput(format!("mesh node {m} is outside the model grid: {e}")))?;
+                let beyond = (0..3)
+                    .map(|d| (lo[d] - p[d]).max(p[d] - hi[d]) - OUTSIDE_CELLS * grid.spacing[d])
+                    .fold(f64::NEG_INFINITY, f64::max);
+                if !(beyond <= 0.0) {
+                    return Err(LearnError::InvalidInput(format!(
+                        "mesh node {m} at {} lies outside the model's grid box {}..{}, by more than half a cell: \
+                         is the mesh the organ the model was trained on, in metres?",
+                        point_in_mm(*p),
+                        point_in_mm(lo),
+                        point_in_mm(hi)
+                    )));
+                }
+                let corners = grid.corners(m, std::array::from_fn(|d| p[d].clamp(lo[d], hi[d])))?;
                 let kept: f64 = corners.iter().filter(|(g, _)| inside[*g]).map(|(_, w)| w).sum();
                 Ok(corners
                     .into_iter()
@@ -323,6 +341,22 @@ mod tests {
             assert_eq!(field[c * n + b], values[2][c] as f32);
         }
         assert_eq!(field.iter().filter(|v| **v != 0.0).count(), 6, "only the two nodes are written");
+    }
+
+    /// A mesh sticking out of the grid's box by less than half a cell (another mesh of the same
+    /// organ) takes the values at the box's nearest point; by more, it is refused, in mm.
+    #[test]
+    fn mesh_nodes_just_outside_the_grid_take_the_nearest_values_and_farther_ones_are_refused() {
+        let g = grid();
+        // A field linear in x: x itself, in every channel.
+        let field: Vec<f32> = (0..3).flat_map(|_| g.nodes().into_iter().map(|p| p[0] as f32)).collect();
+        let cube = |x0: f64, x1: f64| mesh::box_tet([x0, -0.9, 2.1], [x1, -0.1, 3.9], [2, 2, 2]).unwrap();
+        let u = GridToMesh::new(&cube(-0.2, 1.7), &g).unwrap().apply(&field).unwrap();
+        let xs: Vec<f64> = u.chunks(3).map(|c| c[0]).collect();
+        let (min, max) = (xs.iter().copied().fold(f64::MAX, f64::min), xs.iter().copied().fold(f64::MIN, f64::max));
+        assert!(min.abs() < 1e-6 && (max - 1.5).abs() < 1e-6, "clamped to the box: {min} to {max}");
+        let error = GridToMesh::new(&cube(-0.3, 1.5), &g).unwrap_err().to_string();
+        assert!(error.contains("at (-300, -900, 2100) mm lies outside the model's grid box"), "{error}");
     }
 
     #[test]

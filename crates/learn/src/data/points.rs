@@ -5,6 +5,8 @@
 use std::path::Path;
 
 use mesh::io::csv::{number, Dialect, Header, Table};
+use mesh::io::points::coordinate_unit;
+use mesh::length::LengthUnit;
 use mesh::Point;
 
 use crate::data::grid::encode_points;
@@ -24,11 +26,22 @@ pub struct PointCloud {
 impl PointCloud {
     /// Parses CSV text ([`mesh::io::csv`]) with six numbers per line (x, y, z, vx, vy, vz), separated by commas
     /// or semicolons; blank lines and empty fields are skipped and a first line that is not numbers is a header.
-    /// `path` names the text in errors, with the line number.
+    /// A header whose first three columns are `x_mm, y_mm, z_mm` gives the positions in mm, and one whose
+    /// last three end in `_mm` the vectors (displacements) too; otherwise they are in m. `path` names the text
+    /// in errors, with the line number.
     pub fn parse_csv(text: &str, path: &Path) -> Result<PointCloud> {
         let bad = |line: Option<usize>, message: String| LearnError::Input { path: path.to_path_buf(), line, message };
         let dialect = Dialect { separators: &[',', ';'], header: Header::Optional };
         let table = Table::parse(text, &dialect).map_err(|e| bad(e.line, e.message))?;
+        let names = &table.names;
+        let position_scale = match names.get(..3).map(coordinate_unit) {
+            Some(Ok(Some(unit))) => unit.metres(),
+            _ => 1.0,
+        };
+        let vector_scale = match names.get(3..6) {
+            Some(vector) if vector.iter().all(|n| n.ends_with("_mm")) => LengthUnit::Millimetre.metres(),
+            _ => 1.0,
+        };
         let mut rows = Vec::new();
         for row in &table.rows {
             let fields: Vec<&String> = row.fields.iter().filter(|f| !f.is_empty()).collect();
@@ -45,6 +58,8 @@ impl PointCloud {
             {
                 *value = number(field).map_err(|m| bad(Some(row.line), format!("{name} {m}")))?;
             }
+            values[..3].iter_mut().for_each(|v| *v *= position_scale);
+            values[3..].iter_mut().for_each(|v| *v *= vector_scale);
             rows.push(values);
         }
         Ok(PointCloud::from_rows(&rows))
@@ -135,6 +150,11 @@ mod tests {
         let e = PointCloud::parse_csv("1,2,3,4,5,6\nx,y,z,a,b,c\n", path).unwrap_err().to_string();
         assert!(e.starts_with("cloud.csv:2: "), "{e}");
         assert!(PointCloud::parse_csv("x,y,z,a,b,c\n", path).unwrap().is_empty());
+        // A header naming millimetres: positions (and displacements named so) in metres.
+        let mm = PointCloud::parse_csv("x_mm,y_mm,z_mm,fx,fy,fz\n-50,10,30,0,0,-0.2\n", path).unwrap();
+        assert_eq!((mm.points[0], mm.vectors[0]), ([-0.05, 0.01, 0.03], [0.0, 0.0, -0.2]));
+        let mm = PointCloud::parse_csv("x_mm,y_mm,z_mm,ux_mm,uy_mm,uz_mm\n-50,10,30,0,0,-2\n", path).unwrap();
+        assert_eq!(mm.vectors[0], [0.0, 0.0, -0.002]);
     }
 
     #[test]

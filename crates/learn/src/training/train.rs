@@ -93,16 +93,16 @@ impl TrainConfig {
     pub fn validate(&self) -> Result<()> {
         let bad = |m: &str| Err(LearnError::InvalidInput(format!("training config: {m}")));
         if self.iterations == 0 || self.batch_size == 0 {
-            return bad("iterations and batch_size must be at least 1");
+            return bad("iterations and batch_size (`augsim train --iterations`, `--batch`) must be at least 1");
         }
         if self.validate_every == 0 || self.checkpoint_every == 0 {
-            return bad("validate_every and checkpoint_every must be at least 1");
+            return bad("validate_every and checkpoint_every (`augsim train --validate-every`) must be at least 1");
         }
         if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
-            return bad("learning_rate must be finite and > 0");
+            return bad("learning_rate (`augsim train --lr`) must be finite and > 0");
         }
         if self.final_learning_rate.is_some_and(|r| !(r > 0.0 && r <= self.learning_rate)) {
-            return bad("final_learning_rate must be > 0 and at most learning_rate");
+            return bad("final_learning_rate (`--final-lr`) must be > 0 and at most learning_rate (`--lr`)");
         }
         self.train_corruption.validate()?;
         self.val_corruption.validate()
@@ -639,7 +639,7 @@ fn resume(
         return Err(LearnError::model(
             path,
             "checkpoint is from a different setup (configuration, initialisation or data); \
-             use another output directory or start without resume",
+             use another output directory, or start afresh without resuming (`augsim train --restart`)",
         ));
     }
     let best = restore(&saved, net, adam, path)?;
