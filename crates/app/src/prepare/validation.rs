@@ -427,8 +427,6 @@ pub(super) fn validation_step(
     dir: &Path,
     progress: &dyn learn::Progress,
 ) -> Result<Vec<String>> {
-    use rand::SeedableRng;
-
     let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
     let surface = read_organ_surface(dir, &organ)?;
     let camera = read_points_csv(&dir.join("camera.csv"))?[0];
@@ -461,48 +459,8 @@ pub(super) fn validation_step(
     let solve = |truth: &Truth, push: usize| solve_at(truth, push, pushes[push].force);
     let (truth, solutions, mut lines) = converged_truth(truth, &truth_of, &solve, &targets, &pushes)?;
 
-    // Registration of each push the truth solved (one it found no equilibrium under is left out,
-    // and the report says so).
-    let mut methods = [PatientMethod::Learned, PatientMethod::Fem, PatientMethod::Hybrid]
-        .map(|method| MethodRun { method, ..MethodRun::default() });
-    let mut rest_errors = Vec::new();
-    // The streams' noise is drawn apart, so that the clouds from rest do not depend on them.
-    let (mut rng, mut stream_rng) =
-        (rand::rngs::StdRng::seed_from_u64(options.seed), rand::rngs::StdRng::seed_from_u64(options.seed ^ 1));
-    let noise = rand_distr::Normal::new(0.0, 0.0005).context("noise")?;
-    let mut forces = Vec::new();
-    let mut left_out = Vec::new();
-    let mut streams_left_out = Vec::new();
-    for (p, (&Push { at, force, .. }, solution)) in pushes.iter().zip(&solutions).enumerate() {
-        let u = match solution {
-            Ok(u) => u,
-            Err(e) => {
-                left_out.push(format!("{force} N at {:.0} % across the view ({e})", 100.0 * at));
-                continue;
-            }
-        };
-        let moved = truth.targets(&targets, u);
-        rest_errors.extend(register::target_errors(&targets, &moved));
-        let cloud = truth.cloud(u, &noise, &mut rng);
-        methods.iter_mut().try_for_each(|run| run.register(dir, force, &[(&moved, &cloud)]))?;
-        forces.push(force);
-        // The same push as a stream: the tool pressing in by quarters of its force.
-        let mut frames = Vec::new();
-        for share in STREAM_SHARES {
-            let solution = if share == 1.0 { Ok(u.clone()) } else { solve_at(&truth, p, share * force)? };
-            match solution {
-                Ok(u) => frames.push((truth.targets(&targets, &u), truth.cloud(&u, &noise, &mut stream_rng))),
-                Err(e) => {
-                    streams_left_out.push(format!("{force} N's stream, its {} N frame ({e})", share * force));
-                    break;
-                }
-            }
-        }
-        if frames.len() == STREAM_SHARES.len() {
-            let frames: Vec<(&[Point], &[Point])> = frames.iter().map(|(m, c)| (m.as_slice(), c.as_slice())).collect();
-            methods.iter_mut().try_for_each(|run| run.register(dir, force, &frames))?;
-        }
-    }
+    let Registrations { methods, rest_errors, forces, left_out, streams_left_out } =
+        register_pushes(dir, options.seed, &truth, &targets, (&pushes, &solutions), &solve_at)?;
     if forces.is_empty() {
         bail!("the validation's truth found no equilibrium under any push: {}", left_out.join("; "));
     }
@@ -543,6 +501,73 @@ pub(super) fn validation_step(
     lines.extend(methods.iter().flat_map(method_lines));
     lines.push(record_best_method(dir, &methods)?);
     Ok(lines)
+}
+
+/// What the validation's registrations gave: each method's runs, the targets' motion under each
+/// push (their TRE without deformation), the forces registered, and the pushes and streams left
+/// out (the truth finding no equilibrium under them), in words.
+struct Registrations {
+    methods: [MethodRun; 3],
+    rest_errors: Vec<f64>,
+    forces: Vec<f64>,
+    left_out: Vec<String>,
+    streams_left_out: Vec<String>,
+}
+
+/// Registers each push the truth solved (`solutions` of `pushes`) with the learned model, the FEM
+/// and the hybrid of the set-up in `dir`, from rest and as a stream of [`STREAM_SHARES`] of its
+/// force (the stream's truths by `solve_at`), the clouds' noise drawn from `seed`.
+fn register_pushes(
+    dir: &Path,
+    seed: u64,
+    truth: &Truth,
+    targets: &[Point],
+    (pushes, solutions): (&[Push], &[Solution]),
+    solve_at: &dyn Fn(&Truth, usize, f64) -> Result<Solution>,
+) -> Result<Registrations> {
+    use rand::SeedableRng;
+
+    let mut methods = [PatientMethod::Learned, PatientMethod::Fem, PatientMethod::Hybrid]
+        .map(|method| MethodRun { method, ..MethodRun::default() });
+    let mut rest_errors = Vec::new();
+    // The streams' noise is drawn apart, so that the clouds from rest do not depend on them.
+    let (mut rng, mut stream_rng) =
+        (rand::rngs::StdRng::seed_from_u64(seed), rand::rngs::StdRng::seed_from_u64(seed ^ 1));
+    let noise = rand_distr::Normal::new(0.0, 0.0005).context("noise")?;
+    let mut forces = Vec::new();
+    let mut left_out = Vec::new();
+    let mut streams_left_out = Vec::new();
+    for (p, (&Push { at, force, .. }, solution)) in pushes.iter().zip(solutions).enumerate() {
+        let u = match solution {
+            Ok(u) => u,
+            Err(e) => {
+                left_out.push(format!("{force} N at {:.0} % across the view ({e})", 100.0 * at));
+                continue;
+            }
+        };
+        let moved = truth.targets(targets, u);
+        rest_errors.extend(register::target_errors(targets, &moved));
+        let cloud = truth.cloud(u, &noise, &mut rng);
+        methods.iter_mut().try_for_each(|run| run.register(dir, force, &[(&moved, &cloud)]))?;
+        forces.push(force);
+        // The same push as a stream: the tool pressing in by quarters of its force.
+        let mut frames = Vec::new();
+        for share in STREAM_SHARES {
+            let solution = if share == 1.0 { Ok(u.clone()) } else { solve_at(truth, p, share * force)? };
+            match solution {
+                Ok(u) => frames.push((truth.targets(targets, &u), truth.cloud(&u, &noise, &mut stream_rng))),
+                Err(e) => {
+                    streams_left_out.push(format!("{force} N's stream, its {} N frame ({e})", share * force));
+                    break;
+                }
+            }
+        }
+        if frames.len() == STREAM_SHARES.len() {
+            let frames: Vec<(&[Point], &[Point])> = frames.iter().map(|(m, c)| (m.as_slice(), c.as_slice())).collect();
+            methods.iter_mut().try_for_each(|run| run.register(dir, force, &frames))?;
+        }
+    }
+    Ok(Registrations { methods, rest_errors, forces, left_out, streams_left_out })
 }
 
 /// The validation's lines on one method's registrations: from rest, and as streams.
