@@ -494,6 +494,7 @@ fn answer(
     shared.send_status(&serde_json::json!({
         "frame": frame,
         "ms": start.elapsed().as_secs_f64() * 1e3,
+        "unit": units.symbol(),
         "surface_residual": units.from_metres(result.surface_residual),
         "plausible": result.warnings.is_empty(),
         "warnings": result.warnings,

@@ -124,6 +124,7 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
     let s = status(client.receive().unwrap());
     assert_eq!(s["frame"], 1);
     assert!(s["ms"].as_f64().unwrap() > 0.0 && s["surface_residual"].as_f64().unwrap() < 0.5, "{s}");
+    assert_eq!(s["unit"], "mm", "the lengths' unit: the stream's");
     assert!(s["plausible"] == true && s["warnings"].as_array().unwrap().is_empty(), "{s}");
 
     // A cloud with a NaN: an error status for that frame, the stream goes on.
