@@ -135,6 +135,10 @@ magnitude = [0.05, 0.2]
     std::fs::write(d.join("bad.csv"), "x,y,z,fx,fy,fz\n0,0,0,1,2\n").unwrap();
     let e = augsim_err(&["predict", "net/model.json", "bad.csv"], d);
     assert!(e.contains("bad.csv:2") && e.contains("expected 6"), "{e}");
+    // Vectors named in mm are displacements: not the forces this network takes.
+    std::fs::write(d.join("mm.csv"), "x_mm,y_mm,z_mm,ux_mm,uy_mm,uz_mm\n0,0,0,0,0,1\n").unwrap();
+    let e = augsim_err(&["predict", "net/model.json", "mm.csv"], d);
+    assert!(e.contains("the points' vectors are named in mm, but the model takes forces (N)"), "{e}");
     let e = augsim_err(&["predict", "net/model.json", "cloud.csv", "--runs", "0"], d);
     assert!(e.contains("'0' for '--runs <RUNS>': must be at least 1"), "{e}");
 }

@@ -21,6 +21,8 @@ pub struct PointCloud {
     pub points: Vec<Point>,
     /// One vector per point.
     pub vectors: Vec<[f64; 3]>,
+    /// The length unit a file named its vectors in (then displacements, read in m); `None`: not named.
+    pub vector_unit: Option<LengthUnit>,
 }
 
 impl PointCloud {
@@ -38,10 +40,11 @@ impl PointCloud {
             Some(Ok(Some(unit))) => unit.metres(),
             _ => 1.0,
         };
-        let vector_scale = match names.get(3..6) {
-            Some(vector) if vector.iter().all(|n| n.ends_with("_mm")) => LengthUnit::Millimetre.metres(),
-            _ => 1.0,
+        let vector_unit = match names.get(3..6) {
+            Some(vector) if vector.iter().all(|n| n.ends_with("_mm")) => Some(LengthUnit::Millimetre),
+            _ => None,
         };
+        let vector_scale = vector_unit.map_or(1.0, LengthUnit::metres);
         let mut rows = Vec::new();
         for row in &table.rows {
             let fields: Vec<&String> = row.fields.iter().filter(|f| !f.is_empty()).collect();
@@ -62,7 +65,7 @@ impl PointCloud {
             values[3..].iter_mut().for_each(|v| *v *= vector_scale);
             rows.push(values);
         }
-        Ok(PointCloud::from_rows(&rows))
+        Ok(PointCloud { vector_unit, ..PointCloud::from_rows(&rows) })
     }
 
     /// The cloud of `[x, y, z, vx, vy, vz]` rows.
@@ -70,6 +73,7 @@ impl PointCloud {
         PointCloud {
             points: rows.iter().map(|r| [r[0], r[1], r[2]]).collect(),
             vectors: rows.iter().map(|r| [r[3], r[4], r[5]]).collect(),
+            vector_unit: None,
         }
     }
 
@@ -127,7 +131,13 @@ impl PredictInput {
                 array.shape, g.nx, g.ny, g.nz
             ))),
             PredictInput::Points(cloud) => {
-                encode_points(&model.placed_grid()?, &cloud.points, &cloud.vectors, model.takes_forces()?)
+                let forces = model.takes_forces()?;
+                if let (true, Some(unit)) = (forces, cloud.vector_unit) {
+                    return Err(LearnError::InvalidInput(format!(
+                        "the points' vectors are named in {unit}, but the model takes forces (N)"
+                    )));
+                }
+                encode_points(&model.placed_grid()?, &cloud.points, &cloud.vectors, forces)
             }
         }
     }
