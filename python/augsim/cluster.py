@@ -14,14 +14,14 @@ on a laptop (``LocalCluster``), on a running cluster, or as Slurm / PBS batch jo
 which speaks to the queue directly) with the same few lines; both install from PyPI in seconds,
 pure Python. Each worker needs the ``augsim`` binary (``--augsim PATH``, default: ``augsim`` on the
 PATH) and sees the output directory (a shared file system on a cluster). A shard that stopped
-resumes where it stopped when the run is repeated (``augsim generate`` resumes), and the shards
-already complete are not run again.
+resumes where it stopped when the run is repeated (``augsim generate`` resumes), and a shard
+already complete for the same scenario and draws is not solved again; one made for other ones
+(left by ``--keep-parts`` or a failed merge) is refused, naming what differs.
 
 Needs dask: ``pip install "./python[cluster]"`` (with dask-jobqueue for --slurm / --pbs).
 """
 
 import argparse
-import json
 import os
 import shutil
 import subprocess
@@ -34,20 +34,10 @@ def shard_dir(out, index, count):
     return os.path.join(out + ".parts", f"part{index}of{count}")
 
 
-def _complete(directory):
-    try:
-        with open(os.path.join(directory, "manifest.json")) as f:
-            return json.load(f).get("complete", False)
-    except (OSError, ValueError):
-        return False
-
-
 def generate_shard(augsim, scenario, out, index, count, samples=None, threads=1):
     """Runs ``augsim generate SCENARIO --shard index/count`` into its shard directory (on a worker);
     returns the directory and the run's wall time (s)."""
     directory = shard_dir(out, index, count)
-    if _complete(directory):
-        return directory, 0.0
     command = [augsim, "generate", scenario, "--shard", f"{index}/{count}", "--out", directory]
     if samples is not None:
         command += ["--samples", str(samples)]
@@ -83,6 +73,11 @@ def generate(args):
     from dask.distributed import Client, as_completed
 
     out = os.path.abspath(args.out)
+    if os.path.exists(os.path.join(out, "manifest.json")):
+        raise SystemExit(f"{out} already holds a dataset: give another --out (`augsim generate SCENARIO --out "
+                         f"{args.out} --samples N` grows a complete one)")
+    if not (args.scheduler or args.slurm or args.pbs) and shutil.which(args.augsim) is None:
+        raise SystemExit(f"no augsim binary at '{args.augsim}': give its path with --augsim")
     shards = args.shards or (args.local_workers if not (args.scheduler or args.slurm or args.pbs) else args.jobs)
     cluster = make_cluster(args)
     client = Client(args.scheduler) if cluster is None else Client(cluster)

@@ -32,19 +32,36 @@ import numpy as np
 _SCALE = {"m": 1.0, "mm": 1e-3}
 
 
+def _xyz_columns(header):
+    """The columns of x, y and z in a CSV header (``x``, ``x_mm`` or ``x_m`` and the same for y, z)
+    and the unit they name (None for plain ``x, y, z``); None when the header has no such columns."""
+    found = []
+    for axis in "xyz":
+        named = [(i, c[2:] or None) for i, c in enumerate(header) if c == axis or (c[:2] == axis + "_" and c[2:] in _SCALE)]
+        if len(named) != 1:
+            return None
+        found.append(named[0])
+    units = {u for _, u in found}
+    return ([i for i, _ in found], units.pop()) if len(units) == 1 else None
+
+
 def read_cloud(path, units="m"):
     """A cloud file as an (n, 3) float array in metres: ``.npy`` in ``units``, or CSV whose first line
-    is a header, in the unit its columns name (``x_mm``, ``x_m``), else in ``units``."""
+    is a header: its ``x``, ``y``, ``z`` columns (the first three where it names none), in the unit
+    they name (``x_mm``, ``x_m``), else in ``units``. A file that is not such a cloud raises
+    ValueError."""
     unit = units
-    if path.lower().endswith(".npy"):
-        cloud = np.load(path)
-    else:
-        with open(path, encoding="utf-8-sig") as f:
-            header = [c.strip().lower() for c in f.readline().split(",")]
-        named = {c[2:] for c in header[:3] if c[:2] in ("x_", "y_", "z_")}
-        if len(named) == 1 and next(iter(named)) in _SCALE:
-            unit = next(iter(named))
-        cloud = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)[:, :3]
+    try:
+        if path.lower().endswith(".npy"):
+            cloud = np.load(path)
+        else:
+            with open(path, encoding="utf-8-sig") as f:
+                header = [c.strip().lower() for c in f.readline().split(",")]
+            columns, named = _xyz_columns(header) or ([0, 1, 2], None)
+            unit = named or units
+            cloud = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, usecols=columns)
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: not a cloud: {e}") from e
     cloud = np.asarray(cloud, dtype=float) * _SCALE[unit]
     if cloud.ndim != 2 or cloud.shape[1] != 3 or len(cloud) == 0:
         raise ValueError(f"{path}: a cloud must be n x 3 points, got shape {cloud.shape}")
@@ -86,7 +103,13 @@ def replay(files, client, units="m", rate=None, out=None, unit="mm", timeout=60.
     records = []
     for k, path in enumerate(files):
         began = time.perf_counter()
-        cloud = read_cloud(path, units) / _SCALE[unit]
+        try:
+            cloud = read_cloud(path, units) / _SCALE[unit]
+        except ValueError as e:
+            records.append({"file": path, "points": 0, "round_trip_ms": 0.0, "status": {"error": str(e)},
+                            "targets": None})
+            report(f"frame {k:<4} {os.path.basename(path)}: not sent: {e}")
+            continue
         client.send_message(pyigtl.PolyDataMessage(points=cloud.astype(np.float32), device_name="cloud"), wait=True)
         status_message = client.wait_for_message("status", timeout=timeout)
         if status_message is None:

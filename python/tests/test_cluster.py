@@ -37,3 +37,24 @@ def test_two_local_workers_write_the_single_machine_dataset(tmp_path):
 def test_a_failing_shard_is_reported(tmp_path):
     with pytest.raises(RuntimeError, match="shard 0/1 failed"):
         cluster.generate_shard(augsim_bin(), str(tmp_path / "missing.toml"), str(tmp_path / "out"), 0, 1)
+
+
+def test_kept_shards_are_reused_only_for_the_same_draws_and_a_dataset_is_never_overwritten(tmp_path):
+    out = str(tmp_path / "ds")
+    # A shard made for 20 draws, kept: the same shard again solves nothing; for 24 draws it is refused.
+    directory, _ = cluster.generate_shard(augsim_bin(), "liver_ar", out, 0, 1, samples=20)
+    manifest = os.path.join(directory, "manifest.json")
+    with open(manifest, "rb") as f:
+        first = f.read()
+    os.utime(manifest, (0, 0))
+    cluster.generate_shard(augsim_bin(), "liver_ar", out, 0, 1, samples=20)
+    with open(manifest, "rb") as f:
+        assert f.read() == first
+    assert os.stat(manifest).st_mtime == 0, "a complete shard is left as it is"
+    with pytest.raises(RuntimeError, match=r"metadata\.dataset\.samples 20 there, 24 now"):
+        cluster.generate_shard(augsim_bin(), "liver_ar", out, 0, 1, samples=24)
+    os.makedirs(out)
+    with open(os.path.join(out, "manifest.json"), "w") as f:
+        f.write("{}")
+    with pytest.raises(SystemExit, match="already holds a dataset"):
+        cluster.main(["liver_ar", "--samples", "20", "--local-workers", "1", "--out", out, "--augsim", augsim_bin()])

@@ -321,3 +321,13 @@ def test_the_pytorch_parts_without_torch_say_what_to_install():
     assert run.stderr.strip() == 'python -m augsim.train needs PyTorch: pip install "./python[torch]" (python/README.md)'
     with pytest.raises(ImportError, match=r'augsim.torch needs PyTorch: pip install "\./python\[torch\]"'):
         import augsim.torch  # noqa: F401
+
+
+def test_errors_cross_process_boundaries_and_bad_shapes_are_value_errors():
+    import pickle
+
+    error = pickle.loads(pickle.dumps(augsim.AugsimError("a message")))
+    assert type(error) is augsim.AugsimError and str(error) == "a message"
+    for shape in [(24, 24, 16, 3), (1, 3, 24, 24, 16), (5,)]:
+        with pytest.raises(ValueError, match=r"a grid tensor \[3, nx, ny, nz\] or a point cloud \[N, 6\]"):
+            augsim.predict(LIVER_AR, np.zeros(shape))

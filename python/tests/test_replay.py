@@ -87,3 +87,15 @@ def test_a_cloud_file_is_read_in_the_unit_its_header_names(tmp_path):
     np.testing.assert_allclose(replay.read_cloud(str(named), "m"), [[0.01, 0.02, 0.03]])
     np.testing.assert_allclose(replay.read_cloud(str(plain), "mm"), [[0.01, 0.02, 0.03]])
     np.testing.assert_allclose(replay.read_cloud(str(plain), "m"), [[10.0, 20.0, 30.0]])
+    # Columns found by their names wherever they are; a file that is no cloud is a ValueError.
+    labelled = tmp_path / "labelled.csv"
+    labelled.write_text("id,x_mm,y_mm,z_mm\n7,10,20,30\n")
+    np.testing.assert_allclose(replay.read_cloud(str(labelled), "m"), [[0.01, 0.02, 0.03]])
+    wrong = tmp_path / "wrong.npy"
+    np.save(wrong, np.zeros((3, 5)))
+    with pytest.raises(ValueError, match="a cloud must be n x 3 points"):
+        replay.read_cloud(str(wrong))
+    broken = tmp_path / "broken.csv"
+    broken.write_text("x,y,z\n1,2\n")
+    with pytest.raises(ValueError, match="not a cloud"):
+        replay.read_cloud(str(broken))

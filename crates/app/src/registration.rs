@@ -327,8 +327,9 @@ fn targets_file(path: &str) -> Result<TargetsSpec, String> {
     Ok(TargetsSpec::File(PathBuf::from(path)))
 }
 
-/// The choices of a patient's method.
-const PATIENT_METHODS: [&str; 3] = ["use_fem", "use_model", "use_hybrid"];
+/// The choices of a patient's method, as both fronts name them.
+const PATIENT_METHODS: &str = "--use-fem, --use-model and --use-hybrid (use_fem=True, use_fem=False and \
+                               use_hybrid=True in Python)";
 
 /// What a registration needs when no way of deforming the organ is given.
 const NO_METHOD: &str = "give --patient DIR, --fem SCENARIO, or --model MODEL with --scenario SCENARIO (in Python: \
@@ -366,14 +367,13 @@ impl RegistrationChoice {
                 ));
             }
             if self.uses() > 1 {
-                return Err(format!("{} ask for different methods: give one", options_named(&PATIENT_METHODS)));
+                return Err(format!("{PATIENT_METHODS} ask for different methods: give one"));
             }
             return Ok(());
         }
         if self.uses() > 0 {
             return Err(format!(
-                "{} choose a patient's method: give --patient DIR (patient= in Python)",
-                options_named(&PATIENT_METHODS)
+                "{PATIENT_METHODS} choose a patient's method: give --patient DIR (patient= in Python)"
             ));
         }
         self.method().map(|_| ())
@@ -393,7 +393,11 @@ impl RegistrationChoice {
             ));
         }
         match (&self.fem, &self.model, &self.scenario) {
-            (Some(fem), None, _) => Ok(MethodSpec::fem(fem)),
+            (Some(_), None, Some(_)) => Err(format!(
+                "{} is a learned model's dataset scenario: a FEM (--fem) takes none",
+                options_named(&["scenario"])
+            )),
+            (Some(fem), None, None) => Ok(MethodSpec::fem(fem)),
             (None, Some(model), Some(scenario)) => Ok(match &self.shape_model {
                 None => MethodSpec::learned(model, scenario),
                 Some(basis) => MethodSpec::learned_after_shape_fit(model, scenario, basis),
@@ -718,6 +722,9 @@ mod tests {
         assert_eq!(none.check().unwrap_err(), NO_METHOD);
         let model_alone = RegistrationChoice { model: Some("m".into()), ..RegistrationChoice::default() };
         assert!(model_alone.spec().unwrap_err().to_string().contains("--model MODEL with --scenario SCENARIO"));
+        let scenario_for_fem = RegistrationChoice { scenario: Some("liver_ar_t10".into()), ..fem() };
+        let error = scenario_for_fem.check().unwrap_err();
+        assert!(error.starts_with("--scenario (scenario= in Python) is a learned model's dataset scenario"), "{error}");
         let both = RegistrationChoice { model: Some("m".into()), ..fem() };
         assert_eq!(both.check().unwrap_err(), "give --fem or --model, not both (fem= or model= in Python)");
         let basis_alone = RegistrationChoice { shape_model: Some("rom".into()), ..fem() };
@@ -734,7 +741,10 @@ mod tests {
         assert!(use_hybrid_alone.check().unwrap_err().contains("give --patient DIR (patient= in Python)"));
         let patient = || RegistrationChoice { patient: Some("p".into()), ..RegistrationChoice::default() };
         let two_methods = RegistrationChoice { use_fem: true, use_hybrid: true, ..patient() };
-        assert!(two_methods.check().unwrap_err().contains("give one"));
+        let error = two_methods.check().unwrap_err();
+        assert!(
+            error.contains("use_fem=True, use_fem=False and use_hybrid=True in Python") && error.ends_with("give one")
+        );
         assert_eq!(PatientMethod::asked(false, false, true), Some(PatientMethod::Hybrid));
         assert_eq!(PatientMethod::asked(false, false, false), None);
         let missing = RegistrationChoice { patient: Some("no/such/dir".into()), ..RegistrationChoice::default() };

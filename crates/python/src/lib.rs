@@ -27,8 +27,10 @@ use pyo3::prelude::*;
 use register::Tracked;
 use scenario::AssimilationScenario;
 
+// Named as the package exports it (`augsim.AugsimError`), so that pickle finds it: an error
+// raised in a worker process reaches its parent whole.
 create_exception!(
-    _augsim,
+    augsim,
     AugsimError,
     PyRuntimeError,
     "An error reported by augsim: a file that cannot be read, an invalid scenario, cloud or \
@@ -404,10 +406,16 @@ fn predict<'py>(py: Python<'py>, model: PathBuf, input: &Bound<'py, PyAny>) -> P
         [_, 6] => PredictInput::Points(PointCloud::from_rows(
             &values.chunks_exact(6).map(|r| std::array::from_fn(|i| r[i])).collect::<Vec<_>>(),
         )),
-        _ => PredictInput::Grid(NpyArray {
+        [3, _, _, _] => PredictInput::Grid(NpyArray {
             shape: shape.clone(),
             data: NpyData::F32(values.iter().map(|&v| v as f32).collect()),
         }),
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "input: an array of shape {other:?}, where a grid tensor [3, nx, ny, nz] or a point cloud [N, 6] \
+                 is expected"
+            )))
+        }
     };
     let (grid, prediction) = compute(py, || {
         let model = Model::load(&model)?;

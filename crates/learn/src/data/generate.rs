@@ -691,6 +691,12 @@ impl Generator {
     pub fn run(&self, dir: &Path, name: &str, part: Option<DatasetPart>, progress: &dyn Progress) -> Result<Manifest> {
         let range = part_range(self.config.samples, part.as_ref())?;
         let spec = self.spec(name, part);
+        // A complete dataset of this very spec (a shard run again) has nothing left to draw.
+        if let Ok(done) = crate::Dataset::open(dir) {
+            if done.manifest().complete && done.manifest().spec() == spec {
+                return Ok(done.manifest().clone());
+            }
+        }
         let mut writer = DatasetWriter::create_or_resume(dir, spec)?;
         let start = writer.resume_from().max(range.start as u64);
         let total = range.end as u64;
