@@ -148,6 +148,12 @@ fn tool_tracks_as_controls_reproduce_the_tool() {
     let read = experiment.run(&dir.path().join("controlled"), &learn::Silent).unwrap();
     let (a, b) = (synthetic.young.unwrap(), read.young.unwrap());
     assert!((a.mean - b.mean).abs() < 1e-9 * a.mean && (a.std - b.std).abs() < 1e-9 * a.std, "{a:?} vs {b:?}");
+    // The scenario's tool kept beside the tracked one would move the beam twice: refused.
+    let (sc, base) = scenario(dir.path(), "both.toml", &with_tool);
+    let Err(error) = Experiment::prepare(sc, &base, Some(&files(&tracks, true))) else {
+        panic!("the scenario's tool and tracked controls together are refused")
+    };
+    assert!(error.to_string().contains("remove [[tool]] from the scenario"), "{error}");
     // Without the controls the beam moves differently and the estimate is off.
     let (sc, base) = scenario(dir.path(), "uncontrolled.toml", &beam);
     let report = Experiment::prepare(sc, &base, Some(&files(&tracks, false)))
@@ -232,7 +238,8 @@ fn bad_track_files_are_named_with_their_line() {
     let err = Experiment::prepare(sc, &base, Some(&files)).err().unwrap().to_string();
     assert!(err.contains("outside.csv:3: feature `out`") && err.contains("outside the mesh"), "{err}");
 
-    // A feature just outside (0.5 mm above the top face, as from a finer surface) is moved onto the surface.
+    // A feature just outside (0.5 mm above the top face, as from a finer surface) is located on the surface
+    // and keeps its offset: the model sees it where it was tracked, so a constant offset is no innovation.
     std::fs::write(
         d.join("near.csv"),
         "frame,id,x,y,z\n0,in,0.05,0.01,0.02\n0,near,0.05,0.01,0.0205\n1,in,0.05,0.01,0.02\n1,near,0.05,0.01,0.0205\n",
@@ -240,9 +247,12 @@ fn bad_track_files_are_named_with_their_line() {
     .unwrap();
     let (sc, base) = scenario(d, "beam.toml", &beam());
     let files = ObservationFiles { observations: d.join("near.csv"), ..Default::default() };
-    let setup = Experiment::prepare(sc, &base, Some(&files)).unwrap().setup().clone();
+    let experiment = Experiment::prepare(sc, &base, Some(&files)).unwrap();
+    let setup = experiment.setup().clone();
     assert_eq!((setup.features, setup.projected), (2, 1));
     assert!((setup.max_projection - 5e-4).abs() < 1e-12, "{}", setup.max_projection);
+    let near = experiment.observed_points()[1];
+    assert!(mesh::distance(near, [0.05, 0.01, 0.0205]) < 1e-12, "observed at rest at {near:?}");
 }
 
 #[test]

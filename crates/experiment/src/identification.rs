@@ -277,7 +277,7 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
             format!(
                 "No inverse crime: the observations ({} noisy surface features) come from a reference run \
                  with E = {:.0} Pa on a phantom of {reference_mesh}; the filter's model is the \
-                 scenario's {}-node phantom, onto whose surface {} features outside it were moved (at most {:.2} mm). \
+                 scenario's {}-node phantom, on whose surface {} features outside it were located, keeping their offset (at most {:.2} mm). \
                  {} sigma points. Published: ~11,000-tet liver.",
                 setup.features,
                 report.young.as_ref().and_then(|y| y.truth).unwrap_or(f64::NAN),
@@ -371,8 +371,8 @@ pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<Expe
             format!(
                 "{} springs on the hidden surface of a {}-node phantom, a tool prescribing displacement on a small \
              visible area (on each mesh its own nodes nearest the tool). No inverse crime: observations and \
-             assessment points come from a reference run on a phantom of {reference_mesh} ({} points moved \
-             onto the model's surface, at most {:.2} mm); assessment errors are means over the run at {} internal \
+             assessment points come from a reference run on a phantom of {reference_mesh} ({} points located \
+             on the model's surface, keeping their offset, at most {:.2} mm); assessment errors are means over the run at {} internal \
              markers.",
                 s.stiffness.len(),
                 report.nodes,

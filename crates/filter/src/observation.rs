@@ -21,6 +21,11 @@ pub struct TrackedPoint {
     pub weights: [f64; MAX_CELL_NODES],
     /// The number of nodes.
     pub count: usize,
+    /// From where the point was located to where it was tracked (m): a point just outside the
+    /// mesh (a feature of a finer or smoother surface) is located on the mesh's surface and keeps
+    /// this offset, so that the model sees it where its tracks are. Zero for a point located as it
+    /// is.
+    pub offset: Point,
 }
 
 impl TrackedPoint {
@@ -28,7 +33,7 @@ impl TrackedPoint {
     pub fn at_node(node: usize) -> Self {
         let mut weights = [0.0; MAX_CELL_NODES];
         weights[0] = 1.0;
-        TrackedPoint { nodes: [node; MAX_CELL_NODES], weights, count: 1 }
+        TrackedPoint { nodes: [node; MAX_CELL_NODES], weights, count: 1, offset: [0.0; 3] }
     }
 
     /// The nodes and their weights.
@@ -46,7 +51,8 @@ impl TrackedPoint {
         let location = locator
             .locate(p)
             .ok_or_else(|| FemModelError::Invalid(format!("tracked point {p:?} lies outside the mesh")))?;
-        let point = TrackedPoint { nodes: location.nodes, weights: location.weights, count: location.count };
+        let point =
+            TrackedPoint { nodes: location.nodes, weights: location.weights, count: location.count, offset: [0.0; 3] };
         match location.count {
             4 => {
                 let w = point.weights.map(|v| v.max(0.0));
@@ -60,9 +66,15 @@ impl TrackedPoint {
         }
     }
 
-    /// Current position of the point: reference position plus interpolated displacement `u` (3 per node).
+    /// The point located at `located` and tracked at `tracked`: it keeps the offset between them.
+    pub fn tracked_at(self, located: Point, tracked: Point) -> Self {
+        TrackedPoint { offset: std::array::from_fn(|d| tracked[d] - located[d]), ..self }
+    }
+
+    /// Current position of the point: reference position plus interpolated displacement `u` (3 per node), plus its
+    /// [`offset`](Self::offset).
     pub fn position(&self, nodes: &[Point], u: &[f64]) -> Point {
-        let mut x = [0.0; 3];
+        let mut x = self.offset;
         for (n, w) in self.terms() {
             for d in 0..3 {
                 x[d] += w * (nodes[n][d] + u[3 * n + d]);

@@ -305,6 +305,8 @@ fn read_messages(mut stream: TcpStream, shared: &Shared) {
                 shared.waiting.lock().unwrap_or_else(|e| e.into_inner()).cloud = Some((frame, cloud));
                 shared.arrived.notify_one();
             }
+            // The features are points of the assimilation scenario's own mesh, in its frame: only their
+            // unit is converted, not the registration organ's frame.
             Ok(Incoming::Features(points)) => {
                 step += 1;
                 let mut waiting = shared.waiting.lock().unwrap_or_else(|e| e.into_inner());
@@ -314,7 +316,10 @@ fn read_messages(mut stream: TcpStream, shared: &Shared) {
                     shared.send_estimate(&serde_json::json!({ "step": step, "error": error }));
                     continue;
                 }
-                waiting.features.push_back((step, to_metres(points)));
+                let units = shared.options.units;
+                waiting
+                    .features
+                    .push_back((step, points.into_iter().map(|p| units.point_to_metres(p.map(f64::from))).collect()));
                 drop(waiting);
                 shared.arrived.notify_one();
             }

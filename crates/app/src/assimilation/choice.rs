@@ -71,7 +71,9 @@ impl AssimilationChoice {
     /// its settings applied.
     pub fn scenario(&self) -> Result<(AssimilationScenario, PathBuf)> {
         let (mut sc, dir) = AssimilationScenario::load(&self.scenario)?;
-        if self.iterations.is_some() {
+        // Track files are filtered to their last frame unless --iterations says otherwise: the
+        // scenario's own count is that of its synthetic run.
+        if self.iterations.is_some() || self.observations.is_some() {
             sc.iterations = self.iterations;
         }
         if self.sequential {
@@ -141,5 +143,9 @@ mod tests {
         let files = tracked.files().unwrap();
         assert!(files.known_truth && files.observations == std::path::Path::new("obs.csv"));
         assert_eq!(files.units, LengthUnit::Millimetre);
+        // Track files are filtered to their last frame, not to the scenario's synthetic run's 600.
+        assert_eq!(tracked.scenario().unwrap().0.iterations, Some(3));
+        let all = AssimilationChoice { iterations: None, ..tracked };
+        assert_eq!(all.scenario().unwrap().0.iterations, None);
     }
 }

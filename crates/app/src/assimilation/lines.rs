@@ -34,8 +34,8 @@ impl Setup {
                     "the filter's own model (an inverse crime: add a [reference] section with another mesh)".to_string()
                 } else {
                     format!(
-                        "a reference of its own: {} nodes, {} cells, {:?} ({} tracked points moved onto the \
-                         model's surface, at most {:.2} mm)",
+                        "a reference of its own: {} nodes, {} cells, {:?} ({} tracked points located on the \
+                         model's surface, keeping their offset, at most {:.2} mm)",
                         r.nodes,
                         r.cells,
                         r.law,
@@ -46,7 +46,7 @@ impl Setup {
             )),
             (None, Some(f)) => lines.push(format!(
                 "tracks       {} frames from {}, {} occluded feature observations, {} points outside the mesh \
-                 moved onto its surface (at most {:.2} mm)",
+                 located on its surface, keeping their offset (at most {:.2} mm)",
                 s.iterations,
                 f.observations.display(),
                 s.occluded,

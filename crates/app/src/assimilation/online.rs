@@ -73,7 +73,10 @@ impl OnlineFilter {
     /// One step with the observed points' positions (m; NaN for a point not seen), the estimate
     /// as JSON fields: `iteration`, `names`, `mean`, `std`, `innovation` (what a stream answers).
     pub fn step_points(&mut self, positions: &[Point]) -> Result<serde_json::Map<String, serde_json::Value>, String> {
-        let e = self.step(positions.iter().flatten().copied().collect()).map_err(|e| e.to_string())?;
+        // The whole chain of causes, as the command line prints it: a context alone says nothing.
+        let e = self
+            .step(positions.iter().flatten().copied().collect())
+            .map_err(|e| format!("{:#}", anyhow::Error::new(e)))?;
         let mut fields = serde_json::Map::new();
         fields.insert("iteration".into(), e.iteration.into());
         fields.insert("names".into(), self.names.clone().into());

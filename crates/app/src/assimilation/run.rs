@@ -370,6 +370,14 @@ impl Experiment {
             .map(|(z, available)| Frame { z, available })
             .collect();
         if let Some(controls) = &tracks.controls {
+            if self.setup.tool_nodes > 0 {
+                let why = format!(
+                    "these track the tool, which the scenario's [[tool]] also moves ({} nodes): remove [[tool]] from \
+                     the scenario to follow the tracked one",
+                    self.setup.tool_nodes
+                );
+                return Err(AssimilationError::file(&controls.path, None, why));
+            }
             self.controls = control_paths(&mut self.base, controls, rest, iterations)?;
         }
         if let Some(assessment) = &tracks.assessment {
@@ -496,15 +504,18 @@ impl Experiment {
         let trace = roukf.trace();
         trace.write_csv(&out_dir.join("trace.csv")).context(|| "writing the trace".into())?;
         trace.write_json(&out_dir.join("trace.json")).context(|| "writing the trace".into())?;
-        let synthetic = self.setup.reference.is_some() || self.known_truth;
+        // The truth is known for synthetic observations (a reference run) and for track files said
+        // to come from the scenario's values (--known-truth); only the former are synthetic.
+        let synthetic = self.setup.reference.is_some();
+        let truth_known = synthetic || self.known_truth;
         let offset = usize::from(self.scenario.young.is_some());
         let young = match self.scenario.young {
-            Some(_) => Some(report::young(trace, synthetic.then_some(self.unknowns.truth[0]), out_dir)?),
+            Some(_) => Some(report::young(trace, truth_known.then_some(self.unknowns.truth[0]), out_dir)?),
             None => None,
         };
         let springs = match &self.unknowns.springs {
             Some((nodes, scale)) => {
-                let truth = synthetic.then(|| &self.unknowns.truth[offset..]);
+                let truth = truth_known.then(|| &self.unknowns.truth[offset..]);
                 Some(report::springs(trace, nodes, *scale, truth, offset, out_dir)?)
             }
             None => None,
@@ -697,8 +708,8 @@ fn assessment_points(
 }
 
 /// Locates tracked points in a tetrahedral mesh. A point outside the mesh by at most half the mean element size
-/// (a feature of a finer or smoother surface than the mesh's facets) is moved to the closest point of the mesh's
-/// surface first; the moves are kept.
+/// (a feature of a finer or smoother surface than the mesh's facets) is located at the closest point of the mesh's
+/// surface and keeps its offset from there ([`TrackedPoint::tracked_at`]); the moves' lengths are kept.
 struct PointFinder<'a> {
     locator: &'a MeshLocator,
     surface: SurfaceBvh,
@@ -733,7 +744,7 @@ impl<'a> PointFinder<'a> {
         let inside: Point = std::array::from_fn(|d| c.point[d] + 1e-3 * (c.point[d] - p[d]));
         let t = TrackedPoint::locate(self.locator, inside)?;
         self.moved.push(c.distance);
-        Ok(t)
+        Ok(t.tracked_at(inside, p))
     }
 }
 
