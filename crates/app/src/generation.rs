@@ -81,6 +81,8 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
         None => PathBuf::from(format!("out/{}", scenario.name)),
         Some(p) => PathBuf::from(format!("out/{}.part{}of{}", scenario.name, p.index, p.count)),
     });
+    // What the dataset held before this run (resumed, grown, or complete already).
+    let held = learn::Dataset::open(&out).map_or(0, |d| d.manifest().num_samples + d.manifest().failed.len());
     let start = Instant::now();
     let manifest = match &recipe {
         None => generator.run(&out, &scenario.name, args.shard.clone(), progress)?,
@@ -108,9 +110,17 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
             chosen.rounds.len()
         ));
     }
-    lines.push(match drawn {
-        0 => format!("time       {secs:.1} s"),
-        _ => format!("time       {:.1} s ({:.1} ms per draw)", secs, 1e3 * secs / drawn as f64),
+    let per_draw = |n: usize| 1e3 * secs / n as f64;
+    lines.push(match (drawn.saturating_sub(held), held) {
+        (0, 0) => format!("time       {secs:.1} s"),
+        (0, _) => format!("time       {secs:.1} s: the dataset was complete, nothing drawn"),
+        (now, 0) => format!("time       {secs:.1} s ({:.1} ms per draw)", per_draw(now)),
+        (now, held) => {
+            format!(
+                "time       {secs:.1} s ({:.1} ms per draw; {now} drawn by this run after the {held} held)",
+                per_draw(now)
+            )
+        }
     });
     lines.push(format!("wrote      {}", out.display()));
     Ok(lines)
