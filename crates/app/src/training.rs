@@ -117,10 +117,10 @@ pub struct TrainArgs {
     #[arg(long)]
     pub final_lr: Option<f64>,
     /// Channels of the first U-Net level.
-    #[arg(long, default_value_t = UNET_DEFAULTS.channels)]
+    #[arg(long, default_value_t = UNetConfig::default().base_channels)]
     pub channels: usize,
     /// Down-sampling steps of the U-Net.
-    #[arg(long, default_value_t = UNET_DEFAULTS.depth)]
+    #[arg(long, default_value_t = UNetConfig::default().depth)]
     pub depth: usize,
     /// Fine-tune this pre-trained U-Net (its directory or model.json; trained on inputs of the
     /// dataset's kind) instead of starting from scratch.
@@ -154,28 +154,24 @@ struct UNetDefaults {
     iterations: usize,
     batch: usize,
     lr: f64,
-    channels: usize,
-    depth: usize,
     validate_every: usize,
 }
 
-const UNET_DEFAULTS: UNetDefaults =
-    UNetDefaults { iterations: 2000, batch: 4, lr: 1e-3, channels: 16, depth: 3, validate_every: 100 };
+const UNET_DEFAULTS: UNetDefaults = UNetDefaults { iterations: 2000, batch: 4, lr: 1e-3, validate_every: 100 };
 
 impl TrainArgs {
     /// The options given that the chosen method does not use, by flag: a U-Net's training
     /// settings for a reduced-order model, a reduced-order model's for a U-Net.
     fn unused_options(&self) -> Vec<&'static str> {
-        let d = &UNET_DEFAULTS;
-        let rom = RomConfig::default();
+        let (d, net, rom) = (&UNET_DEFAULTS, UNetConfig::default(), RomConfig::default());
         let given = match self.method {
             Method::Rom => vec![
                 ("--iterations", self.iterations != d.iterations),
                 ("--batch", self.batch != d.batch),
                 ("--lr", self.lr != d.lr),
                 ("--final-lr", self.final_lr.is_some()),
-                ("--channels", self.channels != d.channels),
-                ("--depth", self.depth != d.depth),
+                ("--channels", self.channels != net.base_channels),
+                ("--depth", self.depth != net.depth),
                 ("--init", self.init.is_some()),
                 ("--validate-every", self.validate_every != d.validate_every),
                 ("--restart", self.restart),
