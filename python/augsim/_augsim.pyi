@@ -65,7 +65,7 @@ class Estimate:
     iteration: int
     mean: list[float]
     std: list[float]
-    innovation: float
+    innovation: Optional[float]
 
 class Assimilation:
     names: list[str]

@@ -26,7 +26,8 @@ use crate::picture::side_view;
 /// The folder of a run's results: `out` when the user names one, refused when it already holds
 /// an earlier run's (its summary.json), so that two runs' files are never mixed; otherwise a
 /// fresh numbered folder under `parent` (`001`, `002`, …: the first free number), created. The
-/// flag says whether the folder is a fresh numbered one.
+/// flag says whether the folder is this run's own (a fresh numbered one, or an `out` that does not
+/// exist yet), which a run that fails before writing into it removes again.
 pub fn run_dir(out: Option<&Path>, parent: &Path) -> Result<(PathBuf, bool)> {
     if let Some(dir) = out {
         if dir.join("summary.json").exists() {
@@ -35,7 +36,7 @@ pub fn run_dir(out: Option<&Path>, parent: &Path) -> Result<(PathBuf, bool)> {
                 dir.display()
             );
         }
-        return Ok((dir.to_path_buf(), false));
+        return Ok((dir.to_path_buf(), !dir.exists()));
     }
     std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
     for n in 1..=99_999 {
@@ -428,8 +429,9 @@ mod tests {
         assert!(fresh && first == parent.join("001") && first.is_dir());
         assert_eq!(run_dir(None, &parent).unwrap().0, parent.join("002"));
         let given = dir.path().join("mine");
-        assert_eq!(run_dir(Some(&given), &parent).unwrap(), (given.clone(), false));
+        assert_eq!(run_dir(Some(&given), &parent).unwrap(), (given.clone(), true), "not there yet: the run's own");
         std::fs::create_dir_all(&given).unwrap();
+        assert_eq!(run_dir(Some(&given), &parent).unwrap(), (given.clone(), false), "there already: the user's");
         std::fs::write(given.join("summary.json"), "{}").unwrap();
         let e = run_dir(Some(&given), &parent).unwrap_err().to_string();
         assert!(e.contains("holds the results of an earlier run"), "{e}");

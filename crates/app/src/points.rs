@@ -81,13 +81,15 @@ impl PointInput {
     }
 
     /// Reads the true target positions of a run of `frames` clouds: one points file, or a
-    /// directory of one file per frame (in file-name order), as [`PointInput::read`].
-    pub fn read_truths(&mut self, path: &Path, frames: usize) -> Result<Vec<Vec<Point>>> {
+    /// directory of one file per frame (in file-name order), as [`PointInput::read`]. Where the
+    /// targets (`labels`) and a file are labelled throughout, its points are taken by label, in
+    /// the targets' order; otherwise row by row.
+    pub fn read_truths(&mut self, path: &Path, frames: usize, labels: &[String]) -> Result<Vec<Vec<Point>>> {
         let files = if path.is_dir() { register::cloud::read_frames(path)? } else { vec![path.to_path_buf()] };
         if files.len() != frames {
             anyhow::bail!("{} truth file(s) for {frames} cloud frame(s)", files.len());
         }
-        files.iter().map(|f| Ok(self.read(f)?.points)).collect()
+        files.iter().map(|f| by_label(f, self.read(f)?, labels)).collect()
     }
 
     /// Reads an intraoperative cloud: a points file as [`PointInput::read`], or a cloud of
@@ -105,6 +107,31 @@ impl PointInput {
         register::check_cloud(&points).map_err(|e| register::RegisterError::format(path, e.to_string()))?;
         Ok(points)
     }
+}
+
+/// The points of `truth` (read from `path`) in the order of the targets' `labels` when both are
+/// labelled throughout (an error for a label missing from either or given twice), else as read.
+fn by_label(path: &Path, truth: LabelledPoints, labels: &[String]) -> Result<Vec<Point>> {
+    let labelled = |l: &[String]| !l.is_empty() && l.iter().all(|l| !l.is_empty());
+    if !(labelled(labels) && labelled(&truth.labels)) {
+        return Ok(truth.points);
+    }
+    let mut at = std::collections::HashMap::new();
+    for (i, label) in truth.labels.iter().enumerate() {
+        if at.insert(label.as_str(), i).is_some() {
+            anyhow::bail!("{}: the label `{label}` is given twice", path.display());
+        }
+    }
+    if let Some(extra) = truth.labels.iter().find(|l| !labels.contains(l)) {
+        anyhow::bail!("{}: `{extra}` is no target's label (the targets are {})", path.display(), labels.join(", "));
+    }
+    labels
+        .iter()
+        .map(|label| match at.get(label.as_str()) {
+            Some(&i) => Ok(truth.points[i]),
+            None => anyhow::bail!("{}: no point is labelled `{label}`, a target's label", path.display()),
+        })
+        .collect()
 }
 
 /// A targets file (CSV, `.fcsv`, `.mrk.json`) with its rest positions in metres: read in the unit
@@ -171,8 +198,9 @@ mod tests {
         // Where the organ names its frame, the other one is converted.
         let mut input = PointInput::new(Some(Frame::Ras), LengthUnit::Millimetre, LengthUnit::Millimetre);
         assert_eq!(input.read(&lps).unwrap().points, [[-1.0, -2.0, 3.0]]);
-        assert_eq!(input.read_truths(&plain, 1).unwrap(), [[[1.0, 2.0, 3.0]]]);
-        assert!(input.read_truths(&plain, 2).unwrap_err().to_string().contains("1 truth file(s) for 2 cloud frame(s)"));
+        assert_eq!(input.read_truths(&plain, 1, &[]).unwrap(), [[[1.0, 2.0, 3.0]]]);
+        let two = input.read_truths(&plain, 2, &[]).unwrap_err().to_string();
+        assert!(two.contains("1 truth file(s) for 2 cloud frame(s)"), "{two}");
         // Files that name no frame, in the frame given.
         let mut input = PointInput::new(Some(Frame::Lps), LengthUnit::Millimetre, LengthUnit::Millimetre)
             .with_given_frame(Some(Frame::Ras));
@@ -189,6 +217,32 @@ mod tests {
             [[1e-3, 2e-3, 3e-3]],
             "the named unit wins"
         );
+    }
+
+    /// A truth file labelled as the targets are is taken by label, whatever its rows' order; one
+    /// whose labels differ is refused; one without labels is taken row by row.
+    #[test]
+    fn truths_are_matched_to_the_targets_by_label() {
+        let dir = tempfile::tempdir().unwrap();
+        let truth = dir.path().join("truth.csv");
+        let labels: Vec<String> = ["A", "B", "C"].map(String::from).to_vec();
+        let mut input = PointInput::new(None, LengthUnit::Millimetre, LengthUnit::Millimetre);
+        let mut read = |text: &str, labels: &[String]| {
+            std::fs::write(&truth, text).unwrap();
+            input.read_truths(&truth, 1, labels).map_err(|e| e.to_string())
+        };
+        let reversed = "label,x,y,z\nC,3,0,0\nB,2,0,0\nA,1,0,0\n";
+        let in_order = vec![vec![[1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [3.0, 0.0, 0.0]]];
+        assert_eq!(read(reversed, &labels), Ok(in_order.clone()));
+        let rows = vec![vec![[3.0, 0.0, 0.0], [2.0, 0.0, 0.0], [1.0, 0.0, 0.0]]];
+        assert_eq!(read(reversed, &[]), Ok(rows.clone()), "unlabelled targets: row by row");
+        assert_eq!(read("x,y,z\n3,0,0\n2,0,0\n1,0,0\n", &labels), Ok(rows), "unlabelled truth: row by row");
+        let other = read("label,x,y,z\nQ1,3,0,0\nB,2,0,0\nA,1,0,0\n", &labels).unwrap_err();
+        assert!(other.ends_with("truth.csv: `Q1` is no target's label (the targets are A, B, C)"), "{other}");
+        let twice = read("label,x,y,z\nA,3,0,0\nB,2,0,0\nA,1,0,0\n", &labels).unwrap_err();
+        assert!(twice.ends_with("truth.csv: the label `A` is given twice"), "{twice}");
+        let missing = read("label,x,y,z\nB,2,0,0\nA,1,0,0\n", &labels).unwrap_err();
+        assert!(missing.ends_with("truth.csv: no point is labelled `C`, a target's label"), "{missing}");
     }
 
     #[test]

@@ -163,6 +163,14 @@ fn tool_tracks_as_controls_reproduce_the_tool() {
     assert!((report.young.unwrap().mean - a.mean).abs() > 1e-3 * a.mean);
 }
 
+/// The beam scenario as `augsim assimilate --observations` reads it: every frame of the track
+/// files, not the scenario's own number of iterations.
+fn tracked(dir: &Path) -> (AssimilationScenario, PathBuf) {
+    let (mut sc, base) = scenario(dir, "beam.toml", &beam());
+    sc.iterations = None;
+    (sc, base)
+}
+
 /// Writes `text` to a file in `dir` and reads it as tracks; returns the error message.
 fn track_error(dir: &Path, text: &str) -> String {
     let path = dir.join("bad.csv");
@@ -233,7 +241,7 @@ fn bad_track_files_are_named_with_their_line() {
         "frame,id,x,y,z\n0,in,0.05,0.01,0.02\n0,out,0.05,0.01,0.03\n1,in,0.05,0.01,0.02\n",
     )
     .unwrap();
-    let (sc, base) = scenario(d, "beam.toml", &beam());
+    let (sc, base) = tracked(d);
     let files = ObservationFiles { observations: d.join("outside.csv"), ..Default::default() };
     let err = Experiment::prepare(sc, &base, Some(&files)).err().unwrap().to_string();
     assert!(err.contains("outside.csv:3: feature `out`") && err.contains("outside the mesh"), "{err}");
@@ -245,7 +253,7 @@ fn bad_track_files_are_named_with_their_line() {
         "frame,id,x,y,z\n0,in,0.05,0.01,0.02\n0,near,0.05,0.01,0.0205\n1,in,0.05,0.01,0.02\n1,near,0.05,0.01,0.0205\n",
     )
     .unwrap();
-    let (sc, base) = scenario(d, "beam.toml", &beam());
+    let (sc, base) = tracked(d);
     let files = ObservationFiles { observations: d.join("near.csv"), ..Default::default() };
     let experiment = Experiment::prepare(sc, &base, Some(&files)).unwrap();
     let setup = experiment.setup().clone();
@@ -253,6 +261,36 @@ fn bad_track_files_are_named_with_their_line() {
     assert!((setup.max_projection - 5e-4).abs() < 1e-12, "{}", setup.max_projection);
     let near = experiment.observed_points()[1];
     assert!(mesh::distance(near, [0.05, 0.01, 0.0205]) < 1e-12, "observed at rest at {near:?}");
+
+    // More iterations than the file has frames are refused, not cut short.
+    let (mut sc, base) = tracked(d);
+    sc.iterations = Some(3);
+    let files = ObservationFiles { observations: d.join("near.csv"), ..Default::default() };
+    let err = Experiment::prepare(sc, &base, Some(&files)).err().unwrap().to_string();
+    assert!(err.contains("near.csv: 3 iterations asked for, but the file's last frame is 1"), "{err}");
+
+    // Rest positions in m and frames in mm read as m: the features seem to leave the organ by metres.
+    std::fs::write(d.join("rest.csv"), "id,x,y,z\nin,0.05,0.01,0.02\n").unwrap();
+    std::fs::write(d.join("frames_mm.csv"), "frame,id,x,y,z\n1,in,50,10,19.5\n").unwrap();
+    let in_mm = ObservationFiles {
+        observations: d.join("frames_mm.csv"),
+        features: Some(d.join("rest.csv")),
+        ..Default::default()
+    };
+    let (sc, base) = tracked(d);
+    let err = Experiment::prepare(sc, &base, Some(&in_mm)).err().unwrap().to_string();
+    assert!(
+        err.contains("frames_mm.csv:2: feature `in` lies 54")
+            && err.contains("at frame 1, farther than the organ's size (103.9 mm")
+            && err.contains("another unit than the rest positions in")
+            && err.contains("rest.csv"),
+        "{err}"
+    );
+    // A rest position outside the organ is named at its own line, in the features file.
+    std::fs::write(d.join("rest.csv"), "id,x,y,z\nin,0.05,0.01,0.2\n").unwrap();
+    let (sc, base) = tracked(d);
+    let err = Experiment::prepare(sc, &base, Some(&in_mm)).err().unwrap().to_string();
+    assert!(err.contains("rest.csv:2: feature `in`") && err.contains("outside the mesh, 180.00 mm"), "{err}");
 }
 
 #[test]

@@ -29,8 +29,9 @@ pub struct RegisterArgs {
     cloud: Option<PathBuf>,
     #[command(flatten)]
     registration: RegistrationChoice,
-    /// True deformed positions of the targets (CSV x,y,z in --units, .fcsv or .mrk.json; same
-    /// order), or a directory of one such file per frame: the TRE is reported.
+    /// True deformed positions of the targets (CSV x,y,z in --units, .fcsv or .mrk.json; by
+    /// label where both files label every point, else in the same order), or a directory of one
+    /// such file per frame: the TRE is reported.
     #[arg(long)]
     truth: Option<PathBuf>,
     /// Output directory: organ.vtu (organ.pvd for a sequence), targets.csv, summary.json; one
@@ -67,11 +68,11 @@ pub struct RegisterArgs {
 const RUNS: &str = "out/register";
 
 /// Runs the registration (or the comparison) and writes the outputs into a folder of the run's
-/// own; a fresh numbered folder is removed again when the run fails before writing into it.
+/// own; a folder the run made is removed again when the run fails before writing into it.
 pub fn run(args: &RegisterArgs) -> Result<()> {
-    let (out, fresh) = run_dir(args.out.as_deref(), Path::new(RUNS))?;
+    let (out, own) = run_dir(args.out.as_deref(), Path::new(RUNS))?;
     let result = if args.demo || args.case.is_some() { demo(args, &out) } else { register(args, &out) };
-    if result.is_err() && fresh {
+    if result.is_err() && own {
         // Only an empty folder is removed.
         let _ = std::fs::remove_dir(&out);
     }
@@ -87,7 +88,8 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     let mut input =
         PointInput::new(organ_frame, LengthUnit::Metre, spec.given_units).with_given_frame(spec.given_frame);
     let frames = read_frames(&cloud_path)?;
-    let truths = args.truth.as_ref().map(|p| input.read_truths(p, frames.len())).transpose()?;
+    let labels = registration.target_labels();
+    let truths = args.truth.as_ref().map(|p| input.read_truths(p, frames.len(), labels)).transpose()?;
     println!("method     {}", registration.method());
     println!("{}", organ_line(registration.organ(), registration.targets().len()));
     for w in registration.warnings() {

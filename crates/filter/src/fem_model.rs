@@ -24,12 +24,11 @@ use crate::{Model, SigmaPointSet};
 pub enum FemParameter {
     /// Young's modulus of the material (Pa) = θ_j.
     Young,
-    /// Zero-length springs on `nodes`, each of stiffness `scale · θ_j` (N/m), added to the problem's own springs.
+    /// Zero-length springs on `nodes`, each of stiffness θ_j (N/m), added to the problem's own springs. (A filter
+    /// value in units of a typical stiffness is the parameter's [`crate::ParameterSpec::scale`].)
     Springs {
         /// The nodes tied to their rest position by this parameter.
         nodes: Vec<usize>,
-        /// Stiffness (N/m) per unit of θ_j (> 0).
-        scale: f64,
     },
 }
 
@@ -142,15 +141,12 @@ impl FemModel {
         let n = problem.mesh.num_nodes();
         let invalid = |m: String| Err(FemModelError::Invalid(m));
         for (j, p) in parameters.iter().enumerate() {
-            if let FemParameter::Springs { nodes, scale } = p {
+            if let FemParameter::Springs { nodes } = p {
                 if nodes.is_empty() {
                     return invalid(format!("spring parameter #{j} has no node"));
                 }
                 if let Some(&k) = nodes.iter().find(|&&k| k >= n) {
                     return invalid(format!("spring parameter #{j} refers to node {k}, but the mesh has {n} nodes"));
-                }
-                if !(scale.is_finite() && *scale > 0.0) {
-                    return invalid(format!("spring parameter #{j}: scale must be finite and > 0, got {scale}"));
                 }
             }
         }
@@ -237,9 +233,9 @@ impl FemModel {
         for (p, &value) in self.parameters.iter().zip(theta) {
             match p {
                 FemParameter::Young => problem.material.young = value,
-                FemParameter::Springs { nodes, scale } => {
+                FemParameter::Springs { nodes } => {
                     for &k in nodes {
-                        problem.springs[k] += scale * value;
+                        problem.springs[k] += value;
                     }
                 }
             }

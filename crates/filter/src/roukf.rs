@@ -89,8 +89,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::{FilterError, IterationTrace, Model, SigmaPointSet, SigmaPoints, Trace, Transform, VectorState};
 
-/// One uncertain parameter: its name, transform and Gaussian prior **in filter space**
-/// (e.g. for [`Transform::Exp`], the mean and standard deviation of the logarithm).
+/// One uncertain parameter: its name, its map to the physical value the model receives (`scale · transform(v)`)
+/// and its Gaussian prior **in filter space** (e.g. for [`Transform::Exp`], the mean and standard deviation of the
+/// logarithm).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ParameterSpec {
@@ -103,12 +104,35 @@ pub struct ParameterSpec {
     pub prior_mean: f64,
     /// Prior standard deviation σ0 > 0 (filter space).
     pub prior_std: f64,
+    /// Physical value per unit of the transformed one (> 0, default 1): e.g. a spring stiffness in N/m whose filter
+    /// value counts typical stiffnesses. Traces report the physical value, `scale · transform(v)`.
+    #[serde(default = "unit_scale")]
+    pub scale: f64,
+}
+
+fn unit_scale() -> f64 {
+    1.0
 }
 
 impl ParameterSpec {
-    /// A parameter with the given name, transform and filter-space prior.
+    /// A parameter with the given name, transform and filter-space prior, and scale 1.
     pub fn new(name: impl Into<String>, transform: Transform, prior_mean: f64, prior_std: f64) -> Self {
-        ParameterSpec { name: name.into(), transform, prior_mean, prior_std }
+        ParameterSpec { name: name.into(), transform, prior_mean, prior_std, scale: 1.0 }
+    }
+
+    /// The same parameter with physical value `scale · transform(v)`.
+    pub fn scaled(self, scale: f64) -> Self {
+        ParameterSpec { scale, ..self }
+    }
+
+    /// The physical value of the filter-space value `v`: `scale · transform(v)`.
+    pub fn to_physical(&self, v: f64) -> f64 {
+        self.scale * self.transform.to_physical(v)
+    }
+
+    /// The derivative d(physical)/d(filter) at `v`.
+    pub fn derivative(&self, v: f64) -> f64 {
+        self.scale * self.transform.derivative(v)
     }
 }
 
@@ -366,6 +390,12 @@ impl<M: Model> Roukf<M> {
                     spec.name, spec.prior_mean, spec.prior_std
                 )));
             }
+            if !(spec.scale.is_finite() && spec.scale > 0.0) {
+                return Err(FilterError::InvalidConfig(format!(
+                    "parameter '{}': scale must be finite and > 0 (got {})",
+                    spec.name, spec.scale
+                )));
+            }
         }
         if !(config.forgetting > 0.0 && config.forgetting <= 1.0) {
             return Err(FilterError::InvalidConfig(format!(
@@ -390,6 +420,7 @@ impl<M: Model> Roukf<M> {
         let trace = Trace {
             parameter_names: config.parameters.iter().map(|s| s.name.clone()).collect(),
             transforms: config.parameters.iter().map(|s| s.transform).collect(),
+            scales: config.parameters.iter().map(|s| s.scale).collect(),
             records: Vec::new(),
         };
         let mut states = vec![initial_state; sigma.count()];
@@ -424,8 +455,8 @@ impl<M: Model> Roukf<M> {
 
     /// Like [`Roukf::step`] with only the components of `z` marked in `available` measured (e.g. tracked features
     /// occluded in this frame): the others get zero weight in the correction and their values in `z` are ignored
-    /// (they may be NaN). With no component available the iteration only predicts. The innovation norm of the
-    /// record is over the available components.
+    /// (they may be NaN). With no component available the iteration only predicts, and its record has no
+    /// innovation norm; otherwise the norm is over the available components.
     pub fn step_partial(&mut self, z: &DVector<f64>, available: &[bool]) -> Result<&IterationTrace, FilterError> {
         let start = Instant::now();
         let k = self.iteration + 1;
@@ -507,7 +538,8 @@ impl<M: Model> Roukf<M> {
         self.iteration = k;
         self.predicted_observation = Some(z_mean);
         self.misfit = misfit;
-        let record = self.record(Some(innovation.norm()), Some(start.elapsed().as_secs_f64()));
+        let measured = available.contains(&true).then(|| innovation.norm());
+        let record = self.record(measured, Some(start.elapsed().as_secs_f64()));
         self.trace.records.push(record);
         Ok(self.trace.records.last().expect("a record was just pushed"))
     }
@@ -568,8 +600,7 @@ impl<M: Model> Roukf<M> {
         let m = thetas.len();
         let mut physical: Vec<Vec<f64>> = Vec::with_capacity(m);
         for (i, t) in thetas.iter().enumerate() {
-            let phys: Vec<f64> =
-                t.iter().zip(&self.config.parameters).map(|(v, s)| s.transform.to_physical(*v)).collect();
+            let phys: Vec<f64> = t.iter().zip(&self.config.parameters).map(|(v, s)| s.to_physical(*v)).collect();
             if phys.iter().any(|v| !v.is_finite()) {
                 return Err(FilterError::SigmaPoint {
                     sigma_point: i,
@@ -672,9 +703,9 @@ impl<M: Model> Roukf<M> {
         &self.theta
     }
 
-    /// Current parameter estimate in physical space (transform applied to θ̂).
+    /// Current parameter estimate in physical space (`scale · transform(θ̂)`).
     pub fn mean_physical(&self) -> Vec<f64> {
-        self.theta.iter().zip(&self.config.parameters).map(|(v, s)| s.transform.to_physical(*v)).collect()
+        self.theta.iter().zip(&self.config.parameters).map(|(v, s)| s.to_physical(*v)).collect()
     }
 
     /// Reported parameter covariance in filter space (p × p): the filter's [`Roukf::filter_covariance`], plus the
@@ -705,7 +736,7 @@ impl<M: Model> Roukf<M> {
         self.covariance().diagonal().iter().map(|v| v.max(0.0).sqrt()).collect()
     }
 
-    /// Standard deviations in physical space, first order: `|g'(θ̂)| σ`.
+    /// Standard deviations in physical space, first order: `|g'(θ̂)| σ` for g = `scale · transform`.
     pub fn std_physical(&self) -> Vec<f64> {
         self.physical(&self.covariance())
     }
@@ -717,7 +748,7 @@ impl<M: Model> Roukf<M> {
             .iter()
             .zip(self.theta.iter())
             .zip(&self.config.parameters)
-            .map(|((c, v), spec)| spec.transform.derivative(*v).abs() * c.max(0.0).sqrt())
+            .map(|((c, v), spec)| spec.derivative(*v).abs() * c.max(0.0).sqrt())
             .collect()
     }
 

@@ -17,11 +17,12 @@ pub struct IterationTrace {
     pub mean: Vec<f64>,
     /// Standard deviation σ in filter space: square root of the diagonal of `L U^{-1} L^T`.
     pub std: Vec<f64>,
-    /// Mean in physical space: transform applied to μ.
+    /// Mean in physical space: `g(μ)` for each parameter's map g = `scale · transform` ([`crate::ParameterSpec`]).
     pub mean_physical: Vec<f64>,
-    /// Standard deviation in physical space, first order: `|g'(μ)| σ` for the transform g.
+    /// Standard deviation in physical space, first order: `|g'(μ)| σ`.
     pub std_physical: Vec<f64>,
-    /// Euclidean norm of the innovation `z - Σ α_i H(x_i)` (None for the prior).
+    /// Euclidean norm of the innovation `z - Σ α_i H(x_i)` over the measured components (None for the prior and
+    /// for a frame in which nothing was measured).
     pub innovation_norm: Option<f64>,
     /// Wall-clock time of the iteration, seconds (None for the prior).
     pub wall_seconds: Option<f64>,
@@ -42,6 +43,8 @@ pub struct Trace {
     pub parameter_names: Vec<String>,
     /// Transform of each parameter.
     pub transforms: Vec<Transform>,
+    /// Scale of each parameter: its physical value is `scale · transform(v)`.
+    pub scales: Vec<f64>,
     /// One record per iteration, starting with the prior.
     pub records: Vec<IterationTrace>,
 }

@@ -146,6 +146,10 @@ fn bad_measurements_and_configurations_are_rejected() {
     assert!(matches!(mk(&|c| c.parameters.clear()), Some(FilterError::InvalidConfig(_))));
     assert!(matches!(mk(&|c| c.parameters[0].prior_std = 0.0), Some(FilterError::InvalidConfig(_))));
     assert!(matches!(mk(&|c| c.parameters[0].prior_mean = f64::NAN), Some(FilterError::InvalidConfig(_))));
+    for scale in [0.0, -1.0, f64::INFINITY] {
+        let err = mk(&|c| c.parameters[0].scale = scale).map(|e| e.to_string());
+        assert!(err.as_deref().is_some_and(|e| e.contains("scale must be finite and > 0")), "{err:?}");
+    }
     assert!(matches!(
         mk(&|c| c.observation_std = ObservationNoise::Uniform(-1.0)),
         Some(FilterError::InvalidConfig(_))

@@ -15,6 +15,8 @@ const LENGTH: f64 = 0.1;
 const SIDE: f64 = 0.02;
 const TRUE_YOUNG: f64 = 5000.0;
 const PERIOD: usize = 8;
+/// N/m per unit of the spring parameters' filter values.
+const SPRING_SCALE: f64 = 10.0;
 
 fn beam() -> Mesh {
     mesh::box_tet([0.0; 3], [LENGTH, SIDE, SIDE], [5, 2, 2]).unwrap()
@@ -99,8 +101,8 @@ fn young_modulus_is_identified_within_one_percent_from_noiseless_data() {
 }
 
 /// The beam held at x = 0 by its fixed face and at its free end by two groups of springs (lower and upper end
-/// nodes), loaded on its top face; `scale` N/m per unit of the filter's physical value.
-fn spring_model(scale: f64) -> (FemModel, Vec<Vec<usize>>) {
+/// nodes), loaded on its top face.
+fn spring_model() -> (FemModel, Vec<Vec<usize>>) {
     let mesh = beam();
     let mut problem = Problem::new(mesh, Material::new(Law::Svk, TRUE_YOUNG, 0.45));
     problem.fix(&face(&problem.mesh, 0.0));
@@ -124,15 +126,16 @@ fn spring_model(scale: f64) -> (FemModel, Vec<Vec<usize>>) {
         },
     ];
     let observed = top(&problem.mesh).into_iter().map(TrackedPoint::at_node).collect();
-    let parameters = groups.iter().map(|g| FemParameter::Springs { nodes: g.clone(), scale }).collect();
+    let parameters = groups.iter().map(|g| FemParameter::Springs { nodes: g.clone() }).collect();
     (FemModel::new(problem, parameters, loads, observed, SolverOptions::default()).unwrap(), groups)
 }
 
+/// The filter of the two spring groups, whose values count `SPRING_SCALE` N/m.
 fn spring_config(execution: Execution) -> RoukfConfig {
     RoukfConfig {
         parameters: vec![
-            ParameterSpec::new("k_low", Transform::Abs, 0.005, 0.01),
-            ParameterSpec::new("k_high", Transform::Abs, 0.005, 0.01),
+            ParameterSpec::new("k_low", Transform::Abs, 0.005, 0.01).scaled(SPRING_SCALE),
+            ParameterSpec::new("k_high", Transform::Abs, 0.005, 0.01).scaled(SPRING_SCALE),
         ],
         observation_std: ObservationNoise::Uniform(2e-5),
         execution,
@@ -143,9 +146,8 @@ fn spring_config(execution: Execution) -> RoukfConfig {
 
 #[test]
 fn abs_transform_keeps_springs_non_negative_and_finds_them() {
-    let scale = 10.0;
-    let truth = [0.02, 0.002];
-    let (model, groups) = spring_model(scale);
+    let truth = [0.2, 0.02];
+    let (model, groups) = spring_model();
     let data = clean_observations(&model, &truth, 5 * PERIOD);
     let initial = model.initial_state();
     let mut roukf = Roukf::new(model, initial, spring_config(Execution::Parallel)).unwrap();
@@ -159,7 +161,12 @@ fn abs_transform_keeps_springs_non_negative_and_finds_them() {
     }
     let est = roukf.mean_physical();
     assert!(est.iter().all(|v| *v >= 0.0));
-    // Both stiffnesses are found: the dominant one within 10 %, each within 3σ.
+    // Both stiffnesses (N/m) are found: the dominant one within 10 %, each within 3σ; the filter's own values
+    // count SPRING_SCALE N/m.
+    let filter_values = roukf.mean();
+    for j in 0..2 {
+        assert!((SPRING_SCALE * filter_values[j].abs() - est[j]).abs() <= 1e-12 * est[j], "{est:?}");
+    }
     let std = roukf.std_physical();
     assert!((est[0] - truth[0]).abs() < 0.1 * truth[0], "{est:?}");
     for j in 0..2 {
@@ -167,11 +174,11 @@ fn abs_transform_keeps_springs_non_negative_and_finds_them() {
     }
     // The estimate is applied to the right nodes.
     for (g, value) in groups.iter().zip(&est) {
-        assert!(g.iter().all(|&k| (problem.springs[k] - scale * value).abs() <= 1e-12 * scale));
+        assert!(g.iter().all(|&k| (problem.springs[k] - value).abs() <= 1e-12));
     }
 
     // Without the transform, the same prior hands negative stiffnesses to the FEM model, which refuses them.
-    let (model, _) = spring_model(scale);
+    let (model, _) = spring_model();
     let initial = model.initial_state();
     let mut config = spring_config(Execution::Sequential);
     config.parameters.iter_mut().for_each(|p| p.transform = Transform::Identity);
@@ -186,9 +193,9 @@ fn bits(v: &[f64]) -> Vec<u64> {
 
 #[test]
 fn parallel_and_sequential_fem_filters_are_bit_identical() {
-    let truth = [0.015, 0.004];
+    let truth = [0.15, 0.04];
     let run = |execution| {
-        let (model, _) = spring_model(10.0);
+        let (model, _) = spring_model();
         let data = add_noise(&clean_observations(&model, &truth, 12), 2e-5, 7).unwrap();
         let initial = model.initial_state();
         let mut roukf = Roukf::new(model, initial, spring_config(execution)).unwrap();
@@ -278,9 +285,8 @@ fn inconsistent_models_are_rejected() {
     let tool = |profile| LoadPattern { profile, forces: vec![], displacements: vec![(free_node, [0.0, 0.0, 1e-3])] };
     assert!(msg(new(vec![], vec![tool(Profile::RaisedCosine { period: 4 })], obs.clone())).contains("not constrained"));
     assert!(msg(new(vec![], vec![tool(Profile::RaisedCosine { period: 0 })], obs.clone())).contains("period"));
-    let springs = |nodes: Vec<usize>, scale| vec![FemParameter::Springs { nodes, scale }];
-    assert!(msg(new(springs(vec![99], 1.0), vec![], obs.clone())).contains("node 99"));
-    assert!(msg(new(springs(vec![1], -1.0), vec![], obs.clone())).contains("scale"));
+    let springs = |nodes: Vec<usize>| vec![FemParameter::Springs { nodes }];
+    assert!(msg(new(springs(vec![99]), vec![], obs.clone())).contains("node 99"));
     assert!(msg(new(vec![FemParameter::Young], vec![], vec![])).contains("no observed point"));
 
     let model = FemModel::new(problem.clone(), vec![FemParameter::Young], vec![], obs, opts.clone()).unwrap();

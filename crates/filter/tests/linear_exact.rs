@@ -84,6 +84,8 @@ fn static_parameters_against_kalman(
 
         let rec = roukf.step_partial(&z, &mask).unwrap().clone();
         assert_eq!(rec.iteration, k + 1);
+        // A frame with nothing measured has no innovation (not a zero one).
+        assert_eq!(rec.innovation_norm.is_some(), !rows.is_empty(), "step {k}");
         let got_mu = DMatrix::from_column_slice(p, 1, &rec.mean);
         let exp_mu = DMatrix::from_column_slice(p, 1, mu.as_slice());
         assert!(rel_diff(&got_mu, &exp_mu) < 1e-10, "mean at {k}: {got_mu} vs {exp_mu}");

@@ -85,10 +85,30 @@ impl Model {
     /// Loads the model of a model directory (or of its `model.json`), whichever kind it is.
     pub fn load(path: &Path) -> Result<Model> {
         let json = Model::json_path(path);
-        if ReducedModel::is_rom_file(&json) {
-            Ok(Model::Reduced(Arc::new(ReducedModel::load(&json)?)))
-        } else {
-            Ok(Model::UNet(Arc::new(TrainedModel::load(&json)?)))
+        match Model::kind(&json)? {
+            Method::Rom => Ok(Model::Reduced(Arc::new(ReducedModel::load(&json)?))),
+            Method::UNet => Ok(Model::UNet(Arc::new(TrainedModel::load(&json)?))),
+        }
+    }
+
+    /// The kind of model a `model.json` describes, from its `format`; an error names a file that
+    /// is no JSON (with the place of the fault) or no model's.
+    pub fn kind(json: &Path) -> Result<Method> {
+        let text = std::fs::read_to_string(json).map_err(|e| LearnError::io(json, e))?;
+        let value: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| LearnError::model(json, format!("invalid model JSON: {e}")))?;
+        match value.get("format").and_then(|f| f.as_str()) {
+            Some(crate::rom::ROM_FORMAT) => Ok(Method::Rom),
+            Some(crate::net::unet::MODEL_FORMAT) => Ok(Method::UNet),
+            other => Err(LearnError::model(
+                json,
+                format!(
+                    "its format {} is no model's: {:?} (a U-Net) or {:?} (a reduced-order model) was expected",
+                    other.map_or("(none)".to_string(), |f| format!("{f:?}")),
+                    crate::net::unet::MODEL_FORMAT,
+                    crate::rom::ROM_FORMAT
+                ),
+            )),
         }
     }
 

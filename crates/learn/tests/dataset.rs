@@ -416,6 +416,26 @@ fn corrupt_shards_give_clear_errors() {
     assert!(e.contains("0 or 1"), "{e}");
     std::fs::write(&masks, &saved).unwrap();
 
+    // A NaN, or a value no organ's displacement or force comes near, in a target or an input:
+    // named by file, sample, draw and place, not trained on.
+    let targets = dir.path().join("shard_00001/targets.npy");
+    let saved = std::fs::read(&targets).unwrap();
+    let shard = ds.load_shard(1).unwrap();
+    let (mut values, draw) = (shard.targets, shard.indices[0]);
+    let shape = [1, 3, 6, 5, 4];
+    values[7] = f32::NAN;
+    npy::write_f32(&targets, &shape, &values).unwrap();
+    let e = ds.load_all().unwrap_err().to_string();
+    assert!(
+        e.contains("shard_00001/targets.npy") && e.contains(&format!("sample 0 (draw {draw}), value 7 is NaN")),
+        "{e}"
+    );
+    values[7] = 1e30;
+    npy::write_f32(&targets, &shape, &values).unwrap();
+    let e = ds.load_shard(1).unwrap_err().to_string();
+    assert!(e.contains("value 7 is 1e30") && e.contains("is the file damaged?"), "{e}");
+    std::fs::write(&targets, &saved).unwrap();
+
     // A manifest whose counts disagree.
     let mp = dir.path().join(MANIFEST_FILE);
     let text = std::fs::read_to_string(&mp).unwrap();

@@ -138,6 +138,15 @@ fn bad_input_is_refused_with_a_message() {
     std::fs::write(dir.path().join("weights.npy"), b"not an array").unwrap();
     let e = Model::load(dir.path()).unwrap_err().to_string();
     assert!(e.contains("weights.npy"), "{e}");
+    // A model.json cut short is named as bad JSON, at its fault; one of another format says so.
+    let json = dir.path().join("model.json");
+    let text = std::fs::read_to_string(&json).unwrap();
+    std::fs::write(&json, &text[..text.len() / 2]).unwrap();
+    let e = Model::load(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("invalid model JSON: EOF while parsing") && e.contains("line"), "{e}");
+    std::fs::write(&json, text.replace("\"augsim-rom\"", "\"augsim-rm\"")).unwrap();
+    let e = Model::load(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("its format \"augsim-rm\" is no model's: \"augsim-unet\""), "{e}");
 }
 
 /// The shipped reduced-order models load, save back to the very bytes of their files, and predict

@@ -91,11 +91,17 @@ fn gunzip_if_needed(bytes: Vec<u8>) -> Result<Vec<u8>, String> {
 
 /// The voxels of `data` as labels, `count` values of type `ty` in the given byte order (a
 /// non-integral or non-finite float is an error: a labelmap holds labels, not intensities; so is
-/// one beyond 32 bits).
-fn labels(ty: Scalar, data: &[u8], count: usize, little: bool) -> Result<Vec<i32>, String> {
+/// one beyond 32 bits). Data short of them, or holding a whole slice more (`count` over the grid's
+/// last size `nz`: sizes smaller than the data's), are an error; a few bytes more are padding.
+fn labels(ty: Scalar, data: &[u8], count: usize, nz: usize, little: bool) -> Result<Vec<i32>, String> {
     let size = ty.size();
-    if data.len() < count * size {
-        return Err(format!("the data hold {} bytes, {} expected ({count} voxels)", data.len(), count * size));
+    let expected = count * size;
+    if data.len() < expected || data.len() - expected >= (count / nz.max(1)).max(1) * size {
+        return Err(format!(
+            "the data hold {} bytes, {expected} expected ({count} voxels of {size} byte(s)): do the sizes in the \
+             header match the image?",
+            data.len()
+        ));
     }
     (0..count).map(|i| label(i, ty.decode(&data[i * size..(i + 1) * size], !little))).collect()
 }
@@ -163,7 +169,7 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
         return Err(format!("bad voxel offset {offset}"));
     }
     let count = dims.iter().product::<usize>();
-    let mut labels = labels(scalar, &bytes[offset as usize..], count, little)?;
+    let mut labels = labels(scalar, &bytes[offset as usize..], count, dims[2], little)?;
     let (slope, intercept) = (f32_at(112), f32_at(116));
     if slope != 0.0 && (slope != 1.0 || intercept != 0.0) {
         for l in labels.iter_mut() {
@@ -421,7 +427,7 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
         s if s > 0 && (s as usize) < raw.len() => &raw[s as usize..],
         s => return Err(format!("bad byte skip {s}")),
     };
-    let labels = labels(scalar, raw, count, little)?;
+    let labels = labels(scalar, raw, count, dims[2], little)?;
     Ok(Labelmap { dims, layers, labels, affine, frame, segments })
 }
 
@@ -484,10 +490,10 @@ impl Labelmap {
             .present()
             .into_iter()
             .map(|(layer, label, count, name)| {
-                let layer = if self.layers > 1 { format!(" layer {layer},") } else { String::new() };
+                let layer = if self.layers > 1 { format!("layer {layer}, ") } else { String::new() };
                 match name {
-                    Some(n) => format!("{label} ('{n}',{layer} {count} voxels)"),
-                    None => format!("{label} ({}{count} voxels)", layer.trim_start().trim_end_matches(',')),
+                    Some(n) => format!("{label} ('{n}', {layer}{count} voxels)"),
+                    None => format!("{label} ({layer}{count} voxels)"),
                 }
             })
             .collect();
@@ -872,6 +878,13 @@ mod tests {
         assert!(write("d.nrrd", header.as_bytes()).contains("the data hold 0 bytes, 16 expected"));
         let zeros = [header.as_bytes(), &[0u8; 16]].concat();
         assert!(write("e.nrrd", &zeros).contains("empty"));
+        // Sizes one slice short of the data (2 × 2 shorts more) would crop the organ: refused. A few
+        // bytes of padding are not.
+        let slab = [header.as_bytes(), &[0u8; 24]].concat();
+        assert!(write("e1.nrrd", &slab).contains("the data hold 24 bytes, 16 expected"), "{}", write("e1.nrrd", &slab));
+        let padded = [header.as_bytes(), &[0u8; 14], &[1u8, 0], &[0u8; 2]].concat();
+        std::fs::write(dir.path().join("e2.nrrd"), &padded).unwrap();
+        assert_eq!(read_labelmap(dir.path().join("e2.nrrd")).unwrap().labels.iter().filter(|&&l| l == 1).count(), 1);
         let floats = header.replace("short", "float");
         let values: Vec<u8> = (0..8).flat_map(|i| (i as f32 * 0.3).to_le_bytes()).collect();
         assert!(write("f.nrrd", &[floats.as_bytes(), &values].concat()).contains("not a label"));

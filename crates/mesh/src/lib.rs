@@ -354,8 +354,9 @@ pub fn coordinate_fault<'a>(
 
 /// What is wrong with one point for [`coordinate_fault`], `None` when nothing is.
 fn point_fault(p: &Point, bound: f64) -> Option<String> {
-    if p.iter().any(|c| !c.is_finite()) {
-        Some(format!("has a non-finite coordinate {p:?}"))
+    // The non-finite value alone, not the point: a reader's caller may have scaled it into another unit.
+    if let Some((axis, c)) = ["x", "y", "z"].iter().zip(p).find(|(_, c)| !c.is_finite()) {
+        Some(format!("has a non-finite coordinate: {axis} = {c}"))
     } else if p.iter().any(|c| c.abs() > bound) {
         Some(format!("lies at {p:?}: a coordinate beyond {bound:e}, out of reach (a damaged file?)"))
     } else {

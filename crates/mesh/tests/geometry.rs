@@ -618,3 +618,17 @@ fn grid_layout_and_errors() {
     let nodes = g.nodes();
     assert_eq!(nodes[g.node_index(1, 1, 2)], g.node(1, 1, 2));
 }
+
+/// A measured point's fault names the first bad point and, for a non-finite value, the axis and the value
+/// alone (its other coordinates may have been scaled into another unit than the file's).
+#[test]
+fn measured_faults_name_the_point_and_the_axis() {
+    let good = [[0.1, 0.2, 0.3]];
+    assert_eq!(augsim_mesh::measured_fault(&good), None);
+    let nan = [[0.1, 0.2, 0.3], [1.0, f64::NAN, 2.0]];
+    assert_eq!(augsim_mesh::measured_fault(&nan), Some((1, "has a non-finite coordinate: y = NaN".to_string())));
+    let infinite = [[f64::NEG_INFINITY, 0.0, 0.0]];
+    assert_eq!(augsim_mesh::measured_fault(&infinite).unwrap().1, "has a non-finite coordinate: x = -inf");
+    let far = [[0.0, 0.0, 2e6]];
+    assert!(augsim_mesh::measured_fault(&far).unwrap().1.contains("beyond 1e6"));
+}

@@ -521,6 +521,15 @@ fn ascii_stl_and_obj_details() {
         text.replace("vertex 1 1 0\n   vertex 0 1 0", "vertex 1 1\n   vertex 0 1 0"),
     )));
     assert!(m.contains("line 12") && m.contains("missing vertex coordinate"), "{m}");
+    // NUL padding after an ASCII STL (some exporters fill a block) is not read as a binary header.
+    let padded = [text.as_bytes(), &[0u8; 37]].concat();
+    std::fs::write(d.join("padded.stl"), &padded).unwrap();
+    assert_eq!(read_stl(d.join("padded.stl")).unwrap(), s);
+    // A binary STL of no triangles is named as empty.
+    let empty = [&[b' '; 80][..], &0u32.to_le_bytes()].concat();
+    std::fs::write(d.join("empty.stl"), &empty).unwrap();
+    let m = message(read_stl(d.join("empty.stl")));
+    assert!(m.contains("a binary STL of no triangles"), "{m}");
 
     // OBJ: quads as fans, negative indices, v/vt/vn forms, comments and other statements.
     let text = "# a square\no sq\nv 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvn 0 0 1\nv 0 1 0\ns off\nf 1/1/1 2//1 -2 -1\n";

@@ -439,9 +439,10 @@ struct Estimate {
     /// Their standard deviations.
     #[pyo3(get)]
     std: Vec<f64>,
-    /// Norm of the innovation of the step (m), over the measured components.
+    /// Norm of the innovation of the step (m), over the measured components; None when no point was
+    /// seen.
     #[pyo3(get)]
-    innovation: f64,
+    innovation: Option<f64>,
 }
 
 /// The ROUKF of an assimilation scenario, one step at a time.

@@ -117,9 +117,11 @@ impl ScenarioText {
         }
     }
 
-    /// Text named `origin` (a path: relative paths in it start from its directory).
+    /// Text named `origin` (a path: relative paths in it start from its directory), without the
+    /// byte-order mark some editors put first.
     pub fn new(text: &str, origin: &Path) -> ScenarioText {
         let dir = origin.parent().map(Path::to_path_buf).unwrap_or_default();
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         ScenarioText { text: text.to_string(), origin: origin.to_path_buf(), dir }
     }
 

@@ -189,19 +189,28 @@ impl StaticScenario {
         let pick = |s: &NodeSelection, what: &str, p: &Problem| {
             s.select(&p.mesh).map_err(|e| fail(format!("{what} selection: {e}")))
         };
-        for f in &self.prescribed {
+        // Each value where the file gives it: [[prescribed]] 2's displacement, not the assembled load.
+        let finite = |what: &str, k: usize, key: &str, values: &[f64]| match values.iter().all(|v| v.is_finite()) {
+            true => Ok(()),
+            false => Err(fail(format!("{what} {}: {key} = {values:?} must be finite", k + 1))),
+        };
+        for (k, f) in self.prescribed.iter().enumerate() {
+            finite("prescribed", k, "displacement", &f.displacement)?;
             let nodes = pick(&f.select, "prescribed", &p)?;
             p.prescribe(&nodes, f.displacement);
         }
-        for s in &self.springs {
+        for (k, s) in self.springs.iter().enumerate() {
+            finite("springs", k, "stiffness", &[s.stiffness])?;
             let nodes = pick(&s.select, "springs", &p)?;
             p.add_springs(&nodes, s.stiffness);
         }
-        for f in &self.force {
+        for (k, f) in self.force.iter().enumerate() {
+            finite("force", k, "total", &f.total)?;
             let nodes = pick(&f.select, "force", &p)?;
             p.add_force(&nodes, f.total);
         }
         for (k, t) in self.traction.iter().enumerate() {
+            finite("traction", k, "traction", &t.traction)?;
             let nodes = pick(&t.select, "traction", &p)?;
             if p.add_traction(&nodes, t.traction) == 0.0 {
                 return Err(fail(format!(

@@ -98,6 +98,9 @@ pub fn build_mesh(source: &MeshSource, dir: &Path) -> Result<Mesh, MeshError> {
             mesh::tetmesh::mesh_surface_to_count(&surface, *tets, mesh::tetmesh::BoundaryFit::default())?.0
         }
         MeshSource::File { path, scale, centre } => {
+            if !(scale.is_finite() && *scale > 0.0) {
+                return Err(MeshError::Invalid(format!("[mesh.file] scale must be finite and > 0, got {scale}")));
+            }
             let mut m = mesh::io::read_mesh(dir.join(path))?;
             let (lo, hi) = m.bounds();
             let c = if *centre { std::array::from_fn(|d| 0.5 * (lo[d] + hi[d])) } else { [0.0; 3] };

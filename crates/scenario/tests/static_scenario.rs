@@ -109,3 +109,33 @@ fn a_press_and_release_reaches_the_case_s_force_for_any_number_of_frames() {
         }
     }
 }
+
+/// A file as some editors save it (a byte-order mark first) reads as without; a load or a mesh scale
+/// that no solve can use is named by its section and key, before any solve.
+#[test]
+fn a_byte_order_mark_is_read_and_unusable_numbers_are_named() {
+    let text = "kind = \"static\"\nname = \"b\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.1, 0.02, 0.02]\n\
+                cells = [4, 1, 1]\nelement = \"hex\"\n[material]\nlaw = \"linear\"\nyoung = 5000.0\npoisson = 0.3\n\
+                [[fixed]]\nselect = { box = { min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] } }\n";
+    let parse = |text: &str| StaticScenario::parse(text, Path::new("b.toml"));
+    let with_bom = parse(&format!("\u{feff}{text}")).unwrap();
+    assert_eq!(with_bom.name, "b");
+    let load = "[[prescribed]]\nselect = { box = { min = [0.099, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\n\
+                displacement = [0.0, 0.0, nan]\n";
+    let err = parse(&format!("{text}{load}")).unwrap().build_problem(Path::new(".")).unwrap_err().to_string();
+    assert!(err.contains("prescribed 1: displacement = [0.0, 0.0, NaN] must be finite"), "{err}");
+    let force = "[[force]]\nselect = { box = { min = [0.099, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\n\
+                 total = [inf, 0.0, 0.0]\n";
+    let err = parse(&format!("{text}{force}")).unwrap().build_problem(Path::new(".")).unwrap_err().to_string();
+    assert!(err.contains("force 1: total = [inf, 0.0, 0.0] must be finite"), "{err}");
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("m.vtu");
+    mesh::io::write_vtu(&file, &mesh::box_tet([0.0; 3], [1.0; 3], [1, 1, 1]).unwrap(), &[]).unwrap();
+    let scaled = format!(
+        "kind = \"static\"\nname = \"s\"\n[mesh.file]\npath = \"{}\"\nscale = -1.0\n[material]\nlaw = \"linear\"\n\
+         young = 5000.0\npoisson = 0.3\n",
+        file.display()
+    );
+    let err = parse(&scaled).unwrap().build_problem(Path::new(".")).unwrap_err().to_string();
+    assert!(err.contains("[mesh.file] scale must be finite and > 0, got -1"), "{err}");
+}

@@ -23,8 +23,8 @@ pub struct Estimate {
     pub mean: Vec<f64>,
     /// Their standard deviations.
     pub std: Vec<f64>,
-    /// Norm of the step's innovation over the measured components (m).
-    pub innovation: f64,
+    /// Norm of the step's innovation over the measured components (m); `None` when no point was seen.
+    pub innovation: Option<f64>,
 }
 
 impl OnlineFilter {
@@ -66,7 +66,7 @@ impl OnlineFilter {
         }
         let available: Vec<bool> = z.iter().map(|v| !v.is_nan()).collect();
         let record = self.filter.step_partial(&DVector::from_vec(z), &available).context(|| "a filter step".into())?;
-        let innovation = record.innovation_norm.unwrap_or(0.0);
+        let innovation = record.innovation_norm;
         Ok(Estimate { iteration: self.iteration(), mean: self.mean(), std: self.std(), innovation })
     }
 

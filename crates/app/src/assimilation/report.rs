@@ -188,26 +188,25 @@ pub(super) fn young(trace: &Trace, truth: Option<f64>, out_dir: &Path) -> Result
 }
 
 /// Plots the spring estimates (`springs.png` over the iterations, `springs_final.png` per node, with the truth when
-/// known), in N/m; `truth` in transformed units, parameters from index `offset` on.
+/// known), in N/m; parameters from index `offset` on.
 pub(super) fn springs(
     trace: &Trace,
     nodes: &[usize],
-    scale: f64,
     truth: Option<&[f64]>,
     offset: usize,
     out_dir: &Path,
 ) -> Result<SpringsReport, AssimilationError> {
     let last = last(trace)?;
-    let est: Vec<f64> = (0..nodes.len()).map(|j| scale * last.mean_physical[offset + j]).collect();
-    let sd: Vec<f64> = (0..nodes.len()).map(|j| scale * last.std_physical[offset + j]).collect();
-    let truth: Option<Vec<f64>> = truth.map(|t| t.iter().map(|t| scale * t).collect());
+    let est = last.mean_physical[offset..offset + nodes.len()].to_vec();
+    let sd = last.std_physical[offset..offset + nodes.len()].to_vec();
+    let truth: Option<Vec<f64>> = truth.map(<[f64]>::to_vec);
     let rms = truth
         .as_ref()
         .map(|truth| (est.iter().zip(truth).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / est.len() as f64).sqrt());
     let series: Vec<Series> = (0..nodes.len())
         .map(|j| Series {
             name: String::new(),
-            points: trace.records.iter().map(|r| (r.iteration as f64, scale * r.mean_physical[offset + j])).collect(),
+            points: trace.records.iter().map(|r| (r.iteration as f64, r.mean_physical[offset + j])).collect(),
             band: None,
         })
         .collect();

@@ -96,10 +96,10 @@ impl Frame {
 struct Unknowns {
     specs: Vec<ParameterSpec>,
     parameters: Vec<FemParameter>,
-    /// The scenario's values: the truth of a synthetic run.
+    /// The scenario's values in physical units (Pa, N/m): the truth of a synthetic run.
     truth: Vec<f64>,
-    /// Nodes of Σ (one spring parameter each, after the modulus if estimated) and the stiffness scale.
-    springs: Option<(Vec<usize>, f64)>,
+    /// Nodes of Σ (one spring parameter each, after the modulus if estimated).
+    springs: Option<Vec<usize>>,
 }
 
 /// Points where the estimated deformation is assessed and their true positions at steps 1, 2, ….
@@ -143,7 +143,8 @@ pub struct Experiment {
 impl Experiment {
     /// Builds the model and the measurements of `scenario` (relative paths from `dir`): synthetic from a reference
     /// run when `files` is `None`, else read from the track files. Synthetic data need `iterations`; with files,
-    /// the frames 1..=last are filtered, at most `iterations` of them when it is set.
+    /// the frames 1..=last are filtered, or the first `iterations` of them when it is set (an error when the
+    /// file has fewer).
     pub fn prepare(
         scenario: AssimilationScenario,
         dir: &Path,
@@ -358,11 +359,18 @@ impl Experiment {
     fn use_tracks(&mut self, locator: &MeshLocator, tracks: &TrackSet) -> Result<(), AssimilationError> {
         let rest = tracks.rest.as_ref();
         let last = tracks.observations.last_frame();
-        let iterations = self.scenario.iterations.map_or(last, |n| n.min(last));
-        if iterations == 0 {
-            let path = &tracks.observations.path;
+        let path = &tracks.observations.path;
+        if last == 0 {
             return Err(AssimilationError::file(path, None, "no frame after frame 0 (the rest)".into()));
         }
+        let iterations = match self.scenario.iterations {
+            Some(n) if n > last => {
+                let why = format!("{n} iterations asked for, but the file's last frame is {last} (one per iteration)");
+                return Err(AssimilationError::file(path, None, why));
+            }
+            Some(n) => n,
+            None => last,
+        };
         let mut finder = PointFinder::new(&self.base.mesh, locator)?;
         self.observed = locate_tracks(&tracks.observations, rest, &mut finder)?;
         self.measurements = (1..=iterations)
@@ -385,6 +393,12 @@ impl Experiment {
             let truth =
                 (1..=iterations).map(|k| assessment.frame(k)).map(|(z, available)| Frame { z, available }).collect();
             self.assessment = Some(Assessment { points, truth });
+        }
+        // Located at rest first: a bad rest position is named before the motion it would seem to make.
+        let (lo, hi) = self.base.mesh.bounds();
+        let size = mesh::norm(mesh::sub(hi, lo));
+        for t in std::iter::once(&tracks.observations).chain(&tracks.controls).chain(&tracks.assessment) {
+            t.check_motion(&t.rest_positions(rest)?, size, iterations, rest)?;
         }
         self.setup.projected = finder.moved.len();
         self.setup.max_projection = finder.moved.iter().copied().fold(0.0, f64::max);
@@ -463,7 +477,7 @@ impl Experiment {
         let t_filter = Instant::now();
         for (k, frame) in (1..).zip(&self.measurements) {
             let rec = roukf.step_partial(&frame.z, &frame.available).context(|| format!("filter iteration {k}"))?;
-            let innovation = rec.innovation_norm.unwrap_or(0.0);
+            let innovation = rec.innovation_norm;
             let states = roukf.sigma_states();
             newton += states.iter().map(|s| s.newton_iterations).sum::<usize>();
             for s in states {
@@ -514,9 +528,9 @@ impl Experiment {
             None => None,
         };
         let springs = match &self.unknowns.springs {
-            Some((nodes, scale)) => {
+            Some(nodes) => {
                 let truth = truth_known.then(|| &self.unknowns.truth[offset..]);
-                Some(report::springs(trace, nodes, *scale, truth, offset, out_dir)?)
+                Some(report::springs(trace, nodes, truth, offset, out_dir)?)
             }
             None => None,
         };
@@ -554,7 +568,7 @@ impl Experiment {
 
     /// With `springs.compare`: the assessment errors over time with Σ fully fixed and fully free.
     fn comparisons(&self) -> Result<Vec<(&'static str, Vec<f64>)>, AssimilationError> {
-        let (Some((nodes, _)), Some(a), true) =
+        let (Some(nodes), Some(a), true) =
             (&self.unknowns.springs, &self.assessment, self.scenario.springs.as_ref().is_some_and(|s| s.compare))
         else {
             return Ok(Vec::new());
@@ -576,16 +590,18 @@ impl Experiment {
         Ok(out)
     }
 
-    fn progress_message(&self, mu: &[f64], sd: &[f64], innovation: f64) -> String {
+    fn progress_message(&self, mu: &[f64], sd: &[f64], innovation: Option<f64>) -> String {
+        let innovation = match innovation {
+            Some(norm) => format!("|innovation| = {norm:.2e} m"),
+            None => "no feature seen".to_string(),
+        };
         match (&self.unknowns.springs, self.unknowns.parameters.first()) {
-            (_, Some(FemParameter::Young)) => {
-                format!("E = {:.1} ± {:.1} Pa, |innovation| = {innovation:.2e} m", mu[0], sd[0])
+            (_, Some(FemParameter::Young)) => format!("E = {:.1} ± {:.1} Pa, {innovation}", mu[0], sd[0]),
+            (Some(_), _) => {
+                let mean = mu.iter().sum::<f64>() / mu.len() as f64;
+                format!("mean k = {mean:.1} N/m, {innovation}")
             }
-            (Some((_, scale)), _) => {
-                let mean = scale * mu.iter().sum::<f64>() / mu.len() as f64;
-                format!("mean k = {mean:.1} N/m, |innovation| = {innovation:.2e} m")
-            }
-            _ => format!("|innovation| = {innovation:.2e} m"),
+            _ => innovation,
         }
     }
 }
@@ -627,11 +643,11 @@ fn unknowns(sc: &AssimilationScenario, mesh: &Mesh) -> Result<Unknowns, Assimila
             }
         }
         for (j, &k) in nodes.iter().enumerate() {
-            u.specs.push(ParameterSpec::new(format!("k_{k}"), s.transform, s.prior_mean, s.prior_std));
-            u.parameters.push(FemParameter::Springs { nodes: vec![k], scale: s.scale });
-            u.truth.push(truth[j]);
+            u.specs.push(ParameterSpec::new(format!("k_{k}"), s.transform, s.prior_mean, s.prior_std).scaled(s.scale));
+            u.parameters.push(FemParameter::Springs { nodes: vec![k] });
+            u.truth.push(s.scale * truth[j]);
         }
-        u.springs = Some((nodes, s.scale));
+        u.springs = Some(nodes);
     }
     Ok(u)
 }
@@ -735,9 +751,11 @@ impl<'a> PointFinder<'a> {
                 return Err(outside);
             }
             return Err(FemModelError::Invalid(format!(
-                "tracked point {p:?} lies outside the mesh, {:.3e} m from its surface (points within {:.3e} m, \
-                 half an element, are moved onto it)",
-                c.distance, self.reach
+                "tracked point {} lies outside the mesh, {:.2} mm from its surface (points within {:.2} mm, half an \
+                 element, are moved onto it)",
+                mesh::length::point_in_mm(p),
+                mesh::length::mm(c.distance),
+                mesh::length::mm(self.reach)
             )));
         }
         // A hair inside, so that rounding cannot leave the point on the outer side of the facet.
@@ -748,7 +766,8 @@ impl<'a> PointFinder<'a> {
     }
 }
 
-/// The features of a track file located in the mesh at their rest positions; an error names the feature's line.
+/// The features of a track file located in the mesh at their rest positions; an error names the line that
+/// gives the rest position (in `rest`'s file, or the feature's first row).
 fn locate_tracks(
     tracks: &Tracks,
     rest: Option<&RestPositions>,
@@ -762,7 +781,11 @@ fn locate_tracks(
         .enumerate()
         .map(|(j, (id, p))| {
             finder.locate(p).map_err(|e| {
-                AssimilationError::file(&tracks.path, Some(tracks.line(j)), format!("feature `{id}`: {e}"))
+                let (path, line) = match rest.and_then(|r| Some((&r.path, r.line(id)?))) {
+                    Some(given) => given,
+                    None => (&tracks.path, tracks.line(j)),
+                };
+                AssimilationError::file(path, Some(line), format!("feature `{id}`: {e}"))
             })
         })
         .collect()

@@ -132,6 +132,43 @@ impl Tracks {
             .collect()
     }
 
+    /// Refuses a feature that moves farther from its rest position (`rest[j]`, given by the file `rest_file` when
+    /// there is one) than `size` (the organ's) in frames 1..=`frames`: no tissue does, but a file in another unit
+    /// than its rest positions does.
+    pub fn check_motion(
+        &self,
+        rest: &[Point],
+        size: f64,
+        frames: usize,
+        rest_file: Option<&RestPositions>,
+    ) -> Result<(), AssimilationError> {
+        for (j, id) in self.ids.iter().enumerate() {
+            for (&frame, p) in self.positions[j].range(1..=frames) {
+                let distance = mesh::norm(mesh::sub(*p, rest[j]));
+                if distance > size {
+                    let cause = match rest_file {
+                        Some(r) => format!(
+                            "is this file in another unit than the rest positions in {}? A header x_mm, y_mm, z_mm or \
+                             x_m, y_m, z_m names the unit",
+                            r.path.display()
+                        ),
+                        None => "no tissue moves that far: a tracking error, or two features under one id?".into(),
+                    };
+                    let (distance, size) = (mesh::length::mm(distance), mesh::length::mm(size));
+                    return Err(AssimilationError::file(
+                        &self.path,
+                        Some(self.lines[j]),
+                        format!(
+                            "feature `{id}` lies {distance:.1} mm from its rest position at frame {frame}, farther \
+                             than the organ's size ({size:.1} mm, its mesh's box diagonal): {cause}"
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// The stacked positions (x, y, z per feature) in `frame` and, per component, whether it was measured;
     /// occluded components hold NaN.
     pub fn frame(&self, frame: usize) -> (DVector<f64>, Vec<bool>) {
@@ -155,6 +192,7 @@ pub struct RestPositions {
     /// The file read.
     pub path: PathBuf,
     positions: HashMap<String, Point>,
+    lines: HashMap<String, usize>,
 }
 
 impl RestPositions {
@@ -176,12 +214,17 @@ impl RestPositions {
             }
             positions.insert(id.clone(), point);
         }
-        Ok(RestPositions { path: path.to_path_buf(), positions })
+        Ok(RestPositions { path: path.to_path_buf(), positions, lines })
     }
 
     /// The rest position of feature `id`.
     pub fn get(&self, id: &str) -> Option<Point> {
         self.positions.get(id).copied()
+    }
+
+    /// The line that gives feature `id`'s rest position.
+    pub fn line(&self, id: &str) -> Option<usize> {
+        self.lines.get(id).copied()
     }
 }
 

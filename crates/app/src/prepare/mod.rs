@@ -179,8 +179,20 @@ pub trait PrepareProgress: learn::Progress {
 }
 
 /// Prepares the organ of `options` into `dir` (see the module documentation); resumes after the
-/// steps already done there. Returns the record of every step.
+/// steps already done there. Returns the record of every step. A `dir` this call made is removed
+/// again when it fails before writing into it.
 pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgress) -> Result<PrepareState> {
+    let made = !dir.exists();
+    let result = prepare_steps(options, dir, progress);
+    if result.is_err() && made {
+        // Only an empty folder is removed.
+        let _ = std::fs::remove_dir(dir);
+    }
+    result
+}
+
+/// [`prepare`]'s steps.
+fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgress) -> Result<PrepareState> {
     let options = absolute(options)?;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let state_path = dir.join(STATE_FILE);

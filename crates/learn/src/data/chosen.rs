@@ -35,7 +35,7 @@ use crate::data::dataset::{fnv1a, Dataset, DatasetWriter, Manifest, MANIFEST_FIL
 use crate::data::generate::{Generator, Input, BLOCK};
 use crate::data::response::RestResponse;
 use crate::data::split::{IndexSet, Split};
-use crate::model::{Model, MODEL_FILE};
+use crate::model::{Method, Model, MODEL_FILE};
 use crate::progress::Progress;
 use crate::rom::{fit, Context, ReducedModel};
 use crate::{LearnError, Result};
@@ -87,7 +87,7 @@ impl ChoiceRecipe {
         }
         let json = Model::json_path(model);
         let text = std::fs::read(&json).map_err(|e| LearnError::io(&json, e))?;
-        if !ReducedModel::is_rom_file(&json) {
+        if !matches!(Model::kind(&json), Ok(Method::Rom)) {
             return Err(LearnError::model(&json, "not a reduced-order model (`augsim train --method rom` makes one)"));
         }
         Ok(ChoiceRecipe {

@@ -972,8 +972,8 @@ impl Dataset {
                 }
             })
         });
-        let (_, inputs) = inputs?;
-        let (_, targets) = targets?;
+        let (input_path, inputs) = inputs?;
+        let (target_path, targets) = targets?;
         let (mask_path, masks) = masks?;
         let samples = Samples {
             grid: self.manifest.grid,
@@ -983,6 +983,9 @@ impl Dataset {
             masks: masks.into_mask(&mask_path)?,
             source: Some(self.manifest.source_id()),
         };
+        let per = self.manifest.grid.field_len();
+        check_values(&input_path, &samples.inputs, per, &samples.indices)?;
+        check_values(&target_path, &samples.targets, per, &samples.indices)?;
         Ok(samples)
     }
 
@@ -1019,6 +1022,29 @@ impl Dataset {
             start = end;
         }
         Ok(out)
+    }
+}
+
+/// The largest magnitude a dataset's value may have: no displacement (m) or force (N) of an
+/// organ comes near it, a damaged file does.
+const MAX_DATASET_VALUE: f32 = 1e6;
+
+/// Refuses the first of a shard's `values` (`per` of them a sample, drawn as `indices`) that no
+/// dataset holds: one not finite or beyond [`MAX_DATASET_VALUE`], named by file, sample and place.
+fn check_values(path: &Path, values: &[f32], per: usize, indices: &[u64]) -> Result<()> {
+    match values.iter().position(|x| !(x.is_finite() && x.abs() <= MAX_DATASET_VALUE)) {
+        Some(i) => Err(LearnError::manifest(
+            path,
+            format!(
+                "sample {} (draw {}), value {} is {:e}: a dataset holds finite displacements (m) and forces (N) \
+                 within {MAX_DATASET_VALUE:e}: is the file damaged?",
+                i / per,
+                indices[i / per],
+                i % per,
+                values[i]
+            ),
+        )),
+        None => Ok(()),
     }
 }
 

@@ -519,7 +519,8 @@ struct ModelFile {
     training: Option<TrainingInfo>,
 }
 
-const MODEL_FORMAT: &str = "augsim-unet";
+/// The `format` of a U-Net's `model.json`.
+pub(crate) const MODEL_FORMAT: &str = "augsim-unet";
 const MODEL_VERSION: u32 = 1;
 
 /// A trained network with everything needed to use it: configuration, normalisation, the grid

@@ -334,17 +334,6 @@ impl ReducedModel {
     }
 
     /// Whether `json_path` (a `model.json`) holds a reduced-order model.
-    pub fn is_rom_file(json_path: &Path) -> bool {
-        #[derive(Deserialize)]
-        struct Head {
-            format: String,
-        }
-        std::fs::read_to_string(json_path)
-            .ok()
-            .and_then(|t| serde_json::from_str::<Head>(&t).ok())
-            .is_some_and(|h| h.format == ROM_FORMAT)
-    }
-
     /// Saves the model as a directory: `dir/model.json` and its arrays beside it, each file
     /// written atomically.
     pub fn save(&self, dir: &Path) -> Result<()> {

@@ -110,8 +110,10 @@ pub fn read_stl(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
     let binary_size = declared.map(|n| 84 + 50 * n as u128);
     let size_matches = binary_size == Some(bytes.len() as u128);
     let ascii_start = bytes.trim_ascii_start().get(..5).is_some_and(|s| s.eq_ignore_ascii_case(b"solid"));
-    if !size_matches && ascii_start && !bytes.contains(&0) {
-        return read_stl_ascii(path, &String::from_utf8_lossy(&bytes));
+    // Some exporters pad an ASCII STL with NUL bytes to a block size.
+    let text = &bytes[..bytes.iter().rposition(|&b| b != 0).map_or(0, |last| last + 1)];
+    if !size_matches && ascii_start && !text.contains(&0) {
+        return read_stl_ascii(path, &String::from_utf8_lossy(text));
     }
     let (Some(n), Some(size)) = (declared, binary_size) else {
         return Err(parse_error(
@@ -131,6 +133,9 @@ pub fn read_stl(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
                 bytes.len()
             ),
         ));
+    }
+    if n == 0 {
+        return Err(parse_error(path, "a binary STL of no triangles: the surface is empty"));
     }
     let mut merger = Merger::default();
     let mut triangles = Vec::with_capacity(n);
