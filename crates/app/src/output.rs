@@ -358,7 +358,14 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         // The picture is drawn in the organ's frame: cloud, targets and truth moved back.
         let back = outcome.rigid.as_ref().map_or_else(RigidTransform::identity, |r| r.cloud_to_organ);
         let to_organ = |points: &[Point]| -> Vec<Point> { points.iter().map(|&p| back.apply(p)).collect() };
-        let title = format!("{}: TRE mean {:.2} mm (side view)", s.method, s.tre_mean_mm.unwrap_or(f64::NAN));
+        // The picture's own frame's TRE: a sequence's mean over its frames is not what it shows.
+        let errors: Vec<f64> =
+            outcome.targets.iter().zip(&peak.truth).map(|(a, b)| mm(mesh::distance(*a, *b))).collect();
+        let frame = match case.frames.len() {
+            1 => String::new(),
+            n => format!(", frame {} of {n} (the peak)", case.peak_index() + 1),
+        };
+        let title = format!("{}: TRE mean {:.2} mm{frame} (side view)", s.method, mesh::stats::mean(&errors));
         side_view(
             &method_dir.join("registration.png"),
             &title,

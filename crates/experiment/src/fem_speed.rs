@@ -12,6 +12,11 @@ use mesh::stats::median;
 
 use crate::{reference, ExperimentResult, Headline, Name, Progress, Row, Size};
 
+/// Cases above this many dofs are timed at most [`LARGE_RUNS`] times (each solve takes seconds).
+const LARGE_DOFS: usize = 20_000;
+/// Most runs of a case above [`LARGE_DOFS`].
+const LARGE_RUNS: usize = 3;
+
 /// The timings of one case (ms, medians over the runs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CaseTiming {
@@ -295,7 +300,7 @@ pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> R
         cases.push(liver(50000, 1, Law::Svk, Formulation::Fbar, 1.0)?);
     }
     let opts = SolverOptions::default();
-    let runs_of = |case: &Case| if case.problem.num_dofs() > 20_000 { runs.min(3) } else { runs };
+    let runs_of = |case: &Case| if case.problem.num_dofs() > LARGE_DOFS { runs.min(LARGE_RUNS) } else { runs };
     // New solvers (setup and first solve), then repeated solves from rest on the last one; the
     // cases take turns in both.
     let mut timed = Vec::new();
@@ -433,7 +438,7 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
     plot::bar_chart(
         &dir.join("timings.png"),
         &plot::PlotSpec {
-            title: format!("Static solves ({runs} runs, medians)"),
+            title: format!("Static solves ({runs} runs, {} above {LARGE_DOFS} dofs; medians)", runs.min(LARGE_RUNS)),
             x_label: String::new(),
             y_label: "ms".into(),
             log_y: false,
@@ -476,7 +481,7 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
         figures: vec!["timings.png".into()],
         page_figures: Vec::new(),
         notes: vec![
-            format!("{runs} runs per case on this machine, medians; 'setup': building a solver (sparse pattern, ordering, symbolic analysis, buffers) and 'first': its first solve from rest, medians over as many new solvers; 'from rest': repeated solves with the rest tangent's factor kept, the cases taking turns; 'frame': one frame of a load varying by {:.0} % per frame, warm-started. {}", 100.0 * FRAME_LOAD_STEP, reference::note(reference)),
+            format!("{runs} runs per case on this machine ({} for the cases above {LARGE_DOFS} dofs), medians; 'setup': building a solver (sparse pattern, ordering, symbolic analysis, buffers) and 'first': its first solve from rest, medians over as many new solvers; 'from rest': repeated solves with the rest tangent's factor kept, the cases taking turns; 'frame': one frame of a load varying by {:.0} % per frame, warm-started. {}", runs.min(LARGE_RUNS), 100.0 * FRAME_LOAD_STEP, reference::note(reference)),
             format!(
                 "Liver: the built-in phantom, E = {} Pa, ν = {}, {} Pa on one lobe. The published times are for a \
                  ~5k-tet liver on the authors' machine.",
