@@ -115,7 +115,7 @@ fn bad_clouds_and_targets_are_clear_errors() {
     let e = organ.locate(&[[0.0; 3], [5.0, 5.0, 5.0]], "target").unwrap_err().to_string();
     assert!(e.contains("target 1") && e.contains("outside"), "{e}");
     let e = organ.locate(&[[0.0; 3], [f64::NAN; 3]], "target").unwrap_err().to_string();
-    assert_eq!(e, "target 1 has a non-finite coordinate [NaN, NaN, NaN]");
+    assert_eq!(e, "target 1 has a non-finite coordinate: x = NaN");
     let e = register_frame(&organ, &mut deformer, &[[0.0; 3]], Some(&[0.0; 5]), &opts).unwrap_err().to_string();
     assert!(e.contains("start displacement"), "{e}");
 }
