@@ -225,7 +225,17 @@ pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
     let (scenario, model) = (network.scenario, network.model);
     // The mesh its samples were solved and encoded on: quadratic when the scenario's material
     // asks for T10 (the mid-edge nodes are network inputs too).
-    let mesh = scenario.generator(network.dir)?.mesh().clone();
+    let generator = scenario.generator(network.dir)?;
+    if model.grid() != generator.grid() {
+        bail!(
+            "the model was trained on a {} grid, scenario {} encodes its organ on {}: give the model's own dataset \
+             scenario",
+            model.grid(),
+            scenario.name,
+            generator.grid()
+        );
+    }
+    let mesh = generator.mesh().clone();
     let (inputs, normal) = match &scenario.dataset.input {
         Input::Displacement { nodes, normal, .. } => (nodes.select(&mesh)?, *normal),
         Input::Force => {

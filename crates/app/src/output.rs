@@ -15,7 +15,6 @@ use mesh::io::points::{write_markups_json, LabelledPoints};
 use mesh::io::{csv_field, write_atomic_bytes, write_surface_in_frame, Field, Frame, FrameChange};
 use mesh::length::{mm, LengthUnit};
 use mesh::{Mesh, Point};
-use register::cloud::write_csv;
 use register::{FrameOutcome, Organ, Registration, RigidResult, RigidTransform, Summary};
 use scenario::registration::slug;
 use serde::Serialize;
@@ -315,16 +314,21 @@ pub fn write_deformed_surface(path: &Path, surface: &mesh::TriSurface, frame: Op
 
 /// Writes a synthetic case's files into `dir`: cloud.csv and truth.csv (of the peak frame),
 /// targets_rest.csv and, for a case of several frames, clouds/cloud_NNNN.csv and
-/// truths/truth_NNNN.csv of every frame (m).
+/// truths/truth_NNNN.csv of every frame, in metres, which their headers name (`x_m, y_m, z_m`).
 pub fn write_case(dir: &Path, case: &SyntheticCase) -> Result<()> {
+    let write = |path: PathBuf, points: &[Point]| -> Result<()> {
+        let mut labelled = LabelledPoints::new(points.to_vec());
+        labelled.unit = Some(LengthUnit::Metre);
+        Ok(mesh::io::points::write_points(path, &labelled)?)
+    };
     let peak = case.peak();
-    write_csv(&dir.join("cloud.csv"), &peak.cloud)?;
-    write_csv(&dir.join("targets_rest.csv"), &case.targets)?;
-    write_csv(&dir.join("truth.csv"), &peak.truth)?;
+    write(dir.join("cloud.csv"), &peak.cloud)?;
+    write(dir.join("targets_rest.csv"), &case.targets)?;
+    write(dir.join("truth.csv"), &peak.truth)?;
     if case.frames.len() > 1 {
         for (k, frame) in case.frames.iter().enumerate() {
-            write_csv(&dir.join("clouds").join(format!("cloud_{k:04}.csv")), &frame.cloud)?;
-            write_csv(&dir.join("truths").join(format!("truth_{k:04}.csv")), &frame.truth)?;
+            write(dir.join("clouds").join(format!("cloud_{k:04}.csv")), &frame.cloud)?;
+            write(dir.join("truths").join(format!("truth_{k:04}.csv")), &frame.truth)?;
         }
     }
     Ok(())

@@ -343,4 +343,9 @@ fn the_network_of_a_t10_scenario_deforms_the_quadratic_mesh() {
     let expected = linear.mesh().quadratic().unwrap();
     assert_eq!(quadratic.mesh().nodes, expected.nodes);
     assert!(quadratic.mesh().region("visible").unwrap().len() > 2 * linear.mesh().region("visible").unwrap().len());
+    // A scenario that encodes on another grid than the model's is no scenario of the model's.
+    scenario.dataset.grid = Some([32, 32, 16]);
+    let n = augsim_app::case::Network { model: &model, scenario: &scenario, dir: std::path::Path::new("") };
+    let e = augsim_app::case::network_model(&n).err().unwrap().to_string();
+    assert!(e.contains("trained on a 24x24x16 grid, scenario liver_ar encodes its organ on 32x32x16"), "{e}");
 }

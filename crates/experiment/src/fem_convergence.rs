@@ -53,8 +53,8 @@ pub struct ConvergencePoint {
     pub value: f64,
     /// Relative error against the problem's reference.
     pub error: f64,
-    /// Whether the solve entered the reference (its error is then not independent of it, and it
-    /// is no candidate for the cheapest element).
+    /// Whether the solve is not independent of the reference ([`shares_reference`]): its error
+    /// is then no measure of its own, and it is no candidate for the cheapest element.
     #[serde(default)]
     pub in_reference: bool,
 }
@@ -219,9 +219,10 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
             "Times: a new solver's setup and first solve (ms), on this machine, one run each. {}",
             reference::note(Some(reference_ms))
         ),
-        "Solves that enter a reference (the three finest T10 solves of a problem, or the finest alone where they do \
-         not converge at an order of at least 1) are marked; their errors are not independent of it, and they are \
-         no candidates for the cheapest element."
+        "Solves not independent of a reference are marked, and are no candidates for the cheapest element: the \
+         three finest T10 solves its Richardson extrapolation is made of, or, where those do not converge at an \
+         order of at least 1 and the finest T10 is the reference, every solve on that finest mesh (they share its \
+         geometry)."
             .to_string(),
     ];
     let mut values = serde_json::Map::new();
@@ -268,16 +269,17 @@ fn cantilever_study(
     let n = t10.len();
     let h = [n - 3, n - 2, n - 1].map(|i| 1.0 / levels[i] as f64);
     let last = [t10[n - 3], t10[n - 2], t10[n - 1]];
-    let (value, source) = match richardson(last, h) {
-        Some((p, c)) => (last[2] + c * (last[2] - last[1]), format!("Richardson extrapolation of T10, order {p:.2}")),
-        None => (last[2], "finest T10 mesh (no monotone convergence of order ≥ 1: no extrapolation)".into()),
+    let (value, source, extrapolated) = match richardson(last, h) {
+        Some((p, c)) => {
+            (last[2] + c * (last[2] - last[1]), format!("Richardson extrapolation of T10, order {p:.2}"), true)
+        }
+        None => (last[2], "finest T10 mesh (no monotone convergence of order ≥ 1: no extrapolation)".into(), false),
     };
     let source = format!(
         "{source}; Timoshenko beam theory {:.4e} m ({:+.2} %)",
         verification::timoshenko_deflection(poisson),
         100.0 * (verification::timoshenko_deflection(poisson) / value - 1.0)
     );
-    let in_reference = |e: Element, k: usize| e == ELEMENTS[2] && k >= n - 3;
     points.extend(solved.into_iter().enumerate().map(|(i, (e, mesh, v, dofs, ms))| ConvergencePoint {
         problem: problem.clone(),
         element: e.label(),
@@ -286,7 +288,7 @@ fn cantilever_study(
         ms,
         value: v,
         error: (v / value - 1.0).abs(),
-        in_reference: in_reference(e, i % levels.len()),
+        in_reference: shares_reference(e, i % levels.len(), n, extrapolated),
     }));
     Ok(Reference { problem, value, source })
 }
@@ -309,17 +311,18 @@ fn phantom_study(sizes: &[usize], progress: Progress, points: &mut Vec<Convergen
     let n = sizes.len();
     let t10: Vec<&Vec<Point>> = solved.iter().filter(|s| s.0 == ELEMENTS[2]).map(|s| &s.2).collect();
     let h = [n - 3, n - 2, n - 1].map(|i| (meshes[i].cells.len() as f64).powf(-1.0 / 3.0));
-    let (reference, entering, how) = match richardson([n - 3, n - 2, n - 1].map(|i| rms(t10[i])), h) {
+    let (reference, extrapolated, how) = match richardson([n - 3, n - 2, n - 1].map(|i| rms(t10[i])), h) {
         Some((p, c)) => {
             let field = t10[n - 1].iter().zip(t10[n - 2]).map(|(f, m)| std::array::from_fn(|d| f[d] + c * (f[d] - m[d])));
             let meshes = format!("{}, {} and {} tetrahedra", sizes[n - 3], sizes[n - 2], sizes[n - 1]);
-            (field.collect::<Vec<Point>>(), &sizes[n - 3..], format!("Richardson extrapolation of T10 on {meshes} (h ∝ cells^-1/3), order {p:.2}, at each probe"))
+            (field.collect::<Vec<Point>>(), true, format!("Richardson extrapolation of T10 on {meshes} (h ∝ cells^-1/3), order {p:.2}, at each probe"))
         }
-        None => (t10[n - 1].clone(), &sizes[n - 1..], format!("T10 on the finest phantom ({} tetrahedra; no monotone convergence of order ≥ 1 on the three finest: no extrapolation)", sizes[n - 1])),
+        None => (t10[n - 1].clone(), false, format!("T10 on the finest phantom ({} tetrahedra; no monotone convergence of order ≥ 1 on the three finest: no extrapolation)", sizes[n - 1])),
     };
     let scale = rms(&reference);
     let source = format!("{how}; RMS displacement at {} probes 5 mm or more inside", probe_points.len());
     for (e, tets, at, dofs, ms) in solved {
+        let level = sizes.iter().position(|&t| t == tets).expect("a size of the study");
         let diff: Vec<Point> = at.iter().zip(&reference).map(|(a, r)| mesh::sub(*a, *r)).collect();
         points.push(ConvergencePoint {
             problem: problem.clone(),
@@ -329,13 +332,26 @@ fn phantom_study(sizes: &[usize], progress: Progress, points: &mut Vec<Convergen
             ms,
             value: rms(&at),
             error: rms(&diff) / scale,
-            in_reference: e == ELEMENTS[2] && entering.contains(&tets),
+            in_reference: shares_reference(e, level, n, extrapolated),
         });
     }
     Ok(Reference { problem, value: scale, source })
 }
 
-/// The cheapest solve (not entering the reference) within 1 % and within 5 % on each problem.
+/// Whether a solve of `element` on the mesh of refinement `level` (0-based, coarse to fine, of
+/// `n`) is not independent of its problem's reference: a T10 solve that entered the Richardson
+/// extrapolation (the three finest), or, where the reference is the finest T10 alone
+/// (`extrapolated` false), any solve on that finest mesh (the same geometry: its error would
+/// count only the element's difference on it).
+fn shares_reference(element: Element, level: usize, n: usize, extrapolated: bool) -> bool {
+    if extrapolated {
+        element == ELEMENTS[2] && level + 3 >= n
+    } else {
+        level + 1 == n
+    }
+}
+
+/// The cheapest solve (not sharing the reference) within 1 % and within 5 % on each problem.
 fn cheapest(problems: &[String], points: &[ConvergencePoint]) -> Vec<Cheapest> {
     let mut cheapest = Vec::new();
     for p in problems {
@@ -440,10 +456,21 @@ fn plot_errors(
 
 #[cfg(test)]
 mod tests {
-    use super::richardson;
+    use super::{richardson, shares_reference, ELEMENTS};
 
     /// Values e(h) = 1 + a hᵖ on unequal mesh sizes: the order and the limit are found; values that
     /// do not converge monotonically, or converge slower than first order, are not extrapolated.
+    /// The solves that are no measure of their own: the T10 solves an extrapolation is made of,
+    /// or every solve on the mesh of a reference that is that mesh's T10 alone.
+    #[test]
+    fn solves_sharing_the_reference_are_no_candidates() {
+        let (t4, t10, t10_fbar) = (ELEMENTS[0], ELEMENTS[2], ELEMENTS[3]);
+        assert!(shares_reference(t10, 2, 5, true) && shares_reference(t10, 4, 5, true));
+        assert!(!shares_reference(t10, 1, 5, true) && !shares_reference(t10_fbar, 4, 5, true));
+        assert!(shares_reference(t10_fbar, 4, 5, false) && shares_reference(t4, 4, 5, false));
+        assert!(!shares_reference(t10, 3, 5, false) && !shares_reference(t10, 2, 5, false));
+    }
+
     #[test]
     fn richardson_recovers_the_limit_and_order_on_unequal_meshes() {
         let h: [f64; 3] = [0.1, 0.06, 0.045];

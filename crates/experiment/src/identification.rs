@@ -344,8 +344,14 @@ pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<Expe
         Row::new("assessment error, fixed attachment", error("fixed"), ""),
         Row::new("assessment error, free attachment", error("free"), ""),
     ];
-    if let Some(rms) = s.rms_error {
-        rows.push(Row::new("spring stiffness RMS error", fmt(rms, 2, "N/m"), ""));
+    if let (Some(rms), Some(truth)) = (s.rms_error, &s.truth) {
+        // The scale of the error: the reference run's stiffnesses.
+        let (lo, hi) = truth.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &k| (lo.min(k), hi.max(k)));
+        rows.push(Row::new(
+            format!("spring stiffness RMS error (true: {lo:.0} to {hi:.0} N/m)"),
+            fmt(rms, 2, "N/m"),
+            "",
+        ));
     }
     rows.push(filter_time_row(report, reference_ms, ""));
     let mean_error = |label: &str| report.assessment.iter().find(|c| c.label == label).map(|c| c.mean_error);

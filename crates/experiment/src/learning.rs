@@ -550,6 +550,8 @@ pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<
         Row::new("ē, no noise", pair(&clean), "3.03 mm (max 57.1 mm), 10,080 training samples"),
         Row::new("ē, noise σ = 1 mm", pair(&mm), "nearly unchanged"),
         Row::new("ē, noise σ = 1 cm", pair(&cm), "about 10 mm"),
+        // The scale of the motion the errors are of: the published test set's is not given.
+        Row::new("max displacement in the test set", fmt(max_displacement(&t.test) * 1e3, 1, "mm"), ""),
     ];
     let mut values = serde_json::Map::new();
     for (key, r) in [("clean", &clean), ("noise_1mm", &mm), ("noise_1cm", &cm)] {

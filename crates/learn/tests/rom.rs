@@ -116,7 +116,11 @@ fn bad_input_is_refused_with_a_message() {
     assert!(e.contains("expected"), "{e}");
     let mut input = train.input(0).to_vec();
     input[3] = f32::NAN;
-    assert!(model.predict(&input).unwrap_err().to_string().contains("non-finite"));
+    let e = model.predict(&input).unwrap_err().to_string();
+    assert!(e.contains("prediction input value 3 is NaN"), "{e}");
+    input[3] = 1e30;
+    let e = model.predict(&input).unwrap_err().to_string();
+    assert!(e.contains("value 3 is 1e30: inputs are finite displacements (m) or forces (N) within 1e6"), "{e}");
     // Settings that leave nothing to fit.
     for (config, what) in [
         (RomConfig { max_modes: 0, ..RomConfig::default() }, "at least one of its modes"),

@@ -918,6 +918,15 @@ fn counts_beyond_any_file_never_abort() {
     let ply = fs::read_to_string(slicer("tetrahedron_lps_ascii.ply")).unwrap();
     let ply = ply.replace("list uchar int", "list uint int").replacen("\n3 0 2 1", "\n4000000000 0 2 1", 1);
     assert!(message(read_surface(put(d, "list.ply", ply))).contains("face"));
+    // A binary PLY whose header declares the other byte order: its faces' indices come out
+    // impossible, and the message names the likely cause.
+    let ply = fs::read(slicer("tetrahedron_ras.ply")).unwrap();
+    let swapped = String::from_utf8_lossy(&ply).replacen("binary_little_endian", "binary_big_endian   ", 1);
+    let bytes =
+        [&swapped.as_bytes()[..swapped.find("end_header").unwrap()], &ply[swapped.find("end_header").unwrap()..]]
+            .concat();
+    let m = message(read_surface(put(d, "endian.ply", bytes)));
+    assert!(m.contains("byte order and element counts"), "{m}");
     let vtp = fs::read_to_string(slicer("tetrahedron_lps_ascii.vtp")).unwrap();
     let vtp = vtp.replacen("NumberOfPolys=\"4\"", "NumberOfPolys=\"1000000000000\"", 1);
     assert!(message(read_surface(put(d, "polys.vtp", vtp))).contains("offsets"));

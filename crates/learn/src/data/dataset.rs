@@ -26,7 +26,7 @@ use mesh::Point;
 use serde::{Deserialize, Serialize};
 
 use crate::data::chosen::ChosenDraws;
-use crate::data::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
+use crate::data::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT, MAX_FIELD_VALUE};
 use crate::data::npy;
 use crate::{LearnError, Result};
 
@@ -1025,19 +1025,15 @@ impl Dataset {
     }
 }
 
-/// The largest magnitude a dataset's value may have: no displacement (m) or force (N) of an
-/// organ comes near it, a damaged file does.
-const MAX_DATASET_VALUE: f32 = 1e6;
-
 /// Refuses the first of a shard's `values` (`per` of them a sample, drawn as `indices`) that no
-/// dataset holds: one not finite or beyond [`MAX_DATASET_VALUE`], named by file, sample and place.
+/// dataset holds: one not finite or beyond [`MAX_FIELD_VALUE`], named by file, sample and place.
 fn check_values(path: &Path, values: &[f32], per: usize, indices: &[u64]) -> Result<()> {
-    match values.iter().position(|x| !(x.is_finite() && x.abs() <= MAX_DATASET_VALUE)) {
+    match values.iter().position(|x| !(x.is_finite() && x.abs() <= MAX_FIELD_VALUE)) {
         Some(i) => Err(LearnError::manifest(
             path,
             format!(
                 "sample {} (draw {}), value {} is {:e}: a dataset holds finite displacements (m) and forces (N) \
-                 within {MAX_DATASET_VALUE:e}: is the file damaged?",
+                 within {MAX_FIELD_VALUE:e}: is the file damaged?",
                 i / per,
                 indices[i / per],
                 i % per,

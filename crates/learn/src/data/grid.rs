@@ -268,11 +268,19 @@ pub(crate) fn check_prediction_input(input: &[f32], grid: GridShape) -> Result<(
             input.len()
         )));
     }
-    if input.iter().any(|v| !v.is_finite()) {
-        return Err(LearnError::InvalidInput("prediction input has a non-finite value".into()));
+    match input.iter().position(|v| !(v.is_finite() && v.abs() <= MAX_FIELD_VALUE)) {
+        Some(i) => Err(LearnError::InvalidInput(format!(
+            "prediction input value {i} is {:e}: inputs are finite displacements (m) or forces (N) within \
+             {MAX_FIELD_VALUE:e}",
+            input[i]
+        ))),
+        None => Ok(()),
     }
-    Ok(())
 }
+
+/// The largest magnitude a value of a field on the grid (a dataset's, a prediction's input) may
+/// have: no displacement (m) or force (N) of an organ comes near it, a damaged file does.
+pub(crate) const MAX_FIELD_VALUE: f32 = 1e6;
 
 /// A model's grid where it lies in space; an error for a model that does not record it.
 pub(crate) fn placed_model_grid(placement: Option<GridPlacement>, grid: GridShape) -> Result<Grid> {

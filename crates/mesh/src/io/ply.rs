@@ -270,6 +270,11 @@ fn parse(bytes: &[u8], want_faces: bool) -> Result<(Vec<Point>, Vec<Vec<usize>>)
         }
     };
 
+    // What a face's impossible list length or index most often comes from.
+    let cause = match header.format {
+        Format::Ascii => "do the header's element counts match the data?",
+        _ => "do the header's byte order and element counts match the data?",
+    };
     let mut points = Vec::with_capacity(header.elements[vertex_index].count.min(data.len()));
     let mut faces = Vec::new();
     for (e, element) in header.elements.iter().enumerate().take(last + 1) {
@@ -297,7 +302,7 @@ fn parse(bytes: &[u8], want_faces: bool) -> Result<(Vec<Point>, Vec<Vec<usize>>)
                     Property::List { count, item: item_ty, .. } => {
                         let n = reader.value(*count).map_err(|m| context(&reader, m))?;
                         if n < 0.0 || n.fract() != 0.0 {
-                            return Err(context(&reader, format!("bad list length {n}")));
+                            return Err(context(&reader, format!("bad list length {n}: {cause}")));
                         }
                         // Not reserved from `n`: a count the data does not hold fails at its end.
                         let mut list = Vec::new();
@@ -305,7 +310,7 @@ fn parse(bytes: &[u8], want_faces: bool) -> Result<(Vec<Point>, Vec<Vec<usize>>)
                             let v = reader.value(*item_ty).map_err(|m| context(&reader, m))?;
                             if role == Role::Face {
                                 if v < 0.0 {
-                                    return Err(context(&reader, format!("vertex index {v}")));
+                                    return Err(context(&reader, format!("vertex index {v}: {cause}")));
                                 }
                                 list.push(v as usize);
                             }
@@ -320,6 +325,11 @@ fn parse(bytes: &[u8], want_faces: bool) -> Result<(Vec<Point>, Vec<Vec<usize>>)
                 points.push(p);
             }
         }
+    }
+    let beyond =
+        faces.iter().enumerate().find_map(|(f, face)| face.iter().find(|&&v| v >= points.len()).map(|&v| (f, v)));
+    if let Some((f, v)) = beyond {
+        return Err(format!("face {f} refers to vertex {v}, but there are {} vertices: {cause}", points.len()));
     }
     if last + 1 == header.elements.len() && reader.has_more() {
         let element = &header.elements[last];
