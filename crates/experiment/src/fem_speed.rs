@@ -117,7 +117,7 @@ pub fn fbar_ratios(cases: &[CaseTiming]) -> Vec<Ratio> {
 /// co-rotational standard 5k-tet liver (the law and element of the registration's FEM), measured
 /// among the other cases.
 /// Every time is also given as a multiple of it, which varies less than milliseconds from one
-/// host (or day) to another.
+/// host (or day) to another, on a quiet host.
 pub(crate) fn reference_ms(cases: &[CaseTiming]) -> Option<f64> {
     cases.iter().find(|c| c.reference).map(|c| c.median_ms)
 }
@@ -441,7 +441,7 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
             title: format!("Static solves ({runs} runs, {} above {LARGE_DOFS} dofs; medians)", runs.min(LARGE_RUNS)),
             x_label: String::new(),
             y_label: "ms".into(),
-            log_y: false,
+            log_y: true,
         },
         &categories,
         &[series("first solve", |c| c.first_ms), series("from rest", |c| c.median_ms), series("frame", |c| c.frame_ms)],

@@ -198,8 +198,8 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     for path in missing {
         rows.push(Row::new("learned model", format!("skipped: {path} not found (run from the repository)"), ""));
     }
-    let figure = "stream.png";
-    plot_stream(&dir.join(figure), &rest, &streams)?;
+    let (figure, latency_figure) = ("stream.png", "stream_latency.png");
+    plot_stream(&dir.join(figure), &dir.join(latency_figure), &rest, &streams)?;
     let notes = vec![
         format!(
             "Case: the built-in registration case's truth ({} phantom, E = {} kPa, ν = {}, {}) \
@@ -243,33 +243,34 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         seconds: 0.0,
         headlines: Vec::new(),
         rows,
-        figures: vec![figure.into()],
+        figures: vec![figure.into(), latency_figure.into()],
         page_figures: vec![figure.into()],
         notes,
         values,
     })
 }
 
-/// TRE and latency of each frame.
-fn plot_stream(path: &Path, rest: &[f64], streams: &[Stream]) -> Result<()> {
+/// Plots each frame's TRE (`tre_path`, with the markers' own motion: no deformation) and each
+/// frame's latency from sending the cloud to its answer (`latency_path`, on a log axis), a method
+/// in the same colour in both.
+fn plot_stream(tre_path: &Path, latency_path: &Path, rest: &[f64], streams: &[Stream]) -> Result<()> {
     let frames = |v: &[f64]| -> Vec<(f64, f64)> { v.iter().enumerate().map(|(k, &y)| (k as f64 + 1.0, y)).collect() };
-    let mut series = vec![plot::Series { name: "no deformation: TRE (mm)".into(), points: frames(rest), band: None }];
+    let mut tre = vec![plot::Series { name: "no deformation".into(), points: frames(rest), band: None }];
+    // The first colour is no deformation's in both charts.
+    let mut latency = vec![plot::Series::default()];
     for s in streams {
-        series.push(plot::Series { name: format!("{}: TRE (mm)", s.method), points: frames(&s.tre_mm), band: None });
-        let latency: Vec<f64> = s.latency_ms.iter().map(|ms| ms / 10.0).collect();
-        series.push(plot::Series {
-            name: format!("{}: latency (10 ms)", s.method),
-            points: frames(&latency),
-            band: None,
-        });
+        tre.push(plot::Series { name: s.method.clone(), points: frames(&s.tre_mm), band: None });
+        latency.push(plot::Series { name: s.method.clone(), points: frames(&s.latency_ms), band: None });
     }
-    let spec = plot::PlotSpec {
-        title: "Press and release streamed over OpenIGTLink".into(),
+    let title = "Press and release streamed over OpenIGTLink";
+    let spec = |what: &str, y_label: &str, log_y| plot::PlotSpec {
+        title: format!("{title}: {what}"),
         x_label: "frame".into(),
-        y_label: "TRE (mm); latency (units of 10 ms)".into(),
-        log_y: false,
+        y_label: y_label.into(),
+        log_y,
     };
-    plot::line_plot(path, &spec, &series)?;
+    plot::line_plot(tre_path, &spec("TRE", "TRE, mean over the markers (mm)", false), &tre)?;
+    plot::line_plot(latency_path, &spec("latency", "from sending a cloud to its answer (ms)", true), &latency)?;
     Ok(())
 }
 

@@ -201,8 +201,11 @@ pub struct BarSeries {
     pub values: Vec<Option<f64>>,
 }
 
-/// Draws a grouped bar chart (one group per category, one bar per series, from 0) into the PNG
-/// file `path`, written atomically. Every series needs one value per category.
+/// Draws a grouped bar chart (one group per category, one bar per series) into the PNG file
+/// `path`, written atomically: bars from 0, or with `spec.log_y` (positive values spanning a
+/// decade or more) from the decade below the smallest on a logarithmic axis. The chart is 1000
+/// pixels wide, wider when its categories need it (130 pixels each). Every series needs one value
+/// per category.
 pub fn bar_chart(path: &Path, spec: &PlotSpec, categories: &[String], series: &[BarSeries]) -> Result<(), PlotError> {
     let no_data = |message: String| PlotError::NoData { path: path.to_path_buf(), message };
     if let Some(s) = series.iter().find(|s| s.values.len() != categories.len()) {
@@ -220,54 +223,79 @@ pub fn bar_chart(path: &Path, spec: &PlotSpec, categories: &[String], series: &[
     if values.is_empty() || top == bottom {
         return Err(no_data("no finite non-zero value".into()));
     }
-    let pad = 0.08 * (top - bottom);
-    let y = (bottom - if bottom < 0.0 { pad } else { 0.0 })..(top + pad);
-    let n = categories.len() as f64;
-    write_png(path, SIZE, |root| {
-        let err = |e: &dyn std::fmt::Display| e.to_string();
-        let mut chart = new_chart(root, &spec.title, Frame::LARGE, 0.0..n, y.clone())?;
-        let y_span = (y.end - y.start).abs();
-        let label = |v: &f64| {
-            let k = v.floor();
-            if (v - k - 0.5).abs() < 1e-6 && k >= 0.0 && (k as usize) < categories.len() {
-                categories[k as usize].clone()
-            } else {
-                String::new()
-            }
-        };
-        chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .x_labels(2 * categories.len() + 1)
-            .x_desc(&spec.x_label)
-            .y_desc(&spec.y_label)
-            .light_line_style(RGBColor(242, 242, 242))
-            .label_style(("sans-serif", 15))
-            .axis_desc_style(("sans-serif", 17))
-            .x_label_formatter(&label)
-            .y_label_formatter(&|v| tick_label(*v, y_span))
-            .draw()
-            .map_err(|e| err(&e))?;
-        let width = 0.8 / series.len().max(1) as f64;
-        for (i, s) in series.iter().enumerate() {
-            let color = PALETTE[i % PALETTE.len()];
-            let bars = s.values.iter().enumerate().filter_map(|(c, v)| {
-                let v = v.filter(|v| v.is_finite())?;
-                let x0 = c as f64 + 0.1 + i as f64 * width;
-                Some(Rectangle::new([(x0, 0.0), (x0 + 0.92 * width, v)], color.filled()))
-            });
-            let drawn = chart.draw_series(bars).map_err(|e| err(&e))?;
-            if !s.name.is_empty() {
-                drawn
-                    .label(&s.name)
-                    .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 16, y + 6)], color.filled()));
-            }
+    let smallest = values.iter().copied().filter(|v| *v > 0.0).fold(f64::INFINITY, f64::min);
+    let size = (SIZE.0.max(130 * categories.len() as u32), SIZE.1);
+    write_png(path, size, |root| {
+        if spec.log_y && bottom >= 0.0 && top >= 10.0 * smallest {
+            let floor = 10f64.powf(smallest.log10().floor());
+            let y = floor..top * 1.5;
+            let keys = log_ticks(&y);
+            draw_bars(root, spec, categories, series, y.clone().log_scale().with_key_points(keys), y, floor)
+        } else {
+            let pad = 0.08 * (top - bottom);
+            let y = (bottom - if bottom < 0.0 { pad } else { 0.0 })..(top + pad);
+            draw_bars(root, spec, categories, series, y.clone(), y, 0.0)
         }
-        if series.iter().any(|s| !s.name.is_empty()) {
-            draw_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
-        }
-        Ok(())
     })
+}
+
+/// [`bar_chart`]'s drawing on the y coordinate `y_coord` over `y_range`, bars from `base`.
+fn draw_bars<Y>(
+    root: &DrawingArea<BitMapBackend, Shift>,
+    spec: &PlotSpec,
+    categories: &[String],
+    series: &[BarSeries],
+    y_coord: Y,
+    y_range: Range<f64>,
+    base: f64,
+) -> Result<(), String>
+where
+    Y: AsRangedCoord<Value = f64>,
+    Y::CoordDescType: ValueFormatter<f64>,
+{
+    let err = |e: &dyn std::fmt::Display| e.to_string();
+    let n = categories.len() as f64;
+    let mut chart = new_chart(root, &spec.title, Frame::LARGE, 0.0..n, y_coord)?;
+    let y_span = (y_range.end - y_range.start).abs().max(y_range.end.abs());
+    let label = |v: &f64| {
+        let k = v.floor();
+        if (v - k - 0.5).abs() < 1e-6 && k >= 0.0 && (k as usize) < categories.len() {
+            categories[k as usize].clone()
+        } else {
+            String::new()
+        }
+    };
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .x_labels(2 * categories.len() + 1)
+        .x_desc(&spec.x_label)
+        .y_desc(&spec.y_label)
+        .light_line_style(RGBColor(242, 242, 242))
+        .label_style(("sans-serif", 15))
+        .axis_desc_style(("sans-serif", 17))
+        .x_label_formatter(&label)
+        .y_label_formatter(&|v| tick_label(*v, y_span))
+        .draw()
+        .map_err(|e| err(&e))?;
+    let width = 0.8 / series.len().max(1) as f64;
+    for (i, s) in series.iter().enumerate() {
+        let color = PALETTE[i % PALETTE.len()];
+        let bars = s.values.iter().enumerate().filter_map(|(c, v)| {
+            // On a log axis a value that is not positive has no bar.
+            let v = v.filter(|v| v.is_finite() && (base == 0.0 || *v > 0.0))?;
+            let x0 = c as f64 + 0.1 + i as f64 * width;
+            Some(Rectangle::new([(x0, base), (x0 + 0.92 * width, v)], color.filled()))
+        });
+        let drawn = chart.draw_series(bars).map_err(|e| err(&e))?;
+        if !s.name.is_empty() {
+            drawn.label(&s.name).legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 16, y + 6)], color.filled()));
+        }
+    }
+    if series.iter().any(|s| !s.name.is_empty()) {
+        draw_legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
+    }
+    Ok(())
 }
 
 /// Title size and label-area sizes (pixels) of a chart.

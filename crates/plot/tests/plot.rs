@@ -116,4 +116,11 @@ fn bar_charts_are_written_and_mismatched_series_refused() {
     let empty = [BarSeries { name: "ours".into(), values: vec![None, Some(f64::NAN)] }];
     assert!(bar_chart(&dir.path().join("empty.png"), &spec, &categories, &empty).is_err());
     assert!(!dir.path().join("bad.png").exists() && !dir.path().join("empty.png").exists());
+    // Ten categories of times spanning three decades: a log axis, and a chart wide enough for the
+    // labels.
+    let categories: Vec<String> = (0..10).map(|k| format!("case {k} label")).collect();
+    let times = [BarSeries { name: "ms".into(), values: (0..10).map(|k| Some(2.0 * 2f64.powi(k))).collect() }];
+    let log = PlotSpec { log_y: true, ..spec };
+    bar_chart(&path, &log, &categories, &times).unwrap();
+    assert_eq!(png_size(&std::fs::read(&path).unwrap()), (1300, 600));
 }
