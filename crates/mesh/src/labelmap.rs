@@ -361,9 +361,27 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
     if dimension.parse::<usize>().ok() != Some(sizes.len()) {
         return Err(format!("dimension: {dimension}, but 'sizes' gives {} axes", sizes.len()));
     }
-    let (layers, dims) = match sizes[..] {
-        [a, b, c] => (1, [a, b, c]),
-        [l, a, b, c] => (l, [a, b, c]),
+    let directions = nrrd_vectors(header.field("space directions")?)?;
+    let axes: Vec<[f64; 3]> = directions.iter().flatten().copied().collect();
+    if axes.len() != 3 || directions.len() != sizes.len() {
+        return Err(format!(
+            "'space directions' must give one vector per spatial axis (3, and 'none' per other axis of \
+             'sizes', which has {}), got '{}'",
+            sizes.len(),
+            header.field("space directions")?
+        ));
+    }
+    // Layers of segments come first, as 3D Slicer writes them; a last axis of one voxel is no axis.
+    let (layers, dims) = match (sizes.as_slice(), directions.iter().position(Option::is_none)) {
+        (&[a, b, c], _) => (1, [a, b, c]),
+        (&[l, a, b, c], Some(0)) => (l, [a, b, c]),
+        (&[a, b, c, 1], Some(3)) => (1, [a, b, c]),
+        (&[_, _, _, _], Some(k)) => {
+            return Err(format!(
+                "the non-spatial axis ('none' in 'space directions') is axis {k} of 'sizes' {sizes:?}: it must come \
+                 first, as 3D Slicer writes layers of segments"
+            ))
+        }
         _ => return Err(format!("expected a 3D volume (or layers of one), got sizes {sizes:?}")),
     };
     // The bytes of the voxels must be countable (a corrupt header may overflow them).
@@ -381,16 +399,6 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
             ))
         }
     };
-    let directions = nrrd_vectors(header.field("space directions")?)?;
-    let axes: Vec<[f64; 3]> = directions.iter().flatten().copied().collect();
-    if axes.len() != 3 || directions.len() != sizes.len() {
-        return Err(format!(
-            "'space directions' must give one vector per spatial axis (3, and 'none' per other axis of \
-             'sizes', which has {}), got '{}'",
-            sizes.len(),
-            header.field("space directions")?
-        ));
-    }
     let origin = match header.fields.get("space origin") {
         Some(text) => nrrd_vectors(text)?.first().copied().flatten().ok_or("bad 'space origin'")?,
         None => [0.0; 3],
@@ -897,6 +905,18 @@ mod tests {
         assert!(write("i.nrrd", seconds.as_bytes()).contains("space unit \"s\" is not supported"));
         let mixed = header.replace("encoding", "space units: \"mm\" \"m\" \"mm\"\nencoding");
         assert!(write("j.nrrd", mixed.as_bytes()).contains("one unit for the three axes"));
+        // A non-spatial axis last: of one voxel it is no axis; of more it must come first.
+        let last = header
+            .replace("dimension: 3", "dimension: 4")
+            .replace("sizes: 2 2 2", "sizes: 2 2 2 3")
+            .replace("(0,0,1)\n", "(0,0,1) none\n");
+        let e = write("k.nrrd", &[last.as_bytes(), &[0u8; 48]].concat());
+        assert!(e.contains("is axis 3 of 'sizes' [2, 2, 2, 3]: it must come first"), "{e}");
+        let one = last.replace("sizes: 2 2 2 3", "sizes: 2 2 2 1");
+        let voxels: Vec<u8> = (0..8).flat_map(|i| i16::from(i == 5).to_le_bytes()).collect();
+        std::fs::write(dir.path().join("k1.nrrd"), [one.as_bytes(), &voxels].concat()).unwrap();
+        let read = read_labelmap(dir.path().join("k1.nrrd")).unwrap();
+        assert_eq!((read.dims, read.layers, read.labels[5]), ([2, 2, 2], 1, 1));
         // A dimension that is not the number of sizes, a size that is no count.
         let dimension = header.replace("dimension: 3", "dimension: 99");
         assert!(write("j1.nrrd", dimension.as_bytes()).contains("dimension: 99, but 'sizes' gives 3 axes"));

@@ -58,8 +58,10 @@ pub fn check_closed_manifold(surface: &TriSurface) -> Result<SurfaceReport, Mesh
         }
     }
     let used_points: Vec<Point> = surface.vertices.iter().zip(&used).filter(|(_, &u)| u).map(|(p, _)| *p).collect();
-    if let Some(i) = surface.vertices.iter().zip(&used).position(|(p, &u)| u && p.iter().any(|c| !c.is_finite())) {
-        return Err(MeshError::Invalid(format!("vertex {i} has a non-finite coordinate")));
+    // A vertex no organ has (a damaged file) is named before the tolerances it would scale.
+    let vertices = surface.vertices.iter().enumerate().zip(&used).filter(|(_, &u)| u).map(|(v, _)| v);
+    if let Some((i, fault)) = crate::coordinate_fault(vertices, crate::MAX_MEASURED_COORDINATE) {
+        return Err(MeshError::Invalid(format!("vertex {i} {fault}")));
     }
     let (lo, hi) = bounds(&used_points);
     let diag2 = dot(sub(hi, lo), sub(hi, lo));

@@ -253,6 +253,12 @@ fn closedness_checks_report_what_and_where() {
     let err = check_closed_manifold(&open).unwrap_err().to_string();
     assert!(err.contains("surface is open: 3 boundary edges"), "{err}");
 
+    // A vertex of a damaged file is named, not the sound triangles its size makes look degenerate.
+    let mut far = s.clone();
+    far.vertices[16][2] = 1e30;
+    let err = check_closed_manifold(&far).unwrap_err().to_string();
+    assert!(err.contains("vertex 16 lies at") && err.contains("beyond 1e6"), "{err}");
+
     let mut flipped = s.clone();
     flipped.triangles[42].swap(0, 1);
     let err = check_closed_manifold(&flipped).unwrap_err().to_string();
