@@ -508,9 +508,8 @@ impl RegistrationSpec {
             _ => "the targets".into(),
         };
         let LabelledPoints { points, labels, frame, .. } = targets;
-        let mut registration = Registration::new(organ, deformer, method, points, options)
-            .and_then(|r| r.named(labels, frame))
-            .with_context(|| what)?;
+        let mut registration =
+            Registration::new(organ, deformer, method, points, labels, options).with_context(|| what)?.in_frame(frame);
         unplaced.into_iter().for_each(|w| registration.warn(w));
         Ok(registration)
     }

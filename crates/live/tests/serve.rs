@@ -56,7 +56,7 @@ fn cube_registration_with(rigid: Option<register::RigidOptions>) -> Result<Regis
     let stiffness = FemDeformer::default_stiffness(&problem);
     let deformer = FemDeformer::new(problem, stiffness, SolverOptions::default()).map_err(|e| e.to_string())?;
     let options = RegistrationOptions { view: Some([0.0, 0.0, -1.0]), rigid, ..RegistrationOptions::default() };
-    Registration::new(organ, Box::new(deformer), "FEM", vec![centre], options).map_err(|e| e.to_string())
+    Registration::new(organ, Box::new(deformer), "FEM", vec![centre], Vec::new(), options).map_err(|e| e.to_string())
 }
 
 fn status(message: Option<Answer>) -> serde_json::Value {

@@ -159,15 +159,25 @@ impl Organ {
     /// Stencils of points inside the organ (e.g. targets); a point outside, or not finite, is an
     /// error naming it.
     pub fn locate(&self, points: &[Point], what: &str) -> Result<Vec<Stencil>> {
+        self.locate_labelled(points, &[], what)
+    }
+
+    /// [`Organ::locate`] of points with labels (one each, "" for none; or none at all), which an
+    /// error names beside the point's number: "target 2 (`T3`)".
+    fn locate_labelled(&self, points: &[Point], labels: &[String], what: &str) -> Result<Vec<Stencil>> {
+        let name = |i: usize| match labels.get(i).filter(|l| !l.is_empty()) {
+            Some(label) => format!("{what} {i} (`{label}`)"),
+            None => format!("{what} {i}"),
+        };
         if let Some((i, fault)) = mesh::measured_fault(points) {
-            return Err(RegisterError::Invalid(format!("{what} {i} {fault}")));
+            return Err(RegisterError::Invalid(format!("{} {fault}", name(i))));
         }
         points
             .iter()
             .enumerate()
             .map(|(i, &p)| {
                 self.locator.locate(p).map(|l| Stencil::of(&l)).ok_or_else(|| {
-                    RegisterError::Invalid(format!("{what} {i} at {} is outside the organ mesh", point_in_mm(p)))
+                    RegisterError::Invalid(format!("{} at {} is outside the organ mesh", name(i), point_in_mm(p)))
                 })
             })
             .collect()
@@ -184,11 +194,12 @@ pub const LANDMARK_REACH: f64 = 0.15;
 
 impl Organ {
     /// Stencils of the targets in the organ, and warnings about them. A target outside the organ
-    /// is an error, which names the likely mistake ([`likely_mistake`]); a set of targets whose
+    /// is an error, which names it (by its label too, where `labels` give one) and the likely
+    /// mistake ([`likely_mistake`]); a set of targets whose
     /// extent is under [`SMALL_TARGET_EXTENT`] of the organ's is warned about.
-    pub fn locate_targets(&self, targets: &[Point]) -> Result<(Vec<Stencil>, Vec<String>)> {
+    pub fn locate_targets(&self, targets: &[Point], labels: &[String]) -> Result<(Vec<Stencil>, Vec<String>)> {
         let inside = |moved: &[Point]| self.locate(moved, "target").is_ok();
-        let stencils = self.locate(targets, "target").map_err(|e| {
+        let stencils = self.locate_labelled(targets, labels, "target").map_err(|e| {
             let hint = likely_mistake(targets, self.extent(), "every target lies inside", inside);
             RegisterError::Invalid(format!("{e}{hint}"))
         })?;

@@ -98,27 +98,33 @@ pub fn organ_surface(organ: &Organ, u: &[f64], rigid: Option<&RigidResult>) -> m
 
 impl Registration {
     /// The registration of `organ` by `deformer` (`method`: its name in words) of the `targets`
-    /// (rest positions, m) with `options`. An error for invalid options, no target, or a target
-    /// outside the organ (naming the likely unit mistake when the targets fit the organ read in
-    /// the other unit); a set of targets much smaller than the organ is accepted with a warning
-    /// ([`Registration::warnings`]).
+    /// (rest positions, m; `labels`: one each, a targets file's, "" where it gives none, or none
+    /// at all) with `options`. An error for invalid options, no target, a number of labels other
+    /// than the targets', or a target outside the organ (naming it, and the likely unit mistake
+    /// when the targets fit the organ read in the other unit); a set of targets much smaller than
+    /// the organ is accepted with a warning ([`Registration::warnings`]).
     pub fn new(
         organ: Organ,
         deformer: Box<dyn Deformer + Send>,
         method: impl Into<String>,
         targets: Vec<Point>,
+        labels: Vec<String>,
         options: RegistrationOptions,
     ) -> Result<Registration> {
         options.validate()?;
         if targets.is_empty() {
             return Err(RegisterError::Invalid("no targets".into()));
         }
-        let (stencils, warnings) = organ.locate_targets(&targets)?;
+        let labels = if labels.is_empty() { vec![String::new(); targets.len()] } else { labels };
+        if labels.len() != targets.len() {
+            return Err(RegisterError::Invalid(format!("{} labels for {} targets", labels.len(), targets.len())));
+        }
+        let (stencils, warnings) = organ.locate_targets(&targets, &labels)?;
         Ok(Registration {
             organ,
             deformer,
             method: method.into(),
-            labels: vec![String::new(); targets.len()],
+            labels,
             targets,
             frame: None,
             stencils,
@@ -149,19 +155,12 @@ impl Registration {
         &self.targets
     }
 
-    /// The targets named: one label each (a targets file's, "" where it gives none), and the
-    /// frame (RAS or LPS) that the organ and its targets are in, where known; an error for a
-    /// number of labels other than the targets'.
-    pub fn named(mut self, labels: Vec<String>, frame: Option<Frame>) -> Result<Registration> {
-        if labels.len() != self.targets.len() {
-            return Err(RegisterError::Invalid(format!("{} labels for {} targets", labels.len(), self.targets.len())));
-        }
-        self.labels = labels;
-        self.frame = frame;
-        Ok(self)
+    /// The same registration, its organ and targets in `frame` (RAS or LPS), where known.
+    pub fn in_frame(self, frame: Option<Frame>) -> Registration {
+        Registration { frame, ..self }
     }
 
-    /// The targets' labels, in order ("" for a target not named: [`Registration::named`]).
+    /// The targets' labels, in order ("" for a target not named: [`Registration::new`]).
     pub fn target_labels(&self) -> &[String] {
         &self.labels
     }
@@ -405,7 +404,7 @@ mod tests {
     /// A 5 cm cube at the origin, registered by [`Still`] to the given targets (m).
     fn cube_with(targets: Vec<Point>) -> Result<Registration> {
         let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap(), None).unwrap();
-        Registration::new(organ, Box::new(Still), "still", targets, RegistrationOptions::default())
+        Registration::new(organ, Box::new(Still), "still", targets, Vec::new(), RegistrationOptions::default())
     }
 
     #[test]
@@ -414,10 +413,19 @@ mod tests {
         assert!(r.warnings().is_empty(), "{:?}", r.warnings());
         assert_eq!(r.targets().len(), 2);
         assert_eq!((r.target_labels(), r.frame()), (&[String::new(), String::new()][..], None), "not named");
-        let named = r.named(vec!["A".into(), "B".into()], Some(Frame::Lps)).unwrap();
+        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap(), None).unwrap();
+        let labelled = |labels: Vec<String>, targets: Vec<Point>| {
+            let options = RegistrationOptions::default();
+            Registration::new(organ.clone(), Box::new(Still), "still", targets, labels, options)
+        };
+        let two = vec![[0.01, 0.02, 0.03], [0.04, 0.01, 0.02]];
+        let named = labelled(vec!["A".into(), "B".into()], two.clone()).unwrap().in_frame(Some(Frame::Lps));
         assert_eq!((named.target_labels(), named.frame()), (&["A".to_string(), "B".to_string()][..], Some(Frame::Lps)));
-        let one_label = named.named(vec!["A".into()], None).err().expect("a label short").to_string();
+        let one_label = labelled(vec!["A".into()], two.clone()).err().expect("a label short").to_string();
         assert!(one_label.contains("1 labels for 2 targets"), "{one_label}");
+        // A target outside is named by its label too.
+        let outside = labelled(vec!["A".into(), "B".into()], vec![two[0], [0.2, 0.0, 0.0]]).err().expect("outside");
+        assert!(outside.to_string().starts_with("target 1 (`B`) at (200, 0, 0) mm is outside"), "{outside}");
     }
 
     #[test]

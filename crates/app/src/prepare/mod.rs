@@ -370,8 +370,9 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
         100.0 * held_share
     ));
     lines.extend(landmark_warnings.into_iter().map(|w| format!("warning: {w}")));
-    let (_, warnings) =
-        located.locate_targets(&targets).with_context(|| format!("the targets of {}", options.targets.display()))?;
+    let (_, warnings) = located
+        .locate_targets(&targets, &labelled_targets.labels)
+        .with_context(|| format!("the targets of {}", options.targets.display()))?;
     lines.push(format!("targets: {} inside the organ", targets.len()));
     lines.extend(warnings.into_iter().map(|w| format!("warning: {w}")));
     organ.regions.insert("visible".into(), visible);
