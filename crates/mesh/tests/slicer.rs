@@ -275,7 +275,7 @@ fn broken_vtp_and_ply_models_are_refused_naming_the_file_and_what_is_wrong() {
             ),
             "no 'face' element",
         ),
-        (put(d, "face.ply", ply.replace("3 1 2 3", "3 1 2 9")), "refers to point 9"),
+        (put(d, "face.ply", ply.replace("3 1 2 3", "3 1 2 9")), "face 3 refers to vertex 9, but there are 4"),
         (put(d, "short.ply", ply.replace("3 1 2 3 \n", "")), "face 3 of 4"),
         (
             put(d, "float.ply", ply.replace("uchar int vertex_indices", "uchar float vertex_indices")),
