@@ -363,13 +363,12 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         let back = outcome.rigid.as_ref().map_or_else(RigidTransform::identity, |r| r.cloud_to_organ);
         let to_organ = |points: &[Point]| -> Vec<Point> { points.iter().map(|&p| back.apply(p)).collect() };
         // The picture's own frame's TRE: a sequence's mean over its frames is not what it shows.
-        let errors: Vec<f64> =
-            outcome.targets.iter().zip(&peak.truth).map(|(a, b)| mm(mesh::distance(*a, *b))).collect();
+        let tre = outcome.tre_mm().map_or(f64::NAN, |(mean, _)| mean);
         let frame = match case.frames.len() {
             1 => String::new(),
             n => format!(", frame {} of {n} (the peak)", case.peak_index() + 1),
         };
-        let title = format!("{}: TRE mean {:.2} mm{frame} (side view)", s.method, mesh::stats::mean(&errors));
+        let title = format!("{}: TRE mean {tre:.2} mm{frame} (side view)", s.method);
         side_view(
             &method_dir.join("registration.png"),
             &title,

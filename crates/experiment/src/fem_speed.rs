@@ -44,6 +44,9 @@ pub struct CaseTiming {
     pub reference: bool,
     /// Degrees of freedom.
     pub dofs: usize,
+    /// How many times the case was timed (fewer above [`LARGE_DOFS`]).
+    #[serde(default)]
+    pub runs: usize,
     /// Newton iterations of the last solve from rest.
     pub iterations: usize,
     /// Factorisations of the last solve from rest.
@@ -277,7 +280,7 @@ fn frames(solver: &mut StaticSolver, opts: &SolverOptions, u_full: &[f64], runs:
     Ok((median(&mut times), iterations as f64 / runs as f64))
 }
 
-/// Times every case `runs` times (the 50k-tet phantom, when `large`, at most 3 times): as
+/// Times every case `runs` times (those above [`LARGE_DOFS`] at most [`LARGE_RUNS`] times): as
 /// many new solvers (setup and first solve), then as many repeated solves from rest and
 /// frames; calls `each` with each case's timing once all are done. The cases take turns,
 /// so that a burst of load from elsewhere on the machine falls on all of them alike and
@@ -348,6 +351,7 @@ pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> R
             load,
             reference,
             dofs,
+            runs,
             iterations: last.iterations,
             factorizations: last.factorizations,
             assemblies: last.tangent_assemblies,
@@ -365,6 +369,17 @@ pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> R
         out.push(timing);
     }
     Ok(out)
+}
+
+/// How many times the cases were timed, as they were: "5 runs", or "5 runs, 3 for the cases
+/// above 20000 dofs".
+fn runs_text(cases: &[CaseTiming]) -> String {
+    let most = cases.iter().map(|c| c.runs).max().unwrap_or(0);
+    let fewest = cases.iter().map(|c| c.runs).min().unwrap_or(0);
+    match most == fewest {
+        true => format!("{most} runs"),
+        false => format!("{most} runs, {fewest} for the cases above {LARGE_DOFS} dofs"),
+    }
 }
 
 /// `timings.csv`: a line per case, with its counts and times.
@@ -438,7 +453,7 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
     plot::bar_chart(
         &dir.join("timings.png"),
         &plot::PlotSpec {
-            title: format!("Static solves ({runs} runs, {} above {LARGE_DOFS} dofs; medians)", runs.min(LARGE_RUNS)),
+            title: format!("Static solves ({}; medians)", runs_text(&cases)),
             x_label: String::new(),
             y_label: "ms".into(),
             log_y: true,
@@ -481,7 +496,7 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
         figures: vec!["timings.png".into()],
         page_figures: Vec::new(),
         notes: vec![
-            format!("{runs} runs per case on this machine ({} for the cases above {LARGE_DOFS} dofs), medians; 'setup': building a solver (sparse pattern, ordering, symbolic analysis, buffers) and 'first': its first solve from rest, medians over as many new solvers; 'from rest': repeated solves with the rest tangent's factor kept, the cases taking turns; 'frame': one frame of a load varying by {:.0} % per frame, warm-started. {}", runs.min(LARGE_RUNS), 100.0 * FRAME_LOAD_STEP, reference::note(reference)),
+            format!("Each case timed on this machine ({}), medians; 'setup': building a solver (sparse pattern, ordering, symbolic analysis, buffers) and 'first': its first solve from rest, medians over as many new solvers; 'from rest': repeated solves with the rest tangent's factor kept, the cases taking turns; 'frame': one frame of a load varying by {:.0} % per frame, warm-started. {}", runs_text(&cases), 100.0 * FRAME_LOAD_STEP, reference::note(reference)),
             format!(
                 "Liver: the built-in phantom, E = {} Pa, ν = {}, {} Pa on one lobe. The published times are for a \
                  ~5k-tet liver on the authors' machine.",
@@ -526,6 +541,7 @@ mod tests {
             load,
             reference: false,
             dofs: 1,
+            runs: 1,
             iterations: 1,
             factorizations: 1,
             assemblies: 1,

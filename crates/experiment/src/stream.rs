@@ -219,14 +219,15 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
              targets and STRING status). Each cloud is sent when the previous one is answered. A frame warm-started \
              from the previous one runs at most {} iterations for the FEM and {} for the learned models, which match \
              both ways on those frames. The first frame, from rest, runs up to {} iterations for the FEM and {} for \
-             the U-Net (the registration case's budgets), {} for a reduced-order model's shape fit and one more for \
-             the U-Net after it; its latency also holds the building of the client's registration (its organ and \
+             the U-Net (the registration case's budgets), {} for a reduced-order model's shape fit and {} more \
+             for the U-Net after it; its latency also holds the building of the client's registration (its organ and \
              model, made as the client connects), which its server time does not.",
             options.warm_iterations,
             budgets.warm_iterations,
             options.iterations,
             budgets.iterations,
             register::shape::SHAPE_ITERATIONS,
+            app::case::NETWORK_AFTER_FIT,
         ),
         format!(
             "Timings: one run on this machine; the figures are only as quiet as the machine was. {}",

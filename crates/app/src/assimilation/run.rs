@@ -372,7 +372,11 @@ impl Experiment {
             None => last,
         };
         let mut finder = PointFinder::new(&self.base.mesh, locator)?;
-        self.observed = locate_tracks(&tracks.observations, rest, &mut finder)?;
+        // Each file's rest positions, once: located, then checked against the file's motion.
+        let mut at_rest = Vec::new();
+        let observed_rest = tracks.observations.rest_positions(rest)?;
+        self.observed = locate_tracks(&tracks.observations, &observed_rest, rest, &mut finder)?;
+        at_rest.push((&tracks.observations, observed_rest));
         self.measurements = (1..=iterations)
             .map(|k| tracks.observations.frame(k))
             .map(|(z, available)| Frame { z, available })
@@ -386,10 +390,14 @@ impl Experiment {
                 );
                 return Err(AssimilationError::file(&controls.path, None, why));
             }
-            self.controls = control_paths(&mut self.base, controls, rest, iterations)?;
+            let control_rest = controls.rest_positions(rest)?;
+            self.controls = control_paths(&mut self.base, controls, &control_rest, iterations)?;
+            at_rest.push((controls, control_rest));
         }
         if let Some(assessment) = &tracks.assessment {
-            let points = locate_tracks(assessment, rest, &mut finder)?;
+            let assessment_rest = assessment.rest_positions(rest)?;
+            let points = locate_tracks(assessment, &assessment_rest, rest, &mut finder)?;
+            at_rest.push((assessment, assessment_rest));
             let truth =
                 (1..=iterations).map(|k| assessment.frame(k)).map(|(z, available)| Frame { z, available }).collect();
             self.assessment = Some(Assessment { points, truth });
@@ -397,8 +405,8 @@ impl Experiment {
         // Located at rest first: a bad rest position is named before the motion it would seem to make.
         let (lo, hi) = self.base.mesh.bounds();
         let size = mesh::norm(mesh::sub(hi, lo));
-        for t in std::iter::once(&tracks.observations).chain(&tracks.controls).chain(&tracks.assessment) {
-            t.check_motion(&t.rest_positions(rest)?, size, iterations, rest)?;
+        for (t, positions) in &at_rest {
+            t.check_motion(positions, size, iterations, rest)?;
         }
         self.setup.projected = finder.moved.len();
         self.setup.max_projection = finder.moved.iter().copied().fold(0.0, f64::max);
@@ -766,21 +774,21 @@ impl<'a> PointFinder<'a> {
     }
 }
 
-/// The features of a track file located in the mesh at their rest positions; an error names the line that
-/// gives the rest position (in `rest`'s file, or the feature's first row).
+/// The features of a track file located in the mesh at their rest positions (`positions`, from `rest` when
+/// given); an error names the line that gives the rest position (in `rest`'s file, or the feature's first row).
 fn locate_tracks(
     tracks: &Tracks,
+    positions: &[Point],
     rest: Option<&RestPositions>,
     finder: &mut PointFinder,
 ) -> Result<Vec<TrackedPoint>, AssimilationError> {
-    let positions = tracks.rest_positions(rest)?;
     tracks
         .ids
         .iter()
         .zip(positions)
         .enumerate()
         .map(|(j, (id, p))| {
-            finder.locate(p).map_err(|e| {
+            finder.locate(*p).map_err(|e| {
                 let (path, line) = match rest.and_then(|r| Some((&r.path, r.line(id)?))) {
                     Some(given) => given,
                     None => (&tracks.path, tracks.line(j)),
@@ -791,15 +799,15 @@ fn locate_tracks(
         .collect()
 }
 
-/// Control paths of the tool features: each on the surface node nearest its rest position among those not
-/// constrained yet (which it then constrains); displacement = tracked position − rest position, held while occluded.
+/// Control paths of the tool features: each on the surface node nearest its rest position (`positions`) among
+/// those not constrained yet (which it then constrains); displacement = tracked position − rest position, held while
+/// occluded.
 fn control_paths(
     problem: &mut Problem,
     tracks: &Tracks,
-    rest: Option<&RestPositions>,
+    positions: &[Point],
     steps: usize,
 ) -> Result<Vec<ControlPath>, AssimilationError> {
-    let positions = tracks.rest_positions(rest)?;
     let surface = mesh::boundary_nodes(&problem.mesh);
     let mut paths: Vec<ControlPath> = Vec::with_capacity(positions.len());
     for (j, p) in positions.iter().enumerate() {

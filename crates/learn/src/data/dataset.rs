@@ -26,7 +26,7 @@ use mesh::Point;
 use serde::{Deserialize, Serialize};
 
 use crate::data::chosen::ChosenDraws;
-use crate::data::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT, MAX_FIELD_VALUE};
+use crate::data::grid::{unfit_value, GridPlacement, GridShape, CHANNELS, LAYOUT, MAX_FIELD_VALUE};
 use crate::data::npy;
 use crate::{LearnError, Result};
 
@@ -1026,9 +1026,9 @@ impl Dataset {
 }
 
 /// Refuses the first of a shard's `values` (`per` of them a sample, drawn as `indices`) that no
-/// dataset holds: one not finite or beyond [`MAX_FIELD_VALUE`], named by file, sample and place.
+/// dataset holds ([`unfit_value`]), named by file, sample and place.
 fn check_values(path: &Path, values: &[f32], per: usize, indices: &[u64]) -> Result<()> {
-    match values.iter().position(|x| !(x.is_finite() && x.abs() <= MAX_FIELD_VALUE)) {
+    match unfit_value(values) {
         Some(i) => Err(LearnError::manifest(
             path,
             format!(

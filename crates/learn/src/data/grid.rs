@@ -268,7 +268,7 @@ pub(crate) fn check_prediction_input(input: &[f32], grid: GridShape) -> Result<(
             input.len()
         )));
     }
-    match input.iter().position(|v| !(v.is_finite() && v.abs() <= MAX_FIELD_VALUE)) {
+    match unfit_value(input) {
         Some(i) => Err(LearnError::InvalidInput(format!(
             "prediction input value {i} is {:e}: inputs are finite displacements (m) or forces (N) within \
              {MAX_FIELD_VALUE:e}",
@@ -281,6 +281,12 @@ pub(crate) fn check_prediction_input(input: &[f32], grid: GridShape) -> Result<(
 /// The largest magnitude a value of a field on the grid (a dataset's, a prediction's input) may
 /// have: no displacement (m) or force (N) of an organ comes near it, a damaged file does.
 pub(crate) const MAX_FIELD_VALUE: f32 = 1e6;
+
+/// The place of the first of `values` that no field on the grid holds: not finite, or beyond
+/// [`MAX_FIELD_VALUE`].
+pub(crate) fn unfit_value(values: &[f32]) -> Option<usize> {
+    values.iter().position(|v| !(v.is_finite() && v.abs() <= MAX_FIELD_VALUE))
+}
 
 /// A model's grid where it lies in space; an error for a model that does not record it.
 pub(crate) fn placed_model_grid(placement: Option<GridPlacement>, grid: GridShape) -> Result<Grid> {
