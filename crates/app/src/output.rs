@@ -49,6 +49,16 @@ pub fn run_dir(out: Option<&Path>, parent: &Path) -> Result<(PathBuf, bool)> {
     anyhow::bail!("{} holds 99,999 runs: give --out", parent.display())
 }
 
+/// Passes `result` on; when it is a failure and the folder `dir` is the run's own (see
+/// [`run_dir`]), removes the folder again if the run wrote nothing into it.
+pub fn tidy_failed_run<T>(dir: &Path, own: bool, result: Result<T>) -> Result<T> {
+    if result.is_err() && own {
+        // Only an empty folder is removed.
+        let _ = std::fs::remove_dir(dir);
+    }
+    result
+}
+
 /// One frame's line of summary.json.
 #[derive(Clone, Debug, Serialize)]
 pub struct FrameSummary {

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use app::comparison::{run_comparison, LearnedModels};
-use app::output::{run_dir, RunWriter};
+use app::output::{run_dir, tidy_failed_run, RunWriter};
 use app::points::PointInput;
 use app::printout::{frame_line, organ_line, rigid_lines, run_lines};
 use app::registration::RegistrationChoice;
@@ -72,11 +72,7 @@ const RUNS: &str = "out/register";
 pub fn run(args: &RegisterArgs) -> Result<()> {
     let (out, own) = run_dir(args.out.as_deref(), Path::new(RUNS))?;
     let result = if args.demo || args.case.is_some() { demo(args, &out) } else { register(args, &out) };
-    if result.is_err() && own {
-        // Only an empty folder is removed.
-        let _ = std::fs::remove_dir(&out);
-    }
-    result
+    tidy_failed_run(&out, own, result)
 }
 
 /// Registers the cloud (or sequence) of the command line into `out`.

@@ -416,13 +416,27 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
         }
         None => affine,
     };
-    let little = header.fields.get("endian").is_none_or(|e| e == "little");
     let segments = slicer_segments(&header.pairs)?;
-    let raw = match header.field("encoding")? {
-        "ascii" | "text" | "txt" => {
-            let labels = ascii_labels(data, count)?;
-            return Ok(Labelmap { dims, layers, labels, affine, frame, segments });
+    let encoding = header.field("encoding")?;
+    if matches!(encoding, "ascii" | "text" | "txt") {
+        let labels = ascii_labels(data, count)?;
+        return Ok(Labelmap { dims, layers, labels, affine, frame, segments });
+    }
+    // As teem, the reference reader, does: binary data of more than one byte need their byte order.
+    let little = match header.fields.get("endian").map(String::as_str) {
+        Some("little") => true,
+        Some("big") => false,
+        Some(other) => return Err(format!("endian '{other}' is neither little nor big")),
+        None if scalar.size() == 1 => true,
+        None => {
+            return Err(format!(
+                "the header has no 'endian' field, which {}-byte voxels need: add 'endian: little' (or big) \
+                 to the header",
+                scalar.size()
+            ))
         }
+    };
+    let raw = match encoding {
         "raw" => data.to_vec(),
         "gzip" | "gz" => gunzip_if_needed(data.to_vec())?,
         other => return Err(format!("encoding '{other}' is not supported (raw, gzip or ascii)")),
@@ -882,8 +896,18 @@ mod tests {
         assert!(write("b.nii", &[0u8; 400]).contains("not a NIfTI-1 file"));
         assert!(write("c.nrrd", b"P3\n").contains("not a NRRD file"));
         let header = "NRRD0004\ntype: short\ndimension: 3\nsizes: 2 2 2\nspace: left-posterior-superior\n\
-                      space directions: (1,0,0) (0,1,0) (0,0,1)\nencoding: raw\n\n";
+                      space directions: (1,0,0) (0,1,0) (0,0,1)\nendian: little\nencoding: raw\n\n";
         assert!(write("d.nrrd", header.as_bytes()).contains("the data hold 0 bytes, 16 expected"));
+        // Shorts without their byte order would be read in a guessed one: refused, as
+        // teem refuses them; bytes need none.
+        let data = [0u8; 16];
+        let unordered = header.replace("endian: little\n", "");
+        assert!(write("d1.nrrd", &[unordered.as_bytes(), &data].concat()).contains("no 'endian' field"));
+        let odd = header.replace("endian: little", "endian: middle");
+        assert!(write("d2.nrrd", &[odd.as_bytes(), &data].concat()).contains("endian 'middle' is neither"));
+        let bytes = unordered.replace("type: short", "type: uchar");
+        std::fs::write(dir.path().join("d3.nrrd"), [bytes.as_bytes(), &[0, 0, 0, 1, 0, 0, 0, 0]].concat()).unwrap();
+        assert_eq!(read_labelmap(dir.path().join("d3.nrrd")).unwrap().labels, [0, 0, 0, 1, 0, 0, 0, 0]);
         let zeros = [header.as_bytes(), &[0u8; 16]].concat();
         assert!(write("e.nrrd", &zeros).contains("empty"));
         // Sizes one slice short of the data (2 × 2 shorts more) would crop the organ: refused. A few

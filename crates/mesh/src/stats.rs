@@ -1,20 +1,25 @@
 //! Small statistics shared by the crates (the one median, mean and maximum).
 
-/// The median of `values`, reordering them: the element of rank `n / 2` (0-based) in `f64::total_cmp` order,
-/// i.e. the middle value for an odd count and the upper of the two middle values for an even count (no
-/// averaging: the median is always one of the values). NaNs count as the largest values (a negative NaN as the
-/// smallest), as `total_cmp` orders them; an empty list gives NaN. Linear time (`select_nth_unstable_by`).
+/// The median of `values`, reordering them: the middle value in `f64::total_cmp` order for an odd
+/// count, the mean of the two middle values for an even one. NaNs count as the largest values (a
+/// negative NaN as the smallest), as `total_cmp` orders them; an empty list gives NaN. Linear time
+/// (`select_nth_unstable_by`).
 pub fn median(values: &mut [f64]) -> f64 {
     if values.is_empty() {
         return f64::NAN;
     }
     let mid = values.len() / 2;
-    *values.select_nth_unstable_by(mid, f64::total_cmp).1
+    let odd = values.len() % 2 == 1;
+    let (lower, &mut upper, _) = values.select_nth_unstable_by(mid, f64::total_cmp);
+    match lower.iter().copied().max_by(f64::total_cmp) {
+        Some(below) if !odd => 0.5 * (below + upper),
+        _ => upper,
+    }
 }
 
 /// The `q`-th percentile (0–100] of `values` by nearest rank: the smallest value with at least
-/// q % of the values at or below it (the median's rank rule aside, the upper one: `q = 50` of
-/// four values is the second). NaN when there are none.
+/// q % of the values at or below it (`q = 50` of four values is the second, where the median
+/// averages the second and the third). NaN when there are none.
 pub fn percentile(values: &[f64], q: f64) -> f64 {
     if values.is_empty() {
         return f64::NAN;
@@ -57,9 +62,10 @@ mod tests {
     }
 
     #[test]
-    fn the_median_is_the_middle_or_upper_middle_value() {
+    fn the_median_is_the_middle_value_or_the_mean_of_the_two() {
         assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
-        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 3.0, "even count: the upper middle value");
+        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 2.5, "even count: the mean of the middle values");
+        assert_eq!(median(&mut [10.0, 2.0]), 6.0);
         assert_eq!(median(&mut [5.0]), 5.0);
         assert!(median(&mut []).is_nan());
         // NaN counts as the largest value.

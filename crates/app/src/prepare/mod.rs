@@ -183,12 +183,7 @@ pub trait PrepareProgress: learn::Progress {
 /// again when it fails before writing into it.
 pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgress) -> Result<PrepareState> {
     let made = !dir.exists();
-    let result = prepare_steps(options, dir, progress);
-    if result.is_err() && made {
-        // Only an empty folder is removed.
-        let _ = std::fs::remove_dir(dir);
-    }
-    result
+    crate::output::tidy_failed_run(dir, made, prepare_steps(options, dir, progress))
 }
 
 /// [`prepare`]'s steps.

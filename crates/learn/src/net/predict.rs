@@ -118,7 +118,7 @@ impl TrainedModel {
 pub struct Timing {
     /// Timed runs.
     pub runs: usize,
-    /// Median ([`mesh::stats::median`]: the upper of the two middle runs for an even count).
+    /// Median ([`mesh::stats::median`]: the mean of the two middle runs for an even count).
     pub median: f64,
     /// Mean.
     pub mean: f64,
