@@ -263,6 +263,9 @@ def test_roukf_converges_to_the_young_modulus():
     far[3, 1] = 1e300
     with pytest.raises(augsim.AugsimError, match="observed point 3 has the coordinate 1e300.*out of reach"):
         a.step(far)
+    # A step in millimetres to a filter in metres would drive the estimate anywhere: refused.
+    with pytest.raises(augsim.AugsimError, match="observed point 0 lies .* mm from its rest position.*another unit"):
+        a.step(observations[0] * 1000.0)
     assert a.iteration == len(observations)
     with pytest.raises(augsim.AugsimError, match="missing"):
         augsim.Assimilation(os.path.join(ROOT, "missing.toml"))

@@ -84,6 +84,9 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     // Built once here so that a bad model, scenario or targets file stops the command before it
     // listens.
     let first = spec.build()?;
+    if first.options().rigid.is_none() && !(outputs.targets || outputs.organ || outputs.status) {
+        anyhow::bail!("--outputs transform: the transform is the rigid pre-alignment's, sent with --rigid only");
+    }
     let (frame, frame_line) = spec.stream_frame(&first);
     println!("method     {}", first.method());
     println!("organ      {} nodes, {} targets", first.organ().mesh().num_nodes(), first.targets().len());

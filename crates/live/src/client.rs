@@ -21,6 +21,8 @@ pub enum Answer {
     Status(serde_json::Value),
     /// STRING `estimate`: an identification step's estimate, one line of JSON.
     Estimate(serde_json::Value),
+    /// STRING `warning`: messages the server ignores, one line of JSON (`warnings`).
+    Warning(serde_json::Value),
 }
 
 /// The answers to one cloud that [`Client::until_status`] keeps.
@@ -59,6 +61,11 @@ impl Client {
         self.send_bytes(&encode_message(&PointMessage { points: elements.collect() }, device)?)
     }
 
+    /// Closes the sending side: the server answers what was sent, then closes the connection.
+    pub fn finish(&mut self) -> std::result::Result<(), String> {
+        self.stream.shutdown(std::net::Shutdown::Write).map_err(|e| format!("closing: {e}"))
+    }
+
     /// Sends raw bytes (e.g. a malformed message).
     pub fn send_bytes(&mut self, bytes: &[u8]) -> std::result::Result<(), String> {
         self.stream.write_all(bytes).map_err(|e| format!("sending: {e}"))
@@ -84,6 +91,7 @@ impl Client {
                 let json = serde_json::from_str(&text.text).map_err(|e| format!("a STRING is not JSON: {e}"))?;
                 match parsed.device_name.as_str() {
                     "estimate" => Answer::Estimate(json),
+                    "warning" => Answer::Warning(json),
                     _ => Answer::Status(json),
                 }
             }

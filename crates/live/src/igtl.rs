@@ -82,17 +82,21 @@ impl Header {
     }
 
     /// The header from the first [`Header::SIZE`] bytes of `bytes`; an error when there are fewer
-    /// or a name is not UTF-8 text.
+    /// or its version is neither 1 nor 2 (OpenIGTLink 3 sends version 2 headers).
     pub fn decode(bytes: &[u8]) -> Result<Header, String> {
         let bytes: &[u8; Header::SIZE] = bytes
             .get(..Header::SIZE)
             .and_then(|b| b.try_into().ok())
             .ok_or_else(|| format!("a header of {} bytes, {} expected", bytes.len(), Header::SIZE))?;
         let u64_at = |at: usize| u64::from_be_bytes(std::array::from_fn(|k| bytes[at + k]));
+        let version = u16::from_be_bytes([bytes[0], bytes[1]]);
+        if !matches!(version, 1 | 2) {
+            return Err(format!("header version {version}: OpenIGTLink headers are of version 1 or 2"));
+        }
         Ok(Header {
-            version: u16::from_be_bytes([bytes[0], bytes[1]]),
-            type_name: read_name(&bytes[2..2 + TYPE_BYTES], "type")?,
-            device_name: read_name(&bytes[14..14 + DEVICE_BYTES], "device")?,
+            version,
+            type_name: read_name(&bytes[2..2 + TYPE_BYTES]),
+            device_name: read_name(&bytes[14..14 + DEVICE_BYTES]),
             timestamp: u64_at(34),
             body_size: u64_at(42),
             crc: u64_at(50),
@@ -115,10 +119,11 @@ fn write_name(field: &mut [u8], what: &str, name: &str) -> Result<(), String> {
     Ok(())
 }
 
-/// The text of a NUL-padded `field`, up to its first NUL; an error when it is not UTF-8.
-fn read_name(field: &[u8], what: &str) -> Result<String, String> {
+/// The text of a NUL-padded `field`, up to its first NUL. A byte that is not UTF-8 (a Latin-1
+/// name, a character cut at the field's end) becomes U+FFFD: names label, they do not decide.
+fn read_name(field: &[u8]) -> String {
     let end = field.iter().position(|&b| b == 0).unwrap_or(field.len());
-    String::from_utf8(field[..end].to_vec()).map_err(|_| format!("the {what} name is not UTF-8 text"))
+    String::from_utf8_lossy(&field[..end]).into_owned()
 }
 
 /// The generator polynomial of OpenIGTLink's CRC-64 (ECMA-182).
@@ -262,21 +267,18 @@ impl Content for PointMessage {
         }
         let points = content
             .chunks_exact(POINT_BYTES)
-            .enumerate()
-            .map(|(k, bytes)| {
-                let text =
-                    |field: &[u8], what: &str| read_name(field, what).map_err(|e| format!("point {}: {e}", k + 1));
+            .map(|bytes| {
                 let [x, y, z, diameter] = read_f32s(&bytes[100..116]);
-                Ok(PointElement {
-                    name: text(&bytes[..64], "point")?,
-                    group: text(&bytes[64..96], "group")?,
+                PointElement {
+                    name: read_name(&bytes[..64]),
+                    group: read_name(&bytes[64..96]),
                     rgba: [bytes[96], bytes[97], bytes[98], bytes[99]],
                     position: [x, y, z],
                     diameter,
-                    owner: text(&bytes[116..], "owner")?,
-                })
+                    owner: read_name(&bytes[116..]),
+                }
             })
-            .collect::<Result<_, String>>()?;
+            .collect();
         Ok(PointMessage { points })
     }
 }
@@ -467,9 +469,17 @@ mod tests {
         let long = Header { type_name: "TRANSFORMATION".into(), ..header };
         assert!(long.encode().unwrap_err().contains("longer than 12 bytes"));
         assert!(Header::decode(&bytes(HEADER)[..57]).unwrap_err().contains("57 bytes, 58 expected"));
+        // A name that is not UTF-8 is read, its bad byte replaced; a version other than 1 or 2 is
+        // refused.
         let mut not_text = bytes(HEADER);
         not_text[2] = 0xff;
-        assert!(Header::decode(&not_text).unwrap_err().contains("type name is not UTF-8"));
+        assert!(Header::decode(&not_text).unwrap().type_name.starts_with('\u{FFFD}'));
+        for version in [0u16, 3] {
+            let mut other = bytes(HEADER);
+            other[..2].copy_from_slice(&version.to_be_bytes());
+            let e = Header::decode(&other).unwrap_err();
+            assert!(e.contains(&format!("header version {version}: OpenIGTLink headers are of version 1 or 2")), "{e}");
+        }
     }
 
     #[test]
@@ -552,9 +562,11 @@ mod tests {
         let content = |hex: &str| bytes(hex)[Header::SIZE..].to_vec();
         let point = content(POINT);
         assert!(PointMessage::decode(&point[..200]).unwrap_err().contains("not a whole number of 136-byte points"));
+        // A Latin-1 group name (é) is read, its byte replaced: names label, they do not decide.
         let mut not_text = point.clone();
-        not_text[136 + 64] = 0xff;
-        assert!(PointMessage::decode(&not_text).unwrap_err().contains("point 2: the group name is not UTF-8"));
+        not_text[136 + 64] = 0xe9;
+        let read = PointMessage::decode(&not_text).unwrap();
+        assert!(read.points[1].group.starts_with('\u{FFFD}'), "{:?}", read.points[1].group);
         assert!(PointMessage::decode(&[]).unwrap().points.is_empty());
 
         let text = content(STRING);

@@ -7,27 +7,34 @@
 //! - out, per cloud, in this order and as chosen by [`Outputs`]: POINT `targets` (the
 //!   registered targets, in the order given to the server), POLYDATA `organ` (the registered
 //!   surface with its triangles), TRANSFORM `rigid` (the organ-to-cloud transform, when the
-//!   registration options ask for a rigid pre-alignment: estimated on a client's first cloud,
-//!   kept after it; targets and organ are then in the cloud's frame), STRING `status` (one line
+//!   registration options ask for a rigid pre-alignment: estimated on a client's first cloud
+//!   that registers without a warning, kept after it; targets and organ are then in the cloud's
+//!   frame), STRING `status` (one line
 //!   of JSON: `frame`, `ms`,
 //!   `surface_residual`, `plausible` and `warnings` (see `register::plausibility`), `inliers`,
 //!   `points`, `iterations`, and `target_sigma` (the predicted standard deviation σ at each target, for
 //!   the reduced-order model; else null), in the stream's unit; or `frame` and `error`).
 //!
-//! Each client has its own registration, warm-started from its previous frame. A client's clouds
-//! are registered one at a time; a cloud that arrives while one is being registered replaces any
-//! cloud still waiting (the newest wins: the backlog never grows). A malformed, truncated or
-//! oversized message closes that client's connection (after a STRING `status` error where the
-//! connection still allows it); a cloud with no point, too many points or a non-finite
-//! coordinate gets an error status and the stream goes on. Other clients are never affected.
+//! Each client has its own registration, built at its first cloud and warm-started from its
+//! previous frame. A client's clouds are registered one at a time; a cloud that arrives while one
+//! is being registered replaces any cloud still waiting (the newest wins: the backlog never
+//! grows). A malformed or oversized `cloud` or `features`, or a message that stalls mid-way
+//! ([`ServeOptions::stall`]), closes that client's connection (after a STRING `status` error
+//! where the connection still allows it); so does a client that leaves its answers unread. A
+//! cloud with no point, too many points or a non-finite coordinate gets an error status and the
+//! stream goes on. Messages of other types or devices (a navigation system's transforms, images)
+//! are skipped, whatever their size, each type and device said once in a STRING `warning` (one
+//! line of JSON: `warnings`). A client that closes its side after sending still gets the answers
+//! to what it sent. Other clients are never affected; the server's log (standard error) has a
+//! line per connection, per error and per connection closed.
 //!
 //! Identification on the stream, when the server has one ([`ServeOptions::identification`], e.g.
 //! the ROUKF of an assimilation scenario): POINT (or POLYDATA) `features`, the observed
 //! features' positions in the scenario's order (NaN for one not seen), make one filter step each,
 //! in order, answered by a STRING `estimate` (one line of JSON: `step`, `ms` and the
 //! identification's fields, or `step` and `error`). A client's filter is built at its first
-//! `features`; steps waiting beyond [`MAX_PENDING_STEPS`] are refused, so that the backlog stays
-//! bounded.
+//! `features`; steps waiting beyond [`MAX_PENDING_STEPS`] are refused at once, so that the
+//! backlog stays bounded (their refusals may thus arrive before the estimates of earlier steps).
 
 pub mod client;
 pub mod igtl;
@@ -129,6 +136,9 @@ pub struct ServeOptions {
     pub max_message_bytes: u64,
     /// Largest cloud registered (points); a larger one gets an error status.
     pub max_points: usize,
+    /// How long a message may stall between two of its bytes, and an answer wait for a client
+    /// that does not read, before the connection is closed.
+    pub stall: Duration,
     /// Identification on the stream (`features` in, `estimate` out); `None`: `features` are
     /// answered with an error.
     pub identification: Option<Arc<IdentificationFactory>>,
@@ -142,6 +152,7 @@ impl Default for ServeOptions {
             outputs: Outputs::ALL,
             max_message_bytes: 64 << 20,
             max_points: 200_000,
+            stall: Duration::from_secs(10),
             identification: None,
         }
     }
@@ -167,6 +178,11 @@ pub fn first_then_build<T: Send>(
 /// How long the accept loop sleeps between checks of the stop flag.
 const POLL: Duration = Duration::from_millis(20);
 
+/// One line of the server's log (standard error).
+fn log(line: impl std::fmt::Display) {
+    eprintln!("augsim serve: {line}");
+}
+
 /// Serves clients on `listener` until `stop` is set, then closes every connection and returns.
 pub fn serve(
     listener: TcpListener,
@@ -180,14 +196,28 @@ pub fn serve(
     };
     listener.set_nonblocking(true).map_err(io("listening"))?;
     let mut clients: Vec<Client> = Vec::new();
+    // An error accepting a client (out of file descriptors, a connection reset before it was
+    // accepted) is the system's state of the moment: said once, and the clients served go on.
+    let mut last_error = None;
     while !stop.load(Ordering::SeqCst) {
         match listener.accept() {
-            Ok((stream, _)) => match Client::start(stream, factory.clone(), options.clone()) {
-                Ok(client) => clients.push(client),
-                Err(e) => eprintln!("augsim serve: a client could not be set up: {e}"),
+            Ok((stream, peer)) => match Client::start(stream, peer.to_string(), factory.clone(), options.clone()) {
+                Ok(client) => {
+                    log(format_args!("{peer}: connected"));
+                    clients.push(client);
+                    last_error = None;
+                }
+                Err(e) => log(format_args!("{peer}: the connection could not be set up: {e}")),
             },
             Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(POLL),
-            Err(e) => return Err(io("accepting a client")(e)),
+            Err(e) => {
+                let text = e.to_string();
+                if last_error.as_ref() != Some(&text) {
+                    log(format_args!("accepting a client: {text}; still serving the {} connected", clients.len()));
+                }
+                last_error = Some(text);
+                std::thread::sleep(POLL);
+            }
         }
         clients.retain(|c| !c.finished());
     }
@@ -213,23 +243,35 @@ struct Mailbox {
 
 /// What a client's two threads share.
 struct Shared {
+    /// The client's address, for the log.
+    peer: String,
     /// What waits for the registration thread.
     waiting: Mutex<Mailbox>,
     arrived: Condvar,
     /// Set when the connection ends (either side, or the server stops).
     closed: AtomicBool,
+    /// Set when the client has closed its side: what it sent is answered, then the connection ends.
+    input_ended: AtomicBool,
     /// The socket, for writing (answers from the registration thread, errors from the reader).
     writer: Mutex<TcpStream>,
+    /// The socket, to shut it down without waiting for a write under way.
+    socket: TcpStream,
     options: ServeOptions,
 }
 
 impl Shared {
     fn close(&self) {
-        self.closed.store(true, Ordering::SeqCst);
-        if let Ok(w) = self.writer.lock() {
-            let _ = w.shutdown(Shutdown::Both);
+        if !self.closed.swap(true, Ordering::SeqCst) {
+            log(format_args!("{}: connection closed", self.peer));
         }
+        let _ = self.socket.shutdown(Shutdown::Both);
         self.arrived.notify_all();
+    }
+
+    /// Logs an error of this client's and sends it as a status (when the status is an output).
+    fn report(&self, status: &serde_json::Value) {
+        log(format_args!("{}: {}", self.peer, status));
+        self.send_status(status);
     }
 
     fn send<T: Content>(&self, content: &T, device: &str) -> std::result::Result<(), String> {
@@ -257,15 +299,25 @@ impl Shared {
 }
 
 impl Client {
-    fn start(stream: TcpStream, factory: Arc<RegistrationFactory>, options: ServeOptions) -> std::io::Result<Client> {
+    fn start(
+        stream: TcpStream,
+        peer: String,
+        factory: Arc<RegistrationFactory>,
+        options: ServeOptions,
+    ) -> std::io::Result<Client> {
         stream.set_nonblocking(false)?;
         stream.set_nodelay(true)?;
+        stream.set_write_timeout(Some(options.stall))?;
         let reader = stream.try_clone()?;
+        let socket = stream.try_clone()?;
         let shared = Arc::new(Shared {
+            peer,
             waiting: Mutex::new(Mailbox::default()),
             arrived: Condvar::new(),
             closed: AtomicBool::new(false),
+            input_ended: AtomicBool::new(false),
             writer: Mutex::new(stream),
+            socket,
             options,
         });
         let (s1, s2) = (shared.clone(), shared.clone());
@@ -298,7 +350,7 @@ fn read_messages(mut stream: TcpStream, shared: &Shared) {
         points.into_iter().map(|p| frame.point(units.point_to_metres(p.map(f64::from)))).collect()
     };
     while !shared.closed.load(Ordering::SeqCst) {
-        match read_message(&mut stream, shared.options.max_message_bytes) {
+        match read_message(&mut stream, &shared.options) {
             Ok(Incoming::Cloud(points)) => {
                 frame += 1;
                 let cloud = to_metres(points);
@@ -313,6 +365,7 @@ fn read_messages(mut stream: TcpStream, shared: &Shared) {
                 if waiting.features.len() >= MAX_PENDING_STEPS {
                     drop(waiting);
                     let error = format!("{MAX_PENDING_STEPS} steps are already waiting: step refused");
+                    log(format_args!("{}: step {step}: {error}", shared.peer));
                     shared.send_estimate(&serde_json::json!({ "step": step, "error": error }));
                     continue;
                 }
@@ -327,16 +380,21 @@ fn read_messages(mut stream: TcpStream, shared: &Shared) {
                 // Said once per kind and device: a navigation system may send other messages often.
                 if ignored.insert((kind.clone(), device.clone())) {
                     let warning = format!(
-                        "a {kind} message from device '{device}' is ignored: clouds come as POLYDATA or POINT from \
+                        "{kind} messages from device '{device}' are ignored: clouds come as POLYDATA or POINT from \
                          device 'cloud', tracked features from 'features'"
                     );
-                    eprintln!("augsim serve: {warning}");
-                    shared.send_status(&serde_json::json!({ "warnings": [warning] }));
+                    log(format_args!("{}: {warning}", shared.peer));
+                    shared.send_json("warning", &serde_json::json!({ "warnings": [warning] }));
                 }
             }
-            Ok(Incoming::Closed) => break,
+            Ok(Incoming::Closed) => {
+                // What the client sent is still answered; the registration thread then closes.
+                shared.input_ended.store(true, Ordering::SeqCst);
+                shared.arrived.notify_all();
+                return;
+            }
             Err(e) => {
-                shared.send_status(&serde_json::json!({ "error": e }));
+                shared.report(&serde_json::json!({ "error": e }));
                 break;
             }
         }
@@ -356,25 +414,42 @@ enum Incoming {
     Closed,
 }
 
-/// The next message from the stream; an error for a malformed, truncated or oversized one.
-fn read_message(stream: &mut TcpStream, max_body: u64) -> std::result::Result<Incoming, String> {
+/// The next message from the stream; an error for a malformed, truncated, stalled or oversized
+/// one. Between messages the stream may wait for as long as the client likes; within one, no
+/// longer than [`ServeOptions::stall`] between bytes. A message that is not a `cloud` or
+/// `features` is skipped unread, whatever its size.
+fn read_message(stream: &mut TcpStream, options: &ServeOptions) -> std::result::Result<Incoming, String> {
+    let (max_body, stall) = (options.max_message_bytes, options.stall);
     let mut header = [0u8; Header::SIZE];
+    stream.set_read_timeout(None).map_err(|e| format!("reading a message: {e}"))?;
     match stream.read(&mut header[..1]) {
         Ok(0) => return Ok(Incoming::Closed),
         Ok(_) => {}
         Err(e) => return Err(format!("reading a message: {e}")),
     }
-    stream.read_exact(&mut header[1..]).map_err(|e| format!("truncated message header: {e}"))?;
+    stream.set_read_timeout(Some(stall)).map_err(|e| format!("reading a message: {e}"))?;
+    let stalled = |what: &str, e: std::io::Error| match e.kind() {
+        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut => {
+            format!("{what}: nothing more came for {:.1} s", stall.as_secs_f64())
+        }
+        _ => format!("{what}: {e}"),
+    };
+    stream.read_exact(&mut header[1..]).map_err(|e| stalled("truncated message header", e))?;
     let header = Header::decode(&header).map_err(|e| format!("malformed message header: {e}"))?;
+    let (kind, device) = (header.type_name.as_str(), header.device_name.as_str());
+    if !matches!(device, "cloud" | "features") || !matches!(kind, "POLYDATA" | "POINT") {
+        let skipped = std::io::copy(&mut Read::by_ref(stream).take(header.body_size), &mut std::io::sink())
+            .map_err(|e| stalled("truncated message body", e))?;
+        if skipped < header.body_size {
+            return Err(format!("truncated message body: {skipped} of {} bytes", header.body_size));
+        }
+        return Ok(Incoming::Other { kind: kind.to_string(), device: device.to_string() });
+    }
     if header.body_size > max_body {
         return Err(format!("message body of {} bytes exceeds the limit of {max_body}", header.body_size));
     }
     let mut body = vec![0; header.body_size as usize];
-    stream.read_exact(&mut body).map_err(|e| format!("truncated message body: {e}"))?;
-    let (kind, device) = (header.type_name.as_str(), header.device_name.as_str());
-    if !matches!(device, "cloud" | "features") || !matches!(kind, "POLYDATA" | "POINT") {
-        return Ok(Incoming::Other { kind: kind.to_string(), device: device.to_string() });
-    }
+    stream.read_exact(&mut body).map_err(|e| stalled("truncated message body", e))?;
     let points = match kind {
         "POLYDATA" => decode_body::<PolyData>(&header, &body)?.points,
         _ => decode_body::<PointMessage>(&header, &body)?.points.iter().map(|p| p.position).collect(),
@@ -383,16 +458,10 @@ fn read_message(stream: &mut TcpStream, max_body: u64) -> std::result::Result<In
 }
 
 /// Registers the newest cloud, frame after frame, and makes the identification steps, until the
-/// connection ends.
+/// connection ends (or the client has closed its side and everything it sent is answered).
 fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
-    let mut registration = match factory() {
-        Ok(r) => r,
-        Err(e) => {
-            shared.send_status(&serde_json::json!({ "error": format!("setting up the registration: {e}") }));
-            shared.close();
-            return;
-        }
-    };
+    // Built at the first cloud: a client that only connects, or only sends features, costs none.
+    let mut registration: Option<Registration> = None;
     let mut identification: Option<Box<dyn Identification>> = None;
     loop {
         let work = {
@@ -408,13 +477,29 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
                 if let Some((frame, cloud)) = waiting.cloud.take() {
                     break Work::Cloud(frame, cloud);
                 }
+                if shared.input_ended.load(Ordering::SeqCst) {
+                    drop(waiting);
+                    shared.close();
+                    return;
+                }
                 waiting = shared.arrived.wait(waiting).unwrap_or_else(|e| e.into_inner());
             }
         };
         match work {
             Work::Cloud(frame, cloud) => {
-                if let Err(e) = answer(shared, &mut registration, frame, &cloud) {
-                    shared.send_status(&serde_json::json!({ "frame": frame, "error": e }));
+                let registration = match &mut registration {
+                    Some(r) => r,
+                    None => match factory() {
+                        Ok(r) => registration.insert(r),
+                        Err(e) => {
+                            shared.report(&serde_json::json!({ "error": format!("setting up the registration: {e}") }));
+                            shared.close();
+                            return;
+                        }
+                    },
+                };
+                if let Err(e) = answer(shared, registration, frame, &cloud) {
+                    shared.report(&serde_json::json!({ "frame": frame, "error": e }));
                 }
             }
             Work::Step(step, features) => {
@@ -425,7 +510,10 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
                 });
                 let mut answer = match estimate {
                     Ok(fields) => fields,
-                    Err(e) => serde_json::Map::from_iter([("error".to_string(), e.into())]),
+                    Err(e) => {
+                        log(format_args!("{}: step {step}: {e}", shared.peer));
+                        serde_json::Map::from_iter([("error".to_string(), e.into())])
+                    }
                 };
                 answer.insert("step".into(), step.into());
                 shared.send_estimate(&serde_json::Value::Object(answer));

@@ -96,7 +96,8 @@ fn connect(port: u16) -> Client {
 
 #[test]
 fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
-    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, ..ServeOptions::default() });
+    let options = ServeOptions { units: LengthUnit::Millimetre, max_message_bytes: 1 << 20, ..ServeOptions::default() };
+    let server = Server::start(options);
     let port = server.port;
 
     // A cloud in millimetres: the registered target is the pressed centre.
@@ -144,11 +145,19 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
     let s = status(client.receive().unwrap());
     assert!(s["frame"] == 5 && s["error"].as_str().unwrap().contains("millimetres?"), "{s}");
     // Points from another device: said once (the targets of the next cloud come next), ignored.
+    // So is a message of another type, even beyond the size limit of clouds (a CT volume).
     for _ in 0..2 {
         client.send_points("tool", &cloud[..3]).unwrap();
     }
-    let s = status(client.receive().unwrap());
-    assert!(s["warnings"][0].as_str().unwrap().starts_with("a POINT message from device 'tool' is ignored"), "{s}");
+    let volume = vec![0u8; 3 << 20];
+    let header = Header::new("IMAGE", "CT", &volume).encode().unwrap();
+    client.send_bytes(&[&header[..], &volume].concat()).unwrap();
+    for expected in ["POINT messages from device 'tool' are ignored", "IMAGE messages from device 'CT' are ignored"] {
+        match client.receive().unwrap() {
+            Some(Answer::Warning(w)) => assert!(w["warnings"][0].as_str().unwrap().starts_with(expected), "{w}"),
+            other => panic!("expected the warning STRING, got {other:?}"),
+        }
+    }
 
     // Another client sends an oversized message, a third garbage: each is closed alone.
     let mut huge = encode_message(&PolyData { points: cloud.clone(), triangles: Vec::new() }, "cloud").unwrap();
@@ -186,6 +195,28 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
 
     server.stop();
     assert!(client.receive().unwrap().is_none(), "the server closed the connection when it stopped");
+}
+
+/// A client that closes its side after its last cloud still gets the answers; a message that
+/// stalls mid-way closes its connection with an error.
+#[test]
+fn a_half_closed_client_is_answered_and_a_stalled_message_is_dropped() {
+    let stall = Duration::from_millis(300);
+    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, stall, ..ServeOptions::default() });
+    let (cloud, _) = pressed_cloud(300.0);
+    let mut client = connect(server.port);
+    client.send_cloud(cloud.clone()).unwrap();
+    client.finish().unwrap();
+    assert_eq!(client.until_status().unwrap().status["frame"], 1);
+    assert!(client.receive().unwrap().is_none(), "then the connection is closed");
+
+    let mut slow = connect(server.port);
+    let message = encode_message(&PolyData { points: cloud, triangles: Vec::new() }, "cloud").unwrap();
+    slow.send_bytes(&message[..Header::SIZE + 10]).unwrap();
+    let s = status(slow.receive().unwrap());
+    assert!(s["error"].as_str().unwrap().contains("truncated message body: nothing more came for 0.3 s"), "{s}");
+    assert!(slow.receive().unwrap().is_none(), "the connection is closed");
+    server.stop();
 }
 
 /// A stream in the other frame (RAS against an LPS organ): the cloud is brought into the organ's

@@ -116,7 +116,7 @@ pub struct RegistrationOptions {
     pub capture_decay: f64,
     /// Rigid pre-alignment of the cloud to the rest surface (ICP, [`crate::rigid`]) before the
     /// deformable iterations; `None`: the cloud is taken as rigidly aligned. In a sequence it is
-    /// estimated on the first frame and kept for the others.
+    /// estimated on the first frame that registers without a warning and kept for the others.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rigid: Option<RigidOptions>,
     /// The direction the camera looks along, in the organ's frame: cloud points are matched
@@ -208,8 +208,8 @@ pub struct FrameResult {
     pub time: Duration,
 }
 
-/// Registers `organ` to `cloud` (positions only, rigidly aligned: `options.rigid` is not used
-/// here, see [`crate::Registration`]), starting from `start` (a previous frame's
+/// Registers `organ` to `cloud` (positions only, rigidly aligned: `options.rigid` only words the
+/// warnings here, see [`crate::Registration`]), starting from `start` (a previous frame's
 /// displacement) or from rest.
 pub fn register_frame(
     organ: &Organ,
@@ -299,7 +299,7 @@ pub fn register_frame(
     let distances: Vec<f64> = cloud.par_iter().map(|&c| bvh.distance(c)).collect();
     let surface_residual = distances.iter().sum::<f64>() / cloud.len() as f64;
     let far_share = crate::plausibility::far_share(&distances);
-    let warnings = crate::plausibility::warnings(organ, &u, far_share);
+    let warnings = crate::plausibility::warnings(organ, &u, far_share, cloud.len(), options.rigid.is_some());
     Ok(FrameResult {
         u,
         iterations,

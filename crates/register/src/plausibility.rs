@@ -21,6 +21,8 @@ pub const FAR_DISTANCE: f64 = 0.005;
 /// A result leaving more than this share of the cloud's points unfitted is flagged (a camera's
 /// outliers are a few per cent).
 pub const SUSPECT_FAR_SHARE: f64 = 0.2;
+/// A cloud of fewer points is flagged: a few points leave the organ's deformation undetermined.
+pub const FEW_POINTS: usize = 10;
 /// An organ moved by more than this fraction of its extent is flagged.
 pub const SUSPECT_MOTION: f64 = 0.5;
 
@@ -92,15 +94,29 @@ pub fn far_share(distances: &[f64]) -> f64 {
 }
 
 /// What a registered frame says about itself: the warnings (empty when the result is plausible)
-/// given the share of its cloud left unfitted ([`far_share`]) and its displacement `u`.
-pub fn warnings(organ: &Organ, u: &[f64], far_share: f64) -> Vec<String> {
+/// given the share of its cloud left unfitted ([`far_share`]), its displacement `u`, the points
+/// its cloud had and whether it was rigidly pre-aligned.
+pub fn warnings(organ: &Organ, u: &[f64], far_share: f64, points: usize, rigid: bool) -> Vec<String> {
     let size = organ.extent();
     let motion = u.chunks_exact(3).map(|d| mesh::norm([d[0], d[1], d[2]])).fold(0.0, f64::max);
     let mut out = Vec::new();
+    if points < FEW_POINTS {
+        out.push(format!(
+            "the cloud has {points} point(s), fewer than {FEW_POINTS}: so few leave the organ's deformation \
+             undetermined"
+        ));
+    }
     if far_share > SUSPECT_FAR_SHARE {
+        let hint = match rigid {
+            true => {
+                "the rigid pre-alignment may have failed (the next cloud estimates it again), or the cloud is not \
+                     the organ's"
+            }
+            false => "if its frame is not the organ's, pre-align it (--rigid)",
+        };
         out.push(format!(
             "{:.0} % of the cloud stays more than {:.0} mm from the registered surface: the cloud does not fit the \
-             organ. If its frame is not the organ's, pre-align it (--rigid)",
+             organ; {hint}",
             100.0 * far_share,
             FAR_DISTANCE * 1e3
         ));

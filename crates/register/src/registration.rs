@@ -3,7 +3,8 @@
 //! summary of the run.
 //!
 //! With a rigid pre-alignment ([`RegistrationOptions::rigid`]) the cloud is moved onto the organ
-//! (the transform estimated on the first frame, kept for the sequence), registered there, and
+//! (the transform estimated on the first frame that registers without a warning, kept for the
+//! sequence), registered there, and
 //! the registered targets are moved back: targets and errors are in the cloud's frame.
 
 use mesh::io::Frame;
@@ -45,8 +46,9 @@ impl FrameOutcome {
 
 /// A registration under way: an organ, what deforms it, targets inside it and the loop's
 /// settings. Clouds are registered one after the other, each warm-started from the previous one's
-/// displacement; with a rigid pre-alignment in the options, the cloud's pose is estimated on the
-/// first cloud (trimmed ICP to the organ's rest surface) and kept; the targets are carried along
+/// displacement; with a rigid pre-alignment in the options, the cloud's pose is estimated (trimmed
+/// ICP to the organ's rest surface) on each cloud until one registers without a warning, and kept
+/// from then on; the targets are carried along
 /// in the cloud's frame. What `augsim register`, `augsim serve` (one per client), the Python
 /// `Registration` and the experiments run.
 pub struct Registration {
@@ -188,10 +190,15 @@ impl Registration {
     }
 
     /// Registers `cloud` (m, in its own frame), starting from the previous cloud's displacement,
-    /// which it then replaces; a failed cloud leaves the warm start and the pose as they were.
+    /// which it then replaces; a failed cloud leaves the warm start and the pose as they were. The
+    /// pose, when rigid pre-alignment is on, is estimated on each cloud until one registers
+    /// without a warning, and kept from then on.
     pub fn register(&mut self, cloud: &[Point]) -> Result<Tracked> {
         let (rigid, rigid_time) = match (&self.options.rigid, &self.rigid) {
             (Some(rigid_options), None) => {
+                // A cloud in another unit is named as such, before an alignment it would defeat.
+                crate::checks::check_cloud(cloud)?;
+                crate::plausibility::check_extent(&self.organ, cloud)?;
                 let r = rigid_align(self.organ.surface(), cloud, rigid_options)?;
                 let time = r.time;
                 (Some(r), time)
@@ -219,7 +226,9 @@ impl Registration {
         let target_std = self.deformer.uncertainty(&self.targets, &self.stencils).transpose()?;
         registration.time += sigma_start.elapsed();
         self.warm = Some(registration.u.clone());
-        self.rigid = rigid.clone();
+        if registration.warnings.is_empty() {
+            self.rigid = rigid.clone();
+        }
         Ok(Tracked { registration, targets, rigid, target_std })
     }
 
@@ -459,6 +468,39 @@ mod tests {
     fn targets_shifted_away_get_no_unit_hint() {
         let message = cube_with(vec![[0.01, 0.02, 0.33], [0.04, 0.01, 0.32]]).err().expect("outside").to_string();
         assert!(message.contains("outside the organ") && !message.contains("expected"), "{message}");
+    }
+
+    /// With rigid pre-alignment, a cloud that registers with a warning does not fix the pose: the
+    /// next cloud estimates it again, and a plausible cloud's pose is kept. A cloud in another
+    /// unit is named as such before an alignment.
+    #[test]
+    fn the_pose_is_kept_from_the_first_plausible_cloud() {
+        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap(), None).unwrap();
+        let options = RegistrationOptions { rigid: Some(crate::rigid::RigidOptions::default()), ..Default::default() };
+        let mut r =
+            Registration::new(organ.clone(), Box::new(Still), "still", vec![[0.02; 3]], Vec::new(), options).unwrap();
+        // Points spread through a box three times the cube's: no view of it.
+        let spread: Vec<Point> =
+            (0..200).map(|k| [(k % 6) as f64 * 0.03, (k / 6 % 6) as f64 * 0.03, (k / 36) as f64 * 0.03]).collect();
+        let first = r.register(&spread).unwrap();
+        assert!(!first.registration.warnings.is_empty(), "a cloud that does not fit is flagged");
+        assert!(first.registration.warnings.iter().any(|w| w.contains("rigid pre-alignment may have failed")));
+        let shift = [0.003, -0.004, 0.002];
+        let view: Vec<Point> =
+            organ.surface().vertices.iter().map(|p| std::array::from_fn(|d| p[d] + shift[d])).collect();
+        let second = r.register(&view).unwrap();
+        assert!(second.registration.warnings.is_empty(), "{:?}", second.registration.warnings);
+        let pose = second.rigid.clone().expect("a pose").cloud_to_organ;
+        assert!((0..3).all(|d| (pose.apply(shift)[d]).abs() < 1e-5), "the shift undone: {:?}", pose.apply(shift));
+        let third = r.register(&spread).unwrap();
+        assert_eq!(third.rigid.expect("the pose kept").cloud_to_organ, pose, "kept, not estimated again");
+        let millimetres: Vec<Point> = organ.surface().vertices.iter().map(|p| p.map(|c| 1e3 * c)).collect();
+        r.reset();
+        let e = r.register(&millimetres).expect_err("mm refused").to_string();
+        assert!(e.contains("Is it in millimetres?"), "{e}");
+        // Without a pre-alignment, a handful of points is flagged too.
+        let few = cube_with(vec![[0.02; 3]]).unwrap().register(&organ.surface().vertices[..4]).unwrap();
+        assert!(few.registration.warnings.iter().any(|w| w.contains("4 point(s), fewer than 10")), "{few:?}");
     }
 
     #[test]

@@ -12,6 +12,9 @@ pub struct OnlineFilter {
     filter: Roukf<FemModel>,
     names: Vec<String>,
     features: usize,
+    /// The observed points' rest positions (m), and the organ's size (m): no point moves farther.
+    rest: Vec<Point>,
+    size: f64,
 }
 
 /// The filter's estimate after a step.
@@ -32,7 +35,8 @@ impl OnlineFilter {
     pub fn new(experiment: &Experiment) -> Result<OnlineFilter, AssimilationError> {
         let filter = experiment.filter()?;
         let names = filter.config().parameters.iter().map(|p| p.name.clone()).collect();
-        Ok(OnlineFilter { filter, names, features: experiment.setup().features })
+        let (rest, size) = (experiment.observed_points(), experiment.organ_size());
+        Ok(OnlineFilter { filter, names, features: experiment.setup().features, rest, size })
     }
 
     /// The estimated parameters' names, in order (`young`, `k_<node>` for a spring).
@@ -63,6 +67,19 @@ impl OnlineFilter {
                 k / 3,
                 z[k]
             )));
+        }
+        // A step in another unit, or a feature mistaken for another, would drive the estimate
+        // anywhere: refused, the filter left as it was.
+        for (k, (p, rest)) in z.chunks_exact(3).zip(&self.rest).enumerate() {
+            let moved = (0..3).filter(|&d| !p[d].is_nan()).map(|d| (p[d] - rest[d]).powi(2)).sum::<f64>().sqrt();
+            if moved > self.size {
+                return Err(AssimilationError::Setup(format!(
+                    "observed point {k} lies {:.1} mm from its rest position, farther than the organ's size ({:.1} \
+                     mm, its mesh's box diagonal): is the step in another unit?",
+                    mesh::length::mm(moved),
+                    mesh::length::mm(self.size)
+                )));
+            }
         }
         let available: Vec<bool> = z.iter().map(|v| !v.is_nan()).collect();
         let record = self.filter.step_partial(&DVector::from_vec(z), &available).context(|| "a filter step".into())?;

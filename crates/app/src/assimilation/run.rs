@@ -403,8 +403,7 @@ impl Experiment {
             self.assessment = Some(Assessment { points, truth });
         }
         // Located at rest first: a bad rest position is named before the motion it would seem to make.
-        let (lo, hi) = self.base.mesh.bounds();
-        let size = mesh::norm(mesh::sub(hi, lo));
+        let size = self.organ_size();
         for (t, positions) in &at_rest {
             t.check_motion(positions, size, iterations, rest)?;
         }
@@ -448,6 +447,12 @@ impl Experiment {
     pub fn observed_points(&self) -> Vec<Point> {
         let rest = vec![0.0; self.base.num_dofs()];
         self.observed.iter().map(|t| t.position(&self.base.mesh.nodes, &rest)).collect()
+    }
+
+    /// The organ's size: its mesh's box diagonal (m). No feature moves farther than that.
+    pub fn organ_size(&self) -> f64 {
+        let (lo, hi) = self.base.mesh.bounds();
+        mesh::norm(mesh::sub(hi, lo))
     }
 
     /// The scenario's values of the estimated parameters, in filter order (the truth of
