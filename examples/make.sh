@@ -32,7 +32,7 @@ awk -F, 'NR == 1 { print "frame,id,x_mm,y_mm,z_mm"; next } { printf "%s,%s,%.3f,
 # in a scanner's frame (the phantom moved by (35, -60, -180) mm), with two holes, as ASCII STL
 # (every vertex repeated); where it is held (4 points of the phantom's `fixed` region, between the
 # lobes), the camera above it, and the demo's markers, cloud and truth in that frame, all in mm.
-"$augsim" mesh --tets 3000 -o phantom.stl >/dev/null
+"$augsim" mesh --tets 3000 -o phantom.stl >/dev/null  # its boundary surface, in mm
 python3 - "$here" <<'PY'
 import struct, sys
 here, shift = sys.argv[1], (35.0, -60.0, -180.0)
@@ -46,7 +46,7 @@ with open(f"{here}/organ.stl", "w") as f:
             continue
         f.write("facet normal %g %g %g\n outer loop\n" % v[:3])
         for i in range(3):
-            f.write("  vertex %.4f %.4f %.4f\n" % tuple(1000.0 * v[3 + 3 * i + d] + shift[d] for d in range(3)))
+            f.write("  vertex %.4f %.4f %.4f\n" % tuple(v[3 + 3 * i + d] + shift[d] for d in range(3)))
         f.write(" endloop\nendfacet\n")
     f.write("endsolid organ\n")
 def shifted(name, fmt):

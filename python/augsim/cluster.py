@@ -26,6 +26,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 
 
@@ -47,6 +48,19 @@ def generate_shard(augsim, scenario, out, index, count, samples=None, threads=1)
     if run.returncode != 0:
         raise RuntimeError(f"shard {index}/{count} failed:\n{run.stdout}{run.stderr}")
     return directory, time.perf_counter() - start
+
+
+def scenario_problem(augsim, scenario):
+    """What ``augsim`` finds wrong with ``scenario`` (a file it cannot read, no dataset scenario, a
+    mesh that does not load), or None. It runs ``augsim generate`` for no draws, which loads the
+    scenario and its mesh and then stops at the draw count, in a fraction of a second."""
+    with tempfile.TemporaryDirectory(prefix="augsim_cluster_") as tmp:
+        run = subprocess.run([augsim, "generate", scenario, "--samples", "0", "--out", os.path.join(tmp, "probe")],
+                             capture_output=True, text=True)
+    if run.returncode == 0 or "a dataset needs at least one sample" in run.stderr:
+        return None
+    message = (run.stderr.strip() or run.stdout.strip() or f"augsim generate failed ({run.returncode})")
+    return message[len("error: "):] if message.startswith("error: ") else message
 
 
 def make_cluster(args):
@@ -122,8 +136,15 @@ def main(argv=None):
     p.add_argument("--walltime", default="02:00:00", help="wall time per batch job")
     p.add_argument("--keep-parts", action="store_true", help="keep the shard directories after the merge")
     args = p.parse_args(argv)
-    if args.local_workers < 1 or (args.shards is not None and args.shards < 1):
-        p.error("--local-workers and --shards must be at least 1")
+    for name in ("samples", "shards", "local_workers", "jobs", "cores"):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            p.error(f"--{name.replace('_', '-')} must be at least 1, got {value}")
+    # Checked here, once: a bad scenario would otherwise fail in every shard, inside Dask.
+    if shutil.which(args.augsim) is not None:
+        problem = scenario_problem(args.augsim, args.scenario)
+        if problem:
+            p.error(problem)
     print(generate(args), end="")
     return 0
 

@@ -5,9 +5,9 @@ tracker would, and prints what comes back: a way to try a 3D Slicer set-up witho
                             [--units m|mm] [--send-units mm|m] [--out DIR] [--loop N]
 
 ``FRAMES_DIR`` holds one cloud per file, replayed in the order of their names: CSV with an x, y, z
-header (``augsim register --case ... --frames N`` writes such a folder, ``case/clouds``), or
-``.npy`` arrays of shape (n, 3). Their unit is the one a CSV header names (``x_mm``), else ``--units``
-(m by default, as everywhere in augsim);
+header (``augsim register --case ... --frames N`` writes such a folder, ``case/clouds``) or without
+one (x, y, z the first three columns), or ``.npy`` arrays of shape (n, 3). Their unit is the one a
+CSV header names (``x_mm``), else ``--units`` (m by default, as everywhere in augsim);
 each cloud is sent in ``--send-units`` (mm by default, what Slicer sends: give ``augsim serve`` the
 same ``--units``) as a POLYDATA message of device ``cloud``, at most ``--rate`` clouds a second,
 each once the server has answered the one before. The registered targets (POINT ``targets``) and
@@ -34,35 +34,50 @@ _SCALE = {"m": 1.0, "mm": 1e-3}
 
 def _xyz_columns(header):
     """The columns of x, y and z in a CSV header (``x``, ``x_mm`` or ``x_m`` and the same for y, z)
-    and the unit they name (None for plain ``x, y, z``); None when the header has no such columns."""
+    and the unit they name (None for plain ``x, y, z``); None when the header has no such columns,
+    ValueError when they name different units."""
     found = []
     for axis in "xyz":
-        named = [(i, c[2:] or None) for i, c in enumerate(header) if c == axis or (c[:2] == axis + "_" and c[2:] in _SCALE)]
+        named = [(i, c[2:] or None) for i, c in enumerate(header)
+                 if c == axis or (c[:2] == axis + "_" and c[2:] in _SCALE)]
         if len(named) != 1:
             return None
         found.append(named[0])
     units = {u for _, u in found}
-    return ([i for i, _ in found], units.pop()) if len(units) == 1 else None
+    if len(units) != 1:
+        names = ", ".join(header[i] for i, _ in found)
+        raise ValueError(f"columns {names} mix units: name one unit for all three (x_mm, y_mm, z_mm)")
+    return [i for i, _ in found], units.pop()
+
+
+def _is_number(text):
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def read_cloud(path, units="m"):
-    """A cloud file as an (n, 3) float array in metres: ``.npy`` in ``units``, or CSV whose first line
-    is a header: its ``x``, ``y``, ``z`` columns (the first three where it names none), in the unit
-    they name (``x_mm``, ``x_m``), else in ``units``. A file that is not such a cloud raises
-    ValueError."""
+    """A cloud file as an (n, 3) float array in metres: ``.npy`` in ``units``, or CSV: with a header
+    line, its ``x``, ``y``, ``z`` columns (the first three where it names none) in the unit they name
+    (``x_mm``, ``x_m``), else in ``units``; without one (a first line of numbers), its first three
+    columns in ``units``. A file that is not such a cloud raises ValueError."""
     unit = units
     try:
         if path.lower().endswith(".npy"):
-            cloud = np.load(path)
+            cloud = np.asarray(np.load(path), dtype=float)
         else:
             with open(path, encoding="utf-8-sig") as f:
-                header = [c.strip().lower() for c in f.readline().split(",")]
-            columns, named = _xyz_columns(header) or ([0, 1, 2], None)
+                first = [c.strip().lower() for c in f.readline().split(",")]
+            headed = not all(_is_number(c) for c in first)
+            columns, named = (_xyz_columns(first) if headed else None) or ([0, 1, 2], None)
             unit = named or units
-            cloud = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, usecols=columns)
+            cloud = np.loadtxt(path, delimiter=",", skiprows=int(headed), ndmin=2, usecols=columns,
+                               encoding="utf-8-sig")
     except (OSError, ValueError) as e:
         raise ValueError(f"{path}: not a cloud: {e}") from e
-    cloud = np.asarray(cloud, dtype=float) * _SCALE[unit]
+    cloud = cloud * _SCALE[unit]
     if cloud.ndim != 2 or cloud.shape[1] != 3 or len(cloud) == 0:
         raise ValueError(f"{path}: a cloud must be n x 3 points, got shape {cloud.shape}")
     return cloud
@@ -157,11 +172,14 @@ def main(argv=None):
         files = frame_files(args.frames) * max(args.loop, 1)
     except ValueError as e:
         raise SystemExit(str(e))
-    client = connect(args.host, args.port)
     try:
-        records = replay(files, client, args.units, rate=args.rate, out=args.out, unit=args.send_units)
-    finally:
-        client.stop()
+        client = connect(args.host, args.port)
+        try:
+            records = replay(files, client, args.units, rate=args.rate, out=args.out, unit=args.send_units)
+        finally:
+            client.stop()
+    except (ConnectionError, TimeoutError) as e:
+        raise SystemExit(str(e))
     answered = [r for r in records if r["targets"] is not None]
     trips = [r["round_trip_ms"] for r in answered]
     if trips:

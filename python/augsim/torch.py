@@ -38,6 +38,7 @@ Command line: ``python -m augsim.torch MODEL_DIR INPUT.npy OUTPUT.npy``.
 """
 
 import json
+import math
 import os
 import struct
 import sys
@@ -53,6 +54,8 @@ import torch.nn.functional as F
 
 MODEL_FORMAT = "augsim-unet"
 MODEL_VERSION = 1
+# The largest magnitude of a prediction input value that augsim accepts (crates/learn/src/data/grid.rs).
+MAX_FIELD_VALUE = np.float32(1e6)
 
 _DTYPES = {"F32": "<f4", "F64": "<f8", "F16": "<f2", "BF16": "<u2"}
 
@@ -115,6 +118,8 @@ class UNet(nn.Module):
         super().__init__()
         if kernel_size % 2 == 0:
             raise ValueError(f"kernel_size {kernel_size} must be odd")
+        if depth < 0:
+            raise ValueError(f"depth {depth} must be at least 0")
         ch = lambda l: base_channels << l
         k = kernel_size
         self.depth = depth
@@ -143,7 +148,29 @@ class UNet(nn.Module):
 
 
 def _model_json(model_dir):
-    return model_dir if os.path.isfile(model_dir) else os.path.join(model_dir, "model.json")
+    """The model.json of a model directory, or the file given; an error when there is none."""
+    path = os.fspath(model_dir)
+    if os.path.isdir(path):
+        path = os.path.join(path, "model.json")
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"{path}: no such file: give the model directory or its model.json")
+    return path
+
+
+def _read_model_json(path):
+    """The parsed model.json at ``path``; ValueError naming the file when it is not one."""
+    hint = "give the model directory or its model.json"
+    with open(path, "rb") as f:
+        data = f.read()
+    try:
+        info = json.loads(data.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not a model.json (not UTF-8 text): {hint}") from None
+    except ValueError as e:
+        raise ValueError(f"{path}: invalid model JSON: {e}" + ("" if path.endswith(".json") else f": {hint}")) from e
+    if not isinstance(info, dict):
+        raise ValueError(f"{path}: not a model.json (no JSON object): {hint}")
+    return info
 
 
 def load(model_dir, device="cpu"):
@@ -155,33 +182,49 @@ def load(model_dir, device="cpu"):
     ``info`` (the whole model.json). The weights must fit the configuration exactly.
     """
     json_path = _model_json(model_dir)
-    with open(json_path, encoding="utf-8") as f:
-        info = json.load(f)
+    info = _read_model_json(json_path)
     if info.get("format") != MODEL_FORMAT or info.get("version") != MODEL_VERSION:
         raise ValueError(f"{json_path}: format {info.get('format')!r} v{info.get('version')} "
                          f"is not {MODEL_FORMAT!r} v{MODEL_VERSION}")
-    weights = info["weights"]
+    try:
+        weights, unet, norm, grid = info["weights"], info["unet"], info["normalization"], info["grid"]
+    except KeyError as e:
+        raise ValueError(f"{json_path}: no {e} field: not a model.json of `augsim train`") from None
     if os.path.basename(weights) != weights or os.path.isabs(weights):
         raise ValueError(f"{json_path}: weights {weights!r} must be a file name beside the model file")
+    scales = [norm.get(name) if isinstance(norm, dict) else None for name in ("input_scale", "target_scale")]
+    for name, x in zip(("input_scale", "target_scale"), scales):
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not (math.isfinite(x) and x > 0):
+            raise ValueError(f"{json_path}: normalization {name} must be finite and > 0, got {x}")
     config = {"in_channels": 3, "out_channels": 3, "base_channels": 16, "depth": 3, "kernel_size": 3}
-    config.update(info["unet"])
-    net = UNet(**config)
+    config.update(unet)
+    try:
+        net = UNet(**config)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{json_path}: unet {config}: {e}") from e
     tensors = read_safetensors(os.path.join(os.path.dirname(os.path.abspath(json_path)), weights))
     state = {name: torch.from_numpy(a.copy()) for name, a in tensors.items()}
     try:
         net.load_state_dict(state, strict=True)
     except RuntimeError as e:
         raise ValueError(f"{json_path}: weights do not fit the configuration {config}: {e}") from e
-    norm = info["normalization"]
     net.config = config
-    net.input_scale = float(norm["input_scale"])
-    net.target_scale = float(norm["target_scale"])
-    net.grid = tuple(int(n) for n in info["grid"])
+    net.input_scale, net.target_scale = (float(x) for x in scales)
+    net.grid = tuple(int(n) for n in grid)
     net.input_unit = info.get("input_unit")
     net.target_unit = info.get("target_unit")
     net.placement = info.get("placement")
     net.info = info
     return net.to(device).eval()
+
+
+def _rust_e(v):
+    """A float32 as Rust's ``{:e}`` writes it (``2e6``, ``1.5e-3``, ``NaN``, ``-inf``)."""
+    v = np.float32(v)
+    if not np.isfinite(v):
+        return "NaN" if np.isnan(v) else ("inf" if v > 0 else "-inf")
+    mantissa, _, exponent = np.format_float_scientific(v, unique=True, trim="-").partition("e")
+    return f"{mantissa}e{int(exponent)}"
 
 
 def predict(model, grid_input):
@@ -190,18 +233,28 @@ def predict(model, grid_input):
     ``grid_input``: array ``[in_channels, nx, ny, nz]`` (``[channel, x, y, z]``, C order) on the
     model's grid, in the model's input unit; a batch ``[N, in_channels, nx, ny, nz]`` (a dataset
     shard's inputs) also works. Returns float32 ``[out_channels, nx, ny, nz]`` (or
-    ``[N, out_channels, nx, ny, nz]``). Non-finite values and other grids are errors.
+    ``[N, out_channels, nx, ny, nz]``). Other grids, and values that augsim refuses (not finite, or
+    beyond 1e6 in magnitude), raise ValueError.
     """
-    x = np.asarray(grid_input).astype(np.float32)
+    try:
+        with np.errstate(over="ignore"):  # beyond float32's range becomes inf, refused below as augsim does
+            x = np.asarray(grid_input).astype(np.float32)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"prediction input is not an array of numbers: {e}") from e
     single = x.ndim == 4
     if single:
         x = x[None]
     want = (model.config["in_channels"],) + tuple(model.grid)
     if x.ndim != 5 or x.shape[1:] != want:
+        cloud = "; a point cloud [N, 6] is put on the grid by augsim.predict or `augsim predict`" if x.ndim == 2 else ""
         raise ValueError(f"input shape {np.shape(grid_input)}, but the model expects {list(want)} "
-                         f"(or a batch [N, {', '.join(map(str, want))}])")
-    if not np.all(np.isfinite(x)):
-        raise ValueError("prediction input has a non-finite value")
+                         f"(or a batch [N, {', '.join(map(str, want))}]){cloud}")
+    unfit = np.flatnonzero(~(np.abs(x) <= MAX_FIELD_VALUE))  # NaN compares false
+    if len(unfit):
+        sample, i = divmod(int(unfit[0]), x[0].size)
+        where = "" if single else f"sample {sample}: "
+        raise ValueError(f"{where}prediction input value {i} is {_rust_e(x.flat[unfit[0]])}: inputs are finite "
+                         f"displacements (m) or forces (N) within {_rust_e(MAX_FIELD_VALUE)}")
     xn = (x.astype(np.float64) * (1.0 / model.input_scale)).astype(np.float32)
     device = next(model.parameters()).device
     with torch.inference_mode():
@@ -219,9 +272,23 @@ def main(argv=None):
               "  OUTPUT: float32 displacement [3, nx, ny, nz] (m), as `augsim predict` writes",
               file=sys.stderr)
         return 2
-    model = load(argv[0])
-    out = predict(model, np.load(argv[1]))
-    np.save(argv[2], out)
+    try:
+        model = load(argv[0])
+        with open(argv[1], "rb") as f:
+            if f.read(6) != b"\x93NUMPY":
+                raise ValueError(f"{argv[1]}: not a .npy file")
+            f.seek(0)
+            try:
+                out = predict(model, np.load(f))
+            except ValueError as e:
+                raise ValueError(f"{argv[1]}: {e}") from e
+        np.save(argv[2], out)
+    except OSError as e:
+        print(f"error: {e.filename}: {e.strerror}" if e.filename and e.strerror else f"error: {e}", file=sys.stderr)
+        return 1
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
     print(f"wrote {argv[2]}: shape {list(out.shape)}, max |u| component {np.abs(out).max():.4e} m")
     return 0
 

@@ -39,6 +39,10 @@ except ImportError as e:
 
 from .torch import MODEL_FORMAT, MODEL_VERSION, UNet
 
+# augsim's bounds on a U-Net (crates/learn/src/net/unet.rs, UNetConfig::validate).
+MAX_CHANNELS = 4096
+MAX_DEPTH = 6
+
 # Generation index of augsim's first candidate draw: σ-chosen draws (`augsim generate --chosen-by`) lie from here on.
 CANDIDATE_BASE = 1 << 40
 LAYOUT = ("[channel, x, y, z], C order, z fastest: index = ((c*nx + i)*ny + j)*nz + k; shards prepend the "
@@ -51,10 +55,14 @@ LAYOUT = ("[channel, x, y, z], C order, z fastest: index = ((c*nx + i)*ny + j)*n
 def read_dataset(path):
     """The manifest and every sample of an augsim dataset directory, in generation-index order:
     (manifest, indices [N] int64, inputs [N, 3, nx, ny, nz] f32, targets (same), masks [N, nx, ny, nz] u8)."""
-    with open(os.path.join(path, "manifest.json"), encoding="utf-8") as f:
-        manifest = json.load(f)
-    if manifest.get("format") != "augsim-dataset":
-        raise ValueError(f"{path}: not an augsim dataset (format {manifest.get('format')!r})")
+    manifest_path = os.path.join(path, "manifest.json")
+    with open(manifest_path, encoding="utf-8") as f:
+        try:
+            manifest = json.load(f)
+        except ValueError as e:
+            raise ValueError(f"{manifest_path}: not valid JSON: {e}") from e
+    if not isinstance(manifest, dict) or manifest.get("format") != "augsim-dataset":
+        raise ValueError(f"{path}: not an augsim dataset (its manifest.json is not of format 'augsim-dataset')")
     if not manifest.get("complete", False):
         raise ValueError(f"{path}: the dataset is incomplete; finish it with `augsim generate` first")
     parts = [[], [], [], []]
@@ -151,6 +159,8 @@ def split_positions(indices, validation, test):
     test samples: the last `test` uniform draws, the `validation` before them, the rest (σ-chosen draws,
     from CANDIDATE_BASE on, always train)."""
     n, uniform = len(indices), int(np.count_nonzero(np.asarray(indices) < CANDIDATE_BASE))
+    if validation < 0 or test < 0:
+        raise ValueError(f"{validation} validation and {test} test samples: counts must be at least 0")
     if validation + test >= n:
         raise ValueError(f"{validation} validation and {test} test samples leave no training sample out of {n}")
     if validation + test > uniform:
@@ -270,6 +280,7 @@ def model_json(args, manifest, config, scales, best, split):
 
 
 def parse_args(argv):
+    """The parser (for its errors) and the checked arguments."""
     p = argparse.ArgumentParser(prog="python -m augsim.train", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("dataset", help="augsim dataset directory (from `augsim generate`)")
@@ -287,21 +298,35 @@ def parse_args(argv):
     p.add_argument("--validation-samples", type=int, default=None)
     p.add_argument("--train-samples", type=int, default=None, help="train on the first N training samples only")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device", default=None, help="cuda or cpu (default: cuda when available)")
+    p.add_argument("--device", choices=("cuda", "cpu"), default=None, help="cuda or cpu (default: cuda when available)")
     args = p.parse_args(argv)
     for name in ("iterations", "batch", "channels", "validate_every"):
         if getattr(args, name) < 1:
-            p.error(f"--{name.replace('_', '-')} must be at least 1")
+            p.error(f"--{name.replace('_', '-')} must be at least 1, got {getattr(args, name)}")
+    if args.channels > MAX_CHANNELS:
+        p.error(f"--channels must be at most {MAX_CHANNELS} (augsim's U-Net), got {args.channels}")
+    if not 0 <= args.depth <= MAX_DEPTH:
+        p.error(f"--depth must lie in 0..{MAX_DEPTH} (augsim's U-Net), got {args.depth}")
+    for name in ("validation_samples", "test_samples"):
+        if getattr(args, name) is not None and getattr(args, name) < 0:
+            p.error(f"--{name.replace('_', '-')} must be at least 0, got {getattr(args, name)}")
+    if args.train_samples is not None and args.train_samples < 1:
+        p.error(f"--train-samples must be at least 1, got {args.train_samples}")
     if not (args.lr > 0 and (args.final_lr is None or 0 < args.final_lr <= args.lr)):
         p.error("--lr must be > 0 and --final-lr in (0, lr]")
     for name in ("test_fraction", "validation_fraction"):
         if not 0 <= getattr(args, name) < 1:
             p.error(f"--{name.replace('_', '-')} must lie in [0, 1)")
-    return args
+    if args.device == "cuda" and not torch.cuda.is_available():
+        p.error(f"--device cuda: PyTorch {torch.__version__} sees no CUDA GPU here; give --device cpu")
+    if not os.path.isfile(os.path.join(args.dataset, "manifest.json")):
+        what = "no augsim dataset (no manifest.json)" if os.path.isdir(args.dataset) else "not a directory"
+        p.error(f"{args.dataset}: {what}; give a dataset directory from `augsim generate`")
+    return p, args
 
 
 def main(argv=None):
-    args = parse_args(sys.argv[1:] if argv is None else argv)
+    p, args = parse_args(sys.argv[1:] if argv is None else argv)
     distributed = int(os.environ.get("WORLD_SIZE", "1")) > 1
     rank, world = 0, 1
     if distributed:
@@ -314,16 +339,21 @@ def main(argv=None):
         torch.backends.cudnn.benchmark = True  # the grid never changes: pick the fastest convolutions once
     say = print if rank == 0 else (lambda *a, **k: None)
 
-    manifest, indices, inputs, targets, masks = read_dataset(args.dataset)
-    uniform = int(np.count_nonzero(indices < CANDIDATE_BASE))
-    count = lambda fraction, given: given if given is not None else int(round(uniform * fraction))  # noqa: E731
-    train, val, test = split_positions(indices, count(args.validation_fraction, args.validation_samples),
-                                       count(args.test_fraction, args.test_samples))
+    try:
+        manifest, indices, inputs, targets, masks = read_dataset(args.dataset)
+        uniform = int(np.count_nonzero(indices < CANDIDATE_BASE))
+        count = lambda fraction, given: given if given is not None else int(round(uniform * fraction))  # noqa: E731
+        train, val, test = split_positions(indices, count(args.validation_fraction, args.validation_samples),
+                                           count(args.test_fraction, args.test_samples))
+    except KeyError as e:
+        p.error(f"{args.dataset}: manifest.json lacks the field {e}: not a dataset of `augsim generate`")
+    except (OSError, ValueError) as e:
+        p.error(str(e))
     record = {"source": source_id(manifest), "train": index_ranges(indices[train]),
               "validation": index_ranges(indices[val]), "test": index_ranges(indices[test])}
     if args.train_samples is not None:
-        if not 0 < args.train_samples <= len(train):
-            raise SystemExit(f"{args.train_samples} training samples asked, the training split has {len(train)}")
+        if args.train_samples > len(train):
+            p.error(f"--train-samples {args.train_samples}: the training split has {len(train)}")
         train = train[:args.train_samples]
     scales = normalization(inputs[train], targets[train], masks[train])
     say(f"split      {len(train)} training, {len(val)} validation, {len(test)} test samples; grid "

@@ -58,3 +58,18 @@ def test_kept_shards_are_reused_only_for_the_same_draws_and_a_dataset_is_never_o
         f.write("{}")
     with pytest.raises(SystemExit, match="already holds a dataset"):
         cluster.main(["liver_ar", "--samples", "20", "--local-workers", "1", "--out", out, "--augsim", augsim_bin()])
+
+
+def test_what_cannot_be_generated_is_refused_in_one_line_before_any_cluster(tmp_path, capsys):
+    out = str(tmp_path / "ds")
+    for args, message in [(["liver_ar", "--samples", "0"], "--samples must be at least 1, got 0"),
+                          (["liver_ar", "--samples", "-1"], "--samples must be at least 1, got -1"),
+                          ([str(tmp_path / "missing.toml")], "cannot read scenario"),
+                          (["beam"], "a `dataset` scenario is needed here")]:
+        with pytest.raises(SystemExit) as stop:
+            cluster.main([*args, "--out", out, "--augsim", augsim_bin()])
+        assert stop.value.code == 2, args
+        err = capsys.readouterr().err
+        assert "python -m augsim.cluster: error: " in err and message in err, (args, err)
+        assert "Traceback" not in err and "Usage: augsim generate" not in err, err
+    assert not os.path.exists(out) and not os.path.exists(out + ".parts")

@@ -49,7 +49,7 @@ def case(tmp_path_factory):
 
 def test_registration_reduces_the_tre_with_a_warm_start(case):
     reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm")
-    assert reg.units == "mm" and reg.method.startswith("FEM, Corotational")
+    assert reg.units == "mm" and reg.method.startswith("FEM, co-rotational")
     np.testing.assert_allclose(reg.targets, case["rest"], atol=1e-9)
     unregistered = np.linalg.norm(case["rest"] - case["truth"], axis=1).mean()
     rng = np.random.default_rng(1)
@@ -123,6 +123,15 @@ def test_registration_errors(case, tmp_path):
         reg.register(case["cloud"][:, :2])
     with pytest.raises(augsim.AugsimError):
         reg.register(np.zeros((0, 3)))
+    # A damaged coordinate is quoted in the caller's unit.
+    far = case["cloud"].copy()
+    far[5, 1] = 1e300
+    with pytest.raises(augsim.AugsimError, match=r"cloud point 5 lies at \[.*, 1e300, .*\]: a coordinate beyond 1e6"):
+        reg.register(far)
+    with pytest.raises(TypeError, match="cloud is None: an array of numbers is expected"):
+        reg.register(None)
+    with pytest.raises(ValueError, match="targets: the array holds no point"):
+        augsim.Registration(fem=case["scenario"], targets=np.zeros((0, 3)), units="mm")
     # A cloud in metres where millimetres are expected, or in micrometres: refused, saying why.
     with pytest.raises(augsim.AugsimError, match="too small"):
         reg.register(case["cloud"] * 1e-3)

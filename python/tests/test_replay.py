@@ -99,3 +99,16 @@ def test_a_cloud_file_is_read_in_the_unit_its_header_names(tmp_path):
     broken.write_text("x,y,z\n1,2\n")
     with pytest.raises(ValueError, match="not a cloud"):
         replay.read_cloud(str(broken))
+    # Columns that name different units are refused, naming them.
+    mixed = tmp_path / "mixed.csv"
+    mixed.write_text("x_mm,y_m,z_mm\n10,20,30\n")
+    with pytest.raises(ValueError, match="mixed.csv: .*columns x_mm, y_m, z_mm mix units"):
+        replay.read_cloud(str(mixed))
+    # Without a header every line is a point, in `units`.
+    headerless = tmp_path / "headerless.csv"
+    headerless.write_text("10,20,30\n40,50,60\n")
+    np.testing.assert_allclose(replay.read_cloud(str(headerless), "mm"), [[0.01, 0.02, 0.03], [0.04, 0.05, 0.06]])
+    strings = tmp_path / "strings.npy"
+    np.save(strings, np.array([["a", "b", "c"]]))
+    with pytest.raises(ValueError, match="strings.npy: not a cloud"):
+        replay.read_cloud(str(strings))

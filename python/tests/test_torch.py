@@ -128,7 +128,57 @@ def test_bad_inputs_are_errors():
     model = load(LIVER_AR)
     with pytest.raises(ValueError, match="expects"):
         predict(model, np.zeros((3, 24, 24, 15), np.float32))
+    # Refused as `augsim predict` refuses them, in its words: not finite, or beyond 1e6.
     x = np.zeros((3, 24, 24, 16), np.float32)
     x[1, 2, 3, 4] = np.nan
-    with pytest.raises(ValueError, match="non-finite"):
+    with pytest.raises(ValueError, match=r"^prediction input value 10036 is NaN: inputs are finite .* within 1e6$"):
         predict(model, x)
+    x[1, 2, 3, 4] = -2e6
+    with pytest.raises(ValueError, match=r"^prediction input value 10036 is -2e6: "):
+        predict(model, x)
+    with pytest.raises(ValueError, match=r"^sample 1: prediction input value 10036 is -2e6: "):
+        predict(model, np.stack([np.zeros_like(x), x]))
+    x[1, 2, 3, 4] = 1e6
+    assert predict(model, x).shape == x.shape
+    with pytest.raises(ValueError, match="a point cloud"):
+        predict(model, np.zeros((10, 6), np.float32))
+
+
+@pytest.fixture
+def copied_model(tmp_path):
+    """A copy of models/liver_ar, and its model.json parsed."""
+    out = tmp_path / "model"
+    out.mkdir()
+    for name in ("model.json", "model.safetensors"):
+        (out / name).write_bytes(open(os.path.join(LIVER_AR, name), "rb").read())
+    with open(out / "model.json", encoding="utf-8") as f:
+        return out, json.load(f)
+
+
+def test_bad_model_files_are_errors_naming_the_file(copied_model, tmp_path):
+    out, info = copied_model
+    info["normalization"]["input_scale"] = 0
+    (out / "model.json").write_text(json.dumps(info))
+    with pytest.raises(ValueError, match=r"model\.json: normalization input_scale must be finite and > 0, got 0$"):
+        load(out)
+    (out / "model.json").write_text('{"format": "augsim-unet",')
+    with pytest.raises(ValueError, match=r"model\.json: invalid model JSON: "):
+        load(out)
+    with pytest.raises(ValueError, match=r"model\.safetensors: .*give the model directory or its model\.json"):
+        load(os.path.join(LIVER_AR, "model.safetensors"))
+    with pytest.raises(FileNotFoundError, match="give the model directory or its model.json"):
+        load(tmp_path / "missing")
+
+
+def test_command_line_errors_are_one_line(tmp_path, capsys):
+    cloud = tmp_path / "cloud.npy"
+    np.save(cloud, np.zeros((10, 6), np.float32))
+    out = str(tmp_path / "out.npy")
+    from augsim.torch import main
+    for argv, message in [([str(tmp_path / "missing"), str(cloud), out], "missing: no such file"),
+                          ([LIVER_AR, str(cloud), out], "cloud.npy: input shape (10, 6)"),
+                          ([LIVER_AR, os.path.join(LIVER_AR, "model.json"), out], "model.json: not a .npy file")]:
+        assert main(argv) == 1
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and message in err and err.count("\n") == 1, err
+    assert not os.path.exists(out)

@@ -6,7 +6,8 @@ On a small `augsim generate beam_target` dataset:
 - a model it trains a few steps is predicted by `augsim predict` as by the PyTorch module
   (max |difference| <= 1e-5 m and <= 1e-5 of the output scale);
 - `augsim eval` evaluates it on its recorded test samples only;
-- a killed run resumes from its checkpoint to the same weights as an uninterrupted one.
+- a killed run resumes from its checkpoint to the same weights as an uninterrupted one;
+- options and datasets it cannot use are refused in one line, before any training.
 
 Run: pip install "./python[torch,test]", then python -m pytest -s python/tests/test_train.py from
 the repository root (the augsim binary: $AUGSIM_BIN, default target/release/augsim). Without torch
@@ -23,9 +24,9 @@ import pytest
 
 from helpers import run_augsim
 
-pytest.importorskip("torch", reason='training with PyTorch needs torch: pip install "./python[torch]"')
+torch = pytest.importorskip("torch", reason='training with PyTorch needs torch: pip install "./python[torch]"')
 from augsim.torch import load, predict, read_safetensors  # noqa: E402
-from augsim.train import read_dataset  # noqa: E402
+from augsim.train import main, read_dataset  # noqa: E402
 
 SPLIT = ["--validation-samples", "6", "--test-samples", "10"]
 
@@ -97,3 +98,30 @@ def test_a_resumed_run_ends_where_an_uninterrupted_one_does(data, tmp_path):
     assert sorted(a) == sorted(b)
     for name in a:
         np.testing.assert_allclose(a[name], b[name], rtol=0, atol=1e-6, err_msg=name)
+
+
+def test_what_cannot_be_trained_is_refused_in_one_line(data, tmp_path, capsys):
+    out = str(tmp_path / "refused")
+    cases = [
+        (["--test-samples", "-3"], "--test-samples must be at least 0, got -3"),
+        (["--validation-samples", "-1"], "--validation-samples must be at least 0, got -1"),
+        (["--depth", "-1"], "--depth must lie in 0..6 (augsim's U-Net), got -1"),
+        (["--depth", "7"], "--depth must lie in 0..6 (augsim's U-Net), got 7"),
+        (["--train-samples", "0"], "--train-samples must be at least 1, got 0"),
+        (["--validation-samples", "30", "--test-samples", "10"], "leave no training sample out of 40"),
+        (["--train-samples", "50", *SPLIT], "--train-samples 50: the training split has 24"),
+    ]
+    missing = str(tmp_path / "missing")
+    for extra, message in cases:
+        with pytest.raises(SystemExit) as stop:
+            main([str(data), "--out", out, "--device", "cpu", *extra])
+        assert stop.value.code == 2, extra
+        assert message in capsys.readouterr().err, extra
+    with pytest.raises(SystemExit):
+        main([missing, "--out", out, "--device", "cpu"])
+    assert f"{missing}: not a directory; give a dataset directory from `augsim generate`" in capsys.readouterr().err
+    if not torch.cuda.is_available():
+        with pytest.raises(SystemExit):
+            main([str(data), "--out", out, "--device", "cuda"])
+        assert "--device cuda: PyTorch" in capsys.readouterr().err
+    assert not os.path.exists(out), "nothing is written for a refused run"

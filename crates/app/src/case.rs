@@ -225,6 +225,17 @@ pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
     let (scenario, model) = (network.scenario, network.model);
     // The mesh its samples were solved and encoded on: quadratic when the scenario's material
     // asks for T10 (the mid-edge nodes are network inputs too).
+    // A U-Net is fed its scenario's encoding of the input nodes' motion: another scenario of the
+    // same grid (other nodes, another element) feeds it inputs it never saw. (A reduced-order
+    // model's shape fit works in its basis, whatever scenario gave it.)
+    let trained_on = model.provenance().and_then(|p| p.own.scenario());
+    if let Some(trained_on) = trained_on.filter(|&s| s != scenario.name && model.method() == learn::Method::UNet) {
+        bail!(
+            "the U-Net was trained on data of scenario {trained_on}, not {}: give the model's own dataset scenario \
+             (--scenario {trained_on})",
+            scenario.name
+        );
+    }
     let generator = scenario.generator(network.dir)?;
     if model.grid() != generator.grid() {
         bail!(

@@ -35,6 +35,11 @@ pub fn run_comparison(
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<Vec<Compared>> {
+    let wants_network =
+        scenario.models.method.iter().any(|m| matches!(m.kind, MethodKind::Network | MethodKind::Hybrid));
+    if !wants_network && learned.model.is_some() {
+        bail!("--model: the case scenario has no network or hybrid method to register with it");
+    }
     let lines = |lines: Vec<String>| lines.iter().for_each(|l| progress.line(l));
     lines(case_lines(scenario));
     let case = synthetic_case(scenario)?;
@@ -42,8 +47,6 @@ pub fn run_comparison(
     write_case(&dir, &case)?;
     lines(case_files_lines(&case, &dir));
 
-    let wants_network =
-        scenario.models.method.iter().any(|m| matches!(m.kind, MethodKind::Network | MethodKind::Hybrid));
     let (models, missing) = if wants_network { comparison_models(learned.model)? } else { (Vec::new(), Vec::new()) };
     for path in missing {
         progress.line(&format!(

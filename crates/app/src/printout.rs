@@ -89,8 +89,8 @@ pub fn case_lines(scenario: &CaseScenario) -> Vec<String> {
     let mut lines = vec![
         format!("case       {}: {}", scenario.name, scenario.description),
         format!(
-            "truth      {:?} phantom (E = {} kPa, nu = {}) of {}, fixed on `{}`, {} N along {:?} on `{}`",
-            t.material.law,
+            "truth      {} phantom (E = {} kPa, nu = {}) of {}, fixed on `{}`, {} N along {:?} on `{}`",
+            t.material.law.display_name(),
             t.material.young * 1e-3,
             t.material.poisson,
             t.mesh_words(),

@@ -163,7 +163,8 @@ impl MethodSpec {
                 let (scenario, dir) = source.read(StaticScenario::load)?;
                 let (organ, deformer) = fem_model(&scenario, &dir)?;
                 let m = scenario.material;
-                let method = format!("FEM, {:?} ({:?} elements)", m.law, m.resolved_formulation());
+                let method =
+                    format!("FEM, {} ({} elements)", m.law.display_name(), m.resolved_formulation().display_name());
                 Loaded { organ, deformer: Box::new(deformer), method, options: defaults() }
             }
             MethodSpec::Learned { model, scenario, way } => {
@@ -226,7 +227,10 @@ impl MethodSpec {
                     }
                 };
                 let deformer = HybridDeformer::new(learned, Box::new(deformer), network_iterations)?;
-                let method = format!("{words} for {network_iterations} iterations, then FEM, {:?}", fem.material.law);
+                let method = format!(
+                    "{words} for {network_iterations} iterations, then FEM, {}",
+                    fem.material.law.display_name()
+                );
                 // By default the FEM polishes the learned estimate for a few iterations.
                 let options = options.cloned().unwrap_or(RegistrationOptions {
                     iterations: network_iterations + POLISH_ITERATIONS,

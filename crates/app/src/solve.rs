@@ -68,8 +68,11 @@ impl Solved {
                 p.mesh.volume()
             ),
             format!(
-                "material   {:?} ({:?} elements), E = {} Pa, nu = {}",
-                p.material.law, geo.formulation, p.material.young, p.material.poisson
+                "material   {} ({} elements), E = {} Pa, nu = {}",
+                p.material.law.display_name(),
+                geo.formulation.display_name(),
+                p.material.young,
+                p.material.poisson
             ),
             format!(
                 "system     {} dofs, {free} free, {nnz} stored non-zeros, {} ordering",

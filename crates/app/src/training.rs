@@ -202,6 +202,15 @@ impl DeviceArgs {
     pub fn described(self) -> Result<(Compute, String)> {
         Ok((self.compute, format!("device     {}", self.compute.describe()?)))
     }
+
+    /// [`described`](Self::described) for the model at `model` (its directory or model.json): a
+    /// reduced-order model runs on the CPU, whatever the device.
+    pub fn described_for(self, model: &Path) -> Result<(Compute, String)> {
+        match learn::Model::kind(&learn::Model::json_path(model))? {
+            Method::Rom => Ok((self.compute, "device     cpu (a reduced-order model: no network to run)".into())),
+            Method::UNet => self.described(),
+        }
+    }
 }
 
 /// Trains what `augsim train` asks for on its dataset's split: a U-Net (resumed from its
@@ -251,8 +260,11 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
     };
     let run = UNetRun { out: args.out.clone(), resume: !args.restart, compute };
     let outcome = train_unet(&dataset, &split, [&train, &validation], start, &config, run, progress)?;
-    let mut lines =
-        vec![format!("steps      {} ({:.3} s per step)", outcome.iterations_done, outcome.mean_step_seconds)];
+    let pace = match outcome.mean_step_seconds {
+        0.0 => "already trained: no step run now".to_string(),
+        seconds => format!("{seconds:.3} s per step"),
+    };
+    let mut lines = vec![format!("steps      {} ({pace})", outcome.iterations_done)];
     if let Some((it, Some(e))) = outcome.model.training.as_ref().map(|t| (t.best_iteration, t.best_val_mean_error)) {
         lines.push(format!("best       validation mean e = {:.4} mm at iteration {it}", mm(e)));
     }

@@ -54,7 +54,7 @@ fn fem_registration_recovers_hidden_markers_from_a_partial_cloud() {
     assert!(tre_noisy < tre + 1e-3, "1 mm noise and 10 % outliers: TRE {tre_noisy} against {tre}");
 }
 
-/// The network shipped for the phantom (the built-in `liver_ar` scenario).
+/// The network shipped for the phantom (trained on the built-in `liver_ar_t10` scenario).
 const MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
 
 /// The shipped reduced-order model of the T10 phantom.
@@ -113,9 +113,9 @@ fn bad_clouds_and_targets_are_clear_errors() {
     let e = register_frame(&organ, &mut deformer, &[[0.0, f64::NAN, 0.0]], None, &opts).unwrap_err().to_string();
     assert!(e.contains("point 0") && e.contains("finite"), "{e}");
     let e = organ.locate(&[[0.0; 3], [5.0, 5.0, 5.0]], "target").unwrap_err().to_string();
-    assert!(e.contains("target 1") && e.contains("outside"), "{e}");
+    assert!(e.contains("target 2") && e.contains("outside"), "{e}");
     let e = organ.locate(&[[0.0; 3], [f64::NAN; 3]], "target").unwrap_err().to_string();
-    assert_eq!(e, "target 1 has a non-finite coordinate: x = NaN");
+    assert_eq!(e, "target 2 has a non-finite coordinate: x = NaN");
     let e = register_frame(&organ, &mut deformer, &[[0.0; 3]], Some(&[0.0; 5]), &opts).unwrap_err().to_string();
     assert!(e.contains("start displacement"), "{e}");
 }
@@ -176,7 +176,8 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     let model = learn::Model::load(std::path::Path::new(MODEL)).unwrap();
     // A hybrid needs the network on the FEM model's mesh: the 3k-T4 phantom of `liver_ar` (the
     // shipped network's grid covers it too).
-    let network_scenario = scenario::DatasetScenario::builtin("liver_ar");
+    let mut network_scenario = scenario::DatasetScenario::builtin(augsim_app::case::AR_SCENARIO);
+    network_scenario.material = network_scenario.material.with_order(1);
     let network =
         augsim_app::case::Network { model: &model, scenario: &network_scenario, dir: std::path::Path::new("") };
     let mut scenario = scenario::CaseScenario::builtin();
@@ -330,22 +331,24 @@ fn clouds_that_cannot_be_the_organ_are_refused_or_flagged() {
 #[test]
 fn the_network_of_a_t10_scenario_deforms_the_quadratic_mesh() {
     let model = learn::Model::load(std::path::Path::new(MODEL)).unwrap();
-    let mut scenario = scenario::DatasetScenario::builtin("liver_ar");
+    let mut scenario = scenario::DatasetScenario::builtin("liver_ar_t10");
     let network = |scenario: &scenario::DatasetScenario| {
         let n = augsim_app::case::Network { model: &model, scenario, dir: std::path::Path::new("") };
-        augsim_app::case::network_model(&n).unwrap().0
+        augsim_app::case::network_model(&n)
     };
-    let linear = network(&scenario);
-    scenario.material = scenario.material.with_order(2);
-    let quadratic = network(&scenario);
+    let quadratic = network(&scenario).unwrap().0;
+    scenario.material = scenario.material.with_order(1);
+    let linear = network(&scenario).unwrap().0;
     assert_eq!(linear.mesh().cells.kind_name(), "T4");
     assert_eq!(quadratic.mesh().cells.kind_name(), "T10");
     let expected = linear.mesh().quadratic().unwrap();
     assert_eq!(quadratic.mesh().nodes, expected.nodes);
     assert!(quadratic.mesh().region("visible").unwrap().len() > 2 * linear.mesh().region("visible").unwrap().len());
-    // A scenario that encodes on another grid than the model's is no scenario of the model's.
+    // A scenario that encodes on another grid than the model's is no scenario of the model's, nor
+    // is another scenario of the same grid (liver_ar: linear tetrahedra).
     scenario.dataset.grid = Some([32, 32, 16]);
-    let n = augsim_app::case::Network { model: &model, scenario: &scenario, dir: std::path::Path::new("") };
-    let e = augsim_app::case::network_model(&n).err().unwrap().to_string();
-    assert!(e.contains("trained on a 24x24x16 grid, scenario liver_ar encodes its organ on 32x32x16"), "{e}");
+    let e = network(&scenario).err().unwrap().to_string();
+    assert!(e.contains("trained on a 24x24x16 grid, scenario liver_ar_t10 encodes its organ on 32x32x16"), "{e}");
+    let e = network(&scenario::DatasetScenario::builtin("liver_ar")).err().unwrap().to_string();
+    assert!(e.contains("the U-Net was trained on data of scenario liver_ar_t10, not liver_ar: give"), "{e}");
 }

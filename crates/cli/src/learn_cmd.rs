@@ -43,7 +43,7 @@ pub fn eval(
     device: DeviceArgs,
     out: &Path,
 ) -> Result<()> {
-    let (compute, line) = device.described()?;
+    let (compute, line) = device.described_for(model)?;
     println!("{line}");
     print_lines(&app::evaluation::eval(model, dataset, project, &corruption.corruption(), compute, out)?);
     Ok(())
@@ -60,7 +60,7 @@ pub fn predict(
     runs: usize,
     device: DeviceArgs,
 ) -> Result<()> {
-    let (compute, line) = device.described()?;
+    let (compute, line) = device.described_for(model_path)?;
     println!("{line}");
     print_lines(&predict_file(model_path, input, output, mesh_path, runs, compute)?);
     Ok(())

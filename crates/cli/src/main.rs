@@ -83,7 +83,8 @@ enum Command {
         #[arg(required = true)]
         parts: Vec<PathBuf>,
     },
-    /// Train a U-Net on a dataset (from scratch or fine-tuning a pre-trained model); resumable.
+    /// Train a U-Net (from scratch or fine-tuning a pre-trained model; resumable), or fit a
+    /// reduced-order model (--method rom), on a dataset.
     Train(app::training::TrainArgs),
     /// Evaluate a model on the samples held out from it (the test split recorded in the model, or a
     /// dataset it never saw): mean/std/max Euclidean error, worst sample as VTK.
@@ -95,8 +96,8 @@ enum Command {
         /// Output directory (errors.csv, summary.json, worst.vtu).
         #[arg(short, long, default_value = "out/eval")]
         out: PathBuf,
-        /// Project the model's predictions on the basis of this reduced-order model (its directory),
-        /// trained on the same data.
+        /// Project the model's predictions on the basis of this reduced-order model (its directory)
+        /// of the same grid, whose basis spans the dataset's deformations.
         #[arg(long)]
         project: Option<PathBuf>,
         /// Input corruption.

@@ -34,7 +34,8 @@ pub struct RegisterArgs {
     /// such file per frame: the TRE is reported.
     #[arg(long)]
     truth: Option<PathBuf>,
-    /// Output directory: organ.vtu (organ.pvd for a sequence), targets.csv, summary.json; one
+    /// Output directory: organ.vtu (organ.pvd for a sequence), targets.csv (a sequence's last
+    /// frame), summary.json (every frame's TRE); one
     /// that holds an earlier run's results is refused (runs are never mixed). Default: a fresh
     /// numbered folder under out/register (out/register/001, 002, …).
     #[arg(short, long)]

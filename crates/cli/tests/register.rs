@@ -109,7 +109,7 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
         "--targets",
         far.to_str().unwrap(),
     ]);
-    assert!(!ok && text.contains("target 0") && text.contains("outside"), "{text}");
+    assert!(!ok && text.contains("target 1") && text.contains("outside"), "{text}");
 
     // The frame: targets naming RAS, the cloud given in LPS (--frame LPS) comes back in LPS.
     let points = |path: &Path| -> Vec<Vec<f64>> {

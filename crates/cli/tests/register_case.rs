@@ -173,7 +173,7 @@ fn bad_cases_flags_and_clouds_are_clear_errors() {
     ]);
     assert!(
         !ok && text.contains("register_case_test.toml")
-            && text.contains("registration: iterations = 0 must be at least 1"),
+            && text.contains("registration: iterations = 0 must be 1 to 10000"),
         "{text}"
     );
     let case = scenario("register_case_test.toml");

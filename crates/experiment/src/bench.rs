@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use app::case::{case_methods, compare, synthetic_case, Network};
 use mesh::stats::median;
 
-use crate::fem_speed::{fbar_ratios, measure, reference_ms, CaseTiming, FRAME_LOAD_STEP};
+use crate::fem_speed::{fbar_ratios, measure, reference_ms, CaseTiming, FRAME_LOAD_STEP, LARGE_DOFS, LARGE_RUNS};
 use crate::held_out::{base_case, shipped_models, CASES, POINTS};
 
 /// A table of `augsim bench`.
@@ -66,11 +66,17 @@ pub fn bench(runs: usize, tables: &[Table], print: &mut dyn FnMut(&str)) -> Resu
 /// Static solves from rest and as frames of a sequence, each case `runs` times: medians, split by
 /// phase, then F-bar's cost over the standard element.
 fn static_solves(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
-    print("Static solves from rest, medians; the cases take turns. 'setup': building a solver (pattern,");
-    print("ordering, symbolic analysis, buffers) and 'first': its first solve, over as many new solvers as runs;");
-    print("'median': repeated solves from rest on the last (the rest tangent's factorisation is kept).");
     print(&format!(
-        "'frame': a frame of a sequence whose load varies by {:.0} % per frame, warm-started from the previous frame.",
+        "Static solves from rest, medians of {} (at most {LARGE_RUNS} for the cases above {LARGE_DOFS} dofs); the \
+         cases take turns.",
+        runs_counted(runs)
+    ));
+    print("'setup': building a solver (pattern, ordering, symbolic analysis, buffers) and 'first': its first solve,");
+    print("over as many new solvers as runs; 'median': repeated solves from rest on the last (the rest tangent's");
+    print("factorisation is kept); 'iter', 'fact', 'asm': the Newton iterations, factorisations and assemblies of");
+    print(&format!(
+        "its last solve from rest. 'frame': a frame of a sequence whose load varies by {:.0} % per frame, warm-started \
+         from the previous frame; 'fr.iter': its Newton iterations.",
         100.0 * FRAME_LOAD_STEP
     ));
     print(&format!(
@@ -111,6 +117,14 @@ fn static_solves(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
     Ok(())
 }
 
+/// "1 run", "20 runs".
+fn runs_counted(runs: usize) -> String {
+    match runs {
+        1 => "1 run".into(),
+        n => format!("{n} runs"),
+    }
+}
+
 /// Frames of the streamed registration in [`registration_frames`]: a press and release.
 const BENCH_STREAM_FRAMES: usize = 11;
 
@@ -122,7 +136,8 @@ const BENCH_STREAM_FRAMES: usize = 11;
 fn registration_frames(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
     let load = &CASES[0];
     let scenario = load.apply(&base_case()?);
-    let models = shipped_models()?;
+    let (models, skipped) = shipped_models()?;
+    skipped.iter().for_each(|line| print(line));
     let trained_on = app::case::ar_scenario();
     let networks: Vec<Network> =
         models.iter().map(|model| Network { model, scenario: &trained_on, dir: std::path::Path::new("") }).collect();
@@ -132,14 +147,16 @@ fn registration_frames(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
     stream_scenario.truth.frames = BENCH_STREAM_FRAMES;
     let streamed = synthetic_case(&stream_scenario)?;
     print(&format!(
-        "Registration frames, {} ({POINTS} points): median of {runs} frames from rest (each method set up anew) and of the \
-         {} warm-started frames of a press and release; ×FEM: the ratio to the co-rotational FEM's median.",
+        "Registration frames, {} ({POINTS} points): median of {} from rest (each method set up anew) and of the {} \
+         warm-started frames of a press and release; ×FEM: the ratio to the co-rotational FEM's median; TRE: the mean \
+         target error of a frame from rest.",
         load.label,
+        runs_counted(runs),
         BENCH_STREAM_FRAMES - 1
     ));
     print(&format!(
         "{:<32} {:>13} {:>7} {:>13} {:>7} {:>9}",
-        "method", "from rest ms", "×FEM", "streamed ms", "×FEM", "TRE mm"
+        "method", "from rest ms", "×FEM", "streamed ms", "×FEM", "TRE rest mm"
     ));
     let mut from_rest = vec![Vec::new(); methods.len()];
     let mut tre = vec![f64::NAN; methods.len()];

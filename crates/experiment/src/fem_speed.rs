@@ -13,9 +13,9 @@ use mesh::stats::median;
 use crate::{reference, ExperimentResult, Headline, Name, Progress, Row, Size};
 
 /// Cases above this many dofs are timed at most [`LARGE_RUNS`] times (each solve takes seconds).
-const LARGE_DOFS: usize = 20_000;
+pub(crate) const LARGE_DOFS: usize = 20_000;
 /// Most runs of a case above [`LARGE_DOFS`].
-const LARGE_RUNS: usize = 3;
+pub(crate) const LARGE_RUNS: usize = 3;
 
 /// The timings of one case (ms, medians over the runs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

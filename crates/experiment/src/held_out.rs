@@ -211,14 +211,12 @@ pub(crate) fn rom_polish(scenario: &CaseScenario) -> Result<MethodSpec> {
 }
 
 /// The shipped learned models that are there (run from the repository): the U-Net, the
-/// reduced-order model.
-pub(crate) fn shipped_models() -> Result<Vec<Model>> {
-    Ok([SHIPPED_MODEL, SHIPPED_ROM]
-        .iter()
-        .map(Path::new)
-        .filter(|p| p.exists())
-        .map(Model::load)
-        .collect::<learn::Result<_>>()?)
+/// reduced-order model; and the lines saying which were skipped, not found.
+pub(crate) fn shipped_models() -> Result<(Vec<Model>, Vec<String>)> {
+    let (found, missing): (Vec<&str>, Vec<&str>) =
+        [SHIPPED_MODEL, SHIPPED_ROM].into_iter().partition(|p| Path::new(p).exists());
+    let models = found.into_iter().map(|p| Model::load(Path::new(p))).collect::<learn::Result<_>>()?;
+    Ok((models, missing.into_iter().map(|p| format!("skipped: {p} not found (run from the repository)")).collect()))
 }
 
 /// The co-rotational FEM method of `scenario`.
@@ -238,7 +236,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
     };
     let reference_ms = reference::measure()?;
     let base = base_case()?;
-    let models = shipped_models()?;
+    let (models, skipped) = shipped_models()?;
     let network_scenario = ar_scenario();
     let networks: Vec<Network> =
         models.iter().map(|m| Network { model: m, scenario: &network_scenario, dir: Path::new("") }).collect();
@@ -264,11 +262,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
     }
     summary.extend(std::mem::take(&mut cases.rows));
     let headlines = headlines(&methods, &means, &stream_means);
-    for (path, name) in [(SHIPPED_MODEL, "U-Net"), (SHIPPED_ROM, "ROM")] {
-        if !Path::new(path).exists() {
-            summary.push(Row::new(name, format!("skipped: {path} not found (run from the repository)"), ""));
-        }
-    }
+    summary.extend(skipped.into_iter().map(|line| Row::new("learned model", line, "")));
     let notes = notes(&base, runs, reference_ms)?;
     let mut values = serde_json::Map::new();
     values.insert("reference_ms".into(), reference_ms.into());

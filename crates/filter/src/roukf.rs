@@ -493,7 +493,8 @@ impl<M: Model> Roukf<M> {
             .ok_or_else(|| FilterError::NotPositiveDefinite { what: "U".into(), iteration: k })?;
         let correction = chol.solve(&(g.transpose() * &weighted));
         let theta = &theta_mean + &l_theta * &correction;
-        if theta.iter().any(|v| !v.is_finite()) {
+        // Finite in the filter's space is not enough: an exponential transform may overflow.
+        if theta.iter().zip(&self.config.parameters).any(|(v, s)| !v.is_finite() || !s.to_physical(*v).is_finite()) {
             return Err(nonfinite("parameter estimate"));
         }
         let joint_update = match &self.joint {

@@ -166,6 +166,20 @@ fn exp_overflow_of_a_sigma_point_is_an_error() {
     assert!(matches!(err, FilterError::SigmaPoint { iteration: 1, .. }), "{err:?}");
 }
 
+/// An estimate finite in the filter's space but not in physical units (its exponential
+/// overflowing) is refused, and the filter left as it was.
+#[test]
+fn an_estimate_overflowing_its_transform_is_an_error() {
+    let mut c = config(Execution::Parallel);
+    c.parameters[0] = ParameterSpec::new("k", Transform::Exp, 700.0, 1.0);
+    c.observation_std = ObservationNoise::Uniform(1e300);
+    let mut roukf = Roukf::new(Flaky::new(usize::MAX, 0.0), 0.0, c).unwrap();
+    let err = roukf.step(&z(1e308)).unwrap_err();
+    assert!(matches!(err, FilterError::NonFinite { iteration: 1, .. }), "{err:?}");
+    assert!(err.to_string().contains("parameter estimate"), "{err}");
+    assert_eq!(roukf.iteration(), 0);
+}
+
 #[test]
 fn config_deserialises_and_rejects_unknown_fields() {
     let text = r#"{"parameters": [{"name": "E", "transform": "exp", "prior_mean": 6.9, "prior_std": 0.2},

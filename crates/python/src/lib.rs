@@ -22,7 +22,7 @@ use nalgebra::DVector;
 use numpy::ndarray::{Array2, Array3, ArrayD, IxDyn};
 use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayDyn, PyArrayLikeDyn};
 use pyo3::create_exception;
-use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use register::Tracked;
 use scenario::AssimilationScenario;
@@ -60,6 +60,9 @@ fn locked<T>(lock: &Mutex<T>) -> anyhow::Result<MutexGuard<'_, T>> {
 
 /// The values of an array-like (converted to float64) with its shape.
 fn array(value: &Bound<'_, PyAny>, what: &str) -> PyResult<(Vec<usize>, Vec<f64>)> {
+    if value.is_none() {
+        return Err(PyTypeError::new_err(format!("{what} is None: an array of numbers is expected")));
+    }
     let a: PyArrayLikeDyn<'_, f64, AllowTypeChange> =
         value.extract().map_err(|e| PyValueError::new_err(format!("{what} must be an array of numbers: {e}")))?;
     let values = a.as_array();
@@ -72,7 +75,12 @@ fn points(value: &Bound<'_, PyAny>, what: &str, scale: f64) -> PyResult<Vec<Poin
     if shape.len() != 2 || shape[1] != 3 {
         return Err(PyValueError::new_err(format!("{what} must have shape [N, 3], got {shape:?}")));
     }
-    Ok(values.chunks_exact(3).map(|p| [p[0] * scale, p[1] * scale, p[2] * scale]).collect())
+    let given: Vec<Point> = values.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
+    // Named in the caller's unit, before the scaling would change the values quoted.
+    if let Some((i, fault)) = mesh::measured_fault(&given) {
+        return Err(AugsimError::new_err(format!("{what} point {i} {fault}")));
+    }
+    Ok(given.into_iter().map(|p| p.map(|c| c * scale)).collect())
 }
 
 /// An `[N, 3]` array of nodal vectors (3 values per node), each divided by `unit`.
@@ -189,10 +197,11 @@ struct Registered {
 /// (default: a patient's own unit, else "m"). `frame`: "RAS" or "LPS", the frame of every cloud
 /// and every result, converted from and to the organ's when it names one (a patient's, or a
 /// targets file's); default: the organ's.
-/// `iterations`: most match-and-deform iterations per cloud (default: the library's for a FEM,
-/// the built-in registration case's real-time budget for a U-Net). `rigid`:
-/// align the first cloud rigidly to the organ (trimmed ICP) and keep that pose; results are then
-/// in the cloud's frame.
+/// `iterations`: most match-and-deform iterations of the first cloud, from rest (default: the
+/// library's for a FEM, the built-in registration case's real-time budget for a U-Net); a
+/// warm-started cloud takes at most min(iterations, 4). `rigid`: align the first cloud that
+/// registers without a warning rigidly to the organ (trimmed ICP) and keep that pose; `targets`
+/// (and `rigid`) are then in the cloud's frame, `points` and `displacement` in the organ's.
 #[pyclass(module = "augsim")]
 struct Registration {
     state: Mutex<register::Registration>,
@@ -243,7 +252,12 @@ impl Registration {
             None => None,
             Some(t) => Some(match t.extract::<PathBuf>() {
                 Ok(path) => TargetsSpec::File(path),
-                Err(_) => TargetsSpec::Points(points(t, "targets", 1.0)?),
+                Err(_) => match points(t, "targets", 1.0)? {
+                    given if given.is_empty() => {
+                        return Err(PyValueError::new_err("targets: the array holds no point"))
+                    }
+                    given => TargetsSpec::Points(given),
+                },
             }),
         };
         let choice = RegistrationChoice {
@@ -292,7 +306,8 @@ impl Registration {
 
     /// Registers a cloud of positions, float [N, 3] in `units` (no correspondences needed),
     /// starting from the previous cloud's registration. Returns a `Registered` (`targets`,
-    /// `displacement`, `surface_residual`, `inliers`, `iterations`, `warnings`, `ms`). With `out`,
+    /// `target_sigma`, `points`, `displacement`, `rigid`, `surface_residual`, `inliers`,
+    /// `iterations`, `warnings`, `ms`). With `out`,
     /// a directory, also writes there what `augsim register` writes: organ.vtu (m), targets.csv (in
     /// `units`), summary.json, and for 3D Slicer targets.mrk.json and organ_deformed.vtk (mm), all
     /// in the clouds' frame (`frame`; default: the organ's), which they name when known. Raises ValueError for an array of another shape,

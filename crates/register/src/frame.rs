@@ -87,6 +87,10 @@ impl TwoWay {
     }
 }
 
+/// Most match-and-deform iterations of a frame: far more than any registration needs (tens),
+/// few enough that a frame ends.
+pub const MAX_ITERATIONS: usize = 10_000;
+
 /// Settings of the registration loop.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -159,8 +163,10 @@ impl RegistrationOptions {
     /// Checks the values, naming the first that is out of its range.
     pub fn validate(&self) -> Result<()> {
         let counts = [("iterations", self.iterations), ("warm_iterations", self.warm_iterations)];
-        if let Some((name, _)) = counts.iter().find(|(_, n)| *n == 0) {
-            return Err(RegisterError::Invalid(format!("{name} = 0 must be at least 1")));
+        if let Some((name, n)) = counts.iter().find(|(_, n)| !(1..=MAX_ITERATIONS).contains(n)) {
+            return Err(RegisterError::Invalid(format!(
+                "{name} = {n} must be 1 to {MAX_ITERATIONS} (a frame's iterations, each a deformation)"
+            )));
         }
         let (nonnegative, positive) = ("non-negative and finite", "positive and finite");
         check_setting("tolerance", self.tolerance, self.tolerance >= 0.0, nonnegative)?;
@@ -535,7 +541,11 @@ mod tests {
         let base = RegistrationOptions::default();
         assert!(base.validate().is_ok());
         let cases = [
-            (RegistrationOptions { iterations: 0, ..base.clone() }, "iterations = 0 must be at least 1"),
+            (RegistrationOptions { iterations: 0, ..base.clone() }, "iterations = 0 must be 1 to 10000"),
+            (
+                RegistrationOptions { warm_iterations: 1 << 40, ..base.clone() },
+                "warm_iterations = 1099511627776 must be",
+            ),
             (RegistrationOptions { capture_decay: 1.5, ..base.clone() }, "capture_decay = 1.5 must be in (0, 1]"),
             (RegistrationOptions { tolerance: f64::NAN, ..base.clone() }, "tolerance = NaN must be non-negative"),
             (RegistrationOptions { view: Some([0.0; 3]), ..base.clone() }, "view = [0.0, 0.0, 0.0] must be"),

@@ -146,7 +146,8 @@ impl Organ {
                 let (stencil, distance) = self.nearest_surface_stencil(&bvh, p);
                 if !(distance <= tolerance) {
                     return Err(RegisterError::Invalid(format!(
-                        "{what} {i} at {} lies {:.2} mm outside the organ mesh",
+                        "{what} {} at {} lies {:.2} mm outside the organ mesh",
+                        i + 1,
                         point_in_mm(p),
                         distance * 1e3
                     )));
@@ -166,8 +167,8 @@ impl Organ {
     /// error names beside the point's number: "target 2 (`T3`)".
     fn locate_labelled(&self, points: &[Point], labels: &[String], what: &str) -> Result<Vec<Stencil>> {
         let name = |i: usize| match labels.get(i).filter(|l| !l.is_empty()) {
-            Some(label) => format!("{what} {i} (`{label}`)"),
-            None => format!("{what} {i}"),
+            Some(label) => format!("{what} {} (`{label}`)", i + 1),
+            None => format!("{what} {}", i + 1),
         };
         if let Some((i, fault)) = mesh::measured_fault(points) {
             return Err(RegisterError::Invalid(format!("{} {fault}", name(i))));
@@ -213,7 +214,7 @@ impl Organ {
     /// warnings: a set of landmarks so small otherwise.
     pub fn check_landmarks(&self, landmarks: &[Point]) -> Result<Vec<String>> {
         if let Some((i, fault)) = mesh::measured_fault(landmarks) {
-            return Err(RegisterError::Invalid(format!("landmark {i} {fault}")));
+            return Err(RegisterError::Invalid(format!("landmark {} {fault}", i + 1)));
         }
         let bvh = SurfaceBvh::new(&self.surface)?;
         let reach = LANDMARK_REACH * self.extent();
@@ -222,8 +223,9 @@ impl Organ {
         let farthest = landmarks.iter().map(|&p| outside(p)).enumerate().max_by(|a, b| a.1.total_cmp(&b.1));
         if let Some((i, distance)) = farthest.filter(|&(_, d)| !(d <= reach)) {
             return Err(RegisterError::Invalid(format!(
-                "landmark {i} at {} lies {:.1} mm outside the organ, farther than {:.0} % of its {:.0} mm (its box's \
+                "landmark {} at {} lies {:.1} mm outside the organ, farther than {:.0} % of its {:.0} mm (its box's \
                  diagonal; landmarks are points on its surface, where it is held){}",
+                i + 1,
                 point_in_mm(landmarks[i]),
                 distance * 1e3,
                 LANDMARK_REACH * 100.0,
@@ -358,7 +360,7 @@ mod tests {
         let mut far = on.clone();
         far.push([0.02, 0.01, 0.05]);
         let error = refused(&far);
-        assert!(error.starts_with("landmark 4 at (20, 10, 50) mm lies 40.0 mm outside the organ"), "{error}");
+        assert!(error.starts_with("landmark 5 at (20, 10, 50) mm lies 40.0 mm outside the organ"), "{error}");
         let small: Vec<Point> = on.iter().map(|p| p.map(|x| x * 1e-3)).collect();
         assert!(refused(&small).ends_with("were they given in m where mm were expected?"), "{}", refused(&small));
         let negated: Vec<Point> = on.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
@@ -380,6 +382,6 @@ mod tests {
             assert!((0..3).all(|d| (got[d] - want[d]).abs() < 1e-12), "{got:?} against {want:?}");
         }
         let error = organ.locate_near(&[inside, above], 0.001, "target").unwrap_err().to_string();
-        assert!(error.contains("target 1") && error.contains("2.00 mm outside"), "{error}");
+        assert!(error.contains("target 2") && error.contains("2.00 mm outside"), "{error}");
     }
 }

@@ -59,9 +59,11 @@ pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<()> {
     }
     if extent == 0.0 {
         return Err(RegisterError::Invalid(format!(
-            "the cloud's {} points lie at one place (its extent, 2nd to 98th percentile on each axis, is 0): \
-             it cannot be a view of the organ",
-            cloud.len()
+            "{} (its extent, 2nd to 98th percentile on each axis, is 0): it cannot be a view of the organ",
+            match cloud.len() {
+                1 => "the cloud is a single point".to_string(),
+                n => format!("the cloud's {n} points lie at one place"),
+            }
         )));
     }
     if ratio < MIN_EXTENT_RATIO {

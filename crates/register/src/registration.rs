@@ -434,7 +434,7 @@ mod tests {
         assert!(one_label.contains("1 labels for 2 targets"), "{one_label}");
         // A target outside is named by its label too.
         let outside = labelled(vec!["A".into(), "B".into()], vec![two[0], [0.2, 0.0, 0.0]]).err().expect("outside");
-        assert!(outside.to_string().starts_with("target 1 (`B`) at (200, 0, 0) mm is outside"), "{outside}");
+        assert!(outside.to_string().starts_with("target 2 (`B`) at (200, 0, 0) mm is outside"), "{outside}");
     }
 
     #[test]

@@ -145,7 +145,7 @@ impl ScenarioText {
         if kind != expected {
             return Err(ScenarioError::invalid(
                 &self.origin,
-                format!("this is a `{}` scenario; a `{}` scenario is needed here", kind.key(), expected.key()),
+                format!("this is a scenario of kind `{}`; a `{}` scenario is needed here", kind.key(), expected.key()),
             ));
         }
         let mut table: toml::Table =
@@ -313,7 +313,7 @@ mod tests {
             dir: ".".into(),
         };
         let err = StaticScenario::from_text(&source).unwrap_err().to_string();
-        assert!(err.contains("`dataset` scenario") && err.contains("`static`"), "{err}");
+        assert!(err.contains("a scenario of kind `dataset`; a `static` scenario is needed"), "{err}");
         let source = ScenarioText {
             text: "kind = \"static\"\nname = \"x\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\n\
                    cells = [1, 1, 1]\nelement = \"hex\"\n[material]\nlaw = \"svk\"\nyoung = 1.0\npoisson = 0.3\n\

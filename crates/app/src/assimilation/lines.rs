@@ -1,6 +1,6 @@
 //! The lines a front prints for an assimilation: its set-up before the run and its results after.
 
-use filter::SigmaPointSet;
+use filter::{Execution, SigmaPointSet};
 use mesh::length::mm;
 
 use super::{ObservationFiles, Report, Setup};
@@ -34,11 +34,11 @@ impl Setup {
                     "the filter's own model (an inverse crime: add a [reference] section with another mesh)".to_string()
                 } else {
                     format!(
-                        "a reference of its own: {} nodes, {} cells, {:?} ({} tracked points located on the \
+                        "a reference of its own: {} nodes, {} cells, {} ({} tracked points located on the \
                          model's surface, keeping their offset, at most {:.2} mm)",
                         r.nodes,
                         r.cells,
-                        r.law,
+                        r.law.display_name(),
                         s.projected,
                         mm(s.max_projection)
                     )
@@ -68,14 +68,17 @@ impl Report {
         let mut lines = vec![
             format!(
                 "filter       {} iterations in {:.2} s, {:.2} s of them the filter's steps: {:.2} ms per step (median \
-                 {:.2} ms), {:.2} Newton iterations per solve, {:?}",
+                 {:.2} ms), {:.2} Newton iterations per solve, the sigma points {}",
                 r.iterations,
                 r.filter_seconds,
                 r.seconds_per_iteration_mean * r.iterations as f64,
                 1e3 * r.seconds_per_iteration_mean,
                 1e3 * r.seconds_per_iteration_median,
                 r.newton_iterations_per_solve,
-                r.execution
+                match r.execution {
+                    Execution::Parallel => "in parallel",
+                    Execution::Sequential => "one after the other",
+                }
             ),
             format!(
                 "time         FEM solves {:.2} s summed over the sigma points (assembly {:.2} s, {:.2} \

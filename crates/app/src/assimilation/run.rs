@@ -42,6 +42,9 @@ pub struct ObservationFiles {
     pub units: LengthUnit,
 }
 
+/// Most iterations of synthetic observations: each is a FEM solve of the reference.
+pub const MAX_SYNTHETIC_ITERATIONS: usize = 100_000;
+
 /// Summary of a prepared experiment.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Setup {
@@ -248,9 +251,13 @@ impl Experiment {
     fn synthesise(&mut self, locator: &MeshLocator, tool_nodes: &[usize]) -> Result<(), AssimilationError> {
         let sc = &self.scenario;
         let iterations = match sc.iterations {
-            Some(n) if n > 0 => n,
+            Some(n) if (1..=MAX_SYNTHETIC_ITERATIONS).contains(&n) => n,
             _ => {
-                return Err(AssimilationError::Setup("iterations must be at least 1 for synthetic observations".into()))
+                return Err(AssimilationError::Setup(format!(
+                    "iterations must be 1 to {MAX_SYNTHETIC_ITERATIONS} for synthetic observations (a FEM solve \
+                     each), got {}",
+                    sc.iterations.unwrap_or(0)
+                )))
             }
         };
         let (observed, rest) = feature_points(&self.base, locator, &sc.observations)?;

@@ -142,6 +142,12 @@ pub struct Split {
 }
 
 impl Split {
+    /// The dataset scenario the samples were generated from: the first part of the source
+    /// (`<scenario>/seed <seed>/<settings>`), when known.
+    pub fn scenario(&self) -> Option<&str> {
+        self.source.as_deref().and_then(|s| s.rsplitn(3, '/').nth(2))
+    }
+
     /// Splits `samples` in index order: the last `test` uniform samples for testing, the
     /// `validation` uniform samples before them for validation, the rest for training (uniform
     /// samples are drawn independently, so their order carries no information), σ-chosen samples

@@ -111,7 +111,7 @@ fn cpu_burn_available() -> Result<()> {
 #[cfg(not(feature = "cpu-burn"))]
 fn cpu_burn_available() -> Result<()> {
     Err(LearnError::InvalidInput(
-        "this augsim was built without burn's CPU engine: rebuild with `cargo build --release --features cpu-burn` \
+        "this augsim was built without burn's CPU engine: rebuild with `cargo build --release -p augsim --features cpu-burn` \
          (or `--features gpu`), or use --device cpu"
             .into(),
     ))
@@ -146,7 +146,7 @@ fn gpu_name() -> Result<String> {
 #[cfg(not(feature = "gpu"))]
 fn gpu_available() -> Result<()> {
     Err(LearnError::InvalidInput(
-        "this augsim was built without GPU support: rebuild with `cargo build --release --features gpu` \
+        "this augsim was built without GPU support: rebuild with `cargo build --release -p augsim --features gpu` \
          (burn's wgpu backend), or use --device cpu"
             .into(),
     ))

@@ -191,7 +191,8 @@ pub struct TrainOutcome {
     pub completed: bool,
     /// Path of the model JSON (written only when `completed`).
     pub model_path: PathBuf,
-    /// Mean wall time of one training step in this run (s).
+    /// Mean wall time of one training step in this run (s); 0 when it ran none (resumed after
+    /// the last).
     pub mean_step_seconds: f64,
 }
 
