@@ -25,7 +25,7 @@ fn neo_hookean_phantom_reaches_paper_scale_deformation() {
         let out = dir.path().join("out.vtu");
         let (ok, text) = solve(Path::new(scenario), &out);
         assert!(ok, "{scenario} failed:\n{text}");
-        assert!(text.contains("Fbar elements"), "{scenario} must use F-bar at nu >= 0.45:\n{text}");
+        assert!(text.contains("F-bar elements"), "{scenario} must use F-bar at nu >= 0.45:\n{text}");
         let u = max_displacement(&text);
         assert!(u >= at_least, "{scenario}: max |u| = {u} m < {at_least} m");
         assert!(out.exists());

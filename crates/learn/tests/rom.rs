@@ -151,6 +151,12 @@ fn bad_input_is_refused_with_a_message() {
     std::fs::write(&json, text.replace("\"augsim-rom\"", "\"augsim-rm\"")).unwrap();
     let e = Model::load(dir.path()).unwrap_err().to_string();
     assert!(e.contains("its format \"augsim-rm\" is no model's: \"augsim-unet\""), "{e}");
+    // A grid without a node along an axis is no grid.
+    let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
+    value["grid"][2] = 0.into();
+    std::fs::write(&json, value.to_string()).unwrap();
+    let e = Model::load(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("every axis needs at least one node"), "{e}");
 }
 
 /// The shipped reduced-order models load, save back to the very bytes of their files, and predict

@@ -308,6 +308,7 @@ fn malformed_slicer_files_are_refused_naming_the_file_and_the_line_or_point() {
         (put(d, "quote.fcsv", format!("{header}0,1,2,3,0,0,0,1,1,1,0,\"F-1,,\n")), "line 4: field 12 opens a quote"),
         (put(d, "units.csv", "x_mm,y_m,z_mm\n1,2,3\n"), "line 1: the x, y and z columns name different units"),
         (put(d, "inf.csv", "x,y,z\n1,inf,3\n"), "line 2: y = \"inf\" is not finite"),
+        (put(d, "array.npy", b"\x93NUMPY\x01\x00\xff\xfe"), "not text: points come as CSV (x, y, z)"),
         (put(d, "far.csv", "x,y,z\n1,2,3\n1,1e300,3\n"), "point 1 lies at [1.0, 1e300, 3.0]: a coordinate beyond 1e6"),
         (
             put(d, "far.mrk.json", r#"{"markups": [{"controlPoints": [{"position": [1, 2, 3e7]}]}]}"#),

@@ -16,7 +16,7 @@ pub const LAYOUT: &str = "[channel, x, y, z], C order, z fastest: index = ((c*nx
 
 /// Number of nodes of a regular grid along x, y and z (serialized as `[nx, ny, nz]`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(from = "[usize; 3]", into = "[usize; 3]")]
+#[serde(try_from = "[usize; 3]", into = "[usize; 3]")]
 pub struct GridShape {
     /// Nodes along x.
     pub nx: usize,
@@ -26,9 +26,15 @@ pub struct GridShape {
     pub nz: usize,
 }
 
-impl From<[usize; 3]> for GridShape {
-    fn from([nx, ny, nz]: [usize; 3]) -> Self {
-        GridShape { nx, ny, nz }
+impl TryFrom<[usize; 3]> for GridShape {
+    type Error = String;
+
+    /// A grid of at least one node along each axis (a model or manifest of another is damaged).
+    fn try_from([nx, ny, nz]: [usize; 3]) -> std::result::Result<Self, String> {
+        match nx.min(ny).min(nz) {
+            0 => Err(format!("grid [{nx}, {ny}, {nz}]: every axis needs at least one node")),
+            _ => Ok(GridShape { nx, ny, nz }),
+        }
     }
 }
 
@@ -230,7 +236,7 @@ impl GridMesh {
     pub fn new(grid: &Grid) -> Result<Self> {
         let [nx, ny, nz] = grid.dims;
         let mesh = mesh::box_hex(grid.origin, grid.upper(), [nx - 1, ny - 1, nz - 1])?;
-        Ok(GridMesh { mesh, shape: GridShape::from(grid.dims) })
+        Ok(GridMesh { mesh, shape: GridShape::new(grid.dims[0], grid.dims[1], grid.dims[2]) })
     }
 
     /// A field of `channels` channels in the tensor layout (`[c, x, y, z]`, e.g. 3 for a displacement, 1 for a

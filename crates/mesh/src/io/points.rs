@@ -101,8 +101,12 @@ impl LabelledPoints {
 /// [`MAX_MEASURED_COORDINATE`](crate::MAX_MEASURED_COORDINATE) is an error (a damaged file).
 pub fn read_points(path: impl AsRef<Path>) -> Result<LabelledPoints, MeshError> {
     let path = path.as_ref();
-    let text =
-        std::fs::read_to_string(path).map_err(|error| MeshError::Io { path: path.display().to_string(), error })?;
+    let text = std::fs::read_to_string(path).map_err(|error| match error.kind() {
+        std::io::ErrorKind::InvalidData => {
+            parse_error(path, "not text: points come as CSV (x, y, z), Slicer's .fcsv or .mrk.json")
+        }
+        _ => MeshError::Io { path: path.display().to_string(), error },
+    })?;
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     let points = match extension(path).as_str() {
         "fcsv" => read_table(path, text, true),
