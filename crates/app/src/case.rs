@@ -223,8 +223,6 @@ impl Network<'_> {
 /// displacement of the scenario's input nodes.
 pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
     let (scenario, model) = (network.scenario, network.model);
-    // The mesh its samples were solved and encoded on: quadratic when the scenario's material
-    // asks for T10 (the mid-edge nodes are network inputs too).
     // A U-Net is fed its scenario's encoding of the input nodes' motion: another scenario of the
     // same grid (other nodes, another element) feeds it inputs it never saw. (A reduced-order
     // model's shape fit works in its basis, whatever scenario gave it.)
@@ -236,6 +234,8 @@ pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
             scenario.name
         );
     }
+    // The mesh its samples were solved and encoded on: quadratic when the scenario's material
+    // asks for T10 (the mid-edge nodes are network inputs too).
     let generator = scenario.generator(network.dir)?;
     if model.grid() != generator.grid() {
         bail!(

@@ -33,6 +33,15 @@ pub enum FilterError {
         /// The model's own error.
         error: BoxedModelError,
     },
+    /// The step's estimate lies outside the model's parameter domain ([`crate::Model::admissible`]):
+    /// refused, the filter left as it was.
+    #[error("the estimate of iteration {iteration} is refused: {error}")]
+    Estimate {
+        /// Filter iteration (1-based) that was being computed.
+        iteration: usize,
+        /// The model's reason.
+        error: BoxedModelError,
+    },
     /// The observation or state vector of one sigma point contains NaN or infinity, or changed length.
     #[error("sigma point {sigma_point} at iteration {iteration}: {what}")]
     SigmaPoint {

@@ -310,6 +310,28 @@ impl Model for FemModel {
     type State = FemState;
     type Error = FemModelError;
 
+    /// A positive, finite Young's modulus; springs that leave every node's stiffness finite and
+    /// non-negative.
+    fn admissible(&self, theta: &[f64]) -> Result<(), FemModelError> {
+        for (p, &value) in self.parameters.iter().zip(theta) {
+            let fault = match p {
+                FemParameter::Young if !(value > 0.0 && value.is_finite()) => {
+                    format!("Young's modulus {value:.6e} Pa is not positive and finite")
+                }
+                FemParameter::Springs { nodes }
+                    if !nodes.iter().all(|&k| {
+                        (self.problem.springs[k] + value).is_finite() && self.problem.springs[k] + value >= 0.0
+                    }) =>
+                {
+                    format!("a spring stiffness of {value:.6e} N/m leaves a node's stiffness negative")
+                }
+                _ => continue,
+            };
+            return Err(FemModelError::Invalid(fault));
+        }
+        Ok(())
+    }
+
     fn step(&self, state: &mut FemState, theta: &[f64], step: usize) -> Result<(), FemModelError> {
         let slot = self.solvers.get(state.slot).ok_or_else(|| {
             FemModelError::Invalid(format!(

@@ -20,6 +20,13 @@ pub trait Model: Sync {
     /// Observation operator H: the predicted measurement for `state` (same length and ordering as the data).
     fn observe(&self, state: &Self::State) -> DVector<f64>;
 
+    /// Whether the physical parameter values `theta` are in the model's domain (e.g. a positive
+    /// Young's modulus); the filter refuses an estimate outside it, before taking it. Any by
+    /// default.
+    fn admissible(&self, _theta: &[f64]) -> Result<(), Self::Error> {
+        Ok(())
+    }
+
     /// Called once per sigma point when the filter is built, on that sigma point's own copy of the initial state
     /// (`sigma_point` in `0..m`: m = p + 1 simplex or 2p + 1 star sigma points), so that a model can tie
     /// per-sigma-point resources to it (e.g. the index of a solver that keeps its factorisation between the steps of

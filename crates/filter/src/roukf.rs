@@ -494,9 +494,11 @@ impl<M: Model> Roukf<M> {
         let correction = chol.solve(&(g.transpose() * &weighted));
         let theta = &theta_mean + &l_theta * &correction;
         // Finite in the filter's space is not enough: an exponential transform may overflow.
-        if theta.iter().zip(&self.config.parameters).any(|(v, s)| !v.is_finite() || !s.to_physical(*v).is_finite()) {
+        let physical: Vec<f64> = theta.iter().zip(&self.config.parameters).map(|(v, s)| s.to_physical(*v)).collect();
+        if theta.iter().chain(&physical).any(|v| !v.is_finite()) {
             return Err(nonfinite("parameter estimate"));
         }
+        self.model.admissible(&physical).map_err(|e| FilterError::Estimate { iteration: k, error: Box::new(e) })?;
         let joint_update = match &self.joint {
             Some(_) => {
                 let (x_mean, l_x) = self.mean_and_factor(&state_vectors);

@@ -19,17 +19,19 @@ impl std::fmt::Display for Diverged {
 impl std::error::Error for Diverged {}
 
 /// x = θ; fails at time step `fail_step` for every parameter value above `threshold`;
-/// observes `scale * x` plus a NaN when `nan_above` is exceeded.
+/// observes `scale * x` plus a NaN when `nan_above` is exceeded; admits values from `lowest` up.
 struct Flaky {
     fail_step: AtomicUsize,
     threshold: f64,
     nan_above: f64,
     scale: f64,
+    lowest: f64,
 }
 
 impl Flaky {
     fn new(fail_step: usize, threshold: f64) -> Self {
-        Flaky { fail_step: AtomicUsize::new(fail_step), threshold, nan_above: f64::INFINITY, scale: 1.0 }
+        let fail_step = AtomicUsize::new(fail_step);
+        Flaky { fail_step, threshold, nan_above: f64::INFINITY, scale: 1.0, lowest: f64::NEG_INFINITY }
     }
 }
 
@@ -46,6 +48,12 @@ impl Model for Flaky {
     fn observe(&self, x: &f64) -> DVector<f64> {
         let v = if *x > self.nan_above { f64::NAN } else { self.scale * *x };
         DVector::from_element(1, v)
+    }
+    fn admissible(&self, theta: &[f64]) -> Result<(), Diverged> {
+        match theta[0] >= self.lowest {
+            true => Ok(()),
+            false => Err(Diverged(theta[0])),
+        }
     }
 }
 
@@ -178,6 +186,21 @@ fn an_estimate_overflowing_its_transform_is_an_error() {
     assert!(matches!(err, FilterError::NonFinite { iteration: 1, .. }), "{err:?}");
     assert!(err.to_string().contains("parameter estimate"), "{err}");
     assert_eq!(roukf.iteration(), 0);
+}
+
+/// An estimate outside the model's domain (a negative stiffness from a measurement in the wrong
+/// unit) is refused, the filter left as it was: the next, sound measurement goes through.
+#[test]
+fn an_estimate_outside_the_model_s_domain_is_refused_and_the_filter_goes_on() {
+    let mut model = Flaky::new(usize::MAX, 0.0);
+    model.lowest = 0.0;
+    let mut roukf = Roukf::new(model, 0.0, config(Execution::Parallel)).unwrap();
+    let err = roukf.step(&z(-50.0)).unwrap_err();
+    assert!(matches!(err, FilterError::Estimate { iteration: 1, .. }), "{err:?}");
+    assert!(err.to_string().starts_with("the estimate of iteration 1 is refused"), "{err}");
+    assert_eq!((roukf.iteration(), roukf.mean()[0]), (0, 1.0));
+    assert_eq!(roukf.step(&z(1.2)).unwrap().iteration, 1);
+    assert!(roukf.mean()[0] > 1.0);
 }
 
 #[test]

@@ -7,9 +7,9 @@
 //! - out, per cloud, in this order and as chosen by [`Outputs`]: POINT `targets` (the
 //!   registered targets, in the order given to the server), POLYDATA `organ` (the registered
 //!   surface with its triangles), TRANSFORM `rigid` (the organ-to-cloud transform, when the
-//!   registration options ask for a rigid pre-alignment: estimated on a client's first cloud
-//!   that registers without a warning, kept after it; targets and organ are then in the cloud's
-//!   frame), STRING `status` (one line
+//!   registration options ask for a rigid pre-alignment: estimated on a client's first cloud and
+//!   kept while its clouds register without a warning, estimated again after one; targets and
+//!   organ are then in the cloud's frame), STRING `status` (one line
 //!   of JSON: `frame`, `ms`,
 //!   `surface_residual`, `plausible` and `warnings` (see `register::plausibility`), `inliers`,
 //!   `points`, `iterations`, and `target_sigma` (the predicted standard deviation σ at each target, for
@@ -201,14 +201,14 @@ pub fn serve(
     let mut last_error = None;
     while !stop.load(Ordering::SeqCst) {
         match listener.accept() {
-            Ok((stream, peer)) => match Client::start(stream, peer.to_string(), factory.clone(), options.clone()) {
-                Ok(client) => {
-                    log(format_args!("{peer}: connected"));
-                    clients.push(client);
-                    last_error = None;
+            Ok((stream, peer)) => {
+                log(format_args!("{peer}: connected"));
+                last_error = None;
+                match Client::start(stream, peer.to_string(), factory.clone(), options.clone()) {
+                    Ok(client) => clients.push(client),
+                    Err(e) => log(format_args!("{peer}: the connection could not be set up: {e}")),
                 }
-                Err(e) => log(format_args!("{peer}: the connection could not be set up: {e}")),
-            },
+            }
             Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(POLL),
             Err(e) => {
                 let text = e.to_string();
@@ -254,7 +254,7 @@ struct Shared {
     input_ended: AtomicBool,
     /// The socket, for writing (answers from the registration thread, errors from the reader).
     writer: Mutex<TcpStream>,
-    /// The socket, to shut it down without waiting for a write under way.
+    /// The socket, for reading, and to shut it down without waiting for a write under way.
     socket: TcpStream,
     options: ServeOptions,
 }
@@ -268,23 +268,39 @@ impl Shared {
         self.arrived.notify_all();
     }
 
-    /// Logs an error of this client's and sends it as a status (when the status is an output).
+    /// Logs an error of this client's and sends it as a status (when the status is an output),
+    /// unless the connection has ended.
     fn report(&self, status: &serde_json::Value) {
-        log(format_args!("{}: {}", self.peer, status));
-        self.send_status(status);
+        if !self.closed.load(Ordering::SeqCst) {
+            log(format_args!("{}: {}", self.peer, status));
+            self.send_status(status);
+        }
     }
 
+    /// Sends a message; a failed send (answers left unread for the stall time, a client gone)
+    /// ends the connection, saying why.
     fn send<T: Content>(&self, content: &T, device: &str) -> std::result::Result<(), String> {
         let bytes = encode_message(content, device)?;
         let mut w = self.writer.lock().map_err(|_| "writer poisoned".to_string())?;
-        w.write_all(&bytes).map_err(|e| e.to_string())
+        w.write_all(&bytes).map_err(|e| {
+            let why = match e.kind() {
+                std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut => {
+                    format!("the client left its answers unread for {:.1} s", self.options.stall.as_secs_f64())
+                }
+                _ => format!("sending: {e}"),
+            };
+            drop(w);
+            if !self.closed.load(Ordering::SeqCst) {
+                log(format_args!("{}: {why}", self.peer));
+            }
+            self.close();
+            why
+        })
     }
 
     /// Sends one line of JSON as a STRING of `device`; a failed send ends the connection.
     fn send_json(&self, device: &str, json: &serde_json::Value) {
-        if self.send(&StringMessage::utf8(json.to_string()), device).is_err() {
-            self.close();
-        }
+        let _ = self.send(&StringMessage::utf8(json.to_string()), device);
     }
 
     fn send_estimate(&self, estimate: &serde_json::Value) {
@@ -308,7 +324,6 @@ impl Client {
         stream.set_nonblocking(false)?;
         stream.set_nodelay(true)?;
         stream.set_write_timeout(Some(options.stall))?;
-        let reader = stream.try_clone()?;
         let socket = stream.try_clone()?;
         let shared = Arc::new(Shared {
             peer,
@@ -322,7 +337,7 @@ impl Client {
         });
         let (s1, s2) = (shared.clone(), shared.clone());
         let threads = vec![
-            std::thread::spawn(move || read_messages(reader, &s1)),
+            std::thread::spawn(move || read_messages(&s1)),
             std::thread::spawn(move || serve_client(&s2, &*factory)),
         ];
         Ok(Client { shared, threads })
@@ -342,7 +357,7 @@ impl Client {
 
 /// Reads messages until the connection ends; keeps the newest cloud, and the features of the
 /// steps to come, for the registration thread.
-fn read_messages(mut stream: TcpStream, shared: &Shared) {
+fn read_messages(shared: &Shared) {
     let (mut frame, mut step) = (0u64, 0u64);
     let mut ignored = std::collections::HashSet::new();
     let to_metres = |points: Vec<[f32; 3]>| -> Vec<Point> {
@@ -350,7 +365,7 @@ fn read_messages(mut stream: TcpStream, shared: &Shared) {
         points.into_iter().map(|p| frame.point(units.point_to_metres(p.map(f64::from)))).collect()
     };
     while !shared.closed.load(Ordering::SeqCst) {
-        match read_message(&mut stream, &shared.options) {
+        match read_message(&shared.socket, &shared.options) {
             Ok(Incoming::Cloud(points)) => {
                 frame += 1;
                 let cloud = to_metres(points);
@@ -393,6 +408,8 @@ fn read_messages(mut stream: TcpStream, shared: &Shared) {
                 shared.arrived.notify_all();
                 return;
             }
+            // A connection the server ended (stopping, a client that did not read) is no error.
+            Err(_) if shared.closed.load(Ordering::SeqCst) => break,
             Err(e) => {
                 shared.report(&serde_json::json!({ "error": e }));
                 break;
@@ -418,7 +435,7 @@ enum Incoming {
 /// one. Between messages the stream may wait for as long as the client likes; within one, no
 /// longer than [`ServeOptions::stall`] between bytes. A message that is not a `cloud` or
 /// `features` is skipped unread, whatever its size.
-fn read_message(stream: &mut TcpStream, options: &ServeOptions) -> std::result::Result<Incoming, String> {
+fn read_message(mut stream: &TcpStream, options: &ServeOptions) -> std::result::Result<Incoming, String> {
     let (max_body, stall) = (options.max_message_bytes, options.stall);
     let mut header = [0u8; Header::SIZE];
     stream.set_read_timeout(None).map_err(|e| format!("reading a message: {e}"))?;
@@ -438,7 +455,7 @@ fn read_message(stream: &mut TcpStream, options: &ServeOptions) -> std::result::
     let header = Header::decode(&header).map_err(|e| format!("malformed message header: {e}"))?;
     let (kind, device) = (header.type_name.as_str(), header.device_name.as_str());
     if !matches!(device, "cloud" | "features") || !matches!(kind, "POLYDATA" | "POINT") {
-        let skipped = std::io::copy(&mut Read::by_ref(stream).take(header.body_size), &mut std::io::sink())
+        let skipped = std::io::copy(&mut stream.take(header.body_size), &mut std::io::sink())
             .map_err(|e| stalled("truncated message body", e))?;
         if skipped < header.body_size {
             return Err(format!("truncated message body: {skipped} of {} bytes", header.body_size));

@@ -199,8 +199,9 @@ struct Registered {
 /// targets file's); default: the organ's.
 /// `iterations`: most match-and-deform iterations of the first cloud, from rest (default: the
 /// library's for a FEM, the built-in registration case's real-time budget for a U-Net); a
-/// warm-started cloud takes at most min(iterations, 4). `rigid`: align the first cloud that
-/// registers without a warning rigidly to the organ (trimmed ICP) and keep that pose; `targets`
+/// warm-started cloud takes at most min(iterations, 4). `rigid`: align the first cloud rigidly to
+/// the organ (trimmed ICP) and keep that pose while the clouds register without a warning (after
+/// one, the next cloud is aligned again); `targets`
 /// (and `rigid`) are then in the cloud's frame, `points` and `displacement` in the organ's.
 #[pyclass(module = "augsim")]
 struct Registration {

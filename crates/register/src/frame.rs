@@ -120,7 +120,7 @@ pub struct RegistrationOptions {
     pub capture_decay: f64,
     /// Rigid pre-alignment of the cloud to the rest surface (ICP, [`crate::rigid`]) before the
     /// deformable iterations; `None`: the cloud is taken as rigidly aligned. In a sequence it is
-    /// estimated on the first frame that registers without a warning and kept for the others.
+    /// estimated on a frame and kept for the next ones while they register without a warning.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rigid: Option<RigidOptions>,
     /// The direction the camera looks along, in the organ's frame: cloud points are matched

@@ -3,8 +3,8 @@
 //! summary of the run.
 //!
 //! With a rigid pre-alignment ([`RegistrationOptions::rigid`]) the cloud is moved onto the organ
-//! (the transform estimated on the first frame that registers without a warning, kept for the
-//! sequence), registered there, and
+//! (the transform estimated on a frame and kept for the next ones while they register without a
+//! warning), registered there, and
 //! the registered targets are moved back: targets and errors are in the cloud's frame.
 
 use mesh::io::Frame;
@@ -47,8 +47,8 @@ impl FrameOutcome {
 /// A registration under way: an organ, what deforms it, targets inside it and the loop's
 /// settings. Clouds are registered one after the other, each warm-started from the previous one's
 /// displacement; with a rigid pre-alignment in the options, the cloud's pose is estimated (trimmed
-/// ICP to the organ's rest surface) on each cloud until one registers without a warning, and kept
-/// from then on; the targets are carried along
+/// ICP to the organ's rest surface) on a cloud and kept while the next ones register without a
+/// warning (after a warning, the next cloud estimates it again); the targets are carried along
 /// in the cloud's frame. What `augsim register`, `augsim serve` (one per client), the Python
 /// `Registration` and the experiments run.
 pub struct Registration {
@@ -191,8 +191,9 @@ impl Registration {
 
     /// Registers `cloud` (m, in its own frame), starting from the previous cloud's displacement,
     /// which it then replaces; a failed cloud leaves the warm start and the pose as they were. The
-    /// pose, when rigid pre-alignment is on, is estimated on each cloud until one registers
-    /// without a warning, and kept from then on.
+    /// pose, when rigid pre-alignment is on, is estimated on a cloud and kept for the next ones
+    /// while they register without a warning: a cloud with a warning has the next one estimate
+    /// it again.
     pub fn register(&mut self, cloud: &[Point]) -> Result<Tracked> {
         let (rigid, rigid_time) = match (&self.options.rigid, &self.rigid) {
             (Some(rigid_options), None) => {
@@ -226,9 +227,7 @@ impl Registration {
         let target_std = self.deformer.uncertainty(&self.targets, &self.stencils).transpose()?;
         registration.time += sigma_start.elapsed();
         self.warm = Some(registration.u.clone());
-        if registration.warnings.is_empty() {
-            self.rigid = rigid.clone();
-        }
+        self.rigid = if registration.warnings.is_empty() { rigid.clone() } else { None };
         Ok(Tracked { registration, targets, rigid, target_std })
     }
 
@@ -470,11 +469,11 @@ mod tests {
         assert!(message.contains("outside the organ") && !message.contains("expected"), "{message}");
     }
 
-    /// With rigid pre-alignment, a cloud that registers with a warning does not fix the pose: the
-    /// next cloud estimates it again, and a plausible cloud's pose is kept. A cloud in another
-    /// unit is named as such before an alignment.
+    /// With rigid pre-alignment, a plausible cloud's pose is kept for the next clouds; a cloud that
+    /// registers with a warning has the next one estimate it again. A cloud in another unit is
+    /// named as such before an alignment.
     #[test]
-    fn the_pose_is_kept_from_the_first_plausible_cloud() {
+    fn the_pose_is_kept_while_the_clouds_are_plausible() {
         let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap(), None).unwrap();
         let options = RegistrationOptions { rigid: Some(crate::rigid::RigidOptions::default()), ..Default::default() };
         let mut r =
@@ -494,6 +493,14 @@ mod tests {
         assert!((0..3).all(|d| (pose.apply(shift)[d]).abs() < 1e-5), "the shift undone: {:?}", pose.apply(shift));
         let third = r.register(&spread).unwrap();
         assert_eq!(third.rigid.expect("the pose kept").cloud_to_organ, pose, "kept, not estimated again");
+        // That cloud's warning has the next one estimate the pose again: another shift is (mostly)
+        // undone, where the kept pose would leave it all.
+        let shift = [-0.002, 0.003, 0.001];
+        let view: Vec<Point> =
+            organ.surface().vertices.iter().map(|p| std::array::from_fn(|d| p[d] + shift[d])).collect();
+        let again = r.register(&view).unwrap().rigid.expect("a pose").cloud_to_organ;
+        let left = |t: &crate::RigidTransform| mesh::norm(t.apply(shift));
+        assert!(left(&again) < 0.5 * left(&pose), "estimated again: {} m left, {} m kept", left(&again), left(&pose));
         let millimetres: Vec<Point> = organ.surface().vertices.iter().map(|p| p.map(|c| 1e3 * c)).collect();
         r.reset();
         let e = r.register(&millimetres).expect_err("mm refused").to_string();
