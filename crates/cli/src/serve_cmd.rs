@@ -11,6 +11,9 @@ use app::registration::RegistrationChoice;
 use live::{Outputs, ServeOptions};
 use mesh::length::LengthUnit;
 
+/// Every answer: what a server sends unless `--outputs` chooses.
+const OUTPUTS_DEFAULT: &str = "targets,organ,transform,status";
+
 /// Options of `augsim serve`.
 #[derive(Debug, clap::Args)]
 pub struct ServeArgs {
@@ -24,7 +27,7 @@ pub struct ServeArgs {
     host: String,
     /// The answers to each cloud, comma-separated: targets (POINT), organ (POLYDATA), transform
     /// (TRANSFORM `rigid`, with --rigid), status (STRING).
-    #[arg(long, default_value = "targets,organ,transform,status")]
+    #[arg(long, default_value = OUTPUTS_DEFAULT)]
     outputs: String,
     /// Identification on the stream: the ROUKF of this assimilation scenario (its model, unknowns
     /// and observed points) steps with each POINT `features` message (the observed points'
@@ -84,8 +87,13 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     // Built once here so that a bad model, scenario or targets file stops the command before it
     // listens.
     let first = spec.build()?;
-    if first.options().rigid.is_none() && !(outputs.targets || outputs.organ || outputs.status) {
-        anyhow::bail!("--outputs transform: the transform is the rigid pre-alignment's, sent with --rigid only");
+    if first.options().rigid.is_none() && outputs.transform {
+        let only = "--outputs transform: the transform is the rigid pre-alignment's, sent with --rigid only";
+        match outputs.targets || outputs.organ || outputs.status {
+            false => anyhow::bail!(only),
+            true if args.outputs != OUTPUTS_DEFAULT => eprintln!("warning    {only}"),
+            true => {}
+        }
     }
     let (frame, frame_line) = spec.stream_frame(&first);
     println!("method     {}", first.method());

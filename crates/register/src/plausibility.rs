@@ -96,16 +96,16 @@ pub fn far_share(distances: &[f64]) -> f64 {
 }
 
 /// What a registered frame says about itself: the warnings (empty when the result is plausible)
-/// given the share of its cloud left unfitted ([`far_share`]), its displacement `u`, the points
-/// its cloud had and whether it was rigidly pre-aligned.
+/// given the share of its cloud left unfitted ([`far_share`]), its displacement `u`, the distinct
+/// points its cloud had and whether it was rigidly pre-aligned.
 pub fn warnings(organ: &Organ, u: &[f64], far_share: f64, points: usize, rigid: bool) -> Vec<String> {
     let size = organ.extent();
     let motion = u.chunks_exact(3).map(|d| mesh::norm([d[0], d[1], d[2]])).fold(0.0, f64::max);
     let mut out = Vec::new();
     if points < FEW_POINTS {
         out.push(format!(
-            "the cloud has {points} point(s), fewer than {FEW_POINTS}: so few leave the organ's deformation \
-             undetermined"
+            "the cloud has {points} distinct point(s), fewer than {FEW_POINTS}: so few leave the organ's \
+             deformation undetermined"
         ));
     }
     if far_share > SUSPECT_FAR_SHARE {

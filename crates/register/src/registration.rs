@@ -506,8 +506,8 @@ mod tests {
         let e = r.register(&millimetres).expect_err("mm refused").to_string();
         assert!(e.contains("Is it in millimetres?"), "{e}");
         // Without a pre-alignment, a handful of points is flagged too.
-        let few = cube_with(vec![[0.02; 3]]).unwrap().register(&organ.surface().vertices[..4]).unwrap();
-        assert!(few.registration.warnings.iter().any(|w| w.contains("4 point(s), fewer than 10")), "{few:?}");
+        let few = cube_with(vec![[0.02; 3]]).unwrap().register(&organ.surface().vertices[..4].repeat(25)).unwrap();
+        assert!(few.registration.warnings.iter().any(|w| w.contains("4 distinct point(s), fewer than 10")), "{few:?}");
     }
 
     #[test]
