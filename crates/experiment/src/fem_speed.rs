@@ -44,7 +44,7 @@ pub struct CaseTiming {
     pub reference: bool,
     /// Degrees of freedom.
     pub dofs: usize,
-    /// How many times the case was timed (fewer above [`LARGE_DOFS`]).
+    /// How many times the case was timed (at most 3 above 20,000 dofs).
     #[serde(default)]
     pub runs: usize,
     /// Newton iterations of the last solve from rest.

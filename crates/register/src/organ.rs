@@ -196,8 +196,8 @@ pub const LANDMARK_REACH: f64 = 0.15;
 impl Organ {
     /// Stencils of the targets in the organ, and warnings about them. A target outside the organ
     /// is an error, which names it (by its label too, where `labels` give one) and the likely
-    /// mistake ([`likely_mistake`]); a set of targets whose
-    /// extent is under [`SMALL_TARGET_EXTENT`] of the organ's is warned about.
+    /// mistake (millimetres given for metres or the reverse, the other of RAS and LPS); a set of
+    /// targets whose extent is under [`SMALL_TARGET_EXTENT`] of the organ's is warned about.
     pub fn locate_targets(&self, targets: &[Point], labels: &[String]) -> Result<(Vec<Stencil>, Vec<String>)> {
         let inside = |moved: &[Point]| self.locate(moved, "target").is_ok();
         let stencils = self.locate_labelled(targets, labels, "target").map_err(|e| {
@@ -209,7 +209,7 @@ impl Organ {
 
     /// Checks that the landmarks where the organ is held lie on its surface or inside it: one
     /// outside by more than [`LANDMARK_REACH`] of its extent is an error naming it and the likely
-    /// mistake ([`likely_mistake`]); so is a set of landmarks spread over less than
+    /// mistake (another unit, the other frame); so is a set of landmarks spread over less than
     /// [`SMALL_TARGET_EXTENT`] of the organ that, read 1,000 times larger, lies on it. Returns
     /// warnings: a set of landmarks so small otherwise.
     pub fn check_landmarks(&self, landmarks: &[Point]) -> Result<Vec<String>> {
