@@ -11,9 +11,6 @@ use app::registration::RegistrationChoice;
 use live::{Outputs, ServeOptions};
 use mesh::length::LengthUnit;
 
-/// Every answer: what a server sends unless `--outputs` chooses.
-const OUTPUTS_DEFAULT: &str = "targets,organ,transform,status";
-
 /// Options of `augsim serve`.
 #[derive(Debug, clap::Args)]
 pub struct ServeArgs {
@@ -26,9 +23,9 @@ pub struct ServeArgs {
     #[arg(long, default_value = "127.0.0.1")]
     host: String,
     /// The answers to each cloud, comma-separated: targets (POINT), organ (POLYDATA), transform
-    /// (TRANSFORM `rigid`, with --rigid), status (STRING).
-    #[arg(long, default_value = OUTPUTS_DEFAULT)]
-    outputs: String,
+    /// (TRANSFORM `rigid`, with --rigid), status (STRING). Default: every one.
+    #[arg(long, value_name = "LIST")]
+    outputs: Option<String>,
     /// Identification on the stream: the ROUKF of this assimilation scenario (its model, unknowns
     /// and observed points) steps with each POINT `features` message (the observed points'
     /// positions, in the stream's unit, in the scenario's order) and answers a STRING `estimate`.
@@ -81,18 +78,19 @@ extern "C" fn request_stop(_: libc::c_int) {
 
 /// Runs `augsim serve` until SIGINT or SIGTERM.
 pub fn run(args: &ServeArgs) -> Result<()> {
-    let outputs = Outputs::parse(&args.outputs).map_err(anyhow::Error::msg).context("--outputs")?;
+    let chosen =
+        args.outputs.as_deref().map(Outputs::parse).transpose().map_err(anyhow::Error::msg).context("--outputs")?;
+    let outputs = chosen.unwrap_or(Outputs::ALL);
     let spec = args.registration.spec()?;
     let units = spec.given_units;
     // Built once here so that a bad model, scenario or targets file stops the command before it
     // listens.
     let first = spec.build()?;
-    if first.options().rigid.is_none() && outputs.transform {
+    if let Some(chosen) = chosen.filter(|o| o.transform && first.options().rigid.is_none()) {
         let only = "--outputs transform: the transform is the rigid pre-alignment's, sent with --rigid only";
-        match outputs.targets || outputs.organ || outputs.status {
+        match chosen.targets || chosen.organ || chosen.status {
             false => anyhow::bail!(only),
-            true if args.outputs != OUTPUTS_DEFAULT => eprintln!("warning    {only}"),
-            true => {}
+            true => eprintln!("warning    {only}"),
         }
     }
     let (frame, frame_line) = spec.stream_frame(&first);

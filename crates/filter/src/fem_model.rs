@@ -319,9 +319,7 @@ impl Model for FemModel {
                     format!("Young's modulus {value:.6e} Pa is not positive and finite")
                 }
                 FemParameter::Springs { nodes }
-                    if !nodes.iter().all(|&k| {
-                        (self.problem.springs[k] + value).is_finite() && self.problem.springs[k] + value >= 0.0
-                    }) =>
+                    if !nodes.iter().all(|&k| (0.0..f64::INFINITY).contains(&(self.problem.springs[k] + value))) =>
                 {
                     format!("a spring stiffness of {value:.6e} N/m leaves a node's stiffness negative")
                 }

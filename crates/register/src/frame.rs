@@ -305,13 +305,7 @@ pub fn register_frame(
     let distances: Vec<f64> = cloud.par_iter().map(|&c| bvh.distance(c)).collect();
     let surface_residual = distances.iter().sum::<f64>() / cloud.len() as f64;
     let far_share = crate::plausibility::far_share(&distances);
-    let distinct = {
-        let mut keys: Vec<[u64; 3]> = cloud.iter().map(|p| p.map(f64::to_bits)).collect();
-        keys.sort_unstable();
-        keys.dedup();
-        keys.len()
-    };
-    let warnings = crate::plausibility::warnings(organ, &u, far_share, distinct, options.rigid.is_some());
+    let warnings = crate::plausibility::warnings(organ, &u, far_share, cloud, options.rigid.is_some());
     Ok(FrameResult {
         u,
         iterations,

@@ -90,15 +90,31 @@ fn looks_like_millimetres(organ: &Organ, cloud: &[Point]) -> Result<bool> {
     Ok(mesh::stats::median(&mut distances) < MILLIMETRE_FIT * size)
 }
 
+/// The number of distinct points of `cloud`, counted up to `most` (a real cloud has that many
+/// among its first points: the count stops there).
+fn distinct_points(cloud: &[Point], most: usize) -> usize {
+    let mut seen: Vec<Point> = Vec::with_capacity(most);
+    for p in cloud {
+        if seen.len() == most {
+            break;
+        }
+        if !seen.contains(p) {
+            seen.push(*p);
+        }
+    }
+    seen.len()
+}
+
 /// The share of `distances` (cloud point to registered surface, m) beyond [`FAR_DISTANCE`].
 pub fn far_share(distances: &[f64]) -> f64 {
     distances.iter().filter(|&&d| d > FAR_DISTANCE).count() as f64 / distances.len().max(1) as f64
 }
 
 /// What a registered frame says about itself: the warnings (empty when the result is plausible)
-/// given the share of its cloud left unfitted ([`far_share`]), its displacement `u`, the distinct
-/// points its cloud had and whether it was rigidly pre-aligned.
-pub fn warnings(organ: &Organ, u: &[f64], far_share: f64, points: usize, rigid: bool) -> Vec<String> {
+/// given the share of its cloud left unfitted ([`far_share`]), its displacement `u`, its cloud
+/// and whether it was rigidly pre-aligned.
+pub fn warnings(organ: &Organ, u: &[f64], far_share: f64, cloud: &[Point], rigid: bool) -> Vec<String> {
+    let points = distinct_points(cloud, FEW_POINTS);
     let size = organ.extent();
     let motion = u.chunks_exact(3).map(|d| mesh::norm([d[0], d[1], d[2]])).fold(0.0, f64::max);
     let mut out = Vec::new();
