@@ -1,10 +1,12 @@
 //! The reduced-order model on a problem with a known answer: inputs and targets driven by two
 //! hidden parameters, the target a nonlinear function of them.
 
+use augsim_learn::data::npy::{NpyArray, NpyData};
 use augsim_learn::rom::{fit, Context, RomConfig};
 use augsim_learn::LearnedModel;
 use augsim_learn::{
-    evaluate, uncertainty_coverage, Compute, Corruption, GridShape, Method, Model, Sample, Samples, SplitPolicy,
+    evaluate, uncertainty_coverage, Compute, Corruption, GridShape, Method, Model, PredictInput, Sample, Samples,
+    SplitPolicy,
 };
 
 /// Sample `index`: parameters (a, b) in [−1, 1]²; the input a·φ₁ + b·φ₂ on a patch of nodes (a
@@ -121,6 +123,13 @@ fn bad_input_is_refused_with_a_message() {
     input[3] = 1e30;
     let e = model.predict(&input).unwrap_err().to_string();
     assert!(e.contains("value 3 is 1e30: inputs are finite displacements (m) or forces (N) within 1e6"), "{e}");
+    // A float64 input is checked before its rounding to float32 (1e300 would be infinite).
+    let mut wide: Vec<f64> = train.input(0).iter().map(|&v| f64::from(v)).collect();
+    wide[3] = 1e300;
+    let array = NpyArray { shape: vec![3, 6, 5, 4], data: NpyData::F64(wide) };
+    let reduced = Model::Reduced(std::sync::Arc::new(model.clone()));
+    let e = PredictInput::Grid(array).into_network_input(&reduced).unwrap_err().to_string();
+    assert!(e.contains("value 3 is 1e300"), "{e}");
     // Settings that leave nothing to fit.
     for (config, what) in [
         (RomConfig { max_modes: 0, ..RomConfig::default() }, "at least one of its modes"),

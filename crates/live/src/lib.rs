@@ -175,6 +175,11 @@ pub fn first_then_build<T: Send>(
     }
 }
 
+/// TCP keepalive of a client's connection: a probe after 30 s of silence, then every 10 s, until
+/// the system's count of unanswered probes (9 on Linux: about 2 minutes) ends it.
+const KEEPALIVE: socket2::TcpKeepalive =
+    socket2::TcpKeepalive::new().with_time(Duration::from_secs(30)).with_interval(Duration::from_secs(10));
+
 /// How long the accept loop sleeps between checks of the stop flag.
 const POLL: Duration = Duration::from_millis(20);
 
@@ -314,6 +319,16 @@ impl Shared {
     }
 }
 
+/// Sets up an accepted connection: blocking, unbuffered, a write waits at most `options.stall`,
+/// and a client gone without closing (a crash of its machine, a pulled cable) is noticed by the
+/// system's probes of the idle connection ([`KEEPALIVE`]): its read fails and the connection closes.
+fn configure(stream: &TcpStream, options: &ServeOptions) -> std::io::Result<()> {
+    stream.set_nonblocking(false)?;
+    stream.set_nodelay(true)?;
+    stream.set_write_timeout(Some(options.stall))?;
+    socket2::SockRef::from(stream).set_tcp_keepalive(&KEEPALIVE)
+}
+
 impl Client {
     fn start(
         stream: TcpStream,
@@ -321,9 +336,7 @@ impl Client {
         factory: Arc<RegistrationFactory>,
         options: ServeOptions,
     ) -> std::io::Result<Client> {
-        stream.set_nonblocking(false)?;
-        stream.set_nodelay(true)?;
-        stream.set_write_timeout(Some(options.stall))?;
+        configure(&stream, &options)?;
         let socket = stream.try_clone()?;
         let shared = Arc::new(Shared {
             peer,
@@ -614,4 +627,22 @@ fn answer(
         "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| units.from_metres(v)).collect::<Vec<f64>>()),
     }));
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_accepted_connection_is_probed_when_idle() {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let _client = TcpStream::connect(listener.local_addr().unwrap()).unwrap();
+        let (accepted, _) = listener.accept().unwrap();
+        let options = ServeOptions::default();
+        configure(&accepted, &options).unwrap();
+        let socket = socket2::SockRef::from(&accepted);
+        assert!(socket.keepalive().unwrap());
+        assert_eq!(accepted.write_timeout().unwrap(), Some(options.stall));
+        assert!(accepted.nodelay().unwrap());
+    }
 }

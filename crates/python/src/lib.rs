@@ -422,10 +422,7 @@ fn predict<'py>(py: Python<'py>, model: PathBuf, input: &Bound<'py, PyAny>) -> P
         [_, 6] => PredictInput::Points(PointCloud::from_rows(
             &values.chunks_exact(6).map(|r| std::array::from_fn(|i| r[i])).collect::<Vec<_>>(),
         )),
-        [3, _, _, _] => PredictInput::Grid(NpyArray {
-            shape: shape.clone(),
-            data: NpyData::F32(values.iter().map(|&v| v as f32).collect()),
-        }),
+        [3, _, _, _] => PredictInput::Grid(NpyArray { shape: shape.clone(), data: NpyData::F64(values) }),
         other => {
             return Err(PyValueError::new_err(format!(
                 "input: an array of shape {other:?}, where a grid tensor [3, nx, ny, nz] or a point cloud [N, 6] \

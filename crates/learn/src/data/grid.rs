@@ -275,13 +275,17 @@ pub(crate) fn check_prediction_input(input: &[f32], grid: GridShape) -> Result<(
         )));
     }
     match unfit_value(input) {
-        Some(i) => Err(LearnError::InvalidInput(format!(
-            "prediction input value {i} is {:e}: inputs are finite displacements (m) or forces (N) within \
-             {MAX_FIELD_VALUE:e}",
-            input[i]
-        ))),
+        Some(i) => Err(unfit_input(i, input[i])),
         None => Ok(()),
     }
+}
+
+/// The error for prediction input value `i`, `value`, that no field on the grid holds.
+pub(crate) fn unfit_input(i: usize, value: impl std::fmt::LowerExp) -> LearnError {
+    LearnError::InvalidInput(format!(
+        "prediction input value {i} is {value:e}: inputs are finite displacements (m) or forces (N) within \
+         {MAX_FIELD_VALUE:e}"
+    ))
 }
 
 /// The largest magnitude a value of a field on the grid (a dataset's, a prediction's input) may

@@ -9,8 +9,8 @@ use mesh::io::points::coordinate_unit;
 use mesh::length::LengthUnit;
 use mesh::Point;
 
-use crate::data::grid::encode_points;
-use crate::data::npy::{read_npy, NpyArray};
+use crate::data::grid::{encode_points, unfit_input, MAX_FIELD_VALUE};
+use crate::data::npy::{read_npy, NpyArray, NpyData};
 use crate::model::LearnedModel;
 use crate::{LearnError, Result};
 
@@ -125,7 +125,16 @@ impl PredictInput {
     pub fn into_network_input(self, model: &impl LearnedModel) -> Result<Vec<f32>> {
         let g = model.grid_shape();
         match self {
-            PredictInput::Grid(array) if array.shape == [3, g.nx, g.ny, g.nz] => Ok(array.into_f32()),
+            PredictInput::Grid(array) if array.shape == [3, g.nx, g.ny, g.nz] => {
+                // Checked before the rounding to f32 would turn a large value into infinity.
+                if let NpyData::F64(values) = &array.data {
+                    let unfit = values.iter().position(|v| !(v.is_finite() && v.abs() <= f64::from(MAX_FIELD_VALUE)));
+                    if let Some(i) = unfit {
+                        return Err(unfit_input(i, values[i]));
+                    }
+                }
+                Ok(array.into_f32())
+            }
             PredictInput::Grid(array) => Err(LearnError::InvalidInput(format!(
                 "a tensor of shape {:?}, but the model expects [3, {}, {}, {}] (or a point cloud [N, 6])",
                 array.shape, g.nx, g.ny, g.nz
