@@ -5,11 +5,14 @@ Run: pytest -s python/tests (the augsim binary: $AUGSIM_BIN, default target/rele
 `.ci/run` runs them).
 """
 
+import _thread
 import importlib.util
 import os
 import re
 import subprocess
 import sys
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -278,6 +281,22 @@ def test_roukf_converges_to_the_young_modulus():
     assert a.iteration == len(observations)
     with pytest.raises(augsim.AugsimError, match="missing"):
         augsim.Assimilation(os.path.join(ROOT, "missing.toml"))
+
+
+def test_ctrl_c_stops_a_long_computation():
+    # Building the reference of 100,000 steps takes 50 times as long as 2,000 steps; Ctrl-C half a
+    # second in stops it at its next solver iteration, and the next call runs as usual.
+    start = time.perf_counter()
+    augsim.Assimilation(BEAM_ASSIMILATION, iterations=2000)
+    fiftieth = time.perf_counter() - start
+    threading.Timer(0.5, _thread.interrupt_main).start()
+    start = time.perf_counter()
+    with pytest.raises(KeyboardInterrupt):
+        augsim.Assimilation(BEAM_ASSIMILATION, iterations=100_000)
+    stopped = time.perf_counter() - start
+    print(f"\nCtrl-C after 0.5 s: stopped after {stopped:.2f} s (the whole call: about {50 * fiftieth:.0f} s)")
+    assert stopped < 0.5 + 10 * fiftieth
+    assert augsim.Assimilation(BEAM_ASSIMILATION).names == ["young"]
 
 
 def _box_obj(path, size):

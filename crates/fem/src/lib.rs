@@ -34,6 +34,7 @@ pub mod assembly;
 pub mod element;
 pub mod fbar;
 pub mod geometric;
+pub mod interrupt;
 mod lanes;
 pub mod linsolve;
 pub mod material;
@@ -113,6 +114,9 @@ pub enum FemError {
     /// A mesh error.
     #[error(transparent)]
     Mesh(#[from] mesh::MeshError),
+    /// The computation was asked to stop ([`interrupt::request`]).
+    #[error("interrupted")]
+    Interrupted,
 }
 
 /// The stiffness of a load path's last step, in per cent of that at rest, under which a failure to

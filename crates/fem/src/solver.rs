@@ -503,6 +503,7 @@ impl StaticSolver {
     }
 
     fn evaluate(&mut self, u: &[f64], f: &mut [f64], tangent: bool) -> Result<(), FemError> {
+        crate::interrupt::check()?;
         let values = tangent.then_some(self.values.as_mut_slice());
         assemble(&self.geometry, &self.pattern, &self.problem.material, u, f, values, &mut self.work)?;
         for (n, &k) in self.problem.springs.iter().enumerate().filter(|(_, k)| **k != 0.0) {
@@ -811,7 +812,7 @@ impl StaticSolver {
     /// stress peaks. `lambda` is the last converged load factor, `trial` the
     /// failing iterate and `u` the last converged state.
     fn diagnose(&self, error: FemError, lambda: f64, trial: &[f64], u: &[f64], stats: &Stats) -> FemError {
-        if self.problem.material.law != Law::Svk {
+        if self.problem.material.law != Law::Svk || matches!(error, FemError::Interrupted) {
             return error;
         }
         let law = self.problem.material.law;

@@ -2,12 +2,14 @@
 //! static solves, registration of point clouds with a warm start between frames, U-Net
 //! predictions and the ROUKF one step at a time. Every call reuses what the command line does
 //! (scenario loaders, `app::registration`, `app::output`, `app::assimilation`);
-//! long computations run without the GIL, and augsim's errors, panics included, arrive in Python
-//! as `augsim.AugsimError` with augsim's message.
+//! long computations run without the GIL on a thread of their own, which Ctrl-C stops
+//! (`KeyboardInterrupt`), and augsim's errors, panics included, arrive in Python as
+//! `augsim.AugsimError` with augsim's message.
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
+use std::time::Duration;
 
 use app::assimilation::{Experiment, OnlineFilter};
 use app::output::RunWriter;
@@ -37,9 +39,52 @@ create_exception!(
      model, a solve that failed. Its message is augsim's."
 );
 
-/// Runs `f` without the GIL; its error, or a panic, becomes an [`AugsimError`].
+/// How often a caller waiting for a computation checks for Ctrl-C.
+const SIGNAL_POLL: Duration = Duration::from_millis(50);
+
+/// Outcome of a call into augsim: a value, an error, or a panic caught.
+type Outcome<T> = std::thread::Result<anyhow::Result<T>>;
+
+/// Runs `f` on a thread of its own, without the GIL, while the caller checks for signals: Ctrl-C
+/// asks it to stop ([`fem::interrupt`]) and raises `KeyboardInterrupt` once it has. Its error, or a
+/// panic, becomes an [`AugsimError`].
 fn compute<T: Send>(py: Python<'_>, f: impl FnOnce() -> anyhow::Result<T> + Send) -> PyResult<T> {
-    match py.detach(|| catch_unwind(AssertUnwindSafe(f))) {
+    let outcome = std::thread::scope(|scope| {
+        let (sender, receiver) = std::sync::mpsc::channel::<Outcome<T>>();
+        scope.spawn(move || sender.send(catch_unwind(AssertUnwindSafe(f))));
+        // The receiver is not shared between threads; the lock makes it so for `detach`.
+        let receiver = Mutex::new(receiver);
+        let wait = |timeout: Option<Duration>| {
+            let receiver = receiver.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+            match timeout {
+                Some(t) => receiver.recv_timeout(t).ok(),
+                None => receiver.recv().ok(),
+            }
+        };
+        loop {
+            if let Some(outcome) = py.detach(|| wait(Some(SIGNAL_POLL))) {
+                return Ok(outcome);
+            }
+            if let Err(signal) = py.check_signals() {
+                fem::interrupt::request();
+                py.detach(|| wait(None));
+                fem::interrupt::clear();
+                return Err(signal);
+            }
+        }
+    })?;
+    result(outcome)
+}
+
+/// Reads the state of an object with `f`, without the GIL (a read takes no time: it is not
+/// interrupted); its error, or a panic, becomes an [`AugsimError`].
+fn read<T: Send>(py: Python<'_>, f: impl FnOnce() -> anyhow::Result<T> + Send) -> PyResult<T> {
+    result(py.detach(|| catch_unwind(AssertUnwindSafe(f))))
+}
+
+/// The value of an outcome; its error, or its panic, as an [`AugsimError`].
+fn result<T>(outcome: Outcome<T>) -> PyResult<T> {
+    match outcome {
         Ok(Ok(value)) => Ok(value),
         Ok(Err(e)) => Err(AugsimError::new_err(format!("{e:#}"))),
         Err(panic) => {
@@ -348,7 +393,7 @@ impl Registration {
     /// Forgets the previous cloud: the next one is registered from the organ at rest (a FEM
     /// keeps its solver's factorisation, which changes the result slightly: 0.06 mm on the tests' case).
     fn reset(&self, py: Python<'_>) -> PyResult<()> {
-        compute(py, || {
+        read(py, || {
             locked(&self.state)?.reset();
             Ok(())
         })
@@ -357,21 +402,21 @@ impl Registration {
     /// Rest positions of the organ's nodes, float64 [n, 3], in `units`.
     #[getter]
     fn points<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let nodes = compute(py, || Ok(locked(&self.state)?.organ().mesh().nodes.clone()))?;
+        let nodes = read(py, || Ok(locked(&self.state)?.organ().mesh().nodes.clone()))?;
         Ok(self.point_array(py, &nodes))
     }
 
     /// Rest positions of the targets, float64 [k, 3], in `units`.
     #[getter]
     fn targets<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let targets = compute(py, || Ok(locked(&self.state)?.targets().to_vec()))?;
+        let targets = read(py, || Ok(locked(&self.state)?.targets().to_vec()))?;
         Ok(self.point_array(py, &targets))
     }
 
     /// The targets' labels, in the order of `targets`: a targets file's ("" where it gives none).
     #[getter]
     fn target_labels(&self, py: Python<'_>) -> PyResult<Vec<String>> {
-        compute(py, || Ok(locked(&self.state)?.target_labels().to_vec()))
+        read(py, || Ok(locked(&self.state)?.target_labels().to_vec()))
     }
 }
 
@@ -509,19 +554,19 @@ impl Assimilation {
     /// The current estimate of the parameters (physical units), in the order of `names`.
     #[getter]
     fn mean(&self, py: Python<'_>) -> PyResult<Vec<f64>> {
-        compute(py, || Ok(locked(&self.filter)?.mean()))
+        read(py, || Ok(locked(&self.filter)?.mean()))
     }
 
     /// The current standard deviations of the parameters.
     #[getter]
     fn std(&self, py: Python<'_>) -> PyResult<Vec<f64>> {
-        compute(py, || Ok(locked(&self.filter)?.std()))
+        read(py, || Ok(locked(&self.filter)?.std()))
     }
 
     /// Filter steps done.
     #[getter]
     fn iteration(&self, py: Python<'_>) -> PyResult<usize> {
-        compute(py, || Ok(locked(&self.filter)?.iteration()))
+        read(py, || Ok(locked(&self.filter)?.iteration()))
     }
 
     /// The scenario's values of the parameters, in the order of `names`: the truth behind

@@ -260,6 +260,7 @@ pub fn register_frame(
     };
     let mut last_observations = None;
     while iterations < most {
+        fem::interrupt::check()?;
         iterations += 1;
         let iteration = first + iterations - 1;
         let capture = options.capture_distance * options.capture_decay.powi(iteration as i32);
