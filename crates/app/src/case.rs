@@ -171,12 +171,42 @@ pub fn fem_scenario(scenario: &CaseScenario, name: &str, material: Material) -> 
     StaticScenario { fixed: vec![fixed], ..StaticScenario::new(name, source, material) }
 }
 
-/// The shipped augmented-reality network, relative to the directory an experiment runs from (the
-/// repository's).
+/// The shipped augmented-reality network, relative to the repository's root ([`shipped`]).
 pub const SHIPPED_MODEL: &str = "models/liver_ar";
 
 /// The shipped augmented-reality reduced-order model, trained on the same scenario.
 pub const SHIPPED_ROM: &str = "models/liver_ar_rom";
+
+/// The shipped scenario-1 network (forces to displacement).
+pub const SHIPPED_FORCES_MODEL: &str = "models/liver_forces";
+
+/// Where a shipped model (`models/...`) is: under the directory the command runs from, else in
+/// the repository this program was built from; `None` where neither has it.
+pub fn shipped(model: &str) -> Option<PathBuf> {
+    let here = PathBuf::from(model);
+    match here.exists() {
+        true => Some(here),
+        false => Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(model).canonicalize().ok(),
+    }
+}
+
+/// The shipped U-Net and reduced-order model that are found ([`shipped`]), and a line for each
+/// one skipped.
+pub fn shipped_models() -> Result<(Vec<Model>, Vec<String>)> {
+    let (mut models, mut skipped) = (Vec::new(), Vec::new());
+    for name in [SHIPPED_MODEL, SHIPPED_ROM] {
+        match shipped(name) {
+            Some(path) => models.push(Model::load(&path)?),
+            None => skipped.push(skipped_line(name)),
+        }
+    }
+    Ok((models, skipped))
+}
+
+/// The line saying that the shipped model `name` is skipped, not found ([`shipped`]).
+pub fn skipped_line(name: &str) -> String {
+    format!("skipped: {name} not found, here or where augsim was built")
+}
 
 /// The name of the built-in dataset scenario of the shipped AR network.
 pub const AR_SCENARIO: &str = "liver_ar_t10";
@@ -439,25 +469,6 @@ fn with_budgets(
         max_points: max_points.or(options.max_points),
         ..options.clone()
     }
-}
-
-/// The learned models of a comparison: `model` when given, otherwise the shipped U-Net and
-/// reduced-order model ([`SHIPPED_MODEL`], [`SHIPPED_ROM`], relative to the repository's root);
-/// with the shipped ones not found (skipped).
-pub fn comparison_models(model: Option<&Path>) -> Result<(Vec<Model>, Vec<PathBuf>)> {
-    let paths = match model {
-        Some(path) => vec![path.to_path_buf()],
-        None => vec![PathBuf::from(SHIPPED_MODEL), PathBuf::from(SHIPPED_ROM)],
-    };
-    let (mut models, mut missing) = (Vec::new(), Vec::new());
-    for path in paths {
-        if path.exists() {
-            models.push(Model::load(&path)?);
-        } else {
-            missing.push(path);
-        }
-    }
-    Ok((models, missing))
 }
 
 /// A registration method of a comparison: its name, what deforms the organ and the loop's

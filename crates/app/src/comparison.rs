@@ -4,16 +4,16 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
-use learn::Progress;
+use learn::{Model, Progress};
 use scenario::registration::MethodKind;
 use scenario::{CaseScenario, DatasetScenario};
 
-use crate::case::{ar_scenario, case_methods, compare, comparison_models, synthetic_case, Compared, Network};
+use crate::case::{ar_scenario, case_methods, compare, shipped_models, synthetic_case, Compared, Network};
 use crate::output::{write_case, write_comparison};
 use crate::printout::{case_files_lines, case_lines, comparison_table, rigid_lines};
 
 /// The learned models a comparison registers with: `model` (default: the shipped U-Net and
-/// reduced-order model, [`comparison_models`]), trained on the dataset scenario `scenario`
+/// reduced-order model, [`shipped_models`]), trained on the dataset scenario `scenario`
 /// (default: [`ar_scenario`]).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct LearnedModels<'a> {
@@ -47,12 +47,13 @@ pub fn run_comparison(
     write_case(&dir, &case)?;
     lines(case_files_lines(&case, &dir));
 
-    let (models, missing) = if wants_network { comparison_models(learned.model)? } else { (Vec::new(), Vec::new()) };
-    for path in missing {
-        progress.line(&format!(
-            "model      skipped: {} not found (run from the repository root, or give --model)",
-            path.display()
-        ));
+    let (models, skipped) = match (wants_network, learned.model) {
+        (false, _) => (Vec::new(), Vec::new()),
+        (true, Some(path)) => (vec![Model::load(path)?], Vec::new()),
+        (true, None) => shipped_models()?,
+    };
+    for line in skipped {
+        progress.line(&format!("model      {line} (give --model)"));
     }
     let (network_scenario, network_dir) = match learned.scenario {
         Some(path) => DatasetScenario::load(path)?,

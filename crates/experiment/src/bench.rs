@@ -9,7 +9,7 @@ use app::case::{case_methods, compare, synthetic_case, Network};
 use mesh::stats::median;
 
 use crate::fem_speed::{fbar_ratios, measure, reference_ms, CaseTiming, FRAME_LOAD_STEP, LARGE_DOFS, LARGE_RUNS};
-use crate::held_out::{base_case, shipped_models, CASES, POINTS};
+use crate::held_out::{base_case, CASES, POINTS};
 
 /// A table of `augsim bench`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -136,7 +136,7 @@ const BENCH_STREAM_FRAMES: usize = 11;
 fn registration_frames(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
     let load = &CASES[0];
     let scenario = load.apply(&base_case()?);
-    let (models, skipped) = shipped_models()?;
+    let (models, skipped) = app::case::shipped_models()?;
     skipped.iter().for_each(|line| print(line));
     let trained_on = app::case::ar_scenario();
     let networks: Vec<Network> =

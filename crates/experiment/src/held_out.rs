@@ -10,7 +10,6 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use fem::{Formulation, Law, Material};
-use learn::Model;
 use mesh::stats::{max, mean, median};
 use register::{NetworkDeformer, Organ};
 use scenario::registration::{MethodKind, MethodSpec};
@@ -20,8 +19,8 @@ use serde::Serialize;
 use crate::loads::{CaseLoad, LEFT_LOBE_FRONT, RIGHT_LOBE};
 use crate::{fmt, reference, ExperimentResult, Headline, Name, Progress, Row, Size};
 use app::case::{
-    ar_scenario, case_methods, compare, network_from_truth, network_model, network_options, synthetic_case, Network,
-    NETWORK_AFTER_FIT, POLISH_ITERATIONS, SHIPPED_MODEL, SHIPPED_ROM,
+    ar_scenario, case_methods, compare, network_from_truth, network_model, network_options, shipped_models,
+    synthetic_case, Network, NETWORK_AFTER_FIT, POLISH_ITERATIONS, SHIPPED_MODEL, SHIPPED_ROM,
 };
 
 /// The cases, fixed before any method was run on them.
@@ -208,15 +207,6 @@ pub(crate) fn rom_polish(scenario: &CaseScenario) -> Result<MethodSpec> {
         network_iterations: Some(register::shape::SHAPE_ITERATIONS),
         ..corotational.clone()
     })
-}
-
-/// The shipped learned models that are there (run from the repository): the U-Net, the
-/// reduced-order model; and the lines saying which were skipped, not found.
-pub(crate) fn shipped_models() -> Result<(Vec<Model>, Vec<String>)> {
-    let (found, missing): (Vec<&str>, Vec<&str>) =
-        [SHIPPED_MODEL, SHIPPED_ROM].into_iter().partition(|p| Path::new(p).exists());
-    let models = found.into_iter().map(|p| Model::load(Path::new(p))).collect::<learn::Result<_>>()?;
-    Ok((models, missing.into_iter().map(|p| format!("skipped: {p} not found (run from the repository)")).collect()))
 }
 
 /// The co-rotational FEM method of `scenario`.

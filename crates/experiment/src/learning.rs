@@ -79,7 +79,7 @@ pub(crate) struct Recipe {
     pub train_samples: Option<usize>,
     /// Fine-tune this pre-trained model (its `model.json`) instead of starting from scratch.
     pub fine_tune: Option<PathBuf>,
-    /// A shipped network (its directory, from the repository's root) evaluated instead of a
+    /// A shipped network (its directory, [`app::case::shipped`]) evaluated instead of a
     /// training when its record is this recipe's run on this split: hours of training not run again.
     pub shipped: Option<PathBuf>,
 }
@@ -243,7 +243,7 @@ pub(crate) fn train(dataset: &Dataset, dir: &Path, recipe: &Recipe, progress: Pr
 /// The training seed of every recipe.
 const SEED: u64 = 0;
 
-/// The recipe's shipped network, when it is there (run from the repository's root) and its record
+/// The recipe's shipped network, when it is there and its record
 /// is this recipe's run on the draws of `split`: from scratch, the same seed, steps, channels and
 /// input corruption, on the same data source, and none of the `test` samples among those it was
 /// trained or selected on (a draw that failed when it was trained and solves now is one it never saw).
@@ -412,7 +412,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
     let data = dataset(dir, "liver_forces_large", samples, progress)?;
     let recipe = Recipe {
         channels,
-        shipped: (size == Size::Paper).then(|| PathBuf::from("models/liver_forces")),
+        shipped: (size == Size::Paper).then(|| app::case::shipped(app::case::SHIPPED_FORCES_MODEL)).flatten(),
         ..Recipe::new(iterations, samples / 10, samples / 5)
     };
     let t = train(&data.dataset, dir, &recipe, progress)?;

@@ -21,7 +21,9 @@ use serde::Serialize;
 
 use crate::loads::LEFT_LOBE_FRONT;
 use crate::{reference, ExperimentResult, Name, Progress, Row, Size};
-use app::case::{network_options, synthetic_case, SyntheticCase, AR_SCENARIO, SHIPPED_MODEL, SHIPPED_ROM};
+use app::case::{
+    network_options, shipped, skipped_line, synthetic_case, SyntheticCase, AR_SCENARIO, SHIPPED_MODEL, SHIPPED_ROM,
+};
 use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
 
 /// The static scenario of the FEM streamed: the registration case's co-rotational model (3k T4).
@@ -145,20 +147,17 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     let fem = MethodSpec::fem(FEM_SCENARIO);
     streams.push(stream_case("FEM co-rotational (3k T4), warm-started", &case, fem)?);
     // The shipped learned models that are there: the U-Net, the reduced-order model.
-    let mut missing = Vec::new();
-    for (path, method) in [(SHIPPED_MODEL, "U-Net (models/liver_ar)"), (SHIPPED_ROM, "ROM (models/liver_ar_rom)")] {
-        if !Path::new(path).exists() {
-            missing.push(path);
-            continue;
-        }
+    let (network, rom) = (shipped(SHIPPED_MODEL), shipped(SHIPPED_ROM));
+    for (path, method) in [(&network, "U-Net (models/liver_ar)"), (&rom, "ROM (models/liver_ar_rom)")] {
+        let Some(path) = path else { continue };
         progress.line(&format!("streaming to the shipped {method}"));
         let learned = MethodSpec::learned(path, AR_SCENARIO);
         streams.push(stream_case(method, &case, learned)?);
     }
-    if missing.is_empty() {
+    if let (Some(network), Some(rom)) = (&network, &rom) {
         let method = "U-Net after the ROM's shape fit";
         progress.line(&format!("streaming to the shipped {method}"));
-        let learned = MethodSpec::learned_after_shape_fit(SHIPPED_MODEL, AR_SCENARIO, SHIPPED_ROM);
+        let learned = MethodSpec::learned_after_shape_fit(network, AR_SCENARIO, rom);
         streams.push(stream_case(method, &case, learned)?);
     }
     let rest: Vec<f64> =
@@ -195,8 +194,10 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         ];
         rows.extend(figures.map(|row| row.of("registration", &s.method)));
     }
-    for path in missing {
-        rows.push(Row::new("learned model", format!("skipped: {path} not found (run from the repository)"), ""));
+    for (name, found) in [(SHIPPED_MODEL, &network), (SHIPPED_ROM, &rom)] {
+        if found.is_none() {
+            rows.push(Row::new("learned model", skipped_line(name), ""));
+        }
     }
     let (figure, latency_figure) = ("stream.png", "stream_latency.png");
     plot_stream(&dir.join(figure), &dir.join(latency_figure), &rest, &streams)?;
