@@ -24,8 +24,8 @@ pub struct LearnedModels<'a> {
 }
 
 /// Runs the comparison of `scenario` into `out`: simulates its case and writes it to `out/case`,
-/// registers it with each of its methods (the learned ones with `learned`; a shipped model not
-/// found is skipped, with a line saying so), writes `comparison.csv`, `summary.json` and each
+/// registers it with each of its methods (the learned ones with `learned`: a model given must be
+/// there, a shipped one not found is skipped with a line saying so), writes `comparison.csv`, `summary.json` and each
 /// method's files. Its lines (the case, its files, the rigid part, the table) go to
 /// `progress.line` as they come; `progress` advances over the methods. Returns the comparison's
 /// rows (a method that failed carries its error).

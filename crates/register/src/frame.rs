@@ -235,7 +235,7 @@ pub fn register_frame(
         }
         None => vec![0.0; ndof],
     };
-    crate::plausibility::check_extent(organ, cloud)?;
+    let extent = crate::plausibility::check_extent(organ, cloud)?;
     let subset: Vec<Point>;
     let cloud = match options.max_points {
         Some(most) if cloud.len() > most => {
@@ -306,7 +306,7 @@ pub fn register_frame(
     let distances: Vec<f64> = cloud.par_iter().map(|&c| bvh.distance(c)).collect();
     let surface_residual = distances.iter().sum::<f64>() / cloud.len() as f64;
     let far_share = crate::plausibility::far_share(&distances);
-    let warnings = crate::plausibility::warnings(organ, &u, far_share, cloud, options.rigid.is_some());
+    let warnings = crate::plausibility::warnings(organ, &u, far_share, (cloud, extent), options.rigid.is_some());
     Ok(FrameResult {
         u,
         iterations,

@@ -12,6 +12,10 @@ use crate::{Organ, RegisterError, Result};
 pub const MAX_EXTENT_RATIO: f64 = 5.0;
 /// ... and at least this fraction of it (a camera's view of a few centimetres of the organ).
 pub const MIN_EXTENT_RATIO: f64 = 0.01;
+/// A cloud spanning less than this fraction of the organ's extent is flagged: so small a view
+/// leaves most of the deformation undetermined, and it is what centimetres read as millimetres
+/// make of a view (a laparoscope's spans a third of a liver or more).
+pub const SMALL_VIEW: f64 = 0.1;
 /// A cloud taken for millimetres lies, divided by 1000, within this fraction of the organ's size
 /// of its rest surface (median distance).
 pub const MILLIMETRE_FIT: f64 = 0.03;
@@ -40,8 +44,8 @@ fn robust_extent(points: &[Point]) -> f64 {
 }
 
 /// Refuses a (non-empty, finite) cloud whose extent cannot be a view of the organ, saying what it
-/// probably is.
-pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<()> {
+/// probably is; returns the cloud's extent over the organ's.
+pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<f64> {
     let (size, extent) = (organ.extent(), robust_extent(cloud));
     let ratio = extent / size;
     if ratio > MAX_EXTENT_RATIO {
@@ -74,7 +78,7 @@ pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<()> {
             size * 1e3
         )));
     }
-    Ok(())
+    Ok(ratio)
 }
 
 /// Whether the cloud divided by 1000 is a view of the organ at rest: its extent within the
@@ -111,9 +115,16 @@ pub fn far_share(distances: &[f64]) -> f64 {
 }
 
 /// What a registered frame says about itself: the warnings (empty when the result is plausible)
-/// given the share of its cloud left unfitted ([`far_share`]), its displacement `u`, its cloud
-/// and whether it was rigidly pre-aligned.
-pub fn warnings(organ: &Organ, u: &[f64], far_share: f64, cloud: &[Point], rigid: bool) -> Vec<String> {
+/// given its cloud and that cloud's extent over the organ's ([`check_extent`]), the share of the
+/// cloud left unfitted ([`far_share`]), its displacement `u`, and whether it was rigidly
+/// pre-aligned.
+pub fn warnings(
+    organ: &Organ,
+    u: &[f64],
+    far_share: f64,
+    (cloud, extent): (&[Point], f64),
+    rigid: bool,
+) -> Vec<String> {
     let points = distinct_points(cloud, FEW_POINTS);
     let size = organ.extent();
     let motion = u.chunks_exact(3).map(|d| mesh::norm([d[0], d[1], d[2]])).fold(0.0, f64::max);
@@ -122,6 +133,14 @@ pub fn warnings(organ: &Organ, u: &[f64], far_share: f64, cloud: &[Point], rigid
         out.push(format!(
             "the cloud has {points} distinct point(s), fewer than {FEW_POINTS}: so few leave the organ's \
              deformation undetermined"
+        ));
+    } else if extent < SMALL_VIEW {
+        out.push(format!(
+            "the cloud spans {:.0} mm, {:.0} % of the organ's {:.0} mm (its box's diagonal): so small a view leaves \
+             most of the deformation undetermined; if it is in centimetres, convert it to mm",
+            extent * size * 1e3,
+            100.0 * extent,
+            size * 1e3
         ));
     }
     if far_share > SUSPECT_FAR_SHARE {
@@ -168,5 +187,20 @@ mod tests {
         assert!(message(&scaled(1e6)).contains("not the organ's points"), "{}", message(&scaled(1e6)));
         let one_place = vec![[0.05, 0.03, 0.04]; 100];
         assert!(message(&one_place).starts_with("the cloud's 100 points lie at one place"), "{}", message(&one_place));
+    }
+
+    /// A view of a tenth of the organ (the same view in centimetres read as millimetres) is
+    /// flagged; the whole view is not.
+    #[test]
+    fn a_view_of_a_tenth_of_the_organ_is_flagged() {
+        let organ = Organ::new(mesh::generate::box_tet([0.0; 3], [0.1, 0.06, 0.04], [5, 3, 2]).unwrap(), None).unwrap();
+        let top: Vec<Point> = organ.mesh().nodes.iter().copied().filter(|p| p[2] > 0.039).collect();
+        let rest = vec![0.0; 3 * organ.mesh().num_nodes()];
+        let flagged =
+            |cloud: &[Point]| warnings(&organ, &rest, 0.0, (cloud, check_extent(&organ, cloud).unwrap()), false);
+        assert!(flagged(&top).is_empty(), "{:?}", flagged(&top));
+        let centimetres: Vec<Point> = top.iter().map(|p| p.map(|c| 0.1 * c)).collect();
+        let said = flagged(&centimetres);
+        assert!(said.len() == 1 && said[0].contains("so small a view") && said[0].contains("centimetres"), "{said:?}");
     }
 }
