@@ -23,7 +23,8 @@ pub struct ServeArgs {
     #[arg(long, default_value = "127.0.0.1")]
     host: String,
     /// The answers to each cloud, comma-separated: targets (POINT), organ (POLYDATA), transform
-    /// (TRANSFORM `rigid`, with --rigid), status (STRING). Default: every one.
+    /// (TRANSFORM `rigid`, with --rigid), status (STRING; a refused cloud's error is sent
+    /// whatever the list). Default: every one.
     #[arg(long, value_name = "LIST")]
     outputs: Option<String>,
     /// Identification on the stream: the ROUKF of this assimilation scenario (its model, unknowns

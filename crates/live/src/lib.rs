@@ -13,7 +13,9 @@
 //!   of JSON: `frame`, `ms`,
 //!   `surface_residual`, `plausible` and `warnings` (see `register::plausibility`), `inliers`,
 //!   `points`, `iterations`, and `target_sigma` (the predicted standard deviation σ at each target, for
-//!   the reduced-order model; else null), in the stream's unit; or `frame` and `error`).
+//!   the reduced-order model; else null), in the stream's unit; or `frame` and `error`). An
+//!   error is answered whatever the outputs, so that a client never waits for answers that will
+//!   not come.
 //!
 //! Each client has its own registration, built at its first cloud and warm-started from its
 //! previous frame. A client's clouds are registered one at a time; a cloud that arrives while one
@@ -79,7 +81,7 @@ pub struct Outputs {
     pub organ: bool,
     /// TRANSFORM `rigid`: the organ-to-cloud transform, when a rigid pre-alignment is on.
     pub transform: bool,
-    /// STRING `status`.
+    /// STRING `status` of a registered cloud (an error's status is sent whatever this says).
     pub status: bool,
 }
 
@@ -273,12 +275,13 @@ impl Shared {
         self.arrived.notify_all();
     }
 
-    /// Logs an error of this client's and sends it as a status (when the status is an output),
-    /// unless the connection has ended.
+    /// Logs an error of this client's and sends it as a status, whether or not the status is an
+    /// output (a client told nothing would wait for answers that never come), unless the
+    /// connection has ended.
     fn report(&self, status: &serde_json::Value) {
         if !self.closed.load(Ordering::SeqCst) {
             log(format_args!("{}: {}", self.peer, status));
-            self.send_status(status);
+            self.send_json("status", status);
         }
     }
 
@@ -310,12 +313,6 @@ impl Shared {
 
     fn send_estimate(&self, estimate: &serde_json::Value) {
         self.send_json("estimate", estimate);
-    }
-
-    fn send_status(&self, status: &serde_json::Value) {
-        if self.options.outputs.status {
-            self.send_json("status", status);
-        }
     }
 }
 
@@ -614,7 +611,10 @@ fn answer(
         let matrix = change.transform(r.organ_to_cloud().homogeneous(units.metres())).map(|row| row.map(|x| x as f32));
         shared.send(&TransformMessage { matrix }, "rigid")?;
     }
-    shared.send_status(&serde_json::json!({
+    if !options.outputs.status {
+        return Ok(());
+    }
+    let status = serde_json::json!({
         "frame": frame,
         "ms": start.elapsed().as_secs_f64() * 1e3,
         "unit": units.symbol(),
@@ -625,7 +625,8 @@ fn answer(
         "points": result.points,
         "iterations": result.iterations,
         "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| units.from_metres(v)).collect::<Vec<f64>>()),
-    }));
+    });
+    shared.send_json("status", &status);
     Ok(())
 }
 

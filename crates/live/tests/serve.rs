@@ -219,6 +219,28 @@ fn a_half_closed_client_is_answered_and_a_stalled_message_is_dropped() {
     server.stop();
 }
 
+/// With the targets alone as outputs, a refused cloud is still answered by its error status (a
+/// client would otherwise wait for targets that never come); a registered one by its targets only.
+#[test]
+fn a_refused_cloud_is_answered_whatever_the_outputs() {
+    let outputs = Outputs::parse("targets").unwrap();
+    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, outputs, ..ServeOptions::default() });
+    let (cloud, _) = pressed_cloud(300.0);
+    let mut client = connect(server.port);
+    let mut bad = cloud.clone();
+    bad[0][2] = f32::INFINITY;
+    client.send_cloud(bad).unwrap();
+    let s = status(client.receive().unwrap());
+    assert!(s["frame"] == 1 && s["error"].as_str().unwrap().contains("finite"), "{s}");
+    client.send_cloud(cloud).unwrap();
+    assert!(matches!(client.receive().unwrap(), Some(Answer::Targets(_))));
+    client.send_cloud(Vec::new()).unwrap();
+    let s = status(client.receive().unwrap());
+    assert!(s["frame"] == 3 && s["error"].is_string(), "no status for frame 2, which registered: {s}");
+    drop(client);
+    server.stop();
+}
+
 /// A stream in the other frame (RAS against an LPS organ): the cloud is brought into the organ's
 /// frame, and the target and the organ go back in the stream's.
 #[test]
