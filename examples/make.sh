@@ -18,7 +18,7 @@ in_mm() {
 
 # The built-in registration case of `augsim register --demo`: the liver phantom pushed down by 1.5 N
 # (Neo-Hookean, about 9,000 T10) seen from above by a camera (1 mm noise, 5 % outliers), and its 10
-# hidden markers. Run outside the repository, so the U-Net is skipped: only the case is kept.
+# hidden markers. Only the case is kept, not the methods' registrations.
 "$augsim" register --demo --out demo >/dev/null
 in_mm "%.2f" demo/case/cloud.csv >"$here/cloud.csv"
 in_mm "%.3f" demo/case/targets_rest.csv >"$here/targets.csv"
