@@ -138,7 +138,8 @@ def replay(files, client, units="m", rate=None, out=None, unit="mm", timeout=60.
         if targets is not None and out:
             os.makedirs(out, exist_ok=True)
             header = ",".join(f"{axis}_{unit}" for axis in "xyz")
-            np.savetxt(os.path.join(out, f"targets_{k:04d}.csv"), targets, delimiter=",", header=header, comments="")
+            np.savetxt(os.path.join(out, f"targets_{k:04d}.csv"), targets, fmt="%.9g", delimiter=",", header=header,
+                       comments="")
         record = {"file": path, "points": len(cloud), "round_trip_ms": trip, "status": status, "targets": targets}
         records.append(record)
         if "error" in status:

@@ -58,6 +58,9 @@ class ReplayTest(unittest.TestCase):
             self.assertEqual(len(written), FRAMES, written)
             with open(os.path.join(out, written[0]), encoding="utf-8") as f:
                 self.assertEqual(f.readline().strip(), "x_mm,y_mm,z_mm")
+            # The targets as the server sent them (float32), written in as many digits as they hold.
+            first = np.loadtxt(os.path.join(out, written[0]), delimiter=",", skiprows=1)
+            np.testing.assert_array_equal(first.astype(np.float32), records[0]["targets"].astype(np.float32))
         self.assertEqual(len(records), FRAMES + 1)
         self.assertIn("refused", lines[1])
         self.assertIn("finite", records[1]["status"]["error"])
