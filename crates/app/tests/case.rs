@@ -160,6 +160,8 @@ fn bad_case_scenarios_are_clear_errors() {
     assert!(e.contains("registration"), "{e}");
     let e = parse(&edit("tets = 3000", "tets = 10"));
     assert!(e.contains("at least 100"), "{e}");
+    let e = parse(&edit("translation_mm = 0.0", "translation_mm = nan"));
+    assert!(e.contains("misalignment.translation_mm = NaN must be finite"), "{e}");
     let e = CaseScenario::load(Path::new("no/such/case.toml")).unwrap_err().to_string();
     assert!(e.contains("no/such/case.toml"), "{e}");
     // A rigid table with defaults, and a moved push patch, are accepted.

@@ -289,8 +289,14 @@ impl CaseScenario {
             return bad(format!("camera.noise = {} and camera.outliers = {} must be >= 0", c.noise, c.outliers));
         }
         let m = &self.misalignment;
-        if !(m.rotation_deg.is_finite() && m.translation_mm.is_finite() && finite(m.axis) && finite(m.direction)) {
-            return bad(format!("misalignment {m:?} must be finite"));
+        let values = [
+            ("rotation_deg", m.rotation_deg.is_finite(), m.rotation_deg.to_string()),
+            ("axis", finite(m.axis), format!("{:?}", m.axis)),
+            ("translation_mm", m.translation_mm.is_finite(), m.translation_mm.to_string()),
+            ("direction", finite(m.direction), format!("{:?}", m.direction)),
+        ];
+        if let Some((name, _, value)) = values.iter().find(|(_, ok, _)| !ok) {
+            return bad(format!("misalignment.{name} = {value} must be finite"));
         }
         if m.rotation_deg.abs() > 180.0 {
             return bad(format!("misalignment.rotation_deg = {} must lie in [-180, 180]", m.rotation_deg));
