@@ -99,11 +99,21 @@ pub enum PredictInput {
 
 impl PredictInput {
     /// Reads a point cloud (`.csv`, see [`PointCloud::parse_csv`], or `.npy` of shape `[N, 6]`) or a grid tensor
-    /// (any other `.npy`). A cloud without points is an error.
+    /// (any other `.npy`). A cloud without points, or a file of another extension, is an error.
     pub fn read(path: &Path) -> Result<PredictInput> {
-        let cloud = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")) {
+        let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+        let cloud = if extension.as_deref() == Some("csv") {
             let text = std::fs::read_to_string(path).map_err(|e| LearnError::io(path, e))?;
             PointCloud::parse_csv(&text, path)?
+        } else if extension.as_deref() != Some("npy") {
+            return Err(LearnError::Input {
+                path: path.to_path_buf(),
+                line: None,
+                message:
+                    "a prediction reads a grid tensor (.npy) or vectors at points (.csv, or .npy of [N, 6]: x, y, \
+                          z and the vector)"
+                        .into(),
+            });
         } else {
             let array = read_npy(path)?;
             match array.shape.as_slice() {
@@ -196,5 +206,8 @@ mod tests {
         std::fs::write(&empty, "x,y,z,u,v,w\n").unwrap();
         let e = PredictInput::read(&empty).unwrap_err().to_string();
         assert!(e.ends_with("empty.CSV: no points"), "{e}");
+        // A model file given for a cloud is refused by its extension, not read as a broken .npy.
+        let e = PredictInput::read(&dir.path().join("cloud.vtk")).unwrap_err().to_string();
+        assert!(e.contains("cloud.vtk") && e.contains("reads a grid tensor (.npy) or vectors at points"), "{e}");
     }
 }
