@@ -184,27 +184,36 @@ impl SampleOnMesh {
     }
 }
 
-/// The organ's volume mesh of a dataset's sample: read from `mesh` when given, otherwise built
-/// from the dataset scenario `scenario` (default: the built-in one the manifest names); with the
-/// path it came from.
+/// The organ's volume mesh of the dataset in `dataset_dir`: read from `mesh` when given, otherwise
+/// built from the dataset scenario `scenario`; by default the `dataset.toml` beside the dataset
+/// (where `augsim prepare` writes it) when it names the dataset's scenario, else the scenario the
+/// manifest names (a built-in one). With the path it came from.
 pub fn organ_mesh(
     mesh: Option<&std::path::Path>,
     scenario: Option<&std::path::Path>,
+    dataset_dir: &std::path::Path,
     manifest: &Manifest,
 ) -> anyhow::Result<(Mesh, std::path::PathBuf)> {
     use anyhow::Context;
-    match mesh {
-        Some(path) => {
-            Ok((mesh::io::read_mesh(path).with_context(|| format!("reading {}", path.display()))?, path.to_path_buf()))
-        }
-        None => {
-            let path =
-                scenario.map_or_else(|| std::path::PathBuf::from(&manifest.scenario), std::path::Path::to_path_buf);
-            let (scenario, dir) = scenario::DatasetScenario::load(&path)
-                .context("the organ's mesh: give the dataset's scenario (--scenario) or its mesh (--mesh)")?;
-            Ok((scenario.mesh(&dir)?, path))
-        }
+    if let Some(path) = mesh {
+        return Ok((
+            mesh::io::read_mesh(path).with_context(|| format!("reading {}", path.display()))?,
+            path.to_path_buf(),
+        ));
     }
+    let prepared = dataset_dir.parent().map(|d| d.join("dataset.toml"));
+    let path = match (scenario, prepared) {
+        (Some(path), _) => path.to_path_buf(),
+        (None, Some(prepared))
+            if scenario::DatasetScenario::load(&prepared).is_ok_and(|(s, _)| s.name == manifest.scenario) =>
+        {
+            prepared
+        }
+        (None, _) => std::path::PathBuf::from(&manifest.scenario),
+    };
+    let (scenario, dir) = scenario::DatasetScenario::load(&path)
+        .context("the organ's mesh: give the dataset's scenario (--scenario) or its mesh (--mesh)")?;
+    Ok((scenario.mesh(&dir)?, path))
 }
 
 /// The viewer's scene of sample `index` (default: the first held out from the model) of the
@@ -221,15 +230,16 @@ pub fn dataset_sample_scene(
     let model = Model::load(model_path)?;
     let dataset = Dataset::open(dataset_dir)?;
     let manifest = dataset.manifest();
-    let (organ, from) = organ_mesh(mesh, scenario, manifest)?;
+    let (organ, from) = organ_mesh(mesh, scenario, dataset_dir, manifest)?;
     let index = match index {
         Some(i) => i,
         None => first_held_out(&model, manifest)
             .with_context(|| format!("{} holds no sample held out from the model", dataset_dir.display()))?,
     };
     let sample = sample_on_mesh(&model, &dataset, index, &organ)?;
+    let method = model.method().display_name();
     let scene =
-        sample.scene(&organ, &format!("{}, sample {index}: U-Net prediction vs FEM reference", manifest.scenario));
+        sample.scene(&organ, &format!("{}, sample {index}: {method} prediction vs FEM reference", manifest.scenario));
     let mut lines = vec![
         format!("sample     {index} of {} ({} sample of this model)", dataset_dir.display(), sample.role),
         format!(

@@ -157,7 +157,13 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     let motion = dataset.iter().find(|l| l.starts_with("dataset: the draws move the organ by")).unwrap();
     let [mean, p90, largest] = [" by ", " most ", "largest by "]
         .map(|before| -> f64 { motion.split(before).nth(1).unwrap().split(" mm").next().unwrap().parse().unwrap() });
-    let rms = learn::Dataset::open(&out.join("dataset")).unwrap().manifest().statistics.targets.rms_norm * 1e3;
+    let dataset_dir = out.join("dataset");
+    let generated = learn::Dataset::open(&dataset_dir).unwrap();
+    let rms = generated.manifest().statistics.targets.rms_norm * 1e3;
+    // The viewer finds the organ of the dataset in the scenario written beside it.
+    let (viewed, from) = augsim_app::sample_view::organ_mesh(None, None, &dataset_dir, generated.manifest()).unwrap();
+    assert_eq!(from, out.join("dataset.toml"));
+    assert_eq!(viewed.num_nodes(), mesh::io::read_mesh(out.join("organ.vtu")).unwrap().num_nodes());
     assert!(0.0 < mean && mean <= rms + 0.05 && mean <= largest && p90 <= largest, "{motion}; RMS {rms:.2} mm");
     let validation = &state.steps[5].lines;
     assert!(validation.iter().any(|l| l.starts_with("validation: FEM TRE")), "{validation:?}");

@@ -24,7 +24,8 @@ pub struct ViewArgs {
     #[arg(long, requires = "model")]
     pub sample: Option<u64>,
     /// Dataset scenario the dataset was generated from, to rebuild the organ's mesh; default: the
-    /// built-in scenario of the dataset's name.
+    /// `dataset.toml` beside the dataset when it names the dataset's scenario (as `augsim prepare`
+    /// writes it), else the built-in scenario of the dataset's name.
     #[arg(long, requires = "model", conflicts_with = "mesh")]
     pub scenario: Option<PathBuf>,
     /// The organ's volume mesh (.vtu, .vtk, .msh) instead of rebuilding it from the scenario.
