@@ -291,6 +291,37 @@ fn a_warm_started_frame_starts_past_the_ramp() {
     assert_eq!((cold.0, warm.0), (vec![0, 1], vec![w, w + 1]));
 }
 
+/// A frame past its time budget stops at the end of the iteration under way, keeping its estimate,
+/// and says so; without a budget it runs its iterations. (Each iteration of the deformer below
+/// takes at least 20 ms: 5 take at least 100 ms, past a budget of 50 ms whatever the machine.)
+#[test]
+fn a_frame_past_its_time_budget_stops_and_says_so() {
+    struct Slow;
+    impl register::Deformer for Slow {
+        fn deform(&mut self, _: &register::Observations, previous: &[f64], _: usize) -> register::Result<Vec<f64>> {
+            std::thread::sleep(std::time::Duration::from_millis(20));
+            Ok(previous.iter().map(|u| u + 1e-4).collect()) // moves, so the loop goes on
+        }
+    }
+    let (organ, _) = corotational_model().unwrap();
+    let camera = CameraModel { view: [0.0, 0.0, -1.0], points: 300, noise: 0.0, outliers: 0.0 };
+    let cloud = augsim_app::simulate::simulate_cloud(organ.surface(), &camera, 3).unwrap();
+    let options = RegistrationOptions { iterations: 5, tolerance: 0.0, ..RegistrationOptions::default() };
+    let free = register_frame(&organ, &mut Slow, &cloud, None, &options).unwrap();
+    assert_eq!(free.iterations, 5);
+    assert!(free.warnings.iter().all(|w| !w.contains("time budget")), "{:?}", free.warnings);
+    let budget = RegistrationOptions { time_budget_ms: Some(50.0), ..options.clone() };
+    let stopped = register_frame(&organ, &mut Slow, &cloud, None, &budget).unwrap();
+    assert!((1..5).contains(&stopped.iterations), "{} iterations", stopped.iterations);
+    let said =
+        format!("the frame stopped after {} of its 5 iterations, past its time budget of 50 ms", stopped.iterations);
+    assert!(stopped.warnings.iter().any(|w| w.starts_with(&said)), "{:?}", stopped.warnings);
+    assert_eq!(stopped.u.len(), free.u.len());
+    let zero = RegistrationOptions { time_budget_ms: Some(0.0), ..options };
+    let e = register_frame(&organ, &mut Slow, &cloud, None, &zero).unwrap_err().to_string();
+    assert!(e.contains("time_budget_ms"), "{e}");
+}
+
 /// A cloud in millimetres and a cloud of random points are refused with what they probably are; a
 /// cloud shifted by 5 cm registers but is flagged (suggesting a rigid pre-alignment); the aligned
 /// cloud is not flagged.

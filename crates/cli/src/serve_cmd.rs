@@ -32,6 +32,12 @@ pub struct ServeArgs {
     /// positions, in the stream's unit, in the scenario's order) and answers a STRING `estimate`.
     #[arg(long, value_name = "SCENARIO")]
     assimilate: Option<PathBuf>,
+    /// Most wall time of a cloud's registration (ms): a frame past it stops at the end of its
+    /// iteration under way, answers with its estimate so far and a warning, and the next cloud
+    /// goes on from it, so that no cloud holds the stream for long (the FEMs' first frames on the
+    /// demo take 0.25–0.4 s; a stream's next frames tens of ms).
+    #[arg(long, default_value_t = 1000.0, value_name = "MS")]
+    time_budget_ms: f64,
 }
 
 /// The ROUKF on a stream: one step per `features` message.
@@ -86,7 +92,9 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     let units = spec.given_units;
     // Built once here so that a bad model, scenario or targets file stops the command before it
     // listens.
-    let first = spec.build()?;
+    let budget = Some(args.time_budget_ms);
+    let mut first = spec.build()?;
+    first.set_time_budget(budget).context("--time-budget-ms")?;
     if let Some(chosen) = chosen.filter(|o| o.transform && first.options().rigid.is_none()) {
         let only = "--outputs transform: the transform is the rigid pre-alignment's, sent with --rigid only";
         match chosen.targets || chosen.organ || chosen.status {
@@ -101,7 +109,11 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     for w in first.warnings() {
         eprintln!("warning    {w}");
     }
-    let factory = live::first_then_build(Some(first), move || spec.build().map_err(|e| format!("{e:#}")));
+    let factory = live::first_then_build(Some(first), move || {
+        let mut registration = spec.build().map_err(|e| format!("{e:#}"))?;
+        registration.set_time_budget(budget).map_err(|e| e.to_string())?;
+        Ok(registration)
+    });
     let identification = match &args.assimilate {
         Some(path) => Some(identification(path, units)?),
         None => None,

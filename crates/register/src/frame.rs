@@ -138,6 +138,11 @@ pub struct RegistrationOptions {
     /// cloud's spacing of the vertex's normal line (over the cloud, not beyond its edge), so that
     /// the seen part of the organ is held to the cloud as well as the cloud to the organ.
     pub two_way: TwoWay,
+    /// Most wall time of a frame (ms): once an iteration ends past it, the frame stops with the
+    /// estimate so far, and a warning says so (a stream's next frame goes on from it). `None`: no
+    /// limit.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time_budget_ms: Option<f64>,
 }
 
 impl Default for RegistrationOptions {
@@ -155,6 +160,7 @@ impl Default for RegistrationOptions {
             view: None,
             max_points: None,
             two_way: TwoWay::Never,
+            time_budget_ms: None,
         }
     }
 }
@@ -181,6 +187,9 @@ impl RegistrationOptions {
         check_setting("capture_distance", self.capture_distance, self.capture_distance >= 0.0, nonnegative)?;
         let decay = self.capture_decay;
         check_setting("capture_decay", decay, decay > 0.0 && decay <= 1.0, "in (0, 1]")?;
+        if let Some(budget) = self.time_budget_ms {
+            check_setting("time_budget_ms", budget, budget > 0.0, positive)?;
+        }
         if self.max_points == Some(0) {
             return Err(RegisterError::Invalid("max_points = 0 must be at least 1".into()));
         }
@@ -259,6 +268,7 @@ pub fn register_frame(
         None => (0, options.iterations),
     };
     let mut last_observations = None;
+    let mut out_of_time = false;
     while iterations < most {
         fem::interrupt::check()?;
         iterations += 1;
@@ -298,6 +308,11 @@ pub fn register_frame(
         if moved <= options.tolerance {
             break;
         }
+        if options.time_budget_ms.is_some_and(|budget| t0.elapsed().as_secs_f64() * 1e3 >= budget) && iterations < most
+        {
+            out_of_time = true;
+            break;
+        }
     }
     if let Some(observations) = last_observations {
         deformer.end_frame(observations, &u);
@@ -306,7 +321,13 @@ pub fn register_frame(
     let distances: Vec<f64> = cloud.par_iter().map(|&c| bvh.distance(c)).collect();
     let surface_residual = distances.iter().sum::<f64>() / cloud.len() as f64;
     let far_share = crate::plausibility::far_share(&distances);
-    let warnings = crate::plausibility::warnings(organ, &u, far_share, (cloud, extent), options.rigid.is_some());
+    let mut warnings = crate::plausibility::warnings(organ, &u, far_share, (cloud, extent), options.rigid.is_some());
+    if let (true, Some(budget)) = (out_of_time, options.time_budget_ms) {
+        warnings.push(format!(
+            "the frame stopped after {iterations} of its {most} iterations, past its time budget of {budget:.0} ms: \
+             the estimate may not have converged"
+        ));
+    }
     Ok(FrameResult {
         u,
         iterations,
