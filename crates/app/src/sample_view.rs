@@ -201,18 +201,23 @@ pub fn organ_mesh(
             path.to_path_buf(),
         ));
     }
-    let prepared = dataset_dir.parent().map(|d| d.join("dataset.toml"));
-    let path = match (scenario, prepared) {
-        (Some(path), _) => path.to_path_buf(),
-        (None, Some(prepared))
-            if scenario::DatasetScenario::load(&prepared).is_ok_and(|(s, _)| s.name == manifest.scenario) =>
-        {
-            prepared
-        }
-        (None, _) => std::path::PathBuf::from(&manifest.scenario),
+    let load = |path: &std::path::Path| {
+        scenario::DatasetScenario::load(path)
+            .context("the organ's mesh: give the dataset's scenario (--scenario) or its mesh (--mesh)")
     };
-    let (scenario, dir) = scenario::DatasetScenario::load(&path)
-        .context("the organ's mesh: give the dataset's scenario (--scenario) or its mesh (--mesh)")?;
+    // The scenario `augsim prepare` writes beside its dataset, read once, when it is this one's.
+    let prepared = dataset_dir.parent().map(|d| d.join("dataset.toml")).and_then(|path| {
+        let loaded = scenario::DatasetScenario::load(&path).ok()?;
+        (loaded.0.name == manifest.scenario).then_some((loaded, path))
+    });
+    let ((scenario, dir), path) = match (scenario, prepared) {
+        (Some(path), _) => (load(path)?, path.to_path_buf()),
+        (None, Some(found)) => found,
+        (None, None) => {
+            let path = std::path::PathBuf::from(&manifest.scenario);
+            (load(&path)?, path)
+        }
+    };
     Ok((scenario.mesh(&dir)?, path))
 }
 

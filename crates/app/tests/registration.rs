@@ -316,7 +316,9 @@ fn a_frame_past_its_time_budget_stops_and_says_so() {
     let said =
         format!("the frame stopped after {} of its 5 iterations, past its time budget of 50 ms", stopped.iterations);
     assert!(stopped.warnings.iter().any(|w| w.starts_with(&said)), "{:?}", stopped.warnings);
-    assert_eq!(stopped.u.len(), free.u.len());
+    // The estimate so far is kept: each iteration moved every value by 1e-4.
+    let moved = stopped.iterations as f64 * 1e-4;
+    assert!(stopped.u.iter().all(|v| (v - moved).abs() < 1e-12), "{:?}", &stopped.u[..3]);
     let zero = RegistrationOptions { time_budget_ms: Some(0.0), ..options };
     let e = register_frame(&organ, &mut Slow, &cloud, None, &zero).unwrap_err().to_string();
     assert!(e.contains("time_budget_ms"), "{e}");

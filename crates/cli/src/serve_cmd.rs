@@ -35,7 +35,7 @@ pub struct ServeArgs {
     /// Most wall time of a cloud's registration (ms): a frame past it stops at the end of its
     /// iteration under way, answers with its estimate so far and a warning, and the next cloud
     /// goes on from it, so that no cloud holds the stream for long (the FEMs' first frames on the
-    /// demo take 0.25–0.4 s; a stream's next frames tens of ms).
+    /// demo take 0.25–0.41 s; a stream's next frames tens of ms).
     #[arg(long, default_value_t = 1000.0, value_name = "MS")]
     time_budget_ms: f64,
 }
