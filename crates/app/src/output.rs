@@ -15,12 +15,13 @@ use mesh::io::points::{write_markups_json, LabelledPoints};
 use mesh::io::{csv_field, write_atomic_bytes, write_surface_in_frame, Field, Frame, FrameChange};
 use mesh::length::{mm, LengthUnit};
 use mesh::{Mesh, Point};
-use register::{FrameOutcome, Organ, Registration, RigidResult, RigidTransform, Summary};
+use register::{FrameOutcome, Organ, Registration, RigidResult, Summary};
 use scenario::registration::slug;
 use serde::Serialize;
 
 use crate::case::{Compared, Registered, SyntheticCase};
-use crate::picture::side_view;
+use crate::picture::RegisteredFrame;
+use crate::printout::frame_line;
 
 /// The folder of a run's results: `out` when the user names one, refused when it already holds
 /// an earlier run's (its summary.json), so that two runs' files are never mixed; otherwise a
@@ -190,12 +191,15 @@ impl RunWriter {
     /// its targets' labels), the last frame for 3D Slicer (targets.mrk.json and
     /// organ_deformed.vtk, its registered surface) and summary.json, all in the results' frame,
     /// which they name when known (the clouds' frame given, else `working`: the frame the
-    /// registration worked in, once the organ or a file named one); returns the run's summary.
+    /// registration worked in, once the organ or a file named one), and the last frame's
+    /// pictures, registration.png and registration.html, in the organ's frame (`last`: its
+    /// cloud and its targets' truth, when known, as registered); returns the run's summary.
     pub fn finish(
         self,
         registration: &Registration,
         working: Option<Frame>,
         outcomes: &[FrameOutcome],
+        (cloud, truth): (&[Point], Option<&[Point]>),
     ) -> Result<Summary> {
         let frame = self.given.or(working);
         if self.sequence {
@@ -217,6 +221,14 @@ impl RunWriter {
         let mut surface = register::organ_surface(registration.organ(), &last.registration.u, last.rigid.as_ref());
         surface.vertices = self.converted(&surface.vertices);
         write_deformed_surface(&self.dir.join("organ_deformed.vtk"), &surface, frame)?;
+        let row = self.rows.last().context("no frame")?;
+        let targets = (registration.targets(), last.targets.as_slice());
+        let u = &last.registration.u;
+        RegisteredFrame::new(registration.organ(), u, last.rigid.as_ref(), cloud, targets, truth).write(
+            &self.dir,
+            &format!("{}: {}", registration.method(), row.cloud),
+            frame_notes(outcomes.len() - 1, row),
+        )?;
         let summary = Summary::new(registration.method(), outcomes)?;
         let run = RunSummary { frame, summary: &summary, per_frame: &self.rows };
         write_atomic_bytes(&self.dir.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
@@ -369,24 +381,18 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         let sigma = outcome.target_std.as_deref();
         let csv = method_dir.join("targets.csv");
         write_targets(&csv, &rest_targets, &outcome.targets, sigma, &[], (LengthUnit::Metre, None))?;
-        // The picture is drawn in the organ's frame: cloud, targets and truth moved back.
-        let back = outcome.rigid.as_ref().map_or_else(RigidTransform::identity, |r| r.cloud_to_organ);
-        let to_organ = |points: &[Point]| -> Vec<Point> { points.iter().map(|&p| back.apply(p)).collect() };
         // The picture's own frame's TRE: a sequence's mean over its frames is not what it shows.
         let tre = outcome.tre_mm().map_or(f64::NAN, |(mean, _)| mean);
         let frame = match case.frames.len() {
             1 => String::new(),
             n => format!(", frame {} of {n} (the peak)", case.peak_index() + 1),
         };
-        let title = format!("{}: TRE mean {tre:.2} mm{frame} (side view)", s.method);
-        side_view(
-            &method_dir.join("registration.png"),
+        let title = format!("{}: TRE mean {tre:.2} mm{frame}", s.method);
+        let targets = (case.targets.as_slice(), outcome.targets.as_slice());
+        RegisteredFrame::new(&reg.organ, u, outcome.rigid.as_ref(), &peak.cloud, targets, Some(&peak.truth)).write(
+            &method_dir,
             &title,
-            &reg.organ,
-            u,
-            &to_organ(&peak.cloud),
-            &to_organ(&outcome.targets),
-            Some(&to_organ(&peak.truth)),
+            frame_notes(case.peak_index(), &FrameSummary::new(String::new(), outcome)),
         )?;
     }
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -400,6 +406,18 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         .collect::<Result<_, _>>()?;
     write_atomic_bytes(&dir.join("summary.json"), serde_json::to_string_pretty(&summaries)?.as_bytes())?;
     Ok(())
+}
+
+/// The lines under the 3D picture of frame `i`: its figures, as printed, the σ predicted at its
+/// targets, when known, and its warnings.
+fn frame_notes(i: usize, row: &FrameSummary) -> Vec<String> {
+    let mut notes = vec![frame_line(i, row)];
+    if let Some(sigma) = &row.target_sigma_mm {
+        let (mean, max) = (mesh::stats::mean(sigma), mesh::stats::max(sigma));
+        notes.push(format!("σ predicted at the targets: mean {mean:.2} mm, max {max:.2} mm"));
+    }
+    notes.extend(row.warnings.iter().map(|w| format!("warning: {w}")));
+    notes
 }
 
 /// The rows of a comparison: the baseline (not deforming, or the rigid alignment alone, when the

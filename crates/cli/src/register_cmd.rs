@@ -94,7 +94,8 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     }
     let sequence = frames.len() > 1;
     let mut writer = RunWriter::new(out, sequence, spec.given_units, (organ_frame, spec.given_frame))?;
-    let clouds = frames.iter().map(|f| input.read_cloud(f));
+    let mut last_cloud = Vec::new();
+    let clouds = frames.iter().map(|f| input.read_cloud(f).inspect(|c| last_cloud.clone_from(c)));
     let mut rigid_printed = false;
     let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, organ, o| {
         if let (Some(rigid), false) = (&o.rigid, rigid_printed) {
@@ -111,10 +112,11 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     for w in &input.warnings {
         eprintln!("warning    {w}");
     }
-    let summary = writer.finish(&registration, input.frame, &outcomes)?;
+    let last_truth = truths.as_ref().and_then(|t| t.last()).map(Vec::as_slice);
+    let summary = writer.finish(&registration, input.frame, &outcomes, (&last_cloud, last_truth))?;
     print_lines(&run_lines(&outcomes, &summary, spec.given_units));
     println!(
-        "wrote      {} ({}, targets.csv, summary.json; for 3D Slicer: organ_deformed.vtk, targets.mrk.json)",
+        "wrote      {} ({}, targets.csv, summary.json, registration.png and .html; for 3D Slicer: organ_deformed.vtk, targets.mrk.json)",
         out.display(),
         if sequence { "organ.pvd" } else { "organ.vtu" }
     );
@@ -169,7 +171,7 @@ fn demo(args: &RegisterArgs, out: &Path) -> Result<()> {
     println!();
     let peak = if args.frames.is_some_and(|n| n > 1) { ", of the peak frame" } else { "" };
     println!(
-        "wrote      {} (comparison.csv, summary.json; per method{peak}: organ.vtu, targets.csv, registration.png)",
+        "wrote      {} (comparison.csv, summary.json; per method{peak}: organ.vtu, targets.csv, registration.png and .html)",
         out.display()
     );
     Ok(())

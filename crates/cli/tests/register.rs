@@ -42,7 +42,7 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
     assert!(table.lines().skip(1).all(|l| l.split(',').count() == 8 && l.ends_with(',')), "{table}");
     let dir_of = |m: &str| out.join(m);
     for m in ["fem_co_rotational_3k_t4", "fem_svk_3k_t4", "u_net"] {
-        for f in ["organ.vtu", "targets.csv", "registration.png"] {
+        for f in ["organ.vtu", "targets.csv", "registration.png", "registration.html"] {
             assert!(dir_of(m).join(f).exists(), "{m}/{f}");
         }
     }
@@ -72,6 +72,10 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
     );
     assert!(ok, "{text}");
     assert!(seq_out.join("organ.pvd").exists() && seq_out.join("organ_0001.vtu").exists());
+    // The last frame's pictures: its 3D page shows its figures, the cloud and the truth.
+    assert!(seq_out.join("registration.png").exists());
+    let page = std::fs::read_to_string(seq_out.join("registration.html")).unwrap();
+    assert!(page.contains("frame 1 ") && page.contains("TRE mean") && page.contains("targets, true"));
     let summary = json(&seq_out.join("summary.json"));
     assert_eq!((summary["frames"].as_u64(), summary["per_frame"].as_array().unwrap().len()), (Some(2), 2));
     // A second run into the same folder is refused: two runs' files are never mixed.

@@ -60,7 +60,8 @@ pub struct Scalar {
     pub values: Vec<f64>,
 }
 
-/// A set of points of one colour.
+/// A set of points of one colour, drawn as outlined markers, or as small dots when it holds more
+/// than 200 points (a cloud).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct PointLayer {
     /// Checkbox label.
@@ -321,6 +322,7 @@ input[type=range] { width: 110px; vertical-align: middle; }
   const tri = S.triangles, nt = tri.length / 3, nv = S.rest.length / 3;
   const shapes = [{ name: "rest", positions: S.rest }].concat(S.layers);
   const BACKGROUND = "#f4f5f7", PLAIN = [205, 120, 95];
+  const DOTS = 200; // a set of more points (a cloud) is drawn as small dots, not as markers
   const LIGHT = [-0.3, 0.4, 0.87].map((x, _, l) => x / Math.hypot(...l)); // view coordinates, towards the light
   // Sequential yellow-orange-red (ColorBrewer YlOrRd, 9 stops): light where the value is low, so that the shading
   // shows the shape.
@@ -481,10 +483,10 @@ input[type=range] { width: 110px; vertical-align: middle; }
     S.points.forEach((set, i) => {
       if (!state.points[i]) return;
       ctx.fillStyle = set.colour; ctx.strokeStyle = "rgba(0,0,0,0.75)"; ctx.lineWidth = 1;
-      const p = set.positions;
+      const p = set.positions, dots = p.length > 3 * DOTS, r = dots ? 1.8 : 4.5;
       for (let j = 0; j < p.length; j += 3) {
         const q = project(p[j], p[j + 1], p[j + 2], s);
-        ctx.beginPath(); ctx.arc(q[0], q[1], 4.5, 0, 2 * Math.PI); ctx.fill(); ctx.stroke();
+        ctx.beginPath(); ctx.arc(q[0], q[1], r, 0, 2 * Math.PI); ctx.fill(); if (!dots) ctx.stroke();
       }
     });
     drawAxes();
