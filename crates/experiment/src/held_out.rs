@@ -20,7 +20,7 @@ use crate::loads::{CaseLoad, LEFT_LOBE_FRONT, RIGHT_LOBE};
 use crate::{fmt, reference, ExperimentResult, Headline, Name, Progress, Row, Size};
 use app::case::{
     ar_scenario, case_methods, compare, network_from_truth, network_model, network_options, shipped_models,
-    synthetic_case, Network, NETWORK_AFTER_FIT, POLISH_ITERATIONS, SHIPPED_MODEL, SHIPPED_ROM,
+    synthetic_case, Network, Registered, NETWORK_AFTER_FIT, POLISH_ITERATIONS, SHIPPED_MODEL, SHIPPED_ROM,
 };
 
 /// The cases, fixed before any method was run on them.
@@ -89,8 +89,24 @@ struct Outcome {
     /// method that predicts σ.
     std_mean_mm: Option<f64>,
     within_two_std: Option<f64>,
+    /// The warnings of its frames, when any (each cloud is the organ's: a warning says that the
+    /// result is off, or is a false alarm).
+    warnings: Vec<String>,
     /// Why it failed.
     error: Option<String>,
+}
+
+/// The warnings of a registration's frames: each frame's, in order (empty when none was flagged).
+fn frame_warnings(r: &Registered) -> Vec<String> {
+    r.outcomes.iter().flat_map(|o| o.registration.warnings.iter().cloned()).collect()
+}
+
+/// The words for the frames a method flagged (`flagged` of `frames`), none when it flagged none.
+fn flagged(flagged: usize, frames: usize) -> String {
+    match flagged {
+        0 => String::new(),
+        n => format!("; {n} of {frames} frames flagged"),
+    }
 }
 
 /// The words for a method that failed on `failed` cases (none when it failed on none).
@@ -126,6 +142,9 @@ struct StreamOutcome {
     /// The mean predicted σ at the targets over the frames (mm) and the share within 2σ.
     std_mean_mm: Option<f64>,
     within_two_std: Option<f64>,
+    /// The frames flagged by a warning (as from rest), and the first warning.
+    flagged: usize,
+    first_warning: Option<String>,
     /// Why it failed.
     error: Option<String>,
 }
@@ -165,6 +184,8 @@ fn register_stream(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec<
                     time_median_ms: r.summary.time_median_ms,
                     std_mean_mm: r.summary.target_std_mean_mm,
                     within_two_std: r.summary.within_two_std,
+                    flagged: r.outcomes.iter().filter(|o| !o.registration.warnings.is_empty()).count(),
+                    first_warning: frame_warnings(r).into_iter().next(),
                     error: None,
                 }
             }
@@ -338,6 +359,7 @@ impl Cases {
                         outcome.times_ms.push(r.summary.time_ms);
                         outcome.std_mean_mm = r.summary.target_std_mean_mm;
                         outcome.within_two_std = r.summary.within_two_std;
+                        outcome.warnings = frame_warnings(r);
                     }
                     Err(e) => outcome.error = Some(format!("{e}")),
                 }
@@ -399,16 +421,18 @@ fn from_rest_rows(
         let largest: Vec<f64> = ok.iter().filter_map(|o| o.tre_max_mm).collect();
         let mut times: Vec<f64> = ok.iter().map(|o| o.time_ms()).collect();
         let failed = cases.len() - ok.len();
+        let warned = ok.iter().filter(|o| !o.warnings.is_empty()).count();
         means.push(if failed == 0 { mean(&tre) } else { f64::NAN });
         summary.push(
             Row::new(
                 FROM_REST,
                 format!(
-                    "{} ({}), {}{}{}",
+                    "{} ({}), {}{}{}{}",
                     fmt(mean(&tre), 2, "mm"),
                     fmt(max(&largest), 1, "mm"),
                     reference::ms(median(&mut times), 0, Some(reference_ms)),
                     coverage(ok.iter().map(|o| (o.std_mean_mm, o.within_two_std))),
+                    flagged(warned, ok.len()),
                     failures(failed)
                 ),
                 "",
@@ -441,17 +465,19 @@ fn stream_rows(
         let all: Vec<f64> = ok.iter().filter_map(|o| o.tre_mean_mm).collect();
         let mut times: Vec<f64> = ok.iter().map(|o| o.time_median_ms).collect();
         let failed = cases.len() - ok.len();
+        let warned = ok.iter().map(|o| o.flagged).sum();
         stream_means.push(if failed == 0 { mean(&peak) } else { f64::NAN });
         summary.push(
             Row::new(
                 &as_streams,
                 format!(
-                    "{} ({}); {}; {}{}{}",
+                    "{} ({}); {}; {}{}{}{}",
                     fmt(mean(&peak), 2, "mm"),
                     fmt(max(&largest), 1, "mm"),
                     fmt(mean(&all), 2, "mm"),
                     reference::ms(median(&mut times), 0, Some(reference_ms)),
                     coverage(ok.iter().map(|o| (o.std_mean_mm, o.within_two_std))),
+                    flagged(warned, ok.len() * STREAM_FRAMES),
                     failures(failed)
                 ),
                 "",

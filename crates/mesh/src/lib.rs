@@ -261,7 +261,21 @@ impl Mesh {
     /// straight edges; for hexahedra the sum of a 6-tetrahedron split of the trilinear cell,
     /// exact for parallelepipeds).
     pub fn cell_volume(&self, i: usize) -> f64 {
-        let p = |k: usize| self.nodes[self.cells.cell(i)[k]];
+        self.cell_volume_at(i, |node| self.nodes[node])
+    }
+
+    /// Signed volume of cell `i` moved by the nodal displacement `u` (3 per node), computed as
+    /// [`Mesh::cell_volume`].
+    pub fn displaced_cell_volume(&self, i: usize, u: &[f64]) -> f64 {
+        self.cell_volume_at(i, |node| {
+            let p = self.nodes[node];
+            [p[0] + u[3 * node], p[1] + u[3 * node + 1], p[2] + u[3 * node + 2]]
+        })
+    }
+
+    /// Signed volume of cell `i` with its nodes at `position(node)`.
+    fn cell_volume_at(&self, i: usize, position: impl Fn(usize) -> Point) -> f64 {
+        let p = |k: usize| position(self.cells.cell(i)[k]);
         match &self.cells {
             Cells::Tet4(_) | Cells::Tet10(_) => tet_volume(p(0), p(1), p(2), p(3)),
             Cells::Hex8(_) => HEX_TO_TETS.iter().map(|t| tet_volume(p(t[0]), p(t[1]), p(t[2]), p(t[3]))).sum(),

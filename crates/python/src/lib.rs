@@ -213,7 +213,7 @@ struct Registered {
     #[pyo3(get)]
     iterations: usize,
     /// Why the result may not be believed (the registered surface far from the cloud, an
-    /// implausible motion); empty when plausible.
+    /// implausible motion or change of the organ's volume); empty when plausible.
     #[pyo3(get)]
     warnings: Vec<String>,
     /// With `rigid=True`: the organ-to-cloud transform, float64 [4, 4] (translation in `units`);
@@ -355,7 +355,8 @@ impl Registration {
     /// `target_sigma`, `points`, `displacement`, `rigid`, `surface_residual`, `inliers`,
     /// `iterations`, `warnings`, `ms`). With `out`,
     /// a directory, also writes there what `augsim register` writes: organ.vtu (m), targets.csv (in
-    /// `units`), summary.json, and for 3D Slicer targets.mrk.json and organ_deformed.vtk (mm), all
+    /// `units`), summary.json, registration.png and .html (pictures), and for 3D Slicer
+    /// targets.mrk.json and organ_deformed.vtk (mm), all
     /// in the clouds' frame (`frame`; default: the organ's), which they name when known. Raises ValueError for an array of another shape,
     /// AugsimError for a cloud augsim rejects (no point, a NaN) or a failed registration (the
     /// warm start is then kept).
@@ -367,7 +368,7 @@ impl Registration {
             let mut state = locked(&self.state)?;
             let tracked = state.register(&cloud)?;
             if let Some(dir) = &out {
-                write_frame(dir, &state, (self.unit, self.frames), &tracked)?;
+                write_frame(dir, &state, (self.unit, self.frames), &tracked, &cloud)?;
             }
             Ok(tracked)
         })?;
@@ -429,14 +430,16 @@ impl Registration {
     }
 }
 
-/// Writes one registered cloud as `augsim register` does (organ.vtu, targets.csv in `unit`,
-/// summary.json, and for 3D Slicer targets.mrk.json and organ_deformed.vtk), in the clouds' frame
-/// of `(organ, given)` frames ([`RunWriter::new`]).
+/// Writes one registered `cloud` (in the organ's frame, m) as `augsim register` does (organ.vtu,
+/// targets.csv in `unit`, summary.json, registration.png and .html, and for 3D Slicer
+/// targets.mrk.json and organ_deformed.vtk), in the clouds' frame of `(organ, given)` frames
+/// ([`RunWriter::new`]).
 fn write_frame(
     dir: &std::path::Path,
     registration: &register::Registration,
     (unit, (organ, given)): (LengthUnit, (Option<Frame>, Option<Frame>)),
     tracked: &Tracked,
+    cloud: &[Point],
 ) -> anyhow::Result<()> {
     let outcome = register::FrameOutcome {
         registration: tracked.registration.clone(),
@@ -448,7 +451,7 @@ fn write_frame(
     };
     let mut writer = RunWriter::new(dir, false, unit, (organ, given))?;
     writer.frame(0, "python".into(), registration.organ(), &outcome)?;
-    writer.finish(registration, organ, std::slice::from_ref(&outcome))?;
+    writer.finish(registration, organ, std::slice::from_ref(&outcome), (cloud, None))?;
     Ok(())
 }
 
