@@ -225,7 +225,7 @@ impl RunWriter {
         let targets = (registration.targets(), last.targets.as_slice());
         let u = &last.registration.u;
         RegisteredFrame::new(registration.organ(), u, last.rigid.as_ref(), cloud, targets, truth).write(
-            &self.dir,
+            &self.dir.join("registration"),
             &format!("{}: {}", registration.method(), row.cloud),
             frame_notes(outcomes.len() - 1, row),
         )?;

@@ -48,11 +48,10 @@ impl<'a> RegisteredFrame<'a> {
         RegisteredFrame { organ, u, cloud: back(cloud), rest_targets, targets: back(targets), truth: truth.map(back) }
     }
 
-    /// Writes registration.png (the side view) and registration.html (the 3D page, `notes`
-    /// under its title) into `dir`.
-    pub fn write(&self, dir: &Path, title: &str, notes: Vec<String>) -> Result<()> {
-        self.side_view(&dir.join("registration.png"), &format!("{title} (side view)"))?;
-        Ok(write_html(&dir.join("registration.html"), &self.scene(title, notes))?)
+    /// Writes `stem`.png (the side view) and `stem`.html (the 3D page, `notes` under its title).
+    pub fn write(&self, stem: &Path, title: &str, notes: Vec<String>) -> Result<()> {
+        self.side_view(&stem.with_extension("png"), &format!("{title} (side view)"))?;
+        Ok(write_html(&stem.with_extension("html"), &self.scene(title, notes))?)
     }
 
     /// Draws the side view into the PNG file `path`: rest surface (grey), registered surface
@@ -168,7 +167,7 @@ mod tests {
         let frame = RegisteredFrame::new(&organ, &u, None, &cloud, (&rest, &targets), None);
         assert_eq!(frame.scene("t", Vec::new()).points.len(), 3);
         let dir = tempfile::tempdir().unwrap();
-        frame.write(dir.path(), "t", Vec::new()).unwrap();
+        frame.write(&dir.path().join("registration"), "t", Vec::new()).unwrap();
         for f in ["registration.png", "registration.html"] {
             assert!(std::fs::metadata(dir.path().join(f)).unwrap().len() > 1000, "{f}");
         }

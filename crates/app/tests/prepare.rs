@@ -218,6 +218,15 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     for file in ["organ.vtu", "dataset.toml", "static.toml", "registration.toml", "report.md", "regions.png"] {
         assert!(out.join(file).exists(), "{file}");
     }
+    // The chosen method's registration of the strongest push, pictured and shown by the report.
+    let pictured = validation.iter().find(|l| l.contains("on the strongest push, pictured")).unwrap();
+    let words = [("learned", "learned model"), ("fem", "FEM"), ("hybrid", "learned model, then FEM (hybrid)")];
+    let (_, best_words) = words.iter().find(|(name, _)| *name == best).unwrap();
+    assert!(pictured.starts_with(&format!("validation: the {best_words} on")), "{pictured}");
+    let page = std::fs::read_to_string(out.join("validation.html")).unwrap();
+    assert!(page.contains("targets, true") && page.contains("TRE at the "), "the page's scene");
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(out.join("validation.png").exists() && report.contains("](validation.png)"));
     // The regions travel with the mesh file: what ParaView shows is what the scenarios select.
     let mesh = mesh::io::read_mesh(out.join("organ.vtu")).unwrap();
     assert!(mesh.region("visible").unwrap().len() > 20 && mesh.region("attached").unwrap().len() > 5);

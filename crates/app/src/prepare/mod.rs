@@ -37,7 +37,9 @@
 //!    (within 5 % of its TRE: on par), the one with the lowest mean ratio of its TRE to the FEM's
 //!    over the two.
 //! 7. **report**: `report.md`, with `regions.png` (the organ seen from the camera: what it
-//!    sees, where it is held, the targets) and the time of each step.
+//!    sees, where it is held, the targets), `validation.png` (the chosen method's registration of
+//!    the strongest push, drawn by the validation with its 3D page `validation.html`) and the time
+//!    of each step.
 //!
 //! `prepare.json` records the inputs and the steps done; a second run with the same inputs
 //! resumes after the last step done (the report is written anew), and one with other inputs is
@@ -67,7 +69,7 @@ use crate::registration::PATIENT_FILE;
 use crate::training::{train_unet, UNetRun, UNetStart};
 
 mod validation;
-pub use validation::TRUTH_DIR;
+pub use validation::{PICTURE, TRUTH_DIR};
 
 /// What `augsim prepare` is given.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -693,11 +695,17 @@ fn report_step(state: &PrepareState, dir: &Path) -> Result<Vec<String>> {
         &targets,
     )?;
     let mut text = format!(
-        "# {}\n\nPrepared by `augsim prepare` from `{}`.\n\n![The organ seen from the camera](regions.png)\n\n\
-         | step | time (s) | what it did |\n| --- | ---: | --- |\n",
+        "# {}\n\nPrepared by `augsim prepare` from `{}`.\n\n![The organ seen from the camera](regions.png)\n\n",
         state.options.surface.file_stem().map_or("organ".into(), |s| s.to_string_lossy().into_owned()),
         state.options.surface.display()
     );
+    if dir.join(PICTURE).with_extension("png").exists() {
+        text.push_str(&format!(
+            "![The chosen method's registration of the validation's strongest push, seen from the side \
+             ({PICTURE}.html in 3D)]({PICTURE}.png)\n\n"
+        ));
+    }
+    text.push_str("| step | time (s) | what it did |\n| --- | ---: | --- |\n");
     for step in &state.steps {
         text.push_str(&format!("| {} | {:.1} | {} |\n", step.name, step.seconds, step.lines.join("<br>")));
     }

@@ -14,6 +14,7 @@ use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
 use mesh::{Camera, Mesh, Near, Point, TriSurface};
 
 use super::{across_sight, hold_distance, longest_side, swing_warning, tool_radius, PrepareOptions, SURFACE_FILE};
+use crate::picture::RegisteredFrame;
 use crate::registration::{PatientMethod, RegistrationSpec, PATIENT_FILE};
 
 /// Tool pushes of the validation: where along what the camera sees (its spread across the line of
@@ -148,6 +149,10 @@ const TRUTH_TOLERANCE: f64 = 0.1;
 
 /// The sub-directory where the validation keeps its truths' solutions.
 pub const TRUTH_DIR: &str = "validation";
+
+/// The pictures of the chosen method's registration of the strongest push, beside the report:
+/// this name's side view (.png) and 3D page (.html).
+pub const PICTURE: &str = "validation";
 
 /// A push's displacement on a truth, or why it found no equilibrium under it.
 type Solution = std::result::Result<Vec<f64>, String>;
@@ -326,6 +331,18 @@ struct MethodRun {
     rest: Registered,
     /// Each push registered as a stream of [`STREAM_SHARES`] of its force.
     streamed: Registered,
+    /// Its registration from rest of the strongest push it registered, for the picture.
+    strongest: Option<Strongest>,
+}
+
+/// A registration from rest of one push, as its picture shows it.
+struct Strongest {
+    force: f64,
+    registration: register::Registration,
+    tracked: register::Tracked,
+    cloud: Vec<Point>,
+    /// The targets' true positions.
+    moved: Vec<Point>,
 }
 
 impl MethodRun {
@@ -337,9 +354,13 @@ impl MethodRun {
         let mut registration = RegistrationSpec::patient(dir, Some(self.method), None, false)?.build()?;
         let stream = frames.len() > 1;
         let into = if stream { &mut self.streamed } else { &mut self.rest };
+        let mut last = None;
         for (k, &(moved, cloud)) in frames.iter().enumerate() {
             match registration.register(cloud) {
-                Ok(tracked) => into.add(&tracked, moved, !stream || k > 0),
+                Ok(tracked) => {
+                    into.add(&tracked, moved, !stream || k > 0);
+                    last = Some(tracked);
+                }
                 Err(e) => {
                     let frame = if stream { format!(", frame {}", k + 1) } else { String::new() };
                     into.failed.push(format!("{force} N{frame} ({e:#})"));
@@ -347,7 +368,41 @@ impl MethodRun {
                 }
             }
         }
+        if let (false, Some(tracked)) = (stream, last) {
+            if self.strongest.as_ref().is_none_or(|s| force > s.force) {
+                let (moved, cloud) = frames[0];
+                let (cloud, moved) = (cloud.to_vec(), moved.to_vec());
+                self.strongest = Some(Strongest { force, registration, tracked, cloud, moved });
+            }
+        }
         Ok(())
+    }
+
+    /// Draws its registration from rest of the strongest push into `dir` ([`PICTURE`] .png and
+    /// .html); returns the report's line on them, none when it registered no push.
+    fn picture(&self, dir: &Path) -> Result<Option<String>> {
+        let Some(s) = &self.strongest else { return Ok(None) };
+        let errors = register::target_errors(&s.tracked.targets, &s.moved);
+        let mut notes = vec![format!(
+            "TRE at the {} targets: mean {:.2} mm, max {:.2} mm; the truth: the organ meshed anew (T10, Neo-Hookean)",
+            errors.len(),
+            mm(mesh::stats::mean(&errors)),
+            mm(mesh::stats::max(&errors))
+        )];
+        if let Some(std) = &s.tracked.target_std {
+            let (mean, max) = (mm(mesh::stats::mean(std)), mm(mesh::stats::max(std)));
+            notes.push(format!("σ predicted at the targets: mean {mean:.2} mm, max {max:.2} mm"));
+        }
+        notes.extend(s.tracked.registration.warnings.iter().map(|w| format!("warning: {w}")));
+        let name = method_name(self.method);
+        let targets = (s.registration.targets(), s.tracked.targets.as_slice());
+        let (organ, u) = (s.registration.organ(), &s.tracked.registration.u);
+        RegisteredFrame::new(organ, u, s.tracked.rigid.as_ref(), &s.cloud, targets, Some(&s.moved)).write(
+            &dir.join(PICTURE),
+            &format!("{name}: the {} N push of the validation, from rest", s.force),
+            notes,
+        )?;
+        Ok(Some(format!("validation: the {name} on the strongest push, pictured: {PICTURE}.png, {PICTURE}.html")))
     }
 
     /// Lower is better: the pushes it failed on (from rest and as streams); then whether it is
@@ -499,7 +554,10 @@ pub(super) fn validation_step(
         ));
     }
     lines.extend(methods.iter().flat_map(method_lines));
-    lines.push(record_best_method(dir, &methods)?);
+    let (line, chosen) = record_best_method(dir, &methods)?;
+    lines.push(line);
+    let chosen = methods.iter().find(|run| run.method == chosen).context("the chosen method was not validated")?;
+    lines.extend(chosen.picture(dir)?);
     Ok(lines)
 }
 
@@ -581,8 +639,8 @@ fn method_lines(run: &MethodRun) -> [String; 2] {
 }
 
 /// Writes into the patient file the method that did the best on the validation's pushes;
-/// returns the validation's line on it.
-fn record_best_method(dir: &Path, methods: &[MethodRun]) -> Result<String> {
+/// returns the validation's line on it, and the method.
+fn record_best_method(dir: &Path, methods: &[MethodRun]) -> Result<(String, PatientMethod)> {
     // The set-up registers with the method that did the best on these pushes, from rest and
     // on streams ([`MethodRun::rank`]); on a tie the first.
     let fem = methods.iter().find(|run| run.method == PatientMethod::Fem).context("the FEM was not validated")?;
@@ -598,12 +656,13 @@ fn record_best_method(dir: &Path, methods: &[MethodRun]) -> Result<String> {
     let at = set_up.iter().position(|l| l.starts_with("model = ")).unwrap_or(set_up.len());
     set_up.insert(at, &method);
     write_atomic_bytes(&path, (set_up.join("\n") + "\n").as_bytes())?;
-    Ok(format!(
+    let line = format!(
         "validation: {PATIENT_FILE} registers with the {} (method = \"{}\"), the best on these pushes, from rest \
          and as streams",
         method_name(chosen),
         chosen.name()
-    ))
+    );
+    Ok((line, chosen))
 }
 
 #[cfg(test)]
