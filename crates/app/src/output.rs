@@ -390,7 +390,7 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         let title = format!("{}: TRE mean {tre:.2} mm{frame}", s.method);
         let targets = (case.targets.as_slice(), outcome.targets.as_slice());
         RegisteredFrame::new(&reg.organ, u, outcome.rigid.as_ref(), &peak.cloud, targets, Some(&peak.truth)).write(
-            &method_dir,
+            &method_dir.join("registration"),
             &title,
             frame_notes(case.peak_index(), &FrameSummary::new(String::new(), outcome)),
         )?;
