@@ -52,6 +52,10 @@ pub struct Stream {
     pub tre_max_mm: Vec<f64>,
     /// Frames answered per second once the first (from rest, with the server's start-up) was.
     pub frames_per_second: f64,
+    /// Frames whose status flagged the result as not plausible (each cloud is the organ's), and
+    /// the first one's warnings.
+    pub flagged: usize,
+    pub first_warnings: Vec<String>,
 }
 
 /// A press and release held out from the choice of the stream's settings (`warm_iterations`,
@@ -104,6 +108,8 @@ fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
         tre_mm: Vec::new(),
         tre_max_mm: Vec::new(),
         frames_per_second: 0.0,
+        flagged: 0,
+        first_warnings: Vec::new(),
     };
     let mut began = Instant::now();
     for (k, frame) in case.frames.iter().enumerate() {
@@ -122,6 +128,13 @@ fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
         s.tre_max_mm.push(max(&errors));
         s.server_ms.push(status["ms"].as_f64().unwrap_or(f64::NAN));
         s.iterations.push(status["iterations"].as_u64().unwrap_or(0) as usize);
+        if status["plausible"].as_bool() == Some(false) {
+            s.flagged += 1;
+            if s.first_warnings.is_empty() {
+                let warnings = status["warnings"].as_array().into_iter().flatten();
+                s.first_warnings = warnings.filter_map(|w| w.as_str().map(str::to_string)).collect();
+            }
+        }
         if k == 0 {
             began = Instant::now();
         }
@@ -191,6 +204,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
                 "",
             ),
             Row::new("sustained rate after the first frame", format!("{:.1} frames/s", s.frames_per_second), ""),
+            Row::new("frames flagged as not plausible", format!("{} of {}", s.flagged, s.tre_mm.len()), ""),
         ];
         rows.extend(figures.map(|row| row.of("registration", &s.method)));
     }
