@@ -52,9 +52,9 @@ pub struct Stream {
     pub tre_max_mm: Vec<f64>,
     /// Frames answered per second once the first (from rest, with the server's start-up) was.
     pub frames_per_second: f64,
-    /// Frames whose status flagged the result as not plausible (each cloud is the organ's), and
-    /// the first one's warnings.
+    /// Frames whose status flagged the result as not plausible (each cloud is the organ's).
     pub flagged: usize,
+    /// The warnings of the first frame flagged.
     pub first_warnings: Vec<String>,
 }
 
