@@ -43,6 +43,7 @@
 //!     execution: Execution::Parallel,
 //!     forgetting: 1.0,
 //!     sigma_points: SigmaPointSet::Simplex,
+//!     gate: None,
 //! };
 //! let mut filter = Roukf::new(Spring, 0.0, config)?;
 //! for step in 1..=60 {

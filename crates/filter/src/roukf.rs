@@ -176,6 +176,13 @@ pub struct RoukfConfig {
     /// Simplex (p + 1, the default) or star (2p + 1) sigma points.
     #[serde(default)]
     pub sigma_points: SigmaPointSet,
+    /// Validation gate G: a measured component whose innovation exceeds G predicted standard
+    /// deviations, `|z_i − ẑ_i| > G √(σ_obs,i² + Σ_j (HL)_ij²)`, is not measured at this step (a
+    /// tracking failure, not the organ); `None` (the default): every component counts. The
+    /// innovations of honest steps reach a few predicted standard deviations without model error,
+    /// and tens with it: calibrate G on the scenario's own runs.
+    #[serde(default)]
+    pub gate: Option<f64>,
 }
 
 fn no_forgetting() -> f64 {
@@ -403,6 +410,9 @@ impl<M: Model> Roukf<M> {
                 config.forgetting
             )));
         }
+        if let Some(gate) = config.gate.filter(|g| !(g.is_finite() && *g > 0.0)) {
+            return Err(FilterError::InvalidConfig(format!("the validation gate must be finite and > 0, got {gate}")));
+        }
         let stds: &[f64] = match &config.observation_std {
             ObservationNoise::Uniform(s) => std::slice::from_ref(s),
             ObservationNoise::PerComponent(v) => v,
@@ -456,14 +466,15 @@ impl<M: Model> Roukf<M> {
     /// Like [`Roukf::step`] with only the components of `z` marked in `available` measured (e.g. tracked features
     /// occluded in this frame): the others get zero weight in the correction and their values in `z` are ignored
     /// (they may be NaN). With no component available the iteration only predicts, and its record has no
-    /// innovation norm; otherwise the norm is over the available components.
+    /// innovation norm; otherwise the norm is over the available components. With a validation gate
+    /// ([`RoukfConfig::gate`]), the available components beyond it count as not available.
     pub fn step_partial(&mut self, z: &DVector<f64>, available: &[bool]) -> Result<&IterationTrace, FilterError> {
         let start = Instant::now();
         let k = self.iteration + 1;
         let p = self.sigma.dim();
         let m = self.sigma.count();
         let q = z.len();
-        let inv_std = self.measurement_weights(z, available, k)?;
+        let mut inv_std = self.measurement_weights(z, available, k)?;
         let (thetas, mut states) = self.sample(k)?;
         let (observations, state_vectors) = self.predict(&mut states, &thetas, k, q)?;
         let mut theta_matrix = DMatrix::zeros(p, m);
@@ -472,6 +483,8 @@ impl<M: Model> Roukf<M> {
         }
         let (theta_mean, l_theta) = self.mean_and_factor(&theta_matrix);
         let (z_mean, hl) = self.mean_and_factor(&observations);
+        let gated = self.gate(z, &z_mean, &hl, &mut inv_std);
+        let available: Vec<bool> = inv_std.iter().map(|&w| w > 0.0).collect();
 
         // Correction.
         let mut g = hl;
@@ -482,7 +495,7 @@ impl<M: Model> Roukf<M> {
         let u = DMatrix::identity(p, p) + g.transpose() * &g;
         let innovation = DVector::from_iterator(
             q,
-            z.iter().zip(&z_mean).zip(available).map(|((v, mean), &a)| if a { v - mean } else { 0.0 }),
+            z.iter().zip(&z_mean).zip(&available).map(|((v, mean), &a)| if a { v - mean } else { 0.0 }),
         );
         let weighted = innovation.component_mul(&inv_std);
         let nonfinite = |what: &str| FilterError::NonFinite { what: what.into(), iteration: k };
@@ -542,7 +555,8 @@ impl<M: Model> Roukf<M> {
         self.predicted_observation = Some(z_mean);
         self.misfit = misfit;
         let measured = available.contains(&true).then(|| innovation.norm());
-        let record = self.record(measured, Some(start.elapsed().as_secs_f64()));
+        let mut record = self.record(measured, Some(start.elapsed().as_secs_f64()));
+        record.gated = gated;
         self.trace.records.push(record);
         Ok(self.trace.records.last().expect("a record was just pushed"))
     }
@@ -568,6 +582,22 @@ impl<M: Model> Roukf<M> {
             }
         }
         Ok(inv_std)
+    }
+
+    /// The validation gate ([`RoukfConfig::gate`]): sets the weight of each measured component of `z`
+    /// farther from its prediction `z_mean` (sigma-point spread `hl`) than the gate allows to 0;
+    /// returns how many it set.
+    fn gate(&self, z: &DVector<f64>, z_mean: &DVector<f64>, hl: &DMatrix<f64>, inv_std: &mut DVector<f64>) -> usize {
+        let Some(gate) = self.config.gate else { return 0 };
+        let mut gated = 0;
+        for (i, w) in inv_std.iter_mut().enumerate().filter(|(_, w)| **w > 0.0) {
+            let predicted = (1.0 / (*w * *w) + hl.row(i).norm_squared()).sqrt();
+            if (z[i] - z_mean[i]).abs() > gate * predicted {
+                *w = 0.0;
+                gated += 1;
+            }
+        }
+        gated
     }
 
     /// Sampling at iteration `k`: the sigma points' parameters (reduced space), and a copy of the
@@ -693,6 +723,7 @@ impl<M: Model> Roukf<M> {
             wall_seconds,
             noise_std_physical: self.misfit.as_ref().map(|_| self.physical(&self.filter_covariance())),
             misfit: self.misfit(),
+            gated: 0,
         }
     }
 

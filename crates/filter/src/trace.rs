@@ -34,6 +34,13 @@ pub struct IterationTrace {
     /// estimate (about 1 when the model and the nominal observation noise are right).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub misfit: Option<f64>,
+    /// Measured components the validation gate left out at this iteration ([`crate::RoukfConfig::gate`]).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub gated: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// The whole history of a filter run.

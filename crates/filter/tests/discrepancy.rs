@@ -69,6 +69,7 @@ fn filter(data: &Data, forgetting: f64) -> Roukf<Cyclic> {
         execution: Execution::Sequential,
         forgetting,
         sigma_points: SigmaPointSet::Simplex,
+        gate: None,
     };
     Roukf::new(Cyclic { pattern: data.pattern.clone() }, DVector::zeros(data.pattern.len()), config).unwrap()
 }

@@ -64,6 +64,7 @@ fn config(execution: Execution) -> RoukfConfig {
         execution,
         forgetting: 1.0,
         sigma_points: SigmaPointSet::Simplex,
+        gate: None,
     }
 }
 

@@ -71,6 +71,7 @@ fn young_modulus_is_identified_within_one_percent_from_noiseless_data() {
         execution: Execution::Parallel,
         forgetting: 1.0,
         sigma_points: SigmaPointSet::Simplex,
+        gate: None,
     };
     let initial = model.initial_state();
     let mut roukf = Roukf::new(model, initial, config(Transform::Exp, 3000f64.ln(), 0.5)).unwrap();
@@ -141,6 +142,7 @@ fn spring_config(execution: Execution) -> RoukfConfig {
         execution,
         forgetting: 1.0,
         sigma_points: SigmaPointSet::Simplex,
+        gate: None,
     }
 }
 
@@ -314,6 +316,7 @@ fn young_filter(set: SigmaPointSet, data: &[DVector<f64>]) -> Roukf<FemModel> {
         execution: Execution::Parallel,
         forgetting: 1.0,
         sigma_points: set,
+        gate: None,
     };
     let mut roukf = Roukf::new(model, initial, config).unwrap();
     for z in data {

@@ -54,6 +54,7 @@ fn static_parameters_against_kalman(
         execution: Execution::Parallel,
         forgetting,
         sigma_points: set,
+        gate: None,
     };
     let mut roukf = Roukf::new(StaticLinear { h: h.clone() }, DVector::zeros(q), config).unwrap();
     assert_eq!(roukf.sigma_points().count(), set.count(p));
@@ -136,6 +137,7 @@ fn forgetting_and_missing_components_match_kalman_filter() {
             execution: Execution::Sequential,
             forgetting: rho,
             sigma_points: SigmaPointSet::Simplex,
+            gate: None,
         };
         let err = Roukf::new(StaticLinear { h: vec![] }, DVector::zeros(1), config).err().unwrap().to_string();
         assert!(err.contains("forgetting factor"), "{err}");
@@ -198,6 +200,7 @@ fn joint_against_augmented_kalman(set: SigmaPointSet) {
         execution: Execution::Sequential,
         forgetting: 1.0,
         sigma_points: set,
+        gate: None,
     };
     let model = LinearStateSpace { a: a.clone(), b: b.clone(), c: cm.clone(), inputs: inputs.clone() };
     let mut roukf = Roukf::new_joint(model, x0.clone(), config).unwrap();
@@ -249,4 +252,49 @@ fn joint_against_augmented_kalman(set: SigmaPointSet) {
         assert!(rel_diff(&pxt, &cov.view((0, n), (n, p)).into_owned()) < 1e-9, "P_xθ at {k} ({set})");
     }
     assert!((roukf.mean() - &truth).amax() < 0.05, "estimate {} vs truth {truth}", roukf.mean());
+}
+
+#[test]
+fn a_component_past_the_validation_gate_counts_as_not_measured() {
+    let (p, q, steps, outlier) = (3, 2, 30, 12);
+    let mut rng = Rng::new(17);
+    let h: Vec<DMatrix<f64>> = (0..steps).map(|_| DMatrix::from_fn(q, p, |_, _| rng.normal())).collect();
+    let truth = DVector::from_vec(vec![1.5, -0.7, 3.0]);
+    let filter = |gate: Option<f64>| {
+        let config = RoukfConfig {
+            parameters: (0..p).map(|j| ParameterSpec::new(format!("t{j}"), Transform::Identity, 0.0, 2.0)).collect(),
+            observation_std: ObservationNoise::Uniform(0.1),
+            execution: Execution::Sequential,
+            forgetting: 1.0,
+            sigma_points: SigmaPointSet::Simplex,
+            gate,
+        };
+        Roukf::new(StaticLinear { h: h.clone() }, DVector::zeros(q), config).unwrap()
+    };
+    let (mut gated, mut told, mut plain) = (filter(Some(10.0)), filter(None), filter(None));
+    for (k, hk) in h.iter().enumerate() {
+        let mut z = hk * &truth + DVector::from_fn(q, |_, _| 0.1 * rng.normal());
+        // A tracking failure: component 0 off by 100 σ at one step.
+        if k == outlier {
+            z[0] += 10.0;
+        }
+        let record = gated.step(&z).unwrap().clone();
+        assert_eq!(record.gated, usize::from(k == outlier), "step {k}");
+        // The gated filter is the one told that the component was not measured at that step.
+        let told_record = told.step_partial(&z, &[k != outlier, true]).unwrap().clone();
+        assert_eq!(told_record.gated, 0);
+        for (a, b) in record.mean.iter().zip(&told_record.mean) {
+            assert!((a - b).abs() < 1e-12 * b.abs().max(1.0), "step {k}: {:?} vs {:?}", record.mean, told_record.mean);
+        }
+        plain.step(&z).unwrap();
+    }
+    // Without the gate the failure pulls the estimate off; with it the estimate holds.
+    let off = |f: &Roukf<StaticLinear>| (f.mean() - &truth).amax();
+    assert!(off(&gated) < 0.1 && off(&plain) > 2.0 * off(&gated), "{} vs {}", off(&gated), off(&plain));
+    // A gate must be a positive number.
+    for gate in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let config = RoukfConfig { gate: Some(gate), ..filter(None).config().clone() };
+        let err = Roukf::new(StaticLinear { h: vec![] }, DVector::zeros(q), config).err().unwrap().to_string();
+        assert!(err.contains("validation gate"), "{err}");
+    }
 }

@@ -59,6 +59,7 @@ fn rate_config(execution: Execution) -> RoukfConfig {
         execution,
         forgetting: 1.0,
         sigma_points: SigmaPointSet::Simplex,
+        gate: None,
     }
 }
 
@@ -186,6 +187,7 @@ fn cascade_run(execution: Execution, joint: bool) -> (Trace, Vec<[f64; 2]>) {
         execution,
         forgetting: 1.0,
         sigma_points: SigmaPointSet::Simplex,
+        gate: None,
     };
     let mut roukf = if joint {
         Roukf::new_joint(Cascade, [0.0, 0.0], config).unwrap()

@@ -226,6 +226,11 @@ pub struct FilterSpec {
     /// Degrees of freedom d ≥ 1 of a systematic discrepancy (default 1).
     #[serde(default = "one")]
     pub discrepancy_dof: f64,
+    /// Validation gate G: a tracked component farther from its prediction than G predicted
+    /// standard deviations is left out of that step (see [`filter::RoukfConfig::gate`]); none by
+    /// default.
+    #[serde(default)]
+    pub gate: Option<f64>,
 }
 
 impl Default for FilterSpec {
@@ -236,6 +241,7 @@ impl Default for FilterSpec {
             sigma_points: SigmaPointSet::default(),
             discrepancy: Discrepancy::None,
             discrepancy_dof: 1.0,
+            gate: None,
         }
     }
 }

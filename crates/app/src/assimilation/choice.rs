@@ -61,6 +61,10 @@ pub struct AssimilationChoice {
     /// Degrees of freedom d ≥ 1 of a systematic discrepancy (default: the scenario's filter.discrepancy_dof, else 1).
     #[arg(long, value_name = "D")]
     pub discrepancy_dof: Option<f64>,
+    /// Validation gate G: a tracked component farther from the filter's prediction than G predicted standard
+    /// deviations is left out of that step, as a tracking failure (default: the scenario's filter.gate, else none).
+    #[arg(long, value_name = "G")]
+    pub gate: Option<f64>,
     /// Write the estimated deformation every N steps (default: the scenario's output.every, else 1).
     #[arg(long)]
     pub every: Option<usize>,
@@ -93,6 +97,9 @@ impl AssimilationChoice {
         }
         if self.every.is_some() {
             sc.output.every = self.every;
+        }
+        if self.gate.is_some() {
+            sc.filter.gate = self.gate;
         }
         Ok((sc, dir))
     }
@@ -131,12 +138,13 @@ mod tests {
             sigma_points: Some(SigmaPointSet::Star),
             discrepancy: None,
             discrepancy_dof: Some(2.0),
+            gate: Some(30.0),
             every: Some(5),
         };
         let (sc, _) = choice.scenario().unwrap();
         assert_eq!((sc.iterations, sc.output.every), (Some(3), Some(5)));
         assert_eq!(sc.filter.execution, Execution::Sequential);
-        assert_eq!((sc.filter.forgetting, sc.filter.discrepancy_dof), (0.9, 2.0));
+        assert_eq!((sc.filter.forgetting, sc.filter.discrepancy_dof, sc.filter.gate), (0.9, 2.0, Some(30.0)));
         assert_eq!(sc.filter.sigma_points, SigmaPointSet::Star);
         assert!(choice.files().is_none());
         let tracked = AssimilationChoice { observations: Some("obs.csv".into()), known_truth: true, ..choice };

@@ -133,6 +133,12 @@ impl Report {
                 mm(c.max_error)
             ));
         }
+        if let (components, steps @ 1..) = r.gated {
+            lines.push(format!(
+                "gate         {components} tracked components left out of {steps} steps, farther from the \
+                 prediction than the validation gate allows (trace.json: gated)"
+            ));
+        }
         lines.push(format!("wall time    {:.2} s in all", r.total_seconds));
         lines
     }

@@ -67,6 +67,9 @@ pub struct Report {
     pub assessment: Vec<AssessmentCase>,
     /// Steps of the estimated deformation written to `deformation.pvd`.
     pub deformation_frames: usize,
+    /// With a validation gate: the tracked components it left out over the run, and the steps
+    /// they were left out of.
+    pub gated: (usize, usize),
 }
 
 /// Where the filter's time went. The FEM solves' times are each solve's own wall-clock time summed over all

@@ -435,6 +435,7 @@ impl Experiment {
             execution: self.scenario.filter.execution,
             forgetting: self.scenario.filter.forgetting,
             sigma_points: self.scenario.filter.sigma_points,
+            gate: self.scenario.filter.gate,
         };
         let model = self.model(self.base.clone(), self.unknowns.parameters.clone())?;
         let initial = model.initial_state();
@@ -581,6 +582,7 @@ impl Experiment {
             springs,
             assessment,
             deformation_frames: frames.len(),
+            gated: (trace.records.iter().map(|r| r.gated).sum(), trace.records.iter().filter(|r| r.gated > 0).count()),
         };
         report.write_json(&out_dir.join("summary.json"))?;
         Ok(report)
