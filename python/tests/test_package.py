@@ -255,6 +255,21 @@ def test_predict_matches_the_command_line(tmp_path):
         augsim.predict(tmp_path, grid)
 
 
+def test_a_tracking_failure_is_left_out_by_the_validation_gate(tmp_path):
+    scenario = tmp_path / "gated.toml"
+    scenario.write_text(open(BEAM_ASSIMILATION).read() + "\n[filter]\ngate = 30.0\n")
+    gated, plain = augsim.Assimilation(str(scenario)), augsim.Assimilation(BEAM_ASSIMILATION)
+    for k, z in enumerate(gated.observations, 1):
+        if k == 4:
+            z = z.copy()
+            z[2] += 0.05  # a tracker jumping by 5 cm on each axis
+        e = gated.step(z)
+        assert e.gated == (3 if k == 4 else 0), (k, e.gated)
+        assert plain.step(z).gated == 0
+    # The gated filter holds its estimate; the plain one is thrown off.
+    assert abs(gated.mean[0] - 5000.0) < 50.0 < abs(plain.mean[0] - 5000.0)
+
+
 def test_roukf_converges_to_the_young_modulus():
     a = augsim.Assimilation(BEAM_ASSIMILATION)
     assert a.names == ["young"] and a.scenario_values == [5000.0]

@@ -66,7 +66,7 @@ fn the_roukf_steps_with_features_sent_over_openigtlink() {
             assert!(e["step"] == step && e["error"].as_str().unwrap().contains("features sent"), "{e}");
         }
     }
-    assert_eq!(last["names"][0], "young", "{last}");
+    assert_eq!((&last["names"][0], &last["gated"]), (&serde_json::json!("young"), &serde_json::json!(0)), "{last}");
     let (mean, std) = (last["mean"][0].as_f64().unwrap(), last["std"][0].as_f64().unwrap());
     assert!((mean - truth).abs() < 0.01 * truth && std < 0.01 * truth, "E = {mean} ± {std} Pa, truth {truth} Pa");
     drop(client);

@@ -504,6 +504,10 @@ struct Estimate {
     /// seen.
     #[pyo3(get)]
     innovation: Option<f64>,
+    /// Measured components the validation gate left out of the step (the scenario's
+    /// `[filter] gate`: farther from the prediction than it allows, as a tracking failure).
+    #[pyo3(get)]
+    gated: usize,
 }
 
 /// The ROUKF of an assimilation scenario, one step at a time.
@@ -550,7 +554,7 @@ impl Assimilation {
         }
         compute(py, || {
             let e = locked(&self.filter)?.step(z)?;
-            Ok(Estimate { iteration: e.iteration, mean: e.mean, std: e.std, innovation: e.innovation })
+            Ok(Estimate { iteration: e.iteration, mean: e.mean, std: e.std, innovation: e.innovation, gated: e.gated })
         })
     }
 

@@ -28,6 +28,8 @@ pub struct Estimate {
     pub std: Vec<f64>,
     /// Norm of the step's innovation over the measured components (m); `None` when no point was seen.
     pub innovation: Option<f64>,
+    /// Measured components the validation gate left out of the step (the scenario's `[filter] gate`).
+    pub gated: usize,
 }
 
 impl OnlineFilter {
@@ -83,12 +85,13 @@ impl OnlineFilter {
         }
         let available: Vec<bool> = z.iter().map(|v| !v.is_nan()).collect();
         let record = self.filter.step_partial(&DVector::from_vec(z), &available).context(|| "a filter step".into())?;
-        let innovation = record.innovation_norm;
-        Ok(Estimate { iteration: self.iteration(), mean: self.mean(), std: self.std(), innovation })
+        let (innovation, gated) = (record.innovation_norm, record.gated);
+        Ok(Estimate { iteration: self.iteration(), mean: self.mean(), std: self.std(), innovation, gated })
     }
 
     /// One step with the observed points' positions (m; NaN for a point not seen), the estimate
-    /// as JSON fields: `iteration`, `names`, `mean`, `std`, `innovation` (what a stream answers).
+    /// as JSON fields: `iteration`, `names`, `mean`, `std`, `innovation`, `gated` (what a stream
+    /// answers).
     pub fn step_points(&mut self, positions: &[Point]) -> Result<serde_json::Map<String, serde_json::Value>, String> {
         // The whole chain of causes, as the command line prints it: a context alone says nothing.
         let e = self
@@ -100,6 +103,7 @@ impl OnlineFilter {
         fields.insert("mean".into(), e.mean.into());
         fields.insert("std".into(), e.std.into());
         fields.insert("innovation".into(), e.innovation.into());
+        fields.insert("gated".into(), e.gated.into());
         Ok(fields)
     }
 
