@@ -130,7 +130,7 @@ fn tracks_written_by_a_synthetic_run_give_the_same_estimate() {
     let report = experiment.run(&dir.path().join("occluded"), &learn::Silent).unwrap();
     let (e, e0) = (report.young.unwrap().mean, young.mean);
     assert!(e != e0 && (e - e0).abs() < 1e-3 * e0, "{e} vs {e0}");
-    assert_eq!(report.gated, (0, 0));
+    assert_eq!((report.gated_components, report.gated_steps), (0, 0));
 
     // A tracking failure instead (f1 at frame 3 off by 5 cm on each axis): with a validation gate it
     // is left out as the occluded feature was, to the same estimate.
@@ -149,7 +149,7 @@ fn tracks_written_by_a_synthetic_run_give_the_same_estimate() {
     let (sc, base) = scenario(dir.path(), "gated.toml", &format!("{beam}\n[filter]\ngate = 30.0\n"));
     let gated = Experiment::prepare(sc, &base, Some(&split)).unwrap().run(&dir.path().join("gated"), &learn::Silent);
     let gated = gated.unwrap();
-    assert_eq!(gated.gated, (3, 1));
+    assert_eq!((gated.gated_components, gated.gated_steps), (3, 1));
     assert!(gated.lines().iter().any(|l| l.starts_with("gate         3 tracked components left out of 1 steps")));
     let g = gated.young.unwrap().mean;
     assert!((g - e).abs() < 1e-9 * e, "{g} vs the occluded run's {e}");

@@ -133,7 +133,7 @@ impl Report {
                 mm(c.max_error)
             ));
         }
-        if let (components, steps @ 1..) = r.gated {
+        if let (components, steps @ 1..) = (r.gated_components, r.gated_steps) {
             lines.push(format!(
                 "gate         {components} tracked components left out of {steps} steps, farther from the \
                  prediction than the validation gate allows (trace.json: gated)"

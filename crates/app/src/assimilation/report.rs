@@ -67,9 +67,10 @@ pub struct Report {
     pub assessment: Vec<AssessmentCase>,
     /// Steps of the estimated deformation written to `deformation.pvd`.
     pub deformation_frames: usize,
-    /// With a validation gate: the tracked components it left out over the run, and the steps
-    /// they were left out of.
-    pub gated: (usize, usize),
+    /// With a validation gate: the tracked components it left out over the run...
+    pub gated_components: usize,
+    /// ... and the steps they were left out of.
+    pub gated_steps: usize,
 }
 
 /// Where the filter's time went. The FEM solves' times are each solve's own wall-clock time summed over all

@@ -582,7 +582,8 @@ impl Experiment {
             springs,
             assessment,
             deformation_frames: frames.len(),
-            gated: (trace.records.iter().map(|r| r.gated).sum(), trace.records.iter().filter(|r| r.gated > 0).count()),
+            gated_components: trace.records.iter().map(|r| r.gated).sum(),
+            gated_steps: trace.records.iter().filter(|r| r.gated > 0).count(),
         };
         report.write_json(&out_dir.join("summary.json"))?;
         Ok(report)
