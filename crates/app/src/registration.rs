@@ -432,6 +432,7 @@ impl RegistrationChoice {
             given_frame: self.frame,
             iterations: self.iterations,
             rigid: self.rigid,
+            time_budget_ms: None,
             options: None,
         })
     }
@@ -455,6 +456,9 @@ pub struct RegistrationSpec {
     pub iterations: Option<usize>,
     /// A rigid pre-alignment of the first cloud (trimmed ICP), where the loop's settings have none.
     pub rigid: bool,
+    /// Most wall time of a frame (ms), in place of the loop's
+    /// ([`RegistrationOptions::time_budget_ms`]).
+    pub time_budget_ms: Option<f64>,
     /// The loop's settings, in place of the method's defaults (a comparison's: its case's, with
     /// the method's iteration budgets); a reduced-order model's shape fit takes its own budgets
     /// ([`register::shape::loop_options`]).
@@ -474,6 +478,7 @@ impl RegistrationSpec {
             given_frame: None,
             iterations: None,
             rigid: false,
+            time_budget_ms: None,
             options: None,
         }
     }
@@ -504,6 +509,7 @@ impl RegistrationSpec {
         let options = RegistrationOptions {
             iterations: self.iterations.unwrap_or(options.iterations),
             rigid: options.rigid.or_else(|| self.rigid.then(register::RigidOptions::default)),
+            time_budget_ms: self.time_budget_ms.or(options.time_budget_ms),
             ..options
         };
         options.validate()?;
@@ -622,6 +628,7 @@ impl RegistrationSpec {
             given_frame: None,
             iterations,
             rigid,
+            time_budget_ms: None,
             options: None,
         })
     }
@@ -663,6 +670,19 @@ mod tests {
         assert!(flips(Some(Frame::Lps), &named));
         assert!(!flips(Some(Frame::Lps), &points), "the organ names no frame");
         assert!(spec(TargetsSpec::File(dir.path().join("missing.csv")), None).build().is_err());
+    }
+
+    /// The spec's time budget reaches the loop's settings, checked there; none by default.
+    #[test]
+    fn a_time_budget_given_reaches_the_loop() {
+        let spec = |budget| RegistrationSpec {
+            time_budget_ms: budget,
+            ..RegistrationSpec::new(MethodSpec::fem("beam"), TargetsSpec::Points(vec![[2.5, 0.5, 0.5]]))
+        };
+        assert_eq!(spec(None).build().unwrap().options().time_budget_ms, None);
+        assert_eq!(spec(Some(50.0)).build().unwrap().options().time_budget_ms, Some(50.0));
+        let e = spec(Some(0.0)).build().err().unwrap().to_string();
+        assert!(e.contains("time_budget_ms"), "{e}");
     }
 
     #[test]

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use app::assimilation::{Experiment, OnlineFilter};
-use app::registration::RegistrationChoice;
+use app::registration::{RegistrationChoice, RegistrationSpec};
 use live::{Outputs, ServeOptions};
 use mesh::length::LengthUnit;
 
@@ -88,13 +88,11 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     let chosen =
         args.outputs.as_deref().map(Outputs::parse).transpose().map_err(anyhow::Error::msg).context("--outputs")?;
     let outputs = chosen.unwrap_or(Outputs::ALL);
-    let spec = args.registration.spec()?;
+    let spec = RegistrationSpec { time_budget_ms: Some(args.time_budget_ms), ..args.registration.spec()? };
     let units = spec.given_units;
     // Built once here so that a bad model, scenario or targets file stops the command before it
     // listens.
-    let budget = Some(args.time_budget_ms);
-    let mut first = spec.build()?;
-    first.set_time_budget(budget).context("--time-budget-ms")?;
+    let first = spec.build()?;
     if let Some(chosen) = chosen.filter(|o| o.transform && first.options().rigid.is_none()) {
         let only = "--outputs transform: the transform is the rigid pre-alignment's, sent with --rigid only";
         match chosen.targets || chosen.organ || chosen.status {
@@ -109,11 +107,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     for w in first.warnings() {
         eprintln!("warning    {w}");
     }
-    let factory = live::first_then_build(Some(first), move || {
-        let mut registration = spec.build().map_err(|e| format!("{e:#}"))?;
-        registration.set_time_budget(budget).map_err(|e| e.to_string())?;
-        Ok(registration)
-    });
+    let factory = live::first_then_build(Some(first), move || spec.build().map_err(|e| format!("{e:#}")));
     let identification = match &args.assimilate {
         Some(path) => Some(identification(path, units)?),
         None => None,

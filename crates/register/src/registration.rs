@@ -177,15 +177,6 @@ impl Registration {
         &self.options
     }
 
-    /// Limits the wall time of each frame ([`RegistrationOptions::time_budget_ms`]; `None`: no
-    /// limit).
-    pub fn set_time_budget(&mut self, budget_ms: Option<f64>) -> Result<()> {
-        let options = RegistrationOptions { time_budget_ms: budget_ms, ..self.options.clone() };
-        options.validate()?;
-        self.options = options;
-        Ok(())
-    }
-
     /// Why the targets may not be what was meant (e.g. a set far smaller than the organ: a unit
     /// mistake); empty when they look right.
     pub fn warnings(&self) -> &[String] {
