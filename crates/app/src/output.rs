@@ -20,7 +20,7 @@ use scenario::registration::slug;
 use serde::Serialize;
 
 use crate::case::{Compared, Registered, SyntheticCase};
-use crate::picture::RegisteredFrame;
+use crate::picture::{frame_notes, RegisteredFrame};
 use crate::printout::frame_line;
 
 /// The folder of a run's results: `out` when the user names one, refused when it already holds
@@ -227,7 +227,7 @@ impl RunWriter {
         RegisteredFrame::new(registration.organ(), u, last.rigid.as_ref(), cloud, targets, truth).write(
             &self.dir.join("registration"),
             &format!("{}: {}", registration.method(), row.cloud),
-            frame_notes(outcomes.len() - 1, row),
+            frame_notes(frame_line(outcomes.len() - 1, row), last.target_std.as_deref(), &last.registration.warnings),
         )?;
         let summary = Summary::new(registration.method(), outcomes)?;
         let run = RunSummary { frame, summary: &summary, per_frame: &self.rows };
@@ -392,7 +392,11 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         RegisteredFrame::new(&reg.organ, u, outcome.rigid.as_ref(), &peak.cloud, targets, Some(&peak.truth)).write(
             &method_dir.join("registration"),
             &title,
-            frame_notes(case.peak_index(), &FrameSummary::new(String::new(), outcome)),
+            frame_notes(
+                frame_line(case.peak_index(), &FrameSummary::new(String::new(), outcome)),
+                outcome.target_std.as_deref(),
+                &outcome.registration.warnings,
+            ),
         )?;
     }
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -406,18 +410,6 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         .collect::<Result<_, _>>()?;
     write_atomic_bytes(&dir.join("summary.json"), serde_json::to_string_pretty(&summaries)?.as_bytes())?;
     Ok(())
-}
-
-/// The lines under the 3D picture of frame `i`: its figures, as printed, the σ predicted at its
-/// targets, when known, and its warnings.
-fn frame_notes(i: usize, row: &FrameSummary) -> Vec<String> {
-    let mut notes = vec![frame_line(i, row)];
-    if let Some(sigma) = &row.target_sigma_mm {
-        let (mean, max) = (mesh::stats::mean(sigma), mesh::stats::max(sigma));
-        notes.push(format!("σ predicted at the targets: mean {mean:.2} mm, max {max:.2} mm"));
-    }
-    notes.extend(row.warnings.iter().map(|w| format!("warning: {w}")));
-    notes
 }
 
 /// The rows of a comparison: the baseline (not deforming, or the rigid alignment alone, when the

@@ -4,6 +4,7 @@
 
 use std::path::Path;
 
+use mesh::length::mm;
 use mesh::Point;
 use plot::viewer::{write_html, Layer, PointLayer, Scalar, Scene};
 use plot::{scatter_plot, PlotSpec, PointSet};
@@ -16,8 +17,8 @@ use register::{Organ, RigidResult};
 pub struct RegisteredFrame<'a> {
     /// The organ.
     pub organ: &'a Organ,
-    /// Its registered displacement (3 per mesh node).
-    pub u: &'a [f64],
+    /// Its surface's vertices registered.
+    pub registered: Vec<Point>,
     /// The cloud registered to.
     pub cloud: Vec<Point>,
     /// The targets at rest.
@@ -45,7 +46,14 @@ impl<'a> RegisteredFrame<'a> {
                 None => points.to_vec(),
             }
         };
-        RegisteredFrame { organ, u, cloud: back(cloud), rest_targets, targets: back(targets), truth: truth.map(back) }
+        RegisteredFrame {
+            organ,
+            registered: organ.deformed_surface(u).vertices,
+            cloud: back(cloud),
+            rest_targets,
+            targets: back(targets),
+            truth: truth.map(back),
+        }
     }
 
     /// Writes `stem`.png (the side view) and `stem`.html (the 3D page, `notes` under its title).
@@ -60,7 +68,7 @@ impl<'a> RegisteredFrame<'a> {
     fn side_view(&self, path: &Path, title: &str) -> Result<()> {
         let xz = |p: &Point| (p[0], p[2]);
         let rest = self.organ.surface().vertices.iter().map(xz).collect();
-        let registered = self.organ.deformed_surface(self.u).vertices.iter().map(xz).collect();
+        let registered = self.registered.iter().map(xz).collect();
         let mut sets = vec![
             PointSet { name: "surface at rest".into(), points: rest, radius: 1, color: 7 },
             PointSet { name: "registered surface".into(), points: registered, radius: 1, color: 0 },
@@ -95,8 +103,7 @@ impl<'a> RegisteredFrame<'a> {
     /// displacement (mm), with the cloud and the targets at rest, registered and true.
     pub fn scene(&self, title: &str, notes: Vec<String>) -> Scene {
         let surface = self.organ.surface();
-        let registered = self.organ.deformed_surface(self.u).vertices;
-        let moved = mesh::distances(&surface.vertices, &registered).iter().map(|d| 1e3 * d).collect();
+        let moved = mesh::distances(&surface.vertices, &self.registered).iter().map(|d| 1e3 * d).collect();
         let mut points = vec![
             PointLayer { name: "intraoperative cloud".into(), positions: self.cloud.clone(), colour: [31, 119, 180] },
             PointLayer {
@@ -114,11 +121,23 @@ impl<'a> RegisteredFrame<'a> {
             notes,
             triangles: surface.triangles.iter().map(|t| t.map(|i| i as u32)).collect(),
             rest: surface.vertices.clone(),
-            layers: vec![Layer { name: "registered".into(), positions: registered }],
+            layers: vec![Layer { name: "registered".into(), positions: self.registered.clone() }],
             colour: Some(Scalar { name: "displacement".into(), unit: "mm".into(), values: moved }),
             points,
         }
     }
+}
+
+/// The lines under a registered frame's 3D page: `headline` (its figures), the σ predicted at its
+/// targets (m), when known, and its warnings.
+pub fn frame_notes(headline: String, target_std: Option<&[f64]>, warnings: &[String]) -> Vec<String> {
+    let mut notes = vec![headline];
+    if let Some(std) = target_std {
+        let (mean, max) = (mm(mesh::stats::mean(std)), mm(mesh::stats::max(std)));
+        notes.push(format!("σ predicted at the targets: mean {mean:.2} mm, max {max:.2} mm"));
+    }
+    notes.extend(warnings.iter().map(|w| format!("warning: {w}")));
+    notes
 }
 
 #[cfg(test)]

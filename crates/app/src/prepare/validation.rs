@@ -14,7 +14,7 @@ use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
 use mesh::{Camera, Mesh, Near, Point, TriSurface};
 
 use super::{across_sight, hold_distance, longest_side, swing_warning, tool_radius, PrepareOptions, SURFACE_FILE};
-use crate::picture::RegisteredFrame;
+use crate::picture::{frame_notes, RegisteredFrame};
 use crate::registration::{PatientMethod, RegistrationSpec, PATIENT_FILE};
 
 /// Tool pushes of the validation: where along what the camera sees (its spread across the line of
@@ -383,17 +383,13 @@ impl MethodRun {
     fn picture(&self, dir: &Path) -> Result<Option<String>> {
         let Some(s) = &self.strongest else { return Ok(None) };
         let errors = register::target_errors(&s.tracked.targets, &s.moved);
-        let mut notes = vec![format!(
+        let headline = format!(
             "TRE at the {} targets: mean {:.2} mm, max {:.2} mm; the truth: the organ meshed anew (T10, Neo-Hookean)",
             errors.len(),
             mm(mesh::stats::mean(&errors)),
             mm(mesh::stats::max(&errors))
-        )];
-        if let Some(std) = &s.tracked.target_std {
-            let (mean, max) = (mm(mesh::stats::mean(std)), mm(mesh::stats::max(std)));
-            notes.push(format!("σ predicted at the targets: mean {mean:.2} mm, max {max:.2} mm"));
-        }
-        notes.extend(s.tracked.registration.warnings.iter().map(|w| format!("warning: {w}")));
+        );
+        let notes = frame_notes(headline, s.tracked.target_std.as_deref(), &s.tracked.registration.warnings);
         let name = method_name(self.method);
         let targets = (s.registration.targets(), s.tracked.targets.as_slice());
         let (organ, u) = (s.registration.organ(), &s.tracked.registration.u);
