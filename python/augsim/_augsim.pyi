@@ -66,6 +66,7 @@ class Estimate:
     mean: list[float]
     std: list[float]
     innovation: Optional[float]
+    gated: int
 
 class Assimilation:
     names: list[str]

@@ -102,3 +102,15 @@ def test_the_stub_matches_the_built_module():
         else:
             stubbed = [p for p, _, _ in parameters(node, drop_self=False)]
             assert list(inspect.signature(getattr(native, name)).parameters) == stubbed, name
+
+
+def test_the_module_has_nothing_the_stub_leaves_out():
+    native = pytest.importorskip("augsim._augsim", reason="the augsim package is not installed")
+    s = stub()
+    public = [n for n in dir(native) if not n.startswith("_")]
+    assert sorted(n for n in public if n not in s) == [], "in the module but not in the stub"
+    for name, node in s.items():
+        if isinstance(node, ast.ClassDef) and name != "AugsimError":
+            stubbed = set(fields(node)) | set(methods(node))
+            members = [m for m in dir(getattr(native, name)) if not m.startswith("_")]
+            assert sorted(m for m in members if m not in stubbed) == [], f"{name}: in the module but not in the stub"
