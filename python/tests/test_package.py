@@ -192,6 +192,15 @@ def test_register_writes_what_the_command_line_writes(case, tmp_path):
     lines = (tmp_path / "labelled" / "targets.csv").read_text().splitlines()
     assert lines[0] == "x0_mm,y0_mm,z0_mm,x_mm,y_mm,z_mm,label"
     assert [line.rsplit(",", 1)[1] for line in lines[1:]] == [f"T{k}" for k in range(len(case["rest"]))]
+    # A directory that cannot be made (under a file) raises before the cloud moves the warm start on:
+    # the next cloud registers from rest, as a fresh registration's first does.
+    reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm")
+    (tmp_path / "a_file").write_text("")
+    with pytest.raises(augsim.AugsimError, match="a_file"):
+        reg.register(case["cloud"], out=tmp_path / "a_file" / "out")
+    again = reg.register(case["cloud"])
+    assert again.iterations == r.iterations
+    np.testing.assert_allclose(again.targets, r.targets, atol=1e-6)
 
 
 def test_clouds_and_results_in_another_frame(case, tmp_path):

@@ -6,7 +6,8 @@ pushed down, seen from above; its truth from another mesh and law than the model
 `augsim register --case … --frames 40`, the force rising and falling back over 40 frames, each
 seen anew by the camera; `augsim serve` registers it with a co-rotational FEM of the 800-T4
 phantom; pyigtl sends each frame's cloud in millimetres as a POLYDATA message once the previous one
-is answered and reads the registered targets (POINT) and the status (STRING JSON). It checks every
+is answered and reads the registered targets (POINT, each named by its label) and the status
+(STRING JSON). It checks every
 frame is answered in order with a target registration error well below the unregistered one, that
 a cloud with a NaN gets an error status while the stream goes on, and prints the latency (send to
 status, median and p95), the sustained frame rate and the TRE per frame. AUGSIM_STREAM=full
@@ -20,6 +21,7 @@ target/release/augsim). Without pyigtl it is skipped, saying so. `.ci/run` runs 
 """
 
 import json
+import os
 import socket
 import subprocess
 import sys
@@ -59,8 +61,14 @@ class ServeTest(unittest.TestCase):
         """Makes the case of `frames` frames in `tmp`, starts `augsim serve` on it with `options`
         and runs `exchange(port, case)` (mm), then stops the server with SIGINT."""
         case = make_case(tmp, frames)
+        # The targets labelled, as 3D Slicer's markups are: the answers name each by its label.
+        case["labels"] = [f"M{k + 1}" for k in range(len(case["rest"]))]
+        labelled = os.path.join(tmp, "targets_labelled.csv")
+        with open(labelled, "w", encoding="utf-8") as f:
+            f.write("label,x_mm,y_mm,z_mm\n")
+            f.writelines(f"{label},{x!r},{y!r},{z!r}\n" for label, (x, y, z) in zip(case["labels"], case["rest"]))
         port = free_port()
-        server = subprocess.Popen([augsim_bin(), "serve", "--fem", case["scenario"], "--targets", case["targets"],
+        server = subprocess.Popen([augsim_bin(), "serve", "--fem", case["scenario"], "--targets", labelled,
                                    "--port", str(port), "--units", "mm"] + options, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                   text=True)
         try:
@@ -122,6 +130,7 @@ class ServeTest(unittest.TestCase):
                 status = client.wait_for_message("status", timeout=30)
                 latencies.append((time.perf_counter() - sent) * 1e3)
                 self.assertIsNotNone(targets, f"frame {frame}: no targets")
+                self.assertEqual(targets.names, case["labels"], "the targets named by their labels")
                 self.assertIsNotNone(status, f"frame {frame}: no status")
                 s = json.loads(status.string)
                 self.assertEqual(s["frame"], frame, s)

@@ -15,7 +15,7 @@ use mesh::io::points::{write_markups_json, LabelledPoints};
 use mesh::io::{csv_field, write_atomic_bytes, write_surface_in_frame, Field, Frame, FrameChange};
 use mesh::length::{mm, LengthUnit};
 use mesh::{Mesh, Point};
-use register::{FrameOutcome, Organ, Registration, RigidResult, Summary};
+use register::{FrameOutcome, Organ, Registration, RigidResult, RigidTransform, Summary};
 use scenario::registration::slug;
 use serde::Serialize;
 
@@ -129,8 +129,9 @@ pub struct RunWriter {
     given: Option<Frame>,
     /// From the organ's frame to the results'.
     change: FrameChange,
-    /// The organ moved by the rigid alignment, once known (the same for every frame).
-    moved: Option<Mesh>,
+    /// The organ moved by the rigid alignment, with the pose that moved it (moved anew when a
+    /// frame estimates the pose again).
+    moved: Option<(RigidTransform, Mesh)>,
     steps: Vec<(f64, String)>,
     rows: Vec<FrameSummary>,
 }
@@ -168,11 +169,14 @@ impl RunWriter {
 
     /// Writes frame `i` (registered from `cloud`) of `organ`; returns its summary line.
     pub fn frame(&mut self, i: usize, cloud: String, organ: &Organ, outcome: &FrameOutcome) -> Result<&FrameSummary> {
-        if let (Some(r), None) = (&outcome.rigid, &self.moved) {
-            self.moved = Some(r.organ_to_cloud().move_mesh(organ.mesh()));
+        if let Some(r) = &outcome.rigid {
+            if self.moved.as_ref().is_none_or(|(pose, _)| *pose != r.cloud_to_organ) {
+                self.moved = Some((r.cloud_to_organ, r.organ_to_cloud().move_mesh(organ.mesh())));
+            }
         }
         let name = if self.sequence { format!("organ_{i:04}.vtu") } else { "organ.vtu".into() };
-        let (m, u) = in_cloud_frame(organ.mesh(), self.moved.as_ref(), outcome.rigid.as_ref(), &outcome.registration.u);
+        let moved = self.moved.as_ref().map(|(_, m)| m);
+        let (m, u) = in_cloud_frame(organ.mesh(), moved, outcome.rigid.as_ref(), &outcome.registration.u);
         let (m, u) = if self.change.flips() {
             let mut m = m.into_owned();
             m.nodes = self.converted(&m.nodes);
@@ -237,7 +241,8 @@ impl RunWriter {
 }
 
 /// The organ mesh and a displacement in the cloud's frame: as given without a rigid alignment;
-/// with one, the mesh moved by it (`moved`, when already computed) and the displacement rotated.
+/// with one, the mesh moved by it (`moved`, when already computed with that alignment) and the
+/// displacement rotated.
 pub fn in_cloud_frame<'a>(
     organ: &'a Mesh,
     moved: Option<&'a Mesh>,
@@ -465,6 +470,51 @@ mod tests {
         std::fs::write(given.join("summary.json"), "{}").unwrap();
         let e = run_dir(Some(&given), &parent).unwrap_err().to_string();
         assert!(e.contains("holds the results of an earlier run"), "{e}");
+    }
+
+    /// Each frame's organ is moved by that frame's pose: a pose estimated again moves it anew.
+    #[test]
+    fn each_frame_s_organ_is_written_in_its_own_pose() {
+        let dir = tempfile::tempdir().unwrap();
+        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [2, 2, 2]).unwrap(), None).unwrap();
+        let n = organ.mesh().num_nodes();
+        let outcome = |shift: Point| FrameOutcome {
+            registration: register::FrameResult {
+                u: vec![0.0; 3 * n],
+                iterations: 1,
+                surface_residual: 0.0,
+                far_share: 0.0,
+                warnings: Vec::new(),
+                distorted: false,
+                out_of_time: false,
+                points: 100,
+                inliers: 100,
+                time: std::time::Duration::ZERO,
+            },
+            targets: Vec::new(),
+            errors: None,
+            rest_errors: None,
+            rigid: Some(RigidResult {
+                cloud_to_organ: RigidTransform::from_axis_angle([0.0, 0.0, 1.0], 0.0, shift).unwrap(),
+                iterations: 1,
+                converged: true,
+                rms: 0.0,
+                kept: 100,
+                points: 100,
+                time: std::time::Duration::ZERO,
+            }),
+            target_std: None,
+        };
+        let mut writer = RunWriter::new(dir.path(), true, LengthUnit::Metre, (None, None)).unwrap();
+        let shifts = [[0.01, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, -0.02, 0.0]];
+        for (i, &shift) in shifts.iter().enumerate() {
+            writer.frame(i, format!("cloud {i}"), &organ, &outcome(shift)).unwrap();
+            let written = mesh::io::read_mesh(dir.path().join(format!("organ_{i:04}.vtu"))).unwrap();
+            for (w, p) in written.nodes.iter().zip(&organ.mesh().nodes) {
+                // The organ goes to the cloud by the inverse of the cloud-to-organ shift.
+                assert!((0..3).all(|d| (w[d] - (p[d] - shift[d])).abs() < 1e-12), "frame {i}: {w:?} for {p:?}");
+            }
+        }
     }
 
     #[test]

@@ -45,8 +45,14 @@ impl PointInput {
     }
 
     /// The same input, files that name no frame being in `frame` (`None`: the working frame).
+    /// Where the organ names no frame, `frame` names the working one: a file naming the other is
+    /// then refused, as the results are written in `frame`.
     pub fn with_given_frame(self, frame: Option<Frame>) -> PointInput {
-        PointInput { given_frame: frame, ..self }
+        let named_by = match (self.frame, frame) {
+            (None, Some(given)) => Some(format!("--frame {given}")),
+            _ => self.named_by,
+        };
+        PointInput { frame: self.frame.or(frame), given_frame: frame, named_by, ..self }
     }
 
     /// Reads a points file (CSV, `.fcsv`, `.mrk.json`) with its labels, in the working frame and
@@ -284,6 +290,11 @@ mod tests {
         let mut input = PointInput::new(None, LengthUnit::Millimetre, LengthUnit::Millimetre);
         assert_eq!(input.read_cloud(&ras).unwrap()[0], [10.0, 20.0, 30.0]);
         assert_eq!(input.frame, Some(Frame::Ras));
+        // ... unless --frame names another, the frame the results will be written in: refused.
+        let mut lps =
+            PointInput::new(None, LengthUnit::Millimetre, LengthUnit::Millimetre).with_given_frame(Some(Frame::Lps));
+        let refused = lps.read_cloud(&ras).unwrap_err().to_string();
+        assert!(refused.contains("gives the frame RAS where --frame LPS gave LPS"), "{refused}");
         let garbage = dir.path().join("cloud.stl");
         std::fs::write(&garbage, "solid x\nendsolid x\n").unwrap();
         let refused = input.read_cloud(&garbage).unwrap_err().to_string();

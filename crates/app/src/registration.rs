@@ -315,8 +315,9 @@ pub struct RegistrationChoice {
     /// OpenIGTLink streams in.
     #[arg(long)]
     pub frame: Option<Frame>,
-    /// Most match-and-deform iterations of the first cloud, from rest (default: the library's for
-    /// a FEM, the built-in registration case's real-time budget for a learned model).
+    /// Most match-and-deform iterations of the first cloud, from rest (default: 30 for a FEM, the
+    /// built-in registration case's real-time budget for a U-Net, 4, and 10 for a reduced-order
+    /// model's shape fit); a stream's next clouds take at most 4 (a FEM) or 2 (a learned model).
     #[arg(long)]
     pub iterations: Option<usize>,
     /// Rigid pre-alignment: the first cloud is aligned to the organ's rest surface (trimmed

@@ -96,11 +96,11 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     let mut writer = RunWriter::new(out, sequence, spec.given_units, (organ_frame, spec.given_frame))?;
     let mut last_cloud = Vec::new();
     let clouds = frames.iter().map(|f| input.read_cloud(f).inspect(|c| last_cloud.clone_from(c)));
-    let mut rigid_printed = false;
+    let mut printed_pose = None;
     let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, organ, o| {
-        if let (Some(rigid), false) = (&o.rigid, rigid_printed) {
+        if let Some(rigid) = o.rigid.as_ref().filter(|r| printed_pose != Some(r.cloud_to_organ)) {
             print_lines(&rigid_lines(rigid, None));
-            rigid_printed = true;
+            printed_pose = Some(rigid.cloud_to_organ);
         }
         let row = writer.frame(i, frames[i].display().to_string(), organ, o).map_err(to_register_error)?;
         println!("{}", frame_line(i, row));

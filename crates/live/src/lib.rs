@@ -5,10 +5,11 @@
 //! Protocol (OpenIGTLink version 1–3, messages of [`igtl`] and [`polydata`]):
 //! - in: a point cloud as POLYDATA (its points; vertices optional) or POINT, device name `cloud`;
 //! - out, per cloud, in this order and as chosen by [`Outputs`]: POINT `targets` (the
-//!   registered targets, in the order given to the server), POLYDATA `organ` (the registered
+//!   registered targets, in the order given to the server, each named by its label, else
+//!   `target k`), POLYDATA `organ` (the registered
 //!   surface with its triangles), TRANSFORM `rigid` (the organ-to-cloud transform, when the
 //!   registration options ask for a rigid pre-alignment: estimated on a client's first cloud and
-//!   kept while its clouds register without a warning, estimated again after one; targets and
+//!   kept while its clouds register plausibly, estimated again after one that does not; targets and
 //!   organ are then in the cloud's frame), STRING `status` (one line
 //!   of JSON: `frame`, `ms`,
 //!   `surface_residual`, `plausible` and `warnings` (see `register::plausibility`), `inliers`,
@@ -18,7 +19,7 @@
 //!   not come.
 //!
 //! Each client has its own registration, built at its first cloud and warm-started from its
-//! previous frame. A client's clouds are registered one at a time; a cloud that arrives while one
+//! previous frame (from rest after one that left the organ distorted). A client's clouds are registered one at a time; a cloud that arrives while one
 //! is being registered replaces any cloud still waiting (the newest wins: the backlog never
 //! grows). A malformed or oversized `cloud` or `features`, or a message that stalls mid-way
 //! ([`ServeOptions::stall`]), closes that client's connection (after a STRING `status` error
@@ -306,9 +307,14 @@ impl Shared {
         })
     }
 
-    /// Sends one line of JSON as a STRING of `device`; a failed send ends the connection.
+    /// Sends one line of JSON as a STRING of `device`; a failed send ends the connection, and a
+    /// line a STRING cannot hold is logged.
     fn send_json(&self, device: &str, json: &serde_json::Value) {
-        let _ = self.send(&StringMessage::utf8(json.to_string()), device);
+        if let Err(why) = self.send(&StringMessage::utf8(json.to_string()), device) {
+            if !self.closed.load(Ordering::SeqCst) {
+                log(format_args!("{}: {device} not sent: {why}", self.peer));
+            }
+        }
     }
 
     fn send_estimate(&self, estimate: &serde_json::Value) {
@@ -577,6 +583,22 @@ fn identify(
     filter.step(features)
 }
 
+/// Leaves the targets' σ out of a status line longer than a STRING holds (thousands of targets),
+/// saying so in its warnings.
+fn fit_status(status: &mut serde_json::Value) {
+    let length = status.to_string().len();
+    if length > usize::from(u16::MAX) && !status["target_sigma"].is_null() {
+        status["target_sigma"] = serde_json::Value::Null;
+        let why = format!(
+            "target_sigma left out: the status ({length} bytes) would not fit in an OpenIGTLink STRING ({} bytes)",
+            u16::MAX
+        );
+        if let Some(warnings) = status["warnings"].as_array_mut() {
+            warnings.push(why.into());
+        }
+    }
+}
+
 /// Registers one cloud and sends the chosen answers.
 fn answer(
     shared: &Shared,
@@ -597,7 +619,11 @@ fn answer(
         let points = targets
             .iter()
             .enumerate()
-            .map(|(k, p)| PointElement::new(format!("target {}", k + 1), "targets", to_wire(p)))
+            .zip(registration.target_labels())
+            .map(|((k, p), label)| {
+                let name = if label.is_empty() { format!("target {}", k + 1) } else { label.clone() };
+                PointElement::new(name, "targets", to_wire(p))
+            })
             .collect();
         shared.send(&PointMessage { points }, "targets")?;
     }
@@ -614,18 +640,19 @@ fn answer(
     if !options.outputs.status {
         return Ok(());
     }
-    let status = serde_json::json!({
+    let mut status = serde_json::json!({
         "frame": frame,
         "ms": start.elapsed().as_secs_f64() * 1e3,
         "unit": units.symbol(),
         "surface_residual": units.from_metres(result.surface_residual),
-        "plausible": result.warnings.is_empty(),
+        "plausible": result.plausible(),
         "warnings": result.warnings,
         "inliers": result.inliers,
         "points": result.points,
         "iterations": result.iterations,
         "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| units.from_metres(v)).collect::<Vec<f64>>()),
     });
+    fit_status(&mut status);
     shared.send_json("status", &status);
     Ok(())
 }

@@ -170,8 +170,10 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
     }
     let count = dims.iter().product::<usize>();
     let mut labels = labels(scalar, &bytes[offset as usize..], count, dims[2], little)?;
+    // As nifti1_io reads them: a zero or non-finite slope means no scaling, a non-finite intercept 0.
     let (slope, intercept) = (f32_at(112), f32_at(116));
-    if slope != 0.0 && (slope != 1.0 || intercept != 0.0) {
+    let intercept = if intercept.is_finite() { intercept } else { 0.0 };
+    if slope.is_finite() && slope != 0.0 && (slope != 1.0 || intercept != 0.0) {
         for l in labels.iter_mut() {
             let v = *l as f64 * slope + intercept;
             if v != v.round() {
@@ -243,7 +245,9 @@ fn nifti_affine(
             [2.0 * (b * d - a * c), 2.0 * (c * d + a * b), a * a + d * d - b * b - c * c],
         ];
         let qfac = if pixdim[0] < 0.0 { -1.0 } else { 1.0 };
-        let spacing = [pixdim[1], pixdim[2], qfac * pixdim[3]];
+        // As nifti1_io's nifti_quatern_to_mat44 does: a spacing that is not positive is taken as 1.
+        let size = |d: usize| if pixdim[d] > 0.0 { pixdim[d] } else { 1.0 };
+        let spacing = [size(1), size(2), qfac * size(3)];
         let offset = [f32_at(268), f32_at(272), f32_at(276)];
         std::array::from_fn(|r| std::array::from_fn(|c| if c < 3 { rotation[r][c] * spacing[c] } else { offset[r] }))
     } else {
@@ -311,23 +315,29 @@ impl NrrdHeader {
     }
 }
 
-/// Parses "(x,y,z)" vectors of a NRRD field; "none" gives `None`.
+/// Parses "(x,y,z)" vectors of a NRRD field, white space allowed inside them ("(1, 0, 0)");
+/// "none" gives `None`.
 fn nrrd_vectors(text: &str) -> Result<Vec<Option<[f64; 3]>>, String> {
-    text.split_whitespace()
-        .map(|word| {
-            if word == "none" {
-                return Ok(None);
-            }
-            let inner =
-                word.strip_prefix('(').and_then(|w| w.strip_suffix(')')).ok_or(format!("bad vector {word:?}"))?;
+    let mut vectors = Vec::new();
+    let mut rest = text.trim_start();
+    while !rest.is_empty() {
+        if let Some(after) = rest.strip_prefix("none").filter(|a| a.is_empty() || a.starts_with(char::is_whitespace)) {
+            vectors.push(None);
+            rest = after;
+        } else if let Some((inner, after)) = rest.strip_prefix('(').and_then(|r| r.split_once(')')) {
             let values: Vec<f64> = inner
                 .split(',')
                 .map(|v| v.trim().parse::<f64>())
                 .collect::<Result<_, _>>()
-                .map_err(|e| format!("{word:?}: {e}"))?;
-            <[f64; 3]>::try_from(values).map(Some).map_err(|_| format!("{word:?} is not a 3D vector"))
-        })
-        .collect()
+                .map_err(|e| format!("\"({inner})\": {e}"))?;
+            vectors.push(Some(<[f64; 3]>::try_from(values).map_err(|_| format!("\"({inner})\" is not a 3D vector"))?));
+            rest = after;
+        } else {
+            return Err(format!("bad vector {:?}", rest.split_whitespace().next().unwrap_or(rest)));
+        }
+        rest = rest.trim_start();
+    }
+    Ok(vectors)
 }
 
 /// The type of a NRRD `type` field.
@@ -882,6 +892,62 @@ mod tests {
         std::fs::write(&path, &bytes).unwrap();
         let back = read_labelmap(&path).unwrap();
         assert!(close(&back.affine, &expected, 1e-6), "{:?}", back.affine);
+    }
+
+    /// A qform's spacing that is not positive is taken as 1, as nifti1_io takes it.
+    #[test]
+    fn a_qform_spacing_that_is_not_positive_is_taken_as_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Ras);
+        let path = dir.path().join("q.nii");
+        write_nifti(&path, &map).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        // No sform; the identity quaternion, pixdim (0, -2, 2.5).
+        bytes[254..256].copy_from_slice(&0i16.to_le_bytes());
+        bytes[252..254].copy_from_slice(&1i16.to_le_bytes());
+        for (o, x) in [(80, 0f32), (84, -2.0), (256, 0.0), (260, 0.0), (264, 0.0), (268, 1.0), (272, 2.0), (276, 3.0)] {
+            bytes[o..o + 4].copy_from_slice(&x.to_le_bytes());
+        }
+        std::fs::write(&path, &bytes).unwrap();
+        let back = read_labelmap(&path).unwrap();
+        let expected = [[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 2.0], [0.0, 0.0, 2.5, 3.0]];
+        assert!(close(&back.affine, &expected, 1e-6), "{:?}", back.affine);
+    }
+
+    /// A NaN or infinite scl_slope means no scaling, a non-finite scl_inter 0 (as nifti1_io and
+    /// nibabel read them).
+    #[test]
+    fn a_non_finite_nifti_scale_means_no_scaling() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Ras);
+        let path = dir.path().join("s.nii");
+        write_nifti(&path, &map).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        for (slope, intercept) in [(f32::NAN, 0.0), (f32::INFINITY, f32::NAN), (1.0, f32::NAN), (0.0, 7.0)] {
+            let mut bytes = bytes.clone();
+            bytes[112..116].copy_from_slice(&slope.to_le_bytes());
+            bytes[116..120].copy_from_slice(&intercept.to_le_bytes());
+            std::fs::write(&path, &bytes).unwrap();
+            let back = read_labelmap(&path).unwrap_or_else(|e| panic!("slope {slope}, intercept {intercept}: {e}"));
+            assert!(back.labels == map.labels, "slope {slope}, intercept {intercept}");
+        }
+    }
+
+    /// NRRD vectors may hold white space, as some writers put it after the commas.
+    #[test]
+    fn nrrd_vectors_may_hold_white_space() {
+        let spaced = nrrd_vectors(" none ( 1, 0,0 ) (0, 1.5, 0)(0 ,0, 2) ").unwrap();
+        assert_eq!(spaced, [None, Some([1.0, 0.0, 0.0]), Some([0.0, 1.5, 0.0]), Some([0.0, 0.0, 2.0])]);
+        assert!(nrrd_vectors("(1, 0, 0) (0, 1)").unwrap_err().contains("\"(0, 1)\" is not a 3D vector"));
+        assert!(nrrd_vectors("(1, 0, 0) (0, 1, 0").unwrap_err().contains("bad vector \"(0,\""));
+        assert!(nrrd_vectors("nonesuch").unwrap_err().contains("bad vector \"nonesuch\""));
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("spaced.nrrd");
+        let header = "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nspace: left-posterior-superior\n\
+                      space directions: (1, 0, 0) (0, 1, 0) (0, 0, 2)\nspace origin: (1, 2, 3)\nencoding: raw\n\n";
+        std::fs::write(&path, [header.as_bytes(), &[0, 0, 0, 1, 0, 0, 0, 0]].concat()).unwrap();
+        let map = read_labelmap(&path).unwrap();
+        assert_eq!(map.affine, [[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 2.0], [0.0, 0.0, 2.0, 3.0]]);
     }
 
     #[test]

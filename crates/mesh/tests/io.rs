@@ -326,8 +326,14 @@ fn corrupted_vtk_files_give_located_errors() {
     // Line 5 is POINTS, so the first point is on line 6.
     let m = message(read_mesh(put(d, "garbled.vtk", with_line(&text, 7, "0.1 0.2 zz"))));
     assert!(m.contains("line 7") && m.contains("'zz', not a number"), "{m}");
-
+    // A point that is not finite, named with its section whatever is read of the file.
+    let nan = put(d, "nan.vtk", with_line(&text, 7, "0.1 nan 0.3"));
     let points = mesh.num_nodes();
+    for m in [message(read_mesh(&nan)), message(read_surface(&nan)), message(read_vertices(&nan))] {
+        let expected = format!("POINTS {points} (line 5): point 1 has a non-finite coordinate: y = NaN");
+        assert!(m.contains("nan.vtk") && m.contains(&expected), "{m}");
+    }
+
     let cells_line = 6 + points;
     let m = message(read_mesh(put(d, "range.vtk", with_line(&text, cells_line + 1, "4 0 1 2 100000"))));
     assert!(m.contains("cell 0 refers to point 100000"), "{m}");
@@ -521,6 +527,11 @@ fn ascii_stl_and_obj_details() {
         text.replace("vertex 1 1 0\n   vertex 0 1 0", "vertex 1 1\n   vertex 0 1 0"),
     )));
     assert!(m.contains("line 12") && m.contains("missing vertex coordinate"), "{m}");
+    // A degenerate facet's normal as MeshLab writes it: ignored; a missing one is still an error.
+    let nan_normal = text.replacen("facet normal 0 0 1", "facet normal -nan -nan -nan", 1);
+    assert_eq!(read_stl(put(d, "nan.stl", nan_normal)).unwrap(), s);
+    let m = message(read_stl(put(d, "nonormal.stl", text.replacen("facet normal 0 0 1", "facet normal 0 0", 1))));
+    assert!(m.contains("line 2") && m.contains("missing normal component"), "{m}");
     // NUL padding after an ASCII STL (some exporters fill a block) is not read as a binary header.
     let padded = [text.as_bytes(), &[0u8; 37]].concat();
     std::fs::write(d.join("padded.stl"), &padded).unwrap();
@@ -646,6 +657,31 @@ fn corrupted_vtu_files_give_located_errors() {
         let m = message(read_mesh(put(d, name, text)));
         assert!(m.contains(name) && m.contains(expected), "{name}: {m}");
     }
+}
+
+/// A zlib block header declaring a block of 2^64 − 1 bytes is refused, not overflowed.
+#[test]
+fn a_zlib_block_of_any_declared_size_is_refused_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let payload: Vec<u8> = [1.0f64, 2.0, 3.0].iter().flat_map(|x| x.to_le_bytes()).collect();
+    let mut e = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+    e.write_all(&payload).unwrap();
+    let compressed = e.finish().unwrap();
+    // One block of u64::MAX bytes, none in a last partial block, then its compressed size.
+    let header: Vec<u8> = [1, u64::MAX, 0, compressed.len() as u64].iter().flat_map(|x| x.to_le_bytes()).collect();
+    let vtp = format!(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" \
+         header_type=\"UInt64\" compressor=\"vtkZLibDataCompressor\">\n<PolyData>\n<Piece NumberOfPoints=\"1\">\n\
+         <Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"binary\">\n{}{}\n</DataArray>\n\
+         </Points>\n</Piece>\n</PolyData>\n</VTKFile>\n",
+        BASE64.encode(&header),
+        BASE64.encode(&compressed)
+    );
+    let m = message(read_vertices(put(dir.path(), "huge.vtp", vtp)));
+    assert!(
+        m.contains("huge.vtp") && m.contains(&format!("zlib block 0 inflates to 24 bytes, not {}", u64::MAX)),
+        "{m}"
+    );
 }
 
 /// Array layouts of VTK XML files that other tools write.

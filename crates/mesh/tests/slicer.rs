@@ -169,6 +169,31 @@ fn labels_descriptions_frame_and_unit_round_trip_through_every_points_format() {
         .contains("one label per point"));
 }
 
+/// A label starting with `#` is written quoted, so that its row is not read as a comment; a
+/// line break in a label or a description is a space in CSV and `.fcsv` (a line per point), and
+/// kept in `.mrk.json`.
+#[test]
+fn hash_labels_and_line_breaks_survive_every_points_format() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut points = LabelledPoints::new(vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+    points.frame = Some(Frame::Lps);
+    points.unit = Some(LengthUnit::Millimetre);
+    points.labels = vec!["#1".into(), " # 2".into()];
+    points.descriptions = vec!["two\nlines".into(), "three\r\nlines".into()];
+    let json = dir.path().join("p.mrk.json");
+    write_points(&json, &points).unwrap();
+    assert_eq!(read_points(&json).unwrap(), points);
+    let one_line = LabelledPoints { descriptions: vec!["two lines".into(), "three lines".into()], ..points.clone() };
+    for name in ["p.csv", "p.fcsv"] {
+        let path = dir.path().join(name);
+        write_points(&path, &points).unwrap();
+        assert_eq!(read_points(&path).unwrap(), one_line, "{name}");
+    }
+    // A quoted "#" in a file written by hand is data too.
+    let quoted = put(dir.path(), "quoted.csv", "# CoordinateSystem = RAS\nlabel,x,y,z\n\"#7\",1,2,3\n# a note\n");
+    assert_eq!(read_points(&quoted).unwrap().labels, ["#7"]);
+}
+
 #[test]
 fn stl_and_vtk_headers_name_the_frame_as_slicer_writes_it() {
     let (surface, frame) = read_surface_with_frame(slicer("tetrahedron_lps.stl")).unwrap();
@@ -281,6 +306,27 @@ fn broken_vtp_and_ply_models_are_refused_naming_the_file_and_what_is_wrong() {
             put(d, "float.ply", ply.replace("uchar int vertex_indices", "uchar float vertex_indices")),
             "not a list of integers",
         ),
+        // Integers written as fractions or NaN, and a vertex that is not finite, by their line.
+        (
+            put(d, "fraction.ply", ply.replace("3 1 2 3", "3 1 2 1.5")),
+            "line 20: face 3 of 4, property 'vertex_indices'",
+        ),
+        (
+            put(d, "nan.ply", ply.replace("3 1 2 3", "3 1 2 nan")),
+            "line 20: face 3 of 4, property 'vertex_indices': vertex index NaN",
+        ),
+        (
+            put(d, "length.ply", ply.replace("3 1 2 3", "2.5 1 2 3")),
+            "line 20: face 3 of 4, property 'vertex_indices': bad list length 2.5",
+        ),
+        (
+            put(d, "vertex.ply", ply.replace("10 0 0", "10 nan 0")),
+            "line 14: vertex 1 has a non-finite coordinate: y = NaN",
+        ),
+        (
+            put(d, "vertex.vtp", ascii_vtp.replace("0 0 0 10 0 0", "0 0 0 10 0 inf")),
+            "line 15: DataArray 'Points': point 1 has a non-finite coordinate: z = inf",
+        ),
     ];
     for (path, expected) in cases {
         let e = message(read_surface_with_frame(&path));
@@ -288,6 +334,17 @@ fn broken_vtp_and_ply_models_are_refused_naming_the_file_and_what_is_wrong() {
         assert!(e.contains(expected), "{}: {e}\nexpected: {expected}", path.display());
     }
     assert!(message(read_vertices(&cut)).contains("truncated"), "the points of a cut file");
+    assert!(message(read_vertices(d.join("vertex.ply"))).contains("line 14: vertex 1 has a non-finite"));
+}
+
+/// An element of no property holds nothing to read, whatever its count.
+#[test]
+fn ply_elements_without_properties_are_skipped() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = fs::read_to_string(slicer("tetrahedron_lps_ascii.ply")).unwrap();
+    let empty = ply.replace("element vertex 4\n", "element nothing 18446744073709551615\nelement vertex 4\n");
+    let surface = read_surface(put(dir.path(), "empty.ply", empty)).unwrap();
+    assert_eq!(surface.vertices, TETRAHEDRON);
 }
 
 #[test]

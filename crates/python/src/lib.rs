@@ -11,6 +11,7 @@ use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
+use anyhow::Context;
 use app::assimilation::{Experiment, OnlineFilter};
 use app::output::RunWriter;
 use app::registration::{RegistrationChoice, TargetsSpec};
@@ -206,7 +207,8 @@ struct Registered {
     /// Cloud points matched (outliers rejected) in the last iteration.
     #[pyo3(get)]
     inliers: usize,
-    /// Points in the cloud.
+    /// Cloud points registered (a reduced-order model's shape fit takes an evenly spaced 2,000 of a
+    /// larger cloud).
     #[pyo3(get)]
     points: usize,
     /// Match-and-deform iterations.
@@ -243,10 +245,11 @@ struct Registered {
 /// and every result, converted from and to the organ's when it names one (a patient's, or a
 /// targets file's); default: the organ's.
 /// `iterations`: most match-and-deform iterations of the first cloud, from rest (default: the
-/// library's for a FEM, the built-in registration case's real-time budget for a U-Net); a
-/// warm-started cloud takes at most min(iterations, 4). `rigid`: align the first cloud rigidly to
-/// the organ (trimmed ICP) and keep that pose while the clouds register without a warning (after
-/// one, the next cloud is aligned again); `targets`
+/// library's for a FEM, 30; the built-in registration case's real-time budget for a U-Net, 4; 10
+/// for a reduced-order model's shape fit); a warm-started cloud takes at most min(iterations, 4)
+/// for a FEM, min(iterations, 2) for a learned model. `rigid`: align the first cloud rigidly to
+/// the organ (trimmed ICP) and keep that pose while the clouds register plausibly (after a frame
+/// with a warning other than the time budget's, the next cloud is aligned again); `targets`
 /// (and `rigid`) are then in the cloud's frame, `points` and `displacement` in the organ's.
 #[pyclass(module = "augsim")]
 struct Registration {
@@ -365,6 +368,10 @@ impl Registration {
         let cloud: Vec<Point> =
             points(cloud, "cloud", self.unit.metres())?.into_iter().map(|p| self.change.point(p)).collect();
         let Tracked { registration: result, targets, rigid, target_std } = compute(py, || {
+            // A directory that cannot be made fails before the cloud moves the warm start on.
+            if let Some(dir) = &out {
+                std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            }
             let mut state = locked(&self.state)?;
             let tracked = state.register(&cloud)?;
             if let Some(dir) = &out {

@@ -213,14 +213,28 @@ pub struct FrameResult {
     /// The share of the cloud's points left farther than [`crate::plausibility::FAR_DISTANCE`] from the
     /// registered surface.
     pub far_share: f64,
-    /// Why the result may not be believed ([`crate::plausibility::warnings`]); empty when plausible.
+    /// Why the result may not be believed ([`crate::plausibility::verdict`]), and whether the
+    /// frame stopped at its time budget; empty when plausible and converged.
     pub warnings: Vec<String>,
+    /// The registered organ changes its volume as tissue cannot (a cloud in another frame or
+    /// unit): no start for a stream's next frame ([`crate::Registration::register`]).
+    pub distorted: bool,
+    /// The frame stopped at [`RegistrationOptions::time_budget_ms`] before its iterations ran out
+    /// (one of the warnings says so).
+    pub out_of_time: bool,
     /// Cloud points (matched: see [`RegistrationOptions::max_points`]).
     pub points: usize,
     /// Cloud points kept as matches in the last iteration.
     pub inliers: usize,
     /// Wall time of the frame, matching included.
     pub time: Duration,
+}
+
+impl FrameResult {
+    /// Whether the result passed the plausibility checks: no warning but the time budget's.
+    pub fn plausible(&self) -> bool {
+        self.warnings.len() == usize::from(self.out_of_time)
+    }
 }
 
 /// Registers `organ` to `cloud` (positions only, rigidly aligned: `options.rigid` only words the
@@ -321,7 +335,8 @@ pub fn register_frame(
     let distances: Vec<f64> = cloud.par_iter().map(|&c| bvh.distance(c)).collect();
     let surface_residual = distances.iter().sum::<f64>() / cloud.len() as f64;
     let far_share = crate::plausibility::far_share(&distances);
-    let mut warnings = crate::plausibility::warnings(organ, &u, far_share, (cloud, extent), options.rigid.is_some());
+    let crate::plausibility::Verdict { mut warnings, distorted } =
+        crate::plausibility::verdict(organ, &u, far_share, (cloud, extent), options.rigid.is_some());
     if let (true, Some(budget)) = (out_of_time, options.time_budget_ms) {
         warnings.push(format!(
             "the frame stopped after {iterations} of its {most} iterations, past its time budget of {budget:.0} ms: \
@@ -334,6 +349,8 @@ pub fn register_frame(
         surface_residual,
         far_share,
         warnings,
+        distorted,
+        out_of_time,
         points: cloud.len(),
         inliers,
         time: t0.elapsed(),

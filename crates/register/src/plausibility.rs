@@ -143,17 +143,19 @@ pub fn far_share(distances: &[f64]) -> f64 {
     distances.iter().filter(|&&d| d > FAR_DISTANCE).count() as f64 / distances.len().max(1) as f64
 }
 
-/// What a registered frame says about itself: the warnings (empty when the result is plausible)
-/// given its cloud and that cloud's extent over the organ's ([`check_extent`]), the share of the
-/// cloud left unfitted ([`far_share`]), its displacement `u`, and whether it was rigidly
-/// pre-aligned.
-pub fn warnings(
-    organ: &Organ,
-    u: &[f64],
-    far_share: f64,
-    (cloud, extent): (&[Point], f64),
-    rigid: bool,
-) -> Vec<String> {
+/// What a registered frame says about itself ([`verdict`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Verdict {
+    /// Why the result may not be believed; empty when it is plausible.
+    pub warnings: Vec<String>,
+    /// The registered organ changes its volume as tissue cannot (one of the warnings says so).
+    pub distorted: bool,
+}
+
+/// What a registered frame says about itself, given its cloud and that cloud's extent over the
+/// organ's ([`check_extent`]), the share of the cloud left unfitted ([`far_share`]), its
+/// displacement `u`, and whether it was rigidly pre-aligned.
+pub fn verdict(organ: &Organ, u: &[f64], far_share: f64, (cloud, extent): (&[Point], f64), rigid: bool) -> Verdict {
     let points = distinct_points(cloud, FEW_POINTS);
     let size = organ.extent();
     let motion = u.chunks_exact(3).map(|d| mesh::norm([d[0], d[1], d[2]])).fold(0.0, f64::max);
@@ -187,14 +189,15 @@ pub fn warnings(
             FAR_DISTANCE * 1e3
         ));
     }
-    let (volume, distorted) = volume_change(organ, u);
-    if (volume - 1.0).abs() > SUSPECT_VOLUME_CHANGE || distorted > SUSPECT_DISTORTED_SHARE {
+    let (volume, distorted_share) = volume_change(organ, u);
+    let distorted = (volume - 1.0).abs() > SUSPECT_VOLUME_CHANGE || distorted_share > SUSPECT_DISTORTED_SHARE;
+    if distorted {
         out.push(format!(
             "the registered organ changes its volume by {:+.0} % in all, {:.0} % of it by more than {:.0} % locally: \
              tissue this nearly incompressible keeps its volume; the cloud may be in another frame (RAS for LPS), \
              unit or scale than the organ's, or not the organ's",
             100.0 * (volume - 1.0),
-            100.0 * distorted,
+            100.0 * distorted_share,
             100.0 * DISTORTED_CELL
         ));
     }
@@ -206,7 +209,7 @@ pub fn warnings(
             size * 1e3
         ));
     }
-    out
+    Verdict { warnings: out, distorted }
 }
 
 #[cfg(test)]
@@ -236,8 +239,9 @@ mod tests {
         let organ = Organ::new(mesh::generate::box_tet([0.0; 3], [0.1, 0.06, 0.04], [5, 3, 2]).unwrap(), None).unwrap();
         let top: Vec<Point> = organ.mesh().nodes.iter().copied().filter(|p| p[2] > 0.039).collect();
         let rest = vec![0.0; 3 * organ.mesh().num_nodes()];
-        let flagged =
-            |cloud: &[Point]| warnings(&organ, &rest, 0.0, (cloud, check_extent(&organ, cloud).unwrap()), false);
+        let flagged = |cloud: &[Point]| {
+            verdict(&organ, &rest, 0.0, (cloud, check_extent(&organ, cloud).unwrap()), false).warnings
+        };
         assert!(flagged(&top).is_empty(), "{:?}", flagged(&top));
         let centimetres: Vec<Point> = top.iter().map(|p| p.map(|c| 0.1 * c)).collect();
         let said = flagged(&centimetres);
@@ -251,7 +255,8 @@ mod tests {
         let organ = Organ::new(mesh::generate::box_tet([0.0; 3], [0.1, 0.06, 0.04], [5, 3, 2]).unwrap(), None).unwrap();
         let nodes = &organ.mesh().nodes;
         let top: Vec<Point> = nodes.iter().copied().filter(|p| p[2] > 0.039).collect();
-        let flagged = |u: &[f64]| warnings(&organ, u, 0.0, (&top, check_extent(&organ, &top).unwrap()), false);
+        let judged = |u: &[f64]| verdict(&organ, u, 0.0, (&top, check_extent(&organ, &top).unwrap()), false);
+        let flagged = |u: &[f64]| judged(u).warnings;
         let field = |f: &dyn Fn(Point) -> Point| -> Vec<f64> { nodes.iter().flat_map(|&p| f(p)).collect() };
         // A 30° turn about z and a shear of 0.3: volumes kept exactly.
         let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
@@ -260,7 +265,7 @@ mod tests {
         for u in [&turn, &shear] {
             let (volume, distorted) = volume_change(&organ, u);
             assert!((volume - 1.0).abs() < 1e-12 && distorted == 0.0, "{volume} {distorted}");
-            assert!(flagged(u).is_empty(), "{:?}", flagged(u));
+            assert_eq!(judged(u), Verdict::default());
         }
         // Shrunk to half its size: an eighth of its volume, every cell distorted.
         let half = field(&|p| p.map(|x| -0.5 * x));
@@ -268,6 +273,7 @@ mod tests {
         assert!((volume - 0.125).abs() < 1e-12 && (distorted - 1.0).abs() < 1e-12, "{volume} {distorted}");
         let said = flagged(&half).join("; ");
         assert!(said.contains("changes its volume by -88 % in all, 100 % of it"), "{said}");
+        assert!(judged(&half).distorted);
         // The nodes of its first two fifths along x brought to 60 % of their height: those fifths
         // squashed, the next one partly; the volume changes by −20 % in all (under the limit),
         // half of it by over 30 % (over the limit).
@@ -275,5 +281,6 @@ mod tests {
         let (volume, distorted) = volume_change(&organ, &squash);
         assert!((volume - 0.8).abs() < 1e-12 && (distorted - 0.5).abs() < 1e-12, "{volume} {distorted}");
         assert!(flagged(&squash).join("; ").contains("changes its volume"), "{:?}", flagged(&squash));
+        assert!(judged(&squash).distorted);
     }
 }

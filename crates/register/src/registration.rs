@@ -192,8 +192,9 @@ impl Registration {
     /// Registers `cloud` (m, in its own frame), starting from the previous cloud's displacement,
     /// which it then replaces; a failed cloud leaves the warm start and the pose as they were. The
     /// pose, when rigid pre-alignment is on, is estimated on a cloud and kept for the next ones
-    /// while they register without a warning: a cloud with a warning has the next one estimate
-    /// it again.
+    /// while they register plausibly ([`FrameResult::plausible`]: a frame stopped by its time
+    /// budget keeps it): a cloud with another warning has the next one estimate it again, and a
+    /// cloud that leaves the organ distorted ([`FrameResult::distorted`]) has it start from rest.
     pub fn register(&mut self, cloud: &[Point]) -> Result<Tracked> {
         let (rigid, rigid_time) = match (&self.options.rigid, &self.rigid) {
             (Some(rigid_options), None) => {
@@ -226,8 +227,11 @@ impl Registration {
         let sigma_start = std::time::Instant::now();
         let target_std = self.deformer.uncertainty(&self.targets, &self.stencils).transpose()?;
         registration.time += sigma_start.elapsed();
-        self.warm = Some(registration.u.clone());
-        self.rigid = if registration.warnings.is_empty() { rigid.clone() } else { None };
+        // A cloud only partly fitted is still the best start for the next (a stream tracks a hard
+        // push better than a frame from rest); a distorted organ, a cloud in another frame or unit,
+        // is not (docs/method.md, 6.6).
+        self.warm = (!registration.distorted).then(|| registration.u.clone());
+        self.rigid = if registration.plausible() { rigid.clone() } else { None };
         Ok(Tracked { registration, targets, rigid, target_std })
     }
 
@@ -328,7 +332,8 @@ pub struct Summary {
     pub time_p95_ms: f64,
     /// Match-and-deform iterations per frame, mean over frames.
     pub iterations: f64,
-    /// The rigid pre-alignment (organ → cloud transform, ICP figures), when there was one.
+    /// The last frame's rigid pre-alignment (organ → cloud transform, ICP figures), when there
+    /// was one (the pose estimated last: the results' own).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rigid: Option<RigidSummary>,
     /// Whether every frame's result is plausible ([`crate::plausibility`]).
@@ -375,8 +380,8 @@ impl Summary {
             time_p95_ms: mesh::stats::percentile(&times, 95.0),
             time_median_ms: mesh::stats::median(&mut times),
             iterations: per_frame(|o| o.registration.iterations as f64),
-            rigid: outcomes[0].rigid.as_ref().map(RigidSummary::from),
-            plausible: outcomes.iter().all(|o| o.registration.warnings.is_empty()),
+            rigid: outcomes[n - 1].rigid.as_ref().map(RigidSummary::from),
+            plausible: outcomes.iter().all(|o| o.registration.plausible()),
             target_std_mean_mm: mm(&std, mean),
             within_two_std: within,
             warnings: {
@@ -508,6 +513,68 @@ mod tests {
         // Without a pre-alignment, a handful of points is flagged too.
         let few = cube_with(vec![[0.02; 3]]).unwrap().register(&organ.surface().vertices[..4].repeat(25)).unwrap();
         assert!(few.registration.warnings.iter().any(|w| w.contains("4 distinct point(s), fewer than 10")), "{few:?}");
+    }
+
+    /// A deformer that moves the organ by 0.1 mm along x at each iteration.
+    struct Creeping;
+
+    impl Deformer for Creeping {
+        fn deform(&mut self, _: &Observations, previous: &[f64], _: usize) -> Result<Vec<f64>> {
+            Ok(previous.iter().enumerate().map(|(i, u)| if i % 3 == 0 { u + 1e-4 } else { *u }).collect())
+        }
+    }
+
+    /// A frame stopped by its time budget is plausible otherwise: the next goes on from it, in
+    /// its pose (a frame with another warning has the next estimate the pose again: above).
+    #[test]
+    fn a_frame_out_of_time_is_built_upon_in_its_pose() {
+        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap(), None).unwrap();
+        let rigid = Some(crate::rigid::RigidOptions::default());
+        let options = RegistrationOptions { iterations: 3, time_budget_ms: Some(1e-9), rigid, ..Default::default() };
+        let mut r =
+            Registration::new(organ.clone(), Box::new(Creeping), "creeping", vec![[0.02; 3]], Vec::new(), options)
+                .unwrap();
+        let shifted = |shift: Point| -> Vec<Point> {
+            organ.surface().vertices.iter().map(|p| std::array::from_fn(|d| p[d] + shift[d])).collect()
+        };
+        let first = r.register(&shifted([0.003, -0.004, 0.002])).unwrap();
+        let result = &first.registration;
+        assert!(result.out_of_time && result.plausible(), "{:?}", result.warnings);
+        assert_eq!(result.iterations, 1, "stopped by the budget");
+        let second = r.register(&shifted([-0.002, 0.003, 0.001])).unwrap();
+        assert_eq!(second.rigid.unwrap().cloud_to_organ, first.rigid.unwrap().cloud_to_organ, "the pose kept");
+        assert!((second.registration.u[0] - 2e-4).abs() < 1e-12, "went on: {}", second.registration.u[0]);
+    }
+
+    /// A deformer that shrinks the organ to half its size about the origin, recording at each
+    /// frame's start whether the frame was warm-started.
+    struct Shrinking(Vec<Point>, std::sync::Arc<std::sync::Mutex<Vec<bool>>>);
+
+    impl Deformer for Shrinking {
+        fn deform(&mut self, _: &Observations, _: &[f64], _: usize) -> Result<Vec<f64>> {
+            Ok(self.0.iter().flat_map(|p| p.map(|x| -0.5 * x)).collect())
+        }
+
+        fn start_frame(&mut self, warm: bool) {
+            self.1.lock().unwrap().push(warm);
+        }
+    }
+
+    /// A frame that leaves the organ distorted (a cloud in another frame or unit) is no start for
+    /// the next: it starts from rest.
+    #[test]
+    fn a_distorted_organ_is_no_start_for_the_next_frame() {
+        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap(), None).unwrap();
+        let starts = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let deformer = Box::new(Shrinking(organ.mesh().nodes.clone(), starts.clone()));
+        let options = RegistrationOptions { iterations: 2, ..Default::default() };
+        let mut r =
+            Registration::new(organ.clone(), deformer, "shrinking", vec![[0.02; 3]], Vec::new(), options).unwrap();
+        let view = organ.surface().vertices.clone();
+        for _ in 0..2 {
+            assert!(r.register(&view).unwrap().registration.distorted);
+        }
+        assert_eq!(*starts.lock().unwrap(), [false, false], "the second frame from rest too");
     }
 
     #[test]

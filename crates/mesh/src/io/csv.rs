@@ -209,9 +209,9 @@ pub fn split_fields(line: &str, separators: &[char]) -> Result<Vec<String>, Stri
 }
 
 /// `text` as a CSV field (RFC 4180): quoted, its quotes doubled, when it holds a comma, a quote or a
-/// line break; as it is otherwise.
+/// line break, or starts with `#` (which would make a row it starts a comment); as it is otherwise.
 pub fn csv_field(text: &str) -> String {
-    if text.contains([',', '"', '\n', '\r']) {
+    if text.contains([',', '"', '\n', '\r']) || text.trim_start().starts_with('#') {
         format!("\"{}\"", text.replace('"', "\"\""))
     } else {
         text.to_string()
@@ -259,6 +259,9 @@ mod tests {
         assert_eq!(csv_field("liver 5012 T4, Svk"), "\"liver 5012 T4, Svk\"");
         assert_eq!(csv_field("a \"b\""), "\"a \"\"b\"\"\"");
         assert_eq!(csv_field("two\nlines"), "\"two\nlines\"");
+        assert_eq!(csv_field("#1"), "\"#1\"");
+        assert_eq!(csv_field(" # 2"), "\" # 2\"");
+        assert_eq!(csv_field("T#1"), "T#1");
     }
 
     /// A header line after comments and a byte-order mark; settings kept, comments among the rows skipped.
@@ -316,7 +319,11 @@ mod tests {
     fn written_tables_read_back() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("t.csv");
-        let rows = [vec!["a, b".to_string(), "1.5".to_string()], vec!["say \"hi\"".to_string(), "-2e-7".to_string()]];
+        let rows = [
+            vec!["a, b".to_string(), "1.5".to_string()],
+            vec!["say \"hi\"".to_string(), "-2e-7".to_string()],
+            vec!["#3".to_string(), "4".to_string()],
+        ];
         write_csv(&path, &["CoordinateSystem = RAS".to_string()], &["label", "x"], &rows).unwrap();
         let text = std::fs::read_to_string(&path).unwrap();
         assert!(text.starts_with("# CoordinateSystem = RAS\nlabel,x\n\"a, b\",1.5\n"), "{text}");

@@ -115,8 +115,9 @@ fn show(bytes: &[u8]) -> String {
     s
 }
 
-/// A non-negative integer stored in a float, as an index.
-fn to_index(x: f64) -> Option<usize> {
+/// A non-negative integer stored in a float, as an index (`None` for a fraction, NaN or a value
+/// beyond any count).
+pub(super) fn to_index(x: f64) -> Option<usize> {
     (x >= 0.0 && x.fract() == 0.0 && x < 9.0e15).then_some(x as usize)
 }
 
@@ -436,13 +437,15 @@ impl<'a> Reader<'a> {
     }
 }
 
-/// Parses a whole legacy VTK file.
+/// Parses a whole legacy VTK file; its points must be finite and within
+/// [`MAX_COORDINATE`](crate::MAX_COORDINATE).
 fn parse(path: &Path) -> Result<Parsed, MeshError> {
     let data = read_bytes(path)?;
     let mut r = Reader { path, data: &data, pos: 0, line: 1, binary: false, last: None };
     let dataset = r.dataset()?;
     let mut parsed = Parsed { dataset, points: None, cells: Vec::new(), types: None, fields: Vec::new() };
     let mut location: Option<(FieldLocation, usize)> = None;
+    let mut points_line = 0;
     while let Some(token) = r.token() {
         let header = r.line;
         let keyword = String::from_utf8_lossy(token).to_ascii_uppercase();
@@ -457,6 +460,7 @@ fn parse(path: &Path) -> Result<Parsed, MeshError> {
                 }
                 let xyz = r.values(r.product(3, n, header)?, scalar, &format!("POINTS {n}"), header)?;
                 parsed.points = Some(xyz.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect());
+                points_line = header;
             }
             "CELLS" if grid => {
                 let list = r.cell_list("CELLS", &args, header)?;
@@ -512,6 +516,11 @@ fn parse(path: &Path) -> Result<Parsed, MeshError> {
                 return Err(r.unexpected(token));
             }
         }
+    }
+    // Checked once the file is read, so that a corrupt binary block is told by the section it runs into.
+    let points = parsed.points.as_deref().unwrap_or_default();
+    if let Some((i, fault)) = crate::coordinate_fault(points.iter().enumerate(), crate::MAX_COORDINATE) {
+        return Err(parse_error(path, format!("POINTS {} (line {points_line}): point {i} {fault}", points.len())));
     }
     Ok(parsed)
 }

@@ -7,7 +7,7 @@
 use std::io::Write as _;
 use std::path::Path;
 
-use super::legacy_vtk::surface_from_cells;
+use super::legacy_vtk::{surface_from_cells, to_index};
 use super::{parse_error, read_bytes, write_atomic, Scalar, VTK_POLYGON};
 use crate::{MeshError, Point, TriSurface};
 
@@ -248,7 +248,8 @@ fn roles(element: &Element, is_vertex: bool, is_face: bool) -> Result<Vec<Role>,
 }
 
 /// The vertices and (with `want_faces`) the faces of the PLY file `bytes`. Elements are read in
-/// order up to the last one needed.
+/// order up to the last one needed (an element of no property holds nothing to read); a vertex
+/// must be finite and within [`MAX_COORDINATE`](crate::MAX_COORDINATE).
 fn parse(bytes: &[u8], want_faces: bool) -> Result<(Vec<Point>, Vec<Vec<usize>>), String> {
     let header = parse_header(bytes)?;
     let position = |name: &str| header.elements.iter().position(|e| e.name == name);
@@ -280,6 +281,9 @@ fn parse(bytes: &[u8], want_faces: bool) -> Result<(Vec<Point>, Vec<Vec<usize>>)
     for (e, element) in header.elements.iter().enumerate().take(last + 1) {
         let (is_vertex, is_face) = (e == vertex_index, Some(e) == face_index);
         let roles = roles(element, is_vertex, is_face)?;
+        if element.properties.is_empty() {
+            continue;
+        }
         for item in 0..element.count {
             let mut p = [0.0; 3];
             for (property, &role) in element.properties.iter().zip(&roles) {
@@ -301,18 +305,15 @@ fn parse(bytes: &[u8], want_faces: bool) -> Result<(Vec<Point>, Vec<Vec<usize>>)
                     }
                     Property::List { count, item: item_ty, .. } => {
                         let n = reader.value(*count).map_err(|m| context(&reader, m))?;
-                        if n < 0.0 || n.fract() != 0.0 {
-                            return Err(context(&reader, format!("bad list length {n}: {cause}")));
-                        }
+                        let n = to_index(n).ok_or_else(|| context(&reader, format!("bad list length {n}: {cause}")))?;
                         // Not reserved from `n`: a count the data does not hold fails at its end.
                         let mut list = Vec::new();
-                        for _ in 0..n as usize {
+                        for _ in 0..n {
                             let v = reader.value(*item_ty).map_err(|m| context(&reader, m))?;
                             if role == Role::Face {
-                                if v < 0.0 {
-                                    return Err(context(&reader, format!("vertex index {v}: {cause}")));
-                                }
-                                list.push(v as usize);
+                                let index = to_index(v)
+                                    .ok_or_else(|| context(&reader, format!("vertex index {v}: {cause}")))?;
+                                list.push(index);
                             }
                         }
                         if role == Role::Face {
@@ -322,6 +323,10 @@ fn parse(bytes: &[u8], want_faces: bool) -> Result<(Vec<Point>, Vec<Vec<usize>>)
                 }
             }
             if is_vertex {
+                if let Some((_, fault)) = crate::coordinate_fault([(item, &p)], crate::MAX_COORDINATE) {
+                    let at = reader.location(header.lines, header.data_start);
+                    return Err(format!("{at}: vertex {item} {fault}"));
+                }
                 points.push(p);
             }
         }

@@ -314,7 +314,8 @@ fn read_markup(markup: &Value, m: usize) -> Result<LabelledPoints, String> {
 /// point has a label, `x`, `y`, `z` with the unit's suffix when the unit is known (`x_mm`), a
 /// `description` column when a point has one, and a first line `# CoordinateSystem = …` when the
 /// frame is known. Reading the file back with [`read_points`] gives the same points (Slicer's
-/// files in millimetres).
+/// files in millimetres), but for line breaks in labels and descriptions, which CSV and `.fcsv`
+/// (a line per point) hold as spaces.
 pub fn write_points(path: impl AsRef<Path>, points: &LabelledPoints) -> Result<(), MeshError> {
     let path = path.as_ref();
     let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
@@ -350,6 +351,13 @@ fn texts(points: &LabelledPoints, i: usize) -> (&str, &str) {
     (label, points.descriptions.get(i).map_or("", String::as_str))
 }
 
+/// [`texts`] on one line each, their line breaks as spaces, for a CSV row of the point.
+fn one_line_texts(points: &LabelledPoints, i: usize) -> (String, String) {
+    let one_line = |text: &str| text.replace("\r\n", " ").replace(['\r', '\n'], " ");
+    let (label, description) = texts(points, i);
+    (one_line(label), one_line(description))
+}
+
 fn write_labelled_csv(path: &Path, points: &LabelledPoints) -> Result<(), MeshError> {
     check_points(points)?;
     let labelled = points.labels.iter().any(|l| !l.is_empty());
@@ -365,13 +373,13 @@ fn write_labelled_csv(path: &Path, points: &LabelledPoints) -> Result<(), MeshEr
         header.push("description");
     }
     let rows = points.points.iter().enumerate().map(|(i, p)| {
-        let (label, description) = texts(points, i);
+        let (label, description) = one_line_texts(points, i);
         let mut row: Vec<String> = p.iter().map(|&v| Num(v).to_string()).collect();
         if labelled {
-            row.insert(0, label.to_string());
+            row.insert(0, label);
         }
         if described {
-            row.push(description.to_string());
+            row.push(description);
         }
         row
     });
@@ -381,7 +389,8 @@ fn write_labelled_csv(path: &Path, points: &LabelledPoints) -> Result<(), MeshEr
 
 /// Writes points as Slicer's markups fiducial CSV (`.fcsv`, version 4.11, which Slicer 4.11 and
 /// later read), atomically: in millimetres (converted from the points' unit; none named:
-/// millimetres), in the points' frame, which must be named.
+/// millimetres), in the points' frame, which must be named; line breaks in labels and
+/// descriptions are written as spaces.
 pub fn write_fcsv(path: impl AsRef<Path>, points: &LabelledPoints) -> Result<(), MeshError> {
     let path = path.as_ref();
     check_points(points)?;
@@ -398,8 +407,8 @@ pub fn write_fcsv(path: impl AsRef<Path>, points: &LabelledPoints) -> Result<(),
         writeln!(w, "# columns = id,x,y,z,ow,ox,oy,oz,vis,sel,lock,label,desc,associatedNodeID")?;
         for (i, p) in points.points.iter().enumerate() {
             let [x, y, z] = p.map(|v| Num(v * scale));
-            let (label, description) = texts(points, i);
-            writeln!(w, "{},{x},{y},{z},0,0,0,1,1,1,0,{},{},", i + 1, csv_field(label), csv_field(description))?;
+            let (label, description) = one_line_texts(points, i);
+            writeln!(w, "{},{x},{y},{z},0,0,0,1,1,1,0,{},{},", i + 1, csv_field(&label), csv_field(&description))?;
         }
         Ok(())
     })?;

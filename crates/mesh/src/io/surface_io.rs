@@ -102,7 +102,8 @@ impl Merger {
 }
 
 /// Reads an STL surface, binary or ASCII. Vertices with exactly equal coordinates are merged so
-/// that the surface is indexed; facet normals are ignored (orientation is the vertex order).
+/// that the surface is indexed; facet normals are ignored (orientation is the vertex order), and
+/// may be non-finite (`facet normal -nan -nan -nan`, as MeshLab writes for a degenerate facet).
 pub fn read_stl(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
     let path = path.as_ref();
     let bytes = read_bytes(path)?;
@@ -190,7 +191,9 @@ fn read_stl_ascii(path: &Path, text: &str) -> Result<TriSurface, MeshError> {
                 if !line.token("'normal'")?.eq_ignore_ascii_case("normal") {
                     return Err(line.error("expected 'facet normal'"));
                 }
-                line.point("normal component")?;
+                for _ in 0..3 {
+                    line.parse::<f64>("normal component")?;
+                }
                 State::Facet
             }
             (State::Facet, "outer") => {

@@ -497,7 +497,7 @@ impl XmlFile<'_> {
             let expected = if b + 1 == count && last != 0 { last } else { size };
             let before = out.len();
             flate2::read::ZlibDecoder::new(&blocks[at..end])
-                .take(expected as u64 + 1)
+                .take((expected as u64).saturating_add(1))
                 .read_to_end(&mut out)
                 .map_err(|e| format!("zlib block {b} cannot be inflated: {e}"))?;
             if out.len() - before != expected {
@@ -680,7 +680,7 @@ impl XmlFile<'_> {
         Ok(Some(String::from_utf8_lossy(&bytes).into_owned()))
     }
 
-    /// The `<Points>`.
+    /// The `<Points>`, each finite and within [`MAX_COORDINATE`](crate::MAX_COORDINATE).
     fn points(&self) -> Result<Vec<Point>, MeshError> {
         let points_array = self
             .arrays
@@ -691,7 +691,11 @@ impl XmlFile<'_> {
             return Err(parse_error(self.path, "<Points> must have 3 components"));
         }
         let xyz = self.sized(points_array, self.points)?;
-        Ok(xyz.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+        let points: Vec<Point> = xyz.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        match crate::coordinate_fault(points.iter().enumerate(), crate::MAX_COORDINATE) {
+            Some((i, fault)) => Err(self.array_error(points_array, format!("point {i} {fault}"))),
+            None => Ok(points),
+        }
     }
 
     /// The cells and their VTK types: an unstructured grid's, or poly data's.
