@@ -868,21 +868,27 @@ mod tests {
         assert!(back.select("5").unwrap_err().to_string().contains("in 2 layers: choose the segment by name"));
     }
 
+    /// Rewrites the NIfTI file at `path` to have no sform, a qform with the offset (1, 2, 3) and
+    /// the given header floats (byte offset, value); returns its bytes.
+    fn qform_only(path: &Path, floats: &[(usize, f32)]) -> Vec<u8> {
+        let mut bytes = std::fs::read(path).unwrap();
+        bytes[254..256].copy_from_slice(&0i16.to_le_bytes());
+        bytes[252..254].copy_from_slice(&1i16.to_le_bytes());
+        for &(o, x) in floats.iter().chain(&[(268, 1.0), (272, 2.0), (276, 3.0)]) {
+            bytes[o..o + 4].copy_from_slice(&x.to_le_bytes());
+        }
+        std::fs::write(path, &bytes).unwrap();
+        bytes
+    }
+
     #[test]
     fn a_qform_header_gives_its_rotation_and_flip() {
         let dir = tempfile::tempdir().unwrap();
         let (map, _) = two_balls(Frame::Ras);
         let path = dir.path().join("q.nii");
         write_nifti(&path, &map).unwrap();
-        let mut bytes = std::fs::read(&path).unwrap();
-        // No sform; a qform turning half a turn about z, with qfac -1 (k flipped), offset (1,2,3).
-        bytes[254..256].copy_from_slice(&0i16.to_le_bytes());
-        bytes[252..254].copy_from_slice(&1i16.to_le_bytes());
-        bytes[76..80].copy_from_slice(&(-1f32).to_le_bytes());
-        for (o, x) in [(256, 0f32), (260, 0.0), (264, 1.0), (268, 1.0), (272, 2.0), (276, 3.0)] {
-            bytes[o..o + 4].copy_from_slice(&x.to_le_bytes());
-        }
-        std::fs::write(&path, &bytes).unwrap();
+        // A qform turning half a turn about z, with qfac -1 (k flipped), offset (1,2,3).
+        let mut bytes = qform_only(&path, &[(76, -1.0), (256, 0.0), (260, 0.0), (264, 1.0)]);
         let back = read_labelmap(&path).unwrap();
         let expected = [[-0.75, 0.0, 0.0, 1.0], [0.0, -0.875, 0.0, 2.0], [0.0, 0.0, -2.5, 3.0]];
         assert!(close(&back.affine, &expected, 1e-6), "{:?}", back.affine);
@@ -901,14 +907,8 @@ mod tests {
         let (map, _) = two_balls(Frame::Ras);
         let path = dir.path().join("q.nii");
         write_nifti(&path, &map).unwrap();
-        let mut bytes = std::fs::read(&path).unwrap();
-        // No sform; the identity quaternion, pixdim (0, -2, 2.5).
-        bytes[254..256].copy_from_slice(&0i16.to_le_bytes());
-        bytes[252..254].copy_from_slice(&1i16.to_le_bytes());
-        for (o, x) in [(80, 0f32), (84, -2.0), (256, 0.0), (260, 0.0), (264, 0.0), (268, 1.0), (272, 2.0), (276, 3.0)] {
-            bytes[o..o + 4].copy_from_slice(&x.to_le_bytes());
-        }
-        std::fs::write(&path, &bytes).unwrap();
+        // The identity quaternion, pixdim (0, -2, 2.5).
+        qform_only(&path, &[(80, 0.0), (84, -2.0), (256, 0.0), (260, 0.0), (264, 0.0)]);
         let back = read_labelmap(&path).unwrap();
         let expected = [[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 2.0], [0.0, 0.0, 2.5, 3.0]];
         assert!(close(&back.affine, &expected, 1e-6), "{:?}", back.affine);

@@ -243,7 +243,7 @@ fn ply_errors() {
 
     // NaN and empty.
     let path = write(dir.path(), "nan.ply", format!("{head}1 2 3\n4 nan 6\n"));
-    assert_contains(&error(read_point_cloud(&path)), &["point 1", "non-finite"]);
+    assert_contains(&error(read_point_cloud(&path)), &["line 9", "vertex 1", "non-finite"]);
     let path = dir.path().join("empty.ply");
     write_ply_points(&path, &[]).unwrap();
     assert_contains(&error(read_point_cloud(&path)), &["no points"]);
