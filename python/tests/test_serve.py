@@ -66,7 +66,8 @@ class ServeTest(unittest.TestCase):
         labelled = os.path.join(tmp, "targets_labelled.csv")
         with open(labelled, "w", encoding="utf-8") as f:
             f.write("label,x_mm,y_mm,z_mm\n")
-            f.writelines(f"{label},{x!r},{y!r},{z!r}\n" for label, (x, y, z) in zip(case["labels"], case["rest"]))
+            f.writelines(f"{label},{float(x)!r},{float(y)!r},{float(z)!r}\n"
+                        for label, (x, y, z) in zip(case["labels"], case["rest"]))
         port = free_port()
         server = subprocess.Popen([augsim_bin(), "serve", "--fem", case["scenario"], "--targets", labelled,
                                    "--port", str(port), "--units", "mm"] + options, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
