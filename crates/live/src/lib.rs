@@ -307,10 +307,15 @@ impl Shared {
         })
     }
 
-    /// Sends one line of JSON as a STRING of `device`; a failed send ends the connection, and a
-    /// line a STRING cannot hold is logged.
+    /// Sends one line of JSON as a STRING of `device` ([`Shared::send_line`]).
     fn send_json(&self, device: &str, json: &serde_json::Value) {
-        if let Err(why) = self.send(&StringMessage::utf8(json.to_string()), device) {
+        self.send_line(device, json.to_string());
+    }
+
+    /// Sends one line of text as a STRING of `device`; a failed send ends the connection, and a
+    /// line a STRING cannot hold is logged.
+    fn send_line(&self, device: &str, line: String) {
+        if let Err(why) = self.send(&StringMessage::utf8(line), device) {
             if !self.closed.load(Ordering::SeqCst) {
                 log(format_args!("{}: {device} not sent: {why}", self.peer));
             }
@@ -583,20 +588,23 @@ fn identify(
     filter.step(features)
 }
 
-/// Leaves the targets' σ out of a status line longer than a STRING holds (thousands of targets),
-/// saying so in its warnings.
-fn fit_status(status: &mut serde_json::Value) {
-    let length = status.to_string().len();
-    if length > usize::from(u16::MAX) && !status["target_sigma"].is_null() {
-        status["target_sigma"] = serde_json::Value::Null;
-        let why = format!(
-            "target_sigma left out: the status ({length} bytes) would not fit in an OpenIGTLink STRING ({} bytes)",
-            u16::MAX
-        );
-        if let Some(warnings) = status["warnings"].as_array_mut() {
-            warnings.push(why.into());
-        }
+/// The status as one line of JSON; the targets' σ left out, saying so in its warnings, when the
+/// line would be longer than a STRING holds (thousands of targets).
+fn status_line(mut status: serde_json::Value) -> String {
+    let line = status.to_string();
+    if line.len() <= usize::from(u16::MAX) || status["target_sigma"].is_null() {
+        return line;
     }
+    status["target_sigma"] = serde_json::Value::Null;
+    let why = format!(
+        "target_sigma left out: the status ({} bytes) would not fit in an OpenIGTLink STRING ({} bytes)",
+        line.len(),
+        u16::MAX
+    );
+    if let Some(warnings) = status["warnings"].as_array_mut() {
+        warnings.push(why.into());
+    }
+    status.to_string()
 }
 
 /// Registers one cloud and sends the chosen answers.
@@ -640,7 +648,7 @@ fn answer(
     if !options.outputs.status {
         return Ok(());
     }
-    let mut status = serde_json::json!({
+    let status = serde_json::json!({
         "frame": frame,
         "ms": start.elapsed().as_secs_f64() * 1e3,
         "unit": units.symbol(),
@@ -652,14 +660,27 @@ fn answer(
         "iterations": result.iterations,
         "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| units.from_metres(v)).collect::<Vec<f64>>()),
     });
-    fit_status(&mut status);
-    shared.send_json("status", &status);
+    shared.send_line("status", status_line(status));
     Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A status of thousands of targets' σ would not fit in a STRING: σ is left out, with a
+    /// warning; a short one is sent as it is.
+    #[test]
+    fn an_oversized_status_leaves_sigma_out() {
+        let status = |k: usize| serde_json::json!({"frame": 1, "warnings": [], "target_sigma": vec![1.234_567_89; k]});
+        let short: serde_json::Value = serde_json::from_str(&status_line(status(3))).unwrap();
+        assert_eq!(short, status(3));
+        let line = status_line(status(10_000));
+        assert!(line.len() <= usize::from(u16::MAX), "{} bytes", line.len());
+        let long: serde_json::Value = serde_json::from_str(&line).unwrap();
+        assert!(long["target_sigma"].is_null(), "{long}");
+        assert!(long["warnings"][0].as_str().unwrap().starts_with("target_sigma left out"), "{long}");
+    }
 
     #[test]
     fn an_accepted_connection_is_probed_when_idle() {
