@@ -30,6 +30,7 @@ class Registered:
     inliers: int
     points: int
     iterations: int
+    from_rest: bool
     warnings: list[str]
     rigid: Optional[npt.NDArray[np.float64]]
     target_sigma: Optional[npt.NDArray[np.float64]]

@@ -73,6 +73,7 @@ def test_registration_reduces_the_tre_with_a_warm_start(case):
     warm = reg.register(case["cloud"])
     reg.reset()
     again = reg.register(case["cloud"])
+    assert (first.from_rest, warm.from_rest, again.from_rest) == (True, False, True)
     fresh = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm").register(case["cloud"])
     warm_gap, reset_gap = (np.abs(r.targets - fresh.targets).max() for r in (warm, again))
     print(f"warm vs fresh {warm_gap:.3f} mm, reset vs fresh {reset_gap:.3f} mm", file=sys.stderr)

@@ -116,7 +116,8 @@ class ServeTest(unittest.TestCase):
 
     def stream(self, port, case):
         """The press and release, frame after frame, each cloud sent as POLYDATA once the previous
-        one is answered; then a cloud with a NaN as POINT (an error status), and the stream goes on.
+        one is answered; then a cloud with a NaN as POINT (an error status), and the stream goes on,
+        from rest after a STRING `reset`.
         (pyigtl packs a POINT message point by point in Python: 35 ms for 1,500 points.)"""
         clouds, truths, rest = case["clouds"], case["truths"], case["rest"]
         client = connected(self, port)
@@ -135,6 +136,7 @@ class ServeTest(unittest.TestCase):
                 self.assertIsNotNone(status, f"frame {frame}: no status")
                 s = json.loads(status.string)
                 self.assertEqual(s["frame"], frame, s)
+                self.assertEqual(s["from_rest"], frame == 1, s)
                 server_ms.append(s["ms"])
                 tres.append(float(np.linalg.norm(np.asarray(targets.positions) - truth, axis=1).mean()))
                 unregistered.append(float(np.linalg.norm(rest - truth, axis=1).mean()))
@@ -146,11 +148,13 @@ class ServeTest(unittest.TestCase):
             s = json.loads(client.wait_for_message("status", timeout=30).string)
             self.assertEqual(s["frame"], len(clouds) + 1, s)
             self.assertIn("finite", s["error"])
+            # A reset (a STRING, as 3D Slicer sends a text node): the next cloud from rest.
+            client.send_message(pyigtl.StringMessage("reset", device_name="reset"), wait=True)
             client.send_message(pyigtl.PointMessage(positions=clouds[-1].astype(np.float32), device_name="cloud"),
                                 wait=True)
             self.assertIsNotNone(client.wait_for_message("targets", timeout=30))
-            self.assertEqual(json.loads(client.wait_for_message("status", timeout=30).string)["frame"],
-                             len(clouds) + 2)
+            s = json.loads(client.wait_for_message("status", timeout=30).string)
+            self.assertEqual((s["frame"], s["from_rest"]), (len(clouds) + 2, True), s)
         finally:
             client.stop()
         peak = int(np.argmax(unregistered))

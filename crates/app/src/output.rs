@@ -482,6 +482,7 @@ mod tests {
             registration: register::FrameResult {
                 u: vec![0.0; 3 * n],
                 iterations: 1,
+                from_rest: true,
                 surface_residual: 0.0,
                 far_share: 0.0,
                 warnings: Vec::new(),

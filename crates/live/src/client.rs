@@ -61,6 +61,11 @@ impl Client {
         self.send_bytes(&encode_message(&PointMessage { points: elements.collect() }, device)?)
     }
 
+    /// Sends a STRING of device `reset`: the next cloud starts from rest.
+    pub fn send_reset(&mut self) -> std::result::Result<(), String> {
+        self.send_bytes(&encode_message(&StringMessage::utf8("reset"), "reset")?)
+    }
+
     /// Closes the sending side: the server answers what was sent, then closes the connection.
     pub fn finish(&mut self) -> std::result::Result<(), String> {
         self.stream.shutdown(std::net::Shutdown::Write).map_err(|e| format!("closing: {e}"))

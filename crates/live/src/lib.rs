@@ -13,13 +13,19 @@
 //!   organ are then in the cloud's frame), STRING `status` (one line
 //!   of JSON: `frame`, `ms`,
 //!   `surface_residual`, `plausible` and `warnings` (see `register::plausibility`), `inliers`,
-//!   `points`, `iterations`, and `target_sigma` (the predicted standard deviation σ at each target, for
+//!   `points`, `iterations`, `from_rest` (the frame did not start from the previous one's
+//!   displacement), and `target_sigma` (the predicted standard deviation σ at each target, for
 //!   the reduced-order model; else null), in the stream's unit; or `frame` and `error`). An
 //!   error is answered whatever the outputs, so that a client never waits for answers that will
 //!   not come.
+//! - in: a STRING of device `reset` (any text): the next cloud registered starts from rest, its
+//!   pose (with a rigid pre-alignment) estimated again, as a new client's first cloud would (after
+//!   the camera or the patient moved). It has no answer of its own: the next status says
+//!   `from_rest`.
 //!
 //! Each client has its own registration, built at its first cloud and warm-started from its
-//! previous frame (from rest after one that left the organ distorted). A client's clouds are registered one at a time; a cloud that arrives while one
+//! previous frame (from rest after one that left the organ distorted, or after a `reset`). A
+//! client's clouds are registered one at a time; a cloud that arrives while one
 //! is being registered replaces any cloud still waiting (the newest wins: the backlog never
 //! grows). A malformed or oversized `cloud` or `features`, or a message that stalls mid-way
 //! ([`ServeOptions::stall`]), closes that client's connection (after a STRING `status` error
@@ -241,11 +247,12 @@ struct Client {
     threads: Vec<std::thread::JoinHandle<()>>,
 }
 
-/// The newest cloud, with its frame number, and the features of the steps to come, in order,
-/// with their step numbers.
+/// The newest cloud, with its frame number, whether a reset came since the last cloud
+/// registered, and the features of the steps to come, in order, with their step numbers.
 #[derive(Default)]
 struct Mailbox {
     cloud: Option<(u64, Vec<Point>)>,
+    reset: bool,
     features: std::collections::VecDeque<(u64, Vec<Point>)>,
 }
 
@@ -412,6 +419,10 @@ fn read_messages(shared: &Shared) {
                 drop(waiting);
                 shared.arrived.notify_one();
             }
+            Ok(Incoming::Reset) => {
+                log(format_args!("{}: reset: the next cloud starts from rest", shared.peer));
+                shared.waiting.lock().unwrap_or_else(|e| e.into_inner()).reset = true;
+            }
             Ok(Incoming::Other { kind, device }) => {
                 // Said once per kind and device: a navigation system may send other messages often.
                 if ignored.insert((kind.clone(), device.clone())) {
@@ -446,6 +457,8 @@ enum Incoming {
     Cloud(Vec<[f32; 3]>),
     /// The points of a `features` POLYDATA or POINT message (wire units).
     Features(Vec<[f32; 3]>),
+    /// A STRING of device `reset` (its text ignored): the next cloud starts from rest.
+    Reset,
     /// Any other message (ignored): its type and device name.
     Other { kind: String, device: String },
     /// The peer closed the connection between messages.
@@ -455,7 +468,7 @@ enum Incoming {
 /// The next message from the stream; an error for a malformed, truncated, stalled or oversized
 /// one. Between messages the stream may wait for as long as the client likes; within one, no
 /// longer than [`ServeOptions::stall`] between bytes. A message that is not a `cloud` or
-/// `features` is skipped unread, whatever its size.
+/// `features` is skipped unread, whatever its size (a STRING `reset` too: its text is not read).
 fn read_message(mut stream: &TcpStream, options: &ServeOptions) -> std::result::Result<Incoming, String> {
     let (max_body, stall) = (options.max_message_bytes, options.stall);
     let mut header = [0u8; Header::SIZE];
@@ -480,6 +493,9 @@ fn read_message(mut stream: &TcpStream, options: &ServeOptions) -> std::result::
             .map_err(|e| stalled("truncated message body", e))?;
         if skipped < header.body_size {
             return Err(format!("truncated message body: {skipped} of {} bytes", header.body_size));
+        }
+        if (kind, device) == ("STRING", "reset") {
+            return Ok(Incoming::Reset);
         }
         return Ok(Incoming::Other { kind: kind.to_string(), device: device.to_string() });
     }
@@ -513,7 +529,7 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
                     break Work::Step(step, features);
                 }
                 if let Some((frame, cloud)) = waiting.cloud.take() {
-                    break Work::Cloud(frame, cloud);
+                    break Work::Cloud(frame, cloud, std::mem::take(&mut waiting.reset));
                 }
                 if shared.input_ended.load(Ordering::SeqCst) {
                     drop(waiting);
@@ -524,7 +540,7 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
             }
         };
         match work {
-            Work::Cloud(frame, cloud) => {
+            Work::Cloud(frame, cloud, reset) => {
                 let registration = match &mut registration {
                     Some(r) => r,
                     None => match factory() {
@@ -536,6 +552,9 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
                         }
                     },
                 };
+                if reset {
+                    registration.reset();
+                }
                 if let Err(e) = answer(shared, registration, frame, &cloud) {
                     shared.report(&serde_json::json!({ "frame": frame, "error": e }));
                 }
@@ -562,8 +581,8 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
 
 /// What the registration thread does next.
 enum Work {
-    /// Register a cloud (frame number, points in m).
-    Cloud(u64, Vec<Point>),
+    /// Register a cloud (frame number, points in m), from rest if a reset came before it.
+    Cloud(u64, Vec<Point>, bool),
     /// Make an identification step (step number, features in m).
     Step(u64, Vec<Point>),
 }
@@ -658,6 +677,7 @@ fn answer(
         "inliers": result.inliers,
         "points": result.points,
         "iterations": result.iterations,
+        "from_rest": result.from_rest,
         "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| units.from_metres(v)).collect::<Vec<f64>>()),
     });
     shared.send_line("status", status_line(status));

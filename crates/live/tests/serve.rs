@@ -241,6 +241,32 @@ fn a_refused_cloud_is_answered_whatever_the_outputs() {
     server.stop();
 }
 
+/// A STRING `reset` has the next cloud start from rest, as the client's first did: the same cloud
+/// then registers as it did first, where a warm frame went on from the last one.
+#[test]
+fn a_reset_has_the_next_cloud_start_from_rest() {
+    let outputs = Outputs::parse("targets,status").unwrap();
+    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, outputs, ..ServeOptions::default() });
+    let (cloud, _) = pressed_cloud(300.0);
+    let mut client = connect(server.port);
+    let frame = |client: &mut augsim_live::client::Client| {
+        client.send_cloud(cloud.clone()).unwrap();
+        let answer = client.until_status().unwrap();
+        (answer.targets.expect("targets"), answer.status)
+    };
+    let (first, s) = frame(&mut client);
+    assert!(s["from_rest"] == true && s["iterations"].as_u64().unwrap() > 4, "{s}");
+    let (_, s) = frame(&mut client);
+    assert!(s["from_rest"] == false && s["iterations"].as_u64().unwrap() <= 4, "warm: {s}");
+    client.send_reset().unwrap();
+    let (again, s) = frame(&mut client);
+    assert_eq!(s["from_rest"], true, "{s}");
+    let gap = again.iter().zip(&first).flat_map(|(a, b)| (0..3).map(move |d| (a[d] - b[d]).abs())).fold(0.0, f32::max);
+    assert!(gap < 1e-3, "registered as the first cloud was: {gap} mm apart");
+    drop(client);
+    server.stop();
+}
+
 /// A stream in the other frame (RAS against an LPS organ): the cloud is brought into the organ's
 /// frame, and the target and the organ go back in the stream's.
 #[test]

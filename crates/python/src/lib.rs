@@ -214,6 +214,10 @@ struct Registered {
     /// Match-and-deform iterations.
     #[pyo3(get)]
     iterations: usize,
+    /// The cloud registered from rest, not from the previous cloud's result (the first, after
+    /// `reset()`, or after a cloud that left the organ distorted).
+    #[pyo3(get)]
+    from_rest: bool,
     /// Why the result may not be believed (the registered surface far from the cloud, an
     /// implausible motion or change of the organ's volume); empty when plausible.
     #[pyo3(get)]
@@ -390,6 +394,7 @@ impl Registration {
             inliers: result.inliers,
             points: result.points,
             iterations: result.iterations,
+            from_rest: result.from_rest,
             warnings: result.warnings.clone(),
             rigid,
             target_sigma: target_std

@@ -138,9 +138,9 @@ pub struct RegistrationOptions {
     /// cloud's spacing of the vertex's normal line (over the cloud, not beyond its edge), so that
     /// the seen part of the organ is held to the cloud as well as the cloud to the organ.
     pub two_way: TwoWay,
-    /// Most wall time of a frame (ms): once an iteration ends past it, the frame stops with the
-    /// estimate so far, and a warning says so (a stream's next frame goes on from it). `None`: no
-    /// limit.
+    /// Most wall time of a frame (ms), its rigid pre-alignment included: once an iteration ends
+    /// past it, the frame stops with the estimate so far, and a warning says so (a stream's next
+    /// frame goes on from it). `None`: no limit.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub time_budget_ms: Option<f64>,
 }
@@ -207,6 +207,8 @@ pub struct FrameResult {
     pub u: Vec<f64>,
     /// Match-and-deform iterations run.
     pub iterations: usize,
+    /// The frame started from rest, not from a previous frame's displacement.
+    pub from_rest: bool,
     /// Mean distance from the cloud points to the registered surface (m), all points (those of
     /// [`RegistrationOptions::max_points`] when it limits them).
     pub surface_residual: f64,
@@ -247,7 +249,19 @@ pub fn register_frame(
     start: Option<&[f64]>,
     options: &RegistrationOptions,
 ) -> Result<FrameResult> {
-    let t0 = Instant::now();
+    register_frame_begun(Instant::now(), organ, deformer, cloud, start, options)
+}
+
+/// [`register_frame`] for a frame whose work began at `t0` (its rigid pre-alignment before the
+/// loop): its time budget and its time count from there.
+pub(crate) fn register_frame_begun(
+    t0: Instant,
+    organ: &Organ,
+    deformer: &mut dyn Deformer,
+    cloud: &[Point],
+    start: Option<&[f64]>,
+    options: &RegistrationOptions,
+) -> Result<FrameResult> {
     options.validate()?;
     check_cloud(cloud)?;
     let ndof = 3 * organ.mesh().num_nodes();
@@ -346,6 +360,7 @@ pub fn register_frame(
     Ok(FrameResult {
         u,
         iterations,
+        from_rest: start.is_none(),
         surface_residual,
         far_share,
         warnings,
@@ -572,6 +587,32 @@ mod tests {
 
     fn phantom_surface() -> TriSurface {
         mesh::boundary_surface(&mesh::phantom::liver_phantom(1500).unwrap()).compacted()
+    }
+
+    /// A deformer that moves every value by 0.1 mm at each iteration.
+    struct Creeping;
+
+    impl Deformer for Creeping {
+        fn deform(&mut self, _: &Observations, previous: &[f64], _: usize) -> Result<Vec<f64>> {
+            Ok(previous.iter().map(|u| u + 1e-4).collect())
+        }
+    }
+
+    /// The time budget counts from the frame's start, work before the loop (a rigid
+    /// pre-alignment) included: a frame begun 200 ms ago, with a budget of 100 ms, stops after its
+    /// first iteration, and its time covers the 200 ms.
+    #[test]
+    fn the_time_budget_counts_from_the_frame_start() {
+        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap(), None).unwrap();
+        let cloud = organ.surface().vertices.clone();
+        let options =
+            RegistrationOptions { iterations: 5, tolerance: 0.0, time_budget_ms: Some(100.0), ..Default::default() };
+        let fresh = register_frame(&organ, &mut Creeping, &cloud, None, &options).unwrap();
+        assert_eq!((fresh.iterations, fresh.out_of_time), (5, false), "{:?}", fresh.warnings);
+        let begun = Instant::now() - Duration::from_millis(200);
+        let late = register_frame_begun(begun, &organ, &mut Creeping, &cloud, None, &options).unwrap();
+        assert_eq!((late.iterations, late.out_of_time), (1, true), "{:?}", late.warnings);
+        assert!(late.time >= Duration::from_millis(200), "{:?}", late.time);
     }
 
     /// Out-of-range options are refused by the setting's name, its value and its range.

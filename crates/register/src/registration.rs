@@ -12,7 +12,7 @@ use mesh::stats::{max, mean};
 use mesh::Point;
 use serde::Serialize;
 
-use crate::frame::{register_frame, Deformer, FrameResult, RegistrationOptions};
+use crate::frame::{register_frame_begun, Deformer, FrameResult, RegistrationOptions};
 use crate::organ::{displaced, Organ, Stencil};
 use crate::rigid::{rigid_align, RigidResult, RigidSummary};
 use crate::{RegisterError, Result};
@@ -196,16 +196,15 @@ impl Registration {
     /// budget keeps it): a cloud with another warning has the next one estimate it again, and a
     /// cloud that leaves the organ distorted ([`FrameResult::distorted`]) has it start from rest.
     pub fn register(&mut self, cloud: &[Point]) -> Result<Tracked> {
-        let (rigid, rigid_time) = match (&self.options.rigid, &self.rigid) {
+        let began = std::time::Instant::now();
+        let rigid = match (&self.options.rigid, &self.rigid) {
             (Some(rigid_options), None) => {
                 // A cloud in another unit is named as such, before an alignment it would defeat.
                 crate::checks::check_cloud(cloud)?;
                 crate::plausibility::check_extent(&self.organ, cloud)?;
-                let r = rigid_align(self.organ.surface(), cloud, rigid_options)?;
-                let time = r.time;
-                (Some(r), time)
+                Some(rigid_align(self.organ.surface(), cloud, rigid_options)?)
             }
-            (_, known) => (known.clone(), std::time::Duration::ZERO),
+            (_, known) => known.clone(),
         };
         let moved: Vec<Point>;
         let in_organ = match &rigid {
@@ -215,18 +214,22 @@ impl Registration {
             }
             None => cloud,
         };
-        let mut registration =
-            register_frame(&self.organ, self.deformer.as_mut(), in_organ, self.warm.as_deref(), &self.options)?;
-        registration.time += rigid_time;
+        let mut registration = register_frame_begun(
+            began,
+            &self.organ,
+            self.deformer.as_mut(),
+            in_organ,
+            self.warm.as_deref(),
+            &self.options,
+        )?;
         let mut targets = displaced(&self.targets, &self.stencils, &registration.u);
         if let Some(r) = &rigid {
             let to_cloud = r.organ_to_cloud();
             targets.iter_mut().for_each(|p| *p = to_cloud.apply(*p));
         }
-        // σ is part of the frame's work, and of its time.
-        let sigma_start = std::time::Instant::now();
+        // σ is part of the frame's work, and of its time (not cut by its budget).
         let target_std = self.deformer.uncertainty(&self.targets, &self.stencils).transpose()?;
-        registration.time += sigma_start.elapsed();
+        registration.time = began.elapsed();
         // A cloud only partly fitted is still the best start for the next (a stream tracks a hard
         // push better than a frame from rest); a distorted organ, a cloud in another frame or unit,
         // is not (docs/method.md, 6.6).
