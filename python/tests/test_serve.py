@@ -72,11 +72,15 @@ class ServeTest(unittest.TestCase):
         server = subprocess.Popen([augsim_bin(), "serve", "--fem", case["scenario"], "--targets", labelled,
                                    "--port", str(port), "--units", "mm"] + options, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                   text=True)
+        failed = True
         try:
             exchange(port, case)
+            failed = False
         finally:
             server.send_signal(2)  # SIGINT: a clean stop
             out, _ = server.communicate(timeout=30)
+            if failed:  # why the server did not answer, when it did not
+                print(f"\naugsim serve said:\n{out}", file=sys.stderr)
         self.assertEqual(server.returncode, 0, out)
         self.assertIn("stopped", out)
 
