@@ -161,7 +161,11 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
         256 => Scalar::I8,
         512 => Scalar::U16,
         768 => Scalar::U32,
-        other => return Err(format!("data type {other} is not supported (u8, i8, i16, u16, i32, u32, f32, f64)")),
+        1024 => Scalar::I64,
+        1280 => Scalar::U64,
+        other => {
+            return Err(format!("data type {other} is not supported (u8, i8, i16, u16, i32, u32, i64, u64, f32, f64)"))
+        }
     };
     let pixdim: Vec<f64> = (0..8).map(|d| f32_at(76 + 4 * d)).collect();
     let offset = f32_at(108);
@@ -349,6 +353,14 @@ fn nrrd_scalar(name: &str) -> Result<Scalar, String> {
         "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => Scalar::U16,
         "int" | "signed int" | "int32" | "int32_t" => Scalar::I32,
         "uint" | "unsigned int" | "uint32" | "uint32_t" => Scalar::U32,
+        "longlong"
+        | "long long"
+        | "long long int"
+        | "signed long long"
+        | "signed long long int"
+        | "int64"
+        | "int64_t" => Scalar::I64,
+        "ulonglong" | "unsigned long long" | "unsigned long long int" | "uint64" | "uint64_t" => Scalar::U64,
         "float" => Scalar::F32,
         "double" => Scalar::F64,
         other => return Err(format!("type '{other}' is not supported")),
@@ -426,7 +438,7 @@ fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
         }
         None => affine,
     };
-    let segments = slicer_segments(&header.pairs)?;
+    let segments = slicer_segments(&header.pairs, layers)?;
     let encoding = header.field("encoding")?;
     if matches!(encoding, "ascii" | "text" | "txt") {
         let labels = ascii_labels(data, count)?;
@@ -480,14 +492,22 @@ fn ascii_labels(data: &[u8], count: usize) -> Result<Vec<i32>, String> {
     Ok(labels)
 }
 
-/// Slicer's segments: `Segment{i}_Name`, `Segment{i}_LabelValue`, `Segment{i}_Layer`.
-fn slicer_segments(pairs: &BTreeMap<String, String>) -> Result<Vec<(String, usize, i32)>, String> {
+/// Slicer's segments of a file of `layers` layers: `Segment{i}_Name`, `Segment{i}_LabelValue`
+/// (1 where absent), `Segment{i}_Layer` (where absent, as 3D Slicer reads files written before
+/// segments shared layers: segment `i` in layer `i` of several, else in the only one).
+fn slicer_segments(pairs: &BTreeMap<String, String>, layers: usize) -> Result<Vec<(String, usize, i32)>, String> {
     let mut segments = Vec::new();
     for i in 0.. {
         let Some(name) = pairs.get(&format!("Segment{i}_Name")) else { break };
-        let get = |key: &str, default: &str| pairs.get(&format!("Segment{i}_{key}")).cloned().unwrap_or(default.into());
-        let label = get("LabelValue", "1").parse::<i32>().map_err(|e| format!("Segment{i}_LabelValue: {e}"))?;
-        let layer = get("Layer", "0").parse::<usize>().map_err(|e| format!("Segment{i}_Layer: {e}"))?;
+        let get = |key: &str| pairs.get(&format!("Segment{i}_{key}"));
+        let label =
+            get("LabelValue").map_or(Ok(1), |v| v.parse::<i32>()).map_err(|e| format!("Segment{i}_LabelValue: {e}"))?;
+        let own = if layers > 1 { i } else { 0 };
+        let layer =
+            get("Layer").map_or(Ok(own), |v| v.parse::<usize>()).map_err(|e| format!("Segment{i}_Layer: {e}"))?;
+        if layer >= layers {
+            return Err(format!("Segment{i}_Layer = {layer} ('{name}'), but the file holds {layers} layer(s)"));
+        }
         segments.push((name.clone(), layer, label));
     }
     Ok(segments)
@@ -866,6 +886,22 @@ mod tests {
         assert_eq!(name, "label 5 ('vessel')");
         assert_eq!(vessel.count(), single.labels.iter().filter(|&&l| l == 2).count());
         assert!(back.select("5").unwrap_err().to_string().contains("in 2 layers: choose the segment by name"));
+        // Without `Segment{i}_Layer` (a file from before segments shared layers), segment i is in
+        // layer i, as 3D Slicer reads it; a layer the file does not hold is refused.
+        let text = std::fs::read(&path).unwrap();
+        let cut = text.windows(2).position(|w| w == b"\n\n").unwrap() + 2;
+        let header = String::from_utf8(text[..cut].to_vec()).unwrap();
+        let unlayered: String = header.lines().filter(|l| !l.contains("_Layer:=")).map(|l| format!("{l}\n")).collect();
+        assert_ne!(unlayered, header, "the layers were named");
+        let legacy = dir.path().join("legacy.seg.nrrd");
+        std::fs::write(&legacy, [unlayered.as_bytes(), &text[cut..]].concat()).unwrap();
+        let (vessel, _) = read_labelmap(&legacy).unwrap().select("vessel").unwrap();
+        assert_eq!(vessel.count(), single.labels.iter().filter(|&&l| l == 2).count(), "layer 1's segment");
+        let beyond = header.replace("Segment1_Layer:=1", "Segment1_Layer:=3");
+        assert_ne!(beyond, header);
+        std::fs::write(&legacy, [beyond.as_bytes(), &text[cut..]].concat()).unwrap();
+        let e = read_labelmap(&legacy).unwrap_err().to_string();
+        assert!(e.contains("Segment1_Layer = 3 ('vessel'), but the file holds 2 layer(s)"), "{e}");
     }
 
     /// Rewrites the NIfTI file at `path` to have no sform, a qform with the offset (1, 2, 3) and
@@ -971,6 +1007,11 @@ mod tests {
         assert!(write("d1.nrrd", &[unordered.as_bytes(), &data].concat()).contains("no 'endian' field"));
         let odd = header.replace("endian: little", "endian: middle");
         assert!(write("d2.nrrd", &[odd.as_bytes(), &data].concat()).contains("endian 'middle' is neither"));
+        // 64-bit labels (NumPy's default integer, as SimpleITK writes it).
+        let longs = header.replace("type: short", "type: int64");
+        let voxels: Vec<u8> = (0..8).flat_map(|i| i64::from(i == 6).to_le_bytes()).collect();
+        std::fs::write(dir.path().join("d4.nrrd"), [longs.as_bytes(), &voxels].concat()).unwrap();
+        assert_eq!(read_labelmap(dir.path().join("d4.nrrd")).unwrap().labels, [0, 0, 0, 0, 0, 0, 1, 0]);
         let bytes = unordered.replace("type: short", "type: uchar");
         std::fs::write(dir.path().join("d3.nrrd"), [bytes.as_bytes(), &[0, 0, 0, 1, 0, 0, 0, 0]].concat()).unwrap();
         assert_eq!(read_labelmap(dir.path().join("d3.nrrd")).unwrap().labels, [0, 0, 0, 1, 0, 0, 0, 0]);
