@@ -581,7 +581,7 @@ fn estimate_view(surface: &TriSurface, matches: &[ClosestPoint], limit: f64) -> 
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use mesh::sampling::sample_visible;
 
@@ -590,7 +590,7 @@ mod tests {
     }
 
     /// A deformer that moves every value by 0.1 mm at each iteration.
-    struct Creeping;
+    pub(crate) struct Creeping;
 
     impl Deformer for Creeping {
         fn deform(&mut self, _: &Observations, previous: &[f64], _: usize) -> Result<Vec<f64>> {

@@ -406,6 +406,7 @@ impl Summary {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::frame::tests::Creeping;
     use crate::frame::Observations;
 
     /// A deformer that never moves the organ.
@@ -516,15 +517,6 @@ mod tests {
         // Without a pre-alignment, a handful of points is flagged too.
         let few = cube_with(vec![[0.02; 3]]).unwrap().register(&organ.surface().vertices[..4].repeat(25)).unwrap();
         assert!(few.registration.warnings.iter().any(|w| w.contains("4 distinct point(s), fewer than 10")), "{few:?}");
-    }
-
-    /// A deformer that moves the organ by 0.1 mm along x at each iteration.
-    struct Creeping;
-
-    impl Deformer for Creeping {
-        fn deform(&mut self, _: &Observations, previous: &[f64], _: usize) -> Result<Vec<f64>> {
-            Ok(previous.iter().enumerate().map(|(i, u)| if i % 3 == 0 { u + 1e-4 } else { *u }).collect())
-        }
     }
 
     /// A frame stopped by its time budget is plausible otherwise: the next goes on from it, in
