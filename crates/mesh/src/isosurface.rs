@@ -2,13 +2,16 @@
 //!
 //! 1. The mask keeps its largest piece and its cavities are filled ([`VoxelMask`]).
 //! 2. The mask, as 0 and 1 at the voxels, is averaged over blocks of 3 voxels along each axis
-//!    (weights ¼, ½, ¼), which rounds the staircase of the voxels.
+//!    (weights ¼, ½, ¼), which rounds the staircase of the voxels. The average is then kept on
+//!    the mask's side of ½ at every voxel (at least 0.55 inside, at most 0.45 outside): a bridge
+//!    or a vessel one voxel thick, which the average alone would cut or erase, stays.
 //! 3. The surface at level ½ is extracted by marching tetrahedra over the grid's Kuhn
 //!    triangulation (six tetrahedra per cube around its main diagonal): the level set of a
 //!    piecewise-linear function at a level that no voxel takes is a closed 2-manifold, with
 //!    neither the holes nor the ambiguous cases of marching cubes. Its vertices are placed on the
 //!    triangulation's edges by linear interpolation (kept off the voxels themselves, so that no two
-//!    coincide). The largest closed piece is kept.
+//!    coincide). The triangulation's edges join a voxel to the 14 neighbours by which the mask's
+//!    pieces and cavities are found, so the surface is one closed piece, as the kept mask is.
 //! 4. It is mapped to world coordinates by the mask's voxel-to-world map (anisotropic voxels
 //!    included) and turned outward.
 //! 5. Taubin's λ|μ smoothing (λ = 0.5, μ = −0.53) smooths it without the shrinking of plain
@@ -16,8 +19,6 @@
 //! 6. Quadric edge collapse ([`crate::decimate::decimate`]) brings it to a number of triangles.
 //!
 //! The result passes [`check_closed_manifold`].
-
-use std::collections::HashMap;
 
 use crate::decimate::decimate;
 use crate::surface::check_closed_manifold;
@@ -113,20 +114,19 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
         }
     }
     let voxels = pieces.remove(0);
+    if voxels < MIN_VOXELS {
+        return Err(MeshError::Invalid(format!(
+            "the largest piece, {voxels} voxel(s), is too small to give a surface (fewer than {MIN_VOXELS}): \
+             not an organ (the wrong label?)"
+        )));
+    }
     let filled_voxels = mask.fill_cavities();
     let mask = mask.cropped(2).ok_or_else(|| MeshError::Invalid("the mask is empty".into()))?;
     if mask.inside.len() > 400_000_000 {
         return Err(MeshError::Invalid(format!("the organ spans too many voxels ({:?})", mask.dims)));
     }
-    let field = smoothed(&mask);
-    let surface = largest_piece(&march(&field, mask.dims, 0.5));
+    let surface = march(&smoothed(&mask), mask.dims, 0.5);
     let extracted_triangles = surface.triangles.len();
-    if extracted_triangles == 0 {
-        // The smoothing before extraction shrinks a piece a few voxels across to nothing.
-        return Err(MeshError::Invalid(format!(
-            "the largest piece, {voxels} voxel(s), is too small to give a surface: not an organ (the wrong label?)"
-        )));
-    }
     let mut surface = TriSurface { vertices: surface.vertices.iter().map(|&p| mask.world(p)).collect(), ..surface };
     surface.orient_outward();
     taubin_smooth(&mut surface, options.smoothing_iterations);
@@ -145,7 +145,11 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
     Ok((surface, report))
 }
 
-/// The mask as 0 and 1, averaged with weights ¼, ½, ¼ along each axis (zero beyond the grid).
+/// The fewest voxels a piece needs to give a surface: a block of 3 × 3 × 3.
+const MIN_VOXELS: usize = 27;
+
+/// The mask as 0 and 1, averaged with weights ¼, ½, ¼ along each axis (zero beyond the grid),
+/// then kept at least 0.55 at inside voxels and at most 0.45 at outside ones.
 fn smoothed(mask: &VoxelMask) -> Vec<f32> {
     let dims = mask.dims;
     let mut field: Vec<f32> = mask.inside.iter().map(|&b| if b { 1.0 } else { 0.0 }).collect();
@@ -158,6 +162,9 @@ fn smoothed(mask: &VoxelMask) -> Vec<f32> {
             let after = if s + 1 < dims[axis] { previous[n + stride[axis]] } else { 0.0 };
             *value = 0.25 * before + 0.5 * previous[n] + 0.25 * after;
         }
+    }
+    for (value, &inside) in field.iter_mut().zip(&mask.inside) {
+        *value = if inside { value.max(0.55) } else { value.min(0.45) };
     }
     field
 }
@@ -244,35 +251,6 @@ fn tetrahedron(
     if polygon.len() == 4 {
         push([polygon[0], polygon[2], polygon[3]]);
     }
-}
-
-/// The piece (triangles joined through their vertices) that encloses the largest volume,
-/// compacted.
-fn largest_piece(surface: &TriSurface) -> TriSurface {
-    let mut parent: Vec<usize> = (0..surface.vertices.len()).collect();
-    fn root(parent: &mut [usize], mut v: usize) -> usize {
-        while parent[v] != v {
-            parent[v] = parent[parent[v]];
-            v = parent[v];
-        }
-        v
-    }
-    for t in &surface.triangles {
-        for e in 0..2 {
-            let (a, b) = (root(&mut parent, t[e]), root(&mut parent, t[e + 1]));
-            parent[a] = b;
-        }
-    }
-    let mut volume: HashMap<usize, f64> = HashMap::new();
-    for t in &surface.triangles {
-        let [p, q, r] = t.map(|v| surface.vertices[v]);
-        *volume.entry(root(&mut parent, t[0])).or_default() += dot(p, cross(q, r)) / 6.0;
-    }
-    let Some(best) = volume.iter().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs())).map(|(&r, _)| r) else {
-        return TriSurface::default();
-    };
-    let triangles = surface.triangles.iter().filter(|t| root(&mut parent, t[0]) == best).copied().collect();
-    TriSurface { vertices: surface.vertices.clone(), triangles }.compacted()
 }
 
 /// Taubin's λ|μ smoothing (λ = 0.5, μ = −0.53) with uniform weights, `iterations` times: a
@@ -400,5 +378,35 @@ mod tests {
         let speck = mask([5; 3], [1.0; 3], [0.0; 3], |p| p == [2.0; 3]);
         let e = mask_surface(&speck, &ExtractOptions::default()).unwrap_err().to_string();
         assert!(e.contains("1 voxel(s), is too small to give a surface"), "{e}");
+    }
+
+    /// Two balls joined by a bridge one voxel thick, and a ball with a vessel one voxel thick,
+    /// are meshed whole: the smoothing neither cuts the bridge nor erases the vessel.
+    #[test]
+    fn a_bridge_or_a_vessel_one_voxel_thick_is_kept() {
+        let (r, h) = (6.0, 1.0);
+        let ball = |p: Point, x: f64| norm(sub(p, [x, 0.0, 0.0])) <= r;
+        let line = |p: Point, from: f64, to: f64| p[0] >= from && p[0] <= to && p[1] == 0.0 && p[2] == 0.0;
+        let dumbbell =
+            mask([40, 17, 17], [h; 3], [-10.0, -8.0, -8.0], |p| ball(p, 0.0) || ball(p, 20.0) || line(p, 0.0, 20.0));
+        let (s, report) = mask_surface(&dumbbell, &ExtractOptions::default()).unwrap();
+        let checked = check_closed_manifold(&s).unwrap();
+        // One piece, a sphere's topology: V − E + F = 2.
+        assert_eq!(checked.used_vertices + checked.triangles, checked.edges + 2, "not one piece");
+        let volume = checked.volume;
+        let two_balls = 2.0 * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
+        eprintln!(
+            "dumbbell: volume {:+.4} from two balls, {:+.4} from the voxels",
+            volume / two_balls - 1.0,
+            volume / report.voxel_volume - 1.0
+        );
+        assert!((volume / two_balls - 1.0).abs() < 0.06, "{volume} vs {two_balls}");
+        let (lo, hi) = crate::bounds(&s.vertices);
+        assert!(lo[0] < -r + 1.0 && hi[0] > 20.0 + r - 1.0, "{lo:?} {hi:?}");
+        let vessel = mask([40, 17, 17], [h; 3], [-10.0, -8.0, -8.0], |p| ball(p, 0.0) || line(p, 0.0, 25.0));
+        let (s, _) = mask_surface(&vessel, &ExtractOptions::default()).unwrap();
+        check_closed_manifold(&s).unwrap();
+        let (_, hi) = crate::bounds(&s.vertices);
+        assert!(hi[0] > 23.0, "the vessel ends at {}", hi[0]);
     }
 }
