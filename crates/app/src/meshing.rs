@@ -168,8 +168,8 @@ pub fn immersed_fill(mesh: &Mesh) -> (f64, usize) {
 
 /// Writes the mesh in metres with its regions (point data `region_<name>`, or Gmsh physical
 /// groups) and, for an immersed grid, its cells' volume fractions (not in `.msh`); to .stl or
-/// .obj, its boundary surface in millimetres, as 3D Slicer and surface tools read them, an STL
-/// naming `frame` in its header when known. The directory is created. Returns what was written,
+/// .obj, its boundary surface in millimetres, as 3D Slicer and surface tools read them, naming
+/// `frame` in its header when known. The directory is created. Returns what was written,
 /// in words.
 pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result<String> {
     let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
@@ -178,7 +178,6 @@ pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     if extension == "stl" || extension == "obj" {
-        let frame = frame.filter(|_| extension == "stl");
         write_surface_in_mm(path, &mesh::boundary_surface(mesh).compacted(), frame).with_context(context)?;
         let named = frame.map_or(String::new(), |f| format!(", frame {f} named"));
         return Ok(format!("its boundary surface, in mm{named}"));
@@ -192,7 +191,7 @@ pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result
 }
 
 /// Writes a surface given in metres in millimetres, as 3D Slicer and surface tools read it (.stl,
-/// .obj, .vtk), naming `frame` in its header when known (.stl, .vtk).
+/// .obj, .vtk), naming `frame` in its header when known.
 pub fn write_surface_in_mm(path: &Path, surface: &TriSurface, frame: Option<Frame>) -> Result<()> {
     let vertices = surface.vertices.iter().map(|&v| LengthUnit::Millimetre.point_from_metres(v)).collect();
     let surface = TriSurface { vertices, triangles: surface.triangles.clone() };
@@ -309,6 +308,13 @@ mod tests {
         );
         let (back, frame) = mesh::io::read_surface_with_frame(&out).unwrap();
         assert_eq!(frame, Some(Frame::Lps));
+        let named_obj = dir.path().join("out_lps.obj");
+        assert_eq!(
+            write_mesh_file(&named_obj, &meshed.mesh, meshed.frame).unwrap(),
+            "its boundary surface, in mm, frame LPS named"
+        );
+        let (obj_back, obj_frame) = mesh::io::read_surface_with_frame(&named_obj).unwrap();
+        assert_eq!((obj_back.triangles, obj_frame), (back.triangles.clone(), Some(Frame::Lps)));
         let (lo, hi) = mesh::bounds(&back.vertices);
         for k in 0..3 {
             let centre = [-60.0, 120.0, 30.0][k];

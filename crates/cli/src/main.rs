@@ -63,8 +63,8 @@ enum Command {
         /// Build an immersed-boundary H8 grid with this cell size (m) instead.
         #[arg(long)]
         immersed: Option<f64>,
-        /// Output file (.vtu, .vtk or .msh, in m; .stl or .obj: the mesh's boundary surface in mm, an
-        /// STL naming the input's frame, as 3D Slicer reads it).
+        /// Output file (.vtu, .vtk or .msh, in m; .stl or .obj: the mesh's boundary surface in mm,
+        /// naming the input's frame, as 3D Slicer reads it).
         #[arg(short, long, default_value = "out/mesh.vtu", value_parser = extension_of(&["vtu", "vtk", "msh", "stl", "obj"]))]
         output: PathBuf,
     },

@@ -201,7 +201,7 @@ fn stl_and_vtk_headers_name_the_frame_as_slicer_writes_it() {
     let (vtk, frame) = read_surface_with_frame(slicer("tetrahedron_ras.vtk")).unwrap();
     assert_eq!((vtk.vertices.len(), frame), (4, Some(Frame::Ras)));
     let dir = tempfile::tempdir().unwrap();
-    for (name, frame) in [("out.vtk", Frame::Lps), ("out.stl", Frame::Ras)] {
+    for (name, frame) in [("out.vtk", Frame::Lps), ("out.stl", Frame::Ras), ("out.obj", Frame::Ras)] {
         let path = dir.path().join(name);
         write_surface_in_frame(&path, &surface, frame).unwrap();
         let (back, read) = read_surface_with_frame(&path).unwrap();
@@ -211,7 +211,8 @@ fn stl_and_vtk_headers_name_the_frame_as_slicer_writes_it() {
     assert!(written.starts_with(b"augsim binary STL SPACE=RAS"));
     let vtk_header = fs::read(dir.path().join("out.vtk")).unwrap();
     assert!(vtk_header.starts_with(b"# vtk DataFile Version 3.0\naugsim SPACE=LPS\n"));
-    // No tag: no frame; a frame cannot be put in an OBJ.
+    assert!(fs::read(dir.path().join("out.obj")).unwrap().starts_with(b"# augsim SPACE=RAS\n"));
+    // No tag: no frame; a frame cannot be put in a .vtu.
     let plain = dir.path().join("plain.stl");
     write_surface(&plain, &surface).unwrap();
     assert_eq!(surface_frame(&plain).unwrap(), None);
@@ -230,8 +231,8 @@ fn stl_and_vtk_headers_name_the_frame_as_slicer_writes_it() {
     assert_eq!(surface_frame(plain_obj).unwrap(), None, "only comment lines");
     let indented = put(dir.path(), "indented.stl", "\n  solid liver SPACE=RAS\nendsolid liver SPACE=RAS\n");
     assert_eq!(surface_frame(indented).unwrap(), Some(Frame::Ras));
-    let obj = dir.path().join("out.obj");
-    assert!(write_surface_in_frame(&obj, &surface, Frame::Lps).unwrap_err().to_string().contains(".vtk or .stl"));
+    let vtu = dir.path().join("out.vtu");
+    assert!(write_surface_in_frame(&vtu, &surface, Frame::Lps).unwrap_err().to_string().contains(".vtk, .stl or .obj"));
     assert_eq!(read_surface(slicer("tetrahedron_lps.stl")).unwrap(), surface, "the plain reader reads the same");
 }
 

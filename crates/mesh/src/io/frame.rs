@@ -167,15 +167,16 @@ pub fn read_surface_with_frame(path: impl AsRef<Path>) -> Result<(TriSurface, Op
 }
 
 /// Writes a surface with its frame named in the header as 3D Slicer reads it: `.vtk` (binary
-/// `POLYDATA`, title `augsim SPACE=…`) or `.stl` (binary, header `augsim binary STL SPACE=…`).
-/// Other formats have no such header: an error.
+/// `POLYDATA`, title `augsim SPACE=…`), `.stl` (binary, header `augsim binary STL SPACE=…`) or
+/// `.obj` (first comment `# augsim SPACE=…`). Other formats: an error.
 pub fn write_surface_in_frame(path: impl AsRef<Path>, surface: &TriSurface, frame: Frame) -> Result<(), MeshError> {
     let path = path.as_ref();
     let title = format!("augsim SPACE={frame}");
     match super::extension(path).as_str() {
         "vtk" => super::legacy_vtk::write_surface_vtk_titled(path, surface, &title),
         "stl" => super::surface_io::write_stl_titled(path, surface, &format!("augsim binary STL SPACE={frame}")),
-        _ => Err(parse_error(path, format!("cannot name the frame {frame} in this format: write .vtk or .stl"))),
+        "obj" => super::surface_io::write_obj_titled(path, surface, &title),
+        _ => Err(parse_error(path, format!("cannot name the frame {frame} in this format: write .vtk, .stl or .obj"))),
     }
 }
 

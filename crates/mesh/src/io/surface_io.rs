@@ -68,9 +68,15 @@ fn parse_obj(path: &Path) -> Result<TriSurface, MeshError> {
 
 /// Writes a surface as Wavefront OBJ (vertices written exactly, 1-based faces).
 pub fn write_obj(path: impl AsRef<Path>, surface: &TriSurface) -> Result<(), MeshError> {
+    write_obj_titled(path.as_ref(), surface, "augsim")
+}
+
+/// [`write_obj`] with `title` in its first comment line, where 3D Slicer looks for `SPACE=`.
+pub(super) fn write_obj_titled(path: &Path, surface: &TriSurface, title: &str) -> Result<(), MeshError> {
     check_surface(surface)?;
-    write_atomic(path.as_ref(), |w| {
-        writeln!(w, "# augsim: {} vertices, {} triangles", surface.vertices.len(), surface.triangles.len())?;
+    write_atomic(path, |w| {
+        writeln!(w, "# {title}")?;
+        writeln!(w, "# {} vertices, {} triangles", surface.vertices.len(), surface.triangles.len())?;
         for p in &surface.vertices {
             writeln!(w, "v {} {} {}", Num(p[0]), Num(p[1]), Num(p[2]))?;
         }
