@@ -131,8 +131,9 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
     surface.orient_outward();
     taubin_smooth(&mut surface, options.smoothing_iterations);
     let surface = decimate(&surface, options.target_triangles);
-    let checked = check_closed_manifold(&surface)
-        .map_err(|e| MeshError::Invalid(format!("the extracted surface is not closed and manifold: {e}")))?;
+    let checked = check_closed_manifold(&surface).map_err(|e| {
+        MeshError::Invalid(format!("the extracted surface is not closed and manifold: {}", e.message()))
+    })?;
     let report = ExtractReport {
         voxels: voxels + filled_voxels,
         dropped_pieces: pieces,

@@ -20,7 +20,7 @@
 //! names), `space directions`, `space origin` and `space units`, and Slicer's layered
 //! segmentations (a first `list` axis of layers).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 use std::io::Read;
 use std::path::Path;
 
@@ -73,7 +73,33 @@ pub fn read_labelmap(path: impl AsRef<Path>) -> Result<Labelmap, MeshError> {
     if map.labels.iter().all(|&l| l == 0) {
         return Err(parse_error(path, "the labelmap is empty: every voxel is 0 (background)"));
     }
+    refuse_image(&map.labels).map_err(|m| parse_error(path, m))?;
     Ok(map)
+}
+
+/// More distinct values than any labelmap holds: an image's grey values.
+const MAX_LABELS: usize = 1000;
+
+/// Refuses an image given for a labelmap: values below −1 (a CT's Hounsfield units; −1 is a
+/// common "ignore" label) or more than [`MAX_LABELS`] distinct values.
+fn refuse_image(labels: &[i32]) -> Result<(), String> {
+    let mut distinct = HashSet::new();
+    let mut previous = None;
+    for &l in labels {
+        if previous != Some(l) && distinct.insert(l) && distinct.len() > MAX_LABELS {
+            break;
+        }
+        previous = Some(l);
+    }
+    let (lo, hi) = labels.iter().fold((i32::MAX, i32::MIN), |(lo, hi), &l| (lo.min(l), hi.max(l)));
+    if lo >= -1 && distinct.len() <= MAX_LABELS {
+        return Ok(());
+    }
+    let count = if distinct.len() > MAX_LABELS { format!("over {MAX_LABELS}") } else { distinct.len().to_string() };
+    Err(format!(
+        "holds {count} distinct values, from {lo} to {hi}: an image (CT or MR grey values), not a labelmap; give \
+         the segmentation, one label per voxel (e.g. TotalSegmentator's liver.nii.gz or 3D Slicer's .seg.nrrd)"
+    ))
 }
 
 /// The bytes, decompressed when they start with gzip's magic number.
@@ -513,6 +539,9 @@ fn slicer_segments(pairs: &BTreeMap<String, String>, layers: usize) -> Result<Ve
     Ok(segments)
 }
 
+/// The labels a message lists at most.
+const SHOWN_LABELS: usize = 20;
+
 impl Labelmap {
     /// The size of a voxel along i, j and k (mm).
     pub fn spacing(&self) -> [f64; 3] {
@@ -536,11 +565,14 @@ impl Labelmap {
             .collect()
     }
 
-    /// A list of the labels present for messages, e.g. "1 (liver, 5120 voxels), 2 (842 voxels)".
+    /// A list of the labels present for messages, e.g. "1 (liver, 5120 voxels), 2 (842 voxels)";
+    /// past [`SHOWN_LABELS`], how many more.
     pub fn present_text(&self) -> String {
-        let items: Vec<String> = self
-            .present()
-            .into_iter()
+        let present = self.present();
+        let mut items: Vec<String> = present
+            .iter()
+            .take(SHOWN_LABELS)
+            .cloned()
             .map(|(layer, label, count, name)| {
                 let layer = if self.layers > 1 { format!("layer {layer}, ") } else { String::new() };
                 match name {
@@ -549,6 +581,9 @@ impl Labelmap {
                 }
             })
             .collect();
+        if present.len() > SHOWN_LABELS {
+            items.push(format!("and {} more", present.len() - SHOWN_LABELS));
+        }
         items.join(", ")
     }
 
@@ -778,8 +813,8 @@ pub fn read_labelmap_surface(
             ))
         }
     };
-    let (mask, label) = map.select(&label).map_err(|e| parse_error(path, e.to_string()))?;
-    let (surface, extract) = mask_surface(&mask, options).map_err(|e| parse_error(path, e.to_string()))?;
+    let (mask, label) = map.select(&label).map_err(|e| parse_error(path, e.message()))?;
+    let (surface, extract) = mask_surface(&mask, options).map_err(|e| parse_error(path, e.message()))?;
     Ok(LabelSurface { surface, frame: map.frame, label, spacing: map.spacing(), extract })
 }
 
@@ -1063,6 +1098,51 @@ mod tests {
         assert_eq!(read("k.nrrd", "0 0 0 1\n0 1 1 0\n").unwrap().labels, [0, 0, 0, 1, 0, 1, 1, 0]);
         assert!(read("l.nrrd", "0 0 1").unwrap_err().to_string().contains("hold 3 values, 8 expected"));
         assert!(read("m.nrrd", "0 0 1 x 0 0 0 0").unwrap_err().to_string().contains("voxel 3 holds \"x\""));
+    }
+
+    /// A CT given for a labelmap is named an image, in a message of a line; a labelmap of many
+    /// labels lists twenty of them; a label that is not there is said without "invalid mesh".
+    #[test]
+    fn an_image_is_not_a_labelmap_and_messages_stay_short() {
+        let dir = tempfile::tempdir().unwrap();
+        let header = |n: usize| {
+            format!(
+                "NRRD0004\ntype: short\ndimension: 3\nsizes: {n} {n} {n}\nspace: left-posterior-superior\n\
+                 space directions: (1,0,0) (0,1,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
+            )
+        };
+        let write = |name: &str, n: usize, value: &dyn Fn(usize) -> i16| {
+            let voxels: Vec<u8> = (0..n * n * n).flat_map(|v| value(v).to_le_bytes()).collect();
+            let path = dir.path().join(name);
+            std::fs::write(&path, [header(n).as_bytes(), &voxels].concat()).unwrap();
+            path
+        };
+        // Hounsfield units: air at −1000, soft tissue about 40.
+        let ct = write("ct.nrrd", 12, &|v| if v % 7 == 0 { -1000 } else { 40 + (v % 13) as i16 });
+        let e = read_labelmap(&ct).unwrap_err().to_string();
+        assert!(e.contains("holds 14 distinct values, from -1000 to 52: an image"), "{e}");
+        // Grey values without a sign (an MR, a CT stored with an offset).
+        let mr = write("mr.nrrd", 12, &|v| v as i16);
+        let e = read_labelmap(&mr).unwrap_err().to_string();
+        assert!(e.contains("holds over 1000 distinct values, from 0 to 1727: an image"), "{e}");
+        assert!(e.len() < 300, "{e}");
+        // Over a hundred labels (a row of voxels each), none chosen: twenty listed.
+        let many = write("many.nrrd", 12, &|v| {
+            if v % 12 < 10 && v / 144 < 9 {
+                (1 + v / 12 % 12 + v / 144 * 12) as i16
+            } else {
+                0
+            }
+        });
+        let map = read_labelmap(&many).unwrap();
+        assert!(map.present().len() > 30, "{}", map.present().len());
+        let e = read_labelmap_surface(&many, None, &ExtractOptions::default()).unwrap_err().to_string();
+        assert!(
+            e.contains("choose one with --label") && e.contains(&format!("and {} more", map.present().len() - 20)),
+            "{e}"
+        );
+        let e = read_labelmap_surface(&many, Some("500"), &ExtractOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("label 500 is not in the labelmap") && !e.contains("invalid mesh"), "{e}");
     }
 
     /// The unit a header names (NIfTI's `xyzt_units`, NRRD's `space units`) scales the world to

@@ -80,6 +80,17 @@ pub enum MeshError {
     Invalid(String),
 }
 
+impl MeshError {
+    /// The error's text without the "invalid mesh: " prefix, for errors about an input that is
+    /// not a mesh (a labelmap's label, a surface's voxels).
+    pub fn message(&self) -> String {
+        match self {
+            MeshError::Invalid(m) => m.clone(),
+            other => other.to_string(),
+        }
+    }
+}
+
 /// The cells of a volume mesh: all of one kind.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Cells {

@@ -179,7 +179,7 @@ pub fn rebuild_surface(
     }
     // Refused there when it holds several pieces of similar size.
     let (rebuilt, extract) = mask_surface(&mask, &options.extract)
-        .map_err(|e| MeshError::Invalid(format!("the surface, voxelised at {}: {e}", number(voxel))))?;
+        .map_err(|e| MeshError::Invalid(format!("the surface, voxelised at {}: {}", number(voxel), e.message())))?;
     let bvh = SurfaceBvh::new(surface)?;
     let distances: Vec<f64> = rebuilt.vertices.par_iter().map(|&p| bvh.distance(p)).collect();
     let mean_distance = distances.iter().sum::<f64>() / distances.len() as f64;

@@ -216,7 +216,7 @@ pub fn repair_surface(surface: &TriSurface, options: &RepairOptions) -> Result<(
     fill_holes(&mut repaired, options.max_hole_edges, min_area, &origin, &mut report)?;
     report.reversed = repaired.orient_outward();
 
-    let checked = check_closed_manifold(&repaired).map_err(|e| invalid(format!("after repair: {}", message(&e))))?;
+    let checked = check_closed_manifold(&repaired).map_err(|e| invalid(format!("after repair: {}", e.message())))?;
     if !(checked.volume > 0.0) {
         return Err(invalid("after repair: the surface encloses no volume"));
     }
@@ -357,14 +357,6 @@ fn crossing_triangles(pairs: &[(usize, usize)]) -> usize {
 
 fn invalid(message: impl Into<String>) -> MeshError {
     MeshError::Invalid(message.into())
-}
-
-/// The text of an error without the "invalid mesh: " prefix.
-fn message(e: &MeshError) -> String {
-    match e {
-        MeshError::Invalid(m) => m.clone(),
-        other => other.to_string(),
-    }
 }
 
 /// A number with six significant digits, without trailing zeros.
