@@ -877,6 +877,23 @@ mod tests {
             assert!((organ.extract.volume / exact - 1.0).abs() < 0.05, "{}", organ.extract.volume);
             assert!(organ.lines()[0].starts_with("label 5: "), "{:?}", organ.lines());
         }
+        // The same voxels as 64-bit integers, signed (datatype 1024) and unsigned (1280), as
+        // SimpleITK writes a NumPy integer mask.
+        let plain = std::fs::read(dir.path().join("seg.nii")).unwrap();
+        let offset = f32::from_le_bytes(plain[108..112].try_into().unwrap()) as usize;
+        assert_eq!(i16::from_le_bytes([plain[70], plain[71]]), 4, "written as 16-bit labels");
+        let longs: Vec<u8> = plain[offset..]
+            .chunks_exact(2)
+            .flat_map(|v| i64::from(i16::from_le_bytes([v[0], v[1]])).to_le_bytes())
+            .collect();
+        for datatype in [1024i16, 1280] {
+            let mut bytes = [&plain[..offset], &longs].concat();
+            bytes[70..72].copy_from_slice(&datatype.to_le_bytes());
+            bytes[72..74].copy_from_slice(&64i16.to_le_bytes());
+            let path = dir.path().join(format!("seg{datatype}.nii"));
+            std::fs::write(&path, bytes).unwrap();
+            assert!(read_labelmap(&path).unwrap().labels == map.labels, "datatype {datatype}");
+        }
     }
 
     #[test]
