@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context, Result};
 use mesh::io::{Field, Frame};
 use mesh::isosurface::ExtractOptions;
-use mesh::labelmap::{is_labelmap, read_labelmap_surface};
+use mesh::labelmap::{is_labelmap, read_labelmap_surface, unreadable_segmentation, LABELMAP_FORMATS};
 use mesh::length::{mm, LengthUnit, UnitOrAuto};
 use mesh::phantom::PhantomSpec;
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
@@ -95,11 +95,14 @@ fn organ_surface(
     options: &MeshOptions,
     notes: &mut Vec<(&'static str, String)>,
 ) -> Result<(TriSurface, Option<Frame>)> {
+    if let Some(why) = unreadable_segmentation(path) {
+        bail!("{}: {why}", path.display());
+    }
     if is_labelmap(path) {
         return labelmap_surface(path, options, notes);
     }
     if options.label.is_some() {
-        bail!("--label chooses a label of a labelmap (.nii, .nii.gz, .nrrd, .seg.nrrd), not of {}", path.display());
+        bail!("--label chooses a label of a labelmap ({LABELMAP_FORMATS}), not of {}", path.display());
     }
     let (mut surface, frame) = mesh::io::read_surface_with_frame(path)?;
     let extent = largest_extent(&surface);
@@ -289,6 +292,11 @@ mod tests {
         assert!(meshed.notes.iter().any(|(topic, line)| *topic == "units" && line.starts_with("mm (detected")));
         let labelled = MeshOptions { label: Some("5".into()), ..options };
         assert!(mesh_organ(&labelled).unwrap_err().to_string().contains("--label chooses a label of a labelmap"));
+        let folder = MeshOptions { surface: Some(dir.path().to_path_buf()), ..labelled };
+        assert!(mesh_organ(&folder)
+            .unwrap_err()
+            .to_string()
+            .contains("a folder, not a file (a DICOM series is not read)"));
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! Segmentations as labelmaps: NIfTI-1 (`.nii`, `.nii.gz`, as TotalSegmentator writes them) and
-//! NRRD (`.nrrd`, `.seg.nrrd`, as 3D Slicer saves segmentations).
+//! NRRD (`.nrrd`, `.seg.nrrd`, as 3D Slicer saves segmentations; `.nhdr`, a header whose data
+//! lie in a file beside it).
 //!
 //! A labelmap is a 3D grid of integer labels (0 is the background) with the affine map from voxel
 //! indices (i, j, k) to world coordinates in millimetres, read from the header: spacing (voxels
@@ -15,8 +16,9 @@
 //! a closed surface.
 //!
 //! Supported: NIfTI-1 single files (`n+1`), either byte order, gzipped or not, data types u8,
-//! i8, i16, u16, i32, u32, f32, f64, the sform (preferred) or qform affine; NRRD with attached
-//! data, `raw`, `gzip` or `ascii` encoding, the same types, `space` LPS or RAS (or their long
+//! i8, i16, u16, i32, u32, i64, u64, f32, f64, the sform (preferred) or qform affine; NRRD with
+//! attached data or detached in one file (`data file`, relative to the header's folder), `raw`,
+//! `gzip` or `ascii` encoding, the same types, `space` LPS or RAS (or their long
 //! names), `space directions`, `space origin` and `space units`, and Slicer's layered
 //! segmentations (a first `list` axis of layers).
 
@@ -52,10 +54,39 @@ fn parse_error(path: &Path, message: impl Into<String>) -> MeshError {
     MeshError::Parse { path: path.display().to_string(), message: message.into() }
 }
 
-/// True when `path` names a labelmap by its extension (.nii, .nii.gz, .nrrd, .seg.nrrd).
+/// The labelmaps read, for messages.
+pub const LABELMAP_FORMATS: &str = ".nii, .nii.gz, .nrrd, .seg.nrrd or .nhdr";
+
+/// True when `path` names a labelmap by its extension (.nii, .nii.gz, .nrrd, .seg.nrrd, .nhdr).
 pub fn is_labelmap(path: &Path) -> bool {
     let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-    name.ends_with(".nii") || name.ends_with(".nii.gz") || name.ends_with(".nrrd")
+    [".nii", ".nii.gz", ".nrrd", ".nhdr"].iter().any(|e| name.ends_with(e))
+}
+
+/// Why an organ's segmentation given as `path` cannot be read, saying what to give instead: a
+/// folder or a DICOM file (a series, a DICOM SEG), an image format not read, or an extension that
+/// is neither a labelmap's nor a surface's. `None` for a labelmap or surface extension.
+pub fn unreadable_segmentation(path: &Path) -> Option<String> {
+    let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let extension = name.rsplit_once('.').map_or("", |(_, e)| e);
+    let save_as = format!(
+        "save the segmentation as a labelmap ({LABELMAP_FORMATS}) or a surface (.stl, .obj, .ply, .vtk, .vtp, .vtu)"
+    );
+    if path.is_dir() {
+        return Some(format!(
+            "a folder, not a file (a DICOM series is not read): segment it (3D Slicer, TotalSegmentator) and {save_as}"
+        ));
+    }
+    if is_labelmap(path) || ["stl", "obj", "ply", "vtk", "vtp", "vtu"].contains(&extension) {
+        return None;
+    }
+    Some(match extension {
+        "dcm" | "dicom" | "ima" | "" => format!("DICOM (a series or a DICOM SEG) is not read: {save_as}"),
+        "mha" | "mhd" | "mgz" | "mgh" | "hdr" | "img" | "nia" => {
+            format!("this image format is not read: {save_as} (3D Slicer or ITK-SNAP: Save as)")
+        }
+        _ => format!("not a labelmap nor a surface by its extension: {save_as}"),
+    })
 }
 
 /// Reads a NIfTI or NRRD labelmap, chosen by the file's extension.
@@ -63,12 +94,13 @@ pub fn read_labelmap(path: impl AsRef<Path>) -> Result<Labelmap, MeshError> {
     let path = path.as_ref();
     let bytes = std::fs::read(path).map_err(|error| MeshError::Io { path: path.display().to_string(), error })?;
     let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-    let map = if name.ends_with(".nrrd") {
-        parse_nrrd(&bytes).map_err(|m| parse_error(path, m))?
+    let map = if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
+        let folder = path.parent().unwrap_or(Path::new(""));
+        parse_nrrd(&bytes, folder).map_err(|m| parse_error(path, m))?
     } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
         parse_nifti(&gunzip_if_needed(bytes).map_err(|m| parse_error(path, m))?).map_err(|m| parse_error(path, m))?
     } else {
-        return Err(parse_error(path, "not a labelmap: expected .nii, .nii.gz, .nrrd or .seg.nrrd"));
+        return Err(parse_error(path, format!("not a labelmap: expected {LABELMAP_FORMATS}")));
     };
     if map.labels.iter().all(|&l| l == 0) {
         return Err(parse_error(path, "the labelmap is empty: every voxel is 0 (background)"));
@@ -304,25 +336,25 @@ struct NrrdHeader {
     pairs: BTreeMap<String, String>,
 }
 
-/// Splits a NRRD file into its header and its data (after the blank line).
+/// Splits a NRRD file into its header and its data (after the blank line; a detached header may
+/// end with the file instead).
 fn nrrd_header(bytes: &[u8]) -> Result<(NrrdHeader, &[u8]), String> {
     if !bytes.starts_with(b"NRRD000") {
         return Err("not a NRRD file (it does not start with NRRD000x)".into());
     }
     let mut header = NrrdHeader { fields: BTreeMap::new(), pairs: BTreeMap::new() };
     let mut at = 0;
-    let mut first = true;
-    loop {
-        let Some(end) = bytes[at..].iter().position(|&b| b == b'\n') else {
-            return Err("the header does not end (no blank line before the data)".into());
-        };
+    let (mut first, mut ended) = (true, false);
+    while at < bytes.len() {
+        let end = bytes[at..].iter().position(|&b| b == b'\n').unwrap_or(bytes.len() - at);
         let line = String::from_utf8_lossy(&bytes[at..at + end]).trim_end_matches('\r').to_string();
-        at += end + 1;
+        at = (at + end + 1).min(bytes.len());
         if first {
             first = false;
             continue;
         }
         if line.is_empty() {
+            ended = true;
             break;
         }
         if line.starts_with('#') {
@@ -336,12 +368,33 @@ fn nrrd_header(bytes: &[u8]) -> Result<(NrrdHeader, &[u8]), String> {
             return Err(format!("header line {line:?} is neither 'field: value' nor 'key:=value'"));
         }
     }
+    if !ended && header.data_file().is_none() {
+        return Err("the header does not end (no blank line before the data)".into());
+    }
     Ok((header, &bytes[at..]))
 }
 
 impl NrrdHeader {
     fn field(&self, name: &str) -> Result<&str, String> {
         self.fields.get(name).map(String::as_str).ok_or_else(|| format!("the header has no '{name}' field"))
+    }
+
+    /// The `data file` field of a detached header.
+    fn data_file(&self) -> Option<&str> {
+        self.fields.get("data file").or_else(|| self.fields.get("datafile")).map(String::as_str)
+    }
+
+    /// The data of a detached header: the one file its `data file` names, relative to `folder`
+    /// (the header's); `None` for attached data.
+    fn detached_data(&self, folder: &Path) -> Result<Option<Vec<u8>>, String> {
+        let Some(name) = self.data_file() else { return Ok(None) };
+        if name.starts_with("LIST") || name.split_whitespace().count() > 1 {
+            return Err(format!(
+                "data file: {name}: data in several files are not read; save the segmentation as one .nrrd"
+            ));
+        }
+        let path = folder.join(name);
+        std::fs::read(&path).map(Some).map_err(|e| format!("its data file {} cannot be read: {e}", path.display()))
     }
 }
 
@@ -393,12 +446,12 @@ fn nrrd_scalar(name: &str) -> Result<Scalar, String> {
     })
 }
 
-/// Parses a NRRD file with attached data.
-fn parse_nrrd(bytes: &[u8]) -> Result<Labelmap, String> {
-    let (header, data) = nrrd_header(bytes)?;
-    if header.fields.contains_key("data file") || header.fields.contains_key("datafile") {
-        return Err("detached data ('data file') is not supported: save the segmentation as one .nrrd".into());
-    }
+/// Parses a NRRD file, its data attached or in the file a detached header names (relative to
+/// `folder`).
+fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
+    let (header, attached) = nrrd_header(bytes)?;
+    let detached = header.detached_data(folder)?;
+    let data = detached.as_deref().unwrap_or(attached);
     let scalar = nrrd_scalar(header.field("type")?)?;
     let sizes: Vec<usize> = header
         .field("sizes")?
@@ -1115,6 +1168,48 @@ mod tests {
         assert_eq!(read("k.nrrd", "0 0 0 1\n0 1 1 0\n").unwrap().labels, [0, 0, 0, 1, 0, 1, 1, 0]);
         assert!(read("l.nrrd", "0 0 1").unwrap_err().to_string().contains("hold 3 values, 8 expected"));
         assert!(read("m.nrrd", "0 0 1 x 0 0 0 0").unwrap_err().to_string().contains("voxel 3 holds \"x\""));
+    }
+
+    /// A NRRD header detached from its data (`.nhdr`, as 3D Slicer can save a volume) reads as
+    /// the file with both; data in several files, or a data file that is not there, are refused
+    /// by name.
+    #[test]
+    fn a_detached_nrrd_header_reads_its_data_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Lps);
+        let whole = dir.path().join("seg.nrrd");
+        write_nrrd(&whole, &map).unwrap();
+        let bytes = std::fs::read(&whole).unwrap();
+        let split = bytes.windows(2).position(|w| w == b"\n\n").unwrap();
+        let header = String::from_utf8(bytes[..split + 1].to_vec()).unwrap();
+        std::fs::create_dir(dir.path().join("data")).unwrap();
+        std::fs::write(dir.path().join("data/seg.raw.gz"), &bytes[split + 2..]).unwrap();
+        // Ending with the file, without the blank line an attached header needs.
+        let nhdr = dir.path().join("seg.nhdr");
+        std::fs::write(&nhdr, format!("{header}data file: data/seg.raw.gz\n")).unwrap();
+        assert!(is_labelmap(&nhdr));
+        assert!(read_labelmap(&nhdr).unwrap() == read_labelmap(&whole).unwrap());
+        std::fs::write(&nhdr, format!("{header}data file: seg.raw.gz\n")).unwrap();
+        let e = read_labelmap(&nhdr).unwrap_err().to_string();
+        assert!(e.contains("its data file") && e.contains("seg.raw.gz cannot be read"), "{e}");
+        std::fs::write(&nhdr, format!("{header}data file: slice%03d.raw 1 46 1\n")).unwrap();
+        assert!(read_labelmap(&nhdr).unwrap_err().to_string().contains("data in several files are not read"));
+        std::fs::write(&nhdr, &header).unwrap();
+        assert!(read_labelmap(&nhdr).unwrap_err().to_string().contains("the header does not end"));
+    }
+
+    /// What cannot be an organ's segmentation says what to give instead.
+    #[test]
+    fn a_dicom_folder_or_an_unread_format_says_what_to_give() {
+        let dir = tempfile::tempdir().unwrap();
+        let said = |name: &str| unreadable_segmentation(&dir.path().join(name)).unwrap_or_default();
+        assert!(said("").starts_with("a folder, not a file (a DICOM series is not read)"), "{}", said(""));
+        assert!(said("seg.dcm").starts_with("DICOM (a series or a DICOM SEG) is not read: save the segmentation"));
+        assert!(said("liver.mha").contains("this image format is not read"), "{}", said("liver.mha"));
+        assert!(said("liver.xyz").contains("not a labelmap nor a surface"));
+        for fine in ["liver.STL", "seg.seg.nrrd", "seg.nii.gz", "seg.nhdr", "organ.vtu"] {
+            assert_eq!(said(fine), "", "{fine}");
+        }
     }
 
     /// A CT given for a labelmap is named an image, in a message of a line; a labelmap of many

@@ -52,7 +52,7 @@ use anyhow::{bail, ensure, Context, Result};
 use mesh::io::points::{read_points_csv, write_points, LabelledPoints};
 use mesh::io::{read_surface_with_frame, write_atomic_bytes, Frame};
 use mesh::isosurface::ExtractOptions;
-use mesh::labelmap::{is_labelmap, read_labelmap_surface};
+use mesh::labelmap::{is_labelmap, read_labelmap_surface, unreadable_segmentation, LABELMAP_FORMATS};
 use mesh::length::{mm, point_in_mm, LengthUnit, UnitOrAuto};
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
 use mesh::repair::{detect_unit, RepairOptions};
@@ -395,6 +395,9 @@ fn read_surface_input(
     lines: &mut Vec<String>,
 ) -> Result<(TriSurface, Option<Frame>, LengthUnit)> {
     let path = &options.surface;
+    if let Some(why) = unreadable_segmentation(path) {
+        bail!("{}: {why}", path.display());
+    }
     if is_labelmap(path) {
         if options.units.is_some_and(|u| u != LengthUnit::Millimetre) {
             bail!("{} is a labelmap, whose unit is the millimetre: leave out --units or give mm", path.display());
@@ -404,7 +407,7 @@ fn read_surface_input(
         return Ok((organ.surface, Some(organ.frame), LengthUnit::Millimetre));
     }
     if let Some(label) = &options.label {
-        bail!("--label {label} chooses a label of a labelmap (.nii, .nii.gz, .nrrd), not of {}", path.display());
+        bail!("--label {label} chooses a label of a labelmap ({LABELMAP_FORMATS}), not of {}", path.display());
     }
     let (surface, frame) = read_surface_with_frame(path)?;
     let unit = match options.units {
