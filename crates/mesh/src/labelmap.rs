@@ -1,6 +1,6 @@
 //! Segmentations as labelmaps: NIfTI-1 (`.nii`, `.nii.gz`, as TotalSegmentator writes them) and
 //! NRRD (`.nrrd`, `.seg.nrrd`, as 3D Slicer saves segmentations; `.nhdr`, a header whose data
-//! lie in a file beside it).
+//! lie in a file beside it) and MetaImage (`.mha`, `.mhd`, as ITK-SNAP and SLIVER07 give them).
 //!
 //! A labelmap is a 3D grid of integer labels (0 is the background) with the affine map from voxel
 //! indices (i, j, k) to world coordinates in millimetres, read from the header: spacing (voxels
@@ -21,6 +21,8 @@
 //! `gzip` or `ascii` encoding, the same types, `space` LPS or RAS (or their long
 //! names), `space directions`, `space origin` and `space units`, and Slicer's layered
 //! segmentations (a first `list` axis of layers).
+
+mod metaimage;
 
 use std::collections::{BTreeMap, HashSet};
 use std::io::Read;
@@ -55,12 +57,12 @@ fn parse_error(path: &Path, message: impl Into<String>) -> MeshError {
 }
 
 /// The labelmaps read, for messages.
-pub const LABELMAP_FORMATS: &str = ".nii, .nii.gz, .nrrd, .seg.nrrd or .nhdr";
+pub const LABELMAP_FORMATS: &str = ".nii, .nii.gz, .nrrd, .seg.nrrd, .nhdr, .mha or .mhd";
 
-/// True when `path` names a labelmap by its extension (.nii, .nii.gz, .nrrd, .seg.nrrd, .nhdr).
+/// True when `path` names a labelmap by its extension ([`LABELMAP_FORMATS`]).
 pub fn is_labelmap(path: &Path) -> bool {
     let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-    [".nii", ".nii.gz", ".nrrd", ".nhdr"].iter().any(|e| name.ends_with(e))
+    [".nii", ".nii.gz", ".nrrd", ".nhdr", ".mha", ".mhd"].iter().any(|e| name.ends_with(e))
 }
 
 /// Why an organ's segmentation given as `path` cannot be read, saying what to give instead: a
@@ -82,7 +84,7 @@ pub fn unreadable_segmentation(path: &Path) -> Option<String> {
     }
     Some(match extension {
         "dcm" | "dicom" | "ima" | "" => format!("DICOM (a series or a DICOM SEG) is not read: {save_as}"),
-        "mha" | "mhd" | "mgz" | "mgh" | "hdr" | "img" | "nia" => {
+        "mgz" | "mgh" | "hdr" | "img" | "nia" => {
             format!("this image format is not read: {save_as} (3D Slicer or ITK-SNAP: Save as)")
         }
         _ => format!("not a labelmap nor a surface by its extension: {save_as}"),
@@ -94,9 +96,11 @@ pub fn read_labelmap(path: impl AsRef<Path>) -> Result<Labelmap, MeshError> {
     let path = path.as_ref();
     let bytes = std::fs::read(path).map_err(|error| MeshError::Io { path: path.display().to_string(), error })?;
     let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let folder = path.parent().unwrap_or(Path::new(""));
     let map = if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
-        let folder = path.parent().unwrap_or(Path::new(""));
         parse_nrrd(&bytes, folder).map_err(|m| parse_error(path, m))?
+    } else if name.ends_with(".mha") || name.ends_with(".mhd") {
+        metaimage::parse_metaimage(&bytes, folder).map_err(|m| parse_error(path, m))?
     } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
         parse_nifti(&gunzip_if_needed(bytes).map_err(|m| parse_error(path, m))?).map_err(|m| parse_error(path, m))?
     } else {
@@ -878,7 +882,7 @@ mod tests {
 
     /// A labelmap of two balls (labels 5 and 2) at world positions given in `frame`, with
     /// anisotropic voxels and the x axis flipped.
-    fn two_balls(frame: Frame) -> (Labelmap, Point) {
+    pub(super) fn two_balls(frame: Frame) -> (Labelmap, Point) {
         let dims = [52, 44, 16];
         // Spacings exact in f32, as NIfTI stores them.
         let affine = [[-0.75, 0.0, 0.0, 60.0], [0.0, 0.875, 0.0, -100.0], [0.0, 0.0, 2.5, 200.0]];
@@ -1205,9 +1209,9 @@ mod tests {
         let said = |name: &str| unreadable_segmentation(&dir.path().join(name)).unwrap_or_default();
         assert!(said("").starts_with("a folder, not a file (a DICOM series is not read)"), "{}", said(""));
         assert!(said("seg.dcm").starts_with("DICOM (a series or a DICOM SEG) is not read: save the segmentation"));
-        assert!(said("liver.mha").contains("this image format is not read"), "{}", said("liver.mha"));
+        assert!(said("liver.mgz").contains("this image format is not read"), "{}", said("liver.mgz"));
         assert!(said("liver.xyz").contains("not a labelmap nor a surface"));
-        for fine in ["liver.STL", "seg.seg.nrrd", "seg.nii.gz", "seg.nhdr", "organ.vtu"] {
+        for fine in ["liver.STL", "seg.seg.nrrd", "seg.nii.gz", "seg.nhdr", "liver.mhd", "organ.vtu"] {
             assert_eq!(said(fine), "", "{fine}");
         }
     }
