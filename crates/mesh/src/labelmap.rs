@@ -8,7 +8,7 @@
 //! `xyzt_units`, NRRD's `space units`: m, mm or µm; mm when it names none), converted to mm. The
 //! world frame is the scanner's, as the file states it ([`Frame`]): NIfTI's is always RAS (x
 //! towards the patient's right, y anterior, z superior); NRRD's is its `space` field, LPS for
-//! DICOM-derived data and most of Slicer's files. Points given with the organ (camera, landmarks,
+//! DICOM-derived data and most of Slicer's files; MetaImage's is ITK's, LPS. Points given with the organ (camera, landmarks,
 //! targets) must be in this frame.
 //!
 //! [`Labelmap::select`] picks one label, by number or by a segment name the file carries (Slicer's
