@@ -169,8 +169,8 @@ def test_register_writes_what_the_command_line_writes(case, tmp_path):
     reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm")
     r = reg.register(case["cloud"], out=tmp_path / "out")
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
-        "organ.vtu", "organ_deformed.vtk", "registration.html", "registration.png", "summary.json", "targets.csv",
-        "targets.mrk.json"]
+        "displacement.nrrd", "organ.vtu", "organ_deformed.vtk", "registration.html", "registration.png",
+        "summary.json", "targets.csv", "targets.mrk.json"]
     import json
 
     # For 3D Slicer: the registered targets as markups in mm.

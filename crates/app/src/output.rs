@@ -3,8 +3,9 @@
 //! deviation when the method gives one) and summary.json (the run's figures and each frame's),
 //! all in the cloud's frame (the frame the clouds were given in, which targets.csv and
 //! summary.json name when known); for 3D Slicer, the registered targets as markups (targets.mrk.json)
-//! and the deformed organ's surface (organ_deformed.vtk), in millimetres and naming their frame;
-//! and what a comparison of methods on a synthetic case writes; each
+//! and the deformed organ's surface (organ_deformed.vtk), in millimetres and naming their frame,
+//! and the registration as a displacement-field transform (displacement.nrrd) that warps the CT
+//! and its segmentations; and what a comparison of methods on a synthetic case writes; each
 //! run in a folder of its own ([`run_dir`]).
 
 use std::borrow::Cow;
@@ -15,7 +16,7 @@ use mesh::io::points::{write_markups_json, LabelledPoints};
 use mesh::io::{csv_field, write_atomic_bytes, write_surface_in_frame, Field, Frame, FrameChange};
 use mesh::length::{mm, LengthUnit};
 use mesh::{Mesh, Point};
-use register::{FrameOutcome, Organ, Registration, RigidResult, RigidTransform, Summary};
+use register::{FrameOutcome, Organ, Registration, RigidResult, RigidTransform, Summary, WarpField};
 use scenario::registration::slug;
 use serde::Serialize;
 
@@ -192,19 +193,22 @@ impl RunWriter {
     }
 
     /// Writes organ.pvd (for a sequence), targets.csv (of the last frame of `registration`, with
-    /// its targets' labels), the last frame for 3D Slicer (targets.mrk.json and
-    /// organ_deformed.vtk, its registered surface) and summary.json, all in the results' frame,
+    /// its targets' labels), the last frame for 3D Slicer (targets.mrk.json, organ_deformed.vtk,
+    /// its registered surface, and displacement.nrrd, see [`write_warp`]) and summary.json, all in
+    /// the results' frame,
     /// which they name when known (the clouds' frame given, else `working`: the frame the
     /// registration worked in, once the organ or a file named one), and the last frame's
     /// pictures, registration.png and registration.html, in the organ's frame (`last`: its
-    /// cloud and its targets' truth, when known, as registered); returns the run's summary.
+    /// cloud and its targets' truth, when known, as registered); returns the run's summary and
+    /// what was not written, and why (displacement.nrrd of an organ registered with inverted
+    /// elements).
     pub fn finish(
         self,
         registration: &Registration,
         working: Option<Frame>,
         outcomes: &[FrameOutcome],
         (cloud, truth): (&[Point], Option<&[Point]>),
-    ) -> Result<Summary> {
+    ) -> Result<(Summary, Vec<String>)> {
         let frame = self.given.or(working);
         if self.sequence {
             mesh::io::write_pvd(self.dir.join("organ.pvd"), &self.steps)?;
@@ -225,6 +229,11 @@ impl RunWriter {
         let mut surface = register::organ_surface(registration.organ(), &last.registration.u, last.rigid.as_ref());
         surface.vertices = self.converted(&surface.vertices);
         write_deformed_surface(&self.dir.join("organ_deformed.vtk"), &surface, frame)?;
+        let mut skipped = Vec::new();
+        match WarpField::of_registration(registration.organ(), &last.registration.u, last.rigid.as_ref(), WARP_STEPS) {
+            Ok(field) => write_warp(&self.dir.join("displacement.nrrd"), &field, self.change, frame)?,
+            Err(e) => skipped.push(format!("no displacement.nrrd: {e}")),
+        }
         let row = self.rows.last().context("no frame")?;
         let targets = (registration.targets(), last.targets.as_slice());
         let u = &last.registration.u;
@@ -236,8 +245,27 @@ impl RunWriter {
         let summary = Summary::new(registration.method(), outcomes)?;
         let run = RunSummary { frame, summary: &summary, per_frame: &self.rows };
         write_atomic_bytes(&self.dir.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
-        Ok(summary)
+        Ok((summary, skipped))
     }
+}
+
+/// Grid steps across the registered organ's largest extent, margins included, in displacement.nrrd.
+const WARP_STEPS: usize = 64;
+
+/// Writes a registration's displacement field (computed in the organ's frame, m) as 3D Slicer
+/// loads a displacement-field transform (NRRD in LPS, mm; see
+/// [`mesh::labelmap::write_displacement_nrrd`]): `change` takes it to the results' frame, named
+/// `frame` (taken as LPS, Slicer's default for files, when unknown). Under this transform the
+/// CT and its segmentations, at rest, appear as registered.
+pub fn write_warp(path: &Path, field: &WarpField, change: FrameChange, frame: Option<Frame>) -> Result<()> {
+    let to_lps = FrameChange::between(frame, Some(Frame::Lps));
+    let lps = |p: Point| to_lps.point(change.point(p)).map(|x| LengthUnit::Millimetre.from_metres(x));
+    let origin = lps(field.origin);
+    let axes: [Point; 3] =
+        std::array::from_fn(|c| lps(std::array::from_fn(|d| if d == c { field.spacing } else { 0.0 })));
+    let affine = std::array::from_fn(|r| std::array::from_fn(|c| if c < 3 { axes[c][r] } else { origin[r] }));
+    let vectors: Vec<Point> = field.vectors.iter().map(|&v| lps(v)).collect();
+    Ok(mesh::labelmap::write_displacement_nrrd(path, field.dims, affine, &vectors)?)
 }
 
 /// The organ mesh and a displacement in the cloud's frame: as given without a rigid alignment;
@@ -455,6 +483,29 @@ pub fn comparison_rows(rows: &[Compared]) -> Vec<(String, [Option<f64>; 6], Stri
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A field in RAS is written in LPS, the file's frame for Slicer: its origin and axes with x
+    /// and y negated; in LPS, or in no known frame (Slicer's LPS), as it is; in mm.
+    #[test]
+    fn a_displacement_field_is_written_in_lps_millimetres() {
+        let dir = tempfile::tempdir().unwrap();
+        let field =
+            WarpField { origin: [0.01, 0.02, 0.03], spacing: 0.005, dims: [2, 2, 2], vectors: vec![[0.0; 3]; 8] };
+        let header = |frame: Option<Frame>| {
+            let path = dir.path().join("field.nrrd");
+            write_warp(&path, &field, FrameChange::default(), frame).unwrap();
+            let bytes = std::fs::read(&path).unwrap();
+            let end = bytes.windows(2).position(|w| w == b"\n\n").unwrap();
+            String::from_utf8(bytes[..end].to_vec()).unwrap()
+        };
+        let ras = header(Some(Frame::Ras));
+        assert!(ras.contains("space origin: (-10,-20,30)"), "{ras}");
+        assert!(ras.contains("space directions: none (-5,0,0) (0,-5,0) (0,0,5)"), "{ras}");
+        for lps in [header(Some(Frame::Lps)), header(None)] {
+            assert!(lps.contains("space origin: (10,20,30)"), "{lps}");
+            assert!(lps.contains("space directions: none (5,0,0) (0,5,0) (0,0,5)"), "{lps}");
+        }
+    }
 
     #[test]
     fn each_run_gets_a_folder_of_its_own() {

@@ -113,10 +113,14 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
         eprintln!("warning    {w}");
     }
     let last_truth = truths.as_ref().and_then(|t| t.last()).map(Vec::as_slice);
-    let summary = writer.finish(&registration, input.frame, &outcomes, (&last_cloud, last_truth))?;
+    let (summary, skipped) = writer.finish(&registration, input.frame, &outcomes, (&last_cloud, last_truth))?;
     print_lines(&run_lines(&outcomes, &summary, spec.given_units));
+    for s in skipped {
+        eprintln!("warning    {s}");
+    }
     println!(
-        "wrote      {} ({}, targets.csv, summary.json, registration.png and .html; for 3D Slicer: organ_deformed.vtk, targets.mrk.json)",
+        "wrote      {} ({}, targets.csv, summary.json, registration.png and .html; for 3D Slicer: organ_deformed.vtk, \
+         targets.mrk.json, displacement.nrrd)",
         out.display(),
         if sequence { "organ.pvd" } else { "organ.vtu" }
     );

@@ -2,8 +2,10 @@
 //! mm, its targets as `.fcsv` in LPS and mm, its truth as a CSV whose header names mm; and the
 //! same cloud, targets and truth as plain CSV in mm with `--units mm`. Both give the targets and
 //! the TRE of the same registration done all in metres and LPS (the examples' frame taken as LPS);
-//! the run gives Slicer back its targets and the deformed organ in mm and in its frame.
+//! the run gives Slicer back its targets and the deformed organ in mm and in its frame, and a
+//! displacement field that takes the registered targets back to where they were at rest.
 
+use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -96,11 +98,63 @@ fn slicer_files_and_millimetres_register_as_metres_do() {
         values.clone().fold(f64::MIN, f64::max) - values.fold(f64::MAX, f64::min)
     };
     assert!((100.0..400.0).contains(&extent(0)), "the deformed surface spans {} in x: not mm", extent(0));
+    // The displacement field, as Slicer applies it to the CT: at each registered target, where
+    // that target lay at rest (LPS, mm), to within the grid's interpolation.
+    let warp = displacement_field(&d.join("slicer/displacement.nrrd"));
+    let rest = read_points(&slicer[1]).unwrap().points;
+    let (mut worst, mut moved) = (0.0f64, 0.0f64);
+    for (y, x) in markups.points.iter().zip(&rest) {
+        let back = warp(*y);
+        worst = worst.max((0..3).map(|k| (y[k] + back[k] - x[k]).powi(2)).sum::<f64>().sqrt());
+        moved = moved.max((0..3).map(|k| (y[k] - x[k]).powi(2)).sum::<f64>().sqrt());
+    }
+    println!("displacement.nrrd: the targets back to rest within {worst:.3} mm (they moved up to {moved:.2} mm)");
+    assert!(worst < 0.1 * moved, "{worst} mm off, for motions up to {moved} mm");
     // And near the examples' own metres (a last-bit change of the cloud moves the FEM's targets
     // by up to a few tenths of a millimetre).
     let (_, examples_tre) =
         register(&example("cloud.csv"), &example("targets.csv"), &example("truth.csv"), &d.join("examples"), &[]);
     assert!((examples_tre - tre).abs() < 0.05, "TRE {tre} against {examples_tre} mm");
+}
+
+/// The displacement field of an augsim displacement.nrrd (LPS, mm), interpolated trilinearly as
+/// ITK resamples it; the file's header checked to be what Slicer reads as a transform.
+fn displacement_field(path: &Path) -> impl Fn([f64; 3]) -> [f64; 3] {
+    let bytes = std::fs::read(path).unwrap();
+    let split = bytes.windows(2).position(|w| w == b"\n\n").unwrap();
+    let header = String::from_utf8(bytes[..split].to_vec()).unwrap();
+    let field = |name: &str| {
+        header.lines().find_map(|l| l.strip_prefix(&format!("{name}: "))).unwrap_or_else(|| panic!("no {name}"))
+    };
+    assert_eq!(field("kinds"), "vector domain domain domain");
+    assert_eq!(field("space"), "left-posterior-superior");
+    assert_eq!((field("type"), field("encoding"), field("endian")), ("float", "gzip", "little"));
+    let sizes: Vec<usize> = field("sizes").split(' ').map(|s| s.parse().unwrap()).collect();
+    let vector = |text: &str| -> [f64; 3] {
+        let v: Vec<f64> = text.trim_matches(['(', ')']).split(',').map(|x| x.parse().unwrap()).collect();
+        [v[0], v[1], v[2]]
+    };
+    let axes: Vec<[f64; 3]> = field("space directions").split(' ').skip(1).map(vector).collect();
+    let origin = vector(field("space origin"));
+    let mut raw = Vec::new();
+    flate2::read::GzDecoder::new(&bytes[split + 2..]).read_to_end(&mut raw).unwrap();
+    let values: Vec<f64> = raw.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap()) as f64).collect();
+    let dims = [sizes[1], sizes[2], sizes[3]];
+    assert_eq!((sizes[0], values.len()), (3, 3 * dims.iter().product::<usize>()));
+    move |p: [f64; 3]| {
+        // The axes are the grid's, up to the signs of LPS: index = (p - origin) / step.
+        let f: [f64; 3] = std::array::from_fn(|d| (p[d] - origin[d]) / axes[d][d]);
+        let base: [usize; 3] = std::array::from_fn(|d| (f[d].floor() as usize).min(dims[d] - 2));
+        let mut out = [0.0; 3];
+        for corner in 0..8 {
+            let o = [corner & 1, corner >> 1 & 1, corner >> 2];
+            let w: f64 =
+                (0..3).map(|d| if o[d] == 1 { f[d] - base[d] as f64 } else { 1.0 - f[d] + base[d] as f64 }).product();
+            let n = (base[0] + o[0]) + dims[0] * ((base[1] + o[1]) + dims[1] * (base[2] + o[2]));
+            (0..3).for_each(|c| out[c] += w * values[3 * n + c]);
+        }
+        out
+    }
 }
 
 /// A 3D Slicer user's round trip: the organ as an LPS surface (`SPACE=LPS` STL), its landmarks and

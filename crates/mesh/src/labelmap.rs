@@ -795,6 +795,42 @@ pub fn write_nrrd(path: impl AsRef<Path>, map: &Labelmap) -> Result<(), MeshErro
     std::fs::write(path, [text.into_bytes(), compressed].concat()).map_err(|error| io_error(path, error))
 }
 
+/// Writes a displacement field as 3D Slicer and ITK read a displacement-field transform: NRRD,
+/// `kinds: vector domain domain domain`, 32-bit floats, gzip, `space: left-posterior-superior`.
+/// `affine` maps grid indices to LPS positions (mm) as [`Labelmap::affine`]; `vectors` (mm, LPS)
+/// are x fastest, then y, then z, as many as grid points.
+pub fn write_displacement_nrrd(
+    path: impl AsRef<Path>,
+    dims: [usize; 3],
+    affine: [[f64; 4]; 3],
+    vectors: &[[f64; 3]],
+) -> Result<(), MeshError> {
+    let path = path.as_ref();
+    if vectors.len() != dims.iter().product::<usize>() {
+        return Err(MeshError::Invalid(format!(
+            "{}: {} vectors for a grid of {dims:?}",
+            path.display(),
+            vectors.len()
+        )));
+    }
+    // Adding 0 writes −0 as 0.
+    let vector = |v: [f64; 3]| format!("({},{},{})", v[0] + 0.0, v[1] + 0.0, v[2] + 0.0);
+    let axes: Vec<String> = (0..3).map(|c| vector(std::array::from_fn(|r| affine[r][c]))).collect();
+    let text = format!(
+        "NRRD0004\n# displacement field, written by augsim\ntype: float\ndimension: 4\n\
+         space: left-posterior-superior\nsizes: 3 {} {} {}\nspace directions: none {}\n\
+         kinds: vector domain domain domain\nendian: little\nencoding: gzip\nspace origin: {}\n\n",
+        dims[0],
+        dims[1],
+        dims[2],
+        axes.join(" "),
+        vector(std::array::from_fn(|r| affine[r][3])),
+    );
+    let data: Vec<u8> = vectors.iter().flatten().flat_map(|&x| (x as f32).to_le_bytes()).collect();
+    let bytes = [text.into_bytes(), gzip(path, &data)?].concat();
+    crate::io::write_atomic_bytes(path, &bytes).map_err(MeshError::from)
+}
+
 fn io_error(path: &Path, error: std::io::Error) -> MeshError {
     MeshError::Io { path: path.display().to_string(), error }
 }

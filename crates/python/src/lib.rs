@@ -363,7 +363,7 @@ impl Registration {
     /// `iterations`, `warnings`, `ms`). With `out`,
     /// a directory, also writes there what `augsim register` writes: organ.vtu (m), targets.csv (in
     /// `units`), summary.json, registration.png and .html (pictures), and for 3D Slicer
-    /// targets.mrk.json and organ_deformed.vtk (mm), all
+    /// targets.mrk.json, organ_deformed.vtk and displacement.nrrd (mm), all
     /// in the clouds' frame (`frame`; default: the organ's), which they name when known. Raises ValueError for an array of another shape,
     /// AugsimError for a cloud augsim rejects (no point, a NaN) or a failed registration (the
     /// warm start is then kept).
@@ -444,7 +444,7 @@ impl Registration {
 
 /// Writes one registered `cloud` (in the organ's frame, m) as `augsim register` does (organ.vtu,
 /// targets.csv in `unit`, summary.json, registration.png and .html, and for 3D Slicer
-/// targets.mrk.json and organ_deformed.vtk), in the clouds' frame of `(organ, given)` frames
+/// targets.mrk.json, organ_deformed.vtk and displacement.nrrd), in the clouds' frame of `(organ, given)` frames
 /// ([`RunWriter::new`]).
 fn write_frame(
     dir: &std::path::Path,

@@ -1,0 +1,193 @@
+//! A registration as a displacement field on a regular grid, as ITK and 3D Slicer store and apply
+//! transforms to images: [`WarpField`]. Applied to the preoperative CT or to its segmentations
+//! (tumours, vessels), it shows them as the registration deformed them.
+
+use rayon::prelude::*;
+
+use mesh::{bounds, MeshLocator, Point, SurfaceBvh};
+
+use crate::{Organ, RegisterError, Result, RigidResult};
+
+/// A displacement field on a grid aligned with the axes, in metres, in the registered organ's
+/// frame (the cloud's): at grid point `y`, `d(y)` such that `y + d(y)` is where that point lay in
+/// the organ at rest. This is the resampling direction in which ITK and 3D Slicer store a
+/// displacement-field transform, the organ at rest (the CT) being the child and the cloud's frame
+/// the parent.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WarpField {
+    /// The position of grid point (0, 0, 0).
+    pub origin: Point,
+    /// The grid's step along each axis.
+    pub spacing: f64,
+    /// Grid points along x, y and z.
+    pub dims: [usize; 3],
+    /// `d` at each grid point, x fastest, then y, then z.
+    pub vectors: Vec<Point>,
+}
+
+impl WarpField {
+    /// The field of displacement `u` of `organ` (node-major, m), moved by `rigid` when the
+    /// registration aligned the organ rigidly first. The grid covers the registered organ with a
+    /// margin of 15 % of its largest extent on every side, that extent divided into
+    /// `cells_across` steps. Inside the registered organ, `y + d(y)` is the rest position of the
+    /// point (exact in linear elements: the map is affine in each); outside, the deformation at
+    /// the nearest point of the organ's boundary fades linearly to nothing across the margin, so
+    /// that the tissue around the organ, which the model does not hold, stays where the rigid
+    /// alignment puts it. An error when the registered organ has inverted elements (its
+    /// displacement is then no map).
+    pub fn of_registration(
+        organ: &Organ,
+        u: &[f64],
+        rigid: Option<&RigidResult>,
+        cells_across: usize,
+    ) -> Result<WarpField> {
+        let rest = organ.mesh();
+        if u.len() != 3 * rest.nodes.len() {
+            return Err(RegisterError::Invalid(format!(
+                "a displacement of {} values for {} nodes",
+                u.len(),
+                rest.nodes.len()
+            )));
+        }
+        let mut deformed = rest.clone();
+        deformed.nodes.iter_mut().zip(u.chunks_exact(3)).for_each(|(p, v)| (0..3).for_each(|d| p[d] += v[d]));
+        let locator = MeshLocator::new(&deformed).map_err(|e| {
+            RegisterError::Invalid(format!("the registered organ is no map of the organ at rest: {}", e.message()))
+        })?;
+        let boundary = mesh::boundary_surface(&deformed);
+        let bvh = SurfaceBvh::new(&boundary)?;
+        let in_cloud: Vec<Point> = match rigid {
+            Some(r) => deformed.nodes.iter().map(|&p| r.organ_to_cloud().apply(p)).collect(),
+            None => deformed.nodes.clone(),
+        };
+        let (lo, hi) = bounds(&in_cloud);
+        let extent = (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max);
+        let margin = 0.15 * extent;
+        let spacing = (extent + 2.0 * margin) / cells_across.max(1) as f64;
+        let origin: Point = std::array::from_fn(|d| lo[d] - margin);
+        let dims: [usize; 3] = std::array::from_fn(|d| ((hi[d] - lo[d] + 2.0 * margin) / spacing).ceil() as usize + 1);
+        let point = |n: usize| -> Point {
+            let ijk = [n % dims[0], (n / dims[0]) % dims[1], n / (dims[0] * dims[1])];
+            std::array::from_fn(|d| origin[d] + spacing * ijk[d] as f64)
+        };
+        let vectors = (0..dims.iter().product::<usize>())
+            .into_par_iter()
+            .map(|n| {
+                let y = point(n);
+                // In the organ's frame, registered.
+                let z = rigid.map_or(y, |r| r.cloud_to_organ.apply(y));
+                let x = match locator.locate(z) {
+                    Some(location) => {
+                        let mut x = [0.0; 3];
+                        for (node, weight) in location.terms() {
+                            (0..3).for_each(|d| x[d] += weight * rest.nodes[node][d]);
+                        }
+                        x
+                    }
+                    None => {
+                        let closest = bvh.closest_point(z);
+                        let corners = boundary.triangles[closest.triangle];
+                        let weights =
+                            mesh::bvh::triangle_barycentric(corners.map(|c| deformed.nodes[c]), closest.point);
+                        let fade = (1.0 - closest.distance / margin).max(0.0);
+                        std::array::from_fn(|d| {
+                            let back: f64 = (0..3).map(|k| weights[k] * u[3 * corners[k] + d]).sum();
+                            z[d] - fade * back
+                        })
+                    }
+                };
+                std::array::from_fn(|d| x[d] - y[d])
+            })
+            .collect();
+        Ok(WarpField { origin, spacing, dims, vectors })
+    }
+
+    /// `d` at `p` by trilinear interpolation of the grid, as ITK resamples it; `None` outside the
+    /// grid.
+    pub fn at(&self, p: Point) -> Option<Point> {
+        let mut base = [0usize; 3];
+        let mut t = [0.0; 3];
+        for d in 0..3 {
+            let f = (p[d] - self.origin[d]) / self.spacing;
+            if !(f >= 0.0 && f <= (self.dims[d] - 1) as f64) {
+                return None;
+            }
+            base[d] = (f.floor() as usize).min(self.dims[d].saturating_sub(2));
+            t[d] = f - base[d] as f64;
+        }
+        let mut value = [0.0; 3];
+        for corner in 0..8 {
+            let offset = [corner & 1, corner >> 1 & 1, corner >> 2];
+            let weight: f64 = (0..3).map(|d| if offset[d] == 1 { t[d] } else { 1.0 - t[d] }).product();
+            let [i, j, k]: [usize; 3] = std::array::from_fn(|d| (base[d] + offset[d]).min(self.dims[d] - 1));
+            let v = self.vectors[i + self.dims[0] * (j + self.dims[1] * k)];
+            (0..3).for_each(|d| value[d] += weight * v[d]);
+        }
+        Some(value)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::RigidTransform;
+    use mesh::norm;
+
+    /// A cube stretched by 10 % along x and sheared: inside, the field takes every registered
+    /// point back to its rest position (to rounding for this affine map, between grid points to
+    /// the grid's interpolation); far outside it is nothing; with a rigid alignment, the rigid
+    /// motion is undone everywhere.
+    #[test]
+    fn the_field_takes_registered_points_back_to_rest() {
+        let cube = mesh::box_tet([0.0; 3], [0.04; 3], [4, 4, 4]).unwrap();
+        let organ = Organ::new(cube.clone(), None).unwrap();
+        let motion = |p: Point| -> Point { [0.1 * p[0] + 0.05 * p[2], 0.02 * p[0], 0.0] };
+        let u: Vec<f64> = cube.nodes.iter().flat_map(|&p| motion(p)).collect();
+        let field = WarpField::of_registration(&organ, &u, None, 40).unwrap();
+        assert_eq!(field.dims.iter().max(), Some(&41), "40 steps across the largest extent");
+        let mut worst: f64 = 0.0;
+        for &x in &[[0.01, 0.02, 0.03], [0.035, 0.005, 0.02], [0.02, 0.02, 0.02]] {
+            let y: Point = std::array::from_fn(|d| x[d] + motion(x)[d]);
+            let d = field.at(y).unwrap();
+            worst = worst.max(norm(std::array::from_fn(|k| y[k] + d[k] - x[k])));
+        }
+        // Trilinear interpolation of an affine field is exact; the grid points themselves are
+        // exact inside: what is left is rounding.
+        assert!(worst < 1e-12, "{worst}");
+        // Far from the organ: no deformation.
+        let corner = field.origin;
+        assert!(norm(field.at(corner).unwrap()) < 1e-15);
+        // Rigidly aligned (turned about z, moved): the field undoes that motion as well.
+        let turn = RigidTransform {
+            rotation: [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
+            translation: [0.3, -0.2, 0.1],
+        };
+        let rigid = RigidResult {
+            cloud_to_organ: turn.inverse(),
+            iterations: 1,
+            converged: true,
+            rms: 0.0,
+            kept: 0,
+            points: 0,
+            time: std::time::Duration::ZERO,
+        };
+        let moved = WarpField::of_registration(&organ, &u, Some(&rigid), 40).unwrap();
+        let x = [0.01, 0.02, 0.03];
+        let y = turn.apply(std::array::from_fn(|d| x[d] + motion(x)[d]));
+        let d = moved.at(y).unwrap();
+        assert!(norm(std::array::from_fn(|k| y[k] + d[k] - x[k])) < 1e-12);
+        let far = moved.origin;
+        let back = turn.inverse().apply(far);
+        assert!(norm(std::array::from_fn(|k| far[k] + moved.at(far).unwrap()[k] - back[k])) < 1e-12);
+    }
+
+    /// An inverted organ has no field.
+    #[test]
+    fn an_inverted_organ_is_refused() {
+        let cube = mesh::box_tet([0.0; 3], [0.04; 3], [2, 2, 2]).unwrap();
+        let organ = Organ::new(cube.clone(), None).unwrap();
+        let u: Vec<f64> = cube.nodes.iter().flat_map(|&p| [-2.0 * p[0], 0.0, 0.0]).collect();
+        let e = WarpField::of_registration(&organ, &u, None, 10).unwrap_err().to_string();
+        assert!(e.contains("no map of the organ at rest"), "{e}");
+    }
+}
