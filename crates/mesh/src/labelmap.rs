@@ -623,7 +623,7 @@ impl Labelmap {
     }
 
     /// A list of the labels present for messages, e.g. "1 (liver, 5120 voxels), 2 (842 voxels)";
-    /// past [`SHOWN_LABELS`], how many more.
+    /// past twenty, how many more.
     pub fn present_text(&self) -> String {
         let present = self.present();
         let mut items: Vec<String> = present
