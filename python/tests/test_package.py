@@ -43,6 +43,7 @@ def test_solve_beam_matches_the_command_line(tmp_path):
     # Converged: a relative residual under rtol (1e-6), or a last increment under utol at one under
     # its square root.
     assert 0 < s.residual <= 1e-3 and s.load_steps >= 1
+    assert repr(s).startswith(f"Solution(nodes={6 * 6 * 21}, iterations={s.iterations}, load_steps={s.load_steps}, ")
 
 
 @pytest.fixture(scope="module")
@@ -67,6 +68,9 @@ def test_registration_reduces_the_tre_with_a_warm_start(case):
     assert first.displacement.shape == reg.points.shape
     assert first.points == len(case["cloud"]) and 0 < first.inliers <= first.points
     assert 0 < first.surface_residual < 2.0  # mm
+    assert repr(first).startswith(f"Registered(targets={len(case['rest'])}, iterations={first.iterations}, "
+                                  "from_rest=True, ")
+    assert repr(frames[1]).count("from_rest=False") == 1
     # The warm start: after those frames the noiseless cloud registers otherwise (measured: 0.85 mm
     # apart) than from rest, as a new Registration does; after reset() it registers from rest
     # again (measured: 0.06 mm apart, the FEM solver keeping its factorisation).
@@ -290,6 +294,7 @@ def test_roukf_converges_to_the_young_modulus():
     for k, z in enumerate(observations, 1):
         e = a.step(z)
         assert e.iteration == k == a.iteration and len(e.mean) == len(e.std) == 1
+        assert repr(e) == f"Estimate(iteration={k}, mean=[{e.mean[0]}], std=[{e.std[0]}], gated={e.gated})"
         errors.append(abs(e.mean[0] - 5000.0))
     print(f"\nROUKF: E from {prior:.0f} Pa to {a.mean[0]:.1f} ± {a.std[0]:.1f} Pa (truth 5000 Pa)", file=sys.stderr)
     assert abs(prior - 5000.0) > 1000.0

@@ -23,7 +23,9 @@ use mesh::length::LengthUnit;
 use mesh::Point;
 use nalgebra::DVector;
 use numpy::ndarray::{Array2, Array3, ArrayD, IxDyn};
-use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayDyn, PyArrayLikeDyn};
+use numpy::{
+    AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayDyn, PyArrayLikeDyn, PyUntypedArrayMethods,
+};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -169,6 +171,21 @@ struct Solution {
     ms: f64,
 }
 
+#[pymethods]
+impl Solution {
+    fn __repr__(&self, py: Python<'_>) -> String {
+        format!(
+            "Solution(nodes={}, iterations={}, load_steps={}, residual={:.3e}, max_displacement={:.6}, ms={:.1})",
+            self.points.bind(py).shape()[0],
+            self.iterations,
+            self.load_steps,
+            self.residual,
+            self.max_displacement,
+            self.ms
+        )
+    }
+}
+
 /// Solves a static scenario as `augsim solve` does.
 ///
 /// `scenario`: a scenario file (TOML, `kind = "static"`) or the name of a built-in one (`beam`,
@@ -233,6 +250,24 @@ struct Registered {
     /// Wall time of the registration (ms).
     #[pyo3(get)]
     ms: f64,
+}
+
+#[pymethods]
+impl Registered {
+    fn __repr__(&self, py: Python<'_>) -> String {
+        format!(
+            "Registered(targets={}, iterations={}, from_rest={}, surface_residual={:.6}, inliers={}, points={}, \
+             warnings={}, ms={:.1})",
+            self.targets.bind(py).shape()[0],
+            self.iterations,
+            if self.from_rest { "True" } else { "False" },
+            self.surface_residual,
+            self.inliers,
+            self.points,
+            self.warnings.len(),
+            self.ms
+        )
+    }
 }
 
 /// Registration of intraoperative point clouds, as `augsim serve` does for each client: each
@@ -520,6 +555,20 @@ struct Estimate {
     /// `[filter] gate`: farther from the prediction than it allows, as a tracking failure).
     #[pyo3(get)]
     gated: usize,
+}
+
+#[pymethods]
+impl Estimate {
+    fn __repr__(&self) -> String {
+        let list = |v: &[f64]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", ");
+        format!(
+            "Estimate(iteration={}, mean=[{}], std=[{}], gated={})",
+            self.iteration,
+            list(&self.mean),
+            list(&self.std),
+            self.gated
+        )
+    }
 }
 
 /// The ROUKF of an assimilation scenario, one step at a time.
