@@ -35,6 +35,7 @@ class Registered:
     rigid: Optional[npt.NDArray[np.float64]]
     target_sigma: Optional[npt.NDArray[np.float64]]
     ms: float
+    structures: dict[str, npt.NDArray[np.float64]]
 
 class Registration:
     method: str
@@ -58,6 +59,7 @@ class Registration:
         frame: Optional[str] = None,
         iterations: Optional[int] = None,
         rigid: bool = False,
+        structures: list[_Path] = [],
     ) -> None: ...
     def register(self, cloud: npt.ArrayLike, *, out: Optional[_Path] = None) -> Registered: ...
     def reset(self) -> None: ...

@@ -169,6 +169,30 @@ def test_a_unit_mistake_in_the_targets_is_named(case):
         augsim.Registration(fem=case["scenario"], targets=case["rest"] * 1e-3, units="mm")
 
 
+def test_a_structure_moves_with_the_organ(case, tmp_path):
+    # An octahedron of 2 mm about the first target, as an ASCII STL in mm: it comes back moved with
+    # the organ, its centre on the registered target, and is written beside the organ.
+    corners = case["rest"][0] + 2.0 * np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]])
+    faces = [(0, 2, 4), (2, 1, 4), (1, 3, 4), (3, 0, 4), (2, 0, 5), (1, 2, 5), (3, 1, 5), (0, 3, 5)]
+    facets = "".join("facet normal 0 0 0\nouter loop\n" + "".join(f"vertex {x} {y} {z}\n" for x, y, z in corners[list(f)])
+                     + "endloop\nendfacet\n" for f in faces)
+    stl = tmp_path / "tumour.stl"
+    stl.write_text(f"solid tumour\n{facets}endsolid tumour\n")
+    reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm", structures=[stl])
+    r = reg.register(case["cloud"], out=tmp_path / "out")
+    moved = r.structures["tumour"]
+    assert list(r.structures) == ["tumour"] and moved.shape == (6, 3)
+    np.testing.assert_allclose(moved.mean(axis=0), r.targets[0], atol=0.05)
+    assert np.linalg.norm(moved - corners, axis=1).max() > 0.5, "moved with the organ"
+    assert (tmp_path / "out" / "tumour_deformed.vtk").exists()
+    assert augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm").register(
+        case["cloud"]).structures == {}
+    organ = tmp_path / "organ.stl"
+    organ.write_text(stl.read_text())
+    with pytest.raises(augsim.AugsimError, match="cannot be named `organ`"):
+        augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm", structures=[organ])
+
+
 def test_register_writes_what_the_command_line_writes(case, tmp_path):
     reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm")
     r = reg.register(case["cloud"], out=tmp_path / "out")

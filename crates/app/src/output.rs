@@ -3,7 +3,8 @@
 //! deviation when the method gives one) and summary.json (the run's figures and each frame's),
 //! all in the cloud's frame (the frame the clouds were given in, which targets.csv and
 //! summary.json name when known); for 3D Slicer, the registered targets as markups (targets.mrk.json)
-//! and the deformed organ's surface (organ_deformed.vtk), in millimetres and naming their frame,
+//! and the deformed organ's surface (organ_deformed.vtk) and structures (NAME_deformed.vtk), in
+//! millimetres and naming their frame,
 //! and the registration as a displacement-field transform (displacement.nrrd) that warps the CT
 //! and its segmentations; and what a comparison of methods on a synthetic case writes; each
 //! run in a folder of its own ([`run_dir`]).
@@ -194,8 +195,8 @@ impl RunWriter {
 
     /// Writes organ.pvd (for a sequence), targets.csv (of the last frame of `registration`, with
     /// its targets' labels), the last frame for 3D Slicer (targets.mrk.json, organ_deformed.vtk,
-    /// its registered surface, and displacement.nrrd, see [`write_warp`]) and summary.json, all in
-    /// the results' frame,
+    /// its registered surface, NAME_deformed.vtk for each of its structures, and
+    /// displacement.nrrd, see [`write_warp`]) and summary.json, all in the results' frame,
     /// which they name when known (the clouds' frame given, else `working`: the frame the
     /// registration worked in, once the organ or a file named one), and the last frame's
     /// pictures, registration.png and registration.html, in the organ's frame (`last`: its
@@ -229,6 +230,11 @@ impl RunWriter {
         let mut surface = register::organ_surface(registration.organ(), &last.registration.u, last.rigid.as_ref());
         surface.vertices = self.converted(&surface.vertices);
         write_deformed_surface(&self.dir.join("organ_deformed.vtk"), &surface, frame)?;
+        for structure in registration.structures() {
+            let mut surface = structure.deformed(&last.registration.u, last.rigid.as_ref());
+            surface.vertices = self.converted(&surface.vertices);
+            write_deformed_surface(&self.dir.join(format!("{}_deformed.vtk", structure.name())), &surface, frame)?;
+        }
         let mut skipped = Vec::new();
         match WarpField::of_registration(registration.organ(), &last.registration.u, last.rigid.as_ref(), WARP_STEPS) {
             Ok(field) => write_warp(&self.dir.join("displacement.nrrd"), &field, self.change, frame)?,

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use learn::Model;
 use mesh::io::points::LabelledPoints;
-use mesh::io::{Frame, FrameChange};
+use mesh::io::{read_surface_with_frame, Frame, FrameChange};
 use mesh::length::LengthUnit;
 use mesh::Point;
 use register::{shape, Deformer, HybridDeformer, Organ, Registration, RegistrationOptions};
@@ -325,6 +325,11 @@ pub struct RegistrationChoice {
     /// clouds; targets and organ are then given back in the cloud's frame.
     #[arg(long)]
     pub rigid: bool,
+    /// A structure inside the organ (a tumour, vessels: a surface 3D Slicer exports, .stl, .obj,
+    /// .ply, .vtk, .vtp) given back deformed with it, named by its file's stem; in --units and in
+    /// the frame its header names (else the targets'). Repeat for several.
+    #[arg(long = "structure", value_name = "SURFACE")]
+    pub structures: Vec<PathBuf>,
 }
 
 /// A targets file argument.
@@ -422,6 +427,7 @@ impl RegistrationChoice {
             let mut spec = RegistrationSpec::patient(dir, method, self.iterations, self.rigid)?;
             spec.given_units = self.units.unwrap_or(spec.given_units);
             spec.given_frame = self.frame;
+            spec.structures.clone_from(&self.structures);
             return Ok(spec);
         }
         let units = self.units.unwrap_or(LengthUnit::DEFAULT);
@@ -435,6 +441,7 @@ impl RegistrationChoice {
             rigid: self.rigid,
             time_budget_ms: None,
             options: None,
+            structures: self.structures.clone(),
         })
     }
 }
@@ -464,6 +471,9 @@ pub struct RegistrationSpec {
     /// the method's iteration budgets); a reduced-order model's shape fit takes its own budgets
     /// ([`register::shape::loop_options`]).
     pub options: Option<RegistrationOptions>,
+    /// Surfaces of structures inside the organ, given back deformed with it
+    /// ([`RegistrationChoice::structures`]).
+    pub structures: Vec<PathBuf>,
 }
 
 impl RegistrationSpec {
@@ -481,6 +491,7 @@ impl RegistrationSpec {
             rigid: false,
             time_budget_ms: None,
             options: None,
+            structures: Vec::new(),
         }
     }
 
@@ -522,7 +533,24 @@ impl RegistrationSpec {
         let mut registration =
             Registration::new(organ, deformer, method, points, labels, options).with_context(|| what)?.in_frame(frame);
         unplaced.into_iter().for_each(|w| registration.warn(w));
+        for path in &self.structures {
+            self.add_structure(&mut registration, path).with_context(|| format!("the structure {}", path.display()))?;
+        }
         Ok(registration)
+    }
+
+    /// Reads a structure's surface (in the unit of the points given, in the frame its header
+    /// names, else theirs) into `registration`'s frame and adds it, named by the file's stem, which
+    /// must fit an OpenIGTLink device name (20 bytes).
+    fn add_structure(&self, registration: &mut Registration, path: &Path) -> Result<()> {
+        let name = path.file_stem().map(|s| s.to_string_lossy().replace(char::is_whitespace, "_")).unwrap_or_default();
+        if name.len() > 20 {
+            anyhow::bail!("its name `{name}` is longer than 20 bytes, an OpenIGTLink device name: rename the file");
+        }
+        let (mut surface, frame) = read_surface_with_frame(path)?;
+        let change = FrameChange::between(frame.or(self.given_frame), registration.frame());
+        surface.vertices.iter_mut().for_each(|p| *p = self.given_units.point_to_metres(change.point(*p)));
+        Ok(registration.add_structure(&name, surface)?)
     }
 
     /// A stream's frame change: from the frame given (else RAS, the frame OpenIGTLink sends) to
@@ -631,6 +659,7 @@ impl RegistrationSpec {
             rigid,
             time_budget_ms: None,
             options: None,
+            structures: Vec::new(),
         })
     }
 }

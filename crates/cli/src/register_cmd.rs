@@ -118,9 +118,10 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
     for s in skipped {
         eprintln!("warning    {s}");
     }
+    let structures: String = registration.structures().iter().map(|s| format!(", {}_deformed.vtk", s.name())).collect();
     println!(
-        "wrote      {} ({}, targets.csv, summary.json, registration.png and .html; for 3D Slicer: organ_deformed.vtk, \
-         targets.mrk.json, displacement.nrrd)",
+        "wrote      {} ({}, targets.csv, summary.json, registration.png and .html; for 3D Slicer: organ_deformed.vtk\
+         {structures}, targets.mrk.json, displacement.nrrd)",
         out.display(),
         if sequence { "organ.pvd" } else { "organ.vtu" }
     );

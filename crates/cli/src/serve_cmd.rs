@@ -24,7 +24,8 @@ pub struct ServeArgs {
     host: String,
     /// The answers to each cloud, comma-separated: targets (POINT), organ (POLYDATA), transform
     /// (TRANSFORM `rigid`, with --rigid), status (STRING; a refused cloud's error is sent
-    /// whatever the list). Default: every one.
+    /// whatever the list), structures (a POLYDATA per --structure, named by it). Default: every
+    /// one.
     #[arg(long, value_name = "LIST")]
     outputs: Option<String>,
     /// Identification on the stream: the ROUKF of this assimilation scenario (its model, unknowns

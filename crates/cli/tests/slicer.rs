@@ -117,6 +117,47 @@ fn slicer_files_and_millimetres_register_as_metres_do() {
     assert!((examples_tre - tre).abs() < 0.05, "TRE {tre} against {examples_tre} mm");
 }
 
+/// A tumour given as 3D Slicer exports a segment (an STL in LPS and mm) comes back moved with
+/// the organ: about the registered target it was drawn around, and where the displacement field
+/// the run writes takes it back to rest.
+#[test]
+fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mm = LengthUnit::Millimetre;
+    let centre = points("targets.csv", Some(Frame::Lps), mm, true, false).points[0];
+    let mut ball = mesh::generate::icosphere(6.0, 2);
+    ball.transform(centre.map(|x| -x), 1.0);
+    let tumour = d.join("tumour.stl");
+    mesh::io::write_surface_in_frame(&tumour, &ball, Frame::Lps).unwrap();
+    let tumour = tumour.to_str().unwrap();
+    let (registered, _) = register(
+        &example("cloud.csv"),
+        &example("targets.csv"),
+        &example("truth.csv"),
+        &d.join("run"),
+        &["--units", "mm", "--structure", tumour],
+    );
+    let moved = mesh::io::read_surface(d.join("run/tumour_deformed.vtk")).unwrap();
+    let rest = mesh::io::read_surface(tumour).unwrap();
+    assert_eq!(moved.triangles, rest.triangles);
+    let n = moved.vertices.len() as f64;
+    let middle: Vec<f64> = (0..3).map(|k| moved.vertices.iter().map(|v| v[k]).sum::<f64>() / n).collect();
+    let off = (0..3).map(|k| (middle[k] - 1e3 * registered[0][k]).powi(2)).sum::<f64>().sqrt(); // targets.csv read in m
+    let warp = displacement_field(&d.join("run/displacement.nrrd"));
+    let (mut worst, mut motion) = (0.0f64, 0.0f64);
+    for (y, x) in moved.vertices.iter().zip(&rest.vertices) {
+        let back = warp(*y);
+        worst = worst.max((0..3).map(|k| (y[k] + back[k] - x[k]).powi(2)).sum::<f64>().sqrt());
+        motion = motion.max((0..3).map(|k| (y[k] - x[k]).powi(2)).sum::<f64>().sqrt());
+    }
+    println!(
+        "tumour: centre {off:.2} mm from its target; back to rest within {worst:.3} mm of motions up to {motion:.1} mm"
+    );
+    assert!(motion > 5.0 && worst < 0.05 * motion, "{worst} mm back from rest, motions up to {motion} mm");
+    assert!(off < 1.0, "the tumour's centre is {off} mm from its registered target");
+}
+
 /// The displacement field of an augsim displacement.nrrd (LPS, mm), interpolated trilinearly as
 /// ITK resamples it; the file's header checked to be what Slicer reads as a transform.
 fn displacement_field(path: &Path) -> impl Fn([f64; 3]) -> [f64; 3] {

@@ -82,7 +82,7 @@ pub fn stream_case(method: &str, case: &SyntheticCase, deformed_by: MethodSpec) 
     let factory = live::first_then_build(None, move || spec.build().map_err(|e| format!("{e:#}")));
     let serve_options = ServeOptions {
         units: LengthUnit::Millimetre,
-        outputs: Outputs { targets: true, organ: false, transform: false, status: true },
+        outputs: Outputs { targets: true, organ: false, transform: false, status: true, structures: false },
         ..ServeOptions::default()
     };
     let stop = Arc::new(AtomicBool::new(false));

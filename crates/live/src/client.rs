@@ -15,6 +15,8 @@ pub enum Answer {
     Targets(Vec<[f32; 3]>),
     /// POLYDATA `organ`: the registered organ surface.
     Organ(PolyData),
+    /// A POLYDATA of another name: a structure moved with the organ, by its name.
+    Structure(String, PolyData),
     /// TRANSFORM `rigid`: the organ-to-cloud transform, row-major 4 × 4.
     Rigid([[f32; 4]; 4]),
     /// STRING `status`: one line of JSON.
@@ -89,7 +91,10 @@ impl Client {
             "POINT" => Answer::Targets(
                 decode_body::<PointMessage>(&parsed, &body)?.points.iter().map(|p| p.position).collect(),
             ),
-            "POLYDATA" => Answer::Organ(decode_body(&parsed, &body)?),
+            "POLYDATA" => match parsed.device_name.as_str() {
+                "organ" => Answer::Organ(decode_body(&parsed, &body)?),
+                name => Answer::Structure(name.to_string(), decode_body(&parsed, &body)?),
+            },
             "TRANSFORM" => Answer::Rigid(decode_body::<TransformMessage>(&parsed, &body)?.matrix),
             "STRING" => {
                 let text: StringMessage = decode_body(&parsed, &body)?;

@@ -7,7 +7,8 @@
 //! - out, per cloud, in this order and as chosen by [`Outputs`]: POINT `targets` (the
 //!   registered targets, in the order given to the server, each named by its label, else
 //!   `target k`), POLYDATA `organ` (the registered
-//!   surface with its triangles), TRANSFORM `rigid` (the organ-to-cloud transform, when the
+//!   surface with its triangles), a POLYDATA per structure that moves with the organ (a tumour,
+//!   vessels: [`register::Structure`]), named as it, TRANSFORM `rigid` (the organ-to-cloud transform, when the
 //!   registration options ask for a rigid pre-alignment: estimated on a client's first cloud and
 //!   kept while its clouds register plausibly, estimated again after one that does not; targets and
 //!   organ are then in the cloud's frame), STRING `status` (one line
@@ -90,23 +91,29 @@ pub struct Outputs {
     pub transform: bool,
     /// STRING `status` of a registered cloud (an error's status is sent whatever this says).
     pub status: bool,
+    /// POLYDATA of each structure that moves with the organ, named as the structure
+    /// ([`register::Structure`]).
+    pub structures: bool,
 }
 
 impl Outputs {
     /// Every output.
-    pub const ALL: Outputs = Outputs { targets: true, organ: true, transform: true, status: true };
+    pub const ALL: Outputs = Outputs { targets: true, organ: true, transform: true, status: true, structures: true };
 
-    /// Parses a comma-separated list of `targets`, `organ`, `transform`, `status` (e.g.
-    /// `targets,status`).
+    /// Parses a comma-separated list of `targets`, `organ`, `transform`, `status`, `structures`
+    /// (e.g. `targets,status`).
     pub fn parse(list: &str) -> std::result::Result<Outputs, String> {
-        let mut out = Outputs { targets: false, organ: false, transform: false, status: false };
+        let mut out = Outputs { targets: false, organ: false, transform: false, status: false, structures: false };
         for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
             match name {
                 "targets" => out.targets = true,
                 "organ" => out.organ = true,
                 "transform" => out.transform = true,
                 "status" => out.status = true,
-                other => return Err(format!("unknown output '{other}' (targets, organ, transform, status)")),
+                "structures" => out.structures = true,
+                other => {
+                    return Err(format!("unknown output '{other}' (targets, organ, transform, status, structures)"))
+                }
             }
         }
         if !(out.targets || out.organ || out.transform || out.status) {
@@ -654,11 +661,17 @@ fn answer(
             .collect();
         shared.send(&PointMessage { points }, "targets")?;
     }
+    let polydata = |surface: mesh::TriSurface| PolyData {
+        points: surface.vertices.iter().map(to_wire).collect(),
+        triangles: surface.triangles.iter().map(|t| t.map(|i| i as u32)).collect(),
+    };
     if options.outputs.organ {
-        let surface = tracked.organ_surface(registration.organ());
-        let triangles = surface.triangles.iter().map(|t| t.map(|i| i as u32)).collect();
-        let organ = PolyData { points: surface.vertices.iter().map(to_wire).collect(), triangles };
-        shared.send(&organ, "organ")?;
+        shared.send(&polydata(tracked.organ_surface(registration.organ())), "organ")?;
+    }
+    if options.outputs.structures {
+        for structure in registration.structures() {
+            shared.send(&polydata(structure.deformed(&result.u, rigid.as_ref())), structure.name())?;
+        }
     }
     if let (true, Some(r)) = (options.outputs.transform, rigid) {
         let matrix = change.transform(r.organ_to_cloud().homogeneous(units.metres())).map(|row| row.map(|x| x as f32));

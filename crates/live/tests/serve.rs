@@ -75,11 +75,16 @@ struct Server {
 
 impl Server {
     fn start(options: ServeOptions) -> Server {
+        Server::start_with(options, cube_registration)
+    }
+
+    /// A server of the registrations `factory` makes.
+    fn start_with(options: ServeOptions, factory: fn() -> Result<Registration, String>) -> Server {
         let listener = TcpListener::bind("127.0.0.1:0").unwrap();
         let port = listener.local_addr().unwrap().port();
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
-        let thread = std::thread::spawn(move || serve(listener, Arc::new(cube_registration), options, &flag));
+        let thread = std::thread::spawn(move || serve(listener, Arc::new(factory), options, &flag));
         Server { port, stop, thread }
     }
 
@@ -293,13 +298,50 @@ fn clouds_in_another_frame_are_answered_in_theirs() {
     server.stop();
 }
 
+/// A structure of the registration (a ball about the cube's centre, named `tumour`) comes after
+/// the organ as a POLYDATA of its name, moved with the organ: its centre where the registered
+/// target is.
+#[test]
+fn a_structure_is_answered_as_a_polydata_of_its_name() {
+    fn with_tumour() -> Result<Registration, String> {
+        let mut registration = cube_registration()?;
+        let mut ball = mesh::generate::icosphere(0.005, 1);
+        ball.transform([-SIDE / 2.0; 3], 1.0);
+        registration.add_structure("tumour", ball).map_err(|e| e.to_string())?;
+        Ok(registration)
+    }
+    let server =
+        Server::start_with(ServeOptions { units: LengthUnit::Millimetre, ..ServeOptions::default() }, with_tumour);
+    let (cloud, _) = pressed_cloud(300.0);
+    let mut client = connect(server.port);
+    client.send_cloud(cloud).unwrap();
+    let mut target = None;
+    let tumour = loop {
+        match client.receive().unwrap() {
+            Some(Answer::Targets(t)) => target = Some(t[0]),
+            Some(Answer::Organ(_)) => {}
+            Some(Answer::Structure(name, polydata)) => break (name, polydata),
+            other => panic!("expected the tumour's POLYDATA, got {other:?}"),
+        }
+    };
+    assert_eq!((tumour.0.as_str(), tumour.1.points.len(), tumour.1.triangles.len()), ("tumour", 42, 80));
+    let n = tumour.1.points.len() as f32;
+    let centre: Vec<f32> = (0..3).map(|d| tumour.1.points.iter().map(|p| p[d]).sum::<f32>() / n).collect();
+    let target = target.expect("the targets before the structures");
+    let off = (0..3).map(|d| (centre[d] - target[d]).powi(2)).sum::<f32>().sqrt();
+    assert!(off < 0.05, "the tumour's centre {centre:?} mm, the target {target:?} mm");
+    assert!(matches!(client.receive().unwrap(), Some(Answer::Status(_))));
+    drop(client);
+    server.stop();
+}
+
 #[test]
 fn outputs_parse_and_refuse_unknown_names() {
     assert_eq!(
         Outputs::parse("targets,status").unwrap(),
-        Outputs { targets: true, organ: false, transform: false, status: true }
+        Outputs { targets: true, organ: false, transform: false, status: true, structures: false }
     );
-    assert_eq!(Outputs::parse("targets, organ, transform, status").unwrap(), Outputs::ALL);
+    assert_eq!(Outputs::parse("targets, organ, transform, status, structures").unwrap(), Outputs::ALL);
     assert!(Outputs::parse("targets,mesh").unwrap_err().contains("mesh"));
     assert!(Outputs::parse("").is_err());
 }

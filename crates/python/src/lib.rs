@@ -29,6 +29,7 @@ use numpy::{
 use pyo3::create_exception;
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 use register::Tracked;
 use scenario::AssimilationScenario;
 
@@ -250,6 +251,10 @@ struct Registered {
     /// Wall time of the registration (ms).
     #[pyo3(get)]
     ms: f64,
+    /// Each structure's vertices moved with the organ, float64 [n, 3], by its name (the file's
+    /// stem; its triangles are the file's); empty without `structures`.
+    #[pyo3(get)]
+    structures: Py<PyDict>,
 }
 
 #[pymethods]
@@ -315,7 +320,7 @@ struct Registration {
 #[pymethods]
 impl Registration {
     #[new]
-    #[pyo3(signature = (*, fem=None, model=None, scenario=None, shape_model=None, patient=None, use_fem=None, use_hybrid=false, targets=None, units=None, frame=None, iterations=None, rigid=false))]
+    #[pyo3(signature = (*, fem=None, model=None, scenario=None, shape_model=None, patient=None, use_fem=None, use_hybrid=false, targets=None, units=None, frame=None, iterations=None, rigid=false, structures=Vec::new()))]
     #[allow(clippy::too_many_arguments)] // one per Python keyword argument
     fn new(
         py: Python<'_>,
@@ -331,6 +336,7 @@ impl Registration {
         frame: Option<&str>,
         iterations: Option<usize>,
         rigid: bool,
+        structures: Vec<PathBuf>,
     ) -> PyResult<Self> {
         let units: Option<LengthUnit> =
             units.map(str::parse).transpose().map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
@@ -362,6 +368,7 @@ impl Registration {
             frame,
             iterations,
             rigid,
+            structures,
         };
         choice.check().map_err(PyValueError::new_err)?;
         let (state, spec) = compute(py, move || {
@@ -406,7 +413,7 @@ impl Registration {
     fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>, out: Option<PathBuf>) -> PyResult<Registered> {
         let cloud: Vec<Point> =
             points(cloud, "cloud", self.unit.metres())?.into_iter().map(|p| self.change.point(p)).collect();
-        let Tracked { registration: result, targets, rigid, target_std } = compute(py, || {
+        let (Tracked { registration: result, targets, rigid, target_std }, moved) = compute(py, || {
             // A directory that cannot be made fails before the cloud moves the warm start on.
             if let Some(dir) = &out {
                 std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -416,8 +423,17 @@ impl Registration {
             if let Some(dir) = &out {
                 write_frame(dir, &state, (self.unit, self.frames), &tracked, &cloud)?;
             }
-            Ok(tracked)
+            let moved: Vec<(String, Vec<Point>)> = state
+                .structures()
+                .iter()
+                .map(|s| (s.name().to_string(), s.deformed(&tracked.registration.u, tracked.rigid.as_ref()).vertices))
+                .collect();
+            Ok((tracked, moved))
         })?;
+        let structures = PyDict::new(py);
+        for (name, vertices) in moved {
+            structures.set_item(name, self.point_array(py, &vertices))?;
+        }
         let rigid = rigid.map(|r| {
             let rows = self.change.transform(r.organ_to_cloud().homogeneous(self.unit.metres()));
             Array2::from_shape_fn((4, 4), |(i, j)| rows[i][j]).into_pyarray(py).unbind()
@@ -435,6 +451,7 @@ impl Registration {
             target_sigma: target_std
                 .map(|s| s.iter().map(|&v| self.unit.from_metres(v)).collect::<Vec<f64>>().into_pyarray(py).unbind()),
             ms: result.time.as_secs_f64() * 1e3,
+            structures: structures.unbind(),
         })
     }
 

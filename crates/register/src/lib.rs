@@ -55,6 +55,7 @@ pub mod plausibility;
 pub mod registration;
 pub mod rigid;
 pub mod shape;
+pub mod structure;
 pub mod warp;
 
 pub use checks::check_cloud;
@@ -67,4 +68,5 @@ pub use organ::{Organ, Stencil};
 pub use registration::{organ_surface, target_errors, within_two_std, FrameOutcome, Registration, Summary, Tracked};
 pub use rigid::{rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
 pub use shape::{model_shape_space, ShapeDeformer, ShapeOptions, ShapeSpace};
+pub use structure::Structure;
 pub use warp::WarpField;

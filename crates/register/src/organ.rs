@@ -279,7 +279,12 @@ fn scaled_fits(points: &[Point], scale: f64, organ_extent: f64, fits: impl Fn(&[
 /// extent `organ_extent`), as the end of an error message: that with x and y negated (a frame
 /// mix-up, RAS and LPS), or read 1,000 times smaller or larger (a unit mistake), `claim` holds.
 /// Empty when none of these fits.
-fn likely_mistake(points: &[Point], organ_extent: f64, claim: &str, fits: impl Fn(&[Point]) -> bool) -> String {
+pub(crate) fn likely_mistake(
+    points: &[Point],
+    organ_extent: f64,
+    claim: &str,
+    fits: impl Fn(&[Point]) -> bool,
+) -> String {
     let negated: Vec<Point> = points.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
     if fits(&negated) {
         format!(" (with x and y negated {claim}: are they in LPS where the organ is in RAS, or the reverse?)")

@@ -9,13 +9,30 @@
 
 use mesh::io::Frame;
 use mesh::stats::{max, mean};
-use mesh::Point;
+use mesh::{Point, TriSurface};
 use serde::Serialize;
 
 use crate::frame::{register_frame_begun, Deformer, FrameResult, RegistrationOptions};
 use crate::organ::{displaced, Organ, Stencil};
 use crate::rigid::{rigid_align, RigidResult, RigidSummary};
-use crate::{RegisterError, Result};
+use crate::{RegisterError, Result, Structure};
+
+/// Names a structure cannot take: those of what a registration writes and of the server's
+/// messages.
+pub const RESERVED_NAMES: [&str; 12] = [
+    "organ",
+    "targets",
+    "rigid",
+    "status",
+    "cloud",
+    "features",
+    "estimate",
+    "warning",
+    "reset",
+    "registration",
+    "displacement",
+    "summary",
+];
 
 /// One registered frame.
 #[derive(Clone, Debug)]
@@ -63,6 +80,7 @@ pub struct Registration {
     warnings: Vec<String>,
     warm: Option<Vec<f64>>,
     rigid: Option<RigidResult>,
+    structures: Vec<Structure>,
 }
 
 /// One cloud registered by a [`Registration`].
@@ -134,7 +152,29 @@ impl Registration {
             warnings,
             warm: None,
             rigid: None,
+            structures: Vec::new(),
         })
+    }
+
+    /// Adds a structure that moves with the organ (a tumour, vessels: [`Structure::new`]), named
+    /// `name`, its surface in m in the organ's frame; its warnings join the registration's. An
+    /// error for a name already taken, or one of the server's messages' (`organ`, `targets`…).
+    pub fn add_structure(&mut self, name: &str, surface: TriSurface) -> Result<()> {
+        if name.is_empty() || RESERVED_NAMES.contains(&name) || self.structures.iter().any(|s| s.name() == name) {
+            return Err(RegisterError::Invalid(format!(
+                "a structure cannot be named `{name}`: names are unique and none of {}",
+                RESERVED_NAMES.join(", ")
+            )));
+        }
+        let (structure, warnings) = Structure::new(&self.organ, name, surface)?;
+        self.structures.push(structure);
+        self.warnings.extend(warnings);
+        Ok(())
+    }
+
+    /// The structures that move with the organ, in the order added.
+    pub fn structures(&self) -> &[Structure] {
+        &self.structures
     }
 
     /// The organ (its mesh and surface, in m, at rest).
@@ -443,6 +483,23 @@ mod tests {
         // A target outside is named by its label too.
         let outside = labelled(vec!["A".into(), "B".into()], vec![two[0], [0.2, 0.0, 0.0]]).err().expect("outside");
         assert!(outside.to_string().starts_with("target 2 (`B`) at (200, 0, 0) mm is outside"), "{outside}");
+    }
+
+    /// Structures join the registration, their warnings with them; a name taken, or one of the
+    /// server's messages', is refused.
+    #[test]
+    fn structures_are_named_apart() {
+        let mut r = cube_with(vec![[0.01, 0.02, 0.03]]).unwrap();
+        let mut ball = mesh::generate::icosphere(0.01, 1);
+        ball.transform([-0.045, -0.025, -0.025], 1.0);
+        r.add_structure("vessel", ball.clone()).unwrap();
+        assert_eq!(r.structures().iter().map(Structure::name).collect::<Vec<_>>(), ["vessel"]);
+        assert!(r.warnings()[0].starts_with("`vessel`: "), "{:?}", r.warnings());
+        for taken in ["vessel", "organ", "targets", ""] {
+            let e = r.add_structure(taken, ball.clone()).unwrap_err().to_string();
+            assert!(e.contains(&format!("a structure cannot be named `{taken}`")), "{e}");
+        }
+        assert_eq!(r.structures().len(), 1);
     }
 
     #[test]
