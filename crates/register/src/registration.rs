@@ -217,8 +217,8 @@ impl Registration {
         &self.options
     }
 
-    /// Why the targets may not be what was meant (e.g. a set far smaller than the organ: a unit
-    /// mistake); empty when they look right.
+    /// Why the targets or structures may not be what was meant (e.g. a set of targets far smaller
+    /// than the organ: a unit mistake; a structure leaving the organ); empty when they look right.
     pub fn warnings(&self) -> &[String] {
         &self.warnings
     }
