@@ -12,6 +12,8 @@ use anyhow::{Context, Result};
 use learn::Model;
 use mesh::io::points::LabelledPoints;
 use mesh::io::{read_surface_with_frame, Frame, FrameChange};
+use mesh::isosurface::ExtractOptions;
+use mesh::labelmap::{is_labelmap, read_labelmap_surface};
 use mesh::length::LengthUnit;
 use mesh::Point;
 use register::{shape, Deformer, HybridDeformer, Organ, Registration, RegistrationOptions};
@@ -325,9 +327,10 @@ pub struct RegistrationChoice {
     /// clouds; targets and organ are then given back in the cloud's frame.
     #[arg(long)]
     pub rigid: bool,
-    /// A structure inside the organ (a tumour, vessels: a surface 3D Slicer exports, .stl, .obj,
-    /// .ply, .vtk, .vtp) given back deformed with it, named by its file's stem; in --units and in
-    /// the frame its header names (else the targets'). Repeat for several.
+    /// A structure inside the organ given back deformed with it (a tumour, vessels): a surface 3D
+    /// Slicer exports (.stl, .obj, .ply, .vtk, .vtp; in --units and the frame its header names,
+    /// else the targets'), named by its file's stem; or LABELMAP:LABEL, a label of a labelmap
+    /// (seg.seg.nrrd:tumour, seg.nii.gz:2), named by the label. Repeat for several.
     #[arg(long = "structure", value_name = "SURFACE")]
     pub structures: Vec<PathBuf>,
 }
@@ -539,17 +542,37 @@ impl RegistrationSpec {
         Ok(registration)
     }
 
-    /// Reads a structure's surface (in the unit of the points given, in the frame its header
-    /// names, else theirs) into `registration`'s frame and adds it, named by the file's stem, which
-    /// must fit an OpenIGTLink device name (20 bytes).
-    fn add_structure(&self, registration: &mut Registration, path: &Path) -> Result<()> {
-        let name = path.file_stem().map(|s| s.to_string_lossy().replace(char::is_whitespace, "_")).unwrap_or_default();
+    /// Reads a structure into `registration`'s frame and adds it: a surface file (in the unit of
+    /// the points given, in the frame its header names, else theirs), named by its stem; or
+    /// `LABELMAP:LABEL`, a label's surface extracted from a labelmap (mm, the scanner's frame),
+    /// named by the label. The name must fit an OpenIGTLink device name (20 bytes).
+    fn add_structure(&self, registration: &mut Registration, source: &Path) -> Result<()> {
+        let text = source.to_string_lossy();
+        let labelled = text.rsplit_once(':').filter(|(path, _)| is_labelmap(Path::new(path)));
+        let (name, mut surface, frame, unit) = match labelled {
+            Some((path, label)) => {
+                let extracted = read_labelmap_surface(path, Some(label), &ExtractOptions::default())?;
+                let name = if label.parse::<i32>().is_ok() { format!("label_{label}") } else { label.to_string() };
+                (name, extracted.surface, Some(extracted.frame), LengthUnit::Millimetre)
+            }
+            None if is_labelmap(source) => {
+                anyhow::bail!(
+                    "a labelmap's structure is one of its labels: give {}:LABEL (a number or a segment name)",
+                    text
+                )
+            }
+            None => {
+                let (surface, frame) = read_surface_with_frame(source)?;
+                let stem = source.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+                (stem, surface, frame.or(self.given_frame), self.given_units)
+            }
+        };
+        let name = name.replace(char::is_whitespace, "_");
         if name.len() > 20 {
-            anyhow::bail!("its name `{name}` is longer than 20 bytes, an OpenIGTLink device name: rename the file");
+            anyhow::bail!("its name `{name}` is longer than 20 bytes, an OpenIGTLink device name: rename it");
         }
-        let (mut surface, frame) = read_surface_with_frame(path)?;
-        let change = FrameChange::between(frame.or(self.given_frame), registration.frame());
-        surface.vertices.iter_mut().for_each(|p| *p = self.given_units.point_to_metres(change.point(*p)));
+        let change = FrameChange::between(frame, registration.frame());
+        surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(change.point(*p)));
         Ok(registration.add_structure(&name, surface)?)
     }
 

@@ -119,7 +119,8 @@ fn slicer_files_and_millimetres_register_as_metres_do() {
 
 /// A tumour given as 3D Slicer exports a segment (an STL in LPS and mm) comes back moved with
 /// the organ: about the registered target it was drawn around, and where the displacement field
-/// the run writes takes it back to rest.
+/// the run writes takes it back to rest. The same ball given as a label of a NIfTI labelmap
+/// comes back about the same target.
 #[test]
 fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
     let dir = tempfile::tempdir().unwrap();
@@ -131,12 +132,37 @@ fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
     let tumour = d.join("tumour.stl");
     mesh::io::write_surface_in_frame(&tumour, &ball, Frame::Lps).unwrap();
     let tumour = tumour.to_str().unwrap();
+    // The ball in 1 mm voxels, label 5.
+    let dims = [20, 20, 20];
+    let affine: [[f64; 4]; 3] = std::array::from_fn(|r| {
+        std::array::from_fn(|c| {
+            if c == r {
+                1.0
+            } else if c == 3 {
+                centre[r] - 9.5
+            } else {
+                0.0
+            }
+        })
+    });
+    let mut labels = Vec::new();
+    for k in 0..20 {
+        for j in 0..20 {
+            for i in 0..20 {
+                let p = [i, j, k].map(|n| n as f64 - 9.5);
+                labels.push(if p.iter().map(|x| x * x).sum::<f64>() <= 36.0 { 5 } else { 0 });
+            }
+        }
+    }
+    let map = mesh::labelmap::Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new() };
+    mesh::labelmap::write_nifti(d.join("seg.nii.gz"), &map).unwrap();
+    let labelled = format!("{}:5", d.join("seg.nii.gz").display());
     let (registered, _) = register(
         &example("cloud.csv"),
         &example("targets.csv"),
         &example("truth.csv"),
         &d.join("run"),
-        &["--units", "mm", "--structure", tumour],
+        &["--units", "mm", "--structure", tumour, "--structure", &labelled],
     );
     let moved = mesh::io::read_surface(d.join("run/tumour_deformed.vtk")).unwrap();
     let rest = mesh::io::read_surface(tumour).unwrap();
@@ -156,6 +182,13 @@ fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
     );
     assert!(motion > 5.0 && worst < 0.05 * motion, "{worst} mm back from rest, motions up to {motion} mm");
     assert!(off < 1.0, "the tumour's centre is {off} mm from its registered target");
+    let label = mesh::io::read_surface(d.join("run/label_5_deformed.vtk")).unwrap();
+    let n = label.vertices.len() as f64;
+    let off = (0..3)
+        .map(|k| (label.vertices.iter().map(|v| v[k]).sum::<f64>() / n - 1e3 * registered[0][k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(off < 1.0, "the labelmap's ball is {off} mm from its registered target");
 }
 
 /// The displacement field of an augsim displacement.nrrd (LPS, mm), interpolated trilinearly as
