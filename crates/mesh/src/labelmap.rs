@@ -8,8 +8,8 @@
 //! `xyzt_units`, NRRD's `space units`: m, mm or µm; mm when it names none), converted to mm. The
 //! world frame is the scanner's, as the file states it ([`Frame`]): NIfTI's is always RAS (x
 //! towards the patient's right, y anterior, z superior); NRRD's is its `space` field, LPS for
-//! DICOM-derived data and most of Slicer's files; MetaImage's is ITK's, LPS. Points given with the organ (camera, landmarks,
-//! targets) must be in this frame.
+//! DICOM-derived data and most of Slicer's files; MetaImage's is ITK's, LPS. Points given with
+//! the organ (camera, landmarks, targets) must be in this frame.
 //!
 //! [`Labelmap::select`] picks one label, by number or by a segment name the file carries (Slicer's
 //! `Segment{i}_Name`), as a [`VoxelMask`]; [`crate::isosurface::mask_surface`] turns the mask into
@@ -91,7 +91,8 @@ pub fn unreadable_segmentation(path: &Path) -> Option<String> {
     })
 }
 
-/// Reads a NIfTI or NRRD labelmap, chosen by the file's extension.
+/// Reads a NIfTI, NRRD or MetaImage labelmap, chosen by the file's extension; an image's grey
+/// values (a CT given for its segmentation) are refused.
 pub fn read_labelmap(path: impl AsRef<Path>) -> Result<Labelmap, MeshError> {
     let path = path.as_ref();
     let bytes = std::fs::read(path).map_err(|error| MeshError::Io { path: path.display().to_string(), error })?;
@@ -111,6 +112,13 @@ pub fn read_labelmap(path: impl AsRef<Path>) -> Result<Labelmap, MeshError> {
     }
     refuse_image(&map.labels).map_err(|m| parse_error(path, m))?;
     Ok(map)
+}
+
+/// Whether a detached header's data file names several files: `LIST`, or a `printf` pattern with
+/// its range (`slice%03d.raw 1 46 1`), as NRRD and MetaImage write them.
+fn several_files(name: &str) -> bool {
+    let words: Vec<&str> = name.split_whitespace().collect();
+    name.starts_with("LIST") || (words.len() >= 4 && words[0].contains('%'))
 }
 
 /// More distinct values than any labelmap holds: an image's grey values.
@@ -392,7 +400,7 @@ impl NrrdHeader {
     /// (the header's); `None` for attached data.
     fn detached_data(&self, folder: &Path) -> Result<Option<Vec<u8>>, String> {
         let Some(name) = self.data_file() else { return Ok(None) };
-        if name.starts_with("LIST") || name.split_whitespace().count() > 1 {
+        if several_files(name) {
             return Err(format!(
                 "data file: {name}: data in several files are not read; save the segmentation as one .nrrd"
             ));
@@ -1228,6 +1236,10 @@ mod tests {
         let nhdr = dir.path().join("seg.nhdr");
         std::fs::write(&nhdr, format!("{header}data file: data/seg.raw.gz\n")).unwrap();
         assert!(is_labelmap(&nhdr));
+        assert!(read_labelmap(&nhdr).unwrap() == read_labelmap(&whole).unwrap());
+        // A file name with spaces is one file.
+        std::fs::copy(dir.path().join("data/seg.raw.gz"), dir.path().join("my seg.raw.gz")).unwrap();
+        std::fs::write(&nhdr, format!("{header}data file: my seg.raw.gz\n")).unwrap();
         assert!(read_labelmap(&nhdr).unwrap() == read_labelmap(&whole).unwrap());
         std::fs::write(&nhdr, format!("{header}data file: seg.raw.gz\n")).unwrap();
         let e = read_labelmap(&nhdr).unwrap_err().to_string();

@@ -64,7 +64,7 @@ pub(super) fn parse_metaimage(bytes: &[u8], folder: &Path) -> Result<Labelmap, S
     let detached;
     let data = if data_file.eq_ignore_ascii_case("LOCAL") {
         attached
-    } else if data_file.starts_with("LIST") || data_file.split_whitespace().count() > 1 {
+    } else if super::several_files(data_file) {
         return Err(format!("ElementDataFile = {data_file}: data in several files are not read; save one .mha"));
     } else {
         let path = folder.join(data_file);
