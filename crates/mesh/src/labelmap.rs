@@ -13,7 +13,8 @@
 //!
 //! [`Labelmap::select`] picks one label, by number or by a segment name the file carries (Slicer's
 //! `Segment{i}_Name`), as a [`VoxelMask`]; [`crate::isosurface::mask_surface`] turns the mask into
-//! a closed surface.
+//! a closed surface. [`write_displacement_nrrd`] writes a displacement-field transform as a NRRD
+//! image that 3D Slicer and ITK load.
 //!
 //! Supported: NIfTI-1 single files (`n+1`), either byte order, gzipped or not, data types u8,
 //! i8, i16, u16, i32, u32, i64, u64, f32, f64, the sform (preferred) or qform affine; NRRD with
