@@ -8,8 +8,8 @@
 //!   registered targets, in the order given to the server, each named by its label, else
 //!   `target k`), POLYDATA `organ` (the registered surface with its triangles), a POLYDATA per
 //!   structure that moves with the organ (a tumour, vessels: [`register::Structure`]), named as
-//!   it, TRANSFORM `rigid` (the organ-to-cloud transform, when the registration options ask for a rigid pre-alignment: estimated on a client's first cloud and
-//!   kept while its clouds register plausibly, estimated again after one that does not; targets and
+//!   it, TRANSFORM `rigid` (the organ-to-cloud transform, when the registration options ask for
+//!   a rigid pre-alignment: estimated on a client's first cloud and kept while its clouds register plausibly, estimated again after one that does not; targets and
 //!   organ are then in the cloud's frame), STRING `status` (one line
 //!   of JSON: `frame`, `ms`,
 //!   `surface_residual`, `plausible` and `warnings` (see `register::plausibility`), `inliers`,
