@@ -4,20 +4,19 @@
 //!
 //! Protocol (OpenIGTLink version 1–3, messages of [`igtl`] and [`polydata`]):
 //! - in: a point cloud as POLYDATA (its points; vertices optional) or POINT, device name `cloud`;
-//! - out, per cloud, in this order and as chosen by [`Outputs`]: POINT `targets` (the
-//!   registered targets, in the order given to the server, each named by its label, else
-//!   `target k`), POLYDATA `organ` (the registered surface with its triangles), a POLYDATA per
-//!   structure that moves with the organ (a tumour, vessels: [`register::Structure`]), named as
-//!   it, TRANSFORM `rigid` (the organ-to-cloud transform, when the registration options ask for
-//!   a rigid pre-alignment: estimated on a client's first cloud and kept while its clouds register plausibly, estimated again after one that does not; targets and
-//!   organ are then in the cloud's frame), STRING `status` (one line
-//!   of JSON: `frame`, `ms`,
-//!   `surface_residual`, `plausible` and `warnings` (see `register::plausibility`), `inliers`,
-//!   `points`, `iterations`, `from_rest` (the frame did not start from the previous one's
-//!   displacement), and `target_sigma` (the predicted standard deviation σ at each target, for
-//!   the reduced-order model; else null), in the stream's unit; or `frame` and `error`). An
-//!   error is answered whatever the outputs, so that a client never waits for answers that will
-//!   not come.
+//! - out, per cloud, in this order and as chosen by [`Outputs`]: POINT `targets` (the registered
+//!   targets, in the order given to the server, each named by its label, else `target k`), POLYDATA
+//!   `organ` (the registered surface with its triangles), a POLYDATA per structure that moves with
+//!   the organ (a tumour, vessels: [`register::Structure`]), named as it, TRANSFORM `rigid` (the
+//!   organ-to-cloud transform, when the registration options ask for a rigid pre-alignment: estimated
+//!   on a client's first cloud and kept while its clouds register plausibly, estimated again after
+//!   one that does not; targets and organ are then in the cloud's frame), STRING `status` (one line
+//!   of JSON: `frame`, `ms`, `surface_residual`, `plausible` and `warnings` (see
+//!   `register::plausibility`), `inliers`, `points`, `iterations`, `from_rest` (the frame did not
+//!   start from the previous one's displacement), and `target_sigma` (the predicted standard
+//!   deviation σ at each target, for the reduced-order model; else null), in the stream's unit; or
+//!   `frame` and `error`). An error is answered whatever the outputs, so that a client never waits
+//!   for answers that will not come.
 //! - in: a STRING of device `reset` (any text): the next cloud registered starts from rest, its
 //!   pose (with a rigid pre-alignment) estimated again, as a new client's first cloud would (after
 //!   the camera or the patient moved). It has no answer of its own: the next status says
