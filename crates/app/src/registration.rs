@@ -15,7 +15,7 @@ use mesh::io::{read_surface_with_frame, Frame, FrameChange};
 use mesh::isosurface::ExtractOptions;
 use mesh::labelmap::{is_labelmap, read_labelmap_surface};
 use mesh::length::LengthUnit;
-use mesh::Point;
+use mesh::{Point, TriSurface};
 use register::{shape, Deformer, HybridDeformer, Organ, Registration, RegistrationOptions};
 use scenario::{CaseScenario, DatasetScenario, MeshSource, StaticScenario};
 
@@ -430,7 +430,7 @@ impl RegistrationChoice {
             let mut spec = RegistrationSpec::patient(dir, method, self.iterations, self.rigid)?;
             spec.given_units = self.units.unwrap_or(spec.given_units);
             spec.given_frame = self.frame;
-            spec.structures.clone_from(&self.structures);
+            spec.structures.extend(self.structures.iter().map(StructureFile::given));
             return Ok(spec);
         }
         let units = self.units.unwrap_or(LengthUnit::DEFAULT);
@@ -444,7 +444,7 @@ impl RegistrationChoice {
             rigid: self.rigid,
             time_budget_ms: None,
             options: None,
-            structures: self.structures.clone(),
+            structures: self.structures.iter().map(StructureFile::given).collect(),
         })
     }
 }
@@ -474,9 +474,75 @@ pub struct RegistrationSpec {
     /// the method's iteration budgets); a reduced-order model's shape fit takes its own budgets
     /// ([`register::shape::loop_options`]).
     pub options: Option<RegistrationOptions>,
-    /// Surfaces of structures inside the organ, given back deformed with it
-    /// ([`RegistrationChoice::structures`]).
-    pub structures: Vec<PathBuf>,
+    /// Structures inside the organ, given back deformed with it
+    /// ([`RegistrationChoice::structures`]; a patient's own).
+    pub structures: Vec<StructureFile>,
+}
+
+/// Where a structure comes from: a surface file or `LABELMAP:LABEL` ([`read_structure`]), with
+/// the unit of a surface file when known (a patient's own structures: mm).
+#[derive(Clone, Debug, PartialEq)]
+pub struct StructureFile {
+    /// The file, or `LABELMAP:LABEL`.
+    pub path: PathBuf,
+    /// The unit of a surface file; `None`: the unit of the points given.
+    pub unit: Option<LengthUnit>,
+}
+
+impl StructureFile {
+    /// A structure given on the command line or in Python, in the unit of the points given.
+    fn given(path: impl AsRef<Path>) -> StructureFile {
+        StructureFile { path: path.as_ref().to_path_buf(), unit: None }
+    }
+}
+
+/// The name of the structure `source` holds: a surface file's stem, or the label of
+/// `LABELMAP:LABEL` (`label_N` for a number), white space turned into `_`.
+pub fn structure_name(source: &Path) -> String {
+    let name = match labelmap_label(source) {
+        Some((_, label)) if label.parse::<i32>().is_ok() => format!("label_{label}"),
+        Some((_, label)) => label.to_string(),
+        None => source.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+    };
+    name.replace(char::is_whitespace, "_")
+}
+
+/// `LABELMAP:LABEL` split, when `source` is one.
+fn labelmap_label(source: &Path) -> Option<(&str, &str)> {
+    source.to_str()?.rsplit_once(':').filter(|(path, _)| is_labelmap(Path::new(path)))
+}
+
+/// The structure `source` holds ([`structure_name`], its surface in m in the frame `to`): a
+/// surface file in `unit`, in the frame its header names (else `frame`); or `LABELMAP:LABEL`, a
+/// label's surface extracted from a labelmap (mm, its scanner frame). The name must fit an
+/// OpenIGTLink device name (20 bytes).
+pub fn read_structure(
+    source: &Path,
+    unit: LengthUnit,
+    frame: Option<Frame>,
+    to: Option<Frame>,
+) -> Result<(String, TriSurface)> {
+    let (mut surface, frame, unit) = match labelmap_label(source) {
+        Some((path, label)) => {
+            let extracted = read_labelmap_surface(path, Some(label), &ExtractOptions::default())?;
+            (extracted.surface, Some(extracted.frame), LengthUnit::Millimetre)
+        }
+        None if is_labelmap(source) => anyhow::bail!(
+            "a labelmap's structure is one of its labels: give {}:LABEL (a number or a segment name)",
+            source.display()
+        ),
+        None => {
+            let (surface, own) = read_surface_with_frame(source)?;
+            (surface, own.or(frame), unit)
+        }
+    };
+    let name = structure_name(source);
+    if name.len() > 20 {
+        anyhow::bail!("its name `{name}` is longer than 20 bytes, an OpenIGTLink device name: rename it");
+    }
+    let change = FrameChange::between(frame, to);
+    surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(change.point(*p)));
+    Ok((name, surface))
 }
 
 impl RegistrationSpec {
@@ -536,44 +602,15 @@ impl RegistrationSpec {
         let mut registration =
             Registration::new(organ, deformer, method, points, labels, options).with_context(|| what)?.in_frame(frame);
         unplaced.into_iter().for_each(|w| registration.warn(w));
-        for path in &self.structures {
-            self.add_structure(&mut registration, path).with_context(|| format!("the structure {}", path.display()))?;
+        for source in &self.structures {
+            let unit = source.unit.unwrap_or(self.given_units);
+            let (name, surface) = read_structure(&source.path, unit, self.given_frame, registration.frame())
+                .with_context(|| format!("the structure {}", source.path.display()))?;
+            registration
+                .add_structure(&name, surface)
+                .with_context(|| format!("the structure {}", source.path.display()))?;
         }
         Ok(registration)
-    }
-
-    /// Reads a structure into `registration`'s frame and adds it: a surface file (in the unit of
-    /// the points given, in the frame its header names, else theirs), named by its stem; or
-    /// `LABELMAP:LABEL`, a label's surface extracted from a labelmap (mm, the scanner's frame),
-    /// named by the label. The name must fit an OpenIGTLink device name (20 bytes).
-    fn add_structure(&self, registration: &mut Registration, source: &Path) -> Result<()> {
-        let text = source.to_string_lossy();
-        let labelled = text.rsplit_once(':').filter(|(path, _)| is_labelmap(Path::new(path)));
-        let (name, mut surface, frame, unit) = match labelled {
-            Some((path, label)) => {
-                let extracted = read_labelmap_surface(path, Some(label), &ExtractOptions::default())?;
-                let name = if label.parse::<i32>().is_ok() { format!("label_{label}") } else { label.to_string() };
-                (name, extracted.surface, Some(extracted.frame), LengthUnit::Millimetre)
-            }
-            None if is_labelmap(source) => {
-                anyhow::bail!(
-                    "a labelmap's structure is one of its labels: give {}:LABEL (a number or a segment name)",
-                    text
-                )
-            }
-            None => {
-                let (surface, frame) = read_surface_with_frame(source)?;
-                let stem = source.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-                (stem, surface, frame.or(self.given_frame), self.given_units)
-            }
-        };
-        let name = name.replace(char::is_whitespace, "_");
-        if name.len() > 20 {
-            anyhow::bail!("its name `{name}` is longer than 20 bytes, an OpenIGTLink device name: rename it");
-        }
-        let change = FrameChange::between(frame, registration.frame());
-        surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(change.point(*p)));
-        Ok(registration.add_structure(&name, surface)?)
     }
 
     /// A stream's frame change: from the frame given (else RAS, the frame OpenIGTLink sends) to
@@ -645,6 +682,9 @@ struct Patient {
     /// The unit of the files the set-up was prepared from (set-ups of older versions name none).
     #[serde(default)]
     input_units: Option<LengthUnit>,
+    /// Structures that move with the organ, surfaces in mm in the organ's frame.
+    #[serde(default)]
+    structures: Vec<PathBuf>,
 }
 
 impl RegistrationSpec {
@@ -682,7 +722,11 @@ impl RegistrationSpec {
             rigid,
             time_budget_ms: None,
             options: None,
-            structures: Vec::new(),
+            structures: p
+                .structures
+                .iter()
+                .map(|path| StructureFile { path: dir.join(path), unit: Some(LengthUnit::Millimetre) })
+                .collect(),
         })
     }
 }

@@ -37,6 +37,11 @@ pub struct PrepareArgs {
     /// (their labels are kept).
     #[arg(long, value_name = "TARGETS")]
     targets: PathBuf,
+    /// A structure inside the organ (a tumour, vessels) that the set-up's registrations give back
+    /// moved with it: a surface (in the surface's unit and frame, else those its header names) or
+    /// LABELMAP:LABEL (Segmentation.seg.nrrd:tumour). Repeat for several.
+    #[arg(long = "structure", value_name = "SURFACE")]
+    structures: Vec<PathBuf>,
     /// Output directory (resumed when it holds a preparation of the same inputs).
     #[arg(short, long)]
     out: PathBuf,
@@ -94,6 +99,7 @@ pub fn run(args: &PrepareArgs) -> Result<()> {
         PrepareOptions::new(args.surface.clone(), args.camera.clone(), args.attach.clone(), args.targets.clone());
     options.units = args.units;
     options.label = args.label.clone();
+    options.structures.clone_from(&args.structures);
     options.attach_distance = args.attach_mm.map(mesh::length::from_mm);
     options.samples = args.samples;
     options.method = args.method;

@@ -256,6 +256,11 @@ fn a_slicer_users_files_prepare_register_and_come_back_in_their_frame_and_unit()
     let mut camera = LabelledPoints::new(vec![[35.0, -60.0, 120.0]]);
     (camera.frame, camera.unit) = (Some(Frame::Lps), Some(mm));
     write_points(d.join("camera.fcsv"), &camera).unwrap();
+    // A tumour about the first target, as Slicer exports a segment: kept in the set-up.
+    let tumour_centre = in_lps_mm("organ_targets.csv", "tumour").points[0];
+    let mut ball = mesh::generate::icosphere(5.0, 2);
+    ball.transform(tumour_centre.map(|x| -x), 1.0);
+    mesh::io::write_surface_in_frame(d.join("tumour.stl"), &ball, Frame::Lps).unwrap();
     let prepare = [
         "prepare",
         &path(&d.join("liver.stl")),
@@ -269,6 +274,8 @@ fn a_slicer_users_files_prepare_register_and_come_back_in_their_frame_and_unit()
         "40",
         "--tets",
         "800",
+        "--structure",
+        &path(&d.join("tumour.stl")),
         "--out",
         &path(&d.join("patient")),
     ];
@@ -306,6 +313,20 @@ fn a_slicer_users_files_prepare_register_and_come_back_in_their_frame_and_unit()
     for (a, b) in markups.points.iter().zip(&in_m.points) {
         assert!((0..3).all(|k| (a[k] - 1e3 * b[k]).abs() < 0.01), "{a:?} mm against {b:?} m");
     }
+    // The set-up's tumour comes back moved with the organ, about its registered target, whatever
+    // the unit the registration is given.
+    let centre = |run: &str| -> Vec<f64> {
+        let moved = mesh::io::read_surface(d.join(run).join("tumour_deformed.vtk")).unwrap();
+        (0..3).map(|k| moved.vertices.iter().map(|v| v[k]).sum::<f64>() / moved.vertices.len() as f64).collect()
+    };
+    let (in_slicer, in_metres) = (centre("slicer"), centre("metres"));
+    let gap = |a: &[f64], b: &[f64]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt();
+    assert!(
+        gap(&in_slicer, &markups.points[0]) < 1.0,
+        "tumour at {in_slicer:?}, its target at {:?}",
+        markups.points[0]
+    );
+    assert!(gap(&in_slicer, &in_metres) < 0.01, "{in_slicer:?} against {in_metres:?}");
     let tre = |s: &serde_json::Value| s["tre_mean_mm"].as_f64().unwrap();
     assert!((tre(&slicer) - tre(&metres)).abs() < 0.01, "TRE {} against {} mm", tre(&slicer), tre(&metres));
     let csv = std::fs::read_to_string(d.join("slicer/targets.csv")).unwrap();

@@ -83,6 +83,17 @@ pub struct Registration {
     structures: Vec<Structure>,
 }
 
+/// Refuses a structure's name that is empty, `taken` by another, or one of [`RESERVED_NAMES`].
+pub fn check_structure_name(name: &str, taken: &[&str]) -> Result<()> {
+    if name.is_empty() || RESERVED_NAMES.contains(&name) || taken.contains(&name) {
+        return Err(RegisterError::Invalid(format!(
+            "a structure cannot be named `{name}`: names are unique and none of {}",
+            RESERVED_NAMES.join(", ")
+        )));
+    }
+    Ok(())
+}
+
 /// One cloud registered by a [`Registration`].
 #[derive(Clone, Debug)]
 pub struct Tracked {
@@ -160,12 +171,8 @@ impl Registration {
     /// `name`, its surface in m in the organ's frame; its warnings join the registration's. An
     /// error for a name already taken, or one of the server's messages' (`organ`, `targets`…).
     pub fn add_structure(&mut self, name: &str, surface: TriSurface) -> Result<()> {
-        if name.is_empty() || RESERVED_NAMES.contains(&name) || self.structures.iter().any(|s| s.name() == name) {
-            return Err(RegisterError::Invalid(format!(
-                "a structure cannot be named `{name}`: names are unique and none of {}",
-                RESERVED_NAMES.join(", ")
-            )));
-        }
+        let taken: Vec<&str> = self.structures.iter().map(Structure::name).collect();
+        check_structure_name(name, &taken)?;
         let (structure, warnings) = Structure::new(&self.organ, name, surface)?;
         self.structures.push(structure);
         self.warnings.extend(warnings);

@@ -65,7 +65,7 @@ use learn::LearnedModel;
 
 use crate::meshing::write_surface_in_mm;
 use crate::points::PointInput;
-use crate::registration::PATIENT_FILE;
+use crate::registration::{read_structure, structure_name, PATIENT_FILE};
 use crate::training::{train_unet, UNetRun, UNetStart};
 
 mod validation;
@@ -94,6 +94,11 @@ pub struct PrepareOptions {
     pub attach_distance: Option<f64>,
     /// The targets (tumour, vessels) at rest: a points file (CSV x, y, z, `.fcsv`, `.mrk.json`).
     pub targets: PathBuf,
+    /// Structures that move with the organ (a tumour, vessels): surface files in the surface's
+    /// unit and frame (else the one their header names), or `LABELMAP:LABEL`
+    /// ([`crate::registration::read_structure`]); kept in the set-up, which registers them.
+    #[serde(default)]
+    pub structures: Vec<PathBuf>,
     /// Tetrahedra of the organ's mesh (about).
     pub tets: usize,
     /// FEM draws of the dataset.
@@ -116,6 +121,7 @@ impl PrepareOptions {
             attach,
             attach_distance: None,
             targets,
+            structures: Vec::new(),
             tets: 3000,
             samples: 2000,
             method: learn::Method::Rom,
@@ -168,6 +174,11 @@ pub const STATE_FILE: &str = "prepare.json";
 
 /// The organ's surface in a prepared directory: in millimetres, in the segmentation's frame.
 pub const SURFACE_FILE: &str = "surface.stl";
+
+/// A structure's surface in the set-up (mm, the organ's frame), relative to its directory.
+fn structure_file(name: &str) -> String {
+    format!("structures/{name}.stl")
+}
 
 /// The steps, in order.
 pub const STEPS: [&str; 7] = ["organ", "scenarios", "dataset", "model", "evaluation", "validation", "report"];
@@ -258,6 +269,7 @@ fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
         surface: full(&options.surface)?,
         attach: full(&options.attach)?,
         targets: full(&options.targets)?,
+        structures: options.structures.iter().map(|s| full(s)).collect::<Result<_>>()?,
         camera: match &options.camera {
             CameraAt::File(path) => CameraAt::File(full(path)?),
             at => at.clone(),
@@ -372,6 +384,18 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
         .with_context(|| format!("the targets of {}", options.targets.display()))?;
     lines.push(format!("targets: {} inside the organ", targets.len()));
     lines.extend(warnings.into_iter().map(|w| format!("warning: {w}")));
+    let mut names: Vec<String> = Vec::new();
+    for source in &options.structures {
+        let context = || format!("the structure {}", source.display());
+        let (name, structure) = read_structure(source, unit, frame, frame).with_context(context)?;
+        let taken: Vec<&str> = names.iter().map(String::as_str).collect();
+        register::registration::check_structure_name(&name, &taken).with_context(context)?;
+        let (_, warnings) = register::Structure::new(&located, &name, structure.clone()).with_context(context)?;
+        write_surface_in_mm(&dir.join(structure_file(&name)), &structure, frame)?;
+        lines.push(format!("structure: {name}, {} vertices, {}", structure.vertices.len(), structure_file(&name)));
+        lines.extend(warnings.into_iter().map(|w| format!("warning: {w}")));
+        names.push(name);
+    }
     organ.regions.insert("visible".into(), visible);
     organ.regions.insert("attached".into(), attached);
     // In millimetres, for 3D Slicer (which shows it over the CT where the frame is named).
@@ -534,6 +558,8 @@ fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
          [[fixed]]\nselect = {held}\n",
         surface = options.surface.display(),
     );
+    let structures: Vec<String> =
+        options.structures.iter().map(|s| format!("\"{}\"", structure_file(&structure_name(s)))).collect();
     let patient = format!(
         "# The registration set-up of this organ: `augsim register --patient DIR`, `augsim serve\n\
          # --patient DIR`, `augsim.Registration(patient=DIR)`. Paths are relative to this file.\n\
@@ -541,9 +567,11 @@ fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
          # that registered the validation's pushes the best.\n\
          # input_units: the unit of the files it was prepared from, in which points whose files name\n\
          # none are read and results given back.\n\
+         # structures: surfaces that move with the organ (mm, the organ's frame).\n\
          method = \"learned\"\nmodel = \"model\"\nscenario = \"dataset.toml\"\nfem = \"static.toml\"\ntargets = \"targets.csv\"\nunits = \"m\"\n\
-         input_units = \"{}\"\n",
-        input_unit(options)?.symbol()
+         input_units = \"{}\"\nstructures = [{}]\n",
+        input_unit(options)?.symbol(),
+        structures.join(", ")
     );
     write_atomic_bytes(&dir.join("dataset.toml"), dataset.as_bytes())?;
     write_atomic_bytes(&dir.join("static.toml"), fem.as_bytes())?;
