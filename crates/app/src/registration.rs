@@ -603,12 +603,11 @@ impl RegistrationSpec {
             Registration::new(organ, deformer, method, points, labels, options).with_context(|| what)?.in_frame(frame);
         unplaced.into_iter().for_each(|w| registration.warn(w));
         for source in &self.structures {
+            let context = || format!("the structure {}", source.path.display());
             let unit = source.unit.unwrap_or(self.given_units);
-            let (name, surface) = read_structure(&source.path, unit, self.given_frame, registration.frame())
-                .with_context(|| format!("the structure {}", source.path.display()))?;
-            registration
-                .add_structure(&name, surface)
-                .with_context(|| format!("the structure {}", source.path.display()))?;
+            let (name, surface) =
+                read_structure(&source.path, unit, self.given_frame, registration.frame()).with_context(context)?;
+            registration.add_structure(&name, surface).with_context(context)?;
         }
         Ok(registration)
     }
