@@ -29,13 +29,13 @@ impl Structure {
             return Err(RegisterError::Invalid(format!("`{name}`: a surface without triangles")));
         }
         let reach = LANDMARK_REACH * organ.extent();
-        let held =
-            |points: &[Point]| -> Result<Vec<(Stencil, f64)>> { organ.locate_near(points, f64::INFINITY, "vertex") };
-        let mostly_inside = |points: &[Point]| {
-            held(points).is_ok_and(|located| 2 * located.iter().filter(|l| l.1 <= reach).count() > located.len())
-        };
+        let held = |points: &[Point]| organ.locate_near(points, f64::INFINITY, "vertex");
+        let mostly_near =
+            |located: &[(Stencil, f64)]| 2 * located.iter().filter(|l| l.1 <= reach).count() > located.len();
         let located = held(&surface.vertices)?;
-        if !mostly_inside(&surface.vertices) {
+        if !mostly_near(&located) {
+            // Only then are the vertices located again, moved as a mistake would have them.
+            let mostly_inside = |points: &[Point]| held(points).is_ok_and(|moved| mostly_near(&moved));
             return Err(RegisterError::Invalid(format!(
                 "`{name}` lies outside the organ: most of its vertices are farther than {:.0} mm from it{}",
                 reach * 1e3,

@@ -56,8 +56,8 @@ impl WarpField {
         })?;
         let boundary = mesh::boundary_surface(&deformed);
         let bvh = SurfaceBvh::new(&boundary)?;
-        let in_cloud: Vec<Point> = match rigid {
-            Some(r) => deformed.nodes.iter().map(|&p| r.organ_to_cloud().apply(p)).collect(),
+        let in_cloud: Vec<Point> = match rigid.map(RigidResult::organ_to_cloud) {
+            Some(t) => deformed.nodes.iter().map(|&p| t.apply(p)).collect(),
             None => deformed.nodes.clone(),
         };
         let (lo, hi) = bounds(&in_cloud);

@@ -390,9 +390,10 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
         let (name, structure) = read_structure(source, unit, frame, frame).with_context(context)?;
         let taken: Vec<&str> = names.iter().map(String::as_str).collect();
         register::registration::check_structure_name(&name, &taken).with_context(context)?;
-        let (_, warnings) = register::Structure::new(&located, &name, structure.clone()).with_context(context)?;
-        write_surface_in_mm(&dir.join(structure_file(&name)), &structure, frame)?;
-        lines.push(format!("structure: {name}, {} vertices, {}", structure.vertices.len(), structure_file(&name)));
+        let (embedded, warnings) = register::Structure::new(&located, &name, structure).with_context(context)?;
+        let file = structure_file(&name);
+        write_surface_in_mm(&dir.join(&file), embedded.rest(), frame)?;
+        lines.push(format!("structure: {name}, {} vertices, {file}", embedded.rest().vertices.len()));
         lines.extend(warnings.into_iter().map(|w| format!("warning: {w}")));
         names.push(name);
     }
