@@ -215,20 +215,14 @@ fn displacement_field(path: &Path) -> impl Fn([f64; 3]) -> [f64; 3] {
     let values: Vec<f64> = raw.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap()) as f64).collect();
     let dims = [sizes[1], sizes[2], sizes[3]];
     assert_eq!((sizes[0], values.len()), (3, 3 * dims.iter().product::<usize>()));
-    move |p: [f64; 3]| {
-        // The axes are the grid's, up to the signs of LPS: index = (p - origin) / step.
-        let f: [f64; 3] = std::array::from_fn(|d| (p[d] - origin[d]) / axes[d][d]);
-        let base: [usize; 3] = std::array::from_fn(|d| (f[d].floor() as usize).min(dims[d] - 2));
-        let mut out = [0.0; 3];
-        for corner in 0..8 {
-            let o = [corner & 1, corner >> 1 & 1, corner >> 2];
-            let w: f64 =
-                (0..3).map(|d| if o[d] == 1 { f[d] - base[d] as f64 } else { 1.0 - f[d] + base[d] as f64 }).product();
-            let n = (base[0] + o[0]) + dims[0] * ((base[1] + o[1]) + dims[1] * (base[2] + o[2]));
-            (0..3).for_each(|c| out[c] += w * values[3 * n + c]);
-        }
-        out
-    }
+    // These runs' results are in LPS: the grid's axes are x, y and z, one step each.
+    let step = axes[0][0];
+    assert!(axes.iter().enumerate().all(|(c, a)| (0..3).all(|r| a[r] == if r == c { step } else { 0.0 })), "{axes:?}");
+    // Read back in metres, the grid interpolates as ITK resamples it (`WarpField::at`).
+    let m = |x: f64| x * 1e-3;
+    let vectors = values.chunks_exact(3).map(|v| [m(v[0]), m(v[1]), m(v[2])]).collect();
+    let field = register::WarpField { origin: origin.map(m), spacing: m(step), dims, vectors };
+    move |p: [f64; 3]| field.at(p.map(m)).expect("inside the grid").map(|x| x * 1e3)
 }
 
 /// A 3D Slicer user's round trip: the organ as an LPS surface (`SPACE=LPS` STL), its landmarks and
