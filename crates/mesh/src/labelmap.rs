@@ -80,7 +80,7 @@ pub fn unreadable_segmentation(path: &Path) -> Option<String> {
             "a folder, not a file (a DICOM series is not read): segment it (3D Slicer, TotalSegmentator) and {save_as}"
         ));
     }
-    if is_labelmap(path) || ["stl", "obj", "ply", "vtk", "vtp", "vtu"].contains(&extension) {
+    if is_labelmap(path) || crate::io::SURFACE_EXTENSIONS.contains(&extension) {
         return None;
     }
     Some(match extension {

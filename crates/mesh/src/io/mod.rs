@@ -289,6 +289,9 @@ pub fn write_mesh(path: impl AsRef<Path>, mesh: &Mesh, fields: &[Field]) -> Resu
     }
 }
 
+/// The extensions [`read_surface`] reads.
+pub const SURFACE_EXTENSIONS: [&str; 6] = ["obj", "stl", "ply", "vtk", "vtp", "vtu"];
+
 /// The error of a surface reader given another extension.
 const UNKNOWN_SURFACE: &str = "unknown surface extension (expected .obj, .stl, .ply, .vtk, .vtp or .vtu)";
 
@@ -626,6 +629,19 @@ pub fn write_pvd(path: impl AsRef<Path>, steps: &[(f64, String)]) -> Result<(), 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every extension of [`SURFACE_EXTENSIONS`] has a reader (a missing file is an I/O error,
+    /// not an unknown extension), and no other.
+    #[test]
+    fn the_surface_extensions_are_those_read() {
+        let dir = tempfile::tempdir().unwrap();
+        for extension in SURFACE_EXTENSIONS {
+            let e = read_surface(dir.path().join(format!("missing.{extension}"))).unwrap_err();
+            assert!(matches!(e, MeshError::Io { .. }), "{extension}: {e}");
+        }
+        let e = read_surface(dir.path().join("missing.off")).unwrap_err().to_string();
+        assert!(e.contains("unknown surface extension"), "{e}");
+    }
 
     #[test]
     fn atomic_writes_replace_whole_files_and_leave_nothing_behind_on_failure() {
