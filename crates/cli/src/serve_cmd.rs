@@ -37,7 +37,7 @@ pub struct ServeArgs {
     /// iteration under way, answers with its estimate so far and a warning, and the next cloud
     /// goes on from it, so that no cloud holds the stream for long (the FEMs' first frames on the
     /// demo take 0.25–0.41 s; a stream's next frames tens of ms).
-    #[arg(long, default_value_t = 1000.0, value_name = "MS")]
+    #[arg(long, default_value_t = live::TIME_BUDGET_MS, value_name = "MS")]
     time_budget_ms: f64,
 }
 
@@ -94,11 +94,9 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     // Built once here so that a bad model, scenario or targets file stops the command before it
     // listens.
     let first = spec.build()?;
-    if let Some(chosen) = chosen.filter(|o| o.transform && first.options().rigid.is_none()) {
-        let only = "--outputs transform: the transform is the rigid pre-alignment's, sent with --rigid only";
-        match chosen.targets || chosen.organ || chosen.status {
-            false => anyhow::bail!(only),
-            true => eprintln!("warning    {only}"),
+    if let Some(chosen) = chosen {
+        for warning in chosen.check(&first).map_err(anyhow::Error::msg)? {
+            eprintln!("warning    {warning}");
         }
     }
     let (frame, frame_line) = spec.stream_frame(&first);

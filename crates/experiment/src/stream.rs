@@ -78,11 +78,14 @@ pub fn press_and_release() -> CaseScenario {
 pub fn stream_case(method: &str, case: &SyntheticCase, deformed_by: MethodSpec) -> Result<Stream> {
     let listener = TcpListener::bind("127.0.0.1:0").context("listening on a local port")?;
     let port = listener.local_addr()?.port();
-    let spec = RegistrationSpec::new(deformed_by, TargetsSpec::Points(case.targets.clone()));
+    let spec = RegistrationSpec {
+        time_budget_ms: Some(live::TIME_BUDGET_MS),
+        ..RegistrationSpec::new(deformed_by, TargetsSpec::Points(case.targets.clone()))
+    };
     let factory = live::first_then_build(None, move || spec.build().map_err(|e| format!("{e:#}")));
     let serve_options = ServeOptions {
         units: LengthUnit::Millimetre,
-        outputs: Outputs { targets: true, organ: false, transform: false, status: true, structures: false },
+        outputs: Outputs { targets: true, status: true, ..Outputs::NONE },
         ..ServeOptions::default()
     };
     let stop = Arc::new(AtomicBool::new(false));

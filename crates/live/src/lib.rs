@@ -97,11 +97,14 @@ pub struct Outputs {
 impl Outputs {
     /// Every output.
     pub const ALL: Outputs = Outputs { targets: true, organ: true, transform: true, status: true, structures: true };
+    /// No output.
+    pub const NONE: Outputs =
+        Outputs { targets: false, organ: false, transform: false, status: false, structures: false };
 
     /// Parses a comma-separated list of `targets`, `organ`, `transform`, `status`, `structures`
     /// (e.g. `targets,status`).
     pub fn parse(list: &str) -> std::result::Result<Outputs, String> {
-        let mut out = Outputs { targets: false, organ: false, transform: false, status: false, structures: false };
+        let mut out = Outputs::NONE;
         for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
             match name {
                 "targets" => out.targets = true,
@@ -114,10 +117,35 @@ impl Outputs {
                 }
             }
         }
-        if !(out.targets || out.organ || out.transform || out.status) {
-            return Err("no output chosen (targets, organ, transform, status)".into());
+        if out == Outputs::NONE {
+            return Err("no output chosen (targets, organ, transform, status, structures)".into());
         }
         Ok(out)
+    }
+
+    /// Checks outputs chosen by name against what `registration` can send: the transform needs a
+    /// rigid pre-alignment, `structures` a structure. Such an output is an error when nothing
+    /// else was chosen, else a warning (returned).
+    pub fn check(&self, registration: &Registration) -> std::result::Result<Vec<String>, String> {
+        let mut sendable = Outputs { transform: false, structures: false, ..*self };
+        let mut unsendable = Vec::new();
+        if self.transform {
+            match registration.options().rigid.is_some() {
+                true => sendable.transform = true,
+                false => unsendable.push("transform: the rigid pre-alignment's, sent with --rigid only"),
+            }
+        }
+        if self.structures {
+            match registration.structures().is_empty() {
+                false => sendable.structures = true,
+                true => unsendable.push("structures: none given (--structure, or a patient's structures)"),
+            }
+        }
+        let lines = unsendable.into_iter().map(|why| format!("--outputs {why}")).collect::<Vec<_>>();
+        match sendable == Outputs::NONE {
+            true => Err(lines.join("; ")),
+            false => Ok(lines),
+        }
     }
 }
 
@@ -136,6 +164,12 @@ pub type IdentificationFactory = dyn Fn() -> std::result::Result<Box<dyn Identif
 
 /// Most `features` messages waiting for their step; more are refused with an error estimate.
 pub const MAX_PENDING_STEPS: usize = 16;
+
+/// The wall time a cloud's registration may take on a stream unless told otherwise (ms): a
+/// frame past it answers with its estimate so far ([`RegistrationOptions::time_budget_ms`]).
+///
+/// [`RegistrationOptions::time_budget_ms`]: register::RegistrationOptions::time_budget_ms
+pub const TIME_BUDGET_MS: f64 = 1000.0;
 
 /// Settings of the server.
 #[derive(Clone)]

@@ -344,6 +344,29 @@ fn outputs_parse_and_refuse_unknown_names() {
     assert_eq!(Outputs::parse("targets, organ, transform, status, structures").unwrap(), Outputs::ALL);
     assert!(Outputs::parse("targets,mesh").unwrap_err().contains("mesh"));
     assert!(Outputs::parse("").is_err());
+    let structures = Outputs::parse("structures").unwrap();
+    assert_eq!(structures, Outputs { structures: true, ..Outputs::NONE });
+}
+
+/// An output the registration has nothing to send for (the transform without a rigid
+/// pre-alignment, structures without structures) is refused when it is the only one chosen, and
+/// warned about beside others.
+#[test]
+fn outputs_the_registration_cannot_send_are_named() {
+    let plain = cube_registration_with(None).unwrap();
+    let only = |list: &str| Outputs::parse(list).unwrap().check(&plain);
+    assert!(only("transform").unwrap_err().contains("--rigid"));
+    assert!(only("structures").unwrap_err().contains("--structure"));
+    let warnings = only("targets,transform,structures").unwrap();
+    assert_eq!(warnings.len(), 2, "{warnings:?}");
+    assert_eq!(only("targets,status").unwrap(), Vec::<String>::new());
+    let rigid = cube_registration_with(Some(register::RigidOptions::default())).unwrap();
+    assert_eq!(Outputs::parse("transform").unwrap().check(&rigid).unwrap(), Vec::<String>::new());
+    let mut with_tumour = cube_registration_with(None).unwrap();
+    let mut ball = mesh::generate::icosphere(0.005, 1);
+    ball.transform([-SIDE / 2.0; 3], 1.0);
+    with_tumour.add_structure("tumour", ball).unwrap();
+    assert_eq!(Outputs::parse("structures").unwrap().check(&with_tumour).unwrap(), Vec::<String>::new());
 }
 
 /// With a rigid pre-alignment, a cloud of the cube's sides and top moved by a few millimetres is
