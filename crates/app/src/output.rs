@@ -12,12 +12,13 @@
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
+use crate::meshing::write_surface_in_mm;
 use anyhow::{Context, Result};
 use mesh::io::points::{write_markups_json, LabelledPoints};
-use mesh::io::{csv_field, write_atomic_bytes, write_surface_in_frame, Field, Frame, FrameChange};
+use mesh::io::{csv_field, write_atomic_bytes, Field, Frame, FrameChange};
 use mesh::length::{mm, LengthUnit};
 use mesh::{Mesh, Point};
-use register::{FrameOutcome, Organ, Registration, RigidResult, RigidTransform, Summary, WarpField};
+use register::{in_cloud_frame, FrameOutcome, Organ, Registration, RigidResult, RigidTransform, Summary, WarpField};
 use scenario::registration::slug;
 use serde::Serialize;
 
@@ -178,7 +179,7 @@ impl RunWriter {
         }
         let name = if self.sequence { format!("organ_{i:04}.vtu") } else { "organ.vtu".into() };
         let moved = self.moved.as_ref().map(|(_, m)| m);
-        let (m, u) = in_cloud_frame(organ.mesh(), moved, outcome.rigid.as_ref(), &outcome.registration.u);
+        let (m, u) = mesh_in_cloud_frame(organ.mesh(), moved, outcome.rigid.as_ref(), &outcome.registration.u);
         let (m, u) = if self.change.flips() {
             let mut m = m.into_owned();
             m.nodes = self.converted(&m.nodes);
@@ -220,7 +221,7 @@ impl RunWriter {
         let labels = registration.target_labels();
         write_targets(
             &self.dir.join("targets.csv"),
-            &self.converted(&rest_in_cloud_frame(registration.targets(), last.rigid.as_ref())),
+            &self.converted(&in_cloud_frame(registration.targets().to_vec(), last.rigid.as_ref())),
             &registered,
             sigma,
             labels,
@@ -229,11 +230,11 @@ impl RunWriter {
         write_targets_for_slicer(&self.dir.join("targets.mrk.json"), &registered, sigma, labels, frame)?;
         let mut surface = register::organ_surface(registration.organ(), &last.registration.u, last.rigid.as_ref());
         surface.vertices = self.converted(&surface.vertices);
-        write_deformed_surface(&self.dir.join("organ_deformed.vtk"), &surface, frame)?;
+        write_surface_in_mm(&self.dir.join("organ_deformed.vtk"), &surface, frame)?;
         for structure in registration.structures() {
             let mut surface = structure.deformed(&last.registration.u, last.rigid.as_ref());
             surface.vertices = self.converted(&surface.vertices);
-            write_deformed_surface(&self.dir.join(format!("{}_deformed.vtk", structure.name())), &surface, frame)?;
+            write_surface_in_mm(&self.dir.join(format!("{}_deformed.vtk", structure.name())), &surface, frame)?;
         }
         let mut skipped = Vec::new();
         match WarpField::of_registration(registration.organ(), &last.registration.u, last.rigid.as_ref(), WARP_STEPS) {
@@ -277,7 +278,7 @@ pub fn write_warp(path: &Path, field: &WarpField, change: FrameChange, frame: Op
 /// The organ mesh and a displacement in the cloud's frame: as given without a rigid alignment;
 /// with one, the mesh moved by it (`moved`, when already computed with that alignment) and the
 /// displacement rotated.
-pub fn in_cloud_frame<'a>(
+pub fn mesh_in_cloud_frame<'a>(
     organ: &'a Mesh,
     moved: Option<&'a Mesh>,
     rigid: Option<&RigidResult>,
@@ -292,17 +293,6 @@ pub fn in_cloud_frame<'a>(
                 None => Cow::Owned(t.move_mesh(organ)),
             };
             (m, t.rotate_field(u))
-        }
-    }
-}
-
-/// Rest targets in the cloud's frame (moved by the rigid alignment, if any).
-pub fn rest_in_cloud_frame(targets: &[Point], rigid: Option<&RigidResult>) -> Vec<Point> {
-    match rigid {
-        None => targets.to_vec(),
-        Some(r) => {
-            let t = r.organ_to_cloud();
-            targets.iter().map(|&p| t.apply(p)).collect()
         }
     }
 }
@@ -361,18 +351,6 @@ pub fn write_targets_for_slicer(
     Ok(write_markups_json(path, &points)?)
 }
 
-/// A registered organ surface (m) in millimetres (`.vtk`), its header naming `frame` when known
-/// (3D Slicer reads `SPACE=` there).
-pub fn write_deformed_surface(path: &Path, surface: &mesh::TriSurface, frame: Option<Frame>) -> Result<()> {
-    let mut surface = surface.clone();
-    surface.vertices.iter_mut().for_each(|v| *v = LengthUnit::Millimetre.point_from_metres(*v));
-    match frame {
-        Some(frame) => write_surface_in_frame(path, &surface, frame)?,
-        None => mesh::io::write_surface(path, &surface)?,
-    }
-    Ok(())
-}
-
 /// Writes a synthetic case's files into `dir`: cloud.csv and truth.csv (of the peak frame),
 /// targets_rest.csv and, for a case of several frames, clouds/cloud_NNNN.csv and
 /// truths/truth_NNNN.csv of every frame, in metres, which their headers name (`x_m, y_m, z_m`).
@@ -414,9 +392,9 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         let method_dir = dir.join(slug(&s.method));
         std::fs::create_dir_all(&method_dir).with_context(|| format!("creating {}", method_dir.display()))?;
         let u = &outcome.registration.u;
-        let (m, u_cloud) = in_cloud_frame(reg.organ.mesh(), None, outcome.rigid.as_ref(), u);
+        let (m, u_cloud) = mesh_in_cloud_frame(reg.organ.mesh(), None, outcome.rigid.as_ref(), u);
         mesh::io::write_mesh(method_dir.join("organ.vtu"), &m, &[Field::point("displacement", 3, u_cloud)])?;
-        let rest_targets = rest_in_cloud_frame(&case.targets, outcome.rigid.as_ref());
+        let rest_targets = in_cloud_frame(case.targets.clone(), outcome.rigid.as_ref());
         let sigma = outcome.target_std.as_deref();
         let csv = method_dir.join("targets.csv");
         write_targets(&csv, &rest_targets, &outcome.targets, sigma, &[], (LengthUnit::Metre, None))?;

@@ -706,7 +706,7 @@ fn answer(
         }
     }
     if let (true, Some(r)) = (options.outputs.transform, rigid) {
-        let matrix = change.transform(r.organ_to_cloud().homogeneous(units.metres())).map(|row| row.map(|x| x as f32));
+        let matrix = change.transform(r.organ_to_cloud().homogeneous(units)).map(|row| row.map(|x| x as f32));
         shared.send(&TransformMessage { matrix }, "rigid")?;
     }
     if !options.outputs.status {

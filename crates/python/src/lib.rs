@@ -435,7 +435,7 @@ impl Registration {
             structures.set_item(name, self.point_array(py, &vertices))?;
         }
         let rigid = rigid.map(|r| {
-            let rows = self.change.transform(r.organ_to_cloud().homogeneous(self.unit.metres()));
+            let rows = self.change.transform(r.organ_to_cloud().homogeneous(self.unit));
             Array2::from_shape_fn((4, 4), |(i, j)| rows[i][j]).into_pyarray(py).unbind()
         });
         Ok(Registered {

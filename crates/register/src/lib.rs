@@ -66,7 +66,7 @@ pub use frame::{
 };
 pub use organ::{Organ, Stencil};
 pub use registration::{organ_surface, target_errors, within_two_std, FrameOutcome, Registration, Summary, Tracked};
-pub use rigid::{rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
+pub use rigid::{in_cloud_frame, rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
 pub use shape::{model_shape_space, ShapeDeformer, ShapeOptions, ShapeSpace};
 pub use structure::Structure;
 pub use warp::WarpField;

@@ -14,7 +14,7 @@ use serde::Serialize;
 
 use crate::frame::{register_frame_begun, Deformer, FrameResult, RegistrationOptions};
 use crate::organ::{displaced, Organ, Stencil};
-use crate::rigid::{rigid_align, RigidResult, RigidSummary};
+use crate::rigid::{in_cloud_frame, rigid_align, RigidResult, RigidSummary};
 use crate::{RegisterError, Result, Structure};
 
 /// Names a structure cannot take: those of what a registration writes and of the server's
@@ -119,12 +119,8 @@ impl Tracked {
 /// The surface of `organ` displaced by `u`, in the cloud's frame (moved by the rigid alignment,
 /// if any).
 pub fn organ_surface(organ: &Organ, u: &[f64], rigid: Option<&RigidResult>) -> mesh::TriSurface {
-    let mut surface = organ.deformed_surface(u);
-    if let Some(r) = rigid {
-        let t = r.organ_to_cloud();
-        surface.vertices.iter_mut().for_each(|p| *p = t.apply(*p));
-    }
-    surface
+    let surface = organ.deformed_surface(u);
+    mesh::TriSurface { vertices: in_cloud_frame(surface.vertices, rigid), triangles: surface.triangles }
 }
 
 impl Registration {
@@ -269,11 +265,7 @@ impl Registration {
             self.warm.as_deref(),
             &self.options,
         )?;
-        let mut targets = displaced(&self.targets, &self.stencils, &registration.u);
-        if let Some(r) = &rigid {
-            let to_cloud = r.organ_to_cloud();
-            targets.iter_mut().for_each(|p| *p = to_cloud.apply(*p));
-        }
+        let targets = in_cloud_frame(displaced(&self.targets, &self.stencils, &registration.u), rigid.as_ref());
         // σ is part of the frame's work, and of its time (not cut by its budget).
         let target_std = self.deformer.uncertainty(&self.targets, &self.stencils).transpose()?;
         registration.time = began.elapsed();
@@ -319,11 +311,7 @@ impl Registration {
                 None => None,
             };
             let Tracked { registration, targets: registered, rigid, target_std } = self.register(&cloud)?;
-            let mut rest = self.targets.clone();
-            if let Some(r) = &rigid {
-                let to_cloud = r.organ_to_cloud();
-                rest.iter_mut().for_each(|p| *p = to_cloud.apply(*p));
-            }
+            let rest = in_cloud_frame(self.targets.clone(), rigid.as_ref());
             let outcome = FrameOutcome {
                 errors: truth.map(|t| target_errors(&registered, t)),
                 rest_errors: truth.map(|t| target_errors(&rest, t)),

@@ -13,6 +13,7 @@
 use std::time::{Duration, Instant};
 
 use mesh::bvh::SurfaceBvh;
+use mesh::length::LengthUnit;
 use mesh::{cross, dot, sub, Mesh, Point, TriSurface};
 use nalgebra::{Matrix6, Vector6};
 use rayon::prelude::*;
@@ -69,11 +70,11 @@ impl RigidTransform {
         [r[0] + self.translation[0], r[1] + self.translation[1], r[2] + self.translation[2]]
     }
 
-    /// The 4 × 4 homogeneous matrix, rows, its translation expressed in units of `unit` m.
-    pub fn homogeneous(&self, unit: f64) -> [[f64; 4]; 4] {
+    /// The 4 × 4 homogeneous matrix, rows, its translation in `unit`.
+    pub fn homogeneous(&self, unit: LengthUnit) -> [[f64; 4]; 4] {
         let row = |i: usize| {
             let r = self.rotation[i];
-            [r[0], r[1], r[2], self.translation[i] / unit]
+            [r[0], r[1], r[2], unit.from_metres(self.translation[i])]
         };
         [row(0), row(1), row(2), [0.0, 0.0, 0.0, 1.0]]
     }
@@ -110,17 +111,6 @@ impl RigidTransform {
     /// The length of the translation (m).
     pub fn translation_norm(&self) -> f64 {
         dot(self.translation, self.translation).sqrt()
-    }
-
-    /// The homogeneous 4 × 4 matrix, rows.
-    pub fn matrix(&self) -> [[f64; 4]; 4] {
-        let (r, t) = (self.rotation, self.translation);
-        [
-            [r[0][0], r[0][1], r[0][2], t[0]],
-            [r[1][0], r[1][1], r[1][2], t[1]],
-            [r[2][0], r[2][1], r[2][2], t[2]],
-            [0.0, 0.0, 0.0, 1.0],
-        ]
     }
 
     /// How far `self` is from `truth` (two transforms of the same direction): the rotation angle
@@ -241,6 +231,15 @@ impl RigidResult {
     pub fn organ_to_cloud(&self) -> RigidTransform {
         self.cloud_to_organ.inverse()
     }
+}
+
+/// `points` of the organ's frame in the cloud's: moved by the rigid alignment `rigid`, if any.
+pub fn in_cloud_frame(mut points: Vec<Point>, rigid: Option<&RigidResult>) -> Vec<Point> {
+    if let Some(r) = rigid {
+        let t = r.organ_to_cloud();
+        points.iter_mut().for_each(|p| *p = t.apply(*p));
+    }
+    points
 }
 
 /// The rigid transform that moves `cloud` onto `surface` (trimmed ICP from the identity: the
@@ -393,7 +392,7 @@ impl From<&RigidResult> for RigidSummary {
     fn from(r: &RigidResult) -> Self {
         let t = r.organ_to_cloud();
         RigidSummary {
-            organ_to_cloud: t.matrix(),
+            organ_to_cloud: t.homogeneous(LengthUnit::Metre),
             rotation_deg: t.angle().to_degrees(),
             translation_mm: t.translation_norm() * 1e3,
             iterations: r.iterations,

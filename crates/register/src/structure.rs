@@ -4,6 +4,7 @@
 use mesh::{Point, TriSurface};
 
 use crate::organ::{displaced, likely_mistake, Stencil, LANDMARK_REACH};
+use crate::rigid::in_cloud_frame;
 use crate::{Organ, RegisterError, Result, RigidResult};
 
 /// A surface embedded in the organ (in m, in the organ's frame, at rest): each vertex inside the
@@ -70,11 +71,7 @@ impl Structure {
     /// The surface moved by the organ's displacement `u`, in the cloud's frame (moved by the
     /// rigid alignment, if any).
     pub fn deformed(&self, u: &[f64], rigid: Option<&RigidResult>) -> TriSurface {
-        let mut vertices = displaced(&self.rest.vertices, &self.stencils, u);
-        if let Some(r) = rigid {
-            let t = r.organ_to_cloud();
-            vertices.iter_mut().for_each(|p| *p = t.apply(*p));
-        }
+        let vertices = in_cloud_frame(displaced(&self.rest.vertices, &self.stencils, u), rigid);
         TriSurface { vertices, triangles: self.rest.triangles.clone() }
     }
 }
