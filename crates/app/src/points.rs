@@ -171,7 +171,7 @@ mod tests {
         )
         .unwrap();
         let unplaced = format!(
-            "{}: 1 control point not placed in 3D Slicer (positionStatus undefined) is left out: q",
+            "{}: 1 control point not placed in 3D Slicer (positionStatus undefined, preview or missing) is left out: q",
             ras.display()
         );
         let (targets, warning) = read_targets(&ras, LengthUnit::Metre).unwrap();

@@ -61,6 +61,39 @@ fn fcsv_of_older_slicer_with_numeric_coordinate_system_is_ras_and_converts_to_lp
     assert_eq!(read_points(none).unwrap().frame, Some(Frame::Ras));
 }
 
+/// Slicer 5 writes two fields per row more than its header names (the position status and
+/// whether the point was made automatically); a point skipped when placing (status 3, missing)
+/// is written at the origin and left out.
+#[test]
+fn fcsv_of_slicer_5_reads_its_unnamed_status_fields_and_leaves_out_missing_points() {
+    let five = read_points(slicer("landmarks_5.6.fcsv")).unwrap();
+    let four = read_points(slicer("landmarks.fcsv")).unwrap();
+    assert_eq!((&five.points, &five.labels, &five.descriptions), (&four.points, &four.labels, &four.descriptions));
+    assert_eq!((five.frame, five.unit), (Some(Frame::Lps), Some(LengthUnit::Millimetre)));
+    assert_eq!(five.unplaced, ["F-4"]);
+    let dir = tempfile::tempdir().unwrap();
+    let columns =
+        "# CoordinateSystem = LPS\n# columns = id,x,y,z,ow,ox,oy,oz,vis,sel,lock,label,desc,associatedNodeID\n";
+    let statuses = put(
+        dir.path(),
+        "statuses.fcsv",
+        format!(
+            "{columns}a,1,2,3,0,0,0,1,1,1,0,,,,0,0\nb,4,5,6,0,0,0,1,1,1,0,B,,,1,0\nc,7,8,9,0,0,0,1,1,1,0,C,,,2,1\n"
+        ),
+    );
+    let p = read_points(statuses).unwrap();
+    assert_eq!((p.points, p.labels), (vec![[7.0, 8.0, 9.0]], vec!["C".to_string()]));
+    assert_eq!(p.unplaced, ["line 3", "B"], "an unlabelled point named by its line");
+    let unknown = put(dir.path(), "unknown.fcsv", format!("{columns}a,1,2,3,0,0,0,1,1,1,0,A,,,7,0\n"));
+    assert_eq!(
+        message(read_points(unknown)),
+        format!(
+            "{}: line 3: position status \"7\" (0 to 3 in Slicer's .fcsv)",
+            dir.path().join("unknown.fcsv").display()
+        )
+    );
+}
+
 #[test]
 fn mrk_json_of_slicer_5_gives_defined_points_with_labels_frame_and_units() {
     let p = read_points(slicer("targets.mrk.json")).unwrap();
@@ -69,7 +102,7 @@ fn mrk_json_of_slicer_5_gives_defined_points_with_labels_frame_and_units() {
     assert_eq!(p.unplaced, ["F-3"]);
     assert_eq!(
         p.unplaced_warning().unwrap(),
-        "1 control point not placed in 3D Slicer (positionStatus undefined) is left out: F-3"
+        "1 control point not placed in 3D Slicer (positionStatus undefined, preview or missing) is left out: F-3"
     );
     assert_eq!(p.descriptions, ["segment VIII", "", ""]);
     assert_eq!((p.frame, p.unit), (Some(Frame::Lps), Some(LengthUnit::Millimetre)));
@@ -80,13 +113,18 @@ fn mrk_json_of_slicer_5_gives_defined_points_with_labels_frame_and_units() {
         "two.mrk.json",
         r#"{"markups": [{"type": "Fiducial", "coordinateSystem": "RAS", "controlPoints": [{"label": "a", "position": [1, 2, 3]}]},
                        {"type": "Fiducial", "coordinateSystem": "LPS", "coordinateUnits": "m", "controlPoints": [{"position": [0.001, 0.002, 0.003]},
-                         {"position": [0, 0, 0], "positionStatus": "undefined"}]}]}"#,
+                         {"position": [0, 0, 0], "positionStatus": "undefined"},
+                         {"label": "skipped", "position": "", "positionStatus": "missing"}]}]}"#,
     );
     let p = read_points(two).unwrap();
     assert_eq!((p.frame, p.unit), (Some(Frame::Ras), Some(LengthUnit::Millimetre)));
     assert_eq!(p.points, [[1.0, 2.0, 3.0], [-1.0, -2.0, 3.0]]);
     assert_eq!(p.labels, ["a", ""]);
-    assert_eq!(p.unplaced, ["markups[1].controlPoints[1]"], "an unlabelled placeholder named by its place");
+    assert_eq!(
+        p.unplaced,
+        ["markups[1].controlPoints[1]", "skipped"],
+        "an unlabelled placeholder named by its place; a point skipped when placing, which has no position"
+    );
     // Microns, which Slicer's schema allows beside millimetres.
     let um = put(
         dir.path(),

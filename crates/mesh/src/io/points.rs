@@ -8,12 +8,16 @@
 //! - **`.fcsv`**: 3D Slicer's markups fiducial CSV (4.x and 5.x): `# CoordinateSystem = LPS`,
 //!   `RAS`, or the older numeric codes `0` (RAS) and `1` (LPS) (no such line: RAS, as Slicer wrote
 //!   before it had one); `# columns = id,x,y,z,ow,ox,oy,oz,vis,sel,lock,label,desc,associatedNodeID`
-//!   names the columns; always millimetres.
+//!   names the columns; always millimetres. Slicer 5 writes two more fields per row that the
+//!   header does not name, each point's position status and whether it was made automatically:
+//!   points of status 0 (undefined), 1 (preview) or 3 (missing, skipped when placing) are left
+//!   out and named in [`LabelledPoints::unplaced`].
 //! - **`.mrk.json`**: 3D Slicer's markups JSON: each markup's `coordinateSystem` (`LPS` when
 //!   absent, as Slicer reads it), `coordinateUnits` (`mm` when absent, `um` read as mm, `m`; also
 //!   coded, `["mm", "UCUM", "millimeter"]`) and `controlPoints` with
 //!   their `position`, `label` and `description`; points whose `positionStatus` is `undefined`
-//!   (placeholders not yet placed) are left out and named in [`LabelledPoints::unplaced`].
+//!   (placeholders not yet placed), `preview` or `missing` (skipped when placing: Slicer writes
+//!   no position) are left out and named in [`LabelledPoints::unplaced`].
 //!   Markups of several frames or units are brought to the first's.
 //!
 //! Every error names the file and the line (CSV) or the control point (JSON).
@@ -43,8 +47,8 @@ pub struct LabelledPoints {
     pub frame: Option<Frame>,
     /// The unit the file names.
     pub unit: Option<LengthUnit>,
-    /// The control points left out because 3D Slicer has not placed them (`.mrk.json`
-    /// `positionStatus: undefined`), by label (or place in the file when unlabelled).
+    /// The control points left out because 3D Slicer has not placed them (their position status
+    /// undefined, preview or missing), by label (or place in the file when unlabelled).
     pub unplaced: Vec<String>,
 }
 
@@ -72,7 +76,7 @@ impl LabelledPoints {
             let (count, verb) =
                 if n == 1 { ("1 control point".to_string(), "is") } else { (format!("{n} control points"), "are") };
             format!(
-                "{count} not placed in 3D Slicer (positionStatus undefined) {verb} left out: {}",
+                "{count} not placed in 3D Slicer (positionStatus undefined, preview or missing) {verb} left out: {}",
                 self.unplaced.join(", ")
             )
         })
@@ -201,20 +205,43 @@ fn read_table(path: &Path, text: &str, fcsv: bool) -> Result<LabelledPoints, Mes
     let header = table.names.join(",");
     let columns = Columns::find(&table.names)
         .map_err(|m| table_error(CsvError::at(header_line, format!("{m} in {header:?}"))))?;
+    // Slicer 5's two unnamed fields: the position status and whether the point was made
+    // automatically.
+    let unnamed = fcsv && table.column(FCSV_STATUS).is_none();
+    if unnamed && table.rows.iter().any(|r| r.fields.len() == table.names.len() + 2) {
+        table.names.extend([FCSV_STATUS.to_string(), "autocreated".to_string()]);
+    }
     table.check_widths().map_err(table_error)?;
+    let status = table.column(FCSV_STATUS).filter(|_| fcsv);
     let mut out = LabelledPoints {
         frame: if fcsv { frame.or(Some(Frame::Ras)) } else { frame },
         unit: if fcsv { Some(LengthUnit::Millimetre) } else { columns.unit },
         ..Default::default()
     };
     for row in &table.rows {
-        out.points.push(row.point(columns.xyz).map_err(table_error)?);
         let field = |c: Option<usize>| c.map_or_else(String::new, |c| row.fields[c].clone());
+        if let Some(code) = status.map(|c| row.fields[c].as_str()).filter(|&c| c != "2" && !c.is_empty()) {
+            let label = field(columns.label);
+            match code {
+                "0" | "1" | "3" => {
+                    out.unplaced.push(if label.is_empty() { format!("line {}", row.line) } else { label });
+                    continue;
+                }
+                other => {
+                    let message = format!("position status {other:?} (0 to 3 in Slicer's .fcsv)");
+                    return Err(table_error(CsvError::at(row.line, message)));
+                }
+            }
+        }
+        out.points.push(row.point(columns.xyz).map_err(table_error)?);
         out.labels.push(field(columns.label));
         out.descriptions.push(field(columns.description));
     }
     Ok(out)
 }
+
+/// The name given to Slicer 5's unnamed position status field of `.fcsv` rows.
+const FCSV_STATUS: &str = "positionstatus";
 
 /// The frame of an `.fcsv` `CoordinateSystem` value: `LPS`, `RAS`, or Slicer's older codes
 /// `0` (RAS) and `1` (LPS).
@@ -289,7 +316,7 @@ fn read_markup(markup: &Value, m: usize) -> Result<LabelledPoints, String> {
         } else {
             format!("{at}.controlPoints[{i}] ({label})")
         };
-        if text("positionStatus") == "undefined" {
+        if matches!(text("positionStatus").as_str(), "undefined" | "preview" | "missing") {
             out.unplaced.push(if label.is_empty() { name } else { label });
             continue;
         }
