@@ -18,7 +18,9 @@ use mesh::io::points::{write_markups_json, LabelledPoints};
 use mesh::io::{csv_field, write_atomic_bytes, Field, Frame, FrameChange};
 use mesh::length::{mm, LengthUnit};
 use mesh::{Mesh, Point};
-use register::{in_cloud_frame, FrameOutcome, Organ, Registration, RigidResult, RigidTransform, Summary, WarpField};
+use register::{
+    in_cloud_frame, FrameOutcome, Organ, Registration, RigidResult, RigidTransform, Summary, Tracked, WarpField,
+};
 use scenario::registration::slug;
 use serde::Serialize;
 
@@ -120,6 +122,21 @@ struct RunSummary<'a> {
     #[serde(flatten)]
     summary: &'a Summary,
     per_frame: &'a [FrameSummary],
+    /// What a user should know of the files written (or left out), a line each.
+    #[serde(skip_serializing_if = "<[String]>::is_empty")]
+    file_notes: &'a [String],
+}
+
+/// What [`RunWriter::finish`] wrote.
+#[derive(Clone, Debug)]
+pub struct Finished {
+    /// The run's figures.
+    pub summary: Summary,
+    /// The files written for 3D Slicer, by name.
+    pub for_slicer: Vec<String>,
+    /// What a user should know of the files written or left out (displacement.nrrd of an organ
+    /// registered with inverted elements), a line each; also in summary.json.
+    pub notes: Vec<String>,
 }
 
 /// Writes a registration run into a directory, frame by frame, then its targets and summary.
@@ -201,16 +218,14 @@ impl RunWriter {
     /// which they name when known (the clouds' frame given, else `working`: the frame the
     /// registration worked in, once the organ or a file named one), and the last frame's
     /// pictures, registration.png and registration.html, in the organ's frame (`last`: its
-    /// cloud and its targets' truth, when known, as registered); returns the run's summary and
-    /// what was not written, and why (displacement.nrrd of an organ registered with inverted
-    /// elements).
+    /// cloud and its targets' truth, when known, as registered).
     pub fn finish(
         self,
         registration: &Registration,
         working: Option<Frame>,
         outcomes: &[FrameOutcome],
         (cloud, truth): (&[Point], Option<&[Point]>),
-    ) -> Result<(Summary, Vec<String>)> {
+    ) -> Result<Finished> {
         let frame = self.given.or(working);
         if self.sequence {
             mesh::io::write_pvd(self.dir.join("organ.pvd"), &self.steps)?;
@@ -227,19 +242,35 @@ impl RunWriter {
             labels,
             (self.unit, frame),
         )?;
-        write_targets_for_slicer(&self.dir.join("targets.mrk.json"), &registered, sigma, labels, frame)?;
-        let mut surface = register::organ_surface(registration.organ(), &last.registration.u, last.rigid.as_ref());
-        surface.vertices = self.converted(&surface.vertices);
-        write_surface_in_mm(&self.dir.join("organ_deformed.vtk"), &surface, frame)?;
+        let mut for_slicer = vec!["targets.mrk.json".to_string()];
+        write_targets_for_slicer(&self.dir.join(&for_slicer[0]), &registered, sigma, labels, frame)?;
+        let mut surfaces = vec![(
+            "organ_deformed.vtk".to_string(),
+            register::organ_surface(registration.organ(), &last.registration.u, last.rigid.as_ref()),
+        )];
         for structure in registration.structures() {
-            let mut surface = structure.deformed(&last.registration.u, last.rigid.as_ref());
-            surface.vertices = self.converted(&surface.vertices);
-            write_surface_in_mm(&self.dir.join(format!("{}_deformed.vtk", structure.name())), &surface, frame)?;
+            let surface = structure.deformed(&last.registration.u, last.rigid.as_ref());
+            surfaces.push((format!("{}_deformed.vtk", structure.name()), surface));
         }
-        let mut skipped = Vec::new();
+        for (name, mut surface) in surfaces {
+            surface.vertices = self.converted(&surface.vertices);
+            write_surface_in_mm(&self.dir.join(&name), &surface, frame)?;
+            for_slicer.push(name);
+        }
+        let mut notes = Vec::new();
         match WarpField::of_registration(registration.organ(), &last.registration.u, last.rigid.as_ref(), WARP_STEPS) {
-            Ok(field) => write_warp(&self.dir.join("displacement.nrrd"), &field, self.change, frame)?,
-            Err(e) => skipped.push(format!("no displacement.nrrd: {e}")),
+            Ok(field) => {
+                write_warp(&self.dir.join("displacement.nrrd"), &field, self.change, frame)?;
+                for_slicer.push("displacement.nrrd".into());
+                if field.inverted > 0 {
+                    notes.push(format!(
+                        "displacement.nrrd: {} cell(s) of the registered organ inverted; where they fold over \
+                         their neighbours, the field takes one of the rest positions folded there",
+                        field.inverted
+                    ));
+                }
+            }
+            Err(e) => notes.push(format!("no displacement.nrrd: {e}")),
         }
         let row = self.rows.last().context("no frame")?;
         let targets = (registration.targets(), last.targets.as_slice());
@@ -250,10 +281,27 @@ impl RunWriter {
             frame_notes(frame_line(outcomes.len() - 1, row), last.target_std.as_deref(), &last.registration.warnings),
         )?;
         let summary = Summary::new(registration.method(), outcomes)?;
-        let run = RunSummary { frame, summary: &summary, per_frame: &self.rows };
+        let run = RunSummary { frame, summary: &summary, per_frame: &self.rows, file_notes: &notes };
         write_atomic_bytes(&self.dir.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
-        Ok((summary, skipped))
+        Ok(Finished { summary, for_slicer, notes })
     }
+}
+
+/// Writes one registered `cloud` (in the organ's frame, m) into `dir` as [`RunWriter`] writes a
+/// run of one frame, named `name`: in `unit` and the clouds' frame of `(organ, given)` frames
+/// ([`RunWriter::new`]).
+pub fn write_registered_cloud(
+    dir: &Path,
+    name: &str,
+    registration: &Registration,
+    (unit, (organ, given)): (LengthUnit, (Option<Frame>, Option<Frame>)),
+    tracked: Tracked,
+    cloud: &[Point],
+) -> Result<Finished> {
+    let outcome = tracked.into_outcome(None);
+    let mut writer = RunWriter::new(dir, false, unit, (organ, given))?;
+    writer.frame(0, name.into(), registration.organ(), &outcome)?;
+    writer.finish(registration, organ, std::slice::from_ref(&outcome), (cloud, None))
 }
 
 /// Grid steps across the registered organ's largest extent, margins included, in displacement.nrrd.
@@ -473,8 +521,13 @@ mod tests {
     #[test]
     fn a_displacement_field_is_written_in_lps_millimetres() {
         let dir = tempfile::tempdir().unwrap();
-        let field =
-            WarpField { origin: [0.01, 0.02, 0.03], spacing: 0.005, dims: [2, 2, 2], vectors: vec![[0.0; 3]; 8] };
+        let field = WarpField {
+            origin: [0.01, 0.02, 0.03],
+            spacing: 0.005,
+            dims: [2, 2, 2],
+            vectors: vec![[0.0; 3]; 8],
+            inverted: 0,
+        };
         let header = |frame: Option<Frame>| {
             let path = dir.path().join("field.nrrd");
             write_warp(&path, &field, FrameChange::default(), frame).unwrap();

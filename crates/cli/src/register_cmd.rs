@@ -113,17 +113,16 @@ fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
         eprintln!("warning    {w}");
     }
     let last_truth = truths.as_ref().and_then(|t| t.last()).map(Vec::as_slice);
-    let (summary, skipped) = writer.finish(&registration, input.frame, &outcomes, (&last_cloud, last_truth))?;
-    print_lines(&run_lines(&outcomes, &summary, spec.given_units));
-    for s in skipped {
-        eprintln!("warning    {s}");
+    let finished = writer.finish(&registration, input.frame, &outcomes, (&last_cloud, last_truth))?;
+    print_lines(&run_lines(&outcomes, &finished.summary, spec.given_units));
+    for note in &finished.notes {
+        eprintln!("warning    {note}");
     }
-    let structures: String = registration.structures().iter().map(|s| format!(", {}_deformed.vtk", s.name())).collect();
     println!(
-        "wrote      {} ({}, targets.csv, summary.json, registration.png and .html; for 3D Slicer: organ_deformed.vtk\
-         {structures}, targets.mrk.json, displacement.nrrd)",
+        "wrote      {} ({}, targets.csv, summary.json, registration.png and .html; for 3D Slicer: {})",
         out.display(),
-        if sequence { "organ.pvd" } else { "organ.vtu" }
+        if sequence { "organ.pvd" } else { "organ.vtu" },
+        finished.for_slicer.join(", ")
     );
     Ok(())
 }

@@ -107,4 +107,18 @@ fn every_command_of_the_readme_tour_runs_as_written() {
         }
         println!("{:6.1} s  {command}", began.elapsed().as_secs_f64());
     }
+    // Every registered cloud's results for 3D Slicer include the transform of its CT, whichever
+    // method registered it (a learned model's prediction may fold a cell).
+    let mut runs = vec![dir.path().join("out/register")];
+    let mut registered = 0;
+    while let Some(folder) = runs.pop() {
+        for entry in std::fs::read_dir(&folder).unwrap().map(Result::unwrap).filter(|e| e.path().is_dir()) {
+            runs.push(entry.path());
+        }
+        if folder.join("targets.mrk.json").exists() {
+            registered += 1;
+            assert!(folder.join("displacement.nrrd").exists(), "{}: no displacement.nrrd", folder.display());
+        }
+    }
+    assert!(registered >= 4, "{registered} registered clouds in out/register");
 }

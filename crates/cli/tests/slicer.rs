@@ -221,7 +221,7 @@ fn displacement_field(path: &Path) -> impl Fn([f64; 3]) -> [f64; 3] {
     // Read back in metres, the grid interpolates as ITK resamples it (`WarpField::at`).
     let m = |x: f64| x * 1e-3;
     let vectors = values.chunks_exact(3).map(|v| [m(v[0]), m(v[1]), m(v[2])]).collect();
-    let field = register::WarpField { origin: origin.map(m), spacing: m(step), dims, vectors };
+    let field = register::WarpField { origin: origin.map(m), spacing: m(step), dims, vectors, inverted: 0 };
     move |p: [f64; 3]| field.at(p.map(m)).expect("inside the grid").map(|x| x * 1e3)
 }
 

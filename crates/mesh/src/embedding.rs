@@ -227,6 +227,18 @@ impl MeshLocator {
     /// Bins the elements of `mesh` (checked with [`Mesh::validate`]).
     pub fn new(mesh: &Mesh) -> Result<Self, MeshError> {
         mesh.validate()?;
+        Self::binned(mesh)
+    }
+
+    /// Bins the elements of a mesh some of whose cells may be inverted (checked with
+    /// [`Mesh::validate_connectivity`]), e.g. a deformed mesh folding over itself: a point where
+    /// cells overlap is located in one of them; a degenerate (flat) cell holds none.
+    pub fn allowing_inverted(mesh: &Mesh) -> Result<Self, MeshError> {
+        mesh.validate_connectivity()?;
+        Self::binned(mesh)
+    }
+
+    fn binned(mesh: &Mesh) -> Result<Self, MeshError> {
         if mesh.cells.is_empty() {
             return Err(MeshError::Invalid("cannot locate points in a mesh without cells".into()));
         }

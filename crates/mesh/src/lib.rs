@@ -226,15 +226,8 @@ impl Mesh {
     /// Tetrahedra must have positive volume; hexahedra a positive Jacobian at the
     /// centre and corners.
     pub fn validate(&self) -> Result<(), MeshError> {
-        let n = self.nodes.len();
-        if let Some(i) = self.nodes.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
-            return Err(MeshError::Invalid(format!("node {i} has a non-finite coordinate")));
-        }
+        self.validate_connectivity()?;
         for i in 0..self.cells.len() {
-            let cell = self.cells.cell(i);
-            if let Some(&bad) = cell.iter().find(|&&k| k >= n) {
-                return Err(MeshError::Invalid(format!("cell {i} refers to node {bad}, but there are {n} nodes")));
-            }
             let vol = self.cell_volume(i);
             if !(vol > 0.0) {
                 return Err(MeshError::Invalid(format!("cell {i} is inverted or degenerate (volume {vol:.3e})")));
@@ -245,6 +238,21 @@ impl Mesh {
                 if !hex_corner_jacobians_positive(&self.nodes, h) {
                     return Err(MeshError::Invalid(format!("hexahedron {i} has a non-positive corner Jacobian")));
                 }
+            }
+        }
+        Ok(())
+    }
+
+    /// [`Mesh::validate`] but for the cells' orientation: indices, finiteness, region indices
+    /// (e.g. of a deformed mesh, whose cells may have been turned inside out).
+    pub fn validate_connectivity(&self) -> Result<(), MeshError> {
+        let n = self.nodes.len();
+        if let Some(i) = self.nodes.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
+            return Err(MeshError::Invalid(format!("node {i} has a non-finite coordinate")));
+        }
+        for i in 0..self.cells.len() {
+            if let Some(&bad) = self.cells.cell(i).iter().find(|&&k| k >= n) {
+                return Err(MeshError::Invalid(format!("cell {i} refers to node {bad}, but there are {n} nodes")));
             }
         }
         for (name, set) in &self.regions {

@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use app::assimilation::{Experiment, OnlineFilter};
-use app::output::RunWriter;
+use app::output::write_registered_cloud;
 use app::registration::{RegistrationChoice, TargetsSpec};
 use fem::post;
 use learn::data::npy::{NpyArray, NpyData};
@@ -408,28 +408,36 @@ impl Registration {
     /// targets.mrk.json, organ_deformed.vtk and displacement.nrrd (mm), all
     /// in the clouds' frame (`frame`; default: the organ's), which they name when known. Raises ValueError for an array of another shape,
     /// AugsimError for a cloud augsim rejects (no point, a NaN) or a failed registration (the
-    /// warm start is then kept).
+    /// warm start is then kept). What to know of the files written (a displacement.nrrd left
+    /// out, or folded somewhere) comes as a UserWarning.
     #[pyo3(signature = (cloud, *, out=None))]
     fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>, out: Option<PathBuf>) -> PyResult<Registered> {
         let cloud: Vec<Point> =
             points(cloud, "cloud", self.unit.metres())?.into_iter().map(|p| self.change.point(p)).collect();
-        let (Tracked { registration: result, targets, rigid, target_std }, moved) = compute(py, || {
+        let (Tracked { registration: result, targets, rigid, target_std }, moved, notes) = compute(py, || {
             // A directory that cannot be made fails before the cloud moves the warm start on.
             if let Some(dir) = &out {
                 std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
             }
             let mut state = locked(&self.state)?;
             let tracked = state.register(&cloud)?;
-            if let Some(dir) = &out {
-                write_frame(dir, &state, (self.unit, self.frames), &tracked, &cloud)?;
-            }
+            let notes = match &out {
+                Some(dir) => {
+                    let frames = (self.unit, self.frames);
+                    write_registered_cloud(dir, "python", &state, frames, tracked.clone(), &cloud)?.notes
+                }
+                None => Vec::new(),
+            };
             let moved: Vec<(String, Vec<Point>)> = state
                 .structures()
                 .iter()
                 .map(|s| (s.name().to_string(), s.deformed(&tracked.registration.u, tracked.rigid.as_ref()).vertices))
                 .collect();
-            Ok((tracked, moved))
+            Ok((tracked, moved, notes))
         })?;
+        for note in notes {
+            PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &std::ffi::CString::new(note)?, 1)?;
+        }
         let structures = PyDict::new(py);
         for (name, vertices) in moved {
             structures.set_item(name, self.point_array(py, &vertices))?;
@@ -492,31 +500,6 @@ impl Registration {
         let changed: Vec<Point> = points.iter().map(|&p| self.change.point(p)).collect();
         point_array(py, &changed, self.unit.metres())
     }
-}
-
-/// Writes one registered `cloud` (in the organ's frame, m) as `augsim register` does (organ.vtu,
-/// targets.csv in `unit`, summary.json, registration.png and .html, and for 3D Slicer
-/// targets.mrk.json, organ_deformed.vtk and displacement.nrrd), in the clouds' frame of `(organ, given)` frames
-/// ([`RunWriter::new`]).
-fn write_frame(
-    dir: &std::path::Path,
-    registration: &register::Registration,
-    (unit, (organ, given)): (LengthUnit, (Option<Frame>, Option<Frame>)),
-    tracked: &Tracked,
-    cloud: &[Point],
-) -> anyhow::Result<()> {
-    let outcome = register::FrameOutcome {
-        registration: tracked.registration.clone(),
-        targets: tracked.targets.clone(),
-        errors: None,
-        rest_errors: None,
-        rigid: tracked.rigid.clone(),
-        target_std: tracked.target_std.clone(),
-    };
-    let mut writer = RunWriter::new(dir, false, unit, (organ, given))?;
-    writer.frame(0, "python".into(), registration.organ(), &outcome)?;
-    writer.finish(registration, organ, std::slice::from_ref(&outcome), (cloud, None))?;
-    Ok(())
 }
 
 /// Predicts with a trained U-Net, as `augsim predict` does.

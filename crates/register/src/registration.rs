@@ -110,6 +110,20 @@ pub struct Tracked {
 }
 
 impl Tracked {
+    /// The frame's outcome; with `(truth, rest)`, the targets' true positions and their rest
+    /// positions (both in the cloud's frame), its errors and those of not deforming.
+    pub fn into_outcome(self, truth: Option<(&[Point], &[Point])>) -> FrameOutcome {
+        let Tracked { registration, targets, rigid, target_std } = self;
+        FrameOutcome {
+            errors: truth.map(|(t, _)| target_errors(&targets, t)),
+            rest_errors: truth.map(|(t, rest)| target_errors(rest, t)),
+            targets,
+            registration,
+            rigid,
+            target_std,
+        }
+    }
+
     /// The registered organ surface, in the cloud's frame.
     pub fn organ_surface(&self, organ: &Organ) -> mesh::TriSurface {
         organ_surface(organ, &self.registration.u, self.rigid.as_ref())
@@ -310,16 +324,9 @@ impl Registration {
                 ),
                 None => None,
             };
-            let Tracked { registration, targets: registered, rigid, target_std } = self.register(&cloud)?;
-            let rest = in_cloud_frame(self.targets.clone(), rigid.as_ref());
-            let outcome = FrameOutcome {
-                errors: truth.map(|t| target_errors(&registered, t)),
-                rest_errors: truth.map(|t| target_errors(&rest, t)),
-                targets: registered,
-                registration,
-                rigid,
-                target_std,
-            };
+            let tracked = self.register(&cloud)?;
+            let rest = in_cloud_frame(self.targets.clone(), tracked.rigid.as_ref());
+            let outcome = tracked.into_outcome(truth.map(|t| (t.as_slice(), rest.as_slice())));
             on_frame(i, &self.organ, &outcome)?;
             outcomes.push(outcome);
         }
