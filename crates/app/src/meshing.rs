@@ -14,7 +14,7 @@ use mesh::length::{mm, LengthUnit, UnitOrAuto};
 use mesh::phantom::PhantomSpec;
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
 use mesh::repair::{detect_unit, largest_extent, RepairOptions};
-use mesh::tetmesh::BoundaryFit;
+use mesh::tetmesh::{BoundaryFit, Coverage};
 use mesh::{Mesh, TriSurface};
 
 /// What to mesh and how.
@@ -52,11 +52,30 @@ pub struct Meshed {
     /// What was done on the way, each a topic (`labelmap`, `repair`, `warning`, `units`) and a
     /// line, in order.
     pub notes: Vec<(&'static str, String)>,
+    /// How much of the surface meshed with tetrahedra the mesh covers.
+    pub coverage: Option<Coverage>,
+}
+
+/// Parts of the surface left out of its mesh beyond this share of its area are warned about.
+pub const MOST_UNCOVERED: f64 = 0.01;
+
+/// A warning when the mesh leaves out more than [`MOST_UNCOVERED`] of its surface.
+pub fn coverage_warning(coverage: &Coverage) -> Option<String> {
+    (coverage.uncovered > MOST_UNCOVERED).then(|| {
+        format!(
+            "{:.1} % of the surface lies more than {:.1} mm from the mesh (up to {:.1} mm): parts thinner than \
+             the tetrahedra are left out; mesh finer (--tets)",
+            100.0 * coverage.uncovered,
+            mm(coverage.distance),
+            mm(coverage.farthest)
+        )
+    })
 }
 
 /// Meshes the organ of `options`.
 pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
     let mut notes = Vec::new();
+    let mut coverage = None;
     let (mesh, reference_volume, frame) = match (&options.surface, options.immersed) {
         (None, None) => {
             let spec = PhantomSpec::default();
@@ -71,9 +90,11 @@ pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
             let volume = Some(surface.enclosed_volume().abs());
             let mesh = match immersed {
                 None => {
-                    mesh::tetmesh::mesh_surface_to_count(&surface, options.tets, BoundaryFit::default())
-                        .with_context(|| format!("meshing {}", path.display()))?
-                        .0
+                    let (mesh, quality) =
+                        mesh::tetmesh::mesh_surface_to_count(&surface, options.tets, BoundaryFit::default())
+                            .with_context(|| format!("meshing {}", path.display()))?;
+                    coverage = quality.coverage;
+                    mesh
                 }
                 Some(h) => {
                     let opts = mesh::immersed::ImmersedOptions::with_spacing(h);
@@ -83,7 +104,7 @@ pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
             (mesh, volume, frame)
         }
     };
-    Ok(Meshed { mesh, reference_volume, frame, notes })
+    Ok(Meshed { mesh, reference_volume, frame, notes, coverage })
 }
 
 /// Reads a surface, repairs it unless told not to, and brings it to metres: fitted to `length`
@@ -228,6 +249,7 @@ impl Meshed {
                         q.pieces
                     ));
                 }
+                lines.extend(self.coverage.as_ref().and_then(coverage_warning).map(|w| format!("warning    {w}")));
                 volume_line(q.volume, q.reference_volume)
             }
             mesh::Cells::Tet10(_) => volume_line(mesh.volume(), reference),
@@ -257,6 +279,14 @@ mod tests {
 
     fn phantom(immersed: Option<f64>) -> MeshOptions {
         MeshOptions { surface: None, label: None, length: None, units: None, repair: true, tets: 800, immersed }
+    }
+
+    #[test]
+    fn a_mesh_that_leaves_out_part_of_its_surface_is_warned_about() {
+        let lost = Coverage { distance: 0.005, uncovered: 0.097, farthest: 0.027 };
+        let warning = coverage_warning(&lost).unwrap();
+        assert!(warning.starts_with("9.7 % of the surface lies more than 5.0 mm from the mesh (up to 27.0 mm)"));
+        assert_eq!(coverage_warning(&Coverage { uncovered: 0.005, ..lost }), None);
     }
 
     #[test]

@@ -638,3 +638,46 @@ fn measured_faults_name_the_point_and_the_axis() {
     let far = [[0.0, 0.0, 2e6]];
     assert!(augsim_mesh::measured_fault(&far).unwrap().1.contains("beyond 1e6"));
 }
+
+/// A ball of radius 40 mm with a flap 6 mm thick reaching 45 mm beyond it, as a closed surface
+/// (the boundary of a fine mesh of it).
+fn ball_with_flap() -> augsim_mesh::TriSurface {
+    let flap = |p: Point| {
+        let q = [(p[0] - 0.0625).abs() - 0.0425, p[1].abs() - 0.02, p[2].abs() - 0.003];
+        let outside = norm(q.map(|c| c.max(0.0)));
+        outside + q[0].max(q[1]).max(q[2]).min(0.0)
+    };
+    let domain = SdfDomain::new(move |p: Point| (norm(p) - 0.04).min(flap(p)), [-0.041; 3], [0.106, 0.041, 0.041]);
+    let fine = stuff(&domain, &TetMeshOptions::with_size(0.0015).with_fit(BoundaryFit::OnSurface)).unwrap();
+    augsim_mesh::boundary_surface(&fine).compacted()
+}
+
+/// A part thinner than the elements is left out of the mesh and the coverage says how much; a
+/// mesh fine enough keeps it.
+#[test]
+fn coverage_names_a_thin_part_the_mesh_leaves_out() {
+    let surface = ball_with_flap();
+    let (coarse, q) = mesh_surface_to_count(&surface, 400, BoundaryFit::VolumePreserving).unwrap();
+    let c = q.coverage.unwrap();
+    let reach = coarse.nodes.iter().map(|p| p[0]).fold(f64::MIN, f64::max);
+    assert!(reach < 0.09, "the flap reaches x = 105 mm, the coarse mesh {reach} m");
+    assert!(c.uncovered > 0.05 && c.farthest > 0.02, "{c:?}");
+    assert!((c.distance - 0.02 * 0.145).abs() < 1e-3, "2 % of the 145 mm extent: {c:?}");
+    let (fine, q) = mesh_surface_to_count(&surface, 20_000, BoundaryFit::VolumePreserving).unwrap();
+    let c = q.coverage.unwrap();
+    assert!(fine.nodes.iter().map(|p| p[0]).fold(f64::MIN, f64::max) > 0.1);
+    assert!(c.uncovered < 0.005 && c.farthest < c.distance, "{c:?}");
+}
+
+/// A ball behind a neck thinner than the lattice comes out of stuffing as a body that shares no
+/// node with the rest: it is left out (nothing would hold it), the larger body kept.
+#[test]
+fn a_body_cut_off_by_a_thin_neck_is_left_out() {
+    let neck = |p: Point| (p[1] * p[1] + p[2] * p[2]).sqrt().max((p[0] - 0.045).abs() - 0.02) - 0.0015;
+    let two = |p: Point| (norm(p) - 0.03).min(norm([p[0] - 0.09, p[1], p[2]]) - 0.024).min(neck(p) + 0.0);
+    let domain = SdfDomain::new(two, [-0.031, -0.031, -0.031], [0.115, 0.031, 0.031]);
+    let mesh = stuff(&domain, &TetMeshOptions::with_size(0.012)).unwrap();
+    assert!(mesh.nodes.iter().all(|p| p[0] < 0.05), "the far ball is left out");
+    let (lo, hi) = mesh.bounds();
+    assert!(hi[0] - lo[0] > 0.05, "the near ball is kept: {lo:?} {hi:?}");
+}

@@ -63,7 +63,7 @@ use serde::{Deserialize, Serialize};
 
 use learn::LearnedModel;
 
-use crate::meshing::write_surface_in_mm;
+use crate::meshing::{coverage_warning, write_surface_in_mm};
 use crate::points::PointInput;
 use crate::registration::{read_structure, structure_name, PATIENT_FILE};
 use crate::training::{train_unet, UNetRun, UNetStart};
@@ -316,6 +316,18 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
     Ok(Inputs { surface, unit, landmarks, targets, camera, frame })
 }
 
+/// Why a target lies outside the organ's mesh when it lies inside the organ's surface (m):
+/// the part around it was left out of the mesh; `None` when every target outside the mesh is
+/// outside the surface too.
+fn thin_part_left_out(surface: &TriSurface, organ: &register::Organ, targets: &[Point]) -> Option<String> {
+    let bvh = mesh::SurfaceBvh::new(surface).ok()?;
+    targets.iter().any(|&p| bvh.is_inside(p) && organ.locate(&[p], "target").is_err()).then(|| {
+        "it lies inside the organ's surface, in a part thinner than the tetrahedra that the mesh leaves out: \
+         mesh finer (--tets)"
+            .to_string()
+    })
+}
+
 /// Step 1: the surface repaired and meshed, the regions selected, the targets located.
 fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let mut lines = Vec::new();
@@ -345,6 +357,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
             quality.pieces
         ));
     }
+    lines.extend(quality.coverage.as_ref().and_then(coverage_warning).map(|w| format!("warning: {w}")));
     let visible = Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&organ)?;
     if visible.is_empty() {
         bail!(
@@ -379,9 +392,13 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
         100.0 * held_share
     ));
     lines.extend(landmark_warnings.into_iter().map(|w| format!("warning: {w}")));
-    let (_, warnings) = located
-        .locate_targets(&targets, &labelled_targets.labels)
-        .with_context(|| format!("the targets of {}", options.targets.display()))?;
+    let (_, warnings) = located.locate_targets(&targets, &labelled_targets.labels).map_err(|e| {
+        let context = format!("the targets of {}", options.targets.display());
+        match thin_part_left_out(&surface, &located, &targets) {
+            Some(why) => anyhow::anyhow!("{e}: {why}").context(context),
+            None => anyhow::Error::from(e).context(context),
+        }
+    })?;
     lines.push(format!("targets: {} inside the organ", targets.len()));
     lines.extend(warnings.into_iter().map(|w| format!("warning: {w}")));
     let mut names: Vec<String> = Vec::new();
@@ -788,6 +805,25 @@ fn regions_picture(
 mod tests {
     use super::*;
     use mesh::io::points::write_points_csv;
+
+    /// A target in a flap of the organ thinner than the tetrahedra is outside the mesh but inside
+    /// the surface, and said to be so; a target outside both is not.
+    #[test]
+    fn a_target_in_a_part_the_mesh_left_out_is_told_so() {
+        let flap = |p: Point| {
+            let q = [(p[0] - 0.06).abs() - 0.03, p[1].abs() - 0.02, p[2].abs() - 0.003];
+            mesh::norm(q.map(|c| c.max(0.0))) + q[0].max(q[1]).max(q[2]).min(0.0)
+        };
+        let sdf = move |p: Point| (mesh::norm(p) - 0.04).min(flap(p));
+        let domain = mesh::SdfDomain::new(sdf, [-0.041; 3], [0.091, 0.041, 0.041]);
+        let fine = mesh::stuff(&domain, &mesh::TetMeshOptions::with_size(0.0015)).unwrap();
+        let surface = mesh::boundary_surface(&fine).compacted();
+        let coarse = mesh::stuff(&domain, &mesh::TetMeshOptions::with_size(0.015)).unwrap();
+        let organ = register::Organ::new(coarse, None).unwrap();
+        let why = thin_part_left_out(&surface, &organ, &[[0.0; 3], [0.08, 0.0, 0.0]]).unwrap();
+        assert!(why.contains("thinner than the tetrahedra"), "{why}");
+        assert_eq!(thin_part_left_out(&surface, &organ, &[[0.0; 3], [0.0, 0.1, 0.0]]), None);
+    }
 
     #[test]
     fn an_organ_that_swings_under_the_pushes_is_told_so() {
