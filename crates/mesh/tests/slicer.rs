@@ -144,6 +144,27 @@ fn mrk_json_of_slicer_5_gives_defined_points_with_labels_frame_and_units() {
     assert_eq!((p.unit, p.points), (Some(LengthUnit::Metre), vec![[0.1, 0.2, 0.3]]));
 }
 
+/// A written point's orientation is Slicer's identity (in RAS) in the file's frame: negated x
+/// and y in LPS, as it is in RAS.
+#[test]
+fn mrk_json_orientation_is_the_identity_in_the_files_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    for (frame, identity) in [(Frame::Lps, [-1.0, -1.0, 1.0]), (Frame::Ras, [1.0, 1.0, 1.0])] {
+        let path = dir.path().join(format!("{frame}.mrk.json"));
+        let points = LabelledPoints { frame: Some(frame), ..LabelledPoints::new(vec![[1.0, 2.0, 3.0]]) };
+        augsim_mesh::io::points::write_markups_json(&path, &points).unwrap();
+        let json: serde_json::Value = serde_json::from_str(&fs::read_to_string(&path).unwrap()).unwrap();
+        let o: Vec<f64> = json["markups"][0]["controlPoints"][0]["orientation"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!([o[0], o[4], o[8]], identity, "{frame}");
+        assert!(o.iter().enumerate().all(|(k, v)| k % 4 == 0 || *v == 0.0), "{frame}: {o:?}");
+    }
+}
+
 #[test]
 fn csv_points_keep_their_labels_and_the_unit_their_header_names() {
     let dir = tempfile::tempdir().unwrap();

@@ -450,6 +450,11 @@ pub fn write_markups_json(path: impl AsRef<Path>, points: &LabelledPoints) -> Re
     let path = path.as_ref();
     check_points(points)?;
     let scale = millimetres_per_unit(points);
+    // Slicer's orientation of a point is the identity in RAS, written in the file's frame.
+    let orientation = match points.frame {
+        Some(Frame::Ras) => [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        _ => [-1.0, -0.0, -0.0, -0.0, -1.0, -0.0, 0.0, 0.0, 1.0],
+    };
     let control: Vec<Value> = points
         .points
         .iter()
@@ -463,7 +468,7 @@ pub fn write_markups_json(path: impl AsRef<Path>, points: &LabelledPoints) -> Re
                 "description": description,
                 "associatedNodeID": "",
                 "position": p,
-                "orientation": [-1.0, -0.0, -0.0, -0.0, -1.0, -0.0, 0.0, 0.0, 1.0],
+                "orientation": orientation,
                 "selected": true,
                 "locked": false,
                 "visibility": true,
