@@ -380,12 +380,6 @@ pub fn ar_network_model(model: &Model) -> Result<(Organ, NetworkDeformer)> {
     network_model(&Network { model, scenario: &ar_scenario(), dir: Path::new("") })
 }
 
-/// The methods of the built-in case: the co-rotational FEM and the SVK FEM (E = 5 kPa, ν = 0.49,
-/// the law of the network's training data) on [`model_mesh`], and the learned `networks`.
-pub fn methods(networks: &[Network]) -> Result<Vec<Method>> {
-    case_methods(&CaseScenario::builtin(), networks)
-}
-
 /// The methods of `scenario`, in its order, each with the case's loop settings and its own
 /// iteration budgets: its FEM methods ([`fem_scenario`]); its network method once per learned
 /// model of `networks` (on its scenario's organ), named by the model's kind ("U-Net", "ROM"), a
