@@ -168,6 +168,8 @@ fn labelmap_surface(
     }
     let organ = read_labelmap_surface(path, options.label.as_deref(), &ExtractOptions::default())?;
     notes.extend(organ.lines().into_iter().map(|l| ("labelmap", l)));
+    notes.extend(organ.warnings.iter().map(|w| ("warning", w.clone())));
+    let frame = organ.scanner_frame();
     let mut surface = organ.surface;
     match options.length {
         Some(l) => {
@@ -175,9 +177,10 @@ fn labelmap_surface(
             Ok((surface, None))
         }
         None => {
-            notes.push(("units", format!("mm (the labelmap's); frame {} kept", organ.frame.name())));
+            let kept = frame.map_or("no frame".to_string(), |f| format!("frame {f} kept"));
+            notes.push(("units", format!("mm (the labelmap's); {kept}")));
             surface.transform([0.0; 3], LengthUnit::Millimetre.metres());
-            Ok((surface, Some(organ.frame)))
+            Ok((surface, frame))
         }
     }
 }

@@ -40,7 +40,7 @@ fn labelmap() -> Labelmap {
             }
         }
     }
-    Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new() }
+    Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new(), placed: true }
 }
 
 #[test]

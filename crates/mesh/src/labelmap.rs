@@ -51,6 +51,9 @@ pub struct Labelmap {
     pub frame: Frame,
     /// Named segments the file carries: (name, layer, label).
     pub segments: Vec<(String, usize, i32)>,
+    /// Whether the file places its voxels in the scanner's frame (a NIfTI without qform and sform
+    /// codes does not: its world is the voxel grid scaled by the spacing).
+    pub placed: bool,
 }
 
 fn parse_error(path: &Path, message: impl Into<String>) -> MeshError {
@@ -262,7 +265,8 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
     }
     let affine = nifti_affine(i16_at(252), i16_at(254), &pixdim, f32_at)?;
     let affine = in_millimetres(affine, nifti_unit_mm(bytes[123])?);
-    Ok(Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new() })
+    let placed = i16_at(252) > 0 || i16_at(254) > 0;
+    Ok(Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new(), placed })
 }
 
 /// The millimetres in a NIfTI spatial unit (the low three bits of `xyzt_units`): metre, mm,
@@ -534,7 +538,7 @@ fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
     let encoding = header.field("encoding")?;
     if matches!(encoding, "ascii" | "text" | "txt") {
         let labels = ascii_labels(data, count)?;
-        return Ok(Labelmap { dims, layers, labels, affine, frame, segments });
+        return Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed: true });
     }
     // As teem, the reference reader, does: binary data of more than one byte need their byte order.
     let little = match header.fields.get("endian").map(String::as_str) {
@@ -564,7 +568,7 @@ fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
         s => return Err(format!("bad byte skip {s}")),
     };
     let labels = labels(scalar, raw, count, dims[2], little)?;
-    Ok(Labelmap { dims, layers, labels, affine, frame, segments })
+    Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed: true })
 }
 
 /// The `count` labels of NRRD's ascii encoding: numbers separated by white space.
@@ -660,6 +664,20 @@ impl Labelmap {
     /// present; a number matching segments of several layers must be chosen by name, and a name
     /// that several segments carry is refused.
     pub fn select(&self, choice: &str) -> Result<(VoxelMask, String), MeshError> {
+        let (whole, description) = self.select_uncropped(choice)?;
+        Ok((self.cropped(&whole, &description)?, description))
+    }
+
+    /// `whole`, a selection of `description` on this labelmap's grid, cut to its box with one
+    /// voxel around; an error when it has no voxel.
+    fn cropped(&self, whole: &VoxelMask, description: &str) -> Result<VoxelMask, MeshError> {
+        whole.cropped(1).ok_or_else(|| {
+            MeshError::Invalid(format!("{description} has no voxel; labels present: {}", self.present_text()))
+        })
+    }
+
+    /// [`Labelmap::select`] on the labelmap's whole grid.
+    fn select_uncropped(&self, choice: &str) -> Result<(VoxelMask, String), MeshError> {
         let choice = choice.trim();
         let present = self.present();
         let (layer, label) = if let Ok(label) = choice.parse::<i32>() {
@@ -706,12 +724,7 @@ impl Labelmap {
             Some(n) => format!("label {label} ('{n}')"),
             None => format!("label {label}"),
         };
-        match (VoxelMask { dims: self.dims, inside, affine: self.affine }).cropped(1) {
-            Some(mask) => Ok((mask, description)),
-            None => {
-                Err(MeshError::Invalid(format!("{description} has no voxel; labels present: {}", self.present_text())))
-            }
-        }
+        Ok((VoxelMask { dims: self.dims, inside, affine: self.affine }, description))
     }
 }
 
@@ -870,19 +883,28 @@ pub struct LabelSurface {
     pub spacing: [f64; 3],
     /// What the extraction did.
     pub extract: ExtractReport,
+    /// Whether the file places its voxels in the scanner's frame ([`Labelmap::placed`]).
+    pub placed: bool,
+    /// What a user should know of the organ as read, a line each: a file that places its voxels
+    /// nowhere, an organ cut by the image's border.
+    pub warnings: Vec<String>,
 }
 
 impl LabelSurface {
+    /// The scanner's frame the surface is in; `None` when the file places its voxels nowhere.
+    pub fn scanner_frame(&self) -> Option<Frame> {
+        self.placed.then_some(self.frame)
+    }
+
     /// What was read and extracted, one line each.
     pub fn lines(&self) -> Vec<String> {
         let e = &self.extract;
         let [a, b, c] = self.spacing;
-        let mut lines = vec![format!(
-            "{}: {} voxels of {a:.2} × {b:.2} × {c:.2} mm, in the scanner's {} frame (mm)",
-            self.label,
-            e.voxels,
-            self.frame.name()
-        )];
+        let frame = match self.placed {
+            true => format!("in the scanner's {} frame (mm)", self.frame.name()),
+            false => "at its voxel indices times the spacing (mm; no scanner frame)".to_string(),
+        };
+        let mut lines = vec![format!("{}: {} voxels of {a:.2} × {b:.2} × {c:.2} mm, {frame}", self.label, e.voxels)];
         lines.extend(e.cleaning_lines());
         lines.push(format!(
             "surface: {} triangles (decimated from {}), {}",
@@ -915,9 +937,51 @@ pub fn read_labelmap_surface(
             ))
         }
     };
-    let (mask, label) = map.select(&label).map_err(|e| parse_error(path, e.message()))?;
+    let (whole, label) = map.select_uncropped(&label).map_err(|e| parse_error(path, e.message()))?;
+    let borders = touched_borders(&whole);
+    let mask = map.cropped(&whole, &label).map_err(|e| parse_error(path, e.message()))?;
     let (surface, extract) = mask_surface(&mask, options).map_err(|e| parse_error(path, e.message()))?;
-    Ok(LabelSurface { surface, frame: map.frame, label, spacing: map.spacing(), extract })
+    let mut warnings = Vec::new();
+    if !map.placed {
+        warnings.push(
+            "the file places its voxels nowhere (a NIfTI without qform and sform): the organ lies at its voxel \
+             indices times the spacing, not where the CT lies in the scanner's frame"
+                .to_string(),
+        );
+    }
+    if !borders.is_empty() {
+        warnings.push(format!(
+            "the organ reaches the image's border ({}): it is cut there, flat where the image ends",
+            borders.join(", ")
+        ));
+    }
+    let placed = map.placed;
+    Ok(LabelSurface { surface, frame: map.frame, label, spacing: map.spacing(), extract, placed, warnings })
+}
+
+/// The faces of the image the mask's voxels reach, as `i = 0`, `k = 63`.
+fn touched_borders(mask: &VoxelMask) -> Vec<String> {
+    let [ni, nj, nk] = mask.dims;
+    let mut touched = [[false; 2]; 3];
+    for k in 0..nk {
+        for j in 0..nj {
+            for i in 0..ni {
+                if mask.inside[i + ni * (j + nj * k)] {
+                    for (axis, (index, n)) in [(i, ni), (j, nj), (k, nk)].into_iter().enumerate() {
+                        touched[axis][0] |= index == 0;
+                        touched[axis][1] |= index + 1 == n;
+                    }
+                }
+            }
+        }
+    }
+    let mut faces = Vec::new();
+    for (axis, name) in ["i", "j", "k"].into_iter().enumerate() {
+        let n = mask.dims[axis];
+        faces.extend(touched[axis][0].then(|| format!("{name} = 0")));
+        faces.extend(touched[axis][1].then(|| format!("{name} = {}", n - 1)));
+    }
+    faces
 }
 
 #[cfg(test)]
@@ -950,7 +1014,7 @@ mod tests {
             }
         }
         let segments = vec![("liver".to_string(), 0, 5), ("tumour".to_string(), 0, 2)];
-        (Labelmap { dims, layers: 1, labels, affine, frame, segments }, organ)
+        (Labelmap { dims, layers: 1, labels, affine, frame, segments, placed: true }, organ)
     }
 
     /// Whether two affines agree entry by entry within `tolerance`.
@@ -1069,6 +1133,36 @@ mod tests {
         }
         std::fs::write(path, &bytes).unwrap();
         bytes
+    }
+
+    /// A NIfTI without qform and sform codes places its voxels nowhere: read at its indices times
+    /// the spacing, with no scanner frame, and said so; an organ cut by the image's border is
+    /// said to be, naming the faces.
+    #[test]
+    fn a_labelmap_placed_nowhere_or_cut_by_its_border_is_warned_about() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Ras);
+        let path = dir.path().join("seg.nii");
+        write_nifti(&path, &map).unwrap();
+        let placed = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+        assert_eq!((placed.scanner_frame(), placed.warnings.len()), (Some(Frame::Ras), 0), "{:?}", placed.warnings);
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes[252..256].copy_from_slice(&[0; 4]);
+        std::fs::write(&path, &bytes).unwrap();
+        let nowhere = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+        assert_eq!(nowhere.scanner_frame(), None);
+        assert!(nowhere.lines()[0].contains("no scanner frame"), "{:?}", nowhere.lines());
+        assert!(nowhere.warnings[0].contains("without qform and sform"), "{:?}", nowhere.warnings);
+        let (lo, _) = crate::bounds(&nowhere.surface.vertices);
+        assert!(lo.iter().all(|&x| x > -1.0), "at indices times spacing, from the origin: {lo:?}");
+        // The ball reaches past the first slice (k = 0) once the image starts at its middle.
+        let [ni, nj, _] = map.dims;
+        let cut = Labelmap { dims: [ni, nj, 10], labels: map.labels[ni * nj * 6..].to_vec(), ..map.clone() };
+        let path = dir.path().join("cut.nii");
+        write_nifti(&path, &cut).unwrap();
+        let organ = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+        assert_eq!(organ.warnings.len(), 1, "{:?}", organ.warnings);
+        assert!(organ.warnings[0].contains("image's border (k = 0)"), "{:?}", organ.warnings);
     }
 
     #[test]
@@ -1371,7 +1465,7 @@ mod tests {
             .map(|p| if centres.iter().any(|&c| norm(sub(p, c)) <= 6.0) { 5 } else { 0 })
             .collect();
         let affine = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
-        let twins = Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new() };
+        let twins = Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new(), placed: true };
         let (mask, _) = twins.select("5").unwrap();
         let e = mask_surface(&mask, &ExtractOptions::default()).unwrap_err().to_string();
         assert!(e.contains("several pieces of similar size"), "{e}");

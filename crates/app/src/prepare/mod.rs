@@ -446,7 +446,9 @@ fn read_surface_input(
         }
         let organ = read_labelmap_surface(path, options.label.as_deref(), &ExtractOptions::default())?;
         lines.extend(organ.lines().into_iter().map(|l| format!("labelmap: {l}")));
-        return Ok((organ.surface, Some(organ.frame), LengthUnit::Millimetre));
+        lines.extend(organ.warnings.iter().map(|w| format!("warning: {w}")));
+        let frame = organ.scanner_frame();
+        return Ok((organ.surface, frame, LengthUnit::Millimetre));
     }
     if let Some(label) = &options.label {
         bail!("--label {label} chooses a label of a labelmap ({LABELMAP_FORMATS}), not of {}", path.display());
