@@ -541,8 +541,9 @@ pub fn stuff(domain: &dyn ImplicitDomain, opts: &TetMeshOptions) -> Result<Mesh,
     let (nodes, tets) = stuffing.compact(&stuffing.tetrahedra(domain)?)?;
     if tets.is_empty() {
         return Err(MeshError::Invalid(format!(
-            "the domain produced no element at size {} m: is it empty or thinner than the element size?",
-            opts.size
+            "the domain produced no element at size {:.1} mm: is it empty, or thinner than the elements (mesh \
+             finer)?",
+            crate::length::mm(opts.size)
         )));
     }
     let mut mesh = without_small_pieces(Mesh::new(nodes, Cells::Tet4(tets))?)?;

@@ -141,7 +141,7 @@ fn stuffing_rejects_bad_sizes_and_empty_domains() {
     }
     let empty = SdfDomain::new(|_: Point| 1.0, [0.0; 3], [1.0; 3]);
     let err = stuff(&empty, &TetMeshOptions::with_size(0.2)).unwrap_err().to_string();
-    assert!(err.contains("no element"), "{err}");
+    assert!(err.contains("no element at size 200.0 mm"), "{err}");
     // A count beyond the bound is refused before any memory is taken (100 million would take
     // about 60 GB).
     for (count, what) in [(5, "too small"), (100_000_000, "too large (at most 20000000")] {
