@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use learn::Model;
 use mesh::io::points::LabelledPoints;
-use mesh::io::{read_surface_with_frame, Frame, FrameChange};
+use mesh::io::{read_surface_with_frame, Frame, FrameChange, GivenCoordinates};
 use mesh::isosurface::ExtractOptions;
 use mesh::labelmap::{is_labelmap, read_labelmap_surface};
 use mesh::length::LengthUnit;
@@ -612,10 +612,16 @@ impl RegistrationSpec {
         Ok(registration)
     }
 
-    /// A stream's frame change: from the frame given (else RAS, the frame OpenIGTLink sends) to
-    /// `organ`'s, the frame its registration works in ([`Registration::frame`]), and back; with a
-    /// line that says what is done.
-    pub fn stream_frame(&self, organ: &Registration) -> (FrameChange, String) {
+    /// The coordinates clouds are given in to `organ` and its results given back in: in the
+    /// unit given, from the frame given (else the organ's) to the organ's, the frame its
+    /// registration works in ([`Registration::frame`]).
+    pub fn coordinates(&self, organ: &Registration) -> GivenCoordinates {
+        GivenCoordinates { unit: self.given_units, change: FrameChange::between(self.given_frame, organ.frame()) }
+    }
+
+    /// [`RegistrationSpec::coordinates`] of a stream, whose frame is RAS (the frame OpenIGTLink
+    /// sends) unless given; with a line that says what is done.
+    pub fn stream_coordinates(&self, organ: &Registration) -> (GivenCoordinates, String) {
         let stream = self.given_frame.unwrap_or(Frame::Ras);
         let organ = organ.frame();
         let line = match organ {
@@ -625,7 +631,8 @@ impl RegistrationSpec {
             Some(organ) => format!("{organ}, the stream's and the organ's"),
             None => format!("the organ names none: the stream's coordinates ({stream}) taken as the organ's"),
         };
-        (FrameChange::between(Some(stream), organ), line)
+        let change = FrameChange::between(Some(stream), organ);
+        (GivenCoordinates { unit: self.given_units, change }, line)
     }
 }
 
@@ -761,7 +768,8 @@ mod tests {
         let points = spec(TargetsSpec::Points(vec![[2.5, 0.5, 0.5]]), None).build().unwrap();
         assert_eq!((points.frame(), points.target_labels()), (None, &[String::new()][..]));
         // A stream is RAS unless given otherwise; converted only where the organ names another.
-        let flips = |given, organ: &Registration| spec(TargetsSpec::Regions, given).stream_frame(organ).0.flips();
+        let flips =
+            |given, organ: &Registration| spec(TargetsSpec::Regions, given).stream_coordinates(organ).0.change.flips();
         assert!(!flips(None, &named));
         assert!(flips(Some(Frame::Lps), &named));
         assert!(!flips(Some(Frame::Lps), &points), "the organ names no frame");

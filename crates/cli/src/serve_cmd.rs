@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use app::assimilation::{Experiment, OnlineFilter};
+use app::printout::organ_line;
 use app::registration::{RegistrationChoice, RegistrationSpec};
 use live::{Outputs, ServeOptions};
 use mesh::length::LengthUnit;
@@ -99,9 +100,9 @@ pub fn run(args: &ServeArgs) -> Result<()> {
             eprintln!("warning    {warning}");
         }
     }
-    let (frame, frame_line) = spec.stream_frame(&first);
+    let (coordinates, frame_line) = spec.stream_coordinates(&first);
     println!("method     {}", first.method());
-    println!("organ      {} nodes, {} targets", first.organ().mesh().num_nodes(), first.targets().len());
+    println!("{}", organ_line(first.organ(), first.targets().len()));
     println!("frame      {frame_line}");
     for w in first.warnings() {
         eprintln!("warning    {w}");
@@ -121,7 +122,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         libc::signal(libc::SIGTERM, request_stop as *const () as libc::sighandler_t);
     }
     println!("listening  {address} (OpenIGTLink; clouds as POLYDATA or POINT named `cloud`, in {units}); Ctrl-C stops");
-    let serve_options = ServeOptions { units, frame, outputs, identification, ..ServeOptions::default() };
+    let serve_options = ServeOptions { coordinates, outputs, identification, ..ServeOptions::default() };
     live::serve(listener, Arc::new(factory), serve_options, &STOP)?;
     println!("stopped");
     Ok(())

@@ -84,7 +84,7 @@ pub fn stream_case(method: &str, case: &SyntheticCase, deformed_by: MethodSpec) 
     };
     let factory = live::first_then_build(None, move || spec.build().map_err(|e| format!("{e:#}")));
     let serve_options = ServeOptions {
-        units: LengthUnit::Millimetre,
+        coordinates: LengthUnit::Millimetre.into(),
         outputs: Outputs { targets: true, status: true, ..Outputs::NONE },
         ..ServeOptions::default()
     };

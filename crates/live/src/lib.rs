@@ -56,7 +56,7 @@ use std::time::{Duration, Instant};
 
 pub use igtl::{decode_body, encode_message};
 use igtl::{Content, Header, PointElement, PointMessage, StringMessage, TransformMessage};
-use mesh::io::FrameChange;
+use mesh::io::GivenCoordinates;
 use mesh::length::LengthUnit;
 use mesh::Point;
 use polydata::PolyData;
@@ -174,10 +174,9 @@ pub const TIME_BUDGET_MS: f64 = 1000.0;
 /// Settings of the server.
 #[derive(Clone)]
 pub struct ServeOptions {
-    /// The unit of the coordinates on the wire (3D Slicer sends millimetres).
-    pub units: LengthUnit,
-    /// From the frame of the coordinates on the wire (3D Slicer sends RAS) to the organ's.
-    pub frame: FrameChange,
+    /// The coordinates on the wire: their unit (3D Slicer sends millimetres) and the change
+    /// from their frame (3D Slicer sends RAS) to the organ's, and back.
+    pub coordinates: GivenCoordinates,
     /// The answers sent for each cloud.
     pub outputs: Outputs,
     /// Largest message body accepted (bytes); a larger one closes the connection.
@@ -195,8 +194,7 @@ pub struct ServeOptions {
 impl Default for ServeOptions {
     fn default() -> Self {
         ServeOptions {
-            units: LengthUnit::DEFAULT,
-            frame: FrameChange::default(),
+            coordinates: GivenCoordinates::default(),
             outputs: Outputs::ALL,
             max_message_bytes: 64 << 20,
             max_points: 200_000,
@@ -428,8 +426,7 @@ fn read_messages(shared: &Shared) {
     let (mut frame, mut step) = (0u64, 0u64);
     let mut ignored = std::collections::HashSet::new();
     let to_metres = |points: Vec<[f32; 3]>| -> Vec<Point> {
-        let ServeOptions { units, frame, .. } = shared.options;
-        points.into_iter().map(|p| frame.point(units.point_to_metres(p.map(f64::from)))).collect()
+        points.into_iter().map(|p| shared.options.coordinates.point_in(p.map(f64::from))).collect()
     };
     while !shared.closed.load(Ordering::SeqCst) {
         match read_message(&shared.socket, &shared.options) {
@@ -451,7 +448,7 @@ fn read_messages(shared: &Shared) {
                     shared.send_estimate(&serde_json::json!({ "step": step, "error": error }));
                     continue;
                 }
-                let units = shared.options.units;
+                let units = shared.options.coordinates.unit;
                 waiting
                     .features
                     .push_back((step, points.into_iter().map(|p| units.point_to_metres(p.map(f64::from))).collect()));
@@ -679,8 +676,8 @@ fn answer(
     let start = Instant::now();
     let tracked = registration.register(cloud).map_err(|e| e.to_string())?;
     let Tracked { registration: result, targets, rigid, target_std } = &tracked;
-    let (units, change) = (options.units, options.frame);
-    let to_wire = |p: &Point| units.point_from_metres(change.point(*p)).map(|x| x as f32);
+    let given = options.coordinates;
+    let to_wire = |p: &Point| given.point_out(*p).map(|x| x as f32);
     if options.outputs.targets {
         let points = targets
             .iter()
@@ -706,7 +703,8 @@ fn answer(
         }
     }
     if let (true, Some(r)) = (options.outputs.transform, rigid) {
-        let matrix = change.transform(r.organ_to_cloud().homogeneous(units)).map(|row| row.map(|x| x as f32));
+        let organ_to_cloud = r.organ_to_cloud().homogeneous(LengthUnit::Metre);
+        let matrix = given.transform_out(organ_to_cloud).map(|row| row.map(|x| x as f32));
         shared.send(&TransformMessage { matrix }, "rigid")?;
     }
     if !options.outputs.status {
@@ -715,15 +713,15 @@ fn answer(
     let status = serde_json::json!({
         "frame": frame,
         "ms": start.elapsed().as_secs_f64() * 1e3,
-        "unit": units.symbol(),
-        "surface_residual": units.from_metres(result.surface_residual),
+        "unit": given.unit.symbol(),
+        "surface_residual": given.length_out(result.surface_residual),
         "plausible": result.plausible(),
         "warnings": result.warnings,
         "inliers": result.inliers,
         "points": result.points,
         "iterations": result.iterations,
         "from_rest": result.from_rest,
-        "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| units.from_metres(v)).collect::<Vec<f64>>()),
+        "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| given.length_out(v)).collect::<Vec<f64>>()),
     });
     shared.send_line("status", status_line(status));
     Ok(())

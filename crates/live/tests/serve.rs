@@ -12,7 +12,7 @@ use augsim_live::igtl::{crc64, Header};
 use augsim_live::polydata::PolyData;
 use augsim_live::{encode_message, serve, Outputs, ServeOptions};
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
-use mesh::io::{Frame, FrameChange};
+use mesh::io::{Frame, FrameChange, GivenCoordinates};
 use mesh::length::LengthUnit;
 use mesh::select::nodes_in_box;
 use mesh::Point;
@@ -101,7 +101,11 @@ fn connect(port: u16) -> Client {
 
 #[test]
 fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
-    let options = ServeOptions { units: LengthUnit::Millimetre, max_message_bytes: 1 << 20, ..ServeOptions::default() };
+    let options = ServeOptions {
+        coordinates: LengthUnit::Millimetre.into(),
+        max_message_bytes: 1 << 20,
+        ..ServeOptions::default()
+    };
     let server = Server::start(options);
     let port = server.port;
 
@@ -207,7 +211,8 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
 #[test]
 fn a_half_closed_client_is_answered_and_a_stalled_message_is_dropped() {
     let stall = Duration::from_millis(300);
-    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, stall, ..ServeOptions::default() });
+    let server =
+        Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), stall, ..ServeOptions::default() });
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     client.send_cloud(cloud.clone()).unwrap();
@@ -229,7 +234,8 @@ fn a_half_closed_client_is_answered_and_a_stalled_message_is_dropped() {
 #[test]
 fn a_refused_cloud_is_answered_whatever_the_outputs() {
     let outputs = Outputs::parse("targets").unwrap();
-    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, outputs, ..ServeOptions::default() });
+    let server =
+        Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), outputs, ..ServeOptions::default() });
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     let mut bad = cloud.clone();
@@ -251,7 +257,8 @@ fn a_refused_cloud_is_answered_whatever_the_outputs() {
 #[test]
 fn a_reset_has_the_next_cloud_start_from_rest() {
     let outputs = Outputs::parse("targets,status").unwrap();
-    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, outputs, ..ServeOptions::default() });
+    let server =
+        Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), outputs, ..ServeOptions::default() });
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     let frame = |client: &mut augsim_live::client::Client| {
@@ -277,7 +284,8 @@ fn a_reset_has_the_next_cloud_start_from_rest() {
 #[test]
 fn clouds_in_another_frame_are_answered_in_theirs() {
     let frame = FrameChange::between(Some(Frame::Ras), Some(Frame::Lps));
-    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, frame, ..ServeOptions::default() });
+    let coordinates = GivenCoordinates { unit: LengthUnit::Millimetre, change: frame };
+    let server = Server::start(ServeOptions { coordinates, ..ServeOptions::default() });
     let (cloud, truth) = pressed_cloud(300.0);
     let flip = |p: [f32; 3]| frame.point(p.map(f64::from));
     let mut client = connect(server.port);
@@ -310,8 +318,10 @@ fn a_structure_is_answered_as_a_polydata_of_its_name() {
         registration.add_structure("tumour", ball).map_err(|e| e.to_string())?;
         Ok(registration)
     }
-    let server =
-        Server::start_with(ServeOptions { units: LengthUnit::Millimetre, ..ServeOptions::default() }, with_tumour);
+    let server = Server::start_with(
+        ServeOptions { coordinates: LengthUnit::Millimetre.into(), ..ServeOptions::default() },
+        with_tumour,
+    );
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     client.send_cloud(cloud).unwrap();
@@ -426,7 +436,7 @@ fn features_step_the_identification_in_order_with_a_bounded_backlog() {
     let factory: Arc<augsim_live::IdentificationFactory> = Arc::new(|| Ok(Box::new(SlowMean)));
     let server = Server::start(ServeOptions {
         identification: Some(factory),
-        units: LengthUnit::Millimetre,
+        coordinates: LengthUnit::Millimetre.into(),
         ..ServeOptions::default()
     });
     let mut client = connect(server.port);
@@ -455,7 +465,7 @@ fn features_step_the_identification_in_order_with_a_bounded_backlog() {
     assert_eq!(client.until_status().unwrap().status["frame"], 1);
     // A server without identification answers features with an error.
     server.stop();
-    let server = Server::start(ServeOptions { units: LengthUnit::Millimetre, ..ServeOptions::default() });
+    let server = Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), ..ServeOptions::default() });
     let mut client = connect(server.port);
     client.send_points("features", &[[0.0; 3]; 2]).unwrap();
     match client.receive().unwrap() {

@@ -18,7 +18,7 @@ use app::registration::{RegistrationChoice, TargetsSpec};
 use fem::post;
 use learn::data::npy::{NpyArray, NpyData};
 use learn::{Model, PointCloud, PredictInput};
-use mesh::io::{Frame, FrameChange};
+use mesh::io::{Frame, GivenCoordinates};
 use mesh::length::LengthUnit;
 use mesh::Point;
 use nalgebra::DVector;
@@ -118,29 +118,27 @@ fn array(value: &Bound<'_, PyAny>, what: &str) -> PyResult<(Vec<usize>, Vec<f64>
     Ok((values.shape().to_vec(), values.iter().copied().collect()))
 }
 
-/// Points from an array of shape `[N, 3]`, each coordinate multiplied by `scale`.
-fn points(value: &Bound<'_, PyAny>, what: &str, scale: f64) -> PyResult<Vec<Point>> {
+/// Points from an array of shape `[N, 3]`.
+fn points(value: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<Point>> {
     let (shape, values) = array(value, what)?;
     if shape.len() != 2 || shape[1] != 3 {
         return Err(PyValueError::new_err(format!("{what} must have shape [N, 3], got {shape:?}")));
     }
     let given: Vec<Point> = values.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
-    // Named in the caller's unit, before the scaling would change the values quoted.
     if let Some((i, fault)) = mesh::measured_fault(&given) {
         return Err(AugsimError::new_err(format!("{what} point {i} {fault}")));
     }
-    Ok(given.into_iter().map(|p| p.map(|c| c * scale)).collect())
+    Ok(given)
 }
 
-/// An `[N, 3]` array of nodal vectors (3 values per node), each divided by `unit`.
-fn nodal<'py>(py: Python<'py>, values: &[f64], unit: f64) -> Bound<'py, PyArray2<f64>> {
-    let scaled = values.iter().map(|v| v / unit).collect();
-    Array2::from_shape_vec((values.len() / 3, 3), scaled).expect("3 values per node").into_pyarray(py)
+/// An `[N, 3]` array of nodal vectors (3 values per node).
+fn nodal<'py>(py: Python<'py>, values: &[f64]) -> Bound<'py, PyArray2<f64>> {
+    Array2::from_shape_vec((values.len() / 3, 3), values.to_vec()).expect("3 values per node").into_pyarray(py)
 }
 
-/// An `[N, 3]` array of points, each coordinate divided by `unit`.
-fn point_array<'py>(py: Python<'py>, points: &[Point], unit: f64) -> Bound<'py, PyArray2<f64>> {
-    nodal(py, points.as_flattened(), unit)
+/// An `[N, 3]` array of points.
+fn point_array<'py>(py: Python<'py>, points: &[Point]) -> Bound<'py, PyArray2<f64>> {
+    nodal(py, points.as_flattened())
 }
 
 /// The result of a static solve (m).
@@ -199,8 +197,8 @@ fn solve(py: Python<'_>, scenario: PathBuf) -> PyResult<Solution> {
         Ok((solved.solver.problem().mesh.nodes.clone(), solved.solution))
     })?;
     Ok(Solution {
-        points: point_array(py, &nodes, 1.0).unbind(),
-        displacement: nodal(py, &sol.u, 1.0).unbind(),
+        points: point_array(py, &nodes).unbind(),
+        displacement: nodal(py, &sol.u).unbind(),
         iterations: sol.iterations,
         load_steps: sol.load_steps,
         factorizations: sol.factorizations,
@@ -298,10 +296,8 @@ impl Registered {
 #[pyclass(module = "augsim")]
 struct Registration {
     state: Mutex<register::Registration>,
-    /// The unit of clouds, targets and results.
-    unit: LengthUnit,
-    /// From the frame of clouds and results to the organ's, and back.
-    change: FrameChange,
+    /// The unit and frame of clouds, targets and results, against the organ's.
+    given: GivenCoordinates,
     /// The organ's frame and the one clouds are given in (`frame`), each when known: the files
     /// `out` writes are in the clouds' frame, else the organ's.
     frames: (Option<Frame>, Option<Frame>),
@@ -346,7 +342,7 @@ impl Registration {
             None => None,
             Some(t) => Some(match t.extract::<PathBuf>() {
                 Ok(path) => TargetsSpec::File(path),
-                Err(_) => match points(t, "targets", 1.0)? {
+                Err(_) => match points(t, "targets")? {
                     given if given.is_empty() => {
                         return Err(PyValueError::new_err("targets: the array holds no point"))
                     }
@@ -376,7 +372,7 @@ impl Registration {
             Ok((spec.build()?, spec))
         })?;
         let organ_frame = state.frame();
-        let change = FrameChange::between(spec.given_frame, organ_frame);
+        let given = spec.coordinates(&state);
         let warnings = state.warnings().iter().map(|w| format!("targets: {w}")).collect::<Vec<_>>();
         for w in &warnings {
             PyErr::warn(
@@ -387,14 +383,12 @@ impl Registration {
             )?;
         }
         let method = state.method().to_string();
-        let units = spec.given_units;
         Ok(Registration {
             state: Mutex::new(state),
-            unit: units,
-            change,
+            given,
             frames: (organ_frame, spec.given_frame),
             method,
-            units: units.to_string(),
+            units: given.unit.to_string(),
             frame: spec.given_frame.or(organ_frame).map(|f| f.to_string()),
         })
     }
@@ -412,8 +406,7 @@ impl Registration {
     /// out, or folded somewhere) comes as a UserWarning.
     #[pyo3(signature = (cloud, *, out=None))]
     fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>, out: Option<PathBuf>) -> PyResult<Registered> {
-        let cloud: Vec<Point> =
-            points(cloud, "cloud", self.unit.metres())?.into_iter().map(|p| self.change.point(p)).collect();
+        let cloud: Vec<Point> = points(cloud, "cloud")?.into_iter().map(|p| self.given.point_in(p)).collect();
         let (Tracked { registration: result, targets, rigid, target_std }, moved, notes) = compute(py, || {
             // A directory that cannot be made fails before the cloud moves the warm start on.
             if let Some(dir) = &out {
@@ -423,7 +416,7 @@ impl Registration {
             let tracked = state.register(&cloud)?;
             let notes = match &out {
                 Some(dir) => {
-                    let frames = (self.unit, self.frames);
+                    let frames = (self.given.unit, self.frames);
                     write_registered_cloud(dir, "python", &state, frames, tracked.clone(), &cloud)?.notes
                 }
                 None => Vec::new(),
@@ -443,13 +436,13 @@ impl Registration {
             structures.set_item(name, self.point_array(py, &vertices))?;
         }
         let rigid = rigid.map(|r| {
-            let rows = self.change.transform(r.organ_to_cloud().homogeneous(self.unit));
+            let rows = self.given.transform_out(r.organ_to_cloud().homogeneous(LengthUnit::Metre));
             Array2::from_shape_fn((4, 4), |(i, j)| rows[i][j]).into_pyarray(py).unbind()
         });
         Ok(Registered {
             targets: self.point_array(py, &targets).unbind(),
             displacement: self.point_array(py, result.u.as_chunks::<3>().0).unbind(),
-            surface_residual: self.unit.from_metres(result.surface_residual),
+            surface_residual: self.given.length_out(result.surface_residual),
             inliers: result.inliers,
             points: result.points,
             iterations: result.iterations,
@@ -457,7 +450,7 @@ impl Registration {
             warnings: result.warnings.clone(),
             rigid,
             target_sigma: target_std
-                .map(|s| s.iter().map(|&v| self.unit.from_metres(v)).collect::<Vec<f64>>().into_pyarray(py).unbind()),
+                .map(|s| s.iter().map(|&v| self.given.length_out(v)).collect::<Vec<f64>>().into_pyarray(py).unbind()),
             ms: result.time.as_secs_f64() * 1e3,
             structures: structures.unbind(),
         })
@@ -497,8 +490,8 @@ impl Registration {
     /// Points (or vectors) of the organ's frame, in m, as an `[N, 3]` array in the registration's
     /// frame and unit.
     fn point_array<'py>(&self, py: Python<'py>, points: &[Point]) -> Bound<'py, PyArray2<f64>> {
-        let changed: Vec<Point> = points.iter().map(|&p| self.change.point(p)).collect();
-        point_array(py, &changed, self.unit.metres())
+        let given: Vec<Point> = points.iter().map(|&p| self.given.point_out(p)).collect();
+        point_array(py, &given)
     }
 }
 
@@ -647,7 +640,7 @@ impl Assimilation {
     /// Rest positions of the observed points, float64 [p, 3] (m).
     #[getter]
     fn observed_points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        point_array(py, &self.experiment.observed_points(), 1.0)
+        point_array(py, &self.experiment.observed_points())
     }
 
     /// The scenario's synthetic measurements, float64 [steps, p, 3] (m; NaN where not seen).

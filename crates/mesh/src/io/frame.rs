@@ -8,6 +8,7 @@ use std::io::Read as _;
 use std::path::Path;
 
 use super::parse_error;
+use crate::length::LengthUnit;
 use crate::{MeshError, Point, TriSurface};
 
 /// An anatomical coordinate frame, named by where its axes point: RAS has x towards the patient's
@@ -82,6 +83,49 @@ impl FrameChange {
     pub fn transform(self, m: [[f64; 4]; 4]) -> [[f64; 4]; 4] {
         let s = |i: usize| if self.flips && i < 2 { -1.0 } else { 1.0 };
         std::array::from_fn(|i| std::array::from_fn(|j| s(i) * s(j) * m[i][j]))
+    }
+}
+
+/// Coordinates given from outside (a cloud, a stream, arrays from Python) against the organ's:
+/// their unit, and the change between their frame and the organ's. Results go back through the
+/// same (the change is its own inverse).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GivenCoordinates {
+    /// Their unit.
+    pub unit: LengthUnit,
+    /// From their frame to the organ's, and back.
+    pub change: FrameChange,
+}
+
+impl From<LengthUnit> for GivenCoordinates {
+    /// Coordinates in `unit`, in the organ's frame.
+    fn from(unit: LengthUnit) -> Self {
+        GivenCoordinates { unit, change: FrameChange::default() }
+    }
+}
+
+impl GivenCoordinates {
+    /// A given point (or vector) in the organ's frame, in metres.
+    pub fn point_in(self, p: Point) -> Point {
+        self.change.point(self.unit.point_to_metres(p))
+    }
+
+    /// A point (or vector) of the organ's frame, in metres, as given.
+    pub fn point_out(self, p: Point) -> Point {
+        self.unit.point_from_metres(self.change.point(p))
+    }
+
+    /// A length (m) in the given unit.
+    pub fn length_out(self, metres: f64) -> f64 {
+        self.unit.from_metres(metres)
+    }
+
+    /// A rigid transform of the organ's frame (homogeneous 4 × 4, rows, its translation in m) as
+    /// it acts on given coordinates.
+    pub fn transform_out(self, m: [[f64; 4]; 4]) -> [[f64; 4]; 4] {
+        let mut t = self.change.transform(m);
+        (0..3).for_each(|r| t[r][3] = self.unit.from_metres(t[r][3]));
+        t
     }
 }
 
@@ -205,6 +249,28 @@ mod tests {
         assert_eq!(points, [[-1.0, 2.0, 3.0], [-0.5, -0.0, -1.0]]);
         assert_eq!("lps".parse::<Frame>(), Ok(Frame::Lps));
         assert!("IJK".parse::<Frame>().unwrap_err().contains("IJK"));
+    }
+
+    /// Given coordinates in mm and RAS against an LPS organ: a point goes in and back out as it
+    /// was; a transform given back acts on given points as it acts on the organ's (m).
+    #[test]
+    fn given_coordinates_convert_points_lengths_and_transforms_both_ways() {
+        let given = GivenCoordinates {
+            unit: LengthUnit::Millimetre,
+            change: FrameChange::between(Some(Frame::Ras), Some(Frame::Lps)),
+        };
+        let p = [10.0, -20.0, 30.0];
+        assert_eq!(given.point_in(p), [-0.01, 0.02, 0.03]);
+        assert_eq!(given.point_out(given.point_in(p)), p);
+        assert_eq!(given.length_out(0.0025), 2.5);
+        let m = [[0.0, -1.0, 0.0, 0.001], [1.0, 0.0, 0.0, 0.002], [0.0, 0.0, 1.0, 0.003], [0.0, 0.0, 0.0, 1.0]];
+        let apply = |m: [[f64; 4]; 4], p: Point| {
+            std::array::from_fn::<f64, 3, _>(|i| (0..3).map(|j| m[i][j] * p[j]).sum::<f64>() + m[i][3])
+        };
+        let moved = apply(given.transform_out(m), p);
+        let expected = given.point_out(apply(m, given.point_in(p)));
+        assert!((0..3).all(|d| (moved[d] - expected[d]).abs() < 1e-12), "{moved:?} {expected:?}");
+        assert_eq!(GivenCoordinates::from(LengthUnit::Metre), GivenCoordinates::default());
     }
 
     #[test]

@@ -75,7 +75,10 @@ use std::path::{Path, PathBuf};
 use crate::{Cells, Mesh, MeshError, Point, TriSurface, HEX_TO_TETS};
 
 pub use csv::csv_field;
-pub use frame::{frame_in_header, read_surface_with_frame, surface_frame, write_surface_in_frame, Frame, FrameChange};
+pub use frame::{
+    frame_in_header, read_surface_with_frame, surface_frame, write_surface_in_frame, Frame, FrameChange,
+    GivenCoordinates,
+};
 pub use gmsh::{read_gmsh, write_msh};
 pub use legacy_vtk::{read_vtk, read_vtk_surface, read_vtk_with_fields, write_vtk_legacy, write_vtk_legacy_with};
 pub use ply::write_ply_points;
