@@ -107,80 +107,100 @@ pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
     Ok(Meshed { mesh, reference_volume, frame, notes, coverage })
 }
 
-/// Reads a surface, repairs it unless told not to, and brings it to metres: fitted to `length`
-/// when given, otherwise scaled from its unit (given or detected) about the origin. A labelmap's
-/// label is extracted instead, in millimetres. With it, the frame it is in (see
+/// An organ's segmentation as given: a labelmap's label extracted (in mm, in its scanner frame),
+/// or a surface file read (in its unit, in the frame its header names).
+#[derive(Debug)]
+pub struct OrganInput {
+    /// The surface, in its unit.
+    pub surface: TriSurface,
+    /// The frame the file names, if any.
+    pub frame: Option<Frame>,
+    /// Whether it is a labelmap's label (a clean surface, in mm).
+    pub labelmap: bool,
+    /// Its unit when known: a labelmap's millimetre, or the one given ([`OrganInput::unit`]).
+    unit: Option<LengthUnit>,
+    /// What was read, each a topic (`labelmap`, `warning`, `units`) and a line, in order.
+    pub notes: Vec<(&'static str, String)>,
+}
+
+impl OrganInput {
+    /// Reads `path` ([`LABELMAP_FORMATS`], or a surface: [`mesh::io::SURFACE_EXTENSIONS`]),
+    /// choosing a labelmap's `label`, in `units` when given; a folder, a DICOM file or an image
+    /// format not read is refused saying what to save instead.
+    pub fn read(path: &Path, label: Option<&str>, units: UnitOrAuto) -> Result<OrganInput> {
+        if let Some(why) = unreadable_segmentation(path) {
+            bail!("{}: {why}", path.display());
+        }
+        if is_labelmap(path) {
+            if units.is_some_and(|u| u != LengthUnit::Millimetre) {
+                bail!("{} is a labelmap, whose unit is the millimetre: leave out --units or give mm", path.display());
+            }
+            let organ = read_labelmap_surface(path, label, &ExtractOptions::default())?;
+            let mut notes: Vec<_> = organ.lines().into_iter().map(|l| ("labelmap", l)).collect();
+            notes.extend(organ.warnings.iter().map(|w| ("warning", w.clone())));
+            let (frame, unit) = (organ.scanner_frame(), Some(LengthUnit::Millimetre));
+            return Ok(OrganInput { surface: organ.surface, frame, labelmap: true, unit, notes });
+        }
+        if let Some(label) = label {
+            bail!("--label {label} chooses a label of a labelmap ({LABELMAP_FORMATS}), not of {}", path.display());
+        }
+        let (surface, frame) = mesh::io::read_surface_with_frame(path)?;
+        Ok(OrganInput { surface, frame, labelmap: false, unit: units, notes: Vec::new() })
+    }
+
+    /// Its unit: a labelmap's millimetre, the one given, or the one detected from the surface's
+    /// size; noted.
+    pub fn unit(&mut self) -> Result<LengthUnit> {
+        let (unit, how) = match self.unit {
+            Some(unit) if self.labelmap => (unit, "the labelmap's".to_string()),
+            Some(unit) => (unit, "given".to_string()),
+            None => {
+                let unit = detect_unit(&self.surface).map_err(|e| anyhow!("{e}: give --units (mm or m)"))?;
+                let extent = largest_extent(&self.surface);
+                let shown = if extent >= 1.0 { format!("{extent:.1}") } else { format!("{extent:.4}") };
+                (unit, format!("detected: largest extent {shown} in the file's unit; give --units otherwise"))
+            }
+        };
+        self.unit = Some(unit);
+        self.notes.push(("units", format!("{} ({how})", unit.symbol())));
+        Ok(unit)
+    }
+}
+
+/// Reads the organ's segmentation, repairs a surface unless told not to, and brings it to
+/// metres: fitted to `length` when given (no frame then), otherwise scaled from its unit (a
+/// labelmap's mm, given or detected) about the origin, in the frame the file names (see
 /// [`Meshed::frame`]).
 fn organ_surface(
     path: &Path,
     options: &MeshOptions,
     notes: &mut Vec<(&'static str, String)>,
 ) -> Result<(TriSurface, Option<Frame>)> {
-    if let Some(why) = unreadable_segmentation(path) {
-        bail!("{}: {why}", path.display());
-    }
-    if is_labelmap(path) {
-        return labelmap_surface(path, options, notes);
-    }
-    if options.label.is_some() {
-        bail!("--label chooses a label of a labelmap ({LABELMAP_FORMATS}), not of {}", path.display());
-    }
-    let (mut surface, frame) = mesh::io::read_surface_with_frame(path)?;
-    let extent = largest_extent(&surface);
-    let unit = match (options.length, options.units) {
-        (Some(_), _) => None,
-        (None, None) => {
-            let unit =
-                detect_unit(&surface).map_err(|e| anyhow!("{}: {e} (--units mm or m, or --length)", path.display()))?;
-            let shown = if extent >= 1.0 { format!("{extent:.1}") } else { format!("{extent:.4}") };
-            Some((unit, format!("detected: largest extent {shown} in the file's unit")))
-        }
-        (None, Some(unit)) => Some((unit, "given".to_string())),
+    let mut input = OrganInput::read(path, options.label.as_deref(), options.units)?;
+    let unit = match options.length {
+        Some(_) => None,
+        None => Some(input.unit().with_context(|| format!("the unit of {} (or give --length)", path.display()))?),
     };
-    if options.repair {
+    notes.append(&mut input.notes);
+    let mut surface = input.surface;
+    if options.repair && !input.labelmap {
         let (repaired, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
             .with_context(|| format!("repairing {} (see --no-repair)", path.display()))?;
-        notes.extend(route.lines(unit.as_ref().map(|(u, _)| mm(u.metres()))).into_iter().map(|l| ("repair", l)));
+        notes.extend(route.lines(unit.map(|u| mm(u.metres()))).into_iter().map(|l| ("repair", l)));
         notes.extend(route.warnings().into_iter().map(|l| ("warning", l)));
         surface = repaired;
     }
-    if let Some(l) = options.length {
-        surface.fit_to(l)?;
-    }
-    if let Some((unit, how)) = unit {
-        notes.push(("units", format!("{} ({how})", unit.symbol())));
-        if unit != LengthUnit::Metre {
-            surface.transform([0.0; 3], unit.metres());
-        }
-    }
-    Ok((surface, frame.filter(|_| options.length.is_none())))
-}
-
-/// The closed surface of a labelmap's label, in metres (from the file's millimetres, in its
-/// scanner frame, which comes with it), or fitted to `length` (no frame).
-fn labelmap_surface(
-    path: &Path,
-    options: &MeshOptions,
-    notes: &mut Vec<(&'static str, String)>,
-) -> Result<(TriSurface, Option<Frame>)> {
-    if options.units == Some(LengthUnit::Metre) {
-        bail!("{} is a labelmap, whose unit is the millimetre: leave out --units m", path.display());
-    }
-    let organ = read_labelmap_surface(path, options.label.as_deref(), &ExtractOptions::default())?;
-    notes.extend(organ.lines().into_iter().map(|l| ("labelmap", l)));
-    notes.extend(organ.warnings.iter().map(|w| ("warning", w.clone())));
-    let frame = organ.scanner_frame();
-    let mut surface = organ.surface;
-    match options.length {
-        Some(l) => {
+    match (options.length, unit) {
+        (Some(l), _) => {
             surface.fit_to(l)?;
             Ok((surface, None))
         }
-        None => {
-            let kept = frame.map_or("no frame".to_string(), |f| format!("frame {f} kept"));
-            notes.push(("units", format!("mm (the labelmap's); {kept}")));
-            surface.transform([0.0; 3], LengthUnit::Millimetre.metres());
-            Ok((surface, frame))
+        (None, unit) => {
+            surface.transform([0.0; 3], unit.unwrap_or(LengthUnit::Metre).metres());
+            if let Some(frame) = input.frame {
+                notes.push(("frame", format!("{frame} kept")));
+            }
+            Ok((surface, input.frame))
         }
     }
 }
@@ -324,7 +344,7 @@ mod tests {
         assert!(report[2].starts_with("dihedral   min "), "{report:?}");
         assert!(meshed.notes.iter().any(|(topic, line)| *topic == "units" && line.starts_with("mm (detected")));
         let labelled = MeshOptions { label: Some("5".into()), ..options };
-        assert!(mesh_organ(&labelled).unwrap_err().to_string().contains("--label chooses a label of a labelmap"));
+        assert!(mesh_organ(&labelled).unwrap_err().to_string().contains("--label 5 chooses a label of a labelmap"));
         let folder = MeshOptions { surface: Some(dir.path().to_path_buf()), ..labelled };
         assert!(mesh_organ(&folder)
             .unwrap_err()

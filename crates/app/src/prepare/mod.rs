@@ -50,9 +50,8 @@ use std::time::Instant;
 
 use anyhow::{bail, ensure, Context, Result};
 use mesh::io::points::{read_points_csv, write_points, LabelledPoints};
-use mesh::io::{read_surface_with_frame, write_atomic_bytes, Frame};
-use mesh::isosurface::ExtractOptions;
-use mesh::labelmap::{is_labelmap, read_labelmap_surface, unreadable_segmentation, LABELMAP_FORMATS};
+use mesh::io::{write_atomic_bytes, Frame};
+use mesh::labelmap::is_labelmap;
 use mesh::length::{mm, point_in_mm, LengthUnit, UnitOrAuto};
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
 use mesh::repair::{detect_unit, RepairOptions};
@@ -63,7 +62,7 @@ use serde::{Deserialize, Serialize};
 
 use learn::LearnedModel;
 
-use crate::meshing::{coverage_warning, write_surface_in_mm};
+use crate::meshing::{coverage_warning, write_surface_in_mm, OrganInput};
 use crate::points::PointInput;
 use crate::registration::{read_structure, structure_name, PATIENT_FILE};
 use crate::training::{train_unet, UNetRun, UNetStart};
@@ -429,40 +428,16 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     Ok(lines)
 }
 
-/// The organ's surface in its own unit, with its frame and unit: a label of a labelmap extracted
-/// (in mm, in the file's scanner frame), or a surface file (its frame in a `SPACE=` header, its
-/// unit given or detected from its size).
+/// The organ's surface in its own unit, with its frame and unit ([`OrganInput`]).
 fn read_surface_input(
     options: &PrepareOptions,
     lines: &mut Vec<String>,
 ) -> Result<(TriSurface, Option<Frame>, LengthUnit)> {
     let path = &options.surface;
-    if let Some(why) = unreadable_segmentation(path) {
-        bail!("{}: {why}", path.display());
-    }
-    if is_labelmap(path) {
-        if options.units.is_some_and(|u| u != LengthUnit::Millimetre) {
-            bail!("{} is a labelmap, whose unit is the millimetre: leave out --units or give mm", path.display());
-        }
-        let organ = read_labelmap_surface(path, options.label.as_deref(), &ExtractOptions::default())?;
-        lines.extend(organ.lines().into_iter().map(|l| format!("labelmap: {l}")));
-        lines.extend(organ.warnings.iter().map(|w| format!("warning: {w}")));
-        let frame = organ.scanner_frame();
-        return Ok((organ.surface, frame, LengthUnit::Millimetre));
-    }
-    if let Some(label) = &options.label {
-        bail!("--label {label} chooses a label of a labelmap ({LABELMAP_FORMATS}), not of {}", path.display());
-    }
-    let (surface, frame) = read_surface_with_frame(path)?;
-    let unit = match options.units {
-        Some(unit) => unit,
-        None => {
-            let u = detect_unit(&surface).with_context(|| format!("the unit of {}", path.display()))?;
-            lines.push(format!("units: {} (detected from the surface's size; give --units otherwise)", u.symbol()));
-            u
-        }
-    };
-    Ok((surface, frame, unit))
+    let mut input = OrganInput::read(path, options.label.as_deref(), options.units)?;
+    let unit = input.unit().with_context(|| format!("the unit of {}", path.display()))?;
+    lines.extend(input.notes.iter().map(|(topic, line)| format!("{topic}: {line}")));
+    Ok((input.surface, input.frame, unit))
 }
 
 /// The unit of the user's files: the one given, a labelmap's millimetre, or the one detected from
