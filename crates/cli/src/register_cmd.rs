@@ -11,8 +11,7 @@ use app::printout::{frame_line, organ_line, rigid_lines, run_lines};
 use app::registration::RegistrationChoice;
 use mesh::length::LengthUnit;
 use register::cloud::read_frames;
-use register::RigidOptions;
-use scenario::registration::BUILTIN_CASE;
+use scenario::registration::CaseOverrides;
 use scenario::CaseScenario;
 
 use crate::bar::{print_lines, Bar};
@@ -135,34 +134,15 @@ fn to_register_error(e: anyhow::Error) -> register::RegisterError {
 /// The comparison case of `--demo` (the built-in scenario) or `--case FILE`, with the command
 /// line's overrides.
 fn comparison_case(args: &RegisterArgs) -> Result<CaseScenario> {
-    let mut scenario = match &args.case {
-        Some(path) => CaseScenario::load(path)?,
-        None => CaseScenario::builtin(),
+    let overrides = CaseOverrides {
+        force: args.force,
+        frames: args.frames,
+        misalign_deg: args.misalign_deg,
+        misalign_mm: args.misalign_mm,
+        iterations: args.registration.iterations,
+        rigid: args.registration.rigid,
     };
-    if let Some(force) = args.force {
-        scenario.truth.force = force;
-    }
-    if let Some(frames) = args.frames {
-        scenario.truth.frames = frames;
-    }
-    if let Some(deg) = args.misalign_deg {
-        scenario.misalignment.rotation_deg = deg;
-    }
-    if let Some(mm) = args.misalign_mm {
-        scenario.misalignment.translation_mm = mm;
-    }
-    if let Some(iterations) = args.registration.iterations {
-        // Given on the command line, it holds for every method.
-        scenario.registration.iterations = iterations;
-        scenario.models.method.iter_mut().for_each(|m| m.iterations = None);
-    }
-    if args.registration.rigid && scenario.registration.rigid.is_none() {
-        scenario.registration.rigid = Some(RigidOptions::default());
-    }
-    let origin =
-        args.case.as_ref().map_or_else(|| format!("{BUILTIN_CASE} (built-in scenario)"), |p| p.display().to_string());
-    scenario.validate().map_err(|m| anyhow::anyhow!("{origin} with the command line's settings: {m}"))?;
-    Ok(scenario)
+    Ok(CaseScenario::with_overrides(args.case.as_deref(), &overrides)?)
 }
 
 /// `--demo` and `--case`: simulates the case, registers it with each method and prints the

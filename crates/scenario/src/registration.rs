@@ -16,6 +16,24 @@ use crate::{Kind, Result, ScenarioError, ScenarioText};
 /// The name of the built-in case of `augsim register --demo`.
 pub const BUILTIN_CASE: &str = "register_case";
 
+/// Settings given beside a comparison case's file (e.g. on the command line), which override
+/// its own ([`CaseScenario::with_overrides`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CaseOverrides {
+    /// The truth's largest force (N).
+    pub force: Option<f64>,
+    /// The truth's frames.
+    pub frames: Option<usize>,
+    /// The cloud's misalignment: its rotation (degrees)...
+    pub misalign_deg: Option<f64>,
+    /// ... and its translation (mm).
+    pub misalign_mm: Option<f64>,
+    /// Match-and-deform iterations from rest, for every method.
+    pub iterations: Option<usize>,
+    /// A rigid pre-alignment (the default one) where the case has none.
+    pub rigid: bool,
+}
+
 /// A registration comparison case.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -254,6 +272,32 @@ impl CaseScenario {
         crate::builtin_with(BUILTIN_CASE, Self::from_text)
     }
 
+    /// A case scenario given as a file, or the built-in one, with `overrides`, checked; errors
+    /// name where it came from.
+    pub fn with_overrides(path: Option<&Path>, overrides: &CaseOverrides) -> Result<CaseScenario> {
+        let mut scenario = match path {
+            Some(path) => CaseScenario::load(path)?,
+            None => CaseScenario::builtin(),
+        };
+        let o = overrides;
+        o.force.into_iter().for_each(|f| scenario.truth.force = f);
+        o.frames.into_iter().for_each(|n| scenario.truth.frames = n);
+        o.misalign_deg.into_iter().for_each(|d| scenario.misalignment.rotation_deg = d);
+        o.misalign_mm.into_iter().for_each(|m| scenario.misalignment.translation_mm = m);
+        if let Some(iterations) = o.iterations {
+            // Given beside the file, it holds for every method.
+            scenario.registration.iterations = iterations;
+            scenario.models.method.iter_mut().for_each(|m| m.iterations = None);
+        }
+        if o.rigid && scenario.registration.rigid.is_none() {
+            scenario.registration.rigid = Some(register::RigidOptions::default());
+        }
+        let origin = path.map_or_else(|| format!("{BUILTIN_CASE} (built-in scenario)"), |p| p.display().to_string());
+        let origin = format!("{origin} with the settings given");
+        scenario.validate().map_err(|message| ScenarioError::Invalid { origin, message })?;
+        Ok(scenario)
+    }
+
     /// Checks the values (what parsing cannot).
     pub fn validate(&self) -> std::result::Result<(), String> {
         let bad = |m: String| Err(m);
@@ -352,4 +396,32 @@ pub fn slug(name: &str) -> String {
     let lower = name.to_ascii_lowercase();
     let words: Vec<&str> = lower.split(|c: char| !c.is_ascii_alphanumeric()).filter(|w| !w.is_empty()).collect();
     words.join("_")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Settings given beside the case override its own; iterations hold for every method; a
+    /// value the case cannot take is refused naming where the case came from.
+    #[test]
+    fn overrides_reach_the_case_and_are_checked() {
+        let overrides = CaseOverrides {
+            force: Some(2.5),
+            frames: Some(4),
+            misalign_deg: Some(3.0),
+            misalign_mm: Some(7.0),
+            iterations: Some(9),
+            rigid: true,
+        };
+        let case = CaseScenario::with_overrides(None, &overrides).unwrap();
+        assert_eq!((case.truth.force, case.truth.frames, case.registration.iterations), (2.5, 4, 9));
+        assert_eq!((case.misalignment.rotation_deg, case.misalignment.translation_mm), (3.0, 7.0));
+        assert!(case.models.method.iter().all(|m| m.iterations.is_none()));
+        assert_eq!(case.registration.rigid, Some(register::RigidOptions::default()));
+        assert_eq!(CaseScenario::with_overrides(None, &CaseOverrides::default()).unwrap(), CaseScenario::builtin());
+        let e = CaseScenario::with_overrides(None, &CaseOverrides { frames: Some(0), ..overrides }).unwrap_err();
+        let e = e.to_string();
+        assert!(e.contains("(built-in scenario) with the settings given: truth.frames = 0"), "{e}");
+    }
 }
