@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::Args;
 use experiment::{Name, Size};
 
@@ -15,8 +15,8 @@ pub struct ExperimentArgs {
     /// held-out, or all.
     pub name: String,
     /// quick (minutes on 2 cores) or paper (the published data sizes).
-    #[arg(long, default_value = "quick")]
-    pub size: String,
+    #[arg(long, default_value = "quick", value_parser = str::parse::<Size>)]
+    pub size: Size,
     /// Output directory: one sub-directory per experiment, report.md and report.html.
     #[arg(long, default_value = "out/experiments")]
     pub out: PathBuf,
@@ -32,16 +32,10 @@ pub struct ExperimentArgs {
 
 /// Runs `augsim experiment`.
 pub fn run(args: &ExperimentArgs) -> Result<()> {
-    let size = match args.size.as_str() {
-        "quick" => Size::Quick,
-        "paper" => Size::Paper,
-        other => bail!("--size must be quick or paper, got '{other}'"),
-    };
-    let names = if args.name == "all" { Name::ALL.to_vec() } else { vec![Name::parse(&args.name)?] };
-    for name in names {
-        println!("== {} ({})", name.as_str(), args.size);
+    for name in Name::chosen(&args.name)? {
+        println!("== {} ({})", name.as_str(), args.size.as_str());
         let bar = Bar::new("steps", "   ");
-        let result = experiment::run(name, size, &args.out, &bar);
+        let result = experiment::run(name, args.size, &args.out, &bar);
         bar.finish();
         let result = result?;
         result.lines().iter().for_each(|l| println!("   {l}"));

@@ -127,6 +127,36 @@ impl Name {
             format!("unknown experiment '{s}' (one of: {}, all)", names.join(", "))
         })
     }
+
+    /// The experiments `s` names: one by its name, or `all` of them.
+    pub fn chosen(s: &str) -> Result<Vec<Name>> {
+        match s {
+            "all" => Ok(Name::ALL.to_vec()),
+            one => Ok(vec![Name::parse(one)?]),
+        }
+    }
+}
+
+impl Size {
+    /// Its name: `quick` or `paper`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Size::Quick => "quick",
+            Size::Paper => "paper",
+        }
+    }
+}
+
+impl std::str::FromStr for Size {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Size, String> {
+        match s {
+            "quick" => Ok(Size::Quick),
+            "paper" => Ok(Size::Paper),
+            other => Err(format!("must be quick or paper, got '{other}'")),
+        }
+    }
 }
 
 /// One figure of a result: ours beside the published one, of the experiment as a whole or of one

@@ -56,6 +56,13 @@ fn names_parse_and_unknown_ones_are_refused() {
     }
     let e = Name::parse("liver").unwrap_err().to_string();
     assert!(e.contains("unknown experiment 'liver'") && e.contains("beam-sparse"), "{e}");
+    assert_eq!(Name::chosen("all").unwrap(), Name::ALL);
+    assert_eq!(Name::chosen("stream").unwrap(), [Name::Stream]);
+    assert!(Name::chosen("liver").is_err());
+    for size in [experiment::Size::Quick, experiment::Size::Paper] {
+        assert_eq!(size.as_str().parse::<experiment::Size>(), Ok(size));
+    }
+    assert_eq!("large".parse::<experiment::Size>(), Err("must be quick or paper, got 'large'".to_string()));
     let empty = tempfile::tempdir().unwrap();
     assert!(experiment::load_all(empty.path()).unwrap_err().to_string().contains("no experiment result"));
 }
