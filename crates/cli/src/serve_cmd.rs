@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use anyhow::{Context, Result};
-use app::assimilation::{Experiment, OnlineFilter};
+use app::assimilation::{AssimilationChoice, OnlineFilter};
 use app::printout::organ_line;
 use app::registration::{RegistrationChoice, RegistrationSpec};
 use live::{Outputs, ServeOptions};
@@ -61,9 +61,9 @@ impl live::Identification for StreamFilter {
 /// The ROUKF of an assimilation scenario for each client (its experiment, with the reference run
 /// of synthetic observations, prepared once here).
 fn identification(path: &std::path::Path, units: LengthUnit) -> Result<Arc<live::IdentificationFactory>> {
-    let (scenario, dir) = scenario::AssimilationScenario::load(path)?;
-    let experiment = Arc::new(Experiment::prepare(scenario, &dir, None)?);
-    let filter = OnlineFilter::new(&experiment)?;
+    let (experiment, filter) =
+        AssimilationChoice { scenario: path.to_path_buf(), ..AssimilationChoice::default() }.online()?;
+    let experiment = Arc::new(experiment);
     println!(
         "identify   {} ({}) from {} features per step (POINT `features`, in {units})",
         path.display(),

@@ -12,7 +12,7 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
 use anyhow::Context;
-use app::assimilation::{Experiment, OnlineFilter};
+use app::assimilation::{AssimilationChoice, Experiment, OnlineFilter};
 use app::output::write_registered_cloud;
 use app::registration::{RegistrationChoice, TargetsSpec};
 use fem::post;
@@ -31,7 +31,6 @@ use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use register::Tracked;
-use scenario::AssimilationScenario;
 
 // Named as the package exports it (`augsim.AugsimError`), so that pickle finds it: an error
 // raised in a worker process reaches its parent whole.
@@ -584,15 +583,8 @@ impl Assimilation {
     #[new]
     #[pyo3(signature = (scenario, *, iterations=None))]
     fn new(py: Python<'_>, scenario: PathBuf, iterations: Option<usize>) -> PyResult<Self> {
-        let (experiment, filter) = compute(py, || {
-            let (mut sc, dir) = AssimilationScenario::load(&scenario)?;
-            if iterations.is_some() {
-                sc.iterations = iterations;
-            }
-            let experiment = Experiment::prepare(sc, &dir, None)?;
-            let filter = OnlineFilter::new(&experiment)?;
-            Ok((experiment, filter))
-        })?;
+        let choice = AssimilationChoice { scenario, iterations, ..AssimilationChoice::default() };
+        let (experiment, filter) = compute(py, || choice.online())?;
         let names = filter.names().to_vec();
         Ok(Assimilation { experiment, filter: Mutex::new(filter), names })
     }

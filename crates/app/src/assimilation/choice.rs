@@ -8,11 +8,11 @@ use filter::{Discrepancy, Execution, SigmaPointSet};
 use mesh::length::LengthUnit;
 use scenario::AssimilationScenario;
 
-use super::ObservationFiles;
+use super::{Experiment, ObservationFiles, OnlineFilter};
 
 /// The user's choices of an assimilation run: the arguments of `augsim assimilate` (its scenario
 /// and what overrides the scenario's settings). [`AssimilationChoice::scenario`] applies them.
-#[derive(Debug, Clone, clap::Args)]
+#[derive(Debug, Clone, Default, clap::Args)]
 pub struct AssimilationChoice {
     /// Assimilation scenario: a TOML file, or the name of a built-in one (e.g. roukf_young).
     pub scenario: PathBuf,
@@ -102,6 +102,16 @@ impl AssimilationChoice {
             sc.filter.gate = self.gate;
         }
         Ok((sc, dir))
+    }
+
+    /// The filter of the scenario chosen on a stream, one step per set of observed features, with
+    /// its experiment (prepared: its reference run of synthetic observations made), which builds
+    /// more such filters ([`OnlineFilter::new`]).
+    pub fn online(&self) -> Result<(Experiment, OnlineFilter)> {
+        let (scenario, dir) = self.scenario()?;
+        let experiment = Experiment::prepare(scenario, &dir, None)?;
+        let filter = OnlineFilter::new(&experiment)?;
+        Ok((experiment, filter))
     }
 
     /// The track files that replace the synthetic observations, when given.
