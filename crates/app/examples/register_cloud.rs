@@ -1,36 +1,38 @@
-//! Registers an intraoperative point cloud with the library: a synthetic case (the built-in
-//! `register_case_test` scenario: a Neo-Hookean phantom pushed down, seen from above as a partial,
-//! noisy cloud with outliers), then a co-rotational FEM of another mesh pulled onto the cloud by
-//! data springs, frame by frame; the target registration error at the hidden markers.
+//! Registers an intraoperative point cloud with the library, through the same front door as
+//! `augsim register`, `serve` and Python: a synthetic case (the built-in `register_case_test`
+//! scenario: a Neo-Hookean phantom pushed down, seen from above as a partial, noisy cloud with
+//! outliers), registered by a co-rotational FEM of another mesh (the built-in static scenario
+//! `liver_corotational`); the target registration error at the hidden markers.
 //!
 //! `cargo run --release -p augsim-app --example register_cloud`
 
 use std::path::Path;
 
-use augsim_app::case::{corotational_model, synthetic_case};
-use register::organ::displaced;
-use register::{register_frame, target_errors, RegistrationOptions};
+use augsim_app::case::synthetic_case;
+use augsim_app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
+use mesh::length::mm;
+use mesh::stats::mean;
+use register::target_errors;
 use scenario::CaseScenario;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     // What the operating room gives (a cloud of positions) and what it hides (the markers' truth).
     let scenario = CaseScenario::load(Path::new("register_case_test"))?;
     let case = synthetic_case(&scenario)?;
-    println!("cloud      {} points, {} hidden markers", case.peak().cloud.len(), case.targets.len());
+    let (cloud, truth) = (&case.peak().cloud, &case.peak().truth);
+    println!("cloud      {} points, {} hidden markers", cloud.len(), case.targets.len());
 
-    // The preoperative model: the organ (its mesh and surface) and what deforms it.
-    let (organ, mut deformer) = corotational_model()?;
-    let stencils = organ.locate(&case.targets, "target")?;
-    let tre = |u: &[f64]| {
-        1e3 * mesh::stats::mean(&target_errors(&displaced(&case.targets, &stencils, u), &case.peak().truth))
-    };
-    println!("before     mean TRE {:.2} mm (no deformation)", tre(&vec![0.0; 3 * organ.mesh().num_nodes()]));
+    // The preoperative model and the points to follow in it.
+    let spec = RegistrationSpec::new(MethodSpec::fem("liver_corotational"), TargetsSpec::Points(case.targets.clone()));
+    let mut registration = spec.build()?;
+    println!("before     mean TRE {:.2} mm (no deformation)", mm(mean(&target_errors(&case.targets, truth))));
 
-    let frame = register_frame(&organ, &mut deformer, &case.peak().cloud, None, &RegistrationOptions::default())?;
+    let tracked = registration.register(cloud)?;
+    let frame = &tracked.registration;
     println!(
         "after      mean TRE {:.2} mm; surface residual {:.2} mm, {} of {} points kept, {} iterations, {:.0} ms",
-        tre(&frame.u),
-        frame.surface_residual * 1e3,
+        mm(mean(&target_errors(&tracked.targets, truth))),
+        mm(frame.surface_residual),
         frame.inliers,
         frame.points,
         frame.iterations,
