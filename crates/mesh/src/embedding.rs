@@ -352,7 +352,7 @@ impl MeshLocator {
                 let h = h[c];
                 let x = h.map(|k| self.nodes[k]);
                 let (lo, hi) = bounds(&x);
-                let pad: f64 = (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max) * 1e-9;
+                let pad = crate::longest_side((lo, hi)) * 1e-9;
                 if (0..3).any(|d| p[d] < lo[d] - pad || p[d] > hi[d] + pad) {
                     return None;
                 }

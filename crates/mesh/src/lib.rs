@@ -358,6 +358,11 @@ pub fn bounds(points: &[Point]) -> (Point, Point) {
     (lo, hi)
 }
 
+/// The longest side of the box `(lo, hi)` (e.g. of [`bounds`]).
+pub fn longest_side((lo, hi): (Point, Point)) -> f64 {
+    (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max)
+}
+
 /// The largest coordinate magnitude a mesh or a surface to repair may have (in its own unit,
 /// whatever it is: a million kilometres in m, a thousand in mm). Beyond about 1e75 the products of
 /// four coordinates that geometric tests form overflow to infinity, and repair then never ends.

@@ -216,7 +216,7 @@ impl PhantomSpec {
     /// fixed order, so reproducible to the last bit.
     pub fn volume(&self) -> f64 {
         let (lo, hi) = self.bounds();
-        let dx = (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max) / 200.0;
+        let dx = crate::longest_side((lo, hi)) / 200.0;
         let n: [usize; 3] = std::array::from_fn(|d| ((hi[d] - lo[d]) / dx).ceil() as usize + 1);
         (0..n[2])
             .into_par_iter()

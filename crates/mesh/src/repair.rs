@@ -325,8 +325,7 @@ pub fn largest_extent(surface: &TriSurface) -> f64 {
     if points.is_empty() {
         return 0.0;
     }
-    let (lo, hi) = bounds(&points);
-    (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max)
+    crate::longest_side(bounds(&points))
 }
 
 /// The length unit of an organ's surface, from its size: an organ is between 2 cm and 60 cm

@@ -274,7 +274,7 @@ impl TriSurface {
             return Err(MeshError::Invalid(format!("fit_to: length must be positive and finite, got {length}")));
         }
         let (lo, hi) = bounds(&self.vertices);
-        let extent = (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max);
+        let extent = crate::longest_side((lo, hi));
         if !(extent > 0.0 && extent.is_finite()) {
             return Err(MeshError::Invalid("fit_to: the surface has no finite extent".into()));
         }

@@ -935,8 +935,7 @@ pub const UNCOVERED_DISTANCE: f64 = 0.02;
 /// [`Coverage`] of `surface` by `mesh` (each triangle counted by its centroid).
 pub fn surface_coverage(mesh: &Mesh, surface: &TriSurface) -> Result<Coverage, MeshError> {
     let boundary = SurfaceBvh::new(&crate::boundary_surface(mesh))?;
-    let (lo, hi) = crate::bounds(&surface.vertices);
-    let distance = UNCOVERED_DISTANCE * (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max);
+    let distance = UNCOVERED_DISTANCE * crate::longest_side(crate::bounds(&surface.vertices));
     let (area, left_out) = surface
         .triangles
         .par_iter()

@@ -73,7 +73,7 @@ impl WarpField {
             None => deformed.nodes.clone(),
         };
         let (lo, hi) = bounds(&in_cloud);
-        let extent = (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max);
+        let extent = mesh::longest_side((lo, hi));
         let margin = 0.15 * extent;
         let spacing = (extent + 2.0 * margin) / cells_across.max(1) as f64;
         let origin: Point = std::array::from_fn(|d| lo[d] - margin);

@@ -468,7 +468,7 @@ fn extent(organ: &Mesh) -> [f64; 3] {
 
 /// The longest side of `organ`'s bounding box (m).
 fn longest_side(organ: &Mesh) -> f64 {
-    extent(organ).into_iter().fold(0.0, f64::max)
+    mesh::longest_side(organ.bounds())
 }
 
 /// The tool's footprint on `organ`: 3 cm on the phantom's 21 cm, in proportion to its longest side.

@@ -550,8 +550,7 @@ fn finish_volume(
             VolumeKind::Tet | VolumeKind::Tet10 => crate::tet_volume(p(0), p(1), p(2), p(3)),
             VolumeKind::Hex => HEX_TO_TETS.iter().map(|t| crate::tet_volume(p(t[0]), p(t[1]), p(t[2]), p(t[3]))).sum(),
         };
-        let (lo, hi) = crate::bounds(&cell.iter().map(|&i| nodes[i]).collect::<Vec<_>>());
-        let size = (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max);
+        let size = crate::longest_side(crate::bounds(&cell.iter().map(|&i| nodes[i]).collect::<Vec<_>>()));
         let zero = volume.is_nan() || volume.abs() <= 1e-12 * size * size * size;
         if zero {
             return Err(parse_error(
