@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use mesh::io::csv::{number, Dialect, Header, Table};
-use mesh::io::points::coordinate_unit;
+use mesh::io::points::{column_unit, coordinate_unit};
 use mesh::length::LengthUnit;
 use mesh::Point;
 
@@ -29,20 +29,24 @@ impl PointCloud {
     /// Parses CSV text ([`mesh::io::csv`]) with six numbers per line (x, y, z, vx, vy, vz), separated by commas
     /// or semicolons; blank lines and empty fields are skipped and a first line that is not numbers is a header.
     /// A header whose first three columns are `x_mm, y_mm, z_mm` gives the positions in mm, and one whose
-    /// last three end in `_mm` the vectors (displacements) too; otherwise they are in m. `path` names the text
-    /// in errors, with the line number.
+    /// last three end in `_mm` the vectors (displacements) too (`_m`: m); otherwise they are in m. Columns of
+    /// one kind naming different units are an error. `path` names the text in errors, with the line number.
     pub fn parse_csv(text: &str, path: &Path) -> Result<PointCloud> {
         let bad = |line: Option<usize>, message: String| LearnError::Input { path: path.to_path_buf(), line, message };
         let dialect = Dialect { separators: &[',', ';'], header: Header::Optional };
         let table = Table::parse(text, &dialect).map_err(|e| bad(e.line, e.message))?;
         let names = &table.names;
-        let position_scale = match names.get(..3).map(coordinate_unit) {
-            Some(Ok(Some(unit))) => unit.metres(),
+        let header = |message: String| bad(table.header_line, format!("{message} in {:?}", names.join(",")));
+        let named = |columns: &[String]| columns.iter().any(|n| column_unit(n).is_some());
+        let position_scale = match names.get(..3).map(|xyz| (coordinate_unit(xyz), named(xyz))) {
+            Some((Ok(Some(unit)), _)) => unit.metres(),
+            Some((Err(message), true)) => return Err(header(message)),
             _ => 1.0,
         };
-        let vector_unit = match names.get(3..6) {
-            Some(vector) if vector.iter().all(|n| n.ends_with("_mm")) => Some(LengthUnit::Millimetre),
-            _ => None,
+        let vector_unit = match names.get(3..6).map(|v| v.iter().map(|n| column_unit(n)).collect::<Vec<_>>()) {
+            Some(units) if units.iter().all(|u| *u == units[0]) => units[0],
+            Some(_) => return Err(header("the vector columns name different units".into())),
+            None => None,
         };
         let vector_scale = vector_unit.map_or(1.0, LengthUnit::metres);
         let mut rows = Vec::new();
@@ -184,6 +188,13 @@ mod tests {
         assert_eq!((mm.points[0], mm.vectors[0]), ([-0.05, 0.01, 0.03], [0.0, 0.0, -0.2]));
         let mm = PointCloud::parse_csv("x_mm,y_mm,z_mm,ux_mm,uy_mm,uz_mm\n-50,10,30,0,0,-2\n", path).unwrap();
         assert_eq!(mm.vectors[0], [0.0, 0.0, -0.002]);
+        // Columns of one kind naming different units are refused, not read as metres.
+        let e = PointCloud::parse_csv("x_mm,y,z_mm,fx,fy,fz\n-50,10,30,0,0,-0.2\n", path).unwrap_err().to_string();
+        assert!(e.starts_with("cloud.csv:1: the x, y and z columns name different units"), "{e}");
+        let e = PointCloud::parse_csv("x,y,z,ux_mm,uy_mm,uz\n0,0,0,0,0,1\n", path).unwrap_err().to_string();
+        assert!(e.starts_with("cloud.csv:1: the vector columns name different units"), "{e}");
+        let m = PointCloud::parse_csv("x,y,z,ux_m,uy_m,uz_m\n0,0,0,0,0,0.001\n", path).unwrap();
+        assert_eq!((m.vectors[0], m.vector_unit), ([0.0, 0.0, 0.001], Some(LengthUnit::Metre)));
     }
 
     #[test]

@@ -140,6 +140,12 @@ pub fn coordinate_unit(names: &[String]) -> Result<Option<LengthUnit>, String> {
     Columns::find(names).map(|c| c.unit)
 }
 
+/// The unit a column's name ends with: `_mm` (e.g. `x_mm`) or `_m`; `None` for none.
+pub fn column_unit(name: &str) -> Option<LengthUnit> {
+    let (_, suffix) = name.rsplit_once('_')?;
+    suffix.parse().ok()
+}
+
 /// The columns of a table: where x, y, z, the label and the description are, and the unit.
 struct Columns {
     xyz: [usize; 3],
@@ -155,12 +161,9 @@ impl Columns {
         let mut unit = None;
         for (axis, name) in ["x", "y", "z"].into_iter().enumerate() {
             let mut found = names.iter().enumerate().filter_map(|(i, n)| {
-                let suffix = n.strip_prefix(name)?;
-                let u = match suffix {
+                let u = match n.strip_prefix(name)? {
                     "" => None,
-                    "_mm" => Some(LengthUnit::Millimetre),
-                    "_m" => Some(LengthUnit::Metre),
-                    _ => return None,
+                    suffix => Some(column_unit(suffix).filter(|_| suffix.starts_with('_'))?),
                 };
                 Some((i, u))
             });
