@@ -35,7 +35,7 @@ pub fn predict_file(
         .with_context(|| format!("{} as the input of {}", input.display(), model_path.display()))?;
     let mut lines = Vec::new();
     if let Some(n) = points {
-        let what = if model.takes_forces()? {
+        let what = if model.takes_forces() {
             "forces spread to the grid"
         } else {
             "displacements on their nearest grid nodes"

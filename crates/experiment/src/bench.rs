@@ -234,8 +234,8 @@ fn unet_prediction(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
             normalization: learn::Normalization { input_scale: 1.0, target_scale: 1.0 },
             grid,
             placement: None,
-            input_unit: "N".into(),
-            target_unit: "m".into(),
+            input_unit: learn::FieldUnit::Newton,
+            target_unit: learn::FieldUnit::Metre,
             training: None,
             net,
         };

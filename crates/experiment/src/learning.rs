@@ -610,7 +610,7 @@ mod tests {
         let init = Initialization::Scratch {
             unet: UNetConfig { base_channels: recipe.channels, depth: 1, ..UNetConfig::default() },
             normalization: learn::Normalization::from_samples(&train),
-            input_unit: "N".into(),
+            input_unit: learn::FieldUnit::Newton,
         };
         let options = TrainOptions { test: split.test.clone(), ..TrainOptions::new(dir.path().to_path_buf()) };
         learn::train(&train, &validation, &init, &recipe.train_config(), &options, &learn::Silent).unwrap();

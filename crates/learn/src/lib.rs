@@ -40,8 +40,8 @@ pub mod training;
 pub use data::chosen::{ChoiceRecipe, ChosenDraws, ChosenRound, CANDIDATE_BASE};
 pub use data::corrupt::{Corruption, Sparsity};
 pub use data::dataset::{
-    json_differences, merge_datasets, Dataset, DatasetPart, DatasetSpec, DatasetWriter, FailedSample, Manifest,
-    Normalization, Sample, Samples, ShardInfo, Statistics,
+    json_differences, merge_datasets, Dataset, DatasetPart, DatasetSpec, DatasetWriter, FailedSample, FieldUnit,
+    Manifest, Normalization, Sample, Samples, ShardInfo, Statistics,
 };
 pub use data::grid::{encode_points, GridMesh, GridPlacement, GridShape, GridToMesh, CHANNELS, LAYOUT};
 pub use data::points::{PointCloud, PredictInput};

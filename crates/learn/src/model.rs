@@ -11,11 +11,12 @@ use mesh::Mesh;
 
 use crate::data::corrupt::Corruption;
 use crate::data::dataset::Samples;
-use crate::data::grid::{input_is_force, placed_model_grid, GridPlacement, GridShape, GridToMesh};
+use crate::data::grid::{placed_model_grid, GridPlacement, GridShape, GridToMesh};
 use crate::data::split::{Provenance, SampleRole};
 use crate::net::predict::Predictor;
 use crate::net::unet::TrainedModel;
 use crate::rom::ReducedModel;
+use crate::FieldUnit;
 use crate::{Compute, LearnError, Result};
 
 /// The file of a model directory that describes the model.
@@ -136,11 +137,11 @@ impl Model {
         }
     }
 
-    /// The input unit ("N" or "m").
-    pub fn input_unit(&self) -> &str {
+    /// The input unit (forces or displacements).
+    pub fn input_unit(&self) -> FieldUnit {
         match self {
-            Model::UNet(m) => &m.input_unit,
-            Model::Reduced(m) => &m.input_unit,
+            Model::UNet(m) => m.input_unit,
+            Model::Reduced(m) => m.input_unit,
         }
     }
 
@@ -166,8 +167,8 @@ impl Model {
     }
 
     /// Whether the model takes nodal forces (N) rather than displacements (m).
-    pub fn takes_forces(&self) -> Result<bool> {
-        input_is_force(self.input_unit())
+    pub fn takes_forces(&self) -> bool {
+        self.input_unit().is_force()
     }
 
     /// A field on the model's grid interpolated to the nodes of `organ` ([`GridToMesh`]).
@@ -195,7 +196,7 @@ pub trait LearnedModel {
     /// The grid placed in space.
     fn placed_grid(&self) -> Result<Grid>;
     /// Whether it takes forces (N) rather than displacements (m).
-    fn takes_forces(&self) -> Result<bool>;
+    fn takes_forces(&self) -> bool;
     /// The splits behind it, when its training recorded them.
     fn provenance(&self) -> Option<Provenance<'_>>;
     /// A predictor on `compute`.
@@ -232,7 +233,7 @@ impl LearnedModel for TrainedModel {
     fn placed_grid(&self) -> Result<Grid> {
         TrainedModel::placed_grid(self)
     }
-    fn takes_forces(&self) -> Result<bool> {
+    fn takes_forces(&self) -> bool {
         TrainedModel::takes_forces(self)
     }
     fn provenance(&self) -> Option<Provenance<'_>> {
@@ -250,7 +251,7 @@ impl LearnedModel for Model {
     fn placed_grid(&self) -> Result<Grid> {
         Model::placed_grid(self)
     }
-    fn takes_forces(&self) -> Result<bool> {
+    fn takes_forces(&self) -> bool {
         Model::takes_forces(self)
     }
     fn provenance(&self) -> Option<Provenance<'_>> {
@@ -337,7 +338,7 @@ impl LearnedModel for Projected {
     fn placed_grid(&self) -> Result<Grid> {
         self.model.placed_grid()
     }
-    fn takes_forces(&self) -> Result<bool> {
+    fn takes_forces(&self) -> bool {
         self.model.takes_forces()
     }
     fn provenance(&self) -> Option<Provenance<'_>> {

@@ -19,8 +19,8 @@ fn spec(shard_size: usize, part: Option<DatasetPart>) -> DatasetSpec {
         seed: 7,
         part,
         grid: grid(),
-        input_unit: "N".into(),
-        target_unit: "m".into(),
+        input_unit: augsim_learn::FieldUnit::Newton,
+        target_unit: augsim_learn::FieldUnit::Metre,
         shard_size,
         metadata: serde_json::json!({"young_modulus": 5000.0}),
     }
@@ -192,7 +192,7 @@ fn write_read_round_trip_is_exact() {
     assert_eq!(m.shards.len(), 3);
     assert_eq!(m.shards.iter().map(|s| s.num_samples).collect::<Vec<_>>(), vec![4, 4, 1]);
     assert_eq!(m.next_index, 11);
-    assert_eq!(m.units.input, "N");
+    assert_eq!(m.units.input, augsim_learn::FieldUnit::Newton);
     let all = ds.load_all().unwrap();
     let expected: Vec<u64> = (0..11).filter(|i| i % 7 != 3).collect();
     assert_eq!(all.indices, expected);
@@ -463,4 +463,16 @@ fn samples_select_and_append() {
     t.append(sel).unwrap();
     assert_eq!(t.len(), 2);
     assert!(Samples::new(GridShape::new(2, 2, 2)).append(s).is_err());
+}
+
+/// A field's unit is written as the files always had it ("N", "m"); any other is refused on
+/// reading, naming the two.
+#[test]
+fn field_units_are_written_n_and_m_and_others_refused() {
+    use augsim_learn::FieldUnit;
+    assert_eq!(serde_json::to_string(&[FieldUnit::Newton, FieldUnit::Metre]).unwrap(), r#"["N","m"]"#);
+    assert_eq!(serde_json::from_str::<FieldUnit>(r#""N""#).unwrap(), FieldUnit::Newton);
+    assert!(FieldUnit::Newton.is_force() && !FieldUnit::Metre.is_force());
+    let e = serde_json::from_str::<FieldUnit>(r#""kg""#).unwrap_err().to_string();
+    assert!(e.contains("unknown variant `kg`, expected `N` or `m`"), "{e}");
 }

@@ -79,7 +79,12 @@ fn with_the_prior_a_linear_dataset_is_learned_to_its_basis() {
     let all = Dataset::open(dir.path()).unwrap().load_all().unwrap();
     let policy = SplitPolicy { validation_samples: Some(10), test_samples: Some(10), ..SplitPolicy::default() };
     let (split, [train, validation, _]) = policy.apply(&all).unwrap();
-    let context = || Context { placement: None, input_unit: "N", target_unit: "m", split: split.clone() };
+    let context = || Context {
+        placement: None,
+        input_unit: augsim_learn::FieldUnit::Newton,
+        target_unit: augsim_learn::FieldUnit::Metre,
+        split: split.clone(),
+    };
     let (plain, plain_report) = fit(&train, &validation, &RomConfig::default(), context(), None).unwrap();
     let mut response = g.rest_response().unwrap();
     let (model, report) = fit(&train, &validation, &RomConfig::default(), context(), Some(&mut response)).unwrap();

@@ -3,11 +3,11 @@
 
 use augsim_learn::data::npy::{NpyArray, NpyData};
 use augsim_learn::rom::{fit, Context, RomConfig};
-use augsim_learn::LearnedModel;
 use augsim_learn::{
     evaluate, uncertainty_coverage, Compute, Corruption, GridShape, Method, Model, PredictInput, Sample, Samples,
     SplitPolicy,
 };
+use augsim_learn::{FieldUnit, LearnedModel};
 
 /// Sample `index`: parameters (a, b) in [−1, 1]²; the input a·φ₁ + b·φ₂ on a patch of nodes (a
 /// "visible surface"); the target a smooth field a·ψ₁ + b·ψ₂ + a·b·ψ₃ + a²·ψ₄ (m) inside the mask.
@@ -54,7 +54,7 @@ fn a_smooth_two_parameter_family_is_learned_saved_and_evaluated() {
     let all = samples(grid, 400);
     let policy = SplitPolicy { validation_samples: Some(50), test_samples: Some(80), ..SplitPolicy::default() };
     let (split, [train, validation, test]) = policy.apply(&all).unwrap();
-    let context = Context { placement: None, input_unit: "m", target_unit: "m", split };
+    let context = Context { placement: None, input_unit: FieldUnit::Metre, target_unit: FieldUnit::Metre, split };
     let (model, report) = fit(&train, &validation, &RomConfig::default(), context, None).unwrap();
     // The basis holds the targets (four fields span them); the regression learns the map.
     assert!(model.info.modes >= 4, "{} modes", model.info.modes);
@@ -112,7 +112,8 @@ fn bad_input_is_refused_with_a_message() {
     let all = samples(grid, 60);
     let policy = SplitPolicy { validation_samples: Some(10), test_samples: Some(10), ..SplitPolicy::default() };
     let (split, [train, validation, _]) = policy.apply(&all).unwrap();
-    let context = |split| Context { placement: None, input_unit: "m", target_unit: "m", split };
+    let context =
+        |split| Context { placement: None, input_unit: FieldUnit::Metre, target_unit: FieldUnit::Metre, split };
     let (model, _) = fit(&train, &validation, &RomConfig::default(), context(split.clone()), None).unwrap();
     let e = model.predict(&[0.0; 7]).unwrap_err().to_string();
     assert!(e.contains("expected"), "{e}");

@@ -132,7 +132,7 @@ fn models_record_their_split_and_evaluation_refuses_seen_samples() {
     let init = Initialization::Scratch {
         unet: UNetConfig { base_channels: 2, depth: 1, ..UNetConfig::default() },
         normalization: Normalization::from_samples(&train_set),
-        input_unit: "N".into(),
+        input_unit: augsim_learn::FieldUnit::Newton,
     };
     let config = TrainConfig { iterations: 2, validate_every: 1, checkpoint_every: 2, ..TrainConfig::default() };
     let options = |name: &str| TrainOptions { test: split.test.clone(), ..TrainOptions::new(root.path().join(name)) };

@@ -26,7 +26,7 @@ fn scratch(base: usize, depth: usize, data: &Samples) -> Initialization {
     Initialization::Scratch {
         unet: UNetConfig { base_channels: base, depth, ..UNetConfig::default() },
         normalization: Normalization { input_scale: rms(&data.inputs) * 8.0, target_scale: rms(&data.targets) * 4.0 },
-        input_unit: "N".into(),
+        input_unit: augsim_learn::FieldUnit::Newton,
     }
 }
 
@@ -67,8 +67,8 @@ fn tiny_unet_overfits_a_handful_of_samples() {
         normalization: *normalization,
         grid: grid(),
         placement: None,
-        input_unit: "N".into(),
-        target_unit: "m".into(),
+        input_unit: augsim_learn::FieldUnit::Newton,
+        target_unit: augsim_learn::FieldUnit::Metre,
         training: None,
         net: UNet::new(unet, config.seed).unwrap(),
     };
@@ -434,8 +434,8 @@ fn cpu_burn_without_the_feature_is_a_clear_error() {
         normalization,
         grid: grid(),
         placement: None,
-        input_unit: "N".into(),
-        target_unit: "m".into(),
+        input_unit: augsim_learn::FieldUnit::Newton,
+        target_unit: augsim_learn::FieldUnit::Metre,
         training: None,
         net: UNet::new(&unet, 0).unwrap(),
     };

@@ -105,8 +105,8 @@ fn save_then_load_gives_identical_predictions() {
         normalization: Normalization { input_scale: 2.5, target_scale: 0.01 },
         grid,
         placement: Some(GridPlacement { origin: [-0.1, 0.0, 0.25], spacing: [0.01, 0.02, 0.015] }),
-        input_unit: "N".into(),
-        target_unit: "m".into(),
+        input_unit: augsim_learn::FieldUnit::Newton,
+        target_unit: augsim_learn::FieldUnit::Metre,
         training: None,
         net: UNet::new(&config, 3).unwrap(),
     };

@@ -325,7 +325,7 @@ impl NetworkDeformer {
     /// `input_nodes`: the mesh nodes whose displacement the network was trained to take, along
     /// the rest surface's normal only when `normal` (boundary nodes then).
     pub fn new(model: &Model, organ: &Organ, input_nodes: &[usize], normal: bool) -> Result<NetworkDeformer> {
-        if model.input_unit() != "m" {
+        if model.takes_forces() {
             return Err(RegisterError::Invalid(format!(
                 "the model takes {} on its input, registration needs a displacement model (m)",
                 model.input_unit()

@@ -611,8 +611,11 @@ fn dataset_step(dir: &Path, progress: &dyn learn::Progress) -> Result<Vec<String
 
 /// Each draw's mean displacement (m) over the grid nodes inside the organ, shard by shard.
 fn draw_motions(dataset: &learn::Dataset) -> Result<Vec<f64>> {
-    let unit = &dataset.manifest().units.target;
-    ensure!(unit == "m", "the dataset's displacements are in {unit}, not in metres as the generator writes them");
+    let unit = dataset.manifest().units.target;
+    ensure!(
+        unit == learn::FieldUnit::Metre,
+        "the dataset's targets are in {unit}, not in metres as the generator writes them"
+    );
     let mut motions = Vec::with_capacity(dataset.len());
     for shard in 0..dataset.manifest().shards.len() {
         let samples = dataset.load_shard(shard)?;

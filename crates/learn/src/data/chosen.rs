@@ -38,6 +38,7 @@ use crate::data::split::{IndexSet, Split};
 use crate::model::{Method, Model, MODEL_FILE};
 use crate::progress::Progress;
 use crate::rom::{fit, Context, ReducedModel};
+use crate::FieldUnit;
 use crate::{LearnError, Result};
 
 /// Generation index of candidate 0: candidate `c` is the dataset's draw `CANDIDATE_BASE + c`.
@@ -297,7 +298,7 @@ impl Generator {
         if self.config().input != Input::Force {
             return Err(invalid("σ-chosen draws need force inputs: a displacement input is known only once solved"));
         }
-        if model.grid != self.grid() || model.input_unit != "N" {
+        if model.grid != self.grid() || model.input_unit != FieldUnit::Newton {
             return Err(invalid(format!(
                 "the model predicts on grid {} from inputs in {}, the draws are on grid {} in N",
                 model.grid,

@@ -59,10 +59,10 @@ pub struct DatasetSpec {
     pub part: Option<DatasetPart>,
     /// The grid.
     pub grid: GridShape,
-    /// Unit of the input field: "N" (forces) or "m" (imposed displacements).
-    pub input_unit: String,
-    /// Unit of the target field ("m").
-    pub target_unit: String,
+    /// Unit of the input field: forces or imposed displacements.
+    pub input_unit: FieldUnit,
+    /// Unit of the target field (displacements).
+    pub target_unit: FieldUnit,
     /// Samples per shard.
     pub shard_size: usize,
     /// Free-form scenario parameters recorded by the generator.
@@ -142,9 +142,41 @@ impl DatasetSpec {
 #[serde(deny_unknown_fields)]
 pub struct Units {
     /// Unit of the inputs.
-    pub input: String,
+    pub input: FieldUnit,
     /// Unit of the targets.
-    pub target: String,
+    pub target: FieldUnit,
+}
+
+/// The unit of a dataset's or a model's field: forces or displacements (written "N" and "m").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum FieldUnit {
+    /// Newtons: nodal forces.
+    #[serde(rename = "N")]
+    Newton,
+    /// Metres: displacements.
+    #[serde(rename = "m")]
+    Metre,
+}
+
+impl FieldUnit {
+    /// Its symbol: "N" or "m".
+    pub fn symbol(self) -> &'static str {
+        match self {
+            FieldUnit::Newton => "N",
+            FieldUnit::Metre => "m",
+        }
+    }
+
+    /// Whether it is a force's (rather than a displacement's).
+    pub fn is_force(self) -> bool {
+        self == FieldUnit::Newton
+    }
+}
+
+impl std::fmt::Display for FieldUnit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.symbol())
+    }
 }
 
 /// A generation index that produced no sample, and why.

@@ -33,6 +33,7 @@ use crate::data::dataset::{DatasetPart, DatasetSpec, DatasetWriter, Manifest, Sa
 use crate::data::grid::{encode_points, GridPlacement, GridShape};
 use crate::data::response::RestResponse;
 use crate::progress::Progress;
+use crate::FieldUnit;
 use crate::{LearnError, Result};
 
 /// Stream number of the load generator in [`item_rng`].
@@ -667,10 +668,10 @@ impl Generator {
             part,
             grid: self.grid,
             input_unit: match self.config.input {
-                Input::Force => "N".into(),
-                Input::Displacement { .. } => "m".into(),
+                Input::Force => FieldUnit::Newton,
+                Input::Displacement { .. } => FieldUnit::Metre,
             },
-            target_unit: "m".into(),
+            target_unit: FieldUnit::Metre,
             shard_size: self.config.shard_size,
             metadata: serde_json::json!({
                 "generator": "augsim",

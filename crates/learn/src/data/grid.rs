@@ -310,18 +310,6 @@ pub(crate) fn placed_model_grid(placement: Option<GridPlacement>, grid: GridShap
         .grid(grid)
 }
 
-/// Whether a model's input unit is a force (N) rather than a displacement (m); any other unit is an
-/// error.
-pub(crate) fn input_is_force(unit: &str) -> Result<bool> {
-    match unit {
-        "N" => Ok(true),
-        "m" => Ok(false),
-        other => Err(LearnError::InvalidInput(format!(
-            "model input unit {other:?} is neither N (forces) nor m (displacements)"
-        ))),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

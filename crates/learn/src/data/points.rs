@@ -154,7 +154,7 @@ impl PredictInput {
                 array.shape, g.nx, g.ny, g.nz
             ))),
             PredictInput::Points(cloud) => {
-                let forces = model.takes_forces()?;
+                let forces = model.takes_forces();
                 if let (true, Some(unit)) = (forces, cloud.vector_unit) {
                     return Err(LearnError::InvalidInput(format!(
                         "the points' vectors are named in {unit}, but the model takes forces (N)"

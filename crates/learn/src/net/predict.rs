@@ -9,7 +9,7 @@ use mesh::Mesh;
 use serde::{Deserialize, Serialize};
 
 use crate::data::dataset::Normalization;
-use crate::data::grid::{check_prediction_input, input_is_force, placed_model_grid, GridShape, GridToMesh};
+use crate::data::grid::{check_prediction_input, placed_model_grid, GridShape, GridToMesh};
 #[cfg(feature = "cpu-burn")]
 use crate::net::burn_unet::{tensor_values, BurnUNet};
 use crate::net::inference::InferenceNet;
@@ -100,10 +100,9 @@ impl TrainedModel {
         placed_model_grid(self.placement, self.grid)
     }
 
-    /// Whether the network takes nodal forces (input unit N) rather than displacements (m); any other unit is an
-    /// error.
-    pub fn takes_forces(&self) -> Result<bool> {
-        input_is_force(&self.input_unit)
+    /// Whether the network takes nodal forces (input unit N) rather than displacements (m).
+    pub fn takes_forces(&self) -> bool {
+        self.input_unit.is_force()
     }
 
     /// A field on the model's grid (`[3, nx, ny, nz]`, e.g. a prediction) interpolated to the nodes of `organ`

@@ -25,6 +25,7 @@ use crate::data::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::data::split::{Provenance, Split};
 use crate::fsutil::read;
 use crate::net::inference::{InferenceNet, Packed};
+use crate::FieldUnit;
 use crate::{LearnError, Result};
 
 /// U-Net hyper-parameters.
@@ -513,8 +514,8 @@ struct ModelFile {
     grid: GridShape,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     placement: Option<GridPlacement>,
-    input_unit: String,
-    target_unit: String,
+    input_unit: FieldUnit,
+    target_unit: FieldUnit,
     weights: String,
     training: Option<TrainingInfo>,
 }
@@ -535,10 +536,10 @@ pub struct TrainedModel {
     pub grid: GridShape,
     /// Where that grid lies in space, when known (needed to map point clouds onto it).
     pub placement: Option<GridPlacement>,
-    /// Input unit ("N" or "m").
-    pub input_unit: String,
-    /// Target unit ("m").
-    pub target_unit: String,
+    /// Input unit (forces or displacements).
+    pub input_unit: FieldUnit,
+    /// Target unit (displacements).
+    pub target_unit: FieldUnit,
     /// How it was trained.
     pub training: Option<TrainingInfo>,
     /// The network's parameters.

@@ -16,6 +16,7 @@ use crate::data::dataset::Samples;
 use crate::data::grid::{GridPlacement, GridShape, CHANNELS};
 use crate::data::response::RestResponse;
 use crate::data::split::Split;
+use crate::FieldUnit;
 use crate::{LearnError, Result};
 
 /// Settings of a reduced-order model's fit.
@@ -138,24 +139,24 @@ const KERNEL_RANK_TOLERANCE: f64 = 1e-10;
 const COVERAGE: f64 = 0.95;
 
 /// Where the samples lie and what they mean, for the model file.
-pub struct Context<'a> {
+pub struct Context {
     /// The grid's placement.
     pub placement: Option<GridPlacement>,
     /// Input unit.
-    pub input_unit: &'a str,
+    pub input_unit: FieldUnit,
     /// Target unit.
-    pub target_unit: &'a str,
+    pub target_unit: FieldUnit,
     /// The split the samples come from.
     pub split: Split,
 }
 
-impl<'a> Context<'a> {
+impl Context {
     /// The context of samples of the dataset described by `manifest`, split by `split`.
-    pub fn of_dataset(manifest: &'a crate::Manifest, split: Split) -> Context<'a> {
+    pub fn of_dataset(manifest: &crate::Manifest, split: Split) -> Context {
         Context {
             placement: manifest.placement(),
-            input_unit: &manifest.units.input,
-            target_unit: &manifest.units.target,
+            input_unit: manifest.units.input,
+            target_unit: manifest.units.target,
             split,
         }
     }
@@ -168,7 +169,7 @@ pub fn fit(
     train: &Samples,
     validation: &Samples,
     config: &RomConfig,
-    context: Context<'_>,
+    context: Context,
     prior: Option<&mut RestResponse>,
 ) -> Result<(ReducedModel, RomReport)> {
     let start = Instant::now();
@@ -481,7 +482,7 @@ fn validation_candidates(
 /// projected on its basis.
 fn chosen_model(
     grid: GridShape,
-    context: &Context<'_>,
+    context: &Context,
     info: RomInfo,
     inputs: Inputs,
     features: Features,
@@ -517,8 +518,8 @@ fn chosen_model(
     let model = ReducedModel {
         grid,
         placement: context.placement,
-        input_unit: context.input_unit.into(),
-        target_unit: context.target_unit.into(),
+        input_unit: context.input_unit,
+        target_unit: context.target_unit,
         info,
         input_entries: inputs.entries,
         input_mean: inputs.mean,

@@ -56,6 +56,7 @@ use crate::data::corrupt::Corruption;
 use crate::data::grid::{check_prediction_input, GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::data::npy::{read_npy, write_f32, write_f64, write_u8};
 use crate::data::split::Split;
+use crate::FieldUnit;
 use crate::{LearnError, Result};
 
 pub use fit::{fit, Candidate, Context, RomConfig, RomReport};
@@ -123,8 +124,8 @@ struct RomFile {
     layout: String,
     grid: GridShape,
     placement: Option<GridPlacement>,
-    input_unit: String,
-    target_unit: String,
+    input_unit: FieldUnit,
+    target_unit: FieldUnit,
     rom: RomInfo,
 }
 
@@ -135,10 +136,10 @@ pub struct ReducedModel {
     pub grid: GridShape,
     /// Where that grid lies in space, when known.
     pub placement: Option<GridPlacement>,
-    /// Input unit ("N" or "m").
-    pub input_unit: String,
-    /// Target unit ("m").
-    pub target_unit: String,
+    /// Input unit (forces or displacements).
+    pub input_unit: FieldUnit,
+    /// Target unit (displacements).
+    pub target_unit: FieldUnit,
     /// How it was trained.
     pub info: RomInfo,
     /// Field entries (`[3, nx, ny, nz]` indices) the input features read.
@@ -379,8 +380,8 @@ impl ReducedModel {
             layout: LAYOUT.into(),
             grid: self.grid,
             placement: self.placement,
-            input_unit: self.input_unit.clone(),
-            target_unit: self.target_unit.clone(),
+            input_unit: self.input_unit,
+            target_unit: self.target_unit,
             rom: self.info.clone(),
         };
         let path = dir.join("model.json");

@@ -43,6 +43,7 @@ use crate::progress::Progress;
 use crate::training::adam::{Adam, Moments};
 use crate::training::curve::{write_curve_csv, CurveRow};
 use crate::training::evaluation::evaluate_net;
+use crate::FieldUnit;
 use crate::{Compute, LearnError, Result};
 
 /// Training hyper-parameters.
@@ -130,8 +131,8 @@ pub enum Initialization {
         unet: UNetConfig,
         /// Input/target scales (e.g. [`Normalization::from_statistics`] of the manifest).
         normalization: Normalization,
-        /// Unit of the inputs ("N" or "m").
-        input_unit: String,
+        /// Unit of the inputs (forces or displacements).
+        input_unit: FieldUnit,
     },
     /// Transfer learning from a saved model (its configuration, weights, normalisation and units).
     FineTune {
@@ -207,8 +208,8 @@ pub const CURVE_CSV: &str = "curve.csv";
 struct Start {
     config: UNetConfig,
     normalization: Normalization,
-    input_unit: String,
-    target_unit: String,
+    input_unit: FieldUnit,
+    target_unit: FieldUnit,
     fine_tuned_from: Option<String>,
     freeze: bool,
     /// The splits of the model fine-tuned from.
@@ -222,8 +223,8 @@ fn resolve_start(init: &Initialization, seed: u64) -> Result<(UNet, Start)> {
             let start = Start {
                 config: unet.clone(),
                 normalization: *normalization,
-                input_unit: input_unit.clone(),
-                target_unit: "m".into(),
+                input_unit: *input_unit,
+                target_unit: FieldUnit::Metre,
                 fine_tuned_from: None,
                 freeze: false,
                 pretraining: Vec::new(),
