@@ -5,6 +5,7 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use learn::CurveRow;
+use mesh::length::mm;
 use plot::{line_plot, PlotSpec, Series};
 
 /// File name of the loss plot that `augsim train` writes beside `curve.csv`.
@@ -30,8 +31,7 @@ pub fn plot_learning_curve(path: &Path, curve: &[CurveRow]) -> Result<()> {
         log_y: true,
     };
     line_plot(path, &spec, &[loss]).with_context(what)?;
-    let val: Vec<_> =
-        curve.iter().filter_map(|r| r.val.map(|v| (r.iteration as f64, v.mean * 1e3, v.std * 1e3))).collect();
+    let val: Vec<_> = curve.iter().filter_map(|r| r.val.map(|v| (r.iteration as f64, mm(v.mean), mm(v.std)))).collect();
     if !val.is_empty() {
         let series = Series {
             name: "validation mean error".into(),

@@ -103,7 +103,7 @@ impl<'a> RegisteredFrame<'a> {
     /// displacement (mm), with the cloud and the targets at rest, registered and true.
     pub fn scene(&self, title: &str, notes: Vec<String>) -> Scene {
         let surface = self.organ.surface();
-        let moved = mesh::distances(&surface.vertices, &self.registered).iter().map(|d| 1e3 * d).collect();
+        let moved = mesh::distances(&surface.vertices, &self.registered).iter().map(|&d| mm(d)).collect();
         let mut points = vec![
             PointLayer { name: "intraoperative cloud".into(), positions: self.cloud.clone(), colour: [31, 119, 180] },
             PointLayer {

@@ -8,6 +8,7 @@
 //! markers), so their difference is the network's error alone, not that of the grid encoding.
 
 use mesh::embedding::Grid;
+use mesh::length::mm;
 use mesh::{stats, Mesh, Point};
 use plot::viewer::{Layer, PointLayer, Scalar, Scene};
 
@@ -143,14 +144,14 @@ impl SampleOnMesh {
         let largest = self.reference.iter().copied().map(mesh::norm).fold(0.0, f64::max);
         let mut notes = vec![
             format!("sample {} ({} sample of this model)", self.index, self.role),
-            format!("error at the {} nodes: mean {:.2} mm, max {:.2} mm", errors.len(), 1e3 * mean, 1e3 * max),
-            format!("reference displacement up to {:.1} mm", 1e3 * largest),
+            format!("error at the {} nodes: mean {:.2} mm, max {:.2} mm", errors.len(), mm(mean), mm(max)),
+            format!("reference displacement up to {:.1} mm", mm(largest)),
         ];
         let mut points = Vec::new();
         if !self.markers.is_empty() {
             let marker_errors = self.marker_errors();
             let (m, x) = (stats::mean(&marker_errors), stats::max(&marker_errors));
-            notes.push(format!("{} markers: error mean {:.2} mm, max {:.2} mm", self.markers.len(), 1e3 * m, 1e3 * x));
+            notes.push(format!("{} markers: error mean {:.2} mm, max {:.2} mm", self.markers.len(), mm(m), mm(x)));
             points = vec![
                 PointLayer { name: "markers at rest".into(), positions: self.markers.clone(), colour: [170, 170, 170] },
                 PointLayer {
@@ -177,7 +178,7 @@ impl SampleOnMesh {
             colour: Some(Scalar {
                 name: "prediction error".into(),
                 unit: "mm".into(),
-                values: errors.iter().map(|e| 1e3 * e).collect(),
+                values: errors.iter().map(|&e| mm(e)).collect(),
             }),
             points,
         }

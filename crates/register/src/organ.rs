@@ -2,7 +2,7 @@
 
 use mesh::bvh::{triangle_barycentric, SurfaceBvh};
 use mesh::embedding::MeshLocator;
-use mesh::length::point_in_mm;
+use mesh::length::{mm, point_in_mm};
 use mesh::{Mesh, Point, TriSurface};
 
 use crate::{RegisterError, Result};
@@ -149,7 +149,7 @@ impl Organ {
                         "{what} {} at {} lies {:.2} mm outside the organ mesh",
                         i + 1,
                         point_in_mm(p),
-                        distance * 1e3
+                        mm(distance)
                     )));
                 }
                 Ok((stencil, distance))
@@ -227,9 +227,9 @@ impl Organ {
                  diagonal; landmarks are points on its surface, where it is held){}",
                 i + 1,
                 point_in_mm(landmarks[i]),
-                distance * 1e3,
+                mm(distance),
                 LANDMARK_REACH * 100.0,
-                self.extent() * 1e3,
+                mm(self.extent()),
                 likely_mistake(landmarks, self.extent(), "every landmark lies on the organ", held)
             )));
         }
@@ -256,9 +256,9 @@ impl Organ {
         vec![format!(
             "the {} {what} span {:.3} mm, under {:.0} % of the organ's {:.0} mm (its box's diagonal){}",
             points.len(),
-            extent * 1e3,
+            mm(extent),
             SMALL_TARGET_EXTENT * 100.0,
-            organ_extent * 1e3,
+            mm(organ_extent),
             if scaled_fits(points, 1e3, organ_extent, &fits) { READ_LARGER } else { "" }
         )]
     }

@@ -3,6 +3,7 @@
 //! tiny fraction of it (metres given for millimetres) is refused; a result whose registered surface stays far from the cloud or
 //! whose organ moves by more than half its size is flagged, with what to try.
 
+use mesh::length::mm;
 use mesh::{Point, SurfaceBvh};
 use rayon::prelude::*;
 
@@ -87,7 +88,7 @@ pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<f64> {
         return Err(RegisterError::Invalid(format!(
             "the cloud, read in metres, spans {extent:.1} m, {ratio:.0} times the organ's {:.0} mm (its box's \
              diagonal).{hint}",
-            size * 1e3
+            mm(size)
         )));
     }
     if extent == 0.0 {
@@ -103,8 +104,8 @@ pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<f64> {
         return Err(RegisterError::Invalid(format!(
             "the cloud spans {:.3e} mm, {ratio:.1e} of the organ's {:.0} mm (its box's diagonal): too small to be a \
              view of it (in metres, read as millimetres? give its unit as m: --units m, units=\"m\" in Python)",
-            extent * 1e3,
-            size * 1e3
+            mm(extent),
+            mm(size)
         )));
     }
     Ok(ratio)
@@ -169,9 +170,9 @@ pub fn verdict(organ: &Organ, u: &[f64], far_share: f64, (cloud, extent): (&[Poi
         out.push(format!(
             "the cloud spans {:.0} mm, {:.0} % of the organ's {:.0} mm (its box's diagonal): so small a view leaves \
              most of the deformation undetermined; if it is in centimetres, convert it to mm",
-            extent * size * 1e3,
+            extent * mm(size),
             100.0 * extent,
-            size * 1e3
+            mm(size)
         ));
     }
     if far_share > SUSPECT_FAR_SHARE {
@@ -186,7 +187,7 @@ pub fn verdict(organ: &Organ, u: &[f64], far_share: f64, (cloud, extent): (&[Poi
             "{:.0} % of the cloud stays more than {:.0} mm from the registered surface: the cloud does not fit the \
              organ; {hint}",
             100.0 * far_share,
-            FAR_DISTANCE * 1e3
+            mm(FAR_DISTANCE)
         ));
     }
     let (volume, distorted_share) = volume_change(organ, u);
@@ -205,8 +206,8 @@ pub fn verdict(organ: &Organ, u: &[f64], far_share: f64, (cloud, extent): (&[Poi
         out.push(format!(
             "the organ moves by up to {:.0} mm, over half its size ({:.0} mm, its box's diagonal): not a plausible \
              deformation",
-            motion * 1e3,
-            size * 1e3
+            mm(motion),
+            mm(size)
         ));
     }
     Verdict { warnings: out, distorted }

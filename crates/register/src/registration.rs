@@ -8,6 +8,7 @@
 //! the registered targets are moved back: targets and errors are in the cloud's frame.
 
 use mesh::io::Frame;
+use mesh::length::mm;
 use mesh::stats::{max, mean};
 use mesh::{Point, TriSurface};
 use serde::Serialize;
@@ -57,7 +58,7 @@ pub struct FrameOutcome {
 impl FrameOutcome {
     /// Mean and largest TRE of the frame (mm), when the truth is known.
     pub fn tre_mm(&self) -> Option<(f64, f64)> {
-        self.errors.as_ref().filter(|e| !e.is_empty()).map(|e| (mean(e) * 1e3, max(e) * 1e3))
+        self.errors.as_ref().filter(|e| !e.is_empty()).map(|e| (mm(mean(e)), mm(max(e))))
     }
 }
 
@@ -406,8 +407,8 @@ impl Summary {
         let all = |f: fn(&FrameOutcome) -> &Option<Vec<f64>>| -> Option<Vec<f64>> {
             outcomes.iter().map(|o| f(o).clone()).collect::<Option<Vec<_>>>().map(|v| v.concat())
         };
-        let mm =
-            |v: &Option<Vec<f64>>, stat: fn(&[f64]) -> f64| v.as_ref().filter(|v| !v.is_empty()).map(|v| stat(v) * 1e3);
+        let in_mm =
+            |v: &Option<Vec<f64>>, stat: fn(&[f64]) -> f64| v.as_ref().filter(|v| !v.is_empty()).map(|v| mm(stat(v)));
         let (errors, rest, std) = (all(|o| &o.errors), all(|o| &o.rest_errors), all(|o| &o.target_std));
         let within = errors.as_deref().zip(std.as_deref()).and_then(|(e, s)| within_two_std(e, s));
         let per_frame = |f: fn(&FrameOutcome) -> f64| outcomes.iter().map(f).sum::<f64>() / n as f64;
@@ -416,18 +417,18 @@ impl Summary {
             method: method.into(),
             frames: n,
             targets: outcomes[0].targets.len(),
-            tre_mean_mm: mm(&errors, mean),
-            tre_max_mm: mm(&errors, max),
-            no_deformation_tre_mean_mm: mm(&rest, mean),
-            no_deformation_tre_max_mm: mm(&rest, max),
-            surface_residual_mm: per_frame(|o| o.registration.surface_residual) * 1e3,
+            tre_mean_mm: in_mm(&errors, mean),
+            tre_max_mm: in_mm(&errors, max),
+            no_deformation_tre_mean_mm: in_mm(&rest, mean),
+            no_deformation_tre_max_mm: in_mm(&rest, max),
+            surface_residual_mm: mm(per_frame(|o| o.registration.surface_residual)),
             time_ms: per_frame(|o| o.registration.time.as_secs_f64()) * 1e3,
             time_p95_ms: mesh::stats::percentile(&times, 95.0),
             time_median_ms: mesh::stats::median(&mut times),
             iterations: per_frame(|o| o.registration.iterations as f64),
             rigid: outcomes[n - 1].rigid.as_ref().map(RigidSummary::from),
             plausible: outcomes.iter().all(|o| o.registration.plausible()),
-            target_std_mean_mm: mm(&std, mean),
+            target_std_mean_mm: in_mm(&std, mean),
             within_two_std: within,
             warnings: {
                 let mut seen = Vec::new();

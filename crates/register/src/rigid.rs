@@ -13,6 +13,7 @@
 use std::time::{Duration, Instant};
 
 use mesh::bvh::SurfaceBvh;
+use mesh::length::mm;
 use mesh::length::LengthUnit;
 use mesh::{cross, dot, sub, Mesh, Point, TriSurface};
 use nalgebra::{Matrix6, Vector6};
@@ -394,10 +395,10 @@ impl From<&RigidResult> for RigidSummary {
         RigidSummary {
             organ_to_cloud: t.homogeneous(LengthUnit::Metre),
             rotation_deg: t.angle().to_degrees(),
-            translation_mm: t.translation_norm() * 1e3,
+            translation_mm: mm(t.translation_norm()),
             iterations: r.iterations,
             converged: r.converged,
-            rms_mm: r.rms * 1e3,
+            rms_mm: mm(r.rms),
             kept: r.kept,
             points: r.points,
             time_ms: r.time.as_secs_f64() * 1e3,

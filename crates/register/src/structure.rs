@@ -1,6 +1,7 @@
 //! Structures inside the organ that the surgeon cannot see (a tumour, vessels), as surfaces that
 //! move with the registered organ: [`Structure`].
 
+use mesh::length::mm;
 use mesh::{Point, TriSurface};
 
 use crate::organ::{displaced, likely_mistake, Stencil, LANDMARK_REACH};
@@ -39,7 +40,7 @@ impl Structure {
             let mostly_inside = |points: &[Point]| held(points).is_ok_and(|moved| mostly_near(&moved));
             return Err(RegisterError::Invalid(format!(
                 "`{name}` lies outside the organ: most of its vertices are farther than {:.0} mm from it{}",
-                reach * 1e3,
+                mm(reach),
                 likely_mistake(&surface.vertices, organ.extent(), "it lies in the organ", mostly_inside)
             )));
         }
@@ -50,7 +51,7 @@ impl Structure {
                  nearest surface point",
                 outside.len(),
                 located.len(),
-                farthest * 1e3
+                mm(farthest)
             )],
             None => Vec::new(),
         };

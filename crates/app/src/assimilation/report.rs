@@ -4,6 +4,7 @@
 use std::path::Path;
 
 use mesh::io::write_atomic_bytes;
+use mesh::length::mm;
 use plot::{line_plot, PlotSpec, Series};
 use serde::Serialize;
 
@@ -277,8 +278,8 @@ pub(super) fn assessment(
         let max = finite.iter().copied().fold(f64::NAN, f64::max);
         summary.push(AssessmentCase { label: label.to_string(), mean_error: mean, max_error: max });
         series.push(Series {
-            name: format!("{label} ({:.2} mm mean)", 1e3 * mean),
-            points: errors.iter().enumerate().map(|(k, e)| ((k + 1) as f64, 1e3 * e)).collect(),
+            name: format!("{label} ({:.2} mm mean)", mm(mean)),
+            points: errors.iter().enumerate().map(|(k, &e)| ((k + 1) as f64, mm(e))).collect(),
             band: None,
         });
     }
