@@ -22,6 +22,11 @@ class Solution:
 
 def solve(scenario: _Path) -> Solution: ...
 def predict(model: _Path, input: npt.ArrayLike) -> npt.NDArray[np.float32]: ...
+def dataset_split(
+    dataset: _Path, indices: list[int], validation: int, test: int
+) -> tuple[str, list[list[int]]]: ...
+
+CANDIDATE_BASE: int
 
 class Registered:
     targets: npt.NDArray[np.float64]

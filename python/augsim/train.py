@@ -37,14 +37,13 @@ try:
 except ImportError as e:
     raise SystemExit('python -m augsim.train needs PyTorch: pip install "./python[torch]" (python/README.md)') from e
 
+from ._augsim import CANDIDATE_BASE, AugsimError, dataset_split
 from .torch import MODEL_FORMAT, MODEL_VERSION, UNet
 
 # augsim's bounds on a U-Net (crates/learn/src/net/unet.rs, UNetConfig::validate).
 MAX_CHANNELS = 4096
 MAX_DEPTH = 6
 
-# Generation index of augsim's first candidate draw: σ-chosen draws (`augsim generate --chosen-by`) lie from here on.
-CANDIDATE_BASE = 1 << 40
 LAYOUT = ("[channel, x, y, z], C order, z fastest: index = ((c*nx + i)*ny + j)*nz + k; shards prepend the "
           "sample axis; masks are [x, y, z]")
 
@@ -78,97 +77,6 @@ def read_dataset(path):
     order = np.argsort(indices, kind="stable")
     return manifest, indices[order], inputs[order].astype(np.float32), targets[order].astype(np.float32), \
         masks[order].astype(np.uint8)
-
-
-def _json_float(x):
-    """A float as serde_json writes it (Ryu's shortest representation and notation)."""
-    if x == 0.0:
-        return "-0.0" if math.copysign(1.0, x) < 0 else "0.0"
-    if not math.isfinite(x):
-        return "null"
-    sign = "-" if x < 0 else ""
-    mantissa, _, exponent = repr(abs(x)).partition("e")
-    whole, _, fraction = mantissa.partition(".")
-    digits = (whole + fraction).lstrip("0")
-    k = int(exponent or 0) - len(fraction)
-    stripped = digits.rstrip("0")
-    k += len(digits) - len(stripped)
-    digits, length = stripped, len(stripped)
-    kk = length + k
-    if 0 <= k and kk <= 16:
-        text = digits + "0" * k + ".0"
-    elif 0 < kk <= 16:
-        text = digits[:kk] + "." + digits[kk:]
-    elif -5 < kk <= 0:
-        text = "0." + "0" * (-kk) + digits
-    elif length == 1:
-        text = f"{digits}e{kk - 1}"
-    else:
-        text = f"{digits[0]}.{digits[1:]}e{kk - 1}"
-    return sign + text
-
-
-def _json_compact(value):
-    """Compact JSON with sorted keys, as serde_json writes a ``Value``."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if value is None:
-        return "null"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        return _json_float(value)
-    if isinstance(value, str):
-        return json.dumps(value, ensure_ascii=False)
-    if isinstance(value, list):
-        return "[" + ",".join(_json_compact(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "{" + ",".join(f"{json.dumps(k, ensure_ascii=False)}:{_json_compact(v)}"
-                              for k, v in sorted(value.items())) + "}"
-    raise TypeError(f"cannot encode {type(value).__name__}")
-
-
-def source_id(manifest):
-    """The dataset's identity, as augsim computes it (``Manifest::source_id``): the scenario, the
-    seed and a hash of everything that decides the samples except their count."""
-    metadata = json.loads(json.dumps(manifest.get("metadata")))
-    config = metadata.get("dataset") if isinstance(metadata, dict) else None
-    if isinstance(config, dict):
-        config.pop("samples", None)
-        config.pop("shard_size", None)
-    key = _json_compact([manifest["grid"], manifest["units"], metadata]).encode("utf-8")
-    h = 0xCBF29CE484222325
-    for b in key:
-        h = ((h ^ b) * 0x100000001B3) & 0xFFFFFFFFFFFFFFFF
-    return f"{manifest['scenario']}/seed {manifest['seed']}/{h:016x}"
-
-
-def index_ranges(indices):
-    """Sorted indices as half-open ranges [[start, end], ...] (augsim's ``IndexSet``)."""
-    ranges = []
-    for i in sorted(int(i) for i in indices):
-        if ranges and i <= ranges[-1][1]:
-            ranges[-1][1] = max(ranges[-1][1], i + 1)
-        else:
-            ranges.append([i, i + 1])
-    return ranges
-
-
-def split_positions(indices, validation, test):
-    """Positions, in the order of the sorted generation indices `indices`, of the training, validation and
-    test samples: the last `test` uniform draws, the `validation` before them, the rest (σ-chosen draws,
-    from CANDIDATE_BASE on, always train)."""
-    n, uniform = len(indices), int(np.count_nonzero(np.asarray(indices) < CANDIDATE_BASE))
-    if validation < 0 or test < 0:
-        raise ValueError(f"{validation} validation and {test} test samples: counts must be at least 0")
-    if validation + test >= n:
-        raise ValueError(f"{validation} validation and {test} test samples leave no training sample out of {n}")
-    if validation + test > uniform:
-        raise ValueError(f"{validation} validation and {test} test samples asked, but only {uniform} of the {n} "
-                         "samples are uniform draws (σ-chosen draws are never held out)")
-    cut = uniform - validation - test
-    train = np.concatenate([np.arange(cut), np.arange(uniform, n)])
-    return train, np.arange(cut, cut + validation), np.arange(cut + validation, uniform)
 
 
 def normalization(inputs, targets, masks):
@@ -343,14 +251,15 @@ def main(argv=None):
         manifest, indices, inputs, targets, masks = read_dataset(args.dataset)
         uniform = int(np.count_nonzero(indices < CANDIDATE_BASE))
         count = lambda fraction, given: given if given is not None else int(round(uniform * fraction))  # noqa: E731
-        train, val, test = split_positions(indices, count(args.validation_fraction, args.validation_samples),
-                                           count(args.test_fraction, args.test_samples))
+        record, (train, val, test) = dataset_split(args.dataset, indices.tolist(),
+                                                   count(args.validation_fraction, args.validation_samples),
+                                                   count(args.test_fraction, args.test_samples))
     except KeyError as e:
         p.error(f"{args.dataset}: manifest.json lacks the field {e}: not a dataset of `augsim generate`")
-    except (OSError, ValueError) as e:
+    except (OSError, ValueError, AugsimError) as e:
         p.error(str(e))
-    record = {"source": source_id(manifest), "train": index_ranges(indices[train]),
-              "validation": index_ranges(indices[val]), "test": index_ranges(indices[test])}
+    record = json.loads(record)
+    train, val, test = (np.asarray(positions, dtype=np.int64) for positions in (train, val, test))
     if args.train_samples is not None:
         if args.train_samples > len(train):
             p.error(f"--train-samples {args.train_samples}: the training split has {len(train)}")

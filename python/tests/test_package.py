@@ -293,6 +293,29 @@ def test_predict_matches_the_command_line(tmp_path):
         augsim.predict(tmp_path, grid)
 
 
+def test_the_dataset_split_is_the_one_augsim_train_records(tmp_path):
+    """The split `python -m augsim.train` uses (augsim's own, through the native module) is the one
+    `augsim train` records for the same counts; counts that leave no training sample are refused."""
+    import json
+
+    from augsim._augsim import dataset_split
+
+    data = tmp_path / "data"
+    run_augsim("generate", "beam_target", "--out", str(data), "--samples", "24")
+    run_augsim("train", str(data), "--out", str(tmp_path / "m"), "--iterations", "1", "--channels", "4", "--depth",
+        "2", "--validation-samples", "4", "--test-samples", "5")
+    with open(tmp_path / "m" / "model.json", encoding="utf-8") as f:
+        recorded = json.load(f)["training"]["split"]
+    with open(data / "manifest.json", encoding="utf-8") as f:
+        indices = sorted(i for shard in json.load(f)["shards"] for i in shard["indices"])
+    record, (train, validation, test) = dataset_split(str(data), indices, 4, 5)
+    assert json.loads(record) == recorded
+    assert (len(train), len(validation), len(test)) == (15, 4, 5)
+    assert [indices[p] for p in test] == indices[-5:], "the last uniform draws are the test samples"
+    with pytest.raises(augsim.AugsimError, match="leave no training sample"):
+        dataset_split(str(data), indices, 20, 4)
+
+
 def test_a_tracking_failure_is_left_out_by_the_validation_gate(tmp_path):
     scenario = tmp_path / "gated.toml"
     scenario.write_text(open(BEAM_ASSIMILATION).read() + "\n[filter]\ngate = 30.0\n")

@@ -494,6 +494,29 @@ impl Registration {
     }
 }
 
+/// The split `augsim train` makes of the samples of the dataset in `dataset` (a directory)
+/// whose generation indices are `indices`: the last `test` uniform draws, the `validation`
+/// before them, the rest (σ-chosen draws included) for training. Returns the split as a model
+/// records it (JSON: `source`, `train`, `validation`, `test`) and the positions in `indices` of
+/// the training, validation and test samples. Raises AugsimError for counts that leave no
+/// training sample, or an unreadable manifest.
+#[pyfunction]
+fn dataset_split(
+    py: Python<'_>,
+    dataset: PathBuf,
+    indices: Vec<u64>,
+    validation: usize,
+    test: usize,
+) -> PyResult<(String, [Vec<usize>; 3])> {
+    compute(py, || {
+        let manifest = learn::Manifest::read(&dataset.join("manifest.json"))?;
+        let split = learn::Split::of_indices(Some(manifest.source_id()), &indices, validation, test)?;
+        let positions = |set: &learn::IndexSet| (0..indices.len()).filter(|&p| set.contains(indices[p])).collect();
+        let sets = [positions(&split.train), positions(&split.validation), positions(&split.test)];
+        Ok((serde_json::to_string(&split)?, sets))
+    })
+}
+
 /// Predicts with a trained U-Net, as `augsim predict` does.
 ///
 /// `model`: a model directory or its model.json. `input`: a grid tensor [3, nx, ny, nz] on the
@@ -654,6 +677,8 @@ fn _augsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("AugsimError", m.py().get_type::<AugsimError>())?;
     m.add_function(wrap_pyfunction!(solve, m)?)?;
     m.add_function(wrap_pyfunction!(predict, m)?)?;
+    m.add_function(wrap_pyfunction!(dataset_split, m)?)?;
+    m.add("CANDIDATE_BASE", learn::CANDIDATE_BASE)?;
     m.add_class::<Solution>()?;
     m.add_class::<Registration>()?;
     m.add_class::<Registered>()?;

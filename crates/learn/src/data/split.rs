@@ -153,13 +153,18 @@ impl Split {
     /// samples are drawn independently, so their order carries no information), σ-chosen samples
     /// included: they were chosen for the model's doubts, and would not measure it fairly.
     pub fn last(samples: &Samples, validation: usize, test: usize) -> Result<Split> {
-        let n = samples.len();
+        Split::of_indices(samples.source.clone(), &samples.indices, validation, test)
+    }
+
+    /// [`Split::last`] of samples of `source` with the generation indices `indices`.
+    pub fn of_indices(source: Option<String>, indices: &[u64], validation: usize, test: usize) -> Result<Split> {
+        let n = indices.len();
         if validation + test >= n {
             return Err(LearnError::InvalidInput(format!(
                 "{validation} validation and {test} test samples leave no training sample out of {n}"
             )));
         }
-        let mut indices = samples.indices.clone();
+        let mut indices = indices.to_vec();
         indices.sort_unstable();
         // Uniform draws come first in index order.
         let uniform = indices.partition_point(|&i| is_uniform(i));
@@ -173,7 +178,7 @@ impl Split {
         let (train, rest) = head.split_at(uniform - validation - test);
         let (val, test) = rest.split_at(validation);
         Ok(Split {
-            source: samples.source.clone(),
+            source,
             train: IndexSet::from_indices(&[train, chosen].concat()),
             validation: IndexSet::from_indices(val),
             test: IndexSet::from_indices(test),
