@@ -27,8 +27,8 @@ pub struct ServeArgs {
     /// (TRANSFORM `rigid`, with --rigid), status (STRING; a refused cloud's error is sent
     /// whatever the list), structures (a POLYDATA per --structure, named by it). Default: every
     /// one.
-    #[arg(long, value_name = "LIST")]
-    outputs: Option<String>,
+    #[arg(long, value_name = "LIST", value_parser = Outputs::parse)]
+    outputs: Option<Outputs>,
     /// Identification on the stream: the ROUKF of this assimilation scenario (its model, unknowns
     /// and observed points) steps with each POINT `features` message (the observed points'
     /// positions, in the stream's unit, in the scenario's order) and answers a STRING `estimate`.
@@ -87,9 +87,7 @@ extern "C" fn request_stop(_: libc::c_int) {
 
 /// Runs `augsim serve` until SIGINT or SIGTERM.
 pub fn run(args: &ServeArgs) -> Result<()> {
-    let chosen =
-        args.outputs.as_deref().map(Outputs::parse).transpose().map_err(anyhow::Error::msg).context("--outputs")?;
-    let outputs = chosen.unwrap_or(Outputs::ALL);
+    let (chosen, outputs) = (args.outputs, args.outputs.unwrap_or(Outputs::ALL));
     let spec = RegistrationSpec { time_budget_ms: Some(args.time_budget_ms), ..args.registration.spec()? };
     let units = spec.given_units;
     // Built once here so that a bad model, scenario or targets file stops the command before it
