@@ -18,6 +18,7 @@ use mesh::io::points::{write_markups_json, LabelledPoints};
 use mesh::io::{csv_field, write_atomic_bytes, Field, Frame, FrameChange};
 use mesh::length::{mm, LengthUnit};
 use mesh::{Mesh, Point};
+use register::cloud::read_frames;
 use register::{
     in_cloud_frame, FrameOutcome, Organ, Registration, RigidResult, RigidTransform, Summary, Tracked, WarpField,
 };
@@ -26,7 +27,9 @@ use serde::Serialize;
 
 use crate::case::{Compared, Registered, SyntheticCase};
 use crate::picture::{frame_notes, RegisteredFrame};
-use crate::printout::frame_line;
+use crate::points::PointInput;
+use crate::printout::{frame_line, organ_line, rigid_lines, run_lines};
+use crate::registration::RegistrationSpec;
 
 /// The folder of a run's results: `out` when the user names one, refused when it already holds
 /// an earlier run's (its summary.json), so that two runs' files are never mixed; otherwise a
@@ -285,6 +288,57 @@ impl RunWriter {
         write_atomic_bytes(&self.dir.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
         Ok(Finished { summary, for_slicer, notes })
     }
+}
+
+/// `augsim register CLOUD`: the cloud of `cloud` (a file, or a directory of frames registered in
+/// turn, each from the last) registered as `spec` says, the targets' truth of `truth` (a file,
+/// or one per frame) measured, the run written into `out` ([`RunWriter`]); each line for the
+/// user (the method, the organ, each frame, the run, the files) goes to `say`, a warning's
+/// starting with `warning`.
+pub fn register_files(
+    spec: &RegistrationSpec,
+    cloud: &Path,
+    truth: Option<&Path>,
+    out: &Path,
+    say: &mut dyn FnMut(&str),
+) -> Result<()> {
+    let mut registration = spec.build()?;
+    let organ_frame = registration.frame();
+    let mut input =
+        PointInput::new(organ_frame, LengthUnit::Metre, spec.given_units).with_given_frame(spec.given_frame);
+    let frames = read_frames(cloud)?;
+    let truths = truth.map(|p| input.read_truths(p, frames.len(), registration.target_labels())).transpose()?;
+    say(&format!("method     {}", registration.method()));
+    say(&organ_line(registration.organ(), registration.targets().len()));
+    registration.warnings().iter().for_each(|w| say(&format!("warning    {w}")));
+    let sequence = frames.len() > 1;
+    let mut writer = RunWriter::new(out, sequence, spec.given_units, (organ_frame, spec.given_frame))?;
+    let mut last_cloud = Vec::new();
+    let clouds = frames.iter().map(|f| input.read_cloud(f).inspect(|c| last_cloud.clone_from(c)));
+    let mut said_pose = None;
+    let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, organ, o| {
+        if let Some(rigid) = o.rigid.as_ref().filter(|r| said_pose != Some(r.cloud_to_organ)) {
+            rigid_lines(rigid, None).iter().for_each(|l| say(l));
+            said_pose = Some(rigid.cloud_to_organ);
+        }
+        let to_register_error = |e: anyhow::Error| register::RegisterError::Invalid(format!("{e:#}"));
+        let row = writer.frame(i, frames[i].display().to_string(), organ, o).map_err(to_register_error)?;
+        say(&frame_line(i, row));
+        row.warnings.iter().for_each(|w| say(&format!("warning    frame {i}: {w}")));
+        Ok(())
+    })?;
+    input.warnings.iter().for_each(|w| say(&format!("warning    {w}")));
+    let last_truth = truths.as_ref().and_then(|t| t.last()).map(Vec::as_slice);
+    let finished = writer.finish(&registration, input.frame, &outcomes, (&last_cloud, last_truth))?;
+    run_lines(&outcomes, &finished.summary, spec.given_units).iter().for_each(|l| say(l));
+    finished.notes.iter().for_each(|n| say(&format!("warning    {n}")));
+    say(&format!(
+        "wrote      {} ({}, targets.csv, summary.json, registration.png and .html; for 3D Slicer: {})",
+        out.display(),
+        if sequence { "organ.pvd" } else { "organ.vtu" },
+        finished.for_slicer.join(", ")
+    ));
+    Ok(())
 }
 
 /// Writes one registered `cloud` (in the organ's frame, m) into `dir` as [`RunWriter`] writes a

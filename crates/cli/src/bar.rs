@@ -40,9 +40,18 @@ impl Bar {
     }
 }
 
-/// Prints lines built by the application layer.
+/// Prints lines built by the application layer ([`print_line`]).
 pub fn print_lines(lines: &[String]) {
-    lines.iter().for_each(|l| println!("{l}"));
+    lines.iter().for_each(|l| print_line(l));
+}
+
+/// Prints a line for the user: a warning (starting with `warning`) to standard error, any other
+/// to standard output.
+pub fn print_line(line: &str) {
+    match line.starts_with("warning") {
+        true => eprintln!("{line}"),
+        false => println!("{line}"),
+    }
 }
 
 impl learn::Progress for Bar {

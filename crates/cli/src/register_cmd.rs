@@ -5,16 +5,12 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use app::comparison::{run_comparison, LearnedModels};
-use app::output::{run_dir, tidy_failed_run, RunWriter};
-use app::points::PointInput;
-use app::printout::{frame_line, organ_line, rigid_lines, run_lines};
+use app::output::{register_files, run_dir, tidy_failed_run};
 use app::registration::RegistrationChoice;
-use mesh::length::LengthUnit;
-use register::cloud::read_frames;
 use scenario::registration::CaseOverrides;
 use scenario::CaseScenario;
 
-use crate::bar::{print_lines, Bar};
+use crate::bar::{print_line, Bar};
 
 /// Arguments of `augsim register`.
 #[derive(clap::Args)]
@@ -77,58 +73,9 @@ pub fn run(args: &RegisterArgs) -> Result<()> {
 
 /// Registers the cloud (or sequence) of the command line into `out`.
 fn register(args: &RegisterArgs, out: &Path) -> Result<()> {
-    let cloud_path = args.cloud.clone().context("a cloud is required")?;
+    let cloud = args.cloud.as_deref().context("a cloud is required")?;
     let spec = args.registration.spec()?;
-    let mut registration = spec.build()?;
-    let organ_frame = registration.frame();
-    let mut input =
-        PointInput::new(organ_frame, LengthUnit::Metre, spec.given_units).with_given_frame(spec.given_frame);
-    let frames = read_frames(&cloud_path)?;
-    let labels = registration.target_labels();
-    let truths = args.truth.as_ref().map(|p| input.read_truths(p, frames.len(), labels)).transpose()?;
-    println!("method     {}", registration.method());
-    println!("{}", organ_line(registration.organ(), registration.targets().len()));
-    for w in registration.warnings() {
-        eprintln!("warning    {w}");
-    }
-    let sequence = frames.len() > 1;
-    let mut writer = RunWriter::new(out, sequence, spec.given_units, (organ_frame, spec.given_frame))?;
-    let mut last_cloud = Vec::new();
-    let clouds = frames.iter().map(|f| input.read_cloud(f).inspect(|c| last_cloud.clone_from(c)));
-    let mut printed_pose = None;
-    let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, organ, o| {
-        if let Some(rigid) = o.rigid.as_ref().filter(|r| printed_pose != Some(r.cloud_to_organ)) {
-            print_lines(&rigid_lines(rigid, None));
-            printed_pose = Some(rigid.cloud_to_organ);
-        }
-        let row = writer.frame(i, frames[i].display().to_string(), organ, o).map_err(to_register_error)?;
-        println!("{}", frame_line(i, row));
-        for w in &row.warnings {
-            eprintln!("warning    frame {i}: {w}");
-        }
-        Ok(())
-    })?;
-    for w in &input.warnings {
-        eprintln!("warning    {w}");
-    }
-    let last_truth = truths.as_ref().and_then(|t| t.last()).map(Vec::as_slice);
-    let finished = writer.finish(&registration, input.frame, &outcomes, (&last_cloud, last_truth))?;
-    print_lines(&run_lines(&outcomes, &finished.summary, spec.given_units));
-    for note in &finished.notes {
-        eprintln!("warning    {note}");
-    }
-    println!(
-        "wrote      {} ({}, targets.csv, summary.json, registration.png and .html; for 3D Slicer: {})",
-        out.display(),
-        if sequence { "organ.pvd" } else { "organ.vtu" },
-        finished.for_slicer.join(", ")
-    );
-    Ok(())
-}
-
-/// A writer's error as the registration loop's (its callback returns the loop's error type).
-fn to_register_error(e: anyhow::Error) -> register::RegisterError {
-    register::RegisterError::Invalid(format!("{e:#}"))
+    register_files(&spec, cloud, args.truth.as_deref(), out, &mut print_line)
 }
 
 /// The comparison case of `--demo` (the built-in scenario) or `--case FILE`, with the command
