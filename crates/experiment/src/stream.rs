@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context, Result};
 use live::client::Client;
-use live::{Outputs, ServeOptions};
+use live::Outputs;
 use mesh::length::{from_mm, mm, LengthUnit};
 use mesh::stats::{max, mean, median, percentile};
 use scenario::CaseScenario;
@@ -25,6 +25,7 @@ use app::case::{
     network_options, shipped, skipped_line, synthetic_case, SyntheticCase, AR_SCENARIO, SHIPPED_MODEL, SHIPPED_ROM,
 };
 use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
+use app::serving::serve_setup;
 
 /// The static scenario of the FEM streamed: the registration case's co-rotational model (3k T4).
 const FEM_SCENARIO: &str = "liver_corotational";
@@ -79,19 +80,14 @@ pub fn stream_case(method: &str, case: &SyntheticCase, deformed_by: MethodSpec) 
     let listener = TcpListener::bind("127.0.0.1:0").context("listening on a local port")?;
     let port = listener.local_addr()?.port();
     let spec = RegistrationSpec {
-        time_budget_ms: Some(live::TIME_BUDGET_MS),
+        given_units: LengthUnit::Millimetre,
         ..RegistrationSpec::new(deformed_by, TargetsSpec::Points(case.targets.clone()))
     };
-    let factory = live::first_then_build(None, move || spec.build().map_err(|e| format!("{e:#}")));
-    let serve_options = ServeOptions {
-        coordinates: LengthUnit::Millimetre.into(),
-        outputs: Outputs { targets: true, status: true, ..Outputs::NONE },
-        ..ServeOptions::default()
-    };
+    let setup = serve_setup(spec, Some(Outputs { targets: true, status: true, ..Outputs::NONE }), None)?;
     let stop = Arc::new(AtomicBool::new(false));
     let server = {
         let stop = stop.clone();
-        std::thread::spawn(move || live::serve(listener, Arc::new(factory), serve_options, &stop))
+        std::thread::spawn(move || live::serve(listener, setup.registrations, setup.options, &stop))
     };
     let measured = measure(method, case, port);
     stop.store(true, Ordering::SeqCst);
