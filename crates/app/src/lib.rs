@@ -42,6 +42,7 @@ pub mod prepare;
 pub mod printout;
 pub mod registration;
 pub mod sample_view;
+#[cfg(feature = "live")]
 pub mod serving;
 pub mod simulate;
 pub mod solve;
