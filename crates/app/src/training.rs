@@ -325,7 +325,7 @@ pub fn train_unet(
         UNetStart::Scratch(unet) => Initialization::Scratch {
             unet,
             normalization: Normalization::from_samples(train),
-            input_unit: manifest.units.input.clone(),
+            input_unit: manifest.units.input,
         },
         UNetStart::FineTune { model, freeze_encoder } => {
             let model = learn::Model::json_path(&model);

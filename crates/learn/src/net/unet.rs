@@ -564,8 +564,8 @@ impl TrainedModel {
             normalization: self.normalization,
             grid: self.grid,
             placement: self.placement,
-            input_unit: self.input_unit.clone(),
-            target_unit: self.target_unit.clone(),
+            input_unit: self.input_unit,
+            target_unit: self.target_unit,
             weights: weights_name,
             training: self.training.clone(),
         };
