@@ -14,10 +14,12 @@ STUB = os.path.join(HERE, "..", "augsim", "_augsim.pyi")
 
 
 def stub():
-    """The stub's functions and classes: name -> ast node."""
+    """The stub's functions, classes and constants: name -> ast node."""
     with open(STUB, encoding="utf-8") as f:
         tree = ast.parse(f.read())
-    return {n.name: n for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))}
+    named = {n.name: n for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))}
+    constants = {n.target.id: n for n in tree.body if isinstance(n, ast.AnnAssign)}
+    return {**named, **constants}
 
 
 def methods(cls):
@@ -99,9 +101,11 @@ def test_the_stub_matches_the_built_module():
             if signature is not None:
                 stubbed = [p for p, _, _ in parameters(methods(node)["__init__"], drop_self=True)]
                 assert list(signature.parameters) == stubbed, name
-        else:
+        elif isinstance(node, ast.FunctionDef):
             stubbed = [p for p, _, _ in parameters(node, drop_self=False)]
             assert list(inspect.signature(getattr(native, name)).parameters) == stubbed, name
+        else:
+            assert isinstance(getattr(native, name), int), f"{name} is stubbed as an int"
 
 
 def test_the_module_has_nothing_the_stub_leaves_out():

@@ -847,8 +847,8 @@ fn cut_points(domain: &dyn ImplicitDomain, lat: &Lattice, val: &[f64]) -> Vec<Cu
 /// neck thinner than the lattice) is kept, and [`TetQuality::pieces`] counts it.
 pub const SMALL_PIECE: f64 = 0.01;
 
-/// A T4 mesh without its pieces smaller than [`SMALL_PIECE`] (the largest piece is always
-/// kept), nor those that share no node with the largest body of pieces (a part cut off where
+/// A T4 mesh without its pieces smaller than [`SMALL_PIECE`] (the largest piece of the body kept
+/// is always kept), nor those that share no node with the largest body of pieces (a part cut off where
 /// the organ is thinner than the lattice: nothing would hold it), its nodes renumbered in their
 /// order and its regions with them; other meshes as they are. What is lost shows in
 /// [`TetQuality::coverage`].
@@ -859,11 +859,12 @@ pub fn without_small_pieces(mesh: Mesh) -> Result<Mesh, MeshError> {
     }
     let Cells::Tet4(tets) = &mesh.cells else { return Ok(mesh) };
     let volumes: Vec<f64> = pieces.iter().map(|p| p.iter().map(|&c| mesh.cell_volume(c)).sum()).collect();
-    let (total, largest) = (volumes.iter().sum::<f64>(), volumes.iter().copied().fold(0.0, f64::max));
+    let total = volumes.iter().sum::<f64>();
     let body = bodies(&pieces, tets, mesh.nodes.len());
     let mut body_volume = vec![0.0; pieces.len()];
     body.iter().zip(&volumes).for_each(|(&b, v)| body_volume[b] += v);
     let main = (0..body_volume.len()).max_by(|&a, &b| body_volume[a].total_cmp(&body_volume[b])).unwrap_or(0);
+    let largest = volumes.iter().zip(&body).filter(|(_, &b)| b == main).map(|(&v, _)| v).fold(0.0, f64::max);
     let mut kept: Vec<usize> = pieces
         .iter()
         .zip(&volumes)
