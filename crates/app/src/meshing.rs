@@ -216,14 +216,11 @@ pub fn immersed_fill(mesh: &Mesh) -> (f64, usize) {
 /// Writes the mesh in metres with its regions (point data `region_<name>`, or Gmsh physical
 /// groups) and, for an immersed grid, its cells' volume fractions (not in `.msh`); to .stl or
 /// .obj, its boundary surface in millimetres, as 3D Slicer and surface tools read them, naming
-/// `frame` in its header when known. The directory is created. Returns what was written,
+/// `frame` in its header when known (the directory created by the writer). Returns what was written,
 /// in words.
 pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result<String> {
     let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     let context = || format!("writing {}", path.display());
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
     if extension == "stl" || extension == "obj" {
         write_surface_in_mm(path, &mesh::boundary_surface(mesh).compacted(), frame).with_context(context)?;
         let named = frame.map_or(String::new(), |f| format!(", frame {f} named"));

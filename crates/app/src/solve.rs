@@ -41,9 +41,6 @@ impl Solved {
 
     /// Writes the mesh with [`Solved::fields`] to `path` (.vtu or .vtk), its directory created.
     pub fn write(&self, path: &Path) -> Result<()> {
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        }
         mesh::io::write_mesh(path, &self.solver.problem().mesh, &self.fields()?)
             .with_context(|| format!("writing {}", path.display()))
     }

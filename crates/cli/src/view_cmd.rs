@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use app::sample_view::{dataset_sample_scene, mesh_file_scene};
 use plot::viewer::Scene;
 
@@ -53,9 +53,6 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         }
         _ => bail!("give --model and --dataset (a dataset sample), or --vtu FILE (a mesh file with displacements)"),
     };
-    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
     plot::viewer::write_html(&args.out, &scene)?;
     println!("wrote      {} (open it in a browser)", args.out.display());
     Ok(())

@@ -353,12 +353,13 @@ fn write_png(
     Ok(())
 }
 
-/// A temporary file beside `path` (same directory, so that persisting it over `path` is a rename), named
+/// A temporary file beside `path` (same directory, made if need be, so that persisting it over `path` is a rename), named
 /// `.<name>.XXXXXX<suffix>`, with ordinary permissions (0o666 less the umask) rather than a temporary file's
 /// owner-only ones. The plot crate's writers fill it and persist it: a reader sees the old file or the new one.
 pub(crate) fn sibling_tempfile(path: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir)?;
     let prefix = format!(".{name}.");
     let mut builder = tempfile::Builder::new();
     builder.prefix(&prefix).suffix(suffix);

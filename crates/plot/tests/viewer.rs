@@ -105,6 +105,10 @@ fn page_embeds_the_scene_and_nothing_external() {
     assert!(page.contains(r#""points":[{"name":"targets","positions":[0.5,0.5,0.5,0.2,0.8,0.4]"#));
     // No temporary file is left beside it.
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    // A folder that does not exist yet is made.
+    let nested = dir.path().join("out/views/cube.html");
+    write_html(&nested, &cube()).unwrap();
+    assert!(std::fs::read_to_string(&nested).unwrap().starts_with("<!DOCTYPE html>"));
 }
 
 #[test]
@@ -139,9 +143,10 @@ fn bad_scenes_are_refused_without_writing() {
     let mut s = cube();
     s.triangles.clear();
     refuse(s, "no triangle");
-    // A missing directory is an I/O error naming the file.
-    let e = write_html(&dir.path().join("missing/x.html"), &cube()).unwrap_err();
-    assert!(matches!(e, ViewerError::Io { .. }) && e.to_string().contains("missing"), "{e}");
+    // A path under a file is an I/O error naming the file.
+    std::fs::write(dir.path().join("plain"), "").unwrap();
+    let e = write_html(&dir.path().join("plain/x.html"), &cube()).unwrap_err();
+    assert!(matches!(e, ViewerError::Io { .. }) && e.to_string().contains("plain"), "{e}");
 }
 
 /// The Chromium binary: `$CHROMIUM`, or `chromium`, `chromium-browser` or `google-chrome` on the path.
