@@ -11,9 +11,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use learn::Model;
 use mesh::io::points::LabelledPoints;
-use mesh::io::{read_surface_with_frame, Frame, FrameChange, GivenCoordinates};
-use mesh::isosurface::ExtractOptions;
-use mesh::labelmap::{is_labelmap, read_labelmap_surface};
+use mesh::io::{Frame, FrameChange, GivenCoordinates};
+use mesh::labelmap::is_labelmap;
 use mesh::length::LengthUnit;
 use mesh::{Point, TriSurface};
 use register::{shape, Deformer, HybridDeformer, Organ, Registration, RegistrationOptions};
@@ -23,6 +22,7 @@ use crate::case::{
     fem_model, learned_registration, network_model, network_options, shape_fit, LearnedRegistration, Network,
     POLISH_ITERATIONS,
 };
+use crate::meshing::OrganInput;
 
 /// What deforms the organ.
 #[derive(Clone, Debug)]
@@ -512,30 +512,26 @@ fn labelmap_label(source: &Path) -> Option<(&str, &str)> {
     source.to_str()?.rsplit_once(':').filter(|(path, _)| is_labelmap(Path::new(path)))
 }
 
-/// The structure `source` holds ([`structure_name`], its surface in m in the frame `to`): a
-/// surface file in `unit`, in the frame its header names (else `frame`); or `LABELMAP:LABEL`, a
-/// label's surface extracted from a labelmap (mm, its scanner frame). The name must fit an
-/// OpenIGTLink device name (20 bytes).
+/// The structure `source` holds ([`structure_name`], its surface in m in the frame `to`), read as
+/// an organ's segmentation is ([`OrganInput`]): a surface file in `unit`, in the frame its header
+/// names (else `frame`); or `LABELMAP:LABEL`, a label's surface extracted from a labelmap (mm,
+/// its scanner frame). The name must fit an OpenIGTLink device name (20 bytes).
 pub fn read_structure(
     source: &Path,
     unit: LengthUnit,
     frame: Option<Frame>,
     to: Option<Frame>,
 ) -> Result<(String, TriSurface)> {
-    let (mut surface, frame, unit) = match labelmap_label(source) {
-        Some((path, label)) => {
-            let extracted = read_labelmap_surface(path, Some(label), &ExtractOptions::default())?;
-            (extracted.surface, Some(extracted.frame), LengthUnit::Millimetre)
-        }
+    let mut input = match labelmap_label(source) {
+        Some((path, label)) => OrganInput::read(Path::new(path), Some(label), None)?,
         None if is_labelmap(source) => anyhow::bail!(
             "a labelmap's structure is one of its labels: give {}:LABEL (a number or a segment name)",
             source.display()
         ),
-        None => {
-            let (surface, own) = read_surface_with_frame(source)?;
-            (surface, own.or(frame), unit)
-        }
+        None => OrganInput::read(source, None, Some(unit))?,
     };
+    let unit = input.unit()?;
+    let (mut surface, frame) = (input.surface, input.frame.or(frame));
     let name = structure_name(source);
     if name.len() > 20 {
         anyhow::bail!("its name `{name}` is longer than 20 bytes, an OpenIGTLink device name: rename it");
