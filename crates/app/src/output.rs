@@ -316,12 +316,12 @@ pub fn register_files(
     let mut last_cloud = Vec::new();
     let clouds = frames.iter().map(|f| input.read_cloud(f).inspect(|c| last_cloud.clone_from(c)));
     let mut said_pose = None;
+    let to_register_error = |e: anyhow::Error| register::RegisterError::Invalid(format!("{e:#}"));
     let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, organ, o| {
         if let Some(rigid) = o.rigid.as_ref().filter(|r| said_pose != Some(r.cloud_to_organ)) {
             rigid_lines(rigid, None).iter().for_each(|l| say(l));
             said_pose = Some(rigid.cloud_to_organ);
         }
-        let to_register_error = |e: anyhow::Error| register::RegisterError::Invalid(format!("{e:#}"));
         let row = writer.frame(i, frames[i].display().to_string(), organ, o).map_err(to_register_error)?;
         say(&frame_line(i, row));
         row.warnings.iter().for_each(|w| say(&format!("warning    frame {i}: {w}")));
