@@ -313,8 +313,8 @@ pub struct RegistrationChoice {
     pub units: Option<LengthUnit>,
     /// Frame (RAS or LPS) of the points given whose files name none (clouds, truth; a stream's
     /// coordinates), converted into the organ's frame and results converted back (every file
-    /// `register` writes, which name it). Default: the organ's own frame; `serve`: RAS, the frame
-    /// OpenIGTLink streams in.
+    /// `register` writes, which name it). Default: a patient's own (the frame of the files
+    /// `augsim prepare` was given), else the organ's; `serve`: RAS, the frame OpenIGTLink streams in.
     #[arg(long)]
     pub frame: Option<Frame>,
     /// Most match-and-deform iterations of the first cloud, from rest (default: 30 for a FEM, the
@@ -429,7 +429,7 @@ impl RegistrationChoice {
             let method = PatientMethod::asked(self.use_fem, self.use_model, self.use_hybrid);
             let mut spec = RegistrationSpec::patient(dir, method, self.iterations, self.rigid)?;
             spec.given_units = self.units.unwrap_or(spec.given_units);
-            spec.given_frame = self.frame;
+            spec.given_frame = self.frame.or(spec.given_frame);
             spec.structures.extend(self.structures.iter().map(StructureFile::given));
             return Ok(spec);
         }
@@ -461,7 +461,8 @@ pub struct RegistrationSpec {
     /// The unit of the points given and given back whose files name none: clouds, truth, results
     /// (a patient's: the unit of the files it was prepared from).
     pub given_units: LengthUnit,
-    /// The frame of the points given whose files name none (`None`: the organ's).
+    /// The frame of the points given whose files name none (`None`: the organ's; a patient's: the
+    /// frame of the files it was prepared from).
     pub given_frame: Option<Frame>,
     /// Most match-and-deform iterations from rest, in place of the method's default.
     pub iterations: Option<usize>,
@@ -684,6 +685,10 @@ struct Patient {
     /// The unit of the files the set-up was prepared from (set-ups of older versions name none).
     #[serde(default)]
     input_units: Option<LengthUnit>,
+    /// The frame of the files the set-up was prepared from (set-ups of older versions, and those
+    /// prepared from files naming none, name none).
+    #[serde(default)]
+    input_frame: Option<Frame>,
     /// Structures that move with the organ, surfaces in mm in the organ's frame.
     #[serde(default)]
     structures: Vec<PathBuf>,
@@ -691,8 +696,8 @@ struct Patient {
 
 impl RegistrationSpec {
     /// The registration set-up of the patient directory `dir` (written by `augsim prepare`): the
-    /// method it names, or `method` when given; its targets; the unit of its inputs for the points
-    /// given and given back.
+    /// method it names, or `method` when given; its targets; the unit and frame of its inputs for
+    /// the points given and given back.
     pub fn patient(
         dir: &Path,
         method: Option<PatientMethod>,
@@ -719,7 +724,9 @@ impl RegistrationSpec {
             targets: TargetsSpec::File(dir.join(p.targets)),
             units: p.units,
             given_units: p.input_units.unwrap_or(LengthUnit::DEFAULT),
-            given_frame: None,
+            // Where the inputs were in the set-up's own frame, none: clouds are then in the organ's
+            // frame, and a stream in OpenIGTLink's RAS.
+            given_frame: p.input_frame.filter(|&f| f != crate::prepare::SET_UP_FRAME),
             iterations,
             rigid,
             time_budget_ms: None,
@@ -837,6 +844,27 @@ mod tests {
         let after_fit = RegistrationChoice { shape_model: Some("rom".into()), ..learned };
         assert!(matches!(&after_fit.spec().unwrap().method, MethodSpec::Learned {
             way: LearnedWay::AfterShapeFit(ModelSource::File(basis)), .. } if basis == Path::new("rom")));
+    }
+
+    /// A patient prepared from RAS files takes clouds naming no frame in RAS (its set-up works in
+    /// LPS); one prepared from LPS files, or from files naming none, in the organ's own frame.
+    #[test]
+    fn a_patient_s_clouds_are_in_the_frame_of_the_files_it_was_prepared_from() {
+        let dir = tempfile::tempdir().unwrap();
+        let set_up =
+            "model = \"model\"\nscenario = \"dataset.toml\"\nfem = \"static.toml\"\ntargets = \"targets.csv\"\n\
+                      units = \"m\"\ninput_units = \"mm\"\n";
+        for (frame, given) in
+            [("input_frame = \"RAS\"\n", Some(Frame::Ras)), ("input_frame = \"LPS\"\n", None), ("", None)]
+        {
+            std::fs::write(dir.path().join(PATIENT_FILE), format!("{set_up}{frame}")).unwrap();
+            let spec = RegistrationSpec::patient(dir.path(), None, None, false).unwrap();
+            assert_eq!((spec.given_units, spec.given_frame), (LengthUnit::Millimetre, given), "{frame}");
+            let choice = RegistrationChoice { patient: Some(dir.path().into()), ..RegistrationChoice::default() };
+            assert_eq!(choice.spec().unwrap().given_frame, given, "{frame}");
+            let asked = RegistrationChoice { frame: Some(Frame::Lps), ..choice };
+            assert_eq!(asked.spec().unwrap().given_frame, Some(Frame::Lps), "the frame asked for wins");
+        }
     }
 
     #[test]

@@ -10,8 +10,9 @@
 //!    tetrahedra; the nodes the camera sees
 //!    (`visible`, self-occlusion included) and those near the attachment landmarks (`attached`,
 //!    on the surface) selected; the targets located inside the organ (a unit mistake is named).
-//!    Written in the segmentation's frame: `surface.stl` in millimetres, for 3D Slicer (its
-//!    header naming the frame when known); in metres `organ.vtu` (the regions as point data
+//!    Written in [`SET_UP_FRAME`] (LPS) when the inputs name a frame, so that the same organ in
+//!    RAS or LPS gives the same set-up: `surface.stl` in millimetres, for 3D Slicer (its header
+//!    naming the frame when known); in metres `organ.vtu` (the regions as point data
 //!    `region_visible`, `region_attached`), `attach.csv`, `targets.csv` (with the points'
 //!    labels, `x_m` headers, and the frame in a `# CoordinateSystem` line when known).
 //! 2. **scenarios**, written out to be read and edited: `dataset.toml` (a tool pushing the
@@ -166,12 +167,16 @@ pub struct PrepareState {
     pub options: PrepareOptions,
     /// The steps done, in order.
     pub steps: Vec<StepRecord>,
+    /// The frame the inputs were given in, as the organ step found it (`None` when none names
+    /// one): the frame of clouds and results whose files name none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_frame: Option<Frame>,
 }
 
 /// The file that records a preparation.
 pub const STATE_FILE: &str = "prepare.json";
 
-/// The organ's surface in a prepared directory: in millimetres, in the segmentation's frame.
+/// The organ's surface in a prepared directory: in millimetres, in the set-up's frame.
 pub const SURFACE_FILE: &str = "surface.stl";
 
 /// A structure's surface in the set-up (mm, the organ's frame), relative to its directory.
@@ -217,7 +222,7 @@ fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PreparePro
         }
         state
     } else {
-        PrepareState { format: "augsim-prepare".into(), options: options.clone(), steps: Vec::new() }
+        PrepareState { format: "augsim-prepare".into(), options: options.clone(), steps: Vec::new(), input_frame: None }
     };
     for (index, name) in STEPS.iter().enumerate() {
         // The report is written anew at every run; the other steps once.
@@ -229,8 +234,12 @@ fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PreparePro
         progress.step(index, name);
         let start = Instant::now();
         let lines = match index {
-            0 => organ_step(&options, dir)?,
-            1 => scenarios_step(&options, dir)?,
+            0 => {
+                let (lines, given) = organ_step(&options, dir)?;
+                state.input_frame = given;
+                lines
+            }
+            1 => scenarios_step(&options, state.input_frame, dir)?,
             2 => dataset_step(dir, progress)?,
             3 => model_step(&options, dir, progress)?,
             4 => evaluation_step(dir)?,
@@ -277,7 +286,11 @@ fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
     })
 }
 
-/// The organ's inputs in the surface's frame (see [`crate::points`]): the surface in its file's
+/// The frame a set-up works in whenever its inputs name one: the same organ segmented in RAS or
+/// in LPS gives the same mesh, draws and model.
+pub const SET_UP_FRAME: Frame = Frame::Lps;
+
+/// The organ's inputs in the set-up's frame (see [`crate::points`]): the surface in its file's
 /// `unit` (it is repaired there, so that what the repair reports is in that unit), the points in
 /// metres.
 struct Inputs {
@@ -286,12 +299,16 @@ struct Inputs {
     landmarks: LabelledPoints,
     targets: LabelledPoints,
     camera: Point,
+    /// The frame they were given in: the surface's, or, when its header names none, the first
+    /// named by the points' files.
+    given: Option<Frame>,
+    /// The set-up's: [`SET_UP_FRAME`] when they name one.
     frame: Option<Frame>,
 }
 
 /// Reads the surface in its unit (given or detected) and frame, and the landmarks, the targets
 /// and the camera, each in the unit and frame its file names, else the surface's; all brought to
-/// the surface's frame (or, when its header names none, the first named), the points to metres.
+/// the set-up's frame ([`SET_UP_FRAME`] where any input names one), the points to metres.
 fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inputs> {
     let (surface, surface_frame, unit) = read_surface_input(options, lines)?;
     let mut input = PointInput::new(surface_frame, LengthUnit::Metre, unit);
@@ -305,14 +322,33 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
             other => bail!("{}: the camera is one point, the file holds {}", path.display(), other.len()),
         },
     };
-    let frame = input.frame;
-    lines.push(match (surface_frame, frame) {
-        (Some(f), _) => format!("frame: {f} (named by {})", options.surface.display()),
-        (None, Some(f)) => format!("frame: {f} (named by the points' files; the surface's header names none)"),
+    let given = input.frame;
+    let set_up = match given {
+        Some(f) if f != SET_UP_FRAME => format!(", set up in {SET_UP_FRAME} (x and y negated)"),
+        _ => String::new(),
+    };
+    lines.push(match (surface_frame, given) {
+        (Some(f), _) => format!("frame: {f} (named by {}){set_up}", options.surface.display()),
+        (None, Some(f)) => format!("frame: {f} (named by the points' files; the surface's header names none){set_up}"),
         (None, None) => "frame: not named by any input (SPACE= header, .fcsv, .mrk.json): all taken as given".into(),
     });
     lines.extend(input.warnings.iter().map(|w| format!("warning: {w}")));
-    Ok(Inputs { surface, unit, landmarks, targets, camera, frame })
+    let mut inputs = Inputs { surface, unit, landmarks, targets, camera, given, frame: given };
+    if let Some(from) = given {
+        inputs.convert(from, SET_UP_FRAME);
+    }
+    Ok(inputs)
+}
+
+impl Inputs {
+    /// Every point brought from frame `from` to `to`.
+    fn convert(&mut self, from: Frame, to: Frame) {
+        from.convert_all(to, &mut self.surface.vertices);
+        from.convert_all(to, &mut self.landmarks.points);
+        from.convert_all(to, &mut self.targets.points);
+        self.camera = from.convert(to, self.camera);
+        self.frame = Some(to);
+    }
 }
 
 /// Why a target lies outside the organ's mesh when it lies inside the organ's surface (m):
@@ -328,9 +364,10 @@ fn thin_part_left_out(surface: &TriSurface, organ: &register::Organ, targets: &[
 }
 
 /// Step 1: the surface repaired and meshed, the regions selected, the targets located.
-fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
+/// Returns what it did and the frame its inputs were given in.
+fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Option<Frame>)> {
     let mut lines = Vec::new();
-    let Inputs { surface, unit, landmarks: labelled_landmarks, targets: labelled_targets, camera, frame } =
+    let Inputs { surface, unit, landmarks: labelled_landmarks, targets: labelled_targets, camera, given, frame } =
         read_inputs(options, &mut lines)?;
     let (mut surface, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
         .with_context(|| format!("repairing {}", options.surface.display()))?;
@@ -403,7 +440,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     let mut names: Vec<String> = Vec::new();
     for source in &options.structures {
         let context = || format!("the structure {}", source.display());
-        let (name, structure) = read_structure(source, unit, frame, frame).with_context(context)?;
+        let (name, structure) = read_structure(source, unit, given, frame).with_context(context)?;
         let taken: Vec<&str> = names.iter().map(String::as_str).collect();
         register::registration::check_structure_name(&name, &taken).with_context(context)?;
         let (embedded, warnings) = register::Structure::new(&located, &name, structure).with_context(context)?;
@@ -425,7 +462,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
     write_points(dir.join("targets.csv"), &LabelledPoints { frame, ..labelled_targets })?;
     let camera = LabelledPoints { frame, unit: Some(LengthUnit::Metre), ..LabelledPoints::new(vec![camera]) };
     write_points(dir.join("camera.csv"), &camera)?;
-    Ok(lines)
+    Ok((lines, given))
 }
 
 /// The organ's surface in its own unit, with its frame and unit ([`OrganInput`]).
@@ -515,7 +552,7 @@ fn hold_distance(options: &PrepareOptions, organ: &Mesh, landmarks: &[Point]) ->
 }
 
 /// Step 2: the scenario files.
-fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
+fn scenarios_step(options: &PrepareOptions, input_frame: Option<Frame>, dir: &Path) -> Result<Vec<String>> {
     let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
     let camera = read_points_csv(&dir.join("camera.csv"))?[0];
     let [nx, ny, nz] = grid_for(&organ);
@@ -560,12 +597,13 @@ fn scenarios_step(options: &PrepareOptions, dir: &Path) -> Result<Vec<String>> {
          # --patient DIR`, `augsim.Registration(patient=DIR)`. Paths are relative to this file.\n\
          # method: \"learned\", \"fem\" or \"hybrid\" (the learned model from rest, then the FEM), the one\n\
          # that registered the validation's pushes the best.\n\
-         # input_units: the unit of the files it was prepared from, in which points whose files name\n\
-         # none are read and results given back.\n\
+         # input_units, input_frame: the unit and frame of the files it was prepared from, in which\n\
+         # points whose files name none are read and results given back (the set-up works in {SET_UP_FRAME}).\n\
          # structures: surfaces that move with the organ (mm, the organ's frame).\n\
          method = \"learned\"\nmodel = \"model\"\nscenario = \"dataset.toml\"\nfem = \"static.toml\"\ntargets = \"targets.csv\"\nunits = \"m\"\n\
-         input_units = \"{}\"\nstructures = [{}]\n",
+         input_units = \"{}\"\n{}structures = [{}]\n",
         input_unit(options)?.symbol(),
+        input_frame.map_or(String::new(), |f| format!("input_frame = \"{f}\"\n")),
         structures.join(", ")
     );
     write_atomic_bytes(&dir.join("dataset.toml"), dataset.as_bytes())?;
@@ -842,23 +880,35 @@ mod tests {
         options
     }
 
+    /// The same segmentation in RAS (NIfTI) and in LPS (Slicer's .seg.nrrd) is set up in LPS, the
+    /// organ where the scanner saw it, with the same mesh.
     #[test]
-    fn a_labelmap_is_prepared_in_its_scanner_frame() {
+    fn a_labelmap_is_set_up_in_lps_whatever_its_scanner_frame() {
+        let mut organs = Vec::new();
         for (file, label, lps) in [("liver_labels.nii.gz", "5", false), ("liver_labels.seg.nrrd", "liver", true)] {
             let dir = tempfile::tempdir().unwrap();
-            let lines = organ_step(&options(dir.path(), file, label, lps), dir.path()).unwrap();
-            let frame = if lps { "LPS" } else { "RAS" };
-            assert!(lines.iter().any(|l| l.starts_with(&format!("frame: {frame} (named by"))), "{lines:?}");
+            let (lines, given) = organ_step(&options(dir.path(), file, label, lps), dir.path()).unwrap();
+            let (frame, set_up) =
+                if lps { (Frame::Lps, "") } else { (Frame::Ras, ", set up in LPS (x and y negated)") };
+            assert_eq!(given, Some(frame));
+            let line = lines.iter().find(|l| l.starts_with("frame: ")).unwrap();
+            assert!(line.starts_with(&format!("frame: {frame} (named by")) && line.ends_with(set_up), "{line}");
             assert!(lines.iter().any(|l| l == "targets: 2 inside the organ"), "{lines:?}");
             // The organ stays where the scanner saw it: the phantom spans x from −180 to 20 mm
-            // (RAS), y from −40 to 100, z from −185 to −95.
+            // (RAS), y from −40 to 100, z from −185 to −95; in LPS, x and y negated.
             let organ = mesh::io::read_mesh(dir.path().join("organ.vtu")).unwrap();
             let (lo, hi) = organ.bounds();
-            let sign = if lps { -1.0 } else { 1.0 };
             let middle: Point = std::array::from_fn(|d| 0.5e3 * (lo[d] + hi[d]));
-            let expected = [sign * -80.0, sign * 30.0, -140.0];
-            assert!(mesh::distance(middle, expected) < 3.0, "{file}: centre {middle:?}, {expected:?} expected");
+            assert!(mesh::distance(middle, [80.0, -30.0, -140.0]) < 3.0, "{file}: centre {middle:?}");
+            let targets = mesh::io::points::read_points(dir.path().join("targets.csv")).unwrap();
+            assert_eq!(targets.frame, Some(Frame::Lps));
+            assert!(mesh::distance(targets.points[0], [0.045, -0.030, -0.140]) < 1e-9, "{:?}", targets.points);
+            organs.push(organ);
         }
+        assert_eq!(organs[0].nodes.len(), organs[1].nodes.len());
+        let apart =
+            organs[0].nodes.iter().zip(&organs[1].nodes).map(|(a, b)| mesh::distance(*a, *b)).fold(0.0, f64::max);
+        assert!(apart < 1e-6, "the two set-ups' nodes lie up to {:.3} mm apart", mm(apart));
     }
 
     #[test]
@@ -876,7 +926,7 @@ mod tests {
         );
         options.units = Some(LengthUnit::Millimetre);
         options.tets = 800;
-        let lines = organ_step(&options, dir.path()).unwrap();
+        let (lines, _) = organ_step(&options, dir.path()).unwrap();
         // The defect as local repair names it on the file as read (mm), not on the surface in metres.
         let as_read = mesh::io::read_surface(&export).unwrap();
         let Err(mesh::MeshError::Invalid(defect)) = mesh::repair::repair_surface(&as_read, &RepairOptions::default())
