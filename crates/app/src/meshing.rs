@@ -54,6 +54,8 @@ pub struct Meshed {
     pub notes: Vec<(&'static str, String)>,
     /// How much of the surface meshed with tetrahedra the mesh covers.
     pub coverage: Option<Coverage>,
+    /// The wall time of the meshing, reading included (s).
+    pub seconds: f64,
 }
 
 /// Parts of the surface left out of its mesh beyond this share of its area are warned about.
@@ -74,6 +76,7 @@ pub fn coverage_warning(coverage: &Coverage) -> Option<String> {
 
 /// Meshes the organ of `options`.
 pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
+    let start = std::time::Instant::now();
     let mut notes = Vec::new();
     let mut coverage = None;
     let (mesh, reference_volume, frame) = match (&options.surface, options.immersed) {
@@ -104,7 +107,7 @@ pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
             (mesh, volume, frame)
         }
     };
-    Ok(Meshed { mesh, reference_volume, frame, notes, coverage })
+    Ok(Meshed { mesh, reference_volume, frame, notes, coverage, seconds: start.elapsed().as_secs_f64() })
 }
 
 /// An organ's segmentation as given: a labelmap's label extracted (in mm, in its scanner frame),
@@ -247,6 +250,14 @@ pub fn write_surface_in_mm(path: &Path, surface: &TriSurface, frame: Option<Fram
 }
 
 impl Meshed {
+    /// What `augsim mesh` prints: the notes, the [`Meshed::report`] and the time it took.
+    pub fn lines(&self) -> Result<Vec<String>> {
+        let mut lines: Vec<String> = self.notes.iter().map(|(topic, line)| format!("{topic:<10} {line}")).collect();
+        lines.extend(self.report()?);
+        lines.push(format!("time       {:.1} ms", 1e3 * self.seconds));
+        Ok(lines)
+    }
+
     /// The mesh in words: size, extent, quality (tetrahedra) or fill (immersed cells), volume
     /// against the domain's, regions. Inverted tetrahedra are an error.
     pub fn report(&self) -> Result<Vec<String>> {

@@ -2,7 +2,7 @@
 //! the answers chosen and checked, and the ROUKF stepped with tracked features (see the
 //! `augsim-live` crate for the server itself).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::Result;
@@ -10,7 +10,45 @@ use live::{IdentificationFactory, Outputs, RegistrationFactory, ServeOptions};
 
 use crate::assimilation::{AssimilationChoice, OnlineFilter};
 use crate::printout::organ_line;
-use crate::registration::RegistrationSpec;
+use crate::registration::{RegistrationChoice, RegistrationSpec};
+
+/// Options of `augsim serve`.
+#[derive(Debug, clap::Args)]
+pub struct ServeArgs {
+    #[command(flatten)]
+    pub registration: RegistrationChoice,
+    /// TCP port (OpenIGTLink's is 18944).
+    #[arg(long, default_value_t = 18944)]
+    pub port: u16,
+    /// Address to listen on (0.0.0.0: every interface).
+    #[arg(long, default_value = "127.0.0.1")]
+    pub host: String,
+    /// The answers to each cloud, comma-separated: targets (POINT), organ (POLYDATA), transform
+    /// (TRANSFORM `rigid`, with --rigid), status (STRING; a refused cloud's error is sent
+    /// whatever the list), structures (a POLYDATA per --structure, named by it). Default: every
+    /// one.
+    #[arg(long, value_name = "LIST", value_parser = Outputs::parse)]
+    pub outputs: Option<Outputs>,
+    /// Identification on the stream: the ROUKF of this assimilation scenario (its model, unknowns
+    /// and observed points) steps with each POINT `features` message (the observed points'
+    /// positions, in the stream's unit, in the scenario's order) and answers a STRING `estimate`.
+    #[arg(long, value_name = "SCENARIO")]
+    pub assimilate: Option<PathBuf>,
+    /// Most wall time of a cloud's registration (ms), its rigid pre-alignment included: a frame past it stops at the end of its
+    /// iteration under way, answers with its estimate so far and a warning, and the next cloud
+    /// goes on from it, so that no cloud holds the stream for long (the FEMs' first frames on the
+    /// demo take 0.25–0.41 s; a stream's next frames tens of ms).
+    #[arg(long, default_value_t = live::TIME_BUDGET_MS, value_name = "MS")]
+    pub time_budget_ms: f64,
+}
+
+impl ServeArgs {
+    /// The server's set-up ([`serve_setup`]) of the registration chosen, with the time budget given.
+    pub fn setup(&self) -> Result<ServeSetup> {
+        let spec = RegistrationSpec { time_budget_ms: Some(self.time_budget_ms), ..self.registration.spec()? };
+        serve_setup(spec, self.outputs, self.assimilate.as_deref())
+    }
+}
 
 /// A server set up: its options, the registration of each client, and the lines that say what
 /// it does (a warning's starting with `warning`).

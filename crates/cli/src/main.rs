@@ -133,13 +133,13 @@ enum Command {
     /// mesh, regions (what the camera sees, where the organ is held), scenario files, FEM
     /// dataset, trained model, its test error and a report; resumable. Register and serve it with
     /// `--patient DIR`.
-    Prepare(prepare_cmd::PrepareArgs),
+    Prepare(app::prepare::PrepareArgs),
     /// Register the organ to an intraoperative point cloud (no correspondences): deformed organ,
     /// registered targets and, given the truth, the target registration error.
     Register(register_cmd::RegisterArgs),
     /// Registration on a stream for navigation systems: an OpenIGTLink server that registers each
     /// point cloud it receives and answers with the registered targets, organ and status.
-    Serve(serve_cmd::ServeArgs),
+    Serve(app::serving::ServeArgs),
     /// A self-contained HTML 3D viewer (opens in a browser, no network): a dataset sample on the organ (rest,
     /// FEM reference, the model's prediction, coloured by its error, markers) or a mesh file's displacements.
     View(view_cmd::ViewArgs),

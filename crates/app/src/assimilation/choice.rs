@@ -114,6 +114,20 @@ impl AssimilationChoice {
         Ok((experiment, filter))
     }
 
+    /// The experiment chosen, prepared (its reference run made, or its track files read), with
+    /// where it writes and the lines that say what it is set up to do.
+    pub fn prepare(&self) -> Result<PreparedAssimilation> {
+        let (sc, dir) = self.scenario()?;
+        let out_dir = self.output.clone().unwrap_or_else(|| sc.output_dir());
+        let files = self.files();
+        let described = if sc.description.is_empty() { String::new() } else { format!(": {}", sc.description) };
+        let mut lines = vec![format!("scenario     {}{described}", sc.name)];
+        let sigma_points = sc.filter.sigma_points;
+        let experiment = Experiment::prepare(sc, &dir, files.as_ref())?;
+        lines.extend(experiment.setup().lines(sigma_points, files.as_ref()));
+        Ok(PreparedAssimilation { experiment, out_dir, synthetic: files.is_none(), lines })
+    }
+
     /// The track files that replace the synthetic observations, when given.
     pub fn files(&self) -> Option<ObservationFiles> {
         self.observations.as_ref().map(|observations| ObservationFiles {
@@ -124,6 +138,30 @@ impl AssimilationChoice {
             known_truth: self.known_truth,
             units: self.units,
         })
+    }
+}
+
+/// An assimilation run prepared ([`AssimilationChoice::prepare`]), to be run.
+pub struct PreparedAssimilation {
+    experiment: Experiment,
+    out_dir: PathBuf,
+    /// Whether its observations are synthetic (written as track files by the run).
+    synthetic: bool,
+    /// What it is set up to do, a line each.
+    pub lines: Vec<String>,
+}
+
+impl PreparedAssimilation {
+    /// Runs the filter, telling each iteration to `progress`, and writes its results; returns
+    /// them in words, with what was written.
+    pub fn run(&self, progress: &dyn learn::Progress) -> Result<Vec<String>> {
+        let mut lines = self.experiment.run(&self.out_dir, progress)?.lines();
+        lines.push(format!(
+            "wrote        {}/{{trace.csv, trace.json, summary.json, deformation.pvd, *.png}}{}",
+            self.out_dir.display(),
+            if self.synthetic { ", tracks/*.csv (the synthetic observations)" } else { "" }
+        ));
+        Ok(lines)
     }
 }
 

@@ -28,7 +28,7 @@ pub mod tracks;
 
 use std::path::Path;
 
-pub use choice::AssimilationChoice;
+pub use choice::{AssimilationChoice, PreparedAssimilation};
 pub use online::{Estimate, OnlineFilter};
 pub use report::{AssessmentCase, FilterTimes, Reference, Report, SpringsReport, YoungReport};
 pub use run::{Experiment, ObservationFiles, Setup};

@@ -109,6 +109,12 @@ pub struct PrepareOptions {
     pub seed: u64,
 }
 
+/// Tetrahedra of an organ's mesh, unless given.
+pub const DEFAULT_TETS: usize = 3000;
+
+/// FEM draws of an organ's dataset, unless given.
+pub const DEFAULT_SAMPLES: usize = 2000;
+
 impl PrepareOptions {
     /// The options with the defaults for what is not given: held near the landmarks over
     /// [`HELD_SHARE`] of the organ's surface, 3,000 tetrahedra, 2,000 draws, the reduced-order model, seed 2.
@@ -122,10 +128,89 @@ impl PrepareOptions {
             attach_distance: None,
             targets,
             structures: Vec::new(),
-            tets: 3000,
-            samples: 2000,
+            tets: DEFAULT_TETS,
+            samples: DEFAULT_SAMPLES,
             method: learn::Method::Rom,
             seed: 2,
+        }
+    }
+}
+
+/// Arguments of `augsim prepare`.
+#[derive(Debug, clap::Args)]
+pub struct PrepareArgs {
+    /// The segmented organ: a surface (.stl, .obj, .ply, .vtk, .vtp, .vtu) as a segmentation gives it (holes,
+    /// duplicated vertices and flipped triangles are repaired; what local repair cannot mend is
+    /// rebuilt through voxels), or a labelmap (.nii, .nii.gz from TotalSegmentator, .seg.nrrd
+    /// from 3D Slicer, .nrrd, .nhdr, .mha, .mhd; in mm, in the scanner's frame the file states, RAS or LPS).
+    pub surface: PathBuf,
+    /// The labelmap's label: a number (TotalSegmentator's liver is 5) or a segment name (3D
+    /// Slicer's); needed when it holds several.
+    #[arg(long)]
+    pub label: Option<String>,
+    /// Where the laparoscope looks from: X,Y,Z in the surface's unit and frame (a labelmap's: mm,
+    /// its scanner frame), or a points file of one point (.csv, 3D Slicer's .fcsv or .mrk.json).
+    #[arg(long, value_parser = CameraAt::parse, allow_hyphen_values = true)]
+    pub camera: CameraAt,
+    /// Landmarks where the organ is held (ligaments, the hilum): CSV with a header x, y, z, or
+    /// 3D Slicer's .fcsv or .mrk.json (in the frame and unit they name).
+    #[arg(long, value_name = "LANDMARKS")]
+    pub attach: PathBuf,
+    /// Surface nodes within this distance (mm) of a landmark are held [default: the distance that
+    /// holds 12 % of the organ's surface, as SOFA's liver scenario does]
+    #[arg(long)]
+    pub attach_mm: Option<f64>,
+    /// The targets at rest (tumour, vessels): CSV with a header x, y, z, or .fcsv or .mrk.json
+    /// (their labels are kept).
+    #[arg(long, value_name = "TARGETS")]
+    pub targets: PathBuf,
+    /// A structure inside the organ (a tumour, vessels) that the set-up's registrations give back
+    /// moved with it: a surface (in the surface's unit and frame, else those its header names) or
+    /// LABELMAP:LABEL (Segmentation.seg.nrrd:tumour). Repeat for several.
+    #[arg(long = "structure", value_name = "SURFACE")]
+    pub structures: Vec<PathBuf>,
+    /// Output directory (resumed when it holds a preparation of the same inputs).
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Unit of the surface, camera, landmarks and targets: mm, m, or auto (told from the
+    /// surface's size).
+    #[arg(long, default_value = "auto", value_parser = mesh::length::parse_unit_or_auto)]
+    pub units: mesh::length::UnitOrAuto,
+    /// FEM draws of the dataset.
+    #[arg(long, default_value_t = DEFAULT_SAMPLES)]
+    pub samples: usize,
+    /// The learned model: rom (the reduced-order model) or unet.
+    #[arg(long, default_value = "rom")]
+    pub method: learn::Method,
+    /// Tetrahedra of the organ's mesh (about).
+    #[arg(long, default_value_t = DEFAULT_TETS)]
+    pub tets: usize,
+}
+
+impl CameraAt {
+    /// `X,Y,Z` as three numbers, or else a file.
+    pub fn parse(text: &str) -> Result<CameraAt, String> {
+        let values: Vec<f64> = match text.split(',').map(|v| v.trim().parse::<f64>()).collect() {
+            Ok(values) => values,
+            Err(_) if std::path::Path::new(text).is_file() => return Ok(CameraAt::File(PathBuf::from(text))),
+            Err(e) => return Err(format!("expected X,Y,Z or a points file, got {text:?} ({e})")),
+        };
+        <[f64; 3]>::try_from(values).map(CameraAt::Point).map_err(|v| format!("expected X,Y,Z, got {} values", v.len()))
+    }
+}
+
+impl PrepareArgs {
+    /// The preparation's options.
+    pub fn options(&self) -> PrepareOptions {
+        PrepareOptions {
+            label: self.label.clone(),
+            units: self.units,
+            structures: self.structures.clone(),
+            attach_distance: self.attach_mm.map(mesh::length::from_mm),
+            samples: self.samples,
+            method: self.method,
+            tets: self.tets,
+            ..PrepareOptions::new(self.surface.clone(), self.camera.clone(), self.attach.clone(), self.targets.clone())
         }
     }
 }
@@ -171,6 +256,13 @@ pub struct PrepareState {
     /// one): the frame of clouds and results whose files name none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub input_frame: Option<Frame>,
+}
+
+impl PrepareState {
+    /// The time of the steps done (s), over every run.
+    pub fn seconds(&self) -> f64 {
+        self.steps.iter().map(|s| s.seconds).sum()
+    }
 }
 
 /// The file that records a preparation.
