@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use fem::material::kpa;
 use mesh::length::{mm, LengthUnit};
 use register::{FrameOutcome, Organ, RigidResult, RigidTransform, Summary};
 use scenario::CaseScenario;
@@ -91,7 +92,7 @@ pub fn case_lines(scenario: &CaseScenario) -> Vec<String> {
         format!(
             "truth      {} phantom (E = {} kPa, nu = {}) of {}, fixed on `{}`, {} N along {:?} on `{}`",
             t.material.law.display_name(),
-            t.material.young * 1e-3,
+            kpa(t.material.young),
             t.material.poisson,
             t.mesh_words(),
             t.fixed,

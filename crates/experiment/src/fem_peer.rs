@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use fem::{verification, Formulation, Law, Material, Problem, SolverOptions, StaticSolver};
+use mesh::length::mm;
 use mesh::CellKind;
 use scenario::StaticScenario;
 use serde::{Deserialize, Serialize};
@@ -145,7 +146,7 @@ fn row(c: &PeerCase, reference_ms: f64) -> Row {
             "largest difference {:.2e} m at most {:.1} mm displacement ({:.1e} of it; RMS {:.1e} m); {} dofs, \
              augsim {}, {calculix}",
             a.max_difference,
-            1e3 * a.max_displacement,
+            mm(a.max_displacement),
             a.relative(),
             a.rms_difference,
             c.dofs,
@@ -177,7 +178,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         format!(
             "static solves against CalculiX {version}: {} problems, T4, T10, H8, up to {:.0} mm",
             cases.len(),
-            1e3 * largest
+            mm(largest)
         ),
         format!(
             "largest difference {worst:.1e} of the largest displacement on {}{}",

@@ -9,7 +9,9 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
+use fem::material::kpa;
 use fem::{Formulation, Law, Material};
+use mesh::length::mm;
 use mesh::stats::{max, mean, median};
 use register::{NetworkDeformer, Organ};
 use scenario::registration::{MethodKind, MethodSpec};
@@ -20,7 +22,8 @@ use crate::loads::{CaseLoad, LEFT_LOBE_FRONT, RIGHT_LOBE};
 use crate::{fmt, reference, ExperimentResult, Headline, Name, Progress, Row, Size};
 use app::case::{
     ar_scenario, case_methods, compare, network_from_truth, network_model, network_options, shipped_models,
-    synthetic_case, Network, Registered, NETWORK_AFTER_FIT, POLISH_ITERATIONS, SHIPPED_MODEL, SHIPPED_ROM,
+    synthetic_case, CaseFrame, Network, Registered, SyntheticCase, NETWORK_AFTER_FIT, POLISH_ITERATIONS, SHIPPED_MODEL,
+    SHIPPED_ROM,
 };
 
 /// The cases, fixed before any method was run on them.
@@ -239,6 +242,12 @@ fn corotational(scenario: &CaseScenario) -> Option<&MethodSpec> {
         .find(|m| m.kind == MethodKind::Fem && m.material.is_some_and(|m| m.law == Law::Corotational))
 }
 
+/// The mean motion (mm) of `case`'s markers from rest to `frame`'s truth: the TRE of not
+/// deforming.
+pub(crate) fn marker_motion_mm(case: &SyntheticCase, frame: &CaseFrame) -> f64 {
+    mm(mean(&register::target_errors(&case.targets, &frame.truth)))
+}
+
 /// Runs the experiment; quick: the median of 3 runs per frame time, paper: of 10.
 pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let runs = match size {
@@ -343,7 +352,7 @@ impl Cases {
         progress.line(&format!("simulating the case {}", case.label));
         let scenario = case.apply(base);
         let synthetic = synthetic_case(&scenario)?;
-        let moved = mean(&register::target_errors(&synthetic.targets, &synthetic.peak().truth)) * 1e3;
+        let moved = marker_motion_mm(&synthetic, synthetic.peak());
         self.motion.push(moved);
         let mut here = vec![Outcome::default(); methods.len()];
         let specs = case_methods(&scenario, networks)?;
@@ -379,7 +388,7 @@ impl Cases {
         }
         if let Some((organ, deformer)) = oracle {
             let errors = network_from_truth(&synthetic, organ, deformer)?;
-            let (m, x) = (mean(&errors) * 1e3, max(&errors) * 1e3);
+            let (m, x) = (mm(mean(&errors)), mm(max(&errors)));
             let cell = format!("{} / {}", fmt(m, 2, "mm"), fmt(x, 1, "mm"));
             self.rows.push(Row::new("U-Net fed the truth's surface motion", cell, "").of(CASE_FROM_REST, &label));
             self.from_truth.push((m, x));
@@ -532,10 +541,10 @@ fn notes(base: &CaseScenario, runs: usize, reference_ms: f64) -> Result<Vec<Stri
              outliers; no correspondences. None of these cases played a part in choosing a setting.",
             base.truth.mesh_words(),
             base.truth.material.law.display_name(),
-            base.truth.material.young * 1e-3,
+            kpa(base.truth.material.young),
             base.truth.material.poisson,
             base.camera.view,
-            fmt(base.camera.noise * 1e3, 1, "mm"),
+            fmt(mm(base.camera.noise), 1, "mm"),
             100.0 * base.camera.outliers
         ),
         format!(
@@ -551,7 +560,7 @@ fn notes(base: &CaseScenario, runs: usize, reference_ms: f64) -> Result<Vec<Stri
              of {runs} runs \
              with fresh methods, correspondence search included; one machine, only as quiet as it was.",
             base.models.tets,
-            fem.young * 1e-3,
+            kpa(fem.young),
             fem.poisson,
             register::shape::SHAPE_ITERATIONS,
             register::shape::SHAPE_POINTS,

@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use app::assimilation::{Experiment, ObservationFiles, Report, Setup};
 use filter::Discrepancy;
-use mesh::length::LengthUnit;
+use mesh::length::{mm, LengthUnit};
 use scenario::assimilation::ReferenceSpec;
 use scenario::{AssimilationScenario, MeshSource};
 
@@ -283,7 +283,7 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
                 report.young.as_ref().and_then(|y| y.truth).unwrap_or(f64::NAN),
                 report.nodes,
                 setup.projected,
-                1e3 * setup.max_projection,
+                mm(setup.max_projection),
                 report.sigma_points
             ),
             format!(
@@ -336,7 +336,7 @@ pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<Expe
             .assessment
             .iter()
             .find(|c| c.label == label)
-            .map_or("—".to_string(), |c| fmt(1e3 * c.mean_error, 3, "mm"))
+            .map_or("—".to_string(), |c| fmt(mm(c.mean_error), 3, "mm"))
     };
     let s = report.springs.as_ref().context("the springs scenario reported no springs")?;
     let mut rows = vec![
@@ -383,7 +383,7 @@ pub(crate) fn springs(size: Size, dir: &Path, progress: Progress) -> Result<Expe
                 s.stiffness.len(),
                 report.nodes,
                 setup.projected,
-                1e3 * setup.max_projection,
+                mm(setup.max_projection),
                 setup.assessment_points
             ),
             reference::note(Some(reference_ms)),

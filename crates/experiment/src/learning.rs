@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use app::training::{train_unet, UNetRun, UNetStart};
 use learn::{Compute, Corruption, CurveRow, Dataset, EvalReport, Model, Samples, SplitPolicy, TrainConfig, UNetConfig};
+use mesh::length::{from_mm, mm};
 use scenario::DatasetScenario;
 
 use crate::{fmt, reference, write_scenario, ExperimentResult, Headline, Name, Progress, Row, Size, Tenths};
@@ -291,7 +292,7 @@ pub(crate) fn prediction_seconds(model: &Model, input: &[f32]) -> Result<f64> {
 
 /// Histogram of the per-sample errors (mm) as a PNG.
 pub(crate) fn error_histogram(path: &Path, title: &str, reports: &[(&str, &EvalReport)]) -> Result<()> {
-    let max = reports.iter().map(|(_, r)| r.stats.max * 1e3).fold(0.0, f64::max);
+    let max = reports.iter().map(|(_, r)| mm(r.stats.max)).fold(0.0, f64::max);
     let bins = 30;
     let width = (max / bins as f64).max(f64::MIN_POSITIVE);
     let series: Vec<plot::Series> = reports
@@ -299,7 +300,7 @@ pub(crate) fn error_histogram(path: &Path, title: &str, reports: &[(&str, &EvalR
         .map(|(name, r)| {
             let mut counts = vec![0usize; bins];
             for e in &r.errors {
-                counts[((e * 1e3 / width) as usize).min(bins - 1)] += 1;
+                counts[((mm(*e) / width) as usize).min(bins - 1)] += 1;
             }
             let n = r.errors.len().max(1) as f64;
             let points = counts
@@ -380,10 +381,10 @@ fn liver_forces_headlines(
     reference_ms: f64,
 ) -> Vec<Headline> {
     vec![
-        Headline::lower_is_better("liver, forces → displacement: test ē", s.mean * 1e3, 0.0694, 3, "mm"),
+        Headline::lower_is_better("liver, forces → displacement: test ē", mm(s.mean), 0.0694, 3, "mm"),
         Headline::lower_is_better(
             "liver, forces → displacement: test ē, reduced-order model with the linear-elastic prior",
-            r.mean * 1e3,
+            mm(r.mean),
             0.0694,
             3,
             "mm",
@@ -437,13 +438,13 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
     let r = &rom_report.stats;
     let mean = mean_displacement(&t.test);
     let rows = vec![
-        Row::new("mean error ē", fmt(s.mean * 1e3, 3, "mm"), "0.0694 mm"),
-        Row::new("σ(e)", fmt(s.std * 1e3, 3, "mm"), "0.0781 mm"),
-        Row::new("max e", fmt(s.max * 1e3, 3, "mm"), "0.68 mm"),
-        Row::new("max displacement in the test set", fmt(max_displacement(&t.test) * 1e3, 1, "mm"), "80 mm"),
+        Row::new("mean error ē", fmt(mm(s.mean), 3, "mm"), "0.0694 mm"),
+        Row::new("σ(e)", fmt(mm(s.std), 3, "mm"), "0.0781 mm"),
+        Row::new("max e", fmt(mm(s.max), 3, "mm"), "0.68 mm"),
+        Row::new("max displacement in the test set", fmt(mm(max_displacement(&t.test)), 1, "mm"), "80 mm"),
         Row::new(
             "relative error: ē / mean displacement of the test set",
-            format!("{:.1} % (mean displacement {})", 100.0 * s.mean / mean, fmt(mean * 1e3, 2, "mm")),
+            format!("{:.1} % (mean displacement {})", 100.0 * s.mean / mean, fmt(mm(mean), 2, "mm")),
             "",
         ),
         Row::new(
@@ -458,7 +459,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
         ),
         Row::new(
             "reduced-order model with the linear-elastic prior: ē (σ, max)",
-            format!("{} ({}, {})", fmt(r.mean * 1e3, 3, "mm"), fmt(r.std * 1e3, 3, "mm"), fmt(r.max * 1e3, 3, "mm")),
+            format!("{} ({}, {})", fmt(mm(r.mean), 3, "mm"), fmt(mm(r.std), 3, "mm"), fmt(mm(r.max), 3, "mm")),
             "0.0694 mm (0.0781, 0.68 mm)",
         ),
         Row::new(
@@ -476,8 +477,8 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
             "U-Net projected on the reduced-order model's basis: ē (max)",
             format!(
                 "{} ({})",
-                fmt(projected_report.stats.mean * 1e3, 3, "mm"),
-                fmt(projected_report.stats.max * 1e3, 3, "mm")
+                fmt(mm(projected_report.stats.mean), 3, "mm"),
+                fmt(mm(projected_report.stats.max), 3, "mm")
             ),
             "",
         ),
@@ -530,31 +531,30 @@ pub(crate) fn beam_sparse(size: Size, dir: &Path, progress: Progress) -> Result<
     let reference_ms = reference::measure()?;
     let noise = |std: f64| Corruption { noise_std: std, ..Corruption::default() };
     let clean = learn::evaluate(&t.model, &t.test, &noise(0.0), 0, Compute::Cpu)?;
-    let mm = learn::evaluate(&t.model, &t.test, &noise(1e-3), 0, Compute::Cpu)?;
-    let cm = learn::evaluate(&t.model, &t.test, &noise(1e-2), 0, Compute::Cpu)?;
+    let noisy_mm = learn::evaluate(&t.model, &t.test, &noise(from_mm(1.0)), 0, Compute::Cpu)?;
+    let noisy_cm = learn::evaluate(&t.model, &t.test, &noise(from_mm(10.0)), 0, Compute::Cpu)?;
     error_histogram(
         &dir.join("errors.png"),
         "Beam sparse input: test-sample errors by input noise",
-        &[("no noise", &clean), ("σ = 1 mm", &mm), ("σ = 1 cm", &cm)],
+        &[("no noise", &clean), ("σ = 1 mm", &noisy_mm), ("σ = 1 cm", &noisy_cm)],
     )?;
-    let pair =
-        |r: &EvalReport| format!("{} (max {})", fmt(r.stats.mean * 1e3, 2, "mm"), fmt(r.stats.max * 1e3, 1, "mm"));
+    let pair = |r: &EvalReport| format!("{} (max {})", fmt(mm(r.stats.mean), 2, "mm"), fmt(mm(r.stats.max), 1, "mm"));
     let headlines = vec![Headline::lower_is_better(
         "beam, sparse input: test ē without noise",
-        clean.stats.mean * 1e3,
+        mm(clean.stats.mean),
         3.03,
         2,
         "mm",
     )];
     let rows = vec![
         Row::new("ē, no noise", pair(&clean), "3.03 mm (max 57.1 mm), 10,080 training samples"),
-        Row::new("ē, noise σ = 1 mm", pair(&mm), "nearly unchanged"),
-        Row::new("ē, noise σ = 1 cm", pair(&cm), "about 10 mm"),
+        Row::new("ē, noise σ = 1 mm", pair(&noisy_mm), "nearly unchanged"),
+        Row::new("ē, noise σ = 1 cm", pair(&noisy_cm), "about 10 mm"),
         // The scale of the motion the errors are of: the published test set's is not given.
-        Row::new("max displacement in the test set", fmt(max_displacement(&t.test) * 1e3, 1, "mm"), ""),
+        Row::new("max displacement in the test set", fmt(mm(max_displacement(&t.test)), 1, "mm"), ""),
     ];
     let mut values = serde_json::Map::new();
-    for (key, r) in [("clean", &clean), ("noise_1mm", &mm), ("noise_1cm", &cm)] {
+    for (key, r) in [("clean", &clean), ("noise_1mm", &noisy_mm), ("noise_1cm", &noisy_cm)] {
         values.insert(key.into(), serde_json::to_value(r.stats)?);
     }
     Ok(ExperimentResult {

@@ -9,10 +9,11 @@ use anyhow::{Context, Result};
 use app::case::{case_methods, compare, synthetic_case, Network};
 use app::sample_view::sample_on_mesh;
 use learn::{Compute, Corruption, EvalReport, Model, PointErrors};
+use mesh::length::mm;
 use mesh::stats::{max, mean};
 use scenario::CaseScenario;
 
-use crate::held_out::rom_polish;
+use crate::held_out::{marker_motion_mm, rom_polish};
 use crate::learning::{dataset, error_histogram, fit_rom, prediction_seconds, train, Generated, Recipe, Trained};
 use crate::{fmt, reference, ExperimentResult, Headline, Name, Progress, Row, Size};
 
@@ -165,7 +166,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
                 "Network: {samples} samples of the {LIVER_AR} scenario ({train_n} training, {validation_n} validation, {test_n} test), \
                  {iterations} steps, {} channels, {} mm training noise; {}.",
                 recipe.channels,
-                1e3 * recipe.corruption.noise_std,
+                mm(recipe.corruption.noise_std),
                 t.timing(test.reference_ms)
             ),
             format!(
@@ -220,8 +221,8 @@ impl TestFigures {
                 "network on the test samples: TRE at the markers",
                 format!(
                     "{} (no motion: {})",
-                    fmt(self.tre.errors.mean * 1e3, 2, "mm"),
-                    fmt(self.tre.no_motion.mean * 1e3, 1, "mm")
+                    fmt(mm(self.tre.errors.mean), 2, "mm"),
+                    fmt(mm(self.tre.no_motion.mean), 1, "mm")
                 ),
                 "",
             ),
@@ -236,7 +237,7 @@ impl TestFigures {
             Row::new("reduced-order model on the test samples: ē (max)", mean_and_max(&self.rom_report), ""),
             Row::new(
                 "reduced-order model on the test samples: TRE at the markers",
-                fmt(self.rom_tre.errors.mean * 1e3, 2, "mm"),
+                fmt(mm(self.rom_tre.errors.mean), 2, "mm"),
                 "",
             ),
             Row::new(
@@ -268,7 +269,7 @@ impl TestFigures {
 
 /// A report's mean error (max) in mm.
 fn mean_and_max(report: &EvalReport) -> String {
-    format!("{} ({})", fmt(report.stats.mean * 1e3, 2, "mm"), fmt(report.stats.max * 1e3, 1, "mm"))
+    format!("{} ({})", fmt(mm(report.stats.mean), 2, "mm"), fmt(mm(report.stats.max), 1, "mm"))
 }
 
 /// The first test sample of `t` in the 3D viewer (`viewer.html`), on the mesh its samples were
@@ -312,7 +313,7 @@ fn register_cases(builtin: &CaseScenario, networks: &[Network<'_>; 2], progress:
             figures.per_method =
                 rows.iter().map(|r| MethodTre { method: r.method.clone(), ..MethodTre::default() }).collect();
         }
-        let motion = mean(&register::target_errors(&case.targets, &case.peak().truth)) * 1e3;
+        let motion = marker_motion_mm(&case, case.peak());
         let kind = match role {
             Role::Design => "design case",
             Role::HeldOut => "held-out case",
@@ -463,7 +464,7 @@ fn cases_note(builtin: &CaseScenario) -> String {
         builtin.truth.mesh_words(),
         builtin.camera.view,
         builtin.camera.points,
-        fmt(builtin.camera.noise * 1e3, 1, "mm"),
+        fmt(mm(builtin.camera.noise), 1, "mm"),
         100.0 * builtin.camera.outliers,
         HELD_OUT.len(),
         BEYOND_PUSHES.len()

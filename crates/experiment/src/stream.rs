@@ -12,6 +12,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context, Result};
+use fem::material::kpa;
 use live::client::Client;
 use live::Outputs;
 use mesh::length::{from_mm, mm, LengthUnit};
@@ -19,6 +20,7 @@ use mesh::stats::{max, mean, median, percentile};
 use scenario::CaseScenario;
 use serde::Serialize;
 
+use crate::held_out::marker_motion_mm;
 use crate::loads::LEFT_LOBE_FRONT;
 use crate::{reference, ExperimentResult, Name, Progress, Row, Size};
 use app::case::{
@@ -172,8 +174,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         let learned = MethodSpec::learned_after_shape_fit(network, AR_SCENARIO, rom);
         streams.push(stream_case(method, &case, learned)?);
     }
-    let rest: Vec<f64> =
-        case.frames.iter().map(|f| mm(mean(&register::target_errors(&case.targets, &f.truth)))).collect();
+    let rest: Vec<f64> = case.frames.iter().map(|f| marker_motion_mm(&case, f)).collect();
     let reference_ms = Some(reference::measure()?);
     let ms = |v: f64| reference::ms(v, 1, reference_ms);
     let mut rows = vec![Row::new(STREAM_TRE, format!("{:.2} mm ({:.2} mm)", mean(&rest), max(&rest)), "")
@@ -222,7 +223,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
              outliers); the models are another mesh (3k T4) and law. The stream's settings were chosen on the \
              built-in case's own press and release, not on this one.",
             scenario.truth.material.law.display_name(),
-            scenario.truth.material.young * 1e-3,
+            kpa(scenario.truth.material.young),
             scenario.truth.material.poisson,
             scenario.truth.mesh_words(),
             scenario.truth.direction,

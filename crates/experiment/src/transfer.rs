@@ -8,6 +8,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use learn::{Compute, Corruption, CurveRow, EvalReport};
+use mesh::length::{from_mm, mm};
 use serde::Serialize;
 
 use crate::learning::{dataset, error_histogram, max_displacement, model_dir, train, Recipe, Trained};
@@ -62,7 +63,7 @@ fn first_step(curve: &[(usize, f64)], threshold: f64) -> Option<usize> {
 /// ē (σ, max) of a report, in mm.
 fn stats_cell(r: &EvalReport) -> String {
     let s = &r.stats;
-    format!("ē {} (σ {:.3}, max {:.2})", fmt(s.mean * 1e3, 3, "mm"), s.std * 1e3, s.max * 1e3)
+    format!("ē {} (σ {:.3}, max {:.2})", fmt(mm(s.mean), 3, "mm"), mm(s.std), mm(s.max))
 }
 
 /// The beam transfer experiment (quick: 2,009 samples per dataset, 8 channels; paper: the published 5,241, 16 channels; 1,500
@@ -96,10 +97,10 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
     let scratch_curve = validation_curve(&scratch.curve);
     let crossings: Vec<Crossing> = THRESHOLDS_MM
         .iter()
-        .map(|&mm| Crossing {
-            threshold_mm: mm,
-            fine_tuned_step: first_step(&tuned_curve, mm * 1e-3),
-            scratch_step: first_step(&scratch_curve, mm * 1e-3),
+        .map(|&threshold_mm| Crossing {
+            threshold_mm,
+            fine_tuned_step: first_step(&tuned_curve, from_mm(threshold_mm)),
+            scratch_step: first_step(&scratch_curve, from_mm(threshold_mm)),
         })
         .collect();
 
@@ -138,21 +139,21 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
             .of("validation ē ≤", format!("{:.1} mm", c.threshold_mm)),
         );
     }
-    rows.push(Row::new("largest displacement in the target test set", fmt(max_displacement(test) * 1e3, 1, "mm"), ""));
+    rows.push(Row::new("largest displacement in the target test set", fmt(mm(max_displacement(test)), 1, "mm"), ""));
     let reference_ms = reference::measure()?;
     let notes = runs.notes(samples, iterations, &recipe, pre_validation, reference_ms);
 
     let headlines = vec![
         Headline::lower_is_better(
             format!("beam transfer: test ē, pre-trained on BC4 and fine-tuned on {few_n} samples"),
-            tuned_test.stats.mean * 1e3,
+            mm(tuned_test.stats.mean),
             0.80,
             2,
             "mm",
         ),
         Headline::lower_is_better(
             format!("beam transfer: test ē, from scratch on {few_n} samples"),
-            scratch_test.stats.mean * 1e3,
+            mm(scratch_test.stats.mean),
             3.49,
             2,
             "mm",
@@ -278,7 +279,7 @@ impl Runs {
                  to within {VALIDATE_EVERY}) falls to the threshold; step 0 of fine-tuning is the pre-trained network \
                  ({} on the validation samples). The ratio is the scratch run's step over the fine-tuned run's; each run \
                  has one seed and noisy curves, so the steps are indicative.",
-                fmt(pre_validation * 1e3, 3, "mm")
+                fmt(mm(pre_validation), 3, "mm")
             ),
             "Beam 4 × 1 × 1 m (20×5×5 H8), SVK, Y = 300 Pa, ν = 0.4, a downward force of 0–0.3 N on a patch of radius 0.5 m on the \
              top face; input: the top-face displacement. BC4: each sample fixes one of four adjacent 1 m cuboids of the \
@@ -298,7 +299,7 @@ fn plot_strategies(
     validation_n: usize,
     reports: &[(&str, &EvalReport)],
 ) -> Result<()> {
-    let mm_points = |curve: &[(usize, f64)]| curve.iter().map(|&(step, e)| (step as f64, e * 1e3)).collect();
+    let mm_points = |curve: &[(usize, f64)]| curve.iter().map(|&(step, e)| (step as f64, mm(e))).collect();
     // In the order of the histogram, so that each strategy has the same colour in both figures.
     let series =
         curves.map(|(name, curve)| plot::Series { name: name.to_string(), points: mm_points(curve), band: None });

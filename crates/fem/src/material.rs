@@ -106,6 +106,11 @@ fn default_density() -> f64 {
     1000.0
 }
 
+/// A stress or modulus in pascals (as [`Material::young`] is), in kilopascals, as reports give it.
+pub fn kpa(pascals: f64) -> f64 {
+    pascals / 1e3
+}
+
 fn linear_order() -> u8 {
     1
 }

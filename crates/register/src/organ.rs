@@ -2,7 +2,7 @@
 
 use mesh::bvh::{triangle_barycentric, SurfaceBvh};
 use mesh::embedding::MeshLocator;
-use mesh::length::{mm, point_in_mm};
+use mesh::length::{mm, point_in_mm, LengthUnit};
 use mesh::{Mesh, Point, TriSurface};
 
 use crate::{RegisterError, Result};
@@ -259,7 +259,11 @@ impl Organ {
             mm(extent),
             SMALL_TARGET_EXTENT * 100.0,
             mm(organ_extent),
-            if scaled_fits(points, 1e3, organ_extent, &fits) { READ_LARGER } else { "" }
+            if scaled_fits(points, 1.0 / LengthUnit::Millimetre.metres(), organ_extent, &fits) {
+                READ_LARGER
+            } else {
+                ""
+            }
         )]
     }
 }
@@ -286,11 +290,13 @@ pub(crate) fn likely_mistake(
     fits: impl Fn(&[Point]) -> bool,
 ) -> String {
     let negated: Vec<Point> = points.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
+    // The scale that undoes millimetres taken for metres; its inverse, metres taken for millimetres.
+    let millimetre = LengthUnit::Millimetre.metres();
     if fits(&negated) {
         format!(" (with x and y negated {claim}: are they in LPS where the organ is in RAS, or the reverse?)")
-    } else if scaled_fits(points, 1e-3, organ_extent, &fits) {
+    } else if scaled_fits(points, millimetre, organ_extent, &fits) {
         format!(" (read as 1,000 times smaller, {claim}: were they given in mm where m were expected?)")
-    } else if scaled_fits(points, 1e3, organ_extent, &fits) {
+    } else if scaled_fits(points, 1.0 / millimetre, organ_extent, &fits) {
         format!(" (read as 1,000 times larger, {claim}: were they given in m where mm were expected?)")
     } else {
         String::new()

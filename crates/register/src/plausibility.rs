@@ -3,7 +3,7 @@
 //! tiny fraction of it (metres given for millimetres) is refused; a result whose registered surface stays far from the cloud or
 //! whose organ moves by more than half its size is flagged, with what to try.
 
-use mesh::length::mm;
+use mesh::length::{mm, LengthUnit};
 use mesh::{Point, SurfaceBvh};
 use rayon::prelude::*;
 
@@ -114,7 +114,7 @@ pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<f64> {
 /// Whether the cloud divided by 1000 is a view of the organ at rest: its extent within the
 /// organ's, its median distance to the rest surface within [`MILLIMETRE_FIT`] of the organ's size.
 fn looks_like_millimetres(organ: &Organ, cloud: &[Point]) -> Result<bool> {
-    let metres: Vec<Point> = cloud.iter().map(|p| p.map(|c| 1e-3 * c)).collect();
+    let metres: Vec<Point> = cloud.iter().map(|&p| LengthUnit::Millimetre.point_to_metres(p)).collect();
     let size = organ.extent();
     if robust_extent(&metres) > MAX_EXTENT_RATIO * size {
         return Ok(false);

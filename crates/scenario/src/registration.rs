@@ -6,6 +6,7 @@
 use std::path::Path;
 
 use fem::Material;
+use mesh::length::from_mm;
 use mesh::phantom::SurfacePatch;
 use mesh::Point;
 use register::{RegistrationOptions, RigidTransform};
@@ -192,7 +193,7 @@ impl Misalignment {
         if self.translation_mm != 0.0 && !(len > 0.0 && len.is_finite()) {
             return Err(format!("misalignment direction {:?} must be non-zero and finite", self.direction));
         }
-        let shift = if self.translation_mm == 0.0 { 0.0 } else { self.translation_mm * 1e-3 / len };
+        let shift = if self.translation_mm == 0.0 { 0.0 } else { from_mm(self.translation_mm) / len };
         RigidTransform::from_axis_angle(self.axis, self.rotation_deg.to_radians(), self.direction.map(|x| x * shift))
             .map_err(|e| e.to_string())
     }

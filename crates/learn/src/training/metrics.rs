@@ -7,6 +7,7 @@
 
 #[cfg(feature = "cpu-burn")]
 use burn::tensor::Tensor;
+use mesh::length::mm;
 use serde::{Deserialize, Serialize};
 
 use crate::data::grid::{GridShape, CHANNELS};
@@ -143,7 +144,7 @@ impl EvalReport {
 
     /// `[mean, std, max]` in millimetres.
     pub fn summary_mm(&self) -> [f64; 3] {
-        [self.stats.mean * 1e3, self.stats.std * 1e3, self.stats.max * 1e3]
+        [mm(self.stats.mean), mm(self.stats.std), mm(self.stats.max)]
     }
 }
 
