@@ -20,7 +20,7 @@ use mesh::{Mesh, TriSurface};
 /// What to mesh and how.
 #[derive(Clone, Debug)]
 pub struct MeshOptions {
-    /// Organ surface (.obj, .stl, .ply, .vtk, .vtp, .vtu) or labelmap (.nii, .nii.gz, .nrrd, .seg.nrrd); the
+    /// Organ surface (.obj, .stl, .ply, .vtk, .vtp, .vtu) or labelmap (.nii, .nii.gz, .nrrd, .seg.nrrd, .dcm); the
     /// phantom when `None`.
     pub surface: Option<PathBuf>,
     /// The labelmap's label: a number or a segment name (needed when it holds several).

@@ -1,6 +1,7 @@
 //! Segmentations as labelmaps: NIfTI-1 (`.nii`, `.nii.gz`, as TotalSegmentator writes them) and
 //! NRRD (`.nrrd`, `.seg.nrrd`, as 3D Slicer saves segmentations; `.nhdr`, a header whose data
-//! lie in a file beside it) and MetaImage (`.mha`, `.mhd`, as ITK-SNAP and SLIVER07 give them).
+//! lie in a file beside it), MetaImage (`.mha`, `.mhd`, as ITK-SNAP and SLIVER07 give them) and
+//! DICOM SEG (`.dcm`, as TotalSegmentator, 3D Slicer and highdicom export them).
 //!
 //! A labelmap is a 3D grid of integer labels (0 is the background) with the affine map from voxel
 //! indices (i, j, k) to world coordinates in millimetres, read from the header: spacing (voxels
@@ -21,8 +22,10 @@
 //! attached data or detached in one file (`data file`, relative to the header's folder), `raw`,
 //! `gzip` or `ascii` encoding, the same types, `space` LPS or RAS (or their long
 //! names), `space directions`, `space origin` and `space units`, and Slicer's layered
-//! segmentations (a first `list` axis of layers).
+//! segmentations (a first `list` axis of layers); DICOM SEG of uncompressed BINARY, FRACTIONAL or
+//! LABELMAP frames (see its module), its segments by number and label.
 
+mod dicom_seg;
 mod metaimage;
 
 use std::collections::{BTreeMap, HashSet};
@@ -61,12 +64,12 @@ fn parse_error(path: &Path, message: impl Into<String>) -> MeshError {
 }
 
 /// The labelmaps read, for messages.
-pub const LABELMAP_FORMATS: &str = ".nii, .nii.gz, .nrrd, .seg.nrrd, .nhdr, .mha or .mhd";
+pub const LABELMAP_FORMATS: &str = ".nii, .nii.gz, .nrrd, .seg.nrrd, .nhdr, .mha, .mhd or a DICOM SEG .dcm";
 
 /// True when `path` names a labelmap by its extension ([`LABELMAP_FORMATS`]).
 pub fn is_labelmap(path: &Path) -> bool {
     let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-    [".nii", ".nii.gz", ".nrrd", ".nhdr", ".mha", ".mhd"].iter().any(|e| name.ends_with(e))
+    [".nii", ".nii.gz", ".nrrd", ".nhdr", ".mha", ".mhd", ".dcm"].iter().any(|e| name.ends_with(e))
 }
 
 /// Why an organ's segmentation given as `path` cannot be read, saying what to give instead: a
@@ -87,7 +90,9 @@ pub fn unreadable_segmentation(path: &Path) -> Option<String> {
         return None;
     }
     Some(match extension {
-        "dcm" | "dicom" | "ima" | "" => format!("DICOM (a series or a DICOM SEG) is not read: {save_as}"),
+        "dicom" | "ima" | "" => {
+            format!("a DICOM file? a DICOM SEG is read when named .dcm; an image series is not: {save_as}")
+        }
         "mgz" | "mgh" | "hdr" | "img" | "nia" => {
             format!("this image format is not read: {save_as} (3D Slicer or ITK-SNAP: Save as)")
         }
@@ -108,6 +113,8 @@ pub fn read_labelmap(path: impl AsRef<Path>) -> Result<Labelmap, MeshError> {
         metaimage::parse_metaimage(&bytes, folder).map_err(|m| parse_error(path, m))?
     } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
         parse_nifti(&gunzip_if_needed(bytes).map_err(|m| parse_error(path, m))?).map_err(|m| parse_error(path, m))?
+    } else if name.ends_with(".dcm") {
+        dicom_seg::parse_dicom_seg(&bytes).map_err(|m| parse_error(path, m))?
     } else {
         return Err(parse_error(path, format!("not a labelmap: expected {LABELMAP_FORMATS}")));
     };
@@ -1351,10 +1358,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let said = |name: &str| unreadable_segmentation(&dir.path().join(name)).unwrap_or_default();
         assert!(said("").starts_with("a folder, not a file (a DICOM series is not read)"), "{}", said(""));
-        assert!(said("seg.dcm").starts_with("DICOM (a series or a DICOM SEG) is not read: save the segmentation"));
+        assert!(said("IM0001").starts_with("a DICOM file? a DICOM SEG is read when named .dcm; an image series is not"));
         assert!(said("liver.mgz").contains("this image format is not read"), "{}", said("liver.mgz"));
         assert!(said("liver.xyz").contains("not a labelmap nor a surface"));
-        for fine in ["liver.STL", "seg.seg.nrrd", "seg.nii.gz", "seg.nhdr", "liver.mhd", "organ.vtu"] {
+        for fine in ["liver.STL", "seg.seg.nrrd", "seg.nii.gz", "seg.nhdr", "liver.mhd", "organ.vtu", "seg.dcm"] {
             assert_eq!(said(fine), "", "{fine}");
         }
     }

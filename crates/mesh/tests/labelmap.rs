@@ -114,3 +114,46 @@ fn the_shipped_liver_comes_back_whole_at_its_place() {
     let (a, b) = (centre(&ras.surface.vertices), centre(&lps.surface.vertices));
     assert!(norm(sub(b, [-a[0], -a[1], a[2]])) < 1e-6, "{a:?} vs {b:?}");
 }
+
+/// The world positions (mm, rounded to µm) of the voxels of `map` in `choice`.
+fn voxel_positions(map: &Labelmap, choice: &str) -> std::collections::BTreeSet<[i64; 3]> {
+    let (mask, _) = map.select(choice).unwrap();
+    let [nx, ny, _] = mask.dims;
+    let a = mask.affine;
+    let at = |n: usize| {
+        let ijk = [(n % nx) as f64, ((n / nx) % ny) as f64, (n / (nx * ny)) as f64];
+        std::array::from_fn(|r| ((0..3).map(|c| a[r][c] * ijk[c]).sum::<f64>() + a[r][3]) * 1e3)
+            .map(|x| x.round() as i64)
+    };
+    mask.inside.iter().enumerate().filter(|(_, &inside)| inside).map(|(n, _)| at(n)).collect()
+}
+
+/// The phantom's labelmap as a DICOM SEG written by highdicom (`make_dicom_seg.py`: a writer
+/// that is not augsim's; its frames stacked along −z of their normal, the empty ones left out)
+/// holds the same voxels, at the same places in LPS, as the `.seg.nrrd` it was made from.
+#[test]
+fn a_dicom_seg_holds_the_voxels_of_the_labelmap_it_was_made_from() {
+    let seg = read_labelmap(data("liver_labels_seg.dcm")).unwrap();
+    let nrrd = read_labelmap(data("liver_labels.seg.nrrd")).unwrap();
+    assert_eq!(seg.frame, Frame::Lps);
+    assert!(seg.placed);
+    let names: Vec<(&str, i32)> = seg.segments.iter().map(|(name, _, label)| (name.as_str(), *label)).collect();
+    assert_eq!(names, [("liver", 1), ("kidney", 2)]);
+    assert_eq!(seg.spacing(), [1.5, 1.5, 4.0]);
+    for (in_seg, in_nrrd) in [("liver", "liver"), ("2", "kidney")] {
+        let (a, b) = (voxel_positions(&seg, in_seg), voxel_positions(&nrrd, in_nrrd));
+        assert!(!a.is_empty() && a == b, "{in_seg}: {} voxels, {} in the NRRD", a.len(), b.len());
+    }
+    let options = ExtractOptions::default();
+    let from_seg = read_labelmap_surface(data("liver_labels_seg.dcm"), Some("liver"), &options).unwrap();
+    let from_nrrd = read_labelmap_surface(data("liver_labels.seg.nrrd"), Some("liver"), &options).unwrap();
+    assert_eq!(from_seg.frame, Frame::Lps);
+    assert!(from_seg.warnings.is_empty(), "frames left out are not the image's border: {:?}", from_seg.warnings);
+    // The same voxels on a grid whose k runs the other way: the same surface to within the
+    // extraction's dependence on the grid's axes (a fraction of a voxel).
+    let volume = |s: &augsim_mesh::TriSurface| check_closed_manifold(s).unwrap().volume;
+    let (a, b) = (volume(&from_seg.surface), volume(&from_nrrd.surface));
+    assert!((a / b - 1.0).abs() < 0.005, "{a} vs {b} mm³");
+    let (a, b) = (centre(&from_seg.surface.vertices), centre(&from_nrrd.surface.vertices));
+    assert!(norm(sub(a, b)) < 1.0, "{a:?} vs {b:?}");
+}

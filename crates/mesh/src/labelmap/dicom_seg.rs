@@ -1,0 +1,482 @@
+//! DICOM Segmentation objects (DICOM SEG, `.dcm`), as TotalSegmentator (`--output_type dicom`),
+//! 3D Slicer, MONAI Label and highdicom write them: a multi-frame image whose frames are planes
+//! of one segment each (BINARY: one bit per pixel, FRACTIONAL: a byte or two thresholded at half
+//! their maximum; LABELMAP: the segment number per pixel), placed by their per-frame
+//! `ImagePositionPatient` and the shared (or per-frame) orientation and spacing, in DICOM's
+//! patient frame (LPS, mm). Empty frames may be left out, as writers do; the volume holds one
+//! empty slice beyond the first and the last frame (whether the scan went on there cannot be
+//! told). Segments may overlap:
+//! a segment that overlaps those of a layer goes to a layer of its own, as 3D Slicer's layered
+//! segmentations do, so that every segment is read whole.
+
+use dicom_dictionary_std::tags;
+use dicom_object::file::ReadPreamble;
+use dicom_object::mem::InMemElement;
+use dicom_object::{InMemDicomObject, OpenFileOptions};
+
+use super::{Frame, Labelmap};
+
+/// The SOP class of a Segmentation (and of a Label Map Segmentation).
+const SEGMENTATION_CLASSES: [&str; 2] = ["1.2.840.10008.5.1.4.1.1.66.4", "1.2.840.10008.5.1.4.1.1.66.7"];
+
+/// Transfer syntaxes whose pixel data are not compressed, in little endian: implicit and explicit
+/// VR, and explicit VR deflated.
+const NATIVE_SYNTAXES: [&str; 3] = ["1.2.840.10008.1.2", "1.2.840.10008.1.2.1", "1.2.840.10008.1.2.1.99"];
+
+/// Positions along the slice normal closer than this (mm) are one slice.
+const SAME_SLICE_MM: f64 = 1e-3;
+
+/// Reads a DICOM SEG from the bytes of its file.
+pub(super) fn parse_dicom_seg(bytes: &[u8]) -> Result<Labelmap, String> {
+    let object = OpenFileOptions::new()
+        .read_preamble(ReadPreamble::Auto)
+        .from_reader(bytes)
+        .map_err(|e| format!("not a DICOM file ({e})"))?;
+    let class = text(&object, tags::SOP_CLASS_UID).unwrap_or_default();
+    if !SEGMENTATION_CLASSES.contains(&class.as_str()) {
+        let modality = text(&object, tags::MODALITY).unwrap_or_else(|| "unknown".into());
+        return Err(format!(
+            "a DICOM {modality} image (SOP class {class}), not a segmentation: segment it (3D Slicer, \
+             TotalSegmentator) and give its DICOM SEG or a labelmap"
+        ));
+    }
+    let syntax = object.meta().transfer_syntax().trim_end_matches('\0').to_string();
+    if !NATIVE_SYNTAXES.contains(&syntax.as_str()) {
+        return Err(format!(
+            "its pixel data are compressed (transfer syntax {syntax}), which is not read: export the \
+             segmentation uncompressed (explicit VR little endian) or as a labelmap"
+        ));
+    }
+    let rows = number(&object, tags::ROWS)? as usize;
+    let columns = number(&object, tags::COLUMNS)? as usize;
+    if rows == 0 || columns == 0 {
+        return Err(format!("its frames have {rows} rows of {columns} columns: no pixel"));
+    }
+    let frames = text(&object, tags::NUMBER_OF_FRAMES)
+        .map_or(Ok(1), |t| t.trim().parse::<usize>().map_err(|e| format!("NumberOfFrames {t:?}: {e}")))?;
+    let kind = text(&object, tags::SEGMENTATION_TYPE).unwrap_or_default();
+    let bits = number(&object, tags::BITS_ALLOCATED)? as usize;
+    let segments = segment_names(&object)?;
+    let planes = planes(&object, frames, &kind)?;
+    let pixels = object.element(tags::PIXEL_DATA).map_err(|_| "it holds no pixel data".to_string())?;
+    if pixels.fragments().is_some() {
+        return Err("its pixel data are encapsulated (compressed), which is not read".into());
+    }
+    let data = pixels.to_bytes().map_err(|e| format!("pixel data: {e}"))?;
+    let frame_pixels = rows * columns;
+    let value = pixel_reader(&kind, bits, &data, frames * frame_pixels, &object)?;
+    let grid = Grid::new(&planes, &object)?;
+    let dims = [columns, rows, grid.slices];
+    let voxels = dims.iter().product::<usize>();
+    // Each segment's voxels, then each put in the first layer it does not overlap.
+    let mut layers: Vec<Vec<i32>> = Vec::new();
+    let mut placed_segments = Vec::new();
+    for &(number, ref name) in &segments {
+        let mut own: Vec<usize> = Vec::new();
+        for (f, plane) in planes.iter().enumerate() {
+            let k = grid.slice_of(plane.position);
+            for p in 0..frame_pixels {
+                let v = value(f * frame_pixels + p);
+                let inside = match plane.segment {
+                    Some(s) => s == number && v != 0,
+                    None => v == number,
+                };
+                if inside {
+                    own.push(p + frame_pixels * k);
+                }
+            }
+        }
+        if own.is_empty() {
+            continue;
+        }
+        let layer = match layers.iter().position(|l| own.iter().all(|&n| l[n] == 0)) {
+            Some(layer) => layer,
+            None => {
+                layers.push(vec![0; voxels]);
+                layers.len() - 1
+            }
+        };
+        own.iter().for_each(|&n| layers[layer][n] = number as i32);
+        placed_segments.push((name.clone(), layer, number as i32));
+    }
+    if layers.is_empty() {
+        return Err("the labelmap is empty: no segment has a pixel in any frame".into());
+    }
+    let count = layers.len();
+    let labels = (0..voxels * count).map(|n| layers[n % count][n / count]).collect();
+    Ok(Labelmap {
+        dims,
+        layers: count,
+        labels,
+        affine: grid.affine,
+        frame: Frame::Lps,
+        segments: placed_segments,
+        placed: true,
+    })
+}
+
+/// An attribute's text, trimmed of DICOM's padding; `None` when absent.
+fn text(object: &InMemDicomObject, tag: dicom_object::Tag) -> Option<String> {
+    object.get(tag).and_then(|e| e.to_str().ok()).map(|s| s.trim_matches(|c: char| c == '\0' || c == ' ').to_string())
+}
+
+/// An attribute's integer, an error naming it when absent.
+fn number(object: &InMemDicomObject, tag: dicom_object::Tag) -> Result<u32, String> {
+    let element = object.get(tag).ok_or_else(|| format!("it has no {}", name_of(tag)))?;
+    element.to_int::<u32>().map_err(|e| format!("{}: {e}", name_of(tag)))
+}
+
+/// An attribute's numbers, an error naming it when absent.
+fn numbers(object: &InMemDicomObject, tag: dicom_object::Tag) -> Result<Vec<f64>, String> {
+    let element = object.get(tag).ok_or_else(|| format!("it has no {}", name_of(tag)))?;
+    element.to_multi_float64().map_err(|e| format!("{}: {e}", name_of(tag)))
+}
+
+/// The name of an attribute the reader needs, for messages.
+fn name_of(tag: dicom_object::Tag) -> String {
+    use dicom_core::DataDictionary as _;
+    dicom_dictionary_std::StandardDataDictionary
+        .by_tag(tag)
+        .map_or_else(|| format!("{tag}"), |entry| entry.alias.to_string())
+}
+
+/// The items of a sequence attribute (none when absent).
+fn items(object: &InMemDicomObject, tag: dicom_object::Tag) -> &[InMemDicomObject] {
+    object.get(tag).and_then(InMemElement::items).unwrap_or(&[])
+}
+
+/// The segments the object describes: (segment number, label).
+fn segment_names(object: &InMemDicomObject) -> Result<Vec<(u32, String)>, String> {
+    let segments: Vec<(u32, String)> = items(object, tags::SEGMENT_SEQUENCE)
+        .iter()
+        .map(|item| {
+            let number = number(item, tags::SEGMENT_NUMBER)?;
+            Ok((number, text(item, tags::SEGMENT_LABEL).unwrap_or_else(|| format!("segment {number}"))))
+        })
+        .collect::<Result<_, String>>()?;
+    if segments.is_empty() {
+        return Err("it describes no segment (its SegmentSequence is empty)".into());
+    }
+    Ok(segments)
+}
+
+/// One frame's plane: where its first pixel lies (mm, LPS), its orientation (the row's and the
+/// column's direction) and pixel spacing, and the segment it shows (`None`: a label map's
+/// frame, whose pixels hold segment numbers).
+struct Plane {
+    position: [f64; 3],
+    orientation: [f64; 6],
+    spacing: [f64; 2],
+    segment: Option<u32>,
+}
+
+/// A functional group attribute of frame `item`, else of the shared groups.
+fn group_value(
+    item: &InMemDicomObject,
+    shared: Option<&InMemDicomObject>,
+    sequence: dicom_object::Tag,
+    tag: dicom_object::Tag,
+) -> Result<Vec<f64>, String> {
+    [Some(item), shared]
+        .into_iter()
+        .flatten()
+        .find_map(|group| items(group, sequence).first().filter(|g| g.get(tag).is_some()))
+        .map_or_else(|| Err(format!("no frame nor the shared groups give its {}", name_of(tag))), |g| numbers(g, tag))
+}
+
+/// The planes of the `frames` frames, from the per-frame and shared functional groups.
+fn planes(object: &InMemDicomObject, frames: usize, kind: &str) -> Result<Vec<Plane>, String> {
+    let shared = items(object, tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE).first();
+    let per_frame = items(object, tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE);
+    if per_frame.len() != frames {
+        return Err(format!("it has {frames} frames but {} per-frame functional groups", per_frame.len()));
+    }
+    per_frame
+        .iter()
+        .enumerate()
+        .map(|(f, item)| {
+            let context = |e: String| format!("frame {}: {e}", f + 1);
+            let position = group_value(item, shared, tags::PLANE_POSITION_SEQUENCE, tags::IMAGE_POSITION_PATIENT)
+                .map_err(context)?;
+            let orientation =
+                group_value(item, shared, tags::PLANE_ORIENTATION_SEQUENCE, tags::IMAGE_ORIENTATION_PATIENT)
+                    .map_err(context)?;
+            let spacing =
+                group_value(item, shared, tags::PIXEL_MEASURES_SEQUENCE, tags::PIXEL_SPACING).map_err(context)?;
+            let segment = match kind {
+                "LABELMAP" => None,
+                _ => Some(
+                    [Some(item), shared]
+                        .into_iter()
+                        .flatten()
+                        .find_map(|g| items(g, tags::SEGMENT_IDENTIFICATION_SEQUENCE).first())
+                        .ok_or_else(|| context("it names no segment (SegmentIdentificationSequence)".into()))
+                        .and_then(|g| number(g, tags::REFERENCED_SEGMENT_NUMBER).map_err(context))?,
+                ),
+            };
+            let position: [f64; 3] = position.try_into().map_err(|v: Vec<f64>| {
+                context(format!("ImagePositionPatient holds {} numbers, 3 expected", v.len()))
+            })?;
+            let orientation: [f64; 6] = orientation.try_into().map_err(|v: Vec<f64>| {
+                context(format!("ImageOrientationPatient holds {} numbers, 6 expected", v.len()))
+            })?;
+            let spacing: [f64; 2] = spacing
+                .try_into()
+                .map_err(|v: Vec<f64>| context(format!("PixelSpacing holds {} numbers, 2 expected", v.len())))?;
+            Ok(Plane { position, orientation, spacing, segment })
+        })
+        .collect()
+}
+
+/// The reader of pixel `n` (frames one after the other, rows of `columns` in each): 1 inside a
+/// BINARY segment's frame, or a FRACTIONAL frame's value at half its maximum or above, or a
+/// LABELMAP's segment number.
+fn pixel_reader<'a>(
+    kind: &str,
+    bits: usize,
+    data: &'a [u8],
+    count: usize,
+    object: &InMemDicomObject,
+) -> Result<Box<dyn Fn(usize) -> u32 + 'a>, String> {
+    let needed = (count * bits).div_ceil(8);
+    if data.len() < needed {
+        return Err(format!(
+            "its pixel data hold {} bytes, {needed} expected ({count} pixels of {bits} bit(s))",
+            data.len()
+        ));
+    }
+    let word = move |n: usize| -> u32 {
+        match bits {
+            8 => u32::from(data[n]),
+            _ => u32::from(u16::from_le_bytes([data[2 * n], data[2 * n + 1]])),
+        }
+    };
+    Ok(match (kind, bits) {
+        ("BINARY", 1) => Box::new(move |n| u32::from(data[n / 8] >> (n % 8) & 1)),
+        ("FRACTIONAL", 8 | 16) => {
+            let most = number(object, tags::MAXIMUM_FRACTIONAL_VALUE)?;
+            Box::new(move |n| u32::from(2 * word(n) >= most && word(n) > 0))
+        }
+        ("LABELMAP", 8 | 16) => Box::new(word),
+        (kind, bits) => {
+            return Err(format!(
+                "segmentation type {kind:?} with {bits} bit(s) per pixel is not read (BINARY of 1 bit, FRACTIONAL \
+                 or LABELMAP of 8 or 16)"
+            ))
+        }
+    })
+}
+
+/// The voxel grid the frames lie on: the affine map of the labelmap and the slices it spans.
+struct Grid {
+    affine: [[f64; 4]; 3],
+    /// The origin's position along the normal, the slice spacing, the normal (mm).
+    first: f64,
+    step: f64,
+    normal: [f64; 3],
+    slices: usize,
+}
+
+impl Grid {
+    /// The grid of `planes`: one orientation and pixel spacing for all, slices a whole number of
+    /// steps apart along their normal (`SpacingBetweenSlices` when given, else the smallest gap).
+    fn new(planes: &[Plane], object: &InMemDicomObject) -> Result<Grid, String> {
+        let first = planes.first().ok_or("it has no frame")?;
+        for plane in planes {
+            let apart = (0..6).map(|i| (plane.orientation[i] - first.orientation[i]).abs()).fold(0.0, f64::max);
+            if apart > 1e-4 || (0..2).any(|i| (plane.spacing[i] - first.spacing[i]).abs() > 1e-4) {
+                return Err("its frames have different orientations or pixel spacings: not one volume".into());
+            }
+        }
+        let o = first.orientation;
+        let (row, column) = ([o[0], o[1], o[2]], [o[3], o[4], o[5]]);
+        let normal = crate::cross(row, column);
+        let length = crate::norm(normal);
+        if !(length > 0.5) {
+            return Err(format!("ImageOrientationPatient {o:?} is not two orthogonal unit vectors"));
+        }
+        let normal = normal.map(|c| c / length);
+        let along = |p: [f64; 3]| crate::dot(p, normal);
+        let mut heights: Vec<f64> = planes.iter().map(|p| along(p.position)).collect();
+        heights.sort_by(f64::total_cmp);
+        heights.dedup_by(|a, b| (*a - *b).abs() < SAME_SLICE_MM);
+        let between = object
+            .get(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE)
+            .and_then(InMemElement::items)
+            .and_then(|s| s.first())
+            .and_then(|g| items(g, tags::PIXEL_MEASURES_SEQUENCE).first())
+            .and_then(|m| m.get(tags::SPACING_BETWEEN_SLICES))
+            .and_then(|e| e.to_float64().ok())
+            .filter(|s| *s > 0.0);
+        let smallest = heights.windows(2).map(|w| w[1] - w[0]).fold(f64::INFINITY, f64::min);
+        let step = between.or(smallest.is_finite().then_some(smallest)).unwrap_or(1.0);
+        let (lowest, highest) = (heights[0], heights[heights.len() - 1]);
+        for h in &heights {
+            let steps = (h - lowest) / step;
+            if (steps - steps.round()).abs() * step > 0.01 * step.max(SAME_SLICE_MM) {
+                return Err(format!(
+                    "its frames do not lie on slices {step} mm apart (one lies {:.3} mm along the normal from the \
+                     first): not one volume",
+                    h - lowest
+                ));
+            }
+        }
+        // One empty slice beyond each end: frames are written where segments are (writers leave
+        // the empty ones out), so the ends are not where the image ends.
+        let (lowest, highest) = (lowest - step, highest + step);
+        let slices = ((highest - lowest) / step).round() as usize + 1;
+        // The origin: the first frame's position moved along the normal to the lowest slice.
+        let shift = lowest - along(first.position);
+        let origin: [f64; 3] = std::array::from_fn(|d| first.position[d] + shift * normal[d]);
+        // Check that every frame's first pixel lies on the grid's column of the origin.
+        for plane in planes {
+            let offset = crate::sub(plane.position, origin);
+            let sideways = crate::norm(crate::sub(offset, normal.map(|c| c * crate::dot(offset, normal))));
+            if sideways > 0.01 * first.spacing[0].min(first.spacing[1]) {
+                return Err("its frames are shifted within their planes: not one volume".into());
+            }
+        }
+        let [row_spacing, column_spacing] = first.spacing;
+        let affine =
+            std::array::from_fn(|r| [row[r] * column_spacing, column[r] * row_spacing, normal[r] * step, origin[r]]);
+        Ok(Grid { affine, first: lowest, step, normal, slices })
+    }
+
+    /// The slice a frame at `position` lies in.
+    fn slice_of(&self, position: [f64; 3]) -> usize {
+        ((crate::dot(position, self.normal) - self.first) / self.step).round() as usize
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use dicom_core::value::DataSetSequence;
+    use dicom_core::{DataElement, PrimitiveValue, VR};
+    use dicom_object::meta::FileMetaTableBuilder;
+
+    use super::*;
+
+    /// An element of `vr` holding `text` (several values separated by `\`).
+    fn text_element(tag: dicom_object::Tag, vr: VR, text: &str) -> InMemElement {
+        DataElement::new(tag, vr, PrimitiveValue::from(text))
+    }
+
+    /// A sequence of one item holding `elements`.
+    fn sequence(tag: dicom_object::Tag, elements: Vec<InMemElement>) -> InMemElement {
+        DataElement::new(tag, VR::SQ, DataSetSequence::from(vec![InMemDicomObject::from_element_iter(elements)]))
+    }
+
+    /// A DICOM SEG file of 4 × 4 pixel frames, 1 mm apart in plane, each frame (its segment, its
+    /// height z in mm) in a plane of normal +z; `pixels` bit-packed (BINARY) or a byte each.
+    fn seg_file(class: &str, kind: &str, frames: &[(u32, f64)], bits: u16, pixels: Vec<u8>) -> Vec<u8> {
+        let per_frame = frames
+            .iter()
+            .map(|&(segment, z)| {
+                InMemDicomObject::from_element_iter([
+                    sequence(
+                        tags::PLANE_POSITION_SEQUENCE,
+                        vec![text_element(tags::IMAGE_POSITION_PATIENT, VR::DS, &format!("10\\20\\{z}"))],
+                    ),
+                    sequence(
+                        tags::SEGMENT_IDENTIFICATION_SEQUENCE,
+                        vec![DataElement::new(
+                            tags::REFERENCED_SEGMENT_NUMBER,
+                            VR::US,
+                            PrimitiveValue::from(segment as u16),
+                        )],
+                    ),
+                ])
+            })
+            .collect::<Vec<_>>();
+        let segment = |number: u16, label: &str| {
+            InMemDicomObject::from_element_iter([
+                DataElement::new(tags::SEGMENT_NUMBER, VR::US, PrimitiveValue::from(number)),
+                text_element(tags::SEGMENT_LABEL, VR::LO, label),
+            ])
+        };
+        let object = InMemDicomObject::from_element_iter([
+            text_element(tags::SOP_CLASS_UID, VR::UI, class),
+            text_element(tags::SOP_INSTANCE_UID, VR::UI, "2.25.1"),
+            text_element(tags::MODALITY, VR::CS, if class == SEGMENTATION_CLASSES[0] { "SEG" } else { "CT" }),
+            text_element(tags::SEGMENTATION_TYPE, VR::CS, kind),
+            DataElement::new(tags::ROWS, VR::US, PrimitiveValue::from(4_u16)),
+            DataElement::new(tags::COLUMNS, VR::US, PrimitiveValue::from(4_u16)),
+            DataElement::new(tags::BITS_ALLOCATED, VR::US, PrimitiveValue::from(bits)),
+            text_element(tags::NUMBER_OF_FRAMES, VR::IS, &frames.len().to_string()),
+            DataElement::new(
+                tags::SEGMENT_SEQUENCE,
+                VR::SQ,
+                DataSetSequence::from(vec![segment(1, "liver"), segment(2, "tumour")]),
+            ),
+            sequence(
+                tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE,
+                vec![
+                    sequence(
+                        tags::PLANE_ORIENTATION_SEQUENCE,
+                        vec![text_element(tags::IMAGE_ORIENTATION_PATIENT, VR::DS, "1\\0\\0\\0\\1\\0")],
+                    ),
+                    sequence(tags::PIXEL_MEASURES_SEQUENCE, vec![text_element(tags::PIXEL_SPACING, VR::DS, "1\\1")]),
+                ],
+            ),
+            DataElement::new(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE, VR::SQ, DataSetSequence::from(per_frame)),
+            DataElement::new(tags::PIXEL_DATA, if bits == 1 { VR::OB } else { VR::OW }, PrimitiveValue::from(pixels)),
+        ]);
+        let file = object.with_meta(FileMetaTableBuilder::new().transfer_syntax("1.2.840.10008.1.2.1")).unwrap();
+        let mut bytes = Vec::new();
+        file.write_all(&mut bytes).unwrap();
+        bytes
+    }
+
+    const SEG: &str = SEGMENTATION_CLASSES[0];
+
+    /// A whole 4 × 4 frame of segment 1 at z = 0 and z = 2 (two slices of 2 mm), and one pixel
+    /// (row 1, column 2) of segment 2 inside it at z = 2, in frames of 16 bits each.
+    fn liver_and_tumour() -> Vec<u8> {
+        let tumour_pixel = 4 + 2;
+        seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (2, 2.0)], 1, vec![0xff, 0xff, 0xff, 0xff, 1 << tumour_pixel, 0])
+    }
+
+    #[test]
+    fn overlapping_segments_are_read_whole_in_layers_of_their_own() {
+        let map = parse_dicom_seg(&liver_and_tumour()).unwrap();
+        assert_eq!((map.dims, map.layers), ([4, 4, 4], 2), "two slices and an empty one beyond each");
+        assert_eq!(map.segments, [("liver".to_string(), 0, 1), ("tumour".to_string(), 1, 2)]);
+        // i along x by 1 mm, j along y by 1 mm, k along z by 2 mm, from the first pixel.
+        assert_eq!(map.affine, [[1.0, 0.0, 0.0, 10.0], [0.0, 1.0, 0.0, 20.0], [0.0, 0.0, 2.0, -2.0]]);
+        assert_eq!(map.select("liver").unwrap().0.count(), 32, "the liver keeps the voxel the tumour takes");
+        let (tumour, _) = map.select("tumour").unwrap();
+        assert_eq!(tumour.count(), 1);
+        let at = tumour.inside.iter().position(|&b| b).unwrap();
+        let [nx, ny, _] = tumour.dims;
+        let ijk = [at % nx, (at / nx) % ny, at / (nx * ny)].map(|c| c as f64);
+        let world: [f64; 3] =
+            std::array::from_fn(|r| (0..3).map(|c| tumour.affine[r][c] * ijk[c]).sum::<f64>() + tumour.affine[r][3]);
+        assert_eq!(world, [12.0, 21.0, 2.0], "column 2, row 1 of the slice at z = 2");
+    }
+
+    #[test]
+    fn a_labelmap_segmentation_holds_segment_numbers() {
+        let mut pixels = vec![0u8; 32];
+        pixels[5] = 1;
+        pixels[16 + 6] = 2;
+        let frames = [(0, 0.0), (0, 3.0)];
+        let map = parse_dicom_seg(&seg_file(SEGMENTATION_CLASSES[1], "LABELMAP", &frames, 8, pixels)).unwrap();
+        assert_eq!((map.dims, map.layers, map.spacing()), ([4, 4, 4], 1, [1.0, 1.0, 3.0]));
+        assert_eq!(map.present().iter().map(|p| (p.1, p.2)).collect::<Vec<_>>(), [(1, 1), (2, 1)]);
+    }
+
+    #[test]
+    fn what_is_not_one_segmented_volume_is_refused_by_name() {
+        let error = |bytes: Vec<u8>| parse_dicom_seg(&bytes).unwrap_err();
+        let ct = error(seg_file("1.2.840.10008.5.1.4.1.1.2", "BINARY", &[(1, 0.0)], 1, vec![0xff, 0xff]));
+        assert!(ct.starts_with("a DICOM CT image (SOP class 1.2.840.10008.5.1.4.1.1.2), not a segmentation"), "{ct}");
+        // Slices 0, 2 and 3 mm high are slices 1 mm apart, one empty; 0, 2 and 3.5 mm are no grid.
+        let off = error(seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (1, 3.5)], 1, vec![0xff; 6]));
+        assert!(off.starts_with("its frames do not lie on slices 1.5 mm apart"), "{off}");
+        let short = error(seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0)], 1, vec![0xff; 2]));
+        assert!(short.contains("pixel data hold 2 bytes, 4 expected"), "{short}");
+        let fractional = error(seg_file(SEG, "FRACTIONAL", &[(1, 0.0)], 8, vec![255; 16]));
+        assert!(fractional.contains("MaximumFractionalValue"), "{fractional}");
+        assert!(error(vec![0; 200]).starts_with("not a DICOM file"));
+    }
+}
