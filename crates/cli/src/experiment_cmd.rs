@@ -6,7 +6,7 @@ use anyhow::Result;
 use clap::Args;
 use experiment::{Name, Size};
 
-use crate::bar::Bar;
+use crate::bar::{print_lines, Bar};
 
 /// Arguments of `augsim experiment`.
 #[derive(Debug, Args)]
@@ -40,16 +40,6 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
         let result = result?;
         result.lines().iter().for_each(|l| println!("   {l}"));
     }
-    let results = experiment::load_all(&args.out)?;
-    let [md, html] = experiment::report::write(&args.out, &results)?;
-    println!("wrote      {} and {} ({} experiments)", md.display(), html.display(), results.len());
-    if let Some(readme) = &args.readme {
-        experiment::report::update_markdown(readme, &results)?;
-        println!("updated    {}", readme.display());
-    }
-    if let Some(page) = &args.results {
-        experiment::report::write_results_page(page, &results, &args.out)?;
-        println!("wrote      {}", page.display());
-    }
+    print_lines(&experiment::report::publish(&args.out, args.readme.as_deref(), args.results.as_deref())?);
     Ok(())
 }

@@ -359,6 +359,25 @@ pub fn write(root: &Path, results: &[ExperimentResult]) -> Result<[PathBuf; 2]> 
     Ok([md, page])
 }
 
+/// The reports of every result under `root` ([`crate::load_all`]): `report.md` and `report.html`
+/// there ([`write`]), and, when given, the headline summary of the Markdown file `readme`
+/// ([`update_markdown`]) and the full results page `page` ([`write_results_page`]); what was
+/// written, a line each.
+pub fn publish(root: &Path, readme: Option<&Path>, page: Option<&Path>) -> Result<Vec<String>> {
+    let results = crate::load_all(root)?;
+    let [md, html] = write(root, &results)?;
+    let mut lines = vec![format!("wrote      {} and {} ({} experiments)", md.display(), html.display(), results.len())];
+    if let Some(readme) = readme {
+        update_markdown(readme, &results)?;
+        lines.push(format!("updated    {}", readme.display()));
+    }
+    if let Some(page) = page {
+        write_results_page(page, &results, root)?;
+        lines.push(format!("wrote      {}", page.display()));
+    }
+    Ok(lines)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
