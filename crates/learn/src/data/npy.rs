@@ -112,28 +112,30 @@ fn check_len(shape: &[usize], len: usize) -> Result<()> {
 
 /// Writes f32 values of the given shape to `path` atomically (`<f4`, C order).
 pub fn write_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
-    check_len(shape, data.len())?;
-    let head = header("<f4", shape);
-    write_atomic(path, |w| {
-        w.write_all(&head)?;
-        for chunk in data.chunks(16384) {
-            let bytes: Vec<u8> = chunk.iter().flat_map(|x| x.to_le_bytes()).collect();
-            w.write_all(&bytes)?;
-        }
-        Ok(())
-    })?;
-    Ok(())
+    write_values(path, "<f4", shape, data, |x| x.to_le_bytes())
 }
 
 /// Writes f64 values of the given shape to `path` atomically (`<f8`, C order).
 pub fn write_f64(path: &Path, shape: &[usize], data: &[f64]) -> Result<()> {
+    write_values(path, "<f8", shape, data, |x| x.to_le_bytes())
+}
+
+/// Writes `data` of the given shape to `path` atomically, as `descr` says (C order), each value's
+/// bytes given by `bytes`, in chunks of 64 KiB.
+fn write_values<T: Copy, const N: usize>(
+    path: &Path,
+    descr: &str,
+    shape: &[usize],
+    data: &[T],
+    bytes: impl Fn(T) -> [u8; N],
+) -> Result<()> {
     check_len(shape, data.len())?;
-    let head = header("<f8", shape);
+    let head = header(descr, shape);
     write_atomic(path, |w| {
         w.write_all(&head)?;
-        for chunk in data.chunks(8192) {
-            let bytes: Vec<u8> = chunk.iter().flat_map(|x| x.to_le_bytes()).collect();
-            w.write_all(&bytes)?;
+        for chunk in data.chunks(65536 / N) {
+            let chunk: Vec<u8> = chunk.iter().flat_map(|&x| bytes(x)).collect();
+            w.write_all(&chunk)?;
         }
         Ok(())
     })?;
@@ -142,13 +144,7 @@ pub fn write_f64(path: &Path, shape: &[usize], data: &[f64]) -> Result<()> {
 
 /// Writes u8 values of the given shape to `path` atomically (`|u1`, C order).
 pub fn write_u8(path: &Path, shape: &[usize], data: &[u8]) -> Result<()> {
-    check_len(shape, data.len())?;
-    let head = header("|u1", shape);
-    write_atomic(path, |w| {
-        w.write_all(&head)?;
-        w.write_all(data)
-    })?;
-    Ok(())
+    write_values(path, "|u1", shape, data, |x| [x])
 }
 
 /// Reads an `.npy` file.

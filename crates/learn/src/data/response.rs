@@ -55,41 +55,47 @@ impl RestResponse {
     /// The displacement field (`[3, nx, ny, nz]`, m) of the force field `force` (N).
     pub fn apply(&mut self, force: &[f64]) -> Result<Vec<f64>> {
         self.check(force.len())?;
-        let n = self.grid_nodes;
-        let mut f = vec![0.0; CHANNELS * self.pull.len()];
-        for (m, terms) in self.pull.iter().enumerate() {
-            for &(g, share) in terms {
-                (0..CHANNELS).for_each(|c| f[CHANNELS * m + c] += share * force[c * n + g]);
-            }
-        }
+        let mut f = to_mesh(pairs_of_mesh(&self.pull), force, self.grid_nodes, self.pull.len());
         self.solver.rest_solve(&mut f)?;
-        let mut out = vec![0.0; CHANNELS * n];
-        for (g, terms) in self.push.iter().enumerate() {
-            for &(m, w) in terms {
-                (0..CHANNELS).for_each(|c| out[c * n + g] += w * f[CHANNELS * m + c]);
-            }
-        }
-        Ok(out)
+        Ok(to_grid(pairs_of_grid(&self.push), &f, self.grid_nodes))
     }
 
     /// The transpose: for weights `b` on the displacement field, the weights `a` on the force
     /// field with `a · x = b · apply(x)` for every force field `x`.
     pub fn adjoint(&mut self, b: &[f64]) -> Result<Vec<f64>> {
         self.check(b.len())?;
-        let n = self.grid_nodes;
-        let mut v = vec![0.0; CHANNELS * self.pull.len()];
-        for (g, terms) in self.push.iter().enumerate() {
-            for &(m, w) in terms {
-                (0..CHANNELS).for_each(|c| v[CHANNELS * m + c] += w * b[c * n + g]);
-            }
-        }
+        let mut v = to_mesh(pairs_of_grid(&self.push), b, self.grid_nodes, self.pull.len());
         self.solver.rest_solve(&mut v)?;
-        let mut out = vec![0.0; CHANNELS * n];
-        for (m, terms) in self.pull.iter().enumerate() {
-            for &(g, share) in terms {
-                (0..CHANNELS).for_each(|c| out[c * n + g] += share * v[CHANNELS * m + c]);
-            }
-        }
-        Ok(out)
+        Ok(to_grid(pairs_of_mesh(&self.pull), &v, self.grid_nodes))
     }
+}
+
+/// The (grid node, mesh node, weight) pairs of terms listed per mesh node.
+fn pairs_of_mesh(terms: &[Vec<(usize, f64)>]) -> impl Iterator<Item = (usize, usize, f64)> + '_ {
+    terms.iter().enumerate().flat_map(|(m, t)| t.iter().map(move |&(g, w)| (g, m, w)))
+}
+
+/// The (grid node, mesh node, weight) pairs of terms listed per grid node.
+fn pairs_of_grid(terms: &[Vec<(usize, f64)>]) -> impl Iterator<Item = (usize, usize, f64)> + '_ {
+    terms.iter().enumerate().flat_map(|(g, t)| t.iter().map(move |&(m, w)| (g, m, w)))
+}
+
+/// A grid field (`[3, n]`) carried to the `nodes` mesh nodes (`[nodes, 3]`) through `pairs`:
+/// mesh(m) += w · grid(g).
+fn to_mesh(pairs: impl Iterator<Item = (usize, usize, f64)>, grid: &[f64], n: usize, nodes: usize) -> Vec<f64> {
+    let mut mesh = vec![0.0; CHANNELS * nodes];
+    for (g, m, w) in pairs {
+        (0..CHANNELS).for_each(|c| mesh[CHANNELS * m + c] += w * grid[c * n + g]);
+    }
+    mesh
+}
+
+/// A mesh field (`[nodes, 3]`) carried to the grid's `n` nodes (`[3, n]`) through `pairs`:
+/// grid(g) += w · mesh(m).
+fn to_grid(pairs: impl Iterator<Item = (usize, usize, f64)>, mesh: &[f64], n: usize) -> Vec<f64> {
+    let mut grid = vec![0.0; CHANNELS * n];
+    for (g, m, w) in pairs {
+        (0..CHANNELS).for_each(|c| grid[c * n + g] += w * mesh[CHANNELS * m + c]);
+    }
+    grid
 }
