@@ -26,7 +26,7 @@ pub struct LearnedModels<'a> {
 /// Runs the comparison of `scenario` into `out`: simulates its case and writes it to `out/case`,
 /// registers it with each of its methods (the learned ones with `learned`: a model given must be
 /// there, a shipped one not found is skipped with a line saying so), writes `comparison.csv`, `summary.json` and each
-/// method's files. Its lines (the case, its files, the rigid part, the table) go to
+/// method's files. Its lines (the case, its files, the rigid part, the table, what it wrote) go to
 /// `progress.line` as they come; `progress` advances over the methods. Returns the comparison's
 /// rows (a method that failed carries its error).
 pub fn run_comparison(
@@ -78,5 +78,12 @@ pub fn run_comparison(
     }
     lines(comparison_table(&rows));
     write_comparison(out, &case, &rows)?;
+    let peak = if case.frames.len() > 1 { ", of the peak frame" } else { "" };
+    progress.line("");
+    progress.line(&format!(
+        "wrote      {} (comparison.csv, summary.json; per method{peak}: organ.vtu, targets.csv, registration.png and \
+         .html)",
+        out.display()
+    ));
     Ok(rows)
 }

@@ -99,11 +99,5 @@ fn demo(args: &RegisterArgs, out: &Path) -> Result<()> {
     let learned =
         LearnedModels { model: args.registration.model.as_deref(), scenario: args.registration.scenario.as_deref() };
     Bar::during("methods", |bar| run_comparison(&scenario, learned, out, bar))?;
-    println!();
-    let peak = if args.frames.is_some_and(|n| n > 1) { ", of the peak frame" } else { "" };
-    println!(
-        "wrote      {} (comparison.csv, summary.json; per method{peak}: organ.vtu, targets.csv, registration.png and .html)",
-        out.display()
-    );
     Ok(())
 }

@@ -284,7 +284,8 @@ impl Registered {
 /// and `tumour` nodes. `units`: "m" or "mm", of the targets, every cloud and every result
 /// (default: a patient's own unit, else "m"). `frame`: "RAS" or "LPS", the frame of every cloud
 /// and every result, converted from and to the organ's when it names one (a patient's, or a
-/// targets file's); default: the organ's.
+/// targets file's); default: a patient's own (the frame of the files it was prepared from), else
+/// the organ's.
 /// `iterations`: most match-and-deform iterations of the first cloud, from rest (default: the
 /// library's for a FEM, 30; the built-in registration case's real-time budget for a U-Net, 4; 10
 /// for a reduced-order model's shape fit); a warm-started cloud takes at most min(iterations, 4)
@@ -399,7 +400,7 @@ impl Registration {
     /// a directory, also writes there what `augsim register` writes: organ.vtu (m), targets.csv (in
     /// `units`), summary.json, registration.png and .html (pictures), and for 3D Slicer
     /// targets.mrk.json, organ_deformed.vtk and displacement.nrrd (mm), all
-    /// in the clouds' frame (`frame`; default: the organ's), which they name when known. Raises ValueError for an array of another shape,
+    /// in the clouds' frame (`frame`, or its default), which they name when known. Raises ValueError for an array of another shape,
     /// AugsimError for a cloud augsim rejects (no point, a NaN) or a failed registration (the
     /// warm start is then kept). What to know of the files written (a displacement.nrrd left
     /// out, or folded somewhere) comes as a UserWarning.
