@@ -11,7 +11,7 @@ use std::path::Path;
 use augsim_app::case::synthetic_case;
 use augsim_app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
 use mesh::length::mm;
-use mesh::stats::mean;
+use mesh::stats::{mean, ms};
 use register::target_errors;
 use scenario::CaseScenario;
 
@@ -36,7 +36,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         frame.inliers,
         frame.points,
         frame.iterations,
-        frame.time.as_secs_f64() * 1e3
+        ms(frame.time)
     );
     Ok(())
 }

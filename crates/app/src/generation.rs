@@ -88,7 +88,8 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
         None => generator.run(&out, &scenario.name, args.shard.clone(), progress)?,
         Some(recipe) => generator.run_chosen(&out, &scenario.name, recipe, progress)?,
     };
-    let secs = start.elapsed().as_secs_f64();
+    let elapsed = start.elapsed();
+    let secs = elapsed.as_secs_f64();
     let drawn = manifest.num_samples + manifest.failed.len();
     let mut lines = vec![match (&args.shard, drawn) {
         (Some(p), 0) => format!(
@@ -110,7 +111,7 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
             chosen.rounds.len()
         ));
     }
-    let per_draw = |n: usize| 1e3 * secs / n as f64;
+    let per_draw = |n: usize| mesh::stats::ms(elapsed) / n as f64;
     lines.push(match (drawn.saturating_sub(held), held) {
         (0, 0) => format!("time       {secs:.1} s"),
         (0, _) => format!("time       {secs:.1} s: the dataset was complete, nothing drawn"),

@@ -107,7 +107,7 @@ impl FrameSummary {
             inliers: r.inliers,
             iterations: r.iterations,
             surface_residual_mm: mm(r.surface_residual),
-            time_ms: r.time.as_secs_f64() * 1e3,
+            time_ms: mesh::stats::ms(r.time),
             warnings: r.warnings.clone(),
             tre_mean_mm: tre.map(|t| t.0),
             tre_max_mm: tre.map(|t| t.1),

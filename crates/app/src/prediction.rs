@@ -40,7 +40,7 @@ pub fn predict_file(
         } else {
             "displacements on their nearest grid nodes"
         };
-        lines.push(format!("points     {n} ({what}, {:.2} ms)", t0.elapsed().as_secs_f64() * 1e3));
+        lines.push(format!("points     {n} ({what}, {:.2} ms)", mesh::stats::ms(t0.elapsed())));
     }
     let predictor = model.predictor(compute)?;
     let prediction = predictor.predict(&data)?;

@@ -5,12 +5,12 @@ use std::path::Path;
 
 use fem::material::kpa;
 use mesh::length::{mm, LengthUnit};
+use mesh::stats::ms;
 use register::{FrameOutcome, Organ, RigidResult, RigidTransform, Summary};
 use scenario::CaseScenario;
 
 use crate::case::{Compared, SyntheticCase};
 use crate::output::{comparison_rows, FrameSummary};
-use crate::solve::ms;
 
 /// The organ's line: its mesh, its surface and its number of targets.
 pub fn organ_line(organ: &Organ, targets: usize) -> String {

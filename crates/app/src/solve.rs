@@ -6,6 +6,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use fem::{post, Solution, StaticSolver};
 use mesh::io::Field;
+use mesh::stats::ms;
 use scenario::StaticScenario;
 
 /// A static scenario with its solution.
@@ -93,11 +94,6 @@ impl Solved {
             ),
         ]
     }
-}
-
-/// Milliseconds of a duration.
-pub fn ms(d: std::time::Duration) -> f64 {
-    d.as_secs_f64() * 1e3
 }
 
 #[cfg(test)]

@@ -7,6 +7,7 @@ use std::path::Path;
 use augsim_app::case::{case_methods, compare, synthetic_case};
 use augsim_app::simulate::{simulate_cloud, CameraModel};
 use mesh::sampling::sample_visible;
+use mesh::stats::ms;
 use mesh::{Point, TriSurface};
 use register::{rigid_align, IcpMetric, Organ, RegistrationOptions, RigidOptions, RigidTransform};
 use scenario::CaseScenario;
@@ -45,7 +46,7 @@ fn icp_recovers_a_rotation_and_translation_of_the_rest_surface() {
             "{metric:?}: {angle:.4}°, {shift:.4} mm, {} iterations, rms {:.3} mm, {:.1} ms",
             r.iterations,
             r.rms * 1e3,
-            r.time.as_secs_f64() * 1e3
+            ms(r.time)
         );
         assert!(angle < 0.5 && shift < 1.0, "{metric:?}: {angle}° {shift} mm");
         assert!(r.converged && r.rms < 1e-4, "{r:?}");
@@ -67,7 +68,7 @@ fn icp_recovers_the_pose_from_a_partial_noisy_cloud_with_outliers() {
             r.kept,
             r.points,
             r.rms * 1e3,
-            r.time.as_secs_f64() * 1e3
+            ms(r.time)
         );
         assert!(angle < 1.0 && shift < 1.0, "seed {seed}: {angle}° {shift} mm");
     }

@@ -163,14 +163,14 @@ fn registration_frames(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
     for _ in 0..runs {
         for ((times, tre), c) in from_rest.iter_mut().zip(&mut tre).zip(compare(&single, &methods)) {
             let r = c.result.with_context(|| format!("{} from rest", c.method))?;
-            times.push(r.outcomes[0].registration.time.as_secs_f64() * 1e3);
+            times.push(mesh::stats::ms(r.outcomes[0].registration.time));
             *tre = r.summary.tre_mean_mm.unwrap_or(f64::NAN);
         }
     }
     let mut warm = Vec::new();
     for c in compare(&streamed, &methods) {
         let r = c.result.with_context(|| format!("{} streamed", c.method))?;
-        warm.push(r.outcomes[1..].iter().map(|o| o.registration.time.as_secs_f64() * 1e3).collect::<Vec<f64>>());
+        warm.push(r.outcomes[1..].iter().map(|o| mesh::stats::ms(o.registration.time)).collect::<Vec<f64>>());
     }
     let rest_ms: Vec<f64> = from_rest.iter_mut().map(|t| median(t)).collect();
     let warm_ms: Vec<f64> = warm.iter_mut().map(|t| median(t)).collect();

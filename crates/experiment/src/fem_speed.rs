@@ -252,8 +252,8 @@ fn new_solver(problem: &Problem, opts: &SolverOptions) -> Result<(StaticSolver, 
     let problem = problem.clone();
     let clock = std::time::Instant::now();
     let mut solver = StaticSolver::new(problem)?;
-    let setup = clock.elapsed().as_secs_f64() * 1e3;
-    let first = solver.solve(opts)?.timings.total.as_secs_f64() * 1e3;
+    let setup = mesh::stats::ms(clock.elapsed());
+    let first = mesh::stats::ms(solver.solve(opts)?.timings.total);
     Ok((solver, setup, first))
 }
 
@@ -272,7 +272,7 @@ fn frames(solver: &mut StaticSolver, opts: &SolverOptions, u_full: &[f64], runs:
         let factor = 1.0 + FRAME_LOAD_STEP * if phase < 10.0 { phase - 5.0 } else { 15.0 - phase };
         solver.problem_mut().f_ext.iter_mut().zip(&base).for_each(|(f, b)| *f = factor * b);
         let s = solver.solve_from(Some(&u), opts)?;
-        times.push(s.timings.total.as_secs_f64() * 1e3);
+        times.push(mesh::stats::ms(s.timings.total));
         iterations += s.iterations;
         u = s.u;
     }
@@ -337,7 +337,7 @@ pub fn measure(runs: usize, large: bool, each: &mut dyn FnMut(&CaseTiming)) -> R
     {
         let dofs = problem.num_dofs();
         let med = |f: &dyn Fn(&fem::Solution) -> std::time::Duration| {
-            median(&mut rows.iter().map(|s| f(s).as_secs_f64() * 1e3).collect::<Vec<_>>())
+            median(&mut rows.iter().map(|s| mesh::stats::ms(f(s))).collect::<Vec<_>>())
         };
         let last = rows.last().expect("at least one run");
         let (frame_ms, frame_iterations) = frames(&mut solver, &opts, &last.u, runs)?;

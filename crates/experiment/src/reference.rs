@@ -22,7 +22,7 @@ pub(crate) fn measure() -> Result<f64> {
     solver.solve(&opts)?;
     let mut times = Vec::with_capacity(RUNS);
     for _ in 0..RUNS {
-        times.push(solver.solve(&opts)?.timings.total.as_secs_f64() * 1e3);
+        times.push(mesh::stats::ms(solver.solve(&opts)?.timings.total));
     }
     Ok(median(&mut times))
 }

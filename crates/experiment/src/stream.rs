@@ -118,7 +118,7 @@ fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
         let sent = Instant::now();
         client.send_cloud(cloud).map_err(|e| anyhow!(e))?;
         let live::client::Frame { targets, status } = client.until_status().map_err(|e| anyhow!(e))?;
-        s.latency_ms.push(sent.elapsed().as_secs_f64() * 1e3);
+        s.latency_ms.push(mesh::stats::ms(sent.elapsed()));
         if let Some(e) = status.get("error") {
             return Err(anyhow!("{method}, frame {k}: the server answered {e}"));
         }

@@ -598,7 +598,7 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
             Work::Step(step, features) => {
                 let start = Instant::now();
                 let estimate = identify(&shared.options, &mut identification, &features).map(|mut fields| {
-                    fields.insert("ms".into(), (start.elapsed().as_secs_f64() * 1e3).into());
+                    fields.insert("ms".into(), mesh::stats::ms(start.elapsed()).into());
                     fields
                 });
                 let mut answer = match estimate {
@@ -712,7 +712,7 @@ fn answer(
     }
     let status = serde_json::json!({
         "frame": frame,
-        "ms": start.elapsed().as_secs_f64() * 1e3,
+        "ms": mesh::stats::ms(start.elapsed()),
         "unit": given.unit.symbol(),
         "surface_residual": given.length_out(result.surface_residual),
         "plausible": result.plausible(),

@@ -1,4 +1,5 @@
-//! Small statistics shared by the crates (the one median, mean and maximum).
+//! Small statistics shared by the crates (the one median, mean and maximum, and durations in
+//! milliseconds).
 
 /// The median of `values`, reordering them: the middle value in `f64::total_cmp` order for an odd
 /// count, the mean of the two middle values for an even one. NaNs count as the largest values (a
@@ -40,9 +41,14 @@ pub fn max(values: &[f64]) -> f64 {
     values.iter().copied().fold(f64::NAN, f64::max)
 }
 
+/// A duration in milliseconds, as reports give times.
+pub fn ms(d: std::time::Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
 #[cfg(test)]
 mod tests {
-    use super::{max, mean, median, percentile};
+    use super::{max, mean, median, ms, percentile};
 
     #[test]
     fn percentiles_by_nearest_rank() {
@@ -59,6 +65,12 @@ mod tests {
         assert_eq!(mean(&[1.0, 2.0, 6.0]), 3.0);
         assert_eq!(max(&[1.0, f64::NAN, 6.0, 2.0]), 6.0);
         assert!(mean(&[]).is_nan() && max(&[]).is_nan());
+    }
+
+    #[test]
+    fn a_duration_in_milliseconds() {
+        assert_eq!(ms(std::time::Duration::from_micros(1500)), 1.5);
+        assert_eq!(ms(std::time::Duration::from_secs(2)), 2000.0);
     }
 
     #[test]

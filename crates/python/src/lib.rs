@@ -203,7 +203,7 @@ fn solve(py: Python<'_>, scenario: PathBuf) -> PyResult<Solution> {
         factorizations: sol.factorizations,
         residual: sol.residuals.last().copied().unwrap_or(0.0),
         max_displacement: post::max_displacement(&sol.u),
-        ms: sol.timings.total.as_secs_f64() * 1e3,
+        ms: mesh::stats::ms(sol.timings.total),
     })
 }
 
@@ -451,7 +451,7 @@ impl Registration {
             rigid,
             target_sigma: target_std
                 .map(|s| s.iter().map(|&v| self.given.length_out(v)).collect::<Vec<f64>>().into_pyarray(py).unbind()),
-            ms: result.time.as_secs_f64() * 1e3,
+            ms: mesh::stats::ms(result.time),
             structures: structures.unbind(),
         })
     }

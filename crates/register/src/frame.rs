@@ -336,8 +336,7 @@ pub(crate) fn register_frame_begun(
         if moved <= options.tolerance {
             break;
         }
-        if options.time_budget_ms.is_some_and(|budget| t0.elapsed().as_secs_f64() * 1e3 >= budget) && iterations < most
-        {
+        if options.time_budget_ms.is_some_and(|budget| mesh::stats::ms(t0.elapsed()) >= budget) && iterations < most {
             out_of_time = true;
             break;
         }

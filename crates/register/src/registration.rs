@@ -9,7 +9,7 @@
 
 use mesh::io::Frame;
 use mesh::length::mm;
-use mesh::stats::{max, mean};
+use mesh::stats::{max, mean, ms};
 use mesh::{Point, TriSurface};
 use serde::Serialize;
 
@@ -412,7 +412,7 @@ impl Summary {
         let (errors, rest, std) = (all(|o| &o.errors), all(|o| &o.rest_errors), all(|o| &o.target_std));
         let within = errors.as_deref().zip(std.as_deref()).and_then(|(e, s)| within_two_std(e, s));
         let per_frame = |f: fn(&FrameOutcome) -> f64| outcomes.iter().map(f).sum::<f64>() / n as f64;
-        let mut times: Vec<f64> = outcomes.iter().map(|o| o.registration.time.as_secs_f64() * 1e3).collect();
+        let mut times: Vec<f64> = outcomes.iter().map(|o| ms(o.registration.time)).collect();
         Ok(Summary {
             method: method.into(),
             frames: n,
@@ -422,7 +422,7 @@ impl Summary {
             no_deformation_tre_mean_mm: in_mm(&rest, mean),
             no_deformation_tre_max_mm: in_mm(&rest, max),
             surface_residual_mm: mm(per_frame(|o| o.registration.surface_residual)),
-            time_ms: per_frame(|o| o.registration.time.as_secs_f64()) * 1e3,
+            time_ms: per_frame(|o| ms(o.registration.time)),
             time_p95_ms: mesh::stats::percentile(&times, 95.0),
             time_median_ms: mesh::stats::median(&mut times),
             iterations: per_frame(|o| o.registration.iterations as f64),

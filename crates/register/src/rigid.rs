@@ -401,7 +401,7 @@ impl From<&RigidResult> for RigidSummary {
             rms_mm: mm(r.rms),
             kept: r.kept,
             points: r.points,
-            time_ms: r.time.as_secs_f64() * 1e3,
+            time_ms: mesh::stats::ms(r.time),
         }
     }
 }

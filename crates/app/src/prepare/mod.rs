@@ -713,7 +713,7 @@ fn dataset_step(dir: &Path, progress: &dyn learn::Progress) -> Result<Vec<String
     let generator = scenario.generator(&base)?;
     let start = Instant::now();
     let manifest = generator.run(&dir.join("dataset"), &scenario.name, None, progress)?;
-    let seconds = start.elapsed().as_secs_f64();
+    let elapsed = start.elapsed();
     let motions = draw_motions(&learn::Dataset::open(&dir.join("dataset"))?)?;
     let mean = mesh::stats::mean(&motions);
     let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
@@ -722,7 +722,7 @@ fn dataset_step(dir: &Path, progress: &dyn learn::Progress) -> Result<Vec<String
             "dataset: {} draws solved, {} failed (reasons in dataset/manifest.json), {:.0} ms per draw",
             manifest.num_samples,
             manifest.failed.len(),
-            1e3 * seconds / manifest.num_samples.max(1) as f64
+            mesh::stats::ms(elapsed) / manifest.num_samples.max(1) as f64
         ),
         format!(
             "dataset: the draws move the organ by {:.1} mm on average over its grid nodes (90 % of the draws by at \

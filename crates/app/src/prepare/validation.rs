@@ -281,7 +281,7 @@ impl Registered {
         self.errors.extend(register::target_errors(&tracked.targets, moved));
         self.std.extend(tracked.target_std.iter().flatten());
         if timed {
-            self.times_ms.push(tracked.registration.time.as_secs_f64() * 1e3);
+            self.times_ms.push(mesh::stats::ms(tracked.registration.time));
         }
     }
 
