@@ -54,8 +54,8 @@ pub struct Meshed {
     pub notes: Vec<(&'static str, String)>,
     /// How much of the surface meshed with tetrahedra the mesh covers.
     pub coverage: Option<Coverage>,
-    /// The wall time of the meshing, reading included (s).
-    pub seconds: f64,
+    /// The wall time of the meshing, reading included.
+    pub elapsed: std::time::Duration,
 }
 
 /// Parts of the surface left out of its mesh beyond this share of its area are warned about.
@@ -107,7 +107,7 @@ pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
             (mesh, volume, frame)
         }
     };
-    Ok(Meshed { mesh, reference_volume, frame, notes, coverage, seconds: start.elapsed().as_secs_f64() })
+    Ok(Meshed { mesh, reference_volume, frame, notes, coverage, elapsed: start.elapsed() })
 }
 
 /// An organ's segmentation as given: a labelmap's label extracted (in mm, in its scanner frame),
@@ -254,7 +254,7 @@ impl Meshed {
     pub fn lines(&self) -> Result<Vec<String>> {
         let mut lines: Vec<String> = self.notes.iter().map(|(topic, line)| format!("{topic:<10} {line}")).collect();
         lines.extend(self.report()?);
-        lines.push(format!("time       {:.1} ms", 1e3 * self.seconds));
+        lines.push(format!("time       {:.1} ms", mesh::stats::ms(self.elapsed)));
         Ok(lines)
     }
 
