@@ -40,7 +40,16 @@ fn labelmap() -> Labelmap {
             }
         }
     }
-    Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new(), placed: true }
+    Labelmap {
+        dims,
+        layers: 1,
+        labels,
+        affine,
+        frame: Frame::Ras,
+        segments: Vec::new(),
+        placed: true,
+        warnings: Vec::new(),
+    }
 }
 
 #[test]

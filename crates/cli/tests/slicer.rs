@@ -162,6 +162,7 @@ fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
         frame: Frame::Ras,
         segments: Vec::new(),
         placed: true,
+        warnings: Vec::new(),
     };
     mesh::labelmap::write_nifti(d.join("seg.nii.gz"), &map).unwrap();
     let labelled = format!("{}:5", d.join("seg.nii.gz").display());

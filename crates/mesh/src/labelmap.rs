@@ -57,6 +57,9 @@ pub struct Labelmap {
     /// Whether the file places its voxels in the scanner's frame (a NIfTI without qform and sform
     /// codes does not: its world is the voxel grid scaled by the spacing).
     pub placed: bool,
+    /// What a user should know of the file as read, for every label (`None`) or for one (its
+    /// layer and label): a slice the series lacks, a segment cut at the end of the frames.
+    pub warnings: Vec<(Option<(usize, i32)>, String)>,
 }
 
 fn parse_error(path: &Path, message: impl Into<String>) -> MeshError {
@@ -82,9 +85,19 @@ pub fn unreadable_segmentation(path: &Path) -> Option<String> {
         "save the segmentation as a labelmap ({LABELMAP_FORMATS}) or a surface (.stl, .obj, .ply, .vtk, .vtp, .vtu)"
     );
     if path.is_dir() {
-        return Some(format!(
-            "a folder, not a file (a DICOM series is not read): segment it (3D Slicer, TotalSegmentator) and {save_as}"
-        ));
+        let dicom = std::fs::read_dir(path).map_or(0, |entries| {
+            entries.flatten().filter(|e| e.path().extension().is_some_and(|x| x.eq_ignore_ascii_case("dcm"))).count()
+        });
+        return Some(match dicom {
+            0 => format!(
+                "a folder, not a file (a DICOM series is not read): segment it (3D Slicer, TotalSegmentator) and \
+                 {save_as}"
+            ),
+            n => format!(
+                "a folder, not a file: give its DICOM SEG, if one of its {n} .dcm files is (a DICOM image series is \
+                 not read), or {save_as}"
+            ),
+        });
     }
     if is_labelmap(path) || crate::io::SURFACE_EXTENSIONS.contains(&extension) {
         return None;
@@ -273,7 +286,16 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
     let affine = nifti_affine(i16_at(252), i16_at(254), &pixdim, f32_at)?;
     let affine = in_millimetres(affine, nifti_unit_mm(bytes[123])?);
     let placed = i16_at(252) > 0 || i16_at(254) > 0;
-    Ok(Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new(), placed })
+    Ok(Labelmap {
+        dims,
+        layers: 1,
+        labels,
+        affine,
+        frame: Frame::Ras,
+        segments: Vec::new(),
+        placed,
+        warnings: Vec::new(),
+    })
 }
 
 /// The millimetres in a NIfTI spatial unit (the low three bits of `xyzt_units`): metre, mm,
@@ -545,7 +567,7 @@ fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
     let encoding = header.field("encoding")?;
     if matches!(encoding, "ascii" | "text" | "txt") {
         let labels = ascii_labels(data, count)?;
-        return Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed: true });
+        return Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed: true, warnings: Vec::new() });
     }
     // As teem, the reference reader, does: binary data of more than one byte need their byte order.
     let little = match header.fields.get("endian").map(String::as_str) {
@@ -575,7 +597,7 @@ fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
         s => return Err(format!("bad byte skip {s}")),
     };
     let labels = labels(scalar, raw, count, dims[2], little)?;
-    Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed: true })
+    Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed: true, warnings: Vec::new() })
 }
 
 /// The `count` labels of NRRD's ascii encoding: numbers separated by white space.
@@ -671,7 +693,7 @@ impl Labelmap {
     /// present; a number matching segments of several layers must be chosen by name, and a name
     /// that several segments carry is refused.
     pub fn select(&self, choice: &str) -> Result<(VoxelMask, String), MeshError> {
-        let (whole, description) = self.select_uncropped(choice)?;
+        let (whole, description, _) = self.select_uncropped(choice)?;
         Ok((self.cropped(&whole, &description)?, description))
     }
 
@@ -684,7 +706,7 @@ impl Labelmap {
     }
 
     /// [`Labelmap::select`] on the labelmap's whole grid.
-    fn select_uncropped(&self, choice: &str) -> Result<(VoxelMask, String), MeshError> {
+    fn select_uncropped(&self, choice: &str) -> Result<(VoxelMask, String, (usize, i32)), MeshError> {
         let choice = choice.trim();
         let present = self.present();
         let (layer, label) = if let Ok(label) = choice.parse::<i32>() {
@@ -712,7 +734,7 @@ impl Labelmap {
                 [s] => (s.1, s.2),
                 [_, _, ..] => {
                     return Err(MeshError::Invalid(format!(
-                        "{} segments are named '{choice}': rename them apart (labels present: {})",
+                        "{} segments are named '{choice}': rename them apart, or choose by number (labels present: {})",
                         named.len(),
                         self.present_text()
                     )))
@@ -731,7 +753,7 @@ impl Labelmap {
             Some(n) => format!("label {label} ('{n}')"),
             None => format!("label {label}"),
         };
-        Ok((VoxelMask { dims: self.dims, inside, affine: self.affine }, description))
+        Ok((VoxelMask { dims: self.dims, inside, affine: self.affine }, description, (layer, label)))
     }
 }
 
@@ -944,11 +966,12 @@ pub fn read_labelmap_surface(
             ))
         }
     };
-    let (whole, label) = map.select_uncropped(&label).map_err(|e| parse_error(path, e.message()))?;
+    let (whole, label, chosen) = map.select_uncropped(&label).map_err(|e| parse_error(path, e.message()))?;
     let borders = touched_borders(&whole);
     let mask = map.cropped(&whole, &label).map_err(|e| parse_error(path, e.message()))?;
     let (surface, extract) = mask_surface(&mask, options).map_err(|e| parse_error(path, e.message()))?;
-    let mut warnings = Vec::new();
+    let mut warnings: Vec<String> =
+        map.warnings.iter().filter(|(of, _)| of.is_none_or(|of| of == chosen)).map(|(_, w)| w.clone()).collect();
     if !map.placed {
         warnings.push(
             "the file places its voxels nowhere (a NIfTI without qform and sform): the organ lies at its voxel \
@@ -1021,7 +1044,7 @@ mod tests {
             }
         }
         let segments = vec![("liver".to_string(), 0, 5), ("tumour".to_string(), 0, 2)];
-        (Labelmap { dims, layers: 1, labels, affine, frame, segments, placed: true }, organ)
+        (Labelmap { dims, layers: 1, labels, affine, frame, segments, placed: true, warnings: Vec::new() }, organ)
     }
 
     /// Whether two affines agree entry by entry within `tolerance`.
@@ -1472,7 +1495,16 @@ mod tests {
             .map(|p| if centres.iter().any(|&c| norm(sub(p, c)) <= 6.0) { 5 } else { 0 })
             .collect();
         let affine = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
-        let twins = Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments: Vec::new(), placed: true };
+        let twins = Labelmap {
+            dims,
+            layers: 1,
+            labels,
+            affine,
+            frame: Frame::Ras,
+            segments: Vec::new(),
+            placed: true,
+            warnings: Vec::new(),
+        };
         let (mask, _) = twins.select("5").unwrap();
         let e = mask_surface(&mask, &ExtractOptions::default()).unwrap_err().to_string();
         assert!(e.contains("several pieces of similar size"), "{e}");

@@ -9,6 +9,8 @@
 //! a segment that overlaps those of a layer goes to a layer of its own, as 3D Slicer's layered
 //! segmentations do, so that every segment is read whole.
 
+use std::collections::{BTreeMap, BTreeSet, HashSet};
+
 use dicom_dictionary_std::tags;
 use dicom_object::file::ReadPreamble;
 use dicom_object::mem::InMemElement;
@@ -23,15 +25,33 @@ const SEGMENTATION_CLASSES: [&str; 2] = ["1.2.840.10008.5.1.4.1.1.66.4", "1.2.84
 /// VR, and explicit VR deflated.
 const NATIVE_SYNTAXES: [&str; 3] = ["1.2.840.10008.1.2", "1.2.840.10008.1.2.1", "1.2.840.10008.1.2.1.99"];
 
+/// A compressed transfer syntax by name, with its UID.
+fn syntax_name(uid: &str) -> String {
+    let name = match uid {
+        "1.2.840.10008.1.2.5" => "RLE Lossless",
+        "1.2.840.10008.1.2.4.50" | "1.2.840.10008.1.2.4.51" => "JPEG",
+        "1.2.840.10008.1.2.4.57" | "1.2.840.10008.1.2.4.70" => "JPEG Lossless",
+        "1.2.840.10008.1.2.4.80" | "1.2.840.10008.1.2.4.81" => "JPEG-LS",
+        "1.2.840.10008.1.2.4.90" | "1.2.840.10008.1.2.4.91" => "JPEG 2000",
+        "1.2.840.10008.1.2.4.201" | "1.2.840.10008.1.2.4.202" | "1.2.840.10008.1.2.4.203" => "HTJ2K",
+        "1.2.840.10008.1.2.2" => "explicit VR big endian",
+        _ => return format!("transfer syntax {uid}"),
+    };
+    format!("{name}, transfer syntax {uid}")
+}
+
 /// Positions along the slice normal closer than this (mm) are one slice.
 const SAME_SLICE_MM: f64 = 1e-3;
 
 /// Reads a DICOM SEG from the bytes of its file.
 pub(super) fn parse_dicom_seg(bytes: &[u8]) -> Result<Labelmap, String> {
-    let object = OpenFileOptions::new()
-        .read_preamble(ReadPreamble::Auto)
-        .from_reader(bytes)
-        .map_err(|e| format!("not a DICOM file ({e})"))?;
+    let object = OpenFileOptions::new().read_preamble(ReadPreamble::Auto).from_reader(bytes).map_err(|e| {
+        if bytes.get(128..132) == Some(b"DICM") {
+            format!("a DICOM file that cannot be read: cut short or damaged? ({e})")
+        } else {
+            format!("not a DICOM file ({e})")
+        }
+    })?;
     let class = text(&object, tags::SOP_CLASS_UID).unwrap_or_default();
     if !SEGMENTATION_CLASSES.contains(&class.as_str()) {
         let modality = text(&object, tags::MODALITY).unwrap_or_else(|| "unknown".into());
@@ -43,8 +63,10 @@ pub(super) fn parse_dicom_seg(bytes: &[u8]) -> Result<Labelmap, String> {
     let syntax = object.meta().transfer_syntax().trim_end_matches('\0').to_string();
     if !NATIVE_SYNTAXES.contains(&syntax.as_str()) {
         return Err(format!(
-            "its pixel data are compressed (transfer syntax {syntax}), which is not read: export the \
-             segmentation uncompressed (explicit VR little endian) or as a labelmap"
+            "its pixel data are compressed ({}), which is not read: decompress it first (`gdcmconv --raw IN.dcm \
+             OUT.dcm`, DCMTK's `dcmdrle` or `dcmdjpeg`, pydicom's `decompress()`), or export the segmentation \
+             uncompressed or as a labelmap",
+            syntax_name(&syntax)
         ));
     }
     let rows = number(&object, tags::ROWS)? as usize;
@@ -56,7 +78,6 @@ pub(super) fn parse_dicom_seg(bytes: &[u8]) -> Result<Labelmap, String> {
         .map_or(Ok(1), |t| t.trim().parse::<usize>().map_err(|e| format!("NumberOfFrames {t:?}: {e}")))?;
     let kind = text(&object, tags::SEGMENTATION_TYPE).unwrap_or_default();
     let bits = number(&object, tags::BITS_ALLOCATED)? as usize;
-    let segments = segment_names(&object)?;
     let planes = planes(&object, frames, &kind)?;
     let pixels = object.element(tags::PIXEL_DATA).map_err(|_| "it holds no pixel data".to_string())?;
     if pixels.fragments().is_some() {
@@ -67,51 +88,127 @@ pub(super) fn parse_dicom_seg(bytes: &[u8]) -> Result<Labelmap, String> {
     let value = pixel_reader(&kind, bits, &data, frames * frame_pixels, &object)?;
     let grid = Grid::new(&planes, &object)?;
     let dims = [columns, rows, grid.slices];
-    let voxels = dims.iter().product::<usize>();
-    // Each segment's voxels, then each put in the first layer it does not overlap.
-    let mut layers: Vec<Vec<i32>> = Vec::new();
-    let mut placed_segments = Vec::new();
-    for &(number, ref name) in &segments {
-        let mut own: Vec<usize> = Vec::new();
-        for (f, plane) in planes.iter().enumerate() {
-            let k = grid.slice_of(plane.position);
-            for p in 0..frame_pixels {
-                let v = value(f * frame_pixels + p);
-                let inside = match plane.segment {
-                    Some(s) => s == number && v != 0,
-                    None => v == number,
-                };
-                if inside {
-                    own.push(p + frame_pixels * k);
-                }
+    // Each segment's voxels (indices into the grid), in one pass over the frames.
+    let mut voxels: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+    let mut slices = BTreeSet::new();
+    for (f, plane) in planes.iter().enumerate() {
+        let k = grid.slice_of(plane.position);
+        slices.insert(k);
+        for p in 0..frame_pixels {
+            let v = value(f * frame_pixels + p);
+            if v != 0 {
+                voxels.entry(plane.segment.unwrap_or(v)).or_default().push((p + frame_pixels * k) as u32);
             }
         }
-        if own.is_empty() {
-            continue;
+    }
+    let mut warnings = Vec::new();
+    let missing = fill_missing_slices(&mut voxels, &slices, frame_pixels);
+    if !missing.is_empty() {
+        let at: Vec<String> = missing.iter().map(|&k| format!("{:.1}", grid.height(k))).collect();
+        warnings.push((
+            None,
+            format!(
+                "no frame lies {} mm from the first along the slices' normal, between frames {} mm apart: the \
+                 series lacks {}; each segment is filled there with what its slices on both sides share",
+                at.join(", "),
+                grid.step,
+                if missing.len() == 1 { "that slice" } else { "those slices" }
+            ),
+        ));
+    }
+    let mut names = segment_names(&object)?;
+    for &number in voxels.keys() {
+        if let std::collections::btree_map::Entry::Vacant(entry) = names.entry(number) {
+            entry.insert(format!("segment {number}"));
+            warnings.push((None, format!("frames show segment {number}, which the file does not describe")));
         }
-        let layer = match layers.iter().position(|l| own.iter().all(|&n| l[n] == 0)) {
+    }
+    // Each segment in the first layer it does not overlap; an empty one in the first.
+    let mut layers: Vec<Vec<i32>> = vec![vec![0; dims.iter().product()]];
+    let mut segments = Vec::new();
+    for (&number, name) in &names {
+        let own = voxels.get(&number).map_or(&[][..], Vec::as_slice);
+        let layer = match layers.iter().position(|l| own.iter().all(|&n| l[n as usize] == 0)) {
             Some(layer) => layer,
             None => {
-                layers.push(vec![0; voxels]);
+                layers.push(vec![0; layers[0].len()]);
                 layers.len() - 1
             }
         };
-        own.iter().for_each(|&n| layers[layer][n] = number as i32);
-        placed_segments.push((name.clone(), layer, number as i32));
+        own.iter().for_each(|&n| layers[layer][n as usize] = number as i32);
+        segments.push((name.clone(), layer, number as i32));
+        if let Some(cut) = cut_at_an_end(own, frame_pixels) {
+            warnings.push((Some((layer, number as i32)), cut));
+        }
     }
-    if layers.is_empty() {
+    if voxels.is_empty() {
         return Err("the labelmap is empty: no segment has a pixel in any frame".into());
     }
     let count = layers.len();
-    let labels = (0..voxels * count).map(|n| layers[n % count][n / count]).collect();
+    let labels = (0..layers[0].len() * count).map(|n| layers[n % count][n / count]).collect();
     Ok(Labelmap {
         dims,
         layers: count,
         labels,
         affine: grid.affine,
         frame: Frame::Lps,
-        segments: placed_segments,
+        segments,
         placed: true,
+        warnings,
+    })
+}
+
+/// Fills, in each segment, the slices between its first and last that no frame of any segment
+/// lies on (a slice the series lacks) with the pixels its nearest slices on both sides share;
+/// returns those slices.
+fn fill_missing_slices(
+    voxels: &mut BTreeMap<u32, Vec<u32>>,
+    present: &BTreeSet<usize>,
+    frame_pixels: usize,
+) -> Vec<usize> {
+    let mut missing = BTreeSet::new();
+    for own in voxels.values_mut() {
+        let slice = |n: &u32| *n as usize / frame_pixels;
+        let (Some(first), Some(last)) = (own.iter().map(slice).min(), own.iter().map(slice).max()) else { continue };
+        let gaps: Vec<usize> = (first..=last).filter(|k| !present.contains(k)).collect();
+        if gaps.is_empty() {
+            continue;
+        }
+        let mut by_slice: BTreeMap<usize, HashSet<usize>> = BTreeMap::new();
+        own.iter().for_each(|&n| {
+            by_slice.entry(n as usize / frame_pixels).or_default().insert(n as usize % frame_pixels);
+        });
+        for &k in &gaps {
+            let below = (first..k).rev().find(|s| present.contains(s)).and_then(|s| by_slice.get(&s));
+            let above = (k + 1..=last).find(|s| present.contains(s)).and_then(|s| by_slice.get(&s));
+            if let (Some(below), Some(above)) = (below, above) {
+                own.extend(below.intersection(above).map(|&p| (p + frame_pixels * k) as u32));
+            }
+            missing.insert(k);
+        }
+    }
+    missing.into_iter().collect()
+}
+
+/// The share of its largest slice at or above which a segment's first or last slice says it goes
+/// on beyond them: organs taper to their ends.
+const CUT_SHARE: f64 = 0.5;
+
+/// A warning when a segment's first or last slice holds [`CUT_SHARE`] of its largest slice's
+/// pixels or more: the organ goes on beyond the frames (a scan's end, a segmentation made on part
+/// of the series).
+fn cut_at_an_end(own: &[u32], frame_pixels: usize) -> Option<String> {
+    let mut counts: BTreeMap<usize, usize> = BTreeMap::new();
+    own.iter().for_each(|&n| *counts.entry(n as usize / frame_pixels).or_default() += 1);
+    let largest = *counts.values().max()?;
+    let ends = [("first", *counts.first_key_value()?.1), ("last", *counts.last_key_value()?.1)];
+    let (end, count) = ends.into_iter().find(|&(_, count)| count as f64 >= CUT_SHARE * largest as f64)?;
+    (counts.len() > 1).then(|| {
+        format!(
+            "its {end} frame holds {count} pixels, {:.0} % of its largest: the organ seems to go on beyond the frames \
+             (cut by the scan's end, or segmented on part of the series)",
+            100.0 * count as f64 / largest as f64
+        )
     })
 }
 
@@ -145,9 +242,9 @@ fn items(object: &InMemDicomObject, tag: dicom_object::Tag) -> &[InMemDicomObjec
     object.get(tag).and_then(InMemElement::items).unwrap_or(&[])
 }
 
-/// The segments the object describes: (segment number, label).
-fn segment_names(object: &InMemDicomObject) -> Result<Vec<(u32, String)>, String> {
-    let segments: Vec<(u32, String)> = items(object, tags::SEGMENT_SEQUENCE)
+/// The segments the object describes: segment number to label.
+fn segment_names(object: &InMemDicomObject) -> Result<BTreeMap<u32, String>, String> {
+    let segments: BTreeMap<u32, String> = items(object, tags::SEGMENT_SEQUENCE)
         .iter()
         .map(|item| {
             let number = number(item, tags::SEGMENT_NUMBER)?;
@@ -342,6 +439,11 @@ impl Grid {
         Ok(Grid { affine, first: lowest, step, normal, slices })
     }
 
+    /// The height of slice `k` along the normal from the first frame's (mm).
+    fn height(&self, k: usize) -> f64 {
+        (k as f64 - 1.0) * self.step
+    }
+
     /// The slice a frame at `position` lies in.
     fn slice_of(&self, position: [f64; 3]) -> usize {
         ((crate::dot(position, self.normal) - self.first) / self.step).round() as usize
@@ -454,6 +556,53 @@ mod tests {
         assert_eq!(world, [12.0, 21.0, 2.0], "column 2, row 1 of the slice at z = 2");
     }
 
+    /// Warnings of `map` for the segment `number` and for all.
+    fn warnings(map: &Labelmap, number: i32) -> Vec<&str> {
+        map.warnings.iter().filter(|(of, _)| of.is_none_or(|(_, l)| l == number)).map(|(_, w)| w.as_str()).collect()
+    }
+
+    /// A slice that no frame lies on between the frames of a segment is one the series lacks:
+    /// filled with what the slices on both sides share, and said.
+    #[test]
+    fn a_slice_missing_from_the_series_is_filled_and_named() {
+        // Frames 2 mm apart at z = 0, 2 and 6: none at 4. The frame at 6 holds the first row only.
+        let pixels = vec![0xff, 0xff, 0xff, 0xff, 0x0f, 0x00];
+        let map = parse_dicom_seg(&seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (1, 6.0)], 1, pixels)).unwrap();
+        let (liver, _) = map.select("liver").unwrap();
+        assert_eq!(liver.count(), 16 + 16 + 4 + 4, "the slice at z = 4 takes the row both sides share");
+        let said = warnings(&map, 1);
+        assert!(
+            said.iter().any(|w| w.starts_with("no frame lies 4.0 mm from the first along the slices' normal")),
+            "{said:?}"
+        );
+    }
+
+    /// A segment whose end slices are as large as its largest goes on beyond the frames; one that
+    /// tapers does not.
+    #[test]
+    fn a_segment_cut_at_the_end_of_the_frames_is_said_to_be() {
+        let map = parse_dicom_seg(&liver_and_tumour()).unwrap();
+        assert!(warnings(&map, 1)
+            .iter()
+            .any(|w| w.starts_with("its first frame holds 16 pixels, 100 % of its largest")));
+        // Three slices of 1, 16 and 1 pixels: a tapering organ.
+        let pixels = vec![0x01, 0x00, 0xff, 0xff, 0x01, 0x00];
+        let map = parse_dicom_seg(&seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (1, 4.0)], 1, pixels)).unwrap();
+        assert!(map.warnings.is_empty(), "{:?}", map.warnings);
+    }
+
+    /// A described segment no frame shows is named and empty; frames of a segment the file does not
+    /// describe are read as `segment N`, and said.
+    #[test]
+    fn empty_and_undescribed_segments_are_told_apart() {
+        let map =
+            parse_dicom_seg(&seg_file(SEG, "BINARY", &[(1, 0.0), (3, 0.0)], 1, vec![0xff, 0xff, 0x01, 0])).unwrap();
+        let tumour = map.select("tumour").unwrap_err().to_string();
+        assert!(tumour.contains("label 2 ('tumour') has no voxel"), "{tumour}");
+        assert_eq!(map.select("segment 3").unwrap().0.count(), 1);
+        assert!(warnings(&map, 3).contains(&"frames show segment 3, which the file does not describe"));
+    }
+
     #[test]
     fn a_labelmap_segmentation_holds_segment_numbers() {
         let mut pixels = vec![0u8; 32];
@@ -478,5 +627,9 @@ mod tests {
         let fractional = error(seg_file(SEG, "FRACTIONAL", &[(1, 0.0)], 8, vec![255; 16]));
         assert!(fractional.contains("MaximumFractionalValue"), "{fractional}");
         assert!(error(vec![0; 200]).starts_with("not a DICOM file"));
+        let whole = liver_and_tumour();
+        let cut = error(whole[..whole.len() * 7 / 10].to_vec());
+        assert!(cut.starts_with("a DICOM file that cannot be read: cut short or damaged?"), "{cut}");
+        assert_eq!(syntax_name("1.2.840.10008.1.2.4.90"), "JPEG 2000, transfer syntax 1.2.840.10008.1.2.4.90");
     }
 }
