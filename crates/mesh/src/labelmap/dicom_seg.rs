@@ -88,6 +88,9 @@ pub(super) fn parse_dicom_seg(bytes: &[u8]) -> Result<Labelmap, String> {
     let value = pixel_reader(&kind, bits, &data, frames * frame_pixels, &object)?;
     let grid = Grid::new(&planes, &object)?;
     let dims = [columns, rows, grid.slices];
+    if dims.iter().product::<usize>() > u32::MAX as usize {
+        return Err(format!("its volume of {dims:?} voxels is too large to read"));
+    }
     // Each segment's voxels (indices into the grid), in one pass over the frames.
     let mut voxels: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
     let mut slices = BTreeSet::new();
@@ -123,24 +126,7 @@ pub(super) fn parse_dicom_seg(bytes: &[u8]) -> Result<Labelmap, String> {
             warnings.push((None, format!("frames show segment {number}, which the file does not describe")));
         }
     }
-    // Each segment in the first layer it does not overlap; an empty one in the first.
-    let mut layers: Vec<Vec<i32>> = vec![vec![0; dims.iter().product()]];
-    let mut segments = Vec::new();
-    for (&number, name) in &names {
-        let own = voxels.get(&number).map_or(&[][..], Vec::as_slice);
-        let layer = match layers.iter().position(|l| own.iter().all(|&n| l[n as usize] == 0)) {
-            Some(layer) => layer,
-            None => {
-                layers.push(vec![0; layers[0].len()]);
-                layers.len() - 1
-            }
-        };
-        own.iter().for_each(|&n| layers[layer][n as usize] = number as i32);
-        segments.push((name.clone(), layer, number as i32));
-        if let Some(cut) = cut_at_an_end(own, frame_pixels) {
-            warnings.push((Some((layer, number as i32)), cut));
-        }
-    }
+    let (layers, segments) = in_layers(&names, &voxels, dims.iter().product(), frame_pixels, &mut warnings);
     if voxels.is_empty() {
         return Err("the labelmap is empty: no segment has a pixel in any frame".into());
     }
@@ -156,6 +142,39 @@ pub(super) fn parse_dicom_seg(bytes: &[u8]) -> Result<Labelmap, String> {
         placed: true,
         warnings,
     })
+}
+
+/// A segment as [`Labelmap::segments`] lists it: name, layer, label.
+type Segment = (String, usize, i32);
+
+/// The segments `names`, their `voxels` each in the first layer of `count` voxels it does not
+/// overlap (an empty one in the first), with their (name, layer, label); a warning for each cut at
+/// an end of the frames ([`cut_at_an_end`]).
+fn in_layers(
+    names: &BTreeMap<u32, String>,
+    voxels: &BTreeMap<u32, Vec<u32>>,
+    count: usize,
+    frame_pixels: usize,
+    warnings: &mut Vec<(Option<(usize, i32)>, String)>,
+) -> (Vec<Vec<i32>>, Vec<Segment>) {
+    let mut layers: Vec<Vec<i32>> = vec![vec![0; count]];
+    let mut segments = Vec::new();
+    for (&number, name) in names {
+        let own = voxels.get(&number).map_or(&[][..], Vec::as_slice);
+        let layer = match layers.iter().position(|l| own.iter().all(|&n| l[n as usize] == 0)) {
+            Some(layer) => layer,
+            None => {
+                layers.push(vec![0; count]);
+                layers.len() - 1
+            }
+        };
+        own.iter().for_each(|&n| layers[layer][n as usize] = number as i32);
+        segments.push((name.clone(), layer, number as i32));
+        if let Some(cut) = cut_at_an_end(own, frame_pixels) {
+            warnings.push((Some((layer, number as i32)), cut));
+        }
+    }
+    (layers, segments)
 }
 
 /// Fills, in each segment, the slices between its first and last that no frame of any segment
