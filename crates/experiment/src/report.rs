@@ -360,7 +360,7 @@ pub fn write(root: &Path, results: &[ExperimentResult]) -> Result<[PathBuf; 2]> 
 }
 
 /// The reports of every result under `root` ([`crate::load_all`]): `report.md` and `report.html`
-/// there ([`write`]), and, when given, the headline summary of the Markdown file `readme`
+/// there ([`write()`]), and, when given, the headline summary of the Markdown file `readme`
 /// ([`update_markdown`]) and the full results page `page` ([`write_results_page`]); what was
 /// written, a line each.
 pub fn publish(root: &Path, readme: Option<&Path>, page: Option<&Path>) -> Result<Vec<String>> {
