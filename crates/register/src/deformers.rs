@@ -131,6 +131,9 @@ pub struct HybridDeformer {
     first: Box<dyn Deformer + Send>,
     then: Box<dyn Deformer + Send>,
     first_iterations: usize,
+    /// The iteration of a frame from rest at which the second deformer takes over, when the
+    /// first settled before its `first_iterations`.
+    handover: Option<usize>,
     /// Whether the frame under way is warm-started.
     warm: bool,
     /// Once the second deformer has taken over: the first's estimate, and (at the frame's end) the
@@ -146,7 +149,8 @@ const _: () = assert!(crate::frame::WARM_START_ITERATION >= STIFFNESS_RAMP);
 
 impl HybridDeformer {
     /// `first` (a learned model's deformer) for the first `first_iterations` iterations of a frame
-    /// from rest (at least 1), `then` (on the same organ) after them and on warm-started frames.
+    /// from rest (at least 1), or until it settles, `then` (on the same organ) after them and on
+    /// warm-started frames.
     pub fn new(
         first: Box<dyn Deformer + Send>,
         then: Box<dyn Deformer + Send>,
@@ -161,6 +165,7 @@ impl HybridDeformer {
             first,
             then,
             first_iterations,
+            handover: None,
             warm: false,
             first_estimate: None,
             then_estimate: None,
@@ -172,6 +177,7 @@ impl HybridDeformer {
 impl Deformer for HybridDeformer {
     fn start_frame(&mut self, warm: bool) {
         self.warm = warm;
+        self.handover = None;
         self.first_estimate = None;
         self.then_estimate = None;
         self.last_observations = None;
@@ -181,7 +187,8 @@ impl Deformer for HybridDeformer {
     }
 
     fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>> {
-        let then = match (self.warm, iteration.checked_sub(self.first_iterations)) {
+        let handover = self.handover.unwrap_or(self.first_iterations);
+        let then = match (self.warm, iteration.checked_sub(handover)) {
             (false, None) => None,
             (false, Some(k)) => Some(crate::frame::WARM_START_ITERATION + k),
             (true, _) => Some(iteration),
@@ -191,6 +198,15 @@ impl Deformer for HybridDeformer {
             self.first_estimate.get_or_insert_with(|| previous.to_vec());
         }
         self.then.deform(observations, previous, iteration)
+    }
+
+    fn settled(&mut self, iteration: usize) -> bool {
+        // The first deformer settled on a frame from rest: the second takes over from its estimate.
+        let first_settled = !self.warm && iteration < self.handover.unwrap_or(self.first_iterations);
+        if first_settled {
+            self.handover = Some(iteration + 1);
+        }
+        first_settled
     }
 
     fn end_frame(&mut self, observations: Observations, u: &[f64]) {
@@ -263,6 +279,13 @@ impl Deformer for RestAndStream {
         match self.warm {
             true => self.streamed.deform(observations, previous, iteration),
             false => self.from_rest.deform(observations, previous, iteration),
+        }
+    }
+
+    fn settled(&mut self, iteration: usize) -> bool {
+        match self.warm {
+            true => self.streamed.settled(iteration),
+            false => self.from_rest.settled(iteration),
         }
     }
 
@@ -673,6 +696,19 @@ mod tests {
         let warm = register_frame(&organ, &mut deformer, &cloud, Some(&rest.u), &options).unwrap();
         assert_eq!((rest.u[2], warm.u[2]), (1e-3, 2e-3));
         assert_eq!(register_frame(&organ, &mut deformer, &cloud, None, &options).unwrap().u[2], 1e-3);
+    }
+
+    /// A hybrid whose first deformer settles before its iterations are spent hands over to the
+    /// second then, rather than end the frame with the first's estimate.
+    #[test]
+    fn a_hybrid_hands_over_when_its_first_deformer_settles() {
+        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.04; 3], [2, 2, 2]).unwrap(), None).unwrap();
+        let cloud = organ.surface().vertices.clone();
+        let mut hybrid = HybridDeformer::new(Box::new(Offset(1e-3)), Box::new(Offset(2e-3)), 5).unwrap();
+        let options = RegistrationOptions { iterations: 10, ..RegistrationOptions::default() };
+        let r = register_frame(&organ, &mut hybrid, &cloud, None, &options).unwrap();
+        assert_eq!(r.u[2], 2e-3, "the second deformer's estimate");
+        assert_eq!(r.iterations, 4, "the first settles at its second iteration, the second at its second");
     }
 
     /// The observations of a block's top pressed down 2 mm, seen from above.

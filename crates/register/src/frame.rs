@@ -47,6 +47,12 @@ pub trait Deformer {
     /// A frame begins: warm-started from the previous frame's estimate (`warm`) or from rest.
     fn start_frame(&mut self, _warm: bool) {}
 
+    /// The estimate settled at iteration `iteration`: whether the deformer goes on to a next
+    /// stage (a hybrid's second model) rather than end the frame there. Default: it ends.
+    fn settled(&mut self, _iteration: usize) -> bool {
+        false
+    }
+
     /// A frame ends: `observations` are the matches of its last iteration, `u` its estimate.
     fn end_frame(&mut self, _observations: Observations, _u: &[f64]) {}
 
@@ -333,7 +339,7 @@ pub(crate) fn register_frame_begun(
         let moved =
             next.vertices.iter().zip(&surface.vertices).map(|(a, b)| mesh::distance(*a, *b)).fold(0.0, f64::max);
         surface = next;
-        if moved <= options.tolerance {
+        if moved <= options.tolerance && !deformer.settled(iteration) {
             break;
         }
         if options.time_budget_ms.is_some_and(|budget| mesh::stats::ms(t0.elapsed()) >= budget) && iterations < most {
