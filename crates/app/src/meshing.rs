@@ -219,8 +219,8 @@ pub fn immersed_fill(mesh: &Mesh) -> (f64, usize) {
 /// Writes the mesh in metres with its regions (point data `region_<name>`, or Gmsh physical
 /// groups) and, for an immersed grid, its cells' volume fractions (not in `.msh`); to .stl or
 /// .obj, its boundary surface in millimetres, as 3D Slicer and surface tools read them, naming
-/// `frame` in its header when known (the directory created by the writer). Returns what was written,
-/// in words.
+/// `frame` in its header when known (a `.vtu` names it in its field data; the directory created by
+/// the writer). Returns what was written, in words.
 pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result<String> {
     let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     let context = || format!("writing {}", path.display());
@@ -233,8 +233,12 @@ pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result
         Some(f) if extension != "msh" => vec![Field::cell("volume_fraction", 1, f.clone())],
         _ => Vec::new(),
     };
-    mesh::io::write_mesh(path, mesh, &fields).with_context(context)?;
-    Ok("in m".into())
+    mesh::io::write_mesh_in_frame(path, mesh, &fields, frame).with_context(context)?;
+    let named = match (frame, extension.as_str()) {
+        (Some(f), "vtu") => format!(", frame {f} named"),
+        _ => String::new(),
+    };
+    Ok(format!("in m{named}"))
 }
 
 /// Writes a surface given in metres in millimetres, as 3D Slicer and surface tools read it (.stl,

@@ -150,6 +150,8 @@ pub struct RunWriter {
     unit: LengthUnit,
     /// The frame the clouds were given in (`--frame`), when given: the results' frame.
     given: Option<Frame>,
+    /// The meshes' frame, when known at the start: the clouds', else the organ's.
+    meshes: Option<Frame>,
     /// From the organ's frame to the results'.
     change: FrameChange,
     /// The organ moved by the rigid alignment, with the pose that moved it (moved anew when a
@@ -178,6 +180,7 @@ impl RunWriter {
             sequence,
             unit,
             given,
+            meshes: given.or(organ),
             change,
             moved: None,
             steps: Vec::new(),
@@ -208,7 +211,7 @@ impl RunWriter {
         } else {
             (m, u)
         };
-        mesh::io::write_mesh(self.dir.join(&name), &m, &[Field::point("displacement", 3, u)])?;
+        mesh::io::write_mesh_in_frame(self.dir.join(&name), &m, &[Field::point("displacement", 3, u)], self.meshes)?;
         self.steps.push((i as f64, name));
         self.rows.push(FrameSummary::new(cloud, outcome));
         Ok(self.rows.last().expect("just pushed"))
@@ -310,6 +313,7 @@ pub fn register_files(
     let truths = truth.map(|p| input.read_truths(p, frames.len(), registration.target_labels())).transpose()?;
     say(&format!("method     {}", registration.method()));
     say(&organ_line(registration.organ(), registration.targets().len()));
+    say(&format!("space      {}", spec.frame_line(&registration)));
     registration.warnings().iter().for_each(|w| say(&format!("warning    {w}")));
     let sequence = frames.len() > 1;
     let mut writer = RunWriter::new(out, sequence, spec.given_units, (organ_frame, spec.given_frame))?;

@@ -616,6 +616,24 @@ impl RegistrationSpec {
         GivenCoordinates { unit: self.given_units, change: FrameChange::between(self.given_frame, organ.frame()) }
     }
 
+    /// What [`RegistrationSpec::coordinates`] does with frames, in words.
+    pub fn frame_line(&self, organ: &Registration) -> String {
+        match (self.given_frame, organ.frame()) {
+            (Some(given), Some(organ)) if given != organ => format!(
+                "{given}: clouds naming no frame are taken in it and results given in it; the organ's {organ} (x and y \
+                 negated)"
+            ),
+            (given, Some(organ)) => {
+                format!(
+                    "{}, the organ's: clouds naming no frame are taken in it and results given in it",
+                    given.unwrap_or(organ)
+                )
+            }
+            (Some(given), None) => format!("{given}, given; the organ names none, so nothing is converted"),
+            (None, None) => "none named by the organ or --frame: coordinates are taken as given".into(),
+        }
+    }
+
     /// [`RegistrationSpec::coordinates`] of a stream, whose frame is RAS (the frame OpenIGTLink
     /// sends) unless given; with a line that says what is done.
     pub fn stream_coordinates(&self, organ: &Registration) -> (GivenCoordinates, String) {

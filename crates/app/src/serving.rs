@@ -76,7 +76,7 @@ pub fn serve_setup(spec: RegistrationSpec, outputs: Option<Outputs>, assimilate:
     let (coordinates, frame_line) = spec.stream_coordinates(&first);
     lines.push(format!("method     {}", first.method()));
     lines.push(organ_line(first.organ(), first.targets().len()));
-    lines.push(format!("frame      {frame_line}"));
+    lines.push(format!("space      {frame_line}"));
     lines.extend(first.warnings().iter().map(|w| format!("warning    {w}")));
     let identification = match assimilate {
         Some(path) => Some(stream_filters(path, &mut lines)?),
@@ -136,7 +136,7 @@ mod tests {
         assert_eq!(setup.options.outputs, Outputs::ALL);
         let registration = (setup.registrations)().unwrap();
         assert_eq!(registration.options().time_budget_ms, Some(live::TIME_BUDGET_MS));
-        assert!(setup.lines[0].starts_with("method     FEM") && setup.lines[2].starts_with("frame      "));
+        assert!(setup.lines[0].starts_with("method     FEM") && setup.lines[2].starts_with("space      "));
         let budget = serve_setup(RegistrationSpec { time_budget_ms: Some(50.0), ..spec() }, None, None).unwrap();
         assert_eq!((budget.registrations)().unwrap().options().time_budget_ms, Some(50.0));
         let only_transform = Outputs { transform: true, ..Outputs::NONE };

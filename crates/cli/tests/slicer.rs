@@ -93,6 +93,7 @@ fn slicer_files_and_millimetres_register_as_metres_do() {
     }
     let (surface, frame) = mesh::io::read_surface_with_frame(d.join("slicer/organ_deformed.vtk")).unwrap();
     assert_eq!(frame, Some(Frame::Lps));
+    assert_eq!(mesh::io::surface_frame(d.join("slicer/organ.vtu")).unwrap(), Some(Frame::Lps), "the mesh names it too");
     let extent = |k: usize| {
         let values = surface.vertices.iter().map(|v| v[k]);
         values.clone().fold(f64::MIN, f64::max) - values.fold(f64::MAX, f64::min)

@@ -548,7 +548,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
     write_surface_in_mm(&dir.join(SURFACE_FILE), &surface, frame)?;
     // The regions as point data `region_visible`, `region_attached` (ParaView shows them; the
     // mesh reads them back).
-    mesh::io::write_mesh(dir.join("organ.vtu"), &organ, &[])?;
+    mesh::io::write_mesh_in_frame(dir.join("organ.vtu"), &organ, &[], frame)?;
     // In metres, in the organ's frame, with their labels: what `register` reads back.
     write_points(dir.join("attach.csv"), &LabelledPoints { frame, ..labelled_landmarks })?;
     write_points(dir.join("targets.csv"), &LabelledPoints { frame, ..labelled_targets })?;
@@ -989,6 +989,7 @@ mod tests {
             // The organ stays where the scanner saw it: the phantom spans x from −180 to 20 mm
             // (RAS), y from −40 to 100, z from −185 to −95; in LPS, x and y negated.
             let organ = mesh::io::read_mesh(dir.path().join("organ.vtu")).unwrap();
+            assert_eq!(mesh::io::surface_frame(dir.path().join("organ.vtu")).unwrap(), Some(Frame::Lps));
             let (lo, hi) = organ.bounds();
             let middle: Point = std::array::from_fn(|d| 0.5e3 * (lo[d] + hi[d]));
             assert!(mesh::distance(middle, [80.0, -30.0, -140.0]) < 3.0, "{file}: centre {middle:?}");

@@ -251,6 +251,22 @@ mod tests {
         assert!("IJK".parse::<Frame>().unwrap_err().contains("IJK"));
     }
 
+    /// A mesh written naming its frame reads back as it was, and names its frame as a surface
+    /// file does (a `SPACE` string of the field data, where 3D Slicer reads it).
+    #[test]
+    fn a_volume_mesh_names_its_frame_in_its_field_data() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut mesh = crate::box_tet([0.0; 3], [0.04, 0.02, 0.02], [2, 1, 1]).unwrap();
+        mesh.regions.insert("top".into(), vec![0, 1]);
+        let path = dir.path().join("organ.vtu");
+        super::super::write_mesh_in_frame(&path, &mesh, &[], Some(Frame::Ras)).unwrap();
+        assert_eq!(surface_frame(&path).unwrap(), Some(Frame::Ras));
+        let back = super::super::read_mesh(&path).unwrap();
+        assert_eq!((back.nodes, back.regions), (mesh.nodes.clone(), mesh.regions.clone()));
+        super::super::write_mesh_in_frame(&path, &mesh, &[], None).unwrap();
+        assert_eq!(surface_frame(&path).unwrap(), None);
+    }
+
     /// Given coordinates in mm and RAS against an LPS organ: a point goes in and back out as it
     /// was; a transform given back acts on given points as it acts on the organ's (m).
     #[test]

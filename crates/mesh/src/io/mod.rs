@@ -84,7 +84,7 @@ pub use legacy_vtk::{read_vtk, read_vtk_surface, read_vtk_with_fields, write_vtk
 pub use ply::write_ply_points;
 pub use scalar::Scalar;
 pub use surface_io::{read_obj, read_stl, write_obj, write_stl};
-pub use vtk_xml::{read_vtu, read_vtu_with_fields, write_vtu, write_vtu_with};
+pub use vtk_xml::{read_vtu, read_vtu_with_fields, write_vtu, write_vtu_in_frame, write_vtu_with};
 
 /// Prefix of the name of a point field that holds a region (see the [module](self) documentation).
 pub const REGION_FIELD_PREFIX: &str = "region_";
@@ -289,6 +289,21 @@ pub fn write_mesh(path: impl AsRef<Path>, mesh: &Mesh, fields: &[Field]) -> Resu
             path.display()
         ))),
         _ => Err(parse_error(path, "unknown volume mesh extension (expected .vtu, .vtk or .msh)")),
+    }
+}
+
+/// [`write_mesh`], a `.vtu` naming the mesh's frame when known ([`write_vtu_in_frame`]); the
+/// other formats name none.
+pub fn write_mesh_in_frame(
+    path: impl AsRef<Path>,
+    mesh: &Mesh,
+    fields: &[Field],
+    frame: Option<Frame>,
+) -> Result<(), MeshError> {
+    let path = path.as_ref();
+    match (extension(path).as_str(), frame) {
+        ("vtu", Some(frame)) => write_vtu_in_frame(path, mesh, &with_region_fields(mesh, fields), frame),
+        _ => write_mesh(path, mesh, fields),
     }
 }
 

@@ -103,6 +103,7 @@ fn write_grid(
     cell_type: u8,
     fields: &[Field],
     encoding: Encoding,
+    frame: Option<Frame>,
 ) -> Result<(), MeshError> {
     let cells = conn.len() / k;
     check_for_writing(nodes.len(), cells, conn, fields)?;
@@ -115,9 +116,19 @@ fn write_grid(
             w,
             "<?xml version=\"1.0\"?>\n\
              <VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n\
-             <UnstructuredGrid>\n<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{cells}\">",
-            nodes.len()
+             <UnstructuredGrid>",
         )?;
+        if let Some(frame) = frame {
+            // As 3D Slicer names a model's frame: a string array `SPACE` of the field data.
+            let name: Vec<String> = frame.name().bytes().chain([0]).map(|b| b.to_string()).collect();
+            writeln!(
+                w,
+                "<FieldData>\n<Array type=\"String\" Name=\"SPACE\" NumberOfTuples=\"1\" format=\"ascii\">\n{}\n</Array>\n\
+                 </FieldData>",
+                name.join(" ")
+            )?;
+        }
+        writeln!(w, "<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{cells}\">", nodes.len())?;
         for (location, tag) in [(FieldLocation::Point, "PointData"), (FieldLocation::Cell, "CellData")] {
             let here: Vec<&Field> = fields.iter().filter(|f| f.location == location).collect();
             if here.is_empty() {
@@ -155,13 +166,25 @@ pub fn write_vtu_with(
     encoding: Encoding,
 ) -> Result<(), MeshError> {
     let (ty, k, conn) = mesh_cells_flat(mesh);
-    write_grid(path.as_ref(), &mesh.nodes, &conn, k, ty, fields, encoding)
+    write_grid(path.as_ref(), &mesh.nodes, &conn, k, ty, fields, encoding, None)
+}
+
+/// Like [`write_vtu`], naming the mesh's frame as 3D Slicer reads it from a model's field data
+/// (a string array `SPACE`).
+pub fn write_vtu_in_frame(
+    path: impl AsRef<Path>,
+    mesh: &Mesh,
+    fields: &[Field],
+    frame: Frame,
+) -> Result<(), MeshError> {
+    let (ty, k, conn) = mesh_cells_flat(mesh);
+    write_grid(path.as_ref(), &mesh.nodes, &conn, k, ty, fields, Encoding::Binary, Some(frame))
 }
 
 /// Writes a surface as a `.vtu` of triangles.
 pub(super) fn write_surface_vtu(path: &Path, surface: &TriSurface) -> Result<(), MeshError> {
     let conn = check_surface(surface)?;
-    write_grid(path, &surface.vertices, &conn, 3, VTK_TRIANGLE, &[], Encoding::Binary)
+    write_grid(path, &surface.vertices, &conn, 3, VTK_TRIANGLE, &[], Encoding::Binary, None)
 }
 
 /// Message for a binary header that ends early.
