@@ -726,7 +726,11 @@ impl RegistrationSpec {
         let text = std::fs::read_to_string(&path).with_context(|| {
             format!("reading {} (is {} a directory made by augsim prepare?)", path.display(), dir.display())
         })?;
-        let p: Patient = toml::from_str(&text).with_context(|| format!("reading {}", path.display()))?;
+        let p: Patient = toml::from_str(&text).map_err(|e| {
+            let newer =
+                if e.message().starts_with("unknown field") { " (prepared by a newer augsim? update it)" } else { "" };
+            anyhow::anyhow!("reading {}{newer}: {e}", path.display())
+        })?;
         let method = match method.unwrap_or(p.method) {
             PatientMethod::Fem => MethodSpec::fem(dir.join(p.fem)),
             PatientMethod::Learned => MethodSpec::learned(dir.join(p.model), dir.join(p.scenario)),
@@ -883,6 +887,11 @@ mod tests {
             let asked = RegistrationChoice { frame: Some(Frame::Lps), ..choice };
             assert_eq!(asked.spec().unwrap().given_frame, Some(Frame::Lps), "the frame asked for wins");
         }
+        std::fs::write(dir.path().join(PATIENT_FILE), format!("{set_up}input_shape = \"ball\"\n")).unwrap();
+        let newer = RegistrationSpec::patient(dir.path(), None, None, false).unwrap_err().to_string();
+        assert!(
+            newer.contains("(prepared by a newer augsim? update it)") && newer.contains("unknown field `input_shape`")
+        );
     }
 
     #[test]

@@ -701,10 +701,17 @@ fn scenarios_step(options: &PrepareOptions, input_frame: Option<Frame>, dir: &Pa
     write_atomic_bytes(&dir.join("dataset.toml"), dataset.as_bytes())?;
     write_atomic_bytes(&dir.join("static.toml"), fem.as_bytes())?;
     write_atomic_bytes(&dir.join(PATIENT_FILE), patient.as_bytes())?;
-    Ok(vec![format!(
+    let mut lines = vec![format!(
         "scenarios: dataset.toml (grid {nx} × {ny} × {nz}, tool radius {:.0} mm), static.toml, {PATIENT_FILE}",
         mm(radius)
-    )])
+    )];
+    lines.extend(input_frame.map(|f| {
+        format!(
+            "frame: clouds whose files name no frame will be taken in {f}, the inputs' frame, and results given in \
+             it (input_frame in {PATIENT_FILE}; --frame says otherwise)"
+        )
+    }));
+    Ok(lines)
 }
 
 /// Step 3: the FEM draws.

@@ -94,13 +94,12 @@ fn write_array<T: VtuScalar>(
     }
 }
 
-/// Writes a whole `.vtu` file of cells of one VTK type with `k` nodes each.
+/// Writes a whole `.vtu` file of cells of one VTK type (`cells`: their connectivity, `k` nodes
+/// each, their type).
 fn write_grid(
     path: &Path,
     nodes: &[Point],
-    conn: &[usize],
-    k: usize,
-    cell_type: u8,
+    (conn, k, cell_type): (&[usize], usize, u8),
     fields: &[Field],
     encoding: Encoding,
     frame: Option<Frame>,
@@ -166,7 +165,7 @@ pub fn write_vtu_with(
     encoding: Encoding,
 ) -> Result<(), MeshError> {
     let (ty, k, conn) = mesh_cells_flat(mesh);
-    write_grid(path.as_ref(), &mesh.nodes, &conn, k, ty, fields, encoding, None)
+    write_grid(path.as_ref(), &mesh.nodes, (&conn, k, ty), fields, encoding, None)
 }
 
 /// Like [`write_vtu`], naming the mesh's frame as 3D Slicer reads it from a model's field data
@@ -178,13 +177,13 @@ pub fn write_vtu_in_frame(
     frame: Frame,
 ) -> Result<(), MeshError> {
     let (ty, k, conn) = mesh_cells_flat(mesh);
-    write_grid(path.as_ref(), &mesh.nodes, &conn, k, ty, fields, Encoding::Binary, Some(frame))
+    write_grid(path.as_ref(), &mesh.nodes, (&conn, k, ty), fields, Encoding::Binary, Some(frame))
 }
 
 /// Writes a surface as a `.vtu` of triangles.
 pub(super) fn write_surface_vtu(path: &Path, surface: &TriSurface) -> Result<(), MeshError> {
     let conn = check_surface(surface)?;
-    write_grid(path, &surface.vertices, &conn, 3, VTK_TRIANGLE, &[], Encoding::Binary, None)
+    write_grid(path, &surface.vertices, (&conn, 3, VTK_TRIANGLE), &[], Encoding::Binary, None)
 }
 
 /// Message for a binary header that ends early.
