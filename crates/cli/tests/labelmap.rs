@@ -40,16 +40,7 @@ fn labelmap() -> Labelmap {
             }
         }
     }
-    Labelmap {
-        dims,
-        layers: 1,
-        labels,
-        affine,
-        frame: Frame::Ras,
-        segments: Vec::new(),
-        placed: true,
-        warnings: Vec::new(),
-    }
+    Labelmap::single(dims, labels, affine, Frame::Ras)
 }
 
 #[test]

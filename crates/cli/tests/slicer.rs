@@ -155,16 +155,7 @@ fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
             }
         }
     }
-    let map = mesh::labelmap::Labelmap {
-        dims,
-        layers: 1,
-        labels,
-        affine,
-        frame: Frame::Ras,
-        segments: Vec::new(),
-        placed: true,
-        warnings: Vec::new(),
-    };
+    let map = mesh::labelmap::Labelmap::single(dims, labels, affine, Frame::Ras);
     mesh::labelmap::write_nifti(d.join("seg.nii.gz"), &map).unwrap();
     let labelled = format!("{}:5", d.join("seg.nii.gz").display());
     let (registered, _) = register(

@@ -286,16 +286,7 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
     let affine = nifti_affine(i16_at(252), i16_at(254), &pixdim, f32_at)?;
     let affine = in_millimetres(affine, nifti_unit_mm(bytes[123])?);
     let placed = i16_at(252) > 0 || i16_at(254) > 0;
-    Ok(Labelmap {
-        dims,
-        layers: 1,
-        labels,
-        affine,
-        frame: Frame::Ras,
-        segments: Vec::new(),
-        placed,
-        warnings: Vec::new(),
-    })
+    Ok(Labelmap { placed, ..Labelmap::single(dims, labels, affine, Frame::Ras) })
 }
 
 /// The millimetres in a NIfTI spatial unit (the low three bits of `xyzt_units`): metre, mm,
@@ -642,6 +633,12 @@ fn slicer_segments(pairs: &BTreeMap<String, String>, layers: usize) -> Result<Ve
 const SHOWN_LABELS: usize = 20;
 
 impl Labelmap {
+    /// A labelmap of one layer: `labels` (i fastest, then j, then k) on a grid of `dims` voxels
+    /// placed in `frame` by `affine`, naming no segment.
+    pub fn single(dims: [usize; 3], labels: Vec<i32>, affine: [[f64; 4]; 3], frame: Frame) -> Labelmap {
+        Labelmap { dims, layers: 1, labels, affine, frame, segments: Vec::new(), placed: true, warnings: Vec::new() }
+    }
+
     /// The size of a voxel along i, j and k (mm).
     pub fn spacing(&self) -> [f64; 3] {
         std::array::from_fn(|c| (0..3).map(|r| self.affine[r][c].powi(2)).sum::<f64>().sqrt())
@@ -1044,7 +1041,7 @@ mod tests {
             }
         }
         let segments = vec![("liver".to_string(), 0, 5), ("tumour".to_string(), 0, 2)];
-        (Labelmap { dims, layers: 1, labels, affine, frame, segments, placed: true, warnings: Vec::new() }, organ)
+        (Labelmap { segments, ..Labelmap::single(dims, labels, affine, frame) }, organ)
     }
 
     /// Whether two affines agree entry by entry within `tolerance`.
@@ -1495,16 +1492,7 @@ mod tests {
             .map(|p| if centres.iter().any(|&c| norm(sub(p, c)) <= 6.0) { 5 } else { 0 })
             .collect();
         let affine = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
-        let twins = Labelmap {
-            dims,
-            layers: 1,
-            labels,
-            affine,
-            frame: Frame::Ras,
-            segments: Vec::new(),
-            placed: true,
-            warnings: Vec::new(),
-        };
+        let twins = Labelmap::single(dims, labels, affine, Frame::Ras);
         let (mask, _) = twins.select("5").unwrap();
         let e = mask_surface(&mask, &ExtractOptions::default()).unwrap_err().to_string();
         assert!(e.contains("several pieces of similar size"), "{e}");

@@ -54,7 +54,7 @@ fn phantom_labelmap() -> Labelmap {
         }
     }
     let segments = vec![("liver".into(), 0, 5), ("kidney".into(), 0, 2)];
-    Labelmap { dims, layers: 1, labels, affine, frame: Frame::Ras, segments, placed: true, warnings: Vec::new() }
+    Labelmap { segments, ..Labelmap::single(dims, labels, affine, Frame::Ras) }
 }
 
 /// The same voxels in LPS, as 3D Slicer's DICOM-derived files hold them.

@@ -90,16 +90,7 @@ pub(super) fn parse_metaimage(bytes: &[u8], folder: &Path) -> Result<Labelmap, S
         Some(_) => return Err(format!("bad HeaderSize {}", get(&["HeaderSize"]).unwrap_or_default())),
     };
     let labels = labels(scalar, data, count, dims[2], !is_true(msb))?;
-    Ok(Labelmap {
-        dims,
-        layers: 1,
-        labels,
-        affine,
-        frame: Frame::Lps,
-        segments: Vec::new(),
-        placed: true,
-        warnings: Vec::new(),
-    })
+    Ok(Labelmap::single(dims, labels, affine, Frame::Lps))
 }
 
 /// The header's fields by lower-case key, and the bytes after `ElementDataFile`'s line.
