@@ -392,10 +392,8 @@ struct Inputs {
     targets: LabelledPoints,
     camera: Point,
     /// The frame they were given in: the surface's, or, when its header names none, the first
-    /// named by the points' files.
+    /// named by the points' files; they are in [`SET_UP_FRAME`] when it is named.
     given: Option<Frame>,
-    /// The set-up's: [`SET_UP_FRAME`] when they name one.
-    frame: Option<Frame>,
 }
 
 /// Reads the surface in its unit (given or detected) and frame, and the landmarks, the targets
@@ -425,7 +423,7 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
         (None, None) => "frame: not named by any input (SPACE= header, .fcsv, .mrk.json): all taken as given".into(),
     });
     lines.extend(input.warnings.iter().map(|w| format!("warning: {w}")));
-    let mut inputs = Inputs { surface, unit, landmarks, targets, camera, given, frame: given };
+    let mut inputs = Inputs { surface, unit, landmarks, targets, camera, given };
     if let Some(from) = given {
         inputs.convert(from, SET_UP_FRAME);
     }
@@ -439,7 +437,11 @@ impl Inputs {
         from.convert_all(to, &mut self.landmarks.points);
         from.convert_all(to, &mut self.targets.points);
         self.camera = from.convert(to, self.camera);
-        self.frame = Some(to);
+    }
+
+    /// The frame they are in: [`SET_UP_FRAME`] when one was named.
+    fn frame(&self) -> Option<Frame> {
+        self.given.map(|_| SET_UP_FRAME)
     }
 }
 
@@ -459,8 +461,9 @@ fn thin_part_left_out(surface: &TriSurface, organ: &register::Organ, targets: &[
 /// Returns what it did and the frame its inputs were given in.
 fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Option<Frame>)> {
     let mut lines = Vec::new();
-    let Inputs { surface, unit, landmarks: labelled_landmarks, targets: labelled_targets, camera, given, frame } =
-        read_inputs(options, &mut lines)?;
+    let inputs = read_inputs(options, &mut lines)?;
+    let frame = inputs.frame();
+    let Inputs { surface, unit, landmarks: labelled_landmarks, targets: labelled_targets, camera, given } = inputs;
     let (mut surface, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
         .with_context(|| format!("repairing {}", options.surface.display()))?;
     lines.extend(route.lines(Some(mm(unit.metres()))).into_iter().map(|l| format!("repair: {l}")));
