@@ -25,6 +25,9 @@ const SEGMENTATION_CLASSES: [&str; 2] = ["1.2.840.10008.5.1.4.1.1.66.4", "1.2.84
 /// VR, and explicit VR deflated.
 const NATIVE_SYNTAXES: [&str; 3] = ["1.2.840.10008.1.2", "1.2.840.10008.1.2.1", "1.2.840.10008.1.2.1.99"];
 
+/// Explicit VR big endian, retired: uncompressed, in the other byte order.
+const BIG_ENDIAN: &str = "1.2.840.10008.1.2.2";
+
 /// A compressed transfer syntax by name, with its UID.
 fn syntax_name(uid: &str) -> String {
     let name = match uid {
@@ -34,7 +37,6 @@ fn syntax_name(uid: &str) -> String {
         "1.2.840.10008.1.2.4.80" | "1.2.840.10008.1.2.4.81" => "JPEG-LS",
         "1.2.840.10008.1.2.4.90" | "1.2.840.10008.1.2.4.91" => "JPEG 2000",
         "1.2.840.10008.1.2.4.201" | "1.2.840.10008.1.2.4.202" | "1.2.840.10008.1.2.4.203" => "HTJ2K",
-        "1.2.840.10008.1.2.2" => "explicit VR big endian",
         _ => return format!("transfer syntax {uid}"),
     };
     format!("{name}, transfer syntax {uid}")
@@ -61,6 +63,11 @@ pub(super) fn parse_dicom_seg(bytes: &[u8]) -> Result<Labelmap, String> {
         ));
     }
     let syntax = object.meta().transfer_syntax().trim_end_matches('\0').to_string();
+    if syntax == BIG_ENDIAN {
+        return Err("it is written big endian (a retired transfer syntax), which is not read: save it again little \
+                    endian (`gdcmconv --raw IN.dcm OUT.dcm`, or pydicom)"
+            .into());
+    }
     if !NATIVE_SYNTAXES.contains(&syntax.as_str()) {
         return Err(format!(
             "its pixel data are compressed ({}), which is not read: decompress it first (`gdcmconv --raw IN.dcm \
@@ -371,7 +378,10 @@ fn pixel_reader<'a>(
         ("BINARY", 1) => Box::new(move |n| u32::from(data[n / 8] >> (n % 8) & 1)),
         ("FRACTIONAL", 8 | 16) => {
             let most = number(object, tags::MAXIMUM_FRACTIONAL_VALUE)?;
-            Box::new(move |n| u32::from(2 * word(n) >= most && word(n) > 0))
+            Box::new(move |n| {
+                let value = word(n);
+                u32::from(value > 0 && 2 * value >= most)
+            })
         }
         ("LABELMAP", 8 | 16) => Box::new(word),
         (kind, bits) => {
@@ -416,10 +426,8 @@ impl Grid {
         let mut heights: Vec<f64> = planes.iter().map(|p| along(p.position)).collect();
         heights.sort_by(f64::total_cmp);
         heights.dedup_by(|a, b| (*a - *b).abs() < SAME_SLICE_MM);
-        let between = object
-            .get(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE)
-            .and_then(InMemElement::items)
-            .and_then(|s| s.first())
+        let between = items(object, tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE)
+            .first()
             .and_then(|g| items(g, tags::PIXEL_MEASURES_SEQUENCE).first())
             .and_then(|m| m.get(tags::SPACING_BETWEEN_SLICES))
             .and_then(|e| e.to_float64().ok())
@@ -650,5 +658,6 @@ mod tests {
         let cut = error(whole[..whole.len() * 7 / 10].to_vec());
         assert!(cut.starts_with("a DICOM file that cannot be read: cut short or damaged?"), "{cut}");
         assert_eq!(syntax_name("1.2.840.10008.1.2.4.90"), "JPEG 2000, transfer syntax 1.2.840.10008.1.2.4.90");
+        assert_eq!(syntax_name(BIG_ENDIAN), format!("transfer syntax {BIG_ENDIAN}"), "not a compression");
     }
 }
