@@ -39,7 +39,7 @@ enum Command {
     Mesh {
         /// Organ surface (.obj, .stl, .ply, .vtk, .vtp, .vtu), repaired first unless --no-repair (through voxels
         /// when local repair cannot mend it), or a segmentation's labelmap (.nii, .nii.gz, .nrrd,
-        /// .seg.nrrd, .nhdr, .mha, .mhd, a DICOM SEG .dcm; in mm, the scanner's frame kept); the liver phantom when omitted.
+        /// .seg.nrrd, .nhdr, .mha, .mhd, a DICOM SEG or RTSTRUCT; in mm, the scanner's frame kept); the liver phantom when omitted.
         surface: Option<PathBuf>,
         /// The labelmap's label: a number (e.g. 5, TotalSegmentator's liver) or a segment name
         /// (3D Slicer's); needed when the file holds several.

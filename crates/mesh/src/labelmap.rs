@@ -1,7 +1,8 @@
 //! Segmentations as labelmaps: NIfTI-1 (`.nii`, `.nii.gz`, as TotalSegmentator writes them) and
 //! NRRD (`.nrrd`, `.seg.nrrd`, as 3D Slicer saves segmentations; `.nhdr`, a header whose data
 //! lie in a file beside it), MetaImage (`.mha`, `.mhd`, as ITK-SNAP and SLIVER07 give them) and
-//! DICOM SEG (`.dcm`, as TotalSegmentator, 3D Slicer and highdicom export them).
+//! DICOM SEG and RT Structure Sets (`.dcm` or no extension, as TotalSegmentator, 3D Slicer,
+//! highdicom and treatment planning systems export them).
 //!
 //! A labelmap is a 3D grid of integer labels (0 is the background) with the affine map from voxel
 //! indices (i, j, k) to world coordinates in millimetres, read from the header: spacing (voxels
@@ -25,7 +26,7 @@
 //! segmentations (a first `list` axis of layers); DICOM SEG of uncompressed BINARY, FRACTIONAL or
 //! LABELMAP frames (see its module), its segments by number and label.
 
-mod dicom_seg;
+mod dicom;
 mod metaimage;
 
 use std::collections::{BTreeMap, HashSet};
@@ -67,12 +68,15 @@ fn parse_error(path: &Path, message: impl Into<String>) -> MeshError {
 }
 
 /// The labelmaps read, for messages.
-pub const LABELMAP_FORMATS: &str = ".nii, .nii.gz, .nrrd, .seg.nrrd, .nhdr, .mha, .mhd or a DICOM SEG .dcm";
+pub const LABELMAP_FORMATS: &str =
+    ".nii, .nii.gz, .nrrd, .seg.nrrd, .nhdr, .mha, .mhd or a DICOM SEG or RTSTRUCT (.dcm or no extension)";
 
-/// True when `path` names a labelmap by its extension ([`LABELMAP_FORMATS`]).
+/// True when `path` names a labelmap by its extension ([`LABELMAP_FORMATS`]), or is a DICOM file
+/// by its content (PACS and scanners write them without an extension).
 pub fn is_labelmap(path: &Path) -> bool {
     let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     [".nii", ".nii.gz", ".nrrd", ".nhdr", ".mha", ".mhd", ".dcm"].iter().any(|e| name.ends_with(e))
+        || dicom::is_dicom_file(path)
 }
 
 /// Why an organ's segmentation given as `path` cannot be read, saying what to give instead: a
@@ -85,17 +89,16 @@ pub fn unreadable_segmentation(path: &Path) -> Option<String> {
         "save the segmentation as a labelmap ({LABELMAP_FORMATS}) or a surface (.stl, .obj, .ply, .vtk, .vtp, .vtu)"
     );
     if path.is_dir() {
-        let dicom = std::fs::read_dir(path).map_or(0, |entries| {
-            entries.flatten().filter(|e| e.path().extension().is_some_and(|x| x.eq_ignore_ascii_case("dcm"))).count()
-        });
+        let dicom = std::fs::read_dir(path)
+            .map_or(0, |entries| entries.flatten().filter(|e| dicom::is_dicom_file(&e.path())).count());
         return Some(match dicom {
             0 => format!(
                 "a folder, not a file (a DICOM series is not read): segment it (3D Slicer, TotalSegmentator) and \
                  {save_as}"
             ),
             n => format!(
-                "a folder, not a file: give its DICOM SEG, if one of its {n} .dcm files is (a DICOM image series is \
-                 not read), or {save_as}"
+                "a folder, not a file: give its DICOM SEG or RTSTRUCT, if one of its {n} DICOM files is (a DICOM \
+                 image series is not read), or {save_as}"
             ),
         });
     }
@@ -103,9 +106,7 @@ pub fn unreadable_segmentation(path: &Path) -> Option<String> {
         return None;
     }
     Some(match extension {
-        "dicom" | "ima" | "" => {
-            format!("a DICOM file? a DICOM SEG is read when named .dcm; an image series is not: {save_as}")
-        }
+        "dicom" | "ima" | "" => format!("neither a DICOM file by its content nor named by an extension: {save_as}"),
         "mgz" | "mgh" | "hdr" | "img" | "nia" => {
             format!("this image format is not read: {save_as} (3D Slicer or ITK-SNAP: Save as)")
         }
@@ -126,8 +127,8 @@ pub fn read_labelmap(path: impl AsRef<Path>) -> Result<Labelmap, MeshError> {
         metaimage::parse_metaimage(&bytes, folder).map_err(|m| parse_error(path, m))?
     } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
         parse_nifti(&gunzip_if_needed(bytes).map_err(|m| parse_error(path, m))?).map_err(|m| parse_error(path, m))?
-    } else if name.ends_with(".dcm") {
-        dicom_seg::parse_dicom_seg(&bytes).map_err(|m| parse_error(path, m))?
+    } else if name.ends_with(".dcm") || bytes.get(128..132) == Some(b"DICM") {
+        dicom::parse_dicom(&bytes).map_err(|m| parse_error(path, m))?
     } else {
         return Err(parse_error(path, format!("not a labelmap: expected {LABELMAP_FORMATS}")));
     };
@@ -1378,12 +1379,18 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let said = |name: &str| unreadable_segmentation(&dir.path().join(name)).unwrap_or_default();
         assert!(said("").starts_with("a folder, not a file (a DICOM series is not read)"), "{}", said(""));
-        assert!(said("IM0001").starts_with("a DICOM file? a DICOM SEG is read when named .dcm; an image series is not"));
+        assert!(said("IM0001").starts_with("neither a DICOM file by its content nor named by an extension"));
         assert!(said("liver.mgz").contains("this image format is not read"), "{}", said("liver.mgz"));
         assert!(said("liver.xyz").contains("not a labelmap nor a surface"));
         for fine in ["liver.STL", "seg.seg.nrrd", "seg.nii.gz", "seg.nhdr", "liver.mhd", "organ.vtu", "seg.dcm"] {
             assert_eq!(said(fine), "", "{fine}");
         }
+        // A DICOM file is one by its content, as PACS write them: without an extension.
+        std::fs::copy(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/liver_labels_rt.dcm"), dir.path().join("RS1"))
+            .unwrap();
+        assert_eq!(said("RS1"), "");
+        assert!(read_labelmap(dir.path().join("RS1")).is_ok());
+        assert!(said("").starts_with("a folder, not a file: give its DICOM SEG or RTSTRUCT, if one of its 1 DICOM"));
     }
 
     /// A CT given for a labelmap is named an image, in a message of a line; a labelmap of many

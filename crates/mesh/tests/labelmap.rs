@@ -128,7 +128,7 @@ fn voxel_positions(map: &Labelmap, choice: &str) -> std::collections::BTreeSet<[
     mask.inside.iter().enumerate().filter(|(_, &inside)| inside).map(|(n, _)| at(n)).collect()
 }
 
-/// The phantom's labelmap as a DICOM SEG written by highdicom (`make_dicom_seg.py`: a writer
+/// The phantom's labelmap as a DICOM SEG written by highdicom (`make_dicom.py`: a writer
 /// that is not augsim's; its frames stacked along −z of their normal, the empty ones left out)
 /// holds the same voxels, at the same places in LPS, as the `.seg.nrrd` it was made from.
 #[test]
@@ -156,4 +156,43 @@ fn a_dicom_seg_holds_the_voxels_of_the_labelmap_it_was_made_from() {
     assert!((a / b - 1.0).abs() < 0.005, "{a} vs {b} mm³");
     let (a, b) = (centre(&from_seg.surface.vertices), centre(&from_nrrd.surface.vertices));
     assert!(norm(sub(a, b)) < 1.0, "{a:?} vs {b:?}");
+}
+
+/// The centroid of the volume a closed surface encloses.
+fn enclosed_centroid(surface: &augsim_mesh::TriSurface) -> Point {
+    let (mut volume, mut moment) = (0.0, [0.0; 3]);
+    for t in &surface.triangles {
+        let [a, b, c] = t.map(|v| surface.vertices[v]);
+        let v = augsim_mesh::dot(a, augsim_mesh::cross(b, c)) / 6.0;
+        volume += v;
+        (0..3).for_each(|d| moment[d] += v * (a[d] + b[d] + c[d]) / 4.0);
+    }
+    moment.map(|m| m / volume)
+}
+
+/// The phantom's labelmap as an RT Structure Set written by rt-utils (`make_dicom.py`: contours
+/// through the centres of each CT slice's boundary pixels, as TotalSegmentator writes them) reads
+/// as its polygons filled, and so as the same organs at the same places in LPS, smaller by the half
+/// pixel the contours lose around each slice (2 % of the liver, 5 % of the ball below it).
+#[test]
+fn an_rt_structure_set_holds_the_organs_it_was_drawn_from() {
+    let rt = read_labelmap(data("liver_labels_rt.dcm")).unwrap();
+    assert_eq!(rt.frame, Frame::Lps);
+    let names: Vec<(&str, i32)> = rt.segments.iter().map(|(name, _, label)| (name.as_str(), *label)).collect();
+    assert_eq!(names, [("liver", 1), ("kidney", 2)]);
+    assert_eq!(rt.spacing(), [1.0, 1.0, 4.0]);
+    let options = ExtractOptions::default();
+    let volume = |s: &augsim_mesh::TriSurface| check_closed_manifold(s).unwrap().volume;
+    // The contours' areas (shoelace, by pydicom) times the 4 mm between slices, in mm³.
+    for (organ, contours, (low, high)) in [("liver", 1_111_383.0, (0.97, 0.99)), ("kidney", 86_220.0, (0.94, 0.96))] {
+        let filled = rt.select(organ).unwrap().0.count() as f64 * 4.0;
+        assert!((filled / contours - 1.0).abs() < 0.003, "{organ}: {filled} mm³ filled, {contours} in its contours");
+        let from_rt = read_labelmap_surface(data("liver_labels_rt.dcm"), Some(organ), &options).unwrap();
+        let from_nrrd = read_labelmap_surface(data("liver_labels.seg.nrrd"), Some(organ), &options).unwrap();
+        assert!(from_rt.warnings.is_empty(), "{:?}", from_rt.warnings);
+        let ratio = volume(&from_rt.surface) / volume(&from_nrrd.surface);
+        assert!(ratio > low && ratio < high, "{organ}: {ratio} of the labelmap's volume");
+        let (p, q) = (enclosed_centroid(&from_rt.surface), enclosed_centroid(&from_nrrd.surface));
+        assert!(norm(sub(p, q)) < 0.3, "{organ}: {p:?} vs {q:?}");
+    }
 }

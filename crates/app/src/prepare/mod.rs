@@ -75,7 +75,7 @@ pub use validation::{PICTURE, TRUTH_DIR};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PrepareOptions {
     /// The segmented surface (.stl, .obj, .ply, .vtk, .vtp, .vtu) or labelmap (.nii, .nii.gz, .nrrd,
-    /// .seg.nrrd, a DICOM SEG .dcm).
+    /// .seg.nrrd, a DICOM SEG or RTSTRUCT).
     pub surface: PathBuf,
     /// The labelmap's label: a number or a segment name (`None`: the only label it holds).
     #[serde(default)]
@@ -142,7 +142,7 @@ pub struct PrepareArgs {
     /// The segmented organ: a surface (.stl, .obj, .ply, .vtk, .vtp, .vtu) as a segmentation gives it (holes,
     /// duplicated vertices and flipped triangles are repaired; what local repair cannot mend is
     /// rebuilt through voxels), or a labelmap (.nii, .nii.gz from TotalSegmentator, .seg.nrrd
-    /// from 3D Slicer, .nrrd, .nhdr, .mha, .mhd, a DICOM SEG .dcm; in mm, in the scanner's frame the file states, RAS or LPS).
+    /// from 3D Slicer, .nrrd, .nhdr, .mha, .mhd, a DICOM SEG or RTSTRUCT; in mm, in the scanner's frame the file states, RAS or LPS).
     pub surface: PathBuf,
     /// The labelmap's label: a number (TotalSegmentator's liver is 5) or a segment name (3D
     /// Slicer's); needed when it holds several.

@@ -1,16 +1,20 @@
-"""Writes liver_labels_seg.dcm: the liver phantom's labelmap (liver_labels.seg.nrrd) as a DICOM SEG
-made by highdicom, an independent writer (pip install highdicom), over a synthetic CT series of the
-same geometry. Its segments: 1 `liver` (label 5 of the labelmap), 2 `kidney` (label 2); empty
-frames omitted, as highdicom does by default.
+"""Writes the liver phantom's labelmap (liver_labels.seg.nrrd) as DICOM by independent writers, over
+a synthetic CT series of the same geometry (pip install highdicom rt-utils):
+- liver_labels_seg.dcm: a DICOM SEG made by highdicom; segments 1 `liver` (label 5 of the
+  labelmap) and 2 `kidney` (label 2); empty frames omitted, as highdicom does by default;
+- liver_labels_rt.dcm: an RT Structure Set made by rt-utils (as TotalSegmentator writes one); ROIs
+  `liver` and `kidney`, contours through the centres of each slice's boundary pixels (OpenCV).
 
-    python make_dicom_seg.py   # in this folder
+    python make_dicom.py   # in this folder
 """
 
 import gzip
+import tempfile
 from pathlib import Path
 
 import highdicom as hd
 import numpy as np
+from rt_utils import RTStructBuilder
 from pydicom.dataset import Dataset, FileMetaDataset
 from pydicom.sr.codedict import codes
 from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
@@ -80,3 +84,15 @@ seg = hd.seg.Segmentation(
 )
 seg.save_as(here / "liver_labels_seg.dcm")
 print(f"{seg.NumberOfFrames} frames, {(here / 'liver_labels_seg.dcm').stat().st_size} bytes")
+
+# rt-utils reads the series from files and orders the slices along their normal (-z here, as the
+# rows run along -y): slice s of its mask is the labelmap's k = nz - 1 - s.
+with tempfile.TemporaryDirectory() as series_folder:
+    for k, s in enumerate(ct):
+        s.save_as(Path(series_folder) / f"ct{k:03d}.dcm", enforce_file_format=True)
+    rt = RTStructBuilder.create_new(dicom_series_path=series_folder)
+    along_normal = labels[::-1].transpose(1, 2, 0)
+    rt.add_roi(mask=along_normal == 5, name="liver")
+    rt.add_roi(mask=along_normal == 2, name="kidney")
+    rt.save(str(here / "liver_labels_rt.dcm"))
+print(f"RT structure set: {(here / 'liver_labels_rt.dcm').stat().st_size} bytes")

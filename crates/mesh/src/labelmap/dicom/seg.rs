@@ -1,4 +1,4 @@
-//! DICOM Segmentation objects (DICOM SEG, `.dcm`), as TotalSegmentator (`--output_type dicom`),
+//! DICOM Segmentation objects (DICOM SEG), as TotalSegmentator (`--output_type dicom`),
 //! 3D Slicer, MONAI Label and highdicom write them: a multi-frame image whose frames are planes
 //! of one segment each (BINARY: one bit per pixel, FRACTIONAL: a byte or two thresholded at half
 //! their maximum; LABELMAP: the segment number per pixel), placed by their per-frame
@@ -9,17 +9,16 @@
 //! a segment that overlaps those of a layer goes to a layer of its own, as 3D Slicer's layered
 //! segmentations do, so that every segment is read whole.
 
-use std::collections::{BTreeMap, BTreeSet, HashSet};
+use std::collections::{BTreeMap, BTreeSet};
 
 use dicom_dictionary_std::tags;
-use dicom_object::file::ReadPreamble;
-use dicom_object::mem::InMemElement;
-use dicom_object::{InMemDicomObject, OpenFileOptions};
+use dicom_object::{DefaultDicomObject, InMemDicomObject};
 
-use super::{Frame, Labelmap};
+use super::{fill_missing_slices, in_layers, items, name_of, number, numbers, slice_step, text, SAME_SLICE_MM};
+use crate::labelmap::{Frame, Labelmap};
 
 /// The SOP class of a Segmentation (and of a Label Map Segmentation).
-const SEGMENTATION_CLASSES: [&str; 2] = ["1.2.840.10008.5.1.4.1.1.66.4", "1.2.840.10008.5.1.4.1.1.66.7"];
+pub(super) const SEGMENTATION_CLASSES: [&str; 2] = ["1.2.840.10008.5.1.4.1.1.66.4", "1.2.840.10008.5.1.4.1.1.66.7"];
 
 /// Transfer syntaxes whose pixel data are not compressed, in little endian: implicit and explicit
 /// VR, and explicit VR deflated.
@@ -42,26 +41,8 @@ fn syntax_name(uid: &str) -> String {
     format!("{name}, transfer syntax {uid}")
 }
 
-/// Positions along the slice normal closer than this (mm) are one slice.
-const SAME_SLICE_MM: f64 = 1e-3;
-
-/// Reads a DICOM SEG from the bytes of its file.
-pub(super) fn parse_dicom_seg(bytes: &[u8]) -> Result<Labelmap, String> {
-    let object = OpenFileOptions::new().read_preamble(ReadPreamble::Auto).from_reader(bytes).map_err(|e| {
-        if bytes.get(128..132) == Some(b"DICM") {
-            format!("a DICOM file that cannot be read: cut short or damaged? ({e})")
-        } else {
-            format!("not a DICOM file ({e})")
-        }
-    })?;
-    let class = text(&object, tags::SOP_CLASS_UID).unwrap_or_default();
-    if !SEGMENTATION_CLASSES.contains(&class.as_str()) {
-        let modality = text(&object, tags::MODALITY).unwrap_or_else(|| "unknown".into());
-        return Err(format!(
-            "a DICOM {modality} image (SOP class {class}), not a segmentation: segment it (3D Slicer, \
-             TotalSegmentator) and give its DICOM SEG or a labelmap"
-        ));
-    }
+/// Reads a DICOM SEG (`object`, of one of the [`SEGMENTATION_CLASSES`]).
+pub(super) fn read(object: &DefaultDicomObject) -> Result<Labelmap, String> {
     let syntax = object.meta().transfer_syntax().trim_end_matches('\0').to_string();
     if syntax == BIG_ENDIAN {
         return Err("it is written big endian (a retired transfer syntax), which is not read: save it again little \
@@ -76,24 +57,24 @@ pub(super) fn parse_dicom_seg(bytes: &[u8]) -> Result<Labelmap, String> {
             syntax_name(&syntax)
         ));
     }
-    let rows = number(&object, tags::ROWS)? as usize;
-    let columns = number(&object, tags::COLUMNS)? as usize;
+    let rows = number(object, tags::ROWS)? as usize;
+    let columns = number(object, tags::COLUMNS)? as usize;
     if rows == 0 || columns == 0 {
         return Err(format!("its frames have {rows} rows of {columns} columns: no pixel"));
     }
-    let frames = text(&object, tags::NUMBER_OF_FRAMES)
+    let frames = text(object, tags::NUMBER_OF_FRAMES)
         .map_or(Ok(1), |t| t.trim().parse::<usize>().map_err(|e| format!("NumberOfFrames {t:?}: {e}")))?;
-    let kind = text(&object, tags::SEGMENTATION_TYPE).unwrap_or_default();
-    let bits = number(&object, tags::BITS_ALLOCATED)? as usize;
-    let planes = planes(&object, frames, &kind)?;
+    let kind = text(object, tags::SEGMENTATION_TYPE).unwrap_or_default();
+    let bits = number(object, tags::BITS_ALLOCATED)? as usize;
+    let planes = planes(object, frames, &kind)?;
     let pixels = object.element(tags::PIXEL_DATA).map_err(|_| "it holds no pixel data".to_string())?;
     if pixels.fragments().is_some() {
         return Err("its pixel data are encapsulated (compressed), which is not read".into());
     }
     let data = pixels.to_bytes().map_err(|e| format!("pixel data: {e}"))?;
     let frame_pixels = rows * columns;
-    let value = pixel_reader(&kind, bits, &data, frames * frame_pixels, &object)?;
-    let grid = Grid::new(&planes, &object)?;
+    let value = pixel_reader(&kind, bits, &data, frames * frame_pixels, object)?;
+    let grid = Grid::new(&planes, object)?;
     let dims = [columns, rows, grid.slices];
     if dims.iter().product::<usize>() > u32::MAX as usize {
         return Err(format!("its volume of {dims:?} voxels is too large to read"));
@@ -126,19 +107,17 @@ pub(super) fn parse_dicom_seg(bytes: &[u8]) -> Result<Labelmap, String> {
             ),
         ));
     }
-    let mut names = segment_names(&object)?;
+    let mut names = segment_names(object)?;
     for &number in voxels.keys() {
         if let std::collections::btree_map::Entry::Vacant(entry) = names.entry(number) {
             entry.insert(format!("segment {number}"));
             warnings.push((None, format!("frames show segment {number}, which the file does not describe")));
         }
     }
-    let (layers, segments) = in_layers(&names, &voxels, dims.iter().product(), frame_pixels, &mut warnings);
+    let (count, labels, segments) = in_layers(&names, &voxels, dims.iter().product(), frame_pixels, &mut warnings);
     if voxels.is_empty() {
         return Err("the labelmap is empty: no segment has a pixel in any frame".into());
     }
-    let count = layers.len();
-    let labels = (0..layers[0].len() * count).map(|n| layers[n % count][n / count]).collect();
     Ok(Labelmap {
         dims,
         layers: count,
@@ -149,123 +128,6 @@ pub(super) fn parse_dicom_seg(bytes: &[u8]) -> Result<Labelmap, String> {
         placed: true,
         warnings,
     })
-}
-
-/// A segment as [`Labelmap::segments`] lists it: name, layer, label.
-type Segment = (String, usize, i32);
-
-/// The segments `names`, their `voxels` each in the first layer of `count` voxels it does not
-/// overlap (an empty one in the first), with their (name, layer, label); a warning for each cut at
-/// an end of the frames ([`cut_at_an_end`]).
-fn in_layers(
-    names: &BTreeMap<u32, String>,
-    voxels: &BTreeMap<u32, Vec<u32>>,
-    count: usize,
-    frame_pixels: usize,
-    warnings: &mut Vec<(Option<(usize, i32)>, String)>,
-) -> (Vec<Vec<i32>>, Vec<Segment>) {
-    let mut layers: Vec<Vec<i32>> = vec![vec![0; count]];
-    let mut segments = Vec::new();
-    for (&number, name) in names {
-        let own = voxels.get(&number).map_or(&[][..], Vec::as_slice);
-        let layer = match layers.iter().position(|l| own.iter().all(|&n| l[n as usize] == 0)) {
-            Some(layer) => layer,
-            None => {
-                layers.push(vec![0; count]);
-                layers.len() - 1
-            }
-        };
-        own.iter().for_each(|&n| layers[layer][n as usize] = number as i32);
-        segments.push((name.clone(), layer, number as i32));
-        if let Some(cut) = cut_at_an_end(own, frame_pixels) {
-            warnings.push((Some((layer, number as i32)), cut));
-        }
-    }
-    (layers, segments)
-}
-
-/// Fills, in each segment, the slices between its first and last that no frame of any segment
-/// lies on (a slice the series lacks) with the pixels its nearest slices on both sides share;
-/// returns those slices.
-fn fill_missing_slices(
-    voxels: &mut BTreeMap<u32, Vec<u32>>,
-    present: &BTreeSet<usize>,
-    frame_pixels: usize,
-) -> Vec<usize> {
-    let mut missing = BTreeSet::new();
-    for own in voxels.values_mut() {
-        let slice = |n: &u32| *n as usize / frame_pixels;
-        let (Some(first), Some(last)) = (own.iter().map(slice).min(), own.iter().map(slice).max()) else { continue };
-        let gaps: Vec<usize> = (first..=last).filter(|k| !present.contains(k)).collect();
-        if gaps.is_empty() {
-            continue;
-        }
-        let mut by_slice: BTreeMap<usize, HashSet<usize>> = BTreeMap::new();
-        own.iter().for_each(|&n| {
-            by_slice.entry(n as usize / frame_pixels).or_default().insert(n as usize % frame_pixels);
-        });
-        for &k in &gaps {
-            let below = (first..k).rev().find(|s| present.contains(s)).and_then(|s| by_slice.get(&s));
-            let above = (k + 1..=last).find(|s| present.contains(s)).and_then(|s| by_slice.get(&s));
-            if let (Some(below), Some(above)) = (below, above) {
-                own.extend(below.intersection(above).map(|&p| (p + frame_pixels * k) as u32));
-            }
-            missing.insert(k);
-        }
-    }
-    missing.into_iter().collect()
-}
-
-/// The share of its largest slice at or above which a segment's first or last slice says it goes
-/// on beyond them: organs taper to their ends.
-const CUT_SHARE: f64 = 0.5;
-
-/// A warning when a segment's first or last slice holds [`CUT_SHARE`] of its largest slice's
-/// pixels or more: the organ goes on beyond the frames (a scan's end, a segmentation made on part
-/// of the series).
-fn cut_at_an_end(own: &[u32], frame_pixels: usize) -> Option<String> {
-    let mut counts: BTreeMap<usize, usize> = BTreeMap::new();
-    own.iter().for_each(|&n| *counts.entry(n as usize / frame_pixels).or_default() += 1);
-    let largest = *counts.values().max()?;
-    let ends = [("first", *counts.first_key_value()?.1), ("last", *counts.last_key_value()?.1)];
-    let (end, count) = ends.into_iter().find(|&(_, count)| count as f64 >= CUT_SHARE * largest as f64)?;
-    (counts.len() > 1).then(|| {
-        format!(
-            "its {end} frame holds {count} pixels, {:.0} % of its largest: the organ seems to go on beyond the frames \
-             (cut by the scan's end, or segmented on part of the series)",
-            100.0 * count as f64 / largest as f64
-        )
-    })
-}
-
-/// An attribute's text, trimmed of DICOM's padding; `None` when absent.
-fn text(object: &InMemDicomObject, tag: dicom_object::Tag) -> Option<String> {
-    object.get(tag).and_then(|e| e.to_str().ok()).map(|s| s.trim_matches(|c: char| c == '\0' || c == ' ').to_string())
-}
-
-/// An attribute's integer, an error naming it when absent.
-fn number(object: &InMemDicomObject, tag: dicom_object::Tag) -> Result<u32, String> {
-    let element = object.get(tag).ok_or_else(|| format!("it has no {}", name_of(tag)))?;
-    element.to_int::<u32>().map_err(|e| format!("{}: {e}", name_of(tag)))
-}
-
-/// An attribute's numbers, an error naming it when absent.
-fn numbers(object: &InMemDicomObject, tag: dicom_object::Tag) -> Result<Vec<f64>, String> {
-    let element = object.get(tag).ok_or_else(|| format!("it has no {}", name_of(tag)))?;
-    element.to_multi_float64().map_err(|e| format!("{}: {e}", name_of(tag)))
-}
-
-/// The name of an attribute the reader needs, for messages.
-fn name_of(tag: dicom_object::Tag) -> String {
-    use dicom_core::DataDictionary as _;
-    dicom_dictionary_std::StandardDataDictionary
-        .by_tag(tag)
-        .map_or_else(|| format!("{tag}"), |entry| entry.alias.to_string())
-}
-
-/// The items of a sequence attribute (none when absent).
-fn items(object: &InMemDicomObject, tag: dicom_object::Tag) -> &[InMemDicomObject] {
-    object.get(tag).and_then(InMemElement::items).unwrap_or(&[])
 }
 
 /// The segments the object describes: segment number to label.
@@ -432,19 +294,8 @@ impl Grid {
             .and_then(|m| m.get(tags::SPACING_BETWEEN_SLICES))
             .and_then(|e| e.to_float64().ok())
             .filter(|s| *s > 0.0);
-        let smallest = heights.windows(2).map(|w| w[1] - w[0]).fold(f64::INFINITY, f64::min);
-        let step = between.or(smallest.is_finite().then_some(smallest)).unwrap_or(1.0);
+        let step = slice_step(&heights, between, "frames")?.unwrap_or(1.0);
         let (lowest, highest) = (heights[0], heights[heights.len() - 1]);
-        for h in &heights {
-            let steps = (h - lowest) / step;
-            if (steps - steps.round()).abs() * step > 0.01 * step.max(SAME_SLICE_MM) {
-                return Err(format!(
-                    "its frames do not lie on slices {step} mm apart (one lies {:.3} mm along the normal from the \
-                     first): not one volume",
-                    h - lowest
-                ));
-            }
-        }
         // One empty slice beyond each end: frames are written where segments are (writers leave
         // the empty ones out), so the ends are not where the image ends.
         let (lowest, highest) = (lowest - step, highest + step);
@@ -481,9 +332,11 @@ impl Grid {
 mod tests {
     use dicom_core::value::DataSetSequence;
     use dicom_core::{DataElement, PrimitiveValue, VR};
+    use dicom_object::mem::InMemElement;
     use dicom_object::meta::FileMetaTableBuilder;
 
     use super::*;
+    use crate::labelmap::dicom::parse_dicom;
 
     /// An element of `vr` holding `text` (several values separated by `\`).
     fn text_element(tag: dicom_object::Tag, vr: VR, text: &str) -> InMemElement {
@@ -567,7 +420,7 @@ mod tests {
 
     #[test]
     fn overlapping_segments_are_read_whole_in_layers_of_their_own() {
-        let map = parse_dicom_seg(&liver_and_tumour()).unwrap();
+        let map = parse_dicom(&liver_and_tumour()).unwrap();
         assert_eq!((map.dims, map.layers), ([4, 4, 4], 2), "two slices and an empty one beyond each");
         assert_eq!(map.segments, [("liver".to_string(), 0, 1), ("tumour".to_string(), 1, 2)]);
         // i along x by 1 mm, j along y by 1 mm, k along z by 2 mm, from the first pixel.
@@ -594,7 +447,7 @@ mod tests {
     fn a_slice_missing_from_the_series_is_filled_and_named() {
         // Frames 2 mm apart at z = 0, 2 and 6: none at 4. The frame at 6 holds the first row only.
         let pixels = vec![0xff, 0xff, 0xff, 0xff, 0x0f, 0x00];
-        let map = parse_dicom_seg(&seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (1, 6.0)], 1, pixels)).unwrap();
+        let map = parse_dicom(&seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (1, 6.0)], 1, pixels)).unwrap();
         let (liver, _) = map.select("liver").unwrap();
         assert_eq!(liver.count(), 16 + 16 + 4 + 4, "the slice at z = 4 takes the row both sides share");
         let said = warnings(&map, 1);
@@ -608,13 +461,13 @@ mod tests {
     /// tapers does not.
     #[test]
     fn a_segment_cut_at_the_end_of_the_frames_is_said_to_be() {
-        let map = parse_dicom_seg(&liver_and_tumour()).unwrap();
+        let map = parse_dicom(&liver_and_tumour()).unwrap();
         assert!(warnings(&map, 1)
             .iter()
-            .any(|w| w.starts_with("its first frame holds 16 pixels, 100 % of its largest")));
+            .any(|w| w.starts_with("its first slice holds 16 pixels, 100 % of its largest")));
         // Three slices of 1, 16 and 1 pixels: a tapering organ.
         let pixels = vec![0x01, 0x00, 0xff, 0xff, 0x01, 0x00];
-        let map = parse_dicom_seg(&seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (1, 4.0)], 1, pixels)).unwrap();
+        let map = parse_dicom(&seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (1, 4.0)], 1, pixels)).unwrap();
         assert!(map.warnings.is_empty(), "{:?}", map.warnings);
     }
 
@@ -622,8 +475,7 @@ mod tests {
     /// describe are read as `segment N`, and said.
     #[test]
     fn empty_and_undescribed_segments_are_told_apart() {
-        let map =
-            parse_dicom_seg(&seg_file(SEG, "BINARY", &[(1, 0.0), (3, 0.0)], 1, vec![0xff, 0xff, 0x01, 0])).unwrap();
+        let map = parse_dicom(&seg_file(SEG, "BINARY", &[(1, 0.0), (3, 0.0)], 1, vec![0xff, 0xff, 0x01, 0])).unwrap();
         let tumour = map.select("tumour").unwrap_err().to_string();
         assert!(tumour.contains("label 2 ('tumour') has no voxel"), "{tumour}");
         assert_eq!(map.select("segment 3").unwrap().0.count(), 1);
@@ -636,14 +488,14 @@ mod tests {
         pixels[5] = 1;
         pixels[16 + 6] = 2;
         let frames = [(0, 0.0), (0, 3.0)];
-        let map = parse_dicom_seg(&seg_file(SEGMENTATION_CLASSES[1], "LABELMAP", &frames, 8, pixels)).unwrap();
+        let map = parse_dicom(&seg_file(SEGMENTATION_CLASSES[1], "LABELMAP", &frames, 8, pixels)).unwrap();
         assert_eq!((map.dims, map.layers, map.spacing()), ([4, 4, 4], 1, [1.0, 1.0, 3.0]));
         assert_eq!(map.present().iter().map(|p| (p.1, p.2)).collect::<Vec<_>>(), [(1, 1), (2, 1)]);
     }
 
     #[test]
     fn what_is_not_one_segmented_volume_is_refused_by_name() {
-        let error = |bytes: Vec<u8>| parse_dicom_seg(&bytes).unwrap_err();
+        let error = |bytes: Vec<u8>| parse_dicom(&bytes).unwrap_err();
         let ct = error(seg_file("1.2.840.10008.5.1.4.1.1.2", "BINARY", &[(1, 0.0)], 1, vec![0xff, 0xff]));
         assert!(ct.starts_with("a DICOM CT image (SOP class 1.2.840.10008.5.1.4.1.1.2), not a segmentation"), "{ct}");
         // Slices 0, 2 and 3 mm high are slices 1 mm apart, one empty; 0, 2 and 3.5 mm are no grid.
