@@ -95,7 +95,14 @@ pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
                 None => {
                     let (mesh, quality) =
                         mesh::tetmesh::mesh_surface_to_count(&surface, options.tets, BoundaryFit::default())
-                            .with_context(|| format!("meshing {}", path.display()))?;
+                            .with_context(|| match &notes[..] {
+                                [] => format!("meshing {}", path.display()),
+                                read => {
+                                    let read: Vec<String> =
+                                        read.iter().map(|(topic, l)| format!("{topic}: {l}")).collect();
+                                    format!("meshing {} (as read: {})", path.display(), read.join("; "))
+                                }
+                            })?;
                     coverage = quality.coverage;
                     mesh
                 }
@@ -156,9 +163,29 @@ impl OrganInput {
     pub fn unit(&mut self) -> Result<LengthUnit> {
         let (unit, how) = match self.unit {
             Some(unit) if self.labelmap => (unit, "the labelmap's".to_string()),
-            Some(unit) => (unit, "given".to_string()),
+            Some(unit) => {
+                let extent = unit.to_metres(largest_extent(&self.surface));
+                if !(0.02..=0.6).contains(&extent) {
+                    self.notes.push((
+                        "warning",
+                        format!(
+                            "in {unit} the organ is {:.0} mm across, where organs are 20 to 600 mm: is the unit right?",
+                            mm(extent)
+                        ),
+                    ));
+                }
+                (unit, "given".to_string())
+            }
             None => {
-                let unit = detect_unit(&self.surface).map_err(|e| anyhow!("{e}: give --units (mm or m)"))?;
+                let unit = detect_unit(&self.surface).map_err(|e| {
+                    let extent = largest_extent(&self.surface);
+                    let cm = if (2.0..=60.0).contains(&extent) {
+                        " (in centimetres? scale the file by 10 to mm, e.g. in 3D Slicer's Transforms or MeshLab)"
+                    } else {
+                        ""
+                    };
+                    anyhow!("{e}: give --units (mm or m){cm}")
+                })?;
                 let extent = largest_extent(&self.surface);
                 let shown = if extent >= 1.0 { format!("{extent:.1}") } else { format!("{extent:.4}") };
                 (unit, format!("detected: largest extent {shown} in the file's unit; give --units otherwise"))
@@ -355,6 +382,17 @@ mod tests {
         let report = meshed.report().unwrap();
         assert!(report[2].starts_with("dihedral   min "), "{report:?}");
         assert!(meshed.notes.iter().any(|(topic, line)| *topic == "units" && line.starts_with("mm (detected")));
+        // A unit given that makes no organ of it is warned about; a size in cm is named so.
+        let in_metres = MeshOptions { units: Some(LengthUnit::Metre), tets: 200, ..options.clone() };
+        let warned = mesh_organ(&in_metres).unwrap().notes;
+        assert!(warned.contains(&(
+            "warning",
+            "in m the organ is 80000 mm across, where organs are 20 to 600 mm: is the unit right?".into()
+        )));
+        let centimetres = dir.path().join("ball_cm.stl");
+        mesh::io::write_surface(&centimetres, &mesh::generate::icosphere(4.0, 2)).unwrap();
+        let e = mesh_organ(&MeshOptions { surface: Some(centimetres), ..options.clone() }).unwrap_err();
+        assert!(format!("{e:#}").contains("give --units (mm or m) (in centimetres? scale the file by 10"), "{e:#}");
         let labelled = MeshOptions { label: Some("5".into()), ..options };
         assert!(mesh_organ(&labelled).unwrap_err().to_string().contains("--label 5 chooses a label of a labelmap"));
         let folder = MeshOptions { surface: Some(dir.path().to_path_buf()), ..labelled };

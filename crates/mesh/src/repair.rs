@@ -52,8 +52,12 @@ impl Default for RepairOptions {
     }
 }
 
+/// The share of a repaired surface's area above which the holes filled are said to be large: the
+/// organ was cut open, by the image's field of view or a clipped export.
+pub const LARGE_FILL_SHARE: f64 = 0.05;
+
 /// What [`repair_surface`] changed.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct RepairReport {
     /// Vertices merged into an earlier one at (nearly) the same place.
     pub merged_vertices: usize,
@@ -72,6 +76,8 @@ pub struct RepairReport {
     /// Triangles added to fill the holes. A hole of three edges along a line (left by a
     /// zero-area triangle) is closed by splitting the triangle across its longest edge: one more.
     pub added_triangles: usize,
+    /// The share of the repaired surface's area that the holes' patches make up.
+    pub filled_share: f64,
     /// Pairs of triangles of the repaired surface that cross (see [`self_intersections`]), few
     /// enough to be tolerated: not a change, left in place (see [`RepairReport::warnings`]).
     pub crossings: Vec<(usize, usize)>,
@@ -125,17 +131,28 @@ impl RepairReport {
         *self != unchanged
     }
 
-    /// One line per problem left in place, e.g. "7 pairs of triangles cross (9 triangles, first
-    /// 810 and 811): left in place"; empty when there is none.
+    /// One line per problem left in place: holes filled over more than [`LARGE_FILL_SHARE`] of
+    /// the surface, tolerated crossings ("7 pairs of triangles cross (9 triangles, first 810 and
+    /// 811): left in place"); empty when there is none.
     pub fn warnings(&self) -> Vec<String> {
-        let Some(&(a, b)) = self.crossings.first() else { return Vec::new() };
-        let pairs = self.crossings.len();
-        vec![format!(
-            "{pairs} {} of triangles {} ({} triangles, first {a} and {b}): left in place",
-            if pairs == 1 { "pair" } else { "pairs" },
-            if pairs == 1 { "crosses" } else { "cross" },
-            crossing_triangles(&self.crossings)
-        )]
+        let mut warnings = Vec::new();
+        if self.filled_share > LARGE_FILL_SHARE {
+            warnings.push(format!(
+                "the holes filled make up {:.0} % of the surface: the organ seems cut open (by the image's field of \
+                 view, or a clipped export) and is closed there by a patch of least area, not by its own shape",
+                100.0 * self.filled_share
+            ));
+        }
+        if let Some(&(a, b)) = self.crossings.first() {
+            let pairs = self.crossings.len();
+            warnings.push(format!(
+                "{pairs} {} of triangles {} ({} triangles, first {a} and {b}): left in place",
+                if pairs == 1 { "pair" } else { "pairs" },
+                if pairs == 1 { "crosses" } else { "cross" },
+                crossing_triangles(&self.crossings)
+            ));
+        }
+        warnings
     }
 }
 
@@ -213,7 +230,12 @@ pub fn repair_surface(surface: &TriSurface, options: &RepairOptions) -> Result<(
             shown.join(", ")
         )));
     }
+    let before = repaired.triangles.len();
     fill_holes(&mut repaired, options.max_hole_edges, min_area, &origin, &mut report)?;
+    let area_of = |triangles: &[[usize; 3]]| triangles.iter().map(|&t| area(&repaired.vertices, t)).sum::<f64>();
+    if report.added_triangles > 0 {
+        report.filled_share = area_of(&repaired.triangles[before..]) / area_of(&repaired.triangles);
+    }
     report.reversed = repaired.orient_outward();
 
     let checked = check_closed_manifold(&repaired).map_err(|e| invalid(format!("after repair: {}", e.message())))?;
@@ -1051,6 +1073,25 @@ mod tests {
         assert!(repaired.enclosed_volume() < volume);
         assert_eq!(report.flipped_triangles, 0);
         assert!(!report.reversed);
+    }
+
+    /// A sphere cut by a plane (as an image's field of view cuts an organ) is closed, and the
+    /// patch's share of the surface is said when it is large, not when a triangle is missing.
+    #[test]
+    fn a_large_hole_filled_is_said_to_be_large() {
+        let s = sphere();
+        let (_, report) = repair(&without(&s, &[17])).unwrap();
+        assert!(report.filled_share > 0.0 && report.filled_share < 0.01, "{}", report.filled_share);
+        assert!(report.warnings().is_empty());
+        let above: Vec<usize> =
+            (0..s.triangles.len()).filter(|&t| s.triangles[t].iter().all(|&k| s.vertices[k][2] > 0.6)).collect();
+        let (repaired, report) = repair(&without(&s, &above)).unwrap();
+        // The cap above z = 0.6 is 20 % of the sphere's area (2πr·h / 4πr²); its flat patch less.
+        let share = report.filled_share;
+        assert!(share > 0.1 && share < 0.2, "{share}");
+        assert!(repaired.enclosed_volume() < 0.98 * s.enclosed_volume(), "closed flat, lower than the sphere");
+        let warnings = report.warnings();
+        assert!(warnings[0].starts_with(&format!("the holes filled make up {:.0} % of the surface", 100.0 * share)));
     }
 
     #[test]

@@ -521,6 +521,9 @@ fn ascii_stl_and_obj_details() {
     let cut: String = text.lines().take(10).map(|l| format!("{l}\n")).collect();
     let m = message(read_stl(put(d, "cut.stl", cut)));
     assert!(m.contains("file ends") && m.contains("vertex"), "{m}");
+    // Every facet closed but no `endsolid`, as some exporters end: read.
+    let unended = text.replace("endsolid square\n", "");
+    assert_eq!(read_stl(put(d, "unended.stl", unended)).unwrap(), s);
     let m = message(read_stl(put(
         d,
         "bad.stl",

@@ -295,6 +295,40 @@ fn stl_and_vtk_headers_name_the_frame_as_slicer_writes_it() {
     assert_eq!(read_surface(slicer("tetrahedron_lps.stl")).unwrap(), surface, "the plain reader reads the same");
 }
 
+/// A legacy VTK file may name its frame in a string array `SPACE` of its field data, as VTK saves
+/// a Slicer model read from a `.vtp`: one string a line (ASCII) or after its length (binary).
+#[test]
+fn a_legacy_vtk_file_names_its_frame_in_a_string_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let points = TETRAHEDRON.iter().flatten().map(|c| format!("{c}")).collect::<Vec<_>>().join(" ");
+    let polygons: String = TETRAHEDRON_TRIANGLES.iter().map(|t| format!("3 {} {} {}\n", t[0], t[1], t[2])).collect();
+    let ascii = format!(
+        "# vtk DataFile Version 4.2\nvtk output\nASCII\nDATASET POLYDATA\nFIELD FieldData 2\nSPACE 1 1 string\nLPS\n\
+         note 1 1 string\na%20segment\nPOINTS 4 float\n{points}\nPOLYGONS 4 16\n{polygons}"
+    );
+    let (surface, frame) = read_surface_with_frame(put(dir.path(), "ascii.vtk", &ascii)).unwrap();
+    assert_eq!((oriented_set(&surface.triangles), frame), (oriented_set(&TETRAHEDRON_TRIANGLES), Some(Frame::Lps)));
+    let mut binary = b"# vtk DataFile Version 4.2\nvtk output\nBINARY\nDATASET POLYDATA\nFIELD FieldData 1\n\
+                       SPACE 1 1 string\n"
+        .to_vec();
+    binary.extend([0xc0 | 3, b'R', b'A', b'S']);
+    binary.extend(b"\nPOINTS 4 float\n");
+    TETRAHEDRON.iter().flatten().for_each(|&c| binary.extend((c as f32).to_be_bytes()));
+    binary.extend(b"\nPOLYGONS 4 16\n");
+    TETRAHEDRON_TRIANGLES
+        .iter()
+        .for_each(|t| [3, t[0], t[1], t[2]].iter().for_each(|&i| binary.extend((i as i32).to_be_bytes())));
+    let path = dir.path().join("binary.vtk");
+    fs::write(&path, &binary).unwrap();
+    let (surface, frame) = read_surface_with_frame(&path).unwrap();
+    assert_eq!((surface.vertices, frame), (TETRAHEDRON.to_vec(), Some(Frame::Ras)));
+    // A frame the field names that is not one is refused; no field, no frame.
+    let wrong = put(dir.path(), "wrong.vtk", ascii.replace("\nLPS\n", "\nXYZ\n"));
+    assert!(read_surface_with_frame(wrong).unwrap_err().to_string().contains("SPACE=XYZ"));
+    let none = ascii.replace("FIELD FieldData 2\nSPACE 1 1 string\nLPS\n", "FIELD FieldData 1\n");
+    assert_eq!(read_surface_with_frame(put(dir.path(), "none.vtk", &none)).unwrap().1, None);
+}
+
 /// The tetrahedron `write_vtk_files.py` writes.
 const TETRAHEDRON: [[f64; 3]; 4] = [[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 20.0, 0.0], [0.0, 0.0, 30.0]];
 const TETRAHEDRON_TRIANGLES: [[usize; 3]; 4] = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];

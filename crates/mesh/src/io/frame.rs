@@ -198,11 +198,19 @@ pub fn surface_frame(path: impl AsRef<Path>) -> Result<Option<Frame>, MeshError>
 const HEADER_BYTES: usize = 1024;
 
 /// Reads a surface ([`super::read_surface`]) and the frame it names ([`surface_frame`]); a
-/// `.vtp` or `.vtu` file, which names it in its body, is read once for both.
+/// `.vtp` or `.vtu` file, which names it in its body, is read once for both, and so is a legacy
+/// `.vtk` file, whose field data may name it too (a string array `SPACE`, as VTK saves a
+/// Slicer model's).
 pub fn read_surface_with_frame(path: impl AsRef<Path>) -> Result<(TriSurface, Option<Frame>), MeshError> {
     let path = path.as_ref();
     match super::extension(path).as_str() {
         "vtp" | "vtu" => super::vtk_xml::read_xml_surface_with_frame(path),
+        "vtk" => {
+            let (surface, space) = super::legacy_vtk::read_vtk_surface_and_space(path)?;
+            let in_field = space.map(|s| frame_in_header(&format!("SPACE={}", s.trim()))).transpose();
+            let in_field = in_field.map_err(|message| parse_error(path, message))?.flatten();
+            Ok((surface, surface_frame(path)?.or(in_field)))
+        }
         _ => {
             let frame = surface_frame(path)?;
             Ok((super::read_surface(path)?, frame))

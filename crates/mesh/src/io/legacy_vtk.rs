@@ -86,6 +86,9 @@ struct Parsed {
     cells: Vec<(String, CellList)>,
     types: Option<Vec<u32>>,
     fields: Vec<Field>,
+    /// The string array `SPACE` of the dataset's field data (`LPS` or `RAS`, as VTK writes 3D
+    /// Slicer's frame tag), if any.
+    space: Option<String>,
 }
 
 /// A cursor over the bytes of a legacy file that counts lines (also inside binary blocks, so
@@ -175,6 +178,41 @@ impl<'a> Reader<'a> {
     fn header_args(&mut self) -> Vec<String> {
         let line = self.read_line();
         String::from_utf8_lossy(line).split_whitespace().map(str::to_string).collect()
+    }
+
+    /// `n` strings of a `string` array declared at line `header`: one a line, `%XX` escaped
+    /// (ASCII), or each after its length in a 1, 2, 4 or 8-byte big-endian header whose top two
+    /// bits say its size (binary), as VTK writes them.
+    fn strings(&mut self, n: usize, what: &str, header: usize) -> Result<Vec<String>, MeshError> {
+        let mut strings = Vec::with_capacity(n.min(1024));
+        for k in 0..n {
+            let text = if self.binary {
+                let start = self.pos;
+                let first = self.data.get(start).copied().unwrap_or(0);
+                let size = [8, 4, 2, 1][usize::from(first >> 6)];
+                let head = self.data.get(start..start + size);
+                let length = head
+                    .map(|h| h.iter().fold(0_u64, |a, &b| a << 8 | u64::from(b)) & (u64::MAX >> (64 - 8 * size + 2)));
+                let body = length.and_then(|l| self.data.get(start + size..(start + size).checked_add(l as usize)?));
+                let Some(body) = body.filter(|_| start < self.data.len()) else {
+                    return Err(self.error(format!(
+                        "file ends after {k} of the {n} strings of {what} (line {header}) (truncated file?)"
+                    )));
+                };
+                self.line += body.iter().filter(|&&b| b == b'\n').count();
+                self.pos = start + size + body.len();
+                String::from_utf8_lossy(body).into_owned()
+            } else {
+                if self.pos >= self.data.len() {
+                    return Err(self.error(format!(
+                        "file ends after {k} of the {n} strings of {what} (line {header}) (truncated file?)"
+                    )));
+                }
+                percent_decoded(self.read_line())
+            };
+            strings.push(text);
+        }
+        Ok(strings)
     }
 
     /// `n` values of type `scalar` (binary) or `n` numbers (ASCII), declared by the section
@@ -437,13 +475,35 @@ impl<'a> Reader<'a> {
     }
 }
 
+/// A line of a `string` array in an ASCII legacy file, its `%XX` escapes (VTK's for spaces and
+/// other bytes outside printable ASCII) decoded.
+fn percent_decoded(line: &[u8]) -> String {
+    let line = line.strip_suffix(b"\r").unwrap_or(line);
+    let mut bytes = Vec::with_capacity(line.len());
+    let mut i = 0;
+    while i < line.len() {
+        let hex = line.get(i + 1..i + 3).and_then(|h| u8::from_str_radix(std::str::from_utf8(h).ok()?, 16).ok());
+        match (line[i], hex) {
+            (b'%', Some(byte)) => {
+                bytes.push(byte);
+                i += 3;
+            }
+            (b, _) => {
+                bytes.push(b);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8_lossy(&bytes).into_owned()
+}
+
 /// Parses a whole legacy VTK file; its points must be finite and within
 /// [`MAX_COORDINATE`](crate::MAX_COORDINATE).
 fn parse(path: &Path) -> Result<Parsed, MeshError> {
     let data = read_bytes(path)?;
     let mut r = Reader { path, data: &data, pos: 0, line: 1, binary: false, last: None };
     let dataset = r.dataset()?;
-    let mut parsed = Parsed { dataset, points: None, cells: Vec::new(), types: None, fields: Vec::new() };
+    let mut parsed = Parsed { dataset, points: None, cells: Vec::new(), types: None, fields: Vec::new(), space: None };
     let mut location: Option<(FieldLocation, usize)> = None;
     let mut points_line = 0;
     while let Some(token) = r.token() {
@@ -496,6 +556,14 @@ fn parse(path: &Path) -> Result<Parsed, MeshError> {
                     let args = r.header_args();
                     let name = name.ok_or_else(|| r.error(format!("file ends in FIELD (line {header})")))?;
                     let [components, tuples] = r.counts::<2>(&format!("FIELD array {name}"), &args, line)?;
+                    if args.get(2).is_some_and(|t| t.eq_ignore_ascii_case("string")) {
+                        let strings =
+                            r.strings(r.product(components, tuples, line)?, &format!("FIELD array {name}"), line)?;
+                        if location.is_none() && name.eq_ignore_ascii_case("SPACE") {
+                            parsed.space = strings.into_iter().next();
+                        }
+                        continue;
+                    }
                     let scalar = r.scalar(args.get(2), &format!("FIELD array {name}"), line)?;
                     let values =
                         r.values(r.product(components, tuples, line)?, scalar, &format!("FIELD array {name}"), line)?;
@@ -723,8 +791,18 @@ pub(super) fn read_vtk_points(path: &Path) -> Result<Vec<Point>, MeshError> {
 /// Reads the triangles of a legacy VTK file as a surface: `POLYDATA` polygons and triangle
 /// strips, or the triangles, quads and polygons of an `UNSTRUCTURED_GRID`. All points are kept.
 pub fn read_vtk_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
-    let path = path.as_ref();
+    Ok(read_vtk_surface_and_space(path.as_ref())?.0)
+}
+
+/// [`read_vtk_surface`], with the string array `SPACE` of the file's field data, if any.
+pub(super) fn read_vtk_surface_and_space(path: &Path) -> Result<(TriSurface, Option<String>), MeshError> {
     let parsed = parse(path)?;
+    let space = parsed.space.clone();
+    Ok((surface_of(path, parsed)?, space))
+}
+
+/// The triangles of a parsed legacy file (see [`read_vtk_surface`]).
+fn surface_of(path: &Path, parsed: Parsed) -> Result<TriSurface, MeshError> {
     let points = parsed.points.ok_or_else(|| parse_error(path, "no POINTS section"))?;
     if parsed.dataset == "POLYDATA" {
         let cells = parsed.cells.iter().flat_map(|(key, list)| {

@@ -182,7 +182,8 @@ impl State {
     }
 }
 
-/// Parses an ASCII STL (several solids allowed; loops of more than 3 vertices become fans).
+/// Parses an ASCII STL (several solids allowed, the last `endsolid` optional; loops of more than
+/// 3 vertices become fans).
 fn read_stl_ascii(path: &Path, text: &str) -> Result<TriSurface, MeshError> {
     let mut lines = LineReader::new(path, text);
     let mut merger = Merger::default();
@@ -229,8 +230,9 @@ fn read_stl_ascii(path: &Path, text: &str) -> Result<TriSurface, MeshError> {
             }
         };
     }
-    if state != State::Outside {
-        return Err(lines.end_of_file(&format!("{} (no closing 'endsolid')", state.expected())));
+    // A file may end after its last facet without `endsolid`; inside a facet it is cut short.
+    if state != State::Outside && state != State::Solid {
+        return Err(lines.end_of_file(state.expected()));
     }
     if triangles.is_empty() {
         return Err(parse_error(path, "no facets"));
