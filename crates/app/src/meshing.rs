@@ -246,8 +246,8 @@ pub fn immersed_fill(mesh: &Mesh) -> (f64, usize) {
 /// Writes the mesh in metres with its regions (point data `region_<name>`, or Gmsh physical
 /// groups) and, for an immersed grid, its cells' volume fractions (not in `.msh`); to .stl or
 /// .obj, its boundary surface in millimetres, as 3D Slicer and surface tools read them, naming
-/// `frame` in its header when known (a `.vtu` names it in its field data; the directory created by
-/// the writer). Returns what was written, in words.
+/// `frame` in its header when known (a `.vtu` names it in its field data, a `.vtk` in its title,
+/// a `.msh` nowhere; the directory created by the writer). Returns what was written, in words.
 pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result<String> {
     let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     let context = || format!("writing {}", path.display());
@@ -262,7 +262,8 @@ pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result
     };
     mesh::io::write_mesh_in_frame(path, mesh, &fields, frame).with_context(context)?;
     let named = match (frame, extension.as_str()) {
-        (Some(f), "vtu") => format!(", frame {f} named"),
+        (Some(f), "vtu" | "vtk") => format!(", frame {f} named"),
+        (Some(f), _) => format!(", in {f}: Gmsh's format names no frame"),
         _ => String::new(),
     };
     Ok(format!("in m{named}"))
@@ -434,6 +435,17 @@ mod tests {
                 "{lo:?} {hi:?}"
             );
         }
+        // A volume mesh names it in a .vtu's field data and a .vtk's title; a .msh cannot.
+        for (name, said) in [
+            ("out.vtu", "in m, frame LPS named"),
+            ("out.vtk", "in m, frame LPS named"),
+            ("out.msh", "in m, in LPS: Gmsh's format names no frame"),
+        ] {
+            assert_eq!(write_mesh_file(&dir.path().join(name), &meshed.mesh, meshed.frame).unwrap(), said);
+        }
+        assert_eq!(mesh::io::surface_frame(dir.path().join("out.vtk")).unwrap(), Some(Frame::Lps));
+        let (vtk, _) = mesh::io::read_mesh_with_fields(dir.path().join("out.vtk")).unwrap();
+        assert_eq!(vtk.cells.len(), meshed.mesh.cells.len());
         // Fitted to a length, it is no longer where its input was: no frame named.
         let fitted = mesh_organ(&MeshOptions { length: Some(0.1), ..options }).unwrap();
         assert_eq!(fitted.frame, None);

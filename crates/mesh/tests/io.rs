@@ -970,3 +970,20 @@ fn counts_beyond_any_file_never_abort() {
     let vtp = vtp.replacen("NumberOfPolys=\"4\"", "NumberOfPolys=\"1000000000000\"", 1);
     assert!(message(read_surface(put(d, "polys.vtp", vtp))).contains("offsets"));
 }
+
+/// A volume mesh given where a surface is read (an organ meshed before) gives its boundary: the
+/// closed surface of the volume it fills, from a .vtu and a .vtk alike.
+#[test]
+fn a_volume_mesh_read_as_a_surface_gives_its_boundary() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = box_tet([0.0, 0.0, 0.0], [0.1, 0.2, 0.3], [2, 3, 4]).unwrap();
+    for name in ["organ.vtu", "organ.vtk"] {
+        let path = dir.path().join(name);
+        write_mesh(&path, &mesh, &[]).unwrap();
+        let surface = read_surface(&path).unwrap();
+        let closed = augsim_mesh::check_closed_manifold(&surface).unwrap();
+        assert!((closed.volume - 0.006).abs() < 1e-12, "{name}: {}", closed.volume);
+        // 2 × (2·3 + 3·4 + 2·4) squares of two triangles on the box's faces.
+        assert_eq!(surface.triangles.len(), 2 * 2 * (6 + 12 + 8), "{name}");
+    }
+}

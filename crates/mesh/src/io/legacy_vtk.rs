@@ -720,13 +720,15 @@ pub(super) fn volume_from_cells(
 }
 
 /// The triangles of surface cells (triangles, strips, polygons, quads, pixels given by VTK cell
-/// type) over `num_points` points; lower- and higher-dimensional cells are skipped.
+/// type) over `points`; lower- and higher-dimensional cells are skipped, unless there are only
+/// volume cells: then the boundary of the volume they fill.
 pub(super) fn surface_from_cells<'c>(
     path: &Path,
     points: Vec<Point>,
     cells: impl Iterator<Item = (u32, &'c [usize])>,
 ) -> Result<TriSurface, MeshError> {
     let mut triangles = Vec::new();
+    let (mut solids, mut solid_types) = (Vec::new(), Vec::new());
     for (c, (ty, cell)) in cells.enumerate() {
         if let Some(&bad) = cell.iter().find(|&&i| i >= points.len()) {
             return Err(parse_error(
@@ -739,7 +741,13 @@ pub(super) fn surface_from_cells<'c>(
             6 => (3, "triangle strip"),
             7 => (3, "polygon"),
             8 | 9 => (4, "quad"),
-            _ => continue,
+            _ => {
+                if vtk_cell_type(ty).is_some_and(|(solid, _)| solid) {
+                    solids.push(cell.to_vec());
+                    solid_types.push(ty);
+                }
+                continue;
+            }
         };
         if cell.len() < need || (ty != 6 && ty != 7 && cell.len() != need) {
             return Err(parse_error(path, format!("cell {c} ({what}) has {} vertices", cell.len())));
@@ -750,11 +758,13 @@ pub(super) fn surface_from_cells<'c>(
             _ => fan(cell, &mut triangles),
         }
     }
+    if triangles.is_empty() && !solids.is_empty() {
+        // A volume mesh (an organ meshed before): its boundary.
+        let (mesh, _) = volume_from_cells(path, &points, &solids, &solid_types, Vec::new())?;
+        return Ok(crate::boundary_surface(&mesh).compacted());
+    }
     if triangles.is_empty() {
-        return Err(parse_error(
-            path,
-            "no triangles, polygons or triangle strips (for a volume mesh, read it as a mesh and take its boundary)",
-        ));
+        return Err(parse_error(path, "no triangles, polygons, triangle strips nor volume cells"));
     }
     Ok(TriSurface { vertices: points, triangles })
 }
@@ -789,7 +799,8 @@ pub(super) fn read_vtk_points(path: &Path) -> Result<Vec<Point>, MeshError> {
 }
 
 /// Reads the triangles of a legacy VTK file as a surface: `POLYDATA` polygons and triangle
-/// strips, or the triangles, quads and polygons of an `UNSTRUCTURED_GRID`. All points are kept.
+/// strips, or the triangles, quads and polygons of an `UNSTRUCTURED_GRID` (all points kept), or
+/// the boundary of its volume cells when it has no others.
 pub fn read_vtk_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
     Ok(read_vtk_surface_and_space(path.as_ref())?.0)
 }
@@ -957,8 +968,29 @@ pub fn write_vtk_legacy_with(
     fields: &[Field],
     encoding: Encoding,
 ) -> Result<(), MeshError> {
+    write_vtk_legacy_titled(path.as_ref(), mesh, fields, encoding, "augsim")
+}
+
+/// [`write_vtk_legacy_with`] with `title` as the header line (one line of at most 256
+/// characters; `augsim SPACE=LPS` names the frame as 3D Slicer reads it).
+pub(super) fn write_vtk_legacy_titled(
+    path: &Path,
+    mesh: &Mesh,
+    fields: &[Field],
+    encoding: Encoding,
+    title: &str,
+) -> Result<(), MeshError> {
+    check_title(title)?;
     let (ty, k, conn) = mesh_cells_flat(mesh);
-    write_legacy(path.as_ref(), "augsim", &mesh.nodes, &conn, k, Some(ty), fields, encoding)
+    write_legacy(path, title, &mesh.nodes, &conn, k, Some(ty), fields, encoding)
+}
+
+/// A legacy VTK title is one line of at most 256 characters.
+fn check_title(title: &str) -> Result<(), MeshError> {
+    if title.contains(['\n', '\r']) || title.len() > 256 {
+        return Err(MeshError::Invalid(format!("a legacy VTK title is one line of at most 256 characters: {title:?}")));
+    }
+    Ok(())
 }
 
 /// Writes a surface as a binary legacy VTK `POLYDATA` of triangles.
@@ -968,9 +1000,7 @@ pub(super) fn write_surface_vtk(path: &Path, surface: &TriSurface) -> Result<(),
 
 /// [`write_surface_vtk`] with `title` as the header line (one line of at most 256 characters).
 pub(super) fn write_surface_vtk_titled(path: &Path, surface: &TriSurface, title: &str) -> Result<(), MeshError> {
-    if title.contains(['\n', '\r']) || title.len() > 256 {
-        return Err(MeshError::Invalid(format!("a legacy VTK title is one line of at most 256 characters: {title:?}")));
-    }
+    check_title(title)?;
     let conn = check_surface(surface)?;
     write_legacy(path, title, &surface.vertices, &conn, 3, None, &[], Encoding::Binary)
 }

@@ -292,8 +292,9 @@ pub fn write_mesh(path: impl AsRef<Path>, mesh: &Mesh, fields: &[Field]) -> Resu
     }
 }
 
-/// [`write_mesh`], a `.vtu` naming the mesh's frame when known ([`write_vtu_in_frame`]); the
-/// other formats name none.
+/// [`write_mesh`], naming the mesh's frame when known: a `.vtu` in its field data
+/// ([`write_vtu_in_frame`]), a `.vtk` in its title (`augsim SPACE=LPS`); Gmsh's `.msh` has no
+/// place for it.
 pub fn write_mesh_in_frame(
     path: impl AsRef<Path>,
     mesh: &Mesh,
@@ -303,6 +304,13 @@ pub fn write_mesh_in_frame(
     let path = path.as_ref();
     match (extension(path).as_str(), frame) {
         ("vtu", Some(frame)) => write_vtu_in_frame(path, mesh, &with_region_fields(mesh, fields), frame),
+        ("vtk", Some(frame)) => legacy_vtk::write_vtk_legacy_titled(
+            path,
+            mesh,
+            &with_region_fields(mesh, fields),
+            Encoding::Binary,
+            &format!("augsim SPACE={frame}"),
+        ),
         _ => write_mesh(path, mesh, fields),
     }
 }
