@@ -13,7 +13,7 @@ use mesh::labelmap::{is_labelmap, read_labelmap_surface, unreadable_segmentation
 use mesh::length::{mm, LengthUnit, UnitOrAuto};
 use mesh::phantom::PhantomSpec;
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
-use mesh::repair::{detect_unit, largest_extent, RepairOptions};
+use mesh::repair::{detect_unit, largest_extent, RepairOptions, ORGAN_EXTENT_M};
 use mesh::tetmesh::{BoundaryFit, Coverage};
 use mesh::{Mesh, TriSurface};
 
@@ -165,7 +165,7 @@ impl OrganInput {
             Some(unit) if self.labelmap => (unit, "the labelmap's".to_string()),
             Some(unit) => {
                 let extent = unit.to_metres(largest_extent(&self.surface));
-                if !(0.02..=0.6).contains(&extent) {
+                if !ORGAN_EXTENT_M.contains(&extent) {
                     self.notes.push((
                         "warning",
                         format!(
@@ -179,7 +179,7 @@ impl OrganInput {
             None => {
                 let unit = detect_unit(&self.surface).map_err(|e| {
                     let extent = largest_extent(&self.surface);
-                    let cm = if (2.0..=60.0).contains(&extent) {
+                    let cm = if ORGAN_EXTENT_M.contains(&(extent / 100.0)) {
                         " (in centimetres? scale the file by 10 to mm, e.g. in 3D Slicer's Transforms or MeshLab)"
                     } else {
                         ""

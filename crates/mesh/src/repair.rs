@@ -350,14 +350,17 @@ pub fn largest_extent(surface: &TriSurface) -> f64 {
     crate::longest_side(bounds(&points))
 }
 
+/// The largest extent of an organ (m): from 2 cm (a gallbladder, a kidney's tumour) to 60 cm.
+pub const ORGAN_EXTENT_M: std::ops::RangeInclusive<f64> = 0.02..=0.6;
+
 /// The length unit of an organ's surface, from its size: an organ is between 2 cm and 60 cm
 /// across, so a largest extent in [0.02, 0.6] is in metres and one in [20, 600] in millimetres.
 /// Any other extent is an error that gives it and asks for the unit.
 pub fn detect_unit(surface: &TriSurface) -> Result<LengthUnit, MeshError> {
     let extent = largest_extent(surface);
-    if (0.02..=0.6).contains(&extent) {
+    if ORGAN_EXTENT_M.contains(&extent) {
         Ok(LengthUnit::Metre)
-    } else if (20.0..=600.0).contains(&extent) {
+    } else if ORGAN_EXTENT_M.contains(&LengthUnit::Millimetre.to_metres(extent)) {
         Ok(LengthUnit::Millimetre)
     } else {
         Err(invalid(format!(
