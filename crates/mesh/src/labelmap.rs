@@ -23,8 +23,9 @@
 //! attached data or detached in one file (`data file`, relative to the header's folder), `raw`,
 //! `gzip` or `ascii` encoding, the same types, `space` LPS or RAS (or their long
 //! names), `space directions`, `space origin` and `space units`, and Slicer's layered
-//! segmentations (a first `list` axis of layers); DICOM SEG of uncompressed BINARY, FRACTIONAL or
-//! LABELMAP frames (see its module), its segments by number and label.
+//! segmentations (a first `list` axis of layers); DICOM SEG of BINARY, FRACTIONAL or LABELMAP
+//! frames, uncompressed or RLE Lossless, its segments by number and label; DICOM RT Structure
+//! Sets, their structures by number and name (see the `dicom` module).
 
 mod dicom;
 mod metaimage;

@@ -158,6 +158,16 @@ fn a_dicom_seg_holds_the_voxels_of_the_labelmap_it_was_made_from() {
     assert!(norm(sub(a, b)) < 1.0, "{a:?} vs {b:?}");
 }
 
+/// The phantom's liver as a FRACTIONAL DICOM SEG compressed RLE Lossless by highdicom holds the
+/// voxels of the labelmap it was made from.
+#[test]
+fn an_rle_compressed_dicom_seg_holds_the_same_voxels() {
+    let rle = read_labelmap(data("liver_labels_seg_rle.dcm")).unwrap();
+    let nrrd = read_labelmap(data("liver_labels.seg.nrrd")).unwrap();
+    let (a, b) = (voxel_positions(&rle, "liver"), voxel_positions(&nrrd, "liver"));
+    assert!(!a.is_empty() && a == b, "{} voxels, {} in the NRRD", a.len(), b.len());
+}
+
 /// The centroid of the volume a closed surface encloses.
 fn enclosed_centroid(surface: &augsim_mesh::TriSurface) -> Point {
     let (mut volume, mut moment) = (0.0, [0.0; 3]);

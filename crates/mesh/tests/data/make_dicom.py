@@ -2,6 +2,8 @@
 a synthetic CT series of the same geometry (pip install highdicom rt-utils):
 - liver_labels_seg.dcm: a DICOM SEG made by highdicom; segments 1 `liver` (label 5 of the
   labelmap) and 2 `kidney` (label 2); empty frames omitted, as highdicom does by default;
+- liver_labels_seg_rle.dcm: the liver alone as a FRACTIONAL DICOM SEG (1.0 inside) by highdicom,
+  RLE Lossless compressed (what highdicom compresses: not BINARY frames);
 - liver_labels_rt.dcm: an RT Structure Set made by rt-utils (as TotalSegmentator writes one); ROIs
   `liver` and `kidney`, contours through the centres of each slice's boundary pixels (OpenCV).
 
@@ -17,7 +19,7 @@ import numpy as np
 from rt_utils import RTStructBuilder
 from pydicom.dataset import Dataset, FileMetaDataset
 from pydicom.sr.codedict import codes
-from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
+from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, RLELossless, generate_uid
 
 here = Path(__file__).parent
 raw = (here / "liver_labels.seg.nrrd").read_bytes()
@@ -84,6 +86,24 @@ seg = hd.seg.Segmentation(
 )
 seg.save_as(here / "liver_labels_seg.dcm")
 print(f"{seg.NumberOfFrames} frames, {(here / 'liver_labels_seg.dcm').stat().st_size} bytes")
+
+fractional = hd.seg.Segmentation(
+    source_images=ct,
+    pixel_array=(labels == 5).astype(np.float32),
+    segmentation_type=hd.seg.SegmentationTypeValues.FRACTIONAL,
+    segment_descriptions=[segment(1, "liver", codes.SCT.Liver)],
+    series_instance_uid=generate_uid(),
+    series_number=3,
+    sop_instance_uid=generate_uid(),
+    instance_number=1,
+    manufacturer="augsim",
+    manufacturer_model_name="test data",
+    software_versions="1",
+    device_serial_number="1",
+    transfer_syntax_uid=RLELossless,
+)
+fractional.save_as(here / "liver_labels_seg_rle.dcm")
+print(f"RLE: {(here / 'liver_labels_seg_rle.dcm').stat().st_size} bytes")
 
 # rt-utils reads the series from files and orders the slices along their normal (-z here, as the
 # rows run along -y): slice s of its mask is the labelmap's k = nz - 1 - s.

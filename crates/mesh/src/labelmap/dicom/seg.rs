@@ -3,7 +3,8 @@
 //! of one segment each (BINARY: one bit per pixel, FRACTIONAL: a byte or two thresholded at half
 //! their maximum; LABELMAP: the segment number per pixel), placed by their per-frame
 //! `ImagePositionPatient` and the shared (or per-frame) orientation and spacing, in DICOM's
-//! patient frame (LPS, mm). Empty frames may be left out, as writers do; the volume holds one
+//! patient frame (LPS, mm), uncompressed or RLE Lossless (as highdicom compresses FRACTIONAL and
+//! LABELMAP frames). Empty frames may be left out, as writers do; the volume holds one
 //! empty slice beyond the first and the last frame (whether the scan went on there cannot be
 //! told). Segments may overlap:
 //! a segment that overlaps those of a layer goes to a layer of its own, as 3D Slicer's layered
@@ -24,8 +25,75 @@ pub(super) const SEGMENTATION_CLASSES: [&str; 2] = ["1.2.840.10008.5.1.4.1.1.66.
 /// VR, and explicit VR deflated.
 const NATIVE_SYNTAXES: [&str; 3] = ["1.2.840.10008.1.2", "1.2.840.10008.1.2.1", "1.2.840.10008.1.2.1.99"];
 
+/// RLE Lossless (PS3.5 Annex G), which highdicom writes for FRACTIONAL and LABELMAP frames.
+const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
+
 /// Explicit VR big endian, retired: uncompressed, in the other byte order.
 const BIG_ENDIAN: &str = "1.2.840.10008.1.2.2";
+
+/// The `frames` frames of RLE Lossless pixel data (a fragment each, PS3.5 G.2: a header of
+/// segment offsets, then a PackBits segment per byte of a pixel, the most significant first),
+/// as native little-endian pixels of `bits` (8 or 16) bits.
+fn rle_frames(fragments: &[Vec<u8>], frames: usize, frame_pixels: usize, bits: usize) -> Result<Vec<u8>, String> {
+    if bits != 8 && bits != 16 {
+        return Err(format!("RLE frames of {bits} bit(s) per pixel are not read (8 or 16)"));
+    }
+    if fragments.len() != frames {
+        return Err(format!("its RLE pixel data hold {} fragments for {frames} frames", fragments.len()));
+    }
+    let width = bits / 8;
+    let mut data = vec![0_u8; frames * frame_pixels * width];
+    for (f, fragment) in fragments.iter().enumerate() {
+        let context = |e: String| format!("RLE frame {}: {e}", f + 1);
+        let word = |k: usize| fragment.get(4 * k..4 * k + 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+        let segments = word(0).ok_or_else(|| context("no header".into()))? as usize;
+        if segments != width {
+            return Err(context(format!("{segments} segments for pixels of {width} byte(s)")));
+        }
+        for s in 0..segments {
+            let start = word(1 + s).map(|o| o as usize);
+            let end = if s + 1 < segments { word(2 + s).map(|o| o as usize) } else { Some(fragment.len()) };
+            let coded = start.zip(end).and_then(|(a, b)| fragment.get(a..b));
+            let coded = coded.ok_or_else(|| context(format!("segment {} lies outside the fragment", s + 1)))?;
+            let bytes = pack_bits(coded, frame_pixels).map_err(context)?;
+            // Segment 0 holds the most significant bytes.
+            let byte = width - 1 - s;
+            for (p, &b) in bytes.iter().enumerate() {
+                data[(f * frame_pixels + p) * width + byte] = b;
+            }
+        }
+    }
+    Ok(data)
+}
+
+/// `length` bytes decoded from PackBits: a byte n of 0 to 127 is followed by n + 1 literal
+/// bytes, one of −127 to −1 by a byte repeated 1 − n times; −128 is nothing.
+fn pack_bits(coded: &[u8], length: usize) -> Result<Vec<u8>, String> {
+    let mut out = Vec::with_capacity(length);
+    let mut i = 0;
+    while i < coded.len() && out.len() < length {
+        let n = coded[i] as i8;
+        i += 1;
+        match n {
+            0.. => {
+                let literal = coded.get(i..i + n as usize + 1).ok_or("a literal run goes past the segment's end")?;
+                out.extend_from_slice(literal);
+                i += literal.len();
+            }
+            -128 => {}
+            _ => {
+                let byte = *coded.get(i).ok_or("a repeat run goes past the segment's end")?;
+                out.extend(std::iter::repeat_n(byte, (1 - isize::from(n)) as usize));
+                i += 1;
+            }
+        }
+    }
+    if out.len() < length {
+        return Err(format!("its segment decodes to {} bytes, {length} expected", out.len()));
+    }
+    out.truncate(length);
+    Ok(out)
+}
 
 /// A compressed transfer syntax by name, with its UID.
 fn syntax_name(uid: &str) -> String {
@@ -49,7 +117,7 @@ pub(super) fn read(object: &DefaultDicomObject) -> Result<Labelmap, String> {
                     endian (`gdcmconv --raw IN.dcm OUT.dcm`, or pydicom)"
             .into());
     }
-    if !NATIVE_SYNTAXES.contains(&syntax.as_str()) {
+    if !NATIVE_SYNTAXES.contains(&syntax.as_str()) && syntax != RLE_LOSSLESS {
         return Err(format!(
             "its pixel data are compressed ({}), which is not read: decompress it first (`gdcmconv --raw IN.dcm \
              OUT.dcm`, DCMTK's `dcmdrle` or `dcmdjpeg`, pydicom's `decompress()`), or export the segmentation \
@@ -68,11 +136,12 @@ pub(super) fn read(object: &DefaultDicomObject) -> Result<Labelmap, String> {
     let bits = number(object, tags::BITS_ALLOCATED)? as usize;
     let planes = planes(object, frames, &kind)?;
     let pixels = object.element(tags::PIXEL_DATA).map_err(|_| "it holds no pixel data".to_string())?;
-    if pixels.fragments().is_some() {
-        return Err("its pixel data are encapsulated (compressed), which is not read".into());
-    }
-    let data = pixels.to_bytes().map_err(|e| format!("pixel data: {e}"))?;
     let frame_pixels = rows * columns;
+    let data = match (pixels.fragments(), syntax == RLE_LOSSLESS) {
+        (Some(fragments), true) => std::borrow::Cow::Owned(rle_frames(fragments, frames, frame_pixels, bits)?),
+        (None, false) => pixels.to_bytes().map_err(|e| format!("pixel data: {e}"))?,
+        _ => return Err(format!("its pixel data do not match its transfer syntax ({})", syntax_name(&syntax))),
+    };
     let value = pixel_reader(&kind, bits, &data, frames * frame_pixels, object)?;
     let grid = Grid::new(&planes, object)?;
     let dims = [columns, rows, grid.slices];
@@ -491,6 +560,26 @@ mod tests {
         let map = parse_dicom(&seg_file(SEGMENTATION_CLASSES[1], "LABELMAP", &frames, 8, pixels)).unwrap();
         assert_eq!((map.dims, map.layers, map.spacing()), ([4, 4, 4], 1, [1.0, 1.0, 3.0]));
         assert_eq!(map.present().iter().map(|p| (p.1, p.2)).collect::<Vec<_>>(), [(1, 1), (2, 1)]);
+    }
+
+    /// PackBits as Apple's technical note gives it, and RLE frames of two segments (16 bits).
+    #[test]
+    fn rle_segments_decode() {
+        let coded = [0xfe, 0xaa, 0x02, 0x80, 0x00, 0x2a, 0xfd, 0xaa, 0x03, 0x80, 0x00, 0x2a, 0x22, 0xf7, 0xaa];
+        let mut expected = vec![0xaa, 0xaa, 0xaa, 0x80, 0x00, 0x2a, 0xaa, 0xaa, 0xaa, 0xaa, 0x80, 0x00, 0x2a, 0x22];
+        expected.extend([0xaa; 10]);
+        assert_eq!(pack_bits(&coded, 24).unwrap(), expected);
+        assert!(pack_bits(&coded[..14], 24).unwrap_err().contains("past the segment's end"));
+        assert!(pack_bits(&coded, 30).unwrap_err().contains("decodes to 24 bytes, 30 expected"));
+        // Two pixels of 16 bits: 0x0102 and 0x0304; the high bytes first, each a literal run.
+        let mut fragment = vec![0_u8; 64];
+        fragment[..4].copy_from_slice(&2_u32.to_le_bytes());
+        fragment[4..8].copy_from_slice(&64_u32.to_le_bytes());
+        fragment[8..12].copy_from_slice(&67_u32.to_le_bytes());
+        fragment.extend([1, 0x01, 0x03, 1, 0x02, 0x04]);
+        assert_eq!(rle_frames(&[fragment.clone()], 1, 2, 16).unwrap(), [0x02, 0x01, 0x04, 0x03]);
+        assert!(rle_frames(&[fragment.clone()], 1, 2, 8).unwrap_err().contains("2 segments for pixels of 1 byte"));
+        assert!(rle_frames(&[fragment], 2, 2, 16).unwrap_err().contains("1 fragments for 2 frames"));
     }
 
     #[test]
