@@ -14,7 +14,9 @@
 //! 5. orients the triangles consistently, breadth-first over shared edges (the orientation of
 //!    the majority is kept), and refuses a surface in several pieces: an organ is one piece;
 //! 6. fills each hole with the minimum-area triangulation of its boundary loop, by dynamic
-//!    programming in O(n³) (Barequet & Sharir 1995, Liepa 2003), without new vertices;
+//!    programming in O(n³) (Barequet & Sharir 1995, Liepa 2003); a hole of 16 edges or more
+//!    (an organ cut open) then has its patch refined to the size of its boundary's edges and
+//!    faired into a membrane (Liepa 2003), its new vertices after the others;
 //! 7. turns the surface outward, checks it with [`check_closed_manifold`] and looks for
 //!    self-intersections ([`self_intersections`]): they are refused when more than a fraction of
 //!    the triangles cross others (by default the 1 % the mesher tolerates,
@@ -24,7 +26,7 @@
 //!
 //! [`detect_unit`] tells a surface in metres from one in millimetres by the size of an organ.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 
 use rayon::prelude::*;
 
@@ -76,6 +78,8 @@ pub struct RepairReport {
     /// Triangles added to fill the holes. A hole of three edges along a line (left by a
     /// zero-area triangle) is closed by splitting the triangle across its longest edge: one more.
     pub added_triangles: usize,
+    /// Vertices added inside the patches of holes of [`REFINED_HOLE_EDGES`] edges or more.
+    pub added_vertices: usize,
     /// The share of the repaired surface's area that the holes' patches make up.
     pub filled_share: f64,
     /// Pairs of triangles of the repaired surface that cross (see [`self_intersections`]), few
@@ -112,8 +116,12 @@ impl RepairReport {
         }
         if !self.holes_filled.is_empty() {
             let sizes: Vec<String> = self.holes_filled.iter().map(|n| n.to_string()).collect();
+            let vertices = match self.added_vertices {
+                0 => String::new(),
+                n => format!(" and {}", count(n, "new vertex", "new vertices")),
+            };
             lines.push(format!(
-                "filled {} ({} edges) with {}",
+                "filled {} ({} edges) with {}{vertices}",
                 count(self.holes_filled.len(), "hole", "holes"),
                 sizes.join(", "),
                 count(self.added_triangles, "triangle", "triangles")
@@ -139,7 +147,7 @@ impl RepairReport {
         if self.filled_share > LARGE_FILL_SHARE {
             warnings.push(format!(
                 "the holes filled make up {:.0} % of the surface: the organ seems cut open (by the image's field of \
-                 view, or a clipped export) and is closed there by a patch of least area, not by its own shape",
+                 view, or a clipped export) and is closed there by a membrane across the cut, not by its own shape",
                 100.0 * self.filled_share
             ));
         }
@@ -164,7 +172,7 @@ impl RepairReport {
 /// non-finite or absurdly large coordinates, out-of-range indices, non-manifold edges and
 /// vertices, a non-orientable surface, several pieces, a hole of more than `max_hole_edges` edges,
 /// self-intersections of more than `max_crossing_fraction` of the triangles. The vertices keep
-/// their coordinates and their order.
+/// their coordinates and their order; the new vertices of large holes' patches follow them.
 pub fn repair_surface(surface: &TriSurface, options: &RepairOptions) -> Result<(TriSurface, RepairReport), MeshError> {
     let nv = surface.vertices.len();
     let used = check_input(surface, options)?;
@@ -699,7 +707,12 @@ fn fill_holes(
         .collect();
     for hole in &loops {
         let n = hole.len();
-        if let Some(fill) = min_area_fill(&surface.vertices, hole, &existing, &faces, min_area) {
+        if let Some(mut fill) = min_area_fill(&surface.vertices, hole, &existing, &faces, min_area) {
+            if n >= REFINED_HOLE_EDGES {
+                let before = surface.vertices.len();
+                fill = refine_patch(&mut surface.vertices, hole, fill, &existing);
+                report.added_vertices += surface.vertices.len() - before;
+            }
             report.added_triangles += fill.len();
             surface.triangles.extend(fill);
         } else if let Some((t, split)) = split_across_slit(surface, hole, &owner, &existing, min_area) {
@@ -716,6 +729,142 @@ fn fill_holes(
         report.holes_filled.push(n);
     }
     Ok(())
+}
+
+/// Holes of at least this many edges get their patch refined and faired ([`refine_patch`]):
+/// the least-area triangulation of a large hole is a fan of slivers, which meshes badly.
+const REFINED_HOLE_EDGES: usize = 16;
+
+/// Refines the patch `fill` that closes `hole` (Liepa 2003, "Filling holes in meshes"): a
+/// triangle is split at its centroid while the centroid lies farther than its local edge length
+/// (interpolated from the hole's boundary edges) times √2 from each corner, the patch's inner
+/// edges are flipped towards Delaunay triangles after each round, and the new vertices are moved
+/// to the mean of their neighbours (a membrane spanned by the hole's boundary, which stays
+/// fixed). Returns the patch's triangles; the new vertices are appended to `vertices`.
+fn refine_patch(
+    vertices: &mut Vec<Point>,
+    hole: &[usize],
+    fill: Vec<[usize; 3]>,
+    existing: &HashSet<(usize, usize)>,
+) -> Vec<[usize; 3]> {
+    let first_new = vertices.len();
+    let n = hole.len();
+    let mut scale: HashMap<usize, f64> = HashMap::new();
+    for (i, &v) in hole.iter().enumerate() {
+        let length = |a: usize, b: usize| norm(sub(vertices[a], vertices[b]));
+        let (before, after) = (hole[(i + n - 1) % n], hole[(i + 1) % n]);
+        scale.insert(v, 0.5 * (length(before, v) + length(v, after)));
+    }
+    let mut patch = fill;
+    for _ in 0..MAX_REFINE_ROUNDS {
+        let mut split = false;
+        let mut next = Vec::with_capacity(patch.len());
+        for t in patch {
+            let corners = t.map(|v| vertices[v]);
+            let centre: Point = std::array::from_fn(|d| corners.iter().map(|p| p[d]).sum::<f64>() / 3.0);
+            let sigma = t.iter().map(|v| scale[v]).sum::<f64>() / 3.0;
+            let far = (0..3).all(|k| {
+                let reach = std::f64::consts::SQRT_2 * norm(sub(centre, corners[k]));
+                reach > sigma && reach > scale[&t[k]]
+            });
+            if far {
+                let c = vertices.len();
+                vertices.push(centre);
+                scale.insert(c, sigma);
+                next.extend([[t[0], t[1], c], [t[1], t[2], c], [t[2], t[0], c]]);
+                split = true;
+            } else {
+                next.push(t);
+            }
+        }
+        patch = next;
+        flip_to_delaunay(vertices, &mut patch, existing);
+        if !split {
+            break;
+        }
+    }
+    // The membrane: each new vertex at the mean of its neighbours, the boundary fixed.
+    let mut neighbours: BTreeMap<usize, BTreeSet<usize>> = BTreeMap::new();
+    for t in &patch {
+        for k in 0..3 {
+            if t[k] >= first_new {
+                neighbours.entry(t[k]).or_default().extend([t[(k + 1) % 3], t[(k + 2) % 3]]);
+            }
+        }
+    }
+    let order: Vec<(usize, Vec<usize>)> = neighbours.into_iter().map(|(v, n)| (v, n.into_iter().collect())).collect();
+    for _ in 0..FAIRING_SWEEPS {
+        for (v, around) in &order {
+            let mean =
+                std::array::from_fn(|d| around.iter().map(|&u| vertices[u][d]).sum::<f64>() / around.len() as f64);
+            vertices[*v] = mean;
+        }
+    }
+    flip_to_delaunay(vertices, &mut patch, existing);
+    patch
+}
+
+/// Rounds of splitting in [`refine_patch`] (each at most triples a triangle's count).
+const MAX_REFINE_ROUNDS: usize = 30;
+
+/// Gauss–Seidel sweeps of the membrane in [`refine_patch`].
+const FAIRING_SWEEPS: usize = 200;
+
+/// Flips the inner edges of `patch` (edges two of its triangles share) whose opposite angles sum
+/// to more than π, until none does, unless the flipped edge is already an edge of the surface
+/// (`existing`) or of the patch.
+fn flip_to_delaunay(vertices: &[Point], patch: &mut [[usize; 3]], existing: &HashSet<(usize, usize)>) {
+    let angle = |at: usize, a: usize, b: usize| {
+        let (u, v) = (sub(vertices[a], vertices[at]), sub(vertices[b], vertices[at]));
+        norm(cross(u, v)).atan2(dot(u, v))
+    };
+    for _ in 0..patch.len() {
+        let mut edges: BTreeMap<(usize, usize), Vec<usize>> = BTreeMap::new();
+        for (i, t) in patch.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                edges.entry((a.min(b), a.max(b))).or_default().push(i);
+            }
+        }
+        let mut flipped = false;
+        let mut touched = vec![false; patch.len()];
+        for (&(lo, hi), owners) in &edges {
+            let &[i, j] = owners.as_slice() else { continue };
+            if touched[i] || touched[j] {
+                continue;
+            }
+            // t1 = (a, b, c), t2 = (b, a, d).
+            let t1 = patch[i];
+            let Some(k) = (0..3).find(|&k| {
+                let (a, b) = (t1[k], t1[(k + 1) % 3]);
+                (a.min(b), a.max(b)) == (lo, hi)
+            }) else {
+                continue;
+            };
+            let (a, b, c) = (t1[k], t1[(k + 1) % 3], t1[(k + 2) % 3]);
+            let Some(&d) = patch[j].iter().find(|&&v| v != a && v != b) else { continue };
+            let diagonal = (c.min(d), c.max(d));
+            if c == d || existing.contains(&diagonal) || edges.contains_key(&diagonal) {
+                continue;
+            }
+            if angle(c, a, b) + angle(d, b, a) > std::f64::consts::PI + 1e-9 {
+                let (n1, n2) = (
+                    area_vector([vertices[a], vertices[d], vertices[c]]),
+                    area_vector([vertices[d], vertices[b], vertices[c]]),
+                );
+                if dot(n1, n2) > 0.0 {
+                    patch[i] = [a, d, c];
+                    patch[j] = [d, b, c];
+                    touched[i] = true;
+                    touched[j] = true;
+                    flipped = true;
+                }
+            }
+        }
+        if !flipped {
+            break;
+        }
+    }
 }
 
 /// The minimum-area triangulation of the polygon `hole` (vertex indices, in the direction the
@@ -1095,6 +1244,58 @@ mod tests {
         assert!(repaired.enclosed_volume() < 0.98 * s.enclosed_volume(), "closed flat, lower than the sphere");
         let warnings = report.warnings();
         assert!(warnings[0].starts_with(&format!("the holes filled make up {:.0} % of the surface", 100.0 * share)));
+    }
+
+    /// Half a fine sphere, cut open, is closed by a membrane of triangles the size of its
+    /// boundary's edges, flat where the cut is, that the mesher's inside test accepts.
+    #[test]
+    fn a_large_hole_is_closed_by_a_refined_membrane() {
+        let s = icosphere(1.0, 4);
+        let lower: Vec<usize> =
+            (0..s.triangles.len()).filter(|&t| s.triangles[t].iter().any(|&k| s.vertices[k][2] < 0.0)).collect();
+        let (repaired, report) = repair(&without(&s, &lower)).unwrap();
+        let [n] = report.holes_filled[..] else { panic!("{report:?}") };
+        assert!(n >= REFINED_HOLE_EDGES && report.added_vertices > 0, "{report:?}");
+        assert_eq!(repaired.vertices.len() - report.added_vertices, s.vertices.len() - report.removed_unused_vertices);
+        let checked = check_closed_manifold(&repaired).unwrap();
+        let half = 2.0 / 3.0 * std::f64::consts::PI;
+        assert!((checked.volume / half - 1.0).abs() < 0.03, "{} vs {half}", checked.volume);
+        assert!(self_intersections(&repaired).is_empty());
+        crate::bvh::SurfaceBvh::new(&repaired).unwrap().check_winding(0.0).unwrap();
+        // The rim lies at z = 0 (the equator's vertices): the membrane is flat there, and its
+        // edges are no longer than a few of the rim's.
+        let new = repaired.vertices.len() - report.added_vertices..repaired.vertices.len();
+        let first = repaired.vertices.len() - report.added_vertices;
+        let on_rim = |v: &usize| *v < first;
+        let rim_z: Vec<f64> = patch(&repaired, &report)
+            .iter()
+            .flatten()
+            .filter(|v| on_rim(v))
+            .map(|&v| repaired.vertices[v][2])
+            .collect();
+        let (low, high) = rim_z.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &z| (l.min(z), h.max(z)));
+        assert!(high - low < 0.05, "the cut's vertices lie within {} of z = 0", high - low);
+        assert!(
+            new.clone().all(|v| (low - 1e-6..=high + 1e-6).contains(&repaired.vertices[v][2])),
+            "a membrane between its rim's heights"
+        );
+        let rim = 2.0 * std::f64::consts::PI / n as f64;
+        let patch = &repaired.triangles[repaired.triangles.len() - report.added_triangles..];
+        let longest = patch
+            .iter()
+            .flat_map(|t| (0..3).map(|k| norm(sub(repaired.vertices[t[k]], repaired.vertices[t[(k + 1) % 3]]))))
+            .fold(0.0, f64::max);
+        assert!(longest < 3.0 * rim, "{longest} vs the rim's {rim}");
+        let line = format!(
+            "filled 1 hole ({n} edges) with {} triangles and {} new vertices",
+            report.added_triangles, report.added_vertices
+        );
+        assert!(report.lines().contains(&line), "{:?}", report.lines());
+    }
+
+    /// The triangles a repair added, at the end of its triangles.
+    fn patch<'a>(repaired: &'a TriSurface, report: &RepairReport) -> &'a [[usize; 3]] {
+        &repaired.triangles[repaired.triangles.len() - report.added_triangles..]
     }
 
     #[test]
