@@ -108,6 +108,13 @@ pub fn unreadable_segmentation(path: &Path) -> Option<String> {
     }
     Some(match extension {
         "dicom" | "ima" | "" => format!("neither a DICOM file by its content nor named by an extension: {save_as}"),
+        "mrb" => format!(
+            "a 3D Slicer scene bundle (a zip): unzip it; its Data folder holds the segmentation (.seg.nrrd) and the \
+             markups (.mrk.json) to give"
+        ),
+        "mrml" => "a 3D Slicer scene, which names its files: give the segmentation it holds (.seg.nrrd, in its \
+                   folder)"
+            .to_string(),
         "mgz" | "mgh" | "hdr" | "img" | "nia" => {
             format!("this image format is not read: {save_as} (3D Slicer or ITK-SNAP: Save as)")
         }
@@ -1382,6 +1389,8 @@ mod tests {
         assert!(said("").starts_with("a folder, not a file (a DICOM series is not read)"), "{}", said(""));
         assert!(said("IM0001").starts_with("neither a DICOM file by its content nor named by an extension"));
         assert!(said("liver.mgz").contains("this image format is not read"), "{}", said("liver.mgz"));
+        assert!(said("case.mrb").starts_with("a 3D Slicer scene bundle (a zip): unzip it"));
+        assert!(said("case.mrml").starts_with("a 3D Slicer scene, which names its files"));
         assert!(said("liver.xyz").contains("not a labelmap nor a surface"));
         for fine in ["liver.STL", "seg.seg.nrrd", "seg.nii.gz", "seg.nhdr", "liver.mhd", "organ.vtu", "seg.dcm"] {
             assert_eq!(said(fine), "", "{fine}");
