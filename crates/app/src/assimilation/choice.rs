@@ -22,7 +22,8 @@ pub struct AssimilationChoice {
     /// Evaluate the sigma points one after the other instead of in parallel.
     #[arg(long)]
     pub sequential: bool,
-    /// Output directory; default `out/<name>`.
+    /// Output directory, refused when it holds an earlier run's results; default a fresh numbered
+    /// folder under `out/<name>` (`001`, `002`, …).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// Tracked features instead of synthetic ones: CSV `frame,id,x,y,z` (in --units, or x_mm, y_mm, z_mm; frame 0 =
@@ -118,14 +119,16 @@ impl AssimilationChoice {
     /// where it writes and the lines that say what it is set up to do.
     pub fn prepare(&self) -> Result<PreparedAssimilation> {
         let (sc, dir) = self.scenario()?;
-        let out_dir = self.output.clone().unwrap_or_else(|| sc.output_dir());
+        // Never two runs' files in one folder: `--out` refused once used, else numbered folders.
+        let (out_dir, own) = crate::output::run_dir(self.output.as_deref(), &sc.output_dir())?;
         let files = self.files();
         let described = if sc.description.is_empty() { String::new() } else { format!(": {}", sc.description) };
         let mut lines = vec![format!("scenario     {}{described}", sc.name)];
         let sigma_points = sc.filter.sigma_points;
-        let experiment = Experiment::prepare(sc, &dir, files.as_ref())?;
+        let prepared = Experiment::prepare(sc, &dir, files.as_ref()).map_err(anyhow::Error::from);
+        let experiment = crate::output::tidy_failed_run(&out_dir, own, prepared)?;
         lines.extend(experiment.setup().lines(sigma_points, files.as_ref()));
-        Ok(PreparedAssimilation { experiment, out_dir, synthetic: files.is_none(), lines })
+        Ok(PreparedAssimilation { experiment, out_dir, own, synthetic: files.is_none(), lines })
     }
 
     /// The track files that replace the synthetic observations, when given.
@@ -145,6 +148,8 @@ impl AssimilationChoice {
 pub struct PreparedAssimilation {
     experiment: Experiment,
     out_dir: PathBuf,
+    /// Whether the folder is the run's own, removed again when the run fails before writing.
+    own: bool,
     /// Whether its observations are synthetic (written as track files by the run).
     synthetic: bool,
     /// What it is set up to do, a line each.
@@ -155,7 +160,8 @@ impl PreparedAssimilation {
     /// Runs the filter, telling each iteration to `progress`, and writes its results; returns
     /// them in words, with what was written.
     pub fn run(&self, progress: &dyn learn::Progress) -> Result<Vec<String>> {
-        let mut lines = self.experiment.run(&self.out_dir, progress)?.lines();
+        let report = self.experiment.run(&self.out_dir, progress).map_err(anyhow::Error::from);
+        let mut lines = crate::output::tidy_failed_run(&self.out_dir, self.own, report)?.lines();
         lines.push(format!(
             "wrote        {}/{{trace.csv, trace.json, summary.json, deformation.pvd, *.png}}{}",
             self.out_dir.display(),
