@@ -125,7 +125,12 @@ pub fn unreadable_segmentation(path: &Path) -> Option<String> {
 /// Reads a NIfTI, NRRD or MetaImage labelmap, chosen by the file's extension; an image's grey
 /// values (a CT given for its segmentation) are refused.
 pub fn read_labelmap(path: impl AsRef<Path>) -> Result<Labelmap, MeshError> {
-    let path = path.as_ref();
+    read_labelmap_choosing(path.as_ref(), None)
+}
+
+/// [`read_labelmap`]; of an RT Structure Set, only the structure `label` names when it names
+/// one, on a grid of its own (see the `dicom` module).
+fn read_labelmap_choosing(path: &Path, label: Option<&str>) -> Result<Labelmap, MeshError> {
     let bytes = std::fs::read(path).map_err(|error| MeshError::Io { path: path.display().to_string(), error })?;
     let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     let folder = path.parent().unwrap_or(Path::new(""));
@@ -136,7 +141,7 @@ pub fn read_labelmap(path: impl AsRef<Path>) -> Result<Labelmap, MeshError> {
     } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
         parse_nifti(&gunzip_if_needed(bytes).map_err(|m| parse_error(path, m))?).map_err(|m| parse_error(path, m))?
     } else if name.ends_with(".dcm") || bytes.get(128..132) == Some(b"DICM") {
-        dicom::parse_dicom(&bytes).map_err(|m| parse_error(path, m))?
+        dicom::parse_dicom(&bytes, label).map_err(|m| parse_error(path, m))?
     } else {
         return Err(parse_error(path, format!("not a labelmap: expected {LABELMAP_FORMATS}")));
     };
@@ -699,15 +704,18 @@ impl Labelmap {
     /// present; a number matching segments of several layers must be chosen by name, and a name
     /// that several segments carry is refused.
     pub fn select(&self, choice: &str) -> Result<(VoxelMask, String), MeshError> {
-        let (whole, description, _) = self.select_uncropped(choice)?;
-        Ok((self.cropped(&whole, &description)?, description))
+        let (whole, description, chosen) = self.select_uncropped(choice)?;
+        Ok((self.cropped(&whole, &description, chosen)?, description))
     }
 
     /// `whole`, a selection of `description` on this labelmap's grid, cut to its box with one
     /// voxel around; an error when it has no voxel.
-    fn cropped(&self, whole: &VoxelMask, description: &str) -> Result<VoxelMask, MeshError> {
+    fn cropped(&self, whole: &VoxelMask, description: &str, chosen: (usize, i32)) -> Result<VoxelMask, MeshError> {
         whole.cropped(1).ok_or_else(|| {
-            MeshError::Invalid(format!("{description} has no voxel; labels present: {}", self.present_text()))
+            let why: Vec<&str> =
+                self.warnings.iter().filter(|(of, _)| *of == Some(chosen)).map(|(_, w)| w.as_str()).collect();
+            let why = if why.is_empty() { String::new() } else { format!(" ({})", why.join("; ")) };
+            MeshError::Invalid(format!("{description} has no voxel{why}; labels present: {}", self.present_text()))
         })
     }
 
@@ -960,7 +968,7 @@ pub fn read_labelmap_surface(
     options: &ExtractOptions,
 ) -> Result<LabelSurface, MeshError> {
     let path = path.as_ref();
-    let map = read_labelmap(path)?;
+    let map = read_labelmap_choosing(path, label)?;
     let present = map.present();
     let label = match (label, &present[..]) {
         (Some(label), _) => label.to_string(),
@@ -974,7 +982,7 @@ pub fn read_labelmap_surface(
     };
     let (whole, label, chosen) = map.select_uncropped(&label).map_err(|e| parse_error(path, e.message()))?;
     let borders = touched_borders(&whole);
-    let mask = map.cropped(&whole, &label).map_err(|e| parse_error(path, e.message()))?;
+    let mask = map.cropped(&whole, &label, chosen).map_err(|e| parse_error(path, e.message()))?;
     let (surface, extract) = mask_surface(&mask, options).map_err(|e| parse_error(path, e.message()))?;
     let mut warnings: Vec<String> =
         map.warnings.iter().filter(|(of, _)| of.is_none_or(|of| of == chosen)).map(|(_, w)| w.clone()).collect();

@@ -24,8 +24,9 @@ pub(super) fn is_dicom_file(path: &std::path::Path) -> bool {
         && &start[128..] == b"DICM"
 }
 
-/// Reads a DICOM SEG or RTSTRUCT from the bytes of its file.
-pub(super) fn parse_dicom(bytes: &[u8]) -> Result<Labelmap, String> {
+/// Reads a DICOM SEG or RTSTRUCT from the bytes of its file; of an RTSTRUCT, only the structure
+/// `wanted` (by number or name) when it names one, on a grid of its own extent.
+pub(super) fn parse_dicom(bytes: &[u8], wanted: Option<&str>) -> Result<Labelmap, String> {
     let object = OpenFileOptions::new().read_preamble(ReadPreamble::Auto).from_reader(bytes).map_err(|e| {
         if bytes.get(128..132) == Some(b"DICM") {
             format!("a DICOM file that cannot be read: cut short or damaged? ({e})")
@@ -37,7 +38,7 @@ pub(super) fn parse_dicom(bytes: &[u8]) -> Result<Labelmap, String> {
     if seg::SEGMENTATION_CLASSES.contains(&class.as_str()) {
         seg::read(&object)
     } else if class == rt_struct::RT_STRUCTURE_SET {
-        rt_struct::read(&object)
+        rt_struct::read(&object, wanted)
     } else {
         let modality = text(&object, tags::MODALITY).unwrap_or_else(|| "unknown".into());
         Err(format!(
@@ -138,22 +139,30 @@ pub(super) fn fill_missing_slices(
 /// on beyond them: organs taper to their ends.
 const CUT_SHARE: f64 = 0.5;
 
+/// The share of the slice next to it at or above which an end slice is not tapering: a cut end
+/// is as large as its neighbour, a round end (a tumour on coarse slices) smaller.
+const CUT_NEIGHBOUR_SHARE: f64 = 0.9;
+
 /// A warning when a segment's first or last slice holds [`CUT_SHARE`] of its largest slice's
-/// pixels or more: the organ goes on beyond the slices (a scan's end, a segmentation made on part
-/// of the series).
+/// pixels or more and [`CUT_NEIGHBOUR_SHARE`] of its neighbour's: the organ goes on beyond the
+/// slices (a scan's end, a segmentation made on part of the series).
 pub(super) fn cut_at_an_end(own: &[u32], frame_pixels: usize) -> Option<String> {
     let mut counts: BTreeMap<usize, usize> = BTreeMap::new();
     own.iter().for_each(|&n| *counts.entry(n as usize / frame_pixels).or_default() += 1);
     let largest = *counts.values().max()?;
-    let ends = [("first", *counts.first_key_value()?.1), ("last", *counts.last_key_value()?.1)];
-    let (end, count) = ends.into_iter().find(|&(_, count)| count as f64 >= CUT_SHARE * largest as f64)?;
-    (counts.len() > 1).then(|| {
-        format!(
-            "its {end} slice holds {count} pixels, {:.0} % of its largest: the organ seems to go on beyond the slices \
-             (cut by the scan's end, or segmented on part of the series)",
-            100.0 * count as f64 / largest as f64
-        )
-    })
+    let sizes: Vec<usize> = counts.values().copied().collect();
+    let (first, last) = (sizes.first()?, sizes.last()?);
+    let ends =
+        [("first", *first, sizes.get(1)), ("last", *last, sizes.len().checked_sub(2).and_then(|i| sizes.get(i)))];
+    let (end, count, _) = ends.into_iter().find(|&(_, count, next)| {
+        count as f64 >= CUT_SHARE * largest as f64
+            && next.is_some_and(|&n| count as f64 >= CUT_NEIGHBOUR_SHARE * n as f64)
+    })?;
+    Some(format!(
+        "its {end} slice holds {count} pixels, {:.0} % of its largest: the organ seems to go on beyond the slices (cut \
+         by the scan's end, or segmented on part of the series)",
+        100.0 * count as f64 / largest as f64
+    ))
 }
 
 /// An attribute's text, trimmed of DICOM's padding; `None` when absent.

@@ -16,7 +16,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use dicom_dictionary_std::tags;
 use dicom_object::DefaultDicomObject;
 
-use super::{fill_missing_slices, in_layers, items, number, numbers, slice_step, text};
+use super::{in_layers, items, number, numbers, slice_step, text};
 use crate::labelmap::{Frame, Labelmap};
 use crate::{cross, dot, norm, Point};
 
@@ -46,15 +46,21 @@ struct Contour {
     height: f64,
 }
 
-/// Reads an RT Structure Set (`object`, of the class [`RT_STRUCTURE_SET`]).
-pub(super) fn read(object: &DefaultDicomObject) -> Result<Labelmap, String> {
+/// Reads an RT Structure Set (`object`, of the class [`RT_STRUCTURE_SET`]): every structure, or
+/// only the one `wanted` names (its number, else its name in any case) when one does, so that its
+/// grid is its own and not that of the largest structure (the body's outline).
+pub(super) fn read(object: &DefaultDicomObject, wanted: Option<&str>) -> Result<Labelmap, String> {
     let mut names: BTreeMap<u32, String> = BTreeMap::new();
     for item in items(object, tags::STRUCTURE_SET_ROI_SEQUENCE) {
         let roi = number(item, tags::ROI_NUMBER)?;
         names.insert(roi, text(item, tags::ROI_NAME).filter(|n| !n.is_empty()).unwrap_or_else(|| format!("ROI {roi}")));
     }
     let mut warnings = Vec::new();
-    let (contours, without_volume) = closed_contours(object, &mut names, &mut warnings)?;
+    let (mut contours, without_volume) = closed_contours(object, &mut names, &mut warnings)?;
+    if let Some(roi) = wanted.and_then(|w| chosen(&names, w)) {
+        contours.retain(|c| c.roi == roi);
+        names.retain(|&n, _| n == roi);
+    }
     if contours.is_empty() {
         return Err(match names.is_empty() {
             true => "it describes no structure (its StructureSetROISequence and ROIContourSequence are empty)".into(),
@@ -73,36 +79,53 @@ pub(super) fn read(object: &DefaultDicomObject) -> Result<Labelmap, String> {
     for contour in &contours {
         by_slice.entry((contour.roi, grid.slice_of(contour.height))).or_default().push(contour);
     }
-    let mut voxels: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+    // Each structure's slices as drawn, then the slices between them as the nearest drawn one
+    // (the lower at equal distance): a contour reaches halfway to its neighbours, whatever the
+    // spacing it was drawn at (every slice near a tumour, every other one elsewhere).
+    let mut drawn: BTreeMap<u32, BTreeMap<usize, Vec<usize>>> = BTreeMap::new();
     for (&(roi, k), on_slice) in &by_slice {
+        let mut pixels = Vec::new();
+        grid.fill(on_slice, |pixel| pixels.push(pixel));
+        drawn.entry(roi).or_default().insert(k, pixels);
+    }
+    let mut voxels: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+    for (&roi, slices) in &drawn {
         let own = voxels.entry(roi).or_default();
-        grid.fill(on_slice, |pixel| own.push((pixel + frame_pixels * k) as u32));
+        let ks: Vec<usize> = slices.keys().copied().collect();
+        for (i, &k) in ks.iter().enumerate() {
+            let below = if i == 0 { k } else { k - (k - ks[i - 1] - 1) / 2 };
+            let above = ks.get(i + 1).map_or(k, |&next| k + (next - k) / 2);
+            for slice in below..=above {
+                own.extend(slices[&k].iter().map(|&pixel| (pixel + frame_pixels * slice) as u32));
+            }
+        }
     }
     voxels.retain(|_, own| !own.is_empty());
-    let present: BTreeSet<usize> = by_slice.keys().map(|&(_, k)| k).collect();
-    let missing = fill_missing_slices(&mut voxels, &present, frame_pixels);
-    if !missing.is_empty() {
-        let at: Vec<String> = missing.iter().map(|&k| format!("{:.1}", (k as f64 - 1.0) * step)).collect();
-        warnings.push((
-            None,
-            format!(
-                "no contour lies {} mm from the first along the slices' normal, between contours {step} mm apart: \
-                 each structure is filled there with what its slices on both sides share",
-                at.join(", ")
-            ),
-        ));
-    }
     let dims = [grid.columns, grid.rows, grid.slices];
     let (layers, labels, segments) = in_layers(&names, &voxels, dims.iter().product(), frame_pixels, &mut warnings);
     for (name, layer, label) in &segments {
-        if without_volume.contains(&(*label as u32)) && !voxels.contains_key(&(*label as u32)) {
-            warnings.push((
-                Some((*layer, *label)),
-                format!("'{name}' is drawn as points or open lines (markers, not outlines): it has no volume"),
-            ));
-        }
+        let roi = *label as u32;
+        let why = match (without_volume.contains(&roi), drawn.contains_key(&roi)) {
+            (true, false) => "is drawn as points or open lines (markers, not outlines): it has no volume",
+            (false, false) => "has no contour",
+            _ => continue,
+        };
+        warnings.push((Some((*layer, *label)), format!("'{name}' {why}")));
     }
     Ok(Labelmap { dims, layers, labels, affine: grid.affine, frame: Frame::Lps, segments, placed: true, warnings })
+}
+
+/// The structure `wanted` names: its number, else its name (any case), when exactly one has it.
+fn chosen(names: &BTreeMap<u32, String>, wanted: &str) -> Option<u32> {
+    let wanted = wanted.trim();
+    if let Ok(number) = wanted.parse::<u32>() {
+        return names.contains_key(&number).then_some(number);
+    }
+    let mut named = names.iter().filter(|(_, name)| name.eq_ignore_ascii_case(wanted));
+    match (named.next(), named.next()) {
+        (Some((&roi, _)), None) => Some(roi),
+        _ => None,
+    }
 }
 
 /// The closed planar contours of every structure, and the structures drawn only as points or open
@@ -365,7 +388,7 @@ mod tests {
         contours.push((2, "CLOSED_PLANAR", square(18.0, -7.0, 100.0, 3.0, false)));
         contours.push((3, "POINT", vec![[0.0, 0.0, 100.0]]));
         contours.push((9, "CLOSED_PLANAR", square(40.0, 40.0, 100.0, 2.0, false)));
-        let map = parse_dicom(&rt_struct(&[(1, "Liver"), (2, "GTV"), (3, "marker")], &contours)).unwrap();
+        let map = parse_dicom(&rt_struct(&[(1, "Liver"), (2, "GTV"), (3, "marker")], &contours), None).unwrap();
         assert_eq!(map.frame, Frame::Lps);
         assert_eq!(map.spacing(), [0.5, 0.5, 1.0], "pixels of half the slices' spacing");
         assert_eq!(map.layers, 2, "the tumour overlaps the liver");
@@ -407,7 +430,7 @@ mod tests {
                 (7, "CLOSED_PLANAR", square(0.0, 0.0, 3.0 * k as f64, 12.0, false).into_iter().map(turn).collect())
             })
             .collect();
-        let map = parse_dicom(&rt_struct(&[(7, "liver")], &contours)).unwrap();
+        let map = parse_dicom(&rt_struct(&[(7, "liver")], &contours), None).unwrap();
         let normal = [map.affine[0][2], map.affine[1][2], map.affine[2][2]].map(|x| x / 3.0);
         assert!(norm(crate::sub(normal, [0.0, -s, c])) < 1e-9, "{normal:?}");
         assert_eq!(map.spacing().map(|s| (s * 1e9).round() / 1e9), [COARSEST_MM, COARSEST_MM, 3.0]);
@@ -417,7 +440,7 @@ mod tests {
     #[test]
     fn what_cannot_be_filled_is_refused_by_name() {
         let error = |structures: &[(u32, &str)], contours: &[(u32, &str, Vec<Point>)]| {
-            parse_dicom(&rt_struct(structures, contours)).unwrap_err()
+            parse_dicom(&rt_struct(structures, contours), None).unwrap_err()
         };
         let flat = error(&[(1, "liver")], &[(1, "CLOSED_PLANAR", square(0.0, 0.0, 5.0, 10.0, false))]);
         assert!(flat.starts_with("all its contours lie in one plane"), "{flat}");
@@ -436,17 +459,58 @@ mod tests {
         assert!(error(&[], &[]).starts_with("it describes no structure"));
     }
 
-    /// A slice no contour lies on, between two of a structure's, is filled from both sides and said.
+    /// A small structure beside a body's outline is filled on a grid of its own when it is the one
+    /// wanted, not on the coarse pixels the body's extent needs.
     #[test]
-    fn a_slice_without_contours_is_filled_and_named() {
+    fn the_structure_wanted_gets_a_grid_of_its_own() {
+        let mut contours: Vec<(u32, &str, Vec<Point>)> =
+            (0..=300).map(|z| (1, "CLOSED_PLANAR", square(0.0, 0.0, z as f64, 500.0, false))).collect();
+        let gtv = [(100.0, 2.0), (101.0, 4.0), (102.0, 2.0)];
+        contours.extend(gtv.map(|(z, side)| (2, "CLOSED_PLANAR", square(10.0, 20.0, z, side, false))));
+        let file = rt_struct(&[(1, "BODY"), (2, "GTV")], &contours);
+        let all = parse_dicom(&file, None).unwrap();
+        assert!(all.spacing()[0] > 1.5, "{:?}", all.spacing());
+        assert!(all.warnings.iter().any(|(_, w)| w.starts_with("its contours span 500 × 500 mm on 301 slices")));
+        for wanted in ["gtv", "2"] {
+            let own = parse_dicom(&file, Some(wanted)).unwrap();
+            assert_eq!(own.spacing(), [0.5, 0.5, 1.0], "{wanted}");
+            assert_eq!(own.select("GTV").unwrap().0.count(), 16 + 64 + 16, "{wanted}: 2, 4 and 2 mm squares");
+            assert!(own.warnings.is_empty(), "{:?}", own.warnings);
+        }
+        // A name no structure has: all of them, for the message that lists them.
+        assert_eq!(parse_dicom(&file, Some("liver")).unwrap().segments.len(), 2);
+    }
+
+    /// A round end on coarse slices (a tumour drawn every 5 mm) tapers from its neighbour: not
+    /// said to be cut; an end as large as its neighbour is.
+    #[test]
+    fn only_an_end_as_large_as_its_neighbour_is_cut() {
+        let slices = |sizes: &[usize]| -> Vec<u32> {
+            sizes.iter().enumerate().flat_map(|(k, &n)| (0..n).map(move |p| (p + 1000 * k) as u32)).collect()
+        };
+        assert_eq!(super::super::cut_at_an_end(&slices(&[54, 77, 100, 77, 54]), 1000), None);
+        let cut = super::super::cut_at_an_end(&slices(&[40, 77, 100, 95, 92]), 1000).unwrap();
+        assert!(cut.starts_with("its last slice holds 92 pixels, 92 % of its largest"), "{cut}");
+    }
+
+    /// A structure drawn every 2 mm in one part and every 4 mm (or 6 mm) in another fills each
+    /// contour halfway to its neighbours: a cone keeps the volume of its slabs.
+    #[test]
+    fn contours_drawn_at_several_spacings_reach_halfway_to_their_neighbours() {
+        // Squares of side 10, 8, 6, 4 and 2 mm at z = 0, 2, 4, 8 and 14 mm; slices 2 mm apart.
+        let drawn = [(0.0, 10.0), (2.0, 8.0), (4.0, 6.0), (8.0, 4.0), (14.0, 2.0)];
         let contours: Vec<(u32, &str, Vec<Point>)> =
-            [0.0, 2.0, 6.0].map(|z| (1, "CLOSED_PLANAR", square(0.0, 0.0, z, 10.0, false))).into();
-        let map = parse_dicom(&rt_struct(&[(1, "liver")], &contours)).unwrap();
-        assert_eq!(map.select("liver").unwrap().0.count(), 4 * 100, "10 × 10 mm in pixels of 1 mm");
-        assert!(
-            map.warnings.iter().any(|(_, w)| w.starts_with("no contour lies 4.0 mm from the first")),
-            "{:?}",
-            map.warnings
-        );
+            drawn.iter().map(|&(z, side)| (1, "CLOSED_PLANAR", square(0.0, 0.0, z, side, false))).collect();
+        let map = parse_dicom(&rt_struct(&[(1, "cone"), (2, "empty")], &contours), None).unwrap();
+        let (cone, _) = map.select("cone").unwrap();
+        let per_slice = |k: usize| {
+            (0..cone.dims[0] * cone.dims[1]).filter(|p| cone.inside[p + k * cone.dims[0] * cone.dims[1]]).count()
+        };
+        let counts: Vec<usize> = (0..cone.dims[2]).map(per_slice).collect();
+        // In pixels of 1 mm: z = 0, 2, 4 as drawn; 6 as the lower of 4 and 8; 8, 10 as 8; 12, 14 as 14.
+        assert_eq!(counts, [0, 100, 64, 36, 36, 16, 16, 4, 4, 0], "{counts:?}");
+        assert!(map.warnings.iter().any(|(_, w)| w == "'empty' has no contour"), "{:?}", map.warnings);
+        let e = map.select("empty").unwrap_err().to_string();
+        assert!(e.contains("label 2 ('empty') has no voxel ('empty' has no contour)"), "{e}");
     }
 }

@@ -489,7 +489,7 @@ mod tests {
 
     #[test]
     fn overlapping_segments_are_read_whole_in_layers_of_their_own() {
-        let map = parse_dicom(&liver_and_tumour()).unwrap();
+        let map = parse_dicom(&liver_and_tumour(), None).unwrap();
         assert_eq!((map.dims, map.layers), ([4, 4, 4], 2), "two slices and an empty one beyond each");
         assert_eq!(map.segments, [("liver".to_string(), 0, 1), ("tumour".to_string(), 1, 2)]);
         // i along x by 1 mm, j along y by 1 mm, k along z by 2 mm, from the first pixel.
@@ -516,7 +516,7 @@ mod tests {
     fn a_slice_missing_from_the_series_is_filled_and_named() {
         // Frames 2 mm apart at z = 0, 2 and 6: none at 4. The frame at 6 holds the first row only.
         let pixels = vec![0xff, 0xff, 0xff, 0xff, 0x0f, 0x00];
-        let map = parse_dicom(&seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (1, 6.0)], 1, pixels)).unwrap();
+        let map = parse_dicom(&seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (1, 6.0)], 1, pixels), None).unwrap();
         let (liver, _) = map.select("liver").unwrap();
         assert_eq!(liver.count(), 16 + 16 + 4 + 4, "the slice at z = 4 takes the row both sides share");
         let said = warnings(&map, 1);
@@ -530,13 +530,13 @@ mod tests {
     /// tapers does not.
     #[test]
     fn a_segment_cut_at_the_end_of_the_frames_is_said_to_be() {
-        let map = parse_dicom(&liver_and_tumour()).unwrap();
+        let map = parse_dicom(&liver_and_tumour(), None).unwrap();
         assert!(warnings(&map, 1)
             .iter()
             .any(|w| w.starts_with("its first slice holds 16 pixels, 100 % of its largest")));
         // Three slices of 1, 16 and 1 pixels: a tapering organ.
         let pixels = vec![0x01, 0x00, 0xff, 0xff, 0x01, 0x00];
-        let map = parse_dicom(&seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (1, 4.0)], 1, pixels)).unwrap();
+        let map = parse_dicom(&seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (1, 4.0)], 1, pixels), None).unwrap();
         assert!(map.warnings.is_empty(), "{:?}", map.warnings);
     }
 
@@ -544,7 +544,8 @@ mod tests {
     /// describe are read as `segment N`, and said.
     #[test]
     fn empty_and_undescribed_segments_are_told_apart() {
-        let map = parse_dicom(&seg_file(SEG, "BINARY", &[(1, 0.0), (3, 0.0)], 1, vec![0xff, 0xff, 0x01, 0])).unwrap();
+        let map =
+            parse_dicom(&seg_file(SEG, "BINARY", &[(1, 0.0), (3, 0.0)], 1, vec![0xff, 0xff, 0x01, 0]), None).unwrap();
         let tumour = map.select("tumour").unwrap_err().to_string();
         assert!(tumour.contains("label 2 ('tumour') has no voxel"), "{tumour}");
         assert_eq!(map.select("segment 3").unwrap().0.count(), 1);
@@ -557,7 +558,7 @@ mod tests {
         pixels[5] = 1;
         pixels[16 + 6] = 2;
         let frames = [(0, 0.0), (0, 3.0)];
-        let map = parse_dicom(&seg_file(SEGMENTATION_CLASSES[1], "LABELMAP", &frames, 8, pixels)).unwrap();
+        let map = parse_dicom(&seg_file(SEGMENTATION_CLASSES[1], "LABELMAP", &frames, 8, pixels), None).unwrap();
         assert_eq!((map.dims, map.layers, map.spacing()), ([4, 4, 4], 1, [1.0, 1.0, 3.0]));
         assert_eq!(map.present().iter().map(|p| (p.1, p.2)).collect::<Vec<_>>(), [(1, 1), (2, 1)]);
     }
@@ -584,7 +585,7 @@ mod tests {
 
     #[test]
     fn what_is_not_one_segmented_volume_is_refused_by_name() {
-        let error = |bytes: Vec<u8>| parse_dicom(&bytes).unwrap_err();
+        let error = |bytes: Vec<u8>| parse_dicom(&bytes, None).unwrap_err();
         let ct = error(seg_file("1.2.840.10008.5.1.4.1.1.2", "BINARY", &[(1, 0.0)], 1, vec![0xff, 0xff]));
         assert!(ct.starts_with("a DICOM CT image (SOP class 1.2.840.10008.5.1.4.1.1.2), not a segmentation"), "{ct}");
         // Slices 0, 2 and 3 mm high are slices 1 mm apart, one empty; 0, 2 and 3.5 mm are no grid.
