@@ -108,16 +108,16 @@ pub fn unreadable_segmentation(path: &Path) -> Option<String> {
     }
     Some(match extension {
         "dicom" | "ima" | "" => format!("neither a DICOM file by its content nor named by an extension: {save_as}"),
-        "mrb" => format!(
-            "a 3D Slicer scene bundle (a zip): unzip it; its Data folder holds the segmentation (.seg.nrrd) and the \
-             markups (.mrk.json) to give"
-        ),
+        "mrb" => "a 3D Slicer scene bundle (a zip): unzip it; its Data folder holds the segmentation (.seg.nrrd) and \
+                  the markups (.mrk.json) to give"
+            .to_string(),
         "mrml" => "a 3D Slicer scene, which names its files: give the segmentation it holds (.seg.nrrd, in its \
                    folder)"
             .to_string(),
         "mgz" | "mgh" | "hdr" | "img" | "nia" => {
             format!("this image format is not read: {save_as} (3D Slicer or ITK-SNAP: Save as)")
         }
+        _ if !path.exists() => format!("no such file, and not a labelmap nor a surface by its extension: {save_as}"),
         _ => format!("not a labelmap nor a surface by its extension: {save_as}"),
     })
 }
@@ -1399,7 +1399,9 @@ mod tests {
         assert!(said("liver.mgz").contains("this image format is not read"), "{}", said("liver.mgz"));
         assert!(said("case.mrb").starts_with("a 3D Slicer scene bundle (a zip): unzip it"));
         assert!(said("case.mrml").starts_with("a 3D Slicer scene, which names its files"));
-        assert!(said("liver.xyz").contains("not a labelmap nor a surface"));
+        assert!(said("liver.xyz").starts_with("no such file, and not a labelmap nor a surface"));
+        std::fs::write(dir.path().join("liver.xyz"), "1 2 3\n").unwrap();
+        assert!(said("liver.xyz").starts_with("not a labelmap nor a surface"));
         for fine in ["liver.STL", "seg.seg.nrrd", "seg.nii.gz", "seg.nhdr", "liver.mhd", "organ.vtu", "seg.dcm"] {
             assert_eq!(said(fine), "", "{fine}");
         }
