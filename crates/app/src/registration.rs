@@ -630,7 +630,10 @@ impl RegistrationSpec {
                 )
             }
             (Some(given), None) => format!("{given}, given; the organ names none, so nothing is converted"),
-            (None, None) => "none named by the organ or --frame: coordinates are taken as given".into(),
+            (None, None) => "none named by the organ or --frame: coordinates are taken as given (3D Slicer's files, \
+                             displacement.nrrd and targets.mrk.json, take them as LPS, Slicer's default; --frame \
+                             RAS says otherwise)"
+                .into(),
         }
     }
 
