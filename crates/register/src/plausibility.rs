@@ -80,14 +80,14 @@ pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<f64> {
     let ratio = extent / size;
     if ratio > MAX_EXTENT_RATIO {
         let hint = if looks_like_millimetres(organ, cloud)? {
-            " Is it in millimetres? Divided by 1000 it lies on the organ's surface: give its unit as mm (--units mm, \
-             units=\"mm\" in Python)."
+            " Is it in millimetres? Divided by 1000 it lies on the organ's surface: its numbers are 1000 times the \
+             unit it was read in (mm read as m: give its unit as mm, --units mm, units=\"mm\" in Python; µm read as \
+             mm: convert them to mm)."
         } else {
             " It cannot be a view of the organ: wrong units, or not the organ's points."
         };
         return Err(RegisterError::Invalid(format!(
-            "the cloud, read in metres, spans {extent:.1} m, {ratio:.0} times the organ's {:.0} mm (its box's \
-             diagonal).{hint}",
+            "the cloud, as read, spans {extent:.1} m, {ratio:.0} times the organ's {:.0} mm (its box's diagonal).{hint}",
             mm(size)
         )));
     }
