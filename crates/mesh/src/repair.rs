@@ -78,7 +78,7 @@ pub struct RepairReport {
     /// Triangles added to fill the holes. A hole of three edges along a line (left by a
     /// zero-area triangle) is closed by splitting the triangle across its longest edge: one more.
     pub added_triangles: usize,
-    /// Vertices added inside the patches of holes of [`REFINED_HOLE_EDGES`] edges or more.
+    /// Vertices added inside the patches of holes of 16 edges or more (refined and faired).
     pub added_vertices: usize,
     /// The share of the repaired surface's area that the holes' patches make up.
     pub filled_share: f64,

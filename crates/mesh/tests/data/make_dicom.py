@@ -70,36 +70,36 @@ def segment(number, label, code):
 
 mask = np.zeros(labels.shape, dtype=np.uint8)
 mask[labels == 5], mask[labels == 2] = 1, 2
-seg = hd.seg.Segmentation(
-    source_images=ct,
-    pixel_array=mask,
-    segmentation_type=hd.seg.SegmentationTypeValues.BINARY,
-    segment_descriptions=[segment(1, "liver", codes.SCT.Liver), segment(2, "kidney", codes.SCT.Kidney)],
-    series_instance_uid=generate_uid(),
-    series_number=2,
-    sop_instance_uid=generate_uid(),
-    instance_number=1,
-    manufacturer="augsim",
-    manufacturer_model_name="test data",
-    software_versions="1",
-    device_serial_number="1",
-)
+
+
+def segmentation(pixel_array, kind, segments, series_number, **options):
+    """A DICOM SEG of `ct` by highdicom."""
+    return hd.seg.Segmentation(
+        source_images=ct,
+        pixel_array=pixel_array,
+        segmentation_type=kind,
+        segment_descriptions=segments,
+        series_instance_uid=generate_uid(),
+        series_number=series_number,
+        sop_instance_uid=generate_uid(),
+        instance_number=1,
+        manufacturer="augsim",
+        manufacturer_model_name="test data",
+        software_versions="1",
+        device_serial_number="1",
+        **options,
+    )
+
+
+liver, kidney = segment(1, "liver", codes.SCT.Liver), segment(2, "kidney", codes.SCT.Kidney)
+seg = segmentation(mask, hd.seg.SegmentationTypeValues.BINARY, [liver, kidney], 2)
 seg.save_as(here / "liver_labels_seg.dcm")
 print(f"{seg.NumberOfFrames} frames, {(here / 'liver_labels_seg.dcm').stat().st_size} bytes")
-
-fractional = hd.seg.Segmentation(
-    source_images=ct,
-    pixel_array=(labels == 5).astype(np.float32),
-    segmentation_type=hd.seg.SegmentationTypeValues.FRACTIONAL,
-    segment_descriptions=[segment(1, "liver", codes.SCT.Liver)],
-    series_instance_uid=generate_uid(),
-    series_number=3,
-    sop_instance_uid=generate_uid(),
-    instance_number=1,
-    manufacturer="augsim",
-    manufacturer_model_name="test data",
-    software_versions="1",
-    device_serial_number="1",
+fractional = segmentation(
+    (labels == 5).astype(np.float32),
+    hd.seg.SegmentationTypeValues.FRACTIONAL,
+    [liver],
+    3,
     transfer_syntax_uid=RLELossless,
 )
 fractional.save_as(here / "liver_labels_seg_rle.dcm")
