@@ -4,12 +4,15 @@
 //! made on. The CT itself is not needed: the contours are filled on a grid of their own, its
 //! slices where the contours lie (the smallest gap between them, all others a whole number of
 //! gaps apart) and its pixels half that gap wide, between [`FINEST_MM`] and [`COARSEST_MM`]
-//! (coarser, and said so, when the contours span more than [`VOXEL_BUDGET`] voxels). A pixel is inside a structure when its centre is inside
-//! an odd number of the structure's contours on its slice, so that a contour inside another is
-//! a hole, as planning systems and SlicerRT read them. Structures may overlap (an organ and its
-//! tumour, the body and everything): each goes to the first layer it does not overlap, as for a
-//! DICOM SEG. Points and open contours (markers, lines) have no volume: their structure is listed,
-//! empty, with a warning.
+//! (coarser, and said so, when the contours span more than [`VOXEL_BUDGET`] voxels); the
+//! structure chosen is filled alone on a grid of its own extent. A pixel is inside a structure
+//! when its centre is inside an odd number of the structure's contours on its slice, so that a
+//! contour inside another is a hole, as planning systems and SlicerRT read them; a slice between
+//! two drawn ones takes the nearer's fill, so that a structure drawn on every other slice in places
+//! keeps each contour's slab. Structures may overlap (an organ and its tumour, the body and
+//! everything): each goes to the first layer it does not overlap, as for a DICOM SEG. Points and
+//! open contours (markers, lines) have no volume: their structure is listed, empty, with a
+//! warning.
 
 use std::collections::{BTreeMap, BTreeSet};
 
