@@ -86,10 +86,14 @@ pub(super) fn read(object: &DefaultDicomObject, wanted: Option<&str>) -> Result<
     // (the lower at equal distance): a contour reaches halfway to its neighbours, whatever the
     // spacing it was drawn at (every slice near a tumour, every other one elsewhere).
     let mut drawn: BTreeMap<u32, BTreeMap<usize, Vec<usize>>> = BTreeMap::new();
+    let mut crossing: BTreeMap<u32, usize> = BTreeMap::new();
     for (&(roi, k), on_slice) in &by_slice {
         let mut pixels = Vec::new();
         grid.fill(on_slice, |pixel| pixels.push(pixel));
         drawn.entry(roi).or_default().insert(k, pixels);
+        if grid.contours_cross(on_slice) {
+            *crossing.entry(roi).or_default() += 1;
+        }
     }
     let mut voxels: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
     for (&roi, slices) in &drawn {
@@ -108,6 +112,15 @@ pub(super) fn read(object: &DefaultDicomObject, wanted: Option<&str>) -> Result<
     let (layers, labels, segments) = in_layers(&names, &voxels, dims.iter().product(), frame_pixels, &mut warnings);
     for (name, layer, label) in &segments {
         let roi = *label as u32;
+        if let Some(slices) = crossing.get(&roi) {
+            warnings.push((
+                Some((*layer, *label)),
+                format!(
+                    "contours of '{name}' cross on {slices} slice(s): filled even–odd, where two overlap is a hole, \
+                     as planning systems read them; draw them as one outline if they are one"
+                ),
+            ));
+        }
         let why = match (without_volume.contains(&roi), drawn.contains_key(&roi)) {
             (true, false) => "is drawn as points or open lines (markers, not outlines): it has no volume",
             (false, false) => "has no contour",
@@ -269,6 +282,30 @@ impl Grid {
     /// The slice a contour at `height` lies on.
     fn slice_of(&self, height: f64) -> usize {
         ((height - self.corner[2]) / self.step).round() as usize
+    }
+
+    /// Whether two of `contours` (of one structure, on one slice) overlap without one holding the
+    /// other: they cross, where a contour inside another is a hole.
+    fn contours_cross(&self, contours: &[&Contour]) -> bool {
+        if contours.len() < 2 {
+            return false;
+        }
+        let fills: Vec<BTreeSet<usize>> = contours
+            .iter()
+            .map(|c| {
+                let mut pixels = BTreeSet::new();
+                self.fill(&[c], |p| {
+                    pixels.insert(p);
+                });
+                pixels
+            })
+            .collect();
+        fills.iter().enumerate().any(|(i, a)| {
+            fills[i + 1..].iter().any(|b| {
+                let shared = a.intersection(b).count();
+                shared > 0 && shared < a.len().min(b.len())
+            })
+        })
     }
 
     /// Calls `inside` with each pixel (column + columns × row) of the slice whose centre lies
@@ -482,6 +519,25 @@ mod tests {
         }
         // A name no structure has: all of them, for the message that lists them.
         assert_eq!(parse_dicom(&file, Some("liver")).unwrap().segments.len(), 2);
+    }
+
+    /// Two outlines of one structure that cross on a slice are filled even–odd, and said to cross;
+    /// a hole inside an outline is not.
+    #[test]
+    fn crossing_contours_are_said_to_cross() {
+        let mut contours: Vec<(u32, &str, Vec<Point>)> = Vec::new();
+        for z in [0.0, 1.0] {
+            contours.push((1, "CLOSED_PLANAR", square(0.0, 0.0, z, 10.0, false)));
+            contours.push((1, "CLOSED_PLANAR", square(6.0, 0.0, z, 10.0, false)));
+            contours.push((2, "CLOSED_PLANAR", square(40.0, 0.0, z, 10.0, false)));
+            contours.push((2, "CLOSED_PLANAR", square(40.0, 0.0, z, 4.0, false)));
+        }
+        let map = parse_dicom(&rt_struct(&[(1, "crossed"), (2, "holed")], &contours), None).unwrap();
+        let said: Vec<&str> = map.warnings.iter().map(|(_, w)| w.as_str()).collect();
+        assert!(said.iter().any(|w| w.starts_with("contours of 'crossed' cross on 2 slice(s)")), "{said:?}");
+        assert!(!said.iter().any(|w| w.contains("'holed'")), "{said:?}");
+        // 10 × 10 mm twice, less twice their 4 × 10 mm overlap, in pixels of 0.5 mm, on 2 slices.
+        assert_eq!(map.select("crossed").unwrap().0.count(), 2 * (2 * 400 - 2 * 160));
     }
 
     /// A round end on coarse slices (a tumour drawn every 5 mm) tapers from its neighbour: not
