@@ -98,9 +98,7 @@ pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
                             .with_context(|| match &notes[..] {
                                 [] => format!("meshing {}", path.display()),
                                 read => {
-                                    let read: Vec<String> =
-                                        read.iter().map(|(topic, l)| format!("{topic}: {l}")).collect();
-                                    format!("meshing {} (as read: {})", path.display(), read.join("; "))
+                                    format!("meshing {} (as read: {})", path.display(), note_lines(read).join("; "))
                                 }
                             })?;
                     coverage = quality.coverage;
@@ -115,6 +113,11 @@ pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
         }
     };
     Ok(Meshed { mesh, reference_volume, frame, notes, coverage, elapsed: start.elapsed() })
+}
+
+/// Notes of what was read (topic, line) as lines `topic: line`.
+pub fn note_lines(notes: &[(&'static str, String)]) -> Vec<String> {
+    notes.iter().map(|(topic, line)| format!("{topic}: {line}")).collect()
 }
 
 /// An organ's segmentation as given: a labelmap's label extracted (in mm, in its scanner frame),

@@ -140,7 +140,7 @@ fn read_labelmap_choosing(path: &Path, label: Option<&str>) -> Result<Labelmap, 
         metaimage::parse_metaimage(&bytes, folder).map_err(|m| parse_error(path, m))?
     } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
         parse_nifti(&gunzip_if_needed(bytes).map_err(|m| parse_error(path, m))?).map_err(|m| parse_error(path, m))?
-    } else if name.ends_with(".dcm") || bytes.get(128..132) == Some(b"DICM") {
+    } else if name.ends_with(".dcm") || dicom::has_dicom_magic(&bytes) {
         dicom::parse_dicom(&bytes, label).map_err(|m| parse_error(path, m))?
     } else {
         return Err(parse_error(path, format!("not a labelmap: expected {LABELMAP_FORMATS}")));

@@ -1280,8 +1280,7 @@ mod tests {
             "a membrane between its rim's heights"
         );
         let rim = 2.0 * std::f64::consts::PI / n as f64;
-        let patch = &repaired.triangles[repaired.triangles.len() - report.added_triangles..];
-        let longest = patch
+        let longest = patch(&repaired, &report)
             .iter()
             .flat_map(|t| (0..3).map(|k| norm(sub(repaired.vertices[t[k]], repaired.vertices[t[(k + 1) % 3]]))))
             .fold(0.0, f64::max);

@@ -568,7 +568,7 @@ fn read_surface_input(
     let path = &options.surface;
     let mut input = OrganInput::read(path, options.label.as_deref(), options.units)?;
     let unit = input.unit().with_context(|| format!("the unit of {}", path.display()))?;
-    lines.extend(input.notes.iter().map(|(topic, line)| format!("{topic}: {line}")));
+    lines.extend(crate::meshing::note_lines(&input.notes));
     Ok((input.surface, input.frame, unit))
 }
 

@@ -21,14 +21,19 @@ const SAME_SLICE_MM: f64 = 1e-3;
 pub(super) fn is_dicom_file(path: &std::path::Path) -> bool {
     let mut start = [0_u8; 132];
     std::fs::File::open(path).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut start)).is_ok()
-        && &start[128..] == b"DICM"
+        && has_dicom_magic(&start)
+}
+
+/// Whether `bytes` (a file's start) hold `DICM` after the 128-byte preamble.
+pub(super) fn has_dicom_magic(bytes: &[u8]) -> bool {
+    bytes.get(128..132) == Some(b"DICM")
 }
 
 /// Reads a DICOM SEG or RTSTRUCT from the bytes of its file; of an RTSTRUCT, only the structure
 /// `wanted` (by number or name) when it names one, on a grid of its own extent.
 pub(super) fn parse_dicom(bytes: &[u8], wanted: Option<&str>) -> Result<Labelmap, String> {
     let object = OpenFileOptions::new().read_preamble(ReadPreamble::Auto).from_reader(bytes).map_err(|e| {
-        if bytes.get(128..132) == Some(b"DICM") {
+        if has_dicom_magic(bytes) {
             format!("a DICOM file that cannot be read: cut short or damaged? ({e})")
         } else {
             format!("not a DICOM file ({e})")
