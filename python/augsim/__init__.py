@@ -2,7 +2,7 @@
 U-Net, warm-started between clouds), U-Net predictions and the ROUKF one step at a time.
 
 The computations are augsim's own (the same code as the ``augsim`` command line); arrays are
-NumPy float64 unless said otherwise, lengths in metres unless a ``units`` argument says "mm".
+NumPy float64 unless said otherwise, lengths in metres unless a ``units`` argument says otherwise ("mm", "cm", "um").
 augsim's errors are raised as :class:`AugsimError` with augsim's message; arrays of the wrong
 shape raise :class:`ValueError`. The API is described in ``python/README.md``.
 """

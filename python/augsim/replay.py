@@ -2,7 +2,7 @@
 tracker would, and prints what comes back: a way to try a 3D Slicer set-up without a laparoscope.
 
     python -m augsim.replay FRAMES_DIR [--host 127.0.0.1] [--port 18944] [--rate 20]
-                            [--units m|mm] [--send-units mm|m] [--out DIR] [--loop N]
+                            [--units m|cm|mm|um] [--send-units mm|m|cm|um] [--out DIR] [--loop N]
 
 ``FRAMES_DIR`` holds one cloud per file, replayed in the order of their names: CSV with an x, y, z
 header (``augsim register --case ... --frames N`` writes such a folder, ``case/clouds``) or without
@@ -29,7 +29,7 @@ import time
 
 import numpy as np
 
-_SCALE = {"m": 1.0, "mm": 1e-3}
+_SCALE = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6}
 
 
 def _xyz_columns(header):

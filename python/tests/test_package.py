@@ -152,8 +152,8 @@ def test_registration_errors(case, tmp_path):
     missing = str(tmp_path / "missing.toml")
     with pytest.raises(augsim.AugsimError, match="missing.toml"):
         augsim.Registration(fem=missing)
-    with pytest.raises(ValueError, match="units: must be mm or m, got 'cm'"):
-        augsim.Registration(fem=case["scenario"], units="cm")
+    with pytest.raises(ValueError, match="units: must be m, cm, mm or um, got 'in'"):
+        augsim.Registration(fem=case["scenario"], units="in")
     with pytest.raises(ValueError, match="fem SCENARIO"):
         augsim.Registration(model=LIVER_AR)
     with pytest.raises(augsim.AugsimError, match="target"):

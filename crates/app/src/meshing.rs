@@ -182,12 +182,13 @@ impl OrganInput {
             None => {
                 let unit = detect_unit(&self.surface).map_err(|e| {
                     let extent = largest_extent(&self.surface);
-                    let cm = if ORGAN_EXTENT_M.contains(&(extent / 100.0)) {
-                        " (in centimetres? scale the file by 10 to mm, e.g. in 3D Slicer's Transforms or MeshLab)"
-                    } else {
-                        ""
-                    };
-                    anyhow!("{e}: give --units (mm or m){cm}")
+                    // The units auto does not tell (their organs' numbers overlap mm's) that would fit.
+                    let fitting: Vec<String> = [LengthUnit::Centimetre, LengthUnit::Micrometre]
+                        .into_iter()
+                        .filter(|u| ORGAN_EXTENT_M.contains(&u.to_metres(extent)))
+                        .map(|u| format!(" (in {}? give --units {u})", u.name()))
+                        .collect();
+                    anyhow!("{e}: give --units (m, cm, mm or um){}", fitting.concat())
                 })?;
                 let extent = largest_extent(&self.surface);
                 let shown = if extent >= 1.0 { format!("{extent:.1}") } else { format!("{extent:.4}") };
@@ -374,7 +375,7 @@ mod tests {
     }
 
     #[test]
-    fn a_surface_in_millimetres_is_meshed_in_metres_and_a_wrong_label_is_refused() {
+    fn a_surface_in_millimetres_or_centimetres_is_meshed_in_metres_and_a_wrong_label_is_refused() {
         let dir = tempfile::tempdir().unwrap();
         let sphere = mesh::generate::icosphere(40.0, 2);
         let path = dir.path().join("ball.stl");
@@ -395,8 +396,11 @@ mod tests {
         )));
         let centimetres = dir.path().join("ball_cm.stl");
         mesh::io::write_surface(&centimetres, &mesh::generate::icosphere(4.0, 2)).unwrap();
-        let e = mesh_organ(&MeshOptions { surface: Some(centimetres), ..options.clone() }).unwrap_err();
-        assert!(format!("{e:#}").contains("give --units (mm or m) (in centimetres? scale the file by 10"), "{e:#}");
+        let e = mesh_organ(&MeshOptions { surface: Some(centimetres.clone()), ..options.clone() }).unwrap_err();
+        assert!(format!("{e:#}").contains("give --units (m, cm, mm or um) (in centimetres? give --units cm)"), "{e:#}");
+        let given = MeshOptions { surface: Some(centimetres), units: Some(LengthUnit::Centimetre), ..options.clone() };
+        let (lo, hi) = mesh_organ(&given).unwrap().mesh.bounds();
+        assert!((hi[0] - lo[0] - 0.08).abs() < 0.01, "a 4 cm ball in cm: {lo:?} {hi:?}");
         let labelled = MeshOptions { label: Some("5".into()), ..options };
         assert!(mesh_organ(&labelled).unwrap_err().to_string().contains("--label 5 chooses a label of a labelmap"));
         let folder = MeshOptions { surface: Some(dir.path().to_path_buf()), ..labelled };

@@ -306,7 +306,7 @@ pub struct RegistrationChoice {
     #[arg(long, value_name = "TARGETS", value_parser = targets_file)]
     pub targets: Option<TargetsSpec>,
     /// Unit of the coordinates given and given back whose files name none (clouds, targets,
-    /// truth, results): mm or m. Default: a patient's own (the unit of the files `augsim prepare`
+    /// truth, results): m, cm, mm or um. Default: a patient's own (the unit of the files `augsim prepare`
     /// was given), else m (augsim's unit) on every front. Files that name their unit (.fcsv,
     /// .mrk.json, CSV columns x_mm) are read in it.
     #[arg(long)]

@@ -157,24 +157,24 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
     }
 }
 
-/// Every command that reads lengths parses `--units` the same way: mm or m (auto where an
+/// Every command that reads lengths parses `--units` the same way: m, cm, mm or um (auto where an
 /// organ's surface gives the scale), and refuses another unit before doing anything.
 #[test]
 fn units_are_parsed_the_same_by_every_command() {
     for command in
-        [&["register", "cloud.csv", "--fem", "beam", "--units", "cm"][..], &["serve", "--fem", "beam", "--units", "cm"]]
+        [&["register", "cloud.csv", "--fem", "beam", "--units", "in"][..], &["serve", "--fem", "beam", "--units", "in"]]
     {
         let (ok, text) = augsim(command);
-        assert!(!ok && text.contains("invalid value 'cm' for '--units"), "{command:?}: {text}");
-        assert!(text.contains("must be mm or m, got 'cm'"), "{command:?}: {text}");
+        assert!(!ok && text.contains("invalid value 'in' for '--units"), "{command:?}: {text}");
+        assert!(text.contains("must be m, cm, mm or um, got 'in'"), "{command:?}: {text}");
     }
     for command in [
         &["mesh", "organ.stl"][..],
         &["prepare", "organ.stl", "--camera", "0,0,1", "--attach", "a.csv", "--targets", "t.csv", "--out", "o"],
     ] {
-        let command = [command, &["--units", "cm"]].concat();
+        let command = [command, &["--units", "in"]].concat();
         let (ok, text) = augsim(&command);
-        assert!(!ok && text.contains("must be mm, m or auto, got 'cm'"), "{command:?}: {text}");
+        assert!(!ok && text.contains("must be m, cm, mm, um or auto, got 'in'"), "{command:?}: {text}");
     }
     // Without a way of deforming the organ, register and serve say what to give.
     for command in [&["register", "cloud.csv"][..], &["serve", "--port", "0"]] {

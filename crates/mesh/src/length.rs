@@ -1,8 +1,8 @@
 //! Length units of the coordinates users give and get back.
 //!
 //! augsim computes in metres. Coordinates read from a user (surfaces, clouds, targets, landmarks,
-//! streamed points) are in a [`LengthUnit`]: millimetres, as medical images and 3D Slicer use, or
-//! metres. Every front (command line, server, Python) parses it with [`LengthUnit::from_str`]
+//! streamed points) are in a [`LengthUnit`]: millimetres, as medical images and 3D Slicer use,
+//! metres, centimetres (some surface exports) or micrometres (as Slicer's markups may name). Every front (command line, server, Python) parses it with [`LengthUnit::from_str`]
 //! and takes [`LengthUnit::DEFAULT`], the metre, when none is given; a file that names its unit
 //! (`.fcsv`, `.mrk.json`, a CSV header `x_mm`) is read in its own. Where an organ's surface is
 //! read, `auto` ([`parse_unit_or_auto`]) tells the unit from the organ's size instead.
@@ -18,8 +18,12 @@ use crate::Point;
 pub enum LengthUnit {
     /// Metres (augsim's unit), `m`.
     Metre,
+    /// Centimetres (the unit of some surface exports), `cm`.
+    Centimetre,
     /// Millimetres (the usual unit of medical images and of 3D Slicer), `mm`.
     Millimetre,
+    /// Micrometres, `um` (as Slicer's markups write it; `µm` is read too).
+    Micrometre,
 }
 
 impl LengthUnit {
@@ -27,11 +31,27 @@ impl LengthUnit {
     /// computes and writes in, so that a number without a unit means the same everywhere.
     pub const DEFAULT: LengthUnit = LengthUnit::Metre;
 
-    /// Its symbol: "m" or "mm" (what [`LengthUnit::from_str`] reads).
+    /// Every unit, from the largest.
+    pub const ALL: [LengthUnit; 4] =
+        [LengthUnit::Metre, LengthUnit::Centimetre, LengthUnit::Millimetre, LengthUnit::Micrometre];
+
+    /// Its symbol: "m", "cm", "mm" or "um" (what [`LengthUnit::from_str`] reads).
     pub fn symbol(self) -> &'static str {
         match self {
             LengthUnit::Metre => "m",
+            LengthUnit::Centimetre => "cm",
             LengthUnit::Millimetre => "mm",
+            LengthUnit::Micrometre => "um",
+        }
+    }
+
+    /// Its name in words: "metres", "centimetres", "millimetres" or "micrometres".
+    pub fn name(self) -> &'static str {
+        match self {
+            LengthUnit::Metre => "metres",
+            LengthUnit::Centimetre => "centimetres",
+            LengthUnit::Millimetre => "millimetres",
+            LengthUnit::Micrometre => "micrometres",
         }
     }
 
@@ -39,7 +59,9 @@ impl LengthUnit {
     pub fn metres(self) -> f64 {
         match self {
             LengthUnit::Metre => 1.0,
+            LengthUnit::Centimetre => 1e-2,
             LengthUnit::Millimetre => 1e-3,
+            LengthUnit::Micrometre => 1e-6,
         }
     }
 
@@ -76,15 +98,20 @@ impl fmt::Display for LengthUnit {
     }
 }
 
+/// The units' symbols as messages list them.
+const CHOICES: &str = "m, cm, mm or um";
+
 impl FromStr for LengthUnit {
     type Err = String;
 
-    /// "mm" or "m".
+    /// "m", "cm", "mm" or "um" ("µm").
     fn from_str(name: &str) -> Result<LengthUnit, String> {
         match name {
-            "mm" => Ok(LengthUnit::Millimetre),
-            "m" => Ok(LengthUnit::Metre),
-            other => Err(format!("must be mm or m, got '{other}'")),
+            "µm" | "μm" => Ok(LengthUnit::Micrometre),
+            _ => LengthUnit::ALL
+                .into_iter()
+                .find(|unit| unit.symbol() == name)
+                .ok_or_else(|| format!("must be {CHOICES}, got '{name}'")),
         }
     }
 }
@@ -106,11 +133,11 @@ impl From<LengthUnit> for String {
 /// A unit given, or `None`: told from the organ's size (see [`crate::repair::detect_unit`]).
 pub type UnitOrAuto = Option<LengthUnit>;
 
-/// "mm", "m" or "auto" (`None`), where an organ's surface gives its scale.
+/// A unit ("m", "cm", "mm", "um") or "auto" (`None`), where an organ's surface gives its scale.
 pub fn parse_unit_or_auto(name: &str) -> Result<UnitOrAuto, String> {
     match name {
         "auto" => Ok(None),
-        _ => name.parse().map(Some).map_err(|_| format!("must be mm, m or auto, got '{name}'")),
+        _ => name.parse().map(Some).map_err(|_| format!("must be m, cm, mm, um or auto, got '{name}'")),
     }
 }
 
@@ -137,7 +164,7 @@ mod tests {
 
     #[test]
     fn symbols_parse_back_and_scale_to_metres() {
-        for unit in [LengthUnit::Metre, LengthUnit::Millimetre] {
+        for unit in LengthUnit::ALL {
             assert_eq!(unit.symbol().parse::<LengthUnit>().unwrap(), unit);
             assert_eq!(unit.to_string(), unit.symbol());
             assert_eq!(parse_unit_or_auto(unit.symbol()).unwrap(), Some(unit));
@@ -148,14 +175,19 @@ mod tests {
         assert_eq!(point_in_mm([0.092603, -5.5448e-8, 0.0]), "(92.603, -0.000055448, 0) mm");
         assert!((mm(0.0125) - 12.5).abs() < 1e-12 && (from_mm(12.5) - 0.0125).abs() < 1e-15);
         assert_eq!(LengthUnit::default(), LengthUnit::Metre);
+        assert_eq!(LengthUnit::Centimetre.point_to_metres([10.0, 20.0, -5.0]), [0.1, 0.2, -0.05]);
+        assert!((LengthUnit::Micrometre.to_metres(2.5e4) - 0.025).abs() < 1e-15);
+        assert_eq!("µm".parse::<LengthUnit>().unwrap(), LengthUnit::Micrometre);
+        let sizes: Vec<f64> = LengthUnit::ALL.iter().map(|u| u.metres()).collect();
+        assert!(sizes.windows(2).all(|w| w[0] > w[1]), "{sizes:?}");
     }
 
     #[test]
     fn other_names_are_refused_with_the_choices() {
-        assert_eq!("cm".parse::<LengthUnit>().unwrap_err(), "must be mm or m, got 'cm'");
-        assert_eq!("auto".parse::<LengthUnit>().unwrap_err(), "must be mm or m, got 'auto'");
+        assert_eq!("in".parse::<LengthUnit>().unwrap_err(), "must be m, cm, mm or um, got 'in'");
+        assert_eq!("auto".parse::<LengthUnit>().unwrap_err(), "must be m, cm, mm or um, got 'auto'");
         assert_eq!(parse_unit_or_auto("auto").unwrap(), None);
-        assert_eq!(parse_unit_or_auto("MM").unwrap_err(), "must be mm, m or auto, got 'MM'");
+        assert_eq!(parse_unit_or_auto("MM").unwrap_err(), "must be m, cm, mm, um or auto, got 'MM'");
     }
 
     #[test]
@@ -167,7 +199,8 @@ mod tests {
         let text = serde_json::to_string(&S { units: LengthUnit::Millimetre }).unwrap();
         assert_eq!(text, r#"{"units":"mm"}"#);
         assert_eq!(serde_json::from_str::<S>(r#"{"units":"m"}"#).unwrap().units, LengthUnit::Metre);
-        let err = serde_json::from_str::<S>(r#"{"units":"cm"}"#).err().unwrap().to_string();
-        assert!(err.contains("must be mm or m"), "{err}");
+        assert_eq!(serde_json::from_str::<S>(r#"{"units":"cm"}"#).unwrap().units, LengthUnit::Centimetre);
+        let err = serde_json::from_str::<S>(r#"{"units":"ft"}"#).err().unwrap().to_string();
+        assert!(err.contains("must be m, cm, mm or um"), "{err}");
     }
 }

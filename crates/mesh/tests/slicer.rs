@@ -133,7 +133,9 @@ fn mrk_json_of_slicer_5_gives_defined_points_with_labels_frame_and_units() {
     );
     let p = read_points(um).unwrap();
     assert_eq!(p.unplaced_warning(), None);
-    assert_eq!((p.unit, p.points), (Some(LengthUnit::Millimetre), vec![[1.5, -0.02, 0.003]]));
+    assert_eq!((p.unit, &p.points), (Some(LengthUnit::Micrometre), &vec![[1500.0, -20.0, 3.0]]));
+    let metres = read_points_csv(&dir.path().join("um.mrk.json")).unwrap()[0];
+    assert!(metres.iter().zip([1.5e-3, -2e-5, 3e-6]).all(|(a, b)| (a - b).abs() < 1e-15), "{metres:?}");
     // The unit coded as the schema also allows it: [code, scheme, meaning].
     let coded = put(
         dir.path(),
@@ -472,8 +474,8 @@ fn malformed_slicer_files_are_refused_naming_the_file_and_the_line_or_point() {
             "markups[0]: unknown coordinate system 'IJK'",
         ),
         (
-            put(d, "unit.mrk.json", r#"{"markups": [{"coordinateUnits": "cm", "controlPoints": []}]}"#),
-            "markups[0]: coordinateUnits must be mm or m, got 'cm'",
+            put(d, "unit.mrk.json", r#"{"markups": [{"coordinateUnits": "in", "controlPoints": []}]}"#),
+            "markups[0]: coordinateUnits must be m, cm, mm or um, got 'in'",
         ),
         (
             put(d, "nopos.mrk.json", r#"{"markups": [{"controlPoints": [{"label": "A"}, {"label": "B"}]}]}"#),

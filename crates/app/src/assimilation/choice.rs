@@ -43,7 +43,7 @@ pub struct AssimilationChoice {
     /// mesh): report the estimate's error against them.
     #[arg(long, requires = "observations")]
     pub known_truth: bool,
-    /// Unit of the track files whose header names none: mm or m (the default, as on every front).
+    /// Unit of the track files whose header names none: m (the default, as on every front).
     #[arg(long, default_value_t = LengthUnit::DEFAULT, requires = "observations")]
     pub units: LengthUnit,
     /// Forgetting factor in (0, 1]: the parameter covariance is divided by it before every step (default: the

@@ -440,13 +440,13 @@ fn read_organ_surface(dir: &Path, organ: &Mesh) -> Result<TriSurface> {
     let mut surface = mesh::io::read_surface(&path)?;
     let (extent, organ_extent) = (largest_extent(&surface), longest_side(organ));
     let off = |u: &LengthUnit| (extent * u.metres() / organ_extent).ln().abs();
-    let unit = [LengthUnit::Millimetre, LengthUnit::Metre]
+    let unit = LengthUnit::ALL
         .into_iter()
         .filter(|u| off(u) < SURFACE_TO_MESH.ln())
         .min_by(|a, b| off(a).total_cmp(&off(b)))
         .with_context(|| {
             format!(
-                "{} (largest extent {extent:.4}, in mm or m) does not match organ.vtu ({} mm): remove {} and \
+                "{} (largest extent {extent:.4}, in any length unit) does not match organ.vtu ({} mm): remove {} and \
                  prepare it again",
                 path.display(),
                 mm(organ_extent),

@@ -13,7 +13,7 @@
 //!   points of status 0 (undefined), 1 (preview) or 3 (missing, skipped when placing) are left
 //!   out and named in [`LabelledPoints::unplaced`].
 //! - **`.mrk.json`**: 3D Slicer's markups JSON: each markup's `coordinateSystem` (`LPS` when
-//!   absent, as Slicer reads it), `coordinateUnits` (`mm` when absent, `um` read as mm, `m`; also
+//!   absent, as Slicer reads it), `coordinateUnits` (`mm` when absent, `um` as Slicer's schema allows, or `m`, `cm`; also
 //!   coded, `["mm", "UCUM", "millimeter"]`) and `controlPoints` with
 //!   their `position`, `label` and `description`; points whose `positionStatus` is `undefined`
 //!   (placeholders not yet placed), `preview` or `missing` (skipped when placing: Slicer writes
@@ -299,11 +299,6 @@ fn read_markup(markup: &Value, m: usize) -> Result<LabelledPoints, String> {
         })?,
         _ => text_of("coordinateUnits")?,
     };
-    // Slicer's schema allows microns beside millimetres: read as millimetres.
-    let (unit, scale) = match unit {
-        Some("um" | "µm") => (None, 1e-3),
-        unit => (unit, 1.0),
-    };
     let unit = unit.map_or(Ok(LengthUnit::Millimetre), str::parse).map_err(|e| format!("{at}: coordinateUnits {e}"))?;
     let mut out = LabelledPoints { frame: Some(frame), unit: Some(unit), ..Default::default() };
     let points = match markup.get("controlPoints") {
@@ -332,7 +327,7 @@ fn read_markup(markup: &Value, m: usize) -> Result<LabelledPoints, String> {
         if values.iter().any(|v| !v.is_finite()) {
             return Err(format!("{name}: position {position} is not finite"));
         }
-        out.points.push([values[0] * scale, values[1] * scale, values[2] * scale]);
+        out.points.push([values[0], values[1], values[2]]);
         out.labels.push(label);
         out.descriptions.push(text("description"));
     }
