@@ -8,8 +8,8 @@
 //! structure chosen is filled alone on a grid of its own extent. A pixel is inside a structure
 //! when its centre is inside an odd number of the structure's contours on its slice, so that a
 //! contour inside another is a hole, as planning systems and SlicerRT read them; a slice between
-//! two drawn ones takes the nearer's fill, so that a structure drawn on every other slice in places
-//! keeps each contour's slab. Structures may overlap (an organ and its tumour, the body and
+//! two drawn ones (a structure drawn on every other slice in places) takes the shape between
+//! theirs, interpolated from their signed distance maps. Structures may overlap (an organ and its tumour, the body and
 //! everything): each goes to the first layer it does not overlap, as for a DICOM SEG. Points and
 //! open contours (markers, lines) have no volume: their structure is listed, empty, with a
 //! warning.
@@ -82,9 +82,8 @@ pub(super) fn read(object: &DefaultDicomObject, wanted: Option<&str>) -> Result<
     for contour in &contours {
         by_slice.entry((contour.roi, grid.slice_of(contour.height))).or_default().push(contour);
     }
-    // Each structure's slices as drawn, then the slices between them as the nearest drawn one
-    // (the lower at equal distance): a contour reaches halfway to its neighbours, whatever the
-    // spacing it was drawn at (every slice near a tumour, every other one elsewhere).
+    // Each structure's slices as drawn, then the slices between two drawn ones (drawn every slice
+    // near a tumour, every other one elsewhere) by shape-based interpolation.
     let mut drawn: BTreeMap<u32, BTreeMap<usize, Vec<usize>>> = BTreeMap::new();
     let mut crossing: BTreeMap<u32, usize> = BTreeMap::new();
     for (&(roi, k), on_slice) in &by_slice {
@@ -99,12 +98,23 @@ pub(super) fn read(object: &DefaultDicomObject, wanted: Option<&str>) -> Result<
     for (&roi, slices) in &drawn {
         let own = voxels.entry(roi).or_default();
         let ks: Vec<usize> = slices.keys().copied().collect();
+        let mut distances: Option<(usize, Vec<f64>)> = None;
         for (i, &k) in ks.iter().enumerate() {
-            let below = if i == 0 { k } else { k - (k - ks[i - 1] - 1) / 2 };
-            let above = ks.get(i + 1).map_or(k, |&next| k + (next - k) / 2);
-            for slice in below..=above {
-                own.extend(slices[&k].iter().map(|&pixel| (pixel + frame_pixels * slice) as u32));
+            own.extend(slices[&k].iter().map(|&pixel| (pixel + frame_pixels * k) as u32));
+            let Some(&next) = ks.get(i + 1).filter(|&&next| next > k + 1) else { continue };
+            let below = match distances.take() {
+                Some((at, d)) if at == k => d,
+                _ => grid.signed_distances(&slices[&k]),
+            };
+            let above = grid.signed_distances(&slices[&next]);
+            for slice in k + 1..next {
+                let t = (slice - k) as f64 / (next - k) as f64;
+                // Where the two shapes' boundaries are equally near, the lower one's pixel.
+                let between = |p: usize| (1.0 - t) * below[p] + t * above[p];
+                let inside = (0..frame_pixels).filter(|&p| between(p) < 0.0 || (between(p) == 0.0 && below[p] < 0.0));
+                own.extend(inside.map(|pixel| (pixel + frame_pixels * slice) as u32));
             }
+            distances = Some((next, above));
         }
     }
     voxels.retain(|_, own| !own.is_empty());
@@ -308,6 +318,18 @@ impl Grid {
         })
     }
 
+    /// The signed distance (pixels) of each pixel of a slice to the boundary of the `inside` ones:
+    /// negative inside, so that its zero level between two slices' shapes, weighted by how near
+    /// each lies, is the shape between them (shape-based interpolation, Raya and Udupa 1990).
+    fn signed_distances(&self, inside: &[usize]) -> Vec<f64> {
+        let mut is_inside = vec![false; self.columns * self.rows];
+        inside.iter().for_each(|&p| is_inside[p] = true);
+        let outside: Vec<bool> = is_inside.iter().map(|&i| !i).collect();
+        let to_inside = squared_distances(&is_inside, self.columns, self.rows);
+        let to_outside = squared_distances(&outside, self.columns, self.rows);
+        to_inside.iter().zip(&to_outside).map(|(a, b)| a.sqrt() - b.sqrt()).collect()
+    }
+
     /// Calls `inside` with each pixel (column + columns × row) of the slice whose centre lies
     /// inside an odd number of `contours`.
     fn fill(&self, contours: &[&Contour], mut inside: impl FnMut(usize)) {
@@ -341,6 +363,57 @@ impl Grid {
                 (first..end).for_each(|column| inside(column + self.columns * row));
             }
         }
+    }
+}
+
+/// The squared Euclidean distance (pixels) from each pixel of a `columns` × `rows` image to the
+/// nearest `feature` pixel, infinite where there is none (Felzenszwalb and Huttenlocher 2012: the
+/// lower envelope of parabolas along the rows, then along the columns).
+fn squared_distances(feature: &[bool], columns: usize, rows: usize) -> Vec<f64> {
+    let mut d: Vec<f64> = feature.iter().map(|&f| if f { 0.0 } else { f64::INFINITY }).collect();
+    let mut line = Vec::new();
+    for row in d.chunks_exact_mut(columns) {
+        line.clear();
+        line.extend_from_slice(row);
+        lower_envelope(&line, row);
+    }
+    let mut column_out = vec![0.0; rows];
+    for c in 0..columns {
+        line.clear();
+        line.extend((0..rows).map(|r| d[c + columns * r]));
+        lower_envelope(&line, &mut column_out);
+        column_out.iter().enumerate().for_each(|(r, &v)| d[c + columns * r] = v);
+    }
+    d
+}
+
+/// `out[q] = min over p of (q − p)² + f[p]`, for one line of [`squared_distances`].
+fn lower_envelope(f: &[f64], out: &mut [f64]) {
+    let Some(first) = f.iter().position(|v| v.is_finite()) else {
+        return out.fill(f64::INFINITY);
+    };
+    let parabola = |p: usize| f[p] + (p * p) as f64;
+    let (mut vertices, mut bounds) = (vec![first], vec![f64::NEG_INFINITY]);
+    for q in first + 1..f.len() {
+        if !f[q].is_finite() {
+            continue;
+        }
+        // Where q's parabola falls below the last kept one's; z[0] = −∞ keeps the first.
+        let meets = |p: usize| (parabola(q) - parabola(p)) / (2.0 * (q - p) as f64);
+        while meets(*vertices.last().unwrap()) <= *bounds.last().unwrap() {
+            vertices.pop();
+            bounds.pop();
+        }
+        bounds.push(meets(*vertices.last().unwrap()));
+        vertices.push(q);
+    }
+    let mut j = 0;
+    for (q, value) in out.iter_mut().enumerate() {
+        while j + 1 < vertices.len() && bounds[j + 1] < q as f64 {
+            j += 1;
+        }
+        let p = vertices[j];
+        *value = (q.abs_diff(p) * q.abs_diff(p)) as f64 + f[p];
     }
 }
 
@@ -552,24 +625,66 @@ mod tests {
         assert!(cut.starts_with("its last slice holds 92 pixels, 92 % of its largest"), "{cut}");
     }
 
-    /// A structure drawn every 2 mm in one part and every 4 mm (or 6 mm) in another fills each
-    /// contour halfway to its neighbours: a cone keeps the volume of its slabs.
+    /// The distance transform is the brute force's, on an image with features in clusters, alone
+    /// on a row or a column, and none at all.
     #[test]
-    fn contours_drawn_at_several_spacings_reach_halfway_to_their_neighbours() {
+    fn squared_distances_are_the_nearest_features() {
+        let (columns, rows) = (23, 17);
+        let feature: Vec<bool> = (0..columns * rows).map(|p| (p * 7919) % 97 < 3 || p == 5 + 23 * 9).collect();
+        let d = squared_distances(&feature, columns, rows);
+        for p in 0..columns * rows {
+            let brute = (0..columns * rows)
+                .filter(|&f| feature[f])
+                .map(|f| (f % columns).abs_diff(p % columns).pow(2) + (f / columns).abs_diff(p / columns).pow(2))
+                .min()
+                .unwrap();
+            assert_eq!(d[p], brute as f64, "pixel {p}");
+        }
+        assert!(squared_distances(&[false; 12], 4, 3).iter().all(|d| d.is_infinite()));
+    }
+
+    /// A structure drawn every 2 mm in one part and every 4 mm (or 6 mm) in another takes the
+    /// shapes between its contours where it was not drawn, a cone drawn at its ends only keeps its
+    /// taper.
+    #[test]
+    fn slices_between_contours_take_the_shapes_between_them() {
         // Squares of side 10, 8, 6, 4 and 2 mm at z = 0, 2, 4, 8 and 14 mm; slices 2 mm apart.
         let drawn = [(0.0, 10.0), (2.0, 8.0), (4.0, 6.0), (8.0, 4.0), (14.0, 2.0)];
         let contours: Vec<(u32, &str, Vec<Point>)> =
             drawn.iter().map(|&(z, side)| (1, "CLOSED_PLANAR", square(0.0, 0.0, z, side, false))).collect();
-        let map = parse_dicom(&rt_struct(&[(1, "cone"), (2, "empty")], &contours), None).unwrap();
-        let (cone, _) = map.select("cone").unwrap();
-        let per_slice = |k: usize| {
-            (0..cone.dims[0] * cone.dims[1]).filter(|p| cone.inside[p + k * cone.dims[0] * cone.dims[1]]).count()
-        };
-        let counts: Vec<usize> = (0..cone.dims[2]).map(per_slice).collect();
-        // In pixels of 1 mm: z = 0, 2, 4 as drawn; 6 as the lower of 4 and 8; 8, 10 as 8; 12, 14 as 14.
-        assert_eq!(counts, [0, 100, 64, 36, 36, 16, 16, 4, 4, 0], "{counts:?}");
+        let map = parse_dicom(&rt_struct(&[(1, "pyramid"), (2, "empty")], &contours), None).unwrap();
+        let (pyramid, _) = map.select("pyramid").unwrap();
+        // In pixels of 1 mm: z = 0, 2, 4 as drawn; 6 halfway from 6 to 4 mm (5 mm: the lower's 6
+        // where the sides are as near, its corners, farther from the 4 mm square, left out); 8 as
+        // drawn; 10 and 12 a third and two thirds of the way from 4 to 2 mm; 14 as drawn.
+        assert_eq!(pixels_per_slice(&pyramid), [0, 100, 64, 36, 32, 16, 16, 4, 4, 0]);
         assert!(map.warnings.iter().any(|(_, w)| w == "'empty' has no contour"), "{:?}", map.warnings);
         let e = map.select("empty").unwrap_err().to_string();
         assert!(e.contains("label 2 ('empty') has no voxel ('empty' has no contour)"), "{e}");
+
+        // A cone from a 12 mm radius at z = 2 to 4 mm at z = 18, drawn on its first two slices,
+        // then at its end only.
+        let circle = |z: f64, r: f64| -> Vec<Point> {
+            (0..64)
+                .map(|i| (i as f64 * std::f64::consts::TAU / 64.0).sin_cos())
+                .map(|(s, c)| [r * c, r * s, z])
+                .collect()
+        };
+        let contours: Vec<(u32, &str, Vec<Point>)> =
+            [(0.0, 12.0), (2.0, 12.0), (18.0, 4.0)].iter().map(|&(z, r)| (1, "CLOSED_PLANAR", circle(z, r))).collect();
+        let cone = parse_dicom(&rt_struct(&[(1, "cone")], &contours), None).unwrap().select("cone").unwrap().0;
+        // Each slice between holds its circle's area, to half a pixel of radius (nearest-slice
+        // filling would be 4 to 8 mm off).
+        let counts = pixels_per_slice(&cone);
+        for (j, &count) in counts[3..10].iter().enumerate() {
+            let (r, filled) = (11.0 - j as f64, (count as f64 / std::f64::consts::PI).sqrt());
+            assert!((filled - r).abs() < 0.5, "z = {} mm: radius {filled:.2} mm for {r} mm, {counts:?}", 4 + 2 * j);
+        }
+    }
+
+    /// The inside pixels of each slice of a labelmap.
+    fn pixels_per_slice(map: &crate::labelmap::VoxelMask) -> Vec<usize> {
+        let frame = map.dims[0] * map.dims[1];
+        (0..map.dims[2]).map(|k| map.inside[k * frame..(k + 1) * frame].iter().filter(|&&i| i).count()).collect()
     }
 }
