@@ -17,9 +17,10 @@ pub const MIN_EXTENT_RATIO: f64 = 0.01;
 /// leaves most of the deformation undetermined, and it is what centimetres read as millimetres
 /// make of a view (a laparoscope's spans a third of a liver or more).
 pub const SMALL_VIEW: f64 = 0.1;
-/// A cloud taken for millimetres lies, divided by 1000, within this fraction of the organ's size
-/// of its rest surface (median distance).
-pub const MILLIMETRE_FIT: f64 = 0.03;
+/// A cloud read in its right unit and frame lies within this fraction of the organ's size of its
+/// rest surface (median distance): a view deforms by less. What tells millimetres taken for metres,
+/// and RAS taken for LPS.
+pub const REST_FIT: f64 = 0.03;
 /// A cloud point farther than this (m) from the registered surface is not fitted: several times a
 /// depth camera's noise.
 pub const FAR_DISTANCE: f64 = 0.005;
@@ -119,9 +120,32 @@ fn looks_like_millimetres(organ: &Organ, cloud: &[Point]) -> Result<bool> {
     if robust_extent(&metres) > MAX_EXTENT_RATIO * size {
         return Ok(false);
     }
+    Ok(rest_distance(organ, &metres)? < REST_FIT * size)
+}
+
+/// The median distance of `cloud` to the organ's rest surface.
+fn rest_distance(organ: &Organ, cloud: &[Point]) -> Result<f64> {
     let bvh = SurfaceBvh::new(organ.surface())?;
-    let mut distances: Vec<f64> = metres.par_iter().map(|&c| bvh.distance(c)).collect();
-    Ok(mesh::stats::median(&mut distances) < MILLIMETRE_FIT * size)
+    let mut distances: Vec<f64> = cloud.par_iter().map(|&c| bvh.distance(c)).collect();
+    Ok(mesh::stats::median(&mut distances))
+}
+
+/// The warning for a cloud (as given, before any rigid pre-alignment) that lies on the organ at
+/// rest with x and y negated, within [`REST_FIT`] of its size and at most half as far as it
+/// does: RAS given for LPS or the reverse, which a rigid pre-alignment does not undo (a turn by
+/// 180°, beyond its reach). `None` otherwise.
+pub fn frame_mix_up(organ: &Organ, cloud: &[Point]) -> Result<Option<String>> {
+    let negated: Vec<Point> = cloud.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
+    let (given, other) = (rest_distance(organ, cloud)?, rest_distance(organ, &negated)?);
+    Ok((other < REST_FIT * organ.extent() && other <= 0.5 * given).then(|| {
+        format!(
+            "with x and y negated the cloud lies on the organ at rest (median distance {:.1} mm, against {:.1} mm as \
+             given): is it in RAS where the organ is in LPS, or the reverse? Give its frame (--frame, frame= in \
+             Python)",
+            mm(other),
+            mm(given)
+        )
+    }))
 }
 
 /// The number of distinct points of `cloud`, counted up to `most` (a real cloud has that many

@@ -255,14 +255,21 @@ impl Registration {
     /// cloud that leaves the organ distorted ([`FrameResult::distorted`]) has it start from rest.
     pub fn register(&mut self, cloud: &[Point]) -> Result<Tracked> {
         let began = std::time::Instant::now();
-        let rigid = match (&self.options.rigid, &self.rigid) {
+        // The pose, estimated on this cloud or kept; when estimated, whether the cloud fits the
+        // organ in the other frame (a turn by 180° that the alignment cannot find) is asked first.
+        let estimated = self.options.rigid.is_some() && self.rigid.is_none();
+        let (rigid, mut mix_up) = match (&self.options.rigid, &self.rigid) {
             (Some(rigid_options), None) => {
                 // A cloud in another unit is named as such, before an alignment it would defeat.
                 crate::checks::check_cloud(cloud)?;
                 crate::plausibility::check_extent(&self.organ, cloud)?;
-                Some(rigid_align(self.organ.surface(), cloud, rigid_options)?)
+                let mix_up = crate::plausibility::frame_mix_up(&self.organ, cloud)?;
+                match (rigid_align(self.organ.surface(), cloud, rigid_options), mix_up) {
+                    (Err(e), Some(hint)) => return Err(RegisterError::Invalid(format!("{e}; {hint}"))),
+                    (aligned, mix_up) => (Some(aligned?), Some(mix_up)),
+                }
             }
-            (_, known) => known.clone(),
+            (_, known) => (known.clone(), None),
         };
         let moved: Vec<Point>;
         let in_organ = match &rigid {
@@ -280,6 +287,16 @@ impl Registration {
             self.warm.as_deref(),
             &self.options,
         )?;
+        if let Some(r) = rigid.as_ref().filter(|r| estimated && !r.converged) {
+            registration.warnings.push(format!(
+                "the rigid pre-alignment did not converge in {} iterations: its pose may be wrong",
+                r.iterations
+            ));
+        }
+        if mix_up.is_none() && !registration.warnings.is_empty() {
+            mix_up = Some(crate::plausibility::frame_mix_up(&self.organ, cloud)?);
+        }
+        registration.warnings.extend(mix_up.flatten());
         let targets = in_cloud_frame(displaced(&self.targets, &self.stencils, &registration.u), rigid.as_ref());
         // σ is part of the frame's work, and of its time (not cut by its budget).
         let target_std = self.deformer.uncertainty(&self.targets, &self.stencils).transpose()?;
@@ -577,6 +594,37 @@ mod tests {
         // Without a pre-alignment, a handful of points is flagged too.
         let few = cube_with(vec![[0.02; 3]]).unwrap().register(&organ.surface().vertices[..4].repeat(25)).unwrap();
         assert!(few.registration.warnings.iter().any(|w| w.contains("4 distinct point(s), fewer than 10")), "{few:?}");
+    }
+
+    /// A view in the other frame (x and y negated, RAS for LPS) is said to be so, with or without
+    /// a rigid pre-alignment (a turn by 180° is beyond its reach); the view as given is not.
+    #[test]
+    fn a_view_in_the_other_frame_is_named_so() {
+        let organ = Organ::new(mesh::box_tet([0.02, 0.01, 0.0], [0.1, 0.05, 0.04], [8, 4, 4]).unwrap(), None).unwrap();
+        let seen = |p: &&Point| p[2] > 0.039 || p[1] < 0.011 || p[0] > 0.099;
+        let view: Vec<Point> = organ.surface().vertices.iter().filter(seen).copied().collect();
+        let negated: Vec<Point> = view.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
+        for rigid in [None, Some(crate::rigid::RigidOptions::default())] {
+            let options = RegistrationOptions { rigid: rigid.clone(), ..Default::default() };
+            let mut r = Registration::new(
+                organ.clone(),
+                Box::new(Still),
+                "still",
+                vec![[0.05, 0.03, 0.02]],
+                Vec::new(),
+                options,
+            )
+            .unwrap();
+            let named =
+                |w: &[String]| w.iter().any(|w| w.starts_with("with x and y negated the cloud lies on the organ"));
+            match r.register(&negated) {
+                Ok(wrong) => assert!(named(&wrong.registration.warnings) && !wrong.registration.plausible()),
+                Err(e) => assert!(rigid.is_some() && named(&[e.to_string().split("; ").last().unwrap().into()]), "{e}"),
+            }
+            r.reset();
+            let right = r.register(&view).unwrap().registration;
+            assert!(right.warnings.is_empty(), "rigid {}: {:?}", rigid.is_some(), right.warnings);
+        }
     }
 
     /// A frame stopped by its time budget is plausible otherwise: the next goes on from it, in
