@@ -168,6 +168,10 @@ pub fn far_share(distances: &[f64]) -> f64 {
     distances.iter().filter(|&&d| d > FAR_DISTANCE).count() as f64 / distances.len().max(1) as f64
 }
 
+/// What a cloud that does not fit is advised without a rigid pre-alignment (the end of its
+/// warning), unless it fits in the other frame ([`frame_mix_up`]), which no alignment finds.
+pub(crate) const PRE_ALIGN_HINT: &str = "if its frame is not the organ's, pre-align it (--rigid)";
+
 /// What a registered frame says about itself ([`verdict`]).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Verdict {
@@ -205,7 +209,7 @@ pub fn verdict(organ: &Organ, u: &[f64], far_share: f64, (cloud, extent): (&[Poi
                 "the rigid pre-alignment may have failed (the next cloud estimates it again), or the cloud is not \
                      the organ's"
             }
-            false => "if its frame is not the organ's, pre-align it (--rigid)",
+            false => PRE_ALIGN_HINT,
         };
         out.push(format!(
             "{:.0} % of the cloud stays more than {:.0} mm from the registered surface: the cloud does not fit the \

@@ -296,7 +296,14 @@ impl Registration {
         if mix_up.is_none() && !registration.warnings.is_empty() {
             mix_up = Some(crate::plausibility::frame_mix_up(&self.organ, cloud)?);
         }
-        registration.warnings.extend(mix_up.flatten());
+        if let Some(hint) = mix_up.flatten() {
+            for warning in &mut registration.warnings {
+                if let Some(head) = warning.strip_suffix(crate::plausibility::PRE_ALIGN_HINT) {
+                    *warning = head.trim_end_matches("; ").to_string();
+                }
+            }
+            registration.warnings.push(hint);
+        }
         let targets = in_cloud_frame(displaced(&self.targets, &self.stencils, &registration.u), rigid.as_ref());
         // σ is part of the frame's work, and of its time (not cut by its budget).
         let target_std = self.deformer.uncertainty(&self.targets, &self.stencils).transpose()?;
@@ -615,8 +622,10 @@ mod tests {
                 options,
             )
             .unwrap();
-            let named =
-                |w: &[String]| w.iter().any(|w| w.starts_with("with x and y negated the cloud lies on the organ"));
+            let named = |w: &[String]| {
+                w.iter().any(|w| w.starts_with("with x and y negated the cloud lies on the organ"))
+                    && !w.iter().any(|w| w.contains("--rigid"))
+            };
             match r.register(&negated) {
                 Ok(wrong) => assert!(named(&wrong.registration.warnings) && !wrong.registration.plausible()),
                 Err(e) => assert!(rigid.is_some() && named(&[e.to_string().split("; ").last().unwrap().into()]), "{e}"),
