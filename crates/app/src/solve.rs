@@ -33,11 +33,15 @@ impl Solved {
     /// (6 per cell) and cell `von_mises` (1 per cell).
     pub fn fields(&self) -> Result<Vec<Field>> {
         let (geometry, material, u) = (self.solver.geometry(), &self.solver.problem().material, &self.solution.u);
-        Ok(vec![
+        let mut fields = vec![
             Field::point("displacement", 3, u.clone()),
             Field::cell("green_strain", 6, post::green_strain(geometry, material, u)?),
             Field::cell("von_mises", 1, post::von_mises(geometry, material, u)?),
-        ])
+        ];
+        if let Some(file_nodes) = &self.solver.problem().mesh.file_nodes {
+            fields.push(Field::point("file_node", 1, file_nodes.iter().map(|&i| i as f64).collect()));
+        }
+        Ok(fields)
     }
 
     /// Writes the mesh with [`Solved::fields`] to `path` (.vtu or .vtk), its directory created.
@@ -48,18 +52,25 @@ impl Solved {
 }
 
 impl Solved {
-    /// The solve in words: scenario, mesh, material, system, solver, largest displacement and
-    /// time.
-    pub fn lines(&self) -> Vec<String> {
+    /// The solve in words: scenario, mesh, material, system, solver, largest displacement, time
+    /// and a warning for cells turned inside out.
+    pub fn lines(&self) -> Result<Vec<String>> {
         let (scenario, solver, sol) = (&self.scenario, &self.solver, &self.solution);
         let (geo, p) = (solver.geometry(), solver.problem());
         let (free, nnz) = solver.system_size();
         let t = sol.timings;
         let about = if scenario.description.is_empty() { String::new() } else { format!(": {}", scenario.description) };
-        vec![
+        let left_out = match &p.mesh.file_nodes {
+            Some(_) => {
+                " (its file's nodes that no cell uses left out: `list` selections and the field file_node \
+                        give the file's numbers)"
+            }
+            None => "",
+        };
+        let mut lines = vec![
             format!("scenario   {}{about}", scenario.name),
             format!(
-                "mesh       {} nodes, {} {} cells, {:.4e} m³",
+                "mesh       {} nodes, {} {} cells, {:.4e} m³{left_out}",
                 p.mesh.num_nodes(),
                 p.mesh.cells.len(),
                 p.mesh.cells.kind_name(),
@@ -92,7 +103,26 @@ impl Solved {
                 ms(t.factorization),
                 ms(t.solve)
             ),
-        ]
+        ];
+        if let Some(lambda) = sol.snapped_from {
+            lines.push(format!(
+                "warning    from load factor {lambda:.3} a load step found its equilibrium far away, the response over \
+                 it a quarter as stiff as before or less: past a limit point of the load path the body snapped to \
+                 another branch (as under a real push it gives way); `[solver] continuation = \"arc_length\"` stops \
+                 at the limit point instead"
+            ));
+        }
+        let (inverted, smallest) = post::inverted_cells(geo, p.material.law, &sol.u)?;
+        if inverted > 0 {
+            lines.push(format!(
+                "warning    {inverted} of {} cells are turned inside out (det F down to {smallest:.2}): the {} law \
+                 holds for small strains only: use a finite-strain law (co-rotational, SVK, Neo-Hookean) or a \
+                 smaller load",
+                p.mesh.cells.len(),
+                p.material.law.display_name()
+            ));
+        }
+        Ok(lines)
     }
 }
 
@@ -113,9 +143,49 @@ mod tests {
         let out = dir.path().join("sub/beam.vtu");
         solved.write(&out).unwrap();
         assert_eq!(mesh::io::read_mesh(&out).unwrap().num_nodes(), mesh.num_nodes());
-        let lines = solved.lines();
+        let lines = solved.lines().unwrap();
         assert!(lines[0].starts_with("scenario   beam"), "{lines:?}");
         assert!(lines[1].starts_with(&format!("mesh       {} nodes", mesh.num_nodes())), "{lines:?}");
         assert!(lines.iter().any(|l| l.starts_with("max |u|    ")) && lines.len() == 7, "{lines:?}");
+    }
+
+    /// A bar in a file, held at one end and pulled at the other by node numbers: the same solve
+    /// when the file holds a node that no cell uses before them (the numbers stay the file's),
+    /// which the output names; pulled as far as the linear law turns cells inside out, it says so.
+    #[test]
+    fn nodes_are_numbered_as_in_the_file_and_inverted_cells_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let bar = mesh::box_tet([0.0; 3], [0.1, 0.02, 0.02], [5, 1, 1]).unwrap();
+        let ends = |x: f64| -> Vec<usize> { (0..bar.num_nodes()).filter(|&i| bar.nodes[i][0] == x).collect() };
+        let (held, pulled) = (ends(0.0), ends(0.1));
+        let mut orphaned = bar.clone();
+        orphaned.nodes.insert(0, [0.5, 0.5, 0.5]);
+        let mesh::Cells::Tet4(tets) = &bar.cells else { unreachable!("a tetrahedral bar") };
+        orphaned.cells = mesh::Cells::Tet4(tets.iter().map(|t| t.map(|i| i + 1)).collect());
+        let solve = |mesh: &mesh::Mesh, shift: usize, force: f64, name: &str| {
+            let file = dir.path().join(format!("{name}.vtu"));
+            mesh::io::write_mesh(&file, mesh, &[]).unwrap();
+            let list = |nodes: &[usize]| format!("{:?}", nodes.iter().map(|i| i + shift).collect::<Vec<_>>());
+            let scenario = format!(
+                "kind = \"static\"\nname = \"{name}\"\n[mesh.file]\npath = \"{name}.vtu\"\n[material]\nlaw = \"linear\"\n\
+                 young = 5000.0\npoisson = 0.3\n[[fixed]]\nselect = {{ list = {} }}\n[[force]]\nselect = {{ list = {} }}\n\
+                 total = [{force}, 0.0, 0.0]\n",
+                list(&held),
+                list(&pulled)
+            );
+            let path = dir.path().join(format!("{name}.toml"));
+            std::fs::write(&path, scenario).unwrap();
+            solve_scenario(&path).unwrap()
+        };
+        let (plain, shifted) = (solve(&bar, 0, 0.01, "plain"), solve(&orphaned, 1, 0.01, "orphaned"));
+        assert_eq!(plain.solution.u, shifted.solution.u);
+        assert_eq!(shifted.solver.problem().mesh.file_nodes, Some((1..=bar.num_nodes()).collect()));
+        let fields = shifted.fields().unwrap();
+        assert_eq!(fields.last().unwrap().values[..3], [1.0, 2.0, 3.0], "file_node");
+        assert!(shifted.lines().unwrap()[1].contains("its file's nodes that no cell uses left out"));
+        assert!(!plain.lines().unwrap().iter().any(|l| l.starts_with("warning")));
+        let crushed = solve(&bar, 0, -40.0, "crushed").lines().unwrap();
+        let warning = crushed.last().unwrap();
+        assert!(warning.starts_with("warning    ") && warning.contains("cells are turned inside out"), "{crushed:?}");
     }
 }

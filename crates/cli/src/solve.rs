@@ -12,7 +12,7 @@ pub fn run(path: &Path, output: Option<&Path>) -> Result<()> {
     let solved = solve_scenario(path)?;
     let out = output.map(Path::to_path_buf).unwrap_or_else(|| solved.scenario.output_path());
     solved.write(&out)?;
-    print_lines(&solved.lines());
+    print_lines(&solved.lines()?);
     println!("wrote      {}", out.display());
     Ok(())
 }

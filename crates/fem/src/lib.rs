@@ -127,7 +127,12 @@ const LIMIT_POINT_STIFFNESS: f64 = 25.0;
 /// softened to under [`LIMIT_POINT_STIFFNESS`] per cent of the stiffness at rest, no sign of one
 /// where they had not, nothing where fewer than two steps converged.
 fn stiffness_note(softening: f64) -> String {
-    if softening < LIMIT_POINT_STIFFNESS {
+    if softening <= 0.0 {
+        format!(
+            ": the load path had turned there (its stiffness {softening:.1} % of that at rest: a limit point, past \
+             which the body snaps or gives way under this load)"
+        )
+    } else if softening < LIMIT_POINT_STIFFNESS {
         format!(
             ": the response there was {softening:.1} % as stiff as at rest (a limit point of the load path: past it the \
              body snaps or gives way under this load)"

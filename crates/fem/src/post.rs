@@ -63,6 +63,15 @@ pub fn von_mises(geometry: &ElementGeometry, material: &Material, u: &[f64]) -> 
     })
 }
 
+/// The cells turned inside out by `u` (a quadrature point's det F ≤ 0, F̄ under F-bar), and the
+/// smallest det F of all: the linear law, which knows no finite strain, solves into them.
+pub fn inverted_cells(geometry: &ElementGeometry, law: Law, u: &[f64]) -> Result<(usize, f64), FemError> {
+    let gradients = effective_gradients(geometry, law, u)?;
+    let cells = gradients.chunks(geometry.points_per_element).map(|fs| fs.iter().map(|f| f.determinant()));
+    let smallest: Vec<f64> = cells.map(|dets| dets.fold(f64::INFINITY, f64::min)).collect();
+    Ok((smallest.iter().filter(|&&j| j <= 0.0).count(), smallest.iter().copied().fold(f64::INFINITY, f64::min)))
+}
+
 /// Largest nodal displacement magnitude (m).
 pub fn max_displacement(u: &[f64]) -> f64 {
     u.chunks(3).map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()).fold(0.0, f64::max)

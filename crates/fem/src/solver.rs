@@ -130,6 +130,10 @@ pub struct Solution {
     pub residuals: Vec<f64>,
     /// Time split.
     pub timings: Timings,
+    /// The load factor from which a load step found the next equilibrium far away, past a limit
+    /// point (the body snapped or gave way to another branch of the load path, where an
+    /// arc-length continuation stops instead); `None` otherwise.
+    pub snapped_from: Option<f64>,
 }
 
 /// A reusable static solver: element geometry, sparse pattern and symbolic
@@ -328,34 +332,44 @@ enum Budget {
 struct LoadPath {
     /// The load at load factor 1, normalised (empty when there is none).
     direction: Vec<f64>,
-    /// (load factor, q) of the first and the last two converged states.
+    /// (load factor, q) of the first and the last three converged states, the latest last.
     first: Option<(f64, f64)>,
-    last: [Option<(f64, f64)>; 2],
+    last: [Option<(f64, f64)>; 3],
 }
 
 impl LoadPath {
     fn new(load: Vec<f64>) -> Self {
         let size = norm(&load);
         let direction = if size > 0.0 { load.iter().map(|f| f / size).collect() } else { Vec::new() };
-        LoadPath { direction, first: None, last: [None, None] }
+        LoadPath { direction, first: None, last: [None; 3] }
     }
 
     /// Records the converged state `u` at load factor `lambda`.
     fn record(&mut self, lambda: f64, u: &[f64]) {
         let q = if self.direction.is_empty() { norm(u) } else { dot(&self.direction, u) };
         self.first.get_or_insert((lambda, q));
-        self.last = [self.last[1], Some((lambda, q))];
+        self.last = [self.last[1], self.last[2], Some((lambda, q))];
     }
 
     /// The stiffness dλ/dq of the last step over that of the first (from rest), in per cent; NaN
     /// before two steps.
     fn softening(&self) -> f64 {
         match (self.first, self.last) {
-            (Some((l0, q0)), [Some((l1, q1)), Some((l2, q2))]) if q0 != 0.0 && q2 != q1 => {
+            (Some((l0, q0)), [_, Some((l1, q1)), Some((l2, q2))]) if q0 != 0.0 && q2 != q1 => {
                 100.0 * ((l2 - l1) / (q2 - q1)) / (l0 / q0)
             }
             _ => f64::NAN,
         }
+    }
+
+    /// Whether the last step found its equilibrium far away, past a limit point: its stiffness
+    /// under [`crate::LIMIT_POINT_STIFFNESS`] per cent of that at rest and under a quarter of the
+    /// step's before it (a path that softens gradually, an organ swinging from its hold, does not).
+    fn snapped(&self) -> bool {
+        let [before, Some((l1, q1)), Some((l2, q2))] = self.last else { return false };
+        let (l0, q0) = before.unwrap_or((0.0, 0.0));
+        let (previous, latest) = ((l1 - l0) / (q1 - q0), (l2 - l1) / (q2 - q1));
+        self.softening() < crate::LIMIT_POINT_STIFFNESS && previous > 0.0 && latest < 0.25 * previous
     }
 }
 
@@ -694,6 +708,9 @@ impl StaticSolver {
             match attempt {
                 Ok(()) => {
                     path.record(target, &trial);
+                    if path.snapped() {
+                        stats.snapped_from.get_or_insert(lambda);
+                    }
                     latest_converged = true;
                     previous = Some((lambda, std::mem::replace(&mut u, trial)));
                     lambda = target;
@@ -1158,6 +1175,8 @@ struct Stats {
     refactorized: bool,
     residuals: Vec<f64>,
     timings: Timings,
+    /// See [`Solution::snapped_from`].
+    snapped_from: Option<f64>,
 }
 
 impl Stats {
@@ -1172,6 +1191,7 @@ impl Stats {
             tangent_assemblies: self.tangent_assemblies,
             residuals: self.residuals,
             timings,
+            snapped_from: self.snapped_from,
         }
     }
 }

@@ -72,7 +72,8 @@ fn relative_difference(a: &[f64], b: &[f64]) -> f64 {
 
 /// Below its limit load (between 1.5 and 2 N) the arch bends by a fraction of its rise; above it,
 /// it snaps through to hang below its supports. Load-stepped in 20 steps (or more, where a step is
-/// cut), the solve passes the limit point and reaches the same snapped equilibrium as one full step does.
+/// cut), the solve passes the limit point, says so, and reaches the same snapped equilibrium as one full
+/// step does.
 #[test]
 fn a_shallow_arch_snaps_through_past_its_limit_load_whether_load_stepped_or_not() {
     let (before, _) = arch(1.5, 1).unwrap();
@@ -81,6 +82,10 @@ fn a_shallow_arch_snaps_through_past_its_limit_load_whether_load_stepped_or_not(
     assert!(at_once > RISE + THICK, "past the limit load the crown moves {at_once} m: not snapped through");
     let (stepped, solution) = arch(2.0, 20).unwrap();
     assert!(solution.load_steps >= 20, "{} load steps", solution.load_steps);
+    // Load-stepped, the solution says where it snapped: from an equilibrium short of the limit
+    // point; below the limit load it did not.
+    assert!(solution.snapped_from.is_some_and(|l| (0.7..1.0).contains(&l)), "{:?}", solution.snapped_from);
+    assert_eq!(arch(1.5, 20).unwrap().1.snapped_from, None);
     assert!((stepped - at_once).abs() < 1e-6 * at_once, "stepped {stepped} m, at once {at_once} m");
 }
 
@@ -93,9 +98,11 @@ fn no_equilibrium_names_a_limit_point_only_where_the_path_was_seen_to_soften() {
     assert!(softened.contains("0.918") && softened.contains("2.0 % as stiff") && softened.contains("limit point"));
     let stiff = FemError::NoEquilibrium { load_factor: 0.094, softening: 69.2, iterations: 10 }.to_string();
     assert!(stiff.contains("69.2 % as stiff") && stiff.contains("no sign of a limit point"), "{stiff}");
+    let turned = FemError::NoEquilibrium { load_factor: 0.96, softening: -0.6, iterations: 681 }.to_string();
+    assert!(turned.contains("the load path had turned there") && !turned.contains("-0.6 % as stiff"), "{turned}");
     let unknown = FemError::NoEquilibrium { load_factor: 0.125, softening: f64::NAN, iterations: 74 }.to_string();
     assert!(!unknown.contains("NaN") && !unknown.contains("limit point"), "{unknown}");
-    for message in [softened, stiff, unknown] {
+    for message in [softened, stiff, turned, unknown] {
         assert!(message.contains("further iterations found none") && message.contains("lower the load"), "{message}");
     }
 }

@@ -181,12 +181,18 @@ pub struct Mesh {
     /// cuts through cells, and its nodes are mostly inside the grid. `None`: see
     /// [`Mesh::surface_normals`].
     pub node_normals: Option<Vec<Point>>,
+    /// Where each node lies in the file the mesh was read from, when that file held nodes that no
+    /// cell uses (left out, the others renumbered): node `i` is the file's node `file_nodes[i]`,
+    /// ascending. `None`: numbered as in its file, or made here. Selections by number (`list`)
+    /// take the file's numbers.
+    pub file_nodes: Option<Vec<usize>>,
 }
 
 impl Mesh {
     /// A mesh from nodes and cells, checked with [`Mesh::validate`].
     pub fn new(nodes: Vec<Point>, cells: Cells) -> Result<Self, MeshError> {
-        let mesh = Mesh { nodes, cells, regions: BTreeMap::new(), cell_fraction: None, node_normals: None };
+        let mesh =
+            Mesh { nodes, cells, regions: BTreeMap::new(), cell_fraction: None, node_normals: None, file_nodes: None };
         mesh.validate()?;
         Ok(mesh)
     }

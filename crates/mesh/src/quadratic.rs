@@ -96,6 +96,7 @@ impl Mesh {
             regions,
             cell_fraction: self.cell_fraction.clone(),
             node_normals,
+            file_nodes: self.file_nodes.clone(),
         };
         mesh.validate()?;
         Ok(mesh)

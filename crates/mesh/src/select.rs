@@ -19,7 +19,7 @@ pub enum NodeSelection {
         /// Upper corner.
         max: Point,
     },
-    /// Explicit node indices.
+    /// Explicit node numbers, from 0, as in the mesh's file (see [`crate::Mesh::file_nodes`]).
     List(Vec<usize>),
     /// A named region of the mesh.
     Region(String),
@@ -116,15 +116,29 @@ impl NodeSelection {
     pub fn select(&self, mesh: &Mesh) -> Result<Vec<usize>, MeshError> {
         let mut nodes = match self {
             NodeSelection::Box { min, max } => nodes_in_box(&mesh.nodes, *min, *max),
-            NodeSelection::List(list) => {
-                if let Some(&bad) = list.iter().find(|&&k| k >= mesh.num_nodes()) {
-                    return Err(MeshError::Invalid(format!(
-                        "node {bad} selected, but the mesh has {} nodes",
-                        mesh.num_nodes()
-                    )));
+            NodeSelection::List(list) => match &mesh.file_nodes {
+                None => {
+                    if let Some(&bad) = list.iter().find(|&&k| k >= mesh.num_nodes()) {
+                        return Err(MeshError::Invalid(format!(
+                            "node {bad} selected, but the mesh has {} nodes",
+                            mesh.num_nodes()
+                        )));
+                    }
+                    list.clone()
                 }
-                list.clone()
-            }
+                Some(file_nodes) => list
+                    .iter()
+                    .map(|&k| {
+                        file_nodes.binary_search(&k).map_err(|_| {
+                            MeshError::Invalid(format!(
+                                "node {k} selected, but the mesh file has no such node used by a cell (its {} nodes \
+                                 that cells use are numbered as in the file; the others were left out)",
+                                file_nodes.len()
+                            ))
+                        })
+                    })
+                    .collect::<Result<_, _>>()?,
+            },
             NodeSelection::Region(name) => mesh.region(name)?.to_vec(),
             NodeSelection::Union(parts) => {
                 parts.iter().map(|p| p.select(mesh)).collect::<Result<Vec<_>, _>>()?.into_iter().flatten().collect()

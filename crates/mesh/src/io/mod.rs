@@ -598,7 +598,10 @@ fn finish_volume(
         VolumeKind::Hex => Cells::Hex8(conn.chunks_exact(8).map(|c| std::array::from_fn(|j| c[j])).collect()),
         VolumeKind::Tet10 => Cells::Tet10(conn.chunks_exact(10).map(|c| std::array::from_fn(|j| c[j])).collect()),
     };
-    let mesh = Mesh::new(nodes, cells).map_err(|e| parse_error(path, e.to_string()))?;
+    let mut mesh = Mesh::new(nodes, cells).map_err(|e| parse_error(path, e.to_string()))?;
+    if kept.len() < file_nodes.len() {
+        mesh.file_nodes = Some(kept.clone());
+    }
     Ok((mesh, kept))
 }
 
