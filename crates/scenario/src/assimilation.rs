@@ -289,9 +289,8 @@ impl AssimilationScenario {
     pub fn build_problem(&self, mesh: Mesh) -> Result<(Problem, Vec<LoadPattern>, Vec<usize>)> {
         let fail = |m: String| ScenarioError::build(&self.name, m);
         let mut problem = fixed_problem(mesh, self.material, &self.fixed).map_err(|e| fail(e.to_string()))?;
-        let select = |s: &NodeSelection, what: &str, p: &Problem| {
-            s.select(&p.mesh).map_err(|e| fail(format!("{what} selection: {e}")))
-        };
+        let select =
+            |s: &NodeSelection, what: &str, p: &Problem| crate::source::select_nodes(s, &p.mesh, what).map_err(fail);
         problem.attach_all(&self.attachment).map_err(|e| fail(e.to_string()))?;
         let pattern = |shares: Vec<(usize, f64)>, total: Point, profile: Profile| {
             let forces = shares.into_iter().map(|(k, s)| (k, total.map(|c| c * s))).collect();

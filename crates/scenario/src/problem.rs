@@ -186,9 +186,8 @@ impl StaticScenario {
         let fail = |m: String| ScenarioError::build(&self.name, m);
         let mesh = build_mesh(&self.mesh, dir).map_err(|e| fail(format!("building the mesh: {e}")))?;
         let mut p = fixed_problem(mesh, self.material, &self.fixed).map_err(|e| fail(e.to_string()))?;
-        let pick = |s: &NodeSelection, what: &str, p: &Problem| {
-            s.select(&p.mesh).map_err(|e| fail(format!("{what} selection: {e}")))
-        };
+        let pick =
+            |s: &NodeSelection, what: &str, p: &Problem| crate::source::select_nodes(s, &p.mesh, what).map_err(fail);
         // Each value where the file gives it: [[prescribed]] 2's displacement, not the assembled load.
         let finite = |what: &str, k: usize, key: &str, values: &[f64]| match values.iter().all(|v| v.is_finite()) {
             true => Ok(()),

@@ -110,13 +110,32 @@ pub fn build_mesh(source: &MeshSource, dir: &Path) -> Result<Mesh, MeshError> {
     })
 }
 
+/// A mesh larger than this (m) is an organ in millimetres read as metres (organs span 60 cm at most).
+const MILLIMETRE_MESH_EXTENT: f64 = 5.0;
+
+/// The nodes `selection` picks on `mesh`, or what went wrong, naming the selection's table
+/// (`what`: "fixed", "force"); where it picks none on a mesh of metres, asks whether the mesh is in
+/// millimetres (scenarios are in metres).
+pub fn select_nodes(selection: &NodeSelection, mesh: &Mesh, what: &str) -> Result<Vec<usize>, String> {
+    selection.select(mesh).map_err(|e| {
+        let extent = mesh::longest_side(mesh.bounds());
+        let hint = match extent > MILLIMETRE_MESH_EXTENT && e.to_string().ends_with("picks no node") {
+            true => format!(
+                " (the mesh spans {extent:.0} m: is it in millimetres? scenarios are in metres: [mesh.file] scale = 0.001)"
+            ),
+            false => String::new(),
+        };
+        format!("{what} selection: {e}{hint}")
+    })
+}
+
 /// The problem on `mesh` with `material` (validated) and the `fixed` nodes held at zero displacement; errors name
 /// the material or the selection at fault.
 pub fn fixed_problem(mesh: Mesh, material: Material, fixed: &[Fixed]) -> Result<Problem, FemError> {
     material.validate().map_err(|m| FemError::Invalid(format!("material: {m}")))?;
     let mut problem = Problem::new(mesh, material);
     for f in fixed {
-        let nodes = f.select.select(&problem.mesh).map_err(|e| FemError::Invalid(format!("fixed selection: {e}")))?;
+        let nodes = select_nodes(&f.select, &problem.mesh, "fixed").map_err(FemError::Invalid)?;
         problem.fix(&nodes);
     }
     Ok(problem)

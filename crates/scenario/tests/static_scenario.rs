@@ -139,3 +139,23 @@ fn a_byte_order_mark_is_read_and_unusable_numbers_are_named() {
     let err = parse(&scaled).unwrap().build_problem(Path::new(".")).unwrap_err().to_string();
     assert!(err.contains("[mesh.file] scale must be finite and > 0, got -1"), "{err}");
 }
+
+/// A selection that picks nothing on a mesh spanning metres (an organ in millimetres: scenarios
+/// are in metres) asks whether the mesh is in millimetres; on a mesh of an organ's size it does not.
+#[test]
+fn an_empty_selection_on_a_mesh_of_metres_asks_for_millimetres() {
+    let error = |max: f64| {
+        let text = format!(
+            "kind = \"static\"\nname = \"mm\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [{max}, {max}, {max}]\n\
+             cells = [2, 2, 2]\nelement = \"tet\"\n[material]\nlaw = \"linear\"\nyoung = 5000.0\npoisson = 0.3\n[[fixed]]\n\
+             select = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e4, 1e4, 1e-9] }} }}\n[[force]]\n\
+             select = {{ ball = {{ centre = [0.0, -0.09, 0.0], radius = 0.03 }} }}\ntotal = [0.0, 0.2, 0.0]\n"
+        );
+        let scenario = StaticScenario::parse(&text, Path::new("mm.toml")).unwrap();
+        scenario.build_problem(Path::new(".")).unwrap_err().to_string()
+    };
+    let millimetres = error(200.0);
+    assert!(millimetres.contains("force selection: ") && millimetres.contains("picks no node"), "{millimetres}");
+    assert!(millimetres.contains("the mesh spans 200 m: is it in millimetres?"), "{millimetres}");
+    assert!(!error(0.2).contains("millimetres"), "{}", error(0.2));
+}
