@@ -19,7 +19,7 @@
 //! image that 3D Slicer and ITK load.
 //!
 //! Supported: NIfTI-1 single files (`n+1`), either byte order, gzipped or not, data types u8,
-//! i8, i16, u16, i32, u32, i64, u64, f32, f64, the sform (preferred) or qform affine; NRRD with
+//! i8, i16, u16, i32, u32, i64, u64, f32, f64, the sform or qform affine as 3D Slicer chooses; NRRD with
 //! attached data or detached in one file (`data file`, relative to the header's folder), `raw`,
 //! `gzip` or `ascii` encoding, the same types, `space` LPS or RAS (or their long
 //! names), `space directions`, `space origin` and `space units`, and Slicer's layered
@@ -297,10 +297,26 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
             *l = v as i32;
         }
     }
-    let affine = nifti_affine(i16_at(252), i16_at(254), &pixdim, f32_at)?;
-    let affine = in_millimetres(affine, nifti_unit_mm(bytes[123])?);
-    let placed = i16_at(252) > 0 || i16_at(254) > 0;
-    Ok(Labelmap { placed, ..Labelmap::single(dims, labels, affine, Frame::Ras) })
+    let (qform_code, sform_code) = (i16_at(252), i16_at(254));
+    let unit_mm = nifti_unit_mm(bytes[123])?;
+    let (affine, other) = nifti_affine(qform_code, sform_code, dims, &pixdim, f32_at)?;
+    let affine = in_millimetres(affine, unit_mm);
+    let warnings = other
+        .map(|(unused, apart)| (unused, apart * unit_mm))
+        .filter(|&(_, apart)| apart > FORMS_APART_MM)
+        .map(|(unused, apart)| {
+            let used = if unused == "qform" { "sform" } else { "qform" };
+            let warning = format!(
+                "its sform (code {sform_code}) and qform (code {qform_code}) place the image up to {apart:.1} mm \
+                 apart: read by the {used}, as 3D Slicer (ITK) reads it; tools that take the sform whatever its code \
+                 (nibabel, FSL) place it elsewhere"
+            );
+            (None, warning)
+        })
+        .into_iter()
+        .collect();
+    let placed = qform_code > 0 || sform_code > 0;
+    Ok(Labelmap { placed, warnings, ..Labelmap::single(dims, labels, affine, Frame::Ras) })
 }
 
 /// The millimetres in a NIfTI spatial unit (the low three bits of `xyzt_units`): metre, mm,
@@ -330,44 +346,68 @@ fn in_millimetres(affine: [[f64; 4]; 3], mm_per_unit: f64) -> [[f64; 4]; 3] {
     affine.map(|row| row.map(|x| x * mm_per_unit))
 }
 
-/// The voxel-to-world affine of a NIfTI header: the sform when its code is set, otherwise the
-/// qform (quaternion, offsets, spacing and qfac), otherwise the spacing alone.
+/// The voxel-to-world affine of a NIfTI header (of a `dims` image), as 3D Slicer reads it through
+/// ITK: the sform when its code says scanner coordinates (1) or there is no qform, otherwise the
+/// qform (quaternion, offsets, spacing and qfac), otherwise the spacing alone; and when both are
+/// set, the one not used and how far apart (in the file's unit) the two place the image's corners
+/// (nibabel and FSL take the sform whatever its code).
 fn nifti_affine(
     qform_code: i16,
     sform_code: i16,
+    dims: [usize; 3],
     pixdim: &[f64],
     f32_at: impl Fn(usize) -> f64,
-) -> Result<[[f64; 4]; 3], String> {
-    let affine = if sform_code > 0 {
-        std::array::from_fn(|r| std::array::from_fn(|c| f32_at(280 + 16 * r + 4 * c)))
-    } else if qform_code > 0 {
-        let (mut b, mut c, mut d) = (f32_at(256), f32_at(260), f32_at(264));
-        // As nifti1_io reads it: where b² + c² + d² reaches 1, a = 0 and (b, c, d) is normalised,
-        // so that the quaternion is a rotation and leaves the spacing as it is.
-        let norm2 = b * b + c * c + d * d;
-        let a = if 1.0 - norm2 < 1e-7 {
-            let scale = 1.0 / norm2.sqrt();
-            (b, c, d) = (b * scale, c * scale, d * scale);
-            0.0
-        } else {
-            (1.0 - norm2).sqrt()
-        };
-        let rotation = [
-            [a * a + b * b - c * c - d * d, 2.0 * (b * c - a * d), 2.0 * (b * d + a * c)],
-            [2.0 * (b * c + a * d), a * a + c * c - b * b - d * d, 2.0 * (c * d - a * b)],
-            [2.0 * (b * d - a * c), 2.0 * (c * d + a * b), a * a + d * d - b * b - c * c],
-        ];
-        let qfac = if pixdim[0] < 0.0 { -1.0 } else { 1.0 };
-        // As nifti1_io's nifti_quatern_to_mat44 does: a spacing that is not positive is taken as 1.
-        let size = |d: usize| if pixdim[d] > 0.0 { pixdim[d] } else { 1.0 };
-        let spacing = [size(1), size(2), qfac * size(3)];
-        let offset = [f32_at(268), f32_at(272), f32_at(276)];
-        std::array::from_fn(|r| std::array::from_fn(|c| if c < 3 { rotation[r][c] * spacing[c] } else { offset[r] }))
-    } else {
-        std::array::from_fn(|r| std::array::from_fn(|c| if c == r { pixdim[r + 1] } else { 0.0 }))
+) -> Result<([[f64; 4]; 3], Option<(&'static str, f64)>), String> {
+    let sform = || std::array::from_fn(|r| std::array::from_fn(|c| f32_at(280 + 16 * r + 4 * c)));
+    let qform = || qform_affine(pixdim, &f32_at);
+    let (affine, other) = match (sform_code > 0, qform_code > 0) {
+        (true, false) => (sform(), None),
+        (true, true) if sform_code == 1 => (sform(), Some(("qform", qform()))),
+        (_, true) => (qform(), (sform_code > 0).then(|| ("sform", sform()))),
+        (false, false) => {
+            (std::array::from_fn(|r| std::array::from_fn(|c| if c == r { pixdim[r + 1] } else { 0.0 })), None)
+        }
     };
     check_affine(&affine)?;
-    Ok(affine)
+    let apart = |other: &[[f64; 4]; 3]| {
+        let corners = (0..8)
+            .map(|k| std::array::from_fn::<f64, 3, _>(|d| if k >> d & 1 == 1 { dims[d] as f64 - 1.0 } else { 0.0 }));
+        let place = |a: &[[f64; 4]; 3], v: [f64; 3]| -> [f64; 3] {
+            std::array::from_fn(|r| (0..3).map(|c| a[r][c] * v[c]).sum::<f64>() + a[r][3])
+        };
+        corners.map(|v| crate::distance(place(&affine, v), place(other, v))).fold(0.0, f64::max)
+    };
+    Ok((affine, other.map(|(unused, other)| (unused, apart(&other)))))
+}
+
+/// How far apart (mm) a NIfTI's sform and qform may place the image's corners before the file is
+/// said to be ambiguous: the rounding of the qform's quaternion.
+const FORMS_APART_MM: f64 = 0.1;
+
+/// The qform's voxel-to-world affine (quaternion, offsets, spacing and qfac), as nifti1_io makes it.
+fn qform_affine(pixdim: &[f64], f32_at: &impl Fn(usize) -> f64) -> [[f64; 4]; 3] {
+    let (mut b, mut c, mut d) = (f32_at(256), f32_at(260), f32_at(264));
+    // As nifti1_io reads it: where b² + c² + d² reaches 1, a = 0 and (b, c, d) is normalised,
+    // so that the quaternion is a rotation and leaves the spacing as it is.
+    let norm2 = b * b + c * c + d * d;
+    let a = if 1.0 - norm2 < 1e-7 {
+        let scale = 1.0 / norm2.sqrt();
+        (b, c, d) = (b * scale, c * scale, d * scale);
+        0.0
+    } else {
+        (1.0 - norm2).sqrt()
+    };
+    let rotation = [
+        [a * a + b * b - c * c - d * d, 2.0 * (b * c - a * d), 2.0 * (b * d + a * c)],
+        [2.0 * (b * c + a * d), a * a + c * c - b * b - d * d, 2.0 * (c * d - a * b)],
+        [2.0 * (b * d - a * c), 2.0 * (c * d + a * b), a * a + d * d - b * b - c * c],
+    ];
+    let qfac = if pixdim[0] < 0.0 { -1.0 } else { 1.0 };
+    // As nifti1_io's nifti_quatern_to_mat44 does: a spacing that is not positive is taken as 1.
+    let size = |d: usize| if pixdim[d] > 0.0 { pixdim[d] } else { 1.0 };
+    let spacing = [size(1), size(2), qfac * size(3)];
+    let offset = [f32_at(268), f32_at(272), f32_at(276)];
+    std::array::from_fn(|r| std::array::from_fn(|c| if c < 3 { rotation[r][c] * spacing[c] } else { offset[r] }))
 }
 
 /// Refuses an affine with non-finite entries or without volume (a zero spacing).
@@ -1226,6 +1266,37 @@ mod tests {
         std::fs::write(&path, &bytes).unwrap();
         let back = read_labelmap(&path).unwrap();
         assert!(close(&back.affine, &expected, 1e-6), "{:?}", back.affine);
+    }
+
+    /// Where both forms are set, the sform is read when its code is 1 (scanner), the qform when
+    /// the sform's is another (as 3D Slicer reads it through ITK); forms that disagree are said to.
+    #[test]
+    fn the_form_slicer_reads_is_read_and_disagreeing_forms_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Ras);
+        let path = dir.path().join("sq.nii");
+        write_nifti(&path, &map).unwrap();
+        let sform = read_labelmap(&path).unwrap().affine;
+        // The qform: the sform's axes (half a turn about y, k flipped), offset (1, 2, 3).
+        let mut bytes = qform_only(&path, &[(76, -1.0), (256, 0.0), (260, 1.0), (264, 0.0)]);
+        let qform = read_labelmap(&path).unwrap().affine;
+        let axes = |a: &[[f64; 4]; 3]| a.map(|row| [row[0], row[1], row[2], 0.0]);
+        assert!(close(&axes(&sform), &axes(&qform), 1e-6), "{sform:?} {qform:?}");
+        let mut with_sform = |code: i16, x: f32| {
+            bytes[254..256].copy_from_slice(&code.to_le_bytes());
+            for (at, offset) in [(292, x), (308, 2.0f32), (324, 3.0)] {
+                bytes[at..at + 4].copy_from_slice(&offset.to_le_bytes());
+            }
+            std::fs::write(&path, &bytes).unwrap();
+            read_labelmap(&path).unwrap()
+        };
+        let aligned = with_sform(2, -49.0);
+        assert_eq!(aligned.affine[0][3], 1.0, "code 2: the qform");
+        assert!(aligned.warnings[0].1.contains("place the image up to 50.0 mm apart: read by the qform"));
+        let scanner = with_sform(1, -49.0);
+        assert_eq!(scanner.affine[0][3], -49.0, "code 1: the sform");
+        assert!(scanner.warnings[0].1.contains("read by the sform, as 3D Slicer (ITK) reads it"));
+        assert!(with_sform(2, 1.0).warnings.is_empty(), "the forms agree");
     }
 
     /// A qform's spacing that is not positive is taken as 1, as nifti1_io takes it.
