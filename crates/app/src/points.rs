@@ -135,6 +135,11 @@ fn by_label(path: &Path, truth: LabelledPoints, labels: &[String]) -> Result<Vec
         .iter()
         .map(|label| match at.get(label.as_str()) {
             Some(&i) => Ok(truth.points[i]),
+            None if truth.unplaced.contains(label) => anyhow::bail!(
+                "{}: `{label}` is not placed (its positionStatus in 3D Slicer is undefined, preview or missing): place \
+                 it, or leave the target out",
+                path.display()
+            ),
             None => anyhow::bail!("{}: no point is labelled `{label}`, a target's label", path.display()),
         })
         .collect()
@@ -249,6 +254,16 @@ mod tests {
         assert!(twice.ends_with("truth.csv: the label `A` is given twice"), "{twice}");
         let missing = read("label,x,y,z\nB,2,0,0\nA,1,0,0\n", &labels).unwrap_err();
         assert!(missing.ends_with("truth.csv: no point is labelled `C`, a target's label"), "{missing}");
+        // A point left unplaced in 3D Slicer is said to be so.
+        let markups = dir.path().join("truth.mrk.json");
+        std::fs::write(
+            &markups,
+            r#"{"markups": [{"controlPoints": [{"label": "A", "position": [1, 0, 0]}, {"label": "B", "position": [2, 0, 0]},
+               {"label": "C", "positionStatus": "undefined", "position": [0, 0, 0]}]}]}"#,
+        )
+        .unwrap();
+        let unplaced = input.read_truths(&markups, 1, &labels).unwrap_err().to_string();
+        assert!(unplaced.contains("`C` is not placed (its positionStatus in 3D Slicer is undefined"), "{unplaced}");
     }
 
     #[test]
