@@ -107,7 +107,7 @@ impl Solved {
         if let Some(lambda) = sol.snapped_from {
             lines.push(format!(
                 "warning    from load factor {lambda:.3} a load step found its equilibrium far away, the response over \
-                 it a quarter as stiff as before or less: past a limit point of the load path the body snapped to \
+                 it half as stiff as before or less: past a limit point of the load path the body snapped to \
                  another branch (as under a real push it gives way); `[solver] continuation = \"arc_length\"` stops \
                  at the limit point instead"
             ));

@@ -188,6 +188,7 @@ fn past_its_limit_point_a_hanging_liver_swings_on_to_an_equilibrium() {
     let mut solver = StaticSolver::new(p).unwrap();
     let solution = solver.solve(&SolverOptions::default()).unwrap();
     assert!(max_norm(&solution.u) > 0.2, "moved {} m", max_norm(&solution.u));
+    assert!(solution.snapped_from.is_some_and(|l| l > 0.5), "said to snap: {:?}", solution.snapped_from);
     let cost = format!("{} iterations, {} factorisations", solution.iterations, solution.factorizations);
     assert!(solution.iterations < 1000 && solution.factorizations < 250, "{cost}");
     let internal = solver.internal_force(&solution.u).unwrap();
@@ -195,6 +196,27 @@ fn past_its_limit_point_a_hanging_liver_swings_on_to_an_equilibrium() {
     let residual = free.iter().map(|&d| (internal[d] - load[d]).powi(2)).sum::<f64>().sqrt();
     let scale = free.iter().map(|&d| load[d].powi(2)).sum::<f64>().sqrt();
     assert!(residual <= 1e-4 * scale, "residual {residual} N against a load of {scale} N");
+}
+
+/// The AMOS liver, Saint-Venant–Kirchhoff at ν = 0.3, pushed by 0.5 N or by 1 N: both stop at
+/// its compressive limit, about 0.48 N (CalculiX stops at 0.484 N too), naming the element most
+/// compressed at the last equilibrium and its stretch there, the same for either push (CalculiX's
+/// last converged state: 0.200), not the stretch of the iterate that failed past it.
+#[test]
+fn saint_venant_kirchhoff_s_limit_point_is_told_of_its_last_equilibrium() {
+    let organ = &organs()[0];
+    let limit = |force: f64| {
+        let mut p = problem(organ, meshes(organ).1, force, 1);
+        p.material = Material::new(Law::Svk, 5000.0, 0.3).with_formulation(Formulation::Standard);
+        match StaticSolver::new(p).unwrap().solve(&SolverOptions::default()) {
+            Err(FemError::LimitPoint { element, stretch, load_factor }) => (element, stretch, force * load_factor),
+            other => panic!("{force} N: {:?}", other.map(|s| max_norm(&s.u))),
+        }
+    };
+    let (half, one) = (limit(0.5), limit(1.0));
+    assert_eq!(half.0, one.0, "{half:?} {one:?}");
+    assert!((half.2 - one.2).abs() < 0.01 * one.2 && (0.47..0.49).contains(&one.2), "{half:?} {one:?}");
+    assert!((half.1 - one.1).abs() < 0.02 && (0.15..0.25).contains(&one.1), "{half:?} {one:?}");
 }
 
 /// The load factor of the last increment CalculiX converged (its status file: one line per

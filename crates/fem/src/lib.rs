@@ -81,11 +81,11 @@ pub enum FemError {
     },
     /// Saint-Venant-Kirchhoff passed its compressive limit point: no static
     /// equilibrium exists beyond it under this load.
-    #[error("Saint-Venant-Kirchhoff passed its compressive limit point at load factor {load_factor:.3}: element {element} is compressed to a principal stretch of {stretch:.3} (SVK's stress peaks at 1/sqrt(3) = 0.577 and falls beyond, so no equilibrium exists under the full load); use law = \"neo_hookean\" for large compression")]
+    #[error("Saint-Venant-Kirchhoff passed its compressive limit point beyond load factor {load_factor:.3}, where element {element} is compressed to a principal stretch of {stretch:.3} (SVK's uniaxial stress peaks at 1/sqrt(3) = 0.577 and falls beyond, so no equilibrium exists under the full load); use law = \"neo_hookean\" for large compression")]
     LimitPoint {
-        /// The most compressed element.
+        /// The most compressed element at the last equilibrium.
         element: usize,
-        /// Its smallest principal stretch.
+        /// Its smallest principal stretch there.
         stretch: f64,
         /// The last load factor reached.
         load_factor: f64,

@@ -363,13 +363,13 @@ impl LoadPath {
     }
 
     /// Whether the last step found its equilibrium far away, past a limit point: its stiffness
-    /// under [`crate::LIMIT_POINT_STIFFNESS`] per cent of that at rest and under a quarter of the
-    /// step's before it (a path that softens gradually, an organ swinging from its hold, does not).
+    /// under [`crate::LIMIT_POINT_STIFFNESS`] per cent of that at rest and under half the step's
+    /// before it (a path that softens gradually does not).
     fn snapped(&self) -> bool {
         let [before, Some((l1, q1)), Some((l2, q2))] = self.last else { return false };
         let (l0, q0) = before.unwrap_or((0.0, 0.0));
         let (previous, latest) = ((l1 - l0) / (q1 - q0), (l2 - l1) / (q2 - q1));
-        self.softening() < crate::LIMIT_POINT_STIFFNESS && previous > 0.0 && latest < 0.25 * previous
+        self.softening() < crate::LIMIT_POINT_STIFFNESS && previous > 0.0 && latest < 0.5 * previous
     }
 }
 
@@ -832,23 +832,25 @@ impl StaticSolver {
         if self.problem.material.law != Law::Svk || matches!(error, FemError::Interrupted) {
             return error;
         }
-        let law = self.problem.material.law;
-        let Ok(gradients) =
-            effective_gradients(&self.geometry, law, trial).or_else(|_| effective_gradients(&self.geometry, law, u))
-        else {
-            return error;
+        // The smallest principal stretch of a state, and the element where it is.
+        let most_compressed = |state: &[f64]| -> Option<(usize, f64)> {
+            let gradients = effective_gradients(&self.geometry, self.problem.material.law, state).ok()?;
+            let nq = self.geometry.points_per_element;
+            gradients
+                .iter()
+                .map(|f| (f.transpose() * f).symmetric_eigenvalues().min().max(0.0).sqrt())
+                .enumerate()
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(point, stretch)| (point / nq, stretch))
         };
-        let nq = self.geometry.points_per_element;
-        let (point, stretch) = gradients
-            .iter()
-            .map(|f| (f.transpose() * f).symmetric_eigenvalues().min().max(0.0).sqrt())
-            .enumerate()
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .unwrap_or((0, 1.0));
-        if stats.indefinite || stretch < SVK_LIMIT_STRETCH * 1.05 {
-            FemError::LimitPoint { element: point / nq, stretch, load_factor: lambda }
-        } else {
-            error
+        // Whether the iterate that failed went past the limit; told of the last equilibrium, which
+        // does not depend on how far the failed iterate strayed.
+        let Some((_, strayed)) = most_compressed(trial).or_else(|| most_compressed(u)) else { return error };
+        match most_compressed(u) {
+            Some((element, stretch)) if stats.indefinite || strayed < SVK_LIMIT_STRETCH * 1.05 => {
+                FemError::LimitPoint { element, stretch, load_factor: lambda }
+            }
+            _ => error,
         }
     }
 

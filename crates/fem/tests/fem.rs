@@ -549,3 +549,31 @@ fn total_force_is_shared_by_tributary_area() {
     let centre = mesh::select::nodes_in_box(&cube.nodes, [0.49; 3], [0.51; 3]);
     assert_eq!(fem::force_shares(&cube, &centre), vec![(centre[0], 1.0)]);
 }
+
+/// A block crushed by a force past SVK's compressive limit stops there, naming the most
+/// compressed element at its last equilibrium, short of the stress's peak: the same element
+/// whether the force asked for was twice the limit or three times, where the iterate that failed
+/// strays past the peak, differently.
+#[test]
+fn an_svk_limit_point_is_told_of_the_last_equilibrium() {
+    let m = box_hex([0.0; 3], [0.1, 0.1, 0.1], [2, 2, 2]).unwrap();
+    let bottom = mesh::select::nodes_in_box(&m.nodes, [-1.0, -1.0, -1e-9], [1.0, 1.0, 1e-9]);
+    let top = mesh::select::nodes_in_box(&m.nodes, [-1.0, -1.0, 0.0999], [1.0, 1.0, 1.0]);
+    let limit = |load: f64| {
+        let mut problem = Problem::new(m.clone(), Material::new(Law::Svk, 5000.0, 0.3));
+        problem.fix(&bottom);
+        problem.add_traction(&top, [0.0, 0.0, -load]);
+        match StaticSolver::new(problem).unwrap().solve(&SolverOptions::default()) {
+            Err(fem::FemError::LimitPoint { element, stretch, load_factor }) => (element, stretch, load * load_factor),
+            other => panic!("{load} Pa: {:?}", other.map(|s| s.iterations)),
+        }
+    };
+    // (element, stretch, load reached in Pa): the last equilibria lie a load step's cut apart
+    // (781 and 844 Pa), each short of the peak of SVK's uniaxial stress (stretch 0.577).
+    let (twice, thrice) = (limit(2000.0), limit(3000.0));
+    assert_eq!(twice.0, thrice.0, "the same element: {twice:?} {thrice:?}");
+    assert!((twice.2 - thrice.2).abs() < 0.1 * twice.2, "the limit load: {twice:?} {thrice:?}");
+    for (_, stretch, _) in [twice, thrice] {
+        assert!(stretch > 0.65 && stretch < 0.8, "the stretch at equilibrium: {twice:?} {thrice:?}");
+    }
+}

@@ -281,7 +281,7 @@ impl Registered {
 /// `fem`: a static scenario (file or built-in name, e.g. `liver`) whose FEM deforms the organ; or `model` (a model directory or its model.json) with `scenario`, the dataset scenario
 /// it was trained on (e.g. `liver_ar_t10` for the shipped `models/liver_ar`). `targets`: rest
 /// positions, a CSV file (x, y, z) or an array [k, 3], in `units`; default: the mesh's `markers`
-/// and `tumour` nodes. `units`: "m" or "mm", of the targets, every cloud and every result
+/// and `tumour` nodes. `units`: "m", "mm", "cm" or "um", of the targets, every cloud and every result
 /// (default: a patient's own unit, else "m"). `frame`: "RAS" or "LPS", the frame of every cloud
 /// and every result, converted from and to the organ's when it names one (a patient's, or a
 /// targets file's); default: a patient's own (the frame of the files it was prepared from), else
@@ -304,7 +304,7 @@ struct Registration {
     /// The method in words (e.g. "FEM, Corotational (Standard elements)").
     #[pyo3(get)]
     method: String,
-    /// The units of clouds, targets and results ("m" or "mm").
+    /// The units of clouds, targets and results ("m", "mm", "cm" or "um").
     #[pyo3(get)]
     units: String,
     /// The frame of clouds and results ("RAS", "LPS"), or None where neither the organ nor the
