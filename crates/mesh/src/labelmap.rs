@@ -357,7 +357,7 @@ fn nifti_affine(
     dims: [usize; 3],
     pixdim: &[f64],
     f32_at: impl Fn(usize) -> f64,
-) -> Result<([[f64; 4]; 3], Option<(&'static str, f64)>), String> {
+) -> Result<([[f64; 4]; 3], Option<UnusedForm>), String> {
     let sform = || std::array::from_fn(|r| std::array::from_fn(|c| f32_at(280 + 16 * r + 4 * c)));
     let qform = || qform_affine(pixdim, &f32_at);
     let (affine, other) = match (sform_code > 0, qform_code > 0) {
@@ -379,6 +379,10 @@ fn nifti_affine(
     };
     Ok((affine, other.map(|(unused, other)| (unused, apart(&other)))))
 }
+
+/// A NIfTI form set but not read ("sform" or "qform") and how far apart (in the file's unit) it
+/// places the image's corners from the one read.
+type UnusedForm = (&'static str, f64);
 
 /// How far apart (mm) a NIfTI's sform and qform may place the image's corners before the file is
 /// said to be ambiguous: the rounding of the qform's quaternion.

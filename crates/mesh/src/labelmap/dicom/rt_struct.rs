@@ -394,10 +394,7 @@ fn lower_envelope(f: &[f64], out: &mut [f64]) {
     };
     let parabola = |p: usize| f[p] + (p * p) as f64;
     let (mut vertices, mut bounds) = (vec![first], vec![f64::NEG_INFINITY]);
-    for q in first + 1..f.len() {
-        if !f[q].is_finite() {
-            continue;
-        }
+    for (q, _) in f.iter().enumerate().skip(first + 1).filter(|(_, v)| v.is_finite()) {
         // Where q's parabola falls below the last kept one's; z[0] = −∞ keeps the first.
         let meets = |p: usize| (parabola(q) - parabola(p)) / (2.0 * (q - p) as f64);
         while meets(*vertices.last().unwrap()) <= *bounds.last().unwrap() {
@@ -632,13 +629,13 @@ mod tests {
         let (columns, rows) = (23, 17);
         let feature: Vec<bool> = (0..columns * rows).map(|p| (p * 7919) % 97 < 3 || p == 5 + 23 * 9).collect();
         let d = squared_distances(&feature, columns, rows);
-        for p in 0..columns * rows {
+        for (p, &distance) in d.iter().enumerate() {
             let brute = (0..columns * rows)
                 .filter(|&f| feature[f])
                 .map(|f| (f % columns).abs_diff(p % columns).pow(2) + (f / columns).abs_diff(p / columns).pow(2))
                 .min()
                 .unwrap();
-            assert_eq!(d[p], brute as f64, "pixel {p}");
+            assert_eq!(distance, brute as f64, "pixel {p}");
         }
         assert!(squared_distances(&[false; 12], 4, 3).iter().all(|d| d.is_infinite()));
     }
