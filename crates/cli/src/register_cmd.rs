@@ -50,7 +50,8 @@ pub struct RegisterArgs {
     force: Option<f64>,
     /// The case as a press and release of this many frames (the force rising to the case's and
     /// falling back), registered as a stream: each frame warm-started from the previous one.
-    #[arg(long, requires = "comparison")]
+    #[arg(long, requires = "comparison", value_parser = clap::builder::RangedU64ValueParser::<usize>::new()
+        .range(1..=scenario::registration::MAX_FRAMES as u64))]
     frames: Option<usize>,
     /// Misaligns the case's camera frame: rotation (degrees) about the case's axis...
     #[arg(long, requires = "comparison", allow_negative_numbers = true)]

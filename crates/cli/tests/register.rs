@@ -176,6 +176,9 @@ fn units_are_parsed_the_same_by_every_command() {
         let (ok, text) = augsim(&command);
         assert!(!ok && text.contains("must be m, cm, mm, um or auto, got 'in'"), "{command:?}: {text}");
     }
+    // A stream of no frame is refused as the flag given, before anything runs.
+    let (ok, text) = augsim(&["register", "--demo", "--frames", "0"]);
+    assert!(!ok && text.contains("invalid value '0' for '--frames <FRAMES>'") && text.contains("1..=1000"), "{text}");
     // Without a way of deforming the organ, register and serve say what to give.
     for command in [&["register", "cloud.csv"][..], &["serve", "--port", "0"]] {
         let (ok, text) = augsim(command);
