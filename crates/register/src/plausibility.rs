@@ -120,14 +120,13 @@ fn looks_like_millimetres(organ: &Organ, cloud: &[Point]) -> Result<bool> {
     if robust_extent(&metres) > MAX_EXTENT_RATIO * size {
         return Ok(false);
     }
-    Ok(rest_distance(organ, &metres)? < REST_FIT * size)
+    Ok(median_distance(&SurfaceBvh::new(organ.surface())?, &metres) < REST_FIT * size)
 }
 
-/// The median distance of `cloud` to the organ's rest surface.
-fn rest_distance(organ: &Organ, cloud: &[Point]) -> Result<f64> {
-    let bvh = SurfaceBvh::new(organ.surface())?;
+/// The median distance of `cloud` to the surface of `bvh`.
+fn median_distance(bvh: &SurfaceBvh, cloud: &[Point]) -> f64 {
     let mut distances: Vec<f64> = cloud.par_iter().map(|&c| bvh.distance(c)).collect();
-    Ok(mesh::stats::median(&mut distances))
+    mesh::stats::median(&mut distances)
 }
 
 /// The warning for a cloud (as given, before any rigid pre-alignment) that lies on the organ at
@@ -136,7 +135,8 @@ fn rest_distance(organ: &Organ, cloud: &[Point]) -> Result<f64> {
 /// 180°, beyond its reach). `None` otherwise.
 pub fn frame_mix_up(organ: &Organ, cloud: &[Point]) -> Result<Option<String>> {
     let negated: Vec<Point> = cloud.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
-    let (given, other) = (rest_distance(organ, cloud)?, rest_distance(organ, &negated)?);
+    let bvh = SurfaceBvh::new(organ.surface())?;
+    let (given, other) = (median_distance(&bvh, cloud), median_distance(&bvh, &negated));
     Ok((other < REST_FIT * organ.extent() && other <= 0.5 * given).then(|| {
         format!(
             "with x and y negated the cloud lies on the organ at rest (median distance {:.1} mm, against {:.1} mm as \
@@ -168,10 +168,6 @@ pub fn far_share(distances: &[f64]) -> f64 {
     distances.iter().filter(|&&d| d > FAR_DISTANCE).count() as f64 / distances.len().max(1) as f64
 }
 
-/// What a cloud that does not fit is advised without a rigid pre-alignment (the end of its
-/// warning), unless it fits in the other frame ([`frame_mix_up`]), which no alignment finds.
-pub(crate) const PRE_ALIGN_HINT: &str = "if its frame is not the organ's, pre-align it (--rigid)";
-
 /// What a registered frame says about itself ([`verdict`]).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Verdict {
@@ -183,8 +179,16 @@ pub struct Verdict {
 
 /// What a registered frame says about itself, given its cloud and that cloud's extent over the
 /// organ's ([`check_extent`]), the share of the cloud left unfitted ([`far_share`]), its
-/// displacement `u`, and whether it was rigidly pre-aligned.
-pub fn verdict(organ: &Organ, u: &[f64], far_share: f64, (cloud, extent): (&[Point], f64), rigid: bool) -> Verdict {
+/// displacement `u`, and whether it was rigidly pre-aligned. Without a pre-alignment, a frame
+/// with a warning whose cloud lies on the organ in the other frame says so ([`frame_mix_up`]),
+/// rather than advising one (a turn by 180° is beyond its reach).
+pub fn verdict(
+    organ: &Organ,
+    u: &[f64],
+    far_share: f64,
+    (cloud, extent): (&[Point], f64),
+    rigid: bool,
+) -> Result<Verdict> {
     let points = distinct_points(cloud, FEW_POINTS);
     let size = organ.extent();
     let motion = u.chunks_exact(3).map(|d| mesh::norm([d[0], d[1], d[2]])).fold(0.0, f64::max);
@@ -203,23 +207,28 @@ pub fn verdict(organ: &Organ, u: &[f64], far_share: f64, (cloud, extent): (&[Poi
             mm(size)
         ));
     }
-    if far_share > SUSPECT_FAR_SHARE {
-        let hint = match rigid {
-            true => {
-                "the rigid pre-alignment may have failed (the next cloud estimates it again), or the cloud is not \
+    let (volume, distorted_share) = volume_change(organ, u);
+    let distorted = (volume - 1.0).abs() > SUSPECT_VOLUME_CHANGE || distorted_share > SUSPECT_DISTORTED_SHARE;
+    let moved_too_far = motion > SUSPECT_MOTION * size;
+    let far = far_share > SUSPECT_FAR_SHARE;
+    let suspect = !out.is_empty() || far || distorted || moved_too_far;
+    let mix_up = if !rigid && suspect { frame_mix_up(organ, cloud)? } else { None };
+    if far {
+        let hint = match (rigid, mix_up.is_some()) {
+            (true, _) => {
+                "; the rigid pre-alignment may have failed (the next cloud estimates it again), or the cloud is not \
                      the organ's"
             }
-            false => PRE_ALIGN_HINT,
+            (false, false) => "; if its frame is not the organ's, pre-align it (--rigid)",
+            (false, true) => "",
         };
         out.push(format!(
             "{:.0} % of the cloud stays more than {:.0} mm from the registered surface: the cloud does not fit the \
-             organ; {hint}",
+             organ{hint}",
             100.0 * far_share,
             mm(FAR_DISTANCE)
         ));
     }
-    let (volume, distorted_share) = volume_change(organ, u);
-    let distorted = (volume - 1.0).abs() > SUSPECT_VOLUME_CHANGE || distorted_share > SUSPECT_DISTORTED_SHARE;
     if distorted {
         out.push(format!(
             "the registered organ changes its volume by {:+.0} % in all, {:.0} % of it by more than {:.0} % locally: \
@@ -230,7 +239,7 @@ pub fn verdict(organ: &Organ, u: &[f64], far_share: f64, (cloud, extent): (&[Poi
             100.0 * DISTORTED_CELL
         ));
     }
-    if motion > SUSPECT_MOTION * size {
+    if moved_too_far {
         out.push(format!(
             "the organ moves by up to {:.0} mm, over half its size ({:.0} mm, its box's diagonal): not a plausible \
              deformation",
@@ -238,7 +247,8 @@ pub fn verdict(organ: &Organ, u: &[f64], far_share: f64, (cloud, extent): (&[Poi
             mm(size)
         ));
     }
-    Verdict { warnings: out, distorted }
+    out.extend(mix_up);
+    Ok(Verdict { warnings: out, distorted })
 }
 
 #[cfg(test)]
@@ -269,7 +279,7 @@ mod tests {
         let top: Vec<Point> = organ.mesh().nodes.iter().copied().filter(|p| p[2] > 0.039).collect();
         let rest = vec![0.0; 3 * organ.mesh().num_nodes()];
         let flagged = |cloud: &[Point]| {
-            verdict(&organ, &rest, 0.0, (cloud, check_extent(&organ, cloud).unwrap()), false).warnings
+            verdict(&organ, &rest, 0.0, (cloud, check_extent(&organ, cloud).unwrap()), false).unwrap().warnings
         };
         assert!(flagged(&top).is_empty(), "{:?}", flagged(&top));
         let centimetres: Vec<Point> = top.iter().map(|p| p.map(|c| 0.1 * c)).collect();
@@ -284,7 +294,7 @@ mod tests {
         let organ = Organ::new(mesh::generate::box_tet([0.0; 3], [0.1, 0.06, 0.04], [5, 3, 2]).unwrap(), None).unwrap();
         let nodes = &organ.mesh().nodes;
         let top: Vec<Point> = nodes.iter().copied().filter(|p| p[2] > 0.039).collect();
-        let judged = |u: &[f64]| verdict(&organ, u, 0.0, (&top, check_extent(&organ, &top).unwrap()), false);
+        let judged = |u: &[f64]| verdict(&organ, u, 0.0, (&top, check_extent(&organ, &top).unwrap()), false).unwrap();
         let flagged = |u: &[f64]| judged(u).warnings;
         let field = |f: &dyn Fn(Point) -> Point| -> Vec<f64> { nodes.iter().flat_map(|&p| f(p)).collect() };
         // A 30° turn about z and a shear of 0.3: volumes kept exactly.

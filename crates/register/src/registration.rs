@@ -293,17 +293,12 @@ impl Registration {
                 r.iterations
             ));
         }
-        if mix_up.is_none() && !registration.warnings.is_empty() {
+        // Without a pre-alignment the frame's verdict asks itself; in a kept pose, a frame with a
+        // warning asks here, of the cloud as given.
+        if rigid.is_some() && mix_up.is_none() && !registration.warnings.is_empty() {
             mix_up = Some(crate::plausibility::frame_mix_up(&self.organ, cloud)?);
         }
-        if let Some(hint) = mix_up.flatten() {
-            for warning in &mut registration.warnings {
-                if let Some(head) = warning.strip_suffix(crate::plausibility::PRE_ALIGN_HINT) {
-                    *warning = head.trim_end_matches("; ").to_string();
-                }
-            }
-            registration.warnings.push(hint);
-        }
+        registration.warnings.extend(mix_up.flatten());
         let targets = in_cloud_frame(displaced(&self.targets, &self.stencils, &registration.u), rigid.as_ref());
         // σ is part of the frame's work, and of its time (not cut by its budget).
         let target_std = self.deformer.uncertainty(&self.targets, &self.stencils).transpose()?;
