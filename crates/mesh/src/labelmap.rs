@@ -299,13 +299,12 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
     }
     let (qform_code, sform_code) = (i16_at(252), i16_at(254));
     let unit_mm = nifti_unit_mm(bytes[123])?;
-    let (affine, other) = nifti_affine(qform_code, sform_code, dims, &pixdim, f32_at)?;
+    let (affine, both) = nifti_affine(qform_code, sform_code, dims, &pixdim, f32_at)?;
     let affine = in_millimetres(affine, unit_mm);
-    let warnings = other
-        .map(|(unused, apart)| (unused, apart * unit_mm))
+    let warnings = both
+        .map(|(used, apart)| (used, apart * unit_mm))
         .filter(|&(_, apart)| apart > FORMS_APART_MM)
-        .map(|(unused, apart)| {
-            let used = if unused == "qform" { "sform" } else { "qform" };
+        .map(|(used, apart)| {
             let warning = format!(
                 "its sform (code {sform_code}) and qform (code {qform_code}) place the image up to {apart:.1} mm \
                  apart: read by the {used}, as 3D Slicer (ITK) reads it; tools that take the sform whatever its code \
@@ -349,7 +348,7 @@ fn in_millimetres(affine: [[f64; 4]; 3], mm_per_unit: f64) -> [[f64; 4]; 3] {
 /// The voxel-to-world affine of a NIfTI header (of a `dims` image), as 3D Slicer reads it through
 /// ITK: the sform when its code says scanner coordinates (1) or there is no qform, otherwise the
 /// qform (quaternion, offsets, spacing and qfac), otherwise the spacing alone; and when both are
-/// set, the one not used and how far apart (in the file's unit) the two place the image's corners
+/// set, which one is read and how far apart (in the file's unit) the two place the image's corners
 /// (nibabel and FSL take the sform whatever its code).
 fn nifti_affine(
     qform_code: i16,
@@ -357,13 +356,13 @@ fn nifti_affine(
     dims: [usize; 3],
     pixdim: &[f64],
     f32_at: impl Fn(usize) -> f64,
-) -> Result<([[f64; 4]; 3], Option<UnusedForm>), String> {
+) -> Result<([[f64; 4]; 3], Option<FormRead>), String> {
     let sform = || std::array::from_fn(|r| std::array::from_fn(|c| f32_at(280 + 16 * r + 4 * c)));
     let qform = || qform_affine(pixdim, &f32_at);
     let (affine, other) = match (sform_code > 0, qform_code > 0) {
         (true, false) => (sform(), None),
-        (true, true) if sform_code == 1 => (sform(), Some(("qform", qform()))),
-        (_, true) => (qform(), (sform_code > 0).then(|| ("sform", sform()))),
+        (true, true) if sform_code == 1 => (sform(), Some(("sform", qform()))),
+        (_, true) => (qform(), (sform_code > 0).then(|| ("qform", sform()))),
         (false, false) => {
             (std::array::from_fn(|r| std::array::from_fn(|c| if c == r { pixdim[r + 1] } else { 0.0 })), None)
         }
@@ -377,12 +376,12 @@ fn nifti_affine(
         };
         corners.map(|v| crate::distance(place(&affine, v), place(other, v))).fold(0.0, f64::max)
     };
-    Ok((affine, other.map(|(unused, other)| (unused, apart(&other)))))
+    Ok((affine, other.map(|(used, other)| (used, apart(&other)))))
 }
 
-/// A NIfTI form set but not read ("sform" or "qform") and how far apart (in the file's unit) it
-/// places the image's corners from the one read.
-type UnusedForm = (&'static str, f64);
+/// Of a NIfTI with both forms set: the one read ("sform" or "qform") and how far apart (in the
+/// file's unit) the two place the image's corners.
+type FormRead = (&'static str, f64);
 
 /// How far apart (mm) a NIfTI's sform and qform may place the image's corners before the file is
 /// said to be ambiguous: the rounding of the qform's quaternion.

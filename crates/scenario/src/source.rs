@@ -114,12 +114,12 @@ pub fn build_mesh(source: &MeshSource, dir: &Path) -> Result<Mesh, MeshError> {
 const MILLIMETRE_MESH_EXTENT: f64 = 5.0;
 
 /// The nodes `selection` picks on `mesh`, or what went wrong, naming the selection's table
-/// (`what`: "fixed", "force"); where it picks none on a mesh of metres, asks whether the mesh is in
-/// millimetres (scenarios are in metres).
+/// (`what`: "fixed", "force"); on a mesh of metres, asks whether the mesh is in millimetres
+/// (scenarios are in metres).
 pub fn select_nodes(selection: &NodeSelection, mesh: &Mesh, what: &str) -> Result<Vec<usize>, String> {
     selection.select(mesh).map_err(|e| {
         let extent = mesh::longest_side(mesh.bounds());
-        let hint = match extent > MILLIMETRE_MESH_EXTENT && e.to_string().ends_with("picks no node") {
+        let hint = match extent > MILLIMETRE_MESH_EXTENT {
             true => format!(
                 " (the mesh spans {extent:.0} m: is it in millimetres? scenarios are in metres: [mesh.file] scale = 0.001)"
             ),
