@@ -82,7 +82,7 @@ pub fn serve_setup(spec: RegistrationSpec, outputs: Option<Outputs>, assimilate:
         Some(path) => Some(stream_filters(path, &mut lines)?),
         None => None,
     };
-    let registrations = live::first_then_build(Some(first), move || spec.build().map_err(|e| format!("{e:#}")));
+    let registrations = live::built_ahead(Some(first), move || spec.build().map_err(|e| format!("{e:#}")));
     let options = ServeOptions {
         coordinates,
         outputs: outputs.unwrap_or(Outputs::ALL),
@@ -117,8 +117,7 @@ fn stream_filters(path: &Path, lines: &mut Vec<String>) -> Result<Arc<Identifica
         filter.features()
     ));
     let experiment = Arc::new(experiment);
-    let filters =
-        live::first_then_build(Some(filter), move || OnlineFilter::new(&experiment).map_err(|e| e.to_string()));
+    let filters = live::built_ahead(Some(filter), move || OnlineFilter::new(&experiment).map_err(|e| e.to_string()));
     Ok(Arc::new(move || -> Result<Box<dyn live::Identification>, String> { Ok(Box::new(StreamFilter(filters()?))) }))
 }
 

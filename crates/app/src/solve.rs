@@ -38,8 +38,12 @@ impl Solved {
             Field::cell("green_strain", 6, post::green_strain(geometry, material, u)?),
             Field::cell("von_mises", 1, post::von_mises(geometry, material, u)?),
         ];
-        if let Some(file_nodes) = &self.solver.problem().mesh.file_nodes {
+        let mesh = &self.solver.problem().mesh;
+        if let Some(file_nodes) = &mesh.file_nodes {
             fields.push(Field::point("file_node", 1, file_nodes.iter().map(|&i| i as f64).collect()));
+        }
+        if let Some(file_cells) = &mesh.file_cells {
+            fields.push(Field::cell("file_cell", 1, file_cells.iter().map(|&i| i as f64).collect()));
         }
         Ok(fields)
     }
@@ -61,10 +65,7 @@ impl Solved {
         let t = sol.timings;
         let about = if scenario.description.is_empty() { String::new() } else { format!(": {}", scenario.description) };
         let left_out = match &p.mesh.file_nodes {
-            Some(_) => {
-                " (its file's nodes that no cell uses left out: `list` selections and the field file_node \
-                        give the file's numbers)"
-            }
+            Some(_) => " (numbered as in its file: `list` selections and the field file_node give the file's numbers)",
             None => "",
         };
         let mut lines = vec![
@@ -182,7 +183,7 @@ mod tests {
         assert_eq!(shifted.solver.problem().mesh.file_nodes, Some((1..=bar.num_nodes()).collect()));
         let fields = shifted.fields().unwrap();
         assert_eq!(fields.last().unwrap().values[..3], [1.0, 2.0, 3.0], "file_node");
-        assert!(shifted.lines().unwrap()[1].contains("its file's nodes that no cell uses left out"));
+        assert!(shifted.lines().unwrap()[1].contains("numbered as in its file"));
         assert!(!plain.lines().unwrap().iter().any(|l| l.starts_with("warning")));
         let crushed = solve(&bar, 0, -40.0, "crushed").lines().unwrap();
         let warning = crushed.last().unwrap();

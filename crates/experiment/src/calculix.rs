@@ -212,6 +212,7 @@ pub fn solve(problem: &Problem, dir: &Path) -> Result<PeerSolution> {
 mod tests {
     use super::*;
     use fem::{Material, PointSpring};
+    use std::fs;
 
     fn cube(law: Law, poisson: f64) -> Problem {
         let m = mesh::box_mesh(CellKind::Tet4, [0.0; 3], [1.0; 3], [1, 1, 1]).unwrap();
@@ -251,6 +252,29 @@ mod tests {
             normal_stiffness: 0.0,
         });
         assert!(refused(with_point_spring).contains("point springs"));
+    }
+
+    /// The deck's mesh reads back as the problem's (augsim's `.inp` reader): the same cells in the
+    /// same node order, nodes to the deck's 13 digits, numbered from 1; the spring elements make
+    /// regions of their nodes.
+    #[test]
+    fn the_deck_reads_back_as_the_same_mesh() {
+        let dir = tempfile::tempdir().unwrap();
+        for kind in [CellKind::Tet4, CellKind::Tet10, CellKind::Hex8] {
+            let m = mesh::box_mesh(kind, [0.0; 3], [0.1, 0.07, 0.05], [2, 2, 1]).unwrap();
+            let mut p = Problem::new(m, Material::new(Law::Linear, 3000.0, 0.3));
+            p.fix(&[0, 1, 2]);
+            p.add_springs(&[4, 5], 5.0);
+            let path = dir.path().join("deck.inp");
+            fs::write(&path, input_deck(&p).unwrap()).unwrap();
+            let read = mesh::io::read_inp(&path).unwrap();
+            assert_eq!(read.cells, p.mesh.cells, "{kind:?}");
+            assert_eq!(read.file_nodes, Some((1..=p.mesh.num_nodes()).collect()));
+            let far = read.nodes.iter().zip(&p.mesh.nodes).flat_map(|(a, b)| (0..3).map(move |d| (a[d] - b[d]).abs()));
+            assert!(far.fold(0.0, f64::max) < 1e-13, "{kind:?}");
+            assert_eq!(read.regions["SPRING0D1"], [4, 5]);
+            assert_eq!(read.regions["NALL"].len(), p.mesh.num_nodes());
+        }
     }
 
     /// The last displacement block is read; a missing block, a missing node or a malformed line

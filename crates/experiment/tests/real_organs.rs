@@ -137,19 +137,29 @@ fn max_norm(u: &[f64]) -> f64 {
 
 /// A tetrahedron that hangs on the rest of the mesh by a vertex (as meshing left one in the AMOS
 /// liver) can turn about it freely: the solve is refused, saying where, instead of failing with an
-/// inverted element; without it, the same problem solves.
+/// inverted element, by the element's number in the mesh file (the same mesh as a CalculiX deck,
+/// numbered from 1, names it 2480); without it, the same problem solves.
 #[test]
 fn a_tetrahedron_hanging_by_a_vertex_is_refused_and_the_mesh_without_it_solves() {
     let organ = &organs()[0];
     let (read, whole) = meshes(organ);
     assert_eq!((read.num_nodes(), read.cells.len()), (830, 3058));
     assert_eq!((whole.num_nodes(), whole.cells.len()), (827, 3056), "two one-element pieces dropped");
-    let error = StaticSolver::new(problem(organ, read, 0.2, 1)).unwrap().solve(&SolverOptions::default()).unwrap_err();
+    let error =
+        StaticSolver::new(problem(organ, read.clone(), 0.2, 1)).unwrap().solve(&SolverOptions::default()).unwrap_err();
     let message = error.to_string();
     assert!(
         message.contains("hang on the rest by an edge or a vertex") && message.contains("element 2479"),
         "{message}"
     );
+    let dir = tempfile::tempdir().unwrap();
+    let deck = dir.path().join("liver.inp");
+    std::fs::write(&deck, calculix::input_deck(&problem(organ, read.clone(), 0.2, 1)).unwrap()).unwrap();
+    let from_deck = mesh::io::read_inp(&deck).unwrap();
+    assert_eq!(from_deck.file_cells, Some((1..=read.cells.len()).collect()));
+    let error = StaticSolver::new(problem(organ, from_deck, 0.2, 1)).unwrap().solve(&SolverOptions::default());
+    let message = error.unwrap_err().to_string();
+    assert!(message.contains("from element 2480,"), "{message}");
     let solution = StaticSolver::new(problem(organ, whole, 0.2, 1)).unwrap().solve(&SolverOptions::default()).unwrap();
     assert!(max_norm(&solution.u) > 1e-3);
 }

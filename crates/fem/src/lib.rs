@@ -64,7 +64,7 @@ pub enum FemError {
     /// An element whose deformation gradient (or reference Jacobian) has det ≤ 0.
     #[error("element {element} is inverted (det F = {det:.3e})")]
     InvertedElement {
-        /// Element index.
+        /// The element: its number in the mesh's file once out of the solver ([`mesh::Mesh::file_cell`]).
         element: usize,
         /// The offending determinant.
         det: f64,
@@ -83,7 +83,8 @@ pub enum FemError {
     /// equilibrium exists beyond it under this load.
     #[error("Saint-Venant-Kirchhoff passed its compressive limit point beyond load factor {load_factor:.3}, where element {element} is compressed to a principal stretch of {stretch:.3} (SVK's uniaxial stress peaks at 1/sqrt(3) = 0.577 and falls beyond, so no equilibrium exists under the full load); use law = \"neo_hookean\" for large compression")]
     LimitPoint {
-        /// The most compressed element at the last equilibrium.
+        /// The most compressed element at the last equilibrium (numbered as for
+        /// [`FemError::InvertedElement`]).
         element: usize,
         /// Its smallest principal stretch there.
         stretch: f64,
@@ -117,6 +118,22 @@ pub enum FemError {
     /// The computation was asked to stop ([`interrupt::request`]).
     #[error("interrupted")]
     Interrupted,
+}
+
+impl FemError {
+    /// The error with its element named by its number in `mesh`'s file ([`mesh::Mesh::file_cell`]),
+    /// as the user knows it, rather than by its index.
+    pub(crate) fn in_file_numbers(self, mesh: &mesh::Mesh) -> Self {
+        match self {
+            FemError::InvertedElement { element, det } => {
+                FemError::InvertedElement { element: mesh.file_cell(element), det }
+            }
+            FemError::LimitPoint { element, stretch, load_factor } => {
+                FemError::LimitPoint { element: mesh.file_cell(element), stretch, load_factor }
+            }
+            other => other,
+        }
+    }
 }
 
 /// The stiffness of a load path's last step, in per cent of that at rest, under which a failure to

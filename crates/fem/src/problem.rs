@@ -245,7 +245,7 @@ impl Problem {
             100.0 * volume / self.mesh.volume(),
             loose.len(),
             pieces.cells[first].len(),
-            pieces.cells[first][0],
+            self.mesh.file_cell(pieces.cells[first][0]),
             corner[0],
             corner[1],
             corner[2],

@@ -470,7 +470,7 @@ impl StaticSolver {
     /// towards its target counts as an external load).
     pub fn internal_force(&mut self, u: &[f64]) -> Result<Vec<f64>, FemError> {
         let mut f = vec![0.0; u.len()];
-        self.evaluate(u, &mut f, false)?;
+        self.evaluate(u, &mut f, false).map_err(|e| e.in_file_numbers(&self.problem.mesh))?;
         Ok(f)
     }
 
@@ -627,7 +627,7 @@ impl StaticSolver {
         // sleeping worker to wake: on the 2-core bench host, one assembly in three then ran on
         // a single thread, and solves from rest of the 5k-tet liver took 15 % longer (F-bar
         // 25.4 against 21.8 ms, standard 15.2 against 13.1 ms, medians of 60).
-        rayon::scope(|_| self.solve_on_worker(u0, options, start))
+        rayon::scope(|_| self.solve_on_worker(u0, options, start)).map_err(|e| e.in_file_numbers(&self.problem.mesh))
     }
 
     /// [`StaticSolver::solve_from`] on the current thread; its time counts from `start`.

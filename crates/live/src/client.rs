@@ -80,6 +80,12 @@ impl Client {
 
     /// The next message from the server; `None` when the connection is closed.
     pub fn receive(&mut self) -> std::result::Result<Option<Answer>, String> {
+        Ok(self.receive_stamped()?.map(|(answer, _)| answer))
+    }
+
+    /// The next message from the server and its header timestamp (that of the cloud it
+    /// answers); `None` when the connection is closed.
+    pub fn receive_stamped(&mut self) -> std::result::Result<Option<(Answer, u64)>, String> {
         let mut header = [0u8; Header::SIZE];
         if self.stream.read_exact(&mut header).is_err() {
             return Ok(None);
@@ -87,7 +93,7 @@ impl Client {
         let parsed = Header::decode(&header).map_err(|e| format!("malformed header: {e}"))?;
         let mut body = vec![0; parsed.body_size as usize];
         self.stream.read_exact(&mut body).map_err(|e| format!("truncated answer: {e}"))?;
-        Ok(Some(match parsed.type_name.as_str() {
+        let answer = match parsed.type_name.as_str() {
             "POINT" => Answer::Targets(
                 decode_body::<PointMessage>(&parsed, &body)?.points.iter().map(|p| p.position).collect(),
             ),
@@ -106,7 +112,8 @@ impl Client {
                 }
             }
             other => return Err(format!("unexpected {other} message")),
-        }))
+        };
+        Ok(Some((answer, parsed.timestamp)))
     }
 
     /// Reads answers up to and including the next status.

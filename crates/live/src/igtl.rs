@@ -155,9 +155,22 @@ pub fn crc64(data: &[u8]) -> u64 {
 /// A message as bytes on the wire: a version 1 header (no extended header, what every
 /// OpenIGTLink application reads), timestamped now, then the content.
 pub fn encode_message<T: Content>(content: &T, device: &str) -> Result<Vec<u8>, String> {
+    encode_message_stamped(content, device, None)
+}
+
+/// [`encode_message`] with the header's `timestamp` given (that of the message it answers);
+/// timestamped now for `None`.
+pub fn encode_message_stamped<T: Content>(
+    content: &T,
+    device: &str,
+    timestamp: Option<u64>,
+) -> Result<Vec<u8>, String> {
     let body = content.encode().map_err(|e| format!("encoding a {} message: {e}", T::TYPE))?;
-    let header = Header::new(T::TYPE, device, &body).encode()?;
-    Ok([&header[..], &body].concat())
+    let mut header = Header::new(T::TYPE, device, &body);
+    if let Some(timestamp) = timestamp {
+        header.timestamp = timestamp;
+    }
+    Ok([&header.encode()?[..], &body].concat())
 }
 
 /// The content of a message of type `T` from its header and body: the CRC checked, the

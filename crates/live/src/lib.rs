@@ -22,8 +22,12 @@
 //!   the camera or the patient moved). It has no answer of its own: the next status says
 //!   `from_rest`.
 //!
-//! Each client has its own registration, built at its first cloud and warm-started from its
-//! previous frame (from rest after one that left the organ distorted, or after a `reset`). A
+//! The answers to a cloud (its targets, organ, structures, rigid transform and status, or its
+//! error status) carry the cloud's header timestamp, so that a client tells which cloud each
+//! answers (a cloud stamped 0 gets answers stamped with the server's clock).
+//!
+//! Each client has its own registration, taken at its first cloud from one built ahead (see
+//! [`built_ahead`]) and warm-started from its previous frame (from rest after one that left the organ distorted, or after a `reset`). A
 //! client's clouds are registered one at a time; a cloud that arrives while one
 //! is being registered replaces any cloud still waiting (the newest wins: the backlog never
 //! grows). A malformed or oversized `cloud` or `features`, or a message that stalls mid-way
@@ -54,7 +58,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
-pub use igtl::{decode_body, encode_message};
+pub use igtl::{decode_body, encode_message, encode_message_stamped};
 use igtl::{Content, Header, PointElement, PointMessage, StringMessage, TransformMessage};
 use mesh::io::GivenCoordinates;
 use mesh::length::LengthUnit;
@@ -208,16 +212,30 @@ impl Default for ServeOptions {
 pub type RegistrationFactory = dyn Fn() -> std::result::Result<Registration, String> + Send + Sync;
 
 /// A factory of a client's object (a registration, an identification): the first client takes
-/// `first` (built beforehand, e.g. to stop on a bad set-up before listening), each next one gets
-/// its own from `build`.
-pub fn first_then_build<T: Send>(
+/// `first` (built beforehand, e.g. to stop on a bad set-up before listening), each next one the
+/// object `build` made ahead, on a thread of its own, from the moment the one before was taken
+/// (or from now): a client that connects gets its registration at once rather than after loading
+/// the model and the organ, at the cost of one object built but not yet used. A build's error
+/// reaches the client that takes it.
+pub fn built_ahead<T: Send + 'static>(
     first: Option<T>,
-    build: impl Fn() -> std::result::Result<T, String> + Send + Sync,
+    build: impl Fn() -> std::result::Result<T, String> + Send + Sync + 'static,
 ) -> impl Fn() -> std::result::Result<T, String> + Send + Sync {
+    type Ahead<T> = std::thread::JoinHandle<std::result::Result<T, String>>;
+    let build = Arc::new(build);
+    let start = move || -> Ahead<T> {
+        let build = Arc::clone(&build);
+        std::thread::spawn(move || build())
+    };
     let first = Mutex::new(first);
-    move || match first.lock().map_err(|e| e.to_string())?.take() {
-        Some(made) => Ok(made),
-        None => build(),
+    let next: Mutex<Ahead<T>> = Mutex::new(start());
+    move || {
+        if let Some(made) = first.lock().map_err(|e| e.to_string())?.take() {
+            return Ok(made);
+        }
+        let mut next = next.lock().map_err(|e| e.to_string())?;
+        let ready = std::mem::replace(&mut *next, start());
+        ready.join().map_err(|_| "building a client's registration panicked".to_string())?
     }
 }
 
@@ -288,7 +306,7 @@ struct Client {
 /// registered, and the features of the steps to come, in order, with their step numbers.
 #[derive(Default)]
 struct Mailbox {
-    cloud: Option<(u64, Vec<Point>)>,
+    cloud: Option<(Cloud, Vec<Point>)>,
     reset: bool,
     features: std::collections::VecDeque<(u64, Vec<Point>)>,
 }
@@ -323,17 +341,18 @@ impl Shared {
     /// Logs an error of this client's and sends it as a status, whether or not the status is an
     /// output (a client told nothing would wait for answers that never come), unless the
     /// connection has ended.
-    fn report(&self, status: &serde_json::Value) {
+    /// `timestamp` is that of the cloud it answers, if any.
+    fn report(&self, status: &serde_json::Value, timestamp: Option<u64>) {
         if !self.closed.load(Ordering::SeqCst) {
             log(format_args!("{}: {}", self.peer, status));
-            self.send_json("status", status);
+            self.send_line("status", status.to_string(), timestamp);
         }
     }
 
-    /// Sends a message; a failed send (answers left unread for the stall time, a client gone)
-    /// ends the connection, saying why.
-    fn send<T: Content>(&self, content: &T, device: &str) -> std::result::Result<(), String> {
-        let bytes = encode_message(content, device)?;
+    /// Sends a message, its header stamped `timestamp` (now for `None`); a failed send (answers
+    /// left unread for the stall time, a client gone) ends the connection, saying why.
+    fn send<T: Content>(&self, content: &T, device: &str, timestamp: Option<u64>) -> std::result::Result<(), String> {
+        let bytes = encode_message_stamped(content, device, timestamp)?;
         let mut w = self.writer.lock().map_err(|_| "writer poisoned".to_string())?;
         w.write_all(&bytes).map_err(|e| {
             let why = match e.kind() {
@@ -351,15 +370,15 @@ impl Shared {
         })
     }
 
-    /// Sends one line of JSON as a STRING of `device` ([`Shared::send_line`]).
+    /// Sends one line of JSON as a STRING of `device` ([`Shared::send_line`]), timestamped now.
     fn send_json(&self, device: &str, json: &serde_json::Value) {
-        self.send_line(device, json.to_string());
+        self.send_line(device, json.to_string(), None);
     }
 
     /// Sends one line of text as a STRING of `device`; a failed send ends the connection, and a
     /// line a STRING cannot hold is logged.
-    fn send_line(&self, device: &str, line: String) {
-        if let Err(why) = self.send(&StringMessage::utf8(line), device) {
+    fn send_line(&self, device: &str, line: String, timestamp: Option<u64>) {
+        if let Err(why) = self.send(&StringMessage::utf8(line), device, timestamp) {
             if !self.closed.load(Ordering::SeqCst) {
                 log(format_args!("{}: {device} not sent: {why}", self.peer));
             }
@@ -430,10 +449,11 @@ fn read_messages(shared: &Shared) {
     };
     while !shared.closed.load(Ordering::SeqCst) {
         match read_message(&shared.socket, &shared.options) {
-            Ok(Incoming::Cloud(points)) => {
+            Ok(Incoming::Cloud(points, timestamp)) => {
                 frame += 1;
                 let cloud = to_metres(points);
-                shared.waiting.lock().unwrap_or_else(|e| e.into_inner()).cloud = Some((frame, cloud));
+                let stamp = Cloud { frame, timestamp: (timestamp != 0).then_some(timestamp) };
+                shared.waiting.lock().unwrap_or_else(|e| e.into_inner()).cloud = Some((stamp, cloud));
                 shared.arrived.notify_one();
             }
             // The features are points of the assimilation scenario's own mesh, in its frame: only their
@@ -479,7 +499,7 @@ fn read_messages(shared: &Shared) {
             // A connection the server ended (stopping, a client that did not read) is no error.
             Err(_) if shared.closed.load(Ordering::SeqCst) => break,
             Err(e) => {
-                shared.report(&serde_json::json!({ "error": e }));
+                shared.report(&serde_json::json!({ "error": e }), None);
                 break;
             }
         }
@@ -489,8 +509,8 @@ fn read_messages(shared: &Shared) {
 
 /// What the next message of a stream is.
 enum Incoming {
-    /// The points of a `cloud` POLYDATA or POINT message (wire units).
-    Cloud(Vec<[f32; 3]>),
+    /// The points of a `cloud` POLYDATA or POINT message (wire units) and its header timestamp.
+    Cloud(Vec<[f32; 3]>, u64),
     /// The points of a `features` POLYDATA or POINT message (wire units).
     Features(Vec<[f32; 3]>),
     /// A STRING of device `reset` (its text ignored): the next cloud starts from rest.
@@ -544,7 +564,7 @@ fn read_message(mut stream: &TcpStream, options: &ServeOptions) -> std::result::
         "POLYDATA" => decode_body::<PolyData>(&header, &body)?.points,
         _ => decode_body::<PointMessage>(&header, &body)?.points.iter().map(|p| p.position).collect(),
     };
-    Ok(if device == "cloud" { Incoming::Cloud(points) } else { Incoming::Features(points) })
+    Ok(if device == "cloud" { Incoming::Cloud(points, header.timestamp) } else { Incoming::Features(points) })
 }
 
 /// Registers the newest cloud, frame after frame, and makes the identification steps, until the
@@ -582,7 +602,8 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
                     None => match factory() {
                         Ok(r) => registration.insert(r),
                         Err(e) => {
-                            shared.report(&serde_json::json!({ "error": format!("setting up the registration: {e}") }));
+                            let error = format!("setting up the registration: {e}");
+                            shared.report(&serde_json::json!({ "error": error }), frame.timestamp);
                             shared.close();
                             return;
                         }
@@ -592,7 +613,7 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
                     registration.reset();
                 }
                 if let Err(e) = answer(shared, registration, frame, &cloud) {
-                    shared.report(&serde_json::json!({ "frame": frame, "error": e }));
+                    shared.report(&serde_json::json!({ "frame": frame.frame, "error": e }), frame.timestamp);
                 }
             }
             Work::Step(step, features) => {
@@ -615,10 +636,18 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
     }
 }
 
+/// Which cloud of a client's: its frame number, counted by the server from 1, and its header
+/// timestamp (`None` for 0), which the answers to it carry.
+#[derive(Clone, Copy, Debug)]
+struct Cloud {
+    frame: u64,
+    timestamp: Option<u64>,
+}
+
 /// What the registration thread does next.
 enum Work {
-    /// Register a cloud (frame number, points in m), from rest if a reset came before it.
-    Cloud(u64, Vec<Point>, bool),
+    /// Register a cloud (its numbers, points in m), from rest if a reset came before it.
+    Cloud(Cloud, Vec<Point>, bool),
     /// Make an identification step (step number, features in m).
     Step(u64, Vec<Point>),
 }
@@ -662,19 +691,19 @@ fn status_line(mut status: serde_json::Value) -> String {
     status.to_string()
 }
 
-/// Registers one cloud and sends the chosen answers.
+/// Registers one cloud, `points`, and sends the chosen answers, stamped as the cloud.
 fn answer(
     shared: &Shared,
     registration: &mut Registration,
-    frame: u64,
-    cloud: &[Point],
+    cloud: Cloud,
+    points: &[Point],
 ) -> std::result::Result<(), String> {
     let options = &shared.options;
-    if cloud.len() > options.max_points {
-        return Err(format!("cloud of {} points exceeds the limit of {}", cloud.len(), options.max_points));
+    if points.len() > options.max_points {
+        return Err(format!("cloud of {} points exceeds the limit of {}", points.len(), options.max_points));
     }
     let start = Instant::now();
-    let tracked = registration.register(cloud).map_err(|e| e.to_string())?;
+    let tracked = registration.register(points).map_err(|e| e.to_string())?;
     let Tracked { registration: result, targets, rigid, target_std } = &tracked;
     let given = options.coordinates;
     let to_wire = |p: &Point| given.point_out(*p).map(|x| x as f32);
@@ -688,30 +717,30 @@ fn answer(
                 PointElement::new(name, "targets", to_wire(p))
             })
             .collect();
-        shared.send(&PointMessage { points }, "targets")?;
+        shared.send(&PointMessage { points }, "targets", cloud.timestamp)?;
     }
     let polydata = |surface: mesh::TriSurface| PolyData {
         points: surface.vertices.iter().map(to_wire).collect(),
         triangles: surface.triangles.iter().map(|t| t.map(|i| i as u32)).collect(),
     };
     if options.outputs.organ {
-        shared.send(&polydata(tracked.organ_surface(registration.organ())), "organ")?;
+        shared.send(&polydata(tracked.organ_surface(registration.organ())), "organ", cloud.timestamp)?;
     }
     if options.outputs.structures {
         for structure in registration.structures() {
-            shared.send(&polydata(structure.deformed(&result.u, rigid.as_ref())), structure.name())?;
+            shared.send(&polydata(structure.deformed(&result.u, rigid.as_ref())), structure.name(), cloud.timestamp)?;
         }
     }
     if let (true, Some(r)) = (options.outputs.transform, rigid) {
         let organ_to_cloud = r.organ_to_cloud().homogeneous(LengthUnit::Metre);
         let matrix = given.transform_out(organ_to_cloud).map(|row| row.map(|x| x as f32));
-        shared.send(&TransformMessage { matrix }, "rigid")?;
+        shared.send(&TransformMessage { matrix }, "rigid", cloud.timestamp)?;
     }
     if !options.outputs.status {
         return Ok(());
     }
     let status = serde_json::json!({
-        "frame": frame,
+        "frame": cloud.frame,
         "ms": mesh::stats::ms(start.elapsed()),
         "unit": given.unit.symbol(),
         "surface_residual": given.length_out(result.surface_residual),
@@ -719,11 +748,12 @@ fn answer(
         "warnings": result.warnings,
         "inliers": result.inliers,
         "points": result.points,
+        "received": points.len(),
         "iterations": result.iterations,
         "from_rest": result.from_rest,
         "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| given.length_out(v)).collect::<Vec<f64>>()),
     });
-    shared.send_line("status", status_line(status));
+    shared.send_line("status", status_line(status), cloud.timestamp);
     Ok(())
 }
 

@@ -252,6 +252,28 @@ fn a_refused_cloud_is_answered_whatever_the_outputs() {
     server.stop();
 }
 
+/// Every answer to a cloud, its error status included, carries the cloud's header timestamp.
+#[test]
+fn answers_carry_the_timestamp_of_the_cloud_they_answer() {
+    let server = Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), ..ServeOptions::default() });
+    let (cloud, _) = pressed_cloud(300.0);
+    let mut client = connect(server.port);
+    let stamped = |points: Vec<[f32; 3]>, stamp: u64| {
+        augsim_live::encode_message_stamped(&PolyData { points, triangles: Vec::new() }, "cloud", Some(stamp)).unwrap()
+    };
+    let stamp = 1_234_567 << 32 | 0x8000_0000;
+    client.send_bytes(&stamped(cloud.clone(), stamp)).unwrap();
+    for expected in ["targets", "organ", "status"] {
+        let (answer, at) = client.receive_stamped().unwrap().unwrap();
+        assert_eq!(at, stamp, "{expected}: {answer:?}");
+    }
+    client.send_bytes(&stamped(Vec::new(), stamp + 1)).unwrap();
+    let (answer, at) = client.receive_stamped().unwrap().unwrap();
+    assert!(matches!(answer, Answer::Status(ref s) if s["error"].is_string()) && at == stamp + 1, "{answer:?}");
+    drop(client);
+    server.stop();
+}
+
 /// A STRING `reset` has the next cloud start from rest, as the client's first did: the same cloud
 /// then registers as it did first, where a warm frame went on from the last one.
 #[test]
@@ -475,23 +497,30 @@ fn features_step_the_identification_in_order_with_a_bounded_backlog() {
     server.stop();
 }
 
-/// The factory hands the prebuilt object to the first client and builds one for each next one;
-/// a build's error reaches the client that asked.
+/// The factory hands the prebuilt object to the first client and to each next one the object
+/// built ahead for it (one is always ready: the builds run before they are asked for); a build's
+/// error reaches the client that asked.
 #[test]
-fn the_first_client_takes_the_prebuilt_object_and_the_next_ones_their_own() {
-    let built = std::sync::atomic::AtomicUsize::new(0);
-    let factory = augsim_live::first_then_build(Some("prebuilt".to_string()), || {
-        let n = built.fetch_add(1, Ordering::SeqCst) + 1;
+fn the_first_client_takes_the_prebuilt_object_and_the_next_ones_their_own_built_ahead() {
+    let built = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let count = std::sync::Arc::clone(&built);
+    let factory = augsim_live::built_ahead(Some("prebuilt".to_string()), move || {
+        let n = count.fetch_add(1, Ordering::SeqCst) + 1;
         if n < 3 {
             Ok(format!("built {n}"))
         } else {
             Err("no more".to_string())
         }
     });
+    let settle = || std::thread::sleep(Duration::from_millis(200));
+    settle();
+    assert_eq!(built.load(Ordering::SeqCst), 1, "one built ahead before any client asks");
     assert_eq!(factory().unwrap(), "prebuilt");
     assert_eq!(factory().unwrap(), "built 1");
+    settle();
+    assert_eq!(built.load(Ordering::SeqCst), 2, "the next one built as soon as one is taken");
     assert_eq!(factory().unwrap(), "built 2");
     assert_eq!(factory().unwrap_err(), "no more");
-    let without = augsim_live::first_then_build(None, || Ok(7));
+    let without = augsim_live::built_ahead(None, || Ok(7));
     assert_eq!((without().unwrap(), without().unwrap()), (7, 7));
 }

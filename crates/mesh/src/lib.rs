@@ -181,20 +181,42 @@ pub struct Mesh {
     /// cuts through cells, and its nodes are mostly inside the grid. `None`: see
     /// [`Mesh::surface_normals`].
     pub node_normals: Option<Vec<Point>>,
-    /// Where each node lies in the file the mesh was read from, when that file held nodes that no
-    /// cell uses (left out, the others renumbered): node `i` is the file's node `file_nodes[i]`,
-    /// ascending. `None`: numbered as in its file, or made here. Selections by number (`list`)
-    /// take the file's numbers.
+    /// The number each node has in the file the mesh was read from, where it is not its index:
+    /// nodes that no cell uses were left out (the others renumbered), or the file numbers its
+    /// nodes itself (Gmsh's tags, an Abaqus deck's numbers). Node `i` is the file's node
+    /// `file_nodes[i]`. `None`: numbered as in its file, from 0, or made here. Selections by
+    /// number (`list`) take the file's numbers.
     pub file_nodes: Option<Vec<usize>>,
+    /// The number each cell has in the file the mesh was read from, where it is not its index
+    /// (Gmsh's element tags, an Abaqus deck's element numbers, a VTK file's cells counted with
+    /// those not kept); messages about a cell name it by this number.
+    pub file_cells: Option<Vec<usize>>,
 }
 
 impl Mesh {
     /// A mesh from nodes and cells, checked with [`Mesh::validate`].
     pub fn new(nodes: Vec<Point>, cells: Cells) -> Result<Self, MeshError> {
-        let mesh =
-            Mesh { nodes, cells, regions: BTreeMap::new(), cell_fraction: None, node_normals: None, file_nodes: None };
+        let mesh = Mesh {
+            nodes,
+            cells,
+            regions: BTreeMap::new(),
+            cell_fraction: None,
+            node_normals: None,
+            file_nodes: None,
+            file_cells: None,
+        };
         mesh.validate()?;
         Ok(mesh)
+    }
+
+    /// The number node `i` has in the mesh's file ([`Mesh::file_nodes`]), `i` where none is kept.
+    pub fn file_node(&self, i: usize) -> usize {
+        self.file_nodes.as_ref().and_then(|f| f.get(i).copied()).unwrap_or(i)
+    }
+
+    /// The number cell `i` has in the mesh's file ([`Mesh::file_cells`]), `i` where none is kept.
+    pub fn file_cell(&self, i: usize) -> usize {
+        self.file_cells.as_ref().and_then(|f| f.get(i).copied()).unwrap_or(i)
     }
 
     /// The outward unit normal of the organ's surface at each node: [`Mesh::node_normals`] when

@@ -97,6 +97,7 @@ impl Mesh {
             cell_fraction: self.cell_fraction.clone(),
             node_normals,
             file_nodes: self.file_nodes.clone(),
+            file_cells: self.file_cells.clone(),
         };
         mesh.validate()?;
         Ok(mesh)

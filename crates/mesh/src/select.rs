@@ -4,6 +4,7 @@
 //! nearest nodes to a point (linear scans, for the few queries that need no spatial index).
 
 use std::cmp::Ordering;
+use std::collections::HashMap;
 use std::path::PathBuf;
 
 use crate::{dot, sub, Mesh, MeshError, Point};
@@ -19,7 +20,8 @@ pub enum NodeSelection {
         /// Upper corner.
         max: Point,
     },
-    /// Explicit node numbers, from 0, as in the mesh's file (see [`crate::Mesh::file_nodes`]).
+    /// Explicit node numbers, as in the mesh's file (see [`crate::Mesh::file_nodes`]): from 0 in VTK
+    /// files, Gmsh's node tags, Abaqus' and CalculiX's node numbers.
     List(Vec<usize>),
     /// A named region of the mesh.
     Region(String),
@@ -126,18 +128,21 @@ impl NodeSelection {
                     }
                     list.clone()
                 }
-                Some(file_nodes) => list
-                    .iter()
-                    .map(|&k| {
-                        file_nodes.binary_search(&k).map_err(|_| {
-                            MeshError::Invalid(format!(
-                                "node {k} selected, but the mesh file has no such node used by a cell (its {} nodes \
-                                 that cells use are numbered as in the file; the others were left out)",
-                                file_nodes.len()
-                            ))
+                Some(file_nodes) => {
+                    let index: HashMap<usize, usize> = file_nodes.iter().enumerate().map(|(i, &k)| (k, i)).collect();
+                    list.iter()
+                        .map(|k| {
+                            index.get(k).copied().ok_or_else(|| {
+                                MeshError::Invalid(format!(
+                                    "node {k} selected, but the mesh file has no such node used by a cell (nodes \
+                                     are numbered as in the file, {} to {}; those no cell uses were left out)",
+                                    file_nodes.iter().min().unwrap_or(&0),
+                                    file_nodes.iter().max().unwrap_or(&0)
+                                ))
+                            })
                         })
-                    })
-                    .collect::<Result<_, _>>()?,
+                        .collect::<Result<_, _>>()?
+                }
             },
             NodeSelection::Region(name) => mesh.region(name)?.to_vec(),
             NodeSelection::Union(parts) => {

@@ -13,7 +13,7 @@ use augsim_mesh::io::{
     read_vtk_with_fields, read_vtu_with_fields, write_mesh, write_msh, write_obj, write_stl, write_surface,
     write_vtk_legacy, write_vtk_legacy_with, write_vtu, write_vtu_with, Encoding, Field, FieldLocation,
 };
-use augsim_mesh::{box_hex, box_tet, Cells, Mesh, MeshError, TriSurface};
+use augsim_mesh::{box_hex, box_tet, Cells, Mesh, MeshError, NodeSelection, TriSurface};
 
 fn data(name: &str) -> PathBuf {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data")).join(name)
@@ -119,6 +119,12 @@ fn gmsh_nodes_keep_file_order_and_match_the_obj_surface() {
     let first: Vec<f64> = text.lines().nth(2).unwrap().split_whitespace().skip(1).map(|t| t.parse().unwrap()).collect();
     let mesh = read_mesh(data("liver2.msh")).unwrap();
     assert_eq!(mesh.nodes[0].to_vec(), first);
+    // Selections by number take Gmsh's tags.
+    let tag =
+        |line: usize| -> usize { text.lines().nth(line).unwrap().split_whitespace().next().unwrap().parse().unwrap() };
+    assert_eq!((tag(2), tag(3)), (2, 9));
+    assert_eq!(NodeSelection::List(vec![9, 2]).select(&mesh).unwrap(), [0, 1]);
+    assert!(message(NodeSelection::List(vec![1]).select(&mesh)).contains("no such node"));
     // liver.obj holds the 181 nodes of liver.msh in the same order.
     let liver = read_mesh(data("liver.msh")).unwrap();
     let surface = read_surface(data("liver.obj")).unwrap();
@@ -296,6 +302,16 @@ fn corrupted_gmsh_files_give_located_errors() {
     assert!(message(read_mesh(put(d, "text.msh", "hello\n"))).contains("not a Gmsh mesh"));
 }
 
+/// `mesh` as read back from a Gmsh file written by augsim or an Abaqus deck: its nodes and
+/// elements numbered from 1.
+fn tagged_from_1(mesh: Mesh) -> Mesh {
+    Mesh {
+        file_nodes: Some((1..=mesh.num_nodes()).collect()),
+        file_cells: Some((1..=mesh.cells.len()).collect()),
+        ..mesh
+    }
+}
+
 #[test]
 fn gmsh_sections_that_are_not_needed_are_skipped() {
     let dir = tempfile::tempdir().unwrap();
@@ -306,7 +322,7 @@ fn gmsh_sections_that_are_not_needed_are_skipped() {
         "$EndMeshFormat\n",
         "$EndMeshFormat\n$PhysicalNames\n1\n3 1 \"liver\"\n$EndPhysicalNames\n$Comments\n$Nodes inside a comment\n$EndComments\n",
     );
-    assert_eq!(read_mesh(put(dir.path(), "b.msh", &text)).unwrap(), mesh);
+    assert_eq!(read_mesh(put(dir.path(), "b.msh", &text)).unwrap(), tagged_from_1(mesh));
     let m = message(read_mesh(put(dir.path(), "c.msh", text.replace("$EndComments\n", ""))));
     assert!(m.contains("$Comments") && m.contains("not closed"), "{m}");
 }
@@ -414,7 +430,7 @@ fn volume_round_trips_are_exact() {
         }
         let path = dir.path().join("m.msh");
         write_mesh(&path, &mesh, &[]).unwrap();
-        assert_eq!(read_mesh(&path).unwrap(), mesh);
+        assert_eq!(read_mesh(&path).unwrap(), tagged_from_1(mesh.clone()));
         assert!(message(write_mesh(&path, &mesh, &fields)).contains("no fields"));
         // Default writers and dispatch agree with the explicit ones.
         write_vtu(dir.path().join("d.vtu"), &mesh, &fields).unwrap();
@@ -427,7 +443,10 @@ fn volume_round_trips_are_exact() {
     for name in ["l.vtu", "l.vtk", "l.msh"] {
         let path = dir.path().join(name);
         write_mesh(&path, &liver, &[]).unwrap();
-        assert_eq!(read_mesh(&path).unwrap(), liver, "{name}");
+        // Gmsh's tags are augsim's numbers from 1; VTK numbers nodes from 0.
+        let expected = Mesh { file_nodes: None, file_cells: None, ..liver.clone() };
+        let expected = if name.ends_with(".msh") { tagged_from_1(expected) } else { expected };
+        assert_eq!(read_mesh(&path).unwrap(), expected, "{name}");
     }
     // Writers leave no temporary files behind.
     let mut names: Vec<String> =
@@ -987,4 +1006,132 @@ fn a_volume_mesh_read_as_a_surface_gives_its_boundary() {
         // 2 × (2·3 + 3·4 + 2·4) squares of two triangles on the box's faces.
         assert_eq!(surface.triangles.len(), 2 * 2 * (6 + 12 + 8), "{name}");
     }
+}
+
+/// Two hexahedra side by side along x (nodes numbered 101…112, some in an included file), a skin
+/// of S4 shells on x = 0, sets of every form, and an include.
+const HEX_DECK: &str = "\
+** two bricks
+*HEADING
+A deck as Abaqus or cgx writes it, 2 C3D8R
+*Node, nset=Nall
+101, 0.
+102, 1., 0., 0.
+103, 2., 0., 0.
+104, 0., 1., 0.
+105, 1., 1., 0.
+106, 2., 1., 0.
+*INCLUDE, INPUT=top.inp
+*Element, type=C3D8R, elset=Eall
+1, 101, 102, 105, 104, 107, 108, 111, 110
+2, 102, 103, 106, 105, 108, 109, 112, 111
+*ELEMENT, TYPE=S4, ELSET=Skin
+10, 101, 104, 110,
+107
+*ELSET, ELSET=Right
+2
+*NSET, NSET=fix, GENERATE
+101, 107, 3
+*NSET, NSET=Both
+FIX, 112
+*NSET, NSET=RightNodes, ELSET=RIGHT
+*MATERIAL, NAME=TISSUE
+*ELASTIC
+3000., 0.45
+*STEP
+*STATIC
+*BOUNDARY
+Fix, 1, 3
+*END STEP
+";
+
+#[test]
+fn abaqus_and_calculix_decks_give_the_mesh_its_numbers_and_sets() {
+    let dir = tempfile::tempdir().unwrap();
+    put(
+        dir.path(),
+        "top.inp",
+        "*NODE, NSET=NALL\n107, 0, 0, 1\n108, 1, 0, 1\n109, 2., 0, 1\n110, 0, 1, 1\n111, 1, 1, 1\n112, 2, 1, 1\n",
+    );
+    let mesh = read_mesh(put(dir.path(), "bricks.inp", HEX_DECK)).unwrap();
+    let Cells::Hex8(hexes) = &mesh.cells else { panic!("{:?}", mesh.cells.kind()) };
+    assert_eq!(hexes, &[[0, 1, 4, 3, 6, 7, 10, 9], [1, 2, 5, 4, 7, 8, 11, 10]]);
+    // Missing coordinates are 0 (node 101 gives only x).
+    assert_eq!(mesh.nodes[0], [0.0; 3]);
+    assert_oriented(&mesh);
+    assert_eq!(mesh.file_nodes, Some((101..=112).collect()));
+    assert_eq!(mesh.file_cells, Some(vec![1, 2]));
+    let region = |name: &str| mesh.regions.get(name).cloned().unwrap_or_default();
+    assert_eq!(region("fix"), [0, 3, 6]);
+    assert_eq!(region("Both"), [0, 3, 6, 11]);
+    assert_eq!(region("Skin"), [0, 3, 6, 9]);
+    assert_eq!(region("Right"), [1, 2, 4, 5, 7, 8, 10, 11]);
+    assert_eq!(region("RightNodes"), region("Right"));
+    // Every node is in Nall; Eall holds every solid, so it is the mesh, not a region.
+    assert_eq!(region("Nall").len(), 12);
+    assert!(!mesh.regions.contains_key("Eall"));
+    // `list` takes the deck's numbers.
+    assert_eq!(NodeSelection::List(vec![112, 101]).select(&mesh).unwrap(), [0, 11]);
+    assert!(message(NodeSelection::List(vec![0]).select(&mesh)).contains("101 to 112"));
+}
+
+#[test]
+fn quadratic_tetrahedra_read_from_a_deck_as_from_vtk() {
+    // C3D10 numbers its mid-edge nodes as VTK does; continuation lines are read.
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = tet_box().quadratic().unwrap();
+    let mut deck = String::from("*NODE\n");
+    for (i, p) in mesh.nodes.iter().enumerate() {
+        deck += &format!("{}, {:e}, {:e}, {:e}\n", i + 1, p[0], p[1], p[2]);
+    }
+    deck += "*ELEMENT, TYPE=C3D10M\n";
+    let Cells::Tet10(tets) = &mesh.cells else { unreachable!() };
+    for (c, t) in tets.iter().enumerate() {
+        let n: Vec<String> = t.iter().map(|i| (i + 1).to_string()).collect();
+        deck += &format!("{}, {},\n{}\n", c + 1, n[..6].join(", "), n[6..].join(", "));
+    }
+    let read = read_mesh(put(dir.path(), "t10.inp", deck)).unwrap();
+    assert_eq!(read, tagged_from_1(mesh));
+}
+
+#[test]
+fn broken_decks_are_refused_with_their_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let deck = |name: &str, text: &str| message(read_mesh(put(d, name, text)));
+    let nodes = "*NODE\n1,0,0,0\n2,1,0,0\n3,0,1,0\n4,0,0,1\n5,1,1,1\n";
+    let m = deck("c20.inp", &format!("{nodes}*ELEMENT, TYPE=C3D20R\n1, 1, 2, 3, 4\n"));
+    assert!(m.contains("line 7") && m.contains("C3D20R") && m.contains("C3D10"), "{m}");
+    let m = deck(
+        "mixed.inp",
+        &format!("{nodes}*ELEMENT, TYPE=C3D4\n1, 1, 2, 3, 4\n*ELEMENT, TYPE=C3D8\n2, 1, 2, 3, 4, 5, 5, 5, 5\n"),
+    );
+    assert!(m.contains("mixes tetrahedra (first at") && m.contains("line 10"), "{m}");
+    let m = deck("ghost.inp", &format!("{nodes}*ELEMENT, TYPE=C3D4\n1, 1, 2, 3, 9\n"));
+    assert!(m.contains("element 1 names node 9, which no *NODE defines") && m.contains("line 8"), "{m}");
+    let m = deck("short.inp", &format!("{nodes}*ELEMENT, TYPE=C3D4\n1, 1, 2, 3,\n"));
+    assert!(m.contains("element 1 lists too few nodes") && m.contains("the file ends"), "{m}");
+    let m = deck("twice.inp", &format!("{nodes}3, 1, 1, 1\n*ELEMENT, TYPE=C3D4\n1, 1, 2, 3, 4\n"));
+    assert!(m.contains("line 7") && m.contains("node 3 is defined twice"), "{m}");
+    let m = deck("noset.inp", &format!("{nodes}*ELEMENT, TYPE=C3D4\n1, 1, 2, 3, 4\n*NSET, NSET=A\nB\n"));
+    assert!(m.contains("line 10") && m.contains("set A names B, which is not a node set"), "{m}");
+    let m = deck("badset.inp", &format!("{nodes}*ELEMENT, TYPE=C3D4\n1, 1, 2, 3, 4\n*NSET, NSET=A\n1, 77\n"));
+    assert!(m.contains("line 10") && m.contains("node set A names node 77"), "{m}");
+    let m = deck("include.inp", &format!("{nodes}*INCLUDE, INPUT=elements.inp\n"));
+    assert!(m.contains("line 7") && m.contains("*INCLUDE") && m.contains("elements.inp"), "{m}");
+    let m = deck("self.inp", "*INCLUDE, INPUT=self.inp\n");
+    assert!(m.contains("nested more than"), "{m}");
+    let m = deck("parts.inp", "*PART, NAME=A\n*END PART\n*PART, NAME=B\n");
+    assert!(m.contains("line 3") && m.contains("second *PART"), "{m}");
+    let m = deck(
+        "moved.inp",
+        &format!("*PART, NAME=A\n{nodes}*END PART\n*ASSEMBLY\n*INSTANCE, NAME=A-1, PART=A\n10., 0., 0.\n"),
+    );
+    assert!(m.contains("line 11") && m.contains("translation or rotation"), "{m}");
+    let m = deck("shells.inp", &format!("{nodes}*ELEMENT, TYPE=S3\n1, 1, 2, 3\n"));
+    assert!(m.contains("no solid elements"), "{m}");
+    let m = deck("cyl.inp", "*NODE, SYSTEM=C\n1, 1, 0, 0\n");
+    assert!(m.contains("rectangular"), "{m}");
+    let m = deck("nan.inp", "*NODE\n1, 0, x, 0\n");
+    assert!(m.contains("line 2") && m.contains("expected a coordinate, found 'x'"), "{m}");
 }

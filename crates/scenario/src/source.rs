@@ -47,7 +47,7 @@ pub enum MeshSource {
         /// Target number of tetrahedra.
         tets: usize,
     },
-    /// A volume mesh file (.msh, .vtk, .vtu); the path is relative to the scenario file.
+    /// A volume mesh file (.msh, .vtk, .vtu, .inp); the path is relative to the scenario file.
     File {
         /// Path of the file.
         path: PathBuf,

@@ -68,6 +68,7 @@ fn element_type(ty: u32) -> Option<(u8, usize, &'static str)> {
 #[derive(Default)]
 struct Nodes {
     coords: Vec<Point>,
+    tags: Vec<usize>,
     index: HashMap<u64, usize>,
 }
 
@@ -77,6 +78,7 @@ impl Nodes {
             return Err(line.error(format!("node tag {tag} appears twice")));
         }
         self.coords.push(p);
+        self.tags.push(tag as usize);
         Ok(())
     }
 }
@@ -241,7 +243,9 @@ pub fn read_gmsh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
         return Err(parse_error(path, "no tetrahedra (type 4) or hexahedra (type 5): not a volume mesh"));
     };
     let describe = |i: usize| format!("element {} (line {})", volume.tags[i], volume.lines[i]);
-    let (mut mesh, kept) = finish_volume(path, &nodes.coords, kind, volume.conn.clone(), &describe)?;
+    let tags: Vec<usize> = volume.tags.iter().map(|&t| t as usize).collect();
+    let (mut mesh, kept) =
+        finish_volume(path, &nodes.coords, kind, volume.conn.clone(), &describe, Some(&nodes.tags), &tags)?;
     mesh.regions = physical_regions(&volume, &names, &kept, nodes.coords.len());
     Ok(mesh)
 }

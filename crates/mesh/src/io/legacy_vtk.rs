@@ -713,7 +713,7 @@ pub(super) fn volume_from_cells(
         }
     }
     let describe = |i: usize| format!("cell {}", kept_cells[i]);
-    let (mut mesh, kept_nodes) = finish_volume(path, points, kind, conn, &describe)?;
+    let (mut mesh, kept_nodes) = finish_volume(path, points, kind, conn, &describe, None, &kept_cells)?;
     let fields = restrict_fields(fields, &kept_nodes, &kept_cells);
     mesh.regions = regions_from_fields(&fields);
     Ok((mesh, fields))

@@ -1,11 +1,12 @@
 //! Mesh and surface file input and output.
 //!
 //! Volume meshes ([`Mesh`]) are read from Gmsh `.msh` (legacy `$NOD`/`$ELM`, 2.x ASCII and
-//! 4.1 ASCII), legacy VTK `.vtk` (ASCII or big-endian binary `UNSTRUCTURED_GRID`) and VTK XML
-//! `.vtu`. Only linear tetrahedra or trilinear hexahedra are kept (lower-dimensional cells are
-//! ignored); nodes not used by any kept cell are dropped and the rest renumbered in file order;
-//! every cell is turned positively oriented (mirrored cells are flipped), and a cell of zero
-//! volume is an error.
+//! 4.1 ASCII), legacy VTK `.vtk` (ASCII or big-endian binary `UNSTRUCTURED_GRID`), VTK XML
+//! `.vtu` and Abaqus or CalculiX input decks `.inp` ([`read_inp`]). Only tetrahedra (linear or
+//! quadratic) or trilinear hexahedra are kept (lower-dimensional cells are ignored); nodes not
+//! used by any kept cell are dropped and the rest renumbered in file order, the file's own node
+//! numbers kept in [`Mesh::file_nodes`]; every cell is turned positively oriented (mirrored cells
+//! are flipped), and a cell of zero volume is an error.
 //!
 //! Surfaces ([`TriSurface`]) are read from `.obj`, `.stl` (ASCII or binary, duplicate vertices
 //! merged exactly), `.ply` (ASCII or binary), legacy VTK `.vtk` (`POLYDATA` or
@@ -51,9 +52,12 @@
 //!   [`write_msh`] writes each non-empty region as a named 0-dimensional physical group of point
 //!   elements, one per node, which Gmsh opens and which is read back as the same region.
 //!
+//! - `.inp`: node sets and element sets (the nodes of their elements); see [`read_inp`].
+//!
 //! Region nodes are mesh nodes: nodes that the reader drops (used by no volume cell) are left out
 //! of the regions, and the rest are renumbered with the mesh. A region with no node is not read.
 
+mod abaqus;
 pub mod csv;
 mod frame;
 mod gmsh;
@@ -74,6 +78,7 @@ use std::path::{Path, PathBuf};
 
 use crate::{Cells, Mesh, MeshError, Point, TriSurface, HEX_TO_TETS};
 
+pub use abaqus::read_inp;
 pub use csv::csv_field;
 pub use frame::{
     frame_in_header, read_surface_with_frame, surface_frame, write_surface_in_frame, Frame, FrameChange,
@@ -249,26 +254,32 @@ pub enum Encoding {
     Binary,
 }
 
+/// The extensions [`read_mesh`] reads, for messages.
+const VOLUME_EXTENSIONS: &str = "expected .msh, .vtk, .vtu or .inp";
+
 /// Reads a volume mesh, choosing the format by extension: `.msh` (Gmsh), `.vtk` (legacy VTK),
-/// `.vtu` (VTK XML).
+/// `.vtu` (VTK XML), `.inp` (an Abaqus or CalculiX input deck).
 pub fn read_mesh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
     let path = path.as_ref();
     match extension(path).as_str() {
         "msh" => read_gmsh(path),
+        "inp" => read_inp(path),
         "vtk" => read_vtk(path),
         "vtu" => read_vtu(path),
-        _ => Err(parse_error(path, "unknown volume mesh extension (expected .msh, .vtk or .vtu)")),
+        _ => Err(parse_error(path, format!("unknown volume mesh extension ({VOLUME_EXTENSIONS})"))),
     }
 }
 
-/// Reads a volume mesh and its point and cell data (`.vtk`, `.vtu`; a `.msh` file gives no fields).
+/// Reads a volume mesh and its point and cell data (`.vtk`, `.vtu`; a `.msh` or `.inp` file gives
+/// no fields).
 pub fn read_mesh_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>), MeshError> {
     let path = path.as_ref();
     match extension(path).as_str() {
         "msh" => Ok((read_gmsh(path)?, Vec::new())),
+        "inp" => Ok((read_inp(path)?, Vec::new())),
         "vtk" => read_vtk_with_fields(path),
         "vtu" => read_vtu_with_fields(path),
-        _ => Err(parse_error(path, "unknown volume mesh extension (expected .msh, .vtk or .vtu)")),
+        _ => Err(parse_error(path, format!("unknown volume mesh extension ({VOLUME_EXTENSIONS})"))),
     }
 }
 
@@ -537,13 +548,18 @@ impl VolumeKind {
 /// A volume mesh as read from a file, made into a [`Mesh`]: keeps the nodes used by the cells
 /// (in file order), renumbers them, orients every cell positively and validates the result.
 /// `conn` holds `kind.nodes()` indices into `file_nodes` per cell; `describe(i)` names cell `i`
-/// for error messages. Returns the mesh and, for each mesh node, its index in `file_nodes`.
+/// for error messages; `numbers` are the file's numbers of its nodes (their positions, from 0,
+/// when `None`) and `cell_numbers` those of the cells, kept in [`Mesh::file_nodes`] and
+/// [`Mesh::file_cells`] where they are not the mesh's own. Returns the mesh and, for each mesh
+/// node, its index in `file_nodes`.
 fn finish_volume(
     path: &Path,
     file_nodes: &[Point],
     kind: VolumeKind,
     mut conn: Vec<usize>,
     describe: &dyn Fn(usize) -> String,
+    numbers: Option<&[usize]>,
+    cell_numbers: &[usize],
 ) -> Result<(Mesh, Vec<usize>), MeshError> {
     let k = kind.nodes();
     if conn.is_empty() {
@@ -562,7 +578,8 @@ fn finish_volume(
     }
     let nodes: Vec<Point> = kept.iter().map(|&i| file_nodes[i]).collect();
     if let Some((i, fault)) = crate::coordinate_fault(nodes.iter().enumerate(), crate::MAX_COORDINATE) {
-        return Err(parse_error(path, format!("node {} {fault}", kept[i])));
+        let number = numbers.map_or(kept[i], |numbers| numbers[kept[i]]);
+        return Err(parse_error(path, format!("node {number} {fault}")));
     }
     for i in &mut conn {
         *i = new_index[*i];
@@ -599,8 +616,16 @@ fn finish_volume(
         VolumeKind::Tet10 => Cells::Tet10(conn.chunks_exact(10).map(|c| std::array::from_fn(|j| c[j])).collect()),
     };
     let mut mesh = Mesh::new(nodes, cells).map_err(|e| parse_error(path, e.to_string()))?;
-    if kept.len() < file_nodes.len() {
-        mesh.file_nodes = Some(kept.clone());
+    let numbered: Vec<usize> = match numbers {
+        Some(numbers) => kept.iter().map(|&f| numbers[f]).collect(),
+        None => kept.clone(),
+    };
+    let own = |numbers: &[usize]| numbers.iter().enumerate().all(|(i, &n)| i == n);
+    if !own(&numbered) {
+        mesh.file_nodes = Some(numbered);
+    }
+    if !own(cell_numbers) {
+        mesh.file_cells = Some(cell_numbers.to_vec());
     }
     Ok((mesh, kept))
 }
