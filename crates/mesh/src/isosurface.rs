@@ -76,14 +76,20 @@ impl ExtractReport {
         }
     }
 
+    /// The voxels of the smaller pieces dropped, as a share of the kept piece's.
+    pub fn dropped_share(&self) -> f64 {
+        self.dropped_pieces.iter().sum::<usize>() as f64 / self.voxels.max(1) as f64
+    }
+
     /// What was done to the mask before extraction, one line each: the smaller pieces dropped,
     /// the cavities filled (none when neither).
     pub fn cleaning_lines(&self) -> Vec<String> {
         let mut lines = Vec::new();
         if let Some(largest) = self.dropped_pieces.first() {
             lines.push(format!(
-                "kept the largest piece; dropped {} smaller (the largest of {largest} voxels)",
-                self.dropped_pieces.len()
+                "kept the largest piece; dropped {} smaller, {:.1} % of its voxels (the largest of {largest} voxels)",
+                self.dropped_pieces.len(),
+                100.0 * self.dropped_share()
             ));
         }
         if self.filled_voxels > 0 {
@@ -108,8 +114,11 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
         if second as f64 >= options.max_second_piece * first as f64 {
             let shown: Vec<String> = pieces.iter().take(5).map(|n| n.to_string()).collect();
             return Err(MeshError::Invalid(format!(
-                "several pieces of similar size ({} voxels): not one organ; keep the organ only",
-                shown.join(", ")
+                "several pieces of similar size ({} voxels; the second {:.0} % of the largest, {:.0} % or more): not \
+                 one organ; keep the organ only, or join its pieces in the segmentation",
+                shown.join(", "),
+                100.0 * second as f64 / first as f64,
+                100.0 * options.max_second_piece
             )));
         }
     }

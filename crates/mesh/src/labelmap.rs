@@ -1042,6 +1042,22 @@ pub fn read_labelmap_surface(
             borders.join(", ")
         ));
     }
+    if extract.dropped_share() > DROPPED_SHARE {
+        warnings.push(format!(
+            "pieces apart from the organ's largest, {:.1} % of its voxels, were dropped: if they are part of it (a \
+             lobe the segmentation cut off), join them to it in the segmentation",
+            100.0 * extract.dropped_share()
+        ));
+    }
+    let span = crate::longest_side(crate::bounds(&surface.vertices));
+    if !(ORGAN_SPAN_MM.0..=ORGAN_SPAN_MM.1).contains(&span) {
+        warnings.push(format!(
+            "the organ spans {} mm, no organ's size: its voxels are {} mm as the file's header gives them \
+             (in the unit it names: NIfTI's xyzt_units, NRRD's space units); is that their size?",
+            crate::repair::number(span),
+            map.spacing().map(crate::repair::number).join(" × ")
+        ));
+    }
     let lost = 1.0 - extract.volume / extract.voxel_volume;
     if lost > THINNED_SHARE {
         warnings.push(format!(
@@ -1053,6 +1069,14 @@ pub fn read_labelmap_surface(
     let placed = map.placed;
     Ok(LabelSurface { surface, frame: map.frame, label, spacing: map.spacing(), extract, placed, warnings })
 }
+
+/// The share of the kept piece's voxels that the pieces dropped apart from it may hold before
+/// a warning (specks of a segmentation hold well under 1 %).
+const DROPPED_SHARE: f64 = 0.05;
+
+/// The span (mm) of a structure a labelmap may give without a warning: a few millimetres (a small
+/// tumour) to a metre; outside, the header's unit or voxel size is likely wrong.
+const ORGAN_SPAN_MM: (f64, f64) = (3.0, 1000.0);
 
 /// The share of its voxels' volume a surface may lose before it is said to be thinned (an organ
 /// loses about 1 %, a 14 mm tumour on 5 mm slices 7 %).
@@ -1303,6 +1327,44 @@ mod tests {
         };
         assert!(thinned("7"), "a plate one slice thick");
         assert!(!thinned("5"), "a ball");
+    }
+
+    /// A piece of the organ's label dropped apart from its largest is warned about when it holds
+    /// more than specks (a 5 mm ball beside a 10 mm one: 12 %; a 3 mm one, 2.7 %, is not); so is
+    /// an organ of no organ's size, as a header naming microns for millimetre voxels makes it.
+    #[test]
+    fn a_dropped_lobe_and_an_organ_of_no_organs_size_are_warned_about() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Ras);
+        let path = dir.path().join("lobes.nii");
+        let warned = |map: &Labelmap, what: &str| {
+            write_nifti(&path, map).unwrap();
+            let read = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+            read.warnings.iter().find(|w| w.contains(what)).cloned()
+        };
+        let drop = "were dropped: if they are part of it";
+        let small =
+            Labelmap { labels: map.labels.iter().map(|&l| if l == 2 { 5 } else { l }).collect(), ..map.clone() };
+        assert_eq!(warned(&small, drop), None);
+        let other = [25.0, -80.0, 215.0];
+        let mut lobe = map.clone();
+        for (v, label) in lobe.labels.iter_mut().enumerate() {
+            let ijk = [v % 52, v / 52 % 44, v / (52 * 44)];
+            let p: Point = std::array::from_fn(|r| map.affine[r][r] * ijk[r] as f64 + map.affine[r][3]);
+            if norm(sub(p, other)) <= 5.0 {
+                *label = 5;
+            }
+        }
+        let w = warned(&lobe, drop).expect("a lobe of 12 %");
+        assert!(w.contains("pieces apart from the organ's largest, 1"), "{w}");
+        assert_eq!(warned(&map, "no organ's size"), None);
+        write_nifti(&path, &map).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes[123] = 3 | 8;
+        std::fs::write(&path, bytes).unwrap();
+        let read = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+        let w = read.warnings.iter().find(|w| w.contains("no organ's size")).expect("microns");
+        assert!(w.contains("spans 0.019") && w.contains("0.00075 × 0.000875 × 0.0025 mm"), "{w}");
     }
 
     /// Where both forms are set, the sform is read when its code is 1 (scanner), the qform when
