@@ -84,6 +84,10 @@ fn fcsv_of_slicer_5_reads_its_unnamed_status_fields_and_leaves_out_missing_point
     let p = read_points(statuses).unwrap();
     assert_eq!((p.points, p.labels), (vec![[7.0, 8.0, 9.0]], vec!["C".to_string()]));
     assert_eq!(p.unplaced, ["line 3", "B"], "an unlabelled point named by its line");
+    // A file of which no point is placed is refused, rather than read as no points.
+    let unplaced = put(dir.path(), "unplaced.fcsv", format!("{columns}a,1,2,3,0,0,0,1,1,1,0,A,,,0,0\n"));
+    let m = message(read_points(unplaced));
+    assert!(m.contains("unplaced.fcsv: none of its points is placed: 1 control point not placed"), "{m}");
     let unknown = put(dir.path(), "unknown.fcsv", format!("{columns}a,1,2,3,0,0,0,1,1,1,0,A,,,7,0\n"));
     assert_eq!(
         message(read_points(unknown)),

@@ -102,7 +102,8 @@ impl LabelledPoints {
 
 /// Reads points, choosing the format by extension: `.fcsv`, `.mrk.json` (or any `.json`), and CSV
 /// for any other (see the [module](self) documentation). A point beyond
-/// [`MAX_MEASURED_COORDINATE`](crate::MAX_MEASURED_COORDINATE) is an error (a damaged file).
+/// [`MAX_MEASURED_COORDINATE`](crate::MAX_MEASURED_COORDINATE) is an error (a damaged file), and
+/// so is a file whose every point 3D Slicer has not placed (nothing would be left of it).
 pub fn read_points(path: impl AsRef<Path>) -> Result<LabelledPoints, MeshError> {
     let path = path.as_ref();
     let text = std::fs::read_to_string(path).map_err(|error| match error.kind() {
@@ -117,6 +118,10 @@ pub fn read_points(path: impl AsRef<Path>) -> Result<LabelledPoints, MeshError> 
         "json" => read_markups_json(path, text),
         _ => read_table(path, text, false),
     }?;
+    if points.points.is_empty() && !points.unplaced.is_empty() {
+        let warning = points.unplaced_warning().unwrap_or_default();
+        return Err(parse_error(path, format!("none of its points is placed: {warning}")));
+    }
     match crate::measured_fault(&points.points) {
         Some((i, fault)) => Err(parse_error(path, format!("point {i} {fault}"))),
         None => Ok(points),

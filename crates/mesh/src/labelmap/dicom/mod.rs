@@ -9,7 +9,8 @@ use std::collections::{BTreeMap, BTreeSet, HashSet};
 use dicom_dictionary_std::tags;
 use dicom_object::file::ReadPreamble;
 use dicom_object::mem::InMemElement;
-use dicom_object::{InMemDicomObject, OpenFileOptions};
+use dicom_object::meta::FileMetaTableBuilder;
+use dicom_object::{DefaultDicomObject, InMemDicomObject, OpenFileOptions};
 
 use super::Labelmap;
 
@@ -17,11 +18,14 @@ use super::Labelmap;
 const SAME_SLICE_MM: f64 = 1e-3;
 
 /// Whether the file at `path` is a DICOM file by its content (`DICM` after the 128-byte
-/// preamble), whatever its name: PACS and scanners write files without an extension.
+/// preamble, or a data set without file meta: [`raw_data_set_start`]), whatever its name: PACS
+/// and scanners write files without an extension.
 pub(super) fn is_dicom_file(path: &std::path::Path) -> bool {
-    let mut start = [0_u8; 132];
-    std::fs::File::open(path).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut start)).is_ok()
-        && has_dicom_magic(&start)
+    let mut start = Vec::with_capacity(140);
+    std::fs::File::open(path)
+        .and_then(|f| std::io::Read::read_to_end(&mut std::io::Read::take(f, 140), &mut start))
+        .is_ok()
+        && (has_dicom_magic(&start) || raw_data_set_start(&start).is_some())
 }
 
 /// Whether `bytes` (a file's start) hold `DICM` after the 128-byte preamble.
@@ -29,16 +33,46 @@ pub(super) fn has_dicom_magic(bytes: &[u8]) -> bool {
     bytes.get(128..132) == Some(b"DICM")
 }
 
+/// Where a DICOM data set stored without the Part 10 preamble and file meta begins in `bytes`
+/// (as some archives and toolkits write it: at 0, or after a preamble of zeros without `DICM`),
+/// and whether its VRs are explicit: its first element a little-endian tag of group 0008 (the
+/// identifying module every object begins with), followed by a VR of two capitals when explicit.
+fn raw_data_set_start(bytes: &[u8]) -> Option<(usize, bool)> {
+    [0, 128].into_iter().find_map(|at| {
+        let zeros = bytes.get(..at)?.iter().all(|&b| b == 0);
+        let head = bytes.get(at..at + 8)?;
+        (zeros && head[..2] == [0x08, 0x00] && head[3] == 0x00)
+            .then(|| (at, head[4..6].iter().all(u8::is_ascii_uppercase)))
+    })
+}
+
+/// A data set without file meta ([`raw_data_set_start`]) read as its file would be, in the
+/// transfer syntax it is written in (explicit or implicit VR little endian).
+fn read_raw_data_set(bytes: &[u8]) -> Option<Result<DefaultDicomObject, String>> {
+    let (at, explicit) = raw_data_set_start(bytes)?;
+    let syntax = match explicit {
+        true => dicom_transfer_syntax_registry::entries::EXPLICIT_VR_LITTLE_ENDIAN.erased(),
+        false => dicom_transfer_syntax_registry::entries::IMPLICIT_VR_LITTLE_ENDIAN.erased(),
+    };
+    let read = || -> Result<DefaultDicomObject, String> {
+        let object = InMemDicomObject::read_dataset_with_ts(&bytes[at..], &syntax).map_err(|e| e.to_string())?;
+        object.with_meta(FileMetaTableBuilder::new().transfer_syntax(syntax.uid())).map_err(|e| e.to_string())
+    };
+    Some(read().map_err(|e| {
+        format!("a DICOM data set without file meta (no preamble and `DICM`) that cannot be read: damaged? ({e})")
+    }))
+}
+
 /// Reads a DICOM SEG or RTSTRUCT from the bytes of its file; of an RTSTRUCT, only the structure
 /// `wanted` (by number or name) when it names one, on a grid of its own extent.
 pub(super) fn parse_dicom(bytes: &[u8], wanted: Option<&str>) -> Result<Labelmap, String> {
-    let object = OpenFileOptions::new().read_preamble(ReadPreamble::Auto).from_reader(bytes).map_err(|e| {
-        if has_dicom_magic(bytes) {
-            format!("a DICOM file that cannot be read: cut short or damaged? ({e})")
-        } else {
-            format!("not a DICOM file ({e})")
+    let object = match OpenFileOptions::new().read_preamble(ReadPreamble::Auto).from_reader(bytes) {
+        Ok(object) => object,
+        Err(e) if has_dicom_magic(bytes) => {
+            return Err(format!("a DICOM file that cannot be read: cut short or damaged? ({e})"))
         }
-    })?;
+        Err(e) => read_raw_data_set(bytes).unwrap_or_else(|| Err(format!("not a DICOM file ({e})")))?,
+    };
     let class = text(&object, tags::SOP_CLASS_UID).unwrap_or_default();
     if seg::SEGMENTATION_CLASSES.contains(&class.as_str()) {
         seg::read(&object)

@@ -406,6 +406,8 @@ mod tests {
 
     use super::*;
     use crate::labelmap::dicom::parse_dicom;
+    use dicom_object::OpenFileOptions;
+    use dicom_transfer_syntax_registry::entries;
 
     /// An element of `vr` holding `text` (several values separated by `\`).
     fn text_element(tag: dicom_object::Tag, vr: VR, text: &str) -> InMemElement {
@@ -485,6 +487,26 @@ mod tests {
     fn liver_and_tumour() -> Vec<u8> {
         let tumour_pixel = 4 + 2;
         seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (2, 2.0)], 1, vec![0xff, 0xff, 0xff, 0xff, 1 << tumour_pixel, 0])
+    }
+
+    /// A SEG stored as its data set alone (no preamble, `DICM` or file meta), in explicit or
+    /// implicit VR, or after a preamble of zeros without `DICM`, reads as its Part 10 file does; a
+    /// damaged one says what it is.
+    #[test]
+    fn a_data_set_without_file_meta_reads_as_its_file() {
+        let file = liver_and_tumour();
+        let whole = parse_dicom(&file, None).unwrap();
+        let object = OpenFileOptions::new().from_reader(&file[..]).unwrap();
+        for syntax in [entries::EXPLICIT_VR_LITTLE_ENDIAN.erased(), entries::IMPLICIT_VR_LITTLE_ENDIAN.erased()] {
+            let mut raw = Vec::new();
+            object.write_dataset_with_ts(&mut raw, &syntax).unwrap();
+            assert_eq!(parse_dicom(&raw, None).unwrap(), whole, "{}", syntax.name());
+            let zeros = [vec![0; 128], raw.clone()].concat();
+            assert_eq!(parse_dicom(&zeros, None).unwrap(), whole, "{} after zeros", syntax.name());
+            let e = parse_dicom(&raw[..raw.len() / 2], None).unwrap_err();
+            assert!(e.contains("a DICOM data set without file meta") && e.contains("cannot be read"), "{e}");
+        }
+        assert!(parse_dicom(b"hello, not DICOM at all", None).unwrap_err().starts_with("not a DICOM file"));
     }
 
     #[test]
