@@ -140,7 +140,7 @@ fn read_labelmap_choosing(path: &Path, label: Option<&str>) -> Result<Labelmap, 
         metaimage::parse_metaimage(&bytes, folder).map_err(|m| parse_error(path, m))?
     } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
         parse_nifti(&gunzip_if_needed(bytes).map_err(|m| parse_error(path, m))?).map_err(|m| parse_error(path, m))?
-    } else if name.ends_with(".dcm") || dicom::has_dicom_magic(&bytes) {
+    } else if name.ends_with(".dcm") || dicom::is_dicom(&bytes) {
         dicom::parse_dicom(&bytes, label).map_err(|m| parse_error(path, m))?
     } else {
         return Err(parse_error(path, format!("not a labelmap: expected {LABELMAP_FORMATS}")));
@@ -1078,31 +1078,43 @@ const DROPPED_SHARE: f64 = 0.05;
 /// tumour) to a metre; outside, the header's unit or voxel size is likely wrong.
 const ORGAN_SPAN_MM: (f64, f64) = (3.0, 1000.0);
 
+/// The share of an organ's largest slice under which a slice at the image's face is its tip, not
+/// a cut (a voxel or two, whatever the slice next to it holds).
+const TIP_SHARE: f64 = 0.1;
+
 /// The share of its voxels' volume a surface may lose before it is said to be thinned (an organ
 /// loses about 1 %, a 14 mm tumour on 5 mm slices 7 %).
 const THINNED_SHARE: f64 = 0.2;
 
-/// The faces of the image the mask's voxels reach, as `i = 0`, `k = 63`.
+/// The faces of the image where the mask's organ is cut, as `i = 0`, `k = 63`: faces it reaches
+/// with a slice that holds [`dicom::CUT_SHARE`] of its largest slice's voxels, or that does not
+/// taper (as large as [`dicom::CUT_NEIGHBOUR_SHARE`] of the slice next to it) and is more than
+/// its tip ([`TIP_SHARE`] of the largest). An organ whole in an image cropped to it, as 3D Slicer
+/// saves a segmentation, tapers to each face it touches; one the field of view cuts does not.
 fn touched_borders(mask: &VoxelMask) -> Vec<String> {
     let [ni, nj, nk] = mask.dims;
-    let mut touched = [[false; 2]; 3];
+    let mut counts = [vec![0usize; ni], vec![0; nj], vec![0; nk]];
     for k in 0..nk {
         for j in 0..nj {
             for i in 0..ni {
                 if mask.inside[i + ni * (j + nj * k)] {
-                    for (axis, (index, n)) in [(i, ni), (j, nj), (k, nk)].into_iter().enumerate() {
-                        touched[axis][0] |= index == 0;
-                        touched[axis][1] |= index + 1 == n;
-                    }
+                    [i, j, k].into_iter().zip(counts.iter_mut()).for_each(|(index, c)| c[index] += 1);
                 }
             }
         }
     }
     let mut faces = Vec::new();
-    for (axis, name) in ["i", "j", "k"].into_iter().enumerate() {
-        let n = mask.dims[axis];
-        faces.extend(touched[axis][0].then(|| format!("{name} = 0")));
-        faces.extend(touched[axis][1].then(|| format!("{name} = {}", n - 1)));
+    for (name, c) in ["i", "j", "k"].into_iter().zip(&counts) {
+        let (n, largest) = (c.len(), *c.iter().max().unwrap_or(&0) as f64);
+        let cut = |end: usize, next: Option<&usize>| {
+            let end = end as f64;
+            end > 0.0
+                && (end >= dicom::CUT_SHARE * largest
+                    || (end >= TIP_SHARE * largest
+                        && next.is_none_or(|&next| end >= dicom::CUT_NEIGHBOUR_SHARE * next as f64)))
+        };
+        faces.extend(cut(c[0], c.get(1)).then(|| format!("{name} = 0")));
+        faces.extend(cut(c[n - 1], n.checked_sub(2).map(|i| &c[i])).then(|| format!("{name} = {}", n - 1)));
     }
     faces
 }
@@ -1286,6 +1298,29 @@ mod tests {
         let organ = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
         assert_eq!(organ.warnings.len(), 1, "{:?}", organ.warnings);
         assert!(organ.warnings[0].contains("image's border (k = 0)"), "{:?}", organ.warnings);
+        // The whole ball in an image cropped to it (as 3D Slicer saves a segmentation) tapers to
+        // every face it touches: not cut.
+        let (lo, hi) = (0..3).fold(([usize::MAX; 3], [0; 3]), |(mut lo, mut hi), d| {
+            for (v, &l) in map.labels.iter().enumerate() {
+                let ijk = [v % ni, v / ni % nj, v / (ni * nj)];
+                if l == 5 {
+                    (lo[d], hi[d]) = (lo[d].min(ijk[d]), hi[d].max(ijk[d]));
+                }
+            }
+            (lo, hi)
+        });
+        let dims: [usize; 3] = std::array::from_fn(|d| hi[d] - lo[d] + 1);
+        let labels = (0..dims.iter().product::<usize>())
+            .map(|v| {
+                let ijk = [lo[0] + v % dims[0], lo[1] + v / dims[0] % dims[1], lo[2] + v / (dims[0] * dims[1])];
+                map.labels[ijk[0] + ni * (ijk[1] + nj * ijk[2])]
+            })
+            .collect();
+        let cropped = Labelmap { dims, labels, ..map.clone() };
+        let path = dir.path().join("cropped.nii");
+        write_nifti(&path, &cropped).unwrap();
+        let organ = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+        assert!(organ.warnings.is_empty(), "{:?}", organ.warnings);
     }
 
     #[test]

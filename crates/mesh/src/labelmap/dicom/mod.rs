@@ -18,14 +18,20 @@ use super::Labelmap;
 const SAME_SLICE_MM: f64 = 1e-3;
 
 /// Whether the file at `path` is a DICOM file by its content (`DICM` after the 128-byte
-/// preamble, or a data set without file meta: [`raw_data_set_start`]), whatever its name: PACS
-/// and scanners write files without an extension.
+/// preamble, or a file without it: [`headless_start`]), whatever its name: PACS and scanners
+/// write files without an extension.
 pub(super) fn is_dicom_file(path: &std::path::Path) -> bool {
     let mut start = Vec::with_capacity(140);
     std::fs::File::open(path)
         .and_then(|f| std::io::Read::read_to_end(&mut std::io::Read::take(f, 140), &mut start))
         .is_ok()
-        && (has_dicom_magic(&start) || raw_data_set_start(&start).is_some())
+        && is_dicom(&start)
+}
+
+/// Whether `bytes` (a file's start) are DICOM: `DICM` after the preamble, or a file without it
+/// ([`headless_start`]).
+pub(super) fn is_dicom(bytes: &[u8]) -> bool {
+    has_dicom_magic(bytes) || headless_start(bytes).is_some()
 }
 
 /// Whether `bytes` (a file's start) hold `DICM` after the 128-byte preamble.
@@ -33,23 +39,29 @@ pub(super) fn has_dicom_magic(bytes: &[u8]) -> bool {
     bytes.get(128..132) == Some(b"DICM")
 }
 
-/// Where a DICOM data set stored without the Part 10 preamble and file meta begins in `bytes`
-/// (as some archives and toolkits write it: at 0, or after a preamble of zeros without `DICM`),
-/// and whether its VRs are explicit: its first element a little-endian tag of group 0008 (the
-/// identifying module every object begins with), followed by a VR of two capitals when explicit.
-fn raw_data_set_start(bytes: &[u8]) -> Option<(usize, bool)> {
+/// Where a DICOM file without `DICM` begins in `bytes` (as some archives and toolkits write it:
+/// at 0, or after a preamble of zeros), and its first element's group: 0002 for the file meta, or
+/// 0008 (the identifying module every data set begins with) for a data set without file meta,
+/// little endian; and whether a VR of two capitals follows that first tag (explicit VRs).
+fn headless_start(bytes: &[u8]) -> Option<(usize, u8, bool)> {
     [0, 128].into_iter().find_map(|at| {
         let zeros = bytes.get(..at)?.iter().all(|&b| b == 0);
         let head = bytes.get(at..at + 8)?;
-        (zeros && head[..2] == [0x08, 0x00] && head[3] == 0x00)
-            .then(|| (at, head[4..6].iter().all(u8::is_ascii_uppercase)))
+        (zeros && matches!(head[..2], [0x02 | 0x08, 0x00]) && head[3] == 0x00)
+            .then(|| (at, head[0], head[4..6].iter().all(u8::is_ascii_uppercase)))
     })
 }
 
-/// A data set without file meta ([`raw_data_set_start`]) read as its file would be, in the
-/// transfer syntax it is written in (explicit or implicit VR little endian).
-fn read_raw_data_set(bytes: &[u8]) -> Option<Result<DefaultDicomObject, String>> {
-    let (at, explicit) = raw_data_set_start(bytes)?;
+/// A DICOM file without `DICM` ([`headless_start`]) read as its file would be: its file meta
+/// after the missing `DICM`, or its data set in the transfer syntax it is written in (explicit or
+/// implicit VR little endian).
+fn read_headless(bytes: &[u8]) -> Option<Result<DefaultDicomObject, String>> {
+    let (at, group, explicit) = headless_start(bytes)?;
+    if group == 0x02 {
+        let with_magic = [&[0; 128][..], b"DICM", &bytes[at..]].concat();
+        let read = OpenFileOptions::new().read_preamble(ReadPreamble::Always).from_reader(&with_magic[..]);
+        return Some(read.map_err(|e| format!("a DICOM file without `DICM` that cannot be read: damaged? ({e})")));
+    }
     let syntax = match explicit {
         true => dicom_transfer_syntax_registry::entries::EXPLICIT_VR_LITTLE_ENDIAN.erased(),
         false => dicom_transfer_syntax_registry::entries::IMPLICIT_VR_LITTLE_ENDIAN.erased(),
@@ -71,7 +83,7 @@ pub(super) fn parse_dicom(bytes: &[u8], wanted: Option<&str>) -> Result<Labelmap
         Err(e) if has_dicom_magic(bytes) => {
             return Err(format!("a DICOM file that cannot be read: cut short or damaged? ({e})"))
         }
-        Err(e) => read_raw_data_set(bytes).unwrap_or_else(|| Err(format!("not a DICOM file ({e})")))?,
+        Err(e) => read_headless(bytes).unwrap_or_else(|| Err(format!("not a DICOM file ({e})")))?,
     };
     let class = text(&object, tags::SOP_CLASS_UID).unwrap_or_default();
     if seg::SEGMENTATION_CLASSES.contains(&class.as_str()) {
@@ -176,11 +188,11 @@ pub(super) fn fill_missing_slices(
 
 /// The share of its largest slice at or above which a segment's first or last slice says it goes
 /// on beyond them: organs taper to their ends.
-const CUT_SHARE: f64 = 0.5;
+pub(super) const CUT_SHARE: f64 = 0.5;
 
 /// The share of the slice next to it at or above which an end slice is not tapering: a cut end
 /// is as large as its neighbour, a round end (a tumour on coarse slices) smaller.
-const CUT_NEIGHBOUR_SHARE: f64 = 0.9;
+pub(super) const CUT_NEIGHBOUR_SHARE: f64 = 0.9;
 
 /// A warning when a segment's first or last slice holds [`CUT_SHARE`] of its largest slice's
 /// pixels or more and [`CUT_NEIGHBOUR_SHARE`] of its neighbour's: the organ goes on beyond the

@@ -490,8 +490,8 @@ mod tests {
     }
 
     /// A SEG stored as its data set alone (no preamble, `DICM` or file meta), in explicit or
-    /// implicit VR, or after a preamble of zeros without `DICM`, reads as its Part 10 file does; a
-    /// damaged one says what it is.
+    /// implicit VR, or after a preamble of zeros, or with its file meta but no `DICM`, reads as
+    /// its Part 10 file does; a damaged one says what it is.
     #[test]
     fn a_data_set_without_file_meta_reads_as_its_file() {
         let file = liver_and_tumour();
@@ -501,12 +501,16 @@ mod tests {
             let mut raw = Vec::new();
             object.write_dataset_with_ts(&mut raw, &syntax).unwrap();
             assert_eq!(parse_dicom(&raw, None).unwrap(), whole, "{}", syntax.name());
+            assert!(crate::labelmap::dicom::is_dicom(&raw), "recognised by its content");
             let zeros = [vec![0; 128], raw.clone()].concat();
             assert_eq!(parse_dicom(&zeros, None).unwrap(), whole, "{} after zeros", syntax.name());
             let e = parse_dicom(&raw[..raw.len() / 2], None).unwrap_err();
             assert!(e.contains("a DICOM data set without file meta") && e.contains("cannot be read"), "{e}");
         }
         assert!(parse_dicom(b"hello, not DICOM at all", None).unwrap_err().starts_with("not a DICOM file"));
+        // A file whose preamble is there but not `DICM`.
+        let without_magic = [&file[..128], &file[132..]].concat();
+        assert_eq!(parse_dicom(&without_magic, None).unwrap(), whole);
     }
 
     #[test]
