@@ -148,6 +148,29 @@ pub fn frame_mix_up(organ: &Organ, cloud: &[Point]) -> Result<Option<String>> {
     }))
 }
 
+/// The warning for the targets' truth, `truth` (in the organ's frame, as read), that lies more
+/// than a quarter of the organ's size from the `targets` at rest on average and at most half as
+/// far with x and y negated: RAS given for LPS or the reverse. `None` otherwise (a truth in the
+/// cloud's own pose, under a rigid pre-alignment, is far either way and not flagged).
+pub fn truth_frame_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option<String> {
+    let mean_distance = |negate: bool| {
+        let d = targets.iter().zip(truth).map(|(t, p)| {
+            let p = if negate { [-p[0], -p[1], p[2]] } else { *p };
+            mesh::norm(mesh::sub(p, *t))
+        });
+        d.sum::<f64>() / targets.len().max(1) as f64
+    };
+    let (given, other) = (mean_distance(false), mean_distance(true));
+    (given > 0.25 * organ.extent() && other <= 0.5 * given).then(|| {
+        format!(
+            "the truth lies {:.1} mm from the targets at rest on average, {:.1} mm with x and y negated: is it in RAS \
+             where the targets are in LPS, or the reverse? Give its frame (a file that names it, or --frame)",
+            mm(given),
+            mm(other)
+        )
+    })
+}
+
 /// The number of distinct points of `cloud`, counted up to `most` (a real cloud has that many
 /// among its first points: the count stops there).
 fn distinct_points(cloud: &[Point], most: usize) -> usize {
@@ -254,6 +277,22 @@ pub fn verdict(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A truth in the other frame (x and y negated) is named; a truth that moved as an organ
+    /// does, or one far off in another way, is not.
+    #[test]
+    fn a_truth_in_the_other_frame_is_named() {
+        let at = [0.05, 0.12, -0.2];
+        let organ = Organ::new(mesh::generate::box_tet(at, [0.2, 0.22, -0.12], [5, 3, 2]).unwrap(), None).unwrap();
+        let targets = vec![[0.1, 0.15, -0.17], [0.15, 0.18, -0.15]];
+        let moved: Vec<Point> = targets.iter().map(|p| [p[0] + 0.01, p[1], p[2] - 0.005]).collect();
+        assert_eq!(truth_frame_mix_up(&organ, &targets, &moved), None);
+        let other: Vec<Point> = moved.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
+        let w = truth_frame_mix_up(&organ, &targets, &other).expect("named");
+        assert!(w.contains("with x and y negated: is it in RAS"), "{w}");
+        let shifted: Vec<Point> = targets.iter().map(|p| [p[0], p[1], p[2] + 0.3]).collect();
+        assert_eq!(truth_frame_mix_up(&organ, &targets, &shifted), None);
+    }
 
     /// A view of the organ passes; the same points in millimetres, in kilometres or all at one
     /// place are refused with what they probably are.
