@@ -212,6 +212,9 @@ def test_register_writes_what_the_command_line_writes(case, tmp_path):
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["frames"] == 1 and summary["per_frame"][0]["iterations"] == r.iterations
     assert (tmp_path / "out" / "targets.csv").read_text().startswith("x0_mm,y0_mm,z0_mm,x_mm,y_mm,z_mm\n")
+    # An earlier run's results are not overwritten.
+    with pytest.raises(augsim.AugsimError, match="results of an earlier run"):
+        reg.register(case["cloud"], out=tmp_path / "out")
     # Labelled targets keep their labels in targets.csv.
     labelled = tmp_path / "labelled_mm.csv"
     rows = [f"T{k},{p[0]},{p[1]},{p[2]}" for k, p in enumerate(case["rest"])]

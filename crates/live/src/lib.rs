@@ -482,9 +482,13 @@ fn read_messages(shared: &Shared) {
             Ok(Incoming::Other { kind, device }) => {
                 // Said once per kind and device: a navigation system may send other messages often.
                 if ignored.insert((kind.clone(), device.clone())) {
+                    let features = match shared.options.identification {
+                        Some(_) => ", tracked features from 'features'",
+                        None => "",
+                    };
                     let warning = format!(
                         "{kind} messages from device '{device}' are ignored: clouds come as POLYDATA or POINT from \
-                         device 'cloud', tracked features from 'features'"
+                         device 'cloud'{features}, and a STRING from device 'reset' restarts from rest"
                     );
                     log(format_args!("{}: {warning}", shared.peer));
                     shared.send_json("warning", &serde_json::json!({ "warnings": [warning] }));

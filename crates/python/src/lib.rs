@@ -400,7 +400,9 @@ impl Registration {
     /// a directory, also writes there what `augsim register` writes: organ.vtu (m), targets.csv (in
     /// `units`), summary.json, registration.png and .html (pictures), and for 3D Slicer
     /// targets.mrk.json, organ_deformed.vtk and displacement.nrrd (mm), all
-    /// in the clouds' frame (`frame`, or its default), which they name when known. Raises ValueError for an array of another shape,
+    /// in the clouds' frame (`frame`, or its default), which they name when known; a directory
+    /// that holds an earlier run's results (its summary.json) is refused, as `augsim register`
+    /// refuses it. Raises ValueError for an array of another shape,
     /// AugsimError for a cloud augsim rejects (no point, a NaN) or a failed registration (the
     /// warm start is then kept). What to know of the files written (a displacement.nrrd left
     /// out, or folded somewhere) comes as a UserWarning.
@@ -408,8 +410,10 @@ impl Registration {
     fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>, out: Option<PathBuf>) -> PyResult<Registered> {
         let cloud: Vec<Point> = points(cloud, "cloud")?.into_iter().map(|p| self.given.point_in(p)).collect();
         let (Tracked { registration: result, targets, rigid, target_std }, moved, notes) = compute(py, || {
-            // A directory that cannot be made fails before the cloud moves the warm start on.
+            // A directory that cannot be made, or holds an earlier run's results, fails before the
+            // cloud moves the warm start on.
             if let Some(dir) = &out {
+                app::output::run_dir(Some(dir), dir)?;
                 std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
             }
             let mut state = locked(&self.state)?;

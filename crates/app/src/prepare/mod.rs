@@ -497,9 +497,18 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
         );
     }
     let located = register::Organ::new(organ.clone(), None)?;
+    // Positions in messages are the set-up's; say so where the files' differ.
+    let shown = match given.filter(|&f| f != SET_UP_FRAME) {
+        Some(read) => format!(
+            " (positions in the set-up's {} frame: x and y negated from the {} the file was read in)",
+            SET_UP_FRAME.name(),
+            read.name()
+        ),
+        None => String::new(),
+    };
     let landmark_warnings = located
         .check_landmarks(&landmarks)
-        .with_context(|| format!("the landmarks of {}", options.attach.display()))?;
+        .with_context(|| format!("the landmarks of {}{shown}", options.attach.display()))?;
     let distance = hold_distance(options, &organ, &landmarks)?;
     let attached = Near { points: landmarks.clone(), file: None, distance, surface: true }.nodes(&organ)?;
     if attached.is_empty() {
@@ -524,7 +533,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
     ));
     lines.extend(landmark_warnings.into_iter().map(|w| format!("warning: {w}")));
     let (_, warnings) = located.locate_targets(&targets, &labelled_targets.labels).map_err(|e| {
-        let context = format!("the targets of {}", options.targets.display());
+        let context = format!("the targets of {}{shown}", options.targets.display());
         match thin_part_left_out(&surface, &located, &targets) {
             Some(why) => anyhow::anyhow!("{e}: {why}").context(context),
             None => anyhow::Error::from(e).context(context),
