@@ -1,21 +1,4 @@
-//! Abaqus and CalculiX input decks (`.inp`): the mesh and its node and element sets.
-//!
-//! Read: `*NODE` (rectangular coordinates; missing ones are 0, as Abaqus reads them), `*ELEMENT`
-//! of the solid types C3D4, C3D10 and C3D8 and their variants (C3D4H, C3D10M, C3D8R, C3D8I…),
-//! whose node orders are VTK's, `*NSET` and `*ELSET` (lists of numbers and of sets named before or
-//! after, `GENERATE` ranges, `*NSET, ELSET=` for the nodes of an element set), the `NSET=` and
-//! `ELSET=` of `*NODE` and `*ELEMENT`, and `*INCLUDE` (a path relative to the including file's
-//! directory, as CalculiX decks made by cgx use it). Other elements (shells, beams, springs) make
-//! no cell but their nodes count in element sets. Every other keyword (materials, sections,
-//! steps, boundary conditions, loads) is skipped with its data lines: the loads are a scenario's.
-//! Keywords, parameters and set names are case-insensitive, as in Abaqus; a region keeps its set's
-//! spelling where first defined.
-//!
-//! Regions: every node set, and every element set as the nodes of its elements (a node set and
-//! an element set of the same name add up); an element set that holds every solid element is the
-//! whole mesh, not a region. Node numbers are the file's: [`Mesh::file_nodes`] keeps them, so
-//! that `list` selections take them. Other solid elements (C3D6, C3D15, C3D20…) are refused; so
-//! are decks with several `*PART`s or an `*INSTANCE` placed by a translation or rotation.
+//! Abaqus and CalculiX input decks (`.inp`): the mesh and its node and element sets ([`read_inp`]).
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -406,8 +389,24 @@ fn listed(line: &Line, e: &[&str]) -> Result<Vec<Member>, MeshError> {
         .collect()
 }
 
-/// Reads the mesh of an Abaqus or CalculiX input deck, its sets as regions (see the
-/// [module](self) documentation).
+/// Reads the mesh of an Abaqus or CalculiX input deck, its sets as regions.
+///
+/// Read: `*NODE` (rectangular coordinates; missing ones are 0, as Abaqus reads them), `*ELEMENT`
+/// of the solid types C3D4, C3D10 and C3D8 and their variants (C3D4H, C3D10M, C3D8R, C3D8I…),
+/// whose node orders are VTK's, `*NSET` and `*ELSET` (lists of numbers and of sets named before or
+/// after, `GENERATE` ranges, `*NSET, ELSET=` for the nodes of an element set), the `NSET=` and
+/// `ELSET=` of `*NODE` and `*ELEMENT`, and `*INCLUDE` (a path relative to the including file's
+/// directory, as CalculiX decks made by cgx use it). Other elements (shells, beams, springs) make
+/// no cell but their nodes count in element sets. Every other keyword (materials, sections,
+/// steps, boundary conditions, loads) is skipped with its data lines: the loads are a scenario's.
+/// Keywords, parameters and set names are case-insensitive, as in Abaqus; a region keeps its set's
+/// spelling where first defined.
+///
+/// Regions: every node set, and every element set as the nodes of its elements (a node set and
+/// an element set of the same name add up); an element set that holds every solid element is the
+/// whole mesh, not a region. Node numbers are the file's: [`Mesh::file_nodes`] keeps them, so
+/// that `list` selections take them. Other solid elements (C3D6, C3D15, C3D20…) are refused; so
+/// are decks with several `*PART`s or an `*INSTANCE` placed by a translation or rotation.
 pub fn read_inp(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
     let path = path.as_ref();
     let mut deck = Deck::default();
