@@ -247,6 +247,18 @@ pub fn immersed_fill(mesh: &Mesh) -> (f64, usize) {
     (organ, fraction.iter().filter(|&&f| f < 1.0).count())
 }
 
+/// The edges of a mesh's boundary surface shared by more than two of its triangles: where cells
+/// meet along an edge only, at the surface (a surface there is not a manifold).
+fn pinched_edges(mesh: &Mesh) -> usize {
+    let mut count: std::collections::HashMap<[usize; 2], usize> = std::collections::HashMap::new();
+    for t in &mesh::boundary_surface(mesh).triangles {
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            *count.entry([a.min(b), a.max(b)]).or_default() += 1;
+        }
+    }
+    count.values().filter(|&&n| n > 2).count()
+}
+
 /// Writes the mesh in metres with its regions (point data `region_<name>`, or Gmsh physical
 /// groups) and, for an immersed grid, its cells' volume fractions (not in `.msh`); to .stl or
 /// .obj, its boundary surface in millimetres, as 3D Slicer and surface tools read them, naming
@@ -316,6 +328,14 @@ impl Meshed {
                         q.pieces
                     ));
                 }
+                let pinched = pinched_edges(mesh);
+                if pinched > 0 {
+                    lines.push(format!(
+                        "warning    {pinched} edge(s) of its surface are shared by four triangles (two tetrahedra meet \
+                         there along an edge only): surface tools refuse such a surface (.stl, .obj); mesh with \
+                         another --tets"
+                    ));
+                }
                 lines.extend(self.coverage.as_ref().and_then(coverage_warning).map(|w| format!("warning    {w}")));
                 volume_line(q.volume, q.reference_volume)
             }
@@ -346,6 +366,28 @@ mod tests {
 
     fn phantom(immersed: Option<f64>) -> MeshOptions {
         MeshOptions { surface: None, label: None, length: None, units: None, repair: true, tets: 800, immersed }
+    }
+
+    /// Two tetrahedra meeting along an edge only make a surface edge of four triangles; a box of
+    /// tetrahedra has none.
+    #[test]
+    fn a_surface_edge_of_four_triangles_is_counted() {
+        let box_mesh = mesh::box_tet([0.0; 3], [1.0; 3], [2, 2, 2]).unwrap();
+        assert_eq!(pinched_edges(&box_mesh), 0);
+        let nodes = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [0.0, -1.0, 0.0],
+            [0.0, 0.0, -1.0],
+        ];
+        let mut second = [0, 1, 4, 5];
+        if mesh::tet_volume(nodes[0], nodes[1], nodes[4], nodes[5]) < 0.0 {
+            second.swap(2, 3);
+        }
+        let pinched = Mesh::new(nodes, mesh::Cells::Tet4(vec![[0, 1, 2, 3], second])).unwrap();
+        assert_eq!(pinched_edges(&pinched), 1);
     }
 
     #[test]

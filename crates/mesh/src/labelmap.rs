@@ -149,7 +149,32 @@ fn read_labelmap_choosing(path: &Path, label: Option<&str>) -> Result<Labelmap, 
         return Err(parse_error(path, "the labelmap is empty: every voxel is 0 (background)"));
     }
     refuse_image(&map.labels).map_err(|m| parse_error(path, m))?;
+    let mut map = map;
+    map.warnings.extend(shear_warning(&map.affine).map(|w| (None, w)));
     Ok(map)
+}
+
+/// The angle (degrees) by which a voxel grid's axes may stray from perpendicular before it is
+/// called sheared (a float32 header's rounding is far below it).
+const SHEAR_DEG: f64 = 0.05;
+
+/// A warning for a voxel-to-world affine whose axes are not perpendicular (a sheared grid, which
+/// 3D Slicer, through ITK, does not show as the file gives it), naming the largest stray.
+fn shear_warning(affine: &[[f64; 4]; 3]) -> Option<String> {
+    let axis = |c: usize| -> crate::Point { std::array::from_fn(|r| affine[r][c]) };
+    let stray = [(0, 1), (0, 2), (1, 2)]
+        .into_iter()
+        .map(|(a, b)| {
+            let cos = crate::dot(axis(a), axis(b)) / (crate::norm(axis(a)) * crate::norm(axis(b)));
+            90.0 - cos.abs().clamp(0.0, 1.0).acos().to_degrees()
+        })
+        .fold(0.0, f64::max);
+    (stray > SHEAR_DEG).then(|| {
+        format!(
+            "the file's voxel axes are {stray:.1}° from perpendicular (a sheared grid): the organ is read as the \
+             file places it, while 3D Slicer (ITK) shows the image without the shear, so that the two disagree"
+        )
+    })
 }
 
 /// Whether a detached header's data file names several files: `LIST`, or a `printf` pattern with
@@ -219,7 +244,11 @@ fn label(i: usize, x: f64) -> Result<i32, String> {
     if x == x.round() && (f64::from(i32::MIN)..=f64::from(i32::MAX)).contains(&x) {
         Ok(x as i32)
     } else {
-        Err(format!("voxel {i} holds {x}, not a label (a labelmap holds whole numbers)"))
+        Err(format!(
+            "voxel {i} holds {}, not a label (a labelmap holds whole numbers; threshold a probability map, e.g. at \
+             0.5)",
+            if x.abs() < 1e-3 { format!("{x:.3e}") } else { crate::repair::number(x) }
+        ))
     }
 }
 
@@ -777,12 +806,22 @@ impl Labelmap {
                         self.present_text()
                     )))
                 }
-                _ => {
+                _ if label == 0 => {
                     return Err(MeshError::Invalid(format!(
-                        "label {choice} is not in the labelmap; labels present: {}",
+                        "label 0 is the background, not a segment; labels present: {}",
                         self.present_text()
                     )))
                 }
+                // A segment the file names, which holds no voxel: said so as when named.
+                _ => match self.segments.iter().find(|s| s.2 == label) {
+                    Some(s) => (s.1, s.2),
+                    None => {
+                        return Err(MeshError::Invalid(format!(
+                            "label {choice} is not in the labelmap; labels present: {}",
+                            self.present_text()
+                        )))
+                    }
+                },
             }
         } else {
             let named: Vec<&(String, usize, i32)> =
@@ -1114,7 +1153,9 @@ fn touched_borders(mask: &VoxelMask) -> Vec<String> {
                         && next.is_none_or(|&next| end >= dicom::CUT_NEIGHBOUR_SHARE * next as f64)))
         };
         faces.extend(cut(c[0], c.get(1)).then(|| format!("{name} = 0")));
-        faces.extend(cut(c[n - 1], n.checked_sub(2).map(|i| &c[i])).then(|| format!("{name} = {}", n - 1)));
+        if n > 1 {
+            faces.extend(cut(c[n - 1], c.get(n - 2)).then(|| format!("{name} = {}", n - 1)));
+        }
     }
     faces
 }
@@ -1218,7 +1259,7 @@ mod tests {
         let absent = error("7");
         assert!(absent.contains("label 7 is not in the labelmap") && absent.contains("5 ('liver',"), "{absent}");
         assert!(error("kidney").contains("no segment is named 'kidney'; labels present: 2 ('tumour',"));
-        assert!(error("0").contains("not in the labelmap"));
+        assert!(error("0").contains("label 0 is the background, not a segment"));
         let unchosen = read_labelmap_surface(&path, None, &ExtractOptions::default()).unwrap_err().to_string();
         assert!(unchosen.contains("holds several labels: choose one with --label"), "{unchosen}");
     }
@@ -1400,6 +1441,24 @@ mod tests {
         let read = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
         let w = read.warnings.iter().find(|w| w.contains("no organ's size")).expect("microns");
         assert!(w.contains("spans 0.019") && w.contains("0.00075 × 0.000875 × 0.0025 mm"), "{w}");
+    }
+
+    /// A sheared voxel grid (its axes not perpendicular) is read as the file places it, and said
+    /// to be; a rotated, flipped, anisotropic one is not.
+    #[test]
+    fn a_sheared_grid_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut map, _) = two_balls(Frame::Ras);
+        assert_eq!(shear_warning(&map.affine), None);
+        let (c, s) = (0.6_f64.cos(), 0.6_f64.sin());
+        let turned = [[-0.75 * c, -0.875 * s, 0.0, 60.0], [-0.75 * s, 0.875 * c, 0.0, -100.0], [0.0, 0.0, 2.5, 200.0]];
+        assert_eq!(shear_warning(&turned), None);
+        map.affine[0][1] = 0.3 * 0.875;
+        let path = dir.path().join("shear.nii");
+        write_nifti(&path, &map).unwrap();
+        let read = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+        let w = read.warnings.iter().find(|w| w.contains("from perpendicular")).expect("named");
+        assert!(w.contains("16.7° from perpendicular (a sheared grid)"), "{w}");
     }
 
     /// Where both forms are set, the sform is read when its code is 1 (scanner), the qform when
