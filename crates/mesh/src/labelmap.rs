@@ -521,6 +521,22 @@ impl NrrdHeader {
     }
 }
 
+/// A NRRD `spacings` field as the axes' vectors, along i, j and k in turn (`nan` for a
+/// non-spatial axis, which has none).
+fn nrrd_spacings(text: &str) -> Result<Vec<Option<[f64; 3]>>, String> {
+    let mut spatial = 0;
+    text.split_whitespace()
+        .map(|s| match s.parse::<f64>() {
+            Ok(x) if x.is_nan() => Ok(None),
+            Ok(x) if x > 0.0 && x.is_finite() && spatial < 3 => {
+                spatial += 1;
+                Ok(Some(std::array::from_fn(|r| if r == spatial - 1 { x } else { 0.0 })))
+            }
+            _ => Err(format!("spacings: {s:?} is not a voxel size")),
+        })
+        .collect()
+}
+
 /// Parses "(x,y,z)" vectors of a NRRD field, white space allowed inside them ("(1, 0, 0)");
 /// "none" gives `None`.
 fn nrrd_vectors(text: &str) -> Result<Vec<Option<[f64; 3]>>, String> {
@@ -585,14 +601,20 @@ fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
     if dimension.parse::<usize>().ok() != Some(sizes.len()) {
         return Err(format!("dimension: {dimension}, but 'sizes' gives {} axes", sizes.len()));
     }
-    let directions = nrrd_vectors(header.field("space directions")?)?;
+    // A header without a space gives its voxel sizes alone (`spacings`): placed nowhere.
+    let placed = header.fields.contains_key("space directions") || !header.fields.contains_key("spacings");
+    let directions = match placed {
+        true => nrrd_vectors(header.field("space directions")?)?,
+        false => nrrd_spacings(header.field("spacings")?)?,
+    };
     let axes: Vec<[f64; 3]> = directions.iter().flatten().copied().collect();
     if axes.len() != 3 || directions.len() != sizes.len() {
+        let field = if placed { "space directions" } else { "spacings" };
         return Err(format!(
-            "'space directions' must give one vector per spatial axis (3, and 'none' per other axis of \
+            "'{field}' must give one vector per spatial axis (3, and 'none' per other axis of \
              'sizes', which has {}), got '{}'",
             sizes.len(),
-            header.field("space directions")?
+            header.field(field)?
         ));
     }
     // Layers of segments come first, as 3D Slicer writes them; a last axis of one voxel is no axis.
@@ -614,7 +636,8 @@ fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
         return Err(format!("bad sizes {sizes:?}"));
     }
     let count = layers * dims.iter().product::<usize>();
-    let frame = match header.field("space")?.to_ascii_lowercase().as_str() {
+    let space = if placed { header.field("space")?.to_ascii_lowercase() } else { "ras".to_string() };
+    let frame = match space.as_str() {
         "left-posterior-superior" | "lps" => Frame::Lps,
         "right-anterior-superior" | "ras" => Frame::Ras,
         other => {
@@ -644,7 +667,7 @@ fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
     let encoding = header.field("encoding")?;
     if matches!(encoding, "ascii" | "text" | "txt") {
         let labels = ascii_labels(data, count)?;
-        return Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed: true, warnings: Vec::new() });
+        return Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed, warnings: Vec::new() });
     }
     // As teem, the reference reader, does: binary data of more than one byte need their byte order.
     let little = match header.fields.get("endian").map(String::as_str) {
@@ -674,7 +697,7 @@ fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
         s => return Err(format!("bad byte skip {s}")),
     };
     let labels = labels(scalar, raw, count, dims[2], little)?;
-    Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed: true, warnings: Vec::new() })
+    Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed, warnings: Vec::new() })
 }
 
 /// The `count` labels of NRRD's ascii encoding: numbers separated by white space.
@@ -1070,8 +1093,9 @@ pub fn read_labelmap_surface(
         map.warnings.iter().filter(|(of, _)| of.is_none_or(|of| of == chosen)).map(|(_, w)| w.clone()).collect();
     if !map.placed {
         warnings.push(
-            "the file places its voxels nowhere (a NIfTI without qform and sform): the organ lies at its voxel \
-             indices times the spacing, not where the CT lies in the scanner's frame"
+            "the file places its voxels nowhere (a NIfTI without qform and sform, a NRRD with spacings but no space \
+             directions): the organ lies at its voxel indices times the spacing, not where the CT lies in the scanner's \
+             frame"
                 .to_string(),
         );
     }
@@ -1540,6 +1564,16 @@ mod tests {
         std::fs::write(&path, [header.as_bytes(), &[0, 0, 0, 1, 0, 0, 0, 0]].concat()).unwrap();
         let map = read_labelmap(&path).unwrap();
         assert_eq!(map.affine, [[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 2.0], [0.0, 0.0, 2.0, 3.0]]);
+        assert!(map.placed);
+        // Voxel sizes alone (`spacings`, no space), as ITK reads them: at the indices times the
+        // spacing, placed nowhere; a size that is not one is refused.
+        let header = "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nspacings: 0.8 0.9 2.5\nencoding: raw\n\n";
+        std::fs::write(&path, [header.as_bytes(), &[0, 0, 0, 1, 0, 0, 0, 0]].concat()).unwrap();
+        let map = read_labelmap(&path).unwrap();
+        assert_eq!(map.affine, [[0.8, 0.0, 0.0, 0.0], [0.0, 0.9, 0.0, 0.0], [0.0, 0.0, 2.5, 0.0]]);
+        assert!(!map.placed);
+        std::fs::write(&path, [header.replace("0.9", "-1").as_bytes(), &[0; 8]].concat()).unwrap();
+        assert!(read_labelmap(&path).unwrap_err().to_string().contains("spacings: \"-1\" is not a voxel size"));
     }
 
     #[test]
