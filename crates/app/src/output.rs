@@ -38,12 +38,7 @@ use crate::registration::RegistrationSpec;
 /// exist yet), which a run that fails before writing into it removes again.
 pub fn run_dir(out: Option<&Path>, parent: &Path) -> Result<(PathBuf, bool)> {
     if let Some(dir) = out {
-        if dir.join("summary.json").exists() {
-            anyhow::bail!(
-                "{} holds the results of an earlier run (summary.json): give another --out, or remove it",
-                dir.display()
-            );
-        }
+        refuse_earlier_run(dir)?;
         return Ok((dir.to_path_buf(), !dir.exists()));
     }
     std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
@@ -56,6 +51,18 @@ pub fn run_dir(out: Option<&Path>, parent: &Path) -> Result<(PathBuf, bool)> {
         }
     }
     anyhow::bail!("{} holds 99,999 runs: give --out", parent.display())
+}
+
+/// Refuses a folder `dir` that holds the results of an earlier run (its summary.json), so that two
+/// runs' files are never mixed.
+pub fn refuse_earlier_run(dir: &Path) -> Result<()> {
+    if dir.join("summary.json").exists() {
+        anyhow::bail!(
+            "{} holds the results of an earlier run (summary.json): give another --out, or remove it",
+            dir.display()
+        );
+    }
+    Ok(())
 }
 
 /// Passes `result` on; when it is a failure and the folder `dir` is the run's own (see

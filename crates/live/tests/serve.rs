@@ -502,23 +502,23 @@ fn features_step_the_identification_in_order_with_a_bounded_backlog() {
 /// error reaches the client that asked.
 #[test]
 fn the_first_client_takes_the_prebuilt_object_and_the_next_ones_their_own_built_ahead() {
-    let built = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
-    let count = std::sync::Arc::clone(&built);
+    // Each build says so on a channel: the test waits for it, not for a time.
+    let (said, builds) = std::sync::mpsc::channel();
+    let count = std::sync::atomic::AtomicUsize::new(0);
     let factory = augsim_live::built_ahead(Some("prebuilt".to_string()), move || {
         let n = count.fetch_add(1, Ordering::SeqCst) + 1;
+        let _ = said.send(n); // the last build ahead may outlive the test's receiver
         if n < 3 {
             Ok(format!("built {n}"))
         } else {
             Err("no more".to_string())
         }
     });
-    let settle = || std::thread::sleep(Duration::from_millis(200));
-    settle();
-    assert_eq!(built.load(Ordering::SeqCst), 1, "one built ahead before any client asks");
+    let next_build = || builds.recv_timeout(Duration::from_secs(60)).unwrap();
+    assert_eq!(next_build(), 1, "one built ahead before any client asks");
     assert_eq!(factory().unwrap(), "prebuilt");
     assert_eq!(factory().unwrap(), "built 1");
-    settle();
-    assert_eq!(built.load(Ordering::SeqCst), 2, "the next one built as soon as one is taken");
+    assert_eq!(next_build(), 2, "the next one built as soon as one is taken");
     assert_eq!(factory().unwrap(), "built 2");
     assert_eq!(factory().unwrap_err(), "no more");
     let without = augsim_live::built_ahead(None, || Ok(7));

@@ -134,7 +134,7 @@ fn read_labelmap_choosing(path: &Path, label: Option<&str>) -> Result<Labelmap, 
     let bytes = std::fs::read(path).map_err(|error| MeshError::Io { path: path.display().to_string(), error })?;
     let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     let folder = path.parent().unwrap_or(Path::new(""));
-    let map = if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
+    let mut map = if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
         parse_nrrd(&bytes, folder).map_err(|m| parse_error(path, m))?
     } else if name.ends_with(".mha") || name.ends_with(".mhd") {
         metaimage::parse_metaimage(&bytes, folder).map_err(|m| parse_error(path, m))?
@@ -149,7 +149,6 @@ fn read_labelmap_choosing(path: &Path, label: Option<&str>) -> Result<Labelmap, 
         return Err(parse_error(path, "the labelmap is empty: every voxel is 0 (background)"));
     }
     refuse_image(&map.labels).map_err(|m| parse_error(path, m))?;
-    let mut map = map;
     map.warnings.extend(shear_warning(&map.affine).map(|w| (None, w)));
     Ok(map)
 }

@@ -413,7 +413,7 @@ impl Registration {
             // A directory that cannot be made, or holds an earlier run's results, fails before the
             // cloud moves the warm start on.
             if let Some(dir) = &out {
-                app::output::run_dir(Some(dir), dir)?;
+                app::output::refuse_earlier_run(dir)?;
                 std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
             }
             let mut state = locked(&self.state)?;

@@ -190,12 +190,12 @@ impl Deck {
                     }
                     self.coords.push(p);
                     self.node_numbers.push(n as usize);
-                    if let Some(set) = set.clone() {
-                        self.set(true, &set).members.push((Member::Number(n), place));
+                    if let Some(set) = set {
+                        self.set(true, set).members.push((Member::Number(n), place));
                     }
                 }
                 Block::Elements { kind, set } => {
-                    let (kind, set) = (*kind, set.clone());
+                    let kind = *kind;
                     let (n, mut nodes, at, listed) = match pending.take() {
                         Some((n, nodes, at)) => (n, nodes, at, &e[..]),
                         None => (
@@ -226,12 +226,12 @@ impl Deck {
                     }
                     self.elements.push((n, Element { kind, nodes, place: at }));
                     if let Some(set) = set {
-                        self.set(false, &set).members.push((Member::Number(n), at));
+                        self.set(false, set).members.push((Member::Number(n), at));
                     }
                 }
                 Block::NodeSet { name, generate } | Block::ElementSet { name, generate } => {
                     let members = if *generate { generated(&line, &e)? } else { listed(&line, &e)? };
-                    let set = self.set(matches!(block, Block::NodeSet { .. }), &name.clone());
+                    let set = self.set(matches!(block, Block::NodeSet { .. }), name);
                     set.members.extend(members.into_iter().map(|m| (m, place)));
                 }
             }
@@ -436,20 +436,18 @@ pub fn read_inp(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
         for &node in &element.nodes {
             conn.push(deck.node(node, element.place, &format!("element {n}"))?);
         }
-        solids.push(*n);
+        solids.push(*n as usize);
     }
     let Some((kind, _)) = kind else {
         return Err(parse_error(path, "no solid elements (C3D4, C3D10 or C3D8): not a volume mesh"));
     };
     let describe = |i: usize| format!("element {}", solids[i]);
-    let numbers: Vec<usize> = solids.iter().map(|&n| n as usize).collect();
-    let (mut mesh, kept) =
-        finish_volume(path, &deck.coords, kind, conn, &describe, Some(&deck.node_numbers), &numbers)?;
+    let (mut mesh, kept) = finish_volume(path, &deck.coords, kind, conn, &describe, Some(&deck.node_numbers), &solids)?;
     let mut mesh_index = vec![usize::MAX; deck.coords.len()];
     for (i, &f) in kept.iter().enumerate() {
         mesh_index[f] = i;
     }
-    let solid_set: HashSet<u64> = solids.iter().copied().collect();
+    let solid_set: HashSet<u64> = solids.iter().map(|&n| n as u64).collect();
     for (nodes, key) in &deck.set_order {
         let name = if *nodes { &deck.node_sets[key].name } else { &deck.element_sets[key].name };
         let members = deck.resolve(*nodes, key, &mut HashSet::new())?;
