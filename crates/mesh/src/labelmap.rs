@@ -1,4 +1,4 @@
-//! Segmentations as labelmaps: NIfTI-1 (`.nii`, `.nii.gz`, as TotalSegmentator writes them) and
+//! Segmentations as labelmaps: NIfTI-1 and NIfTI-2 (`.nii`, `.nii.gz`, as TotalSegmentator writes them) and
 //! NRRD (`.nrrd`, `.seg.nrrd`, as 3D Slicer saves segmentations; `.nhdr`, a header whose data
 //! lie in a file beside it), MetaImage (`.mha`, `.mhd`, as ITK-SNAP and SLIVER07 give them) and
 //! DICOM SEG and RT Structure Sets (`.dcm` or no extension, as TotalSegmentator, 3D Slicer,
@@ -18,7 +18,7 @@
 //! a closed surface. [`write_displacement_nrrd`] writes a displacement-field transform as a NRRD
 //! image that 3D Slicer and ITK load.
 //!
-//! Supported: NIfTI-1 single files (`n+1`), either byte order, gzipped or not, data types u8,
+//! Supported: NIfTI-1 and NIfTI-2 single files (`n+1`, `n+2`), either byte order, gzipped or not, data types u8,
 //! i8, i16, u16, i32, u32, i64, u64, f32, f64, the sform or qform affine as 3D Slicer chooses; NRRD with
 //! attached data or detached in one file (`data file`, relative to the header's folder), `raw`,
 //! `gzip` or `ascii` encoding, the same types, `space` LPS or RAS (or their long
@@ -251,32 +251,109 @@ fn label(i: usize, x: f64) -> Result<i32, String> {
     }
 }
 
-/// Parses a NIfTI-1 single file (header, then the voxels at `vox_offset`).
-fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
-    if bytes.len() < 352 {
-        return Err(format!("too short for a NIfTI-1 file ({} bytes)", bytes.len()));
-    }
-    let little = match (i32::from_le_bytes(bytes[0..4].try_into().unwrap()), &bytes[344..348]) {
-        (348, _) => true,
-        (_, _) if i32::from_be_bytes(bytes[0..4].try_into().unwrap()) == 348 => false,
-        _ => return Err("not a NIfTI-1 file (the header size is not 348; NIfTI-2 is not supported)".into()),
-    };
-    if &bytes[344..348] != b"n+1\0" {
-        return Err("not a single-file NIfTI-1 (magic is not \"n+1\"; a .hdr/.img pair is not supported)".into());
-    }
-    let i16_at = |o: usize| {
-        let b = [bytes[o], bytes[o + 1]];
-        if little {
-            i16::from_le_bytes(b)
-        } else {
-            i16::from_be_bytes(b)
+/// The fields of a NIfTI-1 or NIfTI-2 header that size, read and place the voxels (NIfTI-2 holds
+/// the same fields, wider, at other offsets).
+struct NiftiHeader {
+    version: u8,
+    little: bool,
+    dim: [i64; 8],
+    datatype: i16,
+    pixdim: [f64; 8],
+    vox_offset: f64,
+    scl_slope: f64,
+    scl_inter: f64,
+    xyzt_units: u8,
+    qform_code: i32,
+    sform_code: i32,
+    quatern: [f64; 3],
+    qoffset: [f64; 3],
+    srow: [[f64; 4]; 3],
+}
+
+impl NiftiHeader {
+    /// The header of a single-file NIfTI-1 (`n+1`, 348 bytes) or NIfTI-2 (`n+2`, 540 bytes), in
+    /// either byte order, which its size field tells.
+    fn parse(bytes: &[u8]) -> Result<NiftiHeader, String> {
+        let size = |little: bool| {
+            let b: [u8; 4] = bytes.get(0..4).and_then(|b| b.try_into().ok()).unwrap_or_default();
+            if little {
+                i32::from_le_bytes(b)
+            } else {
+                i32::from_be_bytes(b)
+            }
+        };
+        let (version, little) = match (size(true), size(false)) {
+            (348, _) => (1, true),
+            (_, 348) => (1, false),
+            (540, _) => (2, true),
+            (_, 540) => (2, false),
+            _ => return Err("not a NIfTI file (its header size is neither 348, NIfTI-1, nor 540, NIfTI-2)".into()),
+        };
+        let header_size = if version == 1 { 352 } else { 544 };
+        if bytes.len() < header_size {
+            return Err(format!("too short for a NIfTI-{version} file ({} bytes)", bytes.len()));
         }
-    };
-    let f32_at = |o: usize| {
-        let b: [u8; 4] = bytes[o..o + 4].try_into().unwrap();
-        (if little { f32::from_le_bytes(b) } else { f32::from_be_bytes(b) }) as f64
-    };
-    let dim: Vec<i64> = (0..8).map(|d| i16_at(40 + 2 * d) as i64).collect();
+        let at = |o: usize, n: usize| -> Vec<u8> {
+            let mut b = bytes[o..o + n].to_vec();
+            if !little {
+                b.reverse();
+            }
+            b
+        };
+        let i16_at = |o: usize| i16::from_le_bytes(at(o, 2).try_into().unwrap());
+        let i32_at = |o: usize| i32::from_le_bytes(at(o, 4).try_into().unwrap());
+        let i64_at = |o: usize| i64::from_le_bytes(at(o, 8).try_into().unwrap());
+        let f32_at = |o: usize| f32::from_le_bytes(at(o, 4).try_into().unwrap()) as f64;
+        let f64_at = |o: usize| f64::from_le_bytes(at(o, 8).try_into().unwrap());
+        if version == 1 {
+            if &bytes[344..348] != b"n+1\0" {
+                return Err(
+                    "not a single-file NIfTI-1 (magic is not \"n+1\"; a .hdr/.img pair is not supported)".into()
+                );
+            }
+            return Ok(NiftiHeader {
+                version,
+                little,
+                dim: std::array::from_fn(|d| i16_at(40 + 2 * d) as i64),
+                datatype: i16_at(70),
+                pixdim: std::array::from_fn(|d| f32_at(76 + 4 * d)),
+                vox_offset: f32_at(108),
+                scl_slope: f32_at(112),
+                scl_inter: f32_at(116),
+                xyzt_units: bytes[123],
+                qform_code: i16_at(252) as i32,
+                sform_code: i16_at(254) as i32,
+                quatern: std::array::from_fn(|k| f32_at(256 + 4 * k)),
+                qoffset: std::array::from_fn(|k| f32_at(268 + 4 * k)),
+                srow: std::array::from_fn(|r| std::array::from_fn(|c| f32_at(280 + 16 * r + 4 * c))),
+            });
+        }
+        if &bytes[4..12] != b"n+2\0\r\n\x1a\n" {
+            return Err("not a single-file NIfTI-2 (magic is not \"n+2\"; a .hdr/.img pair is not supported)".into());
+        }
+        Ok(NiftiHeader {
+            version,
+            little,
+            dim: std::array::from_fn(|d| i64_at(16 + 8 * d)),
+            datatype: i16_at(12),
+            pixdim: std::array::from_fn(|d| f64_at(104 + 8 * d)),
+            vox_offset: i64_at(168) as f64,
+            scl_slope: f64_at(176),
+            scl_inter: f64_at(184),
+            xyzt_units: i32_at(500) as u8,
+            qform_code: i32_at(344),
+            sform_code: i32_at(348),
+            quatern: std::array::from_fn(|k| f64_at(352 + 8 * k)),
+            qoffset: std::array::from_fn(|k| f64_at(376 + 8 * k)),
+            srow: std::array::from_fn(|r| std::array::from_fn(|c| f64_at(400 + 32 * r + 8 * c))),
+        })
+    }
+}
+
+/// Parses a NIfTI-1 or NIfTI-2 single file (header, then the voxels at `vox_offset`).
+fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
+    let header = NiftiHeader::parse(bytes)?;
+    let (dim, little) = (header.dim, header.little);
     if !(3..=7).contains(&dim[0]) || (4..=dim[0] as usize).any(|d| dim[d] != 1) {
         return Err(format!(
             "expected a 3D volume, got dimensions {:?} (read {}-endian, as the header size says)",
@@ -284,11 +361,11 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
             if little { "little" } else { "big" }
         ));
     }
-    if dim[1..4].iter().any(|&n| n < 1) {
+    if dim[1..4].iter().any(|&n| n < 1 || n > u32::MAX as i64) {
         return Err(format!("bad dimensions {:?}", &dim[1..4]));
     }
     let dims = [dim[1] as usize, dim[2] as usize, dim[3] as usize];
-    let scalar = match i16_at(70) {
+    let scalar = match header.datatype {
         2 => Scalar::U8,
         4 => Scalar::I16,
         8 => Scalar::I32,
@@ -303,15 +380,15 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
             return Err(format!("data type {other} is not supported (u8, i8, i16, u16, i32, u32, i64, u64, f32, f64)"))
         }
     };
-    let pixdim: Vec<f64> = (0..8).map(|d| f32_at(76 + 4 * d)).collect();
-    let offset = f32_at(108);
-    if !(offset >= 348.0) || offset as usize > bytes.len() {
+    let offset = header.vox_offset;
+    let smallest = if header.version == 1 { 348.0 } else { 540.0 };
+    if !(offset >= smallest) || offset as usize > bytes.len() {
         return Err(format!("bad voxel offset {offset}"));
     }
-    let count = dims.iter().product::<usize>();
+    let count = dims.iter().try_fold(1usize, |n, &d| n.checked_mul(d)).ok_or("the image's size overflows")?;
     let mut labels = labels(scalar, &bytes[offset as usize..], count, dims[2], little)?;
     // As nifti1_io reads them: a zero or non-finite slope means no scaling, a non-finite intercept 0.
-    let (slope, intercept) = (f32_at(112), f32_at(116));
+    let (slope, intercept) = (header.scl_slope, header.scl_inter);
     let intercept = if intercept.is_finite() { intercept } else { 0.0 };
     if slope.is_finite() && slope != 0.0 && (slope != 1.0 || intercept != 0.0) {
         for l in labels.iter_mut() {
@@ -325,9 +402,9 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
             *l = v as i32;
         }
     }
-    let (qform_code, sform_code) = (i16_at(252), i16_at(254));
-    let unit_mm = nifti_unit_mm(bytes[123])?;
-    let (affine, both) = nifti_affine(qform_code, sform_code, dims, &pixdim, f32_at)?;
+    let (qform_code, sform_code) = (header.qform_code, header.sform_code);
+    let unit_mm = nifti_unit_mm(header.xyzt_units)?;
+    let (affine, both) = nifti_affine(&header, dims)?;
     let affine = in_millimetres(affine, unit_mm);
     let warnings = both
         .map(|(used, apart)| (used, apart * unit_mm))
@@ -378,15 +455,10 @@ fn in_millimetres(affine: [[f64; 4]; 3], mm_per_unit: f64) -> [[f64; 4]; 3] {
 /// qform (quaternion, offsets, spacing and qfac), otherwise the spacing alone; and when both are
 /// set, which one is read and how far apart (in the file's unit) the two place the image's corners
 /// (nibabel and FSL take the sform whatever its code).
-fn nifti_affine(
-    qform_code: i16,
-    sform_code: i16,
-    dims: [usize; 3],
-    pixdim: &[f64],
-    f32_at: impl Fn(usize) -> f64,
-) -> Result<([[f64; 4]; 3], Option<FormRead>), String> {
-    let sform = || std::array::from_fn(|r| std::array::from_fn(|c| f32_at(280 + 16 * r + 4 * c)));
-    let qform = || qform_affine(pixdim, &f32_at);
+fn nifti_affine(header: &NiftiHeader, dims: [usize; 3]) -> Result<([[f64; 4]; 3], Option<FormRead>), String> {
+    let (qform_code, sform_code, pixdim) = (header.qform_code, header.sform_code, &header.pixdim);
+    let sform = || header.srow;
+    let qform = || qform_affine(header);
     let (affine, other) = match (sform_code > 0, qform_code > 0) {
         (true, false) => (sform(), None),
         (true, true) if sform_code == 1 => (sform(), Some(("sform", qform()))),
@@ -416,8 +488,9 @@ type FormRead = (&'static str, f64);
 const FORMS_APART_MM: f64 = 0.1;
 
 /// The qform's voxel-to-world affine (quaternion, offsets, spacing and qfac), as nifti1_io makes it.
-fn qform_affine(pixdim: &[f64], f32_at: &impl Fn(usize) -> f64) -> [[f64; 4]; 3] {
-    let (mut b, mut c, mut d) = (f32_at(256), f32_at(260), f32_at(264));
+fn qform_affine(header: &NiftiHeader) -> [[f64; 4]; 3] {
+    let [mut b, mut c, mut d] = header.quatern;
+    let pixdim = &header.pixdim;
     // As nifti1_io reads it: where b² + c² + d² reaches 1, a = 0 and (b, c, d) is normalised,
     // so that the quaternion is a rotation and leaves the spacing as it is.
     let norm2 = b * b + c * c + d * d;
@@ -437,7 +510,7 @@ fn qform_affine(pixdim: &[f64], f32_at: &impl Fn(usize) -> f64) -> [[f64; 4]; 3]
     // As nifti1_io's nifti_quatern_to_mat44 does: a spacing that is not positive is taken as 1.
     let size = |d: usize| if pixdim[d] > 0.0 { pixdim[d] } else { 1.0 };
     let spacing = [size(1), size(2), qfac * size(3)];
-    let offset = [f32_at(268), f32_at(272), f32_at(276)];
+    let offset = header.qoffset;
     std::array::from_fn(|r| std::array::from_fn(|c| if c < 3 { rotation[r][c] * spacing[c] } else { offset[r] }))
 }
 
@@ -1259,6 +1332,62 @@ mod tests {
             std::fs::write(&path, bytes).unwrap();
             assert!(read_labelmap(&path).unwrap().labels == map.labels, "datatype {datatype}");
         }
+    }
+
+    /// The NIfTI-2 header of `map` (its fields at their NIfTI-2 offsets, 64-bit wide), 16-bit
+    /// labels after it, in either byte order, as nibabel's `Nifti2Image` writes one.
+    fn nifti2(map: &Labelmap, little: bool) -> Vec<u8> {
+        let mut bytes = vec![0u8; 544];
+        let mut put = |offset: usize, mut b: Vec<u8>| {
+            if !little {
+                b.reverse();
+            }
+            bytes[offset..offset + b.len()].copy_from_slice(&b);
+        };
+        put(0, 540i32.to_le_bytes().to_vec());
+        put(12, 4i16.to_le_bytes().to_vec());
+        put(14, 16i16.to_le_bytes().to_vec());
+        let dims = [3, map.dims[0] as i64, map.dims[1] as i64, map.dims[2] as i64, 1, 1, 1, 1];
+        dims.iter().enumerate().for_each(|(d, n)| put(16 + 8 * d, n.to_le_bytes().to_vec()));
+        let spacing = map.spacing();
+        let pixdim = [1.0, spacing[0], spacing[1], spacing[2], 1.0, 1.0, 1.0, 1.0];
+        pixdim.iter().enumerate().for_each(|(d, x)| put(104 + 8 * d, x.to_le_bytes().to_vec()));
+        put(168, 544i64.to_le_bytes().to_vec());
+        put(176, 1f64.to_le_bytes().to_vec());
+        put(348, 1i32.to_le_bytes().to_vec());
+        for r in 0..3 {
+            (0..4).for_each(|c| put(400 + 32 * r + 8 * c, map.affine[r][c].to_le_bytes().to_vec()));
+        }
+        put(500, 2i32.to_le_bytes().to_vec()); // xyzt_units: mm
+        bytes[4..12].copy_from_slice(b"n+2\0\r\n\x1a\n");
+        for &l in &map.labels {
+            bytes.extend(if little { (l as i16).to_le_bytes() } else { (l as i16).to_be_bytes() });
+        }
+        bytes
+    }
+
+    /// A NIfTI-2 file (either byte order, gzipped or not) reads as the NIfTI-1 of the same
+    /// voxels; its 64-bit affine is kept whole (NIfTI-1 rounds it to 32 bits).
+    #[test]
+    fn a_nifti2_labelmap_reads_as_its_nifti1() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut map, _) = two_balls(Frame::Ras);
+        map.affine[0][3] += 0.1;
+        map.segments.clear();
+        for little in [true, false] {
+            let path = dir.path().join("seg.nii");
+            std::fs::write(&path, nifti2(&map, little)).unwrap();
+            assert!(read_labelmap(&path).unwrap() == map, "little-endian {little}");
+            let gz = dir.path().join("seg.nii.gz");
+            write_maybe_gzipped(&gz, nifti2(&map, little), true).unwrap();
+            assert!(read_labelmap(&gz).unwrap() == map, "gzipped, little-endian {little}");
+        }
+        let mut bad = nifti2(&map, true);
+        bad[4..8].copy_from_slice(b"ni2\0");
+        let path = dir.path().join("pair.nii");
+        std::fs::write(&path, bad).unwrap();
+        let e = read_labelmap(&path).unwrap_err().to_string();
+        assert!(e.contains("not a single-file NIfTI-2"), "{e}");
     }
 
     #[test]
