@@ -396,6 +396,13 @@ fn handwritten_vtk_variants() {
     let surface = read_surface(d.join("voxel.vtk")).unwrap();
     assert_eq!(surface.triangles, vec![[0, 1, 2]]);
 
+    // VTK 9's polydata writer gives some OFFSETS and CONNECTIVITY as vtkIdType (64-bit ids).
+    let text = "# vtk DataFile Version 5.1\n3D Slicer output. SPACE=LPS\nASCII\nDATASET POLYDATA\n\
+        POINTS 4 float\n0 0 0 1 0 0 0 1 0 1 1 0\n\
+        POLYGONS 3 6\nOFFSETS vtkIdType\n0 3 6\nCONNECTIVITY vtkIdType\n0 1 2 2 1 3\n";
+    let s = read_surface(put(d, "ids.vtk", text)).unwrap();
+    assert_eq!(s.triangles, vec![[0, 1, 2], [2, 1, 3]]);
+
     // POLYDATA with a triangle strip and a quad polygon.
     let text = "# vtk DataFile Version 3.0\nstrip\nASCII\nDATASET POLYDATA\nPOINTS 5 double\n\
         0 0 0 1 0 0 0 1 0 1 1 0 2 0 0\nTRIANGLE_STRIPS 1 5\n4 0 1 2 3\nPOLYGONS 1 5\n4 1 4 3 2\n";

@@ -46,7 +46,9 @@ fn vtk_scalar(name: &str) -> Option<Scalar> {
         "unsigned_int" | "vtktypeuint32" => Scalar::U32,
         "int" | "vtktypeint32" => Scalar::I32,
         "unsigned_long" | "vtktypeuint64" => Scalar::U64,
-        "long" | "vtktypeint64" => Scalar::I64,
+        // vtkIdType: 64-bit in every VTK built with 64-bit ids (the default since VTK 6), as VTK 9
+        // writes the OFFSETS and CONNECTIVITY of some polydata.
+        "long" | "vtktypeint64" | "vtkidtype" => Scalar::I64,
         "float" | "vtktypefloat32" => Scalar::F32,
         "double" | "vtktypefloat64" => Scalar::F64,
         _ => return None,
