@@ -192,6 +192,18 @@ impl OrganInput {
                 })?;
                 let extent = largest_extent(&self.surface);
                 let shown = if extent >= 1.0 { format!("{extent:.1}") } else { format!("{extent:.4}") };
+                if unit == LengthUnit::Millimetre && ORGAN_EXTENT_M.contains(&LengthUnit::Centimetre.to_metres(extent))
+                {
+                    // 20 to 60 mm across in mm, or 20 to 60 cm across (a liver) in cm.
+                    self.notes.push((
+                        "warning",
+                        format!(
+                            "the organ, taken as in mm, is {extent:.0} mm across: if its file is in centimetres \
+                             ({:.0} mm across), give --units cm",
+                            10.0 * extent
+                        ),
+                    ));
+                }
                 (unit, format!("detected: largest extent {shown} in the file's unit; give --units otherwise"))
             }
         };
@@ -429,6 +441,16 @@ mod tests {
         let report = meshed.report().unwrap();
         assert!(report[2].starts_with("dihedral   min "), "{report:?}");
         assert!(meshed.notes.iter().any(|(topic, line)| *topic == "units" && line.starts_with("mm (detected")));
+        assert!(!meshed.notes.iter().any(|(topic, _)| *topic == "warning"), "{:?}", meshed.notes);
+        // A liver in cm is 20 to 60 across, as a small organ in mm: taken as mm, and named.
+        let liver_cm = dir.path().join("liver_cm.stl");
+        mesh::io::write_surface(&liver_cm, &mesh::generate::icosphere(12.0, 2)).unwrap();
+        let notes = mesh_organ(&MeshOptions { surface: Some(liver_cm), tets: 200, ..options.clone() }).unwrap().notes;
+        assert!(
+            notes.iter().any(|(topic, line)| *topic == "warning"
+                && line.contains("is 24 mm across: if its file is in centimetres (240 mm")),
+            "{notes:?}"
+        );
         // A unit given that makes no organ of it is warned about; a size in cm is named so.
         let in_metres = MeshOptions { units: Some(LengthUnit::Metre), tets: 200, ..options.clone() };
         let warned = mesh_organ(&in_metres).unwrap().notes;

@@ -281,8 +281,8 @@ fn scaled_fits(points: &[Point], scale: f64, organ_extent: f64, fits: impl Fn(&[
 
 /// The likely mistake behind `points` that do not lie where `fits` wants them (in an organ of
 /// extent `organ_extent`), as the end of an error message: that with x and y negated (a frame
-/// mix-up, RAS and LPS), or read 1,000 times smaller or larger (a unit mistake), `claim` holds.
-/// Empty when none of these fits.
+/// mix-up, RAS and LPS), or read 1,000 or 10 times smaller or larger (a unit mistake: m and mm,
+/// cm and mm), `claim` holds. Empty when none of these fits.
 pub(crate) fn likely_mistake(
     points: &[Point],
     organ_extent: f64,
@@ -298,6 +298,13 @@ pub(crate) fn likely_mistake(
         format!(" (read as 1,000 times smaller, {claim}: were they given in mm where m were expected?)")
     } else if scaled_fits(points, 1.0 / millimetre, organ_extent, &fits) {
         format!(" (read as 1,000 times larger, {claim}: were they given in m where mm were expected?)")
+    } else if scaled_fits(points, 0.1, organ_extent, &fits) {
+        format!(
+            " (read as 10 times smaller, {claim}: were they given in mm where the organ is in cm, or the organ's \
+             unit taken as mm where it is cm?)"
+        )
+    } else if scaled_fits(points, 10.0, organ_extent, &fits) {
+        format!(" (read as 10 times larger, {claim}: were they given in cm where the organ is in mm?)")
     } else {
         String::new()
     }
@@ -376,6 +383,9 @@ mod tests {
         assert!(refused(&small).ends_with("were they given in m where mm were expected?"), "{}", refused(&small));
         let negated: Vec<Point> = on.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
         assert!(refused(&negated).contains("with x and y negated every landmark lies on the organ"));
+        // Millimetres against an organ in cm taken as mm: 10 times too large.
+        let large: Vec<Point> = on.iter().map(|p| p.map(|x| x * 10.0)).collect();
+        assert!(refused(&large).contains("read as 10 times smaller, every landmark"), "{}", refused(&large));
     }
 
     /// A point inside is located in its element; one 2 mm above the top face follows the face's

@@ -457,6 +457,10 @@ fn thin_part_left_out(surface: &TriSurface, organ: &register::Organ, targets: &[
     })
 }
 
+/// A camera farther from the organ than this many times its size (its box's diagonal) is warned
+/// about: a unit mistake (a camera in mm read as m lies 1,000 times too far).
+const FAR_CAMERA: f64 = 10.0;
+
 /// Step 1: the surface repaired and meshed, the regions selected, the targets located.
 /// Returns what it did and the frame its inputs were given in.
 fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Option<Frame>)> {
@@ -495,6 +499,22 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
             "the camera at {} sees no node of the organ: is it given in the surface's unit and frame?",
             point_in_mm(camera)
         );
+    }
+    let size = {
+        let (lo, hi) = organ.bounds();
+        mesh::norm(mesh::sub(hi, lo))
+    };
+    let nearest = organ.nodes.iter().map(|&p| mesh::distance(p, camera)).fold(f64::INFINITY, f64::min);
+    if nearest > FAR_CAMERA * size {
+        lines.push(format!(
+            "warning: the camera at {} lies {:.0} mm from the organ, {:.0} times its size ({:.0} mm): a laparoscope \
+             or a depth camera is centimetres to a metre away; is it given in the surface's unit ({})?",
+            point_in_mm(camera),
+            mm(nearest),
+            nearest / size,
+            mm(size),
+            unit.symbol()
+        ));
     }
     let located = register::Organ::new(organ.clone(), None)?;
     // Positions in messages are the set-up's; say so where the files' differ.
@@ -1048,6 +1068,15 @@ mod tests {
         let route = format!("repair: route: volumetric (local repair cannot mend it: {defect})");
         assert!(lines.contains(&route), "{route} expected in {lines:?}");
         assert!(lines.iter().any(|l| l == "targets: 2 inside the organ"), "{lines:?}");
+        assert!(!lines.iter().any(|l| l.contains("the camera at")), "{lines:?}");
+        // A camera given in µm where the surface is in mm: 1,000 times too far, named.
+        options.camera = [0.0, 0.0, 300_000.0].into();
+        let (lines, _) = organ_step(&options, dir.path()).unwrap();
+        assert!(
+            lines.iter().any(|l| l.starts_with("warning: the camera at (0, 0, 300000) mm lies")
+                && l.ends_with("is it given in the surface's unit (mm)?")),
+            "{lines:?}"
+        );
     }
 
     #[test]
