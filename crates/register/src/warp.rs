@@ -28,6 +28,15 @@ pub struct WarpField {
     pub inverted: usize,
 }
 
+/// The margin of a field's grid around the registered organ, as a share of its largest extent.
+const MARGIN: f64 = 0.15;
+
+/// Outside the organ the deformation fades over at least this many times its largest
+/// displacement: fading faster, a boundary pushed in by more than the distance it fades over
+/// would fold the space around it (points outside mapped behind the boundary), and the field
+/// would have no inverse, which 3D Slicer needs to move models and markups with it.
+const FADE_OVER_MOTION: f64 = 2.0;
+
 /// The largest share of a registered organ's cells that may be inverted for its field to be
 /// made: a learned model's prediction may fold a cell or two; more is no map of the organ.
 pub const MOST_INVERTED: f64 = 0.01;
@@ -35,8 +44,9 @@ pub const MOST_INVERTED: f64 = 0.01;
 impl WarpField {
     /// The field of displacement `u` of `organ` (node-major, m), moved by `rigid` when the
     /// registration aligned the organ rigidly first. The grid covers the registered organ with a
-    /// margin of 15 % of its largest extent on every side, that extent divided into
-    /// `cells_across` steps. Inside the registered organ, `y + d(y)` is the rest position of the
+    /// margin of 15 % of its largest extent on every side, or twice its largest displacement where
+    /// that is more ([`FADE_OVER_MOTION`]), in steps of that extent and its default margins divided
+    /// into `cells_across`. Inside the registered organ, `y + d(y)` is the rest position of the
     /// point (exact in linear elements: the map is affine in each); outside, the deformation at
     /// the nearest point of the organ's boundary fades linearly to nothing across the margin, so
     /// that the tissue around the organ, which the model does not hold, stays where the rigid
@@ -74,8 +84,9 @@ impl WarpField {
         };
         let (lo, hi) = bounds(&in_cloud);
         let extent = mesh::longest_side((lo, hi));
-        let margin = 0.15 * extent;
-        let spacing = (extent + 2.0 * margin) / cells_across.max(1) as f64;
+        let spacing = (1.0 + 2.0 * MARGIN) * extent / cells_across.max(1) as f64;
+        let most = u.chunks_exact(3).map(|v| mesh::norm([v[0], v[1], v[2]])).fold(0.0, f64::max);
+        let margin = (MARGIN * extent).max(FADE_OVER_MOTION * most);
         let origin: Point = std::array::from_fn(|d| lo[d] - margin);
         let dims: [usize; 3] = std::array::from_fn(|d| ((hi[d] - lo[d] + 2.0 * margin) / spacing).ceil() as usize + 1);
         let point = |n: usize| -> Point {
@@ -156,7 +167,8 @@ mod tests {
         let motion = |p: Point| -> Point { [0.1 * p[0] + 0.05 * p[2], 0.02 * p[0], 0.0] };
         let u: Vec<f64> = cube.nodes.iter().flat_map(|&p| motion(p)).collect();
         let field = WarpField::of_registration(&organ, &u, None, 40).unwrap();
-        assert_eq!(field.dims.iter().max(), Some(&41), "40 steps across the largest extent");
+        // The registered cube spans 46 mm along x: 40 steps across it and its default margins.
+        assert!((field.spacing - 1.3 * 0.046 / 40.0).abs() < 1e-15, "{}", field.spacing);
         let mut worst: f64 = 0.0;
         for &x in &[[0.01, 0.02, 0.03], [0.035, 0.005, 0.02], [0.02, 0.02, 0.02]] {
             let y: Point = std::array::from_fn(|d| x[d] + motion(x)[d]);
@@ -191,6 +203,48 @@ mod tests {
         let far = moved.origin;
         let back = turn.inverse().apply(far);
         assert!(norm(std::array::from_fn(|k| far[k] + moved.at(far).unwrap()[k] - back[k])) < 1e-12);
+    }
+
+    /// The smallest Jacobian determinant of the map y ↦ y + d(y) over the grid's cells (central
+    /// differences at each inner grid point): positive where the field has an inverse.
+    fn smallest_jacobian(field: &WarpField) -> f64 {
+        let [nx, ny, nz] = field.dims;
+        let at = |i: usize, j: usize, k: usize| field.vectors[i + nx * (j + ny * k)];
+        let mut smallest = f64::INFINITY;
+        for k in 1..nz - 1 {
+            for j in 1..ny - 1 {
+                for i in 1..nx - 1 {
+                    let pairs = [
+                        (at(i + 1, j, k), at(i - 1, j, k)),
+                        (at(i, j + 1, k), at(i, j - 1, k)),
+                        (at(i, j, k + 1), at(i, j, k - 1)),
+                    ];
+                    let g: [[f64; 3]; 3] = std::array::from_fn(|r| {
+                        std::array::from_fn(|c| {
+                            f64::from(u8::from(r == c)) + (pairs[c].0[r] - pairs[c].1[r]) / (2.0 * field.spacing)
+                        })
+                    });
+                    let det = g[0][0] * (g[1][1] * g[2][2] - g[1][2] * g[2][1])
+                        - g[0][1] * (g[1][0] * g[2][2] - g[1][2] * g[2][0])
+                        + g[0][2] * (g[1][0] * g[2][1] - g[1][1] * g[2][0]);
+                    smallest = smallest.min(det);
+                }
+            }
+        }
+        smallest
+    }
+
+    /// A face pushed in by a quarter of the organ's size, more than the default margin (15 %):
+    /// the space outside it, fading over twice the push, does not fold.
+    #[test]
+    fn a_deep_push_leaves_a_field_without_folds() {
+        let cube = mesh::box_tet([0.0; 3], [0.04; 3], [6, 6, 6]).unwrap();
+        let organ = Organ::new(cube.clone(), None).unwrap();
+        let u: Vec<f64> = cube.nodes.iter().flat_map(|&p| [-0.25 * p[0], 0.0, 0.0]).collect();
+        let field = WarpField::of_registration(&organ, &u, None, 40).unwrap();
+        let det = smallest_jacobian(&field);
+        assert!(det > 0.3, "the field folds: Jacobian down to {det}");
+        assert!((field.spacing - 1.3 * 0.04 / 40.0).abs() < 1e-15, "the step is kept: {}", field.spacing);
     }
 
     /// An inverted organ has no field.

@@ -153,7 +153,7 @@ pub fn encode_points(grid: &Grid, points: &[Point], values: &[[f64; 3]], force: 
 /// Interpolation of grid fields (`[3, nx, ny, nz]`) to the nodes of a mesh embedded in the
 /// grid, weights computed once. Grid nodes outside the organ carry no trained value, so each
 /// mesh node uses only the corners of its grid cell that lie inside the organ (weights
-/// renormalised), or all eight when none does.
+/// renormalised), or, when none does (the tip of a thin lobe), the nearest grid nodes inside it.
 #[derive(Clone, Debug)]
 pub struct GridToMesh {
     grid_nodes: usize,
@@ -165,6 +165,37 @@ pub struct GridToMesh {
 /// box's nearest point: another mesh of the training organ (finer or coarser) may stick out of the
 /// box fitted around the training mesh by a fraction of a cell.
 pub const OUTSIDE_CELLS: f64 = 0.5;
+
+/// How many rings of grid cells around a mesh node's own cell [`GridToMesh`] searches for grid
+/// nodes inside the organ, when none of its cell's corners is (the tip of a thin lobe).
+const NEAREST_RINGS: usize = 3;
+
+/// The grid nodes inside the organ (`inside`) nearest to `p`, weighted by their inverse squared
+/// distance (summing to 1): those of the smallest block of cells around `p`'s cell, grown ring by
+/// ring up to [`NEAREST_RINGS`], that holds any; `None` if none does.
+fn nearest_inside(grid: &Grid, inside: &[bool], p: mesh::Point) -> Option<Vec<(usize, f64)>> {
+    let cell: [i64; 3] = std::array::from_fn(|d| ((p[d] - grid.origin[d]) / grid.spacing[d]).floor() as i64);
+    for ring in 1..=NEAREST_RINGS as i64 {
+        let range = |d: usize| (cell[d] - ring + 1).max(0)..=(cell[d] + ring).min(grid.dims[d] as i64 - 1);
+        let mut terms = Vec::new();
+        for i in range(0) {
+            for j in range(1) {
+                for k in range(2) {
+                    let g = grid.node_index(i as usize, j as usize, k as usize);
+                    if inside[g] {
+                        let d2 = mesh::distance(p, grid.node(i as usize, j as usize, k as usize)).powi(2);
+                        terms.push((g, 1.0 / d2.max(1e-30)));
+                    }
+                }
+            }
+        }
+        if !terms.is_empty() {
+            let total: f64 = terms.iter().map(|(_, w)| w).sum();
+            return Some(terms.into_iter().map(|(g, w)| (g, w / total)).collect());
+        }
+    }
+    None
+}
 
 impl GridToMesh {
     /// The weights for the nodes of `organ` in `grid`; every node must lie in the grid's box, or
@@ -191,11 +222,16 @@ impl GridToMesh {
                 }
                 let corners = grid.corners(m, std::array::from_fn(|d| p[d].clamp(lo[d], hi[d])))?;
                 let kept: f64 = corners.iter().filter(|(g, _)| inside[*g]).map(|(_, w)| w).sum();
-                Ok(corners
-                    .into_iter()
-                    .filter(|&(g, w)| w != 0.0 && (kept <= 1e-12 || inside[g]))
-                    .map(|(g, w)| (g, if kept > 1e-12 { w / kept } else { w }))
-                    .collect())
+                if kept <= 1e-12 {
+                    return nearest_inside(grid, &inside, *p).ok_or_else(|| {
+                        LearnError::InvalidInput(format!(
+                            "mesh node {m} at {} has no grid node inside the organ within {NEAREST_RINGS} cells: is \
+                             the mesh the organ the model was trained on?",
+                            point_in_mm(*p)
+                        ))
+                    });
+                }
+                Ok(corners.into_iter().filter(|&(g, w)| w != 0.0 && inside[g]).map(|(g, w)| (g, w / kept)).collect())
             })
             .collect::<Result<_>>()?;
         Ok(GridToMesh { grid_nodes: grid.num_nodes(), terms })
@@ -369,6 +405,29 @@ mod tests {
         assert!(min.abs() < 1e-6 && (max - 1.5).abs() < 1e-6, "clamped to the box: {min} to {max}");
         let error = GridToMesh::new(&cube(-0.3, 1.5), &g).unwrap_err().to_string();
         assert!(error.contains("at (-300, -900, 2100) mm lies outside the model's grid box"), "{error}");
+    }
+
+    /// A mesh vertex none of whose grid cell's corners lies inside the organ (a tip) takes the
+    /// values of the nearest grid nodes inside it, not the zero the grid holds outside.
+    #[test]
+    fn a_tip_outside_every_corner_of_its_cell_takes_the_nearest_inside_values() {
+        let g = Grid::new([-0.1; 3], [0.2; 3], [7, 7, 7]).unwrap();
+        let tet = mesh::Mesh::new(
+            vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            mesh::Cells::Tet4(vec![[0, 1, 2, 3]]),
+        )
+        .unwrap();
+        let inside = mesh::embedding::Embedding::new(&tet, g.clone()).unwrap().mask();
+        // Linear in x inside the organ, zero outside (as a trained model gives it).
+        let nodes = g.nodes();
+        let field: Vec<f32> = (0..3)
+            .flat_map(|_| nodes.iter().zip(&inside).map(|(p, &i)| if i { 1.0 + p[0] as f32 } else { 0.0 }))
+            .collect();
+        let u = GridToMesh::new(&tet, &g).unwrap().apply(&field).unwrap();
+        // The tip at x = 1: its cell's corners (x = 0.9 or 1.1, y and z = ±0.1) are all outside.
+        let tip = u[3];
+        assert!(tip > 1.5 && tip <= 2.0, "the tip takes its neighbours' values (1.5 to 1.9): {tip}");
+        assert!(u.chunks(3).all(|c| c[0] > 0.9), "no node left at zero: {u:?}");
     }
 
     #[test]
