@@ -274,6 +274,9 @@ impl NiftiHeader {
     /// The header of a single-file NIfTI-1 (`n+1`, 348 bytes) or NIfTI-2 (`n+2`, 540 bytes), in
     /// either byte order, which its size field tells.
     fn parse(bytes: &[u8]) -> Result<NiftiHeader, String> {
+        if bytes.len() < 352 {
+            return Err(format!("too short for a NIfTI file ({} bytes)", bytes.len()));
+        }
         let size = |little: bool| {
             let b: [u8; 4] = bytes.get(0..4).and_then(|b| b.try_into().ok()).unwrap_or_default();
             if little {
@@ -1713,7 +1716,7 @@ mod tests {
             read_labelmap(&p).unwrap_err().to_string()
         };
         assert!(write("a.nii", b"short").contains("too short"));
-        assert!(write("b.nii", &[0u8; 400]).contains("not a NIfTI-1 file"));
+        assert!(write("b.nii", &[0u8; 400]).contains("not a NIfTI file (its header size is neither 348"));
         assert!(write("c.nrrd", b"P3\n").contains("not a NRRD file"));
         let header = "NRRD0004\ntype: short\ndimension: 3\nsizes: 2 2 2\nspace: left-posterior-superior\n\
                       space directions: (1,0,0) (0,1,0) (0,0,1)\nendian: little\nencoding: raw\n\n";

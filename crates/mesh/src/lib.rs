@@ -290,6 +290,11 @@ impl Mesh {
                 )));
             }
         }
+        if self.file_nodes.as_ref().is_some_and(|f| f.len() != n)
+            || self.file_cells.as_ref().is_some_and(|f| f.len() != self.cells.len())
+        {
+            return Err(MeshError::Invalid("file_nodes and file_cells must hold one number per node and cell".into()));
+        }
         if let Some(f) = &self.cell_fraction {
             if f.len() != self.cells.len() || f.iter().any(|x| !(0.0..=1.0).contains(x)) {
                 return Err(MeshError::Invalid("cell_fraction must hold one value in [0, 1] per cell".into()));

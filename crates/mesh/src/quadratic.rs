@@ -41,7 +41,9 @@ impl Mesh {
     /// midpoint, numbered after the mesh's own nodes (which keep their indices) in the order
     /// the cells first meet the edges. A region gains the mid-edge nodes between two of its
     /// nodes; per-cell fractions are kept; a mid-edge node's surface normal (when the mesh has
-    /// them) is the mean of its ends'. A T10 mesh is returned as it is; H8 meshes fail.
+    /// them) is the mean of its ends'; where the file numbers its nodes ([`Mesh::file_nodes`]),
+    /// the mid-edge nodes are numbered after its largest number. A T10 mesh is returned as it is;
+    /// H8 meshes fail.
     pub fn quadratic(&self) -> Result<Mesh, MeshError> {
         let tets = match &self.cells {
             Cells::Tet4(tets) => tets,
@@ -96,7 +98,10 @@ impl Mesh {
             regions,
             cell_fraction: self.cell_fraction.clone(),
             node_normals,
-            file_nodes: self.file_nodes.clone(),
+            file_nodes: self.file_nodes.as_ref().map(|numbers| {
+                let after = numbers.iter().max().map_or(0, |&m| m + 1);
+                numbers.iter().copied().chain(after..after + ends.len()).collect()
+            }),
             file_cells: self.file_cells.clone(),
         };
         mesh.validate()?;
@@ -171,6 +176,12 @@ mod tests {
         assert!(region.iter().all(|&k| q.nodes[k][0].abs() < 1e-12));
         assert!(crate::box_hex([0.0; 3], [1.0; 3], [1, 1, 1]).unwrap().quadratic().is_err());
         assert_eq!(q.quadratic().unwrap(), q);
+        // A file's own node numbers (Gmsh tags, a deck's): the mid-edge nodes come after them.
+        let tags: Vec<usize> = (0..m.num_nodes()).map(|i| 10 + 3 * i).collect();
+        let numbered = Mesh { file_nodes: Some(tags.clone()), ..m.clone() }.quadratic().unwrap();
+        let after = tags.last().unwrap() + 1;
+        let want: Vec<usize> = tags.iter().copied().chain(after..after + edges).collect();
+        assert_eq!(numbered.file_nodes, Some(want));
     }
 
     #[test]

@@ -396,6 +396,12 @@ fn handwritten_vtk_variants() {
     let surface = read_surface(d.join("voxel.vtk")).unwrap();
     assert_eq!(surface.triangles, vec![[0, 1, 2]]);
 
+    // A tetrahedron flat to the digits printed (its apex 1e-9 off the base's plane): refused.
+    let text = "# vtk DataFile Version 3.0\nflat\nASCII\nDATASET UNSTRUCTURED_GRID\n\
+        POINTS 4 double\n0 0 0 1 0 0 0 1 0 0.333333333 0.333333333 1e-9\nCELLS 1 5\n4 0 1 2 3\nCELL_TYPES 1\n10\n";
+    let e = read_mesh(put(d, "flat.vtk", text)).unwrap_err().to_string();
+    assert!(e.contains("zero volume") && e.contains("repeated or coplanar"), "{e}");
+
     // VTK 9's polydata writer gives some OFFSETS and CONNECTIVITY as vtkIdType (64-bit ids).
     let text = "# vtk DataFile Version 5.1\n3D Slicer output. SPACE=LPS\nASCII\nDATASET POLYDATA\n\
         POINTS 4 float\n0 0 0 1 0 0 0 1 0 1 1 0\n\

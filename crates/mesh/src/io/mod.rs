@@ -545,6 +545,10 @@ impl VolumeKind {
     }
 }
 
+/// A cell whose volume is at most this share of its longest side cubed is flat (a regular
+/// tetrahedron's is 0.118): its nodes are repeated or coplanar, to the digits the file prints.
+const FLAT_CELL: f64 = 1e-8;
+
 /// A volume mesh as read from a file, made into a [`Mesh`]: keeps the nodes used by the cells
 /// (in file order), renumbers them, orients every cell positively and validates the result.
 /// `conn` holds `kind.nodes()` indices into `file_nodes` per cell; `describe(i)` names cell `i`
@@ -591,7 +595,7 @@ fn finish_volume(
             VolumeKind::Hex => HEX_TO_TETS.iter().map(|t| crate::tet_volume(p(t[0]), p(t[1]), p(t[2]), p(t[3]))).sum(),
         };
         let size = crate::longest_side(crate::bounds(&cell.iter().map(|&i| nodes[i]).collect::<Vec<_>>()));
-        let zero = volume.is_nan() || volume.abs() <= 1e-12 * size * size * size;
+        let zero = volume.is_nan() || volume.abs() <= FLAT_CELL * size * size * size;
         if zero {
             return Err(parse_error(
                 path,
