@@ -25,6 +25,17 @@ pub enum ScenarioError {
         /// Why it could not be read as a file.
         error: std::io::Error,
     },
+    /// A file name (`liver.toml`) that is not there, though a built-in scenario has its stem's
+    /// name: a file is never replaced by a built-in.
+    #[error("cannot read scenario {}: {error} (the built-in scenario of that name is `{name}`, without .toml)", path.display())]
+    MissingFile {
+        /// The file given.
+        path: PathBuf,
+        /// Why it could not be read.
+        error: std::io::Error,
+        /// The built-in scenario's name.
+        name: String,
+    },
     /// The text is not a valid scenario of its kind, or its values are unusable.
     #[error("invalid scenario {origin}: {message}")]
     Invalid {

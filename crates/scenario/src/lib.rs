@@ -100,18 +100,21 @@ pub struct ScenarioText {
 }
 
 impl ScenarioText {
-    /// Reads the file at `path`; when there is none and `path` is a bare name (`beam` or
-    /// `beam.toml`), the built-in scenario of that name.
+    /// Reads the file at `path`; when there is none and `path` is a bare name (`beam`, no folder,
+    /// no extension), the built-in scenario of that name. A missing file (`beam.toml`) is an
+    /// error, which names the built-in of its stem's name if there is one.
     pub fn read(path: &Path) -> Result<ScenarioText> {
         match std::fs::read_to_string(path) {
             Ok(text) => Ok(ScenarioText::new(&text, path)),
             Err(error) => {
-                let bare = path.parent().is_none_or(|p| p.as_os_str().is_empty());
-                let name = path.to_str().map(|s| s.trim_end_matches(".toml")).unwrap_or_default();
+                let bare = path.parent().is_none_or(|p| p.as_os_str().is_empty()) && path.extension().is_none();
+                let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or_default();
+                let path = path.to_path_buf();
                 match (builtin(name), bare) {
                     (Some(text), true) => Ok(ScenarioText::builtin(name, text)),
-                    (None, true) => Err(ScenarioError::Unknown { path: path.to_path_buf(), error }),
-                    (_, false) => Err(ScenarioError::Io { path: path.to_path_buf(), error }),
+                    (None, true) => Err(ScenarioError::Unknown { path, error }),
+                    (Some(_), false) => Err(ScenarioError::MissingFile { path, error, name: name.to_string() }),
+                    (None, false) => Err(ScenarioError::Io { path, error }),
                 }
             }
         }
@@ -363,6 +366,14 @@ mod tests {
         let builtins = "nor is it a built-in scenario's name (beam, beam_bc1, ";
         assert!(err.contains(builtins) && err.ends_with(", roukf_springs, roukf_young)"), "{err}");
         let err = ScenarioText::read(Path::new("dir/beam.toml")).unwrap_err();
-        assert!(matches!(err, ScenarioError::Io { .. }), "a path with a directory never falls back to a built-in");
+        assert!(
+            matches!(err, ScenarioError::MissingFile { .. }),
+            "a path with a directory never falls back to a built-in"
+        );
+        // A file name is a file's: one that is not there is not replaced by the built-in `liver`.
+        let err = ScenarioText::read(Path::new("liver.toml")).unwrap_err().to_string();
+        assert!(err.ends_with("(the built-in scenario of that name is `liver`, without .toml)"), "{err}");
+        let err = ScenarioText::read(Path::new("dir/other.toml")).unwrap_err();
+        assert!(matches!(err, ScenarioError::Io { .. }), "{err}");
     }
 }
