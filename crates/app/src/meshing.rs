@@ -285,7 +285,7 @@ pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result
         return Ok(format!("its boundary surface, in mm{named}"));
     }
     let fields: Vec<Field> = match &mesh.cell_fraction {
-        Some(f) if extension != "msh" => vec![Field::cell("volume_fraction", 1, f.clone())],
+        Some(f) if extension != "msh" => vec![Field::cell(mesh::io::FRACTION_FIELD, 1, f.clone())],
         _ => Vec::new(),
     };
     mesh::io::write_mesh_in_frame(path, mesh, &fields, frame).with_context(context)?;
@@ -424,8 +424,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("grid/organ.vtu");
         assert_eq!(write_mesh_file(&path, &meshed.mesh, meshed.frame).unwrap(), "in m");
-        let (_, fields) = mesh::io::read_mesh_with_fields(&path).unwrap();
+        let (read, fields) = mesh::io::read_mesh_with_fields(&path).unwrap();
         assert!(fields.iter().any(|f| f.name == "volume_fraction"));
+        // Read back, the grid keeps its fractions (the FEM weighs each cell by its own).
+        assert_eq!(read.cell_fraction, meshed.mesh.cell_fraction);
+        assert_eq!(immersed_fill(&read), (organ, cut));
     }
 
     #[test]

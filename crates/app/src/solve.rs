@@ -30,7 +30,9 @@ pub fn solve_scenario(path: &Path) -> Result<Solved> {
 
 impl Solved {
     /// The fields written with the mesh: point `displacement` (3 per node), cell `green_strain`
-    /// (6 per cell) and cell `von_mises` (1 per cell).
+    /// (6 per cell) and cell `von_mises` (1 per cell); where the mesh has them, its file's
+    /// numbers (`file_node`, `file_cell`) and an immersed grid's cell fractions
+    /// (`volume_fraction`).
     pub fn fields(&self) -> Result<Vec<Field>> {
         let (geometry, material, u) = (self.solver.geometry(), &self.solver.problem().material, &self.solution.u);
         let mut fields = vec![
@@ -44,6 +46,9 @@ impl Solved {
         }
         if let Some(file_cells) = &mesh.file_cells {
             fields.push(Field::cell("file_cell", 1, file_cells.iter().map(|&i| i as f64).collect()));
+        }
+        if let Some(fractions) = &mesh.cell_fraction {
+            fields.push(Field::cell(mesh::io::FRACTION_FIELD, 1, fractions.clone()));
         }
         Ok(fields)
     }

@@ -5,9 +5,9 @@ use std::path::Path;
 
 use super::scalar::Scalar;
 use super::{
-    check_for_writing, check_surface, fan, finish_volume, mesh_cells_flat, parse_error, read_bytes,
-    regions_from_fields, restrict_fields, strip, write_atomic, Encoding, Field, FieldLocation, Num, VolumeKind,
-    VTK_HEXAHEDRON, VTK_POLYGON, VTK_QUADRATIC_TETRA, VTK_TETRA, VTK_TRIANGLE_STRIP, VTK_VOXEL,
+    check_for_writing, check_surface, fan, finish_volume, fractions_from_fields, mesh_cells_flat, parse_error,
+    read_bytes, regions_from_fields, restrict_fields, strip, write_atomic, Encoding, Field, FieldLocation, Num,
+    VolumeKind, VTK_HEXAHEDRON, VTK_POLYGON, VTK_QUADRATIC_TETRA, VTK_TETRA, VTK_TRIANGLE_STRIP, VTK_VOXEL,
 };
 use crate::{Mesh, MeshError, Point, TriSurface};
 
@@ -718,6 +718,7 @@ pub(super) fn volume_from_cells(
     let (mut mesh, kept_nodes) = finish_volume(path, points, kind, conn, &describe, None, &kept_cells)?;
     let fields = restrict_fields(fields, &kept_nodes, &kept_cells);
     mesh.regions = regions_from_fields(&fields);
+    mesh.cell_fraction = fractions_from_fields(&fields).map_err(|m| parse_error(path, m))?;
     Ok((mesh, fields))
 }
 

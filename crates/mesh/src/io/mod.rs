@@ -164,6 +164,26 @@ pub fn regions_from_fields(fields: &[Field]) -> BTreeMap<String, Vec<usize>> {
     regions
 }
 
+/// Name of the one-component cell field that holds an immersed grid's cell fractions
+/// ([`Mesh::cell_fraction`]), as `augsim mesh --immersed` writes it to `.vtu` and `.vtk`.
+pub const FRACTION_FIELD: &str = "volume_fraction";
+
+/// The cell fractions held by a [`FRACTION_FIELD`] cell field of `fields`, if any; an error for
+/// a fraction outside [0, 1] (not a share of a cell's volume).
+fn fractions_from_fields(fields: &[Field]) -> Result<Option<Vec<f64>>, String> {
+    let Some(f) = fields.iter().find(|f| f.location == FieldLocation::Cell && f.name == FRACTION_FIELD) else {
+        return Ok(None);
+    };
+    match f.values.iter().position(|v| !(0.0..=1.0).contains(v)) {
+        _ if f.components != 1 => Err(format!("cell array '{FRACTION_FIELD}' has {} components, not 1", f.components)),
+        Some(i) => Err(format!(
+            "cell array '{FRACTION_FIELD}' holds {} at cell {i}: a cell's share of material is within [0, 1]",
+            f.values[i]
+        )),
+        None => Ok(Some(f.values.clone())),
+    }
+}
+
 /// Where the values of a [`Field`] live.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FieldLocation {
