@@ -30,14 +30,14 @@ pub fn solve_scenario(path: &Path) -> Result<Solved> {
 
 impl Solved {
     /// The fields written with the mesh: point `displacement` (3 per node), cell `green_strain`
-    /// (6 per cell) and cell `von_mises` (1 per cell); where the mesh has them, its file's
+    /// (`small_strain` under the linear law; 6 per cell) and cell `von_mises` (1 per cell); where the mesh has them, its file's
     /// numbers (`file_node`, `file_cell`) and an immersed grid's cell fractions
     /// (`volume_fraction`).
     pub fn fields(&self) -> Result<Vec<Field>> {
         let (geometry, material, u) = (self.solver.geometry(), &self.solver.problem().material, &self.solution.u);
         let mut fields = vec![
             Field::point("displacement", 3, u.clone()),
-            Field::cell("green_strain", 6, post::green_strain(geometry, material, u)?),
+            Field::cell(post::strain_name(material.law), 6, post::strain(geometry, material, u)?),
             Field::cell("von_mises", 1, post::von_mises(geometry, material, u)?),
         ];
         let mesh = &self.solver.problem().mesh;

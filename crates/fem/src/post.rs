@@ -1,5 +1,6 @@
-//! Derived fields: Green-Lagrange strain and von Mises stress per cell, from
-//! the deformation gradient each quadrature point is evaluated at (F̄ under F-bar).
+//! Derived fields: strain (small under the linear law, Green-Lagrange under the others) and von
+//! Mises stress per cell, from the deformation gradient each quadrature point is evaluated at (F̄
+//! under F-bar).
 
 use nalgebra::Matrix3;
 
@@ -37,24 +38,43 @@ fn per_cell<T>(
     Ok(gradients.chunks(geometry.points_per_element).map(each).collect())
 }
 
-/// Mean over each cell's quadrature points of the Green-Lagrange strain
-/// E = ½(FᵀF − I), as 6 components per cell (xx, yy, zz, xy, yz, xz).
-pub fn green_strain(geometry: &ElementGeometry, material: &Material, u: &[f64]) -> Result<Vec<f64>, FemError> {
+/// The name of the strain [`strain`] gives under `law`: `small_strain` for the linear law,
+/// `green_strain` for the others.
+pub fn strain_name(law: Law) -> &'static str {
+    if law == Law::Linear {
+        "small_strain"
+    } else {
+        "green_strain"
+    }
+}
+
+/// Mean over each cell's quadrature points of the strain the law is written in, as 6 components
+/// per cell (xx, yy, zz, xy, yz, xz): the small strain ε = ½(F + Fᵀ) − I that the linear law
+/// solves, the Green-Lagrange strain E = ½(FᵀF − I) under the others.
+pub fn strain(geometry: &ElementGeometry, material: &Material, u: &[f64]) -> Result<Vec<f64>, FemError> {
+    let linear = material.law == Law::Linear;
     let cells = per_cell(geometry, material, u, |fs| {
-        let mean =
-            fs.iter().map(|f| (f.transpose() * f - Matrix3::identity()) * 0.5).sum::<Matrix3<f64>>() / fs.len() as f64;
+        let strain = |f: &Matrix3<f64>| match linear {
+            true => (f + f.transpose()) * 0.5 - Matrix3::identity(),
+            false => (f.transpose() * f - Matrix3::identity()) * 0.5,
+        };
+        let mean = fs.iter().map(strain).sum::<Matrix3<f64>>() / fs.len() as f64;
         [mean[(0, 0)], mean[(1, 1)], mean[(2, 2)], mean[(0, 1)], mean[(1, 2)], mean[(0, 2)]]
     })?;
     Ok(cells.into_iter().flatten().collect())
 }
 
-/// Mean over each cell's quadrature points of the von Mises equivalent of the
-/// Cauchy stress σ = J⁻¹ P Fᵀ (Pa).
+/// Mean over each cell's quadrature points of the von Mises equivalent of the Cauchy stress
+/// (Pa): σ = J⁻¹ P Fᵀ, and under the linear law its own small-strain stress σ = λ tr(ε) I + 2μ ε
+/// (which knows no current configuration).
 pub fn von_mises(geometry: &ElementGeometry, material: &Material, u: &[f64]) -> Result<Vec<f64>, FemError> {
     per_cell(geometry, material, u, |fs| {
         fs.iter()
             .map(|f| {
-                let s = material.stress(f) * f.transpose() / f.determinant();
+                let s = match material.law {
+                    Law::Linear => material.stress(f),
+                    _ => material.stress(f) * f.transpose() / f.determinant(),
+                };
                 let dev = s - Matrix3::identity() * (s.trace() / 3.0);
                 (1.5 * dev.norm_squared()).sqrt()
             })
@@ -75,4 +95,29 @@ pub fn inverted_cells(geometry: &ElementGeometry, law: Law, u: &[f64]) -> Result
 /// Largest nodal displacement magnitude (m).
 pub fn max_displacement(u: &[f64]) -> f64 {
     u.chunks(3).map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()).fold(0.0, f64::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A box stretched uniformly by 10 % along x: under the linear law the strain written is the
+    /// small strain (εxx = 0.1, not Green's 0.105) and the von Mises stress that of the linear
+    /// stress, 2μ εxx; under SVK, Green's strain.
+    #[test]
+    fn the_linear_law_writes_its_own_small_strain_and_stress() {
+        let mesh = mesh::box_tet([0.0; 3], [1.0, 0.5, 0.5], [2, 1, 1]).unwrap();
+        let geometry = ElementGeometry::new(&mesh, Formulation::Standard).unwrap();
+        let u: Vec<f64> = mesh.nodes.iter().flat_map(|p| [0.1 * p[0], 0.0, 0.0]).collect();
+        let linear = Material::new(Law::Linear, 3000.0, 0.3);
+        let (_, mu) = linear.lame();
+        let strain_of = |material: &Material| strain(&geometry, material, &u).unwrap();
+        assert!(strain_of(&linear).chunks(6).all(|e| (e[0] - 0.1).abs() < 1e-12 && e[1].abs() < 1e-12));
+        for vm in von_mises(&geometry, &linear, &u).unwrap() {
+            assert!((vm - 2.0 * mu * 0.1).abs() < 1e-9 * mu, "{vm} against {}", 2.0 * mu * 0.1);
+        }
+        let svk = Material::new(Law::Svk, 3000.0, 0.3);
+        assert!(strain_of(&svk).chunks(6).all(|e| (e[0] - 0.105).abs() < 1e-12));
+        assert_eq!((strain_name(Law::Linear), strain_name(Law::Svk)), ("small_strain", "green_strain"));
+    }
 }
