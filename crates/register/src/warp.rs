@@ -45,7 +45,7 @@ impl WarpField {
     /// The field of displacement `u` of `organ` (node-major, m), moved by `rigid` when the
     /// registration aligned the organ rigidly first. The grid covers the registered organ with a
     /// margin of 15 % of its largest extent on every side, or twice its largest displacement where
-    /// that is more ([`FADE_OVER_MOTION`]), in steps of that extent and its default margins divided
+    /// that is more (so that it never folds), in steps of that extent and its default margins divided
     /// into `cells_across`. Inside the registered organ, `y + d(y)` is the rest position of the
     /// point (exact in linear elements: the map is affine in each); outside, the deformation at
     /// the nearest point of the organ's boundary fades linearly to nothing across the margin, so
