@@ -23,8 +23,9 @@ pub struct Solved {
 pub fn solve_scenario(path: &Path) -> Result<Solved> {
     let (scenario, dir) = StaticScenario::load(path)?;
     let problem = scenario.build_problem(&dir)?;
+    let hint = scenario::source::millimetre_hint(&problem.mesh).map_or(String::new(), |h| format!(" ({h})"));
     let mut solver = StaticSolver::new(problem)?;
-    let solution = solver.solve(&scenario.solver).context("static solve")?;
+    let solution = solver.solve(&scenario.solver).with_context(|| format!("static solve{hint}"))?;
     Ok(Solved { scenario, solver, solution })
 }
 
@@ -118,6 +119,19 @@ impl Solved {
                  at the limit point instead"
             ));
         }
+        let loaded = |n: usize| p.f_ext[3 * n..3 * n + 3].iter().any(|&f| f != 0.0);
+        let moved = p.dirichlet.values().any(|d| *d != [0.0; 3]);
+        if !moved
+            && (0..p.mesh.num_nodes()).any(loaded)
+            && (0..p.mesh.num_nodes()).all(|n| !loaded(n) || p.dirichlet.contains_key(&n))
+        {
+            lines.push(
+                "warning    every load acts on held nodes ([[fixed]] or [[prescribed]]): nothing moves; do the \
+                 selections of the loads and of the held nodes overlap?"
+                    .into(),
+            );
+        }
+        lines.extend(scenario::source::millimetre_hint(&p.mesh).map(|h| format!("warning    {h}")));
         let (inverted, smallest) = post::inverted_cells(geo, p.material.law, &sol.u)?;
         if inverted > 0 {
             lines.push(format!(
@@ -135,6 +149,23 @@ impl Solved {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Loads that act on held nodes only move nothing: said so.
+    #[test]
+    fn loads_on_held_nodes_only_are_warned_about() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("held.toml");
+        let text = "kind = \"static\"\nname = \"held\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.1, 0.02, 0.02]\n\
+                    cells = [4, 1, 1]\nelement = \"hex\"\n[material]\nlaw = \"linear\"\nyoung = 5000.0\npoisson = 0.3\n\
+                    [[fixed]]\nselect = { box = { min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] } }\n\
+                    [[force]]\nselect = { box = { min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] } }\n\
+                    total = [0.0, 0.0, -0.1]\n";
+        std::fs::write(&path, text).unwrap();
+        let lines = solve_scenario(&path).unwrap().lines().unwrap();
+        assert!(lines.iter().any(|l| l.starts_with("warning    every load acts on held nodes")), "{lines:?}");
+        let beam = solve_scenario(Path::new("beam")).unwrap().lines().unwrap();
+        assert!(!beam.iter().any(|l| l.starts_with("warning")), "{beam:?}");
+    }
 
     #[test]
     fn the_beam_bends_and_its_fields_fit_its_mesh() {

@@ -236,19 +236,30 @@ impl Problem {
         }
         let cells: usize = loose.iter().map(|&p| pieces.cells[p].len()).sum();
         let volume: f64 = loose.iter().flat_map(|&p| &pieces.cells[p]).map(|&c| self.mesh.cell_volume(c)).sum();
-        let corner = self.mesh.nodes[pieces.nodes[first][0]];
+        // How each loose piece meets the rest: by shared nodes (an edge or a vertex), or not at all.
+        let mut owners = vec![0u32; self.mesh.num_nodes()];
+        pieces.nodes.iter().flatten().for_each(|&n| owners[n] += 1);
+        let touching = loose.iter().filter(|&&p| pieces.nodes[p].iter().any(|&n| owners[n] > 1)).count();
+        let how = match touching {
+            0 => "lie apart from the rest, touching it nowhere",
+            t if t == loose.len() => "hang on the rest by an edge or a vertex",
+            _ => "hang on the rest by an edge or a vertex, or lie apart from it",
+        };
+        let corner = pieces.nodes[first][0];
+        let at = self.mesh.nodes[corner];
         Err(FemError::Invalid(format!(
-            "{cells} element(s) ({:.2} % of the volume) in {} piece(s) of the mesh hang on the rest by an edge or a \
-             vertex, and nothing else holds them: they can rotate freely (the first, of {} element(s) from element {}, \
-             at node ({:.4}, {:.4}, {:.4}) m); remesh the organ (e.g. more tetrahedra: `augsim mesh` and `prepare` drop \
-             such small pieces), or fix or tie nodes of each piece",
+            "{cells} element(s) ({:.2} % of the volume) in {} piece(s) of the mesh {how}, and nothing else holds \
+             them: they can move freely (the first, of {} element(s) from element {}, at node {} ({:.4}, {:.4}, \
+             {:.4}) m); remesh the organ (e.g. more tetrahedra: `augsim mesh` and `prepare` drop such small pieces), \
+             or fix or tie nodes of each piece",
             100.0 * volume / self.mesh.volume(),
             loose.len(),
             pieces.cells[first].len(),
             self.mesh.file_cell(pieces.cells[first][0]),
-            corner[0],
-            corner[1],
-            corner[2],
+            self.mesh.file_node(corner),
+            at[0],
+            at[1],
+            at[2],
         )))
     }
 }

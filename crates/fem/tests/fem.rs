@@ -466,6 +466,21 @@ fn a_body_held_against_no_rigid_motion_is_refused() {
     let mut tied = on_a_line;
     tied.springs[c] = 10.0;
     assert!(solve(tied).is_ok());
+
+    // A second block beside the first, touching it nowhere, with nothing to hold it: named apart.
+    let mesh::Cells::Tet4(tets) = &m.cells else { panic!("tetrahedra") };
+    let n = m.num_nodes();
+    let nodes: Vec<[f64; 3]> = m
+        .nodes
+        .iter()
+        .chain(m.nodes.iter().map(|p| [p[0], p[1], p[2] + 0.03]).collect::<Vec<_>>().iter())
+        .copied()
+        .collect();
+    let cells: Vec<[usize; 4]> = tets.iter().copied().chain(tets.iter().map(|t| t.map(|k| k + n))).collect();
+    let mut two = Problem::new(mesh::Mesh::new(nodes, mesh::Cells::Tet4(cells)).unwrap(), material);
+    two.fix(&[a, b, c]);
+    let err = solve(two).expect_err("a loose second body is refused").to_string();
+    assert!(err.contains("in 1 piece(s) of the mesh lie apart from the rest, touching it nowhere"), "{err}");
 }
 
 #[test]

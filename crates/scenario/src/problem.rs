@@ -196,6 +196,18 @@ impl StaticScenario {
         for (k, f) in self.prescribed.iter().enumerate() {
             finite("prescribed", k, "displacement", &f.displacement)?;
             let nodes = pick(&f.select, "prescribed", &p)?;
+            let clash =
+                nodes.iter().find_map(|n| p.dirichlet.get(n).filter(|&&d| d != f.displacement).map(|d| (*n, *d)));
+            if let Some((n, held)) = clash {
+                return Err(fail(format!(
+                    "prescribed {}: node {} is already held at {} (by [[fixed]] or an earlier [[prescribed]]), not at \
+                     {}: give each node one displacement",
+                    k + 1,
+                    p.mesh.file_node(n),
+                    mesh::length::point_in_mm(held),
+                    mesh::length::point_in_mm(f.displacement)
+                )));
+            }
             p.prescribe(&nodes, f.displacement);
         }
         for (k, s) in self.springs.iter().enumerate() {

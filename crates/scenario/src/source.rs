@@ -118,14 +118,19 @@ const MILLIMETRE_MESH_EXTENT: f64 = 5.0;
 /// (scenarios are in metres).
 pub fn select_nodes(selection: &NodeSelection, mesh: &Mesh, what: &str) -> Result<Vec<usize>, String> {
     selection.select(mesh).map_err(|e| {
-        let extent = mesh::longest_side(mesh.bounds());
-        let hint = match extent > MILLIMETRE_MESH_EXTENT {
-            true => format!(
-                " (the mesh spans {extent:.0} m: is it in millimetres? scenarios are in metres: [mesh.file] scale = 0.001)"
-            ),
-            false => String::new(),
-        };
+        let hint = millimetre_hint(mesh).map_or(String::new(), |h| format!(" ({h})"));
         format!("{what} selection: {e}{hint}")
+    })
+}
+
+/// For a mesh over [`MILLIMETRE_MESH_EXTENT`] across, what it probably is: an organ in
+/// millimetres read as metres.
+pub fn millimetre_hint(mesh: &Mesh) -> Option<String> {
+    let extent = mesh::longest_side(mesh.bounds());
+    (extent > MILLIMETRE_MESH_EXTENT).then(|| {
+        format!(
+            "the mesh spans {extent:.0} m: is it in millimetres? scenarios are in metres: [mesh.file] scale = 0.001"
+        )
     })
 }
 

@@ -124,6 +124,12 @@ fn a_byte_order_mark_is_read_and_unusable_numbers_are_named() {
                 displacement = [0.0, 0.0, nan]\n";
     let err = parse(&format!("{text}{load}")).unwrap().build_problem(Path::new(".")).unwrap_err().to_string();
     assert!(err.contains("prescribed 1: displacement = [0.0, 0.0, NaN] must be finite"), "{err}");
+    // A node both fixed and prescribed a displacement: refused, whichever comes first in the file.
+    let clash = "[[prescribed]]\nselect = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\n\
+                 displacement = [0.0, 0.0, 0.005]\n";
+    let err = parse(&format!("{text}{clash}")).unwrap().build_problem(Path::new(".")).unwrap_err().to_string();
+    assert!(err.contains("prescribed 1: node 0 is already held at (0, 0, 0) mm (by [[fixed]]"), "{err}");
+    assert!(err.ends_with("not at (0, 0, 5) mm: give each node one displacement"), "{err}");
     let force = "[[force]]\nselect = { box = { min = [0.099, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\n\
                  total = [inf, 0.0, 0.0]\n";
     let err = parse(&format!("{text}{force}")).unwrap().build_problem(Path::new(".")).unwrap_err().to_string();

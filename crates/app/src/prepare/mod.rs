@@ -488,7 +488,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
     if quality.pieces > 1 {
         lines.push(format!(
             "warning: the mesh is in {} pieces joined only by edges or vertices (a part thinner than its \
-             tetrahedra): a piece that nothing holds makes every FEM solve fail; mesh it finer (--tets)",
+             tetrahedra): the FEM solves fail where a piece has no held node of its own; mesh it finer (--tets)",
             quality.pieces
         ));
     }
