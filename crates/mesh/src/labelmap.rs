@@ -1163,6 +1163,7 @@ pub fn read_labelmap_surface(
     let (whole, label, chosen) = map.select_uncropped(&label).map_err(|e| parse_error(path, e.message()))?;
     let borders = touched_borders(&whole);
     let mask = map.cropped(&whole, &label, chosen).map_err(|e| parse_error(path, e.message()))?;
+    let mask = mask.in_scanner_order(map.frame == Frame::Ras);
     let (surface, extract) = mask_surface(&mask, options).map_err(|e| parse_error(path, e.message()))?;
     let mut warnings: Vec<String> =
         map.warnings.iter().filter(|(of, _)| of.is_none_or(|of| of == chosen)).map(|(_, w)| w.clone()).collect();
@@ -1417,6 +1418,42 @@ mod tests {
         assert!(error("0").contains("label 0 is the background, not a segment"));
         let unchosen = read_labelmap_surface(&path, None, &ExtractOptions::default()).unwrap_err().to_string();
         assert!(unchosen.contains("holds several labels: choose one with --label"), "{unchosen}");
+    }
+
+    /// The same voxels as a RAS NIfTI, an LPS NRRD and a RAS NIfTI stored with its k axis
+    /// reversed give the same surface, vertex for vertex (x and y negated in LPS).
+    #[test]
+    fn the_same_voxels_give_the_same_surface_whatever_their_frame_and_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let (ras, _) = two_balls(Frame::Ras);
+        let ras = Labelmap { segments: Vec::new(), ..ras };
+        let mut lps = Labelmap { frame: Frame::Lps, ..ras.clone() };
+        (0..2).for_each(|r| lps.affine[r].iter_mut().for_each(|x| *x = -*x));
+        let [nx, ny, nz] = ras.dims;
+        let mut reversed = ras.clone();
+        reversed.labels =
+            (0..nx * ny * nz).map(|n| ras.labels[n % (nx * ny) + nx * ny * (nz - 1 - n / (nx * ny))]).collect();
+        (0..3).for_each(|r| {
+            reversed.affine[r][3] += (nz - 1) as f64 * ras.affine[r][2];
+            reversed.affine[r][2] = -ras.affine[r][2];
+        });
+        let surface = |name: &str, map: &Labelmap| {
+            let path = dir.path().join(name);
+            match map.frame {
+                Frame::Ras => write_nifti(&path, map).unwrap(),
+                Frame::Lps => write_nrrd(&path, map).unwrap(),
+            }
+            read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap().surface
+        };
+        let reference = surface("ras.nii", &ras);
+        let negated =
+            |s: TriSurface| TriSurface { vertices: s.vertices.iter().map(|p| [-p[0], -p[1], p[2]]).collect(), ..s };
+        for other in [negated(surface("lps.nrrd", &lps)), surface("reversed.nii", &reversed)] {
+            assert!(other.triangles == reference.triangles, "the triangles differ");
+            let apart =
+                other.vertices.iter().zip(&reference.vertices).map(|(a, b)| norm(sub(*a, *b))).fold(0.0, f64::max);
+            assert!(apart < 1e-9, "{apart} mm apart");
+        }
     }
 
     #[test]

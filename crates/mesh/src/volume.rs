@@ -54,6 +54,47 @@ pub struct VoxelMask {
 }
 
 impl VoxelMask {
+    /// The same voxels in the scanner's order: axes permuted and reversed so that voxel axis `r`
+    /// runs along world axis `r` (L, P, S), increasing; `ras`: the affine maps to RAS (x and y
+    /// negated from LPS). The voxels then meet the surface extraction in one order whatever the
+    /// file's (an LPS `.seg.nrrd` and a RAS `.nii.gz` of the same voxels, or an image stored with
+    /// flipped axes, give the same surface).
+    pub fn in_scanner_order(&self, ras: bool) -> VoxelMask {
+        let a = &self.affine;
+        let lps = |r: usize, d: usize| if ras && r < 2 { -a[r][d] } else { a[r][d] };
+        // The voxel axis of each world axis: the permutation with the largest alignment.
+        let permutations = [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]];
+        let alignment = |p: &[usize; 3]| -> f64 {
+            (0..3).map(|r| lps(r, p[r]).abs() / (0..3).map(|q| lps(q, p[r]).powi(2)).sum::<f64>().sqrt()).sum()
+        };
+        let perm = permutations.into_iter().max_by(|p, q| alignment(p).total_cmp(&alignment(q))).unwrap_or([0, 1, 2]);
+        let flip: [bool; 3] = std::array::from_fn(|r| lps(r, perm[r]) < 0.0);
+        let dims: [usize; 3] = std::array::from_fn(|r| self.dims[perm[r]]);
+        // Voxel (0, 0, 0) of the new order, in the old one.
+        let mut first = [0.0; 3];
+        (0..3).filter(|&r| flip[r]).for_each(|r| first[perm[r]] = (self.dims[perm[r]] - 1) as f64);
+        let origin = self.world(first);
+        let affine = std::array::from_fn(|row| {
+            std::array::from_fn(|c| match c {
+                3 => origin[row],
+                _ if flip[c] => -a[row][perm[c]],
+                _ => a[row][perm[c]],
+            })
+        });
+        let mut inside = vec![false; self.inside.len()];
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let new = [i, j, k];
+                    let mut old = [0; 3];
+                    (0..3).for_each(|r| old[perm[r]] = if flip[r] { dims[r] - 1 - new[r] } else { new[r] });
+                    inside[i + dims[0] * (j + dims[1] * k)] = self.inside[self.index(old[0], old[1], old[2])];
+                }
+            }
+        }
+        VoxelMask { dims, inside, affine }
+    }
+
     /// The number of voxels inside.
     pub fn count(&self) -> usize {
         self.inside.iter().filter(|&&b| b).count()
