@@ -461,6 +461,24 @@ fn thin_part_left_out(surface: &TriSurface, organ: &register::Organ, targets: &[
 /// about: a unit mistake (a camera in mm read as m lies 1,000 times too far).
 const FAR_CAMERA: f64 = 10.0;
 
+/// The warning for a camera farther from `organ` than [`FAR_CAMERA`] times its size.
+fn far_camera(organ: &mesh::Mesh, camera: Point, unit: LengthUnit) -> Option<String> {
+    let (lo, hi) = organ.bounds();
+    let size = mesh::norm(mesh::sub(hi, lo));
+    let nearest = organ.nodes.iter().map(|&p| mesh::distance(p, camera)).fold(f64::INFINITY, f64::min);
+    (nearest > FAR_CAMERA * size).then(|| {
+        format!(
+            "warning: the camera at {} lies {:.0} mm from the organ, {:.0} times its size ({:.0} mm): a laparoscope \
+             or a depth camera is centimetres to a metre away; is it given in the surface's unit ({})?",
+            point_in_mm(camera),
+            mm(nearest),
+            nearest / size,
+            mm(size),
+            unit.symbol()
+        )
+    })
+}
+
 /// Step 1: the surface repaired and meshed, the regions selected, the targets located.
 /// Returns what it did and the frame its inputs were given in.
 fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Option<Frame>)> {
@@ -500,22 +518,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
             point_in_mm(camera)
         );
     }
-    let size = {
-        let (lo, hi) = organ.bounds();
-        mesh::norm(mesh::sub(hi, lo))
-    };
-    let nearest = organ.nodes.iter().map(|&p| mesh::distance(p, camera)).fold(f64::INFINITY, f64::min);
-    if nearest > FAR_CAMERA * size {
-        lines.push(format!(
-            "warning: the camera at {} lies {:.0} mm from the organ, {:.0} times its size ({:.0} mm): a laparoscope \
-             or a depth camera is centimetres to a metre away; is it given in the surface's unit ({})?",
-            point_in_mm(camera),
-            mm(nearest),
-            nearest / size,
-            mm(size),
-            unit.symbol()
-        ));
-    }
+    lines.extend(far_camera(&organ, camera, unit));
     let located = register::Organ::new(organ.clone(), None)?;
     // Positions in messages are the set-up's; say so where the files' differ.
     let shown = match given.filter(|&f| f != SET_UP_FRAME) {
