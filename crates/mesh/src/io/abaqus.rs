@@ -392,8 +392,10 @@ fn listed(line: &Line, e: &[&str]) -> Result<Vec<Member>, MeshError> {
 /// Reads the mesh of an Abaqus or CalculiX input deck, its sets as regions.
 ///
 /// Read: `*NODE` (rectangular coordinates; missing ones are 0, as Abaqus reads them), `*ELEMENT`
-/// of the solid types C3D4, C3D10 and C3D8 and their variants (C3D4H, C3D10M, C3D8R, C3D8I…),
-/// whose node orders are VTK's, `*NSET` and `*ELSET` (lists of numbers and of sets named before or
+/// of the solid types C3D4, C3D10 and C3D8 and their variants (C3D4H, C3D10M, C3D8R, C3D8I…:
+/// the mesh only; the scenario's formulation decides the integration, so a C3D8R deck solves as
+/// full-integration hexahedra, stiffer than CalculiX's reduced integration), whose node orders are
+/// VTK's, `*NSET` and `*ELSET` (lists of numbers and of sets named before or
 /// after, `GENERATE` ranges, `*NSET, ELSET=` for the nodes of an element set), the `NSET=` and
 /// `ELSET=` of `*NODE` and `*ELEMENT`, and `*INCLUDE` (a path relative to the including file's
 /// directory, as CalculiX decks made by cgx use it). Other elements (shells, beams, springs) make
