@@ -139,6 +139,13 @@ def test_registration_errors(case, tmp_path):
         reg.register(far)
     with pytest.raises(TypeError, match="cloud is None: an array of numbers is expected"):
         reg.register(None)
+    # NumPy would cast complex numbers and booleans silently.
+    with pytest.raises(ValueError, match="cloud holds complex numbers: real numbers are expected"):
+        reg.register(case["cloud"].astype(complex))
+    with pytest.raises(ValueError, match="cloud holds booleans"):
+        reg.register(case["cloud"] > 0)
+    with pytest.raises(ValueError, match="iterations = -1 must be at least 1"):
+        augsim.Registration(fem=case["scenario"], units="mm", iterations=-1)
     with pytest.raises(ValueError, match="targets: the array holds no point"):
         augsim.Registration(fem=case["scenario"], targets=np.zeros((0, 3)), units="mm")
     # A cloud in metres where millimetres are expected, or in micrometres: refused, saying why.

@@ -111,10 +111,28 @@ fn array(value: &Bound<'_, PyAny>, what: &str) -> PyResult<(Vec<usize>, Vec<f64>
     if value.is_none() {
         return Err(PyTypeError::new_err(format!("{what} is None: an array of numbers is expected")));
     }
+    // NumPy would cast these to numbers silently (complex losing its imaginary part).
+    if let Ok(kind) = value.getattr("dtype").and_then(|d| d.getattr("kind")).and_then(|k| k.extract::<String>()) {
+        if let Some(name) = match kind.as_str() {
+            "c" => Some("complex numbers"),
+            "b" => Some("booleans"),
+            _ => None,
+        } {
+            return Err(PyValueError::new_err(format!("{what} holds {name}: real numbers are expected")));
+        }
+    }
     let a: PyArrayLikeDyn<'_, f64, AllowTypeChange> =
         value.extract().map_err(|e| PyValueError::new_err(format!("{what} must be an array of numbers: {e}")))?;
     let values = a.as_array();
     Ok((values.shape().to_vec(), values.iter().copied().collect()))
+}
+
+/// A count given from Python (`None`: the default), refused below 1 with its name.
+fn count(value: Option<i64>, what: &str) -> PyResult<Option<usize>> {
+    value
+        .map(|n| usize::try_from(n).ok().filter(|&n| n >= 1).ok_or(n))
+        .transpose()
+        .map_err(|n| PyValueError::new_err(format!("{what} = {n} must be at least 1")))
 }
 
 /// Points from an array of shape `[N, 3]`.
@@ -330,10 +348,11 @@ impl Registration {
         targets: Option<&Bound<'_, PyAny>>,
         units: Option<&str>,
         frame: Option<&str>,
-        iterations: Option<usize>,
+        iterations: Option<i64>,
         rigid: bool,
         structures: Vec<PathBuf>,
     ) -> PyResult<Self> {
+        let iterations = count(iterations, "iterations")?;
         let units: Option<LengthUnit> =
             units.map(str::parse).transpose().map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
         let frame: Option<Frame> =
@@ -610,7 +629,8 @@ struct Assimilation {
 impl Assimilation {
     #[new]
     #[pyo3(signature = (scenario, *, iterations=None))]
-    fn new(py: Python<'_>, scenario: PathBuf, iterations: Option<usize>) -> PyResult<Self> {
+    fn new(py: Python<'_>, scenario: PathBuf, iterations: Option<i64>) -> PyResult<Self> {
+        let iterations = count(iterations, "iterations")?;
         let choice = AssimilationChoice { scenario, iterations, ..AssimilationChoice::default() };
         let (experiment, filter) = compute(py, || choice.online())?;
         let names = filter.names().to_vec();
