@@ -36,6 +36,10 @@ pub struct Frame {
     pub status: serde_json::Value,
 }
 
+/// The largest answer body the client reads (an organ of a million nodes as POLYDATA is some
+/// tens of MB): a larger size is a stream that is not augsim's server, not an allocation to make.
+const MAX_ANSWER_BYTES: u64 = 1 << 30;
+
 /// A connection to `augsim serve`.
 pub struct Client {
     stream: TcpStream,
@@ -91,6 +95,12 @@ impl Client {
             return Ok(None);
         }
         let parsed = Header::decode(&header).map_err(|e| format!("malformed header: {e}"))?;
+        if parsed.body_size > MAX_ANSWER_BYTES {
+            return Err(format!(
+                "an answer of {} bytes, over the {MAX_ANSWER_BYTES} an organ's answer may take: not augsim's server?",
+                parsed.body_size
+            ));
+        }
         let mut body = vec![0; parsed.body_size as usize];
         self.stream.read_exact(&mut body).map_err(|e| format!("truncated answer: {e}"))?;
         let answer = match parsed.type_name.as_str() {
@@ -127,5 +137,27 @@ impl Client {
                 None => return Err("the server closed the connection".into()),
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A peer announcing an answer of an exabyte is refused, not allocated for.
+    #[test]
+    fn an_oversized_answer_is_refused() {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let address = listener.local_addr().unwrap();
+        let peer = std::thread::spawn(move || {
+            let (mut stream, _) = listener.accept().unwrap();
+            let mut wire = encode_message(&StringMessage::utf8("{}"), "status").unwrap();
+            wire[42..50].copy_from_slice(&(1u64 << 60).to_be_bytes());
+            stream.write_all(&wire[..Header::SIZE]).unwrap();
+        });
+        let mut client = Client::connect(address, Duration::from_secs(10)).unwrap();
+        let error = client.receive().unwrap_err();
+        assert!(error.contains("an answer of 1152921504606846976 bytes"), "{error}");
+        peer.join().unwrap();
     }
 }
