@@ -372,10 +372,15 @@ fn merge_of_worker_parts_equals_single_writer() {
     merge_datasets(&parts, &merged, Some(4)).unwrap();
     assert_eq!(tree(&single), tree(&merged));
 
-    // Overlapping parts are refused.
+    // A part given twice, or one missing (its draws would be left out of a "complete" dataset),
+    // is refused.
     let dup = root.path().join("dup");
-    let e = merge_datasets(&[parts[0].clone(), parts[0].clone()], &dup, None).unwrap_err().to_string();
-    assert!(e.contains("also appears"), "{e}");
+    let twice = [parts.clone(), vec![parts[0].clone()]].concat();
+    let e = merge_datasets(&twice, &dup, None).unwrap_err().to_string();
+    assert!(e.contains("part(s) 0/3 are given more than once"), "{e}");
+    let e = merge_datasets(&[parts[0].clone(), parts[2].clone()], &dup, None).unwrap_err().to_string();
+    assert!(e.contains("part(s) 1/3 of the split generation are missing"), "{e}");
+    assert!(!dup.join("manifest.json").exists(), "nothing written");
     // An unfinished part is refused.
     let open = root.path().join("open");
     drop(DatasetWriter::create_or_resume(&open, spec(2, Some(DatasetPart { index: 0, count: 3 }))).unwrap());

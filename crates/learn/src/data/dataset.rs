@@ -1150,10 +1150,37 @@ impl MergeCursor {
     }
 }
 
+/// Refuses parts of a split generation (`--shard i/n`) that are not every part once: a missing
+/// part would leave its draws out of a dataset marked complete.
+fn check_parts_cover(paths: &[PathBuf], datasets: &[Dataset]) -> Result<()> {
+    let parts: Vec<Option<&DatasetPart>> = datasets.iter().map(|d| d.manifest.part.as_ref()).collect();
+    let Some(count) = parts.iter().flatten().map(|p| p.count).next() else { return Ok(()) };
+    let fail = |message: String| Err(LearnError::InvalidInput(format!("merge: {message}")));
+    if let Some(k) = parts.iter().position(|p| p.is_none_or(|p| p.count != count)) {
+        return fail(format!(
+            "{} is not one of the {count} parts of a split generation (--shard i/{count}) as {} is",
+            paths[k].display(),
+            paths[parts.iter().position(Option::is_some).unwrap_or(0)].display()
+        ));
+    }
+    let mut given = vec![0usize; count];
+    parts.iter().flatten().for_each(|p| given[p.index.min(count - 1)] += 1);
+    let missing: Vec<String> = (0..count).filter(|&i| given[i] == 0).map(|i| format!("{i}/{count}")).collect();
+    let twice: Vec<String> = (0..count).filter(|&i| given[i] > 1).map(|i| format!("{i}/{count}")).collect();
+    match (missing.is_empty(), twice.is_empty()) {
+        (true, true) => Ok(()),
+        (false, _) => fail(format!(
+            "part(s) {} of the split generation are missing: merge every part written with --shard i/{count}",
+            missing.join(", ")
+        )),
+        (true, false) => fail(format!("part(s) {} are given more than once", twice.join(", "))),
+    }
+}
+
 /// Merges complete datasets written by parallel workers (`--shard i/n`) into a new dataset
 /// `out`, in generation-index order, re-sharded with `shard_size` (default: the first part's).
-/// The parts must agree on scenario, seed, grid, units and metadata, and no generation index
-/// may appear twice. The result equals what a single worker would have written.
+/// The parts must agree on scenario, seed, grid, units and metadata, be every part of the split
+/// once, and no generation index may appear twice. The result equals what a single worker would have written.
 pub fn merge_datasets(parts: &[PathBuf], out: &Path, shard_size: Option<usize>) -> Result<Manifest> {
     if parts.is_empty() {
         return Err(LearnError::InvalidInput("merge needs at least one dataset".into()));
@@ -1195,6 +1222,7 @@ pub fn merge_datasets(parts: &[PathBuf], out: &Path, shard_size: Option<usize>) 
             ));
         }
     }
+    check_parts_cover(parts, &datasets)?;
     let spec = DatasetSpec { part: None, shard_size: shard_size.unwrap_or(first.shard_size), ..first };
     let mut writer = DatasetWriter::create_or_resume(out, spec)?;
     let mut cursors: Vec<MergeCursor> = datasets.into_iter().map(MergeCursor::new).collect();
