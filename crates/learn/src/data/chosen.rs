@@ -306,7 +306,7 @@ impl Generator {
                 self.grid()
             )));
         }
-        if model.info.split.source.as_deref() != Some(source) {
+        if !crate::data::split::same_source(model.info.split.source.as_deref(), Some(source)) {
             return Err(invalid(format!(
                 "the model was trained on {:?}, not on this dataset's draws ({source}): train it on the uniform \
                  draws first (`augsim train DATASET --method rom`)",

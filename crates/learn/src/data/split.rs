@@ -141,6 +141,17 @@ pub struct Split {
     pub test: IndexSet,
 }
 
+/// Whether two data sources ([`crate::Manifest::source_id`]: `<scenario>/seed <seed>/<settings>`)
+/// are the same draws: their seed and settings agree, whatever the scenario is called (a
+/// scenario renamed, or copied under another name, draws the same samples).
+pub fn same_source(a: Option<&str>, b: Option<&str>) -> bool {
+    let draws = |s: &str| -> Vec<String> { s.rsplitn(3, '/').take(2).map(str::to_string).collect() };
+    match (a, b) {
+        (Some(a), Some(b)) => a == b || draws(a) == draws(b),
+        _ => false,
+    }
+}
+
 impl Split {
     /// The dataset scenario the samples were generated from: the first part of the source
     /// (`<scenario>/seed <seed>/<settings>`), when known.
@@ -188,7 +199,7 @@ impl Split {
     /// The training, validation and test samples of `samples` (which must come from the
     /// split's source), each in the order of `samples`.
     pub fn apply(&self, samples: &Samples) -> Result<[Samples; 3]> {
-        if samples.source != self.source {
+        if !same_source(samples.source.as_deref(), self.source.as_deref()) {
             return Err(LearnError::InvalidInput(format!(
                 "the split is of source {:?}, the samples of {:?}",
                 self.source, samples.source
@@ -204,7 +215,7 @@ impl Split {
     /// Fails when `samples` share an index with the training or validation samples of this
     /// split's source: figures on them would not be held out.
     pub fn check_unseen(&self, samples: &Samples) -> Result<()> {
-        if samples.source.is_none() || samples.source != self.source {
+        if !same_source(samples.source.as_deref(), self.source.as_deref()) {
             return Ok(());
         }
         for (set, role) in [(&self.train, "train"), (&self.validation, "select (validate)")] {
@@ -267,12 +278,12 @@ impl<'a> Provenance<'a> {
 
     /// Whether `samples` come from the data the model's own run was trained on.
     pub fn trained_on(self, samples: &Samples) -> bool {
-        samples.source.is_some() && self.own.source == samples.source
+        same_source(samples.source.as_deref(), self.own.source.as_deref())
     }
 
     /// What sample `index` of the data source `source` was to the model.
     pub fn role(self, source: Option<&str>, index: u64) -> SampleRole {
-        let ours = |s: &Split| source.is_some() && s.source.as_deref() == source;
+        let ours = |s: &Split| same_source(s.source.as_deref(), source);
         for split in self.splits().filter(|s| ours(s)) {
             if split.train.contains(index) {
                 return SampleRole::Training;
@@ -298,5 +309,23 @@ impl<'a> Provenance<'a> {
             |i: u64| matches!(self.role(samples.source.as_deref(), i), SampleRole::Training | SampleRole::Validation);
         let positions: Vec<usize> = (0..samples.len()).filter(|&p| !seen(samples.indices[p])).collect();
         samples.select(&positions)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scenario renamed draws the same samples: the model's training samples stay training
+    /// samples under the new name; another seed is other data.
+    #[test]
+    fn a_renamed_scenario_is_the_same_source() {
+        let split = Split::of_indices(Some("liver_ar/seed 1/00ab".into()), &(0..10).collect::<Vec<_>>(), 2, 2).unwrap();
+        let provenance = Provenance { own: &split, earlier: &[] };
+        assert_eq!(provenance.role(Some("my_liver/seed 1/00ab"), 0), SampleRole::Training);
+        assert_eq!(provenance.role(Some("my_liver/seed 1/00ab"), 9), SampleRole::Test);
+        assert_eq!(provenance.role(Some("liver_ar/seed 2/00ab"), 0), SampleRole::Unseen);
+        assert_eq!(provenance.role(Some("liver_ar/seed 1/00ac"), 0), SampleRole::Unseen);
+        assert!(!same_source(None, None) && !same_source(Some("a/seed 1/0"), None));
     }
 }
