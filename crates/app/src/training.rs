@@ -226,6 +226,12 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
         let (are, them) = if unused.len() == 1 { ("is", "it") } else { ("are", "them") };
         bail!("{} {are} {other}: {this} does not use {them}", unused.join(", "));
     }
+    let net = UNetConfig::default();
+    let shaped = [("--channels", args.channels != net.base_channels), ("--depth", args.depth != net.depth)];
+    let shaped: Vec<&str> = shaped.into_iter().filter(|(_, given)| *given).map(|(flag, _)| flag).collect();
+    if args.init.is_some() && !shaped.is_empty() {
+        bail!("{}: a network fine-tuned from --init keeps the pre-trained one's architecture", shaped.join(", "));
+    }
     let dataset = Dataset::open(&args.dataset)?;
     let all = dataset.load_all()?;
     let (split, [train, validation, test]) = args.split.policy().apply(&all)?;

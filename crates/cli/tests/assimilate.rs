@@ -29,8 +29,9 @@ fn synthetic_tracks_fed_back_and_bad_files() {
     assert!(text.contains("on the filter's own model (an inverse crime"), "{text}");
     assert!(synthetic.join("deformation.pvd").exists() && synthetic.join("deformation/step_00008.vtu").exists());
     // A second run into the same folder is refused: two runs' files are never mixed.
-    let (ok, again) = assimilate(&[s, "-o", synthetic.to_str().unwrap()]);
-    assert!(!ok && again.contains("holds the results of an earlier run (summary.json)"), "{again}");
+    // (`--out`, as every command writing a folder names it, the error's advice.)
+    let (ok, again) = assimilate(&[s, "--out", synthetic.to_str().unwrap()]);
+    assert!(!ok && again.contains("holds the results of an earlier run (summary.json): give another --out"), "{again}");
 
     let tracks = synthetic.join("tracks/observations.csv");
     let read = d.join("read");

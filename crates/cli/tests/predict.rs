@@ -127,6 +127,9 @@ magnitude = [0.05, 0.2]
     }
     let e = augsim_err(&["eval", "net/model.json", "data", "--device", "tpu"], d);
     assert!(e.contains("expected `cpu`, `gpu` or `cpu-burn`"), "{e}");
+    // A network fine-tuned from another keeps its architecture: a shape asked for is refused.
+    let e = augsim_err(&["train", "data", "--out", "tuned", "--init", "net", "--channels", "4"], d);
+    assert!(e.contains("--channels: a network fine-tuned from --init keeps the pre-trained one's architecture"), "{e}");
 
     // A point outside the grid, a malformed line and a grid tensor of the wrong shape.
     std::fs::write(d.join("far.csv"), "5,5,5,0,0,1\n").unwrap();

@@ -23,8 +23,9 @@ pub struct AssimilationChoice {
     #[arg(long)]
     pub sequential: bool,
     /// Output directory, refused when it holds an earlier run's results; default a fresh numbered
-    /// folder under `out/<name>` (`001`, `002`, …).
-    #[arg(short, long)]
+    /// folder under `out/<name>` (`001`, `002`, …). `--out` as every command writing a folder
+    /// names it (`--output` also taken).
+    #[arg(short, long = "out", alias = "output")]
     pub output: Option<PathBuf>,
     /// Tracked features instead of synthetic ones: CSV `frame,id,x,y,z` (in --units, or x_mm, y_mm, z_mm; frame 0 =
     /// rest, frame k = step k).
