@@ -226,6 +226,20 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
         let (are, them) = if unused.len() == 1 { ("is", "it") } else { ("are", "them") };
         bail!("{} {are} {other}: {this} does not use {them}", unused.join(", "));
     }
+    let other = match args.method {
+        Method::Rom => ["model.safetensors", "checkpoint.bin"].into_iter().find(|f| args.out.join(f).exists()),
+        Method::UNet => Some("basis.npy").filter(|f| args.out.join(f).exists()),
+    };
+    if let Some(file) = other {
+        let (held, this) = match args.method {
+            Method::Rom => ("a U-Net", "a reduced-order model"),
+            Method::UNet => ("a reduced-order model", "a U-Net"),
+        };
+        bail!(
+            "{} holds {held} ({file}): {this} written there would mix their files; give another --out",
+            args.out.display()
+        );
+    }
     let net = UNetConfig::default();
     let shaped = [("--channels", args.channels != net.base_channels), ("--depth", args.depth != net.depth)];
     let shaped: Vec<&str> = shaped.into_iter().filter(|(_, given)| *given).map(|(flag, _)| flag).collect();

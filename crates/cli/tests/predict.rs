@@ -127,6 +127,9 @@ magnitude = [0.05, 0.2]
     }
     let e = augsim_err(&["eval", "net/model.json", "data", "--device", "tpu"], d);
     assert!(e.contains("expected `cpu`, `gpu` or `cpu-burn`"), "{e}");
+    // A reduced-order model is not written over a U-Net's folder (their files would mix).
+    let e = augsim_err(&["train", "data", "--out", "net", "--method", "rom"], d);
+    assert!(e.contains("net holds a U-Net (model.safetensors): a reduced-order model written there"), "{e}");
     // A network fine-tuned from another keeps its architecture: a shape asked for is refused.
     let e = augsim_err(&["train", "data", "--out", "tuned", "--init", "net", "--channels", "4"], d);
     assert!(e.contains("--channels: a network fine-tuned from --init keeps the pre-trained one's architecture"), "{e}");
