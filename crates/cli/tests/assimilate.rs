@@ -39,6 +39,9 @@ fn synthetic_tracks_fed_back_and_bad_files() {
     assert!(ok, "{text}");
     assert!(text.contains("tracks       8 frames") && text.contains("0 occluded"), "{text}");
     assert_eq!(young(&synthetic.join("summary.json")).to_bits(), young(&read.join("summary.json")).to_bits());
+    // The same file (in m) read as mm: its features crowd within a fraction of a millimetre.
+    let (ok, text) = assimilate(&[s, "--observations", tracks.to_str().unwrap(), "--units", "mm", "-o", "/dev/null/x"]);
+    assert!(!ok && text.contains("features span") && text.contains("in metres read as millimetres"), "{text}");
 
     let bad = d.join("bad.csv");
     std::fs::write(&bad, "frame,id,x,y,z\n0,f0,0.05,0.01,0.02\n1,f0,0.05,oops,0.02\n").unwrap();
