@@ -125,7 +125,12 @@ pub fn encode_points(grid: &Grid, points: &[Point], values: &[[f64; 3]], force: 
         if pt.iter().chain(v).any(|x| !x.is_finite()) {
             return Err(LearnError::InvalidInput(format!("point {p}: non-finite position or value")));
         }
-        let corners = grid.corners(p, *pt)?;
+        let corners = grid.corners(p, *pt).map_err(|e| {
+            LearnError::InvalidInput(format!(
+                "{}: is it in the model's frame and unit (m; a CSV header x_mm, y_mm, z_mm names millimetres)?",
+                e.message()
+            ))
+        })?;
         if force {
             for (g, w) in corners {
                 for c in 0..CHANNELS {
@@ -455,6 +460,7 @@ mod tests {
         let g = grid();
         let e = encode_points(&g, &[[0.0, 0.0, 5.0]], &[[1.0, 0.0, 0.0]], true).unwrap_err().to_string();
         assert!(e.contains("point 0") && e.contains("outside"), "{e}");
+        assert!(!e.contains("invalid mesh") && e.ends_with("names millimetres)?"), "a point, not a mesh: {e}");
         let e = encode_points(&g, &[[0.1, 0.0, 2.5]], &[[f64::NAN, 0.0, 0.0]], false).unwrap_err().to_string();
         assert!(e.contains("non-finite"), "{e}");
         assert!(encode_points(&g, &[[0.1, 0.0, 2.5]], &[], false).is_err());
