@@ -145,6 +145,9 @@ magnitude = [0.05, 0.2]
     std::fs::write(d.join("mm.csv"), "x_mm,y_mm,z_mm,ux_mm,uy_mm,uz_mm\n0,0,0,0,0,1\n").unwrap();
     let e = augsim_err(&["predict", "net/model.json", "mm.csv"], d);
     assert!(e.contains("the points' vectors are named in mm, but the model takes forces (N)"), "{e}");
+    std::fs::write(d.join("u.csv"), "x,y,z,ux,uy,uz\n0,0,0,0,0,1\n").unwrap();
+    let e = augsim_err(&["predict", "net/model.json", "u.csv"], d);
+    assert!(e.contains("the points' vectors are named displacements, but the model takes forces (N)"), "{e}");
     let e = augsim_err(&["predict", "net/model.json", "cloud.csv", "--runs", "0"], d);
     assert!(e.contains("'0' for '--runs <RUNS>': must be at least 1"), "{e}");
 }

@@ -23,6 +23,25 @@ pub struct PointCloud {
     pub vectors: Vec<[f64; 3]>,
     /// The length unit a file named its vectors in (then displacements, read in m); `None`: not named.
     pub vector_unit: Option<LengthUnit>,
+    /// What the file's header names its vectors: `Some(true)` forces (`fx, fy, fz`), `Some(false)`
+    /// displacements (`ux, uy, uz` or `dx, dy, dz`, with or without a unit); `None`: neither.
+    pub named_forces: Option<bool>,
+}
+
+/// Whether vector columns `names` name forces (`Some(true)`: fx, fy, fz), displacements
+/// (`Some(false)`: ux, uy, uz or dx, dy, dz), each with or without a unit suffix, or neither.
+fn vector_kind(names: &[String]) -> Option<bool> {
+    // The name without its unit (`ux_mm`, `fx_N`), lower case.
+    let stem = |name: &str| -> String {
+        let unit = |u: &str| u.eq_ignore_ascii_case("n") || u.parse::<LengthUnit>().is_ok();
+        name.rsplit_once('_').filter(|(_, u)| unit(u)).map_or(name, |(stem, _)| stem).to_ascii_lowercase()
+    };
+    let is = |prefix: &str| names.iter().zip(["x", "y", "z"]).all(|(n, axis)| stem(n) == format!("{prefix}{axis}"));
+    match (is("f"), is("u") || is("d")) {
+        (true, _) => Some(true),
+        (_, true) => Some(false),
+        _ => None,
+    }
 }
 
 impl PointCloud {
@@ -69,7 +88,8 @@ impl PointCloud {
             values[3..].iter_mut().for_each(|v| *v *= vector_scale);
             rows.push(values);
         }
-        Ok(PointCloud { vector_unit, ..PointCloud::from_rows(&rows) })
+        let named_forces = names.get(3..6).and_then(vector_kind);
+        Ok(PointCloud { vector_unit, named_forces, ..PointCloud::from_rows(&rows) })
     }
 
     /// The cloud of `[x, y, z, vx, vy, vz]` rows.
@@ -78,6 +98,7 @@ impl PointCloud {
             points: rows.iter().map(|r| [r[0], r[1], r[2]]).collect(),
             vectors: rows.iter().map(|r| [r[3], r[4], r[5]]).collect(),
             vector_unit: None,
+            named_forces: None,
         }
     }
 
@@ -160,6 +181,15 @@ impl PredictInput {
                         "the points' vectors are named in {unit}, but the model takes forces (N)"
                     )));
                 }
+                if let Some(named) = cloud.named_forces.filter(|&named| named != forces) {
+                    let (given, taken) = match named {
+                        true => ("forces (fx, fy, fz)", "displacements (m)"),
+                        false => ("displacements", "forces (N)"),
+                    };
+                    return Err(LearnError::InvalidInput(format!(
+                        "the points' vectors are named {given}, but the model takes {taken}"
+                    )));
+                }
                 encode_points(&model.placed_grid()?, &cloud.points, &cloud.vectors, forces)
             }
         }
@@ -183,6 +213,14 @@ mod tests {
         let e = PointCloud::parse_csv("1,2,3,4,5,6\nx,y,z,a,b,c\n", path).unwrap_err().to_string();
         assert!(e.starts_with("cloud.csv:2: "), "{e}");
         assert!(PointCloud::parse_csv("x,y,z,a,b,c\n", path).unwrap().is_empty());
+        // What the header names the vectors: forces, displacements (with or without a unit), or neither.
+        let kind =
+            |header: &str| PointCloud::parse_csv(&format!("{header}\n0,0,0,0,0,1\n"), path).unwrap().named_forces;
+        assert_eq!(kind("x,y,z,fx,fy,fz"), Some(true));
+        assert_eq!(kind("x,y,z,Fx_N,Fy_N,Fz_N"), Some(true));
+        assert_eq!(kind("x,y,z,ux,uy,uz"), Some(false));
+        assert_eq!(kind("x_mm,y_mm,z_mm,dx_mm,dy_mm,dz_mm"), Some(false));
+        assert_eq!(kind("x,y,z,vx,vy,vz"), None);
         // A header naming millimetres: positions (and displacements named so) in metres.
         let mm = PointCloud::parse_csv("x_mm,y_mm,z_mm,fx,fy,fz\n-50,10,30,0,0,-0.2\n", path).unwrap();
         assert_eq!((mm.points[0], mm.vectors[0]), ([-0.05, 0.01, 0.03], [0.0, 0.0, -0.2]));
