@@ -18,6 +18,7 @@
 use std::collections::HashMap;
 use std::ops::Range;
 use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use fem::{Material, Problem, SolverOptions, StaticSolver};
 use mesh::embedding::{Embedding, Grid};
@@ -686,8 +687,8 @@ impl Generator {
         }
     }
 
-    /// Generates indices `range` into `dir` (resuming an unfinished dataset
-    /// there), reporting the draws done to `progress` after each batch. Stops with an error when most of
+    /// Generates indices `range` into `dir` (resuming an unfinished dataset there from its last
+    /// complete shard), reporting the draws done to `progress` as each block of them is solved. Stops with an error when most of
     /// its first draws fail ([`EARLY_DRAWS`]), saying why and what to change.
     pub fn run(&self, dir: &Path, name: &str, part: Option<DatasetPart>, progress: &dyn Progress) -> Result<Manifest> {
         let range = part_range(self.config.samples, part.as_ref())?;
@@ -710,8 +711,17 @@ impl Generator {
         while next < total {
             let end = ((next / BLOCK + batch) * BLOCK).min(total);
             let keep = next..end;
-            let results: Vec<_> =
-                (next / BLOCK..end.div_ceil(BLOCK)).into_par_iter().map(|b| self.block(b, &keep)).collect();
+            // The draws solved so far are reported block by block (a batch takes minutes).
+            let solved = AtomicU64::new(next - range.start as u64);
+            let results: Vec<_> = (next / BLOCK..end.div_ceil(BLOCK))
+                .into_par_iter()
+                .map(|b| {
+                    let drawn = self.block(b, &keep);
+                    let done = solved.fetch_add(drawn.len() as u64, Ordering::Relaxed) + drawn.len() as u64;
+                    progress.advance(done, total - range.start as u64, "");
+                    drawn
+                })
+                .collect();
             for (i, r) in results.into_iter().flatten() {
                 match r {
                     Ok(s) => writer.push(&s)?,
