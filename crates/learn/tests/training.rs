@@ -123,13 +123,24 @@ fn tiny_unet_overfits_a_handful_of_samples() {
         |u: [f64; 3], v: [f64; 3]| ((u[0] - v[0]).powi(2) + (u[1] - v[1]).powi(2) + (u[2] - v[2]).powi(2)).sqrt();
     let (na, nb) = (g.node_index(1, 2, 1), g.node_index(2, 2, 1));
     let (mut at_a, mut at_mid, mut still) = (0.0, 0.0, 0.0f64);
+    let mut worst = (0.0, 0, 0);
     for p in 0..data.len() {
         let (pred, target) = (out.model.predict(data.input(p)).unwrap(), data.target(p));
-        at_a += dist(value(&pred, na), value(target, na)) / data.len() as f64;
-        let avg = |f: &[f32]| -> [f64; 3] { std::array::from_fn(|c| 0.5 * (value(f, na)[c] + value(f, nb)[c])) };
-        at_mid += dist(avg(&pred), avg(target)) / data.len() as f64;
-        still = still.max(dist(value(target, na), [0.0; 3])).max(dist(avg(target), [0.0; 3]));
+        let errors = [dist(value(&pred, na), value(target, na)), {
+            let avg = |f: &[f32]| -> [f64; 3] { std::array::from_fn(|c| 0.5 * (value(f, na)[c] + value(f, nb)[c])) };
+            still = still.max(dist(value(target, na), [0.0; 3])).max(dist(avg(target), [0.0; 3]));
+            dist(avg(&pred), avg(target))
+        }];
+        at_a += errors[0] / data.len() as f64;
+        at_mid += errors[1] / data.len() as f64;
+        for (k, e) in errors.into_iter().enumerate() {
+            if e > worst.0 {
+                worst = (e, data.indices[p], k);
+            }
+        }
     }
+    // The largest error named by its sample's generation index and its point.
+    assert_eq!((at.worst_sample, at.worst_point), (worst.1, worst.2));
     assert!((at.per_point_mean[0] - at_a).abs() < 1e-6 * at_a.max(1e-12), "{:?} vs {at_a}", at.per_point_mean);
     assert!((at.per_point_mean[1] - at_mid).abs() < 1e-6 * at_mid.max(1e-12), "{:?} vs {at_mid}", at.per_point_mean);
     assert!((at.no_motion.max - still).abs() < 1e-6 * still);

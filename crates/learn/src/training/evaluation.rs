@@ -110,12 +110,19 @@ fn check_samples(model: &impl LearnedModel, samples: &Samples) -> Result<()> {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PointErrors {
     /// `|u_pred(x) − u_ref(x)|` over all (sample, point) pairs, both fields interpolated
-    /// trilinearly on the grid.
+    /// trilinearly on the grid (its `worst`: the pair's position, sample position × points +
+    /// point; see `worst_sample`, `worst_point`).
     pub errors: ErrorStats,
     /// `|u_ref(x)|`: the error of assuming the organ did not move, for comparison.
     pub no_motion: ErrorStats,
     /// Mean error of each point over the samples.
     pub per_point_mean: Vec<f64>,
+    /// The generation index of the sample with the largest error...
+    #[serde(default)]
+    pub worst_sample: u64,
+    /// ... and the point (from 0) where it is.
+    #[serde(default)]
+    pub worst_point: usize,
 }
 
 /// [`evaluate`], plus the errors at `points` (positions on `grid`, the model grid placed in
@@ -163,12 +170,16 @@ pub fn evaluate_at_points(
     let per_point_mean = (0..points.len())
         .map(|k| errors.iter().skip(k).step_by(points.len()).sum::<f64>() / samples.len() as f64)
         .collect();
+    let errors = ErrorStats::from_errors(&errors)?;
+    let (worst_sample, worst_point) = (samples.indices[errors.worst / points.len()], errors.worst % points.len());
     Ok((
         report,
         PointErrors {
-            errors: ErrorStats::from_errors(&errors)?,
+            errors,
             no_motion: ErrorStats::from_errors(&no_motion)?,
             per_point_mean,
+            worst_sample,
+            worst_point,
         },
     ))
 }
