@@ -123,7 +123,7 @@ pub fn select_nodes(selection: &NodeSelection, mesh: &Mesh, what: &str) -> Resul
     })
 }
 
-/// For a mesh over [`MILLIMETRE_MESH_EXTENT`] across, what it probably is: an organ in
+/// For a mesh over 5 m across (no organ is), what it probably is: an organ in
 /// millimetres read as metres.
 pub fn millimetre_hint(mesh: &Mesh) -> Option<String> {
     let extent = mesh::longest_side(mesh.bounds());
