@@ -155,8 +155,24 @@ pub fn write_evaluation(
 
 /// `augsim eval`: `model_path`'s model (projected on the basis of the reduced-order model
 /// `project`, when given) evaluated on the samples of `dataset_dir` held out from it, inputs
-/// corrupted by `corruption`, and written into `out` ([`write_evaluation`]); returns it in lines.
+/// corrupted by `corruption`, and written into `out` ([`write_evaluation`]; a folder of an earlier
+/// run's results is refused, and without `out` a fresh numbered folder under `out/eval` is taken:
+/// [`crate::output::run_dir`]); returns it in lines.
 pub fn eval(
+    model_path: &Path,
+    dataset_dir: &Path,
+    project: Option<&Path>,
+    corruption: &Corruption,
+    compute: Compute,
+    out: Option<&Path>,
+) -> Result<Vec<String>> {
+    let (out, own) = crate::output::run_dir(out, Path::new("out/eval"))?;
+    let lines = evaluate_in(model_path, dataset_dir, project, corruption, compute, &out);
+    crate::output::tidy_failed_run(&out, own, lines)
+}
+
+/// [`eval`] into the folder `out`.
+fn evaluate_in(
     model_path: &Path,
     dataset_dir: &Path,
     project: Option<&Path>,

@@ -31,9 +31,9 @@ pub fn solve_scenario(path: &Path) -> Result<Solved> {
 
 impl Solved {
     /// The fields written with the mesh: point `displacement` (3 per node), cell `green_strain`
-    /// (`small_strain` under the linear law; 6 per cell) and cell `von_mises` (1 per cell); where the mesh has them, its file's
-    /// numbers (`file_node`, `file_cell`) and an immersed grid's cell fractions
-    /// (`volume_fraction`).
+    /// (`small_strain` under the linear law; 6 per cell) and cell `von_mises` (1 per cell); where
+    /// the mesh has them, its file's numbers (`file_node`, `file_cell`) and an immersed grid's cell
+    /// fractions (`volume_fraction`).
     pub fn fields(&self) -> Result<Vec<Field>> {
         let (geometry, material, u) = (self.solver.geometry(), &self.solver.problem().material, &self.solution.u);
         let mut fields = vec![

@@ -41,7 +41,7 @@ pub fn eval(
     project: Option<&Path>,
     corruption: &CorruptionArgs,
     device: DeviceArgs,
-    out: &Path,
+    out: Option<&Path>,
 ) -> Result<()> {
     let (compute, line) = device.described_for(model)?;
     println!("{line}");

@@ -93,9 +93,10 @@ enum Command {
         model: PathBuf,
         /// Dataset directory.
         dataset: PathBuf,
-        /// Output directory (errors.csv, summary.json, worst.vtu).
-        #[arg(short, long, default_value = "out/eval")]
-        out: PathBuf,
+        /// Output directory (errors.csv, summary.json, worst.vtu), refused when it holds an earlier
+        /// run's results; default a fresh numbered folder under `out/eval` (`001`, `002`, …).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
         /// Project the model's predictions on the basis of this reduced-order model (its directory)
         /// of the same grid, whose basis spans the dataset's deformations.
         #[arg(long)]
@@ -203,7 +204,7 @@ fn main() {
         Command::Merge { out, parts } => learn_cmd::merge(&out, &parts),
         Command::Train(args) => learn_cmd::train(&args),
         Command::Eval { model, dataset, out, project, corruption, device } => {
-            learn_cmd::eval(&model, &dataset, project.as_deref(), &corruption, device, &out)
+            learn_cmd::eval(&model, &dataset, project.as_deref(), &corruption, device, out.as_deref())
         }
         Command::Predict { model, input, output, mesh, runs, device } => {
             learn_cmd::predict(&model, &input, &output, mesh.as_deref(), runs, device)

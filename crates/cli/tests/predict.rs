@@ -73,6 +73,12 @@ magnitude = [0.05, 0.2]
     assert!(text.contains("held out   2 of 6 samples (the test split recorded in the model)"), "{text}");
     let errors = std::fs::read_to_string(d.join("eval/errors.csv")).unwrap();
     assert_eq!(errors.lines().count(), 3, "{errors}");
+    // A folder of an earlier evaluation is refused; without --out each run takes a fresh one.
+    let e = augsim_err(&["eval", "net/model.json", "data", "--out", "eval"], d);
+    assert!(e.contains("holds the results of an earlier run"), "{e}");
+    for run in ["001", "002"] {
+        assert!(augsim(&["eval", "net/model.json", "data"], d).contains(&format!("out/eval/{run}/summary.json")));
+    }
     // Sparse, noisy input: MIN,MAX as the help says; a malformed or reversed range is refused.
     let text =
         augsim(&["eval", "net/model.json", "data", "--out", "eval_sparse", "--sparse", "2,20", "--noise", "1e-4"], d);
