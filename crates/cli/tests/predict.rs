@@ -85,6 +85,9 @@ magnitude = [0.05, 0.2]
     assert!(text.contains("held out   2 of 6 samples"), "{text}");
     let e = augsim_err(&["eval", "net/model.json", "data", "--sparse", "20"], d);
     assert!(e.contains("expected MIN,MAX (e.g. 13,114), got '20'"), "{e}");
+    // A patch of more nodes than any input has would leave the input dense: refused.
+    let e = augsim_err(&["eval", "net/model.json", "data", "--sparse", "500,1000"], d);
+    assert!(e.contains("--sparse 500,1000 keeps every input node: the samples have at most"), "{e}");
     let e = augsim_err(&["eval", "net/model.json", "data", "--sparse", "20,2"], d);
     assert!(e.contains("patch sizes must satisfy 1 <= min <= max, got 20, 2"), "{e}");
 
