@@ -92,7 +92,7 @@ pub fn evaluate_held_out(
         bail!("{} holds no sample held out from this model (no test split recorded for it)", dataset_dir.display());
     }
     if let Some(learn::Sparsity::Patch { min_nodes, max_nodes }) = &corruption.sparsity {
-        let most = (0..test.len()).map(|p| input_nodes(test.input(p))).max().unwrap_or(0);
+        let most = (0..test.len()).map(|p| learn::nonzero_nodes(test.input(p), test.grid).len()).max().unwrap_or(0);
         if *min_nodes >= most {
             bail!(
                 "--sparse {min_nodes},{max_nodes} keeps every input node: the samples have at most {most}, so the \
@@ -120,12 +120,6 @@ pub fn evaluate_held_out(
         markers: at_markers,
         coverage,
     })
-}
-
-/// The grid nodes of a `[3, nodes]` input whose vector is not zero (the loaded or seen ones).
-fn input_nodes(input: &[f32]) -> usize {
-    let n = input.len() / 3;
-    (0..n).filter(|&k| (0..3).any(|c| input[c * n + k] != 0.0)).count()
 }
 
 /// Writes an evaluation into `out` (created): errors.csv, summary.json and worst.vtu (the worst

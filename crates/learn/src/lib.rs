@@ -38,7 +38,7 @@ pub mod rom;
 pub mod training;
 
 pub use data::chosen::{ChoiceRecipe, ChosenDraws, ChosenRound, CANDIDATE_BASE};
-pub use data::corrupt::{Corruption, Sparsity};
+pub use data::corrupt::{nonzero_nodes, Corruption, Sparsity};
 pub use data::dataset::{
     json_differences, merge_datasets, Dataset, DatasetPart, DatasetSpec, DatasetWriter, FailedSample, FieldUnit,
     Manifest, Normalization, Sample, Samples, ShardInfo, Statistics,

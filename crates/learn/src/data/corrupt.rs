@@ -35,6 +35,13 @@ pub enum Sparsity {
     },
 }
 
+/// The nonzero input nodes of an input field (`[3, nx, ny, nz]` on `grid`): the grid nodes whose
+/// vector is not zero (the loaded patch or the visible surface), which a corruption acts on.
+pub fn nonzero_nodes(input: &[f32], grid: GridShape) -> Vec<usize> {
+    let n = grid.nodes();
+    (0..n).filter(|&v| (0..CHANNELS).any(|c| input[c * n + v] != 0.0)).collect()
+}
+
 /// Input corruption applied at training and/or evaluation time.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -89,7 +96,7 @@ impl Corruption {
             )));
         }
         let n = grid.nodes();
-        let nonzero: Vec<usize> = (0..n).filter(|&v| (0..CHANNELS).any(|c| input[c * n + v] != 0.0)).collect();
+        let nonzero = nonzero_nodes(input, grid);
         if nonzero.is_empty() {
             return Ok(());
         }
