@@ -278,7 +278,7 @@ impl NiftiHeader {
             return Err(format!("too short for a NIfTI file ({} bytes)", bytes.len()));
         }
         let size = |little: bool| {
-            let b: [u8; 4] = bytes.get(0..4).and_then(|b| b.try_into().ok()).unwrap_or_default();
+            let b: [u8; 4] = bytes[0..4].try_into().unwrap();
             if little {
                 i32::from_le_bytes(b)
             } else {
