@@ -42,7 +42,9 @@ pub use tetmesh::{
     mesh_surface, stuff, tet_quality, without_small_pieces, BoundaryFit, ImplicitDomain, SdfDomain, TetMeshOptions,
     TetQuality,
 };
-pub use topology::{boundary_faces, boundary_nodes, boundary_surface, face_connected_pieces, BoundaryFace};
+pub use topology::{
+    boundary_faces, boundary_nodes, boundary_surface, face_connected_pieces, folded_faces, BoundaryFace,
+};
 
 /// A point or vector in 3D, in metres.
 pub type Point = [f64; 3];

@@ -64,6 +64,42 @@ pub fn boundary_faces(mesh: &Mesh) -> Vec<BoundaryFace> {
         .collect()
 }
 
+/// Pairs of cells that lie on the same side of a face they share, found among positively
+/// oriented cells: each turns the face the same way, where neighbours turn it opposite ways. The
+/// mesh folds over itself there (a cell whose nodes were moved through a neighbour, turned
+/// positive again, overlaps it); a face that three cells share always gives such a pair. Each
+/// pair (lower cell first) once, in increasing order.
+pub fn folded_faces(mesh: &Mesh) -> Vec<[usize; 2]> {
+    /// The face's corners (a quadratic face's first three) turned to start at the smallest.
+    fn turned(face: &[usize]) -> Vec<usize> {
+        let corners = if face.len() == 6 { &face[..3] } else { face };
+        let start = (0..corners.len()).min_by_key(|&k| corners[k]).unwrap_or(0);
+        corners[start..].iter().chain(&corners[..start]).copied().collect()
+    }
+    let mut sharing: HashMap<Vec<usize>, Vec<(usize, Vec<usize>)>> = HashMap::new();
+    for (cell, face) in cell_faces(mesh) {
+        let turn = turned(&face);
+        let mut key = turn.clone();
+        key.sort_unstable();
+        sharing.entry(key).or_default().push((cell, turn));
+    }
+    let mut pairs: Vec<[usize; 2]> = sharing
+        .values()
+        .filter(|cells| cells.len() > 1)
+        .flat_map(|cells| {
+            cells.iter().enumerate().flat_map(move |(i, (a, turn_a))| {
+                cells[i + 1..]
+                    .iter()
+                    .filter(move |(_, turn_b)| turn_b == turn_a)
+                    .map(move |(b, _)| [*a.min(b), *a.max(b)])
+            })
+        })
+        .collect();
+    pairs.sort_unstable();
+    pairs.dedup();
+    pairs
+}
+
 /// The cells grouped into pieces joined through shared faces: two cells sharing a face are in
 /// the same piece, two that share only an edge or a vertex may not be. A piece that hangs on the
 /// rest by an edge or a vertex can rotate about it at no cost of energy (a mechanism), unless

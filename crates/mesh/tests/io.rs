@@ -1150,3 +1150,26 @@ fn broken_decks_are_refused_with_their_line() {
         assert!(said.iter().all(|s| m.contains(s)), "{name}: {m}");
     }
 }
+
+/// A node moved through its neighbours inverts the cells around it; turned round, they would
+/// overlap those neighbours. Such a mesh is refused, naming an inverted cell by the file's number
+/// (cells given inside out all together, or every other one, are turned: see above). A tangled
+/// hexahedral mesh fails on its corner Jacobians.
+#[test]
+fn a_tangled_mesh_is_refused() {
+    for mesh in [tet_box(), tet_box().quadratic().unwrap()] {
+        let mut tangled = mesh.clone();
+        let interior = (0..mesh.num_nodes())
+            .find(|&i| !augsim_mesh::boundary_nodes(&mesh).contains(&i))
+            .expect("the box has interior nodes");
+        tangled.nodes[interior][0] += 0.15; // 1.7 cell widths
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("tangled.vtu");
+        write_vtu(&path, &tangled, &[]).unwrap();
+        let e = message(read_mesh(&path));
+        assert!(e.contains("is inverted") && e.contains("folds over") && e.contains("tangled"), "{e}");
+        // Unmoved, the same file reads.
+        write_vtu(&path, &mesh, &[]).unwrap();
+        assert_eq!(read_mesh(&path).unwrap().cells.len(), mesh.cells.len());
+    }
+}

@@ -6,7 +6,8 @@
 //! quadratic) or trilinear hexahedra are kept (lower-dimensional cells are ignored); nodes not
 //! used by any kept cell are dropped and the rest renumbered in file order, the file's own node
 //! numbers kept in [`Mesh::file_nodes`]; every cell is turned positively oriented (mirrored cells
-//! are flipped), and a cell of zero volume is an error.
+//! are flipped), and a cell of zero volume is an error, as is a cell inverted among cells turned
+//! the other way that, flipped, would overlap a neighbour (a tangled mesh).
 //!
 //! Surfaces ([`TriSurface`]) are read from `.obj`, `.stl` (ASCII or binary, duplicate vertices
 //! merged exactly), `.ply` (ASCII or binary), legacy VTK `.vtk` (`POLYDATA` or
@@ -608,6 +609,7 @@ fn finish_volume(
     for i in &mut conn {
         *i = new_index[*i];
     }
+    let mut flipped = vec![false; conn.len() / k];
     for (c, cell) in conn.chunks_exact_mut(k).enumerate() {
         let p = |j: usize| nodes[cell[j]];
         let volume = match kind {
@@ -623,6 +625,7 @@ fn finish_volume(
             ));
         }
         if volume < 0.0 {
+            flipped[c] = true;
             match kind {
                 VolumeKind::Tet => cell.swap(2, 3),
                 // Corners 2 and 3 swap, and with them the mid-edge nodes of 1-2 and 1-3, 0-2 and 0-3.
@@ -640,6 +643,7 @@ fn finish_volume(
         VolumeKind::Tet10 => Cells::Tet10(conn.chunks_exact(10).map(|c| std::array::from_fn(|j| c[j])).collect()),
     };
     let mut mesh = Mesh::new(nodes, cells).map_err(|e| parse_error(path, e.to_string()))?;
+    check_untangled(path, &mesh, &flipped, describe)?;
     let numbered: Vec<usize> = match numbers {
         Some(numbers) => kept.iter().map(|&f| numbers[f]).collect(),
         None => kept.clone(),
@@ -652,6 +656,43 @@ fn finish_volume(
         mesh.file_cells = Some(cell_numbers.to_vec());
     }
     Ok((mesh, kept))
+}
+
+/// Refuses a mesh whose cells came in both orientations where, turned positive, one of the
+/// fewer orientation overlaps a neighbour across their shared face: that cell was inverted (its
+/// nodes moved through the neighbour), not written in the other convention, and turning it
+/// leaves the mesh folded over itself (CalculiX stops on such a cell's negative Jacobian).
+/// `flipped[c]`: cell `c` came with a negative volume.
+fn check_untangled(
+    path: &Path,
+    mesh: &Mesh,
+    flipped: &[bool],
+    describe: &dyn Fn(usize) -> String,
+) -> Result<(), MeshError> {
+    let turned = flipped.iter().filter(|&&f| f).count();
+    let fewer = turned.min(flipped.len() - turned);
+    if fewer == 0 {
+        return Ok(());
+    }
+    let odd = |c: usize| flipped[c] == (turned == fewer);
+    let fold = crate::folded_faces(mesh).into_iter().find_map(|[a, b]| match (odd(a), odd(b)) {
+        (true, false) => Some((a, b)),
+        (false, true) => Some((b, a)),
+        _ => None,
+    });
+    let Some((cell, other)) = fold else { return Ok(()) };
+    Err(parse_error(
+        path,
+        format!(
+            "{} is inverted: its nodes turn the other way from {} of the mesh's {} cells, and turned round it folds \
+             over {} across the face they share, so the mesh is tangled there; remesh it, or move that cell's nodes \
+             back",
+            describe(cell),
+            flipped.len() - fewer,
+            flipped.len(),
+            describe(other),
+        ),
+    ))
 }
 
 /// Restricts fields read from a file to the kept nodes and cells of a mesh.
