@@ -644,6 +644,7 @@ mod tests {
                 far_share: 0.0,
                 warnings: Vec::new(),
                 distorted: false,
+                other_frame: false,
                 out_of_time: false,
                 points: 100,
                 inliers: 100,

@@ -23,18 +23,21 @@
 //!   `from_rest`.
 //!
 //! The answers to a cloud (its targets, organ, structures, rigid transform and status, or its
-//! error status) carry the cloud's header timestamp, so that a client tells which cloud each
-//! answers (a cloud stamped 0 gets answers stamped with the server's clock).
+//! error status) carry the cloud's header timestamp, and an estimate that of its `features`, so
+//! that a client tells which message each answers (one stamped 0 gets answers stamped with the
+//! server's clock).
 //!
 //! Each client has its own registration, taken at its first cloud from one built ahead (see
 //! [`built_ahead`]) and warm-started from its previous frame (from rest after one that left the organ distorted, or after a `reset`). A
 //! client's clouds are registered one at a time; a cloud that arrives while one
 //! is being registered replaces any cloud still waiting (the newest wins: the backlog never
-//! grows). A malformed or oversized `cloud` or `features`, or a message that stalls mid-way
-//! ([`ServeOptions::stall`]), closes that client's connection (after a STRING `status` error
-//! where the connection still allows it); so does a client that leaves its answers unread. A
-//! cloud with no point, too many points or a non-finite coordinate gets an error status and the
-//! stream goes on. Messages of other types or devices (a navigation system's transforms, images)
+//! grows). A message whose header is malformed, whose body exceeds the size limit, or that stalls
+//! mid-way ([`ServeOptions::stall`]), closes that client's connection (after a STRING `status`
+//! error where the connection still allows it): what follows cannot be told apart; so does a
+//! client that leaves its answers unread. A `cloud` whose body, its size as its header says, does
+//! not decode (a CRC mismatch, a malformed POLYDATA) gets an error status, and a `features` an
+//! error estimate, as does a cloud with no point, too many points or a non-finite coordinate;
+//! the stream goes on. Messages of other types or devices (a navigation system's transforms, images)
 //! are skipped, whatever their size, each type and device said once in a STRING `warning` (one
 //! line of JSON: `warnings`). A client that closes its side after sending still gets the answers
 //! to what it sent. Other clients are never affected; the server's log (standard error) has a
@@ -308,7 +311,7 @@ struct Client {
 struct Mailbox {
     cloud: Option<(Cloud, Vec<Point>)>,
     reset: bool,
-    features: std::collections::VecDeque<(u64, Vec<Point>)>,
+    features: std::collections::VecDeque<(u64, Vec<Point>, Option<u64>)>,
 }
 
 /// What a client's two threads share.
@@ -385,8 +388,9 @@ impl Shared {
         }
     }
 
-    fn send_estimate(&self, estimate: &serde_json::Value) {
-        self.send_json("estimate", estimate);
+    /// Sends an estimate (one line of JSON), stamped `timestamp` (that of its `features`).
+    fn send_estimate(&self, estimate: &serde_json::Value, timestamp: Option<u64>) {
+        self.send_line("estimate", estimate.to_string(), timestamp);
     }
 }
 
@@ -452,28 +456,39 @@ fn read_messages(shared: &Shared) {
             Ok(Incoming::Cloud(points, timestamp)) => {
                 frame += 1;
                 let cloud = to_metres(points);
-                let stamp = Cloud { frame, timestamp: (timestamp != 0).then_some(timestamp) };
+                let stamp = Cloud { frame, timestamp: stamped(timestamp) };
                 shared.waiting.lock().unwrap_or_else(|e| e.into_inner()).cloud = Some((stamp, cloud));
                 shared.arrived.notify_one();
             }
             // The features are points of the assimilation scenario's own mesh, in its frame: only their
             // unit is converted, not the registration organ's frame.
-            Ok(Incoming::Features(points)) => {
+            Ok(Incoming::Features(points, timestamp)) => {
                 step += 1;
                 let mut waiting = shared.waiting.lock().unwrap_or_else(|e| e.into_inner());
                 if waiting.features.len() >= MAX_PENDING_STEPS {
                     drop(waiting);
                     let error = format!("{MAX_PENDING_STEPS} steps are already waiting: step refused");
                     log(format_args!("{}: step {step}: {error}", shared.peer));
-                    shared.send_estimate(&serde_json::json!({ "step": step, "error": error }));
+                    shared.send_estimate(&serde_json::json!({ "step": step, "error": error }), stamped(timestamp));
                     continue;
                 }
                 let units = shared.options.coordinates.unit;
-                waiting
-                    .features
-                    .push_back((step, points.into_iter().map(|p| units.point_to_metres(p.map(f64::from))).collect()));
+                let features = points.into_iter().map(|p| units.point_to_metres(p.map(f64::from))).collect();
+                waiting.features.push_back((step, features, stamped(timestamp)));
                 drop(waiting);
                 shared.arrived.notify_one();
+            }
+            // Its body does not decode, but the next message starts where its header says: answered
+            // with an error, the stream goes on.
+            Ok(Incoming::Undecodable { cloud, error, timestamp }) => {
+                if cloud {
+                    frame += 1;
+                    shared.report(&serde_json::json!({ "frame": frame, "error": error }), stamped(timestamp));
+                } else {
+                    step += 1;
+                    log(format_args!("{}: step {step}: {error}", shared.peer));
+                    shared.send_estimate(&serde_json::json!({ "step": step, "error": error }), stamped(timestamp));
+                }
             }
             Ok(Incoming::Reset) => {
                 log(format_args!("{}: reset: the next cloud starts from rest", shared.peer));
@@ -515,8 +530,11 @@ fn read_messages(shared: &Shared) {
 enum Incoming {
     /// The points of a `cloud` POLYDATA or POINT message (wire units) and its header timestamp.
     Cloud(Vec<[f32; 3]>, u64),
-    /// The points of a `features` POLYDATA or POINT message (wire units).
-    Features(Vec<[f32; 3]>),
+    /// The points of a `features` POLYDATA or POINT message (wire units) and its header timestamp.
+    Features(Vec<[f32; 3]>, u64),
+    /// A `cloud` (or else `features`) message whose body, read whole, does not decode: why, and
+    /// its header timestamp.
+    Undecodable { cloud: bool, error: String, timestamp: u64 },
     /// A STRING of device `reset` (its text ignored): the next cloud starts from rest.
     Reset,
     /// Any other message (ignored): its type and device name.
@@ -525,8 +543,8 @@ enum Incoming {
     Closed,
 }
 
-/// The next message from the stream; an error for a malformed, truncated, stalled or oversized
-/// one. Between messages the stream may wait for as long as the client likes; within one, no
+/// The next message from the stream; an error for a truncated, stalled or oversized one, or one
+/// whose header is malformed (a body that does not decode is [`Incoming::Undecodable`]). Between messages the stream may wait for as long as the client likes; within one, no
 /// longer than [`ServeOptions::stall`] between bytes. A message that is not a `cloud` or
 /// `features` is skipped unread, whatever its size (a STRING `reset` too: its text is not read).
 fn read_message(mut stream: &TcpStream, options: &ServeOptions) -> std::result::Result<Incoming, String> {
@@ -565,10 +583,15 @@ fn read_message(mut stream: &TcpStream, options: &ServeOptions) -> std::result::
     let mut body = vec![0; header.body_size as usize];
     stream.read_exact(&mut body).map_err(|e| stalled("truncated message body", e))?;
     let points = match kind {
-        "POLYDATA" => decode_body::<PolyData>(&header, &body)?.points,
-        _ => decode_body::<PointMessage>(&header, &body)?.points.iter().map(|p| p.position).collect(),
+        "POLYDATA" => decode_body::<PolyData>(&header, &body).map(|p| p.points),
+        _ => decode_body::<PointMessage>(&header, &body).map(|p| p.points.iter().map(|p| p.position).collect()),
     };
-    Ok(if device == "cloud" { Incoming::Cloud(points, header.timestamp) } else { Incoming::Features(points) })
+    let (cloud, timestamp) = (device == "cloud", header.timestamp);
+    Ok(match points {
+        Ok(points) if cloud => Incoming::Cloud(points, timestamp),
+        Ok(points) => Incoming::Features(points, timestamp),
+        Err(error) => Incoming::Undecodable { cloud, error, timestamp },
+    })
 }
 
 /// Registers the newest cloud, frame after frame, and makes the identification steps, until the
@@ -585,8 +608,8 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
                     return;
                 }
                 // Steps first, in order: they are few and each counts; then the newest cloud.
-                if let Some((step, features)) = waiting.features.pop_front() {
-                    break Work::Step(step, features);
+                if let Some((step, features, timestamp)) = waiting.features.pop_front() {
+                    break Work::Step(step, features, timestamp);
                 }
                 if let Some((frame, cloud)) = waiting.cloud.take() {
                     break Work::Cloud(frame, cloud, std::mem::take(&mut waiting.reset));
@@ -620,7 +643,7 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
                     shared.report(&serde_json::json!({ "frame": frame.frame, "error": e }), frame.timestamp);
                 }
             }
-            Work::Step(step, features) => {
+            Work::Step(step, features, timestamp) => {
                 let start = Instant::now();
                 let estimate = identify(&shared.options, &mut identification, &features).map(|mut fields| {
                     fields.insert("ms".into(), mesh::stats::ms(start.elapsed()).into());
@@ -634,10 +657,15 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
                     }
                 };
                 answer.insert("step".into(), step.into());
-                shared.send_estimate(&serde_json::Value::Object(answer));
+                shared.send_estimate(&serde_json::Value::Object(answer), timestamp);
             }
         }
     }
+}
+
+/// A header timestamp as the answers carry it: `None` (the server's clock) for 0.
+fn stamped(timestamp: u64) -> Option<u64> {
+    (timestamp != 0).then_some(timestamp)
 }
 
 /// Which cloud of a client's: its frame number, counted by the server from 1, and its header
@@ -652,8 +680,9 @@ struct Cloud {
 enum Work {
     /// Register a cloud (its numbers, points in m), from rest if a reset came before it.
     Cloud(Cloud, Vec<Point>, bool),
-    /// Make an identification step (step number, features in m).
-    Step(u64, Vec<Point>),
+    /// Make an identification step (step number, features in m, the header timestamp of its
+    /// message).
+    Step(u64, Vec<Point>, Option<u64>),
 }
 
 /// One identification step with `features`, building the client's filter at its first step.

@@ -176,24 +176,27 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
     let s = status(other.receive().unwrap());
     assert!(s["error"].as_str().unwrap().contains("exceeds"), "{s}");
     assert!(other.receive().unwrap().is_none(), "the connection is closed");
-    // A POLYDATA that claims 1,000 points and holds 2, with a correct CRC; then a corrupted one.
+    // A POLYDATA that claims 1,000 points and holds 2, with a correct CRC; then a corrupted one:
+    // each answered with an error, stamped as it was, and the stream goes on where its header
+    // said the next message starts.
     let mut lying = encode_message(&PolyData { points: vec![[0.0; 3]; 2], triangles: Vec::new() }, "cloud").unwrap();
     lying[Header::SIZE..Header::SIZE + 4].copy_from_slice(&1000u32.to_be_bytes());
+    lying[34..42].copy_from_slice(&(77u64 << 32).to_be_bytes());
     let crc = crc64(&lying[Header::SIZE..]);
     lying[50..58].copy_from_slice(&crc.to_be_bytes());
-    let mut garbage = connect(port);
-    garbage.send_bytes(&lying).unwrap();
-    let s = status(garbage.receive().unwrap());
-    assert!(s["error"].as_str().unwrap().contains("malformed POLYDATA"), "{s}");
-    assert!(garbage.receive().unwrap().is_none(), "the connection is closed");
     let mut corrupted = huge.clone();
     let body_size = (corrupted.len() - Header::SIZE) as u64;
     corrupted[42..50].copy_from_slice(&body_size.to_be_bytes());
     corrupted[Header::SIZE + 10] ^= 0x55;
     let mut garbage = connect(port);
-    garbage.send_bytes(&corrupted).unwrap();
+    garbage.send_bytes(&[&lying[..], &corrupted[..]].concat()).unwrap();
+    let (answer, at) = garbage.receive_stamped().unwrap().unwrap();
+    let s = status(Some(answer));
+    assert!(s["frame"] == 1 && s["error"].as_str().unwrap().contains("malformed POLYDATA") && at == 77 << 32, "{s}");
     let s = status(garbage.receive().unwrap());
-    assert!(s["error"].as_str().unwrap().contains("CRC"), "{s}");
+    assert!(s["frame"] == 2 && s["error"].as_str().unwrap().contains("CRC"), "{s}");
+    garbage.send_cloud(cloud.clone()).unwrap();
+    assert_eq!(garbage.until_status().unwrap().status["frame"], 3, "the connection goes on");
 
     // The first client is still served, warm-started; only the status is asked of a new server
     // setting, so here the three answers again.
@@ -478,6 +481,23 @@ fn features_step_the_identification_in_order_with_a_bounded_backlog() {
         }
     }
     let refused = answered.iter().flatten().filter(|e| e["error"].is_string()).count();
+    // An estimate carries the timestamp of its features; features that do not decode get an error
+    // estimate, and the steps go on.
+    let features = |stamp: u64| {
+        let points = vec![[0.0, 0.0, 1.0], [0.0, 0.0, 3.0]];
+        augsim_live::encode_message_stamped(&PolyData { points, triangles: Vec::new() }, "features", Some(stamp))
+    };
+    let mut corrupted = features(5 << 32).unwrap();
+    corrupted[Header::SIZE + 6] ^= 0x55;
+    client.send_bytes(&[corrupted, features(6 << 32).unwrap()].concat()).unwrap();
+    for (step, stamp, error) in [(burst + 1, 5 << 32, true), (burst + 2, 6 << 32, false)] {
+        match client.receive_stamped().unwrap() {
+            Some((Answer::Estimate(e), at)) => {
+                assert!(e["step"] == step && at == stamp && e["error"].is_string() == error, "{e} at {at}")
+            }
+            other => panic!("expected an estimate, got {other:?}"),
+        }
+    }
     assert!(refused > 0 && refused <= burst - augsim_live::MAX_PENDING_STEPS, "{refused} of {burst} refused");
     // The first step was made at once: 1 mm, in metres.
     assert!((answered[0].as_ref().unwrap()["z"].as_f64().unwrap() - 1e-3).abs() < 1e-12);

@@ -248,7 +248,7 @@ struct Registered {
     #[pyo3(get)]
     iterations: usize,
     /// The cloud registered from rest, not from the previous cloud's result (the first, after
-    /// `reset()`, or after a cloud that left the organ distorted).
+    /// `reset()`, or after a cloud that left the organ distorted or lay on it in the other frame).
     #[pyo3(get)]
     from_rest: bool,
     /// Why the result may not be believed (the registered surface far from the cloud, an

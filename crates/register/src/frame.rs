@@ -227,6 +227,9 @@ pub struct FrameResult {
     /// The registered organ changes its volume as tissue cannot (a cloud in another frame or
     /// unit): no start for a stream's next frame ([`crate::Registration::register`]).
     pub distorted: bool,
+    /// The cloud lies on the organ at rest in the other frame (RAS for LPS: x and y negated; one
+    /// of the warnings says so): no start for a stream's next frame either.
+    pub other_frame: bool,
     /// The frame stopped at [`RegistrationOptions::time_budget_ms`] before its iterations ran out
     /// (one of the warnings says so).
     pub out_of_time: bool,
@@ -354,7 +357,7 @@ pub(crate) fn register_frame_begun(
     let distances: Vec<f64> = cloud.par_iter().map(|&c| bvh.distance(c)).collect();
     let surface_residual = distances.iter().sum::<f64>() / cloud.len() as f64;
     let far_share = crate::plausibility::far_share(&distances);
-    let crate::plausibility::Verdict { mut warnings, distorted } =
+    let crate::plausibility::Verdict { mut warnings, distorted, other_frame } =
         crate::plausibility::verdict(organ, &u, far_share, (cloud, extent), options.rigid.is_some())?;
     if let (true, Some(budget)) = (out_of_time, options.time_budget_ms) {
         warnings.push(format!(
@@ -370,6 +373,7 @@ pub(crate) fn register_frame_begun(
         far_share,
         warnings,
         distorted,
+        other_frame,
         out_of_time,
         points: cloud.len(),
         inliers,

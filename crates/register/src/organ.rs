@@ -193,15 +193,26 @@ pub const SMALL_TARGET_EXTENT: f64 = 0.01;
 /// points on its surface, where it is held.
 pub const LANDMARK_REACH: f64 = 0.15;
 
+/// Targets outside the organ's mesh by less than this share of its extent are near it (in a part
+/// of the organ its mesh leaves out, or just past its surface): their error names no unit or frame
+/// mistake, which would put some of them far off.
+pub const NEAR_OUTSIDE: f64 = 0.1;
+
 impl Organ {
     /// Stencils of the targets in the organ, and warnings about them. A target outside the organ
-    /// is an error, which names it (by its label too, where `labels` give one) and the likely
-    /// mistake (millimetres given for metres or the reverse, the other of RAS and LPS); a set of
-    /// targets whose extent is under [`SMALL_TARGET_EXTENT`] of the organ's is warned about.
+    /// is an error, which names it (by its label too, where `labels` give one) and, when one of
+    /// them lies farther than [`NEAR_OUTSIDE`], the likely mistake (millimetres given for metres
+    /// or the reverse, the other of RAS and LPS); a set of targets whose extent is under
+    /// [`SMALL_TARGET_EXTENT`] of the organ's is warned about.
     pub fn locate_targets(&self, targets: &[Point], labels: &[String]) -> Result<(Vec<Stencil>, Vec<String>)> {
         let inside = |moved: &[Point]| self.locate(moved, "target").is_ok();
         let stencils = self.locate_labelled(targets, labels, "target").map_err(|e| {
-            let hint = likely_mistake(targets, self.extent(), "every target lies inside", inside);
+            let near = SurfaceBvh::new(&self.surface)
+                .is_ok_and(|bvh| targets.iter().all(|&p| bvh.signed_distance(p) <= NEAR_OUTSIDE * self.extent()));
+            let hint = match near {
+                true => String::new(),
+                false => likely_mistake(targets, self.extent(), "every target lies inside", inside),
+            };
             RegisterError::Invalid(format!("{e}{hint}"))
         })?;
         Ok((stencils, self.spread_warnings(targets, "targets", inside)))

@@ -198,6 +198,9 @@ pub struct Verdict {
     pub warnings: Vec<String>,
     /// The registered organ changes its volume as tissue cannot (one of the warnings says so).
     pub distorted: bool,
+    /// The cloud lies on the organ at rest with x and y negated ([`frame_mix_up`]; one of the
+    /// warnings says so).
+    pub other_frame: bool,
 }
 
 /// What a registered frame says about itself, given its cloud and that cloud's extent over the
@@ -270,8 +273,9 @@ pub fn verdict(
             mm(size)
         ));
     }
+    let other_frame = mix_up.is_some();
     out.extend(mix_up);
-    Ok(Verdict { warnings: out, distorted })
+    Ok(Verdict { warnings: out, distorted, other_frame })
 }
 
 #[cfg(test)]

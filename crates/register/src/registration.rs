@@ -252,7 +252,8 @@ impl Registration {
     /// pose, when rigid pre-alignment is on, is estimated on a cloud and kept for the next ones
     /// while they register plausibly ([`FrameResult::plausible`]: a frame stopped by its time
     /// budget keeps it): a cloud with another warning has the next one estimate it again, and a
-    /// cloud that leaves the organ distorted ([`FrameResult::distorted`]) has it start from rest.
+    /// cloud that leaves the organ distorted ([`FrameResult::distorted`]) or lies on it in the
+    /// other frame ([`FrameResult::other_frame`]) has it start from rest.
     pub fn register(&mut self, cloud: &[Point]) -> Result<Tracked> {
         let began = std::time::Instant::now();
         // The pose, estimated on this cloud or kept; when estimated, whether the cloud fits the
@@ -298,7 +299,10 @@ impl Registration {
         if rigid.is_some() && mix_up.is_none() && !registration.warnings.is_empty() {
             mix_up = Some(crate::plausibility::frame_mix_up(&self.organ, cloud)?);
         }
-        registration.warnings.extend(mix_up.flatten());
+        if let Some(hint) = mix_up.flatten() {
+            registration.other_frame = true;
+            registration.warnings.push(hint);
+        }
         let targets = in_cloud_frame(displaced(&self.targets, &self.stencils, &registration.u), rigid.as_ref());
         // σ is part of the frame's work, and of its time (not cut by its budget).
         let target_std = self.deformer.uncertainty(&self.targets, &self.stencils).transpose()?;
@@ -306,7 +310,7 @@ impl Registration {
         // A cloud only partly fitted is still the best start for the next (a stream tracks a hard
         // push better than a frame from rest); a distorted organ, a cloud in another frame or unit,
         // is not (docs/method.md, 6.6).
-        self.warm = (!registration.distorted).then(|| registration.u.clone());
+        self.warm = (!registration.distorted && !registration.other_frame).then(|| registration.u.clone());
         self.rigid = if registration.plausible() { rigid.clone() } else { None };
         Ok(Tracked { registration, targets, rigid, target_std })
     }
@@ -557,6 +561,14 @@ mod tests {
         assert!(message.contains("outside the organ") && !message.contains("expected"), "{message}");
     }
 
+    /// A target just outside the organ (as in a part its mesh leaves out) is no unit mistake,
+    /// though read 10 times smaller it would lie inside, as any point near the origin would.
+    #[test]
+    fn targets_just_outside_get_no_unit_hint() {
+        let message = cube_with(vec![[0.051, 0.02, 0.03], [0.04, 0.01, 0.02]]).err().expect("outside").to_string();
+        assert!(message.contains("outside the organ") && !message.contains("times smaller"), "{message}");
+    }
+
     /// With rigid pre-alignment, a plausible cloud's pose is kept for the next clouds; a cloud that
     /// registers with a warning has the next one estimate it again. A cloud in another unit is
     /// named as such before an alignment.
@@ -653,35 +665,55 @@ mod tests {
         assert!((second.registration.u[0] - 2e-4).abs() < 1e-12, "went on: {}", second.registration.u[0]);
     }
 
-    /// A deformer that shrinks the organ to half its size about the origin, recording at each
-    /// frame's start whether the frame was warm-started.
-    struct Shrinking(Vec<Point>, std::sync::Arc<std::sync::Mutex<Vec<bool>>>);
+    /// A deformer that scales the organ about the origin by its factor, recording at each frame's
+    /// start whether the frame was warm-started.
+    struct Scaling(f64, Vec<Point>, std::sync::Arc<std::sync::Mutex<Vec<bool>>>);
 
-    impl Deformer for Shrinking {
+    impl Deformer for Scaling {
         fn deform(&mut self, _: &Observations, _: &[f64], _: usize) -> Result<Vec<f64>> {
-            Ok(self.0.iter().flat_map(|p| p.map(|x| -0.5 * x)).collect())
+            Ok(self.1.iter().flat_map(|p| p.map(|x| (self.0 - 1.0) * x)).collect())
         }
 
         fn start_frame(&mut self, warm: bool) {
-            self.1.lock().unwrap().push(warm);
+            self.2.lock().unwrap().push(warm);
         }
+    }
+
+    /// Registers `clouds` in turn with a [`Scaling`] deformer of `factor` on a 5 cm cube; returns
+    /// the frames and whether each was warm-started.
+    fn scaled_stream(factor: f64, clouds: &[Vec<Point>]) -> (Vec<FrameResult>, Vec<bool>) {
+        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap(), None).unwrap();
+        let starts = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let deformer = Box::new(Scaling(factor, organ.mesh().nodes.clone(), starts.clone()));
+        let options = RegistrationOptions { iterations: 2, ..Default::default() };
+        let mut r = Registration::new(organ, deformer, "scaling", vec![[0.02; 3]], Vec::new(), options).unwrap();
+        let frames = clouds.iter().map(|c| r.register(c).unwrap().registration).collect();
+        let starts = starts.lock().unwrap().clone();
+        (frames, starts)
     }
 
     /// A frame that leaves the organ distorted (a cloud in another frame or unit) is no start for
     /// the next: it starts from rest.
     #[test]
     fn a_distorted_organ_is_no_start_for_the_next_frame() {
-        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap(), None).unwrap();
-        let starts = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-        let deformer = Box::new(Shrinking(organ.mesh().nodes.clone(), starts.clone()));
-        let options = RegistrationOptions { iterations: 2, ..Default::default() };
-        let mut r =
-            Registration::new(organ.clone(), deformer, "shrinking", vec![[0.02; 3]], Vec::new(), options).unwrap();
-        let view = organ.surface().vertices.clone();
-        for _ in 0..2 {
-            assert!(r.register(&view).unwrap().registration.distorted);
-        }
-        assert_eq!(*starts.lock().unwrap(), [false, false], "the second frame from rest too");
+        let view = mesh::boundary_surface(&mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap()).vertices;
+        let (frames, starts) = scaled_stream(0.5, &[view.clone(), view]);
+        assert!(frames.iter().all(|f| f.distorted));
+        assert_eq!(starts, [false, false], "the second frame from rest too");
+    }
+
+    /// A cloud in the other frame (x and y negated) that leaves the organ undistorted is no start
+    /// for the next frame either: the next, in the right frame, starts from rest, and the one
+    /// after it from that.
+    #[test]
+    fn a_cloud_in_the_other_frame_is_no_start_for_the_next_frame() {
+        let view = mesh::boundary_surface(&mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap()).vertices;
+        let other: Vec<Point> = view.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
+        let (frames, starts) = scaled_stream(1.0, &[other, view.clone(), view]);
+        assert!(frames[0].other_frame && !frames[0].distorted, "{:?}", frames[0].warnings);
+        assert!(frames[0].warnings.iter().any(|w| w.contains("with x and y negated")));
+        assert!(frames[1].plausible() && frames[1].from_rest && !frames[2].from_rest);
+        assert_eq!(starts, [false, false, true]);
     }
 
     #[test]
