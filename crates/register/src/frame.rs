@@ -135,8 +135,9 @@ pub struct RegistrationOptions {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub view: Option<Point>,
     /// Most cloud points matched at each iteration and in the frame's residual: an evenly spaced
-    /// subset of the cloud when it has more (`None`: every point). A fit of a few dozen shape
-    /// coefficients needs far fewer points than a cloud holds, and matching is most of its time.
+    /// subset of the cloud when it has more (`None`: every point; [`MAX_POINTS`] by default). A
+    /// fit of a few dozen shape coefficients needs far fewer points than a cloud holds, and
+    /// matching is most of its time.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_points: Option<usize>,
     /// Which frames match both ways: besides each cloud point to the surface, each vertex of the
@@ -151,6 +152,12 @@ pub struct RegistrationOptions {
     pub time_budget_ms: Option<f64>,
 }
 
+/// Most cloud points a registration matches by default: a depth camera's full frame (10⁵ points
+/// and more) takes seconds to match and says no more. On a real liver's prepared patient (FEM,
+/// 100,000 points of its seen surface) 10,000 of them moved its targets by 0.17 mm at most, in
+/// 0.16 times the time of a warm frame.
+pub const MAX_POINTS: usize = 10_000;
+
 impl Default for RegistrationOptions {
     fn default() -> Self {
         RegistrationOptions {
@@ -164,7 +171,7 @@ impl Default for RegistrationOptions {
             capture_decay: 0.93,
             rigid: None,
             view: None,
-            max_points: None,
+            max_points: Some(MAX_POINTS),
             two_way: TwoWay::Never,
             time_budget_ms: None,
         }

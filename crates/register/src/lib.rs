@@ -61,7 +61,7 @@ pub mod warp;
 pub use checks::check_cloud;
 pub use deformers::{FemDeformer, HybridDeformer, NetworkDeformer, RestAndStream};
 pub use frame::{
-    observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions, TwoWay,
+    observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions, TwoWay, MAX_POINTS,
     WARM_START_ITERATION,
 };
 pub use organ::{Organ, Stencil};

@@ -490,6 +490,20 @@ mod tests {
         Registration::new(organ, Box::new(Still), "still", targets, Vec::new(), RegistrationOptions::default())
     }
 
+    /// A depth camera's full frame is matched on [`crate::MAX_POINTS`] of its points by default,
+    /// spread over the whole of it.
+    #[test]
+    fn a_large_cloud_is_matched_on_a_subset() {
+        let mut r = cube_with(vec![[0.02; 3]]).unwrap();
+        let n = 3 * crate::MAX_POINTS;
+        // The top face, row by row.
+        let cloud: Vec<Point> =
+            (0..n).map(|k| [0.05 * (k % 300) as f64 / 300.0, 0.05 * (k / 300) as f64 / 100.0, 0.05]).collect();
+        let result = r.register(&cloud).unwrap().registration;
+        assert_eq!(result.points, crate::MAX_POINTS);
+        assert!(result.plausible() && result.surface_residual < 1e-9, "{:?}", result.warnings);
+    }
+
     #[test]
     fn targets_in_the_organ_are_accepted_without_warning() {
         let r = cube_with(vec![[0.01, 0.02, 0.03], [0.04, 0.01, 0.02]]).unwrap();
