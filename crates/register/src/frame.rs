@@ -424,6 +424,7 @@ fn observations(
 ) -> Observations {
     let mut obs = Observations { matches: Vec::with_capacity(cloud.len()) };
     let rest = &organ.surface().vertices;
+    let vertex_normals = surface.vertex_normals();
     for (c, m) in cloud.iter().zip(matches) {
         if m.distance > limit {
             continue;
@@ -432,7 +433,9 @@ fn observations(
         let tri = surface.triangles[triangle];
         let corners = tri.map(|k| surface.vertices[k]);
         let bary = mesh::bvh::triangle_barycentric(corners, m.point);
-        let normal = unit(mesh::cross(sub(corners[1], corners[0]), sub(corners[2], corners[0])));
+        // The vertex normals interpolated: on an edge or a vertex, which of its triangles a point
+        // matched does not change its normal.
+        let normal = unit(std::array::from_fn(|d| (0..3).map(|j| bary[j] * vertex_normals[tri[j]][d]).sum()));
         let mut p0 = [0.0; 3];
         for (b, &k) in bary.iter().zip(&tri) {
             for d in 0..3 {
@@ -600,6 +603,24 @@ fn estimate_view(surface: &TriSurface, matches: &[ClosestPoint], limit: f64) -> 
 pub(crate) mod tests {
     use super::*;
     use mesh::sampling::sample_visible;
+
+    /// A point whose closest surface point lies on an edge gets the same normal whichever of
+    /// the edge's triangles it matched: points a rounding error apart on either side of the
+    /// bisector of a cube's edge are matched along the same normal, between the faces'.
+    #[test]
+    fn a_match_on_an_edge_has_one_normal() {
+        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [2, 2, 2]).unwrap(), None).unwrap();
+        let surface = organ.surface().clone();
+        let options = RegistrationOptions::default();
+        let normal = |offset: f64| {
+            let point = [0.03, 0.06 + offset, 0.06 - offset];
+            let observations = observe(&organ, &surface, &[point], &options, 1.0, None).unwrap();
+            observations.matches[0].normal
+        };
+        let (a, b) = (normal(1e-12), normal(-1e-12));
+        assert!(mesh::distance(a, b) < 1e-9, "{a:?} against {b:?}");
+        assert!(a[1] > 0.5 && (a[1] - a[2]).abs() < 1e-9, "{a:?}");
+    }
 
     fn phantom_surface() -> TriSurface {
         mesh::boundary_surface(&mesh::phantom::liver_phantom(1500).unwrap()).compacted()
