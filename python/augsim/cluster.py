@@ -16,7 +16,10 @@ pure Python. Each worker needs the ``augsim`` binary (``--augsim PATH``, default
 PATH) and sees the output directory (a shared file system on a cluster). A shard that stopped
 resumes where it stopped when the run is repeated (``augsim generate`` resumes), and a shard
 already complete for the same scenario and draws is not solved again; one made for other ones
-(left by ``--keep-parts`` or a failed merge) is refused, naming what differs.
+(left by ``--keep-parts`` or a failed merge) is refused, naming what differs. A shard's directory has
+one writer at a time: a shard run again while a killed worker's ``augsim`` still writes it is refused.
+The draws go to the shards in blocks of 32 (as ``augsim generate --shard`` splits them): a run of
+fewer than 32 draws a shard leaves some shards without work.
 
 Needs dask: ``pip install "./python[cluster]"`` (with dask-jobqueue for --slurm / --pbs).
 """
@@ -24,6 +27,7 @@ Needs dask: ``pip install "./python[cluster]"`` (with dask-jobqueue for --slurm 
 import argparse
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -46,8 +50,28 @@ def generate_shard(augsim, scenario, out, index, count, samples=None, threads=1)
     start = time.perf_counter()
     run = subprocess.run(command, capture_output=True, text=True, env=env)
     if run.returncode != 0:
-        raise RuntimeError(f"shard {index}/{count} failed:\n{run.stdout}{run.stderr}")
+        raise RuntimeError(f"shard {index}/{count} failed ({exit_cause(run.returncode)}): {last_words(run)}")
     return directory, time.perf_counter() - start
+
+
+def exit_cause(returncode):
+    """How a process ended, in words: ``exit status 1``, ``killed by SIGKILL``."""
+    if returncode < 0:
+        try:
+            return f"killed by {signal.Signals(-returncode).name}"
+        except ValueError:
+            return f"killed by signal {-returncode}"
+    return f"exit status {returncode}"
+
+
+def last_words(run):
+    """What a finished ``augsim`` run said last: its error line, else its last line of output."""
+    lines = [line.strip() for line in (run.stdout + run.stderr).splitlines() if line.strip()]
+    errors = [line for line in lines if line.startswith("error")]
+    return (errors or lines or ["no output"])[-1]
+
+
+RESUME = "run the same command again to resume: the draws each shard saved are kept"
 
 
 def scenario_problem(augsim, scenario):
@@ -101,9 +125,13 @@ def generate(args):
                                  pure=False, key=f"shard-{i}-of-{shards}")
                    for i in range(shards)]
         start = time.perf_counter()
-        for done, future in enumerate(as_completed(futures), 1):
-            directory, seconds = future.result()
-            print(f"shard      {done}/{shards} done: {os.path.basename(directory)} ({seconds:.1f} s)", flush=True)
+        try:
+            for done, future in enumerate(as_completed(futures), 1):
+                directory, seconds = future.result()
+                print(f"shard      {done}/{shards} done: {os.path.basename(directory)} ({seconds:.1f} s)", flush=True)
+        except RuntimeError as e:
+            client.cancel(futures)
+            raise SystemExit(f"{e}; {RESUME}") from None
         print(f"shards     {time.perf_counter() - start:.1f} s on the cluster", flush=True)
     finally:
         client.close()
@@ -145,7 +173,11 @@ def main(argv=None):
         problem = scenario_problem(args.augsim, args.scenario)
         if problem:
             p.error(problem)
-    print(generate(args), end="")
+    try:
+        print(generate(args), end="")
+    except KeyboardInterrupt:
+        print(f"interrupted: {RESUME}", file=sys.stderr)
+        return 130
     return 0
 
 

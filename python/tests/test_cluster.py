@@ -35,8 +35,9 @@ def test_two_local_workers_write_the_single_machine_dataset(tmp_path):
 
 
 def test_a_failing_shard_is_reported(tmp_path):
-    with pytest.raises(RuntimeError, match="shard 0/1 failed"):
+    with pytest.raises(RuntimeError, match=r"shard 0/1 failed \(exit status 1\): error: .*missing\.toml"):
         cluster.generate_shard(augsim_bin(), str(tmp_path / "missing.toml"), str(tmp_path / "out"), 0, 1)
+    assert cluster.exit_cause(-9) == "killed by SIGKILL"
 
 
 def test_kept_shards_are_reused_only_for_the_same_draws_and_a_dataset_is_never_overwritten(tmp_path):

@@ -277,6 +277,24 @@ fn the_source_names_the_samples_not_the_dataset_size() {
 }
 
 #[test]
+/// A dataset has one writer at a time: a second is refused while the first writes (its draws
+/// would mix with the first's), and may go on once the first has stopped (killed: dropped here).
+#[test]
+fn a_second_writer_is_refused_while_the_first_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut first = DatasetWriter::create_or_resume(dir.path(), spec(3, None)).unwrap();
+    push(&mut first, 0);
+    let refused = |e: LearnError| e.to_string().contains("is being written by another run");
+    assert!(DatasetWriter::create_or_resume(dir.path(), spec(3, None)).err().is_some_and(refused));
+    assert!(DatasetWriter::append(dir.path(), &spec(3, None)).err().is_some_and(refused));
+    drop(first);
+    let mut second = DatasetWriter::create_or_resume(dir.path(), spec(3, None)).unwrap();
+    push(&mut second, 0);
+    second.finish().unwrap();
+    assert!(!dir.path().join(augsim_learn::data::dataset::WRITER_LOCK).exists(), "removed when finished");
+}
+
+#[test]
 fn resumed_writing_equals_uninterrupted() {
     let a = tempfile::tempdir().unwrap();
     let b = tempfile::tempdir().unwrap();

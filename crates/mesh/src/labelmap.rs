@@ -251,6 +251,10 @@ fn label(i: usize, x: f64) -> Result<i32, String> {
     }
 }
 
+/// How far (relative) a voxel scaled by a NIfTI's slope and intercept may lie from a whole number
+/// and still be a label: several times the precision of the 32-bit numbers NIfTI-1 stores them in.
+const SCALED_LABEL_TOLERANCE: f64 = 1e-6;
+
 /// The fields of a NIfTI-1 or NIfTI-2 header that size, read and place the voxels (NIfTI-2 holds
 /// the same fields, wider, at other offsets).
 struct NiftiHeader {
@@ -396,13 +400,15 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
     if slope.is_finite() && slope != 0.0 && (slope != 1.0 || intercept != 0.0) {
         for l in labels.iter_mut() {
             let v = *l as f64 * slope + intercept;
-            if v != v.round() {
+            // NIfTI-1 stores slope and intercept in 32 bits: 0.1 is 0.100000001490116, and 40 times
+            // it a label to within that precision.
+            if (v - v.round()).abs() > SCALED_LABEL_TOLERANCE * (1.0 + v.abs()) {
                 return Err(format!("scaled value {v} is not a label (scl_slope {slope}, scl_inter {intercept})"));
             }
             if v.abs() > i32::MAX as f64 {
                 return Err(format!("scaled value {v} is beyond 32 bits"));
             }
-            *l = v as i32;
+            *l = v.round() as i32;
         }
     }
     let (qform_code, sform_code) = (header.qform_code, header.sform_code);
@@ -1715,6 +1721,27 @@ mod tests {
             let back = read_labelmap(&path).unwrap_or_else(|e| panic!("slope {slope}, intercept {intercept}: {e}"));
             assert!(back.labels == map.labels, "slope {slope}, intercept {intercept}");
         }
+    }
+
+    /// Labels stored as ten times their value with a slope of 0.1 (in 32 bits: 0.100000001490116)
+    /// read as labels; a slope that leaves a voxel between labels is refused.
+    #[test]
+    fn a_nifti_scaled_by_a_32_bit_slope_gives_its_labels() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Ras);
+        let tenfold = Labelmap { labels: map.labels.iter().map(|l| 10 * l).collect(), ..map.clone() };
+        let path = dir.path().join("s.nii");
+        write_nifti(&path, &tenfold).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let scaled = |slope: f32| {
+            let mut bytes = bytes.clone();
+            bytes[112..116].copy_from_slice(&slope.to_le_bytes());
+            std::fs::write(&path, &bytes).unwrap();
+            read_labelmap(&path)
+        };
+        assert_eq!(scaled(0.1).unwrap().labels, map.labels);
+        let e = scaled(0.025).unwrap_err().to_string();
+        assert!(e.contains("is not a label"), "{e}");
     }
 
     /// NRRD vectors may hold white space, as some writers put it after the commas.

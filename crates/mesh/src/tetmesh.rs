@@ -426,6 +426,12 @@ pub fn surface_domain(surface: &TriSurface) -> Result<(SurfaceBvh, f64), MeshErr
     Ok((bvh, s.enclosed_volume()))
 }
 
+/// Most lattice cubes over a domain's bounding box per tetrahedron asked for: an organ's box holds
+/// about a third of a cube per tetrahedron (12 tetrahedra a cube of its volume, 3 to 4 times its
+/// volume in its box); 50 lets through a domain 600 times smaller than its box (a curved vessel),
+/// not a sheet a voxel thick, whose lattice would fill the memory.
+const LATTICE_PER_TET: f64 = 50.0;
+
 /// Stuffs `domain` with lattice spacings chosen so that the mesh has about
 /// `target` tetrahedra: a first guess from `volume` (or half the bounding
 /// box), then secant steps on log(count) against log(size), at most six
@@ -447,11 +453,22 @@ pub fn stuff_to_count(
         )));
     }
     let (lo, hi) = domain.bounds();
-    let vol = volume.unwrap_or(0.5 * (hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
+    let size = sub(hi, lo);
+    let bounding = size[0] * size[1] * size[2];
+    let vol = volume.unwrap_or(0.5 * bounding);
     let mut h = size_for_count(vol, target);
     let mut best: Option<Mesh> = None;
     let mut prev: Option<(f64, f64)> = None; // (ln h, ln count)
     for _ in 0..6 {
+        let cubes = bounding / (h * h * h);
+        if cubes > LATTICE_PER_TET * target as f64 {
+            return Err(MeshError::Invalid(format!(
+                "the surface encloses {vol:.3e} m³, {:.0} times less than its bounding box ({bounding:.3e} m³): too \
+                 thin or flat to fill with {target} tetrahedra (it would take a lattice of {cubes:.1e} cubes); a \
+                 segment a voxel or two thick (a sheet, a line) has no volume to mesh",
+                bounding / vol
+            )));
+        }
         let mesh = stuff(domain, &TetMeshOptions::with_size(h).with_fit(fit))?;
         let n = mesh.cells.len().max(1) as f64;
         let err = (n / target as f64).ln().abs();

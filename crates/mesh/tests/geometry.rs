@@ -177,6 +177,24 @@ fn icosphere_surface_meshing() {
 }
 
 #[test]
+fn a_rod_too_thin_to_fill_is_refused_at_once() {
+    // A rod 10 cm long along the diagonal of its box: the box holds 7,700 times its volume (0.5 mm
+    // across) or 43 times (6 mm across).
+    let diagonal = |p: Point| -> Point {
+        let (a, b, c) = (1.0 / 3f64.sqrt(), 1.0 / 2f64.sqrt(), 1.0 / 6f64.sqrt());
+        [a * p[0] + b * p[1] + c * p[2], a * p[0] - b * p[1] + c * p[2], a * p[0] - 2.0 * c * p[2]]
+    };
+    let rod = |across: f64| {
+        let mut s = augsim_mesh::boundary_surface(&box_tet([0.0; 3], [0.1, across, across], [10, 1, 1]).unwrap());
+        s.vertices.iter_mut().for_each(|p| *p = diagonal(*p));
+        s
+    };
+    let e = mesh_surface_to_count(&rod(5e-4), 5000, BoundaryFit::VolumePreserving).unwrap_err().to_string();
+    assert!(e.contains("too thin or flat to fill with 5000 tetrahedra"), "{e}");
+    assert!(mesh_surface_to_count(&rod(6e-3), 2000, BoundaryFit::VolumePreserving).is_ok());
+}
+
+#[test]
 fn liver_smooth_obj_meshing() {
     let mut s = augsim_mesh::io::read_surface(LIVER_OBJ).unwrap();
     let report = check_closed_manifold(&s).unwrap();

@@ -334,7 +334,7 @@ struct Registration {
 #[pymethods]
 impl Registration {
     #[new]
-    #[pyo3(signature = (*, fem=None, model=None, scenario=None, shape_model=None, patient=None, use_fem=None, use_hybrid=false, targets=None, units=None, frame=None, iterations=None, rigid=false, structures=Vec::new()))]
+    #[pyo3(signature = (*, fem=None, model=None, scenario=None, shape_model=None, patient=None, use_fem=None, use_hybrid=false, targets=None, units=None, frame=None, iterations=None, rigid=false, structures=None))]
     #[allow(clippy::too_many_arguments)] // one per Python keyword argument
     fn new(
         py: Python<'_>,
@@ -350,7 +350,7 @@ impl Registration {
         frame: Option<&str>,
         iterations: Option<i64>,
         rigid: bool,
-        structures: Vec<PathBuf>,
+        structures: Option<Vec<PathBuf>>,
     ) -> PyResult<Self> {
         let iterations = count(iterations, "iterations")?;
         let units: Option<LengthUnit> =
@@ -383,7 +383,7 @@ impl Registration {
             frame,
             iterations,
             rigid,
-            structures,
+            structures: structures.unwrap_or_default(),
         };
         choice.check().map_err(PyValueError::new_err)?;
         let (state, spec) = compute(py, move || {

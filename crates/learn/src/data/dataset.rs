@@ -726,6 +726,8 @@ impl Samples {
 /// ([`resume_from`](Self::resume_from)); samples of the uncommitted shard are generated again.
 pub struct DatasetWriter {
     dir: PathBuf,
+    /// The dataset's [`WRITER_LOCK`], held while this writer lives.
+    _lock: std::fs::File,
     manifest: Manifest,
     pending: Samples,
     pending_failures: Vec<FailedSample>,
@@ -748,6 +750,8 @@ impl DatasetWriter {
                 return Err(LearnError::InvalidInput(format!("invalid part {}/{}", part.index, part.count)));
             }
         }
+        std::fs::create_dir_all(dir).map_err(|e| LearnError::io(dir, e))?;
+        let lock = lock_for_writing(dir)?;
         let manifest_path = dir.join(MANIFEST_FILE);
         let manifest = if manifest_path.exists() {
             let dataset = Dataset::open(dir)?;
@@ -778,7 +782,6 @@ impl DatasetWriter {
             }
             manifest
         } else {
-            std::fs::create_dir_all(dir).map_err(|e| LearnError::io(dir, e))?;
             let manifest = Manifest::new(&spec);
             manifest.write(&manifest_path)?;
             manifest
@@ -786,6 +789,7 @@ impl DatasetWriter {
         let last_index = manifest.next_index.checked_sub(1);
         Ok(DatasetWriter {
             dir: dir.to_path_buf(),
+            _lock: lock,
             pending: Samples::new(manifest.grid),
             manifest,
             pending_failures: Vec::new(),
@@ -797,6 +801,10 @@ impl DatasetWriter {
     /// last one (the σ-chosen draws after its uniform ones); it is unfinished until
     /// [`finish`](Self::finish).
     pub fn append(dir: &Path, spec: &DatasetSpec) -> Result<DatasetWriter> {
+        if !dir.is_dir() {
+            Dataset::open(dir)?; // says what is missing
+        }
+        let lock = lock_for_writing(dir)?;
         let dataset = Dataset::open(dir)?;
         let manifest_path = dir.join(MANIFEST_FILE);
         let existing = dataset.manifest.spec();
@@ -815,6 +823,7 @@ impl DatasetWriter {
         let last_index = manifest.next_index.checked_sub(1);
         Ok(DatasetWriter {
             dir: dir.to_path_buf(),
+            _lock: lock,
             pending: Samples::new(manifest.grid),
             manifest,
             pending_failures: Vec::new(),
@@ -919,7 +928,36 @@ impl DatasetWriter {
     pub fn finish(mut self) -> Result<Manifest> {
         self.manifest.complete = true;
         self.commit()?;
+        // Still held: no other writer opens the dataset while the file goes.
+        let lock = self.dir.join(WRITER_LOCK);
+        std::fs::remove_file(&lock).map_err(|e| LearnError::io(&lock, e))?;
         Ok(self.manifest)
+    }
+}
+
+/// The file of a dataset directory that its writer holds locked while it writes (left by a writer
+/// that was killed; removed when one finishes).
+pub const WRITER_LOCK: &str = "writing.lock";
+
+/// Locks the dataset directory `dir` for one writer: a second (another `augsim generate` on the
+/// same directory, a cluster's shard run again while the first still runs) is refused at once
+/// rather than mixing its draws with the first's. The lock ends with the writer's process.
+fn lock_for_writing(dir: &Path) -> Result<std::fs::File> {
+    let path = dir.join(WRITER_LOCK);
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .map_err(|e| LearnError::io(&path, e))?;
+    match file.try_lock() {
+        Ok(()) => Ok(file),
+        Err(std::fs::TryLockError::WouldBlock) => Err(LearnError::InvalidInput(format!(
+            "{} is being written by another run (`augsim generate`, a cluster's shard): two writers would mix their \
+             draws; wait for it to end, or stop it",
+            dir.display()
+        ))),
+        Err(std::fs::TryLockError::Error(e)) => Err(LearnError::io(&path, e)),
     }
 }
 
