@@ -276,7 +276,6 @@ fn the_source_names_the_samples_not_the_dataset_size() {
     assert!(mixed.append(Dataset::open(c.path()).unwrap().load_range(0..1).unwrap()).is_err());
 }
 
-#[test]
 /// A dataset has one writer at a time: a second is refused while the first writes (its draws
 /// would mix with the first's), and may go on once the first has stopped (killed: dropped here).
 #[test]

@@ -878,7 +878,7 @@ impl Labelmap {
     /// around. Returns the mask and a description of
     /// the choice ("label 5 ('liver')"). An absent label or name is an error that lists those
     /// present; a number matching segments of several layers must be chosen by name, and a name
-    /// that several segments carry is refused.
+    /// that several segments carry is refused. `1+2` selects segments 1 and 2 together.
     pub fn select(&self, choice: &str) -> Result<(VoxelMask, String), MeshError> {
         let (whole, description, chosen) = self.select_uncropped(choice)?;
         Ok((self.cropped(&whole, &description, chosen)?, description))
@@ -895,8 +895,22 @@ impl Labelmap {
         })
     }
 
-    /// [`Labelmap::select`] on the labelmap's whole grid.
+    /// [`Labelmap::select`] on the labelmap's whole grid; `a+b` (not a segment's own name) is the
+    /// union of segments `a` and `b` (a liver labelled 1 and its tumour 2, as LiTS and MSD label
+    /// them), chosen for the first's warnings.
     fn select_uncropped(&self, choice: &str) -> Result<(VoxelMask, String, (usize, i32)), MeshError> {
+        let named = self.segments.iter().any(|s| s.0.eq_ignore_ascii_case(choice.trim()));
+        if let (false, Some((first, rest))) = (named, choice.split_once('+')) {
+            let (mut union, first, chosen) = self.select_single(first)?;
+            let (other, rest, _) = self.select_uncropped(rest)?;
+            union.inside.iter_mut().zip(&other.inside).for_each(|(a, &b)| *a |= b);
+            return Ok((union, format!("{first} + {rest}"), chosen));
+        }
+        self.select_single(choice)
+    }
+
+    /// One segment, by number or name ([`Labelmap::select`]), on the labelmap's whole grid.
+    fn select_single(&self, choice: &str) -> Result<(VoxelMask, String, (usize, i32)), MeshError> {
         let choice = choice.trim();
         let present = self.present();
         let (layer, label) = if let Ok(label) = choice.parse::<i32>() {
@@ -1460,6 +1474,19 @@ mod tests {
                 other.vertices.iter().zip(&reference.vertices).map(|(a, b)| norm(sub(*a, *b))).fold(0.0, f64::max);
             assert!(apart < 1e-9, "{apart} mm apart");
         }
+    }
+
+    #[test]
+    fn segments_are_taken_together_with_a_plus() {
+        let (map, _) = two_balls(Frame::Lps);
+        let count = |l: i32| map.labels.iter().filter(|&&x| x == l).count();
+        let (union, description) = map.select("5 + tumour").unwrap();
+        assert_eq!(union.count(), count(5) + count(2));
+        assert_eq!(description, "label 5 ('liver') + label 2 ('tumour')");
+        assert!(map.select("5+3").unwrap_err().to_string().contains("label 3 is not in the labelmap"));
+        // A segment whose own name holds a plus is that segment.
+        let named = Labelmap { segments: vec![("liver+tumour".into(), 0, 5)], ..map.clone() };
+        assert_eq!(named.select("liver+tumour").unwrap().0.count(), count(5));
     }
 
     #[test]

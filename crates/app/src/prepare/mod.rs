@@ -145,7 +145,8 @@ pub struct PrepareArgs {
     /// from 3D Slicer, .nrrd, .nhdr, .mha, .mhd, a DICOM SEG or RTSTRUCT; in mm, in the scanner's frame the file states, RAS or LPS).
     pub surface: PathBuf,
     /// The labelmap's label: a number (TotalSegmentator's liver is 5) or a segment name (3D
-    /// Slicer's); needed when it holds several.
+    /// Slicer's); needed when it holds several. `1+2` takes labels 1 and 2 together (a liver and
+    /// the tumour labelled apart in it).
     #[arg(long)]
     pub label: Option<String>,
     /// Where the laparoscope looks from: X,Y,Z in the surface's unit and frame (a labelmap's: mm,
