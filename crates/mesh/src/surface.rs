@@ -304,6 +304,48 @@ impl TriSurface {
         TriSurface { vertices, triangles }
     }
 
+    /// The normal at each corner of each triangle: the area-weighted mean of the normals of the
+    /// triangles around the corner's vertex that turn from this triangle's by less than the angle
+    /// whose cosine is `sharp_cos`. On a smooth surface every triangle around a vertex gets the
+    /// vertex's normal, so that normals interpolated over the triangles vary continuously; a sharp
+    /// edge (a box's) keeps the normals of its two sides apart.
+    pub fn corner_normals(&self, sharp_cos: f64) -> Vec<[Point; 3]> {
+        let areas: Vec<Point> = (0..self.triangles.len()).map(|t| triangle_area_vector(self, t)).collect();
+        let units: Vec<Point> = areas
+            .iter()
+            .map(|a| {
+                let len = dot(*a, *a).sqrt();
+                if len > 0.0 {
+                    a.map(|c| c / len)
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect();
+        let mut around: Vec<Vec<usize>> = vec![Vec::new(); self.vertices.len()];
+        for (t, tri) in self.triangles.iter().enumerate() {
+            tri.iter().for_each(|&k| around[k].push(t));
+        }
+        self.triangles
+            .iter()
+            .enumerate()
+            .map(|(t, tri)| {
+                tri.map(|k| {
+                    let mut n = [0.0; 3];
+                    for &u in around[k].iter().filter(|&&u| u == t || dot(units[u], units[t]) > sharp_cos) {
+                        (0..3).for_each(|d| n[d] += areas[u][d]);
+                    }
+                    let len = dot(n, n).sqrt();
+                    if len > 0.0 {
+                        n.map(|c| c / len)
+                    } else {
+                        units[t]
+                    }
+                })
+            })
+            .collect()
+    }
+
     /// Area-weighted outward unit normal at each vertex (zero for unused vertices).
     pub fn vertex_normals(&self) -> Vec<Point> {
         let mut n = vec![[0.0; 3]; self.vertices.len()];
