@@ -74,12 +74,14 @@ impl std::str::FromStr for Method {
 }
 
 impl Model {
-    /// The `model.json` of `path`: `path/model.json` for a model directory, else `path` itself.
+    /// The `model.json` of `path`: `path/model.json` for a model directory or for one of its
+    /// other files (its `.safetensors` weights), else `path` itself.
     pub fn json_path(path: &Path) -> PathBuf {
-        if path.is_dir() {
-            path.join(MODEL_FILE)
-        } else {
-            path.to_path_buf()
+        let weights = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("safetensors"));
+        match (path.is_dir(), weights, path.parent()) {
+            (true, _, _) => path.join(MODEL_FILE),
+            (false, true, Some(directory)) => directory.join(MODEL_FILE),
+            _ => path.to_path_buf(),
         }
     }
 

@@ -153,3 +153,13 @@ fn shipped_models_load_and_serialize_back_unchanged() {
         assert_eq!(names[40..], ["head.weight", "head.bias"]);
     }
 }
+
+/// A model is found from its directory, its `model.json` or its weights file alike.
+#[test]
+fn a_model_is_found_from_its_weights_file() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/liver_ar");
+    for path in [dir.clone(), dir.join("model.json"), dir.join("model.safetensors")] {
+        assert_eq!(augsim_learn::Model::json_path(&path), dir.join("model.json"), "{}", path.display());
+        assert!(matches!(augsim_learn::Model::load(&path), Ok(augsim_learn::Model::UNet(_))), "{}", path.display());
+    }
+}
