@@ -198,6 +198,12 @@ def test_a_structure_moves_with_the_organ(case, tmp_path):
     organ.write_text(stl.read_text())
     with pytest.raises(augsim.AugsimError, match="cannot be named `organ`"):
         augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm", structures=[organ])
+    # One structure may be given alone, as a str or a path; anything else is a TypeError.
+    for one in (str(stl), stl):
+        alone = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm", structures=one)
+        np.testing.assert_allclose(alone.register(case["cloud"]).structures["tumour"], moved)
+    with pytest.raises(TypeError, match="a path or a list of paths"):
+        augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm", structures=3)
 
 
 def test_register_writes_what_the_command_line_writes(case, tmp_path):

@@ -350,8 +350,16 @@ impl Registration {
         frame: Option<&str>,
         iterations: Option<i64>,
         rigid: bool,
-        structures: Option<Vec<PathBuf>>,
+        structures: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
+        // One path (a str or a PathLike) or a list of them.
+        let structures: Vec<PathBuf> = match structures {
+            None => Vec::new(),
+            Some(one) if one.extract::<PathBuf>().is_ok() => vec![one.extract()?],
+            Some(many) => many.extract().map_err(|_| {
+                PyTypeError::new_err("structures must be a path or a list of paths (models, or 'labelmap:label')")
+            })?,
+        };
         let iterations = count(iterations, "iterations")?;
         let units: Option<LengthUnit> =
             units.map(str::parse).transpose().map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
@@ -383,7 +391,7 @@ impl Registration {
             frame,
             iterations,
             rigid,
-            structures: structures.unwrap_or_default(),
+            structures,
         };
         choice.check().map_err(PyValueError::new_err)?;
         let (state, spec) = compute(py, move || {
