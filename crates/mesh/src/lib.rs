@@ -496,6 +496,12 @@ pub fn unit(v: Point) -> Point {
     }
 }
 
+/// The unit vector of `vectors` weighted by `weights`: a normal interpolated over a triangle from
+/// normals at its corners, at the point of barycentric `weights`.
+pub fn blend_unit(vectors: [Point; 3], weights: [f64; 3]) -> Point {
+    unit(std::array::from_fn(|d| (0..3).map(|j| weights[j] * vectors[j][d]).sum()))
+}
+
 /// |a − b|.
 pub fn distance(a: Point, b: Point) -> f64 {
     norm(sub(a, b))

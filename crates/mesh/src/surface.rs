@@ -9,7 +9,7 @@
 
 use std::collections::HashMap;
 
-use crate::{bounds, cross, dot, sub, MeshError, Point, TriSurface};
+use crate::{bounds, cross, dot, sub, unit, MeshError, Point, TriSurface};
 
 /// Summary of a surface that passed [`check_closed_manifold`].
 #[derive(Clone, Debug, PartialEq)]
@@ -311,17 +311,7 @@ impl TriSurface {
     /// edge (a box's) keeps the normals of its two sides apart.
     pub fn corner_normals(&self, sharp_cos: f64) -> Vec<[Point; 3]> {
         let areas: Vec<Point> = (0..self.triangles.len()).map(|t| triangle_area_vector(self, t)).collect();
-        let units: Vec<Point> = areas
-            .iter()
-            .map(|a| {
-                let len = dot(*a, *a).sqrt();
-                if len > 0.0 {
-                    a.map(|c| c / len)
-                } else {
-                    [0.0; 3]
-                }
-            })
-            .collect();
+        let units: Vec<Point> = areas.iter().map(|&a| unit(a)).collect();
         let mut around: Vec<Vec<usize>> = vec![Vec::new(); self.vertices.len()];
         for (t, tri) in self.triangles.iter().enumerate() {
             tri.iter().for_each(|&k| around[k].push(t));
@@ -335,11 +325,9 @@ impl TriSurface {
                     for &u in around[k].iter().filter(|&&u| u == t || dot(units[u], units[t]) > sharp_cos) {
                         (0..3).for_each(|d| n[d] += areas[u][d]);
                     }
-                    let len = dot(n, n).sqrt();
-                    if len > 0.0 {
-                        n.map(|c| c / len)
-                    } else {
-                        units[t]
+                    match unit(n) {
+                        [0.0, 0.0, 0.0] => units[t],
+                        n => n,
                     }
                 })
             })

@@ -355,10 +355,12 @@ impl Registration {
         // One path (a str or a PathLike) or a list of them.
         let structures: Vec<PathBuf> = match structures {
             None => Vec::new(),
-            Some(one) if one.extract::<PathBuf>().is_ok() => vec![one.extract()?],
-            Some(many) => many.extract().map_err(|_| {
-                PyTypeError::new_err("structures must be a path or a list of paths (models, or 'labelmap:label')")
-            })?,
+            Some(given) => match given.extract::<PathBuf>() {
+                Ok(one) => vec![one],
+                Err(_) => given.extract().map_err(|_| {
+                    PyTypeError::new_err("structures must be a path or a list of paths (models, or 'labelmap:label')")
+                })?,
+            },
         };
         let iterations = count(iterations, "iterations")?;
         let units: Option<LengthUnit> =

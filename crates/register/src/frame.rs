@@ -440,8 +440,7 @@ fn observations(
         let bary = mesh::bvh::triangle_barycentric(corners, m.point);
         // The corner normals interpolated: on a smooth edge or vertex, which of its triangles a
         // point matched does not change its normal.
-        let corners = &corner_normals[triangle];
-        let normal = unit(std::array::from_fn(|d| (0..3).map(|j| bary[j] * corners[j][d]).sum()));
+        let normal = mesh::blend_unit(corner_normals[triangle], bary);
         let mut p0 = [0.0; 3];
         for (b, &k) in bary.iter().zip(&tri) {
             for d in 0..3 {

@@ -263,7 +263,7 @@ pub fn rigid_align(surface: &TriSurface, cloud: &[Point], options: &RigidOptions
     let smooth_normal = |triangle: usize, p: Point| {
         let tri = surface.triangles[triangle];
         let b = mesh::bvh::triangle_barycentric(tri.map(|k| surface.vertices[k]), p);
-        mesh::unit(std::array::from_fn(|d| (0..3).map(|c| b[c] * vertex_normals[tri[c]][d]).sum()))
+        mesh::blend_unit(tri.map(|k| vertex_normals[k]), b)
     };
     let mut transform = RigidTransform::identity();
     let mut iterations = 0;
