@@ -145,10 +145,7 @@ impl OrganInput {
             bail!("{}: {why}", path.display());
         }
         if is_labelmap(path) {
-            if units.is_some_and(|u| u != LengthUnit::Millimetre) {
-                bail!("{} is a labelmap, whose unit is the millimetre: leave out --units or give mm", path.display());
-            }
-            let organ = read_labelmap_surface(path, label, &ExtractOptions::default())?;
+            let organ = read_labelmap_surface(path, label, units, &ExtractOptions::default())?;
             let mut notes: Vec<_> = organ.lines().into_iter().map(|l| ("labelmap", l)).collect();
             notes.extend(organ.warnings.iter().map(|w| ("warning", w.clone())));
             let (frame, unit) = (organ.scanner_frame(), Some(LengthUnit::Millimetre));

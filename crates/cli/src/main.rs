@@ -50,8 +50,8 @@ enum Command {
         #[arg(long, requires = "surface")]
         length: Option<f64>,
         /// Length unit of the surface's coordinates: mm, m, or auto (told from the organ's size,
-        /// 2 to 60 cm across); the surface is scaled to metres about the origin, keeping its
-        /// (e.g. CT scanner's) frame.
+        /// 2 to 60 cm across; a labelmap's is the one its header names, else mm); the surface is
+        /// scaled to metres about the origin, keeping its (e.g. CT scanner's) frame.
         #[arg(long, default_value = "auto", value_parser = mesh::length::parse_unit_or_auto)]
         units: mesh::length::UnitOrAuto,
         /// Mesh the surface as it is, without repairing holes, duplicated vertices or flipped

@@ -36,6 +36,7 @@ use std::path::Path;
 
 use crate::io::Scalar;
 use crate::isosurface::{mask_surface, ExtractOptions, ExtractReport};
+use crate::length::LengthUnit;
 use crate::volume::{determinant, VoxelMask};
 use crate::{MeshError, TriSurface};
 
@@ -62,6 +63,9 @@ pub struct Labelmap {
     /// What a user should know of the file as read, for every label (`None`) or for one (its
     /// layer and label): a slice the series lacks, a segment cut at the end of the frames.
     pub warnings: Vec<(Option<(usize, i32)>, String)>,
+    /// The unit the header names for the world, if it names one (a NIfTI's `xyzt_units` other
+    /// than 0, a NRRD's `space units`; DICOM's is the millimetre); read as mm when it names none.
+    pub named_unit: Option<LengthUnit>,
 }
 
 fn parse_error(path: &Path, message: impl Into<String>) -> MeshError {
@@ -412,11 +416,12 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
         }
     }
     let (qform_code, sform_code) = (header.qform_code, header.sform_code);
-    let unit_mm = nifti_unit_mm(header.xyzt_units)?;
+    let named_unit = nifti_unit(header.xyzt_units)?;
+    let mm_per_unit = unit_mm(named_unit.unwrap_or(LengthUnit::Millimetre));
     let (affine, both) = nifti_affine(&header, dims)?;
-    let affine = in_millimetres(affine, unit_mm);
+    let affine = in_millimetres(affine, mm_per_unit);
     let warnings = both
-        .map(|(used, apart)| (used, apart * unit_mm))
+        .map(|(used, apart)| (used, apart * mm_per_unit))
         .filter(|&(_, apart)| apart > FORMS_APART_MM)
         .map(|(used, apart)| {
             let warning = format!(
@@ -429,29 +434,36 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
         .into_iter()
         .collect();
     let placed = qform_code > 0 || sform_code > 0;
-    Ok(Labelmap { placed, warnings, ..Labelmap::single(dims, labels, affine, Frame::Ras) })
+    Ok(Labelmap { placed, warnings, named_unit, ..Labelmap::single(dims, labels, affine, Frame::Ras) })
 }
 
-/// The millimetres in a NIfTI spatial unit (the low three bits of `xyzt_units`): metre, mm,
-/// micron; an unknown unit (0) is taken as mm, as 3D Slicer and ITK read it.
-fn nifti_unit_mm(xyzt_units: u8) -> Result<f64, String> {
+/// The unit a NIfTI spatial unit code names (the low three bits of `xyzt_units`): metre, mm,
+/// micron; none for an unknown unit (0), which is read as mm, as 3D Slicer and ITK read it.
+fn nifti_unit(xyzt_units: u8) -> Result<Option<LengthUnit>, String> {
     match xyzt_units & 0x07 {
-        0 | 2 => Ok(1.0),
-        1 => Ok(1000.0),
-        3 => Ok(1e-3),
+        0 => Ok(None),
+        1 => Ok(Some(LengthUnit::Metre)),
+        2 => Ok(Some(LengthUnit::Millimetre)),
+        3 => Ok(Some(LengthUnit::Micrometre)),
         other => Err(format!("spatial unit code {other} in xyzt_units is not a length (1: m, 2: mm, 3: µm)")),
     }
 }
 
-/// The millimetres in a NRRD `space units` entry ("mm", "m", "cm", "um", "µm", "micron").
-fn nrrd_unit_mm(unit: &str) -> Result<f64, String> {
+/// The unit a NRRD `space units` entry names ("mm", "m", "cm", "um", "µm", "micron"; an empty
+/// one is mm).
+fn nrrd_unit(unit: &str) -> Result<LengthUnit, String> {
     match unit.trim_matches('"').trim() {
-        "mm" | "" => Ok(1.0),
-        "m" => Ok(1000.0),
-        "cm" => Ok(10.0),
-        "um" | "µm" | "micron" => Ok(1e-3),
+        "mm" | "" => Ok(LengthUnit::Millimetre),
+        "m" => Ok(LengthUnit::Metre),
+        "cm" => Ok(LengthUnit::Centimetre),
+        "um" | "µm" | "micron" => Ok(LengthUnit::Micrometre),
         other => Err(format!("space unit {other:?} is not supported (mm, m, cm, um)")),
     }
+}
+
+/// The millimetres in one `unit`.
+fn unit_mm(unit: LengthUnit) -> f64 {
+    1e3 * unit.metres()
 }
 
 /// A voxel-to-world affine whose world unit is `mm_per_unit` millimetres, in millimetres.
@@ -734,21 +746,32 @@ fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
     let affine: [[f64; 4]; 3] =
         std::array::from_fn(|r| std::array::from_fn(|c| if c < 3 { axes[c][r] } else { origin[r] }));
     check_affine(&affine)?;
-    let affine = match header.fields.get("space units") {
+    let named_unit = match header.fields.get("space units") {
         Some(text) => {
-            let units: Vec<f64> = text.split_whitespace().map(nrrd_unit_mm).collect::<Result<_, _>>()?;
+            let units: Vec<LengthUnit> = text.split_whitespace().map(nrrd_unit).collect::<Result<_, _>>()?;
             match units[..] {
-                [a, b, c] if a == b && b == c => in_millimetres(affine, a),
+                [a, b, c] if a == b && b == c => Some(a),
                 _ => return Err(format!("'space units' must name one unit for the three axes, got {text}")),
             }
         }
-        None => affine,
+        None => None,
     };
+    let affine = in_millimetres(affine, unit_mm(named_unit.unwrap_or(LengthUnit::Millimetre)));
     let segments = slicer_segments(&header.pairs, layers)?;
     let encoding = header.field("encoding")?;
     if matches!(encoding, "ascii" | "text" | "txt") {
         let labels = ascii_labels(data, count)?;
-        return Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed, warnings: Vec::new() });
+        return Ok(Labelmap {
+            dims,
+            layers,
+            labels,
+            affine,
+            frame,
+            segments,
+            placed,
+            warnings: Vec::new(),
+            named_unit,
+        });
     }
     // As teem, the reference reader, does: binary data of more than one byte need their byte order.
     let little = match header.fields.get("endian").map(String::as_str) {
@@ -778,7 +801,7 @@ fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
         s => return Err(format!("bad byte skip {s}")),
     };
     let labels = labels(scalar, raw, count, dims[2], little)?;
-    Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed, warnings: Vec::new() })
+    Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed, warnings: Vec::new(), named_unit })
 }
 
 /// The `count` labels of NRRD's ascii encoding: numbers separated by white space.
@@ -826,7 +849,8 @@ impl Labelmap {
     /// A labelmap of one layer: `labels` (i fastest, then j, then k) on a grid of `dims` voxels
     /// placed in `frame` by `affine`, naming no segment.
     pub fn single(dims: [usize; 3], labels: Vec<i32>, affine: [[f64; 4]; 3], frame: Frame) -> Labelmap {
-        Labelmap { dims, layers: 1, labels, affine, frame, segments: Vec::new(), placed: true, warnings: Vec::new() }
+        let (segments, warnings) = (Vec::new(), Vec::new());
+        Labelmap { dims, layers: 1, labels, affine, frame, segments, placed: true, warnings, named_unit: None }
     }
 
     /// The size of a voxel along i, j and k (mm).
@@ -1161,14 +1185,31 @@ impl LabelSurface {
 
 /// Reads a labelmap and extracts the closed surface of one label (a number, or a segment name
 /// the file carries), in millimetres in the file's world frame. Without a label, the file must
-/// hold only one.
+/// hold only one. `unit` is the world's unit where the header names none (read as mm without
+/// it); one other than the unit the header names is refused.
 pub fn read_labelmap_surface(
     path: impl AsRef<Path>,
     label: Option<&str>,
+    unit: Option<LengthUnit>,
     options: &ExtractOptions,
 ) -> Result<LabelSurface, MeshError> {
     let path = path.as_ref();
-    let map = read_labelmap_choosing(path, label)?;
+    let mut map = read_labelmap_choosing(path, label)?;
+    match (unit, map.named_unit) {
+        (Some(given), Some(named)) if given != named => {
+            let message = format!(
+                "its header names its unit, {}; {} given contradicts it: leave the unit out",
+                named.name(),
+                given.name()
+            );
+            return Err(parse_error(path, message));
+        }
+        (Some(given), None) => {
+            map.affine = in_millimetres(map.affine, unit_mm(given));
+            map.named_unit = Some(given);
+        }
+        _ => {}
+    }
     let present = map.present();
     let label = match (label, &present[..]) {
         (Some(label), _) => label.to_string(),
@@ -1210,9 +1251,13 @@ pub fn read_labelmap_surface(
     }
     let span = crate::longest_side(crate::bounds(&surface.vertices));
     if !(ORGAN_SPAN_MM.0..=ORGAN_SPAN_MM.1).contains(&span) {
+        let unit = match map.named_unit {
+            Some(unit) => format!("in the unit it names, {}", unit.name()),
+            None => "it names no unit, so they are read as mm: give the unit (--units) if it is another".into(),
+        };
         warnings.push(format!(
-            "the organ spans {} mm, no organ's size: its voxels are {} mm as the file's header gives them \
-             (in the unit it names: NIfTI's xyzt_units, NRRD's space units); is that their size?",
+            "the organ spans {} mm, no organ's size: its voxels are {} mm as the file's header gives them ({unit}); \
+             is that their size?",
             crate::repair::number(span),
             map.spacing().map(crate::repair::number).join(" × ")
         ));
@@ -1330,8 +1375,9 @@ mod tests {
             let path = dir.path().join(name);
             write_nifti(&path, &map).unwrap();
             let back = read_labelmap(&path).unwrap();
-            assert!(back == Labelmap { segments: Vec::new(), ..map.clone() }, "{:?}", back.affine);
-            let organ = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+            let in_mm = Some(LengthUnit::Millimetre);
+            assert!(back == Labelmap { segments: Vec::new(), named_unit: in_mm, ..map.clone() }, "{:?}", back.affine);
+            let organ = read_labelmap_surface(&path, Some("5"), None, &ExtractOptions::default()).unwrap();
             assert_eq!(organ.frame, Frame::Ras);
             let c = centroid(&organ.surface);
             assert!(norm(sub(c, centre)) < 0.5, "{c:?} vs {centre:?}");
@@ -1398,6 +1444,7 @@ mod tests {
         let (mut map, _) = two_balls(Frame::Ras);
         map.affine[0][3] += 0.1;
         map.segments.clear();
+        map.named_unit = Some(LengthUnit::Millimetre);
         for little in [true, false] {
             let path = dir.path().join("seg.nii");
             std::fs::write(&path, nifti2(&map, little)).unwrap();
@@ -1424,19 +1471,19 @@ mod tests {
         let path = dir.path().join("seg.seg.nrrd");
         write_nrrd(&path, &lps).unwrap();
         assert!(read_labelmap(&path).unwrap() == lps);
-        let organ = read_labelmap_surface(&path, Some("Liver"), &ExtractOptions::default()).unwrap();
+        let organ = read_labelmap_surface(&path, Some("Liver"), None, &ExtractOptions::default()).unwrap();
         assert_eq!((organ.frame, organ.label.as_str()), (Frame::Lps, "label 5 ('liver')"));
         let c = centroid(&organ.surface);
         let expected = [-centre[0], -centre[1], centre[2]];
         assert!(norm(sub(c, expected)) < 0.5, "{c:?} vs {expected:?}");
         let error = |choice: &str| {
-            read_labelmap_surface(&path, Some(choice), &ExtractOptions::default()).unwrap_err().to_string()
+            read_labelmap_surface(&path, Some(choice), None, &ExtractOptions::default()).unwrap_err().to_string()
         };
         let absent = error("7");
         assert!(absent.contains("label 7 is not in the labelmap") && absent.contains("5 ('liver',"), "{absent}");
         assert!(error("kidney").contains("no segment is named 'kidney'; labels present: 2 ('tumour',"));
         assert!(error("0").contains("label 0 is the background, not a segment"));
-        let unchosen = read_labelmap_surface(&path, None, &ExtractOptions::default()).unwrap_err().to_string();
+        let unchosen = read_labelmap_surface(&path, None, None, &ExtractOptions::default()).unwrap_err().to_string();
         assert!(unchosen.contains("holds several labels: choose one with --label"), "{unchosen}");
     }
 
@@ -1463,7 +1510,7 @@ mod tests {
                 Frame::Ras => write_nifti(&path, map).unwrap(),
                 Frame::Lps => write_nrrd(&path, map).unwrap(),
             }
-            read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap().surface
+            read_labelmap_surface(&path, Some("5"), None, &ExtractOptions::default()).unwrap().surface
         };
         let reference = surface("ras.nii", &ras);
         let negated =
@@ -1545,12 +1592,12 @@ mod tests {
         let (map, _) = two_balls(Frame::Ras);
         let path = dir.path().join("seg.nii");
         write_nifti(&path, &map).unwrap();
-        let placed = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+        let placed = read_labelmap_surface(&path, Some("5"), None, &ExtractOptions::default()).unwrap();
         assert_eq!((placed.scanner_frame(), placed.warnings.len()), (Some(Frame::Ras), 0), "{:?}", placed.warnings);
         let mut bytes = std::fs::read(&path).unwrap();
         bytes[252..256].copy_from_slice(&[0; 4]);
         std::fs::write(&path, &bytes).unwrap();
-        let nowhere = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+        let nowhere = read_labelmap_surface(&path, Some("5"), None, &ExtractOptions::default()).unwrap();
         assert_eq!(nowhere.scanner_frame(), None);
         assert!(nowhere.lines()[0].contains("no scanner frame"), "{:?}", nowhere.lines());
         assert!(nowhere.warnings[0].contains("without qform and sform"), "{:?}", nowhere.warnings);
@@ -1561,7 +1608,7 @@ mod tests {
         let cut = Labelmap { dims: [ni, nj, 10], labels: map.labels[ni * nj * 6..].to_vec(), ..map.clone() };
         let path = dir.path().join("cut.nii");
         write_nifti(&path, &cut).unwrap();
-        let organ = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+        let organ = read_labelmap_surface(&path, Some("5"), None, &ExtractOptions::default()).unwrap();
         assert_eq!(organ.warnings.len(), 1, "{:?}", organ.warnings);
         assert!(organ.warnings[0].contains("image's border (k = 0)"), "{:?}", organ.warnings);
         // The whole ball in an image cropped to it (as 3D Slicer saves a segmentation) tapers to
@@ -1585,7 +1632,7 @@ mod tests {
         let cropped = Labelmap { dims, labels, ..map.clone() };
         let path = dir.path().join("cropped.nii");
         write_nifti(&path, &cropped).unwrap();
-        let organ = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+        let organ = read_labelmap_surface(&path, Some("5"), None, &ExtractOptions::default()).unwrap();
         assert!(organ.warnings.is_empty(), "{:?}", organ.warnings);
     }
 
@@ -1623,7 +1670,7 @@ mod tests {
         let path = dir.path().join("plate.nii");
         write_nifti(&path, &map).unwrap();
         let thinned = |label: &str| {
-            let read = read_labelmap_surface(&path, Some(label), &ExtractOptions::default()).unwrap();
+            let read = read_labelmap_surface(&path, Some(label), None, &ExtractOptions::default()).unwrap();
             read.warnings.iter().any(|w| w.contains("less than its voxels: a structure a voxel or two thick"))
         };
         assert!(thinned("7"), "a plate one slice thick");
@@ -1640,7 +1687,7 @@ mod tests {
         let path = dir.path().join("lobes.nii");
         let warned = |map: &Labelmap, what: &str| {
             write_nifti(&path, map).unwrap();
-            let read = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+            let read = read_labelmap_surface(&path, Some("5"), None, &ExtractOptions::default()).unwrap();
             read.warnings.iter().find(|w| w.contains(what)).cloned()
         };
         let drop = "were dropped: if they are part of it";
@@ -1663,7 +1710,7 @@ mod tests {
         let mut bytes = std::fs::read(&path).unwrap();
         bytes[123] = 3 | 8;
         std::fs::write(&path, bytes).unwrap();
-        let read = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+        let read = read_labelmap_surface(&path, Some("5"), None, &ExtractOptions::default()).unwrap();
         let w = read.warnings.iter().find(|w| w.contains("no organ's size")).expect("microns");
         assert!(w.contains("spans 0.019") && w.contains("0.00075 × 0.000875 × 0.0025 mm"), "{w}");
     }
@@ -1681,7 +1728,7 @@ mod tests {
         map.affine[0][1] = 0.3 * 0.875;
         let path = dir.path().join("shear.nii");
         write_nifti(&path, &map).unwrap();
-        let read = read_labelmap_surface(&path, Some("5"), &ExtractOptions::default()).unwrap();
+        let read = read_labelmap_surface(&path, Some("5"), None, &ExtractOptions::default()).unwrap();
         let w = read.warnings.iter().find(|w| w.contains("from perpendicular")).expect("named");
         assert!(w.contains("16.7° from perpendicular (a sheared grid)"), "{w}");
     }
@@ -1969,12 +2016,12 @@ mod tests {
         });
         let map = read_labelmap(&many).unwrap();
         assert!(map.present().len() > 30, "{}", map.present().len());
-        let e = read_labelmap_surface(&many, None, &ExtractOptions::default()).unwrap_err().to_string();
+        let e = read_labelmap_surface(&many, None, None, &ExtractOptions::default()).unwrap_err().to_string();
         assert!(
             e.contains("choose one with --label") && e.contains(&format!("and {} more", map.present().len() - 20)),
             "{e}"
         );
-        let e = read_labelmap_surface(&many, Some("500"), &ExtractOptions::default()).unwrap_err().to_string();
+        let e = read_labelmap_surface(&many, Some("500"), None, &ExtractOptions::default()).unwrap_err().to_string();
         assert!(e.contains("label 500 is not in the labelmap") && !e.contains("invalid mesh"), "{e}");
     }
 
@@ -2020,6 +2067,35 @@ mod tests {
         std::fs::write(&nrrd, with_units).unwrap();
         let back = read_labelmap(&nrrd).unwrap().affine;
         assert!(close(&back, &map.affine, 1e-3), "{back:?}");
+    }
+
+    /// A labelmap in metres whose header names no unit is read in mm, with a warning that names
+    /// the way out; given its unit, it is the organ the same labelmap in mm gives. A unit other
+    /// than the one the header names is refused.
+    #[test]
+    fn a_unit_is_given_where_the_header_names_none() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Ras);
+        let (in_mm, in_m) = (dir.path().join("mm.nii"), dir.path().join("m.nii"));
+        write_nifti(&in_mm, &map).unwrap();
+        let metres = Labelmap { affine: map.affine.map(|row| row.map(|x| x * 1e-3)), ..map.clone() };
+        write_nifti(&in_m, &metres).unwrap();
+        let mut bytes = std::fs::read(&in_m).unwrap();
+        bytes[123] = 0; // xyzt_units: none
+        std::fs::write(&in_m, &bytes).unwrap();
+        let read = |path: &Path, unit| read_labelmap_surface(path, Some("5"), unit, &ExtractOptions::default());
+        let unnamed = read(&in_m, None).unwrap();
+        assert!(unnamed.warnings.iter().any(|w| w.contains("names no unit") && w.contains("--units")), "{unnamed:?}");
+        let given = read(&in_m, Some(LengthUnit::Metre)).unwrap();
+        let reference = read(&in_mm, None).unwrap();
+        assert!(given.warnings.is_empty(), "{:?}", given.warnings);
+        let (a, b) = (centroid(&given.surface), centroid(&reference.surface));
+        assert!(norm(sub(a, b)) < 1e-3, "{a:?} vs {b:?}");
+        assert!((given.spacing[0] - reference.spacing[0]).abs() < 1e-6);
+        // The header of the mm file names mm: metres contradict it; mm agrees with it.
+        let e = read(&in_mm, Some(LengthUnit::Metre)).unwrap_err().to_string();
+        assert!(e.contains("names its unit, millimetres") && e.contains("metres given"), "{e}");
+        assert!(read(&in_mm, Some(LengthUnit::Millimetre)).is_ok());
     }
 
     /// A label split into two pieces of similar size is not one organ; a segment name carried

@@ -81,7 +81,7 @@ pub struct PrepareOptions {
     #[serde(default)]
     pub label: Option<String>,
     /// The unit of the surface, the camera, the landmarks and the targets (`None`: detected from
-    /// the surface's size; a labelmap's is mm).
+    /// the surface's size; a labelmap's is the one its header names, else mm).
     pub units: UnitOrAuto,
     /// Where the laparoscope looks from, in the segmentation's frame.
     pub camera: CameraAt,
@@ -174,7 +174,7 @@ pub struct PrepareArgs {
     #[arg(short, long)]
     pub out: PathBuf,
     /// Unit of the surface, camera, landmarks and targets: mm, m, or auto (told from the
-    /// surface's size).
+    /// surface's size; a labelmap's is the one its header names, else mm).
     #[arg(long, default_value = "auto", value_parser = mesh::length::parse_unit_or_auto)]
     pub units: mesh::length::UnitOrAuto,
     /// FEM draws of the dataset.
@@ -605,7 +605,7 @@ fn read_surface_input(
     Ok((input.surface, input.frame, unit))
 }
 
-/// The unit of the user's files: the one given, a labelmap's millimetre, or the one detected from
+/// The unit of the user's files: the one given, a labelmap's (mm where not given), or the one detected from
 /// the surface's size (as [`read_surface_input`] finds it).
 fn input_unit(options: &PrepareOptions) -> Result<LengthUnit> {
     let path = &options.surface;
@@ -1100,9 +1100,11 @@ mod tests {
         write_points_csv(&wrong.targets, &[[-45.0, 30.0, -140.0]]).unwrap();
         let error = format!("{:#}", organ_step(&wrong, dir.path()).unwrap_err());
         assert!(error.contains("the targets of"), "{error}");
-        wrong.units = Some(LengthUnit::Metre);
-        let error = organ_step(&wrong, dir.path()).unwrap_err().to_string();
-        assert!(error.contains("is a labelmap, whose unit is the millimetre"), "{error}");
+        // A NIfTI whose header names mm, given in metres.
+        let mut metres = options(dir.path(), "liver_labels.nii.gz", "5", false);
+        metres.units = Some(LengthUnit::Metre);
+        let error = organ_step(&metres, dir.path()).unwrap_err().to_string();
+        assert!(error.contains("names its unit, millimetres; metres given contradicts it"), "{error}");
         let mut surface = options(dir.path(), "liver_labels.nii.gz", "5", false);
         surface.surface = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mesh/tests/data/liver.obj");
         let error = organ_step(&surface, dir.path()).unwrap_err().to_string();

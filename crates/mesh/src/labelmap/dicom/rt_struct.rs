@@ -21,6 +21,7 @@ use dicom_object::DefaultDicomObject;
 
 use super::{in_layers, items, number, numbers, slice_step, text};
 use crate::labelmap::{Frame, Labelmap};
+use crate::length::LengthUnit;
 use crate::{cross, dot, norm, Point};
 
 /// The SOP class of an RT Structure Set.
@@ -138,7 +139,8 @@ pub(super) fn read(object: &DefaultDicomObject, wanted: Option<&str>) -> Result<
         };
         warnings.push((Some((*layer, *label)), format!("'{name}' {why}")));
     }
-    Ok(Labelmap { dims, layers, labels, affine: grid.affine, frame: Frame::Lps, segments, placed: true, warnings })
+    let (affine, named_unit) = (grid.affine, Some(LengthUnit::Millimetre));
+    Ok(Labelmap { dims, layers, labels, affine, frame: Frame::Lps, segments, placed: true, warnings, named_unit })
 }
 
 /// The structure `wanted` names: its number, else its name (any case), when exactly one has it.

@@ -17,6 +17,7 @@ use dicom_object::{DefaultDicomObject, InMemDicomObject};
 
 use super::{fill_missing_slices, in_layers, items, name_of, number, numbers, slice_step, text, SAME_SLICE_MM};
 use crate::labelmap::{Frame, Labelmap};
+use crate::length::LengthUnit;
 
 /// The SOP class of a Segmentation (and of a Label Map Segmentation).
 pub(super) const SEGMENTATION_CLASSES: [&str; 2] = ["1.2.840.10008.5.1.4.1.1.66.4", "1.2.840.10008.5.1.4.1.1.66.7"];
@@ -196,6 +197,7 @@ pub(super) fn read(object: &DefaultDicomObject) -> Result<Labelmap, String> {
         segments,
         placed: true,
         warnings,
+        named_unit: Some(LengthUnit::Millimetre),
     })
 }
 
