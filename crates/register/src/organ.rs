@@ -211,7 +211,7 @@ impl Organ {
                 .is_ok_and(|bvh| targets.iter().all(|&p| bvh.signed_distance(p) <= NEAR_OUTSIDE * self.extent()));
             let hint = match near {
                 true => String::new(),
-                false => likely_mistake(targets, self.extent(), "every target lies inside", inside),
+                false => likely_mistake(targets, &self.mesh.nodes, "every target lies inside", inside),
             };
             RegisterError::Invalid(format!("{e}{hint}"))
         })?;
@@ -241,7 +241,7 @@ impl Organ {
                 mm(distance),
                 LANDMARK_REACH * 100.0,
                 mm(self.extent()),
-                likely_mistake(landmarks, self.extent(), "every landmark lies on the organ", held)
+                likely_mistake(landmarks, &self.mesh.nodes, "every landmark lies on the organ", held)
             )));
         }
         let warnings = self.spread_warnings(landmarks, "landmarks", held);
@@ -270,7 +270,7 @@ impl Organ {
             mm(extent),
             SMALL_TARGET_EXTENT * 100.0,
             mm(organ_extent),
-            if scaled_fits(points, 1.0 / LengthUnit::Millimetre.metres(), organ_extent, &fits) {
+            if scaled_fits(points, 1.0 / LengthUnit::Millimetre.metres(), &OrganBox::of(&self.mesh.nodes), &fits) {
                 READ_LARGER
             } else {
                 ""
@@ -284,37 +284,54 @@ const READ_LARGER: &str = ": were they given in m where mm were expected?";
 
 /// Whether `points` scaled by `scale` lie where `fits` wants them, spread (when several) over at
 /// least [`SMALL_TARGET_EXTENT`] of the organ's extent: points merely shrunk onto an organ around
-/// the origin tell nothing.
-fn scaled_fits(points: &[Point], scale: f64, organ_extent: f64, fits: impl Fn(&[Point]) -> bool) -> bool {
-    let spread = points.len() < 2 || scale * diagonal(points) >= SMALL_TARGET_EXTENT * organ_extent;
-    spread && fits(&points.iter().map(|p| p.map(|x| x * scale)).collect::<Vec<_>>())
+/// the origin tell nothing. Read smaller (`scale` < 1), they must lie farther than the organ's
+/// extent from its centre, as points too large by a unit's factor do: near it, shrunk towards an
+/// origin the organ holds, any of them would fit.
+fn scaled_fits(points: &[Point], scale: f64, organ: &OrganBox, fits: impl Fn(&[Point]) -> bool) -> bool {
+    let spread = points.len() < 2 || scale * diagonal(points) >= SMALL_TARGET_EXTENT * organ.extent;
+    let far = scale >= 1.0 || points.iter().any(|&p| mesh::norm(mesh::sub(p, organ.centre)) > organ.extent);
+    spread && far && fits(&points.iter().map(|p| p.map(|x| x * scale)).collect::<Vec<_>>())
+}
+
+/// The centre and extent (diagonal) of the box of an organ's nodes.
+struct OrganBox {
+    centre: Point,
+    extent: f64,
+}
+
+impl OrganBox {
+    fn of(nodes: &[Point]) -> OrganBox {
+        let (lo, hi) = mesh::bounds(nodes);
+        OrganBox { centre: std::array::from_fn(|d| 0.5 * (lo[d] + hi[d])), extent: mesh::norm(mesh::sub(hi, lo)) }
+    }
 }
 
 /// The likely mistake behind `points` that do not lie where `fits` wants them (in an organ of
-/// extent `organ_extent`), as the end of an error message: that with x and y negated (a frame
-/// mix-up, RAS and LPS), or read 1,000 or 10 times smaller or larger (a unit mistake: m and mm,
-/// cm and mm), `claim` holds. Empty when none of these fits.
+/// nodes `organ`), as the end of an error message: that with x and y negated (a frame mix-up,
+/// RAS and LPS), or read 1,000 or 10 times smaller or larger (a unit mistake: m and mm, cm and
+/// mm), `claim` holds. Empty when none of these fits.
 pub(crate) fn likely_mistake(
     points: &[Point],
-    organ_extent: f64,
+    organ: &[Point],
     claim: &str,
     fits: impl Fn(&[Point]) -> bool,
 ) -> String {
+    let organ = &OrganBox::of(organ);
     let negated: Vec<Point> = points.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
     // The scale that undoes millimetres taken for metres; its inverse, metres taken for millimetres.
     let millimetre = LengthUnit::Millimetre.metres();
     if fits(&negated) {
         format!(" (with x and y negated {claim}: are they in LPS where the organ is in RAS, or the reverse?)")
-    } else if scaled_fits(points, millimetre, organ_extent, &fits) {
+    } else if scaled_fits(points, millimetre, organ, &fits) {
         format!(" (read as 1,000 times smaller, {claim}: were they given in mm where m were expected?)")
-    } else if scaled_fits(points, 1.0 / millimetre, organ_extent, &fits) {
+    } else if scaled_fits(points, 1.0 / millimetre, organ, &fits) {
         format!(" (read as 1,000 times larger, {claim}: were they given in m where mm were expected?)")
-    } else if scaled_fits(points, 0.1, organ_extent, &fits) {
+    } else if scaled_fits(points, 0.1, organ, &fits) {
         format!(
             " (read as 10 times smaller, {claim}: were they given in mm where the organ is in cm, or the organ's \
              unit taken as mm where it is cm?)"
         )
-    } else if scaled_fits(points, 10.0, organ_extent, &fits) {
+    } else if scaled_fits(points, 10.0, organ, &fits) {
         format!(" (read as 10 times larger, {claim}: were they given in cm where the organ is in mm?)")
     } else {
         String::new()

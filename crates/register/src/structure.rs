@@ -41,7 +41,7 @@ impl Structure {
             return Err(RegisterError::Invalid(format!(
                 "`{name}` lies outside the organ: most of its vertices are farther than {:.0} mm from it{}",
                 mm(reach),
-                likely_mistake(&surface.vertices, organ.extent(), "it lies in the organ", mostly_inside)
+                likely_mistake(&surface.vertices, &organ.mesh().nodes, "it lies in the organ", mostly_inside)
             )));
         }
         let outside: Vec<f64> = located.iter().map(|l| l.1).filter(|&d| d > 0.0).collect();
@@ -89,7 +89,7 @@ mod tests {
 
     /// A ball inside a cube that the registration stretches moves as the cube does; a vessel
     /// leaving it is warned about and follows its surface; a ball given in mm is refused, naming
-    /// the unit.
+    /// the unit; one beside the cube is refused naming none.
     #[test]
     fn a_structure_moves_with_the_organ_and_one_outside_it_is_named() {
         let organ = cube();
@@ -122,5 +122,11 @@ mod tests {
             e.contains("`tumour` lies outside the organ") && e.contains("given in mm where m were expected"),
             "{e}"
         );
+        // Beside the cube (another organ of the same labelmap): outside, in the right unit, though
+        // read 10 times smaller it would lie at the cube's corner, which holds the origin.
+        let mut beside = ball.clone();
+        beside.transform([0.0, 0.035, 0.035], 1.0);
+        let e = Structure::new(&organ, "kidney", beside).unwrap_err().to_string();
+        assert!(e.contains("`kidney` lies outside the organ") && !e.contains("times"), "{e}");
     }
 }
