@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use augsim_mesh::isosurface::ExtractOptions;
 use augsim_mesh::labelmap::{read_labelmap, read_labelmap_surface, write_nifti, write_nrrd, Frame, Labelmap};
+use augsim_mesh::length::LengthUnit;
 use augsim_mesh::phantom::PhantomSpec;
 use augsim_mesh::surface::check_closed_manifold;
 use augsim_mesh::{norm, sub, Point};
@@ -72,7 +73,8 @@ fn shipped_labelmaps_are_what_their_generator_writes() {
         write_nrrd(data("liver_labels.seg.nrrd"), &in_lps(&map)).unwrap();
     }
     let nifti = read_labelmap(data("liver_labels.nii.gz")).unwrap();
-    assert!(nifti == Labelmap { segments: Vec::new(), ..map.clone() }, "the NIfTI differs from its generator");
+    let written = Labelmap { segments: Vec::new(), named_unit: Some(LengthUnit::Millimetre), ..map.clone() };
+    assert!(nifti == written, "the NIfTI differs from its generator");
     let nrrd = read_labelmap(data("liver_labels.seg.nrrd")).unwrap();
     assert!(nrrd == in_lps(&map), "the NRRD differs from its generator");
     assert_eq!(nifti.dims, [153, 113, 46]);
@@ -88,7 +90,7 @@ fn the_shipped_liver_comes_back_whole_at_its_place() {
     let phantom = PhantomSpec::default();
     let exact = phantom.volume() * 1e9;
     let options = ExtractOptions::default();
-    let ras = read_labelmap_surface(data("liver_labels.nii.gz"), Some("5"), &options).unwrap();
+    let ras = read_labelmap_surface(data("liver_labels.nii.gz"), Some("5"), None, &options).unwrap();
     let report = check_closed_manifold(&ras.surface).unwrap();
     let error = report.volume / exact - 1.0;
     println!(
@@ -109,7 +111,7 @@ fn the_shipped_liver_comes_back_whole_at_its_place() {
         let voxel = [1.5, 1.5, 4.0][d];
         assert!((lo[d] - want_lo).abs() < voxel && (hi[d] - want_hi).abs() < voxel, "axis {d}: {lo:?} {hi:?}");
     }
-    let lps = read_labelmap_surface(data("liver_labels.seg.nrrd"), Some("Liver"), &options).unwrap();
+    let lps = read_labelmap_surface(data("liver_labels.seg.nrrd"), Some("Liver"), None, &options).unwrap();
     assert_eq!((lps.frame, lps.label.as_str()), (Frame::Lps, "label 5 ('liver')"));
     let (a, b) = (centre(&ras.surface.vertices), centre(&lps.surface.vertices));
     assert!(norm(sub(b, [-a[0], -a[1], a[2]])) < 1e-6, "{a:?} vs {b:?}");
@@ -145,8 +147,8 @@ fn a_dicom_seg_holds_the_voxels_of_the_labelmap_it_was_made_from() {
         assert!(!a.is_empty() && a == b, "{in_seg}: {} voxels, {} in the NRRD", a.len(), b.len());
     }
     let options = ExtractOptions::default();
-    let from_seg = read_labelmap_surface(data("liver_labels_seg.dcm"), Some("liver"), &options).unwrap();
-    let from_nrrd = read_labelmap_surface(data("liver_labels.seg.nrrd"), Some("liver"), &options).unwrap();
+    let from_seg = read_labelmap_surface(data("liver_labels_seg.dcm"), Some("liver"), None, &options).unwrap();
+    let from_nrrd = read_labelmap_surface(data("liver_labels.seg.nrrd"), Some("liver"), None, &options).unwrap();
     assert_eq!(from_seg.frame, Frame::Lps);
     assert!(from_seg.warnings.is_empty(), "frames left out are not the image's border: {:?}", from_seg.warnings);
     // The same voxels on a grid whose k runs the other way: the same surface to within the
@@ -197,8 +199,8 @@ fn an_rt_structure_set_holds_the_organs_it_was_drawn_from() {
     for (organ, contours, (low, high)) in [("liver", 1_111_383.0, (0.97, 0.99)), ("kidney", 86_220.0, (0.94, 0.96))] {
         let filled = rt.select(organ).unwrap().0.count() as f64 * 4.0;
         assert!((filled / contours - 1.0).abs() < 0.003, "{organ}: {filled} mm³ filled, {contours} in its contours");
-        let from_rt = read_labelmap_surface(data("liver_labels_rt.dcm"), Some(organ), &options).unwrap();
-        let from_nrrd = read_labelmap_surface(data("liver_labels.seg.nrrd"), Some(organ), &options).unwrap();
+        let from_rt = read_labelmap_surface(data("liver_labels_rt.dcm"), Some(organ), None, &options).unwrap();
+        let from_nrrd = read_labelmap_surface(data("liver_labels.seg.nrrd"), Some(organ), None, &options).unwrap();
         assert!(from_rt.warnings.is_empty(), "{:?}", from_rt.warnings);
         let ratio = volume(&from_rt.surface) / volume(&from_nrrd.surface);
         assert!(ratio > low && ratio < high, "{organ}: {ratio} of the labelmap's volume");

@@ -1096,7 +1096,7 @@ mod tests {
     fn targets_in_the_wrong_frame_and_a_wrong_unit_are_refused() {
         let dir = tempfile::tempdir().unwrap();
         // RAS targets for an LPS segmentation: outside the organ.
-        let mut wrong = options(dir.path(), "liver_labels.seg.nrrd", "liver", true);
+        let wrong = options(dir.path(), "liver_labels.seg.nrrd", "liver", true);
         write_points_csv(&wrong.targets, &[[-45.0, 30.0, -140.0]]).unwrap();
         let error = format!("{:#}", organ_step(&wrong, dir.path()).unwrap_err());
         assert!(error.contains("the targets of"), "{error}");
