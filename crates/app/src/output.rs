@@ -322,10 +322,11 @@ pub fn register_files(
     say(&organ_line(registration.organ(), registration.targets().len()));
     say(&format!("space      {}", spec.frame_line(&registration)));
     registration.warnings().iter().for_each(|w| say(&format!("warning    {w}")));
-    let truth_frame = truths.as_ref().and_then(|t| t.first()).and_then(|truth| {
-        register::plausibility::truth_frame_mix_up(registration.organ(), registration.targets(), truth)
-    });
-    truth_frame.iter().for_each(|w| say(&format!("warning    {w}")));
+    let truth_warning = truths
+        .as_ref()
+        .and_then(|t| t.first())
+        .and_then(|truth| register::plausibility::truth_mix_up(registration.organ(), registration.targets(), truth));
+    truth_warning.iter().for_each(|w| say(&format!("warning    {w}")));
     let sequence = frames.len() > 1;
     let mut writer = RunWriter::new(out, sequence, spec.given_units, (organ_frame, spec.given_frame))?;
     let mut last_cloud = Vec::new();

@@ -148,28 +148,43 @@ pub fn frame_mix_up(organ: &Organ, cloud: &[Point]) -> Result<Option<String>> {
     }))
 }
 
-/// The warning for the targets' truth, `truth` (in the organ's frame, as read), that lies more
-/// than a quarter of the organ's size from the `targets` at rest on average and at most half as
-/// far with x and y negated: RAS given for LPS or the reverse. `None` otherwise (a truth in the
-/// cloud's own pose, under a rigid pre-alignment, is far either way and not flagged).
-pub fn truth_frame_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option<String> {
-    let mean_distance = |negate: bool| {
-        let d = targets.iter().zip(truth).map(|(t, p)| {
-            let p = if negate { [-p[0], -p[1], p[2]] } else { *p };
-            mesh::norm(mesh::sub(p, *t))
-        });
+/// The warning for the targets' truth, `truth` (in the organ's frame and unit, as read), that
+/// lies more than [`TRUTH_OFF`] of the organ's size from the `targets` at rest on average and at
+/// most a third as far read otherwise: with x and y negated (RAS given for LPS or the reverse),
+/// or 1,000 or 10 times larger or smaller (metres given for millimetres, centimetres). `None`
+/// otherwise (a truth in the cloud's own pose, under a rigid pre-alignment, is far either way and
+/// not flagged).
+pub fn truth_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option<String> {
+    let mean_distance = |read: &dyn Fn(Point) -> Point| {
+        let d = targets.iter().zip(truth).map(|(t, p)| mesh::norm(mesh::sub(read(*p), *t)));
         d.sum::<f64>() / targets.len().max(1) as f64
     };
-    let (given, other) = (mean_distance(false), mean_distance(true));
-    (given > 0.25 * organ.extent() && other <= 0.5 * given).then(|| {
+    let given = mean_distance(&|p| p);
+    let scaled = |k: f64| move |p: Point| p.map(|x| x * k);
+    let readings: [(&str, &dyn Fn(Point) -> Point, &str); 5] = [
+        ("with x and y negated", &|p| [-p[0], -p[1], p[2]], "is it in RAS where the targets are in LPS, or the reverse? Give its frame (a file that names it, or --frame)"),
+        ("read 1,000 times larger", &scaled(1e3), "was it given in m where mm were expected? Give its unit (a header such as x_m, or --units)"),
+        ("read 1,000 times smaller", &scaled(1e-3), "was it given in mm where m were expected? Give its unit (a header such as x_mm, or --units)"),
+        ("read 10 times larger", &scaled(10.0), "was it given in cm where mm were expected? Give its unit (a header such as x_cm, or --units)"),
+        ("read 10 times smaller", &scaled(0.1), "was it given in mm where cm were expected? Give its unit (a header such as x_mm, or --units)"),
+    ];
+    let (how, other, question) = readings
+        .iter()
+        .map(|(how, read, question)| (*how, mean_distance(read), *question))
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    (given > TRUTH_OFF * organ.extent() && other <= given / 3.0).then(|| {
         format!(
-            "the truth lies {:.1} mm from the targets at rest on average, {:.1} mm with x and y negated: is it in RAS \
-             where the targets are in LPS, or the reverse? Give its frame (a file that names it, or --frame)",
+            "the truth lies {:.1} mm from the targets at rest on average, {:.1} mm {how}: {question}",
             mm(given),
             mm(other)
         )
     })
 }
+
+/// The share of the organ's size (its box's diagonal) beyond which a truth that lies far nearer
+/// the targets at rest read in another frame or unit is flagged ([`truth_mix_up`]): 15 mm on a
+/// liver, about what a strong push moves its targets.
+pub const TRUTH_OFF: f64 = 0.05;
 
 /// The number of distinct points of `cloud`, counted up to `most` (a real cloud has that many
 /// among its first points: the count stops there).
@@ -282,20 +297,30 @@ pub fn verdict(
 mod tests {
     use super::*;
 
-    /// A truth in the other frame (x and y negated) is named; a truth that moved as an organ
-    /// does, or one far off in another way, is not.
+    /// A truth in the other frame (x and y negated) or in another unit is named; a truth that
+    /// moved as an organ does, or one far off in another way, is not.
     #[test]
-    fn a_truth_in_the_other_frame_is_named() {
+    fn a_truth_in_the_other_frame_or_another_unit_is_named() {
         let at = [0.05, 0.12, -0.2];
         let organ = Organ::new(mesh::generate::box_tet(at, [0.2, 0.22, -0.12], [5, 3, 2]).unwrap(), None).unwrap();
         let targets = vec![[0.1, 0.15, -0.17], [0.15, 0.18, -0.15]];
         let moved: Vec<Point> = targets.iter().map(|p| [p[0] + 0.01, p[1], p[2] - 0.005]).collect();
-        assert_eq!(truth_frame_mix_up(&organ, &targets, &moved), None);
+        assert_eq!(truth_mix_up(&organ, &targets, &moved), None);
         let other: Vec<Point> = moved.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
-        let w = truth_frame_mix_up(&organ, &targets, &other).expect("named");
+        let w = truth_mix_up(&organ, &targets, &other).expect("named");
         assert!(w.contains("with x and y negated: is it in RAS"), "{w}");
         let shifted: Vec<Point> = targets.iter().map(|p| [p[0], p[1], p[2] + 0.3]).collect();
-        assert_eq!(truth_frame_mix_up(&organ, &targets, &shifted), None);
+        assert_eq!(truth_mix_up(&organ, &targets, &shifted), None);
+        // Metres read as millimetres: a thousand times too small.
+        let in_metres: Vec<Point> = moved.iter().map(|p| p.map(|x| x * 1e-3)).collect();
+        let w = truth_mix_up(&organ, &targets, &in_metres).expect("named");
+        assert!(w.contains("read 1,000 times larger") && w.contains("given in m where mm"), "{w}");
+        let in_cm: Vec<Point> = moved.iter().map(|p| p.map(|x| x * 10.0)).collect();
+        assert!(truth_mix_up(&organ, &targets, &in_cm).expect("named").contains("read 10 times smaller"));
+        // Near the z axis the other frame lies near too; a moderate push is not flagged.
+        let central = vec![[0.004, 0.003, -0.17]];
+        let pushed = vec![[0.004, 0.003, -0.19]];
+        assert_eq!(truth_mix_up(&organ, &central, &pushed), None);
     }
 
     /// A view of the organ passes; the same points in millimetres, in kilometres or all at one
