@@ -16,6 +16,7 @@ pub mod isosurface;
 pub mod labelmap;
 pub mod length;
 pub mod phantom;
+pub mod pinch;
 pub mod quadratic;
 pub mod rebuild;
 pub mod repair;

@@ -563,7 +563,9 @@ pub fn stuff(domain: &dyn ImplicitDomain, opts: &TetMeshOptions) -> Result<Mesh,
             crate::length::mm(opts.size)
         )));
     }
-    let mut mesh = without_small_pieces(Mesh::new(nodes, Cells::Tet4(tets))?)?;
+    let mut mesh = Mesh::new(nodes, Cells::Tet4(tets))?;
+    crate::pinch::bridge_pinched_edges(&mut mesh);
+    let mut mesh = without_small_pieces(mesh)?;
     if opts.fit == BoundaryFit::VolumePreserving {
         preserve_volume(&mut mesh, domain);
     }
