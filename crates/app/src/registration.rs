@@ -148,9 +148,11 @@ impl ModelSource {
     }
 }
 
-/// A method loaded: its organ, how it deforms, the method in words, the loop's settings.
+/// A method loaded: its organ and the frame its mesh file names, how it deforms, the method in
+/// words, the loop's settings.
 struct Loaded {
     organ: Organ,
+    frame: Option<Frame>,
     deformer: Box<dyn Deformer + Send>,
     method: String,
     options: RegistrationOptions,
@@ -167,12 +169,14 @@ impl MethodSpec {
                 let m = scenario.material;
                 let method =
                     format!("FEM, {} ({} elements)", m.law.display_name(), m.resolved_formulation().display_name());
-                Loaded { organ, deformer: Box::new(deformer), method, options: defaults() }
+                let frame = scenario.mesh.frame(&dir)?;
+                Loaded { organ, frame, deformer: Box::new(deformer), method, options: defaults() }
             }
             MethodSpec::Learned { model, scenario, way } => {
                 let (model, words) = model.load()?;
                 let (scenario, dir) = scenario.read(DatasetScenario::load)?;
                 let network = Network { model: &model, scenario: &scenario, dir: &dir };
+                let frame = scenario.mesh.frame(&dir)?;
                 let options = match options {
                     Some(options) => options.clone(),
                     None => network_options(&CaseScenario::builtin())?,
@@ -181,12 +185,12 @@ impl MethodSpec {
                     LearnedWay::Membrane => {
                         let (organ, deformer) = network_model(&network)?;
                         let method = format!("{words}, membrane loop");
-                        Loaded { organ, deformer: Box::new(deformer), method, options }
+                        Loaded { organ, frame, deformer: Box::new(deformer), method, options }
                     }
                     LearnedWay::Own => {
                         let LearnedRegistration { organ, deformer, options } =
                             learned_registration(&network, None, &options)?;
-                        Loaded { organ, deformer, method: words, options }
+                        Loaded { organ, frame, deformer, method: words, options }
                     }
                     LearnedWay::AfterShapeFit(basis) => {
                         let (basis, basis_words) = basis.load()?;
@@ -194,6 +198,7 @@ impl MethodSpec {
                             learned_registration(&network, Some(&basis), &options)?;
                         Loaded {
                             organ,
+                            frame,
                             deformer,
                             method: format!("{words} after the shape fit of {basis_words}"),
                             options,
@@ -209,6 +214,7 @@ impl MethodSpec {
                 });
                 let (fem, fem_dir) = fem.read(StaticScenario::load)?;
                 let (organ, deformer) = fem_model(&fem, &fem_dir)?;
+                let frame = fem.mesh.frame(&fem_dir)?;
                 let learned: Box<dyn Deformer + Send> = match &model {
                     // The shape space holds on any mesh inside the model's grid: the FEM's own.
                     Model::Reduced(_) => Box::new(shape_fit(&model, &organ)?),
@@ -238,7 +244,7 @@ impl MethodSpec {
                     iterations: network_iterations + POLISH_ITERATIONS,
                     ..RegistrationOptions::default()
                 });
-                Loaded { organ, deformer: Box::new(deformer), method, options }
+                Loaded { organ, frame, deformer: Box::new(deformer), method, options }
             }
         })
     }
@@ -566,7 +572,8 @@ impl RegistrationSpec {
     /// settings are the library's for a FEM and a hybrid; for a learned model, the real-time
     /// iteration budgets of the built-in registration case's network method.
     pub fn build(&self) -> Result<Registration> {
-        let Loaded { organ, deformer, method, options } = self.method.load(self.options.as_ref())?;
+        let Loaded { organ, frame: organ_frame, deformer, method, options } =
+            self.method.load(self.options.as_ref())?;
         let (targets, unplaced) = match &self.targets {
             TargetsSpec::Regions => (LabelledPoints::new(region_targets(organ.mesh())), None),
             TargetsSpec::File(path) => crate::points::read_targets(path, self.units)?,
@@ -595,9 +602,15 @@ impl RegistrationSpec {
             TargetsSpec::File(path) => format!("the targets of {}", path.display()),
             _ => "the targets".into(),
         };
-        let LabelledPoints { points, labels, frame, .. } = targets;
-        let mut registration =
-            Registration::new(organ, deformer, method, points, labels, options).with_context(|| what)?.in_frame(frame);
+        // The organ's mesh names the frame it works in, where it names one: targets in the other
+        // are brought into it.
+        let LabelledPoints { mut points, labels, frame, .. } = targets;
+        if let (Some(organ), Some(named)) = (organ_frame, frame) {
+            named.convert_all(organ, &mut points);
+        }
+        let mut registration = Registration::new(organ, deformer, method, points, labels, options)
+            .with_context(|| what)?
+            .in_frame(organ_frame.or(frame));
         unplaced.into_iter().for_each(|w| registration.warn(w));
         for source in &self.structures {
             let context = || format!("the structure {}", source.path.display());
@@ -802,6 +815,31 @@ mod tests {
         assert!(flips(Some(Frame::Lps), &named));
         assert!(!flips(Some(Frame::Lps), &points), "the organ names no frame");
         assert!(spec(TargetsSpec::File(dir.path().join("missing.csv")), None).build().is_err());
+    }
+
+    /// An organ whose mesh file names its frame works in it: targets in the other frame are
+    /// brought into it (x and y negated), not taken as they are.
+    #[test]
+    fn the_organ_s_mesh_names_the_working_frame() {
+        let dir = tempfile::tempdir().unwrap();
+        let mesh = mesh::box_tet([-0.1, -0.06, 0.0], [-0.02, 0.0, 0.05], [4, 3, 2]).unwrap();
+        mesh::io::write_vtu_in_frame(dir.path().join("organ.vtu"), &mesh, &[], Frame::Lps).unwrap();
+        let scenario = dir.path().join("static.toml");
+        std::fs::write(
+            &scenario,
+            "kind = \"static\"\nname = \"lps\"\n[mesh.file]\npath = \"organ.vtu\"\n[material]\nlaw = \"linear\"\n\
+             young = 5000.0\npoisson = 0.45\n[[fixed]]\nselect = { box = { min = [-0.2, -0.2, -0.001], max = [0.2, 0.2, \
+             0.001] } }\n",
+        )
+        .unwrap();
+        let ras = dir.path().join("targets.mrk.json");
+        let json = r#"{"markups": [{"coordinateSystem": "RAS", "controlPoints": [{"label": "t", "position": [50, 30, 20]}]}]}"#;
+        std::fs::write(&ras, json).unwrap();
+        let registration =
+            RegistrationSpec::new(MethodSpec::fem(&scenario), TargetsSpec::File(ras)).build().expect("inside in LPS");
+        assert_eq!(registration.frame(), Some(Frame::Lps));
+        let t = registration.targets()[0];
+        assert!(mesh::norm(mesh::sub(t, [-0.05, -0.03, 0.02])) < 1e-12, "{t:?}");
     }
 
     /// The spec's time budget reaches the loop's settings, checked there; none by default.

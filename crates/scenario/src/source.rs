@@ -64,6 +64,18 @@ fn one() -> f64 {
     1.0
 }
 
+impl MeshSource {
+    /// The frame (RAS or LPS) its mesh file names ([`mesh::io::surface_frame`]: a `.vtu`'s field
+    /// data, a `.vtk`'s title), `dir` the scenario's folder; none for a generated mesh or one
+    /// moved to the origin.
+    pub fn frame(&self, dir: &Path) -> Result<Option<mesh::io::Frame>, MeshError> {
+        match self {
+            MeshSource::File { path, centre: false, scale } if *scale > 0.0 => mesh::io::surface_frame(dir.join(path)),
+            _ => Ok(None),
+        }
+    }
+}
+
 /// Element kind of a generated box.
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
