@@ -484,7 +484,24 @@ fn far_camera(organ: &mesh::Mesh, camera: Point, unit: LengthUnit) -> Option<Str
 /// Returns what it did and the frame its inputs were given in.
 fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Option<Frame>)> {
     let mut lines = Vec::new();
-    let inputs = read_inputs(options, &mut lines)?;
+    let frame = organ_lines(options, dir, &mut lines).map_err(|e| {
+        // The warnings said before the error (a unit that makes no organ's size) are often its cause.
+        let warnings: Vec<&str> = lines.iter().filter_map(|l| l.strip_prefix("warning: ")).collect();
+        match warnings.is_empty() {
+            true => e,
+            false => e.context(format!(
+                "after the warning{} {}",
+                if warnings.len() > 1 { "s" } else { "" },
+                warnings.join("; ")
+            )),
+        }
+    })?;
+    Ok((lines, frame))
+}
+
+/// [`organ_step`], its lines said in `lines` as they come.
+fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) -> Result<Option<Frame>> {
+    let inputs = read_inputs(options, lines)?;
     let frame = inputs.frame();
     let Inputs { surface, unit, landmarks: labelled_landmarks, targets: labelled_targets, camera, given } = inputs;
     let (mut surface, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
@@ -590,7 +607,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
     write_points(dir.join("targets.csv"), &LabelledPoints { frame, ..labelled_targets })?;
     let camera = LabelledPoints { frame, unit: Some(LengthUnit::Metre), ..LabelledPoints::new(vec![camera]) };
     write_points(dir.join("camera.csv"), &camera)?;
-    Ok((lines, given))
+    Ok(given)
 }
 
 /// The organ's surface in its own unit, with its frame and unit ([`OrganInput`]).
@@ -1109,5 +1126,12 @@ mod tests {
         surface.surface = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mesh/tests/data/liver.obj");
         let error = organ_step(&surface, dir.path()).unwrap_err().to_string();
         assert!(error.contains("--label 5 chooses a label of a labelmap"), "{error}");
+        // A unit that makes the organ metres across: the error that follows names it first.
+        let giant = PrepareOptions { label: None, units: Some(LengthUnit::Metre), ..surface };
+        let error = format!("{:#}", organ_step(&giant, dir.path()).unwrap_err());
+        assert!(
+            error.starts_with("after the warning") && error.contains("in m the organ is 6483 mm across"),
+            "{error}"
+        );
     }
 }
