@@ -92,7 +92,9 @@ fn fcsv_of_slicer_5_reads_its_unnamed_status_fields_and_leaves_out_missing_point
     assert_eq!(
         message(read_points(unknown)),
         format!(
-            "{}: line 3: position status \"7\" (0 to 3 in Slicer's .fcsv)",
+            "{}: line 3: position status \"7\": Slicer's .fcsv rows end with two fields its columns comment does \
+             not name, the position status (0 to 3) and whether the point was made automatically; a row two fields \
+             longer than its columns reads them there",
             dir.path().join("unknown.fcsv").display()
         )
     );
@@ -128,6 +130,19 @@ fn mrk_json_of_slicer_5_gives_defined_points_with_labels_frame_and_units() {
         p.unplaced,
         ["markups[1].controlPoints[1]", "skipped"],
         "an unlabelled placeholder named by its place; a point skipped when placing, which has no position"
+    );
+    // A curve is a shape, not a point list.
+    let curve = put(
+        dir.path(),
+        "curve.mrk.json",
+        r#"{"markups": [{"type": "Curve", "controlPoints": [{"position": [1, 2, 3]}, {"position": [4, 5, 6]}]}]}"#,
+    );
+    let m = message(read_points(curve));
+    assert!(
+        m.ends_with(
+            "markups[0] is a Curve, not a point list: save the points as a point list (type Fiducial in the file)"
+        ),
+        "{m}"
     );
     // Microns, which Slicer's schema allows beside millimetres.
     let um = put(

@@ -236,7 +236,11 @@ fn read_table(path: &Path, text: &str, fcsv: bool) -> Result<LabelledPoints, Mes
                     continue;
                 }
                 other => {
-                    let message = format!("position status {other:?} (0 to 3 in Slicer's .fcsv)");
+                    let message = format!(
+                        "position status {other:?}: Slicer's .fcsv rows end with two fields its columns comment does \
+                         not name, the position status (0 to 3) and whether the point was made automatically; a row \
+                         two fields longer than its columns reads them there"
+                    );
                     return Err(table_error(CsvError::at(row.line, message)));
                 }
             }
@@ -296,6 +300,12 @@ fn read_markup(markup: &Value, m: usize) -> Result<LabelledPoints, String> {
             Some(other) => Err(format!("{at}.{key} is {other}, not a string")),
         }
     };
+    // Slicer's point list; its other markups (a curve, a plane, a line, an angle, a box) are shapes.
+    if let Some(kind) = text_of("type")?.filter(|&kind| kind != "Fiducial") {
+        return Err(format!(
+            "{at} is a {kind}, not a point list: save the points as a point list (type Fiducial in the file)"
+        ));
+    }
     let frame = text_of("coordinateSystem")?.map_or(Ok(Frame::Lps), str::parse).map_err(|e| format!("{at}: {e}"))?;
     // A unit code alone ("mm"), or coded as the schema also allows: [code, scheme, meaning].
     let unit = match markup.get("coordinateUnits") {
