@@ -155,22 +155,28 @@ pub fn frame_mix_up(organ: &Organ, cloud: &[Point]) -> Result<Option<String>> {
 /// otherwise (a truth in the cloud's own pose, under a rigid pre-alignment, is far either way and
 /// not flagged).
 pub fn truth_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option<String> {
-    let mean_distance = |read: &dyn Fn(Point) -> Point| {
-        let d = targets.iter().zip(truth).map(|(t, p)| mesh::norm(mesh::sub(read(*p), *t)));
+    // Each reading: x and y negated or not, a scale, and what it says.
+    let mean_distance = |negate: bool, scale: f64| {
+        let d = targets.iter().zip(truth).map(|(t, p)| {
+            let p = if negate { [-p[0], -p[1], p[2]] } else { *p };
+            mesh::norm(mesh::sub(p.map(|x| x * scale), *t))
+        });
         d.sum::<f64>() / targets.len().max(1) as f64
     };
-    let given = mean_distance(&|p| p);
-    let scaled = |k: f64| move |p: Point| p.map(|x| x * k);
-    let readings: [(&str, &dyn Fn(Point) -> Point, &str); 5] = [
-        ("with x and y negated", &|p| [-p[0], -p[1], p[2]], "is it in RAS where the targets are in LPS, or the reverse? Give its frame (a file that names it, or --frame)"),
-        ("read 1,000 times larger", &scaled(1e3), "was it given in m where mm were expected? Give its unit (a header such as x_m, or --units)"),
-        ("read 1,000 times smaller", &scaled(1e-3), "was it given in mm where m were expected? Give its unit (a header such as x_mm, or --units)"),
-        ("read 10 times larger", &scaled(10.0), "was it given in cm where mm were expected? Give its unit (a header such as x_cm, or --units)"),
-        ("read 10 times smaller", &scaled(0.1), "was it given in mm where cm were expected? Give its unit (a header such as x_mm, or --units)"),
+    let given = mean_distance(false, 1.0);
+    let unit = |given: &str, expected: &str, header: &str| {
+        format!("was it given in {given} where {expected} were expected? Give its unit (a header such as {header}, or --units)")
+    };
+    let readings = [
+        ("with x and y negated", true, 1.0, "is it in RAS where the targets are in LPS, or the reverse? Give its frame (a file that names it, or --frame)".to_string()),
+        ("read 1,000 times larger", false, 1e3, unit("m", "mm", "x_m")),
+        ("read 1,000 times smaller", false, 1e-3, unit("mm", "m", "x_mm")),
+        ("read 10 times larger", false, 10.0, unit("cm", "mm", "x_cm")),
+        ("read 10 times smaller", false, 0.1, unit("mm", "cm", "x_mm")),
     ];
     let (how, other, question) = readings
-        .iter()
-        .map(|(how, read, question)| (*how, mean_distance(read), *question))
+        .into_iter()
+        .map(|(how, negate, scale, question)| (how, mean_distance(negate, scale), question))
         .min_by(|a, b| a.1.total_cmp(&b.1))?;
     (given > TRUTH_OFF * organ.extent() && other <= given / 3.0).then(|| {
         format!(
