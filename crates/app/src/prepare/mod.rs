@@ -83,6 +83,10 @@ pub struct PrepareOptions {
     /// The unit of the surface, the camera, the landmarks and the targets (`None`: detected from
     /// the surface's size; a labelmap's is the one its header names, else mm).
     pub units: UnitOrAuto,
+    /// The frame (RAS or LPS) of the inputs whose files name none: a surface without a `SPACE=`
+    /// tag, CSV points (`None`: the first that a file names).
+    #[serde(default)]
+    pub frame: Option<Frame>,
     /// Where the laparoscope looks from, in the segmentation's frame.
     pub camera: CameraAt,
     /// Landmarks where the organ is held (ligaments, the hilum): a points file (CSV x, y, z,
@@ -123,6 +127,7 @@ impl PrepareOptions {
             surface,
             label: None,
             units: None,
+            frame: None,
             camera: camera.into(),
             attach,
             attach_distance: None,
@@ -177,6 +182,10 @@ pub struct PrepareArgs {
     /// surface's size; a labelmap's is the one its header names, else mm).
     #[arg(long, default_value = "auto", value_parser = mesh::length::parse_unit_or_auto)]
     pub units: mesh::length::UnitOrAuto,
+    /// Frame (RAS or LPS) of the inputs whose files name none: a surface without a SPACE= tag
+    /// (3D Slicer writes one), CSV points [default: the one the first file naming one names]
+    #[arg(long)]
+    pub frame: Option<Frame>,
     /// FEM draws of the dataset.
     #[arg(long, default_value_t = DEFAULT_SAMPLES)]
     pub samples: usize,
@@ -206,6 +215,7 @@ impl PrepareArgs {
         PrepareOptions {
             label: self.label.clone(),
             units: self.units,
+            frame: self.frame,
             structures: self.structures.clone(),
             attach_distance: self.attach_mm.map(mesh::length::from_mm),
             samples: self.samples,
@@ -401,8 +411,9 @@ struct Inputs {
 /// and the camera, each in the unit and frame its file names, else the surface's; all brought to
 /// the set-up's frame ([`SET_UP_FRAME`] where any input names one), the points to metres.
 fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inputs> {
-    let (surface, surface_frame, unit) = read_surface_input(options, lines)?;
-    let mut input = PointInput::new(surface_frame, LengthUnit::Metre, unit);
+    let (surface, named_frame, unit) = read_surface_input(options, lines)?;
+    let surface_frame = named_frame.or(options.frame);
+    let mut input = PointInput::new(surface_frame, LengthUnit::Metre, unit).with_given_frame(options.frame);
     // Each error of a points file names the file.
     let landmarks = input.read(&options.attach)?;
     let targets = input.read(&options.targets)?;
@@ -418,8 +429,11 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
         Some(f) if f != SET_UP_FRAME => format!(", set up in {SET_UP_FRAME} (x and y negated)"),
         _ => String::new(),
     };
-    lines.push(match (surface_frame, given) {
+    lines.push(match (named_frame, given) {
         (Some(f), _) => format!("frame: {f} (named by {}){set_up}", options.surface.display()),
+        (None, Some(f)) if options.frame.is_some() => {
+            format!("frame: {f} (given; the surface's header names none){set_up}")
+        }
         (None, Some(f)) => format!("frame: {f} (named by the points' files; the surface's header names none){set_up}"),
         (None, None) => "frame: not named by any input (SPACE= header, .fcsv, .mrk.json): all taken as given".into(),
     });
@@ -1098,6 +1112,38 @@ mod tests {
                 && l.ends_with("is it given in the surface's unit (mm)?")),
             "{lines:?}"
         );
+    }
+
+    /// A surface whose header names no frame is in the frame given (`--frame`), points files
+    /// naming the other brought into it; without it, the first file that names one gives it.
+    #[test]
+    fn the_frame_given_is_the_header_less_surface_s() {
+        let dir = tempfile::tempdir().unwrap();
+        let surface = dir.path().join("organ.obj");
+        let mut ball = mesh::generate::icosphere(80.0, 2);
+        ball.transform([-100.0, -50.0, 0.0], 1.0);
+        mesh::io::write_surface(&surface, &ball).unwrap();
+        write_points_csv(&dir.path().join("attach.csv"), &[[100.0, 50.0, -80.0]]).unwrap();
+        let ras = dir.path().join("targets.mrk.json");
+        let json = r#"{"markups": [{"coordinateSystem": "RAS", "controlPoints": [{"position": [-110, -40, 5]}]}]}"#;
+        std::fs::write(&ras, json).unwrap();
+        let mut options = PrepareOptions::new(surface, [100.0, 50.0, 200.0], dir.path().join("attach.csv"), ras);
+        options.units = Some(LengthUnit::Millimetre);
+        let read = |options: &PrepareOptions| {
+            let mut lines = Vec::new();
+            let inputs = read_inputs(options, &mut lines).unwrap();
+            (inputs.surface.vertices[0], inputs.targets.points[0], lines)
+        };
+        // Taken as RAS, the targets file's: the surface is brought to the set-up's LPS with them.
+        let (vertex, target, _) = read(&options);
+        assert_eq!(vertex, [-ball.vertices[0][0], -ball.vertices[0][1], ball.vertices[0][2]]);
+        assert!(mesh::norm(mesh::sub(target, [0.11, 0.04, 0.005])) < 1e-12, "{target:?}");
+        // Given as LPS: the surface stays, the targets alone are brought to it.
+        options.frame = Some(Frame::Lps);
+        let (vertex, target, lines) = read(&options);
+        assert_eq!(vertex, ball.vertices[0]);
+        assert!(mesh::norm(mesh::sub(target, [0.11, 0.04, 0.005])) < 1e-12, "{target:?}");
+        assert!(lines.iter().any(|l| l == "frame: LPS (given; the surface's header names none)"), "{lines:?}");
     }
 
     #[test]
