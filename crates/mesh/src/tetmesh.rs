@@ -436,7 +436,9 @@ const LATTICE_PER_TET: f64 = 50.0;
 /// `target` tetrahedra: a first guess from `volume` (or half the bounding
 /// box), then secant steps on log(count) against log(size), at most six
 /// meshings; returns the mesh whose count is nearest the target (within 2%
-/// it stops early). Boundary nodes are placed by `fit`. Deterministic.
+/// it stops early), one in one piece when one is within [`PIECE_SLACK`] of the
+/// target (a lattice a little finer or coarser, up to [`PIECE_TRIES`] more, is
+/// tried for one when none is). Boundary nodes are placed by `fit`. Deterministic.
 pub fn stuff_to_count(
     domain: &dyn ImplicitDomain,
     target: usize,
@@ -457,8 +459,15 @@ pub fn stuff_to_count(
     let bounding = size[0] * size[1] * size[2];
     let vol = volume.unwrap_or(0.5 * bounding);
     let mut h = size_for_count(vol, target);
-    let mut best: Option<Mesh> = None;
+    let mut best: Option<(Mesh, f64)> = None;
+    let mut whole: Option<Mesh> = None;
     let mut prev: Option<(f64, f64)> = None; // (ln h, ln count)
+    let miss = |mesh: &Mesh| (mesh.cells.len().max(1) as f64 / target as f64).ln().abs();
+    let keep_whole = |mesh: &Mesh, whole: &mut Option<Mesh>| {
+        if face_connected_pieces(mesh).len() == 1 && whole.as_ref().is_none_or(|w| miss(mesh) < miss(w)) {
+            *whole = Some(mesh.clone());
+        }
+    };
     for _ in 0..6 {
         let cubes = bounding / (h * h * h);
         if cubes > LATTICE_PER_TET * target as f64 {
@@ -471,9 +480,10 @@ pub fn stuff_to_count(
         }
         let mesh = stuff(domain, &TetMeshOptions::with_size(h).with_fit(fit))?;
         let n = mesh.cells.len().max(1) as f64;
-        let err = (n / target as f64).ln().abs();
-        if best.as_ref().is_none_or(|b| err < (b.cells.len().max(1) as f64 / target as f64).ln().abs()) {
-            best = Some(mesh);
+        let err = miss(&mesh);
+        keep_whole(&mesh, &mut whole);
+        if best.as_ref().is_none_or(|b| err < miss(&b.0)) {
+            best = Some((mesh, h));
         }
         if err < 0.02 {
             break;
@@ -486,8 +496,33 @@ pub fn stuff_to_count(
         prev = Some((h.ln(), n.ln()));
         h = (h.ln() + ((target as f64).ln() - n.ln()) / slope).exp();
     }
-    best.ok_or_else(|| MeshError::Invalid("stuffing produced no mesh".into()))
+    let (best, h_best) = best.ok_or_else(|| MeshError::Invalid("stuffing produced no mesh".into()))?;
+    if whole.as_ref().is_none_or(|w| miss(w) > PIECE_SLACK.ln_1p()) {
+        // Pieces joined by a vertex only (a neck thinner than the lattice) come and go with the
+        // lattice's size: a few sizes about the best's.
+        for k in 1..=PIECE_TRIES {
+            let step = 1.0 + 0.02 * k.div_ceil(2) as f64;
+            let size = if k % 2 == 1 { h_best * step } else { h_best / step };
+            let mesh = stuff(domain, &TetMeshOptions::with_size(size).with_fit(fit))?;
+            keep_whole(&mesh, &mut whole);
+            if whole.as_ref().is_some_and(|w| miss(w) <= PIECE_SLACK.ln_1p()) {
+                break;
+            }
+        }
+    }
+    Ok(match whole {
+        Some(w) if miss(&w) <= PIECE_SLACK.ln_1p() => w,
+        _ => best,
+    })
 }
+
+/// How far (a share of the count asked for) a mesh in one piece may miss it to be taken before
+/// a nearer one in several ([`stuff_to_count`]).
+pub const PIECE_SLACK: f64 = 0.1;
+
+/// Lattices tried about the best one when no mesh in one piece is within [`PIECE_SLACK`] of the
+/// count asked for ([`stuff_to_count`]).
+pub const PIECE_TRIES: usize = 4;
 
 /// The BCC lattice: corner vertices (nx+1)(ny+1)(nz+1) then centre vertices
 /// nx·ny·nz. Doubled integer coordinates: corners at 2(i, j, k), centres at
