@@ -309,6 +309,36 @@ fn bad_track_files_are_named_with_their_line() {
             && err.contains("rest.csv"),
         "{err}"
     );
+    // Rest positions in mm and frames in m read as mm: each feature within the organ's size of its rest
+    // position, but the features span a thousand times less.
+    std::fs::write(
+        d.join("rest_mm.csv"),
+        "id,x_mm,y_mm,z_mm\nin,50,10,20\nleft,20,10,20\nright,80,10,20\nfront,50,0,20\n",
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("frames_m.csv"),
+        "frame,id,x,y,z\n1,in,0.05,0.01,0.0195\n1,left,0.02,0.01,0.02\n1,right,0.08,0.01,0.02\n1,front,0.05,0,0.02\n",
+    )
+    .unwrap();
+    let m_as_mm = ObservationFiles {
+        observations: d.join("frames_m.csv"),
+        features: Some(d.join("rest_mm.csv")),
+        units: LengthUnit::Millimetre,
+        ..Default::default()
+    };
+    let (sc, base) = tracked(d);
+    let err = Experiment::prepare(sc, &base, Some(&m_as_mm)).err().unwrap().to_string();
+    assert!(
+        err.contains("frames_m.csv: its 4 features at frame 1 span 0.061 mm, 1.0") && err.contains("e-3 times"),
+        "{err}"
+    );
+    // Zero iterations are refused, not filtered.
+    let (mut sc, base) = tracked(d);
+    sc.iterations = Some(0);
+    let files = ObservationFiles { observations: d.join("near.csv"), ..Default::default() };
+    let err = Experiment::prepare(sc, &base, Some(&files)).err().unwrap().to_string();
+    assert!(err.contains("iterations must be at least 1"), "{err}");
     // A rest position outside the organ is named at its own line, in the features file.
     std::fs::write(d.join("rest.csv"), "id,x,y,z\nin,0.05,0.01,0.2\n").unwrap();
     let (sc, base) = tracked(d);

@@ -371,6 +371,7 @@ impl Experiment {
             return Err(AssimilationError::file(path, None, "no frame after frame 0 (the rest)".into()));
         }
         let iterations = match self.scenario.iterations {
+            Some(0) => return Err(AssimilationError::Setup("iterations must be at least 1 (one per frame)".into())),
             Some(n) if n > last => {
                 let why = format!("{n} iterations asked for, but the file's last frame is {last} (one per iteration)");
                 return Err(AssimilationError::file(path, None, why));

@@ -40,6 +40,10 @@ pub struct Tracks {
 /// refused ([`Tracks::check_motion`]): 0.25 mm on a 25 cm liver, closer than any camera tracks.
 pub const TINY_SPREAD: f64 = 1e-3;
 
+/// How many times more or less than at rest the tracked features of a frame may span
+/// ([`Tracks::check_motion`]).
+pub const UNIT_SPREAD: f64 = 10.0;
+
 impl Tracks {
     /// Reads a track file (header `frame,id,x,y,z`) into metres, from the unit its header names or else from
     /// `unit`.
@@ -166,8 +170,9 @@ impl Tracks {
                 ),
             ));
         }
+        self.check_spread(rest, frames, rest_file)?;
         for (j, id) in self.ids.iter().enumerate() {
-            for (&frame, p) in self.positions[j].range(1..=frames) {
+            for (&frame, p) in self.positions[j].range(1..frames + 1) {
                 let distance = mesh::norm(mesh::sub(*p, rest[j]));
                 if distance > size {
                     let cause = match rest_file {
@@ -188,6 +193,48 @@ impl Tracks {
                         ),
                     ));
                 }
+            }
+        }
+        Ok(())
+    }
+
+    /// Refuses a frame (1..=`frames`) whose features (three or more) span [`UNIT_SPREAD`] times more or less than
+    /// they do at rest (`rest`): tissue stretches, but not tenfold; a file in another unit than its rest positions
+    /// does (metres read as millimetres shrink it a thousand times, and leave each feature within the organ's size of
+    /// its rest position near an origin the organ holds).
+    fn check_spread(
+        &self,
+        rest: &[Point],
+        frames: usize,
+        rest_file: Option<&RestPositions>,
+    ) -> Result<(), AssimilationError> {
+        for frame in 1..frames + 1 {
+            let seen: Vec<usize> = (0..self.ids.len()).filter(|&j| self.positions[j].contains_key(&frame)).collect();
+            if seen.len() < 3 {
+                continue;
+            }
+            let diagonal = |points: Vec<Point>| {
+                let (lo, hi) = mesh::bounds(&points);
+                mesh::norm(mesh::sub(hi, lo))
+            };
+            let at_rest = diagonal(seen.iter().map(|&j| rest[j]).collect());
+            let now = diagonal(seen.iter().map(|&j| self.positions[j][&frame]).collect());
+            let ratio = now / at_rest;
+            if at_rest > 0.0 && !(1.0 / UNIT_SPREAD..=UNIT_SPREAD).contains(&ratio) {
+                let against = match rest_file {
+                    Some(r) => format!("the rest positions in {}", r.path.display()),
+                    None => "its frame 0".into(),
+                };
+                return Err(AssimilationError::file(
+                    &self.path,
+                    None,
+                    format!(
+                        "its {} features at frame {frame} span {:.3} mm, {ratio:.3e} times what they span at rest                          ({:.1} mm): is the file in another unit than {against}? A header x_mm, y_mm, z_mm or x_m,                          y_m, z_m names the unit (or give --units)",
+                        seen.len(),
+                        mesh::length::mm(now),
+                        mesh::length::mm(at_rest)
+                    ),
+                ));
             }
         }
         Ok(())
