@@ -316,12 +316,20 @@ impl Model for FemModel {
         for (p, &value) in self.parameters.iter().zip(theta) {
             let fault = match p {
                 FemParameter::Young if !(value > 0.0 && value.is_finite()) => {
-                    format!("Young's modulus {value:.6e} Pa is not positive and finite")
+                    format!(
+                        "Young's modulus {value:.6e} Pa is not positive and finite: the filter, on the modulus \
+                         itself, stepped past zero (a prior far from the data); `transform = \"exp\"` in the \
+                         parameter's section keeps it positive"
+                    )
                 }
                 FemParameter::Springs { nodes }
                     if !nodes.iter().all(|&k| (0.0..f64::INFINITY).contains(&(self.problem.springs[k] + value))) =>
                 {
-                    format!("a spring stiffness of {value:.6e} N/m leaves a node's stiffness negative")
+                    format!(
+                        "a spring stiffness of {value:.6e} N/m leaves a node's stiffness negative: the filter, on the \
+                         stiffness itself, stepped past zero; `transform = \"exp\"` in the parameter's section keeps \
+                         it positive"
+                    )
                 }
                 _ => continue,
             };
