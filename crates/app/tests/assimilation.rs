@@ -333,6 +333,17 @@ fn bad_track_files_are_named_with_their_line() {
         err.contains("frames_m.csv: its 4 features at frame 1 span 0.061 mm, 1.0") && err.contains("e-3 times"),
         "{err}"
     );
+    // Millimetres under a plain header read as metres: outside the organ, a thousand times too far.
+    std::fs::write(d.join("plain_mm.csv"), "frame,id,x,y,z\n0,in,50,10,19.5\n1,in,50,10,19\n").unwrap();
+    let (sc, base) = tracked(d);
+    let files = ObservationFiles { observations: d.join("plain_mm.csv"), ..Default::default() };
+    let err = Experiment::prepare(sc, &base, Some(&files)).err().unwrap().to_string();
+    assert!(
+        err.contains("plain_mm.csv:2: feature `in`: tracked point")
+            && err.contains("is the file in mm where m were expected?")
+            && !err.contains("invalid FEM model"),
+        "{err}"
+    );
     // Zero iterations are refused, not filtered.
     let (mut sc, base) = tracked(d);
     sc.iterations = Some(0);

@@ -798,21 +798,31 @@ fn locate_tracks(
     rest: Option<&RestPositions>,
     finder: &mut PointFinder,
 ) -> Result<Vec<TrackedPoint>, AssimilationError> {
-    tracks
-        .ids
-        .iter()
-        .zip(positions)
-        .enumerate()
-        .map(|(j, (id, p))| {
-            finder.locate(*p).map_err(|e| {
-                let (path, line) = match rest.and_then(|r| Some((&r.path, r.line(id)?))) {
-                    Some(given) => given,
-                    None => (&tracks.path, tracks.line(j)),
-                };
-                AssimilationError::file(path, Some(line), format!("feature `{id}`: {e}"))
-            })
-        })
-        .collect()
+    let mut located = Vec::with_capacity(positions.len());
+    for (j, (id, p)) in tracks.ids.iter().zip(positions).enumerate() {
+        let point = finder.locate(*p).map_err(|e| {
+            let (path, line) = match rest.and_then(|r| Some((&r.path, r.line(id)?))) {
+                Some(given) => given,
+                None => (&tracks.path, tracks.line(j)),
+            };
+            // Where it is: a data error, not the model's.
+            let why = match e {
+                FemModelError::Invalid(why) => why,
+                other => other.to_string(),
+            };
+            let in_mm = positions.iter().all(|p| finder.locator.locate(p.map(|x| x * 1e-3)).is_some());
+            let hint = match in_mm {
+                true => {
+                    ": read 1,000 times smaller, every feature lies in the organ; is the file in mm where m were \
+                         expected? A header x_mm, y_mm, z_mm names the unit (or give --units mm)"
+                }
+                false => "",
+            };
+            AssimilationError::file(path, Some(line), format!("feature `{id}`: {why}{hint}"))
+        })?;
+        located.push(point);
+    }
+    Ok(located)
 }
 
 /// Control paths of the tool features: each on the surface node nearest its rest position (`positions`) among
