@@ -285,6 +285,19 @@ fn bad_track_files_are_named_with_their_line() {
     let near = experiment.observed_points()[1];
     assert!(mesh::distance(near, [0.05, 0.01, 0.0205]) < 1e-12, "observed at rest at {near:?}");
 
+    // Frames without a row (a frame column that skips): every feature occluded there, said.
+    std::fs::write(
+        d.join("gap.csv"),
+        "frame,id,x,y,z\n0,in,0.05,0.01,0.02\n1,in,0.05,0.01,0.02\n4,in,0.05,0.01,0.02\n",
+    )
+    .unwrap();
+    let (sc, base) = tracked(d);
+    let files = ObservationFiles { observations: d.join("gap.csv"), ..Default::default() };
+    let experiment = Experiment::prepare(sc, &base, Some(&files)).unwrap();
+    assert_eq!((experiment.setup().iterations, experiment.setup().blind_frames), (4, 2));
+    let lines = experiment.setup().lines(filter::SigmaPointSet::Simplex, Some(&files));
+    assert!(lines.iter().any(|l| l.starts_with("warning      2 of the 4 frames have no row")), "{lines:?}");
+
     // More iterations than the file has frames are refused, not cut short.
     let (mut sc, base) = tracked(d);
     sc.iterations = Some(3);

@@ -44,15 +44,24 @@ impl Setup {
                     )
                 }
             )),
-            (None, Some(f)) => lines.push(format!(
-                "tracks       {} frames from {}, {} occluded feature observations, {} points outside the mesh \
-                 located on its surface, keeping their offset (at most {:.2} mm)",
-                s.iterations,
-                f.observations.display(),
-                s.occluded,
-                s.projected,
-                mm(s.max_projection)
-            )),
+            (None, Some(f)) => {
+                lines.push(format!(
+                    "tracks       {} frames from {}, {} occluded feature observations, {} points outside the mesh \
+                     located on its surface, keeping their offset (at most {:.2} mm)",
+                    s.iterations,
+                    f.observations.display(),
+                    s.occluded,
+                    s.projected,
+                    mm(s.max_projection)
+                ));
+                if s.blind_frames > 0 {
+                    lines.push(format!(
+                        "warning      {} of the {} frames have no row: every feature occluded, the filter only \
+                         predicts there (is the frame column a frame number?)",
+                        s.blind_frames, s.iterations
+                    ));
+                }
+            }
             (None, None) => {}
         }
         lines

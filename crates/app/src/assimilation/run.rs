@@ -72,6 +72,8 @@ pub struct Setup {
     pub iterations: usize,
     /// Feature observations missing (occluded) in the filtered frames.
     pub occluded: usize,
+    /// Filtered frames in which no feature is seen (the filter only predicts there).
+    pub blind_frames: usize,
     /// Tracked points (features, assessment) outside the mesh moved onto its surface.
     pub projected: usize,
     /// The largest such move (m).
@@ -204,6 +206,7 @@ impl Experiment {
             sigma_points: 0,
             iterations: 0,
             occluded: 0,
+            blind_frames: 0,
             projected: 0,
             max_projection: 0.0,
             reference: None,
@@ -238,6 +241,7 @@ impl Experiment {
         s.sigma_points = experiment.scenario.filter.sigma_points.count(s.parameters);
         s.iterations = experiment.measurements.len();
         s.occluded = experiment.measurements.iter().map(|f| f.available.iter().filter(|a| !**a).count() / 3).sum();
+        s.blind_frames = experiment.measurements.iter().filter(|f| !f.available.iter().any(|&a| a)).count();
         Ok(experiment)
     }
 
