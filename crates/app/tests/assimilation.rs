@@ -285,6 +285,22 @@ fn bad_track_files_are_named_with_their_line() {
     let near = experiment.observed_points()[1];
     assert!(mesh::distance(near, [0.05, 0.01, 0.0205]) < 1e-12, "observed at rest at {near:?}");
 
+    // A feature 10 mm below the top face (the beam is 20 mm thick): said, by name and depth.
+    std::fs::write(
+        d.join("deep.csv"),
+        "frame,id,x,y,z\n0,in,0.05,0.01,0.02\n0,deep,0.05,0.01,0.01\n1,in,0.05,0.01,0.02\n",
+    )
+    .unwrap();
+    let (sc, base) = tracked(d);
+    let files = ObservationFiles { observations: d.join("deep.csv"), ..Default::default() };
+    let experiment = Experiment::prepare(sc, &base, Some(&files)).unwrap();
+    let lines = experiment.setup().lines(filter::SigmaPointSet::Simplex, Some(&files));
+    assert!(
+        lines.iter().any(|l| l.starts_with("warning      1 feature(s) lie deeper") && l.contains("(`deep` 10.0 mm)")),
+        "{lines:?}"
+    );
+    assert!(!experiment.setup().deep_features.iter().any(|(id, _)| id == "in"));
+
     // Frames without a row (a frame column that skips): every feature occluded there, said.
     std::fs::write(
         d.join("gap.csv"),

@@ -54,6 +54,14 @@ impl Setup {
                     s.projected,
                     mm(s.max_projection)
                 ));
+                if let Some((id, depth)) = s.deep_features.iter().max_by(|a, b| a.1.total_cmp(&b.1)) {
+                    lines.push(format!(
+                        "warning      {} feature(s) lie deeper than an element below the mesh's surface (`{id}` {:.1} \
+                         mm): a camera tracks the surface; is it a wrong position, or another organ's?",
+                        s.deep_features.len(),
+                        mm(*depth)
+                    ));
+                }
                 if s.blind_frames > 0 {
                     lines.push(format!(
                         "warning      {} of the {} frames have no row: every feature occluded, the filter only \

@@ -74,6 +74,9 @@ pub struct Setup {
     pub occluded: usize,
     /// Filtered frames in which no feature is seen (the filter only predicts there).
     pub blind_frames: usize,
+    /// Features whose rest position lies deeper below the mesh's surface than an element (id,
+    /// depth in m): a camera tracks the surface.
+    pub deep_features: Vec<(String, f64)>,
     /// Tracked points (features, assessment) outside the mesh moved onto its surface.
     pub projected: usize,
     /// The largest such move (m).
@@ -207,6 +210,7 @@ impl Experiment {
             iterations: 0,
             occluded: 0,
             blind_frames: 0,
+            deep_features: Vec::new(),
             projected: 0,
             max_projection: 0.0,
             reference: None,
@@ -388,6 +392,10 @@ impl Experiment {
         let mut at_rest = Vec::new();
         let observed_rest = tracks.observations.rest_positions(rest)?;
         self.observed = locate_tracks(&tracks.observations, &observed_rest, rest, &mut finder)?;
+        // A camera sees the surface: a feature deep inside is another organ's, or a wrong position.
+        let depth = |p: &Point| -finder.surface.signed_distance(*p);
+        let deep = tracks.observations.ids.iter().zip(&observed_rest).filter(|(_, p)| depth(p) > 2.0 * finder.reach);
+        self.setup.deep_features = deep.map(|(id, p)| (id.clone(), depth(p))).collect();
         at_rest.push((&tracks.observations, observed_rest));
         self.measurements = (1..=iterations)
             .map(|k| tracks.observations.frame(k))
