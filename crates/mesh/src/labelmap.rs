@@ -461,6 +461,15 @@ fn nrrd_unit(unit: &str) -> Result<LengthUnit, String> {
     }
 }
 
+/// The one unit a NRRD `space units` field names for the three axes.
+fn nrrd_space_unit(text: &str) -> Result<LengthUnit, String> {
+    let units: Vec<LengthUnit> = text.split_whitespace().map(nrrd_unit).collect::<Result<_, _>>()?;
+    match units[..] {
+        [a, b, c] if a == b && b == c => Ok(a),
+        _ => Err(format!("'space units' must name one unit for the three axes, got {text}")),
+    }
+}
+
 /// The millimetres in one `unit`.
 fn unit_mm(unit: LengthUnit) -> f64 {
     1e3 * unit.metres()
@@ -746,16 +755,7 @@ fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
     let affine: [[f64; 4]; 3] =
         std::array::from_fn(|r| std::array::from_fn(|c| if c < 3 { axes[c][r] } else { origin[r] }));
     check_affine(&affine)?;
-    let named_unit = match header.fields.get("space units") {
-        Some(text) => {
-            let units: Vec<LengthUnit> = text.split_whitespace().map(nrrd_unit).collect::<Result<_, _>>()?;
-            match units[..] {
-                [a, b, c] if a == b && b == c => Some(a),
-                _ => return Err(format!("'space units' must name one unit for the three axes, got {text}")),
-            }
-        }
-        None => None,
-    };
+    let named_unit = header.fields.get("space units").map(|text| nrrd_space_unit(text)).transpose()?;
     let affine = in_millimetres(affine, unit_mm(named_unit.unwrap_or(LengthUnit::Millimetre)));
     let segments = slicer_segments(&header.pairs, layers)?;
     let encoding = header.field("encoding")?;
