@@ -359,7 +359,8 @@ fn bad_track_files_are_named_with_their_line() {
     let (sc, base) = tracked(d);
     let err = Experiment::prepare(sc, &base, Some(&m_as_mm)).err().unwrap().to_string();
     assert!(
-        err.contains("frames_m.csv: its 4 features at frame 1 span 0.061 mm, 1.0") && err.contains("e-3 times"),
+        err.contains("frames_m.csv: its 4 features at frame 1 span 0.061 mm, 1.0")
+            && err.contains("e-3 times what they span at rest (60.8 mm): is the file in another unit"),
         "{err}"
     );
     // Millimetres under a plain header read as metres: outside the organ, a thousand times too far.

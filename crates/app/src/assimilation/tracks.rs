@@ -229,7 +229,9 @@ impl Tracks {
                     &self.path,
                     None,
                     format!(
-                        "its {} features at frame {frame} span {:.3} mm, {ratio:.3e} times what they span at rest                          ({:.1} mm): is the file in another unit than {against}? A header x_mm, y_mm, z_mm or x_m,                          y_m, z_m names the unit (or give --units)",
+                        "its {} features at frame {frame} span {:.3} mm, {ratio:.3e} times what they span at rest \
+                         ({:.1} mm): is the file in another unit than {against}? A header x_mm, y_mm, z_mm or x_m, \
+                         y_m, z_m names the unit (or give --units)",
                         seen.len(),
                         mesh::length::mm(now),
                         mesh::length::mm(at_rest)
