@@ -194,6 +194,13 @@ fn tracked(dir: &Path) -> (AssimilationScenario, PathBuf) {
     (sc, base)
 }
 
+/// The experiment of [`tracked`] on the track file `file` of `dir`, or its error message.
+fn prepare_tracks(dir: &Path, file: &str) -> Result<Experiment, String> {
+    let (sc, base) = tracked(dir);
+    let files = ObservationFiles { observations: dir.join(file), ..Default::default() };
+    Experiment::prepare(sc, &base, Some(&files)).map_err(|e| e.to_string())
+}
+
 /// Writes `text` to a file in `dir` and reads it as tracks; returns the error message.
 fn track_error(dir: &Path, text: &str) -> String {
     let path = dir.join("bad.csv");
@@ -291,10 +298,9 @@ fn bad_track_files_are_named_with_their_line() {
         "frame,id,x,y,z\n0,in,0.05,0.01,0.02\n0,deep,0.05,0.01,0.01\n1,in,0.05,0.01,0.02\n",
     )
     .unwrap();
-    let (sc, base) = tracked(d);
+    let experiment = prepare_tracks(d, "deep.csv").unwrap();
     let files = ObservationFiles { observations: d.join("deep.csv"), ..Default::default() };
-    let experiment = Experiment::prepare(sc, &base, Some(&files)).unwrap();
-    let lines = experiment.setup().lines(filter::SigmaPointSet::Simplex, Some(&files));
+    let lines = experiment.setup().lines(SigmaPointSet::Simplex, Some(&files));
     assert!(
         lines.iter().any(|l| l.starts_with("warning      1 feature(s) lie deeper") && l.contains("(`deep` 10.0 mm)")),
         "{lines:?}"
@@ -307,11 +313,10 @@ fn bad_track_files_are_named_with_their_line() {
         "frame,id,x,y,z\n0,in,0.05,0.01,0.02\n1,in,0.05,0.01,0.02\n4,in,0.05,0.01,0.02\n",
     )
     .unwrap();
-    let (sc, base) = tracked(d);
-    let files = ObservationFiles { observations: d.join("gap.csv"), ..Default::default() };
-    let experiment = Experiment::prepare(sc, &base, Some(&files)).unwrap();
+    let experiment = prepare_tracks(d, "gap.csv").unwrap();
     assert_eq!((experiment.setup().iterations, experiment.setup().blind_frames), (4, 2));
-    let lines = experiment.setup().lines(filter::SigmaPointSet::Simplex, Some(&files));
+    let files = ObservationFiles { observations: d.join("gap.csv"), ..Default::default() };
+    let lines = experiment.setup().lines(SigmaPointSet::Simplex, Some(&files));
     assert!(lines.iter().any(|l| l.starts_with("warning      2 of the 4 frames have no row")), "{lines:?}");
 
     // More iterations than the file has frames are refused, not cut short.
@@ -365,9 +370,7 @@ fn bad_track_files_are_named_with_their_line() {
     );
     // Millimetres under a plain header read as metres: outside the organ, a thousand times too far.
     std::fs::write(d.join("plain_mm.csv"), "frame,id,x,y,z\n0,in,50,10,19.5\n1,in,50,10,19\n").unwrap();
-    let (sc, base) = tracked(d);
-    let files = ObservationFiles { observations: d.join("plain_mm.csv"), ..Default::default() };
-    let err = Experiment::prepare(sc, &base, Some(&files)).err().unwrap().to_string();
+    let err = prepare_tracks(d, "plain_mm.csv").err().unwrap();
     assert!(
         err.contains("plain_mm.csv:2: feature `in`: tracked point")
             && err.contains("is the file in mm where m were expected?")

@@ -394,6 +394,11 @@ pub fn bounds(points: &[Point]) -> (Point, Point) {
     (lo, hi)
 }
 
+/// The diagonal of the box `(lo, hi)` (e.g. of [`bounds`]): the size of an organ, or of a set of points.
+pub fn box_diagonal((lo, hi): (Point, Point)) -> f64 {
+    norm(sub(hi, lo))
+}
+
 /// The longest side of the box `(lo, hi)` (e.g. of [`bounds`]).
 pub fn longest_side((lo, hi): (Point, Point)) -> f64 {
     (0..3).map(|d| hi[d] - lo[d]).fold(0.0, f64::max)

@@ -463,6 +463,7 @@ pub fn stuff_to_count(
     let mut whole: Option<Mesh> = None;
     let mut prev: Option<(f64, f64)> = None; // (ln h, ln count)
     let miss = |mesh: &Mesh| (mesh.cells.len().max(1) as f64 / target as f64).ln().abs();
+    let near = |mesh: &Mesh| miss(mesh) <= PIECE_SLACK.ln_1p();
     let keep_whole = |mesh: &Mesh, whole: &mut Option<Mesh>| {
         if face_connected_pieces(mesh).len() == 1 && whole.as_ref().is_none_or(|w| miss(mesh) < miss(w)) {
             *whole = Some(mesh.clone());
@@ -497,7 +498,7 @@ pub fn stuff_to_count(
         h = (h.ln() + ((target as f64).ln() - n.ln()) / slope).exp();
     }
     let (best, h_best) = best.ok_or_else(|| MeshError::Invalid("stuffing produced no mesh".into()))?;
-    if whole.as_ref().is_none_or(|w| miss(w) > PIECE_SLACK.ln_1p()) {
+    if !whole.as_ref().is_some_and(near) {
         // Pieces joined by a vertex only (a neck thinner than the lattice) come and go with the
         // lattice's size: a few sizes about the best's.
         for k in 1..=PIECE_TRIES {
@@ -505,15 +506,12 @@ pub fn stuff_to_count(
             let size = if k % 2 == 1 { h_best * step } else { h_best / step };
             let mesh = stuff(domain, &TetMeshOptions::with_size(size).with_fit(fit))?;
             keep_whole(&mesh, &mut whole);
-            if whole.as_ref().is_some_and(|w| miss(w) <= PIECE_SLACK.ln_1p()) {
+            if whole.as_ref().is_some_and(near) {
                 break;
             }
         }
     }
-    Ok(match whole {
-        Some(w) if miss(&w) <= PIECE_SLACK.ln_1p() => w,
-        _ => best,
-    })
+    Ok(whole.filter(near).unwrap_or(best))
 }
 
 /// How far (a share of the count asked for) a mesh in one piece may miss it to be taken before

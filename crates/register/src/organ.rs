@@ -302,7 +302,7 @@ struct OrganBox {
 impl OrganBox {
     fn of(nodes: &[Point]) -> OrganBox {
         let (lo, hi) = mesh::bounds(nodes);
-        OrganBox { centre: std::array::from_fn(|d| 0.5 * (lo[d] + hi[d])), extent: mesh::norm(mesh::sub(hi, lo)) }
+        OrganBox { centre: std::array::from_fn(|d| 0.5 * (lo[d] + hi[d])), extent: mesh::box_diagonal((lo, hi)) }
     }
 }
 
@@ -340,8 +340,7 @@ pub(crate) fn likely_mistake(
 
 /// The diagonal of the bounding box of `points`.
 fn diagonal(points: &[Point]) -> f64 {
-    let (lo, hi) = mesh::bounds(points);
-    mesh::norm(mesh::sub(hi, lo))
+    mesh::box_diagonal(mesh::bounds(points))
 }
 
 /// Positions of located points after the displacement `u`.

@@ -393,9 +393,10 @@ impl Experiment {
         let observed_rest = tracks.observations.rest_positions(rest)?;
         self.observed = locate_tracks(&tracks.observations, &observed_rest, rest, &mut finder)?;
         // A camera sees the surface: a feature deep inside is another organ's, or a wrong position.
-        let depth = |p: &Point| -finder.surface.signed_distance(*p);
-        let deep = tracks.observations.ids.iter().zip(&observed_rest).filter(|(_, p)| depth(p) > 2.0 * finder.reach);
-        self.setup.deep_features = deep.map(|(id, p)| (id.clone(), depth(p))).collect();
+        let depths =
+            tracks.observations.ids.iter().zip(&observed_rest).map(|(id, p)| (id, -finder.surface.signed_distance(*p)));
+        self.setup.deep_features =
+            depths.filter(|(_, d)| *d > 2.0 * finder.reach).map(|(id, d)| (id.clone(), d)).collect();
         at_rest.push((&tracks.observations, observed_rest));
         self.measurements = (1..=iterations)
             .map(|k| tracks.observations.frame(k))
@@ -472,8 +473,7 @@ impl Experiment {
 
     /// The organ's size: its mesh's box diagonal (m). No feature moves farther than that.
     pub fn organ_size(&self) -> f64 {
-        let (lo, hi) = self.base.mesh.bounds();
-        mesh::norm(mesh::sub(hi, lo))
+        mesh::box_diagonal(self.base.mesh.bounds())
     }
 
     /// The scenario's values of the estimated parameters, in filter order (the truth of

@@ -151,10 +151,7 @@ impl Tracks {
         frames: usize,
         rest_file: Option<&RestPositions>,
     ) -> Result<(), AssimilationError> {
-        let spread = {
-            let (lo, hi) = mesh::bounds(rest);
-            mesh::norm(mesh::sub(hi, lo))
-        };
+        let spread = mesh::box_diagonal(mesh::bounds(rest));
         if rest.len() >= 3 && spread < TINY_SPREAD * size {
             return Err(AssimilationError::file(
                 &self.path,
@@ -213,10 +210,7 @@ impl Tracks {
             if seen.len() < 3 {
                 continue;
             }
-            let diagonal = |points: Vec<Point>| {
-                let (lo, hi) = mesh::bounds(&points);
-                mesh::norm(mesh::sub(hi, lo))
-            };
+            let diagonal = |points: Vec<Point>| mesh::box_diagonal(mesh::bounds(&points));
             let at_rest = diagonal(seen.iter().map(|&j| rest[j]).collect());
             let now = diagonal(seen.iter().map(|&j| self.positions[j][&frame]).collect());
             let ratio = now / at_rest;
