@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use fem::{post, Solution, StaticSolver};
+use fem::{post, Law, Solution, StaticSolver};
 use mesh::io::Field;
 use mesh::stats::ms;
 use scenario::StaticScenario;
@@ -115,8 +115,8 @@ impl Solved {
             lines.push(format!(
                 "warning    from load factor {lambda:.3} a load step found its equilibrium far away, the response over \
                  it half as stiff as before or less: past a limit point of the load path the body snapped to \
-                 another branch (as under a real push it gives way); `[solver] continuation = \"arc_length\"` stops \
-                 at the limit point instead"
+                 another branch (as under a real push it gives way), or the path is that soft there; \
+                 `[solver] continuation = \"arc_length\"` follows the path and stops at a limit point"
             ));
         }
         let loaded = |n: usize| p.f_ext[3 * n..3 * n + 3].iter().any(|&f| f != 0.0);
@@ -141,6 +141,20 @@ impl Solved {
                 p.mesh.cells.len(),
                 p.material.law.display_name()
             ));
+        }
+        if p.material.law == Law::Svk {
+            if let (over, Some((cell, stretch))) = post::over_compressed_cells(geo, p.material.law, &sol.u)? {
+                if over > 0 {
+                    lines.push(format!(
+                        "warning    {over} of {} cells are compressed past Saint-Venant-Kirchhoff's limit stretch \
+                         1/sqrt(3) = 0.577 (down to {stretch:.3} in cell {}), where its stress falls as the \
+                         compression grows (no tissue's does): the equilibrium found holds for that law alone; \
+                         law = \"neo_hookean\" holds under large compression",
+                        p.mesh.cells.len(),
+                        p.mesh.file_cell(cell)
+                    ));
+                }
+            }
         }
         Ok(lines)
     }
@@ -184,6 +198,32 @@ mod tests {
         assert!(lines[0].starts_with("scenario   beam"), "{lines:?}");
         assert!(lines[1].starts_with(&format!("mesh       {} nodes", mesh.num_nodes())), "{lines:?}");
         assert!(lines.iter().any(|l| l.starts_with("max |u|    ")) && lines.len() == 7, "{lines:?}");
+    }
+
+    /// A cube of Saint-Venant-Kirchhoff (ν 0.49: F-bar) held at its base and pushed down at its
+    /// centre by a point force: at 0.1 N no cell is compressed past the law's limit stretch; at
+    /// 1 N the solve converges with a third of them past it, and says so.
+    #[test]
+    fn cells_compressed_past_svk_s_limit_are_warned_about() {
+        let dir = tempfile::tempdir().unwrap();
+        let lines = |force: f64| {
+            let path = dir.path().join("svk.toml");
+            let text = format!(
+                "kind = \"static\"\nname = \"svk\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.02, 0.02, 0.02]\n\
+                 cells = [4, 4, 4]\nelement = \"tet\"\n[material]\nlaw = \"svk\"\nyoung = 5000.0\npoisson = 0.49\n\
+                 [[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1e-9] }} }}\n\
+                 [[force]]\nselect = {{ list = [62] }}\ntotal = [0.0, 0.0, -{force}]\n"
+            );
+            std::fs::write(&path, text).unwrap();
+            solve_scenario(&path).unwrap().lines().unwrap()
+        };
+        let warned = |lines: &[String]| lines.iter().any(|l| l.contains("past Saint-Venant-Kirchhoff's limit stretch"));
+        let small = lines(0.1);
+        assert!(!warned(&small), "{small:?}");
+        let large = lines(1.0);
+        assert!(large.iter().any(|l| l.starts_with("material   SVK (F-bar")), "{large:?}");
+        let warning = large.iter().find(|l| warned(std::slice::from_ref(*l))).expect("no warning");
+        assert!(warning.contains("of 384 cells") && warning.contains("neo_hookean"), "{warning}");
     }
 
     /// A bar in a file, held at one end and pulled at the other by node numbers: the same solve

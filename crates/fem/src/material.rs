@@ -75,6 +75,10 @@ impl Formulation {
     }
 }
 
+/// Principal stretch 1/√3 at which Saint-Venant-Kirchhoff's uniaxial compressive stress peaks:
+/// compressed further, the stress falls.
+pub const SVK_LIMIT_STRETCH: f64 = 0.577_350_269_189_625_8;
+
 /// Poisson's ratio from which [`Formulation::Auto`] selects F-bar.
 pub const FBAR_POISSON: f64 = 0.45;
 

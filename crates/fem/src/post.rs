@@ -6,7 +6,7 @@ use nalgebra::Matrix3;
 
 use crate::element::ElementGeometry;
 use crate::fbar;
-use crate::material::{Formulation, Law, Material};
+use crate::material::{Formulation, Law, Material, SVK_LIMIT_STRETCH};
 use crate::FemError;
 
 /// The deformation gradient each quadrature point is evaluated at (F, or F̄
@@ -92,6 +92,29 @@ pub fn inverted_cells(geometry: &ElementGeometry, law: Law, u: &[f64]) -> Result
     Ok((smallest.iter().filter(|&&j| j <= 0.0).count(), smallest.iter().copied().fold(f64::INFINITY, f64::min)))
 }
 
+/// Each cell's least principal stretch over its quadrature points (from F̄ under F-bar).
+pub fn least_stretches(geometry: &ElementGeometry, law: Law, u: &[f64]) -> Result<Vec<f64>, FemError> {
+    let gradients = effective_gradients(geometry, law, u)?;
+    let stretch = |f: &Matrix3<f64>| (f.transpose() * f).symmetric_eigenvalues().min().max(0.0).sqrt();
+    Ok(gradients
+        .chunks(geometry.points_per_element)
+        .map(|fs| fs.iter().map(stretch).fold(f64::INFINITY, f64::min))
+        .collect())
+}
+
+/// The cells compressed past [`SVK_LIMIT_STRETCH`] by `u` (a quadrature point's least principal
+/// stretch below it, from F̄ under F-bar), where Saint-Venant-Kirchhoff's stress falls as the
+/// compression grows; and the most compressed cell with its stretch (`None` without cells).
+pub fn over_compressed_cells(
+    geometry: &ElementGeometry,
+    law: Law,
+    u: &[f64],
+) -> Result<(usize, Option<(usize, f64)>), FemError> {
+    let stretches = least_stretches(geometry, law, u)?;
+    let over = stretches.iter().filter(|&&s| s < SVK_LIMIT_STRETCH).count();
+    Ok((over, stretches.into_iter().enumerate().min_by(|a, b| a.1.total_cmp(&b.1))))
+}
+
 /// Largest nodal displacement magnitude (m).
 pub fn max_displacement(u: &[f64]) -> f64 {
     u.chunks(3).map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()).fold(0.0, f64::max)
@@ -119,5 +142,22 @@ mod tests {
         let svk = Material::new(Law::Svk, 3000.0, 0.3);
         assert!(strain_of(&svk).chunks(6).all(|e| (e[0] - 0.105).abs() < 1e-12));
         assert_eq!((strain_name(Law::Linear), strain_name(Law::Svk)), ("small_strain", "green_strain"));
+    }
+
+    /// A bar of two cubes along x, the first compressed to a stretch of 0.5 along x, the second to
+    /// 0.9: the first cube's six tetrahedra are past SVK's limit stretch 1/√3, the least stretch 0.5.
+    #[test]
+    fn cells_past_svk_s_limit_stretch_are_counted() {
+        let mesh = mesh::box_tet([0.0; 3], [1.0, 0.5, 0.5], [2, 1, 1]).unwrap();
+        let geometry = ElementGeometry::new(&mesh, Formulation::Standard).unwrap();
+        let ux = |x: f64| if x <= 0.5 { -0.5 * x } else { -0.25 - 0.1 * (x - 0.5) };
+        let u: Vec<f64> = mesh.nodes.iter().flat_map(|p| [ux(p[0]), 0.0, 0.0]).collect();
+        let (over, least) = over_compressed_cells(&geometry, Law::Svk, &u).unwrap();
+        let (cell, stretch) = least.unwrap();
+        assert_eq!(over, 6);
+        let first_cube = mesh.cells.cell(cell).iter().all(|&n| mesh.nodes[n][0] <= 0.5);
+        assert!((stretch - 0.5).abs() < 1e-12 && first_cube, "{cell}: {stretch}");
+        let stretches = least_stretches(&geometry, Law::Svk, &u).unwrap();
+        assert!(stretches.iter().all(|&s| (s - 0.5).abs() < 1e-12 || (s - 0.9).abs() < 1e-12), "{stretches:?}");
     }
 }

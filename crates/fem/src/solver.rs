@@ -19,7 +19,7 @@ use crate::assembly::{assemble, Pattern, Workspace};
 use crate::element::ElementGeometry;
 use crate::linsolve::{Ordering, Slot, SparseCholesky};
 use crate::material::{Law, Material};
-use crate::post::effective_gradients;
+use crate::post;
 use crate::problem::{Pieces, PointSpring, Problem};
 use crate::{written_zeros, FemError};
 
@@ -130,9 +130,10 @@ pub struct Solution {
     pub residuals: Vec<f64>,
     /// Time split.
     pub timings: Timings,
-    /// The load factor from which a load step found the next equilibrium far away, past a limit
+    /// The load factor from which a load step found the next equilibrium far away: past a limit
     /// point (the body snapped or gave way to another branch of the load path, where an
-    /// arc-length continuation stops instead); `None` otherwise.
+    /// arc-length continuation stops instead), or over a stretch of the path that soft; `None`
+    /// otherwise.
     pub snapped_from: Option<f64>,
 }
 
@@ -311,10 +312,9 @@ const MAX_INVERSION_HALVINGS: usize = 30;
 /// to 839 iterations each.
 const EARLY_PATIENT_CUTS: usize = 1;
 
-/// Iterations of a patient attempt at a whole load step (see
-/// [`Budget::Patient`]). The AMOS liver's quadratic mesh pushed by 1 N (the experiment crate's
-/// `tests/real_organs.rs`) stops at load factor 0.918 under force control; with such attempts it
-/// solves, in 905 iterations over 8 load steps.
+/// Iterations of a patient attempt at a load step (see [`Budget::Patient`]). The AMOS liver's
+/// quadratic mesh pushed by 1 N (the experiment crate's `tests/real_organs.rs`) stops at load
+/// factor 0.918 under force control; with such attempts it solves, in 853 iterations.
 const PATIENT_ITERATIONS: usize = 1000;
 
 /// How many iterations a Newton sequence may take.
@@ -372,9 +372,6 @@ impl LoadPath {
         self.softening() < crate::LIMIT_POINT_STIFFNESS && previous > 0.0 && latest < 0.5 * previous
     }
 }
-
-/// Principal stretch at which Saint-Venant-Kirchhoff's uniaxial compressive stress peaks.
-const SVK_LIMIT_STRETCH: f64 = 0.577_350_269_189_625_8;
 
 /// Euclidean norm.
 pub fn norm(v: &[f64]) -> f64 {
@@ -672,7 +669,7 @@ impl StaticSolver {
         // (the load factor it started from, its iterations).
         let (mut early_patient, mut patient_failed) = (true, None);
         while lambda < 1.0 {
-            let mut target = (lambda + step).min(1.0);
+            let target = (lambda + step).min(1.0);
             let tried = target - lambda;
             let mut trial = predict(&u, previous.as_ref(), lambda, target);
             // Start from the rest tangent unless this solve already refactorised
@@ -686,10 +683,12 @@ impl StaticSolver {
             let mut attempt = self.newton(&mut trial, target, from, options, Budget::Normal, &mut stats);
             // Near a limit point of the load path, a step cut once fails again. Past it the body
             // snaps to an equilibrium far away, which a descent may need hundreds of iterations to
-            // reach, and which ever shorter steps only creep towards: a patient attempt at a whole
-            // step from the last equilibrium, once early (see [`EARLY_PATIENT_CUTS`]), and as the
-            // last resort when the smallest step (a whole one halved `max_step_cuts` times; steps
-            // are such halvings, or halves of what is left of the load) failed.
+            // reach, and which ever shorter steps only creep towards: a patient attempt at the
+            // step that failed, once early (see [`EARLY_PATIENT_CUTS`]), and as the last resort
+            // when the smallest step (a whole one halved `max_step_cuts` times; steps are such
+            // halvings, or halves of what is left of the load) failed. Not a longer step: a
+            // descent over more of the load may leave the path where it is soft and end on
+            // another branch (`docs/method.md` § 2.5).
             let last_resort = tried <= 1.5 * smallest_step;
             let retry = patient_failed.is_none_or(|(at, _)| at != lambda);
             let patient = attempt.is_err()
@@ -697,7 +696,6 @@ impl StaticSolver {
                 && ((cuts >= EARLY_PATIENT_CUTS && early_patient) || (last_resort && retry));
             if patient {
                 early_patient = false;
-                target = (lambda + full_step).min(1.0);
                 trial.copy_from_slice(&u);
                 let before = stats.iterations;
                 attempt = self.newton(&mut trial, target, Start::Fresh, options, Budget::Patient, &mut stats);
@@ -834,20 +832,14 @@ impl StaticSolver {
         }
         // The smallest principal stretch of a state, and the element where it is.
         let most_compressed = |state: &[f64]| -> Option<(usize, f64)> {
-            let gradients = effective_gradients(&self.geometry, self.problem.material.law, state).ok()?;
-            let nq = self.geometry.points_per_element;
-            gradients
-                .iter()
-                .map(|f| (f.transpose() * f).symmetric_eigenvalues().min().max(0.0).sqrt())
-                .enumerate()
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-                .map(|(point, stretch)| (point / nq, stretch))
+            let stretches = post::least_stretches(&self.geometry, self.problem.material.law, state).ok()?;
+            stretches.into_iter().enumerate().min_by(|a, b| a.1.total_cmp(&b.1))
         };
         // Whether the iterate that failed went past the limit; told of the last equilibrium, which
         // does not depend on how far the failed iterate strayed.
         let Some((_, strayed)) = most_compressed(trial).or_else(|| most_compressed(u)) else { return error };
         match most_compressed(u) {
-            Some((element, stretch)) if stats.indefinite || strayed < SVK_LIMIT_STRETCH * 1.05 => {
+            Some((element, stretch)) if stats.indefinite || strayed < crate::material::SVK_LIMIT_STRETCH * 1.05 => {
                 FemError::LimitPoint { element, stretch, load_factor: lambda }
             }
             _ => error,
