@@ -685,10 +685,9 @@ impl StaticSolver {
             // snaps to an equilibrium far away, which a descent may need hundreds of iterations to
             // reach, and which ever shorter steps only creep towards: a patient attempt at the
             // step that failed, once early (see [`EARLY_PATIENT_CUTS`]), and as the last resort
-            // when the smallest step (a whole one halved `max_step_cuts` times; steps are such
-            // halvings, or halves of what is left of the load) failed. Not a longer step: a
-            // descent over more of the load may leave the path where it is soft and end on
-            // another branch (`docs/method.md` § 2.5).
+            // when the smallest step (a whole one halved `max_step_cuts` times) failed. Not a
+            // longer step: a descent over more of the load may leave the path where it is soft
+            // and end on another branch (`docs/method.md` § 2.5).
             let last_resort = tried <= 1.5 * smallest_step;
             let retry = patient_failed.is_none_or(|(at, _)| at != lambda);
             let patient = attempt.is_err()
