@@ -93,7 +93,7 @@ pub fn inverted_cells(geometry: &ElementGeometry, law: Law, u: &[f64]) -> Result
 }
 
 /// Each cell's least principal stretch over its quadrature points (from F̄ under F-bar).
-pub fn least_stretches(geometry: &ElementGeometry, law: Law, u: &[f64]) -> Result<Vec<f64>, FemError> {
+fn least_stretches(geometry: &ElementGeometry, law: Law, u: &[f64]) -> Result<Vec<f64>, FemError> {
     let gradients = effective_gradients(geometry, law, u)?;
     let stretch = |f: &Matrix3<f64>| (f.transpose() * f).symmetric_eigenvalues().min().max(0.0).sqrt();
     Ok(gradients

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 use crate::assembly::{assemble, Pattern, Workspace};
 use crate::element::ElementGeometry;
 use crate::linsolve::{Ordering, Slot, SparseCholesky};
-use crate::material::{Law, Material};
+use crate::material::{Law, Material, SVK_LIMIT_STRETCH};
 use crate::post;
 use crate::problem::{Pieces, PointSpring, Problem};
 use crate::{written_zeros, FemError};
@@ -831,14 +831,13 @@ impl StaticSolver {
         }
         // The smallest principal stretch of a state, and the element where it is.
         let most_compressed = |state: &[f64]| -> Option<(usize, f64)> {
-            let stretches = post::least_stretches(&self.geometry, self.problem.material.law, state).ok()?;
-            stretches.into_iter().enumerate().min_by(|a, b| a.1.total_cmp(&b.1))
+            post::over_compressed_cells(&self.geometry, self.problem.material.law, state).ok()?.1
         };
         // Whether the iterate that failed went past the limit; told of the last equilibrium, which
         // does not depend on how far the failed iterate strayed.
         let Some((_, strayed)) = most_compressed(trial).or_else(|| most_compressed(u)) else { return error };
         match most_compressed(u) {
-            Some((element, stretch)) if stats.indefinite || strayed < crate::material::SVK_LIMIT_STRETCH * 1.05 => {
+            Some((element, stretch)) if stats.indefinite || strayed < SVK_LIMIT_STRETCH * 1.05 => {
                 FemError::LimitPoint { element, stretch, load_factor: lambda }
             }
             _ => error,
