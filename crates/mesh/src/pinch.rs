@@ -4,7 +4,9 @@
 //! joins them, a lobe hangs on the rest by that edge and turns about it at no cost of energy, a
 //! mechanism no FEM solve survives. Around such an edge the fans leave empty wedges; the
 //! narrower one, filled with a tetrahedron on the edge and the two fans' facing corners, joins
-//! them through faces, as the organ's tissue joins them there.
+//! them through faces, as the organ's tissue joins them there. Where a neck is thinner still, two
+//! pieces meet at a vertex only: a tetrahedron on one piece's surface reaching the other's nearest
+//! corner turns the vertex into a pinched edge, which the next pass bridges.
 
 use std::collections::{HashMap, HashSet};
 
@@ -16,19 +18,26 @@ use crate::{cross, dot, norm, sub, tet_volume, Cells, Mesh, Point};
 /// 180° less this (its tetrahedron would be flat).
 pub const MIN_BRIDGE_DIHEDRAL_DEG: f64 = 5.0;
 
-/// Passes over the mesh: a bridge may leave a new pinched edge where its faces meet another fan.
-const PASSES: usize = 3;
+/// Passes over the mesh: a bridge may leave a new pinched edge where its faces meet another fan,
+/// and a vertex's bridge always leaves one.
+const PASSES: usize = 4;
 
-/// Bridges the pinched edges of a T4 mesh (other meshes are left as they are): returns the
-/// tetrahedra added, each on a pinched edge and the corners of the two fans that face each other
-/// across the narrower empty wedge about it. A wedge is bridged only when its tetrahedron is
-/// positive, has no dihedral angle under [`MIN_BRIDGE_DIHEDRAL_DEG`], holds no node and gives
-/// no face a third cell. Nodes are not moved.
+/// Bridges the pinched edges and vertices of a T4 mesh (other meshes are left as they are):
+/// returns the tetrahedra added. An edge's is on the edge and the corners of the two fans that
+/// face each other across the narrower empty wedge about it; a vertex's is on a boundary face of
+/// one piece there and a boundary corner of the other, the best shaped of those that overlap no
+/// cell (its edge on the other piece is bridged in the next pass). Vertices are bridged only where
+/// no edge is left to bridge. A tetrahedron is added only when it is positive, has no dihedral
+/// angle under [`MIN_BRIDGE_DIHEDRAL_DEG`], holds no node and gives no face a third cell. Nodes
+/// are not moved.
 pub fn bridge_pinched_edges(mesh: &mut Mesh) -> usize {
     let Cells::Tet4(tets) = &mut mesh.cells else { return 0 };
     let mut added = 0;
     for _ in 0..PASSES {
-        let bridges = bridges(&mesh.nodes, tets);
+        let mut bridges = bridges(&mesh.nodes, tets);
+        if bridges.is_empty() {
+            bridges = vertex_bridges(&mesh.nodes, tets);
+        }
         if bridges.is_empty() {
             break;
         }
@@ -49,14 +58,20 @@ fn faces_of(t: &[usize; 4]) -> [[usize; 3]; 4] {
     [[t[1], t[2], t[3]], [t[0], t[2], t[3]], [t[0], t[1], t[3]], [t[0], t[1], t[2]]].map(face_key)
 }
 
-/// One pass: the bridging tetrahedra of the pinched edges of `tets`, at most one about any node.
-fn bridges(nodes: &[Point], tets: &[[usize; 4]]) -> Vec<[usize; 4]> {
+/// How many of `tets` each face (its corners sorted) belongs to.
+fn cells_of_faces(tets: &[[usize; 4]]) -> HashMap<[usize; 3], u8> {
     let mut cells_of_face: HashMap<[usize; 3], u8> = HashMap::with_capacity(2 * tets.len());
     for t in tets {
         for f in faces_of(t) {
             *cells_of_face.entry(f).or_default() += 1;
         }
     }
+    cells_of_face
+}
+
+/// One pass: the bridging tetrahedra of the pinched edges of `tets`, at most one about any node.
+fn bridges(nodes: &[Point], tets: &[[usize; 4]]) -> Vec<[usize; 4]> {
+    let cells_of_face = cells_of_faces(tets);
     let mut boundary_faces_of_edge: HashMap<[usize; 2], u8> = HashMap::new();
     for (f, _) in cells_of_face.iter().filter(|(_, &n)| n == 1) {
         for e in [[f[0], f[1]], [f[1], f[2]], [f[0], f[2]]] {
@@ -150,6 +165,158 @@ fn narrowest_wedge(nodes: &[Point], [a, b]: [usize; 2], cells: &[[usize; 2]]) ->
     Some(tet)
 }
 
+/// One pass: a bridging tetrahedron for each pinched vertex of `tets` (whose cells fall in groups
+/// that share no face about it), at most one about any node.
+fn vertex_bridges(nodes: &[Point], tets: &[[usize; 4]]) -> Vec<[usize; 4]> {
+    let cells_of_face = cells_of_faces(tets);
+    let mut cells_at: Vec<Vec<usize>> = vec![Vec::new(); nodes.len()];
+    for (c, t) in tets.iter().enumerate() {
+        for &n in t {
+            cells_at[n].push(c);
+        }
+    }
+    let mut used = HashSet::new();
+    let mut out = Vec::new();
+    for (v, cells) in cells_at.iter().enumerate() {
+        if cells.len() < 2 || used.contains(&v) {
+            continue;
+        }
+        let groups = groups_about(v, cells, tets);
+        if groups.len() < 2 {
+            continue;
+        }
+        let best = groups
+            .iter()
+            .enumerate()
+            .flat_map(|(i, from)| {
+                groups.iter().enumerate().filter(move |&(j, _)| j != i).map(move |(_, to)| (from, to))
+            })
+            .flat_map(|(from, to)| vertex_candidates(nodes, tets, v, from, to, &cells_of_face))
+            .filter(|tet| !tet.iter().any(|n| used.contains(n)) && acceptable(nodes, tet, &cells_of_face))
+            .filter(|tet| !overlaps_a_cell(nodes, tets, tet))
+            .map(|tet| (least_dihedral(nodes, &tet), tet))
+            .max_by(|a, b| a.0.total_cmp(&b.0));
+        if let Some((_, tet)) = best {
+            used.extend(tet);
+            out.push(tet);
+        }
+    }
+    out
+}
+
+/// The cells about node `v` (indices into `tets`) in groups joined through faces that hold `v`.
+fn groups_about(v: usize, cells: &[usize], tets: &[[usize; 4]]) -> Vec<Vec<usize>> {
+    let mut group: Vec<usize> = (0..cells.len()).collect();
+    let others = |c: usize| -> HashSet<usize> { tets[c].iter().copied().filter(|&n| n != v).collect() };
+    for i in 0..cells.len() {
+        for j in i + 1..cells.len() {
+            if others(cells[i]).intersection(&others(cells[j])).count() == 2 {
+                let (gi, gj) = (group[i], group[j]);
+                group.iter_mut().filter(|g| **g == gj).for_each(|g| *g = gi);
+            }
+        }
+    }
+    let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
+    for (i, &g) in group.iter().enumerate() {
+        groups.entry(g).or_default().push(cells[i]);
+    }
+    let mut groups: Vec<Vec<usize>> = groups.into_values().collect();
+    groups.sort_unstable();
+    groups
+}
+
+/// The tetrahedra on a boundary face about `v` of a cell in `from`, on its outer side, and a
+/// corner of a boundary face about `v` of a cell in `to`, positively oriented.
+fn vertex_candidates(
+    nodes: &[Point],
+    tets: &[[usize; 4]],
+    v: usize,
+    from: &[usize],
+    to: &[usize],
+    cells_of_face: &HashMap<[usize; 3], u8>,
+) -> Vec<[usize; 4]> {
+    let boundary_faces = |cells: &[usize]| -> Vec<([usize; 3], usize)> {
+        cells
+            .iter()
+            .flat_map(|&c| {
+                let t = tets[c];
+                faces_of(&t)
+                    .into_iter()
+                    .filter(move |f| f.contains(&v) && cells_of_face.get(f) == Some(&1))
+                    .map(move |f| (f, t.into_iter().find(|n| !f.contains(n)).unwrap_or(v)))
+            })
+            .collect()
+    };
+    let mut corners: Vec<usize> = boundary_faces(to).iter().flat_map(|(f, _)| *f).filter(|&n| n != v).collect();
+    corners.sort_unstable();
+    corners.dedup();
+    let side = |f: &[usize; 3], n: usize| tet_volume(nodes[f[0]], nodes[f[1]], nodes[f[2]], nodes[n]);
+    let mut out = Vec::new();
+    for (face, inner) in boundary_faces(from) {
+        for &c in &corners {
+            // On the other side of the face from its cell.
+            if face.contains(&c) || side(&face, c) * side(&face, inner) >= 0.0 {
+                continue;
+            }
+            let mut tet = [face[0], face[1], face[2], c];
+            if side(&face, c) < 0.0 {
+                tet.swap(1, 2);
+            }
+            out.push(tet);
+        }
+    }
+    out
+}
+
+/// The smallest dihedral angle (radians) of the tetrahedron `tet`.
+fn least_dihedral(nodes: &[Point], tet: &[usize; 4]) -> f64 {
+    dihedral_angles(tet.map(|n| nodes[n])).into_iter().fold(f64::INFINITY, f64::min)
+}
+
+/// Whether the tetrahedron `tet` overlaps (shares interior with) a cell of `tets`: touching at
+/// corners, edges or faces is not overlapping. Separating axes: the two tetrahedra's face normals
+/// and the cross products of their edges.
+fn overlaps_a_cell(nodes: &[Point], tets: &[[usize; 4]], tet: &[usize; 4]) -> bool {
+    let p = tet.map(|n| nodes[n]);
+    let bounds = |q: &[Point; 4]| -> (Point, Point) {
+        let lo = std::array::from_fn(|d| q.iter().map(|x| x[d]).fold(f64::INFINITY, f64::min));
+        let hi = std::array::from_fn(|d| q.iter().map(|x| x[d]).fold(f64::NEG_INFINITY, f64::max));
+        (lo, hi)
+    };
+    let (lo, hi) = bounds(&p);
+    let scale = norm(sub(hi, lo));
+    tets.iter().any(|t| {
+        let q = t.map(|n| nodes[n]);
+        let (qlo, qhi) = bounds(&q);
+        (0..3).all(|d| qlo[d] < hi[d] && lo[d] < qhi[d]) && !separated(&p, &q, 1e-9 * scale)
+    })
+}
+
+/// Whether a plane separates the tetrahedra `p` and `q` (`tolerance`: a gap of at most this much
+/// length counts as touching).
+fn separated(p: &[Point; 4], q: &[Point; 4], tolerance: f64) -> bool {
+    const EDGES: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
+    const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]];
+    let normals = |x: &[Point; 4]| FACES.map(|[a, b, c]| cross(sub(x[b], x[a]), sub(x[c], x[a])));
+    let edges = |x: &[Point; 4]| EDGES.map(|(a, b)| sub(x[b], x[a]));
+    let (ep, eq) = (edges(p), edges(q));
+    // An axis from nearly parallel edges has no direction to trust.
+    let longest = ep.iter().chain(&eq).map(|&e| dot(e, e)).fold(0.0, f64::max);
+    let axes =
+        normals(p).into_iter().chain(normals(q)).chain(ep.iter().flat_map(|&a| eq.iter().map(move |&b| cross(a, b))));
+    axes.filter_map(|axis| {
+        let length = norm(axis);
+        (length > 1e-9 * longest).then(|| axis.map(|x| x / length))
+    })
+    .any(|axis| {
+        let span = |x: &[Point; 4]| {
+            x.iter().map(|&y| dot(y, axis)).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| (a.min(d), b.max(d)))
+        };
+        let ((p0, p1), (q0, q1)) = (span(p), span(q));
+        p1 <= q0 + tolerance || q1 <= p0 + tolerance
+    })
+}
+
 /// Whether a bridging `tet` is positive, has no dihedral angle under
 /// [`MIN_BRIDGE_DIHEDRAL_DEG`], holds no other node and gives no face a third cell.
 fn acceptable(nodes: &[Point], tet: &[usize; 4], cells_of_face: &HashMap<[usize; 3], u8>) -> bool {
@@ -224,6 +391,43 @@ mod tests {
         assert_eq!((pinched(&mesh), face_connected_pieces(&mesh).len()), (0, 1));
         // Nothing more to bridge.
         assert_eq!(bridge_pinched_edges(&mut mesh), 0);
+    }
+
+    /// Two tetrahedra meeting at a vertex only, in opposite octants: a tetrahedron on a face of
+    /// one reaching a corner of the other, then one on the edge that leaves, join them through
+    /// faces; every cell positive, no edge or vertex pinched.
+    #[test]
+    fn two_tetrahedra_meeting_at_a_vertex_are_bridged() {
+        let nodes = vec![
+            [0.0; 3],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [-1.0, 0.0, 0.0],
+            [0.0, -1.0, 0.0],
+            [0.0, 0.0, -1.0],
+        ];
+        let mut mesh = Mesh::new(nodes, Cells::Tet4(vec![[0, 1, 2, 3], [0, 5, 4, 6]])).unwrap();
+        assert!((0..2).all(|c| mesh.cell_volume(c) > 0.0));
+        assert_eq!(face_connected_pieces(&mesh).len(), 2);
+        assert_eq!(bridge_pinched_edges(&mut mesh), 2);
+        let cells = mesh.cells.len();
+        assert!((0..cells).all(|c| mesh.cell_volume(c) > 0.0));
+        assert_eq!((pinched(&mesh), face_connected_pieces(&mesh).len()), (0, 1));
+        let Cells::Tet4(tets) = &mesh.cells else { unreachable!() };
+        assert!(groups_about(0, &(0..cells).collect::<Vec<_>>(), tets).len() == 1, "the vertex is no longer pinched");
+    }
+
+    /// Tetrahedra that share a face, an edge or a corner do not overlap; one pushed into another
+    /// does.
+    #[test]
+    fn touching_tetrahedra_do_not_overlap_crossing_ones_do() {
+        let a = [[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let face = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 1.0]];
+        let corner = [[0.0; 3], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]];
+        let into = [[0.2, 0.2, 0.2], [1.0, 1.0, 1.0], [2.0, 0.0, 1.0], [0.0, 2.0, 1.0]];
+        assert!(separated(&a, &face, 1e-12) && separated(&a, &corner, 1e-12));
+        assert!(!separated(&a, &into, 1e-12));
     }
 
     /// A wedge narrower than [`MIN_BRIDGE_DIHEDRAL_DEG`] is left (its tetrahedron a sliver), as
