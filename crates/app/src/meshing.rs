@@ -141,11 +141,22 @@ impl OrganInput {
     /// choosing a labelmap's `label`, in `units` when given; a folder, a DICOM file or an image
     /// format not read is refused saying what to save instead.
     pub fn read(path: &Path, label: Option<&str>, units: UnitOrAuto) -> Result<OrganInput> {
+        OrganInput::read_with(path, label, units, &ExtractOptions::default())
+    }
+
+    /// [`OrganInput::read`], a labelmap's label extracted with `extract` (a structure's:
+    /// [`ExtractOptions::structure`], every piece kept).
+    pub fn read_with(
+        path: &Path,
+        label: Option<&str>,
+        units: UnitOrAuto,
+        extract: &ExtractOptions,
+    ) -> Result<OrganInput> {
         if let Some(why) = unreadable_segmentation(path) {
             bail!("{}: {why}", path.display());
         }
         if is_labelmap(path) {
-            let organ = read_labelmap_surface(path, label, units, &ExtractOptions::default())?;
+            let organ = read_labelmap_surface(path, label, units, extract)?;
             let mut notes: Vec<_> = organ.lines().into_iter().map(|l| ("labelmap", l)).collect();
             notes.extend(organ.warnings.iter().map(|w| ("warning", w.clone())));
             let (frame, unit) = (organ.scanner_frame(), Some(LengthUnit::Millimetre));

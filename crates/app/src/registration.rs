@@ -12,6 +12,7 @@ use anyhow::{Context, Result};
 use learn::Model;
 use mesh::io::points::LabelledPoints;
 use mesh::io::{Frame, FrameChange, GivenCoordinates};
+use mesh::isosurface::ExtractOptions;
 use mesh::labelmap::is_labelmap;
 use mesh::length::LengthUnit;
 use mesh::{Point, TriSurface};
@@ -530,7 +531,7 @@ pub fn read_structure(
     to: Option<Frame>,
 ) -> Result<(String, TriSurface)> {
     let mut input = match labelmap_label(source) {
-        Some((path, label)) => OrganInput::read(Path::new(path), Some(label), None)?,
+        Some((path, label)) => OrganInput::read_with(Path::new(path), Some(label), None, &ExtractOptions::structure())?,
         None if is_labelmap(source) => anyhow::bail!(
             "a labelmap's structure is one of its labels: give {}:LABEL (a number or a segment name)",
             source.display()

@@ -1,6 +1,7 @@
 //! A closed surface from a voxel mask: [`mask_surface`].
 //!
-//! 1. The mask keeps its largest piece and its cavities are filled ([`VoxelMask`]).
+//! 1. The mask keeps its largest piece (an organ's; a structure's every piece, see
+//!    [`ExtractOptions::every_piece`]) and its cavities are filled ([`VoxelMask`]).
 //! 2. The mask, as 0 and 1 at the voxels, is averaged over blocks of 3 voxels along each axis
 //!    (weights ¼, ½, ¼), which rounds the staircase of the voxels. The average is then kept on
 //!    the mask's side of ½ at every voxel (at least 0.55 inside, at most 0.45 outside): a bridge
@@ -35,19 +36,32 @@ pub struct ExtractOptions {
     /// A second piece of at least this fraction of the largest's voxels means the mask is not
     /// one organ: refused (default 0.2). Smaller pieces are dropped.
     pub max_second_piece: f64,
+    /// Keep every piece of at least a block of 3 × 3 × 3 voxels, each a closed surface of the
+    /// result, instead of the largest (default false): a structure's label may hold several
+    /// (tumours of one label, a vessel tree the segmentation cut), an organ's not.
+    pub every_piece: bool,
 }
 
 impl Default for ExtractOptions {
     fn default() -> Self {
-        ExtractOptions { smoothing_iterations: 20, target_triangles: 20_000, max_second_piece: 0.2 }
+        ExtractOptions { smoothing_iterations: 20, target_triangles: 20_000, max_second_piece: 0.2, every_piece: false }
+    }
+}
+
+impl ExtractOptions {
+    /// The options of a structure's surface: every piece kept ([`ExtractOptions::every_piece`]).
+    pub fn structure() -> ExtractOptions {
+        ExtractOptions { every_piece: true, ..ExtractOptions::default() }
     }
 }
 
 /// What [`mask_surface`] did.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ExtractReport {
-    /// Voxels of the largest piece, kept, with its cavities filled.
+    /// Voxels of the pieces kept, with their cavities filled.
     pub voxels: usize,
+    /// The pieces kept: one, the largest, unless [`ExtractOptions::every_piece`].
+    pub pieces: usize,
     /// Sizes (voxels) of the smaller pieces dropped, largest first.
     pub dropped_pieces: Vec<usize>,
     /// Voxels of the cavities filled.
@@ -85,12 +99,18 @@ impl ExtractReport {
     /// the cavities filled (none when neither).
     pub fn cleaning_lines(&self) -> Vec<String> {
         let mut lines = Vec::new();
+        let kept = match self.pieces {
+            1 => "kept the largest piece".to_string(),
+            n => format!("kept its {n} pieces"),
+        };
         if let Some(largest) = self.dropped_pieces.first() {
             lines.push(format!(
-                "kept the largest piece; dropped {} smaller, {:.1} % of its voxels (the largest of {largest} voxels)",
+                "{kept}; dropped {} smaller, {:.1} % of its voxels (the largest of {largest} voxels)",
                 self.dropped_pieces.len(),
                 100.0 * self.dropped_share()
             ));
+        } else if self.pieces > 1 {
+            lines.push(kept);
         }
         if self.filled_voxels > 0 {
             lines.push(format!("filled cavities of {} voxels", self.filled_voxels));
@@ -106,29 +126,35 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
         return Err(MeshError::Invalid(format!("mask of {} voxels for a grid of {:?}", mask.inside.len(), mask.dims)));
     }
     let mut mask = mask.clone();
-    let mut pieces = mask.keep_largest();
-    if pieces.is_empty() {
-        return Err(MeshError::Invalid("the mask is empty: no voxel is inside".into()));
-    }
-    if let [first, second, ..] = pieces[..] {
-        if second as f64 >= options.max_second_piece * first as f64 {
-            let shown: Vec<String> = pieces.iter().take(5).map(|n| n.to_string()).collect();
-            return Err(MeshError::Invalid(format!(
-                "several pieces of similar size ({} voxels; the second {:.0} % of the largest, {:.0} % or more): not \
-                 one organ; keep the organ only, or join its pieces in the segmentation",
-                shown.join(", "),
-                100.0 * second as f64 / first as f64,
-                100.0 * options.max_second_piece
-            )));
+    let (kept, dropped) = if options.every_piece {
+        mask.keep_pieces_of_at_least(MIN_VOXELS)
+    } else {
+        let mut sizes = mask.keep_largest();
+        if let [first, second, ..] = sizes[..] {
+            if second as f64 >= options.max_second_piece * first as f64 {
+                let shown: Vec<String> = sizes.iter().take(5).map(|n| n.to_string()).collect();
+                return Err(MeshError::Invalid(format!(
+                    "several pieces of similar size ({} voxels; the second {:.0} % of the largest, {:.0} % or more): \
+                     not one organ; keep the organ only, or join its pieces in the segmentation",
+                    shown.join(", "),
+                    100.0 * second as f64 / first as f64,
+                    100.0 * options.max_second_piece
+                )));
+            }
         }
-    }
-    let voxels = pieces.remove(0);
-    if voxels < MIN_VOXELS {
+        let largest = if sizes.is_empty() { Vec::new() } else { vec![sizes.remove(0)] };
+        (largest, sizes)
+    };
+    let Some(&largest) = kept.first().or(dropped.first()) else {
+        return Err(MeshError::Invalid("the mask is empty: no voxel is inside".into()));
+    };
+    if largest < MIN_VOXELS {
         return Err(MeshError::Invalid(format!(
-            "the largest piece, {voxels} voxel(s), is too small to give a surface (fewer than {MIN_VOXELS}): \
+            "the largest piece, {largest} voxel(s), is too small to give a surface (fewer than {MIN_VOXELS}): \
              not an organ (the wrong label?)"
         )));
     }
+    let voxels: usize = kept.iter().sum();
     let filled_voxels = mask.fill_cavities();
     let mask = mask.cropped(2).ok_or_else(|| MeshError::Invalid("the mask is empty".into()))?;
     if mask.inside.len() > 400_000_000 {
@@ -145,7 +171,8 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
     })?;
     let report = ExtractReport {
         voxels: voxels + filled_voxels,
-        dropped_pieces: pieces,
+        pieces: kept.len(),
+        dropped_pieces: dropped,
         filled_voxels,
         extracted_triangles,
         triangles: surface.triangles.len(),
@@ -388,6 +415,33 @@ mod tests {
         let speck = mask([5; 3], [1.0; 3], [0.0; 3], |p| p == [2.0; 3]);
         let e = mask_surface(&speck, &ExtractOptions::default()).unwrap_err().to_string();
         assert!(e.contains("1 voxel(s), is too small to give a surface"), "{e}");
+    }
+
+    /// Two tumours of one label, a speck beside them: an organ's extraction refuses the label (two
+    /// pieces of similar size), a structure's keeps both balls, each a closed surface, and drops
+    /// the speck.
+    #[test]
+    fn a_structure_keeps_every_piece_an_organ_only_its_largest() {
+        let ball = |p: Point, c: Point, r: f64| norm(sub(p, c)) <= r;
+        let m = mask([40, 20, 20], [1.0; 3], [-10.0; 3], |p| {
+            ball(p, [-3.0, 0.0, 0.0], 5.0) || ball(p, [13.0, 0.0, 0.0], 4.0) || p == [5.0, 8.0, 8.0]
+        });
+        let e = mask_surface(&m, &ExtractOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("several pieces of similar size"), "{e}");
+        let (s, report) = mask_surface(&m, &ExtractOptions::structure()).unwrap();
+        assert_eq!((report.pieces, report.dropped_pieces.as_slice()), (2, &[1][..]));
+        assert_eq!(
+            report.cleaning_lines()[0],
+            "kept its 2 pieces; dropped 1 smaller, 0.1 % of its voxels (the largest of 1 voxels)"
+        );
+        let exact = 4.0 / 3.0 * std::f64::consts::PI * (125.0 + 64.0);
+        let volume = check_closed_manifold(&s).unwrap().volume;
+        // Balls of radius 4 and 5 voxels lose about a tenth to the smoothing.
+        assert!((volume / exact - 1.0).abs() < 0.12, "{volume} vs {exact}");
+        // Two closed surfaces, one about each centre.
+        let near = |c: Point, r: f64| s.vertices.iter().filter(|&&v| norm(sub(v, c)) < r + 1.5).count();
+        assert_eq!(near([-3.0, 0.0, 0.0], 5.0) + near([13.0, 0.0, 0.0], 4.0), s.vertices.len());
+        assert!(near([-3.0, 0.0, 0.0], 5.0) > 0 && near([13.0, 0.0, 0.0], 4.0) > 0);
     }
 
     /// Two balls joined by a bridge one voxel thick, and a ball with a vessel one voxel thick,

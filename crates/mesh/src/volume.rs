@@ -154,6 +154,19 @@ impl VoxelMask {
         (piece, sizes)
     }
 
+    /// Keeps the pieces of inside voxels of at least `min` voxels; returns the sizes of those kept
+    /// and of those dropped, each largest first.
+    pub fn keep_pieces_of_at_least(&mut self, min: usize) -> (Vec<usize>, Vec<usize>) {
+        let (piece, sizes) = self.pieces(true);
+        for (b, &p) in self.inside.iter_mut().zip(&piece) {
+            *b = p != usize::MAX && sizes[p] >= min;
+        }
+        let (mut kept, mut dropped): (Vec<usize>, Vec<usize>) = sizes.into_iter().partition(|&n| n >= min);
+        kept.sort_unstable_by(|a, b| b.cmp(a));
+        dropped.sort_unstable_by(|a, b| b.cmp(a));
+        (kept, dropped)
+    }
+
     /// Keeps the largest piece of inside voxels; returns the sizes (voxels) of all pieces,
     /// largest first (empty when no voxel is inside).
     pub fn keep_largest(&mut self) -> Vec<usize> {
