@@ -166,6 +166,8 @@ pub struct RunWriter {
     moved: Option<(RigidTransform, Mesh)>,
     steps: Vec<(f64, String)>,
     rows: Vec<FrameSummary>,
+    /// The run's warnings beside the registration's own ([`RunWriter::warn`]).
+    warnings: Vec<String>,
 }
 
 impl RunWriter {
@@ -192,6 +194,7 @@ impl RunWriter {
             moved: None,
             steps: Vec::new(),
             rows: Vec::new(),
+            warnings: Vec::new(),
         })
     }
 
@@ -222,6 +225,12 @@ impl RunWriter {
         self.steps.push((i as f64, name));
         self.rows.push(FrameSummary::new(cloud, outcome));
         Ok(self.rows.last().expect("just pushed"))
+    }
+
+    /// Keeps a warning of the run (the truth's, the clouds' files') for summary.json, beside the
+    /// registration's own.
+    pub fn warn(&mut self, warning: impl Into<String>) {
+        self.warnings.push(warning.into());
     }
 
     /// Writes organ.pvd (for a sequence), targets.csv (of the last frame of `registration`, with
@@ -293,7 +302,10 @@ impl RunWriter {
             &format!("{}: {}", registration.method(), row.cloud),
             frame_notes(frame_line(outcomes.len() - 1, row), last.target_std.as_deref(), &last.registration.warnings),
         )?;
-        let summary = Summary::new(registration.method(), outcomes)?;
+        let mut summary = Summary::new(registration.method(), outcomes)?;
+        // The set-up's warnings (targets, structures, the truth, the clouds' files) first.
+        let frames = std::mem::take(&mut summary.warnings);
+        summary.warnings = registration.warnings().iter().chain(&self.warnings).cloned().chain(frames).collect();
         let run = RunSummary { frame, summary: &summary, per_frame: &self.rows, file_notes: &notes };
         write_atomic_bytes(&self.dir.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
         Ok(Finished { summary, for_slicer, notes })
@@ -329,6 +341,7 @@ pub fn register_files(
     truth_warning.iter().for_each(|w| say(&format!("warning    {w}")));
     let sequence = frames.len() > 1;
     let mut writer = RunWriter::new(out, sequence, spec.given_units, (organ_frame, spec.given_frame))?;
+    truth_warning.into_iter().for_each(|w| writer.warn(w));
     let mut last_cloud = Vec::new();
     let clouds = frames.iter().map(|f| input.read_cloud(f).inspect(|c| last_cloud.clone_from(c)));
     let mut said_pose = None;
@@ -344,6 +357,7 @@ pub fn register_files(
         Ok(())
     })?;
     input.warnings.iter().for_each(|w| say(&format!("warning    {w}")));
+    input.warnings.iter().for_each(|w| writer.warn(w.clone()));
     let last_truth = truths.as_ref().and_then(|t| t.last()).map(Vec::as_slice);
     let finished = writer.finish(&registration, input.frame, &outcomes, (&last_cloud, last_truth))?;
     run_lines(&outcomes, &finished.summary, spec.given_units).iter().for_each(|l| say(l));

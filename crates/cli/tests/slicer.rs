@@ -121,7 +121,8 @@ fn slicer_files_and_millimetres_register_as_metres_do() {
 /// A tumour given as 3D Slicer exports a segment (an STL in LPS and mm) comes back moved with
 /// the organ: about the registered target it was drawn around, and where the displacement field
 /// the run writes takes it back to rest. The same ball given as a label of a NIfTI labelmap
-/// comes back about the same target.
+/// comes back about the same target; a label of two balls comes back in two pieces; a structure
+/// partly outside the organ is warned about in summary.json.
 #[test]
 fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
     let dir = tempfile::tempdir().unwrap();
@@ -151,20 +152,48 @@ fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
         for j in 0..20 {
             for i in 0..20 {
                 let p = [i, j, k].map(|n| n as f64 - 9.5);
-                labels.push(if p.iter().map(|x| x * x).sum::<f64>() <= 36.0 { 5 } else { 0 });
+                let within = |c: f64, r: f64| p.iter().map(|x| (x - c).powi(2)).sum::<f64>() <= r * r;
+                labels.push(match () {
+                    _ if within(0.0, 6.0) => 5,
+                    _ if within(-6.0, 2.5) || within(6.0, 2.5) => 7,
+                    _ => 0,
+                });
             }
         }
     }
     let map = mesh::labelmap::Labelmap::single(dims, labels, affine, Frame::Ras);
     mesh::labelmap::write_nifti(d.join("seg.nii.gz"), &map).unwrap();
     let labelled = format!("{}:5", d.join("seg.nii.gz").display());
+    let two_pieces = format!("{}:7", d.join("seg.nii.gz").display());
+    ball.transform([70.0, 0.0, 0.0], 1.0);
+    let far = d.join("far.stl");
+    mesh::io::write_surface_in_frame(&far, &ball, Frame::Lps).unwrap();
+    let far = far.to_str().unwrap();
     let (registered, _) = register(
         &example("cloud.csv"),
         &example("targets.csv"),
         &example("truth.csv"),
         &d.join("run"),
-        &["--units", "mm", "--structure", tumour, "--structure", &labelled],
+        &[
+            "--units",
+            "mm",
+            "--structure",
+            tumour,
+            "--structure",
+            &labelled,
+            "--structure",
+            &two_pieces,
+            "--structure",
+            far,
+        ],
     );
+    let said = "`far`: 39 of its 162 vertices lie outside the organ";
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("run/summary.json")).unwrap()).unwrap();
+    let warnings = summary["warnings"].as_array().unwrap();
+    assert!(warnings.iter().any(|w| w.as_str().unwrap().starts_with(said)), "{warnings:?}");
+    let pieces = mesh::io::read_surface(d.join("run/label_7_deformed.vtk")).unwrap();
+    assert_eq!(surface_pieces(&pieces), 2);
     let moved = mesh::io::read_surface(d.join("run/tumour_deformed.vtk")).unwrap();
     let rest = mesh::io::read_surface(tumour).unwrap();
     assert_eq!(moved.triangles, rest.triangles);
@@ -190,6 +219,24 @@ fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
         .sum::<f64>()
         .sqrt();
     assert!(off < 1.0, "the labelmap's ball is {off} mm from its registered target");
+}
+
+/// The pieces of a surface: its triangles joined through shared corners.
+fn surface_pieces(surface: &mesh::TriSurface) -> usize {
+    let mut piece: Vec<usize> = (0..surface.vertices.len()).collect();
+    fn root(piece: &mut [usize], mut a: usize) -> usize {
+        while piece[a] != a {
+            a = piece[a];
+        }
+        a
+    }
+    for t in &surface.triangles {
+        for k in 1..3 {
+            let (a, b) = (root(&mut piece, t[0]), root(&mut piece, t[k]));
+            piece[a] = b;
+        }
+    }
+    (0..piece.len()).filter(|&v| root(&mut piece, v) == v).count()
 }
 
 /// The displacement field of an augsim displacement.nrrd (LPS, mm), interpolated trilinearly as

@@ -408,7 +408,8 @@ pub struct Summary {
     /// Whether every frame's result is plausible ([`crate::plausibility`]).
     pub plausible: bool,
     /// The frames' warnings, each once, in order of first appearance (prefixed by the frame when
-    /// there are several).
+    /// there are several); a run's summary.json puts its set-up's (targets, structures, the truth)
+    /// before them.
     pub warnings: Vec<String>,
     /// The mean predicted standard deviation σ of the targets' error (mm), for a method that
     /// predicts one.
