@@ -748,6 +748,15 @@ impl RegistrationSpec {
                 if e.message().starts_with("unknown field") { " (prepared by a newer augsim? update it)" } else { "" };
             anyhow::anyhow!("reading {}{newer}: {e}", path.display())
         })?;
+        if let (None, Some(done)) = (method, crate::prepare::steps_before_validation(dir)?) {
+            anyhow::bail!(
+                "{} is not prepared to the end: its validation, which chooses the method {PATIENT_FILE} names, has not \
+                 run (steps done: {}); run the same `augsim prepare` again to resume it, or name the method (the \
+                 FEM's is ready)",
+                dir.display(),
+                if done.is_empty() { "none".to_string() } else { done.join(", ") }
+            );
+        }
         let method = match method.unwrap_or(p.method) {
             PatientMethod::Fem => MethodSpec::fem(dir.join(p.fem)),
             PatientMethod::Learned => MethodSpec::learned(dir.join(p.model), dir.join(p.scenario)),
@@ -787,6 +796,35 @@ fn region_targets(m: &mesh::Mesh) -> Vec<Point> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A set-up whose preparation stopped before its validation chose a method is refused for its
+    /// own method (registration.toml names one all the same), not for a method named.
+    #[test]
+    fn a_set_up_not_validated_is_refused_its_own_method() {
+        use crate::prepare::{PrepareOptions, PrepareState, StepRecord, STATE_FILE};
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let set_up = "method = \"learned\"\nmodel = \"model\"\nscenario = \"dataset.toml\"\nfem = \"static.toml\"\n\
+                      targets = \"targets.csv\"\nunits = \"mm\"\n";
+        std::fs::write(d.join(PATIENT_FILE), set_up).unwrap();
+        let steps = |names: &[&str]| {
+            let steps = names.iter().map(|n| StepRecord { name: n.to_string(), seconds: 1.0, lines: Vec::new() });
+            let options = PrepareOptions::new("s.stl".into(), [0.0; 3], "a.csv".into(), "t.csv".into());
+            let state =
+                PrepareState { format: "augsim-prepare".into(), options, steps: steps.collect(), input_frame: None };
+            std::fs::write(d.join(STATE_FILE), serde_json::to_string(&state).unwrap()).unwrap();
+        };
+        steps(&["organ", "scenarios", "dataset", "model", "evaluation"]);
+        let e = RegistrationSpec::patient(d, None, None, false).unwrap_err().to_string();
+        assert!(
+            e.contains("is not prepared to the end")
+                && e.contains("(steps done: organ, scenarios, dataset, model, evaluation)"),
+            "{e}"
+        );
+        assert!(RegistrationSpec::patient(d, Some(PatientMethod::Fem), None, false).is_ok());
+        steps(&["organ", "scenarios", "dataset", "model", "evaluation", "validation"]);
+        assert!(RegistrationSpec::patient(d, None, None, false).is_ok());
+    }
 
     fn fem() -> RegistrationChoice {
         RegistrationChoice { fem: Some("beam".into()), ..RegistrationChoice::default() }

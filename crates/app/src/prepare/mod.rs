@@ -279,6 +279,19 @@ impl PrepareState {
 /// The file that records a preparation.
 pub const STATE_FILE: &str = "prepare.json";
 
+/// The steps a preparation in `dir` has done, when its record is there and its validation, which
+/// chooses the method `registration.toml` names, is not among them (`None` otherwise).
+pub fn steps_before_validation(dir: &Path) -> Result<Option<Vec<String>>> {
+    let path = dir.join(STATE_FILE);
+    if !path.exists() {
+        return Ok(None);
+    }
+    let state: PrepareState = serde_json::from_str(&std::fs::read_to_string(&path)?)
+        .with_context(|| format!("reading {}", path.display()))?;
+    let done: Vec<String> = state.steps.into_iter().map(|s| s.name).collect();
+    Ok((!done.iter().any(|s| s == "validation")).then_some(done))
+}
+
 /// The organ's surface in a prepared directory: in millimetres, in the set-up's frame.
 pub const SURFACE_FILE: &str = "surface.stl";
 
