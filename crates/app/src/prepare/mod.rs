@@ -507,6 +507,36 @@ fn far_camera(organ: &mesh::Mesh, camera: Point, unit: LengthUnit) -> Option<Str
     })
 }
 
+/// A warning when the camera at `camera` sees most of the `attached` nodes where the camera of the
+/// other frame (x and y negated) would see under half as many: an organ is held at its back, away
+/// from the laparoscope, so a camera given in the other frame than the surface's is the likely
+/// cause (a ligament in view is not warned about unless the other frame's camera explains it);
+/// `shown`: what frame the positions are in, when not the files'.
+fn camera_sees_the_hold(
+    organ: &Mesh,
+    camera: Point,
+    (visible, attached): (&[usize], &[usize]),
+    shown: &str,
+) -> Result<Option<String>> {
+    let seen = |nodes: &[usize]| attached.iter().filter(|n| nodes.contains(n)).count();
+    let here = seen(visible);
+    if 2 * here <= attached.len() {
+        return Ok(None);
+    }
+    let mirrored = [-camera[0], -camera[1], camera[2]];
+    let there = seen(&Camera { view: None, position: Some(mirrored), max_angle_deg: 90.0 }.seen_nodes(organ)?);
+    Ok((2 * there < here).then(|| {
+        format!(
+            "warning: the camera at {} sees {here} of the {} held nodes, where the organ is held away from it; given \
+             in the other frame (RAS for LPS: x and y negated, at {}), it would see {there}: is the camera in the \
+             surface's frame?{shown}",
+            point_in_mm(camera),
+            attached.len(),
+            point_in_mm(mirrored)
+        )
+    }))
+}
+
 /// Step 1: the surface repaired and meshed, the regions selected, the targets located.
 /// Returns what it did and the frame its inputs were given in.
 fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Option<Frame>)> {
@@ -600,6 +630,7 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
         100.0 * held_share
     ));
     lines.extend(landmark_warnings.into_iter().map(|w| format!("warning: {w}")));
+    lines.extend(camera_sees_the_hold(&organ, camera, (&visible, &attached), &shown)?);
     let (_, warnings) = located.locate_targets(&targets, &labelled_targets.labels).map_err(|e| {
         let context = format!("the targets of {}{shown}", options.targets.display());
         match thin_part_left_out(&surface, &located, &targets) {
@@ -1020,6 +1051,26 @@ mod tests {
         let why = thin_part_left_out(&surface, &organ, &[[0.0; 3], [0.08, 0.0, 0.0]]).unwrap();
         assert!(why.contains("thinner than the tetrahedra"), "{why}");
         assert_eq!(thin_part_left_out(&surface, &organ, &[[0.0; 3], [0.0, 0.1, 0.0]]), None);
+    }
+
+    /// A camera that sees the held side of the organ, where the other frame's would not, is
+    /// warned about; one that looks at the other side is not.
+    #[test]
+    fn a_camera_seeing_where_the_organ_is_held_is_told_of_the_other_frame() {
+        let organ = mesh::box_tet([-0.1, -0.1, -0.05], [0.1, 0.1, 0.05], [4, 4, 2]).unwrap();
+        let attached: Vec<usize> = (0..organ.num_nodes()).filter(|&n| organ.nodes[n][1] < -0.099).collect();
+        let warning = |camera: Point| {
+            let visible =
+                Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&organ).unwrap();
+            camera_sees_the_hold(&organ, camera, (&visible, &attached), "").unwrap()
+        };
+        // Facing the held side (the seen nodes as `Camera::seen_nodes` finds them: 13 of 15).
+        let line = warning([0.0, -0.3, 0.0]).expect("a camera facing the held side");
+        assert!(
+            line.contains(&format!("sees 13 of the {} held nodes", attached.len())) && line.contains("it would see 0"),
+            "{line}"
+        );
+        assert_eq!(warning([0.0, 0.3, 0.0]), None);
     }
 
     #[test]
