@@ -285,7 +285,7 @@ fn pinched_edges(mesh: &Mesh) -> usize {
 /// `frame` in its header when known (a `.vtu` names it in its field data, a `.vtk` in its title,
 /// a `.msh` nowhere; the directory created by the writer). Returns what was written, in words.
 pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result<String> {
-    let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let extension = mesh::io::extension(path);
     let context = || format!("writing {}", path.display());
     if extension == "stl" || extension == "obj" {
         write_surface_in_mm(path, &mesh::boundary_surface(mesh).compacted(), frame).with_context(context)?;

@@ -173,7 +173,7 @@ fn at_least_one(text: &str) -> Result<usize, String> {
 fn extension_of(allowed: &'static [&'static str]) -> impl Fn(&str) -> Result<PathBuf, String> + Clone {
     move |text: &str| {
         let path = PathBuf::from(text);
-        let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+        let extension = mesh::io::extension(&path);
         match allowed.contains(&extension.as_str()) {
             true => Ok(path),
             false => Err(format!("expected a file ending in .{}", allowed.join(", ."))),

@@ -449,15 +449,13 @@ fn nifti_unit(xyzt_units: u8) -> Result<Option<LengthUnit>, String> {
     }
 }
 
-/// The unit a NRRD `space units` entry names ("mm", "m", "cm", "um", "µm", "micron"; an empty
+/// The unit a NRRD `space units` entry names (a [`LengthUnit`] symbol, "µm" or "micron"; an empty
 /// one is mm).
 fn nrrd_unit(unit: &str) -> Result<LengthUnit, String> {
     match unit.trim_matches('"').trim() {
-        "mm" | "" => Ok(LengthUnit::Millimetre),
-        "m" => Ok(LengthUnit::Metre),
-        "cm" => Ok(LengthUnit::Centimetre),
-        "um" | "µm" | "micron" => Ok(LengthUnit::Micrometre),
-        other => Err(format!("space unit {other:?} is not supported (mm, m, cm, um)")),
+        "" => Ok(LengthUnit::Millimetre),
+        "micron" => Ok(LengthUnit::Micrometre),
+        other => other.parse().map_err(|_| format!("space unit {other:?} is not supported (mm, m, cm, um)")),
     }
 }
 
@@ -1328,6 +1326,21 @@ fn touched_borders(mask: &VoxelMask) -> Vec<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// NRRD's `space units` take every symbol of a length unit (both micro signs), "micron", and
+    /// an empty entry as mm; other units, or several for the three axes, are refused.
+    #[test]
+    fn nrrd_space_units_are_read_as_length_units() {
+        let unit = |text: &str| nrrd_space_unit(text);
+        assert_eq!(unit("\"mm\" \"mm\" \"mm\""), Ok(LengthUnit::Millimetre));
+        assert_eq!(unit("\"\" \"\" \"\""), Ok(LengthUnit::Millimetre));
+        for micro in ["um", "\u{b5}m", "\u{3bc}m", "micron"] {
+            assert_eq!(unit(&[micro; 3].join(" ")), Ok(LengthUnit::Micrometre), "{micro}");
+        }
+        assert_eq!(unit("cm cm cm"), Ok(LengthUnit::Centimetre));
+        assert!(unit("in in in").unwrap_err().contains("space unit \"in\" is not supported"));
+        assert!(unit("mm m mm").unwrap_err().contains("one unit for the three axes"));
+    }
     use crate::{norm, sub, Point};
 
     /// A labelmap of two balls (labels 5 and 2) at world positions given in `frame`, with

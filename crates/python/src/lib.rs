@@ -402,7 +402,7 @@ impl Registration {
         })?;
         let organ_frame = state.frame();
         let given = spec.coordinates(&state);
-        let warnings = state.warnings().iter().map(|w| format!("targets: {w}")).collect::<Vec<_>>();
+        let warnings = state.warnings().to_vec();
         for w in &warnings {
             PyErr::warn(
                 py,

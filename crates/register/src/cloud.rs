@@ -9,17 +9,13 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
+use mesh::io::extension;
 use mesh::Point;
 
 use crate::{RegisterError, Result};
 
 /// The file extensions (lower case) that [`read_point_cloud`] understands.
 pub const CLOUD_EXTENSIONS: [&str; 8] = ["csv", "npy", "ply", "obj", "stl", "vtk", "vtp", "vtu"];
-
-/// The lower-case extension of `path`, if any.
-fn extension(path: &Path) -> Option<String> {
-    path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase)
-}
 
 /// The cloud formats as a user reads them: ".csv, .npy, … or .vtu".
 fn cloud_formats() -> String {
@@ -30,20 +26,21 @@ fn cloud_formats() -> String {
 /// Whether `path` is a cloud of positions alone, naming no unit: any of the
 /// [`CLOUD_EXTENSIONS`] but CSV (whose header may name a unit and carry labels).
 pub fn holds_positions_only(path: &Path) -> bool {
-    extension(path).is_some_and(|e| e != "csv" && CLOUD_EXTENSIONS.contains(&e.as_str()))
+    let e = extension(path);
+    e != "csv" && CLOUD_EXTENSIONS.contains(&e.as_str())
 }
 
 fn is_cloud_file(path: &Path) -> bool {
-    extension(path).is_some_and(|e| CLOUD_EXTENSIONS.contains(&e.as_str()))
+    CLOUD_EXTENSIONS.contains(&extension(path).as_str())
 }
 
 /// Reads a point cloud, choosing the format from the extension (any of [`CLOUD_EXTENSIONS`], any
 /// case).
 pub fn read_point_cloud(path: &Path) -> Result<Vec<Point>> {
-    let points = match extension(path).as_deref() {
-        Some("csv") => mesh::io::points::read_points_csv(path)?,
-        Some("npy") => read_npy_cloud(path)?,
-        Some(model) if CLOUD_EXTENSIONS.contains(&model) => mesh::io::read_vertices(path)?,
+    let points = match extension(path).as_str() {
+        "csv" => mesh::io::points::read_points_csv(path)?,
+        "npy" => read_npy_cloud(path)?,
+        model if CLOUD_EXTENSIONS.contains(&model) => mesh::io::read_vertices(path)?,
         _ => {
             return Err(RegisterError::format(
                 path,

@@ -126,11 +126,11 @@ impl PredictInput {
     /// Reads a point cloud (`.csv`, see [`PointCloud::parse_csv`], or `.npy` of shape `[N, 6]`) or a grid tensor
     /// (any other `.npy`). A cloud without points, or a file of another extension, is an error.
     pub fn read(path: &Path) -> Result<PredictInput> {
-        let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
-        let cloud = if extension.as_deref() == Some("csv") {
+        let extension = mesh::io::extension(path);
+        let cloud = if extension == "csv" {
             let text = std::fs::read_to_string(path).map_err(|e| LearnError::io(path, e))?;
             PointCloud::parse_csv(&text, path)?
-        } else if extension.as_deref() != Some("npy") {
+        } else if extension != "npy" {
             return Err(LearnError::Input {
                 path: path.to_path_buf(),
                 line: None,

@@ -397,7 +397,7 @@ pub fn write_surface(path: impl AsRef<Path>, surface: &TriSurface) -> Result<(),
 }
 
 /// Lower-case extension of a path ("" when none).
-fn extension(path: &Path) -> String {
+pub fn extension(path: &Path) -> String {
     path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase()
 }
 
