@@ -543,6 +543,27 @@ mod tests {
         assert_eq!(r.structures().len(), 1);
     }
 
+    /// A structure wholly outside the organ, beside it, is asked whether it was segmented apart
+    /// from it; one partly outside is not.
+    #[test]
+    fn a_structure_beside_the_organ_is_asked_if_segmented_apart() {
+        let warning = |centre: Point| {
+            let mut r = cube_with(vec![[0.01, 0.02, 0.03]]).unwrap();
+            let mut ball = mesh::generate::icosphere(0.01, 1);
+            ball.transform(centre.map(|x| -x), 1.0);
+            r.add_structure("tumour", ball).unwrap();
+            r.warnings().join("; ")
+        };
+        let beside = warning([-0.012, 0.025, 0.025]);
+        assert!(
+            beside.starts_with("`tumour`: 42 of its 42 vertices lie outside") && beside.contains("segmented apart"),
+            "{beside}"
+        );
+        let across = warning([0.0, 0.025, 0.025]);
+        assert!(across.contains("lie outside") && !across.contains("segmented apart"), "{across}");
+        assert_eq!(warning([0.025; 3]), "");
+    }
+
     #[test]
     fn millimetres_given_as_metres_are_refused_naming_the_unit() {
         let e = cube_with(vec![[10.0, 20.0, 30.0], [40.0, 10.0, 20.0]]).err().expect("targets outside");

@@ -45,10 +45,19 @@ impl Structure {
             )));
         }
         let outside: Vec<f64> = located.iter().map(|l| l.1).filter(|&d| d > 0.0).collect();
+        // Wholly outside yet near: most likely segmented apart from the organ (a tumour on its
+        // capsule, taken out of the organ's label), which the organ then does not hold.
+        let apart = match outside.len() == located.len() {
+            true => {
+                "; segmented apart from the organ? the organ's mesh holds it only when the organ's segment does \
+                     (a labelmap's organ and structure together: `--label ORGAN+STRUCTURE`)"
+            }
+            false => "",
+        };
         let warnings = match outside.iter().copied().reduce(f64::max) {
             Some(farthest) => vec![format!(
                 "`{name}`: {} of its {} vertices lie outside the organ (up to {:.1} mm): they move as the organ's \
-                 nearest surface point",
+                 nearest surface point{apart}",
                 outside.len(),
                 located.len(),
                 mm(farthest)
