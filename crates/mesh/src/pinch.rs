@@ -34,9 +34,10 @@ pub fn bridge_pinched_edges(mesh: &mut Mesh) -> usize {
     let Cells::Tet4(tets) = &mut mesh.cells else { return 0 };
     let mut added = 0;
     for _ in 0..PASSES {
-        let mut bridges = bridges(&mesh.nodes, tets);
+        let cells_of_face = cells_of_faces(tets);
+        let mut bridges = bridges(&mesh.nodes, tets, &cells_of_face);
         if bridges.is_empty() {
-            bridges = vertex_bridges(&mesh.nodes, tets);
+            bridges = vertex_bridges(&mesh.nodes, tets, &cells_of_face);
         }
         if bridges.is_empty() {
             break;
@@ -69,9 +70,9 @@ fn cells_of_faces(tets: &[[usize; 4]]) -> HashMap<[usize; 3], u8> {
     cells_of_face
 }
 
-/// One pass: the bridging tetrahedra of the pinched edges of `tets`, at most one about any node.
-fn bridges(nodes: &[Point], tets: &[[usize; 4]]) -> Vec<[usize; 4]> {
-    let cells_of_face = cells_of_faces(tets);
+/// One pass: the bridging tetrahedra of the pinched edges of `tets` (`cells_of_face`: their
+/// [`cells_of_faces`]), at most one about any node.
+fn bridges(nodes: &[Point], tets: &[[usize; 4]], cells_of_face: &HashMap<[usize; 3], u8>) -> Vec<[usize; 4]> {
     let mut boundary_faces_of_edge: HashMap<[usize; 2], u8> = HashMap::new();
     for (f, _) in cells_of_face.iter().filter(|(_, &n)| n == 1) {
         for e in [[f[0], f[1]], [f[1], f[2]], [f[0], f[2]]] {
@@ -99,7 +100,7 @@ fn bridges(nodes: &[Point], tets: &[[usize; 4]]) -> Vec<[usize; 4]> {
     let mut out = Vec::new();
     for edge in pinched {
         let Some(tet) = narrowest_wedge(nodes, edge, &around[&edge]) else { continue };
-        if tet.iter().any(|n| used.contains(n)) || !acceptable(nodes, &tet, &cells_of_face) {
+        if tet.iter().any(|n| used.contains(n)) || !acceptable(nodes, &tet, cells_of_face) {
             continue;
         }
         used.extend(tet);
@@ -166,19 +167,24 @@ fn narrowest_wedge(nodes: &[Point], [a, b]: [usize; 2], cells: &[[usize; 2]]) ->
 }
 
 /// One pass: a bridging tetrahedron for each pinched vertex of `tets` (whose cells fall in groups
-/// that share no face about it), at most one about any node.
-fn vertex_bridges(nodes: &[Point], tets: &[[usize; 4]]) -> Vec<[usize; 4]> {
-    let cells_of_face = cells_of_faces(tets);
+/// that share no face about it; `cells_of_face`: their [`cells_of_faces`]), at most one about any
+/// node.
+fn vertex_bridges(nodes: &[Point], tets: &[[usize; 4]], cells_of_face: &HashMap<[usize; 3], u8>) -> Vec<[usize; 4]> {
     let mut cells_at: Vec<Vec<usize>> = vec![Vec::new(); nodes.len()];
     for (c, t) in tets.iter().enumerate() {
         for &n in t {
             cells_at[n].push(c);
         }
     }
+    // Only a boundary node can be pinched: an inner one's cells fill a ball about it.
+    let mut on_boundary = vec![false; nodes.len()];
+    for (f, _) in cells_of_face.iter().filter(|(_, &n)| n == 1) {
+        f.iter().for_each(|&n| on_boundary[n] = true);
+    }
     let mut used = HashSet::new();
     let mut out = Vec::new();
     for (v, cells) in cells_at.iter().enumerate() {
-        if cells.len() < 2 || used.contains(&v) {
+        if !on_boundary[v] || cells.len() < 2 || used.contains(&v) {
             continue;
         }
         let groups = groups_about(v, cells, tets);
@@ -191,8 +197,8 @@ fn vertex_bridges(nodes: &[Point], tets: &[[usize; 4]]) -> Vec<[usize; 4]> {
             .flat_map(|(i, from)| {
                 groups.iter().enumerate().filter(move |&(j, _)| j != i).map(move |(_, to)| (from, to))
             })
-            .flat_map(|(from, to)| vertex_candidates(nodes, tets, v, from, to, &cells_of_face))
-            .filter(|tet| !tet.iter().any(|n| used.contains(n)) && acceptable(nodes, tet, &cells_of_face))
+            .flat_map(|(from, to)| vertex_candidates(nodes, tets, v, from, to, cells_of_face))
+            .filter(|tet| !tet.iter().any(|n| used.contains(n)) && acceptable(nodes, tet, cells_of_face))
             .filter(|tet| !overlaps_a_cell(nodes, tets, tet))
             .map(|tet| (least_dihedral(nodes, &tet), tet))
             .max_by(|a, b| a.0.total_cmp(&b.0));
@@ -207,10 +213,11 @@ fn vertex_bridges(nodes: &[Point], tets: &[[usize; 4]]) -> Vec<[usize; 4]> {
 /// The cells about node `v` (indices into `tets`) in groups joined through faces that hold `v`.
 fn groups_about(v: usize, cells: &[usize], tets: &[[usize; 4]]) -> Vec<Vec<usize>> {
     let mut group: Vec<usize> = (0..cells.len()).collect();
-    let others = |c: usize| -> HashSet<usize> { tets[c].iter().copied().filter(|&n| n != v).collect() };
+    // Each cell's corners other than `v`: two cells share a face about `v` when they share two.
+    let others: Vec<Vec<usize>> = cells.iter().map(|&c| tets[c].into_iter().filter(|&n| n != v).collect()).collect();
     for i in 0..cells.len() {
         for j in i + 1..cells.len() {
-            if others(cells[i]).intersection(&others(cells[j])).count() == 2 {
+            if others[i].iter().filter(|n| others[j].contains(n)).count() == 2 {
                 let (gi, gj) = (group[i], group[j]);
                 group.iter_mut().filter(|g| **g == gj).for_each(|g| *g = gi);
             }
