@@ -293,8 +293,13 @@ pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result
         return Ok(format!("its boundary surface, in mm{named}"));
     }
     let fields: Vec<Field> = match &mesh.cell_fraction {
-        Some(f) if extension != "msh" => vec![Field::cell(mesh::io::FRACTION_FIELD, 1, f.clone())],
-        _ => Vec::new(),
+        Some(_) if extension == "msh" => bail!(
+            "{}: an immersed grid's cell volume fractions have no place in Gmsh's format (read back, every cut \
+             cell would solve as full); write .vtu or .vtk",
+            path.display()
+        ),
+        Some(f) => vec![Field::cell(mesh::io::FRACTION_FIELD, 1, f.clone())],
+        None => Vec::new(),
     };
     mesh::io::write_mesh_in_frame(path, mesh, &fields, frame).with_context(context)?;
     let named = match (frame, extension.as_str()) {
@@ -437,6 +442,10 @@ mod tests {
         // Read back, the grid keeps its fractions (the FEM weighs each cell by its own).
         assert_eq!(read.cell_fraction, meshed.mesh.cell_fraction);
         assert_eq!(immersed_fill(&read), (organ, cut));
+        // Gmsh's format has no place for them: refused, not written without.
+        let msh = dir.path().join("grid/organ.msh");
+        let e = write_mesh_file(&msh, &meshed.mesh, meshed.frame).unwrap_err().to_string();
+        assert!(e.contains("volume fractions have no place in Gmsh's format") && !msh.exists(), "{e}");
     }
 
     #[test]
