@@ -131,6 +131,14 @@ impl Solved {
                     .into(),
             );
         }
+        let half_held = mid_edge_nodes_left_free(p);
+        if half_held > 0 {
+            lines.push(format!(
+                "warning    {half_held} mid-edge node(s) lie between held corners and are free: a selection of \
+                 corners only (a linear mesh's group on this quadratic one) holds its faces by half; select their \
+                 mid-edge nodes too"
+            ));
+        }
         lines.extend(scenario::source::millimetre_hint(&p.mesh).map(|h| format!("warning    {h}")));
         let (inverted, smallest) = post::inverted_cells(geo, p.material.law, &sol.u)?;
         if inverted > 0 {
@@ -158,6 +166,27 @@ impl Solved {
     }
 }
 
+/// The mid-edge nodes of a T10 mesh that are not held where both corners of their edge are
+/// ([[fixed]] or [[prescribed]]).
+fn mid_edge_nodes_left_free(p: &fem::Problem) -> usize {
+    let mesh::Cells::Tet10(cells) = &p.mesh.cells else { return 0 };
+    let held = |n: usize| p.dirichlet.contains_key(&n);
+    let mut free: Vec<usize> = cells
+        .iter()
+        .flat_map(|c| {
+            mesh::quadratic::TET10_EDGES
+                .iter()
+                .enumerate()
+                .filter(|(_, [a, b])| held(c[*a]) && held(c[*b]))
+                .map(|(k, _)| c[4 + k])
+                .filter(|&m| !held(m))
+        })
+        .collect();
+    free.sort_unstable();
+    free.dedup();
+    free.len()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -177,6 +206,33 @@ mod tests {
         assert!(lines.iter().any(|l| l.starts_with("warning    every load acts on held nodes")), "{lines:?}");
         let beam = solve_scenario(Path::new("beam")).unwrap().lines().unwrap();
         assert!(!beam.iter().any(|l| l.starts_with("warning")), "{beam:?}");
+    }
+
+    /// A quadratic mesh held at the corners of a face only (a linear mesh's group) is warned
+    /// about; held at the whole face, not.
+    #[test]
+    fn a_quadratic_face_held_at_its_corners_only_is_warned_about() {
+        let dir = tempfile::tempdir().unwrap();
+        let linear = mesh::box_tet([0.0; 3], [0.1, 0.02, 0.02], [4, 1, 1]).unwrap();
+        let corners: Vec<usize> = (0..linear.num_nodes()).filter(|&n| linear.nodes[n][0] < 1e-9).collect();
+        let quadratic = linear.quadratic().unwrap();
+        let face: Vec<usize> = (0..quadratic.num_nodes()).filter(|&n| quadratic.nodes[n][0] < 1e-9).collect();
+        mesh::io::write_mesh(dir.path().join("beam.vtu"), &quadratic, &[]).unwrap();
+        let lines = |held: &[usize]| {
+            let path = dir.path().join("beam.toml");
+            let text = format!(
+                "kind = \"static\"\nname = \"t10\"\n[mesh.file]\npath = \"beam.vtu\"\n[material]\nlaw = \"linear\"\n\
+                 young = 5000.0\npoisson = 0.3\n[[fixed]]\nselect = {{ list = {held:?} }}\n[[force]]\n\
+                 select = {{ box = {{ min = [0.099, -1.0, -1.0], max = [1.0, 1.0, 1.0] }} }}\ntotal = [0.0, 0.0, -0.01]\n"
+            );
+            std::fs::write(&path, text).unwrap();
+            solve_scenario(&path).unwrap().lines().unwrap()
+        };
+        let half = lines(&corners);
+        let warning = half.iter().find(|l| l.contains("mid-edge node(s) lie between held corners")).expect("warned");
+        // The face x = 0 of one cube: 4 corners, 5 edges between them (4 sides and a diagonal).
+        assert!(warning.starts_with("warning    5 mid-edge node(s)"), "{warning}");
+        assert!(!lines(&face).iter().any(|l| l.contains("mid-edge")), "held at the whole face");
     }
 
     #[test]
