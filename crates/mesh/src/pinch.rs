@@ -285,16 +285,11 @@ fn least_dihedral(nodes: &[Point], tet: &[usize; 4]) -> f64 {
 /// and the cross products of their edges.
 fn overlaps_a_cell(nodes: &[Point], tets: &[[usize; 4]], tet: &[usize; 4]) -> bool {
     let p = tet.map(|n| nodes[n]);
-    let bounds = |q: &[Point; 4]| -> (Point, Point) {
-        let lo = std::array::from_fn(|d| q.iter().map(|x| x[d]).fold(f64::INFINITY, f64::min));
-        let hi = std::array::from_fn(|d| q.iter().map(|x| x[d]).fold(f64::NEG_INFINITY, f64::max));
-        (lo, hi)
-    };
-    let (lo, hi) = bounds(&p);
+    let (lo, hi) = crate::bounds(&p);
     let scale = norm(sub(hi, lo));
     tets.iter().any(|t| {
         let q = t.map(|n| nodes[n]);
-        let (qlo, qhi) = bounds(&q);
+        let (qlo, qhi) = crate::bounds(&q);
         (0..3).all(|d| qlo[d] < hi[d] && lo[d] < qhi[d]) && !separated(&p, &q, 1e-9 * scale)
     })
 }
