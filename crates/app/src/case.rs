@@ -10,18 +10,17 @@ use fem::{Material, Problem, SolverOptions, StaticSolver};
 use mesh::phantom::PhantomSpec;
 use mesh::{Mesh, NodeSelection, Point};
 
-use learn::data::generate::Input;
 use learn::Model;
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use register::{
-    shape, Deformer, FemDeformer, FrameOutcome, HybridDeformer, NetworkDeformer, Organ, RegisterError,
-    RegistrationOptions, RestAndStream, RigidTransform, ShapeDeformer, ShapeOptions, Summary, TwoWay,
+    FemDeformer, FrameOutcome, NetworkDeformer, Organ, RegisterError, RegistrationOptions, RigidTransform, Summary,
 };
 use scenario::registration::{CameraSpec, MethodKind, Misalignment};
 use scenario::{CaseScenario, DatasetScenario, Fixed, MeshSource, StaticScenario};
 
-use crate::registration::{LearnedWay, MethodSpec, ModelSource, RegistrationSpec, ScenarioSource, TargetsSpec};
+use crate::models::{fem_model, hybrid_options, network_model, Network};
+use crate::registration::{LearnedWay, MethodSpec, RegistrationSpec, ScenarioSource, TargetsSpec};
 use crate::simulate::{simulate_cloud, CameraModel};
 
 /// Tetrahedra of the ground-truth phantom of the built-in case.
@@ -147,16 +146,6 @@ pub fn model_mesh() -> Result<Mesh> {
     Ok(mesh::phantom::liver_phantom(MODEL_TETS)?)
 }
 
-/// The FEM registration model of a static scenario (paths relative to `dir`): its problem's mesh
-/// (quadratic when the material asks for it) as the organ, pulled by data springs of the default
-/// stiffness, with the scenario's solver.
-pub fn fem_model(scenario: &StaticScenario, dir: &Path) -> Result<(Organ, FemDeformer)> {
-    let problem = scenario.build_problem(dir)?;
-    let organ = organ_of(&scenario.mesh, problem.mesh.clone())?;
-    let stiffness = FemDeformer::default_stiffness(&problem);
-    Ok((organ, FemDeformer::new(problem, stiffness, scenario.solver.clone())?))
-}
-
 /// The co-rotational registration model (E = 5 kPa, ν = 0.48: another law than the truth's) on
 /// [`model_mesh`], fixed between the lobes: the built-in static scenario `liver_corotational`.
 pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
@@ -221,73 +210,6 @@ pub fn camera_model(camera: &CameraSpec) -> CameraModel {
     CameraModel { view: camera.view, points: camera.points, noise: camera.noise, outliers: camera.outliers }
 }
 
-/// The organ of a mesh built from `source`: the mesh, with the phantom's smooth surface when
-/// it is the phantom's immersed grid (the camera sees the organ, not the grid's staircase).
-pub fn organ_of(source: &MeshSource, mesh: Mesh) -> Result<Organ> {
-    let surface = match source {
-        MeshSource::PhantomGrid { .. } => Some(mesh::boundary_surface(&mesh::phantom::liver_phantom(5000)?)),
-        _ => None,
-    };
-    Ok(Organ::new(mesh, surface)?)
-}
-
-/// A trained network and the dataset scenario it was trained on.
-pub struct Network<'a> {
-    /// The network.
-    pub model: &'a Model,
-    /// Its dataset scenario: the organ's mesh and the network's input nodes.
-    pub scenario: &'a DatasetScenario,
-    /// The scenario's directory (mesh paths are relative to it).
-    pub dir: &'a Path,
-}
-
-impl Network<'_> {
-    /// The model and its scenario, in memory, as a method's spec takes them.
-    pub fn sources(&self) -> (ModelSource, ScenarioSource<DatasetScenario>) {
-        let scenario = ScenarioSource::Given { scenario: Box::new(self.scenario.clone()), dir: self.dir.to_path_buf() };
-        (ModelSource::Given(self.model.clone()), scenario)
-    }
-}
-
-/// The U-Net registration model of a network: its scenario's organ, the network fed with the
-/// displacement of the scenario's input nodes.
-pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
-    let (scenario, model) = (network.scenario, network.model);
-    // A U-Net is fed its scenario's encoding of the input nodes' motion: another scenario of the
-    // same grid (other nodes, another element) feeds it inputs it never saw. (A reduced-order
-    // model's shape fit works in its basis, whatever scenario gave it.)
-    let trained_on = model.provenance().and_then(|p| p.own.scenario());
-    if let Some(trained_on) = trained_on.filter(|&s| s != scenario.name && model.method() == learn::Method::UNet) {
-        bail!(
-            "the U-Net was trained on data of scenario {trained_on}, not {}: give the model's own dataset scenario \
-             (--scenario {trained_on})",
-            scenario.name
-        );
-    }
-    // The mesh its samples were solved and encoded on: quadratic when the scenario's material
-    // asks for T10 (the mid-edge nodes are network inputs too).
-    let generator = scenario.generator(network.dir)?;
-    if model.grid() != generator.grid() {
-        bail!(
-            "the model was trained on a {} grid, scenario {} encodes its organ on {}: give the model's own dataset \
-             scenario",
-            model.grid(),
-            scenario.name,
-            generator.grid()
-        );
-    }
-    let mesh = generator.mesh().clone();
-    let (inputs, normal) = match &scenario.dataset.input {
-        Input::Displacement { nodes, normal, .. } => (nodes.select(&mesh)?, *normal),
-        Input::Force => {
-            bail!("scenario {}: registration needs a network of displacements, not of forces", scenario.name)
-        }
-    };
-    let organ = organ_of(&scenario.mesh, mesh)?;
-    let deformer = NetworkDeformer::new(model, &organ, &inputs, normal)?;
-    Ok((organ, deformer))
-}
-
 /// The target errors (m) of a network model ([`network_model`]: its organ and deformer) fed the
 /// truth's own motion of its input nodes at the case's peak frame, without a cloud: the
 /// network's error alone, apart from the surface fit's (the input nodes take the motion of the
@@ -300,79 +222,6 @@ pub fn network_from_truth(case: &SyntheticCase, organ: &Organ, network: &Network
     let moved: Vec<Point> =
         register::organ::displaced(&case.targets, &stencils, &u).into_iter().map(|p| case.pose.apply(p)).collect();
     Ok(register::target_errors(&moved, &peak.truth))
-}
-
-/// The registration of a learned model on its scenario's organ, its loop's settings from
-/// `options` (the case's settings for its learned models). A model with a basis (the reduced-order
-/// model) fits its shape space on a frame from rest ([`ShapeDeformer`], with its own loop budgets)
-/// and runs the match-and-membrane loop on a stream's warm-started frames ([`RestAndStream`]): on
-/// the design case streamed (21 frames, 2 N) the shape fit alone left 5.52 mm at the peak and 3.55
-/// mm over the frames, with the membrane loop on the stream 4.12 and 2.23 mm. The U-Net fits a
-/// membrane to the matches and predicts from it ([`NetworkDeformer`]); given a `basis` (a
-/// reduced-order model), it predicts from the shape fit of that model's shape space on a frame from
-/// rest ([`HybridDeformer`], [`NETWORK_AFTER_FIT`]).
-pub fn learned_registration(
-    network: &Network,
-    basis: Option<&Model>,
-    options: &RegistrationOptions,
-) -> Result<LearnedRegistration> {
-    let (organ, membrane) = network_model(network)?;
-    let (deformer, options): (Box<dyn Deformer + Send>, _) = match (network.model, basis) {
-        (Model::Reduced(_), None) => {
-            let fit = shape_fit(network.model, &organ)?;
-            (Box::new(RestAndStream::new(Box::new(fit), Box::new(membrane))), shape::loop_options(options))
-        }
-        (Model::Reduced(_), Some(_)) => {
-            bail!("a reduced-order model fits its own shape space: another model's basis is for a U-Net")
-        }
-        // One way from rest, both ways on a stream's frames: on the design cases streamed (21 frames
-        // each), matching both ways brought the U-Net's TRE at the peak from 2.41 to 1.98 mm on
-        // average (better on all 7 cases); from rest it changed little (2.48 → 2.42 mm, better on 3,
-        // worse on 2).
-        (Model::UNet(_), None) => {
-            (Box::new(membrane), RegistrationOptions { two_way: TwoWay::Streamed, ..options.clone() })
-        }
-        (Model::UNet(_), Some(basis)) => {
-            let fit = shape_fit(basis, &organ)?;
-            let hybrid = HybridDeformer::new(Box::new(fit), Box::new(membrane), shape::SHAPE_ITERATIONS)?;
-            let options = shape::loop_options(options);
-            let iterations = shape::SHAPE_ITERATIONS + NETWORK_AFTER_FIT;
-            (Box::new(hybrid), RegistrationOptions { iterations, ..options })
-        }
-    };
-    Ok(LearnedRegistration { organ, deformer, options })
-}
-
-/// The shape fit of `model`'s shape space (a model with a basis) on `organ`, whose mesh must lie in
-/// the model's grid, in the default settings.
-pub fn shape_fit(model: &Model, organ: &Organ) -> Result<ShapeDeformer> {
-    let shape = ShapeOptions::default();
-    let space = register::model_shape_space(model, organ, shape.max_modes)?;
-    Ok(ShapeDeformer::new(space, organ, shape)?)
-}
-
-/// The U-Net's iterations after the shape fit of a reduced-order model's basis, on a frame from
-/// rest ([`learned_registration`]). On the design cases (the built-in case pressed at 1–2.5 N,
-/// lifted, dragged and pulled), one and two gave 1.95 mm (two at 1.5× the time); the shape fit
-/// alone 2.34 mm, the U-Net alone 2.48 mm, the reduced-order model's own membrane loop after the
-/// fit 2.60 mm (one iteration) and 2.76 mm (two).
-pub const NETWORK_AFTER_FIT: usize = 1;
-
-/// The FEM's iterations after a learned model's in a hybrid registration from rest, by default
-/// ([`MethodSpec::Hybrid`]). On the design cases (the built-in case pressed at 1–2.5 N, lifted,
-/// dragged and pulled; from rest), 1, 2, 3 and 4 co-rotational iterations after the reduced-order
-/// model's shape fit gave a mean TRE of 2.40, 2.38, 2.40 and 2.41 mm, the shape fit alone on the
-/// FEM's mesh 2.73 mm (on the model's own quadratic mesh 2.34 mm), the FEM alone 2.94 mm.
-pub const POLISH_ITERATIONS: usize = 2;
-
-/// A learned model's registration method ([`learned_registration`]).
-pub struct LearnedRegistration {
-    /// Its scenario's organ.
-    pub organ: Organ,
-    /// How it deforms.
-    pub deformer: Box<dyn Deformer + Send>,
-    /// The loop's settings.
-    pub options: RegistrationOptions,
 }
 
 /// [`network_model`] of `model` trained on [`ar_scenario`] (e.g. the shipped `models/liver_ar`).
@@ -393,7 +242,7 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
     let reduced = networks.iter().find(|n| matches!(n.model, Model::Reduced(_)));
     for spec in &scenario.models.method {
         let name = spec.name.clone();
-        let options = with_budgets(&scenario.registration, spec.iterations, spec.warm_iterations, None);
+        let options = method_options(scenario, spec);
         let fem = |material| ScenarioSource::Given {
             scenario: Box::new(fem_scenario(scenario, &name, material)),
             dir: PathBuf::new(),
@@ -439,29 +288,20 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
     Ok(out)
 }
 
-/// The registration settings of `scenario`'s network method (its iteration budgets).
-pub fn network_options(scenario: &CaseScenario) -> Result<RegistrationOptions> {
-    let spec = scenario
-        .models
-        .method
-        .iter()
-        .find(|m| m.kind == MethodKind::Network)
-        .context("the registration case has no network method")?;
-    Ok(with_budgets(&scenario.registration, spec.iterations, spec.warm_iterations, None))
-}
-
-/// `options` with a method's own iteration budgets and points, where it has them.
-fn with_budgets(
-    options: &RegistrationOptions,
-    iterations: Option<usize>,
-    warm: Option<usize>,
-    max_points: Option<usize>,
-) -> RegistrationOptions {
+/// The loop's settings of `scenario`'s method `spec`: the case's, with its kind's default
+/// budgets (a network's [`NetworkDeformer::loop_options`], a hybrid's [`hybrid_options`]) unless
+/// the method gives its own.
+pub fn method_options(scenario: &CaseScenario, spec: &scenario::registration::MethodSpec) -> RegistrationOptions {
+    let base = &scenario.registration;
+    let kind = match (spec.kind, spec.network_iterations) {
+        (MethodKind::Network, _) => NetworkDeformer::loop_options(base),
+        (MethodKind::Hybrid, Some(network_iterations)) => hybrid_options(base, network_iterations),
+        _ => base.clone(),
+    };
     RegistrationOptions {
-        iterations: iterations.unwrap_or(options.iterations),
-        warm_iterations: warm.unwrap_or(options.warm_iterations),
-        max_points: max_points.or(options.max_points),
-        ..options.clone()
+        iterations: spec.iterations.unwrap_or(kind.iterations),
+        warm_iterations: spec.warm_iterations.unwrap_or(kind.warm_iterations),
+        ..kind
     }
 }
 
@@ -568,5 +408,48 @@ mod tests {
         let (ours, shipped) =
             (ours.build_problem(Path::new("")).unwrap(), shipped.build_problem(Path::new("")).unwrap());
         assert_eq!((ours.mesh, ours.material, ours.dirichlet), (shipped.mesh, shipped.material, shipped.dirichlet));
+    }
+
+    /// A method's budgets are its kind's unless it gives its own: a FEM the case's loop's, a
+    /// network its real-time budget (as `register --model` gives it), a hybrid its learned
+    /// iterations and the FEM's polish; a budget given beside the case holds for every method.
+    #[test]
+    fn a_method_s_budgets_are_its_kind_s_unless_it_gives_its_own() {
+        let mut case = CaseScenario::builtin();
+        let hybrid = scenario::registration::MethodSpec {
+            name: "hybrid".into(),
+            kind: MethodKind::Hybrid,
+            material: Some(Material::new(Law::Corotational, 5000.0, 0.48)),
+            iterations: None,
+            warm_iterations: None,
+            network_iterations: Some(7),
+        };
+        case.models.method.push(hybrid);
+        let budgets = |case: &CaseScenario| -> Vec<(MethodKind, usize, usize)> {
+            case.models
+                .method
+                .iter()
+                .map(|m| (m.kind, method_options(case, m)))
+                .map(|(k, o)| (k, o.iterations, o.warm_iterations))
+                .collect()
+        };
+        let (base, network) = (&case.registration, NetworkDeformer::loop_options(&case.registration));
+        let expected = [
+            (MethodKind::Fem, base.iterations, base.warm_iterations),
+            (MethodKind::Fem, base.iterations, base.warm_iterations),
+            (MethodKind::Network, NetworkDeformer::ITERATIONS, NetworkDeformer::WARM_ITERATIONS),
+            (MethodKind::Hybrid, 7 + crate::models::POLISH_ITERATIONS, base.warm_iterations),
+        ];
+        assert_eq!(budgets(&case), expected);
+        assert_eq!((network.iterations, network.warm_iterations), (4, 2));
+        let default_learned = NetworkDeformer::loop_options(&RegistrationOptions::default());
+        let builtin_network = case.models.method.iter().find(|m| m.kind == MethodKind::Network).unwrap();
+        assert_eq!(method_options(&CaseScenario::builtin(), builtin_network), default_learned);
+        case.models.method[2].iterations = Some(9);
+        case.models.method[2].warm_iterations = Some(3);
+        assert_eq!(budgets(&case)[2], (MethodKind::Network, 9, 3));
+        let overrides = scenario::registration::CaseOverrides { iterations: Some(12), ..Default::default() };
+        let given = CaseScenario::with_overrides(None, &overrides).unwrap();
+        assert!(budgets(&given).iter().all(|&(_, iterations, _)| iterations == 12), "{:?}", budgets(&given));
     }
 }

@@ -8,7 +8,8 @@ use learn::{Model, Progress};
 use scenario::registration::MethodKind;
 use scenario::{CaseScenario, DatasetScenario};
 
-use crate::case::{ar_scenario, case_methods, compare, shipped_models, synthetic_case, Compared, Network};
+use crate::case::{ar_scenario, case_methods, compare, shipped_models, synthetic_case, Compared};
+use crate::models::Network;
 use crate::output::{write_case, write_comparison};
 use crate::printout::{case_files_lines, case_lines, comparison_table, rigid_lines};
 

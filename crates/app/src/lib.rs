@@ -3,7 +3,8 @@
 //!
 //! - [`registration`]: a registration set up from the user's choices (a patient's set-up, a FEM
 //!   scenario, or a learned model and its dataset scenario; targets in their unit; settings), the
-//!   one way `register`, `serve` and Python build it; [`output`]: what a registration writes (organ.vtu, targets.csv,
+//!   one way `register`, `serve` and Python build it; [`models`]: the models it deforms the organ
+//!   with (a FEM, a U-Net, a reduced-order model) and their default loop settings; [`output`]: what a registration writes (organ.vtu, targets.csv,
 //!   summary.json) and what a comparison of methods writes; [`printout`]: the lines printed about
 //!   a registration run and a comparison.
 //! - [`points`]: points read at a command's boundary (CSV, 3D Slicer's `.fcsv` and `.mrk.json`,
@@ -34,6 +35,7 @@ pub mod curve;
 pub mod evaluation;
 pub mod generation;
 pub mod meshing;
+pub mod models;
 pub mod output;
 pub mod picture;
 pub mod points;

@@ -16,14 +16,13 @@ use mesh::isosurface::ExtractOptions;
 use mesh::labelmap::is_labelmap;
 use mesh::length::LengthUnit;
 use mesh::{Point, TriSurface};
-use register::{shape, Deformer, HybridDeformer, Organ, Registration, RegistrationOptions};
-use scenario::{CaseScenario, DatasetScenario, MeshSource, StaticScenario};
+use register::{shape, Deformer, HybridDeformer, NetworkDeformer, Organ, Registration, RegistrationOptions};
+use scenario::{DatasetScenario, MeshSource, StaticScenario};
 
-use crate::case::{
-    fem_model, learned_registration, network_model, network_options, shape_fit, LearnedRegistration, Network,
-    POLISH_ITERATIONS,
-};
 use crate::meshing::OrganInput;
+use crate::models::{
+    fem_model, hybrid_options, learned_registration, network_model, shape_fit, LearnedRegistration, Network,
+};
 
 /// What deforms the organ.
 #[derive(Clone, Debug)]
@@ -178,10 +177,7 @@ impl MethodSpec {
                 let (scenario, dir) = scenario.read(DatasetScenario::load)?;
                 let network = Network { model: &model, scenario: &scenario, dir: &dir };
                 let frame = scenario.mesh.frame(&dir)?;
-                let options = match options {
-                    Some(options) => options.clone(),
-                    None => network_options(&CaseScenario::builtin())?,
-                };
+                let options = options.cloned().unwrap_or_else(|| NetworkDeformer::loop_options(&Default::default()));
                 match way {
                     LearnedWay::Membrane => {
                         let (organ, deformer) = network_model(&network)?;
@@ -241,10 +237,8 @@ impl MethodSpec {
                     fem.material.law.display_name()
                 );
                 // By default the FEM polishes the learned estimate for a few iterations.
-                let options = options.cloned().unwrap_or(RegistrationOptions {
-                    iterations: network_iterations + POLISH_ITERATIONS,
-                    ..RegistrationOptions::default()
-                });
+                let options =
+                    options.cloned().unwrap_or_else(|| hybrid_options(&Default::default(), network_iterations));
                 Loaded { organ, frame, deformer: Box::new(deformer), method, options }
             }
         })
@@ -324,9 +318,8 @@ pub struct RegistrationChoice {
     /// `augsim prepare` was given), else the organ's; `serve`: RAS, the frame OpenIGTLink streams in.
     #[arg(long)]
     pub frame: Option<Frame>,
-    /// Most match-and-deform iterations of the first cloud, from rest (default: 30 for a FEM, the
-    /// built-in registration case's real-time budget for a U-Net, 4, and 10 for a reduced-order
-    /// model's shape fit); a stream's next clouds take at most 4 (a FEM) or 2 (a learned model).
+    /// Most match-and-deform iterations of the first cloud, from rest (default: 30 for a FEM, a
+    /// U-Net's real-time budget, 4, and 10 for a reduced-order model's shape fit); a stream's next clouds take at most 4 (a FEM) or 2 (a learned model).
     #[arg(long)]
     pub iterations: Option<usize>,
     /// Rigid pre-alignment: the first cloud is aligned to the organ's rest surface (trimmed
@@ -479,8 +472,10 @@ pub struct RegistrationSpec {
     /// ([`RegistrationOptions::time_budget_ms`]).
     pub time_budget_ms: Option<f64>,
     /// The loop's settings, in place of the method's defaults (a comparison's: its case's, with
-    /// the method's iteration budgets); a reduced-order model's shape fit takes its own budgets
-    /// ([`register::shape::loop_options`]).
+    /// the method's iteration budgets): a FEM's [`RegistrationOptions::default`], a U-Net's
+    /// [`NetworkDeformer::loop_options`], a hybrid's [`hybrid_options`]. A reduced-order model's
+    /// shape fit (alone or before a U-Net) takes its own budgets and points over them
+    /// ([`register::shape::loop_options`]); in a hybrid it takes the hybrid's.
     pub options: Option<RegistrationOptions>,
     /// Structures inside the organ, given back deformed with it
     /// ([`RegistrationChoice::structures`]; a patient's own).
@@ -569,9 +564,8 @@ impl RegistrationSpec {
     }
 
     /// The registration: the method loaded, the targets read and located in the organ (an error
-    /// for one outside it, naming the likely unit mistake), the settings checked. The default
-    /// settings are the library's for a FEM and a hybrid; for a learned model, the real-time
-    /// iteration budgets of the built-in registration case's network method.
+    /// for one outside it, naming the likely unit mistake), the settings checked (the method's
+    /// defaults where none are given: [`RegistrationSpec::options`]).
     pub fn build(&self) -> Result<Registration> {
         let Loaded { organ, frame: organ_frame, deformer, method, options } =
             self.method.load(self.options.as_ref())?;

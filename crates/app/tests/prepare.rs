@@ -253,7 +253,7 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
         assert_eq!(registration.method().contains("then FEM"), method == PatientMethod::Hybrid, "{method:?}");
         if method == PatientMethod::Hybrid {
             // The ROM's shape fit, then the FEM's polish.
-            let iterations = register::shape::SHAPE_ITERATIONS + augsim_app::case::POLISH_ITERATIONS;
+            let iterations = register::shape::SHAPE_ITERATIONS + augsim_app::models::POLISH_ITERATIONS;
             assert_eq!(registration.options().iterations, iterations);
         }
         let cloud: Vec<Point> = registration.organ().surface().vertices.iter().step_by(2).copied().collect();

@@ -179,7 +179,7 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     let mut network_scenario = scenario::DatasetScenario::builtin(augsim_app::case::AR_SCENARIO);
     network_scenario.material = network_scenario.material.with_order(1);
     let network =
-        augsim_app::case::Network { model: &model, scenario: &network_scenario, dir: std::path::Path::new("") };
+        augsim_app::models::Network { model: &model, scenario: &network_scenario, dir: std::path::Path::new("") };
     let mut scenario = scenario::CaseScenario::builtin();
     let material = Some(Material::new(Law::Corotational, 5000.0, 0.48));
     let hybrid = |network_iterations: usize, iterations: usize| MethodSpec {
@@ -192,7 +192,7 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     };
     scenario.models.method.retain(|m| m.kind == MethodKind::Network);
     // The network's own cap on a frame from rest.
-    let cap = scenario.models.method[0].iterations.expect("the built-in U-Net's iteration cap");
+    let cap = register::NetworkDeformer::ITERATIONS;
     scenario.models.method.extend([hybrid(cap, cap), hybrid(cap, cap + 2)]);
     scenario.validate().unwrap();
     let case = augsim_app::case::synthetic_case(&scenario).unwrap();
@@ -208,14 +208,14 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     assert!(tre(2) < 0.7 * s.no_deformation_tre_mean_mm.unwrap() && tre(2) < tre(1), "{s:?}, network {}", tre(1));
     // A network on another organ than the FEM's mesh (the shipped one's T10 phantom) is refused.
     let t10 = augsim_app::case::ar_scenario();
-    let other = augsim_app::case::Network { model: &model, scenario: &t10, dir: std::path::Path::new("") };
+    let other = augsim_app::models::Network { model: &model, scenario: &t10, dir: std::path::Path::new("") };
     let mismatched = augsim_app::case::case_methods(&scenario, &[other]).unwrap();
     let e = compare(&case, &mismatched[1..2]).remove(0).result.err().expect("a hybrid on another mesh").to_string();
     assert!(e.contains("is not the FEM model's mesh (the phantom of 3000 T4"), "{e}");
     // A reduced-order model of the T10 phantom fits its shape space on the FEM's T4 mesh (its modes
     // interpolated there), then the FEM polishes the fit: closer to the truth than either alone.
     let rom = learn::Model::load(std::path::Path::new(ROM)).unwrap();
-    let reduced = augsim_app::case::Network { model: &rom, scenario: &t10, dir: std::path::Path::new("") };
+    let reduced = augsim_app::models::Network { model: &rom, scenario: &t10, dir: std::path::Path::new("") };
     let fit = register::shape::SHAPE_ITERATIONS;
     let mut with_rom = scenario.clone();
     let corotational = MethodSpec {
@@ -247,7 +247,7 @@ fn the_u_net_after_the_rom_s_shape_fit_beats_each_alone_on_a_deep_press() {
     let unet = learn::Model::load(std::path::Path::new(MODEL)).unwrap();
     let rom = learn::Model::load(std::path::Path::new(ROM)).unwrap();
     let t10 = augsim_app::case::ar_scenario();
-    let network = |model| augsim_app::case::Network { model, scenario: &t10, dir: std::path::Path::new("") };
+    let network = |model| augsim_app::models::Network { model, scenario: &t10, dir: std::path::Path::new("") };
     let mut scenario = scenario::CaseScenario::builtin();
     scenario.truth.force = 2.0;
     scenario.models.method.retain(|m| m.kind == scenario::registration::MethodKind::Network);
@@ -366,8 +366,8 @@ fn the_network_of_a_t10_scenario_deforms_the_quadratic_mesh() {
     let model = learn::Model::load(std::path::Path::new(MODEL)).unwrap();
     let mut scenario = scenario::DatasetScenario::builtin("liver_ar_t10");
     let network = |scenario: &scenario::DatasetScenario| {
-        let n = augsim_app::case::Network { model: &model, scenario, dir: std::path::Path::new("") };
-        augsim_app::case::network_model(&n)
+        let n = augsim_app::models::Network { model: &model, scenario, dir: std::path::Path::new("") };
+        augsim_app::models::network_model(&n)
     };
     let quadratic = network(&scenario).unwrap().0;
     scenario.material = scenario.material.with_order(1);

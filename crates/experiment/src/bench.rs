@@ -5,7 +5,8 @@
 //! to `print` as soon as it is measured.
 
 use anyhow::{Context, Result};
-use app::case::{case_methods, compare, synthetic_case, Network};
+use app::case::{case_methods, compare, synthetic_case};
+use app::models::Network;
 use mesh::stats::median;
 
 use crate::fem_speed::{fbar_ratios, measure, reference_ms, CaseTiming, FRAME_LOAD_STEP, LARGE_DOFS, LARGE_RUNS};

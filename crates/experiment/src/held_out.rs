@@ -21,10 +21,10 @@ use serde::Serialize;
 use crate::loads::{CaseLoad, LEFT_LOBE_FRONT, RIGHT_LOBE};
 use crate::{fmt, reference, ExperimentResult, Headline, Name, Progress, Row, Size};
 use app::case::{
-    ar_scenario, case_methods, compare, network_from_truth, network_model, network_options, shipped_models,
-    synthetic_case, CaseFrame, Network, Registered, SyntheticCase, NETWORK_AFTER_FIT, POLISH_ITERATIONS, SHIPPED_MODEL,
-    SHIPPED_ROM,
+    ar_scenario, case_methods, compare, method_options, network_from_truth, shipped_models, synthetic_case, CaseFrame,
+    Registered, SyntheticCase, SHIPPED_MODEL, SHIPPED_ROM,
 };
+use app::models::{network_model, Network, NETWORK_AFTER_FIT, POLISH_ITERATIONS};
 
 /// The cases, fixed before any method was run on them.
 pub(crate) const CASES: [CaseLoad; 7] = [
@@ -227,10 +227,17 @@ pub(crate) fn rom_polish(scenario: &CaseScenario) -> Result<MethodSpec> {
     Ok(MethodSpec {
         name: "ROM, then FEM polish".into(),
         kind: MethodKind::Hybrid,
-        iterations: Some(register::shape::SHAPE_ITERATIONS + POLISH_ITERATIONS),
         network_iterations: Some(register::shape::SHAPE_ITERATIONS),
         ..corotational.clone()
     })
+}
+
+/// The loop's settings of `scenario`'s network method (a network's defaults when it has none).
+fn network_budget(scenario: &CaseScenario) -> register::RegistrationOptions {
+    match scenario.models.method.iter().find(|m| m.kind == MethodKind::Network) {
+        Some(spec) => method_options(scenario, spec),
+        None => NetworkDeformer::loop_options(&scenario.registration),
+    }
 }
 
 /// The co-rotational FEM method of `scenario`.
@@ -564,7 +571,7 @@ fn notes(base: &CaseScenario, runs: usize, reference_ms: f64) -> Result<Vec<Stri
             fem.poisson,
             register::shape::SHAPE_ITERATIONS,
             register::shape::SHAPE_POINTS,
-            network_options(base)?.iterations
+            network_budget(base).iterations
         ),
         format!(
             "Streams: each case again as a press and release of {STREAM_FRAMES} frames, as a navigation system \
@@ -577,7 +584,7 @@ fn notes(base: &CaseScenario, runs: usize, reference_ms: f64) -> Result<Vec<Stri
              TRE at the peak frame, and over all frames; time: the median over the stream's frames, one run.",
             STREAM_FRAMES + 1,
             corotational(base).and_then(|m| m.warm_iterations).unwrap_or(base.registration.warm_iterations),
-            network_options(base)?.warm_iterations,
+            network_budget(base).warm_iterations,
             register::shape::SHAPE_WARM_ITERATIONS,
             register::shape::SHAPE_WARM_ITERATIONS,
         ),

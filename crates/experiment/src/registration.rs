@@ -6,7 +6,8 @@ use std::path::Path;
 
 use crate::loads::{CaseLoad, LEFT_LOBE_FRONT, RIGHT_LOBE};
 use anyhow::{Context, Result};
-use app::case::{case_methods, compare, synthetic_case, Network};
+use app::case::{case_methods, compare, synthetic_case};
+use app::models::Network;
 use app::sample_view::sample_on_mesh;
 use learn::{Compute, Corruption, EvalReport, Model, PointErrors};
 use mesh::length::mm;

@@ -23,9 +23,7 @@ use serde::Serialize;
 use crate::held_out::marker_motion_mm;
 use crate::loads::LEFT_LOBE_FRONT;
 use crate::{reference, ExperimentResult, Name, Progress, Row, Size};
-use app::case::{
-    network_options, shipped, skipped_line, synthetic_case, SyntheticCase, AR_SCENARIO, SHIPPED_MODEL, SHIPPED_ROM,
-};
+use app::case::{shipped, skipped_line, synthetic_case, SyntheticCase, AR_SCENARIO, SHIPPED_MODEL, SHIPPED_ROM};
 use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
 use app::serving::serve_setup;
 
@@ -155,7 +153,6 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         .line(&format!("simulating the press and release ({FRAMES} frames, truth of {})", scenario.truth.mesh_words()));
     let case = synthetic_case(&scenario)?;
     let options = scenario.registration.clone();
-    let budgets = network_options(&scenario)?;
     let mut streams = Vec::new();
     progress.line("streaming to the co-rotational FEM");
     let fem = MethodSpec::fem(FEM_SCENARIO);
@@ -234,15 +231,15 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
              targets and STRING status). Each cloud is sent when the previous one is answered. A frame warm-started \
              from the previous one runs at most {} iterations for the FEM and {} for the learned models, which match \
              both ways on those frames. The first frame, from rest, runs up to {} iterations for the FEM and {} for \
-             the U-Net (the registration case's budgets), {} for a reduced-order model's shape fit and {} more \
+             the U-Net (its real-time budget), {} for a reduced-order model's shape fit and {} more \
              for the U-Net after it; its latency also holds the building of the client's registration (its organ and \
              model, made as the client connects), which its server time does not.",
             options.warm_iterations,
-            budgets.warm_iterations,
+            register::NetworkDeformer::WARM_ITERATIONS,
             options.iterations,
-            budgets.iterations,
+            register::NetworkDeformer::ITERATIONS,
             register::shape::SHAPE_ITERATIONS,
-            app::case::NETWORK_AFTER_FIT,
+            app::models::NETWORK_AFTER_FIT,
         ),
         format!(
             "Timings: one run on this machine; the figures are only as quiet as the machine was. {}",

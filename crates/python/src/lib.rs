@@ -305,7 +305,7 @@ impl Registered {
 /// targets file's); default: a patient's own (the frame of the files it was prepared from), else
 /// the organ's.
 /// `iterations`: most match-and-deform iterations of the first cloud, from rest (default: the
-/// library's for a FEM, 30; the built-in registration case's real-time budget for a U-Net, 4; 10
+/// library's for a FEM, 30; a U-Net's real-time budget, 4; 10
 /// for a reduced-order model's shape fit); a warm-started cloud takes at most min(iterations, 4)
 /// for a FEM, min(iterations, 2) for a learned model. `rigid`: align the first cloud rigidly to
 /// the organ (trimmed ICP) and keep that pose while the clouds register plausibly (after a frame

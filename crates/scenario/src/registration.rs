@@ -220,12 +220,15 @@ pub struct MethodSpec {
     /// The finite-element model's material (`kind = "fem"` only).
     #[serde(default)]
     pub material: Option<Material>,
-    /// Most match-and-deform iterations for this method, in place of `[registration]
-    /// iterations`: e.g. the U-Net's real-time budget.
+    /// Most match-and-deform iterations of a frame from rest for this method, in place of its
+    /// kind's default: `[registration] iterations` for a FEM, a network's real-time budget
+    /// ([`register::NetworkDeformer::ITERATIONS`]), a hybrid's `network_iterations` and 2 of the
+    /// FEM.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub iterations: Option<usize>,
-    /// Most iterations of a frame warm-started from the previous one, in place of
-    /// `[registration] warm_iterations`.
+    /// Most iterations of a frame warm-started from the previous one, in place of its kind's
+    /// default: `[registration] warm_iterations`, a network's
+    /// ([`register::NetworkDeformer::WARM_ITERATIONS`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub warm_iterations: Option<usize>,
     /// The network's iterations before the finite-element ones (`kind = "hybrid"` only).
@@ -288,7 +291,7 @@ impl CaseScenario {
         if let Some(iterations) = o.iterations {
             // Given beside the file, it holds for every method.
             scenario.registration.iterations = iterations;
-            scenario.models.method.iter_mut().for_each(|m| m.iterations = None);
+            scenario.models.method.iter_mut().for_each(|m| m.iterations = Some(iterations));
         }
         if o.rigid && scenario.registration.rigid.is_none() {
             scenario.registration.rigid = Some(register::RigidOptions::default());
@@ -418,7 +421,7 @@ mod tests {
         let case = CaseScenario::with_overrides(None, &overrides).unwrap();
         assert_eq!((case.truth.force, case.truth.frames, case.registration.iterations), (2.5, 4, 9));
         assert_eq!((case.misalignment.rotation_deg, case.misalignment.translation_mm), (3.0, 7.0));
-        assert!(case.models.method.iter().all(|m| m.iterations.is_none()));
+        assert!(case.models.method.iter().all(|m| m.iterations == Some(9)));
         assert_eq!(case.registration.rigid, Some(register::RigidOptions::default()));
         assert_eq!(CaseScenario::with_overrides(None, &CaseOverrides::default()).unwrap(), CaseScenario::builtin());
         let e = CaseScenario::with_overrides(None, &CaseOverrides { frames: Some(0), ..overrides }).unwrap_err();
