@@ -28,7 +28,7 @@ use serde::Serialize;
 use crate::case::{Compared, Registered, SyntheticCase};
 use crate::picture::{frame_notes, RegisteredFrame};
 use crate::points::PointInput;
-use crate::printout::{frame_line, organ_line, rigid_lines, run_lines};
+use crate::printout::{frame_line, rigid_lines, run_lines, setup_lines};
 use crate::registration::RegistrationSpec;
 
 /// The folder of a run's results: `out` when the user names one, refused when it already holds
@@ -265,7 +265,8 @@ impl RunWriter {
             (self.unit, frame),
         )?;
         let mut for_slicer = vec!["targets.mrk.json".to_string()];
-        write_targets_for_slicer(&self.dir.join(&for_slicer[0]), &registered, sigma, labels, frame)?;
+        let names = registration.target_names();
+        write_targets_for_slicer(&self.dir.join(&for_slicer[0]), &registered, sigma, &names, frame)?;
         let mut surfaces = vec![(
             "organ_deformed.vtk".to_string(),
             register::organ_surface(registration.organ(), &last.registration.u, last.rigid.as_ref()),
@@ -330,10 +331,7 @@ pub fn register_files(
         PointInput::new(organ_frame, LengthUnit::Metre, spec.given_units).with_given_frame(spec.given_frame);
     let frames = read_frames(cloud)?;
     let truths = truth.map(|p| input.read_truths(p, frames.len(), registration.target_labels())).transpose()?;
-    say(&format!("method     {}", registration.method()));
-    say(&organ_line(registration.organ(), registration.targets().len()));
-    say(&format!("space      {}", spec.frame_line(&registration)));
-    registration.warnings().iter().for_each(|w| say(&format!("warning    {w}")));
+    setup_lines(&registration, &spec.frame_line(&registration)).iter().for_each(|l| say(l));
     let truth_warning = truths
         .as_ref()
         .and_then(|t| t.first())
@@ -459,20 +457,18 @@ pub fn write_targets(
 }
 
 /// The registered targets as 3D Slicer markups (`.mrk.json`), in millimetres and in `frame` when
-/// known: each target's label (`target-N` where it has none) and σ in its description.
+/// known: each target's name ([`register::Registration::target_names`]) and σ in its description.
 pub fn write_targets_for_slicer(
     path: &Path,
     registered: &[Point],
     sigma: Option<&[f64]>,
-    labels: &[String],
+    names: &[String],
     frame: Option<Frame>,
 ) -> Result<()> {
     let millimetres = LengthUnit::Millimetre;
     let points = LabelledPoints {
         points: registered.iter().map(|&p| millimetres.point_from_metres(p)).collect(),
-        labels: (0..registered.len())
-            .map(|i| labels.get(i).filter(|l| !l.is_empty()).cloned().unwrap_or_else(|| format!("target-{}", i + 1)))
-            .collect(),
+        labels: names.to_vec(),
         descriptions: (0..registered.len())
             .map(|i| sigma.map_or(String::new(), |s| format!("sigma {:.2} mm", mm(s[i]))))
             .collect(),

@@ -6,21 +6,31 @@ use std::path::Path;
 use fem::material::kpa;
 use mesh::length::{mm, LengthUnit};
 use mesh::stats::ms;
-use register::{FrameOutcome, Organ, RigidResult, RigidTransform, Summary};
+use register::{FrameOutcome, Registration, RigidResult, RigidTransform, Summary};
 use scenario::CaseScenario;
 
 use crate::case::{Compared, SyntheticCase};
 use crate::output::{comparison_rows, FrameSummary};
 
-/// The organ's line: its mesh, its surface and its number of targets.
-pub fn organ_line(organ: &Organ, targets: usize) -> String {
-    format!(
-        "organ      {} nodes, {} {} cells; surface of {} triangles; {targets} targets",
-        organ.mesh().num_nodes(),
-        organ.mesh().cells.len(),
-        organ.mesh().cells.kind_name(),
-        organ.surface().triangles.len(),
-    )
+/// The lines that open a registration's run or server: its method, its organ (mesh, surface,
+/// number of targets), `space` (what is done with the coordinates given), then the set-up's
+/// warnings.
+pub fn setup_lines(registration: &Registration, space: &str) -> Vec<String> {
+    let organ = registration.organ();
+    let mut lines = vec![
+        format!("method     {}", registration.method()),
+        format!(
+            "organ      {} nodes, {} {} cells; surface of {} triangles; {} targets",
+            organ.mesh().num_nodes(),
+            organ.mesh().cells.len(),
+            organ.mesh().cells.kind_name(),
+            organ.surface().triangles.len(),
+            registration.targets().len()
+        ),
+        format!("space      {space}"),
+    ];
+    lines.extend(registration.warnings().iter().map(|w| format!("warning    {w}")));
+    lines
 }
 
 /// The rigid alignment's lines, with its error against `truth` (the true organ → cloud

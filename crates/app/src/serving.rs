@@ -9,7 +9,7 @@ use anyhow::Result;
 use live::{IdentificationFactory, Outputs, RegistrationFactory, ServeOptions};
 
 use crate::assimilation::{AssimilationChoice, OnlineFilter};
-use crate::printout::organ_line;
+use crate::printout::setup_lines;
 use crate::registration::{RegistrationChoice, RegistrationSpec};
 
 /// Options of `augsim serve`.
@@ -74,10 +74,7 @@ pub fn serve_setup(spec: RegistrationSpec, outputs: Option<Outputs>, assimilate:
         lines.extend(chosen.check(&first).map_err(anyhow::Error::msg)?.into_iter().map(|w| format!("warning    {w}")));
     }
     let (coordinates, frame_line) = spec.stream_coordinates(&first);
-    lines.push(format!("method     {}", first.method()));
-    lines.push(organ_line(first.organ(), first.targets().len()));
-    lines.push(format!("space      {frame_line}"));
-    lines.extend(first.warnings().iter().map(|w| format!("warning    {w}")));
+    lines.extend(setup_lines(&first, &frame_line));
     let identification = match assimilate {
         Some(path) => Some(stream_filters(path, &mut lines)?),
         None => None,

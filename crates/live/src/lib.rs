@@ -743,12 +743,8 @@ fn answer(
     if options.outputs.targets {
         let points = targets
             .iter()
-            .enumerate()
-            .zip(registration.target_labels())
-            .map(|((k, p), label)| {
-                let name = if label.is_empty() { format!("target {}", k + 1) } else { label.clone() };
-                PointElement::new(name, "targets", to_wire(p))
-            })
+            .zip(registration.target_names())
+            .map(|(p, name)| PointElement::new(name, "targets", to_wire(p)))
             .collect();
         shared.send(&PointMessage { points }, "targets", cloud.timestamp)?;
     }

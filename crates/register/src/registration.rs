@@ -225,6 +225,16 @@ impl Registration {
         &self.labels
     }
 
+    /// The targets' names, in order: each one's label, `target-N` (from 1) for one not named; what
+    /// 3D Slicer shows beside a control point, in files and on a stream alike.
+    pub fn target_names(&self) -> Vec<String> {
+        let name = |(k, label): (usize, &String)| match label.is_empty() {
+            true => format!("target-{}", k + 1),
+            false => label.clone(),
+        };
+        self.labels.iter().enumerate().map(name).collect()
+    }
+
     /// The frame (RAS or LPS) of the organ and its targets, `None` when unknown.
     pub fn frame(&self) -> Option<Frame> {
         self.frame
@@ -511,6 +521,7 @@ mod tests {
         assert!(r.warnings().is_empty(), "{:?}", r.warnings());
         assert_eq!(r.targets().len(), 2);
         assert_eq!((r.target_labels(), r.frame()), (&[String::new(), String::new()][..], None), "not named");
+        assert_eq!(r.target_names(), ["target-1", "target-2"]);
         let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap(), None).unwrap();
         let labelled = |labels: Vec<String>, targets: Vec<Point>| {
             let options = RegistrationOptions::default();
@@ -519,6 +530,7 @@ mod tests {
         let two = vec![[0.01, 0.02, 0.03], [0.04, 0.01, 0.02]];
         let named = labelled(vec!["A".into(), "B".into()], two.clone()).unwrap().in_frame(Some(Frame::Lps));
         assert_eq!((named.target_labels(), named.frame()), (&["A".to_string(), "B".to_string()][..], Some(Frame::Lps)));
+        assert_eq!(named.target_names(), ["A", "B"]);
         let one_label = labelled(vec!["A".into()], two.clone()).err().expect("a label short").to_string();
         assert!(one_label.contains("1 labels for 2 targets"), "{one_label}");
         // A target outside is named by its label too.
