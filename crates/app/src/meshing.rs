@@ -10,7 +10,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use mesh::io::{Field, Frame};
 use mesh::isosurface::ExtractOptions;
 use mesh::labelmap::{is_labelmap, read_labelmap_surface, unreadable_segmentation, LABELMAP_FORMATS};
-use mesh::length::{mm, LengthUnit, UnitOrAuto};
+use mesh::length::{mm, organ_units, LengthUnit, UnitOrAuto};
 use mesh::phantom::PhantomSpec;
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
 use mesh::repair::{detect_unit, largest_extent, RepairOptions, ORGAN_EXTENT_M};
@@ -191,17 +191,15 @@ impl OrganInput {
                 let unit = detect_unit(&self.surface).map_err(|e| {
                     let extent = largest_extent(&self.surface);
                     // The units auto does not tell (their organs' numbers overlap mm's) that would fit.
-                    let fitting: Vec<String> = [LengthUnit::Centimetre, LengthUnit::Micrometre]
+                    let fitting: Vec<String> = organ_units(extent, &[LengthUnit::Centimetre, LengthUnit::Micrometre])
                         .into_iter()
-                        .filter(|u| ORGAN_EXTENT_M.contains(&u.to_metres(extent)))
                         .map(|u| format!(" (in {}? give --units {u})", u.name()))
                         .collect();
                     anyhow!("{e}: give --units (m, cm, mm or um){}", fitting.concat())
                 })?;
                 let extent = largest_extent(&self.surface);
                 let shown = if extent >= 1.0 { format!("{extent:.1}") } else { format!("{extent:.4}") };
-                if unit == LengthUnit::Millimetre && ORGAN_EXTENT_M.contains(&LengthUnit::Centimetre.to_metres(extent))
-                {
+                if unit == LengthUnit::Millimetre && !organ_units(extent, &[LengthUnit::Centimetre]).is_empty() {
                     // 20 to 60 mm across in mm, or 20 to 60 cm across (a liver) in cm.
                     self.notes.push((
                         "warning",

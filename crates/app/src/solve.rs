@@ -23,7 +23,7 @@ pub struct Solved {
 pub fn solve_scenario(path: &Path) -> Result<Solved> {
     let (scenario, dir) = StaticScenario::load(path)?;
     let problem = scenario.build_problem(&dir)?;
-    let hint = scenario::source::millimetre_hint(&problem.mesh).map_or(String::new(), |h| format!(" ({h})"));
+    let hint = scenario::source::unit_hint(&problem.mesh).map_or(String::new(), |h| format!(" ({h})"));
     let mut solver = StaticSolver::new(problem)?;
     let solution = solver.solve(&scenario.solver).with_context(|| format!("static solve{hint}"))?;
     Ok(Solved { scenario, solver, solution })
@@ -139,7 +139,7 @@ impl Solved {
                  mid-edge nodes too"
             ));
         }
-        lines.extend(scenario::source::millimetre_hint(&p.mesh).map(|h| format!("warning    {h}")));
+        lines.extend(scenario::source::unit_hint(&p.mesh).map(|h| format!("warning    {h}")));
         let (inverted, smallest) = post::inverted_cells(geo, p.material.law, &sol.u)?;
         if inverted > 0 {
             lines.push(format!(

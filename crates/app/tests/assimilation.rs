@@ -373,7 +373,7 @@ fn bad_track_files_are_named_with_their_line() {
     let err = prepare_tracks(d, "plain_mm.csv").err().unwrap();
     assert!(
         err.contains("plain_mm.csv:2: feature `in`: tracked point")
-            && err.contains("is the file in mm where m were expected?")
+            && err.contains("is the file given in mm where m were expected?")
             && !err.contains("invalid FEM model"),
         "{err}"
     );

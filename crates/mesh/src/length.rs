@@ -158,9 +158,79 @@ pub fn point_in_mm(p: Point) -> String {
     format!("({x}, {y}, {z}) mm")
 }
 
+/// The units among `candidates` in which a largest extent of `extent` (a number, as a file holds
+/// it) is an organ's size ([`crate::repair::ORGAN_EXTENT_M`]), in their order.
+pub fn organ_units(extent: f64, candidates: &[LengthUnit]) -> Vec<LengthUnit> {
+    candidates.iter().copied().filter(|u| crate::repair::ORGAN_EXTENT_M.contains(&u.to_metres(extent))).collect()
+}
+
+/// A unit mistake that numbers of lengths can carry: given in `given` where `expected` was meant,
+/// so read [`UnitMistake::factor`] times too large or too small.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct UnitMistake {
+    /// The unit the numbers are in.
+    pub given: LengthUnit,
+    /// The unit they were read in.
+    pub expected: LengthUnit,
+}
+
+impl UnitMistake {
+    /// The mistakes the checks look for, the likeliest first: millimetres and metres either way,
+    /// then millimetres and centimetres either way.
+    pub const COMMON: [UnitMistake; 4] = [
+        UnitMistake { given: LengthUnit::Millimetre, expected: LengthUnit::Metre },
+        UnitMistake { given: LengthUnit::Metre, expected: LengthUnit::Millimetre },
+        UnitMistake { given: LengthUnit::Millimetre, expected: LengthUnit::Centimetre },
+        UnitMistake { given: LengthUnit::Centimetre, expected: LengthUnit::Millimetre },
+    ];
+
+    /// What the numbers read must be multiplied by to undo the mistake (0.001 for millimetres
+    /// read as metres).
+    pub fn factor(self) -> f64 {
+        self.given.metres() / self.expected.metres()
+    }
+
+    /// How the numbers compare with what they were meant to be, read once more with the mistake
+    /// undone: "1,000 times smaller", "10 times larger".
+    pub fn undone_words(self) -> String {
+        let factor = self.factor();
+        let times = |f: f64| match f.round() as u64 {
+            n if n >= 1000 => format!("{},{:03}", n / 1000, n % 1000),
+            n => n.to_string(),
+        };
+        match factor < 1.0 {
+            true => format!("{} times smaller", times(1.0 / factor)),
+            false => format!("{} times larger", times(factor)),
+        }
+    }
+
+    /// The question a message asks about it: "given in mm where m were expected".
+    pub fn question(self) -> String {
+        format!("given in {} where {} were expected", self.given, self.expected)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each mistake's factor undoes it, in words as a message says it.
+    #[test]
+    fn unit_mistakes_are_undone_by_their_factor() {
+        let [mm_for_m, m_for_mm, mm_for_cm, cm_for_mm] = UnitMistake::COMMON;
+        assert_eq!((mm_for_m.factor(), m_for_mm.factor()), (1e-3, 1e3));
+        assert!((mm_for_cm.factor() - 0.1).abs() < 1e-15 && (cm_for_mm.factor() - 10.0).abs() < 1e-12);
+        let words: Vec<String> = UnitMistake::COMMON.iter().map(|m| m.undone_words()).collect();
+        assert_eq!(words, ["1,000 times smaller", "1,000 times larger", "10 times smaller", "10 times larger"]);
+        assert_eq!(mm_for_m.question(), "given in mm where m were expected");
+        // 300 is an organ in mm; 8 one in cm; 45 one in either; 5000 in neither.
+        let units = [LengthUnit::Millimetre, LengthUnit::Centimetre];
+        let fits = |extent: f64| organ_units(extent, &units);
+        assert_eq!((fits(300.0), fits(8.0)), (vec![LengthUnit::Millimetre], vec![LengthUnit::Centimetre]));
+        assert_eq!((fits(45.0), fits(5000.0)), (units.to_vec(), vec![]));
+        // 120 mm read as metres: the factor brings it back to 0.12 m.
+        assert!((mm_for_m.factor() * 120.0 - LengthUnit::Millimetre.to_metres(120.0)).abs() < 1e-15);
+    }
 
     #[test]
     fn symbols_parse_back_and_scale_to_metres() {

@@ -2,7 +2,7 @@
 
 use mesh::bvh::{triangle_barycentric, SurfaceBvh};
 use mesh::embedding::MeshLocator;
-use mesh::length::{mm, point_in_mm, LengthUnit};
+use mesh::length::{mm, point_in_mm, LengthUnit, UnitMistake};
 use mesh::{Mesh, Point, TriSurface};
 
 use crate::{RegisterError, Result};
@@ -215,7 +215,7 @@ impl Organ {
             };
             RegisterError::Invalid(format!("{e}{hint}"))
         })?;
-        Ok((stencils, self.spread_warnings(targets, "targets", inside)))
+        Ok((stencils, self.spread_warning(targets, "targets", inside).into_iter().map(|(w, _)| w).collect()))
     }
 
     /// Checks that the landmarks where the organ is held lie on its surface or inside it: one
@@ -244,11 +244,10 @@ impl Organ {
                 likely_mistake(landmarks, &self.mesh.nodes, "every landmark lies on the organ", held)
             )));
         }
-        let warnings = self.spread_warnings(landmarks, "landmarks", held);
-        if let Some(warning) = warnings.iter().find(|w| w.ends_with(READ_LARGER)) {
-            return Err(RegisterError::Invalid(warning.clone()));
+        match self.spread_warning(landmarks, "landmarks", held) {
+            Some((warning, true)) => Err(RegisterError::Invalid(warning)),
+            warning => Ok(warning.into_iter().map(|(w, _)| w).collect()),
         }
-        Ok(warnings)
     }
 
     /// The diagonal of the bounding box of the organ's mesh.
@@ -257,30 +256,26 @@ impl Organ {
     }
 
     /// The warning when several `points` (`what`: "targets") span less than
-    /// [`SMALL_TARGET_EXTENT`] of the organ, which ends with [`READ_LARGER`] when, read 1,000
-    /// times larger, they lie where `fits` wants them.
-    fn spread_warnings(&self, points: &[Point], what: &str, fits: impl Fn(&[Point]) -> bool) -> Vec<String> {
+    /// [`SMALL_TARGET_EXTENT`] of the organ, and whether, read 1,000 times larger, they lie where
+    /// `fits` wants them (metres given for millimetres, which it then asks).
+    fn spread_warning(&self, points: &[Point], what: &str, fits: impl Fn(&[Point]) -> bool) -> Option<(String, bool)> {
         let (organ_extent, extent) = (self.extent(), diagonal(points));
         if points.len() < 2 || extent >= SMALL_TARGET_EXTENT * organ_extent {
-            return Vec::new();
+            return None;
         }
-        vec![format!(
+        let metres = UnitMistake { given: LengthUnit::Metre, expected: LengthUnit::Millimetre };
+        let mistaken = scaled_fits(points, metres.factor(), &OrganBox::of(&self.mesh.nodes), &fits);
+        let warning = format!(
             "the {} {what} span {:.3} mm, under {:.0} % of the organ's {:.0} mm (its box's diagonal){}",
             points.len(),
             mm(extent),
             SMALL_TARGET_EXTENT * 100.0,
             mm(organ_extent),
-            if scaled_fits(points, 1.0 / LengthUnit::Millimetre.metres(), &OrganBox::of(&self.mesh.nodes), &fits) {
-                READ_LARGER
-            } else {
-                ""
-            }
-        )]
+            if mistaken { format!(": were they {}?", metres.question()) } else { String::new() }
+        );
+        Some((warning, mistaken))
     }
 }
-
-/// How [`Organ::spread_warnings`] ends when the points, read 1,000 times larger, fit.
-const READ_LARGER: &str = ": were they given in m where mm were expected?";
 
 /// Whether `points` scaled by `scale` lie where `fits` wants them, spread (when several) over at
 /// least [`SMALL_TARGET_EXTENT`] of the organ's extent: points merely shrunk onto an organ around
@@ -318,23 +313,14 @@ pub(crate) fn likely_mistake(
 ) -> String {
     let organ = &OrganBox::of(organ);
     let negated: Vec<Point> = points.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
-    // The scale that undoes millimetres taken for metres; its inverse, metres taken for millimetres.
-    let millimetre = LengthUnit::Millimetre.metres();
     if fits(&negated) {
-        format!(" (with x and y negated {claim}: are they in LPS where the organ is in RAS, or the reverse?)")
-    } else if scaled_fits(points, millimetre, organ, &fits) {
-        format!(" (read as 1,000 times smaller, {claim}: were they given in mm where m were expected?)")
-    } else if scaled_fits(points, 1.0 / millimetre, organ, &fits) {
-        format!(" (read as 1,000 times larger, {claim}: were they given in m where mm were expected?)")
-    } else if scaled_fits(points, 0.1, organ, &fits) {
-        format!(
-            " (read as 10 times smaller, {claim}: were they given in mm where the organ is in cm, or the organ's \
-             unit taken as mm where it is cm?)"
-        )
-    } else if scaled_fits(points, 10.0, organ, &fits) {
-        format!(" (read as 10 times larger, {claim}: were they given in cm where the organ is in mm?)")
-    } else {
-        String::new()
+        return format!(" (with x and y negated {claim}: are they in LPS where the organ is in RAS, or the reverse?)");
+    }
+    match UnitMistake::COMMON.into_iter().find(|m| scaled_fits(points, m.factor(), organ, &fits)) {
+        Some(mistake) => {
+            format!(" (read as {}, {claim}: were they {}?)", mistake.undone_words(), mistake.question())
+        }
+        None => String::new(),
     }
 }
 

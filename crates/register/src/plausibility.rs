@@ -3,7 +3,7 @@
 //! tiny fraction of it (metres given for millimetres) is refused; a result whose registered surface stays far from the cloud or
 //! whose organ moves by more than half its size is flagged, with what to try.
 
-use mesh::length::{mm, LengthUnit};
+use mesh::length::{mm, LengthUnit, UnitMistake};
 use mesh::{Point, SurfaceBvh};
 use rayon::prelude::*;
 
@@ -164,16 +164,19 @@ pub fn truth_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option
         d.sum::<f64>() / targets.len().max(1) as f64
     };
     let given = mean_distance(false, 1.0);
-    let unit = |given: &str, expected: &str, header: &str| {
-        format!("was it given in {given} where {expected} were expected? Give its unit (a header such as {header}, or --units)")
+    let frame = "is it in RAS where the targets are in LPS, or the reverse? Give its frame (a file that names it, or \
+                 --frame)";
+    let unit = |m: UnitMistake| {
+        let (how, header) = (format!("read {}", m.undone_words()), format!("x_{}", m.given));
+        (
+            how,
+            false,
+            m.factor(),
+            format!("was it {}? Give its unit (a header such as {header}, or --units)", m.question()),
+        )
     };
-    let readings = [
-        ("with x and y negated", true, 1.0, "is it in RAS where the targets are in LPS, or the reverse? Give its frame (a file that names it, or --frame)".to_string()),
-        ("read 1,000 times larger", false, 1e3, unit("m", "mm", "x_m")),
-        ("read 1,000 times smaller", false, 1e-3, unit("mm", "m", "x_mm")),
-        ("read 10 times larger", false, 10.0, unit("cm", "mm", "x_cm")),
-        ("read 10 times smaller", false, 0.1, unit("mm", "cm", "x_mm")),
-    ];
+    let readings = std::iter::once(("with x and y negated".to_string(), true, 1.0, frame.to_string()))
+        .chain(UnitMistake::COMMON.map(unit));
     let (how, other, question) = readings
         .into_iter()
         .map(|(how, negate, scale, question)| (how, mean_distance(negate, scale), question))

@@ -3,6 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use mesh::immersed::ImmersedOptions;
+use mesh::length::{organ_units, LengthUnit};
 use mesh::{Mesh, MeshError, NodeSelection, Point};
 use serde::Deserialize;
 
@@ -51,7 +52,10 @@ pub enum MeshSource {
     File {
         /// Path of the file.
         path: PathBuf,
-        /// Multiply coordinates by this factor (e.g. 0.001 for mm).
+        /// The unit of the file's coordinates (m, cm, mm or um; default: m, as a scenario's).
+        #[serde(default)]
+        unit: Option<LengthUnit>,
+        /// Multiply coordinates by this factor (after the unit), e.g. to enlarge a model.
         #[serde(default = "one")]
         scale: f64,
         /// Move the bounding-box centre to the origin before scaling.
@@ -70,7 +74,9 @@ impl MeshSource {
     /// moved to the origin.
     pub fn frame(&self, dir: &Path) -> Result<Option<mesh::io::Frame>, MeshError> {
         match self {
-            MeshSource::File { path, centre: false, scale } if *scale > 0.0 => mesh::io::surface_frame(dir.join(path)),
+            MeshSource::File { path, centre: false, scale, .. } if *scale > 0.0 => {
+                mesh::io::surface_frame(dir.join(path))
+            }
             _ => Ok(None),
         }
     }
@@ -109,40 +115,53 @@ pub fn build_mesh(source: &MeshSource, dir: &Path) -> Result<Mesh, MeshError> {
             surface.fit_to(*length)?;
             mesh::tetmesh::mesh_surface_to_count(&surface, *tets, mesh::tetmesh::BoundaryFit::default())?.0
         }
-        MeshSource::File { path, scale, centre } => {
+        MeshSource::File { path, unit, scale, centre } => {
             if !(scale.is_finite() && *scale > 0.0) {
                 return Err(MeshError::Invalid(format!("[mesh.file] scale must be finite and > 0, got {scale}")));
             }
             let mut m = mesh::io::read_mesh(dir.join(path))?;
             let (lo, hi) = m.bounds();
             let c = if *centre { std::array::from_fn(|d| 0.5 * (lo[d] + hi[d])) } else { [0.0; 3] };
-            m.transform(c, *scale);
+            m.transform(c, unit.unwrap_or(LengthUnit::Metre).metres() * scale);
             m
         }
     })
 }
 
-/// A mesh larger than this (m) is an organ in millimetres read as metres (organs span 60 cm at most).
-const MILLIMETRE_MESH_EXTENT: f64 = 5.0;
+/// A mesh larger than this (m) is no organ nor a built-in beam, but an organ in another unit read
+/// as metres (organs span 60 cm at most).
+const MISREAD_MESH_EXTENT: f64 = 5.0;
 
 /// The nodes `selection` picks on `mesh`, or what went wrong, naming the selection's table
-/// (`what`: "fixed", "force"); on a mesh of metres, asks whether the mesh is in millimetres
-/// (scenarios are in metres).
+/// (`what`: "fixed", "force"); on a mesh of metres, asks for the mesh's unit (scenarios are in
+/// metres).
 pub fn select_nodes(selection: &NodeSelection, mesh: &Mesh, what: &str) -> Result<Vec<usize>, String> {
     selection.select(mesh).map_err(|e| {
-        let hint = millimetre_hint(mesh).map_or(String::new(), |h| format!(" ({h})"));
+        let hint = unit_hint(mesh).map_or(String::new(), |h| format!(" ({h})"));
         format!("{what} selection: {e}{hint}")
     })
 }
 
-/// For a mesh over 5 m across (no organ is), what it probably is: an organ in
-/// millimetres read as metres.
-pub fn millimetre_hint(mesh: &Mesh) -> Option<String> {
+/// For a mesh over 5 m across (no organ is), what it probably is: an organ in millimetres or
+/// centimetres (those in which its size is an organ's) read as metres.
+pub fn unit_hint(mesh: &Mesh) -> Option<String> {
     let extent = mesh::longest_side(mesh.bounds());
-    (extent > MILLIMETRE_MESH_EXTENT).then(|| {
-        format!(
-            "the mesh spans {extent:.0} m: is it in millimetres? scenarios are in metres: [mesh.file] scale = 0.001"
-        )
+    if extent <= MISREAD_MESH_EXTENT {
+        return None;
+    }
+    let units = organ_units(extent, &[LengthUnit::Millimetre, LengthUnit::Centimetre]);
+    let names: Vec<&str> = units.iter().map(|u| u.name()).collect();
+    let keys: Vec<String> = units.iter().map(|u| format!("unit = \"{u}\"")).collect();
+    Some(match units.is_empty() {
+        true => format!(
+            "the mesh spans {extent:.0} m, where organs span 2 to 60 cm: is its unit right? scenarios are in metres: \
+             [mesh.file] unit"
+        ),
+        false => format!(
+            "the mesh spans {extent:.0} m: is it in {}? scenarios are in metres: [mesh.file] {}",
+            names.join(" or "),
+            keys.join(" or ")
+        ),
     })
 }
 

@@ -144,12 +144,22 @@ fn a_byte_order_mark_is_read_and_unusable_numbers_are_named() {
     );
     let err = parse(&scaled).unwrap().build_problem(Path::new(".")).unwrap_err().to_string();
     assert!(err.contains("[mesh.file] scale must be finite and > 0, got -1"), "{err}");
+    // A file's unit brings it to metres, as the factor would; a unit augsim does not know is named.
+    let in_unit = |key: &str| scaled.replace("scale = -1.0", key);
+    let mesh = |key: &str| parse(&in_unit(key)).unwrap().build_problem(Path::new(".")).unwrap().mesh;
+    let (millimetres, factor) = (mesh("unit = \"mm\""), mesh("scale = 0.001"));
+    assert_eq!(millimetres.nodes, factor.nodes);
+    assert_eq!(mesh::longest_side(millimetres.bounds()), 0.001);
+    assert_eq!(mesh("unit = \"cm\"\nscale = 2.0").nodes, mesh("scale = 0.02").nodes);
+    let err = parse(&in_unit("unit = \"ft\"")).unwrap_err().to_string();
+    assert!(err.contains("ft") && err.contains("mm"), "{err}");
 }
 
-/// A selection that picks nothing on a mesh spanning metres (an organ in millimetres: scenarios
-/// are in metres) asks whether the mesh is in millimetres; on a mesh of an organ's size it does not.
+/// A selection that picks nothing on a mesh spanning metres (an organ in millimetres or
+/// centimetres: scenarios are in metres) asks for the unit in which it is an organ's size; on a
+/// mesh of an organ's size it does not.
 #[test]
-fn an_empty_selection_on_a_mesh_of_metres_asks_for_millimetres() {
+fn an_empty_selection_on_a_mesh_of_metres_asks_for_its_unit() {
     let error = |max: f64| {
         let text = format!(
             "kind = \"static\"\nname = \"mm\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [{max}, {max}, {max}]\n\
@@ -162,6 +172,18 @@ fn an_empty_selection_on_a_mesh_of_metres_asks_for_millimetres() {
     };
     let millimetres = error(200.0);
     assert!(millimetres.contains("force selection: ") && millimetres.contains("picks no node"), "{millimetres}");
-    assert!(millimetres.contains("the mesh spans 200 m: is it in millimetres?"), "{millimetres}");
+    assert!(
+        millimetres
+            .contains("the mesh spans 200 m: is it in millimetres? scenarios are in metres: [mesh.file] unit = \"mm\""),
+        "{millimetres}"
+    );
+    // 8 m across is an organ in centimetres (8 mm is none); 50 m one in either; 5 km in neither.
+    assert!(
+        error(8.0).contains("is it in centimetres? scenarios are in metres: [mesh.file] unit = \"cm\""),
+        "{}",
+        error(8.0)
+    );
+    assert!(error(50.0).contains("is it in millimetres or centimetres?"), "{}", error(50.0));
+    assert!(error(5000.0).contains("where organs span 2 to 60 cm: is its unit right?"), "{}", error(5000.0));
     assert!(!error(0.2).contains("millimetres"), "{}", error(0.2));
 }

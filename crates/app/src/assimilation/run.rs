@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use fem::Problem;
 use mesh::io::Field;
-use mesh::length::LengthUnit;
+use mesh::length::{LengthUnit, UnitMistake};
 use mesh::select::nearest;
 use mesh::{Mesh, MeshLocator, Point, SurfaceBvh};
 use nalgebra::DVector;
@@ -822,13 +822,16 @@ fn locate_tracks(
                 FemModelError::Invalid(why) => why,
                 other => other.to_string(),
             };
-            let in_mm = positions.iter().all(|p| finder.locator.locate(p.map(|x| x * 1e-3)).is_some());
+            let mistake = UnitMistake { given: LengthUnit::Millimetre, expected: LengthUnit::Metre };
+            let in_mm = positions.iter().all(|p| finder.locator.locate(p.map(|x| x * mistake.factor())).is_some());
             let hint = match in_mm {
-                true => {
-                    ": read 1,000 times smaller, every feature lies in the organ; is the file in mm where m were \
-                         expected? A header x_mm, y_mm, z_mm names the unit (or give --units mm)"
-                }
-                false => "",
+                true => format!(
+                    ": read {}, every feature lies in the organ; is the file {}? A header x_mm, y_mm, z_mm names \
+                     the unit (or give --units mm)",
+                    mistake.undone_words(),
+                    mistake.question()
+                ),
+                false => String::new(),
             };
             AssimilationError::file(path, Some(line), format!("feature `{id}`: {why}{hint}"))
         })?;
