@@ -255,19 +255,21 @@ impl Mesh {
 
     /// Checks indices, finiteness, cell orientation and region indices.
     /// Tetrahedra must have positive volume; hexahedra a positive Jacobian at the
-    /// centre and corners.
+    /// centre and corners. Cells and nodes are named by their numbers in the mesh's file.
     pub fn validate(&self) -> Result<(), MeshError> {
         self.validate_connectivity()?;
         for i in 0..self.cells.len() {
             let vol = self.cell_volume(i);
             if !(vol > 0.0) {
-                return Err(MeshError::Invalid(format!("cell {i} is inverted or degenerate (volume {vol:.3e})")));
+                let cell = self.file_cell(i);
+                return Err(MeshError::Invalid(format!("cell {cell} is inverted or degenerate (volume {vol:.3e})")));
             }
         }
         if let Cells::Hex8(hexes) = &self.cells {
             for (i, h) in hexes.iter().enumerate() {
                 if !hex_corner_jacobians_positive(&self.nodes, h) {
-                    return Err(MeshError::Invalid(format!("hexahedron {i} has a non-positive corner Jacobian")));
+                    let cell = self.file_cell(i);
+                    return Err(MeshError::Invalid(format!("hexahedron {cell} has a non-positive corner Jacobian")));
                 }
             }
         }
@@ -279,7 +281,7 @@ impl Mesh {
     pub fn validate_connectivity(&self) -> Result<(), MeshError> {
         let n = self.nodes.len();
         if let Some(i) = self.nodes.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
-            return Err(MeshError::Invalid(format!("node {i} has a non-finite coordinate")));
+            return Err(MeshError::Invalid(format!("node {} has a non-finite coordinate", self.file_node(i))));
         }
         for i in 0..self.cells.len() {
             if let Some(&bad) = self.cells.cell(i).iter().find(|&&k| k >= n) {

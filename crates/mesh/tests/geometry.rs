@@ -699,3 +699,24 @@ fn a_body_cut_off_by_a_thin_neck_is_left_out() {
     let (lo, hi) = mesh.bounds();
     assert!(hi[0] - lo[0] > 0.05, "the near ball is kept: {lo:?} {hi:?}");
 }
+
+/// A bad cell is named by its number in the mesh's file (a Gmsh tag, an .inp number), not by its
+/// place among the cells: a hexahedron folded at a corner (its volume still positive) and an
+/// inverted tetrahedron.
+#[test]
+fn validation_names_a_bad_cell_by_its_file_number() {
+    let mut hex = box_hex([0.0; 3], [1.0; 3], [1, 1, 1]).unwrap();
+    let corner = hex.nodes.iter().position(|&p| p == [1.0; 3]).unwrap();
+    hex.nodes[corner] = [0.4; 3];
+    assert!(hex.cell_volume(0) > 0.0);
+    hex.file_cells = Some(vec![203]);
+    let e = hex.validate().unwrap_err().to_string();
+    assert!(e.contains("hexahedron 203 has a non-positive corner Jacobian"), "{e}");
+    let mut tet = box_tet([0.0; 3], [1.0; 3], [1, 1, 1]).unwrap();
+    if let Cells::Tet4(cells) = &mut tet.cells {
+        cells[2].swap(0, 1);
+    }
+    tet.file_cells = Some((0..tet.cells.len()).map(|c| 17 + c).collect());
+    let e = tet.validate().unwrap_err().to_string();
+    assert!(e.contains("cell 19 is inverted"), "{e}");
+}

@@ -330,6 +330,31 @@ fn gmsh_2_physical_groups_of_every_dimension_are_regions() {
     );
 }
 
+/// A name a volume group shares with a surface group (the whole mesh and its boundary, both
+/// called `liver`) is split by dimension, the whole mesh's group kept too: `liver` was the surface
+/// alone, silently. Lower-dimensional groups of one name still add up (`fixed`: a face and an edge).
+#[test]
+fn gmsh_a_name_shared_by_a_volume_and_its_surface_is_split_by_dimension() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!(
+        "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n\
+         $PhysicalNames\n4\n3 1 \"liver\"\n2 2 \"liver\"\n2 3 \"fixed\"\n1 4 \"fixed\"\n$EndPhysicalNames\n\
+         {NODES_V2}$Elements\n5\n\
+         1 2 2 2 1 1 2 3\n\
+         2 2 2 3 1 2 3 5\n\
+         3 1 2 4 1 4 5\n\
+         4 4 2 1 1 1 2 3 4\n\
+         5 4 2 1 1 2 3 4 5\n\
+         $EndElements\n"
+    );
+    let mesh = read_gmsh(put(dir.path(), "shared.msh", &text)).unwrap();
+    let got: Vec<(&str, &[usize])> = mesh.regions.iter().map(|(k, v)| (k.as_str(), v.as_slice())).collect();
+    assert_eq!(
+        got,
+        [("fixed", &[1, 2, 3, 4][..]), ("liver_surface", &[0, 1, 2][..]), ("liver_volume", &[0, 1, 2, 3, 4][..])]
+    );
+}
+
 #[test]
 fn gmsh_4_physical_groups_come_from_the_entities() {
     // A point entity in unnamed group 9, a surface entity in group 5 "bottom", volume 1 in group 6

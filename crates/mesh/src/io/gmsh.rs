@@ -252,7 +252,10 @@ pub fn read_gmsh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
 
 /// The regions of the physical groups of a file: one per group name (`physical_<tag>` for a group
 /// without one), holding the mesh nodes of the group's elements. A volume group that holds every
-/// volume element is the whole mesh, not a region. `kept` maps mesh nodes to file nodes.
+/// volume element is the whole mesh, not a region. A name that a volume group shares with groups
+/// of lower dimension (a part and its boundary, or the whole mesh and its surface) would mean either:
+/// each then takes its dimension's suffix (`liver_volume`, `liver_surface`), the whole mesh's group
+/// too. `kept` maps mesh nodes to file nodes.
 fn physical_regions(
     volume: &Volume,
     names: &HashMap<GroupKey, String>,
@@ -263,16 +266,24 @@ fn physical_regions(
     for (i, &f) in kept.iter().enumerate() {
         mesh_index[f] = i;
     }
+    let name = |key: &GroupKey| names.get(key).cloned().unwrap_or_else(|| format!("physical_{}", key.1));
+    let volume_names: Vec<String> = volume.groups.keys().filter(|k| k.0 == 3).map(name).collect();
+    let shared = |n: &String| volume_names.contains(n) && volume.groups.keys().any(|k| k.0 < 3 && name(k) == *n);
     let mut regions: BTreeMap<String, Vec<usize>> = BTreeMap::new();
     for (key, group) in &volume.groups {
-        if group.volume_elements == volume.tags.len() {
+        let plain = name(key);
+        let split = shared(&plain);
+        if group.volume_elements == volume.tags.len() && !split {
             continue;
         }
         let set: Vec<usize> = group.nodes.iter().map(|&f| mesh_index[f]).filter(|&i| i != usize::MAX).collect();
         if set.is_empty() {
             continue;
         }
-        let name = names.get(key).cloned().unwrap_or_else(|| format!("physical_{}", key.1));
+        let name = match split {
+            true => format!("{plain}_{}", ["point", "curve", "surface", "volume"][key.0 as usize]),
+            false => plain,
+        };
         regions.entry(name).or_default().extend(set);
     }
     for set in regions.values_mut() {

@@ -49,7 +49,9 @@
 //!   `physical_<tag>`, each holding the nodes of the group's elements (groups of the same name add
 //!   their nodes up). The physical group of an element is its first tag (2.x; 0 is none), its
 //!   physical region (legacy) or that of its entity in `$Entities` (4.1). A volume group that holds
-//!   every volume element is the whole mesh, not a region (Gmsh gives one to any volume mesh).
+//!   every volume element is the whole mesh, not a region (Gmsh gives one to any volume mesh). A
+//!   name shared by a volume group and groups of lower dimension is split by dimension
+//!   (`liver_volume`, `liver_surface`, `_curve`, `_point`), so that neither is taken for the other.
 //!   [`write_msh`] writes each non-empty region as a named 0-dimensional physical group of point
 //!   elements, one per node, which Gmsh opens and which is read back as the same region.
 //!
