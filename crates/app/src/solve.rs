@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use fem::{post, Law, Solution, StaticSolver};
+use fem::{post, ElementGeometry, Formulation, Law, Solution, StaticSolver};
 use mesh::io::Field;
 use mesh::stats::ms;
 use scenario::StaticScenario;
@@ -150,6 +150,9 @@ impl Solved {
                 p.material.law.display_name()
             ));
         }
+        if let Some(line) = volume_change_line(geo, p, &sol.u)? {
+            lines.push(line);
+        }
         if p.material.law == Law::Svk {
             if let (over @ 1.., Some((cell, stretch))) = post::over_compressed_cells(geo, p.material.law, &sol.u)? {
                 lines.push(format!(
@@ -164,6 +167,41 @@ impl Solved {
         }
         Ok(lines)
     }
+}
+
+/// The share of its volume a cell may gain or lose in a nearly incompressible material
+/// ([`fem::material::FBAR_POISSON`] and above) before the solve warns.
+const VOLUME_CHANGE: f64 = 0.1;
+
+/// The warning for a nearly incompressible material (ν ≥ [`fem::material::FBAR_POISSON`]) whose
+/// cells changed volume by more than [`VOLUME_CHANGE`]: the law or the elements do not hold the
+/// volume under this strain (a co-rotational cube of hexahedra at ν = 0.499 pressed by a quarter
+/// of its height: 21 of 27 cells, det F down to 0.55; Neo-Hookean on F-bar elements: none).
+fn volume_change_line(geometry: &ElementGeometry, p: &fem::Problem, u: &[f64]) -> Result<Option<String>> {
+    if p.material.poisson < fem::material::FBAR_POISSON {
+        return Ok(None);
+    }
+    let ratios = post::volume_ratios(geometry, p.material.law, u)?;
+    let changed = ratios.iter().filter(|&&j| (j - 1.0).abs() > VOLUME_CHANGE).count();
+    if changed == 0 {
+        return Ok(None);
+    }
+    let (least, most) = (ratios.iter().copied().fold(f64::INFINITY, f64::min), mesh::stats::max(&ratios));
+    let cure = match (p.material.law, geometry.formulation) {
+        (Law::NeoHookean, Formulation::Fbar) => "a finer mesh or a smaller load",
+        (Law::NeoHookean, _) => "formulation = \"fbar\"",
+        _ => "law = \"neo_hookean\" (formulation = \"fbar\")",
+    };
+    Ok(Some(format!(
+        "warning    {changed} of {} cells changed volume by more than {:.0} % (det F from {least:.3} to {most:.3}) \
+         where nu = {} makes the material nearly incompressible: the {} law on {} elements does not hold the volume \
+         under this strain; {cure} does",
+        p.mesh.cells.len(),
+        100.0 * VOLUME_CHANGE,
+        p.material.poisson,
+        p.material.law.display_name(),
+        geometry.formulation.display_name()
+    )))
 }
 
 /// The mid-edge nodes of a T10 mesh that are not held where both corners of their edge are
@@ -278,6 +316,36 @@ mod tests {
         assert!(large.iter().any(|l| l.starts_with("material   SVK (F-bar")), "{large:?}");
         let warning = large.iter().find(|l| warned(std::slice::from_ref(*l))).expect("no warning");
         assert!(warning.contains("of 384 cells") && warning.contains("neo_hookean"), "{warning}");
+    }
+
+    /// A cube of ν = 0.499 held at its base and pressed down by a quarter of its height: the
+    /// co-rotational law on standard elements loses volume and says so; Neo-Hookean on F-bar
+    /// elements holds it, without a word.
+    #[test]
+    fn a_nearly_incompressible_body_that_changes_volume_is_warned_about() {
+        let dir = tempfile::tempdir().unwrap();
+        let lines = |law: &str, formulation: &str| {
+            let path = dir.path().join("press.toml");
+            let text = format!(
+                "kind = \"static\"\nname = \"press\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.02, 0.02, 0.02]\n\
+                 cells = [3, 3, 3]\nelement = \"hex\"\n[material]\nlaw = \"{law}\"\nyoung = 5000.0\npoisson = 0.499\n\
+                 formulation = \"{formulation}\"\n\
+                 [[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1e-9] }} }}\n\
+                 [[prescribed]]\nselect = {{ box = {{ min = [-1.0, -1.0, 0.02], max = [1.0, 1.0, 1.0] }} }}\n\
+                 displacement = [0.0, 0.0, -0.005]\n"
+            );
+            std::fs::write(&path, text).unwrap();
+            solve_scenario(&path).unwrap().lines().unwrap()
+        };
+        let warned = |lines: &[String]| lines.iter().find(|l| l.contains("changed volume by more than")).cloned();
+        let corotational = lines("corotational", "standard");
+        let warning = warned(&corotational).expect("the co-rotational standard cube warned");
+        assert!(
+            warning.contains("co-rotational law on standard elements") && warning.contains("neo_hookean"),
+            "{warning}"
+        );
+        let neo = lines("neo_hookean", "fbar");
+        assert_eq!(warned(&neo), None, "{neo:?}");
     }
 
     /// A bar in a file, held at one end and pulled at the other by node numbers: the same solve

@@ -92,6 +92,14 @@ pub fn inverted_cells(geometry: &ElementGeometry, law: Law, u: &[f64]) -> Result
     Ok((smallest.iter().filter(|&&j| j <= 0.0).count(), smallest.iter().copied().fold(f64::INFINITY, f64::min)))
 }
 
+/// Each cell's volume ratio J = det F (det F̄ under F-bar), the mean over its quadrature points:
+/// 1 where it keeps its volume.
+pub fn volume_ratios(geometry: &ElementGeometry, law: Law, u: &[f64]) -> Result<Vec<f64>, FemError> {
+    let gradients = effective_gradients(geometry, law, u)?;
+    let points = geometry.points_per_element;
+    Ok(gradients.chunks(points).map(|fs| fs.iter().map(|f| f.determinant()).sum::<f64>() / points as f64).collect())
+}
+
 /// Each cell's least principal stretch over its quadrature points (from F̄ under F-bar).
 fn least_stretches(geometry: &ElementGeometry, law: Law, u: &[f64]) -> Result<Vec<f64>, FemError> {
     let gradients = effective_gradients(geometry, law, u)?;
