@@ -330,7 +330,8 @@ pub struct RegistrationChoice {
     /// A structure inside the organ given back deformed with it (a tumour, vessels): a surface 3D
     /// Slicer exports (.stl, .obj, .ply, .vtk, .vtp; in --units and the frame its header names,
     /// else the targets'), named by its file's stem; or LABELMAP:LABEL, a label of a labelmap
-    /// (seg.seg.nrrd:tumour, seg.nii.gz:2), named by the label. Repeat for several.
+    /// (seg.seg.nrrd:tumour, seg.nii.gz:2), named by the label; NAME=SOURCE names it NAME
+    /// (tumour=seg.nii.gz:2). Repeat for several.
     #[arg(long = "structure", value_name = "SURFACE")]
     pub structures: Vec<PathBuf>,
 }
@@ -499,15 +500,31 @@ impl StructureFile {
     }
 }
 
-/// The name of the structure `source` holds: a surface file's stem, or the label of
-/// `LABELMAP:LABEL` (`label_N` for a number), white space turned into `_`.
+/// The name of the structure `source` holds: the `NAME` of `NAME=SOURCE`; else a surface file's
+/// stem, or the label of `LABELMAP:LABEL` (`label_N` for a number); white space turned into `_`.
 pub fn structure_name(source: &Path) -> String {
-    let name = match labelmap_label(source) {
-        Some((_, label)) if label.parse::<i32>().is_ok() => format!("label_{label}"),
-        Some((_, label)) => label.to_string(),
-        None => source.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+    let (named, source) = named_source(source);
+    let name = match (named, labelmap_label(source)) {
+        (Some(name), _) => name.to_string(),
+        (None, Some((_, label))) if label.parse::<i32>().is_ok() => format!("label_{label}"),
+        (None, Some((_, label))) => label.to_string(),
+        (None, None) => source.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
     };
     name.replace(char::is_whitespace, "_")
+}
+
+/// `NAME=SOURCE` split into the name and the source; a `source` with no `=` before its path (or a
+/// file that is there under that whole name) has none.
+fn named_source(source: &Path) -> (Option<&str>, &Path) {
+    let split = source.to_str().and_then(|s| s.split_once('='));
+    match split {
+        Some((name, rest))
+            if !name.is_empty() && !rest.is_empty() && !name.contains(['/', '\\']) && !source.exists() =>
+        {
+            (Some(name), Path::new(rest))
+        }
+        _ => (None, source),
+    }
 }
 
 /// `LABELMAP:LABEL` split, when `source` is one.
@@ -525,6 +542,8 @@ pub fn read_structure(
     frame: Option<Frame>,
     to: Option<Frame>,
 ) -> Result<(String, TriSurface)> {
+    let name = structure_name(source);
+    let source = named_source(source).1;
     let mut input = match labelmap_label(source) {
         Some((path, label)) => OrganInput::read_with(Path::new(path), Some(label), None, &ExtractOptions::structure())?,
         None if is_labelmap(source) => anyhow::bail!(
@@ -535,9 +554,11 @@ pub fn read_structure(
     };
     let unit = input.unit()?;
     let (mut surface, frame) = (input.surface, input.frame.or(frame));
-    let name = structure_name(source);
     if name.len() > 20 {
-        anyhow::bail!("its name `{name}` is longer than 20 bytes, an OpenIGTLink device name: rename it");
+        anyhow::bail!(
+            "its name `{name}` is longer than 20 bytes, an OpenIGTLink device name: name it (NAME={})",
+            source.display()
+        );
     }
     let change = FrameChange::between(frame, to);
     surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(change.point(*p)));
@@ -790,6 +811,20 @@ fn region_targets(m: &mesh::Mesh) -> Vec<Point> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A structure is named by `NAME=` where given, else by its file's stem or its label; a path
+    /// with `=` in a folder's name, or a file there under the whole name, is a path.
+    #[test]
+    fn structures_are_named_as_given() {
+        let name = |s: &str| structure_name(Path::new(s));
+        assert_eq!((name("seg.nii.gz:2"), name("tumour=seg.nii.gz:2")), ("label_2".into(), "tumour".into()));
+        assert_eq!((name("left lobe=a/b.stl"), name("a/b.stl")), ("left_lobe".into(), "b".into()));
+        assert_eq!((name("runs/x=1/b.stl"), name("seg.seg.nrrd:liver vessels")), ("b".into(), "liver_vessels".into()));
+        let dir = tempfile::tempdir().unwrap();
+        let odd = dir.path().join("a=b.stl");
+        std::fs::write(&odd, "").unwrap();
+        assert_eq!(structure_name(&odd), "a=b");
+    }
 
     /// A set-up whose preparation stopped before its validation chose a method is refused for its
     /// own method (registration.toml names one all the same), not for a method named.

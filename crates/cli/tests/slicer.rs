@@ -164,7 +164,8 @@ fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
     let map = mesh::labelmap::Labelmap::single(dims, labels, affine, Frame::Ras);
     mesh::labelmap::write_nifti(d.join("seg.nii.gz"), &map).unwrap();
     let labelled = format!("{}:5", d.join("seg.nii.gz").display());
-    let two_pieces = format!("{}:7", d.join("seg.nii.gz").display());
+    // Named on the command line (a second labelmap's label 7 would collide with `label_7`).
+    let two_pieces = format!("nodules={}:7", d.join("seg.nii.gz").display());
     ball.transform([70.0, 0.0, 0.0], 1.0);
     let far = d.join("far.stl");
     mesh::io::write_surface_in_frame(&far, &ball, Frame::Lps).unwrap();
@@ -192,7 +193,7 @@ fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
         serde_json::from_str(&std::fs::read_to_string(d.join("run/summary.json")).unwrap()).unwrap();
     let warnings = summary["warnings"].as_array().unwrap();
     assert!(warnings.iter().any(|w| w.as_str().unwrap().starts_with(said)), "{warnings:?}");
-    let pieces = mesh::io::read_surface(d.join("run/label_7_deformed.vtk")).unwrap();
+    let pieces = mesh::io::read_surface(d.join("run/nodules_deformed.vtk")).unwrap();
     assert_eq!(surface_pieces(&pieces), 2);
     let moved = mesh::io::read_surface(d.join("run/tumour_deformed.vtk")).unwrap();
     let rest = mesh::io::read_surface(tumour).unwrap();

@@ -88,7 +88,7 @@ pub struct Registration {
 pub fn check_structure_name(name: &str, taken: &[&str]) -> Result<()> {
     if name.is_empty() || RESERVED_NAMES.contains(&name) || taken.contains(&name) {
         return Err(RegisterError::Invalid(format!(
-            "a structure cannot be named `{name}`: names are unique and none of {}",
+            "a structure cannot be named `{name}`: names are unique and none of {} (give another: NAME=SOURCE)",
             RESERVED_NAMES.join(", ")
         )));
     }

@@ -350,6 +350,8 @@ impl CaseScenario {
             return bad(format!("misalignment.rotation_deg = {} must lie in [-180, 180]", m.rotation_deg));
         }
         m.transform().map_err(|e| format!("misalignment: {e}"))?;
+        // The loop's settings first: a budget given beside the case holds for every method too.
+        self.registration.validate().map_err(|e| format!("registration: {e}"))?;
         if self.models.method.is_empty() {
             return bad("models.method: no method to compare (add [[models.method]] tables)".into());
         }
@@ -391,7 +393,7 @@ impl CaseScenario {
             }
             slugs.push(slug);
         }
-        self.registration.validate().map_err(|e| format!("registration: {e}"))
+        Ok(())
     }
 }
 
