@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
 use mesh::io::{Field, Frame};
-use mesh::isosurface::ExtractOptions;
+use mesh::isosurface::{ExtractOptions, ExtractReport};
 use mesh::labelmap::{is_labelmap, read_labelmap_surface, unreadable_segmentation, LABELMAP_FORMATS};
 use mesh::length::{mm, organ_units, LengthUnit, UnitOrAuto};
 use mesh::phantom::PhantomSpec;
@@ -134,6 +134,8 @@ pub struct OrganInput {
     unit: Option<LengthUnit>,
     /// What was read, each a topic (`labelmap`, `warning`, `units`) and a line, in order.
     pub notes: Vec<(&'static str, String)>,
+    /// What the extraction of a labelmap's label did (none for a surface file).
+    pub extract: Option<ExtractReport>,
 }
 
 impl OrganInput {
@@ -160,13 +162,14 @@ impl OrganInput {
             let mut notes: Vec<_> = organ.lines().into_iter().map(|l| ("labelmap", l)).collect();
             notes.extend(organ.warnings.iter().map(|w| ("warning", w.clone())));
             let (frame, unit) = (organ.scanner_frame(), Some(LengthUnit::Millimetre));
-            return Ok(OrganInput { surface: organ.surface, frame, labelmap: true, unit, notes });
+            let extract = Some(organ.extract);
+            return Ok(OrganInput { surface: organ.surface, frame, labelmap: true, unit, notes, extract });
         }
         if let Some(label) = label {
             bail!("--label {label} chooses a label of a labelmap ({LABELMAP_FORMATS}), not of {}", path.display());
         }
         let (surface, frame) = mesh::io::read_surface_with_frame(path)?;
-        Ok(OrganInput { surface, frame, labelmap: false, unit: units, notes: Vec::new() })
+        Ok(OrganInput { surface, frame, labelmap: false, unit: units, notes: Vec::new(), extract: None })
     }
 
     /// Its unit: a labelmap's millimetre, the one given, or the one detected from the surface's

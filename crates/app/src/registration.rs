@@ -535,13 +535,15 @@ fn labelmap_label(source: &Path) -> Option<(&str, &str)> {
 /// The structure `source` holds ([`structure_name`], its surface in m in the frame `to`), read as
 /// an organ's segmentation is ([`OrganInput`]): a surface file in `unit`, in the frame its header
 /// names (else `frame`); or `LABELMAP:LABEL`, a label's surface extracted from a labelmap (mm,
-/// its scanner frame). The name must fit an OpenIGTLink device name (20 bytes).
+/// its scanner frame). The name must fit an OpenIGTLink device name (20 bytes). With the
+/// warnings of its reading: a labelmap's (the image's border), and a label's cavities filled (a
+/// hollow structure: its inner wall is not given back).
 pub fn read_structure(
     source: &Path,
     unit: LengthUnit,
     frame: Option<Frame>,
     to: Option<Frame>,
-) -> Result<(String, TriSurface)> {
+) -> Result<(String, TriSurface, Vec<String>)> {
     let name = structure_name(source);
     let source = named_source(source).1;
     let mut input = match labelmap_label(source) {
@@ -562,7 +564,20 @@ pub fn read_structure(
     }
     let change = FrameChange::between(frame, to);
     surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(change.point(*p)));
-    Ok((name, surface))
+    let mut warnings: Vec<String> = input
+        .notes
+        .into_iter()
+        .filter(|(topic, _)| *topic == "warning")
+        .map(|(_, w)| format!("`{name}`: {w}"))
+        .collect();
+    if let Some(filled) = input.extract.filter(|e| e.filled_voxels > 0) {
+        warnings.push(format!(
+            "`{name}` is hollow: {} of its {} voxels are a cavity it encloses, filled; its outer surface is given \
+             back, not its inner wall",
+            filled.filled_voxels, filled.voxels
+        ));
+    }
+    Ok((name, surface, warnings))
 }
 
 impl RegistrationSpec {
@@ -631,9 +646,10 @@ impl RegistrationSpec {
         for source in &self.structures {
             let context = || format!("the structure {}", source.path.display());
             let unit = source.unit.unwrap_or(self.given_units);
-            let (name, surface) =
+            let (name, surface, warnings) =
                 read_structure(&source.path, unit, self.given_frame, registration.frame()).with_context(context)?;
             registration.add_structure(&name, surface).with_context(context)?;
+            warnings.into_iter().for_each(|w| registration.warn(w));
         }
         Ok(registration)
     }

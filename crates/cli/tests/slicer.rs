@@ -122,7 +122,7 @@ fn slicer_files_and_millimetres_register_as_metres_do() {
 /// the organ: about the registered target it was drawn around, and where the displacement field
 /// the run writes takes it back to rest. The same ball given as a label of a NIfTI labelmap
 /// comes back about the same target; a label of two balls comes back in two pieces; a structure
-/// partly outside the organ is warned about in summary.json.
+/// partly outside the organ, and a hollow one, are warned about in summary.json.
 #[test]
 fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
     let dir = tempfile::tempdir().unwrap();
@@ -156,6 +156,7 @@ fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
                 labels.push(match () {
                     _ if within(0.0, 6.0) => 5,
                     _ if within(-6.0, 2.5) || within(6.0, 2.5) => 7,
+                    _ if within(0.0, 8.5) && !within(0.0, 6.5) => 9,
                     _ => 0,
                 });
             }
@@ -166,6 +167,7 @@ fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
     let labelled = format!("{}:5", d.join("seg.nii.gz").display());
     // Named on the command line (a second labelmap's label 7 would collide with `label_7`).
     let two_pieces = format!("nodules={}:7", d.join("seg.nii.gz").display());
+    let hollow = format!("cyst={}:9", d.join("seg.nii.gz").display());
     ball.transform([70.0, 0.0, 0.0], 1.0);
     let far = d.join("far.stl");
     mesh::io::write_surface_in_frame(&far, &ball, Frame::Lps).unwrap();
@@ -185,6 +187,8 @@ fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
             "--structure",
             &two_pieces,
             "--structure",
+            &hollow,
+            "--structure",
             far,
         ],
     );
@@ -193,6 +197,8 @@ fn a_structure_moves_with_the_organ_as_the_displacement_field_says() {
         serde_json::from_str(&std::fs::read_to_string(d.join("run/summary.json")).unwrap()).unwrap();
     let warnings = summary["warnings"].as_array().unwrap();
     assert!(warnings.iter().any(|w| w.as_str().unwrap().starts_with(said)), "{warnings:?}");
+    let hollow = "`cyst` is hollow: ";
+    assert!(warnings.iter().any(|w| w.as_str().unwrap().starts_with(hollow)), "{warnings:?}");
     let pieces = mesh::io::read_surface(d.join("run/nodules_deformed.vtk")).unwrap();
     assert_eq!(surface_pieces(&pieces), 2);
     let moved = mesh::io::read_surface(d.join("run/tumour_deformed.vtk")).unwrap();

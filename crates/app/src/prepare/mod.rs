@@ -643,14 +643,14 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
     let mut names: Vec<String> = Vec::new();
     for source in &options.structures {
         let context = || format!("the structure {}", source.display());
-        let (name, structure) = read_structure(source, unit, given, frame).with_context(context)?;
+        let (name, structure, read_warnings) = read_structure(source, unit, given, frame).with_context(context)?;
         let taken: Vec<&str> = names.iter().map(String::as_str).collect();
         register::registration::check_structure_name(&name, &taken).with_context(context)?;
         let (embedded, warnings) = register::Structure::new(&located, &name, structure).with_context(context)?;
         let file = structure_file(&name);
         write_surface_in_mm(&dir.join(&file), embedded.rest(), frame)?;
         lines.push(format!("structure: {name}, {} vertices, {file}", embedded.rest().vertices.len()));
-        lines.extend(warnings.into_iter().map(|w| format!("warning: {w}")));
+        lines.extend(read_warnings.into_iter().chain(warnings).map(|w| format!("warning: {w}")));
         names.push(name);
     }
     organ.regions.insert("visible".into(), visible);
