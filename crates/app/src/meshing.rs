@@ -241,7 +241,7 @@ fn organ_surface(
     if options.repair && !input.labelmap {
         let (repaired, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
             .with_context(|| format!("repairing {} (see --no-repair)", path.display()))?;
-        notes.extend(route.lines(unit.map(|u| mm(u.metres()))).into_iter().map(|l| ("repair", l)));
+        notes.extend(route.lines(unit).into_iter().map(|l| ("repair", l)));
         notes.extend(route.warnings().into_iter().map(|l| ("warning", l)));
         surface = repaired;
     }

@@ -22,6 +22,7 @@
 //! The result passes [`check_closed_manifold`].
 
 use crate::decimate::decimate;
+use crate::length::LengthUnit;
 use crate::surface::check_closed_manifold;
 use crate::volume::VoxelMask;
 use crate::{cross, dot, sub, MeshError, Point, TriSurface};
@@ -77,13 +78,14 @@ pub struct ExtractReport {
 }
 
 impl ExtractReport {
-    /// The result's enclosed volume, in mL when `mm_per_unit` (the millimetres in one world unit)
-    /// is known, and how far it lies from the kept voxels' volume: "1569.0 mL (-0.2 % from the
-    /// voxels)".
-    pub fn volume_text(&self, mm_per_unit: Option<f64>) -> String {
+    /// The result's enclosed volume, in mL when the world `unit` is known, and how far it lies
+    /// from the kept voxels' volume: "1569.0 mL (-0.2 % from the voxels)".
+    pub fn volume_text(&self, unit: Option<LengthUnit>) -> String {
         let change = 100.0 * (self.volume / self.voxel_volume - 1.0);
-        match mm_per_unit {
-            Some(scale) => format!("{:.1} mL ({change:+.1} % from the voxels)", self.volume * scale.powi(3) * 1e-3),
+        // A millilitre is a cubic centimetre.
+        let centimetres = |unit: LengthUnit| LengthUnit::Centimetre.from_metres(unit.metres());
+        match unit {
+            Some(unit) => format!("{:.1} mL ({change:+.1} % from the voxels)", self.volume * centimetres(unit).powi(3)),
             None => {
                 format!("{} (the world unit cubed; {change:+.1} % from the voxels)", crate::repair::number(self.volume))
             }

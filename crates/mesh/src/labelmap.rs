@@ -1175,7 +1175,7 @@ impl LabelSurface {
             "surface: {} triangles (decimated from {}), {}",
             self.surface.triangles.len(),
             e.extracted_triangles,
-            e.volume_text(Some(1.0))
+            e.volume_text(Some(LengthUnit::Millimetre))
         ));
         lines
     }

@@ -20,6 +20,7 @@ use rayon::prelude::*;
 
 use crate::bvh::SurfaceBvh;
 use crate::isosurface::{mask_surface, ExtractOptions, ExtractReport};
+use crate::length::LengthUnit;
 use crate::repair::{largest_extent, number, repair_surface, RepairOptions, RepairReport};
 use crate::volume::voxelise_surface;
 use crate::{bounds, MeshError, Point, TriSurface};
@@ -64,10 +65,9 @@ pub enum Route {
 }
 
 impl Route {
-    /// What was done, one line each; lengths are given in mm when `mm_per_unit` (the
-    /// millimetres in one unit of the surface's coordinates) is known, otherwise in the surface's
-    /// unit.
-    pub fn lines(&self, mm_per_unit: Option<f64>) -> Vec<String> {
+    /// What was done, one line each; lengths are given in mm when the `unit` of the surface's
+    /// coordinates is known, otherwise in that unit.
+    pub fn lines(&self, unit: Option<LengthUnit>) -> Vec<String> {
         match self {
             Route::Local(report) => {
                 let mut lines = vec!["route: local repair".to_string()];
@@ -79,8 +79,8 @@ impl Route {
                 lines
             }
             Route::Volumetric(r) => {
-                let mm = |x: f64| match mm_per_unit {
-                    Some(scale) => format!("{:.2} mm", x * scale),
+                let mm = |x: f64| match unit {
+                    Some(unit) => format!("{:.2} mm", crate::length::mm(unit.to_metres(x))),
                     None => format!("{} (the surface's unit)", number(x)),
                 };
                 let e = &r.extract;
@@ -95,7 +95,7 @@ impl Route {
                     ),
                 ];
                 lines.extend(e.cleaning_lines());
-                lines.push(format!("enclosed volume: {}", e.volume_text(mm_per_unit)));
+                lines.push(format!("enclosed volume: {}", e.volume_text(unit)));
                 lines.push(format!(
                     "distance to the input surface: mean {}, largest {}",
                     mm(r.mean_distance),
@@ -235,7 +235,7 @@ mod tests {
             / (12.0 * d);
         let expected = a.enclosed_volume() + b.enclosed_volume() + c.enclosed_volume()
             - lens * a.enclosed_volume() / (4.0 / 3.0 * PI * r1.powi(3));
-        let lines = route.lines(Some(1.0));
+        let lines = route.lines(Some(LengthUnit::Millimetre));
         eprintln!(
             "{lines:#?}\nvolume {volume:.0}, expected {expected:.0} ({:+.2} %)",
             100.0 * (volume / expected - 1.0)
@@ -282,7 +282,7 @@ mod tests {
         let (result, route) = repair_or_rebuild(&s, &RepairOptions::default(), &RebuildOptions::default()).unwrap();
         assert!(matches!(&route, Route::Local(r) if r.holes_filled == vec![3]));
         assert_eq!(result.triangles.len(), 1280);
-        assert_eq!(route.lines(Some(1.0))[0], "route: local repair");
+        assert_eq!(route.lines(Some(LengthUnit::Millimetre))[0], "route: local repair");
     }
 
     #[test]

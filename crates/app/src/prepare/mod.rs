@@ -569,7 +569,7 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
     let Inputs { surface, unit, landmarks: labelled_landmarks, targets: labelled_targets, camera, given } = inputs;
     let (mut surface, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
         .with_context(|| format!("repairing {}", options.surface.display()))?;
-    lines.extend(route.lines(Some(mm(unit.metres()))).into_iter().map(|l| format!("repair: {l}")));
+    lines.extend(route.lines(Some(unit)).into_iter().map(|l| format!("repair: {l}")));
     surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(*p));
     lines.extend(route.warnings().into_iter().map(|w| format!("warning: {w}")));
     let landmarks = labelled_landmarks.points.clone();

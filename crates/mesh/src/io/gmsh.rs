@@ -255,7 +255,7 @@ pub fn read_gmsh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
 /// volume element is the whole mesh, not a region. A name that a volume group shares with groups
 /// of lower dimension (a part and its boundary, or the whole mesh and its surface) would mean either:
 /// each then takes its dimension's suffix (`liver_volume`, `liver_surface`), the whole mesh's group
-/// too. `kept` maps mesh nodes to file nodes.
+/// too, where `$PhysicalNames` names the volume group. `kept` maps mesh nodes to file nodes.
 fn physical_regions(
     volume: &Volume,
     names: &HashMap<GroupKey, String>,
@@ -267,8 +267,9 @@ fn physical_regions(
         mesh_index[f] = i;
     }
     let name = |key: &GroupKey| names.get(key).cloned().unwrap_or_else(|| format!("physical_{}", key.1));
-    let volume_names: Vec<String> = volume.groups.keys().filter(|k| k.0 == 3).map(name).collect();
-    let shared = |n: &String| volume_names.contains(n) && volume.groups.keys().any(|k| k.0 < 3 && name(k) == *n);
+    // Named volume groups only: an unnamed one's `physical_<tag>` is no name a user gave.
+    let volume_names: Vec<&String> = volume.groups.keys().filter(|k| k.0 == 3).filter_map(|k| names.get(k)).collect();
+    let shared = |n: &String| volume_names.contains(&n) && volume.groups.keys().any(|k| k.0 < 3 && name(k) == *n);
     let mut regions: BTreeMap<String, Vec<usize>> = BTreeMap::new();
     for (key, group) in &volume.groups {
         let plain = name(key);
