@@ -536,8 +536,8 @@ fn labelmap_label(source: &Path) -> Option<(&str, &str)> {
 /// an organ's segmentation is ([`OrganInput`]): a surface file in `unit`, in the frame its header
 /// names (else `frame`); or `LABELMAP:LABEL`, a label's surface extracted from a labelmap (mm,
 /// its scanner frame). The name must fit an OpenIGTLink device name (20 bytes). With the
-/// warnings of its reading: a labelmap's (the image's border), and a label's cavities filled (a
-/// hollow structure: its inner wall is not given back).
+/// warning of a label whose cavities were filled (a hollow structure: its inner wall is not given
+/// back).
 pub fn read_structure(
     source: &Path,
     unit: LengthUnit,
@@ -564,12 +564,8 @@ pub fn read_structure(
     }
     let change = FrameChange::between(frame, to);
     surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(change.point(*p)));
-    let mut warnings: Vec<String> = input
-        .notes
-        .into_iter()
-        .filter(|(topic, _)| *topic == "warning")
-        .map(|(_, w)| format!("`{name}`: {w}"))
-        .collect();
+    // (The organ's reading warnings, of an organ's size and border, are not a structure's.)
+    let mut warnings = Vec::new();
     if let Some(filled) = input.extract.filter(|e| e.filled_voxels > 0) {
         warnings.push(format!(
             "`{name}` is hollow: {} of its {} voxels are a cavity it encloses, filled; its outer surface is given \
