@@ -4,9 +4,9 @@
 //! - [`registration`]: a registration set up from the user's choices (a patient's set-up, a FEM
 //!   scenario, or a learned model and its dataset scenario; targets in their unit; settings), the
 //!   one way `register`, `serve` and Python build it; [`models`]: the models it deforms the organ
-//!   with (a FEM, a U-Net, a reduced-order model) and their default loop settings; [`output`]: what a registration writes (organ.vtu, targets.csv,
-//!   summary.json) and what a comparison of methods writes; [`printout`]: the lines printed about
-//!   a registration run and a comparison.
+//!   with (a FEM, a U-Net, a reduced-order model) and their default loop settings; [`output`]:
+//!   what a registration writes (organ.vtu, targets.csv, summary.json) and what a comparison of
+//!   methods writes; [`printout`]: the lines printed about a registration run and a comparison.
 //! - [`points`]: points read at a command's boundary (CSV, 3D Slicer's `.fcsv` and `.mrk.json`,
 //!   clouds as `.npy`, `.ply` and model files) in its working frame (RAS or LPS) and unit.
 //! - [`meshing`]: an organ's volume mesh from its surface, a labelmap's label or the phantom.

@@ -160,8 +160,9 @@ pub const NETWORK_AFTER_FIT: usize = 1;
 /// The FEM's iterations after a learned model's in a hybrid registration from rest, by default
 /// ([`crate::registration::MethodSpec::Hybrid`]). On the design cases (the built-in case pressed
 /// at 1–2.5 N, lifted, dragged and pulled; from rest), 1, 2, 3 and 4 co-rotational iterations
-/// after the reduced-order model's shape fit gave a mean TRE of 2.40, 2.38, 2.40 and 2.41 mm, the shape fit alone on the
-/// FEM's mesh 2.73 mm (on the model's own quadratic mesh 2.34 mm), the FEM alone 2.94 mm.
+/// after the reduced-order model's shape fit gave a mean TRE of 2.40, 2.38, 2.40 and 2.41 mm,
+/// the shape fit alone on the FEM's mesh 2.73 mm (on the model's own quadratic mesh 2.34 mm), the
+/// FEM alone 2.94 mm.
 pub const POLISH_ITERATIONS: usize = 2;
 
 /// A learned model's registration method ([`learned_registration`]).

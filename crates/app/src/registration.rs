@@ -319,7 +319,8 @@ pub struct RegistrationChoice {
     #[arg(long)]
     pub frame: Option<Frame>,
     /// Most match-and-deform iterations of the first cloud, from rest (default: 30 for a FEM, a
-    /// U-Net's real-time budget, 4, and 10 for a reduced-order model's shape fit); a stream's next clouds take at most 4 (a FEM) or 2 (a learned model).
+    /// U-Net's real-time budget, 4, and 10 for a reduced-order model's shape fit); a stream's next
+    /// clouds take at most 4 (a FEM) or 2 (a learned model).
     #[arg(long)]
     pub iterations: Option<usize>,
     /// Rigid pre-alignment: the first cloud is aligned to the organ's rest surface (trimmed

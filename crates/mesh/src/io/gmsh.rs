@@ -252,10 +252,10 @@ pub fn read_gmsh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
 
 /// The regions of the physical groups of a file: one per group name (`physical_<tag>` for a group
 /// without one), holding the mesh nodes of the group's elements. A volume group that holds every
-/// volume element is the whole mesh, not a region. A name that a volume group shares with groups
-/// of lower dimension (a part and its boundary, or the whole mesh and its surface) would mean either:
-/// each then takes its dimension's suffix (`liver_volume`, `liver_surface`), the whole mesh's group
-/// too, where `$PhysicalNames` names the volume group. `kept` maps mesh nodes to file nodes.
+/// volume element is the whole mesh, not a region. A name that `$PhysicalNames` gives a volume
+/// group and groups of lower dimension (a part and its boundary, or the whole mesh and its
+/// surface) would mean either: each then takes its dimension's suffix (`liver_volume`,
+/// `liver_surface`), the whole mesh's group too. `kept` maps mesh nodes to file nodes.
 fn physical_regions(
     volume: &Volume,
     names: &HashMap<GroupKey, String>,
