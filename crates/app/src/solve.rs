@@ -226,18 +226,24 @@ fn mid_edge_nodes_left_free(p: &fem::Problem) -> usize {
 mod tests {
     use super::*;
 
+    /// The lines of the static scenario `text` solved, written as `scenario.toml` into `dir`
+    /// (where its mesh files lie).
+    fn solved_lines(dir: &Path, text: &str) -> Vec<String> {
+        let path = dir.join("scenario.toml");
+        std::fs::write(&path, text).unwrap();
+        solve_scenario(&path).unwrap().lines().unwrap()
+    }
+
     /// Loads that act on held nodes only move nothing: said so.
     #[test]
     fn loads_on_held_nodes_only_are_warned_about() {
         let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("held.toml");
         let text = "kind = \"static\"\nname = \"held\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.1, 0.02, 0.02]\n\
                     cells = [4, 1, 1]\nelement = \"hex\"\n[material]\nlaw = \"linear\"\nyoung = 5000.0\npoisson = 0.3\n\
                     [[fixed]]\nselect = { box = { min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] } }\n\
                     [[force]]\nselect = { box = { min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] } }\n\
                     total = [0.0, 0.0, -0.1]\n";
-        std::fs::write(&path, text).unwrap();
-        let lines = solve_scenario(&path).unwrap().lines().unwrap();
+        let lines = solved_lines(dir.path(), text);
         assert!(lines.iter().any(|l| l.starts_with("warning    every load acts on held nodes")), "{lines:?}");
         let beam = solve_scenario(Path::new("beam")).unwrap().lines().unwrap();
         assert!(!beam.iter().any(|l| l.starts_with("warning")), "{beam:?}");
@@ -254,14 +260,12 @@ mod tests {
         let face: Vec<usize> = (0..quadratic.num_nodes()).filter(|&n| quadratic.nodes[n][0] < 1e-9).collect();
         mesh::io::write_mesh(dir.path().join("beam.vtu"), &quadratic, &[]).unwrap();
         let lines = |held: &[usize]| {
-            let path = dir.path().join("beam.toml");
             let text = format!(
                 "kind = \"static\"\nname = \"t10\"\n[mesh.file]\npath = \"beam.vtu\"\n[material]\nlaw = \"linear\"\n\
                  young = 5000.0\npoisson = 0.3\n[[fixed]]\nselect = {{ list = {held:?} }}\n[[force]]\n\
                  select = {{ box = {{ min = [0.099, -1.0, -1.0], max = [1.0, 1.0, 1.0] }} }}\ntotal = [0.0, 0.0, -0.01]\n"
             );
-            std::fs::write(&path, text).unwrap();
-            solve_scenario(&path).unwrap().lines().unwrap()
+            solved_lines(dir.path(), &text)
         };
         let half = lines(&corners);
         let warning = half.iter().find(|l| l.contains("mid-edge node(s) lie between held corners")).expect("warned");
@@ -296,15 +300,13 @@ mod tests {
     fn cells_compressed_past_svk_s_limit_are_warned_about() {
         let dir = tempfile::tempdir().unwrap();
         let lines = |force: f64| {
-            let path = dir.path().join("svk.toml");
             let text = format!(
                 "kind = \"static\"\nname = \"svk\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.02, 0.02, 0.02]\n\
                  cells = [4, 4, 4]\nelement = \"tet\"\n[material]\nlaw = \"svk\"\nyoung = 5000.0\npoisson = 0.49\n\
                  [[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1e-9] }} }}\n\
                  [[force]]\nselect = {{ list = [62] }}\ntotal = [0.0, 0.0, -{force}]\n"
             );
-            std::fs::write(&path, text).unwrap();
-            solve_scenario(&path).unwrap().lines().unwrap()
+            solved_lines(dir.path(), &text)
         };
         let warned = |lines: &[String]| lines.iter().any(|l| l.contains("past Saint-Venant-Kirchhoff's limit stretch"));
         let small = lines(0.1);
@@ -322,7 +324,6 @@ mod tests {
     fn a_nearly_incompressible_body_that_changes_volume_is_warned_about() {
         let dir = tempfile::tempdir().unwrap();
         let lines = |press: f64| {
-            let path = dir.path().join("press.toml");
             let text = format!(
                 "kind = \"static\"\nname = \"press\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.02, 0.02, 0.02]\n\
                  cells = [3, 3, 3]\nelement = \"hex\"\n[material]\nlaw = \"corotational\"\nyoung = 5000.0\n\
@@ -331,8 +332,7 @@ mod tests {
                  [[prescribed]]\nselect = {{ box = {{ min = [-1.0, -1.0, 0.02], max = [1.0, 1.0, 1.0] }} }}\n\
                  displacement = [0.0, 0.0, -{press}]\n"
             );
-            std::fs::write(&path, text).unwrap();
-            solve_scenario(&path).unwrap().lines().unwrap()
+            solved_lines(dir.path(), &text)
         };
         let warned = |lines: &[String]| lines.iter().find(|l| l.contains("changed volume by more than")).cloned();
         let pressed = lines(0.005);

@@ -178,7 +178,6 @@ pub fn truth_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option
     let readings = std::iter::once(("with x and y negated".to_string(), true, 1.0, frame.to_string()))
         .chain(UnitMistake::COMMON.map(unit));
     let (how, other, question) = readings
-        .into_iter()
         .map(|(how, negate, scale, question)| (how, mean_distance(negate, scale), question))
         .min_by(|a, b| a.1.total_cmp(&b.1))?;
     (given > TRUTH_OFF * organ.extent() && other <= given / 3.0).then(|| {

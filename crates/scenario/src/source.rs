@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 
 use mesh::immersed::ImmersedOptions;
 use mesh::length::{organ_units, LengthUnit};
+use mesh::repair::ORGAN_EXTENT_M;
 use mesh::{Mesh, MeshError, NodeSelection, Point};
 use serde::Deserialize;
 
@@ -154,8 +155,10 @@ pub fn unit_hint(mesh: &Mesh) -> Option<String> {
     let keys: Vec<String> = units.iter().map(|u| format!("unit = \"{u}\"")).collect();
     Some(match units.is_empty() {
         true => format!(
-            "the mesh spans {extent:.0} m, where organs span 2 to 60 cm: is its unit right? scenarios are in metres: \
-             [mesh.file] unit"
+            "the mesh spans {extent:.0} m, where organs span {} to {} cm: is its unit right? scenarios are in metres: \
+             [mesh.file] unit",
+            LengthUnit::Centimetre.from_metres(*ORGAN_EXTENT_M.start()),
+            LengthUnit::Centimetre.from_metres(*ORGAN_EXTENT_M.end())
         ),
         false => format!(
             "the mesh spans {extent:.0} m: is it in {}? scenarios are in metres: [mesh.file] {}",
