@@ -17,7 +17,8 @@ PATH) and sees the output directory (a shared file system on a cluster). A shard
 resumes where it stopped when the run is repeated (``augsim generate`` resumes), and a shard
 already complete for the same scenario and draws is not solved again; one made for other ones
 (left by ``--keep-parts`` or a failed merge) is refused, naming what differs. A shard's directory has
-one writer at a time: a shard run again while a killed worker's ``augsim`` still writes it is refused.
+one writer at a time: a shard run again while a killed worker's ``augsim`` still writes it is refused
+(on Linux a worker's ``augsim`` is stopped when its worker dies).
 The draws go to the shards in blocks of 32 (as ``augsim generate --shard`` splits them): a run of
 fewer than 32 draws a shard leaves some shards without work.
 
@@ -25,6 +26,7 @@ Needs dask: ``pip install "./python[cluster]"`` (with dask-jobqueue for --slurm 
 """
 
 import argparse
+import ctypes
 import os
 import shutil
 import signal
@@ -39,6 +41,24 @@ def shard_dir(out, index, count):
     return os.path.join(out + ".parts", f"part{index}of{count}")
 
 
+def _parent_death_signal():
+    """On Linux, a ``preexec_fn`` that has the child sent SIGTERM when the thread that started it
+    dies: a Dask worker killed (by its nanny, the batch queue, an out-of-memory kill) takes its
+    ``augsim`` with it instead of leaving it writing the shard. None elsewhere. ``prctl`` is looked
+    up here, before any fork: the child only calls it."""
+    if not sys.platform.startswith("linux"):
+        return None
+    prctl = ctypes.CDLL(None, use_errno=True).prctl
+    pr_set_pdeathsig, parent = 1, os.getpid()
+
+    def die_with_parent():
+        prctl(pr_set_pdeathsig, int(signal.SIGTERM))
+        if os.getppid() != parent:  # the worker died before the signal was asked for
+            os._exit(1)
+
+    return die_with_parent
+
+
 def generate_shard(augsim, scenario, out, index, count, samples=None, threads=1):
     """Runs ``augsim generate SCENARIO --shard index/count`` into its shard directory (on a worker);
     returns the directory and the run's wall time (s)."""
@@ -48,7 +68,7 @@ def generate_shard(augsim, scenario, out, index, count, samples=None, threads=1)
         command += ["--samples", str(samples)]
     env = dict(os.environ, RAYON_NUM_THREADS=str(threads))
     start = time.perf_counter()
-    run = subprocess.run(command, capture_output=True, text=True, env=env)
+    run = subprocess.run(command, capture_output=True, text=True, env=env, preexec_fn=_parent_death_signal())
     if run.returncode != 0:
         raise RuntimeError(f"shard {index}/{count} failed ({exit_cause(run.returncode)}): {last_words(run)}")
     return directory, time.perf_counter() - start

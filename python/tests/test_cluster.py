@@ -4,6 +4,10 @@ alone, byte for byte. Needs dask (``pip install "./python[cluster]"``; `.ci/run`
 
 import filecmp
 import os
+import signal
+import subprocess
+import sys
+import time
 
 import pytest
 
@@ -38,6 +42,51 @@ def test_a_failing_shard_is_reported(tmp_path):
     with pytest.raises(RuntimeError, match=r"shard 0/1 failed \(exit status 1\): error: .*missing\.toml"):
         cluster.generate_shard(augsim_bin(), str(tmp_path / "missing.toml"), str(tmp_path / "out"), 0, 1)
     assert cluster.exit_cause(-9) == "killed by SIGKILL"
+
+
+def _children(pid):
+    """The processes ``pid``'s threads started (Linux)."""
+    found = []
+    for task in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{task}/children") as f:
+            found += [int(c) for c in f.read().split()]
+    return found
+
+
+def _running(pid):
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the parent-death signal is Linux's")
+def test_a_killed_worker_s_augsim_stops_with_it(tmp_path):
+    # A worker runs its task in a thread, as Dask's do; killed, it must not leave its augsim writing.
+    worker = subprocess.Popen([sys.executable, "-c", (
+        "import sys, threading; from augsim import cluster; "
+        "t = threading.Thread(target=cluster.generate_shard, args=(sys.argv[1], 'liver_ar', sys.argv[2], 0, 1, 100000)); "
+        "t.start(); t.join()"), augsim_bin(), str(tmp_path / "out")])
+    child = None
+    try:
+        deadline = time.monotonic() + 30
+        while child is None and time.monotonic() < deadline:
+            child = next(iter(_children(worker.pid)), None)
+            time.sleep(0.05)
+        assert child is not None, "the worker started no augsim"
+        time.sleep(0.5)
+        assert _running(child)
+        worker.send_signal(signal.SIGKILL)
+        worker.wait()
+        deadline = time.monotonic() + 10
+        while _running(child) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not _running(child), "the killed worker's augsim still runs"
+    finally:
+        worker.kill()
+        if child is not None and _running(child):
+            os.kill(child, signal.SIGKILL)
 
 
 def test_kept_shards_are_reused_only_for_the_same_draws_and_a_dataset_is_never_overwritten(tmp_path):
