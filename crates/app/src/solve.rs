@@ -25,7 +25,9 @@ pub fn solve_scenario(path: &Path) -> Result<Solved> {
     let problem = scenario.build_problem(&dir)?;
     let hint = scenario::source::unit_hint(&problem.mesh).map_or(String::new(), |h| format!(" ({h})"));
     let mut solver = StaticSolver::new(problem)?;
-    let solution = solver.solve(&scenario.solver).with_context(|| format!("static solve{hint}"))?;
+    // Its lines say whether the body snapped past a limit point: made sure of.
+    let options = fem::SolverOptions { confirm_snaps: true, ..scenario.solver.clone() };
+    let solution = solver.solve(&options).with_context(|| format!("static solve{hint}"))?;
     Ok(Solved { scenario, solver, solution })
 }
 
@@ -111,16 +113,21 @@ impl Solved {
                 ms(t.solve)
             ),
         ];
-        if let Some(lambda) = sol.snapped_from {
-            lines.push(format!(
-                "warning    from load factor {lambda:.3} a load step found its equilibrium far away, the response over \
-                 it half as stiff as before or less: past a limit point of the load path the body snapped to \
-                 another branch (as under a real push it gives way), or the path is that soft there; \
-                 `[solver] continuation = \"arc_length\"` follows the path and stops at a limit point"
-            ));
-        }
         let loaded = |n: usize| p.f_ext[3 * n..3 * n + 3].iter().any(|&f| f != 0.0);
         let moved = p.dirichlet.values().any(|d| *d != [0.0; 3]);
+        match sol.snapped_from {
+            Some(lambda) if moved => lines.push(format!(
+                "warning    from load factor {lambda:.3} a load step found its equilibrium far away, the response over \
+                 it half as stiff as before or less: past a limit point of the load path the body snapped to \
+                 another branch (as under a real push it gives way), or the path is that soft there"
+            )),
+            Some(lambda) => lines.push(format!(
+                "warning    the load path turns back at load factor {lambda:.3}, a limit point: past it the body snapped to \
+                 an equilibrium far away (as under a real push it gives way); `[solver] continuation = \"arc_length\"` \
+                 follows the path and stops there"
+            )),
+            None => {}
+        }
         if !moved
             && (0..p.mesh.num_nodes()).any(loaded)
             && (0..p.mesh.num_nodes()).all(|n| !loaded(n) || p.dirichlet.contains_key(&n))

@@ -48,6 +48,12 @@ pub struct SolverOptions {
     pub bfgs_memory: usize,
     /// How the load path is followed.
     pub continuation: Continuation,
+    /// Whether a force-controlled step that softened as a snap does is followed again by arc
+    /// length, to tell a limit point from a path that soft (see [`Solution::snapped_from`]): it
+    /// may cost as many iterations again as the solve. Not a scenario's setting: for callers
+    /// that report snaps.
+    #[serde(skip)]
+    pub confirm_snaps: bool,
 }
 
 /// How a solve follows the load path from rest to the whole load.
@@ -96,6 +102,7 @@ impl Default for SolverOptions {
             reuse_factorization: true,
             bfgs_memory: 12,
             continuation: Continuation::Force,
+            confirm_snaps: false,
         }
     }
 }
@@ -130,10 +137,13 @@ pub struct Solution {
     pub residuals: Vec<f64>,
     /// Time split.
     pub timings: Timings,
-    /// The load factor from which a load step found the next equilibrium far away: past a limit
-    /// point (the body snapped or gave way to another branch of the load path, where an
-    /// arc-length continuation stops instead), or over a stretch of the path that soft; `None`
-    /// otherwise.
+    /// The load factor from which a load step found the next equilibrium far away, the response
+    /// over it half as stiff as before or less: past a limit point the body snapped (or gave way)
+    /// to another branch of the load path, where an arc-length continuation stops instead, or the
+    /// path is that soft there. With [`SolverOptions::confirm_snaps`], such a step is followed
+    /// again by arc length: where the path turns back, the load factor of that limit point; where
+    /// it reaches the step's end, `None` (loads that cannot be scaled alone, with prescribed
+    /// displacements, keep the first answer). `None` otherwise.
     pub snapped_from: Option<f64>,
 }
 
@@ -329,6 +339,7 @@ enum Budget {
 
 /// The converged states of a load-stepped solve, as far as the load's work-conjugate
 /// displacement q = f·u / |f| tells: how much the response has softened.
+#[derive(Clone)]
 struct LoadPath {
     /// The load at load factor 1, normalised (empty when there is none).
     direction: Vec<f64>,
@@ -662,7 +673,7 @@ impl StaticSolver {
                     "an arc-length continuation scales loads, not prescribed displacements".into(),
                 ));
             }
-            let steps = self.arc_length(&mut u, &mut lambda, &mut path, options, &mut stats)?;
+            let steps = self.arc_length(&mut u, &mut lambda, 1.0, &mut path, options, &mut stats)?;
             return Ok(stats.finish(u, steps, start));
         }
         // Whether the early patient attempt is still to be made; the last failed patient attempt
@@ -705,10 +716,16 @@ impl StaticSolver {
             match attempt {
                 Ok(()) => {
                     path.record(target, &trial);
-                    if path.snapped() {
-                        stats.snapped_from.get_or_insert(lambda);
-                    }
                     latest_converged = true;
+                    if path.snapped() && stats.snapped_from.is_none() {
+                        stats.snapped_from = if options.confirm_snaps {
+                            // The check's factor is at a state of its own path.
+                            latest_converged = !self.arc_length_applies();
+                            self.limit_point_between(&u, lambda, target, &path, options, &mut stats)?
+                        } else {
+                            Some(lambda)
+                        };
+                    }
                     previous = Some((lambda, std::mem::replace(&mut u, trial)));
                     lambda = target;
                     steps += 1;
@@ -765,7 +782,7 @@ impl StaticSolver {
             return Err(failure);
         }
         let (from, indefinite) = (*lambda, stats.indefinite);
-        match self.arc_length(u, lambda, path, options, stats) {
+        match self.arc_length(u, lambda, 1.0, path, options, stats) {
             // Not a step further: force control's own failure says more (a tolerance below
             // round-off, too few iterations allowed), and what its last attempt found.
             Err(FemError::NoEquilibrium { load_factor, .. }) if load_factor <= from => {
@@ -773,6 +790,37 @@ impl StaticSolver {
                 Err(failure)
             }
             other => other,
+        }
+    }
+
+    /// Whether force control's step from the equilibrium `u` at load factor `lambda` to `target`,
+    /// seen to soften as a snap does ([`LoadPath::snapped`]), passed a limit point: the path
+    /// followed by arc length from `u` turns back before `target`, at the load factor returned
+    /// (`lambda` itself where loads cannot be scaled alone), or reaches it (`None`: the path is
+    /// that soft there, and the body follows it without snapping).
+    fn limit_point_between(
+        &mut self,
+        u: &[f64],
+        lambda: f64,
+        target: f64,
+        path: &LoadPath,
+        options: &SolverOptions,
+        stats: &mut Stats,
+    ) -> Result<Option<f64>, FemError> {
+        if !self.arc_length_applies() {
+            return Ok(Some(lambda));
+        }
+        let (mut along, mut reached, indefinite) = (u.to_vec(), lambda, stats.indefinite);
+        let followed = self.arc_length(&mut along, &mut reached, target, &mut path.clone(), options, stats);
+        stats.indefinite = indefinite;
+        match followed {
+            Ok(_) => Ok(None),
+            Err(FemError::NoEquilibrium { load_factor, .. }) => Ok(Some(load_factor)),
+            // A check that could not be made keeps what the softening said.
+            Err(FemError::NotConverged { .. } | FemError::InvertedElement { .. } | FemError::Factorization(_)) => {
+                Ok(Some(lambda))
+            }
+            Err(e) => Err(e),
         }
     }
 

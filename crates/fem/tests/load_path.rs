@@ -86,6 +86,12 @@ fn a_shallow_arch_snaps_through_past_its_limit_load_whether_load_stepped_or_not(
     // point; below the limit load it did not.
     assert!(solution.snapped_from.is_some_and(|l| (0.7..1.0).contains(&l)), "{:?}", solution.snapped_from);
     assert_eq!(arch(1.5, 20).unwrap().1.snapped_from, None);
+    // Followed again by arc length, the step is seen to pass the limit point, which lies above
+    // the equilibrium it started from.
+    let (problem, _) = arch_problem(2.0);
+    let options = SolverOptions { load_steps: 20, confirm_snaps: true, ..SolverOptions::default() };
+    let limit = StaticSolver::new(problem).unwrap().solve(&options).unwrap().snapped_from;
+    assert!(limit.is_some_and(|l| l > solution.snapped_from.unwrap() && l < 1.0), "{limit:?}");
     assert!((stepped - at_once).abs() < 1e-6 * at_once, "stepped {stepped} m, at once {at_once} m");
 }
 
@@ -170,4 +176,35 @@ fn settings_that_cannot_solve_are_refused() {
             other => panic!("{what}: expected a refusal, got {:?}", other.map(|s| s.load_steps)),
         }
     }
+}
+
+/// A slender column (20 × 1 × 1 cm, Neo-Hookean, E 1 MPa, ν 0.3, 40 × 2 × 2 H8) clamped at its
+/// base and pressed down at its top by `force` newtons, pushed sideways by a hundredth of it (an
+/// imperfection); and its top's nodes.
+fn column_problem(force: f64) -> (Problem, Vec<usize>) {
+    let mesh = mesh::box_hex([0.0; 3], [0.01, 0.01, 0.2], [2, 2, 40]).unwrap();
+    let base: Vec<usize> = (0..mesh.num_nodes()).filter(|&n| mesh.nodes[n][2] < 1e-9).collect();
+    let top: Vec<usize> = (0..mesh.num_nodes()).filter(|&n| mesh.nodes[n][2] > 0.2 - 1e-9).collect();
+    let material = Material::new(Law::NeoHookean, 1e6, 0.3).with_formulation(Formulation::Fbar);
+    let mut problem = Problem::new(mesh, material);
+    problem.fix(&base);
+    problem.add_force(&top, [0.01 * force, 0.0, -force]);
+    (problem, top)
+}
+
+/// Past its buckling load (about 0.05 N) the column bends over, its top sinking fast under a
+/// load that still grows: a path as soft as a snap's, without a limit point. Force-controlled in
+/// ten steps, the solve finds that soft stretch, follows it by arc length, and does not say the
+/// column snapped; the arch, checked the same way, did (above).
+#[test]
+fn a_column_bending_over_past_its_buckling_load_is_not_said_to_snap() {
+    let (problem, top) = column_problem(0.08);
+    let options = SolverOptions { load_steps: 10, confirm_snaps: true, ..SolverOptions::default() };
+    let solution = StaticSolver::new(problem.clone()).unwrap().solve(&options).unwrap();
+    let sideways = top.iter().map(|&n| solution.u[3 * n]).sum::<f64>() / top.len() as f64;
+    assert!(sideways > 0.1, "the column's top moved sideways by {sideways} m: it did not bend over");
+    assert_eq!(solution.snapped_from, None);
+    // Without the check, the first soft step is taken for a snap.
+    let unchecked = SolverOptions { confirm_snaps: false, ..options };
+    assert!(StaticSolver::new(problem).unwrap().solve(&unchecked).unwrap().snapped_from.is_some());
 }

@@ -64,7 +64,7 @@ impl StaticSolver {
     }
 
     /// Follows the load path by arc length from the equilibrium `u` at load factor `lambda` to
-    /// load factor 1, updating both (they stay at the last equilibrium reached on failure);
+    /// load factor `end`, updating both (they stay at the last equilibrium reached on failure);
     /// returns the steps taken. It ends with [`FemError::NoEquilibrium`] where the path turns back
     /// (a step ends at a lower load factor, or the tangent is indefinite where one starts) or the
     /// shortest arc fails.
@@ -72,6 +72,7 @@ impl StaticSolver {
         &mut self,
         u: &mut Vec<f64>,
         lambda: &mut f64,
+        end: f64,
         path: &mut LoadPath,
         opt: &SolverOptions,
         stats: &mut Stats,
@@ -104,23 +105,23 @@ impl StaticSolver {
                 return Err(FemError::Invalid("an arc-length continuation without a load".into()));
             }
             if arc.is_nan() {
-                arc = FIRST_ARC * length * (1.0 - *lambda);
+                arc = FIRST_ARC * length * (end - *lambda);
                 smallest = SMALLEST_ARC * arc;
             }
-            if *lambda + arc / length >= 1.0 {
+            if *lambda + arc / length >= end {
                 // The rest of the load in one force-controlled step from the tangent's prediction.
                 let mut trial = u.clone();
-                self.add_free(&mut trial, &tangent, 1.0 - *lambda);
+                self.add_free(&mut trial, &tangent, end - *lambda);
                 let factorizations = stats.factorizations;
-                let finished = self.newton(&mut trial, 1.0, Start::Kept, opt, Budget::Normal, stats);
+                let finished = self.newton(&mut trial, end, Start::Kept, opt, Budget::Normal, stats);
                 current = stats.factorizations == factorizations;
                 if finished.is_ok() {
-                    path.record(1.0, &trial);
+                    path.record(end, &trial);
                     *u = trial;
-                    *lambda = 1.0;
+                    *lambda = end;
                     return Ok(steps + 1);
                 }
-                arc = 0.5 * (1.0 - *lambda) * length;
+                arc = 0.5 * (end - *lambda) * length;
                 continue;
             }
             let factorizations = stats.factorizations;
