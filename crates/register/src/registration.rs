@@ -765,6 +765,45 @@ mod tests {
         assert_eq!(starts, [false, false, true]);
     }
 
+    /// A deformer that moves the organ by its frame's translation, as a warm-started FEM fits a
+    /// cloud in the other frame within a few iterations.
+    struct Translating(Vec<Point>, usize);
+
+    impl Deformer for Translating {
+        fn deform(&mut self, _: &Observations, u: &[f64], _: usize) -> Result<Vec<f64>> {
+            Ok((0..u.len()).map(|d| self.0[self.1 - 1][d % 3]).collect())
+        }
+
+        fn start_frame(&mut self, _: bool) {
+            self.1 += 1;
+        }
+    }
+
+    /// A cloud in the other frame that a warm-started frame fits, undistorted and not far moved,
+    /// is named all the same.
+    #[test]
+    fn a_cloud_in_the_other_frame_is_named_mid_stream() {
+        let cube = mesh::box_tet([-0.01, -0.01, 0.0], [0.04, 0.04, 0.05], [3, 3, 3]).unwrap();
+        let view = mesh::boundary_surface(&cube).vertices;
+        let other: Vec<Point> = view.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
+        let deformer = Box::new(Translating(vec![[0.0; 3], [-0.03, -0.03, 0.0]], 0));
+        let options = RegistrationOptions { iterations: 2, ..Default::default() };
+        let mut r = Registration::new(
+            Organ::new(cube, None).unwrap(),
+            deformer,
+            "translating",
+            vec![[0.02; 3]],
+            Vec::new(),
+            options,
+        )
+        .unwrap();
+        assert!(r.register(&view).unwrap().registration.plausible());
+        let mirrored = r.register(&other).unwrap().registration;
+        let fits = mirrored.far_share < crate::plausibility::SUSPECT_FAR_SHARE && !mirrored.distorted;
+        assert!(!mirrored.from_rest && fits, "{mirrored:?}");
+        assert!(mirrored.other_frame && mirrored.warnings.iter().any(|w| w.contains("with x and y negated")));
+    }
+
     #[test]
     fn targets_far_outside_in_any_unit_are_refused_without_a_hint() {
         let message = cube_with(vec![[-5.0, 0.0, 0.0]]).err().expect("outside").to_string();
