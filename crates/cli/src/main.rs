@@ -49,7 +49,7 @@ enum Command {
         /// Centre the surface and scale its largest extent to this length (m); overrides --units.
         #[arg(long, requires = "surface")]
         length: Option<f64>,
-        /// Length unit of the surface's coordinates: mm, m, or auto (told from the organ's size,
+        /// Length unit of the surface's coordinates: mm, cm, m, um, or auto (told from the organ's size,
         /// 2 to 60 cm across; a labelmap's is the one its header names, else mm); the surface is
         /// scaled to metres about the origin, keeping its (e.g. CT scanner's) frame.
         #[arg(long, default_value = "auto", value_parser = mesh::length::parse_unit_or_auto)]

@@ -33,7 +33,7 @@ use std::collections::BTreeMap;
 use rayon::prelude::*;
 
 use crate::immersed::{immersed_grid, ImmersedGrid, ImmersedOptions};
-use crate::select::{k_nearest, nearest};
+use crate::select::{farthest_points, k_nearest};
 use crate::tetmesh::{segment_root, stuff_to_count, BoundaryFit, ImplicitDomain};
 use crate::{dot, sub, Mesh, MeshError, Point};
 
@@ -338,7 +338,8 @@ impl PhantomSpec {
         let deep: Vec<usize> =
             interior.iter().copied().filter(|&k| self.signed_distance(nodes[k]) < -self.marker_depth).collect();
         let candidates = if deep.len() >= self.markers { deep } else { interior.clone() };
-        let markers = farthest_points(nodes, &candidates, self.markers);
+        let mut markers = farthest_points(nodes, &candidates, self.markers);
+        markers.sort_unstable();
         let mut tumour: Vec<usize> =
             interior.iter().copied().filter(|&k| within(self.tumour_centre, self.tumour_radius, nodes[k])).collect();
         if tumour.len() < 4 {
@@ -364,28 +365,4 @@ impl PhantomSpec {
         }
         Ok(regions)
     }
-}
-
-/// `count` of the `candidates` spread out by farthest-point sampling, from
-/// the candidate nearest their centroid; returned sorted.
-fn farthest_points(nodes: &[Point], candidates: &[usize], count: usize) -> Vec<usize> {
-    if candidates.is_empty() || count == 0 {
-        return Vec::new();
-    }
-    let n = candidates.len() as f64;
-    let centroid: Point = std::array::from_fn(|d| candidates.iter().map(|&k| nodes[k][d]).sum::<f64>() / n);
-    let d2 = |a: Point, b: Point| dot(sub(a, b), sub(a, b));
-    let first = nearest(nodes, candidates.iter().copied(), centroid).unwrap_or(candidates[0]);
-    let mut chosen = vec![first];
-    let mut dist: Vec<f64> = candidates.iter().map(|&k| d2(nodes[k], nodes[first])).collect();
-    while chosen.len() < count.min(candidates.len()) {
-        let (i, _) = dist.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(&a.0))).unwrap_or((0, &0.0));
-        let k = candidates[i];
-        chosen.push(k);
-        for (j, &c) in candidates.iter().enumerate() {
-            dist[j] = dist[j].min(d2(nodes[c], nodes[k]));
-        }
-    }
-    chosen.sort_unstable();
-    chosen
 }

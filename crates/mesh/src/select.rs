@@ -328,6 +328,29 @@ pub fn nearest(points: &[Point], candidates: impl IntoIterator<Item = usize>, p:
     candidates.into_iter().map(|i| (distance2(points[i], p), i)).min_by(closer).map(|(_, i)| i)
 }
 
+/// `count` of the `candidates` (indices into `nodes`) spread out by farthest-point sampling, in
+/// the order chosen: first the candidate nearest their centroid, then each time the one farthest
+/// from those chosen (ties go to the earlier candidate).
+pub fn farthest_points(nodes: &[Point], candidates: &[usize], count: usize) -> Vec<usize> {
+    let n = candidates.len() as f64;
+    let centroid: Point = std::array::from_fn(|d| candidates.iter().map(|&k| nodes[k][d]).sum::<f64>() / n);
+    let Some(first) = nearest(nodes, candidates.iter().copied(), centroid) else { return Vec::new() };
+    let mut chosen = Vec::with_capacity(count.min(candidates.len()));
+    if count > 0 {
+        chosen.push(first);
+    }
+    let mut gap: Vec<f64> = candidates.iter().map(|&k| distance2(nodes[k], nodes[first])).collect();
+    while chosen.len() < count.min(candidates.len()) {
+        let (i, _) = gap.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(&a.0))).unwrap_or((0, &0.0));
+        let k = candidates[i];
+        chosen.push(k);
+        for (j, &c) in candidates.iter().enumerate() {
+            gap[j] = gap[j].min(distance2(nodes[c], nodes[k]));
+        }
+    }
+    chosen
+}
+
 /// Squared Euclidean distance.
 fn distance2(a: Point, b: Point) -> f64 {
     let d = sub(a, b);

@@ -375,7 +375,7 @@ fn gmsh_4_physical_groups_come_from_the_entities() {
     let got: Vec<(&str, &[usize])> = mesh.regions.iter().map(|(k, v)| (k.as_str(), v.as_slice())).collect();
     assert_eq!(got, [("body", &[0, 1, 2, 3][..]), ("bottom", &[0, 1, 2][..]), ("physical_9", &[4][..])]);
 
-    // $Entities is read now, so a broken one is reported with its line.
+    // $Entities is read, so a broken one is reported with its line.
     let broken = text.replace("1 1 1 1 1 9\n", "1 1 1 1 x 9\n");
     let m = read_gmsh(put(dir.path(), "broken.msh", &broken)).unwrap_err().to_string();
     assert!(m.contains("line 11") && m.contains("number of physical tags, found 'x'"), "{m}");

@@ -51,11 +51,6 @@ pub fn read_point_cloud(path: &Path) -> Result<Vec<Point>> {
     check_points(path, points)
 }
 
-/// Reads target (or ground-truth) positions from a CSV file whose header names `x`, `y`, `z`.
-pub fn read_targets(path: &Path) -> Result<Vec<Point>> {
-    check_points(path, mesh::io::points::read_points_csv(path)?)
-}
-
 /// The clouds of a sequence: a file is a single frame; a directory gives its files of the
 /// [`CLOUD_EXTENSIONS`] sorted by file name (an error if there are none).
 pub fn read_frames(path: &Path) -> Result<Vec<PathBuf>> {
@@ -76,11 +71,6 @@ pub fn read_frames(path: &Path) -> Result<Vec<PathBuf>> {
     }
     frames.sort_by(|a, b| a.file_name().cmp(&b.file_name()));
     Ok(frames)
-}
-
-/// Writes points as CSV with the header `x,y,z` ([`mesh::io::points::write_points_csv`]).
-pub fn write_csv(path: &Path, points: &[Point]) -> Result<()> {
-    Ok(mesh::io::points::write_points_csv(path, points)?)
 }
 
 /// Rejects an empty cloud and non-finite coordinates ([`crate::checks::check_cloud`]), naming the file.

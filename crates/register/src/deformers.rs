@@ -675,7 +675,7 @@ mod tests {
 
     /// A block fixed at its base whose whole top is seen 5 cm lower, deeper than the block is
     /// tall: at their full stiffness the data springs would crush it through itself, and a solve
-    /// of the loop finds no equilibrium (the frame used to end with that error); the springs are
+    /// of the loop finds no equilibrium (the frame would end with that error); the springs are
     /// softened, and the frame ends with the top pressed down, by more than a millimetre, short of
     /// going through the block.
     #[test]

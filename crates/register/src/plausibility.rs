@@ -233,8 +233,8 @@ pub struct Verdict {
 /// What a registered frame says about itself, given its cloud and that cloud's extent over the
 /// organ's ([`check_extent`]), the share of the cloud left unfitted ([`far_share`]), its
 /// displacement `u`, and whether it was rigidly pre-aligned. Without a pre-alignment, a frame
-/// with a warning whose cloud lies on the organ in the other frame says so ([`frame_mix_up`]),
-/// rather than advising one (a turn by 180° is beyond its reach).
+/// whose cloud lies on the organ in the other frame says so ([`frame_mix_up`]), rather than
+/// advising one (a turn by 180° is beyond its reach).
 pub fn verdict(
     organ: &Organ,
     u: &[f64],
@@ -264,7 +264,6 @@ pub fn verdict(
     let distorted = (volume - 1.0).abs() > SUSPECT_VOLUME_CHANGE || distorted_share > SUSPECT_DISTORTED_SHARE;
     let moved_too_far = motion > SUSPECT_MOTION * size;
     let far = far_share > SUSPECT_FAR_SHARE;
-    let suspect = !out.is_empty() || far || distorted || moved_too_far;
     // Asked of every frame: one warm-started from a good frame fits a cloud in the other frame
     // within a few iterations, undistorted (a FEM's, with its targets 29 mm off on the phantom).
     let mix_up = if rigid { None } else { frame_mix_up(organ, cloud)? };

@@ -3,7 +3,8 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use augsim_register::cloud::{read_frames, read_point_cloud, read_targets, write_csv};
+use augsim_register::cloud::{read_frames, read_point_cloud};
+use mesh::io::points::write_points_csv;
 use mesh::io::write_ply_points;
 use mesh::Point;
 
@@ -53,7 +54,7 @@ fn npy_header(descr: &str, rows: usize, cols: usize) -> Vec<u8> {
 fn csv_round_trip_is_exact() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("cloud.csv");
-    write_csv(&path, &sample()).unwrap();
+    write_points_csv(&path, &sample()).unwrap();
     let back = read_point_cloud(&path).unwrap();
     assert_eq!(back.len(), sample().len());
     for (a, b) in back.iter().zip(sample()) {
@@ -61,7 +62,6 @@ fn csv_round_trip_is_exact() {
             assert_eq!(a[k].to_bits(), b[k].to_bits(), "{a:?} vs {b:?}");
         }
     }
-    assert_eq!(read_targets(&path).unwrap(), back);
     assert!(fs::read_to_string(&path).unwrap().starts_with("x,y,z\n"));
 }
 
@@ -70,7 +70,6 @@ fn csv_with_extra_columns_in_another_order() {
     let dir = tempfile::tempdir().unwrap();
     let path = write(dir.path(), "targets.CSV", "z, id ,X,y\r\n3,7,1,2\r\n\r\n -6 , 8, -4 ,-5\n\n");
     assert_eq!(read_point_cloud(&path).unwrap(), vec![[1.0, 2.0, 3.0], [-4.0, -5.0, -6.0]]);
-    assert_eq!(read_targets(&path).unwrap(), vec![[1.0, 2.0, 3.0], [-4.0, -5.0, -6.0]]);
 }
 
 #[test]
@@ -189,13 +188,13 @@ fn csv_errors_name_the_line() {
     assert_contains(&error(read_point_cloud(&path)), &["bad.csv", "line 4", "y", "\"abc\"", "not a number"]);
 
     let path = write(dir.path(), "count.csv", "x,y,z\n1,2,3\n4,5\n");
-    assert_contains(&error(read_targets(&path)), &["line 3", "2 fields", "3 columns"]);
+    assert_contains(&error(read_point_cloud(&path)), &["line 3", "2 fields", "3 columns"]);
 
     let path = write(dir.path(), "nan.csv", "x,y,z\n1,2,3\n4,NaN,6\n");
     assert_contains(&error(read_point_cloud(&path)), &["line 3", "not finite"]);
 
     let path = write(dir.path(), "inf.csv", "x,y,z\n-inf,2,3\n");
-    assert_contains(&error(read_targets(&path)), &["line 2", "not finite"]);
+    assert_contains(&error(read_point_cloud(&path)), &["line 2", "not finite"]);
 
     let path = write(dir.path(), "header_only.csv", "x,y,z\n\n");
     assert_contains(&error(read_point_cloud(&path)), &["no points"]);
@@ -271,7 +270,7 @@ fn frames_of_a_directory_and_of_a_file() {
     let b = dir.path().join("b.ply");
     write_ply_points(&b, &[[1.0, 2.0, 3.0]]).unwrap();
     let a = dir.path().join("a.csv");
-    write_csv(&a, &[[4.0, 5.0, 6.0]]).unwrap();
+    write_points_csv(&a, &[[4.0, 5.0, 6.0]]).unwrap();
     write(dir.path(), "notes.txt", "not a cloud");
     let c = write(dir.path(), "c.obj", "v 7 8 9\n");
     fs::create_dir(dir.path().join("sub.csv")).unwrap();

@@ -743,20 +743,7 @@ fn assessment_points(
             candidates.len()
         )));
     }
-    let n = candidates.len() as f64;
-    let centroid: Point = std::array::from_fn(|d| candidates.iter().map(|&k| nodes[k][d]).sum::<f64>() / n);
-    let mut chosen = vec![nearest(nodes, candidates.iter().copied(), centroid).expect("at least one candidate")];
-    while chosen.len() < spec.count {
-        let gap = |k: usize| chosen.iter().map(|&c| dist2(nodes[k], nodes[c])).fold(f64::INFINITY, f64::min);
-        let next = candidates
-            .iter()
-            .copied()
-            .filter(|k| !chosen.contains(k))
-            .max_by(|&a, &b| gap(a).total_cmp(&gap(b)))
-            .expect("more candidates than chosen points");
-        chosen.push(next);
-    }
-    Ok(chosen.into_iter().map(TrackedPoint::at_node).collect())
+    Ok(mesh::select::farthest_points(nodes, &candidates, spec.count).into_iter().map(TrackedPoint::at_node).collect())
 }
 
 /// Locates tracked points in a tetrahedral mesh. A point outside the mesh by at most half the mean element size
@@ -876,10 +863,6 @@ fn control_paths(
         paths.push(ControlPath { node, displacements });
     }
     Ok(paths)
-}
-
-fn dist2(a: Point, b: Point) -> f64 {
-    (0..3).map(|d| (a[d] - b[d]).powi(2)).sum()
 }
 
 /// Mean Euclidean distance between stacked positions and the measured points of a frame (NaN if none measured).

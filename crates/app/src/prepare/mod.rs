@@ -178,7 +178,7 @@ pub struct PrepareArgs {
     /// Output directory (resumed when it holds a preparation of the same inputs).
     #[arg(short, long)]
     pub out: PathBuf,
-    /// Unit of the surface, camera, landmarks and targets: mm, m, or auto (told from the
+    /// Unit of the surface, camera, landmarks and targets: mm, cm, m, um, or auto (told from the
     /// surface's size; a labelmap's is the one its header names, else mm).
     #[arg(long, default_value = "auto", value_parser = mesh::length::parse_unit_or_auto)]
     pub units: mesh::length::UnitOrAuto,
@@ -760,10 +760,21 @@ fn hold_distance(options: &PrepareOptions, organ: &Mesh, landmarks: &[Point]) ->
     }
 }
 
+/// The camera position a set-up's `camera.csv` in `dir` holds.
+fn read_camera(dir: &Path) -> Result<Point> {
+    let path = dir.join("camera.csv");
+    read_points_csv(&path)?.first().copied().with_context(|| {
+        format!(
+            "{} holds no point (the camera position `prepare` wrote there): prepare the organ again",
+            path.display()
+        )
+    })
+}
+
 /// Step 2: the scenario files.
 fn scenarios_step(options: &PrepareOptions, input_frame: Option<Frame>, dir: &Path) -> Result<Vec<String>> {
     let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
-    let camera = read_points_csv(&dir.join("camera.csv"))?[0];
+    let camera = read_camera(dir)?;
     let [nx, ny, nz] = grid_for(&organ);
     let radius = tool_radius(&organ);
     let name = organ_name(&options.surface);
@@ -965,7 +976,7 @@ fn swing_warning(what: &str, motion: f64, organ: &Mesh) -> Option<String> {
 /// Step 7: the report page and its picture.
 fn report_step(state: &PrepareState, dir: &Path) -> Result<Vec<String>> {
     let mesh = mesh::io::read_mesh(dir.join("organ.vtu"))?;
-    let camera = read_points_csv(&dir.join("camera.csv"))?[0];
+    let camera = read_camera(dir)?;
     let targets = read_points_csv(&dir.join("targets.csv"))?;
     let in_region =
         |name: &str| -> Result<Vec<Point>> { Ok(mesh.region(name)?.iter().map(|&n| mesh.nodes[n]).collect()) };

@@ -486,7 +486,7 @@ pub(super) fn validation_step(
 ) -> Result<Vec<String>> {
     let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
     let surface = read_organ_surface(dir, &organ)?;
-    let camera = read_points_csv(&dir.join("camera.csv"))?[0];
+    let camera = super::read_camera(dir)?;
     let landmarks = read_points_csv(&dir.join("attach.csv"))?;
     let targets = read_points_csv(&dir.join("targets.csv"))?;
     let distance = hold_distance(options, &organ, &landmarks)?;
