@@ -53,12 +53,33 @@ pub fn run_dir(out: Option<&Path>, parent: &Path) -> Result<(PathBuf, bool)> {
     anyhow::bail!("{} holds 99,999 runs: give --out", parent.display())
 }
 
-/// Refuses a folder `dir` that holds the results of an earlier run (its summary.json), so that two
-/// runs' files are never mixed.
+/// Refuses a folder `dir` that holds the results of an earlier run (its summary.json), or the
+/// frames of one stopped before its summary (its organ.vtu or organ_NNNN.vtu), so that two runs'
+/// files are never mixed.
 pub fn refuse_earlier_run(dir: &Path) -> Result<()> {
     if dir.join("summary.json").exists() {
         anyhow::bail!(
             "{} holds the results of an earlier run (summary.json): give another --out, or remove it",
+            dir.display()
+        );
+    }
+    let is_frame = |name: &str| {
+        name == "organ.vtu"
+            || name
+                .strip_prefix("organ_")
+                .and_then(|n| n.strip_suffix(".vtu"))
+                .is_some_and(|n| n.parse::<u32>().is_ok())
+    };
+    let frames = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter(|e| is_frame(&e.file_name().to_string_lossy()))
+        .count();
+    if frames > 0 {
+        anyhow::bail!(
+            "{} holds {frames} frame(s) of an earlier run stopped before its summary (organ.vtu, organ_NNNN.vtu): give \
+             another --out, or remove it",
             dir.display()
         );
     }
@@ -635,6 +656,9 @@ mod tests {
         assert_eq!(run_dir(Some(&given), &parent).unwrap(), (given.clone(), true), "not there yet: the run's own");
         std::fs::create_dir_all(&given).unwrap();
         assert_eq!(run_dir(Some(&given), &parent).unwrap(), (given.clone(), false), "there already: the user's");
+        std::fs::write(given.join("organ_0007.vtu"), "").unwrap();
+        let e = run_dir(Some(&given), &parent).unwrap_err().to_string();
+        assert!(e.contains("holds 1 frame(s) of an earlier run stopped before its summary"), "{e}");
         std::fs::write(given.join("summary.json"), "{}").unwrap();
         let e = run_dir(Some(&given), &parent).unwrap_err().to_string();
         assert!(e.contains("holds the results of an earlier run"), "{e}");
