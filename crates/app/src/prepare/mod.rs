@@ -818,10 +818,11 @@ fn scenarios_step(options: &PrepareOptions, input_frame: Option<Frame>, dir: &Pa
          # method: \"learned\", \"fem\" or \"hybrid\" (the learned model from rest, then the FEM), the one\n\
          # that registered the validation's pushes the best.\n\
          # input_units, input_frame: the unit and frame of the files it was prepared from, in which\n\
-         # points whose files name none are read and results given back (the set-up works in {SET_UP_FRAME}).\n\
+         # points whose files name none are read and results given back{}.\n\
          # structures: surfaces that move with the organ (mm, the organ's frame).\n\
          method = \"learned\"\nmodel = \"model\"\nscenario = \"dataset.toml\"\nfem = \"static.toml\"\ntargets = \"targets.csv\"\nunits = \"m\"\n\
          input_units = \"{}\"\n{}structures = [{}]\n",
+        input_frame.map_or(" (no input named a frame)".into(), |_| format!(" (the set-up works in {SET_UP_FRAME})")),
         input_unit(options)?.symbol(),
         input_frame.map_or(String::new(), |f| format!("input_frame = \"{f}\"\n")),
         structures.join(", ")
