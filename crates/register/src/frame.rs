@@ -340,7 +340,14 @@ pub(crate) fn register_frame_begun(
         if let Some(tree) = &cloud_tree {
             observations.matches.extend(seen_surface_matches(organ, &surface, tree, view, options, capture));
         }
-        u = deformer.deform(&observations, &u, iteration)?;
+        u = deformer.deform(&observations, &u, iteration).map_err(|e| match e {
+            // What so small a cloud may be: said where the frame's verdict would have said it.
+            RegisterError::Invalid(why) if extent < crate::plausibility::SMALL_VIEW => RegisterError::Invalid(format!(
+                "{why}; the cloud spans {:.0} % of the organ: if it is in centimetres, convert it to mm",
+                100.0 * extent
+            )),
+            e => e,
+        })?;
         if u.len() != ndof || u.iter().any(|v| !v.is_finite()) {
             return Err(RegisterError::Invalid("the deformer returned a displacement that is not finite".into()));
         }

@@ -804,6 +804,30 @@ mod tests {
         assert!(mirrored.other_frame && mirrored.warnings.iter().any(|w| w.contains("with x and y negated")));
     }
 
+    /// A deformer that finds nothing to follow.
+    struct Lost;
+
+    impl Deformer for Lost {
+        fn deform(&mut self, _: &Observations, _: &[f64], _: usize) -> Result<Vec<f64>> {
+            Err(RegisterError::Invalid("no cloud point matches the model's input".into()))
+        }
+    }
+
+    /// A deformer's refusal of a cloud a tenth of the organ's size (centimetres read as
+    /// millimetres) says what the cloud may be.
+    #[test]
+    fn a_refused_small_cloud_is_asked_whether_it_is_in_centimetres() {
+        let organ = Organ::new(mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap(), None).unwrap();
+        let options = RegistrationOptions { iterations: 2, ..Default::default() };
+        let mut r = Registration::new(organ, Box::new(Lost), "lost", vec![[0.02; 3]], Vec::new(), options).unwrap();
+        let small: Vec<Point> = (0..25).map(|i| [0.001 * (i % 5) as f64, 0.001 * (i / 5) as f64, 0.05]).collect();
+        let message = r.register(&small).err().expect("refused").to_string();
+        assert!(message.contains("no cloud point matches") && message.contains("if it is in centimetres"), "{message}");
+        let view = mesh::boundary_surface(&mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap()).vertices;
+        let message = r.register(&view).err().expect("refused").to_string();
+        assert!(!message.contains("centimetres"), "{message}");
+    }
+
     #[test]
     fn targets_far_outside_in_any_unit_are_refused_without_a_hint() {
         let message = cube_with(vec![[-5.0, 0.0, 0.0]]).err().expect("outside").to_string();
