@@ -210,10 +210,10 @@ fn past_its_limit_point_a_hanging_liver_swings_on_to_an_equilibrium() {
 
 /// The AMOS liver's quadratic mesh pulled forward at five nodes by 0.17 N each (Neo-Hookean, ν
 /// 0.49, held where `prepare` attached it): its path softens so far on the way that a load step
-/// cut once still fails. A patient attempt over a whole load step from there (load factor 0.5 to
-/// 1) finds an equilibrium 283.6 mm away on another branch, where the path followed in 32 load
-/// steps reaches 272.4 mm (and by arc length, to 3e-7 of it). Made over the step that failed, as
-/// force control makes it, it keeps to the path.
+/// cut once still fails. A patient attempt over a whole load step from there (from load factor
+/// 0.5 to 1) finds an equilibrium 283.6 mm away on another branch, where the path followed in 32
+/// load steps reaches 272.4 mm (and by arc length, to 3e-7 of it). Made over the step that
+/// failed, as force control makes it, it keeps to the path.
 #[test]
 fn force_control_keeps_to_the_path_where_it_softens() {
     let material = Material::new(Law::NeoHookean, 5000.0, 0.49).with_order(2).with_formulation(Formulation::Standard);
