@@ -175,9 +175,9 @@ pub fn eval(
     compute: Compute,
     out: Option<&Path>,
 ) -> Result<Vec<String>> {
-    let (out, own) = crate::output::run_dir(out, Path::new("out/eval"))?;
-    let lines = evaluate_in(model_path, dataset_dir, project, corruption, compute, &out);
-    crate::output::tidy_failed_run(&out, own, lines)
+    crate::output::in_run_dir(out, Path::new("out/eval"), |out| {
+        evaluate_in(model_path, dataset_dir, project, corruption, compute, out)
+    })
 }
 
 /// [`eval`] into the folder `out`.

@@ -53,6 +53,16 @@ pub fn run_dir(out: Option<&Path>, parent: &Path) -> Result<(PathBuf, bool)> {
     anyhow::bail!("{} holds 99,999 runs: give --out", parent.display())
 }
 
+/// Where `augsim register`'s runs go when no folder is named, each in a numbered folder of its own.
+pub const REGISTER_RUNS: &str = "out/register";
+
+/// `work` done in a run's folder ([`run_dir`] of `out`, else under `parent`), which is removed
+/// again when the work fails before writing into it ([`tidy_failed_run`]).
+pub fn in_run_dir<T>(out: Option<&Path>, parent: &Path, work: impl FnOnce(&Path) -> Result<T>) -> Result<T> {
+    let (dir, own) = run_dir(out, parent)?;
+    tidy_failed_run(&dir, own, work(&dir))
+}
+
 /// Refuses a folder `dir` that holds the results of an earlier run (its summary.json), or the
 /// frames of one stopped before its summary (its organ.vtu or organ_NNNN.vtu), so that two runs'
 /// files are never mixed.

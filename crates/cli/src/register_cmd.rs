@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use app::comparison::{run_comparison, LearnedModels};
-use app::output::{register_files, run_dir, tidy_failed_run};
+use app::output::{in_run_dir, register_files, REGISTER_RUNS};
 use app::registration::RegistrationChoice;
 use scenario::registration::CaseOverrides;
 use scenario::CaseScenario;
@@ -61,15 +61,15 @@ pub struct RegisterArgs {
     misalign_mm: Option<f64>,
 }
 
-/// Where runs go when --out is not given, each in a numbered folder of its own.
-const RUNS: &str = "out/register";
-
-/// Runs the registration (or the comparison) and writes the outputs into a folder of the run's
-/// own; a folder the run made is removed again when the run fails before writing into it.
+/// Runs the registration (or the comparison) into a folder of the run's own.
 pub fn run(args: &RegisterArgs) -> Result<()> {
-    let (out, own) = run_dir(args.out.as_deref(), Path::new(RUNS))?;
-    let result = if args.demo || args.case.is_some() { demo(args, &out) } else { register(args, &out) };
-    tidy_failed_run(&out, own, result)
+    in_run_dir(args.out.as_deref(), Path::new(REGISTER_RUNS), |out| {
+        if args.demo || args.case.is_some() {
+            demo(args, out)
+        } else {
+            register(args, out)
+        }
+    })
 }
 
 /// Registers the cloud (or sequence) of the command line into `out`.
