@@ -291,7 +291,7 @@ pub fn case_methods(scenario: &CaseScenario, networks: &[Network]) -> Result<Vec
 /// The loop's settings of `scenario`'s method `spec`: the case's, with its kind's default
 /// budgets (a network's [`NetworkDeformer::loop_options`], a hybrid's [`hybrid_options`]) unless
 /// the method gives its own.
-pub fn method_options(scenario: &CaseScenario, spec: &scenario::registration::MethodSpec) -> RegistrationOptions {
+pub fn method_options(scenario: &CaseScenario, spec: &scenario::registration::CaseMethod) -> RegistrationOptions {
     let base = &scenario.registration;
     let kind = match (spec.kind, spec.network_iterations) {
         (MethodKind::Network, _) => NetworkDeformer::loop_options(base),
@@ -416,7 +416,7 @@ mod tests {
     #[test]
     fn a_method_s_budgets_are_its_kind_s_unless_it_gives_its_own() {
         let mut case = CaseScenario::builtin();
-        let hybrid = scenario::registration::MethodSpec {
+        let hybrid = scenario::registration::CaseMethod {
             name: "hybrid".into(),
             kind: MethodKind::Hybrid,
             material: Some(Material::new(Law::Corotational, 5000.0, 0.48)),

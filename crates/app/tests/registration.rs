@@ -172,7 +172,7 @@ fn a_failing_method_is_reported_and_the_others_still_register() {
 /// with a reduced-order model, its shape fit on the FEM's mesh, then the FEM.
 #[test]
 fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
-    use scenario::registration::{MethodKind, MethodSpec};
+    use scenario::registration::{CaseMethod, MethodKind};
     let model = learn::Model::load(std::path::Path::new(MODEL)).unwrap();
     // A hybrid needs the network on the FEM model's mesh: the 3k-T4 phantom of `liver_ar` (the
     // shipped network's grid covers it too).
@@ -182,7 +182,7 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
         augsim_app::models::Network { model: &model, scenario: &network_scenario, dir: std::path::Path::new("") };
     let mut scenario = scenario::CaseScenario::builtin();
     let material = Some(Material::new(Law::Corotational, 5000.0, 0.48));
-    let hybrid = |network_iterations: usize, iterations: usize| MethodSpec {
+    let hybrid = |network_iterations: usize, iterations: usize| CaseMethod {
         name: format!("hybrid {network_iterations}/{iterations}"),
         kind: MethodKind::Hybrid,
         material,
@@ -218,7 +218,7 @@ fn a_hybrid_method_hands_the_network_s_estimate_to_the_fem() {
     let reduced = augsim_app::models::Network { model: &rom, scenario: &t10, dir: std::path::Path::new("") };
     let fit = register::shape::SHAPE_ITERATIONS;
     let mut with_rom = scenario.clone();
-    let corotational = MethodSpec {
+    let corotational = CaseMethod {
         name: "FEM".into(),
         kind: MethodKind::Fem,
         iterations: None,

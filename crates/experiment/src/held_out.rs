@@ -14,7 +14,7 @@ use fem::{Formulation, Law, Material};
 use mesh::length::mm;
 use mesh::stats::{max, mean, median};
 use register::{NetworkDeformer, Organ};
-use scenario::registration::{MethodKind, MethodSpec};
+use scenario::registration::{CaseMethod, MethodKind};
 use scenario::CaseScenario;
 use serde::Serialize;
 
@@ -222,9 +222,9 @@ pub(crate) fn base_case() -> Result<CaseScenario> {
 
 /// The hybrid of `scenario`'s reduced-order model and co-rotational FEM: the shape fit's
 /// iterations from rest, then [`POLISH_ITERATIONS`] of the FEM.
-pub(crate) fn rom_polish(scenario: &CaseScenario) -> Result<MethodSpec> {
+pub(crate) fn rom_polish(scenario: &CaseScenario) -> Result<CaseMethod> {
     let corotational = corotational(scenario).context("the case has no co-rotational FEM method")?;
-    Ok(MethodSpec {
+    Ok(CaseMethod {
         name: "ROM, then FEM polish".into(),
         kind: MethodKind::Hybrid,
         network_iterations: Some(register::shape::SHAPE_ITERATIONS),
@@ -241,7 +241,7 @@ fn network_budget(scenario: &CaseScenario) -> register::RegistrationOptions {
 }
 
 /// The co-rotational FEM method of `scenario`.
-fn corotational(scenario: &CaseScenario) -> Option<&MethodSpec> {
+fn corotational(scenario: &CaseScenario) -> Option<&CaseMethod> {
     scenario
         .models
         .method

@@ -206,13 +206,13 @@ pub struct ModelsSpec {
     /// The phantom meshed with about this many tetrahedra.
     pub tets: usize,
     /// The methods compared, in order (`[[models.method]]`).
-    pub method: Vec<MethodSpec>,
+    pub method: Vec<CaseMethod>,
 }
 
 /// A registration method of the comparison.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct MethodSpec {
+pub struct CaseMethod {
     /// Name in the table (its output directory is made of its letters and digits).
     pub name: String,
     /// What deforms the organ.
