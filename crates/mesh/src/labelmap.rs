@@ -36,7 +36,7 @@ use std::path::Path;
 
 use crate::io::Scalar;
 use crate::isosurface::{mask_surface, ExtractOptions, ExtractReport};
-use crate::length::LengthUnit;
+use crate::length::{mm, LengthUnit};
 use crate::volume::{determinant, VoxelMask};
 use crate::{MeshError, TriSurface};
 
@@ -470,7 +470,7 @@ fn nrrd_space_unit(text: &str) -> Result<LengthUnit, String> {
 
 /// The millimetres in one `unit`.
 fn unit_mm(unit: LengthUnit) -> f64 {
-    1e3 * unit.metres()
+    mm(unit.metres())
 }
 
 /// A voxel-to-world affine whose world unit is `mm_per_unit` millimetres, in millimetres.
