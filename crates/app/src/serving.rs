@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use live::{IdentificationFactory, Outputs, RegistrationFactory, ServeOptions};
 
 use crate::assimilation::{AssimilationChoice, OnlineFilter};
@@ -40,13 +40,24 @@ pub struct ServeArgs {
     /// demo take 0.25–0.41 s; a stream's next frames tens of ms).
     #[arg(long, default_value_t = live::TIME_BUDGET_MS, value_name = "MS")]
     pub time_budget_ms: f64,
+    /// Records each client's session in this folder, as it goes: `client-NNN.jsonl`, one line of
+    /// JSON per answer (each cloud's status with its timestamp and registered targets, each error,
+    /// each estimate), in the stream's unit and frame.
+    #[arg(long, value_name = "DIR")]
+    pub record: Option<PathBuf>,
 }
 
 impl ServeArgs {
     /// The server's set-up ([`serve_setup`]) of the registration chosen, with the time budget given.
     pub fn setup(&self) -> Result<ServeSetup> {
         let spec = RegistrationSpec { time_budget_ms: Some(self.time_budget_ms), ..self.registration.spec()? };
-        serve_setup(spec, self.outputs, self.assimilate.as_deref())
+        let mut setup = serve_setup(spec, self.outputs, self.assimilate.as_deref())?;
+        if let Some(dir) = &self.record {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            setup.lines.push(format!("record     each client's session in {}/client-NNN.jsonl", dir.display()));
+            setup.options.record = Some(dir.clone());
+        }
+        Ok(setup)
     }
 }
 

@@ -18,10 +18,11 @@ extern "C" fn request_stop(_: libc::c_int) {
 
 /// Runs `augsim serve` until SIGINT or SIGTERM.
 pub fn run(args: &ServeArgs) -> Result<()> {
-    let setup = args.setup()?;
-    print_lines(&setup.lines);
+    // The port first: one in use is said before the organ and the model load.
     let address = format!("{}:{}", args.host, args.port);
     let listener = TcpListener::bind(&address).with_context(|| format!("listening on {address}"))?;
+    let setup = args.setup()?;
+    print_lines(&setup.lines);
     let address = listener.local_addr().map_or(address, |a| a.to_string());
     #[cfg(unix)]
     // SAFETY: the handler only stores to an atomic, which is async-signal-safe.

@@ -57,6 +57,7 @@ pub mod polydata;
 
 use std::io::{Read, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
@@ -196,6 +197,8 @@ pub struct ServeOptions {
     /// Identification on the stream (`features` in, `estimate` out); `None`: `features` are
     /// answered with an error.
     pub identification: Option<Arc<IdentificationFactory>>,
+    /// A folder where each client's session is recorded ([`Record`]); `None`: nothing is written.
+    pub record: Option<PathBuf>,
 }
 
 impl Default for ServeOptions {
@@ -207,6 +210,7 @@ impl Default for ServeOptions {
             max_points: 200_000,
             stall: Duration::from_secs(10),
             identification: None,
+            record: None,
         }
     }
 }
@@ -250,9 +254,52 @@ const KEEPALIVE: socket2::TcpKeepalive =
 /// How long the accept loop sleeps between checks of the stop flag.
 const POLL: Duration = Duration::from_millis(20);
 
-/// One line of the server's log (standard error).
+/// One line of the server's log (standard error), with the time of day (UTC).
 fn log(line: impl std::fmt::Display) {
-    eprintln!("augsim serve: {line}");
+    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+    let (seconds, ms) = (now.as_secs() % 86_400, now.subsec_millis());
+    eprintln!("augsim serve: {:02}:{:02}:{:02}.{ms:03} {line}", seconds / 3600, seconds / 60 % 60, seconds % 60);
+}
+
+/// A client's session written as it goes, in a file of its own in [`ServeOptions::record`]
+/// (`client-NNN.jsonl`, the first number free): one line of JSON per event, flushed at once, so
+/// that a server stopped in any way leaves every answer it sent. The first line names the client
+/// (`peer`, `connected`: seconds since 1970, `unit`, the stream's); then each cloud's status with
+/// its `timestamp` (the cloud's header timestamp, null for 0) and `targets` (in the stream's unit
+/// and frame), each error status and each estimate.
+pub struct Record {
+    file: Mutex<std::io::BufWriter<std::fs::File>>,
+    /// The file, for the log.
+    path: PathBuf,
+}
+
+impl Record {
+    /// A new record in `dir` (created) for the client `peer`.
+    fn create(dir: &Path, peer: &str, unit: LengthUnit) -> std::io::Result<Record> {
+        std::fs::create_dir_all(dir)?;
+        let (file, path) = (1..=999_999)
+            .find_map(|n| {
+                let path = dir.join(format!("client-{n:03}.jsonl"));
+                match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
+                    Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => None,
+                    opened => Some(opened.map(|f| (f, path))),
+                }
+            })
+            .unwrap_or_else(|| Err(std::io::Error::other(format!("{} holds 999,999 records", dir.display()))))?;
+        let record = Record { file: Mutex::new(std::io::BufWriter::new(file)), path };
+        let connected = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+        record
+            .write(&serde_json::json!({ "peer": peer, "connected": connected.as_secs_f64(), "unit": unit.symbol() }))?;
+        Ok(record)
+    }
+
+    /// Appends `line`.
+    fn write(&self, line: &serde_json::Value) -> std::io::Result<()> {
+        let mut file = self.file.lock().map_err(|_| std::io::Error::other("record poisoned"))?;
+        serde_json::to_writer(&mut *file, line)?;
+        file.write_all(b"\n")?;
+        file.flush()
+    }
 }
 
 /// Serves clients on `listener` until `stop` is set, then closes every connection and returns.
@@ -330,6 +377,8 @@ struct Shared {
     /// The socket, for reading, and to shut it down without waiting for a write under way.
     socket: TcpStream,
     options: ServeOptions,
+    /// The client's session, written as it goes (see [`ServeOptions::record`]).
+    record: Option<Record>,
 }
 
 impl Shared {
@@ -341,11 +390,22 @@ impl Shared {
         self.arrived.notify_all();
     }
 
+    /// Writes `line` into the client's record, if any; a failed write is logged, and the
+    /// stream goes on.
+    fn record(&self, line: serde_json::Value) {
+        if let Some(record) = &self.record {
+            if let Err(e) = record.write(&line) {
+                log(format_args!("{}: recording in {}: {e}", self.peer, record.path.display()));
+            }
+        }
+    }
+
     /// Logs an error of this client's and sends it as a status, whether or not the status is an
     /// output (a client told nothing would wait for answers that never come), unless the
-    /// connection has ended.
+    /// connection has ended; records it.
     /// `timestamp` is that of the cloud it answers, if any.
     fn report(&self, status: &serde_json::Value, timestamp: Option<u64>) {
+        self.record(serde_json::json!({ "status": status, "timestamp": timestamp }));
         if !self.closed.load(Ordering::SeqCst) {
             log(format_args!("{}: {}", self.peer, status));
             self.send_line("status", status.to_string(), timestamp);
@@ -388,8 +448,10 @@ impl Shared {
         }
     }
 
-    /// Sends an estimate (one line of JSON), stamped `timestamp` (that of its `features`).
+    /// Sends an estimate (one line of JSON), stamped `timestamp` (that of its `features`), and
+    /// records it.
     fn send_estimate(&self, estimate: &serde_json::Value, timestamp: Option<u64>) {
+        self.record(serde_json::json!({ "estimate": estimate, "timestamp": timestamp }));
         self.send_line("estimate", estimate.to_string(), timestamp);
     }
 }
@@ -413,6 +475,13 @@ impl Client {
     ) -> std::io::Result<Client> {
         configure(&stream, &options)?;
         let socket = stream.try_clone()?;
+        let record = match &options.record {
+            Some(dir) => Some(Record::create(dir, &peer, options.coordinates.unit)?),
+            None => None,
+        };
+        if let Some(r) = &record {
+            log(format_args!("{peer}: recorded in {}", r.path.display()));
+        }
         let shared = Arc::new(Shared {
             peer,
             waiting: Mutex::new(Mailbox::default()),
@@ -422,6 +491,7 @@ impl Client {
             writer: Mutex::new(stream),
             socket,
             options,
+            record,
         });
         let (s1, s2) = (shared.clone(), shared.clone());
         let threads = vec![
@@ -765,9 +835,6 @@ fn answer(
         let matrix = given.transform_out(organ_to_cloud).map(|row| row.map(|x| x as f32));
         shared.send(&TransformMessage { matrix }, "rigid", cloud.timestamp)?;
     }
-    if !options.outputs.status {
-        return Ok(());
-    }
     let status = serde_json::json!({
         "frame": cloud.frame,
         "ms": mesh::stats::ms(start.elapsed()),
@@ -782,7 +849,13 @@ fn answer(
         "from_rest": result.from_rest,
         "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| given.length_out(v)).collect::<Vec<f64>>()),
     });
-    shared.send_line("status", status_line(status), cloud.timestamp);
+    if shared.record.is_some() {
+        let targets: Vec<Point> = targets.iter().map(|p| given.point_out(*p)).collect();
+        shared.record(serde_json::json!({ "status": status, "timestamp": cloud.timestamp, "targets": targets }));
+    }
+    if options.outputs.status {
+        shared.send_line("status", status_line(status), cloud.timestamp);
+    }
     Ok(())
 }
 

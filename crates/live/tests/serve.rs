@@ -277,6 +277,47 @@ fn answers_carry_the_timestamp_of_the_cloud_they_answer() {
     server.stop();
 }
 
+/// With a record folder, each client's session is written as it goes, one line of JSON per
+/// answer: the client, then each cloud's status with its timestamp and targets (in the stream's
+/// unit, as sent), and each error; a second client gets a file of its own.
+#[test]
+fn each_client_s_session_is_recorded_as_it_goes() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = Some(dir.path().join("session"));
+    let server =
+        Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), record, ..ServeOptions::default() });
+    let (cloud, _) = pressed_cloud(300.0);
+    let mut client = connect(server.port);
+    client.send_cloud(cloud.clone()).unwrap();
+    let sent = match client.receive().unwrap() {
+        Some(Answer::Targets(points)) => points,
+        other => panic!("expected targets, got {other:?}"),
+    };
+    let _organ = client.receive().unwrap();
+    let _status = status(client.receive().unwrap());
+    client.send_cloud(Vec::new()).unwrap();
+    assert!(status(client.receive().unwrap())["error"].is_string());
+    let mut second = connect(server.port);
+    second.send_cloud(cloud).unwrap();
+    assert!(matches!(second.receive().unwrap(), Some(Answer::Targets(_))));
+    drop((client, second));
+    server.stop();
+    let read = |name: &str| -> Vec<serde_json::Value> {
+        let text = std::fs::read_to_string(dir.path().join("session").join(name)).unwrap();
+        text.lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+    };
+    let lines = read("client-001.jsonl");
+    assert!(lines[0]["peer"].as_str().unwrap().starts_with("127.0.0.1:") && lines[0]["unit"] == "mm", "{}", lines[0]);
+    assert!(lines[1]["status"]["frame"] == 1 && lines[1]["status"]["plausible"] == true, "{}", lines[1]);
+    let recorded: Vec<Vec<f64>> = serde_json::from_value(lines[1]["targets"].clone()).unwrap();
+    assert_eq!(recorded.len(), sent.len());
+    for (r, s) in recorded.iter().zip(&sent) {
+        assert!(r.iter().zip(s).all(|(a, b)| (a - f64::from(*b)).abs() < 1e-3), "{r:?} against {s:?}");
+    }
+    assert!(lines[2]["status"]["frame"] == 2 && lines[2]["status"]["error"].is_string(), "{}", lines[2]);
+    assert_eq!(read("client-002.jsonl").len(), 2, "the second client's record: its header and its cloud");
+}
+
 /// A STRING `reset` has the next cloud start from rest, as the client's first did: the same cloud
 /// then registers as it did first, where a warm frame went on from the last one.
 #[test]
