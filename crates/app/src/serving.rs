@@ -34,8 +34,8 @@ pub struct ServeArgs {
     /// positions, in the stream's unit, in the scenario's order) and answers a STRING `estimate`.
     #[arg(long, value_name = "SCENARIO")]
     pub assimilate: Option<PathBuf>,
-    /// Most wall time of a cloud's registration (ms), its rigid pre-alignment included: a frame past it stops at the end of its
-    /// iteration under way, answers with its estimate so far and a warning, and the next cloud
+    /// Most wall time of a cloud's registration (ms), its rigid pre-alignment included: a frame past it stops (a FEM's
+    /// solve under way at its next iteration), answers with its estimate so far and a warning, and the next cloud
     /// goes on from it, so that no cloud holds the stream for long (the FEMs' first frames on the
     /// demo take 0.25–0.41 s; a stream's next frames tens of ms).
     #[arg(long, default_value_t = live::TIME_BUDGET_MS, value_name = "MS")]

@@ -118,6 +118,9 @@ pub enum FemError {
     /// The computation was asked to stop ([`interrupt::request`]).
     #[error("interrupted")]
     Interrupted,
+    /// The solve passed its deadline ([`SolverOptions::deadline`]) before it converged.
+    #[error("the solve passed its deadline before it converged")]
+    OutOfTime,
 }
 
 impl FemError {

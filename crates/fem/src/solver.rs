@@ -54,6 +54,10 @@ pub struct SolverOptions {
     /// that report snaps.
     #[serde(skip)]
     pub confirm_snaps: bool,
+    /// A wall-clock time past which the solve stops with [`FemError::OutOfTime`], at its next
+    /// iteration (a frame's time budget on a stream). Not a scenario's setting.
+    #[serde(skip)]
+    pub deadline: Option<Instant>,
 }
 
 /// How a solve follows the load path from rest to the whole load.
@@ -103,6 +107,7 @@ impl Default for SolverOptions {
             bfgs_memory: 12,
             continuation: Continuation::Force,
             confirm_snaps: false,
+            deadline: None,
         }
     }
 }
@@ -381,6 +386,14 @@ impl LoadPath {
         let (l0, q0) = before.unwrap_or((0.0, 0.0));
         let (previous, latest) = ((l1 - l0) / (q1 - q0), (l2 - l1) / (q2 - q1));
         self.softening() < crate::LIMIT_POINT_STIFFNESS && previous > 0.0 && latest < 0.5 * previous
+    }
+}
+
+/// [`FemError::OutOfTime`] once the solve's [`SolverOptions::deadline`] has passed.
+fn past_deadline(options: &SolverOptions) -> Result<(), FemError> {
+    match options.deadline {
+        Some(deadline) if Instant::now() >= deadline => Err(FemError::OutOfTime),
+        _ => Ok(()),
     }
 }
 
@@ -844,8 +857,10 @@ impl StaticSolver {
         } else {
             Start::Kept
         };
-        if self.newton(&mut u, 1.0, from, options, Budget::Normal, stats).is_err() {
-            return Ok(None);
+        match self.newton(&mut u, 1.0, from, options, Budget::Normal, stats) {
+            Err(FemError::OutOfTime) => return Err(FemError::OutOfTime),
+            Err(_) => return Ok(None),
+            Ok(()) => {}
         }
         self.latest_slow =
             !stats.refactorized && stats.iterations as f64 > self.refactorization_cost + FRESH_FACTOR_ITERATIONS;
@@ -953,6 +968,7 @@ impl StaticSolver {
             if it == last_iteration || (stall_rule && stalled(&stats.residuals[first_residual..])) {
                 return Err(FemError::NotConverged { load_factor: lambda, iterations: it, residual: rel });
             }
+            past_deadline(opt)?;
             stats.iterations += 1;
             if refresh {
                 self.refactorize(u, &mut f_int, it > 0 && rel > STALE_RESIDUAL, stats)?;

@@ -77,6 +77,10 @@ impl FemDeformer {
 }
 
 impl Deformer for FemDeformer {
+    fn set_deadline(&mut self, deadline: Option<std::time::Instant>) {
+        self.options.deadline = deadline;
+    }
+
     fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>> {
         if observations.matches.is_empty() {
             return Err(RegisterError::Invalid("no cloud point matches the organ surface".into()));
@@ -99,6 +103,8 @@ impl Deformer for FemDeformer {
                 normal_stiffness: (1.0 - ISOTROPIC_FRACTION) * k,
             }));
             match self.solver.solve_from(Some(reached.as_deref().unwrap_or(previous)), &self.options) {
+                // Past the frame's deadline: the best estimate so far.
+                Err(fem::FemError::OutOfTime) => return Ok(reached.unwrap_or_else(|| previous.to_vec())),
                 Ok(solution) if softening == wanted => return Ok(solution.u),
                 Ok(solution) => {
                     softening -= 1;
@@ -184,6 +190,11 @@ impl Deformer for HybridDeformer {
         // On a warm-started frame the first deformer only fits for σ.
         self.first.start_frame(warm);
         self.then.start_frame(warm);
+    }
+
+    fn set_deadline(&mut self, deadline: Option<std::time::Instant>) {
+        self.first.set_deadline(deadline);
+        self.then.set_deadline(deadline);
     }
 
     fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>> {
@@ -273,6 +284,11 @@ impl Deformer for RestAndStream {
             true => self.streamed.start_frame(true),
             false => self.from_rest.start_frame(false),
         }
+    }
+
+    fn set_deadline(&mut self, deadline: Option<std::time::Instant>) {
+        self.from_rest.set_deadline(deadline);
+        self.streamed.set_deadline(deadline);
     }
 
     fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>> {
@@ -671,6 +687,41 @@ mod tests {
             assert!((node_z(0.04) + 0.005).abs() < 1e-3, "frame {frame}: the top moved by {} m", node_z(0.04));
             start = Some(r.u);
         }
+    }
+
+    /// A frame's time budget stops the FEM's solve under way, not only the iterations after it:
+    /// with a budget already spent, the first solve gives back its start (rest) and the frame
+    /// ends after one iteration, saying so; with a budget to spare, the same frame follows the
+    /// cloud.
+    #[test]
+    fn a_frame_s_time_budget_stops_the_solve_under_way() {
+        let mesh = mesh::box_tet([0.0; 3], [0.04, 0.04, 0.04], [4, 4, 4]).unwrap();
+        let mut problem = Problem::new(mesh, fem::Material::new(fem::Law::Corotational, 5000.0, 0.45));
+        let base: Vec<usize> = (0..problem.mesh.num_nodes()).filter(|&n| problem.mesh.nodes[n][2] < 1e-9).collect();
+        problem.fix(&base);
+        let organ = Organ::new(problem.mesh.clone(), None).unwrap();
+        let stiffness = FemDeformer::default_stiffness(&problem);
+        let cloud: Vec<mesh::Point> = organ
+            .surface()
+            .vertices
+            .iter()
+            .filter(|p| p[2] > 0.04 - 1e-9)
+            .map(|p| [p[0], p[1], p[2] - 0.005])
+            .collect();
+        let frame = |budget: f64| {
+            let mut deformer = FemDeformer::new(problem.clone(), stiffness, SolverOptions::default()).unwrap();
+            let options = RegistrationOptions {
+                view: Some([0.0, 0.0, -1.0]),
+                time_budget_ms: Some(budget),
+                ..Default::default()
+            };
+            register_frame(&organ, &mut deformer, &cloud, None, &options).unwrap()
+        };
+        let spent = frame(1e-9);
+        assert!(spent.out_of_time && spent.iterations == 1, "{:?}", spent.warnings);
+        assert!(spent.u.iter().all(|&v| v == 0.0), "the solve went on past the deadline");
+        let spare = frame(1e6);
+        assert!(!spare.out_of_time && spare.u.iter().any(|&v| v.abs() > 1e-3), "{:?}", spare.warnings);
     }
 
     /// A block fixed at its base whose whole top is seen 5 cm lower, deeper than the block is

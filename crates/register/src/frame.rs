@@ -47,6 +47,10 @@ pub trait Deformer {
     /// A frame begins: warm-started from the previous frame's estimate (`warm`) or from rest.
     fn start_frame(&mut self, _warm: bool) {}
 
+    /// The time by which the frame should end (its time budget), if any: a deformer whose one
+    /// step may take long (a FEM solve) stops there, with its best estimate so far.
+    fn set_deadline(&mut self, _deadline: Option<Instant>) {}
+
     /// The estimate settled at iteration `iteration`: whether the deformer goes on to a next
     /// stage (a hybrid's second model) rather than end the frame there. Default: it ends.
     fn settled(&mut self, _iteration: usize) -> bool {
@@ -146,8 +150,9 @@ pub struct RegistrationOptions {
     /// the seen part of the organ is held to the cloud as well as the cloud to the organ.
     pub two_way: TwoWay,
     /// Most wall time of a frame (ms), its rigid pre-alignment included: once an iteration ends
-    /// past it, the frame stops with the estimate so far, and a warning says so (a stream's next
-    /// frame goes on from it). `None`: no limit.
+    /// past it (a deformer's step under way is told the deadline, [`Deformer::set_deadline`]: a
+    /// FEM's solve stops at its next Newton iteration), the frame stops with the estimate so far,
+    /// and a warning says so (a stream's next frame goes on from it). `None`: no limit.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub time_budget_ms: Option<f64>,
 }
@@ -298,6 +303,7 @@ pub(crate) fn register_frame_begun(
         _ => cloud,
     };
     deformer.start_frame(start.is_some());
+    deformer.set_deadline(options.time_budget_ms.map(|budget| t0 + Duration::from_secs_f64(budget / 1e3)));
     let mut surface = organ.deformed_surface(&u);
     let mut iterations = 0;
     let mut inliers = 0;
@@ -356,11 +362,12 @@ pub(crate) fn register_frame_begun(
         let moved =
             next.vertices.iter().zip(&surface.vertices).map(|(a, b)| mesh::distance(*a, *b)).fold(0.0, f64::max);
         surface = next;
-        if moved <= options.tolerance && !deformer.settled(iteration) {
-            break;
-        }
+        // The budget first: a deformer stopped at the deadline gives back its estimate unmoved.
         if options.time_budget_ms.is_some_and(|budget| mesh::stats::ms(t0.elapsed()) >= budget) && iterations < most {
             out_of_time = true;
+            break;
+        }
+        if moved <= options.tolerance && !deformer.settled(iteration) {
             break;
         }
     }

@@ -190,6 +190,7 @@ impl StaticSolver {
             if converged(opt, rel, step_norm, &trial) {
                 return Ok(Corrected { u: trial, lambda: lam, iterations: it });
             }
+            super::past_deadline(opt)?;
             stats.iterations += 1;
             if it > 0 && res > REFRESH_RATIO * last {
                 self.refactorize(&trial, &mut f_int, false, stats)?;
