@@ -30,6 +30,8 @@ pub struct Evaluation {
     /// Share of the nodes' errors within twice the predicted standard deviation, for a model that
     /// predicts one.
     pub coverage: Option<f64>,
+    /// Why the held-out figures may not be held out after all, when a sign says so.
+    pub warning: Option<String>,
 }
 
 impl Evaluation {
@@ -66,6 +68,7 @@ impl Evaluation {
                 c * 100.0
             ));
         }
+        lines.extend(self.warning.iter().map(|w| format!("warning    {w}")));
         lines
     }
 }
@@ -86,6 +89,22 @@ pub fn evaluate_held_out(
             dataset.manifest().grid
         );
     }
+    let input = dataset.manifest().units.input;
+    if model.takes_forces() != input.is_force() {
+        bail!(
+            "the model takes {} as input, the dataset's inputs are {} (in {input}): a model is evaluated on inputs of \
+             its own kind",
+            if model.takes_forces() { "forces" } else { "displacements" },
+            if input.is_force() { "forces" } else { "displacements" }
+        );
+    }
+    // A record without a source (a split lost, or data of unknown origin) cannot tell them either.
+    let Some(provenance) = model.provenance().filter(|p| p.own.source.is_some()) else {
+        bail!(
+            "the model records no split of the data it was trained on (model.json: training.split), so the samples \
+             it trained and was validated on cannot be told from held-out ones"
+        );
+    };
     let all = dataset.load_all()?;
     let test = model.held_out(&all)?;
     if test.is_empty() {
@@ -110,6 +129,15 @@ pub fn evaluate_held_out(
         _ => (learn::evaluate(model, &test, corruption, 0, compute)?, None),
     };
     let coverage = learn::uncertainty_coverage(model, &test, corruption, 0)?;
+    let near_copies = learn::data::split::same_name_and_seed(all.source.as_deref(), provenance.own.source.as_deref());
+    let warning = near_copies.then(|| {
+        format!(
+            "the dataset's scenario has the name and seed of the model's training data ({}) but other settings: its \
+             draws may be near copies of the model's training draws of the same index, and these figures not held \
+             out; generate it with another seed",
+            provenance.own.source.as_deref().unwrap_or_default()
+        )
+    });
     Ok(Evaluation {
         dataset_dir: dataset_dir.to_path_buf(),
         corruption: corruption.clone(),
@@ -119,6 +147,7 @@ pub fn evaluate_held_out(
         report,
         markers: at_markers,
         coverage,
+        warning,
     })
 }
 

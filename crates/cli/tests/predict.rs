@@ -90,6 +90,29 @@ magnitude = [0.05, 0.2]
     assert!(e.contains("--sparse 500,1000 keeps every input node: the samples have at most"), "{e}");
     let e = augsim_err(&["eval", "net/model.json", "data", "--sparse", "20,2"], d);
     assert!(e.contains("patch sizes must satisfy 1 <= min <= max, got 20, 2"), "{e}");
+    // A copy of the model whose record lost its split, or that takes displacements, is not
+    // evaluated: its figures would be on its own training samples, or on inputs of another kind.
+    let edited = |name: &str, edit: &dyn Fn(&mut serde_json::Value)| {
+        std::fs::create_dir_all(d.join(name)).unwrap();
+        for entry in std::fs::read_dir(d.join("net")).unwrap() {
+            let entry = entry.unwrap();
+            if entry.path().is_file() {
+                std::fs::copy(entry.path(), d.join(name).join(entry.file_name())).unwrap();
+            }
+        }
+        let path = d.join(name).join("model.json");
+        let mut model: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        edit(&mut model);
+        std::fs::write(&path, model.to_string()).unwrap();
+    };
+    edited("no_split", &|m| {
+        m["training"].as_object_mut().unwrap().remove("split");
+    });
+    let e = augsim_err(&["eval", "no_split/model.json", "data"], d);
+    assert!(e.contains("the model records no split of the data it was trained on"), "{e}");
+    edited("displacements", &|m| m["input_unit"] = "m".into());
+    let e = augsim_err(&["eval", "displacements/model.json", "data"], d);
+    assert!(e.contains("the model takes displacements as input, the dataset's inputs are forces"), "{e}");
 
     // Two point forces inside the organ's bounding box, one on a grid-cell corner.
     let model: serde_json::Value =

@@ -151,6 +151,19 @@ pub fn same_source(a: Option<&str>, b: Option<&str>) -> bool {
     }
 }
 
+/// Whether the sources `a` and `b` come from scenarios of one name and seed whose settings
+/// differ (`<scenario>/seed <seed>/<settings>`): their draws of one index may be near copies (a
+/// load range changed in its last digit).
+pub fn same_name_and_seed(a: Option<&str>, b: Option<&str>) -> bool {
+    match (a, b) {
+        (Some(a), Some(b)) => {
+            let (a, b): (Vec<&str>, Vec<&str>) = (a.rsplitn(3, '/').collect(), b.rsplitn(3, '/').collect());
+            a.len() == 3 && b.len() == 3 && a[1..] == b[1..] && a[0] != b[0]
+        }
+        _ => false,
+    }
+}
+
 impl Split {
     /// The dataset scenario the samples were generated from: the first part of the source
     /// (`<scenario>/seed <seed>/<settings>`), when known.
@@ -326,5 +339,16 @@ mod tests {
         assert_eq!(provenance.role(Some("liver_ar/seed 2/00ab"), 0), SampleRole::Unseen);
         assert_eq!(provenance.role(Some("liver_ar/seed 1/00ac"), 0), SampleRole::Unseen);
         assert!(!same_source(None, None) && !same_source(Some("a/seed 1/0"), None));
+    }
+
+    /// Settings changed under the same scenario name and seed are another source, but told apart
+    /// from another scenario or seed.
+    #[test]
+    fn the_same_name_and_seed_with_other_settings_is_told() {
+        assert!(same_name_and_seed(Some("liver_ar/seed 2/00ab"), Some("liver_ar/seed 2/00ac")));
+        assert!(!same_name_and_seed(Some("liver_ar/seed 2/00ab"), Some("liver_ar/seed 2/00ab")), "the same source");
+        assert!(!same_name_and_seed(Some("liver_ar/seed 2/00ab"), Some("liver_ar/seed 3/00ac")));
+        assert!(!same_name_and_seed(Some("liver_ar/seed 2/00ab"), Some("my_liver/seed 2/00ac")));
+        assert!(!same_name_and_seed(Some("liver_ar/seed 2/00ab"), None));
     }
 }
