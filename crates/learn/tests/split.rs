@@ -182,4 +182,18 @@ fn models_record_their_split_and_evaluation_refuses_seen_samples() {
     assert_eq!(tuned.held_out(&other).unwrap(), beam_test);
     assert_eq!(tuned.held_out(&all).unwrap(), test, "the pre-training's unseen samples");
     assert!(evaluate(&tuned, &train_set, &none, 0, Compute::Cpu).is_err());
+
+    // Fine-tuned on the pre-training's own data with its split, it trains; a run that would test
+    // or validate on samples the pre-trained network learned is refused before it trains.
+    assert!(train(&train_set, &val, &fine, &config, &options("f"), &Silent).is_ok());
+    let wider = Split::last(&all, 2, 6).unwrap();
+    let [wider_train, wider_val, _] = wider.apply(&all).unwrap();
+    let wider_options = TrainOptions { test: wider.test.clone(), ..options("g") };
+    let e = train(&wider_train, &wider_val, &fine, &config, &wider_options, &Silent).unwrap_err().to_string();
+    assert!(e.contains("sample 4, a test sample of this run, is one the pre-trained network trained on"), "{e}");
+    let shifted = Split::last(&all, 7, 0).unwrap();
+    let [shifted_train, shifted_val, _] = shifted.apply(&all).unwrap();
+    let shifted_options = TrainOptions { test: shifted.test.clone(), ..options("h") };
+    let e = train(&shifted_train, &shifted_val, &fine, &config, &shifted_options, &Silent).unwrap_err().to_string();
+    assert!(e.contains("a validation sample of this run, is one the pre-trained network trained on"), "{e}");
 }

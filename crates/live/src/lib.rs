@@ -810,6 +810,26 @@ fn answer(
     let Tracked { registration: result, targets, rigid, target_std } = &tracked;
     let given = options.coordinates;
     let to_wire = |p: &Point| given.point_out(*p).map(|x| x as f32);
+    // The status and the record of the registration itself, before any answer is sent (a send
+    // that fails ends the connection, not the record).
+    let status = serde_json::json!({
+        "frame": cloud.frame,
+        "ms": mesh::stats::ms(start.elapsed()),
+        "unit": given.unit.symbol(),
+        "surface_residual": given.length_out(result.surface_residual),
+        "plausible": result.plausible(),
+        "warnings": result.warnings,
+        "inliers": result.inliers,
+        "points": result.points,
+        "received": points.len(),
+        "iterations": result.iterations,
+        "from_rest": result.from_rest,
+        "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| given.length_out(v)).collect::<Vec<f64>>()),
+    });
+    if shared.record.is_some() {
+        let targets: Vec<Point> = targets.iter().map(|p| given.point_out(*p)).collect();
+        shared.record(serde_json::json!({ "status": status, "timestamp": cloud.timestamp, "targets": targets }));
+    }
     if options.outputs.targets {
         let points = targets
             .iter()
@@ -834,24 +854,6 @@ fn answer(
         let organ_to_cloud = r.organ_to_cloud().homogeneous(LengthUnit::Metre);
         let matrix = given.transform_out(organ_to_cloud).map(|row| row.map(|x| x as f32));
         shared.send(&TransformMessage { matrix }, "rigid", cloud.timestamp)?;
-    }
-    let status = serde_json::json!({
-        "frame": cloud.frame,
-        "ms": mesh::stats::ms(start.elapsed()),
-        "unit": given.unit.symbol(),
-        "surface_residual": given.length_out(result.surface_residual),
-        "plausible": result.plausible(),
-        "warnings": result.warnings,
-        "inliers": result.inliers,
-        "points": result.points,
-        "received": points.len(),
-        "iterations": result.iterations,
-        "from_rest": result.from_rest,
-        "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| given.length_out(v)).collect::<Vec<f64>>()),
-    });
-    if shared.record.is_some() {
-        let targets: Vec<Point> = targets.iter().map(|p| given.point_out(*p)).collect();
-        shared.record(serde_json::json!({ "status": status, "timestamp": cloud.timestamp, "targets": targets }));
     }
     if options.outputs.status {
         shared.send_line("status", status_line(status), cloud.timestamp);

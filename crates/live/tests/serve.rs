@@ -300,6 +300,8 @@ fn each_client_s_session_is_recorded_as_it_goes() {
     let mut second = connect(server.port);
     second.send_cloud(cloud).unwrap();
     assert!(matches!(second.receive().unwrap(), Some(Answer::Targets(_))));
+    let _organ = second.receive().unwrap();
+    let _status = status(second.receive().unwrap());
     drop((client, second));
     server.stop();
     let read = |name: &str| -> Vec<serde_json::Value> {

@@ -55,6 +55,12 @@ impl IndexSet {
     pub fn first_common(&self, indices: &[u64]) -> Option<u64> {
         indices.iter().copied().find(|&i| self.contains(i))
     }
+
+    /// The first index of `other` in this set, if any.
+    pub fn first_common_with(&self, other: &IndexSet) -> Option<u64> {
+        let indices: Vec<u64> = other.0.iter().flat_map(|&[start, end]| start..end).collect();
+        self.first_common(&indices)
+    }
 }
 
 /// How many samples [`Split::last`] holds out, as `augsim train` takes them: each held-out set is a fraction of

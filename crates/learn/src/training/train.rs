@@ -487,6 +487,31 @@ fn held_out_split(train: &Samples, val: &Samples, test: &IndexSet) -> Result<Spl
     Ok(split)
 }
 
+/// Fails when a fine-tuning run's `split` tests on samples of the same data that the runs behind
+/// the pre-trained network (`pretraining`) trained or validated on, or validates on samples they
+/// trained on: its figures would not be held out, and its checkpoint would be chosen on samples
+/// the network had learned (sharing the pre-training's validation samples only selects again).
+fn check_unseen_by_pretraining(split: &Split, pretraining: &[Split]) -> Result<()> {
+    let same = |p: &&Split| crate::data::split::same_source(p.source.as_deref(), split.source.as_deref());
+    for pre in pretraining.iter().filter(same) {
+        let checks = [
+            (&pre.train, &split.test, "a test sample of this run", "trained"),
+            (&pre.validation, &split.test, "a test sample of this run", "was validated"),
+            (&pre.train, &split.validation, "a validation sample of this run", "trained"),
+        ];
+        for (theirs, ours, what, role) in checks {
+            if let Some(i) = theirs.first_common_with(ours) {
+                return Err(LearnError::InvalidInput(format!(
+                    "sample {i}, {what}, is one the pre-trained network {role} on: its figures would not be held \
+                     out; fine-tune with the split of the pre-training (its test and validation sizes) or on other \
+                     data (another seed)"
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Trains a U-Net on `train`, validating on `val` (may be empty: then the last weights are
 /// kept), reporting the iterations done and the loss to `progress`. See the module documentation
 /// for files, reproducibility and resume.
@@ -513,6 +538,7 @@ pub fn train(
     std::fs::create_dir_all(out).map_err(|e| LearnError::io(out, e))?;
     let engine = GradientEngine::new(options.compute)?;
     let (mut net, start) = resolve_start(init, config.seed)?;
+    check_unseen_by_pretraining(&split, &start.pretraining)?;
     let mut adam = Adam::new(net.values().len());
     let mut state = CheckpointState::new(config, fingerprint(train, val, init, config)?);
     let mut best: Option<UNet> = None;
