@@ -264,6 +264,7 @@ mod tests {
             report: EvalReport::new(vec![0.001, 0.003], vec![8, 9]).unwrap(),
             markers: None,
             coverage: Some(0.9),
+            warning: None,
         };
         let lines = evaluation.lines();
         assert_eq!(lines[0], "held out   0 of 10 samples (the test split recorded in the model)");
