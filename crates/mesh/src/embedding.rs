@@ -29,6 +29,12 @@ use crate::{bounds, Cells, Mesh, MeshError, Point, MAX_CELLS};
 /// Tolerance on barycentric / reference coordinates for "inside".
 const INSIDE_TOL: f64 = 1e-10;
 
+/// How far (in grid cells) a point may lie outside the grid box and still be taken at its edge: a
+/// point of the box's face written in single precision (a float32 `.npy` cloud) rounds off it by
+/// about 1e-7 of its coordinate, some 1e-5 cells; a ten-thousandth of a cell is a micrometre
+/// at a spacing of 1 cm.
+pub const EDGE_TOLERANCE_CELLS: f64 = 1e-4;
+
 /// A regular grid of nodes (see the module documentation for the layout).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Grid {
@@ -123,8 +129,7 @@ impl Grid {
         for d in 0..3 {
             let f = (p[d] - self.origin[d]) / self.spacing[d];
             let last = (self.dims[d] - 1) as f64;
-            let tol = 1e-9 * last.max(1.0);
-            if !(f >= -tol && f <= last + tol) {
+            if !(f >= -EDGE_TOLERANCE_CELLS && f <= last + EDGE_TOLERANCE_CELLS) {
                 let (lo, hi) = (self.origin, self.upper());
                 let out = (0..3).map(|d| (lo[d] - p[d]).max(p[d] - hi[d]).max(0.0)).fold(0.0, f64::max);
                 return Err(MeshError::Invalid(format!(

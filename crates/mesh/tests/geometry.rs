@@ -624,6 +624,23 @@ fn visible_surface_sampling() {
     assert!(sample_visible(&s, [0.0; 3], 10, 1).is_err());
 }
 
+/// A point on the grid box's face, written in single precision, rounds off it by a few millionths
+/// of a cell: taken at the face. A thousandth of a cell out is outside.
+#[test]
+fn a_point_on_the_grid_box_s_face_in_single_precision_is_inside() {
+    let g = Grid::new([0.1, -0.2, 0.3], [0.005; 3], [10, 10, 10]).unwrap();
+    let face = [0.1 + 9.0 * 0.005, -0.2 + 4.5 * 0.005, 0.3];
+    let rounded = face.map(|x| f64::from(x as f32));
+    assert!(rounded != face, "single precision moves the point");
+    let nudged = [face[0] + 1e-6 * 0.005, face[1], face[2] - 1e-6 * 0.005];
+    for p in [rounded, nudged] {
+        let corners = g.corners(0, p).unwrap();
+        assert!((corners.iter().map(|(_, w)| w).sum::<f64>() - 1.0).abs() < 1e-12);
+    }
+    let e = g.corners(3, [face[0] + 1e-3 * 0.005, face[1], face[2]]).unwrap_err().to_string();
+    assert!(e.contains("point 3") && e.contains("outside the grid box"), "{e}");
+}
+
 #[test]
 fn grid_layout_and_errors() {
     assert!(Grid::new([0.0; 3], [1.0; 3], [1, 2, 2]).is_err());
