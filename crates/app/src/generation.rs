@@ -81,6 +81,13 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
         None => PathBuf::from(format!("out/{}", scenario.name)),
         Some(p) => PathBuf::from(format!("out/{}.part{}of{}", scenario.name, p.index, p.count)),
     });
+    if out.join(learn::MODEL_FILE).exists() {
+        anyhow::bail!(
+            "{} holds a model ({}): a dataset written there would mix their files; give another --out",
+            out.display(),
+            learn::MODEL_FILE
+        );
+    }
     // What the dataset held before this run (resumed, grown, or complete already).
     let held = learn::Dataset::open(&out).map_or(0, |d| d.manifest().num_samples + d.manifest().failed.len());
     let start = Instant::now();

@@ -226,17 +226,29 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
         let (are, them) = if unused.len() == 1 { ("is", "it") } else { ("are", "them") };
         bail!("{} {are} {other}: {this} does not use {them}", unused.join(", "));
     }
+    if args.out.join(learn::data::dataset::MANIFEST_FILE).exists() {
+        bail!(
+            "{} holds a dataset ({}): a model written there would mix their files; give another --out",
+            args.out.display(),
+            learn::data::dataset::MANIFEST_FILE
+        );
+    }
+    // A U-Net's run resumes from its checkpoint; a reduced-order model's fit is made anew, and
+    // would replace the model there.
     let other = match args.method {
-        Method::Rom => ["model.safetensors", "checkpoint.bin"].into_iter().find(|f| args.out.join(f).exists()),
+        Method::Rom => {
+            ["model.safetensors", "checkpoint.bin", learn::MODEL_FILE].into_iter().find(|f| args.out.join(f).exists())
+        }
         Method::UNet => Some("basis.npy").filter(|f| args.out.join(f).exists()),
     };
     if let Some(file) = other {
         let (held, this) = match args.method {
+            Method::Rom if file == learn::MODEL_FILE => ("a model", "a new fit"),
             Method::Rom => ("a U-Net", "a reduced-order model"),
             Method::UNet => ("a reduced-order model", "a U-Net"),
         };
         bail!(
-            "{} holds {held} ({file}): {this} written there would mix their files; give another --out",
+            "{} holds {held} ({file}): {this} written there would replace or mix with its files; give another --out",
             args.out.display()
         );
     }

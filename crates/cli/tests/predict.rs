@@ -162,6 +162,15 @@ magnitude = [0.05, 0.2]
     // A reduced-order model is not written over a U-Net's folder (their files would mix).
     let e = augsim_err(&["train", "data", "--out", "net", "--method", "rom"], d);
     assert!(e.contains("net holds a U-Net (model.safetensors): a reduced-order model written there"), "{e}");
+    // Nor a model over a dataset, a dataset over a model, or a fit over another fit.
+    let e = augsim_err(&["train", "data", "--out", "data", "--method", "rom"], d);
+    assert!(e.contains("data holds a dataset (manifest.json): a model written there"), "{e}");
+    let e = augsim_err(&["generate", "tiny.toml", "--out", "net"], d);
+    assert!(e.contains("net holds a model (model.json): a dataset written there"), "{e}");
+    std::fs::create_dir_all(d.join("fitted")).unwrap();
+    std::fs::write(d.join("fitted/model.json"), "{}").unwrap();
+    let e = augsim_err(&["train", "data", "--out", "fitted", "--method", "rom"], d);
+    assert!(e.contains("fitted holds a model (model.json): a new fit written there would replace"), "{e}");
     // A network fine-tuned from another keeps its architecture: a shape asked for is refused.
     let e = augsim_err(&["train", "data", "--out", "tuned", "--init", "net", "--channels", "4"], d);
     assert!(e.contains("--channels: a network fine-tuned from --init keeps the pre-trained one's architecture"), "{e}");
