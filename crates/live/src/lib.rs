@@ -475,13 +475,18 @@ impl Client {
     ) -> std::io::Result<Client> {
         configure(&stream, &options)?;
         let socket = stream.try_clone()?;
-        let record = match &options.record {
-            Some(dir) => Some(Record::create(dir, &peer, options.coordinates.unit)?),
-            None => None,
-        };
-        if let Some(r) = &record {
-            log(format_args!("{peer}: recorded in {}", r.path.display()));
-        }
+        // A record that cannot be written is said, and the client served all the same.
+        let record =
+            options.record.as_ref().and_then(|dir| match Record::create(dir, &peer, options.coordinates.unit) {
+                Ok(record) => {
+                    log(format_args!("{peer}: recorded in {}", record.path.display()));
+                    Some(record)
+                }
+                Err(e) => {
+                    log(format_args!("{peer}: not recorded in {}: {e}", dir.display()));
+                    None
+                }
+            });
         let shared = Arc::new(Shared {
             peer,
             waiting: Mutex::new(Mailbox::default()),
