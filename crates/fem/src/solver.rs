@@ -728,17 +728,8 @@ impl StaticSolver {
             }
             match attempt {
                 Ok(()) => {
-                    path.record(target, &trial);
-                    latest_converged = true;
-                    if path.snapped() && stats.snapped_from.is_none() {
-                        stats.snapped_from = if options.confirm_snaps {
-                            // The check's factor is at a state of its own path.
-                            latest_converged = !self.arc_length_applies();
-                            self.limit_point_between(&u, lambda, target, &path, options, &mut stats)?
-                        } else {
-                            Some(lambda)
-                        };
-                    }
+                    latest_converged =
+                        self.record_step(&mut path, (lambda, &u), (target, &trial), options, &mut stats)?;
                     previous = Some((lambda, std::mem::replace(&mut u, trial)));
                     lambda = target;
                     steps += 1;
@@ -806,11 +797,36 @@ impl StaticSolver {
         }
     }
 
+    /// Records force control's step from the equilibrium `u` at load factor `lambda` to `trial` at
+    /// `target` on the load `path`; where it softened as a snap does ([`LoadPath::snapped`]) and
+    /// no snap was told yet, tells it ([`Solution::snapped_from`]): checked by arc length with
+    /// [`SolverOptions::confirm_snaps`] where the loads can be scaled alone. Returns whether the
+    /// latest factor is still that of a converged state (a check factorises along its own path).
+    fn record_step(
+        &mut self,
+        path: &mut LoadPath,
+        (lambda, u): (f64, &[f64]),
+        (target, trial): (f64, &[f64]),
+        options: &SolverOptions,
+        stats: &mut Stats,
+    ) -> Result<bool, FemError> {
+        path.record(target, trial);
+        if !path.snapped() || stats.snapped_from.is_some() {
+            return Ok(true);
+        }
+        if !(options.confirm_snaps && self.arc_length_applies()) {
+            stats.snapped_from = Some(lambda);
+            return Ok(true);
+        }
+        stats.snapped_from = self.limit_point_between(u, lambda, target, path, options, stats)?;
+        Ok(false)
+    }
+
     /// Whether force control's step from the equilibrium `u` at load factor `lambda` to `target`,
     /// seen to soften as a snap does ([`LoadPath::snapped`]), passed a limit point: the path
-    /// followed by arc length from `u` turns back before `target`, at the load factor returned
-    /// (`lambda` itself where loads cannot be scaled alone), or reaches it (`None`: the path is
-    /// that soft there, and the body follows it without snapping).
+    /// followed by arc length from `u` turns back before `target`, at the load factor returned, or
+    /// reaches it (`None`: the path is that soft there, and the body follows it without
+    /// snapping).
     fn limit_point_between(
         &mut self,
         u: &[f64],
@@ -820,9 +836,6 @@ impl StaticSolver {
         options: &SolverOptions,
         stats: &mut Stats,
     ) -> Result<Option<f64>, FemError> {
-        if !self.arc_length_applies() {
-            return Ok(Some(lambda));
-        }
         let (mut along, mut reached, indefinite) = (u.to_vec(), lambda, stats.indefinite);
         let followed = self.arc_length(&mut along, &mut reached, target, &mut path.clone(), options, stats);
         stats.indefinite = indefinite;

@@ -260,6 +260,18 @@ impl FrameResult {
     }
 }
 
+/// A deformer's refusal `e` of a cloud spanning `extent` of the organ: a tenth of it or less asks
+/// what so small a cloud may be, as the frame's verdict would have.
+fn with_unit_hint(e: RegisterError, extent: f64) -> RegisterError {
+    match e {
+        RegisterError::Invalid(why) if extent < crate::plausibility::SMALL_VIEW => RegisterError::Invalid(format!(
+            "{why}; the cloud spans {:.0} % of the organ: if it is in centimetres, convert it to mm",
+            100.0 * extent
+        )),
+        e => e,
+    }
+}
+
 /// Registers `organ` to `cloud` (positions only, rigidly aligned: `options.rigid` only words the
 /// warnings here, see [`crate::Registration`]), starting from `start` (a previous frame's
 /// displacement) or from rest.
@@ -346,14 +358,7 @@ pub(crate) fn register_frame_begun(
         if let Some(tree) = &cloud_tree {
             observations.matches.extend(seen_surface_matches(organ, &surface, tree, view, options, capture));
         }
-        u = deformer.deform(&observations, &u, iteration).map_err(|e| match e {
-            // What so small a cloud may be: said where the frame's verdict would have said it.
-            RegisterError::Invalid(why) if extent < crate::plausibility::SMALL_VIEW => RegisterError::Invalid(format!(
-                "{why}; the cloud spans {:.0} % of the organ: if it is in centimetres, convert it to mm",
-                100.0 * extent
-            )),
-            e => e,
-        })?;
+        u = deformer.deform(&observations, &u, iteration).map_err(|e| with_unit_hint(e, extent))?;
         if u.len() != ndof || u.iter().any(|v| !v.is_finite()) {
             return Err(RegisterError::Invalid("the deformer returned a displacement that is not finite".into()));
         }
