@@ -68,6 +68,11 @@ impl PointCloud {
             None => None,
         };
         let vector_scale = vector_unit.map_or(1.0, LengthUnit::metres);
+        // A field is named in errors as the header names its column (`uy`, `fz_N`), if it names six.
+        let columns: Vec<&str> = match names.len() {
+            6 => names.iter().map(String::as_str).collect(),
+            _ => vec!["x", "y", "z", "vx", "vy", "vz"],
+        };
         let mut rows = Vec::new();
         for row in &table.rows {
             let fields: Vec<&String> = row.fields.iter().filter(|f| !f.is_empty()).collect();
@@ -79,9 +84,7 @@ impl PointCloud {
                 return Err(bad(Some(row.line), message));
             }
             let mut values = [0.0; 6];
-            for (value, (field, name)) in
-                values.iter_mut().zip(fields.into_iter().zip(["x", "y", "z", "vx", "vy", "vz"]))
-            {
+            for (value, (field, name)) in values.iter_mut().zip(fields.into_iter().zip(&columns)) {
                 *value = number(field).map_err(|m| bad(Some(row.line), format!("{name} {m}")))?;
             }
             values[..3].iter_mut().for_each(|v| *v *= position_scale);
@@ -231,6 +234,11 @@ mod tests {
         assert!(e.starts_with("cloud.csv:1: the x, y and z columns name different units"), "{e}");
         let e = PointCloud::parse_csv("x,y,z,ux_mm,uy_mm,uz\n0,0,0,0,0,1\n", path).unwrap_err().to_string();
         assert!(e.starts_with("cloud.csv:1: the vector columns name different units"), "{e}");
+        // A field that is no number is named as the header names its column.
+        let e = PointCloud::parse_csv("x,y,z,ux,uy,uz\n0,0,0,0,nan,0\n", path).unwrap_err().to_string();
+        assert!(e.starts_with("cloud.csv:2: uy ") && e.contains("not finite"), "{e}");
+        let e = PointCloud::parse_csv("0,0,0,0,nan,0\n", path).unwrap_err().to_string();
+        assert!(e.starts_with("cloud.csv:1: vy "), "{e}");
         let m = PointCloud::parse_csv("x,y,z,ux_m,uy_m,uz_m\n0,0,0,0,0,0.001\n", path).unwrap();
         assert_eq!((m.vectors[0], m.vector_unit), ([0.0, 0.0, 0.001], Some(LengthUnit::Metre)));
     }
