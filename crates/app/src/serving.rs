@@ -40,7 +40,7 @@ pub struct ServeArgs {
     /// demo take 0.25–0.41 s; a stream's next frames tens of ms).
     #[arg(long, default_value_t = live::TIME_BUDGET_MS, value_name = "MS")]
     pub time_budget_ms: f64,
-    /// Records each client's session in this folder, as it goes: `client-NNN.jsonl`, one line of
+    /// Records each client's stream in this folder, as it goes: `client-NNN.jsonl`, one line of
     /// JSON per answer (each cloud's status with its timestamp and registered targets, each error,
     /// each estimate), in the stream's unit and frame.
     #[arg(long, value_name = "DIR")]
@@ -54,7 +54,7 @@ impl ServeArgs {
         let mut setup = serve_setup(spec, self.outputs, self.assimilate.as_deref())?;
         if let Some(dir) = &self.record {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-            setup.lines.push(format!("record     each client's session in {}/client-NNN.jsonl", dir.display()));
+            setup.lines.push(format!("record     each client's stream in {}/client-NNN.jsonl", dir.display()));
             setup.options.record = Some(dir.clone());
         }
         Ok(setup)

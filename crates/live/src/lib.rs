@@ -197,7 +197,7 @@ pub struct ServeOptions {
     /// Identification on the stream (`features` in, `estimate` out); `None`: `features` are
     /// answered with an error.
     pub identification: Option<Arc<IdentificationFactory>>,
-    /// A folder where each client's session is recorded ([`Record`]); `None`: nothing is written.
+    /// A folder where each client's stream is recorded ([`Record`]); `None`: nothing is written.
     pub record: Option<PathBuf>,
 }
 
@@ -261,7 +261,7 @@ fn log(line: impl std::fmt::Display) {
     eprintln!("augsim serve: {:02}:{:02}:{:02}.{ms:03} {line}", seconds / 3600, seconds / 60 % 60, seconds % 60);
 }
 
-/// A client's session written as it goes, in a file of its own in [`ServeOptions::record`]
+/// A client's stream written as it goes, in a file of its own in [`ServeOptions::record`]
 /// (`client-NNN.jsonl`, the first number free): one line of JSON per event, flushed at once, so
 /// that a server stopped in any way leaves every answer it sent. The first line names the client
 /// (`peer`, `connected`: seconds since 1970, `unit`, the stream's); then each cloud's status with
@@ -377,7 +377,7 @@ struct Shared {
     /// The socket, for reading, and to shut it down without waiting for a write under way.
     socket: TcpStream,
     options: ServeOptions,
-    /// The client's session, written as it goes (see [`ServeOptions::record`]).
+    /// The client's stream, written as it goes (see [`ServeOptions::record`]).
     record: Option<Record>,
 }
 

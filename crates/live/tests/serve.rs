@@ -277,13 +277,13 @@ fn answers_carry_the_timestamp_of_the_cloud_they_answer() {
     server.stop();
 }
 
-/// With a record folder, each client's session is written as it goes, one line of JSON per
+/// With a record folder, each client's stream is written as it goes, one line of JSON per
 /// answer: the client, then each cloud's status with its timestamp and targets (in the stream's
 /// unit, as sent), and each error; a second client gets a file of its own.
 #[test]
-fn each_client_s_session_is_recorded_as_it_goes() {
+fn each_client_s_stream_is_recorded_as_it_goes() {
     let dir = tempfile::tempdir().unwrap();
-    let record = Some(dir.path().join("session"));
+    let record = Some(dir.path().join("record"));
     let server =
         Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), record, ..ServeOptions::default() });
     let (cloud, _) = pressed_cloud(300.0);
@@ -305,7 +305,7 @@ fn each_client_s_session_is_recorded_as_it_goes() {
     drop((client, second));
     server.stop();
     let read = |name: &str| -> Vec<serde_json::Value> {
-        let text = std::fs::read_to_string(dir.path().join("session").join(name)).unwrap();
+        let text = std::fs::read_to_string(dir.path().join("record").join(name)).unwrap();
         text.lines().map(|l| serde_json::from_str(l).unwrap()).collect()
     };
     let lines = read("client-001.jsonl");
