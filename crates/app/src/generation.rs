@@ -66,17 +66,7 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
         }
         None => None,
     };
-    progress.line(&format!("scenario   {}: {}", scenario.name, scenario.description));
-    let generator = scenario.generator(&dir)?;
-    let mesh = generator.mesh();
-    progress.line(&format!(
-        "mesh       {} nodes, {} {} cells",
-        mesh.num_nodes(),
-        mesh.cells.len(),
-        mesh.cells.kind_name()
-    ));
-    let (grid, inside) = (generator.grid(), generator.mask().iter().filter(|&&m| m == 1).count());
-    progress.line(&format!("grid       {} × {} × {} ({inside} nodes inside)", grid.nx, grid.ny, grid.nz));
+    // Where the dataset goes, refused before its mesh and grid are built.
     let out = args.out.clone().unwrap_or_else(|| match &args.shard {
         None => PathBuf::from(format!("out/{}", scenario.name)),
         Some(p) => PathBuf::from(format!("out/{}.part{}of{}", scenario.name, p.index, p.count)),
@@ -88,6 +78,17 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
             learn::MODEL_FILE
         );
     }
+    progress.line(&format!("scenario   {}: {}", scenario.name, scenario.description));
+    let generator = scenario.generator(&dir)?;
+    let mesh = generator.mesh();
+    progress.line(&format!(
+        "mesh       {} nodes, {} {} cells",
+        mesh.num_nodes(),
+        mesh.cells.len(),
+        mesh.cells.kind_name()
+    ));
+    let (grid, inside) = (generator.grid(), generator.mask().iter().filter(|&&m| m == 1).count());
+    progress.line(&format!("grid       {} × {} × {} ({inside} nodes inside)", grid.nx, grid.ny, grid.nz));
     // What the dataset held before this run (resumed, grown, or complete already).
     let held = learn::Dataset::open(&out).map_or(0, |d| d.manifest().num_samples + d.manifest().failed.len());
     let start = Instant::now();

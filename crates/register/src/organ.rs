@@ -46,6 +46,8 @@ pub struct Organ {
     surface: TriSurface,
     stencils: Vec<Stencil>,
     locator: MeshLocator,
+    /// The rest surface's bounding-volume hierarchy, built once.
+    rest_bvh: SurfaceBvh,
 }
 
 impl Organ {
@@ -74,7 +76,8 @@ impl Organ {
                 None => Stencil(vec![(mesh::select::nearest(&mesh.nodes, 0..mesh.num_nodes(), p).unwrap_or(0), 1.0)]),
             })
             .collect();
-        Ok(Organ { mesh, surface, stencils, locator })
+        let rest_bvh = SurfaceBvh::new(&surface)?;
+        Ok(Organ { mesh, surface, stencils, locator, rest_bvh })
     }
 
     /// The volumetric mesh.
@@ -85,6 +88,11 @@ impl Organ {
     /// The surface at rest.
     pub fn surface(&self) -> &TriSurface {
         &self.surface
+    }
+
+    /// The rest surface's bounding-volume hierarchy (closest points, distances).
+    pub fn rest_bvh(&self) -> &SurfaceBvh {
+        &self.rest_bvh
     }
 
     /// Where each surface vertex takes its displacement from.
@@ -117,8 +125,8 @@ impl Organ {
     /// `points`: of another discretisation of the same organ, e.g. a model's surface nodes on a
     /// truth's finer surface.
     pub fn surface_displacement_at(&self, u: &[f64], points: &[Point]) -> Result<Vec<Point>> {
-        let bvh = SurfaceBvh::new(&self.surface)?;
-        Ok(points.iter().map(|&p| self.nearest_surface_stencil(&bvh, p).0.vector(u)).collect())
+        let bvh = &self.rest_bvh;
+        Ok(points.iter().map(|&p| self.nearest_surface_stencil(bvh, p).0.vector(u)).collect())
     }
 
     /// The stencil of the rest surface's point nearest to `p` (`bvh` over the surface), and its
@@ -135,7 +143,7 @@ impl Organ {
     /// it lies (0 inside): a point outside, by at most `tolerance`, follows the surface's nearest
     /// point.
     pub fn locate_near(&self, points: &[Point], tolerance: f64, what: &str) -> Result<Vec<(Stencil, f64)>> {
-        let bvh = SurfaceBvh::new(&self.surface)?;
+        let bvh = &self.rest_bvh;
         points
             .iter()
             .enumerate()
@@ -143,7 +151,7 @@ impl Organ {
                 if let Some(location) = self.locator.locate(p) {
                     return Ok((Stencil::of(&location), 0.0));
                 }
-                let (stencil, distance) = self.nearest_surface_stencil(&bvh, p);
+                let (stencil, distance) = self.nearest_surface_stencil(bvh, p);
                 if !(distance <= tolerance) {
                     return Err(RegisterError::Invalid(format!(
                         "{what} {} at {} lies {:.2} mm outside the organ mesh",
@@ -207,8 +215,7 @@ impl Organ {
     pub fn locate_targets(&self, targets: &[Point], labels: &[String]) -> Result<(Vec<Stencil>, Vec<String>)> {
         let inside = |moved: &[Point]| self.locate(moved, "target").is_ok();
         let stencils = self.locate_labelled(targets, labels, "target").map_err(|e| {
-            let near = SurfaceBvh::new(&self.surface)
-                .is_ok_and(|bvh| targets.iter().all(|&p| bvh.signed_distance(p) <= NEAR_OUTSIDE * self.extent()));
+            let near = targets.iter().all(|&p| self.rest_bvh.signed_distance(p) <= NEAR_OUTSIDE * self.extent());
             let hint = match near {
                 true => String::new(),
                 false => likely_mistake(targets, &self.mesh.nodes, "every target lies inside", inside),
@@ -227,7 +234,7 @@ impl Organ {
         if let Some((i, fault)) = mesh::measured_fault(landmarks) {
             return Err(RegisterError::Invalid(format!("landmark {} {fault}", i + 1)));
         }
-        let bvh = SurfaceBvh::new(&self.surface)?;
+        let bvh = &self.rest_bvh;
         let reach = LANDMARK_REACH * self.extent();
         let outside = |p: Point| bvh.signed_distance(p).max(0.0);
         let held = |moved: &[Point]| moved.iter().all(|&p| outside(p) <= reach);

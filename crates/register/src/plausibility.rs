@@ -122,7 +122,7 @@ fn looks_like_millimetres(organ: &Organ, cloud: &[Point]) -> Result<bool> {
     if robust_extent(&metres) > MAX_EXTENT_RATIO * size {
         return Ok(false);
     }
-    Ok(median_distance(&SurfaceBvh::new(organ.surface())?, &metres) < REST_FIT * size)
+    Ok(median_distance(organ.rest_bvh(), &metres) < REST_FIT * size)
 }
 
 /// The median distance of `cloud` to the surface of `bvh`.
@@ -139,8 +139,8 @@ pub fn frame_mix_up(organ: &Organ, cloud: &[Point]) -> Result<Option<String>> {
     // The medians of evenly spread points: a fraction of a millisecond a frame.
     let sample: Vec<Point> = cloud.iter().step_by(cloud.len().div_ceil(MIX_UP_POINTS).max(1)).copied().collect();
     let negated: Vec<Point> = sample.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
-    let bvh = SurfaceBvh::new(organ.surface())?;
-    let (given, other) = (median_distance(&bvh, &sample), median_distance(&bvh, &negated));
+    let bvh = organ.rest_bvh();
+    let (given, other) = (median_distance(bvh, &sample), median_distance(bvh, &negated));
     Ok((other < REST_FIT * organ.extent() && other <= 0.5 * given).then(|| {
         format!(
             "with x and y negated the cloud lies on the organ at rest (median distance {:.1} mm, against {:.1} mm as \

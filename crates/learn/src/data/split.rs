@@ -147,25 +147,27 @@ pub struct Split {
     pub test: IndexSet,
 }
 
-/// Whether two data sources ([`crate::Manifest::source_id`]: `<scenario>/seed <seed>/<settings>`)
-/// are the same draws: their seed and settings agree, whatever the scenario is called (a
-/// scenario renamed, or copied under another name, draws the same samples).
+/// The parts of a data source ([`crate::Manifest::source_id`]: `<scenario>/seed <seed>/<settings>`),
+/// last first: settings, seed, scenario (those present).
+fn source_parts(source: &str) -> Vec<&str> {
+    source.rsplitn(3, '/').collect()
+}
+
+/// Whether two data sources (see [`source_parts`]) are the same draws: their seed and settings
+/// agree, whatever the scenario is called (a scenario renamed, or copied under another name, draws
+/// the same samples).
 pub fn same_source(a: Option<&str>, b: Option<&str>) -> bool {
     match (a, b) {
-        (Some(a), Some(b)) => a.rsplitn(3, '/').take(2).eq(b.rsplitn(3, '/').take(2)),
+        (Some(a), Some(b)) => source_parts(a).iter().take(2).eq(source_parts(b).iter().take(2)),
         _ => false,
     }
 }
 
 /// Whether the sources `a` and `b` come from scenarios of one name and seed whose settings
-/// differ (`<scenario>/seed <seed>/<settings>`): their draws of one index may be near copies (a
-/// load range changed in its last digit).
+/// differ: their draws of one index may be near copies (a load range changed in its last digit).
 pub fn same_name_and_seed(a: Option<&str>, b: Option<&str>) -> bool {
-    match (a, b) {
-        (Some(a), Some(b)) => {
-            let (a, b): (Vec<&str>, Vec<&str>) = (a.rsplitn(3, '/').collect(), b.rsplitn(3, '/').collect());
-            a.len() == 3 && b.len() == 3 && a[1..] == b[1..] && a[0] != b[0]
-        }
+    match (a.map(source_parts), b.map(source_parts)) {
+        (Some(a), Some(b)) => a.len() == 3 && b.len() == 3 && a[1..] == b[1..] && a[0] != b[0],
         _ => false,
     }
 }
@@ -174,7 +176,7 @@ impl Split {
     /// The dataset scenario the samples were generated from: the first part of the source
     /// (`<scenario>/seed <seed>/<settings>`), when known.
     pub fn scenario(&self) -> Option<&str> {
-        self.source.as_deref().and_then(|s| s.rsplitn(3, '/').nth(2))
+        self.source.as_deref().and_then(|s| source_parts(s).get(2).copied())
     }
 
     /// Splits `samples` in index order: the last `test` uniform samples for testing, the
