@@ -153,7 +153,7 @@ fn source_parts(source: &str) -> Vec<&str> {
     source.rsplitn(3, '/').collect()
 }
 
-/// Whether two data sources (see [`source_parts`]) are the same draws: their seed and settings
+/// Whether two data sources (`<scenario>/seed <seed>/<settings>`) are the same draws: their seed and settings
 /// agree, whatever the scenario is called (a scenario renamed, or copied under another name, draws
 /// the same samples).
 pub fn same_source(a: Option<&str>, b: Option<&str>) -> bool {
