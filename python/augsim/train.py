@@ -183,6 +183,8 @@ def model_json(args, manifest, config, scales, best, split):
             "frozen_encoder": False,
             "corruption": {"sparsity": None, "noise_std": 0.0},  # trained on clean, whole inputs
             "split": split["record"],
+            "schedule": {"batch_size": args.batch, "learning_rate": args.lr, "final_learning_rate": args.final_lr,
+                         "validate_every": args.validate_every},
         },
     }
 

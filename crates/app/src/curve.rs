@@ -21,7 +21,7 @@ pub fn plot_learning_curve(path: &Path, curve: &[CurveRow]) -> Result<()> {
     let what = || format!("drawing the learning curve {}", path.display());
     let loss = Series {
         name: "training loss".into(),
-        points: curve.iter().map(|r| (r.iteration as f64, r.train_loss)).collect(),
+        points: curve.iter().filter_map(|r| Some((r.iteration as f64, r.train_loss?))).collect(),
         band: None,
     };
     let spec = PlotSpec {
@@ -60,7 +60,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let val = ErrorStats { mean: 2e-3, std: 1e-3, max: 5e-3, worst: 0 };
         let curve: Vec<CurveRow> = (1..=4)
-            .map(|i| CurveRow { iteration: 100 * i, train_loss: 1.0 / i as f64, val: (i % 2 == 0).then_some(val) })
+            .map(|i| CurveRow {
+                iteration: 100 * i,
+                train_loss: Some(1.0 / i as f64),
+                val: (i % 2 == 0).then_some(val),
+            })
             .collect();
         let path = dir.path().join(CURVE_PNG);
         plot_learning_curve(&path, &curve).unwrap();

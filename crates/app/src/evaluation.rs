@@ -98,6 +98,7 @@ pub fn evaluate_held_out(
             if input.is_force() { "forces" } else { "displacements" }
         );
     }
+    corruption.check_scale(dataset.manifest().statistics.inputs.rms_norm, input)?;
     // A record without a source (a split lost, or data of unknown origin) cannot tell them either.
     let Some(provenance) = model.provenance().filter(|p| p.own.source.is_some()) else {
         bail!(

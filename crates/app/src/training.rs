@@ -259,6 +259,8 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
         bail!("{}: a network fine-tuned from --init keeps the pre-trained one's architecture", shaped.join(", "));
     }
     let dataset = Dataset::open(&args.dataset)?;
+    let manifest = dataset.manifest();
+    args.corruption.corruption().check_scale(manifest.statistics.inputs.rms_norm, manifest.units.input)?;
     let all = dataset.load_all()?;
     let (split, [train, validation, test]) = args.split.policy().apply(&all)?;
     progress.line(&format!(
@@ -266,13 +268,20 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
         train.len(),
         validation.len(),
         test.len(),
-        dataset.manifest().grid
+        manifest.grid
     ));
     if args.method == Method::Rom {
         return train_rom(args, &dataset, split, [train, validation]);
     }
     let (compute, device) = args.device.described()?;
     progress.line(&device);
+    if args.batch > train.len() {
+        progress.line(&format!(
+            "batch      {} samples per step: the whole training set (--batch {} is more than it holds)",
+            train.len(),
+            args.batch
+        ));
+    }
     let start = match &args.init {
         Some(model) => UNetStart::FineTune { model: model.clone(), freeze_encoder: args.freeze_encoder },
         None => {
@@ -298,7 +307,8 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
     };
     let mut lines = vec![format!("steps      {} ({pace})", outcome.iterations_done)];
     if let Some((it, Some(e))) = outcome.model.training.as_ref().map(|t| (t.best_iteration, t.best_val_mean_error)) {
-        lines.push(format!("best       validation mean e = {:.4} mm at iteration {it}", mm(e)));
+        let kept = if it == 0 { " (the pre-trained network, kept: no step improved on it)" } else { "" };
+        lines.push(format!("best       validation mean e = {:.4} mm at iteration {it}{kept}", mm(e)));
     }
     lines.push(format!("wrote      {}", outcome.model_path.display()));
     Ok(lines)

@@ -65,6 +65,7 @@ magnitude = [0.05, 0.2]
         d,
     );
     assert!(text.contains("split      3 training, 1 validation, 2 test samples"), "{text}");
+    assert!(text.contains("batch      3 samples per step: the whole training set (--batch 4 is more"), "{text}");
     assert!(text.contains("best       validation"), "{text}");
     assert!(d.join("net/curve.png").is_file(), "the learning curve is drawn beside the model");
 
@@ -83,6 +84,12 @@ magnitude = [0.05, 0.2]
     let text =
         augsim(&["eval", "net/model.json", "data", "--out", "eval_sparse", "--sparse", "2,20", "--noise", "1e-4"], d);
     assert!(text.contains("held out   2 of 6 samples"), "{text}");
+    // A noise in another unit than the inputs' would drown them.
+    let e = augsim_err(&["eval", "net/model.json", "data", "--noise", "1"], d);
+    assert!(
+        e.contains("a noise of 1 N on inputs whose RMS is") && e.contains("the noise is in the inputs' unit, N"),
+        "{e}"
+    );
     let e = augsim_err(&["eval", "net/model.json", "data", "--sparse", "20"], d);
     assert!(e.contains("expected MIN,MAX (e.g. 13,114), got '20'"), "{e}");
     // A patch of more nodes than any input has would leave the input dense: refused.

@@ -51,7 +51,7 @@ pub use model::{LearnedModel, Method, Model, ModelPredictor, Projected, MODEL_FI
 pub use net::compute::Compute;
 pub use net::inference::InferenceNet;
 pub use net::predict::{time_prediction, Predictor, Timing};
-pub use net::unet::{Gradients, TrainedModel, TrainingInfo, UNet, UNetConfig};
+pub use net::unet::{Gradients, Schedule, TrainedModel, TrainingInfo, UNet, UNetConfig};
 pub use progress::{Progress, Silent};
 pub use training::curve::CurveRow;
 pub use training::evaluation::{

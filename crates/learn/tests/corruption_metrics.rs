@@ -4,7 +4,7 @@ mod common;
 
 use augsim_learn::data::corrupt::item_rng;
 use augsim_learn::training::metrics::{masked_mse_values, mean_euclidean_error};
-use augsim_learn::{Corruption, ErrorStats, GridShape, Sparsity};
+use augsim_learn::{Corruption, ErrorStats, FieldUnit, GridShape, Sparsity};
 
 #[test]
 fn masked_mse_matches_hand_computation() {
@@ -153,4 +153,17 @@ fn noise_touches_only_visible_nodes_with_the_requested_spread() {
     let bad = Corruption { sparsity: Some(Sparsity::Patch { min_nodes: 5, max_nodes: 2 }), noise_std: 0.0 };
     assert!(bad.apply(&mut x, grid, &mut item_rng(0, 0, 0)).is_err());
     assert!(Corruption { sparsity: None, noise_std: -1.0 }.validate().is_err());
+}
+
+#[test]
+fn a_noise_in_the_wrong_unit_is_refused() {
+    // Displacements of about 5 mm: 2 mm of noise is a noisy camera; 1 (meaning 1 mm) is a metre.
+    let rms = 5e-3;
+    let noise = |std: f64| Corruption { sparsity: None, noise_std: std };
+    assert!(noise(2e-3).check_scale(rms, FieldUnit::Metre).is_ok());
+    let e = noise(1.0).check_scale(rms, FieldUnit::Metre).unwrap_err().to_string();
+    assert!(e.contains("a noise of 1 m on inputs whose RMS is 5.000e-3 m") && e.contains("1 mm is 0.001"), "{e}");
+    // Forces of about 1 N: half a newton of noise is kept.
+    assert!(noise(0.5).check_scale(1.0, FieldUnit::Newton).is_ok());
+    assert!(noise(50.0).check_scale(1.0, FieldUnit::Newton).is_err());
 }

@@ -131,12 +131,20 @@ fn bad_input_is_refused_with_a_message() {
     let reduced = Model::Reduced(std::sync::Arc::new(model.clone()));
     let e = PredictInput::Grid(array).into_network_input(&reduced).unwrap_err().to_string();
     assert!(e.contains("value 3 is 1e300"), "{e}");
-    // Settings that leave nothing to fit.
+    // Settings that leave nothing to fit, or that would fit the same thing twice.
+    let noisy = Corruption { noise_std: 1e-3, ..Corruption::none() };
     for (config, what) in [
         (RomConfig { max_modes: 0, ..RomConfig::default() }, "at least one of its modes"),
         (RomConfig { max_inducing: 0, ..RomConfig::default() }, "at least one of its inducing points"),
         (RomConfig { input_energy: 0.0, ..RomConfig::default() }, "input energy"),
-        (RomConfig { noise_copies: 1_000_000_000_000, ..RomConfig::default() }, "corrupted copies of each would take"),
+        (
+            RomConfig { noise_copies: 2, ..RomConfig::default() },
+            "copies of each training sample asked for, but no corruption",
+        ),
+        (
+            RomConfig { noise_copies: 1_000_000_000_000, corruption: noisy.clone(), ..RomConfig::default() },
+            "corrupted copies of each would take",
+        ),
     ] {
         let e = fit(&train, &validation, &config, context(split.clone()), None).unwrap_err().to_string();
         assert!(e.contains(what), "{e}");

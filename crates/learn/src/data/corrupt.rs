@@ -9,6 +9,7 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
+use crate::data::dataset::FieldUnit;
 use crate::data::grid::{GridShape, CHANNELS};
 use crate::{LearnError, Result};
 
@@ -83,6 +84,24 @@ impl Corruption {
             }
             _ => Ok(()),
         }
+    }
+
+    /// Refuses a noise more than ten times the inputs' RMS norm (`input_rms`, in `unit`): a
+    /// standard deviation given in another unit (1 meaning 1 mm, on inputs in metres) would
+    /// drown the inputs.
+    pub fn check_scale(&self, input_rms: f64, unit: FieldUnit) -> Result<()> {
+        if input_rms > 0.0 && self.noise_std > 10.0 * input_rms {
+            let hint = match unit {
+                FieldUnit::Metre => " (1 mm is 0.001)",
+                FieldUnit::Newton => "",
+            };
+            return Err(LearnError::InvalidInput(format!(
+                "a noise of {} {unit} on inputs whose RMS is {:.3e} {unit} would drown them: the noise is in the \
+                 inputs' unit, {unit}{hint}",
+                self.noise_std, input_rms
+            )));
+        }
+        Ok(())
     }
 
     /// Corrupts one input field (`[3, nx, ny, nz]`) in place.

@@ -492,6 +492,24 @@ pub struct TrainingInfo {
     /// The splits of the runs this one was fine-tuned from, most recent first.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub pretraining: Vec<Split>,
+    /// How its steps were taken (absent from models trained before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub schedule: Option<Schedule>,
+}
+
+/// The optimiser's settings of a training run: with the seed, the split and the corruption, what
+/// retraining it takes.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Schedule {
+    /// Samples per step (after capping at the training samples).
+    pub batch_size: usize,
+    /// Adam's learning rate at the first step.
+    pub learning_rate: f64,
+    /// The rate at the last step, reached along a half cosine, if it fell.
+    pub final_learning_rate: Option<f64>,
+    /// Steps between validations (the kept weights are chosen among them).
+    pub validate_every: usize,
 }
 
 impl TrainingInfo {

@@ -79,6 +79,13 @@ impl RomConfig {
                 self.input_energy
             )));
         }
+        if self.noise_copies > 0 && self.corruption.is_identity() {
+            return Err(LearnError::InvalidInput(format!(
+                "reduced-order model: {} corrupted copies of each training sample asked for, but no corruption \
+                 (`augsim train --noise` or `--sparse`): they would be copies of the clean samples",
+                self.noise_copies
+            )));
+        }
         self.corruption.validate()
     }
 }

@@ -38,7 +38,9 @@ use crate::net::backprop::loss_and_gradients;
 #[cfg(feature = "cpu-burn")]
 use crate::net::burn_unet::BurnUNet;
 use crate::net::predict::Predictor;
-use crate::net::unet::{read_tensor, write_safetensors, Gradients, TrainedModel, TrainingInfo, UNet, UNetConfig};
+use crate::net::unet::{
+    read_tensor, write_safetensors, Gradients, Schedule, TrainedModel, TrainingInfo, UNet, UNetConfig,
+};
 use crate::progress::Progress;
 use crate::training::adam::{Adam, Moments};
 use crate::training::curve::{write_curve_csv, CurveRow};
@@ -553,6 +555,12 @@ pub fn train(
         ));
     }
 
+    // A fine-tuned network must earn its place: the pre-trained one, validated before its first
+    // step, is kept when no later validation beats it.
+    if state.iteration == 0 && start.fine_tuned_from.is_some() && !val.is_empty() {
+        state.validate(&net, val, &start.normalization, config, options.compute)?;
+        best = Some(net.clone());
+    }
     let total = config.iterations as u64;
     progress.advance(state.iteration as u64, total, "");
 
@@ -723,7 +731,7 @@ impl CheckpointState {
         };
         self.curve.push(CurveRow {
             iteration: self.iteration,
-            train_loss: self.loss_sum / self.loss_count.max(1) as f64,
+            train_loss: (self.loss_count > 0).then(|| self.loss_sum / self.loss_count as f64),
             val: val_error,
         });
         self.loss_sum = 0.0;
@@ -773,6 +781,12 @@ fn trained_model(
             corruption: config.train_corruption.clone(),
             split,
             pretraining: start.pretraining,
+            schedule: Some(Schedule {
+                batch_size: config.batch_size.min(train.len()),
+                learning_rate: config.learning_rate,
+                final_learning_rate: config.final_learning_rate,
+                validate_every: config.validate_every,
+            }),
         }),
         net,
     }
