@@ -348,7 +348,8 @@ impl RunWriter {
 /// turn, each from the last) registered as `spec` says, the targets' truth of `truth` (a file,
 /// or one per frame) measured, the run written into `out` ([`RunWriter`]); each line for the
 /// user (the method, the organ, each frame, the run, the files) goes to `say`, a warning's
-/// starting with `warning`.
+/// starting with `warning`. An error, once written, when the last frame's result is not
+/// plausible.
 pub fn register_files(
     spec: &RegistrationSpec,
     cloud: &Path,
@@ -397,6 +398,15 @@ pub fn register_files(
         if sequence { "organ.pvd" } else { "organ.vtu" },
         finished.for_slicer.join(", ")
     ));
+    // A result flagged as not believable must not pass for one in a script's eyes.
+    if outcomes.last().is_some_and(|o| !o.registration.plausible()) {
+        anyhow::bail!(
+            "the registration{} is not plausible (the warnings above; summary.json: \"plausible\": false): its \
+             files in {} are kept to look at, not to navigate by",
+            if sequence { " of the last frame" } else { "" },
+            out.display()
+        );
+    }
     Ok(())
 }
 

@@ -14,7 +14,12 @@ use mesh::io::Frame;
 use mesh::length::LengthUnit;
 
 fn augsim(args: &[&str]) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_augsim")).args(args).output().expect("augsim runs");
+    augsim_in(Path::new("."), args)
+}
+
+/// `augsim` run in `dir`: whether it succeeded, and what it printed.
+fn augsim_in(dir: &Path, args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_augsim")).args(args).current_dir(dir).output().expect("augsim runs");
     (out.status.success(), format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr)))
 }
 
@@ -116,6 +121,18 @@ fn slicer_files_and_millimetres_register_as_metres_do() {
     let (_, examples_tre) =
         register(&example("cloud.csv"), &example("targets.csv"), &example("truth.csv"), &d.join("examples"), &[]);
     assert!((examples_tre - tre).abs() < 0.05, "TRE {tre} against {examples_tre} mm");
+
+    // The cloud in the other frame (x and y negated): registered, written to look at, and the
+    // run fails, so that no script takes its files for a registration.
+    let mirrored: Vec<[f64; 3]> =
+        read_points_csv(&metres[0]).unwrap().iter().map(|p| [-p[0], -p[1], p[2]]).collect();
+    write_points_csv(&d.join("mirrored.csv"), &mirrored).unwrap();
+    let out = d.join("mirrored");
+    let args = ["register", "mirrored.csv", "--fem", "liver", "--targets", "targets_m.csv", "--out", "mirrored"];
+    let (ok, text) = augsim_in(d, &args);
+    assert!(!ok && text.contains("with x and y negated the cloud lies on the organ"), "{text}");
+    assert!(text.contains("error: the registration is not plausible") && text.contains("kept to look at"), "{text}");
+    assert!(out.join("summary.json").is_file() && out.join("targets.mrk.json").is_file());
 }
 
 /// A tumour given as 3D Slicer exports a segment (an STL in LPS and mm) comes back moved with

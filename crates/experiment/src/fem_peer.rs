@@ -201,8 +201,8 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         ),
         "An inverted solution: augsim's element evaluation finds det F ≤ 0 at a quadrature point of CalculiX's \
          displacement. Saint-Venant-Kirchhoff's energy stays finite for an element turned inside out, so CalculiX's \
-         Newton iterations may converge there; augsim refuses such states and reports the compressive limit point \
-         it stopped at."
+         Newton iterations may converge there; augsim refuses such states and reports the compressive limit point or the \
+         element crushed flat it stopped at."
             .to_string(),
         format!(
             "augsim: the standard formulation, residual tolerance 1e-9 (no stop on a small step); the same solution means a largest nodal \

@@ -91,6 +91,18 @@ pub enum FemError {
         /// The last load factor reached.
         load_factor: f64,
     },
+    /// Saint-Venant-Kirchhoff crushed an element flat with the body still stiff: beyond, no
+    /// equilibrium was found that keeps the element the right way out.
+    #[error("Saint-Venant-Kirchhoff crushed element {element} flat by load factor {load_factor:.3} (its smallest principal stretch {stretch:.1e}: SVK's compressive stress peaks at the stretch 0.577 and falls to zero when flat) while the body stayed stiff; beyond it no equilibrium was found that keeps the element the right way out. SVK's energy lets an element pass through flat and turn inside out, which augsim refuses (codes that do not check, CalculiX among them, go on with inverted elements); use law = \"neo_hookean\", which resists crushing, or a finer mesh there")]
+    CrushedFlat {
+        /// The element crushed flat at the last equilibrium (numbered as for
+        /// [`FemError::InvertedElement`]).
+        element: usize,
+        /// Its smallest principal stretch there.
+        stretch: f64,
+        /// The last load factor reached.
+        load_factor: f64,
+    },
     /// The load path turned back: the smallest load step past the last equilibrium found none,
     /// even with a long descent.
     #[error("no equilibrium found beyond load factor {load_factor:.3}{}, and {iterations} further iterations found none; lower the load, hold the body more firmly, or push with a displacement", stiffness_note(*.softening))]
@@ -133,6 +145,9 @@ impl FemError {
             }
             FemError::LimitPoint { element, stretch, load_factor } => {
                 FemError::LimitPoint { element: mesh.file_cell(element), stretch, load_factor }
+            }
+            FemError::CrushedFlat { element, stretch, load_factor } => {
+                FemError::CrushedFlat { element: mesh.file_cell(element), stretch, load_factor }
             }
             other => other,
         }

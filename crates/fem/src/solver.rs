@@ -686,8 +686,10 @@ impl StaticSolver {
                     "an arc-length continuation scales loads, not prescribed displacements".into(),
                 ));
             }
-            let steps = self.arc_length(&mut u, &mut lambda, 1.0, &mut path, options, &mut stats)?;
-            return Ok(stats.finish(u, steps, start));
+            return match self.arc_length(&mut u, &mut lambda, 1.0, &mut path, options, &mut stats) {
+                Ok(steps) => Ok(stats.finish(u, steps, start)),
+                Err(e) => Err(self.diagnose(e, lambda, &u, &u, &stats)),
+            };
         }
         // Whether the early patient attempt is still to be made; the last failed patient attempt
         // (the load factor it started from, its iterations).
@@ -896,11 +898,9 @@ impl StaticSolver {
         Ok(())
     }
 
-    /// Turns the failure of a Saint-Venant-Kirchhoff solve past its compressive
-    /// limit point into [`FemError::LimitPoint`]: the failing attempt found the tangent
-    /// indefinite, or a quadrature point is compressed beyond the stretch 1/√3 where SVK's
-    /// stress peaks. `lambda` is the last converged load factor, `trial` the
-    /// failing iterate and `u` the last converged state.
+    /// Turns the failure of a Saint-Venant-Kirchhoff solve by compression into what it is
+    /// ([`svk_failure`]). `lambda` is the last converged load factor, `trial` the failing
+    /// iterate and `u` the last converged state.
     fn diagnose(&self, error: FemError, lambda: f64, trial: &[f64], u: &[f64], stats: &Stats) -> FemError {
         if self.problem.material.law != Law::Svk || matches!(error, FemError::Interrupted) {
             return error;
@@ -912,12 +912,7 @@ impl StaticSolver {
         // Whether the iterate that failed went past the limit; told of the last equilibrium, which
         // does not depend on how far the failed iterate strayed.
         let Some((_, strayed)) = most_compressed(trial).or_else(|| most_compressed(u)) else { return error };
-        match most_compressed(u) {
-            Some((element, stretch)) if stats.indefinite || strayed < SVK_LIMIT_STRETCH * 1.05 => {
-                FemError::LimitPoint { element, stretch, load_factor: lambda }
-            }
-            _ => error,
-        }
+        svk_failure(stats.indefinite, strayed, most_compressed(u), lambda).unwrap_or(error)
     }
 
     /// Iterations at load factor `lambda`, updating `u` in place.
@@ -1265,9 +1260,55 @@ impl Stats {
     }
 }
 
+/// A smallest principal stretch under which an element is crushed flat (a twentieth of its
+/// length left in that direction).
+const FLAT_STRETCH: f64 = 0.05;
+
+/// What stopped a Saint-Venant-Kirchhoff solve that failed with the tangent found `indefinite` or
+/// not, its failing iterate compressed to the stretch `strayed`, the last equilibrium's most
+/// compressed element `last` (index, stretch) at load factor `lambda`:
+/// - [`FemError::CrushedFlat`] when that element was already flat and the tangent stayed
+///   positive definite: the body is still stiff, and what stops it is an element that can only
+///   go on by turning inside out (the voxel liver of 2,133 H8 under gravity: stretch 2e-6 at
+///   load factor 0.944; CalculiX's equilibrium beyond has 15 quadrature points with det F < 0);
+/// - [`FemError::LimitPoint`] when the tangent turned indefinite, or the failing iterate was
+///   compressed past the stretch 1/√3 where SVK's stress peaks: the compressive limit point;
+/// - none otherwise (the failure is told as it came).
+fn svk_failure(indefinite: bool, strayed: f64, last: Option<(usize, f64)>, lambda: f64) -> Option<FemError> {
+    let (element, stretch) = last?;
+    if stretch < FLAT_STRETCH && !indefinite {
+        return Some(FemError::CrushedFlat { element, stretch, load_factor: lambda });
+    }
+    (indefinite || strayed < SVK_LIMIT_STRETCH * 1.05).then_some(FemError::LimitPoint {
+        element,
+        stretch,
+        load_factor: lambda,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An element flat at the last equilibrium of a still-stiff body is told as crushed, not as
+    /// the body's limit point; the limit point as before; anything else as it came.
+    #[test]
+    fn an_svk_failure_is_told_by_what_stopped_it() {
+        let crushed = svk_failure(false, 3e-5, Some((1070, 2e-6)), 0.944).unwrap();
+        assert!(matches!(crushed, FemError::CrushedFlat { element: 1070, load_factor: 0.944, .. }), "{crushed:?}");
+        let text = crushed.to_string();
+        assert!(text.contains("crushed element 1070 flat by load factor 0.944 (its smallest principal stretch 2.0e-6"));
+        assert!(text.contains("turn inside out") && text.contains("neo_hookean"), "{text}");
+        // A flat element in a body whose tangent turned indefinite: the body's limit point.
+        let limit = svk_failure(true, 0.9, Some((7, 0.01)), 0.5).unwrap();
+        assert!(matches!(limit, FemError::LimitPoint { element: 7, .. }), "{limit:?}");
+        // Short of the peak at equilibrium, the failing iterate past it (the block crushed by a force).
+        let limit = svk_failure(false, 0.3, Some((3, 0.7)), 0.4).unwrap();
+        assert!(matches!(limit, FemError::LimitPoint { element: 3, .. }), "{limit:?}");
+        // Nothing compressed near the limit, or no element at all: not SVK's doing.
+        assert!(svk_failure(false, 0.9, Some((3, 0.95)), 0.4).is_none());
+        assert!(svk_failure(true, 0.1, None, 0.4).is_none());
+    }
 
     #[test]
     fn the_predictor_extrapolates_a_straight_path_and_never_divides_by_a_zero_step() {

@@ -542,9 +542,9 @@ fn camera_sees_the_hold(
 fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Option<Frame>)> {
     let mut lines = Vec::new();
     let frame = organ_lines(options, dir, &mut lines).map_err(|e| {
-        // A warning said before the error that doubts the unit (one that makes no organ's size)
-        // is often its cause; the others are not.
-        let warnings = unit_doubts(&lines);
+        // A warning said before the error that doubts the organ itself (a unit that makes no
+        // organ's size, an organ cut by the image's border) is often its cause; the others are not.
+        let warnings = organ_doubts(&lines);
         match warnings.is_empty() {
             true => e,
             false => e.context(format!(
@@ -557,9 +557,14 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
     Ok((lines, frame))
 }
 
-/// The warnings among `lines` that doubt the unit of the inputs (an organ's size in it).
-fn unit_doubts(lines: &[String]) -> Vec<&str> {
-    lines.iter().filter_map(|l| l.strip_prefix("warning: ")).filter(|w| w.contains("unit")).collect()
+/// The warnings among `lines` that doubt the organ itself: the unit of the inputs (an organ's
+/// size in it), or an organ cut by the image's border (targets and regions in the part cut off).
+fn organ_doubts(lines: &[String]) -> Vec<&str> {
+    lines
+        .iter()
+        .filter_map(|l| l.strip_prefix("warning: "))
+        .filter(|w| w.contains("unit") || w.contains("the image's border"))
+        .collect()
 }
 
 /// [`organ_step`], its lines said in `lines` as they come.
@@ -1237,19 +1242,21 @@ mod tests {
         }
     }
 
-    /// An error in the organ's step is put after the warnings that doubt the unit, not after
-    /// every warning said before it.
+    /// An error in the organ's step is put after the warnings that doubt the organ (its unit, its
+    /// cut by the image's border), not after every warning said before it.
     #[test]
-    fn an_error_carries_the_unit_s_doubts_alone() {
+    fn an_error_carries_the_organ_s_doubts_alone() {
         let lines: Vec<String> = [
             "units: m (given)",
             "warning: in m the organ is 6483 mm across, where organs are 20 to 600 mm: is the unit right?",
             "warning: the camera, looking along (0, 0, -1), sees 45 of the 58 held nodes",
+            "warning: the organ reaches the image's border (i = 112): it is cut there, flat where the image ends",
             "warning: `tumour`: 39 of its 162 vertices lie outside the organ",
         ]
         .map(String::from)
         .to_vec();
-        assert_eq!(unit_doubts(&lines), [&lines[1]["warning: ".len()..]]);
+        let doubt = |i: usize| &lines[i]["warning: ".len()..];
+        assert_eq!(organ_doubts(&lines), [doubt(1), doubt(3)]);
     }
 
     #[test]
