@@ -20,13 +20,17 @@ pub struct Solved {
 }
 
 /// Loads the static scenario `path` (a file or a built-in name), builds its problem and solves it.
-pub fn solve_scenario(path: &Path) -> Result<Solved> {
+pub fn solve_scenario(path: &Path, progress: impl Fn(f64, usize) + Send + Sync + 'static) -> Result<Solved> {
     let (scenario, dir) = StaticScenario::load(path)?;
     let problem = scenario.build_problem(&dir)?;
     let hint = scenario::source::unit_hint(&problem.mesh).map_or(String::new(), |h| format!(" ({h})"));
     let mut solver = StaticSolver::new(problem)?;
     // Its lines say whether the body snapped past a limit point: made sure of.
-    let options = fem::SolverOptions { confirm_snaps: true, ..scenario.solver.clone() };
+    let options = fem::SolverOptions {
+        confirm_snaps: true,
+        progress: Some(fem::SolveProgress(std::sync::Arc::new(progress))),
+        ..scenario.solver.clone()
+    };
     let solution = solver.solve(&options).with_context(|| format!("static solve{hint}"))?;
     Ok(Solved { scenario, solver, solution })
 }
@@ -238,7 +242,7 @@ mod tests {
     fn solved_lines(dir: &Path, text: &str) -> Vec<String> {
         let path = dir.join("scenario.toml");
         std::fs::write(&path, text).unwrap();
-        solve_scenario(&path).unwrap().lines().unwrap()
+        solve_scenario(&path, |_, _| {}).unwrap().lines().unwrap()
     }
 
     /// Loads that act on held nodes only move nothing: said so.
@@ -252,7 +256,7 @@ mod tests {
                     total = [0.0, 0.0, -0.1]\n";
         let lines = solved_lines(dir.path(), text);
         assert!(lines.iter().any(|l| l.starts_with("warning    every load acts on held nodes")), "{lines:?}");
-        let beam = solve_scenario(Path::new("beam")).unwrap().lines().unwrap();
+        let beam = solve_scenario(Path::new("beam"), |_, _| {}).unwrap().lines().unwrap();
         assert!(!beam.iter().any(|l| l.starts_with("warning")), "{beam:?}");
     }
 
@@ -283,7 +287,17 @@ mod tests {
 
     #[test]
     fn the_beam_bends_and_its_fields_fit_its_mesh() {
-        let solved = solve_scenario(Path::new("beam")).unwrap();
+        // The solve tells its advance at every iteration: the equilibria reached, in order.
+        let told = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let record = told.clone();
+        let solved = solve_scenario(Path::new("beam"), move |reached, iterations| {
+            record.lock().unwrap().push((reached, iterations));
+        })
+        .unwrap();
+        let told = told.lock().unwrap().clone();
+        assert_eq!(told.len(), solved.solution.iterations, "{told:?}");
+        assert!(told.windows(2).all(|w| w[0].0 <= w[1].0 && w[0].1 < w[1].1), "{told:?}");
+        assert!(told.iter().all(|&(reached, _)| (0.0..1.0).contains(&reached)), "{told:?}");
         let mesh = &solved.solver.problem().mesh;
         let fields = solved.fields().unwrap();
         let names: Vec<&str> = fields.iter().map(|f| f.name.as_str()).collect();
@@ -379,7 +393,7 @@ mod tests {
             );
             let path = dir.path().join(format!("{name}.toml"));
             std::fs::write(&path, scenario).unwrap();
-            solve_scenario(&path).unwrap()
+            solve_scenario(&path, |_, _| {}).unwrap()
         };
         let (plain, shifted) = (solve(&bar, 0, 0.01, "plain"), solve(&orphaned, 1, 0.01, "orphaned"));
         assert_eq!(plain.solution.u, shifted.solution.u);

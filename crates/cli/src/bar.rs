@@ -29,6 +29,17 @@ impl Bar {
         result
     }
 
+    /// The bar's advance as a closure `(done, total, note)` that outlives the borrow (for work
+    /// that keeps its observer).
+    pub fn reporter(&self) -> impl Fn(u64, u64, &str) + Send + Sync + 'static {
+        let bar = self.bar.clone();
+        move |done, total, note| {
+            bar.set_length(total);
+            bar.set_position(done);
+            bar.set_message(note.to_string());
+        }
+    }
+
     /// Prints `text` above the bar, not indented.
     pub fn print(&self, text: &str) {
         self.bar.suspend(|| println!("{text}"));
@@ -56,9 +67,7 @@ pub fn print_line(line: &str) {
 
 impl learn::Progress for Bar {
     fn advance(&self, done: u64, total: u64, note: &str) {
-        self.bar.set_length(total);
-        self.bar.set_position(done);
-        self.bar.set_message(note.to_string());
+        self.reporter()(done, total, note)
     }
 
     fn line(&self, text: &str) {

@@ -124,8 +124,7 @@ fn slicer_files_and_millimetres_register_as_metres_do() {
 
     // The cloud in the other frame (x and y negated): registered, written to look at, and the
     // run fails, so that no script takes its files for a registration.
-    let mirrored: Vec<[f64; 3]> =
-        read_points_csv(&metres[0]).unwrap().iter().map(|p| [-p[0], -p[1], p[2]]).collect();
+    let mirrored: Vec<[f64; 3]> = read_points_csv(&metres[0]).unwrap().iter().map(|p| [-p[0], -p[1], p[2]]).collect();
     write_points_csv(&d.join("mirrored.csv"), &mirrored).unwrap();
     let out = d.join("mirrored");
     let args = ["register", "mirrored.csv", "--fem", "liver", "--targets", "targets_m.csv", "--out", "mirrored"];

@@ -48,7 +48,7 @@ pub use element::ElementGeometry;
 pub use geometric::Attachment;
 pub use material::{Formulation, Law, Material};
 pub use problem::{force_shares, nodal_masses, PointSpring, Problem};
-pub use solver::{Continuation, Solution, SolverOptions, StaticSolver, Timings};
+pub use solver::{Continuation, Solution, SolveProgress, SolverOptions, StaticSolver, Timings};
 
 /// `n` zeros, written now: a buffer made so has its pages touched when it is built rather than
 /// at its first use (`vec![0.0; n]` may take untouched zero pages from the operating system).

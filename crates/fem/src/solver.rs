@@ -58,6 +58,27 @@ pub struct SolverOptions {
     /// iteration (a frame's time budget on a stream). Not a scenario's setting.
     #[serde(skip)]
     pub deadline: Option<Instant>,
+    /// Told the solve's advance at every iteration (for a progress bar). Not a scenario's setting.
+    #[serde(skip)]
+    pub progress: Option<SolveProgress>,
+}
+
+/// Where a solve tells how far it has come: the load factor of the last equilibrium reached and
+/// the iterations made so far, at every iteration.
+#[derive(Clone)]
+pub struct SolveProgress(pub std::sync::Arc<dyn Fn(f64, usize) + Send + Sync>);
+
+impl std::fmt::Debug for SolveProgress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("SolveProgress")
+    }
+}
+
+impl PartialEq for SolveProgress {
+    /// The same observer.
+    fn eq(&self, other: &Self) -> bool {
+        std::sync::Arc::ptr_eq(&self.0, &other.0)
+    }
 }
 
 /// How a solve follows the load path from rest to the whole load.
@@ -108,6 +129,7 @@ impl Default for SolverOptions {
             continuation: Continuation::Force,
             confirm_snaps: false,
             deadline: None,
+            progress: None,
         }
     }
 }
@@ -389,8 +411,12 @@ impl LoadPath {
     }
 }
 
+/// Between two iterations: the advance told ([`SolverOptions::progress`]), then
 /// [`FemError::OutOfTime`] once the solve's [`SolverOptions::deadline`] has passed.
-fn past_deadline(options: &SolverOptions) -> Result<(), FemError> {
+fn between_iterations(options: &SolverOptions, stats: &Stats) -> Result<(), FemError> {
+    if let Some(progress) = &options.progress {
+        (progress.0)(stats.reached, stats.iterations);
+    }
     match options.deadline {
         Some(deadline) if Instant::now() >= deadline => Err(FemError::OutOfTime),
         _ => Ok(()),
@@ -734,6 +760,7 @@ impl StaticSolver {
                         self.record_step(&mut path, (lambda, &u), (target, &trial), options, &mut stats)?;
                     previous = Some((lambda, std::mem::replace(&mut u, trial)));
                     lambda = target;
+                    stats.reached = lambda;
                     steps += 1;
                     // Grow back towards the requested step after a cut.
                     step = if patient { full_step } else { (2.0 * step).min(full_step) };
@@ -976,7 +1003,7 @@ impl StaticSolver {
             if it == last_iteration || (stall_rule && stalled(&stats.residuals[first_residual..])) {
                 return Err(FemError::NotConverged { load_factor: lambda, iterations: it, residual: rel });
             }
-            past_deadline(opt)?;
+            between_iterations(opt, stats)?;
             stats.iterations += 1;
             if refresh {
                 self.refactorize(u, &mut f_int, it > 0 && rel > STALE_RESIDUAL, stats)?;
@@ -1241,6 +1268,8 @@ struct Stats {
     timings: Timings,
     /// See [`Solution::snapped_from`].
     snapped_from: Option<f64>,
+    /// The load factor of the last equilibrium reached.
+    reached: f64,
 }
 
 impl Stats {

@@ -210,7 +210,7 @@ impl Solution {
 #[pyfunction]
 fn solve(py: Python<'_>, scenario: PathBuf) -> PyResult<Solution> {
     let (nodes, sol) = compute(py, || {
-        let solved = app::solve::solve_scenario(&scenario)?;
+        let solved = app::solve::solve_scenario(&scenario, |_, _| {})?;
         Ok((solved.solver.problem().mesh.nodes.clone(), solved.solution))
     })?;
     Ok(Solution {

@@ -119,6 +119,7 @@ impl StaticSolver {
                     path.record(end, &trial);
                     *u = trial;
                     *lambda = end;
+                    stats.reached = end;
                     return Ok(steps + 1);
                 }
                 arc = 0.5 * (end - *lambda) * length;
@@ -137,6 +138,7 @@ impl StaticSolver {
                     path.record(step.lambda, &step.u);
                     *u = step.u;
                     *lambda = step.lambda;
+                    stats.reached = step.lambda;
                     (steps, current) = (steps + 1, false);
                     arc *= (WANTED_ITERATIONS / step.iterations.max(1) as f64).sqrt().clamp(0.5, 2.0);
                 }
@@ -190,7 +192,7 @@ impl StaticSolver {
             if converged(opt, rel, step_norm, &trial) {
                 return Ok(Corrected { u: trial, lambda: lam, iterations: it });
             }
-            super::past_deadline(opt)?;
+            super::between_iterations(opt, stats)?;
             stats.iterations += 1;
             if it > 0 && res > REFRESH_RATIO * last {
                 self.refactorize(&trial, &mut f_int, false, stats)?;
