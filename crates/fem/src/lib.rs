@@ -91,10 +91,13 @@ pub enum FemError {
         /// The last load factor reached.
         load_factor: f64,
     },
-    /// Saint-Venant-Kirchhoff crushed an element flat with the body still stiff: beyond, no
-    /// equilibrium was found that keeps the element the right way out.
-    #[error("Saint-Venant-Kirchhoff crushed element {element} flat by load factor {load_factor:.3} (its smallest principal stretch {stretch:.1e}: SVK's compressive stress peaks at the stretch 0.577 and falls to zero when flat) while the body stayed stiff; beyond it no equilibrium was found that keeps the element the right way out. SVK's energy lets an element pass through flat and turn inside out, which augsim refuses (codes that do not check, CalculiX among them, go on with inverted elements); use law = \"neo_hookean\", which resists crushing, or a finer mesh there")]
+    /// A law whose energy stays finite for a flat element (SVK, co-rotational) crushed one flat
+    /// with the body still stiff: beyond, no equilibrium was found that keeps the element the
+    /// right way out.
+    #[error("{law} crushed element {element} flat by load factor {load_factor:.3} (its smallest principal stretch {stretch:.1e}) while the body stayed stiff; beyond it no equilibrium was found that keeps the element the right way out. The {law} energy lets an element pass through flat and turn inside out, which augsim refuses (codes that do not check, CalculiX among them, go on with inverted elements); use law = \"neo_hookean\", which resists crushing, or a finer mesh there")]
     CrushedFlat {
+        /// The law's name ([`crate::Law::display_name`]).
+        law: &'static str,
         /// The element crushed flat at the last equilibrium (numbered as for
         /// [`FemError::InvertedElement`]).
         element: usize,
@@ -146,8 +149,8 @@ impl FemError {
             FemError::LimitPoint { element, stretch, load_factor } => {
                 FemError::LimitPoint { element: mesh.file_cell(element), stretch, load_factor }
             }
-            FemError::CrushedFlat { element, stretch, load_factor } => {
-                FemError::CrushedFlat { element: mesh.file_cell(element), stretch, load_factor }
+            FemError::CrushedFlat { law, element, stretch, load_factor } => {
+                FemError::CrushedFlat { law, element: mesh.file_cell(element), stretch, load_factor }
             }
             other => other,
         }

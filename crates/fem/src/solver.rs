@@ -925,11 +925,13 @@ impl StaticSolver {
         Ok(())
     }
 
-    /// Turns the failure of a Saint-Venant-Kirchhoff solve by compression into what it is
-    /// ([`svk_failure`]). `lambda` is the last converged load factor, `trial` the failing
-    /// iterate and `u` the last converged state.
+    /// Turns the failure of a solve by compression into what it is ([`compression_failure`]).
+    /// `lambda` is the last converged load factor, `trial` the failing iterate and `u` the last
+    /// converged state.
     fn diagnose(&self, error: FemError, lambda: f64, trial: &[f64], u: &[f64], stats: &Stats) -> FemError {
-        if self.problem.material.law != Law::Svk || matches!(error, FemError::Interrupted) {
+        let law = self.problem.material.law;
+        if !matches!(law, Law::Svk | Law::Corotational) || matches!(error, FemError::Interrupted | FemError::OutOfTime)
+        {
             return error;
         }
         // The smallest principal stretch of a state, and the element where it is.
@@ -939,7 +941,7 @@ impl StaticSolver {
         // Whether the iterate that failed went past the limit; told of the last equilibrium, which
         // does not depend on how far the failed iterate strayed.
         let Some((_, strayed)) = most_compressed(trial).or_else(|| most_compressed(u)) else { return error };
-        svk_failure(stats.indefinite, strayed, most_compressed(u), lambda).unwrap_or(error)
+        compression_failure(law, stats.indefinite, strayed, most_compressed(u), lambda).unwrap_or(error)
     }
 
     /// Iterations at load factor `lambda`, updating `u` in place.
@@ -1293,22 +1295,32 @@ impl Stats {
 /// length left in that direction).
 const FLAT_STRETCH: f64 = 0.05;
 
-/// What stopped a Saint-Venant-Kirchhoff solve that failed with the tangent found `indefinite` or
-/// not, its failing iterate compressed to the stretch `strayed`, the last equilibrium's most
+/// What stopped a solve under `law` (Saint-Venant-Kirchhoff or co-rotational, whose energies stay
+/// finite for an element crushed flat) that failed with the tangent found `indefinite` or not,
+/// its failing iterate compressed to the stretch `strayed`, the last equilibrium's most
 /// compressed element `last` (index, stretch) at load factor `lambda`:
 /// - [`FemError::CrushedFlat`] when that element was already flat and the tangent stayed
 ///   positive definite: the body is still stiff, and what stops it is an element that can only
-///   go on by turning inside out (the voxel liver of 2,133 H8 under gravity: stretch 2e-6 at
-///   load factor 0.944; CalculiX's equilibrium beyond has 15 quadrature points with det F < 0);
-/// - [`FemError::LimitPoint`] when the tangent turned indefinite, or the failing iterate was
-///   compressed past the stretch 1/√3 where SVK's stress peaks: the compressive limit point;
+///   go on by turning inside out (SVK, the voxel liver of 2,133 H8 under gravity: stretch 2e-6
+///   at load factor 0.944, where CalculiX's equilibrium beyond has 15 quadrature points with
+///   det F < 0; co-rotational, the AMOS liver turned by 90° through its held nodes, which a
+///   prescribed displacement moves along the chord, squeezing the organ between them);
+/// - [`FemError::LimitPoint`] under SVK when the tangent turned indefinite, or the failing
+///   iterate was compressed past the stretch 1/√3 where SVK's stress peaks: the compressive
+///   limit point;
 /// - none otherwise (the failure is told as it came).
-fn svk_failure(indefinite: bool, strayed: f64, last: Option<(usize, f64)>, lambda: f64) -> Option<FemError> {
+fn compression_failure(
+    law: Law,
+    indefinite: bool,
+    strayed: f64,
+    last: Option<(usize, f64)>,
+    lambda: f64,
+) -> Option<FemError> {
     let (element, stretch) = last?;
     if stretch < FLAT_STRETCH && !indefinite {
-        return Some(FemError::CrushedFlat { element, stretch, load_factor: lambda });
+        return Some(FemError::CrushedFlat { law: law.display_name(), element, stretch, load_factor: lambda });
     }
-    (indefinite || strayed < SVK_LIMIT_STRETCH * 1.05).then_some(FemError::LimitPoint {
+    (law == Law::Svk && (indefinite || strayed < SVK_LIMIT_STRETCH * 1.05)).then_some(FemError::LimitPoint {
         element,
         stretch,
         load_factor: lambda,
@@ -1320,23 +1332,28 @@ mod tests {
     use super::*;
 
     /// An element flat at the last equilibrium of a still-stiff body is told as crushed, not as
-    /// the body's limit point; the limit point as before; anything else as it came.
+    /// the body's limit point; SVK's limit point as before; anything else as it came.
     #[test]
-    fn an_svk_failure_is_told_by_what_stopped_it() {
-        let crushed = svk_failure(false, 3e-5, Some((1070, 2e-6)), 0.944).unwrap();
+    fn a_failure_by_compression_is_told_by_what_stopped_it() {
+        let crushed = compression_failure(Law::Svk, false, 3e-5, Some((1070, 2e-6)), 0.944).unwrap();
         assert!(matches!(crushed, FemError::CrushedFlat { element: 1070, load_factor: 0.944, .. }), "{crushed:?}");
         let text = crushed.to_string();
-        assert!(text.contains("crushed element 1070 flat by load factor 0.944 (its smallest principal stretch 2.0e-6"));
+        assert!(
+            text.contains("SVK crushed element 1070 flat by load factor 0.944 (its smallest principal stretch 2.0e-6")
+        );
         assert!(text.contains("turn inside out") && text.contains("neo_hookean"), "{text}");
-        // A flat element in a body whose tangent turned indefinite: the body's limit point.
-        let limit = svk_failure(true, 0.9, Some((7, 0.01)), 0.5).unwrap();
+        let crushed = compression_failure(Law::Corotational, false, 0.0, Some((1317, 1e-3)), 0.414).unwrap();
+        assert!(crushed.to_string().starts_with("co-rotational crushed element 1317 flat"), "{crushed}");
+        // A flat element in a body whose tangent turned indefinite: SVK's limit point.
+        let limit = compression_failure(Law::Svk, true, 0.9, Some((7, 0.01)), 0.5).unwrap();
         assert!(matches!(limit, FemError::LimitPoint { element: 7, .. }), "{limit:?}");
         // Short of the peak at equilibrium, the failing iterate past it (the block crushed by a force).
-        let limit = svk_failure(false, 0.3, Some((3, 0.7)), 0.4).unwrap();
+        let limit = compression_failure(Law::Svk, false, 0.3, Some((3, 0.7)), 0.4).unwrap();
         assert!(matches!(limit, FemError::LimitPoint { element: 3, .. }), "{limit:?}");
-        // Nothing compressed near the limit, or no element at all: not SVK's doing.
-        assert!(svk_failure(false, 0.9, Some((3, 0.95)), 0.4).is_none());
-        assert!(svk_failure(true, 0.1, None, 0.4).is_none());
+        // Nothing compressed near the limit, no element at all, or no SVK limit to pass.
+        assert!(compression_failure(Law::Svk, false, 0.9, Some((3, 0.95)), 0.4).is_none());
+        assert!(compression_failure(Law::Svk, true, 0.1, None, 0.4).is_none());
+        assert!(compression_failure(Law::Corotational, true, 0.1, Some((3, 0.3)), 0.4).is_none());
     }
 
     #[test]
