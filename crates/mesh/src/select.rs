@@ -165,9 +165,27 @@ impl NodeSelection {
         nodes.sort_unstable();
         nodes.dedup();
         if nodes.is_empty() {
-            return Err(MeshError::Invalid(format!("selection {self} picks no node")));
+            return Err(MeshError::Invalid(format!("selection {self} picks no node{}", self.unit_hint(mesh))));
         }
         Ok(nodes)
+    }
+
+    /// Where a ball or box that picked nothing is ten times the mesh's size or more, or lies
+    /// that far from it, the question whether its coordinates are in another unit than the
+    /// mesh's metres; empty otherwise.
+    fn unit_hint(&self, mesh: &Mesh) -> String {
+        let (lo, hi) = mesh.bounds();
+        let size = crate::longest_side((lo, hi));
+        let outside = |p: Point| (0..3).map(|k| (lo[k] - p[k]).max(p[k] - hi[k]).max(0.0)).fold(0.0, f64::max);
+        let reach = match self {
+            NodeSelection::Ball(ball) => ball.radius.max(outside(ball.centre)),
+            NodeSelection::Box { min, max } => crate::longest_side((*min, *max)).max(outside(*min).min(outside(*max))),
+            _ => return String::new(),
+        };
+        if !(size > 0.0 && reach >= 10.0 * size) {
+            return String::new();
+        }
+        format!(" (the mesh spans {size:.3} m; a scenario's coordinates are in metres, whatever its mesh file's unit: are these in millimetres?)")
     }
 }
 

@@ -76,6 +76,10 @@ fn selections_that_cannot_work_say_why() {
     let ball = NodeSelection::Ball(Ball { centre: [1.0; 3], radius: 0.01 });
     let e = error(ball.clone());
     assert!(e.contains("selection ball of radius 0.01 m about [1.0, 1.0, 1.0] picks no node"), "{e}");
+    assert!(!e.contains("millimetres"), "{e}");
+    // One in millimetres on a mesh in metres: its unit is asked about.
+    let e = error(NodeSelection::Ball(Ball { centre: [0.0, -90.0, 0.0], radius: 30.0 }));
+    assert!(e.contains("picks no node (the mesh spans") && e.contains("are these in millimetres?"), "{e}");
     let away = NodeSelection::Box { min: [9.0; 3], max: [10.0; 3] };
     let e = error(NodeSelection::Union(vec![NodeSelection::Surface, away.clone()]));
     assert!(e.contains("selection box [9.0, 9.0, 9.0] to [10.0, 10.0, 10.0] picks no node"), "{e}");
