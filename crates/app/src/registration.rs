@@ -679,10 +679,15 @@ impl RegistrationSpec {
         }
     }
 
+    /// The frame of a stream's coordinates: the one given, else RAS (3D Slicer's).
+    pub fn stream_frame(&self) -> Frame {
+        self.given_frame.unwrap_or(Frame::Ras)
+    }
+
     /// [`RegistrationSpec::coordinates`] of a stream, whose frame is RAS (the frame OpenIGTLink
     /// sends) unless given; with a line that says what is done.
     pub fn stream_coordinates(&self, organ: &Registration) -> (GivenCoordinates, String) {
-        let stream = self.given_frame.unwrap_or(Frame::Ras);
+        let stream = self.stream_frame();
         let organ = organ.frame();
         let line = match organ {
             Some(organ) if organ != stream => {

@@ -85,6 +85,7 @@ pub fn serve_setup(spec: RegistrationSpec, outputs: Option<Outputs>, assimilate:
         lines.extend(chosen.check(&first).map_err(anyhow::Error::msg)?.into_iter().map(|w| format!("warning    {w}")));
     }
     let (coordinates, frame_line) = spec.stream_coordinates(&first);
+    let frame = spec.stream_frame();
     lines.extend(setup_lines(&first, &frame_line));
     let identification = match assimilate {
         Some(path) => Some(stream_filters(path, &mut lines)?),
@@ -93,6 +94,7 @@ pub fn serve_setup(spec: RegistrationSpec, outputs: Option<Outputs>, assimilate:
     let registrations = live::built_ahead(Some(first), move || spec.build().map_err(|e| format!("{e:#}")));
     let options = ServeOptions {
         coordinates,
+        frame: Some(frame),
         outputs: outputs.unwrap_or(Outputs::ALL),
         identification,
         ..ServeOptions::default()

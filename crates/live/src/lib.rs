@@ -64,7 +64,7 @@ use std::time::{Duration, Instant};
 
 pub use igtl::{decode_body, encode_message, encode_message_stamped};
 use igtl::{Content, Header, PointElement, PointMessage, StringMessage, TransformMessage};
-use mesh::io::GivenCoordinates;
+use mesh::io::{Frame, GivenCoordinates};
 use mesh::length::LengthUnit;
 use mesh::Point;
 use polydata::PolyData;
@@ -185,6 +185,8 @@ pub struct ServeOptions {
     /// The coordinates on the wire: their unit (3D Slicer sends millimetres) and the change
     /// from their frame (3D Slicer sends RAS) to the organ's, and back.
     pub coordinates: GivenCoordinates,
+    /// The frame the coordinates on the wire are in, where named (recorded with them).
+    pub frame: Option<Frame>,
     /// The answers sent for each cloud.
     pub outputs: Outputs,
     /// Largest message body accepted (bytes); a larger one closes the connection.
@@ -205,6 +207,7 @@ impl Default for ServeOptions {
     fn default() -> Self {
         ServeOptions {
             coordinates: GivenCoordinates::default(),
+            frame: None,
             outputs: Outputs::ALL,
             max_message_bytes: 64 << 20,
             max_points: 200_000,
@@ -264,7 +267,8 @@ fn log(line: impl std::fmt::Display) {
 /// A client's stream written as it goes, in a file of its own in [`ServeOptions::record`]
 /// (`client-NNN.jsonl`, the first number free): one line of JSON per event, flushed at once, so
 /// that a server stopped in any way leaves every answer it sent. The first line names the client
-/// (`peer`, `connected`: seconds since 1970, `unit`, the stream's); then each cloud's status with
+/// (`peer`, `connected`: seconds since 1970, `unit` and `frame`, the stream's; the frame null
+/// where unnamed); then each cloud's status with
 /// its `timestamp` (the cloud's header timestamp, null for 0) and `targets` (in the stream's unit
 /// and frame), each error status and each estimate.
 pub struct Record {
@@ -275,7 +279,7 @@ pub struct Record {
 
 impl Record {
     /// A new record in `dir` (created) for the client `peer`.
-    fn create(dir: &Path, peer: &str, unit: LengthUnit) -> std::io::Result<Record> {
+    fn create(dir: &Path, peer: &str, (unit, frame): (LengthUnit, Option<Frame>)) -> std::io::Result<Record> {
         std::fs::create_dir_all(dir)?;
         let (file, path) = (1..=999_999)
             .find_map(|n| {
@@ -288,8 +292,13 @@ impl Record {
             .unwrap_or_else(|| Err(std::io::Error::other(format!("{} holds 999,999 records", dir.display()))))?;
         let record = Record { file: Mutex::new(std::io::BufWriter::new(file)), path };
         let connected = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
-        record
-            .write(&serde_json::json!({ "peer": peer, "connected": connected.as_secs_f64(), "unit": unit.symbol() }))?;
+        let header = serde_json::json!({
+            "peer": peer,
+            "connected": connected.as_secs_f64(),
+            "unit": unit.symbol(),
+            "frame": frame.map(|f| f.to_string()),
+        });
+        record.write(&header)?;
         Ok(record)
     }
 
@@ -476,8 +485,8 @@ impl Client {
         configure(&stream, &options)?;
         let socket = stream.try_clone()?;
         // A record that cannot be written is said, and the client served all the same.
-        let record =
-            options.record.as_ref().and_then(|dir| match Record::create(dir, &peer, options.coordinates.unit) {
+        let record = options.record.as_ref().and_then(|dir| {
+            match Record::create(dir, &peer, (options.coordinates.unit, options.frame)) {
                 Ok(record) => {
                     log(format_args!("{peer}: recorded in {}", record.path.display()));
                     Some(record)
@@ -486,7 +495,8 @@ impl Client {
                     log(format_args!("{peer}: not recorded in {}: {e}", dir.display()));
                     None
                 }
-            });
+            }
+        });
         let shared = Arc::new(Shared {
             peer,
             waiting: Mutex::new(Mailbox::default()),

@@ -284,8 +284,13 @@ fn answers_carry_the_timestamp_of_the_cloud_they_answer() {
 fn each_client_s_stream_is_recorded_as_it_goes() {
     let dir = tempfile::tempdir().unwrap();
     let record = Some(dir.path().join("record"));
-    let server =
-        Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), record, ..ServeOptions::default() });
+    let frame = Some(mesh::io::Frame::Ras);
+    let server = Server::start(ServeOptions {
+        coordinates: LengthUnit::Millimetre.into(),
+        frame,
+        record,
+        ..ServeOptions::default()
+    });
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     client.send_cloud(cloud.clone()).unwrap();
@@ -310,6 +315,7 @@ fn each_client_s_stream_is_recorded_as_it_goes() {
     };
     let lines = read("client-001.jsonl");
     assert!(lines[0]["peer"].as_str().unwrap().starts_with("127.0.0.1:") && lines[0]["unit"] == "mm", "{}", lines[0]);
+    assert_eq!(lines[0]["frame"], "RAS", "the stream's frame is recorded with its unit: {}", lines[0]);
     assert!(lines[1]["status"]["frame"] == 1 && lines[1]["status"]["plausible"] == true, "{}", lines[1]);
     let recorded: Vec<Vec<f64>> = serde_json::from_value(lines[1]["targets"].clone()).unwrap();
     assert_eq!(recorded.len(), sent.len());
