@@ -43,7 +43,7 @@ pub fn predict_file(
         lines.push(format!("points     {n} ({what}, {:.2} ms)", mesh::stats::ms(t0.elapsed())));
     }
     let predictor = model.predictor(compute)?;
-    let prediction = predictor.predict(&data)?;
+    let (prediction, sigma) = predictor.predict_with_std(&data)?;
     learn::data::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
     let t = learn::time_prediction(|x| predictor.predict(x), &data, 3, runs)?;
     lines.push(format!(
@@ -56,30 +56,54 @@ pub fn predict_file(
         t.max * 1e3
     ));
     lines.push(format!("wrote      {}", output.display()));
+    if let Some(sigma) = &sigma {
+        let path = sigma_path(output);
+        learn::data::npy::write_f32(&path, &[g.nx, g.ny, g.nz], sigma)?;
+        let inside: Vec<f64> = sigma.iter().filter(|&&s| s > 0.0).map(|&s| f64::from(s)).collect();
+        let mean = inside.iter().sum::<f64>() / inside.len().max(1) as f64;
+        lines.push(format!(
+            "sigma      predicted at the organ's grid nodes: mean {:.3} mm, max {:.3} mm",
+            mm(mean),
+            mm(inside.iter().copied().fold(0.0, f64::max))
+        ));
+        lines.push(format!("wrote      {}", path.display()));
+    }
     if let Some(mesh_path) = mesh_path {
         let vtu = output.with_extension("vtu");
-        lines.push(prediction_on_mesh(&model, model_path, &prediction, mesh_path, &vtu)?);
+        lines.push(prediction_on_mesh(&model, model_path, (&prediction, sigma.as_deref()), mesh_path, &vtu)?);
         lines.push(format!("wrote      {}", vtu.display()));
     }
     Ok(lines)
 }
 
-/// Interpolates a prediction of `model` (from `model_path`) to the nodes of the volume mesh in
-/// `mesh_path` (in the training mesh's frame) and writes it as the point field `displacement`
-/// into `vtu`; returns the line that describes it (nodes, largest displacement).
+/// Where `predict` writes the predicted standard deviation beside its `output` tensor:
+/// `NAME_sigma.npy` (`[nx, ny, nz]`, m).
+fn sigma_path(output: &Path) -> std::path::PathBuf {
+    let stem = output.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    output.with_file_name(format!("{stem}_sigma.npy"))
+}
+
+/// Interpolates a prediction of `model` (from `model_path`) and its standard deviation, where it
+/// has one, to the nodes of the volume mesh in `mesh_path` (in the training mesh's frame) and
+/// writes them as the point fields `displacement` and `sigma` (m) into `vtu`; returns the line
+/// that describes it (nodes, largest displacement).
 fn prediction_on_mesh(
     model: &Model,
     model_path: &Path,
-    prediction: &[f32],
+    (prediction, sigma): (&[f32], Option<&[f32]>),
     mesh_path: &Path,
     vtu: &Path,
 ) -> Result<String> {
     let organ = mesh::io::read_mesh(mesh_path).with_context(|| format!("reading {}", mesh_path.display()))?;
-    let u = model
-        .field_on_mesh(prediction, &organ)
-        .with_context(|| format!("{} on {}", model_path.display(), mesh_path.display()))?;
+    let on_mesh = || format!("{} on {}", model_path.display(), mesh_path.display());
+    let u = model.field_on_mesh(prediction, &organ).with_context(on_mesh)?;
     let max = fem::post::max_displacement(&u);
-    mesh::io::write_mesh(vtu, &organ, &[mesh::io::Field::point("displacement", 3, u)])
-        .with_context(|| format!("writing {}", vtu.display()))?;
+    let mut fields = vec![mesh::io::Field::point("displacement", 3, u)];
+    if let Some(sigma) = sigma {
+        let values: Vec<f64> = sigma.iter().map(|&s| f64::from(s)).collect();
+        let at_nodes = model.placed_grid()?.interpolate(&values, 1, &organ.nodes).with_context(on_mesh)?;
+        fields.push(mesh::io::Field::point("sigma", 1, at_nodes));
+    }
+    mesh::io::write_mesh(vtu, &organ, &fields).with_context(|| format!("writing {}", vtu.display()))?;
     Ok(format!("mesh       {} nodes, max |u| {:.3} mm", organ.num_nodes(), mm(max)))
 }

@@ -117,7 +117,9 @@ enum Command {
         /// and the force (N) or displacement (m) at each point, as the model was trained; in mm where
         /// a CSV header names them so: x_mm, y_mm, z_mm, and ux_mm, uy_mm, uz_mm).
         input: PathBuf,
-        /// Output tensor (.npy [3, nx, ny, nz], m).
+        /// Output tensor (.npy [3, nx, ny, nz], m); a model that predicts its standard deviation
+        /// (a reduced-order model) writes it beside, as NAME_sigma.npy ([nx, ny, nz], m), and on
+        /// --mesh as the point field sigma.
         #[arg(short, long, default_value = "out/prediction.npy")]
         output: PathBuf,
         /// Also interpolate the displacement to this volume mesh's nodes (same frame as the

@@ -143,6 +143,19 @@ magnitude = [0.05, 0.2]
     let u = fields.iter().find(|f| f.name == "displacement").expect("displacement field");
     assert_eq!(u.values.len(), 3 * organ.num_nodes());
     assert!(u.values.iter().all(|v| v.is_finite()) && u.values.iter().any(|v| *v != 0.0));
+    assert!(!d.join("pred_sigma.npy").exists() && !fields.iter().any(|f| f.name == "sigma"), "a U-Net predicts no σ");
+    // A reduced-order model writes its predicted σ beside the displacement, on the grid and the mesh.
+    augsim(&["train", "data", "--out", "rom", "--method", "rom", "--test-samples", "2"], d);
+    let text = augsim(&["predict", "rom", "cloud.csv", "-o", "rom.npy", "--mesh", "organ.vtu", "--runs", "1"], d);
+    assert!(text.contains("sigma      predicted at the organ's grid nodes: mean"), "{text}");
+    let sigma = learn::data::npy::read_npy(&d.join("rom_sigma.npy")).unwrap();
+    assert_eq!(sigma.shape, [9, 10, 9]);
+    let sigma = sigma.into_f32();
+    assert!(sigma.iter().all(|s| s.is_finite() && *s >= 0.0) && sigma.iter().any(|s| *s > 0.0));
+    let (_, fields) = mesh::io::read_mesh_with_fields(d.join("rom.vtu")).unwrap();
+    let at_nodes = fields.iter().find(|f| f.name == "sigma").expect("sigma on the mesh");
+    assert_eq!(at_nodes.values.len(), organ.num_nodes());
+    assert!(at_nodes.values.iter().all(|s| s.is_finite() && *s >= 0.0), "{:?}", &at_nodes.values[..5]);
 
     // burn's own kernels (the GPU's code path) predict the same tensor; they and the GPU need their
     // features.
