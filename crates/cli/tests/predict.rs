@@ -143,6 +143,12 @@ magnitude = [0.05, 0.2]
     let u = fields.iter().find(|f| f.name == "displacement").expect("displacement field");
     assert_eq!(u.values.len(), 3 * organ.num_nodes());
     assert!(u.values.iter().all(|v| v.is_finite()) && u.values.iter().any(|v| *v != 0.0));
+    // The same forces a thousand times stronger (kN read as N): far outside what the network learned.
+    let strong =
+        std::fs::read_to_string(d.join("cloud.csv")).unwrap().replace(",-0.1\n", ",-100\n").replace(",0.05,", ",50,");
+    std::fs::write(d.join("strong.csv"), strong).unwrap();
+    let e = augsim_err(&["predict", "net/model.json", "strong.csv", "-o", "strong.npy"], d);
+    assert!(e.contains("times that of the inputs the model was trained on") && e.contains("another unit"), "{e}");
     assert!(!d.join("pred_sigma.npy").exists() && !fields.iter().any(|f| f.name == "sigma"), "a U-Net predicts no σ");
     // A reduced-order model writes its predicted σ beside the displacement, on the grid and the mesh.
     augsim(&["train", "data", "--out", "rom", "--method", "rom", "--test-samples", "2"], d);

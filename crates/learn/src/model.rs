@@ -203,6 +203,11 @@ pub trait LearnedModel {
     fn provenance(&self) -> Option<Provenance<'_>>;
     /// A predictor on `compute`.
     fn predictor(&self, compute: Compute) -> Result<ModelPredictor>;
+    /// The RMS norm of its training inputs (in its input unit), where it records one (the
+    /// U-Net's input normalisation).
+    fn training_input_scale(&self) -> Option<f64> {
+        None
+    }
 
     /// Fails when `samples` include samples it (or a model it was fine-tuned from) was trained or
     /// validated on; a model without a recorded split passes.
@@ -244,6 +249,9 @@ impl LearnedModel for TrainedModel {
     fn predictor(&self, compute: Compute) -> Result<ModelPredictor> {
         Ok(ModelPredictor::UNet(Box::new(Predictor::new(self, compute)?)))
     }
+    fn training_input_scale(&self) -> Option<f64> {
+        Some(self.normalization.input_scale)
+    }
 }
 
 impl LearnedModel for Model {
@@ -261,6 +269,12 @@ impl LearnedModel for Model {
     }
     fn predictor(&self, compute: Compute) -> Result<ModelPredictor> {
         Model::predictor(self, compute)
+    }
+    fn training_input_scale(&self) -> Option<f64> {
+        match self {
+            Model::UNet(m) => m.training_input_scale(),
+            Model::Reduced(_) => None,
+        }
     }
 }
 
@@ -348,5 +362,8 @@ impl LearnedModel for Projected {
     }
     fn predictor(&self, compute: Compute) -> Result<ModelPredictor> {
         Ok(ModelPredictor::Projected(Box::new(self.model.predictor(compute)?), Arc::clone(&self.basis)))
+    }
+    fn training_input_scale(&self) -> Option<f64> {
+        self.model.training_input_scale()
     }
 }

@@ -161,6 +161,13 @@ impl PredictInput {
     /// is checked; a point cloud put on the model's grid where it lies ([`encode_points`]: forces spread to the
     /// corners of their cell, displacements on their nearest grid node, by the model's input unit).
     pub fn into_network_input(self, model: &impl LearnedModel) -> Result<Vec<f32>> {
+        let field = self.into_field(model)?;
+        check_input_scale(&field, model)?;
+        Ok(field)
+    }
+
+    /// [`into_network_input`](Self::into_network_input) before the check of its scale.
+    fn into_field(self, model: &impl LearnedModel) -> Result<Vec<f32>> {
         let g = model.grid_shape();
         match self {
             PredictInput::Grid(array) if array.shape == [3, g.nx, g.ny, g.nz] => {
@@ -197,6 +204,30 @@ impl PredictInput {
             }
         }
     }
+}
+
+/// How many times the RMS norm of a model's training inputs an input may reach: beyond, it is
+/// taken for one in another unit (a thousand times for millimetres given as metres).
+const MAX_INPUT_SCALE_RATIO: f64 = 100.0;
+
+/// Refuses an input field whose RMS norm over its non-zero nodes is more than
+/// [`MAX_INPUT_SCALE_RATIO`] times that of `model`'s training inputs, where it records one: a
+/// network asked so far outside what it learned predicts nonsense (metres of displacement).
+fn check_input_scale(field: &[f32], model: &impl LearnedModel) -> Result<()> {
+    let Some(scale) = model.training_input_scale() else { return Ok(()) };
+    let g = model.grid_shape();
+    let nodes = crate::data::corrupt::nonzero_nodes(field, g);
+    let sum: f64 = field.iter().map(|&v| f64::from(v).powi(2)).sum();
+    let rms = (sum / nodes.len().max(1) as f64).sqrt();
+    if rms > MAX_INPUT_SCALE_RATIO * scale {
+        let unit = if model.takes_forces() { "N" } else { "m" };
+        return Err(LearnError::InvalidInput(format!(
+            "the input's RMS norm is {rms:.3e} {unit}, {:.0} times that of the inputs the model was trained on \
+             ({scale:.3e} {unit}): is it in another unit (millimetres given as metres)?",
+            rms / scale
+        )));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
