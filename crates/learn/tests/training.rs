@@ -283,7 +283,7 @@ fn resumed_training_equals_uninterrupted() {
     // A checkpoint from another setup is refused.
     let other = TrainConfig { learning_rate: 2e-3, ..config.clone() };
     let e = train(&train_set, &val, &init, &other, &TrainOptions::new(&b), &Silent).unwrap_err().to_string();
-    assert!(e.contains("different setup"), "{e}");
+    assert!(e.contains("different setup (config.learning_rate 0.001 there, 0.002 now)"), "{e}");
     // A corrupt checkpoint gives a clear error.
     let ck = b.join(CHECKPOINT_FILE);
     let bytes = std::fs::read(&ck).unwrap();

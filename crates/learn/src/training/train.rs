@@ -672,10 +672,14 @@ fn resume(
 ) -> Result<Option<UNet>> {
     let saved = read_checkpoint(path)?;
     if saved.state.fingerprint != state.fingerprint {
+        let differences = crate::data::dataset::json_differences(&saved.state.fingerprint, &state.fingerprint);
         return Err(LearnError::model(
             path,
-            "checkpoint is from a different setup (configuration, initialisation or data); \
-             use another output directory, or start afresh without resuming (`augsim train --restart`)",
+            format!(
+                "checkpoint is from a different setup ({}); use another output directory, or start afresh without \
+                 resuming (`augsim train --restart`)",
+                differences.join("; ")
+            ),
         ));
     }
     let best = restore(&saved, net, adam, path)?;
