@@ -167,6 +167,15 @@ def test_registration_errors(case, tmp_path):
         augsim.Registration(fem=case["scenario"], targets=[[10.0, 10.0, 10.0]])  # 10 m: outside the organ
 
 
+def test_a_time_budget_ends_a_cloud_with_its_estimate(case):
+    # A budget far below one FEM solve: the cloud answers with the estimate reached, saying why.
+    reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm", time_budget_ms=1e-3)
+    r = reg.register(case["cloud"])
+    assert any("past its time budget of 0 ms" in w for w in r.warnings), r.warnings
+    with pytest.raises(augsim.AugsimError, match="time_budget_ms"):
+        augsim.Registration(fem=case["scenario"], units="mm", time_budget_ms=-1.0)
+
+
 def test_a_unit_mistake_in_the_targets_is_named(case):
     # Millimetres declared as metres: outside the organ, refused, naming the likely mistake.
     with pytest.raises(augsim.AugsimError, match="given in mm where m were expected"):

@@ -552,7 +552,9 @@ fn read_messages(shared: &Shared) {
                 let mut waiting = shared.waiting.lock().unwrap_or_else(|e| e.into_inner());
                 if waiting.features.len() >= MAX_PENDING_STEPS {
                     drop(waiting);
-                    let error = format!("{MAX_PENDING_STEPS} steps are already waiting: step refused");
+                    let error = format!(
+                        "{MAX_PENDING_STEPS} steps are already waiting: step refused (taken as one with no feature seen)"
+                    );
                     log(format_args!("{}: step {step}: {error}", shared.peer));
                     shared.send_estimate(&serde_json::json!({ "step": step, "error": error }), stamped(timestamp));
                     continue;
@@ -685,6 +687,8 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
     // Built at the first cloud: a client that only connects, or only sends features, costs none.
     let mut registration: Option<Registration> = None;
     let mut identification: Option<Box<dyn Identification>> = None;
+    // The steps the filter has made: its clock, kept on the stream's step numbers.
+    let mut taken = 0;
     loop {
         let work = {
             let mut waiting = shared.waiting.lock().unwrap_or_else(|e| e.into_inner());
@@ -730,10 +734,11 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
             }
             Work::Step(step, features, timestamp) => {
                 let start = Instant::now();
-                let estimate = identify(&shared.options, &mut identification, &features).map(|mut fields| {
-                    fields.insert("ms".into(), mesh::stats::ms(start.elapsed()).into());
-                    fields
-                });
+                let estimate =
+                    identify(&shared.options, &mut identification, (&mut taken, step), &features).map(|mut fields| {
+                        fields.insert("ms".into(), mesh::stats::ms(start.elapsed()).into());
+                        fields
+                    });
                 let mut answer = match estimate {
                     Ok(fields) => fields,
                     Err(e) => {
@@ -774,6 +779,7 @@ enum Work {
 fn identify(
     options: &ServeOptions,
     identification: &mut Option<Box<dyn Identification>>,
+    (taken, step): (&mut u64, u64),
     features: &[Point],
 ) -> std::result::Result<serde_json::Map<String, serde_json::Value>, String> {
     if identification.is_none() {
@@ -781,13 +787,32 @@ fn identify(
         *identification = Some(factory().map_err(|e| format!("setting up the identification: {e}"))?);
     }
     let filter = identification.as_mut().ok_or("no identification")?;
-    if features.len() != filter.features() {
-        return Err(format!("{} features sent, the identification observes {}", features.len(), filter.features()));
+    // The filter's clock follows the stream's steps: a step refused (features that did not decode,
+    // a backlog full, features it cannot take) is taken as one with no feature seen, so that the
+    // load of every later step stays the one its number says.
+    let unseen = vec![[f64::NAN; 3]; filter.features()];
+    while *taken + 1 < step {
+        filter.step(&unseen)?;
+        *taken += 1;
     }
-    if features.iter().flatten().any(|x| x.is_infinite()) {
-        return Err("a feature has an infinite coordinate (NaN marks one not seen)".into());
-    }
-    filter.step(features)
+    *taken = step;
+    let refused = if features.len() != filter.features() {
+        Some(format!("{} features sent, the identification observes {}", features.len(), filter.features()))
+    } else if features.iter().flatten().any(|x| x.is_infinite()) {
+        Some("a feature has an infinite coordinate (NaN marks one not seen)".to_string())
+    } else {
+        None
+    };
+    let why = match refused {
+        None => match filter.step(features) {
+            Ok(estimate) => return Ok(estimate),
+            // The filter stays as it was.
+            Err(why) => why,
+        },
+        Some(why) => why,
+    };
+    filter.step(&unseen)?;
+    Err(format!("{why}: taken as a step with no feature seen"))
 }
 
 /// The status as one line of JSON; the targets' σ left out, saying so in its warnings, when the

@@ -502,6 +502,52 @@ impl augsim_live::Identification for SlowMean {
     }
 }
 
+/// An identification that counts its steps and the features seen at the last one.
+#[derive(Default)]
+struct Counting {
+    steps: usize,
+}
+
+impl augsim_live::Identification for Counting {
+    fn features(&self) -> usize {
+        2
+    }
+
+    fn step(&mut self, positions: &[Point]) -> Result<serde_json::Map<String, serde_json::Value>, String> {
+        self.steps += 1;
+        let seen = positions.iter().filter(|p| !p[0].is_nan()).count();
+        Ok(serde_json::Map::from_iter([("steps".to_string(), self.steps.into()), ("seen".to_string(), seen.into())]))
+    }
+}
+
+/// A step refused (features it cannot take) is taken as one with no feature seen: the filter's
+/// clock stays on the stream's step numbers, so that the load of each later step is the right one.
+#[test]
+fn a_refused_step_keeps_the_identification_s_clock() {
+    let factory: Arc<augsim_live::IdentificationFactory> = Arc::new(|| Ok(Box::new(Counting::default())));
+    let server = Server::start(ServeOptions {
+        identification: Some(factory),
+        coordinates: LengthUnit::Millimetre.into(),
+        ..ServeOptions::default()
+    });
+    let mut client = connect(server.port);
+    client.send_points("features", &[[0.0; 3]; 2]).unwrap();
+    client.send_points("features", &[[0.0; 3]; 1]).unwrap();
+    client.send_points("features", &[[0.0; 3]; 2]).unwrap();
+    let mut estimates = Vec::new();
+    for _ in 0..3 {
+        match client.receive().unwrap() {
+            Some(Answer::Estimate(e)) => estimates.push(e),
+            other => panic!("expected an estimate, got {other:?}"),
+        }
+    }
+    let e = estimates[1]["error"].as_str().unwrap();
+    assert!(e.contains("1 features sent, the identification observes 2: taken as a step with no feature seen"), "{e}");
+    assert_eq!((estimates[2]["step"].as_u64(), estimates[2]["steps"].as_u64()), (Some(3), Some(3)), "{}", estimates[2]);
+    assert_eq!(estimates[2]["seen"], 2);
+    server.stop();
+}
+
 /// `features` make identification steps in order, each answered by an `estimate`; a burst
 /// larger than the server keeps waiting gets errors for the steps beyond it, never a backlog;
 /// a server without identification says so.

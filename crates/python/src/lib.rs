@@ -14,7 +14,7 @@ use std::time::Duration;
 use anyhow::Context;
 use app::assimilation::{AssimilationChoice, Experiment, OnlineFilter};
 use app::output::write_registered_cloud;
-use app::registration::{RegistrationChoice, TargetsSpec};
+use app::registration::{RegistrationChoice, RegistrationSpec, TargetsSpec};
 use fem::post;
 use learn::data::npy::{NpyArray, NpyData};
 use learn::{Model, PointCloud, PredictInput};
@@ -311,6 +311,9 @@ impl Registered {
 /// the organ (trimmed ICP) and keep that pose while the clouds register plausibly (after a frame
 /// with a warning other than the time budget's, the next cloud is aligned again); `targets`
 /// (and `rigid`) are then in the cloud's frame, `points` and `displacement` in the organ's.
+/// `time_budget_ms`: most wall time of a cloud's registration; a cloud past it returns the
+/// estimate reached, with a warning (default: none, as `augsim register`; `augsim serve` takes
+/// 1000 ms).
 #[pyclass(module = "augsim")]
 struct Registration {
     state: Mutex<register::Registration>,
@@ -334,7 +337,7 @@ struct Registration {
 #[pymethods]
 impl Registration {
     #[new]
-    #[pyo3(signature = (*, fem=None, model=None, scenario=None, shape_model=None, patient=None, use_fem=None, use_hybrid=false, targets=None, units=None, frame=None, iterations=None, rigid=false, structures=None))]
+    #[pyo3(signature = (*, fem=None, model=None, scenario=None, shape_model=None, patient=None, use_fem=None, use_hybrid=false, targets=None, units=None, frame=None, iterations=None, rigid=false, structures=None, time_budget_ms=None))]
     #[allow(clippy::too_many_arguments)] // one per Python keyword argument
     fn new(
         py: Python<'_>,
@@ -351,6 +354,7 @@ impl Registration {
         iterations: Option<i64>,
         rigid: bool,
         structures: Option<&Bound<'_, PyAny>>,
+        time_budget_ms: Option<f64>,
     ) -> PyResult<Self> {
         // One path (a str or a PathLike) or a list of them.
         let structures: Vec<PathBuf> = match structures {
@@ -397,7 +401,7 @@ impl Registration {
         };
         choice.check().map_err(PyValueError::new_err)?;
         let (state, spec) = compute(py, move || {
-            let spec = choice.spec()?;
+            let spec = RegistrationSpec { time_budget_ms, ..choice.spec()? };
             Ok((spec.build()?, spec))
         })?;
         let organ_frame = state.frame();
