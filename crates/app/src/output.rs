@@ -64,8 +64,8 @@ pub fn in_run_dir<T>(out: Option<&Path>, parent: &Path, work: impl FnOnce(&Path)
 }
 
 /// Refuses a folder `dir` that holds the results of an earlier run (its summary.json), or the
-/// frames of one stopped before its summary (its organ.vtu or organ_NNNN.vtu), so that two runs'
-/// files are never mixed.
+/// frames of one stopped before its summary (a registration's organ.vtu or organ_NNNN.vtu, an
+/// assimilation's deformation/step_NNNNN.vtu), so that two runs' files are never mixed.
 pub fn refuse_earlier_run(dir: &Path) -> Result<()> {
     if dir.join("summary.json").exists() {
         anyhow::bail!(
@@ -80,18 +80,26 @@ pub fn refuse_earlier_run(dir: &Path) -> Result<()> {
                 .and_then(|n| n.strip_suffix(".vtu"))
                 .is_some_and(|n| n.parse::<u32>().is_ok())
     };
-    let frames = std::fs::read_dir(dir)
-        .into_iter()
-        .flatten()
-        .flatten()
-        .filter(|e| is_frame(&e.file_name().to_string_lossy()))
-        .count();
-    if frames > 0 {
-        anyhow::bail!(
-            "{} holds {frames} frame(s) of an earlier run stopped before its summary (organ.vtu, organ_NNNN.vtu): give \
-             another --out, or remove it",
-            dir.display()
-        );
+    let count = |dir: &Path, is_frame: &dyn Fn(&str) -> bool| {
+        std::fs::read_dir(dir)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter(|e| is_frame(&e.file_name().to_string_lossy()))
+            .count()
+    };
+    let is_step = |name: &str| name.starts_with("step_") && name.ends_with(".vtu");
+    for (frames, files) in [
+        (count(dir, &is_frame), "organ.vtu, organ_NNNN.vtu"),
+        (count(&dir.join("deformation"), &is_step), "deformation/step_NNNNN.vtu"),
+    ] {
+        if frames > 0 {
+            anyhow::bail!(
+                "{} holds {frames} frame(s) of an earlier run stopped before its summary ({files}): give another \
+                 --out, or remove it",
+                dir.display()
+            );
+        }
     }
     Ok(())
 }
@@ -676,6 +684,12 @@ mod tests {
         assert_eq!(run_dir(Some(&given), &parent).unwrap(), (given.clone(), true), "not there yet: the run's own");
         std::fs::create_dir_all(&given).unwrap();
         assert_eq!(run_dir(Some(&given), &parent).unwrap(), (given.clone(), false), "there already: the user's");
+        // An assimilation stopped before its summary (its steps' deformations).
+        let steps = dir.path().join("assimilation");
+        std::fs::create_dir_all(steps.join("deformation")).unwrap();
+        std::fs::write(steps.join("deformation/step_00003.vtu"), "").unwrap();
+        let e = run_dir(Some(&steps), &parent).unwrap_err().to_string();
+        assert!(e.contains("holds 1 frame(s) of an earlier run stopped") && e.contains("step_NNNNN.vtu"), "{e}");
         std::fs::write(given.join("organ_0007.vtu"), "").unwrap();
         let e = run_dir(Some(&given), &parent).unwrap_err().to_string();
         assert!(e.contains("holds 1 frame(s) of an earlier run stopped before its summary"), "{e}");
