@@ -124,6 +124,7 @@ impl Report {
                     noise,
                     misfit.sqrt()
                 ));
+                lines.extend(misfit_warning(misfit));
             }
         }
         if let Some(s) = &r.springs {
@@ -158,5 +159,46 @@ impl Report {
         }
         lines.push(format!("wall time    {:.2} s in all", r.total_seconds));
         lines
+    }
+}
+
+/// The reduced misfit χ²/ν beyond which (or under whose inverse) the observations are said not to
+/// fit the model with their nominal noise: an effective noise twice the nominal, or half.
+const MISFIT_BOUND: f64 = 4.0;
+
+/// A warning when the reduced misfit χ²/ν of a run lies outside [1/[`MISFIT_BOUND`],
+/// [`MISFIT_BOUND`]]: the noise said, the load or the model are then wrong, and σ is not the
+/// estimate's.
+fn misfit_warning(misfit: f64) -> Option<String> {
+    let (how, what) = if misfit > MISFIT_BOUND {
+        ("farther", "the observation noise is larger than said, or the model (its load, its mesh, its law) differs from what was observed")
+    } else if misfit < 1.0 / MISFIT_BOUND {
+        ("closer", "the observation noise is smaller than said")
+    } else {
+        return None;
+    };
+    Some(format!(
+        "warning      the observations lie {:.1} × {how} from the model than their nominal noise says \
+         (χ²/ν = {misfit:.3}): {what}; σ is then not the estimate's",
+        if misfit > 1.0 { misfit.sqrt() } else { 1.0 / misfit.sqrt() }
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::misfit_warning;
+
+    /// A misfit near 1 passes; one of an effective noise over twice or under half the nominal is
+    /// warned about, saying which way.
+    #[test]
+    fn a_misfit_far_from_one_is_warned_about() {
+        assert_eq!(misfit_warning(1.3), None);
+        let large = misfit_warning(12.2).unwrap();
+        assert!(
+            large.contains("3.5 × farther from the model than their nominal noise says (χ²/ν = 12.200)"),
+            "{large}"
+        );
+        let small = misfit_warning(0.015).unwrap();
+        assert!(small.contains("8.2 × closer") && small.contains("smaller than said"), "{small}");
     }
 }
