@@ -7,6 +7,8 @@ augsim's errors are raised as :class:`AugsimError` with augsim's message; arrays
 shape raise :class:`ValueError`. The API is described in ``python/README.md``.
 """
 
+from importlib import metadata as _metadata
+
 from ._augsim import (
     Assimilation,
     AugsimError,
@@ -17,6 +19,11 @@ from ._augsim import (
     predict,
     solve,
 )
+
+try:
+    __version__ = _metadata.version("augsim")
+except _metadata.PackageNotFoundError:  # run from the source tree, not installed
+    __version__ = "unknown"
 
 __all__ = [
     "Assimilation",

@@ -167,6 +167,11 @@ def test_registration_errors(case, tmp_path):
         augsim.Registration(fem=case["scenario"], targets=[[10.0, 10.0, 10.0]])  # 10 m: outside the organ
 
 
+def test_the_package_says_its_version():
+    # The installed distribution's, which the crate's version makes.
+    assert augsim.__version__.count(".") == 2 and augsim.__version__[0].isdigit(), augsim.__version__
+
+
 def test_a_time_budget_ends_a_cloud_with_its_estimate(case):
     # A budget far below one FEM solve: the cloud answers with the estimate reached, saying why.
     reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm", time_budget_ms=1e-3)

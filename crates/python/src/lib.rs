@@ -260,7 +260,8 @@ struct Registered {
     #[pyo3(get)]
     rigid: Option<Py<PyArray2<f64>>>,
     /// The predicted standard deviation of each target's error, float64 [k], in `units`, for a
-    /// model that predicts one (the reduced-order model); otherwise None.
+    /// method that predicts one (the reduced-order model, and the U-Net after its shape fit);
+    /// otherwise None.
     #[pyo3(get)]
     target_sigma: Option<Py<PyArray1<f64>>>,
     /// Wall time of the registration (ms).
