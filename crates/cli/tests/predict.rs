@@ -162,6 +162,13 @@ magnitude = [0.05, 0.2]
     let at_nodes = fields.iter().find(|f| f.name == "sigma").expect("sigma on the mesh");
     assert_eq!(at_nodes.values.len(), organ.num_nodes());
     assert!(at_nodes.values.iter().all(|s| s.is_finite() && *s >= 0.0), "{:?}", &at_nodes.values[..5]);
+    // Projected on a basis fitted on the same split, the U-Net is evaluated; on one fitted or chosen
+    // on its test samples, it is not (the basis would hold them).
+    let text = augsim(&["eval", "net/model.json", "data", "--project", "rom", "--out", "eval_projected"], d);
+    assert!(text.contains("projected  on the basis of rom"), "{text}");
+    augsim(&["train", "data", "--out", "rom_other", "--method", "rom", "--test-samples", "1"], d);
+    let e = augsim_err(&["eval", "net/model.json", "data", "--project", "rom_other"], d);
+    assert!(e.contains("the projection's basis (a reduced-order model): sample 4 of"), "{e}");
 
     // burn's own kernels (the GPU's code path) predict the same tensor; they and the GPU need their
     // features.

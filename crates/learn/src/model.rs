@@ -366,4 +366,27 @@ impl LearnedModel for Projected {
     fn training_input_scale(&self) -> Option<f64> {
         self.model.training_input_scale()
     }
+    /// The model's held-out samples, which the basis must not have been fitted or chosen on
+    /// either: its basis would hold them.
+    fn held_out(&self, samples: &Samples) -> Result<Samples> {
+        let test = self.model.held_out(samples)?;
+        self.check_basis_unseen(&test)?;
+        Ok(test)
+    }
+    fn check_unseen(&self, samples: &Samples) -> Result<()> {
+        self.model.check_unseen(samples)?;
+        self.check_basis_unseen(samples)
+    }
+}
+
+impl Projected {
+    /// Fails when `samples` include samples the basis was fitted or chosen on.
+    fn check_basis_unseen(&self, samples: &Samples) -> Result<()> {
+        self.basis.info.split.check_unseen(samples).map_err(|e| match e {
+            LearnError::InvalidInput(why) => {
+                LearnError::InvalidInput(format!("the projection's basis (a reduced-order model): {why}"))
+            }
+            other => other,
+        })
+    }
 }
