@@ -151,6 +151,15 @@ impl Solved {
             ));
         }
         lines.extend(scenario::source::unit_hint(&p.mesh).map(|h| format!("warning    {h}")));
+        if let Some(&first) = p.mesh.odd_cells.first() {
+            lines.push(format!(
+                "warning    {} of the file's {} cells are numbered the other way round from the others (the first: \
+                 cell {}); turned positive, as every cell is, they fold over no neighbour: the mesher's slip",
+                p.mesh.odd_cells.len(),
+                p.mesh.cells.len(),
+                p.mesh.file_cell(first)
+            ));
+        }
         let (inverted, smallest) = post::inverted_cells(geo, p.material.law, &sol.u)?;
         if inverted > 0 {
             lines.push(format!(
@@ -405,5 +414,17 @@ mod tests {
         let crushed = solve(&bar, 0, -40.0, "crushed").lines().unwrap();
         let warning = crushed.last().unwrap();
         assert!(warning.starts_with("warning    ") && warning.contains("cells are turned inside out"), "{crushed:?}");
+        // One cell numbered the other way round in the file: the same solve, the cell named.
+        let mut odd = bar.clone();
+        let mesh::Cells::Tet4(tets) = &mut odd.cells else { unreachable!("a tetrahedral bar") };
+        tets[3].swap(2, 3);
+        let turned = solve(&odd, 0, 0.01, "odd");
+        assert_eq!(turned.solution.u, plain.solution.u);
+        let lines = turned.lines().unwrap();
+        let warning = lines.iter().find(|l| l.starts_with("warning")).expect("the odd cell said");
+        assert!(
+            warning.contains("1 of the file's 30 cells are numbered the other way round") && warning.contains("cell 3"),
+            "{warning}"
+        );
     }
 }

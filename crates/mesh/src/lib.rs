@@ -194,6 +194,9 @@ pub struct Mesh {
     /// (Gmsh's element tags, an Abaqus deck's element numbers, a VTK file's cells counted with
     /// those not kept); messages about a cell name it by this number.
     pub file_cells: Option<Vec<usize>>,
+    /// The cells its file numbered the other way round from the others (their indices), turned
+    /// positive as every cell is: a mesher's slip the file's author may want to know of.
+    pub odd_cells: Vec<usize>,
 }
 
 impl Mesh {
@@ -207,6 +210,7 @@ impl Mesh {
             node_normals: None,
             file_nodes: None,
             file_cells: None,
+            odd_cells: Vec::new(),
         };
         mesh.validate()?;
         Ok(mesh)

@@ -103,6 +103,7 @@ impl Mesh {
                 numbers.iter().copied().chain(after..after + ends.len()).collect()
             }),
             file_cells: self.file_cells.clone(),
+            odd_cells: self.odd_cells.clone(),
         };
         mesh.validate()?;
         Ok(mesh)

@@ -105,6 +105,7 @@ fn analytic_volumes_after_orientation_fix() {
     // Three unit cubes side by side, given mirrored (negative volume) in the file.
     let beam = read_gmsh(data("SimpleBeamHexa.msh")).unwrap();
     assert!((beam.volume() - 3.0).abs() < 1e-12, "{}", beam.volume());
+    assert!(beam.odd_cells.is_empty(), "all mirrored alike: the file's convention, no cell odd");
     let unit = read_gmsh(data("msh4_cube.msh")).unwrap();
     assert!((unit.volume() - 1.0).abs() < 1e-12, "{}", unit.volume());
     // A 7 m cube whose coordinates are perturbed by ~5e-7.
@@ -155,6 +156,8 @@ fn inverted_tetrahedra_are_flipped() {
     assert_eq!(read.nodes, mesh.nodes);
     assert_eq!(cell_sets(&read), cell_sets(&mesh));
     assert!((read.volume() - mesh.volume()).abs() < 1e-12 * mesh.volume());
+    // Half of them the other way round: the fewer orientation's cells are named.
+    assert_eq!(read.odd_cells.len(), mesh.cells.len() / 2, "{:?}", read.odd_cells);
 }
 
 #[test]

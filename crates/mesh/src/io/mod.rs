@@ -646,6 +646,12 @@ fn finish_volume(
     };
     let mut mesh = Mesh::new(nodes, cells).map_err(|e| parse_error(path, e.to_string()))?;
     check_untangled(path, &mesh, &flipped, describe)?;
+    // The cells of the orientation fewer cells came in (none when all came one way).
+    let turned = flipped.iter().filter(|&&f| f).count();
+    if turned > 0 && turned < flipped.len() {
+        let odd_are_turned = turned <= flipped.len() - turned;
+        mesh.odd_cells = (0..flipped.len()).filter(|&c| flipped[c] == odd_are_turned).collect();
+    }
     let numbered: Vec<usize> = match numbers {
         Some(numbers) => kept.iter().map(|&f| numbers[f]).collect(),
         None => kept.clone(),
