@@ -275,13 +275,6 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
     }
     let (compute, device) = args.device.described()?;
     progress.line(&device);
-    if args.batch > train.len() {
-        progress.line(&format!(
-            "batch      {} samples per step: the whole training set (--batch {} is more than it holds)",
-            train.len(),
-            args.batch
-        ));
-    }
     let start = match &args.init {
         Some(model) => UNetStart::FineTune { model: model.clone(), freeze_encoder: args.freeze_encoder },
         None => {
@@ -299,6 +292,13 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
         train_corruption: args.corruption.corruption(),
         val_corruption: args.corruption.corruption(),
     };
+    if config.batch_for(train.len()) < args.batch {
+        progress.line(&format!(
+            "batch      {} samples per step: the whole training set (--batch {} is more than it holds)",
+            train.len(),
+            args.batch
+        ));
+    }
     let run = UNetRun { out: args.out.clone(), resume: !args.restart, compute };
     let outcome = train_unet(&dataset, &split, [&train, &validation], start, &config, run, progress)?;
     let pace = match outcome.mean_step_seconds {

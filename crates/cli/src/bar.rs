@@ -33,11 +33,7 @@ impl Bar {
     /// that keeps its observer).
     pub fn reporter(&self) -> impl Fn(u64, u64, &str) + Send + Sync + 'static {
         let bar = self.bar.clone();
-        move |done, total, note| {
-            bar.set_length(total);
-            bar.set_position(done);
-            bar.set_message(note.to_string());
-        }
+        move |done, total, note| show(&bar, done, total, note)
     }
 
     /// Prints `text` above the bar, not indented.
@@ -49,6 +45,13 @@ impl Bar {
     pub fn finish(&self) {
         self.bar.finish_and_clear();
     }
+}
+
+/// Draws `done` of `total` on `bar`, with `note` beside it.
+fn show(bar: &ProgressBar, done: u64, total: u64, note: &str) {
+    bar.set_length(total);
+    bar.set_position(done);
+    bar.set_message(note.to_string());
 }
 
 /// Prints lines built by the application layer ([`print_line`]).
@@ -67,7 +70,7 @@ pub fn print_line(line: &str) {
 
 impl learn::Progress for Bar {
     fn advance(&self, done: u64, total: u64, note: &str) {
-        self.reporter()(done, total, note)
+        show(&self.bar, done, total, note)
     }
 
     fn line(&self, text: &str) {

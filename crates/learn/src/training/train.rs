@@ -111,6 +111,12 @@ impl TrainConfig {
         self.val_corruption.validate()
     }
 
+    /// Samples per step on a training set of `samples`: [`TrainConfig::batch_size`], at most
+    /// the whole set.
+    pub fn batch_for(&self, samples: usize) -> usize {
+        self.batch_size.min(samples)
+    }
+
     /// The learning rate of (0-based) iteration `it`.
     pub fn learning_rate_at(&self, it: usize) -> f64 {
         match self.final_learning_rate {
@@ -565,8 +571,7 @@ pub fn train(
     progress.advance(state.iteration as u64, total, "");
 
     let mut shuffler = Shuffler { seed: config.seed, n: train.len(), epoch: None, perm: Vec::new() };
-    // No step takes more samples than the training set holds.
-    let batch_size = config.batch_size.min(train.len());
+    let batch_size = config.batch_for(train.len());
     let mut step_time = 0.0;
     let mut steps = 0usize;
     let mut completed = true;
@@ -786,7 +791,7 @@ fn trained_model(
             split,
             pretraining: start.pretraining,
             schedule: Some(Schedule {
-                batch_size: config.batch_size.min(train.len()),
+                batch_size: config.batch_for(train.len()),
                 learning_rate: config.learning_rate,
                 final_learning_rate: config.final_learning_rate,
                 validate_every: config.validate_every,
