@@ -10,8 +10,8 @@ use learn::data::generate::Input;
 use learn::Model;
 use mesh::Mesh;
 use register::{
-    shape, Deformer, FemDeformer, HybridDeformer, NetworkDeformer, Organ, RegistrationOptions, RestAndStream,
-    ShapeDeformer, ShapeOptions, TwoWay,
+    shape, Deformer, FemDeformer, HybridDeformer, NetworkDeformer, Organ, RegistrationOptions, ShapeDeformer,
+    ShapeOptions, TwoWay,
 };
 use scenario::{DatasetScenario, MeshSource, StaticScenario};
 
@@ -103,13 +103,19 @@ pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
 
 /// The registration of a learned model on its scenario's organ, its loop's settings from
 /// `options` (the case's settings for its learned models). A model with a basis (the reduced-order
-/// model) fits its shape space on a frame from rest ([`ShapeDeformer`], with its own loop budgets)
-/// and runs the match-and-membrane loop on a stream's warm-started frames ([`RestAndStream`]): on
-/// the design case streamed (21 frames, 2 N) the shape fit alone left 5.52 mm at the peak and 3.55
-/// mm over the frames, with the membrane loop on the stream 4.12 and 2.23 mm. The U-Net fits a
-/// membrane to the matches and predicts from it ([`NetworkDeformer`]); given a `basis` (a
-/// reduced-order model), it predicts from the shape fit of that model's shape space on a frame from
-/// rest ([`HybridDeformer`], [`NETWORK_AFTER_FIT`]).
+/// model) fits its shape space on a frame from rest ([`ShapeDeformer`], with its own loop budgets);
+/// on a stream's warm-started frame it fits once from the last frame's posterior, then predicts
+/// from a membrane fitted to the matches where the cloud sees the surface, the unseen part held at
+/// the fit's ([`NetworkDeformer::holding_unseen`], [`HybridDeformer::on_streams`]). On the design
+/// cases streamed (the built-in case pressed at 1–2.5 N, lifted, dragged and pulled; 21 frames
+/// each) that left 1.71 mm over the frames, where the membrane loop alone on the warm-started
+/// frames (its unseen part spread from the seen) left 1.69 mm; seen by oblique cameras (the 1.5 N
+/// press from the left, right and back) 1.22, 2.10 and 1.61 mm against 2.16, 2.24 and 2.04 mm; and
+/// on a still half view it settles (4.95 to 4.28 mm over 6 frames) where the membrane loop alone
+/// drifted (4.95 to 14.87 mm). From rest, the held membrane after the fit lost on the design cases
+/// (2.89 mm against the fit's 2.42 mm). The U-Net fits a membrane to the matches and predicts from
+/// it ([`NetworkDeformer`]); given a `basis` (a reduced-order model), it predicts from the shape fit
+/// of that model's shape space on a frame from rest ([`HybridDeformer`], [`NETWORK_AFTER_FIT`]).
 pub fn learned_registration(
     network: &Network,
     basis: Option<&Model>,
@@ -119,7 +125,8 @@ pub fn learned_registration(
     let (deformer, options): (Box<dyn Deformer + Send>, _) = match (network.model, basis) {
         (Model::Reduced(_), None) => {
             let fit = shape_fit(network.model, &organ)?;
-            (Box::new(RestAndStream::new(Box::new(fit), Box::new(membrane))), shape::loop_options(options))
+            let membrane = Box::new(membrane.holding_unseen());
+            (Box::new(HybridDeformer::on_streams(Box::new(fit), membrane, 1)), shape::loop_options(options))
         }
         (Model::Reduced(_), Some(_)) => {
             bail!("a reduced-order model fits its own shape space: another model's basis is for a U-Net")

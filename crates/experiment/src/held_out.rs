@@ -578,8 +578,9 @@ fn notes(base: &CaseScenario, runs: usize, reference_ms: f64) -> Result<Vec<Stri
              streams them: frame k is pushed by F sin(πk/{}) (F the case's force, at the middle frame), each truth \
              solved from the last and seen anew by the camera (seed + k − 1). Each method registers frame 1 from \
              rest and every next frame warm-started from the last, with its warm budget (the FEM {} iterations, the \
-             U-Net and \"ROM, membrane loop\" {}, \"ROM\" {} of the membrane loop, the U-Net after the shape fit {} \
-             of the U-Net's loop; the hybrid's frames are the FEM's); the U-Net (both rows) and \"ROM\" match \
+             U-Net and \"ROM, membrane loop\" {}, \"ROM\" {}: one of its shape fit from the last frame's posterior, \
+             then its membrane loop, the surface unseen held at the fit's; the U-Net after the shape fit {} of the \
+             U-Net's loop; the hybrid's frames are the FEM's); the U-Net (both rows) and \"ROM\" match \
              both ways on those frames: the surface they see over the cloud is matched to the cloud as well. \
              TRE at the peak frame, and over all frames; time: the median over the stream's frames, one run.",
             STREAM_FRAMES + 1,

@@ -59,7 +59,7 @@ pub mod structure;
 pub mod warp;
 
 pub use checks::check_cloud;
-pub use deformers::{FemDeformer, HybridDeformer, NetworkDeformer, RestAndStream};
+pub use deformers::{FemDeformer, HybridDeformer, NetworkDeformer};
 pub use frame::{
     observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions, TwoWay, MAX_POINTS,
     WARM_START_ITERATION,
