@@ -1,7 +1,7 @@
 //! A static scenario solved once, as `augsim solve` and Python's `augsim.solve` run it, and the
 //! fields it writes for ParaView: the displacement, the Green strain and the von Mises stress.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use fem::{post, ElementGeometry, Law, Solution, StaticSolver};
@@ -22,8 +22,42 @@ pub struct Solved {
 /// Loads the static scenario `path` (a file or a built-in name), builds its problem and solves it.
 pub fn solve_scenario(path: &Path, progress: impl Fn(f64, usize) + Send + Sync + 'static) -> Result<Solved> {
     let (scenario, dir) = StaticScenario::load(path)?;
-    let problem = scenario.build_problem(&dir)?;
-    let hint = scenario::source::unit_hint(&problem.mesh).map_or(String::new(), |h| format!(" ({h})"));
+    solve(scenario, &dir, progress)
+}
+
+/// [`solve_scenario`], written to `output` (by default the scenario's own output path), which is
+/// checked before the solve: a path that cannot be written fails at once, not after minutes of
+/// solving. Returns the solve and the file written.
+pub fn solve_and_write(
+    path: &Path,
+    output: Option<&Path>,
+    progress: impl Fn(f64, usize) + Send + Sync + 'static,
+) -> Result<(Solved, PathBuf)> {
+    let (scenario, dir) = StaticScenario::load(path)?;
+    let out = output.map(Path::to_path_buf).unwrap_or_else(|| scenario.output_path());
+    mesh::io::check_writable(&out).context("the solution could not be written there")?;
+    let solved = solve(scenario, &dir, progress)?;
+    solved.write(&out)?;
+    Ok((solved, out))
+}
+
+/// What makes a problem's units doubtful: a mesh the size of a room, a modulus far below soft
+/// tissues'.
+fn doubts(problem: &fem::Problem) -> Vec<String> {
+    let young = scenario::source::young_hint(problem.material.young);
+    scenario::source::unit_hint(&problem.mesh).into_iter().chain(young).collect()
+}
+
+/// Builds `scenario`'s problem (its files relative to `dir`) and solves it, telling `progress` the
+/// load factor reached and the iterations so far.
+fn solve(
+    scenario: StaticScenario,
+    dir: &Path,
+    progress: impl Fn(f64, usize) + Send + Sync + 'static,
+) -> Result<Solved> {
+    let problem = scenario.build_problem(dir)?;
+    let hints = doubts(&problem);
+    let hint = if hints.is_empty() { String::new() } else { format!(" ({})", hints.join("; ")) };
     let mut solver = StaticSolver::new(problem)?;
     // Its lines say whether the body snapped past a limit point: made sure of.
     let options = fem::SolverOptions {
@@ -80,10 +114,14 @@ impl Solved {
             Some(_) => " (numbered as in its file: `list` selections and the field file_node give the file's numbers)",
             None => "",
         };
+        let inside = match p.mesh.cell_fraction {
+            Some(_) => format!(" ({:.4e} m³ of them inside the organ)", p.mesh.body_volume()),
+            None => String::new(),
+        };
         let mut lines = vec![
             format!("scenario   {}{about}", scenario.name),
             format!(
-                "mesh       {} nodes, {} {} cells, {:.4e} m³{left_out}",
+                "mesh       {} nodes, {} {} cells, {:.4e} m³{inside}{left_out}",
                 p.mesh.num_nodes(),
                 p.mesh.cells.len(),
                 p.mesh.cells.kind_name(),
@@ -150,7 +188,7 @@ impl Solved {
                  mid-edge nodes too"
             ));
         }
-        lines.extend(scenario::source::unit_hint(&p.mesh).map(|h| format!("warning    {h}")));
+        lines.extend(doubts(p).into_iter().map(|h| format!("warning    {h}")));
         if let Some(&first) = p.mesh.odd_cells.first() {
             lines.push(format!(
                 "warning    {} of the file's {} cells are numbered the other way round from the others (the first: \

@@ -73,3 +73,37 @@ fn a_missing_scenario_file_is_reported_once() {
     assert!(line.contains("missing.toml"), "{line}");
     assert_eq!(line.matches("os error").count(), 1, "the reason said once: {line}");
 }
+
+/// An output that cannot be written fails before the solve, saying which part of its path is a
+/// file, rather than after it.
+#[test]
+fn an_output_that_cannot_be_written_fails_before_the_solve() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("afile");
+    std::fs::write(&file, b"x").unwrap();
+    let (ok, text) = solve(Path::new("beam"), &file.join("out.vtu"));
+    assert!(!ok, "{text}");
+    assert!(text.contains(&format!("{} is a file, not a directory", file.display())), "{text}");
+    assert!(!text.contains("max |u|") && !text.contains("iterations"), "solved first:\n{text}");
+}
+
+/// A Young's modulus far below soft tissues' (one written in kPa) is doubted aloud, whether the
+/// solve then fails or not.
+#[test]
+fn a_modulus_in_kilopascals_is_doubted() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = dir.path().join("kpa.toml");
+    let text = |young: f64| {
+        format!(
+            "kind = \"static\"\nname = \"kpa\"\n[mesh.phantom]\ntets = 500\n[material]\nlaw = \"neo_hookean\"\n\
+             young = {young:?}\npoisson = 0.45\n[[fixed]]\nselect = {{ region = \"fixed\" }}\n[[force]]\n\
+             select = {{ region = \"push\" }}\ntotal = [0.0, 0.0, -0.001]\n"
+        )
+    };
+    std::fs::write(&scenario, text(5.0)).unwrap();
+    let (_, said) = solve(&scenario, &dir.path().join("out.vtu"));
+    assert!(said.contains("E = 5 Pa, where soft tissues are 0.1 to 100 kPa: is it in kPa?"), "{said}");
+    std::fs::write(&scenario, text(5000.0)).unwrap();
+    let (ok, said) = solve(&scenario, &dir.path().join("out.vtu"));
+    assert!(ok && !said.contains("kPa?"), "{said}");
+}

@@ -84,7 +84,7 @@ fn main() -> Result<(), MeshError> {
             "immersed phantom grid, spacing {spacing} m: {ms:8.2} ms | {} cells, {} nodes, volume error {:+.3}%",
             grid.mesh.cells.len(),
             grid.mesh.num_nodes(),
-            100.0 * (grid.organ_volume() / volume - 1.0)
+            100.0 * (grid.mesh.body_volume() / volume - 1.0)
         );
     }
     let (ms, samples) = time(21, || sample_visible_boundary(&mesh, spec.view_direction, 100, 1));

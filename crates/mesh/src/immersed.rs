@@ -63,12 +63,6 @@ pub struct ImmersedGrid {
 }
 
 impl ImmersedGrid {
-    /// Σ fraction × cell volume: the organ volume seen by the grid (m³).
-    pub fn organ_volume(&self) -> f64 {
-        let cell = self.spacing.powi(3);
-        self.mesh.cell_fraction.as_ref().map_or(self.mesh.cells.len() as f64 * cell, |f| f.iter().sum::<f64>() * cell)
-    }
-
     /// Copies the regions of `source` (e.g. a T4 mesh of the same organ) to
     /// the grid: a grid region holds the nodes of every active cell that
     /// contains a node of the source region. Suited to surface patches

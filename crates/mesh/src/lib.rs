@@ -364,6 +364,15 @@ impl Mesh {
         (0..self.cells.len()).map(|i| self.cell_volume(i)).sum()
     }
 
+    /// The volume of the body the mesh models: its cells' volumes, each weighted by the share of
+    /// it inside the organ on an immersed grid ([`Mesh::cell_fraction`]).
+    pub fn body_volume(&self) -> f64 {
+        match &self.cell_fraction {
+            Some(fraction) => (0..self.cells.len()).map(|i| fraction[i] * self.cell_volume(i)).sum(),
+            None => self.volume(),
+        }
+    }
+
     /// Axis-aligned bounding box (min, max) of the nodes.
     pub fn bounds(&self) -> (Point, Point) {
         bounds(&self.nodes)

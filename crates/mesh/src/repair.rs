@@ -33,6 +33,7 @@ use rayon::prelude::*;
 use crate::length::LengthUnit;
 use crate::surface::check_closed_manifold;
 use crate::tetmesh::MAX_OVERLAP_FRACTION;
+use crate::topology::root;
 use crate::{bounds, cross, dot, norm, sub, MeshError, Point, TriSurface};
 
 /// Options of [`repair_surface`].
@@ -510,13 +511,6 @@ fn check_fans(surface: &TriSurface, neighbours: &[[usize; 3]], origin: &[usize])
     // both ends of the edge.
     let tris = &surface.triangles;
     let mut parent: Vec<usize> = (0..3 * tris.len()).collect();
-    fn root(parent: &mut [usize], mut i: usize) -> usize {
-        while parent[i] != i {
-            parent[i] = parent[parent[i]];
-            i = parent[i];
-        }
-        i
-    }
     let corner = |t: usize, v: usize| 3 * t + tris[t].iter().position(|&k| k == v).unwrap_or(0);
     for (t, tri) in tris.iter().enumerate() {
         for e in 0..3 {

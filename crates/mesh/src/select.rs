@@ -7,7 +7,7 @@ use std::cmp::Ordering;
 use std::collections::HashMap;
 use std::path::PathBuf;
 
-use crate::{dot, sub, Mesh, MeshError, Point};
+use crate::{dot, sub, Cells, Mesh, MeshError, Point};
 
 /// A rule that picks a set of nodes of a mesh.
 #[derive(Clone, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
@@ -118,7 +118,7 @@ impl NodeSelection {
     pub fn select(&self, mesh: &Mesh) -> Result<Vec<usize>, MeshError> {
         let mut nodes = match self {
             NodeSelection::Box { min, max } => nodes_in_box(&mesh.nodes, *min, *max),
-            NodeSelection::List(list) => match &mesh.file_nodes {
+            NodeSelection::List(list) => mesh.with_mid_edge_nodes(match &mesh.file_nodes {
                 None => {
                     if let Some(&bad) = list.iter().find(|&&k| k >= mesh.num_nodes()) {
                         return Err(MeshError::Invalid(format!(
@@ -143,7 +143,7 @@ impl NodeSelection {
                         })
                         .collect::<Result<_, _>>()?
                 }
-            },
+            }),
             NodeSelection::Region(name) => mesh.region(name)?.to_vec(),
             NodeSelection::Union(parts) => {
                 parts.iter().map(|p| p.select(mesh)).collect::<Result<Vec<_>, _>>()?.into_iter().flatten().collect()
@@ -380,9 +380,42 @@ fn closer(a: &(f64, usize), b: &(f64, usize)) -> Ordering {
     a.0.total_cmp(&b.0).then(a.1.cmp(&b.1))
 }
 
+impl Mesh {
+    /// `nodes` and, on a quadratic mesh, the mid-edge nodes between two of them (as a region
+    /// gains them, [`Mesh::quadratic`]): a list of a face's corners holds the whole quadratic face.
+    pub fn with_mid_edge_nodes(&self, mut nodes: Vec<usize>) -> Vec<usize> {
+        let Cells::Tet10(cells) = &self.cells else { return nodes };
+        let mut member = vec![false; self.num_nodes()];
+        nodes.iter().for_each(|&n| member[n] = true);
+        for cell in cells {
+            for (slot, [i, j]) in crate::quadratic::TET10_EDGES.iter().enumerate() {
+                if member[cell[*i]] && member[cell[*j]] && !member[cell[4 + slot]] {
+                    member[cell[4 + slot]] = true;
+                    nodes.push(cell[4 + slot]);
+                }
+            }
+        }
+        nodes
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// On a quadratic mesh a list of nodes gains the mid-edge nodes between two of them, as a
+    /// region does: the corners of the bottom face select the whole quadratic face.
+    #[test]
+    fn a_list_of_corners_on_a_quadratic_mesh_holds_the_mid_edge_nodes_between_them() {
+        let linear = crate::box_mesh(crate::CellKind::Tet4, [0.0; 3], [1.0; 3], [2, 2, 2]).unwrap();
+        let bottom: Vec<usize> = (0..linear.num_nodes()).filter(|&n| linear.nodes[n][2] == 0.0).collect();
+        let quadratic = linear.quadratic().unwrap();
+        let listed = NodeSelection::List(bottom.clone()).select(&quadratic).unwrap();
+        let on_face: Vec<usize> = (0..quadratic.num_nodes()).filter(|&n| quadratic.nodes[n][2] == 0.0).collect();
+        assert!(on_face.len() > bottom.len());
+        assert_eq!(listed, on_face, "the face's corners and mid-edge nodes, nothing else");
+        assert_eq!(NodeSelection::List(bottom.clone()).select(&linear).unwrap(), bottom, "T4: the list itself");
+    }
 
     #[test]
     fn nearest_nodes_come_nearest_first_with_ties_to_the_smaller_index() {

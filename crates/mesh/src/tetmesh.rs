@@ -51,7 +51,7 @@ use rayon::prelude::*;
 
 use crate::bvh::SurfaceBvh;
 use crate::surface::check_closed_manifold;
-use crate::topology::face_connected_pieces;
+use crate::topology::{face_connected_pieces, root};
 use crate::{cross, dot, sub, Cells, Mesh, MeshError, Point, TriSurface, MAX_CELLS};
 
 /// Warp threshold for black (axis-parallel) lattice edges, from the paper.
@@ -944,13 +944,6 @@ pub fn without_small_pieces(mesh: Mesh) -> Result<Mesh, MeshError> {
 /// The body of each piece (cells of `tets`): pieces sharing a node are in one body.
 fn bodies(pieces: &[Vec<usize>], tets: &[[usize; 4]], nodes: usize) -> Vec<usize> {
     let mut parent: Vec<usize> = (0..pieces.len()).collect();
-    fn root(parent: &mut [usize], mut a: usize) -> usize {
-        while parent[a] != a {
-            parent[a] = parent[parent[a]];
-            a = parent[a];
-        }
-        a
-    }
     let mut piece_of_node = vec![usize::MAX; nodes];
     for (p, cells) in pieces.iter().enumerate() {
         for n in cells.iter().flat_map(|&c| tets[c]) {

@@ -100,6 +100,16 @@ pub fn folded_faces(mesh: &Mesh) -> Vec<[usize; 2]> {
     pairs
 }
 
+/// The root of `a`'s set in a union-find forest (`parent[k] == k` at a root), halving the path on
+/// the way.
+pub(crate) fn root(parent: &mut [usize], mut a: usize) -> usize {
+    while parent[a] != a {
+        parent[a] = parent[parent[a]];
+        a = parent[a];
+    }
+    a
+}
+
 /// The cells grouped into pieces joined through shared faces: two cells sharing a face are in
 /// the same piece, two that share only an edge or a vertex may not be. A piece that hangs on the
 /// rest by an edge or a vertex can rotate about it at no cost of energy (a mechanism), unless
@@ -108,13 +118,6 @@ pub fn folded_faces(mesh: &Mesh) -> Vec<[usize; 2]> {
 pub fn face_connected_pieces(mesh: &Mesh) -> Vec<Vec<usize>> {
     let faces = cell_faces(mesh);
     let mut parent: Vec<usize> = (0..mesh.cells.len()).collect();
-    fn root(parent: &mut [usize], mut a: usize) -> usize {
-        while parent[a] != a {
-            parent[a] = parent[parent[a]];
-            a = parent[a];
-        }
-        a
-    }
     let mut first_cell: HashMap<Vec<usize>, usize> = HashMap::with_capacity(faces.len());
     for (cell, mut key) in faces {
         key.sort_unstable();

@@ -532,7 +532,7 @@ fn immersed_grid_fractions_and_volume() {
     let f = grid.mesh.cell_fraction.as_ref().unwrap();
     assert!(f.iter().all(|&x| x > 0.0 && x <= 1.0));
     assert!(f.iter().any(|&x| x < 1.0) && f.contains(&1.0));
-    let err = grid.organ_volume() / volume - 1.0;
+    let err = grid.mesh.body_volume() / volume - 1.0;
     println!("immersed phantom: {} cells, {} nodes, volume error {:+.3}%", f.len(), grid.mesh.num_nodes(), 100.0 * err);
     assert!(err.abs() < 0.03);
     // Without the nearly empty cells: fewer cells, each above the threshold, the regions kept,
@@ -542,7 +542,7 @@ fn immersed_grid_fractions_and_volume() {
     let kept = trimmed.mesh.cell_fraction.as_ref().unwrap();
     let dropped = f.len() - kept.len();
     assert!(dropped > 0 && kept.iter().all(|&x| x > 0.1), "{dropped} cells left out");
-    let lost = grid.organ_volume() - trimmed.organ_volume();
+    let lost = grid.mesh.body_volume() - trimmed.mesh.body_volume();
     assert!(lost > 0.0 && lost <= 0.1 * dropped as f64 * 1e-6 + 1e-12, "{lost} m³ lost with {dropped} cells");
     for name in ["fixed", "visible", "push", "markers"] {
         assert!(!trimmed.mesh.region(name).unwrap().is_empty(), "{name}");
@@ -586,7 +586,7 @@ fn immersed_grid_fractions_and_volume() {
     // From a closed surface.
     let s = icosphere(0.05, 3);
     let g = immersed_surface(&s, &ImmersedOptions::with_spacing(0.008)).unwrap();
-    let err = g.organ_volume() / s.enclosed_volume() - 1.0;
+    let err = g.mesh.body_volume() / s.enclosed_volume() - 1.0;
     println!("immersed icosphere: {} cells, volume error {:+.3}%", g.mesh.cells.len(), 100.0 * err);
     assert!(err.abs() < 0.03);
     assert!(matches!(g.mesh.cells, Cells::Hex8(_)));

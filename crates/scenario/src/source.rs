@@ -168,6 +168,21 @@ pub fn unit_hint(mesh: &Mesh) -> Option<String> {
     })
 }
 
+/// Soft tissues' Young's moduli (Pa): a brain's to a stiff liver's.
+const TISSUE_YOUNG_PA: std::ops::RangeInclusive<f64> = 100.0..=1e5;
+
+/// A hint for a Young's modulus `young` (Pa) far below soft tissues', as one given in kPa is:
+/// said beside a solve that failed.
+pub fn young_hint(young: f64) -> Option<String> {
+    (young < *TISSUE_YOUNG_PA.start()).then(|| {
+        format!(
+            "E = {young} Pa, where soft tissues are {} to {} kPa: is it in kPa? scenarios are in pascals",
+            TISSUE_YOUNG_PA.start() / 1e3,
+            TISSUE_YOUNG_PA.end() / 1e3
+        )
+    })
+}
+
 /// The problem on `mesh` with `material` (validated) and the `fixed` nodes held at zero displacement; errors name
 /// the material or the selection at fault.
 pub fn fixed_problem(mesh: Mesh, material: Material, fixed: &[Fixed]) -> Result<Problem, FemError> {

@@ -447,12 +447,23 @@ pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     write_atomic(path, |w| w.write_all(bytes))
 }
 
-/// The body of [`write_atomic`], with the bare I/O error.
-fn persist_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> std::io::Result<()> {
+/// Whether [`write_atomic`] could write `path`, checked before long work whose result it is to hold:
+/// its directory is created and a temporary file made there (and removed), as the write would.
+pub fn check_writable(path: &Path) -> Result<(), WriteError> {
+    temporary_beside(path).map(drop).map_err(|error| WriteError { path: path.to_path_buf(), error })
+}
+
+/// A temporary file in `path`'s directory (created when missing; an error naming the part of the
+/// path that is a file where a directory should be), with ordinary permissions.
+fn temporary_beside(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
     let name =
         path.file_name().ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file name"))?;
     let dir = match path.parent().filter(|d| !d.as_os_str().is_empty()) {
         Some(dir) => {
+            if let Some(file) = dir.ancestors().find(|a| a.is_file()) {
+                let message = format!("{} is a file, not a directory", file.display());
+                return Err(std::io::Error::new(std::io::ErrorKind::NotADirectory, message));
+            }
             fs::create_dir_all(dir)?;
             dir
         }
@@ -463,8 +474,13 @@ fn persist_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> std::
     builder.prefix(&prefix).suffix(".tmp");
     #[cfg(unix)]
     builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    builder.tempfile_in(dir)
+}
+
+/// The body of [`write_atomic`], with the bare I/O error.
+fn persist_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> std::io::Result<()> {
     // Dropped on an early return, the temporary file removes itself.
-    let tmp = builder.tempfile_in(dir)?;
+    let tmp = temporary_beside(path)?;
     let (file, tmp_path) = tmp.into_parts();
     let mut writer = BufWriter::new(file);
     write(&mut writer)?;
@@ -797,5 +813,21 @@ mod tests {
         assert_eq!(names, ["out.txt"], "no temporary file is left");
         let e = MeshError::from(write_atomic_bytes(dir.path(), b"x").unwrap_err());
         assert!(e.to_string().contains(&dir.path().display().to_string()), "{e}");
+    }
+
+    /// A path that cannot be written is found before the work whose result it is to hold, the
+    /// part of it that is a file named; a writable one is left as it was, no file made.
+    #[test]
+    fn a_path_is_checked_writable_before_the_work() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("afile");
+        fs::write(&file, b"x").unwrap();
+        let e = check_writable(&file.join("deeper/out.vtu")).unwrap_err().to_string();
+        assert!(e.contains(&format!("{} is a file, not a directory", file.display())), "{e}");
+        let fine = dir.path().join("new/out.vtu");
+        check_writable(&fine).unwrap();
+        assert!(!fine.exists());
+        let names: Vec<_> = fs::read_dir(dir.path().join("new")).unwrap().collect();
+        assert!(names.is_empty(), "no temporary file is left");
     }
 }
