@@ -40,10 +40,10 @@ pub struct RegisterArgs {
     /// (FEM models on another mesh, the shipped U-Net and reduced-order model, or --model on
     /// --scenario, default liver_ar_t10); prints the comparison. --iterations and --rigid then
     /// hold for every method of the case.
-    #[arg(long, group = "comparison", conflicts_with = "patient")]
+    #[arg(long, group = "comparison", conflicts_with_all = NOT_IN_A_COMPARISON)]
     demo: bool,
     /// The comparison of --demo on this case scenario (TOML, as register_case).
-    #[arg(long, group = "comparison", value_name = "CASE.toml", conflicts_with = "patient")]
+    #[arg(long, group = "comparison", value_name = "CASE.toml", conflicts_with_all = NOT_IN_A_COMPARISON)]
     case: Option<PathBuf>,
     /// The force (N) pushing the case's truth (default: the case's).
     #[arg(long, requires = "comparison")]
@@ -60,6 +60,11 @@ pub struct RegisterArgs {
     #[arg(long, requires = "comparison", allow_negative_numbers = true)]
     misalign_mm: Option<f64>,
 }
+
+/// The registration's arguments a comparison has no use for (its case makes the cloud, the truth,
+/// the targets and the methods, in metres and in its own frame): refused beside it, not ignored.
+const NOT_IN_A_COMPARISON: [&str; 9] =
+    ["cloud", "truth", "patient", "fem", "shape_model", "targets", "units", "frame", "structures"];
 
 /// Runs the registration (or the comparison) into a folder of the run's own.
 pub fn run(args: &RegisterArgs) -> Result<()> {

@@ -179,6 +179,16 @@ fn units_are_parsed_the_same_by_every_command() {
     // A stream of no frame is refused as the flag given, before anything runs.
     let (ok, text) = augsim(&["register", "--demo", "--frames", "0"]);
     assert!(!ok && text.contains("invalid value '0' for '--frames <FRAMES>'") && text.contains("1..=1000"), "{text}");
+    // A comparison makes its own cloud, truth, targets and methods: a registration's arguments
+    // beside it are refused, not ignored.
+    for extra in
+        [&["cloud.csv"][..], &["--units", "mm"], &["--frame", "RAS"], &["--fem", "liver"], &["--structure", "s.stl"]]
+    {
+        for comparison in [&["--demo"][..], &["--case", "case.toml"]] {
+            let (ok, text) = augsim(&[&["register"][..], comparison, extra].concat());
+            assert!(!ok && text.contains("cannot be used with"), "{comparison:?} {extra:?}: {text}");
+        }
+    }
     // Without a way of deforming the organ, register and serve say what to give.
     for command in [&["register", "cloud.csv"][..], &["serve", "--port", "0"]] {
         let (ok, text) = augsim(command);
