@@ -17,6 +17,7 @@ from ._augsim import (
     Registration,
     Solution,
     predict,
+    read_cloud,
     solve,
 )
 
@@ -33,5 +34,6 @@ __all__ = [
     "Registration",
     "Solution",
     "predict",
+    "read_cloud",
     "solve",
 ]

@@ -5,9 +5,9 @@ tracker would, and prints what comes back: a way to try a 3D Slicer set-up witho
                             [--units m|cm|mm|um] [--send-units mm|m|cm|um] [--out DIR] [--loop N]
 
 ``FRAMES_DIR`` holds one cloud per file, replayed in the order of their names: CSV with an x, y, z
-header (``augsim register --case ... --frames N`` writes such a folder, ``case/clouds``) or without
-one (x, y, z the first three columns), or ``.npy`` arrays of shape (n, 3). Their unit is the one a
-CSV header names (``x_mm``), else ``--units`` (m by default, as everywhere in augsim);
+header (``augsim register --case ... --frames N`` writes such a folder, ``case/clouds``) or ``.npy``
+arrays of shape (n, 3), read as ``augsim register`` reads them (:func:`augsim.read_cloud`). Their unit
+is the one a CSV header names (``x_mm``), else ``--units`` (m by default, as everywhere in augsim);
 each cloud is sent in ``--send-units`` (mm by default, what Slicer sends: give ``augsim serve`` the
 same ``--units``) as a POLYDATA message of device ``cloud``, at most ``--rate`` clouds a second,
 each once the server has answered the one before. The registered targets (POINT ``targets``) and
@@ -29,58 +29,20 @@ import time
 
 import numpy as np
 
-_SCALE = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6}
+UNITS = ("m", "cm", "mm", "um")
 
 
-def _xyz_columns(header):
-    """The columns of x, y and z in a CSV header (``x``, ``x_mm`` or ``x_m`` and the same for y, z)
-    and the unit they name (None for plain ``x, y, z``); None when the header has no such columns,
-    ValueError when they name different units."""
-    found = []
-    for axis in "xyz":
-        named = [(i, c[2:] or None) for i, c in enumerate(header)
-                 if c == axis or (c[:2] == axis + "_" and c[2:] in _SCALE)]
-        if len(named) != 1:
-            return None
-        found.append(named[0])
-    units = {u for _, u in found}
-    if len(units) != 1:
-        names = ", ".join(header[i] for i, _ in found)
-        raise ValueError(f"columns {names} mix units: name one unit for all three (x_mm, y_mm, z_mm)")
-    return [i for i, _ in found], units.pop()
+def read_cloud(path, units="m", unit="m"):
+    """A cloud file as an (n, 3) float array in ``unit``, read as ``augsim register`` reads it
+    (:func:`augsim.read_cloud`; ``units``: the unit of a file that names none). A file that is not
+    such a cloud raises ValueError."""
+    from augsim import AugsimError
+    from augsim import read_cloud as read
 
-
-def _is_number(text):
     try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-def read_cloud(path, units="m"):
-    """A cloud file as an (n, 3) float array in metres: ``.npy`` in ``units``, or CSV: with a header
-    line, its ``x``, ``y``, ``z`` columns (the first three where it names none) in the unit they name
-    (``x_mm``, ``x_m``), else in ``units``; without one (a first line of numbers), its first three
-    columns in ``units``. A file that is not such a cloud raises ValueError."""
-    unit = units
-    try:
-        if path.lower().endswith(".npy"):
-            cloud = np.asarray(np.load(path), dtype=float)
-        else:
-            with open(path, encoding="utf-8-sig") as f:
-                first = [c.strip().lower() for c in f.readline().split(",")]
-            headed = not all(_is_number(c) for c in first)
-            columns, named = (_xyz_columns(first) if headed else None) or ([0, 1, 2], None)
-            unit = named or units
-            cloud = np.loadtxt(path, delimiter=",", skiprows=int(headed), ndmin=2, usecols=columns,
-                               encoding="utf-8-sig")
-    except (OSError, ValueError) as e:
-        raise ValueError(f"{path}: not a cloud: {e}") from e
-    cloud = cloud * _SCALE[unit]
-    if cloud.ndim != 2 or cloud.shape[1] != 3 or len(cloud) == 0:
-        raise ValueError(f"{path}: a cloud must be n x 3 points, got shape {cloud.shape}")
-    return cloud
+        return read(path, units=unit, file_units=units)
+    except AugsimError as e:
+        raise ValueError(f"not a cloud: {e}") from e
 
 
 def frame_files(directory):
@@ -119,7 +81,7 @@ def replay(files, client, units="m", rate=None, out=None, unit="mm", timeout=60.
     for k, path in enumerate(files):
         began = time.perf_counter()
         try:
-            cloud = read_cloud(path, units) / _SCALE[unit]
+            cloud = read_cloud(path, units, unit)
         except ValueError as e:
             records.append({"file": path, "points": 0, "round_trip_ms": 0.0, "status": {"error": str(e)},
                             "targets": None})
@@ -159,8 +121,8 @@ def main(argv=None):
     parser.add_argument("--host", default="127.0.0.1")
     parser.add_argument("--port", type=int, default=18944, help="the server's port (OpenIGTLink's: 18944)")
     parser.add_argument("--rate", type=float, default=20.0, help="at most this many clouds a second (0: no limit)")
-    parser.add_argument("--units", choices=sorted(_SCALE), default="m", help="the unit of the files")
-    parser.add_argument("--send-units", choices=sorted(_SCALE), default="mm",
+    parser.add_argument("--units", choices=UNITS, default="m", help="the unit of the files")
+    parser.add_argument("--send-units", choices=UNITS, default="mm",
                         help="the unit sent (give `augsim serve` the same --units)")
     parser.add_argument("--out", help="writes each frame's registered targets here")
     parser.add_argument("--loop", type=int, default=1, help="replays the sequence this many times")

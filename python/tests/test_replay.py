@@ -2,7 +2,7 @@
 """`python -m augsim.replay`: a recorded press and release (the server test's case, 8 frames, its
 clouds in metres as `augsim register --case` writes them) replayed to `augsim serve --units mm` as a
 tracker would; each frame comes back registered, the targets written per frame in mm, much nearer
-their truth than at rest; a cloud file the server refuses is reported and the replay goes on.
+their truth than at rest; a cloud file that cannot be sent (a NaN) is reported and the replay goes on.
 
 Run: python -m pytest -s python/tests/test_replay.py (needs pyigtl; `.ci/run` runs it).
 """
@@ -20,6 +20,7 @@ from helpers import augsim_bin, make_case
 
 pytest.importorskip("pyigtl", reason="the replay needs pyigtl: pip install pyigtl (or ./python[test])")
 
+import augsim  # noqa: E402
 from augsim import replay  # noqa: E402
 from test_serve import free_port  # noqa: E402
 
@@ -31,7 +32,7 @@ class ReplayTest(unittest.TestCase):
         with tempfile.TemporaryDirectory(prefix="augsim_replay_test_") as tmp:
             case = make_case(tmp, FRAMES)
             frames = os.path.join(tmp, "case", "clouds")
-            # A cloud the server refuses (a NaN), recorded between two good ones.
+            # A cloud that cannot be sent (a NaN), recorded between two good ones.
             refused = os.path.join(tmp, "with_nan")
             shutil.copytree(frames, refused)
             bad = np.loadtxt(os.path.join(frames, "cloud_0000.csv"), delimiter=",", skiprows=1)
@@ -62,7 +63,7 @@ class ReplayTest(unittest.TestCase):
             first = np.loadtxt(os.path.join(out, written[0]), delimiter=",", skiprows=1)
             np.testing.assert_array_equal(first.astype(np.float32), records[0]["targets"].astype(np.float32))
         self.assertEqual(len(records), FRAMES + 1)
-        self.assertIn("refused", lines[1])
+        self.assertIn("not sent", lines[1])
         self.assertIn("finite", records[1]["status"]["error"])
         self.assertIsNone(records[1]["targets"])
         good = [r for k, r in enumerate(records) if k != 1]
@@ -83,35 +84,41 @@ class ReplayTest(unittest.TestCase):
             self.assertIn("is not a directory", str(stop.exception))
 
 
-def test_a_cloud_file_is_read_in_the_unit_its_header_names(tmp_path):
+def test_a_cloud_file_is_read_as_register_reads_it(tmp_path):
     named, plain = tmp_path / "named.csv", tmp_path / "plain.csv"
     named.write_text("x_mm,y_mm,z_mm\n10,20,30\n")
     plain.write_text("x,y,z\n10,20,30\n")
     np.testing.assert_allclose(replay.read_cloud(str(named), "m"), [[0.01, 0.02, 0.03]])
     np.testing.assert_allclose(replay.read_cloud(str(plain), "mm"), [[0.01, 0.02, 0.03]])
     np.testing.assert_allclose(replay.read_cloud(str(plain), "m"), [[10.0, 20.0, 30.0]])
-    # Columns found by their names wherever they are; a file that is no cloud is a ValueError.
+    # Sent in another unit than the files' own.
+    np.testing.assert_allclose(replay.read_cloud(str(named), "m", "mm"), [[10.0, 20.0, 30.0]])
+    np.testing.assert_allclose(augsim.read_cloud(str(plain), units="mm", file_units="m"), [[1e4, 2e4, 3e4]])
+    # Columns found by their names wherever they are; a file that is no cloud is a ValueError
+    # saying why, as `augsim register` says it.
     labelled = tmp_path / "labelled.csv"
     labelled.write_text("id,x_mm,y_mm,z_mm\n7,10,20,30\n")
     np.testing.assert_allclose(replay.read_cloud(str(labelled), "m"), [[0.01, 0.02, 0.03]])
     wrong = tmp_path / "wrong.npy"
     np.save(wrong, np.zeros((3, 5)))
-    with pytest.raises(ValueError, match="a cloud must be n x 3 points"):
+    with pytest.raises(ValueError, match=r"expected an array of shape \[N, 3\], found \[3, 5\]"):
         replay.read_cloud(str(wrong))
     broken = tmp_path / "broken.csv"
     broken.write_text("x,y,z\n1,2\n")
-    with pytest.raises(ValueError, match="not a cloud"):
+    with pytest.raises(ValueError, match="broken.csv: line 2: 2 fields, the header has 3 columns"):
         replay.read_cloud(str(broken))
-    # Columns that name different units are refused, naming them.
     mixed = tmp_path / "mixed.csv"
     mixed.write_text("x_mm,y_m,z_mm\n10,20,30\n")
-    with pytest.raises(ValueError, match="mixed.csv: .*columns x_mm, y_m, z_mm mix units"):
+    with pytest.raises(ValueError, match="mixed.csv: line 1: the x, y and z columns name different units"):
         replay.read_cloud(str(mixed))
-    # Without a header every line is a point, in `units`.
+    # A CSV without a header is refused, as `augsim register` refuses it: which column is x?
     headerless = tmp_path / "headerless.csv"
     headerless.write_text("10,20,30\n40,50,60\n")
-    np.testing.assert_allclose(replay.read_cloud(str(headerless), "mm"), [[0.01, 0.02, 0.03], [0.04, 0.05, 0.06]])
+    with pytest.raises(ValueError, match="headerless.csv: line 1: the header has no 'x' column"):
+        replay.read_cloud(str(headerless), "mm")
     strings = tmp_path / "strings.npy"
     np.save(strings, np.array([["a", "b", "c"]]))
-    with pytest.raises(ValueError, match="strings.npy: not a cloud"):
+    with pytest.raises(ValueError, match="strings.npy: invalid .npy file"):
         replay.read_cloud(str(strings))
+    with pytest.raises(ValueError, match="units: must be m, cm, mm or um, got 'in'"):
+        augsim.read_cloud(str(plain), units="in")

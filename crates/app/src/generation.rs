@@ -134,3 +134,16 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
     lines.push(format!("wrote      {}", out.display()));
     Ok(lines)
 }
+
+/// `augsim merge`: the dataset parts `parts` (written with `generate --shard i/n`) merged into
+/// `out`; the line that says so.
+pub fn merge(out: &std::path::Path, parts: &[PathBuf]) -> Result<String> {
+    let manifest = learn::merge_datasets(parts, out, None)?;
+    Ok(format!(
+        "merged {} parts: {} samples, {} failed → {}",
+        parts.len(),
+        manifest.num_samples,
+        manifest.failed.len(),
+        out.display()
+    ))
+}

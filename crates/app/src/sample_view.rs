@@ -7,6 +7,8 @@
 //! Both fields come from the grid the same way ([`GridToMesh`] at the nodes, trilinear interpolation at the
 //! markers), so their difference is the network's error alone, not that of the grid encoding.
 
+use std::path::PathBuf;
+
 use mesh::embedding::Grid;
 use mesh::length::mm;
 use mesh::{stats, Mesh, Point};
@@ -220,6 +222,63 @@ pub fn organ_mesh(
         }
     };
     Ok((scenario.mesh(&dir)?, path))
+}
+
+/// Options of `augsim view`.
+#[derive(Debug, clap::Args)]
+pub struct ViewArgs {
+    /// Trained model: its directory or its model.json.
+    #[arg(long, requires = "dataset")]
+    pub model: Option<PathBuf>,
+    /// Dataset directory the sample is taken from.
+    #[arg(long, requires = "model")]
+    pub dataset: Option<PathBuf>,
+    /// Generation index of the sample (as `eval` reports them); default: the first sample held out from the
+    /// model.
+    #[arg(long, requires = "model")]
+    pub sample: Option<u64>,
+    /// Dataset scenario the dataset was generated from, to rebuild the organ's mesh; default: the
+    /// `dataset.toml` beside the dataset when it names the dataset's scenario (as `augsim prepare`
+    /// writes it), else the built-in scenario of the dataset's name.
+    #[arg(long, requires = "model", conflicts_with = "mesh")]
+    pub scenario: Option<PathBuf>,
+    /// The organ's volume mesh (.vtu, .vtk, .msh) instead of rebuilding it from the scenario.
+    #[arg(long, requires = "model")]
+    pub mesh: Option<PathBuf>,
+    /// Show a mesh file (.vtu, .vtk) instead: its 3-component point fields as displacements (m), coloured by the
+    /// error when it has `reference` and `prediction` fields (as `eval` writes), else by the first one's
+    /// magnitude.
+    #[arg(long, conflicts_with_all = ["model", "dataset"])]
+    pub vtu: Option<PathBuf>,
+    /// Output HTML file.
+    #[arg(short, long, default_value = "out/view.html")]
+    pub out: PathBuf,
+}
+
+/// `augsim view`: the scene of [`ViewArgs`] (a dataset sample, or a mesh file's displacement
+/// fields) written as a self-contained HTML viewer; the lines that describe it.
+pub fn view(args: &ViewArgs) -> anyhow::Result<Vec<String>> {
+    let (scene, mut lines) = match (&args.vtu, &args.model, &args.dataset) {
+        (Some(file), _, _) => {
+            let (scene, fields) = mesh_file_scene(file)?;
+            let line = format!(
+                "mesh       {} nodes, {} surface triangles; displacement fields: {}",
+                scene.rest.len(),
+                scene.triangles.len(),
+                if fields.is_empty() { "none".into() } else { fields.join(", ") }
+            );
+            (scene, vec![line])
+        }
+        (None, Some(model), Some(dataset)) => {
+            dataset_sample_scene(model, dataset, args.sample, args.mesh.as_deref(), args.scenario.as_deref())?
+        }
+        _ => anyhow::bail!(
+            "give --model and --dataset (a dataset sample), or --vtu FILE (a mesh file with displacements)"
+        ),
+    };
+    plot::viewer::write_html(&args.out, &scene)?;
+    lines.push(format!("wrote      {} (open it in a browser)", args.out.display()));
+    Ok(lines)
 }
 
 /// The viewer's scene of sample `index` (default: the first held out from the model) of the

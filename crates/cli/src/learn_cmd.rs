@@ -1,6 +1,6 @@
 //! Learning commands: `generate`, `merge`, `train`, `eval`, `predict`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::Result;
 use app::generation::GenerateArgs;
@@ -12,19 +12,6 @@ use crate::bar::{print_lines, Bar};
 /// `augsim generate`.
 pub fn generate(args: &GenerateArgs) -> Result<()> {
     print_lines(&Bar::during("samples", |bar| app::generation::generate(args, bar))?);
-    Ok(())
-}
-
-/// `augsim merge`.
-pub fn merge(out: &Path, parts: &[PathBuf]) -> Result<()> {
-    let manifest = learn::merge_datasets(parts, out, None)?;
-    println!(
-        "merged {} parts: {} samples, {} failed → {}",
-        parts.len(),
-        manifest.num_samples,
-        manifest.failed.len(),
-        out.display()
-    );
     Ok(())
 }
 

@@ -10,7 +10,6 @@ mod prepare_cmd;
 mod register_cmd;
 mod serve_cmd;
 mod solve;
-mod view_cmd;
 
 use std::path::PathBuf;
 
@@ -146,7 +145,7 @@ enum Command {
     Serve(app::serving::ServeArgs),
     /// A self-contained HTML 3D viewer (opens in a browser, no network): a dataset sample on the organ (rest,
     /// FEM reference, the model's prediction, coloured by its error, markers) or a mesh file's displacements.
-    View(view_cmd::ViewArgs),
+    View(app::sample_view::ViewArgs),
     /// Run a published experiment end to end (generate, train, identify, register, evaluate) and write
     /// result.json, PNG figures and the report (report.md, report.html) beside the published figures.
     Experiment(experiment_cmd::ExperimentArgs),
@@ -197,14 +196,14 @@ fn main() {
         Command::Register(args) => register_cmd::run(&args),
         Command::Prepare(args) => prepare_cmd::run(&args),
         Command::Serve(args) => serve_cmd::run(&args),
-        Command::View(args) => view_cmd::run(&args),
+        Command::View(args) => app::sample_view::view(&args).map(|lines| bar::print_lines(&lines)),
         Command::Mesh { surface, label, length, units, no_repair, tets, immersed, output } => {
             let repair = !no_repair;
             mesh_cmd::run(&app::meshing::MeshOptions { surface, label, length, units, repair, tets, immersed }, &output)
         }
         Command::Assimilate(args) => assimilate::run(&args),
         Command::Generate(args) => learn_cmd::generate(&args),
-        Command::Merge { out, parts } => learn_cmd::merge(&out, &parts),
+        Command::Merge { out, parts } => app::generation::merge(&out, &parts).map(|line| println!("{line}")),
         Command::Train(args) => learn_cmd::train(&args),
         Command::Eval { model, dataset, out, project, corruption, device } => {
             learn_cmd::eval(&model, &dataset, project.as_deref(), &corruption, device, out.as_deref())

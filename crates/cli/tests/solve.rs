@@ -107,3 +107,20 @@ fn a_modulus_in_kilopascals_is_doubted() {
     let (ok, said) = solve(&scenario, &dir.path().join("out.vtu"));
     assert!(ok && !said.contains("kPa?"), "{said}");
 }
+
+/// A solve's file is shown by `view`: its displacement field named, one HTML file written.
+#[test]
+fn a_solved_file_is_viewed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (vtu, html) = (dir.path().join("beam.vtu"), dir.path().join("beam.html"));
+    let (ok, text) = solve(Path::new("beam"), &vtu);
+    assert!(ok, "{text}");
+    let out = Command::new(env!("CARGO_BIN_EXE_augsim"))
+        .args(["view", "--vtu", vtu.to_str().unwrap(), "-o", html.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{said}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(said.contains("displacement fields: displacement") && said.contains("wrote"), "{said}");
+    assert!(std::fs::read_to_string(&html).unwrap().contains("<html"), "an HTML page");
+}

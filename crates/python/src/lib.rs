@@ -556,6 +556,27 @@ fn dataset_split(
     })
 }
 
+/// Reads an intraoperative cloud file as `augsim register` does: CSV with a header naming x, y, z
+/// (or x_mm, …), 3D Slicer's .fcsv or .mrk.json, .npy [N, 3], or the points of a .ply, .vtk, .vtp,
+/// .vtu, .stl or .obj file. Returns float64 [N, 3] in `units` ("m", "cm", "mm" or "um"), in the
+/// frame the file is in; a file that names no unit is read in `file_units` (default: `units`).
+/// Raises AugsimError for a file that is not such a cloud, ValueError for an unknown unit.
+#[pyfunction]
+#[pyo3(signature = (path, units = "m", file_units = None))]
+fn read_cloud<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    units: &str,
+    file_units: Option<&str>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let unit =
+        |name: &str, what: &str| name.parse::<LengthUnit>().map_err(|e| PyValueError::new_err(format!("{what}: {e}")));
+    let into = unit(units, "units")?;
+    let given = file_units.map_or(Ok(into), |u| unit(u, "file_units"))?;
+    let cloud = compute(py, || Ok(app::points::PointInput::new(None, into, given).read_cloud(&path)?))?;
+    Ok(point_array(py, &cloud))
+}
+
 /// Predicts with a trained U-Net, as `augsim predict` does.
 ///
 /// `model`: a model directory or its model.json. `input`: a grid tensor [3, nx, ny, nz] on the
@@ -717,6 +738,7 @@ fn _augsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("AugsimError", m.py().get_type::<AugsimError>())?;
     m.add_function(wrap_pyfunction!(solve, m)?)?;
     m.add_function(wrap_pyfunction!(predict, m)?)?;
+    m.add_function(wrap_pyfunction!(read_cloud, m)?)?;
     m.add_function(wrap_pyfunction!(dataset_split, m)?)?;
     m.add("CANDIDATE_BASE", learn::CANDIDATE_BASE)?;
     m.add_class::<Solution>()?;
