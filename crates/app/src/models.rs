@@ -108,11 +108,11 @@ pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
 /// from a membrane fitted to the matches where the cloud sees the surface, the unseen part held at
 /// the fit's ([`NetworkDeformer::holding_unseen`], [`HybridDeformer::on_streams`]). On the design
 /// cases streamed (the built-in case pressed at 1–2.5 N, lifted, dragged and pulled; 21 frames
-/// each) that left 1.71 mm over the frames, where the membrane loop alone on the warm-started
+/// each) that left 1.70 mm over the frames, where the membrane loop alone on the warm-started
 /// frames (its unseen part spread from the seen) left 1.69 mm; seen by oblique cameras (the 1.5 N
-/// press from the left, right and back) 1.22, 2.10 and 1.61 mm against 2.16, 2.24 and 2.04 mm; and
-/// on a still half view it settles (4.95 to 4.28 mm over 6 frames) where the membrane loop alone
-/// drifted (4.95 to 14.87 mm). From rest, the held membrane after the fit lost on the design cases
+/// press from the left, right and back) 1.25, 2.10 and 1.49 mm against 2.16, 2.24 and 2.04 mm; and
+/// on a still half view it settles (4.95 to 4.27 mm over 100 frames) where the membrane loop alone
+/// drifted (4.95 to 14.87 mm over 6). From rest, the held membrane after the fit lost on the design cases
 /// (2.89 mm against the fit's 2.42 mm). The U-Net fits a membrane to the matches and predicts from
 /// it ([`NetworkDeformer`]); given a `basis` (a reduced-order model), it predicts from the shape fit
 /// of that model's shape space on a frame from rest ([`HybridDeformer`], [`NETWORK_AFTER_FIT`]).

@@ -739,27 +739,67 @@ impl PatientMethod {
 
 /// A patient's registration set-up ([`PATIENT_FILE`]): the method `augsim prepare` found the
 /// best on its validation, the learned model and its dataset scenario, the FEM alternative, the
-/// targets and their unit; paths relative to the file.
-#[derive(Clone, Debug, serde::Deserialize)]
+/// targets and their unit; paths relative to the file. `augsim prepare` writes it, its validation
+/// names the method, `--patient` reads it: all through this type.
+#[derive(Clone, Debug, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
-struct Patient {
+pub(crate) struct Patient {
     #[serde(default)]
-    method: PatientMethod,
-    model: PathBuf,
-    scenario: PathBuf,
-    fem: PathBuf,
-    targets: PathBuf,
-    units: LengthUnit,
+    pub method: PatientMethod,
+    pub model: PathBuf,
+    pub scenario: PathBuf,
+    pub fem: PathBuf,
+    pub targets: PathBuf,
+    pub units: LengthUnit,
     /// The unit of the files the set-up was prepared from (set-ups of older versions name none).
-    #[serde(default)]
-    input_units: Option<LengthUnit>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_units: Option<LengthUnit>,
     /// The frame of the files the set-up was prepared from (set-ups of older versions, and those
     /// prepared from files naming none, name none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_frame: Option<Frame>,
+    /// Structures that move with the organ, surfaces in [`STRUCTURES_UNIT`] in the organ's frame.
     #[serde(default)]
-    input_frame: Option<Frame>,
-    /// Structures that move with the organ, surfaces in mm in the organ's frame.
-    #[serde(default)]
-    structures: Vec<PathBuf>,
+    pub structures: Vec<PathBuf>,
+}
+
+/// The unit of a set-up's structure surfaces ([`Patient::structures`]).
+pub(crate) const STRUCTURES_UNIT: LengthUnit = LengthUnit::Millimetre;
+
+impl Patient {
+    /// The set-up of the patient directory `dir`.
+    pub(crate) fn read(dir: &Path) -> Result<Patient> {
+        let path = dir.join(PATIENT_FILE);
+        let text = std::fs::read_to_string(&path).with_context(|| {
+            format!("reading {} (is {} a directory made by augsim prepare?)", path.display(), dir.display())
+        })?;
+        toml::from_str(&text).map_err(|e| {
+            let newer =
+                if e.message().starts_with("unknown field") { " (prepared by a newer augsim? update it)" } else { "" };
+            anyhow::anyhow!("reading {}{newer}: {e}", path.display())
+        })
+    }
+
+    /// Writes the set-up into the patient directory `dir`, under comments that say what it holds.
+    pub(crate) fn write(&self, dir: &Path) -> Result<()> {
+        let works_in = match self.input_frame {
+            Some(_) => format!(" (the set-up works in {})", crate::prepare::SET_UP_FRAME),
+            None => " (no input named a frame)".into(),
+        };
+        let text = format!(
+            "# The registration set-up of this organ: `augsim register --patient DIR`, `augsim serve\n\
+             # --patient DIR`, `augsim.Registration(patient=DIR)`. Paths are relative to this file.\n\
+             # method: \"learned\", \"fem\" or \"hybrid\" (the learned model from rest, then the FEM), the one\n\
+             # that registered the validation's pushes the best.\n\
+             # input_units, input_frame: the unit and frame of the files it was prepared from, in which\n\
+             # points whose files name none are read and results given back{works_in}.\n\
+             # structures: surfaces that move with the organ ({}, the organ's frame).\n{}",
+            STRUCTURES_UNIT.symbol(),
+            toml::to_string(self)?
+        );
+        mesh::io::write_atomic_bytes(&dir.join(PATIENT_FILE), text.as_bytes())?;
+        Ok(())
+    }
 }
 
 impl RegistrationSpec {
@@ -772,15 +812,7 @@ impl RegistrationSpec {
         iterations: Option<usize>,
         rigid: bool,
     ) -> Result<RegistrationSpec> {
-        let path = dir.join(PATIENT_FILE);
-        let text = std::fs::read_to_string(&path).with_context(|| {
-            format!("reading {} (is {} a directory made by augsim prepare?)", path.display(), dir.display())
-        })?;
-        let p: Patient = toml::from_str(&text).map_err(|e| {
-            let newer =
-                if e.message().starts_with("unknown field") { " (prepared by a newer augsim? update it)" } else { "" };
-            anyhow::anyhow!("reading {}{newer}: {e}", path.display())
-        })?;
+        let p = Patient::read(dir)?;
         if let (None, Some(done)) = (method, crate::prepare::steps_before_validation(dir)?) {
             anyhow::bail!(
                 "{} is not prepared to the end: its validation, which chooses the method {PATIENT_FILE} names, has not \
@@ -815,7 +847,7 @@ impl RegistrationSpec {
             structures: p
                 .structures
                 .iter()
-                .map(|path| StructureFile { path: dir.join(path), unit: Some(LengthUnit::Millimetre) })
+                .map(|path| StructureFile { path: dir.join(path), unit: Some(STRUCTURES_UNIT) })
                 .collect(),
         })
     }

@@ -110,6 +110,12 @@ fn timestamp(since_epoch: std::time::Duration) -> u64 {
     (since_epoch.as_secs() << 32) | ((u64::from(since_epoch.subsec_nanos()) << 32) / 1_000_000_000)
 }
 
+/// A header's timestamp in seconds since the Unix epoch, as pyigtl gives it
+/// (`message.timestamp`): the upper 32 bits whole seconds, the lower a fraction of 2³².
+pub fn timestamp_seconds(timestamp: u64) -> f64 {
+    (timestamp >> 32) as f64 + (timestamp & 0xffff_ffff) as f64 / 4_294_967_296.0
+}
+
 /// Writes `name` into its NUL-padded `field`; an error when it is longer than the field.
 fn write_name(field: &mut [u8], what: &str, name: &str) -> Result<(), String> {
     if name.len() > field.len() {
@@ -473,6 +479,7 @@ mod tests {
         assert_eq!(header.encode().unwrap().to_vec(), bytes(HEADER));
         assert_eq!(Header::decode(&bytes(HEADER)).unwrap(), header);
         assert_eq!(timestamp(std::time::Duration::new(1000, 500_000_000)), 1000 << 32 | 0x8000_0000);
+        assert_eq!(timestamp_seconds(1000 << 32 | 0x8000_0000), 1000.5);
         // A full-length device name fills its field without a NUL.
         let full = Header { device_name: "d".repeat(20), ..header.clone() };
         assert_eq!(Header::decode(&full.encode().unwrap()).unwrap(), full);

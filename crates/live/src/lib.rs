@@ -62,7 +62,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
-pub use igtl::{decode_body, encode_message, encode_message_stamped};
+pub use igtl::{decode_body, encode_message, encode_message_stamped, timestamp_seconds};
 use igtl::{Content, Header, PointElement, PointMessage, StringMessage, TransformMessage};
 use mesh::io::{Frame, GivenCoordinates};
 use mesh::length::LengthUnit;
@@ -269,7 +269,7 @@ fn log(line: impl std::fmt::Display) {
 /// that a server stopped in any way leaves every answer it sent. The first line names the client
 /// (`peer`, `connected`: seconds since 1970, `unit` and `frame`, the stream's; the frame null
 /// where unnamed); then each cloud's status with
-/// its `timestamp` (the cloud's header timestamp, null for 0) and `targets` (in the stream's unit
+/// its `timestamp` (the cloud's header timestamp in seconds since 1970, null for 0) and `targets` (in the stream's unit
 /// and frame), each error status and each estimate.
 pub struct Record {
     file: Mutex<std::io::BufWriter<std::fs::File>>,
@@ -414,7 +414,7 @@ impl Shared {
     /// connection has ended; records it.
     /// `timestamp` is that of the cloud it answers, if any.
     fn report(&self, status: &serde_json::Value, timestamp: Option<u64>) {
-        self.record(serde_json::json!({ "status": status, "timestamp": timestamp }));
+        self.record(serde_json::json!({ "status": status, "timestamp": timestamp.map(timestamp_seconds) }));
         if !self.closed.load(Ordering::SeqCst) {
             log(format_args!("{}: {}", self.peer, status));
             self.send_line("status", status.to_string(), timestamp);
@@ -460,7 +460,7 @@ impl Shared {
     /// Sends an estimate (one line of JSON), stamped `timestamp` (that of its `features`), and
     /// records it.
     fn send_estimate(&self, estimate: &serde_json::Value, timestamp: Option<u64>) {
-        self.record(serde_json::json!({ "estimate": estimate, "timestamp": timestamp }));
+        self.record(serde_json::json!({ "estimate": estimate, "timestamp": timestamp.map(timestamp_seconds) }));
         self.send_line("estimate", estimate.to_string(), timestamp);
     }
 }
@@ -868,7 +868,7 @@ fn answer(
     });
     if shared.record.is_some() {
         let targets: Vec<Point> = targets.iter().map(|p| given.point_out(*p)).collect();
-        shared.record(serde_json::json!({ "status": status, "timestamp": cloud.timestamp, "targets": targets }));
+        shared.record(serde_json::json!({ "status": status, "timestamp": cloud.timestamp.map(timestamp_seconds), "targets": targets }));
     }
     if options.outputs.targets {
         let points = targets

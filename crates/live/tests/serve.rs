@@ -278,7 +278,7 @@ fn answers_carry_the_timestamp_of_the_cloud_they_answer() {
 }
 
 /// With a record folder, each client's stream is written as it goes, one line of JSON per
-/// answer: the client, then each cloud's status with its timestamp and targets (in the stream's
+/// answer: the client, then each cloud's status with its timestamp (seconds) and targets (in the stream's
 /// unit, as sent), and each error; a second client gets a file of its own.
 #[test]
 fn each_client_s_stream_is_recorded_as_it_goes() {
@@ -300,7 +300,10 @@ fn each_client_s_stream_is_recorded_as_it_goes() {
     };
     let _organ = client.receive().unwrap();
     let _status = status(client.receive().unwrap());
-    client.send_cloud(Vec::new()).unwrap();
+    // An empty cloud, stamped 1,234,567.5 s since 1970 in its header.
+    let empty = PolyData { points: Vec::new(), triangles: Vec::new() };
+    let stamp = Some(1_234_567 << 32 | 0x8000_0000);
+    client.send_bytes(&augsim_live::encode_message_stamped(&empty, "cloud", stamp).unwrap()).unwrap();
     assert!(status(client.receive().unwrap())["error"].is_string());
     let mut second = connect(server.port);
     second.send_cloud(cloud).unwrap();
@@ -323,6 +326,7 @@ fn each_client_s_stream_is_recorded_as_it_goes() {
         assert!(r.iter().zip(s).all(|(a, b)| (a - f64::from(*b)).abs() < 1e-3), "{r:?} against {s:?}");
     }
     assert!(lines[2]["status"]["frame"] == 2 && lines[2]["status"]["error"].is_string(), "{}", lines[2]);
+    assert_eq!(lines[2]["timestamp"], 1_234_567.5, "the header's timestamp in seconds, as pyigtl gives it");
     assert_eq!(read("client-002.jsonl").len(), 2, "the second client's record: its header and its cloud");
 }
 

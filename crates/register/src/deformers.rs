@@ -343,7 +343,7 @@ const ANCHOR_WEIGHT: f64 = 1e-3;
 /// Weight holding an unseen input node at its current estimate, when held
 /// ([`NetworkDeformer::holding_unseen`]): a match's (its interpolation weights sum to one). On
 /// the design case streamed and on a still half view 0.1 to 1000 gave the same TRE within 0.05 mm.
-pub const HOLD_WEIGHT: f64 = 1.0;
+const HOLD_WEIGHT: f64 = 1.0;
 
 impl NetworkDeformer {
     /// Most match-and-deform iterations of a frame from rest by default: the real-time budget
@@ -438,7 +438,7 @@ impl NetworkDeformer {
     }
 
     /// The surface fit holds the input nodes no match moves at their current estimate, as firmly
-    /// as a match holds a seen one ([`HOLD_WEIGHT`]), rather than letting the membrane carry the
+    /// as a match holds a seen one (`HOLD_WEIGHT`), rather than letting the membrane carry the
     /// seen part's motion over them: for a loop that starts from a shape fit, whose estimate there
     /// is its extrapolation from the whole view. Spread by the membrane, the unseen part of a half
     /// view fed back frame after frame took the reduced-order model's TRE from 4.95 to 14.87 mm on a
@@ -451,7 +451,7 @@ impl NetworkDeformer {
     /// The surface estimate: the displacement `s` of the input nodes and of the other matched
     /// nodes minimising, per coordinate, Σ_matches (Σ_j a_j s_j − shift)² + λ Σ_edges (s_i −
     /// s_j)² + Σ ε_i |s_i − s₀_i|², where a_j are a match's interpolation weights, λ the membrane
-    /// weight, s₀ the current estimate and ε_i [`ANCHOR_WEIGHT`] ([`HOLD_WEIGHT`] at a held unseen node); by Jacobi-preconditioned conjugate gradients from s₀. Returns
+    /// weight, s₀ the current estimate and ε_i `ANCHOR_WEIGHT` (`HOLD_WEIGHT` at a held unseen node); by Jacobi-preconditioned conjugate gradients from s₀. Returns
     /// the input nodes' part. Fitting the matches themselves, not each node's mean match offset,
     /// keeps the depth of a push: a mean over the triangles around a node flattens a dent.
     pub fn surface_estimate(&self, observations: &Observations, previous: &[f64]) -> Vec<[f64; 3]> {

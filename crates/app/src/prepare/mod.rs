@@ -65,7 +65,7 @@ use learn::LearnedModel;
 
 use crate::meshing::{coverage_warning, write_surface_in_mm, OrganInput};
 use crate::points::PointInput;
-use crate::registration::{read_structure, structure_name, PATIENT_FILE};
+use crate::registration::{read_structure, structure_name, Patient, PatientMethod, PATIENT_FILE};
 use crate::training::{train_unet, UNetRun, UNetStart};
 
 mod validation;
@@ -815,26 +815,20 @@ fn scenarios_step(options: &PrepareOptions, input_frame: Option<Frame>, dir: &Pa
          [[fixed]]\nselect = {held}\n",
         surface = options.surface.display(),
     );
-    let structures: Vec<String> =
-        options.structures.iter().map(|s| format!("\"{}\"", structure_file(&structure_name(s)))).collect();
-    let patient = format!(
-        "# The registration set-up of this organ: `augsim register --patient DIR`, `augsim serve\n\
-         # --patient DIR`, `augsim.Registration(patient=DIR)`. Paths are relative to this file.\n\
-         # method: \"learned\", \"fem\" or \"hybrid\" (the learned model from rest, then the FEM), the one\n\
-         # that registered the validation's pushes the best.\n\
-         # input_units, input_frame: the unit and frame of the files it was prepared from, in which\n\
-         # points whose files name none are read and results given back{}.\n\
-         # structures: surfaces that move with the organ (mm, the organ's frame).\n\
-         method = \"learned\"\nmodel = \"model\"\nscenario = \"dataset.toml\"\nfem = \"static.toml\"\ntargets = \"targets.csv\"\nunits = \"m\"\n\
-         input_units = \"{}\"\n{}structures = [{}]\n",
-        input_frame.map_or(" (no input named a frame)".into(), |_| format!(" (the set-up works in {SET_UP_FRAME})")),
-        input_unit(options)?.symbol(),
-        input_frame.map_or(String::new(), |f| format!("input_frame = \"{f}\"\n")),
-        structures.join(", ")
-    );
+    let patient = Patient {
+        method: PatientMethod::Learned,
+        model: "model".into(),
+        scenario: "dataset.toml".into(),
+        fem: "static.toml".into(),
+        targets: "targets.csv".into(),
+        units: LengthUnit::Metre,
+        input_units: Some(input_unit(options)?),
+        input_frame,
+        structures: options.structures.iter().map(|s| structure_file(&structure_name(s)).into()).collect(),
+    };
     write_atomic_bytes(&dir.join("dataset.toml"), dataset.as_bytes())?;
     write_atomic_bytes(&dir.join("static.toml"), fem.as_bytes())?;
-    write_atomic_bytes(&dir.join(PATIENT_FILE), patient.as_bytes())?;
+    patient.write(dir)?;
     let mut lines = vec![format!(
         "scenarios: dataset.toml (grid {nx} × {ny} × {nz}, tool radius {:.0} mm), static.toml, {PATIENT_FILE}",
         mm(radius)

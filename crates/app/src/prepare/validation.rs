@@ -15,7 +15,7 @@ use mesh::{Camera, Mesh, Near, Point, TriSurface};
 
 use super::{across_sight, hold_distance, longest_side, swing_warning, tool_radius, PrepareOptions, SURFACE_FILE};
 use crate::picture::{frame_notes, RegisteredFrame};
-use crate::registration::{PatientMethod, RegistrationSpec, PATIENT_FILE};
+use crate::registration::{Patient, PatientMethod, RegistrationSpec, PATIENT_FILE};
 
 /// Tool pushes of the validation: where along what the camera sees (its spread across the line of
 /// sight, as a fraction) and the force (N).
@@ -651,13 +651,9 @@ fn record_best_method(dir: &Path, methods: &[MethodRun]) -> Result<(String, Pati
         .min_by(|a, b| a.rank(fem).partial_cmp(&b.rank(fem)).unwrap_or(std::cmp::Ordering::Equal))
         .context("no method was validated")?
         .method;
-    let path = dir.join(PATIENT_FILE);
-    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let mut set_up: Vec<&str> = text.lines().filter(|l| !l.starts_with("method = ")).collect();
-    let method = format!("method = \"{}\"", chosen.name());
-    let at = set_up.iter().position(|l| l.starts_with("model = ")).unwrap_or(set_up.len());
-    set_up.insert(at, &method);
-    write_atomic_bytes(&path, (set_up.join("\n") + "\n").as_bytes())?;
+    let mut patient = Patient::read(dir)?;
+    patient.method = chosen;
+    patient.write(dir)?;
     let line = format!(
         "validation: {PATIENT_FILE} registers with the {} (method = \"{}\"), the best on these pushes, from rest \
          and as streams",
