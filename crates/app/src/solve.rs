@@ -41,6 +41,31 @@ pub fn solve_and_write(
     Ok((solved, out))
 }
 
+/// Warnings of a problem's set-up, whatever its solution: faces held by half, doubtful units,
+/// cells the file numbers the other way round.
+fn set_up_warnings(p: &fem::Problem) -> Vec<String> {
+    let mut lines = Vec::new();
+    let half_held = mid_edge_nodes_left_free(p);
+    if half_held > 0 {
+        lines.push(format!(
+            "warning    {half_held} mid-edge node(s) lie between held corners and are free: a selection of \
+             corners only (a linear mesh's group on this quadratic one) holds its faces by half; select their \
+             mid-edge nodes too"
+        ));
+    }
+    lines.extend(doubts(p).into_iter().map(|h| format!("warning    {h}")));
+    if let Some(&first) = p.mesh.odd_cells.first() {
+        lines.push(format!(
+            "warning    {} of the file's {} cells are numbered the other way round from the others (the first: \
+             cell {}); turned positive, as every cell is, they fold over no neighbour: the mesher's slip",
+            p.mesh.odd_cells.len(),
+            p.mesh.cells.len(),
+            p.mesh.file_cell(first)
+        ));
+    }
+    lines
+}
+
 /// What makes a problem's units doubtful: a mesh the size of a room, a modulus far below soft
 /// tissues'.
 fn doubts(problem: &fem::Problem) -> Vec<String> {
@@ -180,24 +205,7 @@ impl Solved {
                     .into(),
             );
         }
-        let half_held = mid_edge_nodes_left_free(p);
-        if half_held > 0 {
-            lines.push(format!(
-                "warning    {half_held} mid-edge node(s) lie between held corners and are free: a selection of \
-                 corners only (a linear mesh's group on this quadratic one) holds its faces by half; select their \
-                 mid-edge nodes too"
-            ));
-        }
-        lines.extend(doubts(p).into_iter().map(|h| format!("warning    {h}")));
-        if let Some(&first) = p.mesh.odd_cells.first() {
-            lines.push(format!(
-                "warning    {} of the file's {} cells are numbered the other way round from the others (the first: \
-                 cell {}); turned positive, as every cell is, they fold over no neighbour: the mesher's slip",
-                p.mesh.odd_cells.len(),
-                p.mesh.cells.len(),
-                p.mesh.file_cell(first)
-            ));
-        }
+        lines.extend(set_up_warnings(p));
         let (inverted, smallest) = post::inverted_cells(geo, p.material.law, &sol.u)?;
         if inverted > 0 {
             lines.push(format!(

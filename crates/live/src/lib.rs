@@ -541,7 +541,7 @@ fn read_messages(shared: &Shared) {
             Ok(Incoming::Cloud(points, timestamp)) => {
                 frame += 1;
                 let cloud = to_metres(points);
-                let stamp = Cloud { frame, timestamp: stamped(timestamp) };
+                let stamp = Cloud { frame, timestamp: stamped(timestamp), skipped: 0 };
                 shared.waiting.lock().unwrap_or_else(|e| e.into_inner()).cloud = Some((stamp, cloud));
                 shared.arrived.notify_one();
             }
@@ -689,6 +689,8 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
     let mut identification: Option<Box<dyn Identification>> = None;
     // The steps the filter has made: its clock, kept on the stream's step numbers.
     let mut taken = 0;
+    // The last cloud taken up.
+    let mut taken_up = 0;
     loop {
         let work = {
             let mut waiting = shared.waiting.lock().unwrap_or_else(|e| e.into_inner());
@@ -712,7 +714,9 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
             }
         };
         match work {
-            Work::Cloud(frame, cloud, reset) => {
+            Work::Cloud(mut frame, cloud, reset) => {
+                frame.skipped = frame.frame.saturating_sub(taken_up + 1);
+                taken_up = frame.frame;
                 let registration = match &mut registration {
                     Some(r) => r,
                     None => match factory() {
@@ -764,6 +768,9 @@ fn stamped(timestamp: u64) -> Option<u64> {
 struct Cloud {
     frame: u64,
     timestamp: Option<u64>,
+    /// The clouds received since the last one registered that a newer one replaced (the server
+    /// falling behind the stream), counted when this one is taken up.
+    skipped: u64,
 }
 
 /// What the registration thread does next.
@@ -854,6 +861,7 @@ fn answer(
     // that fails ends the connection, not the record).
     let status = serde_json::json!({
         "frame": cloud.frame,
+        "skipped": cloud.skipped,
         "ms": mesh::stats::ms(start.elapsed()),
         "unit": given.unit.symbol(),
         "surface_residual": given.length_out(result.surface_residual),

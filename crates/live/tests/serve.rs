@@ -330,6 +330,32 @@ fn each_client_s_stream_is_recorded_as_it_goes() {
     assert_eq!(read("client-002.jsonl").len(), 2, "the second client's record: its header and its cloud");
 }
 
+/// Clouds sent faster than they are registered: the newest wins, and each status counts the
+/// clouds a newer one replaced since the last answer (`skipped`), so that every cloud sent is
+/// either answered or counted.
+#[test]
+fn clouds_a_newer_one_replaced_are_counted() {
+    let outputs = Outputs::parse("status").unwrap();
+    let server =
+        Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), outputs, ..ServeOptions::default() });
+    let (cloud, _) = pressed_cloud(300.0);
+    let mut client = connect(server.port);
+    const SENT: u64 = 6;
+    for _ in 0..SENT {
+        client.send_cloud(cloud.clone()).unwrap();
+    }
+    let (mut answered, mut skipped, mut last) = (0, 0, 0);
+    while last < SENT {
+        let s = status(client.receive().unwrap());
+        (answered, skipped, last) =
+            (answered + 1, skipped + s["skipped"].as_u64().unwrap(), s["frame"].as_u64().unwrap());
+    }
+    assert_eq!(answered + skipped, SENT, "{answered} answered, {skipped} skipped");
+    assert!(skipped > 0, "six clouds at once, each registration taking milliseconds: some are replaced");
+    drop(client);
+    server.stop();
+}
+
 /// A STRING `reset` has the next cloud start from rest, as the client's first did: the same cloud
 /// then registers as it did first, where a warm frame went on from the last one.
 #[test]
