@@ -315,8 +315,9 @@ mod tests {
         assert!(!beam.iter().any(|l| l.starts_with("warning")), "{beam:?}");
     }
 
-    /// A quadratic mesh held at the corners of a face only (a linear mesh's group) is warned
-    /// about; held at the whole face, not.
+    /// A quadratic mesh held at the corners of a face only (landmarks near the corners: a linear
+    /// mesh's points) is warned about; held at the whole face, or by a list of the corners (which
+    /// gains the mid-edge nodes between them), not.
     #[test]
     fn a_quadratic_face_held_at_its_corners_only_is_warned_about() {
         let dir = tempfile::tempdir().unwrap();
@@ -325,19 +326,23 @@ mod tests {
         let quadratic = linear.quadratic().unwrap();
         let face: Vec<usize> = (0..quadratic.num_nodes()).filter(|&n| quadratic.nodes[n][0] < 1e-9).collect();
         mesh::io::write_mesh(dir.path().join("beam.vtu"), &quadratic, &[]).unwrap();
-        let lines = |held: &[usize]| {
+        let lines = |held: &str| {
             let text = format!(
                 "kind = \"static\"\nname = \"t10\"\n[mesh.file]\npath = \"beam.vtu\"\n[material]\nlaw = \"linear\"\n\
-                 young = 5000.0\npoisson = 0.3\n[[fixed]]\nselect = {{ list = {held:?} }}\n[[force]]\n\
+                 young = 5000.0\npoisson = 0.3\n[[fixed]]\nselect = {held}\n[[force]]\n\
                  select = {{ box = {{ min = [0.099, -1.0, -1.0], max = [1.0, 1.0, 1.0] }} }}\ntotal = [0.0, 0.0, -0.01]\n"
             );
             solved_lines(dir.path(), &text)
         };
-        let half = lines(&corners);
+        let points: Vec<mesh::Point> = corners.iter().map(|&n| linear.nodes[n]).collect();
+        let half = lines(&format!("{{ near = {{ points = {points:?}, distance = 0.001 }} }}"));
         let warning = half.iter().find(|l| l.contains("mid-edge node(s) lie between held corners")).expect("warned");
         // The face x = 0 of one cube: 4 corners, 5 edges between them (4 sides and a diagonal).
         assert!(warning.starts_with("warning    5 mid-edge node(s)"), "{warning}");
-        assert!(!lines(&face).iter().any(|l| l.contains("mid-edge")), "held at the whole face");
+        for held in [&face, &corners] {
+            let listed = lines(&format!("{{ list = {held:?} }}"));
+            assert!(!listed.iter().any(|l| l.contains("mid-edge")), "held at the whole face: {listed:?}");
+        }
     }
 
     #[test]

@@ -126,8 +126,9 @@ impl Deformer for FemDeformer {
 /// that the matches the springs pull on are already good, and the springs take their full stiffness
 /// at once), or a learned model's match-and-membrane loop (predicting from the surface the shape
 /// fit found). A warm-started frame (a stream) starts near the cloud already: the second deformer
-/// alone registers it; or ([`HybridDeformer::on_streams`]) the first alone registers a frame from
-/// rest, and the second a warm-started frame after the first's iterations from its last posterior.
+/// alone registers it, or the second after the first's iterations from its last posterior
+/// ([`HybridDeformer::first_on_warm_frames`]); [`HybridDeformer::on_streams`] leaves a frame from
+/// rest to the first alone.
 ///
 /// σ: the expected distance of the second's estimate to the truth under the first's posterior:
 /// with the first's error of standard deviation σ₁ and the second's estimate Δ away from the
@@ -183,6 +184,13 @@ impl HybridDeformer {
         first_iterations: usize,
     ) -> HybridDeformer {
         HybridDeformer::with_parts(first, then, None, first_iterations)
+    }
+
+    /// On a warm-started frame, `iterations` of the first deformer (from its last posterior) before
+    /// the second takes over from its estimate (default: none, the second alone).
+    pub fn first_on_warm_frames(mut self, iterations: usize) -> HybridDeformer {
+        self.warm_first = iterations;
+        self
     }
 
     fn with_parts(
@@ -451,7 +459,8 @@ impl NetworkDeformer {
     /// The surface estimate: the displacement `s` of the input nodes and of the other matched
     /// nodes minimising, per coordinate, Σ_matches (Σ_j a_j s_j − shift)² + λ Σ_edges (s_i −
     /// s_j)² + Σ ε_i |s_i − s₀_i|², where a_j are a match's interpolation weights, λ the membrane
-    /// weight, s₀ the current estimate and ε_i `ANCHOR_WEIGHT` (`HOLD_WEIGHT` at a held unseen node); by Jacobi-preconditioned conjugate gradients from s₀. Returns
+    /// weight, s₀ the current estimate and ε_i `ANCHOR_WEIGHT` (`HOLD_WEIGHT` at a held unseen
+    /// node); by Jacobi-preconditioned conjugate gradients from s₀. Returns
     /// the input nodes' part. Fitting the matches themselves, not each node's mean match offset,
     /// keeps the depth of a push: a mean over the triangles around a node flattens a dent.
     pub fn surface_estimate(&self, observations: &Observations, previous: &[f64]) -> Vec<[f64; 3]> {
