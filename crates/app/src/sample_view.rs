@@ -2,7 +2,7 @@
 //! sample's target) and a model's prediction at the mesh nodes and at the dataset's internal markers, and the
 //! 3D viewer scene that shows them ([`plot::viewer`]).
 //!
-//! Also the scene of a mesh file's displacement fields ([`mesh_file_scene`]).
+//! Also the scene of a mesh file's displacement fields, and `augsim view`, which writes either ([`view`]).
 //!
 //! Both fields come from the grid the same way ([`GridToMesh`] at the nodes, trilinear interpolation at the
 //! markers), so their difference is the network's error alone, not that of the grid encoding.
@@ -284,7 +284,7 @@ pub fn view(args: &ViewArgs) -> anyhow::Result<Vec<String>> {
 /// The viewer's scene of sample `index` (default: the first held out from the model) of the
 /// dataset in `dataset_dir` on the organ ([`organ_mesh`] of `mesh` or `scenario`), the model of
 /// `model_path` predicting it; with the lines that describe it.
-pub fn dataset_sample_scene(
+fn dataset_sample_scene(
     model_path: &std::path::Path,
     dataset_dir: &std::path::Path,
     index: Option<u64>,
@@ -321,7 +321,7 @@ pub fn dataset_sample_scene(
 /// The scene of a mesh file: its boundary at rest and moved by each 3-component point field (m),
 /// coloured by the error when it has `reference` and `prediction` fields (as `eval` writes), else
 /// by the first one's magnitude (mm); with the names of those fields.
-pub fn mesh_file_scene(path: &std::path::Path) -> anyhow::Result<(Scene, Vec<String>)> {
+fn mesh_file_scene(path: &std::path::Path) -> anyhow::Result<(Scene, Vec<String>)> {
     use anyhow::Context;
     use mesh::io::{Field, FieldLocation};
     let (organ, fields) =
