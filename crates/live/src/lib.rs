@@ -541,7 +541,7 @@ fn read_messages(shared: &Shared) {
             Ok(Incoming::Cloud(points, timestamp)) => {
                 frame += 1;
                 let cloud = to_metres(points);
-                let stamp = Cloud { frame, timestamp: stamped(timestamp), skipped: 0 };
+                let stamp = Cloud { frame, timestamp: stamped(timestamp) };
                 shared.waiting.lock().unwrap_or_else(|e| e.into_inner()).cloud = Some((stamp, cloud));
                 shared.arrived.notify_one();
             }
@@ -714,8 +714,10 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
             }
         };
         match work {
-            Work::Cloud(mut frame, cloud, reset) => {
-                frame.skipped = frame.frame.saturating_sub(taken_up + 1);
+            Work::Cloud(frame, cloud, reset) => {
+                // The clouds received since the last one taken up that this one replaced (the
+                // server falling behind the stream).
+                let skipped = frame.frame.saturating_sub(taken_up + 1);
                 taken_up = frame.frame;
                 let registration = match &mut registration {
                     Some(r) => r,
@@ -732,7 +734,7 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
                 if reset {
                     registration.reset();
                 }
-                if let Err(e) = answer(shared, registration, frame, &cloud) {
+                if let Err(e) = answer(shared, registration, (frame, skipped), &cloud) {
                     shared.report(&serde_json::json!({ "frame": frame.frame, "error": e }), frame.timestamp);
                 }
             }
@@ -768,9 +770,6 @@ fn stamped(timestamp: u64) -> Option<u64> {
 struct Cloud {
     frame: u64,
     timestamp: Option<u64>,
-    /// The clouds received since the last one registered that a newer one replaced (the server
-    /// falling behind the stream), counted when this one is taken up.
-    skipped: u64,
 }
 
 /// What the registration thread does next.
@@ -841,11 +840,12 @@ fn status_line(mut status: serde_json::Value) -> String {
     status.to_string()
 }
 
-/// Registers one cloud, `points`, and sends the chosen answers, stamped as the cloud.
+/// Registers one cloud, `points` (`skipped`: the clouds it replaced), and sends the chosen
+/// answers, stamped as the cloud.
 fn answer(
     shared: &Shared,
     registration: &mut Registration,
-    cloud: Cloud,
+    (cloud, skipped): (Cloud, u64),
     points: &[Point],
 ) -> std::result::Result<(), String> {
     let options = &shared.options;
@@ -861,7 +861,7 @@ fn answer(
     // that fails ends the connection, not the record).
     let status = serde_json::json!({
         "frame": cloud.frame,
-        "skipped": cloud.skipped,
+        "skipped": skipped,
         "ms": mesh::stats::ms(start.elapsed()),
         "unit": given.unit.symbol(),
         "surface_residual": given.length_out(result.surface_residual),

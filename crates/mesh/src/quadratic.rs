@@ -72,17 +72,6 @@ impl Mesh {
                 cell
             })
             .collect();
-        let n0 = self.nodes.len();
-        let regions = self
-            .regions
-            .iter()
-            .map(|(name, set)| {
-                let mut member = vec![false; n0];
-                set.iter().for_each(|&k| member[k] = true);
-                let mids = ends.iter().enumerate().filter(|(_, [a, b])| member[*a] && member[*b]).map(|(m, _)| n0 + m);
-                (name.clone(), set.iter().copied().chain(mids).collect())
-            })
-            .collect();
         let node_normals = self.node_normals.as_ref().map(|normals| {
             let mid = |[a, b]: [usize; 2]| -> Point {
                 if normals[a] == [0.0; 3] || normals[b] == [0.0; 3] {
@@ -92,10 +81,10 @@ impl Mesh {
             };
             normals.iter().copied().chain(ends.iter().map(|&e| mid(e))).collect()
         });
-        let mesh = Mesh {
+        let mut mesh = Mesh {
             nodes,
             cells: Cells::Tet10(cells),
-            regions,
+            regions: Default::default(),
             cell_fraction: self.cell_fraction.clone(),
             node_normals,
             file_nodes: self.file_nodes.as_ref().map(|numbers| {
@@ -105,6 +94,8 @@ impl Mesh {
             file_cells: self.file_cells.clone(),
             odd_cells: self.odd_cells.clone(),
         };
+        mesh.regions =
+            self.regions.iter().map(|(name, set)| (name.clone(), mesh.with_mid_edge_nodes(set.clone()))).collect();
         mesh.validate()?;
         Ok(mesh)
     }

@@ -395,8 +395,8 @@ impl Deformer for ShapeDeformer {
                 // wander and widen without bound (a random walk, z' = z + w: on a still half view σ
                 // grew from 4.9 to 9.4 mm over 100 frames and the TRE from 4.3 to 6.4 mm).
                 let w2 = self.options.widening.powi(2);
+                let widened = posterior * (1.0 - w2) + DMatrix::identity(k, k) * w2;
                 let a = (1.0 - w2).sqrt();
-                let widened = posterior * (a * a) + DMatrix::identity(k, k) * w2;
                 let mean = DVector::from_iterator(k, (0..k).map(|j| a * self.z.get(j).copied().unwrap_or(0.0)));
                 let precision = widened.try_inverse().unwrap_or_else(|| DMatrix::identity(k, k));
                 Prior { mean, precision }
