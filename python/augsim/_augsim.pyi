@@ -13,6 +13,7 @@ class AugsimError(RuntimeError): ...
 class Solution:
     points: npt.NDArray[np.float64]
     displacement: npt.NDArray[np.float64]
+    reaction_force: npt.NDArray[np.float64]
     iterations: int
     load_steps: int
     factorizations: int

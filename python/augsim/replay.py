@@ -94,7 +94,9 @@ def replay(files, client, units="m", rate=None, out=None, unit="mm", timeout=60.
         status = json.loads(status_message.string)
         targets = None
         if "error" not in status:
-            message = client.wait_for_message("targets", timeout=timeout)
+            # A result that is not plausible comes under names that say so.
+            device = "targets" if status.get("plausible", True) else "targets_implausible"
+            message = client.wait_for_message(device, timeout=timeout)
             targets = None if message is None else np.asarray(message.positions, dtype=float)
         trip = (time.perf_counter() - began) * 1e3
         if targets is not None and out:
@@ -108,7 +110,8 @@ def replay(files, client, units="m", rate=None, out=None, unit="mm", timeout=60.
             report(f"frame {k:<4} {os.path.basename(path)}: refused: {status['error']}")
         else:
             server = f", server {status['ms']:.1f} ms" if "ms" in status else ""
-            report(f"frame {k:<4} {os.path.basename(path)}: {len(cloud)} points, round trip {trip:.1f} ms{server}")
+            flagged = "" if status.get("plausible", True) else "; not plausible: " + "; ".join(status["warnings"])
+            report(f"frame {k:<4} {os.path.basename(path)}: {len(cloud)} points, round trip {trip:.1f} ms{server}{flagged}")
         left = period - (time.perf_counter() - began)
         if left > 0:
             time.sleep(left)

@@ -38,6 +38,13 @@ def test_solve_beam_matches_the_command_line(tmp_path):
     # Fixed on its bottom face up to x = 1 m, pulled down at x = 4 m: the tip sinks.
     fixed = (s.points[:, 0] <= 1.0) & (s.points[:, 2] < 0.01)
     assert fixed.sum() == 6 * 6 and np.abs(s.displacement[fixed]).max() == 0.0
+    # The held nodes take the pull: their reaction forces balance it, as the command line says.
+    assert s.reaction_force.shape == s.points.shape and np.abs(s.reaction_force[~fixed]).max() == 0.0
+    reaction = next(l for l in out.splitlines() if l.startswith("reaction"))
+    held, loads = reaction.split("held nodes (")[1].split(")")[0], reaction.split("the loads: (")[1].split(")")[0]
+    held, loads = np.array(held.split(", "), float), np.array(loads.split(", "), float)
+    assert s.reaction_force.sum(axis=0) == pytest.approx(held, abs=1e-6 * np.abs(loads).max())
+    assert held == pytest.approx(-loads, abs=1e-3 * np.abs(loads).max())
     tip = s.points[:, 0] > 4.0 - 1e-9
     assert (s.displacement[tip, 2] < -0.45).all()
     # Converged: a relative residual under rtol (1e-6), or a last increment under utol at one under

@@ -275,7 +275,8 @@ impl RunWriter {
     /// Writes organ.pvd (for a sequence), targets.csv (of the last frame of `registration`, with
     /// its targets' labels), the last frame for 3D Slicer (targets.mrk.json, organ_deformed.vtk,
     /// its registered surface, NAME_deformed.vtk for each of its structures, and
-    /// displacement.nrrd, see [`write_warp`]) and summary.json, all in the results' frame,
+    /// displacement.nrrd, see [`write_warp`]; their names ending in [`register::IMPLAUSIBLE`] when the
+    /// last frame is not plausible) and summary.json, all in the results' frame,
     /// which they name when known (the clouds' frame given, else `working`: the frame the
     /// registration worked in, once the organ or a file named one), and the last frame's
     /// pictures, registration.png and registration.html, in the organ's frame (`last`: its
@@ -303,16 +304,18 @@ impl RunWriter {
             labels,
             (self.unit, frame),
         )?;
-        let mut for_slicer = vec!["targets.mrk.json".to_string()];
+        // A result that is not plausible says so in the names 3D Slicer gives what it loads.
+        let verdict = last.registration.verdict_suffix();
+        let mut for_slicer = vec![format!("targets{verdict}.mrk.json")];
         let names = registration.target_names();
         write_targets_for_slicer(&self.dir.join(&for_slicer[0]), &registered, sigma, &names, frame)?;
         let mut surfaces = vec![(
-            "organ_deformed.vtk".to_string(),
+            format!("organ_deformed{verdict}.vtk"),
             register::organ_surface(registration.organ(), &last.registration.u, last.rigid.as_ref()),
         )];
         for structure in registration.structures() {
             let surface = structure.deformed(&last.registration.u, last.rigid.as_ref());
-            surfaces.push((format!("{}_deformed.vtk", structure.name()), surface));
+            surfaces.push((format!("{}_deformed{verdict}.vtk", structure.name()), surface));
         }
         for (name, mut surface) in surfaces {
             surface.vertices = self.converted(&surface.vertices);
@@ -322,15 +325,16 @@ impl RunWriter {
         let mut notes = Vec::new();
         match WarpField::of_registration(registration.organ(), &last.registration.u, last.rigid.as_ref(), WARP_STEPS) {
             Ok(field) => {
-                write_warp(&self.dir.join("displacement.nrrd"), &field, self.change, frame)?;
-                for_slicer.push("displacement.nrrd".into());
+                let name = format!("displacement{verdict}.nrrd");
+                write_warp(&self.dir.join(&name), &field, self.change, frame)?;
                 if field.inverted > 0 {
                     notes.push(format!(
-                        "displacement.nrrd: {} cell(s) of the registered organ inverted; where they fold over \
+                        "{name}: {} cell(s) of the registered organ inverted; where they fold over \
                          their neighbours, the field takes one of the rest positions folded there",
                         field.inverted
                     ));
                 }
+                for_slicer.push(name);
             }
             Err(e) => notes.push(format!("no displacement.nrrd: {e}")),
         }
@@ -372,10 +376,11 @@ pub fn register_files(
     let frames = read_frames(cloud)?;
     let truths = truth.map(|p| input.read_truths(p, frames.len(), registration.target_labels())).transpose()?;
     setup_lines(&registration, &spec.frame_line(&registration)).iter().for_each(|l| say(l));
-    let truth_warning = truths
-        .as_ref()
-        .and_then(|t| t.first())
-        .and_then(|truth| register::plausibility::truth_mix_up(registration.organ(), registration.targets(), truth));
+    let truth_warning = match truths.as_ref().and_then(|t| t.first()) {
+        Some(truth) => register::plausibility::check_truth(registration.organ(), registration.targets(), truth)
+            .context("the targets' truth (--truth)")?,
+        None => None,
+    };
     truth_warning.iter().for_each(|w| say(&format!("warning    {w}")));
     let sequence = frames.len() > 1;
     let mut writer = RunWriter::new(out, sequence, spec.given_units, (organ_frame, spec.given_frame))?;
@@ -410,9 +415,10 @@ pub fn register_files(
     if outcomes.last().is_some_and(|o| !o.registration.plausible()) {
         anyhow::bail!(
             "the registration{} is not plausible (the warnings above; summary.json: \"plausible\": false): its \
-             files in {} are kept to look at, not to navigate by",
+             files in {} are kept to look at, not to navigate by (those for 3D Slicer named *{}.*)",
             if sequence { " of the last frame" } else { "" },
-            out.display()
+            out.display(),
+            register::IMPLAUSIBLE
         );
     }
     Ok(())
@@ -714,6 +720,7 @@ mod tests {
                 warnings: Vec::new(),
                 distorted: false,
                 other_frame: false,
+                small_view: false,
                 out_of_time: false,
                 points: 100,
                 inliers: 100,

@@ -17,6 +17,9 @@ pub struct Solved {
     pub solver: StaticSolver,
     /// The solution.
     pub solution: Solution,
+    /// The forces the held nodes and the springs take at the solution (N, 3 per node:
+    /// [`StaticSolver::reaction_forces`]).
+    pub reaction: Vec<f64>,
 }
 
 /// Loads the static scenario `path` (a file or a built-in name), builds its problem and solves it.
@@ -91,11 +94,13 @@ fn solve(
         ..scenario.solver.clone()
     };
     let solution = solver.solve(&options).with_context(|| format!("static solve{hint}"))?;
-    Ok(Solved { scenario, solver, solution })
+    let reaction = solver.reaction_forces(&solution.u)?;
+    Ok(Solved { scenario, solver, solution, reaction })
 }
 
 impl Solved {
-    /// The fields written with the mesh: point `displacement` (3 per node), cell `green_strain`
+    /// The fields written with the mesh: point `displacement` (3 per node) and `reaction_force`
+    /// (N, 3 per node: [`Solved::reaction`]), cell `green_strain`
     /// (`small_strain` under the linear law; 6 per cell) and cell `von_mises` (1 per cell); where
     /// the mesh has them, its file's numbers (`file_node`, `file_cell`) and an immersed grid's cell
     /// fractions (`volume_fraction`).
@@ -103,6 +108,7 @@ impl Solved {
         let (geometry, material, u) = (self.solver.geometry(), &self.solver.problem().material, &self.solution.u);
         let mut fields = vec![
             Field::point("displacement", 3, u.clone()),
+            Field::point("reaction_force", 3, self.reaction.clone()),
             Field::cell(post::strain_name(material.law), 6, post::strain(geometry, material, u)?),
             Field::cell("von_mises", 1, post::von_mises(geometry, material, u)?),
         ];
@@ -172,6 +178,7 @@ impl Solved {
                 sol.residuals.last().copied().unwrap_or(0.0)
             ),
             format!("max |u|    {:.4e} m", post::max_displacement(&sol.u)),
+            self.reaction_line(),
             format!(
                 "time       {:.1} ms (assembly {:.1}, factorisation {:.1}, solve {:.1})",
                 ms(t.total),
@@ -232,6 +239,26 @@ impl Solved {
             }
         }
         Ok(lines)
+    }
+
+    /// The supports' forces in total, held nodes and springs apart, beside the loads' total they
+    /// balance (the field `reaction_force` gives them node by node).
+    fn reaction_line(&self) -> String {
+        let p = self.solver.problem();
+        let total = |nodes: &mut dyn Iterator<Item = usize>, f: &[f64]| {
+            nodes.fold([0.0; 3], |s, n| [s[0] + f[3 * n], s[1] + f[3 * n + 1], s[2] + f[3 * n + 2]])
+        };
+        let newtons = |f: [f64; 3]| format!("({:.4e}, {:.4e}, {:.4e}) N", f[0], f[1], f[2]);
+        let held = total(&mut p.dirichlet.keys().copied(), &self.reaction);
+        let sprung = &mut (0..p.mesh.num_nodes()).filter(|n| p.springs[*n] != 0.0 && !p.dirichlet.contains_key(n));
+        let springs = total(sprung, &self.reaction);
+        let loads = total(&mut (0..p.mesh.num_nodes()), &p.f_ext);
+        format!(
+            "reaction   held nodes {}, springs {} (field reaction_force); the loads: {}",
+            newtons(held),
+            newtons(springs),
+            newtons(loads)
+        )
     }
 }
 
@@ -361,7 +388,13 @@ mod tests {
         let mesh = &solved.solver.problem().mesh;
         let fields = solved.fields().unwrap();
         let names: Vec<&str> = fields.iter().map(|f| f.name.as_str()).collect();
-        assert_eq!(names, ["displacement", "green_strain", "von_mises"]);
+        assert_eq!(names, ["displacement", "reaction_force", "green_strain", "von_mises"]);
+        // The clamp takes the loads (the beam has no springs): their totals cancel.
+        let p = solved.solver.problem();
+        let load: Vec<f64> = (0..3).map(|d| p.f_ext.iter().skip(d).step_by(3).sum()).collect();
+        let held: Vec<f64> = (0..3).map(|d| p.dirichlet.keys().map(|&n| solved.reaction[3 * n + d]).sum()).collect();
+        let scale = mesh::norm([load[0], load[1], load[2]]);
+        assert!(scale > 0.0 && (0..3).all(|d| (held[d] + load[d]).abs() < 1e-3 * scale), "{held:?} vs {load:?}");
         assert_eq!(solved.solution.u.len(), 3 * mesh.num_nodes());
         assert!(fem::post::max_displacement(&solved.solution.u) > 0.0);
         let dir = tempfile::tempdir().unwrap();
@@ -371,7 +404,9 @@ mod tests {
         let lines = solved.lines().unwrap();
         assert!(lines[0].starts_with("scenario   beam"), "{lines:?}");
         assert!(lines[1].starts_with(&format!("mesh       {} nodes", mesh.num_nodes())), "{lines:?}");
-        assert!(lines.iter().any(|l| l.starts_with("max |u|    ")) && lines.len() == 7, "{lines:?}");
+        assert!(lines.iter().any(|l| l.starts_with("max |u|    ")) && lines.len() == 8, "{lines:?}");
+        let reaction = lines.iter().find(|l| l.starts_with("reaction   held nodes (")).expect("a reaction line");
+        assert!(reaction.contains("springs (0.0000e0, 0.0000e0, 0.0000e0) N"), "{reaction}");
     }
 
     /// A cube of Saint-Venant-Kirchhoff (ν 0.49: F-bar) held at its base and pushed down at its

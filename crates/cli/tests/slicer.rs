@@ -123,7 +123,8 @@ fn slicer_files_and_millimetres_register_as_metres_do() {
     assert!((examples_tre - tre).abs() < 0.05, "TRE {tre} against {examples_tre} mm");
 
     // The cloud in the other frame (x and y negated): registered, written to look at, and the
-    // run fails, so that no script takes its files for a registration.
+    // run fails, so that no script takes its files for a registration; the files for 3D Slicer
+    // say so in their names, which Slicer gives the nodes it loads.
     let mirrored: Vec<[f64; 3]> = read_points_csv(&metres[0]).unwrap().iter().map(|p| [-p[0], -p[1], p[2]]).collect();
     write_points_csv(&d.join("mirrored.csv"), &mirrored).unwrap();
     let out = d.join("mirrored");
@@ -131,7 +132,11 @@ fn slicer_files_and_millimetres_register_as_metres_do() {
     let (ok, text) = augsim_in(d, &args);
     assert!(!ok && text.contains("with x and y negated the cloud lies on the organ"), "{text}");
     assert!(text.contains("error: the registration is not plausible") && text.contains("kept to look at"), "{text}");
-    assert!(out.join("summary.json").is_file() && out.join("targets.mrk.json").is_file());
+    assert!(out.join("summary.json").is_file() && out.join("targets_implausible.mrk.json").is_file());
+    assert!(text.contains("for 3D Slicer: targets_implausible.mrk.json, organ_deformed_implausible.vtk"), "{text}");
+    let slicer_files = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap());
+    let named = |f: &String| f.contains("_implausible.") || !f.ends_with(".mrk.json") && !f.ends_with("deformed.vtk");
+    assert!(slicer_files.collect::<Vec<_>>().iter().all(named));
 }
 
 /// A tumour given as 3D Slicer exports a segment (an STL in LPS and mm) comes back moved with

@@ -35,6 +35,8 @@ const JOB: &str = "peer";
 pub struct PeerSolution {
     /// Nodal displacement (m, 3 per node), in augsim's node order.
     pub u: Vec<f64>,
+    /// Reaction forces (N, 3 per node: CalculiX's RF, the force a node's constraint exerts on it).
+    pub reaction: Vec<f64>,
     /// Wall time of the `ccx` run (s), reading the deck and writing the results included.
     pub seconds: f64,
 }
@@ -132,14 +134,25 @@ pub fn input_deck(problem: &Problem) -> Result<String> {
     }
     deck.push_str("*END STEP\n");
     deck.push_str(&step);
-    deck.push_str("1.0, 1.0, 1e-6, 1.0\n*NODE PRINT, NSET=NALL\nU\n*END STEP\n");
+    deck.push_str("1.0, 1.0, 1e-6, 1.0\n*NODE PRINT, NSET=NALL\nU, RF\n*END STEP\n");
     Ok(deck)
 }
 
 /// The displacements of the last increment of a CalculiX `.dat` file (`*NODE PRINT` of `U` on
 /// every node), for `num_nodes` nodes.
 pub fn read_displacements(dat: &str, num_nodes: usize) -> Result<Vec<f64>> {
-    let start = dat.rfind(" displacements (vx,vy,vz)").context("no displacement block in the CalculiX results")?;
+    read_nodal_block(dat, " displacements (vx,vy,vz)", "displacement", num_nodes)
+}
+
+/// The reaction forces of the last increment of a CalculiX `.dat` file (`*NODE PRINT` of `RF` on
+/// every node: zero where nothing holds a node), for `num_nodes` nodes.
+pub fn read_reaction_forces(dat: &str, num_nodes: usize) -> Result<Vec<f64>> {
+    read_nodal_block(dat, " forces (fx,fy,fz)", "force", num_nodes)
+}
+
+/// The last block of a `.dat` file headed by `heading` (the `what` block), three values a node.
+fn read_nodal_block(dat: &str, heading: &str, what: &str, num_nodes: usize) -> Result<Vec<f64>> {
+    let start = dat.rfind(heading).with_context(|| format!("no {what} block in the CalculiX results"))?;
     let mut u = vec![f64::NAN; 3 * num_nodes];
     let mut seen = 0;
     for (no, line) in dat[start..].lines().enumerate().skip(1) {
@@ -150,11 +163,7 @@ pub fn read_displacements(dat: &str, num_nodes: usize) -> Result<Vec<f64>> {
             }
             continue;
         }
-        ensure!(
-            fields.len() == 4,
-            "line {} of the displacement block: expected a node and 3 values, got '{line}'",
-            no + 1
-        );
+        ensure!(fields.len() == 4, "line {} of the {what} block: expected a node and 3 values, got '{line}'", no + 1);
         let node: usize = fields[0].parse().with_context(|| format!("node number '{}'", fields[0]))?;
         ensure!((1..=num_nodes).contains(&node), "node {node} out of 1..={num_nodes}");
         for d in 0..3 {
@@ -162,7 +171,7 @@ pub fn read_displacements(dat: &str, num_nodes: usize) -> Result<Vec<f64>> {
         }
         seen += 1;
     }
-    ensure!(seen == num_nodes, "the displacement block has {seen} nodes, the problem {num_nodes}");
+    ensure!(seen == num_nodes, "the {what} block has {seen} nodes, the problem {num_nodes}");
     Ok(u)
 }
 
@@ -205,7 +214,8 @@ pub fn solve(problem: &Problem, dir: &Path) -> Result<PeerSolution> {
     let dat_path = dir.join(format!("{JOB}.dat"));
     let dat = std::fs::read_to_string(&dat_path).with_context(|| format!("reading {}", dat_path.display()))?;
     let u = read_displacements(&dat, problem.mesh.nodes.len())?;
-    Ok(PeerSolution { u, seconds })
+    let reaction = read_reaction_forces(&dat, problem.mesh.nodes.len())?;
+    Ok(PeerSolution { u, reaction, seconds })
 }
 
 #[cfg(test)]
@@ -287,6 +297,9 @@ mod tests {
         let dat = block(1.0).replace("1.000000E-03", "9.0E+00") + &block(2.0);
         assert_eq!(read_displacements(&dat, 2).unwrap(), vec![1e-3, -2e-3, 0.0, 0.0, 0.0, 4.5e-2]);
         assert!(read_displacements(" stresses\n", 2).unwrap_err().to_string().contains("no displacement block"));
+        let forces = dat.replace(" displacements (vx,vy,vz)", " forces (fx,fy,fz)");
+        assert_eq!(read_reaction_forces(&forces, 2).unwrap(), vec![1e-3, -2e-3, 0.0, 0.0, 0.0, 4.5e-2]);
+        assert!(read_reaction_forces(&dat, 2).unwrap_err().to_string().contains("no force block"));
         assert!(read_displacements(&block(1.0), 3).unwrap_err().to_string().contains("has 2 nodes, the problem 3"));
         let bad = block(1.0).replace("-2.000000E-03 ", "");
         assert!(read_displacements(&bad, 2).unwrap_err().to_string().contains("expected a node and 3 values"));

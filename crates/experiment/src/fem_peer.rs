@@ -45,12 +45,27 @@ pub struct Agreement {
     pub rms_difference: f64,
     /// augsim: the solve (s), the solver's setup before it not counted.
     pub seconds: f64,
+    /// The largest reaction force of a held node, augsim's (N).
+    #[serde(default)]
+    pub max_reaction: f64,
+    /// The largest difference between the two solvers' reaction forces of a held node (N).
+    #[serde(default)]
+    pub max_reaction_difference: f64,
 }
 
 impl Agreement {
     /// The largest difference relative to the largest displacement.
     pub fn relative(&self) -> f64 {
         self.max_difference / self.max_displacement
+    }
+
+    /// The largest difference of the reaction forces relative to the largest (0 when nothing holds
+    /// a node).
+    pub fn reaction_relative(&self) -> f64 {
+        match self.max_reaction {
+            0.0 => 0.0,
+            largest => self.max_reaction_difference / largest,
+        }
     }
 }
 
@@ -119,17 +134,28 @@ fn compare(description: &str, problem: Problem, peer: &calculix::PeerSolution) -
     let start = Instant::now();
     // A tight tolerance on the residual alone (no stop on a small step).
     let options = SolverOptions { rtol: 1e-9, utol: 0.0, ..Default::default() };
-    let augsim = solver.solve(&options).map_err(|e| e.to_string()).map(|solution| {
-        let point = |d: &[f64]| [d[0], d[1], d[2]];
-        let pairs = solution.u.chunks_exact(3).zip(peer.u.chunks_exact(3));
-        let distances: Vec<f64> = pairs.map(|(a, b)| mesh::distance(point(a), point(b))).collect();
-        Agreement {
-            max_displacement: solution.u.chunks_exact(3).map(|d| mesh::norm(point(d))).fold(0.0, f64::max),
-            max_difference: distances.iter().copied().fold(0.0, f64::max),
-            rms_difference: (distances.iter().map(|d| d * d).sum::<f64>() / distances.len() as f64).sqrt(),
-            seconds: start.elapsed().as_secs_f64(),
+    let solved = solver.solve(&options).map_err(|e| e.to_string());
+    let seconds = start.elapsed().as_secs_f64();
+    let augsim = match solved {
+        Ok(solution) => {
+            let reaction = solver.reaction_forces(&solution.u)?;
+            let point = |v: &[f64], n: usize| [v[3 * n], v[3 * n + 1], v[3 * n + 2]];
+            let nodes = 0..solver.problem().mesh.num_nodes();
+            let distances: Vec<f64> =
+                nodes.clone().map(|n| mesh::distance(point(&solution.u, n), point(&peer.u, n))).collect();
+            let held: Vec<usize> = solver.problem().dirichlet.keys().copied().collect();
+            let reaction_gaps = held.iter().map(|&n| mesh::distance(point(&reaction, n), point(&peer.reaction, n)));
+            Ok(Agreement {
+                max_displacement: nodes.map(|n| mesh::norm(point(&solution.u, n))).fold(0.0, f64::max),
+                max_difference: distances.iter().copied().fold(0.0, f64::max),
+                rms_difference: (distances.iter().map(|d| d * d).sum::<f64>() / distances.len() as f64).sqrt(),
+                seconds,
+                max_reaction: held.iter().map(|&n| mesh::norm(point(&reaction, n))).fold(0.0, f64::max),
+                max_reaction_difference: reaction_gaps.fold(0.0, f64::max),
+            })
         }
-    });
+        Err(e) => Err(e),
+    };
     Ok(PeerCase { problem: description.to_string(), dofs, calculix_seconds: peer.seconds, calculix_inverted, augsim })
 }
 
@@ -143,12 +169,14 @@ fn row(c: &PeerCase, reference_ms: f64) -> Row {
     };
     let ours = match &c.augsim {
         Ok(a) => format!(
-            "largest difference {:.2e} m at most {:.1} mm displacement ({:.1e} of it; RMS {:.1e} m); {} dofs, \
-             augsim {}, {calculix}",
+            "largest difference {:.2e} m at most {:.1} mm displacement ({:.1e} of it; RMS {:.1e} m); reaction forces: \
+             {:.1e} of the largest, {:.3e} N; {} dofs, augsim {}, {calculix}",
             a.max_difference,
             mm(a.max_displacement),
             a.relative(),
             a.rms_difference,
+            a.reaction_relative(),
+            a.max_reaction,
             c.dofs,
             reference::seconds(a.seconds, 2, reference_ms)
         ),
@@ -170,6 +198,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
     }
     let solved: Vec<&Agreement> = cases.iter().filter_map(|c| c.augsim.as_ref().ok()).collect();
     let worst = solved.iter().map(|a| a.relative()).fold(0.0, f64::max);
+    let worst_reaction = solved.iter().map(|a| a.reaction_relative()).fold(0.0, f64::max);
     let largest = solved.iter().map(|a| a.max_displacement).fold(0.0, f64::max);
     // A problem augsim finds no solution of is explained when CalculiX's turns an element inside out.
     let unexplained = cases.iter().filter(|c| c.augsim.is_err() && c.calculix_inverted.is_none()).count();
@@ -181,7 +210,8 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
             mm(largest)
         ),
         format!(
-            "largest difference {worst:.1e} of the largest displacement on {}{}",
+            "largest difference {worst:.1e} of the largest displacement, {worst_reaction:.1e} of the largest reaction \
+             force, on {}{}",
             solved.len(),
             match refused {
                 0 => String::new(),
@@ -189,7 +219,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
             }
         ),
         "the same solution",
-        worst <= SAME_SOLUTION && unexplained == 0,
+        worst <= SAME_SOLUTION && worst_reaction <= SAME_SOLUTION && unexplained == 0,
     );
     let rows = cases.iter().map(|c| row(c, reference_ms)).collect();
     let notes = vec![
@@ -206,7 +236,8 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
             .to_string(),
         format!(
             "augsim: the standard formulation, residual tolerance 1e-9 (no stop on a small step); the same solution means a largest nodal \
-             difference at most {SAME_SOLUTION:.0e} of the largest displacement (CalculiX prints 7 significant digits)."
+             difference at most {SAME_SOLUTION:.0e} of the largest displacement, and of the held nodes' reaction forces \
+             (CalculiX's RF) at most that of the largest (CalculiX prints 7 significant digits)."
         ),
         "Times: one run each on this machine; CalculiX's include reading its deck and writing its results, and it \
          steps the load in increments, then iterates again under the full load, where augsim solves in one Newton \
@@ -250,12 +281,14 @@ mod tests {
             let deck = calculix::input_deck(&problem).unwrap();
             assert!(deck == stored("inp"), "{name}: the deck is not the one CalculiX solved (see the data's README)");
             let u = calculix::read_displacements(&stored("dat"), problem.mesh.nodes.len()).unwrap();
-            let case = compare(name, problem, &calculix::PeerSolution { u, seconds: 0.0 }).unwrap();
+            let reaction = calculix::read_reaction_forces(&stored("dat"), problem.mesh.nodes.len()).unwrap();
+            let case = compare(name, problem, &calculix::PeerSolution { u, reaction, seconds: 0.0 }).unwrap();
             assert_eq!(case.calculix_inverted, None);
             let case = case.augsim.unwrap();
             assert!(case.max_displacement > 0.08, "{name}: {case:?}");
             // CalculiX prints 7 significant digits.
             assert!(case.max_difference < 1e-6 * case.max_displacement, "{name}: {case:?}");
+            assert!(case.max_reaction > 0.0 && case.reaction_relative() < 1e-5, "{name}: {case:?}");
         }
     }
 }

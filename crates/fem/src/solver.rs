@@ -521,6 +521,25 @@ impl StaticSolver {
         Ok(f)
     }
 
+    /// The forces the supports exert on the body at `u` (N, 3 per node), as CalculiX's RF: a node
+    /// spring's −k u, and at a held dof (fixed or prescribed) the force that holds it there,
+    /// f_int − f_ext (f_int the elastic force). At an equilibrium they balance the loads:
+    /// Σ R = −Σ f_ext.
+    pub fn reaction_forces(&mut self, u: &[f64]) -> Result<Vec<f64>, FemError> {
+        // `internal_force` holds the springs' k u: what is left is the elastic force.
+        let f_int = self.internal_force(u)?;
+        let p = &self.problem;
+        Ok((0..u.len())
+            .map(|dof| {
+                let spring = p.springs[dof / 3] * u[dof];
+                match self.free_index(dof) {
+                    None => f_int[dof] - spring - p.f_ext[dof],
+                    Some(_) => -spring,
+                }
+            })
+            .collect())
+    }
+
     /// The free-dof tangent at u as a dense matrix (for tests and small problems).
     pub fn tangent_dense(&mut self, u: &[f64]) -> Result<Vec<Vec<f64>>, FemError> {
         let mut f = vec![0.0; u.len()];

@@ -354,6 +354,48 @@ fn gravity_and_springs_balance_exactly() {
     assert!((spring_force + weight).abs() < 1e-6 * weight, "springs carry {spring_force}, weight {weight}");
 }
 
+/// The reaction forces (clamp and springs) of a cantilever under a tip traction and its weight
+/// balance the loads; under a hyperelastic law their moments balance too, about any point of
+/// the deformed body (the clamp pushes up and turns back the tip's moment).
+#[test]
+fn reaction_forces_balance_the_loads_and_their_moments() {
+    let (l, h) = (4.0, 1.0);
+    for kind in KINDS {
+        for law in LAWS {
+            let m = mesh::box_mesh(kind, [0.0; 3], [l, h, h], [6, 2, 2]).unwrap();
+            let clamp = mesh::select::nodes_in_box(&m.nodes, [-1e-9; 3], [1e-9, h + 1e-9, h + 1e-9]);
+            let tip = mesh::select::nodes_in_box(&m.nodes, [l - 1e-9, -1e-9, -1e-9], [l + 1e-9, h + 1e-9, h + 1e-9]);
+            let middle = mesh::select::nodes_in_box(&m.nodes, [1.9, -1e-9, -1e-9], [2.1, h + 1e-9, 1e-9]);
+            let mut problem = Problem::new(m.clone(), Material { density: 0.2, ..Material::new(law, 3000.0, 0.3) });
+            problem.fix(&clamp);
+            problem.add_springs(&middle, 40.0);
+            problem.add_traction(&tip, [0.0, 3.0, -4.0]);
+            problem.add_gravity([0.0, 0.0, -9.81]).unwrap();
+            let load: Vec<f64> = (0..3).map(|d| problem.f_ext.iter().skip(d).step_by(3).sum()).collect();
+            let mut solver = StaticSolver::new(problem).unwrap();
+            let sol = solver.solve(&SolverOptions { load_steps: 2, rtol: 1e-10, ..Default::default() }).unwrap();
+            let r = solver.reaction_forces(&sol.u).unwrap();
+            let held = |n: usize| clamp.contains(&n) || middle.contains(&n);
+            assert!((0..m.num_nodes()).filter(|&n| !held(n)).all(|n| r[3 * n..3 * n + 3] == [0.0; 3]));
+            let total: Vec<f64> = (0..3).map(|d| r.iter().skip(d).step_by(3).sum()).collect();
+            let scale = mesh::norm([load[0], load[1], load[2]]);
+            for d in 0..3 {
+                assert!((total[d] + load[d]).abs() < 1e-6 * scale, "{kind:?} {law:?}: {total:?} vs loads {load:?}");
+            }
+            assert!(total[2] > 0.0, "the supports push up: {total:?}");
+            if matches!(law, Law::Svk | Law::NeoHookean) {
+                let f_ext = &solver.problem().f_ext;
+                let mut moment = Vector3::zeros();
+                for (n, p) in m.nodes.iter().enumerate() {
+                    let x = Vector3::new(p[0] + sol.u[3 * n], p[1] + sol.u[3 * n + 1], p[2] + sol.u[3 * n + 2]);
+                    moment += x.cross(&Vector3::from_fn(|d, _| r[3 * n + d] + f_ext[3 * n + d]));
+                }
+                assert!(moment.norm() < 1e-6 * scale * l, "{kind:?} {law:?}: moment {moment:?}");
+            }
+        }
+    }
+}
+
 #[test]
 fn point_springs_balance_gravity_and_pull_their_point() {
     // The block hanging on springs at points of its cells (each point between two nodes that

@@ -13,8 +13,13 @@ use crate::polydata::PolyData;
 pub enum Answer {
     /// POINT `targets`: the registered targets, in the stream's unit.
     Targets(Vec<[f32; 3]>),
+    /// POINT `targets_implausible`: the registered targets of a result that is not plausible.
+    ImplausibleTargets(Vec<[f32; 3]>),
     /// POLYDATA `organ`: the registered organ surface.
     Organ(PolyData),
+    /// POLYDATA `organ_implausible`: the registered organ surface of a result that is not
+    /// plausible.
+    ImplausibleOrgan(PolyData),
     /// A POLYDATA of another name: a structure moved with the organ, by its name.
     Structure(String, PolyData),
     /// TRANSFORM `rigid`: the organ-to-cloud transform, row-major 4 × 4.
@@ -30,7 +35,7 @@ pub enum Answer {
 /// The answers to one cloud that [`Client::until_status`] keeps.
 #[derive(Debug)]
 pub struct Frame {
-    /// The registered targets, when the server sends them.
+    /// The registered targets, when the server sends them (plausible or not: the status says).
     pub targets: Option<Vec<[f32; 3]>>,
     /// The status line.
     pub status: serde_json::Value,
@@ -104,11 +109,18 @@ impl Client {
         let mut body = vec![0; parsed.body_size as usize];
         self.stream.read_exact(&mut body).map_err(|e| format!("truncated answer: {e}"))?;
         let answer = match parsed.type_name.as_str() {
-            "POINT" => Answer::Targets(
-                decode_body::<PointMessage>(&parsed, &body)?.points.iter().map(|p| p.position).collect(),
-            ),
+            "POINT" => {
+                let points = decode_body::<PointMessage>(&parsed, &body)?.points.iter().map(|p| p.position).collect();
+                match parsed.device_name.strip_suffix(register::IMPLAUSIBLE) {
+                    Some(_) => Answer::ImplausibleTargets(points),
+                    None => Answer::Targets(points),
+                }
+            }
             "POLYDATA" => match parsed.device_name.as_str() {
                 "organ" => Answer::Organ(decode_body(&parsed, &body)?),
+                name if name.strip_suffix(register::IMPLAUSIBLE) == Some("organ") => {
+                    Answer::ImplausibleOrgan(decode_body(&parsed, &body)?)
+                }
                 name => Answer::Structure(name.to_string(), decode_body(&parsed, &body)?),
             },
             "TRANSFORM" => Answer::Rigid(decode_body::<TransformMessage>(&parsed, &body)?.matrix),
@@ -132,7 +144,7 @@ impl Client {
         loop {
             match self.receive()? {
                 Some(Answer::Status(status)) => return Ok(Frame { targets, status }),
-                Some(Answer::Targets(t)) => targets = Some(t),
+                Some(Answer::Targets(t) | Answer::ImplausibleTargets(t)) => targets = Some(t),
                 Some(_) => {}
                 None => return Err("the server closed the connection".into()),
             }

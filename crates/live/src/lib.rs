@@ -878,24 +878,31 @@ fn answer(
         let targets: Vec<Point> = targets.iter().map(|p| given.point_out(*p)).collect();
         shared.record(serde_json::json!({ "status": status, "timestamp": cloud.timestamp.map(timestamp_seconds), "targets": targets }));
     }
+    // A result that is not plausible comes under names that say so (`targets_implausible`,
+    // `organ_implausible`), without its structures (whose names fill a device name's 20 bytes): a
+    // viewer's `targets`, `organ` and structures keep the last plausible answer.
+    let verdict = result.verdict_suffix();
     if options.outputs.targets {
+        let device = format!("targets{verdict}");
         let points = targets
             .iter()
             .zip(registration.target_names())
-            .map(|(p, name)| PointElement::new(name, "targets", to_wire(p)))
+            .map(|(p, name)| PointElement::new(name, &device, to_wire(p)))
             .collect();
-        shared.send(&PointMessage { points }, "targets", cloud.timestamp)?;
+        shared.send(&PointMessage { points }, &device, cloud.timestamp)?;
     }
     let polydata = |surface: mesh::TriSurface| PolyData {
         points: surface.vertices.iter().map(to_wire).collect(),
         triangles: surface.triangles.iter().map(|t| t.map(|i| i as u32)).collect(),
     };
     if options.outputs.organ {
-        shared.send(&polydata(tracked.organ_surface(registration.organ())), "organ", cloud.timestamp)?;
+        let organ = polydata(tracked.organ_surface(registration.organ()));
+        shared.send(&organ, &format!("organ{verdict}"), cloud.timestamp)?;
     }
-    if options.outputs.structures {
+    if options.outputs.structures && result.plausible() {
         for structure in registration.structures() {
-            shared.send(&polydata(structure.deformed(&result.u, rigid.as_ref())), structure.name(), cloud.timestamp)?;
+            let moved = polydata(structure.deformed(&result.u, rigid.as_ref()));
+            shared.send(&moved, &format!("{}{verdict}", structure.name()), cloud.timestamp)?;
         }
     }
     if let (true, Some(r)) = (options.outputs.transform, rigid) {

@@ -59,6 +59,15 @@ fn cube_registration_with(rigid: Option<register::RigidOptions>) -> Result<Regis
     Registration::new(organ, Box::new(deformer), "FEM", vec![centre], Vec::new(), options).map_err(|e| e.to_string())
 }
 
+/// The cube's registration with a structure: a ball about its centre, named `tumour`.
+fn with_tumour() -> Result<Registration, String> {
+    let mut registration = cube_registration()?;
+    let mut ball = mesh::generate::icosphere(0.005, 1);
+    ball.transform([-SIDE / 2.0; 3], 1.0);
+    registration.add_structure("tumour", ball).map_err(|e| e.to_string())?;
+    Ok(registration)
+}
+
 fn status(message: Option<Answer>) -> serde_json::Value {
     match message {
         Some(Answer::Status(s)) => s,
@@ -410,18 +419,35 @@ fn clouds_in_another_frame_are_answered_in_theirs() {
     server.stop();
 }
 
+/// A cloud in the other frame (x and y negated), which the registration flags, is answered under
+/// names that say so (`targets_implausible`, `organ_implausible`, no structure), so that a
+/// viewer's `targets` keeps the last plausible answer; the next cloud, in the right frame, comes
+/// back under the plain names.
+#[test]
+fn an_implausible_result_is_answered_under_names_that_say_so() {
+    let options = ServeOptions { coordinates: LengthUnit::Millimetre.into(), ..ServeOptions::default() };
+    let server = Server::start_with(options, with_tumour);
+    let (cloud, _) = pressed_cloud(300.0);
+    let mut client = connect(server.port);
+    client.send_cloud(cloud.iter().map(|p| [-p[0], -p[1], p[2]]).collect()).unwrap();
+    assert!(matches!(client.receive().unwrap(), Some(Answer::ImplausibleTargets(_))));
+    assert!(matches!(client.receive().unwrap(), Some(Answer::ImplausibleOrgan(_))));
+    let flagged = status(client.receive().unwrap());
+    assert_eq!(flagged["plausible"], false, "{flagged}");
+    client.send_cloud(cloud).unwrap();
+    assert!(matches!(client.receive().unwrap(), Some(Answer::Targets(_))));
+    assert!(matches!(client.receive().unwrap(), Some(Answer::Organ(_))));
+    assert!(matches!(client.receive().unwrap(), Some(Answer::Structure(name, _)) if name == "tumour"));
+    assert_eq!(status(client.receive().unwrap())["plausible"], true);
+    drop(client);
+    server.stop();
+}
+
 /// A structure of the registration (a ball about the cube's centre, named `tumour`) comes after
 /// the organ as a POLYDATA of its name, moved with the organ: its centre where the registered
 /// target is.
 #[test]
 fn a_structure_is_answered_as_a_polydata_of_its_name() {
-    fn with_tumour() -> Result<Registration, String> {
-        let mut registration = cube_registration()?;
-        let mut ball = mesh::generate::icosphere(0.005, 1);
-        ball.transform([-SIDE / 2.0; 3], 1.0);
-        registration.add_structure("tumour", ball).map_err(|e| e.to_string())?;
-        Ok(registration)
-    }
     let server = Server::start_with(
         ServeOptions { coordinates: LengthUnit::Millimetre.into(), ..ServeOptions::default() },
         with_tumour,

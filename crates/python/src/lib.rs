@@ -167,6 +167,10 @@ struct Solution {
     /// Displacement of each node, float64 [n, 3] (m).
     #[pyo3(get)]
     displacement: Py<PyArray2<f64>>,
+    /// The force each node's supports (its hold, its spring) exert on it, float64 [n, 3] (N); zero
+    /// on free nodes without a spring.
+    #[pyo3(get)]
+    reaction_force: Py<PyArray2<f64>>,
     /// Solver iterations over all load steps.
     #[pyo3(get)]
     iterations: usize,
@@ -209,13 +213,14 @@ impl Solution {
 /// `AugsimError` when the scenario cannot be read or the solve fails to converge.
 #[pyfunction]
 fn solve(py: Python<'_>, scenario: PathBuf) -> PyResult<Solution> {
-    let (nodes, sol) = compute(py, || {
+    let (nodes, sol, reaction) = compute(py, || {
         let solved = app::solve::solve_scenario(&scenario, |_, _| {})?;
-        Ok((solved.solver.problem().mesh.nodes.clone(), solved.solution))
+        Ok((solved.solver.problem().mesh.nodes.clone(), solved.solution, solved.reaction))
     })?;
     Ok(Solution {
         points: point_array(py, &nodes).unbind(),
         displacement: nodal(py, &sol.u).unbind(),
+        reaction_force: nodal(py, &reaction).unbind(),
         iterations: sol.iterations,
         load_steps: sol.load_steps,
         factorizations: sol.factorizations,
@@ -433,7 +438,8 @@ impl Registration {
     /// `iterations`, `warnings`, `ms`). With `out`,
     /// a directory, also writes there what `augsim register` writes: organ.vtu (m), targets.csv (in
     /// `units`), summary.json, registration.png and .html (pictures), and for 3D Slicer
-    /// targets.mrk.json, organ_deformed.vtk and displacement.nrrd (mm), all
+    /// targets.mrk.json, organ_deformed.vtk and displacement.nrrd (mm; named
+    /// targets_implausible.mrk.json and so on for a registration that is not plausible), all
     /// in the clouds' frame (`frame`, or its default), which they name when known; a directory
     /// that holds an earlier run's results (its summary.json) is refused, as `augsim register`
     /// refuses it. Raises ValueError for an array of another shape,

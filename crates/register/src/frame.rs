@@ -242,6 +242,10 @@ pub struct FrameResult {
     /// The cloud lies on the organ at rest in the other frame (RAS for LPS: x and y negated; one
     /// of the warnings says so): no start for a stream's next frame either.
     pub other_frame: bool,
+    /// The cloud spans under a tenth of the organ ([`crate::plausibility::SMALL_VIEW`]; one of the
+    /// warnings says so), as a cloud in centimetres read as millimetres does: no start for a
+    /// stream's next frame either.
+    pub small_view: bool,
     /// The frame stopped at [`RegistrationOptions::time_budget_ms`] before its iterations ran out
     /// (one of the warnings says so).
     pub out_of_time: bool,
@@ -254,11 +258,27 @@ pub struct FrameResult {
 }
 
 impl FrameResult {
+    /// [`IMPLAUSIBLE`] for a result that is not plausible, nothing for one that is: the end of
+    /// the names its answers are given (files, a stream's messages), so that a viewer showing them
+    /// by name shows the verdict too.
+    pub fn verdict_suffix(&self) -> &'static str {
+        if self.plausible() {
+            ""
+        } else {
+            IMPLAUSIBLE
+        }
+    }
+
     /// Whether the result passed the plausibility checks: no warning but the time budget's.
     pub fn plausible(&self) -> bool {
         self.warnings.len() == usize::from(self.out_of_time)
     }
 }
+
+/// The end of the names given to the answers of a registration that is not plausible
+/// (`targets_implausible.mrk.json`, a stream's `targets_implausible`): 3D Slicer names the
+/// nodes it loads or receives after them.
+pub const IMPLAUSIBLE: &str = "_implausible";
 
 /// A deformer's refusal `e` of a cloud spanning `extent` of the organ: a tenth of it or less asks
 /// what so small a cloud may be, as the frame's verdict would have.
@@ -383,7 +403,7 @@ pub(crate) fn register_frame_begun(
     let distances: Vec<f64> = cloud.par_iter().map(|&c| bvh.distance(c)).collect();
     let surface_residual = distances.iter().sum::<f64>() / cloud.len() as f64;
     let far_share = crate::plausibility::far_share(&distances);
-    let crate::plausibility::Verdict { mut warnings, distorted, other_frame } =
+    let crate::plausibility::Verdict { mut warnings, distorted, other_frame, small_view } =
         crate::plausibility::verdict(organ, &u, far_share, (cloud, extent), options.rigid.is_some())?;
     if let (true, Some(budget)) = (out_of_time, options.time_budget_ms) {
         warnings.push(format!(
@@ -400,6 +420,7 @@ pub(crate) fn register_frame_begun(
         warnings,
         distorted,
         other_frame,
+        small_view,
         out_of_time,
         points: cloud.len(),
         inliers,

@@ -61,8 +61,8 @@ pub mod warp;
 pub use checks::check_cloud;
 pub use deformers::{FemDeformer, HybridDeformer, NetworkDeformer};
 pub use frame::{
-    observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions, TwoWay, MAX_POINTS,
-    WARM_START_ITERATION,
+    observe, register_frame, Deformer, FrameResult, Observations, PointMatch, RegistrationOptions, TwoWay, IMPLAUSIBLE,
+    MAX_POINTS, WARM_START_ITERATION,
 };
 pub use organ::{Organ, Stencil};
 pub use registration::{organ_surface, target_errors, within_two_std, FrameOutcome, Registration, Summary, Tracked};

@@ -152,21 +152,45 @@ pub fn frame_mix_up(organ: &Organ, cloud: &[Point]) -> Result<Option<String>> {
     }))
 }
 
-/// The warning for the targets' truth, `truth` (in the organ's frame and unit, as read), that
-/// lies more than [`TRUTH_OFF`] of the organ's size from the `targets` at rest on average and at
-/// most a third as far read otherwise: with x and y negated (RAS given for LPS or the reverse),
-/// or 1,000 or 10 times larger or smaller (metres given for millimetres, centimetres). `None`
-/// otherwise (a truth in the cloud's own pose, under a rigid pre-alignment, is far either way and
-/// not flagged).
-pub fn truth_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option<String> {
+/// Checks the targets' truth, `truth` (in the organ's frame and unit, as read): a truth lying on
+/// average over [`TRUTH_ABSURD`] times the organ's size from the `targets` at rest is refused (no
+/// error measured against it could mean anything), with the reading that brings it near when one
+/// does. Otherwise the warning for a truth lying more than [`TRUTH_OFF`] of the organ's size from
+/// them and at most a third as far read otherwise: with x and y negated (RAS given for LPS or the
+/// reverse), or 1,000 or 10 times larger or smaller (metres given for millimetres, centimetres).
+/// `None` otherwise (a truth in the cloud's own pose, under a rigid pre-alignment, is far either
+/// way and not flagged).
+pub fn check_truth(organ: &Organ, targets: &[Point], truth: &[Point]) -> Result<Option<String>> {
+    let mix_up = truth_mix_up(organ, targets, truth);
+    let given = mean_distance(targets, truth, false, 1.0);
+    if given > TRUTH_ABSURD * organ.extent() {
+        return Err(RegisterError::Invalid(match mix_up {
+            Some(why) => format!("refused: {why}"),
+            None => format!(
+                "the truth lies {:.0} mm from the targets at rest on average, over {TRUTH_ABSURD:.0} times the organ's \
+                 size ({:.0} mm): it cannot be their truth (its unit or frame?)",
+                mm(given),
+                mm(organ.extent())
+            ),
+        }));
+    }
+    Ok(mix_up)
+}
+
+/// The mean distance from `targets` to `truth`, read with x and y negated or not, and scaled.
+fn mean_distance(targets: &[Point], truth: &[Point], negate: bool, scale: f64) -> f64 {
+    let d = targets.iter().zip(truth).map(|(t, p)| {
+        let p = if negate { [-p[0], -p[1], p[2]] } else { *p };
+        mesh::norm(mesh::sub(p.map(|x| x * scale), *t))
+    });
+    d.sum::<f64>() / targets.len().max(1) as f64
+}
+
+/// The warning of [`check_truth`] for a truth that lies far nearer the targets read in another
+/// frame or unit.
+fn truth_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option<String> {
     // Each reading: x and y negated or not, a scale, and what it says.
-    let mean_distance = |negate: bool, scale: f64| {
-        let d = targets.iter().zip(truth).map(|(t, p)| {
-            let p = if negate { [-p[0], -p[1], p[2]] } else { *p };
-            mesh::norm(mesh::sub(p.map(|x| x * scale), *t))
-        });
-        d.sum::<f64>() / targets.len().max(1) as f64
-    };
+    let mean_distance = |negate: bool, scale: f64| mean_distance(targets, truth, negate, scale);
     let given = mean_distance(false, 1.0);
     let frame = "is it in RAS where the targets are in LPS, or the reverse? Give its frame (a file that names it, or \
                  --frame)";
@@ -192,6 +216,11 @@ pub fn truth_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option
         )
     })
 }
+
+/// The multiple of the organ's size (its box's diagonal) beyond which a truth is refused
+/// ([`check_truth`]): a tracker's frame may lie a metre or two from the image's, not 26 m (on a
+/// liver) as millimetres read as metres do.
+pub const TRUTH_ABSURD: f64 = 100.0;
 
 /// The share of the organ's size (its box's diagonal) beyond which a truth that lies far nearer
 /// the targets at rest read in another frame or unit is flagged ([`truth_mix_up`]): 15 mm on a
@@ -228,6 +257,9 @@ pub struct Verdict {
     /// The cloud lies on the organ at rest with x and y negated ([`frame_mix_up`]; one of the
     /// warnings says so).
     pub other_frame: bool,
+    /// The cloud spans under [`SMALL_VIEW`] of the organ (one of the warnings says so): a cloud in
+    /// centimetres read as millimetres, or a view too small to tell the deformation.
+    pub small_view: bool,
 }
 
 /// What a registered frame says about itself, given its cloud and that cloud's extent over the
@@ -246,12 +278,13 @@ pub fn verdict(
     let size = organ.extent();
     let motion = u.chunks_exact(3).map(|d| mesh::norm([d[0], d[1], d[2]])).fold(0.0, f64::max);
     let mut out = Vec::new();
+    let small_view = points >= FEW_POINTS && extent < SMALL_VIEW;
     if points < FEW_POINTS {
         out.push(format!(
             "the cloud has {points} distinct point(s), fewer than {FEW_POINTS}: so few leave the organ's \
              deformation undetermined"
         ));
-    } else if extent < SMALL_VIEW {
+    } else if small_view {
         out.push(format!(
             "the cloud spans {:.0} mm, {:.0} % of the organ's {:.0} mm (its box's diagonal): so small a view leaves \
              most of the deformation undetermined; if it is in centimetres, convert it to mm",
@@ -303,7 +336,7 @@ pub fn verdict(
     }
     let other_frame = mix_up.is_some();
     out.extend(mix_up);
-    Ok(Verdict { warnings: out, distorted, other_frame })
+    Ok(Verdict { warnings: out, distorted, other_frame, small_view })
 }
 
 #[cfg(test)]
@@ -334,6 +367,19 @@ mod tests {
         let central = vec![[0.004, 0.003, -0.17]];
         let pushed = vec![[0.004, 0.003, -0.19]];
         assert_eq!(truth_mix_up(&organ, &central, &pushed), None);
+        // Checked: the warnings as they are; millimetres read as metres refused, saying so.
+        assert_eq!(check_truth(&organ, &targets, &other).unwrap(), truth_mix_up(&organ, &targets, &other));
+        let in_mm: Vec<Point> = moved.iter().map(|p| p.map(|x| x * 1e3)).collect();
+        let refused = check_truth(&organ, &targets, &in_mm).unwrap_err().to_string();
+        assert!(
+            refused.contains("refused: the truth lies") && refused.contains("read 1,000 times smaller"),
+            "{refused}"
+        );
+        // 40 m off an organ lying 100 m from the origin: no reading brings it near.
+        let remote = Organ::new(mesh::generate::box_tet([100.0; 3], [100.2; 3], [2, 2, 2]).unwrap(), None).unwrap();
+        let targets = [[100.1; 3]];
+        let refused = check_truth(&remote, &targets, &[[140.1, 100.1, 100.1]]).unwrap_err().to_string();
+        assert!(refused.contains("over 100 times the organ's size (346 mm): it cannot be their truth"), "{refused}");
     }
 
     /// A view of the organ passes; the same points in millimetres, in kilometres or all at one

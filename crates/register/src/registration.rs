@@ -262,8 +262,9 @@ impl Registration {
     /// pose, when rigid pre-alignment is on, is estimated on a cloud and kept for the next ones
     /// while they register plausibly ([`FrameResult::plausible`]: a frame stopped by its time
     /// budget keeps it): a cloud with another warning has the next one estimate it again, and a
-    /// cloud that leaves the organ distorted ([`FrameResult::distorted`]) or lies on it in the
-    /// other frame ([`FrameResult::other_frame`]) has it start from rest.
+    /// cloud that leaves the organ distorted ([`FrameResult::distorted`]), lies on it in the
+    /// other frame ([`FrameResult::other_frame`]) or spans a tenth of it or less
+    /// ([`FrameResult::small_view`]: centimetres read as millimetres) has it start from rest.
     pub fn register(&mut self, cloud: &[Point]) -> Result<Tracked> {
         let began = std::time::Instant::now();
         // The pose, estimated on this cloud or kept; when estimated, whether the cloud fits the
@@ -320,7 +321,8 @@ impl Registration {
         // A cloud only partly fitted is still the best start for the next (a stream tracks a hard
         // push better than a frame from rest); a distorted organ, a cloud in another frame or unit,
         // is not (docs/method.md, 6.6).
-        self.warm = (!registration.distorted && !registration.other_frame).then(|| registration.u.clone());
+        let no_start = registration.distorted || registration.other_frame || registration.small_view;
+        self.warm = (!no_start).then(|| registration.u.clone());
         self.rigid = if registration.plausible() { rigid.clone() } else { None };
         Ok(Tracked { registration, targets, rigid, target_std })
     }
@@ -749,6 +751,19 @@ mod tests {
         let (frames, starts) = scaled_stream(0.5, &[view.clone(), view]);
         assert!(frames.iter().all(|f| f.distorted));
         assert_eq!(starts, [false, false], "the second frame from rest too");
+    }
+
+    /// A cloud in centimetres read as millimetres (a tenth of its size) is no start for the next
+    /// frame, even when it leaves the organ undistorted: the next frame starts from rest.
+    #[test]
+    fn a_cloud_a_tenth_of_its_size_is_no_start_for_the_next_frame() {
+        let view = mesh::boundary_surface(&mesh::box_tet([0.0; 3], [0.05; 3], [3, 3, 3]).unwrap()).vertices;
+        let tenth: Vec<Point> = view.iter().map(|p| p.map(|x| x / 10.0)).collect();
+        let (frames, starts) = scaled_stream(1.0, &[tenth, view.clone(), view]);
+        assert!(frames[0].small_view && !frames[0].distorted, "{:?}", frames[0].warnings);
+        assert!(frames[0].warnings.iter().any(|w| w.contains("if it is in centimetres")));
+        assert!(frames[1].plausible() && frames[1].from_rest && !frames[2].from_rest);
+        assert_eq!(starts, [false, false, true]);
     }
 
     /// A cloud in the other frame (x and y negated) that leaves the organ undistorted is no start
