@@ -311,7 +311,7 @@ impl RunWriter {
         write_targets_for_slicer(&self.dir.join(&for_slicer[0]), &registered, sigma, &names, frame)?;
         let mut surfaces = vec![(
             format!("organ_deformed{verdict}.vtk"),
-            register::organ_surface(registration.organ(), &last.registration.u, last.rigid.as_ref()),
+            registration.deformed_surface(&last.registration.u, last.rigid.as_ref()),
         )];
         for structure in registration.structures() {
             let surface = structure.deformed(&last.registration.u, last.rigid.as_ref());

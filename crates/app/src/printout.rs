@@ -20,11 +20,15 @@ pub fn setup_lines(registration: &Registration, space: &str) -> Vec<String> {
     let mut lines = vec![
         format!("method     {}", registration.method()),
         format!(
-            "organ      {} nodes, {} {} cells; surface of {} triangles; {} targets",
+            "organ      {} nodes, {} {} cells; surface of {} triangles{}; {} targets",
             organ.mesh().num_nodes(),
             organ.mesh().cells.len(),
             organ.mesh().cells.kind_name(),
             organ.surface().triangles.len(),
+            match registration.own_surface() {
+                Some(own) => format!(" (given back as its own, of {} triangles)", own.triangles.len()),
+                None => String::new(),
+            },
             registration.targets().len()
         ),
         format!("space      {space}"),

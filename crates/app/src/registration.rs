@@ -447,6 +447,7 @@ impl RegistrationChoice {
             time_budget_ms: None,
             options: None,
             structures: self.structures.iter().map(StructureFile::given).collect(),
+            surface: None,
         })
     }
 }
@@ -482,6 +483,9 @@ pub struct RegistrationSpec {
     /// Structures inside the organ, given back deformed with it
     /// ([`RegistrationChoice::structures`]; a patient's own).
     pub structures: Vec<StructureFile>,
+    /// The organ's own surface (a patient's `surface.stl`, in mm or m as its size tells), given
+    /// back registered in place of its mesh's boundary ([`Registration::set_surface`]).
+    pub surface: Option<PathBuf>,
 }
 
 /// Where a structure comes from: a surface file or `LABELMAP:LABEL` ([`read_structure`]), with
@@ -593,6 +597,7 @@ impl RegistrationSpec {
             time_budget_ms: None,
             options: None,
             structures: Vec::new(),
+            surface: None,
         }
     }
 
@@ -647,6 +652,10 @@ impl RegistrationSpec {
                 read_structure(&source.path, unit, self.given_frame, registration.frame()).with_context(context)?;
             registration.add_structure(&name, surface).with_context(context)?;
             warnings.into_iter().for_each(|w| registration.warn(w));
+        }
+        if let Some(path) = &self.surface {
+            let surface = crate::prepare::read_organ_surface(path, registration.organ().mesh())?;
+            registration.set_surface(surface).with_context(|| format!("the organ's surface {}", path.display()))?;
         }
         Ok(registration)
     }
@@ -849,6 +858,7 @@ impl RegistrationSpec {
                 .iter()
                 .map(|path| StructureFile { path: dir.join(path), unit: Some(STRUCTURES_UNIT) })
                 .collect(),
+            surface: Some(dir.join(crate::prepare::SURFACE_FILE)).filter(|path| path.is_file()),
         })
     }
 }

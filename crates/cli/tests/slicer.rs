@@ -305,7 +305,7 @@ fn displacement_field(path: &Path) -> impl Fn([f64; 3]) -> [f64; 3] {
 /// targets as `.mrk.json` in LPS, the camera as `.fcsv`; `prepare` at a small size; then
 /// `register --patient` with a cloud saved in RAS and mm. The targets come back as `.mrk.json` in
 /// LPS and mm, where the same registration done all in metres and LPS puts them; the deformed
-/// surface comes back in LPS and mm, on the cloud.
+/// surface, the segmentation's own, comes back in LPS and mm, on the cloud.
 #[test]
 fn a_slicer_users_files_prepare_register_and_come_back_in_their_frame_and_unit() {
     let dir = tempfile::tempdir().unwrap();
@@ -407,6 +407,8 @@ fn a_slicer_users_files_prepare_register_and_come_back_in_their_frame_and_unit()
     let (deformed, frame) = mesh::io::read_surface_with_frame(d.join("slicer/organ_deformed.vtk")).unwrap();
     assert_eq!(frame, Some(Frame::Lps));
     let rest = mesh::io::read_surface(d.join("patient/surface.stl")).unwrap();
+    // The organ given back is the segmentation's own surface, not the coarser mesh's boundary.
+    assert_eq!(deformed.triangles.len(), rest.triangles.len());
     let cloud_lps = in_lps_mm("organ_cloud.csv", "p").points;
     let median_distance = |surface: &mesh::TriSurface| {
         let bvh = mesh::bvh::SurfaceBvh::new(surface).unwrap();

@@ -68,7 +68,7 @@ use mesh::io::{Frame, GivenCoordinates};
 use mesh::length::LengthUnit;
 use mesh::Point;
 use polydata::PolyData;
-use register::{Registration, Tracked};
+use register::Registration;
 
 /// Errors of the server.
 #[derive(Debug, thiserror::Error)]
@@ -854,8 +854,8 @@ fn answer(
     }
     let start = Instant::now();
     let tracked = registration.register(points).map_err(|e| e.to_string())?;
-    let Tracked { registration: result, targets, rigid, target_std } = &tracked;
-    let given = options.coordinates;
+    let (result, given) = (&tracked.registration, options.coordinates);
+    let back = tracked.given_back(given);
     let to_wire = |p: &Point| given.point_out(*p).map(|x| x as f32);
     // The status and the record of the registration itself, before any answer is sent (a send
     // that fails ends the connection, not the record).
@@ -864,7 +864,7 @@ fn answer(
         "skipped": skipped,
         "ms": mesh::stats::ms(start.elapsed()),
         "unit": given.unit.symbol(),
-        "surface_residual": given.length_out(result.surface_residual),
+        "surface_residual": back.surface_residual,
         "plausible": result.plausible(),
         "warnings": result.warnings,
         "inliers": result.inliers,
@@ -872,11 +872,11 @@ fn answer(
         "received": points.len(),
         "iterations": result.iterations,
         "from_rest": result.from_rest,
-        "target_sigma": target_std.as_ref().map(|s| s.iter().map(|&v| given.length_out(v)).collect::<Vec<f64>>()),
+        "target_sigma": back.target_std,
     });
     if shared.record.is_some() {
-        let targets: Vec<Point> = targets.iter().map(|p| given.point_out(*p)).collect();
-        shared.record(serde_json::json!({ "status": status, "timestamp": cloud.timestamp.map(timestamp_seconds), "targets": targets }));
+        let (timestamp, targets) = (cloud.timestamp.map(timestamp_seconds), &back.targets);
+        shared.record(serde_json::json!({ "status": status, "timestamp": timestamp, "targets": targets }));
     }
     // A result that is not plausible comes under names that say so (`targets_implausible`,
     // `organ_implausible`), without its structures (whose names fill a device name's 20 bytes): a
@@ -884,10 +884,11 @@ fn answer(
     let verdict = result.verdict_suffix();
     if options.outputs.targets {
         let device = format!("targets{verdict}");
-        let points = targets
+        let points = back
+            .targets
             .iter()
             .zip(registration.target_names())
-            .map(|(p, name)| PointElement::new(name, &device, to_wire(p)))
+            .map(|(p, name)| PointElement::new(name, &device, p.map(|x| x as f32)))
             .collect();
         shared.send(&PointMessage { points }, &device, cloud.timestamp)?;
     }
@@ -896,18 +897,17 @@ fn answer(
         triangles: surface.triangles.iter().map(|t| t.map(|i| i as u32)).collect(),
     };
     if options.outputs.organ {
-        let organ = polydata(tracked.organ_surface(registration.organ()));
+        let organ = polydata(tracked.organ_surface(registration));
         shared.send(&organ, &format!("organ{verdict}"), cloud.timestamp)?;
     }
     if options.outputs.structures && result.plausible() {
         for structure in registration.structures() {
-            let moved = polydata(structure.deformed(&result.u, rigid.as_ref()));
+            let moved = polydata(structure.deformed(&result.u, tracked.rigid.as_ref()));
             shared.send(&moved, &format!("{}{verdict}", structure.name()), cloud.timestamp)?;
         }
     }
-    if let (true, Some(r)) = (options.outputs.transform, rigid) {
-        let organ_to_cloud = r.organ_to_cloud().homogeneous(LengthUnit::Metre);
-        let matrix = given.transform_out(organ_to_cloud).map(|row| row.map(|x| x as f32));
+    if let (true, Some(organ_to_cloud)) = (options.outputs.transform, back.organ_to_cloud) {
+        let matrix = organ_to_cloud.map(|row| row.map(|x| x as f32));
         shared.send(&TransformMessage { matrix }, "rigid", cloud.timestamp)?;
     }
     if options.outputs.status {

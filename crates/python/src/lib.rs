@@ -30,7 +30,6 @@ use pyo3::create_exception;
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use register::Tracked;
 
 // Named as the package exports it (`augsim.AugsimError`), so that pickle finds it: an error
 // raised in a worker process reaches its parent whole.
@@ -449,7 +448,7 @@ impl Registration {
     #[pyo3(signature = (cloud, *, out=None))]
     fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>, out: Option<PathBuf>) -> PyResult<Registered> {
         let cloud: Vec<Point> = points(cloud, "cloud")?.into_iter().map(|p| self.given.point_in(p)).collect();
-        let (Tracked { registration: result, targets, rigid, target_std }, moved, notes) = compute(py, || {
+        let (tracked, moved, notes) = compute(py, || {
             // A directory that cannot be made, or holds an earlier run's results, fails before the
             // cloud moves the warm start on.
             if let Some(dir) = &out {
@@ -479,22 +478,22 @@ impl Registration {
         for (name, vertices) in moved {
             structures.set_item(name, self.point_array(py, &vertices))?;
         }
-        let rigid = rigid.map(|r| {
-            let rows = self.given.transform_out(r.organ_to_cloud().homogeneous(LengthUnit::Metre));
-            Array2::from_shape_fn((4, 4), |(i, j)| rows[i][j]).into_pyarray(py).unbind()
-        });
+        let back = tracked.given_back(self.given);
+        let result = tracked.registration;
+        let rigid = back
+            .organ_to_cloud
+            .map(|rows| Array2::from_shape_fn((4, 4), |(i, j)| rows[i][j]).into_pyarray(py).unbind());
         Ok(Registered {
-            targets: self.point_array(py, &targets).unbind(),
+            targets: point_array(py, &back.targets).unbind(),
             displacement: self.point_array(py, result.u.as_chunks::<3>().0).unbind(),
-            surface_residual: self.given.length_out(result.surface_residual),
+            surface_residual: back.surface_residual,
             inliers: result.inliers,
             points: result.points,
             iterations: result.iterations,
             from_rest: result.from_rest,
             warnings: result.warnings.clone(),
             rigid,
-            target_sigma: target_std
-                .map(|s| s.iter().map(|&v| self.given.length_out(v)).collect::<Vec<f64>>().into_pyarray(py).unbind()),
+            target_sigma: back.target_std.map(|s| s.into_pyarray(py).unbind()),
             ms: mesh::stats::ms(result.time),
             structures: structures.unbind(),
         })

@@ -65,7 +65,7 @@ pub use frame::{
     MAX_POINTS, WARM_START_ITERATION,
 };
 pub use organ::{Organ, Stencil};
-pub use registration::{organ_surface, target_errors, within_two_std, FrameOutcome, Registration, Summary, Tracked};
+pub use registration::{target_errors, within_two_std, FrameOutcome, GivenBack, Registration, Summary, Tracked};
 pub use rigid::{in_cloud_frame, rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
 pub use shape::{model_shape_space, ShapeDeformer, ShapeOptions, ShapeSpace};
 pub use structure::Structure;

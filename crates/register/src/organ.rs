@@ -174,10 +174,7 @@ impl Organ {
     /// [`Organ::locate`] of points with labels (one each, "" for none; or none at all), which an
     /// error names beside the point's number: "target 2 (`T3`)".
     fn locate_labelled(&self, points: &[Point], labels: &[String], what: &str) -> Result<Vec<Stencil>> {
-        let name = |i: usize| match labels.get(i).filter(|l| !l.is_empty()) {
-            Some(label) => format!("{what} {} (`{label}`)", i + 1),
-            None => format!("{what} {}", i + 1),
-        };
+        let name = |i: usize| point_name(what, i, labels);
         if let Some((i, fault)) = mesh::measured_fault(points) {
             return Err(RegisterError::Invalid(format!("{} {fault}", name(i))));
         }
@@ -230,9 +227,10 @@ impl Organ {
     /// mistake (another unit, the other frame); so is a set of landmarks spread over less than
     /// [`SMALL_TARGET_EXTENT`] of the organ that, read 1,000 times larger, lies on it. Returns
     /// warnings: a set of landmarks so small otherwise.
-    pub fn check_landmarks(&self, landmarks: &[Point]) -> Result<Vec<String>> {
+    pub fn check_landmarks(&self, landmarks: &[Point], labels: &[String]) -> Result<Vec<String>> {
+        let name = |i: usize| point_name("landmark", i, labels);
         if let Some((i, fault)) = mesh::measured_fault(landmarks) {
-            return Err(RegisterError::Invalid(format!("landmark {} {fault}", i + 1)));
+            return Err(RegisterError::Invalid(format!("{} {fault}", name(i))));
         }
         let bvh = &self.rest_bvh;
         let reach = LANDMARK_REACH * self.extent();
@@ -241,9 +239,9 @@ impl Organ {
         let farthest = landmarks.iter().map(|&p| outside(p)).enumerate().max_by(|a, b| a.1.total_cmp(&b.1));
         if let Some((i, distance)) = farthest.filter(|&(_, d)| !(d <= reach)) {
             return Err(RegisterError::Invalid(format!(
-                "landmark {} at {} lies {:.1} mm outside the organ, farther than {:.0} % of its {:.0} mm (its box's \
+                "{} at {} lies {:.1} mm outside the organ, farther than {:.0} % of its {:.0} mm (its box's \
                  diagonal; landmarks are points on its surface, where it is held){}",
-                i + 1,
+                name(i),
                 point_in_mm(landmarks[i]),
                 mm(distance),
                 LANDMARK_REACH * 100.0,
@@ -347,6 +345,15 @@ pub fn displaced(rest: &[Point], stencils: &[Stencil], u: &[f64]) -> Vec<Point> 
         .collect()
 }
 
+/// The name of point `i` of a set of `what` ("target") in messages: its number from 1, and its
+/// label, when it has one, as in "target 2 (`T3`)".
+fn point_name(what: &str, i: usize, labels: &[String]) -> String {
+    match labels.get(i).filter(|l| !l.is_empty()) {
+        Some(label) => format!("{what} {} (`{label}`)", i + 1),
+        None => format!("{what} {}", i + 1),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -393,12 +400,16 @@ mod tests {
     fn landmarks_outside_the_organ_are_refused_with_the_likely_mistake() {
         let (organ, _) = box_organ();
         let on = vec![[0.0, 0.01, 0.005], [0.04, 0.012, 0.005], [0.02, 0.02, 0.004], [0.02, 0.01, 0.005]];
-        assert_eq!(organ.check_landmarks(&on).unwrap(), Vec::<String>::new());
-        let refused = |points: &[Point]| organ.check_landmarks(points).unwrap_err().to_string();
+        assert_eq!(organ.check_landmarks(&on, &[]).unwrap(), Vec::<String>::new());
+        let refused = |points: &[Point]| organ.check_landmarks(points, &[]).unwrap_err().to_string();
         let mut far = on.clone();
         far.push([0.02, 0.01, 0.05]);
         let error = refused(&far);
         assert!(error.starts_with("landmark 5 at (20, 10, 50) mm lies 40.0 mm outside the organ"), "{error}");
+        // Labelled (3D Slicer's markups), by its label too.
+        let labels = ["", "", "", "", "left triangular"].map(String::from);
+        let error = organ.check_landmarks(&far, &labels).unwrap_err().to_string();
+        assert!(error.starts_with("landmark 5 (`left triangular`) at (20, 10, 50) mm lies 40.0 mm"), "{error}");
         let small: Vec<Point> = on.iter().map(|p| p.map(|x| x * 1e-3)).collect();
         assert!(refused(&small).ends_with("were they given in m where mm were expected?"), "{}", refused(&small));
         let negated: Vec<Point> = on.iter().map(|p| [-p[0], -p[1], p[2]]).collect();

@@ -7,7 +7,7 @@
 //! warning), registered there, and
 //! the registered targets are moved back: targets and errors are in the cloud's frame.
 
-use mesh::io::Frame;
+use mesh::io::{Frame, GivenCoordinates};
 use mesh::length::mm;
 use mesh::stats::{max, mean, ms};
 use mesh::{Point, TriSurface};
@@ -82,6 +82,7 @@ pub struct Registration {
     warm: Option<Vec<f64>>,
     rigid: Option<RigidResult>,
     structures: Vec<Structure>,
+    surface: Option<Structure>,
 }
 
 /// Refuses a structure's name that is empty, `taken` by another, or one of [`RESERVED_NAMES`].
@@ -93,6 +94,20 @@ pub fn check_structure_name(name: &str, taken: &[&str]) -> Result<()> {
         )));
     }
     Ok(())
+}
+
+/// A registered cloud's figures in the coordinates its clouds are given in
+/// ([`Tracked::given_back`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct GivenBack {
+    /// The registered targets.
+    pub targets: Vec<Point>,
+    /// The predicted standard deviation of each target's error, for a method that predicts one.
+    pub target_std: Option<Vec<f64>>,
+    /// The mean distance from the cloud to the registered surface.
+    pub surface_residual: f64,
+    /// The rigid pre-alignment, organ to cloud (homogeneous 4 × 4, rows), when there is one.
+    pub organ_to_cloud: Option<[[f64; 4]; 4]>,
 }
 
 /// One cloud registered by a [`Registration`].
@@ -125,15 +140,29 @@ impl Tracked {
         }
     }
 
-    /// The registered organ surface, in the cloud's frame.
-    pub fn organ_surface(&self, organ: &Organ) -> mesh::TriSurface {
-        organ_surface(organ, &self.registration.u, self.rigid.as_ref())
+    /// What a front (a stream's answer, Python's result) gives back of it in the coordinates the
+    /// clouds are `given` in: the targets, their σ, the surface residual and the pose.
+    pub fn given_back(&self, given: GivenCoordinates) -> GivenBack {
+        GivenBack {
+            targets: self.targets.iter().map(|&p| given.point_out(p)).collect(),
+            target_std: self.target_std.as_ref().map(|s| s.iter().map(|&v| given.length_out(v)).collect()),
+            surface_residual: given.length_out(self.registration.surface_residual),
+            organ_to_cloud: self
+                .rigid
+                .as_ref()
+                .map(|r| given.transform_out(r.organ_to_cloud().homogeneous(mesh::length::LengthUnit::Metre))),
+        }
+    }
+
+    /// The registered organ surface, in the cloud's frame ([`Registration::deformed_surface`]).
+    pub fn organ_surface(&self, registration: &Registration) -> mesh::TriSurface {
+        registration.deformed_surface(&self.registration.u, self.rigid.as_ref())
     }
 }
 
 /// The surface of `organ` displaced by `u`, in the cloud's frame (moved by the rigid alignment,
 /// if any).
-pub fn organ_surface(organ: &Organ, u: &[f64], rigid: Option<&RigidResult>) -> mesh::TriSurface {
+fn organ_surface(organ: &Organ, u: &[f64], rigid: Option<&RigidResult>) -> mesh::TriSurface {
     let surface = organ.deformed_surface(u);
     mesh::TriSurface { vertices: in_cloud_frame(surface.vertices, rigid), triangles: surface.triangles }
 }
@@ -175,7 +204,32 @@ impl Registration {
             warm: None,
             rigid: None,
             structures: Vec::new(),
+            surface: None,
         })
+    }
+
+    /// Gives the organ's own surface (a segmentation's, finer than its mesh's boundary: m, the
+    /// organ's frame), which [`Registration::deformed_surface`] then gives back moved with the
+    /// organ in place of its mesh's boundary. Its vertices outside the mesh (a mesh smooths what
+    /// is thinner than its cells) move as the mesh's nearest surface point.
+    pub fn set_surface(&mut self, surface: TriSurface) -> Result<()> {
+        let (surface, _outside) = Structure::new(&self.organ, "organ", surface)?;
+        self.surface = Some(surface);
+        Ok(())
+    }
+
+    /// The organ's own surface at rest, when given ([`Registration::set_surface`]).
+    pub fn own_surface(&self) -> Option<&TriSurface> {
+        self.surface.as_ref().map(Structure::rest)
+    }
+
+    /// The organ's surface displaced by `u`, in the cloud's frame (moved by `rigid`, if any): its
+    /// own ([`Registration::set_surface`]) when given, else its mesh's boundary.
+    pub fn deformed_surface(&self, u: &[f64], rigid: Option<&RigidResult>) -> TriSurface {
+        match &self.surface {
+            Some(surface) => surface.deformed(u, rigid),
+            None => organ_surface(&self.organ, u, rigid),
+        }
     }
 
     /// Adds a structure that moves with the organ (a tumour, vessels: [`Structure::new`]), named

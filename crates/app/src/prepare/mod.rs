@@ -544,14 +544,21 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
     let frame = organ_lines(options, dir, &mut lines).map_err(|e| {
         // A warning said before the error that doubts the organ itself (a unit that makes no
         // organ's size, an organ cut by the image's border) is often its cause; the others are not.
+        // Which label of a labelmap was read may be too (a number that names a segment of
+        // another layer than the one meant).
         let warnings = organ_doubts(&lines);
-        match warnings.is_empty() {
+        let e = match warnings.is_empty() {
             true => e,
             false => e.context(format!(
                 "after the warning{} {}",
                 if warnings.len() > 1 { "s" } else { "" },
                 warnings.join("; ")
             )),
+        };
+        let read = lines.iter().find_map(|l| l.strip_prefix("labelmap: ").filter(|l| l.starts_with("label")));
+        match read.and_then(|l| l.split(':').next()) {
+            Some(label) => e.context(format!("the organ read from the labelmap's {label}")),
+            None => e,
         }
     })?;
     Ok((lines, frame))
@@ -616,7 +623,7 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
         None => String::new(),
     };
     let landmark_warnings = located
-        .check_landmarks(&landmarks)
+        .check_landmarks(&landmarks, &labelled_landmarks.labels)
         .with_context(|| format!("the landmarks of {}{shown}", options.attach.display()))?;
     let distance = hold_distance(options, &organ, &landmarks)?;
     let attached = Near { points: landmarks.clone(), file: None, distance, surface: true }.nodes(&organ)?;
@@ -1046,6 +1053,33 @@ fn regions_picture(
     Ok(scatter_plot(path, &spec, &sets, &[])?)
 }
 
+/// The organ's surface (`surface.stl` of a set-up: `path`) in metres, the unit it is in (mm, or m) told by the size of
+/// the organ's mesh (in m), which it must match within a factor of [`SURFACE_TO_MESH`] (the mesh
+/// may leave out parts thinner than its tetrahedra).
+pub(crate) fn read_organ_surface(path: &Path, organ: &Mesh) -> Result<TriSurface> {
+    let mut surface = mesh::io::read_surface(path)?;
+    let (extent, organ_extent) = (mesh::repair::largest_extent(&surface), longest_side(organ));
+    let off = |u: &LengthUnit| (extent * u.metres() / organ_extent).ln().abs();
+    let unit = LengthUnit::ALL
+        .into_iter()
+        .filter(|u| off(u) < SURFACE_TO_MESH.ln())
+        .min_by(|a, b| off(a).total_cmp(&off(b)))
+        .with_context(|| {
+            format!(
+                "{} (largest extent {extent:.4}, in any length unit) does not match organ.vtu ({} mm): remove {} and \
+                 prepare it again",
+                path.display(),
+                mm(organ_extent),
+                path.parent().unwrap_or(path).display()
+            )
+        })?;
+    surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(*p));
+    Ok(surface)
+}
+
+/// How far the extents of the organ's surface and mesh may differ (as a factor).
+const SURFACE_TO_MESH: f64 = 2.0;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1260,6 +1294,7 @@ mod tests {
         let wrong = options(dir.path(), "liver_labels.seg.nrrd", "liver", true);
         write_points_csv(&wrong.targets, &[[-45.0, 30.0, -140.0]]).unwrap();
         let error = format!("{:#}", organ_step(&wrong, dir.path()).unwrap_err());
+        assert!(error.starts_with("the organ read from the labelmap's label 1 ('liver'): "), "{error}");
         assert!(error.contains("the targets of"), "{error}");
         // A NIfTI whose header names mm, given in metres.
         let mut metres = options(dir.path(), "liver_labels.nii.gz", "5", false);

@@ -8,12 +8,11 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use mesh::io::points::read_points_csv;
 use mesh::io::write_atomic_bytes;
-use mesh::length::{mm, LengthUnit};
-use mesh::repair::largest_extent;
+use mesh::length::mm;
 use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
-use mesh::{Camera, Mesh, Near, Point, TriSurface};
+use mesh::{Camera, Mesh, Near, Point};
 
-use super::{across_sight, hold_distance, longest_side, swing_warning, tool_radius, PrepareOptions, SURFACE_FILE};
+use super::{across_sight, hold_distance, swing_warning, tool_radius, PrepareOptions, SURFACE_FILE};
 use crate::picture::{frame_notes, RegisteredFrame};
 use crate::registration::{Patient, PatientMethod, RegistrationSpec, PATIENT_FILE};
 
@@ -432,34 +431,6 @@ fn method_name(method: PatientMethod) -> &'static str {
     }
 }
 
-/// The organ's surface (`surface.stl`) in metres, the unit it is in (mm, or m) told by the size of
-/// the organ's mesh (in m), which it must match within a factor of [`SURFACE_TO_MESH`] (the mesh
-/// may leave out parts thinner than its tetrahedra).
-fn read_organ_surface(dir: &Path, organ: &Mesh) -> Result<TriSurface> {
-    let path = dir.join(SURFACE_FILE);
-    let mut surface = mesh::io::read_surface(&path)?;
-    let (extent, organ_extent) = (largest_extent(&surface), longest_side(organ));
-    let off = |u: &LengthUnit| (extent * u.metres() / organ_extent).ln().abs();
-    let unit = LengthUnit::ALL
-        .into_iter()
-        .filter(|u| off(u) < SURFACE_TO_MESH.ln())
-        .min_by(|a, b| off(a).total_cmp(&off(b)))
-        .with_context(|| {
-            format!(
-                "{} (largest extent {extent:.4}, in any length unit) does not match organ.vtu ({} mm): remove {} and \
-                 prepare it again",
-                path.display(),
-                mm(organ_extent),
-                dir.display()
-            )
-        })?;
-    surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(*p));
-    Ok(surface)
-}
-
-/// How far the extents of the organ's surface and mesh may differ (as a factor).
-const SURFACE_TO_MESH: f64 = 2.0;
-
 /// The validation's pushes ([`VALIDATION_LOADS`]), at seen nodes of the `coarsest` truth ordered
 /// across the line of sight from `camera`.
 fn validation_pushes(coarsest: &Truth, camera: Point) -> Vec<Push> {
@@ -485,7 +456,7 @@ pub(super) fn validation_step(
     progress: &dyn learn::Progress,
 ) -> Result<Vec<String>> {
     let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
-    let surface = read_organ_surface(dir, &organ)?;
+    let surface = super::read_organ_surface(&dir.join(SURFACE_FILE), &organ)?;
     let camera = super::read_camera(dir)?;
     let landmarks = read_points_csv(&dir.join("attach.csv"))?;
     let targets = read_points_csv(&dir.join("targets.csv"))?;
@@ -674,18 +645,21 @@ mod tests {
         let organ = mesh::box_tet([0.0; 3], [0.1, 0.05, 0.04], [4, 2, 2]).unwrap();
         let surface = mesh::boundary_surface(&organ).compacted();
         write_surface_in_mm(&dir.path().join(SURFACE_FILE), &surface, None).unwrap();
-        let read = read_organ_surface(dir.path(), &organ).unwrap();
+        let read = super::read_organ_surface(&dir.path().join(SURFACE_FILE), &organ).unwrap();
         let off = |s: &TriSurface| {
             s.vertices.iter().zip(&surface.vertices).map(|(a, b)| mesh::distance(*a, *b)).fold(0.0, f64::max)
         };
         assert!(off(&read) < 1e-8, "read back {} m off (STL holds f32)", off(&read));
         mesh::io::write_surface(dir.path().join(SURFACE_FILE), &surface).unwrap();
-        assert!(off(&read_organ_surface(dir.path(), &organ).unwrap()) < 1e-8, "in metres");
+        assert!(off(&super::read_organ_surface(&dir.path().join(SURFACE_FILE), &organ).unwrap()) < 1e-8, "in metres");
         // A mesh that left out a thin part of its surface (30 % of its length) still matches it.
         let shorter = mesh::box_tet([0.0; 3], [0.07, 0.05, 0.04], [4, 2, 2]).unwrap();
-        assert!(off(&read_organ_surface(dir.path(), &shorter).unwrap()) < 1e-8, "a mesh 30 % shorter");
+        assert!(
+            off(&super::read_organ_surface(&dir.path().join(SURFACE_FILE), &shorter).unwrap()) < 1e-8,
+            "a mesh 30 % shorter"
+        );
         let thrice = mesh::box_tet([0.0; 3], [0.3, 0.15, 0.12], [4, 2, 2]).unwrap();
-        let refused = read_organ_surface(dir.path(), &thrice).unwrap_err().to_string();
+        let refused = super::read_organ_surface(&dir.path().join(SURFACE_FILE), &thrice).unwrap_err().to_string();
         assert!(refused.contains("does not match organ.vtu (300 mm)"), "{refused}");
     }
 }
