@@ -114,7 +114,8 @@ pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
 /// on a still half view it settles (4.95 to 4.27 mm over 100 frames) where the membrane loop alone
 /// drifted (4.95 to 14.87 mm over 6). From rest, the held membrane after the fit lost on the design cases
 /// (2.89 mm against the fit's 2.42 mm). The U-Net fits a membrane to the matches and predicts from
-/// it ([`NetworkDeformer`]); given a `basis` (a reduced-order model), it predicts from the shape fit
+/// it ([`NetworkDeformer`]), on a stream's warm-started frames the unseen held at the last frame's
+/// ([`NetworkDeformer::holding_unseen_on_warm_frames`]); given a `basis` (a reduced-order model), it predicts from the shape fit
 /// of that model's shape space ([`HybridDeformer`], [`NETWORK_AFTER_FIT`]), the surface unseen held
 /// at the fit's, and on a warm-started frame fits once from the last posterior first: on the design
 /// cases streamed 1.42 mm over the frames where the U-Net's own loop on those frames (the unseen
@@ -140,7 +141,8 @@ pub fn learned_registration(
         // average (better on all 7 cases); from rest it changed little (2.48 → 2.42 mm, better on 3,
         // worse on 2).
         (Model::UNet(_), None) => {
-            (Box::new(membrane), RegistrationOptions { two_way: TwoWay::Streamed, ..options.clone() })
+            let membrane = Box::new(membrane.holding_unseen_on_warm_frames());
+            (membrane, RegistrationOptions { two_way: TwoWay::Streamed, ..options.clone() })
         }
         (Model::UNet(_), Some(basis)) => {
             let fit = shape_fit(basis, &organ)?;
