@@ -223,7 +223,7 @@ fn truth_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option<Str
 pub const TRUTH_ABSURD: f64 = 100.0;
 
 /// The share of the organ's size (its box's diagonal) beyond which a truth that lies far nearer
-/// the targets at rest read in another frame or unit is flagged ([`truth_mix_up`]): 15 mm on a
+/// the targets at rest read in another frame or unit is flagged ([`check_truth`]): 15 mm on a
 /// liver, about what a strong push moves its targets.
 pub const TRUTH_OFF: f64 = 0.05;
 

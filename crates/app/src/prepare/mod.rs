@@ -1294,7 +1294,7 @@ mod tests {
         let wrong = options(dir.path(), "liver_labels.seg.nrrd", "liver", true);
         write_points_csv(&wrong.targets, &[[-45.0, 30.0, -140.0]]).unwrap();
         let error = format!("{:#}", organ_step(&wrong, dir.path()).unwrap_err());
-        assert!(error.starts_with("the organ read from the labelmap's label 1 ('liver'): "), "{error}");
+        assert!(error.starts_with("the organ read from the labelmap's label 5 ('liver'): "), "{error}");
         assert!(error.contains("the targets of"), "{error}");
         // A NIfTI whose header names mm, given in metres.
         let mut metres = options(dir.path(), "liver_labels.nii.gz", "5", false);
@@ -1312,5 +1312,27 @@ mod tests {
             error.starts_with("after the warning") && error.contains("in m the organ is 6483 mm across"),
             "{error}"
         );
+    }
+
+    #[test]
+    fn the_organ_s_surface_is_read_back_in_metres_from_either_unit() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(SURFACE_FILE);
+        let organ = mesh::box_tet([0.0; 3], [0.1, 0.05, 0.04], [4, 2, 2]).unwrap();
+        let surface = mesh::boundary_surface(&organ).compacted();
+        crate::meshing::write_surface_in_mm(&path, &surface, None).unwrap();
+        let read = read_organ_surface(&path, &organ).unwrap();
+        let off = |s: &mesh::TriSurface| {
+            s.vertices.iter().zip(&surface.vertices).map(|(a, b)| mesh::distance(*a, *b)).fold(0.0, f64::max)
+        };
+        assert!(off(&read) < 1e-8, "read back {} m off (STL holds f32)", off(&read));
+        mesh::io::write_surface(&path, &surface).unwrap();
+        assert!(off(&read_organ_surface(&path, &organ).unwrap()) < 1e-8, "in metres");
+        // A mesh that left out a thin part of its surface (30 % of its length) still matches it.
+        let shorter = mesh::box_tet([0.0; 3], [0.07, 0.05, 0.04], [4, 2, 2]).unwrap();
+        assert!(off(&read_organ_surface(&path, &shorter).unwrap()) < 1e-8, "a mesh 30 % shorter");
+        let thrice = mesh::box_tet([0.0; 3], [0.3, 0.15, 0.12], [4, 2, 2]).unwrap();
+        let refused = read_organ_surface(&path, &thrice).unwrap_err().to_string();
+        assert!(refused.contains("does not match organ.vtu (300 mm)"), "{refused}");
     }
 }

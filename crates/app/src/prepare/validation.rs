@@ -633,33 +633,3 @@ fn record_best_method(dir: &Path, methods: &[MethodRun]) -> Result<(String, Pati
     );
     Ok((line, chosen))
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::meshing::write_surface_in_mm;
-
-    #[test]
-    fn the_organ_s_surface_is_read_back_in_metres_from_either_unit() {
-        let dir = tempfile::tempdir().unwrap();
-        let organ = mesh::box_tet([0.0; 3], [0.1, 0.05, 0.04], [4, 2, 2]).unwrap();
-        let surface = mesh::boundary_surface(&organ).compacted();
-        write_surface_in_mm(&dir.path().join(SURFACE_FILE), &surface, None).unwrap();
-        let read = super::read_organ_surface(&dir.path().join(SURFACE_FILE), &organ).unwrap();
-        let off = |s: &TriSurface| {
-            s.vertices.iter().zip(&surface.vertices).map(|(a, b)| mesh::distance(*a, *b)).fold(0.0, f64::max)
-        };
-        assert!(off(&read) < 1e-8, "read back {} m off (STL holds f32)", off(&read));
-        mesh::io::write_surface(dir.path().join(SURFACE_FILE), &surface).unwrap();
-        assert!(off(&super::read_organ_surface(&dir.path().join(SURFACE_FILE), &organ).unwrap()) < 1e-8, "in metres");
-        // A mesh that left out a thin part of its surface (30 % of its length) still matches it.
-        let shorter = mesh::box_tet([0.0; 3], [0.07, 0.05, 0.04], [4, 2, 2]).unwrap();
-        assert!(
-            off(&super::read_organ_surface(&dir.path().join(SURFACE_FILE), &shorter).unwrap()) < 1e-8,
-            "a mesh 30 % shorter"
-        );
-        let thrice = mesh::box_tet([0.0; 3], [0.3, 0.15, 0.12], [4, 2, 2]).unwrap();
-        let refused = super::read_organ_surface(&dir.path().join(SURFACE_FILE), &thrice).unwrap_err().to_string();
-        assert!(refused.contains("does not match organ.vtu (300 mm)"), "{refused}");
-    }
-}
