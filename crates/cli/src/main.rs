@@ -26,7 +26,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Static solve of a scenario file; writes displacement, strain and stress as VTK.
+    /// Static solve of a scenario file; writes displacement, reaction forces, strain and stress as VTK.
     Solve {
         /// Static scenario: a TOML file, or the name of a built-in one (e.g. beam).
         scenario: PathBuf,

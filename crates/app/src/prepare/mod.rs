@@ -1278,7 +1278,7 @@ mod tests {
             "units: m (given)",
             "warning: in m the organ is 6483 mm across, where organs are 20 to 600 mm: is the unit right?",
             "warning: the camera, looking along (0, 0, -1), sees 45 of the 58 held nodes",
-            "warning: the organ reaches the image's border (i = 112): it is cut there, flat where the image ends",
+            "warning: the organ reaches the image's border (i = 112, left): it is cut there, flat where the image ends",
             "warning: `tumour`: 39 of its 162 vertices lie outside the organ",
         ]
         .map(String::from)
