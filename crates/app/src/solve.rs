@@ -57,6 +57,13 @@ fn set_up_warnings(p: &fem::Problem) -> Vec<String> {
         ));
     }
     lines.extend(doubts(p).into_iter().map(|h| format!("warning    {h}")));
+    if loads_the_whole_surface(p) {
+        lines.push(
+            "warning    every surface node carries a load, and no inner node: a [[force]] or [[traction]] whose \
+             selection takes the whole surface (a ball or box larger than the body: its size in mm read as m?)"
+                .into(),
+        );
+    }
     if let Some(&first) = p.mesh.odd_cells.first() {
         lines.push(format!(
             "warning    {} of the file's {} cells are numbered the other way round from the others (the first: \
@@ -67,6 +74,15 @@ fn set_up_warnings(p: &fem::Problem) -> Vec<String> {
         ));
     }
     lines
+}
+
+/// Whether the loads act on every surface node and on no inner node (gravity loads them all), on
+/// a body that has inner nodes.
+fn loads_the_whole_surface(p: &fem::Problem) -> bool {
+    let loaded = |n: usize| p.f_ext[3 * n..3 * n + 3].iter().any(|&f| f != 0.0);
+    let mut surface = vec![false; p.mesh.num_nodes()];
+    mesh::boundary_nodes(&p.mesh).into_iter().for_each(|n| surface[n] = true);
+    surface.contains(&false) && (0..p.mesh.num_nodes()).all(|n| loaded(n) == surface[n])
 }
 
 /// What makes a problem's units doubtful: a mesh the size of a room, a modulus far below soft
@@ -340,6 +356,31 @@ mod tests {
         assert!(lines.iter().any(|l| l.starts_with("warning    every load acts on held nodes")), "{lines:?}");
         let beam = solve_scenario(Path::new("beam"), |_, _| {}).unwrap().lines().unwrap();
         assert!(!beam.iter().any(|l| l.starts_with("warning")), "{beam:?}");
+    }
+
+    /// A load whose selection takes the whole surface (a 50 m ball about a 10 cm bar) is warned
+    /// about; gravity, which loads every node, is not.
+    #[test]
+    fn a_load_on_the_whole_surface_is_warned_about() {
+        let dir = tempfile::tempdir().unwrap();
+        let lines = |load: &str| {
+            // A top-level key (gravity) before the tables, the others after.
+            let (top, load) = if load.starts_with("gravity") { (load, "") } else { ("", load) };
+            let text = format!(
+                "kind = \"static\"\nname = \"ball\"\n{top}[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.1, 0.02, 0.02]\n\
+                 cells = [6, 3, 3]\nelement = \"hex\"\n[material]\nlaw = \"linear\"\nyoung = 5000.0\npoisson = 0.3\n\
+                 [[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] }} }}\n{load}"
+            );
+            solved_lines(dir.path(), &text)
+        };
+        let warned = |lines: &[String]| lines.iter().any(|l| l.contains("every surface node carries a load"));
+        let ball = "[[traction]]\nselect = { ball = { centre = [0.05, 0.01, 0.01], radius = 50.0 } }\n\
+                    traction = [0.0, 0.0, -1.0]\n";
+        assert!(warned(&lines(ball)), "{:?}", lines(ball));
+        let tip = "[[traction]]\nselect = { box = { min = [0.0999, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\n\
+                   traction = [0.0, 0.0, -1.0]\n";
+        assert!(!warned(&lines(tip)), "{:?}", lines(tip));
+        assert!(!warned(&lines("gravity = [0.0, 0.0, -9.81]\n")));
     }
 
     /// A quadratic mesh held at the corners of a face only (landmarks near the corners: a linear
