@@ -1,7 +1,7 @@
 """Type stubs of augsim's native module (documentation: the docstrings and python/README.md)."""
 
 import os
-from typing import Optional, Union
+from typing import Any, Optional, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -43,6 +43,7 @@ class Registered:
     target_sigma: Optional[npt.NDArray[np.float64]]
     ms: float
     structures: dict[str, npt.NDArray[np.float64]]
+    def to_dict(self) -> dict[str, Any]: ...
 
 class Registration:
     method: str

@@ -7,13 +7,16 @@ Run: pytest -s python/tests (the augsim binary: $AUGSIM_BIN, default target/rele
 
 import _thread
 import importlib.util
+import multiprocessing
 import os
+import pickle
 import re
 import signal
 import subprocess
 import sys
 import threading
 import time
+from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
@@ -79,6 +82,14 @@ def test_registration_reduces_the_tre_with_a_warm_start(case):
     assert repr(first).startswith(f"Registered(targets={len(case['rest'])}, iterations={first.iterations}, "
                                   "from_rest=True, ")
     assert repr(frames[1]).count("from_rest=False") == 1
+    assert repr(reg) == (f"Registration(method='{reg.method}', units='mm', frame=None, nodes={len(reg.points)}, "
+                         f"targets={len(case['rest'])})")
+    # Its fields as a dict, which pickles (a worker process returns it).
+    fields = pickle.loads(pickle.dumps(first.to_dict()))
+    np.testing.assert_array_equal(fields["targets"], first.targets)
+    assert (fields["from_rest"], fields["iterations"], fields["rigid"]) == (True, first.iterations, None)
+    with pytest.raises(TypeError):
+        pickle.dumps(first)
     # The warm start: after those frames the noiseless cloud registers otherwise (measured: 0.85 mm
     # apart) than from rest, as a new Registration does; after reset() it registers from rest
     # again (measured: 0.06 mm apart, the FEM solver keeping its factorisation).
@@ -90,6 +101,24 @@ def test_registration_reduces_the_tre_with_a_warm_start(case):
     warm_gap, reset_gap = (np.abs(r.targets - fresh.targets).max() for r in (warm, again))
     print(f"warm vs fresh {warm_gap:.3f} mm, reset vs fresh {reset_gap:.3f} mm", file=sys.stderr)
     assert warm_gap > 0.3 and reset_gap < 0.25 * warm_gap
+
+
+def _solve_the_beam(_):
+    try:
+        augsim.solve("beam")
+        return "solved"
+    except augsim.AugsimError as e:
+        return str(e)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork on this platform")
+def test_a_forked_worker_is_told_to_spawn_rather_than_wait_forever():
+    """A process forked from one that computed lacks augsim's worker threads: it raises, naming
+    "spawn", instead of waiting for them forever; a spawned worker computes."""
+    augsim.solve("beam")
+    for method, expected in [("fork", "start worker processes with \"spawn\""), ("spawn", "solved")]:
+        with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context(method)) as pool:
+            assert expected in pool.submit(_solve_the_beam, 0).result(timeout=120), method
 
 
 def test_registration_with_default_targets_in_metres(case):

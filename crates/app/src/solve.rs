@@ -59,7 +59,7 @@ fn set_up_warnings(p: &fem::Problem) -> Vec<String> {
     lines.extend(doubts(p).into_iter().map(|h| format!("warning    {h}")));
     if loads_the_whole_surface(p) {
         lines.push(
-            "warning    every surface node carries a load, and no inner node: a [[force]] or [[traction]] whose \
+            "warning    every boundary face carries a load, and no inner node: a [[force]] or [[traction]] whose \
              selection takes the whole surface (a ball or box larger than the body: its size in mm read as m?)"
                 .into(),
         );
@@ -76,13 +76,19 @@ fn set_up_warnings(p: &fem::Problem) -> Vec<String> {
     lines
 }
 
-/// Whether the loads act on every surface node and on no inner node (gravity loads them all), on
-/// a body that has inner nodes.
+/// Whether node `n` carries a load.
+fn loaded(p: &fem::Problem, n: usize) -> bool {
+    p.f_ext[3 * n..3 * n + 3].iter().any(|&f| f != 0.0)
+}
+
+/// Whether the loads act on every boundary face (a quadratic face's traction on its mid-edge
+/// nodes only) and on no inner node (gravity loads them all), on a body that has inner nodes.
 fn loads_the_whole_surface(p: &fem::Problem) -> bool {
-    let loaded = |n: usize| p.f_ext[3 * n..3 * n + 3].iter().any(|&f| f != 0.0);
     let mut surface = vec![false; p.mesh.num_nodes()];
-    mesh::boundary_nodes(&p.mesh).into_iter().for_each(|n| surface[n] = true);
-    surface.contains(&false) && (0..p.mesh.num_nodes()).all(|n| loaded(n) == surface[n])
+    let faces = mesh::boundary_faces(&p.mesh);
+    faces.iter().flat_map(|f| &f.nodes).for_each(|&n| surface[n] = true);
+    let inner_unloaded = (0..p.mesh.num_nodes()).all(|n| surface[n] || !loaded(p, n));
+    surface.contains(&false) && inner_unloaded && faces.iter().all(|f| f.nodes.iter().any(|&n| loaded(p, n)))
 }
 
 /// What makes a problem's units doubtful: a mesh the size of a room, a modulus far below soft
@@ -203,7 +209,7 @@ impl Solved {
                 ms(t.solve)
             ),
         ];
-        let loaded = |n: usize| p.f_ext[3 * n..3 * n + 3].iter().any(|&f| f != 0.0);
+        let loaded = |n: usize| loaded(p, n);
         let moved = p.dirichlet.values().any(|d| *d != [0.0; 3]);
         match sol.snapped_from {
             Some(lambda) if moved => lines.push(format!(
@@ -266,11 +272,11 @@ impl Solved {
         };
         let newtons = |f: [f64; 3]| format!("({:.4e}, {:.4e}, {:.4e}) N", f[0], f[1], f[2]);
         let held = total(&mut p.dirichlet.keys().copied(), &self.reaction);
-        let sprung = &mut (0..p.mesh.num_nodes()).filter(|n| p.springs[*n] != 0.0 && !p.dirichlet.contains_key(n));
-        let springs = total(sprung, &self.reaction);
+        // What a node neither fixed nor prescribed takes, its springs and attachments take.
+        let springs = total(&mut (0..p.mesh.num_nodes()).filter(|n| !p.dirichlet.contains_key(n)), &self.reaction);
         let loads = total(&mut (0..p.mesh.num_nodes()), &p.f_ext);
         format!(
-            "reaction   held nodes {}, springs {} (field reaction_force); the loads: {}",
+            "reaction   held nodes {}, springs and attachments {} (field reaction_force); the loads: {}",
             newtons(held),
             newtons(springs),
             newtons(loads)
@@ -359,28 +365,32 @@ mod tests {
     }
 
     /// A load whose selection takes the whole surface (a 50 m ball about a 10 cm bar) is warned
-    /// about; gravity, which loads every node, is not.
+    /// about, on H8 and on T10 (whose faces carry a traction on their mid-edge nodes only);
+    /// gravity, which loads every node, is not.
     #[test]
     fn a_load_on_the_whole_surface_is_warned_about() {
         let dir = tempfile::tempdir().unwrap();
-        let lines = |load: &str| {
-            // A top-level key (gravity) before the tables, the others after.
-            let (top, load) = if load.starts_with("gravity") { (load, "") } else { ("", load) };
-            let text = format!(
-                "kind = \"static\"\nname = \"ball\"\n{top}[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.1, 0.02, 0.02]\n\
-                 cells = [6, 3, 3]\nelement = \"hex\"\n[material]\nlaw = \"linear\"\nyoung = 5000.0\npoisson = 0.3\n\
-                 [[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] }} }}\n{load}"
-            );
-            solved_lines(dir.path(), &text)
-        };
-        let warned = |lines: &[String]| lines.iter().any(|l| l.contains("every surface node carries a load"));
-        let ball = "[[traction]]\nselect = { ball = { centre = [0.05, 0.01, 0.01], radius = 50.0 } }\n\
-                    traction = [0.0, 0.0, -1.0]\n";
-        assert!(warned(&lines(ball)), "{:?}", lines(ball));
-        let tip = "[[traction]]\nselect = { box = { min = [0.0999, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\n\
-                   traction = [0.0, 0.0, -1.0]\n";
-        assert!(!warned(&lines(tip)), "{:?}", lines(tip));
-        assert!(!warned(&lines("gravity = [0.0, 0.0, -9.81]\n")));
+        for element in ["element = \"hex\"\n[material]\n", "element = \"tet\"\n[material]\norder = 2\n"] {
+            let lines = |load: &str| {
+                // A top-level key (gravity) before the tables, the others after.
+                let (top, load) = if load.starts_with("gravity") { (load, "") } else { ("", load) };
+                let text = format!(
+                    "kind = \"static\"\nname = \"ball\"\n{top}[mesh.box]\nmin = [0.0, 0.0, 0.0]\n\
+                     max = [0.1, 0.02, 0.02]\ncells = [6, 3, 3]\n{element}law = \"linear\"\nyoung = 5000.0\n\
+                     poisson = 0.3\n[[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] }} }}\n\
+                     {load}"
+                );
+                solved_lines(dir.path(), &text)
+            };
+            let warned = |lines: &[String]| lines.iter().any(|l| l.contains("every boundary face carries a load"));
+            let ball = "[[traction]]\nselect = { ball = { centre = [0.05, 0.01, 0.01], radius = 50.0 } }\n\
+                        traction = [0.0, 0.0, -1.0]\n";
+            assert!(warned(&lines(ball)), "{element}: {:?}", lines(ball));
+            let tip = "[[traction]]\nselect = { box = { min = [0.0999, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\n\
+                       traction = [0.0, 0.0, -1.0]\n";
+            assert!(!warned(&lines(tip)), "{element}: {:?}", lines(tip));
+            assert!(!warned(&lines("gravity = [0.0, 0.0, -9.81]\n")), "{element}");
+        }
     }
 
     /// A quadratic mesh held at the corners of a face only (landmarks near the corners: a linear
@@ -447,7 +457,7 @@ mod tests {
         assert!(lines[1].starts_with(&format!("mesh       {} nodes", mesh.num_nodes())), "{lines:?}");
         assert!(lines.iter().any(|l| l.starts_with("max |u|    ")) && lines.len() == 8, "{lines:?}");
         let reaction = lines.iter().find(|l| l.starts_with("reaction   held nodes (")).expect("a reaction line");
-        assert!(reaction.contains("springs (0.0000e0, 0.0000e0, 0.0000e0) N"), "{reaction}");
+        assert!(reaction.contains("springs and attachments (0.0000e0, 0.0000e0, 0.0000e0) N"), "{reaction}");
     }
 
     /// A cube of Saint-Venant-Kirchhoff (ν 0.49: F-bar) held at its base and pushed down at its

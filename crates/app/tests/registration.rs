@@ -294,12 +294,14 @@ fn the_u_net_follows_a_turning_camera() {
     let peak = case.peak();
     let rest = mean(&target_errors(&case.targets, &peak.truth));
     let targets = TargetsSpec::Points(case.targets.clone());
-    // A half view from rest leaves the U-Net alone far off (10.7 mm measured): from the fourth
-    // frame on, having seen the organ all round, neither may be off by more than 0.3 of the motion, and no
-    // frame may be worse than the first.
-    for method in
-        [MethodSpec::learned_after_shape_fit(MODEL, AR_SCENARIO, ROM), MethodSpec::learned(MODEL, AR_SCENARIO)]
-    {
+    // After the fit no frame may be off by more than 0.3 of the motion. A half view from rest leaves
+    // the U-Net alone far off (10.7 mm measured): it is held to that from the fourth frame on,
+    // having seen the organ all round. Neither may have a frame worse than its first.
+    let methods = [
+        (MethodSpec::learned_after_shape_fit(MODEL, AR_SCENARIO, ROM), 0),
+        (MethodSpec::learned(MODEL, AR_SCENARIO), 3),
+    ];
+    for (method, from) in methods {
         let mut registration = RegistrationSpec::new(method, targets.clone()).build().unwrap();
         let errors: Vec<f64> = (0..8)
             .map(|k| {
@@ -314,7 +316,7 @@ fn the_u_net_follows_a_turning_camera() {
             "{name}, turning camera: TRE per frame (mm) {:.2?}",
             errors.iter().map(|e| e * 1e3).collect::<Vec<_>>()
         );
-        let worst = errors[3..].iter().copied().fold(0.0, f64::max);
+        let worst = errors[from..].iter().copied().fold(0.0, f64::max);
         assert!(worst < 0.3 * rest, "{name}: the TRE reached {worst} m, against {rest} m without registration");
         assert!(errors.iter().all(|&e| e <= errors[0]), "{name}: {errors:?}");
     }

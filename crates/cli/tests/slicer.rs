@@ -133,6 +133,7 @@ fn slicer_files_and_millimetres_register_as_metres_do() {
     assert!(!ok && text.contains("with x and y negated the cloud lies on the organ"), "{text}");
     assert!(text.contains("error: the registration is not plausible") && text.contains("kept to look at"), "{text}");
     assert!(out.join("summary.json").is_file() && out.join("targets_implausible.mrk.json").is_file());
+    assert!(out.join("displacement_implausible.nrrd").is_file() || text.contains("no displacement"), "{text}");
     assert!(text.contains("for 3D Slicer: targets_implausible.mrk.json, organ_deformed_implausible.vtk"), "{text}");
     let slicer_files = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap());
     let named = |f: &String| f.contains("_implausible.") || !f.ends_with(".mrk.json") && !f.ends_with("deformed.vtk");

@@ -521,23 +521,30 @@ impl StaticSolver {
         Ok(f)
     }
 
-    /// The forces the supports exert on the body at `u` (N, 3 per node), as CalculiX's RF: a node
-    /// spring's −k u, and at a held dof (fixed or prescribed) the force that holds it there,
-    /// f_int − f_ext (f_int the elastic force). At an equilibrium they balance the loads:
-    /// Σ R = −Σ f_ext.
+    /// The forces the supports exert on the body at `u` (N, 3 per node): a node's springs (node
+    /// springs, −k u, and point springs, −Σ w K (x − t): an attachment's foundation) and at a held
+    /// dof (fixed or prescribed) the hold, f_int − f_ext less the springs' part (CalculiX's RF
+    /// there, where no spring acts on the node); zero elsewhere. At an equilibrium they balance the
+    /// loads: Σ R = −Σ f_ext.
     pub fn reaction_forces(&mut self, u: &[f64]) -> Result<Vec<f64>, FemError> {
-        // `internal_force` holds the springs' k u: what is left is the elastic force.
-        let f_int = self.internal_force(u)?;
+        // `internal_force` holds the springs' k u and K x, `loads` the point springs' pull K t.
+        let (f_int, loads) = (self.internal_force(u)?, self.loads());
         let p = &self.problem;
-        Ok((0..u.len())
-            .map(|dof| {
-                let spring = p.springs[dof / 3] * u[dof];
-                match self.free_index(dof) {
-                    None => f_int[dof] - spring - p.f_ext[dof],
-                    Some(_) => -spring,
-                }
-            })
-            .collect())
+        let mut reaction: Vec<f64> = (0..u.len()).map(|dof| -p.springs[dof / 3] * u[dof]).collect();
+        for s in &p.point_springs {
+            let mut x = [0.0; 3];
+            for &(n, w) in &s.nodes {
+                (0..3).for_each(|d| x[d] += w * u[3 * n + d]);
+            }
+            let pull = s.stiffness_times(mesh::sub(x, s.target));
+            for &(n, w) in &s.nodes {
+                (0..3).for_each(|d| reaction[3 * n + d] -= w * pull[d]);
+            }
+        }
+        for (dof, r) in reaction.iter_mut().enumerate().filter(|(dof, _)| self.pattern.free_index[*dof] == u32::MAX) {
+            *r += f_int[dof] - loads[dof];
+        }
+        Ok(reaction)
     }
 
     /// The free-dof tangent at u as a dense matrix (for tests and small problems).

@@ -354,7 +354,7 @@ fn gravity_and_springs_balance_exactly() {
     assert!((spring_force + weight).abs() < 1e-6 * weight, "springs carry {spring_force}, weight {weight}");
 }
 
-/// The reaction forces (clamp and springs) of a cantilever under a tip traction and its weight
+/// The reaction forces (clamp, node springs and a point spring) of a cantilever under a tip traction and its weight
 /// balance the loads; under a hyperelastic law their moments balance too, about any point of
 /// the deformed body (the clamp pushes up and turns back the tip's moment).
 #[test]
@@ -368,7 +368,16 @@ fn reaction_forces_balance_the_loads_and_their_moments() {
             let middle = mesh::select::nodes_in_box(&m.nodes, [1.9, -1e-9, -1e-9], [2.1, h + 1e-9, 1e-9]);
             let mut problem = Problem::new(m.clone(), Material { density: 0.2, ..Material::new(law, 3000.0, 0.3) });
             problem.fix(&clamp);
-            problem.add_springs(&middle, 40.0);
+            problem.add_springs(&middle[..middle.len() / 2], 40.0);
+            // A point spring between two nodes (an attachment's foundation), pulled up a little.
+            let pair = &middle[middle.len() / 2..];
+            problem.point_springs.push(PointSpring {
+                nodes: vec![(pair[0], 0.5), (pair[1], 0.5)],
+                target: [0.0, 0.0, 0.01],
+                stiffness: 30.0,
+                normal: [0.0, 0.0, 1.0],
+                normal_stiffness: 20.0,
+            });
             problem.add_traction(&tip, [0.0, 3.0, -4.0]);
             problem.add_gravity([0.0, 0.0, -9.81]).unwrap();
             let load: Vec<f64> = (0..3).map(|d| problem.f_ext.iter().skip(d).step_by(3).sum()).collect();

@@ -16,7 +16,9 @@
 //!   start from the previous one's displacement), and `target_sigma` (the predicted standard
 //!   deviation σ at each target, for the reduced-order model; else null), in the stream's unit; or
 //!   `frame` and `error`). An error is answered whatever the outputs, so that a client never waits
-//!   for answers that will not come.
+//!   for answers that will not come. A result that is not plausible comes as `targets_implausible`,
+//!   `organ_implausible` and `rigid_implausible`, without its structures: a viewer's `targets`,
+//!   `organ`, `rigid` and structures keep the last plausible answer.
 //! - in: a STRING of device `reset` (any text): the next cloud registered starts from rest, its
 //!   pose (with a rigid pre-alignment) estimated again, as a new client's first cloud would (after
 //!   the camera or the patient moved). It has no answer of its own: the next status says
@@ -28,7 +30,9 @@
 //! server's clock).
 //!
 //! Each client has its own registration, taken at its first cloud from one built ahead (see
-//! [`built_ahead`]) and warm-started from its previous frame (from rest after one that left the organ distorted, or after a `reset`). A
+//! [`built_ahead`]) and warm-started from its previous frame (from rest after one that left the
+//! organ distorted, lay on it in the other frame or spanned under a tenth of it, or after a
+//! `reset`). A
 //! client's clouds are registered one at a time; a cloud that arrives while one
 //! is being registered replaces any cloud still waiting (the newest wins: the backlog never
 //! grows). A message whose header is malformed, whose body exceeds the size limit, or that stalls
@@ -879,8 +883,9 @@ fn answer(
         shared.record(serde_json::json!({ "status": status, "timestamp": timestamp, "targets": targets }));
     }
     // A result that is not plausible comes under names that say so (`targets_implausible`,
-    // `organ_implausible`), without its structures (whose names fill a device name's 20 bytes): a
-    // viewer's `targets`, `organ` and structures keep the last plausible answer.
+    // `organ_implausible`, `rigid_implausible`), without its structures (whose names fill a device
+    // name's 20 bytes): a viewer's `targets`, `organ`, `rigid` and structures keep the last
+    // plausible answer.
     let verdict = result.verdict_suffix();
     if options.outputs.targets {
         let device = format!("targets{verdict}");
@@ -903,12 +908,12 @@ fn answer(
     if options.outputs.structures && result.plausible() {
         for structure in registration.structures() {
             let moved = polydata(structure.deformed(&result.u, tracked.rigid.as_ref()));
-            shared.send(&moved, &format!("{}{verdict}", structure.name()), cloud.timestamp)?;
+            shared.send(&moved, structure.name(), cloud.timestamp)?;
         }
     }
     if let (true, Some(organ_to_cloud)) = (options.outputs.transform, back.organ_to_cloud) {
         let matrix = organ_to_cloud.map(|row| row.map(|x| x as f32));
-        shared.send(&TransformMessage { matrix }, "rigid", cloud.timestamp)?;
+        shared.send(&TransformMessage { matrix }, &format!("rigid{verdict}"), cloud.timestamp)?;
     }
     if options.outputs.status {
         shared.send_line("status", status_line(status), cloud.timestamp);

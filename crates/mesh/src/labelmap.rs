@@ -1220,7 +1220,7 @@ pub fn read_labelmap_surface(
         }
     };
     let (whole, label, chosen) = map.select_uncropped(&label).map_err(|e| parse_error(path, e.message()))?;
-    let borders = touched_borders(&whole, &map.affine, map.frame);
+    let borders = touched_borders(&whole, map.placed.then_some(map.frame));
     let mask = map.cropped(&whole, &label, chosen).map_err(|e| parse_error(path, e.message()))?;
     let mask = mask.in_scanner_order(map.frame == Frame::Ras);
     let (surface, extract) = mask_surface(&mask, options).map_err(|e| parse_error(path, e.message()))?;
@@ -1289,12 +1289,13 @@ const TIP_SHARE: f64 = 0.1;
 const THINNED_SHARE: f64 = 0.2;
 
 /// The faces of the image where the mask's organ is cut, as `i = 0, left`, `k = 63, superior`
-/// (the side of the patient the face looks to, from the voxels' `affine` in `frame`): faces it reaches
+/// (the side of the patient the face looks to, in `frame`, the scanner's when the file places its
+/// voxels there): faces it reaches
 /// with a slice that holds [`dicom::CUT_SHARE`] of its largest slice's voxels, or that does not
 /// taper (as large as [`dicom::CUT_NEIGHBOUR_SHARE`] of the slice next to it) and is more than
 /// its tip ([`TIP_SHARE`] of the largest). An organ whole in an image cropped to it, as 3D Slicer
 /// saves a segmentation, tapers to each face it touches; one the field of view cuts does not.
-fn touched_borders(mask: &VoxelMask, affine: &[[f64; 4]; 3], frame: Frame) -> Vec<String> {
+fn touched_borders(mask: &VoxelMask, frame: Option<Frame>) -> Vec<String> {
     let [ni, nj, nk] = mask.dims;
     let mut counts = [vec![0usize; ni], vec![0; nj], vec![0; nk]];
     for k in 0..nk {
@@ -1307,15 +1308,20 @@ fn touched_borders(mask: &VoxelMask, affine: &[[f64; 4]; 3], frame: Frame) -> Ve
         }
     }
     let mut faces = Vec::new();
-    // The side of the patient a face of the image looks to: its outward direction's largest part.
+    // The side of the patient a face of the image looks to (its outward direction's largest
+    // part), when the file places its voxels in the scanner's frame.
     let side = |axis: usize, outward: f64| {
-        let direction: [f64; 3] = std::array::from_fn(|r| outward * affine[r][axis]);
+        let direction: [f64; 3] = std::array::from_fn(|r| outward * mask.affine[r][axis]);
         let along = (0..3).max_by(|&a, &b| direction[a].abs().total_cmp(&direction[b].abs())).unwrap_or(2);
-        let sides = match frame {
+        let sides = match frame? {
             Frame::Ras => [["left", "right"], ["posterior", "anterior"], ["inferior", "superior"]],
             Frame::Lps => [["right", "left"], ["anterior", "posterior"], ["inferior", "superior"]],
         };
-        sides[along][usize::from(direction[along] > 0.0)]
+        Some(sides[along][usize::from(direction[along] > 0.0)])
+    };
+    let face = |name: &str, index: usize, axis: usize, outward: f64| match side(axis, outward) {
+        Some(side) => format!("{name} = {index}, {side}"),
+        None => format!("{name} = {index}"),
     };
     for (axis, (name, c)) in ["i", "j", "k"].into_iter().zip(&counts).enumerate() {
         let (n, largest) = (c.len(), *c.iter().max().unwrap_or(&0) as f64);
@@ -1326,9 +1332,9 @@ fn touched_borders(mask: &VoxelMask, affine: &[[f64; 4]; 3], frame: Frame) -> Ve
                     || (end >= TIP_SHARE * largest
                         && next.is_none_or(|&next| end >= dicom::CUT_NEIGHBOUR_SHARE * next as f64)))
         };
-        faces.extend(cut(c[0], c.get(1)).then(|| format!("{name} = 0, {}", side(axis, -1.0))));
+        faces.extend(cut(c[0], c.get(1)).then(|| face(name, 0, axis, -1.0)));
         if n > 1 {
-            faces.extend(cut(c[n - 1], c.get(n - 2)).then(|| format!("{name} = {}, {}", n - 1, side(axis, 1.0))));
+            faces.extend(cut(c[n - 1], c.get(n - 2)).then(|| face(name, n - 1, axis, 1.0)));
         }
     }
     faces

@@ -104,13 +104,13 @@ const CHOICES: &str = "m, cm, mm or um";
 impl FromStr for LengthUnit {
     type Err = String;
 
-    /// "m", "cm", "mm" or "um" ("µm").
+    /// "m", "cm", "mm" or "um" ("µm"), in either case ("MM").
     fn from_str(name: &str) -> Result<LengthUnit, String> {
         match name {
             "µm" | "μm" => Ok(LengthUnit::Micrometre),
             _ => LengthUnit::ALL
                 .into_iter()
-                .find(|unit| unit.symbol() == name)
+                .find(|unit| unit.symbol().eq_ignore_ascii_case(name))
                 .ok_or_else(|| format!("must be {CHOICES}, got '{name}'")),
         }
     }
@@ -257,7 +257,9 @@ mod tests {
         assert_eq!("in".parse::<LengthUnit>().unwrap_err(), "must be m, cm, mm or um, got 'in'");
         assert_eq!("auto".parse::<LengthUnit>().unwrap_err(), "must be m, cm, mm or um, got 'auto'");
         assert_eq!(parse_unit_or_auto("auto").unwrap(), None);
-        assert_eq!(parse_unit_or_auto("MM").unwrap_err(), "must be m, cm, mm, um or auto, got 'MM'");
+        assert_eq!(parse_unit_or_auto("ft").unwrap_err(), "must be m, cm, mm, um or auto, got 'ft'");
+        // Either case, as "RAS" and "ras" are the same frame.
+        assert_eq!(parse_unit_or_auto("MM").unwrap(), Some(LengthUnit::Millimetre));
     }
 
     #[test]

@@ -8,6 +8,7 @@
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
@@ -47,10 +48,32 @@ const SIGNAL_POLL: Duration = Duration::from_millis(50);
 /// Outcome of a call into augsim: a value, an error, or a panic caught.
 type Outcome<T> = std::thread::Result<anyhow::Result<T>>;
 
+/// The process that first computed with augsim (0: none yet). Its worker threads (rayon's) are
+/// not in a process forked from it, whose computations would wait for them forever.
+static COMPUTING_PROCESS: AtomicU32 = AtomicU32::new(0);
+
+/// Refuses to compute in a process forked from one that computed with augsim (multiprocessing's
+/// "fork", Linux's default before Python 3.14), saying how to start workers instead; claims the
+/// process otherwise.
+fn check_not_forked() -> PyResult<()> {
+    let me = std::process::id();
+    match COMPUTING_PROCESS.compare_exchange(0, me, Ordering::SeqCst, Ordering::SeqCst) {
+        Err(parent) if parent != me => Err(AugsimError::new_err(
+            "this process was forked from one that computed with augsim, whose worker threads a forked process \
+             lacks (it would wait for them forever): start worker processes with \"spawn\" or \"forkserver\" \
+             (multiprocessing.get_context(\"spawn\"); ProcessPoolExecutor(mp_context=...)), or use augsim in the \
+             parent only after the workers started",
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// Runs `f` on a thread of its own, without the GIL, while the caller checks for signals: Ctrl-C
 /// asks it to stop ([`fem::interrupt`]) and raises `KeyboardInterrupt` once it has. Its error, or a
-/// panic, becomes an [`AugsimError`].
+/// panic, becomes an [`AugsimError`]; so does a call in a process forked from one that computed
+/// ([`check_not_forked`]).
 fn compute<T: Send>(py: Python<'_>, f: impl FnOnce() -> anyhow::Result<T> + Send) -> PyResult<T> {
+    check_not_forked()?;
     let outcome = std::thread::scope(|scope| {
         let (sender, receiver) = std::sync::mpsc::channel::<Outcome<T>>();
         scope.spawn(move || sender.send(catch_unwind(AssertUnwindSafe(f))));
@@ -81,6 +104,7 @@ fn compute<T: Send>(py: Python<'_>, f: impl FnOnce() -> anyhow::Result<T> + Send
 /// Reads the state of an object with `f`, without the GIL (a read takes no time: it is not
 /// interrupted); its error, or a panic, becomes an [`AugsimError`].
 fn read<T: Send>(py: Python<'_>, f: impl FnOnce() -> anyhow::Result<T> + Send) -> PyResult<T> {
+    check_not_forked()?;
     result(py.detach(|| catch_unwind(AssertUnwindSafe(f))))
 }
 
@@ -166,8 +190,8 @@ struct Solution {
     /// Displacement of each node, float64 [n, 3] (m).
     #[pyo3(get)]
     displacement: Py<PyArray2<f64>>,
-    /// The force each node's supports (its hold, its spring) exert on it, float64 [n, 3] (N); zero
-    /// on free nodes without a spring.
+    /// The force each node's supports (its hold, its springs) exert on it, float64 [n, 3] (N); zero
+    /// on a node that none holds.
     #[pyo3(get)]
     reaction_force: Py<PyArray2<f64>>,
     /// Solver iterations over all load steps.
@@ -279,6 +303,25 @@ struct Registered {
 
 #[pymethods]
 impl Registered {
+    /// Its fields as a dict of NumPy arrays and plain values (the object itself cannot be pickled:
+    /// return this from a worker process).
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        d.set_item("targets", self.targets.clone_ref(py))?;
+        d.set_item("displacement", self.displacement.clone_ref(py))?;
+        d.set_item("surface_residual", self.surface_residual)?;
+        d.set_item("inliers", self.inliers)?;
+        d.set_item("points", self.points)?;
+        d.set_item("iterations", self.iterations)?;
+        d.set_item("from_rest", self.from_rest)?;
+        d.set_item("warnings", self.warnings.clone())?;
+        d.set_item("rigid", self.rigid.as_ref().map(|r| r.clone_ref(py)))?;
+        d.set_item("target_sigma", self.target_sigma.as_ref().map(|s| s.clone_ref(py)))?;
+        d.set_item("ms", self.ms)?;
+        d.set_item("structures", self.structures.bind(py).copy()?)?;
+        Ok(d)
+    }
+
     fn __repr__(&self, py: Python<'_>) -> String {
         format!(
             "Registered(targets={}, iterations={}, from_rest={}, surface_residual={:.6}, inliers={}, points={}, \
@@ -497,6 +540,18 @@ impl Registration {
             ms: mesh::stats::ms(result.time),
             structures: structures.unbind(),
         })
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        let (nodes, targets) = read(py, || {
+            let state = locked(&self.state)?;
+            Ok((state.organ().mesh().num_nodes(), state.targets().len()))
+        })?;
+        let frame = self.frame.as_deref().map_or("None".to_string(), |f| format!("'{f}'"));
+        Ok(format!(
+            "Registration(method='{}', units='{}', frame={frame}, nodes={nodes}, targets={targets})",
+            self.method, self.units
+        ))
     }
 
     /// Forgets the previous cloud: the next one is registered from the organ at rest (a FEM

@@ -306,7 +306,7 @@ pub fn verdict(
                 "; the rigid pre-alignment may have failed (the next cloud estimates it again), or the cloud is not \
                      the organ's"
             }
-            (false, false) => "; if its frame is not the organ's, pre-align it (--rigid)",
+            (false, false) => "; if its frame is not the organ's, pre-align it (--rigid; rigid=True in Python)",
             (false, true) => "",
         };
         out.push(format!(

@@ -85,12 +85,16 @@ pub struct Registration {
     surface: Option<Structure>,
 }
 
-/// Refuses a structure's name that is empty, `taken` by another, or one of [`RESERVED_NAMES`].
+/// Refuses a structure's name that is empty, `taken` by another, one of [`RESERVED_NAMES`], or
+/// ends in [`crate::IMPLAUSIBLE`] (the names of an implausible result's answers).
 pub fn check_structure_name(name: &str, taken: &[&str]) -> Result<()> {
-    if name.is_empty() || RESERVED_NAMES.contains(&name) || taken.contains(&name) {
+    let reserved = RESERVED_NAMES.contains(&name) || name.ends_with(crate::IMPLAUSIBLE);
+    if name.is_empty() || reserved || taken.contains(&name) {
         return Err(RegisterError::Invalid(format!(
-            "a structure cannot be named `{name}`: names are unique and none of {} (give another: NAME=SOURCE)",
-            RESERVED_NAMES.join(", ")
+            "a structure cannot be named `{name}`: names are unique, none of {} and none ends in {} (give another: \
+             NAME=SOURCE)",
+            RESERVED_NAMES.join(", "),
+            crate::IMPLAUSIBLE
         )));
     }
     Ok(())
@@ -317,7 +321,7 @@ impl Registration {
     /// while they register plausibly ([`FrameResult::plausible`]: a frame stopped by its time
     /// budget keeps it): a cloud with another warning has the next one estimate it again, and a
     /// cloud that leaves the organ distorted ([`FrameResult::distorted`]), lies on it in the
-    /// other frame ([`FrameResult::other_frame`]) or spans a tenth of it or less
+    /// other frame ([`FrameResult::other_frame`]) or spans under a tenth of it
     /// ([`FrameResult::small_view`]: centimetres read as millimetres) has it start from rest.
     pub fn register(&mut self, cloud: &[Point]) -> Result<Tracked> {
         let began = std::time::Instant::now();
@@ -594,8 +598,8 @@ mod tests {
         assert!(outside.to_string().starts_with("target 2 (`B`) at (200, 0, 0) mm is outside"), "{outside}");
     }
 
-    /// Structures join the registration, their warnings with them; a name taken, or one of the
-    /// server's messages', is refused.
+    /// Structures join the registration, their warnings with them; a name taken, one of the
+    /// server's messages', or one an implausible result's answers take, is refused.
     #[test]
     fn structures_are_named_apart() {
         let mut r = cube_with(vec![[0.01, 0.02, 0.03]]).unwrap();
@@ -604,7 +608,7 @@ mod tests {
         r.add_structure("vessel", ball.clone()).unwrap();
         assert_eq!(r.structures().iter().map(Structure::name).collect::<Vec<_>>(), ["vessel"]);
         assert!(r.warnings()[0].starts_with("`vessel`: "), "{:?}", r.warnings());
-        for taken in ["vessel", "organ", "targets", ""] {
+        for taken in ["vessel", "organ", "targets", "", "vessel_implausible"] {
             let e = r.add_structure(taken, ball.clone()).unwrap_err().to_string();
             assert!(e.contains(&format!("a structure cannot be named `{taken}`")), "{e}");
         }

@@ -556,8 +556,8 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
             )),
         };
         let read = lines.iter().find_map(|l| l.strip_prefix("labelmap: ").filter(|l| l.starts_with("label")));
-        match read.and_then(|l| l.split(':').next()) {
-            Some(label) => e.context(format!("the organ read from the labelmap's {label}")),
+        match read.and_then(|l| l.split_once("): ")) {
+            Some((label, _)) => e.context(format!("the organ read from the labelmap's {label})")),
             None => e,
         }
     })?;
