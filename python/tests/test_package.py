@@ -214,8 +214,10 @@ def test_a_time_budget_ends_a_cloud_with_its_estimate(case):
     reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm", time_budget_ms=1e-3)
     r = reg.register(case["cloud"])
     assert any("past its time budget of 0 ms" in w for w in r.warnings), r.warnings
-    with pytest.raises(augsim.AugsimError, match="time_budget_ms"):
-        augsim.Registration(fem=case["scenario"], units="mm", time_budget_ms=-1.0)
+    # A budget that is no budget is a ValueError, as iterations=0 is.
+    for budget in [-1.0, 0.0, float("nan")]:
+        with pytest.raises(ValueError, match="time_budget_ms"):
+            augsim.Registration(fem=case["scenario"], units="mm", time_budget_ms=budget)
 
 
 def test_a_unit_mistake_in_the_targets_is_named(case):

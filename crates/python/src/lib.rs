@@ -415,6 +415,9 @@ impl Registration {
             },
         };
         let iterations = count(iterations, "iterations")?;
+        if let Some(budget) = time_budget_ms.filter(|b| !(*b > 0.0 && b.is_finite())) {
+            return Err(PyValueError::new_err(format!("time_budget_ms = {budget} must be a positive number of ms")));
+        }
         let units: Option<LengthUnit> =
             units.map(str::parse).transpose().map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
         let frame: Option<Frame> =
