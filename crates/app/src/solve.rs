@@ -17,8 +17,8 @@ pub struct Solved {
     pub solver: StaticSolver,
     /// The solution.
     pub solution: Solution,
-    /// The forces the held nodes and the springs take at the solution (N, 3 per node:
-    /// [`StaticSolver::reaction_forces`]).
+    /// The forces the supports (holds, springs, attachments) exert on each node at the solution
+    /// (N, 3 per node: [`StaticSolver::reaction_forces`]).
     pub reaction: Vec<f64>,
 }
 
@@ -263,18 +263,19 @@ impl Solved {
         Ok(lines)
     }
 
-    /// The supports' forces in total, held nodes and springs apart, beside the loads' total they
+    /// The supports' forces in total, held nodes and the others apart, beside the loads' total they
     /// balance (the field `reaction_force` gives them node by node).
     fn reaction_line(&self) -> String {
         let p = self.solver.problem();
-        let total = |nodes: &mut dyn Iterator<Item = usize>, f: &[f64]| {
+        // The total of `f` (3 per node) over the nodes `held` says.
+        let total = |f: &[f64], held: Option<bool>| {
+            let nodes = (0..p.mesh.num_nodes()).filter(|n| held.is_none_or(|h| p.dirichlet.contains_key(n) == h));
             nodes.fold([0.0; 3], |s, n| [s[0] + f[3 * n], s[1] + f[3 * n + 1], s[2] + f[3 * n + 2]])
         };
         let newtons = |f: [f64; 3]| format!("({:.4e}, {:.4e}, {:.4e}) N", f[0], f[1], f[2]);
-        let held = total(&mut p.dirichlet.keys().copied(), &self.reaction);
         // What a node neither fixed nor prescribed takes, its springs and attachments take.
-        let springs = total(&mut (0..p.mesh.num_nodes()).filter(|n| !p.dirichlet.contains_key(n)), &self.reaction);
-        let loads = total(&mut (0..p.mesh.num_nodes()), &p.f_ext);
+        let (held, springs) = (total(&self.reaction, Some(true)), total(&self.reaction, Some(false)));
+        let loads = total(&p.f_ext, None);
         format!(
             "reaction   held nodes {}, springs and attachments {} (field reaction_force); the loads: {}",
             newtons(held),

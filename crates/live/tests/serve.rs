@@ -59,6 +59,11 @@ fn cube_registration_with(rigid: Option<register::RigidOptions>) -> Result<Regis
     Registration::new(organ, Box::new(deformer), "FEM", vec![centre], Vec::new(), options).map_err(|e| e.to_string())
 }
 
+/// A server's options with its stream in millimetres, the others the defaults.
+fn in_mm() -> ServeOptions {
+    ServeOptions { coordinates: LengthUnit::Millimetre.into(), ..ServeOptions::default() }
+}
+
 /// The cube's registration with a structure: a ball about its centre, named `tumour`.
 fn with_tumour() -> Result<Registration, String> {
     let mut registration = cube_registration()?;
@@ -110,11 +115,7 @@ fn connect(port: u16) -> Client {
 
 #[test]
 fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
-    let options = ServeOptions {
-        coordinates: LengthUnit::Millimetre.into(),
-        max_message_bytes: 1 << 20,
-        ..ServeOptions::default()
-    };
+    let options = ServeOptions { max_message_bytes: 1 << 20, ..in_mm() };
     let server = Server::start(options);
     let port = server.port;
 
@@ -223,8 +224,7 @@ fn clouds_in_targets_organ_and_status_out_and_bad_input_hurts_no_one_else() {
 #[test]
 fn a_half_closed_client_is_answered_and_a_stalled_message_is_dropped() {
     let stall = Duration::from_millis(300);
-    let server =
-        Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), stall, ..ServeOptions::default() });
+    let server = Server::start(ServeOptions { stall, ..in_mm() });
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     client.send_cloud(cloud.clone()).unwrap();
@@ -246,8 +246,7 @@ fn a_half_closed_client_is_answered_and_a_stalled_message_is_dropped() {
 #[test]
 fn a_refused_cloud_is_answered_whatever_the_outputs() {
     let outputs = Outputs::parse("targets").unwrap();
-    let server =
-        Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), outputs, ..ServeOptions::default() });
+    let server = Server::start(ServeOptions { outputs, ..in_mm() });
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     let mut bad = cloud.clone();
@@ -267,7 +266,7 @@ fn a_refused_cloud_is_answered_whatever_the_outputs() {
 /// Every answer to a cloud, its error status included, carries the cloud's header timestamp.
 #[test]
 fn answers_carry_the_timestamp_of_the_cloud_they_answer() {
-    let server = Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), ..ServeOptions::default() });
+    let server = Server::start(in_mm());
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     let stamped = |points: Vec<[f32; 3]>, stamp: u64| {
@@ -294,12 +293,7 @@ fn each_client_s_stream_is_recorded_as_it_goes() {
     let dir = tempfile::tempdir().unwrap();
     let record = Some(dir.path().join("record"));
     let frame = Some(mesh::io::Frame::Ras);
-    let server = Server::start(ServeOptions {
-        coordinates: LengthUnit::Millimetre.into(),
-        frame,
-        record,
-        ..ServeOptions::default()
-    });
+    let server = Server::start(ServeOptions { frame, record, ..in_mm() });
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     client.send_cloud(cloud.clone()).unwrap();
@@ -345,8 +339,7 @@ fn each_client_s_stream_is_recorded_as_it_goes() {
 #[test]
 fn clouds_a_newer_one_replaced_are_counted() {
     let outputs = Outputs::parse("status").unwrap();
-    let server =
-        Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), outputs, ..ServeOptions::default() });
+    let server = Server::start(ServeOptions { outputs, ..in_mm() });
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     const SENT: u64 = 6;
@@ -370,8 +363,7 @@ fn clouds_a_newer_one_replaced_are_counted() {
 #[test]
 fn a_reset_has_the_next_cloud_start_from_rest() {
     let outputs = Outputs::parse("targets,status").unwrap();
-    let server =
-        Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), outputs, ..ServeOptions::default() });
+    let server = Server::start(ServeOptions { outputs, ..in_mm() });
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     let frame = |client: &mut augsim_live::client::Client| {
@@ -425,8 +417,7 @@ fn clouds_in_another_frame_are_answered_in_theirs() {
 /// back under the plain names.
 #[test]
 fn an_implausible_result_is_answered_under_names_that_say_so() {
-    let options = ServeOptions { coordinates: LengthUnit::Millimetre.into(), ..ServeOptions::default() };
-    let server = Server::start_with(options, with_tumour);
+    let server = Server::start_with(in_mm(), with_tumour);
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     client.send_cloud(cloud.iter().map(|p| [-p[0], -p[1], p[2]]).collect()).unwrap();
@@ -448,10 +439,7 @@ fn an_implausible_result_is_answered_under_names_that_say_so() {
 /// target is.
 #[test]
 fn a_structure_is_answered_as_a_polydata_of_its_name() {
-    let server = Server::start_with(
-        ServeOptions { coordinates: LengthUnit::Millimetre.into(), ..ServeOptions::default() },
-        with_tumour,
-    );
+    let server = Server::start_with(in_mm(), with_tumour);
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     client.send_cloud(cloud).unwrap();
@@ -581,11 +569,7 @@ impl augsim_live::Identification for Counting {
 #[test]
 fn a_refused_step_keeps_the_identification_s_clock() {
     let factory: Arc<augsim_live::IdentificationFactory> = Arc::new(|| Ok(Box::new(Counting::default())));
-    let server = Server::start(ServeOptions {
-        identification: Some(factory),
-        coordinates: LengthUnit::Millimetre.into(),
-        ..ServeOptions::default()
-    });
+    let server = Server::start(ServeOptions { identification: Some(factory), ..in_mm() });
     let mut client = connect(server.port);
     client.send_points("features", &[[0.0; 3]; 2]).unwrap();
     client.send_points("features", &[[0.0; 3]; 1]).unwrap();
@@ -610,11 +594,7 @@ fn a_refused_step_keeps_the_identification_s_clock() {
 #[test]
 fn features_step_the_identification_in_order_with_a_bounded_backlog() {
     let factory: Arc<augsim_live::IdentificationFactory> = Arc::new(|| Ok(Box::new(SlowMean)));
-    let server = Server::start(ServeOptions {
-        identification: Some(factory),
-        coordinates: LengthUnit::Millimetre.into(),
-        ..ServeOptions::default()
-    });
+    let server = Server::start(ServeOptions { identification: Some(factory), ..in_mm() });
     let mut client = connect(server.port);
     let burst = 3 * augsim_live::MAX_PENDING_STEPS;
     for k in 0..burst {
@@ -658,7 +638,7 @@ fn features_step_the_identification_in_order_with_a_bounded_backlog() {
     assert_eq!(client.until_status().unwrap().status["frame"], 1);
     // A server without identification answers features with an error.
     server.stop();
-    let server = Server::start(ServeOptions { coordinates: LengthUnit::Millimetre.into(), ..ServeOptions::default() });
+    let server = Server::start(in_mm());
     let mut client = connect(server.port);
     client.send_points("features", &[[0.0; 3]; 2]).unwrap();
     match client.receive().unwrap() {

@@ -415,9 +415,9 @@ impl Registration {
             },
         };
         let iterations = count(iterations, "iterations")?;
-        if let Some(budget) = time_budget_ms.filter(|b| !(*b > 0.0 && b.is_finite())) {
-            return Err(PyValueError::new_err(format!("time_budget_ms = {budget} must be a positive number of ms")));
-        }
+        // The loop's own check of the budget, raised as a ValueError (as for `iterations`).
+        let budget = register::RegistrationOptions { time_budget_ms, ..Default::default() };
+        budget.validate().map_err(|e| PyValueError::new_err(e.to_string()))?;
         let units: Option<LengthUnit> =
             units.map(str::parse).transpose().map_err(|e| PyValueError::new_err(format!("units: {e}")))?;
         let frame: Option<Frame> =

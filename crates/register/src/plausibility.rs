@@ -190,8 +190,8 @@ fn mean_distance(targets: &[Point], truth: &[Point], negate: bool, scale: f64) -
 /// frame or unit.
 fn truth_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option<String> {
     // Each reading: x and y negated or not, a scale, and what it says.
-    let mean_distance = |negate: bool, scale: f64| mean_distance(targets, truth, negate, scale);
-    let given = mean_distance(false, 1.0);
+    let read = |negate: bool, scale: f64| mean_distance(targets, truth, negate, scale);
+    let given = read(false, 1.0);
     let frame = "is it in RAS where the targets are in LPS, or the reverse? Give its frame (a file that names it, or \
                  --frame)";
     let unit = |m: UnitMistake| {
@@ -206,7 +206,7 @@ fn truth_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option<Str
     let readings = std::iter::once(("with x and y negated".to_string(), true, 1.0, frame.to_string()))
         .chain(UnitMistake::COMMON.map(unit));
     let (how, other, question) = readings
-        .map(|(how, negate, scale, question)| (how, mean_distance(negate, scale), question))
+        .map(|(how, negate, scale, question)| (how, read(negate, scale), question))
         .min_by(|a, b| a.1.total_cmp(&b.1))?;
     (given > TRUTH_OFF * organ.extent() && other <= given / 3.0).then(|| {
         format!(
