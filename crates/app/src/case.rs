@@ -19,8 +19,9 @@ use register::{
 use scenario::registration::{CameraSpec, MethodKind, Misalignment};
 use scenario::{CaseScenario, DatasetScenario, Fixed, MeshSource, StaticScenario};
 
+use crate::models::ScenarioSource;
 use crate::models::{fem_model, hybrid_options, network_model, Network};
-use crate::registration::{LearnedWay, MethodSpec, RegistrationSpec, ScenarioSource, TargetsSpec};
+use crate::registration::{LearnedWay, MethodSpec, RegistrationSpec, TargetsSpec};
 use crate::simulate::{simulate_cloud, CameraModel};
 
 /// Tetrahedra of the ground-truth phantom of the built-in case.

@@ -11,7 +11,8 @@
 //!   clouds as `.npy`, `.ply` and model files) in its working frame (RAS or LPS) and unit.
 //! - [`meshing`]: an organ's volume mesh from its surface, a labelmap's label or the phantom.
 //! - [`prepare`]: a patient's organ from its segmented surface to a registration set-up (repair,
-//!   mesh, regions, scenarios, dataset, model, report), resumable.
+//!   mesh, regions, scenarios, dataset, model, report), resumable; [`setup`]: that set-up's
+//!   directory, its files as `prepare` writes them and a registration reads them.
 //! - [`case`], [`simulate`], [`picture`]: synthetic registration cases on the phantom (truth from
 //!   a finer mesh and another law, a simulated camera cloud), the comparison of methods,
 //!   side-view pictures; [`comparison`]: a comparison case run end to end (`register --demo`).
@@ -46,6 +47,7 @@ pub mod registration;
 pub mod sample_view;
 #[cfg(feature = "live")]
 pub mod serving;
+pub mod setup;
 pub mod simulate;
 pub mod solve;
 pub mod training;

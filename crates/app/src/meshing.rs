@@ -10,7 +10,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use mesh::io::{Field, Frame};
 use mesh::isosurface::{ExtractOptions, ExtractReport};
 use mesh::labelmap::{is_labelmap, read_labelmap_surface, unreadable_segmentation, LABELMAP_FORMATS};
-use mesh::length::{mm, organ_units, LengthUnit, UnitOrAuto};
+use mesh::length::{mm, organ_units, Length, LengthUnit, UnitOrAuto};
 use mesh::phantom::PhantomSpec;
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
 use mesh::repair::{detect_unit, largest_extent, RepairOptions, ORGAN_EXTENT_M};
@@ -25,9 +25,9 @@ pub struct MeshOptions {
     pub surface: Option<PathBuf>,
     /// The labelmap's label: a number or a segment name (needed when it holds several).
     pub label: Option<String>,
-    /// Scale the surface so that its largest extent is this length (m), centred at the origin;
+    /// Scale the surface so that its largest extent is this length, centred at the origin;
     /// overrides `units`.
-    pub length: Option<f64>,
+    pub length: Option<Length>,
     /// The unit of the surface's coordinates (`None`: told from the organ's size); the surface is
     /// scaled to metres about the origin (its frame is kept).
     pub units: UnitOrAuto,
@@ -35,8 +35,8 @@ pub struct MeshOptions {
     pub repair: bool,
     /// Target number of tetrahedra.
     pub tets: usize,
-    /// Make an immersed hex grid with this cell size (m) instead of tetrahedra.
-    pub immersed: Option<f64>,
+    /// Make an immersed hex grid with this cell size instead of tetrahedra.
+    pub immersed: Option<Length>,
 }
 
 /// A volume mesh and how it was made.
@@ -79,7 +79,7 @@ pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
     let start = std::time::Instant::now();
     let mut notes = Vec::new();
     let mut coverage = None;
-    let (mesh, reference_volume, frame) = match (&options.surface, options.immersed) {
+    let (mesh, reference_volume, frame) = match (&options.surface, options.immersed.map(Length::in_metres)) {
         (None, None) => {
             let spec = PhantomSpec::default();
             (spec.mesh(options.tets)?, Some(spec.volume()), None)
@@ -247,7 +247,7 @@ fn organ_surface(
     }
     match (options.length, unit) {
         (Some(l), _) => {
-            surface.fit_to(l)?;
+            surface.fit_to(l.in_metres())?;
             Ok((surface, None))
         }
         (None, unit) => {
@@ -391,6 +391,7 @@ mod tests {
     use super::*;
 
     fn phantom(immersed: Option<f64>) -> MeshOptions {
+        let immersed = immersed.map(Length::metres);
         MeshOptions { surface: None, label: None, length: None, units: None, repair: true, tets: 800, immersed }
     }
 
@@ -539,7 +540,7 @@ mod tests {
         let (vtk, _) = mesh::io::read_mesh_with_fields(dir.path().join("out.vtk")).unwrap();
         assert_eq!(vtk.cells.len(), meshed.mesh.cells.len());
         // Fitted to a length, it is no longer where its input was: no frame named.
-        let fitted = mesh_organ(&MeshOptions { length: Some(0.1), ..options }).unwrap();
+        let fitted = mesh_organ(&MeshOptions { length: Some(Length::metres(0.1)), ..options }).unwrap();
         assert_eq!(fitted.frame, None);
         let obj = dir.path().join("out.obj");
         assert_eq!(write_mesh_file(&obj, &fitted.mesh, fitted.frame).unwrap(), "its boundary surface, in mm");

@@ -3,7 +3,7 @@
 //! scenario it was trained on ([`learned_registration`]): a U-Net's match-and-membrane loop, a
 //! reduced-order model's shape fit; and a hybrid's budgets ([`hybrid_options`]).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
 use learn::data::generate::Input;
@@ -14,8 +14,6 @@ use register::{
     ShapeOptions, TwoWay,
 };
 use scenario::{DatasetScenario, MeshSource, StaticScenario};
-
-use crate::registration::{ModelSource, ScenarioSource};
 
 /// The loop's settings of a hybrid whose learned model takes the first `network_iterations` of a
 /// frame from rest: `base` (the FEM's, which alone registers a stream's next frames) with
@@ -187,4 +185,51 @@ pub struct LearnedRegistration {
     pub deformer: Box<dyn Deformer + Send>,
     /// The loop's settings.
     pub options: RegistrationOptions,
+}
+
+/// A method's scenario: a file (or a built-in name), or a scenario already in memory.
+#[derive(Clone, Debug)]
+pub enum ScenarioSource<T> {
+    /// A scenario file, or a built-in scenario's name.
+    File(PathBuf),
+    /// A scenario in memory.
+    Given {
+        /// The scenario.
+        scenario: Box<T>,
+        /// The directory its relative paths start from.
+        dir: PathBuf,
+    },
+}
+
+impl<T: Clone> ScenarioSource<T> {
+    /// The scenario and its directory; a file is read with `load`.
+    pub(crate) fn read(&self, load: impl Fn(&Path) -> scenario::Result<(T, PathBuf)>) -> Result<(T, PathBuf)> {
+        Ok(match self {
+            ScenarioSource::File(path) => load(path)?,
+            ScenarioSource::Given { scenario, dir } => (T::clone(scenario), dir.clone()),
+        })
+    }
+}
+
+/// A learned model: its file, or a model in memory (e.g. just trained).
+#[derive(Clone, Debug)]
+pub enum ModelSource {
+    /// A U-Net's or a reduced-order model's directory, or its model.json.
+    File(PathBuf),
+    /// A model in memory.
+    Given(Model),
+}
+
+impl ModelSource {
+    /// The model, and its kind and file in words.
+    pub(crate) fn load(&self) -> Result<(Model, String)> {
+        Ok(match self {
+            ModelSource::File(path) => {
+                let model = Model::load(path)?;
+                let words = format!("{} {}", model.method().display_name(), path.display());
+                (model, words)
+            }
+            ModelSource::Given(model) => (model.clone(), model.method().display_name().to_string()),
+        })
+    }
 }

@@ -20,7 +20,8 @@ use mesh::length::{mm, LengthUnit};
 use mesh::{Mesh, Point};
 use register::cloud::read_frames;
 use register::{
-    in_cloud_frame, FrameOutcome, Organ, Registration, RigidResult, RigidTransform, Summary, Tracked, WarpField,
+    in_cloud_frame, FrameOutcome, FrameSummary, Organ, Registration, RigidResult, RigidTransform, Summary, Tracked,
+    WarpField,
 };
 use scenario::registration::slug;
 use serde::Serialize;
@@ -28,7 +29,7 @@ use serde::Serialize;
 use crate::case::{Compared, Registered, SyntheticCase};
 use crate::picture::{frame_notes, RegisteredFrame};
 use crate::points::PointInput;
-use crate::printout::{frame_line, rigid_lines, run_lines, setup_lines};
+use crate::printout::{comparison_rows, frame_line, rigid_lines, run_lines, setup_lines};
 use crate::registration::RegistrationSpec;
 
 /// The folder of a run's results: `out` when the user names one, refused when it already holds
@@ -112,54 +113,6 @@ pub fn tidy_failed_run<T>(dir: &Path, own: bool, result: Result<T>) -> Result<T>
         let _ = std::fs::remove_dir(dir);
     }
     result
-}
-
-/// One frame's line of summary.json.
-#[derive(Clone, Debug, Serialize)]
-pub struct FrameSummary {
-    /// The cloud's file (or name).
-    pub cloud: String,
-    /// Points in the cloud.
-    pub points: usize,
-    /// Points matched (outliers rejected) in the last iteration.
-    pub inliers: usize,
-    /// Match-and-deform iterations.
-    pub iterations: usize,
-    /// Mean distance from the matched points to the registered surface (mm).
-    pub surface_residual_mm: f64,
-    /// Wall time (ms).
-    pub time_ms: f64,
-    /// Why the result may not be believed; empty when plausible.
-    pub warnings: Vec<String>,
-    /// Mean TRE (mm), when the truth is known.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub tre_mean_mm: Option<f64>,
-    /// Largest TRE (mm), when the truth is known.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub tre_max_mm: Option<f64>,
-    /// The predicted standard deviation σ of each target's error (mm), for a method that
-    /// predicts one.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub target_sigma_mm: Option<Vec<f64>>,
-}
-
-impl FrameSummary {
-    /// The line of the frame registered from `cloud`.
-    pub fn new(cloud: String, o: &FrameOutcome) -> FrameSummary {
-        let (r, tre) = (&o.registration, o.tre_mm());
-        FrameSummary {
-            cloud,
-            points: r.points,
-            inliers: r.inliers,
-            iterations: r.iterations,
-            surface_residual_mm: mm(r.surface_residual),
-            time_ms: mesh::stats::ms(r.time),
-            warnings: r.warnings.clone(),
-            tre_mean_mm: tre.map(|t| t.0),
-            tre_max_mm: tre.map(|t| t.1),
-            target_sigma_mm: o.target_std.as_ref().map(|s| s.iter().map(|&v| mm(v)).collect()),
-        }
-    }
 }
 
 /// summary.json: the run's figures and each frame's.
@@ -610,41 +563,6 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         .collect::<Result<_, _>>()?;
     write_atomic_bytes(&dir.join("summary.json"), serde_json::to_string_pretty(&summaries)?.as_bytes())?;
     Ok(())
-}
-
-/// The rows of a comparison: the baseline (not deforming, or the rigid alignment alone, when the
-/// methods aligned rigidly), then each method; each row its name, its figures (TRE mean and max,
-/// surface residual in mm, median and 95th-percentile frame time in ms, iterations) and its error
-/// (empty when it registered).
-pub fn comparison_rows(rows: &[Compared]) -> Vec<(String, [Option<f64>; 6], String)> {
-    let mut out = Vec::new();
-    if let Some(first) = rows.iter().find_map(|r| r.result.as_ref().ok()) {
-        let s = &first.summary;
-        let name = if first.outcomes[0].rigid.is_some() { "rigid only (ICP)" } else { "no deformation" };
-        out.push((
-            name.to_string(),
-            [s.no_deformation_tre_mean_mm, s.no_deformation_tre_max_mm, None, None, None, None],
-            String::new(),
-        ));
-    }
-    for r in rows {
-        out.push(match &r.result {
-            Ok(reg) => {
-                let s = &reg.summary;
-                let values = [
-                    s.tre_mean_mm,
-                    s.tre_max_mm,
-                    Some(s.surface_residual_mm),
-                    Some(s.time_median_ms),
-                    Some(s.time_p95_ms),
-                    Some(s.iterations),
-                ];
-                (r.method.clone(), values, String::new())
-            }
-            Err(e) => (r.method.clone(), [None; 6], e.to_string()),
-        });
-    }
-    out
 }
 
 #[cfg(test)]

@@ -6,11 +6,10 @@ use std::path::Path;
 use fem::material::kpa;
 use mesh::length::{mm, LengthUnit};
 use mesh::stats::ms;
-use register::{FrameOutcome, Registration, RigidResult, RigidTransform, Summary};
+use register::{FrameOutcome, FrameSummary, Registration, RigidResult, RigidTransform, Summary};
 use scenario::CaseScenario;
 
 use crate::case::{Compared, SyntheticCase};
-use crate::output::{comparison_rows, FrameSummary};
 
 /// The lines that open a registration's run or server: its method, its organ (mesh, surface,
 /// number of targets), `space` (what is done with the coordinates given), then the set-up's
@@ -123,10 +122,10 @@ pub fn case_lines(scenario: &CaseScenario) -> Vec<String> {
             c.seed
         ),
     ];
-    if m.rotation_deg != 0.0 || m.translation_mm != 0.0 {
+    if m.rotation_deg != 0.0 || m.translation.in_metres() != 0.0 {
         lines.push(format!(
-            "misaligned camera frame: {} deg about {:?}, then {} mm along {:?}",
-            m.rotation_deg, m.axis, m.translation_mm, m.direction
+            "misaligned camera frame: {} deg about {:?}, then {} along {:?}",
+            m.rotation_deg, m.axis, m.translation, m.direction
         ));
     }
     lines
@@ -173,4 +172,39 @@ pub fn comparison_table(rows: &[Compared]) -> Vec<String> {
         });
     }
     lines
+}
+
+/// The rows of a comparison: the baseline (not deforming, or the rigid alignment alone, when the
+/// methods aligned rigidly), then each method; each row its name, its figures (TRE mean and max,
+/// surface residual in mm, median and 95th-percentile frame time in ms, iterations) and its error
+/// (empty when it registered).
+pub fn comparison_rows(rows: &[Compared]) -> Vec<(String, [Option<f64>; 6], String)> {
+    let mut out = Vec::new();
+    if let Some(first) = rows.iter().find_map(|r| r.result.as_ref().ok()) {
+        let s = &first.summary;
+        let name = if first.outcomes[0].rigid.is_some() { "rigid only (ICP)" } else { "no deformation" };
+        out.push((
+            name.to_string(),
+            [s.no_deformation_tre_mean_mm, s.no_deformation_tre_max_mm, None, None, None, None],
+            String::new(),
+        ));
+    }
+    for r in rows {
+        out.push(match &r.result {
+            Ok(reg) => {
+                let s = &reg.summary;
+                let values = [
+                    s.tre_mean_mm,
+                    s.tre_max_mm,
+                    Some(s.surface_residual_mm),
+                    Some(s.time_median_ms),
+                    Some(s.time_p95_ms),
+                    Some(s.iterations),
+                ];
+                (r.method.clone(), values, String::new())
+            }
+            Err(e) => (r.method.clone(), [None; 6], e.to_string()),
+        });
+    }
+    out
 }

@@ -21,7 +21,12 @@ use scenario::{DatasetScenario, MeshSource, StaticScenario};
 
 use crate::meshing::OrganInput;
 use crate::models::{
-    fem_model, hybrid_options, learned_registration, network_model, shape_fit, LearnedRegistration, Network,
+    fem_model, hybrid_options, learned_registration, network_model, shape_fit, LearnedRegistration, ModelSource,
+    Network, ScenarioSource,
+};
+use crate::setup::{
+    read_organ_surface, steps_before_validation, Patient, PatientMethod, PATIENT_FILE, SET_UP_FRAME, STRUCTURES_UNIT,
+    SURFACE_FILE,
 };
 
 /// What deforms the organ.
@@ -98,53 +103,6 @@ impl MethodSpec {
             scenario: ScenarioSource::File(scenario.into()),
             way: LearnedWay::AfterShapeFit(ModelSource::File(basis.into())),
         }
-    }
-}
-
-/// A method's scenario: a file (or a built-in name), or a scenario already in memory.
-#[derive(Clone, Debug)]
-pub enum ScenarioSource<T> {
-    /// A scenario file, or a built-in scenario's name.
-    File(PathBuf),
-    /// A scenario in memory.
-    Given {
-        /// The scenario.
-        scenario: Box<T>,
-        /// The directory its relative paths start from.
-        dir: PathBuf,
-    },
-}
-
-impl<T: Clone> ScenarioSource<T> {
-    /// The scenario and its directory; a file is read with `load`.
-    fn read(&self, load: impl Fn(&Path) -> scenario::Result<(T, PathBuf)>) -> Result<(T, PathBuf)> {
-        Ok(match self {
-            ScenarioSource::File(path) => load(path)?,
-            ScenarioSource::Given { scenario, dir } => (T::clone(scenario), dir.clone()),
-        })
-    }
-}
-
-/// A learned model: its file, or a model in memory (e.g. just trained).
-#[derive(Clone, Debug)]
-pub enum ModelSource {
-    /// A U-Net's or a reduced-order model's directory, or its model.json.
-    File(PathBuf),
-    /// A model in memory.
-    Given(Model),
-}
-
-impl ModelSource {
-    /// The model, and its kind and file in words.
-    fn load(&self) -> Result<(Model, String)> {
-        Ok(match self {
-            ModelSource::File(path) => {
-                let model = Model::load(path)?;
-                let words = format!("{} {}", model.method().display_name(), path.display());
-                (model, words)
-            }
-            ModelSource::Given(model) => (model.clone(), model.method().display_name().to_string()),
-        })
     }
 }
 
@@ -654,7 +612,7 @@ impl RegistrationSpec {
             warnings.into_iter().for_each(|w| registration.warn(w));
         }
         if let Some(path) = &self.surface {
-            let surface = crate::prepare::read_organ_surface(path, registration.organ().mesh())?;
+            let surface = read_organ_surface(path, registration.organ().mesh())?;
             registration.set_surface(surface).with_context(|| format!("the organ's surface {}", path.display()))?;
         }
         Ok(registration)
@@ -710,107 +668,6 @@ impl RegistrationSpec {
     }
 }
 
-/// The file of a patient's registration set-up in the directory `augsim prepare` writes.
-pub const PATIENT_FILE: &str = "registration.toml";
-
-/// How a patient's organ is registered: with its learned model, its FEM, or both in turn.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum PatientMethod {
-    /// The learned model, on its dataset scenario.
-    #[default]
-    Learned,
-    /// The FEM of the static scenario.
-    Fem,
-    /// The learned model from rest (a reduced-order model's shape fit, on the FEM's mesh), then
-    /// the FEM from its estimate; the FEM alone on a stream's frames ([`MethodSpec::Hybrid`]).
-    Hybrid,
-}
-
-impl PatientMethod {
-    /// The method asked for on a command line: the FEM with `fem`, the learned model with
-    /// `learned`, the hybrid with `hybrid`, otherwise (`None`) the set-up's own.
-    pub fn asked(fem: bool, learned: bool, hybrid: bool) -> Option<PatientMethod> {
-        [(fem, PatientMethod::Fem), (learned, PatientMethod::Learned), (hybrid, PatientMethod::Hybrid)]
-            .into_iter()
-            .find_map(|(asked, method)| asked.then_some(method))
-    }
-
-    /// How the set-up file names it.
-    pub fn name(self) -> &'static str {
-        match self {
-            PatientMethod::Learned => "learned",
-            PatientMethod::Fem => "fem",
-            PatientMethod::Hybrid => "hybrid",
-        }
-    }
-}
-
-/// A patient's registration set-up ([`PATIENT_FILE`]): the method `augsim prepare` found the
-/// best on its validation, the learned model and its dataset scenario, the FEM alternative, the
-/// targets and their unit; paths relative to the file. `augsim prepare` writes it, its validation
-/// names the method, `--patient` reads it: all through this type.
-#[derive(Clone, Debug, serde::Deserialize, serde::Serialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct Patient {
-    #[serde(default)]
-    pub method: PatientMethod,
-    pub model: PathBuf,
-    pub scenario: PathBuf,
-    pub fem: PathBuf,
-    pub targets: PathBuf,
-    pub units: LengthUnit,
-    /// The unit of the files the set-up was prepared from (set-ups of older versions name none).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub input_units: Option<LengthUnit>,
-    /// The frame of the files the set-up was prepared from (set-ups of older versions, and those
-    /// prepared from files naming none, name none).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub input_frame: Option<Frame>,
-    /// Structures that move with the organ, surfaces in [`STRUCTURES_UNIT`] in the organ's frame.
-    #[serde(default)]
-    pub structures: Vec<PathBuf>,
-}
-
-/// The unit of a set-up's structure surfaces ([`Patient::structures`]).
-pub(crate) const STRUCTURES_UNIT: LengthUnit = LengthUnit::Millimetre;
-
-impl Patient {
-    /// The set-up of the patient directory `dir`.
-    pub(crate) fn read(dir: &Path) -> Result<Patient> {
-        let path = dir.join(PATIENT_FILE);
-        let text = std::fs::read_to_string(&path).with_context(|| {
-            format!("reading {} (is {} a directory made by augsim prepare?)", path.display(), dir.display())
-        })?;
-        toml::from_str(&text).map_err(|e| {
-            let newer =
-                if e.message().starts_with("unknown field") { " (prepared by a newer augsim? update it)" } else { "" };
-            anyhow::anyhow!("reading {}{newer}: {e}", path.display())
-        })
-    }
-
-    /// Writes the set-up into the patient directory `dir`, under comments that say what it holds.
-    pub(crate) fn write(&self, dir: &Path) -> Result<()> {
-        let works_in = match self.input_frame {
-            Some(_) => format!(" (the set-up works in {})", crate::prepare::SET_UP_FRAME),
-            None => " (no input named a frame)".into(),
-        };
-        let text = format!(
-            "# The registration set-up of this organ: `augsim register --patient DIR`, `augsim serve\n\
-             # --patient DIR`, `augsim.Registration(patient=DIR)`. Paths are relative to this file.\n\
-             # method: \"learned\", \"fem\" or \"hybrid\" (the learned model from rest, then the FEM), the one\n\
-             # that registered the validation's pushes the best.\n\
-             # input_units, input_frame: the unit and frame of the files it was prepared from, in which\n\
-             # points whose files name none are read and results given back{works_in}.\n\
-             # structures: surfaces that move with the organ ({}, the organ's frame).\n{}",
-            STRUCTURES_UNIT.symbol(),
-            toml::to_string(self)?
-        );
-        mesh::io::write_atomic_bytes(&dir.join(PATIENT_FILE), text.as_bytes())?;
-        Ok(())
-    }
-}
-
 impl RegistrationSpec {
     /// The registration set-up of the patient directory `dir` (written by `augsim prepare`): the
     /// method it names, or `method` when given; its targets; the unit and frame of its inputs for
@@ -822,7 +679,7 @@ impl RegistrationSpec {
         rigid: bool,
     ) -> Result<RegistrationSpec> {
         let p = Patient::read(dir)?;
-        if let (None, Some(done)) = (method, crate::prepare::steps_before_validation(dir)?) {
+        if let (None, Some(done)) = (method, steps_before_validation(dir)?) {
             anyhow::bail!(
                 "{} is not prepared to the end: its validation, which chooses the method {PATIENT_FILE} names, has not \
                  run (steps done: {}); run the same `augsim prepare` again to resume it, or name the method (the \
@@ -848,7 +705,7 @@ impl RegistrationSpec {
             given_units: p.input_units.unwrap_or(LengthUnit::DEFAULT),
             // Where the inputs were in the set-up's own frame, none: clouds are then in the organ's
             // frame, and a stream in OpenIGTLink's RAS.
-            given_frame: p.input_frame.filter(|&f| f != crate::prepare::SET_UP_FRAME),
+            given_frame: p.input_frame.filter(|&f| f != SET_UP_FRAME),
             iterations,
             rigid,
             time_budget_ms: None,
@@ -858,7 +715,7 @@ impl RegistrationSpec {
                 .iter()
                 .map(|path| StructureFile { path: dir.join(path), unit: Some(STRUCTURES_UNIT) })
                 .collect(),
-            surface: Some(dir.join(crate::prepare::SURFACE_FILE)).filter(|path| path.is_file()),
+            surface: Some(dir.join(SURFACE_FILE)).filter(|path| path.is_file()),
         })
     }
 }
@@ -890,7 +747,8 @@ mod tests {
     /// own method (registration.toml names one all the same), not for a method named.
     #[test]
     fn a_set_up_not_validated_is_refused_its_own_method() {
-        use crate::prepare::{PrepareOptions, PrepareState, StepRecord, STATE_FILE};
+        use crate::prepare::{PrepareOptions, PrepareState, StepRecord};
+        use crate::setup::STATE_FILE;
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
         let set_up = "method = \"learned\"\nmodel = \"model\"\nscenario = \"dataset.toml\"\nfem = \"static.toml\"\n\

@@ -79,7 +79,7 @@ fn a_scenario_builds_the_case_exactly_as_its_definition_says() {
     // A misalignment moves cloud and truth, not the rest targets.
     let mut moved = s.clone();
     moved.misalignment.rotation_deg = 5.0;
-    moved.misalignment.translation_mm = 10.0;
+    moved.misalignment.translation = "10 mm".parse().unwrap();
     let off = synthetic_case(&moved).unwrap();
     let plain = synthetic_case(&s).unwrap();
     assert_eq!(off.targets, plain.targets);
@@ -160,8 +160,10 @@ fn bad_case_scenarios_are_clear_errors() {
     assert!(e.contains("registration"), "{e}");
     let e = parse(&edit("tets = 3000", "tets = 10"));
     assert!(e.contains("at least 100"), "{e}");
-    let e = parse(&edit("translation_mm = 0.0", "translation_mm = nan"));
-    assert!(e.contains("misalignment.translation_mm = NaN must be finite"), "{e}");
+    let e = parse(&edit("translation = 0.0", "translation = nan"));
+    assert!(e.contains("the length NaN is not finite"), "{e}");
+    let e = parse(&edit("translation = 0.0", "translation = \"10\""));
+    assert!(e.contains("'10' has no unit"), "{e}");
     let e = CaseScenario::load(Path::new("no/such/case.toml")).unwrap_err().to_string();
     assert!(e.contains("no/such/case.toml"), "{e}");
     // A rigid table with defaults, and a moved push patch, are accepted.

@@ -7,8 +7,9 @@
 
 use std::path::{Path, PathBuf};
 
-use augsim_app::prepare::{prepare, CameraAt, PrepareOptions, PrepareProgress, STATE_FILE, STEPS};
-use augsim_app::registration::{PatientMethod, RegistrationSpec};
+use augsim_app::prepare::{prepare, CameraAt, PrepareOptions, PrepareProgress, STEPS};
+use augsim_app::registration::RegistrationSpec;
+use augsim_app::setup::{PatientMethod, STATE_FILE};
 use mesh::io::points::{read_points, write_points, LabelledPoints};
 use mesh::io::Frame;
 use mesh::length::LengthUnit;

@@ -142,7 +142,7 @@ fn a_method_s_own_iteration_cap_replaces_the_comparison_s() {
 /// still register.
 #[test]
 fn a_failing_method_is_reported_and_the_others_still_register() {
-    use augsim_app::registration::ScenarioSource;
+    use augsim_app::models::ScenarioSource;
     let path = std::path::PathBuf::from("register_case_test");
     let scenario = scenario::CaseScenario::load(&path).unwrap();
     let case = augsim_app::case::synthetic_case(&scenario).unwrap();

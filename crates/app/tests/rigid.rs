@@ -129,7 +129,7 @@ fn rigid_prealignment_brings_a_misaligned_case_back_to_the_aligned_tre() {
     eprintln!("aligned: TRE {tre:.2} mm (no deformation {rest:.2} mm)");
     let mut misaligned = aligned.clone();
     misaligned.misalignment.rotation_deg = 5.0;
-    misaligned.misalignment.translation_mm = 10.0;
+    misaligned.misalignment.translation = "10 mm".parse().unwrap();
     let (tre_off, rest_off, _) = pipeline(&misaligned);
     eprintln!("misaligned 5° and 10 mm, no rigid step: TRE {tre_off:.2} mm (no deformation {rest_off:.2} mm)");
     misaligned.registration =

@@ -15,6 +15,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
+use mesh::length::Length;
 
 /// Finite elements, Kalman filtering and U-Net learning for soft organs.
 #[derive(Parser)]
@@ -45,9 +46,10 @@ enum Command {
         /// (a liver and the tumour labelled apart in it).
         #[arg(long, requires = "surface")]
         label: Option<String>,
-        /// Centre the surface and scale its largest extent to this length (m); overrides --units.
+        /// Centre the surface and scale its largest extent to this length, with its unit (20cm);
+        /// overrides --units.
         #[arg(long, requires = "surface")]
-        length: Option<f64>,
+        length: Option<Length>,
         /// Length unit of the surface's coordinates: mm, cm, m, um, or auto (told from the organ's size,
         /// 2 to 60 cm across; a labelmap's is the one its header names, else mm); the surface is
         /// scaled to metres about the origin, keeping its (e.g. CT scanner's) frame.
@@ -60,9 +62,9 @@ enum Command {
         /// Target number of tetrahedra.
         #[arg(long, default_value_t = 5000)]
         tets: usize,
-        /// Build an immersed-boundary H8 grid with this cell size (m) instead.
-        #[arg(long)]
-        immersed: Option<f64>,
+        /// Build an immersed-boundary H8 grid with this cell size, with its unit (5mm), instead.
+        #[arg(long, value_name = "CELL")]
+        immersed: Option<Length>,
         /// Output file (.vtu, .vtk or .msh, in m; .stl or .obj: the mesh's boundary surface in mm,
         /// naming the input's frame, as 3D Slicer reads it).
         #[arg(short, long, default_value = "out/mesh.vtu", value_parser = extension_of(&["vtu", "vtk", "msh", "stl", "obj"]))]

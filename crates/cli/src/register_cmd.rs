@@ -7,6 +7,7 @@ use anyhow::{Context, Result};
 use app::comparison::{run_comparison, LearnedModels};
 use app::output::{in_run_dir, register_files, REGISTER_RUNS};
 use app::registration::RegistrationChoice;
+use mesh::length::Length;
 use scenario::registration::CaseOverrides;
 use scenario::CaseScenario;
 
@@ -56,9 +57,9 @@ pub struct RegisterArgs {
     /// Misaligns the case's camera frame: rotation (degrees) about the case's axis...
     #[arg(long, requires = "comparison", allow_negative_numbers = true)]
     misalign_deg: Option<f64>,
-    /// ... and translation (mm) along its direction (try with and without --rigid).
-    #[arg(long, requires = "comparison", allow_negative_numbers = true)]
-    misalign_mm: Option<f64>,
+    /// ... and translation along its direction, with its unit (10mm; try with and without --rigid).
+    #[arg(long, requires = "comparison", allow_hyphen_values = true, value_name = "LENGTH")]
+    misalign_shift: Option<Length>,
 }
 
 /// The registration's arguments a comparison has no use for (its case makes the cloud, the truth,
@@ -91,7 +92,7 @@ fn comparison_case(args: &RegisterArgs) -> Result<CaseScenario> {
         force: args.force,
         frames: args.frames,
         misalign_deg: args.misalign_deg,
-        misalign_mm: args.misalign_mm,
+        misalign_shift: args.misalign_shift,
         iterations: args.registration.iterations,
         rigid: args.registration.rigid,
     };

@@ -93,8 +93,11 @@ fn a_broken_export_goes_through_the_volumetric_route() {
     assert!(text.contains("repair     enclosed volume: ") && text.contains(" mL ("), "{text}");
     let (ok, text) = augsim(&["mesh", obj.to_str().unwrap(), "--label", "5", "-o", out.to_str().unwrap()]);
     assert!(!ok && text.contains("--label 5 chooses a label of a labelmap"), "{text}");
+    // A length with no unit is not taken for metres.
+    let (ok, text) = augsim(&["mesh", obj.to_str().unwrap(), "--length", "200", "-o", out.to_str().unwrap()]);
+    assert!(!ok && text.contains("'200' has no unit: give it, e.g. 200mm or 200m"), "{text}");
     // The phantom has no surface to choose a label of, scale or leave unrepaired.
-    for option in [&["--label", "5"][..], &["--length", "0.1"], &["--no-repair"]] {
+    for option in [&["--label", "5"][..], &["--length", "10cm"], &["--no-repair"]] {
         let (ok, text) = augsim(&[&["mesh"][..], option, &["-o", out.to_str().unwrap()]].concat());
         assert!(!ok && text.contains("<SURFACE>"), "{option:?}: {text}");
     }

@@ -60,7 +60,7 @@ fn register_case_runs_the_test_sized_comparison_and_rigid_recovers_a_misalignmen
     }
 
     // 5° and 1 cm off: the deformable registration alone does not recover...
-    let misaligned = ["--misalign-deg", "5", "--misalign-mm", "10"];
+    let misaligned = ["--misalign-deg", "5", "--misalign-shift", "10mm"];
     let (off, text) = run_case(&dir.path().join("off"), &misaligned);
     assert!(text.contains("misaligned camera frame: 5 deg"), "{text}");
     // ... the rigid pre-alignment does (the rigid fit takes up part of the deformation: the

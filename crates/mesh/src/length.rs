@@ -130,6 +130,84 @@ impl From<LengthUnit> for String {
     }
 }
 
+/// A single length a user gives (a distance, a cell size, a shift), held in metres. On a command
+/// line it is written with its unit, `7mm`, `2.5 cm` or `0.2m` ([`Length::from_str`]: a number
+/// without one is refused, 0 aside, so that a distance in mm is never read as metres); in a
+/// scenario file also as a bare number, in metres as every length there.
+#[derive(Clone, Copy, Debug, Default, PartialEq, PartialOrd, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "LengthGiven", into = "f64")]
+pub struct Length(f64);
+
+impl Length {
+    /// The length of `metres` metres.
+    pub fn metres(metres: f64) -> Length {
+        Length(metres)
+    }
+
+    /// The length in metres.
+    pub fn in_metres(self) -> f64 {
+        self.0
+    }
+}
+
+impl fmt::Display for Length {
+    /// In millimetres, as reports give lengths: `7 mm`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} mm", crate::repair::number(mm(self.0)))
+    }
+}
+
+impl FromStr for Length {
+    type Err = String;
+
+    /// A finite number and its unit ([`LengthUnit::from_str`]), a space between them or not:
+    /// `7mm`, `2.5 cm`, `0.2m`; `0` alone.
+    fn from_str(given: &str) -> Result<Length, String> {
+        let given = given.trim();
+        let split = given.find(|c: char| c.is_alphabetic() || c == 'µ' || c == 'μ').unwrap_or(given.len());
+        let (number, unit) = (given[..split].trim(), given[split..].trim());
+        let value: f64 = number
+            .parse()
+            .ok()
+            .filter(|v: &f64| v.is_finite())
+            .ok_or_else(|| format!("'{given}' is not a length: a number and its unit ({CHOICES}), e.g. 7mm"))?;
+        match unit {
+            "" if value == 0.0 => Ok(Length(0.0)),
+            "" => Err(format!("'{given}' has no unit: give it, e.g. {given}mm or {given}m")),
+            unit => unit
+                .parse::<LengthUnit>()
+                .map(|u| Length(u.to_metres(value)))
+                .map_err(|e| format!("the unit of '{given}' {e}")),
+        }
+    }
+}
+
+/// A length as a scenario file holds it: a number in metres, or a text with its unit.
+#[derive(serde::Deserialize)]
+#[serde(untagged)]
+enum LengthGiven {
+    Metres(f64),
+    Text(String),
+}
+
+impl TryFrom<LengthGiven> for Length {
+    type Error = String;
+
+    fn try_from(given: LengthGiven) -> Result<Length, String> {
+        match given {
+            LengthGiven::Metres(m) if m.is_finite() => Ok(Length(m)),
+            LengthGiven::Metres(m) => Err(format!("the length {m} is not finite")),
+            LengthGiven::Text(text) => text.parse(),
+        }
+    }
+}
+
+impl From<Length> for f64 {
+    fn from(length: Length) -> f64 {
+        length.0
+    }
+}
+
 /// A unit given, or `None`: told from the organ's size (see [`crate::repair::detect_unit`]).
 pub type UnitOrAuto = Option<LengthUnit>;
 
@@ -274,5 +352,29 @@ mod tests {
         assert_eq!(serde_json::from_str::<S>(r#"{"units":"cm"}"#).unwrap().units, LengthUnit::Centimetre);
         let err = serde_json::from_str::<S>(r#"{"units":"ft"}"#).err().unwrap().to_string();
         assert!(err.contains("must be m, cm, mm or um"), "{err}");
+    }
+
+    #[test]
+    fn a_length_is_read_with_its_unit_and_refused_without_one() {
+        let read = |s: &str| s.parse::<Length>().map(Length::in_metres);
+        assert_eq!(
+            (read("7mm"), read("2.5 cm"), read(" 0.2m "), read("3 MM")),
+            (Ok(0.007), Ok(0.025), Ok(0.2), Ok(0.003))
+        );
+        assert_eq!((read("0"), read("-4mm")), (Ok(0.0), Ok(-0.004)));
+        let e = read("7").unwrap_err();
+        assert!(e.contains("'7' has no unit") && e.contains("7mm"), "{e}");
+        for bad in ["mm", "7 inches", "nan mm", "", "1e999 m"] {
+            assert!(read(bad).is_err(), "{bad} read as a length");
+        }
+        #[derive(serde::Deserialize)]
+        struct File {
+            a: Length,
+            b: Length,
+        }
+        let file: File = serde_json::from_str(r#"{"a": 0.007, "b": "7 mm"}"#).unwrap();
+        assert_eq!((file.a.in_metres(), file.b.in_metres()), (0.007, 0.007));
+        assert!(serde_json::from_str::<File>(r#"{"a": "7", "b": 0.0}"#).is_err());
+        assert_eq!(Length::metres(0.0123).to_string(), "12.3 mm");
     }
 }

@@ -65,7 +65,9 @@ pub use frame::{
     MAX_POINTS, WARM_START_ITERATION,
 };
 pub use organ::{Organ, Stencil};
-pub use registration::{target_errors, within_two_std, FrameOutcome, GivenBack, Registration, Summary, Tracked};
+pub use registration::{
+    target_errors, within_two_std, FrameOutcome, FrameSummary, GivenBack, Registration, Summary, Tracked,
+};
 pub use rigid::{in_cloud_frame, rigid_align, IcpMetric, RigidOptions, RigidResult, RigidTransform};
 pub use shape::{model_shape_space, ShapeDeformer, ShapeOptions, ShapeSpace};
 pub use structure::Structure;

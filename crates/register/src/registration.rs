@@ -443,6 +443,54 @@ pub fn within_two_std(errors: &[f64], std: &[f64]) -> Option<f64> {
         .then(|| errors.iter().zip(std).filter(|(e, s)| **e <= 2.0 * **s).count() as f64 / errors.len() as f64)
 }
 
+/// One frame's line of summary.json.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameSummary {
+    /// The cloud's file (or name).
+    pub cloud: String,
+    /// Points in the cloud.
+    pub points: usize,
+    /// Points matched (outliers rejected) in the last iteration.
+    pub inliers: usize,
+    /// Match-and-deform iterations.
+    pub iterations: usize,
+    /// Mean distance from the matched points to the registered surface (mm).
+    pub surface_residual_mm: f64,
+    /// Wall time (ms).
+    pub time_ms: f64,
+    /// Why the result may not be believed; empty when plausible.
+    pub warnings: Vec<String>,
+    /// Mean TRE (mm), when the truth is known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tre_mean_mm: Option<f64>,
+    /// Largest TRE (mm), when the truth is known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tre_max_mm: Option<f64>,
+    /// The predicted standard deviation σ of each target's error (mm), for a method that
+    /// predicts one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub target_sigma_mm: Option<Vec<f64>>,
+}
+
+impl FrameSummary {
+    /// The line of the frame registered from `cloud`.
+    pub fn new(cloud: String, o: &FrameOutcome) -> FrameSummary {
+        let (r, tre) = (&o.registration, o.tre_mm());
+        FrameSummary {
+            cloud,
+            points: r.points,
+            inliers: r.inliers,
+            iterations: r.iterations,
+            surface_residual_mm: mm(r.surface_residual),
+            time_ms: ms(r.time),
+            warnings: r.warnings.clone(),
+            tre_mean_mm: tre.map(|t| t.0),
+            tre_max_mm: tre.map(|t| t.1),
+            target_sigma_mm: o.target_std.as_ref().map(|s| s.iter().map(|&v| mm(v)).collect()),
+        }
+    }
+}
+
 /// The figures of a registration run, over all its frames.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Summary {

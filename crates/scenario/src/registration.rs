@@ -6,7 +6,7 @@
 use std::path::Path;
 
 use fem::Material;
-use mesh::length::from_mm;
+use mesh::length::Length;
 use mesh::phantom::SurfacePatch;
 use mesh::Point;
 use register::{RegistrationOptions, RigidTransform};
@@ -27,8 +27,8 @@ pub struct CaseOverrides {
     pub frames: Option<usize>,
     /// The cloud's misalignment: its rotation (degrees)...
     pub misalign_deg: Option<f64>,
-    /// ... and its translation (mm).
-    pub misalign_mm: Option<f64>,
+    /// ... and its translation.
+    pub misalign_shift: Option<Length>,
     /// Match-and-deform iterations from rest, for every method.
     pub iterations: Option<usize>,
     /// A rigid pre-alignment (the default one) where the case has none.
@@ -166,7 +166,7 @@ fn default_seed() -> u64 {
 
 /// A rigid misalignment of the camera's frame: cloud and truth are moved by
 /// `x ↦ R x + t`, R the rotation by `rotation_deg` about `axis` (through the origin of the
-/// model's frame, inside the phantom), t of length `translation_mm` along `direction`.
+/// model's frame, inside the phantom), t of length `translation` along `direction`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Misalignment {
@@ -174,15 +174,20 @@ pub struct Misalignment {
     pub rotation_deg: f64,
     /// Rotation axis.
     pub axis: Point,
-    /// Translation length (mm).
-    pub translation_mm: f64,
+    /// Translation length (in the file: metres, or a text with its unit, "10 mm").
+    pub translation: Length,
     /// Translation direction.
     pub direction: Point,
 }
 
 impl Default for Misalignment {
     fn default() -> Self {
-        Misalignment { rotation_deg: 0.0, axis: [1.0, 1.0, 1.0], translation_mm: 0.0, direction: [-1.0, 1.0, 0.0] }
+        Misalignment {
+            rotation_deg: 0.0,
+            axis: [1.0, 1.0, 1.0],
+            translation: Length::default(),
+            direction: [-1.0, 1.0, 0.0],
+        }
     }
 }
 
@@ -190,10 +195,11 @@ impl Misalignment {
     /// The model → camera transform.
     pub fn transform(&self) -> std::result::Result<RigidTransform, String> {
         let len = mesh::dot(self.direction, self.direction).sqrt();
-        if self.translation_mm != 0.0 && !(len > 0.0 && len.is_finite()) {
+        let translation = self.translation.in_metres();
+        if translation != 0.0 && !(len > 0.0 && len.is_finite()) {
             return Err(format!("misalignment direction {:?} must be non-zero and finite", self.direction));
         }
-        let shift = if self.translation_mm == 0.0 { 0.0 } else { from_mm(self.translation_mm) / len };
+        let shift = if translation == 0.0 { 0.0 } else { translation / len };
         RigidTransform::from_axis_angle(self.axis, self.rotation_deg.to_radians(), self.direction.map(|x| x * shift))
             .map_err(|e| e.to_string())
     }
@@ -287,7 +293,7 @@ impl CaseScenario {
         o.force.into_iter().for_each(|f| scenario.truth.force = f);
         o.frames.into_iter().for_each(|n| scenario.truth.frames = n);
         o.misalign_deg.into_iter().for_each(|d| scenario.misalignment.rotation_deg = d);
-        o.misalign_mm.into_iter().for_each(|m| scenario.misalignment.translation_mm = m);
+        o.misalign_shift.into_iter().for_each(|m| scenario.misalignment.translation = m);
         if let Some(iterations) = o.iterations {
             // Given beside the file, it holds for every method.
             scenario.registration.iterations = iterations;
@@ -340,7 +346,6 @@ impl CaseScenario {
         let values = [
             ("rotation_deg", m.rotation_deg.is_finite(), m.rotation_deg.to_string()),
             ("axis", finite(m.axis), format!("{:?}", m.axis)),
-            ("translation_mm", m.translation_mm.is_finite(), m.translation_mm.to_string()),
             ("direction", finite(m.direction), format!("{:?}", m.direction)),
         ];
         if let Some((name, _, value)) = values.iter().find(|(_, ok, _)| !ok) {
@@ -416,13 +421,13 @@ mod tests {
             force: Some(2.5),
             frames: Some(4),
             misalign_deg: Some(3.0),
-            misalign_mm: Some(7.0),
+            misalign_shift: Some(Length::metres(0.007)),
             iterations: Some(9),
             rigid: true,
         };
         let case = CaseScenario::with_overrides(None, &overrides).unwrap();
         assert_eq!((case.truth.force, case.truth.frames, case.registration.iterations), (2.5, 4, 9));
-        assert_eq!((case.misalignment.rotation_deg, case.misalignment.translation_mm), (3.0, 7.0));
+        assert_eq!((case.misalignment.rotation_deg, case.misalignment.translation.in_metres()), (3.0, 0.007));
         assert!(case.models.method.iter().all(|m| m.iterations == Some(9)));
         assert_eq!(case.registration.rigid, Some(register::RigidOptions::default()));
         assert_eq!(CaseScenario::with_overrides(None, &CaseOverrides::default()).unwrap(), CaseScenario::builtin());

@@ -53,7 +53,7 @@ use anyhow::{bail, ensure, Context, Result};
 use mesh::io::points::{read_points_csv, write_points, LabelledPoints};
 use mesh::io::{write_atomic_bytes, Frame};
 use mesh::labelmap::is_labelmap;
-use mesh::length::{mm, point_in_mm, LengthUnit, UnitOrAuto};
+use mesh::length::{mm, point_in_mm, Length, LengthUnit, UnitOrAuto};
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
 use mesh::repair::{detect_unit, RepairOptions};
 use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
@@ -65,7 +65,8 @@ use learn::LearnedModel;
 
 use crate::meshing::{coverage_warning, write_surface_in_mm, OrganInput};
 use crate::points::PointInput;
-use crate::registration::{read_structure, structure_name, Patient, PatientMethod, PATIENT_FILE};
+use crate::registration::{read_structure, structure_name};
+use crate::setup::{Patient, PatientMethod, PATIENT_FILE, SET_UP_FRAME, STATE_FILE, SURFACE_FILE};
 use crate::training::{train_unet, UNetRun, UNetStart};
 
 mod validation;
@@ -162,10 +163,10 @@ pub struct PrepareArgs {
     /// 3D Slicer's .fcsv or .mrk.json (in the frame and unit they name).
     #[arg(long, value_name = "LANDMARKS")]
     pub attach: PathBuf,
-    /// Surface nodes within this distance (mm) of a landmark are held [default: the distance that
-    /// holds 12 % of the organ's surface, as SOFA's liver scenario does]
-    #[arg(long)]
-    pub attach_mm: Option<f64>,
+    /// Surface nodes within this distance of a landmark are held, with its unit (25mm) [default:
+    /// the distance that holds 12 % of the organ's surface, as SOFA's liver scenario does]
+    #[arg(long, value_name = "DISTANCE")]
+    pub attach_distance: Option<Length>,
     /// The targets at rest (tumour, vessels): CSV with a header x, y, z, or .fcsv or .mrk.json
     /// (their labels are kept).
     #[arg(long, value_name = "TARGETS")]
@@ -217,7 +218,7 @@ impl PrepareArgs {
             units: self.units,
             frame: self.frame,
             structures: self.structures.clone(),
-            attach_distance: self.attach_mm.map(mesh::length::from_mm),
+            attach_distance: self.attach_distance.map(Length::in_metres),
             samples: self.samples,
             method: self.method,
             tets: self.tets,
@@ -275,25 +276,6 @@ impl PrepareState {
         self.steps.iter().map(|s| s.seconds).sum()
     }
 }
-
-/// The file that records a preparation.
-pub const STATE_FILE: &str = "prepare.json";
-
-/// The steps a preparation in `dir` has done, when its record is there and its validation, which
-/// chooses the method `registration.toml` names, is not among them (`None` otherwise).
-pub fn steps_before_validation(dir: &Path) -> Result<Option<Vec<String>>> {
-    let path = dir.join(STATE_FILE);
-    if !path.exists() {
-        return Ok(None);
-    }
-    let state: PrepareState = serde_json::from_str(&std::fs::read_to_string(&path)?)
-        .with_context(|| format!("reading {}", path.display()))?;
-    let done: Vec<String> = state.steps.into_iter().map(|s| s.name).collect();
-    Ok((!done.iter().any(|s| s == "validation")).then_some(done))
-}
-
-/// The organ's surface in a prepared directory: in millimetres, in the set-up's frame.
-pub const SURFACE_FILE: &str = "surface.stl";
 
 /// A structure's surface in the set-up (mm, the organ's frame), relative to its directory.
 fn structure_file(name: &str) -> String {
@@ -401,10 +383,6 @@ fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
         ..options.clone()
     })
 }
-
-/// The frame a set-up works in whenever its inputs name one: the same organ segmented in RAS or
-/// in LPS gives the same mesh, draws and model.
-pub const SET_UP_FRAME: Frame = Frame::Lps;
 
 /// The organ's inputs in the set-up's frame (see [`crate::points`]): the surface in its file's
 /// `unit` (it is repaired there, so that what the repair reports is in that unit), the points in
@@ -972,7 +950,7 @@ fn swing_warning(what: &str, motion: f64, organ: &Mesh) -> Option<String> {
         format!(
             "{what} move by {:.0} mm on average, {:.0} % of the organ's longest side ({:.0} mm): held near the landmarks only, it \
              swings rather than deforms under these pushes, and a registration is judged on that swing; hold it \
-             over more of its attachments (more landmarks, a larger --attach-mm) for the motions of surgery",
+             over more of its attachments (more landmarks, a larger --attach-distance) for the motions of surgery",
             mm(motion),
             100.0 * motion / longest,
             mm(longest)
@@ -1053,33 +1031,6 @@ fn regions_picture(
     Ok(scatter_plot(path, &spec, &sets, &[])?)
 }
 
-/// The organ's surface (`surface.stl` of a set-up: `path`) in metres, the unit it is in (mm, or m) told by the size of
-/// the organ's mesh (in m), which it must match within a factor of [`SURFACE_TO_MESH`] (the mesh
-/// may leave out parts thinner than its tetrahedra).
-pub(crate) fn read_organ_surface(path: &Path, organ: &Mesh) -> Result<TriSurface> {
-    let mut surface = mesh::io::read_surface(path)?;
-    let (extent, organ_extent) = (mesh::repair::largest_extent(&surface), longest_side(organ));
-    let off = |u: &LengthUnit| (extent * u.metres() / organ_extent).ln().abs();
-    let unit = LengthUnit::ALL
-        .into_iter()
-        .filter(|u| off(u) < SURFACE_TO_MESH.ln())
-        .min_by(|a, b| off(a).total_cmp(&off(b)))
-        .with_context(|| {
-            format!(
-                "{} (largest extent {extent:.4}, in any length unit) does not match organ.vtu ({} mm): remove {} and \
-                 prepare it again",
-                path.display(),
-                mm(organ_extent),
-                path.parent().unwrap_or(path).display()
-            )
-        })?;
-    surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(*p));
-    Ok(surface)
-}
-
-/// How far the extents of the organ's surface and mesh may differ (as a factor).
-const SURFACE_TO_MESH: f64 = 2.0;
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1133,7 +1084,7 @@ mod tests {
             line.starts_with("the targets move by 163 mm on average, 82 % of the organ's longest side (200 mm)"),
             "{line}"
         );
-        assert!(line.contains("--attach-mm"), "{line}");
+        assert!(line.contains("--attach-distance"), "{line}");
     }
 
     /// The shipped labelmaps of the liver phantom (its origin at (−80, 30, −140) mm in RAS).
@@ -1312,27 +1263,5 @@ mod tests {
             error.starts_with("after the warning") && error.contains("in m the organ is 6483 mm across"),
             "{error}"
         );
-    }
-
-    #[test]
-    fn the_organ_s_surface_is_read_back_in_metres_from_either_unit() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join(SURFACE_FILE);
-        let organ = mesh::box_tet([0.0; 3], [0.1, 0.05, 0.04], [4, 2, 2]).unwrap();
-        let surface = mesh::boundary_surface(&organ).compacted();
-        crate::meshing::write_surface_in_mm(&path, &surface, None).unwrap();
-        let read = read_organ_surface(&path, &organ).unwrap();
-        let off = |s: &mesh::TriSurface| {
-            s.vertices.iter().zip(&surface.vertices).map(|(a, b)| mesh::distance(*a, *b)).fold(0.0, f64::max)
-        };
-        assert!(off(&read) < 1e-8, "read back {} m off (STL holds f32)", off(&read));
-        mesh::io::write_surface(&path, &surface).unwrap();
-        assert!(off(&read_organ_surface(&path, &organ).unwrap()) < 1e-8, "in metres");
-        // A mesh that left out a thin part of its surface (30 % of its length) still matches it.
-        let shorter = mesh::box_tet([0.0; 3], [0.07, 0.05, 0.04], [4, 2, 2]).unwrap();
-        assert!(off(&read_organ_surface(&path, &shorter).unwrap()) < 1e-8, "a mesh 30 % shorter");
-        let thrice = mesh::box_tet([0.0; 3], [0.3, 0.15, 0.12], [4, 2, 2]).unwrap();
-        let refused = read_organ_surface(&path, &thrice).unwrap_err().to_string();
-        assert!(refused.contains("does not match organ.vtu (300 mm)"), "{refused}");
     }
 }

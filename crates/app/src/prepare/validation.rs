@@ -12,9 +12,10 @@ use mesh::length::mm;
 use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
 use mesh::{Camera, Mesh, Near, Point};
 
-use super::{across_sight, hold_distance, swing_warning, tool_radius, PrepareOptions, SURFACE_FILE};
+use super::{across_sight, hold_distance, swing_warning, tool_radius, PrepareOptions};
 use crate::picture::{frame_notes, RegisteredFrame};
-use crate::registration::{Patient, PatientMethod, RegistrationSpec, PATIENT_FILE};
+use crate::registration::RegistrationSpec;
+use crate::setup::{read_organ_surface, Patient, PatientMethod, PATIENT_FILE, SURFACE_FILE};
 
 /// Tool pushes of the validation: where along what the camera sees (its spread across the line of
 /// sight, as a fraction) and the force (N).
@@ -456,7 +457,7 @@ pub(super) fn validation_step(
     progress: &dyn learn::Progress,
 ) -> Result<Vec<String>> {
     let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
-    let surface = super::read_organ_surface(&dir.join(SURFACE_FILE), &organ)?;
+    let surface = read_organ_surface(&dir.join(SURFACE_FILE), &organ)?;
     let camera = super::read_camera(dir)?;
     let landmarks = read_points_csv(&dir.join("attach.csv"))?;
     let targets = read_points_csv(&dir.join("targets.csv"))?;
