@@ -209,6 +209,15 @@ impl Solved {
                 ms(t.solve)
             ),
         ];
+        let residual = sol.residuals.last().copied().unwrap_or(0.0);
+        if residual > scenario.solver.rtol {
+            lines.push(format!(
+                "warning    the solve ended at a relative residual of {residual:.2e}, above rtol = {:.0e}: it was taken \
+                 after a last increment under utol = {:.0e} of the displacement (the residual may fall no further); \
+                 the loads' balance is in the reaction line; a smaller utol asks for more",
+                scenario.solver.rtol, scenario.solver.utol
+            ));
+        }
         let loaded = |n: usize| loaded(p, n);
         let moved = p.dirichlet.values().any(|d| *d != [0.0; 3]);
         match sol.snapped_from {
@@ -248,6 +257,7 @@ impl Solved {
         if let Some(line) = volume_change_line(geo, p, &sol.u)? {
             lines.push(line);
         }
+        lines.extend(beyond_tissue_lines(geo, p, &sol.u)?);
         if p.material.law == Law::Svk {
             if let (over @ 1.., Some((cell, stretch))) = post::over_compressed_cells(geo, p.material.law, &sol.u)? {
                 lines.push(format!(
@@ -315,6 +325,48 @@ fn volume_change_line(geometry: &ElementGeometry, p: &fem::Problem, u: &[f64]) -
         p.material.poisson,
         p.material.law.display_name(),
     )))
+}
+
+/// The principal stretch past which (or under whose inverse) a cell is strained beyond what soft
+/// tissue bears (a liver tears at about 1.5): the solve warns of a load out of range, or in the
+/// wrong unit.
+const TISSUE_STRETCH: f64 = 3.0;
+
+/// The warnings of a solution far beyond soft tissue's range, whatever the law found: cells
+/// stretched past [`TISSUE_STRETCH`] or compressed under its inverse, and a body moved by more
+/// than its own size (a nearly incompressible Neo-Hookean liver under 50 N on F-bar elements: 1.7
+/// m on a 20 cm organ, a cell stretched 54 times, with no limit point to tell).
+fn beyond_tissue_lines(geometry: &ElementGeometry, p: &fem::Problem, u: &[f64]) -> Result<Vec<String>> {
+    let mut lines = Vec::new();
+    let stretches = post::principal_stretches(geometry, p.material.law, u)?;
+    let beyond = |&(least, most): &(f64, f64)| most > TISSUE_STRETCH || least < 1.0 / TISSUE_STRETCH;
+    let count = stretches.iter().filter(|s| beyond(s)).count();
+    let extreme = |(least, most): (f64, f64)| most.max(1.0 / least.max(f64::MIN_POSITIVE));
+    if let Some((cell, &worst)) =
+        stretches.iter().enumerate().filter(|(_, s)| beyond(s)).max_by(|a, b| extreme(*a.1).total_cmp(&extreme(*b.1)))
+    {
+        let least = stretches.iter().map(|s| s.0).fold(f64::INFINITY, f64::min);
+        let most = stretches.iter().map(|s| s.1).fold(0.0, f64::max);
+        lines.push(format!(
+            "warning    {count} of {} cells are stretched past {TISSUE_STRETCH} times their length or compressed under \
+             1/{TISSUE_STRETCH} (principal stretches from {least:.3} to {most:.3}, the farthest in cell {}: {:.3} to \
+             {:.3}), far beyond what soft tissue bears: is the load right (N, Pa; its unit, its size)?",
+            p.mesh.cells.len(),
+            p.mesh.file_cell(cell),
+            worst.0,
+            worst.1
+        ));
+    }
+    let size = mesh::longest_side(p.mesh.bounds());
+    let moved = post::max_displacement(u);
+    if moved > size {
+        lines.push(format!(
+            "warning    the body moved by up to {moved:.4e} m, {:.1} times its own size ({size:.4e} m): is the load \
+             right?",
+            moved / size
+        ));
+    }
+    Ok(lines)
 }
 
 /// The mid-edge nodes of a T10 mesh that are not held where both corners of their edge are
@@ -514,6 +566,52 @@ mod tests {
         assert_eq!(warned(&touched), None, "{touched:?}");
     }
 
+    /// A bar pulled to four times its length: warned of as beyond soft tissue (stretch and
+    /// motion); pulled by a tenth of it, not.
+    #[test]
+    fn a_solution_beyond_soft_tissue_is_warned_about() {
+        let dir = tempfile::tempdir().unwrap();
+        let lines = |pull: f64| {
+            let text = format!(
+                "kind = \"static\"\nname = \"pull\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.04, 0.01, 0.01]\n\
+                 cells = [4, 1, 1]\nelement = \"hex\"\n[material]\nlaw = \"neo_hookean\"\nyoung = 5000.0\n\
+                 poisson = 0.3\n[[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] }} }}\n\
+                 [[prescribed]]\nselect = {{ box = {{ min = [0.04, -1.0, -1.0], max = [1.0, 1.0, 1.0] }} }}\n\
+                 displacement = [{pull}, 0.0, 0.0]\n"
+            );
+            solved_lines(dir.path(), &text)
+        };
+        let pulled = lines(0.12);
+        let stretched = pulled.iter().find(|l| l.contains("far beyond what soft tissue bears")).expect("warned");
+        assert!(stretched.starts_with("warning    4 of 4 cells are stretched past 3"), "{stretched}");
+        assert!(pulled.iter().any(|l| l.contains("3.0 times its own size")), "{pulled:?}");
+        let touched = lines(0.004);
+        assert!(!touched.iter().any(|l| l.starts_with("warning")), "{touched:?}");
+    }
+
+    /// A solve taken on a small last increment above its residual tolerance says so; the same
+    /// within it does not.
+    #[test]
+    fn a_residual_above_the_tolerance_is_warned_about() {
+        let dir = tempfile::tempdir().unwrap();
+        let lines = |solver: &str| {
+            let text = format!(
+                "kind = \"static\"\nname = \"pull\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.04, 0.01, 0.01]\n\
+                 cells = [4, 1, 1]\nelement = \"hex\"\n[material]\nlaw = \"neo_hookean\"\nyoung = 5000.0\n\
+                 poisson = 0.3\n[solver]\n{solver}\n\
+                 [[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] }} }}\n\
+                 [[force]]\nselect = {{ box = {{ min = [0.04, -1.0, -1.0], max = [1.0, 1.0, 1.0] }} }}\n\
+                 total = [0.0, 0.0, -0.02]\n"
+            );
+            solved_lines(dir.path(), &text)
+        };
+        let warned = |lines: &[String]| lines.iter().any(|l| l.contains("above rtol = 1e-14"));
+        let loose = lines("rtol = 1e-14\nutol = 0.5");
+        assert!(warned(&loose), "{loose:?}");
+        let tight = lines("rtol = 1e-14\nutol = 0.0\nmax_iterations = 60");
+        assert!(!warned(&tight), "{tight:?}");
+    }
+
     /// A bar in a file, held at one end and pulled at the other by node numbers: the same solve
     /// when the file holds a node that no cell uses before them (the numbers stay the file's),
     /// which the output names; pulled as far as the linear law turns cells inside out, it says so.
@@ -550,8 +648,8 @@ mod tests {
         assert!(shifted.lines().unwrap()[1].contains("numbered as in its file"));
         assert!(!plain.lines().unwrap().iter().any(|l| l.starts_with("warning")));
         let crushed = solve(&bar, 0, -40.0, "crushed").lines().unwrap();
-        let warning = crushed.last().unwrap();
-        assert!(warning.starts_with("warning    ") && warning.contains("cells are turned inside out"), "{crushed:?}");
+        let warning = crushed.iter().find(|l| l.contains("cells are turned inside out")).expect("warned");
+        assert!(warning.starts_with("warning    "), "{crushed:?}");
         // One cell numbered the other way round in the file: the same solve, the cell named.
         let mut odd = bar.clone();
         let mesh::Cells::Tet4(tets) = &mut odd.cells else { unreachable!("a tetrahedral bar") };

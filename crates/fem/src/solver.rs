@@ -524,7 +524,8 @@ impl StaticSolver {
     /// The forces the supports exert on the body at `u` (N, 3 per node): a node's springs (node
     /// springs, −k u, and point springs, −Σ w K (x − t): an attachment's foundation) and at a held
     /// dof (fixed or prescribed) the hold, f_int − f_ext less the springs' part (CalculiX's RF
-    /// there, where no spring acts on the node); zero elsewhere. At an equilibrium they balance the
+    /// there, where no spring acts on the node and no load: its RF is f_int alone); zero
+    /// elsewhere. At an equilibrium they balance the
     /// loads: Σ R = −Σ f_ext.
     pub fn reaction_forces(&mut self, u: &[f64]) -> Result<Vec<f64>, FemError> {
         // `internal_force` holds the springs' k u and K x, `loads` the point springs' pull K t.
