@@ -20,6 +20,9 @@ pub struct Solved {
     /// The forces the supports (holds, springs, attachments) exert on each node at the solution
     /// (N, 3 per node: [`StaticSolver::reaction_forces`]).
     pub reaction: Vec<f64>,
+    /// The warning of the pieces of the mesh left out of the solve: pieces that hang on the rest
+    /// by an edge or a vertex and carry nothing.
+    pub left_out: Option<String>,
 }
 
 /// Loads the static scenario `path` (a file or a built-in name), builds its problem and solves it.
@@ -105,7 +108,7 @@ fn solve(
     dir: &Path,
     progress: impl Fn(f64, usize) + Send + Sync + 'static,
 ) -> Result<Solved> {
-    let problem = scenario.build_problem(dir)?;
+    let (problem, left_out) = without_hanging_pieces(&scenario, scenario.build_problem(dir)?)?;
     let hints = doubts(&problem);
     let hint = if hints.is_empty() { String::new() } else { format!(" ({})", hints.join("; ")) };
     let mut solver = StaticSolver::new(problem)?;
@@ -117,7 +120,49 @@ fn solve(
     };
     let solution = solver.solve(&options).with_context(|| format!("static solve{hint}"))?;
     let reaction = solver.reaction_forces(&solution.u)?;
-    Ok(Solved { scenario, solver, solution, reaction })
+    Ok(Solved { scenario, solver, solution, reaction, left_out })
+}
+
+/// `problem` without the pieces of its mesh that hang on the rest by an edge or a vertex and
+/// carry nothing ([`fem::Problem::hanging_pieces`]: no load, hold or spring on the nodes they
+/// alone have), rebuilt on the rest of the mesh (numbered as in its file), with the warning that
+/// says so. Such a piece (a mesher's slip, as in a real liver's mesh) turns about its hinge at no
+/// cost of energy, but carries no force: the rest deforms as with it, as CalculiX, which solves
+/// the whole mesh, finds. A piece that carries something is a mechanism: the problem is left as
+/// it is, and the solve refuses it, naming the piece.
+fn without_hanging_pieces(scenario: &StaticScenario, problem: fem::Problem) -> Result<(fem::Problem, Option<String>)> {
+    let cells: Vec<usize> = problem.hanging_pieces().concat();
+    let Some(&first) = cells.first() else { return Ok((problem, None)) };
+    let mesh = &problem.mesh;
+    let mut hanging = vec![false; mesh.cells.len()];
+    cells.iter().for_each(|&c| hanging[c] = true);
+    let mut in_rest = vec![false; mesh.num_nodes()];
+    (0..mesh.cells.len())
+        .filter(|&c| !hanging[c])
+        .for_each(|c| mesh.cells.cell(c).iter().for_each(|&n| in_rest[n] = true));
+    let mut alone: Vec<usize> =
+        cells.iter().flat_map(|&c| mesh.cells.cell(c)).copied().filter(|&n| !in_rest[n]).collect();
+    alone.sort_unstable();
+    alone.dedup();
+    let carries = |n: usize| {
+        problem.f_ext[3 * n..3 * n + 3].iter().any(|&f| f != 0.0)
+            || problem.dirichlet.contains_key(&n)
+            || problem.springs[n] > 0.0
+            || problem.point_springs.iter().any(|s| s.nodes.iter().any(|&(m, w)| m == n && w != 0.0))
+    };
+    if alone.iter().any(|&n| carries(n)) {
+        return Ok((problem, None));
+    }
+    let rest = scenario.build_problem_on(mesh.without_cells(&cells)?)?;
+    let line = format!(
+        "warning    {} element(s) hang on the rest by an edge or a vertex (the first: element {} of the file) and carry \
+         no load, hold or spring: left out of the solve with the {} node(s) only they have (they carry no force, so \
+         the rest deforms as with them); the fields file_node and file_cell give the file's numbers",
+        cells.len(),
+        mesh.file_cell(first),
+        alone.len()
+    );
+    Ok((rest, Some(line)))
 }
 
 impl Solved {
@@ -243,6 +288,7 @@ impl Solved {
                     .into(),
             );
         }
+        lines.extend(self.left_out.iter().cloned());
         lines.extend(set_up_warnings(p));
         let (inverted, smallest) = post::inverted_cells(geo, p.material.law, &sol.u)?;
         if inverted > 0 {
@@ -564,6 +610,44 @@ mod tests {
         );
         let touched = lines(0.0004);
         assert_eq!(warned(&touched), None, "{touched:?}");
+    }
+
+    /// A bar in a file with a tetrahedron hanging on its free end by a vertex (as a mesher left one
+    /// in a real liver): pulled, it solves as the bar alone, the tetrahedron left out and named;
+    /// under its weight, which loads the tetrahedron too, the mechanism is refused.
+    #[test]
+    fn a_piece_hanging_by_a_vertex_that_carries_nothing_is_left_out() {
+        let dir = tempfile::tempdir().unwrap();
+        let bar = mesh::box_tet([0.0; 3], [0.1, 0.02, 0.02], [5, 1, 1]).unwrap();
+        let mesh::Cells::Tet4(tets) = &bar.cells else { unreachable!("a tetrahedral bar") };
+        let corner = bar.nodes.iter().position(|p| *p == [0.1, 0.02, 0.02]).unwrap();
+        let (mut nodes, mut with_tip) = (bar.nodes.clone(), tets.clone());
+        let k = nodes.len();
+        nodes.extend([[0.105, 0.02, 0.02], [0.105, 0.025, 0.02], [0.105, 0.02, 0.025]]);
+        with_tip.push([corner, k, k + 1, k + 2]);
+        let hanging = mesh::Mesh::new(nodes, mesh::Cells::Tet4(with_tip)).unwrap();
+        let solve = |mesh: &mesh::Mesh, name: &str, load: &str| {
+            mesh::io::write_mesh(dir.path().join(format!("{name}.vtu")), mesh, &[]).unwrap();
+            let scenario = format!(
+                "kind = \"static\"\nname = \"{name}\"\n{load}[mesh.file]\npath = \"{name}.vtu\"\n[material]\n\
+                 law = \"neo_hookean\"\nyoung = 5000.0\npoisson = 0.3\n\
+                 [[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] }} }}\n\
+                 [[force]]\nselect = {{ box = {{ min = [0.0999, -1.0, -1.0], max = [0.1001, 1.0, 1.0] }} }}\n\
+                 total = [0.0, 0.0, -0.01]\n"
+            );
+            let path = dir.path().join(format!("{name}.toml"));
+            std::fs::write(&path, scenario).unwrap();
+            solve_scenario(&path, |_, _| {})
+        };
+        let alone = solve(&bar, "bar", "").unwrap();
+        let with = solve(&hanging, "hanging", "").unwrap();
+        assert_eq!(with.solution.u, alone.solution.u, "the rest deforms as the bar alone");
+        let lines = with.lines().unwrap();
+        let warning = lines.iter().find(|l| l.contains("hang on the rest by an edge or a vertex")).expect("said");
+        assert!(warning.contains("1 element(s)") && warning.contains("element 30 of the file"), "{warning}");
+        assert!(warning.contains("the 3 node(s) only they have"), "{warning}");
+        let error = solve(&hanging, "heavy", "gravity = [0.0, 0.0, -9.81]\n").err().expect("refused");
+        assert!(format!("{error:#}").contains("hang on the rest by an edge or a vertex"), "{error:#}");
     }
 
     /// A bar pulled to four times its length: warned of as beyond soft tissue (stretch and

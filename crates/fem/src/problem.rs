@@ -194,6 +194,11 @@ impl Problem {
     /// a forgotten `[[fixed]]` or a tetrahedron hanging by a vertex surfaces as a failed Newton
     /// solve ("element inverted").
     pub(crate) fn check_held(&self, pieces: &Pieces) -> Result<(), FemError> {
+        self.check_anchored(pieces, self.anchored())
+    }
+
+    /// The nodes prescribed or tied by a spring (a node spring, or a point spring's node).
+    fn anchored(&self) -> Vec<bool> {
         let mut anchored = vec![false; self.mesh.num_nodes()];
         let tied = (0..self.mesh.num_nodes()).filter(|&n| self.springs[n] > 0.0);
         let pulled = self
@@ -202,7 +207,41 @@ impl Problem {
             .filter(|s| s.stiffness + s.normal_stiffness > 0.0)
             .flat_map(|s| s.nodes.iter().filter(|(_, w)| *w != 0.0).map(|&(n, _)| n));
         self.dirichlet.keys().copied().chain(tied).chain(pulled).for_each(|n| anchored[n] = true);
-        self.check_anchored(pieces, anchored)
+        anchored
+    }
+
+    /// The pieces of the mesh that nothing holds although the rest is held, and that hang on it
+    /// by an edge or a vertex (each its cells; see [`Problem::check_held`]): a mesher's slip
+    /// that turns about its hinge at no cost of energy. Where no load, hold or spring acts on the
+    /// nodes a piece alone has, it carries no force, and the rest deforms as without it.
+    pub fn hanging_pieces(&self) -> Vec<Vec<usize>> {
+        let pieces = Pieces::of(&self.mesh);
+        let loose = self.loose_pieces(&pieces, self.anchored());
+        if pieces.nodes.len() == 1 || loose.len() == pieces.nodes.len() {
+            return Vec::new();
+        }
+        let owners = pieces.owners(self.mesh.num_nodes());
+        loose
+            .into_iter()
+            .filter(|&p| pieces.nodes[p].iter().any(|&n| owners[n] > 1))
+            .map(|p| pieces.cells[p].clone())
+            .collect()
+    }
+
+    /// The pieces not held, given the anchored nodes: pieces are held one after the other, each
+    /// by three anchored nodes not on one line, its nodes then anchoring the pieces that share
+    /// them.
+    fn loose_pieces(&self, pieces: &Pieces, mut anchored: Vec<bool>) -> Vec<usize> {
+        let points = |nodes: &[usize], anchored: &[bool]| -> Vec<Point> {
+            nodes.iter().filter(|&&n| anchored[n]).map(|&n| self.mesh.nodes[n]).collect()
+        };
+        let mut held = vec![false; pieces.nodes.len()];
+        while let Some(p) = (0..held.len()).find(|&p| !held[p] && held_by(&points(&pieces.nodes[p], &anchored)).is_ok())
+        {
+            held[p] = true;
+            pieces.nodes[p].iter().for_each(|&n| anchored[n] = true);
+        }
+        (0..held.len()).filter(|&p| !held[p]).collect()
     }
 
     /// Whether the prescribed nodes alone hold the body (then it stays held whatever its springs).
@@ -212,24 +251,18 @@ impl Problem {
         self.check_anchored(pieces, anchored).is_ok()
     }
 
-    /// [`Problem::check_held`] with the anchored nodes given: pieces are held one after the
-    /// other, each by its anchored nodes and those it shares with a piece held before it.
-    fn check_anchored(&self, pieces: &Pieces, mut anchored: Vec<bool>) -> Result<(), FemError> {
+    /// [`Problem::check_held`] with the anchored nodes given: the pieces [`Problem::loose_pieces`]
+    /// leaves are named in the error.
+    fn check_anchored(&self, pieces: &Pieces, anchored: Vec<bool>) -> Result<(), FemError> {
         let points = |nodes: &[usize], anchored: &[bool]| -> Vec<Point> {
             nodes.iter().filter(|&&n| anchored[n]).map(|&n| self.mesh.nodes[n]).collect()
         };
         if pieces.nodes.len() == 1 {
             return held_by(&points(&pieces.nodes[0], &anchored));
         }
-        let mut held = vec![false; pieces.nodes.len()];
-        while let Some(p) = (0..held.len()).find(|&p| !held[p] && held_by(&points(&pieces.nodes[p], &anchored)).is_ok())
-        {
-            held[p] = true;
-            pieces.nodes[p].iter().for_each(|&n| anchored[n] = true);
-        }
-        let loose: Vec<usize> = (0..held.len()).filter(|&p| !held[p]).collect();
+        let loose = self.loose_pieces(pieces, anchored.clone());
         let Some(&first) = loose.first() else { return Ok(()) };
-        if loose.len() == held.len() {
+        if loose.len() == pieces.nodes.len() {
             // Nothing holds any piece: say so as for a body in one piece.
             let all: Vec<usize> = (0..self.mesh.num_nodes()).collect();
             held_by(&points(&all, &anchored))?;
@@ -237,8 +270,7 @@ impl Problem {
         let cells: usize = loose.iter().map(|&p| pieces.cells[p].len()).sum();
         let volume: f64 = loose.iter().flat_map(|&p| &pieces.cells[p]).map(|&c| self.mesh.cell_volume(c)).sum();
         // How each loose piece meets the rest: by shared nodes (an edge or a vertex), or not at all.
-        let mut owners = vec![0u32; self.mesh.num_nodes()];
-        pieces.nodes.iter().flatten().for_each(|&n| owners[n] += 1);
+        let owners = pieces.owners(self.mesh.num_nodes());
         let touching = loose.iter().filter(|&&p| pieces.nodes[p].iter().any(|&n| owners[n] > 1)).count();
         let how = match touching {
             0 => "lie apart from the rest, touching it nowhere",
@@ -285,6 +317,13 @@ impl Pieces {
             })
             .collect();
         Pieces { cells, nodes }
+    }
+
+    /// How many pieces each of the mesh's `nodes` belongs to.
+    fn owners(&self, nodes: usize) -> Vec<u32> {
+        let mut owners = vec![0u32; nodes];
+        self.nodes.iter().flatten().for_each(|&n| owners[n] += 1);
+        owners
     }
 }
 

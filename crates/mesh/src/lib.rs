@@ -252,6 +252,43 @@ impl Mesh {
         nodes
     }
 
+    /// The mesh without the cells `dropped` (indices) and the nodes only they use: the others
+    /// renumbered in their order, with their regions, cell fractions and normals; nodes and cells
+    /// keep their file's numbers ([`Mesh::file_nodes`], [`Mesh::file_cells`]), so that selections
+    /// by number and messages still name them as the file does.
+    pub fn without_cells(&self, dropped: &[usize]) -> Result<Mesh, MeshError> {
+        let mut keep = vec![true; self.cells.len()];
+        let count = keep.len();
+        dropped.iter().filter(|&&c| c < count).for_each(|&c| keep[c] = false);
+        let kept_cells: Vec<usize> = (0..self.cells.len()).filter(|&c| keep[c]).collect();
+        let mut id = vec![usize::MAX; self.nodes.len()];
+        kept_cells.iter().flat_map(|&c| self.cells.cell(c)).for_each(|&n| id[n] = 0);
+        let old: Vec<usize> = (0..self.nodes.len()).filter(|&n| id[n] == 0).collect();
+        old.iter().enumerate().for_each(|(new, &n)| id[n] = new);
+        let remap = |cell: &[usize]| -> Vec<usize> { cell.iter().map(|&n| id[n]).collect() };
+        let cells = match &self.cells {
+            Cells::Tet4(c) => Cells::Tet4(kept_cells.iter().map(|&k| remap(&c[k]).try_into().unwrap()).collect()),
+            Cells::Hex8(c) => Cells::Hex8(kept_cells.iter().map(|&k| remap(&c[k]).try_into().unwrap()).collect()),
+            Cells::Tet10(c) => Cells::Tet10(kept_cells.iter().map(|&k| remap(&c[k]).try_into().unwrap()).collect()),
+        };
+        let mut mesh = Mesh::new(old.iter().map(|&n| self.nodes[n]).collect(), cells)?;
+        mesh.regions = self
+            .regions
+            .iter()
+            .map(|(name, nodes)| {
+                (name.clone(), nodes.iter().filter(|&&n| id[n] != usize::MAX).map(|&n| id[n]).collect())
+            })
+            .collect();
+        mesh.cell_fraction = self.cell_fraction.as_ref().map(|f| kept_cells.iter().map(|&c| f[c]).collect());
+        mesh.node_normals = self.node_normals.as_ref().map(|v| old.iter().map(|&n| v[n]).collect());
+        mesh.file_nodes = Some(old.iter().map(|&n| self.file_node(n)).collect());
+        mesh.file_cells = Some(kept_cells.iter().map(|&c| self.file_cell(c)).collect());
+        let mut new_cell = vec![usize::MAX; self.cells.len()];
+        kept_cells.iter().enumerate().for_each(|(new, &c)| new_cell[c] = new);
+        mesh.odd_cells = self.odd_cells.iter().map(|&c| new_cell[c]).filter(|&c| c != usize::MAX).collect();
+        Ok(mesh)
+    }
+
     /// Number of nodes.
     pub fn num_nodes(&self) -> usize {
         self.nodes.len()

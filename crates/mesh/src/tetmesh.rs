@@ -899,6 +899,11 @@ fn cut_points(domain: &dyn ImplicitDomain, lat: &Lattice, val: &[f64]) -> Vec<Cu
 /// neck thinner than the lattice) is kept, and [`TetQuality::pieces`] counts it.
 pub const SMALL_PIECE: f64 = 0.01;
 
+/// The share of the volume above which a part of the mesh apart from its main body (joined to it
+/// through a neck thinner than the lattice, so that nothing of the mesh joins them) is refused,
+/// not dropped: the mesh would lose a lobe.
+pub const PART_APART: f64 = 0.05;
+
 /// A T4 mesh without its pieces smaller than [`SMALL_PIECE`] (the largest piece of the body kept
 /// is always kept), nor those that share no node with the largest body of pieces (a part cut off where
 /// the organ is thinner than the lattice: nothing would hold it), its nodes renumbered in their
@@ -917,28 +922,41 @@ pub fn without_small_pieces(mesh: Mesh) -> Result<Mesh, MeshError> {
     body.iter().zip(&volumes).for_each(|(&b, v)| body_volume[b] += v);
     let main = (0..body_volume.len()).max_by(|&a, &b| body_volume[a].total_cmp(&body_volume[b])).unwrap_or(0);
     let largest = volumes.iter().zip(&body).filter(|(_, &b)| b == main).map(|(&v, _)| v).fold(0.0, f64::max);
-    let mut kept: Vec<usize> = pieces
+    // A part apart from the main body is joined to it only through a neck thinner than the
+    // lattice: a large one is half an organ lost, not a mesher's crumb.
+    if let Some((part, &volume)) =
+        body_volume.iter().enumerate().filter(|&(b, _)| b != main).max_by(|a, b| a.1.total_cmp(b.1))
+    {
+        if volume >= PART_APART * total {
+            let cells: Vec<usize> =
+                pieces.iter().zip(&body).filter(|(_, &b)| b == part).flat_map(|(p, _)| p.iter().copied()).collect();
+            let at = cells
+                .iter()
+                .flat_map(|&c| tets[c].map(|n| mesh.nodes[n]))
+                .fold([0.0; 3], |s, p| [s[0] + p[0], s[1] + p[1], s[2] + p[2]]);
+            let at = at.map(|x| x / (4 * cells.len()) as f64);
+            return Err(MeshError::Invalid(format!(
+                "the mesh falls apart: a part of {:.0} % of the volume ({:.1} mL) around {} joins the rest \
+                 only through a neck thinner than the tetrahedra, which meshing cannot keep; if the organ's parts \
+                 meet through a thin bridge (a few voxels of a segmentation), join them more broadly or keep one \
+                 of them; otherwise mesh finer (more tetrahedra)",
+                100.0 * volume / total,
+                volume * 1e6,
+                crate::length::point_in_mm(at),
+            )));
+        }
+    }
+    let dropped: Vec<usize> = pieces
         .iter()
         .zip(&volumes)
         .zip(&body)
-        .filter(|((_, &v), &b)| b == main && (v >= SMALL_PIECE * total || v == largest))
+        .filter(|((_, &v), &b)| !(b == main && (v >= SMALL_PIECE * total || v == largest)))
         .flat_map(|((p, _), _)| p.iter().copied())
         .collect();
-    kept.sort_unstable();
-    let mut id = vec![usize::MAX; mesh.nodes.len()];
-    kept.iter().flat_map(|&c| tets[c]).for_each(|n| id[n] = 0);
-    let mut nodes = Vec::new();
-    for (n, slot) in id.iter_mut().enumerate().filter(|(_, slot)| **slot == 0) {
-        *slot = nodes.len();
-        nodes.push(mesh.nodes[n]);
-    }
-    let mut kept_mesh = Mesh::new(nodes, Cells::Tet4(kept.iter().map(|&c| tets[c].map(|n| id[n])).collect()))?;
-    kept_mesh.regions = mesh
-        .regions
-        .iter()
-        .map(|(name, nodes)| (name.clone(), nodes.iter().filter(|&&n| id[n] != usize::MAX).map(|&n| id[n]).collect()))
-        .collect();
-    Ok(kept_mesh)
+    let mut kept = mesh.without_cells(&dropped)?;
+    // Numbered afresh, as a mesh made here is.
+    (kept.file_nodes, kept.file_cells) = (None, None);
+    Ok(kept)
 }
 
 /// The body of each piece (cells of `tets`): pieces sharing a node are in one body.

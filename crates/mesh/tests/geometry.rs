@@ -737,3 +737,51 @@ fn validation_names_a_bad_cell_by_its_file_number() {
     let e = tet.validate().unwrap_err().to_string();
     assert!(e.contains("cell 19 is inverted"), "{e}");
 }
+
+/// Two boxes of tetrahedra side by side, sharing nothing, and a small tetrahedron hanging on the
+/// first by a vertex.
+fn two_boxes(second: [f64; 3]) -> Mesh {
+    let a = box_tet([0.0; 3], [0.04, 0.02, 0.02], [4, 2, 2]).unwrap();
+    let b = box_tet([0.05, 0.0, 0.0], [0.05 + second[0], second[1], second[2]], [4, 2, 2]).unwrap();
+    let (Cells::Tet4(ta), Cells::Tet4(tb)) = (&a.cells, &b.cells) else { unreachable!("tetrahedra") };
+    let mut nodes = a.nodes.clone();
+    nodes.extend(&b.nodes);
+    let mut tets = ta.clone();
+    tets.extend(tb.iter().map(|t| t.map(|n| n + a.nodes.len())));
+    // A small tetrahedron on the corner (0.04, 0.02, 0.02) of the first box.
+    let corner = a.nodes.iter().position(|p| *p == [0.04, 0.02, 0.02]).unwrap();
+    let k = nodes.len();
+    nodes.extend([[0.042, 0.02, 0.02], [0.04, 0.022, 0.02], [0.04, 0.02, 0.022]]);
+    tets.push([corner, k, k + 1, k + 2]);
+    Mesh::new(nodes, Cells::Tet4(tets)).unwrap()
+}
+
+/// A part apart from the main body as large as it (a lobe behind a neck thinner than the
+/// lattice) is refused, named by its share; a small one is dropped with the tetrahedron that
+/// hangs by a vertex, the main body numbered afresh.
+#[test]
+fn a_large_part_apart_is_refused_and_small_pieces_are_dropped() {
+    let halves = two_boxes([0.04, 0.02, 0.02]);
+    let error = augsim_mesh::without_small_pieces(halves).unwrap_err().to_string();
+    assert!(error.contains("the mesh falls apart: a part of 50 % of the volume (16.0 mL)"), "{error}");
+    let crumb = two_boxes([0.002, 0.002, 0.002]);
+    let kept = augsim_mesh::without_small_pieces(crumb).unwrap();
+    let main = box_tet([0.0; 3], [0.04, 0.02, 0.02], [4, 2, 2]).unwrap();
+    assert_eq!((kept.num_nodes(), kept.cells.len()), (main.num_nodes(), main.cells.len()));
+    assert_eq!((kept.file_nodes, kept.file_cells), (None, None));
+}
+
+/// Cells left out keep the others' file numbers and regions, and drop the nodes only they use.
+#[test]
+fn a_mesh_without_some_cells_keeps_its_file_numbers() {
+    let mut mesh = two_boxes([0.002, 0.002, 0.002]);
+    let last = mesh.cells.len() - 1;
+    let corner = mesh.cells.cell(last)[0];
+    mesh.regions.insert("tip".into(), mesh.cells.cell(last).to_vec());
+    let kept = mesh.without_cells(&[last]).unwrap();
+    assert_eq!((kept.num_nodes(), kept.cells.len()), (mesh.num_nodes() - 3, mesh.cells.len() - 1));
+    assert_eq!(kept.regions["tip"].iter().map(|&n| kept.file_node(n)).collect::<Vec<_>>(), vec![corner]);
+    assert_eq!(kept.file_cell(kept.cells.len() - 1), last - 1);
+    let first_of_b = box_tet([0.0; 3], [0.04, 0.02, 0.02], [4, 2, 2]).unwrap().num_nodes();
+    assert_eq!(kept.file_node(first_of_b), first_of_b, "nodes before the dropped ones keep their numbers");
+}

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use fem::{Attachment, Material, Problem, SolverOptions};
-use mesh::{Ball, NodeSelection, Point, SpaceBall};
+use mesh::{Ball, Mesh, NodeSelection, Point, SpaceBall};
 use serde::Deserialize;
 
 use crate::{build_mesh, fixed_problem, Fixed, Kind, MeshSource, Result, ScenarioError, ScenarioText};
@@ -183,8 +183,15 @@ impl StaticScenario {
     /// The boundary-value problem: the mesh built from its source (file paths relative to
     /// `dir`), the material, constraints and loads.
     pub fn build_problem(&self, dir: &Path) -> Result<Problem> {
+        let mesh = build_mesh(&self.mesh, dir)
+            .map_err(|e| ScenarioError::build(&self.name, format!("building the mesh: {e}")))?;
+        self.build_problem_on(mesh)
+    }
+
+    /// The boundary-value problem on `mesh` (the scenario's, as [`StaticScenario::build_problem`]
+    /// builds it, or a part of it): the material, constraints and loads.
+    pub fn build_problem_on(&self, mesh: Mesh) -> Result<Problem> {
         let fail = |m: String| ScenarioError::build(&self.name, m);
-        let mesh = build_mesh(&self.mesh, dir).map_err(|e| fail(format!("building the mesh: {e}")))?;
         let mut p = fixed_problem(mesh, self.material, &self.fixed).map_err(|e| fail(e.to_string()))?;
         let pick =
             |s: &NodeSelection, what: &str, p: &Problem| crate::source::select_nodes(s, &p.mesh, what).map_err(fail);
