@@ -242,15 +242,19 @@ fn labels(ty: Scalar, data: &[u8], count: usize, nz: usize, little: bool) -> Res
     (0..count).map(|i| label(i, ty.decode(&data[i * size..(i + 1) * size], !little))).collect()
 }
 
-/// Voxel `i`'s value `x` as a label (a labelmap holds whole numbers).
+/// Voxel `i`'s value `x` as a label (a labelmap holds whole numbers; a float a rounding away from
+/// one, as exports in floating point leave them, within [`SCALED_LABEL_TOLERANCE`], is that
+/// number).
 fn label(i: usize, x: f64) -> Result<i32, String> {
-    if x == x.round() && (f64::from(i32::MIN)..=f64::from(i32::MAX)).contains(&x) {
-        Ok(x as i32)
+    let whole = x.round();
+    if (x - whole).abs() <= SCALED_LABEL_TOLERANCE * whole.abs().max(1.0)
+        && (f64::from(i32::MIN)..=f64::from(i32::MAX)).contains(&whole)
+    {
+        Ok(whole as i32)
     } else {
         Err(format!(
-            "voxel {i} holds {}, not a label (a labelmap holds whole numbers; threshold a probability map, e.g. at \
-             0.5)",
-            if x.abs() < 1e-3 { format!("{x:.3e}") } else { crate::repair::number(x) }
+            "voxel {i} holds {x}, not a label (a labelmap holds whole numbers; threshold a probability map, e.g. at \
+             0.5)"
         ))
     }
 }
@@ -366,11 +370,19 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
     let header = NiftiHeader::parse(bytes)?;
     let (dim, little) = (header.dim, header.little);
     if !(3..=7).contains(&dim[0]) || (4..=dim[0] as usize).any(|d| dim[d] != 1) {
-        return Err(format!(
-            "expected a 3D volume, got dimensions {:?} (read {}-endian, as the header size says)",
-            &dim[1..=dim[0].clamp(1, 7) as usize],
-            if little { "little" } else { "big" }
-        ));
+        let dims = &dim[1..=dim[0].clamp(1, 7) as usize];
+        let why = match dims {
+            // Sizes no image has: the byte order (which the header's size tells) is worth naming.
+            _ if dims.iter().any(|&d| !(1..=100_000).contains(&d)) => {
+                format!(" (read {}-endian, as the header size says)", if little { "little" } else { "big" })
+            }
+            [_, _, _, n, ..] => format!(
+                ": {n} volumes (one-hot channels of a network's output, or a time series), where a labelmap is one \
+                 volume of labels; save one volume (the channels' argmax, or the channel of the organ)"
+            ),
+            _ => String::new(),
+        };
+        return Err(format!("expected a 3D volume, got dimensions {dims:?}{why}"));
     }
     if dim[1..4].iter().any(|&n| n < 1 || n > u32::MAX as i64) {
         return Err(format!("bad dimensions {:?}", &dim[1..4]));
@@ -424,10 +436,13 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
         .map(|(used, apart)| (used, apart * mm_per_unit))
         .filter(|&(_, apart)| apart > FORMS_APART_MM)
         .map(|(used, apart)| {
+            let others = match used {
+                "sform" => "and nibabel read it; tools that take the qform place it elsewhere",
+                _ => "reads it; tools that take the sform whatever its code (nibabel, FSL) place it elsewhere",
+            };
             let warning = format!(
                 "its sform (code {sform_code}) and qform (code {qform_code}) place the image up to {apart:.1} mm \
-                 apart: read by the {used}, as 3D Slicer (ITK) reads it; tools that take the sform whatever its code \
-                 (nibabel, FSL) place it elsewhere"
+                 apart: read by the {used}, as 3D Slicer (ITK) {others}"
             );
             (None, warning)
         })
@@ -736,7 +751,18 @@ fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
         return Err(format!("bad sizes {sizes:?}"));
     }
     let count = layers * dims.iter().product::<usize>();
-    let space = if placed { header.field("space")?.to_ascii_lowercase() } else { "ras".to_string() };
+    let space = match placed {
+        true => header
+            .field("space")
+            .map_err(|e| {
+                format!(
+                    "{e}: its 'space directions' place the voxels in a frame it does not name; add the one the image \
+                     was saved in, 'space: left-posterior-superior' (DICOM's, ITK's) or 'space: right-anterior-superior'"
+                )
+            })?
+            .to_ascii_lowercase(),
+        false => "ras".to_string(),
+    };
     let frame = match space.as_str() {
         "left-posterior-superior" | "lps" => Frame::Lps,
         "right-anterior-superior" | "ras" => Frame::Ras,
@@ -1184,7 +1210,8 @@ impl LabelSurface {
 /// Reads a labelmap and extracts the closed surface of one label (a number, or a segment name
 /// the file carries), in millimetres in the file's world frame. Without a label, the file must
 /// hold only one. `unit` is the world's unit where the header names none (read as mm without
-/// it); one other than the unit the header names is refused.
+/// it); one other than the unit the header names overrides it, with a warning (a header that
+/// names metres for millimetres).
 pub fn read_labelmap_surface(
     path: impl AsRef<Path>,
     label: Option<&str>,
@@ -1193,14 +1220,17 @@ pub fn read_labelmap_surface(
 ) -> Result<LabelSurface, MeshError> {
     let path = path.as_ref();
     let mut map = read_labelmap_choosing(path, label)?;
+    let mut overridden = None;
     match (unit, map.named_unit) {
         (Some(given), Some(named)) if given != named => {
-            let message = format!(
-                "its header names its unit, {}; {} given contradicts it: leave the unit out",
+            map.affine = in_millimetres(map.affine, unit_mm(given) / unit_mm(named));
+            map.named_unit = Some(given);
+            overridden = Some(format!(
+                "its header names its unit, {}; read in {} as given instead (--units): {} than the header makes it",
                 named.name(),
-                given.name()
-            );
-            return Err(parse_error(path, message));
+                given.name(),
+                crate::length::UnitMistake { given, expected: named }.undone_words()
+            ));
         }
         (Some(given), None) => {
             map.affine = in_millimetres(map.affine, unit_mm(given));
@@ -1226,6 +1256,7 @@ pub fn read_labelmap_surface(
     let (surface, extract) = mask_surface(&mask, options).map_err(|e| parse_error(path, e.message()))?;
     let mut warnings: Vec<String> =
         map.warnings.iter().filter(|(of, _)| of.is_none_or(|of| of == chosen)).map(|(_, w)| w.clone()).collect();
+    warnings.extend(overridden.iter().cloned());
     if !map.placed {
         warnings.push(
             "the file places its voxels nowhere (a NIfTI without qform and sform, a NRRD with spacings but no space \
@@ -1250,6 +1281,7 @@ pub fn read_labelmap_surface(
     let span = crate::longest_side(crate::bounds(&surface.vertices));
     if !(ORGAN_SPAN_MM.0..=ORGAN_SPAN_MM.1).contains(&span) {
         let unit = match map.named_unit {
+            Some(unit) if overridden.is_some() => format!("in the unit given, {}", unit.name()),
             Some(unit) => format!("in the unit it names, {}", unit.name()),
             None => "it names no unit, so they are read as mm: give the unit (--units) if it is another".into(),
         };
@@ -1790,7 +1822,9 @@ mod tests {
         assert!(aligned.warnings[0].1.contains("place the image up to 50.0 mm apart: read by the qform"));
         let scanner = with_sform(1, -49.0);
         assert_eq!(scanner.affine[0][3], -49.0, "code 1: the sform");
-        assert!(scanner.warnings[0].1.contains("read by the sform, as 3D Slicer (ITK) reads it"));
+        assert!(scanner.warnings[0]
+            .1
+            .contains("read by the sform, as 3D Slicer (ITK) and nibabel read it; tools that take the qform"));
         assert!(with_sform(2, 1.0).warnings.is_empty(), "the forms agree");
     }
 
@@ -1824,6 +1858,29 @@ mod tests {
             std::fs::write(&path, &bytes).unwrap();
             let back = read_labelmap(&path).unwrap_or_else(|e| panic!("slope {slope}, intercept {intercept}: {e}"));
             assert!(back.labels == map.labels, "slope {slope}, intercept {intercept}");
+        }
+    }
+
+    /// A NIfTI of several volumes (a network's one-hot channels) is refused with what to save
+    /// instead; one whose fourth axis holds a single volume is that volume.
+    #[test]
+    fn a_nifti_of_several_volumes_is_refused_saying_what_a_labelmap_is() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Ras);
+        let path = dir.path().join("v.nii");
+        write_nifti(&path, &map).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes[40..42].copy_from_slice(&4i16.to_le_bytes());
+        for (volumes, refused) in [(1i16, false), (3, true)] {
+            bytes[48..50].copy_from_slice(&volumes.to_le_bytes());
+            std::fs::write(&path, &bytes).unwrap();
+            match read_labelmap(&path) {
+                Ok(back) => assert!(!refused && back.labels == map.labels),
+                Err(e) => {
+                    let e = e.to_string();
+                    assert!(refused && e.contains("3 volumes (one-hot channels") && !e.contains("endian"), "{e}");
+                }
+            }
         }
     }
 
@@ -1864,6 +1921,11 @@ mod tests {
         let map = read_labelmap(&path).unwrap();
         assert_eq!(map.affine, [[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 2.0], [0.0, 0.0, 2.0, 3.0]]);
         assert!(map.placed);
+        // Directions in a space it does not name: refused, saying which line to add.
+        let unnamed = header.replace("space: left-posterior-superior\n", "space dimension: 3\n");
+        std::fs::write(&path, [unnamed.as_bytes(), &[0, 0, 0, 1, 0, 0, 0, 0]].concat()).unwrap();
+        let e = read_labelmap(&path).unwrap_err().to_string();
+        assert!(e.contains("no 'space' field") && e.contains("add the one the image was saved in"), "{e}");
         // Voxel sizes alone (`spacings`, no space), as ITK reads them: at the indices times the
         // spacing, placed nowhere; a size that is not one is refused.
         let header = "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nspacings: 0.8 0.9 2.5\nencoding: raw\n\n";
@@ -1915,7 +1977,12 @@ mod tests {
         assert_eq!(read_labelmap(dir.path().join("e2.nrrd")).unwrap().labels.iter().filter(|&&l| l == 1).count(), 1);
         let floats = header.replace("short", "float");
         let values: Vec<u8> = (0..8).flat_map(|i| (i as f32 * 0.3).to_le_bytes()).collect();
-        assert!(write("f.nrrd", &[floats.as_bytes(), &values].concat()).contains("not a label"));
+        let said = write("f.nrrd", &[floats.as_bytes(), &values].concat());
+        assert!(said.contains("voxel 1 holds 0.30000001192092896, not a label"), "{said}");
+        // A float export's rounding (1.0000002 in 32 bits) is the label it rounds to.
+        let near: Vec<u8> = (0..8).flat_map(|i| if i == 6 { 1.000_000_2_f32 } else { 0.0 }.to_le_bytes()).collect();
+        std::fs::write(dir.path().join("f1.nrrd"), [floats.as_bytes(), &near].concat()).unwrap();
+        assert_eq!(read_labelmap(dir.path().join("f1.nrrd")).unwrap().labels, [0, 0, 0, 0, 0, 0, 1, 0]);
         let scanner = header.replace("left-posterior-superior", "scanner-xyz");
         assert!(write("g.nrrd", scanner.as_bytes()).contains("space 'scanner-xyz' is not supported"));
         // Sizes whose voxels overflow a byte count, and units that are not lengths.
@@ -2122,10 +2189,19 @@ mod tests {
         let (a, b) = (centroid(&given.surface), centroid(&reference.surface));
         assert!(norm(sub(a, b)) < 1e-3, "{a:?} vs {b:?}");
         assert!((given.spacing[0] - reference.spacing[0]).abs() < 1e-6);
-        // The header of the mm file names mm: metres contradict it; mm agrees with it.
-        let e = read(&in_mm, Some(LengthUnit::Metre)).unwrap_err().to_string();
-        assert!(e.contains("names its unit, millimetres") && e.contains("metres given"), "{e}");
-        assert!(read(&in_mm, Some(LengthUnit::Millimetre)).is_ok());
+        // The header of the mm file names mm: mm agrees with it, without a word.
+        assert!(read(&in_mm, Some(LengthUnit::Millimetre)).unwrap().warnings.is_empty());
+        // A header that names metres for voxels in mm: the unit given overrides it, and says so.
+        let wrong = dir.path().join("wrong.nii");
+        let mut bytes = std::fs::read(&in_mm).unwrap();
+        bytes[123] = 1; // xyzt_units: metre
+        std::fs::write(&wrong, &bytes).unwrap();
+        let overridden = read(&wrong, Some(LengthUnit::Millimetre)).unwrap();
+        let (a, b) = (centroid(&overridden.surface), centroid(&reference.surface));
+        assert!(norm(sub(a, b)) < 1e-6, "{a:?} vs {b:?}");
+        let said =
+            "its header names its unit, metres; read in millimetres as given instead (--units): 1,000 times smaller";
+        assert!(overridden.warnings.iter().any(|w| w.starts_with(said)), "{:?}", overridden.warnings);
     }
 
     /// A label split into two pieces of similar size is not one organ; a segment name carried

@@ -1247,11 +1247,16 @@ mod tests {
         let error = format!("{:#}", organ_step(&wrong, dir.path()).unwrap_err());
         assert!(error.starts_with("the organ read from the labelmap's label 5 ('liver'): "), "{error}");
         assert!(error.contains("the targets of"), "{error}");
-        // A NIfTI whose header names mm, given in metres.
+        // A NIfTI whose header names mm, given in metres: read so, as a header may name the wrong unit,
+        // and said before the error of its size.
         let mut metres = options(dir.path(), "liver_labels.nii.gz", "5", false);
         metres.units = Some(LengthUnit::Metre);
-        let error = organ_step(&metres, dir.path()).unwrap_err().to_string();
-        assert!(error.contains("names its unit, millimetres; metres given contradicts it"), "{error}");
+        let error = format!("{:#}", organ_step(&metres, dir.path()).unwrap_err());
+        assert!(
+            error
+                .contains("names its unit, millimetres; read in metres as given instead (--units): 1,000 times larger"),
+            "{error}"
+        );
         let mut surface = options(dir.path(), "liver_labels.nii.gz", "5", false);
         surface.surface = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mesh/tests/data/liver.obj");
         let error = organ_step(&surface, dir.path()).unwrap_err().to_string();
