@@ -211,8 +211,8 @@ impl Problem {
     }
 
     /// The pieces of the mesh that nothing holds although the rest is held, and that hang on it
-    /// by an edge or a vertex (each its cells; see [`Problem::check_held`]): a mesher's slip
-    /// that turns about its hinge at no cost of energy. Where no load, hold or spring acts on the
+    /// by an edge or a vertex (each its cells): a mesher's slip that turns about its hinge at no
+    /// cost of energy. Where no load, hold or spring acts on the
     /// nodes a piece alone has, it carries no force, and the rest deforms as without it.
     pub fn hanging_pieces(&self) -> Vec<Vec<usize>> {
         let pieces = Pieces::of(&self.mesh);

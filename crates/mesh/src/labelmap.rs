@@ -700,6 +700,21 @@ fn nrrd_scalar(name: &str) -> Result<Scalar, String> {
     })
 }
 
+/// The frame a NRRD header's `space` names, which its `space directions` need.
+fn nrrd_frame(header: &NrrdHeader) -> Result<Frame, String> {
+    let space = header.field("space").map_err(|e| {
+        format!(
+            "{e}: its 'space directions' place the voxels in a frame it does not name; add the one the image was \
+             saved in, 'space: left-posterior-superior' (DICOM's, ITK's) or 'space: right-anterior-superior'"
+        )
+    })?;
+    match space.to_ascii_lowercase().as_str() {
+        "left-posterior-superior" | "lps" => Ok(Frame::Lps),
+        "right-anterior-superior" | "ras" => Ok(Frame::Ras),
+        other => Err(format!("space '{other}' is not supported (left-posterior-superior or right-anterior-superior)")),
+    }
+}
+
 /// Parses a NRRD file, its data attached or in the file a detached header names (relative to
 /// `folder`).
 fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
@@ -751,27 +766,7 @@ fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String> {
         return Err(format!("bad sizes {sizes:?}"));
     }
     let count = layers * dims.iter().product::<usize>();
-    let space = match placed {
-        true => header
-            .field("space")
-            .map_err(|e| {
-                format!(
-                    "{e}: its 'space directions' place the voxels in a frame it does not name; add the one the image \
-                     was saved in, 'space: left-posterior-superior' (DICOM's, ITK's) or 'space: right-anterior-superior'"
-                )
-            })?
-            .to_ascii_lowercase(),
-        false => "ras".to_string(),
-    };
-    let frame = match space.as_str() {
-        "left-posterior-superior" | "lps" => Frame::Lps,
-        "right-anterior-superior" | "ras" => Frame::Ras,
-        other => {
-            return Err(format!(
-                "space '{other}' is not supported (left-posterior-superior or right-anterior-superior)"
-            ))
-        }
-    };
+    let frame = if placed { nrrd_frame(&header)? } else { Frame::Ras };
     let origin = match header.fields.get("space origin") {
         Some(text) => nrrd_vectors(text)?.first().copied().flatten().ok_or("bad 'space origin'")?,
         None => [0.0; 3],
