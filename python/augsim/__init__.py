@@ -3,7 +3,8 @@ U-Net, warm-started between clouds), U-Net predictions and the ROUKF one step at
 
 The computations are augsim's own (the same code as the ``augsim`` command line); arrays are
 NumPy float64 unless said otherwise, lengths in metres unless a ``units`` argument says otherwise ("mm", "cm", "um").
-augsim's errors are raised as :class:`AugsimError` with augsim's message; arrays of the wrong
+augsim's errors are raised as :class:`AugsimError` with augsim's message, its warnings (a result
+that may not be believed, a file left out) issued as :class:`AugsimWarning`; arrays of the wrong
 shape raise :class:`ValueError`. The API is described in ``python/README.md``.
 """
 
@@ -12,6 +13,7 @@ from importlib import metadata as _metadata
 from ._augsim import (
     Assimilation,
     AugsimError,
+    AugsimWarning,
     Estimate,
     Registered,
     Registration,
@@ -29,6 +31,7 @@ except _metadata.PackageNotFoundError:  # run from the source tree, not installe
 __all__ = [
     "Assimilation",
     "AugsimError",
+    "AugsimWarning",
     "Estimate",
     "Registered",
     "Registration",

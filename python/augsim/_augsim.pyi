@@ -9,6 +9,7 @@ import numpy.typing as npt
 _Path = Union[str, os.PathLike]
 
 class AugsimError(RuntimeError): ...
+class AugsimWarning(UserWarning): ...
 
 class Solution:
     points: npt.NDArray[np.float64]

@@ -27,6 +27,20 @@ from helpers import LIVER_AR, ROOT, make_case, run_augsim
 BEAM_ASSIMILATION = os.path.join(ROOT, "crates", "app", "tests", "data", "beam_assimilation.toml")
 
 
+def test_a_solve_s_warnings_are_python_warnings(tmp_path):
+    # A bar pulled to four times its length, far beyond soft tissue: warned of as the command line does.
+    scenario = tmp_path / "pull.toml"
+    scenario.write_text(
+        'kind = "static"\nname = "pull"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.04, 0.01, 0.01]\n'
+        'cells = [4, 1, 1]\nelement = "hex"\n[material]\nlaw = "neo_hookean"\nyoung = 5000.0\npoisson = 0.3\n'
+        "[[fixed]]\nselect = { box = { min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] } }\n"
+        "[[prescribed]]\nselect = { box = { min = [0.04, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\n"
+        "displacement = [0.12, 0.0, 0.0]\n"
+    )
+    with pytest.warns(augsim.AugsimWarning, match="far beyond what soft tissue bears"):
+        augsim.solve(str(scenario))
+
+
 def test_solve_beam_matches_the_command_line(tmp_path):
     s = augsim.solve("beam")
     assert s.points.shape == s.displacement.shape == (6 * 6 * 21, 3)
@@ -212,7 +226,9 @@ def test_the_package_says_its_version():
 def test_a_time_budget_ends_a_cloud_with_its_estimate(case):
     # A budget far below one FEM solve: the cloud answers with the estimate reached, saying why.
     reg = augsim.Registration(fem=case["scenario"], targets=case["targets"], units="mm", time_budget_ms=1e-3)
-    r = reg.register(case["cloud"])
+    # Its warnings are Python's too, of augsim's own class.
+    with pytest.warns(augsim.AugsimWarning, match="past its time budget of 0 ms"):
+        r = reg.register(case["cloud"])
     assert any("past its time budget of 0 ms" in w for w in r.warnings), r.warnings
     # A budget that is no budget is a ValueError, as iterations=0 is.
     for budget in [-1.0, 0.0, float("nan")]:

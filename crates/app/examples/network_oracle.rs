@@ -3,7 +3,8 @@
 //!   truth's surface point nearest to each): the best any matching loop could give it;
 //! - the loop's surface fit computed on the *true* deformed surface: whether the truth is a
 //!   fixed point of matching and fitting;
-//! - the registration loop itself.
+//! - the match-and-fit loop itself, with the case's settings (`register --model` runs the learned
+//!   registration of `augsim_app::registration`, its own settings).
 //!
 //! `cargo run --release -p augsim-app --example network_oracle -- [CASE.toml] [FORCE]`
 //! (default: the built-in `register_case` scenario; FORCE in N replaces its force).
@@ -12,6 +13,7 @@ use std::path::Path;
 
 use augsim_app::case::{ar_network_model, network_from_truth, synthetic_case};
 use learn::Model;
+use mesh::length::mm;
 use mesh::Point;
 use register::{observe, register_frame, target_errors, RigidTransform};
 use scenario::CaseScenario;
@@ -54,18 +56,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let tre = |u: &[f64]| {
         let registered = register::organ::displaced(&case.targets, &stencils, u);
         let e = target_errors(&registered, &case.peak().truth);
-        (1e3 * mesh::stats::mean(&e), 1e3 * mesh::stats::max(&e))
+        (mm(mesh::stats::mean(&e)), mm(mesh::stats::max(&e)))
     };
     println!("case       {} at {} N; markers move {:.1} mm on average", scenario.name, scenario.truth.force, {
         let rest = target_errors(&case.targets, &case.peak().truth);
-        1e3 * mesh::stats::mean(&rest)
+        mm(mesh::stats::mean(&rest))
     });
     let (mean, max) = tre(&truth_u);
     println!("truth on the network's mesh            TRE {mean:.2} / {max:.2} mm (interpolation alone)");
 
     // The network given the true normal motion of its input nodes.
     let errors = network_from_truth(&case, &organ, &deformer)?;
-    let (mean, max) = (1e3 * mesh::stats::mean(&errors), 1e3 * mesh::stats::max(&errors));
+    let (mean, max) = (mm(mesh::stats::mean(&errors)), mm(mesh::stats::max(&errors)));
     println!("network, true normal motion in         TRE {mean:.2} / {max:.2} mm");
 
     let visible = mesh.region("visible")?.to_vec();
@@ -82,13 +84,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .collect();
     println!(
         "fit on the true surface                normal motion off by {:.2} mm on average, {:.2} mm at most",
-        1e3 * mesh::stats::mean(&misfit),
-        1e3 * mesh::stats::max(&misfit)
+        mm(mesh::stats::mean(&misfit)),
+        mm(mesh::stats::max(&misfit))
     );
 
     let mut deformer = deformer;
     let frame = register_frame(&organ, &mut deformer, &case.peak().cloud, None, options)?;
     let (mean, max) = tre(&frame.u);
-    println!("registration loop                      TRE {mean:.2} / {max:.2} mm in {} iterations", frame.iterations);
+    println!("match-and-fit loop, the case's settings TRE {mean:.2} / {max:.2} mm in {} iterations", frame.iterations);
     Ok(())
 }

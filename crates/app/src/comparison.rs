@@ -60,8 +60,7 @@ pub fn run_comparison(
         Some(path) => DatasetScenario::load(path)?,
         None => (ar_scenario(), PathBuf::new()),
     };
-    let networks: Vec<Network> =
-        models.iter().map(|model| Network { model, scenario: &network_scenario, dir: &network_dir }).collect();
+    let networks = Network::each(&models, &network_scenario, &network_dir);
     let methods = case_methods(scenario, &networks)?;
     if methods.is_empty() {
         bail!("no method to compare");

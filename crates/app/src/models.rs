@@ -52,7 +52,12 @@ pub struct Network<'a> {
     pub dir: &'a Path,
 }
 
-impl Network<'_> {
+impl<'a> Network<'a> {
+    /// Each of `models`, trained on the dataset scenario `scenario` (its paths relative to `dir`).
+    pub fn each(models: &'a [Model], scenario: &'a DatasetScenario, dir: &'a Path) -> Vec<Network<'a>> {
+        models.iter().map(|model| Network { model, scenario, dir }).collect()
+    }
+
     /// The model and its scenario, in memory, as a method's spec takes them.
     pub fn sources(&self) -> (ModelSource, ScenarioSource<DatasetScenario>) {
         let scenario = ScenarioSource::Given { scenario: Box::new(self.scenario.clone()), dir: self.dir.to_path_buf() };

@@ -217,7 +217,7 @@ mod tests {
             .with_given_frame(Some(Frame::Ras));
         assert_eq!(input.read(&plain).unwrap().points, [[-1.0, -2.0, 3.0]]);
         let npy = dir.path().join("cloud.npy");
-        learn::data::npy::write_f64(&npy, &[1, 3], &[1.0, 2.0, 3.0]).unwrap();
+        mesh::io::npy::write_f64(&npy, &[1, 3], &[1.0, 2.0, 3.0]).unwrap();
         assert_eq!(input.read_cloud(&npy).unwrap(), [[-1.0, -2.0, 3.0]]);
         let empty = dir.path().join("empty.csv");
         std::fs::write(&empty, "x,y,z\n").unwrap();

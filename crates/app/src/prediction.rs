@@ -44,7 +44,7 @@ pub fn predict_file(
     }
     let predictor = model.predictor(compute)?;
     let (prediction, sigma) = predictor.predict_with_std(&data)?;
-    learn::data::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
+    mesh::io::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
     let t = learn::time_prediction(|x| predictor.predict(x), &data, 3, runs)?;
     lines.push(format!(
         "prediction {} runs: median {:.2} ms, mean {:.2} ± {:.2} ms, min {:.2}, max {:.2}",
@@ -58,7 +58,7 @@ pub fn predict_file(
     lines.push(format!("wrote      {}", output.display()));
     if let Some(sigma) = &sigma {
         let path = sigma_path(output);
-        learn::data::npy::write_f32(&path, &[g.nx, g.ny, g.nz], sigma)?;
+        mesh::io::npy::write_f32(&path, &[g.nx, g.ny, g.nz], sigma)?;
         let inside: Vec<f64> = sigma.iter().filter(|&&s| s > 0.0).map(|&s| f64::from(s)).collect();
         let mean = inside.iter().sum::<f64>() / inside.len().max(1) as f64;
         lines.push(format!(

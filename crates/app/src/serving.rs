@@ -15,6 +15,7 @@ use crate::registration::{RegistrationChoice, RegistrationSpec};
 /// Options of `augsim serve`.
 #[derive(Debug, clap::Args)]
 pub struct ServeArgs {
+    /// The registration every client's frames go through.
     #[command(flatten)]
     pub registration: RegistrationChoice,
     /// TCP port (OpenIGTLink's is 18944).

@@ -53,12 +53,18 @@ impl PatientMethod {
 #[derive(Clone, Debug, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct Patient {
+    /// The method registrations use unless another is asked for.
     #[serde(default)]
     pub method: PatientMethod,
+    /// The learned model's directory.
     pub model: PathBuf,
+    /// The dataset scenario the model was trained on.
     pub scenario: PathBuf,
+    /// The FEM's static scenario.
     pub fem: PathBuf,
+    /// The targets at rest.
     pub targets: PathBuf,
+    /// The unit of the targets' file.
     pub units: LengthUnit,
     /// The unit of the files the set-up was prepared from (set-ups of older versions name none).
     #[serde(default, skip_serializing_if = "Option::is_none")]

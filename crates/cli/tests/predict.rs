@@ -154,7 +154,7 @@ magnitude = [0.05, 0.2]
     augsim(&["train", "data", "--out", "rom", "--method", "rom", "--test-samples", "2"], d);
     let text = augsim(&["predict", "rom", "cloud.csv", "-o", "rom.npy", "--mesh", "organ.vtu", "--runs", "1"], d);
     assert!(text.contains("sigma      predicted at the organ's grid nodes: mean"), "{text}");
-    let sigma = learn::data::npy::read_npy(&d.join("rom_sigma.npy")).unwrap();
+    let sigma = mesh::io::npy::read_npy(&d.join("rom_sigma.npy")).unwrap();
     assert_eq!(sigma.shape, [9, 10, 9]);
     let sigma = sigma.into_f32();
     assert!(sigma.iter().all(|s| s.is_finite() && *s >= 0.0) && sigma.iter().any(|s| *s > 0.0));
@@ -177,7 +177,7 @@ magnitude = [0.05, 0.2]
     if cfg!(feature = "cpu-burn") {
         let text = augsim(&burn_args, d);
         assert!(text.contains("device     cpu (burn flex)"), "{text}");
-        let read = |name: &str| learn::data::npy::read_npy(&d.join(name)).unwrap().into_f32();
+        let read = |name: &str| mesh::io::npy::read_npy(&d.join(name)).unwrap().into_f32();
         let (repacked, burn) = (read("pred.npy"), read("pred_burn.npy"));
         let scale = repacked.iter().fold(0f32, |m, v| m.max(v.abs()));
         let diff = repacked.iter().zip(&burn).fold(0f32, |m, (a, b)| m.max((a - b).abs()));

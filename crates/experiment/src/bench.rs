@@ -140,8 +140,7 @@ fn registration_frames(runs: usize, print: &mut dyn FnMut(&str)) -> Result<()> {
     let (models, skipped) = app::case::shipped_models()?;
     skipped.iter().for_each(|line| print(line));
     let trained_on = app::case::ar_scenario();
-    let networks: Vec<Network> =
-        models.iter().map(|model| Network { model, scenario: &trained_on, dir: std::path::Path::new("") }).collect();
+    let networks = Network::each(&models, &trained_on, std::path::Path::new(""));
     let methods = case_methods(&scenario, &networks)?;
     let single = synthetic_case(&scenario)?;
     let mut stream_scenario = scenario.clone();

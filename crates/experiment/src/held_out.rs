@@ -265,8 +265,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
     let base = base_case()?;
     let (models, skipped) = shipped_models()?;
     let network_scenario = ar_scenario();
-    let networks: Vec<Network> =
-        models.iter().map(|m| Network { model: m, scenario: &network_scenario, dir: Path::new("") }).collect();
+    let networks = Network::each(&models, &network_scenario, Path::new(""));
     // The U-Net the truth's surface motion is fed to (the diagnostic row).
     let oracle = networks.iter().find(|n| n.model.method() == learn::Method::UNet).map(network_model).transpose()?;
     let methods: Vec<String> = case_methods(&base, &networks)?.into_iter().map(|m| m.name).collect();

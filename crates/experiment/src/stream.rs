@@ -15,7 +15,7 @@ use anyhow::{anyhow, Context, Result};
 use fem::material::kpa;
 use live::client::Client;
 use live::Outputs;
-use mesh::length::{from_mm, mm, LengthUnit};
+use mesh::length::{mm, LengthUnit};
 use mesh::stats::{max, mean, median, percentile};
 use scenario::CaseScenario;
 use serde::Serialize;
@@ -83,21 +83,22 @@ pub fn stream_case(method: &str, case: &SyntheticCase, deformed_by: MethodSpec) 
         given_units: LengthUnit::Millimetre,
         ..RegistrationSpec::new(deformed_by, TargetsSpec::Points(case.targets.clone()))
     };
+    let unit = spec.given_units;
     let setup = serve_setup(spec, Some(Outputs { targets: true, status: true, ..Outputs::NONE }), None)?;
     let stop = Arc::new(AtomicBool::new(false));
     let server = {
         let stop = stop.clone();
         std::thread::spawn(move || live::serve(listener, setup.registrations, setup.options, &stop))
     };
-    let measured = measure(method, case, port);
+    let measured = measure(method, case, port, unit);
     stop.store(true, Ordering::SeqCst);
     let served = server.join().map_err(|_| anyhow!("the server panicked"))?;
     served?;
     measured
 }
 
-/// The client's side of [`stream_case`].
-fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
+/// The client's side of [`stream_case`], sending and reading points in `unit`, the server's.
+fn measure(method: &str, case: &SyntheticCase, port: u16, unit: LengthUnit) -> Result<Stream> {
     let mut client = Client::connect(("127.0.0.1", port), Duration::from_secs(120)).map_err(|e| anyhow!(e))?;
     let mut s = Stream {
         method: method.into(),
@@ -112,7 +113,7 @@ fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
     };
     let mut began = Instant::now();
     for (k, frame) in case.frames.iter().enumerate() {
-        let cloud: Vec<[f32; 3]> = frame.cloud.iter().map(|p| p.map(|x| mm(x) as f32)).collect();
+        let cloud: Vec<[f32; 3]> = frame.cloud.iter().map(|p| unit.point_from_metres(*p).map(|x| x as f32)).collect();
         let sent = Instant::now();
         client.send_cloud(cloud).map_err(|e| anyhow!(e))?;
         let live::client::Frame { targets, status } = client.until_status().map_err(|e| anyhow!(e))?;
@@ -121,7 +122,7 @@ fn measure(method: &str, case: &SyntheticCase, port: u16) -> Result<Stream> {
             return Err(anyhow!("{method}, frame {k}: the server answered {e}"));
         }
         let targets = targets.ok_or_else(|| anyhow!("{method}, frame {k}: no targets"))?;
-        let registered: Vec<mesh::Point> = targets.iter().map(|p| p.map(|x| from_mm(f64::from(x)))).collect();
+        let registered: Vec<mesh::Point> = targets.iter().map(|p| unit.point_to_metres(p.map(f64::from))).collect();
         let errors: Vec<f64> = register::target_errors(&registered, &frame.truth).into_iter().map(mm).collect();
         s.tre_mm.push(mean(&errors));
         s.tre_max_mm.push(max(&errors));

@@ -13,14 +13,6 @@ pub enum LearnError {
         /// The underlying error.
         error: std::io::Error,
     },
-    /// A malformed or truncated `.npy` file.
-    #[error("{path}: invalid .npy file: {message}")]
-    Npy {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong.
-        message: String,
-    },
     /// A malformed manifest, or one that disagrees with the files on disk.
     #[error("{path}: {message}")]
     Manifest {

@@ -5,9 +5,9 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use augsim_learn::data::dataset::MANIFEST_FILE;
-use augsim_learn::data::npy::{self, NpyData};
 use augsim_learn::{merge_datasets, Dataset, DatasetPart, DatasetSpec, DatasetWriter, GridShape, LearnError, Samples};
 use common::synthetic_sample;
+use mesh::io::npy::{self, NpyData};
 
 fn grid() -> GridShape {
     GridShape::new(6, 5, 4)
@@ -416,7 +416,7 @@ fn corrupt_shards_give_clear_errors() {
     let bytes = std::fs::read(&inputs).unwrap();
     std::fs::write(&inputs, &bytes[..bytes.len() - 10]).unwrap();
     let e = ds.load_all().unwrap_err();
-    assert!(matches!(e, LearnError::Npy { .. }));
+    assert!(matches!(e, LearnError::Mesh(mesh::MeshError::Parse { .. })));
     let e = e.to_string();
     assert!(e.contains("shard_00001/inputs.npy") && e.contains("truncated"), "{e}");
     std::fs::write(&inputs, &bytes).unwrap();

@@ -1,13 +1,13 @@
 //! The reduced-order model on a problem with a known answer: inputs and targets driven by two
 //! hidden parameters, the target a nonlinear function of them.
 
-use augsim_learn::data::npy::{NpyArray, NpyData};
 use augsim_learn::rom::{fit, Context, RomConfig};
 use augsim_learn::{
     evaluate, uncertainty_coverage, Compute, Corruption, GridShape, Method, Model, PredictInput, Sample, Samples,
     SplitPolicy,
 };
 use augsim_learn::{FieldUnit, LearnedModel};
+use mesh::io::npy::{NpyArray, NpyData};
 
 /// Sample `index`: parameters (a, b) in [−1, 1]²; the input a·φ₁ + b·φ₂ on a patch of nodes (a
 /// "visible surface"); the target a smooth field a·ψ₁ + b·ψ₂ + a·b·ψ₃ + a²·ψ₄ (m) inside the mask.

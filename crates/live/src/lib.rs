@@ -273,8 +273,10 @@ fn log(line: impl std::fmt::Display) {
 /// that a server stopped in any way leaves every answer it sent. The first line names the client
 /// (`peer`, `connected`: seconds since 1970, `unit` and `frame`, the stream's; the frame null
 /// where unnamed); then each cloud's status with
-/// its `timestamp` (the cloud's header timestamp in seconds since 1970, null for 0) and `targets` (in the stream's unit
-/// and frame), each error status and each estimate.
+/// its `timestamp` (the cloud's header timestamp in seconds since 1970, null for 0), `targets` (in the stream's unit
+/// and frame) and `cloud`, the file that holds the cloud as it came (`client-NNN/cloud-NNNNNN.npy`, float32
+/// `[n, 3]` in the stream's unit and frame, relative to the record's folder), each error status and each
+/// estimate.
 pub struct Record {
     file: Mutex<std::io::BufWriter<std::fs::File>>,
     /// The file, for the log.
@@ -304,6 +306,16 @@ impl Record {
         });
         record.write(&header)?;
         Ok(record)
+    }
+
+    /// Writes cloud `frame`'s points as they came (float32 `[n, 3]`, 3 values a point) beside the
+    /// record, in a folder named as its file: returns its path relative to the record's folder.
+    fn cloud(&self, frame: u64, points: &[f32]) -> std::result::Result<String, mesh::MeshError> {
+        let folder = self.path.with_extension("");
+        let name = format!("cloud-{frame:06}.npy");
+        mesh::io::npy::write_f32(&folder.join(&name), &[points.len() / 3, 3], points)?;
+        let stem = folder.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
+        Ok(format!("{stem}/{name}"))
     }
 
     /// Appends `line`.
@@ -878,9 +890,14 @@ fn answer(
         "from_rest": result.from_rest,
         "target_sigma": back.target_std,
     });
-    if shared.record.is_some() {
+    if let Some(record) = &shared.record {
+        let wire: Vec<f32> = points.iter().flat_map(to_wire).collect();
+        // A cloud that cannot be written is logged; its status is recorded all the same.
+        let file = record.cloud(cloud.frame, &wire).map_err(|e| log(format_args!("{}: recording: {e}", shared.peer)));
         let (timestamp, targets) = (cloud.timestamp.map(timestamp_seconds), &back.targets);
-        shared.record(serde_json::json!({ "status": status, "timestamp": timestamp, "targets": targets }));
+        let line =
+            serde_json::json!({ "status": status, "timestamp": timestamp, "targets": targets, "cloud": file.ok() });
+        shared.record(line);
     }
     // A result that is not plausible comes under names that say so (`targets_implausible`,
     // `organ_implausible`, `rigid_implausible`), without its structures (whose names fill a device

@@ -286,8 +286,9 @@ fn answers_carry_the_timestamp_of_the_cloud_they_answer() {
 }
 
 /// With a record folder, each client's stream is written as it goes, one line of JSON per
-/// answer: the client, then each cloud's status with its timestamp (seconds) and targets (in the stream's
-/// unit, as sent), and each error; a second client gets a file of its own.
+/// answer: the client, then each cloud's status with its timestamp (seconds), targets (in the stream's
+/// unit, as sent) and the file of the cloud as it came, and each error; a second client gets a file of
+/// its own.
 #[test]
 fn each_client_s_stream_is_recorded_as_it_goes() {
     let dir = tempfile::tempdir().unwrap();
@@ -297,7 +298,7 @@ fn each_client_s_stream_is_recorded_as_it_goes() {
     let (cloud, _) = pressed_cloud(300.0);
     let mut client = connect(server.port);
     client.send_cloud(cloud.clone()).unwrap();
-    let sent = match client.receive().unwrap() {
+    let answered = match client.receive().unwrap() {
         Some(Answer::Targets(points)) => points,
         other => panic!("expected targets, got {other:?}"),
     };
@@ -309,7 +310,7 @@ fn each_client_s_stream_is_recorded_as_it_goes() {
     client.send_bytes(&augsim_live::encode_message_stamped(&empty, "cloud", stamp).unwrap()).unwrap();
     assert!(status(client.receive().unwrap())["error"].is_string());
     let mut second = connect(server.port);
-    second.send_cloud(cloud).unwrap();
+    second.send_cloud(cloud.clone()).unwrap();
     assert!(matches!(second.receive().unwrap(), Some(Answer::Targets(_))));
     let _organ = second.receive().unwrap();
     let _status = status(second.receive().unwrap());
@@ -324,10 +325,16 @@ fn each_client_s_stream_is_recorded_as_it_goes() {
     assert_eq!(lines[0]["frame"], "RAS", "the stream's frame is recorded with its unit: {}", lines[0]);
     assert!(lines[1]["status"]["frame"] == 1 && lines[1]["status"]["plausible"] == true, "{}", lines[1]);
     let recorded: Vec<Vec<f64>> = serde_json::from_value(lines[1]["targets"].clone()).unwrap();
-    assert_eq!(recorded.len(), sent.len());
-    for (r, s) in recorded.iter().zip(&sent) {
+    assert_eq!(recorded.len(), answered.len());
+    for (r, s) in recorded.iter().zip(&answered) {
         assert!(r.iter().zip(s).all(|(a, b)| (a - f64::from(*b)).abs() < 1e-3), "{r:?} against {s:?}");
     }
+    // The cloud as it came, in the stream's unit and frame (mm: to the f32's precision).
+    assert_eq!(lines[1]["cloud"], "client-001/cloud-000001.npy", "{}", lines[1]);
+    let kept = mesh::io::npy::read_npy(&dir.path().join("record/client-001/cloud-000001.npy")).unwrap();
+    assert_eq!(kept.shape, [cloud.len(), 3]);
+    let flat: Vec<f32> = cloud.iter().flatten().copied().collect();
+    assert!(kept.into_f32().iter().zip(&flat).all(|(a, b)| (a - b).abs() <= 1e-4 * b.abs().max(1.0)));
     assert!(lines[2]["status"]["frame"] == 2 && lines[2]["status"]["error"].is_string(), "{}", lines[2]);
     assert_eq!(lines[2]["timestamp"], 1_234_567.5, "the header's timestamp in seconds, as pyigtl gives it");
     assert_eq!(read("client-002.jsonl").len(), 2, "the second client's record: its header and its cloud");

@@ -705,13 +705,19 @@ fn coverage_names_a_thin_part_the_mesh_leaves_out() {
 }
 
 /// A ball behind a neck thinner than the lattice comes out of stuffing as a body that shares no
-/// node with the rest: it is left out (nothing would hold it), the larger body kept.
+/// node with the rest (nothing would hold it): a small one is left out, the larger body kept; one
+/// of a third of the volume is a lobe lost, refused, named by its share.
 #[test]
-fn a_body_cut_off_by_a_thin_neck_is_left_out() {
+fn a_body_cut_off_by_a_thin_neck_is_left_out_or_refused() {
     let neck = |p: Point| (p[1] * p[1] + p[2] * p[2]).sqrt().max((p[0] - 0.045).abs() - 0.02) - 0.0015;
-    let two = |p: Point| (norm(p) - 0.03).min(norm([p[0] - 0.09, p[1], p[2]]) - 0.024).min(neck(p) + 0.0);
-    let domain = SdfDomain::new(two, [-0.031, -0.031, -0.031], [0.115, 0.031, 0.031]);
-    let mesh = stuff(&domain, &TetMeshOptions::with_size(0.012)).unwrap();
+    let stuffed = |radius: f64| {
+        let two = move |p: Point| (norm(p) - 0.03).min(norm([p[0] - 0.09, p[1], p[2]]) - radius).min(neck(p));
+        let domain = SdfDomain::new(two, [-0.031, -0.031, -0.031], [0.115, 0.031, 0.031]);
+        stuff(&domain, &TetMeshOptions::with_size(0.012))
+    };
+    let error = stuffed(0.024).unwrap_err().to_string();
+    assert!(error.contains("the mesh falls apart: a part of 33 % of the volume"), "{error}");
+    let mesh = stuffed(0.01).unwrap();
     assert!(mesh.nodes.iter().all(|p| p[0] < 0.05), "the far ball is left out");
     let (lo, hi) = mesh.bounds();
     assert!(hi[0] - lo[0] > 0.05, "the near ball is kept: {lo:?} {hi:?}");

@@ -17,8 +17,8 @@ use app::assimilation::{AssimilationChoice, Experiment, OnlineFilter};
 use app::output::write_registered_cloud;
 use app::registration::{RegistrationChoice, RegistrationSpec, TargetsSpec};
 use fem::post;
-use learn::data::npy::{NpyArray, NpyData};
 use learn::{Model, PointCloud, PredictInput};
+use mesh::io::npy::{NpyArray, NpyData};
 use mesh::io::{Frame, GivenCoordinates};
 use mesh::length::LengthUnit;
 use mesh::Point;
@@ -41,6 +41,23 @@ create_exception!(
     "An error reported by augsim: a file that cannot be read, an invalid scenario, cloud or \
      model, a solve that failed. Its message is augsim's."
 );
+
+create_exception!(
+    augsim,
+    AugsimWarning,
+    pyo3::exceptions::PyUserWarning,
+    "A warning of augsim's: a registration's set-up (targets, structures), a file it wrote or left \
+     out, a cloud's result that may not be believed (not plausible, past its time budget). The \
+     result's `warnings` hold the frame's too; filter them with the `warnings` module by this class."
+);
+
+/// Each of `lines` as an [`AugsimWarning`].
+fn warn_each(py: Python<'_>, lines: &[String]) -> PyResult<()> {
+    for line in lines {
+        PyErr::warn(py, &py.get_type::<AugsimWarning>(), &std::ffi::CString::new(line.as_str())?, 1)?;
+    }
+    Ok(())
+}
 
 /// How often a caller waiting for a computation checks for Ctrl-C.
 const SIGNAL_POLL: Duration = Duration::from_millis(50);
@@ -233,13 +250,17 @@ impl Solution {
 ///
 /// `scenario`: a scenario file (TOML, `kind = "static"`) or the name of a built-in one (`beam`,
 /// `liver`, ...). Returns a `Solution` (`points`, `displacement`, `iterations`, ...). Raises
-/// `AugsimError` when the scenario cannot be read or the solve fails to converge.
+/// `AugsimError` when the scenario cannot be read or the solve fails to converge; warns
+/// (`AugsimWarning`) as `augsim solve` does.
 #[pyfunction]
 fn solve(py: Python<'_>, scenario: PathBuf) -> PyResult<Solution> {
-    let (nodes, sol, reaction) = compute(py, || {
+    let (nodes, sol, reaction, warnings) = compute(py, || {
         let solved = app::solve::solve_scenario(&scenario, |_, _| {})?;
-        Ok((solved.solver.problem().mesh.nodes.clone(), solved.solution, solved.reaction))
+        let warnings: Vec<String> =
+            solved.lines()?.iter().filter_map(|l| l.strip_prefix("warning    ").map(str::to_string)).collect();
+        Ok((solved.solver.problem().mesh.nodes.clone(), solved.solution, solved.reaction, warnings))
     })?;
+    warn_each(py, &warnings)?;
     Ok(Solution {
         points: point_array(py, &nodes).unbind(),
         displacement: nodal(py, &sol.u).unbind(),
@@ -457,15 +478,7 @@ impl Registration {
         })?;
         let organ_frame = state.frame();
         let given = spec.coordinates(&state);
-        let warnings = state.warnings().to_vec();
-        for w in &warnings {
-            PyErr::warn(
-                py,
-                &py.get_type::<pyo3::exceptions::PyUserWarning>(),
-                &std::ffi::CString::new(w.as_str())?,
-                1,
-            )?;
-        }
+        warn_each(py, state.warnings())?;
         let method = state.method().to_string();
         Ok(Registration {
             state: Mutex::new(state),
@@ -517,9 +530,8 @@ impl Registration {
                 .collect();
             Ok((tracked, moved, notes))
         })?;
-        for note in notes {
-            PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &std::ffi::CString::new(note)?, 1)?;
-        }
+        warn_each(py, &notes)?;
+        warn_each(py, &tracked.registration.warnings)?;
         let structures = PyDict::new(py);
         for (name, vertices) in moved {
             structures.set_item(name, self.point_array(py, &vertices))?;
@@ -799,6 +811,7 @@ impl Assimilation {
 #[pymodule]
 fn _augsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("AugsimError", m.py().get_type::<AugsimError>())?;
+    m.add("AugsimWarning", m.py().get_type::<AugsimWarning>())?;
     m.add_function(wrap_pyfunction!(solve, m)?)?;
     m.add_function(wrap_pyfunction!(predict, m)?)?;
     m.add_function(wrap_pyfunction!(read_cloud, m)?)?;

@@ -10,10 +10,12 @@
 //! or a trained U-Net) for the volumetric displacement that explains them.
 //!
 //! A soft cube fixed at its base and pressed on top, registered to a cloud of its deformed top
-//! face as a camera above it sees it (positions only, no correspondences):
+//! face as a camera above it sees it (positions only, no correspondences), through
+//! [`Registration`], which `augsim register`, `augsim serve` and Python build (in
+//! `augsim_app::registration`, from the user's choices):
 //!
 //! ```
-//! use augsim_register::{register_frame, FemDeformer, Organ, RegistrationOptions};
+//! use augsim_register::{FemDeformer, Organ, Registration, RegistrationOptions};
 //! use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
 //! use mesh::select::nodes_in_box;
 //!
@@ -30,12 +32,17 @@
 //! let cloud: Vec<_> = deformed.into_iter().zip(&rest).filter(|(_, r)| r[2] > 0.05 - 1e-6).map(|(p, _)| p).collect();
 //!
 //! let stiffness = FemDeformer::default_stiffness(&problem);
-//! let mut deformer = FemDeformer::new(problem, stiffness, SolverOptions::default())?;
+//! let deformer = FemDeformer::new(problem, stiffness, SolverOptions::default())?;
 //! let options = RegistrationOptions { view: Some([0.0, 0.0, -1.0]), ..RegistrationOptions::default() };
-//! let frame = register_frame(&organ, &mut deformer, &cloud, None, &options)?;
-//! // The error at the cube's centre, a hidden target, against the truth's motion there.
+//! // The cube's centre, a hidden target.
 //! let centre = organ.mesh().nodes.iter().position(|p| p.iter().all(|&x| (x - 0.025).abs() < 1e-9)).unwrap();
-//! let error = (0..3).map(|d| (frame.u[3 * centre + d] - u_true[3 * centre + d]).powi(2)).sum::<f64>().sqrt();
+//! let target = organ.mesh().nodes[centre];
+//! let mut registration =
+//!     Registration::new(organ, Box::new(deformer), "co-rotational FEM", vec![target], vec![], options)?;
+//! let tracked = registration.register(&cloud)?;
+//! // Its error against the truth's motion there.
+//! let truth: Vec<f64> = (0..3).map(|d| target[d] + u_true[3 * centre + d]).collect();
+//! let error = (0..3).map(|d| (tracked.targets[0][d] - truth[d]).powi(2)).sum::<f64>().sqrt();
 //! let motion = (0..3).map(|d| u_true[3 * centre + d].powi(2)).sum::<f64>().sqrt();
 //! // Without registration the error would be the whole motion (1.1 mm).
 //! assert!(error < 0.25 * motion, "error {error:.2e} m against a motion of {motion:.2e} m");

@@ -146,7 +146,7 @@ fn binary_ply_with_integer_coordinates() {
 fn npy_f32_and_f64() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("f32.npy");
-    learn::data::npy::write_f32(&path, &[2, 3], &[1.0, 2.0, 3.0, -0.5, 0.25, 1e-3]).unwrap();
+    mesh::io::npy::write_f32(&path, &[2, 3], &[1.0, 2.0, 3.0, -0.5, 0.25, 1e-3]).unwrap();
     assert_eq!(read_point_cloud(&path).unwrap(), vec![[1.0, 2.0, 3.0], [-0.5, 0.25, f64::from(1e-3f32)]]);
 
     let mut bytes = npy_header("<f8", 2, 3);
@@ -161,20 +161,20 @@ fn npy_f32_and_f64() {
 fn npy_of_wrong_shape_or_with_nan_is_rejected() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("six.npy");
-    learn::data::npy::write_f32(&path, &[2, 6], &[0.0; 12]).unwrap();
+    mesh::io::npy::write_f32(&path, &[2, 6], &[0.0; 12]).unwrap();
     assert_contains(&error(read_point_cloud(&path)), &["[N, 3]", "[2, 6]"]);
 
     let path = dir.path().join("nan.npy");
-    learn::data::npy::write_f32(&path, &[2, 3], &[0.0, 0.0, 0.0, 1.0, f32::NAN, 2.0]).unwrap();
+    mesh::io::npy::write_f32(&path, &[2, 3], &[0.0, 0.0, 0.0, 1.0, f32::NAN, 2.0]).unwrap();
     assert_contains(&error(read_point_cloud(&path)), &["point 1", "non-finite"]);
 
     // One point out of reach (a damaged file), which would make every distance to the cloud inf.
     let path = dir.path().join("far.npy");
-    learn::data::npy::write_f64(&path, &[2, 3], &[0.1, 0.0, 0.0, 1e30, 0.0, 0.0]).unwrap();
+    mesh::io::npy::write_f64(&path, &[2, 3], &[0.1, 0.0, 0.0, 1e30, 0.0, 0.0]).unwrap();
     assert_contains(&error(read_point_cloud(&path)), &["point 1", "a damaged file?"]);
 
     let path = dir.path().join("empty.npy");
-    learn::data::npy::write_f32(&path, &[0, 3], &[]).unwrap();
+    mesh::io::npy::write_f32(&path, &[0, 3], &[]).unwrap();
     assert_contains(&error(read_point_cloud(&path)), &["no points"]);
 }
 

@@ -318,8 +318,6 @@ pub fn write_tracks(path: &Path, ids: &[String], frames: &[DVector<f64>]) -> Res
     Ok(())
 }
 
-/// The data rows of a CSV file ([`mesh::io::csv`]) whose header is `header` (compared without case and
-/// spaces): the 1-based line number and the fields (as many as the header has, the id field non-empty).
 /// The data rows of a file with the columns of `header` (its coordinates may name their unit) and the
 /// unit of its coordinates: the one the header names, else `given`.
 fn rows(path: &Path, header: &str, given: LengthUnit) -> Result<(Vec<Row>, LengthUnit), AssimilationError> {

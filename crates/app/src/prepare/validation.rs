@@ -88,7 +88,7 @@ impl Truth {
     ) -> Result<(Solution, bool)> {
         let stem = format!("truth-{}-{push}-{force}N", self.mesh.cells.len());
         let (solved, failed) = (dir.join(format!("{stem}.npy")), dir.join(format!("{stem}.failed")));
-        if let Ok(kept) = learn::data::npy::read_npy(&solved) {
+        if let Ok(kept) = mesh::io::npy::read_npy(&solved) {
             let u = kept.into_f64();
             if u.len() == 3 * self.mesh.num_nodes() {
                 return Ok((Ok(u), true));
@@ -99,7 +99,7 @@ impl Truth {
         }
         let solution = match self.push(centre, camera, force, radius) {
             Ok(u) => {
-                learn::data::npy::write_f64(&solved, &[u.len() / 3, 3], &u)?;
+                mesh::io::npy::write_f64(&solved, &[u.len() / 3, 3], &u)?;
                 Ok(u)
             }
             Err(e) => {

@@ -27,8 +27,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::chosen::ChosenDraws;
 use crate::data::grid::{unfit_value, GridPlacement, GridShape, CHANNELS, LAYOUT, MAX_FIELD_VALUE};
-use crate::data::npy;
 use crate::{LearnError, Result};
+use mesh::io::npy;
 
 /// Value of the manifest's `format` field.
 pub const FORMAT: &str = "augsim-dataset";
@@ -1034,7 +1034,7 @@ impl Dataset {
         })?;
         let [inputs, targets, masks] = self.expected_shapes(info).map(|(file, shape)| {
             let path = self.dir.join(file);
-            npy::read_npy(&path).and_then(|a| {
+            npy::read_npy(&path).map_err(LearnError::from).and_then(|a| {
                 if a.shape != shape {
                     Err(shape_error(&path, &shape, &a.shape))
                 } else {

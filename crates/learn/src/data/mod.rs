@@ -1,6 +1,5 @@
 //! Datasets: what a network learns from, and how inputs reach its grid.
 //!
-//! - [`npy`]: minimal NumPy `.npy` reader/writer (v1.0 header, `<f4`, `<f8`, `|u1`, `|b1`).
 //! - [`dataset`]: sharded datasets with a JSON manifest, resumable writer, reader, merge.
 //! - [`generate`]: FEM-generated samples (random loads → grid input and target), parallel, resumable.
 //! - [`chosen`]: σ-chosen draws, where a reduced-order model is least sure (active learning).
@@ -15,7 +14,6 @@ pub mod corrupt;
 pub mod dataset;
 pub mod generate;
 pub mod grid;
-pub mod npy;
 pub mod points;
 pub mod response;
 pub mod split;

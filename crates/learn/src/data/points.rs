@@ -10,9 +10,9 @@ use mesh::length::LengthUnit;
 use mesh::Point;
 
 use crate::data::grid::{encode_points, unfit_input, MAX_FIELD_VALUE};
-use crate::data::npy::{read_npy, NpyArray, NpyData};
 use crate::model::LearnedModel;
 use crate::{LearnError, Result};
+use mesh::io::npy::{read_npy, NpyArray, NpyData};
 
 /// Vectors at points (m; the vectors in the model's input unit: forces in N or displacements in m).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -278,8 +278,7 @@ mod tests {
     fn clouds_and_grid_tensors_are_told_apart_by_shape_and_extension() {
         let dir = tempfile::tempdir().unwrap();
         let npy = dir.path().join("cloud.npy");
-        crate::data::npy::write_f32(&npy, &[2, 6], &[0.0, 0.1, 0.2, 1.0, 0.0, 0.0, 0.5, 0.5, 0.5, 0.0, 0.0, 2.0])
-            .unwrap();
+        mesh::io::npy::write_f32(&npy, &[2, 6], &[0.0, 0.1, 0.2, 1.0, 0.0, 0.0, 0.5, 0.5, 0.5, 0.0, 0.0, 2.0]).unwrap();
         match PredictInput::read(&npy).unwrap() {
             PredictInput::Points(c) => {
                 assert_eq!(c.len(), 2);
@@ -288,7 +287,7 @@ mod tests {
             PredictInput::Grid(_) => panic!("a [2, 6] array is a point cloud"),
         }
         let grid = dir.path().join("grid.npy");
-        crate::data::npy::write_f32(&grid, &[3, 2, 2, 2], &[0.0; 24]).unwrap();
+        mesh::io::npy::write_f32(&grid, &[3, 2, 2, 2], &[0.0; 24]).unwrap();
         assert!(matches!(PredictInput::read(&grid).unwrap(), PredictInput::Grid(a) if a.shape == [3, 2, 2, 2]));
         let empty = dir.path().join("empty.CSV");
         std::fs::write(&empty, "x,y,z,u,v,w\n").unwrap();

@@ -54,10 +54,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::corrupt::Corruption;
 use crate::data::grid::{check_prediction_input, GridPlacement, GridShape, CHANNELS, LAYOUT};
-use crate::data::npy::{read_npy, write_f32, write_f64, write_u8};
 use crate::data::split::Split;
 use crate::FieldUnit;
 use crate::{LearnError, Result};
+use mesh::io::npy::{read_npy, write_f32, write_f64, write_u8};
 
 pub use fit::{fit, Candidate, Context, RomConfig, RomReport};
 pub use linalg::Kernel;
@@ -487,7 +487,7 @@ fn quadratic_form(m: MatRef<'_, f64>, k: &[f64]) -> f64 {
 /// Writes a matrix as a C-order `<f8` array.
 fn write_matrix(path: &Path, m: MatRef<'_, f64>) -> Result<()> {
     let values: Vec<f64> = (0..m.nrows()).flat_map(|i| m.row(i).iter().copied().collect::<Vec<_>>()).collect();
-    write_f64(path, &[m.nrows(), m.ncols()], &values)
+    Ok(write_f64(path, &[m.nrows(), m.ncols()], &values)?)
 }
 
 /// Reads the arrays of a model directory, checking their shapes.

@@ -19,7 +19,7 @@
 //! [`read_surface_with_frame`] and written by
 //! [`write_surface_in_frame`]; points with labels, frame and unit (CSV, Slicer's `.fcsv` and
 //! `.mrk.json`) by the [`points`] module. Every CSV file of the project is read and written by
-//! the [`csv`] module.
+//! the [`csv`] module, every NumPy `.npy` array (datasets, clouds, predictions) by [`npy`].
 //!
 //! Writers ([`write_vtu`], [`write_vtk_legacy`], [`write_msh`], [`write_surface`]) go through
 //! [`write_atomic`] (a temporary file in the target directory, renamed onto the target), so a
@@ -65,6 +65,7 @@ pub mod csv;
 mod frame;
 mod gmsh;
 mod legacy_vtk;
+pub mod npy;
 mod ply;
 pub mod points;
 mod scalar;

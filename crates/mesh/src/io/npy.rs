@@ -9,10 +9,21 @@
 use std::io::Write;
 use std::path::Path;
 
-use mesh::io::{write_atomic, Scalar};
+use crate::io::{write_atomic, Scalar};
+use crate::MeshError;
 
-use crate::fsutil::read;
-use crate::{LearnError, Result};
+/// A result whose error names the `.npy` file.
+type Result<T> = std::result::Result<T, MeshError>;
+
+/// The error of a malformed or truncated `.npy` file at `path`.
+fn invalid(path: &Path, message: impl std::fmt::Display) -> MeshError {
+    MeshError::Parse { path: path.display().to_string(), message: format!("invalid .npy file: {message}") }
+}
+
+/// The error of `path` that could not be read.
+fn unread(path: &Path, error: std::io::Error) -> MeshError {
+    MeshError::Io { path: path.display().to_string(), error }
+}
 
 const MAGIC: &[u8] = b"\x93NUMPY";
 
@@ -57,10 +68,7 @@ impl NpyArray {
 
     /// The values as u8 (float values must be exactly 0 or 1, as for a mask).
     pub fn into_mask(self, path: &Path) -> Result<Vec<u8>> {
-        let bad = |x: f64| LearnError::Npy {
-            path: path.to_path_buf(),
-            message: format!("mask values must be 0 or 1, found {x}"),
-        };
+        let bad = |x: f64| invalid(path, format!("mask values must be 0 or 1, found {x}"));
         match self.data {
             NpyData::U8(v) => match v.iter().find(|&&x| x > 1) {
                 Some(&x) => Err(bad(f64::from(x))),
@@ -105,7 +113,7 @@ fn header(descr: &str, shape: &[usize]) -> Vec<u8> {
 fn check_len(shape: &[usize], len: usize) -> Result<()> {
     let expected: usize = shape.iter().product();
     if expected != len {
-        return Err(LearnError::InvalidInput(format!("npy write: shape {shape:?} needs {expected} values, got {len}")));
+        return Err(MeshError::Invalid(format!("npy write: shape {shape:?} needs {expected} values, got {len}")));
     }
     Ok(())
 }
@@ -149,17 +157,17 @@ pub fn write_u8(path: &Path, shape: &[usize], data: &[u8]) -> Result<()> {
 
 /// Reads an `.npy` file.
 pub fn read_npy(path: &Path) -> Result<NpyArray> {
-    let bytes = read(path)?;
-    parse(&bytes).map_err(|message| LearnError::Npy { path: path.to_path_buf(), message })
+    let bytes = std::fs::read(path).map_err(|e| unread(path, e))?;
+    parse(&bytes).map_err(|message| invalid(path, message))
 }
 
 /// Reads only the shape of an `.npy` file from its header.
 pub fn read_shape(path: &Path) -> Result<Vec<usize>> {
     use std::io::Read;
-    let err = |message: String| LearnError::Npy { path: path.to_path_buf(), message };
-    let mut file = std::fs::File::open(path).map_err(|e| LearnError::io(path, e))?;
+    let err = |message: String| invalid(path, message);
+    let mut file = std::fs::File::open(path).map_err(|e| unread(path, e))?;
     let mut head = Vec::new();
-    Read::take(&mut file, 65536 + 12).read_to_end(&mut head).map_err(|e| LearnError::io(path, e))?;
+    Read::take(&mut file, 65536 + 12).read_to_end(&mut head).map_err(|e| unread(path, e))?;
     let (header, _) = split_header(&head).map_err(err)?;
     Ok(parse_header(header).map_err(err)?.2)
 }
