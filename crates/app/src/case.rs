@@ -150,7 +150,9 @@ pub fn model_mesh() -> Result<Mesh> {
 /// The co-rotational registration model (E = 5 kPa, ν = 0.48: another law than the truth's) on
 /// [`model_mesh`], fixed between the lobes: the built-in static scenario `liver_corotational`.
 pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
-    fem_model(&StaticScenario::builtin("liver_corotational"), Path::new(""))
+    // The built-in phantom's mesh has no piece to leave out.
+    let (organ, deformer, _) = fem_model(&StaticScenario::builtin("liver_corotational"), Path::new(""))?;
+    Ok((organ, deformer))
 }
 
 /// The FEM of `scenario`'s method `name` of `material`: the phantom of `models.tets` linear

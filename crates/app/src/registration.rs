@@ -107,13 +107,14 @@ impl MethodSpec {
 }
 
 /// A method loaded: its organ and the frame its mesh file names, how it deforms, the method in
-/// words, the loop's settings.
+/// words, the loop's settings, and what the set-up should know of its mesh (pieces left out).
 struct Loaded {
     organ: Organ,
     frame: Option<Frame>,
     deformer: Box<dyn Deformer + Send>,
     method: String,
     options: RegistrationOptions,
+    warnings: Vec<String>,
 }
 
 impl MethodSpec {
@@ -123,12 +124,13 @@ impl MethodSpec {
         Ok(match self {
             MethodSpec::Fem(source) => {
                 let (scenario, dir) = source.read(StaticScenario::load)?;
-                let (organ, deformer) = fem_model(&scenario, &dir)?;
+                let (organ, deformer, left_out) = fem_model(&scenario, &dir)?;
                 let m = scenario.material;
                 let method =
                     format!("FEM, {} ({} elements)", m.law.display_name(), m.resolved_formulation().display_name());
                 let frame = scenario.mesh.frame(&dir)?;
-                Loaded { organ, frame, deformer: Box::new(deformer), method, options: defaults() }
+                let (deformer, warnings) = (Box::new(deformer), left_out.into_iter().collect());
+                Loaded { organ, frame, deformer, method, options: defaults(), warnings }
             }
             MethodSpec::Learned { model, scenario, way } => {
                 let (model, words) = model.load()?;
@@ -140,12 +142,12 @@ impl MethodSpec {
                     LearnedWay::Membrane => {
                         let (organ, deformer) = network_model(&network)?;
                         let method = format!("{words}, membrane loop");
-                        Loaded { organ, frame, deformer: Box::new(deformer), method, options }
+                        Loaded { organ, frame, deformer: Box::new(deformer), method, options, warnings: Vec::new() }
                     }
                     LearnedWay::Own => {
                         let LearnedRegistration { organ, deformer, options } =
                             learned_registration(&network, None, &options)?;
-                        Loaded { organ, frame, deformer, method: words, options }
+                        Loaded { organ, frame, deformer, method: words, options, warnings: Vec::new() }
                     }
                     LearnedWay::AfterShapeFit(basis) => {
                         let (basis, basis_words) = basis.load()?;
@@ -157,6 +159,7 @@ impl MethodSpec {
                             deformer,
                             method: format!("{words} after the shape fit of {basis_words}"),
                             options,
+                            warnings: Vec::new(),
                         }
                     }
                 }
@@ -168,7 +171,7 @@ impl MethodSpec {
                     Model::UNet(_) => 1,
                 });
                 let (fem, fem_dir) = fem.read(StaticScenario::load)?;
-                let (organ, deformer) = fem_model(&fem, &fem_dir)?;
+                let (organ, deformer, left_out) = fem_model(&fem, &fem_dir)?;
                 let frame = fem.mesh.frame(&fem_dir)?;
                 let learned: Box<dyn Deformer + Send> = match &model {
                     // The shape space holds on any mesh inside the model's grid: the FEM's own.
@@ -197,7 +200,8 @@ impl MethodSpec {
                 // By default the FEM polishes the learned estimate for a few iterations.
                 let options =
                     options.cloned().unwrap_or_else(|| hybrid_options(&Default::default(), network_iterations));
-                Loaded { organ, frame, deformer: Box::new(deformer), method, options }
+                let warnings = left_out.into_iter().collect();
+                Loaded { organ, frame, deformer: Box::new(deformer), method, options, warnings }
             }
         })
     }
@@ -563,7 +567,7 @@ impl RegistrationSpec {
     /// for one outside it, naming the likely unit mistake), the settings checked (the method's
     /// defaults where none are given: [`RegistrationSpec::options`]).
     pub fn build(&self) -> Result<Registration> {
-        let Loaded { organ, frame: organ_frame, deformer, method, options } =
+        let Loaded { organ, frame: organ_frame, deformer, method, options, warnings } =
             self.method.load(self.options.as_ref())?;
         let (targets, unplaced) = match &self.targets {
             TargetsSpec::Regions => (LabelledPoints::new(region_targets(organ.mesh())), None),
@@ -602,7 +606,7 @@ impl RegistrationSpec {
         let mut registration = Registration::new(organ, deformer, method, points, labels, options)
             .with_context(|| what)?
             .in_frame(organ_frame.or(frame));
-        unplaced.into_iter().for_each(|w| registration.warn(w));
+        warnings.into_iter().chain(unplaced).for_each(|w| registration.warn(w));
         for source in &self.structures {
             let context = || format!("the structure {}", source.path.display());
             let unit = source.unit.unwrap_or(self.given_units);

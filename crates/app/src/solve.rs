@@ -22,7 +22,7 @@ pub struct Solved {
     pub reaction: Vec<f64>,
     /// The warning of the pieces of the mesh left out of the solve: pieces that hang on the rest
     /// by an edge or a vertex and carry nothing.
-    pub left_out: Option<String>,
+    pub hanging_warning: Option<String>,
 }
 
 /// Loads the static scenario `path` (a file or a built-in name), builds its problem and solves it.
@@ -108,7 +108,7 @@ fn solve(
     dir: &Path,
     progress: impl Fn(f64, usize) + Send + Sync + 'static,
 ) -> Result<Solved> {
-    let (problem, left_out) = without_hanging_pieces(&scenario, scenario.build_problem(dir)?)?;
+    let (problem, hanging_warning) = crate::models::solvable_problem(&scenario, dir)?;
     let hints = doubts(&problem);
     let hint = if hints.is_empty() { String::new() } else { format!(" ({})", hints.join("; ")) };
     let mut solver = StaticSolver::new(problem)?;
@@ -120,49 +120,7 @@ fn solve(
     };
     let solution = solver.solve(&options).with_context(|| format!("static solve{hint}"))?;
     let reaction = solver.reaction_forces(&solution.u)?;
-    Ok(Solved { scenario, solver, solution, reaction, left_out })
-}
-
-/// `problem` without the pieces of its mesh that hang on the rest by an edge or a vertex and
-/// carry nothing ([`fem::Problem::hanging_pieces`]: no load, hold or spring on the nodes they
-/// alone have), rebuilt on the rest of the mesh (numbered as in its file), with the warning that
-/// says so. Such a piece (a mesher's slip, as in a real liver's mesh) turns about its hinge at no
-/// cost of energy, but carries no force: the rest deforms as with it, as CalculiX, which solves
-/// the whole mesh, finds. A piece that carries something is a mechanism: the problem is left as
-/// it is, and the solve refuses it, naming the piece.
-fn without_hanging_pieces(scenario: &StaticScenario, problem: fem::Problem) -> Result<(fem::Problem, Option<String>)> {
-    let cells: Vec<usize> = problem.hanging_pieces().concat();
-    let Some(&first) = cells.first() else { return Ok((problem, None)) };
-    let mesh = &problem.mesh;
-    let mut hanging = vec![false; mesh.cells.len()];
-    cells.iter().for_each(|&c| hanging[c] = true);
-    let mut in_rest = vec![false; mesh.num_nodes()];
-    (0..mesh.cells.len())
-        .filter(|&c| !hanging[c])
-        .for_each(|c| mesh.cells.cell(c).iter().for_each(|&n| in_rest[n] = true));
-    let mut alone: Vec<usize> =
-        cells.iter().flat_map(|&c| mesh.cells.cell(c)).copied().filter(|&n| !in_rest[n]).collect();
-    alone.sort_unstable();
-    alone.dedup();
-    let carries = |n: usize| {
-        problem.f_ext[3 * n..3 * n + 3].iter().any(|&f| f != 0.0)
-            || problem.dirichlet.contains_key(&n)
-            || problem.springs[n] > 0.0
-            || problem.point_springs.iter().any(|s| s.nodes.iter().any(|&(m, w)| m == n && w != 0.0))
-    };
-    if alone.iter().any(|&n| carries(n)) {
-        return Ok((problem, None));
-    }
-    let rest = scenario.build_problem_on(mesh.without_cells(&cells)?)?;
-    let line = format!(
-        "warning    {} element(s) hang on the rest by an edge or a vertex (the first: element {} of the file) and carry \
-         no load, hold or spring: left out of the solve with the {} node(s) only they have (they carry no force, so \
-         the rest deforms as with them); the fields file_node and file_cell give the file's numbers",
-        cells.len(),
-        mesh.file_cell(first),
-        alone.len()
-    );
-    Ok((rest, Some(line)))
+    Ok(Solved { scenario, solver, solution, reaction, hanging_warning })
 }
 
 impl Solved {
@@ -288,7 +246,7 @@ impl Solved {
                     .into(),
             );
         }
-        lines.extend(self.left_out.iter().cloned());
+        lines.extend(self.hanging_warning.iter().map(|w| format!("warning    {w}")));
         lines.extend(set_up_warnings(p));
         let (inverted, smallest) = post::inverted_cells(geo, p.material.law, &sol.u)?;
         if inverted > 0 {
@@ -653,6 +611,17 @@ mod tests {
         assert!(warning.contains("the 3 node(s) only they have"), "{warning}");
         let error = solve(&hanging, "heavy", "gravity = [0.0, 0.0, -9.81]\n").err().expect("refused");
         assert!(format!("{error:#}").contains("hang on the rest by an edge or a vertex"), "{error:#}");
+        // A FEM registration on that scenario leaves the piece out too, and says so.
+        use crate::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
+        let method = MethodSpec::fem(dir.path().join("hanging.toml"));
+        let registration =
+            RegistrationSpec::new(method, TargetsSpec::Points(vec![[0.05, 0.01, 0.01]])).build().unwrap();
+        assert_eq!(registration.organ().mesh().num_nodes(), bar.num_nodes());
+        assert!(
+            registration.warnings().iter().any(|w| w.contains("element 30 of the file")),
+            "{:?}",
+            registration.warnings()
+        );
     }
 
     /// The selection of the free end of [`neo_hookean_bar`].

@@ -42,7 +42,8 @@ pub enum LearnError {
     /// An argument that does not fit (wrong length, empty set, bad configuration value).
     #[error("invalid input: {0}")]
     InvalidInput(String),
-    /// A mesh that cannot be used (refined, embedded, sampled).
+    /// A mesh that cannot be used (refined, embedded, sampled), or a file of the formats `mesh::io`
+    /// reads that cannot be read or written (a malformed or truncated `.npy` file).
     #[error(transparent)]
     Mesh(#[from] mesh::MeshError),
     /// A finite-element problem that cannot be set up.

@@ -275,8 +275,8 @@ fn log(line: impl std::fmt::Display) {
 /// where unnamed); then each cloud's status with
 /// its `timestamp` (the cloud's header timestamp in seconds since 1970, null for 0), `targets` (in the stream's unit
 /// and frame) and `cloud`, the file that holds the cloud as it came (`client-NNN/cloud-NNNNNN.npy`, float32
-/// `[n, 3]` in the stream's unit and frame, relative to the record's folder), each error status and each
-/// estimate.
+/// `[n, 3]` in the stream's unit and frame, relative to the record's folder; written once the cloud is
+/// answered, a refused one too), each error status and each estimate.
 pub struct Record {
     file: Mutex<std::io::BufWriter<std::fs::File>>,
     /// The file, for the log.
@@ -308,14 +308,18 @@ impl Record {
         Ok(record)
     }
 
-    /// Writes cloud `frame`'s points as they came (float32 `[n, 3]`, 3 values a point) beside the
-    /// record, in a folder named as its file: returns its path relative to the record's folder.
-    fn cloud(&self, frame: u64, points: &[f32]) -> std::result::Result<String, mesh::MeshError> {
-        let folder = self.path.with_extension("");
-        let name = format!("cloud-{frame:06}.npy");
-        mesh::io::npy::write_f32(&folder.join(&name), &[points.len() / 3, 3], points)?;
-        let stem = folder.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
-        Ok(format!("{stem}/{name}"))
+    /// The file of cloud `frame` ([`Record::write_cloud`]), relative to the record's folder: in
+    /// a folder named as the record's file.
+    fn cloud_file(&self, frame: u64) -> String {
+        let stem = self.path.file_stem().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
+        format!("{stem}/cloud-{frame:06}.npy")
+    }
+
+    /// Writes cloud `frame`'s points as they came (float32 `[n, 3]`, 3 values a point) into its
+    /// [`Record::cloud_file`].
+    fn write_cloud(&self, frame: u64, points: &[f32]) -> std::result::Result<(), mesh::MeshError> {
+        let path = self.path.with_file_name(self.cloud_file(frame));
+        mesh::io::npy::write_f32(&path, &[points.len() / 3, 3], points)
     }
 
     /// Appends `line`.
@@ -413,6 +417,18 @@ impl Shared {
         }
         let _ = self.socket.shutdown(Shutdown::Both);
         self.arrived.notify_all();
+    }
+
+    /// Writes cloud `frame`'s `points` (m, the organ's frame) into the client's record, if any, as
+    /// they came (the stream's unit and frame); a failed write is logged, and the stream goes on.
+    fn record_cloud(&self, frame: u64, points: &[Point]) {
+        if let Some(record) = &self.record {
+            let given = self.options.coordinates;
+            let wire: Vec<f32> = points.iter().flat_map(|p| given.point_out(*p).map(|x| x as f32)).collect();
+            if let Err(e) = record.write_cloud(frame, &wire) {
+                log(format_args!("{}: recording in {}: {e}", self.peer, record.path.display()));
+            }
+        }
     }
 
     /// Writes `line` into the client's record, if any; a failed write is logged, and the
@@ -753,6 +769,8 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
                 if let Err(e) = answer(shared, registration, (frame, skipped), &cloud) {
                     shared.report(&serde_json::json!({ "frame": frame.frame, "error": e }), frame.timestamp);
                 }
+                // Once answered (its latency untouched), the cloud is kept, refused or not.
+                shared.record_cloud(frame.frame, &cloud);
             }
             Work::Step(step, features, timestamp) => {
                 let start = Instant::now();
@@ -891,13 +909,10 @@ fn answer(
         "target_sigma": back.target_std,
     });
     if let Some(record) = &shared.record {
-        let wire: Vec<f32> = points.iter().flat_map(to_wire).collect();
-        // A cloud that cannot be written is logged; its status is recorded all the same.
-        let file = record.cloud(cloud.frame, &wire).map_err(|e| log(format_args!("{}: recording: {e}", shared.peer)));
         let (timestamp, targets) = (cloud.timestamp.map(timestamp_seconds), &back.targets);
-        let line =
-            serde_json::json!({ "status": status, "timestamp": timestamp, "targets": targets, "cloud": file.ok() });
-        shared.record(line);
+        let file = record.cloud_file(cloud.frame);
+        shared
+            .record(serde_json::json!({ "status": status, "timestamp": timestamp, "targets": targets, "cloud": file }));
     }
     // A result that is not plausible comes under names that say so (`targets_implausible`,
     // `organ_implausible`, `rigid_implausible`), without its structures (whose names fill a device

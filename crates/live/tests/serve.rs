@@ -335,6 +335,9 @@ fn each_client_s_stream_is_recorded_as_it_goes() {
     assert_eq!(kept.shape, [cloud.len(), 3]);
     let flat: Vec<f32> = cloud.iter().flatten().copied().collect();
     assert!(kept.into_f32().iter().zip(&flat).all(|(a, b)| (a - b).abs() <= 1e-4 * b.abs().max(1.0)));
+    // A cloud refused is kept too, under its frame's number.
+    let refused = mesh::io::npy::read_npy(&dir.path().join("record/client-001/cloud-000002.npy")).unwrap();
+    assert_eq!(refused.shape, [0, 3]);
     assert!(lines[2]["status"]["frame"] == 2 && lines[2]["status"]["error"].is_string(), "{}", lines[2]);
     assert_eq!(lines[2]["timestamp"], 1_234_567.5, "the header's timestamp in seconds, as pyigtl gives it");
     assert_eq!(read("client-002.jsonl").len(), 2, "the second client's record: its header and its cloud");

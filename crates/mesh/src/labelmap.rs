@@ -376,9 +376,10 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
             _ if dims.iter().any(|&d| !(1..=100_000).contains(&d)) => {
                 format!(" (read {}-endian, as the header size says)", if little { "little" } else { "big" })
             }
-            [_, _, _, n, ..] => format!(
-                ": {n} volumes (one-hot channels of a network's output, or a time series), where a labelmap is one \
-                 volume of labels; save one volume (the channels' argmax, or the channel of the organ)"
+            [_, _, _, more @ ..] => format!(
+                ": {} volumes (one-hot channels of a network's output, or a time series), where a labelmap is one \
+                 volume of labels; save one volume (the channels' argmax, or the channel of the organ)",
+                more.iter().product::<i64>()
             ),
             _ => String::new(),
         };

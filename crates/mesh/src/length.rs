@@ -164,8 +164,9 @@ impl FromStr for Length {
     /// `7mm`, `2.5 cm`, `0.2m`; `0` alone.
     fn from_str(given: &str) -> Result<Length, String> {
         let given = given.trim();
-        let split = given.find(|c: char| c.is_alphabetic() || c == 'µ' || c == 'μ').unwrap_or(given.len());
-        let (number, unit) = (given[..split].trim(), given[split..].trim());
+        // The unit is the letters that end it (a number may hold an exponent's `e`: 1e-3m).
+        let number = given.trim_end_matches(|c: char| c.is_alphabetic() || c == 'µ' || c == 'μ');
+        let (number, unit) = (number.trim(), &given[number.len()..]);
         let value: f64 = number
             .parse()
             .ok()
@@ -361,12 +362,16 @@ mod tests {
             (read("7mm"), read("2.5 cm"), read(" 0.2m "), read("3 MM")),
             (Ok(0.007), Ok(0.025), Ok(0.2), Ok(0.003))
         );
-        assert_eq!((read("0"), read("-4mm")), (Ok(0.0), Ok(-0.004)));
+        assert_eq!(
+            (read("0"), read("-4mm"), read("1e-3m"), read("2.5E1 mm")),
+            (Ok(0.0), Ok(-0.004), Ok(0.001), Ok(0.025))
+        );
         let e = read("7").unwrap_err();
         assert!(e.contains("'7' has no unit") && e.contains("7mm"), "{e}");
-        for bad in ["mm", "7 inches", "nan mm", "", "1e999 m"] {
+        for bad in ["mm", "7 inches", "nan mm", ""] {
             assert!(read(bad).is_err(), "{bad} read as a length");
         }
+        assert!(read("1e999 m").unwrap_err().contains("is not a length"), "{:?}", read("1e999 m"));
         #[derive(serde::Deserialize)]
         struct File {
             a: Length,

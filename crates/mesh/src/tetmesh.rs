@@ -895,20 +895,22 @@ fn cut_points(domain: &dyn ImplicitDomain, lat: &Lattice, val: &[f64]) -> Vec<Cu
 /// with less than this share of the mesh's volume is dropped. Where the organ is thinner than
 /// the lattice, stuffing leaves tetrahedra that hang on the rest by an edge or a vertex: a
 /// mechanism that no FEM solve survives (a real liver's 3,058-tetrahedron mesh had two, one
-/// hanging by a vertex, 0.08 % of the volume). A larger piece so joined (a lobe behind a
-/// neck thinner than the lattice) is kept, and [`TetQuality::pieces`] counts it.
+/// hanging by a vertex, 0.08 % of the volume). A larger piece joined by an edge or a vertex (a
+/// lobe behind a neck thinner than the lattice, whose nodes the rest shares) is kept, and
+/// [`TetQuality::pieces`] counts it.
 pub const SMALL_PIECE: f64 = 0.01;
 
 /// The share of the volume above which a part of the mesh apart from its main body (joined to it
 /// through a neck thinner than the lattice, so that nothing of the mesh joins them) is refused,
-/// not dropped: the mesh would lose a lobe.
+/// not dropped, at this share or more: the mesh would lose a lobe.
 pub const PART_APART: f64 = 0.05;
 
 /// A T4 mesh without its pieces smaller than [`SMALL_PIECE`] (the largest piece of the body kept
 /// is always kept), nor those that share no node with the largest body of pieces (a part cut off where
 /// the organ is thinner than the lattice: nothing would hold it), its nodes renumbered in their
 /// order and its regions with them; other meshes as they are. What is lost shows in
-/// [`TetQuality::coverage`].
+/// [`TetQuality::coverage`]. A part cut off of [`PART_APART`] of the volume or more is an error
+/// that names it.
 pub fn without_small_pieces(mesh: Mesh) -> Result<Mesh, MeshError> {
     let pieces = face_connected_pieces(&mesh);
     if pieces.len() == 1 {

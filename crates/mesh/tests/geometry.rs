@@ -777,17 +777,24 @@ fn a_large_part_apart_is_refused_and_small_pieces_are_dropped() {
     assert_eq!((kept.file_nodes, kept.file_cells), (None, None));
 }
 
-/// Cells left out keep the others' file numbers and regions, and drop the nodes only they use.
+/// Cells left out (the second box, in the middle of the cells and nodes) drop the nodes only they
+/// use; the others keep their file's numbers and their regions, renumbered.
 #[test]
 fn a_mesh_without_some_cells_keeps_its_file_numbers() {
     let mut mesh = two_boxes([0.002, 0.002, 0.002]);
-    let last = mesh.cells.len() - 1;
-    let corner = mesh.cells.cell(last)[0];
-    mesh.regions.insert("tip".into(), mesh.cells.cell(last).to_vec());
-    let kept = mesh.without_cells(&[last]).unwrap();
-    assert_eq!((kept.num_nodes(), kept.cells.len()), (mesh.num_nodes() - 3, mesh.cells.len() - 1));
-    assert_eq!(kept.regions["tip"].iter().map(|&n| kept.file_node(n)).collect::<Vec<_>>(), vec![corner]);
-    assert_eq!(kept.file_cell(kept.cells.len() - 1), last - 1);
-    let first_of_b = box_tet([0.0; 3], [0.04, 0.02, 0.02], [4, 2, 2]).unwrap().num_nodes();
-    assert_eq!(kept.file_node(first_of_b), first_of_b, "nodes before the dropped ones keep their numbers");
+    let first = box_tet([0.0; 3], [0.04, 0.02, 0.02], [4, 2, 2]).unwrap();
+    let (nodes, cells) = (first.num_nodes(), first.cells.len());
+    let tip = mesh.cells.len() - 1;
+    mesh.regions.insert("tip".into(), mesh.cells.cell(tip).to_vec());
+    let second: Vec<usize> = (cells..tip).collect();
+    let kept = mesh.without_cells(&second).unwrap();
+    let dropped_nodes = mesh.num_nodes() - nodes - 3;
+    assert_eq!((kept.num_nodes(), kept.cells.len()), (nodes + 3, cells + 1));
+    // The tip's cell and nodes come after the dropped ones in the file: their numbers are kept.
+    assert_eq!(kept.file_cell(cells), tip);
+    let tip_nodes: Vec<usize> = kept.regions["tip"].iter().map(|&n| kept.file_node(n)).collect();
+    assert_eq!(tip_nodes, mesh.cells.cell(tip).to_vec());
+    assert_eq!(kept.file_node(nodes), nodes + dropped_nodes, "the first node after the dropped ones");
+    assert_eq!(kept.cells.cell(cells)[1], nodes, "renumbered in the cells");
+    assert_eq!(kept.nodes[nodes], mesh.nodes[nodes + dropped_nodes]);
 }

@@ -51,6 +51,11 @@ create_exception!(
      result's `warnings` hold the frame's too; filter them with the `warnings` module by this class."
 );
 
+/// The warning of a cloud whose registration may not be believed: the same words every cloud,
+/// which Python's default filter shows once at a call site (a frame's own warnings hold numbers
+/// that change from frame to frame, and would be shown every frame of a stream).
+const DOUBTED: &str = "this cloud's registration may not be believed: its result's `warnings` say why";
+
 /// Each of `lines` as an [`AugsimWarning`].
 fn warn_each(py: Python<'_>, lines: &[String]) -> PyResult<()> {
     for line in lines {
@@ -503,7 +508,10 @@ impl Registration {
     /// refuses it. Raises ValueError for an array of another shape,
     /// AugsimError for a cloud augsim rejects (no point, a NaN) or a failed registration (the
     /// warm start is then kept). What to know of the files written (a displacement.nrrd left
-    /// out, or folded somewhere) comes as a UserWarning.
+    /// out, or folded somewhere) comes as an AugsimWarning, and so does a result that may not be
+    /// believed, in words that do not change from cloud to cloud (shown once at a call site by
+    /// Python's default filter: the result's `warnings` say why); a filter that turns them into
+    /// errors raises them after the cloud registered (the warm start has moved on).
     #[pyo3(signature = (cloud, *, out=None))]
     fn register(&self, py: Python<'_>, cloud: &Bound<'_, PyAny>, out: Option<PathBuf>) -> PyResult<Registered> {
         let cloud: Vec<Point> = points(cloud, "cloud")?.into_iter().map(|p| self.given.point_in(p)).collect();
@@ -531,7 +539,9 @@ impl Registration {
             Ok((tracked, moved, notes))
         })?;
         warn_each(py, &notes)?;
-        warn_each(py, &tracked.registration.warnings)?;
+        if !tracked.registration.warnings.is_empty() {
+            warn_each(py, &[DOUBTED.to_string()])?;
+        }
         let structures = PyDict::new(py);
         for (name, vertices) in moved {
             structures.set_item(name, self.point_array(py, &vertices))?;

@@ -113,7 +113,7 @@ fn header(descr: &str, shape: &[usize]) -> Vec<u8> {
 fn check_len(shape: &[usize], len: usize) -> Result<()> {
     let expected: usize = shape.iter().product();
     if expected != len {
-        return Err(MeshError::Invalid(format!("npy write: shape {shape:?} needs {expected} values, got {len}")));
+        return Err(MeshError::Invalid(format!("an .npy array of shape {shape:?} needs {expected} values, got {len}")));
     }
     Ok(())
 }
