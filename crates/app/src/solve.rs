@@ -358,7 +358,7 @@ fn beyond_tissue_lines(geometry: &ElementGeometry, p: &fem::Problem, u: &[f64]) 
         let most = stretches.iter().map(|s| s.1).fold(0.0, f64::max);
         lines.push(format!(
             "warning    {count} of {} cells are stretched past {TISSUE_STRETCH} times their length or compressed under \
-             1/{TISSUE_STRETCH} (principal stretches from {least:.3} to {most:.3}, the farthest in cell {}: {:.3} to \
+             1/{TISSUE_STRETCH} (principal stretches from {least:.3} to {most:.3}; the most strained, cell {}: {:.3} to \
              {:.3}), far beyond what soft tissue bears: is the load right (N, Pa; its unit, its size)?",
             p.mesh.cells.len(),
             p.mesh.file_cell(cell),
