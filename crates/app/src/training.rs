@@ -335,8 +335,13 @@ fn train_rom(args: &TrainArgs, dataset: &Dataset, split: Split, samples: [Sample
 pub enum UNetStart {
     /// A new network of this shape, its normalisation fitted on the training samples.
     Scratch(UNetConfig),
-    /// The model saved at `model`, fine-tuned; its encoder frozen when `freeze_encoder`.
-    FineTune { model: PathBuf, freeze_encoder: bool },
+    /// A saved model, fine-tuned.
+    FineTune {
+        /// The model's directory or file.
+        model: PathBuf,
+        /// Whether its encoder is frozen (only the decoder learns).
+        freeze_encoder: bool,
+    },
 }
 
 /// Where a U-Net's training writes and runs.

@@ -26,8 +26,6 @@
 //! - [`Progress`]: how generation and training (and the application's long runs) report how far
 //!   they have come, for the caller to draw.
 
-#![warn(missing_docs)]
-
 pub mod data;
 mod error;
 mod fsutil;
