@@ -1,7 +1,9 @@
 //! The registration models and the loop settings each takes by default: the FEM of a static
-//! scenario pulled by data springs ([`fem_model`]); a learned model on the organ of the dataset
-//! scenario it was trained on ([`learned_registration`]): a U-Net's match-and-membrane loop, a
-//! reduced-order model's shape fit; and a hybrid's budgets ([`hybrid_options`]).
+//! scenario pulled by data springs ([`fem_model`], on the scenario's problem as a solve builds it:
+//! [`solvable_problem`]); a learned model on the organ of the dataset scenario it was trained on
+//! ([`learned_registration`]): a U-Net's match-and-membrane loop, a reduced-order model's shape
+//! fit; and a hybrid's budgets ([`hybrid_options`]); where a model and its scenario come from
+//! ([`ModelSource`], [`ScenarioSource`]).
 
 use std::path::{Path, PathBuf};
 
@@ -33,14 +35,14 @@ pub fn fem_model(scenario: &StaticScenario, dir: &Path) -> Result<(Organ, FemDef
     Ok((organ, FemDeformer::new(problem, stiffness, scenario.solver.clone())?, left_out))
 }
 
-/// The problem of `scenario` (paths relative to `dir`) without the pieces of its mesh that hang on
-/// the rest by an edge or a vertex and carry nothing ([`fem::Problem::hanging_pieces`]: no load, hold or spring on the nodes they
-/// alone have), rebuilt on the rest of the mesh (numbered as in its file), with the warning that
-/// says so. Such a piece (a mesher's slip, as in a real liver's mesh) turns about its hinge at no
-/// cost of energy, but carries no force: the rest deforms as with it, as CalculiX, which solves
-/// the whole mesh, finds. A piece that carries something is a mechanism: the problem is left as
-/// it is, and a solve refuses it, naming the piece. As `augsim solve` and a FEM registration build
-/// it.
+/// The problem of `scenario` (paths relative to `dir`), as `augsim solve` and a FEM registration
+/// build it: without the pieces of its mesh that hang on the rest by an edge or a vertex and carry
+/// nothing ([`fem::Problem::hanging_pieces`]: no load, hold or spring on the nodes they alone
+/// have), rebuilt on the rest of the mesh (numbered as in its file), with the warning that says so.
+/// Such a piece (a mesher's slip, as in a real liver's mesh) turns about its hinge at no cost of
+/// energy, but carries no force: the rest deforms as with it, as CalculiX, which solves the whole
+/// mesh, finds. A piece that carries something is a mechanism: the problem is left as it is, and a
+/// solve refuses it, naming the piece.
 pub fn solvable_problem(scenario: &StaticScenario, dir: &Path) -> Result<(fem::Problem, Option<String>)> {
     let problem = scenario.build_problem(dir)?;
     let cells: Vec<usize> = problem.hanging_pieces().concat();

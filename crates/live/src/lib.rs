@@ -272,11 +272,11 @@ fn log(line: impl std::fmt::Display) {
 /// (`client-NNN.jsonl`, the first number free): one line of JSON per event, flushed at once, so
 /// that a server stopped in any way leaves every answer it sent. The first line names the client
 /// (`peer`, `connected`: seconds since 1970, `unit` and `frame`, the stream's; the frame null
-/// where unnamed); then each cloud's status with
-/// its `timestamp` (the cloud's header timestamp in seconds since 1970, null for 0), `targets` (in the stream's unit
-/// and frame) and `cloud`, the file that holds the cloud as it came (`client-NNN/cloud-NNNNNN.npy`, float32
-/// `[n, 3]` in the stream's unit and frame, relative to the record's folder; written once the cloud is
-/// answered, a refused one too), each error status and each estimate.
+/// where unnamed); then each cloud's status with its `timestamp` (the cloud's header timestamp in
+/// seconds since 1970, null for 0), `targets` (in the stream's unit and frame) and `cloud`, the
+/// file that holds the cloud as it came (`client-NNN/cloud-NNNNNN.npy`, float32 `[n, 3]` in the
+/// stream's unit and frame, relative to the record's folder; written once the cloud is answered,
+/// a refused one too), each error status and each estimate.
 pub struct Record {
     file: Mutex<std::io::BufWriter<std::fs::File>>,
     /// The file, for the log.

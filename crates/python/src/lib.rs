@@ -46,9 +46,9 @@ create_exception!(
     augsim,
     AugsimWarning,
     pyo3::exceptions::PyUserWarning,
-    "A warning of augsim's: a registration's set-up (targets, structures), a file it wrote or left \
-     out, a cloud's result that may not be believed (not plausible, past its time budget). The \
-     result's `warnings` hold the frame's too; filter them with the `warnings` module by this class."
+    "A warning of augsim's: a solve's, a registration's set-up (targets, structures), a file it \
+     wrote or left out, a cloud whose result may not be believed (in the same words every cloud: \
+     the result's `warnings` say why). Filter them with the `warnings` module by this class."
 );
 
 /// The warning of a cloud whose registration may not be believed: the same words every cloud,
