@@ -37,7 +37,7 @@ pub fn fem_model(scenario: &StaticScenario, dir: &Path) -> Result<(Organ, FemDef
 
 /// The problem of `scenario` (paths relative to `dir`), as `augsim solve` and a FEM registration
 /// build it: without the pieces of its mesh that hang on the rest by an edge or a vertex and carry
-/// nothing ([`fem::Problem::hanging_pieces`]: no load, hold or spring on the nodes they alone
+/// nothing ([`fem::Problem::idle_hanging_pieces`]: no load, hold or spring on the nodes they alone
 /// have), rebuilt on the rest of the mesh (numbered as in its file), with the warning that says so.
 /// Such a piece (a mesher's slip, as in a real liver's mesh) turns about its hinge at no cost of
 /// energy, but carries no force: the rest deforms as with it, as CalculiX, which solves the whole
@@ -45,36 +45,19 @@ pub fn fem_model(scenario: &StaticScenario, dir: &Path) -> Result<(Organ, FemDef
 /// solve refuses it, naming the piece.
 pub fn solvable_problem(scenario: &StaticScenario, dir: &Path) -> Result<(fem::Problem, Option<String>)> {
     let problem = scenario.build_problem(dir)?;
-    let cells: Vec<usize> = problem.hanging_pieces().concat();
+    let cells: Vec<usize> = problem.idle_hanging_pieces().concat();
     let Some(&first) = cells.first() else { return Ok((problem, None)) };
     let mesh = &problem.mesh;
-    let mut hanging = vec![false; mesh.cells.len()];
-    cells.iter().for_each(|&c| hanging[c] = true);
-    let mut in_rest = vec![false; mesh.num_nodes()];
-    (0..mesh.cells.len())
-        .filter(|&c| !hanging[c])
-        .for_each(|c| mesh.cells.cell(c).iter().for_each(|&n| in_rest[n] = true));
-    let mut alone: Vec<usize> =
-        cells.iter().flat_map(|&c| mesh.cells.cell(c)).copied().filter(|&n| !in_rest[n]).collect();
-    alone.sort_unstable();
-    alone.dedup();
-    let carries = |n: usize| {
-        problem.f_ext[3 * n..3 * n + 3].iter().any(|&f| f != 0.0)
-            || problem.dirichlet.contains_key(&n)
-            || problem.springs[n] > 0.0
-            || problem.point_springs.iter().any(|s| s.nodes.iter().any(|&(m, w)| m == n && w != 0.0))
-    };
-    if alone.iter().any(|&n| carries(n)) {
-        return Ok((problem, None));
-    }
-    let rest = scenario.build_problem_on(mesh.without_cells(&cells)?)?;
+    let kept = mesh.without_cells(&cells)?;
+    let alone = mesh.num_nodes() - kept.num_nodes();
+    let rest = scenario.build_problem_on(kept)?;
     let line = format!(
         "{} element(s) hang on the rest by an edge or a vertex (the first: element {} of the file) and carry no \
          load, hold or spring: left out of the solve with the {} node(s) only they have (they carry no force, so the \
          rest deforms as with them); the fields file_node and file_cell give the file's numbers",
         cells.len(),
         mesh.file_cell(first),
-        alone.len()
+        alone
     );
     Ok((rest, Some(line)))
 }

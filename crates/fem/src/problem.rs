@@ -210,20 +210,24 @@ impl Problem {
         anchored
     }
 
-    /// The pieces of the mesh that nothing holds although the rest is held, and that hang on it
-    /// by an edge or a vertex (each its cells): a mesher's slip that turns about its hinge at no
-    /// cost of energy. Where no load, hold or spring acts on the
-    /// nodes a piece alone has, it carries no force, and the rest deforms as without it.
-    pub fn hanging_pieces(&self) -> Vec<Vec<usize>> {
+    /// The pieces of the mesh that nothing holds although the rest is held, that hang on it by an
+    /// edge or a vertex, and that carry nothing: no load, hold or spring acts on the nodes they
+    /// alone have (each its cells). Such a piece (a mesher's slip) turns about its hinge at no
+    /// cost of energy but carries no force: the rest deforms as without it. One that carries
+    /// something is a mechanism, which a solve refuses, naming it.
+    pub fn idle_hanging_pieces(&self) -> Vec<Vec<usize>> {
         let pieces = Pieces::of(&self.mesh);
-        let loose = self.loose_pieces(&pieces, self.anchored());
+        let anchored = self.anchored();
+        let loose = self.loose_pieces(&pieces, anchored.clone());
         if pieces.nodes.len() == 1 || loose.len() == pieces.nodes.len() {
             return Vec::new();
         }
         let owners = pieces.owners(self.mesh.num_nodes());
+        let loaded = |n: usize| self.f_ext[3 * n..3 * n + 3].iter().any(|&f| f != 0.0);
+        let carries = |p: usize| pieces.nodes[p].iter().any(|&n| owners[n] == 1 && (anchored[n] || loaded(n)));
         loose
             .into_iter()
-            .filter(|&p| pieces.nodes[p].iter().any(|&n| owners[n] > 1))
+            .filter(|&p| pieces.nodes[p].iter().any(|&n| owners[n] > 1) && !carries(p))
             .map(|p| pieces.cells[p].clone())
             .collect()
     }
