@@ -40,6 +40,7 @@ class Registered:
     iterations: int
     from_rest: bool
     warnings: list[str]
+    plausible: bool
     rigid: Optional[npt.NDArray[np.float64]]
     target_sigma: Optional[npt.NDArray[np.float64]]
     ms: float

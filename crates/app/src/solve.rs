@@ -54,22 +54,22 @@ fn set_up_warnings(p: &fem::Problem) -> Vec<String> {
     let half_held = mid_edge_nodes_left_free(p);
     if half_held > 0 {
         lines.push(format!(
-            "warning    {half_held} mid-edge node(s) lie between held corners and are free: a selection of \
+            "{half_held} mid-edge node(s) lie between held corners and are free: a selection of \
              corners only (a linear mesh's group on this quadratic one) holds its faces by half; select their \
              mid-edge nodes too"
         ));
     }
-    lines.extend(doubts(p).into_iter().map(|h| format!("warning    {h}")));
+    lines.extend(doubts(p));
     if loads_the_whole_surface(p) {
         lines.push(
-            "warning    every boundary face carries a load, and no inner node: a [[force]] or [[traction]] whose \
+            "every boundary face carries a load, and no inner node: a [[force]] or [[traction]] whose \
              selection takes the whole surface (a ball or box larger than the body: its size in mm read as m?)"
                 .into(),
         );
     }
     if let Some(&first) = p.mesh.odd_cells.first() {
         lines.push(format!(
-            "warning    {} of the file's {} cells are numbered the other way round from the others (the first: \
+            "{} of the file's {} cells are numbered the other way round from the others (the first: \
              cell {}); turned positive, as every cell is, they fold over no neighbour: the mesher's slip",
             p.mesh.odd_cells.len(),
             p.mesh.cells.len(),
@@ -212,10 +212,21 @@ impl Solved {
                 ms(t.solve)
             ),
         ];
+        lines.extend(self.warnings()?.into_iter().map(|w| format!("warning    {w}")));
+        Ok(lines)
+    }
+
+    /// What to know of the solve, each in words: a residual far above its tolerance, a snap past a
+    /// limit point, loads that move nothing, pieces left out, the set-up's doubts, cells turned
+    /// inside out or strained beyond the law's or the tissue's range; empty when there is none.
+    pub fn warnings(&self) -> Result<Vec<String>> {
+        let (scenario, solver, sol) = (&self.scenario, &self.solver, &self.solution);
+        let (geo, p) = (solver.geometry(), solver.problem());
+        let mut lines = Vec::new();
         let residual = sol.residuals.last().copied().unwrap_or(0.0);
         if residual > RESIDUAL_OVER_TOLERANCE * scenario.solver.rtol {
             lines.push(format!(
-                "warning    the solve ended at a relative residual of {residual:.2e}, far above rtol = {:.0e}: it was taken \
+                "the solve ended at a relative residual of {residual:.2e}, far above rtol = {:.0e}: it was taken \
                  after a last increment under utol = {:.0e} of the displacement (the residual may fall no further); \
                  the loads' balance is in the reaction line; a smaller utol asks for more",
                 scenario.solver.rtol, scenario.solver.utol
@@ -225,12 +236,12 @@ impl Solved {
         let moved = p.dirichlet.values().any(|d| *d != [0.0; 3]);
         match sol.snapped_from {
             Some(lambda) if moved => lines.push(format!(
-                "warning    from load factor {lambda:.3} a load step found its equilibrium far away, the response over \
+                "from load factor {lambda:.3} a load step found its equilibrium far away, the response over \
                  it half as stiff as before or less: past a limit point of the load path the body snapped to \
                  another branch (as under a real push it gives way), or the path is that soft there"
             )),
             Some(lambda) => lines.push(format!(
-                "warning    the load path turns back at load factor {lambda:.3}, a limit point: past it the body snapped to \
+                "the load path turns back at load factor {lambda:.3}, a limit point: past it the body snapped to \
                  an equilibrium far away (as under a real push it gives way); `[solver] continuation = \"arc_length\"` \
                  follows the path and stops there"
             )),
@@ -241,17 +252,17 @@ impl Solved {
             && (0..p.mesh.num_nodes()).all(|n| !loaded(n) || p.dirichlet.contains_key(&n))
         {
             lines.push(
-                "warning    every load acts on held nodes ([[fixed]] or [[prescribed]]): nothing moves; do the \
+                "every load acts on held nodes ([[fixed]] or [[prescribed]]): nothing moves; do the \
                  selections of the loads and of the held nodes overlap?"
                     .into(),
             );
         }
-        lines.extend(self.hanging_warning.iter().map(|w| format!("warning    {w}")));
+        lines.extend(self.hanging_warning.iter().map(|w| format!("{w}")));
         lines.extend(set_up_warnings(p));
         let (inverted, smallest) = post::inverted_cells(geo, p.material.law, &sol.u)?;
         if inverted > 0 {
             lines.push(format!(
-                "warning    {inverted} of {} cells are turned inside out (det F down to {smallest:.2}): the {} law \
+                "{inverted} of {} cells are turned inside out (det F down to {smallest:.2}): the {} law \
                  holds for small strains only: use a finite-strain law (co-rotational, SVK, Neo-Hookean) or a \
                  smaller load",
                 p.mesh.cells.len(),
@@ -265,7 +276,7 @@ impl Solved {
         if p.material.law == Law::Svk {
             if let (over @ 1.., Some((cell, stretch))) = post::over_compressed_cells(geo, p.material.law, &sol.u)? {
                 lines.push(format!(
-                    "warning    {over} of {} cells are compressed past Saint-Venant-Kirchhoff's limit stretch \
+                    "{over} of {} cells are compressed past Saint-Venant-Kirchhoff's limit stretch \
                      1/sqrt(3) = 0.577 (down to {stretch:.3} in cell {}), where its stress falls as the \
                      compression grows (no tissue's does): the equilibrium found holds for that law alone; \
                      law = \"neo_hookean\" holds under large compression",
@@ -321,7 +332,7 @@ fn volume_change_line(geometry: &ElementGeometry, p: &fem::Problem, u: &[f64]) -
     }
     let (least, most) = (ratios.iter().copied().fold(f64::INFINITY, f64::min), mesh::stats::max(&ratios));
     Ok(Some(format!(
-        "warning    {changed} of {} cells changed volume by more than {:.0} % (det F from {least:.3} to {most:.3}) \
+        "{changed} of {} cells changed volume by more than {:.0} % (det F from {least:.3} to {most:.3}) \
          where nu = {} makes the material nearly incompressible: the {} law keeps the volume to first order in the \
          strain only; law = \"neo_hookean\" holds it under large strains",
         p.mesh.cells.len(),
@@ -357,7 +368,7 @@ fn beyond_tissue_lines(geometry: &ElementGeometry, p: &fem::Problem, u: &[f64]) 
         let least = stretches.iter().map(|s| s.0).fold(f64::INFINITY, f64::min);
         let most = stretches.iter().map(|s| s.1).fold(0.0, f64::max);
         lines.push(format!(
-            "warning    {count} of {} cells are stretched past {TISSUE_STRETCH} times their length or compressed under \
+            "{count} of {} cells are stretched past {TISSUE_STRETCH} times their length or compressed under \
              1/{TISSUE_STRETCH} (principal stretches from {least:.3} to {most:.3}; the most strained, cell {}: {:.3} to \
              {:.3}), far beyond what soft tissue bears: is the load right (N, Pa; its unit, its size)?",
             p.mesh.cells.len(),
@@ -370,7 +381,7 @@ fn beyond_tissue_lines(geometry: &ElementGeometry, p: &fem::Problem, u: &[f64]) 
     let moved = post::max_displacement(u);
     if moved > size {
         lines.push(format!(
-            "warning    the body moved by up to {moved:.4e} m, {:.1} times its own size ({size:.4e} m): is the load \
+            "the body moved by up to {moved:.4e} m, {:.1} times its own size ({size:.4e} m): is the load \
              right?",
             moved / size
         ));

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, ensure, Result};
 use learn::rom::{ReducedModel, RomConfig, RomReport};
 use learn::{
-    Compute, Corruption, Dataset, Initialization, Method, Normalization, Progress, Samples, Sparsity, Split,
+    Compute, Corruption, Dataset, Initialization, Manifest, Method, Normalization, Progress, Samples, Sparsity, Split,
     SplitPolicy, TrainConfig, TrainOptions, TrainOutcome, UNetConfig,
 };
 use mesh::length::mm;
@@ -417,18 +417,26 @@ pub fn fit_rom(
     prior: Option<&Path>,
     out: &Path,
 ) -> Result<(ReducedModel, RomReport)> {
-    let manifest = dataset.manifest();
-    let mut prior = match prior {
-        Some(path) => {
-            let (scenario, dir) = DatasetScenario::load(path)?;
-            Some(scenario.rest_response(&dir, manifest)?)
-        }
-        None => None,
-    };
-    let context = learn::rom::Context::of_dataset(manifest, split);
-    let (model, report) = learn::rom::fit(&train, &validation, config, context, prior.as_mut())?;
+    let prior = prior.map(DatasetScenario::load).transpose()?;
+    let prior = prior.as_ref().map(|(scenario, dir)| (scenario, dir.as_path()));
+    let (model, report) = fit_rom_to(dataset.manifest(), split, [&train, &validation], config, prior)?;
     model.save(out)?;
     Ok((model, report))
+}
+
+/// A reduced-order model fitted with `config` on `train` (chosen on `validation`) of the data
+/// `manifest` describes, split by `split`, with the linear-elastic response at rest of `prior` (a
+/// dataset scenario and the directory its paths start from) as its physics prior when given.
+pub fn fit_rom_to(
+    manifest: &Manifest,
+    split: Split,
+    [train, validation]: [&Samples; 2],
+    config: &RomConfig,
+    prior: Option<(&DatasetScenario, &Path)>,
+) -> Result<(ReducedModel, RomReport)> {
+    let mut response = prior.map(|(scenario, dir)| scenario.rest_response(dir, manifest)).transpose()?;
+    let context = learn::rom::Context::of_dataset(manifest, split);
+    Ok(learn::rom::fit(train, validation, config, context, response.as_mut())?)
 }
 
 /// A reduced-order model's fit in words: its basis, prior, regression, validation and time.

@@ -276,11 +276,10 @@ pub(crate) fn fit_rom(
     config: &learn::rom::RomConfig,
     prior: bool,
 ) -> Result<(std::sync::Arc<learn::rom::ReducedModel>, learn::rom::RomReport, f64)> {
-    let manifest = data.dataset.manifest();
     let start = std::time::Instant::now();
-    let mut response = if prior { Some(data.scenario.rest_response(&data.scenario_dir, manifest)?) } else { None };
-    let context = learn::rom::Context::of_dataset(manifest, t.record.clone());
-    let (model, report) = learn::rom::fit(&t.train, &t.validation, config, context, response.as_mut())?;
+    let prior = prior.then_some((&data.scenario, data.scenario_dir.as_path()));
+    let samples = [&t.train, &t.validation];
+    let (model, report) = app::training::fit_rom_to(data.dataset.manifest(), t.record.clone(), samples, config, prior)?;
     Ok((std::sync::Arc::new(model), report, start.elapsed().as_secs_f64()))
 }
 

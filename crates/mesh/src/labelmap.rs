@@ -68,10 +68,6 @@ pub struct Labelmap {
     pub named_unit: Option<LengthUnit>,
 }
 
-fn parse_error(path: &Path, message: impl Into<String>) -> MeshError {
-    MeshError::Parse { path: path.display().to_string(), message: message.into() }
-}
-
 /// The labelmaps read, for messages.
 pub const LABELMAP_FORMATS: &str =
     ".nii, .nii.gz, .nrrd, .seg.nrrd, .nhdr, .mha, .mhd or a DICOM SEG or RTSTRUCT (.dcm or no extension)";
@@ -139,20 +135,21 @@ fn read_labelmap_choosing(path: &Path, label: Option<&str>) -> Result<Labelmap, 
     let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     let folder = path.parent().unwrap_or(Path::new(""));
     let mut map = if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
-        parse_nrrd(&bytes, folder).map_err(|m| parse_error(path, m))?
+        parse_nrrd(&bytes, folder).map_err(|m| MeshError::parse(path, m))?
     } else if name.ends_with(".mha") || name.ends_with(".mhd") {
-        metaimage::parse_metaimage(&bytes, folder).map_err(|m| parse_error(path, m))?
+        metaimage::parse_metaimage(&bytes, folder).map_err(|m| MeshError::parse(path, m))?
     } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
-        parse_nifti(&gunzip_if_needed(bytes).map_err(|m| parse_error(path, m))?).map_err(|m| parse_error(path, m))?
+        parse_nifti(&gunzip_if_needed(bytes).map_err(|m| MeshError::parse(path, m))?)
+            .map_err(|m| MeshError::parse(path, m))?
     } else if name.ends_with(".dcm") || dicom::is_dicom(&bytes) {
-        dicom::parse_dicom(&bytes, label).map_err(|m| parse_error(path, m))?
+        dicom::parse_dicom(&bytes, label).map_err(|m| MeshError::parse(path, m))?
     } else {
-        return Err(parse_error(path, format!("not a labelmap: expected {LABELMAP_FORMATS}")));
+        return Err(MeshError::parse(path, format!("not a labelmap: expected {LABELMAP_FORMATS}")));
     };
     if map.labels.iter().all(|&l| l == 0) {
-        return Err(parse_error(path, "the labelmap is empty: every voxel is 0 (background)"));
+        return Err(MeshError::parse(path, "the labelmap is empty: every voxel is 0 (background)"));
     }
-    refuse_image(&map.labels).map_err(|m| parse_error(path, m))?;
+    refuse_image(&map.labels).map_err(|m| MeshError::parse(path, m))?;
     map.warnings.extend(shear_warning(&map.affine).map(|w| (None, w)));
     Ok(map)
 }
@@ -1239,17 +1236,17 @@ pub fn read_labelmap_surface(
         (Some(label), _) => label.to_string(),
         (None, [(_, only, _, _)]) => only.to_string(),
         (None, _) => {
-            return Err(parse_error(
+            return Err(MeshError::parse(
                 path,
                 format!("holds several labels: choose one with --label (labels present: {})", map.present_text()),
             ))
         }
     };
-    let (whole, label, chosen) = map.select_uncropped(&label).map_err(|e| parse_error(path, e.message()))?;
+    let (whole, label, chosen) = map.select_uncropped(&label).map_err(|e| MeshError::parse(path, e.message()))?;
     let borders = touched_borders(&whole, map.placed.then_some(map.frame));
-    let mask = map.cropped(&whole, &label, chosen).map_err(|e| parse_error(path, e.message()))?;
+    let mask = map.cropped(&whole, &label, chosen).map_err(|e| MeshError::parse(path, e.message()))?;
     let mask = mask.in_scanner_order(map.frame == Frame::Ras);
-    let (surface, extract) = mask_surface(&mask, options).map_err(|e| parse_error(path, e.message()))?;
+    let (surface, extract) = mask_surface(&mask, options).map_err(|e| MeshError::parse(path, e.message()))?;
     let mut warnings: Vec<String> =
         map.warnings.iter().filter(|(of, _)| of.is_none_or(|of| of == chosen)).map(|(_, w)| w.clone()).collect();
     warnings.extend(overridden.iter().cloned());

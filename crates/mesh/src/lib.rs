@@ -84,6 +84,11 @@ pub enum MeshError {
 }
 
 impl MeshError {
+    /// A file at `path` that could not be understood: `message` says why.
+    pub fn parse(path: &std::path::Path, message: impl Into<String>) -> MeshError {
+        MeshError::Parse { path: path.display().to_string(), message: message.into() }
+    }
+
     /// The error's text without the "invalid mesh: " prefix, for errors about an input that is
     /// not a mesh (a labelmap's label, a surface's voxels).
     pub fn message(&self) -> String {

@@ -261,8 +261,7 @@ impl Solution {
 fn solve(py: Python<'_>, scenario: PathBuf) -> PyResult<Solution> {
     let (nodes, sol, reaction, warnings) = compute(py, || {
         let solved = app::solve::solve_scenario(&scenario, |_, _| {})?;
-        let warnings: Vec<String> =
-            solved.lines()?.iter().filter_map(|l| l.strip_prefix("warning    ").map(str::to_string)).collect();
+        let warnings = solved.warnings()?;
         Ok((solved.solver.problem().mesh.nodes.clone(), solved.solution, solved.reaction, warnings))
     })?;
     warn_each(py, &warnings)?;
@@ -305,10 +304,15 @@ struct Registered {
     /// `reset()`, or after a cloud that left the organ distorted or lay on it in the other frame).
     #[pyo3(get)]
     from_rest: bool,
-    /// Why the result may not be believed (the registered surface far from the cloud, an
-    /// implausible motion or change of the organ's volume); empty when plausible.
+    /// What to know of the result: why it may not be believed (the registered surface far from
+    /// the cloud, an implausible motion or change of the organ's volume), or that the frame ran
+    /// out of its time budget (which alone leaves it plausible); empty when there is none.
     #[pyo3(get)]
     warnings: Vec<String>,
+    /// Whether the result passed the plausibility checks (no warning but the time budget's): the
+    /// files of one that did not are named `…_implausible`, as a stream's answers are.
+    #[pyo3(get)]
+    plausible: bool,
     /// With `rigid=True`: the organ-to-cloud transform, float64 [4, 4] (translation in `units`);
     /// otherwise None.
     #[pyo3(get)]
@@ -341,6 +345,7 @@ impl Registered {
         d.set_item("iterations", self.iterations)?;
         d.set_item("from_rest", self.from_rest)?;
         d.set_item("warnings", self.warnings.clone())?;
+        d.set_item("plausible", self.plausible)?;
         d.set_item("rigid", self.rigid.as_ref().map(|r| r.clone_ref(py)))?;
         d.set_item("target_sigma", self.target_sigma.as_ref().map(|s| s.clone_ref(py)))?;
         d.set_item("ms", self.ms)?;
@@ -351,13 +356,14 @@ impl Registered {
     fn __repr__(&self, py: Python<'_>) -> String {
         format!(
             "Registered(targets={}, iterations={}, from_rest={}, surface_residual={:.6}, inliers={}, points={}, \
-             warnings={}, ms={:.1})",
+             plausible={}, warnings={}, ms={:.1})",
             self.targets.bind(py).shape()[0],
             self.iterations,
             if self.from_rest { "True" } else { "False" },
             self.surface_residual,
             self.inliers,
             self.points,
+            if self.plausible { "True" } else { "False" },
             self.warnings.len(),
             self.ms
         )
@@ -498,7 +504,7 @@ impl Registration {
     /// Registers a cloud of positions, float [N, 3] in `units` (no correspondences needed),
     /// starting from the previous cloud's registration. Returns a `Registered` (`targets`,
     /// `target_sigma`, `points`, `displacement`, `rigid`, `surface_residual`, `inliers`,
-    /// `iterations`, `warnings`, `ms`). With `out`,
+    /// `iterations`, `warnings`, `plausible`, `ms`). With `out`,
     /// a directory, also writes there what `augsim register` writes: organ.vtu (m), targets.csv (in
     /// `units`), summary.json, registration.png and .html (pictures), and for 3D Slicer
     /// targets.mrk.json, organ_deformed.vtk and displacement.nrrd (mm; named
@@ -539,7 +545,7 @@ impl Registration {
             Ok((tracked, moved, notes))
         })?;
         warn_each(py, &notes)?;
-        if !tracked.registration.warnings.is_empty() {
+        if !tracked.registration.plausible() {
             warn_each(py, &[DOUBTED.to_string()])?;
         }
         let structures = PyDict::new(py);
@@ -560,6 +566,7 @@ impl Registration {
             iterations: result.iterations,
             from_rest: result.from_rest,
             warnings: result.warnings.clone(),
+            plausible: result.plausible(),
             rigid,
             target_sigma: back.target_std.map(|s| s.into_pyarray(py).unbind()),
             ms: mesh::stats::ms(result.time),

@@ -4,7 +4,7 @@ use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use super::text::{Line, LineReader};
-use super::{finish_volume, parse_error, read_bytes, VolumeKind};
+use super::{finish_volume, read_bytes, VolumeKind};
 use crate::{Mesh, MeshError};
 
 /// How deep `*INCLUDE`s may nest (a file that includes itself stops there).
@@ -131,7 +131,7 @@ fn element_kind(line: &Line, ty: &str) -> Result<Option<VolumeKind>, MeshError> 
 impl Deck {
     /// An error located at `place`.
     fn error(&self, place: Place, message: impl std::fmt::Display) -> MeshError {
-        parse_error(&self.files[place.file], format!("line {}: {message}", place.line))
+        MeshError::parse(&self.files[place.file], format!("line {}: {message}", place.line))
     }
 
     /// The set named `name` (any case) of nodes or of elements, created at its first mention.
@@ -414,7 +414,7 @@ pub fn read_inp(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
     let mut deck = Deck::default();
     deck.read_file(path, 0)?;
     if deck.coords.is_empty() {
-        return Err(parse_error(path, "no *NODE lines: not a mesh"));
+        return Err(MeshError::parse(path, "no *NODE lines: not a mesh"));
     }
     let mut kind: Option<(VolumeKind, Place)> = None;
     let (mut conn, mut solids) = (Vec::new(), Vec::new());
@@ -441,7 +441,7 @@ pub fn read_inp(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
         solids.push(*n as usize);
     }
     let Some((kind, _)) = kind else {
-        return Err(parse_error(path, "no solid elements (C3D4, C3D10 or C3D8): not a volume mesh"));
+        return Err(MeshError::parse(path, "no solid elements (C3D4, C3D10 or C3D8): not a volume mesh"));
     };
     let describe = |i: usize| format!("element {}", solids[i]);
     let (mut mesh, kept) = finish_volume(path, &deck.coords, kind, conn, &describe, Some(&deck.node_numbers), &solids)?;

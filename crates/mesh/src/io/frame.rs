@@ -7,7 +7,6 @@ use std::fs::File;
 use std::io::Read as _;
 use std::path::Path;
 
-use super::parse_error;
 use crate::length::LengthUnit;
 use crate::{MeshError, Point, TriSurface};
 
@@ -191,7 +190,7 @@ pub fn surface_frame(path: impl AsRef<Path>) -> Result<Option<Frame>, MeshError>
         "obj" => comments(b"#"),
         _ => comments(b"comment"),
     };
-    frame_in_header(&String::from_utf8_lossy(&header)).map_err(|message| parse_error(path, message))
+    frame_in_header(&String::from_utf8_lossy(&header)).map_err(|message| MeshError::parse(path, message))
 }
 
 /// How much of a file [`surface_frame`] reads.
@@ -208,7 +207,7 @@ pub fn read_surface_with_frame(path: impl AsRef<Path>) -> Result<(TriSurface, Op
         "vtk" => {
             let (surface, space) = super::legacy_vtk::read_vtk_surface_and_space(path)?;
             let in_field = space.map(|s| frame_in_header(&format!("SPACE={}", s.trim()))).transpose();
-            let in_field = in_field.map_err(|message| parse_error(path, message))?.flatten();
+            let in_field = in_field.map_err(|message| MeshError::parse(path, message))?.flatten();
             Ok((surface, surface_frame(path)?.or(in_field)))
         }
         _ => {
@@ -228,7 +227,10 @@ pub fn write_surface_in_frame(path: impl AsRef<Path>, surface: &TriSurface, fram
         "vtk" => super::legacy_vtk::write_surface_vtk_titled(path, surface, &title),
         "stl" => super::surface_io::write_stl_titled(path, surface, &format!("augsim binary STL SPACE={frame}")),
         "obj" => super::surface_io::write_obj_titled(path, surface, &title),
-        _ => Err(parse_error(path, format!("cannot name the frame {frame} in this format: write .vtk, .stl or .obj"))),
+        _ => Err(MeshError::parse(
+            path,
+            format!("cannot name the frame {frame} in this format: write .vtk, .stl or .obj"),
+        )),
     }
 }
 

@@ -8,9 +8,7 @@ use std::io::Write;
 use std::path::Path;
 
 use super::text::{Line, LineReader};
-use super::{
-    check_for_writing, finish_volume, mesh_cells_flat, parse_error, read_bytes, write_atomic, Num, VolumeKind,
-};
+use super::{check_for_writing, finish_volume, mesh_cells_flat, read_bytes, write_atomic, Num, VolumeKind};
 use crate::{Cells, Mesh, MeshError, Point};
 
 /// The flavour of a Gmsh file.
@@ -190,7 +188,7 @@ pub fn read_gmsh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
     let bytes = read_bytes(path)?;
     let text = String::from_utf8_lossy(&bytes);
     let mut lines = LineReader::new(path, &text);
-    let first = lines.next_line().ok_or_else(|| parse_error(path, "empty file"))?;
+    let first = lines.next_line().ok_or_else(|| MeshError::parse(path, "empty file"))?;
     let (format, mut pending) = match first.text.trim() {
         "$NOD" => (Format::Legacy, Some(first)),
         "$MeshFormat" => (read_mesh_format(&mut lines)?, None),
@@ -237,10 +235,10 @@ pub fn read_gmsh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
             skip_section(&mut lines, &line)?;
         }
     }
-    let nodes = nodes.ok_or_else(|| parse_error(path, "no node section ($Nodes or $NOD)"))?;
-    let volume = volume.ok_or_else(|| parse_error(path, "no element section ($Elements or $ELM)"))?;
+    let nodes = nodes.ok_or_else(|| MeshError::parse(path, "no node section ($Nodes or $NOD)"))?;
+    let volume = volume.ok_or_else(|| MeshError::parse(path, "no element section ($Elements or $ELM)"))?;
     let Some((kind, _)) = volume.kind else {
-        return Err(parse_error(path, "no tetrahedra (type 4) or hexahedra (type 5): not a volume mesh"));
+        return Err(MeshError::parse(path, "no tetrahedra (type 4) or hexahedra (type 5): not a volume mesh"));
     };
     let describe = |i: usize| format!("element {} (line {})", volume.tags[i], volume.lines[i]);
     let tags: Vec<usize> = volume.tags.iter().map(|&t| t as usize).collect();

@@ -5,9 +5,9 @@ use std::path::Path;
 
 use super::scalar::Scalar;
 use super::{
-    check_for_writing, check_surface, fan, finish_volume, fractions_from_fields, mesh_cells_flat, parse_error,
-    read_bytes, regions_from_fields, restrict_fields, strip, write_atomic, Encoding, Field, FieldLocation, Num,
-    VolumeKind, VTK_HEXAHEDRON, VTK_POLYGON, VTK_QUADRATIC_TETRA, VTK_TETRA, VTK_TRIANGLE_STRIP, VTK_VOXEL,
+    check_for_writing, check_surface, fan, finish_volume, fractions_from_fields, mesh_cells_flat, read_bytes,
+    regions_from_fields, restrict_fields, strip, write_atomic, Encoding, Field, FieldLocation, Num, VolumeKind,
+    VTK_HEXAHEDRON, VTK_POLYGON, VTK_QUADRATIC_TETRA, VTK_TETRA, VTK_TRIANGLE_STRIP, VTK_VOXEL,
 };
 use crate::{Mesh, MeshError, Point, TriSurface};
 
@@ -128,7 +128,7 @@ pub(super) fn to_index(x: f64) -> Option<usize> {
 
 impl<'a> Reader<'a> {
     fn error(&self, message: impl std::fmt::Display) -> MeshError {
-        parse_error(self.path, format!("line {}: {message}", self.line))
+        MeshError::parse(self.path, format!("line {}: {message}", self.line))
     }
 
     fn skip_ws(&mut self) {
@@ -264,7 +264,7 @@ impl<'a> Reader<'a> {
             .iter()
             .map(|&x| {
                 to_index(x).ok_or_else(|| {
-                    parse_error(self.path, format!("{what} (line {header}) holds {x}, which is not a valid index"))
+                    MeshError::parse(self.path, format!("{what} (line {header}) holds {x}, which is not a valid index"))
                 })
             })
             .collect()
@@ -272,8 +272,9 @@ impl<'a> Reader<'a> {
 
     /// `a × b` values, or an error when the declared sizes overflow.
     fn product(&self, a: usize, b: usize, header: usize) -> Result<usize, MeshError> {
-        a.checked_mul(b)
-            .ok_or_else(|| parse_error(self.path, format!("line {header}: the declared sizes {a} × {b} are too large")))
+        a.checked_mul(b).ok_or_else(|| {
+            MeshError::parse(self.path, format!("line {header}: the declared sizes {a} × {b} are too large"))
+        })
     }
 
     /// An error for a token where a section keyword was expected, explaining how the previous
@@ -281,14 +282,14 @@ impl<'a> Reader<'a> {
     fn unexpected(&self, token: &[u8]) -> MeshError {
         let mut message = format!("line {}: expected a section keyword, found '{}'", self.line, show(token));
         let Some(block) = &self.last else {
-            return parse_error(self.path, message);
+            return MeshError::parse(self.path, message);
         };
         message.push_str(&format!(" after the data of {} (line {})", block.what, block.line));
         if !self.binary {
             if std::str::from_utf8(token).is_ok_and(|s| s.parse::<f64>().is_ok()) {
                 message.push_str(": the file holds more values than the header declares");
             }
-            return parse_error(self.path, message);
+            return MeshError::parse(self.path, message);
         }
         let next = KEYWORDS.iter().filter_map(|k| {
             let pattern = format!("\n{k} ");
@@ -318,7 +319,7 @@ impl<'a> Reader<'a> {
                 message.push_str(": the count in the header does not match the data");
             }
         }
-        parse_error(self.path, message)
+        MeshError::parse(self.path, message)
     }
 
     /// A cell list section: `KEY n size` then either `n` cells as `count i1 .. icount` (legacy)
@@ -346,7 +347,7 @@ impl<'a> Reader<'a> {
                 && offsets.windows(2).all(|w| w[0] <= w[1])
                 && offsets.last().is_none_or(|&o| o == conn.len());
             if !ok {
-                return Err(parse_error(
+                return Err(MeshError::parse(
                     self.path,
                     format!("{keyword} (line {header}): OFFSETS must rise from 0 to the connectivity length"),
                 ));
@@ -359,7 +360,7 @@ impl<'a> Reader<'a> {
         for c in 0..n {
             let count = raw.get(i).copied().unwrap_or(0);
             if i >= size || i + 1 + count > size {
-                return Err(parse_error(
+                return Err(MeshError::parse(
                     self.path,
                     format!("{keyword} (line {header}): cell {c} runs past the declared size {size}"),
                 ));
@@ -369,7 +370,7 @@ impl<'a> Reader<'a> {
             i += 1 + count;
         }
         if i != size {
-            return Err(parse_error(
+            return Err(MeshError::parse(
                 self.path,
                 format!("{keyword} (line {header}): the {n} cells use {i} values, but the size is {size}"),
             ));
@@ -383,7 +384,10 @@ impl<'a> Reader<'a> {
         for (k, slot) in out.iter_mut().enumerate() {
             let arg = args.get(k).map(String::as_str).unwrap_or("");
             *slot = arg.parse().map_err(|_| {
-                parse_error(self.path, format!("line {header}: {keyword} needs {N} counts, found '{}'", args.join(" ")))
+                MeshError::parse(
+                    self.path,
+                    format!("line {header}: {keyword} needs {N} counts, found '{}'", args.join(" ")),
+                )
             })?;
         }
         Ok(out)
@@ -393,7 +397,7 @@ impl<'a> Reader<'a> {
     fn scalar(&self, name: Option<&String>, keyword: &str, header: usize) -> Result<Scalar, MeshError> {
         let name = name.map(String::as_str).unwrap_or("");
         vtk_scalar(name).ok_or_else(|| {
-            parse_error(self.path, format!("line {header}: {keyword} has unsupported data type '{name}'"))
+            MeshError::parse(self.path, format!("line {header}: {keyword} has unsupported data type '{name}'"))
         })
     }
     /// The header: the magic line, the title, the format (ASCII or BINARY, taken by the reader)
@@ -401,17 +405,17 @@ impl<'a> Reader<'a> {
     fn dataset(&mut self) -> Result<String, MeshError> {
         let magic = self.read_line();
         if !magic.to_ascii_lowercase().starts_with(b"# vtk datafile") {
-            return Err(parse_error(self.path, format!("line 1: not a legacy VTK file: '{}'", show(magic))));
+            return Err(MeshError::parse(self.path, format!("line 1: not a legacy VTK file: '{}'", show(magic))));
         }
         if self.pos >= self.data.len() {
-            return Err(parse_error(self.path, "file ends after line 1 (truncated file?)"));
+            return Err(MeshError::parse(self.path, "file ends after line 1 (truncated file?)"));
         }
         self.read_line();
         let mode = String::from_utf8_lossy(self.read_line()).trim().to_ascii_uppercase();
         self.binary = match mode.as_str() {
             "ASCII" => false,
             "BINARY" => true,
-            _ => return Err(parse_error(self.path, format!("line 3: expected ASCII or BINARY, found '{mode}'"))),
+            _ => return Err(MeshError::parse(self.path, format!("line 3: expected ASCII or BINARY, found '{mode}'"))),
         };
         let line = self.line;
         let keyword = self.token().map(|t| String::from_utf8_lossy(t).to_ascii_uppercase());
@@ -420,11 +424,11 @@ impl<'a> Reader<'a> {
             (Some("DATASET"), Some(d)) => d.to_ascii_uppercase(),
             _ => {
                 let found = keyword.map_or("the end of the file".to_string(), |k| format!("'{k}'"));
-                return Err(parse_error(self.path, format!("line {line}: expected DATASET, found {found}")));
+                return Err(MeshError::parse(self.path, format!("line {line}: expected DATASET, found {found}")));
             }
         };
         if dataset != "UNSTRUCTURED_GRID" && dataset != "POLYDATA" {
-            return Err(parse_error(
+            return Err(MeshError::parse(
                 self.path,
                 format!("line {line}: DATASET {dataset} is not supported (UNSTRUCTURED_GRID or POLYDATA are)"),
             ));
@@ -571,7 +575,7 @@ fn parse(path: &Path) -> Result<Parsed, MeshError> {
                         r.values(r.product(components, tuples, line)?, scalar, &format!("FIELD array {name}"), line)?;
                     if let Some((at, count)) = location {
                         if tuples != count {
-                            return Err(parse_error(
+                            return Err(MeshError::parse(
                                 path,
                                 format!("line {line}: FIELD array {name} has {tuples} tuples, but the data section holds {count}"),
                             ));
@@ -590,7 +594,7 @@ fn parse(path: &Path) -> Result<Parsed, MeshError> {
     // Checked once the file is read, so that a corrupt binary block is told by the section it runs into.
     let points = parsed.points.as_deref().unwrap_or_default();
     if let Some((i, fault)) = crate::coordinate_fault(points.iter().enumerate(), crate::MAX_COORDINATE) {
-        return Err(parse_error(path, format!("POINTS {} (line {points_line}): point {i} {fault}", points.len())));
+        return Err(MeshError::parse(path, format!("POINTS {} (line {points_line}): point {i} {fault}", points.len())));
     }
     Ok(parsed)
 }
@@ -640,14 +644,14 @@ pub(super) fn volume_from_cells(
     fields: Vec<Field>,
 ) -> Result<(Mesh, Vec<Field>), MeshError> {
     if cells.len() != types.len() {
-        return Err(parse_error(path, format!("{} cells but {} cell types", cells.len(), types.len())));
+        return Err(MeshError::parse(path, format!("{} cells but {} cell types", cells.len(), types.len())));
     }
     let mut kind: Option<(VolumeKind, usize)> = None;
     let mut conn = Vec::new();
     let mut kept_cells = Vec::new();
     for (c, (cell, &ty)) in cells.iter().zip(types).enumerate() {
-        let (solid, name) =
-            vtk_cell_type(ty).ok_or_else(|| parse_error(path, format!("cell {c} has unknown VTK cell type {ty}")))?;
+        let (solid, name) = vtk_cell_type(ty)
+            .ok_or_else(|| MeshError::parse(path, format!("cell {c} has unknown VTK cell type {ty}")))?;
         if !solid {
             continue;
         }
@@ -657,7 +661,7 @@ pub(super) fn volume_from_cells(
             VTK_VOXEL => (VolumeKind::Hex, &[0, 1, 3, 2, 4, 5, 7, 6]),
             VTK_QUADRATIC_TETRA => (VolumeKind::Tet10, &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9]),
             _ => {
-                return Err(parse_error(
+                return Err(MeshError::parse(
                     path,
                     format!(
                     "cell {c} is a {name} (VTK type {ty}): only tetrahedra (10, 24) and hexahedra (11, 12) are supported"
@@ -666,13 +670,13 @@ pub(super) fn volume_from_cells(
             }
         };
         if cell.len() != order.len() {
-            return Err(parse_error(
+            return Err(MeshError::parse(
                 path,
                 format!("cell {c} ({name}) has {} nodes, expected {}", cell.len(), order.len()),
             ));
         }
         if let Some(&bad) = cell.iter().find(|&&i| i >= points.len()) {
-            return Err(parse_error(
+            return Err(MeshError::parse(
                 path,
                 format!("cell {c} refers to point {bad}, but there are {} points", points.len()),
             ));
@@ -680,7 +684,7 @@ pub(super) fn volume_from_cells(
         match kind {
             None => kind = Some((this, c)),
             Some((k, first)) if k != this => {
-                return Err(parse_error(
+                return Err(MeshError::parse(
                     path,
                     format!(
                         "cell {c}: the file mixes {} (first: cell {first}) and {}; a mesh holds one kind of cell",
@@ -695,7 +699,7 @@ pub(super) fn volume_from_cells(
         kept_cells.push(c);
     }
     let Some((kind, _)) = kind else {
-        return Err(parse_error(path, "no tetrahedra or hexahedra: not a volume mesh"));
+        return Err(MeshError::parse(path, "no tetrahedra or hexahedra: not a volume mesh"));
     };
     for f in &fields {
         let (count, what) = match f.location {
@@ -703,7 +707,7 @@ pub(super) fn volume_from_cells(
             FieldLocation::Cell => (cells.len(), "cells"),
         };
         if f.components == 0 || Some(f.values.len()) != count.checked_mul(f.components) {
-            return Err(parse_error(
+            return Err(MeshError::parse(
                 path,
                 format!(
                     "array '{}' has {} values, which is not {} per one of {count} {what}",
@@ -718,7 +722,7 @@ pub(super) fn volume_from_cells(
     let (mut mesh, kept_nodes) = finish_volume(path, points, kind, conn, &describe, None, &kept_cells)?;
     let fields = restrict_fields(fields, &kept_nodes, &kept_cells);
     mesh.regions = regions_from_fields(&fields);
-    mesh.cell_fraction = fractions_from_fields(&fields).map_err(|m| parse_error(path, m))?;
+    mesh.cell_fraction = fractions_from_fields(&fields).map_err(|m| MeshError::parse(path, m))?;
     Ok((mesh, fields))
 }
 
@@ -734,7 +738,7 @@ pub(super) fn surface_from_cells<'c>(
     let (mut solids, mut solid_types) = (Vec::new(), Vec::new());
     for (c, (ty, cell)) in cells.enumerate() {
         if let Some(&bad) = cell.iter().find(|&&i| i >= points.len()) {
-            return Err(parse_error(
+            return Err(MeshError::parse(
                 path,
                 format!("cell {c} refers to point {bad}, but there are {} points", points.len()),
             ));
@@ -753,7 +757,7 @@ pub(super) fn surface_from_cells<'c>(
             }
         };
         if cell.len() < need || (ty != 6 && ty != 7 && cell.len() != need) {
-            return Err(parse_error(path, format!("cell {c} ({what}) has {} vertices", cell.len())));
+            return Err(MeshError::parse(path, format!("cell {c} ({what}) has {} vertices", cell.len())));
         }
         match ty {
             6 => strip(cell, &mut triangles),
@@ -767,7 +771,7 @@ pub(super) fn surface_from_cells<'c>(
         return Ok(crate::boundary_surface(&mesh).compacted());
     }
     if triangles.is_empty() {
-        return Err(parse_error(path, "no triangles, polygons, triangle strips nor volume cells"));
+        return Err(MeshError::parse(path, "no triangles, polygons, triangle strips nor volume cells"));
     }
     Ok(TriSurface { vertices: points, triangles })
 }
@@ -784,21 +788,21 @@ pub fn read_vtk_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>)
     let path = path.as_ref();
     let parsed = parse(path)?;
     if parsed.dataset != "UNSTRUCTURED_GRID" {
-        return Err(parse_error(
+        return Err(MeshError::parse(
             path,
             format!("DATASET {} holds a surface, not a volume mesh (read it as a surface)", parsed.dataset),
         ));
     }
-    let points = parsed.points.ok_or_else(|| parse_error(path, "no POINTS section"))?;
-    let (_, list) = parsed.cells.into_iter().next().ok_or_else(|| parse_error(path, "no CELLS section"))?;
-    let types = parsed.types.ok_or_else(|| parse_error(path, "no CELL_TYPES section"))?;
+    let points = parsed.points.ok_or_else(|| MeshError::parse(path, "no POINTS section"))?;
+    let (_, list) = parsed.cells.into_iter().next().ok_or_else(|| MeshError::parse(path, "no CELLS section"))?;
+    let types = parsed.types.ok_or_else(|| MeshError::parse(path, "no CELL_TYPES section"))?;
     let cells: Vec<Vec<usize>> = (0..list.len()).map(|i| list.cell(i).to_vec()).collect();
     volume_from_cells(path, &points, &cells, &types, parsed.fields)
 }
 
 /// The `POINTS` of a legacy VTK file of any dataset, whatever its cells (a point cloud).
 pub(super) fn read_vtk_points(path: &Path) -> Result<Vec<Point>, MeshError> {
-    parse(path)?.points.ok_or_else(|| parse_error(path, "no POINTS section"))
+    parse(path)?.points.ok_or_else(|| MeshError::parse(path, "no POINTS section"))
 }
 
 /// Reads the triangles of a legacy VTK file as a surface: `POLYDATA` polygons and triangle
@@ -817,7 +821,7 @@ pub(super) fn read_vtk_surface_and_space(path: &Path) -> Result<(TriSurface, Opt
 
 /// The triangles of a parsed legacy file (see [`read_vtk_surface`]).
 fn surface_of(path: &Path, parsed: Parsed) -> Result<TriSurface, MeshError> {
-    let points = parsed.points.ok_or_else(|| parse_error(path, "no POINTS section"))?;
+    let points = parsed.points.ok_or_else(|| MeshError::parse(path, "no POINTS section"))?;
     if parsed.dataset == "POLYDATA" {
         let cells = parsed.cells.iter().flat_map(|(key, list)| {
             let ty = match key.as_str() {
@@ -829,10 +833,10 @@ fn surface_of(path: &Path, parsed: Parsed) -> Result<TriSurface, MeshError> {
         });
         surface_from_cells(path, points, cells)
     } else {
-        let (_, list) = parsed.cells.first().ok_or_else(|| parse_error(path, "no CELLS section"))?;
-        let types = parsed.types.ok_or_else(|| parse_error(path, "no CELL_TYPES section"))?;
+        let (_, list) = parsed.cells.first().ok_or_else(|| MeshError::parse(path, "no CELLS section"))?;
+        let types = parsed.types.ok_or_else(|| MeshError::parse(path, "no CELL_TYPES section"))?;
         if types.len() != list.len() {
-            return Err(parse_error(path, format!("{} cells but {} cell types", list.len(), types.len())));
+            return Err(MeshError::parse(path, format!("{} cells but {} cell types", list.len(), types.len())));
         }
         surface_from_cells(path, points, types.iter().enumerate().map(|(i, &t)| (t, list.cell(i))))
     }

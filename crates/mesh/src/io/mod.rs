@@ -290,7 +290,7 @@ pub fn read_mesh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
         "inp" => read_inp(path),
         "vtk" => read_vtk(path),
         "vtu" => read_vtu(path),
-        _ => Err(parse_error(path, format!("unknown volume mesh extension ({VOLUME_EXTENSIONS})"))),
+        _ => Err(MeshError::parse(path, format!("unknown volume mesh extension ({VOLUME_EXTENSIONS})"))),
     }
 }
 
@@ -303,7 +303,7 @@ pub fn read_mesh_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>
         "inp" => Ok((read_inp(path)?, Vec::new())),
         "vtk" => read_vtk_with_fields(path),
         "vtu" => read_vtu_with_fields(path),
-        _ => Err(parse_error(path, format!("unknown volume mesh extension ({VOLUME_EXTENSIONS})"))),
+        _ => Err(MeshError::parse(path, format!("unknown volume mesh extension ({VOLUME_EXTENSIONS})"))),
     }
 }
 
@@ -323,7 +323,7 @@ pub fn write_mesh(path: impl AsRef<Path>, mesh: &Mesh, fields: &[Field]) -> Resu
             "{}: Gmsh output carries no fields; write .vtu or .vtk to keep them",
             path.display()
         ))),
-        _ => Err(parse_error(path, "unknown volume mesh extension (expected .vtu, .vtk or .msh)")),
+        _ => Err(MeshError::parse(path, "unknown volume mesh extension (expected .vtu, .vtk or .msh)")),
     }
 }
 
@@ -366,7 +366,7 @@ pub fn read_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
         "ply" => ply::read_ply_surface(path),
         "vtk" => read_vtk_surface(path),
         "vtp" | "vtu" => vtk_xml::read_xml_surface(path),
-        _ => Err(parse_error(path, UNKNOWN_SURFACE)),
+        _ => Err(MeshError::parse(path, UNKNOWN_SURFACE)),
     }
 }
 
@@ -382,7 +382,7 @@ pub fn read_vertices(path: impl AsRef<Path>) -> Result<Vec<Point>, MeshError> {
         "ply" => ply::read_ply_vertices(path),
         "vtk" => legacy_vtk::read_vtk_points(path),
         "vtp" | "vtu" => vtk_xml::read_xml_points(path),
-        _ => Err(parse_error(path, UNKNOWN_SURFACE)),
+        _ => Err(MeshError::parse(path, UNKNOWN_SURFACE)),
     }
 }
 
@@ -395,18 +395,13 @@ pub fn write_surface(path: impl AsRef<Path>, surface: &TriSurface) -> Result<(),
         "vtk" => legacy_vtk::write_surface_vtk(path, surface),
         "obj" => write_obj(path, surface),
         "stl" => write_stl(path, surface),
-        _ => Err(parse_error(path, "unknown surface extension (expected .vtu, .vtk, .obj or .stl)")),
+        _ => Err(MeshError::parse(path, "unknown surface extension (expected .vtu, .vtk, .obj or .stl)")),
     }
 }
 
 /// Lower-case extension of a path ("" when none).
 pub fn extension(path: &Path) -> String {
     path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase()
-}
-
-/// A parse error on `path`.
-fn parse_error(path: &Path, message: impl Into<String>) -> MeshError {
-    MeshError::Parse { path: path.display().to_string(), message: message.into() }
 }
 
 /// Reads a whole file, mapping failures to [`MeshError::Io`].
@@ -607,7 +602,7 @@ fn finish_volume(
 ) -> Result<(Mesh, Vec<usize>), MeshError> {
     let k = kind.nodes();
     if conn.is_empty() {
-        return Err(parse_error(path, "no tetrahedra or hexahedra: not a volume mesh"));
+        return Err(MeshError::parse(path, "no tetrahedra or hexahedra: not a volume mesh"));
     }
     let mut new_index = vec![usize::MAX; file_nodes.len()];
     for &i in &conn {
@@ -623,7 +618,7 @@ fn finish_volume(
     let nodes: Vec<Point> = kept.iter().map(|&i| file_nodes[i]).collect();
     if let Some((i, fault)) = crate::coordinate_fault(nodes.iter().enumerate(), crate::MAX_COORDINATE) {
         let number = numbers.map_or(kept[i], |numbers| numbers[kept[i]]);
-        return Err(parse_error(path, format!("node {number} {fault}")));
+        return Err(MeshError::parse(path, format!("node {number} {fault}")));
     }
     for i in &mut conn {
         *i = new_index[*i];
@@ -638,7 +633,7 @@ fn finish_volume(
         let size = crate::longest_side(crate::bounds(&cell.iter().map(|&i| nodes[i]).collect::<Vec<_>>()));
         let zero = volume.is_nan() || volume.abs() <= FLAT_CELL * size * size * size;
         if zero {
-            return Err(parse_error(
+            return Err(MeshError::parse(
                 path,
                 format!("{} has zero volume ({volume:.3e}): its nodes are repeated or coplanar", describe(c)),
             ));
@@ -661,7 +656,7 @@ fn finish_volume(
         VolumeKind::Hex => Cells::Hex8(conn.chunks_exact(8).map(|c| std::array::from_fn(|j| c[j])).collect()),
         VolumeKind::Tet10 => Cells::Tet10(conn.chunks_exact(10).map(|c| std::array::from_fn(|j| c[j])).collect()),
     };
-    let mut mesh = Mesh::new(nodes, cells).map_err(|e| parse_error(path, e.to_string()))?;
+    let mut mesh = Mesh::new(nodes, cells).map_err(|e| MeshError::parse(path, e.to_string()))?;
     check_untangled(path, &mesh, &flipped, describe)?;
     // The cells of the orientation fewer cells came in (none when all came one way).
     let turned = flipped.iter().filter(|&&f| f).count();
@@ -706,7 +701,7 @@ fn check_untangled(
         _ => None,
     });
     let Some((cell, other)) = fold else { return Ok(()) };
-    Err(parse_error(
+    Err(MeshError::parse(
         path,
         format!(
             "{} is inverted: its nodes turn the other way from {} of the mesh's {} cells, and turned round it folds \

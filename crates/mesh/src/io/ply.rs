@@ -8,7 +8,7 @@ use std::io::Write as _;
 use std::path::Path;
 
 use super::legacy_vtk::{surface_from_cells, to_index};
-use super::{parse_error, read_bytes, write_atomic, Scalar, VTK_POLYGON};
+use super::{read_bytes, write_atomic, Scalar, VTK_POLYGON};
 use crate::{MeshError, Point, TriSurface};
 
 /// Reads the points of a PLY file (its `vertex` element), whatever else it holds.
@@ -42,7 +42,7 @@ pub fn write_ply_points(path: impl AsRef<Path>, points: &[Point]) -> Result<(), 
 /// The vertices and (with `faces`) the faces of a PLY file.
 fn read(path: &Path, faces: bool) -> Result<(Vec<Point>, Vec<Vec<usize>>), MeshError> {
     let bytes = read_bytes(path)?;
-    parse(&bytes, faces).map_err(|message| parse_error(path, format!("PLY: {message}")))
+    parse(&bytes, faces).map_err(|message| MeshError::parse(path, format!("PLY: {message}")))
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]

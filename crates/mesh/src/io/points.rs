@@ -29,7 +29,7 @@ use serde_json::Value;
 
 use super::csv::{csv_field, write_csv, CsvError, Dialect, Header, Table};
 use super::frame::Frame;
-use super::{extension, parse_error, write_atomic, WriteError};
+use super::{extension, write_atomic, WriteError};
 use crate::length::LengthUnit;
 use crate::{MeshError, Point};
 
@@ -108,7 +108,7 @@ pub fn read_points(path: impl AsRef<Path>) -> Result<LabelledPoints, MeshError> 
     let path = path.as_ref();
     let text = std::fs::read_to_string(path).map_err(|error| match error.kind() {
         std::io::ErrorKind::InvalidData => {
-            parse_error(path, "not text: points come as CSV (x, y, z), Slicer's .fcsv or .mrk.json")
+            MeshError::parse(path, "not text: points come as CSV (x, y, z), Slicer's .fcsv or .mrk.json")
         }
         _ => MeshError::Io { path: path.display().to_string(), error },
     })?;
@@ -120,10 +120,10 @@ pub fn read_points(path: impl AsRef<Path>) -> Result<LabelledPoints, MeshError> 
     }?;
     if points.points.is_empty() && !points.unplaced.is_empty() {
         let warning = points.unplaced_warning().unwrap_or_default();
-        return Err(parse_error(path, format!("none of its points is placed: {warning}")));
+        return Err(MeshError::parse(path, format!("none of its points is placed: {warning}")));
     }
     match crate::measured_fault(&points.points) {
-        Some((i, fault)) => Err(parse_error(path, format!("point {i} {fault}"))),
+        Some((i, fault)) => Err(MeshError::parse(path, format!("point {i} {fault}"))),
         None => Ok(points),
     }
 }
@@ -197,7 +197,7 @@ impl Columns {
 /// RAS when no `# CoordinateSystem` line, millimetres); a CSV file with a `# columns =` comment
 /// is read as `.fcsv` names its columns.
 fn read_table(path: &Path, text: &str, fcsv: bool) -> Result<LabelledPoints, MeshError> {
-    let table_error = |e: CsvError| parse_error(path, e.to_string());
+    let table_error = |e: CsvError| MeshError::parse(path, e.to_string());
     let by_comment = Dialect { header: Header::Comment("columns"), ..Dialect::CSV };
     let mut table = Table::parse(text, if fcsv { &by_comment } else { &Dialect::CSV }).map_err(table_error)?;
     if !fcsv && table.settings.iter().any(|s| s.key == "columns") {
@@ -209,7 +209,7 @@ fn read_table(path: &Path, text: &str, fcsv: bool) -> Result<LabelledPoints, Mes
     }
     let header_line = table
         .header_line
-        .ok_or_else(|| parse_error(path, "no points (empty file, expected a header naming x, y, z)"))?;
+        .ok_or_else(|| MeshError::parse(path, "no points (empty file, expected a header naming x, y, z)"))?;
     let header = table.names.join(",");
     let columns = Columns::find(&table.names)
         .map_err(|m| table_error(CsvError::at(header_line, format!("{m} in {header:?}"))))?;
@@ -268,14 +268,14 @@ fn coordinate_system(value: &str) -> Result<Frame, String> {
 
 /// Reads the control points of Slicer's markups JSON.
 fn read_markups_json(path: &Path, text: &str) -> Result<LabelledPoints, MeshError> {
-    let root: Value = serde_json::from_str(text).map_err(|e| parse_error(path, format!("not valid JSON: {e}")))?;
+    let root: Value = serde_json::from_str(text).map_err(|e| MeshError::parse(path, format!("not valid JSON: {e}")))?;
     let markups = root
         .get("markups")
         .and_then(Value::as_array)
-        .ok_or_else(|| parse_error(path, "no \"markups\" list: not a Slicer markups (.mrk.json) file"))?;
+        .ok_or_else(|| MeshError::parse(path, "no \"markups\" list: not a Slicer markups (.mrk.json) file"))?;
     let mut out: Option<LabelledPoints> = None;
     for (m, markup) in markups.iter().enumerate() {
-        let mut points = read_markup(markup, m).map_err(|message| parse_error(path, message))?;
+        let mut points = read_markup(markup, m).map_err(|message| MeshError::parse(path, message))?;
         match &mut out {
             None => out = Some(points),
             Some(all) => {
@@ -287,7 +287,7 @@ fn read_markups_json(path: &Path, text: &str) -> Result<LabelledPoints, MeshErro
             }
         }
     }
-    out.ok_or_else(|| parse_error(path, "the \"markups\" list is empty"))
+    out.ok_or_else(|| MeshError::parse(path, "the \"markups\" list is empty"))
 }
 
 /// The points of markup `m` of a markups JSON file, or what is wrong (naming the point).

@@ -5,7 +5,7 @@ use std::io::Write;
 use std::path::Path;
 
 use super::text::LineReader;
-use super::{check_surface, fan, parse_error, read_bytes, write_atomic, Num};
+use super::{check_surface, fan, read_bytes, write_atomic, Num};
 use crate::{cross, sub, MeshError, Point, TriSurface};
 
 /// Reads a Wavefront OBJ surface: `v` vertices (all kept, in order) and `f` faces (1-based or
@@ -15,7 +15,7 @@ pub fn read_obj(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
     let path = path.as_ref();
     let surface = parse_obj(path)?;
     if surface.triangles.is_empty() {
-        return Err(parse_error(path, "no faces ('f' lines)"));
+        return Err(MeshError::parse(path, "no faces ('f' lines)"));
     }
     Ok(surface)
 }
@@ -123,7 +123,7 @@ pub fn read_stl(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
         return read_stl_ascii(path, &String::from_utf8_lossy(text));
     }
     let (Some(n), Some(size)) = (declared, binary_size) else {
-        return Err(parse_error(
+        return Err(MeshError::parse(
             path,
             format!(
                 "{} bytes: too short for a binary STL, and not an ASCII STL (which starts with 'solid')",
@@ -132,7 +132,7 @@ pub fn read_stl(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
         ));
     };
     if !size_matches {
-        return Err(parse_error(
+        return Err(MeshError::parse(
             path,
             format!(
                 "binary STL header declares {n} triangles ({size} bytes), but the file has {} bytes \
@@ -142,7 +142,7 @@ pub fn read_stl(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
         ));
     }
     if n == 0 {
-        return Err(parse_error(path, "a binary STL of no triangles: the surface is empty"));
+        return Err(MeshError::parse(path, "a binary STL of no triangles: the surface is empty"));
     }
     let mut merger = Merger::default();
     let mut triangles = Vec::with_capacity(n);
@@ -153,7 +153,7 @@ pub fn read_stl(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
         };
         let corners: [Point; 3] = std::array::from_fn(|v| [f(3 * v), f(3 * v + 1), f(3 * v + 2)]);
         if corners.iter().flatten().any(|c| !c.is_finite()) {
-            return Err(parse_error(path, format!("triangle {t} has a non-finite coordinate")));
+            return Err(MeshError::parse(path, format!("triangle {t} has a non-finite coordinate")));
         }
         triangles.push(corners.map(|p| merger.add(p)));
     }
@@ -235,7 +235,7 @@ fn read_stl_ascii(path: &Path, text: &str) -> Result<TriSurface, MeshError> {
         return Err(lines.end_of_file(state.expected()));
     }
     if triangles.is_empty() {
-        return Err(parse_error(path, "no facets"));
+        return Err(MeshError::parse(path, "no facets"));
     }
     Ok(TriSurface { vertices: merger.vertices, triangles })
 }

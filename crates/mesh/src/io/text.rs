@@ -3,7 +3,6 @@
 use std::path::Path;
 use std::str::{FromStr, SplitWhitespace};
 
-use super::parse_error;
 use crate::MeshError;
 
 /// The non-blank lines of a text file, numbered from 1.
@@ -40,7 +39,7 @@ impl<'a> LineReader<'a> {
 
     /// The error for a file that ends while `what` is still expected.
     pub(super) fn end_of_file(&self, what: &str) -> MeshError {
-        parse_error(self.path, format!("file ends at line {} while reading {what} (truncated file?)", self.last))
+        MeshError::parse(self.path, format!("file ends at line {} while reading {what} (truncated file?)", self.last))
     }
 }
 
@@ -60,7 +59,7 @@ impl<'a> Line<'a> {
     /// An error located on this line.
     pub(super) fn error(&self, message: impl std::fmt::Display) -> MeshError {
         let cut = if self.cut { " (the file ends in the middle of this line: truncated?)" } else { "" };
-        parse_error(self.path, format!("line {}: {message}{cut}", self.no))
+        MeshError::parse(self.path, format!("line {}: {message}{cut}", self.no))
     }
 
     /// The next token, or an error naming what is missing.

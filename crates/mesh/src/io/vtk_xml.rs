@@ -19,8 +19,8 @@ use base64::Engine as _;
 
 use super::legacy_vtk::{surface_from_cells, volume_from_cells};
 use super::{
-    check_for_writing, check_surface, frame_in_header, mesh_cells_flat, parse_error, write_atomic, Encoding, Field,
-    FieldLocation, Frame, Num, Scalar, VTK_POLYGON, VTK_POLY_LINE, VTK_POLY_VERTEX, VTK_TRIANGLE, VTK_TRIANGLE_STRIP,
+    check_for_writing, check_surface, frame_in_header, mesh_cells_flat, write_atomic, Encoding, Field, FieldLocation,
+    Frame, Num, Scalar, VTK_POLYGON, VTK_POLY_LINE, VTK_POLY_VERTEX, VTK_TRIANGLE, VTK_TRIANGLE_STRIP,
 };
 use crate::{Mesh, MeshError, Point, TriSurface};
 
@@ -391,7 +391,7 @@ impl XmlFile<'_> {
 
 /// Finds the elements of a VTK XML file that matter.
 fn scan<'a>(path: &'a Path, data: &'a [u8]) -> Result<XmlFile<'a>, MeshError> {
-    let at_error = |at: usize, m: String| parse_error(path, format!("line {}: {m}", line_at(data, at)));
+    let at_error = |at: usize, m: String| MeshError::parse(path, format!("line {}: {m}", line_at(data, at)));
     let mut file = XmlFile {
         path,
         data,
@@ -477,16 +477,16 @@ fn scan<'a>(path: &'a Path, data: &'a [u8]) -> Result<XmlFile<'a>, MeshError> {
         pos = end;
     }
     if !seen_file {
-        return Err(parse_error(path, "not a VTK XML file (no <VTKFile> element)"));
+        return Err(MeshError::parse(path, "not a VTK XML file (no <VTKFile> element)"));
     }
     if let Some((open, at)) = stack.last() {
-        return Err(parse_error(
+        return Err(MeshError::parse(
             path,
             format!("file ends inside <{open}> of line {} (truncated file?)", line_at(data, *at)),
         ));
     }
     if pieces == 0 {
-        return Err(parse_error(path, "no <Piece> element"));
+        return Err(MeshError::parse(path, "no <Piece> element"));
     }
     Ok(file)
 }
@@ -632,8 +632,8 @@ impl XmlFile<'_> {
     fn array_error(&self, a: &ArrayDecl, message: String) -> MeshError {
         let line = line_at(self.data, a.at);
         match a.name.as_str() {
-            "" => parse_error(self.path, format!("line {line}: <{}> DataArray: {message}", a.parent)),
-            name => parse_error(self.path, format!("line {line}: DataArray '{name}': {message}")),
+            "" => MeshError::parse(self.path, format!("line {line}: <{}> DataArray: {message}", a.parent)),
+            name => MeshError::parse(self.path, format!("line {line}: DataArray '{name}': {message}")),
         }
     }
 
@@ -653,7 +653,7 @@ impl XmlFile<'_> {
             .arrays
             .iter()
             .find(|a| a.parent == section && a.name == name)
-            .ok_or_else(|| parse_error(self.path, format!("<{section}> has no '{name}' array")))?;
+            .ok_or_else(|| MeshError::parse(self.path, format!("<{section}> has no '{name}' array")))?;
         let values = match count {
             Some(n) => self.sized(a, n)?,
             None => self.values(a)?,
@@ -682,7 +682,7 @@ impl XmlFile<'_> {
                     "<{section}> cell {c}: offset {end} is out of order or past the {} connectivity entries",
                     connectivity.len()
                 );
-                return Err(parse_error(self.path, m));
+                return Err(MeshError::parse(self.path, m));
             }
             cells.push(connectivity[start..end].to_vec());
             start = end;
@@ -708,9 +708,9 @@ impl XmlFile<'_> {
             .arrays
             .iter()
             .find(|a| a.parent == "Points")
-            .ok_or_else(|| parse_error(self.path, "no <Points> DataArray"))?;
+            .ok_or_else(|| MeshError::parse(self.path, "no <Points> DataArray"))?;
         if points_array.components != 3 {
-            return Err(parse_error(self.path, "<Points> must have 3 components"));
+            return Err(MeshError::parse(self.path, "<Points> must have 3 components"));
         }
         let xyz = self.sized(points_array, self.points)?;
         let points: Vec<Point> = xyz.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
@@ -768,7 +768,7 @@ impl XmlFile<'_> {
             return Ok(None);
         };
         frame_in_header(&format!("SPACE={}", space.trim()))
-            .map_err(|m| parse_error(self.path, format!("field data: {m}")))
+            .map_err(|m| MeshError::parse(self.path, format!("field data: {m}")))
     }
 }
 
@@ -789,7 +789,7 @@ pub fn read_vtu_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>)
     let path = path.as_ref();
     with_file(path, |file| {
         if file.poly {
-            return Err(parse_error(path, "PolyData holds a surface, not a volume mesh (read it as a surface)"));
+            return Err(MeshError::parse(path, "PolyData holds a surface, not a volume mesh (read it as a surface)"));
         }
         let (cells, types) = file.cells()?;
         volume_from_cells(path, &file.points()?, &cells, &types, file.fields()?)
