@@ -287,6 +287,15 @@ impl RunWriter {
                         field.inverted
                     ));
                 }
+                let (folded, cells) =
+                    (field.folded_cells(), field.dims.iter().map(|n| n.saturating_sub(1)).product::<usize>());
+                if folded > 0 {
+                    notes.push(format!(
+                        "{name}: the field folds in {folded} of its {cells} grid cells (where the organ moves more than \
+                         the space around it can follow); there 3D Slicer's inverse of it, which moves models and \
+                         markups, is ambiguous"
+                    ));
+                }
                 for_slicer.push(name);
             }
             Err(e) => notes.push(format!("no displacement.nrrd: {e}")),
