@@ -445,9 +445,26 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
             (None, warning)
         })
         .into_iter()
+        .chain(negative_spacing_warning(&header).map(|w| (None, w)))
         .collect();
     let placed = qform_code > 0 || sform_code > 0;
     Ok(Labelmap { placed, warnings, named_unit, ..Labelmap::single(dims, labels, affine, Frame::Ras) })
+}
+
+/// The warning of a NIfTI placed by its spacings (its qform, or no form) of which one is negative:
+/// the readers part ways there.
+fn negative_spacing_warning(header: &NiftiHeader) -> Option<String> {
+    let by_sform = header.sform_code > 0 && (header.qform_code == 0 || header.sform_code == 1);
+    let negative: Vec<String> =
+        (1..4).filter(|&d| header.pixdim[d] < 0.0).map(|d| format!("pixdim[{d}] = {}", header.pixdim[d])).collect();
+    (!by_sform && !negative.is_empty()).then(|| {
+        format!(
+            "{} negative: read as 3D Slicer (ITK) reads it, its size with the axis reversed, where FSL (nifti1_io) \
+             takes 1 and nibabel its size without reversing it; check where the organ lies, and save the image again \
+             with positive spacings",
+            negative.join(", ") + if negative.len() > 1 { " are" } else { " is" }
+        )
+    })
 }
 
 /// The unit a NIfTI spatial unit code names (the low three bits of `xyzt_units`): metre, mm,
@@ -528,7 +545,7 @@ type FormRead = (&'static str, f64);
 /// said to be ambiguous: the rounding of the qform's quaternion.
 const FORMS_APART_MM: f64 = 0.1;
 
-/// The qform's voxel-to-world affine (quaternion, offsets, spacing and qfac), as nifti1_io makes it.
+/// The qform's voxel-to-world affine (quaternion, offsets, spacing and qfac), as ITK makes it.
 fn qform_affine(header: &NiftiHeader) -> [[f64; 4]; 3] {
     let [mut b, mut c, mut d] = header.quatern;
     let pixdim = &header.pixdim;
@@ -548,8 +565,9 @@ fn qform_affine(header: &NiftiHeader) -> [[f64; 4]; 3] {
         [2.0 * (b * d - a * c), 2.0 * (c * d + a * b), a * a + d * d - b * b - c * c],
     ];
     let qfac = if pixdim[0] < 0.0 { -1.0 } else { 1.0 };
-    // As nifti1_io's nifti_quatern_to_mat44 does: a spacing that is not positive is taken as 1.
-    let size = |d: usize| if pixdim[d] > 0.0 { pixdim[d] } else { 1.0 };
+    // As ITK (3D Slicer) reads it: a negative spacing reverses its axis (nifti1_io takes it as 1,
+    // nibabel as its size), a zero one is 1.
+    let size = |d: usize| if pixdim[d] != 0.0 { pixdim[d] } else { 1.0 };
     let spacing = [size(1), size(2), qfac * size(3)];
     let offset = header.qoffset;
     std::array::from_fn(|r| std::array::from_fn(|c| if c < 3 { rotation[r][c] * spacing[c] } else { offset[r] }))
@@ -886,8 +904,8 @@ impl Labelmap {
         counts
             .into_iter()
             .map(|((layer, label), count)| {
-                let name = self.segments.iter().find(|s| s.1 == layer && s.2 == label).map(|s| s.0.clone());
-                (layer, label, count, name)
+                let names = self.names_of(layer, label);
+                (layer, label, count, (!names.is_empty()).then(|| names.join(" / ")))
             })
             .collect()
     }
@@ -950,6 +968,12 @@ impl Labelmap {
         self.select_single(choice)
     }
 
+    /// The names of the segments the file puts at `label` of `layer` (several where it gives them
+    /// no label value apart).
+    fn names_of(&self, layer: usize, label: i32) -> Vec<&str> {
+        self.segments.iter().filter(|s| s.1 == layer && s.2 == label).map(|s| s.0.as_str()).collect()
+    }
+
     /// One segment, by number or name ([`Labelmap::select`]), on the labelmap's whole grid.
     fn select_single(&self, choice: &str) -> Result<(VoxelMask, String, (usize, i32)), MeshError> {
         let choice = choice.trim();
@@ -986,6 +1010,18 @@ impl Labelmap {
             let named: Vec<&(String, usize, i32)> =
                 self.segments.iter().filter(|s| s.0.eq_ignore_ascii_case(choice)).collect();
             match named[..] {
+                [s] if self.names_of(s.1, s.2).len() > 1 => {
+                    return Err(MeshError::Invalid(format!(
+                        "segments {} all take label {} of layer {} (the file gives {} no Segment{{i}}_LabelValue \
+                         apart): it does not say which voxels are '{choice}'; save the segmentation again from 3D \
+                         Slicer, or choose by number (labels present: {})",
+                        self.names_of(s.1, s.2).iter().map(|n| format!("'{n}'")).collect::<Vec<_>>().join(", "),
+                        s.2,
+                        s.1,
+                        if self.names_of(s.1, s.2).len() > 2 { "them" } else { "both" },
+                        self.present_text()
+                    )))
+                }
                 [s] => (s.1, s.2),
                 [_, _, ..] => {
                     return Err(MeshError::Invalid(format!(
@@ -1002,11 +1038,10 @@ impl Labelmap {
                 }
             }
         };
-        let name = self.segments.iter().find(|s| s.1 == layer && s.2 == label).map(|s| s.0.clone());
         let inside: Vec<bool> = self.labels.iter().skip(layer).step_by(self.layers).map(|&l| l == label).collect();
-        let description = match name {
-            Some(n) => format!("label {label} ('{n}')"),
-            None => format!("label {label}"),
+        let description = match self.names_of(layer, label)[..] {
+            [n] => format!("label {label} ('{n}')"),
+            _ => format!("label {label}"),
         };
         Ok((VoxelMask { dims: self.dims, inside, affine: self.affine }, description, (layer, label)))
     }
@@ -1821,9 +1856,11 @@ mod tests {
         assert!(with_sform(2, 1.0).warnings.is_empty(), "the forms agree");
     }
 
-    /// A qform's spacing that is not positive is taken as 1, as nifti1_io takes it.
+    /// A qform's zero spacing is taken as 1, a negative one as its size with the axis reversed
+    /// (as ITK reads them: SimpleITK 2 gives spacing 1.5 and a reversed direction for -1.5),
+    /// with a warning.
     #[test]
-    fn a_qform_spacing_that_is_not_positive_is_taken_as_one() {
+    fn a_qform_spacing_that_is_not_positive_is_read_as_itk_reads_it() {
         let dir = tempfile::tempdir().unwrap();
         let (map, _) = two_balls(Frame::Ras);
         let path = dir.path().join("q.nii");
@@ -1831,8 +1868,14 @@ mod tests {
         // The identity quaternion, pixdim (0, -2, 2.5).
         qform_only(&path, &[(80, 0.0), (84, -2.0), (256, 0.0), (260, 0.0), (264, 0.0)]);
         let back = read_labelmap(&path).unwrap();
-        let expected = [[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 2.0], [0.0, 0.0, 2.5, 3.0]];
+        let expected = [[1.0, 0.0, 0.0, 1.0], [0.0, -2.0, 0.0, 2.0], [0.0, 0.0, 2.5, 3.0]];
         assert!(close(&back.affine, &expected, 1e-6), "{:?}", back.affine);
+        assert_eq!(back.warnings.len(), 1, "{:?}", back.warnings);
+        assert!(
+            back.warnings[0].1.starts_with("pixdim[2] = -2 is negative: read as 3D Slicer (ITK)"),
+            "{:?}",
+            back.warnings
+        );
     }
 
     /// A NaN or infinite scl_slope means no scaling, a non-finite scl_inter 0 (as nifti1_io and
@@ -2221,5 +2264,19 @@ mod tests {
         map.segments.push(("Liver".into(), 0, 2));
         let e = map.select("liver").unwrap_err().to_string();
         assert!(e.contains("2 segments are named 'liver'"), "{e}");
+    }
+
+    /// Segments a file puts at the same label (a single layer, no `Segment{i}_LabelValue`: each
+    /// takes 1) do not say whose voxels are whose: chosen by name, refused; by number, the label
+    /// is not given one of their names.
+    #[test]
+    fn segments_sharing_a_label_are_not_chosen_by_name() {
+        let (mut map, _) = two_balls(Frame::Ras);
+        map.segments = vec![("liver".into(), 0, 5), ("stomach".into(), 0, 5)];
+        let e = map.select("stomach").unwrap_err().to_string();
+        assert!(e.contains("segments 'liver', 'stomach' all take label 5 of layer 0"), "{e}");
+        let (_, description) = map.select("5").unwrap();
+        assert_eq!(description, "label 5");
+        assert!(map.present_text().contains("liver / stomach"), "{}", map.present_text());
     }
 }
