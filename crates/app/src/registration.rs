@@ -494,9 +494,22 @@ fn named_source(source: &Path) -> (Option<&str>, &Path) {
     }
 }
 
-/// `LABELMAP:LABEL` split, when `source` is one.
+/// `LABELMAP:LABEL` split, when `source` is one (at the first `:` after a labelmap's name, so that
+/// a segment's name may hold one: `seg.seg.nrrd:Tu: S8`).
 fn labelmap_label(source: &Path) -> Option<(&str, &str)> {
-    source.to_str()?.rsplit_once(':').filter(|(path, _)| is_labelmap(Path::new(path)))
+    let text = source.to_str()?;
+    text.match_indices(':').map(|(at, _)| (&text[..at], &text[at + 1..])).find(|(path, _)| is_labelmap(Path::new(path)))
+}
+
+/// `source` ([`read_structure`]'s) with its file's path made absolute, its name (`NAME=`) and
+/// label (`:LABEL`) kept.
+pub fn absolute_structure(source: &Path) -> Result<PathBuf> {
+    let (name, file) = named_source(source);
+    let absolute = std::path::absolute(file).with_context(|| format!("resolving {}", file.display()))?;
+    Ok(match name {
+        Some(name) => PathBuf::from(format!("{name}={}", absolute.display())),
+        None => absolute,
+    })
 }
 
 /// The structure `source` holds ([`structure_name`], its surface in m in the frame `to`), read as
@@ -745,6 +758,17 @@ mod tests {
         let odd = dir.path().join("a=b.stl");
         std::fs::write(&odd, "").unwrap();
         assert_eq!(structure_name(&odd), "a=b");
+        // A segment's name may hold a colon.
+        assert_eq!(name("seg.seg.nrrd:Tu: S8"), "Tu:_S8");
+        // Made absolute (as a set-up records them), the name and label are kept.
+        let cwd = std::env::current_dir().unwrap();
+        let absolute = |s: &str| absolute_structure(Path::new(s)).unwrap();
+        assert_eq!(
+            absolute("tumour=seg.nii.gz:2"),
+            PathBuf::from(format!("tumour={}", cwd.join("seg.nii.gz:2").display()))
+        );
+        assert_eq!(absolute("b.stl"), cwd.join("b.stl"));
+        assert_eq!(structure_name(&absolute("tumour=seg.nii.gz:2")), "tumour");
     }
 
     /// A set-up whose preparation stopped before its validation chose a method is refused for its

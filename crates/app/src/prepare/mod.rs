@@ -65,7 +65,7 @@ use learn::LearnedModel;
 
 use crate::meshing::{coverage_warning, write_surface_in_mm, OrganInput};
 use crate::points::PointInput;
-use crate::registration::{read_structure, structure_name};
+use crate::registration::{absolute_structure, read_structure, structure_name};
 use crate::setup::{Patient, PatientMethod, PATIENT_FILE, SET_UP_FRAME, STATE_FILE, SURFACE_FILE};
 use crate::training::{train_unet, UNetRun, UNetStart};
 
@@ -375,7 +375,7 @@ fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
         surface: full(&options.surface)?,
         attach: full(&options.attach)?,
         targets: full(&options.targets)?,
-        structures: options.structures.iter().map(|s| full(s)).collect::<Result<_>>()?,
+        structures: options.structures.iter().map(|s| absolute_structure(s)).collect::<Result<_>>()?,
         camera: match &options.camera {
             CameraAt::File(path) => CameraAt::File(full(path)?),
             at => at.clone(),
