@@ -90,6 +90,9 @@ fn register_case_runs_the_test_sized_comparison_and_rigid_recovers_a_misalignmen
         .collect();
     assert_eq!(m.len(), 4);
     assert_eq!(m[3], [0.0, 0.0, 0.0, 1.0]);
+    // Its translation in mm, as every length of the summary.
+    let shift = (0..3).map(|r| m[r][3].powi(2)).sum::<f64>().sqrt();
+    assert!((shift - rigid["translation_mm"].as_f64().unwrap()).abs() < 1e-9, "{rigid}");
     assert!(rigid["rotation_deg"].as_f64().unwrap() > 1.0 && rigid["time_ms"].as_f64().unwrap() > 0.0, "{rigid}");
     // Registered targets are in the cloud's frame: their distance to the truth is the TRE.
     let truth = csv_rows(&rigid_out.join("case/truth.csv"));

@@ -369,7 +369,8 @@ fn solve_spd(h: [[f64; 6]; 6], b: [f64; 6]) -> Option<[f64; 6]> {
 /// The rigid alignment in summary.json: the organ → cloud transform and the ICP's figures.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RigidSummary {
-    /// Organ (preoperative) frame → cloud frame, homogeneous 4 × 4, rows: `x_cloud = M x_organ`.
+    /// Organ (preoperative) frame → cloud frame, homogeneous 4 × 4, rows: `x_cloud = M x_organ`,
+    /// its translation in mm as every length of the summary.
     pub organ_to_cloud: [[f64; 4]; 4],
     /// Its rotation angle (degrees).
     pub rotation_deg: f64,
@@ -393,7 +394,7 @@ impl From<&RigidResult> for RigidSummary {
     fn from(r: &RigidResult) -> Self {
         let t = r.organ_to_cloud();
         RigidSummary {
-            organ_to_cloud: t.homogeneous(LengthUnit::Metre),
+            organ_to_cloud: t.homogeneous(LengthUnit::Millimetre),
             rotation_deg: t.angle().to_degrees(),
             translation_mm: mm(t.translation_norm()),
             iterations: r.iterations,

@@ -485,6 +485,34 @@ fn far_camera(organ: &mesh::Mesh, camera: Point, unit: LengthUnit) -> Option<Str
     })
 }
 
+/// A warning when `camera` (in the set-up's frame, LPS) lies behind the organ, more towards the
+/// patient's back than to any side of it: a laparoscope, an open view or a depth camera looks from
+/// the front; the same numbers in the other frame (x and y negated) put it there. `read`: the
+/// frame the inputs were given in; `given`: how the camera was given (typed numbers are taken in
+/// the surface's frame).
+fn camera_behind(organ: &Mesh, camera: Point, read: Frame, given: &CameraAt) -> Option<String> {
+    let (lo, hi) = organ.bounds();
+    let centre: Point = std::array::from_fn(|d| 0.5 * (lo[d] + hi[d]));
+    let towards = mesh::sub(camera, centre);
+    // LPS: +y is posterior.
+    (towards[1] > 0.0 && towards[1] > towards[0].abs().max(towards[2].abs())).then(|| {
+        let typed = match given {
+            CameraAt::Point(_) => format!(", typed on the command line: taken in the surface's frame, {}", read.name()),
+            CameraAt::File(_) => String::new(),
+        };
+        let mirrored = [-camera[0], -camera[1], camera[2]];
+        format!(
+            "warning: the camera at {} (set-up's {}) lies behind the organ, {:.0} mm towards the patient's back from \
+             its centre{typed}; a laparoscope or an open view looks from the front: in the other frame (x and y \
+             negated) it lies in front, at {}; is it given in the surface's frame?",
+            point_in_mm(camera),
+            SET_UP_FRAME.name(),
+            mm(towards[1]),
+            point_in_mm(mirrored)
+        )
+    })
+}
+
 /// A warning when the camera at `camera` sees most of the `attached` nodes where the camera of the
 /// other frame (x and y negated) would see under half as many: an organ is held at its back, away
 /// from the laparoscope, so a camera given in the other frame than the surface's is the likely
@@ -590,6 +618,9 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
         );
     }
     lines.extend(far_camera(&organ, camera, unit));
+    if let Some(read) = given {
+        lines.extend(camera_behind(&organ, camera, read, &options.camera));
+    }
     let located = register::Organ::new(organ.clone(), None)?;
     // Positions in messages are the set-up's; say so where the files' differ.
     let shown = match given.filter(|&f| f != SET_UP_FRAME) {
@@ -1073,6 +1104,24 @@ mod tests {
             "{line}"
         );
         assert_eq!(warning([0.0, 0.3, 0.0]), None);
+    }
+
+    /// A camera behind the organ (LPS: +y) is warned about, naming where the other frame puts it
+    /// and, when typed, the frame it was taken in; one in front, or to a side, is not.
+    #[test]
+    fn a_camera_behind_the_organ_is_told_of_the_other_frame() {
+        let organ = mesh::box_tet([-0.1, -0.1, -0.05], [0.1, 0.1, 0.05], [4, 4, 2]).unwrap();
+        let typed = CameraAt::Point([0.0; 3]);
+        let line = camera_behind(&organ, [0.035, 0.36, -0.18], Frame::Ras, &typed).expect("behind");
+        assert!(line.contains("360 mm towards the patient's back"), "{line}");
+        assert!(
+            line.contains("taken in the surface's frame, RAS") && line.contains("at (-35, -360, -180) mm"),
+            "{line}"
+        );
+        assert_eq!(camera_behind(&organ, [0.035, -0.36, -0.18], Frame::Ras, &typed), None);
+        assert_eq!(camera_behind(&organ, [0.4, 0.2, 0.0], Frame::Lps, &typed), None);
+        let file = CameraAt::File("camera.csv".into());
+        assert!(!camera_behind(&organ, [0.0, 0.3, 0.0], Frame::Lps, &file).unwrap().contains("typed"));
     }
 
     #[test]
