@@ -15,7 +15,7 @@ use augsim_app::case::{ar_network_model, network_from_truth, synthetic_case};
 use learn::Model;
 use mesh::length::mm;
 use mesh::Point;
-use register::{observe, register_frame, target_errors, RigidTransform};
+use register::{observe, target_errors, RigidTransform};
 use scenario::CaseScenario;
 
 const MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar/model.json");
@@ -88,8 +88,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         mm(mesh::stats::max(&misfit))
     );
 
-    let mut deformer = deformer;
-    let frame = register_frame(&organ, &mut deformer, &case.peak().cloud, None, options)?;
+    let targets = case.targets.clone();
+    let mut registration =
+        register::Registration::new(organ, Box::new(deformer), "U-Net", targets, Vec::new(), options.clone())?;
+    let frame = registration.register(&case.peak().cloud)?.registration;
     let (mean, max) = tre(&frame.u);
     println!("match-and-fit loop, the case's settings TRE {mean:.2} / {max:.2} mm in {} iterations", frame.iterations);
     Ok(())

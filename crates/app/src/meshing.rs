@@ -10,10 +10,11 @@ use anyhow::{anyhow, bail, Context, Result};
 use mesh::io::{Field, Frame};
 use mesh::isosurface::{ExtractOptions, ExtractReport};
 use mesh::labelmap::{is_labelmap, read_labelmap_surface, unreadable_segmentation, LABELMAP_FORMATS};
+use mesh::length::ORGAN_EXTENT_M;
 use mesh::length::{mm, organ_units, Length, LengthUnit, UnitOrAuto};
 use mesh::phantom::PhantomSpec;
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
-use mesh::repair::{detect_unit, largest_extent, RepairOptions, ORGAN_EXTENT_M};
+use mesh::repair::{detect_unit, largest_extent, RepairOptions};
 use mesh::tetmesh::{BoundaryFit, Coverage};
 use mesh::{Mesh, TriSurface};
 

@@ -257,7 +257,7 @@ impl Solved {
                     .into(),
             );
         }
-        lines.extend(self.hanging_warning.iter().map(|w| format!("{w}")));
+        lines.extend(self.hanging_warning.iter().cloned());
         lines.extend(set_up_warnings(p));
         let (inverted, smallest) = post::inverted_cells(geo, p.material.law, &sol.u)?;
         if inverted > 0 {

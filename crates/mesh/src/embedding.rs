@@ -135,7 +135,7 @@ impl Grid {
                 return Err(MeshError::Invalid(format!(
                     "point {index} at {} lies {} mm outside the grid box {}..{}",
                     point_in_mm(p),
-                    crate::repair::number(mm(out)),
+                    crate::length::number(mm(out)),
                     point_in_mm(lo),
                     point_in_mm(hi)
                 )));

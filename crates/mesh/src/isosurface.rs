@@ -87,7 +87,7 @@ impl ExtractReport {
         match unit {
             Some(unit) => format!("{:.1} mL ({change:+.1} % from the voxels)", self.volume * centimetres(unit).powi(3)),
             None => {
-                format!("{} (the world unit cubed; {change:+.1} % from the voxels)", crate::repair::number(self.volume))
+                format!("{} (the world unit cubed; {change:+.1} % from the voxels)", crate::length::number(self.volume))
             }
         }
     }

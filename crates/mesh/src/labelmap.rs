@@ -1317,8 +1317,8 @@ pub fn read_labelmap_surface(
         warnings.push(format!(
             "the organ spans {} mm, no organ's size: its voxels are {} mm as the file's header gives them ({unit}); \
              is that their size?",
-            crate::repair::number(span),
-            map.spacing().map(crate::repair::number).join(" × ")
+            crate::length::number(span),
+            map.spacing().map(crate::length::number).join(" × ")
         ));
     }
     let lost = 1.0 - extract.volume / extract.voxel_volume;

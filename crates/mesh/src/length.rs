@@ -153,7 +153,7 @@ impl Length {
 impl fmt::Display for Length {
     /// In millimetres, as reports give lengths: `7 mm`.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{} mm", crate::repair::number(mm(self.0)))
+        write!(f, "{} mm", number(mm(self.0)))
     }
 }
 
@@ -233,14 +233,14 @@ pub fn from_mm(millimetres: f64) -> f64 {
 /// A point given in metres as a message shows it, in millimetres to six significant digits:
 /// `(92.603, -55.448, -209.771) mm`.
 pub fn point_in_mm(p: Point) -> String {
-    let [x, y, z] = p.map(|c| crate::repair::number(mm(c)));
+    let [x, y, z] = p.map(|c| number(mm(c)));
     format!("({x}, {y}, {z}) mm")
 }
 
 /// The units among `candidates` in which a largest extent of `extent` (a number, as a file holds
-/// it) is an organ's size ([`crate::repair::ORGAN_EXTENT_M`]), in their order.
+/// it) is an organ's size ([`ORGAN_EXTENT_M`]), in their order.
 pub fn organ_units(extent: f64, candidates: &[LengthUnit]) -> Vec<LengthUnit> {
-    candidates.iter().copied().filter(|u| crate::repair::ORGAN_EXTENT_M.contains(&u.to_metres(extent))).collect()
+    candidates.iter().copied().filter(|u| ORGAN_EXTENT_M.contains(&u.to_metres(extent))).collect()
 }
 
 /// A unit mistake that numbers of lengths can carry: given in `given` where `expected` was meant,
@@ -289,9 +289,34 @@ impl UnitMistake {
     }
 }
 
+/// The largest extent of an organ (m): from 2 cm (a gallbladder, a kidney's tumour) to 60 cm.
+pub const ORGAN_EXTENT_M: std::ops::RangeInclusive<f64> = 0.02..=0.6;
+
+/// A number with six significant digits, without trailing zeros.
+pub(crate) fn number(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return x.to_string();
+    }
+    let decimals = (5 - x.abs().log10().floor() as i32).clamp(0, 12) as usize;
+    let text = format!("{x:.decimals$}");
+    if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        text
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn numbers_are_short() {
+        assert_eq!(number(187.3), "187.3");
+        assert_eq!(number(6.41234567), "6.41235");
+        assert_eq!(number(0.0002), "0.0002");
+        assert_eq!(number(1500.0), "1500");
+    }
 
     /// Each mistake's factor undoes it, in words as a message says it.
     #[test]

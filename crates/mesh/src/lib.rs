@@ -579,3 +579,31 @@ pub fn distances(a: &[Point], b: &[Point]) -> Vec<f64> {
 pub fn cross(a: Point, b: Point) -> Point {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
+
+/// The six dihedral angles (radians) of the tetrahedron (a, b, c, d).
+pub fn dihedral_angles(p: [Point; 4]) -> [f64; 6] {
+    // Outward normals of the faces opposite each vertex.
+    const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
+    let n: [Point; 4] = std::array::from_fn(|k| {
+        let [i, j, l] = FACES[k];
+        let mut v = cross(sub(p[j], p[i]), sub(p[l], p[i]));
+        if dot(v, sub(p[k], p[i])) > 0.0 {
+            v = v.map(|c| -c);
+        }
+        let len = dot(v, v).sqrt();
+        if len > 0.0 {
+            v.map(|c| c / len)
+        } else {
+            v
+        }
+    });
+    let mut out = [0.0; 6];
+    let mut m = 0;
+    for k in 0..4 {
+        for l in k + 1..4 {
+            out[m] = std::f64::consts::PI - dot(n[k], n[l]).clamp(-1.0, 1.0).acos();
+            m += 1;
+        }
+    }
+    out
+}

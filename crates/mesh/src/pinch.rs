@@ -10,7 +10,7 @@
 
 use std::collections::{HashMap, HashSet};
 
-use crate::tetmesh::dihedral_angles;
+use crate::dihedral_angles;
 use crate::{cross, dot, norm, sub, tet_volume, Cells, Mesh, Point};
 
 /// The smallest dihedral angle (degrees) of a bridging tetrahedron: a wedge narrower than this is

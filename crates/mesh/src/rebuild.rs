@@ -20,8 +20,9 @@ use rayon::prelude::*;
 
 use crate::bvh::SurfaceBvh;
 use crate::isosurface::{mask_surface, ExtractOptions, ExtractReport};
+use crate::length::number;
 use crate::length::LengthUnit;
-use crate::repair::{largest_extent, number, repair_surface, RepairOptions, RepairReport};
+use crate::repair::{largest_extent, repair_surface, RepairOptions, RepairReport};
 use crate::volume::voxelise_surface;
 use crate::{bounds, MeshError, Point, TriSurface};
 

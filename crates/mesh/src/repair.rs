@@ -31,6 +31,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use rayon::prelude::*;
 
 use crate::length::LengthUnit;
+use crate::length::{number, ORGAN_EXTENT_M};
 use crate::surface::check_closed_manifold;
 use crate::tetmesh::MAX_OVERLAP_FRACTION;
 use crate::topology::root;
@@ -359,9 +360,6 @@ pub fn largest_extent(surface: &TriSurface) -> f64 {
     crate::longest_side(bounds(&points))
 }
 
-/// The largest extent of an organ (m): from 2 cm (a gallbladder, a kidney's tumour) to 60 cm.
-pub const ORGAN_EXTENT_M: std::ops::RangeInclusive<f64> = 0.02..=0.6;
-
 /// The length unit of an organ's surface, from its size: an organ is between 2 cm and 60 cm
 /// across, so a largest extent in [0.02, 0.6] is in metres and one in [20, 600] in millimetres.
 /// Any other extent is an error that gives it and asks for the unit.
@@ -390,20 +388,6 @@ fn crossing_triangles(pairs: &[(usize, usize)]) -> usize {
 
 fn invalid(message: impl Into<String>) -> MeshError {
     MeshError::Invalid(message.into())
-}
-
-/// A number with six significant digits, without trailing zeros.
-pub(crate) fn number(x: f64) -> String {
-    if x == 0.0 || !x.is_finite() {
-        return x.to_string();
-    }
-    let decimals = (5 - x.abs().log10().floor() as i32).clamp(0, 12) as usize;
-    let text = format!("{x:.decimals$}");
-    if text.contains('.') {
-        text.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        text
-    }
 }
 
 fn point_text(p: Point) -> String {
@@ -1508,13 +1492,5 @@ mod tests {
         cm.transform([0.0; 3], 100.0);
         let e = detect_unit(&cm).unwrap_err().to_string();
         assert!(e.contains("largest extent is 10,") && e.contains("give the unit explicitly"), "{e}");
-    }
-
-    #[test]
-    fn numbers_are_short() {
-        assert_eq!(number(187.3), "187.3");
-        assert_eq!(number(6.41234567), "6.41235");
-        assert_eq!(number(0.0002), "0.0002");
-        assert_eq!(number(1500.0), "1500");
     }
 }

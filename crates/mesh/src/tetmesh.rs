@@ -52,7 +52,7 @@ use rayon::prelude::*;
 use crate::bvh::SurfaceBvh;
 use crate::surface::check_closed_manifold;
 use crate::topology::{face_connected_pieces, root};
-use crate::{cross, dot, sub, Cells, Mesh, MeshError, Point, TriSurface, MAX_CELLS};
+use crate::{cross, dihedral_angles, dot, sub, Cells, Mesh, MeshError, Point, TriSurface, MAX_CELLS};
 
 /// Warp threshold for black (axis-parallel) lattice edges, from the paper.
 pub const ALPHA_LONG: f64 = 0.24999;
@@ -319,34 +319,6 @@ impl fmt::Display for TetQuality {
         }
         Ok(())
     }
-}
-
-/// The six dihedral angles (radians) of the tetrahedron (a, b, c, d).
-pub fn dihedral_angles(p: [Point; 4]) -> [f64; 6] {
-    // Outward normals of the faces opposite each vertex.
-    const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
-    let n: [Point; 4] = std::array::from_fn(|k| {
-        let [i, j, l] = FACES[k];
-        let mut v = cross(sub(p[j], p[i]), sub(p[l], p[i]));
-        if dot(v, sub(p[k], p[i])) > 0.0 {
-            v = v.map(|c| -c);
-        }
-        let len = dot(v, v).sqrt();
-        if len > 0.0 {
-            v.map(|c| c / len)
-        } else {
-            v
-        }
-    });
-    let mut out = [0.0; 6];
-    let mut m = 0;
-    for k in 0..4 {
-        for l in k + 1..4 {
-            out[m] = std::f64::consts::PI - dot(n[k], n[l]).clamp(-1.0, 1.0).acos();
-            m += 1;
-        }
-    }
-    out
 }
 
 /// Element count, node count, dihedral angle range, inverted elements and

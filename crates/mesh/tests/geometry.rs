@@ -5,14 +5,15 @@ use std::collections::HashMap;
 use std::f64::consts::PI;
 
 use augsim_mesh::bvh::SurfaceBvh;
+use augsim_mesh::dihedral_angles;
 use augsim_mesh::embedding::{interpolate_at, Embedding, Grid, MeshLocator};
 use augsim_mesh::immersed::{immersed_surface, ImmersedOptions};
 use augsim_mesh::phantom::{liver_phantom, PhantomSpec};
 use augsim_mesh::sampling::{interpolate_samples, sample_visible, sample_visible_boundary};
 use augsim_mesh::surface::check_closed_manifold;
 use augsim_mesh::tetmesh::{
-    dihedral_angles, mesh_surface, mesh_surface_to_count, stuff, stuff_to_count, tet_quality, BoundaryFit,
-    ImplicitDomain, SdfDomain, TetMeshOptions,
+    mesh_surface, mesh_surface_to_count, stuff, stuff_to_count, tet_quality, BoundaryFit, ImplicitDomain, SdfDomain,
+    TetMeshOptions,
 };
 use augsim_mesh::{boundary_nodes, box_hex, box_tet, icosphere, Cells, Mesh, Point};
 use rand::rngs::StdRng;

@@ -3,8 +3,8 @@
 use std::path::{Path, PathBuf};
 
 use mesh::immersed::ImmersedOptions;
+use mesh::length::ORGAN_EXTENT_M;
 use mesh::length::{organ_units, LengthUnit};
-use mesh::repair::ORGAN_EXTENT_M;
 use mesh::{Mesh, MeshError, NodeSelection, Point};
 use serde::Deserialize;
 

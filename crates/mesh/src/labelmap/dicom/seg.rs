@@ -172,7 +172,7 @@ pub(super) fn read(object: &DefaultDicomObject) -> Result<Labelmap, String> {
                 "no frame lies {} mm from the first along the slices' normal, between frames {} mm apart: the \
                  series lacks {}; each segment is filled there with what its slices on both sides share",
                 at.join(", "),
-                crate::repair::number(grid.step),
+                crate::length::number(grid.step),
                 if missing.len() == 1 { "that slice" } else { "those slices" }
             ),
         ));
