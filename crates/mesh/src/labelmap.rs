@@ -1355,8 +1355,10 @@ const THINNED_SHARE: f64 = 0.2;
 /// voxels there): faces it reaches
 /// with a slice that holds [`dicom::CUT_SHARE`] of its largest slice's voxels, or that does not
 /// taper (as large as [`dicom::CUT_NEIGHBOUR_SHARE`] of the slice next to it) and is more than
-/// its tip ([`TIP_SHARE`] of the largest). An organ whole in an image cropped to it, as 3D Slicer
-/// saves a segmentation, tapers to each face it touches; one the field of view cuts does not.
+/// its tip ([`TIP_SHARE`] of the largest), or that is more than its tip in an image that leaves
+/// empty slices beyond four of its faces or more (not cropped to the organ, as a CT's grid). An
+/// organ whole in an image cropped to it, as 3D Slicer saves a segmentation, tapers to each face
+/// it touches; one the field of view cuts does not.
 fn touched_borders(mask: &VoxelMask, frame: Option<Frame>) -> Vec<String> {
     let [ni, nj, nk] = mask.dims;
     let mut counts = [vec![0usize; ni], vec![0; nj], vec![0; nk]];
@@ -1385,6 +1387,11 @@ fn touched_borders(mask: &VoxelMask, frame: Option<Frame>) -> Vec<String> {
         Some(side) => format!("{name} = {index}, {side}"),
         None => format!("{name} = {index}"),
     };
+    // An image larger than the organ (empty slices on four faces or more, as a CT's grid is) cuts
+    // it wherever the organ reaches a face with more than its tip, tapering or not (a dome cut a
+    // slice or two below its top).
+    let touched = counts.iter().flat_map(|c| [c.first(), c.last()]).filter(|end| end.is_some_and(|&n| n > 0)).count();
+    let uncropped = touched <= 2;
     for (axis, (name, c)) in ["i", "j", "k"].into_iter().zip(&counts).enumerate() {
         let (n, largest) = (c.len(), *c.iter().max().unwrap_or(&0) as f64);
         let cut = |end: usize, next: Option<&usize>| {
@@ -1392,7 +1399,7 @@ fn touched_borders(mask: &VoxelMask, frame: Option<Frame>) -> Vec<String> {
             end > 0.0
                 && (end >= dicom::CUT_SHARE * largest
                     || (end >= TIP_SHARE * largest
-                        && next.is_none_or(|&next| end >= dicom::CUT_NEIGHBOUR_SHARE * next as f64)))
+                        && (uncropped || next.is_none_or(|&next| end >= dicom::CUT_NEIGHBOUR_SHARE * next as f64))))
         };
         faces.extend(cut(c[0], c.get(1)).then(|| face(name, 0, axis, -1.0)));
         if n > 1 {
@@ -1676,6 +1683,25 @@ mod tests {
     }
 
     /// A NIfTI without qform and sform codes places its voxels nowhere: read at its indices times
+    /// A ball whose top a CT's grid cuts a little below its pole (the last slice 36 % of the
+    /// largest, tapering from the one below) is cut; the same ball cropped to its extent on every
+    /// side, as 3D Slicer saves a segment, tapers to its faces and is not.
+    #[test]
+    fn a_dome_cut_by_a_larger_image_is_told_from_a_cropped_one() {
+        let ball = |dims: [usize; 3], centre: [f64; 3]| {
+            let inside = (0..dims[2])
+                .flat_map(|k| (0..dims[1]).flat_map(move |j| (0..dims[0]).map(move |i| [i, j, k].map(|x| x as f64))))
+                .map(|p| norm(sub(p, centre)) <= 10.0)
+                .collect();
+            let affine = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
+            VoxelMask { dims, inside, affine }
+        };
+        let cut = touched_borders(&ball([40, 40, 28], [20.0, 20.0, 19.0]), Some(Frame::Ras));
+        assert_eq!(cut, ["k = 27, superior"]);
+        let cropped = touched_borders(&ball([21, 21, 19], [10.0, 10.0, 10.0]), Some(Frame::Ras));
+        assert!(cropped.is_empty(), "{cropped:?}");
+    }
+
     /// the spacing, with no scanner frame, and said so; an organ cut by the image's border is
     /// said to be, naming the faces.
     #[test]
