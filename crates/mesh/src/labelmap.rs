@@ -1030,6 +1030,17 @@ impl Labelmap {
                         self.present_text()
                     )))
                 }
+                [] if self.segments.is_empty() => {
+                    let liver = match choice.eq_ignore_ascii_case("liver") {
+                        true => " (TotalSegmentator's `total` task numbers the liver 5)",
+                        false => "",
+                    };
+                    return Err(MeshError::Invalid(format!(
+                        "the file names no segment (a NIfTI or plain NRRD labelmap holds numbers only): choose '{choice}' \
+                         by its number{liver}; labels present: {}",
+                        self.present_text()
+                    )));
+                }
                 [] => {
                     return Err(MeshError::Invalid(format!(
                         "no segment is named '{choice}'; labels present: {}",
@@ -1311,7 +1322,23 @@ pub fn read_labelmap_surface(
     if !(ORGAN_SPAN_MM.0..=ORGAN_SPAN_MM.1).contains(&span) {
         let unit = match map.named_unit {
             Some(unit) if overridden.is_some() => format!("in the unit given, {}", unit.name()),
-            Some(unit) => format!("in the unit it names, {}", unit.name()),
+            Some(unit) => {
+                // The unit in which the header's numbers would make an organ's size, if any.
+                let fits = [LengthUnit::Millimetre, LengthUnit::Centimetre, LengthUnit::Metre, LengthUnit::Micrometre]
+                    .into_iter()
+                    .find(|&other| {
+                        (ORGAN_SPAN_MM.0..=ORGAN_SPAN_MM.1).contains(&(span / unit_mm(unit) * unit_mm(other)))
+                    });
+                match fits {
+                    Some(other) => format!(
+                        "in the unit it names, {}; read in {} they make an organ's size: --units {} says so",
+                        unit.name(),
+                        other.name(),
+                        other.symbol()
+                    ),
+                    None => format!("in the unit it names, {}", unit.name()),
+                }
+            }
             None => "it names no unit, so they are read as mm: give the unit (--units) if it is another".into(),
         };
         warnings.push(format!(
@@ -1835,6 +1862,7 @@ mod tests {
         let read = read_labelmap_surface(&path, Some("5"), None, &ExtractOptions::default()).unwrap();
         let w = read.warnings.iter().find(|w| w.contains("no organ's size")).expect("microns");
         assert!(w.contains("spans 0.019") && w.contains("0.00075 × 0.000875 × 0.0025 mm"), "{w}");
+        assert!(w.contains("read in millimetres they make an organ's size: --units mm says so"), "{w}");
     }
 
     /// A sheared voxel grid (its axes not perpendicular) is read as the file places it, and said
@@ -2310,5 +2338,9 @@ mod tests {
         let (_, description) = map.select("5").unwrap();
         assert_eq!(description, "label 5");
         assert!(map.present_text().contains("liver / stomach"), "{}", map.present_text());
+        // A file that names no segment is told so, and where the liver is in TotalSegmentator's.
+        map.segments.clear();
+        let e = map.select("Liver").unwrap_err().to_string();
+        assert!(e.contains("the file names no segment") && e.contains("numbers the liver 5"), "{e}");
     }
 }

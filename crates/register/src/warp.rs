@@ -197,9 +197,9 @@ impl WarpField {
     }
 }
 
-/// Sweeps of Laplace smoothing over the field around the organ ([`WarpField::of_registration`]): on the shipped models
+/// Sweeps of Laplace smoothing over the field around the organ ([`WarpField::of_registration`]): on the shipped models'
 /// registrations of `examples/cloud.csv`, the cells where the field folds fell from 3,623 (U-Net:
-/// 4,276) of 820,000, up to 85 mm from the organ, to 38 (56), within 8 mm of it; more sweeps fold
+/// 4,276) of 820,000, up to 85 mm from the organ, to 38 (44), within 8 mm of it; more sweeps fold
 /// more cells at the organ's side (50: 70), where the smoothed field falls off faster than the
 /// organ moves.
 pub const SMOOTHING_SWEEPS: usize = 10;
