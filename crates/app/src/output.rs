@@ -276,7 +276,12 @@ impl RunWriter {
             for_slicer.push(name);
         }
         let mut notes = Vec::new();
-        match WarpField::of_registration(registration.organ(), &last.registration.u, last.rigid.as_ref(), WARP_STEPS) {
+        if let Some(rigid) = &last.rigid {
+            let name = format!("rigid{verdict}.tfm");
+            write_rigid_transform(&self.dir.join(&name), &rigid.cloud_to_organ, self.change, frame)?;
+            for_slicer.push(name);
+        }
+        match WarpField::of_registration(registration.organ(), &last.registration.u, WARP_STEPS) {
             Ok(field) => {
                 let name = format!("displacement{verdict}.nrrd");
                 write_warp(&self.dir.join(&name), &field, self.change, frame)?;
@@ -420,6 +425,35 @@ pub fn write_warp(path: &Path, field: &WarpField, change: FrameChange, frame: Op
     let affine = std::array::from_fn(|r| std::array::from_fn(|c| if c < 3 { axes[c][r] } else { origin[r] }));
     let vectors: Vec<Point> = field.vectors.iter().map(|&v| lps(v)).collect();
     Ok(mesh::labelmap::write_displacement_nrrd(path, field.dims, affine, &vectors)?)
+}
+
+/// Writes the rigid alignment `cloud_to_organ` (m, between the organ's frame and the cloud's
+/// positions in it) as 3D Slicer loads a linear transform: an ITK transform file (LPS, mm), in
+/// the resampling direction ITK files hold, from the parent (the cloud's frame) to the child (the
+/// organ's, where displacement.nrrd lies); `change` takes the organ's frame to the results',
+/// named `frame` (taken as LPS, Slicer's default for files, when unknown). Under it goes
+/// displacement.nrrd, and under that the CT: everything then moves rigidly, however far from
+/// the organ, and the organ as registered.
+pub fn write_rigid_transform(
+    path: &Path,
+    cloud_to_organ: &register::RigidTransform,
+    change: FrameChange,
+    frame: Option<Frame>,
+) -> Result<()> {
+    let to_lps = FrameChange::between(frame, Some(Frame::Lps));
+    // A sign change of x and y, or none: its own inverse.
+    let lps = |p: Point| to_lps.point(change.point(p));
+    let columns: [Point; 3] =
+        std::array::from_fn(|c| lps(cloud_to_organ.rotate(lps(std::array::from_fn(|d| f64::from(u8::from(c == d)))))));
+    let shift = lps(cloud_to_organ.translation).map(|x| LengthUnit::Millimetre.from_metres(x));
+    let matrix = (0..3).flat_map(|r| columns.map(|column| column[r]));
+    let parameters: Vec<String> = matrix.chain(shift).map(|x| x.to_string()).collect();
+    let text = format!(
+        "#Insight Transform File V1.0\n#Transform 0\nTransform: AffineTransform_double_3_3\nParameters: {}\n\
+         FixedParameters: 0 0 0\n",
+        parameters.join(" ")
+    );
+    Ok(write_atomic_bytes(path, text.as_bytes())?)
 }
 
 /// The organ mesh and a displacement in the cloud's frame: as given without a rigid alignment;
@@ -603,6 +637,31 @@ mod tests {
         for lps in [header(Some(Frame::Lps)), header(None)] {
             assert!(lps.contains("space origin: (10,20,30)"), "{lps}");
             assert!(lps.contains("space directions: none (5,0,0) (0,5,0) (0,0,5)"), "{lps}");
+        }
+    }
+
+    /// The rigid alignment, written for 3D Slicer in LPS and mm, takes a point of the cloud's
+    /// frame to the organ's as the alignment does, whatever frame the results are in.
+    #[test]
+    fn a_rigid_alignment_is_written_as_an_itk_transform_in_lps() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rigid.tfm");
+        let cloud_to_organ =
+            register::RigidTransform::from_axis_angle([1.0, 2.0, 3.0], 0.4, [0.01, -0.02, 0.03]).unwrap();
+        let cloud = [0.05, -0.01, 0.02];
+        for frame in [Some(Frame::Ras), Some(Frame::Lps), None] {
+            write_rigid_transform(&path, &cloud_to_organ, FrameChange::default(), frame).unwrap();
+            let text = std::fs::read_to_string(&path).unwrap();
+            assert!(text.starts_with("#Insight Transform File V1.0\n") && text.contains("FixedParameters: 0 0 0"));
+            let line = text.lines().find_map(|l| l.strip_prefix("Parameters: ")).unwrap();
+            let p: Vec<f64> = line.split(' ').map(|x| x.parse().unwrap()).collect();
+            // Both points in LPS mm: RAS ones with x and y negated.
+            let sign = if frame == Some(Frame::Ras) { [-1.0, -1.0, 1.0] } else { [1.0; 3] };
+            let lps = |q: Point| std::array::from_fn::<f64, 3, _>(|d| 1e3 * sign[d] * q[d]);
+            let x = lps(cloud);
+            let image: Point = std::array::from_fn(|r| (0..3).map(|c| p[3 * r + c] * x[c]).sum::<f64>() + p[9 + r]);
+            let expected = lps(cloud_to_organ.apply(cloud));
+            assert!(mesh::distance(image, expected) < 1e-9, "{frame:?}: {image:?} vs {expected:?}");
         }
     }
 

@@ -507,7 +507,7 @@ impl Registration {
     /// `iterations`, `warnings`, `plausible`, `ms`). With `out`,
     /// a directory, also writes there what `augsim register` writes: organ.vtu (m), targets.csv (in
     /// `units`), summary.json, registration.png and .html (pictures), and for 3D Slicer
-    /// targets.mrk.json, organ_deformed.vtk and displacement.nrrd (mm; named
+    /// targets.mrk.json, organ_deformed.vtk, displacement.nrrd and, with `rigid=True`, rigid.tfm (mm; named
     /// targets_implausible.mrk.json and so on for a registration that is not plausible), all
     /// in the clouds' frame (`frame`, or its default), which they name when known; a directory
     /// that holds an earlier run's results (its summary.json) is refused, as `augsim register`

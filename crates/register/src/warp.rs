@@ -6,13 +6,13 @@ use rayon::prelude::*;
 
 use mesh::{bounds, MeshLocator, Point, SurfaceBvh};
 
-use crate::{Organ, RegisterError, Result, RigidResult};
+use crate::{Organ, RegisterError, Result};
 
-/// A displacement field on a grid aligned with the axes, in metres, in the registered organ's
-/// frame (the cloud's): at grid point `y`, `d(y)` such that `y + d(y)` is where that point lay in
-/// the organ at rest. This is the resampling direction in which ITK and 3D Slicer store a
-/// displacement-field transform, the organ at rest (the CT) being the child and the cloud's frame
-/// the parent.
+/// A displacement field on a grid aligned with the axes, in metres, in the organ's frame: at grid
+/// point `y`, `d(y)` such that `y + d(y)` is where that point lay in the organ at rest. This is the
+/// resampling direction in which ITK and 3D Slicer store a displacement-field transform, the organ
+/// at rest (the CT) being the child and the registered organ's frame the parent (under the rigid
+/// alignment's transform, when there is one).
 #[derive(Clone, Debug, PartialEq)]
 pub struct WarpField {
     /// The position of grid point (0, 0, 0).
@@ -42,35 +42,23 @@ const FADE_OVER_MOTION: f64 = 2.0;
 pub const MOST_INVERTED: f64 = 0.01;
 
 impl WarpField {
-    /// The field of displacement `u` of `organ` (node-major, m), moved by `rigid` when the
-    /// registration aligned the organ rigidly first. The grid covers the registered organ with a
+    /// The field of displacement `u` of `organ` (node-major, m), in the organ's frame (a rigid
+    /// alignment is a transform of its own, above it). The grid covers the registered organ with a
     /// margin of 15 % of its largest extent on every side, or twice its largest displacement where
     /// that is more (so that it never folds), in steps of that extent and its default margins divided
     /// into `cells_across`. Inside the registered organ, `y + d(y)` is the rest position of the
     /// point (exact in linear elements: the map is affine in each); outside, the deformation at
     /// the nearest point of the organ's boundary fades linearly to nothing across the margin, so
-    /// that the tissue around the organ, which the model does not hold, stays where the rigid
-    /// alignment puts it; beyond the first grid step from the organ it is smoothed
+    /// that the tissue around the organ, which the model does not hold, stays where it was; beyond the first grid step from the organ it is smoothed
     /// ([`SMOOTHING_SWEEPS`] sweeps of Laplace's equation), where the nearest boundary point jumps
     /// from one part of the organ to another. An error when more than [`MOST_INVERTED`] of the
     /// registered organ's elements are inverted (its displacement is then no map).
-    pub fn of_registration(
-        organ: &Organ,
-        u: &[f64],
-        rigid: Option<&RigidResult>,
-        cells_across: usize,
-    ) -> Result<WarpField> {
-        WarpField::smoothed(organ, u, rigid, cells_across, SMOOTHING_SWEEPS)
+    pub fn of_registration(organ: &Organ, u: &[f64], cells_across: usize) -> Result<WarpField> {
+        WarpField::smoothed(organ, u, cells_across, SMOOTHING_SWEEPS)
     }
 
     /// [`WarpField::of_registration`] with `sweeps` sweeps of [`smoothed_outside`].
-    fn smoothed(
-        organ: &Organ,
-        u: &[f64],
-        rigid: Option<&RigidResult>,
-        cells_across: usize,
-        sweeps: usize,
-    ) -> Result<WarpField> {
+    fn smoothed(organ: &Organ, u: &[f64], cells_across: usize, sweeps: usize) -> Result<WarpField> {
         let rest = organ.mesh();
         if u.len() != 3 * rest.nodes.len() {
             return Err(RegisterError::Invalid(format!(
@@ -91,11 +79,7 @@ impl WarpField {
         let locator = MeshLocator::allowing_inverted(&deformed)?;
         let boundary = mesh::boundary_surface(&deformed);
         let bvh = SurfaceBvh::new(&boundary)?;
-        let in_cloud: Vec<Point> = match rigid.map(RigidResult::organ_to_cloud) {
-            Some(t) => deformed.nodes.iter().map(|&p| t.apply(p)).collect(),
-            None => deformed.nodes.clone(),
-        };
-        let (lo, hi) = bounds(&in_cloud);
+        let (lo, hi) = bounds(&deformed.nodes);
         let extent = mesh::longest_side((lo, hi));
         let spacing = (1.0 + 2.0 * MARGIN) * extent / cells_across.max(1) as f64;
         let most = u.chunks_exact(3).map(|v| mesh::norm([v[0], v[1], v[2]])).fold(0.0, f64::max);
@@ -109,9 +93,7 @@ impl WarpField {
         let (vectors, distances): (Vec<Point>, Vec<f64>) = (0..dims.iter().product::<usize>())
             .into_par_iter()
             .map(|n| {
-                let y = point(n);
-                // In the organ's frame, registered.
-                let z = rigid.map_or(y, |r| r.cloud_to_organ.apply(y));
+                let z = point(n);
                 let (x, distance) = match locator.locate(z) {
                     Some(location) => {
                         let mut x = [0.0; 3];
@@ -134,7 +116,7 @@ impl WarpField {
                         (x, closest.distance)
                     }
                 };
-                (std::array::from_fn(|d| x[d] - y[d]), distance)
+                (std::array::from_fn(|d| x[d] - z[d]), distance)
             })
             .unzip();
         // The organ and the first grid step around it hold the organ's own motion.
@@ -238,20 +220,18 @@ fn smoothed_outside(mut vectors: Vec<Point>, held: &[bool], dims: [usize; 3], sw
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::RigidTransform;
     use mesh::norm;
 
     /// A cube stretched by 10 % along x and sheared: inside, the field takes every registered
     /// point back to its rest position (to rounding for this affine map, between grid points to
-    /// the grid's interpolation); far outside it is nothing; with a rigid alignment, the rigid
-    /// motion is undone everywhere.
+    /// the grid's interpolation); far outside it is nothing.
     #[test]
     fn the_field_takes_registered_points_back_to_rest() {
         let cube = mesh::box_tet([0.0; 3], [0.04; 3], [4, 4, 4]).unwrap();
         let organ = Organ::new(cube.clone(), None).unwrap();
         let motion = |p: Point| -> Point { [0.1 * p[0] + 0.05 * p[2], 0.02 * p[0], 0.0] };
         let u: Vec<f64> = cube.nodes.iter().flat_map(|&p| motion(p)).collect();
-        let field = WarpField::of_registration(&organ, &u, None, 40).unwrap();
+        let field = WarpField::of_registration(&organ, &u, 40).unwrap();
         // The registered cube spans 46 mm along x: 40 steps across it and its default margins.
         assert!((field.spacing - 1.3 * 0.046 / 40.0).abs() < 1e-15, "{}", field.spacing);
         let mut worst: f64 = 0.0;
@@ -266,28 +246,6 @@ mod tests {
         // Far from the organ: no deformation.
         let corner = field.origin;
         assert!(norm(field.at(corner).unwrap()) < 1e-15);
-        // Rigidly aligned (turned about z, moved): the field undoes that motion as well.
-        let turn = RigidTransform {
-            rotation: [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
-            translation: [0.3, -0.2, 0.1],
-        };
-        let rigid = RigidResult {
-            cloud_to_organ: turn.inverse(),
-            iterations: 1,
-            converged: true,
-            rms: 0.0,
-            kept: 0,
-            points: 0,
-            time: std::time::Duration::ZERO,
-        };
-        let moved = WarpField::of_registration(&organ, &u, Some(&rigid), 40).unwrap();
-        let x = [0.01, 0.02, 0.03];
-        let y = turn.apply(std::array::from_fn(|d| x[d] + motion(x)[d]));
-        let d = moved.at(y).unwrap();
-        assert!(norm(std::array::from_fn(|k| y[k] + d[k] - x[k])) < 1e-12);
-        let far = moved.origin;
-        let back = turn.inverse().apply(far);
-        assert!(norm(std::array::from_fn(|k| far[k] + moved.at(far).unwrap()[k] - back[k])) < 1e-12);
     }
 
     /// The smallest Jacobian determinant of the map y ↦ y + d(y) over the grid's cells (central
@@ -326,7 +284,7 @@ mod tests {
         let cube = mesh::box_tet([0.0; 3], [0.04; 3], [6, 6, 6]).unwrap();
         let organ = Organ::new(cube.clone(), None).unwrap();
         let u: Vec<f64> = cube.nodes.iter().flat_map(|&p| [-0.25 * p[0], 0.0, 0.0]).collect();
-        let field = WarpField::of_registration(&organ, &u, None, 40).unwrap();
+        let field = WarpField::of_registration(&organ, &u, 40).unwrap();
         let det = smallest_jacobian(&field);
         assert!(det > 0.3, "the field folds: Jacobian down to {det}");
         assert!((field.spacing - 1.3 * 0.04 / 40.0).abs() < 1e-15, "the step is kept: {}", field.spacing);
@@ -349,9 +307,9 @@ mod tests {
         let organ = Organ::new(u_shape.clone(), None).unwrap();
         // The arms spread from the base: 5 mm at the top of each arm's inner face.
         let u: Vec<f64> = u_shape.nodes.iter().flat_map(|&p| [(p[0] - 0.035) * p[2] / 0.04, 0.0, 0.0]).collect();
-        let nearest = WarpField::smoothed(&organ, &u, None, 40, 0).unwrap();
+        let nearest = WarpField::smoothed(&organ, &u, 40, 0).unwrap();
         assert!(nearest.folded_cells() > 0, "the nearest point's motion does not fold");
-        let field = WarpField::of_registration(&organ, &u, None, 40).unwrap();
+        let field = WarpField::of_registration(&organ, &u, 40).unwrap();
         assert_eq!(field.folded_cells(), 0, "the smoothed field folds");
         // Inside an arm, the organ's motion, to the grid's interpolation of it.
         let x = [0.01, 0.01, 0.03];
@@ -373,7 +331,7 @@ mod tests {
         let cube = mesh::box_tet([0.0; 3], [0.04; 3], [2, 2, 2]).unwrap();
         let organ = Organ::new(cube.clone(), None).unwrap();
         let u: Vec<f64> = cube.nodes.iter().flat_map(|&p| [-2.0 * p[0], 0.0, 0.0]).collect();
-        let e = WarpField::of_registration(&organ, &u, None, 10).unwrap_err().to_string();
+        let e = WarpField::of_registration(&organ, &u, 10).unwrap_err().to_string();
         assert!(e.contains("48 of the registered organ's 48 cells are inverted"), "{e}");
     }
 
@@ -387,7 +345,7 @@ mod tests {
         let mut u: Vec<f64> = cube.nodes.iter().flat_map(|&p| motion(p)).collect();
         let centre = cube.nodes.iter().position(|p| norm(std::array::from_fn(|d| p[d] - 0.02)) < 1e-9).unwrap();
         u[3 * centre] += 0.008;
-        let field = WarpField::of_registration(&organ, &u, None, 40).unwrap();
+        let field = WarpField::of_registration(&organ, &u, 40).unwrap();
         assert!(field.inverted > 0 && field.inverted <= 24, "{} inverted", field.inverted);
         let x = [0.006, 0.005, 0.034];
         let y: Point = std::array::from_fn(|d| x[d] + motion(x)[d]);
