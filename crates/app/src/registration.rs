@@ -656,9 +656,9 @@ impl RegistrationSpec {
                 )
             }
             (Some(given), None) => format!("{given}, given; the organ names none, so nothing is converted"),
-            (None, None) => "none named by the organ or --frame: coordinates are taken as given (3D Slicer's files, \
-                             displacement.nrrd and targets.mrk.json, take them as LPS, Slicer's default; --frame \
-                             RAS says otherwise)"
+            (None, None) => "none named by the organ or --frame: coordinates are taken as given, the results named \
+                             in the frame a cloud's file names, if one does (else 3D Slicer's files, displacement.nrrd \
+                             and targets.mrk.json, take them as LPS, Slicer's default; --frame RAS says otherwise)"
                 .into(),
         }
     }

@@ -49,9 +49,9 @@ impl WarpField {
     /// into `cells_across`. Inside the registered organ, `y + d(y)` is the rest position of the
     /// point (exact in linear elements: the map is affine in each); outside, the deformation at
     /// the nearest point of the organ's boundary fades linearly to nothing across the margin, so
-    /// that the tissue around the organ, which the model does not hold, stays where it was; beyond the first grid step from the organ it is smoothed
-    /// ([`SMOOTHING_SWEEPS`] sweeps of Laplace's equation), where the nearest boundary point jumps
-    /// from one part of the organ to another. An error when more than [`MOST_INVERTED`] of the
+    /// that the tissue around the organ, which the model does not hold, stays where it was; beyond
+    /// the first grid step from the organ it is smoothed ([`SMOOTHING_SWEEPS`] sweeps of Laplace's
+    /// equation), where the nearest boundary point jumps from one part of the organ to another. An error when more than [`MOST_INVERTED`] of the
     /// registered organ's elements are inverted (its displacement is then no map).
     pub fn of_registration(organ: &Organ, u: &[f64], cells_across: usize) -> Result<WarpField> {
         WarpField::smoothed(organ, u, cells_across, SMOOTHING_SWEEPS)
