@@ -1304,7 +1304,14 @@ pub fn read_labelmap_surface(
                 .to_string(),
         );
     }
-    if !borders.is_empty() {
+    let filled = whole.inside.iter().filter(|&&i| i).count() as f64 / whole.inside.len().max(1) as f64;
+    if filled > FILLED_SHARE {
+        warnings.push(format!(
+            "{label} fills {:.0} % of the image: a mask of everything (an inverted or all-ones labelmap, the \
+             background's label?), not an organ",
+            100.0 * filled
+        ));
+    } else if !borders.is_empty() {
         warnings.push(format!(
             "the organ reaches the image's border ({}): it is cut there, flat where the image ends",
             borders.join(", ")
@@ -1364,6 +1371,10 @@ pub fn read_labelmap_surface(
 /// a warning: specks of a segmentation hold well under it; a lobe cut off by a gap of a voxel
 /// (4 % of a liver in a tester's case) is over it.
 const DROPPED_SHARE: f64 = 0.01;
+
+/// The share of its image a label may fill before it is said to be no organ: an organ's segment
+/// cropped to it (3D Slicer's) fills a half to two thirds of its box.
+const FILLED_SHARE: f64 = 0.9;
 
 /// The span (mm) of a structure a labelmap may give without a warning: a few millimetres (a small
 /// tumour) to a metre; outside, the header's unit or voxel size is likely wrong.
@@ -1710,6 +1721,17 @@ mod tests {
     }
 
     /// A NIfTI without qform and sform codes places its voxels nowhere: read at its indices times
+    /// A label that fills its whole image (an all-ones mask) is said to be no organ.
+    #[test]
+    fn a_label_filling_its_image_is_no_organ() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("ones.nii");
+        let affine = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
+        write_nifti(&path, &Labelmap::single([30, 30, 30], vec![1; 27_000], affine, Frame::Ras)).unwrap();
+        let read = read_labelmap_surface(&path, Some("1"), None, &ExtractOptions::default()).unwrap();
+        assert!(read.warnings.iter().any(|w| w.starts_with("label 1 fills 100 % of the image")), "{:?}", read.warnings);
+    }
+
     /// A ball whose top a CT's grid cuts a little below its pole (the last slice 36 % of the
     /// largest, tapering from the one below) is cut; the same ball cropped to its extent on every
     /// side, as 3D Slicer saves a segment, tapers to its faces and is not.
