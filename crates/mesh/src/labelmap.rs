@@ -1234,7 +1234,12 @@ impl LabelSurface {
             true => format!("in the scanner's {} frame (mm)", self.frame.name()),
             false => "at its voxel indices times the spacing (mm; no scanner frame)".to_string(),
         };
-        let mut lines = vec![format!("{}: {} voxels of {a:.2} × {b:.2} × {c:.2} mm, {frame}", self.label, e.voxels)];
+        let filled = match e.filled_voxels {
+            0 => String::new(),
+            n => format!(" ({} its own, {n} of cavities filled)", e.voxels - n),
+        };
+        let mut lines =
+            vec![format!("{}: {} voxels{filled} of {a:.2} × {b:.2} × {c:.2} mm, {frame}", self.label, e.voxels)];
         lines.extend(e.cleaning_lines());
         lines.push(format!(
             "surface: {} triangles (decimated from {}), {}",
