@@ -1012,13 +1012,12 @@ impl Labelmap {
             match named[..] {
                 [s] if self.names_of(s.1, s.2).len() > 1 => {
                     return Err(MeshError::Invalid(format!(
-                        "segments {} all take label {} of layer {} (the file gives {} no Segment{{i}}_LabelValue \
-                         apart): it does not say which voxels are '{choice}'; save the segmentation again from 3D \
+                        "segments {} all take label {} of layer {} (no Segment{{i}}_LabelValue sets them apart): \
+                         the file does not say which voxels are '{choice}'; save the segmentation again from 3D \
                          Slicer, or choose by number (labels present: {})",
                         self.names_of(s.1, s.2).iter().map(|n| format!("'{n}'")).collect::<Vec<_>>().join(", "),
                         s.2,
                         s.1,
-                        if self.names_of(s.1, s.2).len() > 2 { "them" } else { "both" },
                         self.present_text()
                     )))
                 }
