@@ -159,7 +159,7 @@ impl Solved {
 
 impl Solved {
     /// The solve in words: scenario, mesh, material, system, solver, largest displacement, time
-    /// and a warning for cells turned inside out.
+    /// and its warnings ([`Solved::warnings`]), each a line of its own.
     pub fn lines(&self) -> Result<Vec<String>> {
         let (scenario, solver, sol) = (&self.scenario, &self.solver, &self.solution);
         let (geo, p) = (solver.geometry(), solver.problem());

@@ -451,10 +451,16 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
     Ok(Labelmap { placed, warnings, named_unit, ..Labelmap::single(dims, labels, affine, Frame::Ras) })
 }
 
+/// Whether 3D Slicer (ITK) places a NIfTI's voxels by its sform ([`nifti_affine`]): when its code
+/// says scanner coordinates (1), or when there is no qform.
+fn placed_by_sform(header: &NiftiHeader) -> bool {
+    header.sform_code > 0 && (header.qform_code == 0 || header.sform_code == 1)
+}
+
 /// The warning of a NIfTI placed by its spacings (its qform, or no form) of which one is negative:
 /// the readers part ways there.
 fn negative_spacing_warning(header: &NiftiHeader) -> Option<String> {
-    let by_sform = header.sform_code > 0 && (header.qform_code == 0 || header.sform_code == 1);
+    let by_sform = placed_by_sform(header);
     let negative: Vec<String> =
         (1..4).filter(|&d| header.pixdim[d] < 0.0).map(|d| format!("pixdim[{d}] = {}", header.pixdim[d])).collect();
     (!by_sform && !negative.is_empty()).then(|| {
@@ -517,13 +523,12 @@ fn nifti_affine(header: &NiftiHeader, dims: [usize; 3]) -> Result<([[f64; 4]; 3]
     let (qform_code, sform_code, pixdim) = (header.qform_code, header.sform_code, &header.pixdim);
     let sform = || header.srow;
     let qform = || qform_affine(header);
-    let (affine, other) = match (sform_code > 0, qform_code > 0) {
-        (true, false) => (sform(), None),
-        (true, true) if sform_code == 1 => (sform(), Some(("sform", qform()))),
-        (_, true) => (qform(), (sform_code > 0).then(|| ("qform", sform()))),
-        (false, false) => {
-            (std::array::from_fn(|r| std::array::from_fn(|c| if c == r { pixdim[r + 1] } else { 0.0 })), None)
-        }
+    let (affine, other) = if placed_by_sform(header) {
+        (sform(), (qform_code > 0).then(|| ("sform", qform())))
+    } else if qform_code > 0 {
+        (qform(), (sform_code > 0).then(|| ("qform", sform())))
+    } else {
+        (std::array::from_fn(|r| std::array::from_fn(|c| if c == r { pixdim[r + 1] } else { 0.0 })), None)
     };
     check_affine(&affine)?;
     let apart = |other: &[[f64; 4]; 3]| {
@@ -1011,15 +1016,16 @@ impl Labelmap {
                 self.segments.iter().filter(|s| s.0.eq_ignore_ascii_case(choice)).collect();
             match named[..] {
                 [s] if self.names_of(s.1, s.2).len() > 1 => {
+                    let sharing: Vec<String> = self.names_of(s.1, s.2).iter().map(|n| format!("'{n}'")).collect();
                     return Err(MeshError::Invalid(format!(
                         "segments {} all take label {} of layer {} (no Segment{{i}}_LabelValue sets them apart): \
                          the file does not say which voxels are '{choice}'; save the segmentation again from 3D \
                          Slicer, or choose by number (labels present: {})",
-                        self.names_of(s.1, s.2).iter().map(|n| format!("'{n}'")).collect::<Vec<_>>().join(", "),
+                        sharing.join(", "),
                         s.2,
                         s.1,
                         self.present_text()
-                    )))
+                    )));
                 }
                 [s] => (s.1, s.2),
                 [_, _, ..] => {
