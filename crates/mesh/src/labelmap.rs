@@ -14,7 +14,8 @@
 //! the organ (camera, landmarks, targets) must be in this frame.
 //!
 //! [`Labelmap::select`] picks one label, by number or by a segment name the file carries (Slicer's
-//! `Segment{i}_Name`), as a [`VoxelMask`]; [`crate::isosurface::mask_surface`] turns the mask into
+//! `Segment{i}_Name`, a DICOM's, a NIfTI extension's label table as TotalSegmentator writes it), as
+//! a [`VoxelMask`]; [`crate::isosurface::mask_surface`] turns the mask into
 //! a closed surface. [`write_displacement_nrrd`] writes a displacement-field transform as a NRRD
 //! image that 3D Slicer and ITK load.
 //!
@@ -448,7 +449,65 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
         .chain(negative_spacing_warning(&header).map(|w| (None, w)))
         .collect();
     let placed = qform_code > 0 || sform_code > 0;
-    Ok(Labelmap { placed, warnings, named_unit, ..Labelmap::single(dims, labels, affine, Frame::Ras) })
+    let segments = nifti_label_names(bytes, &header).into_iter().map(|(name, label)| (name, 0, label)).collect();
+    Ok(Labelmap { placed, warnings, named_unit, segments, ..Labelmap::single(dims, labels, affine, Frame::Ras) })
+}
+
+/// The names a NIfTI's header extensions give its labels: the first extension holding a label
+/// table (`<Label Key="5" ...>liver</Label>`, the text as it is or in CDATA), as TotalSegmentator
+/// writes its multi-label files (a Caret/Workbench `CaretExtension`) and CIFTI label files do.
+/// None when the file has no such table; an extension cut short ends the search.
+fn nifti_label_names(bytes: &[u8], header: &NiftiHeader) -> Vec<(String, i32)> {
+    let start = if header.version == 1 { 348 } else { 540 };
+    // The extender's first byte says whether extensions follow it.
+    if bytes.get(start) != Some(&1) {
+        return Vec::new();
+    }
+    let end = (header.vox_offset as usize).min(bytes.len());
+    let int_at = |o: usize| {
+        let b: [u8; 4] = bytes[o..o + 4].try_into().unwrap();
+        if header.little {
+            i32::from_le_bytes(b)
+        } else {
+            i32::from_be_bytes(b)
+        }
+    };
+    let mut at = start + 4;
+    while at + 8 <= end {
+        let size = int_at(at);
+        if size < 8 || at + size as usize > end {
+            break;
+        }
+        let text = String::from_utf8_lossy(&bytes[at + 8..at + size as usize]);
+        if text.contains("<LabelTable") {
+            return label_table(&text);
+        }
+        at += size as usize;
+    }
+    Vec::new()
+}
+
+/// The `(name, key)` of every `<Label Key="...">name</Label>` of an XML label table.
+fn label_table(xml: &str) -> Vec<(String, i32)> {
+    let mut names = Vec::new();
+    for element in xml.split("<Label ").skip(1) {
+        let Some((attributes, rest)) = element.split_once('>') else { continue };
+        let Some(key) = attributes.split("Key=\"").nth(1).and_then(|k| k.split('"').next()) else { continue };
+        let (Ok(key), Some((text, _))) = (key.trim().parse::<i32>(), rest.split_once("</Label>")) else { continue };
+        let text = text.trim();
+        let text = text.strip_prefix("<![CDATA[").and_then(|t| t.strip_suffix("]]>")).map_or_else(
+            || {
+                [("&lt;", "<"), ("&gt;", ">"), ("&quot;", "\""), ("&apos;", "'"), ("&amp;", "&")]
+                    .iter()
+                    .fold(text.to_string(), |t, (entity, c)| t.replace(entity, c))
+            },
+            str::to_string,
+        );
+        if key != 0 && !text.trim().is_empty() {
+            names.push((text.trim().to_string(), key));
+        }
+    }
+    names
 }
 
 /// Whether 3D Slicer (ITK) places a NIfTI's voxels by its sform ([`nifti_affine`]): when its code
@@ -979,6 +1038,29 @@ impl Labelmap {
         self.segments.iter().filter(|s| s.1 == layer && s.2 == label).map(|s| s.0.as_str()).collect()
     }
 
+    /// The segments' names that hold `choice` or a word of it, or that it holds (any case), as
+    /// ", names like it: 'liver' (5), 'liver_tumor' (100)"; empty when none does.
+    fn names_like(&self, choice: &str) -> String {
+        let words = |s: &str| -> Vec<String> {
+            s.to_lowercase().split(|c: char| !c.is_alphanumeric()).filter(|w| w.len() > 2).map(str::to_string).collect()
+        };
+        let wanted = words(choice);
+        let choice = choice.to_lowercase();
+        let like: Vec<String> = self
+            .segments
+            .iter()
+            .filter(|(name, _, _)| {
+                let name = name.to_lowercase();
+                name.contains(&choice) || choice.contains(&name) || words(&name).iter().any(|w| wanted.contains(w))
+            })
+            .map(|(name, _, label)| format!("'{name}' ({label})"))
+            .collect();
+        match like.is_empty() {
+            true => String::new(),
+            false => format!(", names like it: {}", like.join(", ")),
+        }
+    }
+
     /// One segment, by number or name ([`Labelmap::select`]), on the labelmap's whole grid.
     fn select_single(&self, choice: &str) -> Result<(VoxelMask, String, (usize, i32)), MeshError> {
         let choice = choice.trim();
@@ -1041,14 +1123,15 @@ impl Labelmap {
                         false => "",
                     };
                     return Err(MeshError::Invalid(format!(
-                        "the file names no segment (a NIfTI or plain NRRD labelmap holds numbers only): choose '{choice}' \
+                        "the file names no segment (a NIfTI without a label table or a plain NRRD holds numbers only): choose '{choice}' \
                          by its number{liver}; labels present: {}",
                         self.present_text()
                     )));
                 }
                 [] => {
                     return Err(MeshError::Invalid(format!(
-                        "no segment is named '{choice}'; labels present: {}",
+                        "no segment is named '{choice}'{}; labels present: {}",
+                        self.names_like(choice),
                         self.present_text()
                     )))
                 }
@@ -1581,6 +1664,63 @@ mod tests {
             bytes.extend(if little { (l as i16).to_le_bytes() } else { (l as i16).to_be_bytes() });
         }
         bytes
+    }
+
+    /// A NIfTI-1 file with a header extension of code `code` holding `text` after its header
+    /// (the extender's flag set, the voxels moved after it), as nibabel writes one.
+    fn with_extension(plain: &[u8], code: i32, text: &str) -> Vec<u8> {
+        let size = (8 + text.len()).div_ceil(16) * 16;
+        let mut extension = [(size as i32).to_le_bytes(), code.to_le_bytes()].concat();
+        extension.extend_from_slice(text.as_bytes());
+        extension.resize(size, 0);
+        let mut bytes = [&plain[..352], &extension, &plain[352..]].concat();
+        bytes[348] = 1;
+        bytes[108..112].copy_from_slice(&((352 + size) as f32).to_le_bytes());
+        bytes
+    }
+
+    /// A NIfTI whose extension holds a label table names its labels: TotalSegmentator's
+    /// multi-label files (its `CaretExtension`, code 0, the names in CDATA, as its
+    /// `add_label_map_to_nifti` writes them) and a table of plain text with XML entities. A
+    /// segment is then chosen by name, a name not there is answered with those like it, and an
+    /// extension cut short leaves the labels unnamed.
+    #[test]
+    fn a_nifti_label_table_names_its_labels() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Ras);
+        let path = dir.path().join("plain.nii");
+        write_nifti(&path, &map).unwrap();
+        let plain = std::fs::read(&path).unwrap();
+        let total_segmentator = "<?xml version=\"1.0\" encoding=\"UTF-8\"?> <CaretExtension>  <Date><![CDATA[2013-07-14T05:45:09]]></Date>   \
+            <VolumeInformation Index=\"0\">   <LabelTable>\n<Label Key=\"5\" Red=\"0.6\" Green=\"0.3\" Blue=\"0.2\" Alpha=\"1\"><![CDATA[liver]]></Label>\n\
+            <Label Key=\"2\" Red=\"1\" Green=\"0\" Blue=\"0\" Alpha=\"1\"><![CDATA[liver_tumor]]></Label>\n\n  </LabelTable>  \
+            <StudyMetaDataLinkSet>  </StudyMetaDataLinkSet>  <VolumeType><![CDATA[Label]]></VolumeType>   </VolumeInformation></CaretExtension>\n";
+        let entities = "<LabelTable><Label Key=\"0\">???</Label><Label Key=\"5\">liver &amp; hilum</Label>\
+            <Label Key=\"2\" Red=\"1\">tumour &lt;2 cm&gt;</Label></LabelTable>";
+        for (code, text, liver, tumour) in
+            [(0, total_segmentator, "liver", "liver_tumor"), (32, entities, "liver & hilum", "tumour <2 cm>")]
+        {
+            let path = dir.path().join(format!("named{code}.nii"));
+            std::fs::write(&path, with_extension(&plain, code, text)).unwrap();
+            let named = read_labelmap(&path).unwrap();
+            assert_eq!(named.labels, map.labels, "the voxels read past the extension");
+            assert_eq!(named.segments, [(liver.to_string(), 0, 5), (tumour.to_string(), 0, 2)]);
+            let (mask, description) = named.select(&liver.to_uppercase()).unwrap();
+            assert_eq!((mask.count(), description), (map.labels.iter().filter(|&&l| l == 5).count(), format!("label 5 ('{liver}')")));
+            assert!(named.present_text().contains(&format!("2 ('{tumour}', ")), "{}", named.present_text());
+        }
+        let path = dir.path().join("named0.nii");
+        let e = read_labelmap(&path).unwrap().select("tumour").unwrap_err().to_string();
+        assert!(e.contains("no segment is named 'tumour'; labels"), "{e}");
+        let e = read_labelmap(&path).unwrap().select("liver tumour").unwrap_err().to_string();
+        assert!(e.contains("names like it: 'liver' (5), 'liver_tumor' (2);"), "{e}");
+        // An extension whose size runs past the voxels' offset: no names, the voxels read.
+        let mut cut = with_extension(&plain, 0, total_segmentator);
+        cut[352..356].copy_from_slice(&100_000i32.to_le_bytes());
+        let path = dir.path().join("cut.nii");
+        std::fs::write(&path, cut).unwrap();
+        let unnamed = read_labelmap(&path).unwrap();
+        assert!(unnamed.segments.is_empty() && unnamed.labels == map.labels);
     }
 
     /// A NIfTI-2 file (either byte order, gzipped or not) reads as the NIfTI-1 of the same
