@@ -18,9 +18,14 @@
 //! 5. Taubin's λ|μ smoothing (λ = 0.5, μ = −0.53) smooths it without the shrinking of plain
 //!    Laplacian smoothing.
 //! 6. Quadric edge collapse ([`crate::decimate::decimate`]) brings it to a number of triangles.
+//! 7. Where the result overlaps itself (voxels that touch by an edge or a corner only, a
+//!    checkerboard, give handles thinner than the smoothing), steps 2 to 6 run again on the mask
+//!    closed by a voxel ([`VoxelMask::closed`]), and the voxels that added are reported.
 //!
-//! The result passes [`check_closed_manifold`].
+//! The result passes [`check_closed_manifold`], and overlaps itself on no more triangles than a
+//! mesh allows ([`crate::tetmesh::MAX_OVERLAP_FRACTION`]).
 
+use crate::bvh::SurfaceBvh;
 use crate::decimate::decimate;
 use crate::length::LengthUnit;
 use crate::surface::check_closed_manifold;
@@ -67,6 +72,9 @@ pub struct ExtractReport {
     pub dropped_pieces: Vec<usize>,
     /// Voxels of the cavities filled.
     pub filled_voxels: usize,
+    /// Voxels added by closing gaps of one voxel, when the surface of the voxels as given
+    /// overlapped itself (voxels that touch by an edge or a corner only: a checkerboard).
+    pub closed_voxels: usize,
     /// Triangles extracted, before decimation.
     pub extracted_triangles: usize,
     /// Triangles of the result.
@@ -117,6 +125,13 @@ impl ExtractReport {
         if self.filled_voxels > 0 {
             lines.push(format!("filled cavities of {} voxels", self.filled_voxels));
         }
+        if self.closed_voxels > 0 {
+            lines.push(format!(
+                "closed gaps of a voxel ({} voxels added): the surface of the voxels as given overlapped itself \
+                 (voxels that touch by an edge or a corner only)",
+                self.closed_voxels
+            ));
+        }
         lines
     }
 }
@@ -162,7 +177,40 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
     if mask.inside.len() > 400_000_000 {
         return Err(MeshError::Invalid(format!("the organ spans too many voxels ({:?})", mask.dims)));
     }
-    let surface = march(&smoothed(&mask), mask.dims, 0.5);
+    let (mut surface, mut extracted_triangles, mut volume) = extracted(&mask, options)?;
+    let mut closed_voxels = 0;
+    if overlaps(&surface)? {
+        let mut closed = mask.closed();
+        closed.fill_cavities();
+        closed_voxels = closed.count() - mask.count();
+        (surface, extracted_triangles, volume) = extracted(&closed, options)?;
+        if overlaps(&surface)? {
+            return Err(MeshError::Invalid(
+                "the surface of the voxels overlaps itself, even with gaps of a voxel closed: the segmentation's \
+                 voxels join in ways no surface follows (voxels that touch by an edge or a corner only, over a \
+                 large part); smooth the segment (a closing or a median filter in the segmentation editor)"
+                    .into(),
+            ));
+        }
+    }
+    let report = ExtractReport {
+        voxels: voxels + filled_voxels + closed_voxels,
+        pieces: kept.len(),
+        dropped_pieces: dropped,
+        filled_voxels,
+        closed_voxels,
+        extracted_triangles,
+        triangles: surface.triangles.len(),
+        volume,
+        voxel_volume: (voxels + filled_voxels + closed_voxels) as f64 * mask.voxel_volume(),
+    };
+    Ok((surface, report))
+}
+
+/// Steps 2 to 6 of the module's documentation on a mask cut to its voxels: the surface, the
+/// triangles extracted before decimation, and the volume it encloses.
+fn extracted(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSurface, usize, f64), MeshError> {
+    let surface = march(&smoothed(mask), mask.dims, 0.5);
     let extracted_triangles = surface.triangles.len();
     let mut surface = TriSurface { vertices: surface.vertices.iter().map(|&p| mask.world(p)).collect(), ..surface };
     surface.orient_outward();
@@ -171,17 +219,14 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
     let checked = check_closed_manifold(&surface).map_err(|e| {
         MeshError::Invalid(format!("the extracted surface is not closed and manifold: {}", e.message()))
     })?;
-    let report = ExtractReport {
-        voxels: voxels + filled_voxels,
-        pieces: kept.len(),
-        dropped_pieces: dropped,
-        filled_voxels,
-        extracted_triangles,
-        triangles: surface.triangles.len(),
-        volume: checked.volume,
-        voxel_volume: (voxels + filled_voxels) as f64 * mask.voxel_volume(),
-    };
-    Ok((surface, report))
+    Ok((surface, extracted_triangles, checked.volume))
+}
+
+/// Whether `surface` overlaps itself on more triangles than a mesh may
+/// ([`crate::tetmesh::MAX_OVERLAP_FRACTION`]).
+fn overlaps(surface: &TriSurface) -> Result<bool, MeshError> {
+    let defects = SurfaceBvh::new(surface)?.winding_defects().len();
+    Ok(defects as f64 > crate::tetmesh::MAX_OVERLAP_FRACTION * surface.triangles.len() as f64)
 }
 
 /// The fewest voxels a piece needs to give a surface: a block of 3 × 3 × 3.
