@@ -1387,6 +1387,18 @@ pub fn read_labelmap_surface(
         }
     };
     let (whole, label, chosen) = map.select_uncropped(&label).map_err(|e| MeshError::parse(path, e.message()))?;
+    let filled = whole.inside.iter().filter(|&&i| i).count() as f64 / whole.inside.len().max(1) as f64;
+    if filled > FILLED_SHARE {
+        return Err(MeshError::parse(
+            path,
+            format!(
+                "{label} fills {:.0} % of the image: a mask of everything (an inverted or all-ones labelmap, the \
+                 background's label?), not an organ; labels present: {}",
+                100.0 * filled,
+                map.present_text()
+            ),
+        ));
+    }
     let borders = touched_borders(&whole, map.placed.then_some(map.frame));
     let mask = map.cropped(&whole, &label, chosen).map_err(|e| MeshError::parse(path, e.message()))?;
     let mask = mask.in_scanner_order(map.frame == Frame::Ras);
@@ -1402,14 +1414,7 @@ pub fn read_labelmap_surface(
                 .to_string(),
         );
     }
-    let filled = whole.inside.iter().filter(|&&i| i).count() as f64 / whole.inside.len().max(1) as f64;
-    if filled > FILLED_SHARE {
-        warnings.push(format!(
-            "{label} fills {:.0} % of the image: a mask of everything (an inverted or all-ones labelmap, the \
-             background's label?), not an organ",
-            100.0 * filled
-        ));
-    } else if !borders.is_empty() {
+    if !borders.is_empty() {
         warnings.push(format!(
             "the organ reaches the image's border ({}): it is cut there, flat where the image ends",
             borders.join(", ")
@@ -1478,7 +1483,7 @@ pub fn read_labelmap_surface(
 /// (4 % of a liver in a tester's case) is over it.
 const DROPPED_SHARE: f64 = 0.01;
 
-/// The share of its image a label may fill before it is said to be no organ: an organ's segment
+/// The share of its image a label may fill before it is refused as no organ: an organ's segment
 /// cropped to it (3D Slicer's) fills a half to two thirds of its box.
 const FILLED_SHARE: f64 = 0.9;
 
@@ -1886,16 +1891,16 @@ mod tests {
         bytes
     }
 
-    /// A NIfTI without qform and sform codes places its voxels nowhere: read at its indices times
-    /// A label that fills its whole image (an all-ones mask) is said to be no organ.
+    /// A label that fills its whole image (an all-ones mask) is refused as no organ, before it is
+    /// meshed.
     #[test]
     fn a_label_filling_its_image_is_no_organ() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("ones.nii");
         let affine = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
         write_nifti(&path, &Labelmap::single([30, 30, 30], vec![1; 27_000], affine, Frame::Ras)).unwrap();
-        let read = read_labelmap_surface(&path, Some("1"), None, &ExtractOptions::default()).unwrap();
-        assert!(read.warnings.iter().any(|w| w.starts_with("label 1 fills 100 % of the image")), "{:?}", read.warnings);
+        let e = read_labelmap_surface(&path, Some("1"), None, &ExtractOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("label 1 fills 100 % of the image: a mask of everything"), "{e}");
     }
 
     /// A ball whose top a CT's grid cuts a little below its pole (the last slice 36 % of the
@@ -1917,6 +1922,7 @@ mod tests {
         assert!(cropped.is_empty(), "{cropped:?}");
     }
 
+    /// A NIfTI without qform and sform codes places its voxels nowhere: read at its indices times
     /// the spacing, with no scanner frame, and said so; an organ cut by the image's border is
     /// said to be, naming the faces.
     #[test]
