@@ -7,6 +7,7 @@ use learn::data::generate::normal_part;
 use learn::{encode_points, GridToMesh, Model, ModelPredictor};
 use mesh::embedding::Grid;
 
+use crate::checks::check_setting;
 use crate::frame::{Deformer, Observations};
 use crate::organ::Organ;
 use crate::{RegisterError, Result};
@@ -135,7 +136,8 @@ impl Deformer for FemDeformer {
 /// first's, √(σ₁² + |Δ|²); the second's own when the first predicts none. The first's estimate is
 /// the one the second started from, or, on a warm-started frame that the second registers alone,
 /// the first's fit (from its own last posterior, as on a stream) to the matches of the frame's
-/// last iteration when σ is asked.
+/// last iteration when σ is asked. A calibration factor may scale that σ
+/// ([`HybridDeformer::sigma_scaled`]).
 pub struct HybridDeformer {
     first: Box<dyn Deformer + Send>,
     then: Box<dyn Deformer + Send>,
@@ -154,6 +156,8 @@ pub struct HybridDeformer {
     then_estimate: Option<Vec<f64>>,
     /// At the end of a warm-started frame: the matches of its last iteration.
     last_observations: Option<Observations>,
+    /// The factor on σ where the second's estimate widens the first's.
+    sigma_factor: f64,
 }
 
 // The second deformer goes on as on a warm-started frame: past the data springs' stiffness ramp.
@@ -193,6 +197,14 @@ impl HybridDeformer {
         self
     }
 
+    /// σ where the second's estimate widens the first's, times `factor` (positive): a
+    /// calibration on registrations whose truth is known.
+    pub fn sigma_scaled(mut self, factor: f64) -> Result<HybridDeformer> {
+        check_setting("sigma_factor", factor, factor > 0.0, "positive")?;
+        self.sigma_factor = factor;
+        Ok(self)
+    }
+
     fn with_parts(
         first: Box<dyn Deformer + Send>,
         then: Box<dyn Deformer + Send>,
@@ -209,6 +221,7 @@ impl HybridDeformer {
             first_estimate: None,
             then_estimate: None,
             last_observations: None,
+            sigma_factor: 1.0,
         }
     }
 
@@ -293,7 +306,7 @@ impl Deformer for HybridDeformer {
             .zip(stencils)
             .map(|(s, stencil)| {
                 let moved = mesh::sub(stencil.vector(then), stencil.vector(first));
-                (s * s + mesh::dot(moved, moved)).sqrt()
+                self.sigma_factor * (s * s + mesh::dot(moved, moved)).sqrt()
             })
             .collect()))
     }
@@ -853,7 +866,8 @@ mod tests {
 
     /// A hybrid whose second deformer predicts no σ gives, from rest, the first's σ widened by how
     /// far the second moved each point: √(σ₁² + |Δ|²); on a stream's frame, the first's σ widened
-    /// by the distance from the first's fit to the last matches to the second's estimate.
+    /// by the distance from the first's fit to the last matches to the second's estimate; a
+    /// calibration factor scales the widened σ.
     #[test]
     fn a_hybrid_widens_its_first_deformer_s_sigma_by_the_second_s_move() {
         /// Moves every node by `by` from the last estimate; σ 1 mm at every point when `sigma`.
@@ -895,6 +909,19 @@ mod tests {
         let on_stream = sigma(&mut hybrid).unwrap();
         assert!((on_stream - expected).abs() < 1e-12, "{on_stream} against {expected}");
         assert_eq!(sigma(&mut hybrid), Some(on_stream), "asked again, the same σ");
+        // Scaled: the widened σ, not the first's own.
+        let (first, then) =
+            (Shift { by: [0.0, 0.0, -1e-3], sigma: true }, Shift { by: [3e-3, 0.0, 0.0], sigma: false });
+        let mut scaled = HybridDeformer::new(Box::new(first), Box::new(then), 1).unwrap().sigma_scaled(0.5).unwrap();
+        scaled.start_frame(false);
+        let fitted = scaled.deform(&observations, &rest, 0).unwrap();
+        assert_eq!(sigma(&mut scaled), Some(1e-3), "the first deformer's own, unscaled");
+        let moved = scaled.deform(&observations, &fitted, 1).unwrap();
+        let last = scaled.deform(&observations, &moved, 2).unwrap();
+        scaled.end_frame(observations, &last);
+        assert!((sigma(&mut scaled).unwrap() - 0.5 * from_rest).abs() < 1e-12);
+        let e = HybridDeformer::new(Box::new(Offset(0.0)), Box::new(Offset(0.0)), 1).unwrap().sigma_scaled(0.0).err();
+        assert_eq!(e.map(|e| e.to_string()).as_deref(), Some("sigma_factor = 0 must be positive"));
     }
 
     /// A hybrid deforms a frame from rest with the learned model for its first iterations, then
