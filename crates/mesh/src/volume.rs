@@ -210,6 +210,26 @@ impl VoxelMask {
         filled
     }
 
+    /// The share of the inside voxels with a face neighbour outside (or beyond the grid).
+    pub fn boundary_share(&self) -> f64 {
+        let [nx, ny, nz] = self.dims;
+        let on_boundary = (0..self.inside.len())
+            .into_par_iter()
+            .filter(|&n| {
+                let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
+                self.inside[n]
+                    && (i == 0
+                        || i + 1 == nx
+                        || j == 0
+                        || j + 1 == ny
+                        || k == 0
+                        || k + 1 == nz
+                        || [n - 1, n + 1, n - nx, n + nx, n - nx * ny, n + nx * ny].iter().any(|&m| !self.inside[m]))
+            })
+            .count();
+        on_boundary as f64 / self.count().max(1) as f64
+    }
+
     /// The mask closed by one voxel: dilated, then eroded, over the six face neighbours (voxels
     /// outside the grid count as outside; an inside voxel stays inside). A gap of one voxel
     /// between inside voxels is filled, and so are voxels that join others only by an edge or a
