@@ -501,7 +501,7 @@ mod tests {
     fn an_organ_of_stripes_is_refused() {
         let stripes = mask([40, 40, 22], [1.0; 3], [0.0; 3], |p| {
             let inside = (1.0..39.0).contains(&p[0]) && (1.0..39.0).contains(&p[1]) && (1.0..21.0).contains(&p[2]);
-            inside && (p[0] as usize % 2 == 0 || p[1] == 1.0)
+            inside && ((p[0] as usize).is_multiple_of(2) || p[1] == 1.0)
         });
         assert!(stripes.count() >= JUDGED_VOXELS && stripes.boundary_share() > 0.99, "{}", stripes.boundary_share());
         let e = mask_surface(&stripes, &ExtractOptions::default()).unwrap_err().to_string();
