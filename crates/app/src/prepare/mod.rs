@@ -93,10 +93,10 @@ pub struct PrepareOptions {
     /// Landmarks where the organ is held (ligaments, the hilum): a points file (CSV x, y, z,
     /// `.fcsv`, `.mrk.json`).
     pub attach: PathBuf,
-    /// Surface nodes within this distance (m) of a landmark are held (`None`: the distance that
-    /// holds [`HELD_SHARE`] of the organ's surface).
+    /// Surface nodes within this distance of a landmark are held (`None`: the distance that holds
+    /// [`HELD_SHARE`] of the organ's surface).
     #[serde(default)]
-    pub attach_distance: Option<f64>,
+    pub attach_distance: Option<Length>,
     /// The targets (tumour, vessels) at rest: a points file (CSV x, y, z, `.fcsv`, `.mrk.json`).
     pub targets: PathBuf,
     /// Structures that move with the organ (a tumour, vessels): surface files in the surface's
@@ -218,7 +218,7 @@ impl PrepareArgs {
             units: self.units,
             frame: self.frame,
             structures: self.structures.clone(),
-            attach_distance: self.attach_distance.map(Length::in_metres),
+            attach_distance: self.attach_distance,
             samples: self.samples,
             method: self.method,
             tets: self.tets,
@@ -365,8 +365,8 @@ fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
             bail!("the {what} file {} does not exist", path.display());
         }
     }
-    if let Some(distance) = options.attach_distance.filter(|d| !(*d > 0.0 && d.is_finite())) {
-        bail!("the attachment distance must be positive, got {distance} m");
+    if let Some(distance) = options.attach_distance.filter(|d| !(d.in_metres() > 0.0)) {
+        bail!("the attachment distance must be positive, got {distance}");
     }
     if options.samples < 10 {
         bail!("{} draws are too few to train and test a model (at least 10)", options.samples);
@@ -776,7 +776,7 @@ pub const HELD_SHARE: f64 = 0.12;
 /// given, or the one that holds [`HELD_SHARE`] of its surface.
 fn hold_distance(options: &PrepareOptions, organ: &Mesh, landmarks: &[Point]) -> Result<f64> {
     match options.attach_distance {
-        Some(distance) => Ok(distance),
+        Some(distance) => Ok(distance.in_metres()),
         None => Ok(mesh::distance_holding_share(organ, landmarks, HELD_SHARE)?),
     }
 }
@@ -1259,6 +1259,20 @@ mod tests {
         assert_eq!(vertex, ball.vertices[0]);
         assert!(mesh::norm(mesh::sub(target, [0.11, 0.04, 0.005])) < 1e-12, "{target:?}");
         assert!(lines.iter().any(|l| l == "frame: LPS (given; the surface's header names none)"), "{lines:?}");
+    }
+
+    /// An attachment distance that holds nothing is refused before any step, in the length's
+    /// own words; one given, as a length, holds the nodes within it.
+    #[test]
+    fn the_attachment_distance_is_a_positive_length() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut given = options(dir.path(), "liver_labels.nii.gz", "5", false);
+        given.attach_distance = Some("-5mm".parse().unwrap());
+        let error = absolute(&given).unwrap_err().to_string();
+        assert_eq!(error, "the attachment distance must be positive, got -5 mm");
+        given.attach_distance = Some("2.5cm".parse().unwrap());
+        let organ = mesh::box_tet([0.0; 3], [0.1; 3], [2, 2, 2]).unwrap();
+        assert_eq!(hold_distance(&absolute(&given).unwrap(), &organ, &[[0.0; 3]]).unwrap(), 0.025);
     }
 
     #[test]
