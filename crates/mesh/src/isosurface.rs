@@ -172,17 +172,26 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
         )));
     }
     let voxels: usize = kept.iter().sum();
-    let boundary = mask.boundary_share();
-    if !options.every_piece && voxels >= JUDGED_VOXELS && boundary > MAX_BOUNDARY_SHARE {
-        return Err(MeshError::Invalid(format!(
-            "its voxels do not hold together as an organ's: {:.0} % of them lie on its boundary (a liver's: about \
-             5 to 15 %), as in stripes or noise; is the image's size in its header right (rows read with another \
-             length, the voxels garbled)?",
-            100.0 * boundary
-        )));
-    }
     let filled_voxels = mask.fill_cavities();
-    let mask = mask.cropped(2).ok_or_else(|| MeshError::Invalid("the mask is empty".into()))?;
+    let mask = mask.cropped(PAD).ok_or_else(|| MeshError::Invalid("the mask is empty".into()))?;
+    if !options.every_piece {
+        if let Some(axis) = (0..3).find(|&d| mask.dims[d] == 1 + 2 * PAD) {
+            return Err(MeshError::Invalid(format!(
+                "it lies on a single slice of the image (one voxel along {}): drawn on one slice, it has no volume; \
+                 segment the organ on every slice it crosses",
+                ["i", "j", "k"][axis]
+            )));
+        }
+        let boundary = mask.boundary_share();
+        if voxels >= JUDGED_VOXELS && boundary > MAX_BOUNDARY_SHARE {
+            return Err(MeshError::Invalid(format!(
+                "its voxels do not hold together as an organ's: {:.0} % of them lie on its boundary (a liver's: \
+                 about 5 to 15 %), as in stripes or noise; is the image's size in its header right (rows read with \
+                 another length, the voxels garbled)?",
+                100.0 * boundary
+            )));
+        }
+    }
     if mask.inside.len() > 400_000_000 {
         return Err(MeshError::Invalid(format!("the organ spans too many voxels ({:?})", mask.dims)));
     }
@@ -248,6 +257,9 @@ fn overlaps(surface: &TriSurface) -> Result<bool, MeshError> {
 
 /// The fewest voxels a piece needs to give a surface: a block of 3 × 3 × 3.
 const MIN_VOXELS: usize = 27;
+
+/// Outside voxels kept around the mask's box for the extraction.
+const PAD: usize = 2;
 
 /// The largest share of an organ's voxels that may lie on its boundary (a face neighbour
 /// outside): a liver's is about 5 % at 1.5 mm voxels, 12 % on 5 mm slices; stripes of a garbled
@@ -492,6 +504,16 @@ mod tests {
         let speck = mask([5; 3], [1.0; 3], [0.0; 3], |p| p == [2.0; 3]);
         let e = mask_surface(&speck, &ExtractOptions::default()).unwrap_err().to_string();
         assert!(e.contains("1 voxel(s), is too small to give a surface"), "{e}");
+    }
+
+    /// An organ drawn on a single slice is refused as having no volume; a structure there is
+    /// meshed (a tumour marked on one slice).
+    #[test]
+    fn an_organ_on_a_single_slice_is_refused() {
+        let slice = mask([30, 30, 5], [1.0, 1.0, 5.0], [-15.0, -15.0, -10.0], |p| p[2] == 0.0 && norm(p) <= 12.0);
+        let e = mask_surface(&slice, &ExtractOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("it lies on a single slice of the image (one voxel along k)"), "{e}");
+        assert!(mask_surface(&slice, &ExtractOptions::structure()).is_ok());
     }
 
     /// Voxels in stripes (a garbled image's rows: here plates a voxel thick, joined at one edge),

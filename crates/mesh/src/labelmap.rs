@@ -1994,8 +1994,8 @@ mod tests {
         assert!(close(&back.affine, &expected, 1e-6), "{:?}", back.affine);
     }
 
-    /// A segment one slice thick loses most of its volume to the surface's smoothing, and is said
-    /// to; a ball does not.
+    /// A structure one slice thick loses most of its volume to the surface's smoothing, and is
+    /// said to; a ball does not; an organ one slice thick is refused.
     #[test]
     fn a_thinned_segment_is_warned_about() {
         let dir = tempfile::tempdir().unwrap();
@@ -2009,11 +2009,13 @@ mod tests {
         let path = dir.path().join("plate.nii");
         write_nifti(&path, &map).unwrap();
         let thinned = |label: &str| {
-            let read = read_labelmap_surface(&path, Some(label), None, &ExtractOptions::default()).unwrap();
+            let read = read_labelmap_surface(&path, Some(label), None, &ExtractOptions::structure()).unwrap();
             read.warnings.iter().any(|w| w.contains("less than its voxels: a structure a voxel or two thick"))
         };
         assert!(thinned("7"), "a plate one slice thick");
         assert!(!thinned("5"), "a ball");
+        let e = read_labelmap_surface(&path, Some("7"), None, &ExtractOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("it lies on a single slice of the image"), "{e}");
     }
 
     /// A piece of the organ's label dropped apart from its largest is warned about when it holds
