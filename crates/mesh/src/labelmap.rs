@@ -1420,22 +1420,7 @@ pub fn read_labelmap_surface(
             borders.join(", ")
         ));
     }
-    if extract.closed_voxels > 0 {
-        warnings.push(format!(
-            "the surface of its voxels as given overlapped itself (voxels that touch by an edge or a corner only: a \
-             checkerboard, a brush's dithering): it was extracted with gaps of a voxel closed, {:.1} % of its voxels \
-             added; smooth the segment if that is not the organ",
-            100.0 * extract.closed_voxels as f64 / (extract.voxels - extract.closed_voxels).max(1) as f64
-        ));
-    }
-    if extract.dropped_share() > DROPPED_SHARE {
-        warnings.push(format!(
-            "pieces apart from the organ's largest, {:.1} % of its voxels, were dropped: if they are part of it (a \
-             lobe the segmentation cut off, by a gap as thin as a voxel), join them to it in the segmentation (a \
-             closing or a brush stroke across the gap)",
-            100.0 * extract.dropped_share()
-        ));
-    }
+    warnings.extend(extraction_warnings(&extract));
     let span = crate::longest_side(crate::bounds(&surface.vertices));
     if !(ORGAN_SPAN_MM.0..=ORGAN_SPAN_MM.1).contains(&span) {
         let unit = match map.named_unit {
@@ -1466,6 +1451,30 @@ pub fn read_labelmap_surface(
             map.spacing().map(crate::length::number).join(" × ")
         ));
     }
+    let placed = map.placed;
+    Ok(LabelSurface { surface, frame: map.frame, label, spacing: map.spacing(), extract, placed, warnings })
+}
+
+/// What the extraction of a label's surface did to its voxels that a user should know: gaps
+/// closed, pieces dropped, volume lost to the smoothing.
+fn extraction_warnings(extract: &ExtractReport) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if extract.closed_voxels > 0 {
+        warnings.push(format!(
+            "the surface of its voxels as given overlapped itself (voxels that touch by an edge or a corner only: a \
+             checkerboard, a brush's dithering): it was extracted with gaps of a voxel closed, {:.1} % of its voxels \
+             added; smooth the segment if that is not the organ",
+            100.0 * extract.closed_voxels as f64 / (extract.voxels - extract.closed_voxels).max(1) as f64
+        ));
+    }
+    if extract.dropped_share() > DROPPED_SHARE {
+        warnings.push(format!(
+            "pieces apart from the organ's largest, {:.1} % of its voxels, were dropped: if they are part of it (a \
+             lobe the segmentation cut off, by a gap as thin as a voxel), join them to it in the segmentation (a \
+             closing or a brush stroke across the gap)",
+            100.0 * extract.dropped_share()
+        ));
+    }
     let lost = 1.0 - extract.volume / extract.voxel_volume;
     if lost > THINNED_SHARE {
         warnings.push(format!(
@@ -1474,8 +1483,7 @@ pub fn read_labelmap_surface(
             100.0 * lost
         ));
     }
-    let placed = map.placed;
-    Ok(LabelSurface { surface, frame: map.frame, label, spacing: map.spacing(), extract, placed, warnings })
+    warnings
 }
 
 /// The share of the kept piece's voxels that the pieces dropped apart from it may hold before
