@@ -42,7 +42,8 @@ enum Command {
         /// .seg.nrrd, .nhdr, .mha, .mhd, a DICOM SEG or RTSTRUCT; in mm, the scanner's frame kept); the liver phantom when omitted.
         surface: Option<PathBuf>,
         /// The labelmap's label: a number (e.g. 5, TotalSegmentator's liver) or a segment name
-        /// (3D Slicer's, a DICOM's, a NIfTI label table's); needed when the file holds several. `1+2` takes labels 1 and 2 together
+        /// (3D Slicer's, a DICOM's, a NIfTI label table's); needed when the file holds
+        /// several. `1+2` takes labels 1 and 2 together
         /// (a liver and the tumour labelled apart in it).
         #[arg(long, requires = "surface")]
         label: Option<String>,

@@ -287,14 +287,7 @@ impl NiftiHeader {
         if bytes.len() < 352 {
             return Err(format!("too short for a NIfTI file ({} bytes)", bytes.len()));
         }
-        let size = |little: bool| {
-            let b: [u8; 4] = bytes[0..4].try_into().unwrap();
-            if little {
-                i32::from_le_bytes(b)
-            } else {
-                i32::from_be_bytes(b)
-            }
-        };
+        let size = |little: bool| int32_at(bytes, 0, little);
         let (version, little) = match (size(true), size(false)) {
             (348, _) => (1, true),
             (_, 348) => (1, false),
@@ -455,26 +448,18 @@ fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
 
 /// The names a NIfTI's header extensions give its labels: the first extension holding a label
 /// table (`<Label Key="5" ...>liver</Label>`, the text as it is or in CDATA), as TotalSegmentator
-/// writes its multi-label files (a Caret/Workbench `CaretExtension`) and CIFTI label files do.
-/// None when the file has no such table; an extension cut short ends the search.
+/// writes its multi-label files (a Caret/Workbench `CaretExtension`).
+/// Empty when the file has no such table; an extension cut short ends the search.
 fn nifti_label_names(bytes: &[u8], header: &NiftiHeader) -> Vec<(String, i32)> {
     let start = if header.version == 1 { 348 } else { 540 };
     // The extender's first byte says whether extensions follow it.
-    if bytes.get(start) != Some(&1) {
+    if bytes.get(start).is_none_or(|&flag| flag == 0) {
         return Vec::new();
     }
     let end = (header.vox_offset as usize).min(bytes.len());
-    let int_at = |o: usize| {
-        let b: [u8; 4] = bytes[o..o + 4].try_into().unwrap();
-        if header.little {
-            i32::from_le_bytes(b)
-        } else {
-            i32::from_be_bytes(b)
-        }
-    };
     let mut at = start + 4;
     while at + 8 <= end {
-        let size = int_at(at);
+        let size = int32_at(bytes, at, header.little);
         if size < 8 || at + size as usize > end {
             break;
         }
@@ -487,13 +472,37 @@ fn nifti_label_names(bytes: &[u8], header: &NiftiHeader) -> Vec<(String, i32)> {
     Vec::new()
 }
 
+/// The 32-bit integer at `offset` of `bytes`, in the byte order `little` says.
+fn int32_at(bytes: &[u8], offset: usize, little: bool) -> i32 {
+    let b: [u8; 4] = bytes[offset..offset + 4].try_into().unwrap();
+    match little {
+        true => i32::from_le_bytes(b),
+        false => i32::from_be_bytes(b),
+    }
+}
+
 /// The `(name, key)` of every `<Label Key="...">name</Label>` of an XML label table.
 fn label_table(xml: &str) -> Vec<(String, i32)> {
     let mut names = Vec::new();
-    for element in xml.split("<Label ").skip(1) {
-        let Some((attributes, rest)) = element.split_once('>') else { continue };
-        let Some(key) = attributes.split("Key=\"").nth(1).and_then(|k| k.split('"').next()) else { continue };
-        let (Ok(key), Some((text, _))) = (key.trim().parse::<i32>(), rest.split_once("</Label>")) else { continue };
+    for element in xml.split("<Label").skip(1).filter(|e| e.starts_with(char::is_whitespace)) {
+        // The start tag ends at the first '>' outside a quoted value.
+        let mut quote = None;
+        let Some(end) = element.char_indices().find_map(|(i, c)| {
+            match (quote, c) {
+                (None, '"' | '\'') => quote = Some(c),
+                (Some(q), _) if c == q => quote = None,
+                (None, '>') => return Some(i),
+                _ => {}
+            }
+            None
+        }) else {
+            continue;
+        };
+        let (attributes, rest) = (&element[..end], &element[end + 1..]);
+        let (Some(key), Some((text, _))) = (attribute(attributes, "Key"), rest.split_once("</Label>")) else {
+            continue;
+        };
+        let Ok(key) = key.trim().parse::<i32>() else { continue };
         let text = text.trim();
         let text = text.strip_prefix("<![CDATA[").and_then(|t| t.strip_suffix("]]>")).map_or_else(
             || {
@@ -508,6 +517,22 @@ fn label_table(xml: &str) -> Vec<(String, i32)> {
         }
     }
     names
+}
+
+/// The value of attribute `name` among an XML start tag's `attributes` (`name="v"` or
+/// `name = 'v'`), the name whole (not the end of another's).
+fn attribute<'a>(attributes: &'a str, name: &str) -> Option<&'a str> {
+    let mut from = 0;
+    while let Some(found) = attributes[from..].find(name).map(|i| from + i) {
+        from = found + name.len();
+        let whole = attributes[..found].ends_with(char::is_whitespace);
+        let rest = attributes[from..].trim_start();
+        if let (true, Some(value)) = (whole, rest.strip_prefix('=').map(str::trim_start)) {
+            let quote = value.chars().next().filter(|&c| c == '"' || c == '\'')?;
+            return value[1..].split(quote).next();
+        }
+    }
+    None
 }
 
 /// Whether 3D Slicer (ITK) places a NIfTI's voxels by its sform ([`nifti_affine`]): when its code
@@ -1054,6 +1079,7 @@ impl Labelmap {
                 name.contains(&choice) || choice.contains(&name) || words(&name).iter().any(|w| wanted.contains(w))
             })
             .map(|(name, _, label)| format!("'{name}' ({label})"))
+            .take(SHOWN_LABELS)
             .collect();
         match like.is_empty() {
             true => String::new(),
@@ -1123,7 +1149,8 @@ impl Labelmap {
                         false => "",
                     };
                     return Err(MeshError::Invalid(format!(
-                        "the file names no segment (a NIfTI without a label table or a plain NRRD holds numbers only): choose '{choice}' \
+                        "the file names no segment (a NIfTI without a label table or a plain NRRD holds numbers \
+                         only): choose '{choice}' \
                          by its number{liver}; labels present: {}",
                         self.present_text()
                     )));
@@ -1692,22 +1719,27 @@ mod tests {
         bytes
     }
 
-    /// A NIfTI-1 file with a header extension of code `code` holding `text` after its header
-    /// (the extender's flag set, the voxels moved after it), as nibabel writes one.
-    fn with_extension(plain: &[u8], code: i32, text: &str) -> Vec<u8> {
-        let size = (8 + text.len()).div_ceil(16) * 16;
-        let mut extension = [(size as i32).to_le_bytes(), code.to_le_bytes()].concat();
-        extension.extend_from_slice(text.as_bytes());
-        extension.resize(size, 0);
-        let mut bytes = [&plain[..352], &extension, &plain[352..]].concat();
+    /// A NIfTI-1 file with header extensions of codes and texts `extensions` after its header
+    /// (the extender's flag set, the voxels moved after them), as nibabel writes them.
+    fn with_extensions(plain: &[u8], extensions: &[(i32, &str)]) -> Vec<u8> {
+        let mut all = Vec::new();
+        for (code, text) in extensions {
+            let size = (8 + text.len()).div_ceil(16) * 16;
+            let mut extension = [(size as i32).to_le_bytes(), code.to_le_bytes()].concat();
+            extension.extend_from_slice(text.as_bytes());
+            extension.resize(size, 0);
+            all.extend(extension);
+        }
+        let mut bytes = [&plain[..352], &all, &plain[352..]].concat();
         bytes[348] = 1;
-        bytes[108..112].copy_from_slice(&((352 + size) as f32).to_le_bytes());
+        bytes[108..112].copy_from_slice(&((352 + all.len()) as f32).to_le_bytes());
         bytes
     }
 
     /// A NIfTI whose extension holds a label table names its labels: TotalSegmentator's
     /// multi-label files (its `CaretExtension`, code 0, the names in CDATA, as its
-    /// `add_label_map_to_nifti` writes them) and a table of plain text with XML entities. A
+    /// `add_label_map_to_nifti` writes them) and a table of plain text with XML entities, its
+    /// attributes in any order and quotes, each behind an extension of another kind. A
     /// segment is then chosen by name, a name not there is answered with those like it, and an
     /// extension cut short leaves the labels unnamed.
     #[test]
@@ -1717,17 +1749,23 @@ mod tests {
         let path = dir.path().join("plain.nii");
         write_nifti(&path, &map).unwrap();
         let plain = std::fs::read(&path).unwrap();
-        let total_segmentator = "<?xml version=\"1.0\" encoding=\"UTF-8\"?> <CaretExtension>  <Date><![CDATA[2013-07-14T05:45:09]]></Date>   \
-            <VolumeInformation Index=\"0\">   <LabelTable>\n<Label Key=\"5\" Red=\"0.6\" Green=\"0.3\" Blue=\"0.2\" Alpha=\"1\"><![CDATA[liver]]></Label>\n\
-            <Label Key=\"2\" Red=\"1\" Green=\"0\" Blue=\"0\" Alpha=\"1\"><![CDATA[liver_tumor]]></Label>\n\n  </LabelTable>  \
-            <StudyMetaDataLinkSet>  </StudyMetaDataLinkSet>  <VolumeType><![CDATA[Label]]></VolumeType>   </VolumeInformation></CaretExtension>\n";
-        let entities = "<LabelTable><Label Key=\"0\">???</Label><Label Key=\"5\">liver &amp; hilum</Label>\
-            <Label Key=\"2\" Red=\"1\">tumour &lt;2 cm&gt;</Label></LabelTable>";
+        let total_segmentator = concat!(
+            "<?xml version=\"1.0\" encoding=\"UTF-8\"?> <CaretExtension>  ",
+            "<Date><![CDATA[2013-07-14T05:45:09]]></Date>   <VolumeInformation Index=\"0\">   <LabelTable>\n",
+            "<Label Key=\"5\" Red=\"0.6\" Green=\"0.3\" Blue=\"0.2\" Alpha=\"1\"><![CDATA[liver]]></Label>\n",
+            "<Label Key=\"2\" Red=\"1\" Green=\"0\" Blue=\"0\" Alpha=\"1\"><![CDATA[liver_tumor]]></Label>\n\n",
+            "  </LabelTable>  <StudyMetaDataLinkSet>  </StudyMetaDataLinkSet>  ",
+            "<VolumeType><![CDATA[Label]]></VolumeType>   </VolumeInformation></CaretExtension>\n"
+        );
+        let entities =
+            "<LabelTable><Label Key=\"0\">???</Label><Label ParentKey=\"9\" Name=\"a>b\" Key=\"5\">liver &amp; \
+            hilum</Label><Label\nRed=\"1\" Key = '2'>tumour &lt;2 cm&gt;</Label></LabelTable>";
         for (code, text, liver, tumour) in
             [(0, total_segmentator, "liver", "liver_tumor"), (32, entities, "liver & hilum", "tumour <2 cm>")]
         {
             let path = dir.path().join(format!("named{code}.nii"));
-            std::fs::write(&path, with_extension(&plain, code, text)).unwrap();
+            // Behind an extension of another kind (a JSON sidecar's, code 44).
+            std::fs::write(&path, with_extensions(&plain, &[(44, "{\"Modality\": \"CT\"}"), (code, text)])).unwrap();
             let named = read_labelmap(&path).unwrap();
             assert_eq!(named.labels, map.labels, "the voxels read past the extension");
             assert_eq!(named.segments, [(liver.to_string(), 0, 5), (tumour.to_string(), 0, 2)]);
@@ -1744,7 +1782,7 @@ mod tests {
         let e = read_labelmap(&path).unwrap().select("liver tumour").unwrap_err().to_string();
         assert!(e.contains("names like it: 'liver' (5), 'liver_tumor' (2);"), "{e}");
         // An extension whose size runs past the voxels' offset: no names, the voxels read.
-        let mut cut = with_extension(&plain, 0, total_segmentator);
+        let mut cut = with_extensions(&plain, &[(0, total_segmentator)]);
         cut[352..356].copy_from_slice(&100_000i32.to_le_bytes());
         let path = dir.path().join("cut.nii");
         std::fs::write(&path, cut).unwrap();

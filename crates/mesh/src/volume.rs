@@ -210,24 +210,27 @@ impl VoxelMask {
         filled
     }
 
-    /// The share of the inside voxels with a face neighbour outside (or beyond the grid).
-    pub fn boundary_share(&self) -> f64 {
+    /// The face neighbours of voxel `n`, in pairs along i, j and k (`None` beyond the grid).
+    fn face_neighbours(&self, n: usize) -> [[Option<usize>; 2]; 3] {
         let [nx, ny, nz] = self.dims;
-        let on_boundary = (0..self.inside.len())
+        let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
+        [
+            [(i > 0).then(|| n - 1), (i + 1 < nx).then(|| n + 1)],
+            [(j > 0).then(|| n - nx), (j + 1 < ny).then(|| n + nx)],
+            [(k > 0).then(|| n - nx * ny), (k + 1 < nz).then(|| n + nx * ny)],
+        ]
+    }
+
+    /// The share of the inside voxels that are one voxel thick along some axis (both face
+    /// neighbours along it outside, or beyond the grid): stripes and noise, not the top slice
+    /// of an organ on thick slices, whose slice below holds it.
+    pub fn thin_share(&self) -> f64 {
+        let outside = |m: Option<usize>| m.is_none_or(|m| !self.inside[m]);
+        let thin = (0..self.inside.len())
             .into_par_iter()
-            .filter(|&n| {
-                let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
-                self.inside[n]
-                    && (i == 0
-                        || i + 1 == nx
-                        || j == 0
-                        || j + 1 == ny
-                        || k == 0
-                        || k + 1 == nz
-                        || [n - 1, n + 1, n - nx, n + nx, n - nx * ny, n + nx * ny].iter().any(|&m| !self.inside[m]))
-            })
+            .filter(|&n| self.inside[n] && self.face_neighbours(n).iter().any(|pair| pair.iter().all(|&m| outside(m))))
             .count();
-        on_boundary as f64 / self.count().max(1) as f64
+        thin as f64 / self.count().max(1) as f64
     }
 
     /// The mask closed by one voxel: dilated, then eroded, over the six face neighbours (voxels
@@ -235,25 +238,14 @@ impl VoxelMask {
     /// between inside voxels is filled, and so are voxels that join others only by an edge or a
     /// corner (a checkerboard, a brush's dithering); the mask's outline elsewhere stays.
     pub fn closed(&self) -> VoxelMask {
-        let [nx, ny, nz] = self.dims;
-        let faces = |n: usize| {
-            let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
-            [
-                (i > 0).then(|| n - 1),
-                (i + 1 < nx).then(|| n + 1),
-                (j > 0).then(|| n - nx),
-                (j + 1 < ny).then(|| n + nx),
-                (k > 0).then(|| n - nx * ny),
-                (k + 1 < nz).then(|| n + nx * ny),
-            ]
-        };
+        let faces = |n: usize| self.face_neighbours(n).into_iter().flatten();
         let dilated: Vec<bool> = (0..self.inside.len())
             .into_par_iter()
-            .map(|n| self.inside[n] || faces(n).iter().any(|m| m.is_some_and(|m| self.inside[m])))
+            .map(|n| self.inside[n] || faces(n).any(|m| m.is_some_and(|m| self.inside[m])))
             .collect();
         let inside = (0..dilated.len())
             .into_par_iter()
-            .map(|n| self.inside[n] || (dilated[n] && faces(n).iter().all(|m| m.is_some_and(|m| dilated[m]))))
+            .map(|n| self.inside[n] || (dilated[n] && faces(n).all(|m| m.is_some_and(|m| dilated[m]))))
             .collect();
         VoxelMask { inside, ..self.clone() }
     }
