@@ -18,12 +18,13 @@
 //! 5. Taubin's λ|μ smoothing (λ = 0.5, μ = −0.53) smooths it without the shrinking of plain
 //!    Laplacian smoothing.
 //! 6. Quadric edge collapse ([`crate::decimate::decimate`]) brings it to a number of triangles.
-//! 7. Where the result overlaps itself (voxels that touch by an edge or a corner only, a
+//! 7. Where an organ's result overlaps itself (voxels that touch by an edge or a corner only, a
 //!    checkerboard, give handles thinner than the smoothing), steps 2 to 6 run again on the mask
 //!    closed by a voxel ([`VoxelMask::closed`]), and the voxels that added are reported.
 //!
-//! The result passes [`check_closed_manifold`], and overlaps itself on no more triangles than a
-//! mesh allows ([`crate::tetmesh::MAX_OVERLAP_FRACTION`]).
+//! An organ on a single slice, or whose voxels are mostly one voxel thick (a garbled image's
+//! stripes), is refused before step 2. The result passes [`check_closed_manifold`]; an organ's
+//! overlaps itself on no more triangles than a mesh allows ([`crate::tetmesh::MAX_OVERLAP_FRACTION`]).
 
 use crate::bvh::SurfaceBvh;
 use crate::decimate::decimate;
