@@ -202,13 +202,15 @@ pub fn mask_surface(mask: &VoxelMask, options: &ExtractOptions) -> Result<(TriSu
     if !options.every_piece && overlaps(&surface)? {
         let mut closed = mask.closed();
         closed.fill_cavities();
-        closed_voxels = closed.count() - mask.count();
-        if closed_voxels as f64 > MAX_CLOSED_SHARE * mask.count() as f64 {
+        let given = mask.count();
+        closed_voxels = closed.count() - given;
+        let added = closed_voxels as f64 / given as f64;
+        if added > MAX_CLOSED_SHARE {
             return Err(MeshError::Invalid(format!(
                 "the surface of the voxels overlaps itself, and closing the gaps of a voxel would add {:.0} % to \
                  them: voxels that touch by an edge or a corner only, all over (a dithered or garbled mask); smooth \
                  the segment, or check the image's size in its header",
-                100.0 * closed_voxels as f64 / mask.count() as f64
+                100.0 * added
             )));
         }
         (surface, extracted_triangles, volume) = extracted(&closed, options)?;

@@ -1414,7 +1414,7 @@ pub fn read_labelmap_surface(
         }
     };
     let (whole, label, chosen) = map.select_uncropped(&label).map_err(|e| MeshError::parse(path, e.message()))?;
-    let filled = whole.inside.iter().filter(|&&i| i).count() as f64 / whole.inside.len().max(1) as f64;
+    let filled = whole.count() as f64 / whole.inside.len().max(1) as f64;
     if filled > FILLED_SHARE {
         return Err(MeshError::parse(
             path,

@@ -885,41 +885,42 @@ mod tests {
         }
         let organ = Organ::new(mesh::box_tet([0.0; 3], [0.04; 3], [2, 2, 2]).unwrap(), None).unwrap();
         let observations = top_pressed(&organ);
-        let first = Shift { by: [0.0, 0.0, -1e-3], sigma: true };
-        let then = Shift { by: [3e-3, 0.0, 0.0], sigma: false };
-        let mut hybrid = HybridDeformer::new(Box::new(first), Box::new(then), 1).unwrap();
+        let hybrid = || {
+            let (first, then) =
+                (Shift { by: [0.0, 0.0, -1e-3], sigma: true }, Shift { by: [3e-3, 0.0, 0.0], sigma: false });
+            HybridDeformer::new(Box::new(first), Box::new(then), 1).unwrap()
+        };
         let points = [[0.01, 0.02, 0.03]];
         let stencils = [crate::Stencil(vec![(0, 0.5), (1, 0.5)])];
         let sigma = |hybrid: &mut HybridDeformer| hybrid.uncertainty(&points, &stencils).map(|s| s.unwrap()[0]);
-        hybrid.start_frame(false);
         let rest = vec![0.0; 3 * organ.mesh().num_nodes()];
-        let fitted = hybrid.deform(&observations, &rest, 0).unwrap();
-        assert_eq!(sigma(&mut hybrid), Some(1e-3), "the first deformer's own");
-        let moved = hybrid.deform(&observations, &fitted, 1).unwrap();
-        let last = hybrid.deform(&observations, &moved, 2).unwrap();
-        hybrid.end_frame(observations.clone(), &last);
+        // A frame from rest: σ after the first deformer's iteration, then at the frame's end.
+        let from_rest = |hybrid: &mut HybridDeformer| {
+            hybrid.start_frame(false);
+            let fitted = hybrid.deform(&observations, &rest, 0).unwrap();
+            let first = sigma(hybrid);
+            let moved = hybrid.deform(&observations, &fitted, 1).unwrap();
+            let last = hybrid.deform(&observations, &moved, 2).unwrap();
+            hybrid.end_frame(observations.clone(), &last);
+            (first, sigma(hybrid).unwrap(), last)
+        };
+        let mut plain = hybrid();
+        let (first, widened, last) = from_rest(&mut plain);
+        assert_eq!(first, Some(1e-3), "the first deformer's own");
         let expected = (1e-3f64.powi(2) + 6e-3f64.powi(2)).sqrt();
-        let from_rest = sigma(&mut hybrid).unwrap();
-        assert!((from_rest - expected).abs() < 1e-12, "{from_rest} against {expected}");
-        hybrid.start_frame(true);
-        let streamed = hybrid.deform(&observations, &last, crate::WARM_START_ITERATION).unwrap();
-        hybrid.end_frame(observations.clone(), &streamed);
+        assert!((widened - expected).abs() < 1e-12, "{widened} against {expected}");
+        plain.start_frame(true);
+        let streamed = plain.deform(&observations, &last, crate::WARM_START_ITERATION).unwrap();
+        plain.end_frame(observations.clone(), &streamed);
         // The first fits from the second's estimate, 1 mm down: Δ is that 1 mm.
         let expected = (1e-3f64.powi(2) + 1e-3f64.powi(2)).sqrt();
-        let on_stream = sigma(&mut hybrid).unwrap();
+        let on_stream = sigma(&mut plain).unwrap();
         assert!((on_stream - expected).abs() < 1e-12, "{on_stream} against {expected}");
-        assert_eq!(sigma(&mut hybrid), Some(on_stream), "asked again, the same σ");
+        assert_eq!(sigma(&mut plain), Some(on_stream), "asked again, the same σ");
         // Scaled: the widened σ, not the first's own.
-        let (first, then) =
-            (Shift { by: [0.0, 0.0, -1e-3], sigma: true }, Shift { by: [3e-3, 0.0, 0.0], sigma: false });
-        let mut scaled = HybridDeformer::new(Box::new(first), Box::new(then), 1).unwrap().sigma_scaled(0.5).unwrap();
-        scaled.start_frame(false);
-        let fitted = scaled.deform(&observations, &rest, 0).unwrap();
-        assert_eq!(sigma(&mut scaled), Some(1e-3), "the first deformer's own, unscaled");
-        let moved = scaled.deform(&observations, &fitted, 1).unwrap();
-        let last = scaled.deform(&observations, &moved, 2).unwrap();
-        scaled.end_frame(observations, &last);
-        assert!((sigma(&mut scaled).unwrap() - 0.5 * from_rest).abs() < 1e-12);
+        let (first, scaled, _) = from_rest(&mut hybrid().sigma_scaled(0.5).unwrap());
+        assert_eq!(first, Some(1e-3), "the first deformer's own, unscaled");
+        assert!((scaled - 0.5 * widened).abs() < 1e-12);
         let e = HybridDeformer::new(Box::new(Offset(0.0)), Box::new(Offset(0.0)), 1).unwrap().sigma_scaled(0.0).err();
         assert_eq!(e.map(|e| e.to_string()).as_deref(), Some("sigma_factor = 0 must be positive"));
     }
