@@ -9,7 +9,12 @@
 
 use std::collections::HashMap;
 
+use rayon::prelude::*;
+
 use crate::{bounds, cross, dot, sub, unit, MeshError, Point, TriSurface};
+
+/// Triangles per parallel task of [`TriSurface::corner_normals`].
+const CORNERS_PER_TASK: usize = 2048;
 
 /// Summary of a surface that passed [`check_closed_manifold`].
 #[derive(Clone, Debug, PartialEq)]
@@ -312,17 +317,16 @@ impl TriSurface {
     pub fn corner_normals(&self, sharp_cos: f64) -> Vec<[Point; 3]> {
         let areas: Vec<Point> = (0..self.triangles.len()).map(|t| triangle_area_vector(self, t)).collect();
         let units: Vec<Point> = areas.iter().map(|&a| unit(a)).collect();
-        let mut around: Vec<Vec<usize>> = vec![Vec::new(); self.vertices.len()];
-        for (t, tri) in self.triangles.iter().enumerate() {
-            tri.iter().for_each(|&k| around[k].push(t));
-        }
+        let (start, around) = self.triangles_around();
         self.triangles
-            .iter()
+            .par_iter()
             .enumerate()
+            .with_min_len(CORNERS_PER_TASK)
             .map(|(t, tri)| {
                 tri.map(|k| {
                     let mut n = [0.0; 3];
-                    for &u in around[k].iter().filter(|&&u| u == t || dot(units[u], units[t]) > sharp_cos) {
+                    let near = around[start[k]..start[k + 1]].iter().copied();
+                    for u in near.filter(|&u| u == t || dot(units[u], units[t]) > sharp_cos) {
                         (0..3).for_each(|d| n[d] += areas[u][d]);
                     }
                     match unit(n) {
@@ -332,6 +336,23 @@ impl TriSurface {
                 })
             })
             .collect()
+    }
+
+    /// The triangles around each vertex, compressed: those of vertex `k` are
+    /// `around[start[k]..start[k + 1]]`.
+    fn triangles_around(&self) -> (Vec<usize>, Vec<usize>) {
+        let mut start = vec![0usize; self.vertices.len() + 1];
+        self.triangles.iter().flatten().for_each(|&k| start[k + 1] += 1);
+        (0..self.vertices.len()).for_each(|k| start[k + 1] += start[k]);
+        let mut next = start.clone();
+        let mut around = vec![0; start[self.vertices.len()]];
+        for (t, tri) in self.triangles.iter().enumerate() {
+            for &k in tri {
+                around[next[k]] = t;
+                next[k] += 1;
+            }
+        }
+        (start, around)
     }
 
     /// Area-weighted outward unit normal at each vertex (zero for unused vertices).
