@@ -267,7 +267,7 @@ const PAD: usize = 2;
 /// The largest share of an organ's voxels that may be one voxel thick along some axis
 /// ([`VoxelMask::thin_share`]): a liver's, a pancreas's or a gallbladder's on 5 mm slices hold
 /// hardly any; stripes of a garbled image's rows, most.
-const MAX_THIN_SHARE: f64 = 0.5;
+pub(crate) const MAX_THIN_SHARE: f64 = 0.5;
 
 /// The fewest voxels an organ needs for its thin voxels' share to say whether it holds together.
 const JUDGED_VOXELS: usize = 10_000;

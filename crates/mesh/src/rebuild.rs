@@ -19,7 +19,7 @@
 use rayon::prelude::*;
 
 use crate::bvh::SurfaceBvh;
-use crate::isosurface::{mask_surface, ExtractOptions, ExtractReport};
+use crate::isosurface::{mask_surface, ExtractOptions, ExtractReport, MAX_THIN_SHARE};
 use crate::length::number;
 use crate::length::LengthUnit;
 use crate::repair::{largest_extent, repair_surface, RepairOptions, RepairReport};
@@ -162,8 +162,8 @@ fn refuse_flat(surface: &TriSurface) -> Result<f64, MeshError> {
 }
 
 /// The surface rebuilt through voxels (see the module's documentation); `reason` says why.
-/// Refused with a clear error: an empty or flat surface, one that encloses no volume, several
-/// pieces of similar size.
+/// Refused with a clear error: an empty or flat surface, one that encloses no volume or one
+/// mostly thinner than a voxel, several pieces of similar size.
 pub fn rebuild_surface(
     surface: &TriSurface,
     reason: String,
@@ -176,6 +176,16 @@ pub fn rebuild_surface(
         return Err(MeshError::Invalid(format!(
             "the surface encloses no volume at {} voxels (flat or open on every side): not an organ",
             number(voxel)
+        )));
+    }
+    // A sheet: the extraction's refusal of it would speak of an image's slices.
+    let thin = mask.thin_share();
+    if thin > MAX_THIN_SHARE {
+        return Err(MeshError::Invalid(format!(
+            "the surface is thinner than the voxels it is rebuilt through ({}) over {:.0} % of what it encloses: \
+             a sheet or a shell, not an organ's closed surface",
+            number(voxel),
+            100.0 * thin
         )));
     }
     // Refused there when it holds several pieces of similar size.
@@ -311,5 +321,22 @@ mod tests {
         let pillow = TriSurface { triangles: vec![[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]], ..square };
         assert!(error(&pillow).contains("the surface is flat"), "{}", error(&pillow));
         assert!(error(&TriSurface::default()).contains("no triangles"));
+    }
+
+    /// A closed surface thinner than the voxels it is rebuilt through (a pancake a voxel thick) is
+    /// refused as a sheet, in a surface's words, not an image's; one a few voxels thick is rebuilt.
+    #[test]
+    fn a_surface_thinner_than_its_voxels_is_refused_as_a_sheet() {
+        let options = RebuildOptions::default();
+        let pancake = |thickness: f64| {
+            let mut s = icosphere(30.0, 4);
+            s.vertices.iter_mut().for_each(|p| p[2] *= thickness / 60.0);
+            rebuild_surface(&s, "broken".into(), &options)
+        };
+        // Voxels of 60 / 150 = 0.4.
+        let error = pancake(0.5).unwrap_err().to_string();
+        assert!(error.contains("thinner than the voxels it is rebuilt through (0.4)"), "{error}");
+        assert!(!error.contains("image") && !error.contains("slice"), "{error}");
+        assert!(pancake(2.0).is_ok());
     }
 }
