@@ -15,7 +15,7 @@
 //!
 //! # Modules
 //! - [`data`]: datasets — the `.npy` format, sharded datasets, FEM generation, the grid and its
-//!   placement, splits, input corruption, point clouds as input.
+//!   placement, splits, input corruption.
 //! - [`net`]: the network — the 3D U-Net, its saved-model bundle, and the engines that run it
 //!   (the repacked CPU inference engine, the hand-written backward pass, and with the `cpu-burn`
 //!   or `gpu` cargo feature burn on the CPU or a GPU).
@@ -23,14 +23,19 @@
 //!   learned model beside the U-Net.
 //! - [`training`]: training (Adam, checkpoints, resume, fine-tuning), metrics, evaluation and the
 //!   learning curve.
+//! - [`model`]: a saved model of either kind, loaded and predicting.
+//! - [`points`]: point clouds (`.csv`, `.npy`) and grid tensors as a model's prediction input.
+//! - [`choosing`]: draws chosen where a reduced-order model is least sure (active learning).
 //! - [`Progress`]: how generation and training (and the application's long runs) report how far
 //!   they have come, for the caller to draw.
 
+pub mod choosing;
 pub mod data;
 mod error;
 mod fsutil;
 pub mod model;
 pub mod net;
+pub mod points;
 mod progress;
 pub mod rom;
 pub mod training;
@@ -42,7 +47,6 @@ pub use data::dataset::{
     Manifest, Normalization, Sample, Samples, ShardInfo, Statistics,
 };
 pub use data::grid::{encode_points, GridMesh, GridPlacement, GridShape, GridToMesh, CHANNELS, LAYOUT};
-pub use data::points::{PointCloud, PredictInput};
 pub use data::split::{IndexSet, Split, SplitPolicy};
 pub use error::LearnError;
 pub use model::{LearnedModel, Method, Model, ModelPredictor, Projected, MODEL_FILE};
@@ -50,6 +54,7 @@ pub use net::compute::Compute;
 pub use net::inference::InferenceNet;
 pub use net::predict::{time_prediction, Predictor, Timing};
 pub use net::unet::{Gradients, Schedule, TrainedModel, TrainingInfo, UNet, UNetConfig};
+pub use points::{PointCloud, PredictInput};
 pub use progress::{Progress, Silent};
 pub use training::curve::CurveRow;
 pub use training::evaluation::{

@@ -20,7 +20,7 @@ fn masked_mse_matches_hand_computation() {
     #[cfg(feature = "cpu-burn")]
     {
         // burn's loss, as its engine trains on.
-        use augsim_learn::training::metrics::masked_mse;
+        use augsim_learn::net::burn_unet::masked_mse;
         use burn::tensor::{Device, Tensor, TensorData};
         let device = Device::flex();
         let t = |v: &Vec<f32>| Tensor::<5>::from_data(TensorData::new(v.clone(), [2, 3, 2, 1, 1]), &device);

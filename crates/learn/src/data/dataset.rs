@@ -15,7 +15,7 @@
 //! place, so a killed writer leaves a consistent dataset that [`DatasetWriter::create_or_resume`]
 //! continues. Samples carry their generation index (the random seed of a sample is derived from
 //! the dataset seed and this index by the generator), and a generation that failed is recorded
-//! with its reason instead of a sample. A dataset with σ-chosen draws ([`crate::data::chosen`])
+//! with its reason instead of a sample. A dataset with σ-chosen draws ([`crate::choosing`])
 //! records how they were chosen in its manifest and keeps the models that chose them in `chosen/`.
 
 use std::ops::Range;

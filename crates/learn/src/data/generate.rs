@@ -13,7 +13,7 @@
 //! block's earlier samples again first); a split generation's parts are runs of whole blocks
 //! ([`part_range`]). A sample whose solve fails is recorded
 //! in the manifest with its reason. Draws chosen where a reduced-order model is least sure follow
-//! the uniform ones ([`Generator::run_chosen`], in [`crate::data::chosen`]).
+//! the uniform ones ([`Generator::run_chosen`], in [`crate::choosing`]).
 
 use std::collections::HashMap;
 use std::ops::Range;

@@ -5,7 +5,7 @@
 //! merging; together with the dataset's [source](crate::Manifest::source_id) it names exactly
 //! the samples that shaped a model (its training samples set the weights and the
 //! normalisation, its validation samples chose the checkpoint). Validation and test samples are
-//! uniform draws only: a σ-chosen draw ([`crate::data::chosen`]) is not a draw of the loads to
+//! uniform draws only: a σ-chosen draw ([`crate::choosing`]) is not a draw of the loads to
 //! come, and always trains.
 
 use serde::{Deserialize, Serialize};

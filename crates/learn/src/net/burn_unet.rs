@@ -14,8 +14,18 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::data::grid::GridShape;
 use crate::net::unet::{Gradients, LayerKind, LayerParams, Levels, UNet};
-use crate::training::metrics::masked_mse;
 use crate::{LearnError, Result};
+
+/// Masked MSE loss of a batch: `pred`, `target` `[B, 3, nx, ny, nz]`, `mask` `[B, 1, nx, ny, nz]`
+/// (0/1), as burn tensors (on arrays: [`masked_mse_values`](crate::training::metrics::masked_mse_values)).
+/// Returns a one-element tensor; zero when the mask is empty.
+pub fn masked_mse(pred: Tensor<5>, target: Tensor<5>, mask: Tensor<5>) -> Tensor<1> {
+    let diff = pred - target;
+    let squared_norm = diff.clone().mul(diff).sum_dim(1);
+    let total = squared_norm.mul(mask.clone()).sum();
+    let nodes = mask.sum().clamp_min(1.0);
+    total.div(nodes)
+}
 
 /// Two convolutions with ReLU.
 #[derive(Module, Debug)]

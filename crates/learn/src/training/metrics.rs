@@ -5,28 +5,15 @@
 //! - Error of one sample `e`: mean over its masked nodes of `‖u_pred − u_true‖` (m).
 //! - Over a set: mean `ē`, population standard deviation `σ(e)`, maximum, and the worst sample.
 
-#[cfg(feature = "cpu-burn")]
-use burn::tensor::Tensor;
 use mesh::length::mm;
 use serde::{Deserialize, Serialize};
 
 use crate::data::grid::{GridShape, CHANNELS};
 use crate::{LearnError, Result};
 
-/// Masked MSE loss of a batch: `pred`, `target` `[B, 3, nx, ny, nz]`, `mask` `[B, 1, nx, ny, nz]`
-/// (0/1), as burn tensors (the `cpu-burn` feature). Returns a one-element tensor; zero when the
-/// mask is empty.
-#[cfg(feature = "cpu-burn")]
-pub fn masked_mse(pred: Tensor<5>, target: Tensor<5>, mask: Tensor<5>) -> Tensor<1> {
-    let diff = pred - target;
-    let squared_norm = diff.clone().mul(diff).sum_dim(1);
-    let total = squared_norm.mul(mask.clone()).sum();
-    let nodes = mask.sum().clamp_min(1.0);
-    total.div(nodes)
-}
-
 /// Masked MSE of one or more samples given as plain arrays: the mean over masked nodes of the
-/// squared error norm (the training loss).
+/// squared error norm (the training loss; burn's engine trains on its tensors' own,
+/// [`masked_mse`](crate::net::burn_unet::masked_mse) with the `cpu-burn` feature).
 pub fn masked_mse_values(pred: &[f32], target: &[f32], masks: &[u8], grid: GridShape) -> Result<f64> {
     let samples = check_lengths(pred, target, masks, grid)?;
     let n = grid.nodes();
