@@ -1165,10 +1165,15 @@ impl Labelmap {
             }
         };
         let inside: Vec<bool> = self.labels.iter().skip(layer).step_by(self.layers).map(|&l| l == label).collect();
-        let description = match self.names_of(layer, label)[..] {
+        let mut description = match self.names_of(layer, label)[..] {
             [n] => format!("label {label} ('{n}')"),
             _ => format!("label {label}"),
         };
+        // A number is a label's value: a segment named by another number is said to be elsewhere.
+        let elsewhere = self.segments.iter().find(|s| s.0.trim() == choice && (s.1, s.2) != (layer, label));
+        if let (Ok(_), Some(s)) = (choice.parse::<i32>(), elsewhere) {
+            description += &format!(" (the segment named '{choice}' is label {}: choose {} for it)", s.2, s.2);
+        }
         Ok((VoxelMask { dims: self.dims, inside, affine: self.affine }, description, (layer, label)))
     }
 }
@@ -1888,6 +1893,20 @@ mod tests {
         // A segment whose own name holds a plus is that segment.
         let named = Labelmap { segments: vec![("liver+tumour".into(), 0, 5)], ..map.clone() };
         assert_eq!(named.select("liver+tumour").unwrap().0.count(), count(5));
+    }
+
+    /// A number chooses a label's value, and says so where a segment is named by that number but
+    /// holds another label (3D Slicer names segments imported from a labelmap by their values,
+    /// which may change when segments are removed).
+    #[test]
+    fn a_number_that_names_another_segment_says_where_that_one_is() {
+        let (map, _) = two_balls(Frame::Lps);
+        let count = |l: i32| map.labels.iter().filter(|&&x| x == l).count();
+        let named = Labelmap { segments: vec![("liver".into(), 0, 5), ("5".into(), 0, 2)], ..map.clone() };
+        let (mask, description) = named.select("5").unwrap();
+        assert_eq!(mask.count(), count(5));
+        assert_eq!(description, "label 5 ('liver') (the segment named '5' is label 2: choose 2 for it)");
+        assert_eq!(named.select("2").unwrap().1, "label 2 ('5')");
     }
 
     #[test]
