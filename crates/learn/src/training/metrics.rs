@@ -12,8 +12,8 @@ use crate::data::grid::{GridShape, CHANNELS};
 use crate::{LearnError, Result};
 
 /// Masked MSE of one or more samples given as plain arrays: the mean over masked nodes of the
-/// squared error norm (the training loss; burn's engine trains on its tensors' own,
-/// [`masked_mse`](crate::net::burn_unet::masked_mse) with the `cpu-burn` feature).
+/// squared error norm (the training loss; burn's engine, with the `cpu-burn` feature, trains on
+/// its tensors' own, `net::burn_unet::masked_mse`).
 pub fn masked_mse_values(pred: &[f32], target: &[f32], masks: &[u8], grid: GridShape) -> Result<f64> {
     let samples = check_lengths(pred, target, masks, grid)?;
     let n = grid.nodes();
