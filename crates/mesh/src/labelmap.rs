@@ -1170,9 +1170,10 @@ impl Labelmap {
             _ => format!("label {label}"),
         };
         // A number is a label's value: a segment named by another number is said to be elsewhere.
-        let elsewhere = self.segments.iter().find(|s| s.0.trim() == choice && (s.1, s.2) != (layer, label));
-        if let (Ok(_), Some(s)) = (choice.parse::<i32>(), elsewhere) {
-            description += &format!(" (the segment named '{choice}' is label {}: choose {} for it)", s.2, s.2);
+        if choice.parse::<i32>().is_ok() {
+            if let Some(s) = self.segments.iter().find(|s| s.0.trim() == choice && (s.1, s.2) != (layer, label)) {
+                description += &format!(" (the segment named '{choice}' is label {0}: choose {0} for it)", s.2);
+            }
         }
         Ok((VoxelMask { dims: self.dims, inside, affine: self.affine }, description, (layer, label)))
     }
