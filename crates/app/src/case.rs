@@ -22,7 +22,7 @@ use scenario::{CaseScenario, DatasetScenario, Fixed, MeshSource, StaticScenario}
 use crate::models::ScenarioSource;
 use crate::models::{fem_model, hybrid_options, network_model, Network};
 use crate::registration::{LearnedWay, MethodSpec, RegistrationSpec, TargetsSpec};
-use crate::simulate::{simulate_cloud, CameraModel};
+use crate::simulate::simulate_cloud;
 
 /// Tetrahedra of the ground-truth phantom of the built-in case.
 pub const TRUTH_TETS: usize = 9000;
@@ -76,12 +76,12 @@ impl SyntheticCase {
     }
 
     /// The same truth seen by `camera`: each frame's cloud drawn anew from its deformed surface
-    /// (frame `k` from `seed + k`) and moved by the case's pose. Another view of a case costs no
-    /// solve of its truth.
-    pub fn seen_by(mut self, camera: &CameraModel, seed: u64) -> Result<SyntheticCase> {
+    /// (frame `k` from the camera's seed + `k`) and moved by the case's pose. Another view of a
+    /// case costs no solve of its truth.
+    pub fn seen_by(mut self, camera: &CameraSpec) -> Result<SyntheticCase> {
         for (k, frame) in self.frames.iter_mut().enumerate() {
             let surface = self.truth_organ.deformed_surface(&frame.truth_u);
-            frame.cloud = simulate_cloud(&surface, camera, seed + k as u64)?;
+            frame.cloud = simulate_cloud(&surface, &CameraSpec { seed: camera.seed + k as u64, ..*camera })?;
             frame.cloud.iter_mut().for_each(|x| *x = self.pose.apply(*x));
         }
         Ok(self)
@@ -123,17 +123,16 @@ pub fn synthetic_case(scenario: &CaseScenario) -> Result<SyntheticCase> {
             markers.iter().map(|&n| pose.apply(std::array::from_fn(|d| nodes[n][d] + u[3 * n + d]))).collect();
         frames.push(CaseFrame { force, cloud: Vec::new(), truth, truth_u: u });
     }
-    SyntheticCase { frames, targets, pose, truth_organ: organ }.seen_by(&camera_model(camera), camera.seed)
+    SyntheticCase { frames, targets, pose, truth_organ: organ }.seen_by(camera)
 }
 
 /// The built-in case ([`CaseScenario::builtin`]: the Neo-Hookean phantom, E = 5 kPa, ν = 0.48,
 /// on quadratic tetrahedra built from about [`TRUTH_TETS`] tetrahedra, fixed between the lobes) with its `push` patch
-/// pressed down by `force` N, seen by `camera` from `seed`, without misalignment.
-pub fn phantom_push(force: f64, camera: &CameraModel, seed: u64) -> Result<SyntheticCase> {
+/// pressed down by `force` N, seen by `camera`, without misalignment.
+pub fn phantom_push(force: f64, camera: &CameraSpec) -> Result<SyntheticCase> {
     let mut scenario = CaseScenario::builtin();
     scenario.truth.force = force;
-    scenario.camera =
-        CameraSpec { view: camera.view, points: camera.points, noise: camera.noise, outliers: camera.outliers, seed };
+    scenario.camera = camera.clone();
     scenario.misalignment = Misalignment::default();
     synthetic_case(&scenario)
 }
@@ -206,11 +205,6 @@ pub const AR_SCENARIO: &str = "liver_ar_t10";
 /// The built-in scenario [`AR_SCENARIO`], parsed.
 pub fn ar_scenario() -> DatasetScenario {
     DatasetScenario::builtin(AR_SCENARIO)
-}
-
-/// The camera model of a case's camera.
-pub fn camera_model(camera: &CameraSpec) -> CameraModel {
-    CameraModel { view: camera.view, points: camera.points, noise: camera.noise, outliers: camera.outliers }
 }
 
 /// The target errors (m) of a network model ([`network_model`]: its organ and deformer) fed the

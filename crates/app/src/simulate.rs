@@ -8,23 +8,13 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
 use anyhow::{anyhow, bail, Result};
+use scenario::registration::CameraSpec;
 
-/// How the camera sees the organ.
-#[derive(Clone, Debug, PartialEq)]
-pub struct CameraModel {
-    /// Viewing direction (the camera looks along it).
-    pub view: Point,
-    /// Points sampled uniformly by area on the visible triangles.
-    pub points: usize,
-    /// Standard deviation of the isotropic Gaussian noise added to each point (m).
-    pub noise: f64,
-    /// Fraction of extra points drawn uniformly in the surface's bounding box, grown by 10 %.
-    pub outliers: f64,
-}
-
-/// A cloud of `camera.points` points on the visible part of `surface` (outward oriented)
-/// plus outliers, reproducible from `seed`.
-pub fn simulate_cloud(surface: &TriSurface, camera: &CameraModel, seed: u64) -> Result<Vec<Point>> {
+/// A cloud of `camera.points` points on the visible part of `surface` (outward oriented), each
+/// moved by isotropic Gaussian noise, plus `camera.outliers` × `camera.points` points uniform in
+/// the surface's bounding box grown by 10 %; reproducible from the camera's seed.
+pub fn simulate_cloud(surface: &TriSurface, camera: &CameraSpec) -> Result<Vec<Point>> {
+    let seed = camera.seed;
     if !(camera.noise >= 0.0 && camera.noise.is_finite() && camera.outliers >= 0.0 && camera.outliers.is_finite()) {
         bail!("invalid camera model {camera:?}");
     }

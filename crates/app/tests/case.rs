@@ -3,12 +3,12 @@
 
 use std::path::Path;
 
-use augsim_app::case::{camera_model, case_methods, synthetic_case};
-use augsim_app::simulate::{simulate_cloud, CameraModel};
+use augsim_app::case::{case_methods, synthetic_case};
+use augsim_app::simulate::simulate_cloud;
 use fem::{Formulation, Law, Material, Problem, SolverOptions, StaticSolver};
 use mesh::Point;
 use register::{Organ, RegistrationOptions, RigidTransform};
-use scenario::registration::MethodKind;
+use scenario::registration::{CameraSpec, MethodKind};
 use scenario::CaseScenario;
 
 /// The built-in case's text.
@@ -51,7 +51,7 @@ fn the_builtin_case_is_the_documented_one() {
 }
 
 /// The case built by hand from its definition: the phantom, its law and loads, the camera.
-fn hard_coded(tets: usize, force: f64, camera: &CameraModel, seed: u64) -> (Vec<Point>, Vec<Point>, Vec<Point>) {
+fn hard_coded(tets: usize, force: f64, camera: &CameraSpec) -> (Vec<Point>, Vec<Point>, Vec<Point>) {
     let m = mesh::phantom::liver_phantom(tets).unwrap();
     let mut p = Problem::new(m, Material::new(Law::NeoHookean, 5000.0, 0.48));
     let fixed = p.mesh.region("fixed").unwrap().to_vec();
@@ -63,7 +63,7 @@ fn hard_coded(tets: usize, force: f64, camera: &CameraModel, seed: u64) -> (Vec<
     let targets: Vec<Point> = markers.iter().map(|&n| p.mesh.nodes[n]).collect();
     let truth = markers.iter().map(|&n| std::array::from_fn(|d| p.mesh.nodes[n][d] + u[3 * n + d])).collect();
     let organ = Organ::new(p.mesh, None).unwrap();
-    let cloud = simulate_cloud(&organ.deformed_surface(&u), camera, seed).unwrap();
+    let cloud = simulate_cloud(&organ.deformed_surface(&u), camera).unwrap();
     (cloud, targets, truth)
 }
 
@@ -71,7 +71,7 @@ fn hard_coded(tets: usize, force: f64, camera: &CameraModel, seed: u64) -> (Vec<
 fn a_scenario_builds_the_case_exactly_as_its_definition_says() {
     let s = CaseScenario::load(Path::new("register_case_test")).unwrap();
     let case = synthetic_case(&s).unwrap();
-    let (cloud, targets, truth) = hard_coded(s.truth.tets, s.truth.force, &camera_model(&s.camera), s.camera.seed);
+    let (cloud, targets, truth) = hard_coded(s.truth.tets, s.truth.force, &s.camera);
     assert_eq!(case.frames.len(), 1);
     let frame = case.frames[0].clone();
     assert_eq!((frame.cloud, case.targets, frame.truth), (cloud, targets, truth), "bit for bit");
@@ -106,7 +106,7 @@ fn a_press_and_release_rises_to_the_force_and_falls_back_each_frame_seen_anew() 
     assert_eq!(case.peak_index(), 2);
     // The peak frame, warm-started from the frames before it, is the single frame at the force
     // solved from rest (to the solver's tolerance), seen with the seed of its place.
-    let (_, _, truth) = hard_coded(s.truth.tets, f, &camera_model(&s.camera), s.camera.seed);
+    let (_, _, truth) = hard_coded(s.truth.tets, f, &s.camera);
     let motion = mesh::stats::mean(&register::target_errors(&case.targets, &truth));
     let off = mesh::stats::max(&register::target_errors(&case.peak().truth, &truth));
     assert!(off < 1e-4 * motion, "{off} m off the single frame for a motion of {motion} m");

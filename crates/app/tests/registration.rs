@@ -5,28 +5,33 @@ use augsim_app::case::{
     ar_network_model, compare, corotational_model, network_from_truth, phantom_push, Method, AR_SCENARIO,
 };
 use augsim_app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
-use augsim_app::simulate::CameraModel;
 use fem::{Law, Material, Problem, SolverOptions};
 use register::organ::displaced;
 use register::target_errors;
 use register::{register_frame, FemDeformer, Organ, RegistrationOptions};
+use scenario::registration::CameraSpec;
 
 fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len() as f64
 }
 
-/// The built-in phantom pushed by 1.5 N (the markers move by 18 mm on average), seen by `camera`
-/// from seed 7: its truth is solved once for every test here.
-fn pushed(camera: &CameraModel) -> augsim_app::case::SyntheticCase {
+/// A camera looking along `view`, seeing `points` points with `noise` (m) and a share of
+/// `outliers`, from seed 7.
+fn camera(view: [f64; 3], points: usize, noise: f64, outliers: f64) -> CameraSpec {
+    CameraSpec { view, points, noise, outliers, seed: 7 }
+}
+
+/// The built-in phantom pushed by 1.5 N (the markers move by 18 mm on average), seen by `camera`:
+/// its truth is solved once for every test here.
+fn pushed(camera: &CameraSpec) -> augsim_app::case::SyntheticCase {
     static TRUTH: std::sync::OnceLock<augsim_app::case::SyntheticCase> = std::sync::OnceLock::new();
-    let any = CameraModel { view: [0.0, 0.0, -1.0], points: 10, noise: 0.0, outliers: 0.0 };
-    let truth = TRUTH.get_or_init(|| phantom_push(1.5, &any, 7).unwrap());
-    truth.clone().seen_by(camera, 7).unwrap()
+    let truth = TRUTH.get_or_init(|| phantom_push(1.5, &self::camera([0.0, 0.0, -1.0], 10, 0.0, 0.0)).unwrap());
+    truth.clone().seen_by(camera).unwrap()
 }
 
 /// (TRE, no-deformation TRE, surface residual) in m of a co-rotational FEM
 /// registration on a coarser phantom, for the truth of [`pushed`].
-fn fem_tre(camera: &CameraModel) -> (f64, f64, f64) {
+fn fem_tre(camera: &CameraSpec) -> (f64, f64, f64) {
     let case = pushed(camera);
     let (organ, mut deformer) = corotational_model().unwrap();
     let stencils = organ.locate(&case.targets, "target").unwrap();
@@ -42,13 +47,13 @@ fn fem_tre(camera: &CameraModel) -> (f64, f64, f64) {
 
 #[test]
 fn fem_registration_recovers_hidden_markers_from_a_partial_cloud() {
-    let camera = CameraModel { view: [0.0, 0.0, -1.0], points: 1500, noise: 0.0, outliers: 0.0 };
+    let camera = camera([0.0, 0.0, -1.0], 1500, 0.0, 0.0);
     let (tre, rigid, residual) = fem_tre(&camera);
     eprintln!("TRE {:.2} mm, no deformation {:.2} mm, residual {:.2} mm", tre * 1e3, rigid * 1e3, residual * 1e3);
     assert!(rigid > 1e-2, "the markers must move: {rigid}");
     assert!(tre < 0.2 * rigid, "TRE {tre} against {rigid} without deformation");
     assert!(residual < 5e-4, "the surface must meet the cloud: {residual}");
-    let noisy = CameraModel { noise: 1e-3, outliers: 0.1, ..camera };
+    let noisy = CameraSpec { noise: 1e-3, outliers: 0.1, ..camera };
     let (tre_noisy, _, residual_noisy) = fem_tre(&noisy);
     eprintln!("noisy: TRE {:.2} mm, residual {:.2} mm", tre_noisy * 1e3, residual_noisy * 1e3);
     assert!(tre_noisy < tre + 1e-3, "1 mm noise and 10 % outliers: TRE {tre_noisy} against {tre}");
@@ -62,7 +67,7 @@ const ROM: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_ar_ro
 
 /// (TRE, no-deformation TRE, TRE of the network fed the truth's surface motion) in m of the
 /// shipped U-Net's registration of the 1.5 N case.
-fn network_tre(camera: &CameraModel) -> (f64, f64, f64) {
+fn network_tre(camera: &CameraSpec) -> (f64, f64, f64) {
     let case = pushed(camera);
     let model = learn::Model::load(std::path::Path::new(MODEL)).unwrap();
     let (organ, deformer) = ar_network_model(&model).unwrap();
@@ -77,7 +82,7 @@ fn network_tre(camera: &CameraModel) -> (f64, f64, f64) {
 fn network_registration_recovers_hidden_markers_and_degrades_gracefully() {
     // The network's own marker error on its test split is 1.5 mm (ē 1.7 mm); the truth here
     // comes from another law, mesh and load than its training data.
-    let clean = CameraModel { view: [0.0, 0.0, -1.0], points: 1500, noise: 0.0, outliers: 0.0 };
+    let clean = camera([0.0, 0.0, -1.0], 1500, 0.0, 0.0);
     let (tre, rigid, from_truth) = network_tre(&clean);
     eprintln!(
         "U-Net: TRE {:.2} mm, no deformation {:.2} mm, fed the truth's surface motion {:.2} mm",
@@ -88,13 +93,13 @@ fn network_registration_recovers_hidden_markers_and_degrades_gracefully() {
     assert!(rigid > 1e-2 && tre < 3e-3, "TRE {tre} against {rigid} without deformation");
     // The truth's own surface motion, read on its finer surface at the network's input nodes.
     assert!(from_truth < 3e-3, "fed the truth's surface motion: TRE {from_truth} against {rigid}");
-    let noisy = CameraModel { noise: 1e-3, outliers: 0.1, ..clean };
+    let noisy = CameraSpec { noise: 1e-3, outliers: 0.1, ..clean };
     let (tre_noisy, _, _) = network_tre(&noisy);
     eprintln!("noisy: TRE {:.2} mm", tre_noisy * 1e3);
     assert!(tre_noisy < tre + 1e-3, "1 mm noise and 10 % outliers: TRE {tre_noisy} against {tre}");
     // A camera looking from the side sees less of the pushed lobe: worse, but still far better
     // than no deformation.
-    let side = CameraModel { view: [0.6, 0.0, -0.8], points: 800, ..noisy };
+    let side = CameraSpec { view: [0.6, 0.0, -0.8], points: 800, ..noisy };
     let (tre_side, _, _) = network_tre(&side);
     eprintln!("oblique view, 800 points: TRE {:.2} mm", tre_side * 1e3);
     assert!(tre_side < 0.5 * rigid, "oblique: TRE {tre_side} against {rigid}");
@@ -263,12 +268,12 @@ fn the_u_net_after_the_rom_s_shape_fit_beats_each_alone_on_a_deep_press() {
 }
 
 /// The reduced-order model streaming one still half view of the pressed phantom, frame after frame,
-/// stays where its first frame put it: the unseen half is the shape fit's extrapolation, held, not
-/// the membrane's spread of the seen half fed back into the model (which took a half view of the
-/// README's cloud from 4.95 to 14.87 mm over 6 frames).
+/// stays where its first frame put it: each frame fits its shape space under the model's own prior,
+/// the unseen half the fit's extrapolation, not the membrane's spread of the seen half fed back into
+/// the model (which took a half view of the README's cloud from 4.95 to 14.87 mm over 6 frames).
 #[test]
 fn the_rom_streaming_a_still_half_view_does_not_drift() {
-    let case = pushed(&CameraModel { view: [0.0, 0.0, -1.0], points: 1500, noise: 1e-3, outliers: 0.0 });
+    let case = pushed(&camera([0.0, 0.0, -1.0], 1500, 1e-3, 0.0));
     let peak = case.peak();
     let targets = TargetsSpec::Points(case.targets.clone());
     for side in [1.0, -1.0] {
@@ -290,7 +295,7 @@ fn the_rom_streaming_a_still_half_view_does_not_drift() {
 /// mm, against 18.1 mm without registration).
 #[test]
 fn the_u_net_follows_a_turning_camera() {
-    let case = pushed(&CameraModel { view: [0.0, 0.0, -1.0], points: 3000, noise: 1e-3, outliers: 0.0 });
+    let case = pushed(&camera([0.0, 0.0, -1.0], 3000, 1e-3, 0.0));
     let peak = case.peak();
     let rest = mean(&target_errors(&case.targets, &peak.truth));
     let targets = TargetsSpec::Points(case.targets.clone());
@@ -339,8 +344,8 @@ fn a_warm_started_frame_starts_past_the_ramp() {
         }
     }
     let (organ, _) = corotational_model().unwrap();
-    let camera = CameraModel { view: [0.0, 0.0, -1.0], points: 300, noise: 0.0, outliers: 0.0 };
-    let cloud = augsim_app::simulate::simulate_cloud(organ.surface(), &camera, 3).unwrap();
+    let camera = camera([0.0, 0.0, -1.0], 300, 0.0, 0.0);
+    let cloud = augsim_app::simulate::simulate_cloud(organ.surface(), &CameraSpec { seed: 3, ..camera }).unwrap();
     let options = RegistrationOptions { iterations: 2, tolerance: 0.0, ..RegistrationOptions::default() };
     let mut cold = Recording(Vec::new());
     register_frame(&organ, &mut cold, &cloud, None, &options).unwrap();
@@ -364,8 +369,8 @@ fn a_frame_past_its_time_budget_stops_and_says_so() {
         }
     }
     let (organ, _) = corotational_model().unwrap();
-    let camera = CameraModel { view: [0.0, 0.0, -1.0], points: 300, noise: 0.0, outliers: 0.0 };
-    let cloud = augsim_app::simulate::simulate_cloud(organ.surface(), &camera, 3).unwrap();
+    let camera = camera([0.0, 0.0, -1.0], 300, 0.0, 0.0);
+    let cloud = augsim_app::simulate::simulate_cloud(organ.surface(), &CameraSpec { seed: 3, ..camera }).unwrap();
     let options = RegistrationOptions { iterations: 5, tolerance: 0.0, ..RegistrationOptions::default() };
     let free = register_frame(&organ, &mut Slow, &cloud, None, &options).unwrap();
     assert_eq!(free.iterations, 5);
@@ -389,7 +394,7 @@ fn a_frame_past_its_time_budget_stops_and_says_so() {
 /// cloud is not flagged.
 #[test]
 fn clouds_that_cannot_be_the_organ_are_refused_or_flagged() {
-    let camera = CameraModel { view: [0.0, 0.0, -1.0], points: 1500, noise: 1e-3, outliers: 0.05 };
+    let camera = camera([0.0, 0.0, -1.0], 1500, 1e-3, 0.05);
     let case = pushed(&camera);
     let (organ, mut deformer) = corotational_model().unwrap();
     let opts = RegistrationOptions::default();

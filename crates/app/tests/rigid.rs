@@ -5,11 +5,12 @@
 use std::path::Path;
 
 use augsim_app::case::{case_methods, compare, synthetic_case};
-use augsim_app::simulate::{simulate_cloud, CameraModel};
+use augsim_app::simulate::simulate_cloud;
 use mesh::sampling::sample_visible;
 use mesh::stats::ms;
 use mesh::{Point, TriSurface};
 use register::{rigid_align, IcpMetric, Organ, RegistrationOptions, RigidOptions, RigidTransform};
+use scenario::registration::CameraSpec;
 use scenario::CaseScenario;
 
 /// The rest surface of the registration models' phantom (3,000 T4).
@@ -57,10 +58,13 @@ fn icp_recovers_a_rotation_and_translation_of_the_rest_surface() {
 #[test]
 fn icp_recovers_the_pose_from_a_partial_noisy_cloud_with_outliers() {
     let surface = rest_surface();
-    let camera = CameraModel { view: [0.0, 0.0, -1.0], points: 1500, noise: 1e-3, outliers: 0.05 };
+    let camera = CameraSpec { view: [0.0, 0.0, -1.0], points: 1500, noise: 1e-3, outliers: 0.05, seed: 1 };
     for seed in [1, 2, 3] {
-        let cloud: Vec<Point> =
-            simulate_cloud(&surface, &camera, seed).unwrap().into_iter().map(|p| pose().apply(p)).collect();
+        let cloud: Vec<Point> = simulate_cloud(&surface, &CameraSpec { seed, ..camera })
+            .unwrap()
+            .into_iter()
+            .map(|p| pose().apply(p))
+            .collect();
         let (angle, shift, r) = recovery(&surface, &cloud, &RigidOptions::default());
         eprintln!(
             "seed {seed}: {angle:.3}°, {shift:.3} mm, {} iterations, {} of {} kept, rms {:.2} mm, {:.1} ms",
@@ -73,8 +77,8 @@ fn icp_recovers_the_pose_from_a_partial_noisy_cloud_with_outliers() {
         assert!(angle < 1.0 && shift < 1.0, "seed {seed}: {angle}° {shift} mm");
     }
     // An oblique camera that sees less of the organ, 500 points.
-    let side = CameraModel { view: [0.6, 0.0, -0.8], points: 500, ..camera };
-    let cloud: Vec<Point> = simulate_cloud(&surface, &side, 4).unwrap().into_iter().map(|p| pose().apply(p)).collect();
+    let side = CameraSpec { view: [0.6, 0.0, -0.8], points: 500, seed: 4, ..camera };
+    let cloud: Vec<Point> = simulate_cloud(&surface, &side).unwrap().into_iter().map(|p| pose().apply(p)).collect();
     let (angle, shift, _) = recovery(&surface, &cloud, &RigidOptions::default());
     eprintln!("oblique, 500 points: {angle:.3}°, {shift:.3} mm");
     assert!(angle < 1.0 && shift < 2.0, "oblique: {angle}° {shift} mm");
