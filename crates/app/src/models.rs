@@ -136,24 +136,22 @@ pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
 
 /// The registration of a learned model on its scenario's organ, its loop's settings from
 /// `options` (the case's settings for its learned models). A model with a basis (the reduced-order
-/// model) fits its shape space on a frame from rest ([`ShapeDeformer`], with its own loop budgets);
-/// on a stream's warm-started frame it fits once from the last frame's posterior, then predicts
-/// from a membrane fitted to the matches where the cloud sees the surface, the unseen part held at
-/// the fit's ([`NetworkDeformer::holding_unseen`], [`HybridDeformer::on_streams`]). On the design
-/// cases streamed (the built-in case pressed at 1–2.5 N, lifted, dragged and pulled; 21 frames
-/// each) that left 1.70 mm over the frames, where the membrane loop alone on the warm-started
-/// frames (its unseen part spread from the seen) left 1.69 mm; seen by oblique cameras (the 1.5 N
-/// press from the left, right and back) 1.25, 2.10 and 1.49 mm against 2.16, 2.24 and 2.04 mm; and
-/// on a still half view it settles (4.95 to 4.27 mm over 100 frames) where the membrane loop alone
-/// drifted (4.95 to 14.87 mm over 6). From rest, the held membrane after the fit lost on the design cases
-/// (2.89 mm against the fit's 2.42 mm). The U-Net fits a membrane to the matches and predicts from
-/// it ([`NetworkDeformer`]), on a stream's warm-started frames the unseen held at the last frame's
-/// ([`NetworkDeformer::holding_unseen_on_warm_frames`]); given a `basis` (a reduced-order model), it predicts from the shape fit
-/// of that model's shape space ([`HybridDeformer`], [`NETWORK_AFTER_FIT`]), the surface unseen held
-/// at the fit's, and on a warm-started frame fits once from the last posterior first: on the design
-/// cases streamed 1.42 mm over the frames where the U-Net's own loop on those frames (the unseen
-/// spread by the membrane) left 1.54 mm, from rest 2.08 against 2.09 mm; on a stream whose camera
-/// turns 30° a frame it left 1.54 mm where the U-Net's loop diverged (17.9 mm).
+/// model) fits its shape space ([`ShapeDeformer`], with its own loop budgets): from rest coarse to
+/// fine, on a stream's warm-started frame [`ROM_WARM_ITERATIONS`] iterations of all its modes under
+/// the model's own prior ([`rom_stream_shape`]). On the design cases streamed (the built-in case
+/// pressed at 1–2.5 N, lifted, dragged and pulled; 21 frames each) that left 2.54 mm at the peak
+/// and 1.59 mm over the frames (93 % of the targets within 2σ), where one fit from the last
+/// frame's posterior, then a membrane fitted to the matches where the cloud sees the surface (the
+/// unseen held at the fit's) left 2.69 and 1.70 mm: the membrane went astray on a lift of the right
+/// lobe (3.65 mm at the peak against 1.87 mm). The U-Net fits a membrane to the matches and
+/// predicts from it ([`NetworkDeformer`]), on a stream's warm-started frames the unseen held at the
+/// last frame's ([`NetworkDeformer::holding_unseen_on_warm_frames`]); given a `basis` (a
+/// reduced-order model), it predicts from the shape fit of that model's shape space
+/// ([`HybridDeformer`], [`NETWORK_AFTER_FIT`]), the surface unseen held at the fit's, and on a
+/// warm-started frame fits once from the last posterior first: on the design cases streamed 1.42 mm
+/// over the frames where the U-Net's own loop on those frames (the unseen spread by the membrane)
+/// left 1.54 mm, from rest 2.08 against 2.09 mm; on a stream whose camera turns 30° a frame it left
+/// 1.54 mm where the U-Net's loop diverged (17.9 mm).
 pub fn learned_registration(
     network: &Network,
     basis: Option<&Model>,
@@ -162,9 +160,9 @@ pub fn learned_registration(
     let (organ, membrane) = network_model(network)?;
     let (deformer, options): (Box<dyn Deformer + Send>, _) = match (network.model, basis) {
         (Model::Reduced(_), None) => {
-            let fit = shape_fit(network.model, &organ)?;
-            let membrane = Box::new(membrane.holding_unseen());
-            (Box::new(HybridDeformer::on_streams(Box::new(fit), membrane, 1)), shape::loop_options(options))
+            let fit = shape_fit(network.model, &organ, rom_stream_shape())?;
+            let options = RegistrationOptions { warm_iterations: ROM_WARM_ITERATIONS, ..shape::loop_options(options) };
+            (Box::new(fit), options)
         }
         (Model::Reduced(_), Some(_)) => {
             bail!("a reduced-order model fits its own shape space: another model's basis is for a U-Net")
@@ -178,7 +176,7 @@ pub fn learned_registration(
             (membrane, RegistrationOptions { two_way: TwoWay::Streamed, ..options.clone() })
         }
         (Model::UNet(_), Some(basis)) => {
-            let fit = shape_fit(basis, &organ)?;
+            let fit = shape_fit(basis, &organ, ShapeOptions::default())?;
             let membrane = Box::new(membrane.holding_unseen());
             let hybrid = HybridDeformer::new(Box::new(fit), membrane, shape::SHAPE_ITERATIONS)?
                 .first_on_warm_frames(1)
@@ -192,11 +190,24 @@ pub fn learned_registration(
 }
 
 /// The shape fit of `model`'s shape space (a model with a basis) on `organ`, whose mesh must lie in
-/// the model's grid, in the default settings.
-pub fn shape_fit(model: &Model, organ: &Organ) -> Result<ShapeDeformer> {
-    let shape = ShapeOptions::default();
+/// the model's grid, in the settings `shape`.
+pub fn shape_fit(model: &Model, organ: &Organ, shape: ShapeOptions) -> Result<ShapeDeformer> {
     let space = register::model_shape_space(model, organ, shape.max_modes)?;
     Ok(ShapeDeformer::new(space, organ, shape)?)
+}
+
+/// The iterations of a reduced-order model's shape fit on a stream's warm-started frame. On the
+/// design cases streamed (under [`rom_stream_shape`]), 3 and 4 left 2.54 and 2.58 mm at the peak
+/// (1.59 and 1.58 mm over the frames); 2 (with the prior widened by 0.8) 2.60 mm.
+pub const ROM_WARM_ITERATIONS: usize = 3;
+
+/// A reduced-order model's shape fit in its own registration: on a stream's warm-started frame, the
+/// model's own prior (`widening` 1: the last frame's posterior lends the start of the matches, not
+/// the prior). On the design cases streamed, widenings 0.3, 0.7 and 1 left 2.73, 2.63 and 2.54 mm at
+/// the peak (1.79, 1.66 and 1.59 mm over the frames): a prior held near the last frame lags behind a
+/// press that goes on (2.5 N: 6.86 mm at 0.3 against 6.52 mm).
+pub fn rom_stream_shape() -> ShapeOptions {
+    ShapeOptions { widening: 1.0, ..ShapeOptions::default() }
 }
 
 /// The U-Net's iterations after the shape fit of a reduced-order model's basis, on a frame from

@@ -16,7 +16,9 @@ use mesh::isosurface::ExtractOptions;
 use mesh::labelmap::is_labelmap;
 use mesh::length::LengthUnit;
 use mesh::{Point, TriSurface};
-use register::{shape, Deformer, HybridDeformer, NetworkDeformer, Organ, Registration, RegistrationOptions};
+use register::{
+    shape, Deformer, HybridDeformer, NetworkDeformer, Organ, Registration, RegistrationOptions, ShapeOptions,
+};
 use scenario::{DatasetScenario, MeshSource, StaticScenario};
 
 use crate::meshing::OrganInput;
@@ -175,7 +177,7 @@ impl MethodSpec {
                 let frame = fem.mesh.frame(&fem_dir)?;
                 let learned: Box<dyn Deformer + Send> = match &model {
                     // The shape space holds on any mesh inside the model's grid: the FEM's own.
-                    Model::Reduced(_) => Box::new(shape_fit(&model, &organ)?),
+                    Model::Reduced(_) => Box::new(shape_fit(&model, &organ, ShapeOptions::default())?),
                     Model::UNet(_) => {
                         let (scenario, dir) = scenario.read(DatasetScenario::load)?;
                         let (network_organ, network) =

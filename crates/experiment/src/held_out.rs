@@ -577,15 +577,15 @@ fn notes(base: &CaseScenario, runs: usize, reference_ms: f64) -> Result<Vec<Stri
              streams them: frame k is pushed by F sin(πk/{}) (F the case's force, at the middle frame), each truth \
              solved from the last and seen anew by the camera (seed + k − 1). Each method registers frame 1 from \
              rest and every next frame warm-started from the last, with its warm budget (the FEM {} iterations, the \
-             U-Net and \"ROM, membrane loop\" {}, \"ROM\" {}: one of its shape fit from the last frame's posterior, \
-             then its membrane loop, the surface unseen held at the fit's; the U-Net after the shape fit {} of the \
+             U-Net and \"ROM, membrane loop\" {}, \"ROM\" {} of its shape fit, all its modes under the model's \
+             own prior; the U-Net after the shape fit {}: one of the fit from the last frame's posterior, then the \
              U-Net's loop; the hybrid's frames are the FEM's); the U-Net (both rows) and \"ROM\" match \
              both ways on those frames: the surface they see over the cloud is matched to the cloud as well. \
              TRE at the peak frame, and over all frames; time: the median over the stream's frames, one run.",
             STREAM_FRAMES + 1,
             corotational(base).and_then(|m| m.warm_iterations).unwrap_or(base.registration.warm_iterations),
             network_budget(base).warm_iterations,
-            register::shape::SHAPE_WARM_ITERATIONS,
+            app::models::ROM_WARM_ITERATIONS,
             register::shape::SHAPE_WARM_ITERATIONS,
         ),
         "Diagnostic, not a method: the network fed the truth's own motion of its input nodes (each node takes \

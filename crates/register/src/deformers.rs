@@ -128,8 +128,7 @@ impl Deformer for FemDeformer {
 /// at once), or a learned model's match-and-membrane loop (predicting from the surface the shape
 /// fit found). A warm-started frame (a stream) starts near the cloud already: the second deformer
 /// alone registers it, or the second after the first's iterations from its last posterior
-/// ([`HybridDeformer::first_on_warm_frames`]); [`HybridDeformer::on_streams`] leaves a frame from
-/// rest to the first alone.
+/// ([`HybridDeformer::first_on_warm_frames`]).
 ///
 /// σ: the expected distance of the second's estimate to the truth under the first's posterior:
 /// with the first's error of standard deviation σ₁ and the second's estimate Δ away from the
@@ -141,8 +140,8 @@ impl Deformer for FemDeformer {
 pub struct HybridDeformer {
     first: Box<dyn Deformer + Send>,
     then: Box<dyn Deformer + Send>,
-    /// The first's iterations on a frame from rest before the second's (`None`: the first alone).
-    from_rest: Option<usize>,
+    /// The first's iterations on a frame from rest before the second's.
+    from_rest: usize,
     /// The first's iterations at the start of a warm-started frame.
     warm_first: usize,
     /// The iteration of a frame from rest at which the second deformer takes over, when the
@@ -177,17 +176,18 @@ impl HybridDeformer {
                 "a hybrid registration needs at least one iteration of its first model".into(),
             ));
         }
-        Ok(HybridDeformer::with_parts(first, then, Some(first_iterations), 0))
-    }
-
-    /// `first` alone on a frame from rest; on a warm-started frame `first_iterations` of `first`
-    /// (from its last posterior), then `then` from its estimate.
-    pub fn on_streams(
-        first: Box<dyn Deformer + Send>,
-        then: Box<dyn Deformer + Send>,
-        first_iterations: usize,
-    ) -> HybridDeformer {
-        HybridDeformer::with_parts(first, then, None, first_iterations)
+        Ok(HybridDeformer {
+            first,
+            then,
+            from_rest: first_iterations,
+            warm_first: 0,
+            handover: None,
+            warm: false,
+            first_estimate: None,
+            then_estimate: None,
+            last_observations: None,
+            sigma_factor: 1.0,
+        })
     }
 
     /// On a warm-started frame, `iterations` of the first deformer (from its last posterior) before
@@ -205,32 +205,12 @@ impl HybridDeformer {
         Ok(self)
     }
 
-    fn with_parts(
-        first: Box<dyn Deformer + Send>,
-        then: Box<dyn Deformer + Send>,
-        from_rest: Option<usize>,
-        warm_first: usize,
-    ) -> HybridDeformer {
-        HybridDeformer {
-            first,
-            then,
-            from_rest,
-            warm_first,
-            handover: None,
-            warm: false,
-            first_estimate: None,
-            then_estimate: None,
-            last_observations: None,
-            sigma_factor: 1.0,
-        }
-    }
-
     /// The iteration of the frame under way at which the second deformer takes over (`None`: it
     /// does not).
     fn takeover(&self) -> Option<usize> {
         match self.warm {
             true => Some(crate::frame::WARM_START_ITERATION + self.warm_first),
-            false => self.handover.or(self.from_rest),
+            false => Some(self.handover.unwrap_or(self.from_rest)),
         }
     }
 }
@@ -822,11 +802,10 @@ mod tests {
         }
     }
 
-    /// A hybrid's warm-started frame is the second deformer's; one on streams registers a frame
-    /// from rest with the first alone (even once it settles), and a warm-started frame with the
-    /// first for its iterations, then the second.
+    /// A hybrid's warm-started frame is the second deformer's, or, with the first's iterations on
+    /// warm-started frames, the first's for those iterations, then the second's from its estimate.
     #[test]
-    fn a_hybrid_on_streams_leaves_frames_from_rest_to_the_first() {
+    fn a_hybrid_s_warm_frame_is_the_second_s_after_the_first_s_iterations_there() {
         let organ = Organ::new(mesh::box_tet([0.0; 3], [0.04; 3], [2, 2, 2]).unwrap(), None).unwrap();
         let cloud = organ.surface().vertices.clone();
         let (first, then) = (Box::new(Offset(1e-3)), Box::new(Offset(2e-3)));
@@ -838,10 +817,10 @@ mod tests {
         };
         let mut hybrid = HybridDeformer::new(first.clone(), then.clone(), 5).unwrap();
         assert_eq!(frames(&mut hybrid, 1), ((2e-3, 4), (2e-3, 1)), "handed over from rest; the second alone");
-        let streams = || HybridDeformer::on_streams(first.clone(), then.clone(), 1);
-        assert_eq!(frames(&mut streams(), 1), ((1e-3, 2), (1e-3, 1)), "the first alone; its iteration only");
+        let first_on_warm = || HybridDeformer::new(first.clone(), then.clone(), 5).unwrap().first_on_warm_frames(1);
+        assert_eq!(frames(&mut first_on_warm(), 1).1, (1e-3, 1), "the first's iteration only");
         // The first does not settle the warm frame: the second goes on from its estimate.
-        assert_eq!(frames(&mut streams(), 3).1, (2e-3, 3), "the first's, then the second's");
+        assert_eq!(frames(&mut first_on_warm(), 3).1, (2e-3, 3), "the first's, then the second's");
     }
 
     /// A hybrid whose first deformer settles before its iterations are spent hands over to the
