@@ -9,7 +9,8 @@
 //!
 //! (point to plane, `x_i` a cloud point, `s_i(c)` the surface point it matched, `n_i` its
 //! normal, ρ Huber's loss at 2σ; `μ, Λ` the prior of the coefficients: the model's training
-//! coefficients from rest, the previous frame's posterior, widened, on a stream). The modes are
+//! coefficients from rest; on a stream, the previous frame's posterior widened by
+//! [`ShapeOptions::widening`], up to the model's own prior again). The modes are
 //! fitted coarse to fine (the leading few first, then more) for the capture range of large
 //! motions. The posterior covariance `(Jᵀ W J / σ² + Λ⁻¹)⁻¹` gives the standard deviation of every
 //! target: the registration's own, not the regression's.
