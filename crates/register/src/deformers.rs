@@ -205,12 +205,11 @@ impl HybridDeformer {
         Ok(self)
     }
 
-    /// The iteration of the frame under way at which the second deformer takes over (`None`: it
-    /// does not).
-    fn takeover(&self) -> Option<usize> {
+    /// The iteration of the frame under way at which the second deformer takes over.
+    fn takeover(&self) -> usize {
         match self.warm {
-            true => Some(crate::frame::WARM_START_ITERATION + self.warm_first),
-            false => Some(self.handover.unwrap_or(self.from_rest)),
+            true => crate::frame::WARM_START_ITERATION + self.warm_first,
+            false => self.handover.unwrap_or(self.from_rest),
         }
     }
 }
@@ -232,7 +231,7 @@ impl Deformer for HybridDeformer {
     }
 
     fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>> {
-        let then = match (self.warm, self.takeover().and_then(|at| iteration.checked_sub(at))) {
+        let then = match (self.warm, iteration.checked_sub(self.takeover())) {
             (_, None) => None,
             (false, Some(k)) => Some(crate::frame::WARM_START_ITERATION + k),
             (true, Some(_)) => Some(iteration),
@@ -247,7 +246,7 @@ impl Deformer for HybridDeformer {
     fn settled(&mut self, iteration: usize) -> bool {
         // The first deformer settled (on a frame from rest) or ended its part (on a warm-started
         // frame): the second takes over from its estimate.
-        let first_settled = self.takeover().is_some_and(|at| iteration < at);
+        let first_settled = iteration < self.takeover();
         if first_settled && !self.warm {
             self.handover = Some(iteration + 1);
         }
