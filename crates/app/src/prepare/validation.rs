@@ -164,14 +164,15 @@ type Solutions = Vec<Solution>;
 /// [`TRUTH_LEVELS`], `truth_of` meshing the others): of its pushes that a mesh twice as fine
 /// also solves, the one that moves the targets most is solved again there; while the `targets`
 /// move by more than [`TRUTH_TOLERANCE`] of their motion, the finer mesh becomes the truth.
-/// Returns the truth, its solutions of the `pushes` by `solve`, and a report line per check; each
-/// check that meshes the truth more finely is told to `progress` as it is found (the finer solves
+/// Returns the truth, its solutions of the `pushes` by `solve`, and a report line per check; a
+/// check that meshes the truth more finely is told to `progress` as it is made (the finer solves
 /// that follow may take long).
 fn converged_truth(
     mut truth: Truth,
     truth_of: &dyn Fn(usize) -> Result<Truth>,
     solve: &dyn Fn(&Truth, usize) -> Result<Solution>,
-    (targets, pushes): (&[Point], &[Push]),
+    targets: &[Point],
+    pushes: &[Push],
     progress: &dyn learn::Progress,
 ) -> Result<(Truth, Solutions, Vec<String>)> {
     let mut solutions: Solutions = (0..pushes.len()).map(|p| solve(&truth, p)).collect::<Result<_>>()?;
@@ -232,7 +233,7 @@ fn converged_truth(
                 100.0 * TRUTH_TOLERANCE
             ),
         };
-        lines.push(format!(
+        let line = format!(
             "validation: the truth's convergence under the {} N push: {} T10 against {} T10, its targets move by \
              {:.2} mm more or less (largest {:.2} mm; {:.1} % of their mean motion of {:.2} mm){unsolved}; {verdict}",
             pushes[p].force,
@@ -242,17 +243,13 @@ fn converged_truth(
             mm(mesh::stats::max(&change)),
             100.0 * share,
             mm(motion)
-        ));
+        );
         if converged {
+            lines.push(line);
             break;
         }
-        progress.line(&format!(
-            "validation: the truth of {} T10 not converged (its targets move by {:.1} % of their motion on {} T10): \
-             its other pushes are solved on the finer mesh",
-            truth.mesh.cells.len(),
-            100.0 * share,
-            finer.mesh.cells.len()
-        ));
+        progress.line(&line);
+        lines.push(line);
         // The finer mesh becomes the truth: its pushes not yet solved are solved now.
         solutions = finer_solutions
             .into_iter()
@@ -495,7 +492,7 @@ pub(super) fn validation_step(
         Ok(solution)
     };
     let solve = |truth: &Truth, push: usize| solve_at(truth, push, pushes[push].force);
-    let (truth, solutions, mut lines) = converged_truth(truth, &truth_of, &solve, (&targets, &pushes), progress)?;
+    let (truth, solutions, mut lines) = converged_truth(truth, &truth_of, &solve, &targets, &pushes, progress)?;
 
     let Registrations { methods, rest_errors, forces, left_out, streams_left_out } =
         register_pushes(dir, options.seed, &truth, &targets, (&pushes, &solutions), &solve_at)?;
