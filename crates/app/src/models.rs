@@ -137,7 +137,7 @@ pub fn network_model(network: &Network) -> Result<(Organ, NetworkDeformer)> {
 /// The registration of a learned model on its scenario's organ, its loop's settings from
 /// `options` (the case's settings for its learned models). A model with a basis (the reduced-order
 /// model) fits its shape space ([`ShapeDeformer`], with its own loop budgets): from rest coarse to
-/// fine, on a stream's warm-started frame [`ROM_WARM_ITERATIONS`] iterations of all its modes under
+/// fine, on a stream's warm-started frame [`shape::SHAPE_WARM_ITERATIONS`] iterations of all its modes under
 /// the model's own prior ([`rom_stream_shape`]). On the design cases streamed (the built-in case
 /// pressed at 1–2.5 N, lifted, dragged and pulled; 21 frames each) that left 2.54 mm at the peak
 /// and 1.59 mm over the frames (93 % of the targets within 2σ), where one fit from the last
@@ -161,8 +161,7 @@ pub fn learned_registration(
     let (deformer, options): (Box<dyn Deformer + Send>, _) = match (network.model, basis) {
         (Model::Reduced(_), None) => {
             let fit = shape_fit(network.model, &organ, rom_stream_shape())?;
-            let options = RegistrationOptions { warm_iterations: ROM_WARM_ITERATIONS, ..shape::loop_options(options) };
-            (Box::new(fit), options)
+            (Box::new(fit), shape::loop_options(options))
         }
         (Model::Reduced(_), Some(_)) => {
             bail!("a reduced-order model fits its own shape space: another model's basis is for a U-Net")
@@ -181,9 +180,9 @@ pub fn learned_registration(
             let hybrid = HybridDeformer::new(Box::new(fit), membrane, shape::SHAPE_ITERATIONS)?
                 .first_on_warm_frames(1)
                 .sigma_scaled(NETWORK_AFTER_FIT_SIGMA)?;
-            let options = shape::loop_options(options);
-            let iterations = shape::SHAPE_ITERATIONS + NETWORK_AFTER_FIT;
-            (Box::new(hybrid), RegistrationOptions { iterations, ..options })
+            let (iterations, warm_iterations) =
+                (shape::SHAPE_ITERATIONS + NETWORK_AFTER_FIT, NETWORK_AFTER_FIT_WARM_ITERATIONS);
+            (Box::new(hybrid), RegistrationOptions { iterations, warm_iterations, ..shape::loop_options(options) })
         }
     };
     Ok(LearnedRegistration { organ, deformer, options })
@@ -195,11 +194,6 @@ pub fn shape_fit(model: &Model, organ: &Organ, shape: ShapeOptions) -> Result<Sh
     let space = register::model_shape_space(model, organ, shape.max_modes)?;
     Ok(ShapeDeformer::new(space, organ, shape)?)
 }
-
-/// The iterations of a reduced-order model's shape fit on a stream's warm-started frame. On the
-/// design cases streamed (under [`rom_stream_shape`]), 3 and 4 left 2.54 and 2.58 mm at the peak
-/// (1.59 and 1.58 mm over the frames); 2 (with the prior widened by 0.8) 2.60 mm.
-pub const ROM_WARM_ITERATIONS: usize = 3;
 
 /// A reduced-order model's shape fit in its own registration: on a stream's warm-started frame, the
 /// model's own prior (`widening` 1: the last frame's posterior lends the start of the matches, not
@@ -216,6 +210,10 @@ pub fn rom_stream_shape() -> ShapeOptions {
 /// alone 2.34 mm, the U-Net alone 2.48 mm, the reduced-order model's own membrane loop after the
 /// fit 2.60 mm (one iteration) and 2.76 mm (two).
 pub const NETWORK_AFTER_FIT: usize = 1;
+
+/// The iterations of a warm-started frame of the U-Net after a reduced-order model's shape fit: one
+/// of the fit from the last frame's posterior, then [`NETWORK_AFTER_FIT`] of the U-Net.
+pub const NETWORK_AFTER_FIT_WARM_ITERATIONS: usize = 1 + NETWORK_AFTER_FIT;
 
 /// The factor on σ of the U-Net after a reduced-order model's shape fit (the fit's posterior σ
 /// widened by the U-Net's move from it, [`HybridDeformer`]), calibrated on validation

@@ -585,8 +585,8 @@ fn notes(base: &CaseScenario, runs: usize, reference_ms: f64) -> Result<Vec<Stri
             STREAM_FRAMES + 1,
             corotational(base).and_then(|m| m.warm_iterations).unwrap_or(base.registration.warm_iterations),
             network_budget(base).warm_iterations,
-            app::models::ROM_WARM_ITERATIONS,
             register::shape::SHAPE_WARM_ITERATIONS,
+            app::models::NETWORK_AFTER_FIT_WARM_ITERATIONS,
         ),
         "Diagnostic, not a method: the network fed the truth's own motion of its input nodes (each node takes \
          the motion of the truth's surface point nearest to it), as if the whole visible surface were seen and \
