@@ -604,15 +604,11 @@ mod tests {
     /// far off hardly moves it (where their standard deviation would be theirs).
     #[test]
     fn the_residuals_robust_spread_is_a_gaussian_s_standard_deviation_despite_outliers() {
-        // Box–Muller on a fixed linear congruential sequence: 20,000 draws of N(0, (3 mm)²).
-        let mut state: u64 = 12345;
-        let mut uniform = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        };
-        let mut residuals: Vec<f64> = (0..20_000)
-            .map(|_| 0.003 * (-2.0 * uniform().ln()).sqrt() * (2.0 * std::f64::consts::PI * uniform()).cos())
-            .collect();
+        use rand::SeedableRng;
+        use rand_distr::Distribution;
+        let mut rng = rand::rngs::StdRng::seed_from_u64(12345);
+        let normal = rand_distr::Normal::new(0.0, 0.003).unwrap();
+        let mut residuals: Vec<f64> = (0..20_000).map(|_| normal.sample(&mut rng)).collect();
         let clean = residual_scale(&residuals);
         assert!((clean - 0.003).abs() < 0.03 * 0.003, "{clean} m against 3 mm");
         residuals.iter_mut().step_by(10).for_each(|r| *r = 0.1);
