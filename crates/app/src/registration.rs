@@ -412,6 +412,7 @@ impl RegistrationChoice {
             options: None,
             structures: self.structures.iter().map(StructureFile::given).collect(),
             surface: None,
+            sigma_factor: 1.0,
         })
     }
 }
@@ -450,6 +451,9 @@ pub struct RegistrationSpec {
     /// The organ's own surface (a patient's `surface.stl`, in mm or m as its size tells), given
     /// back registered in place of its mesh's boundary ([`Registration::set_surface`]).
     pub surface: Option<PathBuf>,
+    /// The factor on the method's σ at the targets (a patient's, calibrated by its validation:
+    /// [`Registration::calibrate_sigma`]).
+    pub sigma_factor: f64,
 }
 
 /// Where a structure comes from: a surface file or `LABELMAP:LABEL` ([`read_structure`]), with
@@ -575,6 +579,7 @@ impl RegistrationSpec {
             options: None,
             structures: Vec::new(),
             surface: None,
+            sigma_factor: 1.0,
         }
     }
 
@@ -630,6 +635,7 @@ impl RegistrationSpec {
             registration.add_structure(&name, surface).with_context(context)?;
             warnings.into_iter().for_each(|w| registration.warn(w));
         }
+        registration.calibrate_sigma(self.sigma_factor)?;
         if let Some(path) = &self.surface {
             let surface = read_organ_surface(path, registration.organ().mesh())?;
             registration.set_surface(surface).with_context(|| format!("the organ's surface {}", path.display()))?;
@@ -689,8 +695,8 @@ impl RegistrationSpec {
 
 impl RegistrationSpec {
     /// The registration set-up of the patient directory `dir` (written by `augsim prepare`): the
-    /// method it names, or `method` when given; its targets; the unit and frame of its inputs for
-    /// the points given and given back.
+    /// method it names, or `method` when given, with the σ its validation calibrated; its targets;
+    /// the unit and frame of its inputs for the points given and given back.
     pub fn patient(
         dir: &Path,
         method: Option<PatientMethod>,
@@ -707,7 +713,8 @@ impl RegistrationSpec {
                 if done.is_empty() { "none".to_string() } else { done.join(", ") }
             );
         }
-        let method = match method.unwrap_or(p.method) {
+        let chosen = method.unwrap_or(p.method);
+        let method = match chosen {
             PatientMethod::Fem => MethodSpec::fem(dir.join(p.fem)),
             PatientMethod::Learned => MethodSpec::learned(dir.join(p.model), dir.join(p.scenario)),
             PatientMethod::Hybrid => MethodSpec::Hybrid {
@@ -735,6 +742,7 @@ impl RegistrationSpec {
                 .map(|path| StructureFile { path: dir.join(path), unit: Some(STRUCTURES_UNIT) })
                 .collect(),
             surface: Some(dir.join(SURFACE_FILE)).filter(|path| path.is_file()),
+            sigma_factor: p.sigma.of(chosen),
         })
     }
 }

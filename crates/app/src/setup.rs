@@ -76,6 +76,47 @@ pub(crate) struct Patient {
     /// Structures that move with the organ, surfaces in [`STRUCTURES_UNIT`] in the organ's frame.
     #[serde(default)]
     pub structures: Vec<PathBuf>,
+    /// The factors on the σ of the methods that give one, calibrated by the validation (set-ups
+    /// of older versions name none: 1).
+    #[serde(default)]
+    pub sigma: SigmaFactors,
+}
+
+/// The factor on each method's σ at the targets, calibrated on a set-up's validation registrations
+/// ([`crate::registration::RegistrationSpec::sigma_factor`]); the FEM gives no σ.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SigmaFactors {
+    /// The learned model's.
+    pub learned: f64,
+    /// The hybrid's.
+    pub hybrid: f64,
+}
+
+impl Default for SigmaFactors {
+    fn default() -> Self {
+        SigmaFactors { learned: 1.0, hybrid: 1.0 }
+    }
+}
+
+impl SigmaFactors {
+    /// The factor of `method` (1 for the FEM, which gives no σ).
+    pub fn of(&self, method: PatientMethod) -> f64 {
+        match method {
+            PatientMethod::Learned => self.learned,
+            PatientMethod::Hybrid => self.hybrid,
+            PatientMethod::Fem => 1.0,
+        }
+    }
+
+    /// Sets the factor of `method` (none for the FEM).
+    pub fn set(&mut self, method: PatientMethod, factor: f64) {
+        match method {
+            PatientMethod::Learned => self.learned = factor,
+            PatientMethod::Hybrid => self.hybrid = factor,
+            PatientMethod::Fem => {}
+        }
+    }
 }
 
 /// The unit of a set-up's structure surfaces ([`Patient::structures`]).
@@ -108,7 +149,8 @@ impl Patient {
              # that registered the validation's pushes the best.\n\
              # input_units, input_frame: the unit and frame of the files it was prepared from, in which\n\
              # points whose files name none are read and results given back{works_in}.\n\
-             # structures: surfaces that move with the organ ({}, the organ's frame).\n{}",
+             # structures: surfaces that move with the organ ({}, the organ's frame).\n\
+             # sigma: the factor on each method's σ at the targets, calibrated on the validation's pushes.\n{}",
             STRUCTURES_UNIT.symbol(),
             toml::to_string(self)?
         );

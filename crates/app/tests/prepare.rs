@@ -262,6 +262,21 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
         let tracked = registration.register(&cloud).unwrap();
         let moved = mesh::stats::max(&mesh::distances(&tracked.targets, &rest));
         assert!(moved < 2e-3, "{}: targets moved {:.2} mm for a cloud at rest", registration.method(), moved * 1e3);
+        // The σ of the methods that give one, calibrated by the validation: the factor its line
+        // reports, at least 1, kept in the set-up and applied to what the method gives.
+        if method == PatientMethod::Fem {
+            continue;
+        }
+        let words = if method == PatientMethod::Learned { "learned model" } else { "learned model, then FEM (hybrid)" };
+        let calibrated = validation.iter().find(|l| l.starts_with(&format!("validation: σ of the {words} calibrated")));
+        let factor: f64 = calibrated.unwrap().split('×').nth(1).unwrap().split(',').next().unwrap().parse().unwrap();
+        let kept: f64 = set_up.split(&format!("{} = ", method.name())).nth(1).unwrap().lines().next().unwrap().parse().unwrap();
+        assert!(factor >= 1.0 && (kept - factor).abs() < 0.005, "{factor} reported, {kept} kept");
+        let spec = RegistrationSpec::patient(&out, Some(method), None, false).unwrap();
+        let mut own = RegistrationSpec { sigma_factor: 1.0, ..spec }.build().unwrap();
+        let std = |tracked: &register::Tracked| tracked.target_std.clone().unwrap();
+        let (given, scaled) = (std(&own.register(&cloud).unwrap()), std(&tracked));
+        assert!(given.iter().zip(&scaled).all(|(g, s)| (s - kept * g).abs() <= 1e-9 * s), "{given:?} → {scaled:?}");
     }
 
     // Run again: every step kept; other inputs refused.

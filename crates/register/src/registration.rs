@@ -83,6 +83,8 @@ pub struct Registration {
     rigid: Option<RigidResult>,
     structures: Vec<Structure>,
     surface: Option<Structure>,
+    /// The factor on the method's σ at the targets ([`Registration::calibrate_sigma`]).
+    sigma_factor: f64,
 }
 
 /// Refuses a structure's name that is empty, `taken` by another, one of [`RESERVED_NAMES`], or
@@ -209,6 +211,7 @@ impl Registration {
             rigid: None,
             structures: Vec::new(),
             surface: None,
+            sigma_factor: 1.0,
         })
     }
 
@@ -219,6 +222,14 @@ impl Registration {
     pub fn set_surface(&mut self, surface: TriSurface) -> Result<()> {
         let (surface, _outside) = Structure::new(&self.organ, "organ", surface)?;
         self.surface = Some(surface);
+        Ok(())
+    }
+
+    /// Scales the σ the method gives at the targets by `factor` (positive and finite): its
+    /// calibration on registrations whose truth is known (a patient's validation).
+    pub fn calibrate_sigma(&mut self, factor: f64) -> Result<()> {
+        crate::checks::check_setting("sigma factor", factor, factor > 0.0, "positive and finite")?;
+        self.sigma_factor = factor;
         Ok(())
     }
 
@@ -375,6 +386,7 @@ impl Registration {
         let targets = in_cloud_frame(displaced(&self.targets, &self.stencils, &registration.u), rigid.as_ref());
         // σ is part of the frame's work, and of its time (not cut by its budget).
         let target_std = self.deformer.uncertainty(&self.targets, &self.stencils).transpose()?;
+        let target_std = target_std.map(|std| std.into_iter().map(|s| s * self.sigma_factor).collect());
         registration.time = began.elapsed();
         // A cloud only partly fitted is still the best start for the next (a stream tracks a hard
         // push better than a frame from rest); a distorted organ, a cloud in another frame or unit,

@@ -66,7 +66,7 @@ use learn::LearnedModel;
 use crate::meshing::{coverage_warning, write_surface_in_mm, OrganInput};
 use crate::points::PointInput;
 use crate::registration::{absolute_structure, read_structure, structure_name};
-use crate::setup::{Patient, PatientMethod, PATIENT_FILE, SET_UP_FRAME, STATE_FILE, SURFACE_FILE};
+use crate::setup::{Patient, PatientMethod, SigmaFactors, PATIENT_FILE, SET_UP_FRAME, STATE_FILE, SURFACE_FILE};
 use crate::training::{train_unet, UNetRun, UNetStart};
 
 mod validation;
@@ -841,6 +841,7 @@ fn scenarios_step(options: &PrepareOptions, input_frame: Option<Frame>, dir: &Pa
         input_units: Some(input_unit(options)?),
         input_frame,
         structures: options.structures.iter().map(|s| structure_file(&structure_name(s)).into()).collect(),
+        sigma: SigmaFactors::default(),
     };
     write_atomic_bytes(&dir.join("dataset.toml"), dataset.as_bytes())?;
     write_atomic_bytes(&dir.join("static.toml"), fem.as_bytes())?;

@@ -15,7 +15,7 @@ use mesh::{Camera, Mesh, Near, Point};
 use super::{across_sight, hold_distance, swing_warning, tool_radius, PrepareOptions};
 use crate::picture::{frame_notes, RegisteredFrame};
 use crate::registration::RegistrationSpec;
-use crate::setup::{read_organ_surface, Patient, PatientMethod, PATIENT_FILE, SURFACE_FILE};
+use crate::setup::{read_organ_surface, Patient, PatientMethod, SigmaFactors, PATIENT_FILE, SURFACE_FILE};
 
 /// Tool pushes of the validation: where along what the camera sees (its spread across the line of
 /// sight, as a fraction) and the force (N).
@@ -267,24 +267,43 @@ const ON_PAR: f64 = 0.05;
 /// The shares of a push's force at the frames of its stream: the tool pressing in by quarters.
 const STREAM_SHARES: [f64; 4] = [0.25, 0.5, 0.75, 1.0];
 
+/// The share of the targets a calibrated σ puts within 2σ: a Gaussian's.
+const SIGMA_COVERAGE: f64 = 0.95;
+
+/// A method's σ calibrated on the validation's registrations, from rest and on streams.
+struct SigmaCalibration {
+    /// The least factor on σ, at least 1, that puts [`SIGMA_COVERAGE`] of the targets within 2σ.
+    factor: f64,
+    /// The mean σ (m) so calibrated.
+    mean_std: f64,
+    /// The shares of the targets within 2σ, from rest and on streams (none without), when each
+    /// push's take the factor calibrated on the other pushes; none with a single push.
+    held_out: Option<[Option<f64>; 2]>,
+}
+
 /// A method's registrations of one kind: each push from rest, or each push as a stream.
 #[derive(Default)]
 struct Registered {
     /// The target errors (m) of the frames it registered.
     errors: Vec<f64>,
+    /// The push (its index) of each of those errors.
+    push_of: Vec<usize>,
     /// The predicted σ (m) at the targets of those frames, for a method that predicts one.
     std: Vec<f64>,
     /// The time of each frame timed (ms).
     times_ms: Vec<f64>,
     /// The pushes it failed on, and why.
     failed: Vec<String>,
+    /// Each push it registered: its force (N) and the mean TRE (m) of its frames.
+    per_push: Vec<(f64, f64)>,
 }
 
 impl Registered {
-    /// Adds a registered frame: its targets' errors against their true positions `moved`, their
-    /// σ and, when `timed`, its time.
-    fn add(&mut self, tracked: &register::Tracked, moved: &[Point], timed: bool) {
+    /// Adds a registered frame of push `push`: its targets' errors against their true positions
+    /// `moved`, their σ and, when `timed`, its time.
+    fn add(&mut self, push: usize, tracked: &register::Tracked, moved: &[Point], timed: bool) {
         self.errors.extend(register::target_errors(&tracked.targets, moved));
+        self.push_of.resize(self.errors.len(), push);
         self.std.extend(tracked.target_std.iter().flatten());
         if timed {
             self.times_ms.push(mesh::stats::ms(tracked.registration.time));
@@ -300,8 +319,8 @@ impl Registered {
         }
     }
 
-    /// The TRE, σ and failures in words, after `what` (how the pushes were registered) and the
-    /// time of a frame (`timing`: which frames were timed).
+    /// The TRE, σ, each push's TRE and failures in words, after `what` (how the pushes were
+    /// registered) and the time of a frame (`timing`: which frames were timed).
     fn words(&self, what: &str, timing: &str) -> String {
         let failed = match self.failed.len() {
             0 => String::new(),
@@ -321,10 +340,11 @@ impl Registered {
             )
         });
         format!(
-            "{what} TRE {:.2} mm (largest {:.2} mm), {:.0} ms {timing}{sigma}{failed}",
+            "{what} TRE {:.2} mm (largest {:.2} mm), {:.0} ms {timing}{sigma}; {}{failed}",
             mm(mesh::stats::mean(&self.errors)),
             mm(mesh::stats::max(&self.errors)),
-            mesh::stats::mean(&self.times_ms)
+            mesh::stats::mean(&self.times_ms),
+            push_figures(&self.per_push)
         )
     }
 }
@@ -352,19 +372,21 @@ struct Strongest {
 }
 
 impl MethodRun {
-    /// Registers one push's frames (each the targets' true positions and the cloud), the first
-    /// from rest and each next one warm-started from the last: a single frame from rest, timed,
-    /// or a stream (into `streamed`), whose warm-started frames alone are timed. A failed frame
-    /// ends them.
-    fn register(&mut self, dir: &Path, force: f64, frames: &[(&[Point], &[Point])]) -> Result<()> {
-        let mut registration = RegistrationSpec::patient(dir, Some(self.method), None, false)?.build()?;
+    /// Registers the frames of push `push` of `force` (each the targets' true positions and the
+    /// cloud), the first from rest and each next one warm-started from the last: a single frame
+    /// from rest, timed, or a stream (into `streamed`), whose warm-started frames alone are
+    /// timed. A failed frame ends them. σ is the method's own, which the validation calibrates.
+    fn register(&mut self, dir: &Path, (push, force): (usize, f64), frames: &[(&[Point], &[Point])]) -> Result<()> {
+        let spec = RegistrationSpec::patient(dir, Some(self.method), None, false)?;
+        let mut registration = RegistrationSpec { sigma_factor: 1.0, ..spec }.build()?;
         let stream = frames.len() > 1;
         let into = if stream { &mut self.streamed } else { &mut self.rest };
         let mut last = None;
+        let registered = into.errors.len();
         for (k, &(moved, cloud)) in frames.iter().enumerate() {
             match registration.register(cloud) {
                 Ok(tracked) => {
-                    into.add(&tracked, moved, !stream || k > 0);
+                    into.add(push, &tracked, moved, !stream || k > 0);
                     last = Some(tracked);
                 }
                 Err(e) => {
@@ -373,6 +395,9 @@ impl MethodRun {
                     break;
                 }
             }
+        }
+        if into.errors.len() > registered {
+            into.per_push.push((force, mesh::stats::mean(&into.errors[registered..])));
         }
         if let (false, Some(tracked)) = (stream, last) {
             if self.strongest.as_ref().is_none_or(|s| force > s.force) {
@@ -385,8 +410,9 @@ impl MethodRun {
     }
 
     /// Draws its registration from rest of the strongest push into `dir` ([`PICTURE`] .png and
-    /// .html); returns the report's line on them, none when it registered no push.
-    fn picture(&self, dir: &Path) -> Result<Option<String>> {
+    /// .html), its σ times `sigma_factor`; returns the report's line on them, none when it
+    /// registered no push.
+    fn picture(&self, dir: &Path, sigma_factor: f64) -> Result<Option<String>> {
         let Some(s) = &self.strongest else { return Ok(None) };
         let errors = register::target_errors(&s.tracked.targets, &s.moved);
         let headline = format!(
@@ -395,7 +421,8 @@ impl MethodRun {
             mm(mesh::stats::mean(&errors)),
             mm(mesh::stats::max(&errors))
         );
-        let notes = frame_notes(headline, s.tracked.target_std.as_deref(), &s.tracked.registration.warnings);
+        let std: Option<Vec<f64>> = s.tracked.target_std.as_ref().map(|std| std.iter().map(|v| v * sigma_factor).collect());
+        let notes = frame_notes(headline, std.as_deref(), &s.tracked.registration.warnings);
         let name = method_name(self.method);
         let targets = (s.registration.targets(), s.tracked.targets.as_slice());
         let (organ, u) = (s.registration.organ(), &s.tracked.registration.u);
@@ -405,6 +432,46 @@ impl MethodRun {
             notes,
         )?;
         Ok(Some(format!("validation: the {name} on the strongest push, pictured: {PICTURE}.png, {PICTURE}.html")))
+    }
+
+    /// Its σ calibrated ([`SigmaCalibration`]), for a method that gives one at every target it
+    /// registered.
+    fn sigma_calibration(&self) -> Option<SigmaCalibration> {
+        let runs = [&self.rest, &self.streamed];
+        if runs.iter().any(|run| run.std.len() != run.errors.len()) {
+            return None;
+        }
+        // Each target's error in units of 2σ, with its push and its kind (0 from rest, 1 streamed).
+        let ratios: Vec<(usize, usize, f64)> = runs
+            .iter()
+            .enumerate()
+            .flat_map(|(kind, run)| {
+                let pushes = run.push_of.iter().zip(&run.errors).zip(&run.std);
+                pushes.map(move |((&p, e), s)| (p, kind, e / (2.0 * s)))
+            })
+            .collect();
+        let factor_of = |ratios: Vec<f64>| mesh::stats::percentile(&ratios, 100.0 * SIGMA_COVERAGE).max(1.0);
+        let factor = factor_of(ratios.iter().map(|r| r.2).collect());
+        if !factor.is_finite() {
+            return None;
+        }
+        let mut pushes: Vec<usize> = ratios.iter().map(|r| r.0).collect();
+        pushes.sort_unstable();
+        pushes.dedup();
+        let held_out = (pushes.len() > 1).then(|| {
+            // Within 2σ and in all, of each kind.
+            let mut counts = [[0usize; 2]; 2];
+            for &p in &pushes {
+                let others = factor_of(ratios.iter().filter(|r| r.0 != p).map(|r| r.2).collect());
+                for &(_, kind, ratio) in ratios.iter().filter(|r| r.0 == p) {
+                    counts[kind][0] += usize::from(ratio <= others);
+                    counts[kind][1] += 1;
+                }
+            }
+            counts.map(|[within, all]| (all > 0).then(|| within as f64 / all as f64))
+        });
+        let std: Vec<f64> = runs.iter().flat_map(|run| &run.std).copied().collect();
+        Some(SigmaCalibration { factor, mean_std: factor * mesh::stats::mean(&std), held_out })
     }
 
     /// Lower is better: the pushes it failed on (from rest and as streams); then whether it is
@@ -427,6 +494,12 @@ impl MethodRun {
         let failures = self.rest.failed.len() + self.streamed.failed.len();
         (failures, ratios.iter().any(|&r| r > 1.0 + ON_PAR), mesh::stats::mean(&ratios))
     }
+}
+
+/// Each push's figure in words: `1.5 N 2.10 mm, 2.5 N 3.40 mm` (`(force, m)` pairs), after "per push".
+fn push_figures(pushes: &[(f64, f64)]) -> String {
+    let figures: Vec<String> = pushes.iter().map(|&(force, value)| format!("{force} N {:.2} mm", mm(value))).collect();
+    format!("per push {}", figures.join(", "))
 }
 
 /// How the report names a method.
@@ -494,21 +567,22 @@ pub(super) fn validation_step(
     let solve = |truth: &Truth, push: usize| solve_at(truth, push, pushes[push].force);
     let (truth, solutions, mut lines) = converged_truth(truth, &truth_of, &solve, &targets, &pushes, progress)?;
 
-    let Registrations { methods, rest_errors, forces, left_out, streams_left_out } =
+    let Registrations { methods, rest_errors, motions, left_out, streams_left_out } =
         register_pushes(dir, options.seed, &truth, &targets, (&pushes, &solutions), &solve_at)?;
-    if forces.is_empty() {
+    if motions.is_empty() {
         bail!("the validation's truth found no equilibrium under any push: {}", left_out.join("; "));
     }
     lines.push(format!(
         "validation: {} pushes of {}–{} N on a truth of {} T10 ({} nodes, Neo-Hookean) meshed anew; clouds of {} \
-         seen nodes with 0.5 mm noise; TRE without deformation {:.2} mm",
-        forces.len(),
-        forces.iter().copied().fold(f64::INFINITY, f64::min),
-        forces.iter().copied().fold(0.0, f64::max),
+         seen nodes with 0.5 mm noise; TRE without deformation {:.2} mm ({})",
+        motions.len(),
+        motions.iter().map(|m| m.0).fold(f64::INFINITY, f64::min),
+        motions.iter().map(|m| m.0).fold(0.0, f64::max),
         truth.mesh.cells.len(),
         truth.mesh.num_nodes(),
         truth.seen.len(),
-        mm(mesh::stats::mean(&rest_errors))
+        mm(mesh::stats::mean(&rest_errors)),
+        push_figures(&motions)
     ));
     lines.extend(
         swing_warning("the targets", mesh::stats::mean(&rest_errors), &organ).map(|w| format!("validation: {w}")),
@@ -534,20 +608,24 @@ pub(super) fn validation_step(
         ));
     }
     lines.extend(methods.iter().flat_map(method_lines));
-    let (line, chosen) = record_best_method(dir, &methods)?;
+    let calibrations: Vec<(PatientMethod, SigmaCalibration)> =
+        methods.iter().filter_map(|run| Some((run.method, run.sigma_calibration()?))).collect();
+    lines.extend(calibrations.iter().map(|(method, calibration)| calibration_line(*method, calibration)));
+    let (line, chosen) = record_set_up(dir, &methods, &calibrations)?;
     lines.push(line);
+    let factor = calibrations.iter().find(|(method, _)| *method == chosen).map_or(1.0, |(_, c)| c.factor);
     let chosen = methods.iter().find(|run| run.method == chosen).context("the chosen method was not validated")?;
-    lines.extend(chosen.picture(dir)?);
+    lines.extend(chosen.picture(dir, factor)?);
     Ok(lines)
 }
 
 /// What the validation's registrations gave: each method's runs, the targets' motion under each
-/// push (their TRE without deformation), the forces registered, and the pushes and streams left
-/// out (the truth finding no equilibrium under them), in words.
+/// push (their TRE without deformation) and its mean per push registered (force, m), and the
+/// pushes and streams left out (the truth finding no equilibrium under them), in words.
 struct Registrations {
     methods: [MethodRun; 3],
     rest_errors: Vec<f64>,
-    forces: Vec<f64>,
+    motions: Vec<(f64, f64)>,
     left_out: Vec<String>,
     streams_left_out: Vec<String>,
 }
@@ -568,11 +646,11 @@ fn register_pushes(
     let mut methods = [PatientMethod::Learned, PatientMethod::Fem, PatientMethod::Hybrid]
         .map(|method| MethodRun { method, ..MethodRun::default() });
     let mut rest_errors = Vec::new();
+    let mut motions = Vec::new();
     // The streams' noise is drawn apart, so that the clouds from rest do not depend on them.
     let (mut rng, mut stream_rng) =
         (rand::rngs::StdRng::seed_from_u64(seed), rand::rngs::StdRng::seed_from_u64(seed ^ 1));
     let noise = rand_distr::Normal::new(0.0, 0.0005).context("noise")?;
-    let mut forces = Vec::new();
     let mut left_out = Vec::new();
     let mut streams_left_out = Vec::new();
     for (p, (&Push { at, force, .. }, solution)) in pushes.iter().zip(solutions).enumerate() {
@@ -584,10 +662,11 @@ fn register_pushes(
             }
         };
         let moved = truth.targets(targets, u);
-        rest_errors.extend(register::target_errors(targets, &moved));
+        let motion = register::target_errors(targets, &moved);
+        motions.push((force, mesh::stats::mean(&motion)));
+        rest_errors.extend(motion);
         let cloud = truth.cloud(u, &noise, &mut rng);
-        methods.iter_mut().try_for_each(|run| run.register(dir, force, &[(&moved, &cloud)]))?;
-        forces.push(force);
+        methods.iter_mut().try_for_each(|run| run.register(dir, (p, force), &[(&moved, &cloud)]))?;
         // The same push as a stream: the tool pressing in by quarters of its force.
         let mut frames = Vec::new();
         for share in STREAM_SHARES {
@@ -602,10 +681,10 @@ fn register_pushes(
         }
         if frames.len() == STREAM_SHARES.len() {
             let frames: Vec<(&[Point], &[Point])> = frames.iter().map(|(m, c)| (m.as_slice(), c.as_slice())).collect();
-            methods.iter_mut().try_for_each(|run| run.register(dir, force, &frames))?;
+            methods.iter_mut().try_for_each(|run| run.register(dir, (p, force), &frames))?;
         }
     }
-    Ok(Registrations { methods, rest_errors, forces, left_out, streams_left_out })
+    Ok(Registrations { methods, rest_errors, motions, left_out, streams_left_out })
 }
 
 /// The validation's lines on one method's registrations: from rest, and as streams.
@@ -618,9 +697,34 @@ fn method_lines(run: &MethodRun) -> [String; 2] {
     ]
 }
 
-/// Writes into the patient file the method that did the best on the validation's pushes;
-/// returns the validation's line on it, and the method.
-fn record_best_method(dir: &Path, methods: &[MethodRun]) -> Result<(String, PatientMethod)> {
+/// The validation's line on a method's σ calibrated.
+fn calibration_line(method: PatientMethod, c: &SigmaCalibration) -> String {
+    let held_out = c.held_out.map_or(String::new(), |shares| {
+        let shares: Vec<String> = shares
+            .iter()
+            .zip(["from rest", "on streams"])
+            .filter_map(|(share, kind)| share.map(|share| format!("{:.0} % {kind}", 100.0 * share)))
+            .collect();
+        format!("; each push's targets with the factor of the other pushes: within 2σ {}", shares.join(", "))
+    });
+    format!(
+        "validation: σ of the {} calibrated on these pushes: ×{:.2}, the least factor (at least 1) that puts \
+         {:.0} % of their targets within 2σ (σ {:.2} mm mean){held_out}",
+        method_name(method),
+        c.factor,
+        100.0 * SIGMA_COVERAGE,
+        mm(c.mean_std)
+    )
+}
+
+/// Writes into the patient file the method that did the best on the validation's pushes and the
+/// factors of the methods' σ `calibrations`; returns the validation's line on the method, and
+/// the method.
+fn record_set_up(
+    dir: &Path,
+    methods: &[MethodRun],
+    calibrations: &[(PatientMethod, SigmaCalibration)],
+) -> Result<(String, PatientMethod)> {
     // The set-up registers with the method that did the best on these pushes, from rest and
     // on streams ([`MethodRun::rank`]); on a tie the first.
     let fem = methods.iter().find(|run| run.method == PatientMethod::Fem).context("the FEM was not validated")?;
@@ -631,6 +735,8 @@ fn record_best_method(dir: &Path, methods: &[MethodRun]) -> Result<(String, Pati
         .method;
     let mut patient = Patient::read(dir)?;
     patient.method = chosen;
+    patient.sigma = SigmaFactors::default();
+    calibrations.iter().for_each(|(method, calibration)| patient.sigma.set(*method, calibration.factor));
     patient.write(dir)?;
     let line = format!(
         "validation: {PATIENT_FILE} registers with the {} (method = \"{}\"), the best on these pushes, from rest \
@@ -639,4 +745,37 @@ fn record_best_method(dir: &Path, methods: &[MethodRun]) -> Result<(String, Pati
         chosen.name()
     );
     Ok((line, chosen))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Registrations from rest of pushes 0 and 1, each target's error `ratio` × 2σ (σ 1 mm).
+    fn registered(ratios: &[(usize, f64)]) -> Registered {
+        Registered {
+            errors: ratios.iter().map(|r| 2e-3 * r.1).collect(),
+            push_of: ratios.iter().map(|r| r.0).collect(),
+            std: vec![1e-3; ratios.len()],
+            ..Registered::default()
+        }
+    }
+
+    /// The factor is the nearest-rank 95th percentile of the errors in units of 2σ, at least 1;
+    /// each push's share within 2σ takes the factor of the others; a method without σ has none.
+    #[test]
+    fn sigma_is_calibrated_on_the_pushes_and_checked_on_each_left_out() {
+        let rest = registered(&[(0, 0.5), (0, 3.0), (1, 0.5), (1, 1.5)]);
+        let run = MethodRun { rest, ..MethodRun::default() };
+        let c = run.sigma_calibration().unwrap();
+        assert!((c.factor - 3.0).abs() < 1e-12 && (c.mean_std - 3e-3).abs() < 1e-12, "×{}", c.factor);
+        // Push 0 under push 1's factor 1.5 keeps 1 of 2; push 1 under push 0's 3, both.
+        assert_eq!(c.held_out, Some([Some(0.75), None]));
+        let narrow = MethodRun { rest: registered(&[(0, 0.2), (1, 0.3)]), ..MethodRun::default() };
+        assert_eq!(narrow.sigma_calibration().unwrap().factor, 1.0, "σ is only ever widened");
+        let single = MethodRun { rest: registered(&[(0, 0.2), (0, 0.3)]), ..MethodRun::default() };
+        assert_eq!(single.sigma_calibration().unwrap().held_out, None, "one push: nothing to leave out");
+        let fem = MethodRun { rest: Registered { std: Vec::new(), ..registered(&[(0, 0.5)]) }, ..MethodRun::default() };
+        assert!(fem.sigma_calibration().is_none());
+    }
 }
