@@ -270,7 +270,8 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
         let words = if method == PatientMethod::Learned { "learned model" } else { "learned model, then FEM (hybrid)" };
         let calibrated = validation.iter().find(|l| l.starts_with(&format!("validation: σ of the {words} calibrated")));
         let factor: f64 = calibrated.unwrap().split('×').nth(1).unwrap().split(',').next().unwrap().parse().unwrap();
-        let kept: f64 = set_up.split(&format!("{} = ", method.name())).nth(1).unwrap().lines().next().unwrap().parse().unwrap();
+        let kept: f64 =
+            set_up.split(&format!("{} = ", method.name())).nth(1).unwrap().lines().next().unwrap().parse().unwrap();
         assert!(factor >= 1.0 && (kept - factor).abs() < 0.005, "{factor} reported, {kept} kept");
         let spec = RegistrationSpec::patient(&out, Some(method), None, false).unwrap();
         let mut own = RegistrationSpec { sigma_factor: 1.0, ..spec }.build().unwrap();

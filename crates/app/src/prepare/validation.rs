@@ -421,7 +421,8 @@ impl MethodRun {
             mm(mesh::stats::mean(&errors)),
             mm(mesh::stats::max(&errors))
         );
-        let std: Option<Vec<f64>> = s.tracked.target_std.as_ref().map(|std| std.iter().map(|v| v * sigma_factor).collect());
+        let std: Option<Vec<f64>> =
+            s.tracked.target_std.as_ref().map(|std| std.iter().map(|v| v * sigma_factor).collect());
         let notes = frame_notes(headline, std.as_deref(), &s.tracked.registration.warnings);
         let name = method_name(self.method);
         let targets = (s.registration.targets(), s.tracked.targets.as_slice());
