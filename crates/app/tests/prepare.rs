@@ -228,6 +228,28 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     assert!(page.contains("targets, true") && page.contains("TRE at the "), "the page's scene");
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(out.join("validation.png").exists() && report.contains("](validation.png)"));
+    // The validation's table: a row per method, kind and push solved, and one over all of them,
+    // whose TRE is the line's; the report shows those.
+    let text = std::fs::read_to_string(out.join(augsim_app::prepare::TABLE)).unwrap();
+    let table = mesh::io::csv::Table::parse(&text, &mesh::io::csv::Dialect::CSV).unwrap();
+    table.check_widths().unwrap();
+    let solved = [1.5, 2.5, 2.0, 3.0]
+        .iter()
+        .enumerate()
+        .filter(|(push, force)| kept.contains(&format!("truth-{used}-{push}-{force}N.npy")))
+        .count();
+    let at = |name: &str| table.column(name).unwrap();
+    let rest_rows = table.rows.iter().filter(|r| r.fields[at("registered")] == "rest").count();
+    let all_rows: Vec<_> = table.rows.iter().filter(|r| r.fields[at("push_n")] == "all").collect();
+    assert_eq!((all_rows.len(), rest_rows), (6, 3 * (solved + 1)), "{text}");
+    for (name, words) in [("learned", "learned model"), ("fem", "FEM"), ("hybrid", "learned model, then FEM (hybrid)")]
+    {
+        let row = all_rows.iter().find(|r| r.fields[at("method")] == name && r.fields[at("registered")] == "rest");
+        let tre_mm: f64 = row.unwrap().fields[at("tre_mm")].parse().unwrap();
+        assert!((tre_mm - tre(words)).abs() <= 0.005 + 1e-9, "{name}: {tre_mm} against the line's {}", tre(words));
+        let shown = format!("| {words} | {:.2} mm", tre_mm);
+        assert!(report.contains(&shown), "{shown} not in the report:\n{report}");
+    }
     // The regions travel with the mesh file: what ParaView shows is what the scenarios select.
     let mesh = mesh::io::read_mesh(out.join("organ.vtu")).unwrap();
     assert!(mesh.region("visible").unwrap().len() > 20 && mesh.region("attached").unwrap().len() > 5);

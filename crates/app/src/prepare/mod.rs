@@ -70,7 +70,7 @@ use crate::setup::{Patient, PatientMethod, SigmaFactors, PATIENT_FILE, SET_UP_FR
 use crate::training::{train_unet, UNetRun, UNetStart};
 
 mod validation;
-pub use validation::{PICTURE, TRUTH_DIR};
+pub use validation::{PICTURE, TABLE, TRUTH_DIR};
 
 /// What `augsim prepare` is given.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -1019,6 +1019,12 @@ fn report_step(state: &PrepareState, dir: &Path) -> Result<Vec<String>> {
     text.push_str("| step | time (s) | what it did |\n| --- | ---: | --- |\n");
     for step in &state.steps {
         text.push_str(&format!("| {} | {:.1} | {} |\n", step.name, step.seconds, step.lines.join("<br>")));
+    }
+    if let Some(table) = validation::report_table(dir)? {
+        text.push_str(&format!(
+            "\n**Validation** ({TABLE}: each push too; the method {PATIENT_FILE} names registers with its σ \
+             calibrated):\n\n{table}"
+        ));
     }
     let total: f64 = state.steps.iter().map(|s| s.seconds).sum();
     text.push_str(&format!(

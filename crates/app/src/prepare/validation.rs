@@ -154,6 +154,25 @@ pub const TRUTH_DIR: &str = "validation";
 /// this name's side view (.png) and 3D page (.html).
 pub const PICTURE: &str = "validation";
 
+/// The table of the validation's figures beside the report: each method's registrations of each
+/// push and of all of them, from rest and as streams ([`write_table`]).
+pub const TABLE: &str = "validation.csv";
+
+/// [`TABLE`]'s columns.
+const TABLE_COLUMNS: [&str; 11] = [
+    "method",
+    "registered",
+    "push_n",
+    "targets",
+    "tre_mm",
+    "largest_mm",
+    "sigma_mm",
+    "within_2sigma",
+    "sigma_factor",
+    "within_2sigma_calibrated",
+    "ms_per_frame",
+];
+
 /// A push's displacement on a truth, or why it found no equilibrium under it.
 type Solution = std::result::Result<Vec<f64>, String>;
 
@@ -276,9 +295,26 @@ struct SigmaCalibration {
     factor: f64,
     /// The mean σ (m) so calibrated.
     mean_std: f64,
-    /// The shares of the targets within 2σ, from rest and on streams (none without), when each
-    /// push's take the factor calibrated on the other pushes; none with a single push.
-    held_out: Option<[Option<f64>; 2]>,
+    /// Each target of each frame (its push, its kind: [`REST`] or [`STREAM`]) and whether it lies
+    /// within 2σ under the factor calibrated on the other pushes; empty with a single push.
+    held_out: Vec<(usize, usize, bool)>,
+}
+
+/// The kinds of registration, as [`SigmaCalibration::held_out`] names them: from rest, and the
+/// frames of a stream.
+const REST: usize = 0;
+/// See [`REST`].
+const STREAM: usize = 1;
+
+impl SigmaCalibration {
+    /// The share of the targets of `kind` (of push `push`, else all) within 2σ under the factor
+    /// calibrated on the other pushes; none without such targets.
+    fn held_out_share(&self, kind: usize, push: Option<usize>) -> Option<f64> {
+        let of = |&&(p, k, _): &&(usize, usize, bool)| k == kind && push.is_none_or(|push| p == push);
+        let targets = self.held_out.iter().filter(of).count();
+        let within = self.held_out.iter().filter(of).filter(|t| t.2).count();
+        (targets > 0).then(|| within as f64 / targets as f64)
+    }
 }
 
 /// A method's registrations of one kind: each push from rest, or each push as a stream.
@@ -294,8 +330,6 @@ struct Registered {
     times_ms: Vec<f64>,
     /// The pushes it failed on, and why.
     failed: Vec<String>,
-    /// Each push it registered: its force (N) and the mean TRE (m) of its frames.
-    per_push: Vec<(f64, f64)>,
 }
 
 impl Registered {
@@ -319,9 +353,24 @@ impl Registered {
         }
     }
 
+    /// The pushes it registered (their indices), in order.
+    fn pushes(&self) -> Vec<usize> {
+        let mut pushes = self.push_of.clone();
+        pushes.sort_unstable();
+        pushes.dedup();
+        pushes
+    }
+
+    /// The target errors (m) of push `push`'s frames, and their σ where the method gives one.
+    fn of_push(&self, push: usize) -> (Vec<f64>, Vec<f64>) {
+        let at: Vec<usize> = (0..self.errors.len()).filter(|&k| self.push_of[k] == push).collect();
+        (at.iter().map(|&k| self.errors[k]).collect(), at.iter().filter_map(|&k| self.std.get(k).copied()).collect())
+    }
+
     /// The TRE, σ, each push's TRE and failures in words, after `what` (how the pushes were
-    /// registered) and the time of a frame (`timing`: which frames were timed).
-    fn words(&self, what: &str, timing: &str) -> String {
+    /// registered) and the time of a frame (`timing`: which frames were timed); `forces`: each
+    /// push's (N).
+    fn words(&self, what: &str, timing: &str, forces: &[f64]) -> String {
         let failed = match self.failed.len() {
             0 => String::new(),
             n => format!(", failed on {n}: {}", self.failed.join("; ")),
@@ -344,7 +393,7 @@ impl Registered {
             mm(mesh::stats::mean(&self.errors)),
             mm(mesh::stats::max(&self.errors)),
             mesh::stats::mean(&self.times_ms),
-            push_figures(&self.per_push)
+            push_figures(self.pushes().into_iter().map(|p| (forces[p], mesh::stats::mean(&self.of_push(p).0))))
         )
     }
 }
@@ -382,7 +431,6 @@ impl MethodRun {
         let stream = frames.len() > 1;
         let into = if stream { &mut self.streamed } else { &mut self.rest };
         let mut last = None;
-        let registered = into.errors.len();
         for (k, &(moved, cloud)) in frames.iter().enumerate() {
             match registration.register(cloud) {
                 Ok(tracked) => {
@@ -395,9 +443,6 @@ impl MethodRun {
                     break;
                 }
             }
-        }
-        if into.errors.len() > registered {
-            into.per_push.push((force, mesh::stats::mean(&into.errors[registered..])));
         }
         if let (false, Some(tracked)) = (stream, last) {
             if self.strongest.as_ref().is_none_or(|s| force > s.force) {
@@ -438,15 +483,14 @@ impl MethodRun {
     /// Its σ calibrated ([`SigmaCalibration`]), for a method that gives one at every target it
     /// registered.
     fn sigma_calibration(&self) -> Option<SigmaCalibration> {
-        let runs = [&self.rest, &self.streamed];
-        if runs.iter().any(|run| run.std.len() != run.errors.len()) {
+        let runs = [(REST, &self.rest), (STREAM, &self.streamed)];
+        if runs.iter().any(|(_, run)| run.std.len() != run.errors.len()) {
             return None;
         }
-        // Each target's error in units of 2σ, with its push and its kind (0 from rest, 1 streamed).
+        // Each target's error in units of 2σ, with its push and its kind.
         let ratios: Vec<(usize, usize, f64)> = runs
             .iter()
-            .enumerate()
-            .flat_map(|(kind, run)| {
+            .flat_map(|&(kind, run)| {
                 let pushes = run.push_of.iter().zip(&run.errors).zip(&run.std);
                 pushes.map(move |((&p, e), s)| (p, kind, e / (2.0 * s)))
             })
@@ -459,19 +503,12 @@ impl MethodRun {
         let mut pushes: Vec<usize> = ratios.iter().map(|r| r.0).collect();
         pushes.sort_unstable();
         pushes.dedup();
-        let held_out = (pushes.len() > 1).then(|| {
-            // Within 2σ and in all, of each kind.
-            let mut counts = [[0usize; 2]; 2];
-            for &p in &pushes {
-                let others = factor_of(ratios.iter().filter(|r| r.0 != p).map(|r| r.2).collect());
-                for &(_, kind, ratio) in ratios.iter().filter(|r| r.0 == p) {
-                    counts[kind][0] += usize::from(ratio <= others);
-                    counts[kind][1] += 1;
-                }
-            }
-            counts.map(|[within, all]| (all > 0).then(|| within as f64 / all as f64))
-        });
-        let std: Vec<f64> = runs.iter().flat_map(|run| &run.std).copied().collect();
+        let mut held_out = Vec::new();
+        for &p in pushes.iter().filter(|_| pushes.len() > 1) {
+            let others = factor_of(ratios.iter().filter(|r| r.0 != p).map(|r| r.2).collect());
+            held_out.extend(ratios.iter().filter(|r| r.0 == p).map(|&(_, kind, ratio)| (p, kind, ratio <= others)));
+        }
+        let std: Vec<f64> = runs.iter().flat_map(|(_, run)| &run.std).copied().collect();
         Some(SigmaCalibration { factor, mean_std: factor * mesh::stats::mean(&std), held_out })
     }
 
@@ -498,8 +535,9 @@ impl MethodRun {
 }
 
 /// Each push's figure in words: `1.5 N 2.10 mm, 2.5 N 3.40 mm` (`(force, m)` pairs), after "per push".
-fn push_figures(pushes: &[(f64, f64)]) -> String {
-    let figures: Vec<String> = pushes.iter().map(|&(force, value)| format!("{force} N {:.2} mm", mm(value))).collect();
+fn push_figures(pushes: impl IntoIterator<Item = (f64, f64)>) -> String {
+    let figures: Vec<String> =
+        pushes.into_iter().map(|(force, value)| format!("{force} N {:.2} mm", mm(value))).collect();
     format!("per push {}", figures.join(", "))
 }
 
@@ -583,7 +621,7 @@ pub(super) fn validation_step(
         truth.mesh.num_nodes(),
         truth.seen.len(),
         mm(mesh::stats::mean(&rest_errors)),
-        push_figures(&motions)
+        push_figures(motions.iter().copied())
     ));
     lines.extend(
         swing_warning("the targets", mesh::stats::mean(&rest_errors), &organ).map(|w| format!("validation: {w}")),
@@ -608,10 +646,12 @@ pub(super) fn validation_step(
             pushes.join("; ")
         ));
     }
-    lines.extend(methods.iter().flat_map(method_lines));
+    let forces: Vec<f64> = pushes.iter().map(|p| p.force).collect();
+    lines.extend(methods.iter().flat_map(|run| method_lines(run, &forces)));
     let calibrations: Vec<(PatientMethod, SigmaCalibration)> =
         methods.iter().filter_map(|run| Some((run.method, run.sigma_calibration()?))).collect();
     lines.extend(calibrations.iter().map(|(method, calibration)| calibration_line(*method, calibration)));
+    write_table(dir, &methods, &calibrations, &forces)?;
     let (line, chosen) = record_set_up(dir, &methods, &calibrations)?;
     lines.push(line);
     let factor = calibrations.iter().find(|(method, _)| *method == chosen).map_or(1.0, |(_, c)| c.factor);
@@ -688,26 +728,146 @@ fn register_pushes(
     Ok(Registrations { methods, rest_errors, motions, left_out, streams_left_out })
 }
 
-/// The validation's lines on one method's registrations: from rest, and as streams.
-fn method_lines(run: &MethodRun) -> [String; 2] {
+/// The validation's lines on one method's registrations: from rest, and as streams; `forces`:
+/// each push's (N).
+fn method_lines(run: &MethodRun, forces: &[f64]) -> [String; 2] {
     let name = method_name(run.method);
     let streams = format!("{name} as streams of {} frames", STREAM_SHARES.len());
     [
-        format!("validation: {}", run.rest.words(name, "per registration from rest")),
-        format!("validation: {}", run.streamed.words(&streams, "per warm-started frame")),
+        format!("validation: {}", run.rest.words(name, "per registration from rest", forces)),
+        format!("validation: {}", run.streamed.words(&streams, "per warm-started frame", forces)),
     ]
+}
+
+/// Writes [`TABLE`]: a row for each method, kind of registration (`rest`, `stream`) and push
+/// (`push_n` its force), then one for all the pushes (`push_n` `all`); `forces`: each push's (N).
+fn write_table(
+    dir: &Path,
+    methods: &[MethodRun],
+    calibrations: &[(PatientMethod, SigmaCalibration)],
+    forces: &[f64],
+) -> Result<()> {
+    let figure = |value: Option<f64>, digits: usize| value.map_or(String::new(), |v| format!("{v:.digits$}"));
+    let mut rows = Vec::new();
+    for run in methods {
+        let calibration = calibrations.iter().find(|(method, _)| *method == run.method).map(|(_, c)| c);
+        for (kind, registered) in [(REST, &run.rest), (STREAM, &run.streamed)] {
+            let pushes = registered.pushes().into_iter().map(Some);
+            for push in pushes.chain(std::iter::once(None)) {
+                let (errors, std) = match push {
+                    Some(p) => registered.of_push(p),
+                    None => (registered.errors.clone(), registered.std.clone()),
+                };
+                if errors.is_empty() {
+                    continue;
+                }
+                let given = (std.len() == errors.len()).then_some(std);
+                rows.push(vec![
+                    run.method.name().to_string(),
+                    ["rest", "stream"][kind].to_string(),
+                    push.map_or("all".into(), |p| forces[p].to_string()),
+                    errors.len().to_string(),
+                    format!("{:.3}", mm(mesh::stats::mean(&errors))),
+                    format!("{:.3}", mm(mesh::stats::max(&errors))),
+                    figure(given.as_ref().map(|std| mm(mesh::stats::mean(std))), 3),
+                    figure(given.as_ref().and_then(|std| register::within_two_std(&errors, std)), 4),
+                    figure(calibration.map(|c| c.factor), 3),
+                    figure(calibration.and_then(|c| c.held_out_share(kind, push)), 4),
+                    figure(push.is_none().then(|| mesh::stats::mean(&registered.times_ms)), 1),
+                ]);
+            }
+        }
+    }
+    let comments = [
+        "augsim prepare's validation: the targets' errors registering its pushes (rest: each from rest; stream: \
+         each as a stream of 4 frames, its warm-started frames timed)"
+            .to_string(),
+        "sigma_mm, within_2sigma: the mean σ the method gives and the share of the targets within 2σ; \
+         sigma_factor: its calibration (registration.toml); within_2sigma_calibrated: the share within 2σ under \
+         the factor calibrated on the other pushes"
+            .to_string(),
+    ];
+    mesh::io::csv::write_csv(&dir.join(TABLE), &comments, &TABLE_COLUMNS, rows)?;
+    Ok(())
+}
+
+/// The report's table of the validation's figures, from [`TABLE`] in `dir` (its rows over all
+/// the pushes); none when the validation has not written it.
+pub(super) fn report_table(dir: &Path) -> Result<Option<String>> {
+    let path = dir.join(TABLE);
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let table = mesh::io::csv::Table::parse(&text, &mesh::io::csv::Dialect::CSV)
+        .and_then(|table| table.check_widths().map(|()| table))
+        .with_context(|| format!("reading {}", path.display()))?;
+    let column = |name: &str| table.column(name).with_context(|| format!("{} has no column {name}", path.display()));
+    let [method, registered, push, tre, largest, factor, calibrated, ms] = [
+        "method",
+        "registered",
+        "push_n",
+        "tre_mm",
+        "largest_mm",
+        "sigma_factor",
+        "within_2sigma_calibrated",
+        "ms_per_frame",
+    ]
+    .map(column);
+    let (method, registered, push, tre, largest) = (method?, registered?, push?, tre?, largest?);
+    let (factor, calibrated, ms) = (factor?, calibrated?, ms?);
+    let mut text = String::from(
+        "| method | from rest: TRE (largest) | as streams: TRE (largest) | ms per frame (from rest; warm-started) | σ \
+         factor | within 2σ, each push under the others' factor (from rest; streams) |\n| --- | --- | --- | ---: | \
+         ---: | --- |\n",
+    );
+    for name in [PatientMethod::Learned, PatientMethod::Fem, PatientMethod::Hybrid] {
+        let row = |kind: &str| {
+            table
+                .rows
+                .iter()
+                .find(|r| r.fields[method] == name.name() && r.fields[registered] == kind && r.fields[push] == "all")
+        };
+        let (rest, stream) = (row("rest"), row("stream"));
+        let Some(any) = rest.or(stream) else { continue };
+        // A number of the row in `column` as `form` writes it; a dash where there is none.
+        let figure = |row: Option<&mesh::io::csv::Row>, column: usize, form: &dyn Fn(f64) -> String| {
+            row.and_then(|r| r.fields[column].parse::<f64>().ok()).map_or("—".into(), form)
+        };
+        let tre = |row| {
+            format!(
+                "{} ({})",
+                figure(row, tre, &|v| format!("{v:.2} mm")),
+                figure(row, largest, &|v| format!("{v:.2} mm"))
+            )
+        };
+        let share = |row| figure(row, calibrated, &|v| format!("{:.0} %", 100.0 * v));
+        let ms = |row| figure(row, ms, &|v| format!("{v:.0}"));
+        text.push_str(&format!(
+            "| {} | {} | {} | {}; {} | {} | {}; {} |\n",
+            method_name(name),
+            tre(rest),
+            tre(stream),
+            ms(rest),
+            ms(stream),
+            figure(Some(any), factor, &|v| format!("×{v:.2}")),
+            share(rest),
+            share(stream)
+        ));
+    }
+    Ok(Some(text))
 }
 
 /// The validation's line on a method's σ calibrated.
 fn calibration_line(method: PatientMethod, c: &SigmaCalibration) -> String {
-    let held_out = c.held_out.map_or(String::new(), |shares| {
-        let shares: Vec<String> = shares
-            .iter()
-            .zip(["from rest", "on streams"])
-            .filter_map(|(share, kind)| share.map(|share| format!("{:.0} % {kind}", 100.0 * share)))
-            .collect();
-        format!("; each push's targets with the factor of the other pushes: within 2σ {}", shares.join(", "))
-    });
+    let shares: Vec<String> = [(REST, "from rest"), (STREAM, "on streams")]
+        .into_iter()
+        .filter_map(|(kind, words)| c.held_out_share(kind, None).map(|share| format!("{:.0} % {words}", 100.0 * share)))
+        .collect();
+    let held_out = match shares.is_empty() {
+        true => String::new(),
+        false => format!("; each push's targets with the factor of the other pushes: within 2σ {}", shares.join(", ")),
+    };
     format!(
         "validation: σ of the {} calibrated on these pushes: ×{:.2}, the least factor (at least 1) that puts \
          {:.0} % of their targets within 2σ (σ {:.2} mm mean){held_out}",
@@ -771,11 +931,13 @@ mod tests {
         let c = run.sigma_calibration().unwrap();
         assert!((c.factor - 3.0).abs() < 1e-12 && (c.mean_std - 3e-3).abs() < 1e-12, "×{}", c.factor);
         // Push 0 under push 1's factor 1.5 keeps 1 of 2; push 1 under push 0's 3, both.
-        assert_eq!(c.held_out, Some([Some(0.75), None]));
+        assert_eq!(c.held_out_share(REST, None), Some(0.75));
+        assert_eq!((c.held_out_share(REST, Some(0)), c.held_out_share(REST, Some(1))), (Some(0.5), Some(1.0)));
+        assert_eq!(c.held_out_share(STREAM, None), None, "no stream registered");
         let narrow = MethodRun { rest: registered(&[(0, 0.2), (1, 0.3)]), ..MethodRun::default() };
         assert_eq!(narrow.sigma_calibration().unwrap().factor, 1.0, "σ is only ever widened");
         let single = MethodRun { rest: registered(&[(0, 0.2), (0, 0.3)]), ..MethodRun::default() };
-        assert_eq!(single.sigma_calibration().unwrap().held_out, None, "one push: nothing to leave out");
+        assert!(single.sigma_calibration().unwrap().held_out.is_empty(), "one push: nothing to leave out");
         let fem = MethodRun { rest: Registered { std: Vec::new(), ..registered(&[(0, 0.5)]) }, ..MethodRun::default() };
         assert!(fem.sigma_calibration().is_none());
     }
