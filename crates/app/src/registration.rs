@@ -16,15 +16,13 @@ use mesh::isosurface::ExtractOptions;
 use mesh::labelmap::is_labelmap;
 use mesh::length::LengthUnit;
 use mesh::{Point, TriSurface};
-use register::{
-    shape, Deformer, HybridDeformer, NetworkDeformer, Organ, Registration, RegistrationOptions, ShapeOptions,
-};
+use register::{shape, Deformer, HybridDeformer, NetworkDeformer, Organ, Registration, RegistrationOptions};
 use scenario::{DatasetScenario, MeshSource, StaticScenario};
 
 use crate::meshing::OrganInput;
 use crate::models::{
-    fem_model, hybrid_options, learned_registration, network_model, shape_fit, LearnedRegistration, ModelSource,
-    Network, ScenarioSource,
+    fem_model, hybrid_options, learned_registration, network_model, rom_hybrid, rom_stream_shape, shape_fit,
+    LearnedRegistration, ModelSource, Network, ScenarioSource,
 };
 use crate::setup::{
     read_organ_surface, steps_before_validation, Patient, PatientMethod, PATIENT_FILE, SET_UP_FRAME, STRUCTURES_UNIT,
@@ -47,9 +45,10 @@ pub enum MethodSpec {
         way: LearnedWay,
     },
     /// A learned model for the first `network_iterations` of a frame from rest, then the FEM from
-    /// its estimate, and the FEM alone on a stream's frames ([`HybridDeformer`]), on the FEM's
-    /// organ: a reduced-order model's shape fit there (its modes interpolated from its grid), a
-    /// U-Net's match-and-membrane loop (its organ must be the FEM's mesh).
+    /// its estimate ([`HybridDeformer`]), on the FEM's organ: a reduced-order model's shape fit
+    /// there (its modes interpolated from its grid), alone on a stream's next frames
+    /// ([`rom_hybrid`]); a U-Net's match-and-membrane loop (its organ must be the FEM's mesh),
+    /// the FEM alone on a stream's next frames.
     Hybrid {
         /// The model.
         model: ModelSource,
@@ -177,7 +176,7 @@ impl MethodSpec {
                 let frame = fem.mesh.frame(&fem_dir)?;
                 let learned: Box<dyn Deformer + Send> = match &model {
                     // The shape space holds on any mesh inside the model's grid: the FEM's own.
-                    Model::Reduced(_) => Box::new(shape_fit(&model, &organ, ShapeOptions::default())?),
+                    Model::Reduced(_) => Box::new(shape_fit(&model, &organ, rom_stream_shape())?),
                     Model::UNet(_) => {
                         let (scenario, dir) = scenario.read(DatasetScenario::load)?;
                         let (network_organ, network) =
@@ -202,6 +201,10 @@ impl MethodSpec {
                 // By default the FEM polishes the learned estimate for a few iterations.
                 let options =
                     options.cloned().unwrap_or_else(|| hybrid_options(&Default::default(), network_iterations));
+                let (deformer, options) = match model {
+                    Model::Reduced(_) => rom_hybrid(deformer, options),
+                    Model::UNet(_) => (deformer, options),
+                };
                 let warnings = left_out.into_iter().collect();
                 Loaded { organ, frame, deformer: Box::new(deformer), method, options, warnings }
             }
@@ -246,7 +249,8 @@ pub struct RegistrationChoice {
     #[arg(long, requires = "patient", conflicts_with = "use_fem")]
     pub use_model: bool,
     /// With --patient: register with the patient's learned model from rest, then its FEM from that
-    /// estimate (the FEM alone on a stream's next clouds), whichever its set-up names.
+    /// estimate (on a stream's next clouds, a reduced-order model's shape fit alone; a U-Net's
+    /// FEM alone), whichever its set-up names.
     #[arg(long, requires = "patient", conflicts_with_all = ["use_fem", "use_model"])]
     pub use_hybrid: bool,
     /// FEM registration on this static scenario (a file or a built-in name): its mesh, material

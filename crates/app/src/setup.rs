@@ -23,7 +23,8 @@ pub enum PatientMethod {
     /// The FEM of the static scenario.
     Fem,
     /// The learned model from rest (a reduced-order model's shape fit, on the FEM's mesh), then
-    /// the FEM from its estimate; the FEM alone on a stream's frames ([`crate::registration::MethodSpec::Hybrid`]).
+    /// the FEM from its estimate; the shape fit alone on a stream's next frames
+    /// ([`crate::registration::MethodSpec::Hybrid`]).
     Hybrid,
 }
 

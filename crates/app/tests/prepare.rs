@@ -275,9 +275,10 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
         let mut registration = RegistrationSpec::patient(&out, Some(method), None, false).unwrap().build().unwrap();
         assert_eq!(registration.method().contains("then FEM"), method == PatientMethod::Hybrid, "{method:?}");
         if method == PatientMethod::Hybrid {
-            // The ROM's shape fit, then the FEM's polish.
+            // The ROM's shape fit, then the FEM's polish; on a stream's next frames the fit alone.
             let iterations = register::shape::SHAPE_ITERATIONS + augsim_app::models::POLISH_ITERATIONS;
             assert_eq!(registration.options().iterations, iterations);
+            assert_eq!(registration.options().warm_iterations, register::shape::SHAPE_WARM_ITERATIONS);
         }
         let cloud: Vec<Point> = registration.organ().surface().vertices.iter().step_by(2).copied().collect();
         let rest = registration.targets().to_vec();

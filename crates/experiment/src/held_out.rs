@@ -579,8 +579,9 @@ fn notes(base: &CaseScenario, runs: usize, reference_ms: f64) -> Result<Vec<Stri
              rest and every next frame warm-started from the last, with its warm budget (the FEM {} iterations, the \
              U-Net and \"ROM, membrane loop\" {}, \"ROM\" {} of its shape fit, all its modes under the model's \
              own prior; the U-Net after the shape fit {}: one of the fit from the last frame's posterior, then the \
-             U-Net's loop; the hybrid's frames are the FEM's); the U-Net (both rows) and \"ROM\" match \
-             both ways on those frames: the surface they see over the cloud is matched to the cloud as well. \
+             U-Net's loop; the hybrid's are its shape fit's, as \"ROM\"); the U-Net (both rows), \"ROM\" and \
+             the hybrid match both ways on those frames: the surface they see over the cloud is matched to the \
+             cloud as well. \
              TRE at the peak frame, and over all frames; time: the median over the stream's frames, one run.",
             STREAM_FRAMES + 1,
             corotational(base).and_then(|m| m.warm_iterations).unwrap_or(base.registration.warm_iterations),

@@ -128,7 +128,8 @@ impl Deformer for FemDeformer {
 /// at once), or a learned model's match-and-membrane loop (predicting from the surface the shape
 /// fit found). A warm-started frame (a stream) starts near the cloud already: the second deformer
 /// alone registers it, or the second after the first's iterations from its last posterior
-/// ([`HybridDeformer::first_on_warm_frames`]).
+/// ([`HybridDeformer::first_on_warm_frames`]), or the first alone
+/// ([`HybridDeformer::first_alone_on_warm_frames`]).
 ///
 /// σ: the expected distance of the second's estimate to the truth under the first's posterior:
 /// with the first's error of standard deviation σ₁ and the second's estimate Δ away from the
@@ -142,13 +143,16 @@ pub struct HybridDeformer {
     then: Box<dyn Deformer + Send>,
     /// The first's iterations on a frame from rest before the second's.
     from_rest: usize,
-    /// The first's iterations at the start of a warm-started frame.
+    /// The first's iterations at the start of a warm-started frame (`usize::MAX`: all of them,
+    /// the first alone).
     warm_first: usize,
     /// The iteration of a frame from rest at which the second deformer takes over, when the
     /// first settled before its iterations were spent.
     handover: Option<usize>,
     /// Whether the frame under way is warm-started.
     warm: bool,
+    /// Whether the second deformer has registered in the frame under way.
+    then_ran: bool,
     /// Once the second deformer has taken over: the first's estimate, and (at the frame's end) the
     /// second's, whose difference widens the first's σ.
     first_estimate: Option<Vec<f64>>,
@@ -183,6 +187,7 @@ impl HybridDeformer {
             warm_first: 0,
             handover: None,
             warm: false,
+            then_ran: false,
             first_estimate: None,
             then_estimate: None,
             last_observations: None,
@@ -197,6 +202,12 @@ impl HybridDeformer {
         self
     }
 
+    /// On a warm-started frame, the first deformer alone (from its last posterior), as it
+    /// registers a stream's frames on its own; σ is then its own.
+    pub fn first_alone_on_warm_frames(self) -> HybridDeformer {
+        self.first_on_warm_frames(usize::MAX)
+    }
+
     /// σ where the second's estimate widens the first's, times `factor` (positive): a
     /// calibration on registrations whose truth is known.
     pub fn sigma_scaled(mut self, factor: f64) -> Result<HybridDeformer> {
@@ -208,7 +219,7 @@ impl HybridDeformer {
     /// The iteration of the frame under way at which the second deformer takes over.
     fn takeover(&self) -> usize {
         match self.warm {
-            true => crate::frame::WARM_START_ITERATION + self.warm_first,
+            true => crate::frame::WARM_START_ITERATION.saturating_add(self.warm_first),
             false => self.handover.unwrap_or(self.from_rest),
         }
     }
@@ -217,6 +228,7 @@ impl HybridDeformer {
 impl Deformer for HybridDeformer {
     fn start_frame(&mut self, warm: bool) {
         self.warm = warm;
+        self.then_ran = false;
         self.handover = None;
         self.first_estimate = None;
         self.then_estimate = None;
@@ -240,13 +252,16 @@ impl Deformer for HybridDeformer {
         if !self.warm || self.warm_first > 0 {
             self.first_estimate.get_or_insert_with(|| previous.to_vec());
         }
+        self.then_ran = true;
         self.then.deform(observations, previous, iteration)
     }
 
     fn settled(&mut self, iteration: usize) -> bool {
         // The first deformer settled (on a frame from rest) or ended its part (on a warm-started
-        // frame): the second takes over from its estimate.
-        let first_settled = iteration < self.takeover();
+        // frame): the second takes over from its estimate, unless the first registers the
+        // warm-started frame alone.
+        let first_alone = self.warm && self.warm_first == usize::MAX;
+        let first_settled = iteration < self.takeover() && !first_alone;
         if first_settled && !self.warm {
             self.handover = Some(iteration + 1);
         }
@@ -255,12 +270,12 @@ impl Deformer for HybridDeformer {
 
     fn end_frame(&mut self, observations: Observations, u: &[f64]) {
         // Kept for σ once the second deformer has registered: on a frame from rest after the
-        // first's iterations, on a warm-started frame always.
-        if self.warm || self.first_estimate.is_some() {
+        // first's iterations; on a warm-started frame, unless the first registered it alone.
+        if self.then_ran {
             self.then_estimate = Some(u.to_vec());
-        }
-        if self.warm && self.first_estimate.is_none() {
-            self.last_observations = Some(observations);
+            if self.warm && self.first_estimate.is_none() {
+                self.last_observations = Some(observations);
+            }
         }
     }
 
@@ -802,7 +817,8 @@ mod tests {
     }
 
     /// A hybrid's warm-started frame is the second deformer's, or, with the first's iterations on
-    /// warm-started frames, the first's for those iterations, then the second's from its estimate.
+    /// warm-started frames, the first's for those iterations, then the second's from its estimate,
+    /// or the first's alone.
     #[test]
     fn a_hybrid_s_warm_frame_is_the_second_s_after_the_first_s_iterations_there() {
         let organ = Organ::new(mesh::box_tet([0.0; 3], [0.04; 3], [2, 2, 2]).unwrap(), None).unwrap();
@@ -820,6 +836,8 @@ mod tests {
         assert_eq!(frames(&mut first_on_warm(), 1).1, (1e-3, 1), "the first's iteration only");
         // The first does not settle the warm frame: the second goes on from its estimate.
         assert_eq!(frames(&mut first_on_warm(), 3).1, (2e-3, 3), "the first's, then the second's");
+        let mut first_alone = HybridDeformer::new(first, then, 5).unwrap().first_alone_on_warm_frames();
+        assert_eq!(frames(&mut first_alone, 3), ((2e-3, 4), (1e-3, 2)), "then the first alone, to where it settles");
     }
 
     /// A hybrid whose first deformer settles before its iterations are spent hands over to the
@@ -895,6 +913,13 @@ mod tests {
         let on_stream = sigma(&mut plain).unwrap();
         assert!((on_stream - expected).abs() < 1e-12, "{on_stream} against {expected}");
         assert_eq!(sigma(&mut plain), Some(on_stream), "asked again, the same σ");
+        // The first alone on a stream's frame: its own σ, nothing widens it.
+        let mut alone = hybrid().first_alone_on_warm_frames();
+        let (_, _, last) = from_rest(&mut alone);
+        alone.start_frame(true);
+        let fitted = alone.deform(&observations, &last, crate::WARM_START_ITERATION).unwrap();
+        alone.end_frame(observations.clone(), &fitted);
+        assert_eq!(sigma(&mut alone), Some(1e-3), "the first's own");
         // Scaled: the widened σ, not the first's own.
         let (first, scaled, _) = from_rest(&mut hybrid().sigma_scaled(0.5).unwrap());
         assert_eq!(first, Some(1e-3), "the first deformer's own, unscaled");

@@ -253,9 +253,10 @@ pub enum MethodKind {
     /// with the normal displacement of its `visible` region as input; left out when none is given.
     Network,
     /// A learned model for the first `network_iterations` of a frame from rest, then the
-    /// finite-element model of `material` from its estimate (and alone on a stream's frames): the
-    /// first reduced-order model given (its shape fit, on the FEM's mesh), else the U-Net (which
-    /// must have been trained on the FEM's mesh); left out when no learned model is given.
+    /// finite-element model of `material` from its estimate: the first reduced-order model given
+    /// (its shape fit, on the FEM's mesh, alone on a stream's next frames), else the U-Net (which
+    /// must have been trained on the FEM's mesh; the FEM alone on a stream's next frames); left out
+    /// when no learned model is given.
     Hybrid,
 }
 

@@ -155,7 +155,7 @@ pub const TRUTH_DIR: &str = "validation";
 pub const PICTURE: &str = "validation";
 
 /// The table of the validation's figures beside the report: each method's registrations of each
-/// push and of all of them, from rest and as streams ([`write_table`]).
+/// push and of all of them, from rest and as streams.
 pub const TABLE: &str = "validation.csv";
 
 /// [`TABLE`]'s columns.
