@@ -143,9 +143,8 @@ pub struct HybridDeformer {
     then: Box<dyn Deformer + Send>,
     /// The first's iterations on a frame from rest before the second's.
     from_rest: usize,
-    /// The first's iterations at the start of a warm-started frame (`usize::MAX`: all of them,
-    /// the first alone).
-    warm_first: usize,
+    /// The first's iterations at the start of a warm-started frame (`None`: the first alone).
+    warm_first: Option<usize>,
     /// The iteration of a frame from rest at which the second deformer takes over, when the
     /// first settled before its iterations were spent.
     handover: Option<usize>,
@@ -184,7 +183,7 @@ impl HybridDeformer {
             first,
             then,
             from_rest: first_iterations,
-            warm_first: 0,
+            warm_first: Some(0),
             handover: None,
             warm: false,
             then_ran: false,
@@ -198,14 +197,15 @@ impl HybridDeformer {
     /// On a warm-started frame, `iterations` of the first deformer (from its last posterior) before
     /// the second takes over from its estimate (default: none, the second alone).
     pub fn first_on_warm_frames(mut self, iterations: usize) -> HybridDeformer {
-        self.warm_first = iterations;
+        self.warm_first = Some(iterations);
         self
     }
 
     /// On a warm-started frame, the first deformer alone (from its last posterior), as it
     /// registers a stream's frames on its own; σ is then its own.
-    pub fn first_alone_on_warm_frames(self) -> HybridDeformer {
-        self.first_on_warm_frames(usize::MAX)
+    pub fn first_alone_on_warm_frames(mut self) -> HybridDeformer {
+        self.warm_first = None;
+        self
     }
 
     /// σ where the second's estimate widens the first's, times `factor` (positive): a
@@ -216,11 +216,12 @@ impl HybridDeformer {
         Ok(self)
     }
 
-    /// The iteration of the frame under way at which the second deformer takes over.
-    fn takeover(&self) -> usize {
+    /// The iteration of the frame under way at which the second deformer takes over (`None`: it
+    /// does not).
+    fn takeover(&self) -> Option<usize> {
         match self.warm {
-            true => crate::frame::WARM_START_ITERATION.saturating_add(self.warm_first),
-            false => self.handover.unwrap_or(self.from_rest),
+            true => self.warm_first.map(|first| crate::frame::WARM_START_ITERATION + first),
+            false => Some(self.handover.unwrap_or(self.from_rest)),
         }
     }
 }
@@ -243,13 +244,13 @@ impl Deformer for HybridDeformer {
     }
 
     fn deform(&mut self, observations: &Observations, previous: &[f64], iteration: usize) -> Result<Vec<f64>> {
-        let then = match (self.warm, iteration.checked_sub(self.takeover())) {
+        let then = match (self.warm, self.takeover().and_then(|at| iteration.checked_sub(at))) {
             (_, None) => None,
             (false, Some(k)) => Some(crate::frame::WARM_START_ITERATION + k),
             (true, Some(_)) => Some(iteration),
         };
         let Some(iteration) = then else { return self.first.deform(observations, previous, iteration) };
-        if !self.warm || self.warm_first > 0 {
+        if !self.warm || self.warm_first != Some(0) {
             self.first_estimate.get_or_insert_with(|| previous.to_vec());
         }
         self.then_ran = true;
@@ -258,10 +259,8 @@ impl Deformer for HybridDeformer {
 
     fn settled(&mut self, iteration: usize) -> bool {
         // The first deformer settled (on a frame from rest) or ended its part (on a warm-started
-        // frame): the second takes over from its estimate, unless the first registers the
-        // warm-started frame alone.
-        let first_alone = self.warm && self.warm_first == usize::MAX;
-        let first_settled = iteration < self.takeover() && !first_alone;
+        // frame): the second takes over from its estimate, where it takes over at all.
+        let first_settled = self.takeover().is_some_and(|at| iteration < at);
         if first_settled && !self.warm {
             self.handover = Some(iteration + 1);
         }
