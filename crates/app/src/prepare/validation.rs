@@ -357,11 +357,8 @@ impl Registered {
     }
 
     /// The pushes it registered (their indices), in order.
-    fn pushes(&self) -> Vec<usize> {
-        let mut pushes = self.push_of.clone();
-        pushes.sort_unstable();
-        pushes.dedup();
-        pushes
+    fn pushes(&self) -> std::collections::BTreeSet<usize> {
+        self.push_of.iter().copied().collect()
     }
 
     /// The target errors (m) of push `push`'s frames, and their σ where the method gives one.
@@ -503,9 +500,8 @@ impl MethodRun {
         if !factor.is_finite() {
             return None;
         }
-        let mut pushes: Vec<usize> = ratios.iter().map(|r| r.0).collect();
-        pushes.sort_unstable();
-        pushes.dedup();
+        let pushes: std::collections::BTreeSet<usize> =
+            self.rest.pushes().union(&self.streamed.pushes()).copied().collect();
         let mut held_out = Vec::new();
         for &p in pushes.iter().filter(|_| pushes.len() > 1) {
             let others = factor_of(ratios.iter().filter(|r| r.0 != p).map(|r| r.2).collect());
