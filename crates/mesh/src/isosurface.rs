@@ -597,4 +597,39 @@ mod tests {
         let (_, hi) = crate::bounds(&s.vertices);
         assert!(hi[0] > 23.0, "the vessel ends at {}", hi[0]);
     }
+
+    /// A number in [0, 1) for each voxel centre, drawn as at random but the same on every run
+    /// (splitmix64 of its integer coordinates).
+    fn dither(p: Point) -> f64 {
+        let mut z = p.iter().fold(0x9e37_79b9_7f4a_7c15u64, |h, &x| h.rotate_left(21) ^ (x.round() as i64 as u64));
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        (z ^ (z >> 31)) as f64 / 2f64.powi(64)
+    }
+
+    #[test]
+    fn a_dithered_rim_is_closed_and_a_dithered_organ_refused() {
+        // A ball of 30 voxels' radius whose outer 2 voxels are drawn at random (a dithered rim):
+        // its voxels touching by an edge or a corner only make a surface that overlaps itself.
+        let ball = |keep: f64| {
+            mask([70; 3], [1.0; 3], [-35.0; 3], move |p| norm(p) <= 30.0 || (norm(p) <= 32.0 && dither(p) < keep))
+        };
+        let rim = ball(0.7);
+        let (drawn, _, _) = extracted(&rim.cropped(PAD).unwrap(), &ExtractOptions::default()).unwrap();
+        assert!(overlaps(&drawn).unwrap(), "the dithered rim as drawn should overlap itself");
+        // Closing the gaps of a voxel mends it, and says so.
+        let (s, report) = mask_surface(&rim, &ExtractOptions::default()).unwrap();
+        assert!(!overlaps(&s).unwrap());
+        let checked = check_closed_manifold(&s).unwrap();
+        let added = report.closed_voxels as f64 / rim.count() as f64;
+        assert!(added > 0.0 && added <= MAX_CLOSED_SHARE, "closing added {added}");
+        assert!(report.cleaning_lines().iter().any(|l| l.starts_with("closed gaps of a voxel")));
+        // The mended surface encloses the closed voxels: between the solid ball and its rim.
+        let volume = |r: f64| 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
+        assert!(checked.volume > volume(30.0) && checked.volume < volume(32.5), "{}", checked.volume);
+        assert!((checked.volume / report.voxel_volume - 1.0).abs() < 0.03);
+        // Half the rim's voxels left out: closing would add more than an organ's gaps; refused.
+        let e = mask_surface(&ball(0.5), &ExtractOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("overlaps itself, and closing the gaps of a voxel would add"), "{e}");
+    }
 }
