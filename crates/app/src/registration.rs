@@ -105,6 +105,17 @@ impl MethodSpec {
             way: LearnedWay::AfterShapeFit(ModelSource::File(basis.into())),
         }
     }
+
+    /// The learned model `model` (with its dataset scenario `scenario`) from rest, then the FEM of
+    /// the static scenario `fem` from its estimate, as [`MethodSpec::Hybrid`] does by default.
+    pub fn hybrid(model: impl Into<PathBuf>, scenario: impl Into<PathBuf>, fem: impl Into<PathBuf>) -> MethodSpec {
+        MethodSpec::Hybrid {
+            model: ModelSource::File(model.into()),
+            scenario: ScenarioSource::File(scenario.into()),
+            fem: ScenarioSource::File(fem.into()),
+            network_iterations: None,
+        }
+    }
 }
 
 /// A method loaded: its organ and the frame its mesh file names, how it deforms, the method in
@@ -721,12 +732,7 @@ impl RegistrationSpec {
         let method = match chosen {
             PatientMethod::Fem => MethodSpec::fem(dir.join(p.fem)),
             PatientMethod::Learned => MethodSpec::learned(dir.join(p.model), dir.join(p.scenario)),
-            PatientMethod::Hybrid => MethodSpec::Hybrid {
-                model: ModelSource::File(dir.join(p.model)),
-                scenario: ScenarioSource::File(dir.join(p.scenario)),
-                fem: ScenarioSource::File(dir.join(p.fem)),
-                network_iterations: None,
-            },
+            PatientMethod::Hybrid => MethodSpec::hybrid(dir.join(p.model), dir.join(p.scenario), dir.join(p.fem)),
         };
         Ok(RegistrationSpec {
             method,

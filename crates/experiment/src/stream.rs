@@ -147,7 +147,7 @@ fn measure(method: &str, case: &SyntheticCase, port: u16, unit: LengthUnit) -> R
 const STREAM_TRE: &str = "TRE mean over frames (largest frame mean; largest)";
 
 /// Runs the experiment: the co-rotational FEM (3k T4) and the shipped learned models, when found (the
-/// U-Net after the ROM's shape fit when both are).
+/// U-Net after the ROM's shape fit when both are; the ROM, then the FEM's polish, when the ROM is).
 pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let scenario = press_and_release();
     progress
@@ -171,6 +171,11 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         progress.line(&format!("streaming to the shipped {method}"));
         let learned = MethodSpec::learned_after_shape_fit(network, AR_SCENARIO, rom);
         streams.push(stream_case(method, &case, learned)?);
+    }
+    if let Some(rom) = &rom {
+        let method = "ROM, then FEM polish";
+        progress.line(&format!("streaming to the {method} (the shipped ROM, the co-rotational FEM)"));
+        streams.push(stream_case(method, &case, MethodSpec::hybrid(rom, AR_SCENARIO, FEM_SCENARIO))?);
     }
     let rest: Vec<f64> = case.frames.iter().map(|f| marker_motion_mm(&case, f)).collect();
     let reference_ms = Some(reference::measure()?);
@@ -232,15 +237,17 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
              targets and STRING status). Each cloud is sent when the previous one is answered. A frame warm-started \
              from the previous one runs at most {} iterations for the FEM and {} for the learned models, which match \
              both ways on those frames. The first frame, from rest, runs up to {} iterations for the FEM and {} for \
-             the U-Net (its real-time budget), {} for a reduced-order model's shape fit and {} more \
-             for the U-Net after it; its latency also holds the building of the client's registration (its organ and \
-             model, made as the client connects), which its server time does not.",
+             the U-Net (its real-time budget), {} for a reduced-order model's shape fit, {} more \
+             for the U-Net after it and {} of the FEM after it for the hybrid (\"ROM, then FEM polish\", which \
+             registers the next frames by the shape fit alone); its latency also holds the building of the client's \
+             registration (its organ and model, made as the client connects), which its server time does not.",
             options.warm_iterations,
             register::NetworkDeformer::WARM_ITERATIONS,
             options.iterations,
             register::NetworkDeformer::ITERATIONS,
             register::shape::SHAPE_ITERATIONS,
             app::models::NETWORK_AFTER_FIT,
+            app::models::POLISH_ITERATIONS,
         ),
         format!(
             "Timings: one run on this machine; the figures are only as quiet as the machine was. {}",
