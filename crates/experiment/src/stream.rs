@@ -146,36 +146,39 @@ fn measure(method: &str, case: &SyntheticCase, port: u16, unit: LengthUnit) -> R
 /// The TRE of a registration over the stream (and of no registration: the motion of the markers).
 const STREAM_TRE: &str = "TRE mean over frames (largest frame mean; largest)";
 
-/// Runs the experiment: the co-rotational FEM (3k T4) and the shipped learned models, when found (the
-/// U-Net after the ROM's shape fit when both are; the ROM, then the FEM's polish, when the ROM is).
+/// The methods streamed: the co-rotational FEM (3k T4) and the shipped learned models that are
+/// there, `network` (the U-Net) and `rom` (the reduced-order model): each alone, the U-Net after the
+/// ROM's shape fit when both are, the ROM then the FEM's polish (the hybrid) when the ROM is.
+fn methods(network: Option<&Path>, rom: Option<&Path>) -> Vec<(&'static str, MethodSpec)> {
+    let mut methods = vec![("FEM co-rotational (3k T4), warm-started", MethodSpec::fem(FEM_SCENARIO))];
+    if let Some(network) = network {
+        methods.push(("U-Net (models/liver_ar)", MethodSpec::learned(network, AR_SCENARIO)));
+    }
+    if let Some(rom) = rom {
+        methods.push(("ROM (models/liver_ar_rom)", MethodSpec::learned(rom, AR_SCENARIO)));
+    }
+    if let (Some(network), Some(rom)) = (network, rom) {
+        let after_fit = MethodSpec::learned_after_shape_fit(network, AR_SCENARIO, rom);
+        methods.push(("U-Net after the ROM's shape fit", after_fit));
+    }
+    if let Some(rom) = rom {
+        methods.push(("ROM, then FEM polish", MethodSpec::hybrid(rom, AR_SCENARIO, FEM_SCENARIO)));
+    }
+    methods
+}
+
+/// Runs the experiment on the [`methods`] found.
 pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let scenario = press_and_release();
     progress
         .line(&format!("simulating the press and release ({FRAMES} frames, truth of {})", scenario.truth.mesh_words()));
     let case = synthetic_case(&scenario)?;
     let options = scenario.registration.clone();
-    let mut streams = Vec::new();
-    progress.line("streaming to the co-rotational FEM");
-    let fem = MethodSpec::fem(FEM_SCENARIO);
-    streams.push(stream_case("FEM co-rotational (3k T4), warm-started", &case, fem)?);
-    // The shipped learned models that are there: the U-Net, the reduced-order model.
     let (network, rom) = (shipped(SHIPPED_MODEL), shipped(SHIPPED_ROM));
-    for (path, method) in [(&network, "U-Net (models/liver_ar)"), (&rom, "ROM (models/liver_ar_rom)")] {
-        let Some(path) = path else { continue };
-        progress.line(&format!("streaming to the shipped {method}"));
-        let learned = MethodSpec::learned(path, AR_SCENARIO);
-        streams.push(stream_case(method, &case, learned)?);
-    }
-    if let (Some(network), Some(rom)) = (&network, &rom) {
-        let method = "U-Net after the ROM's shape fit";
-        progress.line(&format!("streaming to the shipped {method}"));
-        let learned = MethodSpec::learned_after_shape_fit(network, AR_SCENARIO, rom);
-        streams.push(stream_case(method, &case, learned)?);
-    }
-    if let Some(rom) = &rom {
-        let method = "ROM, then FEM polish";
-        progress.line(&format!("streaming to the {method} (the shipped ROM, the co-rotational FEM)"));
-        streams.push(stream_case(method, &case, MethodSpec::hybrid(rom, AR_SCENARIO, FEM_SCENARIO))?);
+    let mut streams = Vec::new();
+    for (method, spec) in methods(network.as_deref(), rom.as_deref()) {
+        progress.line(&format!("streaming to the {method}"));
+        streams.push(stream_case(method, &case, spec)?);
     }
     let rest: Vec<f64> = case.frames.iter().map(|f| marker_motion_mm(&case, f)).collect();
     let reference_ms = Some(reference::measure()?);
