@@ -167,7 +167,8 @@ fn methods(network: Option<&Path>, rom: Option<&Path>) -> Vec<(&'static str, Met
     methods
 }
 
-/// Runs the experiment on the [`methods`] found.
+/// Runs the experiment: the co-rotational FEM (3k T4), the shipped learned models that are there,
+/// the U-Net after the ROM's shape fit and the hybrid where they can be made.
 pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResult> {
     let scenario = press_and_release();
     progress
