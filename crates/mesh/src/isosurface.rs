@@ -421,6 +421,8 @@ pub fn taubin_smooth(surface: &mut TriSurface, iterations: usize) {
 mod tests {
     use super::*;
     use crate::norm;
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
 
     /// The voxels of `grid` (spacing `h`, origin `origin`) whose centres satisfy `inside`.
     fn mask(dims: [usize; 3], h: [f64; 3], origin: Point, inside: impl Fn(Point) -> bool) -> VoxelMask {
@@ -598,21 +600,14 @@ mod tests {
         assert!(hi[0] > 23.0, "the vessel ends at {}", hi[0]);
     }
 
-    /// A number in [0, 1) for each voxel centre, drawn as at random but the same on every run
-    /// (splitmix64 of its integer coordinates).
-    fn dither(p: Point) -> f64 {
-        let mut z = p.iter().fold(0x9e37_79b9_7f4a_7c15u64, |h, &x| h.rotate_left(21) ^ (x.round() as i64 as u64));
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        (z ^ (z >> 31)) as f64 / 2f64.powi(64)
-    }
-
     #[test]
     fn a_dithered_rim_is_closed_and_a_dithered_organ_refused() {
         // A ball of 30 voxels' radius whose outer 2 voxels are drawn at random (a dithered rim):
         // its voxels touching by an edge or a corner only make a surface that overlaps itself.
         let ball = |keep: f64| {
-            mask([70; 3], [1.0; 3], [-35.0; 3], move |p| norm(p) <= 30.0 || (norm(p) <= 32.0 && dither(p) < keep))
+            let draws = std::cell::RefCell::new(StdRng::seed_from_u64(7));
+            let kept = move || draws.borrow_mut().random::<f64>() < keep;
+            mask([70; 3], [1.0; 3], [-35.0; 3], move |p| norm(p) <= 30.0 || (norm(p) <= 32.0 && kept()))
         };
         let rim = ball(0.7);
         let (drawn, _, _) = extracted(&rim.cropped(PAD).unwrap(), &ExtractOptions::default()).unwrap();
