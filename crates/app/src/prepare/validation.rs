@@ -298,22 +298,33 @@ struct SigmaCalibration {
     factor: f64,
     /// The mean σ (m) so calibrated.
     mean_std: f64,
-    /// Each target of each frame (its push, its kind: [`REST`] or [`STREAM`]) and whether it lies
-    /// within 2σ under the factor calibrated on the other pushes; empty with a single push.
-    held_out: Vec<(usize, usize, bool)>,
+    /// Each target of each frame (its push, its kind) and whether it lies within 2σ under the
+    /// factor calibrated on the other pushes; empty with a single push.
+    held_out: Vec<(usize, Kind, bool)>,
 }
 
-/// The kinds of registration, as [`SigmaCalibration::held_out`] names them: from rest, and the
-/// frames of a stream.
-const REST: usize = 0;
-/// See [`REST`].
-const STREAM: usize = 1;
+/// How a method registered a push: from rest, or as the frames of a stream.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    Rest,
+    Stream,
+}
+
+impl Kind {
+    /// Its name in [`TABLE`]'s `registered` column.
+    fn name(self) -> &'static str {
+        match self {
+            Kind::Rest => "rest",
+            Kind::Stream => "stream",
+        }
+    }
+}
 
 impl SigmaCalibration {
     /// The share of the targets of `kind` (of push `push`, else all) within 2σ under the factor
     /// calibrated on the other pushes; none without such targets.
-    fn held_out_share(&self, kind: usize, push: Option<usize>) -> Option<f64> {
-        let of = |&&(p, k, _): &&(usize, usize, bool)| k == kind && push.is_none_or(|push| p == push);
+    fn held_out_share(&self, kind: Kind, push: Option<usize>) -> Option<f64> {
+        let of = |&&(p, k, _): &&(usize, Kind, bool)| k == kind && push.is_none_or(|push| p == push);
         let targets = self.held_out.iter().filter(of).count();
         let within = self.held_out.iter().filter(of).filter(|t| t.2).count();
         (targets > 0).then(|| within as f64 / targets as f64)
@@ -483,12 +494,12 @@ impl MethodRun {
     /// Its σ calibrated ([`SigmaCalibration`]), for a method that gives one at every target it
     /// registered.
     fn sigma_calibration(&self) -> Option<SigmaCalibration> {
-        let runs = [(REST, &self.rest), (STREAM, &self.streamed)];
+        let runs = [(Kind::Rest, &self.rest), (Kind::Stream, &self.streamed)];
         if runs.iter().any(|(_, run)| run.std.len() != run.errors.len()) {
             return None;
         }
         // Each target's error in units of 2σ, with its push and its kind.
-        let ratios: Vec<(usize, usize, f64)> = runs
+        let ratios: Vec<(usize, Kind, f64)> = runs
             .iter()
             .flat_map(|&(kind, run)| {
                 let pushes = run.push_of.iter().zip(&run.errors).zip(&run.std);
@@ -500,12 +511,14 @@ impl MethodRun {
         if !factor.is_finite() {
             return None;
         }
-        let pushes: std::collections::BTreeSet<usize> =
-            self.rest.pushes().union(&self.streamed.pushes()).copied().collect();
+        let pushes: std::collections::BTreeSet<usize> = ratios.iter().map(|r| r.0).collect();
         let mut held_out = Vec::new();
-        for &p in pushes.iter().filter(|_| pushes.len() > 1) {
-            let others = factor_of(ratios.iter().filter(|r| r.0 != p).map(|r| r.2).collect());
-            held_out.extend(ratios.iter().filter(|r| r.0 == p).map(|&(_, kind, ratio)| (p, kind, ratio <= others)));
+        if pushes.len() > 1 {
+            for &p in &pushes {
+                let others = factor_of(ratios.iter().filter(|r| r.0 != p).map(|r| r.2).collect());
+                let of_push = ratios.iter().filter(|r| r.0 == p);
+                held_out.extend(of_push.map(|&(_, kind, ratio)| (p, kind, ratio <= others)));
+            }
         }
         let std: Vec<f64> = runs.iter().flat_map(|(_, run)| &run.std).copied().collect();
         Some(SigmaCalibration { factor, mean_std: factor * mesh::stats::mean(&std), held_out })
@@ -750,7 +763,7 @@ fn write_table(
     let mut rows = Vec::new();
     for run in methods {
         let calibration = calibrations.iter().find(|(method, _)| *method == run.method).map(|(_, c)| c);
-        for (kind, registered) in [(REST, &run.rest), (STREAM, &run.streamed)] {
+        for (kind, registered) in [(Kind::Rest, &run.rest), (Kind::Stream, &run.streamed)] {
             let pushes = registered.pushes().into_iter().map(Some);
             for push in pushes.chain(std::iter::once(None)) {
                 let (errors, std) = match push {
@@ -763,7 +776,7 @@ fn write_table(
                 let given = (std.len() == errors.len()).then_some(std);
                 rows.push(vec![
                     run.method.name().to_string(),
-                    ["rest", "stream"][kind].to_string(),
+                    kind.name().to_string(),
                     push.map_or("all".into(), |p| forces[p].to_string()),
                     errors.len().to_string(),
                     format!("{:.3}", mm(mesh::stats::mean(&errors))),
@@ -827,7 +840,7 @@ pub(super) fn report_table(dir: &Path) -> Result<Option<String>> {
                 .iter()
                 .find(|r| r.fields[method] == name.name() && r.fields[registered] == kind && r.fields[push] == "all")
         };
-        let (rest, stream) = (row("rest"), row("stream"));
+        let (rest, stream) = (row(Kind::Rest.name()), row(Kind::Stream.name()));
         let Some(any) = rest.or(stream) else { continue };
         // A number of the row in `column` as `form` writes it; a dash where there is none.
         let figure = |row: Option<&mesh::io::csv::Row>, column: usize, form: &dyn Fn(f64) -> String| {
@@ -859,7 +872,7 @@ pub(super) fn report_table(dir: &Path) -> Result<Option<String>> {
 
 /// The validation's line on a method's σ calibrated.
 fn calibration_line(method: PatientMethod, c: &SigmaCalibration) -> String {
-    let shares: Vec<String> = [(REST, "from rest"), (STREAM, "on streams")]
+    let shares: Vec<String> = [(Kind::Rest, "from rest"), (Kind::Stream, "on streams")]
         .into_iter()
         .filter_map(|(kind, words)| c.held_out_share(kind, None).map(|share| format!("{:.0} % {words}", 100.0 * share)))
         .collect();
@@ -930,9 +943,10 @@ mod tests {
         let c = run.sigma_calibration().unwrap();
         assert!((c.factor - 3.0).abs() < 1e-12 && (c.mean_std - 3e-3).abs() < 1e-12, "×{}", c.factor);
         // Push 0 under push 1's factor 1.5 keeps 1 of 2; push 1 under push 0's 3, both.
-        assert_eq!(c.held_out_share(REST, None), Some(0.75));
-        assert_eq!((c.held_out_share(REST, Some(0)), c.held_out_share(REST, Some(1))), (Some(0.5), Some(1.0)));
-        assert_eq!(c.held_out_share(STREAM, None), None, "no stream registered");
+        assert_eq!(c.held_out_share(Kind::Rest, None), Some(0.75));
+        let shares = (c.held_out_share(Kind::Rest, Some(0)), c.held_out_share(Kind::Rest, Some(1)));
+        assert_eq!(shares, (Some(0.5), Some(1.0)));
+        assert_eq!(c.held_out_share(Kind::Stream, None), None, "no stream registered");
         let narrow = MethodRun { rest: registered(&[(0, 0.2), (1, 0.3)]), ..MethodRun::default() };
         assert_eq!(narrow.sigma_calibration().unwrap().factor, 1.0, "σ is only ever widened");
         let single = MethodRun { rest: registered(&[(0, 0.2), (0, 0.3)]), ..MethodRun::default() };
