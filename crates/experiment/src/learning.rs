@@ -86,9 +86,9 @@ pub(crate) struct Recipe {
 }
 
 impl Recipe {
-    /// 8 channels, Adam at 1e-3 falling to 1e-5 along a half cosine, validated 20 times per run (at least
-    /// every 50 steps), clean inputs, from scratch on every training sample; `validation` and `test` samples
-    /// held out.
+    /// 8 channels, Adam at 1e-3 falling to 1e-5 along a half cosine, validated every twentieth of
+    /// the run but no more often than every 50 steps, clean inputs, from scratch on every training
+    /// sample; `validation` and `test` samples held out.
     pub fn new(iterations: usize, validation: usize, test: usize) -> Recipe {
         Recipe {
             iterations,
@@ -381,13 +381,17 @@ fn liver_forces_headlines(
 ) -> Vec<Headline> {
     vec![
         Headline::lower_is_better("liver, forces → displacement: test ē", mm(s.mean), 0.0694, 3, "mm"),
-        Headline::lower_is_better(
-            "liver, forces → displacement: test ē, reduced-order model with the linear-elastic prior",
-            mm(r.mean),
-            0.0694,
-            3,
-            "mm",
-        ),
+        // The publication has no reduced-order model: its U-Net's figure is the one to reach.
+        Headline {
+            published: "0.069 mm (the published U-Net)".into(),
+            ..Headline::lower_is_better(
+                "liver, forces → displacement: test ē, reduced-order model with the linear-elastic prior",
+                mm(r.mean),
+                0.0694,
+                3,
+                "mm",
+            )
+        },
         Headline {
             ours: reference::ms(prediction * 1e3, 2, Some(reference_ms)),
             ..Headline::lower_is_better(
@@ -459,7 +463,7 @@ pub(crate) fn liver_forces(size: Size, dir: &Path, progress: Progress) -> Result
         Row::new(
             "reduced-order model with the linear-elastic prior: ē (σ, max)",
             format!("{} ({}, {})", fmt(mm(r.mean), 3, "mm"), fmt(mm(r.std), 3, "mm"), fmt(mm(r.max), 3, "mm")),
-            "0.0694 mm (0.0781, 0.68 mm)",
+            "0.0694 mm (0.0781, 0.68 mm), the published U-Net",
         ),
         Row::new(
             "reduced-order model: prediction (one sample); fit",

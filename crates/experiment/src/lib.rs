@@ -27,10 +27,8 @@ mod loads;
 mod reference;
 mod registration;
 pub mod report;
-pub mod stream;
+mod stream;
 mod transfer;
-
-pub use fem_speed::{CaseTiming, Ratio, FRAME_LOAD_STEP};
 
 /// How large an experiment is run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

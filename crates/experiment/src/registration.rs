@@ -140,7 +140,9 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         .filter_map(|m| {
             let value = published(&m.method).1?;
             let figure = format!("registration TRE, {} ({} held-out cases)", m.method, HELD_OUT.len());
-            Some(Headline::lower_is_better(figure, mean(&m.means), value, 2, "mm"))
+            // A method that failed on a case has no mean over the cases (not the mean of the others).
+            let tre = if m.failures.is_empty() { mean(&m.means) } else { f64::NAN };
+            Some(Headline::lower_is_better(figure, tre, value, 2, "mm"))
         })
         .collect();
     rows.extend(cases.rows);

@@ -290,7 +290,8 @@ pub fn html(results: &[ExperimentResult]) -> String {
          table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 10px;text-align:left}\
          th{background:#f2f2f2}img{max-width:48%;margin:4px;border:1px solid #eee}code{background:#f6f6f6}\
          </style></head><body>\n<h1>augsim experiments</h1>\n<p>Each table puts our figure beside the published one; \
-         every figure is measured on data that played no part in producing it.</p>\n<h2>Summary</h2>\n",
+         every test figure is measured on data that played no part in producing it (rows of design cases and \
+         validation curves, which chose settings, say so).</p>\n<h2>Summary</h2>\n",
     );
     s.push_str(&summary_table(results).html());
     for r in results {

@@ -22,7 +22,7 @@ use serde::Serialize;
 
 use crate::held_out::marker_motion_mm;
 use crate::loads::LEFT_LOBE_FRONT;
-use crate::{reference, ExperimentResult, Name, Progress, Row, Size};
+use crate::{fmt, reference, ExperimentResult, Name, Progress, Row, Size};
 use app::case::{shipped, skipped_line, synthetic_case, SyntheticCase, AR_SCENARIO, SHIPPED_MODEL, SHIPPED_ROM};
 use app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
 use app::serving::serve_setup;
@@ -226,7 +226,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         format!(
             "Case: the built-in registration case's truth ({} phantom, E = {} kPa, ν = {}, {}) \
              pressed obliquely along {:?} on the front of the left lobe by a force rising to {} N and falling back \
-             over {FRAMES} frames (sine), each frame seen anew by the camera ({POINTS} points, 1 mm noise, 5 % \
+             over {FRAMES} frames (sine), each frame seen anew by the camera ({POINTS} points, {} noise, {:.0} % \
              outliers); the models are another mesh (3k T4) and law. The stream's settings were chosen on the \
              built-in case's own press and release, not on this one.",
             scenario.truth.material.law.display_name(),
@@ -234,19 +234,24 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
             scenario.truth.material.poisson,
             scenario.truth.mesh_words(),
             scenario.truth.direction,
-            scenario.truth.force
+            scenario.truth.force,
+            fmt(mm(scenario.camera.noise), 1, "mm"),
+            100.0 * scenario.camera.outliers
         ),
         format!(
             "Server in this process, client over TCP on this machine (OpenIGTLink POLYDATA in mm; answers: POINT \
              targets and STRING status). Each cloud is sent when the previous one is answered. A frame warm-started \
-             from the previous one runs at most {} iterations for the FEM and {} for the learned models, which match \
-             both ways on those frames. The first frame, from rest, runs up to {} iterations for the FEM and {} for \
+             from the previous one runs at most {} iterations for the FEM, {} for the U-Net, {} for a reduced-order \
+             model's shape fit (the hybrid's too) and {} for the U-Net after it; the learned models match both ways \
+             on those frames. The first frame, from rest, runs up to {} iterations for the FEM and {} for \
              the U-Net (its real-time budget), {} for a reduced-order model's shape fit, {} more \
              for the U-Net after it and {} of the FEM after it for the hybrid (\"ROM, then FEM polish\", which \
              registers the next frames by the shape fit alone); its latency also holds the building of the client's \
              registration (its organ and model, made as the client connects), which its server time does not.",
             options.warm_iterations,
             register::NetworkDeformer::WARM_ITERATIONS,
+            register::shape::SHAPE_WARM_ITERATIONS,
+            app::models::NETWORK_AFTER_FIT_WARM_ITERATIONS,
             options.iterations,
             register::NetworkDeformer::ITERATIONS,
             register::shape::SHAPE_ITERATIONS,

@@ -143,7 +143,7 @@ fn shipped_models_load_and_serialize_back_unchanged() {
     let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
     for name in ["liver_ar", "liver_forces"] {
         let dir = models.join(name);
-        let model = TrainedModel::load(&TrainedModel::json_path(&dir)).unwrap();
+        let model = TrainedModel::load(&augsim_learn::Model::json_path(&dir)).unwrap();
         assert_eq!(model.net.config(), &model.config);
         let bytes = std::fs::read(dir.join("model.safetensors")).unwrap();
         assert!(model.net.to_safetensors().unwrap() == bytes, "{name}: weights serialize to other bytes");

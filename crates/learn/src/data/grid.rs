@@ -26,14 +26,21 @@ pub struct GridShape {
     pub nz: usize,
 }
 
+/// The most nodes a grid may have: 2^26, a field of 768 MiB in 32-bit floats, far above any
+/// network's grid.
+pub const MAX_GRID_NODES: usize = 1 << 26;
+
 impl TryFrom<[usize; 3]> for GridShape {
     type Error = String;
 
-    /// A grid of at least one node along each axis (a model or manifest of another is damaged).
+    /// A grid of at least one node along each axis and at most [`MAX_GRID_NODES`] nodes (a model or
+    /// manifest of another is damaged).
     fn try_from([nx, ny, nz]: [usize; 3]) -> std::result::Result<Self, String> {
-        match nx.min(ny).min(nz) {
-            0 => Err(format!("grid [{nx}, {ny}, {nz}]: every axis needs at least one node")),
-            _ => Ok(GridShape { nx, ny, nz }),
+        let nodes = nx.checked_mul(ny).and_then(|n| n.checked_mul(nz));
+        match (nx.min(ny).min(nz), nodes) {
+            (0, _) => Err(format!("grid [{nx}, {ny}, {nz}]: every axis needs at least one node")),
+            (_, Some(n)) if n <= MAX_GRID_NODES => Ok(GridShape { nx, ny, nz }),
+            _ => Err(format!("grid [{nx}, {ny}, {nz}]: more than {MAX_GRID_NODES} nodes (a damaged file?)")),
         }
     }
 }
@@ -354,6 +361,17 @@ pub(crate) fn placed_model_grid(placement: Option<GridPlacement>, grid: GridShap
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A grid read from a file has a node along each axis and no more nodes than fit in memory:
+    /// sizes whose product overflows are refused, not wrapped.
+    #[test]
+    fn a_damaged_grid_shape_is_refused() {
+        assert_eq!(GridShape::try_from([4, 5, 3]), Ok(GridShape::new(4, 5, 3)));
+        assert!(GridShape::try_from([4, 0, 3]).unwrap_err().contains("at least one node"));
+        let huge = usize::MAX / 2;
+        assert!(GridShape::try_from([huge, huge, 3]).unwrap_err().contains("more than"));
+        assert!(serde_json::from_str::<GridShape>("[100000, 100000, 100000]").is_err());
+    }
 
     fn grid() -> Grid {
         Grid::new([0.0, -1.0, 2.0], [0.5, 0.25, 1.0], [4, 5, 3]).unwrap()

@@ -16,9 +16,27 @@ use crate::{LearnError, Result};
 
 /// A set of generation indices, stored as sorted, disjoint, non-adjacent half-open ranges
 /// `[start, end)` (a JSON list of pairs).
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
 #[serde(transparent)]
 pub struct IndexSet(Vec<[u64; 2]>);
+
+impl<'de> Deserialize<'de> for IndexSet {
+    /// The ranges as stored, refused unless each is non-empty and they are sorted and disjoint
+    /// (a damaged model file would otherwise answer [`IndexSet::contains`] wrongly).
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> std::result::Result<Self, D::Error> {
+        let ranges = Vec::<[u64; 2]>::deserialize(deserializer)?;
+        if let Some([start, end]) = ranges.iter().find(|r| r[0] >= r[1]) {
+            return Err(serde::de::Error::custom(format!("index range [{start}, {end}) is empty or reversed")));
+        }
+        if let Some(pair) = ranges.windows(2).find(|pair| pair[1][0] < pair[0][1]) {
+            return Err(serde::de::Error::custom(format!(
+                "index ranges {:?} and {:?} overlap or are out of order",
+                pair[0], pair[1]
+            )));
+        }
+        Ok(IndexSet(ranges))
+    }
+}
 
 impl IndexSet {
     /// The set of `indices` (any order, repeats allowed).
@@ -56,10 +74,12 @@ impl IndexSet {
         indices.iter().copied().find(|&i| self.contains(i))
     }
 
-    /// The first index of `other` in this set, if any.
+    /// The first index of `other` in this set, if any (range by range, never index by index).
     pub fn first_common_with(&self, other: &IndexSet) -> Option<u64> {
-        let indices: Vec<u64> = other.0.iter().flat_map(|&[start, end]| start..end).collect();
-        self.first_common(&indices)
+        other.0.iter().find_map(|&[start, end]| {
+            let at = self.0.partition_point(|r| r[1] <= start);
+            self.0.get(at).filter(|r| r[0] < end).map(|r| r[0].max(start))
+        })
     }
 }
 
@@ -335,6 +355,26 @@ impl<'a> Provenance<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A stored set reads back as written; ranges empty, reversed, overlapping or out of order
+    /// (a damaged model file) are refused; the first index two sets share is found range by
+    /// range, as index by index would find it.
+    #[test]
+    fn index_sets_are_checked_as_read_and_compared_by_ranges() {
+        let set = IndexSet::from_indices(&[3, 4, 5, 9, 20, 21]);
+        let text = serde_json::to_string(&set).unwrap();
+        assert_eq!(text, "[[3,6],[9,10],[20,22]]");
+        assert_eq!(serde_json::from_str::<IndexSet>(&text).unwrap(), set);
+        for bad in ["[[5,5]]", "[[6,3]]", "[[0,4],[3,8]]", "[[9,10],[3,6]]"] {
+            assert!(serde_json::from_str::<IndexSet>(bad).is_err(), "{bad}");
+        }
+        let others = [vec![0, 1, 2, 10, 11], vec![7, 8, 21, 30], vec![6, 7, 8], vec![1, 4], vec![]];
+        for other in others {
+            let brute = set.first_common(&other);
+            assert_eq!(set.first_common_with(&IndexSet::from_indices(&other)), brute, "{other:?}");
+        }
+        assert_eq!(set.first_common_with(&IndexSet::from_indices(&[1, 4])), Some(4));
+    }
 
     /// A scenario renamed draws the same samples: the model's training samples stay training
     /// samples under the new name; another seed is other data.

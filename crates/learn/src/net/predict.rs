@@ -5,11 +5,10 @@ use std::time::Instant;
 #[cfg(feature = "cpu-burn")]
 use burn::tensor::{Device, Tensor, TensorData};
 use mesh::embedding::Grid;
-use mesh::Mesh;
 use serde::{Deserialize, Serialize};
 
 use crate::data::dataset::Normalization;
-use crate::data::grid::{check_prediction_input, placed_model_grid, GridShape, GridToMesh};
+use crate::data::grid::{check_prediction_input, placed_model_grid, GridShape};
 #[cfg(feature = "cpu-burn")]
 use crate::net::burn_unet::{tensor_values, BurnUNet};
 use crate::net::inference::InferenceNet;
@@ -103,12 +102,6 @@ impl TrainedModel {
     /// Whether the network takes nodal forces (input unit N) rather than displacements (m).
     pub fn takes_forces(&self) -> bool {
         self.input_unit.is_force()
-    }
-
-    /// A field on the model's grid (`[3, nx, ny, nz]`, e.g. a prediction) interpolated to the nodes of `organ`
-    /// ([`GridToMesh`]), node-major (`3 × nodes`). Every node must lie in the placed grid.
-    pub fn field_on_mesh(&self, field: &[f32], organ: &Mesh) -> Result<Vec<f64>> {
-        GridToMesh::new(organ, &self.placed_grid()?)?.apply(field)
     }
 }
 

@@ -597,15 +597,6 @@ impl TrainedModel {
         self.training.as_ref().map(|t| Provenance { own: &t.split, earlier: &t.pretraining })
     }
 
-    /// The model JSON of `path`: `path/model.json` for a model directory, else `path` itself.
-    pub fn json_path(path: &Path) -> PathBuf {
-        if path.is_dir() {
-            path.join("model.json")
-        } else {
-            path.to_path_buf()
-        }
-    }
-
     /// Loads a model saved by [`save`](Self::save).
     pub fn load(json_path: &Path) -> Result<TrainedModel> {
         let text = std::fs::read_to_string(json_path).map_err(|e| LearnError::io(json_path, e))?;

@@ -334,7 +334,6 @@ impl ReducedModel {
         })
     }
 
-    /// Whether `json_path` (a `model.json`) holds a reduced-order model.
     /// Saves the model as a directory: `dir/model.json` and its arrays beside it, each file
     /// written atomically.
     pub fn save(&self, dir: &Path) -> Result<()> {

@@ -136,7 +136,7 @@ impl EvalReport {
 }
 
 impl std::fmt::Display for EvalReport {
-    /// `ē = … mm, σ(e) = … mm, max e = … mm (sample index …), N samples`.
+    /// `mean e = … mm, std = … mm, max = … mm (sample index …), N samples`.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let [mean, std, max] = self.summary_mm();
         write!(
