@@ -1,7 +1,7 @@
 //! An OpenIGTLink client of the server, for tests, benchmarks and Rust programs: it sends clouds
 //! and reads the server's answers ([`Answer`]).
 
-use std::io::{Read, Write};
+use std::io::{ErrorKind, Read, Write};
 use std::net::{TcpStream, ToSocketAddrs};
 use std::time::Duration;
 
@@ -93,11 +93,15 @@ impl Client {
     }
 
     /// The next message from the server and its header timestamp (that of the cloud it
-    /// answers); `None` when the connection is closed.
+    /// answers); `None` when the connection is closed, an error when nothing came within the
+    /// timeout.
     pub fn receive_stamped(&mut self) -> std::result::Result<Option<(Answer, u64)>, String> {
         let mut header = [0u8; Header::SIZE];
-        if self.stream.read_exact(&mut header).is_err() {
-            return Ok(None);
+        if let Err(e) = self.stream.read_exact(&mut header) {
+            return match e.kind() {
+                ErrorKind::UnexpectedEof => Ok(None),
+                _ => Err(self.failed("receiving", &e)),
+            };
         }
         let parsed = Header::decode(&header).map_err(|e| format!("malformed header: {e}"))?;
         if parsed.body_size > MAX_ANSWER_BYTES {
@@ -107,7 +111,7 @@ impl Client {
             ));
         }
         let mut body = vec![0; parsed.body_size as usize];
-        self.stream.read_exact(&mut body).map_err(|e| format!("truncated answer: {e}"))?;
+        self.stream.read_exact(&mut body).map_err(|e| self.failed("truncated answer", &e))?;
         let answer = match parsed.type_name.as_str() {
             "POINT" => {
                 let points = decode_body::<PointMessage>(&parsed, &body)?.points.iter().map(|p| p.position).collect();
@@ -136,6 +140,17 @@ impl Client {
             other => return Err(format!("unexpected {other} message")),
         };
         Ok(Some((answer, parsed.timestamp)))
+    }
+
+    /// Why a read failed: a timeout says how long nothing came.
+    fn failed(&self, what: &str, e: &std::io::Error) -> String {
+        match e.kind() {
+            ErrorKind::WouldBlock | ErrorKind::TimedOut => match self.stream.read_timeout() {
+                Ok(Some(timeout)) => format!("{what}: the server sent nothing within {:.1} s", timeout.as_secs_f64()),
+                _ => format!("{what}: the server sent nothing within the timeout"),
+            },
+            _ => format!("{what}: {e}"),
+        }
     }
 
     /// Reads answers up to and including the next status.
@@ -171,5 +186,25 @@ mod tests {
         let error = client.receive().unwrap_err();
         assert!(error.contains("an answer of 1152921504606846976 bytes"), "{error}");
         peer.join().unwrap();
+    }
+
+    /// A server that sends nothing within the timeout is an error that says so, not a connection
+    /// closed; one that closes is `None`.
+    #[test]
+    fn a_read_timing_out_is_not_a_closed_connection() {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let address = listener.local_addr().unwrap();
+        let (done, finished) = std::sync::mpsc::channel::<()>();
+        let peer = std::thread::spawn(move || {
+            let (stream, _) = listener.accept().unwrap();
+            let _ = finished.recv_timeout(Duration::from_secs(10));
+            drop(stream);
+        });
+        let mut client = Client::connect(address, Duration::from_millis(100)).unwrap();
+        let error = client.receive().unwrap_err();
+        assert!(error.contains("the server sent nothing within 0.1 s"), "{error}");
+        done.send(()).unwrap();
+        peer.join().unwrap();
+        assert!(client.receive().unwrap().is_none(), "the server closed the connection");
     }
 }

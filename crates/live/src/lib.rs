@@ -5,17 +5,19 @@
 //! Protocol (OpenIGTLink version 1–3, messages of [`igtl`] and [`polydata`]):
 //! - in: a point cloud as POLYDATA (its points; vertices optional) or POINT, device name `cloud`;
 //! - out, per cloud, in this order and as chosen by [`Outputs`]: POINT `targets` (the registered
-//!   targets, in the order given to the server, each named by its label, else `target k`), POLYDATA
+//!   targets, in the order given to the server, each named by its label, else `target-k`), POLYDATA
 //!   `organ` (the registered surface with its triangles), a POLYDATA per structure that moves with
 //!   the organ (a tumour, vessels: [`register::Structure`]), named as it, TRANSFORM `rigid` (the
 //!   organ-to-cloud transform, when the registration options ask for a rigid pre-alignment: estimated
 //!   on a client's first cloud and kept while its clouds register plausibly, estimated again after
 //!   one that does not; targets and organ are then in the cloud's frame), STRING `status` (one line
-//!   of JSON: `frame`, `ms`, `surface_residual`, `plausible` and `warnings` (see
-//!   `register::plausibility`), `inliers`, `points`, `iterations`, `from_rest` (the frame did not
-//!   start from the previous one's displacement), and `target_sigma` (the predicted standard
-//!   deviation σ at each target, for the reduced-order model; else null), in the stream's unit; or
-//!   `frame` and `error`). An error is answered whatever the outputs, so that a client never waits
+//!   of JSON: `frame`, `skipped` (the clouds received since the last one registered that a newer
+//!   one replaced), `ms`, `unit` (the stream's length unit, that of the lengths here),
+//!   `surface_residual`, `plausible` and `warnings` (see `register::plausibility`), `inliers`,
+//!   `points` (the cloud's points matched), `received` (its points as received), `iterations`,
+//!   `from_rest` (the frame did not start from the previous one's displacement), and `target_sigma`
+//!   (the predicted standard deviation σ at each target, for the reduced-order model; else null);
+//!   or `frame` and `error`). An error is answered whatever the outputs, so that a client never waits
 //!   for answers that will not come. A result that is not plausible comes as `targets_implausible`,
 //!   `organ_implausible` and `rigid_implausible`, without its structures: a viewer's `targets`,
 //!   `organ`, `rigid` and structures keep the last plausible answer.
@@ -43,9 +45,11 @@
 //! error estimate, as does a cloud with no point, too many points or a non-finite coordinate;
 //! the stream goes on. Messages of other types or devices (a navigation system's transforms, images)
 //! are skipped, whatever their size, each type and device said once in a STRING `warning` (one
-//! line of JSON: `warnings`). A client that closes its side after sending still gets the answers
-//! to what it sent. Other clients are never affected; the server's log (standard error) has a
-//! line per connection, per error and per connection closed.
+//! line of JSON: `warnings`; past [`MAX_IGNORED_KINDS`] of them, once that further ones are
+//! ignored silently). A client that closes its side after sending still gets the answers to what
+//! it sent. Other clients are never affected; at most [`ServeOptions::max_clients`] are served at
+//! once, one more answered by a STRING `status` error and closed. The server's log (standard
+//! error) has a line per connection, per error, per connection refused and per connection closed.
 //!
 //! Identification on the stream, when the server has one ([`ServeOptions::identification`], e.g.
 //! the ROUKF of an assimilation scenario): POINT (or POLYDATA) `features`, the observed
@@ -203,8 +207,20 @@ pub struct ServeOptions {
     /// Identification on the stream (`features` in, `estimate` out); `None`: `features` are
     /// answered with an error.
     pub identification: Option<Arc<IdentificationFactory>>,
-    /// A folder where each client's stream is recorded ([`Record`]); `None`: nothing is written.
+    /// A folder where each client's stream is recorded, as it goes, in a file of its own
+    /// (`client-NNN.jsonl`, the first number free): one line of JSON per event, flushed at once,
+    /// so that a server stopped in any way leaves every answer it sent. The first line names the
+    /// client (`peer`, `connected`: seconds since 1970, `unit` and `frame`, the stream's; the frame
+    /// null where unnamed); then each cloud's status with its `timestamp` (the cloud's header
+    /// timestamp in seconds since 1970, null for 0), `targets` (in the stream's unit and frame) and
+    /// `cloud`, the file that holds the cloud as it came (`client-NNN/cloud-NNNNNN.npy`, float32
+    /// `[n, 3]` in the stream's unit and frame, relative to the record's folder; written once the
+    /// cloud is answered, a refused one too), each error status and each estimate. `None`: nothing
+    /// is written.
     pub record: Option<PathBuf>,
+    /// Most clients served at once; a connection beyond them is answered by a STRING `status`
+    /// error and closed (each client has a registration of its own: its memory and its threads).
+    pub max_clients: usize,
 }
 
 impl Default for ServeOptions {
@@ -218,6 +234,7 @@ impl Default for ServeOptions {
             stall: Duration::from_secs(10),
             identification: None,
             record: None,
+            max_clients: 8,
         }
     }
 }
@@ -249,7 +266,7 @@ pub fn built_ahead<T: Send + 'static>(
         }
         let mut next = next.lock().map_err(|e| e.to_string())?;
         let ready = std::mem::replace(&mut *next, start());
-        ready.join().map_err(|_| "building a client's registration panicked".to_string())?
+        ready.join().map_err(|_| "the build made ahead for this client panicked".to_string())?
     }
 }
 
@@ -257,6 +274,14 @@ pub fn built_ahead<T: Send + 'static>(
 /// the system's count of unanswered probes (9 on Linux: about 2 minutes) ends it.
 const KEEPALIVE: socket2::TcpKeepalive =
     socket2::TcpKeepalive::new().with_time(Duration::from_secs(30)).with_interval(Duration::from_secs(10));
+
+/// Most records in a record folder ([`ServeOptions::record`]): `client-001` to `client-999999`.
+const MAX_RECORDS: u32 = 999_999;
+
+/// Most distinct (type, device) pairs of ignored messages a client is warned about, one warning
+/// each; further ones are ignored silently (after one warning saying so), so that a client that
+/// invents device names does not grow the server's memory and log without bound.
+pub const MAX_IGNORED_KINDS: usize = 64;
 
 /// How long the accept loop sleeps between checks of the stop flag.
 const POLL: Duration = Duration::from_millis(20);
@@ -268,16 +293,9 @@ fn log(line: impl std::fmt::Display) {
     eprintln!("augsim serve: {:02}:{:02}:{:02}.{ms:03} {line}", seconds / 3600, seconds / 60 % 60, seconds % 60);
 }
 
-/// A client's stream written as it goes, in a file of its own in [`ServeOptions::record`]
-/// (`client-NNN.jsonl`, the first number free): one line of JSON per event, flushed at once, so
-/// that a server stopped in any way leaves every answer it sent. The first line names the client
-/// (`peer`, `connected`: seconds since 1970, `unit` and `frame`, the stream's; the frame null
-/// where unnamed); then each cloud's status with its `timestamp` (the cloud's header timestamp in
-/// seconds since 1970, null for 0), `targets` (in the stream's unit and frame) and `cloud`, the
-/// file that holds the cloud as it came (`client-NNN/cloud-NNNNNN.npy`, float32 `[n, 3]` in the
-/// stream's unit and frame, relative to the record's folder; written once the cloud is answered,
-/// a refused one too), each error status and each estimate.
-pub struct Record {
+/// A client's stream written as it goes, in a file of its own in [`ServeOptions::record`] (its
+/// format there).
+pub(crate) struct Record {
     file: Mutex<std::io::BufWriter<std::fs::File>>,
     /// The file, for the log.
     path: PathBuf,
@@ -287,7 +305,7 @@ impl Record {
     /// A new record in `dir` (created) for the client `peer`.
     fn create(dir: &Path, peer: &str, (unit, frame): (LengthUnit, Option<Frame>)) -> std::io::Result<Record> {
         std::fs::create_dir_all(dir)?;
-        let (file, path) = (1..=999_999)
+        let (file, path) = (1..=MAX_RECORDS)
             .find_map(|n| {
                 let path = dir.join(format!("client-{n:03}.jsonl"));
                 match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
@@ -295,7 +313,7 @@ impl Record {
                     opened => Some(opened.map(|f| (f, path))),
                 }
             })
-            .unwrap_or_else(|| Err(std::io::Error::other(format!("{} holds 999,999 records", dir.display()))))?;
+            .unwrap_or_else(|| Err(std::io::Error::other(format!("{} holds {MAX_RECORDS} records", dir.display()))))?;
         let record = Record { file: Mutex::new(std::io::BufWriter::new(file)), path };
         let connected = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
         let header = serde_json::json!({
@@ -352,9 +370,14 @@ pub fn serve(
             Ok((stream, peer)) => {
                 log(format_args!("{peer}: connected"));
                 last_error = None;
-                match Client::start(stream, peer.to_string(), factory.clone(), options.clone()) {
-                    Ok(client) => clients.push(client),
-                    Err(e) => log(format_args!("{peer}: the connection could not be set up: {e}")),
+                clients.retain(|c| !c.finished());
+                if clients.len() >= options.max_clients {
+                    refuse(stream, &peer.to_string(), &options);
+                } else {
+                    match Client::start(stream, peer.to_string(), factory.clone(), options.clone()) {
+                        Ok(client) => clients.push(client),
+                        Err(e) => log(format_args!("{peer}: the connection could not be set up: {e}")),
+                    }
                 }
             }
             Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(POLL),
@@ -373,6 +396,27 @@ pub fn serve(
         client.stop();
     }
     Ok(())
+}
+
+/// Answers a connection beyond [`ServeOptions::max_clients`] with a STRING `status` error, then
+/// closes it; says so in the log.
+fn refuse(mut stream: TcpStream, peer: &str, options: &ServeOptions) {
+    let error = format!(
+        "the server already serves its most clients ({}): connection refused, try again later",
+        options.max_clients
+    );
+    log(format_args!("{peer}: {error}"));
+    // A fresh connection's send buffer holds the line: the write does not wait on the client.
+    let status = serde_json::json!({ "error": error }).to_string();
+    let sent = configure(&stream, options)
+        .map_err(|e| e.to_string())
+        .and_then(|()| encode_message(&StringMessage::utf8(status), "status"))
+        .and_then(|bytes| stream.write_all(&bytes).map_err(|e| e.to_string()));
+    if let Err(e) = sent {
+        log(format_args!("{peer}: the refusal could not be sent: {e}"));
+    }
+    let _ = stream.shutdown(Shutdown::Both);
+    log(format_args!("{peer}: connection closed"));
 }
 
 /// A connected client: its reader and registration threads.
@@ -564,7 +608,7 @@ impl Client {
 /// steps to come, for the registration thread.
 fn read_messages(shared: &Shared) {
     let (mut frame, mut step) = (0u64, 0u64);
-    let mut ignored = std::collections::HashSet::new();
+    let mut ignored = Ignored::default();
     let to_metres = |points: Vec<[f32; 3]>| -> Vec<Point> {
         points.into_iter().map(|p| shared.options.coordinates.point_in(p.map(f64::from))).collect()
     };
@@ -585,7 +629,8 @@ fn read_messages(shared: &Shared) {
                 if waiting.features.len() >= MAX_PENDING_STEPS {
                     drop(waiting);
                     let error = format!(
-                        "{MAX_PENDING_STEPS} steps are already waiting: step refused (taken as one with no feature seen)"
+                        "{MAX_PENDING_STEPS} steps are already waiting: step refused (taken as one with no feature \
+                         seen)"
                     );
                     log(format_args!("{}: step {step}: {error}", shared.peer));
                     shared.send_estimate(&serde_json::json!({ "step": step, "error": error }), stamped(timestamp));
@@ -613,21 +658,7 @@ fn read_messages(shared: &Shared) {
                 log(format_args!("{}: reset: the next cloud starts from rest", shared.peer));
                 shared.waiting.lock().unwrap_or_else(|e| e.into_inner()).reset = true;
             }
-            Ok(Incoming::Other { kind, device }) => {
-                // Said once per kind and device: a navigation system may send other messages often.
-                if ignored.insert((kind.clone(), device.clone())) {
-                    let features = match shared.options.identification {
-                        Some(_) => ", tracked features from 'features'",
-                        None => "",
-                    };
-                    let warning = format!(
-                        "{kind} messages from device '{device}' are ignored: clouds come as POLYDATA or POINT from \
-                         device 'cloud'{features}, and a STRING from device 'reset' restarts from rest"
-                    );
-                    log(format_args!("{}: {warning}", shared.peer));
-                    shared.send_json("warning", &serde_json::json!({ "warnings": [warning] }));
-                }
-            }
+            Ok(Incoming::Other { kind, device }) => ignored.warn(shared, kind, device),
             Ok(Incoming::Closed) => {
                 // What the client sent is still answered; the registration thread then closes.
                 shared.input_ended.store(true, Ordering::SeqCst);
@@ -643,6 +674,49 @@ fn read_messages(shared: &Shared) {
         }
     }
     shared.close();
+}
+
+/// The messages of a client's that are ignored, said once per type and device: a navigation
+/// system may send other messages often. Past [`MAX_IGNORED_KINDS`] pairs, once that the next
+/// ones are ignored silently.
+#[derive(Default)]
+struct Ignored {
+    /// The (type, device) pairs said so.
+    said: std::collections::HashSet<(String, String)>,
+    /// Whether a pair past them came (and was said to be ignored silently).
+    silent: bool,
+}
+
+impl Ignored {
+    /// Warns the client (and logs) that messages of `kind` from `device` are ignored, unless said.
+    fn warn(&mut self, shared: &Shared, kind: String, device: String) {
+        let pair = (kind, device);
+        if self.silent || self.said.contains(&pair) {
+            return;
+        }
+        let warning = if self.said.len() >= MAX_IGNORED_KINDS {
+            self.silent = true;
+            format!(
+                "messages of {MAX_IGNORED_KINDS} types and devices are ignored: further ones ({} from device '{}' \
+                 first) are ignored without a warning",
+                pair.0, pair.1
+            )
+        } else {
+            let features = match shared.options.identification {
+                Some(_) => ", tracked features from 'features'",
+                None => "",
+            };
+            let warning = format!(
+                "{} messages from device '{}' are ignored: clouds come as POLYDATA or POINT from device 'cloud'\
+                 {features}, and a STRING from device 'reset' restarts from rest",
+                pair.0, pair.1
+            );
+            self.said.insert(pair);
+            warning
+        };
+        log(format_args!("{}: {warning}", shared.peer));
+        shared.send_json("warning", &serde_json::json!({ "warnings": [warning] }));
+    }
 }
 
 /// What the next message of a stream is.
@@ -663,9 +737,11 @@ enum Incoming {
 }
 
 /// The next message from the stream; an error for a truncated, stalled or oversized one, or one
-/// whose header is malformed (a body that does not decode is [`Incoming::Undecodable`]). Between messages the stream may wait for as long as the client likes; within one, no
-/// longer than [`ServeOptions::stall`] between bytes. A message that is not a `cloud` or
-/// `features` is skipped unread, whatever its size (a STRING `reset` too: its text is not read).
+/// whose header is malformed (a body that does not decode is [`Incoming::Undecodable`]). Between
+/// messages the stream may wait for as long as the client likes; within one, no longer than
+/// [`ServeOptions::stall`] between bytes. A message that is not a `cloud` or `features` is skipped
+/// unread, whatever its size (a STRING `reset` too: its text is not read); the body of one that is
+/// grows with the bytes received, not with the size its header announces.
 fn read_message(mut stream: &TcpStream, options: &ServeOptions) -> std::result::Result<Incoming, String> {
     let (max_body, stall) = (options.max_message_bytes, options.stall);
     let mut header = [0u8; Header::SIZE];
@@ -699,8 +775,12 @@ fn read_message(mut stream: &TcpStream, options: &ServeOptions) -> std::result::
     if header.body_size > max_body {
         return Err(format!("message body of {} bytes exceeds the limit of {max_body}", header.body_size));
     }
-    let mut body = vec![0; header.body_size as usize];
-    stream.read_exact(&mut body).map_err(|e| stalled("truncated message body", e))?;
+    let size = header.body_size;
+    let mut body = Vec::with_capacity(size.min(1 << 20) as usize);
+    let read = stream.take(size).read_to_end(&mut body).map_err(|e| stalled("truncated message body", e))?;
+    if (read as u64) < size {
+        return Err(format!("truncated message body: {read} of {size} bytes"));
+    }
     let points = match kind {
         "POLYDATA" => decode_body::<PolyData>(&header, &body).map(|p| p.points),
         _ => decode_body::<PointMessage>(&header, &body).map(|p| p.points.iter().map(|p| p.position).collect()),

@@ -241,6 +241,72 @@ fn a_half_closed_client_is_answered_and_a_stalled_message_is_dropped() {
     server.stop();
 }
 
+/// A connection beyond `max_clients` is answered by an error status and closed, and said in the
+/// log; the clients served go on, and a place that frees is taken by the next connection.
+#[test]
+fn a_connection_beyond_max_clients_is_refused() {
+    let server = Server::start(ServeOptions { max_clients: 2, ..in_mm() });
+    // A client served answers an ignored message with a warning.
+    let served = |client: &mut Client, device: &str| {
+        client.send_points(device, &[[0.0; 3]]).unwrap();
+        assert!(matches!(client.receive().unwrap(), Some(Answer::Warning(_))), "{device}");
+    };
+    let (mut first, mut second) = (connect(server.port), connect(server.port));
+    served(&mut first, "tool");
+    served(&mut second, "tool");
+    let mut third = connect(server.port);
+    let s = status(third.receive().unwrap());
+    assert!(s["error"].as_str().unwrap().contains("most clients (2): connection refused"), "{s}");
+    assert!(third.receive().unwrap().is_none(), "the connection is closed");
+    served(&mut first, "pointer");
+    served(&mut second, "pointer");
+    // The first leaves: a next connection is served (once the server saw it leave), answering nothing
+    // unasked.
+    drop(first);
+    let started = std::time::Instant::now();
+    loop {
+        let mut next = Client::connect(("127.0.0.1", server.port), Duration::from_millis(200)).unwrap();
+        match next.receive() {
+            Err(e) if e.contains("the server sent nothing within") => break,
+            Ok(Some(Answer::Status(s))) if s["error"].is_string() => {}
+            other => panic!("expected a refusal or silence, got {other:?}"),
+        }
+        assert!(started.elapsed() < Duration::from_secs(3), "the first client's place was not freed");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    drop(second);
+    server.stop();
+}
+
+/// Ignored messages are warned about once per type and device, up to `MAX_IGNORED_KINDS` pairs;
+/// past them, once that further ones are ignored silently.
+#[test]
+fn ignored_messages_are_warned_about_up_to_a_bound() {
+    let server = Server::start(in_mm());
+    let mut client = connect(server.port);
+    let bound = augsim_live::MAX_IGNORED_KINDS;
+    for k in 0..bound + 5 {
+        client.send_points(&format!("tool {k}"), &[[0.0; 3]]).unwrap();
+    }
+    client.send_points("tool 0", &[[0.0; 3]]).unwrap();
+    // Answered by an error estimate (no identification): after every warning.
+    client.send_points("features", &[[0.0; 3]; 2]).unwrap();
+    let mut warnings = Vec::new();
+    loop {
+        match client.receive().unwrap() {
+            Some(Answer::Warning(w)) => warnings.push(w["warnings"][0].as_str().unwrap().to_string()),
+            Some(Answer::Estimate(_)) => break,
+            other => panic!("expected a warning or an estimate, got {other:?}"),
+        }
+    }
+    assert_eq!(warnings.len(), bound + 1, "the last: {:?}", warnings.last());
+    assert!(warnings[bound - 1].starts_with(&format!("POINT messages from device 'tool {}'", bound - 1)));
+    let last = &warnings[bound];
+    assert!(last.contains(&format!("'tool {bound}' first) are ignored without a warning")), "{last}");
+    drop(client);
+    server.stop();
+}
+
 /// With the targets alone as outputs, a refused cloud is still answered by its error status (a
 /// client would otherwise wait for targets that never come); a registered one by its targets only.
 #[test]
