@@ -299,7 +299,7 @@ pub struct RegistrationChoice {
     pub frame: Option<Frame>,
     /// Most match-and-deform iterations of the first cloud, from rest (default: 30 for a FEM, a
     /// U-Net's real-time budget, 4, and 10 for a reduced-order model's shape fit); a stream's next
-    /// clouds take at most 4 (a FEM) or 2 (a learned model).
+    /// clouds take at most 4 (a FEM), 2 (a U-Net) or 3 (a reduced-order model's shape fit).
     #[arg(long)]
     pub iterations: Option<usize>,
     /// Rigid pre-alignment: the first cloud is aligned to the organ's rest surface (trimmed
@@ -536,7 +536,8 @@ pub fn absolute_structure(source: &Path) -> Result<PathBuf> {
 /// The structure `source` holds ([`structure_name`], its surface in m in the frame `to`), read as
 /// an organ's segmentation is ([`OrganInput`]): a surface file in `unit`, in the frame its header
 /// names (else `frame`); or `LABELMAP:LABEL`, a label's surface extracted from a labelmap (mm,
-/// its scanner frame). The name must fit an OpenIGTLink device name (20 bytes). With the
+/// its scanner frame). The name must fit an OpenIGTLink device name
+/// ([`register::registration::STRUCTURE_NAME_BYTES`]). With the
 /// warning of a label whose cavities were filled (a hollow structure: its inner wall is not given
 /// back).
 pub fn read_structure(
@@ -547,6 +548,13 @@ pub fn read_structure(
 ) -> Result<(String, TriSurface, Vec<String>)> {
     let name = structure_name(source);
     let source = named_source(source).1;
+    let longest = register::registration::STRUCTURE_NAME_BYTES;
+    if name.len() > longest {
+        anyhow::bail!(
+            "its name `{name}` is longer than {longest} bytes, an OpenIGTLink device name: name it (NAME={})",
+            source.display()
+        );
+    }
     let mut input = match labelmap_label(source) {
         Some((path, label)) => OrganInput::read_with(Path::new(path), Some(label), None, &ExtractOptions::structure())?,
         None if is_labelmap(source) => anyhow::bail!(
@@ -557,12 +565,6 @@ pub fn read_structure(
     };
     let unit = input.unit()?;
     let (mut surface, frame) = (input.surface, input.frame.or(frame));
-    if name.len() > 20 {
-        anyhow::bail!(
-            "its name `{name}` is longer than 20 bytes, an OpenIGTLink device name: name it (NAME={})",
-            source.display()
-        );
-    }
     let change = FrameChange::between(frame, to);
     surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(change.point(*p)));
     // (The organ's reading warnings, of an organ's size and border, are not a structure's.)
@@ -805,8 +807,13 @@ mod tests {
         let steps = |names: &[&str]| {
             let steps = names.iter().map(|n| StepRecord { name: n.to_string(), seconds: 1.0, lines: Vec::new() });
             let options = PrepareOptions::new("s.stl".into(), [0.0; 3], "a.csv".into(), "t.csv".into());
-            let state =
-                PrepareState { format: "augsim-prepare".into(), options, steps: steps.collect(), input_frame: None };
+            let state = PrepareState {
+                format: "augsim-prepare".into(),
+                options,
+                steps: steps.collect(),
+                input_frame: None,
+                input_unit: None,
+            };
             std::fs::write(d.join(STATE_FILE), serde_json::to_string(&state).unwrap()).unwrap();
         };
         steps(&["organ", "scenarios", "dataset", "model", "evaluation"]);

@@ -287,14 +287,15 @@ struct Registered {
     /// Displacement of the organ's nodes, float64 [n, 3] (rest positions: `Registration.points`).
     #[pyo3(get)]
     displacement: Py<PyArray2<f64>>,
-    /// Mean distance from the cloud's matched points to the registered surface.
+    /// Mean distance from the cloud's points to the registered surface (those registered, when the
+    /// cloud is subsampled: `points`).
     #[pyo3(get)]
     surface_residual: f64,
     /// Cloud points matched (outliers rejected) in the last iteration.
     #[pyo3(get)]
     inliers: usize,
-    /// Cloud points registered (a reduced-order model's shape fit takes an evenly spaced 2,000 of a
-    /// larger cloud).
+    /// Cloud points registered: every point up to the library's limit (an evenly spaced subset of a
+    /// larger cloud; a reduced-order model's shape fit takes fewer still).
     #[pyo3(get)]
     points: usize,
     /// Match-and-deform iterations.
@@ -387,7 +388,8 @@ impl Registered {
 /// `iterations`: most match-and-deform iterations of the first cloud, from rest (default: the
 /// library's for a FEM, 30; a U-Net's real-time budget, 4; 10
 /// for a reduced-order model's shape fit); a warm-started cloud takes at most min(iterations, 4)
-/// for a FEM, min(iterations, 2) for a learned model. `rigid`: align the first cloud rigidly to
+/// for a FEM, min(iterations, 2) for a U-Net and min(iterations, 3) for a reduced-order model's
+/// shape fit. `rigid`: align the first cloud rigidly to
 /// the organ (trimmed ICP) and keep that pose while the clouds register plausibly (after a frame
 /// with a warning other than the time budget's, the next cloud is aligned again); `targets`
 /// (and `rigid`) are then in the cloud's frame, `points` and `displacement` in the organ's.

@@ -31,9 +31,9 @@ pub struct PointMatch {
     pub shift: Point,
     /// Unit normal of the matched triangle, deformed.
     pub normal: Point,
-    /// The matched triangle of the organ's surface, and the point's barycentric coordinates in it.
+    /// The matched triangle of the organ's surface (its index).
     pub triangle: usize,
-    /// The barycentric coordinates.
+    /// The matched point's barycentric coordinates in that triangle.
     pub weights: [f64; 3],
 }
 
@@ -404,7 +404,7 @@ pub(crate) fn register_frame_begun(
     let surface_residual = distances.iter().sum::<f64>() / cloud.len() as f64;
     let far_share = crate::plausibility::far_share(&distances);
     let crate::plausibility::Verdict { mut warnings, distorted, other_frame, small_view } =
-        crate::plausibility::verdict(organ, &u, far_share, (cloud, extent), options.rigid.is_some())?;
+        crate::plausibility::verdict(organ, &u, far_share, (cloud, extent), options.rigid.is_some());
     if let (true, Some(budget)) = (out_of_time, options.time_budget_ms) {
         warnings.push(format!(
             "the frame stopped after {iterations} of its {most} iterations, past its time budget of {budget:.0} ms: \

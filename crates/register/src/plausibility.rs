@@ -79,10 +79,13 @@ fn robust_extent(points: &[Point]) -> f64 {
 /// Refuses a (non-empty, finite) cloud whose extent cannot be a view of the organ, saying what it
 /// probably is; returns the cloud's extent over the organ's.
 pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<f64> {
+    if cloud.is_empty() {
+        return Err(RegisterError::Invalid("no points (the point cloud is empty)".into()));
+    }
     let (size, extent) = (organ.extent(), robust_extent(cloud));
     let ratio = extent / size;
     if ratio > MAX_EXTENT_RATIO {
-        let hint = if looks_like_millimetres(organ, cloud)? {
+        let hint = if looks_like_millimetres(organ, cloud) {
             " Is it in millimetres? Divided by 1000 it lies on the organ's surface: its numbers are 1000 times the \
              unit it was read in (mm read as m: give its unit as mm, --units mm, units=\"mm\" in Python; µm read as \
              mm: convert them to mm)."
@@ -115,14 +118,11 @@ pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<f64> {
 }
 
 /// Whether the cloud divided by 1000 is a view of the organ at rest: its extent within the
-/// organ's, its median distance to the rest surface within [`MILLIMETRE_FIT`] of the organ's size.
-fn looks_like_millimetres(organ: &Organ, cloud: &[Point]) -> Result<bool> {
+/// organ's, its median distance to the rest surface within [`REST_FIT`] of the organ's size.
+fn looks_like_millimetres(organ: &Organ, cloud: &[Point]) -> bool {
     let metres: Vec<Point> = cloud.iter().map(|&p| LengthUnit::Millimetre.point_to_metres(p)).collect();
     let size = organ.extent();
-    if robust_extent(&metres) > MAX_EXTENT_RATIO * size {
-        return Ok(false);
-    }
-    Ok(median_distance(organ.rest_bvh(), &metres) < REST_FIT * size)
+    robust_extent(&metres) <= MAX_EXTENT_RATIO * size && median_distance(organ.rest_bvh(), &metres) < REST_FIT * size
 }
 
 /// The median distance of `cloud` to the surface of `bvh`.
@@ -135,13 +135,13 @@ fn median_distance(bvh: &SurfaceBvh, cloud: &[Point]) -> f64 {
 /// rest with x and y negated, within [`REST_FIT`] of its size and at most half as far as it
 /// does: RAS given for LPS or the reverse, which a rigid pre-alignment does not undo (a turn by
 /// 180°, beyond its reach). `None` otherwise.
-pub fn frame_mix_up(organ: &Organ, cloud: &[Point]) -> Result<Option<String>> {
+pub fn frame_mix_up(organ: &Organ, cloud: &[Point]) -> Option<String> {
     // The medians of evenly spread points: a fraction of a millisecond a frame.
     let sample: Vec<Point> = cloud.iter().step_by(cloud.len().div_ceil(MIX_UP_POINTS).max(1)).copied().collect();
     let negated: Vec<Point> = sample.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
     let bvh = organ.rest_bvh();
     let (given, other) = (median_distance(bvh, &sample), median_distance(bvh, &negated));
-    Ok((other < REST_FIT * organ.extent() && other <= 0.5 * given).then(|| {
+    (other < REST_FIT * organ.extent() && other <= 0.5 * given).then(|| {
         format!(
             "with x and y negated the cloud lies on the organ at rest (median distance {:.1} mm, against {:.1} mm as \
              given): is it in RAS where the organ is in LPS, or the reverse? Give its frame (--frame, frame= in \
@@ -149,7 +149,7 @@ pub fn frame_mix_up(organ: &Organ, cloud: &[Point]) -> Result<Option<String>> {
             mm(other),
             mm(given)
         )
-    }))
+    })
 }
 
 /// Checks the targets' truth, `truth` (in the organ's frame and unit, as read): a truth lying on
@@ -267,13 +267,7 @@ pub struct Verdict {
 /// displacement `u`, and whether it was rigidly pre-aligned. Without a pre-alignment, a frame
 /// whose cloud lies on the organ in the other frame says so ([`frame_mix_up`]), rather than
 /// advising one (a turn by 180° is beyond its reach).
-pub fn verdict(
-    organ: &Organ,
-    u: &[f64],
-    far_share: f64,
-    (cloud, extent): (&[Point], f64),
-    rigid: bool,
-) -> Result<Verdict> {
+pub fn verdict(organ: &Organ, u: &[f64], far_share: f64, (cloud, extent): (&[Point], f64), rigid: bool) -> Verdict {
     let points = distinct_points(cloud, FEW_POINTS);
     let size = organ.extent();
     let motion = u.chunks_exact(3).map(|d| mesh::norm([d[0], d[1], d[2]])).fold(0.0, f64::max);
@@ -299,7 +293,7 @@ pub fn verdict(
     let far = far_share > SUSPECT_FAR_SHARE;
     // Asked of every frame: one warm-started from a good frame fits a cloud in the other frame
     // within a few iterations, undistorted (a FEM's, with its targets 29 mm off on the phantom).
-    let mix_up = if rigid { None } else { frame_mix_up(organ, cloud)? };
+    let mix_up = if rigid { None } else { frame_mix_up(organ, cloud) };
     if far {
         let hint = match (rigid, mix_up.is_some()) {
             (true, _) => {
@@ -336,7 +330,7 @@ pub fn verdict(
     }
     let other_frame = mix_up.is_some();
     out.extend(mix_up);
-    Ok(Verdict { warnings: out, distorted, other_frame, small_view })
+    Verdict { warnings: out, distorted, other_frame, small_view }
 }
 
 #[cfg(test)]
@@ -406,7 +400,7 @@ mod tests {
         let top: Vec<Point> = organ.mesh().nodes.iter().copied().filter(|p| p[2] > 0.039).collect();
         let rest = vec![0.0; 3 * organ.mesh().num_nodes()];
         let flagged = |cloud: &[Point]| {
-            verdict(&organ, &rest, 0.0, (cloud, check_extent(&organ, cloud).unwrap()), false).unwrap().warnings
+            verdict(&organ, &rest, 0.0, (cloud, check_extent(&organ, cloud).unwrap()), false).warnings
         };
         assert!(flagged(&top).is_empty(), "{:?}", flagged(&top));
         let centimetres: Vec<Point> = top.iter().map(|p| p.map(|c| 0.1 * c)).collect();
@@ -421,7 +415,7 @@ mod tests {
         let organ = Organ::new(mesh::generate::box_tet([0.0; 3], [0.1, 0.06, 0.04], [5, 3, 2]).unwrap(), None).unwrap();
         let nodes = &organ.mesh().nodes;
         let top: Vec<Point> = nodes.iter().copied().filter(|p| p[2] > 0.039).collect();
-        let judged = |u: &[f64]| verdict(&organ, u, 0.0, (&top, check_extent(&organ, &top).unwrap()), false).unwrap();
+        let judged = |u: &[f64]| verdict(&organ, u, 0.0, (&top, check_extent(&organ, &top).unwrap()), false);
         let flagged = |u: &[f64]| judged(u).warnings;
         let field = |f: &dyn Fn(Point) -> Point| -> Vec<f64> { nodes.iter().flat_map(|&p| f(p)).collect() };
         // A 30° turn about z and a shear of 0.3: volumes kept exactly.

@@ -87,9 +87,20 @@ pub struct Registration {
     sigma_factor: f64,
 }
 
-/// Refuses a structure's name that is empty, `taken` by another, one of [`RESERVED_NAMES`], or
-/// ends in [`crate::IMPLAUSIBLE`] (the names of an implausible result's answers).
+/// The longest name of a structure (bytes): a structure streams under its name as an
+/// OpenIGTLink device name, a field of 20 bytes.
+pub const STRUCTURE_NAME_BYTES: usize = 20;
+
+/// Refuses a structure's name that is empty, longer than [`STRUCTURE_NAME_BYTES`], `taken` by
+/// another, one of [`RESERVED_NAMES`], or ends in [`crate::IMPLAUSIBLE`] (the names of an
+/// implausible result's answers).
 pub fn check_structure_name(name: &str, taken: &[&str]) -> Result<()> {
+    if name.len() > STRUCTURE_NAME_BYTES {
+        return Err(RegisterError::Invalid(format!(
+            "a structure's name `{name}` is longer than {STRUCTURE_NAME_BYTES} bytes, an OpenIGTLink device name's \
+             field: give a shorter one (NAME=SOURCE)"
+        )));
+    }
     let reserved = RESERVED_NAMES.contains(&name) || name.ends_with(crate::IMPLAUSIBLE);
     if name.is_empty() || reserved || taken.contains(&name) {
         return Err(RegisterError::Invalid(format!(
@@ -344,7 +355,7 @@ impl Registration {
                 // A cloud in another unit is named as such, before an alignment it would defeat.
                 crate::checks::check_cloud(cloud)?;
                 crate::plausibility::check_extent(&self.organ, cloud)?;
-                let mix_up = crate::plausibility::frame_mix_up(&self.organ, cloud)?;
+                let mix_up = crate::plausibility::frame_mix_up(&self.organ, cloud);
                 match (rigid_align(self.organ.surface(), cloud, rigid_options), mix_up) {
                     (Err(e), Some(hint)) => return Err(RegisterError::Invalid(format!("{e}; {hint}"))),
                     (aligned, mix_up) => (Some(aligned?), Some(mix_up)),
@@ -377,7 +388,7 @@ impl Registration {
         // Without a pre-alignment the frame's verdict asks itself; in a kept pose, a frame with a
         // warning asks here, of the cloud as given.
         if rigid.is_some() && mix_up.is_none() && !registration.warnings.is_empty() {
-            mix_up = Some(crate::plausibility::frame_mix_up(&self.organ, cloud)?);
+            mix_up = Some(crate::plausibility::frame_mix_up(&self.organ, cloud));
         }
         if let Some(hint) = mix_up.flatten() {
             registration.other_frame = true;
@@ -659,7 +670,8 @@ mod tests {
     }
 
     /// Structures join the registration, their warnings with them; a name taken, one of the
-    /// server's messages', or one an implausible result's answers take, is refused.
+    /// server's messages', one an implausible result's answers take, or one too long to stream,
+    /// is refused.
     #[test]
     fn structures_are_named_apart() {
         let mut r = cube_with(vec![[0.01, 0.02, 0.03]]).unwrap();
@@ -672,7 +684,11 @@ mod tests {
             let e = r.add_structure(taken, ball.clone()).unwrap_err().to_string();
             assert!(e.contains(&format!("a structure cannot be named `{taken}`")), "{e}");
         }
-        assert_eq!(r.structures().len(), 1);
+        // A name streams as an OpenIGTLink device name: 20 bytes fit, 21 do not.
+        r.add_structure("portal_vein_branch_2", ball.clone()).unwrap();
+        let e = r.add_structure("portal_vein_branch_2b", ball.clone()).unwrap_err().to_string();
+        assert!(e.contains("longer than 20 bytes"), "{e}");
+        assert_eq!(r.structures().len(), 2);
     }
 
     /// A structure wholly outside the organ, beside it, is asked whether it was segmented apart

@@ -52,10 +52,9 @@ use std::time::Instant;
 use anyhow::{bail, ensure, Context, Result};
 use mesh::io::points::{read_points_csv, write_points, LabelledPoints};
 use mesh::io::{write_atomic_bytes, Frame};
-use mesh::labelmap::is_labelmap;
 use mesh::length::{mm, point_in_mm, Length, LengthUnit, UnitOrAuto};
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
-use mesh::repair::{detect_unit, RepairOptions};
+use mesh::repair::RepairOptions;
 use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
 use mesh::{Camera, Mesh, Near, Point, TriSurface};
 use plot::{scatter_plot, PlotSpec, PointSet};
@@ -268,6 +267,10 @@ pub struct PrepareState {
     /// one): the frame of clouds and results whose files name none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub input_frame: Option<Frame>,
+    /// The unit the inputs were given in, as the organ step found it: the unit of clouds and
+    /// results whose files name none (`None` in a preparation recorded before it was kept).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_unit: Option<LengthUnit>,
 }
 
 impl PrepareState {
@@ -307,7 +310,7 @@ fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PreparePro
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let state_path = dir.join(STATE_FILE);
     let mut state = if state_path.exists() {
-        let state: PrepareState = serde_json::from_str(&std::fs::read_to_string(&state_path)?)
+        let mut state: PrepareState = serde_json::from_str(&std::fs::read_to_string(&state_path)?)
             .with_context(|| format!("reading {}", state_path.display()))?;
         if state.options != options {
             bail!(
@@ -318,9 +321,14 @@ fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PreparePro
                     .join("; ")
             );
         }
+        // Recorded before the inputs' unit was kept: the organ step finds it again for the scenarios.
+        if state.input_unit.is_none() && !state.steps.iter().any(|s| s.name == "scenarios") {
+            state.steps.retain(|s| s.name != "organ");
+        }
         state
     } else {
-        PrepareState { format: "augsim-prepare".into(), options: options.clone(), steps: Vec::new(), input_frame: None }
+        let (steps, input_frame, input_unit) = (Vec::new(), None, None);
+        PrepareState { format: "augsim-prepare".into(), options: options.clone(), steps, input_frame, input_unit }
     };
     for (index, name) in STEPS.iter().enumerate() {
         // The report is written anew at every run; the other steps once.
@@ -333,11 +341,14 @@ fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PreparePro
         let start = Instant::now();
         let lines = match index {
             0 => {
-                let (lines, given) = organ_step(&options, dir)?;
-                state.input_frame = given;
+                let (lines, given, unit) = organ_step(&options, dir)?;
+                (state.input_frame, state.input_unit) = (given, Some(unit));
                 lines
             }
-            1 => scenarios_step(&options, state.input_frame, dir)?,
+            1 => {
+                let unit = state.input_unit.context("the inputs' unit is not recorded")?;
+                scenarios_step(&options, (state.input_frame, unit), dir)?
+            }
             2 => dataset_step(dir, progress)?,
             3 => model_step(&options, dir, progress)?,
             4 => evaluation_step(dir)?,
@@ -390,6 +401,9 @@ fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
 struct Inputs {
     surface: mesh::TriSurface,
     unit: LengthUnit,
+    /// The unit of the points given (and of the clouds to come) whose files name none: the one
+    /// given, else the surface's (a labelmap's surface is in mm whatever unit its voxels were read in).
+    points_unit: LengthUnit,
     landmarks: LabelledPoints,
     targets: LabelledPoints,
     camera: Point,
@@ -399,17 +413,19 @@ struct Inputs {
 }
 
 /// Reads the surface in its unit (given or detected) and frame, and the landmarks, the targets
-/// and the camera, each in the unit and frame its file names, else the surface's; all brought to
+/// and the camera, each in the unit and frame its file names, else the unit given (the surface's
+/// when none is) and the surface's frame; all brought to
 /// the set-up's frame ([`SET_UP_FRAME`] where any input names one), the points to metres.
 fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inputs> {
     let (surface, named_frame, unit) = read_surface_input(options, lines)?;
     let surface_frame = named_frame.or(options.frame);
-    let mut input = PointInput::new(surface_frame, LengthUnit::Metre, unit).with_given_frame(options.frame);
+    let points_unit = options.units.unwrap_or(unit);
+    let mut input = PointInput::new(surface_frame, LengthUnit::Metre, points_unit).with_given_frame(options.frame);
     // Each error of a points file names the file.
     let landmarks = input.read(&options.attach)?;
     let targets = input.read(&options.targets)?;
     let camera = match &options.camera {
-        CameraAt::Point(p) => unit.point_to_metres(*p),
+        CameraAt::Point(p) => points_unit.point_to_metres(*p),
         CameraAt::File(path) => match input.read(path)?.points.as_slice() {
             [p] => *p,
             other => bail!("{}: the camera is one point, the file holds {}", path.display(), other.len()),
@@ -429,7 +445,7 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
         (None, None) => "frame: not named by any input (SPACE= header, .fcsv, .mrk.json): all taken as given".into(),
     });
     lines.extend(input.warnings.iter().map(|w| format!("warning: {w}")));
-    let mut inputs = Inputs { surface, unit, landmarks, targets, camera, given };
+    let mut inputs = Inputs { surface, unit, points_unit, landmarks, targets, camera, given };
     if let Some(from) = given {
         inputs.convert(from, SET_UP_FRAME);
     }
@@ -467,7 +483,8 @@ fn thin_part_left_out(surface: &TriSurface, organ: &register::Organ, targets: &[
 /// about: a unit mistake (a camera in mm read as m lies 1,000 times too far).
 const FAR_CAMERA: f64 = 10.0;
 
-/// The warning for a camera farther from `organ` than [`FAR_CAMERA`] times its size.
+/// The warning for a camera farther from `organ` than [`FAR_CAMERA`] times its size (`unit`: the
+/// one the camera was read in).
 fn far_camera(organ: &mesh::Mesh, camera: Point, unit: LengthUnit) -> Option<String> {
     let (lo, hi) = organ.bounds();
     let size = mesh::norm(mesh::sub(hi, lo));
@@ -475,7 +492,7 @@ fn far_camera(organ: &mesh::Mesh, camera: Point, unit: LengthUnit) -> Option<Str
     (nearest > FAR_CAMERA * size).then(|| {
         format!(
             "warning: the camera at {} lies {:.0} mm from the organ, {:.0} times its size ({:.0} mm): a laparoscope \
-             or a depth camera is centimetres to a metre away; is it given in the surface's unit ({})?",
+             or a depth camera is centimetres to a metre away; is it given in the inputs' unit ({})?",
             point_in_mm(camera),
             mm(nearest),
             nearest / size,
@@ -545,9 +562,9 @@ fn camera_sees_the_hold(
 
 /// Step 1: the surface repaired and meshed, the regions selected, the targets located.
 /// Returns what it did and the frame its inputs were given in.
-fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Option<Frame>)> {
+fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Option<Frame>, LengthUnit)> {
     let mut lines = Vec::new();
-    let frame = organ_lines(options, dir, &mut lines).map_err(|e| {
+    let (frame, unit) = organ_lines(options, dir, &mut lines).map_err(|e| {
         // A warning said before the error that doubts the organ itself (a unit that makes no
         // organ's size, an organ cut by the image's border) is often its cause; the others are not.
         // Which label of a labelmap was read may be too (a number that names a segment of
@@ -567,7 +584,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
             None => e,
         }
     })?;
-    Ok((lines, frame))
+    Ok((lines, frame, unit))
 }
 
 /// The warnings among `lines` that doubt the organ itself: the unit of the inputs (an organ's
@@ -581,10 +598,11 @@ fn organ_doubts(lines: &[String]) -> Vec<&str> {
 }
 
 /// [`organ_step`], its lines said in `lines` as they come.
-fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) -> Result<Option<Frame>> {
+fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) -> Result<(Option<Frame>, LengthUnit)> {
     let inputs = read_inputs(options, lines)?;
     let frame = inputs.frame();
-    let Inputs { surface, unit, landmarks: labelled_landmarks, targets: labelled_targets, camera, given } = inputs;
+    let Inputs { surface, unit, points_unit, landmarks: labelled_landmarks, targets: labelled_targets, camera, given } =
+        inputs;
     let (mut surface, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
         .with_context(|| format!("repairing {}", options.surface.display()))?;
     lines.extend(route.lines(Some(unit)).into_iter().map(|l| format!("repair: {l}")));
@@ -617,7 +635,7 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
             point_in_mm(camera)
         );
     }
-    lines.extend(far_camera(&organ, camera, unit));
+    lines.extend(far_camera(&organ, camera, points_unit));
     if let Some(read) = given {
         lines.extend(camera_behind(&organ, camera, read, &options.camera));
     }
@@ -692,7 +710,7 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
     write_points(dir.join("targets.csv"), &LabelledPoints { frame, ..labelled_targets })?;
     let camera = LabelledPoints { frame, unit: Some(LengthUnit::Metre), ..LabelledPoints::new(vec![camera]) };
     write_points(dir.join("camera.csv"), &camera)?;
-    Ok(given)
+    Ok((given, points_unit))
 }
 
 /// The organ's surface in its own unit, with its frame and unit ([`OrganInput`]).
@@ -705,17 +723,6 @@ fn read_surface_input(
     let unit = input.unit().with_context(|| format!("the unit of {}", path.display()))?;
     lines.extend(crate::meshing::note_lines(&input.notes));
     Ok((input.surface, input.frame, unit))
-}
-
-/// The unit of the user's files: the one given, a labelmap's (mm where not given), or the one detected from
-/// the surface's size (as [`read_surface_input`] finds it).
-fn input_unit(options: &PrepareOptions) -> Result<LengthUnit> {
-    let path = &options.surface;
-    match options.units {
-        Some(unit) => Ok(unit),
-        None if is_labelmap(path) => Ok(LengthUnit::Millimetre),
-        None => detect_unit(&mesh::io::read_surface(path)?).with_context(|| format!("the unit of {}", path.display())),
-    }
 }
 
 /// The grid of the network's input and output: 32 nodes along the organ's longest side (about
@@ -793,7 +800,11 @@ fn read_camera(dir: &Path) -> Result<Point> {
 }
 
 /// Step 2: the scenario files.
-fn scenarios_step(options: &PrepareOptions, input_frame: Option<Frame>, dir: &Path) -> Result<Vec<String>> {
+fn scenarios_step(
+    options: &PrepareOptions,
+    (input_frame, input_unit): (Option<Frame>, LengthUnit),
+    dir: &Path,
+) -> Result<Vec<String>> {
     let organ = mesh::io::read_mesh(dir.join("organ.vtu"))?;
     let camera = read_camera(dir)?;
     let [nx, ny, nz] = grid_for(&organ);
@@ -838,7 +849,7 @@ fn scenarios_step(options: &PrepareOptions, input_frame: Option<Frame>, dir: &Pa
         fem: "static.toml".into(),
         targets: "targets.csv".into(),
         units: LengthUnit::Metre,
-        input_units: Some(input_unit(options)?),
+        input_units: Some(input_unit),
         input_frame,
         structures: options.structures.iter().map(|s| structure_file(&structure_name(s)).into()).collect(),
         sigma: SigmaFactors::default(),
@@ -1168,6 +1179,21 @@ mod tests {
         options
     }
 
+    /// Points given with a labelmap are read in the unit given (`--units`), the unit of the clouds
+    /// to come; the labelmap's surface comes in mm whatever unit its voxels were read in.
+    #[test]
+    fn a_labelmap_s_points_are_read_in_the_unit_given() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut options = options(dir.path(), "liver_labels.nii.gz", "5", false);
+        options.units = Some(LengthUnit::Centimetre);
+        let inputs = read_inputs(&options, &mut Vec::new()).unwrap();
+        assert_eq!((inputs.unit, inputs.points_unit), (LengthUnit::Millimetre, LengthUnit::Centimetre));
+        // The first landmark, (−115, 30, −183) in the file, in cm, set up in LPS (x and y negated).
+        let read = inputs.landmarks.points[0];
+        assert!(mesh::distance(read, [1.15, -0.30, -1.83]) < 1e-12, "{read:?}");
+        assert!(mesh::distance(inputs.camera, [0.80, -0.30, 1.50]) < 1e-12, "{:?}", inputs.camera);
+    }
+
     /// The same segmentation in RAS (NIfTI) and in LPS (Slicer's .seg.nrrd) is set up in LPS, the
     /// organ where the scanner saw it, with the same mesh.
     #[test]
@@ -1175,7 +1201,8 @@ mod tests {
         let mut organs = Vec::new();
         for (file, label, lps) in [("liver_labels.nii.gz", "5", false), ("liver_labels.seg.nrrd", "liver", true)] {
             let dir = tempfile::tempdir().unwrap();
-            let (lines, given) = organ_step(&options(dir.path(), file, label, lps), dir.path()).unwrap();
+            let (lines, given, unit) = organ_step(&options(dir.path(), file, label, lps), dir.path()).unwrap();
+            assert_eq!(unit, LengthUnit::Millimetre);
             let (frame, set_up) =
                 if lps { (Frame::Lps, "") } else { (Frame::Ras, ", set up in LPS (x and y negated)") };
             assert_eq!(given, Some(frame));
@@ -1215,7 +1242,7 @@ mod tests {
         );
         options.units = Some(LengthUnit::Millimetre);
         options.tets = 800;
-        let (lines, _) = organ_step(&options, dir.path()).unwrap();
+        let (lines, ..) = organ_step(&options, dir.path()).unwrap();
         // The defect as local repair names it on the file as read (mm), not on the surface in metres.
         let as_read = mesh::io::read_surface(&export).unwrap();
         let Err(mesh::MeshError::Invalid(defect)) = mesh::repair::repair_surface(&as_read, &RepairOptions::default())
@@ -1228,10 +1255,10 @@ mod tests {
         assert!(!lines.iter().any(|l| l.contains("the camera at")), "{lines:?}");
         // A camera given in µm where the surface is in mm: 1,000 times too far, named.
         options.camera = [0.0, 0.0, 300_000.0].into();
-        let (lines, _) = organ_step(&options, dir.path()).unwrap();
+        let (lines, ..) = organ_step(&options, dir.path()).unwrap();
         assert!(
             lines.iter().any(|l| l.starts_with("warning: the camera at (0, 0, 300000) mm lies")
-                && l.ends_with("is it given in the surface's unit (mm)?")),
+                && l.ends_with("is it given in the inputs' unit (mm)?")),
             "{lines:?}"
         );
     }
@@ -1309,7 +1336,7 @@ mod tests {
     }
 
     #[test]
-    fn targets_in_the_wrong_frame_and_a_wrong_unit_are_refused() {
+    fn targets_in_the_wrong_frame_and_a_wrong_unit_are_refused_or_named() {
         let dir = tempfile::tempdir().unwrap();
         // RAS targets for an LPS segmentation: outside the organ.
         let wrong = options(dir.path(), "liver_labels.seg.nrrd", "liver", true);
@@ -1318,15 +1345,14 @@ mod tests {
         assert!(error.starts_with("the organ read from the labelmap's label 5 ('liver'): "), "{error}");
         assert!(error.contains("the targets of"), "{error}");
         // A NIfTI whose header names mm, given in metres: read so, as a header may name the wrong unit,
-        // and said before the error of its size.
+        // its points too (the unit given is theirs), and said, with the size it makes.
         let mut metres = options(dir.path(), "liver_labels.nii.gz", "5", false);
         metres.units = Some(LengthUnit::Metre);
-        let error = format!("{:#}", organ_step(&metres, dir.path()).unwrap_err());
-        assert!(
-            error
-                .contains("names its unit, millimetres; read in metres as given instead (--units): 1,000 times larger"),
-            "{error}"
-        );
+        let (lines, _, unit) = organ_step(&metres, dir.path()).unwrap();
+        assert_eq!(unit, LengthUnit::Metre);
+        let said = |text: &str| lines.iter().any(|l| l.starts_with("warning: ") && l.contains(text));
+        assert!(said("names its unit, millimetres; read in metres as given instead (--units): 1,000 times larger"));
+        assert!(said("no organ's size"), "{lines:?}");
         let mut surface = options(dir.path(), "liver_labels.nii.gz", "5", false);
         surface.surface = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mesh/tests/data/liver.obj");
         let error = organ_step(&surface, dir.path()).unwrap_err().to_string();
