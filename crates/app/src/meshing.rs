@@ -15,8 +15,8 @@ use mesh::length::{mm, organ_units, Length, LengthUnit, UnitOrAuto};
 use mesh::phantom::PhantomSpec;
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
 use mesh::repair::{detect_unit, largest_extent, RepairOptions};
-use mesh::tetmesh::{BoundaryFit, Coverage};
-use mesh::{Mesh, TriSurface};
+use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit, Coverage};
+use mesh::{Mesh, TetQuality, TriSurface};
 
 /// What to mesh and how.
 #[derive(Clone, Debug)]
@@ -75,6 +75,95 @@ pub fn coverage_warning(coverage: &Coverage) -> Option<String> {
     })
 }
 
+/// The warnings on a T4 mesh: pieces joined only by edges or vertices, and parts of its surface
+/// left out ([`coverage_warning`], when its quality knows its coverage).
+pub fn tet_mesh_warnings(quality: &TetQuality) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if quality.pieces > 1 {
+        warnings.push(format!(
+            "the mesh is in {} pieces joined only by edges or vertices (a part thinner than its tetrahedra): the \
+             FEM solves fail where a piece has no held node of its own; mesh it finer (--tets)",
+            quality.pieces
+        ));
+    }
+    warnings.extend(quality.coverage.as_ref().and_then(coverage_warning));
+    warnings
+}
+
+/// How an organ's surface is brought from its file's coordinates to metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ToMetres {
+    /// Scaled from its unit about the origin (in the frame its file names).
+    FromUnit(LengthUnit),
+    /// Centred at the origin and scaled so that its largest extent is this length (in no frame).
+    FittedTo(Length),
+}
+
+/// An organ's surface meshed with tetrahedra ([`mesh_organ_surface`]).
+#[derive(Debug)]
+pub struct OrganMesh {
+    /// The surface meshed, in metres (repaired when it was).
+    pub surface: TriSurface,
+    /// The mesh, in metres.
+    pub mesh: Mesh,
+    /// Its quality, with how much of the surface it covers.
+    pub quality: TetQuality,
+}
+
+/// Meshes with about `tets` tetrahedra the organ's surface read from `path` (in the file's
+/// coordinates), brought to metres as `to_metres` says. A surface file's is repaired first when
+/// `repair` asks (local repair, through voxels when it cannot mend it); a labelmap's label never
+/// is: its extraction makes it closed, manifold and within the overlap a mesh allows
+/// ([`mesh::isosurface`]), where repair would find nothing to mend, or voxelise it a second time.
+/// What was done is added to `notes` as it is done (each a topic, `repair` or `warning`, and a
+/// line, the repair's lengths in the file's unit when known), so that they hold it when an error
+/// follows.
+pub fn mesh_organ_surface(
+    path: &Path,
+    surface: TriSurface,
+    to_metres: ToMetres,
+    tets: usize,
+    repair: bool,
+    notes: &mut Vec<(&'static str, String)>,
+) -> Result<OrganMesh> {
+    let surface = organ_surface_in_metres(path, surface, to_metres, repair, notes)?;
+    let (mesh, quality) =
+        mesh_surface_to_count(&surface, tets, BoundaryFit::default()).with_context(|| match &notes[..] {
+            [] => format!("meshing {}", path.display()),
+            done => format!("meshing {} ({})", path.display(), note_lines(done).join("; ")),
+        })?;
+    Ok(OrganMesh { surface, mesh, quality })
+}
+
+/// The organ's surface read from `path` in metres, repaired first as [`mesh_organ_surface`]
+/// says.
+fn organ_surface_in_metres(
+    path: &Path,
+    mut surface: TriSurface,
+    to_metres: ToMetres,
+    repair: bool,
+    notes: &mut Vec<(&'static str, String)>,
+) -> Result<TriSurface> {
+    if repair && !is_labelmap(path) {
+        let (repaired, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
+            .with_context(|| format!("repairing {}", path.display()))?;
+        let unit = match to_metres {
+            ToMetres::FromUnit(unit) => Some(unit),
+            ToMetres::FittedTo(_) => None,
+        };
+        notes.extend(route.lines(unit).into_iter().map(|l| ("repair", l)));
+        notes.extend(route.warnings().into_iter().map(|l| ("warning", l)));
+        surface = repaired;
+    }
+    match to_metres {
+        ToMetres::FromUnit(unit) => surface.transform([0.0; 3], unit.metres()),
+        ToMetres::FittedTo(length) => {
+            surface.fit_to(length.in_metres())?;
+        }
+    }
+    Ok(surface)
+}
+
 /// Meshes the organ of `options`.
 pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
     let start = std::time::Instant::now();
@@ -89,28 +178,18 @@ pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
             let spec = PhantomSpec::default();
             (spec.immersed(h)?.mesh, Some(spec.volume()), None)
         }
-        (Some(path), immersed) => {
-            let (surface, frame) = organ_surface(path, options, &mut notes)?;
+        (Some(path), None) => {
+            let (surface, to_metres, frame) = read_organ(path, options, &mut notes)?;
+            let organ = mesh_organ_surface(path, surface, to_metres, options.tets, options.repair, &mut notes)?;
+            coverage = organ.quality.coverage;
+            (organ.mesh, organ.quality.reference_volume, frame)
+        }
+        (Some(path), Some(h)) => {
+            let (surface, to_metres, frame) = read_organ(path, options, &mut notes)?;
+            let surface = organ_surface_in_metres(path, surface, to_metres, options.repair, &mut notes)?;
+            let opts = mesh::immersed::ImmersedOptions::with_spacing(h);
             let volume = Some(surface.enclosed_volume().abs());
-            let mesh = match immersed {
-                None => {
-                    let (mesh, quality) =
-                        mesh::tetmesh::mesh_surface_to_count(&surface, options.tets, BoundaryFit::default())
-                            .with_context(|| match &notes[..] {
-                                [] => format!("meshing {}", path.display()),
-                                read => {
-                                    format!("meshing {} (as read: {})", path.display(), note_lines(read).join("; "))
-                                }
-                            })?;
-                    coverage = quality.coverage;
-                    mesh
-                }
-                Some(h) => {
-                    let opts = mesh::immersed::ImmersedOptions::with_spacing(h);
-                    mesh::immersed::immersed_surface(&surface, &opts)?.mesh
-                }
-            };
-            (mesh, volume, frame)
+            (mesh::immersed::immersed_surface(&surface, &opts)?.mesh, volume, frame)
         }
     };
     Ok(Meshed { mesh, reference_volume, frame, notes, coverage, elapsed: start.elapsed() })
@@ -184,8 +263,11 @@ impl OrganInput {
                     self.notes.push((
                         "warning",
                         format!(
-                            "in {unit} the organ is {:.0} mm across, where organs are 20 to 600 mm: is the unit right?",
-                            mm(extent)
+                            "in {unit} the organ is {:.0} mm across, where organs are {:.0} to {:.0} mm: is the unit \
+                             right?",
+                            mm(extent),
+                            mm(*ORGAN_EXTENT_M.start()),
+                            mm(*ORGAN_EXTENT_M.end())
                         ),
                     ));
                 }
@@ -223,62 +305,34 @@ impl OrganInput {
     }
 }
 
-/// Reads the organ's segmentation, repairs a surface unless told not to, and brings it to
-/// metres: fitted to `length` when given (no frame then), otherwise scaled from its unit (a
-/// labelmap's mm, given or detected) about the origin, in the frame the file names (see
-/// [`Meshed::frame`]).
-fn organ_surface(
+/// Reads the organ's segmentation ([`OrganInput`]): its surface in the file's coordinates, how it
+/// is brought to metres (fitted to the length given, otherwise scaled from its unit: a labelmap's
+/// mm, given or detected) and the frame it is then in (see [`Meshed::frame`]; none when fitted).
+fn read_organ(
     path: &Path,
     options: &MeshOptions,
     notes: &mut Vec<(&'static str, String)>,
-) -> Result<(TriSurface, Option<Frame>)> {
+) -> Result<(TriSurface, ToMetres, Option<Frame>)> {
     let mut input = OrganInput::read(path, options.label.as_deref(), options.units)?;
-    let unit = match options.length {
-        Some(_) => None,
-        None => Some(input.unit().with_context(|| format!("the unit of {} (or give --length)", path.display()))?),
+    let (to_metres, frame) = match options.length {
+        Some(length) => (ToMetres::FittedTo(length), None),
+        None => {
+            let unit = input.unit().with_context(|| format!("the unit of {} (or give --length)", path.display()))?;
+            (ToMetres::FromUnit(unit), input.frame)
+        }
     };
     notes.append(&mut input.notes);
-    let mut surface = input.surface;
-    if options.repair && !input.labelmap {
-        let (repaired, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
-            .with_context(|| format!("repairing {} (see --no-repair)", path.display()))?;
-        notes.extend(route.lines(unit).into_iter().map(|l| ("repair", l)));
-        notes.extend(route.warnings().into_iter().map(|l| ("warning", l)));
-        surface = repaired;
+    if let Some(frame) = frame {
+        notes.push(("frame", format!("{frame} kept")));
     }
-    match (options.length, unit) {
-        (Some(l), _) => {
-            surface.fit_to(l.in_metres())?;
-            Ok((surface, None))
-        }
-        (None, unit) => {
-            surface.transform([0.0; 3], unit.unwrap_or(LengthUnit::Metre).metres());
-            if let Some(frame) = input.frame {
-                notes.push(("frame", format!("{frame} kept")));
-            }
-            Ok((surface, input.frame))
-        }
-    }
+    Ok((input.surface, to_metres, frame))
 }
 
-/// An immersed grid's organ volume (each cell's volume times its volume fraction; 1 where the
-/// mesh has none) and its cells cut by the surface (fraction below 1).
+/// An immersed grid's organ volume ([`Mesh::body_volume`]: each cell's volume times its volume
+/// fraction) and its cells cut by the surface (fraction below 1).
 pub fn immersed_fill(mesh: &Mesh) -> (f64, usize) {
-    let fraction = mesh.cell_fraction.as_deref().unwrap_or(&[]);
-    let organ = (0..mesh.cells.len()).map(|c| mesh.cell_volume(c) * fraction.get(c).copied().unwrap_or(1.0)).sum();
-    (organ, fraction.iter().filter(|&&f| f < 1.0).count())
-}
-
-/// The edges of a mesh's boundary surface shared by more than two of its triangles: where cells
-/// meet along an edge only, at the surface (a surface there is not a manifold).
-fn pinched_edges(mesh: &Mesh) -> usize {
-    let mut count: std::collections::HashMap<[usize; 2], usize> = std::collections::HashMap::new();
-    for t in &mesh::boundary_surface(mesh).triangles {
-        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-            *count.entry([a.min(b), a.max(b)]).or_default() += 1;
-        }
-    }
-    count.values().filter(|&&n| n > 2).count()
+    let cut = mesh.cell_fraction.as_deref().map_or(0, |fraction| fraction.iter().filter(|&&f| f < 1.0).count());
+    (mesh.body_volume(), cut)
 }
 
 /// Writes the mesh in metres with its regions (point data `region_<name>`, or Gmsh physical
@@ -349,13 +403,9 @@ impl Meshed {
                     bail!("{} inverted tetrahedra", q.inverted);
                 }
                 lines.push(format!("dihedral   min {:.1}°, max {:.1}°", q.min_dihedral_deg, q.max_dihedral_deg));
-                if q.pieces > 1 {
-                    lines.push(format!(
-                        "warning    {} pieces joined only by edges or vertices: mesh finer (--tets)",
-                        q.pieces
-                    ));
-                }
-                let pinched = pinched_edges(mesh);
+                let q = TetQuality { coverage: self.coverage, ..q };
+                lines.extend(tet_mesh_warnings(&q).into_iter().map(|w| format!("warning    {w}")));
+                let pinched = mesh::pinch::pinched_edge_count(mesh);
                 if pinched > 0 {
                     lines.push(format!(
                         "warning    {pinched} edge(s) of its surface are shared by four triangles (two tetrahedra meet \
@@ -363,7 +413,6 @@ impl Meshed {
                          another --tets"
                     ));
                 }
-                lines.extend(self.coverage.as_ref().and_then(coverage_warning).map(|w| format!("warning    {w}")));
                 volume_line(q.volume, q.reference_volume)
             }
             mesh::Cells::Tet10(_) => volume_line(mesh.volume(), reference),
@@ -394,28 +443,6 @@ mod tests {
     fn phantom(immersed: Option<f64>) -> MeshOptions {
         let immersed = immersed.map(Length::metres);
         MeshOptions { surface: None, label: None, length: None, units: None, repair: true, tets: 800, immersed }
-    }
-
-    /// Two tetrahedra meeting along an edge only make a surface edge of four triangles; a box of
-    /// tetrahedra has none.
-    #[test]
-    fn a_surface_edge_of_four_triangles_is_counted() {
-        let box_mesh = mesh::box_tet([0.0; 3], [1.0; 3], [2, 2, 2]).unwrap();
-        assert_eq!(pinched_edges(&box_mesh), 0);
-        let nodes = vec![
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, 0.0, 1.0],
-            [0.0, -1.0, 0.0],
-            [0.0, 0.0, -1.0],
-        ];
-        let mut second = [0, 1, 4, 5];
-        if mesh::tet_volume(nodes[0], nodes[1], nodes[4], nodes[5]) < 0.0 {
-            second.swap(2, 3);
-        }
-        let pinched = Mesh::new(nodes, mesh::Cells::Tet4(vec![[0, 1, 2, 3], second])).unwrap();
-        assert_eq!(pinched_edges(&pinched), 1);
     }
 
     #[test]

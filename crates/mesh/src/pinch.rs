@@ -48,6 +48,19 @@ pub fn bridge_pinched_edges(mesh: &mut Mesh) -> usize {
     added
 }
 
+/// The number of pinched edges of a volume mesh: edges of its boundary surface shared by more
+/// than two of the surface's triangles, where cells meet along an edge only (the surface is no
+/// 2-manifold there, which surface tools refuse).
+pub fn pinched_edge_count(mesh: &Mesh) -> usize {
+    let mut triangles_of_edge: HashMap<[usize; 2], usize> = HashMap::new();
+    for t in &crate::boundary_surface(mesh).triangles {
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            *triangles_of_edge.entry([a.min(b), a.max(b)]).or_default() += 1;
+        }
+    }
+    triangles_of_edge.values().filter(|&&n| n > 2).count()
+}
+
 /// The sorted corners of a face.
 fn face_key(mut f: [usize; 3]) -> [usize; 3] {
     f.sort_unstable();
@@ -347,17 +360,6 @@ mod tests {
     use super::*;
     use crate::face_connected_pieces;
 
-    /// Boundary edges shared by more than two boundary triangles.
-    fn pinched(mesh: &Mesh) -> usize {
-        let mut count: HashMap<[usize; 2], usize> = HashMap::new();
-        for t in &crate::boundary_surface(mesh).triangles {
-            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-                *count.entry([a.min(b), a.max(b)]).or_default() += 1;
-            }
-        }
-        count.values().filter(|&&n| n > 2).count()
-    }
-
     /// Two tetrahedra on the edge from (0, 0, 0) to (0, 0, 1), their other corners at the angles
     /// (degrees) about it given, the second's rotated by `apart`.
     fn two_fans(apart: f64) -> Mesh {
@@ -376,13 +378,20 @@ mod tests {
         Mesh::new(nodes, Cells::Tet4(cells)).unwrap()
     }
 
+    /// A box of tetrahedra has no pinched edge; two tetrahedra meeting along an edge only have one.
+    #[test]
+    fn pinched_edges_are_counted_on_the_boundary() {
+        assert_eq!(pinched_edge_count(&crate::box_tet([0.0; 3], [1.0; 3], [2, 2, 2]).unwrap()), 0);
+        assert_eq!(pinched_edge_count(&two_fans(40.0)), 1);
+    }
+
     /// Two tetrahedra meeting along an edge only, 40° apart: bridged by one tetrahedron on that
     /// edge and their facing corners, the mesh is one piece joined through faces, its surface a
     /// manifold, every cell positive.
     #[test]
     fn two_fans_meeting_along_an_edge_are_bridged() {
         let mut mesh = two_fans(40.0);
-        assert_eq!((pinched(&mesh), face_connected_pieces(&mesh).len()), (1, 2));
+        assert_eq!((pinched_edge_count(&mesh), face_connected_pieces(&mesh).len()), (1, 2));
         assert_eq!(bridge_pinched_edges(&mut mesh), 1);
         let Cells::Tet4(cells) = &mesh.cells else { unreachable!() };
         assert_eq!(cells.len(), 3);
@@ -390,7 +399,7 @@ mod tests {
         bridge.sort_unstable();
         assert_eq!(bridge, [0, 1, 3, 4], "the corners facing each other across the 40° wedge");
         assert!((0..3).all(|c| mesh.cell_volume(c) > 0.0));
-        assert_eq!((pinched(&mesh), face_connected_pieces(&mesh).len()), (0, 1));
+        assert_eq!((pinched_edge_count(&mesh), face_connected_pieces(&mesh).len()), (0, 1));
         // Nothing more to bridge.
         assert_eq!(bridge_pinched_edges(&mut mesh), 0);
     }
@@ -415,7 +424,7 @@ mod tests {
         assert_eq!(bridge_pinched_edges(&mut mesh), 2);
         let cells = mesh.cells.len();
         assert!((0..cells).all(|c| mesh.cell_volume(c) > 0.0));
-        assert_eq!((pinched(&mesh), face_connected_pieces(&mesh).len()), (0, 1));
+        assert_eq!((pinched_edge_count(&mesh), face_connected_pieces(&mesh).len()), (0, 1));
         let Cells::Tet4(tets) = &mesh.cells else { unreachable!() };
         assert!(groups_about(0, &(0..cells).collect::<Vec<_>>(), tets).len() == 1, "the vertex is no longer pinched");
     }

@@ -53,16 +53,15 @@ use anyhow::{bail, ensure, Context, Result};
 use mesh::io::points::{read_points_csv, write_points, LabelledPoints};
 use mesh::io::{write_atomic_bytes, Frame};
 use mesh::length::{mm, point_in_mm, Length, LengthUnit, UnitOrAuto};
-use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
-use mesh::repair::RepairOptions;
-use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
 use mesh::{Camera, Mesh, Near, Point, TriSurface};
 use plot::{scatter_plot, PlotSpec, PointSet};
 use serde::{Deserialize, Serialize};
 
 use learn::LearnedModel;
 
-use crate::meshing::{coverage_warning, write_surface_in_mm, OrganInput};
+use crate::meshing::{
+    mesh_organ_surface, note_lines, tet_mesh_warnings, write_surface_in_mm, OrganInput, OrganMesh, ToMetres,
+};
 use crate::points::PointInput;
 use crate::registration::{absolute_structure, read_structure, structure_name};
 use crate::setup::{Patient, PatientMethod, SigmaFactors, PATIENT_FILE, SET_UP_FRAME, STATE_FILE, SURFACE_FILE};
@@ -284,6 +283,13 @@ impl PrepareState {
 fn structure_file(name: &str) -> String {
     format!("structures/{name}.stl")
 }
+
+/// The organ's Young's modulus (Pa) in the set-up's training draws and the validation's truth
+/// (Neo-Hookean).
+const ORGAN_YOUNG: f64 = 5000.0;
+
+/// The organ's Poisson's ratio in the set-up's training draws and the validation's truth.
+const ORGAN_POISSON: f64 = 0.49;
 
 /// The steps, in order.
 pub const STEPS: [&str; 7] = ["organ", "scenarios", "dataset", "model", "evaluation", "validation", "report"];
@@ -603,15 +609,13 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
     let frame = inputs.frame();
     let Inputs { surface, unit, points_unit, landmarks: labelled_landmarks, targets: labelled_targets, camera, given } =
         inputs;
-    let (mut surface, route) = repair_or_rebuild(&surface, &RepairOptions::default(), &RebuildOptions::default())
-        .with_context(|| format!("repairing {}", options.surface.display()))?;
-    lines.extend(route.lines(Some(unit)).into_iter().map(|l| format!("repair: {l}")));
-    surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(*p));
-    lines.extend(route.warnings().into_iter().map(|w| format!("warning: {w}")));
+    let mut notes = Vec::new();
+    let meshed =
+        mesh_organ_surface(&options.surface, surface, ToMetres::FromUnit(unit), options.tets, true, &mut notes);
+    lines.extend(note_lines(&notes));
+    let OrganMesh { surface, mesh: mut organ, quality } = meshed?;
     let landmarks = labelled_landmarks.points.clone();
     let targets = labelled_targets.points.clone();
-    let (mut organ, quality) = mesh_surface_to_count(&surface, options.tets, BoundaryFit::default())
-        .context("meshing the repaired surface")?;
     let [x, y, z] = extent(&organ).map(mm);
     lines.push(format!(
         "mesh: {} nodes, {} T4 (dihedral angles {:.1}–{:.1}°), {x:.0} × {y:.0} × {z:.0} mm",
@@ -620,14 +624,7 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
         quality.min_dihedral_deg,
         quality.max_dihedral_deg,
     ));
-    if quality.pieces > 1 {
-        lines.push(format!(
-            "warning: the mesh is in {} pieces joined only by edges or vertices (a part thinner than its \
-             tetrahedra): the FEM solves fail where a piece has no held node of its own; mesh it finer (--tets)",
-            quality.pieces
-        ));
-    }
-    lines.extend(quality.coverage.as_ref().and_then(coverage_warning).map(|w| format!("warning: {w}")));
+    lines.extend(tet_mesh_warnings(&quality).into_iter().map(|w| format!("warning: {w}")));
     let visible = Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&organ)?;
     if visible.is_empty() {
         bail!(
@@ -820,9 +817,9 @@ fn scenarios_step(
          # `augsim generate` and `augsim train` to change it.\n\
          kind = \"dataset\"\n\
          name = \"{name}\"\n\
-         description = \"{name}: {tets} T4, Neo-Hookean, nu = 0.49, a tool pushing the visible surface\"\n\n\
+         description = \"{name}: {tets} T4, Neo-Hookean, nu = {ORGAN_POISSON}, a tool pushing the visible surface\"\n\n\
          [mesh.file]\npath = \"organ.vtu\"\n\n\
-         [material]\nlaw = \"neo_hookean\"\nyoung = 5000.0\npoisson = 0.49\n\n\
+         [material]\nlaw = \"neo_hookean\"\nyoung = {ORGAN_YOUNG:?}\npoisson = {ORGAN_POISSON}\n\n\
          [dataset]\nsamples = {samples}\nseed = {seed}\nshard_size = 100\ngrid = [{nx}, {ny}, {nz}]\n\
          fixed = [{held}]\n\
          input = {{ displacement = {{ nodes = {camera_toml}, normal = true }} }}\n\n\
@@ -1245,8 +1242,7 @@ mod tests {
         let (lines, ..) = organ_step(&options, dir.path()).unwrap();
         // The defect as local repair names it on the file as read (mm), not on the surface in metres.
         let as_read = mesh::io::read_surface(&export).unwrap();
-        let Err(mesh::MeshError::Invalid(defect)) = mesh::repair::repair_surface(&as_read, &RepairOptions::default())
-        else {
+        let Err(mesh::MeshError::Invalid(defect)) = mesh::repair::repair_surface(&as_read, &Default::default()) else {
             panic!("local repair mends the broken export")
         };
         let route = format!("repair: route: volumetric (local repair cannot mend it: {defect})");

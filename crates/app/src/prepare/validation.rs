@@ -47,6 +47,9 @@ impl Truth {
         let mesh = coarse.quadratic()?;
         let held = Near { points: landmarks.to_vec(), file: None, distance: attach, surface: true }.nodes(&mesh)?;
         let seen = Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&mesh)?;
+        if seen.is_empty() {
+            bail!("the camera sees no node of the validation's truth, a mesh of the organ's surface made anew");
+        }
         // A target near the surface may lie just outside this mesh, whose boundary is not the
         // organ mesh's: within an element's size it follows the nearest surface point.
         let size = (mesh.volume() / mesh.cells.len() as f64).cbrt();
@@ -55,7 +58,7 @@ impl Truth {
         let stencils = located.into_iter().map(|(s, _)| s).collect();
         let material = fem::Material {
             formulation: fem::Formulation::Standard,
-            ..fem::Material::new(fem::Law::NeoHookean, 5000.0, 0.49).with_order(2)
+            ..fem::Material::new(fem::Law::NeoHookean, super::ORGAN_YOUNG, super::ORGAN_POISSON).with_order(2)
         };
         Ok(Truth { mesh, held, seen, stencils, outside, material })
     }
@@ -285,6 +288,9 @@ const ON_PAR: f64 = 0.05;
 
 /// The shares of a push's force at the frames of its stream: the tool pressing in by quarters.
 const STREAM_SHARES: [f64; 4] = [0.25, 0.5, 0.75, 1.0];
+
+/// The standard deviation of the validation clouds' noise (m).
+const CLOUD_NOISE: f64 = 0.0005;
 
 /// The share of the targets a calibrated σ puts within 2σ: a Gaussian's.
 const SIGMA_COVERAGE: f64 = 0.95;
@@ -625,13 +631,14 @@ pub(super) fn validation_step(
     }
     lines.push(format!(
         "validation: {} pushes of {}–{} N on a truth of {} T10 ({} nodes, Neo-Hookean) meshed anew; clouds of {} \
-         seen nodes with 0.5 mm noise; TRE without deformation {:.2} mm ({})",
+         seen nodes with {:.1} mm noise; TRE without deformation {:.2} mm ({})",
         motions.len(),
         motions.iter().map(|m| m.0).fold(f64::INFINITY, f64::min),
         motions.iter().map(|m| m.0).fold(0.0, f64::max),
         truth.mesh.cells.len(),
         truth.mesh.num_nodes(),
         truth.seen.len(),
+        mm(CLOUD_NOISE),
         mm(mesh::stats::mean(&rest_errors)),
         push_figures(motions.iter().copied())
     ));
@@ -703,7 +710,7 @@ fn register_pushes(
     // The streams' noise is drawn apart, so that the clouds from rest do not depend on them.
     let (mut rng, mut stream_rng) =
         (rand::rngs::StdRng::seed_from_u64(seed), rand::rngs::StdRng::seed_from_u64(seed ^ 1));
-    let noise = rand_distr::Normal::new(0.0, 0.0005).context("noise")?;
+    let noise = rand_distr::Normal::new(0.0, CLOUD_NOISE).context("noise")?;
     let mut left_out = Vec::new();
     let mut streams_left_out = Vec::new();
     for (p, (&Push { at, force, .. }, solution)) in pushes.iter().zip(solutions).enumerate() {
@@ -791,9 +798,11 @@ fn write_table(
         }
     }
     let comments = [
-        "augsim prepare's validation: the targets' errors registering its pushes (rest: each from rest; stream: \
-         each as a stream of 4 frames, its warm-started frames timed)"
-            .to_string(),
+        format!(
+            "augsim prepare's validation: the targets' errors registering its pushes (rest: each from rest; stream: \
+             each as a stream of {} frames, its warm-started frames timed)",
+            STREAM_SHARES.len()
+        ),
         "sigma_mm, within_2sigma: the mean σ the method gives and the share of the targets within 2σ; \
          sigma_factor: its calibration (registration.toml); within_2sigma_calibrated: the share within 2σ under \
          the factor calibrated on the other pushes"
