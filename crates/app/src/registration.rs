@@ -415,19 +415,15 @@ impl RegistrationChoice {
             return Ok(spec);
         }
         let units = self.units.unwrap_or(LengthUnit::DEFAULT);
+        let (method, targets) = (self.method().map_err(anyhow::Error::msg)?, self.targets.clone());
         Ok(RegistrationSpec {
-            method: self.method().map_err(anyhow::Error::msg)?,
-            targets: self.targets.clone().unwrap_or(TargetsSpec::Regions),
             units,
             given_units: units,
             given_frame: self.frame,
             iterations: self.iterations,
             rigid: self.rigid,
-            time_budget_ms: None,
-            options: None,
             structures: self.structures.iter().map(StructureFile::given).collect(),
-            surface: None,
-            sigma_factor: 1.0,
+            ..RegistrationSpec::new(method, targets.unwrap_or(TargetsSpec::Regions))
         })
     }
 }
@@ -737,8 +733,6 @@ impl RegistrationSpec {
             PatientMethod::Hybrid => MethodSpec::hybrid(dir.join(p.model), dir.join(p.scenario), dir.join(p.fem)),
         };
         Ok(RegistrationSpec {
-            method,
-            targets: TargetsSpec::File(dir.join(p.targets)),
             units: p.units,
             given_units: p.input_units.unwrap_or(LengthUnit::DEFAULT),
             // Where the inputs were in the set-up's own frame, none: clouds are then in the organ's
@@ -746,8 +740,6 @@ impl RegistrationSpec {
             given_frame: p.input_frame.filter(|&f| f != SET_UP_FRAME),
             iterations,
             rigid,
-            time_budget_ms: None,
-            options: None,
             structures: p
                 .structures
                 .iter()
@@ -755,6 +747,7 @@ impl RegistrationSpec {
                 .collect(),
             surface: Some(dir.join(SURFACE_FILE)).filter(|path| path.is_file()),
             sigma_factor: p.sigma.of(chosen),
+            ..RegistrationSpec::new(method, TargetsSpec::File(dir.join(p.targets)))
         })
     }
 }

@@ -277,10 +277,11 @@ impl Solved {
             if let (over @ 1.., Some((cell, stretch))) = post::over_compressed_cells(geo, p.material.law, &sol.u)? {
                 lines.push(format!(
                     "{over} of {} cells are compressed past Saint-Venant-Kirchhoff's limit stretch \
-                     1/sqrt(3) = 0.577 (down to {stretch:.3} in cell {}), where its stress falls as the \
+                     1/sqrt(3) = {:.3} (down to {stretch:.3} in cell {}), where its stress falls as the \
                      compression grows (no tissue's does): the equilibrium found holds for that law alone; \
                      law = \"neo_hookean\" holds under large compression",
                     p.mesh.cells.len(),
+                    fem::material::SVK_LIMIT_STRETCH,
                     p.mesh.file_cell(cell)
                 ));
             }

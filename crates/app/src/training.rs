@@ -47,14 +47,14 @@ impl CorruptionArgs {
 #[derive(Debug, Clone, clap::Args)]
 pub struct SplitArgs {
     /// Fraction of the dataset's uniform draws held out as the test set (its last ones).
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = SplitPolicy::default().test_fraction)]
     pub test_fraction: f64,
     /// Number of test samples; overrides --test-fraction.
     #[arg(long)]
     pub test_samples: Option<usize>,
     /// Fraction of the dataset's uniform draws used for validation (checkpoint selection): those
     /// before the test set.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = SplitPolicy::default().validation_fraction)]
     pub validation_fraction: f64,
     /// Number of validation samples; overrides --validation-fraction.
     #[arg(long)]
