@@ -266,9 +266,8 @@ impl RunWriter {
             format!("organ_deformed{verdict}.vtk"),
             registration.deformed_surface(&last.registration.u, last.rigid.as_ref()),
         )];
-        for structure in registration.structures() {
-            let surface = structure.deformed(&last.registration.u, last.rigid.as_ref());
-            surfaces.push((format!("{}_deformed{verdict}.vtk", structure.name()), surface));
+        for (name, surface) in registration.structure_surfaces(&last.registration.u, last.rigid.as_ref()) {
+            surfaces.push((format!("{name}_deformed{verdict}.vtk"), surface));
         }
         for (name, mut surface) in surfaces {
             surface.vertices = self.converted(&surface.vertices);

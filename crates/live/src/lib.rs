@@ -1018,9 +1018,8 @@ fn answer(
         shared.send(&organ, &format!("organ{verdict}"), cloud.timestamp)?;
     }
     if options.outputs.structures && result.plausible() {
-        for structure in registration.structures() {
-            let moved = polydata(structure.deformed(&result.u, tracked.rigid.as_ref()));
-            shared.send(&moved, structure.name(), cloud.timestamp)?;
+        for (name, moved) in registration.structure_surfaces(&result.u, tracked.rigid.as_ref()) {
+            shared.send(&polydata(moved), name, cloud.timestamp)?;
         }
     }
     if let (true, Some(organ_to_cloud)) = (options.outputs.transform, back.organ_to_cloud) {

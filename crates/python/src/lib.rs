@@ -540,9 +540,9 @@ impl Registration {
                 None => Vec::new(),
             };
             let moved: Vec<(String, Vec<Point>)> = state
-                .structures()
-                .iter()
-                .map(|s| (s.name().to_string(), s.deformed(&tracked.registration.u, tracked.rigid.as_ref()).vertices))
+                .structure_surfaces(&tracked.registration.u, tracked.rigid.as_ref())
+                .into_iter()
+                .map(|(name, surface)| (name.to_string(), surface.vertices))
                 .collect();
             Ok((tracked, moved, notes))
         })?;

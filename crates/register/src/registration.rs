@@ -258,6 +258,12 @@ impl Registration {
         }
     }
 
+    /// Each structure with its surface moved with the organ by `u`, in the cloud's frame (moved by
+    /// `rigid`, if any; [`Structure::deformed`]).
+    pub fn structure_surfaces(&self, u: &[f64], rigid: Option<&RigidResult>) -> Vec<(&str, TriSurface)> {
+        self.structures.iter().map(|s| (s.name(), s.deformed(u, rigid))).collect()
+    }
+
     /// Adds a structure that moves with the organ (a tumour, vessels: [`Structure::new`]), named
     /// `name`, its surface in m in the organ's frame; its warnings join the registration's. An
     /// error for a name already taken, or one of the server's messages' (`organ`, `targets`…).
