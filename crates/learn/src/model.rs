@@ -299,6 +299,12 @@ impl ModelPredictor {
         }
     }
 
+    /// Whether it predicts a standard deviation with its fields (the reduced-order model does),
+    /// known without predicting.
+    pub fn predicts_std(&self) -> bool {
+        matches!(self, ModelPredictor::Reduced(_))
+    }
+
     /// [`predict`](Self::predict) with the predicted standard deviation at each grid node
     /// (`[nx, ny, nz]`, m), for a model that predicts one (the reduced-order model).
     pub fn predict_with_std(&self, input: &[f32]) -> Result<(Vec<f32>, Option<Vec<f32>>)> {

@@ -752,49 +752,25 @@ impl DatasetWriter {
         }
         std::fs::create_dir_all(dir).map_err(|e| LearnError::io(dir, e))?;
         let lock = lock_for_writing(dir)?;
-        let manifest_path = dir.join(MANIFEST_FILE);
-        let manifest = if manifest_path.exists() {
-            let dataset = Dataset::open(dir)?;
-            let existing = dataset.manifest.spec();
-            let grows = spec.grows(&existing);
-            if grows && dataset.manifest.chosen.is_some() {
-                return Err(LearnError::manifest(
-                    &manifest_path,
-                    "the dataset holds σ-chosen draws after its uniform ones: its uniform draws cannot grow \
-                     (generate a larger uniform dataset, then choose draws again)",
-                ));
-            }
-            if existing != spec && !grows {
-                return Err(LearnError::manifest(
-                    &manifest_path,
-                    format!("cannot resume: {}", existing.mismatch(&spec)),
-                ));
-            }
-            if dataset.manifest.complete && !grows {
-                return Err(LearnError::manifest(&manifest_path, "the dataset is already complete"));
-            }
-            dataset.check_files()?;
-            let mut manifest = dataset.manifest;
-            if grows {
-                manifest.metadata = spec.metadata;
-                manifest.complete = false;
-                manifest.write(&manifest_path)?;
-            }
-            manifest
-        } else {
-            let manifest = Manifest::new(&spec);
-            manifest.write(&manifest_path)?;
-            manifest
-        };
-        let last_index = manifest.next_index.checked_sub(1);
-        Ok(DatasetWriter {
-            dir: dir.to_path_buf(),
-            _lock: lock,
-            pending: Samples::new(manifest.grid),
-            manifest,
-            pending_failures: Vec::new(),
-            last_index,
-        })
+        if !dir.join(MANIFEST_FILE).exists() {
+            return DatasetWriter::from_manifest(dir, lock, Manifest::new(&spec), true);
+        }
+        let dataset = Dataset::open(dir)?;
+        let existing = dataset.manifest.spec();
+        let grows = spec.grows(&existing) && dataset.manifest.chosen.is_none();
+        if existing != spec && !grows {
+            return Err(refusal(&dataset, &spec, "cannot resume"));
+        }
+        if dataset.manifest.complete && !grows {
+            return Err(LearnError::manifest(dir.join(MANIFEST_FILE), "the dataset is already complete"));
+        }
+        dataset.check_files()?;
+        let mut manifest = dataset.manifest;
+        if grows {
+            manifest.metadata = spec.metadata;
+            manifest.complete = false;
+        }
+        DatasetWriter::from_manifest(dir, lock, manifest, grows)
     }
 
     /// Opens the dataset in `dir`, created with `spec`, complete or not, to append draws after its
@@ -806,20 +782,21 @@ impl DatasetWriter {
         }
         let lock = lock_for_writing(dir)?;
         let dataset = Dataset::open(dir)?;
-        let manifest_path = dir.join(MANIFEST_FILE);
-        let existing = dataset.manifest.spec();
-        if existing != *spec {
-            let why = if spec.grows(&existing) && dataset.manifest.chosen.is_some() {
-                "it holds σ-chosen draws after its uniform ones, which cannot grow".to_string()
-            } else {
-                existing.mismatch(spec)
-            };
-            return Err(LearnError::manifest(&manifest_path, format!("cannot add draws to this dataset: {why}")));
+        if dataset.manifest.spec() != *spec {
+            return Err(refusal(&dataset, spec, "cannot add draws to this dataset"));
         }
         dataset.check_files()?;
         let mut manifest = dataset.manifest;
         manifest.complete = false;
-        manifest.write(&manifest_path)?;
+        DatasetWriter::from_manifest(dir, lock, manifest, true)
+    }
+
+    /// A writer of the dataset in `dir` (locked by `lock`) going on after the last draw of
+    /// `manifest`, which is written first where `rewrite`.
+    fn from_manifest(dir: &Path, lock: std::fs::File, manifest: Manifest, rewrite: bool) -> Result<DatasetWriter> {
+        if rewrite {
+            manifest.write(&dir.join(MANIFEST_FILE))?;
+        }
         let last_index = manifest.next_index.checked_sub(1);
         Ok(DatasetWriter {
             dir: dir.to_path_buf(),
@@ -959,6 +936,21 @@ fn lock_for_writing(dir: &Path) -> Result<std::fs::File> {
         ))),
         Err(std::fs::TryLockError::Error(e)) => Err(LearnError::io(&path, e)),
     }
+}
+
+/// Why `dataset` does not take the draws of `spec` (`refused`: what is refused), as an error on its
+/// manifest: the σ-chosen draws it holds keep its uniform draws from growing, or it was created
+/// otherwise.
+fn refusal(dataset: &Dataset, spec: &DatasetSpec, refused: &str) -> LearnError {
+    let existing = dataset.manifest.spec();
+    let why = if dataset.manifest.chosen.is_some() && spec.grows(&existing) {
+        "it holds σ-chosen draws after its uniform ones, which cannot grow (generate a larger uniform dataset, \
+         then choose draws again)"
+            .to_string()
+    } else {
+        existing.mismatch(spec)
+    };
+    LearnError::manifest(dataset.dir.join(MANIFEST_FILE), format!("{refused}: {why}"))
 }
 
 /// A dataset directory opened for reading.

@@ -196,6 +196,9 @@ pub fn uncertainty_coverage(
 ) -> Result<Option<f64>> {
     check_samples(model, samples)?;
     let predictor = model.predictor(Compute::Cpu)?;
+    if !predictor.predicts_std() {
+        return Ok(None);
+    }
     let n = samples.grid.nodes();
     let (mut within, mut total) = (0usize, 0usize);
     for p in 0..samples.len() {
@@ -209,4 +212,32 @@ pub fn uncertainty_coverage(
         }
     }
     Ok((total > 0).then(|| within as f64 / total as f64))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::dataset::{FieldUnit, Normalization};
+    use crate::data::grid::GridShape;
+    use crate::net::unet::{TrainedModel, UNet, UNetConfig};
+
+    /// A U-Net predicts no σ: it has no coverage, told without a forward pass (the samples here
+    /// hold no fields, so predicting one would fail).
+    #[test]
+    fn a_unet_has_no_coverage_and_is_not_run_for_it() {
+        let grid = GridShape::new(4, 4, 4);
+        let config = UNetConfig { base_channels: 2, depth: 1, ..UNetConfig::default() };
+        let model = TrainedModel {
+            net: UNet::new(&config, 1).unwrap(),
+            config,
+            normalization: Normalization::identity(),
+            grid,
+            placement: None,
+            input_unit: FieldUnit::Newton,
+            target_unit: FieldUnit::Metre,
+            training: None,
+        };
+        let unread = Samples { indices: vec![0, 1], ..Samples::new(grid) };
+        assert_eq!(uncertainty_coverage(&model, &unread, &Corruption::none(), 0).unwrap(), None);
+    }
 }
