@@ -1,5 +1,5 @@
 //! Finite elements for soft-tissue mechanics: linear, co-rotational,
-//! Saint-Venant-Kirchhoff and Neo-Hookean materials on T4 and H8 meshes,
+//! Saint-Venant-Kirchhoff and Neo-Hookean materials on T4, T10 and H8 meshes,
 //! standard or locking-free (F-bar) for nearly incompressible tissue,
 //! Dirichlet conditions, springs, nodal forces, tractions and gravity, and a
 //! static quasi-Newton solver (L-BFGS on a kept sparse Cholesky factorisation) with an
@@ -69,8 +69,11 @@ pub enum FemError {
         /// The offending determinant.
         det: f64,
     },
-    /// Newton-Raphson did not reach the tolerance.
-    #[error("Newton-Raphson did not converge at load factor {load_factor:.4} after {iterations} iterations (relative residual {residual:.3e})")]
+    /// The static solver's quasi-Newton iterations did not reach the tolerance.
+    #[error(
+        "the static solver did not converge at load factor {load_factor:.4} after {iterations} iterations \
+         (relative residual {residual:.3e})"
+    )]
     NotConverged {
         /// The load factor being solved for.
         load_factor: f64,
@@ -81,7 +84,13 @@ pub enum FemError {
     },
     /// Saint-Venant-Kirchhoff passed its compressive limit point: no static
     /// equilibrium exists beyond it under this load.
-    #[error("Saint-Venant-Kirchhoff passed its compressive limit point beyond load factor {load_factor:.3}, where element {element} is compressed to a principal stretch of {stretch:.3} (SVK's uniaxial stress peaks at 1/sqrt(3) = 0.577 and falls beyond, so no equilibrium exists under the full load); use law = \"neo_hookean\" for large compression")]
+    #[error(
+        "Saint-Venant-Kirchhoff passed its compressive limit point beyond load factor {load_factor:.3}, where element \
+         {element} is compressed to a principal stretch of {stretch:.3} (SVK's uniaxial stress peaks at 1/sqrt(3) = \
+         {limit:.3} and falls beyond, so no equilibrium exists under the full load); use law = \"neo_hookean\" for \
+         large compression",
+        limit = material::SVK_LIMIT_STRETCH
+    )]
     LimitPoint {
         /// The most compressed element at the last equilibrium (numbered as for
         /// [`FemError::InvertedElement`]).

@@ -11,7 +11,7 @@ use crate::FemError;
 
 /// The deformation gradient each quadrature point is evaluated at (F, or F̄
 /// under F-bar), index `e * points + q`.
-pub fn effective_gradients(geometry: &ElementGeometry, law: Law, u: &[f64]) -> Result<Vec<Matrix3<f64>>, FemError> {
+fn effective_gradients(geometry: &ElementGeometry, law: Law, u: &[f64]) -> Result<Vec<Matrix3<f64>>, FemError> {
     let nq = geometry.points_per_element;
     let mut out = vec![Matrix3::identity(); geometry.len() * nq];
     for p in 0..geometry.patches.len() {

@@ -27,6 +27,9 @@ pub struct Problem {
     pub f_ext: Vec<f64>,
     /// Zero-length springs on points that move with several nodes (e.g. data terms on surface points).
     pub point_springs: Vec<PointSpring>,
+    /// Why [`Problem::new`] could not make quadratic tetrahedra of the T4 mesh (order 2), for
+    /// [`Problem::validate`] to tell.
+    quadratic_error: Option<String>,
 }
 
 /// A zero-length spring on a point that moves with one or several nodes (its displacement
@@ -62,11 +65,15 @@ impl Problem {
     /// A problem without constraints or loads. When the material asks for quadratic elements
     /// (`order = 2`), a T4 mesh becomes a T10 mesh ([`Mesh::quadratic`]): its own nodes keep
     /// their indices, the mid-edge nodes follow and join the regions between two of their
-    /// nodes; [`Problem::validate`] fails for order 2 on other cells.
+    /// nodes; [`Problem::validate`] fails for order 2 on other cells, and tells why when the T4
+    /// mesh could not be made quadratic.
     pub fn new(mesh: Mesh, material: Material) -> Self {
-        let mesh = match &mesh.cells {
-            Cells::Tet4(_) if material.order == 2 => mesh.quadratic().unwrap_or(mesh),
-            _ => mesh,
+        let (mesh, quadratic_error) = match &mesh.cells {
+            Cells::Tet4(_) if material.order == 2 => match mesh.quadratic() {
+                Ok(quadratic) => (quadratic, None),
+                Err(error) => (mesh, Some(error.to_string())),
+            },
+            _ => (mesh, None),
         };
         let n = mesh.num_nodes();
         Problem {
@@ -76,6 +83,7 @@ impl Problem {
             springs: vec![0.0; n],
             f_ext: vec![0.0; 3 * n],
             point_springs: Vec::new(),
+            quadratic_error,
         }
     }
 
@@ -144,10 +152,16 @@ impl Problem {
         let n = self.mesh.num_nodes();
         self.material.validate().map_err(FemError::Invalid)?;
         if self.material.order == 2 && !matches!(self.mesh.cells, Cells::Tet10(_)) {
-            return Err(FemError::Invalid(format!(
-                "order = 2 makes quadratic tetrahedra from a T4 mesh; this mesh has {} cells",
-                self.mesh.cells.kind_name()
-            )));
+            return Err(FemError::Invalid(match (&self.mesh.cells, &self.quadratic_error) {
+                (Cells::Tet4(_), Some(cause)) => format!(
+                    "order = 2 makes quadratic tetrahedra from a T4 mesh, which failed on this one: {cause}; repair \
+                     the mesh, or use order = 1"
+                ),
+                _ => format!(
+                    "order = 2 makes quadratic tetrahedra from a T4 mesh; this mesh has {} cells",
+                    self.mesh.cells.kind_name()
+                ),
+            }));
         }
         if self.springs.len() != n || self.f_ext.len() != 3 * n {
             return Err(FemError::Invalid(format!(
@@ -236,16 +250,19 @@ impl Problem {
     /// by three anchored nodes not on one line, its nodes then anchoring the pieces that share
     /// them.
     fn loose_pieces(&self, pieces: &Pieces, mut anchored: Vec<bool>) -> Vec<usize> {
-        let points = |nodes: &[usize], anchored: &[bool]| -> Vec<Point> {
-            nodes.iter().filter(|&&n| anchored[n]).map(|&n| self.mesh.nodes[n]).collect()
-        };
         let mut held = vec![false; pieces.nodes.len()];
-        while let Some(p) = (0..held.len()).find(|&p| !held[p] && held_by(&points(&pieces.nodes[p], &anchored)).is_ok())
+        while let Some(p) =
+            (0..held.len()).find(|&p| !held[p] && held_by(&self.anchored_points(&pieces.nodes[p], &anchored)).is_ok())
         {
             held[p] = true;
             pieces.nodes[p].iter().for_each(|&n| anchored[n] = true);
         }
         (0..held.len()).filter(|&p| !held[p]).collect()
+    }
+
+    /// The positions of those of `nodes` that are `anchored`.
+    fn anchored_points(&self, nodes: &[usize], anchored: &[bool]) -> Vec<Point> {
+        nodes.iter().filter(|&&n| anchored[n]).map(|&n| self.mesh.nodes[n]).collect()
     }
 
     /// Whether the prescribed nodes alone hold the body (then it stays held whatever its springs).
@@ -258,18 +275,15 @@ impl Problem {
     /// [`Problem::check_held`] with the anchored nodes given: the pieces [`Problem::loose_pieces`]
     /// leaves are named in the error.
     fn check_anchored(&self, pieces: &Pieces, anchored: Vec<bool>) -> Result<(), FemError> {
-        let points = |nodes: &[usize], anchored: &[bool]| -> Vec<Point> {
-            nodes.iter().filter(|&&n| anchored[n]).map(|&n| self.mesh.nodes[n]).collect()
-        };
         if pieces.nodes.len() == 1 {
-            return held_by(&points(&pieces.nodes[0], &anchored));
+            return held_by(&self.anchored_points(&pieces.nodes[0], &anchored));
         }
         let loose = self.loose_pieces(pieces, anchored.clone());
         let Some(&first) = loose.first() else { return Ok(()) };
         if loose.len() == pieces.nodes.len() {
             // Nothing holds any piece: say so as for a body in one piece.
             let all: Vec<usize> = (0..self.mesh.num_nodes()).collect();
-            held_by(&points(&all, &anchored))?;
+            held_by(&self.anchored_points(&all, &anchored))?;
         }
         let cells: usize = loose.iter().map(|&p| pieces.cells[p].len()).sum();
         let volume: f64 = loose.iter().flat_map(|&p| &pieces.cells[p]).map(|&c| self.mesh.cell_volume(c)).sum();
@@ -485,4 +499,25 @@ pub fn nodal_masses(mesh: &Mesh, density: f64) -> Result<Vec<f64>, FemError> {
         }
     }
     Ok(masses)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Law;
+
+    /// Order 2 makes a T4 mesh quadratic; where that fails, validation tells the mesh's fault.
+    #[test]
+    fn order_two_tells_why_a_t4_mesh_could_not_be_made_quadratic() {
+        let mut material = Material::new(Law::Linear, 1000.0, 0.3);
+        material.order = 2;
+        let mut mesh = mesh::box_tet([0.0; 3], [1.0; 3], [1, 1, 1]).unwrap();
+        let good = Problem::new(mesh.clone(), material);
+        assert!(matches!(good.mesh.cells, Cells::Tet10(_)) && good.validate().is_ok());
+        if let Cells::Tet4(tets) = &mut mesh.cells {
+            tets[0].swap(0, 1);
+        }
+        let err = Problem::new(mesh, material).validate().unwrap_err().to_string();
+        assert!(err.contains("which failed on this one: invalid mesh: cell 0 is inverted"), "{err}");
+    }
 }

@@ -25,7 +25,7 @@ use crate::{written_zeros, FemError};
 
 mod continuation;
 
-/// Settings of the Newton-Raphson solver.
+/// Settings of the static solver (quasi-Newton iterations on a kept factorisation, see the module documentation).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SolverOptions {
@@ -35,7 +35,8 @@ pub struct SolverOptions {
     pub max_iterations: usize,
     /// Convergence: ‖r‖ ≤ rtol · max(‖f_ext‖, ‖f_int‖).
     pub rtol: f64,
-    /// Convergence: ‖Δu‖ ≤ utol · ‖u‖.
+    /// Convergence also when ‖Δu‖ ≤ utol · ‖u‖ and the relative residual ‖r‖ / max(‖f_ext‖, ‖f_int‖)
+    /// is at most √rtol.
     pub utol: f64,
     /// Backtracking line search on the residual norm.
     pub line_search: bool,
@@ -1322,6 +1323,11 @@ impl Stats {
 /// length left in that direction).
 const FLAT_STRETCH: f64 = 0.05;
 
+/// The margin (5 %) above [`SVK_LIMIT_STRETCH`] within which a failing iterate's stretch counts as
+/// past SVK's compressive limit point: an iterate that fails there has reached the limit point,
+/// even if it has not quite crossed it.
+const SVK_LIMIT_MARGIN: f64 = 1.05;
+
 /// What stopped a solve under `law` (Saint-Venant-Kirchhoff or co-rotational, whose energies stay
 /// finite for an element crushed flat) that failed with the tangent found `indefinite` or not,
 /// its failing iterate compressed to the stretch `strayed`, the last equilibrium's most
@@ -1333,8 +1339,8 @@ const FLAT_STRETCH: f64 = 0.05;
 ///   det F < 0; co-rotational, the AMOS liver turned by 90° through its held nodes, which a
 ///   prescribed displacement moves along the chord, squeezing the organ between them);
 /// - [`FemError::LimitPoint`] under SVK when the tangent turned indefinite, or the failing
-///   iterate was compressed past the stretch 1/√3 where SVK's stress peaks: the compressive
-///   limit point;
+///   iterate was compressed past the stretch 1/√3 where SVK's stress peaks (within
+///   [`SVK_LIMIT_MARGIN`]): the compressive limit point;
 /// - none otherwise (the failure is told as it came).
 fn compression_failure(
     law: Law,
@@ -1347,11 +1353,8 @@ fn compression_failure(
     if stretch < FLAT_STRETCH && !indefinite {
         return Some(FemError::CrushedFlat { law: law.display_name(), element, stretch, load_factor: lambda });
     }
-    (law == Law::Svk && (indefinite || strayed < SVK_LIMIT_STRETCH * 1.05)).then_some(FemError::LimitPoint {
-        element,
-        stretch,
-        load_factor: lambda,
-    })
+    (law == Law::Svk && (indefinite || strayed < SVK_LIMIT_STRETCH * SVK_LIMIT_MARGIN))
+        .then_some(FemError::LimitPoint { element, stretch, load_factor: lambda })
 }
 
 #[cfg(test)]

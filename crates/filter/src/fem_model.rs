@@ -1,6 +1,7 @@
 //! A static finite-element problem as a filter [`Model`]: the uncertain parameters (Young's modulus, boundary
 //! spring stiffnesses) are set on the problem, time-dependent loads are applied for step k, and the static
-//! equilibrium is solved by Newton-Raphson warm-started from the sigma point's own previous displacement.
+//! equilibrium is solved by [`StaticSolver`] (quasi-Newton) warm-started from the sigma point's own previous
+//! displacement.
 //! The observation is the current position of tracked points (barycentric in the mesh).
 //!
 //! Every sigma point owns a [`StaticSolver`] (its slot, set by [`Model::assign_sigma_point`]), created on first

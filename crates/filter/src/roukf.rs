@@ -254,7 +254,7 @@ struct Misfit {
     information_theta: DVector<f64>,
     /// `Σ θ_k^T F_k θ_k`.
     theta_information_theta: f64,
-    /// `Σ q_k` (discounted by ρ) and `Σ q_k` discounted by ρ² (the variance of χ² over 2).
+    /// `Σ q_k` (discounted by ρ) and `Σ q_k` discounted by ρ² (less p, the variance of χ² over 2).
     components: f64,
     components_squared_discount: f64,
 }
@@ -314,7 +314,9 @@ impl Misfit {
     /// The covariance `(e/d) S^{-1}` added to the filter's at `theta` (`None` when S is singular).
     fn allowance(&self, theta: &DVector<f64>) -> Option<DMatrix<f64>> {
         let nu = self.nu();
-        let excess = (self.chi_squared(theta) - nu - 2.0 * (2.0 * self.components_squared_discount).sqrt()).max(0.0);
+        // The variance of χ² over 2: ν, with the sums discounted by ρ² rather than ρ.
+        let nu_variance = (self.components_squared_discount - self.prior_information.nrows() as f64).max(1.0);
+        let excess = (self.chi_squared(theta) - nu - 2.0 * (2.0 * nu_variance).sqrt()).max(0.0);
         let d = self.systematic_dof.unwrap_or(nu);
         let s = &self.prior_information + &self.information;
         Cholesky::new(s).map(|c| c.inverse() * (excess / d))
@@ -346,7 +348,6 @@ pub struct Roukf<M: Model> {
     states: Vec<M::State>,
     joint: Option<Joint<M>>,
     iteration: usize,
-    predicted_observation: Option<DVector<f64>>,
     misfit: Option<Misfit>,
     trace: Trace,
 }
@@ -368,12 +369,7 @@ impl<M: Model> Roukf<M> {
                 "the discrepancy's degrees of freedom must be finite and ≥ 1, got {dof}"
             )));
         }
-        let prior = || {
-            DMatrix::from_diagonal(&DVector::from_iterator(
-                self.sigma.dim(),
-                self.config.parameters.iter().map(|s| 1.0 / (s.prior_std * s.prior_std)),
-            ))
-        };
+        let prior = || prior_information(&self.config.parameters);
         self.misfit = match kind {
             Discrepancy::None => None,
             Discrepancy::Independent => Some(Misfit::new(None, prior())),
@@ -421,10 +417,7 @@ impl<M: Model> Roukf<M> {
             return Err(FilterError::InvalidConfig(format!("observation std #{j} must be finite and > 0 (got {s})")));
         }
         let theta = DVector::from_iterator(p, config.parameters.iter().map(|s| s.prior_mean));
-        let u = DMatrix::from_diagonal(&DVector::from_iterator(
-            p,
-            config.parameters.iter().map(|s| 1.0 / (s.prior_std * s.prior_std)),
-        ));
+        let u = prior_information(&config.parameters);
         let u_chol =
             DMatrix::from_diagonal(&DVector::from_iterator(p, config.parameters.iter().map(|s| 1.0 / s.prior_std)));
         let trace = Trace {
@@ -448,7 +441,6 @@ impl<M: Model> Roukf<M> {
             states,
             joint,
             iteration: 0,
-            predicted_observation: None,
             misfit: None,
             trace,
         };
@@ -552,7 +544,6 @@ impl<M: Model> Roukf<M> {
             joint.l_x = l_x;
         }
         self.iteration = k;
-        self.predicted_observation = Some(z_mean);
         self.misfit = misfit;
         let measured = available.contains(&true).then(|| innovation.norm());
         let mut record = self.record(measured, Some(start.elapsed().as_secs_f64()));
@@ -816,11 +807,6 @@ impl<M: Model> Roukf<M> {
         self.joint.as_ref().map(|j| &j.l_x)
     }
 
-    /// Mean predicted observation `Σ α_i H(x_i)` of the last iteration (None before the first).
-    pub fn predicted_observation(&self) -> Option<&DVector<f64>> {
-        self.predicted_observation.as_ref()
-    }
-
     /// History of the estimates, starting with the prior.
     pub fn trace(&self) -> &Trace {
         &self.trace
@@ -856,8 +842,37 @@ impl<M: VectorState> Roukf<M> {
     }
 }
 
+/// The prior information `P_0^{-1} = diag(1/σ0²)` of the parameters (filter space).
+fn prior_information(parameters: &[ParameterSpec]) -> DMatrix<f64> {
+    DMatrix::from_diagonal(&DVector::from_iterator(
+        parameters.len(),
+        parameters.iter().map(|s| 1.0 / (s.prior_std * s.prior_std)),
+    ))
+}
+
 /// `L U^{-1} L^T` from the lower Cholesky factor C of U, as `Y^T Y` with `C Y = L^T`.
 fn covariance_from(l: &DMatrix<f64>, c_lower: &DMatrix<f64>) -> Option<DMatrix<f64>> {
     let y = c_lower.solve_lower_triangular(&l.transpose())?;
     Some(y.transpose() * y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The allowance's excess is `χ² − ν − 2√(2ν)` with `ν = Σq − p`, as the module documentation states.
+    #[test]
+    fn the_excess_is_beyond_two_standard_deviations_of_chi_squared() {
+        let mut misfit = Misfit::new(Some(1.0), DMatrix::identity(1, 1));
+        let residual = DVector::from_element(4, 0.5 * 10f64.sqrt());
+        for _ in 0..10 {
+            misfit.add(1.0, &residual, &DMatrix::zeros(4, 1), &DVector::zeros(1), 4);
+        }
+        let theta = DVector::zeros(1);
+        let (chi_squared, nu) = (misfit.chi_squared(&theta), misfit.nu());
+        assert!((chi_squared - 100.0).abs() < 1e-9 && nu == 39.0, "χ² = {chi_squared}, ν = {nu}");
+        let allowance = misfit.allowance(&theta).unwrap()[(0, 0)];
+        let expected = 100.0 - 39.0 - 2.0 * (2.0 * 39.0f64).sqrt();
+        assert!((allowance - expected).abs() < 1e-9, "allowance {allowance}, expected {expected}");
+    }
 }

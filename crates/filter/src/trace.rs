@@ -15,7 +15,8 @@ pub struct IterationTrace {
     pub iteration: usize,
     /// Mean μ in filter space.
     pub mean: Vec<f64>,
-    /// Standard deviation σ in filter space: square root of the diagonal of `L U^{-1} L^T`.
+    /// Standard deviation σ in filter space: square root of the diagonal of `L U^{-1} L^T`, with the model-discrepancy
+    /// allowance `(e/d) S^{-1}` added to it when there is one ([`crate::Discrepancy`]).
     pub std: Vec<f64>,
     /// Mean in physical space: `g(μ)` for each parameter's map g = `scale · transform` ([`crate::ParameterSpec`]).
     pub mean_physical: Vec<f64>,

@@ -360,8 +360,8 @@ pub fn largest_extent(surface: &TriSurface) -> f64 {
     crate::longest_side(bounds(&points))
 }
 
-/// The length unit of an organ's surface, from its size: an organ is between 2 cm and 60 cm
-/// across, so a largest extent in [0.02, 0.6] is in metres and one in [20, 600] in millimetres.
+/// The length unit of an organ's surface, from its size: a largest extent within an organ's
+/// ([`ORGAN_EXTENT_M`]) is in metres, and one within it in millimetres is in millimetres.
 /// Any other extent is an error that gives it and asks for the unit.
 pub fn detect_unit(surface: &TriSurface) -> Result<LengthUnit, MeshError> {
     let extent = largest_extent(surface);
@@ -370,10 +370,16 @@ pub fn detect_unit(surface: &TriSurface) -> Result<LengthUnit, MeshError> {
     } else if ORGAN_EXTENT_M.contains(&LengthUnit::Millimetre.to_metres(extent)) {
         Ok(LengthUnit::Millimetre)
     } else {
+        let (low, high) = (*ORGAN_EXTENT_M.start(), *ORGAN_EXTENT_M.end());
+        let mm = |metres: f64| number(LengthUnit::Millimetre.from_metres(metres));
         Err(invalid(format!(
             "cannot tell the length unit: the largest extent is {}, which is neither an organ in metres \
-             (0.02 to 0.6) nor in millimetres (20 to 600); give the unit explicitly",
-            number(extent)
+             ({} to {}) nor in millimetres ({} to {}); give the unit explicitly",
+            number(extent),
+            number(low),
+            number(high),
+            mm(low),
+            mm(high)
         )))
     }
 }
@@ -1492,5 +1498,6 @@ mod tests {
         cm.transform([0.0; 3], 100.0);
         let e = detect_unit(&cm).unwrap_err().to_string();
         assert!(e.contains("largest extent is 10,") && e.contains("give the unit explicitly"), "{e}");
+        assert!(e.contains("in metres (0.02 to 0.6) nor in millimetres (20 to 600)"), "{e}");
     }
 }

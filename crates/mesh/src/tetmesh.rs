@@ -270,7 +270,7 @@ impl TetMeshOptions {
 
 /// Lattice spacing that gives about `count` elements for a volume `volume`
 /// (12 BCC tetrahedra per cube of side h, boundary layer ignored).
-pub fn size_for_count(volume: f64, count: usize) -> f64 {
+fn size_for_count(volume: f64, count: usize) -> f64 {
     (12.0 * volume / count.max(1) as f64).cbrt()
 }
 
@@ -971,7 +971,7 @@ pub struct Coverage {
 pub const UNCOVERED_DISTANCE: f64 = 0.02;
 
 /// [`Coverage`] of `surface` by `mesh` (each triangle counted by its centroid).
-pub fn surface_coverage(mesh: &Mesh, surface: &TriSurface) -> Result<Coverage, MeshError> {
+fn surface_coverage(mesh: &Mesh, surface: &TriSurface) -> Result<Coverage, MeshError> {
     let boundary = SurfaceBvh::new(&crate::boundary_surface(mesh))?;
     let distance = UNCOVERED_DISTANCE * crate::longest_side(crate::bounds(&surface.vertices));
     let (area, left_out) = surface

@@ -1,6 +1,7 @@
 //! Assimilation scenarios (`kind = "assimilation"`, `augsim assimilate`): model, loads, unknowns, observations, assessment, filter and outputs.
 //! Unknown keys are errors that name the key.
 
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use fem::{Attachment, Law, Material, Problem, SolverOptions};
@@ -61,7 +62,7 @@ pub struct AssimilationScenario {
     /// Filter settings.
     #[serde(default)]
     pub filter: FilterSpec,
-    /// Newton-Raphson settings of every solve.
+    /// Static solver settings of every solve.
     #[serde(default)]
     pub solver: SolverOptions,
     /// Outputs.
@@ -307,8 +308,10 @@ impl AssimilationScenario {
             let (shares, _) = problem.patch_force_shares(&ball, facing).map_err(|e| fail(e.to_string()))?;
             loads.push(pattern(shares, f.force.total, f.profile));
         }
+        // The nodes [[fixed]] holds: no tool may move them (tools may share nodes: their displacements add up).
+        let held: BTreeSet<usize> = problem.dirichlet.keys().copied().collect();
         let mut tool_nodes = Vec::new();
-        for t in &self.tool {
+        for (i, t) in self.tool.iter().enumerate() {
             let mut nodes = select(&t.select, "tool", &problem)?;
             match (t.near, t.count) {
                 (Some(_), Some(0)) => return Err(fail("tool: count must be at least 1".into())),
@@ -317,6 +320,9 @@ impl AssimilationScenario {
                     return Err(fail("tool: `count` needs `near`, the point the nodes are nearest to".into()))
                 }
                 (None, None) => {}
+            }
+            if let Some(&k) = nodes.iter().find(|k| held.contains(k)) {
+                return Err(fail(self.tool_clash(i, k, &problem)));
             }
             for &k in &nodes {
                 problem.dirichlet.entry(k).or_insert([0.0; 3]);
@@ -331,6 +337,23 @@ impl AssimilationScenario {
         tool_nodes.sort_unstable();
         tool_nodes.dedup();
         Ok((problem, loads, tool_nodes))
+    }
+
+    /// Why tool `i` may not take node `k`, which a `[[fixed]]` holds: the node and both selections.
+    fn tool_clash(&self, i: usize, k: usize, problem: &Problem) -> String {
+        let holds =
+            |f: &Fixed| crate::source::select_nodes(&f.select, &problem.mesh, "fixed").is_ok_and(|n| n.contains(&k));
+        let by = match self.fixed.iter().position(holds) {
+            Some(j) => format!("[[fixed]] {} ({})", j + 1, self.fixed[j].select),
+            None => "[[fixed]]".to_string(),
+        };
+        format!(
+            "tool {}: node {} of its selection ({}) is already held at rest by {by}, and a tool cannot move a held \
+             node: leave the node out of one of the two selections",
+            i + 1,
+            problem.mesh.file_node(k),
+            self.tool[i].select
+        )
     }
 
     /// The output directory: `output.dir`, else `out/<name>`.
@@ -380,6 +403,27 @@ mod tests {
         let away = text.replace("phantom = \"push\"", "ball = { centre = [1.0, 1.0, 1.0], radius = 0.01 }");
         let built = parse(&away).and_then(|s| s.build_problem(mesh::PhantomSpec::default().mesh(1150).unwrap()));
         assert!(built.is_err_and(|e| e.to_string().contains("patch force 1")), "a ball off the organ passed");
+    }
+
+    /// Tools may share nodes (their displacements add up), but a tool on a node that `[[fixed]]` holds is refused,
+    /// naming the node and both selections.
+    #[test]
+    fn a_tool_on_a_fixed_node_is_refused() {
+        let text = crate::builtin("roukf_springs").expect("built in");
+        let parse = |t: &str| AssimilationScenario::from_text(&ScenarioText::new(t, Path::new("springs.toml")));
+        let mesh = mesh::PhantomSpec::default().mesh(1150).unwrap();
+        let (problem, loads, tools) = parse(text).unwrap().build_problem(mesh.clone()).unwrap();
+        assert_eq!(tools.len(), 4, "the two tools move the same 4 nodes");
+        assert!(tools.iter().all(|k| problem.dirichlet[k] == [0.0; 3]));
+        assert_eq!(loads.iter().filter(|l| !l.displacements.is_empty()).count(), 2);
+        let clash = text.replacen("[[tool]]", "[[fixed]]\nselect = { region = \"visible\" }\n\n[[tool]]", 1);
+        let err = parse(&clash).and_then(|s| s.build_problem(mesh)).unwrap_err().to_string();
+        assert!(
+            err.contains("tool 1: node ")
+                && err.contains("region 'visible'")
+                && err.contains("is already held at rest by [[fixed]] 1 (region 'visible')"),
+            "{err}"
+        );
     }
 
     /// The reference run takes its own mesh, law and element order, and keeps the rest.

@@ -25,7 +25,7 @@ pub struct DatasetScenario {
     pub mesh: MeshSource,
     /// The material.
     pub material: Material,
-    /// Newton-Raphson settings.
+    /// Static solver settings.
     #[serde(default)]
     pub solver: SolverOptions,
     /// Sampling of loads and encoding on the grid.

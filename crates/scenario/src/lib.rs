@@ -151,40 +151,40 @@ impl ScenarioText {
                 format!("this is a scenario of kind `{}`; a `{}` scenario is needed here", kind.key(), expected.key()),
             ));
         }
-        let mut table: toml::Table =
-            toml::from_str(&body).map_err(|e| ScenarioError::invalid(&self.origin, e.to_string()))?;
-        if anchor_landmark_files(&mut table, &self.dir) {
-            // Parsed from the table (whose landmark files now start at the scenario's directory).
-            return toml::Value::Table(table)
-                .try_into()
-                .map_err(|e| ScenarioError::invalid(&self.origin, e.to_string()));
+        let invalid = |e: &dyn std::fmt::Display| ScenarioError::invalid(&self.origin, e.to_string());
+        // Parsed from the text first, so that an error names its line.
+        let parsed: T = toml::from_str(&body).map_err(|e| invalid(&e))?;
+        let mut table: toml::Table = toml::from_str(&body).map_err(|e| invalid(&e))?;
+        if !anchor_landmark_files(&mut table, &self.dir) {
+            return Ok(parsed);
         }
-        toml::from_str(&body).map_err(|e| ScenarioError::invalid(&self.origin, e.to_string()))
+        // Parsed again from the table, whose landmark files now start at the scenario's directory.
+        toml::Value::Table(table).try_into().map_err(|e| invalid(&e))
     }
 }
 
 /// Makes the relative `file` of every `near` selection (landmarks, [`mesh::Near`]) start at
-/// `dir`, the scenario's directory; whether any was found.
+/// `dir`, the scenario's directory; whether any changed.
 fn anchor_landmark_files(table: &mut toml::Table, dir: &Path) -> bool {
-    let mut found = false;
+    let mut changed = false;
     for (key, value) in table.iter_mut() {
         if key == "near" {
             if let Some(toml::Value::String(file)) = value.as_table_mut().and_then(|t| t.get_mut("file")) {
                 if Path::new(file.as_str()).is_relative() {
                     *file = dir.join(file.as_str()).to_string_lossy().into_owned();
+                    changed = true;
                 }
-                found = true;
             }
         }
-        found |= anchor_in_value(value, dir);
+        changed |= anchor_in_value(value, dir);
     }
-    found
+    changed
 }
 
 fn anchor_in_value(value: &mut toml::Value, dir: &Path) -> bool {
     match value {
         toml::Value::Table(t) => anchor_landmark_files(t, dir),
-        toml::Value::Array(items) => items.iter_mut().fold(false, |found, v| anchor_in_value(v, dir) | found),
+        toml::Value::Array(items) => items.iter_mut().fold(false, |changed, v| anchor_in_value(v, dir) | changed),
         _ => false,
     }
 }
@@ -327,6 +327,20 @@ mod tests {
         };
         let err = StaticScenario::from_text(&source).unwrap_err().to_string();
         assert!(err.contains("stiffnes") && err.contains("line 12"), "{err}");
+    }
+
+    /// A scenario with a landmark file is parsed from its text first: an unknown key is named with its line.
+    #[test]
+    fn an_unknown_key_beside_a_landmark_file_is_named_with_its_line() {
+        let text = "kind = \"static\"\nname = \"x\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\n\
+                    cells = [1, 1, 1]\nelement = \"hex\"\n[material]\nlaw = \"svk\"\nyoung = 1.0\npoisson = 0.3\n\
+                    [[fixed]]\nselect = { near = { file = \"marks.csv\", distance = 0.1 } }\n";
+        let source = |extra: &str| ScenarioText::new(&format!("{text}{extra}"), Path::new("case/c.toml"));
+        let scenario = StaticScenario::from_text(&source("")).unwrap();
+        let mesh::NodeSelection::Near(near) = &scenario.fixed[0].select else { panic!("not a near selection") };
+        assert_eq!(near.file.as_deref(), Some(Path::new("case/marks.csv")), "the file starts at the scenario's");
+        let err = StaticScenario::from_text(&source("stiffnes = 3\n")).unwrap_err().to_string();
+        assert!(err.contains("stiffnes") && err.contains("line 14"), "{err}");
     }
 
     /// Every file of `scenarios/` is built in, declares its kind and parses as that kind.

@@ -45,7 +45,7 @@ pub struct StaticScenario {
     pub patch_force: Vec<PatchForce>,
     /// Gravity acceleration (m/s²).
     pub gravity: Option<Point>,
-    /// Newton-Raphson settings.
+    /// Static solver settings.
     #[serde(default)]
     pub solver: SolverOptions,
     /// Outputs.

@@ -105,7 +105,6 @@ pub const REGION_FIELD_PREFIX: &str = "region_";
 /// (whitespace, control characters, quotes and `<>&`) become `_`; two names that become the same
 /// make the writer fail. Node indices out of range are left out.
 pub fn region_fields(mesh: &Mesh) -> Vec<Field> {
-    let bad_char = |c: char| c.is_whitespace() || c.is_control() || "\"'<>&".contains(c);
     mesh.regions
         .iter()
         .map(|(name, set)| {
@@ -115,10 +114,15 @@ pub fn region_fields(mesh: &Mesh) -> Vec<Field> {
                     *v = 1.0;
                 }
             }
-            let name: String = name.chars().map(|c| if bad_char(c) { '_' } else { c }).collect();
+            let name: String = name.chars().map(|c| if bad_name_char(c) { '_' } else { c }).collect();
             Field::point(format!("{REGION_FIELD_PREFIX}{name}"), 1, values)
         })
         .collect()
+}
+
+/// Whether `c` may not appear in a VTK array name: whitespace, control characters, quotes and `<>&`.
+fn bad_name_char(c: char) -> bool {
+    c.is_whitespace() || c.is_control() || "\"'<>&".contains(c)
 }
 
 /// `fields` and, after them, the [`region_fields`] of `mesh` whose names no point field of
@@ -240,8 +244,7 @@ impl Field {
     /// Checks the name, the component count and the length against a mesh of `num_points` nodes
     /// and `num_cells` cells.
     pub fn check(&self, num_points: usize, num_cells: usize) -> Result<(), MeshError> {
-        let bad_char = |c: char| c.is_whitespace() || c.is_control() || "\"'<>&".contains(c);
-        if self.name.is_empty() || self.name.chars().any(bad_char) {
+        if self.name.is_empty() || self.name.chars().any(bad_name_char) {
             return Err(MeshError::Invalid(format!(
                 "field name {:?} is empty or holds whitespace, quotes or <>& (not allowed in VTK files)",
                 self.name

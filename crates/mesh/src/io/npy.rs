@@ -1,6 +1,6 @@
 //! Minimal NumPy `.npy` reader and writer.
 //!
-//! Writes format version 1.0 with little-endian `<f4` (f32) or `|u1` (u8) data in C order,
+//! Writes format version 1.0 with little-endian `<f4` (f32), `<f8` (f64) or `|u1` (u8) data in C order,
 //! readable by `numpy.load`. Reads versions 1.0–3.0 with float (`f4`, `f8`), integer (`i1`–`i8`,
 //! `u1`–`u8`, read as f64) or bool (`b1`) data in either byte order and in C or Fortran order
 //! (as `np.save` writes a transposed array), given back in C order; anything else, and any

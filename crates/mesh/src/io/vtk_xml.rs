@@ -17,7 +17,7 @@ use std::ops::Range;
 use base64::engine::general_purpose::STANDARD as BASE64;
 use base64::Engine as _;
 
-use super::legacy_vtk::{surface_from_cells, volume_from_cells};
+use super::legacy_vtk::{surface_from_cells, to_index, volume_from_cells};
 use super::{
     check_for_writing, check_surface, frame_in_header, mesh_cells_flat, write_atomic, Encoding, Field, FieldLocation,
     Frame, Num, Scalar, VTK_POLYGON, VTK_POLY_LINE, VTK_POLY_VERTEX, VTK_TRIANGLE, VTK_TRIANGLE_STRIP,
@@ -658,14 +658,7 @@ impl XmlFile<'_> {
             Some(n) => self.sized(a, n)?,
             None => self.values(a)?,
         };
-        values
-            .iter()
-            .map(|&x| {
-                (x >= 0.0 && x.fract() == 0.0)
-                    .then_some(x as usize)
-                    .ok_or_else(|| self.array_error(a, format!("{x} is not an index")))
-            })
-            .collect()
+        values.iter().map(|&x| to_index(x).ok_or_else(|| self.array_error(a, format!("{x} is not an index")))).collect()
     }
 
     /// The `count` cells of `<section>` (its connectivity cut at its offsets), appended to
