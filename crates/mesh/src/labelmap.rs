@@ -1182,8 +1182,8 @@ mod tests {
         assert_eq!(read_labelmap(dir.path().join("d3.nrrd")).unwrap().labels, [0, 0, 0, 1, 0, 0, 0, 0]);
         let zeros = [header.as_bytes(), &[0u8; 16]].concat();
         assert!(write("e.nrrd", &zeros).contains("empty"));
-        // Sizes one slice short of the data (2 × 2 shorts more) would crop the organ: refused. A few
-        // bytes of padding are not.
+        // Sizes one slice short of the data (2 × 2 shorts more) would crop the organ: refused. A line
+        // end after raw data is not.
         let slab = [header.as_bytes(), &[0u8; 24]].concat();
         assert!(write("e1.nrrd", &slab).contains("the data hold 24 bytes, 16 expected"), "{}", write("e1.nrrd", &slab));
         let padded = [header.as_bytes(), &[0u8; 14], &[1u8, 0], &[0u8; 2]].concat();

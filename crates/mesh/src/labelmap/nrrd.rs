@@ -81,6 +81,12 @@ impl NrrdHeader {
         self.fields.get(name).map(String::as_str).ok_or_else(|| format!("the header has no '{name}' field"))
     }
 
+    /// A skip field, under either of its spellings (`byte skip` or `byteskip`): 0 when absent.
+    fn skip(&self, name: &str, alias: &str) -> Result<i64, String> {
+        let text = self.fields.get(name).or_else(|| self.fields.get(alias));
+        text.map_or(Ok(0), |s| s.parse::<i64>().map_err(|_| format!("{name}: {s:?} is not a whole number")))
+    }
+
     /// The `data file` field of a detached header.
     fn data_file(&self) -> Option<&str> {
         self.fields.get("data file").or_else(|| self.fields.get("datafile")).map(String::as_str)
@@ -270,21 +276,46 @@ pub(super) fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String
             ))
         }
     };
+    let data = after_lines(data, header.skip("line skip", "lineskip")?)?;
     let raw = match encoding {
         "raw" => data.to_vec(),
         "gzip" | "gz" => gunzip_if_needed(data.to_vec())?,
         other => return Err(format!("encoding '{other}' is not supported (raw, gzip or ascii)")),
     };
-    let skip =
-        header.fields.get("byte skip").map_or(Ok(0), |s| s.parse::<i64>()).map_err(|e| format!("byte skip: {e}"))?;
-    let raw = match skip {
+    let expected = count * scalar.size();
+    let raw = match header.skip("byte skip", "byteskip")? {
         0 => &raw[..],
-        -1 => &raw[raw.len().saturating_sub(count * scalar.size())..],
+        -1 => &raw[raw.len().saturating_sub(expected)..],
         s if s > 0 && (s as usize) < raw.len() => &raw[s as usize..],
         s => return Err(format!("bad byte skip {s}")),
     };
+    // Bytes beyond the voxels would be read as the first voxels by some readers and ignored by
+    // others (a detached header over a NIfTI's data, its header left in): refused, as pynrrd does,
+    // but for a line end after raw data.
+    let line_end = if encoding == "raw" { 2 } else { 0 };
+    if raw.len() > expected + line_end {
+        return Err(format!(
+            "the data hold {} bytes, {expected} expected ({count} voxels of {} byte(s)): {} more, which no 'byte skip' \
+             leaves out (a header before the voxels? 'byte skip: -1' takes the last {expected} bytes)",
+            raw.len(),
+            scalar.size(),
+            raw.len() - expected
+        ));
+    }
     let labels = labels(scalar, raw, count, dims[2], little)?;
     Ok(Labelmap { dims, layers, labels, affine, frame, segments, placed, warnings: Vec::new(), named_unit })
+}
+
+/// `data` after its first `lines` lines (NRRD's `line skip`, before any decompression).
+fn after_lines(data: &[u8], lines: i64) -> Result<&[u8], String> {
+    let lines = usize::try_from(lines).map_err(|_| format!("bad line skip {lines}"))?;
+    let mut rest = data;
+    for skipped in 0..lines {
+        let end = rest.iter().position(|&b| b == b'\n');
+        let end = end.ok_or(format!("line skip {lines}: the data hold {skipped} lines"))?;
+        rest = &rest[end + 1..];
+    }
+    Ok(rest)
 }
 
 /// The `count` labels of NRRD's ascii encoding: numbers separated by white space.
@@ -403,6 +434,32 @@ pub fn write_displacement_nrrd(
 mod tests {
     use super::*;
     use crate::labelmap::read_labelmap;
+
+    /// `line skip` lines before the data are passed over, before decompressing (as pynrrd's
+    /// test file has them: text, then the gzip stream); bytes left beyond the voxels (a detached
+    /// header over a NIfTI's data, its 352-byte header left in) are refused, not read as voxels.
+    #[test]
+    fn skipped_lines_are_passed_over_and_data_left_over_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("skip.nrrd");
+        let voxels: Vec<u8> = (0..8).map(|i| u8::from(i == 3)).collect();
+        let header = |extra: &str| {
+            format!(
+                "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nspace: left-posterior-superior\n\
+                 space directions: (1,0,0) (0,1,0) (0,0,1)\nencoding: gzip\n{extra}\n"
+            )
+        };
+        let gzipped = super::super::gzip(&path, &voxels).unwrap();
+        let text = [header("line skip: 2\n").as_bytes(), b"a line\nanother\n", &gzipped].concat();
+        std::fs::write(&path, text).unwrap();
+        assert_eq!(read_labelmap(&path).unwrap().labels, voxels.iter().map(|&v| i32::from(v)).collect::<Vec<_>>());
+        let stray = super::super::gzip(&path, &[&[9u8; 352][..], &voxels].concat()).unwrap();
+        std::fs::write(&path, [header("").as_bytes(), &stray].concat()).unwrap();
+        let e = read_labelmap(&path).unwrap_err().to_string();
+        assert!(e.contains("the data hold 360 bytes, 8 expected") && e.contains("byte skip: -1"), "{e}");
+        std::fs::write(&path, [header("byteskip: -1\n").as_bytes(), &stray].concat()).unwrap();
+        assert_eq!(read_labelmap(&path).unwrap().labels[3], 1);
+    }
 
     /// NRRD's `space units` take every symbol of a length unit (both micro signs), "micron", and
     /// an empty entry as mm; other units, or several for the three axes, are refused.

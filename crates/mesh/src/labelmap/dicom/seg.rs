@@ -244,6 +244,16 @@ fn group_value(
 fn planes(object: &InMemDicomObject, frames: usize, kind: &str) -> Result<Vec<Plane>, String> {
     let shared = items(object, tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE).first();
     let per_frame = items(object, tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE);
+    let placed = |group: &InMemDicomObject| {
+        items(group, tags::PLANE_POSITION_SEQUENCE)
+            .first()
+            .is_some_and(|p| p.get(tags::IMAGE_POSITION_PATIENT).is_some())
+    };
+    if !shared.is_some_and(placed) && !per_frame.iter().any(placed) {
+        return Err("no frame is placed in the patient (no ImagePositionPatient): a segmentation of a 2D image (a \
+                    radiograph, a slide), not of a CT or MR volume"
+            .into());
+    }
     if per_frame.len() != frames {
         return Err(format!("it has {frames} frames but {} per-frame functional groups", per_frame.len()));
     }
@@ -422,25 +432,27 @@ mod tests {
     }
 
     /// A DICOM SEG file of 4 × 4 pixel frames, 1 mm apart in plane, each frame (its segment, its
-    /// height z in mm) in a plane of normal +z; `pixels` bit-packed (BINARY) or a byte each.
+    /// height z in mm; NaN: not placed, as a radiograph's or a slide's) in a plane of normal +z;
+    /// `pixels` bit-packed (BINARY) or a byte each.
     fn seg_file(class: &str, kind: &str, frames: &[(u32, f64)], bits: u16, pixels: Vec<u8>) -> Vec<u8> {
         let per_frame = frames
             .iter()
             .map(|&(segment, z)| {
-                InMemDicomObject::from_element_iter([
-                    sequence(
-                        tags::PLANE_POSITION_SEQUENCE,
-                        vec![text_element(tags::IMAGE_POSITION_PATIENT, VR::DS, &format!("10\\20\\{z}"))],
-                    ),
-                    sequence(
-                        tags::SEGMENT_IDENTIFICATION_SEQUENCE,
-                        vec![DataElement::new(
-                            tags::REFERENCED_SEGMENT_NUMBER,
-                            VR::US,
-                            PrimitiveValue::from(segment as u16),
-                        )],
-                    ),
-                ])
+                let position = sequence(
+                    tags::PLANE_POSITION_SEQUENCE,
+                    vec![text_element(tags::IMAGE_POSITION_PATIENT, VR::DS, &format!("10\\20\\{z}"))],
+                );
+                let identification = sequence(
+                    tags::SEGMENT_IDENTIFICATION_SEQUENCE,
+                    vec![DataElement::new(
+                        tags::REFERENCED_SEGMENT_NUMBER,
+                        VR::US,
+                        PrimitiveValue::from(segment as u16),
+                    )],
+                );
+                InMemDicomObject::from_element_iter(
+                    z.is_finite().then_some(position).into_iter().chain([identification]),
+                )
             })
             .collect::<Vec<_>>();
         let segment = |number: u16, label: &str| {
@@ -621,6 +633,8 @@ mod tests {
         assert!(off.starts_with("its frames do not lie on slices 1.5 mm apart"), "{off}");
         let short = error(seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0)], 1, vec![0xff; 2]));
         assert!(short.contains("pixel data hold 2 bytes, 4 expected"), "{short}");
+        let flat = error(seg_file(SEG, "BINARY", &[(1, f64::NAN), (1, f64::NAN)], 1, vec![0xff; 4]));
+        assert!(flat.starts_with("no frame is placed in the patient") && flat.contains("2D image"), "{flat}");
         let fractional = error(seg_file(SEG, "FRACTIONAL", &[(1, 0.0)], 8, vec![255; 16]));
         assert!(fractional.contains("MaximumFractionalValue"), "{fractional}");
         assert!(error(vec![0; 200]).starts_with("not a DICOM file"));
