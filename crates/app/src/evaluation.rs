@@ -75,7 +75,7 @@ impl Evaluation {
 
 /// Evaluates `model` on the samples of `dataset` (opened from `dataset_dir`) held out from it,
 /// inputs corrupted by `corruption`. An error when the grids differ or no sample is held out.
-pub fn evaluate_held_out(
+fn evaluate_held_out(
     model: &impl LearnedModel,
     dataset: &Dataset,
     dataset_dir: &Path,
@@ -154,7 +154,7 @@ pub fn evaluate_held_out(
 
 /// Writes an evaluation into `out` (created): errors.csv, summary.json and worst.vtu (the worst
 /// sample predicted again); returns their paths.
-pub fn write_evaluation(
+fn write_evaluation(
     out: &Path,
     model: &impl LearnedModel,
     model_path: &Path,
@@ -165,12 +165,9 @@ pub fn write_evaluation(
     let (report, s) = (&evaluation.report, &evaluation.report.stats);
     let corruption = &evaluation.corruption;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let mut csv = String::from("index,error_m\n");
-    for (i, e) in report.indices.iter().zip(&report.errors) {
-        csv.push_str(&format!("{i},{e:e}\n"));
-    }
     let errors = out.join("errors.csv");
-    write_atomic_bytes(&errors, csv.as_bytes())?;
+    let rows = report.indices.iter().zip(&report.errors).map(|(i, e)| [i.to_string(), format!("{e:e}")]);
+    mesh::io::csv::write_csv(&errors, &[], &["index", "error_m"], rows)?;
     let summary = serde_json::json!({
         "model": model_path, "dataset": evaluation.dataset_dir, "samples": evaluation.test.len(),
         "mean_m": s.mean, "std_m": s.std, "max_m": s.max, "worst_index": report.worst_index(),
@@ -194,9 +191,10 @@ pub fn write_evaluation(
 
 /// `augsim eval`: `model_path`'s model (projected on the basis of the reduced-order model
 /// `project`, when given) evaluated on the samples of `dataset_dir` held out from it, inputs
-/// corrupted by `corruption`, and written into `out` ([`write_evaluation`]; a folder of an earlier
-/// run's results is refused, and without `out` a fresh numbered folder under `out/eval` is taken:
-/// [`crate::output::run_dir`]); returns it in lines.
+/// corrupted by `corruption`, and written into `out` (errors.csv, summary.json and worst.vtu, the
+/// worst sample predicted again; a folder of an earlier run's results is refused, and without
+/// `out` a fresh numbered folder under `out/eval` is taken: [`crate::output::run_dir`]); returns
+/// it in lines.
 pub fn eval(
     model_path: &Path,
     dataset_dir: &Path,

@@ -60,9 +60,9 @@ pub struct Meshed {
 }
 
 /// Parts of the surface left out of its mesh beyond this share of its area are warned about.
-pub const MOST_UNCOVERED: f64 = 0.01;
+const MOST_UNCOVERED: f64 = 0.01;
 
-/// A warning when the mesh leaves out more than [`MOST_UNCOVERED`] of its surface.
+/// A warning when the mesh leaves out more than 1 % of its surface's area.
 pub fn coverage_warning(coverage: &Coverage) -> Option<String> {
     (coverage.uncovered > MOST_UNCOVERED).then(|| {
         format!(

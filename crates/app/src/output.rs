@@ -29,7 +29,7 @@ use serde::Serialize;
 use crate::case::{Compared, Registered, SyntheticCase};
 use crate::picture::{frame_notes, RegisteredFrame};
 use crate::points::PointInput;
-use crate::printout::{comparison_rows, frame_line, rigid_lines, run_lines, setup_lines};
+use crate::printout::{comparison_rows, frame_line, rigid_lines, run_lines, setup_lines, COMPARISON_COLUMNS};
 use crate::registration::RegistrationSpec;
 
 /// The folder of a run's results: `out` when the user names one, refused when it already holds
@@ -129,7 +129,7 @@ struct RunSummary<'a> {
     file_notes: &'a [String],
 }
 
-/// What [`RunWriter::finish`] wrote.
+/// What [`write_registered_cloud`] wrote.
 #[derive(Clone, Debug)]
 pub struct Finished {
     /// The run's figures.
@@ -142,7 +142,7 @@ pub struct Finished {
 }
 
 /// Writes a registration run into a directory, frame by frame, then its targets and summary.
-pub struct RunWriter {
+struct RunWriter {
     dir: PathBuf,
     sequence: bool,
     /// The unit of targets.csv.
@@ -168,7 +168,7 @@ impl RunWriter {
     /// metres, the files for 3D Slicer in millimetres). `(organ, given)`: the organ's frame and
     /// the one the clouds were given in (`--frame`), each when known; the results are written in
     /// the clouds' frame, converted from the organ's (in the organ's when none was given).
-    pub fn new(
+    fn new(
         dir: &Path,
         sequence: bool,
         unit: LengthUnit,
@@ -196,7 +196,7 @@ impl RunWriter {
     }
 
     /// Writes frame `i` (registered from `cloud`) of `organ`; returns its summary line.
-    pub fn frame(&mut self, i: usize, cloud: String, organ: &Organ, outcome: &FrameOutcome) -> Result<&FrameSummary> {
+    fn frame(&mut self, i: usize, cloud: String, organ: &Organ, outcome: &FrameOutcome) -> Result<&FrameSummary> {
         if let Some(r) = &outcome.rigid {
             if self.moved.as_ref().is_none_or(|(pose, _)| *pose != r.cloud_to_organ) {
                 self.moved = Some((r.cloud_to_organ, r.organ_to_cloud().move_mesh(organ.mesh())));
@@ -221,7 +221,7 @@ impl RunWriter {
 
     /// Keeps a warning of the run (the truth's, the clouds' files') for summary.json, beside the
     /// registration's own.
-    pub fn warn(&mut self, warning: impl Into<String>) {
+    fn warn(&mut self, warning: impl Into<String>) {
         self.warnings.push(warning.into());
     }
 
@@ -234,7 +234,7 @@ impl RunWriter {
     /// registration worked in, once the organ or a file named one), and the last frame's
     /// pictures, registration.png and registration.html, in the organ's frame (`last`: its
     /// cloud and its targets' truth, when known, as registered).
-    pub fn finish(
+    fn finish(
         self,
         registration: &Registration,
         working: Option<Frame>,
@@ -324,10 +324,10 @@ impl RunWriter {
 
 /// `augsim register CLOUD`: the cloud of `cloud` (a file, or a directory of frames registered in
 /// turn, each from the last) registered as `spec` says, the targets' truth of `truth` (a file,
-/// or one per frame) measured, the run written into `out` ([`RunWriter`]); each line for the
-/// user (the method, the organ, each frame, the run, the files) goes to `say`, a warning's
-/// starting with `warning`. An error, once written, when the last frame's result is not
-/// plausible.
+/// or one per frame) measured, the run written into `out` (frame by frame, then its targets, the
+/// files for 3D Slicer and summary.json); each line for the user (the method, the organ, each
+/// frame, the run, the files) goes to `say`, a warning's starting with `warning`. An error, once
+/// written, when the last frame's result is not plausible.
 pub fn register_files(
     spec: &RegistrationSpec,
     cloud: &Path,
@@ -390,9 +390,9 @@ pub fn register_files(
     Ok(())
 }
 
-/// Writes one registered `cloud` (in the organ's frame, m) into `dir` as [`RunWriter`] writes a
-/// run of one frame, named `name`: in `unit` and the clouds' frame of `(organ, given)` frames
-/// ([`RunWriter::new`]).
+/// Writes one registered `cloud` (in the organ's frame, m) into `dir` as [`register_files`] writes
+/// a run of one frame, named `name`: in `unit` and in the clouds' frame of `(organ, given)` frames
+/// (the organ's and the one the clouds were given in, each when known; the organ's when none was).
 pub fn write_registered_cloud(
     dir: &Path,
     name: &str,
@@ -415,7 +415,7 @@ const WARP_STEPS: usize = 64;
 /// [`mesh::labelmap::write_displacement_nrrd`]): `change` takes it to the results' frame, named
 /// `frame` (taken as LPS, Slicer's default for files, when unknown). Under this transform the
 /// CT and its segmentations, at rest, appear as registered.
-pub fn write_warp(path: &Path, field: &WarpField, change: FrameChange, frame: Option<Frame>) -> Result<()> {
+fn write_warp(path: &Path, field: &WarpField, change: FrameChange, frame: Option<Frame>) -> Result<()> {
     let to_lps = FrameChange::between(frame, Some(Frame::Lps));
     let lps = |p: Point| to_lps.point(change.point(p)).map(|x| LengthUnit::Millimetre.from_metres(x));
     let origin = lps(field.origin);
@@ -433,7 +433,7 @@ pub fn write_warp(path: &Path, field: &WarpField, change: FrameChange, frame: Op
 /// named `frame` (taken as LPS, Slicer's default for files, when unknown). Under it goes
 /// displacement.nrrd, and under that the CT: everything then moves rigidly, however far from
 /// the organ, and the organ as registered.
-pub fn write_rigid_transform(
+fn write_rigid_transform(
     path: &Path,
     cloud_to_organ: &register::RigidTransform,
     change: FrameChange,
@@ -458,7 +458,7 @@ pub fn write_rigid_transform(
 /// The organ mesh and a displacement in the cloud's frame: as given without a rigid alignment;
 /// with one, the mesh moved by it (`moved`, when already computed with that alignment) and the
 /// displacement rotated.
-pub fn mesh_in_cloud_frame<'a>(
+fn mesh_in_cloud_frame<'a>(
     organ: &'a Mesh,
     moved: Option<&'a Mesh>,
     rigid: Option<&RigidResult>,
@@ -482,7 +482,7 @@ pub fn mesh_in_cloud_frame<'a>(
 /// error, when it predicts one, as a column `sigma_m`, and the targets' labels, when they have
 /// any, as a last column `label`; a first line `# CoordinateSystem = RAS` (or LPS) names `frame`
 /// when known, as 3D Slicer's files do.
-pub fn write_targets(
+fn write_targets(
     path: &Path,
     rest: &[Point],
     registered: &[Point],
@@ -508,7 +508,7 @@ pub fn write_targets(
 
 /// The registered targets as 3D Slicer markups (`.mrk.json`), in millimetres and in `frame` when
 /// known: each target's name ([`register::Registration::target_names`]) and σ in its description.
-pub fn write_targets_for_slicer(
+fn write_targets_for_slicer(
     path: &Path,
     registered: &[Point],
     sigma: Option<&[f64]>,
@@ -559,8 +559,7 @@ pub fn write_case(dir: &Path, case: &SyntheticCase) -> Result<()> {
 pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> Result<()> {
     let registered: Vec<&Registered> = rows.iter().filter_map(|r| r.result.as_ref().ok()).collect();
     let peak = case.peak();
-    let mut csv =
-        String::from("method,tre_mean_mm,tre_max_mm,surface_residual_mm,time_median_ms,time_p95_ms,iterations,error\n");
+    let mut csv = format!("method,{},error\n", COMPARISON_COLUMNS.map(|(column, _)| column).join(","));
     for (name, values, error) in comparison_rows(rows) {
         let fields = values.map(|v| v.map_or(String::new(), |v| v.to_string()));
         csv.push_str(&format!("{},{},{}\n", csv_field(&name), fields.join(","), csv_field(&error)));

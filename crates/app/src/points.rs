@@ -110,8 +110,7 @@ impl PointInput {
             read_points(path)?
         };
         let points = self.place(path, points).map_err(|e| register::RegisterError::Invalid(format!("{e:#}")))?.points;
-        register::check_cloud(&points).map_err(|e| register::RegisterError::format(path, e.to_string()))?;
-        Ok(points)
+        register::cloud::check_points(path, points)
     }
 }
 
@@ -228,6 +227,39 @@ mod tests {
             [[1e-3, 2e-3, 3e-3]],
             "the named unit wins"
         );
+    }
+
+    /// A CSV cloud is read exactly, by its header's columns in any order and case; its errors
+    /// name the file and the line.
+    #[test]
+    fn a_csv_cloud_is_read_by_its_header() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut input = PointInput::new(None, LengthUnit::Metre, LengthUnit::Metre);
+        let path = dir.path().join("cloud.csv");
+        let sample = [[0.0, -0.0, 1.0], [0.1, 1.0 / 3.0, -123456.789], [1e-300, f64::MIN_POSITIVE, 5e-324]];
+        mesh::io::points::write_points_csv(&path, &sample).unwrap();
+        let bits = |points: &[Point]| points.iter().map(|p| p.map(f64::to_bits)).collect::<Vec<_>>();
+        assert_eq!(bits(&input.read_cloud(&path).unwrap()), bits(&sample));
+        let mut read = |name: &str, text: &str| {
+            let path = dir.path().join(name);
+            std::fs::write(&path, text).unwrap();
+            input.read_cloud(&path).map_err(|e| e.to_string())
+        };
+        let other_order = read("targets.CSV", "z, id ,X,y\r\n3,7,1,2\r\n\r\n -6 , 8, -4 ,-5\n\n");
+        assert_eq!(other_order, Ok(vec![[1.0, 2.0, 3.0], [-4.0, -5.0, -6.0]]));
+        let refused = [
+            ("nox.csv", "a,y,z\n1,2,3\n", &["nox.csv", "line 1", "'x'"][..]),
+            ("bad.csv", "x,y,z\n1,2,3\n\n4,abc,6\n", &["bad.csv", "line 4", "y", "\"abc\"", "not a number"]),
+            ("count.csv", "x,y,z\n1,2,3\n4,5\n", &["line 3", "2 fields", "3 columns"]),
+            ("nan.csv", "x,y,z\n1,2,3\n4,NaN,6\n", &["line 3", "not finite"]),
+            ("inf.csv", "x,y,z\n-inf,2,3\n", &["line 2", "not finite"]),
+            ("header_only.csv", "x,y,z\n\n", &["header_only.csv", "no points"]),
+            ("empty.csv", "", &["no points"]),
+        ];
+        for (name, text, parts) in refused {
+            let message = read(name, text).unwrap_err();
+            assert!(parts.iter().all(|part| message.contains(part)), "{message:?} should contain {parts:?}");
+        }
     }
 
     /// A truth file labelled as the targets are is taken by label, whatever its rows' order; one

@@ -156,13 +156,9 @@ pub fn case_files_lines(case: &SyntheticCase, dir: &Path) -> Vec<String> {
 /// figures, or why it failed); the name column fits the longest method name.
 pub fn comparison_table(rows: &[Compared]) -> Vec<String> {
     let width = rows.iter().map(|r| r.method.chars().count()).max().unwrap_or(0).max(28);
-    let mut lines = vec![
-        String::new(),
-        format!(
-            "{:<width$} {:>14} {:>13} {:>14} {:>10} {:>10} {:>10}",
-            "method", "TRE mean (mm)", "TRE max (mm)", "residual (mm)", "ms/frame", "p95 (ms)", "iterations"
-        ),
-    ];
+    let [t, m, res, time, p95, it] = COMPARISON_COLUMNS.map(|(_, label)| label);
+    let mut lines =
+        vec![String::new(), format!("{:<width$} {t:>14} {m:>13} {res:>14} {time:>10} {p95:>10} {it:>10}", "method")];
     for (name, values, error) in comparison_rows(rows) {
         let [t, m, res, time, p95, it] = values.map(|v| v.map_or("-".to_string(), |v| format!("{v:.2}")));
         lines.push(if error.is_empty() {
@@ -173,6 +169,17 @@ pub fn comparison_table(rows: &[Compared]) -> Vec<String> {
     }
     lines
 }
+
+/// The figures of a row of [`comparison_rows`], in order: each one's CSV column and its label in
+/// the printed table.
+pub const COMPARISON_COLUMNS: [(&str, &str); 6] = [
+    ("tre_mean_mm", "TRE mean (mm)"),
+    ("tre_max_mm", "TRE max (mm)"),
+    ("surface_residual_mm", "residual (mm)"),
+    ("time_median_ms", "ms/frame"),
+    ("time_p95_ms", "p95 (ms)"),
+    ("iterations", "iterations"),
+];
 
 /// The rows of a comparison: the baseline (not deforming, or the rigid alignment alone, when the
 /// methods aligned rigidly), then each method; each row its name, its figures (TRE mean and max,

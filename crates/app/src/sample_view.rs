@@ -108,7 +108,7 @@ pub fn sample_on_mesh(model: &Model, dataset: &Dataset, index: u64, organ: &Mesh
 
 /// The generation index of the first sample of the dataset of `manifest` held out from `model` (a test sample
 /// of the model's recorded split, or one it never saw); `None` when all were trained or validated on.
-pub fn first_held_out(model: &Model, manifest: &Manifest) -> Option<u64> {
+fn first_held_out(model: &Model, manifest: &Manifest) -> Option<u64> {
     let source = manifest.source_id();
     manifest
         .shards

@@ -1,7 +1,7 @@
-//! Point clouds on disk: CSV with a header naming `x`, `y`, `z`; NumPy `.npy` arrays of shape
-//! `[N, 3]`; the points of a PLY, surface or mesh file (`.ply`, `.obj`, `.stl`, `.vtk`, `.vtp`,
-//! `.vtu`: a cloud saved as a model, as 3D Slicer saves one), whatever its cells
-//! ([`mesh::io::read_vertices`]). Coordinates are in metres.
+//! Point clouds on disk: CSV with a header naming `x`, `y`, `z` (read with its labels and unit as
+//! points, [`mesh::io::points::read_points`]); NumPy `.npy` arrays of shape `[N, 3]`; the points
+//! of a PLY, surface or mesh file (`.ply`, `.obj`, `.stl`, `.vtk`, `.vtp`, `.vtu`: a cloud saved
+//! as a model, as 3D Slicer saves one), whatever its cells ([`mesh::io::read_vertices`]).
 //!
 //! Every reader rejects an empty cloud and non-finite coordinates, and every error names the
 //! file (and, for text, the line).
@@ -14,12 +14,14 @@ use mesh::Point;
 
 use crate::{RegisterError, Result};
 
-/// The file extensions (lower case) that [`read_point_cloud`] understands.
+/// The file extensions (lower case) of a point cloud: CSV and those [`read_point_cloud`] reads.
 pub const CLOUD_EXTENSIONS: [&str; 8] = ["csv", "npy", "ply", "obj", "stl", "vtk", "vtp", "vtu"];
 
-/// The cloud formats as a user reads them: ".csv, .npy, … or .vtu".
-fn cloud_formats() -> String {
-    let [first @ .., last] = CLOUD_EXTENSIONS.map(|e| format!(".{e}"));
+/// The cloud formats as a user reads them (".csv, .npy, … or .vtu"), CSV among them or not.
+fn cloud_formats(csv: bool) -> String {
+    let dotted: Vec<String> =
+        CLOUD_EXTENSIONS.iter().filter(|&&e| csv || e != "csv").map(|e| format!(".{e}")).collect();
+    let (last, first) = dotted.split_last().expect("cloud extensions are given");
     format!("{} or {last}", first.join(", "))
 }
 
@@ -34,20 +36,14 @@ fn is_cloud_file(path: &Path) -> bool {
     CLOUD_EXTENSIONS.contains(&extension(path).as_str())
 }
 
-/// Reads a point cloud, choosing the format from the extension (any of [`CLOUD_EXTENSIONS`], any
-/// case).
+/// Reads a cloud of positions alone ([`holds_positions_only`]), choosing the format from the
+/// extension (any case).
 pub fn read_point_cloud(path: &Path) -> Result<Vec<Point>> {
-    let points = match extension(path).as_str() {
-        "csv" => mesh::io::points::read_points_csv(path)?,
-        "npy" => read_npy_cloud(path)?,
-        model if CLOUD_EXTENSIONS.contains(&model) => mesh::io::read_vertices(path)?,
-        _ => {
-            return Err(RegisterError::format(
-                path,
-                format!("unsupported point-cloud format: expected a {} file", cloud_formats()),
-            ))
-        }
-    };
+    if !holds_positions_only(path) {
+        let expected = format!("unsupported point-cloud format: expected a {} file", cloud_formats(false));
+        return Err(RegisterError::format(path, expected));
+    }
+    let points = if extension(path) == "npy" { read_npy_cloud(path)? } else { mesh::io::read_vertices(path)? };
     check_points(path, points)
 }
 
@@ -67,14 +63,17 @@ pub fn read_frames(path: &Path) -> Result<Vec<PathBuf>> {
         }
     }
     if frames.is_empty() {
-        return Err(RegisterError::format(path, format!("directory holds no point cloud ({} file)", cloud_formats())));
+        return Err(RegisterError::format(
+            path,
+            format!("directory holds no point cloud ({} file)", cloud_formats(true)),
+        ));
     }
     frames.sort_by(|a, b| a.file_name().cmp(&b.file_name()));
     Ok(frames)
 }
 
-/// Rejects an empty cloud and non-finite coordinates ([`crate::checks::check_cloud`]), naming the file.
-fn check_points(path: &Path, points: Vec<Point>) -> Result<Vec<Point>> {
+/// Rejects an empty cloud and non-finite coordinates ([`crate::check_cloud`]), naming the file.
+pub fn check_points(path: &Path, points: Vec<Point>) -> Result<Vec<Point>> {
     crate::checks::check_cloud(&points).map_err(|e| RegisterError::format(path, e.to_string()))?;
     Ok(points)
 }

@@ -5,7 +5,8 @@ use mesh::embedding::MeshLocator;
 use mesh::length::{mm, point_in_mm, LengthUnit, UnitMistake};
 use mesh::{Mesh, Point, TriSurface};
 
-use crate::{RegisterError, Result};
+use crate::rigid::in_cloud_frame;
+use crate::{RegisterError, Result, RigidResult};
 
 /// Interpolation weights below this are rounding errors (see [`Stencil`]'s constructor).
 const NEGLIGIBLE_WEIGHT: f64 = 1e-12;
@@ -102,10 +103,7 @@ impl Organ {
 
     /// The surface moved by the nodal displacement `u` (3 per mesh node).
     pub fn deformed_surface(&self, u: &[f64]) -> TriSurface {
-        TriSurface {
-            vertices: displaced(&self.surface.vertices, &self.stencils, u),
-            triangles: self.surface.triangles.clone(),
-        }
+        moved_surface(&self.surface, &self.stencils, u, None)
     }
 
     /// The stencil of the point with barycentric coordinates `weights` in surface triangle
@@ -343,6 +341,20 @@ pub fn displaced(rest: &[Point], stencils: &[Stencil], u: &[f64]) -> Vec<Point> 
             [p[0] + d[0], p[1] + d[1], p[2] + d[2]]
         })
         .collect()
+}
+
+/// `rest` with each vertex moved by its stencil over `u`, in the cloud's frame (moved by the rigid
+/// alignment `rigid`, if any).
+pub(crate) fn moved_surface(
+    rest: &TriSurface,
+    stencils: &[Stencil],
+    u: &[f64],
+    rigid: Option<&RigidResult>,
+) -> TriSurface {
+    TriSurface {
+        vertices: in_cloud_frame(displaced(&rest.vertices, stencils, u), rigid),
+        triangles: rest.triangles.clone(),
+    }
 }
 
 /// The name of point `i` of a set of `what` ("target") in messages: its number from 1, and its

@@ -14,7 +14,7 @@ use mesh::{Point, TriSurface};
 use serde::Serialize;
 
 use crate::frame::{register_frame_begun, Deformer, FrameResult, RegistrationOptions};
-use crate::organ::{displaced, Organ, Stencil};
+use crate::organ::{displaced, moved_surface, Organ, Stencil};
 use crate::rigid::{in_cloud_frame, rigid_align, RigidResult, RigidSummary};
 use crate::{RegisterError, Result, Structure};
 
@@ -177,13 +177,6 @@ impl Tracked {
     }
 }
 
-/// The surface of `organ` displaced by `u`, in the cloud's frame (moved by the rigid alignment,
-/// if any).
-fn organ_surface(organ: &Organ, u: &[f64], rigid: Option<&RigidResult>) -> mesh::TriSurface {
-    let surface = organ.deformed_surface(u);
-    mesh::TriSurface { vertices: in_cloud_frame(surface.vertices, rigid), triangles: surface.triangles }
-}
-
 impl Registration {
     /// The registration of `organ` by `deformer` (`method`: its name in words) of the `targets`
     /// (rest positions, m; `labels`: one each, a targets file's, "" where it gives none, or none
@@ -254,7 +247,7 @@ impl Registration {
     pub fn deformed_surface(&self, u: &[f64], rigid: Option<&RigidResult>) -> TriSurface {
         match &self.surface {
             Some(surface) => surface.deformed(u, rigid),
-            None => organ_surface(&self.organ, u, rigid),
+            None => moved_surface(self.organ.surface(), self.organ.surface_stencils(), u, rigid),
         }
     }
 

@@ -26,6 +26,9 @@ use crate::{RegisterError, Result};
 /// Fewest cloud points a rigid alignment accepts (6 unknowns, and trimming drops some).
 pub const MIN_POINTS: usize = 10;
 
+/// Fewest matches each step of the alignment keeps, however many the trimming drops: the 6 unknowns.
+const MIN_KEPT: usize = 6;
+
 /// A rigid transform `x ↦ R x + t` (R a rotation matrix, row-major; t in m).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RigidTransform {
@@ -251,9 +254,9 @@ pub fn rigid_align(surface: &TriSurface, cloud: &[Point], options: &RigidOptions
     crate::checks::check_cloud(cloud)?;
     let n = cloud.len();
     let kept = ((options.keep * n as f64).ceil() as usize).min(n);
-    if n < MIN_POINTS || kept < 6 {
+    if n < MIN_POINTS || kept < MIN_KEPT {
         return Err(RegisterError::Invalid(format!(
-            "rigid alignment needs at least {MIN_POINTS} cloud points (and 6 kept), got {n} ({kept} kept)"
+            "rigid alignment needs at least {MIN_POINTS} cloud points (and {MIN_KEPT} kept), got {n} ({kept} kept)"
         )));
     }
     let bvh = SurfaceBvh::new(surface)?;
@@ -273,11 +276,11 @@ pub fn rigid_align(surface: &TriSurface, cloud: &[Point], options: &RigidOptions
         let moved: Vec<Point> = cloud.par_iter().map(|&p| transform.apply(p)).collect();
         let matches: Vec<_> = moved.par_iter().map(|&q| bvh.closest_point(q)).collect();
         // The `kept` closest matches, in a deterministic order, without those beyond the outlier
-        // limit (but never fewer than 6).
+        // limit (but never fewer than MIN_KEPT).
         order.sort_unstable_by(|&a, &b| matches[a].distance.total_cmp(&matches[b].distance).then(a.cmp(&b)));
         let limit = options.outlier_factor * matches[order[n / 2]].distance;
         let within = order.partition_point(|&i| matches[i].distance <= limit);
-        let chosen = &order[..kept.min(within).max(6)];
+        let chosen = &order[..kept.min(within).max(MIN_KEPT)];
         let rms = (chosen.iter().map(|&i| matches[i].distance.powi(2)).sum::<f64>() / chosen.len() as f64).sqrt();
         if converged || iterations == options.iterations {
             break (rms, chosen.len());

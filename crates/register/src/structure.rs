@@ -4,8 +4,7 @@
 use mesh::length::mm;
 use mesh::{Point, TriSurface};
 
-use crate::organ::{displaced, likely_mistake, Stencil, LANDMARK_REACH};
-use crate::rigid::in_cloud_frame;
+use crate::organ::{likely_mistake, moved_surface, Stencil, LANDMARK_REACH};
 use crate::{Organ, RegisterError, Result, RigidResult};
 
 /// A surface embedded in the organ (in m, in the organ's frame, at rest): each vertex inside the
@@ -81,8 +80,7 @@ impl Structure {
     /// The surface moved by the organ's displacement `u`, in the cloud's frame (moved by the
     /// rigid alignment, if any).
     pub fn deformed(&self, u: &[f64], rigid: Option<&RigidResult>) -> TriSurface {
-        let vertices = in_cloud_frame(displaced(&self.rest.vertices, &self.stencils, u), rigid);
-        TriSurface { vertices, triangles: self.rest.triangles.clone() }
+        moved_surface(&self.rest, &self.stencils, u, rigid)
     }
 }
 
