@@ -84,9 +84,16 @@ pub enum MeshError {
 }
 
 impl MeshError {
-    /// A file at `path` that could not be understood: `message` says why.
+    /// A file at `path` that could not be understood: `message` says why, unless the file is a
+    /// Git LFS pointer (a repository cloned without its large files), which is then said instead.
     pub fn parse(path: &std::path::Path, message: impl Into<String>) -> MeshError {
-        MeshError::Parse { path: path.display().to_string(), message: message.into() }
+        let message = match io::is_lfs_pointer(path) {
+            true => "a Git LFS pointer, not the file itself (cloned without its large files): fetch it, e.g. with \
+                     `git lfs pull`"
+                .to_string(),
+            false => message.into(),
+        };
+        MeshError::Parse { path: path.display().to_string(), message }
     }
 
     /// The error's text without the "invalid mesh: " prefix, for errors about an input that is

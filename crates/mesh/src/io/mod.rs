@@ -446,6 +446,14 @@ pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     write_atomic(path, |w| w.write_all(bytes))
 }
 
+/// Whether the file at `path` is a Git LFS pointer: the few lines Git keeps in place of a large
+/// file until it is fetched.
+pub fn is_lfs_pointer(path: &Path) -> bool {
+    let mut start = [0u8; 40];
+    let read = std::fs::File::open(path).and_then(|mut f| std::io::Read::read(&mut f, &mut start));
+    read.is_ok_and(|n| start[..n].starts_with(b"version https://git-lfs.github.com/spec/"))
+}
+
 /// Whether [`write_atomic`] could write `path`, checked before long work whose result it is to hold:
 /// its directory is created and a temporary file made there (and removed), as the write would.
 pub fn check_writable(path: &Path) -> Result<(), WriteError> {
@@ -782,6 +790,26 @@ mod tests {
         }
         let e = read_surface(dir.path().join("missing.off")).unwrap_err().to_string();
         assert!(e.contains("unknown surface extension"), "{e}");
+    }
+
+    /// A Git LFS pointer in place of a surface, a mesh or a labelmap is named as such, whatever
+    /// its extension; a damaged file is not.
+    #[test]
+    fn a_git_lfs_pointer_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let pointer = "version https://git-lfs.github.com/spec/v1\noid sha256:4d7a2146\nsize 12345\n";
+        for name in ["organ.stl", "organ.vtk", "organ.vtu", "organ.ply", "liver.nii", "liver.nrrd"] {
+            let path = dir.path().join(name);
+            std::fs::write(&path, pointer).unwrap();
+            let e = match name.ends_with(".nii") || name.ends_with(".nrrd") {
+                true => crate::labelmap::read_labelmap(&path).unwrap_err().to_string(),
+                false => read_surface(&path).map(drop).or_else(|_| read_mesh(&path).map(drop)).unwrap_err().to_string(),
+            };
+            assert!(e.contains("a Git LFS pointer, not the file itself"), "{name}: {e}");
+        }
+        let damaged = dir.path().join("damaged.vtk");
+        std::fs::write(&damaged, "# vtk DataFile Version 3.0\n").unwrap();
+        assert!(!read_mesh(&damaged).unwrap_err().to_string().contains("LFS"));
     }
 
     #[test]
