@@ -21,6 +21,7 @@ use std::sync::OnceLock;
 
 use rayon::prelude::*;
 
+use crate::surface::area_vector;
 use crate::{cross, dot, norm, sub, MeshError, Point, TriSurface};
 
 /// Triangles per leaf.
@@ -452,11 +453,6 @@ fn box_centre(b: &NodeBox) -> Point {
 
 fn centroid(p: [Point; 3]) -> Point {
     std::array::from_fn(|d| (p[0][d] + p[1][d] + p[2][d]) / 3.0)
-}
-
-/// Half the cross product: area times the unit normal.
-fn area_vector(p: [Point; 3]) -> Point {
-    cross(sub(p[1], p[0]), sub(p[2], p[0])).map(|c| 0.5 * c)
 }
 
 /// Signed solid angle of triangle `p` seen from `q` (Van Oosterom–Strackee):

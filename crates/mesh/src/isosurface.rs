@@ -65,7 +65,8 @@ impl ExtractOptions {
 /// What [`mask_surface`] did.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ExtractReport {
-    /// Voxels of the pieces kept, with their cavities filled.
+    /// Voxels of the pieces kept, with their cavities filled and the gaps closed when the surface
+    /// was closed ([`ExtractReport::closed_voxels`]).
     pub voxels: usize,
     /// The pieces kept: one, the largest, unless [`ExtractOptions::every_piece`].
     pub pieces: usize,

@@ -338,7 +338,8 @@ impl Mesh {
         }
         for i in 0..self.cells.len() {
             if let Some(&bad) = self.cells.cell(i).iter().find(|&&k| k >= n) {
-                return Err(MeshError::Invalid(format!("cell {i} refers to node {bad}, but there are {n} nodes")));
+                let cell = self.file_cell(i);
+                return Err(MeshError::Invalid(format!("cell {cell} refers to node {bad}, but there are {n} nodes")));
             }
         }
         for (name, set) in &self.regions {
@@ -590,7 +591,7 @@ pub fn cross(a: Point, b: Point) -> Point {
 /// The six dihedral angles (radians) of the tetrahedron (a, b, c, d).
 pub fn dihedral_angles(p: [Point; 4]) -> [f64; 6] {
     // Outward normals of the faces opposite each vertex.
-    const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
+    const FACES: [[usize; 3]; 4] = topology::TET_FACES;
     let n: [Point; 4] = std::array::from_fn(|k| {
         let [i, j, l] = FACES[k];
         let mut v = cross(sub(p[j], p[i]), sub(p[l], p[i]));

@@ -254,11 +254,10 @@ impl PhantomSpec {
     }
 
     fn attach_t4_regions(&self, mesh: &mut Mesh) -> Result<(), MeshError> {
-        let crate::Cells::Tet4(tets) = &mesh.cells else {
+        if !matches!(mesh.cells, crate::Cells::Tet4(_)) {
             return Err(MeshError::Invalid("phantom regions: expected a T4 mesh".into()));
-        };
-        let surface =
-            crate::TriSurface { vertices: mesh.nodes.clone(), triangles: crate::tetmesh::boundary_triangles(tets) };
+        }
+        let surface = crate::boundary_surface(mesh);
         let normals = surface.vertex_normals();
         let mut on_surface = vec![false; mesh.num_nodes()];
         for t in &surface.triangles {

@@ -32,7 +32,7 @@ use rayon::prelude::*;
 
 use crate::length::LengthUnit;
 use crate::length::{number, ORGAN_EXTENT_M};
-use crate::surface::check_closed_manifold;
+use crate::surface::{area_vector, check_closed_manifold};
 use crate::tetmesh::MAX_OVERLAP_FRACTION;
 use crate::topology::root;
 use crate::{bounds, cross, dot, norm, sub, MeshError, Point, TriSurface};
@@ -403,10 +403,6 @@ fn point_text(p: Point) -> String {
 /// Where vertex `v` (of the repaired numbering) is: its input number and coordinates.
 fn vertex_text(surface: &TriSurface, origin: &[usize], v: usize) -> String {
     format!("{} at {}", origin[v], point_text(surface.vertices[v]))
-}
-
-fn area_vector(p: [Point; 3]) -> Point {
-    cross(sub(p[1], p[0]), sub(p[2], p[0])).map(|c| 0.5 * c)
 }
 
 fn area(vertices: &[Point], t: [usize; 3]) -> f64 {

@@ -92,14 +92,7 @@ pub fn sample_visible_boundary(
     count: usize,
     seed: u64,
 ) -> Result<Vec<SurfaceSample>, MeshError> {
-    let surface = match &mesh.cells {
-        // Same triangles, in the same order, as `boundary_surface`, without hashing.
-        crate::Cells::Tet4(tets) => {
-            TriSurface { vertices: mesh.nodes.clone(), triangles: crate::tetmesh::boundary_triangles(tets) }
-        }
-        crate::Cells::Hex8(_) | crate::Cells::Tet10(_) => crate::boundary_surface(mesh),
-    };
-    sample_visible(&surface, view_direction, count, seed)
+    sample_visible(&crate::boundary_surface(mesh), view_direction, count, seed)
 }
 
 /// A node-major field (`channels` per node) interpolated at the samples;

@@ -65,7 +65,7 @@ pub fn check_closed_manifold(surface: &TriSurface) -> Result<SurfaceReport, Mesh
     let used_points: Vec<Point> = surface.vertices.iter().zip(&used).filter(|(_, &u)| u).map(|(p, _)| *p).collect();
     // A vertex no organ has (a damaged file) is named before the tolerances it would scale.
     let vertices = surface.vertices.iter().enumerate().zip(&used).filter(|(_, &u)| u).map(|(v, _)| v);
-    if let Some((i, fault)) = crate::coordinate_fault(vertices, crate::MAX_MEASURED_COORDINATE) {
+    if let Some((i, fault)) = crate::coordinate_fault(vertices, crate::MAX_COORDINATE) {
         return Err(MeshError::Invalid(format!("vertex {i} {fault}")));
     }
     let (lo, hi) = bounds(&used_points);
@@ -207,9 +207,13 @@ fn check_vertex_fans(surface: &TriSurface, used: &[bool]) -> Result<(), MeshErro
 /// Area vector of triangle `t`: half the cross product, normal to the
 /// triangle, pointing outward for a counter-clockwise triangle.
 pub fn triangle_area_vector(surface: &TriSurface, t: usize) -> Point {
-    let [a, b, c] = surface.triangles[t].map(|k| surface.vertices[k]);
-    let n = cross(sub(b, a), sub(c, a));
-    [0.5 * n[0], 0.5 * n[1], 0.5 * n[2]]
+    area_vector(surface.triangles[t].map(|k| surface.vertices[k]))
+}
+
+/// The area vector of the triangle of corners `p`: half the cross product of its edges, its area
+/// times its unit normal (counter-clockwise seen from where it points).
+pub(crate) fn area_vector(p: [Point; 3]) -> Point {
+    cross(sub(p[1], p[0]), sub(p[2], p[0])).map(|c| 0.5 * c)
 }
 
 impl TriSurface {

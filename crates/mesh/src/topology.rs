@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use crate::{Cells, Mesh, TriSurface};
 
 /// Outward faces of a positively oriented T4 (local node indices).
-const TET_FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
+pub(crate) const TET_FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
 /// Outward faces of a T10 (local node indices): a T4 face's corners, then the mid-edge nodes
 /// of its edges in the same turn.
 const TET10_FACES: [[usize; 6]; 4] = [[1, 2, 3, 5, 9, 8], [0, 3, 2, 7, 9, 6], [0, 1, 3, 4, 8, 7], [0, 2, 1, 6, 5, 4]];
@@ -155,6 +155,10 @@ pub fn boundary_nodes(mesh: &Mesh) -> Vec<usize> {
 /// The boundary as a triangle surface over the mesh's own node indices (quadrilaterals split
 /// along their 0–2 diagonal, quadratic triangles into four at their mid-edge nodes).
 pub fn boundary_surface(mesh: &Mesh) -> TriSurface {
+    if let Cells::Tet4(tets) = &mesh.cells {
+        // The same triangles in the same order, found by sorting rather than hashing.
+        return TriSurface { vertices: mesh.nodes.clone(), triangles: crate::tetmesh::boundary_triangles(tets) };
+    }
     let triangles = boundary_faces(mesh)
         .into_iter()
         .flat_map(|f| match f.nodes[..] {

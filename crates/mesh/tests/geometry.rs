@@ -276,7 +276,11 @@ fn closedness_checks_report_what_and_where() {
     let mut far = s.clone();
     far.vertices[16][2] = 1e30;
     let err = check_closed_manifold(&far).unwrap_err().to_string();
-    assert!(err.contains("vertex 16 lies at") && err.contains("beyond 1e6"), "{err}");
+    assert!(err.contains("vertex 16 lies at") && err.contains("beyond 1e9"), "{err}");
+    // A surface in µm in a scanner's coordinates (over a metre from its origin) is no damaged file.
+    let mut microns = s.clone();
+    microns.transform([0.0, 0.0, -120.0], 1e4);
+    check_closed_manifold(&microns).unwrap();
 
     let mut flipped = s.clone();
     flipped.triangles[42].swap(0, 1);
