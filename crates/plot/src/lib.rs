@@ -154,14 +154,10 @@ pub fn scatter_plot(path: &Path, spec: &PlotSpec, sets: &[PointSet], links: &[Se
     ) else {
         return Err(PlotError::NoData { path: path.to_path_buf(), message: "no finite point".into() });
     };
-    // Equal scales: the plot area's aspect follows the data's (width fixed).
-    let width = SIZE.0;
-    let aspect = (y.end - y.start) / (x.end - x.start);
-    let height = ((f64::from(width - 150) * aspect) as u32 + 130).clamp(300, 1400);
-    write_png(path, (width, height), |root| {
+    let (x, y, size) = equal_scales(x, y, &spec.title);
+    write_png(path, size, |root| {
         let err = |e: &dyn std::fmt::Display| e.to_string();
-        let mut chart =
-            new_chart(root, &spec.title, Frame { title: 22, x_labels: 45, y_labels: 70 }, x.clone(), y.clone())?;
+        let mut chart = new_chart(root, &spec.title, Frame::SCATTER, x, y)?;
         chart
             .configure_mesh()
             .x_desc(&spec.x_label)
@@ -190,6 +186,23 @@ pub fn scatter_plot(path: &Path, spec: &PlotSpec, sets: &[PointSet], links: &[Se
         }
         Ok(())
     })
+}
+
+/// The data ranges (`x`, `y` widened about their centres) and picture size of a scatter plot captioned `title`:
+/// the height follows the data's aspect within 300..=1400 pixels, and a unit spans as many pixels on both axes.
+fn equal_scales(x: Range<f64>, y: Range<f64>, title: &str) -> (Range<f64>, Range<f64>, (u32, u32)) {
+    let (across, down) = Frame::SCATTER.surround(title);
+    // Pixels from the first to the last pixel of the plotting area, where a range's ends are drawn.
+    let w = SIZE.0 - across - 1;
+    let aspect = (y.end - y.start) / (x.end - x.start);
+    let height = (f64::from(w) * aspect + f64::from(down + 1)).round().clamp(300.0, 1400.0) as u32;
+    let h = height - down - 1;
+    let per_pixel = ((x.end - x.start) / f64::from(w)).max((y.end - y.start) / f64::from(h));
+    let widen = |r: Range<f64>, pixels: u32| {
+        let (centre, half) = (0.5 * (r.start + r.end), 0.5 * per_pixel * f64::from(pixels));
+        centre - half..centre + half
+    };
+    (widen(x, w), widen(y, h), (SIZE.0, height))
 }
 
 /// One series of a grouped bar chart: a value (or none) per category, in the `index`-th palette colour.
@@ -227,7 +240,7 @@ pub fn bar_chart(path: &Path, spec: &PlotSpec, categories: &[String], series: &[
     let size = (SIZE.0.max(130 * categories.len() as u32), SIZE.1);
     write_png(path, size, |root| {
         if spec.log_y && bottom >= 0.0 && top >= 10.0 * smallest {
-            let floor = 10f64.powf(smallest.log10().floor());
+            let floor = decade_below(smallest);
             let y = floor..top * 1.5;
             let keys = log_ticks(&y);
             draw_bars(root, spec, categories, series, y.clone().log_scale().with_key_points(keys), y, floor)
@@ -237,6 +250,16 @@ pub fn bar_chart(path: &Path, spec: &PlotSpec, categories: &[String], series: &[
             draw_bars(root, spec, categories, series, y.clone(), y, 0.0)
         }
     })
+}
+
+/// The largest power of ten strictly below `v` (positive).
+fn decade_below(v: f64) -> f64 {
+    let decade = 10f64.powf(v.log10().floor());
+    if decade < v {
+        decade
+    } else {
+        decade / 10.0
+    }
 }
 
 /// [`bar_chart`]'s drawing on the y coordinate `y_coord` over `y_range`, bars from `base`.
@@ -306,9 +329,22 @@ struct Frame {
     y_labels: u32,
 }
 
+/// Blank border around every chart, pixels.
+const MARGIN: u32 = 20;
+
 impl Frame {
     /// Line and bar charts.
     const LARGE: Frame = Frame { title: 24, x_labels: 50, y_labels: 90 };
+    /// Scatter plots.
+    const SCATTER: Frame = Frame { title: 22, x_labels: 45, y_labels: 70 };
+
+    /// Pixels of a chart captioned `title` outside its plotting area, across and down: the margins, the label
+    /// areas and the caption (its text and up to 5 pixels above and below, as plotters lays it out).
+    fn surround(self, title: &str) -> (u32, u32) {
+        register_fonts();
+        let text = ("sans-serif", self.title).into_font().box_size(title).map_or(self.title, |(_, h)| h);
+        (2 * MARGIN + self.y_labels, 2 * MARGIN + self.x_labels + text + 2 * (text / 2).min(5))
+    }
 }
 
 /// A chart on a PNG bitmap with x and y coordinates of types `X`, `Y`.
@@ -325,7 +361,7 @@ fn new_chart<'b, X: AsRangedCoord, Y: AsRangedCoord>(
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     ChartBuilder::on(root)
         .caption(title, ("sans-serif", frame.title))
-        .margin(20)
+        .margin(MARGIN)
         .x_label_area_size(frame.x_labels)
         .y_label_area_size(frame.y_labels)
         .build_cartesian_2d(x, y)
@@ -368,7 +404,8 @@ pub(crate) fn sibling_tempfile(path: &Path, suffix: &str) -> std::io::Result<tem
     builder.tempfile_in(dir)
 }
 
-/// Range of the values with a 5 % margin (multiplicative on a log axis); a single value gets a unit-size range.
+/// Range of the values with a 5 % margin (multiplicative on a log axis); a single value v gets v ± |v|/2
+/// (± 1/2 when v is 0), or v/2..2v on a log axis.
 fn padded_range(values: &[f64], log: bool) -> Option<Range<f64>> {
     let (lo, hi) = values
         .iter()
@@ -381,7 +418,13 @@ fn padded_range(values: &[f64], log: bool) -> Option<Range<f64>> {
         let pad = if hi > lo { (hi / lo).powf(0.05) } else { 2.0 };
         lo / pad..hi * pad
     } else {
-        let pad = if hi > lo { 0.05 * (hi - lo) } else { 0.5 * lo.abs().max(1e-12) };
+        let pad = if hi > lo {
+            0.05 * (hi - lo)
+        } else if lo != 0.0 {
+            0.5 * lo.abs()
+        } else {
+            0.5
+        };
         lo - pad..hi + pad
     })
 }
@@ -460,8 +503,6 @@ fn draw_legend<'a, CT: CoordTranslate>(
         .map_err(|e| e.to_string())
 }
 
-/// Tick text: plain decimals for moderate magnitudes, scientific notation with a trimmed mantissa otherwise
-/// (`span` is the axis extent, so that 0 on an axis of tiny values reads "0").
 /// The 1-2-5 values of each decade inside `range` (positive): labelled ticks on a log axis
 /// (plotters' own labels only the decade of the upper bound when the range spans a few decades).
 fn log_ticks(range: &Range<f64>) -> Vec<f64> {
@@ -477,6 +518,8 @@ fn log_ticks(range: &Range<f64>) -> Vec<f64> {
     }
 }
 
+/// Tick text: plain decimals for moderate magnitudes, scientific notation with a trimmed mantissa otherwise
+/// (`span` is the axis extent, so that 0 on an axis of tiny values reads "0").
 fn tick_label(v: f64, span: f64) -> String {
     let a = v.abs();
     if a == 0.0 || a < 1e-9 * span {
@@ -502,7 +545,42 @@ fn tick_label(v: f64, span: f64) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::log_ticks;
+    use super::*;
+
+    #[test]
+    fn scatter_plots_draw_a_unit_as_long_on_both_axes() {
+        register_fonts();
+        // Tall and wide data sets reach the height limits; a square one does not.
+        for (x, y) in [(0.0..1.0, -2.0..2.0), (0.0..5.0, 1.0..1.5), (-1.0..1.0, -1.0..1.0)] {
+            let (xr, yr, (w, h)) = equal_scales(x.clone(), y.clone(), "side view");
+            assert!(xr.start <= x.start && x.end <= xr.end && yr.start <= y.start && y.end <= yr.end);
+            let mut buffer = vec![0; (3 * w * h) as usize];
+            let root = BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area();
+            let chart = new_chart(&root, "side view", Frame::SCATTER, xr.clone(), yr.clone()).unwrap();
+            let (left, bottom) = chart.backend_coord(&(xr.start, yr.start));
+            let (right, top) = chart.backend_coord(&(xr.end, yr.end));
+            let per_x = (xr.end - xr.start) / f64::from(right - left);
+            let per_y = (yr.end - yr.start) / f64::from(bottom - top);
+            assert!((per_x / per_y - 1.0).abs() < 0.01, "{x:?} {y:?}: {per_x} vs {per_y} units per pixel, {w} x {h}");
+        }
+    }
+
+    #[test]
+    fn log_bars_start_a_decade_below_the_smallest_value() {
+        assert_eq!(decade_below(10.0), 1.0);
+        assert_eq!(decade_below(2.0), 1.0);
+        assert_eq!(decade_below(1000.0), 100.0);
+        assert!((decade_below(0.05) / 0.01 - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_single_value_gets_a_range_around_it() {
+        assert_eq!(padded_range(&[0.0], false), Some(-0.5..0.5));
+        assert_eq!(padded_range(&[-4.0, -4.0], false), Some(-6.0..-2.0));
+        assert_eq!(padded_range(&[3.0], true), Some(1.5..6.0));
+        assert_eq!(padded_range(&[0.0, 10.0], false), Some(-0.5..10.5));
+        assert_eq!(padded_range(&[f64::NAN], false), None);
+    }
 
     #[test]
     fn a_log_axis_is_labelled_at_1_2_5_in_each_decade_or_at_decades_over_many() {

@@ -131,7 +131,8 @@ impl Scene {
     pub fn to_html(&self) -> Result<String, ViewerError> {
         self.validate()?;
         let title = if self.title.is_empty() { "augsim viewer" } else { self.title.as_str() };
-        Ok(PAGE.replacen("__TITLE__", &escape_html(title), 1).replacen("__DATA__", &self.data_json(title), 1))
+        // The data first: its placeholder follows `<title>`, so a title holding a placeholder's name changes nothing.
+        Ok(PAGE.replacen("__DATA__", &self.data_json(title), 1).replacen("__TITLE__", &escape_html(title), 1))
     }
 
     /// The scene as JSON (vertices no triangle uses left out, coordinates as f32), safe inside a `<script>`.

@@ -112,6 +112,17 @@ fn page_embeds_the_scene_and_nothing_external() {
 }
 
 #[test]
+fn a_title_naming_the_placeholders_leaves_the_page_intact() {
+    let scene = Scene { title: "a __DATA__ b __TITLE__".into(), ..cube() };
+    let page = scene.to_html().unwrap();
+    assert!(page.contains("<title>a __DATA__ b __TITLE__</title>"));
+    let script = r#"<script id="scene" type="application/json">{"title":"a __DATA__ b __TITLE__","#;
+    assert!(page.contains(script), "the scene's data is not in its script");
+    assert!(!page.contains(">__DATA__<"));
+    assert_eq!(page.matches("__DATA__").count(), 2, "the title's two copies only");
+}
+
+#[test]
 fn bad_scenes_are_refused_without_writing() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("bad.html");
