@@ -46,6 +46,11 @@ pub struct ServeArgs {
     /// each estimate), in the stream's unit and frame.
     #[arg(long, value_name = "DIR")]
     pub record: Option<PathBuf>,
+    /// Most clients served at once (each has a registration of its own, its memory and threads): a
+    /// connection beyond them is answered by a STRING `status` error and closed.
+    #[arg(long, default_value_t = ServeOptions::default().max_clients, value_name = "N",
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    pub max_clients: usize,
 }
 
 impl ServeArgs {
@@ -53,6 +58,7 @@ impl ServeArgs {
     pub fn setup(&self) -> Result<ServeSetup> {
         let spec = RegistrationSpec { time_budget_ms: Some(self.time_budget_ms), ..self.registration.spec()? };
         let mut setup = serve_setup(spec, self.outputs, self.assimilate.as_deref())?;
+        setup.options.max_clients = self.max_clients;
         if let Some(dir) = &self.record {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
             setup.lines.push(format!("record     each client's stream in {}/client-NNN.jsonl", dir.display()));
