@@ -384,7 +384,7 @@ fn tetrahedron(
 
 /// Taubin's λ|μ smoothing (λ = 0.5, μ = −0.53) with uniform weights, `iterations` times: a
 /// low-pass filter that, unlike Laplacian smoothing, does not shrink the surface.
-pub fn taubin_smooth(surface: &mut TriSurface, iterations: usize) {
+fn taubin_smooth(surface: &mut TriSurface, iterations: usize) {
     let mut neighbours: Vec<Vec<usize>> = vec![Vec::new(); surface.vertices.len()];
     for t in &surface.triangles {
         for e in 0..3 {

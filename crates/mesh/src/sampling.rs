@@ -29,7 +29,7 @@ pub struct SurfaceSample {
 
 /// Indices of the triangles facing a camera that looks along
 /// `view_direction` (outward normal · direction < 0).
-pub fn visible_triangles(surface: &TriSurface, view_direction: Point) -> Vec<usize> {
+fn visible_triangles(surface: &TriSurface, view_direction: Point) -> Vec<usize> {
     (0..surface.triangles.len()).filter(|&t| dot(triangle_area_vector(surface, t), view_direction) < 0.0).collect()
 }
 
