@@ -252,7 +252,7 @@ fn optimum(q: &Quadric) -> Option<Point> {
 
 /// A triangle's shape: 4√3 area over the sum of its squared edges (1 equilateral, 0 flat).
 fn quality(p: [Point; 3]) -> f64 {
-    let area = 0.5 * norm(cross(sub(p[1], p[0]), sub(p[2], p[0])));
+    let area = norm(crate::surface::area_vector(p));
     let edges: f64 = (0..3).map(|e| norm(sub(p[(e + 1) % 3], p[e])).powi(2)).sum();
     if edges > 0.0 {
         4.0 * 3f64.sqrt() * area / edges

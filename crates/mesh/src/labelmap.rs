@@ -139,6 +139,9 @@ pub fn read_labelmap(path: impl AsRef<Path>) -> Result<Labelmap, MeshError> {
 /// one, on a grid of its own (see the `dicom` module).
 fn read_labelmap_choosing(path: &Path, label: Option<&str>) -> Result<Labelmap, MeshError> {
     let bytes = std::fs::read(path).map_err(|error| MeshError::Io { path: path.display().to_string(), error })?;
+    if bytes.starts_with(crate::io::LFS_POINTER) {
+        return Err(crate::io::lfs_error(path));
+    }
     let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     let folder = path.parent().unwrap_or(Path::new(""));
     let mut map = if name.ends_with(".nrrd") || name.ends_with(".nhdr") {

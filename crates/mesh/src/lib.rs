@@ -84,16 +84,9 @@ pub enum MeshError {
 }
 
 impl MeshError {
-    /// A file at `path` that could not be understood: `message` says why, unless the file is a
-    /// Git LFS pointer (a repository cloned without its large files), which is then said instead.
+    /// A file at `path` that could not be understood: `message` says why.
     pub fn parse(path: &std::path::Path, message: impl Into<String>) -> MeshError {
-        let message = match io::is_lfs_pointer(path) {
-            true => "a Git LFS pointer, not the file itself (cloned without its large files): fetch it, e.g. with \
-                     `git lfs pull`"
-                .to_string(),
-            false => message.into(),
-        };
-        MeshError::Parse { path: path.display().to_string(), message }
+        MeshError::Parse { path: path.display().to_string(), message: message.into() }
     }
 
     /// The error's text without the "invalid mesh: " prefix, for errors about an input that is
@@ -591,9 +584,8 @@ pub fn cross(a: Point, b: Point) -> Point {
 /// The six dihedral angles (radians) of the tetrahedron (a, b, c, d).
 pub fn dihedral_angles(p: [Point; 4]) -> [f64; 6] {
     // Outward normals of the faces opposite each vertex.
-    const FACES: [[usize; 3]; 4] = topology::TET_FACES;
     let n: [Point; 4] = std::array::from_fn(|k| {
-        let [i, j, l] = FACES[k];
+        let [i, j, l] = topology::TET_FACES[k];
         let mut v = cross(sub(p[j], p[i]), sub(p[l], p[i]));
         if dot(v, sub(p[k], p[i])) > 0.0 {
             v = v.map(|c| -c);

@@ -979,7 +979,7 @@ fn surface_coverage(mesh: &Mesh, surface: &TriSurface) -> Result<Coverage, MeshE
         .par_iter()
         .map(|t| {
             let p = t.map(|k| surface.vertices[k]);
-            let area = 0.5 * crate::norm(cross(sub(p[1], p[0]), sub(p[2], p[0])));
+            let area = crate::norm(crate::surface::area_vector(p));
             let centroid = std::array::from_fn(|d| (p[0][d] + p[1][d] + p[2][d]) / 3.0);
             (area, if boundary.distance(centroid) > distance { area } else { 0.0 })
         })
@@ -1215,10 +1215,10 @@ fn prism(b: [u32; 3], t: [u32; 3], q: [Option<u8>; 3], out: &mut Vec<[u32; 4]>) 
 /// Outward boundary triangles of positively oriented tetrahedra (faces that
 /// belong to one tetrahedron only), in tetrahedron order.
 pub(crate) fn boundary_triangles(tets: &[[usize; 4]]) -> Vec<[usize; 3]> {
-    const FACES: [[usize; 3]; 4] = crate::topology::TET_FACES;
+    use crate::topology::TET_FACES;
     let mut keys: Vec<([usize; 3], u32)> = Vec::with_capacity(4 * tets.len());
     for (e, t) in tets.iter().enumerate() {
-        for (f, face) in FACES.iter().enumerate() {
+        for (f, face) in TET_FACES.iter().enumerate() {
             let mut k = face.map(|i| t[i]);
             k.sort_unstable();
             keys.push((k, (4 * e + f) as u32));
@@ -1238,5 +1238,5 @@ pub(crate) fn boundary_triangles(tets: &[[usize; 4]]) -> Vec<[usize; 3]> {
         i = j;
     }
     out.sort_unstable();
-    out.iter().map(|&id| FACES[id as usize % 4].map(|i| tets[id as usize / 4][i])).collect()
+    out.iter().map(|&id| TET_FACES[id as usize % 4].map(|i| tets[id as usize / 4][i])).collect()
 }

@@ -202,10 +202,11 @@ const HEADER_BYTES: usize = 1024;
 /// Slicer model's).
 pub fn read_surface_with_frame(path: impl AsRef<Path>) -> Result<(TriSurface, Option<Frame>), MeshError> {
     let path = path.as_ref();
+    let lfs = |e| super::named_if_lfs(path, e);
     match super::extension(path).as_str() {
-        "vtp" | "vtu" => super::vtk_xml::read_xml_surface_with_frame(path),
+        "vtp" | "vtu" => super::vtk_xml::read_xml_surface_with_frame(path).map_err(lfs),
         "vtk" => {
-            let (surface, space) = super::legacy_vtk::read_vtk_surface_and_space(path)?;
+            let (surface, space) = super::legacy_vtk::read_vtk_surface_and_space(path).map_err(lfs)?;
             let in_field = space.map(|s| frame_in_header(&format!("SPACE={}", s.trim()))).transpose();
             let in_field = in_field.map_err(|message| MeshError::parse(path, message))?.flatten();
             Ok((surface, surface_frame(path)?.or(in_field)))

@@ -288,26 +288,28 @@ const VOLUME_EXTENSIONS: &str = "expected .msh, .vtk, .vtu or .inp";
 /// `.vtu` (VTK XML), `.inp` (an Abaqus or CalculiX input deck).
 pub fn read_mesh(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
     let path = path.as_ref();
-    match extension(path).as_str() {
+    let read = match extension(path).as_str() {
         "msh" => read_gmsh(path),
         "inp" => read_inp(path),
         "vtk" => read_vtk(path),
         "vtu" => read_vtu(path),
-        _ => Err(MeshError::parse(path, format!("unknown volume mesh extension ({VOLUME_EXTENSIONS})"))),
-    }
+        _ => return Err(MeshError::parse(path, format!("unknown volume mesh extension ({VOLUME_EXTENSIONS})"))),
+    };
+    read.map_err(|e| named_if_lfs(path, e))
 }
 
 /// Reads a volume mesh and its point and cell data (`.vtk`, `.vtu`; a `.msh` or `.inp` file gives
 /// no fields).
 pub fn read_mesh_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>), MeshError> {
     let path = path.as_ref();
-    match extension(path).as_str() {
-        "msh" => Ok((read_gmsh(path)?, Vec::new())),
-        "inp" => Ok((read_inp(path)?, Vec::new())),
+    let read = match extension(path).as_str() {
+        "msh" => read_gmsh(path).map(|m| (m, Vec::new())),
+        "inp" => read_inp(path).map(|m| (m, Vec::new())),
         "vtk" => read_vtk_with_fields(path),
         "vtu" => read_vtu_with_fields(path),
-        _ => Err(MeshError::parse(path, format!("unknown volume mesh extension ({VOLUME_EXTENSIONS})"))),
-    }
+        _ => return Err(MeshError::parse(path, format!("unknown volume mesh extension ({VOLUME_EXTENSIONS})"))),
+    };
+    read.map_err(|e| named_if_lfs(path, e))
 }
 
 /// Writes a volume mesh and its regions, choosing the format by extension: `.vtu` and `.vtk`
@@ -363,14 +365,15 @@ const UNKNOWN_SURFACE: &str = "unknown surface extension (expected .obj, .stl, .
 /// faces), `.vtk`, `.vtp`, `.vtu`.
 pub fn read_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
     let path = path.as_ref();
-    match extension(path).as_str() {
+    let read = match extension(path).as_str() {
         "obj" => read_obj(path),
         "stl" => read_stl(path),
         "ply" => ply::read_ply_surface(path),
         "vtk" => read_vtk_surface(path),
         "vtp" | "vtu" => vtk_xml::read_xml_surface(path),
-        _ => Err(MeshError::parse(path, UNKNOWN_SURFACE)),
-    }
+        _ => return Err(MeshError::parse(path, UNKNOWN_SURFACE)),
+    };
+    read.map_err(|e| named_if_lfs(path, e))
 }
 
 /// The points of a surface or mesh file whatever its cells, as a point cloud saved in one of
@@ -379,14 +382,15 @@ pub fn read_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
 /// (their `<Points>`).
 pub fn read_vertices(path: impl AsRef<Path>) -> Result<Vec<Point>, MeshError> {
     let path = path.as_ref();
-    match extension(path).as_str() {
+    let read = match extension(path).as_str() {
         "obj" => surface_io::read_obj_vertices(path),
-        "stl" => Ok(read_stl(path)?.vertices),
+        "stl" => read_stl(path).map(|s| s.vertices),
         "ply" => ply::read_ply_vertices(path),
         "vtk" => legacy_vtk::read_vtk_points(path),
         "vtp" | "vtu" => vtk_xml::read_xml_points(path),
-        _ => Err(MeshError::parse(path, UNKNOWN_SURFACE)),
-    }
+        _ => return Err(MeshError::parse(path, UNKNOWN_SURFACE)),
+    };
+    read.map_err(|e| named_if_lfs(path, e))
 }
 
 /// Writes a triangle surface, choosing the format by extension: `.vtu` (binary), `.vtk` (binary
@@ -446,12 +450,27 @@ pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     write_atomic(path, |w| w.write_all(bytes))
 }
 
-/// Whether the file at `path` is a Git LFS pointer: the few lines Git keeps in place of a large
-/// file until it is fetched.
-pub fn is_lfs_pointer(path: &Path) -> bool {
-    let mut start = [0u8; 40];
+/// How a Git LFS pointer begins: the few lines Git keeps in place of a large file until it is
+/// fetched.
+pub(crate) const LFS_POINTER: &[u8] = b"version https://git-lfs.github.com/spec/";
+
+/// `error`, a reader's on the file at `path`, or, when its bytes could not be understood because
+/// the file is a Git LFS pointer, the error that says so (read on the error path only).
+pub(crate) fn named_if_lfs(path: &Path, error: MeshError) -> MeshError {
+    let MeshError::Parse { .. } = error else { return error };
+    let mut start = [0u8; LFS_POINTER.len()];
     let read = std::fs::File::open(path).and_then(|mut f| std::io::Read::read(&mut f, &mut start));
-    read.is_ok_and(|n| start[..n].starts_with(b"version https://git-lfs.github.com/spec/"))
+    match read.is_ok_and(|n| start[..n].starts_with(LFS_POINTER)) {
+        true => lfs_error(path),
+        false => error,
+    }
+}
+
+/// The error for a Git LFS pointer read in place of the file at `path`.
+pub(crate) fn lfs_error(path: &Path) -> MeshError {
+    let message = "a Git LFS pointer, not the file itself (cloned without its large files): fetch it, e.g. with \
+                   `git lfs pull`";
+    MeshError::parse(path, message)
 }
 
 /// Whether [`write_atomic`] could write `path`, checked before long work whose result it is to hold:
@@ -798,12 +817,16 @@ mod tests {
     fn a_git_lfs_pointer_is_named() {
         let dir = tempfile::tempdir().unwrap();
         let pointer = "version https://git-lfs.github.com/spec/v1\noid sha256:4d7a2146\nsize 12345\n";
-        for name in ["organ.stl", "organ.vtk", "organ.vtu", "organ.ply", "liver.nii", "liver.nrrd"] {
+        let names =
+            ["organ.stl", "organ.vtk", "organ.vtu", "organ.ply", "mesh.vtk", "liver.nii", "liver.nrrd", "t.csv"];
+        for name in names {
             let path = dir.path().join(name);
             std::fs::write(&path, pointer).unwrap();
-            let e = match name.ends_with(".nii") || name.ends_with(".nrrd") {
-                true => crate::labelmap::read_labelmap(&path).unwrap_err().to_string(),
-                false => read_surface(&path).map(drop).or_else(|_| read_mesh(&path).map(drop)).unwrap_err().to_string(),
+            let e = match name.rsplit_once('.').unwrap().1 {
+                "nii" | "nrrd" => crate::labelmap::read_labelmap(&path).unwrap_err().to_string(),
+                "csv" => points::read_points(&path).unwrap_err().to_string(),
+                _ if name.starts_with("mesh") => read_mesh(&path).unwrap_err().to_string(),
+                _ => read_surface(&path).unwrap_err().to_string(),
             };
             assert!(e.contains("a Git LFS pointer, not the file itself"), "{name}: {e}");
         }

@@ -112,6 +112,9 @@ pub fn read_points(path: impl AsRef<Path>) -> Result<LabelledPoints, MeshError> 
         }
         _ => MeshError::Io { path: path.display().to_string(), error },
     })?;
+    if text.as_bytes().starts_with(super::LFS_POINTER) {
+        return Err(super::lfs_error(path));
+    }
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     let points = match extension(path).as_str() {
         "fcsv" => read_table(path, text, true),

@@ -83,13 +83,18 @@ impl NrrdHeader {
 
     /// A skip field, under either of its spellings (`byte skip` or `byteskip`): 0 when absent.
     fn skip(&self, name: &str, alias: &str) -> Result<i64, String> {
-        let text = self.fields.get(name).or_else(|| self.fields.get(alias));
+        let text = self.either(name, alias);
         text.map_or(Ok(0), |s| s.parse::<i64>().map_err(|_| format!("{name}: {s:?} is not a whole number")))
+    }
+
+    /// A field the format spells two ways (`data file` or `datafile`), under either.
+    fn either(&self, name: &str, alias: &str) -> Option<&str> {
+        self.fields.get(name).or_else(|| self.fields.get(alias)).map(String::as_str)
     }
 
     /// The `data file` field of a detached header.
     fn data_file(&self) -> Option<&str> {
-        self.fields.get("data file").or_else(|| self.fields.get("datafile")).map(String::as_str)
+        self.either("data file", "datafile")
     }
 
     /// The data of a detached header: the one file its `data file` names, relative to `folder`
@@ -248,6 +253,7 @@ pub(super) fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String
     let affine = in_millimetres(affine, unit_mm(named_unit.unwrap_or(LengthUnit::Millimetre)));
     let segments = slicer_segments(&header.pairs, layers)?;
     let encoding = header.field("encoding")?;
+    let data = after_lines(data, header.skip("line skip", "lineskip")?)?;
     if matches!(encoding, "ascii" | "text" | "txt") {
         let labels = ascii_labels(data, count)?;
         return Ok(Labelmap {
@@ -276,7 +282,6 @@ pub(super) fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String
             ))
         }
     };
-    let data = after_lines(data, header.skip("line skip", "lineskip")?)?;
     let raw = match encoding {
         "raw" => data.to_vec(),
         "gzip" | "gz" => gunzip_if_needed(data.to_vec())?,
