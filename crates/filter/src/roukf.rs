@@ -303,7 +303,12 @@ impl Misfit {
 
     /// Degrees of freedom ν of χ² (at least 1).
     fn nu(&self) -> f64 {
-        (self.components - self.prior_information.nrows() as f64).max(1.0)
+        self.less_parameters(self.components)
+    }
+
+    /// `components` less the parameters, at least 1.
+    fn less_parameters(&self, components: f64) -> f64 {
+        (components - self.prior_information.nrows() as f64).max(1.0)
     }
 
     /// The reduced χ² at `theta`, `χ²(θ)/ν`.
@@ -315,7 +320,7 @@ impl Misfit {
     fn allowance(&self, theta: &DVector<f64>) -> Option<DMatrix<f64>> {
         let nu = self.nu();
         // The variance of χ² over 2: ν, with the sums discounted by ρ² rather than ρ.
-        let nu_variance = (self.components_squared_discount - self.prior_information.nrows() as f64).max(1.0);
+        let nu_variance = self.less_parameters(self.components_squared_discount);
         let excess = (self.chi_squared(theta) - nu - 2.0 * (2.0 * nu_variance).sqrt()).max(0.0);
         let d = self.systematic_dof.unwrap_or(nu);
         let s = &self.prior_information + &self.information;
@@ -873,6 +878,18 @@ mod tests {
         assert!((chi_squared - 100.0).abs() < 1e-9 && nu == 39.0, "χ² = {chi_squared}, ν = {nu}");
         let allowance = misfit.allowance(&theta).unwrap()[(0, 0)];
         let expected = 100.0 - 39.0 - 2.0 * (2.0 * 39.0f64).sqrt();
+        assert!((allowance - expected).abs() < 1e-9, "allowance {allowance}, expected {expected}");
+        // Forgetting (ρ = 0.9): χ² and ν discounted by ρ per frame, the variance's sum by ρ².
+        let mut forgetting = Misfit::new(Some(1.0), DMatrix::identity(1, 1));
+        let (mut chi_squared, mut components, mut squared) = (0.0, 0.0, 0.0);
+        for _ in 0..10 {
+            forgetting.add(0.9, &residual, &DMatrix::zeros(4, 1), &DVector::zeros(1), 4);
+            chi_squared = 0.9 * chi_squared + 10.0;
+            components = 0.9 * components + 4.0;
+            squared = 0.81 * squared + 4.0;
+        }
+        let expected = chi_squared - (components - 1.0) - 2.0 * (2.0 * (squared - 1.0f64)).sqrt();
+        let allowance = forgetting.allowance(&theta).unwrap()[(0, 0)];
         assert!((allowance - expected).abs() < 1e-9, "allowance {allowance}, expected {expected}");
     }
 }

@@ -152,14 +152,16 @@ impl ScenarioText {
             ));
         }
         let invalid = |e: &dyn std::fmt::Display| ScenarioError::invalid(&self.origin, e.to_string());
-        // Parsed from the text first, so that an error names its line.
-        let parsed: T = toml::from_str(&body).map_err(|e| invalid(&e))?;
         let mut table: toml::Table = toml::from_str(&body).map_err(|e| invalid(&e))?;
         if !anchor_landmark_files(&mut table, &self.dir) {
-            return Ok(parsed);
+            return toml::from_str(&body).map_err(|e| invalid(&e));
         }
-        // Parsed again from the table, whose landmark files now start at the scenario's directory.
-        toml::Value::Table(table).try_into().map_err(|e| invalid(&e))
+        // The table, its landmark files now starting at the scenario's directory; an error is
+        // said as the text gives it, with its line (a table has none).
+        toml::Value::Table(table).try_into().map_err(|e| match toml::from_str::<T>(&body) {
+            Err(with_line) => invalid(&with_line),
+            Ok(_) => invalid(&e),
+        })
     }
 }
 

@@ -203,7 +203,8 @@ pub fn uncertainty_coverage(
     let (mut within, mut total) = (0usize, 0usize);
     for p in 0..samples.len() {
         let (field, std) = predictor.predict_with_std(&evaluation_input(samples, p, corruption, seed)?)?;
-        let Some(std) = std else { return Ok(None) };
+        // `predicts_std` said it gives one with every field.
+        let std = std.ok_or_else(|| LearnError::InvalidInput("the model gave a field without its σ".into()))?;
         let target = samples.target(p);
         for v in (0..n).filter(|&v| samples.mask(p)[v] == 1) {
             let e2: f32 = (0..CHANNELS).map(|c| (field[c * n + v] - target[c * n + v]).powi(2)).sum();
