@@ -53,16 +53,17 @@ pub struct Meshed {
     /// What was done on the way, each a topic (`labelmap`, `repair`, `warning`, `units`) and a
     /// line, in order.
     pub notes: Vec<(&'static str, String)>,
-    /// How much of the surface meshed with tetrahedra the mesh covers.
-    pub coverage: Option<Coverage>,
+    /// The quality of a surface's tetrahedral mesh, as meshing measured it (with how much of the
+    /// surface it covers); `None` for the phantom and immersed grids.
+    pub quality: Option<TetQuality>,
     /// The wall time of the meshing, reading included.
     pub elapsed: std::time::Duration,
 }
 
 /// Parts of the surface left out of its mesh beyond this share of its area are warned about.
-const MOST_UNCOVERED: f64 = 0.01;
+pub const MOST_UNCOVERED: f64 = 0.01;
 
-/// A warning when the mesh leaves out more than 1 % of its surface's area.
+/// A warning when the mesh leaves out more than [`MOST_UNCOVERED`] of its surface's area.
 pub fn coverage_warning(coverage: &Coverage) -> Option<String> {
     (coverage.uncovered > MOST_UNCOVERED).then(|| {
         format!(
@@ -168,7 +169,7 @@ fn organ_surface_in_metres(
 pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
     let start = std::time::Instant::now();
     let mut notes = Vec::new();
-    let mut coverage = None;
+    let mut quality = None;
     let (mesh, reference_volume, frame) = match (&options.surface, options.immersed.map(Length::in_metres)) {
         (None, None) => {
             let spec = PhantomSpec::default();
@@ -181,8 +182,9 @@ pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
         (Some(path), None) => {
             let (surface, to_metres, frame) = read_organ(path, options, &mut notes)?;
             let organ = mesh_organ_surface(path, surface, to_metres, options.tets, options.repair, &mut notes)?;
-            coverage = organ.quality.coverage;
-            (organ.mesh, organ.quality.reference_volume, frame)
+            let reference_volume = organ.quality.reference_volume;
+            quality = Some(organ.quality);
+            (organ.mesh, reference_volume, frame)
         }
         (Some(path), Some(h)) => {
             let (surface, to_metres, frame) = read_organ(path, options, &mut notes)?;
@@ -192,7 +194,7 @@ pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
             (mesh::immersed::immersed_surface(&surface, &opts)?.mesh, volume, frame)
         }
     };
-    Ok(Meshed { mesh, reference_volume, frame, notes, coverage, elapsed: start.elapsed() })
+    Ok(Meshed { mesh, reference_volume, frame, notes, quality, elapsed: start.elapsed() })
 }
 
 /// Notes of what was read (topic, line) as lines `topic: line`.
@@ -398,12 +400,14 @@ impl Meshed {
         ];
         let volume = match &mesh.cells {
             mesh::Cells::Tet4(_) => {
-                let q = mesh::tetmesh::tet_quality(mesh, reference)?;
+                let q = match &self.quality {
+                    Some(q) => q.clone(),
+                    None => mesh::tetmesh::tet_quality(mesh, reference)?,
+                };
                 if q.inverted > 0 {
                     bail!("{} inverted tetrahedra", q.inverted);
                 }
                 lines.push(format!("dihedral   min {:.1}°, max {:.1}°", q.min_dihedral_deg, q.max_dihedral_deg));
-                let q = TetQuality { coverage: self.coverage, ..q };
                 lines.extend(tet_mesh_warnings(&q).into_iter().map(|w| format!("warning    {w}")));
                 let pinched = mesh::pinch::pinched_edge_count(mesh);
                 if pinched > 0 {

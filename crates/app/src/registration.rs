@@ -544,13 +544,8 @@ pub fn read_structure(
 ) -> Result<(String, TriSurface, Vec<String>)> {
     let name = structure_name(source);
     let source = named_source(source).1;
-    let longest = register::registration::STRUCTURE_NAME_BYTES;
-    if name.len() > longest {
-        anyhow::bail!(
-            "its name `{name}` is longer than {longest} bytes, an OpenIGTLink device name: name it (NAME={})",
-            source.display()
-        );
-    }
+    // Its name is checked before its file is read.
+    register::registration::check_structure_name(&name, &[])?;
     let mut input = match labelmap_label(source) {
         Some((path, label)) => OrganInput::read_with(Path::new(path), Some(label), None, &ExtractOptions::structure())?,
         None if is_labelmap(source) => anyhow::bail!(

@@ -8,7 +8,7 @@ use mesh::{sub, unit, Point, TriSurface};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::checks::{check_cloud, check_setting};
+use crate::checks::check_setting;
 use crate::organ::{Organ, Stencil};
 use crate::outliers::PointTree;
 use crate::rigid::RigidOptions;
@@ -316,7 +316,6 @@ pub(crate) fn register_frame_begun(
     options: &RegistrationOptions,
 ) -> Result<FrameResult> {
     options.validate()?;
-    check_cloud(cloud)?;
     let ndof = 3 * organ.mesh().num_nodes();
     let mut u = match start {
         Some(s) if s.len() == ndof => s.to_vec(),

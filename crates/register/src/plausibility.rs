@@ -76,12 +76,10 @@ fn robust_extent(points: &[Point]) -> f64 {
     sum.sqrt()
 }
 
-/// Refuses a (non-empty, finite) cloud whose extent cannot be a view of the organ, saying what it
-/// probably is; returns the cloud's extent over the organ's.
+/// Refuses an empty or damaged cloud ([`crate::check_cloud`]) and one whose extent cannot be a view
+/// of the organ, saying what it probably is; returns the cloud's extent over the organ's.
 pub fn check_extent(organ: &Organ, cloud: &[Point]) -> Result<f64> {
-    if cloud.is_empty() {
-        return Err(RegisterError::Invalid("no points (the point cloud is empty)".into()));
-    }
+    crate::checks::check_cloud(cloud)?;
     let (size, extent) = (organ.extent(), robust_extent(cloud));
     let ratio = extent / size;
     if ratio > MAX_EXTENT_RATIO {

@@ -352,7 +352,6 @@ impl Registration {
         let (rigid, mut mix_up) = match (&self.options.rigid, &self.rigid) {
             (Some(rigid_options), None) => {
                 // A cloud in another unit is named as such, before an alignment it would defeat.
-                crate::checks::check_cloud(cloud)?;
                 crate::plausibility::check_extent(&self.organ, cloud)?;
                 let mix_up = crate::plausibility::frame_mix_up(&self.organ, cloud);
                 match (rigid_align(self.organ.surface(), cloud, rigid_options), mix_up) {
