@@ -1,5 +1,5 @@
-"""augsim from Python: static FEM solves, registration of intraoperative point clouds (FEM or
-U-Net, warm-started between clouds), U-Net predictions and the ROUKF one step at a time.
+"""augsim from Python: static FEM solves, registration of intraoperative point clouds (FEM,
+U-Net or reduced-order model, warm-started between clouds), U-Net predictions and the ROUKF one step at a time.
 
 The computations are augsim's own (the same code as the ``augsim`` command line); arrays are
 NumPy float64 unless said otherwise, lengths in metres unless a ``units`` argument says otherwise ("mm", "cm", "um").

@@ -27,7 +27,7 @@ fn demo_registers_the_phantom_and_reports_the_tre() {
     let methods: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
     assert_eq!(methods, ["FEM co-rotational (3k T4)", "FEM SVK (3k T4)", "U-Net"], "{text}");
     // The figures README.md states for the demo (mean / max TRE, mm), within 5 %.
-    for (s, stated) in rows.iter().zip([(2.89, 9.35), (3.36, 10.94), (1.49, 6.84)]) {
+    for (s, stated) in rows.iter().zip([(2.89, 9.35), (3.36, 10.94), (1.49, 6.89)]) {
         let (tre, max) = (s["tre_mean_mm"].as_f64().unwrap(), s["tre_max_mm"].as_f64().unwrap());
         let near = |value: f64, stated: f64| (value - stated).abs() <= 0.05 * stated;
         assert!(near(tre, stated.0) && near(max, stated.1), "TRE {tre} / {max} mm, README: {stated:?}\n{text}");
