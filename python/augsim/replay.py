@@ -12,7 +12,8 @@ each cloud is sent in ``--send-units`` (mm by default, what Slicer sends: give `
 same ``--units``) as a POLYDATA message of device ``cloud``, at most ``--rate`` clouds a second,
 each once the server has answered the one before. The registered targets (POINT ``targets``) and
 the status (STRING ``status``, JSON) of each frame are read back; ``--out DIR`` writes each frame's
-targets as ``targets_NNNN.csv`` (in ``--send-units``, labelled columns ``x_mm``...). Each frame's
+targets as ``targets_NNNN.csv`` (in ``--send-units``, labelled columns ``x_mm``...; frames
+numbered from 1, as the server numbers them). Each frame's
 line gives the points sent, the round trip and the server's time; a frame the server refused
 prints its reason, and the replay goes on.
 
@@ -78,7 +79,7 @@ def replay(files, client, units="m", rate=None, out=None, unit="mm", timeout=60.
 
     period = 1.0 / rate if rate else 0.0
     records = []
-    for k, path in enumerate(files):
+    for k, path in enumerate(files, 1):
         began = time.perf_counter()
         try:
             cloud = read_cloud(path, units, unit)

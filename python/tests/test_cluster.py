@@ -115,7 +115,7 @@ def test_what_cannot_be_generated_is_refused_in_one_line_before_any_cluster(tmp_
     for args, message in [(["liver_ar", "--samples", "0"], "--samples must be at least 1, got 0"),
                           (["liver_ar", "--samples", "-1"], "--samples must be at least 1, got -1"),
                           ([str(tmp_path / "missing.toml")], "cannot read scenario"),
-                          (["beam"], "a `dataset` scenario is needed here")]:
+                          (["beam"], "one of kind `dataset` is needed here")]:
         with pytest.raises(SystemExit) as stop:
             cluster.main([*args, "--out", out, "--augsim", augsim_bin()])
         assert stop.value.code == 2, args

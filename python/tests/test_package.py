@@ -450,6 +450,10 @@ def test_roukf_converges_to_the_young_modulus():
     # A step in millimetres to a filter in metres would drive the estimate anywhere: refused.
     with pytest.raises(augsim.AugsimError, match="observed point 0 lies .* mm from its rest position.*another unit"):
         a.step(observations[0] * 1000.0)
+    # One in metres to a filter in millimetres leaves each point within the organ's size of its rest
+    # position (near an origin the organ holds), but shrinks their span a thousand times: refused.
+    with pytest.raises(augsim.AugsimError, match=r"observed points seen span .* [0-9.]+e-3 times .*another unit"):
+        a.step(observations[0] * 1e-3)
     assert a.iteration == len(observations)
     with pytest.raises(augsim.AugsimError, match="missing"):
         augsim.Assimilation(os.path.join(ROOT, "missing.toml"))

@@ -425,13 +425,32 @@ struct Client {
     threads: Vec<std::thread::JoinHandle<()>>,
 }
 
-/// The newest cloud, with its frame number, whether a reset came since the last cloud
-/// registered, and the features of the steps to come, in order, with their step numbers.
+/// The newest cloud waiting, whether a reset came after it (for the next cloud), and the features
+/// of the steps to come, in order, with their step numbers.
 #[derive(Default)]
 struct Mailbox {
-    cloud: Option<(Cloud, Vec<Point>)>,
+    cloud: Option<Waiting>,
     reset: bool,
     features: std::collections::VecDeque<(u64, Vec<Point>, Option<u64>)>,
+}
+
+/// A cloud waiting for the registration thread (points in m).
+struct Waiting {
+    cloud: Cloud,
+    points: Vec<Point>,
+    /// Whether a reset came before it and after the last cloud registered.
+    from_rest: bool,
+    /// How many clouds it replaced, received after the last cloud registered.
+    replaced: u64,
+}
+
+impl Mailbox {
+    /// Puts a cloud in, in place of the one waiting: a reset that came before either holds for it.
+    fn put_cloud(&mut self, cloud: Cloud, points: Vec<Point>) {
+        let (from_rest, replaced) = self.cloud.take().map_or((false, 0), |w| (w.from_rest, w.replaced + 1));
+        let from_rest = from_rest || std::mem::take(&mut self.reset);
+        self.cloud = Some(Waiting { cloud, points, from_rest, replaced });
+    }
 }
 
 /// What a client's two threads share.
@@ -502,7 +521,7 @@ impl Shared {
     fn send<T: Content>(&self, content: &T, device: &str, timestamp: Option<u64>) -> std::result::Result<(), String> {
         let bytes = encode_message_stamped(content, device, timestamp)?;
         let mut w = self.writer.lock().map_err(|_| "writer poisoned".to_string())?;
-        w.write_all(&bytes).map_err(|e| {
+        write_within(&mut w, &bytes, self.options.stall).map_err(|e| {
             let why = match e.kind() {
                 std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut => {
                     format!("the client left its answers unread for {:.1} s", self.options.stall.as_secs_f64())
@@ -539,6 +558,26 @@ impl Shared {
         self.record(serde_json::json!({ "estimate": estimate, "timestamp": timestamp.map(timestamp_seconds) }));
         self.send_line("estimate", estimate.to_string(), timestamp);
     }
+}
+
+/// Writes all of `bytes` within `stall` (a write timeout alone starts again at each part of a
+/// message the socket takes, so a client that reads a little now and then holds a write longer).
+fn write_within(stream: &mut TcpStream, mut bytes: &[u8], stall: Duration) -> std::io::Result<()> {
+    let deadline = Instant::now() + stall;
+    while !bytes.is_empty() {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(std::io::ErrorKind::TimedOut.into());
+        }
+        stream.set_write_timeout(Some(left))?;
+        match stream.write(bytes) {
+            Ok(0) => return Err(std::io::ErrorKind::WriteZero.into()),
+            Ok(n) => bytes = &bytes[n..],
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
 }
 
 /// Sets up an accepted connection: blocking, unbuffered, a write waits at most `options.stall`,
@@ -618,7 +657,7 @@ fn read_messages(shared: &Shared) {
                 frame += 1;
                 let cloud = to_metres(points);
                 let stamp = Cloud { frame, timestamp: stamped(timestamp) };
-                shared.waiting.lock().unwrap_or_else(|e| e.into_inner()).cloud = Some((stamp, cloud));
+                shared.waiting.lock().unwrap_or_else(|e| e.into_inner()).put_cloud(stamp, cloud);
                 shared.arrived.notify_one();
             }
             // The features are points of the assimilation scenario's own mesh, in its frame: only their
@@ -801,8 +840,6 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
     let mut identification: Option<Box<dyn Identification>> = None;
     // The steps the filter has made: its clock, kept on the stream's step numbers.
     let mut taken = 0;
-    // The last cloud taken up.
-    let mut taken_up = 0;
     loop {
         let work = {
             let mut waiting = shared.waiting.lock().unwrap_or_else(|e| e.into_inner());
@@ -814,8 +851,8 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
                 if let Some((step, features, timestamp)) = waiting.features.pop_front() {
                     break Work::Step(step, features, timestamp);
                 }
-                if let Some((frame, cloud)) = waiting.cloud.take() {
-                    break Work::Cloud(frame, cloud, std::mem::take(&mut waiting.reset));
+                if let Some(cloud) = waiting.cloud.take() {
+                    break Work::Cloud(cloud);
                 }
                 if shared.input_ended.load(Ordering::SeqCst) {
                     drop(waiting);
@@ -826,11 +863,7 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
             }
         };
         match work {
-            Work::Cloud(frame, cloud, reset) => {
-                // The clouds received since the last one taken up that this one replaced (the
-                // server falling behind the stream).
-                let skipped = frame.frame.saturating_sub(taken_up + 1);
-                taken_up = frame.frame;
+            Work::Cloud(Waiting { cloud: frame, points: cloud, from_rest, replaced }) => {
                 let registration = match &mut registration {
                     Some(r) => r,
                     None => match factory() {
@@ -843,10 +876,10 @@ fn serve_client(shared: &Shared, factory: &RegistrationFactory) {
                         }
                     },
                 };
-                if reset {
+                if from_rest {
                     registration.reset();
                 }
-                if let Err(e) = answer(shared, registration, (frame, skipped), &cloud) {
+                if let Err(e) = answer(shared, registration, (frame, replaced), &cloud) {
                     shared.report(&serde_json::json!({ "frame": frame.frame, "error": e }), frame.timestamp);
                 }
                 // Once answered (its latency untouched), the cloud is kept, refused or not.
@@ -888,8 +921,8 @@ struct Cloud {
 
 /// What the registration thread does next.
 enum Work {
-    /// Register a cloud (its numbers, points in m), from rest if a reset came before it.
-    Cloud(Cloud, Vec<Point>, bool),
+    /// Register a cloud.
+    Cloud(Waiting),
     /// Make an identification step (step number, features in m, the header timestamp of its
     /// message).
     Step(u64, Vec<Point>, Option<u64>),
@@ -1038,6 +1071,32 @@ mod tests {
 
     /// A status of thousands of targets' σ would not fit in a STRING: σ is left out, with a
     /// warning; a short one is sent as it is.
+    /// A reset holds for the first cloud received after it, not for one already waiting when it
+    /// came; a cloud that replaces a waiting one counts it, and keeps its reset.
+    #[test]
+    fn a_reset_holds_for_the_next_cloud_received() {
+        let mut mailbox = Mailbox::default();
+        let put = |m: &mut Mailbox, frame| m.put_cloud(Cloud { frame, timestamp: None }, vec![[0.0; 3]]);
+        let take = |m: &mut Mailbox| m.cloud.take().map(|w| (w.cloud.frame, w.from_rest, w.replaced));
+        put(&mut mailbox, 1);
+        mailbox.reset = true;
+        assert_eq!(take(&mut mailbox), Some((1, false, 0)));
+        put(&mut mailbox, 2);
+        assert_eq!(take(&mut mailbox), Some((2, true, 0)));
+        // A cloud, a reset, a cloud in its place; a reset, two clouds; then a cloud with none.
+        put(&mut mailbox, 3);
+        mailbox.reset = true;
+        put(&mut mailbox, 4);
+        assert_eq!(take(&mut mailbox), Some((4, true, 1)));
+        mailbox.reset = true;
+        put(&mut mailbox, 5);
+        put(&mut mailbox, 6);
+        assert_eq!(take(&mut mailbox), Some((6, true, 1)));
+        put(&mut mailbox, 7);
+        assert_eq!(take(&mut mailbox), Some((7, false, 0)));
+        assert_eq!(take(&mut mailbox), None);
+    }
+
     #[test]
     fn an_oversized_status_leaves_sigma_out() {
         let status = |k: usize| serde_json::json!({"frame": 1, "warnings": [], "target_sigma": vec![1.234_567_89; k]});

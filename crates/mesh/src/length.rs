@@ -292,10 +292,16 @@ impl UnitMistake {
 /// The largest extent of an organ (m): from 2 cm (a gallbladder, a kidney's tumour) to 60 cm.
 pub const ORGAN_EXTENT_M: std::ops::RangeInclusive<f64> = 0.02..=0.6;
 
-/// A number with six significant digits, without trailing zeros.
+/// A number with six significant digits, without trailing zeros (in scientific notation beyond
+/// 1e9 and below 1e-6: a damaged file's 1e300 as 3e300, not three hundred digits).
 pub(crate) fn number(x: f64) -> String {
     if x == 0.0 || !x.is_finite() {
         return x.to_string();
+    }
+    if !(1e-6..1e9).contains(&x.abs()) {
+        let text = format!("{x:.5e}");
+        let (mantissa, exponent) = text.split_once('e').unwrap_or((&text, "0"));
+        return format!("{}e{exponent}", mantissa.trim_end_matches('0').trim_end_matches('.'));
     }
     let decimals = (5 - x.abs().log10().floor() as i32).clamp(0, 12) as usize;
     let text = format!("{x:.decimals$}");
@@ -316,6 +322,8 @@ mod tests {
         assert_eq!(number(6.41234567), "6.41235");
         assert_eq!(number(0.0002), "0.0002");
         assert_eq!(number(1500.0), "1500");
+        assert_eq!(number(1e300), "1e300");
+        assert_eq!(number(-2.5e-9), "-2.5e-9");
     }
 
     /// Each mistake's factor undoes it, in words as a message says it.

@@ -148,7 +148,7 @@ impl ScenarioText {
         if kind != expected {
             return Err(ScenarioError::invalid(
                 &self.origin,
-                format!("this is a scenario of kind `{}`; a `{}` scenario is needed here", kind.key(), expected.key()),
+                format!("this is a scenario of kind `{}`; one of kind `{}` is needed here", kind.key(), expected.key()),
             ));
         }
         let invalid = |e: &dyn std::fmt::Display| ScenarioError::invalid(&self.origin, e.to_string());

@@ -5,6 +5,7 @@ use filter::{FemModel, Roukf};
 use mesh::Point;
 use nalgebra::DVector;
 
+use super::tracks::spread_in_another_unit;
 use super::{AssimilationError, Context, Experiment};
 
 /// The filter at its prior, waiting for measurements.
@@ -83,10 +84,33 @@ impl OnlineFilter {
                 )));
             }
         }
+        self.check_spread(&z)?;
         let available: Vec<bool> = z.iter().map(|v| !v.is_nan()).collect();
         let record = self.filter.step_partial(&DVector::from_vec(z), &available).context(|| "a filter step".into())?;
         let (innovation, gated) = (record.innovation_norm, record.gated);
         Ok(Estimate { iteration: self.iteration(), mean: self.mean(), std: self.std(), innovation, gated })
+    }
+
+    /// Refuses a step whose fully seen points span another unit's ([`spread_in_another_unit`]) than their
+    /// rest positions (the check of each point misses metres read as millimetres).
+    fn check_spread(&self, z: &[f64]) -> Result<(), AssimilationError> {
+        let (seen, rest): (Vec<Point>, Vec<Point>) = z
+            .chunks_exact(3)
+            .zip(&self.rest)
+            .filter(|(p, _)| p.iter().all(|v| !v.is_nan()))
+            .map(|(p, rest)| ([p[0], p[1], p[2]], *rest))
+            .unzip();
+        match spread_in_another_unit(&rest, &seen) {
+            None => Ok(()),
+            Some((now, at_rest)) => Err(AssimilationError::Setup(format!(
+                "the {} observed points seen span {:.3e} mm, {:.1e} times what they span at rest ({:.1} mm): is the \
+                 step in another unit?",
+                seen.len(),
+                mesh::length::mm(now),
+                now / at_rest,
+                mesh::length::mm(at_rest)
+            ))),
+        }
     }
 
     /// One step with the observed points' positions (m; NaN for a point not seen), the estimate

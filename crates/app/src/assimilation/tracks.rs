@@ -44,6 +44,20 @@ pub const TINY_SPREAD: f64 = 1e-3;
 /// ([`Tracks::check_motion`]).
 pub const UNIT_SPREAD: f64 = 10.0;
 
+
+/// What `now` and `rest` span (their boxes' diagonals), for three points or more, when `now` spans
+/// [`UNIT_SPREAD`] times more or less than `rest`, else `None`: tissue stretches, but not tenfold; points in
+/// another unit than their rest positions do (metres read as millimetres shrink them a thousand times, and
+/// leave each within the organ's size of its rest position near an origin the organ holds).
+pub(crate) fn spread_in_another_unit(rest: &[Point], now: &[Point]) -> Option<(f64, f64)> {
+    if rest.len() < 3 {
+        return None;
+    }
+    let diagonal = |points: &[Point]| mesh::box_diagonal(mesh::bounds(points));
+    let (now, at_rest) = (diagonal(now), diagonal(rest));
+    (at_rest > 0.0 && !(1.0 / UNIT_SPREAD..=UNIT_SPREAD).contains(&(now / at_rest))).then_some((now, at_rest))
+}
+
 impl Tracks {
     /// Reads a track file (header `frame,id,x,y,z`) into metres, from the unit its header names or else from
     /// `unit`.
@@ -195,10 +209,8 @@ impl Tracks {
         Ok(())
     }
 
-    /// Refuses a frame (1..=`frames`) whose features (three or more) span [`UNIT_SPREAD`] times more or less than
-    /// they do at rest (`rest`): tissue stretches, but not tenfold; a file in another unit than its rest positions
-    /// does (metres read as millimetres shrink it a thousand times, and leave each feature within the organ's size of
-    /// its rest position near an origin the organ holds).
+    /// Refuses a frame (1..=`frames`) whose features span another unit's ([`spread_in_another_unit`]) than their
+    /// rest positions `rest`.
     fn check_spread(
         &self,
         rest: &[Point],
@@ -207,14 +219,10 @@ impl Tracks {
     ) -> Result<(), AssimilationError> {
         for frame in 1..frames + 1 {
             let seen: Vec<usize> = (0..self.ids.len()).filter(|&j| self.positions[j].contains_key(&frame)).collect();
-            if seen.len() < 3 {
-                continue;
-            }
-            let diagonal = |points: Vec<Point>| mesh::box_diagonal(mesh::bounds(&points));
-            let at_rest = diagonal(seen.iter().map(|&j| rest[j]).collect());
-            let now = diagonal(seen.iter().map(|&j| self.positions[j][&frame]).collect());
-            let ratio = now / at_rest;
-            if at_rest > 0.0 && !(1.0 / UNIT_SPREAD..=UNIT_SPREAD).contains(&ratio) {
+            let at_rest: Vec<Point> = seen.iter().map(|&j| rest[j]).collect();
+            let now: Vec<Point> = seen.iter().map(|&j| self.positions[j][&frame]).collect();
+            if let Some((now, at_rest)) = spread_in_another_unit(&at_rest, &now) {
+                let ratio = now / at_rest;
                 let against = match rest_file {
                     Some(r) => format!("the rest positions in {}", r.path.display()),
                     None => "its frame 0".into(),
