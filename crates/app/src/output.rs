@@ -341,7 +341,7 @@ pub fn register_files(
         PointInput::new(organ_frame, LengthUnit::Metre, spec.given_units).with_given_frame(spec.given_frame);
     let frames = read_frames(cloud)?;
     let truths = truth.map(|p| input.read_truths(p, frames.len(), registration.target_labels())).transpose()?;
-    setup_lines(&registration, &spec.frame_line(&registration)).iter().for_each(|l| say(l));
+    setup_lines(&registration, &spec.frame_line(&registration, input.named_frame())).iter().for_each(|l| say(l));
     let truth_warning = match truths.as_ref().and_then(|t| t.first()) {
         Some(truth) => register::plausibility::check_truth(registration.organ(), registration.targets(), truth)
             .context("the targets' truth (--truth)")?,
@@ -632,6 +632,7 @@ mod tests {
         let ras = header(Some(Frame::Ras));
         assert!(ras.contains("space origin: (-10,-20,30)"), "{ras}");
         assert!(ras.contains("space directions: none (-5,0,0) (0,-5,0) (0,0,5)"), "{ras}");
+        assert!(ras.ends_with("\ndisplacement field type:=resampling"), "{ras}");
         for lps in [header(Some(Frame::Lps)), header(None)] {
             assert!(lps.contains("space origin: (10,20,30)"), "{lps}");
             assert!(lps.contains("space directions: none (5,0,0) (0,5,0) (0,0,5)"), "{lps}");

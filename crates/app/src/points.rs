@@ -55,6 +55,11 @@ impl PointInput {
         PointInput { frame: self.frame.or(frame), given_frame: frame, named_by, ..self }
     }
 
+    /// The working frame and what named it, when a file or `--frame` did rather than the organ.
+    pub fn named_frame(&self) -> Option<(Frame, &str)> {
+        self.frame.zip(self.named_by.as_deref())
+    }
+
     /// Reads a points file (CSV, `.fcsv`, `.mrk.json`) with its labels, in the working frame and
     /// unit; its own frame becomes the working frame when there was none.
     pub fn read(&mut self, path: &Path) -> Result<LabelledPoints> {

@@ -658,8 +658,9 @@ impl RegistrationSpec {
         GivenCoordinates { unit: self.given_units, change: FrameChange::between(self.given_frame, organ.frame()) }
     }
 
-    /// What [`RegistrationSpec::coordinates`] does with frames, in words.
-    pub fn frame_line(&self, organ: &Registration) -> String {
+    /// What [`RegistrationSpec::coordinates`] does with frames, in words; `named`: the frame a
+    /// points file read so far named, and the file, where neither `--frame` nor the organ does.
+    pub fn frame_line(&self, organ: &Registration, named: Option<(Frame, &str)>) -> String {
         match (self.given_frame, organ.frame()) {
             (Some(given), Some(organ)) if given != organ => format!(
                 "{given}: clouds naming no frame are taken in it and results given in it; the organ's {organ} (x and y \
@@ -672,10 +673,16 @@ impl RegistrationSpec {
                 )
             }
             (Some(given), None) => format!("{given}, given; the organ names none, so nothing is converted"),
-            (None, None) => "none named by the organ or --frame: coordinates are taken as given, the results named \
-                             in the frame a cloud's file names, if one does (else 3D Slicer's files, displacement.nrrd \
-                             and targets.mrk.json, take them as LPS, Slicer's default; --frame RAS says otherwise)"
-                .into(),
+            (None, None) => match named {
+                Some((frame, by)) => format!(
+                    "{frame}, named by {by}: coordinates are taken as given and the results named in it (the organ \
+                     names none, so nothing is converted)"
+                ),
+                None => "none named by the organ or --frame: coordinates are taken as given, the results named in \
+                         the frame a cloud's file names, if one does (else 3D Slicer's files, displacement.nrrd and \
+                         targets.mrk.json, take them as LPS, Slicer's default; --frame RAS says otherwise)"
+                    .into(),
+            },
         }
     }
 

@@ -377,7 +377,15 @@ fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
         CameraAt::Point(_) => None,
     };
     let files = [("surface", &options.surface), ("landmarks", &options.attach), ("targets", &options.targets)];
+    if options.surface.is_dir() {
+        // What a folder holds (a DICOM series, a SEG among its files) and what to give instead.
+        let why = mesh::labelmap::unreadable_segmentation(&options.surface).unwrap_or_default();
+        bail!("{}: {why}", options.surface.display());
+    }
     for (what, path) in files.into_iter().chain(camera) {
+        if path.is_dir() {
+            bail!("the {what} file {} is a folder, not a file", path.display());
+        }
         if !path.is_file() {
             bail!("the {what} file {} does not exist", path.display());
         }
@@ -1174,6 +1182,21 @@ mod tests {
         options.label = Some(label.into());
         options.tets = 800;
         options
+    }
+
+    /// A folder given for the organ says what a folder cannot be (a DICOM series) and what to give;
+    /// one given for the landmarks is called a folder, not a file gone missing.
+    #[test]
+    fn a_folder_given_for_a_file_is_named_so() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut organ_folder = options(dir.path(), "liver_labels.nii.gz", "5", false);
+        organ_folder.surface = dir.path().to_path_buf();
+        let e = absolute(&organ_folder).unwrap_err().to_string();
+        assert!(e.contains("a folder, not a file (a DICOM series is not read)"), "{e}");
+        let mut landmarks_folder = options(dir.path(), "liver_labels.nii.gz", "5", false);
+        landmarks_folder.attach = dir.path().to_path_buf();
+        let e = absolute(&landmarks_folder).unwrap_err().to_string();
+        assert!(e.starts_with("the landmarks file ") && e.ends_with(" is a folder, not a file"), "{e}");
     }
 
     /// Points given with a labelmap are read in the unit given (`--units`), the unit of the clouds

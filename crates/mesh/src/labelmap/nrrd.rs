@@ -400,7 +400,9 @@ pub fn write_nrrd(path: impl AsRef<Path>, map: &Labelmap) -> Result<(), MeshErro
 }
 
 /// Writes a displacement field as 3D Slicer and ITK read a displacement-field transform: NRRD,
-/// `kinds: vector domain domain domain`, 32-bit floats, gzip, `space: left-posterior-superior`.
+/// `kinds: vector domain domain domain`, 32-bit floats, gzip, `space: left-posterior-superior`,
+/// and the key 3D Slicer writes to say which way it maps, `displacement field type:=resampling`
+/// (a position in the fixed image plus its vector is where to sample the moving one).
 /// `affine` maps grid indices to LPS positions (mm) as [`Labelmap::affine`]; `vectors` (mm, LPS)
 /// are x fastest, then y, then z, as many as grid points.
 pub fn write_displacement_nrrd(
@@ -423,7 +425,8 @@ pub fn write_displacement_nrrd(
     let text = format!(
         "NRRD0004\n# displacement field, written by augsim\ntype: float\ndimension: 4\n\
          space: left-posterior-superior\nsizes: 3 {} {} {}\nspace directions: none {}\n\
-         kinds: vector domain domain domain\nendian: little\nencoding: gzip\nspace origin: {}\n\n",
+         kinds: vector domain domain domain\nendian: little\nencoding: gzip\nspace origin: {}\n\
+         displacement field type:=resampling\n\n",
         dims[0],
         dims[1],
         dims[2],
