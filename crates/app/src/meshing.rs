@@ -262,14 +262,20 @@ impl OrganInput {
             Some(unit) => {
                 let extent = unit.to_metres(largest_extent(&self.surface));
                 if !ORGAN_EXTENT_M.contains(&extent) {
+                    // The units in which the file's numbers would make an organ.
+                    let fitting: Vec<String> = organ_units(largest_extent(&self.surface), &LengthUnit::ALL)
+                        .into_iter()
+                        .map(|u| format!(" (in {}? give --units {u})", u.name()))
+                        .collect();
                     self.notes.push((
                         "warning",
                         format!(
                             "in {unit} the organ is {:.0} mm across, where organs are {:.0} to {:.0} mm: is the unit \
-                             right?",
+                             right?{}",
                             mm(extent),
                             mm(*ORGAN_EXTENT_M.start()),
-                            mm(*ORGAN_EXTENT_M.end())
+                            mm(*ORGAN_EXTENT_M.end()),
+                            fitting.concat()
                         ),
                     ));
                 }
@@ -510,7 +516,9 @@ mod tests {
         let warned = mesh_organ(&in_metres).unwrap().notes;
         assert!(warned.contains(&(
             "warning",
-            "in m the organ is 80000 mm across, where organs are 20 to 600 mm: is the unit right?".into()
+            "in m the organ is 80000 mm across, where organs are 20 to 600 mm: is the unit right? (in millimetres? \
+             give --units mm)"
+                .into()
         )));
         let centimetres = dir.path().join("ball_cm.stl");
         mesh::io::write_surface(&centimetres, &mesh::generate::icosphere(4.0, 2)).unwrap();

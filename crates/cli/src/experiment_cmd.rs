@@ -32,7 +32,9 @@ pub struct ExperimentArgs {
 
 /// Runs `augsim experiment`.
 pub fn run(args: &ExperimentArgs) -> Result<()> {
-    for name in Name::chosen(&args.name)? {
+    let names = Name::chosen(&args.name)?;
+    experiment::report::check_publish_paths(args.readme.as_deref(), args.results.as_deref())?;
+    for name in names {
         println!("== {} ({})", name.as_str(), args.size.as_str());
         let bar = Bar::new("steps", "   ");
         let result = experiment::run(name, args.size, &args.out, &bar);

@@ -266,9 +266,8 @@ fn sections(results: &[ExperimentResult], heading: &str, figures: bool) -> Strin
 /// Start and end markers of the generated part of a Markdown file (e.g. the README).
 pub const MARKERS: [&str; 2] = ["<!-- augsim experiment: begin -->", "<!-- augsim experiment: end -->"];
 
-/// Replaces the text between the [`MARKERS`] of the Markdown file `path` (e.g. the README) with
-/// the results' [`summary`], atomically.
-pub fn update_markdown(path: &Path, results: &[ExperimentResult]) -> Result<()> {
+/// The text of the Markdown file at `path` and where its summary's markers begin.
+fn marked(path: &Path) -> Result<(String, usize, usize)> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let (Some(begin), Some(end)) = (text.find(MARKERS[0]), text.find(MARKERS[1])) else {
         bail!("{} has no '{}' … '{}' markers", path.display(), MARKERS[0], MARKERS[1]);
@@ -276,6 +275,25 @@ pub fn update_markdown(path: &Path, results: &[ExperimentResult]) -> Result<()> 
     if end < begin {
         bail!("{}: the end marker comes before the begin marker", path.display());
     }
+    Ok((text, begin, end))
+}
+
+/// Refuses, before any experiment runs, a `readme` that [`publish`] could not update (unreadable,
+/// or without its markers) and a results `page` that is a folder.
+pub fn check_publish_paths(readme: Option<&Path>, page: Option<&Path>) -> Result<()> {
+    if let Some(readme) = readme {
+        marked(readme)?;
+    }
+    match page {
+        Some(page) if page.is_dir() => bail!("the results page {} is a folder, not a file", page.display()),
+        _ => Ok(()),
+    }
+}
+
+/// Replaces the text between the [`MARKERS`] of the Markdown file `path` (e.g. the README) with
+/// the results' [`summary`], atomically.
+pub fn update_markdown(path: &Path, results: &[ExperimentResult]) -> Result<()> {
+    let (text, begin, end) = marked(path)?;
     let head = &text[..begin + MARKERS[0].len()];
     let updated = format!("{head}\n{}\n{}", summary(results).trim(), &text[end..]);
     mesh::io::write_atomic_bytes(path, updated.as_bytes())?;

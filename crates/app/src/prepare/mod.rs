@@ -586,11 +586,7 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
         let warnings = organ_doubts(&lines);
         let e = match warnings.is_empty() {
             true => e,
-            false => e.context(format!(
-                "after the warning{} {}",
-                if warnings.len() > 1 { "s" } else { "" },
-                warnings.join("; ")
-            )),
+            false => e.context(format!("{} (warned before, likely the cause of what follows)", warnings.join("; "))),
         };
         let read = lines.iter().find_map(|l| l.strip_prefix("labelmap: ").filter(|l| l.starts_with("label")));
         match read.and_then(|l| l.split_once("): ")) {
@@ -1380,7 +1376,8 @@ mod tests {
         let giant = PrepareOptions { label: None, units: Some(LengthUnit::Metre), ..surface };
         let error = format!("{:#}", organ_step(&giant, dir.path()).unwrap_err());
         assert!(
-            error.starts_with("after the warning") && error.contains("in m the organ is 6483 mm across"),
+            error.starts_with("in m the organ is 6483 mm across")
+                && error.contains("(warned before, likely the cause of what follows): "),
             "{error}"
         );
     }
