@@ -164,7 +164,7 @@ fn write_evaluation(
 ) -> Result<[PathBuf; 3]> {
     let (report, s) = (&evaluation.report, &evaluation.report.stats);
     let corruption = &evaluation.corruption;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    mesh::io::create_folder(out)?;
     let errors = out.join("errors.csv");
     let rows = report.indices.iter().zip(&report.errors).map(|(i, e)| [i.to_string(), format!("{e:e}")]);
     mesh::io::csv::write_csv(&errors, &[], &["index", "error_m"], rows)?;

@@ -321,6 +321,9 @@ fn read_organ(
     options: &MeshOptions,
     notes: &mut Vec<(&'static str, String)>,
 ) -> Result<(TriSurface, ToMetres, Option<Frame>)> {
+    if let Some(length) = options.length.filter(|l| !(l.in_metres() > 0.0)) {
+        bail!("--length must be positive, got {length}");
+    }
     let mut input = OrganInput::read(path, options.label.as_deref(), options.units)?;
     let (to_metres, frame) = match options.length {
         Some(length) => (ToMetres::FittedTo(length), None),

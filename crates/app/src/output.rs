@@ -42,7 +42,7 @@ pub fn run_dir(out: Option<&Path>, parent: &Path) -> Result<(PathBuf, bool)> {
         refuse_earlier_run(dir)?;
         return Ok((dir.to_path_buf(), !dir.exists()));
     }
-    std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
+    mesh::io::create_folder(parent)?;
     for n in 1..=99_999 {
         let dir = parent.join(format!("{n:03}"));
         match std::fs::create_dir(&dir) {
@@ -174,7 +174,7 @@ impl RunWriter {
         unit: LengthUnit,
         (organ, given): (Option<Frame>, Option<Frame>),
     ) -> Result<RunWriter> {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        mesh::io::create_folder(dir)?;
         let change = FrameChange::between(organ, given.or(organ));
         Ok(RunWriter {
             dir: dir.to_path_buf(),
@@ -567,7 +567,7 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
     for reg in &registered {
         let (s, outcome) = (&reg.summary, reg.peak(case));
         let method_dir = dir.join(slug(&s.method));
-        std::fs::create_dir_all(&method_dir).with_context(|| format!("creating {}", method_dir.display()))?;
+        mesh::io::create_folder(&method_dir)?;
         let u = &outcome.registration.u;
         let (m, u_cloud) = mesh_in_cloud_frame(reg.organ.mesh(), None, outcome.rigid.as_ref(), u);
         mesh::io::write_mesh(method_dir.join("organ.vtu"), &m, &[Field::point("displacement", 3, u_cloud)])?;
@@ -593,7 +593,7 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
             ),
         )?;
     }
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    mesh::io::create_folder(dir)?;
     write_atomic_bytes(&dir.join("comparison.csv"), csv.as_bytes())?;
     let summaries: Vec<serde_json::Value> = rows
         .iter()

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use live::{IdentificationFactory, Outputs, RegistrationFactory, ServeOptions};
 
 use crate::assimilation::{AssimilationChoice, OnlineFilter};
@@ -60,7 +60,7 @@ impl ServeArgs {
         let mut setup = serve_setup(spec, self.outputs, self.assimilate.as_deref())?;
         setup.options.max_clients = self.max_clients;
         if let Some(dir) = &self.record {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            mesh::io::create_folder(dir)?;
             setup.lines.push(format!("record     each client's stream in {}/client-NNN.jsonl", dir.display()));
             setup.options.record = Some(dir.clone());
         }

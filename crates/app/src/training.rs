@@ -20,7 +20,7 @@ pub struct CorruptionArgs {
     #[arg(long, value_name = "MIN,MAX", value_parser = node_range)]
     pub sparse: Option<(usize, usize)>,
     /// Additive Gaussian noise on the visible input nodes: standard deviation in the input unit.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = crate::values::non_negative)]
     pub noise: f64,
 }
 

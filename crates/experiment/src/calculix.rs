@@ -195,7 +195,7 @@ pub fn version() -> Result<String> {
 /// output in `ccx.log`).
 pub fn solve(problem: &Problem, dir: &Path) -> Result<PeerSolution> {
     let deck = input_deck(problem)?;
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    mesh::io::create_folder(dir)?;
     mesh::io::write_atomic_bytes(&dir.join(format!("{JOB}.inp")), deck.as_bytes())?;
     let ccx = executable();
     let start = Instant::now();

@@ -400,7 +400,7 @@ pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<Ex
         }
     }
     let resumed = holds_earlier_work(&dir);
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    mesh::io::create_folder(&dir)?;
     let start = Instant::now();
     let mut result = match name {
         Name::FemSpeed => fem_speed::run(size, &dir, progress)?,

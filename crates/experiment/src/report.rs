@@ -351,7 +351,7 @@ pub fn html(results: &[ExperimentResult]) -> String {
 /// page figures (from `root/<experiment>/`) beside it.
 pub fn write_results_page(path: &Path, results: &[ExperimentResult], root: &Path) -> Result<()> {
     let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    mesh::io::create_folder(dir)?;
     for r in results {
         for f in &r.page_figures {
             let (from, to) = (root.join(r.name.as_str()).join(f), dir.join(page_figure(r, f)));

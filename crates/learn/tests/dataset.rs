@@ -472,7 +472,11 @@ fn corrupt_shards_give_clear_errors() {
     let e = Dataset::open(dir.path()).unwrap_err().to_string();
     assert!(e.contains("not a dataset") && e.contains("augsim generate"), "{e}");
     let e = Dataset::open(&dir.path().join("absent")).unwrap_err().to_string();
-    assert!(e.contains("absent: no such directory"), "{e}");
+    assert!(e.contains("absent: no such folder"), "{e}");
+    // A file given for the folder.
+    std::fs::write(dir.path().join("a_file"), "").unwrap();
+    let e = Dataset::open(&dir.path().join("a_file")).unwrap_err().to_string();
+    assert!(e.contains("a_file: a file, not a dataset's folder"), "{e}");
 }
 
 #[test]

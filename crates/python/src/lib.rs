@@ -528,7 +528,7 @@ impl Registration {
             // cloud moves the warm start on.
             if let Some(dir) = &out {
                 app::output::refuse_earlier_run(dir)?;
-                std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+                mesh::io::create_folder(dir)?;
             }
             let mut state = locked(&self.state)?;
             let tracked = state.register(&cloud)?;

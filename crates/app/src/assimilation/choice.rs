@@ -49,7 +49,7 @@ pub struct AssimilationChoice {
     pub units: LengthUnit,
     /// Forgetting factor in (0, 1]: the parameter covariance is divided by it before every step (default: the
     /// scenario's filter.forgetting, else 1 = none).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::values::factor)]
     pub forgetting: Option<f64>,
     /// Sigma points: `simplex` (p + 1) or `star` (2p + 1) (default: the scenario's filter.sigma_points, else
     /// simplex).
@@ -61,11 +61,11 @@ pub struct AssimilationChoice {
     #[arg(long, value_name = "KIND")]
     pub discrepancy: Option<Discrepancy>,
     /// Degrees of freedom d ≥ 1 of a systematic discrepancy (default: the scenario's filter.discrepancy_dof, else 1).
-    #[arg(long, value_name = "D")]
+    #[arg(long, value_name = "D", value_parser = crate::values::at_least_one)]
     pub discrepancy_dof: Option<f64>,
     /// Validation gate G: a tracked component farther from the filter's prediction than G predicted standard
     /// deviations is left out of that step, as a tracking failure (default: the scenario's filter.gate, else none).
-    #[arg(long, value_name = "G")]
+    #[arg(long, value_name = "G", value_parser = crate::values::positive)]
     pub gate: Option<f64>,
     /// Write the estimated deformation every N steps (default: the scenario's output.every, else 1).
     #[arg(long)]

@@ -496,7 +496,7 @@ impl Experiment {
     /// every iteration to `progress`, with the current estimate in words (e.g.
     /// `E = 4979.1 ± 4.2 Pa, |innovation| = 1.2e-3 m`).
     pub fn run(&self, out_dir: &Path, progress: &dyn learn::Progress) -> Result<Report, AssimilationError> {
-        std::fs::create_dir_all(out_dir).context(|| format!("cannot create {}", out_dir.display()))?;
+        mesh::io::create_folder(out_dir).context(|| "creating the output folder".into())?;
         self.write_tracks(&out_dir.join("tracks"))?;
         let iterations = self.measurements.len();
         let nodes = &self.base.mesh.nodes;

@@ -44,7 +44,6 @@ pub const TINY_SPREAD: f64 = 1e-3;
 /// ([`Tracks::check_motion`]).
 pub const UNIT_SPREAD: f64 = 10.0;
 
-
 /// What `now` and `rest` span (their boxes' diagonals), for three points or more, when `now` spans
 /// [`UNIT_SPREAD`] times more or less than `rest`, else `None`: tissue stretches, but not tenfold; points in
 /// another unit than their rest positions do (metres read as millimetres shrink them a thousand times, and

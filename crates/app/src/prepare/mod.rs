@@ -197,13 +197,16 @@ pub struct PrepareArgs {
 }
 
 impl CameraAt {
-    /// `X,Y,Z` as three numbers, or else a file.
+    /// `X,Y,Z` as three finite numbers, or else a file.
     pub fn parse(text: &str) -> Result<CameraAt, String> {
         let values: Vec<f64> = match text.split(',').map(|v| v.trim().parse::<f64>()).collect() {
             Ok(values) => values,
             Err(_) if std::path::Path::new(text).is_file() => return Ok(CameraAt::File(PathBuf::from(text))),
             Err(e) => return Err(format!("expected X,Y,Z or a points file, got {text:?} ({e})")),
         };
+        if values.iter().any(|v| !v.is_finite()) {
+            return Err(format!("expected X,Y,Z as finite numbers, got {text:?}"));
+        }
         <[f64; 3]>::try_from(values).map(CameraAt::Point).map_err(|v| format!("expected X,Y,Z, got {} values", v.len()))
     }
 }
@@ -313,7 +316,7 @@ pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgr
 /// [`prepare`]'s steps.
 fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgress) -> Result<PrepareState> {
     let options = absolute(options)?;
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    mesh::io::create_folder(dir)?;
     let state_path = dir.join(STATE_FILE);
     let mut state = if state_path.exists() {
         let mut state: PrepareState = serde_json::from_str(&std::fs::read_to_string(&state_path)?)

@@ -603,7 +603,7 @@ pub(super) fn validation_step(
     let pushes = validation_pushes(&truth, camera);
     let radius = tool_radius(&truth.mesh);
     let kept = dir.join(TRUTH_DIR);
-    std::fs::create_dir_all(&kept).with_context(|| format!("creating {}", kept.display()))?;
+    mesh::io::create_folder(&kept)?;
     let read_back = std::cell::Cell::new(0);
     // Each solve is told as it ends: on the finest truths one takes an hour.
     let solve_at = |truth: &Truth, push: usize, force: f64| -> Result<Solution> {

@@ -750,7 +750,7 @@ impl DatasetWriter {
                 return Err(LearnError::InvalidInput(format!("invalid part {}/{}", part.index, part.count)));
             }
         }
-        std::fs::create_dir_all(dir).map_err(|e| LearnError::io(dir, e))?;
+        mesh::io::create_folder(dir)?;
         let lock = lock_for_writing(dir)?;
         if !dir.join(MANIFEST_FILE).exists() {
             return DatasetWriter::from_manifest(dir, lock, Manifest::new(&spec), true);
@@ -965,7 +965,11 @@ impl Dataset {
     pub fn open(dir: &Path) -> Result<Dataset> {
         let path = dir.join(MANIFEST_FILE);
         if !path.exists() {
-            let what = if dir.is_dir() { "not a dataset" } else { "no such directory" };
+            let what = match (dir.is_dir(), dir.is_file()) {
+                (true, _) => "not a dataset",
+                (_, true) => "a file, not a dataset's folder",
+                _ => "no such folder",
+            };
             return Err(LearnError::manifest(
                 dir,
                 format!("{what} (a dataset holds a {MANIFEST_FILE}; `augsim generate` writes one)"),

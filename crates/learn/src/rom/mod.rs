@@ -337,7 +337,7 @@ impl ReducedModel {
     /// Saves the model as a directory: `dir/model.json` and its arrays beside it, each file
     /// written atomically.
     pub fn save(&self, dir: &Path) -> Result<()> {
-        std::fs::create_dir_all(dir).map_err(|e| LearnError::io(dir, e))?;
+        mesh::io::create_folder(dir)?;
         let (modes, entries) = (self.basis.nrows(), self.input_entries.len());
         let mut input_mask = vec![0u8; self.grid.field_len()];
         self.input_entries.iter().for_each(|&e| input_mask[e] = 1);

@@ -542,11 +542,12 @@ pub fn train(
         )));
     }
     let split = held_out_split(train, val, &options.test)?;
-    let out = &options.out_dir;
-    std::fs::create_dir_all(out).map_err(|e| LearnError::io(out, e))?;
     let engine = GradientEngine::new(options.compute)?;
     let (mut net, start) = resolve_start(init, config.seed)?;
     check_unseen_by_pretraining(&split, &start.pretraining)?;
+    // Made once the settings are known to build a network: a refused run leaves no folder.
+    let out = &options.out_dir;
+    mesh::io::create_folder(out)?;
     let mut adam = Adam::new(net.values().len());
     let mut state = CheckpointState::new(config, fingerprint(train, val, init, config)?);
     let mut best: Option<UNet> = None;

@@ -445,6 +445,19 @@ pub fn write_atomic(
     persist_atomic(path, write).map_err(|error| WriteError { path: path.to_path_buf(), error })
 }
 
+/// Creates the folder `dir` and the folders above it; an error names it, and the file in the
+/// way when a file holds its name or that of a folder above it (an `--out` given a file).
+pub fn create_folder(dir: &Path) -> Result<(), MeshError> {
+    std::fs::create_dir_all(dir).map_err(|error| {
+        let error = match dir.ancestors().find(|a| a.is_file()) {
+            Some(file) if file == dir => std::io::Error::new(error.kind(), "a file, not a folder"),
+            Some(file) => std::io::Error::new(error.kind(), format!("{} is a file, not a folder", file.display())),
+            None => error,
+        };
+        MeshError::Io { path: dir.display().to_string(), error }
+    })
+}
+
 /// [`write_atomic`] of a whole buffer.
 pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     write_atomic(path, |w| w.write_all(bytes))
@@ -797,6 +810,19 @@ pub fn write_pvd(path: impl AsRef<Path>, steps: &[(f64, String)]) -> Result<(), 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A folder is made with the folders above it; a file in the way is named.
+    #[test]
+    fn a_file_in_a_folder_s_way_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        create_folder(&dir.path().join("a/b")).unwrap();
+        assert!(dir.path().join("a/b").is_dir());
+        std::fs::write(dir.path().join("f"), "").unwrap();
+        let e = create_folder(&dir.path().join("f")).unwrap_err().to_string();
+        assert!(e.ends_with("f: a file, not a folder"), "{e}");
+        let e = create_folder(&dir.path().join("f/g")).unwrap_err().to_string();
+        assert!(e.ends_with(&format!("f/g: {} is a file, not a folder", dir.path().join("f").display())), "{e}");
+    }
 
     /// Every extension of [`SURFACE_EXTENSIONS`] has a reader (a missing file is an I/O error,
     /// not an unknown extension), and no other.
