@@ -37,8 +37,8 @@ pub struct ServeArgs {
     pub assimilate: Option<PathBuf>,
     /// Most wall time of a cloud's registration (ms), its rigid pre-alignment included: a frame past it stops (a FEM's
     /// solve under way at its next iteration), answers with its estimate so far and a warning, and the next cloud
-    /// goes on from it, so that no cloud holds the stream for long (the FEMs' first frames on the
-    /// demo take 0.25–0.41 s; a stream's next frames tens of ms).
+    /// goes on from it, so that no cloud holds the stream for long (a FEM's first frame, from rest,
+    /// takes several times as long as a stream's next frames).
     #[arg(long, default_value_t = live::TIME_BUDGET_MS, value_name = "MS")]
     pub time_budget_ms: f64,
     /// Records each client's stream in this folder, as it goes: `client-NNN.jsonl`, one line of

@@ -116,6 +116,18 @@ impl Route {
     }
 }
 
+/// The edges of `surface` that border a single triangle, and its edges in all.
+fn open_edges(surface: &TriSurface) -> (usize, usize) {
+    let mut uses = std::collections::HashMap::<(usize, usize), usize>::new();
+    for t in &surface.triangles {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *uses.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    (uses.values().filter(|&&n| n == 1).count(), uses.len())
+}
+
 /// A closed, outward oriented 2-manifold from a surface as a segmentation tool exported it: by
 /// local repair ([`repair_surface`]) when it can mend it, otherwise through voxels
 /// ([`rebuild_surface`]). Refused: no triangles, out-of-range indices, non-finite coordinates,
@@ -134,7 +146,22 @@ pub fn repair_or_rebuild(
                 MeshError::Invalid(m) => m,
                 other => other.to_string(),
             };
-            let (rebuilt, report) = rebuild_surface(surface, reason, rebuild)?;
+            // Both reasons: the local one is often the cause (a hole too large to close), the
+            // voxels' failure what followed from it.
+            let (rebuilt, report) = rebuild_surface(surface, reason.clone(), rebuild).map_err(|e| {
+                let (open, edges) = open_edges(surface);
+                let open = match open {
+                    0 => String::new(),
+                    n => format!(
+                        "; {n} of its {edges} edges border a single triangle: the surface is open, more than the \
+                         holes local repair fills (a part missing, cut off?)"
+                    ),
+                };
+                MeshError::Invalid(format!(
+                    "local repair cannot mend it ({reason}), and rebuilt through voxels: {}{open}",
+                    e.message()
+                ))
+            })?;
             Ok((rebuilt, Route::Volumetric(report)))
         }
     }
@@ -174,7 +201,7 @@ pub fn rebuild_surface(
     let mask = voxelise_surface(surface, voxel)?;
     if !mask.inside.contains(&true) {
         return Err(MeshError::Invalid(format!(
-            "the surface encloses no volume at {} voxels (flat or open on every side): not an organ",
+            "the surface encloses no volume at voxels of {} (its unit) (flat or open on every side): not an organ",
             number(voxel)
         )));
     }
@@ -189,8 +216,9 @@ pub fn rebuild_surface(
         )));
     }
     // Refused there when it holds several pieces of similar size.
-    let (rebuilt, extract) = mask_surface(&mask, &options.extract)
-        .map_err(|e| MeshError::Invalid(format!("the surface, voxelised at {}: {}", number(voxel), e.message())))?;
+    let (rebuilt, extract) = mask_surface(&mask, &options.extract).map_err(|e| {
+        MeshError::Invalid(format!("the surface, voxelised at {} (its unit): {}", number(voxel), e.message()))
+    })?;
     let bvh = SurfaceBvh::new(surface)?;
     let distances: Vec<f64> = rebuilt.vertices.par_iter().map(|&p| bvh.distance(p)).collect();
     let mean_distance = distances.iter().sum::<f64>() / distances.len() as f64;

@@ -687,7 +687,11 @@ impl Deformer for NetworkDeformer {
     fn deform(&mut self, observations: &Observations, previous: &[f64], _iteration: usize) -> Result<Vec<f64>> {
         let seen = self.observed_inputs(observations);
         if !seen.contains(&true) {
-            return Err(RegisterError::Invalid("no cloud point matches the network's input surface".into()));
+            return Err(RegisterError::Invalid(
+                "no cloud point lies near the network's input surface: the cloud is away from the organ (in another \
+                 frame, or shifted: a rigid pre-alignment, --rigid, aligns it first)"
+                    .into(),
+            ));
         }
         let surface = self.surface_estimate(observations, previous);
         let (u, input) = self.predict_seen(&surface, self.partial.then_some(seen.as_slice()))?;
