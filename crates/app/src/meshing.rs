@@ -212,8 +212,9 @@ pub struct OrganInput {
     pub frame: Option<Frame>,
     /// Whether it is a labelmap's label (a clean surface, in mm).
     pub labelmap: bool,
-    /// Its unit when known: a labelmap's millimetre, or the one given ([`OrganInput::unit`]).
-    unit: Option<LengthUnit>,
+    /// Its unit when known, and how: a labelmap's millimetre, the one given, or the one its
+    /// file's header names ([`OrganInput::unit`]).
+    unit: Option<(LengthUnit, &'static str)>,
     /// What was read, each a topic (`labelmap`, `warning`, `units`) and a line, in order.
     pub notes: Vec<(&'static str, String)>,
     /// What the extraction of a labelmap's label did (none for a surface file).
@@ -243,7 +244,7 @@ impl OrganInput {
             let organ = read_labelmap_surface(path, label, units, extract)?;
             let mut notes: Vec<_> = organ.lines().into_iter().map(|l| ("labelmap", l)).collect();
             notes.extend(organ.warnings.iter().map(|w| ("warning", w.clone())));
-            let (frame, unit) = (organ.scanner_frame(), Some(LengthUnit::Millimetre));
+            let (frame, unit) = (organ.scanner_frame(), Some((LengthUnit::Millimetre, "the labelmap's")));
             let extract = Some(organ.extract);
             return Ok(OrganInput { surface: organ.surface, frame, labelmap: true, unit, notes, extract });
         }
@@ -251,15 +252,20 @@ impl OrganInput {
             bail!("--label {label} chooses a label of a labelmap ({LABELMAP_FORMATS}), not of {}", path.display());
         }
         let (surface, frame) = mesh::io::read_surface_with_frame(path)?;
-        Ok(OrganInput { surface, frame, labelmap: false, unit: units, notes: Vec::new(), extract: None })
+        // The unit its header names (Materialise's OBJ comment) where none is given.
+        let unit = match units {
+            Some(unit) => Some((unit, "given")),
+            None => mesh::io::surface_unit(path)?.map(|unit| (unit, "named by the file's header")),
+        };
+        Ok(OrganInput { surface, frame, labelmap: false, unit, notes: Vec::new(), extract: None })
     }
 
-    /// Its unit: a labelmap's millimetre, the one given, or the one detected from the surface's
-    /// size; noted.
+    /// Its unit: a labelmap's millimetre, the one given, the one its file's header names, or the
+    /// one detected from the surface's size; noted.
     pub fn unit(&mut self) -> Result<LengthUnit> {
         let (unit, how) = match self.unit {
-            Some(unit) if self.labelmap => (unit, "the labelmap's".to_string()),
-            Some(unit) => {
+            Some((unit, how)) if self.labelmap => (unit, how.to_string()),
+            Some((unit, how)) => {
                 let extent = unit.to_metres(largest_extent(&self.surface));
                 if !ORGAN_EXTENT_M.contains(&extent) {
                     // The units in which the file's numbers would make an organ.
@@ -279,7 +285,7 @@ impl OrganInput {
                         ),
                     ));
                 }
-                (unit, "given".to_string())
+                (unit, how.to_string())
             }
             None => {
                 let unit = detect_unit(&self.surface).map_err(|e| {
@@ -307,7 +313,7 @@ impl OrganInput {
                 (unit, format!("detected: largest extent {shown} in the file's unit; give --units otherwise"))
             }
         };
-        self.unit = Some(unit);
+        self.unit = Some((unit, "detected"));
         self.notes.push(("units", format!("{} ({how})", unit.symbol())));
         Ok(unit)
     }

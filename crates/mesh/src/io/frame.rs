@@ -165,10 +165,45 @@ pub fn frame_in_header(header: &str) -> Result<Option<Frame>, String> {
 /// array `SPACE` of a `.vtp` or `.vtu` file's field data. Other formats name none.
 pub fn surface_frame(path: impl AsRef<Path>) -> Result<Option<Frame>, MeshError> {
     let path = path.as_ref();
-    let kind = super::extension(path);
-    if kind == "vtp" || kind == "vtu" {
+    if matches!(super::extension(path).as_str(), "vtp" | "vtu") {
         return super::vtk_xml::xml_frame(path);
     }
+    match header_text(path)? {
+        Some(header) => frame_in_header(&header).map_err(|message| MeshError::parse(path, message)),
+        None => Ok(None),
+    }
+}
+
+/// The unit an OBJ file's header comment names, as Materialise Mimics and 3-matic write it (and
+/// 3D Slicer reads it): `vertex coordinates are measured in units, where 1 unit = 10.000000 mm`
+/// (here cm); `None` for other files and an OBJ without it; an error for a unit that is none of
+/// m, cm, mm and µm.
+pub fn surface_unit(path: impl AsRef<Path>) -> Result<Option<LengthUnit>, MeshError> {
+    const KEY: &str = "vertex coordinates are measured in units, where 1 unit =";
+    let path = path.as_ref();
+    if super::extension(path) != "obj" {
+        return Ok(None);
+    }
+    let Some(header) = header_text(path)?.map(|h| h.to_ascii_lowercase()) else { return Ok(None) };
+    let Some(at) = header.find(KEY) else { return Ok(None) };
+    let mut words = header[at + KEY.len()..].split_whitespace();
+    let (scale, unit) = (words.next().and_then(|w| w.parse::<f64>().ok()), words.next());
+    let named = match (scale, unit) {
+        (Some(scale), Some("mm")) => {
+            LengthUnit::ALL.into_iter().find(|u| (u.to_metres(1e3) / scale - 1.0).abs() < 1e-6)
+        }
+        _ => None,
+    };
+    named.map(Some).ok_or_else(|| {
+        let line = header[at..].lines().next().unwrap_or_default();
+        MeshError::parse(path, format!("its header says \"{line}\": a unit none of m, cm, mm, µm; convert the file"))
+    })
+}
+
+/// The header of a surface file where [`surface_frame`] and [`surface_unit`] look (`None` for a
+/// format without one).
+fn header_text(path: &Path) -> Result<Option<String>, MeshError> {
+    let kind = super::extension(path);
     if !["stl", "vtk", "obj", "ply"].contains(&kind.as_str()) {
         return Ok(None);
     }
@@ -190,10 +225,10 @@ pub fn surface_frame(path: impl AsRef<Path>) -> Result<Option<Frame>, MeshError>
         "obj" => comments(b"#"),
         _ => comments(b"comment"),
     };
-    frame_in_header(&String::from_utf8_lossy(&header)).map_err(|message| MeshError::parse(path, message))
+    Ok(Some(String::from_utf8_lossy(&header).into_owned()))
 }
 
-/// How much of a file [`surface_frame`] reads.
+/// How much of a file [`header_text`] reads.
 const HEADER_BYTES: usize = 1024;
 
 /// Reads a surface ([`super::read_surface`]) and the frame it names ([`surface_frame`]); a
@@ -238,6 +273,26 @@ pub fn write_surface_in_frame(path: impl AsRef<Path>, surface: &TriSurface, fram
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Materialise's unit comment in an OBJ names its unit; one of no unit augsim knows is refused;
+    /// other files, and an OBJ without it, name none.
+    #[test]
+    fn an_obj_names_its_unit_as_mimics_writes_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let obj = |name: &str, comment: &str| {
+            let path = dir.path().join(name);
+            std::fs::write(&path, format!("# Mimics export\n{comment}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")).unwrap();
+            surface_unit(path)
+        };
+        let says = |scale: &str| format!("# Vertex coordinates are measured in units, where 1 unit = {scale} mm");
+        assert_eq!(obj("cm.obj", &says("10.000000")).unwrap(), Some(LengthUnit::Centimetre));
+        assert_eq!(obj("m.obj", &says("1000.000000")).unwrap(), Some(LengthUnit::Metre));
+        assert_eq!(obj("mm.obj", &says("1")).unwrap(), Some(LengthUnit::Millimetre));
+        assert_eq!(obj("plain.obj", "# no unit").unwrap(), None);
+        assert_eq!(obj("cm.stl", &says("10")).unwrap(), None);
+        let e = obj("inch.obj", &says("25.4")).unwrap_err().to_string();
+        assert!(e.contains("1 unit = 25.4 mm\": a unit none of m, cm, mm, µm"), "{e}");
+    }
 
     #[test]
     fn lps_and_ras_differ_by_the_sign_of_x_and_y() {

@@ -85,7 +85,7 @@ use crate::{Cells, Mesh, MeshError, Point, TriSurface, HEX_TO_TETS};
 pub use abaqus::read_inp;
 pub use csv::csv_field;
 pub use frame::{
-    frame_in_header, read_surface_with_frame, surface_frame, write_surface_in_frame, Frame, FrameChange,
+    frame_in_header, read_surface_with_frame, surface_frame, surface_unit, write_surface_in_frame, Frame, FrameChange,
     GivenCoordinates,
 };
 pub use gmsh::{read_gmsh, write_msh};
