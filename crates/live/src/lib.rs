@@ -1069,8 +1069,6 @@ fn answer(
 mod tests {
     use super::*;
 
-    /// A status of thousands of targets' σ would not fit in a STRING: σ is left out, with a
-    /// warning; a short one is sent as it is.
     /// A reset holds for the first cloud received after it, not for one already waiting when it
     /// came; a cloud that replaces a waiting one counts it, and keeps its reset.
     #[test]
@@ -1097,6 +1095,8 @@ mod tests {
         assert_eq!(take(&mut mailbox), None);
     }
 
+    /// A status of thousands of targets' σ would not fit in a STRING: σ is left out, with a
+    /// warning; a short one is sent as it is.
     #[test]
     fn an_oversized_status_leaves_sigma_out() {
         let status = |k: usize| serde_json::json!({"frame": 1, "warnings": [], "target_sigma": vec![1.234_567_89; k]});

@@ -12,7 +12,6 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
-use anyhow::Context;
 use app::assimilation::{AssimilationChoice, Experiment, OnlineFilter};
 use app::output::write_registered_cloud;
 use app::registration::{RegistrationChoice, RegistrationSpec, TargetsSpec};
