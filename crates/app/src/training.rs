@@ -260,6 +260,13 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
     }
     let dataset = Dataset::open(&args.dataset)?;
     let manifest = dataset.manifest();
+    if !manifest.complete {
+        progress.line(&format!(
+            "warning    the dataset is unfinished ({} draws held: its generation was stopped, or runs now): the \
+             model learns from these alone; `augsim generate` with the same arguments finishes it",
+            manifest.num_samples
+        ));
+    }
     args.corruption.corruption().check_scale(manifest.statistics.inputs.rms_norm, manifest.units.input)?;
     let all = dataset.load_all()?;
     let (split, [train, validation, test]) = args.split.policy().apply(&all)?;

@@ -97,5 +97,5 @@ fn discrepancy_from_the_command_line() {
         "-o",
         d.join("dof").to_str().unwrap(),
     ]);
-    assert!(!ok && text.contains("degrees of freedom"), "{text}");
+    assert!(!ok && text.contains("'--discrepancy-dof <D>': expected a finite number at least 1, got 0"), "{text}");
 }

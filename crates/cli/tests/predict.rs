@@ -207,6 +207,28 @@ magnitude = [0.05, 0.2]
     // A network fine-tuned from another keeps its architecture: a shape asked for is refused.
     let e = augsim_err(&["train", "data", "--out", "tuned", "--init", "net", "--channels", "4"], d);
     assert!(e.contains("--channels: a network fine-tuned from --init keeps the pre-trained one's architecture"), "{e}");
+    // A network that cannot be built is refused before its folder is made.
+    let e = augsim_err(&["train", "data", "--out", "no_net", "--channels", "0"], d);
+    assert!(e.contains("channel counts must be at least 1") && !d.join("no_net").exists(), "{e}");
+    // A dataset whose generation was stopped trains, with a warning.
+    std::fs::create_dir_all(d.join("unfinished")).unwrap();
+    for entry in std::fs::read_dir(d.join("data")).unwrap().flatten() {
+        let to = d.join("unfinished").join(entry.file_name());
+        match entry.path().is_dir() {
+            true => {
+                std::fs::create_dir_all(&to).unwrap();
+                for file in std::fs::read_dir(entry.path()).unwrap().flatten() {
+                    std::fs::copy(file.path(), to.join(file.file_name())).unwrap();
+                }
+            }
+            false => drop(std::fs::copy(entry.path(), to).unwrap()),
+        }
+    }
+    let manifest = std::fs::read_to_string(d.join("unfinished/manifest.json")).unwrap();
+    std::fs::write(d.join("unfinished/manifest.json"), manifest.replace("\"complete\": true", "\"complete\": false"))
+        .unwrap();
+    let text = augsim(&["train", "unfinished", "--out", "rom_unfinished", "--method", "rom", "--test-samples", "1"], d);
+    assert!(text.contains("warning    the dataset is unfinished (6 draws held"), "{text}");
 
     // A point outside the grid, a malformed line and a grid tensor of the wrong shape.
     std::fs::write(d.join("far.csv"), "5,5,5,0,0,1\n").unwrap();

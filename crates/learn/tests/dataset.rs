@@ -82,6 +82,11 @@ fn npy_round_trip_and_header() {
     assert_eq!(m.shape, vec![7]);
     assert_eq!(m.data, NpyData::U8(vec![0, 1, 1, 0, 1, 0, 0]));
     assert_eq!(npy::read_shape(&q).unwrap(), vec![7]);
+    // A file cut short: its shape is refused too, not only its data.
+    let bytes = std::fs::read(&q).unwrap();
+    std::fs::write(&q, &bytes[..bytes.len() - 3]).unwrap();
+    let e = npy::read_shape(&q).unwrap_err().to_string();
+    assert!(e.contains("truncated: shape [7] of |u1 needs 7 data bytes, the file has 4"), "{e}");
 }
 
 /// An .npy file as numpy writes it (v1.0 header padded to 64 bytes).

@@ -133,8 +133,13 @@ fn save_then_load_gives_identical_predictions() {
     let e = TrainedModel::load(&path).unwrap_err().to_string();
     assert!(e.contains("m.safetensors"), "{e}");
     std::fs::write(dir.path().join("m.safetensors"), b"garbage").unwrap();
-    std::fs::write(&path, json).unwrap();
+    std::fs::write(&path, &json).unwrap();
     assert!(TrainedModel::load(&path).is_err());
+    // Another run's weights under this model.json (a run stopped between its two writes): refused.
+    TrainedModel { net: UNet::new(&config, 4).unwrap(), ..model }.save(&path).unwrap();
+    std::fs::write(&path, &json).unwrap();
+    let e = TrainedModel::load(&path).unwrap_err().to_string();
+    assert!(e.contains("m.safetensors is not the weights it describes"), "{e}");
 }
 
 /// The shipped models load, and their weights serialize back to the very bytes of their files.

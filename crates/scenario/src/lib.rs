@@ -318,7 +318,7 @@ mod tests {
             dir: ".".into(),
         };
         let err = StaticScenario::from_text(&source).unwrap_err().to_string();
-        assert!(err.contains("a scenario of kind `dataset`; a `static` scenario is needed"), "{err}");
+        assert!(err.contains("a scenario of kind `dataset`; one of kind `static` is needed"), "{err}");
         let source = ScenarioText {
             text: "kind = \"static\"\nname = \"x\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\n\
                    cells = [1, 1, 1]\nelement = \"hex\"\n[material]\nlaw = \"svk\"\nyoung = 1.0\npoisson = 0.3\n\

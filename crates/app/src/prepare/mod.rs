@@ -317,6 +317,8 @@ pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgr
 fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgress) -> Result<PrepareState> {
     let options = absolute(options)?;
     mesh::io::create_folder(dir)?;
+    // What a killed run left half-written goes: its step is done again.
+    mesh::io::remove_stale_temporaries(dir);
     let state_path = dir.join(STATE_FILE);
     let mut state = if state_path.exists() {
         let mut state: PrepareState = serde_json::from_str(&std::fs::read_to_string(&state_path)?)

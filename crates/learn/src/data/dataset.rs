@@ -755,6 +755,8 @@ impl DatasetWriter {
         if !dir.join(MANIFEST_FILE).exists() {
             return DatasetWriter::from_manifest(dir, lock, Manifest::new(&spec), true);
         }
+        // What a killed run left half-written goes; its shard is made again.
+        mesh::io::remove_stale_temporaries(dir);
         let dataset = Dataset::open(dir)?;
         let existing = dataset.manifest.spec();
         let grows = spec.grows(&existing) && dataset.manifest.chosen.is_none();
@@ -781,6 +783,7 @@ impl DatasetWriter {
             Dataset::open(dir)?; // says what is missing
         }
         let lock = lock_for_writing(dir)?;
+        mesh::io::remove_stale_temporaries(dir);
         let dataset = Dataset::open(dir)?;
         if dataset.manifest.spec() != *spec {
             return Err(refusal(&dataset, spec, "cannot add draws to this dataset"));

@@ -19,7 +19,7 @@ use rand::{Rng, SeedableRng};
 use safetensors::tensor::{Dtype, SafeTensors, TensorView};
 use serde::{Deserialize, Serialize};
 
-use crate::data::corrupt::Corruption;
+use crate::data::corrupt::{splitmix64, Corruption};
 use crate::data::dataset::Normalization;
 use crate::data::grid::{GridPlacement, GridShape, CHANNELS, LAYOUT};
 use crate::data::split::{Provenance, Split};
@@ -535,7 +535,23 @@ struct ModelFile {
     input_unit: FieldUnit,
     target_unit: FieldUnit,
     weights: String,
+    /// [`weights_digest`] of the weights file: a pair written by two runs (one stopped between
+    /// its two writes) is refused. Models saved before it was recorded have none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    weights_digest: Option<String>,
     training: Option<TrainingInfo>,
+}
+
+/// A digest of a weights file's bytes (SplitMix64 over its 8-byte words, in hex): not for
+/// security, to tell one file from another.
+fn weights_digest(bytes: &[u8]) -> String {
+    let mut words = bytes.chunks(8);
+    let digest = words.by_ref().fold(splitmix64(bytes.len() as u64), |h, word| {
+        let mut padded = [0u8; 8];
+        padded[..word.len()].copy_from_slice(word);
+        splitmix64(h ^ u64::from_le_bytes(padded))
+    });
+    format!("{digest:016x}")
 }
 
 /// The `format` of a U-Net's `model.json`.
@@ -573,7 +589,8 @@ impl TrainedModel {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .ok_or_else(|| LearnError::InvalidInput(format!("model path {} has no file name", json_path.display())))?;
-        write_atomic_bytes(&weights_path, &self.net.to_safetensors()?)?;
+        let weights = self.net.to_safetensors()?;
+        write_atomic_bytes(&weights_path, &weights)?;
         let file = ModelFile {
             format: MODEL_FORMAT.into(),
             version: MODEL_VERSION,
@@ -585,6 +602,7 @@ impl TrainedModel {
             input_unit: self.input_unit,
             target_unit: self.target_unit,
             weights: weights_name,
+            weights_digest: Some(weights_digest(&weights)),
             training: self.training.clone(),
         };
         let text = serde_json::to_string_pretty(&file)
@@ -612,6 +630,16 @@ impl TrainedModel {
         file.normalization.validate().map_err(|e| LearnError::model(json_path, e.to_string()))?;
         let weights_path = weights_path(json_path, &file.weights)?;
         let bytes = read(&weights_path)?;
+        if file.weights_digest.as_ref().is_some_and(|d| *d != weights_digest(&bytes)) {
+            return Err(LearnError::model(
+                json_path,
+                format!(
+                    "{} is not the weights it describes (written by another run: one stopped between writing the \
+                     two files?): train again into this folder (it resumes), or use the run's own pair",
+                    weights_path.display()
+                ),
+            ));
+        }
         let net = UNet::from_safetensors(&file.unet, &bytes, &weights_path)?;
         Ok(TrainedModel {
             config: file.unet,

@@ -338,6 +338,7 @@ impl ReducedModel {
     /// written atomically.
     pub fn save(&self, dir: &Path) -> Result<()> {
         mesh::io::create_folder(dir)?;
+        mesh::io::remove_stale_temporaries(dir);
         let (modes, entries) = (self.basis.nrows(), self.input_entries.len());
         let mut input_mask = vec![0u8; self.grid.field_len()];
         self.input_entries.iter().for_each(|&e| input_mask[e] = 1);

@@ -548,6 +548,8 @@ pub fn train(
     // Made once the settings are known to build a network: a refused run leaves no folder.
     let out = &options.out_dir;
     mesh::io::create_folder(out)?;
+    // What a killed run left half-written goes: the run resumes from its last checkpoint.
+    mesh::io::remove_stale_temporaries(out);
     let mut adam = Adam::new(net.values().len());
     let mut state = CheckpointState::new(config, fingerprint(train, val, init, config)?);
     let mut best: Option<UNet> = None;

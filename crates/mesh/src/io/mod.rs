@@ -458,6 +458,23 @@ pub fn create_folder(dir: &Path) -> Result<(), MeshError> {
     })
 }
 
+/// Removes the temporary files an atomic write leaves when its process is killed mid-write
+/// (`.NAME.XXXXXX.tmp`, `.NAME.XXXXXX.tmp.png`) in `dir` and the folders in it; returns how many.
+/// For a job that resumes in `dir`, which it alone writes.
+pub fn remove_stale_temporaries(dir: &Path) -> usize {
+    let Ok(entries) = std::fs::read_dir(dir) else { return 0 };
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        let (path, name) = (entry.path(), entry.file_name().to_string_lossy().into_owned());
+        if entry.file_type().is_ok_and(|t| t.is_dir()) {
+            removed += remove_stale_temporaries(&path);
+        } else if name.starts_with('.') && (name.ends_with(".tmp") || name.ends_with(".tmp.png")) {
+            removed += usize::from(std::fs::remove_file(&path).is_ok());
+        }
+    }
+    removed
+}
+
 /// [`write_atomic`] of a whole buffer.
 pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     write_atomic(path, |w| w.write_all(bytes))
@@ -810,6 +827,24 @@ pub fn write_pvd(path: impl AsRef<Path>, steps: &[(f64, String)]) -> Result<(), 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What a killed write leaves is removed, in the folders below too; other files are kept.
+    #[test]
+    fn stale_temporaries_are_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let shard = dir.path().join("shard_00001");
+        std::fs::create_dir_all(&shard).unwrap();
+        for name in [".model.json.Ab12Cd.tmp", "shard_00001/.inputs.npy.x1Y2z3.tmp", ".curve.png.q9W8e7.tmp.png"] {
+            std::fs::write(dir.path().join(name), "").unwrap();
+        }
+        for name in ["model.json", "shard_00001/inputs.npy", ".hidden"] {
+            std::fs::write(dir.path().join(name), "").unwrap();
+        }
+        assert_eq!(remove_stale_temporaries(dir.path()), 3);
+        assert_eq!(remove_stale_temporaries(dir.path()), 0);
+        let kept = ["model.json", "shard_00001/inputs.npy", ".hidden"];
+        assert!(kept.iter().all(|name| dir.path().join(name).exists()));
+    }
 
     /// A folder is made with the folders above it; a file in the way is named.
     #[test]

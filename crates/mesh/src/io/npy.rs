@@ -161,15 +161,35 @@ pub fn read_npy(path: &Path) -> Result<NpyArray> {
     parse(&bytes).map_err(|message| invalid(path, message))
 }
 
-/// Reads only the shape of an `.npy` file from its header.
+/// Reads the shape of an `.npy` file from its header, without its data; a file whose length is
+/// not that of the data its header announces (truncated) is an error.
 pub fn read_shape(path: &Path) -> Result<Vec<usize>> {
     use std::io::Read;
     let err = |message: String| invalid(path, message);
     let mut file = std::fs::File::open(path).map_err(|e| unread(path, e))?;
     let mut head = Vec::new();
     Read::take(&mut file, 65536 + 12).read_to_end(&mut head).map_err(|e| unread(path, e))?;
-    let (header, _) = split_header(&head).map_err(err)?;
-    Ok(parse_header(header).map_err(err)?.2)
+    let length = file.metadata().map_err(|e| unread(path, e))?.len() as usize;
+    let (header, data) = split_header(&head).map_err(err)?;
+    let (descr, _, shape) = parse_header(header).map_err(err)?;
+    check_data_length(&descr, &shape, length - (head.len() - data.len())).map_err(err)?;
+    Ok(shape)
+}
+
+/// Refuses `data` bytes that are not those of an array of `shape` and `descr`.
+fn check_data_length(descr: &str, shape: &[usize], data: usize) -> std::result::Result<(), String> {
+    let (scalar, _) = element(descr)?;
+    let needed = shape
+        .iter()
+        .try_fold(scalar.size(), |n, &d| n.checked_mul(d))
+        .ok_or_else(|| format!("shape {shape:?} of {descr} holds more bytes than any file can: a damaged header?"))?;
+    if data < needed {
+        return Err(format!("truncated: shape {shape:?} of {descr} needs {needed} data bytes, the file has {data}"));
+    }
+    if data > needed {
+        return Err(format!("{} trailing bytes after the data of shape {shape:?} ({descr})", data - needed));
+    }
+    Ok(())
 }
 
 /// Splits the file into the header dictionary text and the data bytes.
@@ -296,20 +316,7 @@ fn parse(bytes: &[u8]) -> std::result::Result<NpyArray, String> {
     let (header, data) = split_header(bytes)?;
     let (descr, fortran, shape) = parse_header(header)?;
     let (scalar, big_endian) = element(&descr)?;
-    let item = scalar.size();
-    let needed = shape
-        .iter()
-        .try_fold(item, |n, &d| n.checked_mul(d))
-        .ok_or_else(|| format!("shape {shape:?} of {descr} holds more bytes than any file can: a damaged header?"))?;
-    if data.len() < needed {
-        return Err(format!(
-            "truncated: shape {shape:?} of {descr} needs {needed} data bytes, the file has {}",
-            data.len()
-        ));
-    }
-    if data.len() > needed {
-        return Err(format!("{} trailing bytes after the data of shape {shape:?} ({descr})", data.len() - needed));
-    }
+    check_data_length(&descr, &shape, data.len())?;
     let data = match scalar {
         Scalar::F32 => NpyData::F32(
             data.chunks_exact(4)
@@ -324,7 +331,7 @@ fn parse(bytes: &[u8]) -> std::result::Result<NpyArray, String> {
                 .collect(),
         ),
         Scalar::U8 => NpyData::U8(data.to_vec()),
-        _ => NpyData::F64(data.chunks_exact(item).map(|c| scalar.decode(c, big_endian)).collect()),
+        _ => NpyData::F64(data.chunks_exact(scalar.size()).map(|c| scalar.decode(c, big_endian)).collect()),
     };
     // Fortran order stores the first axis fastest: taken back into C order.
     let data = if fortran { data.reordered(&fortran_to_c(&shape)) } else { data };
