@@ -408,6 +408,14 @@ pub fn train_unet(
         compute: run.compute,
     };
     let outcome = learn::train(train, validation, &init, config, &options, progress)?;
+    if !outcome.completed {
+        bail!(
+            "interrupted at step {} of {}: its checkpoint is written in {}; the same command resumes from it",
+            outcome.iterations_done,
+            config.iterations,
+            options.out_dir.display()
+        );
+    }
     crate::curve::plot_learning_curve(&options.out_dir.join(crate::curve::CURVE_PNG), &outcome.curve)?;
     Ok(outcome)
 }

@@ -15,8 +15,10 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
     Ok(())
 }
 
-/// `augsim train`.
+/// `augsim train`; Ctrl-C (or SIGTERM) stops it at its next step with its checkpoint written.
 pub fn train(args: &TrainArgs) -> Result<()> {
+    #[cfg(unix)]
+    crate::signals::on_stop_signals(crate::signals::request_interrupt);
     print_lines(&Bar::during("steps", |bar| app::training::train(args, bar))?);
     Ok(())
 }

@@ -9,6 +9,7 @@ mod mesh_cmd;
 mod prepare_cmd;
 mod register_cmd;
 mod serve_cmd;
+mod signals;
 mod solve;
 
 use std::path::PathBuf;

@@ -25,11 +25,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     print_lines(&setup.lines);
     let address = listener.local_addr().map_or(address, |a| a.to_string());
     #[cfg(unix)]
-    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
-    unsafe {
-        libc::signal(libc::SIGINT, request_stop as *const () as libc::sighandler_t);
-        libc::signal(libc::SIGTERM, request_stop as *const () as libc::sighandler_t);
-    }
+    crate::signals::on_stop_signals(request_stop);
     println!(
         "listening  {address} (OpenIGTLink; clouds as POLYDATA or POINT named `cloud`, in {}); Ctrl-C stops",
         setup.options.coordinates.unit

@@ -11,6 +11,47 @@ fn augsim(args: &[&str], dir: &Path) -> String {
     text
 }
 
+/// Runs `augsim args` until `ready` holds (polled), then sends it SIGINT; its output once it ends.
+#[cfg(unix)]
+fn interrupted(args: &[&str], dir: &Path, ready: impl Fn() -> bool) -> (bool, String) {
+    use std::process::Stdio;
+    let child = Command::new(env!("CARGO_BIN_EXE_augsim"))
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let began = std::time::Instant::now();
+    while !ready() {
+        assert!(began.elapsed().as_secs() < 300, "augsim {args:?} never got ready");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    // SAFETY: a signal to the child process this test spawned.
+    assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) }, 0);
+    let out = child.wait_with_output().unwrap();
+    (out.status.success(), format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr)))
+}
+
+/// Ctrl-C during a training writes its checkpoint and says so; the same command resumes from it.
+#[cfg(unix)]
+fn ctrl_c_stops_a_training_with_its_checkpoint_and_the_next_run_resumes(d: &Path) {
+    let args = ["train", "data", "--out", "long", "--iterations", "100000000", "--channels", "2", "--depth", "1"];
+    let args = [&args[..], &["--test-samples", "2", "--validate-every", "5"]].concat();
+    let checkpoint = d.join("long/checkpoint.bin");
+    let (ok, text) = interrupted(&args, d, || checkpoint.exists());
+    let step = |text: &str| -> u64 {
+        let at = text.find("interrupted at step ").unwrap_or_else(|| panic!("{text}")) + "interrupted at step ".len();
+        text[at..].split(' ').next().unwrap().parse().unwrap()
+    };
+    assert!(!ok && text.contains("its checkpoint is written in long; the same command resumes from it"), "{text}");
+    let first = step(&text);
+    let written = std::fs::metadata(&checkpoint).unwrap().modified().unwrap();
+    let (ok, text) = interrupted(&args, d, || std::fs::metadata(&checkpoint).unwrap().modified().unwrap() != written);
+    assert!(!ok && text.contains(&format!("resuming long/checkpoint.bin at step {first} of 100000000")), "{text}");
+    assert!(step(&text) > first, "{text}");
+}
+
 fn augsim_err(args: &[&str], dir: &Path) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_augsim")).args(args).current_dir(dir).output().unwrap();
     assert!(!out.status.success(), "augsim {args:?} should fail");
@@ -68,6 +109,8 @@ magnitude = [0.05, 0.2]
     assert!(text.contains("batch      3 samples per step: the whole training set (--batch 4 is more"), "{text}");
     assert!(text.contains("best       validation"), "{text}");
     assert!(d.join("net/curve.png").is_file(), "the learning curve is drawn beside the model");
+    #[cfg(unix)]
+    ctrl_c_stops_a_training_with_its_checkpoint_and_the_next_run_resumes(d);
 
     // The model records its split; eval reports on its test samples only.
     let text = augsim(&["eval", "net/model.json", "data", "--out", "eval"], d);

@@ -196,7 +196,8 @@ pub struct TrainOutcome {
     pub curve: Vec<CurveRow>,
     /// Iterations done (including those of a resumed checkpoint).
     pub iterations_done: usize,
-    /// Whether all iterations ran (false after `stop_after`).
+    /// Whether all iterations ran (false after `stop_after`, or when interrupted:
+    /// [`fem::interrupt`]).
     pub completed: bool,
     /// Path of the model JSON (written only when `completed`).
     pub model_path: PathBuf,
@@ -613,7 +614,9 @@ pub fn train(
             }
         }
         progress.advance(state.iteration as u64, total, &note);
-        let stop = options.stop_after.is_some_and(|s| state.iteration >= s) && !done;
+        // Asked for, or interrupted (Ctrl-C: `fem::interrupt`): checkpointed, returned unfinished.
+        let stop =
+            (options.stop_after.is_some_and(|s| state.iteration >= s) || fem::interrupt::check().is_err()) && !done;
         if state.iteration.is_multiple_of(config.checkpoint_every) || done || stop {
             state.adam_steps = adam.moments.iter().map(|m| m.as_ref().map_or(0, |m| m.time)).collect();
             write_checkpoint(&checkpoint_path, &state, &net, &adam, best.as_ref())?;
