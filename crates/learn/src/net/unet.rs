@@ -545,8 +545,7 @@ struct ModelFile {
 /// A digest of a weights file's bytes (SplitMix64 over its 8-byte words, in hex): not for
 /// security, to tell one file from another.
 fn weights_digest(bytes: &[u8]) -> String {
-    let mut words = bytes.chunks(8);
-    let digest = words.by_ref().fold(splitmix64(bytes.len() as u64), |h, word| {
+    let digest = bytes.chunks(8).fold(splitmix64(bytes.len() as u64), |h, word| {
         let mut padded = [0u8; 8];
         padded[..word.len()].copy_from_slice(word);
         splitmix64(h ^ u64::from_le_bytes(padded))
