@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use crate::meshing::write_surface_in_mm;
 use anyhow::{Context, Result};
 use mesh::io::points::{write_markups_json, LabelledPoints};
-use mesh::io::{csv_field, write_atomic_bytes, Field, Frame, FrameChange};
+use mesh::io::{write_atomic_bytes, Field, Frame, FrameChange};
 use mesh::length::{mm, LengthUnit};
 use mesh::{Mesh, Point};
 use register::cloud::read_frames;
@@ -559,11 +559,15 @@ pub fn write_case(dir: &Path, case: &SyntheticCase) -> Result<()> {
 pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> Result<()> {
     let registered: Vec<&Registered> = rows.iter().filter_map(|r| r.result.as_ref().ok()).collect();
     let peak = case.peak();
-    let mut csv = format!("method,{},error\n", COMPARISON_COLUMNS.map(|(column, _)| column).join(","));
-    for (name, values, error) in comparison_rows(rows) {
-        let fields = values.map(|v| v.map_or(String::new(), |v| v.to_string()));
-        csv.push_str(&format!("{},{},{}\n", csv_field(&name), fields.join(","), csv_field(&error)));
-    }
+    let header: Vec<&str> =
+        std::iter::once("method").chain(COMPARISON_COLUMNS.map(|(column, _)| column)).chain(["error"]).collect();
+    let table: Vec<Vec<String>> = comparison_rows(rows)
+        .into_iter()
+        .map(|(name, values, error)| {
+            let fields = values.map(|v| v.map_or(String::new(), |v| v.to_string()));
+            std::iter::once(name).chain(fields).chain([error]).collect()
+        })
+        .collect();
     for reg in &registered {
         let (s, outcome) = (&reg.summary, reg.peak(case));
         let method_dir = dir.join(slug(&s.method));
@@ -594,7 +598,7 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
         )?;
     }
     mesh::io::create_folder(dir)?;
-    write_atomic_bytes(&dir.join("comparison.csv"), csv.as_bytes())?;
+    mesh::io::csv::write_csv(&dir.join("comparison.csv"), &[], &header, table)?;
     let summaries: Vec<serde_json::Value> = rows
         .iter()
         .map(|r| match &r.result {

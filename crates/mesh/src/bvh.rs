@@ -21,7 +21,7 @@ use std::sync::OnceLock;
 
 use rayon::prelude::*;
 
-use crate::surface::area_vector;
+use crate::surface::{area_vector, centroid};
 use crate::{cross, dot, norm, sub, MeshError, Point, TriSurface};
 
 /// Triangles per leaf.
@@ -449,10 +449,6 @@ fn inner_moments(a: &Node, b: &Node) -> Node {
 /// The centre of a node's box.
 fn box_centre(b: &NodeBox) -> Point {
     std::array::from_fn(|d| 0.5 * (b.lo[d] + b.hi[d]))
-}
-
-fn centroid(p: [Point; 3]) -> Point {
-    std::array::from_fn(|d| (p[0][d] + p[1][d] + p[2][d]) / 3.0)
 }
 
 /// Signed solid angle of triangle `p` seen from `q` (Van Oosterom–Strackee):

@@ -257,8 +257,7 @@ pub fn repair_surface(surface: &TriSurface, options: &RepairOptions) -> Result<(
     if let Some(&(a, b)) =
         crossings.first().filter(|_| involved as f64 > options.max_crossing_fraction * repaired.triangles.len() as f64)
     {
-        let [p, q, r] = repaired.triangles[a].map(|k| repaired.vertices[k]);
-        let centre = std::array::from_fn(|d| (p[d] + q[d] + r[d]) / 3.0);
+        let centre = crate::surface::centroid(repaired.triangles[a].map(|k| repaired.vertices[k]));
         return Err(invalid(format!(
             "self-intersecting: triangles {a} and {b} cross ({} {}, {involved} of {} triangles, more than {} % \
              tolerated) near {} (numbering of the repaired surface); cannot be repaired automatically",

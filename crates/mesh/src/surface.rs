@@ -216,6 +216,11 @@ pub(crate) fn area_vector(p: [Point; 3]) -> Point {
     cross(sub(p[1], p[0]), sub(p[2], p[0])).map(|c| 0.5 * c)
 }
 
+/// The centroid of the triangle of corners `p`.
+pub(crate) fn centroid(p: [Point; 3]) -> Point {
+    std::array::from_fn(|d| (p[0][d] + p[1][d] + p[2][d]) / 3.0)
+}
+
 impl TriSurface {
     /// Total area of the triangles (m²).
     pub fn area(&self) -> f64 {

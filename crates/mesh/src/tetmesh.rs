@@ -980,8 +980,7 @@ fn surface_coverage(mesh: &Mesh, surface: &TriSurface) -> Result<Coverage, MeshE
         .map(|t| {
             let p = t.map(|k| surface.vertices[k]);
             let area = crate::norm(crate::surface::area_vector(p));
-            let centroid = std::array::from_fn(|d| (p[0][d] + p[1][d] + p[2][d]) / 3.0);
-            (area, if boundary.distance(centroid) > distance { area } else { 0.0 })
+            (area, if boundary.distance(crate::surface::centroid(p)) > distance { area } else { 0.0 })
         })
         .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
     let farthest = surface.vertices.par_iter().map(|&v| boundary.distance(v)).reduce(|| 0.0, f64::max);

@@ -153,9 +153,7 @@ impl ScenarioText {
         }
         let invalid = |e: &dyn std::fmt::Display| ScenarioError::invalid(&self.origin, e.to_string());
         let mut table: toml::Table = toml::from_str(&body).map_err(|e| invalid(&e))?;
-        if !anchor_landmark_files(&mut table, &self.dir) {
-            return toml::from_str(&body).map_err(|e| invalid(&e));
-        }
+        anchor_landmark_files(&mut table, &self.dir);
         // The table, its landmark files now starting at the scenario's directory; an error is
         // said as the text gives it, with its line (a table has none).
         toml::Value::Table(table).try_into().map_err(|e| match toml::from_str::<T>(&body) {
@@ -166,28 +164,25 @@ impl ScenarioText {
 }
 
 /// Makes the relative `file` of every `near` selection (landmarks, [`mesh::Near`]) start at
-/// `dir`, the scenario's directory; whether any changed.
-fn anchor_landmark_files(table: &mut toml::Table, dir: &Path) -> bool {
-    let mut changed = false;
+/// `dir`, the scenario's directory.
+fn anchor_landmark_files(table: &mut toml::Table, dir: &Path) {
     for (key, value) in table.iter_mut() {
         if key == "near" {
             if let Some(toml::Value::String(file)) = value.as_table_mut().and_then(|t| t.get_mut("file")) {
                 if Path::new(file.as_str()).is_relative() {
                     *file = dir.join(file.as_str()).to_string_lossy().into_owned();
-                    changed = true;
                 }
             }
         }
-        changed |= anchor_in_value(value, dir);
+        anchor_in_value(value, dir);
     }
-    changed
 }
 
-fn anchor_in_value(value: &mut toml::Value, dir: &Path) -> bool {
+fn anchor_in_value(value: &mut toml::Value, dir: &Path) {
     match value {
         toml::Value::Table(t) => anchor_landmark_files(t, dir),
-        toml::Value::Array(items) => items.iter_mut().fold(false, |changed, v| anchor_in_value(v, dir) | changed),
-        _ => false,
+        toml::Value::Array(items) => items.iter_mut().for_each(|v| anchor_in_value(v, dir)),
+        _ => {}
     }
 }
 
