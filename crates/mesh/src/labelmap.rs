@@ -187,6 +187,20 @@ fn shear_warning(affine: &[[f64; 4]; 3]) -> Option<String> {
     })
 }
 
+/// The data file a detached header (`.nhdr`, `.mhd`) names, read from `folder` (the header's);
+/// data in several files (`what` says how to save them as one) and a Git LFS pointer are refused.
+fn read_data_file(folder: &Path, name: &str, what: &str) -> Result<Vec<u8>, String> {
+    if several_files(name) {
+        return Err(format!("data file {name}: data in several files are not read; {what}"));
+    }
+    let path = folder.join(name);
+    let bytes = std::fs::read(&path).map_err(|e| format!("its data file {} cannot be read: {e}", path.display()))?;
+    if bytes.starts_with(crate::io::LFS_POINTER) {
+        return Err(format!("its data file {}: {}", path.display(), crate::io::LFS_MESSAGE));
+    }
+    Ok(bytes)
+}
+
 /// Whether a detached header's data file names several files: `LIST`, or a `printf` pattern with
 /// its range (`slice%03d.raw 1 46 1`), as NRRD and MetaImage write them.
 fn several_files(name: &str) -> bool {
@@ -1239,8 +1253,8 @@ mod tests {
     }
 
     /// A NRRD header detached from its data (`.nhdr`, as 3D Slicer can save a volume) reads as
-    /// the file with both; data in several files, or a data file that is not there, are refused
-    /// by name.
+    /// the file with both; data in several files, a data file that is not there or a Git LFS
+    /// pointer in its place are refused by name.
     #[test]
     fn a_detached_nrrd_header_reads_its_data_file() {
         let dir = tempfile::tempdir().unwrap();
@@ -1264,6 +1278,10 @@ mod tests {
         std::fs::write(&nhdr, format!("{header}data file: seg.raw.gz\n")).unwrap();
         let e = read_labelmap(&nhdr).unwrap_err().to_string();
         assert!(e.contains("its data file") && e.contains("seg.raw.gz cannot be read"), "{e}");
+        let pointer = "version https://git-lfs.github.com/spec/v1\noid sha256:4d7a2146\nsize 12345\n";
+        std::fs::write(dir.path().join("seg.raw.gz"), pointer).unwrap();
+        let e = read_labelmap(&nhdr).unwrap_err().to_string();
+        assert!(e.contains("seg.raw.gz: a Git LFS pointer, not the file itself"), "{e}");
         std::fs::write(&nhdr, format!("{header}data file: slice%03d.raw 1 46 1\n")).unwrap();
         assert!(read_labelmap(&nhdr).unwrap_err().to_string().contains("data in several files are not read"));
         std::fs::write(&nhdr, &header).unwrap();

@@ -496,11 +496,13 @@ pub(crate) fn named_if_lfs(path: &Path, error: MeshError) -> MeshError {
     }
 }
 
+/// What a Git LFS pointer read in place of a file is, and what to do.
+pub(crate) const LFS_MESSAGE: &str =
+    "a Git LFS pointer, not the file itself (cloned without its large files): fetch it, e.g. with `git lfs pull`";
+
 /// The error for a Git LFS pointer read in place of the file at `path`.
 pub(crate) fn lfs_error(path: &Path) -> MeshError {
-    let message = "a Git LFS pointer, not the file itself (cloned without its large files): fetch it, e.g. with \
-                   `git lfs pull`";
-    MeshError::parse(path, message)
+    MeshError::parse(path, LFS_MESSAGE)
 }
 
 /// Whether [`write_atomic`] could write `path`, checked before long work whose result it is to hold:
@@ -872,25 +874,37 @@ mod tests {
         assert!(e.contains("unknown surface extension"), "{e}");
     }
 
-    /// A Git LFS pointer in place of a surface, a mesh or a labelmap is named as such, whatever
+    /// A Git LFS pointer in place of a surface, a mesh, a labelmap or an array is named as such, whatever
     /// its extension; a damaged file is not.
     #[test]
     fn a_git_lfs_pointer_is_named() {
         let dir = tempfile::tempdir().unwrap();
         let pointer = "version https://git-lfs.github.com/spec/v1\noid sha256:4d7a2146\nsize 12345\n";
-        let names =
-            ["organ.stl", "organ.vtk", "organ.vtu", "organ.ply", "mesh.vtk", "liver.nii", "liver.nrrd", "t.csv"];
+        let names = [
+            "organ.stl",
+            "organ.vtk",
+            "organ.vtu",
+            "organ.ply",
+            "mesh.vtk",
+            "liver.nii",
+            "liver.nrrd",
+            "t.csv",
+            "a.npy",
+        ];
         for name in names {
             let path = dir.path().join(name);
             std::fs::write(&path, pointer).unwrap();
             let e = match name.rsplit_once('.').unwrap().1 {
                 "nii" | "nrrd" => crate::labelmap::read_labelmap(&path).unwrap_err().to_string(),
                 "csv" => points::read_points(&path).unwrap_err().to_string(),
+                "npy" => npy::read_npy(&path).unwrap_err().to_string(),
                 _ if name.starts_with("mesh") => read_mesh(&path).unwrap_err().to_string(),
                 _ => read_surface(&path).unwrap_err().to_string(),
             };
             assert!(e.contains("a Git LFS pointer, not the file itself"), "{name}: {e}");
         }
+        let e = npy::read_shape(&dir.path().join("a.npy")).unwrap_err().to_string();
+        assert!(e.contains("a Git LFS pointer, not the file itself"), "{e}");
         let damaged = dir.path().join("damaged.vtk");
         std::fs::write(&damaged, "# vtk DataFile Version 3.0\n").unwrap();
         assert!(!read_mesh(&damaged).unwrap_err().to_string().contains("LFS"));

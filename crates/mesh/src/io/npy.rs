@@ -194,6 +194,9 @@ fn check_data_length(descr: &str, shape: &[usize], data: usize) -> std::result::
 
 /// Splits the file into the header dictionary text and the data bytes.
 fn split_header(bytes: &[u8]) -> std::result::Result<(&str, &[u8]), String> {
+    if bytes.starts_with(super::LFS_POINTER) {
+        return Err(super::LFS_MESSAGE.into());
+    }
     if bytes.len() < 10 || &bytes[..6] != MAGIC {
         return Err("missing the \\x93NUMPY magic string (not an .npy file, or empty)".into());
     }

@@ -64,11 +64,8 @@ pub(super) fn parse_metaimage(bytes: &[u8], folder: &Path) -> Result<Labelmap, S
     let detached;
     let data = if data_file.eq_ignore_ascii_case("LOCAL") {
         attached
-    } else if super::several_files(data_file) {
-        return Err(format!("ElementDataFile = {data_file}: data in several files are not read; save one .mha"));
     } else {
-        let path = folder.join(data_file);
-        detached = std::fs::read(&path).map_err(|e| format!("its data file {} cannot be read: {e}", path.display()))?;
+        detached = super::read_data_file(folder, data_file, "save one .mha")?;
         &detached[..]
     };
     let count = dims.iter().product::<usize>();

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use super::{
-    check_affine, gunzip_if_needed, gzip, in_millimetres, label, label_bytes, labels, several_files, unit_mm, Frame,
+    check_affine, gunzip_if_needed, gzip, in_millimetres, label, label_bytes, labels, read_data_file, unit_mm, Frame,
     Labelmap,
 };
 use crate::io::Scalar;
@@ -101,13 +101,7 @@ impl NrrdHeader {
     /// (the header's); `None` for attached data.
     fn detached_data(&self, folder: &Path) -> Result<Option<Vec<u8>>, String> {
         let Some(name) = self.data_file() else { return Ok(None) };
-        if several_files(name) {
-            return Err(format!(
-                "data file: {name}: data in several files are not read; save the segmentation as one .nrrd"
-            ));
-        }
-        let path = folder.join(name);
-        std::fs::read(&path).map(Some).map_err(|e| format!("its data file {} cannot be read: {e}", path.display()))
+        read_data_file(folder, name, "save the segmentation as one .nrrd").map(Some)
     }
 }
 
