@@ -7,7 +7,7 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, Result};
 use scenario::registration::CameraSpec;
 
 /// A cloud of `camera.points` points on the visible part of `surface` (outward oriented), each
@@ -15,9 +15,7 @@ use scenario::registration::CameraSpec;
 /// the surface's bounding box grown by 10 %; reproducible from the camera's seed.
 pub fn simulate_cloud(surface: &TriSurface, camera: &CameraSpec) -> Result<Vec<Point>> {
     let seed = camera.seed;
-    if !(camera.noise >= 0.0 && camera.noise.is_finite() && camera.outliers >= 0.0 && camera.outliers.is_finite()) {
-        bail!("invalid camera model {camera:?}");
-    }
+    camera.validate().map_err(|e| anyhow!("the simulated camera's {e}"))?;
     let samples = sample_visible(surface, camera.view, camera.points, seed)?;
     let mut rng = StdRng::seed_from_u64(seed ^ 0x9e37_79b9_7f4a_7c15);
     let noise = Normal::new(0.0, camera.noise).map_err(|e| anyhow!("camera noise: {e}"))?;

@@ -143,6 +143,9 @@ fn default_direction() -> Point {
     [0.0, 0.0, -1.0]
 }
 
+/// The most points a simulated camera gives (a full-HD depth frame has about 2 million).
+pub const MAX_CAMERA_POINTS: usize = 5_000_000;
+
 /// The simulated camera and its random seed.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -162,6 +165,28 @@ pub struct CameraSpec {
 
 fn default_seed() -> u64 {
     1
+}
+
+impl CameraSpec {
+    /// Refuses a camera no cloud can be drawn from (the field at fault named first).
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        if !(self.view.iter().all(|x| x.is_finite()) && self.view.iter().any(|&x| x != 0.0)) {
+            return Err(format!("view = {:?} must be non-zero and finite", self.view));
+        }
+        if !(1..=MAX_CAMERA_POINTS).contains(&self.points) {
+            return Err(format!(
+                "points = {} must be between 1 and {MAX_CAMERA_POINTS} (a full-HD depth frame has ~2 million)",
+                self.points
+            ));
+        }
+        if !(self.noise >= 0.0 && self.noise.is_finite()) {
+            return Err(format!("noise = {} must be >= 0 (m)", self.noise));
+        }
+        if !(0.0..=1.0).contains(&self.outliers) {
+            return Err(format!("outliers = {} must lie in [0, 1] (a fraction of the points)", self.outliers));
+        }
+        Ok(())
+    }
 }
 
 /// A rigid misalignment of the camera's frame: cloud and truth are moved by
@@ -333,16 +358,7 @@ impl CaseScenario {
                 return bad(format!("truth.patch = {p:?}: finite `from`, non-zero `direction`, positive `radius`"));
             }
         }
-        let c = &self.camera;
-        if !nonzero(c.view) {
-            return bad(format!("camera.view = {:?} must be non-zero and finite", c.view));
-        }
-        if c.points == 0 {
-            return bad("camera.points must be at least 1".into());
-        }
-        if !(c.noise >= 0.0 && c.noise.is_finite() && c.outliers >= 0.0 && c.outliers.is_finite()) {
-            return bad(format!("camera.noise = {} and camera.outliers = {} must be >= 0", c.noise, c.outliers));
-        }
+        self.camera.validate().map_err(|e| format!("camera.{e}"))?;
         let m = &self.misalignment;
         let values = [
             ("rotation_deg", m.rotation_deg.is_finite(), m.rotation_deg.to_string()),
@@ -435,5 +451,19 @@ mod tests {
         let e = CaseScenario::with_overrides(None, &CaseOverrides { frames: Some(0), ..overrides }).unwrap_err();
         let e = e.to_string();
         assert!(e.contains("(built-in scenario) with the settings given: truth.frames = 0"), "{e}");
+    }
+
+    /// A simulated camera asked for more points than memory holds, or for outliers beyond the
+    /// fraction of its points they are, is refused by its field.
+    #[test]
+    fn a_camera_beyond_its_bounds_is_refused() {
+        let mut case = CaseScenario::builtin();
+        case.camera.points = 1_000_000_000_000_000_000;
+        assert!(case.validate().unwrap_err().starts_with("camera.points = 1000000000000000000 must be between 1"));
+        case.camera.points = MAX_CAMERA_POINTS;
+        case.camera.outliers = 1.5;
+        assert!(case.validate().unwrap_err().starts_with("camera.outliers = 1.5 must lie in [0, 1]"));
+        case.camera.outliers = 1.0;
+        assert_eq!(case.validate(), Ok(()));
     }
 }
