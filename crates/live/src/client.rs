@@ -93,16 +93,21 @@ impl Client {
     }
 
     /// The next message from the server and its header timestamp (that of the cloud it
-    /// answers); `None` when the connection is closed, an error when nothing came within the
-    /// timeout.
+    /// answers); `None` when the connection is closed between messages, an error when it is cut
+    /// within one or nothing came within the timeout.
     pub fn receive_stamped(&mut self) -> std::result::Result<Option<(Answer, u64)>, String> {
         let mut header = [0u8; Header::SIZE];
-        if let Err(e) = self.stream.read_exact(&mut header) {
-            return match e.kind() {
-                ErrorKind::UnexpectedEof => Ok(None),
-                _ => Err(self.failed("receiving", &e)),
-            };
+        // Closed between messages, the connection ends cleanly; within a header, it is cut.
+        let first = loop {
+            match self.stream.read(&mut header[..1]) {
+                Err(e) if e.kind() == ErrorKind::Interrupted => continue,
+                read => break read.map_err(|e| self.failed("receiving", &e))?,
+            }
+        };
+        if first == 0 {
+            return Ok(None);
         }
+        self.stream.read_exact(&mut header[1..]).map_err(|e| self.failed("truncated header", &e))?;
         let parsed = Header::decode(&header).map_err(|e| format!("malformed header: {e}"))?;
         if parsed.body_size > MAX_ANSWER_BYTES {
             return Err(format!(
@@ -206,5 +211,21 @@ mod tests {
         done.send(()).unwrap();
         peer.join().unwrap();
         assert!(client.receive().unwrap().is_none(), "the server closed the connection");
+    }
+
+    /// A server that closes within a message's header has cut it: an error, not a clean close.
+    #[test]
+    fn a_header_cut_short_is_an_error() {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let address = listener.local_addr().unwrap();
+        let peer = std::thread::spawn(move || {
+            let (mut stream, _) = listener.accept().unwrap();
+            let wire = encode_message(&StringMessage::utf8("{}"), "status").unwrap();
+            stream.write_all(&wire[..20]).unwrap();
+        });
+        let mut client = Client::connect(address, Duration::from_secs(10)).unwrap();
+        peer.join().unwrap();
+        let error = client.receive().unwrap_err();
+        assert!(error.starts_with("truncated header: "), "{error}");
     }
 }
