@@ -15,7 +15,7 @@ mod solve;
 use std::path::PathBuf;
 
 use anyhow::Result;
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use mesh::length::Length;
 
 /// Finite elements, Kalman filtering and U-Net learning for soft organs.
@@ -186,6 +186,17 @@ fn extension_of(allowed: &'static [&'static str]) -> impl Fn(&str) -> Result<Pat
     }
 }
 
+/// The command line, a negative number read as an option's value (`--gate -1`), so that the
+/// option's own check says what is wrong with it rather than "unexpected argument '-1'".
+fn command_line() -> clap::Command {
+    fn negative_numbers_as_values(command: clap::Command) -> clap::Command {
+        command
+            .mut_args(|a| if a.get_action().takes_values() { a.allow_negative_numbers(true) } else { a })
+            .mut_subcommands(negative_numbers_as_values)
+    }
+    negative_numbers_as_values(Cli::command())
+}
+
 fn main() {
     // Output piped into a program that stops reading (e.g. `| head`) ends the process quietly, as
     // for other command-line tools, instead of a panic on the failed write.
@@ -194,7 +205,7 @@ fn main() {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
-    let cli = Cli::parse();
+    let cli = Cli::from_arg_matches(&command_line().get_matches()).unwrap_or_else(|e| e.exit());
     let result: Result<()> = match cli.command {
         Command::Solve { scenario, output } => solve::run(&scenario, output.as_deref()),
         Command::Register(args) => register_cmd::run(&args),

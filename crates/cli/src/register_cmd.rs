@@ -55,7 +55,7 @@ pub struct RegisterArgs {
         .range(1..=scenario::registration::MAX_FRAMES as u64))]
     frames: Option<usize>,
     /// Misaligns the case's camera frame: rotation (degrees) about the case's axis...
-    #[arg(long, requires = "comparison", allow_negative_numbers = true)]
+    #[arg(long, requires = "comparison")]
     misalign_deg: Option<f64>,
     /// ... and translation along its direction, with its unit (10mm; try with and without --rigid).
     #[arg(long, requires = "comparison", allow_hyphen_values = true, value_name = "LENGTH")]
