@@ -46,9 +46,12 @@
 //! * After each correction, the whitened post-correction residual `r̃_k = W^{-1/2}(z_k - Ẑ - HL c)` of frame k
 //!   (`c` the correction in sigma-point coordinates, only the available components) is recorded with its
 //!   Fisher information `F_k = J̃_k^T J̃_k` and score `J̃_k^T r̃_k`, `J̃_k = W^{-1/2} HL L_θ^{-1}` (the sensitivity in
-//!   filter space, through the centred factor `L_θ`), and the estimate `θ_k`. From sums of these, the misfit of all
-//!   frames *at the current estimate* θ̂, `χ²(θ̂) = Σ_k |r̃_k - J̃_k (θ̂ - θ_k)|²`, is known to first order without
-//!   storing any frame, so the early frames, observed while θ̂ was still far off, do not count as model error.
+//!   filter space, through the centred factor `L_θ`), the estimate `θ_k` and the region its sigma points sampled.
+//!   The misfit *at the current estimate* θ̂, `χ²(θ̂) = Σ_k |r̃_k - J̃_k (θ̂ - θ_k)|²`, follows to first order over
+//!   the frames whose sampled region, three times the sigma points' radius, holds θ̂ (`S` and `ν` over the same
+//!   frames): a frame observed while the estimate was far off, where the first order cannot reach θ̂ (the
+//!   sensitivity to a modulus falls as its square), does not count as model error. The last frames are kept
+//!   (20,000, fewer with many parameters).
 //! * With the nominal `W` right and the model right, `χ² ~ χ²(ν)`, `ν = Σ_k q_k - p`. The excess
 //!   `e = max(0, χ² - ν - 2√(2ν))` (beyond two standard deviations of a χ²(ν), so that an exact model adds
 //!   nothing in about 98 % of runs) is the misfit energy the noise model cannot explain.
@@ -234,76 +237,92 @@ impl FromStr for Discrepancy {
     }
 }
 
-/// Running sums over the frames (each discounted by the forgetting factor ρ per frame) from which the misfit
-/// `χ²(θ)` of all frames at any θ and the information `S` follow (see the module documentation).
+/// One frame's misfit as a quadratic in θ (filter space), `χ²_k(θ) = |r̃_k - J̃_k (θ - θ_k)|²`, with the region
+/// its sigma points sampled, within which that first-order form holds.
+#[derive(Clone)]
+struct FrameMisfit {
+    /// The forgetting factor's discount, ρ per later frame.
+    weight: f64,
+    /// `|r̃_k|²`.
+    residual: f64,
+    /// `J̃_k^T r̃_k`.
+    score: DVector<f64>,
+    /// `F_k = J̃_k^T J̃_k`.
+    information: DMatrix<f64>,
+    /// The estimate after the frame, `θ_k`.
+    theta: DVector<f64>,
+    /// The sigma points' mean and the inverse of their centred factor `L_θ`: θ lies in the sampled region where
+    /// `|L_θ^{-1} (θ - mean)|` is at most the unit sigma points' radius.
+    centre: DVector<f64>,
+    inverse_factor: DMatrix<f64>,
+    /// Available components `q_k`.
+    components: f64,
+}
+
+impl FrameMisfit {
+    fn chi_squared(&self, theta: &DVector<f64>) -> f64 {
+        let d = theta - &self.theta;
+        self.residual - 2.0 * d.dot(&self.score) + d.dot(&(&self.information * &d))
+    }
+}
+
+/// The frames' misfits (each discounted by the forgetting factor ρ per frame), from which the misfit `χ²(θ)` and
+/// the information `S` at any θ follow over the frames whose sampled region holds θ (see the module
+/// documentation); the last [`misfit_frames`] frames are kept.
 #[derive(Clone)]
 struct Misfit {
     /// Degrees of freedom d of a systematic discrepancy; `None` for an independent one (d = ν).
     systematic_dof: Option<f64>,
     /// Prior information `P_0^{-1}` (filter space).
     prior_information: DMatrix<f64>,
-    /// `Σ |r̃_k|²`.
-    residual: f64,
-    /// `Σ J̃_k^T r̃_k`.
-    score: DVector<f64>,
-    /// `Σ θ_k · J̃_k^T r̃_k`.
-    theta_score: f64,
-    /// `Σ F_k`.
-    information: DMatrix<f64>,
-    /// `Σ F_k θ_k`.
-    information_theta: DVector<f64>,
-    /// `Σ θ_k^T F_k θ_k`.
-    theta_information_theta: f64,
-    /// `Σ q_k` (discounted by ρ) and `Σ q_k` discounted by ρ² (less p, the variance of χ² over 2).
-    components: f64,
-    components_squared_discount: f64,
+    /// The unit sigma points' radius (the largest `|I(i)|`).
+    radius: f64,
+    frames: std::collections::VecDeque<FrameMisfit>,
+}
+
+/// How far beyond its sigma points, in their radii, a frame's first-order misfit is taken to hold (a linear
+/// extrapolation three standard deviations out).
+const REACH: f64 = 3.0;
+
+/// The last frames a misfit is measured over with `p` parameters: 20,000 (over 13 minutes of a stream at 25 Hz),
+/// fewer with many parameters, so that they hold at most 4 million numbers.
+fn misfit_frames(p: usize) -> usize {
+    (4_000_000 / (2 * p * p + 2 * p + 3)).clamp(1, 20_000)
 }
 
 impl Misfit {
-    fn new(systematic_dof: Option<f64>, prior_information: DMatrix<f64>) -> Self {
-        let p = prior_information.nrows();
-        Misfit {
-            systematic_dof,
-            prior_information,
-            residual: 0.0,
-            score: DVector::zeros(p),
-            theta_score: 0.0,
-            information: DMatrix::zeros(p, p),
-            information_theta: DVector::zeros(p),
-            theta_information_theta: 0.0,
-            components: 0.0,
-            components_squared_discount: 0.0,
+    fn new(systematic_dof: Option<f64>, prior_information: DMatrix<f64>, radius: f64) -> Self {
+        Misfit { systematic_dof, prior_information, radius, frames: Default::default() }
+    }
+
+    /// Adds one frame (`None`: left out), the earlier frames discounted by `rho`; the oldest is dropped beyond
+    /// the frames kept.
+    fn add(&mut self, rho: f64, frame: Option<FrameMisfit>) {
+        self.frames.iter_mut().for_each(|f| f.weight *= rho);
+        let p = self.prior_information.nrows();
+        while self.frames.len() >= misfit_frames(p) {
+            self.frames.pop_front();
         }
+        self.frames.extend(frame);
     }
 
-    /// Adds one frame: whitened residual `r`, whitened sensitivity `j` (q × p, filter space), estimate `theta`
-    /// after the frame, `q` available components; the earlier sums discounted by `rho`.
-    fn add(&mut self, rho: f64, r: &DVector<f64>, j: &DMatrix<f64>, theta: &DVector<f64>, q: usize) {
-        let f = j.transpose() * j;
-        let g = j.transpose() * r;
-        let f_theta = &f * theta;
-        self.residual = rho * self.residual + r.norm_squared();
-        self.score = &self.score * rho + &g;
-        self.theta_score = rho * self.theta_score + theta.dot(&g);
-        self.information = &self.information * rho + &f;
-        self.information_theta = &self.information_theta * rho + &f_theta;
-        self.theta_information_theta = rho * self.theta_information_theta + theta.dot(&f_theta);
-        self.components = rho * self.components + q as f64;
-        self.components_squared_discount = rho * rho * self.components_squared_discount + q as f64;
+    /// The frames whose sampled region, [`REACH`] times their sigma points' radius, holds `theta`: where their
+    /// first-order misfit is near what they measured.
+    fn holding<'a>(&'a self, theta: &'a DVector<f64>) -> impl Iterator<Item = &'a FrameMisfit> + 'a {
+        let reach = REACH * self.radius;
+        self.frames.iter().filter(move |f| (&f.inverse_factor * (theta - &f.centre)).norm() <= reach)
     }
 
-    /// `χ²(θ) = Σ_k |r̃_k - J̃_k (θ - θ_k)|²` (first order), never negative.
-    fn chi_squared(&self, theta: &DVector<f64>) -> f64 {
-        let value = self.residual - 2.0 * (theta.dot(&self.score) - self.theta_score)
-            + theta.dot(&(&self.information * theta))
-            - 2.0 * theta.dot(&self.information_theta)
-            + self.theta_information_theta;
-        value.max(0.0)
-    }
-
-    /// Degrees of freedom ν of χ² (at least 1).
-    fn nu(&self) -> f64 {
-        self.less_parameters(self.components)
+    /// `χ²(θ) = Σ_k |r̃_k - J̃_k (θ - θ_k)|²` (first order) over the frames holding θ, never negative, with
+    /// their `Σ q_k` and `Σ q_k` discounted by ρ² (for the variance).
+    fn chi_squared_and_components(&self, theta: &DVector<f64>) -> (f64, f64, f64) {
+        self.holding(theta).fold((0.0, 0.0, 0.0), |(c, q, q2), f| {
+            (
+                c + f.weight * f.chi_squared(theta).max(0.0),
+                q + f.weight * f.components,
+                q2 + f.weight.powi(2) * f.components,
+            )
+        })
     }
 
     /// `components` less the parameters, at least 1.
@@ -311,19 +330,21 @@ impl Misfit {
         (components - self.prior_information.nrows() as f64).max(1.0)
     }
 
-    /// The reduced χ² at `theta`, `χ²(θ)/ν`.
-    fn reduced_chi_squared(&self, theta: &DVector<f64>) -> f64 {
-        self.chi_squared(theta) / self.nu()
+    /// The reduced χ² at `theta`, `χ²(θ)/ν`; `None` while no frame's sampled region holds θ.
+    fn reduced_chi_squared(&self, theta: &DVector<f64>) -> Option<f64> {
+        let (chi_squared, components, _) = self.chi_squared_and_components(theta);
+        (components > 0.0).then(|| chi_squared / self.less_parameters(components))
     }
 
     /// The covariance `(e/d) S^{-1}` added to the filter's at `theta` (`None` when S is singular).
     fn allowance(&self, theta: &DVector<f64>) -> Option<DMatrix<f64>> {
-        let nu = self.nu();
-        // The variance of χ² over 2: ν, with the sums discounted by ρ² rather than ρ.
-        let nu_variance = self.less_parameters(self.components_squared_discount);
-        let excess = (self.chi_squared(theta) - nu - 2.0 * (2.0 * nu_variance).sqrt()).max(0.0);
+        let (chi_squared, components, squared) = self.chi_squared_and_components(theta);
+        let nu = self.less_parameters(components);
+        // The variance of χ² over 2: ν, with the frames discounted by ρ² rather than ρ.
+        let nu_variance = self.less_parameters(squared);
+        let excess = (chi_squared - nu - 2.0 * (2.0 * nu_variance).sqrt()).max(0.0);
         let d = self.systematic_dof.unwrap_or(nu);
-        let s = &self.prior_information + &self.information;
+        let s = self.holding(theta).fold(self.prior_information.clone(), |s, f| s + &f.information * f.weight);
         Cholesky::new(s).map(|c| c.inverse() * (excess / d))
     }
 }
@@ -374,11 +395,12 @@ impl<M: Model> Roukf<M> {
                 "the discrepancy's degrees of freedom must be finite and ≥ 1, got {dof}"
             )));
         }
-        let prior = || prior_information(&self.config.parameters);
+        let radius = self.sigma.points().column_iter().map(|c| c.norm()).fold(0.0, f64::max);
+        let misfit = |dof| Some(Misfit::new(dof, prior_information(&self.config.parameters), radius));
         self.misfit = match kind {
             Discrepancy::None => None,
-            Discrepancy::Independent => Some(Misfit::new(None, prior())),
-            Discrepancy::Systematic => Some(Misfit::new(Some(dof), prior())),
+            Discrepancy::Independent => misfit(None),
+            Discrepancy::Systematic => misfit(Some(dof)),
         };
         Ok(self)
     }
@@ -528,14 +550,20 @@ impl<M: Model> Roukf<M> {
 
         // The frame's misfit statistics: whitened post-correction residual and sensitivity J̃ = G L_θ^{-1} (a singular
         // L_θ, which the sampling never produces, would leave the frame out).
-        let misfit = self.misfit.as_ref().map(|m| {
-            let mut m = m.clone();
-            if let Some(jt) = l_theta.transpose().lu().solve(&g.transpose()) {
-                let residual = &weighted - &g * &correction;
-                let count = available.iter().filter(|&&a| a).count();
-                m.add(self.config.forgetting, &residual, &jt.transpose(), &theta, count);
-            }
-            m
+        let frame_misfit = self.misfit.as_ref().and_then(|_| {
+            let jt = l_theta.transpose().lu().solve(&g.transpose())?;
+            let inverse_factor = l_theta.clone().try_inverse()?;
+            let frame = FrameMisfit {
+                weight: 1.0,
+                residual: (&weighted - &g * &correction).norm_squared(),
+                score: &jt * (&weighted - &g * &correction),
+                information: &jt * jt.transpose(),
+                theta: theta.clone(),
+                centre: theta_mean.clone(),
+                inverse_factor,
+                components: available.iter().filter(|&&a| a).count() as f64,
+            };
+            Some(frame)
         });
 
         // Commit.
@@ -549,7 +577,9 @@ impl<M: Model> Roukf<M> {
             joint.l_x = l_x;
         }
         self.iteration = k;
-        self.misfit = misfit;
+        if let Some(misfit) = &mut self.misfit {
+            misfit.add(self.config.forgetting, frame_misfit);
+        }
         let measured = available.contains(&true).then(|| innovation.norm());
         let mut record = self.record(measured, Some(start.elapsed().as_secs_f64()));
         record.gated = gated;
@@ -758,7 +788,7 @@ impl<M: Model> Roukf<M> {
     /// `χ²(θ̂)/ν` of all frames at the current estimate (about 1 when the model and the nominal noise are right; its
     /// square root times σ_obs is the effective observation noise).
     pub fn misfit(&self) -> Option<f64> {
-        self.misfit.as_ref().filter(|m| m.components > 0.0).map(|m| m.reduced_chi_squared(&self.theta))
+        self.misfit.as_ref().and_then(|m| m.reduced_chi_squared(&self.theta))
     }
 
     /// Standard deviations in filter space (of [`Roukf::covariance`]).
@@ -865,25 +895,45 @@ fn covariance_from(l: &DMatrix<f64>, c_lower: &DMatrix<f64>) -> Option<DMatrix<f
 mod tests {
     use super::*;
 
-    /// The allowance's excess is `χ² − ν − 2√(2ν)` with `ν = Σq − p`, as the module documentation states.
+    /// A frame of whitened residual energy 10 over 4 components, no sensitivity, sampled about `centre`
+    /// with a unit factor.
+    fn frame(centre: f64) -> Option<FrameMisfit> {
+        Some(FrameMisfit {
+            weight: 1.0,
+            residual: 10.0,
+            score: DVector::zeros(1),
+            information: DMatrix::zeros(1, 1),
+            theta: DVector::zeros(1),
+            centre: DVector::from_element(1, centre),
+            inverse_factor: DMatrix::identity(1, 1),
+            components: 4.0,
+        })
+    }
+
+    /// The allowance's excess is `χ² − ν − 2√(2ν)` with `ν = Σq − p`, as the module documentation states, over
+    /// the frames whose sampled region holds the estimate.
     #[test]
     fn the_excess_is_beyond_two_standard_deviations_of_chi_squared() {
-        let mut misfit = Misfit::new(Some(1.0), DMatrix::identity(1, 1));
-        let residual = DVector::from_element(4, 0.5 * 10f64.sqrt());
+        let mut misfit = Misfit::new(Some(1.0), DMatrix::identity(1, 1), 1.0);
         for _ in 0..10 {
-            misfit.add(1.0, &residual, &DMatrix::zeros(4, 1), &DVector::zeros(1), 4);
+            misfit.add(1.0, frame(0.5));
+        }
+        // Sampled about 5 with a unit factor: θ = 0 lies beyond their reach, so these do not count.
+        for _ in 0..5 {
+            misfit.add(1.0, frame(5.0));
         }
         let theta = DVector::zeros(1);
-        let (chi_squared, nu) = (misfit.chi_squared(&theta), misfit.nu());
-        assert!((chi_squared - 100.0).abs() < 1e-9 && nu == 39.0, "χ² = {chi_squared}, ν = {nu}");
+        let (chi_squared, components, _) = misfit.chi_squared_and_components(&theta);
+        assert!((chi_squared - 100.0).abs() < 1e-9 && components == 40.0, "χ² = {chi_squared}, Σq = {components}");
         let allowance = misfit.allowance(&theta).unwrap()[(0, 0)];
         let expected = 100.0 - 39.0 - 2.0 * (2.0 * 39.0f64).sqrt();
         assert!((allowance - expected).abs() < 1e-9, "allowance {allowance}, expected {expected}");
+        assert_eq!(misfit.reduced_chi_squared(&DVector::from_element(1, 20.0)), None, "no frame holds θ = 20");
         // Forgetting (ρ = 0.9): χ² and ν discounted by ρ per frame, the variance's sum by ρ².
-        let mut forgetting = Misfit::new(Some(1.0), DMatrix::identity(1, 1));
+        let mut forgetting = Misfit::new(Some(1.0), DMatrix::identity(1, 1), 1.0);
         let (mut chi_squared, mut components, mut squared) = (0.0, 0.0, 0.0);
         for _ in 0..10 {
-            forgetting.add(0.9, &residual, &DMatrix::zeros(4, 1), &DVector::zeros(1), 4);
+            forgetting.add(0.9, frame(0.0));
             chi_squared = 0.9 * chi_squared + 10.0;
             components = 0.9 * components + 4.0;
             squared = 0.81 * squared + 4.0;
