@@ -292,6 +292,13 @@ fn bad_track_files_are_named_with_their_line() {
     let near = experiment.observed_points()[1];
     assert!(mesh::distance(near, [0.05, 0.01, 0.0205]) < 1e-12, "observed at rest at {near:?}");
 
+    // The same in mm under a bare header, read as metres: far outside, and the unit named (one feature lies
+    // on the surface, not in the mesh).
+    let in_mm = "frame,id,x,y,z\n0,in,50,10,20\n0,near,50,10,20.5\n1,in,50,10,20\n1,near,50,10,20.5\n";
+    std::fs::write(d.join("near_mm.csv"), in_mm).unwrap();
+    let err = prepare_tracks(d, "near_mm.csv").err().unwrap();
+    assert!(err.contains("every feature lies in the organ or on its surface; is the file given in mm"), "{err}");
+
     // A feature 10 mm below the top face (the beam is 20 mm thick): said, by name and depth.
     std::fs::write(
         d.join("deep.csv"),

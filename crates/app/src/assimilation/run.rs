@@ -752,6 +752,7 @@ fn assessment_points(
 struct PointFinder<'a> {
     locator: &'a MeshLocator,
     surface: SurfaceBvh,
+    /// Half an element: how far outside the surface a feature is still moved onto it.
     reach: f64,
     moved: Vec<f64>,
 }
@@ -761,6 +762,11 @@ impl<'a> PointFinder<'a> {
         let surface = SurfaceBvh::new(&mesh::boundary_surface(mesh)).context(|| "indexing the mesh surface".into())?;
         let reach = 0.5 * (mesh.volume() / mesh.cells.len().max(1) as f64).cbrt();
         Ok(PointFinder { locator, surface, reach, moved: Vec::new() })
+    }
+
+    /// Whether `p` lies in the mesh or within [`PointFinder::reach`] of its surface (where it is located).
+    fn holds(&self, p: Point) -> bool {
+        self.locator.locate(p).is_some() || self.surface.closest_point(p).distance <= self.reach
     }
 
     fn locate(&mut self, p: Point) -> Result<TrackedPoint, FemModelError> {
@@ -810,11 +816,11 @@ fn locate_tracks(
                 other => other.to_string(),
             };
             let mistake = UnitMistake { given: LengthUnit::Millimetre, expected: LengthUnit::Metre };
-            let in_mm = positions.iter().all(|p| finder.locator.locate(p.map(|x| x * mistake.factor())).is_some());
+            let in_mm = positions.iter().all(|p| finder.holds(p.map(|x| x * mistake.factor())));
             let hint = match in_mm {
                 true => format!(
-                    ": read {}, every feature lies in the organ; is the file {}? A header x_mm, y_mm, z_mm names \
-                     the unit (or give --units mm)",
+                    ": read {}, every feature lies in the organ or on its surface; is the file {}? A header x_mm, \
+                     y_mm, z_mm names the unit (or give --units mm)",
                     mistake.undone_words(),
                     mistake.question()
                 ),
