@@ -768,7 +768,8 @@ impl Assimilation {
 
     /// One filter step with the measured positions of the observed points, float [p, 3] (m,
     /// in the order of `observed_points`; NaN for a point not seen). Returns the `Estimate`
-    /// after it. Raises ValueError for another shape, AugsimError when the step fails.
+    /// after it. Raises ValueError for another shape, AugsimError when the step is refused or
+    /// fails: the filter is then left as it was, and the next call is the same step again.
     fn step(&self, py: Python<'_>, observation: &Bound<'_, PyAny>) -> PyResult<Estimate> {
         let (shape, z) = array(observation, "observation")?;
         let p = self.experiment.setup().features;
@@ -776,7 +777,14 @@ impl Assimilation {
             return Err(PyValueError::new_err(format!("observation must have shape [{p}, 3], got {shape:?}")));
         }
         compute(py, || {
-            let e = locked(&self.filter)?.step(z)?;
+            let mut filter = locked(&self.filter)?;
+            let next = filter.iteration() + 1;
+            let e = filter.step(z).map_err(|e| {
+                anyhow::Error::new(e).context(format!(
+                    "step {next} refused: the filter is left as it was, and the next call is step {next} again, at \
+                     its load (an observation all NaN counts a step with no point seen)"
+                ))
+            })?;
             Ok(Estimate { iteration: e.iteration, mean: e.mean, std: e.std, innovation: e.innovation, gated: e.gated })
         })
     }
