@@ -31,8 +31,9 @@ pub struct IterationTrace {
     /// (the filter's own covariance), while `std` and `std_physical` include the allowance.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise_std_physical: Option<Vec<f64>>,
-    /// With a model-discrepancy allowance, after the first frame: the reduced misfit χ²/ν of all frames at this
-    /// estimate (about 1 when the model and the nominal observation noise are right).
+    /// With a model-discrepancy allowance: the reduced misfit χ²/ν at this estimate of the frames whose sampled
+    /// region reaches it (about 1 when the model and the nominal observation noise are right); `None` until one
+    /// does.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub misfit: Option<f64>,
     /// Measured components the validation gate left out at this iteration ([`crate::RoukfConfig::gate`]).

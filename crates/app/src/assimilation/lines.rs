@@ -117,6 +117,13 @@ impl Report {
                 None => String::new(),
             };
             lines.push(format!("young        μ = {:.1} ± {:.1} Pa{truth}", y.mean, y.std));
+            if let Some((steps, change)) = y.drift.filter(|(_, change)| change.abs() > y.std) {
+                lines.push(format!(
+                    "warning      the estimate still moves: {change:+.1} Pa over the last {steps} iterations, {:.1} \
+                     times its σ, which does not say where more iterations would take it (--iterations)",
+                    change.abs() / y.std
+                ));
+            }
             if let (Some(noise), Some(misfit)) = (y.noise_std, y.misfit) {
                 lines.push(format!(
                     "discrepancy  σ = {:.1} Pa from the observation noise alone; misfit χ²/ν = {misfit:.3} \

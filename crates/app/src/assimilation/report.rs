@@ -105,6 +105,9 @@ pub struct YoungReport {
     pub within_1_percent_from_iteration: Option<usize>,
     /// Filter wall-clock time (s, the iterations' own times summed) until that iteration.
     pub within_1_percent_after_seconds: Option<f64>,
+    /// How much the estimate changed over the last tenth of the iterations (at least [`DRIFT_STEPS`]): the steps
+    /// and the change (Pa); `None` for a run shorter than that.
+    pub drift: Option<(usize, f64)>,
     /// With a model-discrepancy allowance (`[filter] discrepancy`): the final σ of the observation noise alone
     /// (Pa), while `std` includes the allowance.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -149,6 +152,18 @@ impl Report {
     }
 }
 
+/// The fewest last iterations over which an estimate's drift is measured.
+pub const DRIFT_STEPS: usize = 5;
+
+/// The change of the first parameter's estimate (physical) over the last tenth of the iterations, at least
+/// [`DRIFT_STEPS`] of them: (steps, change).
+fn drift(trace: &Trace) -> Option<(usize, f64)> {
+    let n = trace.records.last()?.iteration;
+    let steps = (n / 10).max(DRIFT_STEPS);
+    let from = trace.records.iter().find(|r| r.iteration + steps == n)?;
+    Some((steps, trace.records.last()?.mean_physical[0] - from.mean_physical[0]))
+}
+
 /// Plots the Young's modulus estimate (`young.png`, and `young_zoom.png` without the first tenth of the
 /// iterations) and summarises it.
 pub(super) fn young(trace: &Trace, truth: Option<f64>, out_dir: &Path) -> Result<YoungReport, AssimilationError> {
@@ -187,6 +202,7 @@ pub(super) fn young(trace: &Trace, truth: Option<f64>, out_dir: &Path) -> Result
         truth,
         within_1_percent_from_iteration: within,
         within_1_percent_after_seconds: seconds,
+        drift: drift(trace),
         noise_std: last.noise_std_physical.as_ref().map(|s| s[0]),
         misfit: last.misfit,
     })
@@ -313,4 +329,36 @@ fn converged_at(means: impl Iterator<Item = f64>, truth: f64, tol: f64) -> Optio
         }
     }
     since
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A trace of `n` iterations whose estimate is `mean(k)` at iteration k.
+    fn trace(n: usize, mean: impl Fn(usize) -> f64) -> Trace {
+        let record = |k: usize| filter::IterationTrace {
+            iteration: k,
+            mean: vec![mean(k)],
+            std: vec![1.0],
+            mean_physical: vec![mean(k)],
+            std_physical: vec![1.0],
+            innovation_norm: None,
+            wall_seconds: None,
+            noise_std_physical: None,
+            misfit: None,
+            gated: 0,
+        };
+        let names = vec!["young".to_string()];
+        Trace { parameter_names: names, transforms: vec![], scales: vec![1.0], records: (0..=n).map(record).collect() }
+    }
+
+    /// The drift is the change over the last tenth of the iterations, at least five of them; a run
+    /// shorter than that has none.
+    #[test]
+    fn the_drift_is_over_the_last_tenth_of_the_run() {
+        assert_eq!(drift(&trace(200, |k| 10.0 * k as f64)), Some((20, 200.0)));
+        assert_eq!(drift(&trace(30, |k| if k < 28 { 0.0 } else { 3.0 })), Some((5, 3.0)));
+        assert_eq!(drift(&trace(4, |k| k as f64)), None);
+    }
 }
