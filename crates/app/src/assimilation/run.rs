@@ -364,6 +364,12 @@ impl Experiment {
         };
         self.use_tracks(locator, &tracks)?;
         self.known_truth = true;
+        if let (Some(model), Some(springs)) = (&self.unknowns.springs, &reference.unknowns.springs) {
+            let truth = &reference.unknowns.truth[reference.unknowns.truth.len() - springs.len()..];
+            let equivalent = equivalent_springs((&reference.base.mesh, springs, truth), (&self.base.mesh, model));
+            let first = self.unknowns.truth.len() - model.len();
+            self.unknowns.truth[first..].copy_from_slice(&equivalent);
+        }
         let run = reference.setup.reference.expect("a synthetic run records its reference run");
         self.setup.reference = Some(Reference { inverse_crime: false, ..run });
         self.synthetic_tracks = reference.synthetic_tracks;
@@ -688,6 +694,24 @@ fn unknowns(sc: &AssimilationScenario, mesh: &Mesh) -> Result<Unknowns, Assimila
     Ok(u)
 }
 
+/// The springs on `model`'s nodes equivalent to the `reference` mesh's (its nodes and stiffnesses, N/m): a node's
+/// spring holds its share of the boundary's area, so the truth on another mesh is the reference's stiffness per
+/// area at its nearest spring node times the model node's area (a finer reference carries more, weaker springs).
+fn equivalent_springs(reference: (&Mesh, &[usize], &[f64]), model: (&Mesh, &[usize])) -> Vec<f64> {
+    let (reference_mesh, reference_nodes, stiffness) = reference;
+    let (reference_area, model_area) = (mesh::boundary_node_areas(reference_mesh), mesh::boundary_node_areas(model.0));
+    model
+        .1
+        .iter()
+        .map(|&i| {
+            let nearest = nearest(&reference_mesh.nodes, reference_nodes.iter().copied(), model.0.nodes[i]);
+            let j = reference_nodes.iter().position(|&n| Some(n) == nearest);
+            j.filter(|&j| reference_area[reference_nodes[j]] > 0.0)
+                .map_or(0.0, |j| stiffness[j] / reference_area[reference_nodes[j]] * model_area[i])
+        })
+        .collect()
+}
+
 /// Feature points drawn on the surface facing the camera, on triangles without constrained nodes, located in
 /// the mesh; with their rest positions.
 fn feature_points(
@@ -878,4 +902,27 @@ fn mean_error(a: &DVector<f64>, truth: &Frame) -> f64 {
         .map(|i| (0..3).map(|d| (a[3 * i + d] - truth.z[3 * i + d]).powi(2)).sum::<f64>().sqrt())
         .fold((0.0, 0usize), |(s, n), e| (s + e, n + 1));
     sum / n as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Springs of 100 N/m on every node of a box's top face, carried over to a coarser box: the
+    /// coarse mesh's springs are fewer and stiffer, each by its share of the area, and hold about the
+    /// same stiffness in all.
+    #[test]
+    fn springs_carried_to_another_mesh_keep_their_stiffness_per_area() {
+        let top = |m: &Mesh| -> Vec<usize> { (0..m.nodes.len()).filter(|&i| m.nodes[i][2] > 0.0999).collect() };
+        let fine = mesh::generate::box_tet([0.0; 3], [0.1; 3], [8, 8, 2]).unwrap();
+        let coarse = mesh::generate::box_tet([0.0; 3], [0.1; 3], [4, 4, 2]).unwrap();
+        let (fine_top, coarse_top) = (top(&fine), top(&coarse));
+        let stiffness = vec![100.0; fine_top.len()];
+        let equivalent = equivalent_springs((&fine, &fine_top, &stiffness), (&coarse, &coarse_top));
+        // In all: about the fine springs' 8,100 N/m (81 nodes), the edges' springs sampled at their nearest.
+        let total: f64 = equivalent.iter().sum();
+        assert!((total / 8100.0 - 1.0).abs() < 0.1, "{total}");
+        let centre = coarse_top.iter().position(|&i| mesh::distance(coarse.nodes[i], [0.05, 0.05, 0.1]) < 1e-9);
+        assert!((equivalent[centre.unwrap()] - 400.0).abs() < 1e-6, "four times the area: {equivalent:?}");
+    }
 }
