@@ -174,7 +174,7 @@ fn write_evaluation(
         "corruption": corruption, "marker_errors": evaluation.markers.as_ref().map(|(_, e)| e),
         "within_2_std": evaluation.coverage,
     });
-    let summary_path = out.join("summary.json");
+    let summary_path = out.join(crate::output::SUMMARY_FILE);
     write_atomic_bytes(&summary_path, serde_json::to_string_pretty(&summary)?.as_bytes())?;
     let worst = evaluation.test.get(s.worst);
     let input = learn::evaluation_input(&evaluation.test, s.worst, corruption, 0)?;

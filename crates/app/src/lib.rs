@@ -51,4 +51,4 @@ pub mod setup;
 pub mod simulate;
 pub mod solve;
 pub mod training;
-mod values;
+pub mod values;

@@ -64,11 +64,14 @@ pub fn in_run_dir<T>(out: Option<&Path>, parent: &Path, work: impl FnOnce(&Path)
     tidy_failed_run(&dir, own, work(&dir))
 }
 
+/// The file that holds a run's results, written last: a folder that has it holds a finished run.
+pub const SUMMARY_FILE: &str = "summary.json";
+
 /// Refuses a folder `dir` that holds the results of an earlier run (its summary.json), or the
 /// frames of one stopped before its summary (a registration's organ.vtu or organ_NNNN.vtu, an
 /// assimilation's deformation/step_NNNNN.vtu), so that two runs' files are never mixed.
 pub fn refuse_earlier_run(dir: &Path) -> Result<()> {
-    if dir.join("summary.json").exists() {
+    if dir.join(SUMMARY_FILE).exists() {
         anyhow::bail!(
             "{} holds the results of an earlier run (summary.json): give another --out, or remove it",
             dir.display()
@@ -317,7 +320,7 @@ impl RunWriter {
         let frames = std::mem::take(&mut summary.warnings);
         summary.warnings = registration.warnings().iter().chain(&self.warnings).cloned().chain(frames).collect();
         let run = RunSummary { frame, summary: &summary, per_frame: &self.rows, file_notes: &notes };
-        write_atomic_bytes(&self.dir.join("summary.json"), serde_json::to_string_pretty(&run)?.as_bytes())?;
+        write_atomic_bytes(&self.dir.join(SUMMARY_FILE), serde_json::to_string_pretty(&run)?.as_bytes())?;
         Ok(Finished { summary, for_slicer, notes })
     }
 }
@@ -606,7 +609,7 @@ pub fn write_comparison(dir: &Path, case: &SyntheticCase, rows: &[Compared]) -> 
             Err(e) => Ok(serde_json::json!({ "method": r.method, "error": e.to_string() })),
         })
         .collect::<Result<_, _>>()?;
-    write_atomic_bytes(&dir.join("summary.json"), serde_json::to_string_pretty(&summaries)?.as_bytes())?;
+    write_atomic_bytes(&dir.join(SUMMARY_FILE), serde_json::to_string_pretty(&summaries)?.as_bytes())?;
     Ok(())
 }
 

@@ -49,7 +49,7 @@ pub struct ServeArgs {
     /// Most clients served at once (each has a registration of its own, its memory and threads): a
     /// connection beyond them is answered by a STRING `status` error and closed.
     #[arg(long, default_value_t = ServeOptions::default().max_clients, value_name = "N",
-          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+          value_parser = crate::values::count)]
     pub max_clients: usize,
 }
 

@@ -25,6 +25,14 @@ pub(crate) fn at_least_one(text: &str) -> Result<f64, String> {
     number_where(text, |v| v >= 1.0, "at least 1")
 }
 
+/// A count of one or more (`--runs 0` is refused rather than run once).
+pub fn count(text: &str) -> Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(0) => Err("expected a count of at least 1, got 0".into()),
+        parsed => parsed.map_err(|e| format!("'{text}' is not a count (a whole number): {e}")),
+    }
+}
+
 /// A factor in (0, 1].
 pub(crate) fn factor(text: &str) -> Result<f64, String> {
     number_where(text, |v| v > 0.0 && v <= 1.0, "in (0, 1]")
@@ -45,5 +53,6 @@ mod tests {
             factor("0").is_err() && factor("1.1").is_err() && positive("inf").is_err() && at_least_one("0.5").is_err()
         );
         assert_eq!(positive("x"), Err("'x' is not a number: invalid float literal".to_string()));
+        assert_eq!((count("3"), count("0")), (Ok(3), Err("expected a count of at least 1, got 0".to_string())));
     }
 }

@@ -130,7 +130,7 @@ enum Command {
         #[arg(long)]
         mesh: Option<PathBuf>,
         /// Timed runs after warm-up.
-        #[arg(long, default_value_t = 50, value_parser = at_least_one)]
+        #[arg(long, default_value_t = 50, value_parser = app::values::count)]
         runs: usize,
         /// Where the network runs.
         #[command(flatten)]
@@ -157,20 +157,12 @@ enum Command {
     /// of registration frames (every method, beside the co-rotational FEM).
     Bench {
         /// Repetitions per case.
-        #[arg(short, long, default_value_t = 20, value_parser = at_least_one)]
+        #[arg(short, long, default_value_t = 20, value_parser = app::values::count)]
         runs: usize,
         /// The tables to run: solves, prediction, registration (default: all of them).
         #[arg(value_parser = |name: &str| name.parse::<experiment::bench::Table>())]
         tables: Vec<experiment::bench::Table>,
     },
-}
-
-/// A count of one or more (`--runs 0` is refused rather than run once).
-fn at_least_one(text: &str) -> Result<usize, String> {
-    match text.parse::<usize>() {
-        Ok(0) => Err("must be at least 1".into()),
-        parsed => parsed.map_err(|e| e.to_string()),
-    }
 }
 
 /// A parser of paths with one of the `allowed` extensions (lower case), refusing others before

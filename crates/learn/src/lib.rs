@@ -44,7 +44,7 @@ pub use data::chosen::{ChoiceRecipe, ChosenDraws, ChosenRound, CANDIDATE_BASE};
 pub use data::corrupt::{nonzero_nodes, Corruption, Sparsity};
 pub use data::dataset::{
     json_differences, merge_datasets, Dataset, DatasetPart, DatasetSpec, DatasetWriter, FailedSample, FieldUnit,
-    Manifest, Normalization, Sample, Samples, ShardInfo, Statistics,
+    Manifest, Normalization, Sample, Samples, ShardInfo, Statistics, MANIFEST_FILE,
 };
 pub use data::grid::{encode_points, GridMesh, GridPlacement, GridShape, GridToMesh, CHANNELS, LAYOUT};
 pub use data::split::{IndexSet, Split, SplitPolicy};

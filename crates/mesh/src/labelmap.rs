@@ -40,7 +40,7 @@ use std::path::Path;
 
 use crate::io::Scalar;
 
-use crate::length::{mm, LengthUnit};
+use crate::length::LengthUnit;
 use crate::volume::{determinant, VoxelMask};
 use crate::MeshError;
 
@@ -283,11 +283,6 @@ fn label(i: usize, x: f64) -> Result<i32, String> {
 /// How far (relative) a voxel scaled by a NIfTI's slope and intercept may lie from a whole number
 /// and still be a label: several times the precision of the 32-bit numbers NIfTI-1 stores them in.
 const SCALED_LABEL_TOLERANCE: f64 = 1e-6;
-
-/// The millimetres in one `unit`.
-fn unit_mm(unit: LengthUnit) -> f64 {
-    mm(unit.metres())
-}
 
 /// A voxel-to-world affine whose world unit is `mm_per_unit` millimetres, in millimetres.
 fn in_millimetres(affine: [[f64; 4]; 3], mm_per_unit: f64) -> [[f64; 4]; 3] {

@@ -65,6 +65,12 @@ impl LengthUnit {
         }
     }
 
+    /// Millimetres in one unit (the scale that brings coordinates in this unit to millimetres, the unit of
+    /// 3D Slicer's and a scanner's files).
+    pub fn millimetres(self) -> f64 {
+        self.metres() / LengthUnit::Millimetre.metres()
+    }
+
     /// A length in this unit, in metres.
     pub fn to_metres(self, length: f64) -> f64 {
         length * self.metres()

@@ -641,7 +641,7 @@ fn dataset_split(
     test: usize,
 ) -> PyResult<(String, [Vec<usize>; 3])> {
     compute(py, || {
-        let manifest = learn::Manifest::read(&dataset.join("manifest.json"))?;
+        let manifest = learn::Manifest::read(&dataset.join(learn::MANIFEST_FILE))?;
         let split = learn::Split::of_indices(Some(manifest.source_id()), &indices, validation, test)?;
         let positions = |set: &learn::IndexSet| (0..indices.len()).filter(|&p| set.contains(indices[p])).collect();
         let sets = [positions(&split.train), positions(&split.validation), positions(&split.test)];

@@ -604,7 +604,7 @@ impl Experiment {
             gated_components: trace.records.iter().map(|r| r.gated).sum(),
             gated_steps: trace.records.iter().filter(|r| r.gated > 0).count(),
         };
-        report.write_json(&out_dir.join("summary.json"))?;
+        report.write_json(&out_dir.join(crate::output::SUMMARY_FILE))?;
         Ok(report)
     }
 

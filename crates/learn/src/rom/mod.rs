@@ -384,7 +384,7 @@ impl ReducedModel {
             target_unit: self.target_unit,
             rom: self.info.clone(),
         };
-        let path = dir.join("model.json");
+        let path = dir.join(crate::MODEL_FILE);
         let text = serde_json::to_string_pretty(&file)
             .map_err(|e| LearnError::model(&path, format!("cannot serialize model file: {e}")))?;
         Ok(mesh::io::write_atomic_bytes(&path, text.as_bytes())?)

@@ -189,9 +189,7 @@ pub fn surface_unit(path: impl AsRef<Path>) -> Result<Option<LengthUnit>, MeshEr
     let mut words = header[at + KEY.len()..].split_whitespace();
     let (scale, unit) = (words.next().and_then(|w| w.parse::<f64>().ok()), words.next());
     let named = match (scale, unit) {
-        (Some(scale), Some("mm")) => {
-            LengthUnit::ALL.into_iter().find(|u| (u.to_metres(1e3) / scale - 1.0).abs() < 1e-6)
-        }
+        (Some(scale), Some("mm")) => LengthUnit::ALL.into_iter().find(|u| (u.millimetres() / scale - 1.0).abs() < 1e-6),
         _ => None,
     };
     named.map(Some).ok_or_else(|| {

@@ -548,19 +548,21 @@ fn persist_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> std::
     Ok(())
 }
 
-/// Displays an `f64` in its shortest form that parses back to the same value (`nan`, `inf` and
-/// `-inf` for non-finite values).
-struct Num(f64);
+/// Displays an `f64` in its shortest form that parses back to the same value: plain notation for
+/// ordinary magnitudes, scientific otherwise; `nan`, `inf` and `-inf` for non-finite values.
+pub(crate) struct Num(pub(crate) f64);
 
 impl fmt::Display for Num {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let x = self.0;
+        let (x, a) = (self.0, self.0.abs());
         if x.is_nan() {
             f.write_str("nan")
         } else if x.is_infinite() {
             f.write_str(if x > 0.0 { "inf" } else { "-inf" })
+        } else if a == 0.0 || (1e-4..1e15).contains(&a) {
+            write!(f, "{x}")
         } else {
-            write!(f, "{x:?}")
+            write!(f, "{x:e}")
         }
     }
 }

@@ -29,7 +29,7 @@ use serde_json::Value;
 
 use super::csv::{csv_field, write_csv, CsvError, Dialect, Header, Table};
 use super::frame::Frame;
-use super::{extension, write_atomic, WriteError};
+use super::{extension, write_atomic, Num, WriteError};
 use crate::length::LengthUnit;
 use crate::{MeshError, Point};
 
@@ -524,27 +524,12 @@ pub fn write_markups_json(path: impl AsRef<Path>, points: &LabelledPoints) -> Re
 /// The factor that brings `points` to millimetres, the unit 3D Slicer's files hold (1 when they
 /// name no unit: taken as millimetres).
 fn millimetres_per_unit(points: &LabelledPoints) -> f64 {
-    points.unit.map_or(1.0, |u| u.metres() / LengthUnit::Millimetre.metres())
+    points.unit.map_or(1.0, LengthUnit::millimetres)
 }
 
 /// Writes `points` as CSV with the header `x,y,z`, atomically; the values read back exactly.
 pub fn write_points_csv(path: &Path, points: &[Point]) -> Result<(), WriteError> {
     write_csv(path, &[], &["x", "y", "z"], points.iter().map(|p| p.map(|v| Num(v).to_string())))
-}
-
-/// Shortest round-tripping text of a value: plain notation for ordinary magnitudes, scientific
-/// otherwise (both forms of Rust's formatting round-trip exactly).
-struct Num(f64);
-
-impl std::fmt::Display for Num {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let a = self.0.abs();
-        if a == 0.0 || (1e-4..1e15).contains(&a) {
-            write!(f, "{}", self.0)
-        } else {
-            write!(f, "{:e}", self.0)
-        }
-    }
 }
 
 #[cfg(test)]

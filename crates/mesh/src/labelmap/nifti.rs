@@ -4,9 +4,7 @@
 
 use std::path::Path;
 
-use super::{
-    check_affine, gzip, in_millimetres, label_bytes, labels, unit_mm, Frame, Labelmap, SCALED_LABEL_TOLERANCE,
-};
+use super::{check_affine, gzip, in_millimetres, label_bytes, labels, Frame, Labelmap, SCALED_LABEL_TOLERANCE};
 use crate::io::Scalar;
 use crate::length::LengthUnit;
 use crate::MeshError;
@@ -171,7 +169,7 @@ pub(super) fn parse_nifti(bytes: &[u8]) -> Result<Labelmap, String> {
     }
     let (qform_code, sform_code) = (header.qform_code, header.sform_code);
     let named_unit = nifti_unit(header.xyzt_units)?;
-    let mm_per_unit = unit_mm(named_unit.unwrap_or(LengthUnit::Millimetre));
+    let mm_per_unit = named_unit.unwrap_or(LengthUnit::Millimetre).millimetres();
     let (affine, both) = nifti_affine(&header, dims)?;
     let affine = in_millimetres(affine, mm_per_unit);
     let warnings = both

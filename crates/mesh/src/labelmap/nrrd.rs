@@ -6,8 +6,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use super::{
-    check_affine, gunzip_if_needed, gzip, in_millimetres, label, label_bytes, labels, read_data_file, unit_mm, Frame,
-    Labelmap,
+    check_affine, gunzip_if_needed, gzip, in_millimetres, label, label_bytes, labels, read_data_file, Frame, Labelmap,
 };
 use crate::io::Scalar;
 use crate::length::LengthUnit;
@@ -244,7 +243,7 @@ pub(super) fn parse_nrrd(bytes: &[u8], folder: &Path) -> Result<Labelmap, String
         std::array::from_fn(|r| std::array::from_fn(|c| if c < 3 { axes[c][r] } else { origin[r] }));
     check_affine(&affine)?;
     let named_unit = header.fields.get("space units").map(|text| nrrd_space_unit(text)).transpose()?;
-    let affine = in_millimetres(affine, unit_mm(named_unit.unwrap_or(LengthUnit::Millimetre)));
+    let affine = in_millimetres(affine, named_unit.unwrap_or(LengthUnit::Millimetre).millimetres());
     let segments = slicer_segments(&header.pairs, layers)?;
     let encoding = header.field("encoding")?;
     let data = after_lines(data, header.skip("line skip", "lineskip")?)?;

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use super::{in_millimetres, read_labelmap_choosing, unit_mm, Frame};
+use super::{in_millimetres, read_labelmap_choosing, Frame};
 use crate::isosurface::{mask_surface, ExtractOptions, ExtractReport};
 use crate::length::LengthUnit;
 use crate::volume::VoxelMask;
@@ -81,7 +81,7 @@ pub fn read_labelmap_surface(
     let mut overridden = None;
     match (unit, map.named_unit) {
         (Some(given), Some(named)) if given != named => {
-            map.affine = in_millimetres(map.affine, unit_mm(given) / unit_mm(named));
+            map.affine = in_millimetres(map.affine, given.millimetres() / named.millimetres());
             map.named_unit = Some(given);
             overridden = Some(format!(
                 "its header names its unit, {}; read in {} as given instead (--units): {} than the header makes it",
@@ -91,7 +91,7 @@ pub fn read_labelmap_surface(
             ));
         }
         (Some(given), None) => {
-            map.affine = in_millimetres(map.affine, unit_mm(given));
+            map.affine = in_millimetres(map.affine, given.millimetres());
             map.named_unit = Some(given);
         }
         _ => {}
@@ -151,7 +151,7 @@ pub fn read_labelmap_surface(
                 let fits = [LengthUnit::Millimetre, LengthUnit::Centimetre, LengthUnit::Metre, LengthUnit::Micrometre]
                     .into_iter()
                     .find(|&other| {
-                        (ORGAN_SPAN_MM.0..=ORGAN_SPAN_MM.1).contains(&(span / unit_mm(unit) * unit_mm(other)))
+                        (ORGAN_SPAN_MM.0..=ORGAN_SPAN_MM.1).contains(&(span / unit.millimetres() * other.millimetres()))
                     });
                 match fits {
                     Some(other) => format!(
