@@ -117,13 +117,15 @@ pub enum FemError {
     },
     /// The load path turned back: the smallest load step past the last equilibrium found none,
     /// even with a long descent.
-    #[error("no equilibrium found beyond load factor {load_factor:.3}{}, and {iterations} further iterations found none; lower the load, hold the body more firmly, or push with a displacement", stiffness_note(*.softening))]
+    #[error("no equilibrium found beyond load factor {load_factor:.3}{}, and {iterations} further iterations found none; lower the load, hold the body more firmly, or push with a displacement", stiffness_note(*.softening, *.indefinite))]
     NoEquilibrium {
         /// The last load factor reached.
         load_factor: f64,
-        /// The stiffness of the last load step against that of the first, in per cent (NaN when
-        /// fewer than two steps converged).
+        /// The stiffness of the last load step against that at rest, in per cent (NaN where
+        /// unknown).
         softening: f64,
+        /// The tangent stiffness was found indefinite there: the body lost its stability.
+        indefinite: bool,
         /// Iterations the last attempt took before it failed.
         iterations: usize,
     },
@@ -171,9 +173,12 @@ impl FemError {
 const LIMIT_POINT_STIFFNESS: f64 = 25.0;
 
 /// What [`FemError::NoEquilibrium`] says of the load path: a limit point where its last steps had
-/// softened to under [`LIMIT_POINT_STIFFNESS`] per cent of the stiffness at rest, no sign of one
-/// where they had not, nothing where fewer than two steps converged.
-fn stiffness_note(softening: f64) -> String {
+/// softened to under [`LIMIT_POINT_STIFFNESS`] per cent of the stiffness at rest; where they had
+/// not, a loss of stability if the tangent turned `indefinite` there, no sign of a limit point
+/// otherwise; nothing of the stiffness where it is unknown.
+fn stiffness_note(softening: f64, indefinite: bool) -> String {
+    let lost = ": the tangent stiffness turned indefinite there, the body losing its stability (a bifurcation: \
+                past it the body buckles, snaps or gives way under this load)";
     if softening <= 0.0 {
         format!(
             ": the load path had turned there (its stiffness {softening:.1} % of that at rest: a limit point, past \
@@ -184,6 +189,10 @@ fn stiffness_note(softening: f64) -> String {
             ": the response there was {softening:.1} % as stiff as at rest (a limit point of the load path: past it the \
              body snaps or gives way under this load)"
         )
+    } else if indefinite && softening.is_finite() {
+        format!("{lost}, its response along the load still {softening:.1} % as stiff as at rest")
+    } else if indefinite {
+        lost.to_string()
     } else if softening.is_finite() {
         format!(": the response there was still {softening:.1} % as stiff as at rest (no sign of a limit point)")
     } else {

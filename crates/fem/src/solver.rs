@@ -371,6 +371,8 @@ enum Budget {
 struct LoadPath {
     /// The load at load factor 1, normalised (empty when there is none).
     direction: Vec<f64>,
+    /// The stiffness dλ/dq at rest, from the linear response at rest ([`LoadPath::record_rest`]).
+    rest: Option<f64>,
     /// (load factor, q) of the first and the last three converged states, the latest last.
     first: Option<(f64, f64)>,
     last: [Option<(f64, f64)>; 3],
@@ -380,35 +382,73 @@ impl LoadPath {
     fn new(load: Vec<f64>) -> Self {
         let size = norm(&load);
         let direction = if size > 0.0 { load.iter().map(|f| f / size).collect() } else { Vec::new() };
-        LoadPath { direction, first: None, last: [None; 3] }
+        LoadPath { direction, rest: None, first: None, last: [None; 3] }
+    }
+
+    /// The displacement q of the state `u`.
+    fn measure(&self, u: &[f64]) -> f64 {
+        if self.direction.is_empty() {
+            norm(u)
+        } else {
+            dot(&self.direction, u)
+        }
     }
 
     /// Records the converged state `u` at load factor `lambda`.
     fn record(&mut self, lambda: f64, u: &[f64]) {
-        let q = if self.direction.is_empty() { norm(u) } else { dot(&self.direction, u) };
+        let q = self.measure(u);
         self.first.get_or_insert((lambda, q));
         self.last = [self.last[1], self.last[2], Some((lambda, q))];
     }
 
-    /// The stiffness dλ/dq of the last step over that of the first (from rest), in per cent; NaN
-    /// before two steps.
-    fn softening(&self) -> f64 {
-        match (self.first, self.last) {
-            (Some((l0, q0)), [_, Some((l1, q1)), Some((l2, q2))]) if q0 != 0.0 && q2 != q1 => {
-                100.0 * ((l2 - l1) / (q2 - q1)) / (l0 / q0)
+    /// Records `u`, the linear response at rest to load factor `lambda` (a solve's first Newton
+    /// iterate from rest): the stiffness at rest, which the first step is measured against
+    /// (a first step that snapped is no measure of it). The first such record is kept.
+    fn record_rest(&mut self, lambda: f64, u: &[f64]) {
+        let q = self.measure(u);
+        if self.rest.is_none() && lambda > 0.0 && q != 0.0 {
+            self.rest = Some(lambda / q);
+        }
+    }
+
+    /// The stiffness dλ/dq at rest: the linear response's where recorded, otherwise the first
+    /// step's.
+    fn at_rest(&self) -> Option<f64> {
+        self.rest.or(self.first.filter(|&(_, q)| q != 0.0).map(|(l, q)| l / q))
+    }
+
+    /// The stiffnesses dλ/dq of the step before the last (the stiffness at rest before the first
+    /// step) and of the last step; `None` before a step, or before two where the stiffness at
+    /// rest is unknown.
+    fn steps(&self) -> Option<(f64, f64)> {
+        let secant = |(l0, q0): (f64, f64), (l1, q1): (f64, f64)| (l1 - l0) / (q1 - q0);
+        match self.last {
+            [_, None, Some(only)] => Some((self.rest?, secant((0.0, 0.0), only))),
+            [before, Some(previous), Some(latest)] => {
+                Some((secant(before.unwrap_or((0.0, 0.0)), previous), secant(previous, latest)))
             }
+            _ => None,
+        }
+    }
+
+    /// The stiffness dλ/dq of the last step over that at rest, in per cent; NaN where either is
+    /// unknown (before a step; before two where the stiffness at rest was not recorded).
+    fn softening(&self) -> f64 {
+        match (self.at_rest(), self.steps()) {
+            (Some(rest), Some((_, latest))) if latest.is_finite() => 100.0 * latest / rest,
             _ => f64::NAN,
         }
     }
 
     /// Whether the last step found its equilibrium far away, past a limit point: its stiffness
     /// under [`crate::LIMIT_POINT_STIFFNESS`] per cent of that at rest and under half the step's
-    /// before it (a path that softens gradually does not).
+    /// before it (a path that softens gradually does not). A first step's stiffness, its secant
+    /// from rest, averages the stiff stretch before a limit point with the snap: under half the
+    /// stiffness at rest is enough.
     fn snapped(&self) -> bool {
-        let [before, Some((l1, q1)), Some((l2, q2))] = self.last else { return false };
-        let (l0, q0) = before.unwrap_or((0.0, 0.0));
-        let (previous, latest) = ((l1 - l0) / (q1 - q0), (l2 - l1) / (q2 - q1));
-        self.softening() < crate::LIMIT_POINT_STIFFNESS && previous > 0.0 && latest < 0.5 * previous
+        let Some((previous, latest)) = self.steps() else { return false };
+        let first = self.last[1].is_none();
+        (first || self.softening() < crate::LIMIT_POINT_STIFFNESS) && previous > 0.0 && latest < 0.5 * previous
     }
 }
 
@@ -810,9 +850,12 @@ impl StaticSolver {
                 }
                 Err(e @ (FemError::NotConverged { .. } | FemError::InvertedElement { .. })) => {
                     let failure = match patient_failed {
-                        Some((at, iterations)) => {
-                            FemError::NoEquilibrium { load_factor: at, softening: path.softening(), iterations }
-                        }
+                        Some((at, iterations)) => FemError::NoEquilibrium {
+                            load_factor: at,
+                            softening: path.softening(),
+                            indefinite: false,
+                            iterations,
+                        },
                         None => e,
                     };
                     return match self.past_force_control(failure, &mut u, &mut lambda, &mut path, options, &mut stats) {
@@ -867,6 +910,9 @@ impl StaticSolver {
         options: &SolverOptions,
         stats: &mut Stats,
     ) -> Result<bool, FemError> {
+        if let Some((at, first)) = stats.rest_response.take() {
+            path.record_rest(at, &first);
+        }
         path.record(target, trial);
         if !path.snapped() || stats.snapped_from.is_some() {
             return Ok(true);
@@ -1046,6 +1092,11 @@ impl StaticSolver {
             let cholesky = &mut self.cholesky;
             bfgs.apply(&mut du, |v| cholesky.solve_in_place(slot, v))?;
             stats.timings.solve += t.elapsed();
+            if from == Start::Rest && it == 0 && stats.rest_response.is_none() {
+                let mut first = u.to_vec();
+                self.add_free(&mut first, &du, 1.0);
+                stats.rest_response = Some((lambda, first));
+            }
             r_old.copy_from_slice(&r);
             let alpha = self.line_search(u, &du, &mut trial, &mut f_int, &f_ext, &mut r, opt, stats)?;
             let res_new = norm(&r);
@@ -1300,6 +1351,9 @@ struct Stats {
     snapped_from: Option<f64>,
     /// The load factor of the last equilibrium reached.
     reached: f64,
+    /// The first Newton iterate from rest and its load factor: the linear response at rest
+    /// ([`LoadPath::record_rest`]).
+    rest_response: Option<(f64, Vec<f64>)>,
 }
 
 impl Stats {

@@ -78,8 +78,11 @@ fn relative_difference(a: &[f64], b: &[f64]) -> f64 {
 fn a_shallow_arch_snaps_through_past_its_limit_load_whether_load_stepped_or_not() {
     let (before, _) = arch(1.5, 1).unwrap();
     assert!(before < RISE / 2.0, "below the limit load the crown moves {before} m");
-    let (at_once, _) = arch(2.0, 1).unwrap();
+    let (at_once, once) = arch(2.0, 1).unwrap();
     assert!(at_once > RISE + THICK, "past the limit load the crown moves {at_once} m: not snapped through");
+    // In one step too, the solve says it snapped: measured against the stiffness at rest.
+    assert!(once.snapped_from.is_some(), "a snap in a single load step not told");
+    assert_eq!(arch(1.5, 1).unwrap().1.snapped_from, None);
     let (stepped, solution) = arch(2.0, 20).unwrap();
     assert!(solution.load_steps >= 20, "{} load steps", solution.load_steps);
     // Load-stepped, the solution says where it snapped: from an equilibrium short of the limit
@@ -100,15 +103,23 @@ fn a_shallow_arch_snaps_through_past_its_limit_load_whether_load_stepped_or_not(
 /// to change either way.
 #[test]
 fn no_equilibrium_names_a_limit_point_only_where_the_path_was_seen_to_soften() {
-    let softened = FemError::NoEquilibrium { load_factor: 0.918, softening: 2.04, iterations: 1000 }.to_string();
+    let softened = FemError::NoEquilibrium { load_factor: 0.918, softening: 2.04, indefinite: false, iterations: 1000 }
+        .to_string();
     assert!(softened.contains("0.918") && softened.contains("2.0 % as stiff") && softened.contains("limit point"));
-    let stiff = FemError::NoEquilibrium { load_factor: 0.094, softening: 69.2, iterations: 10 }.to_string();
+    let stiff =
+        FemError::NoEquilibrium { load_factor: 0.094, softening: 69.2, indefinite: false, iterations: 10 }.to_string();
     assert!(stiff.contains("69.2 % as stiff") && stiff.contains("no sign of a limit point"), "{stiff}");
-    let turned = FemError::NoEquilibrium { load_factor: 0.96, softening: -0.6, iterations: 681 }.to_string();
+    let turned =
+        FemError::NoEquilibrium { load_factor: 0.96, softening: -0.6, indefinite: false, iterations: 681 }.to_string();
     assert!(turned.contains("the load path had turned there") && !turned.contains("-0.6 % as stiff"), "{turned}");
-    let unknown = FemError::NoEquilibrium { load_factor: 0.125, softening: f64::NAN, iterations: 74 }.to_string();
+    let lost = FemError::NoEquilibrium { load_factor: 0.634, softening: 119.7, indefinite: true, iterations: 69 };
+    let lost = lost.to_string();
+    assert!(lost.contains("turned indefinite") && !lost.contains("no sign of a limit point"), "{lost}");
+    let unknown =
+        FemError::NoEquilibrium { load_factor: 0.125, softening: f64::NAN, indefinite: false, iterations: 74 }
+            .to_string();
     assert!(!unknown.contains("NaN") && !unknown.contains("limit point"), "{unknown}");
-    for message in [softened, stiff, turned, unknown] {
+    for message in [softened, stiff, turned, lost, unknown] {
         assert!(message.contains("further iterations found none") && message.contains("lower the load"), "{message}");
     }
 }
@@ -207,4 +218,40 @@ fn a_column_bending_over_past_its_buckling_load_is_not_said_to_snap() {
     // Without the check, the first soft step is taken for a snap.
     let unchecked = SolverOptions { confirm_snaps: false, ..options };
     assert!(StaticSolver::new(problem).unwrap().solve(&unchecked).unwrap().snapped_from.is_some());
+}
+
+/// A 10 cm Neo-Hookean cube (E 5 kPa, ν 0.3, 2 × 2 × 2 cubes of 6 T4) clamped at x = 0 and pressed
+/// at x = 10 cm by a dead traction of `pressure` pascals.
+fn pressed_cube(pressure: f64) -> Problem {
+    let mesh = mesh::box_tet([0.0; 3], [0.1; 3], [2, 2, 2]).unwrap();
+    let face = |x: f64| -> Vec<usize> { (0..mesh.num_nodes()).filter(|&n| mesh.nodes[n][0] == x).collect() };
+    let (held, pressed) = (face(0.0), face(0.1));
+    let material = Material::new(Law::NeoHookean, 5000.0, 0.3).with_formulation(Formulation::Standard);
+    let mut problem = Problem::new(mesh, material);
+    problem.fix(&held);
+    problem.add_traction(&pressed, [-pressure, 0.0, 0.0]);
+    problem
+}
+
+/// Pressed by 3 kPa the cube gives way (it folds back through its clamp) past a loss of
+/// stability: said so whether the load is applied in one step or in twenty, at a load factor the
+/// arc-length check finds; the continuation stops there and says the tangent turned indefinite,
+/// not that the path shows no sign of a limit point. Pressed by 500 Pa, it does not give way.
+#[test]
+fn a_body_that_gives_way_in_its_first_load_step_is_said_to_snap() {
+    for load_steps in [1, 20] {
+        let options = SolverOptions { load_steps, confirm_snaps: true, ..SolverOptions::default() };
+        let solution = StaticSolver::new(pressed_cube(3000.0)).unwrap().solve(&options).unwrap();
+        let snapped = solution.snapped_from;
+        assert!(snapped.is_some_and(|l| (0.5..1.0).contains(&l)), "{load_steps} step(s): {snapped:?}");
+        let options = SolverOptions { load_steps, ..options };
+        assert_eq!(StaticSolver::new(pressed_cube(500.0)).unwrap().solve(&options).unwrap().snapped_from, None);
+    }
+    match solve(pressed_cube(3000.0), Continuation::ArcLength) {
+        Err(e @ FemError::NoEquilibrium { indefinite: true, .. }) => {
+            let message = e.to_string();
+            assert!(message.contains("turned indefinite") && !message.contains("no sign"), "{message}");
+        }
+        other => panic!("the cube by arc length: {:?}", other.map(|s| s.load_steps)),
+    }
 }

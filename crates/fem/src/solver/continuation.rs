@@ -83,9 +83,10 @@ impl StaticSolver {
         let mut f_int = vec![0.0; u.len()];
         let (mut arc, mut smallest) = (f64::NAN, 0.0);
         let (start_iterations, mut steps) = (stats.iterations, 0);
-        let none = |lambda: f64, path: &LoadPath, stats: &Stats| FemError::NoEquilibrium {
+        let none = |lambda: f64, path: &LoadPath, stats: &Stats, indefinite: bool| FemError::NoEquilibrium {
             load_factor: lambda,
             softening: path.softening(),
+            indefinite,
             iterations: stats.iterations - start_iterations,
         };
         // `current`: the latest factor is the tangent's at `u` (an attempt that failed without
@@ -95,10 +96,16 @@ impl StaticSolver {
             if !current {
                 self.refactorize(u, &mut f_int, false, stats)?;
                 if !self.cholesky.is_positive_definite(Slot::Latest) {
-                    return Err(none(*lambda, path, stats));
+                    return Err(none(*lambda, path, stats, true));
                 }
                 tangent.copy_from_slice(&load.free);
                 self.cholesky.solve_in_place(Slot::Latest, &mut tangent)?;
+                if *lambda == 0.0 {
+                    // From rest: the linear response at rest to the whole load.
+                    let mut response = vec![0.0; u.len()];
+                    self.add_free(&mut response, &tangent, 1.0);
+                    path.record_rest(1.0, &response);
+                }
             }
             let length = norm(&tangent);
             if !(length > 0.0) {
@@ -132,7 +139,7 @@ impl StaticSolver {
                 // The path turns back: a limit point of the load (past it the body snaps).
                 Ok(step) if step.lambda < *lambda => {
                     path.record(step.lambda, &step.u);
-                    return Err(none(*lambda, path, stats));
+                    return Err(none(*lambda, path, stats, false));
                 }
                 Ok(step) => {
                     path.record(step.lambda, &step.u);
@@ -146,12 +153,12 @@ impl StaticSolver {
                     arc *= 0.5;
                 }
                 Err(FemError::NotConverged { .. } | FemError::InvertedElement { .. }) => {
-                    return Err(none(*lambda, path, stats));
+                    return Err(none(*lambda, path, stats, false));
                 }
                 Err(e) => return Err(e),
             }
         }
-        Err(none(*lambda, path, stats))
+        Err(none(*lambda, path, stats, false))
     }
 
     /// One arc-length step from the equilibrium `u` at `lambda`: the predictor `dlambda` ×
