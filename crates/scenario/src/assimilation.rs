@@ -289,9 +289,11 @@ impl AssimilationScenario {
     /// time-profiled loads (forces and tool displacements), and the tool nodes.
     pub fn build_problem(&self, mesh: Mesh) -> Result<(Problem, Vec<LoadPattern>, Vec<usize>)> {
         let fail = |m: String| ScenarioError::build(&self.name, m);
-        let mut problem = fixed_problem(mesh, self.material, &self.fixed).map_err(|e| fail(e.to_string()))?;
-        let select =
-            |s: &NodeSelection, what: &str, p: &Problem| crate::source::select_nodes(s, &p.mesh, what).map_err(fail);
+        let mut problem =
+            fixed_problem(mesh, &self.mesh, self.material, &self.fixed).map_err(|e| fail(e.to_string()))?;
+        let select = |s: &NodeSelection, what: &str, p: &Problem| {
+            crate::source::select_nodes(s, &p.mesh, &self.mesh, what).map_err(fail)
+        };
         problem.attach_all(&self.attachment).map_err(|e| fail(e.to_string()))?;
         let pattern = |shares: Vec<(usize, f64)>, total: Point, profile: Profile| {
             let forces = shares.into_iter().map(|(k, s)| (k, total.map(|c| c * s))).collect();
@@ -341,8 +343,9 @@ impl AssimilationScenario {
 
     /// Why tool `i` may not take node `k`, which a `[[fixed]]` holds: the node and both selections.
     fn tool_clash(&self, i: usize, k: usize, problem: &Problem) -> String {
-        let holds =
-            |f: &Fixed| crate::source::select_nodes(&f.select, &problem.mesh, "fixed").is_ok_and(|n| n.contains(&k));
+        let holds = |f: &Fixed| {
+            crate::source::select_nodes(&f.select, &problem.mesh, &self.mesh, "fixed").is_ok_and(|n| n.contains(&k))
+        };
         let by = match self.fixed.iter().position(holds) {
             Some(j) => format!("[[fixed]] {} ({})", j + 1, self.fixed[j].select),
             None => "[[fixed]]".to_string(),

@@ -192,9 +192,10 @@ impl StaticScenario {
     /// builds it, or a part of it): the material, constraints and loads.
     pub fn build_problem_on(&self, mesh: Mesh) -> Result<Problem> {
         let fail = |m: String| ScenarioError::build(&self.name, m);
-        let mut p = fixed_problem(mesh, self.material, &self.fixed).map_err(|e| fail(e.to_string()))?;
-        let pick =
-            |s: &NodeSelection, what: &str, p: &Problem| crate::source::select_nodes(s, &p.mesh, what).map_err(fail);
+        let mut p = fixed_problem(mesh, &self.mesh, self.material, &self.fixed).map_err(|e| fail(e.to_string()))?;
+        let pick = |s: &NodeSelection, what: &str, p: &Problem| {
+            crate::source::select_nodes(s, &p.mesh, &self.mesh, what).map_err(fail)
+        };
         // Each value where the file gives it: [[prescribed]] 2's displacement, not the assembled load.
         let finite = |what: &str, k: usize, key: &str, values: &[f64]| match values.iter().all(|v| v.is_finite()) {
             true => Ok(()),

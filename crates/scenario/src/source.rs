@@ -133,37 +133,56 @@ pub fn build_mesh(source: &MeshSource, dir: &Path) -> Result<Mesh, MeshError> {
 /// as metres (organs span 60 cm at most).
 const MISREAD_MESH_EXTENT: f64 = 5.0;
 
-/// The nodes `selection` picks on `mesh`, or what went wrong, naming the selection's table
-/// (`what`: "fixed", "force"); on a mesh of metres, asks for the mesh's unit (scenarios are in
-/// metres).
-pub fn select_nodes(selection: &NodeSelection, mesh: &Mesh, what: &str) -> Result<Vec<usize>, String> {
+/// The nodes `selection` picks on `mesh` (built from `source`), or what went wrong, naming the
+/// selection's table (`what`: "fixed", "force"); where a selection by position picks nothing on a
+/// mesh of metres, asks for the mesh's unit (scenarios are in metres).
+pub fn select_nodes(
+    selection: &NodeSelection,
+    mesh: &Mesh,
+    source: &MeshSource,
+    what: &str,
+) -> Result<Vec<usize>, String> {
     selection.select(mesh).map_err(|e| {
-        let hint = unit_hint(mesh).map_or(String::new(), |h| format!(" ({h})"));
+        let unit_caused = matches!(e, MeshError::Invalid(_)) && by_position(selection);
+        let hint = unit_hint(mesh, source).filter(|_| unit_caused).map_or(String::new(), |h| format!(" ({h})"));
         format!("{what} selection: {e}{hint}")
     })
 }
 
+/// Whether `selection` picks nodes by their position (which a mesh in another unit misplaces), in
+/// part at least.
+fn by_position(selection: &NodeSelection) -> bool {
+    match selection {
+        NodeSelection::Box { .. } | NodeSelection::Ball(_) | NodeSelection::Near(_) | NodeSelection::Facing(_) => true,
+        NodeSelection::Union(parts) | NodeSelection::Intersection(parts) => parts.iter().any(by_position),
+        _ => false,
+    }
+}
+
 /// For a mesh over 5 m across (no organ is), what it probably is: an organ in millimetres or
-/// centimetres (those in which its size is an organ's) read as metres.
-pub fn unit_hint(mesh: &Mesh) -> Option<String> {
+/// centimetres (those in which its size is an organ's) read as metres; a mesh file's `unit` key is
+/// named where `source` is a file.
+pub fn unit_hint(mesh: &Mesh, source: &MeshSource) -> Option<String> {
     let extent = mesh::longest_side(mesh.bounds());
     if extent <= MISREAD_MESH_EXTENT {
         return None;
     }
     let units = organ_units(extent, &[LengthUnit::Millimetre, LengthUnit::Centimetre]);
     let names: Vec<&str> = units.iter().map(|u| u.name()).collect();
+    let from_file = matches!(source, MeshSource::File { .. });
+    let key = |keys: &str| if from_file { format!(": [mesh.file] {keys}") } else { String::new() };
     let keys: Vec<String> = units.iter().map(|u| format!("unit = \"{u}\"")).collect();
     Some(match units.is_empty() {
         true => format!(
-            "the mesh spans {extent:.0} m, where organs span {} to {} cm: is its unit right? scenarios are in metres: \
-             [mesh.file] unit",
+            "the mesh spans {extent:.0} m, where organs span {} to {} cm: is its unit right? scenarios are in metres{}",
             LengthUnit::Centimetre.from_metres(*ORGAN_EXTENT_M.start()),
-            LengthUnit::Centimetre.from_metres(*ORGAN_EXTENT_M.end())
+            LengthUnit::Centimetre.from_metres(*ORGAN_EXTENT_M.end()),
+            key("unit")
         ),
         false => format!(
-            "the mesh spans {extent:.0} m: is it in {}? scenarios are in metres: [mesh.file] {}",
+            "the mesh spans {extent:.0} m: is it in {}? scenarios are in metres{}",
             names.join(" or "),
-            keys.join(" or ")
+            key(&keys.join(" or "))
         ),
     })
 }
@@ -183,13 +202,18 @@ pub fn young_hint(young: f64) -> Option<String> {
     })
 }
 
-/// The problem on `mesh` with `material` (validated) and the `fixed` nodes held at zero displacement; errors name
-/// the material or the selection at fault.
-pub fn fixed_problem(mesh: Mesh, material: Material, fixed: &[Fixed]) -> Result<Problem, FemError> {
+/// The problem on `mesh` (built from `source`) with `material` (validated) and the `fixed` nodes held at zero
+/// displacement; errors name the material or the selection at fault.
+pub fn fixed_problem(
+    mesh: Mesh,
+    source: &MeshSource,
+    material: Material,
+    fixed: &[Fixed],
+) -> Result<Problem, FemError> {
     material.validate().map_err(|m| FemError::Invalid(format!("material: {m}")))?;
     let mut problem = Problem::new(mesh, material);
     for f in fixed {
-        let nodes = select_nodes(&f.select, &problem.mesh, "fixed").map_err(FemError::Invalid)?;
+        let nodes = select_nodes(&f.select, &problem.mesh, source, "fixed").map_err(FemError::Invalid)?;
         problem.fix(&nodes);
     }
     Ok(problem)

@@ -155,35 +155,48 @@ fn a_byte_order_mark_is_read_and_unusable_numbers_are_named() {
     assert!(err.contains("ft") && err.contains("mm"), "{err}");
 }
 
-/// A selection that picks nothing on a mesh spanning metres (an organ in millimetres or
-/// centimetres: scenarios are in metres) asks for the unit in which it is an organ's size; on a
-/// mesh of an organ's size it does not.
+/// A selection by position that picks nothing on a mesh spanning metres (an organ in millimetres
+/// or centimetres: scenarios are in metres) asks for the unit in which it is an organ's size,
+/// naming `[mesh.file] unit` for a mesh read from a file only; on a mesh of an organ's size it
+/// does not, nor where a region or a landmarks file is at fault.
 #[test]
 fn an_empty_selection_on_a_mesh_of_metres_asks_for_its_unit() {
-    let error = |max: f64| {
+    let dir = tempfile::tempdir().unwrap();
+    let with = |mesh: &str, force: &str| {
         let text = format!(
-            "kind = \"static\"\nname = \"mm\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [{max}, {max}, {max}]\n\
-             cells = [2, 2, 2]\nelement = \"tet\"\n[material]\nlaw = \"linear\"\nyoung = 5000.0\npoisson = 0.3\n[[fixed]]\n\
-             select = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e4, 1e4, 1e-9] }} }}\n[[force]]\n\
-             select = {{ ball = {{ centre = [0.0, -0.09, 0.0], radius = 0.03 }} }}\ntotal = [0.0, 0.2, 0.0]\n"
+            "kind = \"static\"\nname = \"mm\"\n{mesh}[material]\nlaw = \"linear\"\nyoung = 5000.0\npoisson = 0.3\n\
+             [[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e4, 1e4, 1e-9] }} }}\n[[force]]\n\
+             select = {force}\ntotal = [0.0, 0.2, 0.0]\n"
         );
-        let scenario = StaticScenario::parse(&text, Path::new("mm.toml")).unwrap();
-        scenario.build_problem(Path::new(".")).unwrap_err().to_string()
+        let scenario = StaticScenario::parse(&text, &dir.path().join("mm.toml")).unwrap();
+        scenario.build_problem(dir.path()).unwrap_err().to_string()
     };
+    let cube = |max: f64| {
+        format!(
+            "[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [{max}, {max}, {max}]\ncells = [2, 2, 2]\nelement = \"tet\"\n"
+        )
+    };
+    let ball = "{ ball = { centre = [0.0, -0.09, 0.0], radius = 0.03 } }";
+    let error = |max: f64| with(&cube(max), ball);
     let millimetres = error(200.0);
     assert!(millimetres.contains("force selection: ") && millimetres.contains("picks no node"), "{millimetres}");
     assert!(
-        millimetres
-            .contains("the mesh spans 200 m: is it in millimetres? scenarios are in metres: [mesh.file] unit = \"mm\""),
+        millimetres.contains("the mesh spans 200 m: is it in millimetres? scenarios are in metres)"),
         "{millimetres}"
     );
     // 8 m across is an organ in centimetres (8 mm is none); 50 m one in either; 5 km in neither.
-    assert!(
-        error(8.0).contains("is it in centimetres? scenarios are in metres: [mesh.file] unit = \"cm\""),
-        "{}",
-        error(8.0)
-    );
+    assert!(error(8.0).contains("is it in centimetres? scenarios are in metres"), "{}", error(8.0));
     assert!(error(50.0).contains("is it in millimetres or centimetres?"), "{}", error(50.0));
     assert!(error(5000.0).contains("where organs span 2 to 60 cm: is its unit right?"), "{}", error(5000.0));
     assert!(!error(0.2).contains("millimetres"), "{}", error(0.2));
+    // A box has no unit key; a mesh file has.
+    assert!(!error(200.0).contains("[mesh.file]"), "{}", error(200.0));
+    let mesh = mesh::box_tet([0.0; 3], [200.0; 3], [2, 2, 2]).unwrap();
+    mesh::io::write_mesh(dir.path().join("cube.vtu"), &mesh, &[]).unwrap();
+    let file = with("[mesh.file]\npath = \"cube.vtu\"\n", ball);
+    assert!(file.contains("scenarios are in metres: [mesh.file] unit = \"mm\""), "{file}");
+    for unrelated in ["{ region = \"liver\" }", "{ near = { file = \"missing.csv\", distance = 0.01 } }"] {
+        let e = with(&cube(200.0), unrelated);
+        assert!(e.contains("force selection: ") && !e.contains("the mesh spans"), "{e}");
+    }
 }
