@@ -47,9 +47,9 @@ pub fn solve_and_write(
     Ok((solved, out))
 }
 
-/// Warnings of a problem's set-up, whatever its solution: faces held by half, doubtful units,
-/// cells the file numbers the other way round.
-fn set_up_warnings(p: &fem::Problem) -> Vec<String> {
+/// Warnings of a problem's set-up (its mesh built from `source`), whatever its solution: faces held
+/// by half, doubtful units, cells the file numbers the other way round.
+fn set_up_warnings(p: &fem::Problem, source: &scenario::MeshSource) -> Vec<String> {
     let mut lines = Vec::new();
     let half_held = mid_edge_nodes_left_free(p);
     if half_held > 0 {
@@ -59,7 +59,7 @@ fn set_up_warnings(p: &fem::Problem) -> Vec<String> {
              mid-edge nodes too"
         ));
     }
-    lines.extend(doubts(p));
+    lines.extend(doubts(p, source));
     if loads_the_whole_surface(p) {
         lines.push(
             "every boundary face carries a load, and no inner node: a [[force]] or [[traction]] whose \
@@ -84,21 +84,38 @@ fn loaded(p: &fem::Problem, n: usize) -> bool {
     p.f_ext[3 * n..3 * n + 3].iter().any(|&f| f != 0.0)
 }
 
-/// Whether the loads act on every boundary face (a quadratic face's traction on its mid-edge
-/// nodes only) and on no inner node (gravity loads them all), on a body that has inner nodes.
+/// Whether the loads cover every boundary face, each loaded at every node a traction on it loads
+/// (a quadratic face's mid-edge nodes; a coarse mesh's faces that merely touch a loaded one are
+/// not covered), and no inner node (gravity loads them all), on a body that has inner nodes.
 fn loads_the_whole_surface(p: &fem::Problem) -> bool {
     let mut surface = vec![false; p.mesh.num_nodes()];
     let faces = mesh::boundary_faces(&p.mesh);
     faces.iter().flat_map(|f| &f.nodes).for_each(|&n| surface[n] = true);
     let inner_unloaded = (0..p.mesh.num_nodes()).all(|n| surface[n] || !loaded(p, n));
-    surface.contains(&false) && inner_unloaded && faces.iter().all(|f| f.nodes.iter().any(|&n| loaded(p, n)))
+    let traction_nodes = |nodes: &[usize]| -> Vec<usize> {
+        if nodes.len() == 6 {
+            nodes[3..].to_vec()
+        } else {
+            nodes.to_vec()
+        }
+    };
+    surface.contains(&false)
+        && inner_unloaded
+        && faces.iter().all(|f| traction_nodes(&f.nodes).iter().all(|&n| loaded(p, n)))
 }
 
-/// What makes a problem's units doubtful: a mesh the size of a room, a modulus far below soft
-/// tissues'.
-fn doubts(problem: &fem::Problem) -> Vec<String> {
+/// What makes a problem's units doubtful (its mesh built from `source`): a mesh the size of a
+/// room, a modulus far below soft tissues'.
+fn doubts(problem: &fem::Problem, source: &scenario::MeshSource) -> Vec<String> {
     let young = scenario::source::young_hint(problem.material.young);
-    scenario::source::unit_hint(&problem.mesh).into_iter().chain(young).collect()
+    scenario::source::unit_hint(&problem.mesh, source).into_iter().chain(young).collect()
+}
+
+/// Whether a load or modulus in the wrong unit can cause the solver's error `e`: a failure of the
+/// solve itself, not a refusal of its input.
+fn a_wrong_unit_can_cause(e: &fem::FemError) -> bool {
+    use fem::FemError::{Interrupted, Invalid, Mesh, OutOfTime};
+    !matches!(e, Invalid(_) | Mesh(_) | Interrupted | OutOfTime)
 }
 
 /// Builds `scenario`'s problem (its files relative to `dir`) and solves it, telling `progress` the
@@ -109,8 +126,7 @@ fn solve(
     progress: impl Fn(f64, usize) + Send + Sync + 'static,
 ) -> Result<Solved> {
     let (problem, hanging_warning) = crate::models::solvable_problem(&scenario, dir)?;
-    let hints = doubts(&problem);
-    let hint = if hints.is_empty() { String::new() } else { format!(" ({})", hints.join("; ")) };
+    let hints = doubts(&problem, &scenario.mesh);
     let mut solver = StaticSolver::new(problem)?;
     // Its lines say whether the body snapped past a limit point: made sure of.
     let options = fem::SolverOptions {
@@ -118,7 +134,13 @@ fn solve(
         progress: Some(fem::SolveProgress(std::sync::Arc::new(progress))),
         ..scenario.solver.clone()
     };
-    let solution = solver.solve(&options).with_context(|| format!("static solve{hint}"))?;
+    let solution = solver.solve(&options).map_err(|e| {
+        let hint = match hints.is_empty() || !a_wrong_unit_can_cause(&e) {
+            true => String::new(),
+            false => format!(" ({})", hints.join("; ")),
+        };
+        anyhow::Error::new(e).context(format!("static solve{hint}"))
+    })?;
     let reaction = solver.reaction_forces(&solution.u)?;
     Ok(Solved { scenario, solver, solution, reaction, hanging_warning })
 }
@@ -258,7 +280,7 @@ impl Solved {
             );
         }
         lines.extend(self.hanging_warning.iter().cloned());
-        lines.extend(set_up_warnings(p));
+        lines.extend(set_up_warnings(p, &scenario.mesh));
         let (inverted, smallest) = post::inverted_cells(geo, p.material.law, &sol.u)?;
         if inverted > 0 {
             lines.push(format!(
@@ -390,21 +412,18 @@ fn beyond_tissue_lines(geometry: &ElementGeometry, p: &fem::Problem, u: &[f64]) 
     Ok(lines)
 }
 
-/// The mid-edge nodes of a T10 mesh that are not held where both corners of their edge are
-/// ([[fixed]] or [[prescribed]]).
+/// The mid-edge nodes of a T10 mesh that are not held on a boundary face whose three corners are
+/// ([[fixed]] or [[prescribed]]): a held face's; corners held one by one that share an edge hold
+/// no face.
 fn mid_edge_nodes_left_free(p: &fem::Problem) -> usize {
-    let mesh::Cells::Tet10(cells) = &p.mesh.cells else { return 0 };
+    if !matches!(p.mesh.cells, mesh::Cells::Tet10(_)) {
+        return 0;
+    }
     let held = |n: usize| p.dirichlet.contains_key(&n);
-    let mut free: Vec<usize> = cells
+    let mut free: Vec<usize> = mesh::boundary_faces(&p.mesh)
         .iter()
-        .flat_map(|c| {
-            mesh::quadratic::TET10_EDGES
-                .iter()
-                .enumerate()
-                .filter(|(_, [a, b])| held(c[*a]) && held(c[*b]))
-                .map(|(k, _)| c[4 + k])
-                .filter(|&m| !held(m))
-        })
+        .filter(|f| f.nodes[..3].iter().all(|&n| held(n)))
+        .flat_map(|f| f.nodes[3..].iter().copied().filter(|&m| !held(m)))
         .collect();
     free.sort_unstable();
     free.dedup();
@@ -495,6 +514,68 @@ mod tests {
             let listed = lines(&format!("{{ list = {held:?} }}"));
             assert!(!listed.iter().any(|l| l.contains("mid-edge")), "held at the whole face: {listed:?}");
         }
+    }
+
+    /// A coarse cube (2 × 2 × 2 cells) held at three single nodes, each by its own ball, and
+    /// pulled at both ends: every side face touches a loaded end, yet the load does not cover
+    /// the surface; on T10, two of the held nodes share an edge, yet no face is held. Neither is
+    /// warned about, on H8, T4 or T10.
+    #[test]
+    fn a_coarse_cube_pulled_at_its_ends_and_held_at_single_nodes_is_not_warned_about() {
+        let dir = tempfile::tempdir().unwrap();
+        let ball = |c: [f64; 3]| format!("[[fixed]]\nselect = {{ ball = {{ centre = {c:?}, radius = 1e-4 }} }}\n");
+        let end = |x: f64, sign: f64| {
+            format!(
+                "[[traction]]\nselect = {{ box = {{ min = [{}, -1.0, -1.0], max = [{}, 1.0, 1.0] }} }}\n\
+                 traction = [{}, 0.0, 0.0]\n",
+                x - 1e-6,
+                x + 1e-6,
+                sign * 100.0
+            )
+        };
+        for element in [
+            "element = \"hex\"\n[material]\n",
+            "element = \"tet\"\n[material]\n",
+            "element = \"tet\"\n[material]\norder = 2\n",
+        ] {
+            let text = format!(
+                "kind = \"static\"\nname = \"cube\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.1, 0.1, 0.1]\n\
+                 cells = [2, 2, 2]\n{element}law = \"linear\"\nyoung = 5000.0\npoisson = 0.3\n{}{}{}{}{}",
+                ball([0.05, 0.05, 0.05]),
+                ball([0.1, 0.05, 0.05]),
+                ball([0.05, 0.1, 0.05]),
+                end(0.0, -1.0),
+                end(0.1, 1.0)
+            );
+            let lines = solved_lines(dir.path(), &text);
+            assert!(!lines.iter().any(|l| l.starts_with("warning")), "{element}: {lines:?}");
+        }
+    }
+
+    /// A box mesh 10 m long: a refused setting is said without a word of units; a solve that
+    /// fails (turned inside out) asks whether the mesh is in centimetres, without naming a key
+    /// the box lacks.
+    #[test]
+    fn a_unit_hint_goes_with_failures_a_wrong_unit_can_cause_only() {
+        let dir = tempfile::tempdir().unwrap();
+        let error = |solver: &str, force: f64| {
+            let text = format!(
+                "kind = \"static\"\nname = \"long\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [10.0, 1.0, 1.0]\n\
+                 cells = [10, 1, 1]\nelement = \"tet\"\n[material]\nlaw = \"neo_hookean\"\nyoung = 1000.0\n\
+                 poisson = 0.3\n[solver]\n{solver}\n\
+                 [[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e-9, 2.0, 2.0] }} }}\n\
+                 [[force]]\nselect = {{ box = {{ min = [9.99, -1.0, -1.0], max = [11.0, 2.0, 2.0] }} }}\n\
+                 total = [{force}, 0.0, 0.0]\n"
+            );
+            let path = dir.path().join("long.toml");
+            std::fs::write(&path, text).unwrap();
+            format!("{:#}", solve_scenario(&path, |_, _| {}).err().expect("an error"))
+        };
+        let refused = error("load_steps = 0", 1.0);
+        assert!(refused.contains("load_steps = 0") && !refused.contains("the mesh spans"), "{refused}");
+        let failed = error("max_iterations = 1\nload_steps = 1\nmax_step_cuts = 0", -1e6);
+        assert!(failed.contains("the mesh spans 10 m: is it in centimetres?"), "{failed}");
+        assert!(!failed.contains("[mesh.file]"), "{failed}");
     }
 
     #[test]
