@@ -8,24 +8,19 @@ use std::path::{Path, PathBuf};
 
 use fem::{Material, Problem, SolverOptions, StaticSolver};
 use mesh::phantom::PhantomSpec;
-use mesh::{Mesh, NodeSelection, Point};
+use mesh::{NodeSelection, Point};
 
 use learn::Model;
 
 use anyhow::{anyhow, bail, Result};
-use register::{
-    FemDeformer, FrameOutcome, NetworkDeformer, Organ, RegisterError, RegistrationOptions, RigidTransform, Summary,
-};
-use scenario::registration::{CameraSpec, MethodKind, Misalignment};
+use register::{FrameOutcome, NetworkDeformer, Organ, RegisterError, RegistrationOptions, RigidTransform, Summary};
+use scenario::registration::{CameraSpec, MethodKind};
 use scenario::{CaseScenario, DatasetScenario, Fixed, MeshSource, StaticScenario};
 
 use crate::models::ScenarioSource;
-use crate::models::{fem_model, hybrid_options, network_model, Network};
+use crate::models::{hybrid_options, network_model, Network};
 use crate::registration::{LearnedWay, MethodSpec, RegistrationSpec, TargetsSpec};
 use crate::simulate::simulate_cloud;
-
-/// Tetrahedra of the ground-truth phantom of the built-in case.
-pub const TRUTH_TETS: usize = 9000;
 
 /// What the operating room gives (the clouds) and what it hides (the truth).
 #[derive(Clone, Debug)]
@@ -124,34 +119,6 @@ pub fn synthetic_case(scenario: &CaseScenario) -> Result<SyntheticCase> {
         frames.push(CaseFrame { force, cloud: Vec::new(), truth, truth_u: u });
     }
     SyntheticCase { frames, targets, pose, truth_organ: organ }.seen_by(camera)
-}
-
-/// The built-in case ([`CaseScenario::builtin`]: the Neo-Hookean phantom, E = 5 kPa, ν = 0.48,
-/// on quadratic tetrahedra built from about [`TRUTH_TETS`] tetrahedra, fixed between the lobes) with its `push` patch
-/// pressed down by `force` N, seen by `camera`, without misalignment.
-pub fn phantom_push(force: f64, camera: &CameraSpec) -> Result<SyntheticCase> {
-    let mut scenario = CaseScenario::builtin();
-    scenario.truth.force = force;
-    scenario.camera = camera.clone();
-    scenario.misalignment = Misalignment::default();
-    synthetic_case(&scenario)
-}
-
-/// Tetrahedra of the registration models (the FEM models and the network's training mesh).
-pub const MODEL_TETS: usize = 3000;
-
-/// The phantom of about [`MODEL_TETS`] tetrahedra that the registration models deform
-/// (another mesh than the truth's).
-pub fn model_mesh() -> Result<Mesh> {
-    Ok(mesh::phantom::liver_phantom(MODEL_TETS)?)
-}
-
-/// The co-rotational registration model (E = 5 kPa, ν = 0.48: another law than the truth's) on
-/// [`model_mesh`], fixed between the lobes: the built-in static scenario `liver_corotational`.
-pub fn corotational_model() -> Result<(Organ, FemDeformer)> {
-    // The built-in phantom's mesh has no piece to leave out.
-    let (organ, deformer, _) = fem_model(&StaticScenario::builtin("liver_corotational"), Path::new(""))?;
-    Ok((organ, deformer))
 }
 
 /// The FEM of `scenario`'s method `name` of `material`: the phantom of `models.tets` linear

@@ -1,10 +1,11 @@
 //! Registration of the phantom to clouds of a deformation computed on another
 //! mesh with another law (no inverse crime): the hidden markers must be recovered.
 
-use augsim_app::case::{
-    ar_network_model, compare, corotational_model, network_from_truth, phantom_push, Method, AR_SCENARIO,
-};
+mod common;
+
+use augsim_app::case::{ar_network_model, compare, network_from_truth, Method, AR_SCENARIO};
 use augsim_app::registration::{MethodSpec, RegistrationSpec, TargetsSpec};
+use common::{corotational_model, phantom_push};
 use fem::{Law, Material, Problem, SolverOptions};
 use register::organ::displaced;
 use register::target_errors;
@@ -25,7 +26,7 @@ fn camera(view: [f64; 3], points: usize, noise: f64, outliers: f64) -> CameraSpe
 /// its truth is solved once for every test here.
 fn pushed(camera: &CameraSpec) -> augsim_app::case::SyntheticCase {
     static TRUTH: std::sync::OnceLock<augsim_app::case::SyntheticCase> = std::sync::OnceLock::new();
-    let truth = TRUTH.get_or_init(|| phantom_push(1.5, &self::camera([0.0, 0.0, -1.0], 10, 0.0, 0.0)).unwrap());
+    let truth = TRUTH.get_or_init(|| phantom_push(1.5, &self::camera([0.0, 0.0, -1.0], 10, 0.0, 0.0)));
     truth.clone().seen_by(camera).unwrap()
 }
 
@@ -33,7 +34,7 @@ fn pushed(camera: &CameraSpec) -> augsim_app::case::SyntheticCase {
 /// registration on a coarser phantom, for the truth of [`pushed`].
 fn fem_tre(camera: &CameraSpec) -> (f64, f64, f64) {
     let case = pushed(camera);
-    let (organ, mut deformer) = corotational_model().unwrap();
+    let (organ, mut deformer) = corotational_model();
     let stencils = organ.locate(&case.targets, "target").unwrap();
     let frame =
         register_frame(&organ, &mut deformer, &case.peak().cloud, None, &RegistrationOptions::default()).unwrap();
@@ -343,7 +344,7 @@ fn a_warm_started_frame_starts_past_the_ramp() {
             Ok(previous.iter().map(|u| u + 1e-3).collect()) // moves, so the loop goes on
         }
     }
-    let (organ, _) = corotational_model().unwrap();
+    let (organ, _) = corotational_model();
     let camera = camera([0.0, 0.0, -1.0], 300, 0.0, 0.0);
     let cloud = augsim_app::simulate::simulate_cloud(organ.surface(), &CameraSpec { seed: 3, ..camera }).unwrap();
     let options = RegistrationOptions { iterations: 2, tolerance: 0.0, ..RegistrationOptions::default() };
@@ -368,7 +369,7 @@ fn a_frame_past_its_time_budget_stops_and_says_so() {
             Ok(previous.iter().map(|u| u + 1e-4).collect()) // moves, so the loop goes on
         }
     }
-    let (organ, _) = corotational_model().unwrap();
+    let (organ, _) = corotational_model();
     let camera = camera([0.0, 0.0, -1.0], 300, 0.0, 0.0);
     let cloud = augsim_app::simulate::simulate_cloud(organ.surface(), &CameraSpec { seed: 3, ..camera }).unwrap();
     let options = RegistrationOptions { iterations: 5, tolerance: 0.0, ..RegistrationOptions::default() };
@@ -396,7 +397,7 @@ fn a_frame_past_its_time_budget_stops_and_says_so() {
 fn clouds_that_cannot_be_the_organ_are_refused_or_flagged() {
     let camera = camera([0.0, 0.0, -1.0], 1500, 1e-3, 0.05);
     let case = pushed(&camera);
-    let (organ, mut deformer) = corotational_model().unwrap();
+    let (organ, mut deformer) = corotational_model();
     let opts = RegistrationOptions::default();
     let mut register = |cloud: &[[f64; 3]]| register_frame(&organ, &mut deformer, cloud, None, &opts);
     let millimetres: Vec<[f64; 3]> = case.peak().cloud.iter().map(|p| p.map(|c| 1e3 * c)).collect();

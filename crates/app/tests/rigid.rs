@@ -2,6 +2,8 @@
 //! and translation recovered from full and from partial noisy clouds, the whole pipeline on a
 //! misaligned case, and clear errors for clouds that do not determine a transform.
 
+mod common;
+
 use std::path::Path;
 
 use augsim_app::case::{case_methods, compare, synthetic_case};
@@ -15,7 +17,7 @@ use scenario::CaseScenario;
 
 /// The rest surface of the registration models' phantom (3,000 T4).
 fn rest_surface() -> TriSurface {
-    Organ::new(augsim_app::case::model_mesh().unwrap(), None).unwrap().surface().clone()
+    Organ::new(common::model_mesh(), None).unwrap().surface().clone()
 }
 
 /// 8° about a skew axis, then 1 cm: the camera's frame against the model's.
