@@ -145,9 +145,7 @@ impl PredictInput {
         } else {
             let array = read_npy(path)?;
             match array.shape.as_slice() {
-                [_, 6] => PointCloud::from_rows(
-                    &array.into_f64().chunks_exact(6).map(|r| std::array::from_fn(|i| r[i])).collect::<Vec<_>>(),
-                ),
+                [_, 6] => PointCloud::from_rows(&array.into_rows(path, "x, y, z and the vector")?),
                 _ => return Ok(PredictInput::Grid(array)),
             }
         };

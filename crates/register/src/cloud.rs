@@ -80,12 +80,5 @@ pub fn check_points(path: &Path, points: Vec<Point>) -> Result<Vec<Point>> {
 
 /// Reads an `.npy` array of shape `[N, 3]` (float32 or float64) as points.
 fn read_npy_cloud(path: &Path) -> Result<Vec<Point>> {
-    let array = mesh::io::npy::read_npy(path)?;
-    if array.shape.len() != 2 || array.shape[1] != 3 {
-        return Err(RegisterError::format(path, format!("expected an array of shape [N, 3], found {:?}", array.shape)));
-    }
-    if matches!(array.data, mesh::io::npy::NpyData::U8(_)) {
-        return Err(RegisterError::format(path, "expected float32 or float64 values, found uint8"));
-    }
-    Ok(array.into_f64().chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+    Ok(mesh::io::npy::read_npy(path)?.into_rows(path, "x, y, z")?)
 }

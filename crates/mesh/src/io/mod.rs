@@ -876,6 +876,22 @@ mod tests {
         assert!(e.contains("unknown surface extension"), "{e}");
     }
 
+    /// Rows of points or vectors come from a float array of their width; a mask (uint8) or another
+    /// shape is refused, saying what a row holds.
+    #[test]
+    fn rows_come_from_a_float_array_of_their_width() {
+        let dir = tempfile::tempdir().unwrap();
+        let (floats, mask) = (dir.path().join("f.npy"), dir.path().join("m.npy"));
+        npy::write_f64(&floats, &[2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
+        npy::write_u8(&mask, &[2, 3], &[0, 1, 1, 0, 1, 0]).unwrap();
+        let rows = npy::read_npy(&floats).unwrap().into_rows::<3>(&floats, "x, y, z").unwrap();
+        assert_eq!(rows, [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+        let e = npy::read_npy(&floats).unwrap().into_rows::<6>(&floats, "x, y, z and a vector").unwrap_err();
+        assert!(e.to_string().contains("expected an array of shape [N, 6] (x, y, z and a vector per row)"), "{e}");
+        let e = npy::read_npy(&mask).unwrap().into_rows::<3>(&mask, "x, y, z").unwrap_err();
+        assert!(e.to_string().contains("found uint8 or bool (a mask?)"), "{e}");
+    }
+
     /// A Git LFS pointer in place of a surface, a mesh, a labelmap or an array is named as such, whatever
     /// its extension; a damaged file is not.
     #[test]

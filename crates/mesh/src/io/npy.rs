@@ -66,6 +66,19 @@ impl NpyArray {
         }
     }
 
+    /// The rows of an array of shape `[N, C]` as numbers, refusing another shape and a uint8 or
+    /// boolean array (a mask, not coordinates); `what` names a row in the error (`x, y, z`).
+    pub fn into_rows<const C: usize>(self, path: &Path, what: &str) -> Result<Vec<[f64; C]>> {
+        if self.shape.len() != 2 || self.shape[1] != C {
+            let message = format!("expected an array of shape [N, {C}] ({what} per row), found {:?}", self.shape);
+            return Err(invalid(path, message));
+        }
+        if matches!(self.data, NpyData::U8(_)) {
+            return Err(invalid(path, "expected float32 or float64 values, found uint8 or bool (a mask?)"));
+        }
+        Ok(self.into_f64().chunks_exact(C).map(|r| std::array::from_fn(|i| r[i])).collect())
+    }
+
     /// The values as u8 (float values must be exactly 0 or 1, as for a mask).
     pub fn into_mask(self, path: &Path) -> Result<Vec<u8>> {
         let bad = |x: f64| invalid(path, format!("mask values must be 0 or 1, found {x}"));
