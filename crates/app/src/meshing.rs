@@ -251,13 +251,14 @@ impl OrganInput {
         if let Some(label) = label {
             bail!("--label {label} chooses a label of a labelmap ({LABELMAP_FORMATS}), not of {}", path.display());
         }
-        let (surface, frame) = mesh::io::read_surface_with_frame(path)?;
+        let (surface, frame, warnings) = mesh::io::read_surface_noted(path)?;
         // The unit its header names (Materialise's OBJ comment) where none is given.
         let unit = match units {
             Some(unit) => Some((unit, "given")),
             None => mesh::io::surface_unit(path)?.map(|unit| (unit, "named by the file's header")),
         };
-        Ok(OrganInput { surface, frame, labelmap: false, unit, notes: Vec::new(), extract: None })
+        let notes = warnings.into_iter().map(|w| ("warning", w)).collect();
+        Ok(OrganInput { surface, frame, labelmap: false, unit, notes, extract: None })
     }
 
     /// Its unit: a labelmap's millimetre, the one given, the one its file's header names, or the

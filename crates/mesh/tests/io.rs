@@ -9,8 +9,8 @@ use base64::engine::general_purpose::STANDARD as BASE64;
 use base64::Engine as _;
 
 use augsim_mesh::io::{
-    read_gmsh, read_mesh, read_mesh_with_fields, read_obj, read_stl, read_surface, read_vertices, read_vtk,
-    read_vtk_with_fields, read_vtu_with_fields, write_mesh, write_msh, write_obj, write_stl, write_surface,
+    read_gmsh, read_mesh, read_mesh_with_fields, read_obj, read_stl, read_surface, read_surface_noted, read_vertices,
+    read_vtk, read_vtk_with_fields, read_vtu_with_fields, write_mesh, write_msh, write_obj, write_stl, write_surface,
     write_vtk_legacy, write_vtk_legacy_with, write_vtu, write_vtu_with, Encoding, Field, FieldLocation,
 };
 use augsim_mesh::{box_hex, box_tet, Cells, Mesh, MeshError, NodeSelection, TriSurface};
@@ -544,6 +544,47 @@ fn surface_round_trips() {
     assert_eq!(read_obj(dir.path().join("o.obj")).unwrap(), liver);
 }
 
+/// A binary STL whose header's count its size belies (0, as some exporters write, one too low, or
+/// bytes after its last record) is read for the records it holds, with a warning saying so; one
+/// holding fewer than its count is refused as cut short, and one of count 0 whose size is no whole
+/// number of records as no binary STL.
+#[test]
+fn binary_stl_counts_that_its_size_belies() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let path = d.join("s.stl");
+    write_stl(&path, &read_surface(data("liver-smooth.obj")).unwrap()).unwrap();
+    let (bytes, stl) = (fs::read(&path).unwrap(), read_stl(&path).unwrap());
+    let n = stl.triangles.len();
+    let counted = |count: usize, tail: &[u8]| {
+        let mut b = [&bytes[..], tail].concat();
+        b[80..84].copy_from_slice(&(count as u32).to_le_bytes());
+        b
+    };
+    let read = |name: &str, b: Vec<u8>| read_surface_noted(put(d, name, b)).unwrap();
+    let (zero, _, warnings) = read("zero.stl", counted(0, &[]));
+    assert_eq!(zero, stl);
+    assert_eq!(
+        warnings,
+        [format!(
+            "its header declares 0 triangles (84 bytes), but its size holds {n}: read {n}, as VTK (3D Slicer) does"
+        )]
+    );
+    let (low, _, warnings) = read("low.stl", counted(n - 100, &[]));
+    assert!(low == stl && warnings[0].contains(&format!("declares {} triangles", n - 100)), "{warnings:?}");
+    let (trailing, _, warnings) = read("trailing.stl", counted(n, &[7; 72]));
+    assert_eq!(
+        (trailing, warnings),
+        (stl.clone(), vec![format!("72 bytes after its {n} triangles, which its header declares, ignored")])
+    );
+    assert!(read_surface_noted(&path).unwrap().2.is_empty());
+    let m = message(read_stl(put(d, "high.stl", counted(n + 1, &[]))));
+    assert!(m.contains(&format!("a binary STL cut short: its header declares {} triangles", n + 1)), "{m}");
+    assert!(m.contains(&format!("{n} whole triangles")) && !m.contains("truncated"), "{m}");
+    let m = message(read_stl(put(d, "odd.stl", counted(0, &[1; 20]))));
+    assert!(m.contains("not a binary STL") && m.contains("no whole number of 50-byte triangles"), "{m}");
+}
+
 #[test]
 fn ascii_stl_and_obj_details() {
     let dir = tempfile::tempdir().unwrap();
@@ -575,6 +616,12 @@ fn ascii_stl_and_obj_details() {
     let padded = [text.as_bytes(), &[0u8; 37]].concat();
     std::fs::write(d.join("padded.stl"), &padded).unwrap();
     assert_eq!(read_stl(d.join("padded.stl")).unwrap(), s);
+    // So is a NUL byte on a line of its own, which makes the file's size no binary STL's.
+    let nul = text.replace("endsolid", "\0\nendsolid");
+    assert_eq!(read_stl(put(d, "nul.stl", &nul)).unwrap(), s);
+    // Text after the solid is a text error, not a binary header's count.
+    let m = message(read_stl(put(d, "garbage.stl", format!("{text}garbage\0\u{1}\n"))));
+    assert!(m.contains("line 17: expected 'solid', found 'garbage"), "{m}");
     // A binary STL of no triangles is named as empty.
     let empty = [&[b' '; 80][..], &0u32.to_le_bytes()].concat();
     std::fs::write(d.join("empty.stl"), &empty).unwrap();

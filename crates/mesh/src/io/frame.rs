@@ -234,19 +234,29 @@ const HEADER_BYTES: usize = 1024;
 /// `.vtk` file, whose field data may name it too (a string array `SPACE`, as VTK saves a
 /// Slicer model's).
 pub fn read_surface_with_frame(path: impl AsRef<Path>) -> Result<(TriSurface, Option<Frame>), MeshError> {
+    read_surface_noted(path).map(|(surface, frame, _)| (surface, frame))
+}
+
+/// [`read_surface_with_frame`], with what a user should know of the file as read, a line each (a
+/// binary STL whose header's triangle count its size belies).
+pub fn read_surface_noted(path: impl AsRef<Path>) -> Result<(TriSurface, Option<Frame>, Vec<String>), MeshError> {
     let path = path.as_ref();
     let lfs = |e| super::named_if_lfs(path, e);
     match super::extension(path).as_str() {
-        "vtp" | "vtu" => super::vtk_xml::read_xml_surface_with_frame(path).map_err(lfs),
+        "vtp" | "vtu" => {
+            let (surface, frame) = super::vtk_xml::read_xml_surface_with_frame(path).map_err(lfs)?;
+            Ok((surface, frame, Vec::new()))
+        }
         "vtk" => {
             let (surface, space) = super::legacy_vtk::read_vtk_surface_and_space(path).map_err(lfs)?;
             let in_field = space.map(|s| frame_in_header(&format!("SPACE={}", s.trim()))).transpose();
             let in_field = in_field.map_err(|message| MeshError::parse(path, message))?.flatten();
-            Ok((surface, surface_frame(path)?.or(in_field)))
+            Ok((surface, surface_frame(path)?.or(in_field), Vec::new()))
         }
         _ => {
             let frame = surface_frame(path)?;
-            Ok((super::read_surface(path)?, frame))
+            let (surface, warnings) = super::read_surface_noting(path)?;
+            Ok((surface, frame, warnings))
         }
     }
 }

@@ -85,8 +85,8 @@ use crate::{Cells, Mesh, MeshError, Point, TriSurface, HEX_TO_TETS};
 pub use abaqus::read_inp;
 pub use csv::csv_field;
 pub use frame::{
-    frame_in_header, read_surface_with_frame, surface_frame, surface_unit, write_surface_in_frame, Frame, FrameChange,
-    GivenCoordinates,
+    frame_in_header, read_surface_noted, read_surface_with_frame, surface_frame, surface_unit, write_surface_in_frame,
+    Frame, FrameChange, GivenCoordinates,
 };
 pub use gmsh::{read_gmsh, write_msh};
 pub use legacy_vtk::{read_vtk, read_vtk_surface, read_vtk_with_fields, write_vtk_legacy, write_vtk_legacy_with};
@@ -364,13 +364,19 @@ const UNKNOWN_SURFACE: &str = "unknown surface extension (expected .obj, .stl, .
 /// Reads a triangle surface, choosing the format by extension: `.obj`, `.stl`, `.ply` (its
 /// faces), `.vtk`, `.vtp`, `.vtu`.
 pub fn read_surface(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
-    let path = path.as_ref();
+    read_surface_noting(path.as_ref()).map(|(surface, _)| surface)
+}
+
+/// [`read_surface`], with what a user should know of the file as read (a binary STL's count that
+/// its size belies: [`surface_io::read_stl_noting`]).
+fn read_surface_noting(path: &Path) -> Result<(TriSurface, Vec<String>), MeshError> {
+    let plain = |read: Result<TriSurface, MeshError>| read.map(|surface| (surface, Vec::new()));
     let read = match extension(path).as_str() {
-        "obj" => read_obj(path),
-        "stl" => read_stl(path),
-        "ply" => ply::read_ply_surface(path),
-        "vtk" => read_vtk_surface(path),
-        "vtp" | "vtu" => vtk_xml::read_xml_surface(path),
+        "obj" => plain(read_obj(path)),
+        "stl" => surface_io::read_stl_noting(path),
+        "ply" => plain(ply::read_ply_surface(path)),
+        "vtk" => plain(read_vtk_surface(path)),
+        "vtp" | "vtu" => plain(vtk_xml::read_xml_surface(path)),
         _ => return Err(MeshError::parse(path, UNKNOWN_SURFACE)),
     };
     read.map_err(|e| named_if_lfs(path, e))

@@ -110,19 +110,33 @@ impl Merger {
 /// Reads an STL surface, binary or ASCII. Vertices with exactly equal coordinates are merged so
 /// that the surface is indexed; facet normals are ignored (orientation is the vertex order), and
 /// may be non-finite (`facet normal -nan -nan -nan`, as MeshLab writes for a degenerate facet).
+/// A binary STL whose header's triangle count its size belies is read as [`read_stl_noting`]
+/// reads it, its warning dropped.
 pub fn read_stl(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
-    let path = path.as_ref();
+    read_stl_noting(path.as_ref()).map(|(surface, _)| surface)
+}
+
+/// [`read_stl`], with what a user should know of the file as read. A file starting with `solid`
+/// is text unless it is a binary STL whose size its header's count gives exactly (binary headers
+/// may start with `solid` too); one whose text does not parse is binary unless it reads as text.
+/// A binary STL is read for the whole 50-byte records its size holds after the 84-byte header, as
+/// VTK (3D Slicer) reads it, with a warning where its header's count says otherwise (exporters
+/// write 0) or bytes follow its last record; one holding fewer records than its count is cut
+/// short, an error.
+pub(super) fn read_stl_noting(path: &Path) -> Result<(TriSurface, Vec<String>), MeshError> {
     let bytes = read_bytes(path)?;
     let declared = bytes.get(80..84).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
-    let binary_size = declared.map(|n| 84 + 50 * n as u128);
-    let size_matches = binary_size == Some(bytes.len() as u128);
+    let exact = declared.is_some_and(|n| 84 + 50 * n as u128 == bytes.len() as u128);
     let ascii_start = bytes.trim_ascii_start().get(..5).is_some_and(|s| s.eq_ignore_ascii_case(b"solid"));
-    // Some exporters pad an ASCII STL with NUL bytes to a block size.
-    let text = &bytes[..bytes.iter().rposition(|&b| b != 0).map_or(0, |last| last + 1)];
-    if !size_matches && ascii_start && !text.contains(&0) {
-        return read_stl_ascii(path, &String::from_utf8_lossy(text));
+    if ascii_start && !exact {
+        // Some exporters pad an ASCII STL with NUL bytes (to a block size, or a line of its own).
+        let text: Vec<u8> = bytes.iter().map(|&b| if b == 0 { b' ' } else { b }).collect();
+        let ascii = read_stl_ascii(path, &String::from_utf8_lossy(&text));
+        if ascii.is_ok() || looks_like_text(&bytes) {
+            return ascii.map(|surface| (surface, Vec::new()));
+        }
     }
-    let (Some(n), Some(size)) = (declared, binary_size) else {
+    let Some(declared) = declared else {
         return Err(MeshError::parse(
             path,
             format!(
@@ -131,22 +145,47 @@ pub fn read_stl(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
             ),
         ));
     };
-    if !size_matches {
-        return Err(MeshError::parse(
-            path,
-            format!(
-                "binary STL header declares {n} triangles ({size} bytes), but the file has {} bytes \
-                 (truncated, or not an STL file)",
-                bytes.len()
-            ),
-        ));
-    }
+    let (records, left) = ((bytes.len() - 84) / 50, (bytes.len() - 84) % 50);
+    let declares = format!("its header declares {declared} triangles ({} bytes)", 84 + 50 * declared as u128);
+    let (n, warning) = match (declared.cmp(&records), left) {
+        (std::cmp::Ordering::Equal, 0) => (declared, None),
+        (std::cmp::Ordering::Greater, _) => {
+            return Err(MeshError::parse(
+                path,
+                format!(
+                    "a binary STL cut short: {declares}, but the file has {} bytes, {records} whole triangles",
+                    bytes.len()
+                ),
+            ))
+        }
+        (_, 0) => (
+            records,
+            Some(format!("{declares}, but its size holds {records}: read {records}, as VTK (3D Slicer) does")),
+        ),
+        _ if declared == 0 => {
+            return Err(MeshError::parse(
+                path,
+                format!(
+                    "not a binary STL: {declares}, and its {} bytes after the header are no whole number of \
+                     50-byte triangles (cut short, or another file)",
+                    bytes.len() - 84
+                ),
+            ))
+        }
+        _ => {
+            let after = bytes.len() - 84 - 50 * declared;
+            (
+                declared,
+                Some(format!("{after} bytes after its {declared} triangles, which its header declares, ignored")),
+            )
+        }
+    };
     if n == 0 {
         return Err(MeshError::parse(path, "a binary STL of no triangles: the surface is empty"));
     }
     let mut merger = Merger::default();
     let mut triangles = Vec::with_capacity(n);
-    for (t, record) in bytes[84..].chunks_exact(50).enumerate() {
+    for (t, record) in bytes[84..84 + 50 * n].chunks_exact(50).enumerate() {
         let f = |k: usize| {
             let b = &record[12 + 4 * k..16 + 4 * k];
             f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64
@@ -157,7 +196,14 @@ pub fn read_stl(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
         }
         triangles.push(corners.map(|p| merger.add(p)));
     }
-    Ok(TriSurface { vertices: merger.vertices, triangles })
+    Ok((TriSurface { vertices: merger.vertices, triangles }, warning.into_iter().collect()))
+}
+
+/// Whether `bytes` are text, as an ASCII STL's are: under 1 % of them control characters (NUL,
+/// tab and line ends aside) or bytes beyond ASCII, where a binary STL's floats hold far more.
+fn looks_like_text(bytes: &[u8]) -> bool {
+    let binary = bytes.iter().filter(|&&b| !(b == 0 || b.is_ascii_graphic() || b.is_ascii_whitespace())).count();
+    100 * binary < bytes.len()
 }
 
 /// Where an ASCII STL parser is.
