@@ -535,13 +535,13 @@ pub fn absolute_structure(source: &Path) -> Result<PathBuf> {
 /// its scanner frame). The name must fit an OpenIGTLink device name
 /// ([`register::registration::STRUCTURE_NAME_BYTES`]). With the
 /// warning of a label whose cavities were filled (a hollow structure: its inner wall is not given
-/// back).
+/// back), and whether its file names its frame (a labelmap placing its voxels, a surface's header).
 pub fn read_structure(
     source: &Path,
     unit: LengthUnit,
     frame: Option<Frame>,
     to: Option<Frame>,
-) -> Result<(String, TriSurface, Vec<String>)> {
+) -> Result<(String, TriSurface, Vec<String>, bool)> {
     let name = structure_name(source);
     let source = named_source(source).1;
     // Its name is checked before its file is read.
@@ -555,7 +555,7 @@ pub fn read_structure(
         None => OrganInput::read(source, None, Some(unit))?,
     };
     let unit = input.unit()?;
-    let (mut surface, frame) = (input.surface, input.frame.or(frame));
+    let (mut surface, named, frame) = (input.surface, input.frame.is_some(), input.frame.or(frame));
     let change = FrameChange::between(frame, to);
     surface.vertices.iter_mut().for_each(|p| *p = unit.point_to_metres(change.point(*p)));
     // (The organ's reading warnings, of an organ's size and border, are not a structure's.)
@@ -567,7 +567,13 @@ pub fn read_structure(
             filled.filled_voxels, filled.voxels
         ));
     }
-    Ok((name, surface, warnings))
+    Ok((name, surface, warnings, named))
+}
+
+/// The labelmap file of a structure `LABELMAP:LABEL` ([`read_structure`]'s); `None` for a surface
+/// file.
+pub fn structure_labelmap(source: &Path) -> Option<&Path> {
+    labelmap_label(named_source(source).1).map(|(path, _)| Path::new(path))
 }
 
 impl RegistrationSpec {
@@ -638,9 +644,14 @@ impl RegistrationSpec {
         for source in &self.structures {
             let context = || format!("the structure {}", source.path.display());
             let unit = source.unit.unwrap_or(self.given_units);
-            let (name, surface, warnings) =
+            let (name, surface, warnings, named) =
                 read_structure(&source.path, unit, self.given_frame, registration.frame()).with_context(context)?;
-            registration.add_structure(&name, surface).with_context(context)?;
+            // Both files naming their frames, the structure was brought into the organ's.
+            let added = match named && organ_frame.is_some() {
+                true => registration.add_structure_in_organ_frame(&name, surface),
+                false => registration.add_structure(&name, surface),
+            };
+            added.with_context(context)?;
             warnings.into_iter().for_each(|w| registration.warn(w));
         }
         registration.calibrate_sigma(self.sigma_factor)?;
@@ -786,6 +797,21 @@ mod tests {
         );
         assert_eq!(absolute("b.stl"), cwd.join("b.stl"));
         assert_eq!(structure_name(&absolute("tumour=seg.nii.gz:2")), "tumour");
+    }
+
+    /// A structure's labelmap is found behind its name and label; whether a structure's file names
+    /// its frame (which then cannot be mixed up with the organ's) is told.
+    #[test]
+    fn a_structure_says_whether_its_file_names_its_frame() {
+        assert_eq!(structure_labelmap(Path::new("tumour=seg.nii.gz:2")), Some(Path::new("seg.nii.gz")));
+        assert_eq!(structure_labelmap(Path::new("b.stl")), None);
+        let dir = tempfile::tempdir().unwrap();
+        let ball = mesh::generate::icosphere(10.0, 2);
+        let (named, plain) = (dir.path().join("named.stl"), dir.path().join("plain.stl"));
+        mesh::io::write_surface_in_frame(&named, &ball, Frame::Lps).unwrap();
+        mesh::io::write_surface(&plain, &ball).unwrap();
+        let read = |path: &Path| read_structure(path, LengthUnit::Millimetre, None, Some(Frame::Lps)).unwrap().3;
+        assert!(read(&named) && !read(&plain));
     }
 
     /// A set-up whose preparation stopped before its validation chose a method is refused for its

@@ -213,7 +213,7 @@ impl Organ {
             let near = targets.iter().all(|&p| self.rest_bvh.signed_distance(p) <= NEAR_OUTSIDE * self.extent());
             let hint = match near {
                 true => String::new(),
-                false => likely_mistake(targets, &self.mesh.nodes, "every target lies inside", inside),
+                false => likely_mistake(targets, &self.mesh.nodes, "every target lies inside", true, inside),
             };
             RegisterError::Invalid(format!("{e}{hint}"))
         })?;
@@ -244,7 +244,7 @@ impl Organ {
                 mm(distance),
                 LANDMARK_REACH * 100.0,
                 mm(self.extent()),
-                likely_mistake(landmarks, &self.mesh.nodes, "every landmark lies on the organ", held)
+                likely_mistake(landmarks, &self.mesh.nodes, "every landmark lies on the organ", true, held)
             )));
         }
         match self.spread_warning(landmarks, "landmarks", held) {
@@ -306,17 +306,18 @@ impl OrganBox {
 
 /// The likely mistake behind `points` that do not lie where `fits` wants them (in an organ of
 /// nodes `organ`), as the end of an error message: that with x and y negated (a frame mix-up,
-/// RAS and LPS), or read 1,000 or 10 times smaller or larger (a unit mistake: m and mm, cm and
-/// mm), `claim` holds. Empty when none of these fits.
+/// RAS and LPS; only where `frames_may_differ`), or read 1,000 or 10 times smaller or larger (a
+/// unit mistake: m and mm, cm and mm), `claim` holds. Empty when none of these fits.
 pub(crate) fn likely_mistake(
     points: &[Point],
     organ: &[Point],
     claim: &str,
+    frames_may_differ: bool,
     fits: impl Fn(&[Point]) -> bool,
 ) -> String {
     let organ = &OrganBox::of(organ);
     let negated: Vec<Point> = points.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
-    if fits(&negated) {
+    if frames_may_differ && fits(&negated) {
         return format!(" (with x and y negated {claim}: are they in LPS where the organ is in RAS, or the reverse?)");
     }
     match UnitMistake::COMMON.into_iter().find(|m| scaled_fits(points, m.factor(), organ, &fits)) {

@@ -261,9 +261,23 @@ impl Registration {
     /// `name`, its surface in m in the organ's frame; its warnings join the registration's. An
     /// error for a name already taken, or one of the server's messages' (`organ`, `targets`…).
     pub fn add_structure(&mut self, name: &str, surface: TriSurface) -> Result<()> {
+        self.add_structure_of(name, surface, false)
+    }
+
+    /// [`Registration::add_structure`] for a surface known to be in the organ's frame
+    /// ([`Structure::in_organ_frame`]).
+    pub fn add_structure_in_organ_frame(&mut self, name: &str, surface: TriSurface) -> Result<()> {
+        self.add_structure_of(name, surface, true)
+    }
+
+    /// [`Registration::add_structure`], `in_organ_frame` or not.
+    fn add_structure_of(&mut self, name: &str, surface: TriSurface, in_organ_frame: bool) -> Result<()> {
         let taken: Vec<&str> = self.structures.iter().map(Structure::name).collect();
         check_structure_name(name, &taken)?;
-        let (structure, warnings) = Structure::new(&self.organ, name, surface)?;
+        let (structure, warnings) = match in_organ_frame {
+            true => Structure::in_organ_frame(&self.organ, name, surface)?,
+            false => Structure::new(&self.organ, name, surface)?,
+        };
         self.structures.push(structure);
         self.warnings.extend(warnings);
         Ok(())

@@ -23,6 +23,24 @@ impl Structure {
     /// organ by more than [`LANDMARK_REACH`] of its extent (naming the likely mistake: another
     /// unit, the other frame).
     pub fn new(organ: &Organ, name: &str, surface: TriSurface) -> Result<(Structure, Vec<String>)> {
+        Structure::embed(organ, name, surface, true)
+    }
+
+    /// [`Structure::new`] for a surface known to be in the organ's frame (read from the organ's
+    /// own labelmap, or from a file naming the frame the organ's names): one outside the organ is
+    /// refused without the other of LPS and RAS suggested.
+    pub fn in_organ_frame(organ: &Organ, name: &str, surface: TriSurface) -> Result<(Structure, Vec<String>)> {
+        Structure::embed(organ, name, surface, false)
+    }
+
+    /// [`Structure::new`]; `frames_may_differ`: whether a surface outside the organ may be in the
+    /// other of LPS and RAS, to be suggested.
+    fn embed(
+        organ: &Organ,
+        name: &str,
+        surface: TriSurface,
+        frames_may_differ: bool,
+    ) -> Result<(Structure, Vec<String>)> {
         if let Some((i, fault)) = mesh::measured_fault(&surface.vertices) {
             return Err(RegisterError::Invalid(format!("`{name}`: vertex {} {fault}", i + 1)));
         }
@@ -40,7 +58,13 @@ impl Structure {
             return Err(RegisterError::Invalid(format!(
                 "`{name}` lies outside the organ: most of its vertices are farther than {:.0} mm from it{}",
                 mm(reach),
-                likely_mistake(&surface.vertices, &organ.mesh().nodes, "it lies in the organ", mostly_inside)
+                likely_mistake(
+                    &surface.vertices,
+                    &organ.mesh().nodes,
+                    "it lies in the organ",
+                    frames_may_differ,
+                    mostly_inside
+                )
             )));
         }
         let outside: Vec<f64> = located.iter().map(|l| l.1).filter(|&d| d > 0.0).collect();
@@ -135,5 +159,18 @@ mod tests {
         beside.transform([0.0, 0.035, 0.035], 1.0);
         let e = Structure::new(&organ, "kidney", beside).unwrap_err().to_string();
         assert!(e.contains("`kidney` lies outside the organ") && !e.contains("times"), "{e}");
+    }
+
+    /// A structure outside the organ that x and y negated would put in it: the other frame is
+    /// suggested where the frames may differ, not where the structure is in the organ's.
+    #[test]
+    fn the_other_frame_is_suggested_only_where_the_frames_may_differ() {
+        let organ = cube();
+        let mut mirrored = icosphere(0.008, 2);
+        mirrored.transform([0.02, 0.02, -0.02], 1.0);
+        let e = Structure::new(&organ, "tumour", mirrored.clone()).unwrap_err().to_string();
+        assert!(e.contains("(with x and y negated it lies in the organ: are they in LPS"), "{e}");
+        let e = Structure::in_organ_frame(&organ, "tumour", mirrored).unwrap_err().to_string();
+        assert!(e.contains("`tumour` lies outside the organ") && !e.contains("negated"), "{e}");
     }
 }

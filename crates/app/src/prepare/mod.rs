@@ -63,7 +63,7 @@ use crate::meshing::{
     mesh_organ_surface, note_lines, tet_mesh_warnings, write_surface_in_mm, OrganInput, OrganMesh, ToMetres,
 };
 use crate::points::PointInput;
-use crate::registration::{absolute_structure, read_structure, structure_name};
+use crate::registration::{absolute_structure, read_structure, structure_labelmap, structure_name};
 use crate::setup::{Patient, PatientMethod, SigmaFactors, PATIENT_FILE, SET_UP_FRAME, STATE_FILE, SURFACE_FILE};
 use crate::training::{train_unet, UNetRun, UNetStart};
 
@@ -429,6 +429,8 @@ struct Inputs {
     /// The frame they were given in: the surface's, or, when its header names none, the first
     /// named by the points' files; they are in [`SET_UP_FRAME`] when it is named.
     given: Option<Frame>,
+    /// The frame the surface's file names, if any.
+    named_frame: Option<Frame>,
 }
 
 /// Reads the surface in its unit (given or detected) and frame, and the landmarks, the targets
@@ -464,7 +466,7 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
         (None, None) => "frame: not named by any input (SPACE= header, .fcsv, .mrk.json): all taken as given".into(),
     });
     lines.extend(input.warnings.iter().map(|w| format!("warning: {w}")));
-    let mut inputs = Inputs { surface, unit, points_unit, landmarks, targets, camera, given };
+    let mut inputs = Inputs { surface, unit, points_unit, landmarks, targets, camera, given, named_frame };
     if let Some(from) = given {
         inputs.convert(from, SET_UP_FRAME);
     }
@@ -616,8 +618,16 @@ fn organ_doubts(lines: &[String]) -> Vec<&str> {
 fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) -> Result<(Option<Frame>, LengthUnit)> {
     let inputs = read_inputs(options, lines)?;
     let frame = inputs.frame();
-    let Inputs { surface, unit, points_unit, landmarks: labelled_landmarks, targets: labelled_targets, camera, given } =
-        inputs;
+    let Inputs {
+        surface,
+        unit,
+        points_unit,
+        landmarks: labelled_landmarks,
+        targets: labelled_targets,
+        camera,
+        given,
+        named_frame,
+    } = inputs;
     let mut notes = Vec::new();
     let meshed =
         mesh_organ_surface(&options.surface, surface, ToMetres::FromUnit(unit), options.tets, true, &mut notes);
@@ -694,10 +704,17 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
     let mut names: Vec<String> = Vec::new();
     for source in &options.structures {
         let context = || format!("the structure {}", source.display());
-        let (name, structure, read_warnings) = read_structure(source, unit, given, frame).with_context(context)?;
+        let (name, structure, read_warnings, named) =
+            read_structure(source, unit, given, frame).with_context(context)?;
         let taken: Vec<&str> = names.iter().map(String::as_str).collect();
         register::registration::check_structure_name(&name, &taken).with_context(context)?;
-        let (embedded, warnings) = register::Structure::new(&located, &name, structure).with_context(context)?;
+        // In the organ's frame when both files name theirs, or both are one labelmap's.
+        let organ_file = |path: &Path| path.canonicalize().ok() == options.surface.canonicalize().ok();
+        let embed = match (named && named_frame.is_some()) || structure_labelmap(source).is_some_and(organ_file) {
+            true => register::Structure::in_organ_frame,
+            false => register::Structure::new,
+        };
+        let (embedded, warnings) = embed(&located, &name, structure).with_context(context)?;
         let file = structure_file(&name);
         write_surface_in_mm(&dir.join(&file), embedded.rest(), frame)?;
         lines.push(format!("structure: {name}, {} vertices, {file}", embedded.rest().vertices.len()));
