@@ -124,12 +124,13 @@ type Segment = (String, usize, i32);
 /// The segments `names`, their `voxels` each in the first layer of `count` voxels it does not
 /// overlap (an empty one in the first): the number of layers, the labels (layer fastest) and the
 /// segments' (name, layer, label); a warning for each cut at an end of the slices
-/// ([`cut_at_an_end`]).
+/// ([`cut_at_an_end`]) where `series_ends`: the slices may end where the series does (not a SEG
+/// whose frames lie on fewer slices than the images it references).
 pub(super) fn in_layers(
     names: &BTreeMap<u32, String>,
     voxels: &BTreeMap<u32, Vec<u32>>,
-    count: usize,
-    frame_pixels: usize,
+    (count, frame_pixels): (usize, usize),
+    series_ends: bool,
     warnings: &mut Vec<(Option<(usize, i32)>, String)>,
 ) -> (usize, Vec<i32>, Vec<Segment>) {
     let mut layers: Vec<Vec<i32>> = vec![vec![0; count]];
@@ -145,7 +146,7 @@ pub(super) fn in_layers(
         };
         own.iter().for_each(|&n| layers[layer][n as usize] = number as i32);
         segments.push((name.clone(), layer, number as i32));
-        if let Some(cut) = cut_at_an_end(own, frame_pixels) {
+        if let Some(cut) = cut_at_an_end(own, frame_pixels).filter(|_| series_ends) {
             warnings.push((Some((layer, number as i32)), cut));
         }
     }

@@ -120,7 +120,8 @@ pub(super) fn read(object: &DefaultDicomObject, wanted: Option<&str>) -> Result<
     }
     voxels.retain(|_, own| !own.is_empty());
     let dims = [grid.columns, grid.rows, grid.slices];
-    let (layers, labels, segments) = in_layers(&names, &voxels, dims.iter().product(), frame_pixels, &mut warnings);
+    let (layers, labels, segments) =
+        in_layers(&names, &voxels, (dims.iter().product(), frame_pixels), true, &mut warnings);
     for (name, layer, label) in &segments {
         let roi = *label as u32;
         if let Some(slices) = crossing.get(&roi) {

@@ -67,6 +67,14 @@ fn rle_frames(fragments: &[Vec<u8>], frames: usize, frame_pixels: usize, bits: u
     Ok(data)
 }
 
+/// The number of images the SEG references (its `ReferencedSeriesSequence`'s instances, the slices
+/// of the series segmented), 0 when it names none.
+fn referenced_images(object: &InMemDicomObject) -> usize {
+    let series = items(object, tags::REFERENCED_SERIES_SEQUENCE);
+    let instances = series.iter().flat_map(|s| items(s, tags::REFERENCED_INSTANCE_SEQUENCE));
+    instances.filter_map(|i| text(i, tags::REFERENCED_SOP_INSTANCE_UID)).collect::<BTreeSet<_>>().len()
+}
+
 /// `length` bytes decoded from PackBits: a byte n of 0 to 127 is followed by n + 1 literal
 /// bytes, one of −127 to −1 by a byte repeated 1 − n times; −128 is nothing.
 fn pack_bits(coded: &[u8], length: usize) -> Result<Vec<u8>, String> {
@@ -184,7 +192,11 @@ pub(super) fn read(object: &DefaultDicomObject) -> Result<Labelmap, String> {
             warnings.push((None, format!("frames show segment {number}, which the file does not describe")));
         }
     }
-    let (count, labels, segments) = in_layers(&names, &voxels, dims.iter().product(), frame_pixels, &mut warnings);
+    // Writers leave empty frames out: where the file references more images than its frames' slices,
+    // the series goes on beyond them, and a segment ending with its frames is not cut by its end.
+    let series_ends = referenced_images(object) <= slices.len();
+    let (count, labels, segments) =
+        in_layers(&names, &voxels, (dims.iter().product(), frame_pixels), series_ends, &mut warnings);
     if voxels.is_empty() {
         return Err("the labelmap is empty: no segment has a pixel in any frame".into());
     }
@@ -435,6 +447,18 @@ mod tests {
     /// height z in mm; NaN: not placed, as a radiograph's or a slide's) in a plane of normal +z;
     /// `pixels` bit-packed (BINARY) or a byte each.
     fn seg_file(class: &str, kind: &str, frames: &[(u32, f64)], bits: u16, pixels: Vec<u8>) -> Vec<u8> {
+        seg_file_of_series(class, kind, frames, bits, pixels, 0)
+    }
+
+    /// [`seg_file`], referencing `referenced` images of the series segmented.
+    fn seg_file_of_series(
+        class: &str,
+        kind: &str,
+        frames: &[(u32, f64)],
+        bits: u16,
+        pixels: Vec<u8>,
+        referenced: usize,
+    ) -> Vec<u8> {
         let per_frame = frames
             .iter()
             .map(|&(segment, z)| {
@@ -461,7 +485,7 @@ mod tests {
                 text_element(tags::SEGMENT_LABEL, VR::LO, label),
             ])
         };
-        let object = InMemDicomObject::from_element_iter([
+        let mut object = InMemDicomObject::from_element_iter([
             text_element(tags::SOP_CLASS_UID, VR::UI, class),
             text_element(tags::SOP_INSTANCE_UID, VR::UI, "2.25.1"),
             text_element(tags::MODALITY, VR::CS, if class == SEGMENTATION_CLASSES[0] { "SEG" } else { "CT" }),
@@ -488,6 +512,22 @@ mod tests {
             DataElement::new(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE, VR::SQ, DataSetSequence::from(per_frame)),
             DataElement::new(tags::PIXEL_DATA, if bits == 1 { VR::OB } else { VR::OW }, PrimitiveValue::from(pixels)),
         ]);
+        if referenced > 0 {
+            let image = |i: usize| {
+                InMemDicomObject::from_element_iter([text_element(
+                    tags::REFERENCED_SOP_INSTANCE_UID,
+                    VR::UI,
+                    &format!("2.25.{}", 100 + i),
+                )])
+            };
+            let instances = DataSetSequence::from((0..referenced).map(image).collect::<Vec<_>>());
+            let series = InMemDicomObject::from_element_iter([DataElement::new(
+                tags::REFERENCED_INSTANCE_SEQUENCE,
+                VR::SQ,
+                instances,
+            )]);
+            object.put(DataElement::new(tags::REFERENCED_SERIES_SEQUENCE, VR::SQ, DataSetSequence::from(vec![series])));
+        }
         let file = object.with_meta(FileMetaTableBuilder::new().transfer_syntax("1.2.840.10008.1.2.1")).unwrap();
         let mut bytes = Vec::new();
         file.write_all(&mut bytes).unwrap();
@@ -578,6 +618,19 @@ mod tests {
         let pixels = vec![0x01, 0x00, 0xff, 0xff, 0x01, 0x00];
         let map = parse_dicom(&seg_file(SEG, "BINARY", &[(1, 0.0), (1, 2.0), (1, 4.0)], 1, pixels), None).unwrap();
         assert!(map.warnings.is_empty(), "{:?}", map.warnings);
+    }
+
+    /// A segment whose end slices are as large as its largest but whose frames lie on fewer slices
+    /// than the series it references (writers leave empty frames out) is not said to be cut; one
+    /// whose frames lie on every referenced image is.
+    #[test]
+    fn a_segment_ending_inside_the_series_referenced_is_not_said_to_be_cut() {
+        let frames = [(1, 0.0), (1, 2.0), (2, 2.0)];
+        let pixels = vec![0xff, 0xff, 0xff, 0xff, 1 << 6, 0];
+        let map = parse_dicom(&seg_file_of_series(SEG, "BINARY", &frames, 1, pixels.clone(), 81), None).unwrap();
+        assert!(map.warnings.is_empty(), "{:?}", map.warnings);
+        let map = parse_dicom(&seg_file_of_series(SEG, "BINARY", &frames, 1, pixels, 2), None).unwrap();
+        assert!(warnings(&map, 1).iter().any(|w| w.contains("seems to go on beyond the slices")), "{:?}", map.warnings);
     }
 
     /// A described segment no frame shows is named and empty; frames of a segment the file does not
