@@ -277,9 +277,9 @@ impl OrganInput {
                     self.notes.push((
                         "warning",
                         format!(
-                            "in {unit} the organ is {:.0} mm across, where organs are {:.0} to {:.0} mm: is the unit \
+                            "in {unit} the organ is {} mm across, where organs are {:.0} to {:.0} mm: is the unit \
                              right?{}",
-                            mm(extent),
+                            mesh::length::number(mm(extent)),
                             mm(*ORGAN_EXTENT_M.start()),
                             mm(*ORGAN_EXTENT_M.end()),
                             fitting.concat()
@@ -530,6 +530,13 @@ mod tests {
              give --units mm)"
                 .into()
         )));
+        // One in m read as mm: its size said to the digits that show it, not rounded to 0.
+        let metres = dir.path().join("ball_m.stl");
+        mesh::io::write_surface(&metres, &mesh::generate::icosphere(0.06, 2)).unwrap();
+        let mut input = OrganInput::read(&metres, None, Some(LengthUnit::Millimetre)).unwrap();
+        input.unit().unwrap();
+        let said = input.notes.iter().find(|(topic, _)| *topic == "warning").map(|n| n.1.as_str()).unwrap_or("");
+        assert!(said.starts_with("in mm the organ is 0.1"), "{said}");
         let centimetres = dir.path().join("ball_cm.stl");
         mesh::io::write_surface(&centimetres, &mesh::generate::icosphere(4.0, 2)).unwrap();
         let e = mesh_organ(&MeshOptions { surface: Some(centimetres.clone()), ..options.clone() }).unwrap_err();

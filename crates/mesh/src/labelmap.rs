@@ -397,8 +397,9 @@ impl Labelmap {
         self.segments.iter().filter(|s| s.1 == layer && s.2 == label).map(|s| s.0.as_str()).collect()
     }
 
-    /// The segments' names that hold `choice` or a word of it, or that it holds (any case), as
-    /// ", names like it: 'liver' (5), 'liver_tumor' (100)"; empty when none does.
+    /// The segments' names that hold `choice` or a word of it, or that it holds, or that it or a
+    /// word of it misspells ([`misspells`]; any case), as ", names like it: 'liver' (5),
+    /// 'liver_tumor' (100)"; empty when none does.
     fn names_like(&self, choice: &str) -> String {
         let words = |s: &str| -> Vec<String> {
             s.to_lowercase().split(|c: char| !c.is_alphanumeric()).filter(|w| w.len() > 2).map(str::to_string).collect()
@@ -410,7 +411,10 @@ impl Labelmap {
             .iter()
             .filter(|(name, _, _)| {
                 let name = name.to_lowercase();
-                name.contains(&choice) || choice.contains(&name) || words(&name).iter().any(|w| wanted.contains(w))
+                name.contains(&choice)
+                    || choice.contains(&name)
+                    || misspells(&choice, &name)
+                    || words(&name).iter().any(|w| wanted.iter().any(|c| c == w || misspells(c, w)))
             })
             .map(|(name, _, label)| format!("'{name}' ({label})"))
             .take(SHOWN_LABELS)
@@ -425,7 +429,7 @@ impl Labelmap {
     fn select_single(&self, choice: &str) -> Result<(VoxelMask, String, (usize, i32)), MeshError> {
         let choice = choice.trim();
         let present = self.present();
-        let (layer, label) = if let Ok(label) = choice.parse::<i32>() {
+        let (layer, label) = if let Some(label) = label_number(choice) {
             let layers: Vec<usize> = present.iter().filter(|p| p.1 == label).map(|p| p.0).collect();
             match layers[..] {
                 [layer] if label != 0 => (layer, label),
@@ -504,13 +508,44 @@ impl Labelmap {
             _ => format!("label {label}"),
         };
         // A number is a label's value: a segment named by another number is said to be elsewhere.
-        if choice.parse::<i32>().is_ok() {
+        if label_number(choice).is_some() {
             if let Some(s) = self.segments.iter().find(|s| s.0.trim() == choice && (s.1, s.2) != (layer, label)) {
                 description += &format!(" (the segment named '{choice}' is label {0}: choose {0} for it)", s.2);
             }
         }
         Ok((VoxelMask { dims: self.dims, inside, affine: self.affine }, description, (layer, label)))
     }
+}
+
+/// The label a choice names by number: an integer, or a whole number written as a float stores
+/// it (`5.0`, as a float labelmap's values print); `None` for a name.
+fn label_number(choice: &str) -> Option<i32> {
+    choice.parse::<i32>().ok().or_else(|| {
+        let x = choice.parse::<f64>().ok().filter(|x| x.fract() == 0.0 && x.abs() <= i32::MAX as f64)?;
+        choice.contains('.').then_some(x as i32)
+    })
+}
+
+/// Whether `typed` misspells `name`: a letter left out, added or changed per four letters, one at
+/// the least (`livr` for `liver`, `kidny` for `kidney`), as an edit distance counts them.
+fn misspells(typed: &str, name: &str) -> bool {
+    let (a, b): (Vec<char>, Vec<char>) = (typed.chars().collect(), name.chars().collect());
+    let allowed = (a.len().min(b.len()) / 4).max(1);
+    if a.len().abs_diff(b.len()) > allowed {
+        return false;
+    }
+    // The edit distance, row by row.
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.iter().enumerate() {
+        let mut previous = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let replaced = previous + usize::from(ca != cb);
+            previous = row[j + 1];
+            row[j + 1] = replaced.min(row[j] + 1).min(previous + 1);
+        }
+    }
+    row[b.len()] <= allowed
 }
 
 /// `bytes` gzipped (`path` names the file in an error).
@@ -703,9 +738,11 @@ mod tests {
         }
         let path = dir.path().join("named0.nii");
         let e = read_labelmap(&path).unwrap().select("tumour").unwrap_err().to_string();
-        assert!(e.contains("no segment is named 'tumour'; labels"), "{e}");
+        assert!(e.contains("no segment is named 'tumour', names like it: 'liver_tumor' (2);"), "{e}");
         let e = read_labelmap(&path).unwrap().select("liver tumour").unwrap_err().to_string();
         assert!(e.contains("names like it: 'liver' (5), 'liver_tumor' (2);"), "{e}");
+        let e = read_labelmap(&path).unwrap().select("livr").unwrap_err().to_string();
+        assert!(e.contains("no segment is named 'livr', names like it: 'liver' (5), 'liver_tumor' (2);"), "{e}");
         // An extension whose size runs past the voxels' offset: no names, the voxels read.
         let mut cut = with_extensions(&plain, &[(0, total_segmentator)]);
         cut[352..356].copy_from_slice(&100_000i32.to_le_bytes());
@@ -713,6 +750,27 @@ mod tests {
         std::fs::write(&path, cut).unwrap();
         let unnamed = read_labelmap(&path).unwrap();
         assert!(unnamed.segments.is_empty() && unnamed.labels == map.labels);
+    }
+
+    /// A label of two pieces apart (`5+2`: two balls) is said as its largest piece of all its
+    /// voxels; a whole number written as a float (`5.0`) chooses that label.
+    #[test]
+    fn a_label_in_pieces_is_counted_whole_and_a_float_number_chooses_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let (map, _) = two_balls(Frame::Ras);
+        let path = dir.path().join("seg.nii");
+        write_nifti(&path, &map).unwrap();
+        let count = |label: i32| map.labels.iter().filter(|&&l| l == label).count();
+        let (own, all) = (count(5), count(5) + count(2));
+        let organ = read_labelmap_surface(&path, Some("5+2"), None, &ExtractOptions::default()).unwrap();
+        assert_eq!(organ.label_voxels, all);
+        let line = &organ.lines()[0];
+        let said = format!("label 5 + label 2: {own} of its {all} voxels (its largest piece) of ");
+        assert!(line.starts_with(&said), "{line}");
+        let (mask, description) = map.select("5.0").unwrap();
+        assert_eq!((mask.count(), description.as_str()), (own, "label 5 ('liver')"));
+        let e = map.select("5.5").unwrap_err().to_string();
+        assert!(e.contains("no segment is named '5.5'"), "{e}");
     }
 
     /// A NIfTI-2 file (either byte order, gzipped or not) reads as the NIfTI-1 of the same
@@ -761,6 +819,7 @@ mod tests {
         let absent = error("7");
         assert!(absent.contains("label 7 is not in the labelmap") && absent.contains("5 ('liver',"), "{absent}");
         assert!(error("kidney").contains("no segment is named 'kidney'; labels present: 2 ('tumour',"));
+        assert!(error("tumor").contains("no segment is named 'tumor', names like it: 'tumour' (2);"));
         assert!(error("0").contains("label 0 is the background, not a segment"));
         let unchosen = read_labelmap_surface(&path, None, None, &ExtractOptions::default()).unwrap_err().to_string();
         assert!(unchosen.contains("holds several labels: choose one with --label"), "{unchosen}");

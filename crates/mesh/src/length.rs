@@ -300,7 +300,7 @@ pub const ORGAN_EXTENT_M: std::ops::RangeInclusive<f64> = 0.02..=0.6;
 
 /// A number with six significant digits, without trailing zeros (in scientific notation beyond
 /// 1e9 and below 1e-6: a damaged file's 1e300 as 3e300, not three hundred digits).
-pub(crate) fn number(x: f64) -> String {
+pub fn number(x: f64) -> String {
     if x == 0.0 || !x.is_finite() {
         return x.to_string();
     }

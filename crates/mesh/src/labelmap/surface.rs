@@ -20,6 +20,9 @@ pub struct LabelSurface {
     pub label: String,
     /// The voxel size along i, j, k (mm).
     pub spacing: [f64; 3],
+    /// The label's voxels as the file gives them, all its pieces ([`LabelSurface::extract`] counts
+    /// those kept).
+    pub label_voxels: usize,
     /// What the extraction did.
     pub extract: ExtractReport,
     /// Whether the file places its voxels in the scanner's frame ([`super::Labelmap::placed`]).
@@ -48,12 +51,19 @@ impl LabelSurface {
             .filter(|&(n, _)| n > 0)
             .map(|(n, what)| format!("{n} {what}"))
             .collect();
-        let filled = match added.is_empty() {
-            true => String::new(),
-            false => format!(" ({} its own, {})", e.voxels - e.filled_voxels - e.closed_voxels, added.join(", ")),
+        let own = e.voxels - e.filled_voxels - e.closed_voxels;
+        // The piece kept, where the label's others were dropped.
+        let piece = match e.dropped_pieces.is_empty() {
+            true => None,
+            false => Some(format!("{own} of its {}, its largest piece", self.label_voxels)),
         };
-        let mut lines =
-            vec![format!("{}: {} voxels{filled} of {a:.2} × {b:.2} × {c:.2} mm, {frame}", self.label, e.voxels)];
+        let voxels = match (piece, added.is_empty()) {
+            (None, true) => format!("{} voxels", e.voxels),
+            (None, false) => format!("{} voxels ({own} its own, {})", e.voxels, added.join(", ")),
+            (Some(_), true) => format!("{own} of its {} voxels (its largest piece)", self.label_voxels),
+            (Some(piece), false) => format!("{} voxels ({piece}; {})", e.voxels, added.join(", ")),
+        };
+        let mut lines = vec![format!("{}: {voxels} of {a:.2} × {b:.2} × {c:.2} mm, {frame}", self.label)];
         lines.extend(e.cleaning_lines());
         lines.push(format!(
             "surface: {} triangles (decimated from {}), {}",
@@ -121,6 +131,7 @@ pub fn read_labelmap_surface(
         ));
     }
     let borders = touched_borders(&whole, map.placed.then_some(map.frame));
+    let label_voxels = whole.count();
     let mask = map.cropped(&whole, &label, chosen).map_err(|e| MeshError::parse(path, e.message()))?;
     let mask = mask.in_scanner_order(map.frame == Frame::Ras);
     let (surface, extract) = mask_surface(&mask, options).map_err(|e| MeshError::parse(path, e.message()))?;
@@ -173,7 +184,8 @@ pub fn read_labelmap_surface(
         ));
     }
     let placed = map.placed;
-    Ok(LabelSurface { surface, frame: map.frame, label, spacing: map.spacing(), extract, placed, warnings })
+    let spacing = map.spacing();
+    Ok(LabelSurface { surface, frame: map.frame, label, spacing, label_voxels, extract, placed, warnings })
 }
 
 /// What the extraction of a label's surface did to its voxels that a user should know: gaps
