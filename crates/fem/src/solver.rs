@@ -440,6 +440,12 @@ impl LoadPath {
         }
     }
 
+    /// The failure of force control to find an equilibrium beyond `load_factor` (after
+    /// `iterations`), with the path's softening there.
+    fn no_equilibrium(&self, load_factor: f64, iterations: usize) -> FemError {
+        FemError::NoEquilibrium { load_factor, softening: self.softening(), indefinite: false, iterations }
+    }
+
     /// Whether the last step found its equilibrium far away, past a limit point: its stiffness
     /// under [`crate::LIMIT_POINT_STIFFNESS`] per cent of that at rest and under half the step's
     /// before it (a path that softens gradually does not). A first step's stiffness, its secant
@@ -628,6 +634,16 @@ impl StaticSolver {
             if let Some(i) = self.free_index(dof) {
                 *value += scale * free[i];
             }
+        }
+    }
+
+    /// Keeps the first Newton iterate from rest, `u + du` at load factor `lambda`: the linear
+    /// response at rest ([`LoadPath::record_rest`]), the first only.
+    fn keep_rest_response(&self, u: &[f64], du: &[f64], lambda: f64, stats: &mut Stats) {
+        if stats.rest_response.is_none() {
+            let mut first = u.to_vec();
+            self.add_free(&mut first, du, 1.0);
+            stats.rest_response = Some((lambda, first));
         }
     }
 
@@ -850,12 +866,7 @@ impl StaticSolver {
                 }
                 Err(e @ (FemError::NotConverged { .. } | FemError::InvertedElement { .. })) => {
                     let failure = match patient_failed {
-                        Some((at, iterations)) => FemError::NoEquilibrium {
-                            load_factor: at,
-                            softening: path.softening(),
-                            indefinite: false,
-                            iterations,
-                        },
+                        Some((at, iterations)) => path.no_equilibrium(at, iterations),
                         None => e,
                     };
                     return match self.past_force_control(failure, &mut u, &mut lambda, &mut path, options, &mut stats) {
@@ -1092,10 +1103,8 @@ impl StaticSolver {
             let cholesky = &mut self.cholesky;
             bfgs.apply(&mut du, |v| cholesky.solve_in_place(slot, v))?;
             stats.timings.solve += t.elapsed();
-            if from == Start::Rest && it == 0 && stats.rest_response.is_none() {
-                let mut first = u.to_vec();
-                self.add_free(&mut first, &du, 1.0);
-                stats.rest_response = Some((lambda, first));
+            if from == Start::Rest && it == 0 {
+                self.keep_rest_response(u, &du, lambda, stats);
             }
             r_old.copy_from_slice(&r);
             let alpha = self.line_search(u, &du, &mut trial, &mut f_int, &f_ext, &mut r, opt, stats)?;
