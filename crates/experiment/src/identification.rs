@@ -306,9 +306,11 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
              solve the same problem and differ only by their discretisation."
                 .into(),
             "The 'systematic discrepancy' rows: the same filter runs ([filter] discrepancy = \"systematic\", \
-             d = 1, in run-discrepancy/) with an allowance for model error added to σ: the misfit of all frames at \
-             the estimate beyond the observation noise, assumed able to lie wholly along the modulus' sensitivity \
-             (σ² += excess χ² × the inverse information). The estimate is the plain filter's."
+             d = 1, in run-discrepancy/) with an allowance for model error added to σ: the misfit at the estimate \
+             beyond the observation noise, over the frames whose sigma points came near it (not the start-up's, \
+             taken far off), assumed able to lie wholly along the modulus' sensitivity (σ² += excess χ² × the \
+             inverse information). The estimate is the plain filter's. A model error that looks like another \
+             modulus (linear tetrahedra stiffer throughout) leaves no misfit beyond the noise, and so no allowance."
                 .into(),
             "The scenario (roukf_young.toml) is written beside the result.".into(),
             reference::note(Some(reference_ms)),

@@ -232,7 +232,13 @@ impl Experiment {
             setup,
         };
         match (files, experiment.scenario.reference_scenario()) {
-            (Some(f), _) => experiment.read_files(&locator, f)?,
+            (Some(f), reference) => {
+                experiment.read_files(&locator, f)?;
+                // Tracks of the reference run, its values the truth: carried to this mesh.
+                if let Some(reference) = reference.filter(|_| f.known_truth) {
+                    experiment.carry_reference_spring_truth(&reference, dir)?;
+                }
+            }
             (None, Some(reference)) => experiment.observe_reference(&locator, reference, dir)?,
             (None, None) => experiment.synthesise(&locator, &tool_nodes)?,
         }
@@ -338,6 +344,34 @@ impl Experiment {
         self.use_tracks(locator, &tracks)
     }
 
+    /// Takes as the springs' truth those of the `reference` scenario (its mesh built, not run), carried to this
+    /// model's mesh: tracks of that reference read from files.
+    fn carry_reference_spring_truth(
+        &mut self,
+        reference: &AssimilationScenario,
+        dir: &Path,
+    ) -> Result<(), AssimilationError> {
+        if self.unknowns.springs.is_none() {
+            return Ok(());
+        }
+        let mesh = build_mesh(&reference.mesh, dir).context(|| "building the reference mesh".into())?;
+        let (problem, ..) = reference.build_problem(mesh).map_err(|e| AssimilationError::Setup(e.to_string()))?;
+        let springs = unknowns(reference, &problem.mesh)?;
+        self.carry_spring_truth(&problem.mesh, &springs);
+        Ok(())
+    }
+
+    /// Takes as the springs' truth those of a reference run on `mesh` (its `unknowns`), carried to this model's
+    /// mesh ([`equivalent_springs`]).
+    fn carry_spring_truth(&mut self, mesh: &Mesh, unknowns: &Unknowns) {
+        if let (Some(model), Some(springs)) = (&self.unknowns.springs, &unknowns.springs) {
+            let truth = &unknowns.truth[unknowns.truth.len() - springs.len()..];
+            let equivalent = equivalent_springs((mesh, springs, truth), (&self.base.mesh, model));
+            let first = self.unknowns.truth.len() - model.len();
+            self.unknowns.truth[first..].copy_from_slice(&equivalent);
+        }
+    }
+
     /// Synthetic observations of a reference run on another mesh (and law), `scenario`: its tracks are located on
     /// this model's mesh like track files (its tool acts on this model through the scenario's own `[[tool]]`, so
     /// its tool tracks are not used as controls) and kept for writing; its parameters are the truth.
@@ -364,12 +398,7 @@ impl Experiment {
         };
         self.use_tracks(locator, &tracks)?;
         self.known_truth = true;
-        if let (Some(model), Some(springs)) = (&self.unknowns.springs, &reference.unknowns.springs) {
-            let truth = &reference.unknowns.truth[reference.unknowns.truth.len() - springs.len()..];
-            let equivalent = equivalent_springs((&reference.base.mesh, springs, truth), (&self.base.mesh, model));
-            let first = self.unknowns.truth.len() - model.len();
-            self.unknowns.truth[first..].copy_from_slice(&equivalent);
-        }
+        self.carry_spring_truth(&reference.base.mesh, &reference.unknowns);
         let run = reference.setup.reference.expect("a synthetic run records its reference run");
         self.setup.reference = Some(Reference { inverse_crime: false, ..run });
         self.synthetic_tracks = reference.synthetic_tracks;
