@@ -105,7 +105,7 @@ pub struct YoungReport {
     pub within_1_percent_from_iteration: Option<usize>,
     /// Filter wall-clock time (s, the iterations' own times summed) until that iteration.
     pub within_1_percent_after_seconds: Option<f64>,
-    /// How much the estimate changed over the last tenth of the iterations (at least [`DRIFT_STEPS`]): the steps
+    /// How much the estimate changed over the last tenth of the iterations (at least five): the steps
     /// and the change (Pa); `None` for a run shorter than that.
     pub drift: Option<(usize, f64)>,
     /// With a model-discrepancy allowance (`[filter] discrepancy`): the final σ of the observation noise alone
@@ -153,7 +153,7 @@ impl Report {
 }
 
 /// The fewest last iterations over which an estimate's drift is measured.
-pub const DRIFT_STEPS: usize = 5;
+const DRIFT_STEPS: usize = 5;
 
 /// The change of the first parameter's estimate (physical) over the last tenth of the iterations, at least
 /// [`DRIFT_STEPS`] of them: (steps, change).

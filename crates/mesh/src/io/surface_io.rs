@@ -110,8 +110,8 @@ impl Merger {
 /// Reads an STL surface, binary or ASCII. Vertices with exactly equal coordinates are merged so
 /// that the surface is indexed; facet normals are ignored (orientation is the vertex order), and
 /// may be non-finite (`facet normal -nan -nan -nan`, as MeshLab writes for a degenerate facet).
-/// A binary STL whose header's triangle count its size belies is read as [`read_stl_noting`]
-/// reads it, its warning dropped.
+/// A binary STL whose header's triangle count its size belies is read for the records it holds
+/// (the warning saying so is dropped here: [`crate::io::read_surface_noted`] gives it).
 pub fn read_stl(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
     read_stl_noting(path.as_ref()).map(|(surface, _)| surface)
 }
