@@ -17,9 +17,11 @@ const TRUTH: f64 = 5.0;
 const NOMINAL_STD: f64 = 0.01;
 const FRAMES: usize = 200;
 
-/// `h_k(θ) = s_k θ φ` with a raised-cosine load `s_k` of period 100 frames (as the ROUKF Young's-modulus scenario's force).
+/// `h_k(θ) = s_k r(θ) φ` with a raised-cosine load `s_k` of period 100 frames (as the ROUKF Young's-modulus
+/// scenario's force) and the response `r`: θ itself, or 1/θ (a displacement, θ the stiffness).
 struct Cyclic {
     pattern: DVector<f64>,
+    response: fn(f64) -> f64,
 }
 
 fn load(k: usize) -> f64 {
@@ -30,7 +32,7 @@ impl Model for Cyclic {
     type State = DVector<f64>;
     type Error = Infallible;
     fn step(&self, state: &mut DVector<f64>, theta: &[f64], step: usize) -> Result<(), Infallible> {
-        *state = &self.pattern * (load(step) * theta[0]);
+        *state = &self.pattern * (load(step) * (self.response)(theta[0]));
         Ok(())
     }
     fn observe(&self, state: &DVector<f64>) -> DVector<f64> {
@@ -71,7 +73,8 @@ fn filter(data: &Data, forgetting: f64) -> Roukf<Cyclic> {
         sigma_points: SigmaPointSet::Simplex,
         gate: None,
     };
-    Roukf::new(Cyclic { pattern: data.pattern.clone() }, DVector::zeros(data.pattern.len()), config).unwrap()
+    let model = Cyclic { pattern: data.pattern.clone(), response: |theta| theta };
+    Roukf::new(model, DVector::zeros(data.pattern.len()), config).unwrap()
 }
 
 fn run(mut roukf: Roukf<Cyclic>, data: &Data) -> Roukf<Cyclic> {
@@ -198,23 +201,6 @@ fn invalid_degrees_of_freedom_are_refused() {
     assert!("bias".parse::<Discrepancy>().is_err());
 }
 
-/// `h_k(θ) = s_k φ / θ`: a displacement under a load, θ the stiffness (as the Young's modulus).
-struct Compliant {
-    pattern: DVector<f64>,
-}
-
-impl Model for Compliant {
-    type State = DVector<f64>;
-    type Error = Infallible;
-    fn step(&self, state: &mut DVector<f64>, theta: &[f64], step: usize) -> Result<(), Infallible> {
-        *state = &self.pattern * (load(step) / theta[0]);
-        Ok(())
-    }
-    fn observe(&self, state: &DVector<f64>) -> DVector<f64> {
-        state.clone()
-    }
-}
-
 /// An exact model reached from a prior far from the truth (1 ± 0.2 for 5, as the Young's modulus
 /// scenario's): the frames observed on the way, whose sensitivity at their estimate is not the one at
 /// the end, do not count as model error; the misfit is the noise's, and σ is the plain filter's.
@@ -235,7 +221,8 @@ fn the_frames_taken_far_from_the_estimate_do_not_count_as_model_error() {
             sigma_points: SigmaPointSet::Simplex,
             gate: None,
         };
-        Roukf::new(Compliant { pattern: pattern.clone() }, DVector::zeros(q), config).unwrap()
+        let model = Cyclic { pattern: pattern.clone(), response: |theta| 1.0 / theta };
+        Roukf::new(model, DVector::zeros(q), config).unwrap()
     };
     let mut plain = make();
     let mut honest = make().with_discrepancy(Discrepancy::Systematic, 1.0).unwrap();
