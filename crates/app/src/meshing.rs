@@ -353,6 +353,9 @@ pub fn immersed_fill(mesh: &Mesh) -> (f64, usize) {
     (mesh.body_volume(), cut)
 }
 
+/// The files [`write_mesh_file`] writes, by extension: a volume mesh (VTK, Gmsh) or its boundary surface.
+pub const MESH_FILE_EXTENSIONS: [&str; 5] = ["vtu", "vtk", "msh", "stl", "obj"];
+
 /// Writes the mesh in metres with its regions (point data `region_<name>`, or Gmsh physical
 /// groups) and, for an immersed grid, its cells' volume fractions (not in `.msh`); to .stl or
 /// .obj, its boundary surface in millimetres, as 3D Slicer and surface tools read them, naming

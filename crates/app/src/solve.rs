@@ -9,6 +9,9 @@ use mesh::io::Field;
 use mesh::stats::ms;
 use scenario::StaticScenario;
 
+/// The files a solve writes, by extension: VTK's, which hold its fields.
+pub const SOLVE_FILE_EXTENSIONS: [&str; 2] = ["vtu", "vtk"];
+
 /// A static scenario with its solution.
 pub struct Solved {
     /// The scenario.

@@ -33,7 +33,7 @@ enum Command {
         /// Static scenario: a TOML file, or the name of a built-in one (e.g. beam).
         scenario: PathBuf,
         /// Output file (.vtu or .vtk); default `out/<name>.vtu`.
-        #[arg(short, long, value_parser = extension_of(&["vtu", "vtk"]))]
+        #[arg(short, long, value_parser = extension_of(&app::solve::SOLVE_FILE_EXTENSIONS))]
         output: Option<PathBuf>,
     },
     /// Mesh a closed surface (or the built-in liver phantom) with tetrahedra or an immersed hex grid.
@@ -69,7 +69,7 @@ enum Command {
         immersed: Option<Length>,
         /// Output file (.vtu, .vtk or .msh, in m; .stl or .obj: the mesh's boundary surface in mm,
         /// naming the input's frame, as 3D Slicer reads it).
-        #[arg(short, long, default_value = "out/mesh.vtu", value_parser = extension_of(&["vtu", "vtk", "msh", "stl", "obj"]))]
+        #[arg(short, long, default_value = "out/mesh.vtu", value_parser = extension_of(&app::meshing::MESH_FILE_EXTENSIONS))]
         output: PathBuf,
     },
     /// ROUKF identification of Young's modulus and/or boundary springs from tracked surface points (synthetic,
