@@ -288,7 +288,7 @@ magnitude = [0.05, 0.2]
     let e = augsim_err(&["predict", "net/model.json", "u.csv"], d);
     assert!(e.contains("the points' vectors are named displacements, but the model takes forces (N)"), "{e}");
     let e = augsim_err(&["predict", "net/model.json", "cloud.csv", "--runs", "0"], d);
-    assert!(e.contains("'0' for '--runs <RUNS>': must be at least 1"), "{e}");
+    assert!(e.contains("'0' for '--runs <RUNS>': expected a count of at least 1, got 0"), "{e}");
 }
 
 /// The shipped scenario-1 network (`models/liver_forces`, trained on the built-in
