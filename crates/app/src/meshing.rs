@@ -279,7 +279,11 @@ impl OrganInput {
                         format!(
                             "in {unit} the organ is {} mm across, where organs are {:.0} to {:.0} mm: is the unit \
                              right?{}",
-                            mesh::length::number(mm(extent)),
+                            // To the millimetre; a smaller organ to its digits (0.12 mm, not 0).
+                            match mm(extent) {
+                                across if across >= 1.0 => format!("{across:.0}"),
+                                across => mesh::length::number(across),
+                            },
                             mm(*ORGAN_EXTENT_M.start()),
                             mm(*ORGAN_EXTENT_M.end()),
                             fitting.concat()
