@@ -150,7 +150,10 @@ fn tracks_written_by_a_synthetic_run_give_the_same_estimate() {
     let gated = Experiment::prepare(sc, &base, Some(&split)).unwrap().run(&dir.path().join("gated"), &learn::Silent);
     let gated = gated.unwrap();
     assert_eq!((gated.gated_components, gated.gated_steps), (3, 1));
-    assert!(gated.lines().iter().any(|l| l.starts_with("gate         3 tracked components left out of 1 steps")));
+    let gate_line = gated.lines().into_iter().find(|l| l.starts_with("gate ")).unwrap();
+    assert!(gate_line.starts_with("gate         3 tracked components left out of 1 steps"), "{gate_line}");
+    assert_eq!(gated.gated_features, [("f1".to_string(), 1)], "the feature that jumped");
+    assert!(gate_line.ends_with("most often: `f1` 1"), "{gate_line}");
     let g = gated.young.unwrap().mean;
     assert!((g - e).abs() < 1e-9 * e, "{g} vs the occluded run's {e}");
 }

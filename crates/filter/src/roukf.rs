@@ -582,7 +582,7 @@ impl<M: Model> Roukf<M> {
         }
         let measured = available.contains(&true).then(|| innovation.norm());
         let mut record = self.record(measured, Some(start.elapsed().as_secs_f64()));
-        record.gated = gated;
+        (record.gated, record.gated_components) = (gated.len(), gated);
         self.trace.records.push(record);
         Ok(self.trace.records.last().expect("a record was just pushed"))
     }
@@ -612,15 +612,21 @@ impl<M: Model> Roukf<M> {
 
     /// The validation gate ([`RoukfConfig::gate`]): sets the weight of each measured component of `z`
     /// farther from its prediction `z_mean` (sigma-point spread `hl`) than the gate allows to 0;
-    /// returns how many it set.
-    fn gate(&self, z: &DVector<f64>, z_mean: &DVector<f64>, hl: &DMatrix<f64>, inv_std: &mut DVector<f64>) -> usize {
-        let Some(gate) = self.config.gate else { return 0 };
-        let mut gated = 0;
+    /// returns their indices.
+    fn gate(
+        &self,
+        z: &DVector<f64>,
+        z_mean: &DVector<f64>,
+        hl: &DMatrix<f64>,
+        inv_std: &mut DVector<f64>,
+    ) -> Vec<usize> {
+        let Some(gate) = self.config.gate else { return Vec::new() };
+        let mut gated = Vec::new();
         for (i, w) in inv_std.iter_mut().enumerate().filter(|(_, w)| **w > 0.0) {
             let predicted = (1.0 / (*w * *w) + hl.row(i).norm_squared()).sqrt();
             if (z[i] - z_mean[i]).abs() > gate * predicted {
                 *w = 0.0;
-                gated += 1;
+                gated.push(i);
             }
         }
         gated
@@ -750,6 +756,7 @@ impl<M: Model> Roukf<M> {
             noise_std_physical: self.misfit.as_ref().map(|_| self.physical(&self.filter_covariance())),
             misfit: self.misfit(),
             gated: 0,
+            gated_components: Vec::new(),
         }
     }
 

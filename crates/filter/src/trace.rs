@@ -39,6 +39,9 @@ pub struct IterationTrace {
     /// Measured components the validation gate left out at this iteration ([`crate::RoukfConfig::gate`]).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub gated: usize,
+    /// Which: their indices in the measurement vector.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub gated_components: Vec<usize>,
 }
 
 fn is_zero(n: &usize) -> bool {

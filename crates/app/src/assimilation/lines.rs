@@ -159,9 +159,17 @@ impl Report {
             ));
         }
         if let (components, steps @ 1..) = (r.gated_components, r.gated_steps) {
+            let most: Vec<String> = r.gated_features.iter().take(3).map(|(id, n)| format!("`{id}` {n}")).collect();
             lines.push(format!(
                 "gate         {components} tracked components left out of {steps} steps, farther from the \
-                 prediction than the validation gate allows (trace.json: gated)"
+                 prediction than the validation gate allows (trace.json: gated_components); steps left out, most \
+                 often: {}{}",
+                most.join(", "),
+                if r.gated_features.len() > 3 {
+                    format!(" (of {} features)", r.gated_features.len())
+                } else {
+                    String::new()
+                }
             ));
         }
         lines.push(format!("wall time    {:.2} s in all", r.total_seconds));

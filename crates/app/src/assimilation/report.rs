@@ -70,8 +70,10 @@ pub struct Report {
     pub deformation_frames: usize,
     /// With a validation gate: the tracked components it left out over the run...
     pub gated_components: usize,
-    /// ... and the steps they were left out of.
+    /// ... and the steps they were left out of...
     pub gated_steps: usize,
+    /// ... and the features they belong to, with the steps each was left out of, most often first.
+    pub gated_features: Vec<(String, usize)>,
 }
 
 /// Where the filter's time went. The FEM solves' times are each solve's own wall-clock time summed over all
@@ -348,6 +350,7 @@ mod tests {
             noise_std_physical: None,
             misfit: None,
             gated: 0,
+            gated_components: Vec::new(),
         };
         let names = vec!["young".to_string()];
         Trace { parameter_names: names, transforms: vec![], scales: vec![1.0], records: (0..=n).map(record).collect() }

@@ -138,6 +138,8 @@ pub struct Experiment {
     controls: Vec<ControlPath>,
     unknowns: Unknowns,
     observed: Vec<TrackedPoint>,
+    /// The observed features' names (a track file's ids; `f0`, `f1`… when synthetic).
+    observed_ids: Vec<String>,
     measurements: Vec<Frame>,
     filter_std: f64,
     every: usize,
@@ -223,6 +225,7 @@ impl Experiment {
             controls: Vec::new(),
             unknowns,
             observed: Vec::new(),
+            observed_ids: Vec::new(),
             measurements: Vec::new(),
             filter_std,
             every,
@@ -280,6 +283,7 @@ impl Experiment {
             Some(a) => assessment_points(&self.base, a, &observed_nodes)?,
             None => Vec::new(),
         };
+        self.observed_ids = (0..observed.len()).map(|j| format!("f{j}")).collect();
         self.observed = observed;
         let nodes = self.base.mesh.nodes.clone();
         let model = self.model(self.base.clone(), self.unknowns.parameters.clone())?;
@@ -427,6 +431,7 @@ impl Experiment {
         let mut at_rest = Vec::new();
         let observed_rest = tracks.observations.rest_positions(rest)?;
         self.observed = locate_tracks(&tracks.observations, &observed_rest, rest, &mut finder)?;
+        self.observed_ids = tracks.observations.ids.clone();
         // A camera sees the surface: a feature deep inside is another organ's, or a wrong position.
         let depths =
             tracks.observations.ids.iter().zip(&observed_rest).map(|(id, p)| (id, -finder.surface.signed_distance(*p)));
@@ -631,6 +636,7 @@ impl Experiment {
             assessment,
             deformation_frames: frames.len(),
             gated_components: trace.records.iter().map(|r| r.gated).sum(),
+            gated_features: gated_features(trace, &self.observed_ids),
             gated_steps: trace.records.iter().filter(|r| r.gated > 0).count(),
         };
         report.write_json(&out_dir.join(crate::output::SUMMARY_FILE))?;
@@ -721,6 +727,19 @@ fn unknowns(sc: &AssimilationScenario, mesh: &Mesh) -> Result<Unknowns, Assimila
         u.springs = Some(nodes);
     }
     Ok(u)
+}
+
+/// The features the validation gate left out of a step, each with the number of such steps, most often first.
+fn gated_features(trace: &filter::Trace, ids: &[String]) -> Vec<(String, usize)> {
+    let mut steps = vec![0; ids.len()];
+    for record in &trace.records {
+        let mut features: Vec<usize> = record.gated_components.iter().map(|c| c / 3).collect();
+        features.dedup();
+        features.iter().filter(|&&j| j < ids.len()).for_each(|&j| steps[j] += 1);
+    }
+    let mut gated: Vec<(String, usize)> = ids.iter().cloned().zip(steps).filter(|(_, n)| *n > 0).collect();
+    gated.sort_by_key(|(_, n)| std::cmp::Reverse(*n));
+    gated
 }
 
 /// The springs on `model`'s nodes equivalent to the `reference` mesh's (its nodes and stiffnesses, N/m): a node's
