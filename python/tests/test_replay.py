@@ -101,7 +101,7 @@ def test_a_cloud_file_is_read_as_register_reads_it(tmp_path):
     np.testing.assert_allclose(replay.read_cloud(str(labelled), "m"), [[0.01, 0.02, 0.03]])
     wrong = tmp_path / "wrong.npy"
     np.save(wrong, np.zeros((3, 5)))
-    with pytest.raises(ValueError, match=r"expected an array of shape \[N, 3\], found \[3, 5\]"):
+    with pytest.raises(ValueError, match=r"expected an array of shape \[N, 3\] \(x, y, z per row\), found \[3, 5\]"):
         replay.read_cloud(str(wrong))
     broken = tmp_path / "broken.csv"
     broken.write_text("x,y,z\n1,2\n")
