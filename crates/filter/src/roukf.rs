@@ -313,16 +313,17 @@ impl Misfit {
         self.frames.iter().filter(move |f| (&f.inverse_factor * (theta - &f.centre)).norm() <= reach)
     }
 
-    /// `χ²(θ) = Σ_k |r̃_k - J̃_k (θ - θ_k)|²` (first order) over the frames holding θ, never negative, with
-    /// their `Σ q_k` and `Σ q_k` discounted by ρ² (for the variance).
-    fn chi_squared_and_components(&self, theta: &DVector<f64>) -> (f64, f64, f64) {
-        self.holding(theta).fold((0.0, 0.0, 0.0), |(c, q, q2), f| {
-            (
-                c + f.weight * f.chi_squared(theta).max(0.0),
-                q + f.weight * f.components,
-                q2 + f.weight.powi(2) * f.components,
-            )
-        })
+    /// The sums over the frames holding `theta`, in one pass ([`HeldSums`]).
+    fn sums(&self, theta: &DVector<f64>) -> HeldSums {
+        let mut sums =
+            HeldSums { chi_squared: 0.0, components: 0.0, squared: 0.0, information: self.prior_information.clone() };
+        for f in self.holding(theta) {
+            sums.chi_squared += f.weight * f.chi_squared(theta).max(0.0);
+            sums.components += f.weight * f.components;
+            sums.squared += f.weight.powi(2) * f.components;
+            sums.information.zip_apply(&f.information, |s, i| *s += f.weight * i);
+        }
+        sums
     }
 
     /// `components` less the parameters, at least 1.
@@ -332,21 +333,36 @@ impl Misfit {
 
     /// The reduced χ² at `theta`, `χ²(θ)/ν`; `None` while no frame's sampled region holds θ.
     fn reduced_chi_squared(&self, theta: &DVector<f64>) -> Option<f64> {
-        let (chi_squared, components, _) = self.chi_squared_and_components(theta);
-        (components > 0.0).then(|| chi_squared / self.less_parameters(components))
+        let sums = self.sums(theta);
+        (sums.components > 0.0).then(|| sums.chi_squared / self.less_parameters(sums.components))
     }
 
     /// The covariance `(e/d) S^{-1}` added to the filter's at `theta` (`None` when S is singular).
     fn allowance(&self, theta: &DVector<f64>) -> Option<DMatrix<f64>> {
-        let (chi_squared, components, squared) = self.chi_squared_and_components(theta);
-        let nu = self.less_parameters(components);
+        let sums = self.sums(theta);
+        let nu = self.less_parameters(sums.components);
         // The variance of χ² over 2: ν, with the frames discounted by ρ² rather than ρ.
-        let nu_variance = self.less_parameters(squared);
-        let excess = (chi_squared - nu - 2.0 * (2.0 * nu_variance).sqrt()).max(0.0);
+        let nu_variance = self.less_parameters(sums.squared);
+        let excess = (sums.chi_squared - nu - 2.0 * (2.0 * nu_variance).sqrt()).max(0.0);
         let d = self.systematic_dof.unwrap_or(nu);
-        let s = self.holding(theta).fold(self.prior_information.clone(), |s, f| s + &f.information * f.weight);
-        Cholesky::new(s).map(|c| c.inverse() * (excess / d))
+        Cholesky::new(sums.information).map(|c| c.inverse() * (excess / d))
     }
+}
+
+/// The square roots of a covariance's diagonal (a rounding below 0 taken as 0).
+fn standard_deviations(covariance: &DMatrix<f64>) -> Vec<f64> {
+    covariance.diagonal().iter().map(|v| v.max(0.0).sqrt()).collect()
+}
+
+/// Sums over the frames whose sampled region holds an estimate θ ([`Misfit::sums`]).
+struct HeldSums {
+    /// `χ²(θ) = Σ_k |r̃_k - J̃_k (θ - θ_k)|²` (first order, each frame's never negative).
+    chi_squared: f64,
+    /// `Σ q_k`, and `Σ q_k` discounted by ρ² rather than ρ (for the variance of χ²).
+    components: f64,
+    squared: f64,
+    /// `S = P_0^{-1} + Σ_k F_k`.
+    information: DMatrix<f64>,
 }
 
 /// Mean state and its factor for joint state–parameter filtering.
@@ -553,10 +569,11 @@ impl<M: Model> Roukf<M> {
         let frame_misfit = self.misfit.as_ref().and_then(|_| {
             let jt = l_theta.transpose().lu().solve(&g.transpose())?;
             let inverse_factor = l_theta.clone().try_inverse()?;
+            let residual = &weighted - &g * &correction;
             let frame = FrameMisfit {
                 weight: 1.0,
-                residual: (&weighted - &g * &correction).norm_squared(),
-                score: &jt * (&weighted - &g * &correction),
+                residual: residual.norm_squared(),
+                score: &jt * residual,
                 information: &jt * jt.transpose(),
                 theta: theta.clone(),
                 centre: theta_mean.clone(),
@@ -745,12 +762,13 @@ impl<M: Model> Roukf<M> {
 
     /// Trace record of the current estimate.
     fn record(&self, innovation_norm: Option<f64>, wall_seconds: Option<f64>) -> IterationTrace {
+        let covariance = self.covariance();
         IterationTrace {
             iteration: self.iteration,
             mean: self.theta.iter().copied().collect(),
-            std: self.std(),
+            std: standard_deviations(&covariance),
             mean_physical: self.mean_physical(),
-            std_physical: self.std_physical(),
+            std_physical: self.physical(&covariance),
             innovation_norm,
             wall_seconds,
             noise_std_physical: self.misfit.as_ref().map(|_| self.physical(&self.filter_covariance())),
@@ -800,7 +818,7 @@ impl<M: Model> Roukf<M> {
 
     /// Standard deviations in filter space (of [`Roukf::covariance`]).
     pub fn std(&self) -> Vec<f64> {
-        self.covariance().diagonal().iter().map(|v| v.max(0.0).sqrt()).collect()
+        standard_deviations(&self.covariance())
     }
 
     /// Standard deviations in physical space, first order: `|g'(θ̂)| σ` for g = `scale · transform`.
@@ -930,7 +948,7 @@ mod tests {
             misfit.add(1.0, frame(5.0));
         }
         let theta = DVector::zeros(1);
-        let (chi_squared, components, _) = misfit.chi_squared_and_components(&theta);
+        let HeldSums { chi_squared, components, .. } = misfit.sums(&theta);
         assert!((chi_squared - 100.0).abs() < 1e-9 && components == 40.0, "χ² = {chi_squared}, Σq = {components}");
         let allowance = misfit.allowance(&theta).unwrap()[(0, 0)];
         let expected = 100.0 - 39.0 - 2.0 * (2.0 * 39.0f64).sqrt();
