@@ -747,16 +747,15 @@ fn gated_features(trace: &filter::Trace, ids: &[String]) -> Vec<(String, usize)>
 /// area at its nearest spring node times the model node's area (a finer reference carries more, weaker springs).
 fn equivalent_springs(reference: (&Mesh, &[usize], &[f64]), model: (&Mesh, &[usize])) -> Vec<f64> {
     let (reference_mesh, reference_nodes, stiffness) = reference;
-    let (reference_area, model_area) = (mesh::boundary_node_areas(reference_mesh), mesh::boundary_node_areas(model.0));
-    model
-        .1
+    let (model_mesh, model_nodes) = model;
+    let area = mesh::boundary_node_areas(reference_mesh);
+    let per_area: Vec<f64> =
+        reference_nodes.iter().zip(stiffness).map(|(&n, k)| if area[n] > 0.0 { k / area[n] } else { 0.0 }).collect();
+    let at: Vec<Point> = reference_nodes.iter().map(|&n| reference_mesh.nodes[n]).collect();
+    let model_area = mesh::boundary_node_areas(model_mesh);
+    model_nodes
         .iter()
-        .map(|&i| {
-            let nearest = nearest(&reference_mesh.nodes, reference_nodes.iter().copied(), model.0.nodes[i]);
-            let j = reference_nodes.iter().position(|&n| Some(n) == nearest);
-            j.filter(|&j| reference_area[reference_nodes[j]] > 0.0)
-                .map_or(0.0, |j| stiffness[j] / reference_area[reference_nodes[j]] * model_area[i])
-        })
+        .map(|&i| nearest(&at, 0..at.len(), model_mesh.nodes[i]).map_or(0.0, |j| per_area[j] * model_area[i]))
         .collect()
 }
 
