@@ -95,16 +95,10 @@ fn loads_the_whole_surface(p: &fem::Problem) -> bool {
     let faces = mesh::boundary_faces(&p.mesh);
     faces.iter().flat_map(|f| &f.nodes).for_each(|&n| surface[n] = true);
     let inner_unloaded = (0..p.mesh.num_nodes()).all(|n| surface[n] || !loaded(p, n));
-    let traction_nodes = |nodes: &[usize]| -> Vec<usize> {
-        if nodes.len() == 6 {
-            nodes[3..].to_vec()
-        } else {
-            nodes.to_vec()
-        }
-    };
-    surface.contains(&false)
-        && inner_unloaded
-        && faces.iter().all(|f| traction_nodes(&f.nodes).iter().all(|&n| loaded(p, n)))
+    // A quadratic face (6 nodes) loads its mid-edge nodes (the last 3) only.
+    let covered =
+        |f: &mesh::BoundaryFace| f.nodes.iter().skip(if f.nodes.len() == 6 { 3 } else { 0 }).all(|&n| loaded(p, n));
+    surface.contains(&false) && inner_unloaded && faces.iter().all(covered)
 }
 
 /// What makes a problem's units doubtful (its mesh built from `source`): a mesh the size of a
