@@ -53,15 +53,12 @@ impl LabelSurface {
             .collect();
         let own = e.voxels - e.filled_voxels - e.closed_voxels;
         // The piece kept, where the label's others were dropped.
-        let piece = match e.dropped_pieces.is_empty() {
-            true => None,
-            false => Some(format!("{own} of its {}, its largest piece", self.label_voxels)),
-        };
-        let voxels = match (piece, added.is_empty()) {
-            (None, true) => format!("{} voxels", e.voxels),
-            (None, false) => format!("{} voxels ({own} its own, {})", e.voxels, added.join(", ")),
-            (Some(_), true) => format!("{own} of its {} voxels (its largest piece)", self.label_voxels),
-            (Some(piece), false) => format!("{} voxels ({piece}; {})", e.voxels, added.join(", ")),
+        let (all, added) = (self.label_voxels, added.join(", "));
+        let voxels = match (e.dropped_pieces.is_empty(), added.is_empty()) {
+            (true, true) => format!("{} voxels", e.voxels),
+            (true, false) => format!("{} voxels ({own} its own, {added})", e.voxels),
+            (false, true) => format!("{own} of its {all} voxels (its largest piece)"),
+            (false, false) => format!("{} voxels ({own} of its {all}, its largest piece; {added})", e.voxels),
         };
         let mut lines = vec![format!("{}: {voxels} of {a:.2} × {b:.2} × {c:.2} mm, {frame}", self.label)];
         lines.extend(e.cleaning_lines());
