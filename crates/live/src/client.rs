@@ -176,13 +176,17 @@ impl Client {
 mod tests {
     use super::*;
 
+    /// A peer on a local port that serves its first connection with `serve`.
+    fn peer(serve: impl FnOnce(TcpStream) + Send + 'static) -> (std::net::SocketAddr, std::thread::JoinHandle<()>) {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let address = listener.local_addr().unwrap();
+        (address, std::thread::spawn(move || serve(listener.accept().unwrap().0)))
+    }
+
     /// A peer announcing an answer of an exabyte is refused, not allocated for.
     #[test]
     fn an_oversized_answer_is_refused() {
-        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        let address = listener.local_addr().unwrap();
-        let peer = std::thread::spawn(move || {
-            let (mut stream, _) = listener.accept().unwrap();
+        let (address, peer) = peer(|mut stream| {
             let mut wire = encode_message(&StringMessage::utf8("{}"), "status").unwrap();
             wire[42..50].copy_from_slice(&(1u64 << 60).to_be_bytes());
             stream.write_all(&wire[..Header::SIZE]).unwrap();
@@ -197,11 +201,8 @@ mod tests {
     /// closed; one that closes is `None`.
     #[test]
     fn a_read_timing_out_is_not_a_closed_connection() {
-        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        let address = listener.local_addr().unwrap();
         let (done, finished) = std::sync::mpsc::channel::<()>();
-        let peer = std::thread::spawn(move || {
-            let (stream, _) = listener.accept().unwrap();
+        let (address, peer) = peer(move |stream| {
             let _ = finished.recv_timeout(Duration::from_secs(10));
             drop(stream);
         });
@@ -216,10 +217,7 @@ mod tests {
     /// A server that closes within a message's header has cut it: an error, not a clean close.
     #[test]
     fn a_header_cut_short_is_an_error() {
-        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        let address = listener.local_addr().unwrap();
-        let peer = std::thread::spawn(move || {
-            let (mut stream, _) = listener.accept().unwrap();
+        let (address, peer) = peer(|mut stream| {
             let wire = encode_message(&StringMessage::utf8("{}"), "status").unwrap();
             stream.write_all(&wire[..20]).unwrap();
         });
