@@ -169,7 +169,8 @@ pub struct Solution {
     /// over it half as stiff as before or less: past a limit point the body snapped (or gave way)
     /// to another branch of the load path, where an arc-length continuation stops instead, or the
     /// path is that soft there. With [`SolverOptions::confirm_snaps`], such a step is followed
-    /// again by arc length: where the path turns back, the load factor of that limit point; where
+    /// again by arc length, and so is one whose stiffness fell after the path had stiffened (a
+    /// short snap near its end): where the path turns back, the load factor of that limit point; where
     /// it reaches the step's end, `None` (loads that cannot be scaled alone, with prescribed
     /// displacements, keep the first answer). `None` otherwise.
     pub snapped_from: Option<f64>,
@@ -373,16 +374,16 @@ struct LoadPath {
     direction: Vec<f64>,
     /// The stiffness dλ/dq at rest, from the linear response at rest ([`LoadPath::record_rest`]).
     rest: Option<f64>,
-    /// (load factor, q) of the first and the last three converged states, the latest last.
+    /// (load factor, q) of the first and the last four converged states, the latest last.
     first: Option<(f64, f64)>,
-    last: [Option<(f64, f64)>; 3],
+    last: [Option<(f64, f64)>; 4],
 }
 
 impl LoadPath {
     fn new(load: Vec<f64>) -> Self {
         let size = norm(&load);
         let direction = if size > 0.0 { load.iter().map(|f| f / size).collect() } else { Vec::new() };
-        LoadPath { direction, rest: None, first: None, last: [None; 3] }
+        LoadPath { direction, rest: None, first: None, last: [None; 4] }
     }
 
     /// The displacement q of the state `u`.
@@ -398,7 +399,7 @@ impl LoadPath {
     fn record(&mut self, lambda: f64, u: &[f64]) {
         let q = self.measure(u);
         self.first.get_or_insert((lambda, q));
-        self.last = [self.last[1], self.last[2], Some((lambda, q))];
+        self.last = [self.last[1], self.last[2], self.last[3], Some((lambda, q))];
     }
 
     /// Records `u`, the linear response at rest to load factor `lambda` (a solve's first Newton
@@ -421,10 +422,9 @@ impl LoadPath {
     /// step) and of the last step; `None` before a step, or before two where the stiffness at
     /// rest is unknown.
     fn steps(&self) -> Option<(f64, f64)> {
-        let secant = |(l0, q0): (f64, f64), (l1, q1): (f64, f64)| (l1 - l0) / (q1 - q0);
         match self.last {
-            [_, None, Some(only)] => Some((self.rest?, secant((0.0, 0.0), only))),
-            [before, Some(previous), Some(latest)] => {
+            [.., None, Some(only)] => Some((self.rest?, secant((0.0, 0.0), only))),
+            [_, before, Some(previous), Some(latest)] => {
                 Some((secant(before.unwrap_or((0.0, 0.0)), previous), secant(previous, latest)))
             }
             _ => None,
@@ -453,10 +453,35 @@ impl LoadPath {
     /// stiffness at rest is enough.
     fn snapped(&self) -> bool {
         let Some((previous, latest)) = self.steps() else { return false };
-        let first = self.last[1].is_none();
+        let first = self.last[2].is_none();
         (first || self.softening() < crate::LIMIT_POINT_STIFFNESS) && previous > 0.0 && latest < 0.5 * previous
     }
+
+    /// Whether the last step may have passed a limit point close to its end: the path far softer
+    /// than at rest (under [`crate::LIMIT_POINT_STIFFNESS`] per cent), its last step under
+    /// [`TURN_FALL`] times as stiff as the step before, which had stiffened on the one before it.
+    /// A short snap does so, softening its step less than [`LoadPath::snapped`] asks (the AMOS
+    /// liver of `shared` pushed by 1 N in 7 steps: 0.56 times the step before, its limit point at
+    /// load factor 0.970 in the step from 0.938), and so does a path with an inflection: a sign
+    /// that only a check by arc length makes a snap.
+    fn turned(&self) -> bool {
+        let [Some(a), Some(b), Some(c), Some(d)] = self.last else { return false };
+        let (earlier, previous, latest) = (secant(a, b), secant(b, c), secant(c, d));
+        self.softening() < crate::LIMIT_POINT_STIFFNESS
+            && earlier > 0.0
+            && previous > earlier
+            && latest < TURN_FALL * previous
+    }
 }
+
+/// The stiffness dλ/dq of the path from the state (λ₀, q₀) to (λ₁, q₁).
+fn secant((l0, q0): (f64, f64), (l1, q1): (f64, f64)) -> f64 {
+    (l1 - l0) / (q1 - q0)
+}
+
+/// How far a load step's stiffness falls below the step's before it, which had stiffened, for an
+/// arc-length check of a limit point within it ([`LoadPath::turned`]).
+const TURN_FALL: f64 = 0.8;
 
 /// Between two iterations: the advance told ([`SolverOptions::progress`]), then
 /// [`FemError::OutOfTime`] once the solve's [`SolverOptions::deadline`] has passed.
@@ -911,7 +936,8 @@ impl StaticSolver {
     /// Records force control's step from the equilibrium `u` at load factor `lambda` to `trial` at
     /// `target` on the load `path`; where it softened as a snap does ([`LoadPath::snapped`]) and
     /// no snap was told yet, tells it ([`Solution::snapped_from`]): checked by arc length with
-    /// [`SolverOptions::confirm_snaps`] where the loads can be scaled alone. Returns whether the
+    /// [`SolverOptions::confirm_snaps`] where the loads can be scaled alone, which also checks a
+    /// step that fell after the path had stiffened ([`LoadPath::turned`]). Returns whether the
     /// latest factor is still that of a converged state (a check factorises along its own path).
     fn record_step(
         &mut self,
@@ -925,10 +951,11 @@ impl StaticSolver {
             path.record_rest(at, &first);
         }
         path.record(target, trial);
-        if !path.snapped() || stats.snapped_from.is_some() {
+        let checked = options.confirm_snaps && self.arc_length_applies();
+        if stats.snapped_from.is_some() || !(path.snapped() || checked && path.turned()) {
             return Ok(true);
         }
-        if !(options.confirm_snaps && self.arc_length_applies()) {
+        if !checked {
             stats.snapped_from = Some(lambda);
             return Ok(true);
         }
@@ -1458,6 +1485,29 @@ mod tests {
         let same = predict(&path(0.5), Some(&(0.5, path(0.25))), 0.5, 0.5);
         assert_eq!(same, path(0.5));
         assert_eq!(predict(&path(0.5), None, 0.5, 0.75), path(0.5));
+    }
+
+    /// The last states of the AMOS liver pushed by 1 N in 7 load steps (F-bar): the path stiffened
+    /// again after a soft stretch, then its last step, which holds a limit point, fell to 0.56
+    /// times the step before: too little for a snap, enough for a check. A path softening
+    /// steadily, or one far from softened, asks for none.
+    #[test]
+    fn a_step_that_softens_after_the_path_stiffened_asks_for_a_check() {
+        let path = |states: &[(f64, f64)]| {
+            let mut path = LoadPath::new(vec![1.0]);
+            path.rest = Some(24.0);
+            for &(lambda, q) in states {
+                path.record(lambda, &[q]);
+            }
+            path
+        };
+        let liver = [(0.8125, 0.28789), (0.875, 0.34022), (0.9375, 0.38090), (1.0, 0.45415)];
+        assert!(path(&liver).turned() && !path(&liver).snapped());
+        assert!(!path(&liver[..3]).turned(), "three states tell no turn");
+        let softening = [(0.25, 0.05), (0.5, 0.15), (0.75, 0.3), (1.0, 0.5)];
+        assert!(!path(&softening).turned());
+        let stiff = path(&liver.map(|(l, q)| (l, q / 10.0)));
+        assert!(stiff.softening() > crate::LIMIT_POINT_STIFFNESS && !stiff.turned());
     }
 
     #[test]
