@@ -243,7 +243,7 @@ fn force_control_keeps_to_the_path_where_it_softens() {
 fn a_short_snap_within_the_last_load_step_is_told() {
     let material = Material::new(Law::NeoHookean, 5000.0, 0.49).with_formulation(Formulation::Fbar);
     let pushed = |mesh: Mesh| {
-        let mut p = Problem::new(mesh, material.clone());
+        let mut p = Problem::new(mesh, material);
         p.fix(&NodeSelection::Region("attached".into()).select(&p.mesh).unwrap());
         for node in [134, 198, 433, 491, 803] {
             p.add_force(&NodeSelection::List(vec![node]).select(&p.mesh).unwrap(), [0.0, 0.2, 0.0]);
