@@ -299,7 +299,11 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
                  (T10, F-bar) built from a phantom of {quadratic_reference_mesh}: another mesh and another element, \
                  much closer to a converged solution than linear tetrahedra (by how much: fem-convergence). The \
                  error is then mostly the model error \
-                 of the filter's linear tetrahedra, which are stiffer than the converged solid."
+                 of the filter's linear tetrahedra, which are stiffer than the converged solid. The 'T10 model and \
+                 reference' rows: the filter's model quadratic too, built from a phantom of about {} T4 ({} nodes, \
+                 about as many unknowns as the scenario's linear model).",
+                YOUNG_QUADRATIC_MODEL.tets,
+                quadratic_model.nodes
             ),
             "The attachment and the push are regions of space (an elastic foundation over the phantom's `fixed` \
              ball, a traction over the visible boundary inside its `push` ball), so the model and every reference \
@@ -322,6 +326,8 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
             v.insert("published_size_discrepancy_report".into(), serde_json::to_value(fine_honest)?);
             v.insert("quadratic_reference_report".into(), serde_json::to_value(quadratic)?);
             v.insert("quadratic_reference_discrepancy_report".into(), serde_json::to_value(quadratic_honest)?);
+            v.insert("quadratic_model_report".into(), serde_json::to_value(quadratic_model)?);
+            v.insert("quadratic_model_discrepancy_report".into(), serde_json::to_value(quadratic_model_honest)?);
             v
         },
     })

@@ -21,6 +21,18 @@ pub(crate) struct Generated {
 }
 
 impl Generated {
+    /// The draws left out for want of a solution, for a note beside the sample count: empty where
+    /// every draw solved, otherwise " (n of m draws without a solution, left out)".
+    pub fn failed_note(&self) -> String {
+        let manifest = self.dataset.manifest();
+        match manifest.failed.len() {
+            0 => String::new(),
+            n => format!(" ({n} of {} draws without a solution, left out)", manifest.num_samples + n),
+        }
+    }
+}
+
+impl Generated {
     /// What the data are, from the scenario itself: its description, material and, for a
     /// displacement input on a sparse sub-domain, the range of observed nodes.
     pub fn note(&self) -> String {
@@ -351,12 +363,7 @@ fn mean_displacement(samples: &Samples) -> f64 {
 fn split_note(t: &Trained, data: &Generated, reference_ms: f64) -> String {
     let [train, validation, test] = t.split;
     let timing = t.timing(reference_ms);
-    let manifest = data.dataset.manifest();
-    let drawn = manifest.num_samples + manifest.failed.len();
-    let failed = match manifest.failed.len() {
-        0 => String::new(),
-        n => format!(" ({n} of {drawn} draws without a solution, left out)"),
-    };
+    let failed = data.failed_note();
     // A shipped network's checkpoint was chosen on its own validation samples (its timing says).
     let selection = match (&t.shipped, t.best_validation_step()) {
         (Some(_), _) => String::new(),
@@ -366,7 +373,7 @@ fn split_note(t: &Trained, data: &Generated, reference_ms: f64) -> String {
     format!(
         "{} samples generated{failed}: {train} training, {validation} validation{selection}, {test} test (every \
          figure above); {timing}.",
-        manifest.num_samples,
+        data.dataset.manifest().num_samples,
     )
 }
 

@@ -416,6 +416,8 @@ pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<Ex
         Name::HeldOut => held_out::run(size, &dir, progress)?,
     };
     result.seconds = start.elapsed().as_secs_f64();
+    // Results made at different times may sit on one page: each says when, and by which version.
+    result.notes.push(format!("Made on {} (UTC) by augsim {}.", today(), env!("CARGO_PKG_VERSION")));
     if resumed {
         result.notes.push(format!(
             "Its folder held an earlier run's work when this run started: what it could reuse from there \
@@ -426,6 +428,26 @@ pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<Ex
     let json = serde_json::to_string_pretty(&result)?;
     mesh::io::write_atomic_bytes(&dir.join(RESULT_FILE), json.as_bytes())?;
     Ok(result)
+}
+
+/// Today's date (UTC) as YYYY-MM-DD, from the system clock (the proleptic Gregorian calendar).
+fn today() -> String {
+    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
+    civil_date(secs.div_euclid(86_400) as i64)
+}
+
+/// The date `days` after 1970-01-01 as YYYY-MM-DD (Hinnant's `civil_from_days`).
+fn civil_date(days: i64) -> String {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!("{year:04}-{month:02}-{day:02}")
 }
 
 /// Whether `dir` holds anything (an earlier run's work, which the steps that resume reuse).
@@ -474,6 +496,17 @@ fn fmt(v: f64, digits: usize, unit: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Dates against Python's `datetime` (days since 1970-01-01): a leap day, the day before the
+    /// epoch, a century that is no leap year.
+    #[test]
+    fn days_since_the_epoch_are_told_as_calendar_dates() {
+        assert_eq!(civil_date(0), "1970-01-01");
+        assert_eq!(civil_date(-1), "1969-12-31");
+        assert_eq!(civil_date(11_016), "2000-02-29");
+        assert_eq!(civil_date(20_794), "2026-12-07");
+        assert_eq!(civil_date(47_541), "2100-03-01");
+    }
 
     #[test]
     fn a_folder_with_files_holds_earlier_work_an_empty_or_missing_one_not() {

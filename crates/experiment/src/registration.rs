@@ -166,8 +166,10 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         page_figures: Vec::new(),
         notes: vec![
             format!(
-                "Network: {samples} samples of the {LIVER_AR} scenario ({train_n} training, {validation_n} validation, {test_n} test), \
-                 {iterations} steps, {} channels, {} mm training noise; {}.",
+                "Network: {} samples of the {LIVER_AR} scenario{} ({train_n} training, {validation_n} validation, \
+                 {test_n} test), {iterations} steps, {} channels, {} mm training noise; {}.",
+                data.dataset.manifest().num_samples,
+                data.failed_note(),
                 recipe.channels,
                 mm(recipe.corruption.noise_std),
                 t.timing(test.reference_ms)
@@ -453,6 +455,13 @@ impl MethodTre {
 }
 
 /// The note on the registration cases.
+/// The one registration rule compared on held-out cases, said wherever those cases are said to have
+/// played no part in the settings.
+pub(crate) const RULE_COMPARED_ON_HELD_OUT: &str = "one rule was compared on held-out cases: the FEM's \
+    recovery from a solve that finds no equilibrium (its springs softened rather than the solver's arc length, \
+    `docs/method.md` § 6.2), on the 2.5 N right-lobe press of `augsim experiment liver-ar` and on the cases of \
+    `augsim experiment held-out`";
+
 fn cases_note(builtin: &CaseScenario) -> String {
     format!(
         "Registration cases: register_case's truth ({} phantom of {}, \
@@ -462,7 +471,7 @@ fn cases_note(builtin: &CaseScenario) -> String {
          the same spot pushed by 1, 2 and 2.5 N, is where the registration settings were chosen. The \
          {} cases beyond pushes (a lift, a drag, a pull) cover what surgery also does; a network is chosen \
          on its mean over them and the design case, never on the held-out cases here or on `augsim \
-         experiment held-out`. Published: ex vivo human liver.",
+         experiment held-out`; {RULE_COMPARED_ON_HELD_OUT}. Published: ex vivo human liver.",
         builtin.truth.material.law.display_name(),
         builtin.truth.mesh_words(),
         builtin.camera.view,

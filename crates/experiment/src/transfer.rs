@@ -79,7 +79,7 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
         ..Recipe::new(iterations, VALIDATION, samples - TRAIN - VALIDATION)
     };
     let runs = Runs::train(dir, samples, &recipe, progress)?;
-    let Runs { pre, full, scratch, tuned } = &runs;
+    let Runs { pre, full, scratch, tuned, .. } = &runs;
 
     // The target runs share their validation and test samples (the 100-sample runs use part of the training split).
     let clean = Corruption::default();
@@ -191,6 +191,8 @@ struct Runs {
     full: Trained,
     scratch: Trained,
     tuned: Trained,
+    /// The draws of either dataset left out for want of a solution, for the notes (empty: none).
+    failed: String,
 }
 
 impl Runs {
@@ -214,7 +216,13 @@ impl Runs {
         let few = Recipe { train_samples: Some(FEW), ..recipe.clone() };
         let scratch = train(&target.dataset, &target_dir, &few, progress)?;
         let tuned = train(&target.dataset, &target_dir, &Recipe { fine_tune: Some(pre_path), ..few }, progress)?;
-        Ok(Runs { pre, full, scratch, tuned })
+        let failed = [("BC4", &bc4), ("target", &target)]
+            .iter()
+            .filter_map(|(name, data)| {
+                Some(data.failed_note()).filter(|n| !n.is_empty()).map(|n| format!("; {name}{n}"))
+            })
+            .collect();
+        Ok(Runs { pre, full, scratch, tuned, failed })
     }
 
     /// The names of the target strategies: from scratch on the training split, from scratch on
@@ -256,10 +264,11 @@ impl Runs {
         };
         vec![
             format!(
-                "BC4 and target: {samples} samples each, split by generation index into {train_n} training, {validation_n} \
-                 validation (checkpoint selection only) and {test_n} test samples; the {few_n}-sample runs use the first \
+                "BC4 and target: {samples} samples each{}, split by generation index into {train_n} training, \
+                 {validation_n} validation (checkpoint selection only) and {test_n} test samples; the {few_n}-sample runs use the first \
                  {few_n} target training samples. Every figure above is on the target's {test_n} test samples (BC4's own \
-                 row: BC4's), which played no part in training or selection."
+                 row: BC4's), which played no part in training or selection.",
+                self.failed
             ),
             format!(
                 "Each run: {iterations} steps, {} channels, Adam from {:e} falling to {:e} along a half cosine, validated \
