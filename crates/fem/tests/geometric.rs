@@ -4,6 +4,7 @@
 
 use augsim_fem as fem;
 use fem::{Law, Material, Problem, SolverOptions, StaticSolver};
+use mesh::select::NodeSelection;
 use mesh::PhantomSpec;
 
 const YOUNG: f64 = 5000.0;
@@ -21,7 +22,9 @@ fn max_displacement(tets: usize, geometric: bool) -> f64 {
         p.add_foundation(&fixed, 100.0 * YOUNG / fixed.radius.powi(2)).unwrap();
         p.add_patch_force(&spec.region_ball("push").unwrap(), Some(spec.view_direction), total).unwrap();
     } else {
-        let (fixed, push) = (p.mesh.region("fixed").unwrap().to_vec(), p.mesh.region("push").unwrap().to_vec());
+        // As a scenario selects a region: with the mid-edge nodes between its corners.
+        let region = |name: &str| NodeSelection::Region(name.into()).select(&p.mesh).unwrap();
+        let (fixed, push) = (region("fixed"), region("push"));
         p.fix(&fixed);
         p.add_force(&push, total);
     }
@@ -37,7 +40,8 @@ fn geometric_regions_converge_across_four_meshes_where_node_sets_do_not() {
     let monotone = geometric.windows(2).all(|w| w[1] >= w[0]);
     assert!(monotone && geometric[3] / geometric[2] - 1.0 < 0.005, "geometric regions: max |u| {geometric:?} m");
     assert!(geometric[3] / geometric[0] - 1.0 < 0.03, "geometric regions: max |u| {geometric:?} m");
-    // The same ball and patch as node sets: 8.46 and 7.40 mm on the 3k and 11k meshes.
-    let nodes = [max_displacement(3000, false), max_displacement(11000, false)];
+    // The same ball and patch as node sets: 7.87, 8.32, 7.12 and 7.37 mm on the four meshes, up
+    // and down by up to 17 % between neighbours (here the 5k and 11k meshes).
+    let nodes = [max_displacement(5000, false), max_displacement(11000, false)];
     assert!(nodes[0] / nodes[1] - 1.0 > 0.1, "node sets: max |u| {nodes:?} m");
 }
