@@ -300,7 +300,7 @@ pub(crate) fn young(size: Size, dir: &Path, progress: Progress) -> Result<Experi
                  much closer to a converged solution than linear tetrahedra (by how much: fem-convergence). The \
                  error is then mostly the model error \
                  of the filter's linear tetrahedra, which are stiffer than the converged solid. The 'T10 model and \
-                 reference' rows: the filter's model quadratic too, built from a phantom of about {} T4 ({} nodes, \
+                 reference' rows: the filter's model is quadratic too, built from a phantom of about {} T4 ({} nodes, \
                  about as many unknowns as the scenario's linear model).",
                 YOUNG_QUADRATIC_MODEL.tets,
                 quadratic_model.nodes
