@@ -89,11 +89,9 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
     ));
     let (grid, inside) = (generator.grid(), generator.mask().iter().filter(|&&m| m == 1).count());
     progress.line(&format!("grid       {} × {} × {} ({inside} nodes inside)", grid.nx, grid.ny, grid.nz));
-    // What the dataset held before this run (resumed, grown, or complete already).
+    // What the dataset held before this run (resumed, grown, or complete already); the generator
+    // says it resumes once it has accepted the dataset.
     let held = learn::Dataset::open(&out).map_or(0, |d| d.manifest().num_samples + d.manifest().failed.len());
-    if held > 0 {
-        progress.line(&format!("resuming   {}: {held} draws held, kept; drawing goes on after them", out.display()));
-    }
     let start = Instant::now();
     let manifest = match &recipe {
         None => generator.run(&out, &scenario.name, args.shard.clone(), progress)?,

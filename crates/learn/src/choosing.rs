@@ -97,7 +97,8 @@ impl Generator {
     /// Generates the uniform draws `0..samples` into `dir` as [`run`](Self::run) does (unless they
     /// are there), then `recipe.rounds` rounds of σ-chosen draws (see [`crate::choosing`]),
     /// reporting the chosen draws solved to `progress`, and each round in a line. Resumes an
-    /// interrupted run; a dataset with fewer rounds of the same recipe gets the rounds it lacks.
+    /// interrupted run; a dataset with fewer rounds of the same recipe gets the rounds it lacks. A
+    /// dataset whose draws another recipe chose, or that holds more rounds, is refused untouched.
     pub fn run_chosen(
         &self,
         dir: &Path,
@@ -141,6 +142,9 @@ impl Generator {
             Some(done) => done.rounds,
             None => Vec::new(),
         };
+        if let Some(line) = writer.resumed().filter(|_| uniform_done) {
+            progress.line(&line);
+        }
         let mut chosen = ChosenDraws { recipe: recipe.clone(), rounds };
         writer.set_chosen(chosen.clone())?;
         let total = (recipe.rounds * recipe.per_round) as u64;

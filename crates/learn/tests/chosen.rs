@@ -83,6 +83,17 @@ fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
     out
 }
 
+/// A progress that keeps the lines it is told.
+#[derive(Default)]
+struct Lines(std::sync::Mutex<Vec<String>>);
+
+impl Progress for Lines {
+    fn advance(&self, _: u64, _: u64, _: &str) {}
+    fn line(&self, text: &str) {
+        self.0.lock().unwrap().push(text.to_string());
+    }
+}
+
 #[test]
 fn the_most_uncertain_candidates_are_solved_and_never_held_out() {
     let g = generator(UNIFORM, 5);
@@ -91,19 +102,12 @@ fn the_most_uncertain_candidates_are_solved_and_never_held_out() {
     uniform_dataset_and_model(&g, &dir, &model_dir);
     in_pool(|| g.run(&plain, "beam", None, &Silent)).unwrap();
     let recipe = ChoiceRecipe::new(&model_dir, PER_ROUND, CANDIDATES, ROUNDS).unwrap();
-    let lines = std::sync::Mutex::new(Vec::new());
-    struct Lines<'a>(&'a std::sync::Mutex<Vec<String>>);
-    impl Progress for Lines<'_> {
-        fn advance(&self, _: u64, _: u64, _: &str) {}
-        fn line(&self, text: &str) {
-            self.0.lock().unwrap().push(text.to_string());
-        }
-    }
-    let manifest = in_pool(|| g.run_chosen(&dir, "beam", &recipe, &Lines(&lines))).unwrap();
+    let lines = Lines::default();
+    let manifest = in_pool(|| g.run_chosen(&dir, "beam", &recipe, &lines)).unwrap();
     assert!(manifest.complete);
     let chosen = manifest.chosen.clone().unwrap();
     assert_eq!(chosen.rounds.len(), ROUNDS);
-    assert_eq!(lines.lock().unwrap().len(), ROUNDS, "a line per round");
+    assert_eq!(lines.0.lock().unwrap().len(), ROUNDS + 1, "a line for the draws held, one per round");
 
     // Each round's choice: its model's highest-σ candidates, with their σ.
     for round in &chosen.rounds {
@@ -230,9 +234,21 @@ fn bad_choices_are_refused_with_a_reason() {
     in_pool(|| g.run_chosen(&dir, "beam", &recipe, &Silent)).unwrap();
     let message = merge_datasets(std::slice::from_ref(&dir), &tmp.path().join("merged"), None).unwrap_err().to_string();
     assert!(message.contains("σ-chosen"), "{message}");
-    let message = error(in_pool(|| generator(UNIFORM + 5, 7).run(&dir, "beam", None, &Silent)));
+    // Refused, the dataset is left as it was (complete, no lock left), and no resumption is told.
+    let lines = Lines::default();
+    let before = files(&dir);
+    let message = error(in_pool(|| generator(UNIFORM + 5, 7).run(&dir, "beam", None, &lines)));
     assert!(message.contains("cannot grow"), "{message}");
-    // Another recipe does not go on from this one.
+    // Another recipe, or fewer rounds than the dataset holds, do not go on from this one.
     let another = ChoiceRecipe::new(&model_dir, 3, 10, 1).unwrap();
-    assert!(error(in_pool(|| g.run_chosen(&dir, "beam", &another, &Silent))).contains("another model or count"));
+    let message = error(in_pool(|| g.run_chosen(&dir, "beam", &another, &lines)));
+    assert!(message.contains("another model or count"), "{message}");
+    assert!(files(&dir) == before, "a refused run writes nothing");
+    in_pool(|| g.run_chosen(&dir, "beam", &ChoiceRecipe::new(&model_dir, 2, 10, 2).unwrap(), &Silent)).unwrap();
+    let before = files(&dir);
+    let message = error(in_pool(|| g.run_chosen(&dir, "beam", &recipe, &lines)));
+    assert!(message.contains("holds 2 rounds of σ-chosen draws, more than the 1 asked"), "{message}");
+    assert!(files(&dir) == before, "a refused run writes nothing");
+    assert!(before.iter().all(|(name, _)| name != augsim_learn::data::dataset::WRITER_LOCK));
+    assert!(lines.0.lock().unwrap().is_empty(), "{:?}", lines.0.lock().unwrap());
 }

@@ -362,6 +362,13 @@ fn a_complete_dataset_grows_when_asked_for_more_samples() {
     let e = DatasetWriter::create_or_resume(grown.path(), other).err().unwrap().to_string();
     let differences = "metadata.dataset.cone 90.0 there, 180.0 now; metadata.dataset.samples 13 there, 20 now";
     assert!(e.contains(&format!("cannot resume: it was created otherwise ({differences})")), "{e}");
+    // The seed, recorded in the spec and in the generator's metadata, is told once.
+    let seeded =
+        |seed: u64| DatasetSpec { seed, metadata: serde_json::json!({"dataset": {"seed": seed}}), ..spec(3, None) };
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), seeded(7), 0..2);
+    let e = DatasetWriter::create_or_resume(dir.path(), seeded(8)).err().unwrap().to_string();
+    assert!(e.contains("cannot resume: it was created otherwise (seed 7 there, 8 now)"), "{e}");
 }
 
 #[test]
@@ -393,6 +400,17 @@ fn merge_of_worker_parts_equals_single_writer() {
     let merged = root.path().join("merged");
     merge_datasets(&parts, &merged, Some(4)).unwrap();
     assert_eq!(tree(&single), tree(&merged));
+    let e = merge_datasets(&parts, &merged, Some(4)).unwrap_err().to_string();
+    assert!(e.contains("merge output already holds a dataset"), "{e}");
+
+    // A merge killed after two shards (its writer gone, its lock file left) goes on when run again.
+    let killed = root.path().join("killed");
+    let mut w = DatasetWriter::create_or_resume(&killed, spec(4, None)).unwrap();
+    (0..10).for_each(|i| push(&mut w, i));
+    drop(w);
+    std::fs::write(killed.join(augsim_learn::data::dataset::WRITER_LOCK), b"").unwrap();
+    merge_datasets(&parts, &killed, Some(4)).unwrap();
+    assert_eq!(tree(&single), tree(&killed));
 
     // A part given twice, or one missing (its draws would be left out of a "complete" dataset),
     // is refused.

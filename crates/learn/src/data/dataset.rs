@@ -123,8 +123,15 @@ impl DatasetSpec {
     /// [`json_differences`]), and that a dataset grows but does not shrink.
     fn mismatch(&self, new: &DatasetSpec) -> String {
         let as_json = |spec: &DatasetSpec| serde_json::to_value(spec).unwrap_or(serde_json::Value::Null);
-        let mut why =
-            format!("it was created otherwise ({})", json_differences(&as_json(self), &as_json(new)).join("; "));
+        let differences = json_differences(&as_json(self), &as_json(new));
+        // The generator records the seed and shard size in the metadata too: each is said once.
+        let top_level = |d: &&String| !d.split(' ').next().unwrap_or_default().contains('.');
+        let repeated = |d: &&String| {
+            d.starts_with("metadata.")
+                && differences.iter().filter(top_level).any(|top| d.ends_with(&format!(".{top}")))
+        };
+        let kept: Vec<&str> = differences.iter().filter(|d| !repeated(d)).map(String::as_str).collect();
+        let mut why = format!("it was created otherwise ({})", kept.join("; "));
         if let (Some(held), Some(asked)) = (self.requested_samples(), new.requested_samples()) {
             if asked < held && self.same_but_count(new) {
                 why = format!(
@@ -727,7 +734,7 @@ impl Samples {
 pub struct DatasetWriter {
     dir: PathBuf,
     /// The dataset's [`WRITER_LOCK`], held while this writer lives.
-    _lock: std::fs::File,
+    _lock: WriterLock,
     manifest: Manifest,
     pending: Samples,
     pending_failures: Vec<FailedSample>,
@@ -751,7 +758,7 @@ impl DatasetWriter {
             }
         }
         mesh::io::create_folder(dir)?;
-        let lock = lock_for_writing(dir)?;
+        let lock = lock_for_writing(dir, DATASET_WRITERS)?;
         if !dir.join(MANIFEST_FILE).exists() {
             return DatasetWriter::from_manifest(dir, lock, Manifest::new(&spec), true);
         }
@@ -776,13 +783,15 @@ impl DatasetWriter {
     }
 
     /// Opens the dataset in `dir`, created with `spec`, complete or not, to append draws after its
-    /// last one (the σ-chosen draws after its uniform ones); it is unfinished until
-    /// [`finish`](Self::finish).
+    /// last one (the σ-chosen draws after its uniform ones); it is unfinished from the first
+    /// [`commit`](Self::commit) until [`finish`](Self::finish). Until that commit nothing is
+    /// written: a writer dropped before it (a run refused once it has read the manifest) leaves
+    /// the dataset as it was.
     pub fn append(dir: &Path, spec: &DatasetSpec) -> Result<DatasetWriter> {
         if !dir.is_dir() {
             Dataset::open(dir)?; // says what is missing
         }
-        let lock = lock_for_writing(dir)?;
+        let lock = lock_for_writing(dir, DATASET_WRITERS)?;
         mesh::io::remove_stale_temporaries(dir);
         let dataset = Dataset::open(dir)?;
         if dataset.manifest.spec() != *spec {
@@ -791,12 +800,12 @@ impl DatasetWriter {
         dataset.check_files()?;
         let mut manifest = dataset.manifest;
         manifest.complete = false;
-        DatasetWriter::from_manifest(dir, lock, manifest, true)
+        DatasetWriter::from_manifest(dir, lock, manifest, false)
     }
 
     /// A writer of the dataset in `dir` (locked by `lock`) going on after the last draw of
     /// `manifest`, which is written first where `rewrite`.
-    fn from_manifest(dir: &Path, lock: std::fs::File, manifest: Manifest, rewrite: bool) -> Result<DatasetWriter> {
+    fn from_manifest(dir: &Path, lock: WriterLock, manifest: Manifest, rewrite: bool) -> Result<DatasetWriter> {
         if rewrite {
             manifest.write(&dir.join(MANIFEST_FILE))?;
         }
@@ -820,6 +829,14 @@ impl DatasetWriter {
     /// First generation index not yet committed: where a resumed generation starts.
     pub fn resume_from(&self) -> u64 {
         self.manifest.next_index
+    }
+
+    /// The line that says the writer goes on after the draws the dataset held when it was opened
+    /// (`resuming DIR: N draws held, ...`), if it held any.
+    pub fn resumed(&self) -> Option<String> {
+        let held = self.manifest.num_samples + self.manifest.failed.len();
+        (held > 0)
+            .then(|| format!("resuming   {}: {held} draws held, kept; drawing goes on after them", self.dir.display()))
     }
 
     /// The manifest as committed so far.
@@ -908,21 +925,37 @@ impl DatasetWriter {
     pub fn finish(mut self) -> Result<Manifest> {
         self.manifest.complete = true;
         self.commit()?;
-        // Still held: no other writer opens the dataset while the file goes.
-        let lock = self.dir.join(WRITER_LOCK);
-        std::fs::remove_file(&lock).map_err(|e| LearnError::io(&lock, e))?;
         Ok(self.manifest)
     }
 }
 
-/// The file of a dataset directory that its writer holds locked while it writes (left by a writer
-/// that was killed; removed when one finishes).
+/// The file of a folder (a dataset, a model's) that its writer holds locked while it writes (left
+/// by a writer that was killed; removed when one ends).
 pub const WRITER_LOCK: &str = "writing.lock";
 
-/// Locks the dataset directory `dir` for one writer: a second (another `augsim generate` on the
-/// same directory, a cluster's shard run again while the first still runs) is refused at once
-/// rather than mixing its draws with the first's. The lock ends with the writer's process.
-fn lock_for_writing(dir: &Path) -> Result<std::fs::File> {
+/// Who writes a dataset, and why a second writer is refused (see [`lock_for_writing`]).
+const DATASET_WRITERS: &str = "(`augsim generate`, a cluster's shard): two writers would mix their draws";
+
+/// A folder held by one writer ([`lock_for_writing`]); its [`WRITER_LOCK`] file goes when this
+/// is dropped.
+pub(crate) struct WriterLock {
+    path: PathBuf,
+    _file: std::fs::File,
+}
+
+impl Drop for WriterLock {
+    fn drop(&mut self) {
+        // Still held: no other writer opens the folder while the file goes. A file left behind
+        // (unlikely: the folder is writable) only keeps its name.
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// Locks the folder `dir` for one writer: a second (another `augsim generate` on the same dataset,
+/// a cluster's shard run again while the first still runs, another `augsim train` into the same
+/// model folder) is refused at once rather than mixing its files with the first's; `writers` says
+/// who writes there and why a second is refused. The lock ends with the writer's process.
+pub(crate) fn lock_for_writing(dir: &Path, writers: &str) -> Result<WriterLock> {
     let path = dir.join(WRITER_LOCK);
     let file = std::fs::OpenOptions::new()
         .create(true)
@@ -931,10 +964,9 @@ fn lock_for_writing(dir: &Path) -> Result<std::fs::File> {
         .open(&path)
         .map_err(|e| LearnError::io(&path, e))?;
     match file.try_lock() {
-        Ok(()) => Ok(file),
+        Ok(()) => Ok(WriterLock { path, _file: file }),
         Err(std::fs::TryLockError::WouldBlock) => Err(LearnError::InvalidInput(format!(
-            "{} is being written by another run (`augsim generate`, a cluster's shard): two writers would mix their \
-             draws; wait for it to end, or stop it",
+            "{} is being written by another run {writers}; wait for it to end, or stop it",
             dir.display()
         ))),
         Err(std::fs::TryLockError::Error(e)) => Err(LearnError::io(&path, e)),
@@ -1218,11 +1250,12 @@ fn check_parts_cover(paths: &[PathBuf], datasets: &[Dataset]) -> Result<()> {
 /// `out`, in generation-index order, re-sharded with `shard_size` (default: the first part's).
 /// The parts must agree on scenario, seed, grid, units and metadata, be every part of the split
 /// once, and no generation index may appear twice. The result equals what a single worker would have written.
+/// An interrupted merge into `out` (an unfinished dataset of the same spec) goes on after what it committed.
 pub fn merge_datasets(parts: &[PathBuf], out: &Path, shard_size: Option<usize>) -> Result<Manifest> {
     if parts.is_empty() {
         return Err(LearnError::InvalidInput("merge needs at least one dataset".into()));
     }
-    if out.join(MANIFEST_FILE).exists() {
+    if Dataset::open(out).is_ok_and(|d| d.manifest.complete) {
         return Err(LearnError::manifest(out.join(MANIFEST_FILE), "merge output already holds a dataset"));
     }
     let datasets = parts.iter().map(|p| Dataset::open(p)).collect::<Result<Vec<_>>>()?;
@@ -1262,6 +1295,7 @@ pub fn merge_datasets(parts: &[PathBuf], out: &Path, shard_size: Option<usize>) 
     check_parts_cover(parts, &datasets)?;
     let spec = DatasetSpec { part: None, shard_size: shard_size.unwrap_or(first.shard_size), ..first };
     let mut writer = DatasetWriter::create_or_resume(out, spec)?;
+    let committed = writer.resume_from();
     let mut cursors: Vec<MergeCursor> = datasets.into_iter().map(MergeCursor::new).collect();
     let mut last: Option<(u64, usize)> = None;
     loop {
@@ -1284,6 +1318,8 @@ pub fn merge_datasets(parts: &[PathBuf], out: &Path, shard_size: Option<usize>) 
         }
         last = Some((index, c));
         match cursors[c].pop()? {
+            // In the output already: committed by an interrupted merge.
+            Some(_) if index < committed => {}
             Some(MergeItem::Sample(s)) => writer.push(&s)?,
             Some(MergeItem::Failure(f)) => writer.push_failure(f.index, f.reason)?,
             None => break,

@@ -688,8 +688,9 @@ impl Generator {
     }
 
     /// Generates indices `range` into `dir` (resuming an unfinished dataset there from its last
-    /// complete shard), reporting the draws done to `progress` as each block of them is solved. Stops with an error when most of
-    /// its first draws fail ([`EARLY_DRAWS`]), saying why and what to change.
+    /// complete shard), reporting the draws done to `progress` as each block of them is solved (and
+    /// the draws a resumed dataset holds, in a line, once it is accepted). Stops with an error when
+    /// most of its first draws fail ([`EARLY_DRAWS`]), saying why and what to change.
     pub fn run(&self, dir: &Path, name: &str, part: Option<DatasetPart>, progress: &dyn Progress) -> Result<Manifest> {
         let range = part_range(self.config.samples, part.as_ref())?;
         let spec = self.spec(name, part);
@@ -700,6 +701,9 @@ impl Generator {
             }
         }
         let mut writer = DatasetWriter::create_or_resume(dir, spec)?;
+        if let Some(line) = writer.resumed() {
+            progress.line(&line);
+        }
         let start = writer.resume_from().max(range.start as u64);
         let total = range.end as u64;
         // Blocks per batch: at least a shard, and as many for every thread.
