@@ -109,17 +109,17 @@ fn evaluate_held_out(
     let all = dataset.load_all()?;
     let test = model.held_out(&all)?;
     if test.is_empty() {
-        bail!("{} holds no sample held out from this model (no test split recorded for it)", dataset_dir.display());
+        let why = match model.trained_on(&all) {
+            true => format!(
+                "it holds none of the {} test samples recorded in the model, only samples it trained or was \
+                 validated on",
+                provenance.own.test.len()
+            ),
+            false => "every sample is one a run behind the model (its pre-training) trained or was validated on".into(),
+        };
+        bail!("{} holds no sample held out from this model: {why}", dataset_dir.display());
     }
-    if let Some(learn::Sparsity::Patch { min_nodes, max_nodes }) = &corruption.sparsity {
-        let most = (0..test.len()).map(|p| learn::nonzero_nodes(test.input(p), test.grid).len()).max().unwrap_or(0);
-        if *min_nodes >= most {
-            bail!(
-                "--sparse {min_nodes},{max_nodes} keeps every input node: the samples have at most {most}, so the \
-                 input would not be sparse; give a range below {most}"
-            );
-        }
-    }
+    corruption.check_sparsity(&test)?;
     let markers = dataset.manifest().markers();
     let (report, at_markers) = match dataset.manifest().placement() {
         Some(placement) if !markers.is_empty() => {
@@ -130,12 +130,13 @@ fn evaluate_held_out(
         _ => (learn::evaluate(model, &test, corruption, 0, compute)?, None),
     };
     let coverage = learn::uncertainty_coverage(model, &test, corruption, 0)?;
-    let near_copies = learn::data::split::same_name_and_seed(all.source.as_deref(), provenance.own.source.as_deref());
+    let near_copies =
+        learn::data::split::same_seed_other_settings(all.source.as_deref(), provenance.own.source.as_deref());
     let warning = near_copies.then(|| {
         format!(
-            "the dataset's scenario has the name and seed of the model's training data ({}) but other settings: its \
-             draws may be near copies of the model's training draws of the same index, and these figures not held \
-             out; generate it with another seed",
+            "the dataset was drawn with the seed of the model's training data ({}) but other settings (whatever its \
+             scenario is called): its draws may be near copies of the model's training draws of the same index, and \
+             these figures not held out; generate it with another seed",
             provenance.own.source.as_deref().unwrap_or_default()
         )
     });
@@ -152,12 +153,16 @@ fn evaluate_held_out(
     })
 }
 
-/// Writes an evaluation into `out` (created): errors.csv, summary.json and worst.vtu (the worst
-/// sample predicted again); returns their paths.
+/// The basis a model's predictions were projected on (`eval --project`): the reduced-order model's
+/// path and its modes.
+type Projection<'a> = Option<(&'a Path, usize)>;
+
+/// Writes an evaluation into `out` (created): errors.csv, summary.json (with the projection,
+/// when the predictions were projected) and worst.vtu (the worst sample predicted again); returns
+/// their paths.
 fn write_evaluation(
     out: &Path,
-    model: &impl LearnedModel,
-    model_path: &Path,
+    (model, model_path, projection): (&impl LearnedModel, &Path, Projection),
     dataset: &Dataset,
     evaluation: &Evaluation,
     compute: Compute,
@@ -173,6 +178,7 @@ fn write_evaluation(
         "mean_m": s.mean, "std_m": s.std, "max_m": s.max, "worst_index": report.worst_index(),
         "corruption": corruption, "marker_errors": evaluation.markers.as_ref().map(|(_, e)| e),
         "within_2_std": evaluation.coverage,
+        "projection": projection.map(|(basis, modes)| serde_json::json!({"basis": basis, "modes": modes})),
     });
     let summary_path = out.join(crate::output::SUMMARY_FILE);
     write_atomic_bytes(&summary_path, serde_json::to_string_pretty(&summary)?.as_bytes())?;
@@ -222,27 +228,28 @@ fn evaluate_in(
     match project {
         Some(basis) => {
             let projected = learn::Projected::new(model, &Model::load(basis)?)?;
-            let mut lines =
-                vec![format!("projected  on the basis of {} ({} modes)", basis.display(), projected.basis.info.modes)];
-            lines.extend(evaluate_into(&projected, model_path, &dataset, dataset_dir, corruption, compute, out)?);
+            let modes = projected.basis.info.modes;
+            let mut lines = vec![format!("projected  on the basis of {} ({modes} modes)", basis.display())];
+            let model = (&projected, model_path, Some((basis, modes)));
+            lines.extend(evaluate_into(model, &dataset, dataset_dir, corruption, compute, out)?);
             Ok(lines)
         }
-        None => evaluate_into(&model, model_path, &dataset, dataset_dir, corruption, compute, out),
+        None => evaluate_into((&model, model_path, None), &dataset, dataset_dir, corruption, compute, out),
     }
 }
 
-/// [`eval`] for a loaded model: evaluated, written, in lines.
+/// [`eval`] for a loaded model (with its path and the projection of its predictions, if any):
+/// evaluated, written, in lines.
 fn evaluate_into(
-    model: &impl LearnedModel,
-    model_path: &Path,
+    model: (&impl LearnedModel, &Path, Projection),
     dataset: &Dataset,
     dataset_dir: &Path,
     corruption: &Corruption,
     compute: Compute,
     out: &Path,
 ) -> Result<Vec<String>> {
-    let e = evaluate_held_out(model, dataset, dataset_dir, corruption, compute)?;
-    let [errors, summary, vtu] = write_evaluation(out, model, model_path, dataset, &e, compute)?;
+    let e = evaluate_held_out(model.0, dataset, dataset_dir, corruption, compute)?;
+    let [errors, summary, vtu] = write_evaluation(out, model, dataset, &e, compute)?;
     let mut lines = e.lines();
     lines.push(format!("wrote      {}, {}, {}", errors.display(), summary.display(), vtu.display()));
     Ok(lines)

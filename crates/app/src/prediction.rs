@@ -11,9 +11,11 @@ use mesh::length::mm;
 
 /// Predicts with the model at `model_path` from `input` (a grid tensor, `.npy` `[3, nx, ny, nz]`,
 /// or a point cloud, `.csv` or `.npy` `[N, 6]`: x, y, z and the vector in the model's input unit)
-/// on `compute`, writes the displacement tensor to `output`, times `runs` predictions, and with
-/// `mesh_path` writes the displacement interpolated to that mesh's nodes beside the tensor
-/// (`.vtu`). Returns what it did, in lines.
+/// on `compute`, writes the displacement tensor to `output` (and the predicted standard deviation
+/// beside it, for a model that predicts one), times `runs` predictions, and with `mesh_path`
+/// writes both interpolated to that mesh's nodes beside the tensor (`.vtu`). Everything is
+/// computed before anything is written: a failing prediction leaves no file. Returns what it did,
+/// in lines.
 pub fn predict_file(
     model_path: &Path,
     input: &Path,
@@ -44,7 +46,16 @@ pub fn predict_file(
     }
     let predictor = model.predictor(compute)?;
     let (prediction, sigma) = predictor.predict_with_std(&data)?;
-    mesh::io::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
+    if let Some(v) = prediction.iter().chain(sigma.iter().flatten()).find(|v| !v.is_finite()) {
+        anyhow::bail!(
+            "{} predicts a non-finite value ({v}) from {}: its weights are damaged, or the input lies far outside \
+             what it learned",
+            model_path.display(),
+            input.display()
+        );
+    }
+    let on_mesh =
+        mesh_path.map(|m| prediction_on_mesh(&model, model_path, (&prediction, sigma.as_deref()), m)).transpose()?;
     let t = learn::time_prediction(|x| predictor.predict(x), &data, 3, runs)?;
     lines.push(format!(
         "prediction {} runs: median {:.2} ms, mean {:.2} ± {:.2} ms, min {:.2}, max {:.2}",
@@ -55,6 +66,7 @@ pub fn predict_file(
         t.min * 1e3,
         t.max * 1e3
     ));
+    mesh::io::npy::write_f32(output, &[3, g.nx, g.ny, g.nz], &prediction)?;
     lines.push(format!("wrote      {}", output.display()));
     if let Some(sigma) = &sigma {
         let path = sigma_path(output);
@@ -68,10 +80,10 @@ pub fn predict_file(
         ));
         lines.push(format!("wrote      {}", path.display()));
     }
-    if let Some(mesh_path) = mesh_path {
+    if let Some((organ, fields, line)) = on_mesh {
         let vtu = output.with_extension("vtu");
-        lines.push(prediction_on_mesh(&model, model_path, (&prediction, sigma.as_deref()), mesh_path, &vtu)?);
-        lines.push(format!("wrote      {}", vtu.display()));
+        mesh::io::write_mesh(&vtu, &organ, &fields).with_context(|| format!("writing {}", vtu.display()))?;
+        lines.extend([line, format!("wrote      {}", vtu.display())]);
     }
     Ok(lines)
 }
@@ -83,27 +95,25 @@ fn sigma_path(output: &Path) -> std::path::PathBuf {
     output.with_file_name(format!("{stem}_sigma.npy"))
 }
 
-/// Interpolates a prediction of `model` (from `model_path`) and its standard deviation, where it
-/// has one, to the nodes of the volume mesh in `mesh_path` (in the training mesh's frame) and
-/// writes them as the point fields `displacement` and `sigma` (m) into `vtu`; returns the line
-/// that describes it (nodes, largest displacement).
+/// A prediction of `model` (from `model_path`) and its standard deviation, where it has one,
+/// interpolated alike ([`learn::GridToMesh`]: grid nodes inside the organ, half a cell of
+/// tolerance around the grid's box) to the nodes of the volume mesh in `mesh_path` (in the
+/// training mesh's frame): the mesh, its point fields `displacement` and `sigma` (m), and the
+/// line that describes them (nodes, largest displacement).
 fn prediction_on_mesh(
     model: &Model,
     model_path: &Path,
     (prediction, sigma): (&[f32], Option<&[f32]>),
     mesh_path: &Path,
-    vtu: &Path,
-) -> Result<String> {
+) -> Result<(mesh::Mesh, Vec<mesh::io::Field>, String)> {
     let organ = mesh::io::read_mesh(mesh_path).with_context(|| format!("reading {}", mesh_path.display()))?;
     let on_mesh = || format!("{} on {}", model_path.display(), mesh_path.display());
-    let u = model.field_on_mesh(prediction, &organ).with_context(on_mesh)?;
-    let max = fem::post::max_displacement(&u);
+    let to_mesh = model.to_mesh(&organ).with_context(on_mesh)?;
+    let u = to_mesh.apply(prediction).with_context(on_mesh)?;
+    let line = format!("mesh       {} nodes, max |u| {:.3} mm", organ.num_nodes(), mm(fem::post::max_displacement(&u)));
     let mut fields = vec![mesh::io::Field::point("displacement", 3, u)];
     if let Some(sigma) = sigma {
-        let values: Vec<f64> = sigma.iter().map(|&s| f64::from(s)).collect();
-        let at_nodes = model.placed_grid()?.interpolate(&values, 1, &organ.nodes).with_context(on_mesh)?;
-        fields.push(mesh::io::Field::point("sigma", 1, at_nodes));
+        fields.push(mesh::io::Field::point("sigma", 1, to_mesh.apply_channels(sigma, 1).with_context(on_mesh)?));
     }
-    mesh::io::write_mesh(vtu, &organ, &fields).with_context(|| format!("writing {}", vtu.display()))?;
-    Ok(format!("mesh       {} nodes, max |u| {:.3} mm", organ.num_nodes(), mm(max)))
+    Ok((organ, fields, line))
 }

@@ -116,12 +116,12 @@ pub struct TrainArgs {
     /// Let the learning rate fall to this value along a half cosine over the iterations.
     #[arg(long)]
     pub final_lr: Option<f64>,
-    /// Channels of the first U-Net level.
-    #[arg(long, default_value_t = UNetConfig::default().base_channels)]
-    pub channels: usize,
-    /// Down-sampling steps of the U-Net.
-    #[arg(long, default_value_t = UNetConfig::default().depth)]
-    pub depth: usize,
+    /// Channels of the first U-Net level [default: 16; with --init, the pre-trained network's].
+    #[arg(long)]
+    pub channels: Option<usize>,
+    /// Down-sampling steps of the U-Net [default: 3; with --init, the pre-trained network's].
+    #[arg(long)]
+    pub depth: Option<usize>,
     /// Fine-tune this pre-trained U-Net (its directory or model.json; trained on inputs of the
     /// dataset's kind) instead of starting from scratch.
     #[arg(long)]
@@ -163,15 +163,15 @@ impl TrainArgs {
     /// The options given that the chosen method does not use, by flag: a U-Net's training
     /// settings for a reduced-order model, a reduced-order model's for a U-Net.
     fn unused_options(&self) -> Vec<&'static str> {
-        let (d, net, rom) = (&UNET_DEFAULTS, UNetConfig::default(), RomConfig::default());
+        let (d, rom) = (&UNET_DEFAULTS, RomConfig::default());
         let given = match self.method {
             Method::Rom => vec![
                 ("--iterations", self.iterations != d.iterations),
                 ("--batch", self.batch != d.batch),
                 ("--lr", self.lr != d.lr),
                 ("--final-lr", self.final_lr.is_some()),
-                ("--channels", self.channels != net.base_channels),
-                ("--depth", self.depth != net.depth),
+                ("--channels", self.channels.is_some()),
+                ("--depth", self.depth.is_some()),
                 ("--init", self.init.is_some()),
                 ("--validate-every", self.validate_every != d.validate_every),
                 ("--restart", self.restart),
@@ -252,24 +252,22 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
             args.out.display()
         );
     }
-    let net = UNetConfig::default();
-    let shaped = [("--channels", args.channels != net.base_channels), ("--depth", args.depth != net.depth)];
-    let shaped: Vec<&str> = shaped.into_iter().filter(|(_, given)| *given).map(|(flag, _)| flag).collect();
-    if args.init.is_some() && !shaped.is_empty() {
-        bail!("{}: a network fine-tuned from --init keeps the pre-trained one's architecture", shaped.join(", "));
+    if let Some(init) = &args.init {
+        check_init_shape(args, init)?;
     }
     let dataset = Dataset::open(&args.dataset)?;
     let manifest = dataset.manifest();
     if !manifest.complete {
         progress.line(&format!(
-            "warning    the dataset is unfinished ({} draws held: its generation was stopped, or runs now): the \
-             model learns from these alone; `augsim generate` with the same arguments finishes it",
+            "warning    the dataset is unfinished ({} draws held: its generation or merge was stopped, or runs now): \
+             the model learns from these alone; the same `augsim generate` (or `augsim merge`) finishes it",
             manifest.num_samples
         ));
     }
     args.corruption.corruption().check_scale(manifest.statistics.inputs.rms_norm, manifest.units.input)?;
     let all = dataset.load_all()?;
     let (split, [train, validation, test]) = args.split.policy().apply(&all)?;
+    args.corruption.corruption().check_sparsity(&train)?;
     progress.line(&format!(
         "split      {} training, {} validation, {} test samples (held out, recorded in the model); grid {}",
         train.len(),
@@ -280,13 +278,22 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
     if args.method == Method::Rom {
         return train_rom(args, &dataset, split, [train, validation]);
     }
+    if validation.is_empty() {
+        progress.line(
+            "warning    no validation sample: nothing selects a checkpoint, and the last iteration's weights are kept \
+             (give --validation-samples, or more data)",
+        );
+    }
     let (compute, device) = args.device.described()?;
     progress.line(&device);
+    let net = UNetConfig::default();
     let start = match &args.init {
         Some(model) => UNetStart::FineTune { model: model.clone(), freeze_encoder: args.freeze_encoder },
-        None => {
-            UNetStart::Scratch(UNetConfig { base_channels: args.channels, depth: args.depth, ..UNetConfig::default() })
-        }
+        None => UNetStart::Scratch(UNetConfig {
+            base_channels: args.channels.unwrap_or(net.base_channels),
+            depth: args.depth.unwrap_or(net.depth),
+            ..net
+        }),
     };
     let config = TrainConfig {
         iterations: args.iterations,
@@ -313,12 +320,39 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
         seconds => format!("{seconds:.3} s per step"),
     };
     let mut lines = vec![format!("steps      {} ({pace})", outcome.iterations_done)];
-    if let Some((it, Some(e))) = outcome.model.training.as_ref().map(|t| (t.best_iteration, t.best_val_mean_error)) {
-        let kept = if it == 0 { " (the pre-trained network, kept: no step improved on it)" } else { "" };
-        lines.push(format!("best       validation mean e = {:.4} mm at iteration {it}{kept}", mm(e)));
+    match outcome.model.training.as_ref().map(|t| (t.best_iteration, t.best_val_mean_error)) {
+        Some((Some(it), Some(e))) => {
+            let kept = if it == 0 { " (the pre-trained network, kept: no step improved on it)" } else { "" };
+            lines.push(format!("best       validation mean e = {:.4} mm at iteration {it}{kept}", mm(e)));
+        }
+        _ => lines.push("kept       the last iteration's weights (no validation sample chose them)".into()),
     }
     lines.push(format!("wrote      {}", outcome.model_path.display()));
     Ok(lines)
+}
+
+/// Refuses `--channels` or `--depth` given with `--init` that differ from the pre-trained network
+/// (`init`, a model's directory or `model.json`): a fine-tuned network keeps its architecture.
+fn check_init_shape(args: &TrainArgs, init: &Path) -> Result<()> {
+    let json = learn::Model::json_path(init);
+    if args.channels.is_none() && args.depth.is_none() || learn::Model::kind(&json)? != Method::UNet {
+        return Ok(()); // a reduced-order model as --init is refused with the other checks of the start
+    }
+    let pre = learn::TrainedModel::load(&json)?.config;
+    let asked = [("--channels", args.channels, pre.base_channels), ("--depth", args.depth, pre.depth)];
+    let differing: Vec<String> = asked
+        .into_iter()
+        .filter_map(|(flag, given, own)| given.filter(|&g| g != own).map(|g| format!("{flag} {g}")))
+        .collect();
+    if !differing.is_empty() {
+        bail!(
+            "{}: a network fine-tuned from --init keeps the pre-trained one's architecture ({} channels, depth {})",
+            differing.join(", "),
+            pre.base_channels,
+            pre.depth
+        );
+    }
+    Ok(())
 }
 
 /// `train` for a reduced-order model: fitted on the training samples, chosen on the validation
@@ -363,8 +397,9 @@ pub struct UNetRun {
 
 /// Trains a U-Net from `start` with `config` on `train` (its checkpoints chosen on `validation`),
 /// samples of `dataset` split by `split`: the model records the split's test samples and the
-/// dataset's grid placement, and a new network takes the dataset's input unit. Plots the learning
-/// curve beside the model ([`CURVE_PNG`](crate::curve::CURVE_PNG)).
+/// dataset's grid placement, and a new network takes the dataset's input unit; a pre-trained
+/// network of another grid (shape or spacing) is told to `progress` in a warning. Plots the
+/// learning curve beside the model ([`CURVE_PNG`](crate::curve::CURVE_PNG)).
 pub fn train_unet(
     dataset: &Dataset,
     split: &Split,
@@ -396,6 +431,15 @@ pub fn train_unet(
                 pre.input_unit(),
                 manifest.units.input
             );
+            let (theirs, ours) =
+                (grid_in_words(pre.grid(), pre.placement()), grid_in_words(manifest.grid, manifest.placement()));
+            if theirs != ours {
+                progress.line(&format!(
+                    "warning    {} was trained on grid {theirs}, the dataset is on grid {ours}: the network carries \
+                     over, with its normalisation, what it learned of another grid",
+                    model.display()
+                ));
+            }
             Initialization::FineTune { model, freeze_encoder }
         }
     };
@@ -418,6 +462,16 @@ pub fn train_unet(
     }
     crate::curve::plot_learning_curve(&options.out_dir.join(crate::curve::CURVE_PNG), &outcome.curve)?;
     Ok(outcome)
+}
+
+/// A grid in words: its shape and, when placed, its spacing (`21x6x6, spacing 200 × 200 × 200 mm`).
+fn grid_in_words(grid: learn::GridShape, placement: Option<learn::GridPlacement>) -> String {
+    match placement {
+        Some(p) => {
+            format!("{grid}, spacing {:.4} × {:.4} × {:.4} mm", mm(p.spacing[0]), mm(p.spacing[1]), mm(p.spacing[2]))
+        }
+        None => grid.to_string(),
+    }
 }
 
 /// Fits a reduced-order model with `config` on `train` (chosen on `validation`) of `dataset`

@@ -1,7 +1,7 @@
 //! The terminal: every command draws the progress of its long runs through [`Bar`] and prints
 //! the lines the application layer builds through [`print_lines`].
 
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 
 /// A progress bar on the terminal counting `unit`s, with the library's note beside it; lines are
 /// printed above it, indented.
@@ -11,13 +11,19 @@ pub struct Bar {
 }
 
 impl Bar {
-    /// A bar counting `unit` (e.g. "samples"; none when empty), drawn from the first report on; lines printed
-    /// after `indent`.
+    /// A bar counting `unit` (e.g. "samples"; none when empty), drawn from the first report on (lines
+    /// printed before it draw no empty bar); lines printed after `indent`.
     pub fn new(unit: &str, indent: &'static str) -> Self {
         let unit = if unit.is_empty() { String::new() } else { format!(" {unit}") };
-        let template = format!("{indent}{{bar:40}} {{pos}}/{{len}}{unit}, {{per_sec}}, {{eta}} left  {{msg}}");
-        let style = ProgressStyle::with_template(&template).unwrap_or_else(|_| ProgressStyle::default_bar());
-        Bar { bar: ProgressBar::new(0).with_style(style), indent }
+        let template = format!("{indent}{{bar:40}} {{pos}}/{{len}}{unit}, {{rate}}, {{eta}} left  {{msg}}");
+        let style = ProgressStyle::with_template(&template)
+            .map(|s| {
+                s.with_key("rate", |state: &ProgressState, w: &mut dyn std::fmt::Write| {
+                    let _ = w.write_str(&rate(state.per_sec()));
+                })
+            })
+            .unwrap_or_else(|_| ProgressStyle::default_bar());
+        Bar { bar: ProgressBar::with_draw_target(None, ProgressDrawTarget::hidden()).with_style(style), indent }
     }
 
     /// Runs `work` under a new bar counting `unit` (see [`Bar::new`]), which is removed from the
@@ -47,8 +53,20 @@ impl Bar {
     }
 }
 
-/// Draws `done` of `total` on `bar`, with `note` beside it.
+/// A rate per second with three significant digits or so: `187/s`, `12.3/s`, `0.33/s`.
+fn rate(per_sec: f64) -> String {
+    match per_sec {
+        r if r >= 100.0 => format!("{r:.0}/s"),
+        r if r >= 10.0 => format!("{r:.1}/s"),
+        r => format!("{r:.2}/s"),
+    }
+}
+
+/// Draws `done` of `total` on `bar`, with `note` beside it; the first report shows the bar.
 fn show(bar: &ProgressBar, done: u64, total: u64, note: &str) {
+    if bar.length().is_none() {
+        bar.set_draw_target(ProgressDrawTarget::stderr());
+    }
     bar.set_length(total);
     bar.set_position(done);
     bar.set_message(note.to_string());
@@ -75,5 +93,28 @@ impl learn::Progress for Bar {
 
     fn line(&self, text: &str) {
         self.print(&format!("{}{text}", self.indent));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rates_are_given_to_about_three_digits() {
+        assert_eq!(rate(187.6805), "188/s");
+        assert_eq!(rate(12.345), "12.3/s");
+        assert_eq!(rate(0.3312), "0.33/s");
+        assert_eq!(rate(0.0), "0.00/s");
+    }
+
+    /// No report, no bar: lines printed before the work reports leave no empty `0/0` bar.
+    #[test]
+    fn the_bar_is_hidden_until_the_first_report() {
+        let bar = Bar::new("steps", "");
+        assert!(bar.bar.is_hidden() && bar.bar.length().is_none());
+        show(&bar.bar, 0, 10, "");
+        assert_eq!(bar.bar.length(), Some(10));
+        bar.finish();
     }
 }

@@ -209,9 +209,16 @@ magnitude = [0.05, 0.2]
     // on its test samples, it is not (the basis would hold them).
     let text = augsim(&["eval", "net/model.json", "data", "--project", "rom", "--out", "eval_projected"], d);
     assert!(text.contains("projected  on the basis of rom"), "{text}");
+    // The summary tells a projected figure from a plain one.
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("eval_projected/summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["projection"]["basis"], "rom", "{summary}");
+    assert!(summary["projection"]["modes"].as_u64().is_some_and(|m| m >= 1), "{summary}");
+    let summary = std::fs::read_to_string(d.join("eval/summary.json")).unwrap();
+    assert!(summary.contains("\"projection\": null"), "{summary}");
     augsim(&["train", "data", "--out", "rom_other", "--method", "rom", "--test-samples", "1"], d);
     let e = augsim_err(&["eval", "net/model.json", "data", "--project", "rom_other"], d);
-    assert!(e.contains("the projection's basis (a reduced-order model): sample 4 of"), "{e}");
+    assert!(e.contains("was used to select (validate) the projection's basis (a reduced-order model)"), "{e}");
 
     // burn's own kernels (the GPU's code path) predict the same tensor; they and the GPU need their
     // features.
@@ -247,9 +254,32 @@ magnitude = [0.05, 0.2]
     std::fs::write(d.join("fitted/model.json"), "{}").unwrap();
     let e = augsim_err(&["train", "data", "--out", "fitted", "--method", "rom"], d);
     assert!(e.contains("fitted holds a model (model.json): a new fit written there would replace"), "{e}");
-    // A network fine-tuned from another keeps its architecture: a shape asked for is refused.
+    // A network fine-tuned from another keeps its architecture: another shape asked for is refused,
+    // the default one too.
     let e = augsim_err(&["train", "data", "--out", "tuned", "--init", "net", "--channels", "4"], d);
-    assert!(e.contains("--channels: a network fine-tuned from --init keeps the pre-trained one's architecture"), "{e}");
+    let kept = "a network fine-tuned from --init keeps the pre-trained one's architecture (2 channels, depth 1)";
+    assert!(e.contains(&format!("--channels 4: {kept}")), "{e}");
+    let e = augsim_err(&["train", "data", "--out", "tuned", "--init", "net", "--channels", "16", "--depth", "3"], d);
+    assert!(e.contains(&format!("--channels 16, --depth 3: {kept}")), "{e}");
+    // A patch that keeps every input node is no sparse input: refused, as eval refuses it.
+    let e = augsim_err(&["train", "data", "--out", "dense", "--sparse", "500,1000"], d);
+    assert!(e.contains("--sparse 500,1000 keeps every input node") && !d.join("dense").exists(), "{e}");
+    let e = augsim_err(&["train", "data", "--out", "dense", "--method", "rom", "--sparse", "500,1000"], d);
+    assert!(e.contains("--sparse 500,1000 keeps every input node") && !d.join("dense").exists(), "{e}");
+    // Without validation samples nothing chooses the weights: said, and no best iteration recorded.
+    let no_val = ["--validation-samples", "0", "--test-samples", "2", "--iterations", "2", "--channels", "2"];
+    let text = augsim(&[&["train", "data", "--out", "no_val", "--depth", "1"][..], &no_val[..]].concat(), d);
+    assert!(text.contains("warning    no validation sample: nothing selects a checkpoint"), "{text}");
+    assert!(text.contains("kept       the last iteration's weights"), "{text}");
+    let model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("no_val/model.json")).unwrap()).unwrap();
+    assert!(model["training"]["best_iteration"].is_null(), "{}", model["training"]);
+    // A network pre-trained on another grid carries over, with a warning that names both grids.
+    let shipped = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/liver_forces");
+    let args = ["train", "data", "--out", "other_grid", "--init", shipped, "--iterations", "1", "--test-samples", "2"];
+    let text = augsim(&args, d);
+    assert!(text.contains("was trained on grid 21x23x21, spacing"), "{text}");
+    assert!(text.contains("the dataset is on grid 9x10x9, spacing"), "{text}");
     // A network that cannot be built is refused before its folder is made.
     let e = augsim_err(&["train", "data", "--out", "no_net", "--channels", "0"], d);
     assert!(e.contains("channel counts must be at least 1") && !d.join("no_net").exists(), "{e}");
@@ -289,6 +319,38 @@ magnitude = [0.05, 0.2]
     assert!(e.contains("the points' vectors are named displacements, but the model takes forces (N)"), "{e}");
     let e = augsim_err(&["predict", "net/model.json", "cloud.csv", "--runs", "0"], d);
     assert!(e.contains("'0' for '--runs <RUNS>': expected a count of at least 1, got 0"), "{e}");
+}
+
+/// The shipped reduced-order model predicts on the phantom's mesh as the shipped U-Net does: its
+/// displacement and its σ interpolated alike to the mesh nodes (a node a fraction of a cell out
+/// of the grid's box included); a prediction that fails on its mesh writes nothing.
+#[test]
+fn the_shipped_rom_predicts_on_the_phantom_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    augsim(&["mesh", "-o", "organ.vtu"], d);
+    std::fs::write(
+        d.join("forces.csv"),
+        "x,y,z,fx,fy,fz\n0.0097,-0.0701,-0.0136,0,0.5,0\n0.0097,-0.0701,-0.0091,0,0.5,0\n",
+    )
+    .unwrap();
+    let models = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models");
+    for model in ["liver_forces", "liver_forces_rom"] {
+        let out = format!("{model}.npy");
+        let text =
+            augsim(&["predict", &format!("{models}/{model}"), "forces.csv", "--mesh", "organ.vtu", "-o", &out], d);
+        assert!(text.contains("mesh       "), "{text}");
+    }
+    let (organ, fields) = mesh::io::read_mesh_with_fields(d.join("liver_forces_rom.vtu")).unwrap();
+    let sigma = fields.iter().find(|f| f.name == "sigma").expect("sigma on the mesh");
+    assert_eq!(sigma.values.len(), organ.num_nodes());
+    assert!(sigma.values.iter().all(|s| s.is_finite() && *s >= 0.0) && sigma.values.iter().any(|s| *s > 0.0));
+    let e = augsim_err(
+        &["predict", &format!("{models}/liver_forces_rom"), "forces.csv", "--mesh", "no.vtu", "-o", "x.npy"],
+        d,
+    );
+    assert!(e.contains("no.vtu"), "{e}");
+    assert!(!d.join("x.npy").exists() && !d.join("x_sigma.npy").exists(), "a failed prediction writes nothing");
 }
 
 /// The shipped scenario-1 network (`models/liver_forces`, trained on the built-in

@@ -173,7 +173,7 @@ impl Trained {
     /// The step whose weights were kept for their validation error (`None` without validation).
     pub fn best_validation_step(&self) -> Option<usize> {
         match &self.model {
-            Model::UNet(m) => m.training.as_ref().filter(|t| t.best_val_mean_error.is_some()).map(|t| t.best_iteration),
+            Model::UNet(m) => m.training.as_ref().and_then(|t| t.best_val_mean_error.and(t.best_iteration)),
             Model::Reduced(_) => None,
         }
     }

@@ -173,9 +173,10 @@ impl Model {
         self.input_unit().is_force()
     }
 
-    /// A field on the model's grid interpolated to the nodes of `organ` ([`GridToMesh`]).
-    pub fn field_on_mesh(&self, field: &[f32], organ: &Mesh) -> Result<Vec<f64>> {
-        GridToMesh::new(organ, &self.placed_grid()?)?.apply(field)
+    /// The interpolation of fields on the model's grid (a displacement, a standard deviation) to
+    /// the nodes of `organ` ([`GridToMesh`]).
+    pub fn to_mesh(&self, organ: &Mesh) -> Result<GridToMesh> {
+        GridToMesh::new(organ, &self.placed_grid()?)
     }
 
     /// A predictor of this model on `compute` (the reduced-order model runs on the CPU only).
@@ -388,11 +389,14 @@ impl LearnedModel for Projected {
 impl Projected {
     /// Fails when `samples` include samples the basis was fitted or chosen on.
     fn check_basis_unseen(&self, samples: &Samples) -> Result<()> {
-        self.basis.info.split.check_unseen(samples).map_err(|e| match e {
-            LearnError::InvalidInput(why) => {
-                LearnError::InvalidInput(format!("the projection's basis (a reduced-order model): {why}"))
-            }
-            other => other,
-        })
+        match self.basis.info.split.first_seen(samples) {
+            Some((i, role)) => Err(LearnError::InvalidInput(format!(
+                "sample {i} of {} was used to {role} the projection's basis (a reduced-order model), which would \
+                 hold it: project on a basis fitted and chosen on none of the samples evaluated (one trained on the \
+                 model's split)",
+                samples.source.as_deref().unwrap_or_default()
+            ))),
+            None => Ok(()),
+        }
     }
 }

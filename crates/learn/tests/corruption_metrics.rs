@@ -167,3 +167,18 @@ fn a_noise_in_the_wrong_unit_is_refused() {
     assert!(noise(0.5).check_scale(1.0, FieldUnit::Newton).is_ok());
     assert!(noise(50.0).check_scale(1.0, FieldUnit::Newton).is_err());
 }
+
+/// A patch at least as large as every input's nonzero nodes keeps them all: refused, as `train`
+/// and `eval` refuse it.
+#[test]
+fn a_patch_that_keeps_every_input_node_is_refused() {
+    let grid = GridShape::new(6, 5, 4);
+    let samples = common::synthetic_samples(grid, 0, 3);
+    let most = (0..3).map(|p| nonzero_nodes(samples.input(p), grid).len()).max().unwrap();
+    let patch =
+        |min_nodes: usize| Corruption { sparsity: Some(Sparsity::Patch { min_nodes, max_nodes: 100 }), noise_std: 0.0 };
+    assert!(patch(most - 1).check_sparsity(&samples).is_ok());
+    let e = patch(most).check_sparsity(&samples).unwrap_err().to_string();
+    assert!(e.contains(&format!("keeps every input node: the samples have at most {most}")), "{e}");
+    assert!(Corruption::none().check_sparsity(&samples).is_ok());
+}

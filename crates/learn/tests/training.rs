@@ -181,10 +181,48 @@ fn a_batch_is_at_most_the_training_set() {
             .unwrap()
     };
     let whole = run(&config, "whole");
+    // No validation sample: nothing chose the weights kept (the last iteration's).
+    let info = whole.model.training.as_ref().unwrap();
+    assert_eq!((info.best_iteration, info.best_val_mean_error), (None, None));
     let large = run(&TrainConfig { batch_size: 1000, ..config.clone() }, "large");
     assert_eq!(whole.model.net.named_parameters(), large.model.net.named_parameters());
     let two = run(&TrainConfig { batch_size: 2, ..config }, "two");
     assert_ne!(whole.model.net.named_parameters(), two.model.net.named_parameters());
+}
+
+/// Two trainings into one folder: the second is refused while the first runs (their checkpoints
+/// would mix, and one's model would replace the other's); once the first has returned, its lock
+/// is gone.
+#[test]
+fn a_second_training_into_the_same_folder_is_refused_while_the_first_runs() {
+    let root = tempfile::tempdir().unwrap();
+    let data = synthetic_samples(grid(), 0, 3);
+    let init = scratch(2, 1, &data);
+    let config =
+        TrainConfig { iterations: 2, batch_size: 3, validate_every: 2, checkpoint_every: 2, ..TrainConfig::default() };
+    let options = TrainOptions::new(root.path().join("net"));
+    let no_val = Samples::new(grid());
+    let (started, release) = (std::sync::Barrier::new(2), std::sync::Barrier::new(2));
+    let second = std::thread::scope(|scope| {
+        let first = scope.spawn(|| {
+            // Held at its first report, the folder locked, until the second has tried.
+            let held = |done: u64, _: u64, _: &str| {
+                if done == 0 {
+                    started.wait();
+                    release.wait();
+                }
+            };
+            train(&data, &no_val, &init, &config, &options, &held)
+        });
+        started.wait();
+        let second = train(&data, &no_val, &init, &config, &options, &Silent).map(|_| ());
+        release.wait();
+        assert!(first.join().unwrap().unwrap().completed);
+        second
+    });
+    let e = second.unwrap_err().to_string();
+    assert!(e.contains("net is being written by another run (`augsim train`): two trainings would mix"), "{e}");
+    assert!(!root.path().join("net").join(augsim_learn::data::dataset::WRITER_LOCK).exists());
 }
 
 /// A progress that keeps the lines it is told.
@@ -369,7 +407,7 @@ fn fine_tuning_keeps_the_pre_trained_network_when_no_step_beats_it() {
     let at_start = first.val.unwrap().mean;
     assert!(out.curve[1..].iter().all(|r| r.val.unwrap().mean > at_start), "{:?}", out.curve);
     let info = out.model.training.as_ref().unwrap();
-    assert_eq!((info.best_iteration, info.best_val_mean_error), (0, Some(at_start)));
+    assert_eq!((info.best_iteration, info.best_val_mean_error), (Some(0), Some(at_start)));
     assert_eq!(out.model.net.named_parameters(), pre.net.named_parameters());
     let csv = std::fs::read_to_string(root.path().join("tuned").join(CURVE_CSV)).unwrap();
     assert!(csv.lines().nth(1).unwrap().starts_with("0,,"), "{csv}");

@@ -9,7 +9,7 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-use crate::data::dataset::FieldUnit;
+use crate::data::dataset::{FieldUnit, Samples};
 use crate::data::grid::{GridShape, CHANNELS};
 use crate::{LearnError, Result};
 
@@ -99,6 +99,20 @@ impl Corruption {
                 "a noise of {} {unit} on inputs whose RMS is {:.3e} {unit} would drown them: the noise is in the \
                  inputs' unit, {unit}{hint}",
                 self.noise_std, input_rms
+            )));
+        }
+        Ok(())
+    }
+
+    /// Refuses a patch sparsity that keeps every input node of `samples` (its smallest patch at
+    /// least as large as their most nonzero nodes): the input would not be sparse.
+    pub fn check_sparsity(&self, samples: &Samples) -> Result<()> {
+        let Some(Sparsity::Patch { min_nodes, max_nodes }) = &self.sparsity else { return Ok(()) };
+        let most = (0..samples.len()).map(|p| nonzero_nodes(samples.input(p), samples.grid).len()).max().unwrap_or(0);
+        if *min_nodes >= most {
+            return Err(LearnError::InvalidInput(format!(
+                "--sparse {min_nodes},{max_nodes} keeps every input node: the samples have at most {most}, so the \
+                 input would not be sparse; give a range below {most}"
             )));
         }
         Ok(())

@@ -251,18 +251,24 @@ impl GridToMesh {
 
     /// The field at the mesh nodes, node-major (`3 × nodes`).
     pub fn apply(&self, field: &[f32]) -> Result<Vec<f64>> {
+        self.apply_channels(field, CHANNELS)
+    }
+
+    /// A field of `channels` channels in the tensor layout (3 for a displacement, 1 for a
+    /// standard deviation) at the mesh nodes, node-major (`channels × nodes`).
+    pub fn apply_channels(&self, field: &[f32], channels: usize) -> Result<Vec<f64>> {
         let n = self.grid_nodes;
-        if field.len() != CHANNELS * n {
+        if field.len() != channels * n {
             return Err(LearnError::InvalidInput(format!(
-                "grid field has {} values, expected {CHANNELS} × {n}",
+                "grid field has {} values, expected {channels} × {n}",
                 field.len()
             )));
         }
-        let mut u = vec![0.0; CHANNELS * self.terms.len()];
+        let mut u = vec![0.0; channels * self.terms.len()];
         for (m, terms) in self.terms.iter().enumerate() {
             for &(g, w) in terms {
-                for c in 0..CHANNELS {
-                    u[CHANNELS * m + c] += w * f64::from(field[c * n + g]);
+                for c in 0..channels {
+                    u[channels * m + c] += w * f64::from(field[c * n + g]);
                 }
             }
         }
@@ -422,10 +428,14 @@ mod tests {
         // A field linear in x: x itself, in every channel.
         let field: Vec<f32> = (0..3).flat_map(|_| g.nodes().into_iter().map(|p| p[0] as f32)).collect();
         let cube = |x0: f64, x1: f64| mesh::box_tet([x0, -0.9, 2.1], [x1, -0.1, 3.9], [2, 2, 2]).unwrap();
-        let u = GridToMesh::new(&cube(-0.2, 1.7), &g).unwrap().apply(&field).unwrap();
+        let to_mesh = GridToMesh::new(&cube(-0.2, 1.7), &g).unwrap();
+        let u = to_mesh.apply(&field).unwrap();
         let xs: Vec<f64> = u.chunks(3).map(|c| c[0]).collect();
         let (min, max) = (xs.iter().copied().fold(f64::MAX, f64::min), xs.iter().copied().fold(f64::MIN, f64::max));
         assert!(min.abs() < 1e-6 && (max - 1.5).abs() < 1e-6, "clamped to the box: {min} to {max}");
+        // One channel (a standard deviation) lands as each channel of the three does.
+        assert_eq!(to_mesh.apply_channels(&field[..g.num_nodes()], 1).unwrap(), xs);
+        assert!(to_mesh.apply_channels(&field, 1).is_err(), "three channels are not one");
         let error = GridToMesh::new(&cube(-0.3, 1.5), &g).unwrap_err().to_string();
         assert!(error.contains("at (-300, -900, 2100) mm lies outside the model's grid box"), "{error}");
     }

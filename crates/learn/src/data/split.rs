@@ -183,11 +183,12 @@ pub fn same_source(a: Option<&str>, b: Option<&str>) -> bool {
     }
 }
 
-/// Whether the sources `a` and `b` come from scenarios of one name and seed whose settings
-/// differ: their draws of one index may be near copies (a load range changed in its last digit).
-pub fn same_name_and_seed(a: Option<&str>, b: Option<&str>) -> bool {
+/// Whether the sources `a` and `b` were drawn with one seed but other settings, whatever their
+/// scenarios are called (as [`same_source`] ignores the name): their draws of one index may be
+/// near copies (a load range changed in its last digit).
+pub fn same_seed_other_settings(a: Option<&str>, b: Option<&str>) -> bool {
     match (a.map(source_parts), b.map(source_parts)) {
-        (Some(a), Some(b)) => a.len() == 3 && b.len() == 3 && a[1..] == b[1..] && a[0] != b[0],
+        (Some(a), Some(b)) => a.len() >= 2 && b.len() >= 2 && a[1] == b[1] && a[0] != b[0],
         _ => false,
     }
 }
@@ -252,22 +253,28 @@ impl Split {
         Ok([part(&self.train)?, part(&self.validation)?, part(&self.test)?])
     }
 
+    /// The first sample of `samples` that this split trained or validated on, with what it was
+    /// used for ("train", "select (validate)"); `None` when there is none.
+    pub fn first_seen(&self, samples: &Samples) -> Option<(u64, &'static str)> {
+        if !same_source(samples.source.as_deref(), self.source.as_deref()) {
+            return None;
+        }
+        [(&self.train, "train"), (&self.validation, "select (validate)")]
+            .into_iter()
+            .find_map(|(set, role)| set.first_common(&samples.indices).map(|i| (i, role)))
+    }
+
     /// Fails when `samples` share an index with the training or validation samples of this
     /// split's source: figures on them would not be held out.
     pub fn check_unseen(&self, samples: &Samples) -> Result<()> {
-        if !same_source(samples.source.as_deref(), self.source.as_deref()) {
-            return Ok(());
+        match self.first_seen(samples) {
+            Some((i, role)) => Err(LearnError::InvalidInput(format!(
+                "sample {i} of {} was used to {role} this model; evaluate it on its test samples or on another \
+                 dataset",
+                samples.source.as_deref().unwrap_or_default()
+            ))),
+            None => Ok(()),
         }
-        for (set, role) in [(&self.train, "train"), (&self.validation, "select (validate)")] {
-            if let Some(i) = set.first_common(&samples.indices) {
-                return Err(LearnError::InvalidInput(format!(
-                    "sample {i} of {} was used to {role} this model; evaluate it on its test samples \
-                     or on another dataset",
-                    samples.source.as_deref().unwrap_or_default()
-                )));
-            }
-        }
-        Ok(())
     }
 }
 
@@ -389,14 +396,16 @@ mod tests {
         assert!(!same_source(None, None) && !same_source(Some("a/seed 1/0"), None));
     }
 
-    /// Settings changed under the same scenario name and seed are another source, but told apart
-    /// from another scenario or seed.
+    /// Settings changed under the same seed are another source, but told apart from another seed,
+    /// whatever the scenario is called.
     #[test]
-    fn the_same_name_and_seed_with_other_settings_is_told() {
-        assert!(same_name_and_seed(Some("liver_ar/seed 2/00ab"), Some("liver_ar/seed 2/00ac")));
-        assert!(!same_name_and_seed(Some("liver_ar/seed 2/00ab"), Some("liver_ar/seed 2/00ab")), "the same source");
-        assert!(!same_name_and_seed(Some("liver_ar/seed 2/00ab"), Some("liver_ar/seed 3/00ac")));
-        assert!(!same_name_and_seed(Some("liver_ar/seed 2/00ab"), Some("my_liver/seed 2/00ac")));
-        assert!(!same_name_and_seed(Some("liver_ar/seed 2/00ab"), None));
+    fn the_same_seed_with_other_settings_is_told() {
+        let told = same_seed_other_settings;
+        assert!(told(Some("liver_ar/seed 2/00ab"), Some("liver_ar/seed 2/00ac")));
+        assert!(told(Some("liver_ar/seed 2/00ab"), Some("my_liver/seed 2/00ac")), "renamed");
+        assert!(!told(Some("liver_ar/seed 2/00ab"), Some("liver_ar/seed 2/00ab")), "the same source");
+        assert!(!told(Some("liver_ar/seed 2/00ab"), Some("my_liver/seed 2/00ab")), "the same source, renamed");
+        assert!(!told(Some("liver_ar/seed 2/00ab"), Some("liver_ar/seed 3/00ac")));
+        assert!(!told(Some("liver_ar/seed 2/00ab"), None));
     }
 }

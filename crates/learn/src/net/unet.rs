@@ -399,13 +399,24 @@ impl UNet {
         Ok(net)
     }
 
-    /// Replaces every parameter by the tensor `prefix` + its path of `tensors`.
+    /// Replaces every parameter by the tensor `prefix` + its path of `tensors`; a tensor with a
+    /// NaN or an infinite value is refused, named.
     pub(crate) fn load_tensors(&mut self, tensors: &SafeTensors, prefix: &str, path: &Path) -> Result<()> {
         let names: Vec<String> = self.parameter_names().collect();
         for (p, name) in names.iter().enumerate() {
             let values = read_tensor(tensors, &format!("{prefix}{name}"), &self.parameter_shape(p)).map_err(|m| {
                 LearnError::model(path, format!("weights do not fit the configuration {:?}: {m}", self.config))
             })?;
+            if let Some(at) = values.iter().position(|v| !v.is_finite()) {
+                return Err(LearnError::model(
+                    path,
+                    format!(
+                        "tensor {prefix}{name} holds a non-finite value ({} at position {at}): the weights are \
+                         damaged; train again, or use an intact copy",
+                        values[at]
+                    ),
+                ));
+            }
             self.values[p] = values;
         }
         Ok(())
@@ -467,9 +478,9 @@ impl Gradients {
 pub struct TrainingInfo {
     /// Iterations run.
     pub iterations: usize,
-    /// Iteration whose weights were kept (best validation error; the last one without
-    /// validation samples).
-    pub best_iteration: usize,
+    /// Iteration whose weights were kept, chosen on validation: `None` (`null`) without
+    /// validation samples, when nothing chose them and the last iteration's were kept.
+    pub best_iteration: Option<usize>,
     /// Validation mean Euclidean error at that iteration (m), if validated.
     pub best_val_mean_error: Option<f64>,
     /// Training samples.

@@ -43,7 +43,8 @@ pub fn write_grid_sample(
 
 /// Runs `predictor` on the inputs of `samples` (each corrupted with its own generator, derived
 /// from `seed` and the sample position) and returns the per-sample errors (m);
-/// `visit(position, prediction)` sees each prediction (m).
+/// `visit(position, prediction)` sees each prediction (m). A prediction that is not finite is an
+/// error: its figures would mean nothing.
 pub(crate) fn evaluate_net(
     predict: impl Fn(&[f32]) -> Result<Vec<f32>>,
     samples: &Samples,
@@ -58,11 +59,17 @@ pub(crate) fn evaluate_net(
     let mut errors = Vec::with_capacity(samples.len());
     for p in 0..samples.len() {
         let pred = predict(&evaluation_input(samples, p, corruption, seed)?)?;
+        let error = mean_euclidean_error(&pred, samples.target(p), samples.mask(p), grid)
+            .map_err(|e| LearnError::InvalidInput(format!("sample {} (index {}): {e}", p, samples.indices[p])))?;
+        if !error.is_finite() {
+            return Err(LearnError::InvalidInput(format!(
+                "sample {p} (index {}): the model predicts non-finite values (error {error}): its weights are \
+                 damaged, or the input lies far outside what it learned",
+                samples.indices[p]
+            )));
+        }
         visit(p, &pred)?;
-        errors.push(
-            mean_euclidean_error(&pred, samples.target(p), samples.mask(p), grid)
-                .map_err(|e| LearnError::InvalidInput(format!("sample {} (index {}): {e}", p, samples.indices[p])))?,
-        );
+        errors.push(error);
     }
     EvalReport::new(errors, samples.indices.clone())
 }
@@ -218,7 +225,7 @@ pub fn uncertainty_coverage(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::dataset::{FieldUnit, Normalization};
+    use crate::data::dataset::{FieldUnit, Normalization, Sample};
     use crate::data::grid::GridShape;
     use crate::net::unet::{TrainedModel, UNet, UNetConfig};
 
@@ -240,5 +247,24 @@ mod tests {
         };
         let unread = Samples { indices: vec![0, 1], ..Samples::new(grid) };
         assert_eq!(uncertainty_coverage(&model, &unread, &Corruption::none(), 0).unwrap(), None);
+    }
+
+    /// A prediction that is not finite (damaged weights) gives no figures, but an error naming
+    /// the sample.
+    #[test]
+    fn a_non_finite_prediction_is_an_error() {
+        let grid = GridShape::new(2, 2, 2);
+        let n = grid.nodes();
+        let mut samples = Samples::new(grid);
+        for index in [4, 7] {
+            let input = vec![1.0; 3 * n];
+            samples.push(&Sample { index, input, target: vec![0.0; 3 * n], mask: vec![1; n] }).unwrap();
+        }
+        let none = Corruption::none();
+        let fine = |x: &[f32]| Ok(x.to_vec());
+        assert!(evaluate_net(fine, &samples, &none, 0, |_, _| Ok(())).is_ok());
+        let broken = |x: &[f32]| Ok(x.iter().map(|v| v * f32::NAN).collect());
+        let e = evaluate_net(broken, &samples, &none, 0, |_, _| Ok(())).unwrap_err().to_string();
+        assert!(e.contains("sample 0 (index 4): the model predicts non-finite values"), "{e}");
     }
 }

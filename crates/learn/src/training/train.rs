@@ -13,8 +13,10 @@
 //! uninterrupted one. Resuming a finished run with more iterations extends it.
 //!
 //! Files written in `out_dir`: `model.json` + `model.safetensors` (best weights, on completion),
-//! `checkpoint.bin` and `curve.csv` (iteration, train loss, validation mean error); the application
-//! draws the curve from [`TrainOutcome::curve`]. `checkpoint.bin` is the magic `AUGSIMCK`, then two
+//! `checkpoint.bin` and `curve.csv` (iteration, train loss, validation mean error), and
+//! [`WRITER_LOCK`](crate::data::dataset::WRITER_LOCK) while it runs (a second run into the same
+//! folder is refused); the application draws the curve from [`TrainOutcome::curve`].
+//! `checkpoint.bin` is the magic `AUGSIMCK`, then two
 //! sections, each its length (`u64`, little-endian) and its bytes: the JSON state, and a
 //! safetensors file of the model (`model.` + parameter path), Adam's moments (`adam.moment_1.`,
 //! `adam.moment_2.`) and the best weights so far (`best.`).
@@ -30,7 +32,7 @@ use safetensors::SafeTensors;
 use serde::{Deserialize, Serialize};
 
 use crate::data::corrupt::{item_rng, splitmix64, Corruption, STREAM_SHUFFLE, STREAM_TRAIN_CORRUPTION};
-use crate::data::dataset::{Normalization, Samples};
+use crate::data::dataset::{lock_for_writing, Normalization, Samples, WriterLock};
 use crate::data::grid::{GridPlacement, GridShape};
 use crate::data::split::{IndexSet, Split};
 use crate::fsutil::read;
@@ -548,9 +550,7 @@ pub fn train(
     check_unseen_by_pretraining(&split, &start.pretraining)?;
     // Made once the settings are known to build a network: a refused run leaves no folder.
     let out = &options.out_dir;
-    mesh::io::create_folder(out)?;
-    // What a killed run left half-written goes: the run resumes from its last checkpoint.
-    mesh::io::remove_stale_temporaries(out);
+    let _lock = take_folder(out)?;
     let mut adam = Adam::new(net.values().len());
     let mut state = CheckpointState::new(config, fingerprint(train, val, init, config)?);
     let mut best: Option<UNet> = None;
@@ -644,6 +644,20 @@ pub fn train(
         mean_step_seconds: if steps > 0 { step_time / steps as f64 } else { 0.0 },
     })
 }
+
+/// Makes the run's folder `out` and locks it for this run, until the lock drops (a second run
+/// there is refused); what a killed run left half-written there goes: the run resumes from its
+/// last checkpoint.
+fn take_folder(out: &Path) -> Result<WriterLock> {
+    mesh::io::create_folder(out)?;
+    let lock = lock_for_writing(out, TRAINERS)?;
+    mesh::io::remove_stale_temporaries(out);
+    Ok(lock)
+}
+
+/// Who writes a model's folder, and why a second writer is refused (see [`lock_for_writing`]).
+const TRAINERS: &str = "(`augsim train`): two trainings would mix their checkpoints, and one's model would replace \
+                        the other's";
 
 /// Everything that shapes the trajectory, so that a checkpoint is only resumed into the run it
 /// came from. The checkpoint interval is left out, and so is the iteration count under a constant
@@ -786,7 +800,7 @@ fn trained_model(
         target_unit: start.target_unit,
         training: Some(TrainingInfo {
             iterations: state.iteration,
-            best_iteration: state.best_iteration.unwrap_or(state.iteration),
+            best_iteration: state.best_val.and(state.best_iteration),
             best_val_mean_error: state.best_val,
             train_samples: train.len(),
             val_samples: val.len(),
