@@ -142,16 +142,81 @@ fn save_then_load_gives_identical_predictions() {
     assert!(e.contains("m.safetensors is not the weights it describes"), "{e}");
 }
 
-/// The shipped models load, and their weights serialize back to the very bytes of their files.
+/// Where the data of tensor `name` lies in the safetensors `bytes`.
+fn tensor_bytes(bytes: &[u8], name: &str) -> std::ops::Range<usize> {
+    let header_len = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + header_len]).unwrap();
+    let offsets = &header[name]["data_offsets"];
+    let start = 8 + header_len + offsets[0].as_u64().unwrap() as usize;
+    start..8 + header_len + offsets[1].as_u64().unwrap() as usize
+}
+
+/// Weights with a NaN or an infinity (an edited file, or another tool's model) are refused as
+/// they are read, the tensor named: the network would predict NaN, or swallow it in a ReLU.
+#[test]
+fn non_finite_weights_are_refused_when_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = tiny(1);
+    let model = TrainedModel {
+        config: config.clone(),
+        normalization: Normalization { input_scale: 1.0, target_scale: 0.01 },
+        grid: GridShape::new(4, 4, 4),
+        placement: None,
+        input_unit: augsim_learn::FieldUnit::Newton,
+        target_unit: augsim_learn::FieldUnit::Metre,
+        training: None,
+        net: UNet::new(&config, 3).unwrap(),
+    };
+    let path = dir.path().join("model.json");
+    model.save(&path).unwrap();
+    let weights = dir.path().join("model.safetensors");
+    let intact = std::fs::read(&weights).unwrap();
+    for (name, value) in [("bottleneck.conv1.bias", f32::NAN), ("head.weight", f32::INFINITY)] {
+        let mut bytes = intact.clone();
+        let at = tensor_bytes(&bytes, name).start + 4;
+        bytes[at..at + 4].copy_from_slice(&value.to_le_bytes());
+        let e = UNet::from_safetensors(&config, &bytes, &weights).unwrap_err().to_string();
+        assert!(e.contains(&format!("tensor {name} holds a non-finite value ({value} at position 1)")), "{e}");
+        // Through the model file too (one saved without a digest, which would refuse the bytes first).
+        std::fs::write(&weights, &bytes).unwrap();
+        let mut json: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        json.as_object_mut().unwrap().remove("weights_digest");
+        std::fs::write(&path, json.to_string()).unwrap();
+        let e = TrainedModel::load(&path).unwrap_err().to_string();
+        assert!(e.contains(&format!("tensor {name} holds a non-finite value")), "{e}");
+    }
+}
+
+/// The `weights_digest` of the model file at `path`.
+fn digest_of(path: &Path) -> Option<String> {
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap();
+    json["weights_digest"].as_str().map(str::to_string)
+}
+
+/// The shipped models load, their weights serialize back to the very bytes of their files, and
+/// their model files name those bytes by the digest a save writes: a flipped byte is refused.
 #[test]
 fn shipped_models_load_and_serialize_back_unchanged() {
     let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
+    let tmp = tempfile::tempdir().unwrap();
     for name in ["liver_ar", "liver_forces"] {
         let dir = models.join(name);
         let model = TrainedModel::load(&augsim_learn::Model::json_path(&dir)).unwrap();
         assert_eq!(model.net.config(), &model.config);
         let bytes = std::fs::read(dir.join("model.safetensors")).unwrap();
         assert!(model.net.to_safetensors().unwrap() == bytes, "{name}: weights serialize to other bytes");
+        let saved = tmp.path().join(name).join("model.json");
+        std::fs::create_dir(saved.parent().unwrap()).unwrap();
+        model.save(&saved).unwrap();
+        let shipped = dir.join("model.json");
+        assert!(digest_of(&shipped).is_some(), "{name}: model.json holds no weights_digest");
+        assert_eq!(digest_of(&shipped), digest_of(&saved), "{name}");
+        let mut flipped = bytes.clone();
+        flipped[tensor_bytes(&bytes, "head.bias").start] ^= 0x10;
+        std::fs::copy(&shipped, &saved).unwrap();
+        std::fs::write(saved.with_extension("safetensors"), &flipped).unwrap();
+        let e = TrainedModel::load(&saved).unwrap_err().to_string();
+        assert!(e.contains("is not the weights it describes"), "{name}: {e}");
         let names: Vec<String> = model.net.named_parameters().into_iter().map(|(n, _)| n).collect();
         assert_eq!(names.len(), 42);
         assert_eq!(names[..3], ["encoder.0.conv1.weight", "encoder.0.conv1.bias", "encoder.0.conv2.weight"]);
