@@ -464,11 +464,12 @@ pub fn train_unet(
     Ok(outcome)
 }
 
-/// A grid in words: its shape and, when placed, its spacing (`21x6x6, spacing 200 × 200 × 200 mm`).
+/// A grid in words: its shape and, when placed, its spacing (`21x6x6, spacing 200.000 × 200.000 ×
+/// 200.000 mm`).
 fn grid_in_words(grid: learn::GridShape, placement: Option<learn::GridPlacement>) -> String {
     match placement {
         Some(p) => {
-            format!("{grid}, spacing {:.4} × {:.4} × {:.4} mm", mm(p.spacing[0]), mm(p.spacing[1]), mm(p.spacing[2]))
+            format!("{grid}, spacing {:.3} × {:.3} × {:.3} mm", mm(p.spacing[0]), mm(p.spacing[1]), mm(p.spacing[2]))
         }
         None => grid.to_string(),
     }
