@@ -79,7 +79,15 @@ pub struct Cheapest {
     pub tolerance: f64,
     /// The element and mesh, or `None` when no solve reached it.
     pub choice: Option<ConvergencePoint>,
+    /// The other solves within the tolerance that took at most [`TIE`] times the choice's time:
+    /// as cheap within the timing's noise.
+    #[serde(default)]
+    pub ties: Vec<ConvergencePoint>,
 }
+
+/// How much longer than the cheapest solve another may take and still be told as cheap (a time
+/// of a few milliseconds varies by more than a tenth from run to run).
+const TIE: f64 = 1.25;
 
 /// A solve faster than this (ms) is timed [`TIMED_RUNS`] times: the cheapest element is told
 /// apart by a few milliseconds.
@@ -236,7 +244,9 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         ),
         format!(
             "Times: a new solver's setup and first solve (ms), on this machine: the median of {TIMED_RUNS} runs for a \
-             solve under {SHORT_SOLVE_MS} ms, one run otherwise. {}",
+             solve under {SHORT_SOLVE_MS} ms, one run otherwise; a solve within {:.0} % of the cheapest one's time \
+             is named beside it. {}",
+            100.0 * (TIE - 1.0),
             reference::note(Some(reference_ms))
         ),
         "Solves not independent of a reference are marked, and are no candidates for the cheapest element: the \
@@ -375,12 +385,14 @@ fn cheapest(problems: &[String], points: &[ConvergencePoint]) -> Vec<Cheapest> {
     let mut cheapest = Vec::new();
     for p in problems {
         for tolerance in [0.01, 0.05] {
-            let choice = points
-                .iter()
-                .filter(|c| &c.problem == p && c.error <= tolerance && !c.in_reference)
-                .min_by(|a, b| a.ms.total_cmp(&b.ms))
-                .cloned();
-            cheapest.push(Cheapest { problem: p.clone(), tolerance, choice });
+            let within: Vec<&ConvergencePoint> =
+                points.iter().filter(|c| &c.problem == p && c.error <= tolerance && !c.in_reference).collect();
+            let choice = within.iter().min_by(|a, b| a.ms.total_cmp(&b.ms)).map(|&c| c.clone());
+            let ties = match &choice {
+                Some(best) => within.into_iter().filter(|c| *c != best && c.ms <= TIE * best.ms).cloned().collect(),
+                None => Vec::new(),
+            };
+            cheapest.push(Cheapest { problem: p.clone(), tolerance, choice, ties });
         }
     }
     cheapest
@@ -413,12 +425,14 @@ fn rows(cheapest: &[Cheapest], points: &[ConvergencePoint], reference_ms: f64) -
     let ms = |p: &ConvergencePoint| reference::ms(p.ms, 0, Some(reference_ms));
     let mut rows = Vec::new();
     for c in cheapest {
-        let ours = match &c.choice {
-            Some(p) => {
-                format!("{} ({}, {} dofs, {}, error {:.2} %)", p.element, p.mesh, p.dofs, ms(p), 100.0 * p.error)
-            }
-            None => "none of the meshes".into(),
+        let solve = |p: &ConvergencePoint| {
+            format!("{} ({}, {} dofs, {}, error {:.2} %)", p.element, p.mesh, p.dofs, ms(p), 100.0 * p.error)
         };
+        let mut ours = c.choice.as_ref().map_or("none of the meshes".into(), solve);
+        if !c.ties.is_empty() {
+            let ties: Vec<String> = c.ties.iter().map(solve).collect();
+            ours = format!("{ours}; as cheap within {:.0} % of its time: {}", 100.0 * (TIE - 1.0), ties.join(", "));
+        }
         rows.push(
             Row::new(format!("cheapest within {:.0} %", 100.0 * c.tolerance), ours, "").of("problem", &c.problem),
         );
