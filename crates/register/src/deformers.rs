@@ -699,13 +699,18 @@ impl Deformer for NetworkDeformer {
         Ok(u)
     }
 
-    fn uncertainty(&mut self, rest_points: &[mesh::Point], _stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
+    /// The model's σ at the organ's nodes, as its displacement is taken there (the grid nodes
+    /// inside the organ only: those outside carry no σ), then at each point by its stencil.
+    fn uncertainty(&mut self, _rest_points: &[mesh::Point], stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
         let std = match self.predictor.predict_std(self.last_input.as_ref()?) {
             Ok(std) => std?,
             Err(e) => return Some(Err(e.into())),
         };
-        let values: Vec<f64> = std.iter().map(|&v| f64::from(v)).collect();
-        Some(self.grid.interpolate(&values, 1, rest_points).map_err(RegisterError::from))
+        let at_nodes = match self.to_mesh.apply_channels(&std, 1) {
+            Ok(at_nodes) => at_nodes,
+            Err(e) => return Some(Err(e.into())),
+        };
+        Some(Ok(stencils.iter().map(|s| s.0.iter().map(|&(n, w)| w * at_nodes[n]).sum()).collect()))
     }
 }
 
