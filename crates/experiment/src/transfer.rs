@@ -218,9 +218,9 @@ impl Runs {
         let tuned = train(&target.dataset, &target_dir, &Recipe { fine_tune: Some(pre_path), ..few }, progress)?;
         let failed = [("BC4", &bc4), ("target", &target)]
             .iter()
-            .filter_map(|(name, data)| {
-                Some(data.failed_note()).filter(|n| !n.is_empty()).map(|n| format!("; {name}{n}"))
-            })
+            .map(|(name, data)| (name, data.failed_note()))
+            .filter(|(_, note)| !note.is_empty())
+            .map(|(name, note)| format!("; {name}{note}"))
             .collect();
         Ok(Runs { pre, full, scratch, tuned, failed })
     }

@@ -461,8 +461,8 @@ impl LoadPath {
     /// than at rest (under [`crate::LIMIT_POINT_STIFFNESS`] per cent), its last step under
     /// [`TURN_FALL`] times as stiff as the step before, which had stiffened on the one before it.
     /// A short snap does so, softening its step less than [`LoadPath::snapped`] asks (the AMOS
-    /// liver of `shared` pushed by 1 N in 7 steps: 0.56 times the step before, its limit point at
-    /// load factor 0.970 in the step from 0.938), and so does a path with an inflection: a sign
+    /// liver of the experiments' real-organ tests pushed by 1 N in 7 steps: 0.56 times the step
+    /// before, its limit point at load factor 0.970 in the step from 0.938), and so does a path with an inflection: a sign
     /// that only a check by arc length makes a snap.
     fn turned(&self) -> bool {
         let [Some(a), Some(b), Some(c), Some(d)] = self.last else { return false };

@@ -702,15 +702,9 @@ impl Deformer for NetworkDeformer {
     /// The model's σ at the organ's nodes, as its displacement is taken there (the grid nodes
     /// inside the organ only: those outside carry no σ), then at each point by its stencil.
     fn uncertainty(&mut self, _rest_points: &[mesh::Point], stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
-        let std = match self.predictor.predict_std(self.last_input.as_ref()?) {
-            Ok(std) => std?,
-            Err(e) => return Some(Err(e.into())),
-        };
-        let at_nodes = match self.to_mesh.apply_channels(&std, 1) {
-            Ok(at_nodes) => at_nodes,
-            Err(e) => return Some(Err(e.into())),
-        };
-        Some(Ok(stencils.iter().map(|s| s.0.iter().map(|&(n, w)| w * at_nodes[n]).sum()).collect()))
+        let std = self.predictor.predict_std(self.last_input.as_ref()?).transpose()?;
+        let at_nodes = std.and_then(|std| self.to_mesh.apply_channels(&std, 1)).map_err(RegisterError::from);
+        Some(at_nodes.map(|at| stencils.iter().map(|s| s.0.iter().map(|&(n, w)| w * at[n]).sum()).collect()))
     }
 }
 
