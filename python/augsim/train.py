@@ -174,7 +174,8 @@ def model_json(args, manifest, config, scales, best, split):
         "weights": "model.safetensors",
         "training": {
             "iterations": args.iterations,
-            "best_iteration": best["iteration"],
+            # Without validation nothing chose the weights: the last step's are kept.
+            "best_iteration": None if best["error"] is None else best["iteration"],
             "best_val_mean_error": best["error"],
             "train_samples": split["train_samples"],
             "val_samples": split["val_samples"],
@@ -269,6 +270,9 @@ def main(argv=None):
     scales = normalization(inputs[train], targets[train], masks[train])
     say(f"split      {len(train)} training, {len(val)} validation, {len(test)} test samples; grid "
         f"{'x'.join(map(str, manifest['grid']))}; {world} process(es) on {device}")
+    if not len(val):
+        say("warning    no validation sample: nothing selects a checkpoint, and the last iteration's weights are kept "
+            "(give --validation-samples, or more data)")
 
     config = {"in_channels": 3, "out_channels": 3, "base_channels": args.channels, "depth": args.depth,
               "kernel_size": 3}
@@ -330,8 +334,10 @@ def main(argv=None):
         split = {"train_samples": len(train), "val_samples": len(val), "record": record}
         text = json.dumps(model_json(args, manifest, config, scales, best, split), indent=2)
         write_atomic(os.path.join(args.out, "model.json"), text.encode("utf-8"))
-        shown = "—" if best["error"] is None else f"{best['error'] * 1e3:.4f} mm"
-        say(f"best       validation ē {shown} at step {best['iteration']}")
+        if best["error"] is None:
+            say("kept       the last iteration's weights (no validation sample chose them)")
+        else:
+            say(f"best       validation ē {best['error'] * 1e3:.4f} mm at step {best['iteration']}")
         say(f"wrote      {os.path.join(args.out, 'model.json')}")
     if distributed:
         torch.distributed.destroy_process_group()

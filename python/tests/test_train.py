@@ -7,6 +7,7 @@ On a small `augsim generate beam_target` dataset:
   (max |difference| <= 1e-5 m and <= 1e-5 of the output scale);
 - `augsim eval` evaluates it on its recorded test samples only;
 - a killed run resumes from its checkpoint to the same weights as an uninterrupted one;
+- without validation samples no step is recorded as chosen (`best_iteration` null), as augsim records it;
 - options and datasets it cannot use are refused in one line, before any training.
 
 Run: pip install "./python[torch,test]", then python -m pytest -s python/tests/test_train.py from
@@ -83,6 +84,23 @@ def test_augsim_predicts_and_evaluates_a_model_trained_here(data, tmp_path):
     assert diff <= 1e-5 * scale
     text = run_augsim("eval", out / "model.json", data, "--out", out / "eval")
     assert "held out   10 of 40 samples (the test split recorded in the model)" in text
+
+
+def test_without_validation_no_step_is_said_to_be_chosen(data, tmp_path, capsys):
+    out = tmp_path / "no_validation"
+    assert main([str(data), "--out", str(out), "--channels", "4", "--depth", "2", "--iterations", "10",
+                 "--validate-every", "5", "--seed", "3", "--device", "cpu",
+                 "--validation-samples", "0", "--test-samples", "10"]) == 0
+    said = capsys.readouterr().out
+    assert "warning    no validation sample: nothing selects a checkpoint" in said
+    assert "kept       the last iteration's weights (no validation sample chose them)" in said
+    with open(out / "model.json", encoding="utf-8") as f:
+        training = json.load(f)["training"]
+    assert training["best_iteration"] is None and training["best_val_mean_error"] is None
+    assert training["val_samples"] == 0
+    # augsim reads it as one of its own trained without validation.
+    text = run_augsim("eval", out / "model.json", data, "--out", out / "eval")
+    assert "held out   10 of 40 samples" in text
 
 
 def test_a_resumed_run_ends_where_an_uninterrupted_one_does(data, tmp_path):
