@@ -128,19 +128,16 @@ fn tangent_matches_finite_difference_of_internal_force() {
 #[test]
 fn rigid_rotation_produces_no_internal_force() {
     let rot = Rotation3::from_euler_angles(0.7, -0.4, 1.1);
+    // The displacement that turns mesh `m` rigidly by `rot` about the origin.
+    let rotated = |m: &Mesh| -> Vec<f64> {
+        m.nodes.iter().flat_map(|p| (rot * Vector3::from(*p) - Vector3::from(*p)).data.0[0]).collect()
+    };
     for kind in KINDS {
         for (law, form) in
             [Law::Corotational, Law::Svk, Law::NeoHookean].into_iter().flat_map(|l| FORMULATIONS.map(|f| (l, f)))
         {
             let m = distorted(kind, 2);
-            let u: Vec<f64> = m
-                .nodes
-                .iter()
-                .flat_map(|p| {
-                    let x = Vector3::from(*p);
-                    (rot * x - x).data.0[0]
-                })
-                .collect();
+            let u = rotated(&m);
             let material = Material::new(law, 5000.0, 0.45).with_formulation(form);
             let mut solver = StaticSolver::new(Problem::new(m, material)).unwrap();
             let f = solver.internal_force(&u).unwrap();
@@ -149,14 +146,7 @@ fn rigid_rotation_produces_no_internal_force() {
         }
         // The linear law is not rotation invariant: the same test must see forces.
         let m = distorted(kind, 2);
-        let u: Vec<f64> = m
-            .nodes
-            .iter()
-            .flat_map(|p| {
-                let x = Vector3::from(*p);
-                (rot * x - x).data.0[0]
-            })
-            .collect();
+        let u = rotated(&m);
         let mut solver = StaticSolver::new(Problem::new(m, Material::new(Law::Linear, 5000.0, 0.45))).unwrap();
         let f = solver.internal_force(&u).unwrap();
         assert!(f.iter().fold(0.0f64, |a, b| a.max(b.abs())) > 1.0);
