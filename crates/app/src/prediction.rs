@@ -24,7 +24,14 @@ pub fn predict_file(
     runs: usize,
     compute: Compute,
 ) -> Result<Vec<String>> {
+    let vtu = mesh_path.map(|_| output.with_extension("vtu"));
     let model = Model::load(model_path)?;
+    let written: Vec<std::path::PathBuf> =
+        [Some(output.to_path_buf()), matches!(model, Model::Reduced(_)).then(|| sigma_path(output)), vtu.clone()]
+            .into_iter()
+            .flatten()
+            .collect();
+    check_distinct(&written, &[input].into_iter().chain(mesh_path).collect::<Vec<_>>())?;
     let g = model.grid();
     let read = PredictInput::read(input)?;
     let points = match &read {
@@ -80,12 +87,30 @@ pub fn predict_file(
         ));
         lines.push(format!("wrote      {}", path.display()));
     }
-    if let Some((organ, fields, line)) = on_mesh {
-        let vtu = output.with_extension("vtu");
+    if let (Some((organ, fields, line)), Some(vtu)) = (on_mesh, vtu) {
         mesh::io::write_mesh(&vtu, &organ, &fields).with_context(|| format!("writing {}", vtu.display()))?;
         lines.extend([line, format!("wrote      {}", vtu.display())]);
     }
     Ok(lines)
+}
+
+/// Refuses files to write that would overwrite one another or a file read (`-o organ.npy --mesh
+/// organ.vtu` writes the mesh's fields to `organ.vtu`).
+fn check_distinct(written: &[std::path::PathBuf], read: &[&Path]) -> Result<()> {
+    let key = |p: &Path| std::fs::canonicalize(p).or_else(|_| std::path::absolute(p)).unwrap_or_else(|_| p.into());
+    for (i, w) in written.iter().enumerate() {
+        if let Some(other) =
+            read.iter().copied().chain(written[..i].iter().map(|p| p.as_path())).find(|o| key(o) == key(w))
+        {
+            anyhow::bail!(
+                "{} would be written over {}: give another --output (the tensor's name also names the σ and mesh \
+                 files written beside it)",
+                w.display(),
+                other.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Where `predict` writes the predicted standard deviation beside its `output` tensor:

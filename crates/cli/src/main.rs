@@ -123,7 +123,7 @@ enum Command {
         /// Output tensor (.npy [3, nx, ny, nz], m); a model that predicts its standard deviation
         /// (a reduced-order model) writes it beside, as NAME_sigma.npy ([nx, ny, nz], m), and on
         /// --mesh as the point field sigma.
-        #[arg(short, long, default_value = "out/prediction.npy")]
+        #[arg(short, long, default_value = "out/prediction.npy", value_parser = extension_of(&["npy"]))]
         output: PathBuf,
         /// Also interpolate the displacement to this volume mesh's nodes (same frame as the
         /// training mesh) and write it beside the output as .vtu.

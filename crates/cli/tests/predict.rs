@@ -351,6 +351,21 @@ fn the_shipped_rom_predicts_on_the_phantom_mesh() {
     );
     assert!(e.contains("no.vtu"), "{e}");
     assert!(!d.join("x.npy").exists() && !d.join("x_sigma.npy").exists(), "a failed prediction writes nothing");
+    // A tensor named as the mesh would write the mesh's fields over the mesh read, and a tensor
+    // named as its σ file over itself: refused, nothing written; an output not .npy, by the parser.
+    let rom = format!("{models}/liver_forces_rom");
+    let before = std::fs::read(d.join("organ.vtu")).unwrap();
+    let e = augsim_err(&["predict", &rom, "forces.csv", "--mesh", "organ.vtu", "-o", "organ.npy"], d);
+    assert!(e.contains("organ.vtu would be written over organ.vtu"), "{e}");
+    assert_eq!(std::fs::read(d.join("organ.vtu")).unwrap(), before, "the mesh read is left as it was");
+    assert!(!d.join("organ.npy").exists() && !d.join("organ_sigma.npy").exists(), "nothing written");
+    let cloud = [0.0097f32, -0.0701, -0.0136, 0.0, 0.5, 0.0];
+    mesh::io::npy::write_f32(&d.join("p_sigma.npy"), &[1, 6], &cloud).unwrap();
+    let e = augsim_err(&["predict", &rom, "p_sigma.npy", "-o", "p.npy"], d);
+    assert!(e.contains("p_sigma.npy would be written over p_sigma.npy"), "{e}");
+    assert!(!d.join("p.npy").exists(), "nothing written");
+    let e = augsim_err(&["predict", &rom, "forces.csv", "--mesh", "organ.vtu", "-o", "pred.vtu"], d);
+    assert!(e.contains("expected a file ending in .npy"), "{e}");
 }
 
 /// The shipped scenario-1 network (`models/liver_forces`, trained on the built-in
