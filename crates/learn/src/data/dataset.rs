@@ -945,9 +945,27 @@ pub(crate) struct WriterLock {
 
 impl Drop for WriterLock {
     fn drop(&mut self) {
-        // Still held: no other writer opens the folder while the file goes. A file left behind
-        // (unlikely: the folder is writable) only keeps its name.
+        // Removed while still locked: a writer that opened it before and locks it after finds
+        // the name gone or another file's, and opens anew ([`lock_for_writing`]). A file left
+        // behind (unlikely: the folder is writable) only keeps its name.
         let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// Whether `path` still names the open `file` (a lock taken on a file whose name another writer
+/// removed in between locks nothing anyone else sees).
+fn names_file(path: &Path, file: &std::fs::File) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        match (std::fs::metadata(path), file.metadata()) {
+            (Ok(a), Ok(b)) => (a.dev(), a.ino()) == (b.dev(), b.ino()),
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        path.exists() && file.metadata().is_ok()
     }
 }
 
@@ -957,20 +975,31 @@ impl Drop for WriterLock {
 /// who writes there and why a second is refused. The lock ends with the writer's process.
 pub(crate) fn lock_for_writing(dir: &Path, writers: &str) -> Result<WriterLock> {
     let path = dir.join(WRITER_LOCK);
-    let file = std::fs::OpenOptions::new()
-        .create(true)
-        .truncate(false)
-        .write(true)
-        .open(&path)
-        .map_err(|e| LearnError::io(&path, e))?;
-    match file.try_lock() {
-        Ok(()) => Ok(WriterLock { path, _file: file }),
-        Err(std::fs::TryLockError::WouldBlock) => Err(LearnError::InvalidInput(format!(
-            "{} is being written by another run {writers}; wait for it to end, or stop it",
-            dir.display()
-        ))),
-        Err(std::fs::TryLockError::Error(e)) => Err(LearnError::io(&path, e)),
+    // A writer ending between this open and this lock removes the name: the lock then holds a
+    // file no one else opens, and is taken again on the file now named so.
+    for _ in 0..100 {
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(&path)
+            .map_err(|e| LearnError::io(&path, e))?;
+        match file.try_lock() {
+            Ok(()) if names_file(&path, &file) => return Ok(WriterLock { path, _file: file }),
+            Ok(()) => continue,
+            Err(std::fs::TryLockError::WouldBlock) => {
+                return Err(LearnError::InvalidInput(format!(
+                    "{} is being written by another run {writers}; wait for it to end, or stop it",
+                    dir.display()
+                )))
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(LearnError::io(&path, e)),
+        }
     }
+    Err(LearnError::InvalidInput(format!(
+        "{}: its {WRITER_LOCK} is removed as fast as it is made; is another program clearing the folder?",
+        dir.display()
+    )))
 }
 
 /// Why `dataset` does not take the draws of `spec` (`refused`: what is refused), as an error on its
@@ -1326,4 +1355,51 @@ pub fn merge_datasets(parts: &[PathBuf], out: &Path, shard_size: Option<usize>) 
         }
     }
     writer.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    /// Writers taking and ending the lock as fast as they can never hold it two at a time: one
+    /// that locked a file whose name the writer before it removed takes the lock again (without
+    /// that, two writers held the folder at once in each of two runs, within a second).
+    #[test]
+    fn one_writer_holds_a_folder_at_a_time() {
+        let dir = tempfile::tempdir().unwrap();
+        let holders = AtomicUsize::new(0);
+        let (taken, most) = (AtomicUsize::new(0), AtomicUsize::new(0));
+        std::thread::scope(|scope| {
+            for _ in 0..4 {
+                scope.spawn(|| {
+                    for _ in 0..20000 {
+                        if let Ok(lock) = lock_for_writing(dir.path(), "(a test)") {
+                            let now = holders.fetch_add(1, Ordering::SeqCst) + 1;
+                            most.fetch_max(now, Ordering::SeqCst);
+                            taken.fetch_add(1, Ordering::SeqCst);
+                            std::thread::yield_now();
+                            holders.fetch_sub(1, Ordering::SeqCst);
+                            drop(lock);
+                        }
+                    }
+                });
+            }
+        });
+        assert!(taken.load(Ordering::SeqCst) > 0, "no writer ever took the lock");
+        assert_eq!(most.load(Ordering::SeqCst), 1, "two writers held the folder at once");
+    }
+
+    /// A lock file opened before its name was removed is no longer the one the name gives.
+    #[test]
+    fn a_removed_lock_file_is_not_the_folder_s() {
+        let dir = tempfile::tempdir().unwrap();
+        let lock = lock_for_writing(dir.path(), "(a test)").unwrap();
+        let opened = std::fs::File::open(dir.path().join(WRITER_LOCK)).unwrap();
+        assert!(names_file(&dir.path().join(WRITER_LOCK), &opened));
+        drop(lock);
+        assert!(!names_file(&dir.path().join(WRITER_LOCK), &opened), "the name is gone");
+        let _again = lock_for_writing(dir.path(), "(a test)").unwrap();
+        assert!(!names_file(&dir.path().join(WRITER_LOCK), &opened), "the name is another file's");
+    }
 }
