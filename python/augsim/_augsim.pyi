@@ -31,6 +31,13 @@ def dataset_split(
 
 CANDIDATE_BASE: int
 
+def weights_digest(path: _Path) -> str: ...
+
+class ModelFolderLock:
+    def release(self) -> None: ...
+
+def lock_model_folder(out: _Path) -> ModelFolderLock: ...
+
 class Registered:
     targets: npt.NDArray[np.float64]
     displacement: npt.NDArray[np.float64]

@@ -37,7 +37,7 @@ try:
 except ImportError as e:
     raise SystemExit('python -m augsim.train needs PyTorch: pip install "./python[torch]" (python/README.md)') from e
 
-from ._augsim import CANDIDATE_BASE, AugsimError, dataset_split
+from ._augsim import CANDIDATE_BASE, AugsimError, dataset_split, lock_model_folder, weights_digest
 from .torch import MODEL_FORMAT, MODEL_VERSION, UNet
 
 # augsim's bounds on a U-Net (crates/learn/src/net/unet.rs, UNetConfig::validate).
@@ -156,7 +156,7 @@ def write_atomic(path, data):
     os.replace(tmp, path)
 
 
-def model_json(args, manifest, config, scales, best, split):
+def model_json(args, manifest, config, scales, best, split, digest):
     metadata = manifest.get("metadata") or {}
     placement = None
     if "grid_origin" in metadata and "grid_spacing" in metadata:
@@ -172,6 +172,7 @@ def model_json(args, manifest, config, scales, best, split):
         "input_unit": manifest["units"]["input"],
         "target_unit": manifest["units"]["target"],
         "weights": "model.safetensors",
+        "weights_digest": digest,
         "training": {
             "iterations": args.iterations,
             # Without validation nothing chose the weights: the last step's are kept.
@@ -283,7 +284,11 @@ def main(argv=None):
     model = torch.nn.parallel.DistributedDataParallel(net, device_ids=[device] if device.type == "cuda" else None) \
         if distributed else net
     optimiser = torch.optim.Adam(net.parameters(), lr=args.lr, betas=(0.9, 0.999), eps=1e-5)
-    os.makedirs(args.out, exist_ok=True)
+    if rank == 0:
+        try:
+            folder = lock_model_folder(args.out)  # a second training into --out is refused while this one runs
+        except AugsimError as e:
+            p.error(str(e))
     checkpoint_path = os.path.join(args.out, "checkpoint.pt")
     start, best = 0, {"iteration": 0, "error": None, "state": None}
     if os.path.exists(checkpoint_path):
@@ -330,15 +335,18 @@ def main(argv=None):
                 os.replace(checkpoint_path + ".tmp", checkpoint_path)
     if rank == 0:
         weights = {k: v.numpy() for k, v in (best["state"] or net.state_dict()).items()}
-        write_safetensors(os.path.join(args.out, "model.safetensors"), weights)
+        weights_path = os.path.join(args.out, "model.safetensors")
+        write_safetensors(weights_path, weights)
         split = {"train_samples": len(train), "val_samples": len(val), "record": record}
-        text = json.dumps(model_json(args, manifest, config, scales, best, split), indent=2)
+        text = json.dumps(model_json(args, manifest, config, scales, best, split, weights_digest(weights_path)),
+                          indent=2)
         write_atomic(os.path.join(args.out, "model.json"), text.encode("utf-8"))
         if best["error"] is None:
             say("kept       the last iteration's weights (no validation sample chose them)")
         else:
             say(f"best       validation ē {best['error'] * 1e3:.4f} mm at step {best['iteration']}")
         say(f"wrote      {os.path.join(args.out, 'model.json')}")
+        folder.release()
     if distributed:
         torch.distributed.destroy_process_group()
     return 0

@@ -8,6 +8,8 @@ On a small `augsim generate beam_target` dataset:
 - `augsim eval` evaluates it on its recorded test samples only;
 - a killed run resumes from its checkpoint to the same weights as an uninterrupted one;
 - without validation samples no step is recorded as chosen (`best_iteration` null), as augsim records it;
+- augsim refuses its weights once a byte changed (the digest it records), and while one training
+  holds the model folder a second, of either trainer, is refused;
 - options and datasets it cannot use are refused in one line, before any training.
 
 Run: pip install "./python[torch,test]", then python -m pytest -s python/tests/test_train.py from
@@ -23,10 +25,11 @@ import sys
 import numpy as np
 import pytest
 
-from helpers import run_augsim
+from helpers import augsim_bin, run_augsim
 
 torch = pytest.importorskip("torch", reason='training with PyTorch needs torch: pip install "./python[torch]"')
 from augsim.torch import load, predict, read_safetensors  # noqa: E402
+from augsim._augsim import lock_model_folder  # noqa: E402
 from augsim.train import main, read_dataset  # noqa: E402
 
 SPLIT = ["--validation-samples", "6", "--test-samples", "10"]
@@ -101,6 +104,28 @@ def test_without_validation_no_step_is_said_to_be_chosen(data, tmp_path, capsys)
     # augsim reads it as one of its own trained without validation.
     text = run_augsim("eval", out / "model.json", data, "--out", out / "eval")
     assert "held out   10 of 40 samples" in text
+
+
+def test_its_weights_are_checked_and_its_folder_held_as_augsim_s(data, tmp_path, capsys):
+    out = tmp_path / "held"
+    train(data, out, "--iterations", "5")
+    # augsim refuses the weights once a byte of them changed (the digest model.json records).
+    weights = bytearray((out / "model.safetensors").read_bytes())
+    weights[-1] ^= 0x40
+    (out / "model.safetensors").write_bytes(bytes(weights))
+    r = subprocess.run([augsim_bin(), "eval", str(out / "model.json"),
+                        str(data), "--out", str(tmp_path / "eval")], capture_output=True, text=True)
+    assert r.returncode != 0 and "is not the weights it describes" in r.stderr, r.stderr
+    # While one training holds the folder, a second, of either trainer, is refused.
+    folder = lock_model_folder(out)
+    with pytest.raises(SystemExit):
+        main([str(data), "--out", str(out), "--iterations", "5", "--device", "cpu", *SPLIT])
+    assert "is being written by another run" in capsys.readouterr().err
+    r = subprocess.run([augsim_bin(), "train", str(data), "--out",
+                        str(out), "--iterations", "5", *SPLIT], capture_output=True, text=True)
+    assert r.returncode != 0 and "is being written by another run" in r.stderr, r.stderr
+    folder.release()
+    assert train(data, out, "--iterations", "6")["training"]["iterations"] == 6, "released, the folder is written"
 
 
 def test_a_resumed_run_ends_where_an_uninterrupted_one_does(data, tmp_path):

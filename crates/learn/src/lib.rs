@@ -44,7 +44,7 @@ pub use data::chosen::{ChoiceRecipe, ChosenDraws, ChosenRound, CANDIDATE_BASE};
 pub use data::corrupt::{nonzero_nodes, Corruption, Sparsity};
 pub use data::dataset::{
     json_differences, merge_datasets, Dataset, DatasetPart, DatasetSpec, DatasetWriter, FailedSample, FieldUnit,
-    Manifest, Normalization, Sample, Samples, ShardInfo, Statistics, MANIFEST_FILE,
+    Manifest, Normalization, Sample, Samples, ShardInfo, Statistics, WriterLock, MANIFEST_FILE,
 };
 pub use data::grid::{encode_points, GridMesh, GridPlacement, GridShape, GridToMesh, CHANNELS, LAYOUT};
 pub use data::split::{IndexSet, Split, SplitPolicy};
@@ -53,7 +53,7 @@ pub use model::{LearnedModel, Method, Model, ModelPredictor, Projected, MODEL_FI
 pub use net::compute::Compute;
 pub use net::inference::InferenceNet;
 pub use net::predict::{time_prediction, Predictor, Timing};
-pub use net::unet::{Gradients, Schedule, TrainedModel, TrainingInfo, UNet, UNetConfig};
+pub use net::unet::{weights_digest, Gradients, Schedule, TrainedModel, TrainingInfo, UNet, UNetConfig};
 pub use points::{PointCloud, PredictInput};
 pub use progress::{Progress, Silent};
 pub use training::curve::CurveRow;
@@ -61,7 +61,7 @@ pub use training::evaluation::{
     evaluate, evaluate_at_points, evaluation_input, uncertainty_coverage, write_grid_sample, PointErrors,
 };
 pub use training::metrics::{ErrorStats, EvalReport};
-pub use training::train::{train, Initialization, TrainConfig, TrainOptions, TrainOutcome};
+pub use training::train::{take_model_folder, train, Initialization, TrainConfig, TrainOptions, TrainOutcome};
 
 /// Result type of this crate.
 pub type Result<T> = std::result::Result<T, LearnError>;

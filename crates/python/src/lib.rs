@@ -649,6 +649,37 @@ fn dataset_split(
     })
 }
 
+/// The digest of the weights file at `path` that a U-Net's model.json records as
+/// `weights_digest` (augsim refuses weights whose digest differs). Raises AugsimError for an
+/// unreadable file.
+#[pyfunction]
+fn weights_digest(py: Python<'_>, path: PathBuf) -> PyResult<String> {
+    compute(py, || {
+        let bytes = std::fs::read(&path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        Ok(learn::weights_digest(&bytes))
+    })
+}
+
+/// A training's hold on its model folder ([`lock_model_folder`]), until `release()` or its end.
+#[pyclass(module = "augsim")]
+struct ModelFolderLock(Option<learn::WriterLock>);
+
+#[pymethods]
+impl ModelFolderLock {
+    /// Lets another training write the folder.
+    fn release(&mut self) {
+        self.0 = None;
+    }
+}
+
+/// Makes the model folder `out` and holds it for one training, as `augsim train` does: a second
+/// training there (of either) is refused while this one holds it. Raises AugsimError where
+/// another training holds it or the folder cannot be made.
+#[pyfunction]
+fn lock_model_folder(py: Python<'_>, out: PathBuf) -> PyResult<ModelFolderLock> {
+    compute(py, || Ok(ModelFolderLock(Some(learn::take_model_folder(&out)?))))
+}
+
 /// Reads an intraoperative cloud file as `augsim register` does: CSV with a header naming x, y, z
 /// (or x_mm, …), 3D Slicer's .fcsv or .mrk.json, .npy [N, 3], or the points of a .ply, .vtk, .vtp,
 /// .vtu, .stl or .obj file. Returns float64 [N, 3] in `units` ("m", "cm", "mm" or "um"), in the
@@ -842,11 +873,14 @@ fn _augsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(predict, m)?)?;
     m.add_function(wrap_pyfunction!(read_cloud, m)?)?;
     m.add_function(wrap_pyfunction!(dataset_split, m)?)?;
+    m.add_function(wrap_pyfunction!(weights_digest, m)?)?;
+    m.add_function(wrap_pyfunction!(lock_model_folder, m)?)?;
     m.add("CANDIDATE_BASE", learn::CANDIDATE_BASE)?;
     m.add_class::<Solution>()?;
     m.add_class::<Registration>()?;
     m.add_class::<Registered>()?;
     m.add_class::<Assimilation>()?;
     m.add_class::<Estimate>()?;
+    m.add_class::<ModelFolderLock>()?;
     Ok(())
 }

@@ -938,7 +938,7 @@ const DATASET_WRITERS: &str = "(`augsim generate`, a cluster's shard): two write
 
 /// A folder held by one writer ([`lock_for_writing`]); its [`WRITER_LOCK`] file goes when this
 /// is dropped.
-pub(crate) struct WriterLock {
+pub struct WriterLock {
     path: PathBuf,
     _file: std::fs::File,
 }

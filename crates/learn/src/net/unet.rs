@@ -553,9 +553,9 @@ struct ModelFile {
     training: Option<TrainingInfo>,
 }
 
-/// A digest of a weights file's bytes (SplitMix64 over its 8-byte words, in hex): not for
-/// security, to tell one file from another.
-fn weights_digest(bytes: &[u8]) -> String {
+/// A digest of a weights file's bytes (SplitMix64 over its 8-byte words, in hex), recorded in
+/// `model.json` as `weights_digest`: not for security, to tell one file from another.
+pub fn weights_digest(bytes: &[u8]) -> String {
     let digest = bytes.chunks(8).fold(splitmix64(bytes.len() as u64), |h, word| {
         let mut padded = [0u8; 8];
         padded[..word.len()].copy_from_slice(word);

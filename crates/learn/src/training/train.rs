@@ -550,7 +550,7 @@ pub fn train(
     check_unseen_by_pretraining(&split, &start.pretraining)?;
     // Made once the settings are known to build a network: a refused run leaves no folder.
     let out = &options.out_dir;
-    let _lock = take_folder(out)?;
+    let _lock = take_model_folder(out)?;
     let mut adam = Adam::new(net.values().len());
     let mut state = CheckpointState::new(config, fingerprint(train, val, init, config)?);
     let mut best: Option<UNet> = None;
@@ -645,10 +645,10 @@ pub fn train(
     })
 }
 
-/// Makes the run's folder `out` and locks it for this run, until the lock drops (a second run
-/// there is refused); what a killed run left half-written there goes: the run resumes from its
-/// last checkpoint.
-fn take_folder(out: &Path) -> Result<WriterLock> {
+/// Makes a training's folder `out` and locks it for this run, until the lock drops (a second run
+/// there, of `augsim train` or `python -m augsim.train`, is refused); what a killed run left
+/// half-written there goes: the run resumes from its last checkpoint.
+pub fn take_model_folder(out: &Path) -> Result<WriterLock> {
     mesh::io::create_folder(out)?;
     let lock = lock_for_writing(out, TRAINERS)?;
     mesh::io::remove_stale_temporaries(out);
@@ -656,7 +656,7 @@ fn take_folder(out: &Path) -> Result<WriterLock> {
 }
 
 /// Who writes a model's folder, and why a second writer is refused (see [`lock_for_writing`]).
-const TRAINERS: &str = "(`augsim train`): two trainings would mix their checkpoints, and one's model would replace \
+const TRAINERS: &str = "(`augsim train`, `python -m augsim.train`): two trainings would mix their checkpoints, and one's model would replace \
                         the other's";
 
 /// Everything that shapes the trajectory, so that a checkpoint is only resumed into the run it
