@@ -37,6 +37,7 @@ them on the grid with augsim first.
 Command line: ``python -m augsim.torch MODEL_DIR INPUT.npy OUTPUT.npy``.
 """
 
+import io
 import json
 import math
 import os
@@ -58,6 +59,16 @@ MODEL_VERSION = 1
 MAX_FIELD_VALUE = np.float32(1e6)
 
 _DTYPES = {"F32": "<f4", "F64": "<f8", "F16": "<f2", "BF16": "<u2"}
+
+
+def write_atomic(path, data):
+    """Writes the bytes `data` to `path` whole or not at all (a temporary beside it, then renamed)."""
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
 
 
 def read_safetensors(path):
@@ -282,7 +293,9 @@ def main(argv=None):
                 out = predict(model, np.load(f))
             except ValueError as e:
                 raise ValueError(f"{argv[1]}: {e}") from e
-        np.save(argv[2], out)
+        buffer = io.BytesIO()
+        np.save(buffer, out)
+        write_atomic(argv[2], buffer.getvalue())
     except OSError as e:
         print(f"error: {e.filename}: {e.strerror}" if e.filename and e.strerror else f"error: {e}", file=sys.stderr)
         return 1

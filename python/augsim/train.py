@@ -38,7 +38,7 @@ except ImportError as e:
     raise SystemExit('python -m augsim.train needs PyTorch: pip install "./python[torch]" (python/README.md)') from e
 
 from ._augsim import CANDIDATE_BASE, AugsimError, dataset_split, lock_model_folder, weights_digest
-from .torch import MODEL_FORMAT, MODEL_VERSION, UNet
+from .torch import MODEL_FORMAT, MODEL_VERSION, UNet, write_atomic
 
 # augsim's bounds on a U-Net (crates/learn/src/net/unet.rs, UNetConfig::validate).
 MAX_CHANNELS = 4096
@@ -145,15 +145,6 @@ def write_safetensors(path, tensors):
     text = json.dumps(header, separators=(",", ":")).encode("utf-8")
     text += b" " * (-len(text) % 8)
     write_atomic(path, struct.pack("<Q", len(text)) + text + b"".join(blobs))
-
-
-def write_atomic(path, data):
-    tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
 
 
 def model_json(args, manifest, config, scales, best, split, digest):

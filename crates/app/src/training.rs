@@ -545,3 +545,21 @@ pub fn rom_lines(model: &ReducedModel, report: &RomReport) -> Vec<String> {
     lines.push(format!("time       {:.1} s", info.seconds));
     lines
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::Args;
+
+    /// The defaults `--channels` and `--depth` say in their help are the network's own.
+    #[test]
+    fn the_help_names_the_network_s_default_shape() {
+        let command = super::TrainArgs::augment_args(clap::Command::new("train"));
+        let help = |id: &str| {
+            let arg = command.get_arguments().find(|a| a.get_id() == id).unwrap();
+            arg.get_help().unwrap().to_string()
+        };
+        let default = learn::UNetConfig::default();
+        assert!(help("channels").contains(&format!("[default: {};", default.base_channels)), "{}", help("channels"));
+        assert!(help("depth").contains(&format!("[default: {};", default.depth)), "{}", help("depth"));
+    }
+}

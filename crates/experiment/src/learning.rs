@@ -30,9 +30,7 @@ impl Generated {
             n => format!(" ({n} of {} draws without a solution, left out)", manifest.num_samples + n),
         }
     }
-}
 
-impl Generated {
     /// What the data are, from the scenario itself: its description, material and, for a
     /// displacement input on a sparse sub-domain, the range of observed nodes.
     pub fn note(&self) -> String {

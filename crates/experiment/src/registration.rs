@@ -454,7 +454,6 @@ impl MethodTre {
     }
 }
 
-/// The note on the registration cases.
 /// The one registration rule compared on held-out cases, said wherever those cases are said to have
 /// played no part in the settings.
 pub(crate) const RULE_COMPARED_ON_HELD_OUT: &str = "one rule was compared on held-out cases: the FEM's \
@@ -462,6 +461,7 @@ pub(crate) const RULE_COMPARED_ON_HELD_OUT: &str = "one rule was compared on hel
     `docs/method.md` § 6.2), on the 2.5 N right-lobe press of `augsim experiment liver-ar` and on the cases of \
     `augsim experiment held-out`";
 
+/// The note on the registration cases.
 fn cases_note(builtin: &CaseScenario) -> String {
     format!(
         "Registration cases: register_case's truth ({} phantom of {}, \

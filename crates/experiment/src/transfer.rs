@@ -264,7 +264,7 @@ impl Runs {
         };
         vec![
             format!(
-                "BC4 and target: {samples} samples each{}, split by generation index into {train_n} training, \
+                "BC4 and target: {samples} draws each{}, split by generation index into {train_n} training, \
                  {validation_n} validation (checkpoint selection only) and {test_n} test samples; the {few_n}-sample \
                  runs use the first {few_n} target training samples. Every figure above is on the target's {test_n} test samples (BC4's own \
                  row: BC4's), which played no part in training or selection.",

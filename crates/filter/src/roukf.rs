@@ -287,7 +287,7 @@ const REACH: f64 = 3.0;
 /// The last frames a misfit is measured over with `p` parameters: 20,000 (over 13 minutes of a stream at 25 Hz),
 /// fewer with many parameters, so that they hold at most 4 million numbers.
 fn misfit_frames(p: usize) -> usize {
-    (4_000_000 / (2 * p * p + 2 * p + 3)).clamp(1, 20_000)
+    (4_000_000 / (2 * p * p + 3 * p + 3)).clamp(1, 20_000)
 }
 
 impl Misfit {
@@ -810,8 +810,9 @@ impl<M: Model> Roukf<M> {
     }
 
     /// With a discrepancy allowance ([`Roukf::with_discrepancy`]) and at least one frame: the reduced misfit
-    /// `χ²(θ̂)/ν` of all frames at the current estimate (about 1 when the model and the nominal noise are right; its
-    /// square root times σ_obs is the effective observation noise).
+    /// `χ²(θ̂)/ν` at the current estimate of the frames whose sigma points came near it (the last 20,000 at most;
+    /// about 1 when the model and the nominal noise are right; its square root times σ_obs is the effective
+    /// observation noise).
     pub fn misfit(&self) -> Option<f64> {
         self.misfit.as_ref().and_then(|m| m.reduced_chi_squared(&self.theta))
     }

@@ -114,8 +114,8 @@ pub struct YoungReport {
     /// (Pa), while `std` includes the allowance.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub noise_std: Option<f64>,
-    /// With a model-discrepancy allowance: the final reduced misfit χ²/ν of all frames (1 when the model and the
-    /// nominal noise are right).
+    /// With a model-discrepancy allowance: the final reduced misfit χ²/ν of the frames whose sigma points came near
+    /// the final estimate (the last 20,000 at most; 1 when the model and the nominal noise are right).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub misfit: Option<f64>,
 }

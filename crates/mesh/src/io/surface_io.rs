@@ -119,10 +119,11 @@ pub fn read_stl(path: impl AsRef<Path>) -> Result<TriSurface, MeshError> {
 /// [`read_stl`], with what a user should know of the file as read. A file starting with `solid`
 /// is text unless it is a binary STL whose size its header's count gives exactly (binary headers
 /// may start with `solid` too); one whose text does not parse is binary unless it reads as text.
-/// A binary STL is read for the whole 50-byte records its size holds after the 84-byte header, as
-/// VTK (3D Slicer) reads it, with a warning where its header's count says otherwise (exporters
-/// write 0) or bytes follow its last record; one holding fewer records than its count is cut
-/// short, an error.
+/// A binary STL whose size after the 84-byte header is a whole number of 50-byte records is read
+/// for the records its size holds, as VTK (3D Slicer) reads it, with a warning where its header's
+/// count says otherwise (exporters write 0); where part of a record trails, for its header's count
+/// (a warning: the bytes after them ignored), and not at all where that count is 0 (another file,
+/// or one cut short). One holding fewer records than its count is cut short, an error.
 pub(super) fn read_stl_noting(path: &Path) -> Result<(TriSurface, Vec<String>), MeshError> {
     let bytes = read_bytes(path)?;
     let declared = bytes.get(80..84).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
