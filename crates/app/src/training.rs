@@ -236,10 +236,10 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
     // A U-Net's run resumes from its checkpoint; a reduced-order model's fit is made anew, and
     // would replace the model there.
     let other = match args.method {
-        Method::Rom => {
-            ["model.safetensors", "checkpoint.bin", learn::MODEL_FILE].into_iter().find(|f| args.out.join(f).exists())
-        }
-        Method::UNet => Some("basis.npy").filter(|f| args.out.join(f).exists()),
+        Method::Rom => [learn::WEIGHTS_FILE, learn::training::train::CHECKPOINT_FILE, learn::MODEL_FILE]
+            .into_iter()
+            .find(|f| args.out.join(f).exists()),
+        Method::UNet => Some(learn::rom::BASIS_FILE).filter(|f| args.out.join(f).exists()),
     };
     if let Some(file) = other {
         let (held, this) = match args.method {

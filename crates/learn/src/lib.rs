@@ -49,7 +49,7 @@ pub use data::dataset::{
 pub use data::grid::{encode_points, GridMesh, GridPlacement, GridShape, GridToMesh, CHANNELS, LAYOUT};
 pub use data::split::{IndexSet, Split, SplitPolicy};
 pub use error::LearnError;
-pub use model::{LearnedModel, Method, Model, ModelPredictor, Projected, MODEL_FILE};
+pub use model::{LearnedModel, Method, Model, ModelPredictor, Projected, MODEL_FILE, WEIGHTS_FILE};
 pub use net::compute::Compute;
 pub use net::inference::InferenceNet;
 pub use net::predict::{time_prediction, Predictor, Timing};

@@ -21,6 +21,8 @@ use crate::{Compute, LearnError, Result};
 
 /// The file of a model directory that describes the model.
 pub const MODEL_FILE: &str = "model.json";
+/// The file of a U-Net's weights beside its [`MODEL_FILE`], as `augsim train` writes it.
+pub const WEIGHTS_FILE: &str = "model.safetensors";
 
 /// A learned model: the U-Net or the reduced-order model.
 #[derive(Clone, Debug)]

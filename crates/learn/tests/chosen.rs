@@ -1,12 +1,15 @@
 //! σ-chosen draws: the highest-σ candidates are chosen, never held out, the uniform draws stay
 //! those of a uniform dataset, and an interrupted run resumes to the same dataset.
 
+mod common;
+
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
 
 use augsim_learn::data::generate::{DatasetConfig, Generator, Input, Load};
 use augsim_learn::rom::{fit, Context, ReducedModel, RomConfig};
-use augsim_learn::{merge_datasets, ChoiceRecipe, Dataset, Progress, Silent, SplitPolicy, CANDIDATE_BASE, MODEL_FILE};
+use augsim_learn::{merge_datasets, ChoiceRecipe, Dataset, Silent, SplitPolicy, CANDIDATE_BASE, MODEL_FILE};
+use common::Lines;
 use fem::{Law, Material, SolverOptions};
 use mesh::NodeSelection;
 
@@ -81,17 +84,6 @@ fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
     }
     out.sort();
     out
-}
-
-/// A progress that keeps the lines it is told.
-#[derive(Default)]
-struct Lines(std::sync::Mutex<Vec<String>>);
-
-impl Progress for Lines {
-    fn advance(&self, _: u64, _: u64, _: &str) {}
-    fn line(&self, text: &str) {
-        self.0.lock().unwrap().push(text.to_string());
-    }
 }
 
 #[test]

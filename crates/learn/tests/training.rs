@@ -10,7 +10,7 @@ use augsim_learn::{
     Initialization, Normalization, Predictor, Samples, Silent, Sparsity, TrainConfig, TrainOptions, TrainedModel, UNet,
     UNetConfig,
 };
-use common::synthetic_samples;
+use common::{synthetic_samples, Lines};
 use mesh::embedding::Grid;
 
 fn grid() -> GridShape {
@@ -223,17 +223,6 @@ fn a_second_training_into_the_same_folder_is_refused_while_the_first_runs() {
     let e = second.unwrap_err().to_string();
     assert!(e.contains("net is being written by another run (`augsim train`): two trainings would mix"), "{e}");
     assert!(!root.path().join("net").join(augsim_learn::data::dataset::WRITER_LOCK).exists());
-}
-
-/// A progress that keeps the lines it is told.
-#[derive(Default)]
-struct Lines(std::sync::Mutex<Vec<String>>);
-
-impl augsim_learn::Progress for Lines {
-    fn advance(&self, _: u64, _: u64, _: &str) {}
-    fn line(&self, text: &str) {
-        self.0.lock().unwrap().push(text.to_string());
-    }
 }
 
 #[test]

@@ -64,6 +64,8 @@ pub use linalg::Kernel;
 
 /// The format name in a reduced-order model's `model.json`.
 pub const ROM_FORMAT: &str = "augsim-rom";
+/// The file of a reduced-order model's basis, in its folder.
+pub const BASIS_FILE: &str = "basis.npy";
 const ROM_VERSION: u32 = 1;
 
 /// How a reduced-order model was trained and what it chose.
@@ -371,7 +373,7 @@ impl ReducedModel {
         write_f32(&dir.join("output_mean.npy"), &[mean32.len()], &mean32)?;
         let basis32: Vec<f32> =
             (0..modes).flat_map(|j| self.basis.row(j).iter().map(|&v| v as f32).collect::<Vec<_>>()).collect();
-        write_f32(&dir.join("basis.npy"), &[modes, self.basis.ncols()], &basis32)?;
+        write_f32(&dir.join(BASIS_FILE), &[modes, self.basis.ncols()], &basis32)?;
         write_f64(&dir.join("variance_weights.npy"), &[self.nodes.len()], &self.variance_weights)?;
         write_f64(&dir.join("floor.npy"), &[self.nodes.len()], &self.floor)?;
         let file = RomFile {

@@ -4,7 +4,7 @@
 
 #![allow(dead_code)]
 
-use augsim_learn::{GridShape, Sample, Samples};
+use augsim_learn::{GridShape, Progress, Sample, Samples};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
@@ -105,4 +105,15 @@ pub fn batch_values(batch: usize, grid: GridShape) -> (Vec<f32>, Vec<f32>, Vec<f
     let (x, y) = (uniform(&mut rng, 3 * n, -1.0, 1.0), uniform(&mut rng, 3 * n, -1.0, 1.0));
     let mask = uniform(&mut rng, n, -1.0, 1.0).iter().map(|v| if *v > -0.5 { 1.0 } else { 0.0 }).collect();
     (x, y, mask)
+}
+
+/// A progress that keeps the lines it is told.
+#[derive(Default)]
+pub struct Lines(pub std::sync::Mutex<Vec<String>>);
+
+impl Progress for Lines {
+    fn advance(&self, _: u64, _: u64, _: &str) {}
+    fn line(&self, text: &str) {
+        self.0.lock().unwrap().push(text.to_string());
+    }
 }
