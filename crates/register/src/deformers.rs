@@ -278,9 +278,9 @@ impl Deformer for HybridDeformer {
         }
     }
 
-    fn uncertainty(&mut self, rest_points: &[mesh::Point], stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
+    fn uncertainty(&mut self, stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
         if self.then_estimate.is_none() {
-            return self.first.uncertainty(rest_points, stencils);
+            return self.first.uncertainty(stencils);
         }
         if let (Some(observations), Some(then)) = (self.last_observations.take(), &self.then_estimate) {
             match self.first.deform(&observations, then, crate::WARM_START_ITERATION) {
@@ -289,10 +289,10 @@ impl Deformer for HybridDeformer {
             }
         }
         let (first, then) = (self.first_estimate.as_ref()?, self.then_estimate.as_ref()?);
-        let sigma = match self.first.uncertainty(rest_points, stencils) {
+        let sigma = match self.first.uncertainty(stencils) {
             Some(Ok(sigma)) => sigma,
             Some(Err(e)) => return Some(Err(e)),
-            None => return self.then.uncertainty(rest_points, stencils),
+            None => return self.then.uncertainty(stencils),
         };
         Some(Ok(sigma
             .iter()
@@ -701,7 +701,7 @@ impl Deformer for NetworkDeformer {
 
     /// The model's σ at the organ's nodes, as its displacement is taken there (the grid nodes
     /// inside the organ only: those outside carry no σ), then at each point by its stencil.
-    fn uncertainty(&mut self, _rest_points: &[mesh::Point], stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
+    fn uncertainty(&mut self, stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
         let std = self.predictor.predict_std(self.last_input.as_ref()?).transpose()?;
         let at_nodes = std.and_then(|std| self.to_mesh.apply_channels(&std, 1)).map_err(RegisterError::from);
         Some(at_nodes.map(|at| stencils.iter().map(|s| s.0.iter().map(|&(n, w)| w * at[n]).sum()).collect()))
@@ -877,8 +877,8 @@ mod tests {
             fn deform(&mut self, _: &Observations, previous: &[f64], _: usize) -> Result<Vec<f64>> {
                 Ok(previous.iter().enumerate().map(|(k, u)| u + self.by[k % 3]).collect())
             }
-            fn uncertainty(&mut self, points: &[mesh::Point], _: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
-                self.sigma.then(|| Ok(vec![1e-3; points.len()]))
+            fn uncertainty(&mut self, stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
+                self.sigma.then(|| Ok(vec![1e-3; stencils.len()]))
             }
         }
         let organ = Organ::new(mesh::box_tet([0.0; 3], [0.04; 3], [2, 2, 2]).unwrap(), None).unwrap();
@@ -888,9 +888,8 @@ mod tests {
                 (Shift { by: [0.0, 0.0, -1e-3], sigma: true }, Shift { by: [3e-3, 0.0, 0.0], sigma: false });
             HybridDeformer::new(Box::new(first), Box::new(then), 1).unwrap()
         };
-        let points = [[0.01, 0.02, 0.03]];
         let stencils = [crate::Stencil(vec![(0, 0.5), (1, 0.5)])];
-        let sigma = |hybrid: &mut HybridDeformer| hybrid.uncertainty(&points, &stencils).map(|s| s.unwrap()[0]);
+        let sigma = |hybrid: &mut HybridDeformer| hybrid.uncertainty(&stencils).map(|s| s.unwrap()[0]);
         let rest = vec![0.0; 3 * organ.mesh().num_nodes()];
         // A frame from rest: σ after the first deformer's iteration, then at the frame's end.
         let from_rest = |hybrid: &mut HybridDeformer| {
@@ -1071,7 +1070,7 @@ mod tests {
         // (worst relative difference, its sign, the smallest and largest σ) at `points`.
         let mut compare = |points: &[mesh::Point]| -> (f64, f64, f64) {
             let stencils = organ.locate(points, "target").unwrap();
-            let reported = deformer.uncertainty(points, &stencils).unwrap().unwrap();
+            let reported = deformer.uncertainty(&stencils).unwrap().unwrap();
             let direct: Vec<f64> = points.iter().map(|p| trilinear(p).unwrap()).collect();
             let worst =
                 reported.iter().zip(&direct).map(|(r, d)| (r - d) / d).max_by(|a, b| a.abs().total_cmp(&b.abs()));

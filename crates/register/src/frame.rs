@@ -60,10 +60,10 @@ pub trait Deformer {
     /// A frame ends: `observations` are the matches of its last iteration, `u` its estimate.
     fn end_frame(&mut self, _observations: Observations, _u: &[f64]) {}
 
-    /// The predicted standard deviation (m) of the last estimate's error at `rest_points` (rest
-    /// positions inside the organ, moved by the mesh nodes of `stencils`), for a deformer that
-    /// predicts one (the learned models).
-    fn uncertainty(&mut self, _rest_points: &[Point], _stencils: &[Stencil]) -> Option<Result<Vec<f64>>> {
+    /// The predicted standard deviation (m) of the last estimate's error at the points inside the
+    /// organ that the mesh nodes of `stencils` move, for a deformer that predicts one (the learned
+    /// models).
+    fn uncertainty(&mut self, _stencils: &[Stencil]) -> Option<Result<Vec<f64>>> {
         None
     }
 }

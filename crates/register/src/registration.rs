@@ -408,7 +408,7 @@ impl Registration {
         }
         let targets = in_cloud_frame(displaced(&self.targets, &self.stencils, &registration.u), rigid.as_ref());
         // σ is part of the frame's work, and of its time (not cut by its budget).
-        let target_std = self.deformer.uncertainty(&self.targets, &self.stencils).transpose()?;
+        let target_std = self.deformer.uncertainty(&self.stencils).transpose()?;
         let target_std = target_std.map(|std| std.into_iter().map(|s| s * self.sigma_factor).collect());
         registration.time = began.elapsed();
         // A cloud only partly fitted is still the best start for the next (a stream tracks a hard

@@ -444,7 +444,7 @@ impl Deformer for ShapeDeformer {
         Ok(self.space.displacement(&self.z))
     }
 
-    fn uncertainty(&mut self, _rest_points: &[mesh::Point], stencils: &[Stencil]) -> Option<Result<Vec<f64>>> {
+    fn uncertainty(&mut self, stencils: &[Stencil]) -> Option<Result<Vec<f64>>> {
         let posterior = self.posterior.as_ref()?;
         let k = posterior.nrows();
         let mut rows = vec![vec![0.0; k]; 3];
@@ -553,7 +553,7 @@ mod tests {
             .collect();
         let options = ShapeOptions { sigma: 2e-4, schedule: vec![1, 2], ..ShapeOptions::default() };
         let mut deformer = ShapeDeformer::new(space, &organ, options).unwrap();
-        assert!(deformer.uncertainty(&[], &[]).is_none(), "no σ before a fit");
+        assert!(deformer.uncertainty(&[]).is_none(), "no σ before a fit");
         let loop_options = RegistrationOptions { view: Some([0.0, 0.0, -1.0]), iterations: 8, ..Default::default() };
         let frame = register_frame(&organ, &mut deformer, &cloud, None, &loop_options).unwrap();
         let centre = organ.mesh().nodes.iter().position(|p| p == &[0.02, 0.02, 0.02]).unwrap();
@@ -564,10 +564,10 @@ mod tests {
             "error {error:.2e} m at the centre, which moved {motion:.2e} m"
         );
         let stencil = Stencil(vec![(centre, 1.0)]);
-        let sigma = deformer.uncertainty(&[], std::slice::from_ref(&stencil)).unwrap().unwrap()[0];
+        let sigma = deformer.uncertainty(std::slice::from_ref(&stencil)).unwrap().unwrap()[0];
         let mut prior = ShapeDeformer::new(deformer.space.clone(), &organ, ShapeOptions::default()).unwrap();
         prior.posterior = Some(DMatrix::identity(3, 3));
-        let prior_sigma = prior.uncertainty(&[], &[stencil]).unwrap().unwrap()[0];
+        let prior_sigma = prior.uncertainty(&[stencil]).unwrap().unwrap()[0];
         assert!(sigma < 0.5 * prior_sigma, "σ {sigma:.2e} m after the fit, {prior_sigma:.2e} m before");
     }
 
@@ -590,7 +590,7 @@ mod tests {
         let mut sigma = Vec::new();
         for _ in 0..60 {
             let r = register_frame(&organ, &mut deformer, &cloud, last.as_deref(), &options).unwrap();
-            sigma.push(deformer.uncertainty(&[], std::slice::from_ref(&top)).unwrap().unwrap()[0]);
+            sigma.push(deformer.uncertainty(std::slice::from_ref(&top)).unwrap().unwrap()[0]);
             last = Some(r.u);
         }
         let (first, settled, last) = (sigma[0], sigma[29], sigma[59]);
@@ -628,9 +628,9 @@ mod tests {
         let error = |u: &[f64]| u.iter().zip(&truth).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         let top = Stencil(vec![(organ.mesh().nodes.iter().position(|p| p == &[0.04, 0.04, 0.04]).unwrap(), 1.0)]);
         let first = register_frame(&organ, &mut deformer, &cloud, None, &loop_options).unwrap();
-        let sigma_first = deformer.uncertainty(&[], std::slice::from_ref(&top)).unwrap().unwrap()[0];
+        let sigma_first = deformer.uncertainty(std::slice::from_ref(&top)).unwrap().unwrap()[0];
         let second = register_frame(&organ, &mut deformer, &cloud, Some(&first.u), &loop_options).unwrap();
-        let sigma_second = deformer.uncertainty(&[], &[top]).unwrap().unwrap()[0];
+        let sigma_second = deformer.uncertainty(&[top]).unwrap().unwrap()[0];
         assert!(error(&second.u) <= error(&first.u) + 1e-9, "{} then {}", error(&first.u), error(&second.u));
         // A frame from rest would give the same σ again (same cloud, same prior).
         assert!(sigma_second < 0.95 * sigma_first, "σ {sigma_first:.2e} m, then {sigma_second:.2e} m");
