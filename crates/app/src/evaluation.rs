@@ -157,12 +157,19 @@ fn evaluate_held_out(
 /// path and its modes.
 type Projection<'a> = Option<(&'a Path, usize)>;
 
+/// The model evaluated: loaded, with its path and the projection of its predictions, if any.
+struct UnderTest<'a, M> {
+    model: &'a M,
+    path: &'a Path,
+    projection: Projection<'a>,
+}
+
 /// Writes an evaluation into `out` (created): errors.csv, summary.json (with the projection,
 /// when the predictions were projected) and worst.vtu (the worst sample predicted again); returns
 /// their paths.
 fn write_evaluation(
     out: &Path,
-    (model, model_path, projection): (&impl LearnedModel, &Path, Projection),
+    UnderTest { model, path: model_path, projection }: &UnderTest<impl LearnedModel>,
     dataset: &Dataset,
     evaluation: &Evaluation,
     compute: Compute,
@@ -230,26 +237,29 @@ fn evaluate_in(
             let projected = learn::Projected::new(model, &Model::load(basis)?)?;
             let modes = projected.basis.info.modes;
             let mut lines = vec![format!("projected  on the basis of {} ({modes} modes)", basis.display())];
-            let model = (&projected, model_path, Some((basis, modes)));
+            let model = UnderTest { model: &projected, path: model_path, projection: Some((basis, modes)) };
             lines.extend(evaluate_into(model, &dataset, dataset_dir, corruption, compute, out)?);
             Ok(lines)
         }
-        None => evaluate_into((&model, model_path, None), &dataset, dataset_dir, corruption, compute, out),
+        None => {
+            let model = UnderTest { model: &model, path: model_path, projection: None };
+            evaluate_into(model, &dataset, dataset_dir, corruption, compute, out)
+        }
     }
 }
 
 /// [`eval`] for a loaded model (with its path and the projection of its predictions, if any):
 /// evaluated, written, in lines.
 fn evaluate_into(
-    model: (&impl LearnedModel, &Path, Projection),
+    model: UnderTest<impl LearnedModel>,
     dataset: &Dataset,
     dataset_dir: &Path,
     corruption: &Corruption,
     compute: Compute,
     out: &Path,
 ) -> Result<Vec<String>> {
-    let e = evaluate_held_out(model.0, dataset, dataset_dir, corruption, compute)?;
-    let [errors, summary, vtu] = write_evaluation(out, model, dataset, &e, compute)?;
+    let e = evaluate_held_out(model.model, dataset, dataset_dir, corruption, compute)?;
+    let [errors, summary, vtu] = write_evaluation(out, &model, dataset, &e, compute)?;
     let mut lines = e.lines();
     lines.push(format!("wrote      {}, {}, {}", errors.display(), summary.display(), vtu.display()));
     Ok(lines)

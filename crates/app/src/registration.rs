@@ -541,7 +541,7 @@ pub fn read_structure(
     unit: LengthUnit,
     frame: Option<Frame>,
     to: Option<Frame>,
-) -> Result<(String, TriSurface, Vec<String>, bool)> {
+) -> Result<ReadStructure> {
     let name = structure_name(source);
     let source = named_source(source).1;
     // Its name is checked before its file is read.
@@ -567,7 +567,27 @@ pub fn read_structure(
             filled.filled_voxels, filled.voxels
         ));
     }
-    Ok((name, surface, warnings, named))
+    Ok(ReadStructure { name, surface, warnings, names_frame: named })
+}
+
+/// A structure as [`read_structure`] reads it.
+pub struct ReadStructure {
+    /// Its name ([`structure_name`]).
+    pub name: String,
+    /// Its surface (m, in the frame asked).
+    pub surface: TriSurface,
+    /// What a user should know of it.
+    pub warnings: Vec<String>,
+    /// Whether its file names its frame.
+    pub names_frame: bool,
+}
+
+impl ReadStructure {
+    /// Whether it was brought into the organ's frame: both its file and the organ's name their
+    /// frames (`organ_names_frame`).
+    pub fn in_organ_frame(&self, organ_names_frame: bool) -> bool {
+        self.names_frame && organ_names_frame
+    }
 }
 
 /// The labelmap file of a structure `LABELMAP:LABEL` ([`read_structure`]'s); `None` for a surface
@@ -644,15 +664,14 @@ impl RegistrationSpec {
         for source in &self.structures {
             let context = || format!("the structure {}", source.path.display());
             let unit = source.unit.unwrap_or(self.given_units);
-            let (name, surface, warnings, named) =
+            let read =
                 read_structure(&source.path, unit, self.given_frame, registration.frame()).with_context(context)?;
-            // Both files naming their frames, the structure was brought into the organ's.
-            let added = match named && organ_frame.is_some() {
-                true => registration.add_structure_in_organ_frame(&name, surface),
-                false => registration.add_structure(&name, surface),
+            let added = match read.in_organ_frame(organ_frame.is_some()) {
+                true => registration.add_structure_in_organ_frame(&read.name, read.surface),
+                false => registration.add_structure(&read.name, read.surface),
             };
             added.with_context(context)?;
-            warnings.into_iter().for_each(|w| registration.warn(w));
+            read.warnings.into_iter().for_each(|w| registration.warn(w));
         }
         registration.calibrate_sigma(self.sigma_factor)?;
         if let Some(path) = &self.surface {
@@ -810,7 +829,8 @@ mod tests {
         let (named, plain) = (dir.path().join("named.stl"), dir.path().join("plain.stl"));
         mesh::io::write_surface_in_frame(&named, &ball, Frame::Lps).unwrap();
         mesh::io::write_surface(&plain, &ball).unwrap();
-        let read = |path: &Path| read_structure(path, LengthUnit::Millimetre, None, Some(Frame::Lps)).unwrap().3;
+        let read =
+            |path: &Path| read_structure(path, LengthUnit::Millimetre, None, Some(Frame::Lps)).unwrap().names_frame;
         assert!(read(&named) && !read(&plain));
     }
 

@@ -704,21 +704,22 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
     let mut names: Vec<String> = Vec::new();
     for source in &options.structures {
         let context = || format!("the structure {}", source.display());
-        let (name, structure, read_warnings, named) =
-            read_structure(source, unit, given, frame).with_context(context)?;
+        let read = read_structure(source, unit, given, frame).with_context(context)?;
+        let name = read.name.clone();
         let taken: Vec<&str> = names.iter().map(String::as_str).collect();
         register::registration::check_structure_name(&name, &taken).with_context(context)?;
-        // In the organ's frame when both files name theirs, or both are one labelmap's.
+        // In the organ's frame as a registration takes it, or where both are one labelmap's.
         let organ_file = |path: &Path| path.canonicalize().ok() == options.surface.canonicalize().ok();
-        let embed = match (named && named_frame.is_some()) || structure_labelmap(source).is_some_and(organ_file) {
-            true => register::Structure::in_organ_frame,
-            false => register::Structure::new,
-        };
-        let (embedded, warnings) = embed(&located, &name, structure).with_context(context)?;
+        let embed =
+            match read.in_organ_frame(named_frame.is_some()) || structure_labelmap(source).is_some_and(organ_file) {
+                true => register::Structure::in_organ_frame,
+                false => register::Structure::new,
+            };
+        let (embedded, warnings) = embed(&located, &name, read.surface).with_context(context)?;
         let file = structure_file(&name);
         write_surface_in_mm(&dir.join(&file), embedded.rest(), frame)?;
         lines.push(format!("structure: {name}, {} vertices, {file}", embedded.rest().vertices.len()));
-        lines.extend(read_warnings.into_iter().chain(warnings).map(|w| format!("warning: {w}")));
+        lines.extend(read.warnings.into_iter().chain(warnings).map(|w| format!("warning: {w}")));
         names.push(name);
     }
     organ.regions.insert("visible".into(), visible);
