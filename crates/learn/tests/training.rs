@@ -221,7 +221,10 @@ fn a_second_training_into_the_same_folder_is_refused_while_the_first_runs() {
         second
     });
     let e = second.unwrap_err().to_string();
-    assert!(e.contains("net is being written by another run (`augsim train`): two trainings would mix"), "{e}");
+    assert!(
+        e.contains("net is being written by another run (`augsim train`, `python -m augsim.train`): two trainings"),
+        "{e}"
+    );
     assert!(!root.path().join("net").join(augsim_learn::data::dataset::WRITER_LOCK).exists());
 }
 

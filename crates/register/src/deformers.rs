@@ -1099,7 +1099,7 @@ mod tests {
         );
         assert!(high > 1.5 * low, "a σ that varies over the organ: {low}–{high} m");
         assert!(at_nodes.abs() < 1e-9, "the σ reported at the mesh nodes differs from the model's by {at_nodes}");
-        assert!(at_centroids.abs() < 0.1, "the σ reported at the centroids differs from the model's by {at_centroids}");
+        assert!(at_centroids.abs() < 0.1, "the σ reported at the centroids differs from the model's: {at_centroids}");
     }
 
     /// Input nodes left out of `seen` are absent from a partial prediction: moving one of them

@@ -656,8 +656,8 @@ pub fn take_model_folder(out: &Path) -> Result<WriterLock> {
 }
 
 /// Who writes a model's folder, and why a second writer is refused (see [`lock_for_writing`]).
-const TRAINERS: &str = "(`augsim train`, `python -m augsim.train`): two trainings would mix their checkpoints, and one's model would replace \
-                        the other's";
+const TRAINERS: &str = "(`augsim train`, `python -m augsim.train`): two trainings would mix their checkpoints, \
+                        and one's model would replace the other's";
 
 /// Everything that shapes the trajectory, so that a checkpoint is only resumed into the run it
 /// came from. The checkpoint interval is left out, and so is the iteration count under a constant
