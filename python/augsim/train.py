@@ -275,69 +275,74 @@ def main(argv=None):
     model = torch.nn.parallel.DistributedDataParallel(net, device_ids=[device] if device.type == "cuda" else None) \
         if distributed else net
     optimiser = torch.optim.Adam(net.parameters(), lr=args.lr, betas=(0.9, 0.999), eps=1e-5)
+    folder = None
     if rank == 0:
         try:
             folder = lock_model_folder(args.out)  # a second training into --out is refused while this one runs
         except AugsimError as e:
             p.error(str(e))
-    checkpoint_path = os.path.join(args.out, "checkpoint.pt")
-    start, best = 0, {"iteration": 0, "error": None, "state": None}
-    if os.path.exists(checkpoint_path):
-        state = torch.load(checkpoint_path, map_location=device, weights_only=False)
-        if state["config"] != config or state["split"] != record:
-            raise SystemExit(f"{checkpoint_path} is of another configuration or split; remove it to start afresh")
-        net.load_state_dict(state["net"])
-        optimiser.load_state_dict(state["optimiser"])
-        start, best = state["iteration"], state["best"]
-        say(f"resumed    from step {start}")
+    try:
+        checkpoint_path = os.path.join(args.out, "checkpoint.pt")
+        start, best = 0, {"iteration": 0, "error": None, "state": None}
+        if os.path.exists(checkpoint_path):
+            state = torch.load(checkpoint_path, map_location=device, weights_only=False)
+            if state["config"] != config or state["split"] != record:
+                raise SystemExit(f"{checkpoint_path} is of another configuration or split; remove it to start afresh")
+            net.load_state_dict(state["net"])
+            optimiser.load_state_dict(state["optimiser"])
+            start, best = state["iteration"], state["best"]
+            say(f"resumed    from step {start}")
 
-    # On a GPU the training set lives in its memory, so that a step moves no data from the host.
-    home = device if device.type == "cuda" else torch.device("cpu")
-    x_train = torch.from_numpy(inputs[train] * np.float32(1.0 / scales[0])).to(home)
-    y_train = torch.from_numpy(targets[train] * np.float32(1.0 / scales[1])).to(home)
-    m_train = torch.from_numpy(masks[train].astype(np.float32)).to(home)
-    per_rank = max(args.batch // world, 1)
-    began = time.time()
-    for it in range(start, args.iterations):
-        generator = torch.Generator().manual_seed(args.seed * 1_000_003 + it)
-        batch = torch.randint(len(train), (per_rank * world,), generator=generator)[rank * per_rank:(rank + 1) * per_rank]
-        for group in optimiser.param_groups:
-            group["lr"] = learning_rate(args, it)
-        batch = batch.to(home)
-        x, y, m = (t[batch].to(device, non_blocking=True) for t in (x_train, y_train, m_train))
-        loss = masked_mse(model(x), y, m)
-        optimiser.zero_grad(set_to_none=True)
-        loss.backward()
-        optimiser.step()
-        done = it + 1
-        if done % args.validate_every == 0 or done == args.iterations:
-            if rank == 0:
-                errors = mean_euclidean_errors(net, inputs[val], targets[val], masks[val], scales, device, 8) \
-                    if len(val) else np.zeros(0)
-                error = float(errors.mean()) if len(errors) else None
-                if best["error"] is None or (error is not None and error < best["error"]) or not len(errors):
-                    best = {"iteration": done, "error": error,
-                            "state": {k: v.detach().cpu().clone() for k, v in net.state_dict().items()}}
-                rate = (done - start) / max(time.time() - began, 1e-9)
-                shown = "—" if error is None else f"{error * 1e3:.4f} mm"
-                say(f"step {done:>7}  loss {loss.item():.4e}  validation ē {shown}  ({rate:.1f} steps/s)")
-                torch.save({"config": config, "split": record, "iteration": done, "best": best,
-                            "net": net.state_dict(), "optimiser": optimiser.state_dict()}, checkpoint_path + ".tmp")
-                os.replace(checkpoint_path + ".tmp", checkpoint_path)
-    if rank == 0:
-        weights = {k: v.numpy() for k, v in (best["state"] or net.state_dict()).items()}
-        weights_path = os.path.join(args.out, "model.safetensors")
-        write_safetensors(weights_path, weights)
-        split = {"train_samples": len(train), "val_samples": len(val), "record": record}
-        text = json.dumps(model_json(args, manifest, config, scales, best, split, weights_digest(weights_path)),
-                          indent=2)
-        write_atomic(os.path.join(args.out, "model.json"), text.encode("utf-8"))
-        if best["error"] is None:
-            say("kept       the last iteration's weights (no validation sample chose them)")
-        else:
-            say(f"best       validation ē {best['error'] * 1e3:.4f} mm at step {best['iteration']}")
-        say(f"wrote      {os.path.join(args.out, 'model.json')}")
-        folder.release()
+        # On a GPU the training set lives in its memory, so that a step moves no data from the host.
+        home = device if device.type == "cuda" else torch.device("cpu")
+        x_train = torch.from_numpy(inputs[train] * np.float32(1.0 / scales[0])).to(home)
+        y_train = torch.from_numpy(targets[train] * np.float32(1.0 / scales[1])).to(home)
+        m_train = torch.from_numpy(masks[train].astype(np.float32)).to(home)
+        per_rank = max(args.batch // world, 1)
+        began = time.time()
+        for it in range(start, args.iterations):
+            generator = torch.Generator().manual_seed(args.seed * 1_000_003 + it)
+            drawn = torch.randint(len(train), (per_rank * world,), generator=generator)
+            batch = drawn[rank * per_rank:(rank + 1) * per_rank]
+            for group in optimiser.param_groups:
+                group["lr"] = learning_rate(args, it)
+            batch = batch.to(home)
+            x, y, m = (t[batch].to(device, non_blocking=True) for t in (x_train, y_train, m_train))
+            loss = masked_mse(model(x), y, m)
+            optimiser.zero_grad(set_to_none=True)
+            loss.backward()
+            optimiser.step()
+            done = it + 1
+            if done % args.validate_every == 0 or done == args.iterations:
+                if rank == 0:
+                    errors = mean_euclidean_errors(net, inputs[val], targets[val], masks[val], scales, device, 8) \
+                        if len(val) else np.zeros(0)
+                    error = float(errors.mean()) if len(errors) else None
+                    if best["error"] is None or (error is not None and error < best["error"]) or not len(errors):
+                        best = {"iteration": done, "error": error,
+                                "state": {k: v.detach().cpu().clone() for k, v in net.state_dict().items()}}
+                    rate = (done - start) / max(time.time() - began, 1e-9)
+                    shown = "—" if error is None else f"{error * 1e3:.4f} mm"
+                    say(f"step {done:>7}  loss {loss.item():.4e}  validation ē {shown}  ({rate:.1f} steps/s)")
+                    torch.save({"config": config, "split": record, "iteration": done, "best": best,
+                                "net": net.state_dict(), "optimiser": optimiser.state_dict()}, checkpoint_path + ".tmp")
+                    os.replace(checkpoint_path + ".tmp", checkpoint_path)
+        if rank == 0:
+            weights = {k: v.numpy() for k, v in (best["state"] or net.state_dict()).items()}
+            weights_path = os.path.join(args.out, "model.safetensors")
+            write_safetensors(weights_path, weights)
+            split = {"train_samples": len(train), "val_samples": len(val), "record": record}
+            text = json.dumps(model_json(args, manifest, config, scales, best, split, weights_digest(weights_path)),
+                              indent=2)
+            write_atomic(os.path.join(args.out, "model.json"), text.encode("utf-8"))
+            if best["error"] is None:
+                say("kept       the last iteration's weights (no validation sample chose them)")
+            else:
+                say(f"best       validation ē {best['error'] * 1e3:.4f} mm at step {best['iteration']}")
+            say(f"wrote      {os.path.join(args.out, 'model.json')}")
+    finally:
+        if folder is not None:
+            folder.release()
     if distributed:
         torch.distributed.destroy_process_group()
     return 0

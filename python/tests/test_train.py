@@ -126,6 +126,12 @@ def test_its_weights_are_checked_and_its_folder_held_as_augsim_s(data, tmp_path,
     assert r.returncode != 0 and "is being written by another run" in r.stderr, r.stderr
     folder.release()
     assert train(data, out, "--iterations", "6")["training"]["iterations"] == 6, "released, the folder is written"
+    # A training that fails after taking the folder lets it go (its checkpoint is of another shape),
+    # even while its traceback (which holds its frame) lives on.
+    with pytest.raises(SystemExit, match="another configuration") as stopped:
+        main([str(data), "--out", str(out), "--channels", "2", "--iterations", "7", "--device", "cpu", *SPLIT])
+    lock_model_folder(out).release()
+    assert stopped.tb is not None
 
 
 def test_a_resumed_run_ends_where_an_uninterrupted_one_does(data, tmp_path):

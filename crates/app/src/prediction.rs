@@ -31,7 +31,10 @@ pub fn predict_file(
             .into_iter()
             .flatten()
             .collect();
-    check_distinct(&written, &[input].into_iter().chain(mesh_path).collect::<Vec<_>>())?;
+    let model_files = model_files(model_path);
+    let read: Vec<&Path> =
+        [input].into_iter().chain(mesh_path).chain(model_files.iter().map(|p| p.as_path())).collect();
+    check_distinct(&written, &read)?;
     let g = model.grid();
     let read = PredictInput::read(input)?;
     let points = match &read {
@@ -94,10 +97,37 @@ pub fn predict_file(
     Ok(lines)
 }
 
+/// The files of the model at `model_path` (its directory or its model.json): those of its folder.
+fn model_files(model_path: &Path) -> Vec<std::path::PathBuf> {
+    let folder = if model_path.is_dir() { Some(model_path) } else { model_path.parent() };
+    let entries =
+        folder.and_then(|f| std::fs::read_dir(if f.as_os_str().is_empty() { Path::new(".") } else { f }).ok());
+    entries.into_iter().flatten().flatten().map(|e| e.path()).filter(|p| p.is_file()).collect()
+}
+
 /// Refuses files to write that would overwrite one another or a file read (`-o organ.npy --mesh
-/// organ.vtu` writes the mesh's fields to `organ.vtu`).
+/// organ.vtu` writes the mesh's fields to `organ.vtu`), each compared as the file it names: made
+/// absolute, its `.` and `..` taken, then resolved (or its folder, for a file not there yet).
 fn check_distinct(written: &[std::path::PathBuf], read: &[&Path]) -> Result<()> {
-    let key = |p: &Path| std::fs::canonicalize(p).or_else(|_| std::path::absolute(p)).unwrap_or_else(|_| p.into());
+    let lexical = |p: &Path| -> std::path::PathBuf {
+        let absolute = std::path::absolute(p).unwrap_or_else(|_| p.into());
+        let mut out = std::path::PathBuf::new();
+        for part in absolute.components() {
+            match part {
+                std::path::Component::CurDir => {}
+                std::path::Component::ParentDir => {
+                    out.pop();
+                }
+                other => out.push(other),
+            }
+        }
+        out
+    };
+    let key = |p: &Path| {
+        let plain = lexical(p);
+        let in_folder = || Some(std::fs::canonicalize(plain.parent()?).ok()?.join(plain.file_name()?));
+        std::fs::canonicalize(&plain).ok().or_else(in_folder).unwrap_or(plain)
+    };
     for (i, w) in written.iter().enumerate() {
         if let Some(other) =
             read.iter().copied().chain(written[..i].iter().map(|p| p.as_path())).find(|o| key(o) == key(w))

@@ -477,8 +477,8 @@ fn grid_in_words(grid: learn::GridShape, placement: Option<learn::GridPlacement>
 
 /// Fits a reduced-order model with `config` on `train` (chosen on `validation`) of `dataset`
 /// split by `split`, with the linear-elastic response at rest of the dataset scenario `prior`
-/// (a file or built-in name) as its physics prior when given; saves it into `out`. Returns the
-/// model and its fit.
+/// (a file or built-in name) as its physics prior when given; saves it into `out`, held against
+/// another training there meanwhile ([`learn::take_model_folder`]). Returns the model and its fit.
 pub fn fit_rom(
     dataset: &Dataset,
     split: Split,
@@ -489,6 +489,7 @@ pub fn fit_rom(
 ) -> Result<(ReducedModel, RomReport)> {
     let prior = prior.map(DatasetScenario::load).transpose()?;
     let prior = prior.as_ref().map(|(scenario, dir)| (scenario, dir.as_path()));
+    let _held = learn::take_model_folder(out)?;
     let (model, report) = fit_rom_to(dataset.manifest(), split, [&train, &validation], config, prior)?;
     model.save(out)?;
     Ok((model, report))

@@ -1,5 +1,5 @@
 //! A reduced-order model fitted on a small beam dataset, as `augsim train --method rom` fits it:
-//! saved where asked and described in words.
+//! saved where asked (not while another training holds the folder) and described in words.
 
 use std::path::Path;
 
@@ -20,6 +20,12 @@ fn a_rom_fitted_on_a_beam_dataset_is_saved_and_described() {
     let (split, [train, validation, _]) = SplitPolicy::default().apply(&all).unwrap();
     let out = tmp.path().join("rom");
     let config = RomConfig { max_modes: 4, ..RomConfig::default() };
+    // While another training holds the folder, the fit is refused before any work.
+    let held = learn::take_model_folder(&out).unwrap();
+    let e = fit_rom(&dataset, split.clone(), [train.clone(), validation.clone()], &config, None, &out).unwrap_err();
+    assert!(e.to_string().contains("is being written by another run"), "{e}");
+    assert!(!out.join(learn::MODEL_FILE).exists(), "nothing written");
+    drop(held);
     let (model, report) = fit_rom(&dataset, split, [train, validation], &config, None, &out).unwrap();
     assert!(learn::Model::load(&out).is_ok());
     assert!(model.info.modes >= 1 && model.info.modes <= 4, "{} modes", model.info.modes);

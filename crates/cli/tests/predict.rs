@@ -205,6 +205,11 @@ magnitude = [0.05, 0.2]
     let at_nodes = fields.iter().find(|f| f.name == "sigma").expect("sigma on the mesh");
     assert_eq!(at_nodes.values.len(), organ.num_nodes());
     assert!(at_nodes.values.iter().all(|s| s.is_finite() && *s >= 0.0), "{:?}", &at_nodes.values[..5]);
+    // A tensor named as one of the model's own files is refused, the model left as it was.
+    let basis = std::fs::read(d.join("rom/basis.npy")).unwrap();
+    let e = augsim_err(&["predict", "rom", "cloud.csv", "-o", "no_folder/../rom/basis.npy", "--runs", "1"], d);
+    assert!(e.contains("would be written over") && e.contains("basis.npy"), "{e}");
+    assert_eq!(std::fs::read(d.join("rom/basis.npy")).unwrap(), basis, "the model's basis is left as it was");
     // Projected on a basis fitted on the same split, the U-Net is evaluated; on one fitted or chosen
     // on its test samples, it is not (the basis would hold them).
     let text = augsim(&["eval", "net/model.json", "data", "--project", "rom", "--out", "eval_projected"], d);
