@@ -705,9 +705,8 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
     for source in &options.structures {
         let context = || format!("the structure {}", source.display());
         let read = read_structure(source, unit, given, frame).with_context(context)?;
-        let name = read.name.clone();
         let taken: Vec<&str> = names.iter().map(String::as_str).collect();
-        register::registration::check_structure_name(&name, &taken).with_context(context)?;
+        register::registration::check_structure_name(&read.name, &taken).with_context(context)?;
         // In the organ's frame as a registration takes it, or where both are one labelmap's.
         let organ_file = |path: &Path| path.canonicalize().ok() == options.surface.canonicalize().ok();
         let embed =
@@ -715,12 +714,12 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
                 true => register::Structure::in_organ_frame,
                 false => register::Structure::new,
             };
-        let (embedded, warnings) = embed(&located, &name, read.surface).with_context(context)?;
-        let file = structure_file(&name);
+        let (embedded, warnings) = embed(&located, &read.name, read.surface).with_context(context)?;
+        let file = structure_file(&read.name);
         write_surface_in_mm(&dir.join(&file), embedded.rest(), frame)?;
-        lines.push(format!("structure: {name}, {} vertices, {file}", embedded.rest().vertices.len()));
+        lines.push(format!("structure: {}, {} vertices, {file}", read.name, embedded.rest().vertices.len()));
         lines.extend(read.warnings.into_iter().chain(warnings).map(|w| format!("warning: {w}")));
-        names.push(name);
+        names.push(read.name);
     }
     organ.regions.insert("visible".into(), visible);
     organ.regions.insert("attached".into(), attached);
