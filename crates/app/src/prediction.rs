@@ -128,10 +128,11 @@ fn check_distinct(written: &[std::path::PathBuf], read: &[&Path]) -> Result<()> 
         let in_folder = || Some(std::fs::canonicalize(plain.parent()?).ok()?.join(plain.file_name()?));
         std::fs::canonicalize(&plain).ok().or_else(in_folder).unwrap_or(plain)
     };
-    for (i, w) in written.iter().enumerate() {
-        if let Some(other) =
-            read.iter().copied().chain(written[..i].iter().map(|p| p.as_path())).find(|o| key(o) == key(w))
-        {
+    // Each file named once: those read, then each written as it comes.
+    let mut named: Vec<(std::path::PathBuf, &Path)> = read.iter().map(|&p| (key(p), p)).collect();
+    for w in written {
+        let k = key(w);
+        if let Some((_, other)) = named.iter().find(|(n, _)| *n == k) {
             anyhow::bail!(
                 "{} would be written over {}: give another --output (the tensor's name also names the σ and mesh \
                  files written beside it)",
@@ -139,6 +140,7 @@ fn check_distinct(written: &[std::path::PathBuf], read: &[&Path]) -> Result<()> 
                 other.display()
             );
         }
+        named.push((k, w));
     }
     Ok(())
 }

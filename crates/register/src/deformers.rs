@@ -704,7 +704,7 @@ impl Deformer for NetworkDeformer {
     fn uncertainty(&mut self, stencils: &[crate::Stencil]) -> Option<Result<Vec<f64>>> {
         let std = self.predictor.predict_std(self.last_input.as_ref()?).transpose()?;
         let at_nodes = std.and_then(|std| self.to_mesh.apply_channels(&std, 1)).map_err(RegisterError::from);
-        Some(at_nodes.map(|at| stencils.iter().map(|s| s.0.iter().map(|&(n, w)| w * at[n]).sum()).collect()))
+        Some(at_nodes.map(|at| stencils.iter().map(|s| s.scalar(&at)).collect()))
     }
 }
 
@@ -1067,7 +1067,7 @@ mod tests {
             }
             Some(value)
         };
-        // (worst relative difference, its sign, the smallest and largest σ) at `points`.
+        // (worst relative difference, signed; the smallest and largest σ) at `points`.
         let mut compare = |points: &[mesh::Point]| -> (f64, f64, f64) {
             let stencils = organ.locate(points, "target").unwrap();
             let reported = deformer.uncertainty(&stencils).unwrap().unwrap();

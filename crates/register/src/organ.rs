@@ -27,6 +27,11 @@ impl Stencil {
         Stencil(terms.into_iter().map(|(n, w)| (n, w / sum)).collect())
     }
 
+    /// The interpolated value of a field with one value per node.
+    pub fn scalar(&self, values: &[f64]) -> f64 {
+        self.0.iter().map(|&(n, w)| w * values[n]).sum()
+    }
+
     /// The interpolated vector of a node-major field with 3 components per node.
     pub fn vector(&self, u: &[f64]) -> Point {
         let mut v = [0.0; 3];

@@ -463,7 +463,7 @@ impl Deformer for ShapeDeformer {
                         (v.transpose() * posterior * &v)[(0, 0)]
                     })
                     .sum();
-                let floor: f64 = s.0.iter().map(|&(n, w)| w * self.space.floor[n]).sum();
+                let floor = s.scalar(&self.space.floor);
                 self.options.calibration * (variance + floor).max(0.0).sqrt()
             })
             .collect();
