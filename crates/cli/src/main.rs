@@ -20,7 +20,7 @@ use mesh::length::Length;
 
 /// Finite elements, Kalman filtering and U-Net learning for soft organs.
 #[derive(Parser)]
-#[command(name = "augsim", version, about)]
+#[command(name = "augsim", version = experiment::VERSION, about)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -264,6 +264,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         name: Name::FemConvergence,
         size,
         seconds: 0.0,
+        build: String::new(),
         headlines: Vec::new(),
         rows,
         figures,

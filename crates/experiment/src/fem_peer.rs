@@ -255,6 +255,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         name: Name::FemPeer,
         size,
         seconds: 0.0,
+        build: String::new(),
         headlines: vec![headline],
         rows,
         figures: Vec::new(),

@@ -493,6 +493,7 @@ pub(crate) fn run(size: Size, dir: &Path, progress: Progress) -> Result<Experime
         name: Name::FemSpeed,
         size,
         seconds: 0.0,
+        build: String::new(),
         rows,
         figures: vec!["timings.png".into()],
         page_figures: Vec::new(),

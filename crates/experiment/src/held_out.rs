@@ -303,6 +303,7 @@ pub(crate) fn run(size: Size, _dir: &Path, progress: Progress) -> Result<Experim
         name: Name::HeldOut,
         size,
         seconds: 0.0,
+        build: String::new(),
         headlines,
         rows: summary,
         figures: Vec::new(),

@@ -6,8 +6,8 @@
 //! application layer (`augsim-app`); only the command line links them.
 //!
 //! Every step of an experiment resumes after a kill: datasets and training resume from what is
-//! on disk, and an experiment whose `result.json` was written at the requested size is not run
-//! again.
+//! on disk, and an experiment whose `result.json` was written at the requested size by this very
+//! build ([`BUILD`]) is not run again.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -316,6 +316,9 @@ pub struct ExperimentResult {
     pub size: Size,
     /// Wall time of the run that finished it (s; steps resumed from disk are not counted).
     pub seconds: f64,
+    /// The build that made it ([`BUILD`]; empty in results written before builds were named).
+    #[serde(default)]
+    pub build: String,
     /// The headline figures, for the summaries (README, `docs/results.md`).
     #[serde(default)]
     pub headlines: Vec<Headline>,
@@ -350,6 +353,19 @@ impl ExperimentResult {
 
 /// The result file of an experiment.
 pub const RESULT_FILE: &str = "result.json";
+
+/// This build: the commit its sources were built from, with a digest of their uncommitted changes
+/// (`+changes-…`), or "unknown" outside a git checkout.
+pub const BUILD: &str = env!("AUGSIM_BUILD");
+
+/// augsim's version and build, as `--version` prints them.
+pub const VERSION: &str = concat!(env!("CARGO_PKG_VERSION"), " (", env!("AUGSIM_BUILD"), ")");
+
+/// Whether a result already written, `done`, stands for a run at `size` by `build`: made at that
+/// size by that very build (one that can be told: not "unknown").
+fn reusable(done: &ExperimentResult, size: Size, build: &str) -> bool {
+    done.size == size && done.build == build && build != "unknown"
+}
 
 /// Where a long run reports: its lines (the CLI prints them) and the advance of its trainings.
 pub type Progress<'a> = &'a dyn learn::Progress;
@@ -386,17 +402,23 @@ impl learn::Progress for Tenths<'_> {
 }
 
 /// Runs experiment `name` at `size` under `root/<name>/` (resuming what is there) and writes
-/// its `result.json`. A result already written at the same size is returned as it is.
+/// its `result.json`. A result already written at the same size by this build ([`BUILD`]) is
+/// returned as it is; one made by another build is made again.
 pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<ExperimentResult> {
     let dir = root.join(name.as_str());
     if let Some(done) = load(&dir)? {
-        if done.size == size {
-            progress.line(&format!(
-                "{}: already done at this size ({})",
-                name.as_str(),
-                dir.join(RESULT_FILE).display()
-            ));
+        let file = dir.join(RESULT_FILE);
+        if reusable(&done, size, BUILD) {
+            progress.line(&format!("{}: already done at this size by this build ({})", name.as_str(), file.display()));
             return Ok(done);
+        }
+        if done.size == size {
+            let made_by = if done.build.is_empty() { "an unnamed build".to_string() } else { done.build };
+            progress.line(&format!(
+                "{}: {} was made by {made_by}, this is {BUILD}: running it again on the folder's data",
+                name.as_str(),
+                file.display()
+            ));
         }
     }
     let resumed = holds_earlier_work(&dir);
@@ -416,8 +438,9 @@ pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<Ex
         Name::HeldOut => held_out::run(size, &dir, progress)?,
     };
     result.seconds = start.elapsed().as_secs_f64();
-    // Results made at different times may sit on one page: each says when, and by which version.
-    result.notes.push(format!("Made on {} (UTC) by augsim {}.", today(), env!("CARGO_PKG_VERSION")));
+    result.build = BUILD.to_string();
+    // Results made at different times may sit on one page: each says when, and by which build.
+    result.notes.push(format!("Made on {} (UTC) by augsim {VERSION}.", today()));
     if resumed {
         result.notes.push(format!(
             "Its folder held an earlier run's work when this run started: what it could reuse from there \
@@ -506,6 +529,33 @@ mod tests {
         assert_eq!(civil_date(11_016), "2000-02-29");
         assert_eq!(civil_date(20_794), "2026-12-07");
         assert_eq!(civil_date(47_541), "2100-03-01");
+    }
+
+    /// A result stands for a run only at its size and by its very build; a build that cannot be
+    /// told (no git) and a result from before builds were named are made again.
+    #[test]
+    fn a_result_is_reused_only_at_its_size_by_its_own_build() {
+        let made = |build: &str| -> ExperimentResult {
+            serde_json::from_value(serde_json::json!({
+                "name": "springs", "size": "quick", "seconds": 1.0, "build": build,
+                "rows": [], "figures": [], "notes": [], "values": {}
+            }))
+            .unwrap()
+        };
+        assert!(reusable(&made("c2ffc33ed92f"), Size::Quick, "c2ffc33ed92f"));
+        assert!(!reusable(&made("c2ffc33ed92f"), Size::Paper, "c2ffc33ed92f"));
+        assert!(!reusable(&made("c2ffc33ed92f"), Size::Quick, "c2ffc33ed92f+changes-0a1b2c3d"));
+        assert!(!reusable(&made("c2ffc33ed92f+changes-0a1b2c3d"), Size::Quick, "c2ffc33ed92f+changes-9f8e7d6c"));
+        assert!(!reusable(&made("unknown"), Size::Quick, "unknown"));
+        let unnamed: ExperimentResult = serde_json::from_str(
+            r#"{"name": "springs", "size": "quick", "seconds": 1.0, "rows": [], "figures": [], "notes": [], "values": {}}"#,
+        )
+        .unwrap();
+        assert!(unnamed.build.is_empty() && !reusable(&unnamed, Size::Quick, BUILD));
+        // This build's own name: a 12-digit commit, with a digest of its changes, or "unknown".
+        let (commit, changes) = BUILD.split_once("+changes-").unwrap_or((BUILD, "00000000"));
+        let hex = |s: &str, n: usize| s.len() == n && s.chars().all(|c| c.is_ascii_hexdigit());
+        assert!(BUILD == "unknown" || (hex(commit, 12) && hex(changes, 8)), "{BUILD}");
     }
 
     #[test]

@@ -157,6 +157,7 @@ pub(crate) fn liver_ar(size: Size, dir: &Path, progress: Progress) -> Result<Exp
         name: Name::LiverAr,
         size,
         seconds: 0.0,
+        build: String::new(),
         rows,
         figures: ["tre.png".into()]
             .into_iter()

@@ -472,6 +472,7 @@ mod tests {
             name: Name::Young,
             size: Size::Quick,
             seconds: 61.0,
+            build: "0123456789ab".into(),
             headlines: Vec::new(),
             rows: vec![
                 Row::new("filter time", "2.4 s", "500 s").of("filter run", "scenario"),

@@ -271,6 +271,7 @@ pub fn run(size: Size, dir: &Path, progress: Progress) -> Result<ExperimentResul
         name: Name::Stream,
         size,
         seconds: 0.0,
+        build: String::new(),
         headlines: Vec::new(),
         rows,
         figures: vec![figure.into(), latency_figure.into()],

@@ -176,6 +176,7 @@ pub(crate) fn beam_transfer(size: Size, dir: &Path, progress: Progress) -> Resul
         name: Name::BeamTransfer,
         size,
         seconds: 0.0,
+        build: String::new(),
         rows,
         figures: vec!["curves.png".into(), "errors.png".into()],
         page_figures: Vec::new(),

@@ -18,7 +18,13 @@ fn springs_experiment_writes_a_result_resumes_and_reports() {
     let lines = result.lines();
     assert_eq!(lines.len(), result.rows.len() + 1);
     assert!(lines[0].starts_with(result.name.title()) && lines[1].starts_with(&result.rows[0].label()), "{lines:?}");
-    // A second run finds the result and does not run again.
+    // It names the build that made it, and a second run of that build finds it and does not run again.
+    assert_eq!(result.build, experiment::BUILD);
+    assert!(
+        result.notes.iter().any(|n| n.ends_with(&format!("by augsim {}.", experiment::VERSION))),
+        "{:?}",
+        result.notes
+    );
     let again = experiment::run(Name::Springs, Size::Quick, root.path(), &learn::Silent).unwrap();
     assert_eq!(again, result);
     let all = experiment::load_all(root.path()).unwrap();
@@ -78,6 +84,7 @@ fn the_readme_summary_and_the_results_page_come_from_the_same_results() {
         name: Name::Young,
         size: Size::Quick,
         seconds: 12.0,
+        build: experiment::BUILD.into(),
         headlines: vec![
             Headline::lower_is_better("E error", 0.10, 0.16, 2, "%"),
             Headline::lower_is_better("filter time", 510.0, 500.0, 0, "s"),
