@@ -165,6 +165,18 @@ fn organ_surface_in_metres(
     Ok(surface)
 }
 
+/// Refuses, before any meshing, an `output` that names the surface `options` mesh.
+pub fn check_mesh_output(options: &MeshOptions, output: &Path) -> Result<()> {
+    if let Some((_, surface)) = options.surface.as_deref().and_then(|s| mesh::io::overwritten(&[output], &[s])) {
+        bail!(
+            "{} would be written over the surface it meshes, {}: give another -o",
+            output.display(),
+            surface.display()
+        );
+    }
+    Ok(())
+}
+
 /// Meshes the organ of `options`.
 pub fn mesh_organ(options: &MeshOptions) -> Result<Meshed> {
     let start = std::time::Instant::now();

@@ -105,42 +105,17 @@ fn model_files(model_path: &Path) -> Vec<std::path::PathBuf> {
     entries.into_iter().flatten().flatten().map(|e| e.path()).filter(|p| p.is_file()).collect()
 }
 
-/// Refuses files to write that would overwrite one another or a file read (`-o organ.npy --mesh
-/// organ.vtu` writes the mesh's fields to `organ.vtu`), each compared as the file it names: made
-/// absolute, its `.` and `..` taken, then resolved (or its folder, for a file not there yet).
+/// Refuses a prediction whose files to write (`written`) name a file it reads (`read`) or each
+/// other, before any work (`-o organ.npy --mesh organ.vtu` writes the mesh's fields to `organ.vtu`).
 fn check_distinct(written: &[std::path::PathBuf], read: &[&Path]) -> Result<()> {
-    let lexical = |p: &Path| -> std::path::PathBuf {
-        let absolute = std::path::absolute(p).unwrap_or_else(|_| p.into());
-        let mut out = std::path::PathBuf::new();
-        for part in absolute.components() {
-            match part {
-                std::path::Component::CurDir => {}
-                std::path::Component::ParentDir => {
-                    out.pop();
-                }
-                other => out.push(other),
-            }
-        }
-        out
-    };
-    let key = |p: &Path| {
-        let plain = lexical(p);
-        let in_folder = || Some(std::fs::canonicalize(plain.parent()?).ok()?.join(plain.file_name()?));
-        std::fs::canonicalize(&plain).ok().or_else(in_folder).unwrap_or(plain)
-    };
-    // Each file named once: those read, then each written as it comes.
-    let mut named: Vec<(std::path::PathBuf, &Path)> = read.iter().map(|&p| (key(p), p)).collect();
-    for w in written {
-        let k = key(w);
-        if let Some((_, other)) = named.iter().find(|(n, _)| *n == k) {
-            anyhow::bail!(
-                "{} would be written over {}: give another --output (the tensor's name also names the σ and mesh \
-                 files written beside it)",
-                w.display(),
-                other.display()
-            );
-        }
-        named.push((k, w));
+    let written: Vec<&Path> = written.iter().map(|p| p.as_path()).collect();
+    if let Some((w, other)) = mesh::io::overwritten(&written, read) {
+        anyhow::bail!(
+            "{} would be written over {}: give another --output (the tensor's name also names the σ and mesh \
+             files written beside it)",
+            w.display(),
+            other.display()
+        );
     }
     Ok(())
 }

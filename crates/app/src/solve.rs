@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use fem::{post, ElementGeometry, Law, Solution, StaticSolver};
 use mesh::io::Field;
 use mesh::stats::ms;
@@ -44,6 +44,15 @@ pub fn solve_and_write(
 ) -> Result<(Solved, PathBuf)> {
     let (scenario, dir) = StaticScenario::load(path)?;
     let out = output.map(Path::to_path_buf).unwrap_or_else(|| scenario.output_path());
+    let mesh_file = scenario.mesh.file().map(|f| dir.join(f));
+    let read: Vec<&Path> = [path].into_iter().filter(|p| p.is_file()).chain(mesh_file.as_deref()).collect();
+    if let Some((_, input)) = mesh::io::overwritten(&[&out], &read) {
+        bail!(
+            "{} would be written over {}, which the solve reads: give another output",
+            out.display(),
+            input.display()
+        );
+    }
     mesh::io::check_writable(&out).context("the solution could not be written there")?;
     let solved = solve(scenario, &dir, progress)?;
     solved.write(&out)?;

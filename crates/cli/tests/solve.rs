@@ -87,6 +87,44 @@ fn an_output_that_cannot_be_written_fails_before_the_solve() {
     assert!(!text.contains("max |u|") && !text.contains("iterations"), "solved first:\n{text}");
 }
 
+/// An output named as the file a command reads (through another spelling of its path) is refused
+/// before any work, the input left as it was: the surface `mesh` meshes, the mesh a scenario reads.
+#[test]
+fn mesh_and_solve_refuse_to_write_over_their_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_augsim")).args(args).output().unwrap();
+        (
+            out.status.success(),
+            format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr)),
+        )
+    };
+    let surface = dir.path().join("organ.stl");
+    std::fs::copy(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/organ.stl"), &surface).unwrap();
+    let before = std::fs::read(&surface).unwrap();
+    let again = dir.path().join("sub/../organ.stl");
+    let (ok, text) = run(&["mesh", surface.to_str().unwrap(), "--tets", "300", "-o", again.to_str().unwrap()]);
+    assert!(!ok && text.contains("would be written over the surface it meshes"), "{text}");
+    assert!(!text.contains("mesh       "), "meshed first:\n{text}");
+    assert_eq!(std::fs::read(&surface).unwrap(), before);
+
+    let volume = dir.path().join("organ.vtu");
+    let (ok, text) = run(&["mesh", "--tets", "300", "-o", volume.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    let scenario = dir.path().join("s.toml");
+    std::fs::write(
+        &scenario,
+        "kind = \"static\"\nname = \"own\"\n[mesh.file]\npath = \"organ.vtu\"\n[material]\nlaw = \"linear\"\n\
+         young = 5000.0\npoisson = 0.45\n[[fixed]]\nselect = { box = { min = [-1, -1, -1], max = [1, 1, 0] } }\n",
+    )
+    .unwrap();
+    let before = std::fs::read(&volume).unwrap();
+    let (ok, text) = solve(&scenario, &dir.path().join("./organ.vtu"));
+    assert!(!ok && text.contains("which the solve reads"), "{text}");
+    assert!(!text.contains("max |u|"), "solved first:\n{text}");
+    assert_eq!(std::fs::read(&volume).unwrap(), before);
+}
+
 /// A Young's modulus far below soft tissues' (one written in kPa) is doubted aloud, whether the
 /// solve then fails or not.
 #[test]

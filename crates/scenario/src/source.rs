@@ -70,6 +70,14 @@ fn one() -> f64 {
 }
 
 impl MeshSource {
+    /// The file its mesh is read or meshed from (relative to the scenario's folder), if any.
+    pub fn file(&self) -> Option<&Path> {
+        match self {
+            MeshSource::File { path, .. } | MeshSource::Surface { path, .. } => Some(path),
+            _ => None,
+        }
+    }
+
     /// The frame (RAS or LPS) its mesh file names ([`mesh::io::surface_frame`]: a `.vtu`'s field
     /// data, a `.vtk`'s title), `dir` the scenario's folder; none for a generated mesh or one
     /// moved to the origin.

@@ -511,6 +511,40 @@ pub(crate) fn lfs_error(path: &Path) -> MeshError {
     MeshError::parse(path, LFS_MESSAGE)
 }
 
+/// The file `path` names, as a key that two names of one file share: made absolute, with `.` and
+/// `..` taken as written, then with its links resolved (its folder's, where the file is not there
+/// yet).
+fn file_key(path: &Path) -> PathBuf {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.into());
+    let mut plain = PathBuf::new();
+    for part in absolute.components() {
+        match part {
+            std::path::Component::CurDir => {}
+            std::path::Component::ParentDir => {
+                plain.pop();
+            }
+            other => plain.push(other),
+        }
+    }
+    let in_folder = || Some(fs::canonicalize(plain.parent()?).ok()?.join(plain.file_name()?));
+    fs::canonicalize(&plain).ok().or_else(in_folder).unwrap_or(plain)
+}
+
+/// The first of the files a run is to write (`written`, in order) that names a file it reads
+/// (`read`) or one it writes before, with that other file: a write that would replace an input.
+/// `None` where every file written is a file of its own.
+pub fn overwritten<'a>(written: &[&'a Path], read: &[&'a Path]) -> Option<(&'a Path, &'a Path)> {
+    let mut named: Vec<(PathBuf, &Path)> = read.iter().map(|&p| (file_key(p), p)).collect();
+    for &w in written {
+        let key = file_key(w);
+        if let Some(&(_, other)) = named.iter().find(|(n, _)| *n == key) {
+            return Some((w, other));
+        }
+        named.push((key, w));
+    }
+    None
+}
+
 /// Whether [`write_atomic`] could write `path`, checked before long work whose result it is to hold:
 /// its directory is created and a temporary file made there (and removed), as the write would.
 pub fn check_writable(path: &Path) -> Result<(), WriteError> {
