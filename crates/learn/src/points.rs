@@ -28,14 +28,51 @@ pub struct PointCloud {
     pub named_forces: Option<bool>,
 }
 
+/// A column's name without its unit (`ux_mm`, `fx_N`), lower case.
+fn stem(name: &str) -> String {
+    let unit = |u: &str| u.eq_ignore_ascii_case("n") || u.parse::<LengthUnit>().is_ok();
+    name.rsplit_once('_').filter(|(_, u)| unit(u)).map_or(name, |(stem, _)| stem).to_ascii_lowercase()
+}
+
+/// Where a header's six columns hold x, y, z and the vector's x, y, z components, in that order:
+/// the positions are the columns named `x`, `y`, `z` (with a unit or not), the vector's the other
+/// three, by the axis their names end with (`fz`, `uy_mm`) where each names one (`u, v, w`: in
+/// their order). `None` for a header that names no column `x`, `y` or `z` (its columns are taken in
+/// order); an error for one that names an axis twice.
+fn column_order(names: &[String]) -> std::result::Result<Option<[usize; 6]>, String> {
+    let stems: Vec<String> = names.iter().map(|n| stem(n)).collect();
+    let axis = |s: &str| ["x", "y", "z"].iter().position(|a| s.ends_with(a));
+    let position = |s: &String| if s.len() == 1 { axis(s) } else { None };
+    if names.len() != 6 || !stems.iter().any(|s| position(s).is_some()) {
+        return Ok(None);
+    }
+    let twice = || {
+        "the header names an axis twice: name the columns x, y, z and the vector's x, y and z components \
+                    (fx, fy, fz for forces; ux, uy, uz for displacements)"
+    };
+    let mut order = [None; 6];
+    let vectors: Vec<usize> = (0..6).filter(|&c| position(&stems[c]).is_none()).collect();
+    for (column, s) in stems.iter().enumerate() {
+        if let Some(a) = position(s) {
+            if order[a].replace(column).is_some() {
+                return Err(twice().into());
+            }
+        }
+    }
+    let by_axis = vectors.iter().all(|&c| axis(&stems[c]).is_some());
+    for (k, &column) in vectors.iter().enumerate() {
+        let slot = 3 + if by_axis { axis(&stems[column]).unwrap_or(k) } else { k };
+        if vectors.len() != 3 || order[slot].is_some() {
+            return Err(twice().into());
+        }
+        order[slot] = Some(column);
+    }
+    Ok(Some(order.map(|c| c.unwrap_or_default())))
+}
+
 /// Whether vector columns `names` name forces (`Some(true)`: fx, fy, fz), displacements
 /// (`Some(false)`: ux, uy, uz or dx, dy, dz), each with or without a unit suffix, or neither.
 fn vector_kind(names: &[String]) -> Option<bool> {
-    // The name without its unit (`ux_mm`, `fx_N`), lower case.
-    let stem = |name: &str| -> String {
-        let unit = |u: &str| u.eq_ignore_ascii_case("n") || u.parse::<LengthUnit>().is_ok();
-        name.rsplit_once('_').filter(|(_, u)| unit(u)).map_or(name, |(stem, _)| stem).to_ascii_lowercase()
-    };
     let is = |prefix: &str| names.iter().zip(["x", "y", "z"]).all(|(n, axis)| stem(n) == format!("{prefix}{axis}"));
     match (is("f"), is("u") || is("d")) {
         (true, _) => Some(true),
@@ -47,6 +84,8 @@ fn vector_kind(names: &[String]) -> Option<bool> {
 impl PointCloud {
     /// Parses CSV text ([`mesh::io::csv`]) with six numbers per line (x, y, z, vx, vy, vz), separated by commas
     /// or semicolons; blank lines and empty fields are skipped and a first line that is not numbers is a header.
+    /// A header that names its columns `x`, `y`, `z` and the vector's by their axes (`fz`, `uy_mm`) puts them
+    /// in order whatever their places; one that names no column `x`, `y` or `z` leaves them in theirs.
     /// A header whose first three columns are `x_mm, y_mm, z_mm` gives the positions in mm, and one whose
     /// last three end in `_mm` the vectors (displacements) too (`_m`: m); otherwise they are in m. Columns of
     /// one kind naming different units are an error. `path` names the text in errors, with the line number.
@@ -54,8 +93,13 @@ impl PointCloud {
         let bad = |line: Option<usize>, message: String| LearnError::Input { path: path.to_path_buf(), line, message };
         let dialect = Dialect { separators: &[',', ';'], header: Header::Optional };
         let table = Table::parse(text, &dialect).map_err(|e| bad(e.line, e.message))?;
-        let names = &table.names;
-        let header = |message: String| bad(table.header_line, format!("{message} in {:?}", names.join(",")));
+        let header = |message: String| bad(table.header_line, format!("{message} in {:?}", table.names.join(",")));
+        // The header's names put the columns in order: x, y, z, then the vector's.
+        let order = column_order(&table.names).map_err(header)?.unwrap_or([0, 1, 2, 3, 4, 5]);
+        let names: Vec<String> = match table.names.len() {
+            6 => order.iter().map(|&c| table.names[c].clone()).collect(),
+            _ => table.names.clone(),
+        };
         let named = |columns: &[String]| columns.iter().any(|n| column_unit(n).is_some());
         let position_scale = match names.get(..3).map(|xyz| (coordinate_unit(xyz), named(xyz))) {
             Some((Ok(Some(unit)), _)) => unit.metres(),
@@ -84,8 +128,8 @@ impl PointCloud {
                 return Err(bad(Some(row.line), message));
             }
             let mut values = [0.0; 6];
-            for (value, (field, name)) in values.iter_mut().zip(fields.into_iter().zip(&columns)) {
-                *value = number(field).map_err(|m| bad(Some(row.line), format!("{name} {m}")))?;
+            for (value, (&column, name)) in values.iter_mut().zip(order.iter().zip(&columns)) {
+                *value = number(fields[column]).map_err(|m| bad(Some(row.line), format!("{name} {m}")))?;
             }
             values[..3].iter_mut().for_each(|v| *v *= position_scale);
             values[3..].iter_mut().for_each(|v| *v *= vector_scale);
@@ -270,6 +314,35 @@ mod tests {
         assert!(e.starts_with("cloud.csv:1: vy "), "{e}");
         let m = PointCloud::parse_csv("x,y,z,ux_m,uy_m,uz_m\n0,0,0,0,0,0.001\n", path).unwrap();
         assert_eq!((m.vectors[0], m.vector_unit), ([0.0, 0.0, 0.001], Some(LengthUnit::Metre)));
+    }
+
+    /// A header that names its columns puts them in order, wherever they stand; one naming an axis
+    /// twice is refused; one naming no column x, y or z is read in its columns' order.
+    #[test]
+    fn a_csv_header_names_its_columns_in_any_order() {
+        let path = Path::new("cloud.csv");
+        let read = |text: &str| PointCloud::parse_csv(text, path).unwrap();
+        let expected = ([[0.01, 0.02, 0.03]].to_vec(), [[1.0, 0.0, -2.0]].to_vec());
+        for text in [
+            "x,y,z,fx,fy,fz\n0.01,0.02,0.03,1,0,-2\n",
+            "z,y,x,fz,fy,fx\n0.03,0.02,0.01,-2,0,1\n",
+            "fx,fy,fz,x,y,z\n1,0,-2,0.01,0.02,0.03\n",
+            "Fz_N;X_mm;fy;Y_mm;fx;Z_mm\n-2;10;0;20;1;30\n",
+        ] {
+            let cloud = read(text);
+            let close = |a: &[[f64; 3]], b: &[[f64; 3]]| {
+                a.iter().flatten().zip(b.iter().flatten()).all(|(p, q)| (p - q).abs() < 1e-12)
+            };
+            assert!(close(&cloud.points, &expected.0) && close(&cloud.vectors, &expected.1), "{text}: {cloud:?}");
+            assert_eq!(cloud.named_forces, Some(true), "{text}");
+        }
+        // Vectors named without axes keep their order; the units still come from the names.
+        assert_eq!(read("u,v,w,z_mm,y_mm,x_mm\n1,2,3,30,20,10\n").points, [[0.01, 0.02, 0.03]]);
+        assert_eq!(read("a,b,c,d,e,f\n1,2,3,4,5,6\n").vectors, [[4.0, 5.0, 6.0]]);
+        for header in ["x,y,z,ux,uy,uy", "x,x,z,ux,uy,uz", "x,y,z,z,uy,uz"] {
+            let e = PointCloud::parse_csv(&format!("{header}\n0,0,0,0,0,0\n"), path).unwrap_err().to_string();
+            assert!(e.starts_with("cloud.csv:1: the header names an axis twice"), "{header}: {e}");
+        }
     }
 
     #[test]
