@@ -108,6 +108,21 @@ pub fn refuse_earlier_run(dir: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Refuses an output folder `out` that holds one of a run's `inputs` (files or folders, each
+/// compared as the file it names): the run's files could replace it, or be read as its input by
+/// the next run.
+pub fn refuse_inputs_inside(out: &Path, inputs: &[&Path]) -> Result<()> {
+    let folder = mesh::io::file_key(out);
+    if let Some(input) = inputs.iter().find(|p| mesh::io::file_key(p).starts_with(&folder)) {
+        anyhow::bail!(
+            "{} holds {}, which the run reads: the run's files could replace it; give another --out",
+            out.display(),
+            input.display()
+        );
+    }
+    Ok(())
+}
+
 /// Passes `result` on; when it is a failure and the folder `dir` is the run's own (see
 /// [`run_dir`]), removes the folder again if the run wrote nothing into it.
 pub fn tidy_failed_run<T>(dir: &Path, own: bool, result: Result<T>) -> Result<T> {
@@ -338,6 +353,14 @@ pub fn register_files(
     out: &Path,
     say: &mut dyn FnMut(&str),
 ) -> Result<()> {
+    let targets = match &spec.targets {
+        crate::registration::TargetsSpec::File(path) => Some(path.as_path()),
+        _ => None,
+    };
+    let structures = spec.structures.iter().map(|s| s.path.as_path());
+    let inputs: Vec<&Path> =
+        [cloud].into_iter().chain(truth).chain(targets).chain(structures).chain(spec.surface.as_deref()).collect();
+    refuse_inputs_inside(out, &inputs)?;
     let mut registration = spec.build()?;
     let organ_frame = registration.frame();
     let mut input =

@@ -311,6 +311,19 @@ fn a_damaged_segmentation_to_a_registration_set_up() {
     options.samples = 40;
     let refused = prepare(&options, &out, &Told::default()).unwrap_err().to_string();
     assert!(refused.contains("other inputs") && refused.contains("samples 30 there, 40 now"), "{refused}");
+    // An input file changed under the same name is another input too.
+    options.samples = 30;
+    let targets = std::fs::read(&options.targets).unwrap();
+    std::fs::write(&options.targets, [targets.as_slice(), b"\n"].concat()).unwrap();
+    let refused = prepare(&options, &out, &Told::default()).unwrap_err().to_string();
+    let changed = format!("{} changed since", std::path::absolute(&options.targets).unwrap().display());
+    assert!(refused.contains("other inputs") && refused.contains(&changed), "{refused}");
+    std::fs::write(&options.targets, targets).unwrap();
+    assert!(prepare(&options, &out, &Told::default()).is_ok());
+    // A folder that holds an input is not written into.
+    let holder = options.targets.parent().unwrap().to_path_buf();
+    let refused = prepare(&options, &holder, &Told::default()).unwrap_err().to_string();
+    assert!(refused.contains("which the run reads") && refused.contains("give another --out"), "{refused}");
     std::fs::remove_file(out.join(STATE_FILE)).unwrap();
 }
 

@@ -195,3 +195,26 @@ fn units_are_parsed_the_same_by_every_command() {
         assert!(!ok && text.contains("give --patient DIR, --fem SCENARIO, or --model MODEL"), "{command:?}: {text}");
     }
 }
+
+/// A folder that holds the run's input (its targets, the sequence's frames) is not written into:
+/// the run's targets.csv would replace the targets read, its organ files be read as frames next.
+#[test]
+fn an_output_folder_holding_an_input_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    let seq = dir.path().join("seq");
+    std::fs::create_dir(&seq).unwrap();
+    std::fs::copy(examples.join("cloud.csv"), seq.join("f1.csv")).unwrap();
+    let targets = dir.path().join("targets.csv");
+    std::fs::copy(examples.join("targets.csv"), &targets).unwrap();
+    let before = std::fs::read(&targets).unwrap();
+    let (cloud, targets) = (seq.join("f1.csv"), targets.to_str().unwrap().to_string());
+    for (input, out) in [(cloud.as_path(), dir.path()), (seq.as_path(), seq.as_path())] {
+        let args = ["register", input.to_str().unwrap(), "--fem", "liver_corotational", "--units", "mm"];
+        let (ok, text) = augsim(&[&args[..], &["--targets", &targets, "--out", out.to_str().unwrap()]].concat());
+        assert!(!ok && text.contains("which the run reads: the run's files could replace it"), "{text}");
+        assert!(!text.contains("frame 0"), "registered first:\n{text}");
+    }
+    assert_eq!(std::fs::read(dir.path().join("targets.csv")).unwrap(), before);
+    assert_eq!(std::fs::read_dir(&seq).unwrap().count(), 1, "written into the sequence's folder");
+}

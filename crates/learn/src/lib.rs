@@ -53,7 +53,7 @@ pub use model::{LearnedModel, Method, Model, ModelPredictor, Projected, MODEL_FI
 pub use net::compute::Compute;
 pub use net::inference::InferenceNet;
 pub use net::predict::{time_prediction, Predictor, Timing};
-pub use net::unet::{weights_digest, Gradients, Schedule, TrainedModel, TrainingInfo, UNet, UNetConfig};
+pub use net::unet::{digest, Gradients, Schedule, TrainedModel, TrainingInfo, UNet, UNetConfig};
 pub use points::{PointCloud, PredictInput};
 pub use progress::{Progress, Silent};
 pub use training::curve::CurveRow;

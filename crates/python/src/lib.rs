@@ -656,7 +656,7 @@ fn dataset_split(
 fn weights_digest(py: Python<'_>, path: PathBuf) -> PyResult<String> {
     compute(py, || {
         let bytes = std::fs::read(&path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        Ok(learn::weights_digest(&bytes))
+        Ok(learn::digest(&bytes))
     })
 }
 

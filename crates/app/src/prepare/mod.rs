@@ -46,6 +46,7 @@
 //! resumes after the last step done (the report is written anew), and one with other inputs is
 //! refused.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -273,6 +274,10 @@ pub struct PrepareState {
     /// results whose files name none (`None` in a preparation recorded before it was kept).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub input_unit: Option<LengthUnit>,
+    /// A digest ([`learn::digest`]) of each input file, by path: a file changed since is not
+    /// taken for the one prepared from (empty in a preparation recorded before they were kept).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub input_digests: BTreeMap<PathBuf, String>,
 }
 
 impl PrepareState {
@@ -316,10 +321,22 @@ pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgr
 /// [`prepare`]'s steps.
 fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgress) -> Result<PrepareState> {
     let options = absolute(options)?;
+    let camera = match &options.camera {
+        CameraAt::File(path) => Some(path.as_path()),
+        CameraAt::Point(_) => None,
+    };
+    let inputs: Vec<&Path> = [&options.surface, &options.attach, &options.targets]
+        .into_iter()
+        .chain(&options.structures)
+        .map(PathBuf::as_path)
+        .chain(camera)
+        .collect();
+    crate::output::refuse_inputs_inside(dir, &inputs)?;
     mesh::io::create_folder(dir)?;
     // What a killed run left half-written goes: its step is done again.
     mesh::io::remove_stale_temporaries(dir);
     let state_path = dir.join(STATE_FILE);
+    let digests = input_digests(&inputs)?;
     let mut state = if state_path.exists() {
         let mut state: PrepareState = serde_json::from_str(&std::fs::read_to_string(&state_path)?)
             .with_context(|| format!("reading {}", state_path.display()))?;
@@ -332,14 +349,29 @@ fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PreparePro
                     .join("; ")
             );
         }
+        let changed: Vec<String> = state
+            .input_digests
+            .iter()
+            .filter(|(path, digest)| digests.get(*path) != Some(*digest))
+            .map(|(path, _)| path.display().to_string())
+            .collect();
+        if !changed.is_empty() {
+            bail!(
+                "{} was prepared from other inputs: {} changed since; give another --out, or remove it to start again",
+                dir.display(),
+                changed.join(", ")
+            );
+        }
+        state.input_digests = digests;
         // Recorded before the inputs' unit was kept: the organ step finds it again for the scenarios.
         if state.input_unit.is_none() && !state.steps.iter().any(|s| s.name == "scenarios") {
             state.steps.retain(|s| s.name != "organ");
         }
         state
     } else {
-        let (steps, input_frame, input_unit) = (Vec::new(), None, None);
-        PrepareState { format: "augsim-prepare".into(), options: options.clone(), steps, input_frame, input_unit }
+        let (steps, input_frame, input_unit, input_digests) = (Vec::new(), None, None, digests);
+        let format = "augsim-prepare".into();
+        PrepareState { format, options: options.clone(), steps, input_frame, input_unit, input_digests }
     };
     for (index, name) in STEPS.iter().enumerate() {
         // The report is written anew at every run; the other steps once.
@@ -371,6 +403,18 @@ fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PreparePro
         write_atomic_bytes(&state_path, serde_json::to_string_pretty(&state)?.as_bytes())?;
     }
     Ok(state)
+}
+
+/// A digest ([`learn::digest`]) of each of the `inputs` that is a file, by path.
+fn input_digests(inputs: &[&Path]) -> Result<BTreeMap<PathBuf, String>> {
+    inputs
+        .iter()
+        .filter(|path| path.is_file())
+        .map(|path| {
+            let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+            Ok((path.to_path_buf(), learn::digest(&bytes)))
+        })
+        .collect()
 }
 
 /// The options with their files' paths absolute (the record must not depend on where the

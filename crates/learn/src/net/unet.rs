@@ -546,16 +546,17 @@ struct ModelFile {
     input_unit: FieldUnit,
     target_unit: FieldUnit,
     weights: String,
-    /// [`weights_digest`] of the weights file: a pair written by two runs (one stopped between
+    /// [`digest`] of the weights file: a pair written by two runs (one stopped between
     /// its two writes) is refused. Models saved before it was recorded have none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     weights_digest: Option<String>,
     training: Option<TrainingInfo>,
 }
 
-/// A digest of a weights file's bytes (SplitMix64 over its 8-byte words, in hex), recorded in
-/// `model.json` as `weights_digest`: not for security, to tell one file from another.
-pub fn weights_digest(bytes: &[u8]) -> String {
+/// A digest of a file's bytes (SplitMix64 over its 8-byte words, in hex; a weights file's is
+/// recorded in `model.json` as `weights_digest`, an input's in a preparation's record): not for
+/// security, to tell one file from another.
+pub fn digest(bytes: &[u8]) -> String {
     let digest = bytes.chunks(8).fold(splitmix64(bytes.len() as u64), |h, word| {
         let mut padded = [0u8; 8];
         padded[..word.len()].copy_from_slice(word);
@@ -612,7 +613,7 @@ impl TrainedModel {
             input_unit: self.input_unit,
             target_unit: self.target_unit,
             weights: weights_name,
-            weights_digest: Some(weights_digest(&weights)),
+            weights_digest: Some(digest(&weights)),
             training: self.training.clone(),
         };
         let text = serde_json::to_string_pretty(&file)
@@ -640,7 +641,7 @@ impl TrainedModel {
         file.normalization.validate().map_err(|e| LearnError::model(json_path, e.to_string()))?;
         let weights_path = weights_path(json_path, &file.weights)?;
         let bytes = read(&weights_path)?;
-        if file.weights_digest.as_ref().is_some_and(|d| *d != weights_digest(&bytes)) {
+        if file.weights_digest.as_ref().is_some_and(|d| *d != digest(&bytes)) {
             return Err(LearnError::model(
                 json_path,
                 format!(

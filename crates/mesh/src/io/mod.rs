@@ -514,7 +514,7 @@ pub(crate) fn lfs_error(path: &Path) -> MeshError {
 /// The file `path` names, as a key that two names of one file share: made absolute, with `.` and
 /// `..` taken as written, then with its links resolved (its folder's, where the file is not there
 /// yet).
-fn file_key(path: &Path) -> PathBuf {
+pub fn file_key(path: &Path) -> PathBuf {
     let absolute = std::path::absolute(path).unwrap_or_else(|_| path.into());
     let mut plain = PathBuf::new();
     for part in absolute.components() {
