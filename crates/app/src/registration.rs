@@ -854,6 +854,7 @@ mod tests {
                 steps: steps.collect(),
                 input_frame: None,
                 input_unit: None,
+                input_digests: Default::default(),
             };
             std::fs::write(d.join(STATE_FILE), serde_json::to_string(&state).unwrap()).unwrap();
         };
