@@ -54,6 +54,13 @@ pub fn predict_file(
         };
         lines.push(format!("points     {n} ({what}, {:.2} ms)", mesh::stats::ms(t0.elapsed())));
     }
+    let (unread, given) = learn::unread_input_nodes(&data, &model);
+    if unread > 0 {
+        lines.push(format!(
+            "warning    {unread} of the input's {given} non-zero grid nodes lie where the model reads no input (the \
+             surface it was trained to see): left out"
+        ));
+    }
     let predictor = model.predictor(compute)?;
     let (prediction, sigma) = predictor.predict_with_std(&data)?;
     if let Some(v) = prediction.iter().chain(sigma.iter().flatten()).find(|v| !v.is_finite()) {

@@ -212,6 +212,18 @@ pub trait LearnedModel {
         None
     }
 
+    /// How far an input `field` lies from its training inputs as its regression sees it, where
+    /// it can tell ([`ReducedModel::feature_ratio`]: the reduced-order model).
+    fn input_feature_ratio(&self, _field: &[f32]) -> Result<Option<f64>> {
+        Ok(None)
+    }
+
+    /// The field entries its input is read at, where it reads only some (the reduced-order
+    /// model's visible surface); `None`: everywhere.
+    fn input_entries(&self) -> Option<&[usize]> {
+        None
+    }
+
     /// Fails when `samples` include samples it (or a model it was fine-tuned from) was trained or
     /// validated on; a model without a recorded split passes.
     fn check_unseen(&self, samples: &Samples) -> Result<()> {
@@ -277,6 +289,18 @@ impl LearnedModel for Model {
         match self {
             Model::UNet(m) => m.training_input_scale(),
             Model::Reduced(_) => None,
+        }
+    }
+    fn input_feature_ratio(&self, field: &[f32]) -> Result<Option<f64>> {
+        match self {
+            Model::UNet(_) => Ok(None),
+            Model::Reduced(rom) => rom.feature_ratio(field).map(Some),
+        }
+    }
+    fn input_entries(&self) -> Option<&[usize]> {
+        match self {
+            Model::UNet(_) => None,
+            Model::Reduced(rom) => Some(rom.input_entries()),
         }
     }
 }
@@ -374,6 +398,12 @@ impl LearnedModel for Projected {
     }
     fn training_input_scale(&self) -> Option<f64> {
         self.model.training_input_scale()
+    }
+    fn input_feature_ratio(&self, field: &[f32]) -> Result<Option<f64>> {
+        self.model.input_feature_ratio(field)
+    }
+    fn input_entries(&self) -> Option<&[usize]> {
+        self.model.input_entries()
     }
     /// The model's held-out samples, which the basis must not have been fitted or chosen on
     /// either: its basis would hold them.

@@ -205,6 +205,13 @@ impl PredictInput {
     pub fn into_network_input(self, model: &impl LearnedModel) -> Result<Vec<f32>> {
         let field = self.into_field(model)?;
         check_input_scale(&field, model)?;
+        let (unread, given) = unread_input_nodes(&field, model);
+        if given > 0 && unread == given {
+            return Err(LearnError::InvalidInput(format!(
+                "none of the input's {given} non-zero grid nodes lies where the model reads its input (the \
+                 surface it was trained to see): its prediction would be the one for no input"
+            )));
+        }
         Ok(field)
     }
 
@@ -248,14 +255,32 @@ impl PredictInput {
     }
 }
 
+/// The non-zero grid nodes of an input `field` that `model` reads no input at (the reduced-order
+/// model reads the surface it was trained to see, and nothing else), and the non-zero nodes.
+pub fn unread_input_nodes(field: &[f32], model: &impl LearnedModel) -> (usize, usize) {
+    let g = model.grid_shape();
+    let nodes = crate::data::corrupt::nonzero_nodes(field, g);
+    let Some(entries) = model.input_entries() else { return (0, nodes.len()) };
+    let mut read = vec![false; g.nodes()];
+    entries.iter().for_each(|&e| read[e % g.nodes()] = true);
+    (nodes.iter().filter(|&&v| !read[v]).count(), nodes.len())
+}
+
 /// How many times the RMS norm of a model's training inputs an input may reach: beyond, it is
 /// taken for one in another unit (a thousand times for millimetres given as metres).
 const MAX_INPUT_SCALE_RATIO: f64 = 100.0;
 
 /// Refuses an input field whose RMS norm over its non-zero nodes is more than
-/// [`MAX_INPUT_SCALE_RATIO`] times that of `model`'s training inputs, where it records one: a
-/// network asked so far outside what it learned predicts nonsense (metres of displacement).
+/// [`MAX_INPUT_SCALE_RATIO`] times that of `model`'s training inputs, where it records one, or
+/// whose features lie that many times as far out as its training inputs' (a reduced-order
+/// model's): a model asked so far outside what it learned predicts nonsense.
 fn check_input_scale(field: &[f32], model: &impl LearnedModel) -> Result<()> {
+    if let Some(ratio) = model.input_feature_ratio(field)?.filter(|&r| r > MAX_INPUT_SCALE_RATIO) {
+        return Err(LearnError::InvalidInput(format!(
+            "the input lies {ratio:.0} times as far from the model's mean input as its training inputs do (by \
+             the features its regression compares): is it in another unit (millimetres given as metres)?"
+        )));
+    }
     let Some(scale) = model.training_input_scale() else { return Ok(()) };
     let g = model.grid_shape();
     let nodes = crate::data::corrupt::nonzero_nodes(field, g);

@@ -131,6 +131,32 @@ fn bad_input_is_refused_with_a_message() {
     let reduced = Model::Reduced(std::sync::Arc::new(model.clone()));
     let e = PredictInput::Grid(array).into_network_input(&reduced).unwrap_err().to_string();
     assert!(e.contains("value 3 is 1e300"), "{e}");
+    // An input a thousand times its training inputs (millimetres given as metres) is refused; ten
+    // times is not.
+    let field = |scale: f32, at: &dyn Fn(usize) -> bool| -> PredictInput {
+        let data = train.input(0).iter().enumerate().map(|(e, &v)| if at(e) { scale * v } else { 0.0 }).collect();
+        PredictInput::Grid(NpyArray { shape: vec![3, 6, 5, 4], data: NpyData::F32(data) })
+    };
+    let everywhere = |_: usize| true;
+    let e = field(1000.0, &everywhere).into_network_input(&reduced).unwrap_err().to_string();
+    assert!(e.contains("times as far from the model's mean input") && e.contains("another unit"), "{e}");
+    assert!(field(10.0, &everywhere).into_network_input(&reduced).is_ok());
+    // An input only where the model reads none (off the surface it was trained to see) is refused;
+    // a node of one there is counted.
+    let n = grid.nodes();
+    let read: std::collections::BTreeSet<usize> = model.input_entries().iter().map(|e| e % n).collect();
+    let unread: Vec<usize> = (0..n).filter(|v| !read.contains(v)).collect();
+    let mut off = vec![0f32; grid.field_len()];
+    unread.iter().for_each(|&v| off[2 * n + v] = 0.01);
+    let e = PredictInput::Grid(NpyArray { shape: vec![3, 6, 5, 4], data: NpyData::F32(off) })
+        .into_network_input(&reduced)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains(&format!("none of the input's {} non-zero grid nodes", unread.len())), "{e}");
+    let mut partly = train.input(0).to_vec();
+    partly[2 * n + unread[0]] = 0.01;
+    let given = (0..n).filter(|&v| (0..3).any(|c| partly[c * n + v] != 0.0)).count();
+    assert_eq!(augsim_learn::unread_input_nodes(&partly, &reduced), (1, given));
     // Settings that leave nothing to fit, or that would fit the same thing twice.
     let noisy = Corruption { noise_std: 1e-3, ..Corruption::none() };
     for (config, what) in [

@@ -191,8 +191,23 @@ pub struct UncertainPrediction {
 }
 
 impl ReducedModel {
-    /// The kernel row of one input field and the prior's modal coefficients (empty without one).
-    fn kernel_row(&self, input: &[f32]) -> Result<(Vec<f64>, Vec<f64>)> {
+    /// The field entries (`[3, nx, ny, nz]` indices) its input features read: the rest of an
+    /// input field is not read.
+    pub fn input_entries(&self) -> &[usize] {
+        &self.input_entries
+    }
+
+    /// How far one input field lies from the training inputs, as the kernel sees it: its
+    /// features' norm over the root mean square of the inducing points' (training inputs').
+    pub fn feature_ratio(&self, input: &[f32]) -> Result<f64> {
+        let (features, _) = self.features(input)?;
+        let norm: f64 = features.iter().map(|v| v * v).sum();
+        let training = self.inducing_norms.iter().sum::<f64>() / self.inducing_norms.len().max(1) as f64;
+        Ok((norm / training).sqrt())
+    }
+
+    /// The features of one input field and the prior's modal coefficients (empty without one).
+    fn features(&self, input: &[f32]) -> Result<(Vec<f64>, Vec<f64>)> {
         check_prediction_input(input, self.grid)?;
         let x: Vec<f64> =
             self.input_entries.iter().zip(&self.input_mean).map(|(&e, m)| f64::from(input[e]) - m).collect();
@@ -205,6 +220,12 @@ impl ReducedModel {
             }
         };
         features.iter_mut().zip(&self.feature_scales).for_each(|(f, s)| *f *= s);
+        Ok((features, prior))
+    }
+
+    /// The kernel row of one input field and the prior's modal coefficients (empty without one).
+    fn kernel_row(&self, input: &[f32]) -> Result<(Vec<f64>, Vec<f64>)> {
+        let (features, prior) = self.features(input)?;
         let norm: f64 = features.iter().map(|v| v * v).sum();
         let cross = gemv(self.inducing.as_ref(), &features);
         let k = cross
