@@ -195,7 +195,20 @@ magnitude = [0.05, 0.2]
     assert!(!d.join("pred_sigma.npy").exists() && !fields.iter().any(|f| f.name == "sigma"), "a U-Net predicts no σ");
     // A reduced-order model writes its predicted σ beside the displacement, on the grid and the mesh.
     augsim(&["train", "data", "--out", "rom", "--method", "rom", "--test-samples", "2"], d);
+    // It reads its input where its training draws pushed, and nowhere else: the cloud above pushes
+    // inside the organ, where it reads nothing; one on a node it reads is predicted.
+    let e = augsim_err(&["predict", "rom", "cloud.csv", "-o", "rom.npy", "--runs", "1"], d);
+    assert!(e.contains("none of the input's 9 non-zero grid nodes lies where the model reads its input"), "{e}");
+    let read = mesh::io::npy::read_npy(&d.join("rom/input_mask.npy")).unwrap().into_f32();
+    let entry = read.iter().position(|&m| m == 1.0).unwrap();
+    let (channel, node) = (entry / (9 * 10 * 9), entry % (9 * 10 * 9));
+    let at = p((node / 90) as f64, (node / 9 % 10) as f64, (node % 9) as f64);
+    let mut force = [0.0; 3];
+    force[channel] = 0.1;
+    let row = format!("{},{},{},{},{},{}", at[0], at[1], at[2], force[0], force[1], force[2]);
+    std::fs::write(d.join("cloud.csv"), format!("x,y,z,fx,fy,fz\n{row}\n")).unwrap();
     let text = augsim(&["predict", "rom", "cloud.csv", "-o", "rom.npy", "--mesh", "organ.vtu", "--runs", "1"], d);
+    assert!(text.contains("points     1") && !text.contains("warning"), "{text}");
     assert!(text.contains("sigma      predicted at the organ's grid nodes: mean"), "{text}");
     let sigma = mesh::io::npy::read_npy(&d.join("rom_sigma.npy")).unwrap();
     assert_eq!(sigma.shape, [9, 10, 9]);
