@@ -89,6 +89,16 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
     ));
     let (grid, inside) = (generator.grid(), generator.mask().iter().filter(|&&m| m == 1).count());
     progress.line(&format!("grid       {} × {} × {} ({inside} nodes inside)", grid.nx, grid.ny, grid.nz));
+    if inside == 0 {
+        anyhow::bail!(
+            "{}: no node of its [dataset] grid = [{}, {}, {}] lies inside the organ, so no draw would hold a \
+             target: make the grid finer",
+            args.scenario.display(),
+            grid.nx,
+            grid.ny,
+            grid.nz
+        );
+    }
     // What the dataset held before this run (resumed, grown, or complete already); the generator
     // says it resumes once it has accepted the dataset.
     let held = learn::Dataset::open(&out).map_or(0, |d| d.manifest().num_samples + d.manifest().failed.len());

@@ -175,6 +175,7 @@ impl TrainArgs {
                 ("--init", self.init.is_some()),
                 ("--validate-every", self.validate_every != d.validate_every),
                 ("--restart", self.restart),
+                ("--device", self.device.compute != learn::Compute::Cpu),
             ],
             Method::UNet => vec![
                 ("--modes", self.modes != rom.max_modes),

@@ -268,6 +268,15 @@ magnitude = [0.05, 0.2]
     assert!(e.contains("data holds a dataset (manifest.json): a model written there"), "{e}");
     let e = augsim_err(&["generate", "tiny.toml", "--out", "net"], d);
     assert!(e.contains("net holds a model (model.json): a dataset written there"), "{e}");
+    // A grid with no node inside the organ would hold no target: refused before any draw.
+    let coarse = std::fs::read_to_string(d.join("tiny.toml")).unwrap().replace("[9, 10, 9]", "[2, 2, 2]");
+    std::fs::write(d.join("coarse.toml"), coarse).unwrap();
+    let e = augsim_err(&["generate", "coarse.toml", "--out", "coarse"], d);
+    assert!(e.contains("no node of its [dataset] grid = [2, 2, 2] lies inside the organ"), "{e}");
+    assert!(!d.join("coarse").exists());
+    // A reduced-order model runs on no device: --device is refused as the U-Net's other options are.
+    let e = augsim_err(&["train", "data", "--out", "rom_gpu", "--method", "rom", "--device", "cpu-burn"], d);
+    assert!(e.contains("--device is a U-Net's"), "{e}");
     std::fs::create_dir_all(d.join("fitted")).unwrap();
     std::fs::write(d.join("fitted/model.json"), "{}").unwrap();
     let e = augsim_err(&["train", "data", "--out", "fitted", "--method", "rom"], d);
