@@ -100,7 +100,16 @@ impl PointInput {
         if files.len() != frames {
             anyhow::bail!("{} truth file(s) for {frames} cloud frame(s)", files.len());
         }
-        files.iter().map(|f| by_label(f, self.read(f)?, labels)).collect()
+        let mut truths = Vec::with_capacity(files.len());
+        for file in &files {
+            let truth = self.read(file)?;
+            let warning = pairing_warning(file, &truth.labels, labels);
+            if let Some(w) = warning.filter(|w| !self.warnings.contains(w)) {
+                self.warnings.push(w);
+            }
+            truths.push(by_label(file, truth, labels)?);
+        }
+        Ok(truths)
     }
 
     /// Reads an intraoperative cloud: a points file as [`PointInput::read`], or a cloud of
@@ -117,6 +126,23 @@ impl PointInput {
         let points = self.place(path, points).map_err(|e| register::RegisterError::Invalid(format!("{e:#}")))?.points;
         register::cloud::check_points(path, points)
     }
+}
+
+/// The warning for a truth file (`path`, labelled `truth`) that cannot be paired with the targets
+/// (`targets`) by label, though one of them labels some points: they are paired row by row.
+fn pairing_warning(path: &Path, truth: &[String], targets: &[String]) -> Option<String> {
+    let count = |l: &[String]| l.iter().filter(|l| !l.is_empty()).count();
+    let (t, g) = (count(truth), count(targets));
+    let whole = |n: usize, l: &[String]| n > 0 && n == l.len();
+    if (whole(t, truth) && whole(g, targets)) || (t == 0 && g == 0) {
+        return None;
+    }
+    Some(format!(
+        "{}: the truth labels {t} of its {} points, the targets {g}: paired with the targets row by row, not by \
+         label (label every point of both files, or of neither, to be sure of the pairing)",
+        path.display(),
+        truth.len(),
+    ))
 }
 
 /// The points of `truth` (read from `path`) in the order of the targets' `labels` when both are
@@ -301,6 +327,12 @@ mod tests {
         .unwrap();
         let unplaced = input.read_truths(&markups, 1, &labels).unwrap_err().to_string();
         assert!(unplaced.contains("`C` is not placed (its positionStatus in 3D Slicer is undefined"), "{unplaced}");
+        // Each pairing row by row where one file labels points is said.
+        let said: Vec<&str> = input.warnings.iter().filter_map(|w| w.rsplit_once("truth.csv: ")).map(|w| w.1).collect();
+        let paired = ": paired with the targets row by row, not by label (label every point of both files";
+        assert_eq!(said.len(), 2, "{said:?}");
+        assert!(said[0].starts_with(&format!("the truth labels 3 of its 3 points, the targets 0{paired}")), "{said:?}");
+        assert!(said[1].starts_with(&format!("the truth labels 0 of its 3 points, the targets 3{paired}")), "{said:?}");
     }
 
     #[test]
