@@ -59,6 +59,32 @@ total = [0.0, 0.0, -1.0]
     assert!(!ok, "SVK must not converge under this load:\n{text}");
     assert!(text.contains("passed its compressive limit point beyond load factor 0."), "{text}");
     assert!(text.contains("element ") && text.contains("neo_hookean"), "{text}");
+    // A load that defeats the first step: told where the failing iterate crushed the beam, not at
+    // the rest state (a stretch of 1).
+    std::fs::write(
+        &scenario,
+        r#"kind = "static"
+name = "svk_crush"
+[mesh.box]
+min = [0.0, 0.0, 0.0]
+max = [4.0, 1.0, 1.0]
+cells = [8, 2, 2]
+element = "hex"
+[material]
+law = "svk"
+young = 300.0
+poisson = 0.4
+[[fixed]]
+select = { box = { min = [-0.001, -0.001, -0.001], max = [0.001, 1.001, 1.001] } }
+[[traction]]
+select = { box = { min = [3.999, -0.001, -0.001], max = [4.001, 1.001, 1.001] } }
+traction = [0.0, 0.0, -1e5]
+"#,
+    )
+    .unwrap();
+    let (ok, text) = solve(&scenario, &dir.path().join("out.vtu"));
+    let stretch: f64 = text.split("principal stretch of ").nth(1).and_then(|t| t[..5].parse().ok()).expect(&text);
+    assert!(!ok && stretch < 0.577, "{text}");
 }
 
 /// A missing scenario file is named, with the system's reason said once (not repeated by the

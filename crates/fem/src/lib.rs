@@ -92,8 +92,8 @@ pub enum FemError {
         limit = material::SVK_LIMIT_STRETCH
     )]
     LimitPoint {
-        /// The most compressed element at the last equilibrium (numbered as for
-        /// [`FemError::InvertedElement`]).
+        /// The most compressed element at the last equilibrium, or in the failing iterate when no
+        /// load step converged (numbered as for [`FemError::InvertedElement`]).
         element: usize,
         /// Its smallest principal stretch there.
         stretch: f64,

@@ -1053,7 +1053,10 @@ impl StaticSolver {
         // Whether the iterate that failed went past the limit; told of the last equilibrium, which
         // does not depend on how far the failed iterate strayed.
         let Some((_, strayed)) = most_compressed(trial).or_else(|| most_compressed(u)) else { return error };
-        compression_failure(law, stats.indefinite, strayed, most_compressed(u), lambda).unwrap_or(error)
+        // With no load step converged the last equilibrium is the rest state: the failing
+        // iterate tells where the body gave way.
+        let at = if lambda > 0.0 { most_compressed(u) } else { most_compressed(trial) };
+        compression_failure(law, stats.indefinite, strayed, at, lambda).unwrap_or(error)
     }
 
     /// Iterations at load factor `lambda`, updating `u` in place.
