@@ -48,6 +48,18 @@ fn synthetic_tracks_fed_back_and_bad_files() {
     let (ok, text) = assimilate(&[s, "--observations", bad.to_str().unwrap(), "-o", d.join("bad").to_str().unwrap()]);
     assert!(!ok);
     assert!(text.contains(&format!("error: {}:3: y = \"oops\" is not a number", bad.display())), "{text}");
+    // A prior whose mean gives no modulus is refused before the filter starts, naming its key.
+    let text = std::fs::read_to_string(&scenario).unwrap();
+    for (mean, said) in [
+        ("transform = \"exp\"\nprior_mean = 800.0", "of inf Pa (under transform = \"exp\" it is ln E)"),
+        ("transform = \"identity\"\nprior_mean = -1000.0", "of -1000 Pa:"),
+    ] {
+        let bad_prior = d.join("bad_prior.toml");
+        std::fs::write(&bad_prior, text.replace("transform = \"exp\"\nprior_mean = 8.0", mean)).unwrap();
+        let (ok, out) = assimilate(&[bad_prior.to_str().unwrap(), "-o", d.join("prior").to_str().unwrap()]);
+        assert!(!ok && out.contains("[young] prior_mean = ") && out.contains(said), "{out}");
+        assert!(!out.contains("filter iteration"), "{out}");
+    }
     // Track options need --observations.
     let (ok, text) = assimilate(&[s, "--controls", bad.to_str().unwrap()]);
     assert!(!ok && text.contains("--observations"), "{text}");

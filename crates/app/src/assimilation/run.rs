@@ -18,7 +18,7 @@ use super::{AssimilationError, Context};
 use filter::observation::{add_noise, tracked_positions};
 use filter::{
     ControlPath, FemModel, FemModelError, FemParameter, LoadPattern, Model, ObservationNoise, ParameterSpec, Roukf,
-    RoukfConfig, TrackedPoint,
+    RoukfConfig, TrackedPoint, Transform,
 };
 use scenario::assimilation::{AssessmentSpec, ObservationSpec};
 use scenario::{build_mesh, AssimilationScenario};
@@ -687,6 +687,15 @@ impl Experiment {
 fn unknowns(sc: &AssimilationScenario, mesh: &Mesh) -> Result<Unknowns, AssimilationError> {
     let mut u = Unknowns { specs: Vec::new(), parameters: Vec::new(), truth: Vec::new(), springs: None };
     if let Some(y) = &sc.young {
+        let modulus = y.transform.to_physical(y.prior_mean);
+        if !(modulus.is_finite() && modulus > 0.0) {
+            let ln = if y.transform == Transform::Exp { " (under transform = \"exp\" it is ln E)" } else { "" };
+            return Err(AssimilationError::Setup(format!(
+                "[young] prior_mean = {} gives a Young's modulus of {modulus} Pa{ln}: the prior's mean must give a \
+                 positive, finite modulus",
+                y.prior_mean
+            )));
+        }
         u.specs.push(ParameterSpec::new("young", y.transform, y.prior_mean, y.prior_std));
         u.parameters.push(FemParameter::Young);
         u.truth.push(sc.material.young);
