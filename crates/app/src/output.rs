@@ -375,10 +375,12 @@ pub fn register_files(
     };
     truth_warning.iter().for_each(|w| say(&format!("warning    {w}")));
     let sequence = frames.len() > 1;
+    // Every frame read before any is written: a bad file late in a sequence leaves no half run.
+    let clouds: Vec<Vec<Point>> = frames.iter().map(|f| input.read_cloud(f)).collect::<register::Result<_>>()?;
     let mut writer = RunWriter::new(out, sequence, spec.given_units, (organ_frame, spec.given_frame))?;
     truth_warning.into_iter().for_each(|w| writer.warn(w));
-    let mut last_cloud = Vec::new();
-    let clouds = frames.iter().map(|f| input.read_cloud(f).inspect(|c| last_cloud.clone_from(c)));
+    let last_cloud = clouds.last().cloned().unwrap_or_default();
+    let clouds = clouds.into_iter().map(Ok);
     let mut said_pose = None;
     let to_register_error = |e: anyhow::Error| register::RegisterError::Invalid(format!("{e:#}"));
     let outcomes = registration.register_sequence(clouds, truths.as_deref(), |i, organ, o| {

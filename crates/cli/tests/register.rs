@@ -218,3 +218,34 @@ fn an_output_folder_holding_an_input_is_refused() {
     assert_eq!(std::fs::read(dir.path().join("targets.csv")).unwrap(), before);
     assert_eq!(std::fs::read_dir(&seq).unwrap().count(), 1, "written into the sequence's folder");
 }
+
+/// A sequence with a bad frame late in it is refused before any frame is registered: no half run
+/// is left to block the next one.
+#[test]
+fn a_bad_frame_late_in_a_sequence_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    let seq = dir.path().join("seq");
+    std::fs::create_dir(&seq).unwrap();
+    let cloud = std::fs::read_to_string(examples.join("cloud.csv")).unwrap();
+    std::fs::write(seq.join("a.csv"), &cloud).unwrap();
+    let mut lines: Vec<&str> = cloud.lines().collect();
+    lines[11] = "nan,0,0";
+    std::fs::write(seq.join("b.csv"), lines.join("\n")).unwrap();
+    let (out, targets) = (dir.path().join("run"), examples.join("targets.csv"));
+    let (ok, text) = augsim(&[
+        "register",
+        seq.to_str().unwrap(),
+        "--fem",
+        "liver_corotational",
+        "--units",
+        "mm",
+        "--targets",
+        targets.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!ok && text.contains("b.csv") && text.contains("line 12"), "{text}");
+    assert!(!text.contains("frame 0"), "registered first:\n{text}");
+    assert!(!out.exists(), "the run's folder is left behind");
+}
