@@ -630,14 +630,19 @@ fn camera_sees_the_hold(
 fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Option<Frame>, LengthUnit)> {
     let mut lines = Vec::new();
     let (frame, unit) = organ_lines(options, dir, &mut lines).map_err(|e| {
-        // A warning said before the error that doubts the organ itself (a unit that makes no
-        // organ's size, an organ cut by the image's border) is often its cause; the others are not.
-        // Which label of a labelmap was read may be too (a number that names a segment of
-        // another layer than the one meant).
-        let warnings = organ_doubts(&lines);
-        let e = match warnings.is_empty() {
+        // The step's lines are said only once it is done: its warnings go with its error. One
+        // that doubts the organ itself (a unit that makes no organ's size, an organ cut by the
+        // image's border) is often the error's cause, and comes first. Which label of a labelmap
+        // was read may be too (a number that names a segment of another layer than the one meant).
+        let (doubts, others): (Vec<&str>, Vec<&str>) =
+            lines.iter().filter_map(|l| l.strip_prefix("warning: ")).partition(|w| is_organ_doubt(w));
+        let e = match others.is_empty() {
             true => e,
-            false => e.context(format!("{} (warned before, likely the cause of what follows)", warnings.join("; "))),
+            false => e.context(format!("warned as the organ was read: {}", others.join("; "))),
+        };
+        let e = match doubts.is_empty() {
+            true => e,
+            false => e.context(format!("{} (likely the cause of what follows)", doubts.join("; "))),
         };
         let read = lines.iter().find_map(|l| l.strip_prefix("labelmap: ").filter(|l| l.starts_with("label")));
         match read.and_then(|l| l.split_once("): ")) {
@@ -648,14 +653,11 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
     Ok((lines, frame, unit))
 }
 
-/// The warnings among `lines` that doubt the organ itself: the unit of the inputs (an organ's
-/// size in it), or an organ cut by the image's border (targets and regions in the part cut off).
-fn organ_doubts(lines: &[String]) -> Vec<&str> {
-    lines
-        .iter()
-        .filter_map(|l| l.strip_prefix("warning: "))
-        .filter(|w| w.contains("unit") || w.contains("the image's border"))
-        .collect()
+/// Whether a warning doubts the organ itself: the unit of the inputs (an organ's size in it), an
+/// organ cut by the image's border (targets and regions in the part cut off), or one placed nowhere
+/// (a labelmap without its place in the scanner's frame).
+fn is_organ_doubt(warning: &str) -> bool {
+    ["unit", "the image's border", "places its voxels nowhere"].iter().any(|doubt| warning.contains(doubt))
 }
 
 /// [`organ_step`], its lines said in `lines` as they come.
@@ -1399,21 +1401,22 @@ mod tests {
         }
     }
 
-    /// An error in the organ's step is put after the warnings that doubt the organ (its unit, its
-    /// cut by the image's border), not after every warning said before it.
+    /// The warnings that doubt the organ (its unit, its cut by the image's border) are told apart
+    /// from the others: an error of the organ's step is said as likely caused by them alone.
     #[test]
-    fn an_error_carries_the_organ_s_doubts_alone() {
+    fn the_organ_s_doubts_are_told_apart() {
         let lines: Vec<String> = [
             "units: m (given)",
             "warning: in m the organ is 6483 mm across, where organs are 20 to 600 mm: is the unit right?",
             "warning: the camera, looking along (0, 0, -1), sees 45 of the 58 held nodes",
             "warning: the organ reaches the image's border (i = 112, left): it is cut there, flat where the image ends",
             "warning: `tumour`: 39 of its 162 vertices lie outside the organ",
+            "warning: the file places its voxels nowhere (a NIfTI without qform and sform)",
         ]
         .map(String::from)
         .to_vec();
-        let doubt = |i: usize| &lines[i]["warning: ".len()..];
-        assert_eq!(organ_doubts(&lines), [doubt(1), doubt(3)]);
+        let doubts: Vec<bool> = lines.iter().map(|l| l.strip_prefix("warning: ").is_some_and(is_organ_doubt)).collect();
+        assert_eq!(doubts, [false, true, false, true, false, true]);
     }
 
     #[test]
@@ -1443,7 +1446,7 @@ mod tests {
         let error = format!("{:#}", organ_step(&giant, dir.path()).unwrap_err());
         assert!(
             error.starts_with("in m the organ is 6483 mm across")
-                && error.contains("(warned before, likely the cause of what follows): "),
+                && error.contains("(likely the cause of what follows): "),
             "{error}"
         );
     }
