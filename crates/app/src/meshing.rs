@@ -155,6 +155,14 @@ fn organ_surface_in_metres(
         notes.extend(route.lines(unit).into_iter().map(|l| ("repair", l)));
         notes.extend(route.warnings().into_iter().map(|l| ("warning", l)));
         surface = repaired;
+    } else if let Some((a, b)) =
+        (!is_labelmap(path)).then(|| mesh::repair::self_intersections(&surface).first().copied()).flatten()
+    {
+        bail!(
+            "{}: the surface crosses itself (triangles {a} and {b}, among others): it must be a closed 2-manifold to \
+             be meshed without repair; leave out --no-repair",
+            path.display()
+        );
     }
     match to_metres {
         ToMetres::FromUnit(unit) => surface.transform([0.0; 3], unit.metres()),

@@ -151,6 +151,34 @@ fn mesh_and_solve_refuse_to_write_over_their_input() {
     assert_eq!(std::fs::read(&volume).unwrap(), before);
 }
 
+/// Without repair a surface must be a closed 2-manifold as it is: one that crosses itself (two
+/// overlapping cubes) is refused, not meshed with its overlap counted twice.
+#[test]
+fn a_surface_crossing_itself_is_refused_without_repair() {
+    let dir = tempfile::tempdir().unwrap();
+    let cube = |o: f64| -> Vec<[[f64; 3]; 3]> {
+        let p =
+            |i: usize| [o + 100.0 * (i & 1) as f64, o + 100.0 * (i >> 1 & 1) as f64, o + 100.0 * (i >> 2 & 1) as f64];
+        let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+        quads.iter().flat_map(|q| [[p(q[0]), p(q[1]), p(q[2])], [p(q[0]), p(q[2]), p(q[3])]]).collect()
+    };
+    let mut text = String::from("solid two\n");
+    for t in cube(0.0).into_iter().chain(cube(50.0)) {
+        text.push_str("facet normal 0 0 0\nouter loop\n");
+        t.iter().for_each(|v| text.push_str(&format!("vertex {} {} {}\n", v[0], v[1], v[2])));
+        text.push_str("endloop\nendfacet\n");
+    }
+    let stl = dir.path().join("two.stl");
+    std::fs::write(&stl, text + "endsolid two\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_augsim"))
+        .args(["mesh", stl.to_str().unwrap(), "--no-repair", "--tets", "300", "-o"])
+        .arg(dir.path().join("two.vtu"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && text.contains("the surface crosses itself"), "{text}");
+}
+
 /// A Young's modulus far below soft tissues' (one written in kPa) is doubted aloud, whether the
 /// solve then fails or not.
 #[test]
