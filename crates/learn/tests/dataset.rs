@@ -213,6 +213,55 @@ fn write_read_round_trip_is_exact() {
     assert!(ds.load_range(5..10).is_err());
 }
 
+/// A shard whose arrays were changed after it was written (every node masked, targets in mm, the
+/// inputs and targets swapped) is refused as it is loaded, naming its file: it no longer gives the
+/// sums its manifest recorded.
+#[test]
+fn a_shard_changed_since_it_was_written_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), spec(4, None), 0..5);
+    let shard = ds_shard(dir.path());
+    let [nx, ny, nz] = grid().dims();
+    let read = |name: &str| npy::read_npy(&shard.join(name)).unwrap();
+    let (inputs, targets, masks) = (read("inputs.npy"), read("targets.npy"), read("masks.npy"));
+    let field = [4, 3, nx, ny, nz];
+    let changes: [(&str, Box<dyn Fn()>); 3] = [
+        (
+            "masks.npy: its masked nodes",
+            Box::new(|| npy::write_u8(&shard.join("masks.npy"), &[4, nx, ny, nz], &vec![1; 4 * nx * ny * nz]).unwrap()),
+        ),
+        (
+            "targets.npy: its sums of the targets",
+            Box::new(|| {
+                let mm: Vec<f32> = targets.clone().into_f32().iter().map(|v| 1000.0 * v).collect();
+                npy::write_f32(&shard.join("targets.npy"), &field, &mm).unwrap()
+            }),
+        ),
+        (
+            "inputs.npy: its nodes with an input",
+            Box::new(|| {
+                npy::write_f32(&shard.join("inputs.npy"), &field, &targets.clone().into_f32()).unwrap();
+                npy::write_f32(&shard.join("targets.npy"), &field, &inputs.clone().into_f32()).unwrap()
+            }),
+        ),
+    ];
+    for (said, change) in changes {
+        change();
+        let e = Dataset::open(dir.path()).unwrap().load_all().unwrap_err().to_string();
+        assert!(e.contains(said) && e.contains("differ from those") && e.contains("manifest.json"), "{e}");
+        npy::write_f32(&shard.join("inputs.npy"), &field, &inputs.clone().into_f32()).unwrap();
+        npy::write_f32(&shard.join("targets.npy"), &field, &targets.clone().into_f32()).unwrap();
+        npy::write_u8(&shard.join("masks.npy"), &[4, nx, ny, nz], &masks.clone().into_mask(&shard).unwrap()).unwrap();
+        assert!(Dataset::open(dir.path()).unwrap().load_all().is_ok(), "restored");
+    }
+}
+
+/// The folder of a dataset's first shard.
+fn ds_shard(dir: &Path) -> PathBuf {
+    let masks = Dataset::open(dir).unwrap().manifest().shards[0].masks.clone();
+    dir.join(Path::new(&masks).parent().unwrap())
+}
+
 #[test]
 fn statistics_match_hand_computation() {
     let dir = tempfile::tempdir().unwrap();

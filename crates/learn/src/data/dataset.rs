@@ -250,6 +250,36 @@ impl StatSums {
     }
 }
 
+/// Refuses a shard whose arrays (`samples`) do not give the sums its manifest entry (`info`, in
+/// `manifest`) recorded as it was written: one changed since (a mask, a unit, files swapped)
+/// would otherwise train or evaluate silently on other data.
+fn check_sums(info: &ShardInfo, samples: &Samples, manifest: &Path) -> Result<()> {
+    let mut found = StatSums::default();
+    for i in 0..samples.len() {
+        found.add_sample(samples.grid, samples.input(i), samples.target(i), samples.mask(i));
+    }
+    let recorded = &info.sums;
+    let close = |a: &[f64; 3], b: &[f64; 3]| {
+        a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-9 * x.abs().max(y.abs()) + f64::MIN_POSITIVE)
+    };
+    let differs = [
+        ("nodes with an input", found.input_nodes != recorded.input_nodes, info.inputs.as_str()),
+        ("sums of the inputs", !close(&found.input_sum, &recorded.input_sum), info.inputs.as_str()),
+        ("sums of the squared inputs", !close(&found.input_sum_sq, &recorded.input_sum_sq), info.inputs.as_str()),
+        ("masked nodes", found.target_nodes != recorded.target_nodes, info.masks.as_str()),
+        ("sums of the targets", !close(&found.target_sum, &recorded.target_sum), info.targets.as_str()),
+        ("sums of the squared targets", !close(&found.target_sum_sq, &recorded.target_sum_sq), info.targets.as_str()),
+    ];
+    match differs.iter().find(|(_, differ, _)| *differ) {
+        Some((what, _, file)) => Err(LearnError::InvalidInput(format!(
+            "{file}: its {what} differ from those {} recorded as it was written: the shard was changed since (a \
+             mask, a unit, files swapped); generate it again",
+            manifest.display()
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// Statistics of one field: per-channel mean and standard deviation, and the RMS of the vector
 /// norm, over the counted nodes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -1120,6 +1150,7 @@ impl Dataset {
         let per = self.manifest.grid.field_len();
         check_values(&input_path, &samples.inputs, per, &samples.indices)?;
         check_values(&target_path, &samples.targets, per, &samples.indices)?;
+        check_sums(info, &samples, &self.dir.join(MANIFEST_FILE))?;
         Ok(samples)
     }
 
