@@ -225,7 +225,9 @@ fn a_shard_changed_since_it_was_written_is_refused() {
     let read = |name: &str| npy::read_npy(&shard.join(name)).unwrap();
     let (inputs, targets, masks) = (read("inputs.npy"), read("targets.npy"), read("masks.npy"));
     let field = [4, 3, nx, ny, nz];
-    let changes: [(&str, Box<dyn Fn()>); 3] = [
+    /// What a change makes the error say, and the change.
+    type Change<'a> = (&'a str, Box<dyn Fn() + 'a>);
+    let changes: [Change; 3] = [
         (
             "masks.npy: its masked nodes",
             Box::new(|| npy::write_u8(&shard.join("masks.npy"), &[4, nx, ny, nz], &vec![1; 4 * nx * ny * nz]).unwrap()),
