@@ -641,17 +641,19 @@ impl TrainedModel {
         file.normalization.validate().map_err(|e| LearnError::model(json_path, e.to_string()))?;
         let weights_path = weights_path(json_path, &file.weights)?;
         let bytes = read(&weights_path)?;
+        // A file cut short or out of shape is told as such first; one whole but other as such.
+        let net = UNet::from_safetensors(&file.unet, &bytes, &weights_path)?;
         if file.weights_digest.as_ref().is_some_and(|d| *d != digest(&bytes)) {
             return Err(LearnError::model(
                 json_path,
                 format!(
-                    "{} is not the weights it describes (written by another run: one stopped between writing the \
-                     two files?): train again into this folder (it resumes), or use the run's own pair",
+                    "{} is not the weights it describes (its digest differs): damaged since (a copy altered) or \
+                     written by another run (one stopped between writing the two files); copy the model again from \
+                     its source, or train again into this folder (it resumes)",
                     weights_path.display()
                 ),
             ));
         }
-        let net = UNet::from_safetensors(&file.unet, &bytes, &weights_path)?;
         Ok(TrainedModel {
             config: file.unet,
             normalization: file.normalization,
