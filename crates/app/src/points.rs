@@ -181,6 +181,18 @@ fn by_label(path: &Path, truth: LabelledPoints, labels: &[String]) -> Result<Vec
 /// as not placed, if any.
 pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<(LabelledPoints, Option<String>)> {
     let mut points = read_points(path)?;
+    // A label names one target (in the results, in 3D Slicer, on the navigation system's stream).
+    let mut seen = std::collections::HashMap::new();
+    for (i, label) in points.labels.iter().enumerate().filter(|(_, l)| !l.is_empty()) {
+        if let Some(first) = seen.insert(label.as_str(), i) {
+            anyhow::bail!(
+                "{}: the label `{label}` names two targets (points {} and {})",
+                path.display(),
+                first + 1,
+                i + 1
+            );
+        }
+    }
     points.convert(None, LengthUnit::Metre, unit);
     let warning = unplaced_warning(path, &points);
     Ok((points, warning))
@@ -215,6 +227,13 @@ mod tests {
             (targets.frame, targets.unit, warning),
             (Some(Frame::Ras), Some(LengthUnit::Metre), Some(unplaced.clone()))
         );
+        // A label names one target: two named alike are refused (unlabelled points are not).
+        let twice = dir.path().join("twice.csv");
+        std::fs::write(&twice, "label,x,y,z\na,1,2,3\nb,1,2,3\na,4,5,6\n").unwrap();
+        let e = read_targets(&twice, LengthUnit::Metre).unwrap_err().to_string();
+        assert!(e.ends_with("twice.csv: the label `a` names two targets (points 1 and 3)"), "{e}");
+        std::fs::write(&twice, "x,y,z\n1,2,3\n1,2,3\n").unwrap();
+        assert!(read_targets(&twice, LengthUnit::Metre).is_ok());
         let plain = dir.path().join("truth.csv");
         std::fs::write(&plain, "x,y,z\n1,2,3\n").unwrap();
         let mut input = PointInput::new(Some(Frame::Lps), LengthUnit::Metre, LengthUnit::Millimetre);
