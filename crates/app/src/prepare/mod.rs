@@ -736,6 +736,15 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
         landmarks.len(),
         100.0 * held_share
     ));
+    if visible.iter().all(|n| attached.contains(n)) {
+        let given = if options.attach_distance.is_some() { "--attach-distance " } else { "" };
+        bail!(
+            "the organ is held within {given}{:.1} mm of its landmarks, {:.0} % of its surface, every node the \
+             camera sees among them: nothing is left free for the tool to push; give a smaller --attach-distance",
+            mm(distance),
+            100.0 * held_share
+        );
+    }
     lines.extend(landmark_warnings.into_iter().map(|w| format!("warning: {w}")));
     lines.extend(camera_sees_the_hold(&organ, camera, (&visible, &attached), &shown)?);
     let (_, warnings) = located.locate_targets(&targets, &labelled_targets.labels).map_err(|e| {
@@ -1261,6 +1270,17 @@ mod tests {
         landmarks_folder.attach = dir.path().to_path_buf();
         let e = absolute(&landmarks_folder).unwrap_err().to_string();
         assert!(e.starts_with("the landmarks file ") && e.ends_with(" is a folder, not a file"), "{e}");
+    }
+
+    /// A hold that takes every node the camera sees leaves the tool nothing to push: refused in the
+    /// organ's step, naming the option, not when the dataset's draws all fail.
+    #[test]
+    fn a_hold_over_all_the_seen_surface_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut whole = options(dir.path(), "liver_labels.nii.gz", "5", false);
+        whole.attach_distance = Some("1000mm".parse().unwrap());
+        let e = format!("{:#}", organ_step(&whole, dir.path()).unwrap_err());
+        assert!(e.contains("held within --attach-distance 1000.0 mm of its landmarks, 100 % of its surface"), "{e}");
     }
 
     /// Points given with a labelmap are read in the unit given (`--units`), the unit of the clouds
