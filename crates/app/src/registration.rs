@@ -868,6 +868,11 @@ mod tests {
         assert!(RegistrationSpec::patient(d, Some(PatientMethod::Fem), None, false).is_ok());
         steps(&["organ", "scenarios", "dataset", "model", "evaluation", "validation"]);
         assert!(RegistrationSpec::patient(d, None, None, false).is_ok());
+        // A σ factor that is no factor is refused as the set-up is read, naming its key, whichever
+        // method the run takes.
+        std::fs::write(d.join(PATIENT_FILE), format!("{set_up}[sigma]\nhybrid = -2.0\n")).unwrap();
+        let e = RegistrationSpec::patient(d, Some(PatientMethod::Fem), None, false).unwrap_err().to_string();
+        assert!(e.ends_with("registration.toml: [sigma] hybrid = -2 must be positive and finite"), "{e}");
     }
 
     fn fem() -> RegistrationChoice {

@@ -130,11 +130,19 @@ impl Patient {
         let text = std::fs::read_to_string(&path).with_context(|| {
             format!("reading {} (is {} a directory made by augsim prepare?)", path.display(), dir.display())
         })?;
-        toml::from_str(&text).map_err(|e| {
+        let patient: Patient = toml::from_str(&text).map_err(|e| {
             let newer =
                 if e.message().starts_with("unknown field") { " (prepared by a newer augsim? update it)" } else { "" };
             anyhow::anyhow!("reading {}{newer}: {e}", path.display())
-        })
+        })?;
+        // Checked as read, whichever method a run takes.
+        let SigmaFactors { learned, hybrid } = patient.sigma;
+        if let Some((key, factor)) =
+            [("learned", learned), ("hybrid", hybrid)].into_iter().find(|(_, f)| !(f.is_finite() && *f > 0.0))
+        {
+            anyhow::bail!("{}: [sigma] {key} = {factor} must be positive and finite", path.display());
+        }
+        Ok(patient)
     }
 
     /// Writes the set-up into the patient directory `dir`, under comments that say what it holds.
