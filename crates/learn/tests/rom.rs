@@ -197,6 +197,12 @@ fn bad_input_is_refused_with_a_message() {
     assert!(e.contains("its format \"augsim-rm\" is no model's: \"augsim-unet\""), "{e}");
     // A grid without a node along an axis is no grid.
     let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
+    // A placement that places no grid is named with its file.
+    value["placement"] = serde_json::json!({"origin": [0.0, 0.0, 0.0], "spacing": [-0.01, 0.01, 0.01]});
+    std::fs::write(&json, value.to_string()).unwrap();
+    let e = Model::load(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("model.json: placement: ") && e.contains("spacing positive"), "{e}");
+    value["placement"] = serde_json::Value::Null;
     value["grid"][2] = 0.into();
     std::fs::write(&json, value.to_string()).unwrap();
     let e = Model::load(dir.path()).unwrap_err().to_string();

@@ -114,6 +114,19 @@ impl GridPlacement {
     pub fn grid(&self, shape: GridShape) -> Result<Grid> {
         Ok(Grid::new(self.origin, self.spacing, shape.dims())?)
     }
+
+    /// Checks a model file's placement (`json_path`'s), if it has one, on its grid of `shape`
+    /// nodes: an error naming the file and its `placement`.
+    pub(crate) fn check_in(
+        placement: Option<&GridPlacement>,
+        shape: GridShape,
+        json_path: &std::path::Path,
+    ) -> Result<()> {
+        match placement.map(|p| p.grid(shape)) {
+            Some(Err(e)) => Err(crate::LearnError::model(json_path, format!("placement: {e}"))),
+            _ => Ok(()),
+        }
+    }
 }
 
 /// Encodes vectors given at points (e.g. a tracked point cloud, or mesh nodes) as a network

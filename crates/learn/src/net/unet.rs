@@ -639,6 +639,7 @@ impl TrainedModel {
         }
         file.unet.validate().map_err(|e| LearnError::model(json_path, e.to_string()))?;
         file.normalization.validate().map_err(|e| LearnError::model(json_path, e.to_string()))?;
+        GridPlacement::check_in(file.placement.as_ref(), file.grid, json_path)?;
         let weights_path = weights_path(json_path, &file.weights)?;
         let bytes = read(&weights_path)?;
         // A file cut short or out of shape is told as such first; one whole but other as such.

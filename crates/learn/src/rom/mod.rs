@@ -424,6 +424,7 @@ impl ReducedModel {
                 format!("format {:?} v{} is not {ROM_FORMAT:?} v{ROM_VERSION}", file.format, file.version),
             ));
         }
+        GridPlacement::check_in(file.placement.as_ref(), file.grid, json_path)?;
         let dir = json_path.parent().unwrap_or(Path::new("."));
         let arrays = Arrays { dir: dir.to_path_buf(), json: json_path.to_path_buf() };
         let grid = file.grid;
