@@ -67,8 +67,8 @@ pub const MOST_UNCOVERED: f64 = 0.01;
 pub fn coverage_warning(coverage: &Coverage) -> Option<String> {
     (coverage.uncovered > MOST_UNCOVERED).then(|| {
         format!(
-            "{:.1} % of the surface lies more than {:.1} mm from the mesh (up to {:.1} mm): parts thinner than \
-             the tetrahedra are left out; mesh finer (--tets)",
+            "{:.1} % of the surface lies more than {:.1} mm from the mesh (up to {:.1} mm): its tetrahedra are too \
+             coarse to follow the surface there, or leave out parts thinner than themselves; mesh finer (--tets)",
             100.0 * coverage.uncovered,
             mm(coverage.distance),
             mm(coverage.farthest)

@@ -395,6 +395,10 @@ fn write_png(
 pub(crate) fn sibling_tempfile(path: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    if let Some(file) = dir.ancestors().find(|a| a.is_file()) {
+        let message = format!("{} is a file, not a directory", file.display());
+        return Err(std::io::Error::new(std::io::ErrorKind::NotADirectory, message));
+    }
     std::fs::create_dir_all(dir)?;
     let prefix = format!(".{name}.");
     let mut builder = tempfile::Builder::new();
@@ -563,6 +567,16 @@ mod tests {
             let per_y = (yr.end - yr.start) / f64::from(bottom - top);
             assert!((per_x / per_y - 1.0).abs() < 0.01, "{x:?} {y:?}: {per_x} vs {per_y} units per pixel, {w} x {h}");
         }
+    }
+
+    /// A path through a file is told as such, not as the system's "File exists".
+    #[test]
+    fn a_file_where_a_folder_should_be_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("cloud.csv");
+        std::fs::write(&file, "x").unwrap();
+        let e = sibling_tempfile(&file.join("sub/view.html"), ".tmp").unwrap_err().to_string();
+        assert_eq!(e, format!("{} is a file, not a directory", file.display()));
     }
 
     #[test]
