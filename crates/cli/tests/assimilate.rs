@@ -60,6 +60,8 @@ fn synthetic_tracks_fed_back_and_bad_files() {
         assert!(!ok && out.contains("[young] prior_mean = ") && out.contains(said), "{out}");
         assert!(!out.contains("filter iteration"), "{out}");
     }
+    let (ok, out) = assimilate(&[s, "--every", "0", "-o", d.join("every").to_str().unwrap()]);
+    assert!(!ok && out.contains("--every must be at least 1"), "{out}");
     // Track options need --observations.
     let (ok, text) = assimilate(&[s, "--controls", bad.to_str().unwrap()]);
     assert!(!ok && text.contains("--observations"), "{text}");

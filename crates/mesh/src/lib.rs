@@ -425,7 +425,10 @@ impl Mesh {
     pub fn region(&self, name: &str) -> Result<&[usize], MeshError> {
         self.regions.get(name).map(|v| v.as_slice()).ok_or_else(|| {
             let names: Vec<&str> = self.regions.keys().map(|s| s.as_str()).collect();
-            MeshError::Invalid(format!("no region named '{name}' (regions: {})", names.join(", ")))
+            match names.is_empty() {
+                true => MeshError::Invalid(format!("no region named '{name}': the mesh has no region")),
+                false => MeshError::Invalid(format!("no region named '{name}' (regions: {})", names.join(", "))),
+            }
         })
     }
 

@@ -380,3 +380,14 @@ fn gmsh_4_physical_groups_come_from_the_entities() {
     let m = read_gmsh(put(dir.path(), "broken.msh", &broken)).unwrap_err().to_string();
     assert!(m.contains("line 11") && m.contains("number of physical tags, found 'x'"), "{m}");
 }
+
+/// A region asked of a mesh is named among those it has, or the mesh said to have none.
+#[test]
+fn a_missing_region_names_those_there_are() {
+    let mut mesh = box_hex([0.0; 3], [1.0; 3], [1, 1, 1]).unwrap();
+    let e = mesh.region("bottom").unwrap_err().to_string();
+    assert!(e.ends_with("no region named 'bottom': the mesh has no region"), "{e}");
+    mesh.regions.insert("top".into(), vec![4, 5, 6, 7]);
+    let e = mesh.region("bottom").unwrap_err().to_string();
+    assert!(e.ends_with("no region named 'bottom' (regions: top)"), "{e}");
+}

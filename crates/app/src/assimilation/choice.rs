@@ -97,6 +97,9 @@ impl AssimilationChoice {
         if let Some(d) = self.discrepancy_dof {
             sc.filter.discrepancy_dof = d;
         }
+        if self.every == Some(0) {
+            anyhow::bail!("--every must be at least 1");
+        }
         if self.every.is_some() {
             sc.output.every = self.every;
         }
