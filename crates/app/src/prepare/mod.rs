@@ -714,37 +714,8 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
     let landmark_warnings = located
         .check_landmarks(&landmarks, &labelled_landmarks.labels)
         .with_context(|| format!("the landmarks of {}{shown}", options.attach.display()))?;
-    let distance = hold_distance(options, &organ, &landmarks)?;
-    let attached = Near { points: landmarks.clone(), file: None, distance, surface: true }.nodes(&organ)?;
-    if attached.is_empty() {
-        bail!(
-            "no surface node lies within {} mm of the landmarks of {}: are they in the surface's unit and frame?",
-            mm(distance),
-            options.attach.display()
-        );
-    }
-    // The boundary nodes are those with a share of the surface: one pass over its faces.
-    let area = mesh::boundary_node_areas(&organ);
-    let boundary = area.iter().filter(|&&a| a > 0.0).count();
-    let held_share = attached.iter().map(|&n| area[n]).sum::<f64>() / area.iter().sum::<f64>();
-    lines.push(format!(
-        "regions: the camera sees {} of {boundary} surface nodes; {} held within {:.1} mm of {} landmarks, {:.0} % of \
-         its surface",
-        visible.len(),
-        attached.len(),
-        mm(distance),
-        landmarks.len(),
-        100.0 * held_share
-    ));
-    if visible.iter().all(|n| attached.contains(n)) {
-        let given = if options.attach_distance.is_some() { "--attach-distance " } else { "" };
-        bail!(
-            "the organ is held within {given}{:.1} mm of its landmarks, {:.0} % of its surface, every node the \
-             camera sees among them: nothing is left free for the tool to push; give a smaller --attach-distance",
-            mm(distance),
-            100.0 * held_share
-        );
-    }
+    let (attached, regions) = held_nodes(options, &organ, &landmarks, &visible)?;
+    lines.push(regions);
     lines.extend(landmark_warnings.into_iter().map(|w| format!("warning: {w}")));
     lines.extend(camera_sees_the_hold(&organ, camera, (&visible, &attached), &shown)?);
     let (_, warnings) = located.locate_targets(&targets, &labelled_targets.labels).map_err(|e| {
@@ -850,6 +821,49 @@ fn organ_name(path: &Path) -> String {
     } else {
         name
     }
+}
+
+/// The surface nodes of `organ` held near its `landmarks` (within the distance given or chosen)
+/// and the line that says them beside the nodes the camera sees (`visible`); an error where none
+/// is held, or every node seen is (the tool would have nothing to push).
+fn held_nodes(
+    options: &PrepareOptions,
+    organ: &Mesh,
+    landmarks: &[Point],
+    visible: &[usize],
+) -> Result<(Vec<usize>, String)> {
+    let distance = hold_distance(options, organ, landmarks)?;
+    let attached = Near { points: landmarks.to_vec(), file: None, distance, surface: true }.nodes(organ)?;
+    if attached.is_empty() {
+        bail!(
+            "no surface node lies within {} mm of the landmarks of {}: are they in the surface's unit and frame?",
+            mm(distance),
+            options.attach.display()
+        );
+    }
+    // The boundary nodes are those with a share of the surface: one pass over its faces.
+    let area = mesh::boundary_node_areas(organ);
+    let boundary = area.iter().filter(|&&a| a > 0.0).count();
+    let held_share = attached.iter().map(|&n| area[n]).sum::<f64>() / area.iter().sum::<f64>();
+    if visible.iter().all(|n| attached.contains(n)) {
+        let given = if options.attach_distance.is_some() { "--attach-distance " } else { "" };
+        bail!(
+            "the organ is held within {given}{:.1} mm of its landmarks, {:.0} % of its surface, every node the \
+             camera sees among them: nothing is left free for the tool to push; give a smaller --attach-distance",
+            mm(distance),
+            100.0 * held_share
+        );
+    }
+    let line = format!(
+        "regions: the camera sees {} of {boundary} surface nodes; {} held within {:.1} mm of {} landmarks, {:.0} % of \
+         its surface",
+        visible.len(),
+        attached.len(),
+        mm(distance),
+        landmarks.len(),
+        100.0 * held_share
+    );
+    Ok((attached, line))
 }
 
 /// The share of the organ's surface held near its landmarks by default: what SOFA's liver
