@@ -200,10 +200,7 @@ fn units_are_parsed_the_same_by_every_command() {
 /// the run's targets.csv would replace the targets read, its organ files be read as frames next.
 #[test]
 fn an_output_folder_holding_an_input_is_refused() {
-    let dir = tempfile::tempdir().unwrap();
-    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
-    let seq = dir.path().join("seq");
-    std::fs::create_dir(&seq).unwrap();
+    let (dir, examples, seq) = sequence_folder();
     std::fs::copy(examples.join("cloud.csv"), seq.join("f1.csv")).unwrap();
     let targets = dir.path().join("targets.csv");
     std::fs::copy(examples.join("targets.csv"), &targets).unwrap();
@@ -223,10 +220,7 @@ fn an_output_folder_holding_an_input_is_refused() {
 /// is left to block the next one.
 #[test]
 fn a_bad_frame_late_in_a_sequence_writes_nothing() {
-    let dir = tempfile::tempdir().unwrap();
-    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
-    let seq = dir.path().join("seq");
-    std::fs::create_dir(&seq).unwrap();
+    let (dir, examples, seq) = sequence_folder();
     let cloud = std::fs::read_to_string(examples.join("cloud.csv")).unwrap();
     std::fs::write(seq.join("a.csv"), &cloud).unwrap();
     let mut lines: Vec<&str> = cloud.lines().collect();
@@ -248,4 +242,12 @@ fn a_bad_frame_late_in_a_sequence_writes_nothing() {
     assert!(!ok && text.contains("b.csv") && text.contains("line 12"), "{text}");
     assert!(!text.contains("frame 0"), "registered first:\n{text}");
     assert!(!out.exists(), "the run's folder is left behind");
+}
+
+/// A temporary folder with an empty `seq` folder in it for a sequence's frames, and the examples'.
+fn sequence_folder() -> (tempfile::TempDir, std::path::PathBuf, std::path::PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("seq");
+    std::fs::create_dir(&seq).unwrap();
+    (dir, Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples"), seq)
 }
