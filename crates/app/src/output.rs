@@ -39,6 +39,9 @@ use crate::registration::RegistrationSpec;
 /// exist yet), which a run that fails before writing into it removes again.
 pub fn run_dir(out: Option<&Path>, parent: &Path) -> Result<(PathBuf, bool)> {
     if let Some(dir) = out {
+        if dir.is_file() {
+            anyhow::bail!("{} is a file, not a folder: give another --out", dir.display());
+        }
         refuse_earlier_run(dir)?;
         return Ok((dir.to_path_buf(), !dir.exists()));
     }

@@ -212,6 +212,11 @@ fn an_output_folder_holding_an_input_is_refused() {
         assert!(!ok && text.contains("which the run reads: the run's files could replace it"), "{text}");
         assert!(!text.contains("frame 0"), "registered first:\n{text}");
     }
+    // A file given for the folder is named so before anything is read.
+    let args = ["register", cloud.to_str().unwrap(), "--fem", "liver_corotational", "--units", "mm", "--out", &targets];
+    let (ok, text) = augsim(&args);
+    assert!(!ok && text.contains("targets.csv is a file, not a folder: give another --out"), "{text}");
+    assert!(!text.contains("method "), "{text}");
     assert_eq!(std::fs::read(dir.path().join("targets.csv")).unwrap(), before);
     assert_eq!(std::fs::read_dir(&seq).unwrap().count(), 1, "written into the sequence's folder");
 }

@@ -176,10 +176,12 @@ impl Columns {
                 Some((i, u))
             });
             let (column, u) = found.next().ok_or_else(|| {
-                // A spreadsheet saved with semicolons (a locale whose decimal mark is a comma).
-                let semicolons = match names.iter().any(|n| n.contains(';')) {
-                    true => "; its fields are separated by semicolons: save it with commas (and decimal points)",
-                    false => "",
+                // A spreadsheet saved with semicolons (a locale whose decimal mark is a comma), or
+                // tabs.
+                let semicolons = match (names.iter().any(|n| n.contains(';')), names.iter().any(|n| n.contains('\t'))) {
+                    (true, _) => "; its fields are separated by semicolons: save it with commas (and decimal points)",
+                    (_, true) => "; its fields are separated by tabs: save it with commas",
+                    _ => "",
                 };
                 format!(
                     "the header has no '{name}' column (expected the columns x, y, z, or x_mm, y_mm, z_mm){semicolons}"
@@ -551,11 +553,13 @@ mod tests {
         assert_eq!(q.points, [[1e-3, 2e-3, 3e-3]], "a named unit wins over the assumed one");
     }
 
-    /// A CSV saved with semicolons and decimal commas (a spreadsheet in such a locale) is refused,
-    /// saying so.
+    /// A CSV saved with semicolons and decimal commas (a spreadsheet in such a locale), or with tabs,
+    /// is refused, saying so.
     #[test]
     fn semicolons_are_named() {
         let e = read_table(Path::new("p.csv"), "x_mm;y_mm;z_mm\n1,5;2;3\n", false).unwrap_err().to_string();
         assert!(e.contains("no 'y' column") && e.contains("separated by semicolons: save it with commas"), "{e}");
+        let e = read_table(Path::new("p.csv"), "x_mm\ty_mm\tz_mm\n1\t2\t3\n", false).unwrap_err().to_string();
+        assert!(e.contains("no 'y' column") && e.contains("separated by tabs: save it with commas"), "{e}");
     }
 }
