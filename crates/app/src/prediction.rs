@@ -42,7 +42,7 @@ pub fn predict_file(
         PredictInput::Grid(_) => None,
     };
     let t0 = Instant::now();
-    let data = read
+    let learn::NetworkInput { field: data, given_nodes, unread_nodes } = read
         .into_network_input(&model)
         .with_context(|| format!("{} as the input of {}", input.display(), model_path.display()))?;
     let mut lines = Vec::new();
@@ -54,11 +54,10 @@ pub fn predict_file(
         };
         lines.push(format!("points     {n} ({what}, {:.2} ms)", mesh::stats::ms(t0.elapsed())));
     }
-    let (unread, given) = learn::unread_input_nodes(&data, &model);
-    if unread > 0 {
+    if unread_nodes > 0 {
         lines.push(format!(
-            "warning    {unread} of the input's {given} non-zero grid nodes lie where the model reads no input (the \
-             surface it was trained to see): left out"
+            "warning    {unread_nodes} of the input's {given_nodes} non-zero grid nodes lie where the model reads no \
+             input (the surface it was trained to see): left out"
         ));
     }
     let predictor = model.predictor(compute)?;

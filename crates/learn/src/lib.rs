@@ -54,7 +54,7 @@ pub use net::compute::Compute;
 pub use net::inference::InferenceNet;
 pub use net::predict::{time_prediction, Predictor, Timing};
 pub use net::unet::{digest, Gradients, Schedule, TrainedModel, TrainingInfo, UNet, UNetConfig};
-pub use points::{unread_input_nodes, PointCloud, PredictInput};
+pub use points::{NetworkInput, PointCloud, PredictInput};
 pub use progress::{Progress, Silent};
 pub use training::curve::CurveRow;
 pub use training::evaluation::{

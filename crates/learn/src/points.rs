@@ -160,6 +160,18 @@ impl PointCloud {
     }
 }
 
+/// A model's input field ([`PredictInput::into_network_input`]), with how much of it the model reads.
+#[derive(Clone, Debug)]
+pub struct NetworkInput {
+    /// The field, `[3, nx, ny, nz]` in the model's input unit.
+    pub field: Vec<f32>,
+    /// Its non-zero grid nodes.
+    pub given_nodes: usize,
+    /// Those of them the model reads no input at (the reduced-order model reads the surface it was
+    /// trained to see): left out of its prediction.
+    pub unread_nodes: usize,
+}
+
 /// What a prediction reads.
 #[derive(Clone, Debug)]
 pub enum PredictInput {
@@ -201,18 +213,19 @@ impl PredictInput {
 
     /// The network input of `model` (`[3, nx, ny, nz]` in its input unit): a grid tensor as it is, once its shape
     /// is checked; a point cloud put on the model's grid where it lies ([`encode_points`]: forces spread to the
-    /// corners of their cell, displacements on their nearest grid node, by the model's input unit).
-    pub fn into_network_input(self, model: &impl LearnedModel) -> Result<Vec<f32>> {
+    /// corners of their cell, displacements on their nearest grid node, by the model's input unit), with
+    /// how much of it the model reads; one it reads nothing of is refused.
+    pub fn into_network_input(self, model: &impl LearnedModel) -> Result<NetworkInput> {
         let field = self.into_field(model)?;
         check_input_scale(&field, model)?;
-        let (unread, given) = unread_input_nodes(&field, model);
-        if given > 0 && unread == given {
+        let (unread_nodes, given_nodes) = unread_input_nodes(&field, model);
+        if given_nodes > 0 && unread_nodes == given_nodes {
             return Err(LearnError::InvalidInput(format!(
-                "none of the input's {given} non-zero grid nodes lies where the model reads its input (the \
+                "none of the input's {given_nodes} non-zero grid nodes lies where the model reads its input (the \
                  surface it was trained to see): its prediction would be the one for no input"
             )));
         }
-        Ok(field)
+        Ok(NetworkInput { field, given_nodes, unread_nodes })
     }
 
     /// [`into_network_input`](Self::into_network_input) before the check of its scale.
@@ -257,7 +270,7 @@ impl PredictInput {
 
 /// The non-zero grid nodes of an input `field` that `model` reads no input at (the reduced-order
 /// model reads the surface it was trained to see, and nothing else), and the non-zero nodes.
-pub fn unread_input_nodes(field: &[f32], model: &impl LearnedModel) -> (usize, usize) {
+fn unread_input_nodes(field: &[f32], model: &impl LearnedModel) -> (usize, usize) {
     let g = model.grid_shape();
     let nodes = crate::data::corrupt::nonzero_nodes(field, g);
     let Some(entries) = model.input_entries() else { return (0, nodes.len()) };

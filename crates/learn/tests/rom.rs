@@ -156,7 +156,10 @@ fn bad_input_is_refused_with_a_message() {
     let mut partly = train.input(0).to_vec();
     partly[2 * n + unread[0]] = 0.01;
     let given = (0..n).filter(|&v| (0..3).any(|c| partly[c * n + v] != 0.0)).count();
-    assert_eq!(augsim_learn::unread_input_nodes(&partly, &reduced), (1, given));
+    let read = PredictInput::Grid(NpyArray { shape: vec![3, 6, 5, 4], data: NpyData::F32(partly) })
+        .into_network_input(&reduced)
+        .unwrap();
+    assert_eq!((read.unread_nodes, read.given_nodes), (1, given));
     // Settings that leave nothing to fit, or that would fit the same thing twice.
     let noisy = Corruption { noise_std: 1e-3, ..Corruption::none() };
     for (config, what) in [

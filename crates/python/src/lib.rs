@@ -726,7 +726,7 @@ fn predict<'py>(py: Python<'py>, model: PathBuf, input: &Bound<'py, PyAny>) -> P
     };
     let (grid, prediction) = compute(py, || {
         let model = Model::load(&model)?;
-        let data = input.into_network_input(&model)?;
+        let data = input.into_network_input(&model)?.field;
         Ok((model.grid(), model.predictor(learn::Compute::Cpu)?.predict(&data)?))
     })?;
     let array = ArrayD::from_shape_vec(IxDyn(&[3, grid.nx, grid.ny, grid.nz]), prediction)

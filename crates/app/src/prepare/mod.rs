@@ -240,6 +240,16 @@ pub enum CameraAt {
     File(PathBuf),
 }
 
+impl CameraAt {
+    /// The file it is read from, if any.
+    pub fn file(&self) -> Option<&Path> {
+        match self {
+            CameraAt::File(path) => Some(path),
+            CameraAt::Point(_) => None,
+        }
+    }
+}
+
 impl From<Point> for CameraAt {
     fn from(p: Point) -> CameraAt {
         CameraAt::Point(p)
@@ -321,15 +331,11 @@ pub fn prepare(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgr
 /// [`prepare`]'s steps.
 fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PrepareProgress) -> Result<PrepareState> {
     let options = absolute(options)?;
-    let camera = match &options.camera {
-        CameraAt::File(path) => Some(path.as_path()),
-        CameraAt::Point(_) => None,
-    };
     let inputs: Vec<&Path> = [&options.surface, &options.attach, &options.targets]
         .into_iter()
         .chain(&options.structures)
         .map(PathBuf::as_path)
-        .chain(camera)
+        .chain(options.camera.file())
         .collect();
     crate::output::refuse_inputs_inside(dir, &inputs)?;
     mesh::io::create_folder(dir)?;
@@ -421,11 +427,9 @@ fn input_digests(inputs: &[&Path]) -> Result<BTreeMap<PathBuf, String>> {
 /// program runs) and checked.
 fn absolute(options: &PrepareOptions) -> Result<PrepareOptions> {
     let full = |p: &Path| std::path::absolute(p).with_context(|| format!("resolving {}", p.display()));
-    let camera = match &options.camera {
-        CameraAt::File(path) => Some(("camera", path)),
-        CameraAt::Point(_) => None,
-    };
-    let files = [("surface", &options.surface), ("landmarks", &options.attach), ("targets", &options.targets)];
+    let camera = options.camera.file().map(|path| ("camera", path));
+    let files = [("surface", &options.surface), ("landmarks", &options.attach), ("targets", &options.targets)]
+        .map(|(what, path)| (what, path.as_path()));
     if options.surface.is_dir() {
         // What a folder holds (a DICOM series, a SEG among its files) and what to give instead.
         let why = mesh::labelmap::unreadable_segmentation(&options.surface).unwrap_or_default();
@@ -845,7 +849,9 @@ fn held_nodes(
     let area = mesh::boundary_node_areas(organ);
     let boundary = area.iter().filter(|&&a| a > 0.0).count();
     let held_share = attached.iter().map(|&n| area[n]).sum::<f64>() / area.iter().sum::<f64>();
-    if visible.iter().all(|n| attached.contains(n)) {
+    let mut held = vec![false; organ.num_nodes()];
+    attached.iter().for_each(|&n| held[n] = true);
+    if visible.iter().all(|&n| held[n]) {
         let given = if options.attach_distance.is_some() { "--attach-distance " } else { "" };
         bail!(
             "the organ is held within {given}{:.1} mm of its landmarks, {:.0} % of its surface, every node the \

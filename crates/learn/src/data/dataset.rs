@@ -254,11 +254,7 @@ impl StatSums {
 /// `manifest`) recorded as it was written: one changed since (a mask, a unit, files swapped)
 /// would otherwise train or evaluate silently on other data.
 fn check_sums(info: &ShardInfo, samples: &Samples, manifest: &Path) -> Result<()> {
-    let mut found = StatSums::default();
-    for i in 0..samples.len() {
-        found.add_sample(samples.grid, samples.input(i), samples.target(i), samples.mask(i));
-    }
-    let recorded = &info.sums;
+    let (found, recorded) = (samples.sums(), &info.sums);
     let close = |a: &[f64; 3], b: &[f64; 3]| {
         a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-9 * x.abs().max(y.abs()) + f64::MIN_POSITIVE)
     };
@@ -643,11 +639,16 @@ impl Samples {
     /// Statistics of the samples (inputs over nodes with a nonzero input, targets over masked
     /// nodes), as a manifest records them for a whole dataset.
     pub fn statistics(&self) -> Statistics {
+        Statistics::from_sums(&self.sums())
+    }
+
+    /// The sums behind [`statistics`](Self::statistics), as a shard's manifest entry records them.
+    pub fn sums(&self) -> StatSums {
         let mut sums = StatSums::default();
         for i in 0..self.len() {
             sums.add_sample(self.grid, self.input(i), self.target(i), self.mask(i));
         }
-        Statistics::from_sums(&sums)
+        sums
     }
 
     /// Number of samples.
@@ -917,13 +918,7 @@ impl DatasetWriter {
                 masks: format!("{name}/masks.npy"),
                 num_samples: n,
                 indices: self.pending.indices.clone(),
-                sums: {
-                    let mut s = StatSums::default();
-                    for i in 0..n {
-                        s.add_sample(grid, self.pending.input(i), self.pending.target(i), self.pending.mask(i));
-                    }
-                    s
-                },
+                sums: self.pending.sums(),
                 name,
             };
             npy::write_f32(&self.dir.join(&info.inputs), &[n, CHANNELS, nx, ny, nz], &self.pending.inputs)?;
