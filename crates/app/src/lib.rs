@@ -26,14 +26,15 @@
 //!   [`training`]: a U-Net (with its learning curve) or a reduced-order model trained on a
 //!   dataset's split, the one way `train`, `prepare` and the experiments train; [`prediction`]: a
 //!   model's prediction from a file, as `predict` makes it.
-//! - [`curve`], [`sample_view`]: the learning curve as PNG; a dataset sample and a model's
-//!   prediction in the 3D viewer.
+//! - [`curve`], [`sample_view`], [`file_view`]: the learning curve as PNG; a dataset sample and a
+//!   model's prediction in the 3D viewer; a mesh, surface or sequence file in it.
 
 pub mod assimilation;
 pub mod case;
 pub mod comparison;
 pub mod curve;
 pub mod evaluation;
+pub mod file_view;
 pub mod generation;
 pub mod meshing;
 pub mod models;

@@ -2,7 +2,7 @@
 //! sample's target) and a model's prediction at the mesh nodes and at the dataset's internal markers, and the
 //! 3D viewer scene that shows them ([`plot::viewer`]).
 //!
-//! Also the scene of a mesh file's displacement fields, and `augsim view`, which writes either ([`view`]).
+//! And `augsim view`, which writes that scene or a file's ([`crate::file_view`]) as a page ([`view`]).
 //!
 //! Both fields come from the grid the same way ([`GridToMesh`] at the nodes, trilinear interpolation at the
 //! markers), so their difference is the network's error alone, not that of the grid encoding.
@@ -245,35 +245,29 @@ pub struct ViewArgs {
     /// The organ's volume mesh (.vtu, .vtk, .msh) instead of rebuilding it from the scenario.
     #[arg(long, requires = "model")]
     pub mesh: Option<PathBuf>,
-    /// Show a mesh file (.vtu, .vtk) instead: its 3-component point fields as displacements (m), coloured by the
-    /// error when it has `reference` and `prediction` fields (as `eval` writes), else by the first one's
-    /// magnitude.
-    #[arg(long, conflicts_with_all = ["model", "dataset"])]
-    pub vtu: Option<PathBuf>,
+    /// Show a file instead: a volume mesh (.vtu, .vtk, .msh, .inp) moved by its 3-component point fields as
+    /// displacements (m), coloured by the error when it has `reference` and `prediction` fields (as `eval`
+    /// writes), else by the first one's magnitude; a surface (.stl, .obj, .ply, .vtp, a .vtk or .vtu of
+    /// poly data, as `register` writes organ_deformed.vtk) as it is; a sequence (.pvd, as `register` writes a
+    /// stream's) one step per layer.
+    #[arg(long, alias = "vtu", conflicts_with_all = ["model", "dataset"])]
+    pub file: Option<PathBuf>,
     /// Output HTML file.
     #[arg(short, long, default_value = "out/view.html")]
     pub out: PathBuf,
 }
 
-/// `augsim view`: the scene of [`ViewArgs`] (a dataset sample, or a mesh file's displacement
-/// fields) written as a self-contained HTML viewer; the lines that describe it.
+/// `augsim view`: the scene of [`ViewArgs`] (a dataset sample, or a file: a mesh's displacement
+/// fields, a surface, a sequence) written as a self-contained HTML viewer; the lines that describe it.
 pub fn view(args: &ViewArgs) -> anyhow::Result<Vec<String>> {
-    let (scene, mut lines) = match (&args.vtu, &args.model, &args.dataset) {
-        (Some(file), _, _) => {
-            let (scene, fields) = mesh_file_scene(file)?;
-            let line = format!(
-                "mesh       {} nodes, {} surface triangles; displacement fields: {}",
-                scene.rest.len(),
-                scene.triangles.len(),
-                if fields.is_empty() { "none".into() } else { fields.join(", ") }
-            );
-            (scene, vec![line])
-        }
+    let (scene, mut lines) = match (&args.file, &args.model, &args.dataset) {
+        (Some(file), _, _) => crate::file_view::file_scene(file)?,
         (None, Some(model), Some(dataset)) => {
             dataset_sample_scene(model, dataset, args.sample, args.mesh.as_deref(), args.scenario.as_deref())?
         }
         _ => anyhow::bail!(
-            "give --model and --dataset (a dataset sample), or --vtu FILE (a mesh file with displacements)"
+            "give --model and --dataset (a dataset sample), or --file FILE (a mesh with displacements, a surface, \
+             a sequence .pvd)"
         ),
     };
     plot::viewer::write_html(&args.out, &scene)?;
@@ -316,61 +310,6 @@ fn dataset_sample_scene(
     ];
     lines.extend(scene.notes.iter().skip(1).map(|note| format!("           {note}")));
     Ok((scene, lines))
-}
-
-/// The scene of a mesh file: its boundary at rest and moved by each 3-component point field (m),
-/// coloured by the error when it has `reference` and `prediction` fields (as `eval` writes), else
-/// by the first one's magnitude (mm); with the names of those fields.
-fn mesh_file_scene(path: &std::path::Path) -> anyhow::Result<(Scene, Vec<String>)> {
-    use anyhow::Context;
-    use mesh::io::{Field, FieldLocation};
-    let (organ, fields) =
-        mesh::io::read_mesh_with_fields(path).with_context(|| format!("reading {}", path.display()))?;
-    let vectors: Vec<&Field> = fields
-        .iter()
-        .filter(|f| f.location == FieldLocation::Point && f.components == 3 && f.num_tuples() == organ.num_nodes())
-        .collect();
-    let field = |name: &str| vectors.iter().find(|f| f.name == name);
-    let magnitude = |v: &[f64]| -> Vec<f64> {
-        v.chunks_exact(3).map(|c| mesh::length::mm((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt())).collect()
-    };
-    let colour = match (field("reference"), field("prediction"), vectors.first()) {
-        (Some(r), Some(p), _) => Some(Scalar {
-            name: "prediction error".into(),
-            unit: "mm".into(),
-            values: magnitude(&p.values.iter().zip(&r.values).map(|(a, b)| a - b).collect::<Vec<_>>()),
-        }),
-        (_, _, Some(f)) => {
-            Some(Scalar { name: format!("|{}|", f.name), unit: "mm".into(), values: magnitude(&f.values) })
-        }
-        _ => None,
-    };
-    let surface = mesh::boundary_surface(&organ);
-    let names = vectors.iter().map(|f| f.name.clone()).collect();
-    let scene = Scene {
-        title: path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
-        notes: vec![format!("{} nodes, {} {} cells", organ.num_nodes(), organ.cells.len(), organ.cells.kind_name())],
-        triangles: surface.triangles.iter().map(|t| t.map(|i| i as u32)).collect(),
-        layers: vectors
-            .iter()
-            .map(|f| Layer {
-                name: f.name.clone(),
-                positions: organ
-                    .nodes
-                    .iter()
-                    .enumerate()
-                    .map(|(n, p)| {
-                        let u = f.tuple(n);
-                        [p[0] + u[0], p[1] + u[1], p[2] + u[2]]
-                    })
-                    .collect(),
-            })
-            .collect(),
-        rest: organ.nodes,
-        colour,
-        points: Vec::new(),
-    };
-    Ok((scene, names))
 }
 
 #[cfg(test)]

@@ -148,7 +148,8 @@ enum Command {
     /// point cloud it receives and answers with the registered targets, organ and status.
     Serve(app::serving::ServeArgs),
     /// A self-contained HTML 3D viewer (opens in a browser, no network): a dataset sample on the organ (rest,
-    /// FEM reference, the model's prediction, coloured by its error, markers) or a mesh file's displacements.
+    /// FEM reference, the model's prediction, coloured by its error, markers) or a file: a mesh's
+    /// displacements, a surface, a sequence (.pvd).
     View(app::sample_view::ViewArgs),
     /// Run a published experiment end to end (generate, train, identify, register, evaluate) and write
     /// result.json, PNG figures and the report (report.md, report.html) beside the published figures.

@@ -208,7 +208,7 @@ fn a_solved_file_is_viewed() {
     let (ok, text) = solve(Path::new("beam"), &vtu);
     assert!(ok, "{text}");
     let out = Command::new(env!("CARGO_BIN_EXE_augsim"))
-        .args(["view", "--vtu", vtu.to_str().unwrap(), "-o", html.to_str().unwrap()])
+        .args(["view", "--file", vtu.to_str().unwrap(), "-o", html.to_str().unwrap()])
         .output()
         .unwrap();
     let said = String::from_utf8_lossy(&out.stdout);

@@ -81,6 +81,14 @@ pub enum MeshError {
     /// A mesh whose content is inconsistent (bad index, degenerate cell, ...).
     #[error("invalid mesh: {0}")]
     Invalid(String),
+    /// A file read as a volume mesh that holds a surface (VTK poly data).
+    #[error("{path}: {dataset} holds a surface, not a volume mesh (read it as a surface)")]
+    NotVolume {
+        /// The file.
+        path: String,
+        /// What the file holds, as it names it (`DATASET POLYDATA`, `PolyData`).
+        dataset: String,
+    },
 }
 
 impl MeshError {

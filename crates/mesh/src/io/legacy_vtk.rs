@@ -788,10 +788,8 @@ pub fn read_vtk_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>)
     let path = path.as_ref();
     let parsed = parse(path)?;
     if parsed.dataset != "UNSTRUCTURED_GRID" {
-        return Err(MeshError::parse(
-            path,
-            format!("DATASET {} holds a surface, not a volume mesh (read it as a surface)", parsed.dataset),
-        ));
+        let dataset = format!("DATASET {}", parsed.dataset);
+        return Err(MeshError::NotVolume { path: path.display().to_string(), dataset });
     }
     let points = parsed.points.ok_or_else(|| MeshError::parse(path, "no POINTS section"))?;
     let (_, list) = parsed.cells.into_iter().next().ok_or_else(|| MeshError::parse(path, "no CELLS section"))?;

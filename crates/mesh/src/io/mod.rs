@@ -851,7 +851,7 @@ fn strip(vertices: &[usize], out: &mut Vec<[usize; 3]>) {
 }
 
 /// Writes a ParaView collection (`.pvd`) of time steps: (time, file path relative to the
-/// collection's directory) pairs, atomically.
+/// collection's directory) pairs, atomically; [`read_pvd`] reads it back.
 pub fn write_pvd(path: impl AsRef<Path>, steps: &[(f64, String)]) -> Result<(), MeshError> {
     let path = path.as_ref();
     write_atomic(path, |w| {
@@ -868,9 +868,61 @@ pub fn write_pvd(path: impl AsRef<Path>, steps: &[(f64, String)]) -> Result<(), 
     Ok(())
 }
 
+/// The time steps of a ParaView collection (`.pvd`): (time, file) pairs in the collection's
+/// order, each file's path resolved against the collection's directory. A collection with no
+/// `<DataSet>`, or one without its `file`, is an error; a step without `timestep` takes its
+/// position as its time.
+pub fn read_pvd(path: impl AsRef<Path>) -> Result<Vec<(f64, PathBuf)>, MeshError> {
+    let path = path.as_ref();
+    let data = read_bytes(path)?;
+    let parse = |message: String| MeshError::parse(path, message);
+    let head = vtk_xml::find_tag(&data, 0, "VTKFile").map(|lt| vtk_xml::tag_attributes(&data, lt)).transpose();
+    let kind = head.map_err(&parse)?.and_then(|(attrs, _)| attrs.into_iter().find(|(k, _)| k == "type"));
+    if kind.is_none_or(|(_, v)| v != "Collection") {
+        return Err(parse("not a ParaView collection (no <VTKFile type=\"Collection\">)".into()));
+    }
+    let dir = path.parent().unwrap_or(Path::new(""));
+    let mut steps = Vec::new();
+    let mut from = 0;
+    while let Some(lt) = vtk_xml::find_tag(&data, from, "DataSet") {
+        let (attrs, end) = vtk_xml::tag_attributes(&data, lt).map_err(&parse)?;
+        let attr = |key: &str| attrs.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str());
+        let file = attr("file").ok_or_else(|| parse(format!("<DataSet> {} names no file", steps.len() + 1)))?;
+        let time = match attr("timestep") {
+            Some(t) => t.trim().parse().map_err(|_| parse(format!("timestep=\"{t}\" is not a number")))?,
+            None => steps.len() as f64,
+        };
+        steps.push((time, dir.join(file)));
+        from = end;
+    }
+    if steps.is_empty() {
+        return Err(parse("the collection holds no <DataSet>".into()));
+    }
+    Ok(steps)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A collection written is read back with its times and files, the files found beside it; a
+    /// file that is not a collection, or names no step, is refused.
+    #[test]
+    fn a_paraview_collection_reads_back_its_steps() {
+        let dir = tempfile::tempdir().unwrap();
+        let pvd = dir.path().join("organ.pvd");
+        write_pvd(&pvd, &[(0.0, "organ_0000.vtu".into()), (0.5, "a \"b\".vtu".into())]).unwrap();
+        let steps = read_pvd(&pvd).unwrap();
+        assert_eq!(steps, [(0.0, dir.path().join("organ_0000.vtu")), (0.5, dir.path().join("a \"b\".vtu"))]);
+        let grid = dir.path().join("grid.vtu");
+        std::fs::write(&grid, "<VTKFile type=\"UnstructuredGrid\"><DataSet file=\"x.vtu\"/></VTKFile>").unwrap();
+        assert!(read_pvd(&grid).unwrap_err().to_string().contains("not a ParaView collection"));
+        let empty = dir.path().join("empty.pvd");
+        std::fs::write(&empty, "<VTKFile type=\"Collection\"><Collection></Collection></VTKFile>").unwrap();
+        assert!(read_pvd(&empty).unwrap_err().to_string().contains("holds no <DataSet>"));
+        std::fs::write(&empty, "<VTKFile type=\"Collection\"><DataSet timestep=\"x\" file=\"a\"/></VTKFile>").unwrap();
+        assert!(read_pvd(&empty).unwrap_err().to_string().contains("timestep=\"x\" is not a number"));
+    }
 
     /// What a killed write leaves is removed, in the folders below too; other files are kept.
     #[test]

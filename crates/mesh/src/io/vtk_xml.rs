@@ -296,6 +296,25 @@ fn parse_tag(data: &[u8], lt: usize) -> Result<Tag, String> {
     Ok((name, attrs, self_closing, end + 1))
 }
 
+/// The offset of the next opening tag `<name` (followed by whitespace, `/` or `>`) at or after
+/// `from`.
+pub(super) fn find_tag(data: &[u8], from: usize, name: &str) -> Option<usize> {
+    let open = format!("<{name}");
+    let mut at = from;
+    loop {
+        let lt = find(data, at, open.as_bytes())?;
+        match data.get(lt + open.len()) {
+            Some(b) if b.is_ascii_whitespace() || *b == b'/' || *b == b'>' => return Some(lt),
+            _ => at = lt + 1,
+        }
+    }
+}
+
+/// The attributes of the opening tag that starts at `lt`, and the offset after its `>`.
+pub(super) fn tag_attributes(data: &[u8], lt: usize) -> Result<(Vec<(String, String)>, usize), String> {
+    parse_tag(data, lt).map(|(_, attrs, _, end)| (attrs, end)).map_err(|m| format!("line {}: {m}", line_at(data, lt)))
+}
+
 /// An opening tag's name and attributes.
 struct OpenTag<'t> {
     name: &'t str,
@@ -782,7 +801,7 @@ pub fn read_vtu_with_fields(path: impl AsRef<Path>) -> Result<(Mesh, Vec<Field>)
     let path = path.as_ref();
     with_file(path, |file| {
         if file.poly {
-            return Err(MeshError::parse(path, "PolyData holds a surface, not a volume mesh (read it as a surface)"));
+            return Err(MeshError::NotVolume { path: path.display().to_string(), dataset: "PolyData".into() });
         }
         let (cells, types) = file.cells()?;
         volume_from_cells(path, &file.points()?, &cells, &types, file.fields()?)
