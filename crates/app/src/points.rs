@@ -70,7 +70,7 @@ impl PointInput {
     /// frame when there was none); an error when the organ names no frame and they name another
     /// than the file that gave the working frame.
     fn place(&mut self, path: &Path, mut points: LabelledPoints) -> Result<LabelledPoints> {
-        self.warnings.extend(unplaced_warning(path, &points));
+        self.warnings.extend(reading_warnings(path, &points));
         let namer = match (points.frame, self.given_frame) {
             (Some(_), _) => path.display().to_string(),
             (None, Some(given)) => format!("--frame {given}"),
@@ -177,16 +177,17 @@ fn by_label(path: &Path, truth: LabelledPoints, labels: &[String]) -> Result<Vec
 
 /// A targets file (CSV, `.fcsv`, `.mrk.json`) with its rest positions in metres: read in the unit
 /// the file names, else in `unit`; as they are in their own frame, which the file may name (the
-/// frame the registration works in). With them, the warning naming its control points left out
-/// as not placed, if any.
-pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<(LabelledPoints, Option<String>)> {
+/// frame the registration works in). With them, what a user should know of them as read
+/// (control points left out as not placed, several point lists read as one).
+pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<(LabelledPoints, Vec<String>)> {
     let mut points = read_points(path)?;
     // A label names one target (in the results, in 3D Slicer, on the navigation system's stream).
     let mut seen = std::collections::HashMap::new();
     for (i, label) in points.labels.iter().enumerate().filter(|(_, l)| !l.is_empty()) {
         if let Some(first) = seen.insert(label.as_str(), i) {
+            let lists = points.merged_lists_warning().map(|w| format!(" ({w})")).unwrap_or_default();
             anyhow::bail!(
-                "{}: the label `{label}` names two targets (points {} and {})",
+                "{}: the label `{label}` names two targets (points {} and {}){lists}",
                 path.display(),
                 first + 1,
                 i + 1
@@ -194,13 +195,14 @@ pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<(LabelledPoints, Op
         }
     }
     points.convert(None, LengthUnit::Metre, unit);
-    let warning = unplaced_warning(path, &points);
-    Ok((points, warning))
+    let warnings = reading_warnings(path, &points);
+    Ok((points, warnings))
 }
 
-/// The warning that `points`, read from `path`, left out control points not placed.
-fn unplaced_warning(path: &Path, points: &LabelledPoints) -> Option<String> {
-    points.unplaced_warning().map(|w| format!("{}: {w}", path.display()))
+/// What a user should know of `points` as read from `path` ([`LabelledPoints::warnings`]), each
+/// naming the file.
+fn reading_warnings(path: &Path, points: &LabelledPoints) -> Vec<String> {
+    points.warnings().into_iter().map(|w| format!("{}: {w}", path.display())).collect()
 }
 
 #[cfg(test)]
@@ -225,7 +227,7 @@ mod tests {
         assert_eq!((targets.points, targets.labels), (vec![[0.01, 0.02, 0.03]], vec!["p".to_string()]));
         assert_eq!(
             (targets.frame, targets.unit, warning),
-            (Some(Frame::Ras), Some(LengthUnit::Metre), Some(unplaced.clone()))
+            (Some(Frame::Ras), Some(LengthUnit::Metre), vec![unplaced.clone()])
         );
         // A label names one target: two named alike are refused (unlabelled points are not).
         let twice = dir.path().join("twice.csv");
@@ -234,6 +236,22 @@ mod tests {
         assert!(e.ends_with("twice.csv: the label `a` names two targets (points 1 and 3)"), "{e}");
         std::fs::write(&twice, "x,y,z\n1,2,3\n1,2,3\n").unwrap();
         assert!(read_targets(&twice, LengthUnit::Metre).is_ok());
+        // A markups file of two point lists is read as one, and says so; their labels must differ.
+        let lists = dir.path().join("lists.mrk.json");
+        let list = |label: &str| format!(r#"{{"controlPoints": [{{"label": "{label}", "position": [1, 2, 3]}}]}}"#);
+        std::fs::write(&lists, format!(r#"{{"markups": [{}, {}]}}"#, list("a"), list("b"))).unwrap();
+        let (targets, warnings) = read_targets(&lists, LengthUnit::Metre).unwrap();
+        assert_eq!(targets.labels, ["a", "b"]);
+        assert!(
+            warnings[0].ends_with(
+                "its 2 point lists (1, 1 points) are read as one list of 2, in that order: \
+             save the one meant alone if the others are not part of it"
+            ),
+            "{warnings:?}"
+        );
+        std::fs::write(&lists, format!(r#"{{"markups": [{}, {}]}}"#, list("a"), list("a"))).unwrap();
+        let e = read_targets(&lists, LengthUnit::Metre).unwrap_err().to_string();
+        assert!(e.contains("names two targets (points 1 and 2) (its 2 point lists"), "{e}");
         let plain = dir.path().join("truth.csv");
         std::fs::write(&plain, "x,y,z\n1,2,3\n").unwrap();
         let mut input = PointInput::new(Some(Frame::Lps), LengthUnit::Metre, LengthUnit::Millimetre);

@@ -623,11 +623,11 @@ impl RegistrationSpec {
     pub fn build(&self) -> Result<Registration> {
         let Loaded { organ, frame: organ_frame, deformer, method, options, warnings } =
             self.method.load(self.options.as_ref())?;
-        let (targets, unplaced) = match &self.targets {
-            TargetsSpec::Regions => (LabelledPoints::new(region_targets(organ.mesh())), None),
+        let (targets, read_warnings) = match &self.targets {
+            TargetsSpec::Regions => (LabelledPoints::new(region_targets(organ.mesh())), Vec::new()),
             TargetsSpec::File(path) => crate::points::read_targets(path, self.units)?,
             TargetsSpec::Points(points) => {
-                (LabelledPoints::new(points.iter().map(|&p| self.units.point_to_metres(p)).collect()), None)
+                (LabelledPoints::new(points.iter().map(|&p| self.units.point_to_metres(p)).collect()), Vec::new())
             }
         };
         if targets.points.is_empty() {
@@ -635,7 +635,11 @@ impl RegistrationSpec {
                 TargetsSpec::File(path) => anyhow::bail!(
                     "{} holds no targets{}",
                     path.display(),
-                    if unplaced.is_some() { " (none of its control points is placed in 3D Slicer)" } else { "" }
+                    if targets.unplaced.is_empty() {
+                        ""
+                    } else {
+                        " (none of its control points is placed in 3D Slicer)"
+                    }
                 ),
                 _ => anyhow::bail!("no targets: give a targets file, or a mesh with `markers` or `tumour` regions"),
             }
@@ -660,7 +664,7 @@ impl RegistrationSpec {
         let mut registration = Registration::new(organ, deformer, method, points, labels, options)
             .with_context(|| what)?
             .in_frame(organ_frame.or(frame));
-        warnings.into_iter().chain(unplaced).for_each(|w| registration.warn(w));
+        warnings.into_iter().chain(read_warnings).for_each(|w| registration.warn(w));
         for source in &self.structures {
             let context = || format!("the structure {}", source.path.display());
             let unit = source.unit.unwrap_or(self.given_units);

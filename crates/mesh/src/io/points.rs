@@ -18,7 +18,8 @@
 //!   their `position`, `label` and `description`; points whose `positionStatus` is `undefined`
 //!   (placeholders not yet placed), `preview` or `missing` (skipped when placing: Slicer writes
 //!   no position) are left out and named in [`LabelledPoints::unplaced`].
-//!   Markups of several frames or units are brought to the first's.
+//!   Several markups are read as one list, in file order ([`LabelledPoints::lists`] says so),
+//!   those of other frames or units brought to the first's.
 //!
 //! Every error names the file and the line (CSV) or the control point (JSON).
 
@@ -50,6 +51,9 @@ pub struct LabelledPoints {
     /// The control points left out because 3D Slicer has not placed them (their position status
     /// undefined, preview or missing), by label (or place in the file when unlabelled).
     pub unplaced: Vec<String>,
+    /// The number of points read from each point list, in file order, when the file holds several
+    /// (a `.mrk.json` of several markups, read as one list); empty otherwise.
+    pub lists: Vec<usize>,
 }
 
 impl LabelledPoints {
@@ -80,6 +84,26 @@ impl LabelledPoints {
                 self.unplaced.join(", ")
             )
         })
+    }
+
+    /// A warning that the file's several point lists were read as one, `None` when it held one.
+    pub fn merged_lists_warning(&self) -> Option<String> {
+        (self.lists.len() > 1).then(|| {
+            let counts: Vec<String> = self.lists.iter().map(usize::to_string).collect();
+            format!(
+                "its {} point lists ({} points) are read as one list of {}, in that order: save the one meant \
+                 alone if the others are not part of it",
+                self.lists.len(),
+                counts.join(", "),
+                self.points.len()
+            )
+        })
+    }
+
+    /// What a user should know of the points as read, a line each: control points left out as not
+    /// placed, several point lists read as one.
+    pub fn warnings(&self) -> Vec<String> {
+        self.unplaced_warning().into_iter().chain(self.merged_lists_warning()).collect()
     }
 
     /// Brings the points into `frame` (x and y negated when their own frame is the other one;
@@ -286,8 +310,10 @@ fn read_markups_json(path: &Path, text: &str) -> Result<LabelledPoints, MeshErro
         .and_then(Value::as_array)
         .ok_or_else(|| MeshError::parse(path, "no \"markups\" list: not a Slicer markups (.mrk.json) file"))?;
     let mut out: Option<LabelledPoints> = None;
+    let mut lists = Vec::with_capacity(markups.len());
     for (m, markup) in markups.iter().enumerate() {
         let mut points = read_markup(markup, m).map_err(|message| MeshError::parse(path, message))?;
+        lists.push(points.points.len());
         match &mut out {
             None => out = Some(points),
             Some(all) => {
@@ -299,7 +325,11 @@ fn read_markups_json(path: &Path, text: &str) -> Result<LabelledPoints, MeshErro
             }
         }
     }
-    out.ok_or_else(|| MeshError::parse(path, "the \"markups\" list is empty"))
+    let mut out = out.ok_or_else(|| MeshError::parse(path, "the \"markups\" list is empty"))?;
+    if lists.len() > 1 {
+        out.lists = lists;
+    }
+    Ok(out)
 }
 
 /// The points of markup `m` of a markups JSON file, or what is wrong (naming the point).
