@@ -14,7 +14,7 @@ use mesh::length::ORGAN_EXTENT_M;
 use mesh::length::{mm, organ_units, Length, LengthUnit, UnitOrAuto};
 use mesh::phantom::PhantomSpec;
 use mesh::rebuild::{repair_or_rebuild, RebuildOptions};
-use mesh::repair::{detect_unit, largest_extent, RepairOptions};
+use mesh::repair::{detect_unit, largest_extent, scattered_pieces, RepairOptions};
 use mesh::tetmesh::{mesh_surface_to_count, BoundaryFit, Coverage};
 use mesh::{Mesh, TetQuality, TriSurface};
 
@@ -314,6 +314,9 @@ impl OrganInput {
             }
             None => {
                 let unit = detect_unit(&self.surface).map_err(|e| {
+                    if scattered_pieces(&self.surface).is_some() {
+                        return anyhow!("{e}");
+                    }
                     let extent = largest_extent(&self.surface);
                     // The units auto does not tell (their organs' numbers overlap mm's) that would fit.
                     let fitting: Vec<String> = organ_units(extent, &[LengthUnit::Centimetre, LengthUnit::Micrometre])

@@ -351,8 +351,12 @@ pub fn self_intersections(surface: &TriSurface) -> Vec<(usize, usize)> {
 /// The largest extent of the bounding box of the vertices the triangles use (0 when none;
 /// out-of-range indices are ignored).
 pub fn largest_extent(surface: &TriSurface) -> f64 {
-    let points: Vec<Point> =
-        surface.triangles.iter().flatten().filter_map(|&k| surface.vertices.get(k).copied()).collect();
+    extent_of(surface, &surface.triangles)
+}
+
+/// The largest extent of the bounding box of the vertices of `surface` that `triangles` use.
+fn extent_of(surface: &TriSurface, triangles: &[[usize; 3]]) -> f64 {
+    let points: Vec<Point> = triangles.iter().flatten().filter_map(|&k| surface.vertices.get(k).copied()).collect();
     if points.is_empty() {
         return 0.0;
     }
@@ -362,25 +366,55 @@ pub fn largest_extent(surface: &TriSurface) -> f64 {
 /// The length unit of an organ's surface, from its size: a largest extent within an organ's
 /// ([`ORGAN_EXTENT_M`]) is in metres, and one within it in millimetres is in millimetres.
 /// Any other extent is an error that gives it and asks for the unit.
+/// A surface of several pieces is told as such when its largest piece alone would be an organ
+/// ([`scattered_pieces`]).
 pub fn detect_unit(surface: &TriSurface) -> Result<LengthUnit, MeshError> {
     let extent = largest_extent(surface);
-    if ORGAN_EXTENT_M.contains(&extent) {
-        Ok(LengthUnit::Metre)
-    } else if ORGAN_EXTENT_M.contains(&LengthUnit::Millimetre.to_metres(extent)) {
-        Ok(LengthUnit::Millimetre)
-    } else {
-        let (low, high) = (*ORGAN_EXTENT_M.start(), *ORGAN_EXTENT_M.end());
-        let mm = |metres: f64| number(LengthUnit::Millimetre.from_metres(metres));
-        Err(invalid(format!(
-            "cannot tell the length unit: the largest extent is {}, which is neither an organ in metres \
-             ({} to {}) nor in millimetres ({} to {}); give the unit explicitly",
-            number(extent),
-            number(low),
-            number(high),
-            mm(low),
-            mm(high)
-        )))
+    if let Some(unit) = unit_of_organ_extent(extent) {
+        return Ok(unit);
     }
+    if let Some(pieces) = scattered_pieces(surface) {
+        return Err(invalid(pieces));
+    }
+    let (low, high) = (*ORGAN_EXTENT_M.start(), *ORGAN_EXTENT_M.end());
+    let mm = |metres: f64| number(LengthUnit::Millimetre.from_metres(metres));
+    Err(invalid(format!(
+        "cannot tell the length unit: the largest extent is {}, which is neither an organ in metres ({} to {}) \
+         nor in millimetres ({} to {}); give the unit explicitly",
+        number(extent),
+        number(low),
+        number(high),
+        mm(low),
+        mm(high)
+    )))
+}
+
+/// What is wrong with a surface of several pieces too large together to be an organ in metres or
+/// millimetres, whose largest piece alone would be one (two organs exported together, far apart):
+/// the pieces, not the unit; `None` for any other surface.
+pub fn scattered_pieces(surface: &TriSurface) -> Option<String> {
+    let extent = largest_extent(surface);
+    let pieces = surface.pieces();
+    if pieces.len() < 2 || unit_of_organ_extent(extent).is_some() {
+        return None;
+    }
+    let largest = pieces.iter().max_by_key(|p| p.len())?;
+    let largest = extent_of(surface, &largest.iter().map(|&t| surface.triangles[t]).collect::<Vec<_>>());
+    let unit = unit_of_organ_extent(largest)?;
+    Some(format!(
+        "it is {} separate pieces spread over {}; its largest, {} across, would be an organ in {}: keep the organ \
+         only (an organ surface is one piece)",
+        pieces.len(),
+        number(extent),
+        number(largest),
+        unit.name()
+    ))
+}
+
+/// The unit in which a surface whose largest extent is `extent` (in the file's numbers) is an
+/// organ: metres, else millimetres; `None` for neither.
+fn unit_of_organ_extent(extent: f64) -> Option<LengthUnit> {
+    [LengthUnit::Metre, LengthUnit::Millimetre].into_iter().find(|u| ORGAN_EXTENT_M.contains(&u.to_metres(extent)))
 }
 
 /// The number of distinct triangles in a list of pairs.
@@ -1494,5 +1528,16 @@ mod tests {
         let e = detect_unit(&cm).unwrap_err().to_string();
         assert!(e.contains("largest extent is 10,") && e.contains("give the unit explicitly"), "{e}");
         assert!(e.contains("in metres (0.02 to 0.6) nor in millimetres (20 to 600)"), "{e}");
+        // Two organ-sized pieces far apart: the pieces are the fault, not the unit.
+        let mut two = mm.clone();
+        let mut far = mm.clone();
+        far.vertices.iter_mut().for_each(|p| p[0] += 700.0);
+        let offset = two.vertices.len();
+        two.vertices.extend(far.vertices);
+        two.triangles.extend(far.triangles.iter().map(|t| t.map(|k| k + offset)));
+        assert_eq!(two.pieces().len(), 2);
+        let e = detect_unit(&two).unwrap_err().to_string();
+        assert!(e.contains("it is 2 separate pieces spread over 800; its largest, 100 across, would be an organ in"), "{e}");
+        assert!(e.contains("millimetres: keep the organ only"), "{e}");
     }
 }

@@ -298,6 +298,31 @@ impl TriSurface {
         Ok((centre, scale))
     }
 
+    /// The triangles grouped into pieces joined through shared vertices, each piece's triangles in
+    /// increasing order, the pieces ordered by their first triangle. A triangle with a vertex out
+    /// of range is left out.
+    pub fn pieces(&self) -> Vec<Vec<usize>> {
+        let n = self.vertices.len();
+        let mut parent: Vec<usize> = (0..n).collect();
+        for t in self.triangles.iter().filter(|t| t.iter().all(|&k| k < n)) {
+            for k in [t[1], t[2]] {
+                let (a, b) = (crate::topology::root(&mut parent, t[0]), crate::topology::root(&mut parent, k));
+                parent[a.max(b)] = a.min(b);
+            }
+        }
+        let mut piece_of_root = std::collections::HashMap::new();
+        let mut pieces: Vec<Vec<usize>> = Vec::new();
+        for (i, t) in self.triangles.iter().enumerate().filter(|(_, t)| t.iter().all(|&k| k < n)) {
+            let root = crate::topology::root(&mut parent, t[0]);
+            let piece = *piece_of_root.entry(root).or_insert_with(|| {
+                pieces.push(Vec::new());
+                pieces.len() - 1
+            });
+            pieces[piece].push(i);
+        }
+        pieces
+    }
+
     /// The surface restricted to the vertices its triangles use (in order of first use).
     pub fn compacted(&self) -> TriSurface {
         let mut index = vec![usize::MAX; self.vertices.len()];
