@@ -54,6 +54,8 @@ pub struct RebuildReport {
     pub mean_distance: f64,
     /// Largest distance from the result's vertices to the input surface (the surface's unit).
     pub max_distance: f64,
+    /// The input's edges that border a single triangle, and its edges in all.
+    pub open_edges: (usize, usize),
 }
 
 /// The route a surface took to become closed and manifold.
@@ -107,14 +109,31 @@ impl Route {
         }
     }
 
-    /// Problems left in place (tolerated self-intersections of a local repair).
+    /// Problems left in place: tolerated self-intersections of a local repair; an input open over
+    /// more than [`LARGE_OPENING`] of its edges, which the voxels closed (a part may be missing).
     pub fn warnings(&self) -> Vec<String> {
         match self {
             Route::Local(report) => report.warnings(),
-            Route::Volumetric(_) => Vec::new(),
+            Route::Volumetric(r) => {
+                let (open, edges) = r.open_edges;
+                let large = open as f64 > LARGE_OPENING * edges as f64;
+                large
+                    .then(|| {
+                        format!(
+                        "the input surface is open along {open} of its {edges} edges (holes larger than local repair \
+                         fills): the voxels closed it, flat where a part may be missing (cut off?); check the organ"
+                    )
+                    })
+                    .into_iter()
+                    .collect()
+            }
         }
     }
 }
+
+/// The share of an input's edges open (bordering a single triangle) over which a rebuilt surface
+/// is warned about: an export's small holes stay under it.
+const LARGE_OPENING: f64 = 0.01;
 
 /// The edges of `surface` that border a single triangle, and its edges in all.
 fn open_edges(surface: &TriSurface) -> (usize, usize) {
@@ -223,7 +242,8 @@ pub fn rebuild_surface(
     let distances: Vec<f64> = rebuilt.vertices.par_iter().map(|&p| bvh.distance(p)).collect();
     let mean_distance = distances.iter().sum::<f64>() / distances.len() as f64;
     let max_distance = distances.iter().copied().fold(0.0, f64::max);
-    Ok((rebuilt, RebuildReport { reason, voxel, extract, mean_distance, max_distance }))
+    let open_edges = open_edges(surface);
+    Ok((rebuilt, RebuildReport { reason, voxel, extract, mean_distance, max_distance, open_edges }))
 }
 
 #[cfg(test)]

@@ -258,8 +258,19 @@ pub fn repair_surface(surface: &TriSurface, options: &RepairOptions) -> Result<(
         crossings.first().filter(|_| involved as f64 > options.max_crossing_fraction * repaired.triangles.len() as f64)
     {
         let centre = crate::surface::centroid(repaired.triangles[a].map(|k| repaired.vertices[k]));
+        // Crossings mostly of the triangles that filled its holes: the fill of a large hole, not the export.
+        let of_fill = crossings.iter().filter(|&&(a, b)| a >= before || b >= before).count();
+        let filled = match 2 * of_fill > crossings.len() {
+            true => format!(
+                " where its holes were filled (holes of {} edges, the fill {:.0} % of its area: a part missing, cut \
+                 off?)",
+                report.holes_filled.iter().map(usize::to_string).collect::<Vec<_>>().join(", "),
+                100.0 * report.filled_share
+            ),
+            false => String::new(),
+        };
         return Err(invalid(format!(
-            "self-intersecting: triangles {a} and {b} cross ({} {}, {involved} of {} triangles, more than {} % \
+            "self-intersecting{filled}: triangles {a} and {b} cross ({} {}, {involved} of {} triangles, more than {} % \
              tolerated) near {} (numbering of the repaired surface); cannot be repaired automatically",
             crossings.len(),
             if crossings.len() == 1 { "pair" } else { "pairs" },
@@ -1537,7 +1548,10 @@ mod tests {
         two.triangles.extend(far.triangles.iter().map(|t| t.map(|k| k + offset)));
         assert_eq!(two.pieces().len(), 2);
         let e = detect_unit(&two).unwrap_err().to_string();
-        assert!(e.contains("it is 2 separate pieces spread over 800; its largest, 100 across, would be an organ in"), "{e}");
+        assert!(
+            e.contains("it is 2 separate pieces spread over 800; its largest, 100 across, would be an organ in"),
+            "{e}"
+        );
         assert!(e.contains("millimetres: keep the organ only"), "{e}");
     }
 }

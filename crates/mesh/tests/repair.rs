@@ -1,7 +1,7 @@
 //! Repair of segmented organ surfaces on the SOFA livers, damaged the way segmentations are:
 //! holes, a triangle soup (as STL stores it), flipped, degenerate and repeated triangles, in
 //! millimetres; then the repaired surface is meshed. And the shipped broken export, which local
-//! repair refuses.
+//! repair refuses, and the example organ cut in half.
 //!
 //! To write `broken_export.obj` anew: `AUGSIM_WRITE_TEST_DATA=1 cargo test --release -p augsim-mesh --test repair`.
 
@@ -10,6 +10,7 @@ use std::time::Instant;
 
 use augsim_mesh::io::{read_stl, read_surface, write_stl};
 use augsim_mesh::length::LengthUnit;
+use augsim_mesh::rebuild::{repair_or_rebuild, RebuildOptions};
 use augsim_mesh::repair::{detect_unit, repair_surface, self_intersections, RepairOptions};
 use augsim_mesh::surface::check_closed_manifold;
 use augsim_mesh::tetmesh::{mesh_surface_to_count, BoundaryFit};
@@ -253,4 +254,24 @@ fn the_shipped_broken_export_is_what_its_generator_writes_and_local_repair_refus
     assert!(std::fs::read_to_string(data("broken_export.obj")).unwrap() == text, "the file differs from its generator");
     let e = repair_surface(&read_surface(data("broken_export.obj")).unwrap(), &RepairOptions::default()).unwrap_err();
     assert!(e.to_string().contains("non-manifold vertex"), "{e}");
+}
+
+/// The example organ (`examples/organ.stl`) cut through its middle: local repair fills the cut,
+/// and its fill crosses the surface; the refusal says so (a part missing), not as if the export
+/// crossed itself.
+#[test]
+fn an_organ_cut_in_half_is_told_as_a_part_missing() {
+    let organ = read_stl(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/organ.stl")).unwrap();
+    let z = |t: &[usize; 3]| t.iter().map(|&k| organ.vertices[k][2]).sum::<f64>() / 3.0;
+    let (low, high) = organ.vertices.iter().fold((f64::MAX, f64::MIN), |(l, h), p| (l.min(p[2]), h.max(p[2])));
+    let lower = organ.triangles.iter().copied().filter(|t| z(t) < 0.5 * (low + high)).collect();
+    let half = TriSurface { vertices: organ.vertices.clone(), triangles: lower };
+    let e = repair_surface(&half, &RepairOptions::default()).map(|_| ()).unwrap_err().to_string();
+    assert!(e.contains("self-intersecting where its holes were filled (holes of "), "{e}");
+    assert!(e.contains("a part missing, cut off?"), "{e}");
+    // Rebuilt through voxels, it is closed flat where the part is missing: said as a warning.
+    let (_, route) = repair_or_rebuild(&half, &RepairOptions::default(), &RebuildOptions::default()).unwrap();
+    let warnings = route.warnings();
+    assert!(warnings.len() == 1 && warnings[0].starts_with("the input surface is open along "), "{warnings:?}");
+    assert!(warnings[0].ends_with("flat where a part may be missing (cut off?); check the organ"), "{warnings:?}");
 }
