@@ -96,7 +96,7 @@ impl PointInput {
     /// targets (`labels`) and a file are labelled throughout, its points are taken by label, in
     /// the targets' order; otherwise row by row.
     pub fn read_truths(&mut self, path: &Path, frames: usize, labels: &[String]) -> Result<Vec<Vec<Point>>> {
-        let files = if path.is_dir() { register::cloud::read_frames(path)? } else { vec![path.to_path_buf()] };
+        let files = register::cloud::read_points_frames(path)?;
         if files.len() != frames {
             anyhow::bail!("{} truth file(s) for {frames} cloud frame(s)", files.len());
         }

@@ -20,7 +20,7 @@ pub struct RegisterArgs {
     /// 3D Slicer's .fcsv or .mrk.json (their own frame and unit); .npy [N, 3]; the points of a
     /// model file, .ply (ASCII or binary), .vtk, .vtp, .vtu, .stl or .obj (in the frame its SPACE=
     /// tag or field names, as Slicer writes it). A directory is a sequence of frames, in file-name
-    /// order (any of these but .fcsv and .mrk.json).
+    /// order.
     #[arg(required_unless_present = "comparison")]
     cloud: Option<PathBuf>,
     #[command(flatten)]

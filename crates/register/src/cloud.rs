@@ -1,7 +1,8 @@
 //! Point clouds on disk: CSV with a header naming `x`, `y`, `z` (read with its labels and unit as
 //! points, [`mesh::io::points::read_points`]); NumPy `.npy` arrays of shape `[N, 3]`; the points
 //! of a PLY, surface or mesh file (`.ply`, `.obj`, `.stl`, `.vtk`, `.vtp`, `.vtu`: a cloud saved
-//! as a model, as 3D Slicer saves one), whatever its cells ([`mesh::io::read_vertices`]).
+//! as a model, as 3D Slicer saves one), whatever its cells ([`mesh::io::read_vertices`]); a
+//! sequence of them in a directory ([`read_frames`]), 3D Slicer's markups among them.
 //!
 //! Every reader rejects an empty cloud and non-finite coordinates, and every error names the
 //! file (and, for text, the line).
@@ -32,8 +33,20 @@ pub fn holds_positions_only(path: &Path) -> bool {
     e != "csv" && CLOUD_EXTENSIONS.contains(&e.as_str())
 }
 
+/// Whether `path` is 3D Slicer's markups: `.fcsv` or `.mrk.json` (any case).
+fn is_markups_file(path: &Path) -> bool {
+    let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    name.ends_with(".fcsv") || name.ends_with(".mrk.json")
+}
+
+/// Whether `path` is a cloud: one of the [`CLOUD_EXTENSIONS`], or 3D Slicer's markups.
 fn is_cloud_file(path: &Path) -> bool {
-    CLOUD_EXTENSIONS.contains(&extension(path).as_str())
+    CLOUD_EXTENSIONS.contains(&extension(path).as_str()) || is_markups_file(path)
+}
+
+/// Whether `path` is a points file: CSV, or 3D Slicer's markups.
+fn is_points_file(path: &Path) -> bool {
+    extension(path) == "csv" || is_markups_file(path)
 }
 
 /// Reads a cloud of positions alone ([`holds_positions_only`]), choosing the format from the
@@ -47,26 +60,48 @@ pub fn read_point_cloud(path: &Path) -> Result<Vec<Point>> {
     check_points(path, points)
 }
 
-/// The clouds of a sequence: a file is a single frame; a directory gives its files of the
-/// [`CLOUD_EXTENSIONS`] sorted by file name (an error if there are none).
+/// The clouds of a sequence: a file is a single frame; a directory gives its clouds (files of the
+/// [`CLOUD_EXTENSIONS`], 3D Slicer's `.fcsv` and `.mrk.json`) sorted by file name (an error if
+/// there are none, naming the files it holds).
 pub fn read_frames(path: &Path) -> Result<Vec<PathBuf>> {
+    let formats = format!("point cloud ({}, .fcsv or .mrk.json file)", cloud_formats(true));
+    sequence_files(path, is_cloud_file, &formats)
+}
+
+/// The points files of a sequence (one per frame: the truth of each): a file is a single frame;
+/// a directory gives its CSV, `.fcsv` and `.mrk.json` files sorted by file name (an error if
+/// there are none, naming the files it holds).
+pub fn read_points_frames(path: &Path) -> Result<Vec<PathBuf>> {
+    sequence_files(path, is_points_file, "points file (.csv, .fcsv or .mrk.json)")
+}
+
+/// The files of a sequence in `path` that `keep` accepts, `what` naming them in the error.
+fn sequence_files(path: &Path, keep: fn(&Path) -> bool, what: &str) -> Result<Vec<PathBuf>> {
     let meta = fs::metadata(path).map_err(|e| RegisterError::io(path, e))?;
     if !meta.is_dir() {
         return Ok(vec![path.to_path_buf()]);
     }
-    let mut frames = Vec::new();
+    let (mut frames, mut others) = (Vec::new(), Vec::new());
     for entry in fs::read_dir(path).map_err(|e| RegisterError::io(path, e))? {
         let entry = entry.map_err(|e| RegisterError::io(path, e))?;
         let file = entry.path();
-        if file.is_file() && is_cloud_file(&file) {
-            frames.push(file);
+        match (file.is_file(), keep(&file)) {
+            (true, true) => frames.push(file),
+            (true, false) => others.push(entry.file_name().to_string_lossy().into_owned()),
+            _ => {}
         }
     }
     if frames.is_empty() {
-        return Err(RegisterError::format(
-            path,
-            format!("directory holds no point cloud ({} file)", cloud_formats(true)),
-        ));
+        others.sort();
+        let held = match others.len() {
+            0 => "it holds no file".to_string(),
+            n => format!(
+                "its {n} file(s) ({}{}) are none",
+                others[..n.min(3)].join(", "),
+                if n > 3 { ", …" } else { "" }
+            ),
+        };
+        return Err(RegisterError::format(path, format!("directory holds no {what}: {held}")));
     }
     frames.sort_by(|a, b| a.file_name().cmp(&b.file_name()));
     Ok(frames)

@@ -3,7 +3,7 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use augsim_register::cloud::{read_frames, read_point_cloud};
+use augsim_register::cloud::{read_frames, read_point_cloud, read_points_frames};
 use mesh::io::points::write_points_csv;
 use mesh::io::write_ply_points;
 use mesh::Point;
@@ -230,14 +230,17 @@ fn frames_of_a_directory_and_of_a_file() {
     write(dir.path(), "notes.txt", "not a cloud");
     let c = write(dir.path(), "c.obj", "v 7 8 9\n");
     fs::create_dir(dir.path().join("sub.csv")).unwrap();
-    assert_eq!(read_frames(dir.path()).unwrap(), vec![a.clone(), b, c.clone()]);
+    let d = write(dir.path(), "d.mrk.json", "{}");
+    write(dir.path(), "summary.json", "{}");
+    assert_eq!(read_frames(dir.path()).unwrap(), vec![a.clone(), b, c.clone(), d.clone()]);
+    assert_eq!(read_points_frames(dir.path()).unwrap(), vec![a.clone(), d], "a truth's points files");
     assert_eq!(read_point_cloud(&c).unwrap(), [[7.0, 8.0, 9.0]], "a model file's points");
     assert_eq!(read_frames(&a).unwrap(), vec![a]);
 
     let empty = tempfile::tempdir().unwrap();
     write(empty.path(), "readme.md", "nothing here");
     let message = read_frames(empty.path()).unwrap_err().to_string();
-    assert_contains(&message, &["no point cloud"]);
+    assert_contains(&message, &["no point cloud", ".fcsv or .mrk.json file): its 1 file(s) (readme.md) are none"]);
 
     assert!(read_frames(&dir.path().join("missing")).is_err());
 }
