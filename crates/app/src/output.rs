@@ -369,7 +369,14 @@ pub fn register_files(
     let mut input =
         PointInput::new(organ_frame, LengthUnit::Metre, spec.given_units).with_given_frame(spec.given_frame);
     let frames = read_frames(cloud)?;
-    let truths = truth.map(|p| input.read_truths(p, frames.len(), registration.target_labels())).transpose()?;
+    // A truth that does not fit the targets may be explained by how they were read (points left out).
+    let truths =
+        truth.map(|p| input.read_truths(p, frames.len(), registration.target_labels())).transpose().map_err(|e| {
+            match registration.warnings() {
+                [] => e,
+                warnings => e.context(format!("the truth (--truth), after these warnings: {}", warnings.join("; "))),
+            }
+        })?;
     setup_lines(&registration, &spec.frame_line(&registration, input.named_frame())).iter().for_each(|l| say(l));
     let truth_warning = match truths.as_ref().and_then(|t| t.first()) {
         Some(truth) => register::plausibility::check_truth(registration.organ(), registration.targets(), truth)

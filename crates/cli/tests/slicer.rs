@@ -421,3 +421,40 @@ fn a_slicer_users_files_prepare_register_and_come_back_in_their_frame_and_unit()
     println!("TRE {:.3} mm; the cloud's median distance {on:.2} mm to the result, {off:.2} mm at rest", tre(&slicer));
     assert!(on < 3.0 && on < 0.5 * off, "median distance of the cloud: {on:.2} mm to the result, {off:.2} mm at rest");
 }
+
+/// A sequence given as 3D Slicer's markups, its truth a folder of them too; a truth whose label
+/// is a target left out as not placed fails with the warning that explains it.
+#[test]
+fn a_sequence_and_its_truth_come_as_markups() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mm = LengthUnit::Millimetre;
+    let (clouds, truths) = (d.join("clouds"), d.join("truths"));
+    std::fs::create_dir_all(&clouds).unwrap();
+    std::fs::create_dir_all(&truths).unwrap();
+    for k in 0..2 {
+        write_points(clouds.join(format!("{k}.mrk.json")), &points("cloud.csv", Some(Frame::Lps), mm, true, false))
+            .unwrap();
+        write_points(truths.join(format!("{k}.fcsv")), &points("truth.csv", Some(Frame::Lps), mm, true, true)).unwrap();
+    }
+    let targets = d.join("targets.mrk.json");
+    write_points(&targets, &points("targets.csv", Some(Frame::Lps), mm, true, true)).unwrap();
+    let out = d.join("out");
+    let (_, tre) = register(&clouds, &targets, &truths, &out, &[]);
+    assert!(tre > 0.0 && tre < 10.0, "{tre}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["per_frame"].as_array().unwrap().len(), 2);
+    // Marker 2 not placed in the targets: the truth's marker 2 is no target's, and the warning says why.
+    let mut markups: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&targets).unwrap()).unwrap();
+    let second = &mut markups["markups"][0]["controlPoints"][1];
+    assert_eq!(second["label"], "marker 2");
+    second["positionStatus"] = "undefined".into();
+    std::fs::write(&targets, markups.to_string()).unwrap();
+    let path = |p: &Path| p.to_str().unwrap().to_string();
+    let args = ["register", &path(&clouds), "--fem", "liver", "--targets", &path(&targets), "--truth", &path(&truths)];
+    let (ok, text) = augsim(&[&args[..], &["--out", &path(&d.join("out2"))]].concat());
+    assert!(!ok, "{text}");
+    assert!(text.contains("after these warnings: ") && text.contains("is left out: marker 2"), "{text}");
+    assert!(text.contains("`marker 2` is no target's label"), "{text}");
+}
