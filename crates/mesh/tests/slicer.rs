@@ -131,6 +131,26 @@ fn mrk_json_of_slicer_5_gives_defined_points_with_labels_frame_and_units() {
         ["markups[1].controlPoints[1]", "skipped"],
         "an unlabelled placeholder named by its place; a point skipped when placing, which has no position"
     );
+    assert_eq!(p.lists, [1, 1], "two point lists read as one");
+    assert!(
+        p.warnings()[1].starts_with("its 2 point lists (1, 1 points) are read as one list of 2"),
+        "{:?}",
+        p.warnings()
+    );
+    // A position status 3D Slicer does not write is refused, naming the point.
+    let odd = put(
+        dir.path(),
+        "odd.mrk.json",
+        r#"{"markups": [{"controlPoints": [{"label": "p", "position": [1, 2, 3], "positionStatus": "weird"}]}]}"#,
+    );
+    let m = message(read_points(odd));
+    assert!(
+        m.ends_with(
+            "markups[0].controlPoints[0] (p): positionStatus \"weird\" is none of 3D Slicer's (defined, \
+         undefined, preview, missing)"
+        ),
+        "{m}"
+    );
     // A curve is a shape, not a point list.
     let curve = put(
         dir.path(),

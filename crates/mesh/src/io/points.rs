@@ -371,9 +371,17 @@ fn read_markup(markup: &Value, m: usize) -> Result<LabelledPoints, String> {
         } else {
             format!("{at}.controlPoints[{i}] ({label})")
         };
-        if matches!(text("positionStatus").as_str(), "undefined" | "preview" | "missing") {
-            out.unplaced.push(if label.is_empty() { name } else { label });
-            continue;
+        match text("positionStatus").as_str() {
+            "" | "defined" => {}
+            "undefined" | "preview" | "missing" => {
+                out.unplaced.push(if label.is_empty() { name } else { label });
+                continue;
+            }
+            other => {
+                return Err(format!(
+                    "{name}: positionStatus \"{other}\" is none of 3D Slicer's (defined, undefined, preview, missing)"
+                ))
+            }
         }
         let position = point.get("position").ok_or_else(|| format!("{name}: no position"))?;
         let values: Vec<f64> = position
