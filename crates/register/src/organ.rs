@@ -210,19 +210,25 @@ impl Organ {
     /// Stencils of the targets in the organ, and warnings about them. A target outside the organ
     /// is an error, which names it (by its label too, where `labels` give one) and, when one of
     /// them lies farther than [`NEAR_OUTSIDE`], the likely mistake (millimetres given for metres
-    /// or the reverse, the other of RAS and LPS); a set of targets whose extent is under
-    /// [`SMALL_TARGET_EXTENT`] of the organ's is warned about.
+    /// or the reverse; the other of RAS and LPS, also for targets near it: an organ about the
+    /// origin keeps them so); a set of targets whose extent is under [`SMALL_TARGET_EXTENT`] of the
+    /// organ's is warned about, and refused when, read 1,000 times larger, it lies in the organ
+    /// (metres given for millimetres, which would register every target at one point).
     pub fn locate_targets(&self, targets: &[Point], labels: &[String]) -> Result<(Vec<Stencil>, Vec<String>)> {
         let inside = |moved: &[Point]| self.locate(moved, "target").is_ok();
         let stencils = self.locate_labelled(targets, labels, "target").map_err(|e| {
             let near = targets.iter().all(|&p| self.rest_bvh.signed_distance(p) <= NEAR_OUTSIDE * self.extent());
+            let claim = "every target lies inside";
             let hint = match near {
-                true => String::new(),
-                false => likely_mistake(targets, &self.mesh.nodes, "every target lies inside", true, inside),
+                true => likely_frame_mistake(targets, claim, inside).unwrap_or_default(),
+                false => likely_mistake(targets, &self.mesh.nodes, claim, true, inside),
             };
             RegisterError::Invalid(format!("{e}{hint}"))
         })?;
-        Ok((stencils, self.spread_warning(targets, "targets", inside).into_iter().map(|(w, _)| w).collect()))
+        match self.spread_warning(targets, "targets", inside) {
+            Some((warning, true)) => Err(RegisterError::Invalid(warning)),
+            warning => Ok((stencils, warning.into_iter().map(|(w, _)| w).collect())),
+        }
     }
 
     /// Checks that the landmarks where the organ is held lie on its surface or inside it: one
@@ -321,9 +327,8 @@ pub(crate) fn likely_mistake(
     fits: impl Fn(&[Point]) -> bool,
 ) -> String {
     let organ = &OrganBox::of(organ);
-    let negated: Vec<Point> = points.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
-    if frames_may_differ && fits(&negated) {
-        return format!(" (with x and y negated {claim}: are they in LPS where the organ is in RAS, or the reverse?)");
+    if let Some(hint) = likely_frame_mistake(points, claim, &fits).filter(|_| frames_may_differ) {
+        return hint;
     }
     match UnitMistake::COMMON.into_iter().find(|m| scaled_fits(points, m.factor(), organ, &fits)) {
         Some(mistake) => {
@@ -331,6 +336,14 @@ pub(crate) fn likely_mistake(
         }
         None => String::new(),
     }
+}
+
+/// The end of an error message when `points` with x and y negated lie where `fits` wants them (the
+/// other of RAS and LPS), saying that `claim` then holds.
+fn likely_frame_mistake(points: &[Point], claim: &str, fits: impl Fn(&[Point]) -> bool) -> Option<String> {
+    let negated: Vec<Point> = points.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
+    fits(&negated)
+        .then(|| format!(" (with x and y negated {claim}: are they in LPS where the organ is in RAS, or the reverse?)"))
 }
 
 /// The diagonal of the bounding box of `points`.

@@ -733,12 +733,27 @@ mod tests {
     }
 
     #[test]
-    fn metres_read_as_millimetres_are_warned_about() {
+    fn metres_read_as_millimetres_are_refused() {
         // 10 mm and 40 mm given in m but read as mm: 1,000 times too small, near the origin.
-        let r = cube_with(vec![[1e-5, 2e-5, 3e-5], [4e-5, 1e-5, 2e-5]]).unwrap();
-        let w = r.warnings().join("; ");
-        assert!(w.contains("under 1 % of the organ"), "{w}");
-        assert!(w.contains("given in m where mm were expected"), "{w}");
+        let e = cube_with(vec![[1e-5, 2e-5, 3e-5], [4e-5, 1e-5, 2e-5]]).err().expect("targets shrunk").to_string();
+        assert!(e.contains("under 1 % of the organ"), "{e}");
+        assert!(e.contains("given in m where mm were expected"), "{e}");
+        // Close together inside the organ, in its unit: warned about only.
+        let r = cube_with(vec![[0.02, 0.02, 0.02], [0.0201, 0.02, 0.02]]).unwrap();
+        assert!(r.warnings().join("; ").contains("under 1 % of the organ"), "{:?}", r.warnings());
+    }
+
+    /// Targets just outside an organ about the origin, inside it with x and y negated: the frame is
+    /// named, though they lie near it.
+    #[test]
+    fn targets_near_the_organ_in_the_other_frame_are_refused_naming_the_frame() {
+        let organ = Organ::new(mesh::box_tet([-0.005, -0.005, 0.0], [0.05; 3], [3, 3, 3]).unwrap(), None).unwrap();
+        let targets = vec![[-0.008, -0.006, 0.02], [0.002, 0.003, 0.02]];
+        let e = Registration::new(organ, Box::new(Still), "still", targets, Vec::new(), RegistrationOptions::default())
+            .err()
+            .expect("a target outside")
+            .to_string();
+        assert!(e.contains("with x and y negated every target lies inside"), "{e}");
     }
 
     #[test]
