@@ -272,7 +272,12 @@ impl Organ {
     /// The warning when several `points` (`what`: "targets") span less than
     /// [`SMALL_TARGET_EXTENT`] of the organ, and whether, read 1,000 times larger, they lie where
     /// `fits` wants them (metres given for millimetres, which it then asks).
-    fn spread_warning(&self, points: &[Point], what: &str, fits: impl Fn(&[Point]) -> bool) -> Option<(String, bool)> {
+    pub(crate) fn spread_warning(
+        &self,
+        points: &[Point],
+        what: &str,
+        fits: impl Fn(&[Point]) -> bool,
+    ) -> Option<(String, bool)> {
         let (organ_extent, extent) = (self.extent(), diagonal(points));
         if points.len() < 2 || extent >= SMALL_TARGET_EXTENT * organ_extent {
             return None;

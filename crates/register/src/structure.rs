@@ -67,6 +67,13 @@ impl Structure {
                 )
             )));
         }
+        // A structure shrunk 1,000 times (in m where mm were expected) lies in the organ as a speck; a
+        // small one in its unit (a vessel's branch) is not doubted.
+        let mostly_inside = |points: &[Point]| held(points).is_ok_and(|moved| mostly_near(&moved));
+        let what = format!("vertices of `{name}`");
+        if let Some((shrunk, true)) = organ.spread_warning(&surface.vertices, &what, mostly_inside) {
+            return Err(RegisterError::Invalid(shrunk));
+        }
         let outside: Vec<f64> = located.iter().map(|l| l.1).filter(|&d| d > 0.0).collect();
         // Wholly outside yet near: most likely segmented apart from the organ (a tumour on its
         // capsule, taken out of the organ's label), which the organ then does not hold.
@@ -159,6 +166,22 @@ mod tests {
         beside.transform([0.0, 0.035, 0.035], 1.0);
         let e = Structure::new(&organ, "kidney", beside).unwrap_err().to_string();
         assert!(e.contains("`kidney` lies outside the organ") && !e.contains("times"), "{e}");
+    }
+
+    /// A structure in metres read as millimetres, a speck in the organ, is refused naming the unit;
+    /// a small one in the organ's unit is kept.
+    #[test]
+    fn a_structure_shrunk_by_a_unit_mistake_is_refused() {
+        let organ = cube();
+        let mut tumour = icosphere(0.008, 2);
+        tumour.transform([-0.02; 3], 1.0);
+        let mut speck = tumour.clone();
+        speck.vertices.iter_mut().for_each(|p| *p = p.map(|x| x * 1e-3));
+        let e = Structure::new(&organ, "tumour", speck).map(|_| ()).unwrap_err().to_string();
+        assert!(e.contains("vertices of `tumour` span") && e.ends_with("given in m where mm were expected?"), "{e}");
+        let mut small = icosphere(0.0002, 2);
+        small.transform([-0.02; 3], 1.0);
+        assert!(Structure::new(&organ, "branch", small).is_ok(), "a 0.4 mm structure in the organ's unit");
     }
 
     /// A structure outside the organ that x and y negated would put in it: the other frame is
