@@ -777,6 +777,13 @@ mod tests {
         let spent = frame(1e-9);
         assert!(spent.out_of_time && spent.iterations == 1, "{:?}", spent.warnings);
         assert!(spent.u.iter().all(|&v| v == 0.0), "the solve went on past the deadline");
+        // Not registered, and said so: not as if the cloud did not fit the organ.
+        assert!(!spent.plausible(), "{:?}", spent.warnings);
+        assert!(
+            spent.warnings.len() == 2 && spent.warnings[1].starts_with("no iteration finished"),
+            "{:?}",
+            spent.warnings
+        );
         let spare = frame(1e6);
         assert!(!spare.out_of_time && spare.u.iter().any(|&v| v.abs() > 1e-3), "{:?}", spare.warnings);
     }

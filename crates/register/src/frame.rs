@@ -348,6 +348,7 @@ pub(crate) fn register_frame_begun(
         Some(_) => (WARM_START_ITERATION, options.iterations.min(options.warm_iterations)),
         None => (0, options.iterations),
     };
+    let began = u.clone();
     let mut last_observations = None;
     let mut out_of_time = false;
     while iterations < most {
@@ -402,13 +403,23 @@ pub(crate) fn register_frame_begun(
     let distances: Vec<f64> = cloud.par_iter().map(|&c| bvh.distance(c)).collect();
     let surface_residual = distances.iter().sum::<f64>() / cloud.len() as f64;
     let far_share = crate::plausibility::far_share(&distances);
-    let crate::plausibility::Verdict { mut warnings, distorted, other_frame, small_view } =
+    let crate::plausibility::Verdict { mut warnings, mut distorted, mut other_frame, mut small_view } =
         crate::plausibility::verdict(organ, &u, far_share, (cloud, extent), options.rigid.is_some());
     if let (true, Some(budget)) = (out_of_time, options.time_budget_ms) {
+        // No iteration finished in time: there is no registration to judge, the organ is where it began.
+        if u == began {
+            (warnings, distorted, other_frame, small_view) = (Vec::new(), false, false, false);
+        }
         warnings.push(format!(
             "the frame stopped after {iterations} of its {most} iterations, past its time budget of {budget:.0} ms: \
              the estimate may not have converged"
         ));
+        if u == began {
+            warnings.push(format!(
+                "no iteration finished within the time budget of {budget:.0} ms (one takes longer): the organ is left \
+                 as the frame began, not registered to this cloud; give a larger budget"
+            ));
+        }
     }
     Ok(FrameResult {
         u,
