@@ -2,7 +2,8 @@
 """`python -m augsim.replay`: a recorded press and release (the server test's case, 8 frames, its
 clouds in metres as `augsim register --case` writes them) replayed to `augsim serve --units mm` as a
 tracker would; each frame comes back registered, the targets written per frame in mm, much nearer
-their truth than at rest; a cloud file that cannot be sent (a NaN) is reported and the replay goes on.
+their truth than at rest; a cloud file that cannot be sent (a NaN) is reported and the replay goes on;
+a cloud in the other frame is registered, flagged and written under a name that says so.
 
 Run: python -m pytest -s python/tests/test_replay.py (needs pyigtl; `.ci/run` runs it).
 """
@@ -38,6 +39,9 @@ class ReplayTest(unittest.TestCase):
             bad = np.loadtxt(os.path.join(frames, "cloud_0000.csv"), delimiter=",", skiprows=1)
             bad[0, 0] = np.nan
             np.savetxt(os.path.join(refused, "cloud_0000b.csv"), bad, delimiter=",", header="x,y,z", comments="")
+            # A cloud in the other frame (x and y negated): registered, flagged, written under a name that says so.
+            mirrored = np.loadtxt(os.path.join(frames, "cloud_0000.csv"), delimiter=",", skiprows=1) * [-1, -1, 1]
+            np.savetxt(os.path.join(refused, "cloud_0000c.csv"), mirrored, delimiter=",", header="x,y,z", comments="")
             port = free_port()
             server = subprocess.Popen([augsim_bin(), "serve", "--fem", case["scenario"], "--targets", case["targets"],
                                        "--port", str(port), "--units", "mm"], stdout=subprocess.PIPE,
@@ -56,14 +60,21 @@ class ReplayTest(unittest.TestCase):
                 log, _ = server.communicate(timeout=30)
             self.assertEqual(server.returncode, 0, log)
             written = sorted(os.listdir(out))
+            self.assertEqual(written.pop(), "targets_implausible_0002.csv")
             self.assertEqual(len(written), FRAMES, written)
             with open(os.path.join(out, written[0]), encoding="utf-8") as f:
                 self.assertEqual(f.readline().strip(), "x_mm,y_mm,z_mm")
             # The targets as the server sent them (float32), written in as many digits as they hold.
             first = np.loadtxt(os.path.join(out, written[0]), delimiter=",", skiprows=1)
             np.testing.assert_array_equal(first.astype(np.float32), records[0]["targets"].astype(np.float32))
-        self.assertEqual(len(records), FRAMES + 1)
-        self.assertIn("not sent", lines[1])
+        self.assertEqual(len(records), FRAMES + 2)
+        self.assertFalse(records.pop(2)["status"]["plausible"], lines[2])
+        self.assertIn("not plausible", lines[2])
+        self.assertTrue(lines[1].startswith("not sent   cloud_0000b.csv: "), lines[1])
+        # Numbered as the server numbers its frames: the file not sent takes no number.
+        numbers = [r["status"]["frame"] for k, r in enumerate(records) if k != 1]
+        self.assertEqual(numbers, [1] + list(range(3, FRAMES + 2)))
+        self.assertEqual(written[-1], f"targets_{FRAMES + 1:04d}.csv")
         self.assertIn("finite", records[1]["status"]["error"])
         self.assertIsNone(records[1]["targets"])
         good = [r for k, r in enumerate(records) if k != 1]
@@ -82,6 +93,11 @@ class ReplayTest(unittest.TestCase):
             with self.assertRaises(SystemExit) as stop:
                 replay.main([os.path.join(tmp, "missing")])
             self.assertIn("is not a directory", str(stop.exception))
+            # A loop of no pass, a negative rate: refused by the parser (exit status 2), not run once.
+            for flags in (["--loop", "0"], ["--rate", "-1"]):
+                with self.assertRaises(SystemExit) as stop:
+                    replay.main([tmp] + flags)
+                self.assertEqual(stop.exception.code, 2, flags)
 
 
 def test_a_cloud_file_is_read_as_register_reads_it(tmp_path):
