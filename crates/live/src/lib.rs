@@ -230,7 +230,7 @@ impl Default for ServeOptions {
             frame: None,
             outputs: Outputs::ALL,
             max_message_bytes: 64 << 20,
-            max_points: 200_000,
+            max_points: 1_000_000,
             stall: Duration::from_secs(10),
             identification: None,
             record: None,
@@ -997,7 +997,12 @@ fn answer(
 ) -> std::result::Result<(), String> {
     let options = &shared.options;
     if points.len() > options.max_points {
-        return Err(format!("cloud of {} points exceeds the limit of {}", points.len(), options.max_points));
+        return Err(format!(
+            "cloud of {} points exceeds the limit of {}: thin it before sending (a frame matches a few thousand \
+             points of a cloud, evenly spaced)",
+            points.len(),
+            options.max_points
+        ));
     }
     let start = Instant::now();
     let tracked = registration.register(points).map_err(|e| e.to_string())?;

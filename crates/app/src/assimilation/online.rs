@@ -85,6 +85,7 @@ impl OnlineFilter {
             }
         }
         self.check_spread(&z)?;
+        self.check_frame(&z)?;
         let available: Vec<bool> = z.iter().map(|v| !v.is_nan()).collect();
         let record = self.filter.step_partial(&DVector::from_vec(z), &available).context(|| "a filter step".into())?;
         let (innovation, gated) = (record.innovation_norm, record.gated);
@@ -109,6 +110,27 @@ impl OnlineFilter {
                 mesh::length::mm(now),
                 now / at_rest,
                 mesh::length::mm(at_rest)
+            ))),
+        }
+    }
+
+    /// Refuses a step whose fully seen points are in the other frame ([`in_the_other_frame`]),
+    /// which the filter's gate would only partly leave out.
+    fn check_frame(&self, z: &[f64]) -> Result<(), AssimilationError> {
+        let seen: Vec<(Point, Point)> = z
+            .chunks_exact(3)
+            .zip(&self.rest)
+            .filter(|(p, _)| p.iter().all(|v| !v.is_nan()))
+            .map(|(p, rest)| ([p[0], p[1], p[2]], *rest))
+            .collect();
+        match in_the_other_frame(&seen, self.size) {
+            None => Ok(()),
+            Some((given, negated)) => Err(AssimilationError::Setup(format!(
+                "the {} observed points seen lie {:.1} mm from their rest positions on average, {:.1} mm with x and \
+                 y negated: is the step in the other frame (RAS where the organ is in LPS, or the reverse)?",
+                seen.len(),
+                mesh::length::mm(given),
+                mesh::length::mm(negated)
             ))),
         }
     }
@@ -144,5 +166,44 @@ impl OnlineFilter {
     /// Their standard deviations.
     pub fn std(&self) -> Vec<f64> {
         self.filter.std_physical()
+    }
+}
+
+/// For points seen (each with its rest position) of an organ of size `size` (its box's
+/// diagonal): their mean distance from rest as given and with x and y negated, when they lie far
+/// from rest (a tenth of the organ's size on average) and four times nearer negated: points in the
+/// other frame (RAS for LPS). `None` otherwise.
+fn in_the_other_frame(seen: &[(Point, Point)], size: f64) -> Option<(f64, f64)> {
+    if seen.is_empty() {
+        return None;
+    }
+    let mean = |flip: f64| {
+        seen.iter().map(|(p, rest)| mesh::distance([flip * p[0], flip * p[1], p[2]], *rest)).sum::<f64>()
+            / seen.len() as f64
+    };
+    let (given, negated) = (mean(1.0), mean(-1.0));
+    (given > 0.1 * size && negated < 0.25 * given).then_some((given, negated))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Features about an organ around the origin, x and y negated, are told; moved a little in
+    /// the organ's frame, or far from the origin, they are not.
+    #[test]
+    fn features_in_the_other_frame_are_told() {
+        let rest = [[0.03, -0.02, 0.1], [-0.04, 0.05, 0.12], [0.06, 0.01, 0.08]];
+        let pair = |f: &dyn Fn(Point) -> Point| rest.iter().map(|&r| (f(r), r)).collect::<Vec<_>>();
+        let size = 0.25;
+        let (given, negated) =
+            in_the_other_frame(&pair(&|r| [-r[0], -r[1] + 0.002, r[2] - 0.003]), size).expect("the other frame");
+        assert!(given > 0.05 && (negated - 0.0036).abs() < 1e-4, "{given} {negated}");
+        assert_eq!(in_the_other_frame(&pair(&|r| [r[0], r[1], r[2] - 0.005]), size), None);
+        assert_eq!(in_the_other_frame(&[], size), None);
+        // An organ far from the origin: negated, its features lie farther still.
+        let far = |r: Point| [r[0] + 0.5, r[1], r[2]];
+        let shifted: Vec<(Point, Point)> = rest.iter().map(|&r| (far([r[0] + 0.02, r[1], r[2]]), far(r))).collect();
+        assert_eq!(in_the_other_frame(&shifted, size), None);
     }
 }
