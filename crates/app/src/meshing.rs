@@ -407,7 +407,10 @@ pub fn write_mesh_file(path: &Path, mesh: &Mesh, frame: Option<Frame>) -> Result
     };
     mesh::io::write_mesh_in_frame(path, mesh, &fields, frame).with_context(context)?;
     let named = match (frame, extension.as_str()) {
-        (Some(f), "vtu" | "vtk") => format!(", frame {f} named"),
+        // 3D Slicer reads a model's numbers as mm: this one would show 1,000 times too small.
+        (Some(f), "vtu" | "vtk") => {
+            format!(", frame {f} named; for 3D Slicer, which reads models in mm, write .stl or .obj")
+        }
         (Some(f), _) => format!(", in {f}: Gmsh's format names no frame"),
         _ => String::new(),
     };
@@ -617,8 +620,8 @@ mod tests {
         }
         // A volume mesh names it in a .vtu's field data and a .vtk's title; a .msh cannot.
         for (name, said) in [
-            ("out.vtu", "in m, frame LPS named"),
-            ("out.vtk", "in m, frame LPS named"),
+            ("out.vtu", "in m, frame LPS named; for 3D Slicer, which reads models in mm, write .stl or .obj"),
+            ("out.vtk", "in m, frame LPS named; for 3D Slicer, which reads models in mm, write .stl or .obj"),
             ("out.msh", "in m, in LPS: Gmsh's format names no frame"),
         ] {
             assert_eq!(write_mesh_file(&dir.path().join(name), &meshed.mesh, meshed.frame).unwrap(), said);
