@@ -91,6 +91,12 @@ pub fn serve_setup(spec: RegistrationSpec, outputs: Option<Outputs>, assimilate:
     if let Some(chosen) = outputs {
         lines.extend(chosen.check(&first).map_err(anyhow::Error::msg)?.into_iter().map(|w| format!("warning    {w}")));
     }
+    lines.extend(
+        live::check_target_names(&first.target_names())
+            .map_err(anyhow::Error::msg)?
+            .into_iter()
+            .map(|w| format!("warning    {w}")),
+    );
     let (coordinates, frame_line) = spec.stream_coordinates(&first);
     let frame = spec.stream_frame();
     lines.extend(setup_lines(&first, &frame_line));

@@ -251,14 +251,23 @@ pub struct PointMessage {
 /// Bytes of one point of a POINT message.
 const POINT_BYTES: usize = 136;
 
-/// Writes `text` into its NUL-padded `field`, cut at a character boundary so as to keep the last
-/// byte a NUL.
-fn write_text(field: &mut [u8], text: &str) {
-    let mut end = text.len().min(field.len() - 1);
+/// Bytes of a POINT message's point name, its last a NUL: a longer name is cut ([`sent_text`]).
+pub const POINT_NAME_BYTES: usize = 64;
+
+/// What of `text` a NUL-padded field of `bytes` bytes holds: `text` cut at a character boundary
+/// so as to keep the last byte a NUL.
+pub fn sent_text(text: &str, bytes: usize) -> &str {
+    let mut end = text.len().min(bytes - 1);
     while !text.is_char_boundary(end) {
         end -= 1;
     }
-    field[..end].copy_from_slice(&text.as_bytes()[..end]);
+    &text[..end]
+}
+
+/// Writes `text` into its NUL-padded `field` ([`sent_text`]).
+fn write_text(field: &mut [u8], text: &str) {
+    let sent = sent_text(text, field.len());
+    field[..sent.len()].copy_from_slice(sent.as_bytes());
 }
 
 impl Content for PointMessage {
@@ -268,7 +277,7 @@ impl Content for PointMessage {
         let mut out = Vec::with_capacity(POINT_BYTES * self.points.len());
         for point in &self.points {
             let mut bytes = [0u8; POINT_BYTES];
-            write_text(&mut bytes[..64], &point.name);
+            write_text(&mut bytes[..POINT_NAME_BYTES], &point.name);
             write_text(&mut bytes[64..96], &point.group);
             bytes[96..100].copy_from_slice(&point.rgba);
             for (k, x) in point.position.iter().chain([&point.diameter]).enumerate() {

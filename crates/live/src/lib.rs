@@ -165,6 +165,35 @@ impl Outputs {
     }
 }
 
+/// Checks the targets' names (a registration's [`Registration::target_names`]) against the POINT
+/// message's name field ([`igtl::POINT_NAME_BYTES`]): a name cut there is a warning (returned);
+/// two names that are one once cut are an error (a client tells targets by name).
+pub fn check_target_names(names: &[String]) -> std::result::Result<Vec<String>, String> {
+    let sent: Vec<&str> = names.iter().map(|n| igtl::sent_text(n, igtl::POINT_NAME_BYTES)).collect();
+    for (i, a) in sent.iter().enumerate() {
+        if let Some(j) = sent[..i].iter().position(|b| b == a) {
+            return Err(format!(
+                "the targets `{}` and `{}` are both named `{a}` on the stream, where a name is cut to {} bytes: \
+                 shorten their labels",
+                names[j],
+                names[i],
+                igtl::POINT_NAME_BYTES - 1
+            ));
+        }
+    }
+    let cut: Vec<String> =
+        names.iter().zip(&sent).filter(|(n, s)| n.len() > s.len()).map(|(_, s)| format!("`{s}`")).collect();
+    Ok(match cut.is_empty() {
+        true => Vec::new(),
+        false => vec![format!(
+            "{} target name(s) longer than {} bytes are cut on the stream: {}",
+            cut.len(),
+            igtl::POINT_NAME_BYTES - 1,
+            cut.join(", ")
+        )],
+    })
+}
+
 /// Identification on the stream: a filter that takes one set of observed feature positions per
 /// step (e.g. the ROUKF of an assimilation scenario).
 pub trait Identification: Send {
@@ -1098,6 +1127,21 @@ mod tests {
         put(&mut mailbox, 7);
         assert_eq!(take(&mut mailbox), Some((7, false, 0)));
         assert_eq!(take(&mut mailbox), None);
+    }
+
+    /// A target's name cut on the stream is warned about; two that the cut makes one are refused.
+    #[test]
+    fn target_names_cut_on_the_stream_are_told() {
+        let long = |end: &str| format!("{}{end}", "t".repeat(62));
+        let names = |list: &[&str]| list.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert_eq!(check_target_names(&names(&["a", "b"])).unwrap(), Vec::<String>::new());
+        let warned = check_target_names(&[long("ab"), "b".into()]).unwrap();
+        assert!(
+            warned.len() == 1 && warned[0].starts_with("1 target name(s) longer than 63 bytes are cut"),
+            "{warned:?}"
+        );
+        let e = check_target_names(&[long("ab"), long("ac")]).unwrap_err();
+        assert!(e.contains(&format!("are both named `{}` on the stream", long("a"))), "{e}");
     }
 
     /// A status of thousands of targets' σ would not fit in a STRING: σ is left out, with a
