@@ -2,7 +2,8 @@
 //!
 //! - **CSV**: a header naming the columns `x`, `y` and `z` (any order, any case), or `x_mm`,
 //!   `y_mm`, `z_mm` (or `_m`), which name the unit; a `label`, `name` or `id` column gives each
-//!   point's label, a `description` or `desc` column its description; other columns are ignored.
+//!   point's label, a `description` or `desc` column its description; other columns are ignored,
+//!   but for a `frame` column naming several frames (a tracks file), refused.
 //!   Fields may be quoted (RFC 4180). Comment lines starting with `#` may come before the header,
 //!   `# CoordinateSystem = LPS` (or `RAS`) among them.
 //! - **`.fcsv`**: 3D Slicer's markups fiducial CSV (4.x and 5.x): `# CoordinateSystem = LPS`,
@@ -256,6 +257,28 @@ fn read_table(path: &Path, text: &str, fcsv: bool) -> Result<LabelledPoints, Mes
         table.names.extend([FCSV_STATUS.to_string(), "autocreated".to_string()]);
     }
     table.check_widths().map_err(table_error)?;
+    // A tracks file (frame, id, x, y, z) holds several frames' points: read as one set, they would mix.
+    if let Some(c) = table.column("frame").filter(|_| !fcsv) {
+        let mut frames: Vec<&str> = table.rows.iter().map(|r| r.fields[c].as_str()).collect();
+        // Numbers in their order (0, 2, 10), other names in the text's.
+        frames.sort_by(|a, b| match (a.parse::<f64>(), b.parse::<f64>()) {
+            (Ok(x), Ok(y)) => x.total_cmp(&y),
+            _ => a.cmp(b),
+        });
+        frames.dedup();
+        if frames.len() > 1 {
+            return Err(MeshError::parse(
+                path,
+                format!(
+                    "its `frame` column names {} frames ({} to {}): points of one frame are expected (a tracks file \
+                     is read by `augsim assimilate --observations`; a sequence of clouds is a folder of files)",
+                    frames.len(),
+                    frames[0],
+                    frames[frames.len() - 1]
+                ),
+            ));
+        }
+    }
     let status = table.column(FCSV_STATUS).filter(|_| fcsv);
     let mut out = LabelledPoints {
         frame: if fcsv { frame.or(Some(Frame::Ras)) } else { frame },
@@ -599,5 +622,15 @@ mod tests {
         assert!(e.contains("no 'y' column") && e.contains("separated by semicolons: save it with commas"), "{e}");
         let e = read_table(Path::new("p.csv"), "x_mm\ty_mm\tz_mm\n1\t2\t3\n", false).unwrap_err().to_string();
         assert!(e.contains("no 'y' column") && e.contains("separated by tabs: save it with commas"), "{e}");
+    }
+
+    /// A tracks file's points of several frames are refused as one set; one frame's are read.
+    #[test]
+    fn points_of_several_frames_are_refused() {
+        let tracks = "frame,id,x,y,z\n0,a,1,2,3\n0,b,4,5,6\n10,a,1,2,4\n2,a,1,2,5\n";
+        let e = read_table(Path::new("t.csv"), tracks, false).unwrap_err().to_string();
+        assert!(e.contains("its `frame` column names 3 frames (0 to 10): points of one frame are expected"), "{e}");
+        let one = read_table(Path::new("t.csv"), "frame,id,x,y,z\n3,a,1,2,3\n3,b,4,5,6\n", false).unwrap();
+        assert_eq!(one.points.len(), 2);
     }
 }
