@@ -59,11 +59,15 @@ fn with_field_names((scene, fields): (Scene, Vec<String>)) -> (Scene, Vec<String
     (scene, vec![line])
 }
 
-/// The 3-component point fields of `organ` among `fields`: its displacements (m).
+/// The 3-component point fields of `organ` among `fields`, taken as its displacements (m): all
+/// but forces (`reaction_force`, as `solve` writes it) and a learned model's `input`, which may be
+/// forces (as `eval` writes it).
 fn displacements<'f>(organ: &Mesh, fields: &'f [Field]) -> Vec<&'f Field> {
+    let force = |name: &str| name.to_ascii_lowercase().contains("force") || name == "input";
     fields
         .iter()
         .filter(|f| f.location == FieldLocation::Point && f.components == 3 && f.num_tuples() == organ.num_nodes())
+        .filter(|f| !force(&f.name))
         .collect()
 }
 

@@ -252,7 +252,7 @@ pub struct ViewArgs {
     /// stream's) one step per layer.
     #[arg(long, alias = "vtu", conflicts_with_all = ["model", "dataset"])]
     pub file: Option<PathBuf>,
-    /// Output HTML file.
+    /// Output HTML file (.html).
     #[arg(short, long, default_value = "out/view.html")]
     pub out: PathBuf,
 }
@@ -260,6 +260,10 @@ pub struct ViewArgs {
 /// `augsim view`: the scene of [`ViewArgs`] (a dataset sample, or a file: a mesh's displacement
 /// fields, a surface, a sequence) written as a self-contained HTML viewer; the lines that describe it.
 pub fn view(args: &ViewArgs) -> anyhow::Result<Vec<String>> {
+    // A page only: any other name could be one of the files it shows (a mesh, a model, a manifest).
+    if !matches!(mesh::io::extension(&args.out).as_str(), "html" | "htm") {
+        anyhow::bail!("-o {}: the viewer writes an HTML page: give a .html file", args.out.display());
+    }
     let (scene, mut lines) = match (&args.file, &args.model, &args.dataset) {
         (Some(file), _, _) => crate::file_view::file_scene(file)?,
         (None, Some(model), Some(dataset)) => {

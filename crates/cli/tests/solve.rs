@@ -200,7 +200,8 @@ fn a_modulus_in_kilopascals_is_doubted() {
     assert!(ok && !said.contains("kPa?"), "{said}");
 }
 
-/// A solve's file is shown by `view`: its displacement field named, one HTML file written.
+/// A solve's file is shown by `view`: its displacement field named (its reaction force is not one),
+/// one HTML file written, never over another file.
 #[test]
 fn a_solved_file_is_viewed() {
     let dir = tempfile::tempdir().unwrap();
@@ -213,6 +214,15 @@ fn a_solved_file_is_viewed() {
         .unwrap();
     let said = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{said}{}", String::from_utf8_lossy(&out.stderr));
-    assert!(said.contains("displacement fields: displacement") && said.contains("wrote"), "{said}");
+    assert!(said.contains("displacement fields: displacement\n") && said.contains("wrote"), "{said}");
     assert!(std::fs::read_to_string(&html).unwrap().contains("<html"), "an HTML page");
+    // The page only: asked to write over the mesh it shows, it refuses and leaves the mesh as it was.
+    let before = std::fs::read(&vtu).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_augsim"))
+        .args(["view", "--file", vtu.to_str().unwrap(), "-o", vtu.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && said.contains("the viewer writes an HTML page"), "{said}");
+    assert_eq!(std::fs::read(&vtu).unwrap(), before);
 }

@@ -889,7 +889,12 @@ pub fn read_pvd(path: impl AsRef<Path>) -> Result<Vec<(f64, PathBuf)>, MeshError
         let attr = |key: &str| attrs.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str());
         let file = attr("file").ok_or_else(|| parse(format!("<DataSet> {} names no file", steps.len() + 1)))?;
         let time = match attr("timestep") {
-            Some(t) => t.trim().parse().map_err(|_| parse(format!("timestep=\"{t}\" is not a number")))?,
+            Some(t) => t
+                .trim()
+                .parse()
+                .ok()
+                .filter(|t: &f64| t.is_finite())
+                .ok_or_else(|| parse(format!("timestep=\"{t}\" is not a number")))?,
             None => steps.len() as f64,
         };
         steps.push((time, dir.join(file)));
@@ -922,6 +927,9 @@ mod tests {
         assert!(read_pvd(&empty).unwrap_err().to_string().contains("holds no <DataSet>"));
         std::fs::write(&empty, "<VTKFile type=\"Collection\"><DataSet timestep=\"x\" file=\"a\"/></VTKFile>").unwrap();
         assert!(read_pvd(&empty).unwrap_err().to_string().contains("timestep=\"x\" is not a number"));
+        std::fs::write(&empty, "<VTKFile type=\"Collection\"><DataSet timestep=\"nan\" file=\"a\"/></VTKFile>")
+            .unwrap();
+        assert!(read_pvd(&empty).unwrap_err().to_string().contains("timestep=\"nan\" is not a number"));
     }
 
     /// What a killed write leaves is removed, in the folders below too; other files are kept.
