@@ -231,7 +231,7 @@ fn evaluate_in(
     out: &Path,
 ) -> Result<Vec<String>> {
     let model = Model::load(model_path)?;
-    let dataset = Dataset::open(dataset_dir)?;
+    let dataset = Dataset::open_with_samples(dataset_dir)?;
     match project {
         Some(basis) => {
             let projected = learn::Projected::new(model, &Model::load(basis)?)?;

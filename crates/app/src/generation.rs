@@ -20,7 +20,8 @@ pub struct GenerateArgs {
     /// Generate only part i of n (e.g. 0/8), for array jobs; join with `merge`.
     #[arg(long, value_parser = parse_part)]
     pub shard: Option<DatasetPart>,
-    /// Override the number of samples; more than a complete dataset in --out holds grows it.
+    /// Override the number of samples; more than a dataset in --out was made for grows it (a rerun
+    /// without it keeps the count the dataset was made for).
     #[arg(long)]
     pub samples: Option<usize>,
     /// After the uniform draws, draws where this reduced-order model (trained on them: `augsim
@@ -56,8 +57,18 @@ fn parse_part(s: &str) -> Result<DatasetPart, String> {
 /// summary in lines.
 pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<String>> {
     let (mut scenario, dir) = DatasetScenario::load(&args.scenario)?;
-    if let Some(n) = args.samples {
-        scenario.dataset.samples = n;
+    // Where the dataset goes, refused before its mesh and grid are built.
+    let out = args.out.clone().unwrap_or_else(|| match &args.shard {
+        None => PathBuf::from(format!("out/{}", scenario.name)),
+        Some(p) => PathBuf::from(format!("out/{}.part{}of{}", scenario.name, p.index, p.count)),
+    });
+    // A dataset resumed keeps the count it was made for, unless --samples grows it: a bare rerun
+    // must not turn a finished dataset of 60 draws into an unfinished one of the scenario's thousands.
+    let made_for = learn::Dataset::open(&out).ok().and_then(|d| d.manifest().spec().requested_samples());
+    match (args.samples, made_for) {
+        (Some(n), _) => scenario.dataset.samples = n,
+        (None, Some(n)) => scenario.dataset.samples = n as usize,
+        (None, None) => {}
     }
     let recipe = match &args.chosen_by {
         Some(model) => {
@@ -66,11 +77,6 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
         }
         None => None,
     };
-    // Where the dataset goes, refused before its mesh and grid are built.
-    let out = args.out.clone().unwrap_or_else(|| match &args.shard {
-        None => PathBuf::from(format!("out/{}", scenario.name)),
-        Some(p) => PathBuf::from(format!("out/{}.part{}of{}", scenario.name, p.index, p.count)),
-    });
     if out.join(learn::MODEL_FILE).exists() {
         anyhow::bail!(
             "{} holds a model ({}): a dataset written there would mix their files; give another --out",
@@ -79,6 +85,9 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
         );
     }
     progress.line(&format!("scenario   {}: {}", scenario.name, scenario.description));
+    if let (None, Some(n)) = (args.samples, made_for) {
+        progress.line(&format!("samples    {n}, the count {} was made for (--samples grows it)", out.display()));
+    }
     let generator = scenario.generator(&dir)?;
     let mesh = generator.mesh();
     progress.line(&format!(
@@ -110,6 +119,15 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
     let elapsed = start.elapsed();
     let secs = elapsed.as_secs_f64();
     let drawn = manifest.num_samples + manifest.failed.len();
+    if let Some(first) = manifest.failed.first().filter(|_| manifest.num_samples == 0) {
+        anyhow::bail!(
+            "every one of its {} draws failed, so {} holds no sample (the first: {}; the others' reasons are in its \
+             manifest): lighten the loads or check the scenario",
+            manifest.failed.len(),
+            out.display(),
+            first.reason
+        );
+    }
     let mut lines = vec![match (&args.shard, drawn) {
         (Some(p), 0) => format!(
             "samples    none: draws are shared out in whole blocks, and {} draws leave part {}/{} without one \

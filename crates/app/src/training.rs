@@ -256,7 +256,7 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
     if let Some(init) = &args.init {
         check_init_shape(args, init)?;
     }
-    let dataset = Dataset::open(&args.dataset)?;
+    let dataset = Dataset::open_with_samples(&args.dataset)?;
     let manifest = dataset.manifest();
     if !manifest.complete {
         progress.line(&format!(

@@ -268,6 +268,20 @@ magnitude = [0.05, 0.2]
     assert!(e.contains("data holds a dataset (manifest.json): a model written there"), "{e}");
     let e = augsim_err(&["generate", "tiny.toml", "--out", "net"], d);
     assert!(e.contains("net holds a model (model.json): a dataset written there"), "{e}");
+    // A rerun without --samples keeps the count the dataset was made for, not the scenario's 6.
+    augsim(&["generate", "tiny.toml", "--out", "three", "--samples", "3"], d);
+    let text = augsim(&["generate", "tiny.toml", "--out", "three"], d);
+    assert!(text.contains("samples    3, the count three was made for (--samples grows it)"), "{text}");
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("three/manifest.json")).unwrap()).unwrap();
+    assert_eq!(manifest["num_samples"].as_u64().unwrap() + manifest["failed"].as_array().unwrap().len() as u64, 3);
+    // Loads no draw survives: an error, not a dataset of no sample said to be written.
+    let heavy = std::fs::read_to_string(d.join("tiny.toml")).unwrap().replace("[0.05, 0.2]", "[500.0, 600.0]");
+    std::fs::write(d.join("heavy.toml"), heavy.replace("samples = 6", "samples = 2")).unwrap();
+    let e = augsim_err(&["generate", "heavy.toml", "--out", "heavy"], d);
+    assert!(e.contains("every one of its 2 draws failed, so heavy holds no sample (the first: "), "{e}");
+    let e = augsim_err(&["train", "heavy", "--out", "nothing", "--method", "rom"], d);
+    assert!(e.contains("heavy holds no sample (its 2 draws all failed: reasons in its manifest)"), "{e}");
     // A grid with no node inside the organ would hold no target: refused before any draw.
     let coarse = std::fs::read_to_string(d.join("tiny.toml")).unwrap().replace("[9, 10, 9]", "[2, 2, 2]");
     std::fs::write(d.join("coarse.toml"), coarse).unwrap();

@@ -71,7 +71,7 @@ pub struct DatasetSpec {
 
 impl DatasetSpec {
     /// The sample count the generator was asked for (`metadata.dataset.samples`), if recorded.
-    fn requested_samples(&self) -> Option<u64> {
+    pub fn requested_samples(&self) -> Option<u64> {
         self.metadata.get("dataset")?.get("samples")?.as_u64()
     }
 
@@ -1070,6 +1070,21 @@ impl Dataset {
         }
         let manifest = Manifest::read(&path)?;
         Ok(Dataset { dir: dir.to_path_buf(), manifest })
+    }
+
+    /// [`Dataset::open`], refusing a dataset that holds no sample (every draw failed, or none
+    /// made), as a model is trained or measured on one.
+    pub fn open_with_samples(dir: &Path) -> Result<Dataset> {
+        let dataset = Dataset::open(dir)?;
+        let m = dataset.manifest();
+        if m.num_samples == 0 {
+            let failed = match m.failed.len() {
+                0 => "no draw made".to_string(),
+                n => format!("its {n} draws all failed: reasons in its manifest"),
+            };
+            return Err(LearnError::InvalidInput(format!("{} holds no sample ({failed})", dir.display())));
+        }
+        Ok(dataset)
     }
 
     /// The manifest.
