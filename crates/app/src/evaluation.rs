@@ -89,6 +89,9 @@ fn evaluate_held_out(
             dataset.manifest().grid
         );
     }
+    if let (Ok(grid), Some(data)) = (model.placed_grid(), dataset.manifest().placement()) {
+        learn::GridPlacement { origin: grid.origin, spacing: grid.spacing }.check_matches(&data)?;
+    }
     let input = dataset.manifest().units.input;
     if model.takes_forces() != input.is_force() {
         bail!(

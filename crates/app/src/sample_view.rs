@@ -50,11 +50,7 @@ pub fn sample_on_mesh(model: &Model, dataset: &Dataset, index: u64, organ: &Mesh
         invalid(format!("{} does not record where its grid lies (grid_origin, grid_spacing)", dataset.dir().display()))
     })?;
     if let Some(p) = model.placement() {
-        let size = placement.spacing.iter().fold(0.0f64, |a, &s| a.max(s));
-        let far = |a: [f64; 3], b: [f64; 3]| a.iter().zip(b).any(|(x, y)| (x - y).abs() > 1e-6 * size);
-        if far(p.origin, placement.origin) || far(p.spacing, placement.spacing) {
-            return Err(invalid(format!("the model's grid lies elsewhere than the dataset's: {p:?} vs {placement:?}")));
-        }
+        p.check_matches(&placement)?;
     }
     let recorded = |key: &str| manifest.metadata.get(key).and_then(|v| v.as_u64());
     for (what, count, given) in

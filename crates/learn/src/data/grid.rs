@@ -115,6 +115,26 @@ impl GridPlacement {
         Ok(Grid::new(self.origin, self.spacing, shape.dims())?)
     }
 
+    /// An error when `self` (a model's placement) and `data`'s (a dataset's) lie apart: the same
+    /// grid shape placed elsewhere or spaced otherwise (an organ scaled or moved) would be read as
+    /// another organ's. Equal within a millionth of the spacing.
+    pub fn check_matches(&self, data: &GridPlacement) -> Result<()> {
+        let size = self.spacing.iter().fold(0.0f64, |a, &s| a.max(s));
+        let far = |a: [f64; 3], b: [f64; 3]| a.iter().zip(b).any(|(x, y)| !((x - y).abs() <= 1e-6 * size));
+        if !far(self.origin, data.origin) && !far(self.spacing, data.spacing) {
+            return Ok(());
+        }
+        let mm = |v: [f64; 3]| format!("({:.3}, {:.3}, {:.3}) mm", 1e3 * v[0], 1e3 * v[1], 1e3 * v[2]);
+        Err(LearnError::InvalidInput(format!(
+            "the model's grid lies elsewhere than the dataset's: origin {} and spacing {} against {} and {} (another \
+             organ, or the same scaled or moved)",
+            mm(self.origin),
+            mm(self.spacing),
+            mm(data.origin),
+            mm(data.spacing)
+        )))
+    }
+
     /// Checks a model file's placement (`json_path`'s), if it has one, on its grid of `shape`
     /// nodes: an error naming the file and its `placement`.
     pub(crate) fn check_in(
@@ -383,6 +403,18 @@ mod tests {
 
     /// A grid read from a file has a node along each axis and no more nodes than fit in memory:
     /// sizes whose product overflows are refused, not wrapped.
+    /// A placement matches itself within rounding; the same grid spaced twice as wide (an organ
+    /// scaled) or moved is refused, in mm.
+    #[test]
+    fn placements_apart_are_refused() {
+        let p = GridPlacement { origin: [0.01, -0.02, 0.0], spacing: [0.005; 3] };
+        p.check_matches(&GridPlacement { origin: [0.01 + 1e-12, -0.02, 0.0], ..p }).unwrap();
+        let scaled = GridPlacement { spacing: [0.01; 3], ..p };
+        let e = p.check_matches(&scaled).unwrap_err().to_string();
+        assert!(e.contains("spacing (5.000, 5.000, 5.000) mm against (10.000, -20.000, 0.000) mm and (10.000"), "{e}");
+        assert!(p.check_matches(&GridPlacement { origin: [0.02, -0.02, 0.0], ..p }).is_err());
+    }
+
     #[test]
     fn a_damaged_grid_shape_is_refused() {
         assert_eq!(GridShape::try_from([4, 5, 3]), Ok(GridShape::new(4, 5, 3)));
