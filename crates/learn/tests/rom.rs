@@ -189,6 +189,14 @@ fn bad_input_is_refused_with_a_message() {
     std::fs::write(dir.path().join("weights.npy"), b"not an array").unwrap();
     let e = Model::load(dir.path()).unwrap_err().to_string();
     assert!(e.contains("weights.npy"), "{e}");
+    // An array of another fit, of the same shape, copied in: refused by its digest.
+    model.save(dir.path()).unwrap();
+    let weights = mesh::io::npy::read_npy(&dir.path().join("weights.npy")).unwrap();
+    let other: Vec<f64> = weights.clone().into_f64().iter().map(|w| w * 1.5).collect();
+    mesh::io::npy::write_f64(&dir.path().join("weights.npy"), &weights.shape, &other).unwrap();
+    let e = Model::load(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("weights.npy is not the one saved with this model (changed since, or another fit's)"), "{e}");
+    model.save(dir.path()).unwrap();
     // A model.json cut short is named as bad JSON, at its fault; one of another format says so.
     let json = dir.path().join("model.json");
     let text = std::fs::read_to_string(&json).unwrap();

@@ -47,6 +47,7 @@
 mod fit;
 mod linalg;
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use faer::{Mat, MatRef, Par};
@@ -57,7 +58,7 @@ use crate::data::grid::{check_prediction_input, GridPlacement, GridShape, CHANNE
 use crate::data::split::Split;
 use crate::FieldUnit;
 use crate::{LearnError, Result};
-use mesh::io::npy::{read_npy, write_f32, write_f64, write_u8};
+use mesh::io::npy::{read_npy_bytes, write_f32, write_f64, write_u8};
 
 pub use fit::{fit, Candidate, Context, RomConfig, RomReport};
 pub use linalg::Kernel;
@@ -129,6 +130,10 @@ struct RomFile {
     input_unit: FieldUnit,
     target_unit: FieldUnit,
     rom: RomInfo,
+    /// A digest of each array file as saved ([`crate::digest`]), so that arrays of another fit
+    /// copied in are refused; absent in models saved before they were recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    array_digests: Option<BTreeMap<String, String>>,
 }
 
 /// A trained reduced-order model (see the module documentation).
@@ -397,6 +402,13 @@ impl ReducedModel {
         write_f32(&dir.join(BASIS_FILE), &[modes, self.basis.ncols()], &basis32)?;
         write_f64(&dir.join("variance_weights.npy"), &[self.nodes.len()], &self.variance_weights)?;
         write_f64(&dir.join("floor.npy"), &[self.nodes.len()], &self.floor)?;
+        let reader = if matches!(self.reader, Reader::Prior(_)) { "prior" } else { "input_components" };
+        let mut array_digests = BTreeMap::new();
+        for name in ARRAYS.iter().copied().chain([reader]) {
+            let path = dir.join(format!("{name}.npy"));
+            let bytes = std::fs::read(&path).map_err(|e| LearnError::io(&path, e))?;
+            array_digests.insert(name.to_string(), crate::digest(&bytes));
+        }
         let file = RomFile {
             format: ROM_FORMAT.into(),
             version: ROM_VERSION,
@@ -406,6 +418,7 @@ impl ReducedModel {
             input_unit: self.input_unit,
             target_unit: self.target_unit,
             rom: self.info.clone(),
+            array_digests: Some(array_digests),
         };
         let path = dir.join(crate::MODEL_FILE);
         let text = serde_json::to_string_pretty(&file)
@@ -426,10 +439,10 @@ impl ReducedModel {
         }
         GridPlacement::check_in(file.placement.as_ref(), file.grid, json_path)?;
         let dir = json_path.parent().unwrap_or(Path::new("."));
-        let arrays = Arrays { dir: dir.to_path_buf(), json: json_path.to_path_buf() };
+        let arrays = Arrays { dir: dir.to_path_buf(), json: json_path.to_path_buf(), digests: file.array_digests };
         let grid = file.grid;
-        let input_mask = read_npy(&dir.join("input_mask.npy"))?.into_mask(&dir.join("input_mask.npy"))?;
-        let output_mask = read_npy(&dir.join("output_mask.npy"))?.into_mask(&dir.join("output_mask.npy"))?;
+        let input_mask = arrays.mask("input_mask")?;
+        let output_mask = arrays.mask("output_mask")?;
         if input_mask.len() != grid.field_len() || output_mask.len() != grid.nodes() {
             return Err(arrays.bad("the masks do not match the grid"));
         }
@@ -514,10 +527,28 @@ fn write_matrix(path: &Path, m: MatRef<'_, f64>) -> Result<()> {
     Ok(write_f64(path, &[m.nrows(), m.ncols()], &values)?)
 }
 
-/// Reads the arrays of a model directory, checking their shapes.
+/// The arrays every reduced-order model saves (beside its reader's, `input_components` or
+/// `prior`), by name (`NAME.npy`).
+const ARRAYS: [&str; 11] = [
+    "input_mask",
+    "output_mask",
+    "input_mean",
+    "feature_scales",
+    "inducing",
+    "weights",
+    "covariance",
+    "output_mean",
+    "basis",
+    "variance_weights",
+    "floor",
+];
+
+/// Reads the arrays of a model directory, checking their shapes and, where the model records
+/// them, their digests.
 struct Arrays {
     dir: PathBuf,
     json: PathBuf,
+    digests: Option<BTreeMap<String, String>>,
 }
 
 impl Arrays {
@@ -525,9 +556,26 @@ impl Arrays {
         LearnError::model(&self.json, message.into())
     }
 
-    fn read(&self, name: &str, shape: &[usize]) -> Result<Vec<f64>> {
+    /// The array `NAME.npy`, its digest checked against the one recorded.
+    fn array(&self, name: &str) -> Result<mesh::io::npy::NpyArray> {
         let path = self.dir.join(format!("{name}.npy"));
-        let array = read_npy(&path)?;
+        let (array, bytes) = read_npy_bytes(&path)?;
+        let recorded = self.digests.as_ref().and_then(|d| d.get(name));
+        if recorded.is_some_and(|d| *d != crate::digest(&bytes)) {
+            return Err(self.bad(format!(
+                "{name}.npy is not the one saved with this model (changed since, or another fit's): save the model \
+                 again, or restore its folder whole"
+            )));
+        }
+        Ok(array)
+    }
+
+    fn mask(&self, name: &str) -> Result<Vec<u8>> {
+        Ok(self.array(name)?.into_mask(&self.dir.join(format!("{name}.npy")))?)
+    }
+
+    fn read(&self, name: &str, shape: &[usize]) -> Result<Vec<f64>> {
+        let array = self.array(name)?;
         if array.shape != shape {
             return Err(self.bad(format!("{name}.npy has shape {:?}, expected {shape:?}", array.shape)));
         }

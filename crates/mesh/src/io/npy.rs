@@ -170,8 +170,14 @@ pub fn write_u8(path: &Path, shape: &[usize], data: &[u8]) -> Result<()> {
 
 /// Reads an `.npy` file.
 pub fn read_npy(path: &Path) -> Result<NpyArray> {
+    read_npy_bytes(path).map(|(array, _)| array)
+}
+
+/// Reads an `.npy` file, with its bytes as stored (to check them against a digest).
+pub fn read_npy_bytes(path: &Path) -> Result<(NpyArray, Vec<u8>)> {
     let bytes = std::fs::read(path).map_err(|e| unread(path, e))?;
-    parse(&bytes).map_err(|message| invalid(path, message))
+    let array = parse(&bytes).map_err(|message| invalid(path, message))?;
+    Ok((array, bytes))
 }
 
 /// Reads the shape of an `.npy` file from its header, without its data; a file whose length is
