@@ -70,7 +70,9 @@ def generate_shard(augsim, scenario, out, index, count, samples=None, threads=1)
     start = time.perf_counter()
     run = subprocess.run(command, capture_output=True, text=True, env=env, preexec_fn=_parent_death_signal())
     if run.returncode != 0:
-        raise RuntimeError(f"shard {index}/{count} failed ({exit_cause(run.returncode)}): {last_words(run)}")
+        # Killed (a job's wall time, a node lost): rerunning resumes it; refused by augsim: the cause first.
+        advice = RESUME if run.returncode < 0 else f"see to that, then {RESUME}"
+        raise RuntimeError(f"shard {index}/{count} failed ({exit_cause(run.returncode)}): {last_words(run)}; {advice}")
     return directory, time.perf_counter() - start
 
 
@@ -151,7 +153,7 @@ def generate(args):
                 print(f"shard      {done}/{shards} done: {os.path.basename(directory)} ({seconds:.1f} s)", flush=True)
         except RuntimeError as e:
             client.cancel(futures)
-            raise SystemExit(f"{e}; {RESUME}") from None
+            raise SystemExit(str(e)) from None
         print(f"shards     {time.perf_counter() - start:.1f} s on the cluster", flush=True)
     finally:
         client.close()
@@ -188,6 +190,13 @@ def main(argv=None):
         value = getattr(args, name)
         if value is not None and value < 1:
             p.error(f"--{name.replace('_', '-')} must be at least 1, got {value}")
+    if os.path.isfile(args.out):
+        p.error(f"--out {args.out} is a file: give the dataset's folder")
+    # Workers may start in another folder: files named relative to this one are given whole.
+    if os.path.isfile(args.scenario):
+        args.scenario = os.path.abspath(args.scenario)
+    if os.sep in args.augsim and os.path.isfile(args.augsim):
+        args.augsim = os.path.abspath(args.augsim)
     # Checked here, once: a bad scenario would otherwise fail in every shard, inside Dask.
     if shutil.which(args.augsim) is not None:
         problem = scenario_problem(args.augsim, args.scenario)

@@ -39,7 +39,9 @@ def test_two_local_workers_write_the_single_machine_dataset(tmp_path):
 
 
 def test_a_failing_shard_is_reported(tmp_path):
-    with pytest.raises(RuntimeError, match=r"shard 0/1 failed \(exit status 1\): error: .*missing\.toml"):
+    # Refused by augsim: its reason, to be seen to before a rerun.
+    with pytest.raises(RuntimeError, match=r"shard 0/1 failed \(exit status 1\): error: .*missing\.toml.*; see to "
+                                           r"that, then run the same command again"):
         cluster.generate_shard(augsim_bin(), str(tmp_path / "missing.toml"), str(tmp_path / "out"), 0, 1)
     assert cluster.exit_cause(-9) == "killed by SIGKILL"
 
@@ -112,6 +114,7 @@ def test_kept_shards_are_reused_only_for_the_same_draws_and_a_dataset_is_never_o
 
 def test_what_cannot_be_generated_is_refused_in_one_line_before_any_cluster(tmp_path, capsys):
     out = str(tmp_path / "ds")
+    (tmp_path / "afile").write_text("")
     for args, message in [(["liver_ar", "--samples", "0"], "--samples must be at least 1, got 0"),
                           (["liver_ar", "--samples", "-1"], "--samples must be at least 1, got -1"),
                           ([str(tmp_path / "missing.toml")], "cannot read scenario"),
@@ -123,3 +126,8 @@ def test_what_cannot_be_generated_is_refused_in_one_line_before_any_cluster(tmp_
         assert "python -m augsim.cluster: error: " in err and message in err, (args, err)
         assert "Traceback" not in err and "Usage: augsim generate" not in err, err
     assert not os.path.exists(out) and not os.path.exists(out + ".parts")
+    # An --out that is a file, refused before the shards (it failed at their merge).
+    with pytest.raises(SystemExit) as stop:
+        cluster.main(["liver_ar", "--out", str(tmp_path / "afile"), "--augsim", augsim_bin()])
+    assert stop.value.code == 2 and "is a file: give the dataset's folder" in capsys.readouterr().err
+    assert not os.path.exists(str(tmp_path / "afile.parts"))
