@@ -545,3 +545,20 @@ def test_errors_cross_process_boundaries_and_bad_shapes_are_value_errors():
     for shape in [(24, 24, 16, 3), (1, 3, 24, 24, 16), (5,)]:
         with pytest.raises(ValueError, match=r"a grid tensor \[3, nx, ny, nz\] or a point cloud \[N, 6\]"):
             augsim.predict(LIVER_AR, np.zeros(shape))
+
+
+def test_a_model_folder_holding_other_work_is_not_taken_for_a_training(tmp_path):
+    # What python -m augsim.train would write over or mix with: a dataset, a reduced-order model, a run
+    # of `augsim train`; an empty folder is taken, and given back.
+    from augsim._augsim import lock_model_folder
+
+    for name, held, message in [("dataset", "manifest.json", "holds a dataset"),
+                                ("rom", "basis.npy", "holds a reduced-order model"),
+                                ("unet", "checkpoint.bin", "holds a run of `augsim train`")]:
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / held).write_text("")
+        with pytest.raises(augsim.AugsimError, match=re.escape(message)):
+            lock_model_folder(str(folder))
+    lock_model_folder(str(tmp_path / "new")).release()
+    assert (tmp_path / "new").is_dir()

@@ -214,6 +214,37 @@ impl DeviceArgs {
     }
 }
 
+/// Refuses a folder a model of `method` cannot be trained into: one that holds a dataset, or a
+/// model of the other kind; for a reduced-order model, whose fit is made anew, any model (a U-Net's
+/// run resumes from its checkpoint).
+pub fn check_model_folder(out: &Path, method: Method) -> Result<()> {
+    if out.join(learn::data::dataset::MANIFEST_FILE).exists() {
+        bail!(
+            "{} holds a dataset ({}): a model written there would mix their files; give another --out",
+            out.display(),
+            learn::data::dataset::MANIFEST_FILE
+        );
+    }
+    let other = match method {
+        Method::Rom => [learn::WEIGHTS_FILE, learn::training::train::CHECKPOINT_FILE, learn::MODEL_FILE]
+            .into_iter()
+            .find(|f| out.join(f).exists()),
+        Method::UNet => Some(learn::rom::BASIS_FILE).filter(|f| out.join(f).exists()),
+    };
+    if let Some(file) = other {
+        let (held, this) = match method {
+            Method::Rom if file == learn::MODEL_FILE => ("a model", "a new fit"),
+            Method::Rom => ("a U-Net", "a reduced-order model"),
+            Method::UNet => ("a reduced-order model", "a U-Net"),
+        };
+        bail!(
+            "{} holds {held} ({file}): {this} written there would replace or mix with its files; give another --out",
+            out.display()
+        );
+    }
+    Ok(())
+}
+
 /// Trains what `augsim train` asks for on its dataset's split: a U-Net (resumed from its
 /// checkpoint unless `restart`) or a reduced-order model. Tells `progress` the split and the
 /// device in lines, and the training's advance; returns the outcome in lines.
@@ -227,32 +258,7 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
         let (are, them) = if unused.len() == 1 { ("is", "it") } else { ("are", "them") };
         bail!("{} {are} {other}: {this} does not use {them}", unused.join(", "));
     }
-    if args.out.join(learn::data::dataset::MANIFEST_FILE).exists() {
-        bail!(
-            "{} holds a dataset ({}): a model written there would mix their files; give another --out",
-            args.out.display(),
-            learn::data::dataset::MANIFEST_FILE
-        );
-    }
-    // A U-Net's run resumes from its checkpoint; a reduced-order model's fit is made anew, and
-    // would replace the model there.
-    let other = match args.method {
-        Method::Rom => [learn::WEIGHTS_FILE, learn::training::train::CHECKPOINT_FILE, learn::MODEL_FILE]
-            .into_iter()
-            .find(|f| args.out.join(f).exists()),
-        Method::UNet => Some(learn::rom::BASIS_FILE).filter(|f| args.out.join(f).exists()),
-    };
-    if let Some(file) = other {
-        let (held, this) = match args.method {
-            Method::Rom if file == learn::MODEL_FILE => ("a model", "a new fit"),
-            Method::Rom => ("a U-Net", "a reduced-order model"),
-            Method::UNet => ("a reduced-order model", "a U-Net"),
-        };
-        bail!(
-            "{} holds {held} ({file}): {this} written there would replace or mix with its files; give another --out",
-            args.out.display()
-        );
-    }
+    check_model_folder(&args.out, args.method)?;
     if let Some(init) = &args.init {
         check_init_shape(args, init)?;
     }

@@ -674,10 +674,23 @@ impl ModelFolderLock {
 
 /// Makes the model folder `out` and holds it for one training, as `augsim train` does: a second
 /// training there (of either) is refused while this one holds it. Raises AugsimError where
-/// another training holds it or the folder cannot be made.
+/// another training holds it, the folder cannot be made, or it holds what a U-Net trained in
+/// PyTorch would replace or mix with: a dataset, a reduced-order model, a run of `augsim train`
+/// (its checkpoint).
 #[pyfunction]
 fn lock_model_folder(py: Python<'_>, out: PathBuf) -> PyResult<ModelFolderLock> {
-    compute(py, || Ok(ModelFolderLock(Some(learn::take_model_folder(&out)?))))
+    compute(py, || {
+        app::training::check_model_folder(&out, learn::Method::UNet)?;
+        let checkpoint = learn::training::train::CHECKPOINT_FILE;
+        if out.join(checkpoint).exists() {
+            anyhow::bail!(
+                "{} holds a run of `augsim train` ({checkpoint}): a training in PyTorch would replace its model; \
+                 give another --out, or resume it with `augsim train`",
+                out.display()
+            );
+        }
+        Ok(ModelFolderLock(Some(learn::take_model_folder(&out)?)))
+    })
 }
 
 /// Reads an intraoperative cloud file as `augsim register` does: CSV with a header naming x, y, z
