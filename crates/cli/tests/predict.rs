@@ -275,6 +275,12 @@ magnitude = [0.05, 0.2]
     let manifest: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("three/manifest.json")).unwrap()).unwrap();
     assert_eq!(manifest["num_samples"].as_u64().unwrap() + manifest["failed"].as_array().unwrap().len() as u64, 3);
+    // A folder of other files is no place for a new dataset: refused, its files left as they were.
+    std::fs::create_dir_all(d.join("notes/shard_00000")).unwrap();
+    std::fs::write(d.join("notes/shard_00000/inputs.npy"), "mine").unwrap();
+    let e = augsim_err(&["generate", "tiny.toml", "--out", "notes"], d);
+    assert!(e.contains("notes holds other files (shard_00000) and no dataset: give a new or empty folder"), "{e}");
+    assert_eq!(std::fs::read_to_string(d.join("notes/shard_00000/inputs.npy")).unwrap(), "mine");
     // Loads no draw survives: an error, not a dataset of no sample said to be written.
     let heavy = std::fs::read_to_string(d.join("tiny.toml")).unwrap().replace("[0.05, 0.2]", "[500.0, 600.0]");
     std::fs::write(d.join("heavy.toml"), heavy.replace("samples = 6", "samples = 2")).unwrap();

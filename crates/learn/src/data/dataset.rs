@@ -772,6 +772,27 @@ pub struct DatasetWriter {
     last_index: Option<u64>,
 }
 
+/// Refuses a folder a new dataset would share with files of another's making (any but the
+/// writer's lock and hidden temporaries): its shards could overwrite them, and they would be read
+/// as its own.
+fn refuse_other_files(dir: &Path) -> Result<()> {
+    let entries = std::fs::read_dir(dir).map_err(|e| LearnError::io(dir, e))?;
+    let mut others: Vec<String> = entries
+        .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
+        .filter(|name| name != WRITER_LOCK && !name.starts_with('.'))
+        .collect();
+    if others.is_empty() {
+        return Ok(());
+    }
+    others.sort();
+    let more = if others.len() > 3 { ", …" } else { "" };
+    Err(LearnError::InvalidInput(format!(
+        "{} holds other files ({}{more}) and no dataset: give a new or empty folder",
+        dir.display(),
+        others[..others.len().min(3)].join(", ")
+    )))
+}
+
 impl DatasetWriter {
     /// Creates a new dataset in `dir`, or resumes the unfinished one there (whose spec must equal
     /// `spec`), or grows the one there when `spec` asks for more samples of it (its samples are
@@ -791,6 +812,7 @@ impl DatasetWriter {
         mesh::io::create_folder(dir)?;
         let lock = lock_for_writing(dir, DATASET_WRITERS)?;
         if !dir.join(MANIFEST_FILE).exists() {
+            refuse_other_files(dir)?;
             return DatasetWriter::from_manifest(dir, lock, Manifest::new(&spec), true);
         }
         // What a killed run left half-written goes; its shard is made again.
