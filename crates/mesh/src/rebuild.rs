@@ -110,7 +110,7 @@ impl Route {
     }
 
     /// Problems left in place: tolerated self-intersections of a local repair; an input open over
-    /// more than [`LARGE_OPENING`] of its edges, which the voxels closed (a part may be missing).
+    /// more than 1 % of its edges, which the voxels closed (a part may be missing).
     pub fn warnings(&self) -> Vec<String> {
         match self {
             Route::Local(report) => report.warnings(),

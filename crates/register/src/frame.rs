@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 use crate::checks::check_setting;
 use crate::organ::{Organ, Stencil};
 use crate::outliers::PointTree;
+use crate::plausibility::Verdict;
 use crate::rigid::RigidOptions;
 use crate::{RegisterError, Result};
 
@@ -403,24 +404,11 @@ pub(crate) fn register_frame_begun(
     let distances: Vec<f64> = cloud.par_iter().map(|&c| bvh.distance(c)).collect();
     let surface_residual = distances.iter().sum::<f64>() / cloud.len() as f64;
     let far_share = crate::plausibility::far_share(&distances);
-    let crate::plausibility::Verdict { mut warnings, mut distorted, mut other_frame, mut small_view } =
-        crate::plausibility::verdict(organ, &u, far_share, (cloud, extent), options.rigid.is_some());
+    let mut verdict = crate::plausibility::verdict(organ, &u, far_share, (cloud, extent), options.rigid.is_some());
     if let (true, Some(budget)) = (out_of_time, options.time_budget_ms) {
-        // No iteration finished in time: there is no registration to judge, the organ is where it began.
-        if u == began {
-            (warnings, distorted, other_frame, small_view) = (Vec::new(), false, false, false);
-        }
-        warnings.push(format!(
-            "the frame stopped after {iterations} of its {most} iterations, past its time budget of {budget:.0} ms: \
-             the estimate may not have converged"
-        ));
-        if u == began {
-            warnings.push(format!(
-                "no iteration finished within the time budget of {budget:.0} ms (one takes longer): the organ is left \
-                 as the frame began, not registered to this cloud; give a larger budget"
-            ));
-        }
+        verdict = cut_short(verdict, budget, (iterations, most), u == began);
     }
+    let Verdict { warnings, distorted, other_frame, small_view } = verdict;
     Ok(FrameResult {
         u,
         iterations,
@@ -436,6 +424,24 @@ pub(crate) fn register_frame_begun(
         inliers,
         time: t0.elapsed(),
     })
+}
+
+/// `verdict` of a frame its time budget (`budget`, ms) stopped after `iterations` of its `most`:
+/// said among the warnings; when no iteration finished (`unmoved`), there is no registration to
+/// judge, the organ left where the frame began: the verdict's own findings give way to that.
+fn cut_short(verdict: Verdict, budget: f64, (iterations, most): (usize, usize), unmoved: bool) -> Verdict {
+    let mut verdict = if unmoved { Verdict::default() } else { verdict };
+    verdict.warnings.push(format!(
+        "the frame stopped after {iterations} of its {most} iterations, past its time budget of {budget:.0} ms: the \
+         estimate may not have converged"
+    ));
+    if unmoved {
+        verdict.warnings.push(format!(
+            "no iteration finished within the time budget of {budget:.0} ms (one takes longer): the organ is left as \
+             the frame began, not registered to this cloud; give a larger budget"
+        ));
+    }
+    verdict
 }
 
 /// Matches each cloud point to the closest point of the deformed `surface` (of its triangles
