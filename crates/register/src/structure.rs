@@ -52,9 +52,9 @@ impl Structure {
         let mostly_near =
             |located: &[(Stencil, f64)]| 2 * located.iter().filter(|l| l.1 <= reach).count() > located.len();
         let located = held(&surface.vertices)?;
+        // Only where a mistake is suspected are the vertices located again, moved as it would have them.
+        let mostly_inside = |points: &[Point]| held(points).is_ok_and(|moved| mostly_near(&moved));
         if !mostly_near(&located) {
-            // Only then are the vertices located again, moved as a mistake would have them.
-            let mostly_inside = |points: &[Point]| held(points).is_ok_and(|moved| mostly_near(&moved));
             return Err(RegisterError::Invalid(format!(
                 "`{name}` lies outside the organ: most of its vertices are farther than {:.0} mm from it{}",
                 mm(reach),
@@ -69,7 +69,6 @@ impl Structure {
         }
         // A structure shrunk 1,000 times (in m where mm were expected) lies in the organ as a speck; a
         // small one in its unit (a vessel's branch) is not doubted.
-        let mostly_inside = |points: &[Point]| held(points).is_ok_and(|moved| mostly_near(&moved));
         let what = format!("vertices of `{name}`");
         if let Some((shrunk, true)) = organ.spread_warning(&surface.vertices, &what, mostly_inside) {
             return Err(RegisterError::Invalid(shrunk));
