@@ -248,8 +248,9 @@ def test_a_unit_mistake_in_the_targets_is_named(case):
     # Millimetres declared as metres: outside the organ, refused, naming the likely mistake.
     with pytest.raises(augsim.AugsimError, match="given in mm where m were expected"):
         augsim.Registration(fem=case["scenario"], targets=case["rest"], units="m")
-    # Metres declared as millimetres: 1,000 times too small, accepted with a warning naming it.
-    with pytest.warns(UserWarning, match="given in m where mm were expected"):
+    # Metres declared as millimetres: 1,000 times too small, all at one point of the organ; read 1,000
+    # times larger they lie in it: refused too, naming the mistake.
+    with pytest.raises(augsim.AugsimError, match="given in m where mm were expected"):
         augsim.Registration(fem=case["scenario"], targets=case["rest"] * 1e-3, units="mm")
 
 
