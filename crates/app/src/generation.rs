@@ -169,8 +169,9 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
 pub fn merge(out: &std::path::Path, parts: &[PathBuf]) -> Result<String> {
     let manifest = learn::merge_datasets(parts, out, None)?;
     Ok(format!(
-        "merged {} parts: {} samples, {} failed → {}",
+        "merged {} part{}: {} samples, {} failed → {}",
         parts.len(),
+        if parts.len() == 1 { "" } else { "s" },
         manifest.num_samples,
         manifest.failed.len(),
         out.display()

@@ -259,6 +259,21 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
         bail!("{} {are} {other}: {this} does not use {them}", unused.join(", "));
     }
     check_model_folder(&args.out, args.method)?;
+    // A U-Net's settings are checked before its dataset is read.
+    let config = TrainConfig {
+        iterations: args.iterations,
+        batch_size: args.batch,
+        learning_rate: args.lr,
+        final_learning_rate: args.final_lr,
+        seed: args.seed,
+        validate_every: args.validate_every,
+        checkpoint_every: args.validate_every,
+        train_corruption: args.corruption.corruption(),
+        val_corruption: args.corruption.corruption(),
+    };
+    if args.method == Method::UNet {
+        config.validate()?;
+    }
     if let Some(init) = &args.init {
         check_init_shape(args, init)?;
     }
@@ -301,17 +316,6 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
             depth: args.depth.unwrap_or(net.depth),
             ..net
         }),
-    };
-    let config = TrainConfig {
-        iterations: args.iterations,
-        batch_size: args.batch,
-        learning_rate: args.lr,
-        final_learning_rate: args.final_lr,
-        seed: args.seed,
-        validate_every: args.validate_every,
-        checkpoint_every: args.validate_every,
-        train_corruption: args.corruption.corruption(),
-        val_corruption: args.corruption.corruption(),
     };
     if config.batch_for(train.len()) < args.batch {
         progress.line(&format!(

@@ -281,6 +281,14 @@ magnitude = [0.05, 0.2]
     let e = augsim_err(&["generate", "tiny.toml", "--out", "notes"], d);
     assert!(e.contains("notes holds other files (shard_00000) and no dataset: give a new or empty folder"), "{e}");
     assert_eq!(std::fs::read_to_string(d.join("notes/shard_00000/inputs.npy")).unwrap(), "mine");
+    // A U-Net's settings are checked before its dataset is read (and split).
+    let out = Command::new(env!("CARGO_BIN_EXE_augsim"))
+        .args(["train", "data", "--out", "zero", "--iterations", "0"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    let (said, e) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(!out.status.success() && e.contains("must be at least 1") && !said.contains("split"), "{said}{e}");
     // Loads no draw survives: an error, not a dataset of no sample said to be written.
     let heavy = std::fs::read_to_string(d.join("tiny.toml")).unwrap().replace("[0.05, 0.2]", "[500.0, 600.0]");
     std::fs::write(d.join("heavy.toml"), heavy.replace("samples = 6", "samples = 2")).unwrap();
