@@ -153,7 +153,7 @@ fn sequence_scene(path: &Path) -> Result<(Scene, Vec<String>)> {
     let steps = mesh::io::read_pvd(path)?;
     let mut first: Option<Mesh> = None;
     let (mut layers, mut last_displacement) = (Vec::new(), None);
-    for (time, file) in &steps {
+    for (k, (time, file)) in steps.iter().enumerate() {
         let (organ, fields) = mesh::io::read_mesh_with_fields(file)
             .with_context(|| format!("reading {} of {}", file.display(), path.display()))?;
         if let Some(reference) = &first {
@@ -173,21 +173,24 @@ fn sequence_scene(path: &Path) -> Result<(Scene, Vec<String>)> {
         let displacement = vectors.iter().find(|f| f.name == "displacement").or(vectors.first()).copied();
         let positions = displacement.map_or_else(|| organ.nodes.clone(), |f| moved_by(&organ.nodes, f));
         layers.push(Layer { name: format!("t = {time}"), positions });
-        last_displacement = displacement.map(|f| (f.name.clone(), magnitudes_mm(&f.values)));
+        if k + 1 == steps.len() {
+            last_displacement = displacement.map(|f| (f.name.clone(), magnitudes_mm(&f.values)));
+        }
         first.get_or_insert(organ);
     }
     let organ = first.context("a collection without steps")?;
     let (t0, t1) = (steps[0].0, steps[steps.len() - 1].0);
+    let triangles = boundary_triangles(&organ);
     let line = format!(
         "sequence   {} steps (t = {t0} to {t1}) of a mesh of {} nodes, {} surface triangles",
         steps.len(),
         organ.num_nodes(),
-        mesh::boundary_surface(&organ).triangles.len()
+        triangles.len()
     );
     let scene = Scene {
         title: title(path),
         notes: vec![format!("{} steps, t = {t0} to {t1}", steps.len())],
-        triangles: boundary_triangles(&organ),
+        triangles,
         layers,
         colour: last_displacement.map(|(name, values)| Scalar {
             name: format!("|{name}| at t = {t1}"),

@@ -64,7 +64,8 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
     });
     // A dataset resumed keeps the count it was made for, unless --samples grows it: a bare rerun
     // must not turn a finished dataset of 60 draws into an unfinished one of the scenario's thousands.
-    let made_for = learn::Dataset::open(&out).ok().and_then(|d| d.manifest().spec().requested_samples());
+    let existing = learn::Dataset::open(&out).ok();
+    let made_for = existing.as_ref().and_then(|d| d.manifest().spec().requested_samples());
     match (args.samples, made_for) {
         (Some(n), _) => scenario.dataset.samples = n,
         (None, Some(n)) => scenario.dataset.samples = n as usize,
@@ -110,7 +111,7 @@ pub fn generate(args: &GenerateArgs, progress: &dyn Progress) -> Result<Vec<Stri
     }
     // What the dataset held before this run (resumed, grown, or complete already); the generator
     // says it resumes once it has accepted the dataset.
-    let held = learn::Dataset::open(&out).map_or(0, |d| d.manifest().num_samples + d.manifest().failed.len());
+    let held = existing.map_or(0, |d| d.manifest().num_samples + d.manifest().failed.len());
     let start = Instant::now();
     let manifest = match &recipe {
         None => generator.run(&out, &scenario.name, args.shard.clone(), progress)?,

@@ -116,16 +116,13 @@ impl Route {
             Route::Local(report) => report.warnings(),
             Route::Volumetric(r) => {
                 let (open, edges) = r.open_edges;
-                let large = open as f64 > LARGE_OPENING * edges as f64;
-                large
-                    .then(|| {
-                        format!(
-                        "the input surface is open along {open} of its {edges} edges (holes larger than local repair \
-                         fills): the voxels closed it, flat where a part may be missing (cut off?); check the organ"
-                    )
-                    })
-                    .into_iter()
-                    .collect()
+                if !(open as f64 > LARGE_OPENING * edges as f64) {
+                    return Vec::new();
+                }
+                vec![format!(
+                    "the input surface is open along {open} of its {edges} edges (holes larger than local repair \
+                     fills): the voxels closed it, flat where a part may be missing (cut off?); check the organ"
+                )]
             }
         }
     }

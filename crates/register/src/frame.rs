@@ -349,7 +349,8 @@ pub(crate) fn register_frame_begun(
         Some(_) => (WARM_START_ITERATION, options.iterations.min(options.warm_iterations)),
         None => (0, options.iterations),
     };
-    let began = u.clone();
+    // Whether any iteration moved the organ's surface: one stopped at its deadline gives it back unmoved.
+    let mut moved_at_all = false;
     let mut last_observations = None;
     let mut out_of_time = false;
     while iterations < most {
@@ -388,6 +389,7 @@ pub(crate) fn register_frame_begun(
         let moved =
             next.vertices.iter().zip(&surface.vertices).map(|(a, b)| mesh::distance(*a, *b)).fold(0.0, f64::max);
         surface = next;
+        moved_at_all |= moved > 0.0;
         // The budget first: a deformer stopped at the deadline gives back its estimate unmoved.
         if options.time_budget_ms.is_some_and(|budget| mesh::stats::ms(t0.elapsed()) >= budget) && iterations < most {
             out_of_time = true;
@@ -406,7 +408,7 @@ pub(crate) fn register_frame_begun(
     let far_share = crate::plausibility::far_share(&distances);
     let mut verdict = crate::plausibility::verdict(organ, &u, far_share, (cloud, extent), options.rigid.is_some());
     if let (true, Some(budget)) = (out_of_time, options.time_budget_ms) {
-        verdict = cut_short(verdict, budget, (iterations, most), u == began);
+        verdict = cut_short(verdict, budget, (iterations, most), !moved_at_all);
     }
     let Verdict { warnings, distorted, other_frame, small_view } = verdict;
     Ok(FrameResult {
@@ -427,8 +429,9 @@ pub(crate) fn register_frame_begun(
 }
 
 /// `verdict` of a frame its time budget (`budget`, ms) stopped after `iterations` of its `most`:
-/// said among the warnings; when no iteration finished (`unmoved`), there is no registration to
-/// judge, the organ left where the frame began: the verdict's own findings give way to that.
+/// said among the warnings; when no iteration finished (`unmoved`: none moved the organ's surface),
+/// there is no registration to judge, the organ left where the frame began: the verdict's own
+/// findings give way to that.
 fn cut_short(verdict: Verdict, budget: f64, (iterations, most): (usize, usize), unmoved: bool) -> Verdict {
     let mut verdict = if unmoved { Verdict::default() } else { verdict };
     verdict.warnings.push(format!(

@@ -401,8 +401,6 @@ pub(crate) fn placed_model_grid(placement: Option<GridPlacement>, grid: GridShap
 mod tests {
     use super::*;
 
-    /// A grid read from a file has a node along each axis and no more nodes than fit in memory:
-    /// sizes whose product overflows are refused, not wrapped.
     /// A placement matches itself within rounding; the same grid spaced twice as wide (an organ
     /// scaled) or moved is refused, in mm.
     #[test]
@@ -415,6 +413,8 @@ mod tests {
         assert!(p.check_matches(&GridPlacement { origin: [0.02, -0.02, 0.0], ..p }).is_err());
     }
 
+    /// A grid read from a file has a node along each axis and no more nodes than fit in memory:
+    /// sizes whose product overflows are refused, not wrapped.
     #[test]
     fn a_damaged_grid_shape_is_refused() {
         assert_eq!(GridShape::try_from([4, 5, 3]), Ok(GridShape::new(4, 5, 3)));

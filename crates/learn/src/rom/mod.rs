@@ -373,9 +373,10 @@ impl ReducedModel {
         let mut output_mask = vec![0u8; self.grid.nodes()];
         self.nodes.iter().for_each(|&n| output_mask[n] = 1);
         let [nx, ny, nz] = self.grid.dims();
-        write_u8(&dir.join("input_mask.npy"), &[CHANNELS, nx, ny, nz], &input_mask)?;
-        write_u8(&dir.join("output_mask.npy"), &[nx, ny, nz], &output_mask)?;
-        write_f64(&dir.join("input_mean.npy"), &[entries], &self.input_mean)?;
+        let mut saved = SavedArrays { dir, names: Vec::new() };
+        write_u8(&saved.file("input_mask.npy"), &[CHANNELS, nx, ny, nz], &input_mask)?;
+        write_u8(&saved.file("output_mask.npy"), &[nx, ny, nz], &output_mask)?;
+        write_f64(&saved.file("input_mean.npy"), &[entries], &self.input_mean)?;
         // The other reader's array, left by an earlier model in the directory, would mislead.
         let stale =
             dir.join(if matches!(self.reader, Reader::Prior(_)) { "input_components.npy" } else { "prior.npy" });
@@ -384,31 +385,25 @@ impl ReducedModel {
             _ => {}
         }
         match &self.reader {
-            Reader::Components(p) => write_matrix(&dir.join("input_components.npy"), p.as_ref())?,
+            Reader::Components(p) => write_matrix(&saved.file("input_components.npy"), p.as_ref())?,
             Reader::Prior(a) => {
                 let values: Vec<f32> =
                     (0..a.nrows()).flat_map(|i| a.row(i).iter().map(|&v| v as f32).collect::<Vec<_>>()).collect();
-                write_f32(&dir.join("prior.npy"), &[a.nrows(), a.ncols()], &values)?;
+                write_f32(&saved.file("prior.npy"), &[a.nrows(), a.ncols()], &values)?;
             }
         }
-        write_f64(&dir.join("feature_scales.npy"), &[self.feature_scales.len()], &self.feature_scales)?;
-        write_matrix(&dir.join("inducing.npy"), self.inducing.as_ref())?;
-        write_matrix(&dir.join("weights.npy"), self.weights.as_ref())?;
-        write_matrix(&dir.join("covariance.npy"), self.covariance.as_ref())?;
+        write_f64(&saved.file("feature_scales.npy"), &[self.feature_scales.len()], &self.feature_scales)?;
+        write_matrix(&saved.file("inducing.npy"), self.inducing.as_ref())?;
+        write_matrix(&saved.file("weights.npy"), self.weights.as_ref())?;
+        write_matrix(&saved.file("covariance.npy"), self.covariance.as_ref())?;
         let mean32: Vec<f32> = self.output_mean.iter().map(|&v| v as f32).collect();
-        write_f32(&dir.join("output_mean.npy"), &[mean32.len()], &mean32)?;
+        write_f32(&saved.file("output_mean.npy"), &[mean32.len()], &mean32)?;
         let basis32: Vec<f32> =
             (0..modes).flat_map(|j| self.basis.row(j).iter().map(|&v| v as f32).collect::<Vec<_>>()).collect();
-        write_f32(&dir.join(BASIS_FILE), &[modes, self.basis.ncols()], &basis32)?;
-        write_f64(&dir.join("variance_weights.npy"), &[self.nodes.len()], &self.variance_weights)?;
-        write_f64(&dir.join("floor.npy"), &[self.nodes.len()], &self.floor)?;
-        let reader = if matches!(self.reader, Reader::Prior(_)) { "prior" } else { "input_components" };
-        let mut array_digests = BTreeMap::new();
-        for name in ARRAYS.iter().copied().chain([reader]) {
-            let path = dir.join(format!("{name}.npy"));
-            let bytes = std::fs::read(&path).map_err(|e| LearnError::io(&path, e))?;
-            array_digests.insert(name.to_string(), crate::digest(&bytes));
-        }
+        write_f32(&saved.file(BASIS_FILE), &[modes, self.basis.ncols()], &basis32)?;
+        write_f64(&saved.file("variance_weights.npy"), &[self.nodes.len()], &self.variance_weights)?;
+        write_f64(&saved.file("floor.npy"), &[self.nodes.len()], &self.floor)?;
+        let array_digests = saved.digests()?;
         let file = RomFile {
             format: ROM_FORMAT.into(),
             version: ROM_VERSION,
@@ -527,21 +522,32 @@ fn write_matrix(path: &Path, m: MatRef<'_, f64>) -> Result<()> {
     Ok(write_f64(path, &[m.nrows(), m.ncols()], &values)?)
 }
 
-/// The arrays every reduced-order model saves (beside its reader's, `input_components` or
-/// `prior`), by name (`NAME.npy`).
-const ARRAYS: [&str; 11] = [
-    "input_mask",
-    "output_mask",
-    "input_mean",
-    "feature_scales",
-    "inducing",
-    "weights",
-    "covariance",
-    "output_mean",
-    "basis",
-    "variance_weights",
-    "floor",
-];
+/// The arrays a model saves, named as each is written, then each file's digest recorded (keyed by
+/// its name without `.npy`, as [`Arrays`] looks it up).
+struct SavedArrays<'d> {
+    dir: &'d Path,
+    names: Vec<&'static str>,
+}
+
+impl SavedArrays<'_> {
+    /// The path of the array file `name` (`NAME.npy`), to be written and digested.
+    fn file(&mut self, name: &'static str) -> PathBuf {
+        self.names.push(name);
+        self.dir.join(name)
+    }
+
+    /// The digest of each array file named, as written.
+    fn digests(&self) -> Result<BTreeMap<String, String>> {
+        self.names
+            .iter()
+            .map(|name| {
+                let path = self.dir.join(name);
+                let bytes = std::fs::read(&path).map_err(|e| LearnError::io(&path, e))?;
+                Ok((name.trim_end_matches(".npy").to_string(), crate::digest(&bytes)))
+            })
+            .collect()
+    }
+}
 
 /// Reads the arrays of a model directory, checking their shapes and, where the model records
 /// them, their digests.
