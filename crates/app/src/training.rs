@@ -16,7 +16,8 @@ use scenario::DatasetScenario;
 /// Input corruption, shared by `train` (training and validation inputs) and `eval`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct CorruptionArgs {
-    /// Keep a random visible patch of between MIN and MAX input nodes (e.g. 13,114).
+    /// Keep a random visible patch of between MIN and MAX input nodes (e.g. 13,114), MAX at most
+    /// the samples' input nodes.
     #[arg(long, value_name = "MIN,MAX", value_parser = node_range)]
     pub sparse: Option<(usize, usize)>,
     /// Additive Gaussian noise on the visible input nodes: standard deviation in the input unit.
@@ -259,6 +260,14 @@ pub fn train(args: &TrainArgs, progress: &dyn Progress) -> Result<Vec<String>> {
         bail!("{} {are} {other}: {this} does not use {them}", unused.join(", "));
     }
     check_model_folder(&args.out, args.method)?;
+    let torch = learn::training::train::TORCH_CHECKPOINT_FILE;
+    if args.out.join(torch).exists() {
+        bail!(
+            "{} holds a training in PyTorch ({torch}): `augsim train` would replace its model; give another --out, \
+             or resume it with `python -m augsim.train`",
+            args.out.display()
+        );
+    }
     // A U-Net's settings are checked before its dataset is read.
     let config = TrainConfig {
         iterations: args.iterations,

@@ -268,6 +268,11 @@ magnitude = [0.05, 0.2]
     assert!(e.contains("data holds a dataset (manifest.json): a model written there"), "{e}");
     let e = augsim_err(&["generate", "tiny.toml", "--out", "net"], d);
     assert!(e.contains("net holds a model (model.json): a dataset written there"), "{e}");
+    // Nor over a training in PyTorch, which resumes from its own checkpoint.
+    std::fs::create_dir_all(d.join("torch")).unwrap();
+    std::fs::write(d.join("torch/checkpoint.pt"), "a PyTorch checkpoint").unwrap();
+    let e = augsim_err(&["train", "data", "--out", "torch"], d);
+    assert!(e.contains("torch holds a training in PyTorch (checkpoint.pt)"), "{e}");
     // A rerun without --samples keeps the count the dataset was made for, not the scenario's 6.
     augsim(&["generate", "tiny.toml", "--out", "three", "--samples", "3"], d);
     let text = augsim(&["generate", "tiny.toml", "--out", "three"], d);

@@ -169,16 +169,21 @@ fn a_noise_in_the_wrong_unit_is_refused() {
 }
 
 /// A patch at least as large as every input's nonzero nodes keeps them all: refused, as `train`
-/// and `eval` refuse it.
+/// and `eval` refuse it; so is a range reaching past them, whose largest draws keep them all.
 #[test]
 fn a_patch_that_keeps_every_input_node_is_refused() {
     let grid = GridShape::new(6, 5, 4);
     let samples = common::synthetic_samples(grid, 0, 3);
     let most = (0..3).map(|p| nonzero_nodes(samples.input(p), grid).len()).max().unwrap();
-    let patch =
-        |min_nodes: usize| Corruption { sparsity: Some(Sparsity::Patch { min_nodes, max_nodes: 100 }), noise_std: 0.0 };
-    assert!(patch(most - 1).check_sparsity(&samples).is_ok());
-    let e = patch(most).check_sparsity(&samples).unwrap_err().to_string();
+    let patch = |min_nodes: usize, max_nodes: usize| Corruption {
+        sparsity: Some(Sparsity::Patch { min_nodes, max_nodes }),
+        noise_std: 0.0,
+    };
+    assert!(patch(most - 1, most).check_sparsity(&samples).is_ok());
+    let e = patch(most, most).check_sparsity(&samples).unwrap_err().to_string();
     assert!(e.contains(&format!("keeps every input node: the samples have at most {most}")), "{e}");
+    // 1..=2·most: the upper half of the draws would keep every node.
+    let e = patch(1, 2 * most).check_sparsity(&samples).unwrap_err().to_string();
+    assert!(e.contains(&format!("reaches past the samples' input nodes (at most {most}): 50 % of the draws")), "{e}");
     assert!(Corruption::none().check_sparsity(&samples).is_ok());
 }

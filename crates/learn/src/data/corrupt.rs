@@ -105,7 +105,8 @@ impl Corruption {
     }
 
     /// Refuses a patch sparsity that keeps every input node of `samples` (its smallest patch at
-    /// least as large as their most nonzero nodes): the input would not be sparse.
+    /// least as large as their most nonzero nodes: the input would not be sparse), or whose
+    /// largest patch exceeds that count (the draws above it would keep every node).
     pub fn check_sparsity(&self, samples: &Samples) -> Result<()> {
         let Some(Sparsity::Patch { min_nodes, max_nodes }) = &self.sparsity else { return Ok(()) };
         let most = (0..samples.len()).map(|p| nonzero_nodes(samples.input(p), samples.grid).len()).max().unwrap_or(0);
@@ -113,6 +114,14 @@ impl Corruption {
             return Err(LearnError::InvalidInput(format!(
                 "--sparse {min_nodes},{max_nodes} keeps every input node: the samples have at most {most}, so the \
                  input would not be sparse; give a range below {most}"
+            )));
+        }
+        if *max_nodes > most {
+            let kept_whole = 100.0 * (max_nodes - most) as f64 / (max_nodes - min_nodes + 1) as f64;
+            return Err(LearnError::InvalidInput(format!(
+                "--sparse {min_nodes},{max_nodes} reaches past the samples' input nodes (at most {most}): \
+                 {kept_whole:.0} % of the draws would keep every node; give a range within {min_nodes},{}",
+                most - 1
             )));
         }
         Ok(())

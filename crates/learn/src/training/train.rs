@@ -212,6 +212,8 @@ pub struct TrainOutcome {
 pub use crate::model::MODEL_FILE;
 /// Checkpoint file name.
 pub const CHECKPOINT_FILE: &str = "checkpoint.bin";
+/// The checkpoint the PyTorch trainer (`python -m augsim.train`) writes in its model folder.
+pub const TORCH_CHECKPOINT_FILE: &str = "checkpoint.pt";
 /// Learning-curve CSV file name.
 pub const CURVE_CSV: &str = "curve.csv";
 
