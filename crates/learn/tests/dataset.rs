@@ -477,6 +477,16 @@ fn merge_of_worker_parts_equals_single_writer() {
     drop(DatasetWriter::create_or_resume(&open, spec(2, Some(DatasetPart { index: 0, count: 3 }))).unwrap());
     let e = merge_datasets(&[parts[1].clone(), open], &root.path().join("m2"), None).unwrap_err().to_string();
     assert!(e.contains("not complete"), "{e}");
+    // A part generated for another count is named with what differs, not with all that must agree.
+    let other = root.path().join("other");
+    let asked = |spec: DatasetSpec| DatasetSpec {
+        metadata: serde_json::json!({"young_modulus": 5000.0, "dataset": {"samples": 30}}),
+        ..spec
+    };
+    write(&other, asked(spec(2, Some(DatasetPart { index: 1, count: 3 }))), (0..15).filter(|i| i % 3 == 1));
+    let given = [parts[0].clone(), other, parts[2].clone()];
+    let e = merge_datasets(&given, &root.path().join("m3"), None).unwrap_err().to_string();
+    assert!(e.contains("metadata.dataset null there, {\"samples\":30} now; scenario, seed"), "{e}");
 }
 
 #[test]

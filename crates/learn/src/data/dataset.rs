@@ -122,16 +122,7 @@ impl DatasetSpec {
     /// Why a dataset created with `self` cannot take `new`'s draws, in words: what differs (see
     /// [`json_differences`]), and that a dataset grows but does not shrink.
     fn mismatch(&self, new: &DatasetSpec) -> String {
-        let as_json = |spec: &DatasetSpec| serde_json::to_value(spec).unwrap_or(serde_json::Value::Null);
-        let differences = json_differences(&as_json(self), &as_json(new));
-        // The generator records the seed and shard size in the metadata too: each is said once.
-        let top_level = |d: &&String| !d.split(' ').next().unwrap_or_default().contains('.');
-        let repeated = |d: &&String| {
-            d.starts_with("metadata.")
-                && differences.iter().filter(top_level).any(|top| d.ends_with(&format!(".{top}")))
-        };
-        let kept: Vec<&str> = differences.iter().filter(|d| !repeated(d)).map(String::as_str).collect();
-        let mut why = format!("it was created otherwise ({})", kept.join("; "));
+        let mut why = format!("it was created otherwise ({})", self.differences(new).join("; "));
         if let (Some(held), Some(asked)) = (self.requested_samples(), new.requested_samples()) {
             if asked < held && self.same_but_count(new) {
                 why = format!(
@@ -141,6 +132,20 @@ impl DatasetSpec {
             }
         }
         why
+    }
+
+    /// What differs from `self` in `new`, one value a line ([`json_differences`]: "there" is
+    /// `self`'s, "now" `new`'s), each said once.
+    fn differences(&self, new: &DatasetSpec) -> Vec<String> {
+        let as_json = |spec: &DatasetSpec| serde_json::to_value(spec).unwrap_or(serde_json::Value::Null);
+        let differences = json_differences(&as_json(self), &as_json(new));
+        // The generator records the seed and shard size in the metadata too: each is said once.
+        let top_level = |d: &&String| !d.split(' ').next().unwrap_or_default().contains('.');
+        let repeated = |d: &&String| {
+            d.starts_with("metadata.")
+                && differences.iter().filter(top_level).any(|top| d.ends_with(&format!(".{top}")))
+        };
+        differences.iter().filter(|d| !repeated(d)).cloned().collect()
     }
 }
 
@@ -1371,19 +1376,17 @@ pub fn merge_datasets(parts: &[PathBuf], out: &Path, shard_size: Option<usize>) 
                 "dataset holds σ-chosen draws, which are chosen one round after another and not merged",
             ));
         }
-        let spec = m.spec();
-        let same = spec.scenario == first.scenario
-            && spec.seed == first.seed
-            && spec.grid == first.grid
-            && spec.input_unit == first.input_unit
-            && spec.target_unit == first.target_unit
-            && spec.metadata == first.metadata;
-        if !same {
+        // Parts differ in which part they are and may in their shards' size, in nothing else.
+        let whole = |spec: DatasetSpec| DatasetSpec { part: None, shard_size: 0, ..spec };
+        let differences = whole(first.clone()).differences(&whole(m.spec()));
+        if !differences.is_empty() {
             return Err(LearnError::manifest(
                 &manifest_path,
                 format!(
-                    "dataset does not match the first one ({}): scenario, seed, grid, units and metadata must agree",
-                    parts[0].display()
+                    "dataset does not match the first one ({}; \"there\" below, this one \"now\"): {}; scenario, \
+                     seed, grid, units and metadata must agree",
+                    parts[0].display(),
+                    differences.join("; ")
                 ),
             ));
         }
