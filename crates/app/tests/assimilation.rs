@@ -387,6 +387,11 @@ fn bad_track_files_are_named_with_their_line() {
             && !err.contains("invalid FEM model"),
         "{err}"
     );
+    // A feature 8 mm off the organ's corner at the origin fits read a thousand times smaller too, as
+    // any point near it would: its unit is not blamed.
+    std::fs::write(d.join("off.csv"), "frame,id,x,y,z\n0,off,-0.008,0.01,0.01\n1,off,-0.008,0.01,0.01\n").unwrap();
+    let err = prepare_tracks(d, "off.csv").err().unwrap();
+    assert!(err.contains("off.csv:2: feature `off`") && !err.contains("where m were expected"), "{err}");
     // Zero iterations are refused, not filtered.
     let (mut sc, base) = tracked(d);
     sc.iterations = Some(0);

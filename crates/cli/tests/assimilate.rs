@@ -60,12 +60,31 @@ fn synthetic_tracks_fed_back_and_bad_files() {
         assert!(!ok && out.contains("[young] prior_mean = ") && out.contains(said), "{out}");
         assert!(!out.contains("filter iteration"), "{out}");
     }
+    // A prior σ as wide as its mean, on the modulus itself: the sigma points reach past zero.
+    let wide = d.join("wide.toml");
+    std::fs::write(&wide, text.replace("transform = \"exp\"\nprior_mean = 8.0\nprior_std = 0.5", WIDE)).unwrap();
+    let (ok, out) = assimilate(&[wide.to_str().unwrap(), "-o", d.join("wide").to_str().unwrap()]);
+    assert!(!ok && out.contains("sigma point") && out.contains("a prior_std not well below prior_mean"), "{out}");
+    // A tracking noise given in mm is named, before the reference run it would spoil.
+    let noisy = d.join("noisy.toml");
+    std::fs::write(&noisy, text.replace("noise_std = 1e-5", "noise_std = 0.2")).unwrap();
+    let (ok, out) = assimilate(&[noisy.to_str().unwrap(), "-o", d.join("noisy").to_str().unwrap()]);
+    assert!(!ok && out.contains("observations.noise_std = 0.2 m is 192 % of the organ's size (104 mm)"), "{out}");
+    // A folder of the user's files is no place for a run's (it writes tracks/, trace.csv, …).
+    std::fs::create_dir_all(d.join("mine/tracks")).unwrap();
+    std::fs::write(d.join("mine/tracks/observations.csv"), "my own tracks").unwrap();
+    let (ok, out) = assimilate(&[s, "-o", d.join("mine").to_str().unwrap()]);
+    assert!(!ok && out.contains("holds 1 file(s) or folder(s) (tracks)"), "{out}");
+    assert_eq!(std::fs::read_to_string(d.join("mine/tracks/observations.csv")).unwrap(), "my own tracks");
     let (ok, out) = assimilate(&[s, "--every", "0", "-o", d.join("every").to_str().unwrap()]);
     assert!(!ok && out.contains("--every must be at least 1"), "{out}");
     // Track options need --observations.
     let (ok, text) = assimilate(&[s, "--controls", bad.to_str().unwrap()]);
     assert!(!ok && text.contains("--observations"), "{text}");
 }
+
+/// A prior on the modulus itself whose σ equals its mean.
+const WIDE: &str = "transform = \"identity\"\nprior_mean = 4000.0\nprior_std = 4000.0";
 
 #[test]
 fn star_sigma_points_from_the_command_line() {

@@ -319,8 +319,9 @@ impl Model for FemModel {
                 FemParameter::Young if !(value > 0.0 && value.is_finite()) => {
                     format!(
                         "Young's modulus {value:.6e} Pa is not positive and finite: the filter, on the modulus \
-                         itself, stepped past zero (a prior far from the data); `transform = \"exp\"` in the \
-                         parameter's section keeps it positive"
+                         itself, stepped past zero (a prior far from the data), or spread its sigma points past it \
+                         (a prior_std not well below prior_mean); `transform = \"exp\"` in the parameter's section \
+                         keeps it positive"
                     )
                 }
                 FemParameter::Springs { nodes }
@@ -328,8 +329,8 @@ impl Model for FemModel {
                 {
                     format!(
                         "a spring stiffness of {value:.6e} N/m leaves a node's stiffness negative: the filter, on the \
-                         stiffness itself, stepped past zero; `transform = \"exp\"` in the parameter's section keeps \
-                         it positive"
+                         stiffness itself, stepped past zero, or spread its sigma points past it; `transform = \"exp\"` \
+                         in the parameter's section keeps it positive"
                     )
                 }
                 _ => continue,

@@ -21,8 +21,8 @@ pub trait Model: Sync {
     fn observe(&self, state: &Self::State) -> DVector<f64>;
 
     /// Whether the physical parameter values `theta` are in the model's domain (e.g. a positive
-    /// Young's modulus); the filter refuses an estimate outside it, before taking it. Any by
-    /// default.
+    /// Young's modulus); the filter refuses an estimate outside it before taking it, and a sigma
+    /// point outside it before stepping it. Any by default.
     fn admissible(&self, _theta: &[f64]) -> Result<(), Self::Error> {
         Ok(())
     }

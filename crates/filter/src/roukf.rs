@@ -690,6 +690,12 @@ impl<M: Model> Roukf<M> {
                     what: format!("non-finite physical parameters {phys:?}"),
                 });
             }
+            // Spread by the estimate's σ about it, a sigma point may leave the domain the estimate is in.
+            self.model.admissible(&phys).map_err(|e| FilterError::SigmaPoint {
+                sigma_point: i,
+                iteration: k,
+                what: format!("its parameters lie outside the model's domain: {e}"),
+            })?;
             physical.push(phys);
         }
         let model = &self.model;

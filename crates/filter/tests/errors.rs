@@ -204,6 +204,20 @@ fn an_estimate_outside_the_model_s_domain_is_refused_and_the_filter_goes_on() {
     assert!(roukf.mean()[0] > 1.0);
 }
 
+/// A sigma point outside the model's domain (a prior σ as wide as its mean, on a positive
+/// parameter) is an error naming it, before the model steps it.
+#[test]
+fn a_sigma_point_outside_the_model_s_domain_is_an_error() {
+    let mut model = Flaky::new(usize::MAX, 0.0);
+    model.lowest = 0.0;
+    let mut c = config(Execution::Parallel);
+    c.parameters[0] = ParameterSpec::new("k", Transform::Identity, 1.0, 5.0);
+    let mut roukf = Roukf::new(model, 0.0, c).unwrap();
+    let err = roukf.step(&z(1.0)).unwrap_err();
+    assert!(matches!(err, FilterError::SigmaPoint { iteration: 1, .. }), "{err:?}");
+    assert!(err.to_string().contains("its parameters lie outside the model's domain"), "{err}");
+}
+
 #[test]
 fn config_deserialises_and_rejects_unknown_fields() {
     let text = r#"{"parameters": [{"name": "E", "transform": "exp", "prior_mean": 6.9, "prior_std": 0.2},

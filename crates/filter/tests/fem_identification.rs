@@ -179,14 +179,16 @@ fn abs_transform_keeps_springs_non_negative_and_finds_them() {
         assert!(g.iter().all(|&k| (problem.springs[k] - value).abs() <= 1e-12));
     }
 
-    // Without the transform, the same prior hands negative stiffnesses to the FEM model, which refuses them.
+    // Without the transform, the same prior spreads sigma points to negative stiffnesses, outside the FEM
+    // model's domain: refused before they are solved.
     let (model, _) = spring_model();
     let initial = model.initial_state();
     let mut config = spring_config(Execution::Sequential);
     config.parameters.iter_mut().for_each(|p| p.transform = Transform::Identity);
     let mut roukf = Roukf::new(model, initial, config).unwrap();
     let err = roukf.step(&data[0]).unwrap_err();
-    assert!(err.to_string().contains("non-negative"), "{err}");
+    let err = err.to_string();
+    assert!(err.contains("sigma point") && err.contains("leaves a node's stiffness negative"), "{err}");
 }
 
 fn bits(v: &[f64]) -> Vec<u64> {

@@ -1,7 +1,7 @@
 //! The user's choices of an assimilation run, as `augsim assimilate` takes them: the scenario,
 //! the settings that override the scenario file's, and the track files.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use filter::{Discrepancy, Execution, SigmaPointSet};
@@ -67,7 +67,8 @@ pub struct AssimilationChoice {
     /// deviations is left out of that step, as a tracking failure (default: the scenario's filter.gate, else none).
     #[arg(long, value_name = "G", value_parser = crate::values::positive)]
     pub gate: Option<f64>,
-    /// Write the estimated deformation every N steps (default: the scenario's output.every, else 1).
+    /// Write the estimated deformation every N steps, and the last one's (default: the scenario's output.every,
+    /// else 1).
     #[arg(long)]
     pub every: Option<usize>,
 }
@@ -125,6 +126,7 @@ impl AssimilationChoice {
         let (sc, dir) = self.scenario()?;
         // Never two runs' files in one folder: `--out` refused once used, else numbered folders.
         let (out_dir, own) = crate::output::run_dir(self.output.as_deref(), &sc.output_dir())?;
+        refuse_other_files(&out_dir)?;
         let files = self.files();
         let described = if sc.description.is_empty() { String::new() } else { format!(": {}", sc.description) };
         let mut lines = vec![format!("scenario     {}{described}", sc.name)];
@@ -148,6 +150,27 @@ impl AssimilationChoice {
     }
 }
 
+/// Refuses an output folder `dir` that holds files: a run writes many (its traces, plots, the
+/// deformation's steps, track files) and would replace a user's of the same names.
+fn refuse_other_files(dir: &Path) -> Result<()> {
+    let held: Vec<String> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    if let Some(first) = held.first() {
+        anyhow::bail!(
+            "{} holds {} file(s) or folder(s) ({first}{}): an assimilation writes its traces, plots and track \
+             files into a folder of its own and could replace them; give a new or empty --out",
+            dir.display(),
+            held.len(),
+            if held.len() > 1 { ", …" } else { "" }
+        );
+    }
+    Ok(())
+}
+
 /// An assimilation run prepared ([`AssimilationChoice::prepare`]), to be run.
 pub struct PreparedAssimilation {
     experiment: Experiment,
@@ -165,10 +188,13 @@ impl PreparedAssimilation {
     /// them in words, with what was written.
     pub fn run(&self, progress: &dyn learn::Progress) -> Result<Vec<String>> {
         let report = self.experiment.run(&self.out_dir, progress).map_err(anyhow::Error::from);
-        let mut lines = crate::output::tidy_failed_run(&self.out_dir, self.own, report)?.lines();
+        let report = crate::output::tidy_failed_run(&self.out_dir, self.own, report)?;
+        let mut lines = report.lines();
         lines.push(format!(
-            "wrote        {}/{{trace.csv, trace.json, summary.json, deformation.pvd, *.png}}{}",
+            "wrote        {}/{{trace.csv, trace.json, summary.json, deformation.pvd ({} step{}), *.png}}{}",
             self.out_dir.display(),
+            report.deformation_frames,
+            if report.deformation_frames == 1 { "" } else { "s" },
             if self.synthetic { ", tracks/*.csv (the synthetic observations)" } else { "" }
         ));
         Ok(lines)

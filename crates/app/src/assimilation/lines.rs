@@ -62,6 +62,16 @@ impl Setup {
                         mm(*depth)
                     ));
                 }
+                if let (Some((count, farthest)), Some(features)) = (s.rest_disagreement, &f.features) {
+                    lines.push(format!(
+                        "warning      {count} feature(s) of {} lie at frame 0 more than the observation noise from \
+                         their rest positions in {} (at most {:.2} mm): frame 0 is not read when a features file \
+                         gives the rest; is it the same features' rest, in the same frame and unit?",
+                        f.observations.display(),
+                        features.display(),
+                        mm(farthest)
+                    ));
+                }
                 if s.blind_frames > 0 {
                     lines.push(format!(
                         "warning      {} of the {} frames have no row: every feature occluded, the filter only \
@@ -106,8 +116,9 @@ impl Report {
         if let Some(y) = &r.young {
             let truth = match y.truth {
                 Some(t) => format!(
-                    " (truth {t:.0} Pa, error {:+.2} %), within 1 % {}",
+                    " (truth {t:.0} Pa, error {:+.2} %, {:.1} σ), within 1 % {}",
                     100.0 * (y.mean - t) / t,
+                    (y.mean - t).abs() / y.std,
                     match (y.within_1_percent_from_iteration, y.within_1_percent_after_seconds) {
                         (Some(k), Some(t)) => format!("from iteration {k} on ({t:.2} s of filter time)"),
                         (Some(k), None) => format!("from iteration {k} on"),
@@ -117,6 +128,16 @@ impl Report {
                 None => String::new(),
             };
             lines.push(format!("young        μ = {:.1} ± {:.1} Pa{truth}", y.mean, y.std));
+            let data_std = y.noise_std.unwrap_or(y.std);
+            if data_std > PRIOR_LEFT * y.prior_std {
+                lines.push(format!(
+                    "warning      the observations told the filter little: σ from them is {:.0} % of the prior's \
+                     ({:.1} Pa), so the estimate is mostly the prior (few frames, features that barely move, or a \
+                     prior far from the tissue's stiffness?)",
+                    100.0 * data_std / y.prior_std,
+                    y.prior_std
+                ));
+            }
             if let Some((steps, change)) = y.drift.filter(|(_, change)| change.abs() > y.std) {
                 lines.push(format!(
                     "warning      the estimate still moves: {change:+.1} Pa over the last {steps} iterations, {:.1} \
@@ -133,13 +154,22 @@ impl Report {
                 ));
                 lines.extend(misfit_warning(misfit));
             }
+            if let (Some(noise), None) = (y.noise_std, y.misfit) {
+                lines.push(format!(
+                    "warning      the misfit could not be measured: no frame's sigma points came near the final \
+                     estimate (it jumped away from where the frames were taken: a gate leaving most out, tracks \
+                     that do not fit the model?); σ = {noise:.1} Pa is the observation noise's alone"
+                ));
+            }
         }
         if let Some(s) = &r.springs {
             let n = s.stiffness.len() as f64;
             let truth = match (&s.truth, s.rms_error) {
                 (Some(t), Some(rms)) => format!(
-                    ": RMS error {rms:.1} N/m (true values 0..{:.1} N/m)",
-                    t.iter().copied().fold(0.0, f64::max)
+                    ": RMS error {rms:.1} N/m (true values 0..{:.1} N/m; {} of {} within 2σ)",
+                    t.iter().copied().fold(0.0, f64::max),
+                    s.stiffness.iter().zip(&s.std).zip(t).filter(|((k, sd), t)| (*k - *t).abs() <= 2.0 * *sd).count(),
+                    t.len()
                 ),
                 _ => String::new(),
             };
@@ -156,6 +186,26 @@ impl Report {
                 c.label,
                 mm(c.mean_error),
                 mm(c.max_error)
+            ));
+        }
+        if r.largest_feature_motion < STILL_NOISES * r.observation_std {
+            lines.push(format!(
+                "warning      the features hardly move: at most {:.3} mm from rest, under {STILL_NOISES} times the \
+                 observation noise ({:.3} mm): there is no motion to identify the tissue from",
+                mm(r.largest_feature_motion),
+                mm(r.observation_std)
+            ));
+        }
+        let gated_share = r.gated_components as f64 / r.measured_components.max(1) as f64;
+        if gated_share > GATED_SHARE {
+            lines.push(format!(
+                "warning      the validation gate left out {} of the {} tracked components ({:.0} %): the \
+                 estimate rests on the {} it kept; a camera that moved, tracks offset (in another frame or unit?), \
+                 or a gate too tight (--gate)",
+                r.gated_components,
+                r.measured_components,
+                100.0 * gated_share,
+                r.measured_components.saturating_sub(r.gated_components)
             ));
         }
         if let (components, steps @ 1..) = (r.gated_components, r.gated_steps) {
@@ -176,6 +226,17 @@ impl Report {
         lines
     }
 }
+
+/// The share of its prior's σ above which an estimate's σ from the observations says they told
+/// the filter little.
+const PRIOR_LEFT: f64 = 0.5;
+
+/// The observation noises a feature must move beyond, somewhere in the run, for the tracks to
+/// show a motion.
+const STILL_NOISES: f64 = 3.0;
+
+/// The share of the tracked components beyond which the gate is said to have left out the data.
+const GATED_SHARE: f64 = 0.1;
 
 /// The reduced misfit χ²/ν beyond which (or under whose inverse) the observations are said not to
 /// fit the model with their nominal noise: an effective noise twice the nominal, or half.

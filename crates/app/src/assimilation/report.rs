@@ -68,6 +68,12 @@ pub struct Report {
     pub assessment: Vec<AssessmentCase>,
     /// Steps of the estimated deformation written to `deformation.pvd`.
     pub deformation_frames: usize,
+    /// The observation noise the filter assumes (m).
+    pub observation_std: f64,
+    /// The farthest an observed feature moved from its rest position (m).
+    pub largest_feature_motion: f64,
+    /// The tracked components measured over the run (three a feature seen in a frame).
+    pub measured_components: usize,
     /// With a validation gate: the tracked components it left out over the run...
     pub gated_components: usize,
     /// ... and the steps they were left out of...
@@ -101,6 +107,8 @@ pub struct YoungReport {
     pub mean: f64,
     /// Final standard deviation (Pa).
     pub std: f64,
+    /// The prior's standard deviation (Pa).
+    pub prior_std: f64,
     /// The true value (synthetic only).
     pub truth: Option<f64>,
     /// First iteration from which every estimate stays within 1 % of the truth.
@@ -201,6 +209,7 @@ pub(super) fn young(trace: &Trace, truth: Option<f64>, out_dir: &Path) -> Result
     Ok(YoungReport {
         mean: last.mean_physical[0],
         std: last.std_physical[0],
+        prior_std: trace.records.first().map_or(f64::NAN, |r| r.std_physical[0]),
         truth,
         within_1_percent_from_iteration: within,
         within_1_percent_after_seconds: seconds,

@@ -77,6 +77,9 @@ pub struct Setup {
     /// Features whose rest position lies deeper below the mesh's surface than an element (id,
     /// depth in m): a camera tracks the surface.
     pub deep_features: Vec<(String, f64)>,
+    /// With a features file: the observed features whose frame-0 row (not read) lies more than
+    /// the observation noise from the rest position the file gives, with the largest distance (m).
+    pub rest_disagreement: Option<(usize, f64)>,
     /// Tracked points (features, assessment) outside the mesh moved onto its surface.
     pub projected: usize,
     /// The largest such move (m).
@@ -196,6 +199,7 @@ impl Experiment {
         let (problem, loads, tool_nodes) =
             sc.build_problem(mesh).map_err(|e| AssimilationError::Setup(e.to_string()))?;
         let locator = MeshLocator::new(&problem.mesh).context(|| "indexing the mesh for point location".into())?;
+        check_noise_scale(obs, mesh::box_diagonal(problem.mesh.bounds()))?;
         let unknowns = unknowns(sc, &problem.mesh)?;
 
         let setup = Setup {
@@ -213,6 +217,7 @@ impl Experiment {
             occluded: 0,
             blind_frames: 0,
             deep_features: Vec::new(),
+            rest_disagreement: None,
             projected: 0,
             max_projection: 0.0,
             reference: None,
@@ -430,6 +435,14 @@ impl Experiment {
         // Each file's rest positions, once: located, then checked against the file's motion.
         let mut at_rest = Vec::new();
         let observed_rest = tracks.observations.rest_positions(rest)?;
+        if rest.is_some() {
+            let apart: Vec<f64> = (0..observed_rest.len())
+                .filter_map(|j| Some(mesh::distance(tracks.observations.position(j, 0)?, observed_rest[j])))
+                .filter(|&d| d > self.filter_std)
+                .collect();
+            self.setup.rest_disagreement =
+                (!apart.is_empty()).then(|| (apart.len(), apart.iter().copied().fold(0.0, f64::max)));
+        }
         self.observed = locate_tracks(&tracks.observations, &observed_rest, rest, &mut finder)?;
         self.observed_ids = tracks.observations.ids.clone();
         // A camera sees the surface: a feature deep inside is another organ's, or a wrong position.
@@ -511,6 +524,16 @@ impl Experiment {
         self.observed.iter().map(|t| t.position(&self.base.mesh.nodes, &rest)).collect()
     }
 
+    /// The farthest any observed feature lies from its rest position in a frame that measures it (m).
+    fn largest_feature_motion(&self) -> f64 {
+        let rest = self.observed_points();
+        let moved = |f: &Frame| -> f64 {
+            let away = |(i, p): (usize, &Point)| (0..3).map(|c| (f.z[3 * i + c] - p[c]).powi(2)).sum::<f64>().sqrt();
+            rest.iter().enumerate().filter(|&(i, _)| f.available[3 * i]).map(away).fold(0.0, f64::max)
+        };
+        self.measurements.iter().map(moved).fold(0.0, f64::max)
+    }
+
     /// The organ's size: its mesh's box diagonal (m). No feature moves farther than that.
     pub fn organ_size(&self) -> f64 {
         mesh::box_diagonal(self.base.mesh.bounds())
@@ -570,7 +593,8 @@ impl Experiment {
             if let Some(a) = &self.assessment {
                 estimated_errors.push(mean_error(&tracked_positions(nodes, &a.points, &mean), &a.truth[k - 1]));
             }
-            if k % self.every == 0 {
+            // Every `every` steps, and the last (the final estimate's deformation).
+            if k % self.every == 0 || k == iterations {
                 let t_write = Instant::now();
                 let file = format!("deformation/step_{k:05}.vtu");
                 mesh::io::write_vtu(out_dir.join(&file), &self.base.mesh, &[Field::point("displacement", 3, mean)])
@@ -635,6 +659,9 @@ impl Experiment {
             springs,
             assessment,
             deformation_frames: frames.len(),
+            observation_std: self.filter_std,
+            largest_feature_motion: self.largest_feature_motion(),
+            measured_components: self.measurements.iter().map(|f| f.available.iter().filter(|&&a| a).count()).sum(),
             gated_components: trace.records.iter().map(|r| r.gated).sum(),
             gated_features: gated_features(trace, &self.observed_ids),
             gated_steps: trace.records.iter().filter(|r| r.gated > 0).count(),
@@ -681,6 +708,22 @@ impl Experiment {
             _ => innovation,
         }
     }
+}
+
+/// Refuses an observation noise (`noise_std`, `filter_std`, m) over a tenth of the organ's size
+/// (`size`, m): no camera tracks so badly; such a noise is one given in mm.
+fn check_noise_scale(obs: &ObservationSpec, size: f64) -> Result<(), AssimilationError> {
+    for (key, std) in [("noise_std", Some(obs.noise_std)), ("filter_std", obs.filter_std)] {
+        if let Some(std) = std.filter(|&std| std > 0.1 * size) {
+            return Err(AssimilationError::Setup(format!(
+                "observations.{key} = {std} m is {:.0} % of the organ's size ({:.0} mm): a tracking noise is in \
+                 metres (0.2 mm is 0.0002)",
+                100.0 * std / size,
+                mesh::length::mm(size)
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// The filter's parameters, in order: Young's modulus (if estimated), then one spring per node of Σ.
@@ -834,6 +877,8 @@ struct PointFinder<'a> {
     surface: SurfaceBvh,
     /// Half an element: how far outside the surface a feature is still moved onto it.
     reach: f64,
+    /// The mesh's box diagonal (m).
+    organ_size: f64,
     moved: Vec<f64>,
 }
 
@@ -841,7 +886,8 @@ impl<'a> PointFinder<'a> {
     fn new(mesh: &Mesh, locator: &'a MeshLocator) -> Result<Self, AssimilationError> {
         let surface = SurfaceBvh::new(&mesh::boundary_surface(mesh)).context(|| "indexing the mesh surface".into())?;
         let reach = 0.5 * (mesh.volume() / mesh.cells.len().max(1) as f64).cbrt();
-        Ok(PointFinder { locator, surface, reach, moved: Vec::new() })
+        let organ_size = mesh::box_diagonal(mesh.bounds());
+        Ok(PointFinder { locator, surface, reach, organ_size, moved: Vec::new() })
     }
 
     /// Whether `p` lies in the mesh or within [`PointFinder::reach`] of its surface (where it is located).
@@ -895,8 +941,12 @@ fn locate_tracks(
                 FemModelError::Invalid(why) => why,
                 other => other.to_string(),
             };
+            // Millimetres read as metres lie a thousand times too far out: farther from the organ than
+            // its size, and each inside it read so. (A feature just outside it fits when shrunk too,
+            // about an origin the organ holds: its unit is not blamed.)
             let mistake = UnitMistake { given: LengthUnit::Millimetre, expected: LengthUnit::Metre };
-            let in_mm = positions.iter().all(|p| finder.holds(p.map(|x| x * mistake.factor())));
+            let far = finder.surface.closest_point(*p).distance > finder.organ_size;
+            let in_mm = far && positions.iter().all(|p| finder.holds(p.map(|x| x * mistake.factor())));
             let hint = match in_mm {
                 true => format!(
                     ": read {}, every feature lies in the organ or on its surface; is the file {}? A header x_mm, \
