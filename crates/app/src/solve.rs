@@ -72,6 +72,21 @@ fn set_up_warnings(p: &fem::Problem, source: &scenario::MeshSource) -> Vec<Strin
         ));
     }
     lines.extend(doubts(p, source));
+    let coincident = mesh::coincident_points(&p.mesh.nodes);
+    if let Some(&(a, b)) = coincident.first() {
+        let at = p.mesh.nodes[a];
+        lines.push(format!(
+            "{} pair(s) of nodes lie at one place without being one node (the first: nodes {} and {}, at ({:.4}, \
+             {:.4}, {:.4}) m): the cells on either side are joined nowhere there, as across a crack; an export that \
+             did not merge its nodes (merge coincident nodes, e.g. Gmsh's Coherence)",
+            coincident.len(),
+            p.mesh.file_node(a),
+            p.mesh.file_node(b),
+            at[0],
+            at[1],
+            at[2]
+        ));
+    }
     if loads_the_whole_surface(p) {
         lines.push(
             "every boundary face carries a load, and no inner node: a [[force]] or [[traction]] whose \
@@ -490,6 +505,36 @@ mod tests {
             assert!(!warned(&lines(tip)), "{element}: {:?}", lines(tip));
             assert!(!warned(&lines("gravity = [0.0, 0.0, -9.81]\n")), "{element}");
         }
+    }
+
+    /// A bar exported in two halves whose nodes at the cut were not merged: held at both ends it
+    /// solves as two cantilevers, warned about; held at one end its loose half is named as such.
+    #[test]
+    fn nodes_an_export_left_unmerged_are_warned_about() {
+        let dir = tempfile::tempdir().unwrap();
+        let half = |x0: f64| mesh::box_tet([x0, 0.0, 0.0], [x0 + 0.05, 0.02, 0.02], [2, 1, 1]).unwrap();
+        let (left, right) = (half(0.0), half(0.05));
+        let (mesh::Cells::Tet4(a), mesh::Cells::Tet4(b)) = (&left.cells, &right.cells) else { panic!("tetrahedra") };
+        let n = left.num_nodes();
+        let nodes = [left.nodes.clone(), right.nodes.clone()].concat();
+        let cells = a.iter().copied().chain(b.iter().map(|t| t.map(|k| k + n))).collect();
+        let bar = mesh::Mesh::new(nodes, mesh::Cells::Tet4(cells)).unwrap();
+        mesh::io::write_mesh(dir.path().join("bar.vtu"), &bar, &[]).unwrap();
+        let scenario = |held: &str| {
+            format!(
+                "kind = \"static\"\nname = \"cut\"\ngravity = [0.0, 0.0, -9.81]\n[mesh.file]\npath = \"bar.vtu\"\n\
+                 [material]\nlaw = \"linear\"\nyoung = 5000.0\npoisson = 0.3\n{held}"
+            )
+        };
+        let ends = "[[fixed]]\nselect = { box = { min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] } }\n\
+                    [[fixed]]\nselect = { box = { min = [0.0999, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\n";
+        let lines = solved_lines(dir.path(), &scenario(ends));
+        let warning = lines.iter().find(|l| l.contains("lie at one place without being one node")).expect("warned");
+        assert!(warning.starts_with("warning    4 pair(s) of nodes") && warning.contains("at (0.0500,"), "{warning}");
+        let one_end = &ends[..ends.rfind("[[fixed]]").unwrap()];
+        std::fs::write(dir.path().join("scenario.toml"), scenario(one_end)).unwrap();
+        let e = format!("{:#}", solve_scenario(&dir.path().join("scenario.toml"), |_, _| {}).err().unwrap());
+        assert!(e.contains("meet the rest only at nodes that lie where its own do but are not merged"), "{e}");
     }
 
     /// A quadratic mesh held at the corners of a face only (landmarks near the corners: a linear

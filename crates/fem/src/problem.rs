@@ -290,7 +290,17 @@ impl Problem {
         // How each loose piece meets the rest: by shared nodes (an edge or a vertex), or not at all.
         let owners = pieces.owners(self.mesh.num_nodes());
         let touching = loose.iter().filter(|&&p| pieces.nodes[p].iter().any(|&n| owners[n] > 1)).count();
+        // Or at nodes of their own where the rest has its own (an export that did not merge them).
+        let mut unmerged = vec![false; self.mesh.num_nodes()];
+        mesh::coincident_points(&self.mesh.nodes)
+            .into_iter()
+            .for_each(|(a, b)| (unmerged[a], unmerged[b]) = (true, true));
+        let at_unmerged = loose.iter().filter(|&&p| pieces.nodes[p].iter().any(|&n| unmerged[n])).count();
         let how = match touching {
+            0 if at_unmerged == loose.len() => {
+                "meet the rest only at nodes that lie where its own do but are not merged with them (an export \
+                 that kept them apart: merge coincident nodes)"
+            }
             0 => "lie apart from the rest, touching it nowhere",
             t if t == loose.len() => "hang on the rest by an edge or a vertex",
             _ => "hang on the rest by an edge or a vertex, or lie apart from it",

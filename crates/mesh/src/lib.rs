@@ -463,6 +463,24 @@ pub fn bounds(points: &[Point]) -> (Point, Point) {
     (lo, hi)
 }
 
+/// The pairs of distinct points that coincide (within a billionth of their box's diagonal), each
+/// `(i, j)` with `i < j`, in order: a mesh's nodes that an exporter did not merge.
+pub fn coincident_points(points: &[Point]) -> Vec<(usize, usize)> {
+    let tolerance = 1e-9 * box_diagonal(bounds(points));
+    let mut order: Vec<usize> = (0..points.len()).collect();
+    order.sort_by(|&a, &b| points[a][0].total_cmp(&points[b][0]));
+    let mut pairs = Vec::new();
+    for (k, &i) in order.iter().enumerate() {
+        for &j in order[k + 1..].iter().take_while(|&&j| points[j][0] - points[i][0] <= tolerance) {
+            if distance(points[i], points[j]) <= tolerance {
+                pairs.push((i.min(j), i.max(j)));
+            }
+        }
+    }
+    pairs.sort_unstable();
+    pairs
+}
+
 /// The diagonal of the box `(lo, hi)` (e.g. of [`bounds`]): the size of an organ, or of a set of points.
 pub fn box_diagonal((lo, hi): (Point, Point)) -> f64 {
     norm(sub(hi, lo))
