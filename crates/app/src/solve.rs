@@ -290,6 +290,14 @@ impl Solved {
             )),
             None => {}
         }
+        if !moved && !(0..p.mesh.num_nodes()).any(loaded) {
+            lines.push(
+                "nothing loads the body ([[force]], [[traction]], [[patch_force]], gravity or a [[prescribed]] \
+                 displacement): the solution is its rest state (a scenario made to be loaded elsewhere, as \
+                 registration does?)"
+                    .into(),
+            );
+        }
         if !moved
             && (0..p.mesh.num_nodes()).any(loaded)
             && (0..p.mesh.num_nodes()).all(|n| !loaded(n) || p.dirichlet.contains_key(&n))
@@ -302,6 +310,22 @@ impl Solved {
         }
         lines.extend(self.hanging_warning.iter().cloned());
         lines.extend(set_up_warnings(p, &scenario.mesh));
+        for (k, force) in scenario.force.iter().enumerate() {
+            let Ok(nodes) = scenario::source::select_nodes(&force.select, &p.mesh, &scenario.mesh, "force") else {
+                continue;
+            };
+            let strays = fem::force_strays(&p.mesh, &nodes);
+            if let Some(&first) = strays.first() {
+                lines.push(format!(
+                    "force {}: {} of its {} selected nodes lie apart from the boundary faces it acts on (the first: \
+                     node {}) and carry none of it: a force spreads over the faces its selection wholly covers",
+                    k + 1,
+                    strays.len(),
+                    nodes.len(),
+                    p.mesh.file_node(first)
+                ));
+            }
+        }
         let (inverted, smallest) = post::inverted_cells(geo, p.material.law, &sol.u)?;
         if inverted > 0 {
             lines.push(format!(
@@ -505,6 +529,39 @@ mod tests {
             assert!(!warned(&lines(tip)), "{element}: {:?}", lines(tip));
             assert!(!warned(&lines("gravity = [0.0, 0.0, -9.81]\n")), "{element}");
         }
+    }
+
+    /// A node listed with a force's end face but apart from it carries none of the force: said;
+    /// the face alone, or a ball's rim (nodes beside the faces it loads), is not. A scenario that
+    /// loads nothing is said to.
+    #[test]
+    fn a_force_s_stray_nodes_and_a_body_loaded_by_nothing_are_warned_about() {
+        let dir = tempfile::tempdir().unwrap();
+        let bar = mesh::box_hex([0.0; 3], [0.1, 0.02, 0.02], [4, 1, 1]).unwrap();
+        let end: Vec<usize> = (0..bar.num_nodes()).filter(|&n| bar.nodes[n][0] > 0.0999).collect();
+        let middle = (0..bar.num_nodes()).find(|&n| (bar.nodes[n][0] - 0.05).abs() < 1e-9).unwrap();
+        let lines = |force: &str| {
+            let text = format!(
+                "kind = \"static\"\nname = \"bar\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.1, 0.02, 0.02]\n\
+                 cells = [4, 1, 1]\nelement = \"hex\"\n[material]\nlaw = \"linear\"\nyoung = 5000.0\n\
+                 poisson = 0.3\n[[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] }} }}\n\
+                 {force}"
+            );
+            solved_lines(dir.path(), &text)
+        };
+        let force =
+            |nodes: &[usize]| format!("[[force]]\nselect = {{ list = {nodes:?} }}\ntotal = [0.0, 0.0, -0.01]\n");
+        let stray = |lines: &[String]| lines.iter().find(|l| l.contains("lie apart from the boundary faces")).cloned();
+        let with_middle = lines(&force(&[end.clone(), vec![middle]].concat()));
+        let warning = stray(&with_middle).expect("warned");
+        assert!(warning.starts_with(&format!("warning    force 1: 1 of its 5 selected nodes")), "{warning}");
+        assert!(warning.contains(&format!("(the first: node {middle})")), "{warning}");
+        assert_eq!(stray(&lines(&force(&end))), None);
+        let ball = "[[force]]\nselect = { ball = { centre = [0.05, 0.02, 0.01], radius = 0.03 } }\n\
+                    total = [0.0, 0.0, -0.01]\n";
+        assert_eq!(stray(&lines(ball)), None);
+        let nothing = lines("");
+        assert!(nothing.iter().any(|l| l.starts_with("warning    nothing loads the body")), "{nothing:?}");
     }
 
     /// A bar exported in two halves whose nodes at the cut were not merged: held at both ends it

@@ -47,7 +47,7 @@ pub mod verification;
 pub use element::ElementGeometry;
 pub use geometric::Attachment;
 pub use material::{Formulation, Law, Material};
-pub use problem::{force_shares, nodal_masses, PointSpring, Problem};
+pub use problem::{force_shares, force_strays, nodal_masses, PointSpring, Problem};
 pub use solver::{Continuation, Solution, SolveProgress, SolverOptions, StaticSolver, Timings};
 
 /// `n` zeros, written now: a buffer made so has its pages touched when it is built rather than
@@ -87,9 +87,15 @@ pub enum FemError {
     #[error(
         "Saint-Venant-Kirchhoff passed its compressive limit point beyond load factor {load_factor:.3}, where element \
          {element} is compressed to a principal stretch of {stretch:.3} (SVK's uniaxial stress peaks at 1/sqrt(3) = \
-         {limit:.3} and falls beyond, so no equilibrium exists under the full load); use law = \"neo_hookean\" for \
-         large compression",
-        limit = material::SVK_LIMIT_STRETCH
+         {limit:.3} and falls beyond, so no equilibrium exists under the full load){buckling}; use law = \
+         \"neo_hookean\" for large compression",
+        limit = material::SVK_LIMIT_STRETCH,
+        buckling = if *stretch > material::SVK_BUCKLING_STRETCH {
+            ", or the body buckled (no element is compressed by a fifth: a slender part under compression buckles \
+             under any law; neo_hookean, which has no such limit, tells the two apart)"
+        } else {
+            ""
+        }
     )]
     LimitPoint {
         /// The most compressed element at the last equilibrium, or in the failing iterate when no
@@ -194,7 +200,10 @@ fn stiffness_note(softening: f64, indefinite: bool) -> String {
     } else if indefinite {
         lost.to_string()
     } else if softening.is_finite() {
-        format!(": the response there was still {softening:.1} % as stiff as at rest (no sign of a limit point)")
+        format!(
+            ": the response there was still {softening:.1} % as stiff as at rest (no sign of a limit point: more \
+             iterations, [solver] max_iterations, or more load_steps may find it)"
+        )
     } else {
         String::new()
     }

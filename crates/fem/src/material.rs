@@ -79,6 +79,11 @@ impl Formulation {
 /// compressed further, the stress falls.
 pub const SVK_LIMIT_STRETCH: f64 = 0.577_350_269_189_625_8;
 
+/// The smallest principal stretch above which a body that lost its stability under SVK may have
+/// buckled rather than passed SVK's limit: a block crushed by a force reaches its limit point
+/// with its most compressed element at 0.65 to 0.8, a slender column buckles at 0.84.
+pub const SVK_BUCKLING_STRETCH: f64 = 0.8;
+
 /// Poisson's ratio from which [`Formulation::Auto`] selects F-bar.
 pub const FBAR_POISSON: f64 = 0.45;
 

@@ -397,6 +397,19 @@ pub fn force_shares(mesh: &Mesh, nodes: &[usize]) -> Vec<(usize, f64)> {
     nodes.iter().map(|&n| (n, share)).collect()
 }
 
+/// The nodes of `nodes` that a force on them ([`force_shares`]) leaves out and that share no
+/// boundary face with a node it loads: selected apart from the patch it acts on (a node of a
+/// list, a second region), not at the patch's rim, each carrying none of it.
+pub fn force_strays(mesh: &Mesh, nodes: &[usize]) -> Vec<usize> {
+    let mut loaded = vec![false; mesh.num_nodes()];
+    force_shares(mesh, nodes).into_iter().for_each(|(n, _)| loaded[n] = true);
+    let mut beside = loaded.clone();
+    for face in boundary_faces(mesh).iter().filter(|f| f.nodes.iter().any(|&n| loaded[n])) {
+        face.nodes.iter().for_each(|&n| beside[n] = true);
+    }
+    nodes.iter().copied().filter(|&n| !beside[n]).collect()
+}
+
 /// Lumped area (m²) of each node on the boundary faces wholly made of `nodes`, in order of
 /// first appearance; nodes on no such face are left out.
 fn node_areas(mesh: &Mesh, nodes: &[usize]) -> Vec<(usize, f64)> {

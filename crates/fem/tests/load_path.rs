@@ -109,6 +109,7 @@ fn no_equilibrium_names_a_limit_point_only_where_the_path_was_seen_to_soften() {
     let stiff =
         FemError::NoEquilibrium { load_factor: 0.094, softening: 69.2, indefinite: false, iterations: 10 }.to_string();
     assert!(stiff.contains("69.2 % as stiff") && stiff.contains("no sign of a limit point"), "{stiff}");
+    assert!(stiff.contains("[solver] max_iterations"), "{stiff}");
     let turned =
         FemError::NoEquilibrium { load_factor: 0.96, softening: -0.6, indefinite: false, iterations: 681 }.to_string();
     assert!(turned.contains("the load path had turned there") && !turned.contains("-0.6 % as stiff"), "{turned}");
@@ -179,6 +180,7 @@ fn settings_that_cannot_solve_are_refused() {
         (SolverOptions { load_steps: 0, ..default.clone() }, "load_steps = 0"),
         (SolverOptions { max_iterations: 0, ..default.clone() }, "max_iterations = 0"),
         (SolverOptions { rtol: 0.0, ..default.clone() }, "rtol = 0"),
+        (SolverOptions { rtol: 0.5, ..default.clone() }, "rtol = 0.5 would take a residual cut by less than"),
         (SolverOptions { utol: f64::NAN, ..default.clone() }, "utol = NaN"),
     ] {
         let mut solver = StaticSolver::new(hanging_block(0.01)).unwrap();

@@ -151,7 +151,14 @@ impl ScenarioText {
                 format!("this is a scenario of kind `{}`; one of kind `{}` is needed here", kind.key(), expected.key()),
             ));
         }
-        let invalid = |e: &dyn std::fmt::Display| ScenarioError::invalid(&self.origin, e.to_string());
+        let invalid = |e: &dyn std::fmt::Display| {
+            let mut message = e.to_string();
+            if message.contains("wanted exactly 1 element, more than 1 element") {
+                message += "(a table that is one of several kinds, as [mesh.box] or [mesh.file], or a selection's \
+                            box or ball, is given more than one of them here: keep one)";
+            }
+            ScenarioError::invalid(&self.origin, message)
+        };
         let mut table: toml::Table = toml::from_str(&body).map_err(|e| invalid(&e))?;
         anchor_landmark_files(&mut table, &self.dir);
         // The table, its landmark files now starting at the scenario's directory; an error is

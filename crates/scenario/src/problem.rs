@@ -220,6 +220,9 @@ impl StaticScenario {
         }
         for (k, s) in self.springs.iter().enumerate() {
             finite("springs", k, "stiffness", &[s.stiffness])?;
+            if s.stiffness < 0.0 {
+                return Err(fail(format!("springs {}: stiffness = {} N/m must be at least 0", k + 1, s.stiffness)));
+            }
             let nodes = pick(&s.select, "springs", &p)?;
             p.add_springs(&nodes, s.stiffness);
         }
@@ -245,6 +248,9 @@ impl StaticScenario {
             p.add_patch_force(&ball, facing, f.total).map_err(|e| fail(format!("patch force {}: {e}", k + 1)))?;
         }
         if let Some(g) = self.gravity {
+            if !g.iter().all(|v| v.is_finite()) {
+                return Err(fail(format!("gravity = {g:?} must be finite")));
+            }
             p.add_gravity(g).map_err(|e| fail(format!("gravity: {e}")))?;
         }
         Ok(p)

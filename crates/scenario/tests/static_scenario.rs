@@ -134,6 +134,17 @@ fn a_byte_order_mark_is_read_and_unusable_numbers_are_named() {
                  total = [inf, 0.0, 0.0]\n";
     let err = parse(&format!("{text}{force}")).unwrap().build_problem(Path::new(".")).unwrap_err().to_string();
     assert!(err.contains("force 1: total = [inf, 0.0, 0.0] must be finite"), "{err}");
+    // Gravity and springs are named too, as their keys give them.
+    let gravity = text.replace("name = \"b\"\n", "name = \"b\"\ngravity = [0.0, 0.0, nan]\n");
+    let err = parse(&gravity).unwrap().build_problem(Path::new(".")).unwrap_err().to_string();
+    assert!(err.contains("gravity = [0.0, 0.0, NaN] must be finite"), "{err}");
+    let springs = "[[springs]]\nselect = { box = { min = [0.099, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\n\
+                   stiffness = -10.0\n";
+    let err = parse(&format!("{text}{springs}")).unwrap().build_problem(Path::new(".")).unwrap_err().to_string();
+    assert!(err.contains("springs 1: stiffness = -10 N/m must be at least 0"), "{err}");
+    // Two meshes: one is kept.
+    let err = parse(&format!("{text}[mesh.phantom]\ntets = 500\n")).unwrap_err().to_string();
+    assert!(err.contains("is given more than one of them here: keep one"), "{err}");
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("m.vtu");
     mesh::io::write_vtu(&file, &mesh::box_tet([0.0; 3], [1.0; 3], [1, 1, 1]).unwrap(), &[]).unwrap();

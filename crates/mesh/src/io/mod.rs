@@ -548,7 +548,12 @@ pub fn overwritten<'a>(written: &[&'a Path], read: &[&'a Path]) -> Option<(&'a P
 /// Whether [`write_atomic`] could write `path`, checked before long work whose result it is to hold:
 /// its directory is created and a temporary file made there (and removed), as the write would.
 pub fn check_writable(path: &Path) -> Result<(), WriteError> {
-    temporary_beside(path).map(drop).map_err(|error| WriteError { path: path.to_path_buf(), error })
+    let error = |error| WriteError { path: path.to_path_buf(), error };
+    if path.is_dir() {
+        let message = format!("{} is a directory: name a file", path.display());
+        return Err(error(std::io::Error::new(std::io::ErrorKind::IsADirectory, message)));
+    }
+    temporary_beside(path).map(drop).map_err(error)
 }
 
 /// A temporary file in `path`'s directory (created when missing; an error naming the part of the
@@ -1072,5 +1077,8 @@ mod tests {
         assert!(!fine.exists());
         let names: Vec<_> = fs::read_dir(dir.path().join("new")).unwrap().collect();
         assert!(names.is_empty(), "no temporary file is left");
+        // A directory named as the file (`-o out.vtu` where a folder of that name is).
+        let e = check_writable(&dir.path().join("new")).unwrap_err().to_string();
+        assert!(e.contains("new is a directory: name a file"), "{e}");
     }
 }
