@@ -104,9 +104,13 @@ impl std::fmt::Display for NodeSelection {
             },
             NodeSelection::Ball(ball) => write!(f, "ball of radius {} m about {:?}", ball.radius, ball.centre),
             NodeSelection::Near(near) => {
-                let file = near.file.as_ref().map(|p| format!(" and those of {}", p.display())).unwrap_or_default();
                 let surface = if near.surface { "surface nodes" } else { "nodes" };
-                write!(f, "{surface} within {} m of {} landmarks{file}", near.distance, near.points.len())
+                let landmarks = match (near.points.len(), &near.file) {
+                    (0, Some(file)) => format!("the landmarks of {}", file.display()),
+                    (n, Some(file)) => format!("{n} landmarks and those of {}", file.display()),
+                    (n, None) => format!("{n} landmarks"),
+                };
+                write!(f, "{surface} within {} m of {landmarks}", near.distance)
             }
         }
     }
@@ -170,8 +174,8 @@ impl NodeSelection {
         Ok(nodes)
     }
 
-    /// Where a ball or box that picked nothing is ten times the mesh's size or more, or lies
-    /// that far from it, the question whether its coordinates are in another unit than the
+    /// Where a ball or box that picked nothing is ten times the mesh's size or more, or it or the
+    /// nearest of a [`Near`]'s landmarks lies that far from it, the question whether its coordinates are in another unit than the
     /// mesh's metres; empty otherwise.
     fn unit_hint(&self, mesh: &Mesh) -> String {
         let (lo, hi) = mesh.bounds();
@@ -180,12 +184,26 @@ impl NodeSelection {
         let reach = match self {
             NodeSelection::Ball(ball) => ball.radius.max(outside(ball.centre)),
             NodeSelection::Box { min, max } => crate::longest_side((*min, *max)).max(outside(*min).min(outside(*max))),
+            // The nearest landmark's distance from the mesh's box.
+            NodeSelection::Near(near) => match near.landmarks() {
+                Ok(landmarks) => landmarks.into_iter().map(outside).fold(f64::INFINITY, f64::min),
+                Err(_) => return String::new(),
+            },
             _ => return String::new(),
         };
         if !(size > 0.0 && reach >= 10.0 * size) {
             return String::new();
         }
-        format!(" (the mesh spans {size:.3} m; a scenario's coordinates are in metres, whatever its mesh file's unit: are these in millimetres?)")
+        let header = match self {
+            NodeSelection::Near(Near { file: Some(_), .. }) => {
+                "; a landmarks file's header x_mm, y_mm, z_mm names its unit"
+            }
+            _ => "",
+        };
+        format!(
+            " (the mesh spans {size:.3} m; a scenario's coordinates are in metres, whatever its mesh file's unit: are \
+             these in millimetres?{header})"
+        )
     }
 }
 
@@ -258,10 +276,7 @@ impl Near {
         if !(self.distance >= 0.0 && self.distance.is_finite()) {
             return Err(MeshError::Invalid(format!("near: distance = {} must be non-negative", self.distance)));
         }
-        let mut landmarks = self.points.clone();
-        if let Some(file) = &self.file {
-            landmarks.extend(crate::io::points::read_points_csv(file)?);
-        }
+        let landmarks = self.landmarks()?;
         if landmarks.is_empty() {
             return Err(MeshError::Invalid("near: no landmark (give `points` or a `file`)".into()));
         }
@@ -271,6 +286,17 @@ impl Near {
             .into_iter()
             .filter(|&n| landmarks.iter().any(|&l| crate::distance(mesh.nodes[n], l) <= self.distance))
             .collect())
+    }
+}
+
+impl Near {
+    /// Its landmarks: its points and its file's (m).
+    fn landmarks(&self) -> Result<Vec<Point>, MeshError> {
+        let mut landmarks = self.points.clone();
+        if let Some(file) = &self.file {
+            landmarks.extend(crate::io::points::read_points_csv(file)?);
+        }
+        Ok(landmarks)
     }
 }
 

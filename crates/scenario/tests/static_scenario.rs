@@ -210,4 +210,9 @@ fn an_empty_selection_on_a_mesh_of_metres_asks_for_its_unit() {
         let e = with(&cube(200.0), unrelated);
         assert!(e.contains("force selection: ") && !e.contains("the mesh spans"), "{e}");
     }
+    // Landmarks in mm under a bare header, about a 20 cm organ: their file's header is named.
+    std::fs::write(dir.path().join("mm.csv"), "x,y,z\n100,100,200\n").unwrap();
+    let e = with(&cube(0.2), "{ near = { file = \"mm.csv\", distance = 0.01 } }");
+    assert!(e.contains("within 0.01 m of the landmarks of ") && e.contains("mm.csv picks no node"), "{e}");
+    assert!(e.contains("are these in millimetres?; a landmarks file's header x_mm, y_mm, z_mm names its unit"), "{e}");
 }
