@@ -26,6 +26,9 @@ pub struct Solved {
     /// The warning of the pieces of the mesh left out of the solve: pieces that hang on the rest
     /// by an edge or a vertex and carry nothing.
     pub hanging_warning: Option<String>,
+    /// Whether the tangent stiffness at the solution is positive definite: a stable equilibrium
+    /// ([`StaticSolver::stable_at`]).
+    pub stable: bool,
 }
 
 /// Loads the static scenario `path` (a file or a built-in name), builds its problem and solves it.
@@ -163,7 +166,9 @@ fn solve(
         anyhow::Error::new(e).context(format!("static solve{hint}"))
     })?;
     let reaction = solver.reaction_forces(&solution.u)?;
-    Ok(Solved { scenario, solver, solution, reaction, hanging_warning })
+    // The linear law's tangent is its constant stiffness, positive definite on a held body.
+    let stable = scenario.material.law == Law::Linear || solver.stable_at(&solution.u)?;
+    Ok(Solved { scenario, solver, solution, reaction, hanging_warning, stable })
 }
 
 impl Solved {
@@ -289,6 +294,14 @@ impl Solved {
                  follows the path and stops there"
             )),
             None => {}
+        }
+        if !self.stable {
+            lines.push(
+                "the tangent stiffness at the equilibrium found is indefinite: it is unstable, past a bifurcation \
+                 (a column pressed straight beyond its buckling load: a slight disturbance would bend it); a small \
+                 sideways load shows the shape the body takes"
+                    .into(),
+            );
         }
         if !moved && !(0..p.mesh.num_nodes()).any(loaded) {
             lines.push(
@@ -562,6 +575,26 @@ mod tests {
         assert_eq!(stray(&lines(ball)), None);
         let nothing = lines("");
         assert!(nothing.iter().any(|l| l.starts_with("warning    nothing loads the body")), "{nothing:?}");
+    }
+
+    /// A straight column pressed past its buckling load (Euler's, about 21 N here) is found in its
+    /// straight equilibrium, unstable: warned about; under half that load, not.
+    #[test]
+    fn an_unstable_equilibrium_is_warned_about() {
+        let dir = tempfile::tempdir().unwrap();
+        let lines = |force: f64| {
+            let text = format!(
+                "kind = \"static\"\nname = \"column\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 0.1, 0.1]\n\
+                 cells = [20, 2, 2]\nelement = \"hex\"\n[material]\nlaw = \"neo_hookean\"\nyoung = 1.0e6\n\
+                 poisson = 0.3\n[[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] }} }}\n\
+                 [[force]]\nselect = {{ box = {{ min = [0.999, -1.0, -1.0], max = [2.0, 1.0, 1.0] }} }}\n\
+                 total = [{force}, 0.0, 0.0]\n"
+            );
+            solved_lines(dir.path(), &text)
+        };
+        let unstable = |lines: &[String]| lines.iter().any(|l| l.contains("at the equilibrium found is indefinite"));
+        assert!(unstable(&lines(-30.0)), "{:?}", lines(-30.0));
+        assert!(!unstable(&lines(-10.0)), "{:?}", lines(-10.0));
     }
 
     /// A bar exported in two halves whose nodes at the cut were not merged: held at both ends it

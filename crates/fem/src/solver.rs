@@ -603,6 +603,17 @@ impl StaticSolver {
         Ok(f)
     }
 
+    /// Whether the tangent stiffness at `u` (an equilibrium a solve found) is positive definite:
+    /// a stable equilibrium. An indefinite one is unstable (past a bifurcation: a straight column
+    /// pressed beyond its buckling load, which a disturbance would bend). One assembly and
+    /// factorisation, kept as the solver's latest factor.
+    pub fn stable_at(&mut self, u: &[f64]) -> Result<bool, FemError> {
+        let mut f_int = vec![0.0; u.len()];
+        let mut stats = Stats::default();
+        self.refactorize(u, &mut f_int, false, &mut stats)?;
+        Ok(!stats.indefinite)
+    }
+
     /// The forces the supports exert on the body at `u` (N, 3 per node): a node's springs (node
     /// springs, −k u, and point springs, −Σ w K (x − t): an attachment's foundation) and at a held
     /// dof (fixed or prescribed) the hold, f_int − f_ext less the springs' part (CalculiX's RF
