@@ -567,7 +567,7 @@ mod tests {
         let stray = |lines: &[String]| lines.iter().find(|l| l.contains("lie apart from the boundary faces")).cloned();
         let with_middle = lines(&force(&[end.clone(), vec![middle]].concat()));
         let warning = stray(&with_middle).expect("warned");
-        assert!(warning.starts_with(&format!("warning    force 1: 1 of its 5 selected nodes")), "{warning}");
+        assert!(warning.starts_with("warning    force 1: 1 of its 5 selected nodes"), "{warning}");
         assert!(warning.contains(&format!("(the first: node {middle})")), "{warning}");
         assert_eq!(stray(&lines(&force(&end))), None);
         let ball = "[[force]]\nselect = { ball = { centre = [0.05, 0.02, 0.01], radius = 0.03 } }\n\

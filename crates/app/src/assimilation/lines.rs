@@ -3,6 +3,7 @@
 use filter::{Execution, SigmaPointSet};
 use mesh::length::mm;
 
+use super::report::YoungReport;
 use super::{ObservationFiles, Report, Setup};
 
 impl Setup {
@@ -113,55 +114,7 @@ impl Report {
                 t.solves, t.assembly, t.factorizations_per_solve, t.factorization, t.triangular_solves, t.writing
             ),
         ];
-        if let Some(y) = &r.young {
-            let truth = match y.truth {
-                Some(t) => format!(
-                    " (truth {t:.0} Pa, error {:+.2} %, {:.1} σ), within 1 % {}",
-                    100.0 * (y.mean - t) / t,
-                    (y.mean - t).abs() / y.std,
-                    match (y.within_1_percent_from_iteration, y.within_1_percent_after_seconds) {
-                        (Some(k), Some(t)) => format!("from iteration {k} on ({t:.2} s of filter time)"),
-                        (Some(k), None) => format!("from iteration {k} on"),
-                        _ => "never (so far)".to_string(),
-                    }
-                ),
-                None => String::new(),
-            };
-            lines.push(format!("young        μ = {:.1} ± {:.1} Pa{truth}", y.mean, y.std));
-            let data_std = y.noise_std.unwrap_or(y.std);
-            if data_std > PRIOR_LEFT * y.prior_std {
-                lines.push(format!(
-                    "warning      the observations told the filter little: σ from them is {:.0} % of the prior's \
-                     ({:.1} Pa), so the estimate is mostly the prior (few frames, features that barely move, or a \
-                     prior far from the tissue's stiffness?)",
-                    100.0 * data_std / y.prior_std,
-                    y.prior_std
-                ));
-            }
-            if let Some((steps, change)) = y.drift.filter(|(_, change)| change.abs() > y.std) {
-                lines.push(format!(
-                    "warning      the estimate still moves: {change:+.1} Pa over the last {steps} iterations, {:.1} \
-                     times its σ, which does not say where more iterations would take it (--iterations)",
-                    change.abs() / y.std
-                ));
-            }
-            if let (Some(noise), Some(misfit)) = (y.noise_std, y.misfit) {
-                lines.push(format!(
-                    "discrepancy  σ = {:.1} Pa from the observation noise alone; misfit χ²/ν = {misfit:.3} \
-                     (effective observation noise {:.2} × nominal)",
-                    noise,
-                    misfit.sqrt()
-                ));
-                lines.extend(misfit_warning(misfit));
-            }
-            if let (Some(noise), None) = (y.noise_std, y.misfit) {
-                lines.push(format!(
-                    "warning      the misfit could not be measured: no frame's sigma points came near the final \
-                     estimate (it jumped away from where the frames were taken: a gate leaving most out, tracks \
-                     that do not fit the model?); σ = {noise:.1} Pa is the observation noise's alone"
-                ));
-            }
-        }
+        lines.extend(r.young.iter().flat_map(YoungReport::lines));
         if let Some(s) = &r.springs {
             let n = s.stiffness.len() as f64;
             let truth = match (&s.truth, s.rms_error) {
@@ -223,6 +176,61 @@ impl Report {
             ));
         }
         lines.push(format!("wall time    {:.2} s in all", r.total_seconds));
+        lines
+    }
+}
+
+impl YoungReport {
+    /// The estimate in words (against the truth when known), with what makes its σ doubtful.
+    fn lines(&self) -> Vec<String> {
+        let y = self;
+        let truth = match y.truth {
+            Some(t) => format!(
+                " (truth {t:.0} Pa, error {:+.2} %, {:.1} σ), within 1 % {}",
+                100.0 * (y.mean - t) / t,
+                (y.mean - t).abs() / y.std,
+                match (y.within_1_percent_from_iteration, y.within_1_percent_after_seconds) {
+                    (Some(k), Some(t)) => format!("from iteration {k} on ({t:.2} s of filter time)"),
+                    (Some(k), None) => format!("from iteration {k} on"),
+                    _ => "never (so far)".to_string(),
+                }
+            ),
+            None => String::new(),
+        };
+        let mut lines = vec![format!("young        μ = {:.1} ± {:.1} Pa{truth}", y.mean, y.std)];
+        let data_std = y.noise_std.unwrap_or(y.std);
+        if data_std > PRIOR_LEFT * y.prior_std {
+            lines.push(format!(
+                "warning      the observations told the filter little: σ from them is {:.0} % of the prior's \
+                 ({:.1} Pa), so the estimate is mostly the prior (few frames, features that barely move, or a \
+                 prior far from the tissue's stiffness?)",
+                100.0 * data_std / y.prior_std,
+                y.prior_std
+            ));
+        }
+        if let Some((steps, change)) = y.drift.filter(|(_, change)| change.abs() > y.std) {
+            lines.push(format!(
+                "warning      the estimate still moves: {change:+.1} Pa over the last {steps} iterations, {:.1} \
+                 times its σ, which does not say where more iterations would take it (--iterations)",
+                change.abs() / y.std
+            ));
+        }
+        if let (Some(noise), Some(misfit)) = (y.noise_std, y.misfit) {
+            lines.push(format!(
+                "discrepancy  σ = {:.1} Pa from the observation noise alone; misfit χ²/ν = {misfit:.3} \
+                 (effective observation noise {:.2} × nominal)",
+                noise,
+                misfit.sqrt()
+            ));
+            lines.extend(misfit_warning(misfit));
+        }
+        if let (Some(noise), None) = (y.noise_std, y.misfit) {
+            lines.push(format!(
+                "warning      the misfit could not be measured: no frame's sigma points came near the final \
+                 estimate (it jumped away from where the frames were taken: a gate leaving most out, tracks \
+                 that do not fit the model?); σ = {noise:.1} Pa is the observation noise's alone"
+            ));
+        }
         lines
     }
 }
