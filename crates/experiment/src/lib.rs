@@ -402,23 +402,46 @@ impl learn::Progress for Tenths<'_> {
 }
 
 /// Runs experiment `name` at `size` under `root/<name>/` (resuming what is there) and writes
-/// its `result.json`. A result already written at the same size by this build ([`BUILD`]) is
-/// returned as it is; one made by another build is made again.
+/// its `result.json`. A result already written at the same size by this build ([`BUILD`]), its
+/// figures there, is returned as it is; one made by another build, or missing a figure, is made
+/// again; one of the other size is refused (a quick run would replace hours of a paper one).
 pub fn run(name: Name, size: Size, root: &Path, progress: Progress) -> Result<ExperimentResult> {
     let dir = root.join(name.as_str());
     if let Some(done) = load(&dir)? {
         let file = dir.join(RESULT_FILE);
-        if reusable(&done, size, BUILD) {
-            progress.line(&format!("{}: already done at this size by this build ({})", name.as_str(), file.display()));
-            return Ok(done);
+        if done.size != size {
+            bail!(
+                "{}: {} holds its {} result, which a {} run would replace: give another --out, or remove it to run \
+                 it again",
+                name.as_str(),
+                file.display(),
+                done.size.as_str(),
+                size.as_str()
+            );
         }
-        if done.size == size {
-            let made_by = if done.build.is_empty() { "an unnamed build".to_string() } else { done.build };
-            progress.line(&format!(
-                "{}: {} was made by {made_by}, this is {BUILD}: running it again on the folder's data",
+        let missing = done.figures.iter().find(|f| !dir.join(f).exists());
+        match (missing, reusable(&done, size, BUILD)) {
+            (None, true) => {
+                progress.line(&format!(
+                    "{}: already done at this size by this build ({})",
+                    name.as_str(),
+                    file.display()
+                ));
+                return Ok(done);
+            }
+            (Some(figure), _) => progress.line(&format!(
+                "{}: {figure}, a figure of {}, is missing: running it again on the folder's data",
                 name.as_str(),
                 file.display()
-            ));
+            )),
+            (None, false) => {
+                let made_by = if done.build.is_empty() { "an unnamed build".to_string() } else { done.build };
+                progress.line(&format!(
+                    "{}: {} was made by {made_by}, this is {BUILD}: running it again on the folder's data",
+                    name.as_str(),
+                    file.display()
+                ));
+            }
         }
     }
     let resumed = holds_earlier_work(&dir);

@@ -27,6 +27,10 @@ fn springs_experiment_writes_a_result_resumes_and_reports() {
     );
     let again = experiment::run(Name::Springs, Size::Quick, root.path(), &learn::Silent).unwrap();
     assert_eq!(again, result);
+    // A paper run would replace it: refused, the result kept.
+    let e = experiment::run(Name::Springs, Size::Paper, root.path(), &learn::Silent).unwrap_err().to_string();
+    assert!(e.contains("holds its quick result, which a paper run would replace"), "{e}");
+    assert_eq!(experiment::load(&root.path().join("springs")).unwrap().as_ref(), Some(&result));
     let all = experiment::load_all(root.path()).unwrap();
     assert_eq!(all, vec![result.clone()]);
     let [md, html] = experiment::report::write(root.path(), &all).unwrap();
@@ -128,6 +132,39 @@ fn the_readme_summary_and_the_results_page_come_from_the_same_results() {
     report::write_results_page(&page, std::slice::from_ref(&shown), dir.path()).unwrap();
     assert!(std::fs::read_to_string(&page).unwrap().contains("](young-young.png)"));
     assert_eq!(std::fs::read(dir.path().join("docs/young-young.png")).unwrap(), b"png");
+    // A README whose summary shows another experiment, or this one at paper size, is not rewritten
+    // from results that lack it: it keeps what it published.
+    let shown = std::fs::read_to_string(&readme).unwrap();
+    let more = shown.replace("(young quick)", "(young quick, stream paper)");
+    std::fs::write(&readme, &more).unwrap();
+    let e = report::update_markdown(&readme, std::slice::from_ref(&result)).unwrap_err().to_string();
+    assert!(e.contains("shows results that --out does not hold at their size (stream paper)"), "{e}");
+    assert_eq!(std::fs::read_to_string(&readme).unwrap(), more, "left as it was");
+    std::fs::write(&readme, shown.replace("(young quick)", "(young paper)")).unwrap();
+    let e = report::update_markdown(&readme, std::slice::from_ref(&result)).unwrap_err().to_string();
+    assert!(e.contains("(young paper)"), "{e}");
+    let paper = ExperimentResult { size: Size::Paper, ..result.clone() };
+    std::fs::write(&readme, &shown).unwrap();
+    report::update_markdown(&readme, std::slice::from_ref(&paper)).unwrap();
+    // A marker named in the text as well as placed, a README that is the results page, a page
+    // augsim did not write: refused before anything runs.
+    std::fs::write(&readme, format!("keep `{begin}` once\n{shown}")).unwrap();
+    let e = report::check_publish_paths(Some(&readme), None).unwrap_err().to_string();
+    assert!(e.contains("more than once (one in its text?)"), "{e}");
+    std::fs::write(&readme, &shown).unwrap();
+    let e = report::check_publish_paths(Some(&readme), Some(&readme)).unwrap_err().to_string();
+    assert!(e.contains("--readme and --results name one file"), "{e}");
+    let e = report::check_publish_paths(None, Some(&readme)).unwrap_err().to_string();
+    assert!(e.contains("is not a results page augsim wrote"), "{e}");
+    assert!(report::check_publish_paths(Some(&readme), Some(&page)).is_ok());
+    // Through a symbolic link, the file it names is rewritten, the link kept.
+    #[cfg(unix)]
+    {
+        let link = dir.path().join("LINK.md");
+        std::os::unix::fs::symlink(&readme, &link).unwrap();
+        report::update_markdown(&link, std::slice::from_ref(&result)).unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+    }
     std::fs::write(&readme, "no markers").unwrap();
     assert!(report::update_markdown(&readme, &[]).unwrap_err().to_string().contains("markers"));
 }
