@@ -7,6 +7,12 @@ use experiment::bench::Table;
 /// Runs every case of `tables` (all of them when none is named) `runs` times and prints the
 /// medians.
 pub fn run(runs: usize, tables: &[Table]) -> Result<()> {
-    let tables = if tables.is_empty() { &Table::ALL[..] } else { tables };
-    experiment::bench::bench(runs, tables, &mut |line| println!("{line}"))
+    // Each table once, in the order named (`bench solves solves` is one table).
+    let mut chosen: Vec<Table> = Vec::new();
+    for &table in if tables.is_empty() { &Table::ALL[..] } else { tables } {
+        if !chosen.contains(&table) {
+            chosen.push(table);
+        }
+    }
+    experiment::bench::bench(runs, &chosen, &mut |line| println!("{line}"))
 }
