@@ -33,7 +33,7 @@ use crate::printout::{comparison_rows, frame_line, rigid_lines, run_lines, setup
 use crate::registration::RegistrationSpec;
 
 /// The folder of a run's results: `out` when the user names one, refused when it already holds
-/// an earlier run's (its summary.json), so that two runs' files are never mixed; otherwise a
+/// anything ([`refuse_used_folder`]: an earlier run's results, a user's files); otherwise a
 /// fresh numbered folder under `parent` (`001`, `002`, …: the first free number), created. The
 /// flag says whether the folder is this run's own (a fresh numbered one, or an `out` that does not
 /// exist yet), which a run that fails before writing into it removes again.
@@ -42,7 +42,7 @@ pub fn run_dir(out: Option<&Path>, parent: &Path) -> Result<(PathBuf, bool)> {
         if dir.is_file() {
             anyhow::bail!("{} is a file, not a folder: give another --out", dir.display());
         }
-        refuse_earlier_run(dir)?;
+        refuse_used_folder(dir)?;
         return Ok((dir.to_path_buf(), !dir.exists()));
     }
     mesh::io::create_folder(parent)?;
@@ -70,10 +70,11 @@ pub fn in_run_dir<T>(out: Option<&Path>, parent: &Path, work: impl FnOnce(&Path)
 /// The file that holds a run's results, written last: a folder that has it holds a finished run.
 pub const SUMMARY_FILE: &str = "summary.json";
 
-/// Refuses a folder `dir` that holds the results of an earlier run (its summary.json), or the
+/// Refuses a folder `dir` that holds the results of an earlier run (its summary.json), the
 /// frames of one stopped before its summary (a registration's organ.vtu or organ_NNNN.vtu, an
-/// assimilation's deformation/step_NNNNN.vtu), so that two runs' files are never mixed.
-pub fn refuse_earlier_run(dir: &Path) -> Result<()> {
+/// assimilation's deformation/step_NNNNN.vtu), or any other file (a user's, a patient's set-up),
+/// so that two runs' files are never mixed and a run's files replace none of the user's.
+pub fn refuse_used_folder(dir: &Path) -> Result<()> {
     if dir.join(SUMMARY_FILE).exists() {
         anyhow::bail!(
             "{} holds the results of an earlier run (summary.json): give another --out, or remove it",
@@ -100,13 +101,31 @@ pub fn refuse_earlier_run(dir: &Path) -> Result<()> {
         (count(dir, &is_frame), "organ.vtu, organ_NNNN.vtu"),
         (count(&dir.join("deformation"), &is_step), "deformation/step_NNNNN.vtu"),
     ] {
-        if frames > 0 {
+        // (A patient's set-up holds its mesh as organ.vtu: said below.)
+        if frames > 0 && !dir.join(crate::setup::PATIENT_FILE).exists() {
             anyhow::bail!(
                 "{} holds {frames} frame(s) of an earlier run stopped before its summary ({files}): give another \
                  --out, or remove it",
                 dir.display()
             );
         }
+    }
+    let mut held: Vec<String> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    held.sort();
+    if !held.is_empty() {
+        let shown = held.iter().take(3).cloned().collect::<Vec<_>>().join(", ");
+        anyhow::bail!(
+            "{} holds {} file(s) or folder(s) of its own ({shown}{}): the run's files could replace them; give a new \
+             or empty --out",
+            dir.display(),
+            held.len(),
+            if held.len() > 3 { ", …" } else { "" }
+        );
     }
     Ok(())
 }
@@ -729,6 +748,20 @@ mod tests {
         std::fs::write(given.join("summary.json"), "{}").unwrap();
         let e = run_dir(Some(&given), &parent).unwrap_err().to_string();
         assert!(e.contains("holds the results of an earlier run"), "{e}");
+        // A user's own files, which the run's of the same names would replace; a patient's set-up
+        // (its mesh is organ.vtu, not a frame).
+        let notes = dir.path().join("notes");
+        std::fs::create_dir_all(&notes).unwrap();
+        std::fs::write(notes.join("targets.csv"), "mine").unwrap();
+        let e = run_dir(Some(&notes), &parent).unwrap_err().to_string();
+        assert!(e.contains("holds 1 file(s) or folder(s) of its own (targets.csv)"), "{e}");
+        let patient = dir.path().join("patient");
+        std::fs::create_dir_all(&patient).unwrap();
+        for file in [crate::setup::PATIENT_FILE, "organ.vtu"] {
+            std::fs::write(patient.join(file), "").unwrap();
+        }
+        let e = run_dir(Some(&patient), &parent).unwrap_err().to_string();
+        assert!(e.contains("holds 2 file(s) or folder(s) of its own (organ.vtu, registration.toml)"), "{e}");
     }
 
     /// Each frame's organ is moved by that frame's pose: a pose estimated again moves it anew.

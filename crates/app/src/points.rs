@@ -181,7 +181,21 @@ fn by_label(path: &Path, truth: LabelledPoints, labels: &[String]) -> Result<Vec
 /// (control points left out as not placed, several point lists read as one).
 pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<(LabelledPoints, Vec<String>)> {
     let mut points = read_points(path)?;
-    // A label names one target (in the results, in 3D Slicer, on the navigation system's stream).
+    check_targets(path, &points)?;
+    points.convert(None, LengthUnit::Metre, unit);
+    let warnings = reading_warnings(path, &points);
+    Ok((points, warnings))
+}
+
+/// Refuses the targets `points` read from `path` that hold none (a header alone, control points
+/// none of which is placed) or a label twice: a label names one target (in the results, in 3D
+/// Slicer, on the navigation system's stream).
+pub fn check_targets(path: &Path, points: &LabelledPoints) -> Result<()> {
+    if points.points.is_empty() {
+        let unplaced =
+            if points.unplaced.is_empty() { "" } else { " (none of its control points is placed in 3D Slicer)" };
+        anyhow::bail!("{} holds no targets{unplaced}", path.display());
+    }
     let mut seen = std::collections::HashMap::new();
     for (i, label) in points.labels.iter().enumerate().filter(|(_, l)| !l.is_empty()) {
         if let Some(first) = seen.insert(label.as_str(), i) {
@@ -194,9 +208,7 @@ pub fn read_targets(path: &Path, unit: LengthUnit) -> Result<(LabelledPoints, Ve
             );
         }
     }
-    points.convert(None, LengthUnit::Metre, unit);
-    let warnings = reading_warnings(path, &points);
-    Ok((points, warnings))
+    Ok(())
 }
 
 /// What a user should know of `points` as read from `path` ([`LabelledPoints::warnings`]), each

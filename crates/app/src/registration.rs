@@ -630,19 +630,9 @@ impl RegistrationSpec {
                 (LabelledPoints::new(points.iter().map(|&p| self.units.point_to_metres(p)).collect()), Vec::new())
             }
         };
+        // (A file without any is refused as it is read.)
         if targets.points.is_empty() {
-            match &self.targets {
-                TargetsSpec::File(path) => anyhow::bail!(
-                    "{} holds no targets{}",
-                    path.display(),
-                    if targets.unplaced.is_empty() {
-                        ""
-                    } else {
-                        " (none of its control points is placed in 3D Slicer)"
-                    }
-                ),
-                _ => anyhow::bail!("no targets: give a targets file, or a mesh with `markers` or `tumour` regions"),
-            }
+            anyhow::bail!("no targets: give a targets file, or a mesh with `markers` or `tumour` regions");
         }
         let options = RegistrationOptions {
             iterations: self.iterations.unwrap_or(options.iterations),

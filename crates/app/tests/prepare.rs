@@ -376,3 +376,40 @@ fn a_damaged_points_file_is_named_once_with_its_point() {
     assert_eq!(error.matches(&name).count(), 1, "{error}");
     assert!(error.contains("point 1 lies at [1e300") && error.contains("beyond 1e6"), "{error}");
 }
+
+/// Targets a registration would refuse (none but a header, a label twice), a camera inside the
+/// organ and a folder of other files are refused as the preparation starts, not after its dataset
+/// and model are made.
+#[test]
+fn inputs_a_set_up_could_not_use_are_refused_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let (surface, camera, attach, targets) = patient_files(dir.path(), false);
+    let options = |targets: &Path, camera: CameraAt| {
+        let mut options = PrepareOptions::new(surface.clone(), camera, attach.clone(), targets.to_path_buf());
+        (options.samples, options.tets) = (30, 800);
+        options
+    };
+    let refused = |options: &PrepareOptions, out: &str| {
+        format!("{:#}", prepare(options, &dir.path().join(out), &Told::default()).unwrap_err())
+    };
+    let header = dir.path().join("header.csv");
+    std::fs::write(&header, "x_mm,y_mm,z_mm\n").unwrap();
+    let error = refused(&options(&header, camera.clone()), "a");
+    assert!(error.ends_with("header.csv holds no targets"), "{error}");
+    let twice = dir.path().join("twice.csv");
+    let text = std::fs::read_to_string(&targets).unwrap().replacen('\n', ",label\n", 1);
+    let labelled: Vec<String> =
+        text.lines().enumerate().map(|(i, l)| if i == 0 { l.into() } else { format!("{l},tumour") }).collect();
+    std::fs::write(&twice, labelled.join("\n")).unwrap();
+    let error = refused(&options(&twice, camera.clone()), "b");
+    assert!(error.contains("twice.csv: the label `tumour` names two targets (points 1 and 2)"), "{error}");
+    let inside = mesh::io::points::read_points_csv(&targets).unwrap()[0];
+    let error = refused(&options(&targets, inside.into()), "c");
+    assert!(error.contains("lies inside the organ: give where the laparoscope looks from"), "{error}");
+    let notes = dir.path().join("notes");
+    std::fs::create_dir_all(&notes).unwrap();
+    std::fs::write(notes.join("report.md"), "mine").unwrap();
+    let error = refused(&options(&targets, camera.clone()), "notes");
+    assert!(error.contains("holds 1 file(s) or folder(s) of its own (report.md)"), "{error}");
+    assert_eq!(std::fs::read_to_string(notes.join("report.md")).unwrap(), "mine");
+}

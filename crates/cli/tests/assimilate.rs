@@ -74,7 +74,7 @@ fn synthetic_tracks_fed_back_and_bad_files() {
     std::fs::create_dir_all(d.join("mine/tracks")).unwrap();
     std::fs::write(d.join("mine/tracks/observations.csv"), "my own tracks").unwrap();
     let (ok, out) = assimilate(&[s, "-o", d.join("mine").to_str().unwrap()]);
-    assert!(!ok && out.contains("holds 1 file(s) or folder(s) (tracks)"), "{out}");
+    assert!(!ok && out.contains("holds 1 file(s) or folder(s) of its own (tracks)"), "{out}");
     assert_eq!(std::fs::read_to_string(d.join("mine/tracks/observations.csv")).unwrap(), "my own tracks");
     let (ok, out) = assimilate(&[s, "--every", "0", "-o", d.join("every").to_str().unwrap()]);
     assert!(!ok && out.contains("--every must be at least 1"), "{out}");

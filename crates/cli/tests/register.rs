@@ -196,8 +196,9 @@ fn units_are_parsed_the_same_by_every_command() {
     }
 }
 
-/// A folder that holds the run's input (its targets, the sequence's frames) is not written into:
-/// the run's targets.csv would replace the targets read, its organ files be read as frames next.
+/// A folder that holds the run's input (its targets, the sequence's frames), as any folder of
+/// files, is not written into: the run's targets.csv would replace the targets read, its organ
+/// files be read as frames next.
 #[test]
 fn an_output_folder_holding_an_input_is_refused() {
     let (dir, examples, seq) = sequence_folder();
@@ -206,10 +207,12 @@ fn an_output_folder_holding_an_input_is_refused() {
     std::fs::copy(examples.join("targets.csv"), &targets).unwrap();
     let before = std::fs::read(&targets).unwrap();
     let (cloud, targets) = (seq.join("f1.csv"), targets.to_str().unwrap().to_string());
-    for (input, out) in [(cloud.as_path(), dir.path()), (seq.as_path(), seq.as_path())] {
+    for (input, out, held) in
+        [(cloud.as_path(), dir.path(), "(seq, targets.csv)"), (seq.as_path(), seq.as_path(), "(f1.csv)")]
+    {
         let args = ["register", input.to_str().unwrap(), "--fem", "liver_corotational", "--units", "mm"];
         let (ok, text) = augsim(&[&args[..], &["--targets", &targets, "--out", out.to_str().unwrap()]].concat());
-        assert!(!ok && text.contains("which the run reads: the run's files could replace it"), "{text}");
+        assert!(!ok && text.contains(&format!("of its own {held}: the run's files could replace them")), "{text}");
         assert!(!text.contains("frame 0"), "registered first:\n{text}");
     }
     // A file given for the folder is named so before anything is read.

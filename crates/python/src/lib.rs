@@ -511,8 +511,8 @@ impl Registration {
     /// targets.mrk.json, organ_deformed.vtk, displacement.nrrd and, with `rigid=True`, rigid.tfm (mm; named
     /// targets_implausible.mrk.json and so on for a registration that is not plausible), all
     /// in the clouds' frame (`frame`, or its default), which they name when known; a directory
-    /// that holds an earlier run's results (its summary.json) is refused, as `augsim register`
-    /// refuses it. Raises ValueError for an array of another shape,
+    /// that holds an earlier run's results (its summary.json), or other files, is refused, as
+    /// `augsim register` refuses it. Raises ValueError for an array of another shape,
     /// AugsimError for a cloud augsim rejects (no point, a NaN) or a failed registration (the
     /// warm start is then kept). What to know of the files written (a displacement.nrrd left
     /// out, or folded somewhere) comes as an AugsimWarning, and so does a result that may not be
@@ -526,7 +526,7 @@ impl Registration {
             // A directory that cannot be made, or holds an earlier run's results, fails before the
             // cloud moves the warm start on.
             if let Some(dir) = &out {
-                app::output::refuse_earlier_run(dir)?;
+                app::output::refuse_used_folder(dir)?;
                 mesh::io::create_folder(dir)?;
             }
             let mut state = locked(&self.state)?;

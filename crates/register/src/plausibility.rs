@@ -203,8 +203,14 @@ fn truth_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option<Str
     };
     let readings = std::iter::once(("with x and y negated".to_string(), true, 1.0, frame.to_string()))
         .chain(UnitMistake::COMMON.map(unit));
+    let reordered = reordered_distance(targets, truth).map(|d| {
+        let question = "are its rows in another order than the targets'? Label both (a label column, or 3D \
+                        Slicer's markups), or give them in one order";
+        ("each matched to its nearest truth point".to_string(), d, question.to_string())
+    });
     let (how, other, question) = readings
         .map(|(how, negate, scale, question)| (how, read(negate, scale), question))
+        .chain(reordered)
         .min_by(|a, b| a.1.total_cmp(&b.1))?;
     (given > TRUTH_OFF * organ.extent() && other <= given / 3.0).then(|| {
         format!(
@@ -213,6 +219,27 @@ fn truth_mix_up(organ: &Organ, targets: &[Point], truth: &[Point]) -> Option<Str
             mm(other)
         )
     })
+}
+
+/// The mean distance from each target to its nearest point of `truth`, when those nearest points
+/// are the truth's, each once, in another order than the targets' (its rows reordered); `None`
+/// otherwise.
+fn reordered_distance(targets: &[Point], truth: &[Point]) -> Option<f64> {
+    if targets.len() != truth.len() {
+        return None;
+    }
+    let nearest = |t: &Point| {
+        (0..truth.len()).min_by(|&a, &b| mesh::distance(*t, truth[a]).total_cmp(&mesh::distance(*t, truth[b])))
+    };
+    let matched: Vec<usize> = targets.iter().map(nearest).collect::<Option<_>>()?;
+    let mut taken = vec![false; truth.len()];
+    if matched.iter().any(|&j| std::mem::replace(&mut taken[j], true))
+        || matched.iter().enumerate().all(|(i, &j)| i == j)
+    {
+        return None;
+    }
+    let total: f64 = targets.iter().zip(&matched).map(|(t, &j)| mesh::distance(*t, truth[j])).sum();
+    Some(total / targets.len() as f64)
 }
 
 /// The multiple of the organ's size (its box's diagonal) beyond which a truth is refused
@@ -335,8 +362,8 @@ pub fn verdict(organ: &Organ, u: &[f64], far_share: f64, (cloud, extent): (&[Poi
 mod tests {
     use super::*;
 
-    /// A truth in the other frame (x and y negated) or in another unit is named; a truth that
-    /// moved as an organ does, or one far off in another way, is not.
+    /// A truth in the other frame (x and y negated), in another unit or in another order is named;
+    /// a truth that moved as an organ does, or one far off in another way, is not.
     #[test]
     fn a_truth_in_the_other_frame_or_another_unit_is_named() {
         let at = [0.05, 0.12, -0.2];
@@ -355,6 +382,10 @@ mod tests {
         assert!(w.contains("read 1,000 times larger") && w.contains("given in m where mm"), "{w}");
         let in_cm: Vec<Point> = moved.iter().map(|p| p.map(|x| x * 10.0)).collect();
         assert!(truth_mix_up(&organ, &targets, &in_cm).expect("named").contains("read 10 times smaller"));
+        // Its rows in the other order (no labels to pair them): named.
+        let reversed: Vec<Point> = moved.iter().rev().copied().collect();
+        let w = truth_mix_up(&organ, &targets, &reversed).expect("named");
+        assert!(w.contains("mm each matched to its nearest truth point: are its rows in another order"), "{w}");
         // Near the z axis the other frame lies near too; a moderate push is not flagged.
         let central = vec![[0.004, 0.003, -0.17]];
         let pushed = vec![[0.004, 0.003, -0.19]];

@@ -1,7 +1,7 @@
 //! The user's choices of an assimilation run, as `augsim assimilate` takes them: the scenario,
 //! the settings that override the scenario file's, and the track files.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::Result;
 use filter::{Discrepancy, Execution, SigmaPointSet};
@@ -126,7 +126,6 @@ impl AssimilationChoice {
         let (sc, dir) = self.scenario()?;
         // Never two runs' files in one folder: `--out` refused once used, else numbered folders.
         let (out_dir, own) = crate::output::run_dir(self.output.as_deref(), &sc.output_dir())?;
-        refuse_other_files(&out_dir)?;
         let files = self.files();
         let described = if sc.description.is_empty() { String::new() } else { format!(": {}", sc.description) };
         let mut lines = vec![format!("scenario     {}{described}", sc.name)];
@@ -148,27 +147,6 @@ impl AssimilationChoice {
             units: self.units,
         })
     }
-}
-
-/// Refuses an output folder `dir` that holds files: a run writes many (its traces, plots, the
-/// deformation's steps, track files) and would replace a user's of the same names.
-fn refuse_other_files(dir: &Path) -> Result<()> {
-    let held: Vec<String> = std::fs::read_dir(dir)
-        .into_iter()
-        .flatten()
-        .flatten()
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .collect();
-    if let Some(first) = held.first() {
-        anyhow::bail!(
-            "{} holds {} file(s) or folder(s) ({first}{}): an assimilation writes its traces, plots and track \
-             files into a folder of its own and could replace them; give a new or empty --out",
-            dir.display(),
-            held.len(),
-            if held.len() > 1 { ", …" } else { "" }
-        );
-    }
-    Ok(())
 }
 
 /// An assimilation run prepared ([`AssimilationChoice::prepare`]), to be run.

@@ -338,6 +338,10 @@ fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PreparePro
         .chain(options.camera.file())
         .collect();
     crate::output::refuse_inputs_inside(dir, &inputs)?;
+    // A folder of other files is no place for a set-up, whose files would replace theirs.
+    if !dir.join(STATE_FILE).exists() {
+        crate::output::refuse_used_folder(dir)?;
+    }
     mesh::io::create_folder(dir)?;
     // What a killed run left half-written goes: its step is done again.
     mesh::io::remove_stale_temporaries(dir);
@@ -377,7 +381,10 @@ fn prepare_steps(options: &PrepareOptions, dir: &Path, progress: &dyn PreparePro
     } else {
         let (steps, input_frame, input_unit, input_digests) = (Vec::new(), None, None, digests);
         let format = "augsim-prepare".into();
-        PrepareState { format, options: options.clone(), steps, input_frame, input_unit, input_digests }
+        let state = PrepareState { format, options: options.clone(), steps, input_frame, input_unit, input_digests };
+        // Written before any step, so that the folder is known as this preparation's if it stops.
+        write_atomic_bytes(&state_path, serde_json::to_string_pretty(&state)?.as_bytes())?;
+        state
     };
     for (index, name) in STEPS.iter().enumerate() {
         // The report is written anew at every run; the other steps once.
@@ -493,6 +500,7 @@ fn read_inputs(options: &PrepareOptions, lines: &mut Vec<String>) -> Result<Inpu
     // Each error of a points file names the file.
     let landmarks = input.read(&options.attach)?;
     let targets = input.read(&options.targets)?;
+    crate::points::check_targets(&options.targets, &targets)?;
     let camera = match &options.camera {
         CameraAt::Point(p) => points_unit.point_to_metres(*p),
         CameraAt::File(path) => match input.read(path)?.points.as_slice() {
@@ -536,12 +544,14 @@ impl Inputs {
     }
 }
 
-/// Why a target lies outside the organ's mesh when it lies inside the organ's surface (m):
-/// the part around it was left out of the mesh; `None` when every target outside the mesh is
-/// outside the surface too.
+/// Why the first target outside the organ's mesh (the one its error names) lies there when it
+/// lies inside the organ's surface (m): the part around it was left out of the mesh; `None` when
+/// it lies outside the surface too.
 fn thin_part_left_out(surface: &TriSurface, organ: &register::Organ, targets: &[Point]) -> Option<String> {
     let bvh = mesh::SurfaceBvh::new(surface).ok()?;
-    targets.iter().any(|&p| bvh.is_inside(p) && organ.locate(&[p], "target").is_err()).then(|| {
+    // The first outside the mesh, which the error names.
+    let first = targets.iter().find(|&&p| organ.locate(&[p], "target").is_err())?;
+    bvh.is_inside(*first).then(|| {
         "it lies inside the organ's surface, in a part thinner than the tetrahedra that the mesh leaves out: \
          mesh finer (--tets)"
             .to_string()
@@ -640,9 +650,10 @@ fn organ_step(options: &PrepareOptions, dir: &Path) -> Result<(Vec<String>, Opti
         // was read may be too (a number that names a segment of another layer than the one meant).
         let (doubts, others): (Vec<&str>, Vec<&str>) =
             lines.iter().filter_map(|l| l.strip_prefix("warning: ")).partition(|w| is_organ_doubt(w));
+        // The others come after the error, which they may have nothing to do with.
         let e = match others.is_empty() {
             true => e,
-            false => e.context(format!("warned as the organ was read: {}", others.join("; "))),
+            false => anyhow::anyhow!("{e:#} (warned as the organ was read, besides: {})", others.join("; ")),
         };
         let e = match doubts.is_empty() {
             true => e,
@@ -694,6 +705,14 @@ fn organ_lines(options: &PrepareOptions, dir: &Path, lines: &mut Vec<String>) ->
         quality.max_dihedral_deg,
     ));
     lines.extend(tet_mesh_warnings(&quality).into_iter().map(|w| format!("warning: {w}")));
+    // A laparoscope looks at the organ from outside it.
+    if mesh::SurfaceBvh::new(&surface).is_ok_and(|bvh| bvh.is_inside(camera)) {
+        bail!(
+            "the camera at {} lies inside the organ: give where the laparoscope looks from, outside it (in the \
+             surface's unit and frame)",
+            point_in_mm(camera)
+        );
+    }
     let visible = Camera { view: None, position: Some(camera), max_angle_deg: 90.0 }.seen_nodes(&organ)?;
     if visible.is_empty() {
         bail!(
