@@ -557,8 +557,8 @@ mod tests {
             let text = format!(
                 "kind = \"static\"\nname = \"bar\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [0.1, 0.02, 0.02]\n\
                  cells = [4, 1, 1]\nelement = \"hex\"\n[material]\nlaw = \"linear\"\nyoung = 5000.0\n\
-                 poisson = 0.3\n[[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] }} }}\n\
-                 {force}"
+                 poisson = 0.3\n[[fixed]]\n\
+                 select = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] }} }}\n{force}"
             );
             solved_lines(dir.path(), &text)
         };
@@ -586,7 +586,8 @@ mod tests {
             let text = format!(
                 "kind = \"static\"\nname = \"column\"\n[mesh.box]\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 0.1, 0.1]\n\
                  cells = [20, 2, 2]\nelement = \"hex\"\n[material]\nlaw = \"neo_hookean\"\nyoung = 1.0e6\n\
-                 poisson = 0.3\n[[fixed]]\nselect = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] }} }}\n\
+                 poisson = 0.3\n[[fixed]]\n\
+                 select = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1e-9, 1.0, 1.0] }} }}\n\
                  [[force]]\nselect = {{ box = {{ min = [0.999, -1.0, -1.0], max = [2.0, 1.0, 1.0] }} }}\n\
                  total = [{force}, 0.0, 0.0]\n"
             );

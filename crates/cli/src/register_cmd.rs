@@ -32,7 +32,8 @@ pub struct RegisterArgs {
     truth: Option<PathBuf>,
     /// Output directory: organ.vtu (organ.pvd for a sequence), targets.csv (a sequence's last
     /// frame), summary.json (every frame's TRE); one
-    /// that holds an earlier run's results is refused (runs are never mixed). Default: a fresh
+    /// that holds anything (an earlier run's results, other files) is refused (runs are never
+    /// mixed, a user's files never replaced). Default: a fresh
     /// numbered folder under out/register (out/register/001, 002, …).
     #[arg(short, long)]
     out: Option<PathBuf>,

@@ -329,8 +329,8 @@ impl Model for FemModel {
                 {
                     format!(
                         "a spring stiffness of {value:.6e} N/m leaves a node's stiffness negative: the filter, on the \
-                         stiffness itself, stepped past zero, or spread its sigma points past it; `transform = \"exp\"` \
-                         in the parameter's section keeps it positive"
+                         stiffness itself, stepped past zero, or spread its sigma points past it; \
+                         `transform = \"exp\"` in the parameter's section keeps it positive"
                     )
                 }
                 _ => continue,

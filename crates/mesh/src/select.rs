@@ -175,8 +175,8 @@ impl NodeSelection {
     }
 
     /// Where a ball or box that picked nothing is ten times the mesh's size or more, or it or the
-    /// nearest of a [`Near`]'s landmarks lies that far from it, the question whether its coordinates are in another unit than the
-    /// mesh's metres; empty otherwise.
+    /// nearest of a [`Near`]'s landmarks lies that far from it, the question whether its
+    /// coordinates are in another unit than the mesh's metres; empty otherwise.
     fn unit_hint(&self, mesh: &Mesh) -> String {
         let (lo, hi) = mesh.bounds();
         let size = crate::longest_side((lo, hi));

@@ -22,7 +22,8 @@ pub struct AssimilationChoice {
     /// Evaluate the sigma points one after the other instead of in parallel.
     #[arg(long)]
     pub sequential: bool,
-    /// Output directory, refused when it holds an earlier run's results; default a fresh numbered
+    /// Output directory, new or empty (one holding an earlier run's results or other files is
+    /// refused); default a fresh numbered
     /// folder under `out/<name>` (`001`, `002`, …). `--out` as every command writing a folder
     /// names it (`--output` also taken).
     #[arg(short, long = "out", alias = "output")]
