@@ -183,13 +183,12 @@ impl Report {
 impl YoungReport {
     /// The estimate in words (against the truth when known), with what makes its σ doubtful.
     fn lines(&self) -> Vec<String> {
-        let y = self;
-        let truth = match y.truth {
+        let truth = match self.truth {
             Some(t) => format!(
                 " (truth {t:.0} Pa, error {:+.2} %, {:.1} σ), within 1 % {}",
-                100.0 * (y.mean - t) / t,
-                (y.mean - t).abs() / y.std,
-                match (y.within_1_percent_from_iteration, y.within_1_percent_after_seconds) {
+                100.0 * (self.mean - t) / t,
+                (self.mean - t).abs() / self.std,
+                match (self.within_1_percent_from_iteration, self.within_1_percent_after_seconds) {
                     (Some(k), Some(t)) => format!("from iteration {k} on ({t:.2} s of filter time)"),
                     (Some(k), None) => format!("from iteration {k} on"),
                     _ => "never (so far)".to_string(),
@@ -197,25 +196,25 @@ impl YoungReport {
             ),
             None => String::new(),
         };
-        let mut lines = vec![format!("young        μ = {:.1} ± {:.1} Pa{truth}", y.mean, y.std)];
-        let data_std = y.noise_std.unwrap_or(y.std);
-        if data_std > PRIOR_LEFT * y.prior_std {
+        let mut lines = vec![format!("young        μ = {:.1} ± {:.1} Pa{truth}", self.mean, self.std)];
+        let data_std = self.noise_std.unwrap_or(self.std);
+        if data_std > PRIOR_LEFT * self.prior_std {
             lines.push(format!(
                 "warning      the observations told the filter little: σ from them is {:.0} % of the prior's \
                  ({:.1} Pa), so the estimate is mostly the prior (few frames, features that barely move, or a \
                  prior far from the tissue's stiffness?)",
-                100.0 * data_std / y.prior_std,
-                y.prior_std
+                100.0 * data_std / self.prior_std,
+                self.prior_std
             ));
         }
-        if let Some((steps, change)) = y.drift.filter(|(_, change)| change.abs() > y.std) {
+        if let Some((steps, change)) = self.drift.filter(|(_, change)| change.abs() > self.std) {
             lines.push(format!(
                 "warning      the estimate still moves: {change:+.1} Pa over the last {steps} iterations, {:.1} \
                  times its σ, which does not say where more iterations would take it (--iterations)",
-                change.abs() / y.std
+                change.abs() / self.std
             ));
         }
-        if let (Some(noise), Some(misfit)) = (y.noise_std, y.misfit) {
+        if let (Some(noise), Some(misfit)) = (self.noise_std, self.misfit) {
             lines.push(format!(
                 "discrepancy  σ = {:.1} Pa from the observation noise alone; misfit χ²/ν = {misfit:.3} \
                  (effective observation noise {:.2} × nominal)",
@@ -224,7 +223,7 @@ impl YoungReport {
             ));
             lines.extend(misfit_warning(misfit));
         }
-        if let (Some(noise), None) = (y.noise_std, y.misfit) {
+        if let (Some(noise), None) = (self.noise_std, self.misfit) {
             lines.push(format!(
                 "warning      the misfit could not be measured: no frame's sigma points came near the final \
                  estimate (it jumped away from where the frames were taken: a gate leaving most out, tracks \
