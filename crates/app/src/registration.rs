@@ -485,12 +485,15 @@ impl StructureFile {
 }
 
 /// The name of the structure `source` holds: the `NAME` of `NAME=SOURCE`; else a surface file's
-/// stem, or the label of `LABELMAP:LABEL` (`label_N` for a number); white space turned into `_`.
+/// stem, or the label of `LABELMAP:LABEL` (for a number, the name 3D Slicer gives its segment in a
+/// `.seg.nrrd`, else `label_N`); white space turned into `_`.
 pub fn structure_name(source: &Path) -> String {
     let (named, source) = named_source(source);
     let name = match (named, labelmap_label(source)) {
         (Some(name), _) => name.to_string(),
-        (None, Some((_, label))) if label.parse::<i32>().is_ok() => format!("label_{label}"),
+        (None, Some((path, label))) if let Ok(value) = label.parse::<i32>() => {
+            mesh::labelmap::nrrd_segment_name(Path::new(path), value).unwrap_or_else(|| format!("label_{label}"))
+        }
         (None, Some((_, label))) => label.to_string(),
         (None, None) => source.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
     };
@@ -810,6 +813,16 @@ mod tests {
         );
         assert_eq!(absolute("b.stl"), cwd.join("b.stl"));
         assert_eq!(structure_name(&absolute("tumour=seg.nii.gz:2")), "tumour");
+        // 3D Slicer's segmentation names its segments: a label's number gives its segment's name,
+        // where one segment alone has it.
+        let seg = dir.path().join("Segmentation.seg.nrrd");
+        let affine = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
+        let mut map = mesh::labelmap::Labelmap::single([2, 2, 2], vec![0, 1, 1, 2, 0, 0, 3, 3], affine, Frame::Ras);
+        map.segments = vec![("liver".into(), 0, 1), ("tumour S8".into(), 0, 2), ("cyst".into(), 0, 3)];
+        map.segments.push(("another cyst".into(), 0, 3));
+        mesh::labelmap::write_nrrd(&seg, &map).unwrap();
+        let label = |n: i32| structure_name(Path::new(&format!("{}:{n}", seg.display())));
+        assert_eq!([label(2), label(3), label(4)], ["tumour_S8", "label_3", "label_4"]);
     }
 
     /// A structure's labelmap is found behind its name and label; whether a structure's file names

@@ -46,7 +46,7 @@ use crate::MeshError;
 
 pub use crate::io::Frame;
 pub use nifti::write_nifti;
-pub use nrrd::{write_displacement_nrrd, write_nrrd};
+pub use nrrd::{nrrd_segment_name, write_displacement_nrrd, write_nrrd};
 pub use surface::{read_labelmap_surface, LabelSurface};
 
 /// A labelmap read from a file.

@@ -333,6 +333,29 @@ fn ascii_labels(data: &[u8], count: usize) -> Result<Vec<i32>, String> {
     Ok(labels)
 }
 
+/// The name 3D Slicer gives the segment of label value `label` in the NRRD file `path`
+/// (`Segment{i}_Name` in its header, read alone), when one segment alone has that value (several
+/// layers may reuse it); `None` otherwise, or for a file that is not a NRRD.
+pub fn nrrd_segment_name(path: &Path, label: i32) -> Option<String> {
+    use std::io::Read;
+    let mut head = Vec::new();
+    std::fs::File::open(path).ok()?.take(HEADER_BYTES).read_to_end(&mut head).ok()?;
+    let (header, _) = nrrd_header(&head).ok()?;
+    let segment = |i: usize| {
+        let name = header.pairs.get(&format!("Segment{i}_Name"))?;
+        let value = header.pairs.get(&format!("Segment{i}_LabelValue")).map_or(Some(1), |v| v.parse::<i32>().ok());
+        Some((name, value))
+    };
+    let named: Vec<&String> = (0..).map_while(segment).filter(|(_, v)| *v == Some(label)).map(|(n, _)| n).collect();
+    match named.as_slice() {
+        [one] => Some(one.to_string()),
+        _ => None,
+    }
+}
+
+/// The most bytes read for a NRRD header alone (3D Slicer's of hundreds of segments fit).
+const HEADER_BYTES: u64 = 1 << 20;
+
 /// Slicer's segments of a file of `layers` layers: `Segment{i}_Name`, `Segment{i}_LabelValue`
 /// (1 where absent), `Segment{i}_Layer` (where absent, as 3D Slicer reads files written before
 /// segments shared layers: segment `i` in layer `i` of several, else in the only one).
