@@ -24,13 +24,6 @@ surgery*, MICCAI 2019 (registration TRE, solve times); Mendizabal, *Data-driven 
 surgery*, PhD thesis, Université de Strasbourg, 2020 (ROUKF identification; Peterlík et al., MICCAI 2017 for \
 the boundary springs).";
 
-fn size_name(size: Size) -> &'static str {
-    match size {
-        Size::Quick => "quick",
-        Size::Paper => "paper",
-    }
-}
-
 /// A table of a report: the cells of its heading and of its lines, as plain text.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Table {
@@ -195,7 +188,7 @@ fn summary_table(results: &[ExperimentResult]) -> Table {
 /// The headline summary: one row per published figure (ours, published, verdict).
 pub fn summary(results: &[ExperimentResult]) -> String {
     let mut s = summary_table(results).markdown();
-    let sizes: Vec<String> = results.iter().map(|r| format!("{} {}", r.name.as_str(), size_name(r.size))).collect();
+    let sizes: Vec<String> = results.iter().map(|r| format!("{} {}", r.name.as_str(), r.size.as_str())).collect();
     let _ = write!(
         s,
         "\nFrom `augsim experiment` ({}); \"on par\": within {:.0} %. Every figure is measured on data that played \
@@ -236,7 +229,7 @@ fn sections(results: &[ExperimentResult], heading: &str, figures: bool) -> Strin
     for r in results {
         let _ = write!(s, "\n{heading} {}\n\n", r.name.title());
         let _ =
-            writeln!(s, "`augsim experiment {} --size {}` ({:.0} s)\n", r.name.as_str(), size_name(r.size), r.seconds);
+            writeln!(s, "`augsim experiment {} --size {}` ({:.0} s)\n", r.name.as_str(), r.size.as_str(), r.seconds);
         for table in tables(&r.rows) {
             s.push_str(&table.markdown());
             s.push('\n');
@@ -338,7 +331,7 @@ fn check_keeps_published(path: &Path, text: &str, results: &[ExperimentResult]) 
     let kept = |old: &String| {
         let (name, size) = old.split_once(' ').unwrap_or((old, ""));
         let new = results.iter().find(|r| r.name.as_str() == name);
-        new.is_some_and(|r| r.size == Size::Paper || size != size_name(Size::Paper))
+        new.is_some_and(|r| r.size == Size::Paper || size != Size::Paper.as_str())
     };
     let lost: Vec<String> = summarised(text).into_iter().filter(|old| !kept(old)).collect();
     if !lost.is_empty() {
@@ -386,7 +379,7 @@ pub fn html(results: &[ExperimentResult]) -> String {
             "<h2>{}</h2>\n<p><code>augsim experiment {} --size {}</code> ({:.0} s)</p>",
             escape_html(r.name.title()),
             r.name.as_str(),
-            size_name(r.size),
+            r.size.as_str(),
             r.seconds
         );
         for table in tables(&r.rows) {

@@ -287,9 +287,7 @@ impl Near {
             .filter(|&n| landmarks.iter().any(|&l| crate::distance(mesh.nodes[n], l) <= self.distance))
             .collect())
     }
-}
 
-impl Near {
     /// Its landmarks: its points and its file's (m).
     fn landmarks(&self) -> Result<Vec<Point>, MeshError> {
         let mut landmarks = self.points.clone();

@@ -341,16 +341,9 @@ pub fn nrrd_segment_name(path: &Path, label: i32) -> Option<String> {
     let mut head = Vec::new();
     std::fs::File::open(path).ok()?.take(HEADER_BYTES).read_to_end(&mut head).ok()?;
     let (header, _) = nrrd_header(&head).ok()?;
-    let segment = |i: usize| {
-        let name = header.pairs.get(&format!("Segment{i}_Name"))?;
-        let value = header.pairs.get(&format!("Segment{i}_LabelValue")).map_or(Some(1), |v| v.parse::<i32>().ok());
-        Some((name, value))
-    };
-    let named: Vec<&String> = (0..).map_while(segment).filter(|(_, v)| *v == Some(label)).map(|(n, _)| n).collect();
-    match named.as_slice() {
-        [one] => Some(one.to_string()),
-        _ => None,
-    }
+    let segments = named_segments(&header.pairs).ok()?;
+    let mut named: Vec<String> = segments.into_iter().filter(|s| s.2 == label).map(|s| s.0).collect();
+    (named.len() == 1).then(|| named.remove(0))
 }
 
 /// The most bytes read for a NRRD header alone (3D Slicer's of hundreds of segments fit).
@@ -361,17 +354,27 @@ const HEADER_BYTES: u64 = 1 << 20;
 /// segments shared layers: segment `i` in layer `i` of several, else in the only one).
 fn slicer_segments(pairs: &BTreeMap<String, String>, layers: usize) -> Result<Vec<(String, usize, i32)>, String> {
     let mut segments = Vec::new();
+    for (i, (name, layer, label)) in named_segments(pairs)?.into_iter().enumerate() {
+        let layer = layer.unwrap_or(if layers > 1 { i } else { 0 });
+        if layer >= layers {
+            return Err(format!("Segment{i}_Layer = {layer} ('{name}'), but the file holds {layers} layer(s)"));
+        }
+        segments.push((name, layer, label));
+    }
+    Ok(segments)
+}
+
+/// 3D Slicer's segments as its header's pairs name them: `Segment{i}_Name`, `Segment{i}_Layer`
+/// where given, `Segment{i}_LabelValue` (1 where absent).
+fn named_segments(pairs: &BTreeMap<String, String>) -> Result<Vec<(String, Option<usize>, i32)>, String> {
+    let mut segments = Vec::new();
     for i in 0.. {
         let Some(name) = pairs.get(&format!("Segment{i}_Name")) else { break };
         let get = |key: &str| pairs.get(&format!("Segment{i}_{key}"));
         let label =
             get("LabelValue").map_or(Ok(1), |v| v.parse::<i32>()).map_err(|e| format!("Segment{i}_LabelValue: {e}"))?;
-        let own = if layers > 1 { i } else { 0 };
         let layer =
-            get("Layer").map_or(Ok(own), |v| v.parse::<usize>()).map_err(|e| format!("Segment{i}_Layer: {e}"))?;
-        if layer >= layers {
-            return Err(format!("Segment{i}_Layer = {layer} ('{name}'), but the file holds {layers} layer(s)"));
-        }
+            get("Layer").map(|v| v.parse::<usize>()).transpose().map_err(|e| format!("Segment{i}_Layer: {e}"))?;
         segments.push((name.clone(), layer, label));
     }
     Ok(segments)
